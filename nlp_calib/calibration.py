@@ -1,0 +1,206 @@
+"""A scenario set up once (``Calibration.setup``), then solved by any solver (``solve``/``run``).
+
+Set-up reads the log, builds the symbolic Functions, stacks the data and binds the evaluator;
+solving only calls them. :meth:`Calibration.run` adds what a user judges a result by:
+uncertainty and trajectory metrics per solver, next to the uncalibrated baseline.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from nlp_calib.analysis import uncertainty as unc
+from nlp_calib.analysis.metrics import TrajectoryMetrics, trajectory_metrics
+from nlp_calib.data import ResidualData, build_residual_data
+from nlp_calib.errors import ModelError, ScenarioError
+from nlp_calib.io.logfile import Dataset, read_log
+from nlp_calib.io.scenario import Scenario
+from nlp_calib.models import get_model
+from nlp_calib.models.base import SENSOR_PARAMS
+from nlp_calib.solvers import gauss_newton
+from nlp_calib.solvers.backend import BackendOptions, make_backend
+from nlp_calib.solvers.evaluation import Priors, ProblemEvaluator
+from nlp_calib.solvers.ipopt import IpoptSolver
+from nlp_calib.solvers.result import SolverResult
+from nlp_calib.symbolic.builder import ProblemFunctions, ProblemSpec, build
+
+
+@dataclass(frozen=True)
+class SolverReport:
+    """One solver's result with its uncertainty and trajectory metrics."""
+
+    result: SolverResult
+    uncertainty: unc.Uncertainty
+    metrics: TrajectoryMetrics
+    holdout: TrajectoryMetrics | None
+
+
+@dataclass(frozen=True)
+class CalibrationRun:
+    """Everything a run produced; ``baseline`` scores the initial guess."""
+
+    scenario: Scenario
+    dataset: Dataset
+    used: tuple[int, int]
+    fit: tuple[int, int]
+    initial: Mapping[str, float]
+    baseline: TrajectoryMetrics
+    baseline_holdout: TrajectoryMetrics | None
+    reports: Mapping[str, SolverReport]
+    setup_time_s: float
+    n_residuals: int
+    dropped_stationary: int
+    warnings: tuple[str, ...] = field(default=())
+
+
+def initial_parameters(scenario: Scenario, dataset: Dataset) -> dict[str, float]:
+    """The starting point: the log header's values, overridden by the scenario's mapping."""
+    model = get_model(scenario.model)
+    header = dataset.header
+    guess = {n: float(header.parameters[n]) for n in model.kinematic_params if n in header.parameters}
+    guess.update(zip(SENSOR_PARAMS, header.T_base_sensor))
+    if isinstance(scenario.initial_guess, Mapping):
+        guess.update(scenario.initial_guess)
+    elif scenario.initial_guess == "auto":
+        raise ScenarioError(
+            "initial_guess: 'auto' is not available in this version; use from_file or a mapping"
+        )
+    missing = [n for n in (*model.kinematic_params, *SENSOR_PARAMS) if n not in guess]
+    if missing:
+        raise ScenarioError(
+            f"the log header gives no initial value for {missing}; set them under initial_guess"
+        )
+    return guess
+
+
+class Calibration:
+    """A scenario ready to solve: dataset, Functions, data and evaluator built once."""
+
+    def __init__(self, scenario: Scenario, dataset: Dataset | None = None) -> None:
+        t0 = time.perf_counter()
+        self.scenario = sc = scenario
+        self.model = get_model(sc.model)
+        self.dataset = dataset if dataset is not None else read_log(sc.dataset, strict=sc.strict)
+        if self.dataset.header.kinematic_model not in self.model.log_names:
+            raise ModelError(
+                f"{self.dataset.path}: the log is of kind {self.dataset.header.kinematic_model!r}, "
+                f"but the scenario's model {sc.model!r} reads {list(self.model.log_names)}"
+            )
+        n = self.dataset.n_records
+        start = sc.samples.start
+        stop = n if sc.samples.stop is None else sc.samples.stop
+        if stop > n or start >= stop - 1:
+            raise ScenarioError(f"samples: the range [{start}, {stop}) does not fit the log's {n} records")
+        self.used = (start, stop)
+        self.selected = self.dataset.select(start, stop)
+        hf = sc.validation.holdout_fraction
+        split = stop if hf is None else start + round((1.0 - hf) * (stop - start))
+        self.fit = (start, split)
+        self.fns: ProblemFunctions = build(
+            self.model,
+            ProblemSpec(
+                horizon=sc.residual.horizon,
+                integration=sc.residual.integration,
+                kernel=sc.robust.kernel,
+                fixed=sc.fixed,
+            ),
+        )
+        fit_data = self.dataset.select(start, split)
+        self.data: ResidualData = build_residual_data(
+            self.fns, fit_data, sc.residual, drop_stationary=sc.samples.drop_stationary
+        )
+        if self.data.n_residuals < len(self.fns.free):
+            raise ScenarioError(
+                f"only {self.data.n_residuals} residuals in records [{start}, {split}) for "
+                f"{len(self.fns.free)} parameters; widen 'samples' or shorten the horizon"
+            )
+        self.initial = initial_parameters(sc, self.dataset)
+        self.x0 = np.array([self.initial[n] for n in self.fns.free])
+        x_fixed = np.array([self.initial[n] for n in self.fns.fixed])
+        self.lower, self.upper = self._bounds()
+        priors = Priors(
+            mean=np.array([sc.priors[n].mean if n in sc.priors else 0.0 for n in self.fns.free]),
+            sqrt_info=np.array([1.0 / sc.priors[n].std if n in sc.priors else 0.0 for n in self.fns.free]),
+        )
+        self.evaluator = ProblemEvaluator(
+            self.fns,
+            self.data.columns,
+            x_fixed=x_fixed,
+            omega=np.array(sc.information.omega()),
+            delta=sc.robust.delta,
+            priors=priors,
+            backend=make_backend(BackendOptions(kind=sc.backend)),
+        )
+        self._ipopt: IpoptSolver | None = None
+        self.setup_time_s = time.perf_counter() - t0
+
+    @classmethod
+    def setup(cls, scenario: Scenario, data: str | Path | None = None) -> Calibration:
+        """Build everything ``scenario`` needs (``data`` replaces its dataset path)."""
+        return cls(scenario.with_dataset(data) if data is not None else scenario)
+
+    def _bounds(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        b = self.scenario.bounds
+        if not b:
+            return None, None
+        lower = np.array([b[n][0] if n in b else -np.inf for n in self.fns.free])
+        upper = np.array([b[n][1] if n in b else np.inf for n in self.fns.free])
+        for name, lo, hi, x in zip(self.fns.free, lower, upper, self.x0):
+            if not lo <= x <= hi:
+                raise ScenarioError(f"bounds.{name}: the initial guess {x:g} lies outside [{lo:g}, {hi:g}]")
+        return lower, upper
+
+    def solve(self, solver: str) -> SolverResult:
+        """Run one solver from the initial guess."""
+        if solver == "gauss_newton":
+            return gauss_newton.solve(self.evaluator, self.x0, self.scenario.gauss_newton)
+        if solver == "ipopt":
+            if self._ipopt is None:
+                self._ipopt = IpoptSolver(self.evaluator, self.scenario.ipopt)
+            return self._ipopt.solve(self.x0, self.lower, self.upper)
+        raise ScenarioError(f"unknown solver {solver!r}; valid solvers: gauss_newton, ipopt")
+
+    def score(self, params: np.ndarray) -> tuple[TrajectoryMetrics, TrajectoryMetrics | None]:
+        """Full-range and hold-out trajectory metrics of ``params``."""
+        inputs = self.model.inputs(self.selected, self.scenario.residual.steering_sample)
+        poses = self.selected.T_world_sensor
+        W = self.scenario.validation.rpe_window
+        full = trajectory_metrics(self.fns, params, inputs, poses, rpe_window=W)
+        holdout = None
+        split = self.fit[1] - self.used[0]
+        if self.fit[1] < self.used[1] - 1:
+            holdout = trajectory_metrics(self.fns, params, inputs, poses, start=split, rpe_window=W)
+        return full, holdout
+
+    def run(self, solvers: Sequence[str] | None = None) -> CalibrationRun:
+        """Solve with each solver and score every result."""
+        reports: dict[str, SolverReport] = {}
+        for name in solvers or self.scenario.solvers:
+            result = self.solve(name)
+            full, holdout = self.score(result.params)
+            reports[name] = SolverReport(
+                result=result,
+                uncertainty=unc.estimate(self.evaluator, result.x),
+                metrics=full,
+                holdout=holdout,
+            )
+        p0 = np.array([self.initial[n] for n in self.fns.names])
+        base, base_holdout = self.score(p0)
+        return CalibrationRun(
+            scenario=self.scenario,
+            dataset=self.dataset,
+            used=self.used,
+            fit=self.fit,
+            initial=dict(self.initial),
+            baseline=base,
+            baseline_holdout=base_holdout,
+            reports=reports,
+            setup_time_s=self.setup_time_s,
+            n_residuals=self.data.n_residuals,
+            dropped_stationary=self.data.dropped_stationary,
+        )

@@ -1,0 +1,89 @@
+"""``result.json`` (SPEC §8): the document a run writes into its output folder."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nlp_calib import __version__
+from nlp_calib.analysis.metrics import TrajectoryMetrics
+from nlp_calib.calibration import CalibrationRun, SolverReport
+from nlp_calib.io.files import atomic_write_text
+
+RESULT_FILE = "result.json"
+
+
+def _metrics_dict(full: TrajectoryMetrics, holdout: TrajectoryMetrics | None) -> dict[str, Any]:
+    out: dict[str, Any] = full.as_dict()
+    if holdout is not None:
+        out.update({f"holdout_{k}": v for k, v in holdout.as_dict().items()})
+    return out
+
+
+def _solver_dict(report: SolverReport) -> dict[str, Any]:
+    r, u = report.result, report.uncertainty
+    return {
+        "params": r.param_dict(),
+        "std": u.std_dict(),
+        "correlation": {"names": list(u.names), "matrix": np.round(u.correlation, 6).tolist()},
+        "cost": r.cost,
+        "chi2": r.chi2,
+        "inliers": r.inliers,
+        "residuals": r.n_residuals,
+        "iterations": r.iterations,
+        "converged": r.converged,
+        "reason": r.reason,
+        "time_s": r.time_s,
+        "sigma2": u.sigma2,
+        "metrics": _metrics_dict(report.metrics, report.holdout),
+        "history": [
+            {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in h.__dict__.items()}
+            for h in r.history
+        ],
+    }
+
+
+def result_dict(run: CalibrationRun) -> dict[str, Any]:
+    """The ``result.json`` document of a run."""
+    sc = run.scenario
+    return {
+        "scenario": sc.name,
+        "tool": {"name": "nlp_calib", "version": __version__},
+        "model": sc.model,
+        "dataset": {
+            "path": str(sc.dataset),
+            "records": run.dataset.n_records,
+            "used": list(run.used),
+            "fit": list(run.fit),
+            "residuals": run.n_residuals,
+            "dropped_stationary": run.dropped_stationary,
+            "dropped_records": [{"line": d.line, "reason": d.reason} for d in run.dataset.dropped],
+        },
+        "residual": dict(sc.residual.__dict__),
+        "robust": dict(sc.robust.__dict__),
+        "initial": dict(run.initial),
+        "baseline": {"metrics": _metrics_dict(run.baseline, run.baseline_holdout)},
+        "solvers": {name: _solver_dict(rep) for name, rep in run.reports.items()},
+        "warnings": list(run.warnings),
+    }
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"cannot serialise {type(obj).__name__}")
+
+
+def write_result(run: CalibrationRun, out_dir: Path) -> Path:
+    """Write ``out_dir/result.json`` atomically and return its path."""
+    path = out_dir / RESULT_FILE
+    text = json.dumps(result_dict(run), indent=2, default=_json_default, allow_nan=False)
+    atomic_write_text(path, text + "\n")
+    return path

@@ -1,0 +1,187 @@
+"""Scenario YAML files (SPEC §8): frozen dataclasses, validated on load.
+
+Every section is a frozen dataclass; :func:`load_scenario` checks keys and types against the
+dataclass fields, so an unknown key, a wrong type or an inconsistent value is reported with its
+place in the file and the valid choices, before any computation starts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from nlp_calib.data import ResidualOptions
+from nlp_calib.io.schema import coerce, fail, read_yaml
+from nlp_calib.models import MODELS, get_model, param_names
+from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES
+from nlp_calib.solvers.backend import BACKENDS
+from nlp_calib.solvers.gauss_newton import GaussNewtonOptions
+from nlp_calib.solvers.ipopt import IpoptOptions
+from nlp_calib.symbolic.kernels import KERNELS
+
+SOLVERS = ("gauss_newton", "ipopt")
+
+
+@dataclass(frozen=True)
+class SampleSelection:
+    """Records ``start:stop`` of the log; ``drop_stationary`` drops windows with no motion."""
+
+    start: int = 0
+    stop: int | None = None
+    drop_stationary: bool = False
+
+
+@dataclass(frozen=True)
+class RobustOptions:
+    """Kernel name and its threshold ``delta`` on the Mahalanobis norm ``sqrt(eᵀΩe)``."""
+
+    kernel: str = "huber"
+    delta: float = 0.05
+
+
+@dataclass(frozen=True)
+class InformationWeights:
+    """Diagonal of Ω: weight of the x/y error (1/m²) and of the angle error (1/rad²)."""
+
+    translation: float = 1.0
+    rotation: float = 1.0
+
+    def omega(self) -> tuple[float, float, float]:
+        return (self.translation, self.translation, self.rotation)
+
+
+@dataclass(frozen=True)
+class ValidationOptions:
+    """``holdout_fraction``: trailing fraction of the records kept out of the fit and scored."""
+
+    holdout_fraction: float | None = None
+    rpe_window: int = 25
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A Gaussian prior on one parameter."""
+
+    mean: float
+    std: float
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A calibration run: data, model, residual form, kernel, solvers and their options."""
+
+    name: str
+    dataset: Path
+    path: Path | None = None
+    model: str = "tricycle"
+    samples: SampleSelection = field(default_factory=SampleSelection)
+    initial_guess: str | Mapping[str, float] = "from_file"
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    robust: RobustOptions = field(default_factory=RobustOptions)
+    residual: ResidualOptions = field(default_factory=ResidualOptions)
+    information: InformationWeights = field(default_factory=InformationWeights)
+    solvers: tuple[str, ...] = SOLVERS
+    gauss_newton: GaussNewtonOptions = field(default_factory=GaussNewtonOptions)
+    ipopt: IpoptOptions = field(default_factory=IpoptOptions)
+    validation: ValidationOptions = field(default_factory=ValidationOptions)
+    fixed: tuple[str, ...] = ()
+    priors: Mapping[str, Prior] = field(default_factory=dict)
+    strict: bool = True
+    backend: str = "interpreted"
+
+    def with_dataset(self, path: str | Path) -> Scenario:
+        """The same scenario on another log (``--data``)."""
+        return dataclasses.replace(self, dataset=Path(path))
+
+
+# Keys the YAML may hold at top level ('path' is where the file was, not a key).
+_TOP_KEYS = tuple(f.name for f in dataclasses.fields(Scenario) if f.name != "path")
+
+
+def _check_choice(value: str, choices: typing.Iterable[str], where: str) -> None:
+    choices = tuple(choices)
+    if value not in choices:
+        fail(where, f"{value!r} is not one of {', '.join(choices)}")
+
+
+def scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | None = None) -> Scenario:
+    """Validate a parsed YAML mapping; relative dataset paths resolve against ``base_dir``."""
+    if not isinstance(raw, Mapping):
+        fail(
+            source,
+            f"expected a mapping of scenario keys ({', '.join(_TOP_KEYS)}), got {type(raw).__name__}",
+        )
+    for key in raw:
+        if key not in _TOP_KEYS:
+            fail(f"{source}: {key}", f"unknown key; valid keys are {', '.join(_TOP_KEYS)}")
+    if "dataset" not in raw:
+        fail(source, "the key 'dataset' (path of the log, relative to this file) is required")
+    hints = typing.get_type_hints(Scenario)
+    values = {k: coerce(v, hints[k], f"{source}: {k}") for k, v in raw.items()}
+    values.setdefault("name", Path(source).stem)
+    dataset = values["dataset"]
+    values["dataset"] = dataset if dataset.is_absolute() else base_dir / dataset
+    sc = Scenario(path=path, **values)
+    _validate(sc, source)
+    return sc
+
+
+def _validate(sc: Scenario, source: str) -> None:
+    _check_choice(sc.model, MODELS, f"{source}: model")
+    names = param_names(get_model(sc.model))
+    _check_choice(sc.robust.kernel, KERNELS, f"{source}: robust.kernel")
+    if not sc.robust.delta > 0:
+        fail(f"{source}: robust.delta", f"must be > 0, got {sc.robust.delta}")
+    r = sc.residual
+    if r.horizon < 1 or r.stride < 1:
+        fail(
+            f"{source}: residual",
+            f"horizon and stride must be >= 1, got {r.horizon} and {r.stride}",
+        )
+    _check_choice(r.integration, INTEGRATIONS, f"{source}: residual.integration")
+    _check_choice(r.steering_sample, STEERING_SAMPLES, f"{source}: residual.steering_sample")
+    w = sc.information
+    if not (w.translation > 0 and w.rotation > 0):
+        fail(f"{source}: information", "translation and rotation weights must be > 0")
+    if not sc.solvers:
+        fail(f"{source}: solvers", f"list at least one of {', '.join(SOLVERS)}")
+    for s in sc.solvers:
+        _check_choice(s, SOLVERS, f"{source}: solvers")
+    _check_choice(sc.backend, BACKENDS, f"{source}: backend")
+    sel = sc.samples
+    if sel.start < 0 or (sel.stop is not None and sel.stop <= sel.start + 1):
+        fail(f"{source}: samples", f"need 0 <= start < stop - 1, got start={sel.start} stop={sel.stop}")
+    hf = sc.validation.holdout_fraction
+    if hf is not None and not 0.0 < hf < 1.0:
+        fail(f"{source}: validation.holdout_fraction", f"must lie in (0, 1), got {hf}")
+    if sc.validation.rpe_window < 1:
+        fail(f"{source}: validation.rpe_window", "must be >= 1")
+    if isinstance(sc.initial_guess, str):
+        _check_choice(sc.initial_guess, ("from_file", "auto"), f"{source}: initial_guess")
+    else:
+        for n in sc.initial_guess:
+            _check_choice(n, names, f"{source}: initial_guess")
+    for n, (lo, hi) in sc.bounds.items():
+        _check_choice(n, names, f"{source}: bounds")
+        if not lo < hi:
+            fail(f"{source}: bounds.{n}", f"needs lo < hi, got [{lo}, {hi}]")
+    for n in sc.fixed:
+        _check_choice(n, names, f"{source}: fixed")
+    if len(set(sc.fixed)) == len(names):
+        fail(f"{source}: fixed", "every parameter is fixed; nothing is left to estimate")
+    for n, prior in sc.priors.items():
+        _check_choice(n, names, f"{source}: priors")
+        if not prior.std > 0:
+            fail(f"{source}: priors.{n}.std", f"must be > 0, got {prior.std}")
+        if n in sc.fixed:
+            fail(f"{source}: priors.{n}", "a fixed parameter cannot also have a prior; drop one")
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file."""
+    p = Path(path)
+    return scenario_from_mapping(read_yaml(p, "scenario"), str(p), p.parent, p)

@@ -1,0 +1,58 @@
+"""What a kinematic model provides to the rest of the package.
+
+A model is one small module: its parameter names, how raw encoder readings become per-interval
+inputs (numeric, once per dataset), and the symbolic base-link increment those inputs produce.
+The builder, both solvers, code generation and the reports use it only through this protocol.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Protocol
+
+import casadi as ca
+import numpy as np
+
+from nlp_calib.io.logfile import Dataset
+
+#: The sensor mounting pose ``T_base_sensor`` closes every parameter vector, in this order.
+SENSOR_PARAMS: tuple[str, str, str] = ("sensor_x", "sensor_y", "sensor_theta")
+
+INTEGRATIONS = ("exact", "euler")
+STEERING_SAMPLES = ("start", "end", "mean")
+
+
+class KinematicModel(Protocol):
+    """A wheeled base: parameters, encoder inputs and the symbolic SE(2) increment."""
+
+    #: Name used in scenarios (``model:``).
+    name: str
+    #: ``#kinematic_model:`` values of logs this model reads.
+    log_names: tuple[str, ...]
+    #: Kinematic parameter names, in state order (the sensor pose follows them).
+    kinematic_params: tuple[str, ...]
+    #: Names of the per-interval inputs :meth:`inputs` returns, in row order.
+    input_names: tuple[str, ...]
+    #: Plausible ranges, used to reject absurd initial guesses and as basin-study ranges.
+    physical_ranges: Mapping[str, tuple[float, float]]
+
+    def increment(self, k: ca.SX, u: ca.SX, integration: str) -> ca.SX:
+        """Base-link motion ``(x, y, theta)`` over one interval for parameters ``k``, inputs ``u``."""
+        ...
+
+    def inputs(self, dataset: Dataset, steering_sample: str) -> np.ndarray:
+        """Per-interval inputs, ``(len(input_names), n_records - 1)``, from the raw encoders."""
+        ...
+
+    def moving(self, inputs: np.ndarray) -> np.ndarray:
+        """Boolean mask of intervals in which the encoders report motion."""
+        ...
+
+    def input_noise_std(self, dataset: Dataset) -> np.ndarray:
+        """Default 1σ noise of each input row (from the encoder resolution)."""
+        ...
+
+
+def param_names(model: KinematicModel) -> tuple[str, ...]:
+    """The full state order: kinematic parameters then the sensor pose."""
+    return (*model.kinematic_params, *SENSOR_PARAMS)

@@ -1,0 +1,51 @@
+"""The result structure both solvers return."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class IterationRecord:
+    """One solver iteration. Fields a solver does not track are ``nan``."""
+
+    iteration: int
+    cost: float
+    chi2: float = float("nan")
+    inliers: int = -1
+    step_norm: float = float("nan")
+    damping: float = float("nan")
+    accepted: bool = True
+    constraint_violation: float = float("nan")
+    dual_infeasibility: float = float("nan")
+
+
+@dataclass(frozen=True)
+class SolverResult:
+    """What a solve produced; ``converged`` is False with a ``reason`` whenever it failed.
+
+    ``params`` is the full parameter vector in ``names`` order (fixed ones included); ``x`` the
+    free part the solver moved.
+    """
+
+    solver: str
+    names: tuple[str, ...]
+    params: np.ndarray
+    x: np.ndarray
+    cost: float
+    chi2: float
+    inliers: int
+    n_residuals: int
+    iterations: int
+    converged: bool
+    reason: str
+    time_s: float
+    history: tuple[IterationRecord, ...] = ()
+    stats: Mapping[str, Any] = field(default_factory=dict)
+
+    def param_dict(self) -> dict[str, float]:
+        return {n: float(v) for n, v in zip(self.names, self.params)}

@@ -1,0 +1,52 @@
+"""Shared fixtures and helpers."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nlp_calib.simulate import SimulationOptions, simulate, write_simulation
+
+REPO = Path(__file__).resolve().parents[1]
+SCENARIOS = REPO / "scenarios"
+REAL_LOG = Path(os.environ.get("NLP_CALIB_REAL_LOG", REPO.parent / "shared" / "data" / "dataset.txt"))
+
+
+def assert_close(
+    actual: object, expected: object, *, rtol: float = 1e-9, atol: float = 0.0, what: str = ""
+) -> None:
+    """``np.testing.assert_allclose`` that also fails when either side holds NaN or infinity."""
+    a = np.asarray(actual, dtype=float)
+    e = np.asarray(expected, dtype=float)
+    assert np.all(np.isfinite(a)), f"{what}: non-finite values in actual: {a}"
+    assert np.all(np.isfinite(e)), f"{what}: non-finite values in expected: {e}"
+    np.testing.assert_allclose(a, e, rtol=rtol, atol=atol, err_msg=what)
+
+
+@pytest.fixture(scope="session")
+def real_log() -> Path:
+    if not REAL_LOG.is_file():
+        pytest.skip(f"the real log is not at {REAL_LOG} (set NLP_CALIB_REAL_LOG to its path)")
+    return REAL_LOG
+
+
+def write_sim(tmp_path: Path, name: str = "sim.txt", **kwargs: object) -> Path:
+    """Simulate a log with the given options into ``tmp_path``; returns its path."""
+    log, _ = write_simulation(simulate(SimulationOptions(**kwargs)), tmp_path / name)  # type: ignore[arg-type]
+    return log
+
+
+@pytest.fixture(scope="session")
+def noiseless_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A short simulated log without tracker noise, jitter-free, with the wrap."""
+    return write_sim(
+        tmp_path_factory.mktemp("noiseless"),
+        records=800,
+        seed=3,
+        tracker_noise_xy=0.0,
+        tracker_noise_theta=0.0,
+        jitter_s=0.0,
+    )
