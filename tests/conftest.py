@@ -12,7 +12,20 @@ from nlp_calib.simulate import SimulationOptions, simulate, write_simulation
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"
-REAL_LOG = Path(os.environ.get("NLP_CALIB_REAL_LOG", REPO.parent / "shared" / "data" / "dataset.txt"))
+
+
+def _find_real_log() -> Path:
+    """``$NLP_CALIB_REAL_LOG``, else ``shared/data/dataset.txt`` beside the checkout or above it."""
+    if "NLP_CALIB_REAL_LOG" in os.environ:
+        return Path(os.environ["NLP_CALIB_REAL_LOG"])
+    for parent in REPO.parents:
+        candidate = parent / "shared" / "data" / "dataset.txt"
+        if candidate.is_file():
+            return candidate
+    return REPO.parent / "shared" / "data" / "dataset.txt"
+
+
+REAL_LOG = _find_real_log()
 
 
 def assert_close(

@@ -92,7 +92,7 @@ def test_arc_matches_closed_form(d: float, w: float) -> None:
     if abs(w) > 1e-3:
         expected = [d * np.sin(w) / w, d * (1 - np.cos(w)) / w, w]
     else:
-        expected = [d * (1 - w**2 / 6), d * w / 2, w]
+        expected = [d * (1 - w**2 / 6 + w**4 / 120), d * (w / 2 - w**3 / 24), w]
     assert_close(got, expected, atol=1e-12)
 
 
