@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
+from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
 from nlp_calib.analysis.metrics import TrajectoryMetrics, trajectory_metrics
-from nlp_calib.data import ResidualData, build_residual_data
+from nlp_calib.data import ResidualData, build_residual_data, shift_encoders
 from nlp_calib.errors import ModelError, ScenarioError
 from nlp_calib.io.logfile import Dataset, read_log
 from nlp_calib.io.scenario import Scenario
@@ -55,6 +56,8 @@ class CalibrationRun:
     setup_time_s: float
     n_residuals: int
     dropped_stationary: int
+    tracker_lag_s: float = 0.0
+    lag_estimate: LagEstimate | None = None
     warnings: tuple[str, ...] = field(default=())
 
 
@@ -85,22 +88,17 @@ class Calibration:
         t0 = time.perf_counter()
         self.scenario = sc = scenario
         self.model = get_model(sc.model)
-        self.dataset = dataset if dataset is not None else read_log(sc.dataset, strict=sc.strict)
-        if self.dataset.header.kinematic_model not in self.model.log_names:
+        self.log = dataset if dataset is not None else read_log(sc.dataset, strict=sc.strict)
+        if self.log.header.kinematic_model not in self.model.log_names:
             raise ModelError(
-                f"{self.dataset.path}: the log is of kind {self.dataset.header.kinematic_model!r}, "
+                f"{self.log.path}: the log is of kind {self.log.header.kinematic_model!r}, "
                 f"but the scenario's model {sc.model!r} reads {list(self.model.log_names)}"
             )
-        n = self.dataset.n_records
+        n = self.log.n_records
         start = sc.samples.start
         stop = n if sc.samples.stop is None else sc.samples.stop
         if stop > n or start >= stop - 1:
             raise ScenarioError(f"samples: the range [{start}, {stop}) does not fit the log's {n} records")
-        self.used = (start, stop)
-        self.selected = self.dataset.select(start, stop)
-        hf = sc.validation.holdout_fraction
-        split = stop if hf is None else start + round((1.0 - hf) * (stop - start))
-        self.fit = (start, split)
         self.fns: ProblemFunctions = build(
             self.model,
             ProblemSpec(
@@ -110,34 +108,78 @@ class Calibration:
                 fixed=sc.fixed,
             ),
         )
-        fit_data = self.dataset.select(start, split)
-        self.data: ResidualData = build_residual_data(
-            self.fns, fit_data, sc.residual, drop_stationary=sc.samples.drop_stationary
-        )
-        if self.data.n_residuals < len(self.fns.free):
-            raise ScenarioError(
-                f"only {self.data.n_residuals} residuals in records [{start}, {split}) for "
-                f"{len(self.fns.free)} parameters; widen 'samples' or shorten the horizon"
-            )
-        self.initial = initial_parameters(sc, self.dataset)
+        self.initial = initial_parameters(sc, self.log)
         self.x0 = np.array([self.initial[n] for n in self.fns.free])
-        x_fixed = np.array([self.initial[n] for n in self.fns.fixed])
+        self.x_fixed = np.array([self.initial[n] for n in self.fns.fixed])
         self.lower, self.upper = self._bounds()
-        priors = Priors(
+        self.priors = Priors(
             mean=np.array([sc.priors[n].mean if n in sc.priors else 0.0 for n in self.fns.free]),
             sqrt_info=np.array([1.0 / sc.priors[n].std if n in sc.priors else 0.0 for n in self.fns.free]),
         )
-        self.evaluator = ProblemEvaluator(
+        self.backend = make_backend(BackendOptions(kind=sc.backend))
+        self._ipopt: IpoptSolver | None = None
+
+        self.lag_estimate: LagEstimate | None = None
+        lag = sc.alignment.tracker_lag
+        if lag == "auto":
+            self.lag_estimate = self._estimate_lag(start, stop)
+            lag = self.lag_estimate.lag_s
+        self.tracker_lag_s = float(lag)
+        self.dataset, valid = shift_encoders(self.log, self.tracker_lag_s)
+        start, stop = max(start, valid[0]), min(stop, valid[1])
+        self.used = (start, stop)
+        self.selected = self.dataset.select(start, stop)
+        self.fit = (start, self._split(start, stop))
+        self.data, self.evaluator = self.evaluator_for(self.dataset, *self.fit)
+        self.setup_time_s = time.perf_counter() - t0
+
+    def _split(self, start: int, stop: int) -> int:
+        hf = self.scenario.validation.holdout_fraction
+        return stop if hf is None else start + round((1.0 - hf) * (stop - start))
+
+    def evaluator_for(self, dataset: Dataset, start: int, stop: int) -> tuple[ResidualData, ProblemEvaluator]:
+        """Residual data of records ``start:stop`` of ``dataset`` and an evaluator bound to it."""
+        sc = self.scenario
+        data = build_residual_data(
+            self.fns, dataset.select(start, stop), sc.residual, drop_stationary=sc.samples.drop_stationary
+        )
+        if data.n_residuals < len(self.fns.free):
+            raise ScenarioError(
+                f"only {data.n_residuals} residuals in records [{start}, {stop}) for "
+                f"{len(self.fns.free)} parameters; widen 'samples' or shorten the horizon"
+            )
+        evaluator = ProblemEvaluator(
             self.fns,
-            self.data.columns,
-            x_fixed=x_fixed,
+            data.columns,
+            x_fixed=self.x_fixed,
             omega=np.array(sc.information.omega()),
             delta=sc.robust.delta,
-            priors=priors,
-            backend=make_backend(BackendOptions(kind=sc.backend)),
+            priors=self.priors,
+            backend=self.backend,
         )
-        self._ipopt: IpoptSolver | None = None
-        self.setup_time_s = time.perf_counter() - t0
+        return data, evaluator
+
+    def _estimate_lag(self, start: int, stop: int) -> LagEstimate:
+        """Grid search of the tracker lag by the Gauss-Newton fit cost on a common record range."""
+        al = self.scenario.alignment
+        reach = max(abs(al.search[0]), abs(al.search[1]))
+        t = self.log.time_s
+        first = max(start, int(np.searchsorted(t, t[0] + reach, side="left")))
+        last = min(stop, int(np.searchsorted(t, t[-1] - reach, side="right")))
+        split = self._split(first, last)
+        x_start = self.x0
+
+        def fit_cost(lag: float) -> float:
+            nonlocal x_start
+            shifted, _ = shift_encoders(self.log, lag)
+            _, ev = self.evaluator_for(shifted, first, split)
+            res = gauss_newton.solve(ev, x_start, self.scenario.gauss_newton)
+            if not res.converged:
+                return float("nan")
+            x_start = res.x
+            return res.cost
+
+        return estimate_lag(fit_cost, al.search, al.step)
 
     @classmethod
     def setup(cls, scenario: Scenario, data: str | Path | None = None) -> Calibration:
@@ -193,7 +235,7 @@ class Calibration:
         base, base_holdout = self.score(p0)
         return CalibrationRun(
             scenario=self.scenario,
-            dataset=self.dataset,
+            dataset=self.log,
             used=self.used,
             fit=self.fit,
             initial=dict(self.initial),
@@ -203,4 +245,6 @@ class Calibration:
             setup_time_s=self.setup_time_s,
             n_residuals=self.data.n_residuals,
             dropped_stationary=self.data.dropped_stationary,
+            tracker_lag_s=self.tracker_lag_s,
+            lag_estimate=self.lag_estimate,
         )

@@ -24,8 +24,15 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scenario", type=Path, help="scenario YAML file")
-    p.add_argument("--out", type=Path, default=None, help="output folder (default: out/<scenario name>)")
+    p.add_argument(
+        "scenario", type=Path, nargs="+", help="scenario YAML file(s); several are summarised side by side"
+    )
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="output folder (default: out/<scenario name>; with several scenarios, DIR/<scenario name>)",
+    )
     p.add_argument(
         "--data", type=Path, default=None, help="log file to use instead of the scenario's dataset"
     )
@@ -73,25 +80,30 @@ def build_parser() -> argparse.ArgumentParser:
 def _out_dir(args: argparse.Namespace, name: str) -> Path:
     from nlp_calib.io.files import prepare_output_dir
 
-    return prepare_output_dir(args.out if args.out is not None else Path("out") / name)
+    if args.out is None:
+        return prepare_output_dir(Path("out") / name)
+    return prepare_output_dir(args.out / name if len(args.scenario) > 1 else args.out)
 
 
 def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> int:
     from nlp_calib.calibration import Calibration
     from nlp_calib.io.results import write_result
     from nlp_calib.io.scenario import load_scenario
-    from nlp_calib.report.terminal import correlation_table, run_table
+    from nlp_calib.report.terminal import correlation_table, run_table, summary_table
 
-    scenario = load_scenario(args.scenario)
-    out = _out_dir(args, scenario.name)
-    calib = Calibration.setup(scenario, data=args.data)
-    run = calib.run(solvers)
-    print(run_table(run))
-    print()
-    print(correlation_table(run, next(iter(run.reports))))
-    path = write_result(run, out)
-    print(f"\nwrote {path}")
-    return 0 if all(r.result.converged for r in run.reports.values()) else 1
+    scenarios = [load_scenario(p) for p in args.scenario]  # validate all before any work
+    runs = []
+    for scenario in scenarios:
+        out = _out_dir(args, scenario.name)
+        run = Calibration.setup(scenario, data=args.data).run(solvers)
+        runs.append(run)
+        print(run_table(run))
+        print()
+        print(correlation_table(run, next(iter(run.reports))))
+        print(f"\nwrote {write_result(run, out)}\n")
+    if len(runs) > 1:
+        print(summary_table(runs))
+    return 0 if all(r.result.converged for run in runs for r in run.reports.values()) else 1
 
 
 def _cmd_run(args: argparse.Namespace) -> int:

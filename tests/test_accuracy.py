@@ -1,0 +1,214 @@
+"""Horizon residuals, trajectory metrics and the real-log accuracy targets (issue: accuracy)."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import SCENARIOS, assert_close
+
+from nlp_calib.analysis.metrics import trajectory_metrics
+from nlp_calib.calibration import Calibration
+from nlp_calib.data import ResidualOptions, build_residual_data, shift_encoders
+from nlp_calib.io.logfile import format_log, parse_log, read_log
+from nlp_calib.io.scenario import Scenario, ValidationOptions, load_scenario
+from nlp_calib.models import get_model
+from nlp_calib.simulate import SimulationOptions, simulate
+from nlp_calib.symbolic.builder import ProblemSpec, build
+
+MODEL = get_model("tricycle")
+TRUTH = np.array([0.55, 0.0105, 1.5, -0.05, 1.6, 0.1, 0.05])
+
+
+def mat(v: np.ndarray) -> np.ndarray:
+    x, y, t = v
+    return np.array([[np.cos(t), -np.sin(t), x], [np.sin(t), np.cos(t), y], [0.0, 0.0, 1.0]])
+
+
+def vec(T: np.ndarray) -> np.ndarray:
+    return np.array([T[0, 2], T[1, 2], np.arctan2(T[1, 0], T[0, 0])])
+
+
+def base_increment(p: np.ndarray, revs: float, angle: float, exact: bool = True) -> np.ndarray:
+    """The bicycle increment written out in numpy, independently of the CasADi model."""
+    phi = p[0] * angle + p[3]
+    d = p[1] * revs
+    v, w = d * np.cos(phi), d * np.sin(phi) / p[2]
+    if not exact:
+        return mat(np.array([v, 0.0, w]))
+    if abs(w) < 1e-12:
+        return mat(np.array([v, 0.0, 0.0]))
+    return mat(np.array([v * np.sin(w) / w, v * (1 - np.cos(w)) / w, w]))
+
+
+def sensor_motion(p: np.ndarray, revs: float, angle: float, exact: bool = True) -> np.ndarray:
+    S = mat(p[4:7])
+    return np.linalg.inv(S) @ base_increment(p, revs, angle, exact) @ S
+
+
+@pytest.mark.parametrize("exact", [True, False])
+@pytest.mark.parametrize("H", [1, 2, 7])
+def test_horizon_residual_equals_numpy_composition(H: int, exact: bool) -> None:
+    fns = build(MODEL, ProblemSpec(horizon=H, integration="exact" if exact else "euler"))
+    rng = np.random.default_rng(H)
+    for _ in range(10):
+        revs = rng.uniform(-2, 2, H)
+        angles = rng.uniform(-2, 2, H)
+        z = rng.normal(0, 0.3, 3)
+        p = TRUTH + rng.normal(0, 0.05, 7)
+        h = np.eye(3)
+        for j in range(H):
+            h = h @ sensor_motion(p, revs[j], angles[j], exact)
+        expected = vec(np.linalg.inv(mat(z)) @ h)
+        data = np.concatenate([np.column_stack([revs, angles]).ravel(), z, [1.0]])
+        got = np.asarray(fns.residual(p, [], data)).ravel()
+        assert_close(got, expected, rtol=1e-10, atol=1e-12)
+
+
+def test_horizon_one_is_the_single_step_residual() -> None:
+    """H = 1 windows are exactly the per-interval residuals of consecutive records."""
+    sim = parse_log(simulate(SimulationOptions(records=60, seed=2)).text().splitlines())
+    fns = build(MODEL, ProblemSpec(horizon=1))
+    rd = build_residual_data(fns, sim, ResidualOptions(horizon=1))
+    e = np.asarray(fns.residual.map(rd.n_residuals)(TRUTH, [], rd.columns))
+    P, u = sim.T_world_sensor, MODEL.inputs(sim, "start")
+    for k in range(rd.n_residuals):
+        Z = np.linalg.inv(mat(P[k])) @ mat(P[k + 1])
+        expected = vec(np.linalg.inv(Z) @ sensor_motion(TRUTH, u[0, k], u[1, k]))
+        assert_close(e[:, k], expected, rtol=1e-10, atol=1e-12)
+
+
+def model_consistent_log(tmp_path: Path, records: int = 800) -> Path:
+    """A log whose tracker poses are the truth model integrated (numpy) on its own encoder ticks."""
+    sim = simulate(SimulationOptions(records=records, seed=9))
+    ds = parse_log(sim.text().splitlines())
+    u = MODEL.inputs(ds, "start")
+    T = mat(np.array([0.3, -0.2, 0.4]))
+    S = mat(TRUTH[4:7])
+    poses = [vec(T @ S)]
+    for k in range(u.shape[1]):
+        T = T @ base_increment(TRUTH, u[0, k], u[1, k])
+        poses.append(vec(T @ S))
+    text = format_log(sim.header, sim.time_ns, sim.ticks, sim.model_pose, np.array(poses), digits=17)
+    p = tmp_path / "consistent.txt"
+    p.write_text(text)
+    return p
+
+
+def test_ate_of_truth_on_noiseless_log_is_zero(tmp_path: Path) -> None:
+    ds = read_log(model_consistent_log(tmp_path))
+    fns = build(MODEL, ProblemSpec())
+    m = trajectory_metrics(fns, TRUTH, MODEL.inputs(ds, "start"), ds.T_world_sensor)
+    assert m.ate_max <= 1e-9, m
+    assert m.rpe_trans <= 1e-9 and m.rpe_rot <= 1e-9
+    wrong = TRUTH * np.array([1, 1.01, 1, 1, 1, 1, 1])
+    assert trajectory_metrics(fns, wrong, MODEL.inputs(ds, "start"), ds.T_world_sensor).ate_mean > 1e-3
+
+
+def test_ate_does_not_depend_on_where_the_record_range_starts(tmp_path: Path) -> None:
+    """Scoring records 300: of a log equals scoring a log that starts at record 300."""
+    log = SCENARIOS / "data" / "demo_tricycle.txt"
+    lines = log.read_text().splitlines()
+    header = [ln for ln in lines if ln.startswith("#")]
+    records = [ln for ln in lines if not ln.startswith("#")]
+    cut = tmp_path / "cut.txt"
+    cut.write_text("\n".join(header + records[300:]) + "\n")
+    sc = load_scenario(SCENARIOS / "demo.yaml")
+    later = Calibration(dataclasses.replace(sc, samples=dataclasses.replace(sc.samples, start=300)))
+    fresh = Calibration(dataclasses.replace(sc, dataset=cut))
+    p = np.array([later.initial[n] for n in later.fns.names]) * 1.01
+    a, _ = later.score(p)
+    b, _ = fresh.score(p)
+    assert a.records == b.records == 1200
+    assert_close([a.ate_mean, a.ate_max, a.ate_final], [b.ate_mean, b.ate_max, b.ate_final], rtol=1e-12)
+
+
+def test_stationary_windows_are_dropped_and_counted() -> None:
+    sc = load_scenario(SCENARIOS / "demo.yaml")
+    keep = Calibration(sc)
+    drop = Calibration(dataclasses.replace(sc, samples=dataclasses.replace(sc.samples, drop_stationary=True)))
+    assert drop.data.dropped_stationary > 0
+    assert drop.data.n_residuals + drop.data.dropped_stationary == keep.data.n_residuals
+
+
+def test_encoder_shift_by_whole_samples_reproduces_the_readings() -> None:
+    ds = read_log(SCENARIOS / "data" / "demo_tricycle.txt")
+    t = ds.time_s
+    lag = float(t[5] - t[4])  # not a whole sample everywhere: jitter; check the one record it is
+    shifted, valid = shift_encoders(ds, lag)
+    assert valid[0] >= 1
+    np.testing.assert_array_equal(shifted.ticks[5], ds.ticks[4])
+    assert shift_encoders(ds, 0.0)[0] is ds
+
+
+def test_tracker_lag_is_recovered_from_a_simulated_log(tmp_path: Path) -> None:
+    from nlp_calib.simulate import write_simulation
+
+    log, _ = write_simulation(
+        simulate(SimulationOptions(records=1500, seed=4, latency_s=0.06, tracker_noise_xy=0.001)),
+        tmp_path / "lag.txt",
+    )
+    sc = dataclasses.replace(
+        load_scenario(SCENARIOS / "demo.yaml"),
+        dataset=log,
+        alignment=dataclasses.replace(load_scenario(SCENARIOS / "demo.yaml").alignment, tracker_lag="auto"),
+    )
+    calib = Calibration(sc)
+    assert calib.lag_estimate is not None
+    assert calib.tracker_lag_s == pytest.approx(0.06, abs=0.012)
+
+
+@pytest.fixture(scope="module")
+def recommended(real_log: Path) -> tuple[Scenario, dict[str, float]]:
+    sc = load_scenario(SCENARIOS / "real_tricycle.yaml").with_dataset(real_log)
+    out: dict[str, float] = {}
+    full = Calibration(sc)
+    hold = Calibration(dataclasses.replace(sc, validation=ValidationOptions(holdout_fraction=0.4)))
+    for solver in ("gauss_newton", "ipopt"):
+        res = full.solve(solver)
+        assert res.converged, res.reason
+        out[f"ate_{solver}"] = full.score(res.params)[0].ate_mean
+        res_h = hold.solve(solver)
+        holdout = hold.score(res_h.params)[1]
+        assert holdout is not None
+        out[f"holdout_{solver}"] = holdout.ate_mean
+    return sc, out
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="not reached: traction-counter faults at t = 26, 41, 56 s lose counts that no calibration "
+    "can restore; the full-run ATE is 0.25 m (docs/accuracy.md, section 4)",
+)
+def test_recommended_real_scenario_full_run_ate_target(
+    recommended: tuple[Scenario, dict[str, float]],
+) -> None:
+    _, m = recommended
+    assert m["ate_gauss_newton"] <= 0.15 and m["ate_ipopt"] <= 0.15
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="not reached: the hold-out ATE is 0.103 m against 0.10 m (docs/accuracy.md, section 3)",
+)
+def test_recommended_real_scenario_holdout_target(recommended: tuple[Scenario, dict[str, float]]) -> None:
+    _, m = recommended
+    assert m["holdout_gauss_newton"] <= 0.10 and m["holdout_ipopt"] <= 0.10
+
+
+def test_recommended_real_scenario_does_not_regress(
+    recommended: tuple[Scenario, dict[str, float]], real_log: Path
+) -> None:
+    """Guards the figures measured in docs/accuracy.md (0.252 m and 0.103 m) against regressions."""
+    _, m = recommended
+    for solver in ("gauss_newton", "ipopt"):
+        assert m[f"ate_{solver}"] <= 0.26
+        assert m[f"holdout_{solver}"] <= 0.105
+    # The seed formulation's full-run error is an order of magnitude larger; the uncalibrated ~14 m.
+    seed = Calibration(load_scenario(SCENARIOS / "real_tricycle_seed.yaml").with_dataset(real_log))
+    res = seed.solve("gauss_newton")
+    assert 1.5 < seed.score(res.params)[0].ate_mean < 3.0
+    p0 = np.array([seed.initial[n] for n in seed.fns.names])
+    assert 13.0 < seed.score(p0)[0].ate_mean < 15.0
