@@ -27,6 +27,7 @@ from nlp_calib.io.scenario import (
     ValidationOptions,
     load_scenario,
 )
+from nlp_calib.report.progress import Progress
 from nlp_calib.solvers.result import SolverResult
 
 REPO = Path(__file__).resolve().parents[1]
@@ -129,9 +130,11 @@ def main() -> int:
         "sensor_theta | χ²/residual | ATE GN / IPOPT [m] | hold-out ATE [m] | GN [ms] | IPOPT [ms] |"
     )
     w("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    grid = {}
+    grid: dict[tuple[int, str], Evaluation] = {}
+    progress = Progress(10, sys.stderr, label="horizon x integration")  # silent unless a terminal
     for H in (1, 5, 10, 25, 50):
         for integ in ("exact", "euler"):
+            progress.update(len(grid), f"H={H} {integ}")
             sc = dataclasses.replace(
                 variant(base, horizon=H, integration=integ), alignment=AlignmentOptions()
             )
@@ -143,7 +146,7 @@ def main() -> int:
                 f"{ate['gauss_newton']:.3f} / {ate['ipopt']:.3f} | {r.holdout['gauss_newton']:.3f} | "
                 f"{1e3 * times['gauss_newton']:.0f} | {1e3 * times['ipopt']:.0f} |"
             )
-            print(f"H={H} {integ}: ATE {ate['gauss_newton']:.3f}", file=sys.stderr)
+    progress.clear()
     seed = grid[(1, "euler")]
     settled = grid[(25, "exact")].params["k_traction"]
     w("")

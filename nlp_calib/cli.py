@@ -36,6 +36,11 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--data", type=Path, default=None, help="log file to use instead of the scenario's dataset"
     )
+    p.add_argument(
+        "--report",
+        action="store_true",
+        help="also draw trajectory, convergence, residual and model-check figures and report.md",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -89,18 +94,33 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
     from nlp_calib.calibration import Calibration
     from nlp_calib.io.results import write_result
     from nlp_calib.io.scenario import load_scenario
+    from nlp_calib.report.handoff import write_handoff
+    from nlp_calib.report.progress import Progress
     from nlp_calib.report.terminal import correlation_table, run_table, summary_table
 
     scenarios = [load_scenario(p) for p in args.scenario]  # validate all before any work
     runs = []
-    for scenario in scenarios:
-        out = _out_dir(args, scenario.name)
-        run = Calibration.setup(scenario, data=args.data).run(solvers)
-        runs.append(run)
-        print(run_table(run))
-        print()
-        print(correlation_table(run, next(iter(run.reports))))
-        print(f"\nwrote {write_result(run, out)}\n")
+    with Progress(len(scenarios), sys.stderr, label="scenarios") as progress:
+        for i, scenario in enumerate(scenarios):
+            out = _out_dir(args, scenario.name)
+            progress.update(i, f"{scenario.name}: setting up and solving")
+            calib = Calibration.setup(scenario, data=args.data)
+            run = calib.run(solvers)
+            runs.append(run)
+            progress.clear()
+            print(run_table(run))
+            print()
+            print(correlation_table(run, next(iter(run.reports))))
+            written = [write_result(run, out), *write_handoff(run, out)]
+            if len(written) == 1:
+                print("warning: no solver converged; no calibration.yaml or URDF written", file=sys.stderr)
+            if args.report:
+                from nlp_calib.report.writer import write_report  # imports matplotlib
+
+                progress.update(i, f"{scenario.name}: drawing the report")
+                written += write_report(calib, run, out)
+                progress.clear()
+            print("\n" + "\n".join(f"wrote {p}" for p in written) + "\n")
     if len(runs) > 1:
         print(summary_table(runs))
     return 0 if all(r.result.converged for run in runs for r in run.reports.values()) else 1
