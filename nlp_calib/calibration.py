@@ -7,6 +7,7 @@ uncertainty and trajectory metrics per solver, next to the uncalibrated baseline
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -17,6 +18,7 @@ import numpy as np
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
 from nlp_calib.analysis.metrics import TrajectoryMetrics, trajectory_metrics
+from nlp_calib.analysis.observability import Observability, analyse
 from nlp_calib.data import ResidualData, build_residual_data, shift_encoders
 from nlp_calib.errors import ModelError, ScenarioError
 from nlp_calib.io.logfile import Dataset, read_log
@@ -58,22 +60,20 @@ class CalibrationRun:
     dropped_stationary: int
     tracker_lag_s: float = 0.0
     lag_estimate: LagEstimate | None = None
+    observability: Observability | None = None
     warnings: tuple[str, ...] = field(default=())
 
 
 def initial_parameters(scenario: Scenario, dataset: Dataset) -> dict[str, float]:
-    """The starting point: the log header's values, overridden by the scenario's mapping."""
+    """The log header's values, overridden by the scenario's mapping (``auto`` fills in later)."""
     model = get_model(scenario.model)
     header = dataset.header
     guess = {n: float(header.parameters[n]) for n in model.kinematic_params if n in header.parameters}
     guess.update(zip(SENSOR_PARAMS, header.T_base_sensor))
     if isinstance(scenario.initial_guess, Mapping):
         guess.update(scenario.initial_guess)
-    elif scenario.initial_guess == "auto":
-        raise ScenarioError(
-            "initial_guess: 'auto' is not available in this version; use from_file or a mapping"
-        )
-    missing = [n for n in (*model.kinematic_params, *SENSOR_PARAMS) if n not in guess]
+    needed = scenario.fixed if scenario.initial_guess == "auto" else (*model.kinematic_params, *SENSOR_PARAMS)
+    missing = [n for n in needed if n not in guess]
     if missing:
         raise ScenarioError(
             f"the log header gives no initial value for {missing}; set them under initial_guess"
@@ -109,15 +109,19 @@ class Calibration:
             ),
         )
         self.initial = initial_parameters(sc, self.log)
+        self.auto_guess: dict[str, float] | None = None
+        if sc.initial_guess == "auto":
+            self.auto_guess = self._auto_guess(start, self._split(start, stop))
+            self.initial.update({n: v for n, v in self.auto_guess.items() if n not in sc.fixed})
         self.x0 = np.array([self.initial[n] for n in self.fns.free])
         self.x_fixed = np.array([self.initial[n] for n in self.fns.fixed])
         self.lower, self.upper = self._bounds()
-        self.priors = Priors(
-            mean=np.array([sc.priors[n].mean if n in sc.priors else 0.0 for n in self.fns.free]),
-            sqrt_info=np.array([1.0 / sc.priors[n].std if n in sc.priors else 0.0 for n in self.fns.free]),
-        )
         self.backend = make_backend(BackendOptions(kind=sc.backend))
         self._ipopt: IpoptSolver | None = None
+        self.priors = Priors(np.zeros(len(self.fns.free)), np.zeros(len(self.fns.free)))
+        self.residual_sigma: float | None = None
+        if sc.priors:
+            self.priors = self._scaled_priors(start, self._split(start, stop))
 
         self.lag_estimate: LagEstimate | None = None
         lag = sc.alignment.tracker_lag
@@ -159,6 +163,42 @@ class Calibration:
         )
         return data, evaluator
 
+    def _scaled_priors(self, start: int, stop: int) -> Priors:
+        """Priors weighed against the data in the data's own noise units.
+
+        The data term ``Σ ρ(eᵀΩe)`` is not divided by the residual variance σ², so a prior
+        ``((x − μ)/std)²`` enters multiplied by σ², which is estimated (once, at set-up) from a
+        fit without priors. Both solvers then minimise ``σ²·(data/σ² + priors)``: a MAP estimate.
+        """
+        sc = self.scenario
+        _, ev = self.evaluator_for(self.log, start, stop)
+        res = gauss_newton.solve(ev, self.x0, sc.gauss_newton)
+        _, s, weight = ev.robust_terms(res.x)
+        sigma2 = float(np.sum(weight * s)) / max(3 * ev.n_residuals - len(self.fns.free), 1)
+        self.residual_sigma = float(np.sqrt(sigma2))
+        return Priors(
+            mean=np.array([sc.priors[n].mean if n in sc.priors else 0.0 for n in self.fns.free]),
+            sqrt_info=np.array(
+                [self.residual_sigma / sc.priors[n].std if n in sc.priors else 0.0 for n in self.fns.free]
+            ),
+        )
+
+    def _auto_guess(self, start: int, stop: int) -> dict[str, float]:
+        """The model's closed-form estimate from the fit records' windows (no guess needed)."""
+        data = build_residual_data(self.fns, self.log.select(start, stop), self.scenario.residual)
+        rows = self.fns.n_inputs * data.horizon
+        # Windows overlapping by three quarters carry nearly all the information at a fraction
+        # of the cost of every window.
+        step = max(1, data.horizon // (4 * self.scenario.residual.stride))
+        columns = data.columns[:, ::step]
+        predict = self.fns.predict_window.map(columns.shape[1])
+
+        def base_motion(params: Mapping[str, float]) -> np.ndarray:
+            p = np.array([params[n] for n in self.fns.names])
+            return np.asarray(predict(p, columns))
+
+        return self.model.initial_guess(columns[:rows], columns[rows : rows + 3], base_motion)
+
     def _estimate_lag(self, start: int, stop: int) -> LagEstimate:
         """Grid search of the tracker lag by the Gauss-Newton fit cost on a common record range."""
         al = self.scenario.alignment
@@ -198,14 +238,25 @@ class Calibration:
         return lower, upper
 
     def solve(self, solver: str) -> SolverResult:
-        """Run one solver from the initial guess."""
+        """Run one solver from the initial guess; the result is in the model's canonical form."""
         if solver == "gauss_newton":
-            return gauss_newton.solve(self.evaluator, self.x0, self.scenario.gauss_newton)
-        if solver == "ipopt":
+            result = gauss_newton.solve(self.evaluator, self.x0, self.scenario.gauss_newton)
+        elif solver == "ipopt":
             if self._ipopt is None:
                 self._ipopt = IpoptSolver(self.evaluator, self.scenario.ipopt)
-            return self._ipopt.solve(self.x0, self.lower, self.upper)
-        raise ScenarioError(f"unknown solver {solver!r}; valid solvers: gauss_newton, ipopt")
+            result = self._ipopt.solve(self.x0, self.lower, self.upper)
+        else:
+            raise ScenarioError(f"unknown solver {solver!r}; valid solvers: gauss_newton, ipopt")
+        return self._canonical(result)
+
+    def _canonical(self, result: SolverResult) -> SolverResult:
+        """``result`` mapped onto the model's canonical form (same cost: an exact symmetry)."""
+        canon = self.model.canonical(result.param_dict(), self.fns.fixed)
+        params = np.array([canon[n] for n in self.fns.names])
+        if np.array_equal(params, result.params):
+            return result
+        x = np.array([canon[n] for n in self.fns.free])
+        return dataclasses.replace(result, params=params, x=x)
 
     def score(self, params: np.ndarray) -> tuple[TrajectoryMetrics, TrajectoryMetrics | None]:
         """Full-range and hold-out trajectory metrics of ``params``."""
@@ -227,12 +278,20 @@ class Calibration:
             full, holdout = self.score(result.params)
             reports[name] = SolverReport(
                 result=result,
-                uncertainty=unc.estimate(self.evaluator, result.x),
+                uncertainty=unc.estimate(
+                    self.evaluator, result.x, self.data, self.model.input_noise_std(self.dataset)
+                ),
                 metrics=full,
                 holdout=holdout,
             )
         p0 = np.array([self.initial[n] for n in self.fns.names])
         base, base_holdout = self.score(p0)
+        first = next(iter(reports.values())).result
+        observability = analyse(self.evaluator, first.x, self.data.dataset.T_world_sensor)
+        warnings = list(observability.warnings)
+        warnings += [
+            f"{name}: {rep.result.reason}" for name, rep in reports.items() if not rep.result.converged
+        ]
         return CalibrationRun(
             scenario=self.scenario,
             dataset=self.log,
@@ -247,4 +306,6 @@ class Calibration:
             dropped_stationary=self.data.dropped_stationary,
             tracker_lag_s=self.tracker_lag_s,
             lag_estimate=self.lag_estimate,
+            observability=observability,
+            warnings=tuple(warnings),
         )

@@ -1,26 +1,44 @@
-"""Parameter covariance at the optimum from the robust-weighted normal matrix.
+"""Parameter covariance at the optimum, with the noise propagated through the correlated residuals.
 
-``Cov = σ² · M H⁻¹ Mᵀ`` with ``H = Σ ρ'·JᵀΩJ`` (manifold Jacobians), ``M`` the tangent map to
-plain parameter coordinates, and ``σ² = Σ ρ'·s / (m − n)`` the residual variance (``m`` scalar
-residuals, ``n`` free parameters). This assumes independent residuals whose scale is right up to
-the common factor σ², and a locally linear problem.
+Horizon windows share data: windows that meet share a tracker pose, windows that overlap share
+encoder intervals. Treating their residuals as independent (the classical ``σ²·H⁻¹``) is wrong
+both ways: tracker noise largely cancels along a chain of windows (consecutive errors
+telescope), input noise is counted several times. So the covariance is propagated from the
+sources instead, to first order:
+
+- each tracker pose carries white noise ``diag(σ_t², σ_t², σ_θ²)``;
+- each interval's model inputs carry white noise ``diag(σ_u²)`` (encoder quantisation by default).
+
+A residual is ``e_w ≈ E_w^a n_a + E_w^b n_b + Σ_j F_w^j m_j`` (``E = ∂e/∂z·∂z/∂p`` and
+``F = ∂e/∂u``, both symbolic), the Gauss-Newton estimate moves by ``−H⁻¹ Σ_w L_w e_w`` with
+``L_w = ρ'_w J_wᵀΩ``, so ``Cov = M H⁻¹ S H⁻¹ Mᵀ`` with ``S = Σ_p K_p Σ_p K_pᵀ + Σ_j Q_j Σ_u Q_jᵀ``,
+``K_p`` and ``Q_j`` summing ``L_w E_w`` and ``L_w F_w`` over the windows that touch pose ``p`` or
+interval ``j``. The tracker's variances are estimated from the squared residuals by
+non-negative least squares (method of moments, corrected for the fitted degrees of freedom); the
+input noise is given. ``M`` maps the manifold perturbation to plain parameter coordinates.
+
+Assumptions: white tracker-pose noise explains the residuals beyond the given input noise (no
+timing error or slowly varying model error), and the problem is close to linear within a few σ.
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
 
+from nlp_calib.analysis.reference import reference_scales
+from nlp_calib.data import ResidualData
 from nlp_calib.solvers.evaluation import ProblemEvaluator
 
 
 @dataclass(frozen=True)
 class Uncertainty:
-    """Covariance of the free parameters (plain coordinates) and derived figures.
+    """Covariance of the free parameters (plain coordinates) and the noise it was built from.
 
     ``std`` and ``correlation`` cover all parameters in model order; fixed ones have std 0 and
-    correlation 0 with the rest.
+    correlation 0 with the rest. ``noise`` holds the estimated 1σ of each source.
     """
 
     names: tuple[str, ...]
@@ -28,43 +46,122 @@ class Uncertainty:
     covariance: np.ndarray
     std: np.ndarray
     correlation: np.ndarray
-    sigma2: float
+    noise: dict[str, float]
     dof: int
 
     def std_dict(self) -> dict[str, float]:
         return {n: float(s) for n, s in zip(self.names, self.std)}
 
 
-def estimate(evaluator: ProblemEvaluator, x: np.ndarray) -> Uncertainty:
-    """Covariance of the estimate ``x`` (free parameters) of ``evaluator``'s problem."""
+def nnls_small(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Non-negative least squares for a handful of unknowns (exhaustive active sets)."""
+    k = A.shape[1]
+    best, best_cost = np.zeros(k), float(y @ y)
+    for size in range(1, k + 1):
+        for cols in itertools.combinations(range(k), size):
+            sol, *_ = np.linalg.lstsq(A[:, cols], y, rcond=None)
+            if np.all(sol >= 0):
+                full = np.zeros(k)
+                full[list(cols)] = sol
+                r = A @ full - y
+                if r @ r < best_cost:
+                    best, best_cost = full, float(r @ r)
+    return best
+
+
+def _pseudo_inverse(H: np.ndarray, scale: np.ndarray, rcond: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of ``H`` on the subspace the data determine, and a mask of the parameters in the rest.
+
+    The eigen-analysis runs in reference units (``scale``), where an undetermined direction
+    stands out cleanly whatever the parameters' units.
+    """
+    lam, V = np.linalg.eigh(H * np.outer(scale, scale))
+    keep = lam > rcond * max(float(lam[-1]), 1e-300)
+    inv = (V[:, keep] / lam[keep]) @ V[:, keep].T * np.outer(scale, scale)
+    undetermined = (V[:, ~keep] ** 2).sum(axis=1) > 1e-3
+    return inv, undetermined
+
+
+def estimate(
+    evaluator: ProblemEvaluator, x: np.ndarray, data: ResidualData, input_noise_std: np.ndarray
+) -> Uncertainty:
+    """Covariance of the estimate ``x`` fitted to ``data``, given the inputs' 1σ noise."""
     fns = evaluator.fns
-    ne = evaluator.normal_equations(x)
-    _, s, weight = evaluator.robust_terms(x)
-    n = fns.n_free
-    dof = max(3 * evaluator.n_residuals - n, 1)
-    sigma2 = float(np.sum(weight * s) / dof)
+    n, N, H = fns.n_free, evaluator.n_residuals, data.horizon
+    n_in = fns.n_inputs
+    rows = fns.data_rows
+    e, s, weight, _ = evaluator.residual_terms(x)
+    sens, jac = (
+        np.asarray(v)
+        for v in evaluator.mapped("sensitivities", reduce=False)(x, evaluator.x_fixed, evaluator.data)
+    )
+    de_ddata = sens.reshape(3, -1, rows)[:, :N]  # (3, N, rows)
+    J = jac.reshape(3, -1, n)[:, :N]  # (3, N, n)
+    poses = data.dataset.T_world_sensor
+    a_idx, b_idx = data.starts, data.starts + H
+    Da, Db = (
+        np.asarray(v).reshape(3, N, 3) for v in fns.between_jacobians.map(N)(poses[a_idx].T, poses[b_idx].T)
+    )
+    de_dz = de_ddata[:, :, n_in * H : n_in * H + 3]
+    Ea = np.einsum("cwk,kwl->wcl", de_dz, Da)  # (N, 3, 3)
+    Eb = np.einsum("cwk,kwl->wcl", de_dz, Db)
+    F = de_ddata[:, :, : n_in * H].reshape(3, N, H, n_in).transpose(1, 2, 0, 3)  # (N, H, 3, n_in)
+
+    # Input noise is known (encoder resolution, or set by the user); the tracker's two variances
+    # follow from the squared residuals by the method of moments, on inliers only. Estimating the
+    # input noise the same way is ill-posed: its share of the residuals is small, its effect on the
+    # parameters is not (it does not telescope), so residual noise would masquerade as it.
+    Sigma_in = np.asarray(input_noise_std, dtype=float) ** 2
+    use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(N, dtype=bool)
+    E2 = Ea**2 + Eb**2  # (N, 3, 3): per residual component c, pose component k
+    coef = np.concatenate([E2[:, :, :2].sum(axis=2, keepdims=True), E2[:, :, 2:3]], axis=2)  # (N, 3, 2)
+    known = np.einsum("whci,i->wc", F**2, Sigma_in)
+    m = 3 * int(use.sum())
+    dof = max(m - n, 1)
+    var = nnls_small(coef[use].reshape(-1, 2), (e.T[use] ** 2 - known[use]).ravel()) * (m / dof)
+    Sigma_pose = np.array([var[0], var[0], var[1]])
+
+    Omega = evaluator.omega
+    L = weight[:, None, None] * np.einsum("cwi,c->wic", J, Omega)  # (N, n, 3)
+    n_poses = poses.shape[0]
+    K = np.zeros((n_poses, n, 3))
+    np.add.at(K, a_idx, np.einsum("wic,wcl->wil", L, Ea))
+    np.add.at(K, b_idx, np.einsum("wic,wcl->wil", L, Eb))
+    Q = np.zeros((data.inputs.shape[1], n, n_in))
+    intervals = data.starts[:, None] + np.arange(H)[None, :]
+    np.add.at(Q, intervals.ravel(), np.einsum("wic,whcl->whil", L, F).reshape(-1, n, n_in))
+    meat = np.einsum("pik,k,pjk->ij", K, Sigma_pose, K) + np.einsum("jik,k,jlk->il", Q, Sigma_in, Q)
+    # Residuals beyond the kernel threshold are not explained by the noise model; their bounded
+    # but non-zero pull is counted as it is, from their own scores.
+    if not use.all():
+        g_out = np.einsum("wic,cw->iw", L[~use], e[:, ~use])
+        meat = meat + g_out @ g_out.T
+    if evaluator.priors.active:
+        meat = meat + evaluator.prior_information(x)
+    free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[
+        [fns.names.index(f) for f in fns.free]
+    ]
+    bread_inv, undetermined = _pseudo_inverse(
+        evaluator.normal_equations(x).H, reference_scales(fns.free, free_values)
+    )
     M = np.asarray(fns.tangent_map(x))
-    try:
-        H_inv = np.linalg.inv(ne.H)
-    except np.linalg.LinAlgError:
-        H_inv = np.full_like(ne.H, np.inf)
-    cov = sigma2 * M @ H_inv @ M.T
+    cov = M @ bread_inv @ meat @ bread_inv @ M.T
+    # A parameter the data do not determine has no finite variance; say so instead of a number.
+    lost = np.abs(M) @ undetermined > 0
+    cov[lost, :] = np.inf
+    cov[:, lost] = np.inf
     names = fns.names
     idx = [names.index(f) for f in fns.free]
     full = np.zeros((len(names), len(names)))
     full[np.ix_(idx, idx)] = cov
     std = np.sqrt(np.clip(np.diag(full), 0.0, None))
     with np.errstate(divide="ignore", invalid="ignore"):
-        corr = full / np.outer(std, std)
+        corr = np.where(np.isfinite(full), full, 0.0) / np.outer(std, std)
     corr[~np.isfinite(corr)] = 0.0
     for i in idx:
         corr[i, i] = 1.0
+    noise = {"tracker_xy": float(np.sqrt(var[0])), "tracker_theta": float(np.sqrt(var[1]))}
+    noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
     return Uncertainty(
-        names=names,
-        free=fns.free,
-        covariance=cov,
-        std=std,
-        correlation=corr,
-        sigma2=sigma2,
-        dof=dof,
+        names=names, free=fns.free, covariance=cov, std=std, correlation=corr, noise=noise, dof=dof
     )

@@ -37,7 +37,7 @@ def _solver_dict(report: SolverReport) -> dict[str, Any]:
         "converged": r.converged,
         "reason": r.reason,
         "time_s": r.time_s,
-        "sigma2": u.sigma2,
+        "noise": u.noise,
         "metrics": _metrics_dict(report.metrics, report.holdout),
         "history": [
             {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in h.__dict__.items()}
@@ -69,8 +69,10 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
             "estimate": run.lag_estimate.as_dict() if run.lag_estimate is not None else None,
         },
         "initial": dict(run.initial),
+        "initial_guess": sc.initial_guess if isinstance(sc.initial_guess, str) else "mapping",
         "baseline": {"metrics": _metrics_dict(run.baseline, run.baseline_holdout)},
         "solvers": {name: _solver_dict(rep) for name, rep in run.reports.items()},
+        "observability": run.observability.as_dict() if run.observability is not None else None,
         "warnings": list(run.warnings),
     }
 
@@ -85,9 +87,26 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"cannot serialise {type(obj).__name__}")
 
 
+def finite_or_null(obj: Any) -> Any:
+    """The same structure with NaN and infinities as ``None`` (JSON has no such numbers)."""
+    if isinstance(obj, float | np.floating):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: finite_or_null(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [finite_or_null(v) for v in obj]
+    return obj
+
+
+def result_document(run: CalibrationRun) -> dict[str, Any]:
+    """The ``result.json`` document as plain JSON types, exactly as the file stores it."""
+    doc: dict[str, Any] = json.loads(json.dumps(finite_or_null(result_dict(run)), default=_json_default))
+    return doc
+
+
 def write_result(run: CalibrationRun, out_dir: Path) -> Path:
     """Write ``out_dir/result.json`` atomically and return its path."""
     path = out_dir / RESULT_FILE
-    text = json.dumps(result_dict(run), indent=2, default=_json_default, allow_nan=False)
+    text = json.dumps(result_document(run), indent=2, allow_nan=False)
     atomic_write_text(path, text + "\n")
     return path

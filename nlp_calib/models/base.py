@@ -7,7 +7,7 @@ The builder, both solvers, code generation and the reports use it only through t
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Protocol
 
 import casadi as ca
@@ -50,6 +50,23 @@ class KinematicModel(Protocol):
 
     def input_noise_std(self, dataset: Dataset) -> np.ndarray:
         """Default 1σ noise of each input row (from the encoder resolution)."""
+        ...
+
+    def canonical(self, params: Mapping[str, float], fixed: tuple[str, ...] = ()) -> dict[str, float]:
+        """The same physical calibration in the model's canonical form (positive gains, wrapped
+        angles); parameters in ``fixed`` are left as they are."""
+        ...
+
+    def initial_guess(
+        self,
+        U: np.ndarray,
+        z: np.ndarray,
+        base_motion: Callable[[Mapping[str, float]], np.ndarray],
+    ) -> dict[str, float]:
+        """All parameters from horizon windows (inputs ``U``, sensor motions ``z``), no guess needed.
+
+        ``base_motion(params)`` evaluates the windows' base motion ``(3, M)`` for given parameters.
+        """
         ...
 
 

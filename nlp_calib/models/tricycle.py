@@ -7,12 +7,13 @@ Parameters ``(k_steer, k_traction, axis_length, steer_offset)``; inputs per inte
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from types import MappingProxyType
 
 import casadi as ca
 import numpy as np
 
+from nlp_calib.analysis.initialization import hand_eye, robust_lstsq
 from nlp_calib.errors import ModelError
 from nlp_calib.io.logfile import Dataset
 from nlp_calib.models.base import STEERING_SAMPLES
@@ -89,3 +90,90 @@ class Tricycle:
         s_max = header.encoder_max[header.encoder_index(STEERING_ENCODER)]
         t_max = header.encoder_max[header.encoder_index(TRACTION_ENCODER)]
         return np.array([1.0 / t_max, 2.0 * np.pi / s_max]) / np.sqrt(12.0)
+
+    def canonical(self, params: Mapping[str, float], fixed: tuple[str, ...] = ()) -> dict[str, float]:
+        """The same physical calibration with ``k_traction > 0``, ``axis_length > 0`` and angles
+        wrapped onto (-π, π].
+
+        The model has two exact symmetries: ``(k_traction, steer_offset) → (−k_traction,
+        steer_offset + π)`` (the wheel turned round and counting backwards), and ``(axis_length,
+        steer_offset, T_base_sensor) → (−axis_length, steer_offset + π, R(π)·T_base_sensor)``
+        (the base frame turned round). A solver may land on either image; both mean the same robot.
+        Parameters in ``fixed`` are never changed, so a symmetry that would move them is skipped.
+        """
+        p = dict(params)
+        if p["axis_length"] < 0 and not {
+            "axis_length",
+            "steer_offset",
+            "sensor_x",
+            "sensor_y",
+            "sensor_theta",
+        } & set(fixed):
+            p["axis_length"] = -p["axis_length"]
+            p["steer_offset"] += np.pi
+            p["sensor_x"], p["sensor_y"] = -p["sensor_x"], -p["sensor_y"]
+            p["sensor_theta"] += np.pi
+        if p["k_traction"] < 0 and not {"k_traction", "steer_offset"} & set(fixed):
+            p["k_traction"] = -p["k_traction"]
+            p["steer_offset"] += np.pi
+        for name in ("steer_offset", "sensor_theta"):
+            if name not in fixed:
+                p[name] = float(_wrap(np.array(p[name])))
+        return p
+
+    def initial_guess(
+        self,
+        U: np.ndarray,
+        z: np.ndarray,
+        base_motion: Callable[[Mapping[str, float]], np.ndarray],
+    ) -> dict[str, float]:
+        """Closed-form start from windows: inputs ``U (2H, M)``, sensor motions ``z (3, M)``.
+
+        Heading changes give ``k_steer``, ``steer_offset`` and ``c = k_traction/axis_length``
+        (``Δθ = c·Σ r·sin(k_steer·a + offset)``: a 1-D search over ``k_steer``, linear in the
+        rest); the hand-eye step then gives the sensor pose and ``k_traction``.
+        """
+        revs, angle = U[0::2], U[1::2]
+        dtheta = z[2]
+
+        def design(k_steer: float) -> np.ndarray:
+            return np.stack(
+                [(revs * np.sin(k_steer * angle)).sum(0), (revs * np.cos(k_steer * angle)).sum(0)], 1
+            )
+
+        def rss(k_steer: float) -> float:
+            A = design(k_steer)
+            coef, *_ = np.linalg.lstsq(A, dtheta, rcond=None)
+            r = dtheta - A @ coef
+            return float(np.sum(np.minimum(r * r, 9.0 * np.median(r * r))))  # trimmed: outliers
+
+        lo, hi = self.physical_ranges["k_steer"]
+        grid = np.geomspace(lo, hi, 200)
+        best = int(np.argmin([rss(float(k)) for k in grid]))
+        a, b = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
+        for _ in range(40):  # golden-section refinement between the grid neighbours
+            m1, m2 = a + 0.382 * (b - a), a + 0.618 * (b - a)
+            a, b = (a, m2) if rss(m1) < rss(m2) else (m1, b)
+        k_steer = 0.5 * (a + b)
+        alpha, beta = robust_lstsq(design(k_steer), dtheta)
+        c = float(np.hypot(alpha, beta))
+        offset = float(np.arctan2(beta, alpha))
+        unit = {
+            "k_steer": k_steer,
+            "k_traction": 1.0,
+            "axis_length": 1.0 / max(c, 1e-9),
+            "steer_offset": offset,
+        }
+        unit.update({"sensor_x": 0.0, "sensor_y": 0.0, "sensor_theta": 0.0})
+        base = base_motion(unit)
+        he = hand_eye(base[2], base[:2], z)
+        x, y, theta = he.T_base_sensor
+        return {
+            "k_steer": k_steer,
+            "k_traction": he.scale,
+            "axis_length": he.scale / max(c, 1e-9),
+            "steer_offset": offset,
+            "sensor_x": x,
+            "sensor_y": y,
+            "sensor_theta": theta,
+        }

@@ -8,19 +8,17 @@ Nothing time-dependent is written: the same run gives the same bytes.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree as ET
 
-import numpy as np
 import yaml
 
 from nlp_calib import __version__
 from nlp_calib.calibration import CalibrationRun
 from nlp_calib.io.files import atomic_write_text
-from nlp_calib.io.results import result_dict
+from nlp_calib.io.results import result_document
 
 CALIBRATION_FILE = "calibration.yaml"
 URDF_FILE = "sensor_mount.urdf.xml"
@@ -49,19 +47,6 @@ def chosen_solver(run: CalibrationRun) -> str | None:
     return next((s for s in solver_order(run) if run.reports[s].result.converged), None)
 
 
-def _plain(doc: Any) -> Any:
-    """The JSON view of ``doc``, exactly as ``result.json`` stores it."""
-
-    def default(obj: Any) -> Any:
-        if isinstance(obj, np.generic):
-            return obj.item()
-        if isinstance(obj, (np.ndarray, Path)):
-            return obj.tolist() if isinstance(obj, np.ndarray) else str(obj)
-        raise TypeError(f"cannot serialise {type(obj).__name__}")
-
-    return json.loads(json.dumps(doc, default=default, allow_nan=False))
-
-
 def _solver_entry(res: Mapping[str, Any]) -> dict[str, Any]:
     keys = ("converged", "reason", "cost", "chi2", "inliers", "residuals", "iterations")
     return {
@@ -77,7 +62,7 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
     solver = chosen_solver(run)
     if solver is None:
         return None
-    doc = _plain(result_dict(run))
+    doc = result_document(run)
     best = doc["solvers"][solver]
     sc = run.scenario
     ds = doc["dataset"]

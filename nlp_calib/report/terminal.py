@@ -96,6 +96,13 @@ def run_table(run: CalibrationRun) -> str:
                 m = rep.holdout if holdout else rep.metrics
                 cells.append(_fmt(getattr(m, key) if m is not None else float("nan"), w))
             lines.append(_row(label, cells))
+    if run.observability is not None:
+        lines.append("")
+        lines.append(
+            f"observability: condition number {run.observability.condition_number:.3g} (Jacobi-scaled "
+            f"information matrix), heading range {run.observability.heading_range_rad:.2f} rad"
+        )
+        lines.extend(f"WARNING: {w}" for w in run.observability.warnings)
     for s in solvers:
         res = run.reports[s].result
         if not res.converged:

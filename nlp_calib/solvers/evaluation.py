@@ -14,6 +14,27 @@ import numpy as np
 from nlp_calib.solvers.backend import Backend, Buffered, pad_columns
 from nlp_calib.symbolic.builder import ProblemFunctions
 
+#: H is called singular when its Jacobi-scaled condition number exceeds this.
+SINGULAR_CONDITION = 1e12
+SINGULAR_REASON = (
+    "singular normal matrix: some parameters are not determined by the data (see the observability warnings)"
+)
+
+
+def scaled_condition(H: np.ndarray) -> float:
+    """Condition number of ``D^-1/2 H D^-1/2`` (``D = diag H``): insensitive to parameter units."""
+    d = np.diag(H)
+    if np.any(~np.isfinite(H)) or np.any(d <= 0):
+        return float("inf")
+    s = 1.0 / np.sqrt(d)
+    eig = np.linalg.eigvalsh(H * s[:, None] * s[None, :])
+    return float(eig[-1] / eig[0]) if eig[0] > 0 else float("inf")
+
+
+def is_singular(H: np.ndarray) -> bool:
+    """True when the normal matrix does not determine every free parameter."""
+    return scaled_condition(H) > SINGULAR_CONDITION
+
 
 @dataclass(frozen=True)
 class NormalEquations:
@@ -100,11 +121,26 @@ class ProblemEvaluator:
 
     def robust_terms(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per residual: error ``(3, n)``, ``s = eᵀΩe`` and the IRLS weight ρ'(s)."""
+        e, s, w, _ = self.residual_terms(x)
+        return e, s, w
+
+    def residual_terms(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`robust_terms` plus each residual's score ``ρ'·JᵀΩe``, ``(n_free, n)``."""
         if self._terms is None:
             self._terms = Buffered(self.mapped("robust_terms", reduce=False), self._static)
-        e, s, w = self._terms(x=x)
+        e, s, w, g = self._terms(x=x)
         n = self.n_residuals
-        return e.reshape(3, -1, order="F")[:, :n], s.ravel()[:n], w.ravel()[:n]
+        nf = self.fns.n_free
+        return (
+            e.reshape(3, -1, order="F")[:, :n],
+            s.ravel()[:n],
+            w.ravel()[:n],
+            g.reshape(nf, -1, order="F")[:, :n],
+        )
+
+    def prior_information(self, x: np.ndarray) -> np.ndarray:
+        """The priors' contribution ``J_pᵀJ_p`` to the normal matrix."""
+        return self._prior(x=x)[0]
 
     def boxplus(self, x: np.ndarray, step: np.ndarray) -> np.ndarray:
         (x_next,) = self._boxplus(x=x, step=step)

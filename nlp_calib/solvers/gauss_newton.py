@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlp_calib.solvers.evaluation import NormalEquations, ProblemEvaluator
+from nlp_calib.solvers.evaluation import SINGULAR_REASON, NormalEquations, ProblemEvaluator, is_singular
 from nlp_calib.solvers.result import IterationRecord, SolverResult
 
 
@@ -22,12 +22,14 @@ from nlp_calib.solvers.result import IterationRecord, SolverResult
 class GaussNewtonOptions:
     """Stopping rules and damping (scenario key ``gauss_newton``).
 
-    Stops when the relative cost decrease of an accepted step is below ``function_tolerance``
-    and the step is below ``step_tolerance`` (relative to ``|x| + step_tolerance``), or when
-    the scaled gradient ``max |g_i| / sqrt(H_ii)`` is below ``gradient_tolerance``.
+    Stops when the undamped Gauss-Newton step predicts a relative cost decrease below
+    ``function_tolerance`` (the optimum, to rounding), when the scaled gradient
+    ``max |g_i| / sqrt(H_ii)`` is below ``gradient_tolerance``, or when an undamped accepted step
+    is below ``step_tolerance`` (relative to ``|x|``) and lowered the cost by less than
+    ``function_tolerance``.
     """
 
-    max_iterations: int = 100
+    max_iterations: int = 200
     initial_damping: float = 1e-3
     function_tolerance: float = 1e-14
     step_tolerance: float = 1e-10
@@ -48,23 +50,19 @@ class GaussNewtonOptions:
 
 #: λ beyond this means no step can reduce the cost any more.
 _MAX_DAMPING = 1e16
-#: H is called singular when its Jacobi-scaled condition number exceeds this.
-SINGULAR_CONDITION = 1e12
+
+
+def _decrement(ne: NormalEquations) -> float:
+    """``gᵀH⁻¹g``: the cost decrease the undamped Gauss-Newton step predicts (×½ convention)."""
+    try:
+        return float(ne.g @ np.linalg.solve(ne.H, ne.g))
+    except np.linalg.LinAlgError:
+        return float("inf")
 
 
 def _scaled_gradient(ne: NormalEquations) -> float:
     d = np.sqrt(np.maximum(np.diag(ne.H), 1e-300))
     return float(np.max(np.abs(ne.g) / d)) if ne.g.size else 0.0
-
-
-def scaled_condition(H: np.ndarray) -> float:
-    """Condition number of ``D^-1/2 H D^-1/2``: insensitive to parameter units."""
-    d = np.diag(H)
-    if np.any(~np.isfinite(H)) or np.any(d <= 0):
-        return float("inf")
-    s = 1.0 / np.sqrt(d)
-    eig = np.linalg.eigvalsh(H * s[:, None] * s[None, :])
-    return float(eig[-1] / eig[0]) if eig[0] > 0 else float("inf")
 
 
 def solve(
@@ -94,14 +92,13 @@ def solve(
             except np.linalg.LinAlgError:
                 reason = "singular damped normal matrix"
                 break
-            predicted = -(2.0 * ne.g @ step + step @ ne.H @ step)
-            step_norm = float(np.linalg.norm(step))
-            small_step = bool(np.all(np.abs(step) <= opts.step_tolerance * (np.abs(x) + opts.step_tolerance)))
-            if predicted <= opts.function_tolerance * ne.cost or small_step:
-                # Any further change is below what the cost's rounding can resolve.
-                converged, reason = True, "predicted decrease below tolerance"
+            if _decrement(ne) <= opts.function_tolerance * ne.cost:
+                # Even the undamped step could not lower the cost by more than its rounding.
+                converged, reason = True, "Gauss-Newton decrement below tolerance"
                 iteration -= 1
                 break
+            predicted = -(2.0 * ne.g @ step + step @ ne.H @ step)
+            step_norm = float(np.linalg.norm(step))
             x_new = evaluator.boxplus(x, step)
             cost_new = evaluator.cost(x_new)
             gain = (ne.cost - cost_new) / predicted
@@ -111,7 +108,10 @@ def solve(
                 lam *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
                 nu = 2.0
                 history.append(IterationRecord(iteration, ne.cost, ne.chi2, ne.inliers, step_norm, lam))
-                if decrease <= opts.function_tolerance * ne.cost:
+                small_step = bool(
+                    np.all(np.abs(step) <= opts.step_tolerance * (np.abs(x) + opts.step_tolerance))
+                )
+                if decrease <= opts.function_tolerance * ne.cost and small_step and lam < 1.0:
                     converged, reason = True, "cost and step below tolerance"
                     break
             else:
@@ -128,11 +128,8 @@ def solve(
                     break
         else:
             reason = f"iteration limit ({opts.max_iterations}) reached before convergence"
-    if converged and scaled_condition(ne.H) > SINGULAR_CONDITION:
-        converged, reason = (
-            False,
-            "singular normal matrix: some parameters are not determined by the data",
-        )
+    if converged and is_singular(ne.H):
+        converged, reason = False, SINGULAR_REASON
     return SolverResult(
         solver="gauss_newton",
         names=evaluator.fns.names,

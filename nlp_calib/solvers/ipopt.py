@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.errors import SolverError
-from nlp_calib.solvers.evaluation import ProblemEvaluator
+from nlp_calib.solvers.evaluation import SINGULAR_REASON, ProblemEvaluator, is_singular
 from nlp_calib.solvers.result import IterationRecord, SolverResult
 
 HUBER_FORMULATIONS = ("direct", "lifted")
@@ -131,6 +131,9 @@ class IpoptSolver:
         ne = ev.normal_equations(x)
         status = str(stats.get("return_status", "unknown"))
         converged = bool(stats.get("success", False)) or status in _SUCCESS
+        reason = status if converged else f"IPOPT stopped: {status}"
+        if converged and is_singular(ne.H):
+            converged, reason = False, SINGULAR_REASON
         its = stats.get("iterations", {})
         history = tuple(
             IterationRecord(
@@ -162,7 +165,7 @@ class IpoptSolver:
             n_residuals=ev.n_residuals,
             iterations=int(stats.get("iter_count", len(history))),
             converged=converged,
-            reason=status if converged else f"IPOPT stopped: {status}",
+            reason=reason,
             time_s=elapsed,
             history=history,
             stats={

@@ -50,12 +50,14 @@ class ProblemFunctions:
     ``residual`` → e; ``residual_jacobian`` → (e, J) with J = ∂e(x ⊞ Δ)/∂Δ; ``normal_equations`` →
     (H, g, cost, chi2, inliers) with H = w·ρ'·JᵀΩJ, g = w·ρ'·JᵀΩe; ``cost``; ``cost_gradient`` →
     (cost, grad) in plain coordinates; ``cost_hessian`` → upper triangle of ∇²(λ·cost);
-    ``robust_terms`` → (e, s, weight); ``huber_lifted`` → the Black–Rangarajan term.
+    ``robust_terms`` → (e, s, weight, score = w·ρ'·JᵀΩe); ``huber_lifted`` → the Black–Rangarajan term.
     Whole-problem Functions: ``boxplus`` (x, step) → x ⊞ step; ``tangent_map`` x → ∂(x ⊞ Δ)/∂Δ
     at Δ = 0 (maps manifold covariances to plain coordinates); ``prior`` → (H, g, cost) of Gaussian
     priors; ``assemble`` (x, x_fixed) → params. Full-parameter Functions: ``predict``
     (params, u) → sensor motion over one interval; ``integrate_step`` (T_world_sensor, params, u)
-    → T_world_sensor · predict; ``between`` (a, b) → t2v(a⁻¹b).
+    → T_world_sensor · predict; ``predict_window`` (params, data) → sensor motion over a data
+    column's window; ``between`` (a, b) → t2v(a⁻¹b) and ``between_jacobians``.
+    Noise propagation: ``sensitivities`` (x, x_fixed, data) → (∂e/∂data, J), per residual.
     """
 
     spec: ProblemSpec
@@ -78,7 +80,10 @@ class ProblemFunctions:
     assemble: ca.Function
     predict: ca.Function
     integrate_step: ca.Function
+    predict_window: ca.Function
     between: ca.Function
+    sensitivities: ca.Function
+    between_jacobians: ca.Function
 
     @property
     def n_free(self) -> int:
@@ -106,6 +111,7 @@ class ProblemFunctions:
                 self.cost_hessian,
                 self.robust_terms,
                 self.huber_lifted,
+                self.sensitivities,
             )
         }
 
@@ -236,7 +242,13 @@ def build(model: KinematicModel, spec: ProblemSpec) -> ProblemFunctions:
             [*common_names, "lam_f"],
             ["hess"],
         ),
-        robust_terms=fn("robust_terms", common_in, common_names, [e, s, weight], ["e", "s", "weight"]),
+        robust_terms=fn(
+            "robust_terms",
+            common_in,
+            common_names,
+            [e, s, weight, w * weight * ca.mtimes([J.T, Omega, e])],
+            ["e", "s", "weight", "score"],
+        ),
         huber_lifted=fn("huber_lifted", [*common_in, w_lift], [*common_names, "w_lift"], [lifted], ["cost"]),
         boxplus=boxplus,
         tangent_map=fn("tangent_map", [x], ["x"], [M], ["M"]),
@@ -262,5 +274,26 @@ def build(model: KinematicModel, spec: ProblemSpec) -> ProblemFunctions:
             [se2.compose(T_ws, h1)],
             ["T_world_sensor_next"],
         ),
+        predict_window=fn(
+            "predict_window",
+            [params_sym, data],
+            ["params", "data"],
+            [predict_motion(model, params_sym, U, spec.integration)],
+            ["motion"],
+        ),
         between=fn("between", [a, b], ["a", "b"], [se2.between(a, b)], ["motion"]),
+        sensitivities=fn(
+            "sensitivities",
+            [x, x_fixed, data],
+            ["x", "x_fixed", "data"],
+            [ca.jacobian(e, data), J],
+            ["de_ddata", "J"],
+        ),
+        between_jacobians=fn(
+            "between_jacobians",
+            [a, b],
+            ["a", "b"],
+            [ca.jacobian(se2.between(a, b), a), ca.jacobian(se2.between(a, b), b)],
+            ["dmotion_da", "dmotion_db"],
+        ),
     )

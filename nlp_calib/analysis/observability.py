@@ -1,0 +1,117 @@
+"""Which parameters the log determines, and which it does not, in words.
+
+The information matrix ``H/σ²`` is scaled by a reference precision per parameter (what a useful
+calibration must resolve: 1% of a gain or length, 1 cm of the sensor position, 5 mrad of an
+angle). A direction of the scaled matrix whose 1σ exceeds 5 reference units is weakly
+observable; beyond 100, or with no information at all, it is not observable. The drive itself is
+checked too: a log that never turns cannot tell an axis length or a lever arm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.analysis.reference import reference_scale
+from nlp_calib.models.base import SENSOR_PARAMS
+from nlp_calib.solvers.evaluation import ProblemEvaluator
+
+#: A direction with 1σ beyond this many reference units is weakly observable...
+WEAK = 5.0
+#: ...and beyond this many, not observable.
+NOT_OBSERVABLE = 100.0
+#: Range of the sensor's heading (rad) below which the log counts as not turning.
+MIN_TURNING = 0.3
+
+
+@dataclass(frozen=True)
+class WeakDirection:
+    """A poorly determined combination of parameters and its 1σ in reference units."""
+
+    std_reference: float
+    components: dict[str, float]
+
+    def words(self) -> str:
+        names = sorted(self.components, key=lambda n: -abs(self.components[n]))
+        if self.std_reference > NOT_OBSERVABLE:
+            verb = "is" if len(names) == 1 else "are"
+            return f"{', '.join(names)} {verb} not observable from this log"
+        if len(names) == 1:
+            return f"{names[0]} is only weakly observable"
+        return f"{', '.join(names)} are only weakly observable apart (one combination of them is loose)"
+
+
+@dataclass(frozen=True)
+class Observability:
+    """Condition of the information matrix, weak directions and excitation warnings."""
+
+    condition_number: float
+    std_reference: dict[str, float]
+    weak: tuple[WeakDirection, ...]
+    heading_range_rad: float
+    warnings: tuple[str, ...]
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "condition_number": self.condition_number,
+            "std_in_reference_units": self.std_reference,
+            "weak_directions": [
+                {"std_in_reference_units": w.std_reference, "components": w.components} for w in self.weak
+            ],
+            "heading_range_rad": self.heading_range_rad,
+            "warnings": list(self.warnings),
+        }
+
+
+def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarray) -> Observability:
+    """Observability of the free parameters at ``x`` for the log whose tracker poses are given."""
+    fns = evaluator.fns
+    names = fns.free
+    ne = evaluator.normal_equations(x)
+    _, s, weight = evaluator.robust_terms(x)
+    dof = max(3 * evaluator.n_residuals - len(names), 1)
+    sigma2 = max(float(np.sum(weight * s)) / dof, 1e-300)
+    params = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()
+    value = dict(zip(fns.names, params))
+    R = np.array([reference_scale(n, value[n]) for n in names])
+    Hs = ne.H * np.outer(R, R) / sigma2
+    lam, V = np.linalg.eigh(0.5 * (Hs + Hs.T))
+    tiny = 1e-12 * max(float(lam[-1]), 1e-300)
+    std_dir = 1.0 / np.sqrt(np.maximum(lam, tiny))
+    var_param = (V**2 / np.maximum(lam, tiny)).sum(axis=1)
+    d = np.sqrt(np.maximum(np.diag(ne.H), 1e-300))
+    jacobi = np.linalg.eigvalsh(ne.H / np.outer(d, d))
+    cond = float(jacobi[-1] / jacobi[0]) if jacobi[0] > 1e-14 * jacobi[-1] else float("inf")
+    weak = []
+    # Undetermined directions form a subspace whose basis is arbitrary: describe it by the
+    # parameters it involves, not vector by vector.
+    null = std_dir > NOT_OBSERVABLE
+    if null.any():
+        share = (V[:, null] ** 2).sum(axis=1)
+        comps = {names[i]: round(float(share[i]), 3) for i in np.flatnonzero(share > 0.1)}
+        weak.append(WeakDirection(float(std_dir[null].max()), comps))
+    for k in np.flatnonzero((std_dir > WEAK) & ~null):
+        v = V[:, k]
+        comps = {names[i]: round(float(v[i]), 3) for i in np.flatnonzero(np.abs(v) > 0.3)}
+        weak.append(WeakDirection(float(std_dir[k]), comps))
+    # The heading's range, not its summed steps: tracker noise adds up over thousands of steps.
+    heading = np.unwrap(T_world_sensor[:, 2])
+    turning = float(np.ptp(heading))
+    warnings = []
+    if turning < MIN_TURNING:
+        lever = [n for n in ("axis_length", *SENSOR_PARAMS[:2]) if n in names]
+        warnings.append(
+            f"no turning: the sensor's heading spans only {turning:.2f} rad over the whole log, so "
+            f"{', '.join(lever)} and the split between steering gain and offset are not observable; "
+            "drive S-curves or circles in both directions"
+        )
+    for w in sorted(weak, key=lambda w: -w.std_reference):
+        warnings.append(w.words() + f" (1σ = {w.std_reference:.3g} × the reference precision)")
+    return Observability(
+        condition_number=cond,
+        std_reference={n: float(np.sqrt(v)) for n, v in zip(names, var_param)},
+        weak=tuple(weak),
+        heading_range_rad=turning,
+        warnings=tuple(warnings),
+    )
