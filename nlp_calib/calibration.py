@@ -13,6 +13,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
@@ -116,7 +117,8 @@ class Calibration:
         self.x0 = np.array([self.initial[n] for n in self.fns.free])
         self.x_fixed = np.array([self.initial[n] for n in self.fns.fixed])
         self.lower, self.upper = self._bounds()
-        self.backend = make_backend(BackendOptions(kind=sc.backend))
+        self.backend = make_backend(BackendOptions(kind=sc.backend, threads=sc.threads))
+        self.backend.prepare(self._functions_needed())
         self._ipopt: IpoptSolver | None = None
         self.priors = Priors(np.zeros(len(self.fns.free)), np.zeros(len(self.fns.free)))
         self.residual_sigma: float | None = None
@@ -136,6 +138,22 @@ class Calibration:
         self.fit = (start, self._split(start, stop))
         self.data, self.evaluator = self.evaluator_for(self.dataset, *self.fit)
         self.setup_time_s = time.perf_counter() - t0
+
+    def _functions_needed(self) -> list[tuple[ca.Function, tuple[str, ...], bool]]:
+        """The per-residual Functions this scenario's solvers and reports will map."""
+        f = self.fns
+        needed = [
+            (f.normal_equations, True),
+            (f.cost, True),
+            (f.robust_terms, False),
+            (f.sensitivities, False),
+        ]
+        if "ipopt" in self.scenario.solvers:
+            needed += [(f.cost_gradient, True)]
+            hessian = {"exact": f.cost_hessian, "gauss_newton": f.gauss_newton_hessian}
+            if self.scenario.ipopt.hessian in hessian:
+                needed += [(hessian[self.scenario.ipopt.hessian], True)]
+        return [(fn, ("data",), reduce) for fn, reduce in needed]
 
     def _split(self, start: int, stop: int) -> int:
         hf = self.scenario.validation.holdout_fraction

@@ -59,6 +59,13 @@ def build_parser() -> argparse.ArgumentParser:
     p_cmp = sub.add_parser("compare", help="calibrate with Gauss-Newton and IPOPT side by side")
     _add_common(p_cmp)
 
+    p_cg = sub.add_parser("codegen", help="write C source and header of the residual and its Jacobian")
+    p_cg.add_argument("scenario", type=Path, help="scenario YAML file (model, horizon, integration)")
+    p_cg.add_argument("--out", type=Path, required=True, help="folder for the C files")
+    p_cg.add_argument(
+        "--data", type=Path, default=None, help="log file to use instead of the scenario's dataset"
+    )
+
     p_sim = sub.add_parser("simulate", help="write a synthetic log with known truth (truth JSON beside it)")
     p_sim.add_argument("--out", type=Path, required=True, help="log file to write")
     p_sim.add_argument("--config", type=Path, default=None, help="YAML file of simulation options")
@@ -162,9 +169,44 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_codegen(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from nlp_calib.calibration import initial_parameters
+    from nlp_calib.codegen import build_for_export, generate
+    from nlp_calib.data import build_residual_data
+    from nlp_calib.io.files import prepare_output_dir
+    from nlp_calib.io.logfile import read_log
+    from nlp_calib.io.scenario import load_scenario
+    from nlp_calib.models import get_model
+
+    scenario = load_scenario(args.scenario)
+    if args.data is not None:
+        scenario = scenario.with_dataset(args.data)
+    out = prepare_output_dir(args.out)
+    log = read_log(scenario.dataset, strict=scenario.strict)
+    initial = initial_parameters(scenario, log)
+    problems = build_for_export(
+        get_model(scenario.model), scenario.residual.horizon, scenario.residual.integration
+    )
+    last = problems[-1]
+    H = last.spec.horizon
+    windows = build_residual_data(last, log, scenario.residual)
+    # The example evaluates the window with the most motion: a standing robot's Jacobian is 0.
+    busiest = int(np.argmax(np.abs(windows.columns[: last.n_inputs * H]).sum(axis=0)))
+    params = [initial.get(n, 0.0) for n in last.names]
+    origin = (
+        f"scenario {scenario.name} (model {scenario.model}, horizon {H}, {scenario.residual.integration})"
+    )
+    for path in generate(problems, out, np.array(params), windows.columns[:, busiest], origin):
+        print(f"wrote {path}")
+    return 0
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "run": _cmd_run,
     "compare": _cmd_compare,
+    "codegen": _cmd_codegen,
     "simulate": _cmd_simulate,
 }
 

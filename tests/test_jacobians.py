@@ -125,5 +125,5 @@ def test_fixed_parameters_leave_the_decision_vector() -> None:
     fns = build(MODEL, ProblemSpec(fixed=("axis_length", "sensor_theta")))
     assert fns.free == ("k_steer", "k_traction", "steer_offset", "sensor_x", "sensor_y")
     assert fns.normal_equations.size_in("x") == (5, 1)
-    assert fns.normal_equations.size_out("H") == (5, 5)
+    assert fns.normal_equations.size_out("H_upper") == (15, 1)  # 5 x 5, upper triangle
     assert not fns.manifold_sensor

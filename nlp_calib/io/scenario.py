@@ -103,6 +103,7 @@ class Scenario:
     priors: Mapping[str, Prior] = field(default_factory=dict)
     strict: bool = True
     backend: str = "interpreted"
+    threads: int = 1
 
     def with_dataset(self, path: str | Path) -> Scenario:
         """The same scenario on another log (``--data``)."""
@@ -163,6 +164,8 @@ def _validate(sc: Scenario, source: str) -> None:
     for s in sc.solvers:
         _check_choice(s, SOLVERS, f"{source}: solvers")
     _check_choice(sc.backend, BACKENDS, f"{source}: backend")
+    if not 1 <= sc.threads <= 64:
+        fail(f"{source}: threads", f"must lie in [1, 64], got {sc.threads}")
     sel = sc.samples
     if sel.start < 0 or (sel.stop is not None and sel.stop <= sel.start + 1):
         fail(f"{source}: samples", f"need 0 <= start < stop - 1, got start={sel.start} stop={sel.stop}")

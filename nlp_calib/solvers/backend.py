@@ -21,7 +21,7 @@ class BackendOptions:
     """``kind``: ``interpreted`` (CasADi's VM) or ``compiled`` (generated C, cached on disk)."""
 
     kind: str = "interpreted"
-    chunk: int = 256
+    chunk: int = 64
     threads: int = 1
 
     def __post_init__(self) -> None:
@@ -37,6 +37,9 @@ class Backend:
     def padded(self, n: int) -> int:
         """Number of columns the mapped Functions take for ``n`` residuals."""
         return max(n, 1)
+
+    def prepare(self, requests: Sequence[tuple[ca.Function, Sequence[str], bool]]) -> None:
+        """Get ready to map these ``(function, mapped_inputs, reduce)`` (nothing to do here)."""
 
     def map(self, f: ca.Function, n: int, mapped_inputs: Sequence[str], reduce: bool) -> ca.Function:
         """``f`` over ``n`` columns of ``mapped_inputs``; outputs summed when ``reduce``."""

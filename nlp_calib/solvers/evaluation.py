@@ -12,7 +12,7 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.solvers.backend import Backend, Buffered, pad_columns
-from nlp_calib.symbolic.builder import ProblemFunctions
+from nlp_calib.symbolic.builder import ProblemFunctions, unpack_upper
 
 #: H is called singular when its Jacobi-scaled condition number exceeds this.
 SINGULAR_CONDITION = 1e12
@@ -105,8 +105,8 @@ class ProblemEvaluator:
         return self.backend.map(f, self.n_padded, ("data", *extra_mapped), reduce)
 
     def normal_equations(self, x: np.ndarray) -> NormalEquations:
-        H, g, cost, chi2, inliers = self._normal(x=x)
-        H, g, cost_f = H, g, float(cost[0])
+        h_upper, g, cost, chi2, inliers = self._normal(x=x)
+        H, cost_f = unpack_upper(h_upper, self.fns.n_free), float(cost[0])
         if self.priors.active:
             Hp, gp, cp, _, _ = self._prior(x=x)
             H, g, cost_f = H + Hp, g + gp, cost_f + float(cp[0])
@@ -156,7 +156,7 @@ class ProblemEvaluator:
         """The NLP parameter vector ``p``: the padded data matrix, column-major."""
         return self.data.ravel(order="F")
 
-    def nlp_functions(self) -> tuple[ca.Function, ca.Function, ca.Function]:
+    def nlp_functions(self, hessian: str = "exact") -> tuple[ca.Function, ca.Function, ca.Function]:
         """``f(x, p)``, ``grad_f(x, p) -> (f, grad)`` and ``hess_lag(x, p, lam_f, lam_g)``.
 
         Thin MX wrappers around the mapped Functions; nothing is differentiated here.
@@ -172,7 +172,8 @@ class ProblemEvaluator:
         use_prior = self.priors.active
         cost = self.mapped("cost", reduce=True)(x, *static, data)
         cost_grad = self.mapped("cost_gradient", reduce=True)(x, *static, data)
-        hess = self.mapped("cost_hessian", reduce=True)(x, *static, data, lam_f)
+        hess_name = "gauss_newton_hessian" if hessian == "gauss_newton" else "cost_hessian"
+        hess = self.mapped(hess_name, reduce=True)(x, *static, data, lam_f)
         if use_prior:
             cost = cost + prior[2]
             cost_grad = [cost_grad[0] + prior[2], cost_grad[1] + prior[3]]

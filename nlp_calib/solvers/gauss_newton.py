@@ -30,7 +30,7 @@ class GaussNewtonOptions:
     """
 
     max_iterations: int = 200
-    initial_damping: float = 1e-3
+    initial_damping: float = 1e-2
     function_tolerance: float = 1e-14
     step_tolerance: float = 1e-10
     gradient_tolerance: float = 1e-10
@@ -100,11 +100,14 @@ def solve(
             predicted = -(2.0 * ne.g @ step + step @ ne.H @ step)
             step_norm = float(np.linalg.norm(step))
             x_new = evaluator.boxplus(x, step)
-            cost_new = evaluator.cost(x_new)
+            # The trial point's normal equations carry its cost: most steps are accepted, so one
+            # evaluation per iteration is cheaper than a cost-only check followed by another.
+            ne_new = evaluator.normal_equations(x_new)
+            cost_new = ne_new.cost
             gain = (ne.cost - cost_new) / predicted
             if np.isfinite(cost_new) and gain > 0:
                 decrease = ne.cost - cost_new
-                x, ne = x_new, evaluator.normal_equations(x_new)
+                x, ne = x_new, ne_new
                 lam *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
                 nu = 2.0
                 history.append(IterationRecord(iteration, ne.cost, ne.chi2, ne.inliers, step_norm, lam))

@@ -21,7 +21,7 @@ from nlp_calib.solvers.evaluation import SINGULAR_REASON, ProblemEvaluator, is_s
 from nlp_calib.solvers.result import IterationRecord, SolverResult
 
 HUBER_FORMULATIONS = ("direct", "lifted")
-HESSIANS = ("exact", "limited_memory")
+HESSIANS = ("exact", "gauss_newton", "limited_memory")
 _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 #: Lower bound of the lifted weights: keeps δ²/w finite; far below any weight at the optimum.
 _W_MIN = 1e-8
@@ -80,12 +80,12 @@ class IpoptSolver:
         ev = self.evaluator
         opts = self._ipopt_options()
         if not self.lifted:
-            f, grad_f, hess_lag = ev.nlp_functions()
+            f, grad_f, hess_lag = ev.nlp_functions(self.options.hessian)
             x = ca.MX.sym("x", ev.fns.n_free)
             p = ca.MX.sym("p", ev.data.size)
             nlp = {"x": x, "p": p, "f": f(x, p)}
             opts.update({"grad_f": grad_f, "no_nlp_grad": True, "calc_lam_p": False})
-            if self.options.hessian == "exact":
+            if self.options.hessian != "limited_memory":
                 opts["hess_lag"] = hess_lag
             return ca.nlpsol("ipopt_direct", "ipopt", nlp, opts)
         n, N = ev.fns.n_free, ev.n_padded

@@ -15,13 +15,17 @@ fixing a parameter changes the Functions, not the solvers.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import casadi as ca
+import numpy as np
 
 from nlp_calib.models.base import INTEGRATIONS, SENSOR_PARAMS, KinematicModel, param_names
 from nlp_calib.symbolic import se2
 from nlp_calib.symbolic.kernels import KERNELS, kernel_function
+
+_CSE = {"cse": True}
 
 
 @dataclass(frozen=True)
@@ -48,8 +52,10 @@ class ProblemFunctions:
 
     Per-residual Functions (inputs named ``x, x_fixed, omega, delta, data``):
     ``residual`` → e; ``residual_jacobian`` → (e, J) with J = ∂e(x ⊞ Δ)/∂Δ; ``normal_equations`` →
-    (H, g, cost, chi2, inliers) with H = w·ρ'·JᵀΩJ, g = w·ρ'·JᵀΩe; ``cost``; ``cost_gradient`` →
-    (cost, grad) in plain coordinates; ``cost_hessian`` → upper triangle of ∇²(λ·cost);
+    (H_upper, g, cost, chi2, inliers) with H = w·ρ'·JᵀΩJ (upper triangle, column by column,
+    see :func:`unpack_upper`), g = w·ρ'·JᵀΩe; ``cost``; ``cost_gradient`` →
+    (cost, grad) in plain coordinates; ``cost_hessian`` → upper triangle of ∇²(λ·cost) and
+    ``gauss_newton_hessian`` its Gauss-Newton approximation ``λ·2·w·ρ'·JᵀΩJ`` (plain coordinates);
     ``robust_terms`` → (e, s, weight, score = w·ρ'·JᵀΩe); ``huber_lifted`` → the Black–Rangarajan term.
     Whole-problem Functions: ``boxplus`` (x, step) → x ⊞ step; ``tangent_map`` x → ∂(x ⊞ Δ)/∂Δ
     at Δ = 0 (maps manifold covariances to plain coordinates); ``prior`` → (H, g, cost) of Gaussian
@@ -72,6 +78,7 @@ class ProblemFunctions:
     cost: ca.Function
     cost_gradient: ca.Function
     cost_hessian: ca.Function
+    gauss_newton_hessian: ca.Function
     robust_terms: ca.Function
     huber_lifted: ca.Function
     boxplus: ca.Function
@@ -109,6 +116,7 @@ class ProblemFunctions:
                 self.cost,
                 self.cost_gradient,
                 self.cost_hessian,
+                self.gauss_newton_hessian,
                 self.robust_terms,
                 self.huber_lifted,
                 self.sensitivities,
@@ -166,7 +174,7 @@ def build(model: KinematicModel, spec: ProblemSpec) -> ProblemFunctions:
         T_new = se2.boxplus(x[idx], step[idx])
         for j, i in enumerate(idx):
             x_plus[i] = T_new[j]
-    boxplus = ca.Function("boxplus", [x, step], [x_plus], ["x", "step"], ["x_next"])
+    boxplus = ca.Function("boxplus", [x, step], [x_plus], ["x", "step"], ["x_next"], _CSE)
     # dx(x ⊞ Δ)/dΔ at Δ = 0 maps plain-coordinate Jacobians onto the manifold perturbation.
     M = ca.substitute(ca.jacobian(x_plus, step), step, ca.DM.zeros(len(free)))
 
@@ -191,21 +199,25 @@ def build(model: KinematicModel, spec: ProblemSpec) -> ProblemFunctions:
     def fn(
         name: str, ins: list[ca.SX], in_names: list[str], outs: list[ca.SX], out_names: list[str]
     ) -> ca.Function:
-        # Dense outputs: buffers bind numpy memory to stored non-zeros only.
-        return ca.Function(name, ins, [ca.densify(o) for o in outs], in_names, out_names)
+        # Dense outputs: buffers bind numpy memory to stored non-zeros only. Common subexpression
+        # elimination merges repeated sin/cos of the same angle (e.g. cos θ and cos(−θ)).
+        return ca.Function(name, ins, [ca.densify(o) for o in outs], in_names, out_names, _CSE)
 
+    # Only the upper triangle of the symmetric JᵀΩJ: fewer operations per residual and per sum.
+    JtOJ = ca.mtimes([J.T, Omega, J])
+    H_upper = ca.vertcat(*[JtOJ[i, j] for j in range(len(free)) for i in range(j + 1)])
     normal = fn(
         "normal_equations",
         common_in,
         common_names,
         [
-            w * weight * ca.mtimes([J.T, Omega, J]),
+            w * weight * H_upper,
             w * weight * ca.mtimes([J.T, Omega, e]),
             cost,
             w * s,
             w * inlier,
         ],
-        ["H", "g", "cost", "chi2", "inliers"],
+        ["H_upper", "g", "cost", "chi2", "inliers"],
     )
 
     # Gaussian priors on free parameters: r = sqrt_info · (x - mean), r = 0 where sqrt_info = 0.
@@ -241,6 +253,14 @@ def build(model: KinematicModel, spec: ProblemSpec) -> ProblemFunctions:
             [ca.triu(ca.densify(hess))],
             [*common_names, "lam_f"],
             ["hess"],
+        ),
+        gauss_newton_hessian=ca.Function(
+            "gauss_newton_hessian",
+            [*common_in, lam_f],
+            [ca.triu(ca.densify(lam_f * 2.0 * w * weight * ca.mtimes([J_plain.T, Omega, J_plain])))],
+            [*common_names, "lam_f"],
+            ["hess"],
+            _CSE,
         ),
         robust_terms=fn(
             "robust_terms",
@@ -297,3 +317,18 @@ def build(model: KinematicModel, spec: ProblemSpec) -> ProblemFunctions:
             ["dmotion_da", "dmotion_db"],
         ),
     )
+
+
+@functools.cache
+def _upper_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
+    cols, rows = zip(*[(j, i) for j in range(n) for i in range(j + 1)]) if n else ((), ())
+    return np.array(rows, dtype=np.intp), np.array(cols, dtype=np.intp)
+
+
+def unpack_upper(h_upper: np.ndarray, n: int) -> np.ndarray:
+    """The symmetric ``n x n`` matrix whose upper triangle is stored column by column."""
+    rows, cols = _upper_indices(n)
+    H = np.empty((n, n))
+    H[rows, cols] = np.ravel(h_upper)
+    H[cols, rows] = np.ravel(h_upper)
+    return H
