@@ -137,6 +137,7 @@ class Calibration:
         self.selected = self.dataset.select(start, stop)
         self.fit = (start, self._split(start, stop))
         self.data, self.evaluator = self.evaluator_for(self.dataset, *self.fit)
+        self.input_noise_std = self.model.input_noise_std(self.dataset, sc.encoder_noise)
         self.setup_time_s = time.perf_counter() - t0
 
     def _functions_needed(self) -> list[tuple[ca.Function, tuple[str, ...], bool]]:
@@ -296,9 +297,7 @@ class Calibration:
             full, holdout = self.score(result.params)
             reports[name] = SolverReport(
                 result=result,
-                uncertainty=unc.estimate(
-                    self.evaluator, result.x, self.data, self.model.input_noise_std(self.dataset)
-                ),
+                uncertainty=unc.estimate(self.evaluator, result.x, self.data, self.input_noise_std),
                 metrics=full,
                 holdout=holdout,
             )

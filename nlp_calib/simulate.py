@@ -1,9 +1,11 @@
-"""Synthetic tricycle logs with known truth, in the exact text format of SPEC §2.
+"""Synthetic logs with known truth, in the exact text format of SPEC §2 (tricycle or
+differential drive).
 
 The robot is simulated in continuous time (exact arcs on a fine sub-step grid, with smoothly
-varying speed and steering), then sampled at jittered ~25 Hz: quantised steering and traction
-encoders (the traction counter starts near 2³² so it wraps), and a tracker that sees the sensor
-pose with noise, gross outliers and latency. Independent of the symbolic model on purpose: it is
+varying speed and turning), then sampled at jittered ~25 Hz: quantised encoders (wheel counters
+start near 2³² so they wrap), and a tracker that sees the sensor pose with noise, gross outliers
+and latency. What differs between the drives (how speed and turning move the wheels, and which
+encoders read them) lives in :mod:`nlp_calib.sim_drives`. Independent of the symbolic model on purpose: it is
 the yardstick the model is checked against. Deterministic for a given seed.
 """
 
@@ -18,46 +20,34 @@ from typing import Any
 import numpy as np
 
 from nlp_calib.io.files import atomic_write_text
-from nlp_calib.io.logfile import COUNTER_MODULUS, LogHeader, format_log
+from nlp_calib.io.logfile import LogHeader, format_log
+from nlp_calib.sim_drives import DEFAULT_GUESS, DEFAULT_TRUTH, DRIVES, integrate_base, wrap
 
 TRAJECTORIES = ("s_curves", "straight", "no_reversals")
-
-DEFAULT_TRUTH = {
-    "k_steer": 0.55,
-    "k_traction": 0.0105,
-    "axis_length": 1.5,
-    "steer_offset": -0.05,
-    "sensor_x": 1.6,
-    "sensor_y": 0.1,
-    "sensor_theta": 0.05,
-}
-DEFAULT_GUESS = {
-    "k_steer": 0.5,
-    "k_traction": 0.01,
-    "axis_length": 1.4,
-    "steer_offset": 0.0,
-    "sensor_x": 1.5,
-    "sensor_y": 0.0,
-    "sensor_theta": 0.0,
-}
 
 
 @dataclass(frozen=True)
 class SimulationOptions:
     """What to simulate. Angles in rad, lengths in m, times in s.
 
-    ``trajectory``: ``s_curves`` (turns, stops and reversals), ``straight`` (no steering) or
-    ``no_reversals`` (turns and stops, always forward). ``truth`` and ``guess`` map parameter
-    names to values (``guess`` goes into the log header as the initial guess).
+    ``model``: ``tricycle`` or ``diff_drive``. ``trajectory``: ``s_curves`` (turns, stops and
+    reversals), ``straight`` (no turning) or ``no_reversals`` (turns and stops, always forward).
+    ``truth`` and ``guess`` map parameter names to values (``guess`` goes into the log header as
+    the initial guess); empty means the model's defaults. ``max_steer`` is the largest steering
+    angle (tricycle) or the largest curvature per metre travelled (differential drive).
+    ``steering_ticks`` / ``traction_ticks`` are the tricycle's encoder ranges, ``wheel_ticks``
+    the differential drive's counts per wheel turn (written to the header).
     """
 
     records: int = 1500
     seed: int = 0
+    model: str = "tricycle"
     trajectory: str = "s_curves"
-    truth: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_TRUTH))
-    guess: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_GUESS))
+    truth: Mapping[str, float] = field(default_factory=dict)
+    guess: Mapping[str, float] = field(default_factory=dict)
     steering_ticks: int = 8192
     traction_ticks: int = 5000
+    wheel_ticks: int = 4096
     rate_hz: float = 25.0
     jitter_s: float = 0.004
     substeps: int = 20
@@ -72,13 +62,18 @@ class SimulationOptions:
     wrap_after_ticks: int = 20000
 
     def __post_init__(self) -> None:
+        if self.model not in DRIVES:
+            raise ValueError(f"model must be one of {sorted(DRIVES)}, got {self.model!r}")
+        # Fill in the model's defaults so the truth JSON records every value used.
+        object.__setattr__(self, "truth", {**DEFAULT_TRUTH[self.model], **self.truth})
+        object.__setattr__(self, "guess", {**DEFAULT_GUESS[self.model], **self.guess})
         if self.trajectory not in TRAJECTORIES:
             raise ValueError(f"trajectory must be one of {TRAJECTORIES}, got {self.trajectory!r}")
         if self.records < 3:
             raise ValueError("records must be >= 3")
-        missing = [k for k in DEFAULT_TRUTH if k not in self.truth or k not in self.guess]
-        if missing:
-            raise ValueError(f"truth and guess need values for {missing}")
+        unknown = sorted((set(self.truth) | set(self.guess)) - set(DEFAULT_TRUTH[self.model]))
+        if unknown:
+            raise ValueError(f"unknown parameter(s) {unknown} for model {self.model!r}")
         if not 0.0 <= self.outlier_fraction < 1.0 or not 0.0 <= self.stop_fraction < 1.0:
             raise ValueError("outlier_fraction and stop_fraction must lie in [0, 1)")
         if self.substeps < 1 or self.rate_hz <= 0 or self.jitter_s < 0 or self.latency_s < 0:
@@ -142,30 +137,6 @@ def _sample_times(opts: SimulationOptions, rng: np.random.Generator) -> np.ndarr
     return np.concatenate([[0.0], np.cumsum(dt)])
 
 
-def _integrate(
-    opts: SimulationOptions, knots: tuple[np.ndarray, np.ndarray, np.ndarray], t_fine: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Base poses and front-wheel distance on the fine grid (exact arcs per sub-step)."""
-    kt, kv, ks = knots
-    L = opts.truth["axis_length"]
-    t_mid = 0.5 * (t_fine[1:] + t_fine[:-1])
-    v = np.interp(t_mid, kt, kv)
-    phi = np.interp(t_mid, kt, ks)
-    d = v * np.diff(t_fine)
-    ds = d * np.cos(phi)
-    w = d * np.sin(phi) / L
-    theta = np.concatenate([[0.0], np.cumsum(w)])
-    small = np.abs(w) < 1e-9
-    w_safe = np.where(small, 1.0, w)
-    a = np.where(small, ds, ds * np.sin(w_safe) / w_safe)
-    b = np.where(small, 0.5 * ds * w, ds * (1.0 - np.cos(w_safe)) / w_safe)
-    c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
-    x = np.concatenate([[0.0], np.cumsum(c * a - s * b)])
-    y = np.concatenate([[0.0], np.cumsum(s * a + c * b)])
-    front = np.concatenate([[0.0], np.cumsum(d)])
-    return np.stack([x, y, theta], axis=1), front, np.concatenate([[ks[0]], phi])
-
-
 def _pose_at(t_fine: np.ndarray, poses: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(t, t_fine, poses[:, i]) for i in range(3)], axis=1)
 
@@ -174,10 +145,6 @@ def _sensor_pose(base: np.ndarray, mount: tuple[float, float, float]) -> np.ndar
     c, s = np.cos(base[:, 2]), np.sin(base[:, 2])
     mx, my, mth = mount
     return np.stack([base[:, 0] + c * mx - s * my, base[:, 1] + s * mx + c * my, base[:, 2] + mth], axis=1)
-
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
 
 
 def simulate(opts: SimulationOptions) -> SimulatedLog:
@@ -193,11 +160,15 @@ def simulate(opts: SimulationOptions) -> SimulatedLog:
     t_fine = np.concatenate(
         [(base_grid[:-1, None] + np.diff(base_grid)[:, None] * frac).ravel(), base_grid[-1:]]
     )
-    poses, front, phi = _integrate(opts, knots, t_fine - t0)
+    drive = DRIVES[opts.model]
+    kt, kv, ks = knots
+    t_mid = 0.5 * (t_fine[1:] + t_fine[:-1]) - t0
+    ds, w, channels = drive.steps(
+        opts, np.interp(t_mid, kt, kv), np.interp(t_mid, kt, ks), np.diff(t_fine), float(ks[0])
+    )
+    poses = integrate_base(ds, w)
 
     base_at_samples = _pose_at(t_fine, poses, t_s)
-    front_at_samples = np.interp(t_s, t_fine, front)
-    phi_at_samples = np.interp(t_s, t_fine, phi)
     mount = (truth["sensor_x"], truth["sensor_y"], truth["sensor_theta"])
     tracker = _sensor_pose(_pose_at(t_fine, poses, t_s - opts.latency_s), mount)
     tracker[:, :2] += rng.normal(0.0, opts.tracker_noise_xy, (opts.records, 2))
@@ -205,53 +176,19 @@ def simulate(opts: SimulationOptions) -> SimulatedLog:
     outliers = rng.random(opts.records) < opts.outlier_fraction
     tracker[outliers, :2] += rng.normal(0.0, opts.outlier_magnitude, (int(outliers.sum()), 2))
     tracker[outliers, 2] += rng.normal(0.0, opts.outlier_magnitude, int(outliers.sum()))
-    tracker[:, 2] = _wrap(tracker[:, 2])
+    tracker[:, 2] = wrap(tracker[:, 2])
 
-    s_max, t_max = opts.steering_ticks, opts.traction_ticks
-    steer_ticks = np.mod(
-        np.round((phi_at_samples - truth["steer_offset"]) / truth["k_steer"] * s_max / (2 * np.pi)),
-        s_max,
-    )
-    traction_raw = np.floor(front_at_samples * t_max / truth["k_traction"]).astype(np.int64)
-    traction_ticks = np.mod(traction_raw + (COUNTER_MODULUS - opts.wrap_after_ticks), COUNTER_MODULUS)
-    ticks = np.stack([steer_ticks.astype(np.int64), traction_ticks], axis=1)
-
-    guess = opts.guess
-    header = LogHeader(
-        kinematic_model="traction_drive_wheel",
-        parameters={k: float(guess[k]) for k in ("k_steer", "k_traction", "axis_length", "steer_offset")},
-        encoder_names=("steering", "traction_wheel"),
-        encoder_max=(s_max, t_max),
-        sensor_frame="laser",
-        T_base_sensor=(
-            float(guess["sensor_x"]),
-            float(guess["sensor_y"]),
-            float(guess["sensor_theta"]),
-        ),
-    )
+    ticks = drive.ticks(opts, {name: np.interp(t_s, t_fine, c) for name, c in channels.items()})
+    header = drive.header(opts)
     return SimulatedLog(
         header=header,
         time_ns=np.round(t_s * 1e9).astype(np.int64) + 1_700_000_000_000_000_000,
         ticks=ticks,
-        model_pose=_vendor_odometry(header, ticks),
+        model_pose=drive.vendor_odometry(header, ticks),
         T_world_sensor=tracker,
         T_world_base_true=base_at_samples,
         options=opts,
     )
-
-
-def _vendor_odometry(header: LogHeader, ticks: np.ndarray) -> np.ndarray:
-    """The robot's own first-order odometry with the header's parameters (``model_pose``)."""
-    p = header.parameters
-    s_max, t_max = header.encoder_max
-    d_ticks = ((ticks[1:, 1] - ticks[:-1, 1] + COUNTER_MODULUS // 2) % COUNTER_MODULUS) - COUNTER_MODULUS // 2
-    d = p["k_traction"] * d_ticks / t_max
-    phi = p["k_steer"] * _wrap(2 * np.pi * ticks[:-1, 0] / s_max) + p["steer_offset"]
-    theta = np.concatenate([[0.0], np.cumsum(d * np.sin(phi) / p["axis_length"])])
-    step = d * np.cos(phi)
-    x = np.concatenate([[0.0], np.cumsum(step * np.cos(theta[:-1]))])
-    y = np.concatenate([[0.0], np.cumsum(step * np.sin(theta[:-1]))])
-    return np.stack([x, y, theta], axis=1)
 
 
 def truth_path(log_path: Path) -> Path:

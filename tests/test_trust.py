@@ -18,8 +18,8 @@ from nlp_calib.io.logfile import parse_log
 from nlp_calib.io.scenario import AlignmentOptions, Prior, RobustOptions, Scenario, load_scenario
 from nlp_calib.simulate import DEFAULT_TRUTH, SimulationOptions, simulate
 
-TRUTH = np.array(list(DEFAULT_TRUTH.values()))
-NAMES = tuple(DEFAULT_TRUTH)
+TRUTH = np.array(list(DEFAULT_TRUTH["tricycle"].values()))
+NAMES = tuple(DEFAULT_TRUTH["tricycle"])
 # Stated tolerances: k_traction 1 %, axis_length 2 %, steer_offset 0.01 rad, sensor 2 cm / 0.01 rad.
 TOLERANCE = np.array([np.inf, 0.01 * TRUTH[1], 0.02 * TRUTH[2], 0.01, 0.02, 0.02, 0.01])
 TOLERANCE[0] = 0.02 * TRUTH[0]  # k_steer 2 %

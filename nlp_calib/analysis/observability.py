@@ -100,11 +100,12 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
     turning = float(np.ptp(heading))
     warnings = []
     if turning < MIN_TURNING:
-        lever = [n for n in ("axis_length", *SENSOR_PARAMS[:2]) if n in names]
+        model = fns.model
+        lever = [n for n in (*model.turning_params, *SENSOR_PARAMS[:2]) if n in names]
+        what = ", ".join(lever) + (f" and {model.turning_note}" if model.turning_note else "")
         warnings.append(
             f"no turning: the sensor's heading spans only {turning:.2f} rad over the whole log, so "
-            f"{', '.join(lever)} and the split between steering gain and offset are not observable; "
-            "drive S-curves or circles in both directions"
+            f"{what} are not observable; drive S-curves or circles in both directions"
         )
     for w in sorted(weak, key=lambda w: -w.std_reference):
         warnings.append(w.words() + f" (1σ = {w.std_reference:.3g} × the reference precision)")

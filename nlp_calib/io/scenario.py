@@ -101,6 +101,7 @@ class Scenario:
     alignment: AlignmentOptions = field(default_factory=AlignmentOptions)
     fixed: tuple[str, ...] = ()
     priors: Mapping[str, Prior] = field(default_factory=dict)
+    encoder_noise: Mapping[str, float] = field(default_factory=dict)
     strict: bool = True
     backend: str = "interpreted"
     threads: int = 1
@@ -192,6 +193,10 @@ def _validate(sc: Scenario, source: str) -> None:
         _check_choice(n, names, f"{source}: fixed")
     if len(set(sc.fixed)) == len(names):
         fail(f"{source}: fixed", "every parameter is fixed; nothing is left to estimate")
+    for enc, ticks in sc.encoder_noise.items():
+        _check_choice(enc, get_model(sc.model).encoders, f"{source}: encoder_noise")
+        if not ticks > 0:
+            fail(f"{source}: encoder_noise.{enc}", f"must be > 0 ticks, got {ticks}")
     for n, prior in sc.priors.items():
         _check_choice(n, names, f"{source}: priors")
         if not prior.std > 0:

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from nlp_calib.errors import ModelError
 from nlp_calib.models.base import SENSOR_PARAMS, KinematicModel, param_names
+from nlp_calib.models.diff_drive import DiffDrive
 from nlp_calib.models.tricycle import Tricycle
 
-MODELS: dict[str, KinematicModel] = {m.name: m for m in (Tricycle(),)}
+MODELS: dict[str, KinematicModel] = {m.name: m for m in (Tricycle(), DiffDrive())}
 
 
 def get_model(name: str) -> KinematicModel:

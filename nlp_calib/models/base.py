@@ -19,6 +19,8 @@ from nlp_calib.io.logfile import Dataset
 SENSOR_PARAMS: tuple[str, str, str] = ("sensor_x", "sensor_y", "sensor_theta")
 
 INTEGRATIONS = ("exact", "euler")
+#: 1σ of rounding to whole ticks (uniform over one tick).
+QUANTISATION = 1.0 / np.sqrt(12.0)
 STEERING_SAMPLES = ("start", "end", "mean")
 
 
@@ -33,6 +35,11 @@ class KinematicModel(Protocol):
     kinematic_params: tuple[str, ...]
     #: Names of the per-interval inputs :meth:`inputs` returns, in row order.
     input_names: tuple[str, ...]
+    #: Encoder names (``#joints_max_enc``) the model reads.
+    encoders: tuple[str, ...]
+    #: Kinematic parameters a log without turning cannot determine, and a note on what else.
+    turning_params: tuple[str, ...]
+    turning_note: str
     #: Plausible ranges, used to reject absurd initial guesses and as basin-study ranges.
     physical_ranges: Mapping[str, tuple[float, float]]
 
@@ -48,8 +55,10 @@ class KinematicModel(Protocol):
         """Boolean mask of intervals in which the encoders report motion."""
         ...
 
-    def input_noise_std(self, dataset: Dataset) -> np.ndarray:
-        """Default 1σ noise of each input row (from the encoder resolution)."""
+    def input_noise_std(
+        self, dataset: Dataset, encoder_noise: Mapping[str, float] | None = None
+    ) -> np.ndarray:
+        """1σ noise of each input row, from each encoder's noise in ticks (default: quantisation)."""
         ...
 
     def canonical(self, params: Mapping[str, float], fixed: tuple[str, ...] = ()) -> dict[str, float]:

@@ -16,7 +16,7 @@ import numpy as np
 from nlp_calib.analysis.initialization import hand_eye, robust_lstsq
 from nlp_calib.errors import ModelError
 from nlp_calib.io.logfile import Dataset
-from nlp_calib.models.base import STEERING_SAMPLES
+from nlp_calib.models.base import QUANTISATION, STEERING_SAMPLES
 from nlp_calib.symbolic import se2
 
 STEERING_ENCODER = "steering"
@@ -34,6 +34,9 @@ class Tricycle:
     name: str = "tricycle"
     log_names: tuple[str, ...] = ("traction_drive_wheel", "tricycle")
     kinematic_params: tuple[str, ...] = ("k_steer", "k_traction", "axis_length", "steer_offset")
+    encoders: tuple[str, ...] = (STEERING_ENCODER, TRACTION_ENCODER)
+    turning_params: tuple[str, ...] = ("axis_length",)
+    turning_note = "the split between steering gain and offset"
     input_names: tuple[str, ...] = ("traction_revolutions", "steering_angle")
     physical_ranges: Mapping[str, tuple[float, float]] = MappingProxyType(
         {
@@ -84,12 +87,15 @@ class Tricycle:
     def moving(self, inputs: np.ndarray) -> np.ndarray:
         return np.asarray(inputs[0] != 0.0)
 
-    def input_noise_std(self, dataset: Dataset) -> np.ndarray:
-        """One tick of quantisation, uniform: ``tick/√12`` on each input."""
+    def input_noise_std(
+        self, dataset: Dataset, encoder_noise: Mapping[str, float] | None = None
+    ) -> np.ndarray:
+        """1σ of each input from the encoders' noise in ticks (default: quantisation, ``1/√12``)."""
         header = dataset.header
         s_max = header.encoder_max[header.encoder_index(STEERING_ENCODER)]
         t_max = header.encoder_max[header.encoder_index(TRACTION_ENCODER)]
-        return np.array([1.0 / t_max, 2.0 * np.pi / s_max]) / np.sqrt(12.0)
+        ticks = {**dict.fromkeys((TRACTION_ENCODER, STEERING_ENCODER), QUANTISATION), **(encoder_noise or {})}
+        return np.array([ticks[TRACTION_ENCODER] / t_max, 2.0 * np.pi * ticks[STEERING_ENCODER] / s_max])
 
     def canonical(self, params: Mapping[str, float], fixed: tuple[str, ...] = ()) -> dict[str, float]:
         """The same physical calibration with ``k_traction > 0``, ``axis_length > 0`` and angles

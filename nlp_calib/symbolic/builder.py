@@ -63,6 +63,9 @@ class ProblemFunctions:
     (params, u) → sensor motion over one interval; ``integrate_step`` (T_world_sensor, params, u)
     → T_world_sensor · predict; ``predict_window`` (params, data) → sensor motion over a data
     column's window; ``between`` (a, b) → t2v(a⁻¹b) and ``between_jacobians``.
+    Odometry: ``base_from_sensor`` (T_world_sensor, params) → T_world_sensor·T_base_sensor⁻¹;
+    ``odometry_step`` (state = [T_world_base, vec P], params, u, input_std) →
+    state_next, the base pose and its covariance propagated over one interval.
     Noise propagation: ``sensitivities`` (x, x_fixed, data) → (∂e/∂data, J), per residual.
     """
 
@@ -87,6 +90,8 @@ class ProblemFunctions:
     assemble: ca.Function
     predict: ca.Function
     integrate_step: ca.Function
+    base_from_sensor: ca.Function
+    odometry_step: ca.Function
     predict_window: ca.Function
     between: ca.Function
     sensitivities: ca.Function
@@ -233,6 +238,15 @@ def build(model: KinematicModel, spec: ProblemSpec) -> ProblemFunctions:
     T_ws = ca.SX.sym("T_world_sensor", 3)
     a, b = ca.SX.sym("a", 3), ca.SX.sym("b", 3)
 
+    # Odometry with covariance: P' = F·P·Fᵀ + G·diag(σ_u²)·Gᵀ, F = ∂T'/∂T and G = ∂T'/∂u.
+    state = ca.SX.sym("state", 12)
+    T_wb, P = state[:3], ca.reshape(state[3:], 3, 3)
+    input_std = ca.SX.sym("input_std", n_in)
+    k_sym, _ = _split_params(model, params_sym)
+    T_wb_next = se2.compose(T_wb, model.increment(k_sym, u1, spec.integration))
+    F, G = ca.jacobian(T_wb_next, T_wb), ca.jacobian(T_wb_next, u1)
+    P_next = ca.mtimes([F, P, F.T]) + ca.mtimes([G, ca.diag(input_std**2), G.T])
+
     return ProblemFunctions(
         spec=spec,
         model=model,
@@ -293,6 +307,20 @@ def build(model: KinematicModel, spec: ProblemSpec) -> ProblemFunctions:
             ["T_world_sensor", "params", "u"],
             [se2.compose(T_ws, h1)],
             ["T_world_sensor_next"],
+        ),
+        base_from_sensor=fn(
+            "base_from_sensor",
+            [T_ws, params_sym],
+            ["T_world_sensor", "params"],
+            [se2.compose(T_ws, se2.inverse(_split_params(model, params_sym)[1]))],
+            ["T_world_base"],
+        ),
+        odometry_step=fn(
+            "odometry_step",
+            [state, params_sym, u1, input_std],
+            ["state", "params", "u", "input_std"],
+            [ca.vertcat(T_wb_next, ca.reshape(P_next, 9, 1))],
+            ["state_next"],
         ),
         predict_window=fn(
             "predict_window",

@@ -1,4 +1,4 @@
-"""The report's figures as PNG bytes. The only module of the package that imports matplotlib.
+"""The run report's figures as PNG bytes (matplotlib lives only in this ``plots`` package).
 
 Figures are drawn on an explicit Agg canvas (``FigureCanvasAgg``) rather than through pyplot:
 no display is needed, no global figure state is kept, and the backend of an interactive session
@@ -39,7 +39,8 @@ _TRACKER: Mapping[str, Any] = {"color": "0.15", "linestyle": "-", "linewidth": 3
 _PLAIN = FuncFormatter(lambda v, _: f"{v:g}")
 
 
-def _png(fig: Figure) -> bytes:
+def figure_png(fig: Figure) -> bytes:
+    """The figure rendered to PNG bytes (no timestamp, so files are reproducible)."""
     FigureCanvasAgg(fig)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI, metadata={"Software": None})
@@ -130,7 +131,7 @@ def trajectory_png(series: TrajectorySeries, title: str) -> bytes:
     ax_err.grid(True, which="both", alpha=0.3)
     ax_err.legend(loc="lower right", fontsize=8)
     fig.suptitle(title)
-    return _png(fig)
+    return figure_png(fig)
 
 
 # --- convergence -----------------------------------------------------------------------------
@@ -267,7 +268,7 @@ def convergence_png(series: ConvergenceSeries, title: str) -> bytes:
     else:
         bottom.text(0.5, 0.5, "no iteration history recorded", ha="center", transform=bottom.transAxes)
     fig.suptitle(title)
-    return _png(fig)
+    return figure_png(fig)
 
 
 # --- residuals -------------------------------------------------------------------------------
@@ -341,7 +342,7 @@ def residuals_png(series: ResidualSeries, title: str) -> bytes:
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=9)
     fig.suptitle(title)
-    return _png(fig)
+    return figure_png(fig)
 
 
 # --- model check -----------------------------------------------------------------------------
@@ -398,41 +399,4 @@ def model_check_png(series: ModelCheckSeries, title: str) -> bytes:
         a.yaxis.set_major_formatter(_PLAIN)  # no offset/multiplier text that is easy to miss
         a.grid(True, alpha=0.3)
     fig.suptitle(title)
-    return _png(fig)
-
-
-def scaling_png(cases: Sequence[Mapping[str, Any]]) -> bytes:
-    """Benchmark times against the number of residuals, log-log (``benchmarks/performance.py``)."""
-    fig = Figure(figsize=(8, 5.5))
-    ax = fig.add_subplot(1, 1, 1)
-    series = [
-        ("eval_ms", "one normal-equation evaluation", "o-"),
-        ("gn_ms", "Gauss-Newton solve", "s-"),
-        ("ipopt_ms", "IPOPT solve", "^-"),
-        ("scipy_ms", "scipy least_squares (same residual, plain LS)", "v--"),
-        ("seed_solve_ms", "seed method (numpy, 10 iterations)", "x:"),
-    ]
-    sims = [c for c in cases if str(c["case"]).startswith("simulated")]
-    for key, label, style in series:
-        pts = sorted((c["residuals"], c[key]) for c in sims if key in c)
-        if pts:
-            n, t = zip(*pts)
-            ax.plot(n, t, style, label=label)
-    for c in cases:
-        if not str(c["case"]).startswith("simulated"):
-            ax.plot([c["residuals"]], [c["gn_ms"]], "k*", markersize=10)
-            ax.annotate(
-                str(c["case"]),
-                (c["residuals"], c["gn_ms"]),
-                fontsize=7,
-                xytext=(4, -10),
-                textcoords="offset points",
-            )
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("residuals N (records, single-step)")
-    ax.set_ylabel("time [ms] (median)")
-    ax.set_title("nlp_calib compiled backend: time against problem size")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    return _png(fig)
+    return figure_png(fig)

@@ -1,0 +1,63 @@
+"""Calibrated odometry of the base link with its covariance, propagated interval by interval.
+
+``T' = T·Δr(u)`` and ``P' = F·P·Fᵀ + G·diag(σ_u²)·Gᵀ`` with ``F = ∂T'/∂T`` and ``G = ∂T'/∂u``
+the symbolic Jacobians of the model's increment (the builder's ``odometry_step``), folded over
+the intervals with ``mapaccum``. ``σ_u`` is the encoders' noise on the model inputs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.symbolic.builder import ProblemFunctions
+
+
+@dataclass(frozen=True)
+class OdometryTrack:
+    """Base-link poses ``(n, 3)`` ordered ``(x, y, theta)`` and covariances ``(n, 3, 3)``."""
+
+    time_s: np.ndarray
+    T_world_base: np.ndarray
+    covariance: np.ndarray
+
+    def csv(self) -> str:
+        """One row per record: time, pose and the upper triangle of the covariance."""
+        head = "time_s,x,y,theta,var_x,cov_xy,cov_xtheta,var_y,cov_ytheta,var_theta"
+        P = self.covariance
+        cols = np.column_stack(
+            [
+                self.time_s,
+                self.T_world_base,
+                P[:, 0, 0],
+                P[:, 0, 1],
+                P[:, 0, 2],
+                P[:, 1, 1],
+                P[:, 1, 2],
+                P[:, 2, 2],
+            ]
+        )
+        return head + "\n" + "\n".join(",".join(f"{v:.10g}" for v in row) for row in cols) + "\n"
+
+
+def propagate(
+    fns: ProblemFunctions,
+    params: np.ndarray,
+    inputs: np.ndarray,
+    T_world_base_0: np.ndarray,
+    input_std: np.ndarray,
+    P0: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Poses ``(n + 1, 3)`` and covariances ``(n + 1, 3, 3)`` over the ``n`` intervals of ``inputs``."""
+    n = inputs.shape[1]
+    P_start = np.zeros((3, 3)) if P0 is None else np.asarray(P0, dtype=float)
+    state0 = np.concatenate([np.asarray(T_world_base_0, dtype=float), P_start.ravel(order="F")])
+    states = np.empty((n + 1, 12))
+    states[0] = state0
+    if n:
+        fold = fns.odometry_step.mapaccum("odometry", n)
+        reps = np.repeat(np.asarray(params, dtype=float).reshape(-1, 1), n, axis=1)
+        sig = np.repeat(np.asarray(input_std, dtype=float).reshape(-1, 1), n, axis=1)
+        states[1:] = np.asarray(fold(state0, reps, inputs, sig)).T
+    return states[:, :3], states[:, 3:].reshape(-1, 3, 3, order="F")

@@ -1,0 +1,209 @@
+"""One suite, every kinematic model: Jacobians, solver agreement, C export, recovery, odometry
+covariance, symmetries and the data-driven start."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+from conftest import assert_close
+
+from nlp_calib.analysis.odometry import propagate
+from nlp_calib.calibration import Calibration
+from nlp_calib.codegen import build_for_export, export_functions, generate
+from nlp_calib.data import ResidualOptions, build_residual_data
+from nlp_calib.io.logfile import Dataset, parse_log
+from nlp_calib.io.scenario import RobustOptions, Scenario
+from nlp_calib.models import MODELS, get_model
+from nlp_calib.sim_drives import DEFAULT_TRUTH
+from nlp_calib.simulate import SimulationOptions, simulate
+from nlp_calib.solvers.compiled import find_compiler
+from nlp_calib.symbolic.builder import ProblemSpec, build
+
+ALL_MODELS = sorted(MODELS)
+# Stated tolerances, per parameter kind: gains 1 % (tricycle steering 2 %), lengths 2 %,
+# steering offset 0.01 rad, sensor position 2 cm, sensor angle 0.01 rad.
+RELATIVE = {
+    "k_traction": 0.01,
+    "k_left": 0.01,
+    "k_right": 0.01,
+    "k_steer": 0.02,
+    "axis_length": 0.02,
+    "baseline": 0.02,
+}
+ABSOLUTE = {"steer_offset": 0.01, "sensor_x": 0.02, "sensor_y": 0.02, "sensor_theta": 0.01}
+
+
+def truth(model: str) -> np.ndarray:
+    return np.array(list(DEFAULT_TRUTH[model].values()))
+
+
+def sim_log(model: str, **kwargs: object) -> Dataset:
+    opts = {"records": 1000, "seed": 3, **kwargs}
+    return parse_log(simulate(SimulationOptions(model=model, **opts)).text().splitlines(), f"sim-{model}")  # type: ignore[arg-type]
+
+
+def scenario(model: str, **changes: object) -> Scenario:
+    base = Scenario(
+        name=model,
+        dataset=Path("sim"),
+        model=model,
+        robust=RobustOptions("huber", 0.05),
+        residual=ResidualOptions(horizon=5, steering_sample="mean"),
+    )
+    return dataclasses.replace(base, **changes)  # type: ignore[arg-type]
+
+
+def mat(v: np.ndarray) -> np.ndarray:
+    x, y, t = v
+    return np.array([[np.cos(t), -np.sin(t), x], [np.sin(t), np.cos(t), y], [0.0, 0.0, 1.0]])
+
+
+def vec(T: np.ndarray) -> np.ndarray:
+    return np.array([T[0, 2], T[1, 2], np.arctan2(T[1, 0], T[0, 0])])
+
+
+def boxplus_numpy(x: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    out = x + delta
+    out[-3:] = vec(mat(delta[-3:]) @ mat(x[-3:]))
+    return out
+
+
+@pytest.mark.parametrize("model", ALL_MODELS)
+def test_manifold_jacobian_matches_central_differences(model: str) -> None:
+    m = get_model(model)
+    fns = build(m, ProblemSpec(horizon=4))
+    columns = build_residual_data(fns, sim_log(model, records=300), ResidualOptions(horizon=4)).columns
+    rng = np.random.default_rng(1)
+    n_in = len(m.input_names)
+    intervals = columns[: 4 * n_in].reshape(n_in, -1, order="F")  # interval after interval
+    moving = np.flatnonzero(m.moving(intervals).reshape(-1, 4).all(axis=1))
+    for k in rng.choice(moving, 15, replace=False):
+        x = truth(model) * rng.uniform(0.8, 1.2, truth(model).size)
+        data = columns[:, k]
+        _, J = (np.asarray(v) for v in fns.residual_jacobian(x, [], data))
+        J_fd = np.zeros_like(J)
+        for i in range(x.size):
+            d = np.zeros(x.size)
+            d[i] = 1e-4 * max(abs(x[i]), 1e-3)
+
+            def e(step: np.ndarray, x: np.ndarray = x, data: np.ndarray = data) -> np.ndarray:
+                return np.asarray(fns.residual(boxplus_numpy(x, step), [], data)).ravel()
+
+            # Five-point central stencil: truncation O(h⁴), so h can stay clear of round-off.
+            J_fd[:, i] = (-e(2 * d) + 8 * e(d) - 8 * e(-d) + e(-2 * d)) / (12 * d[i])
+        # Per column: the parameters' scales differ by orders of magnitude (metres per tick).
+        col = np.abs(J).max(axis=0)
+        scale = np.maximum(np.abs(J), np.maximum(1e-3 * col, 1e-9 * col.max()))
+        assert (np.abs(J - J_fd) / scale).max() <= 1e-6
+
+
+@pytest.mark.parametrize("model", ALL_MODELS)
+def test_solvers_agree_and_recover_truth(model: str) -> None:
+    calib = Calibration(scenario(model), dataset=sim_log(model, records=1500, outlier_fraction=0.01))
+    gn, ip = calib.solve("gauss_newton"), calib.solve("ipopt")
+    for res in (gn, ip):
+        assert res.converged, res.reason
+    assert_close(gn.params, ip.params, rtol=1e-4, atol=1e-10)
+    assert gn.cost == pytest.approx(ip.cost, rel=1e-6)
+    for name, value, true in zip(gn.names, gn.params, truth(model)):
+        tol = RELATIVE[name] * abs(true) if name in RELATIVE else ABSOLUTE[name]
+        assert abs(value - true) <= tol, f"{model} {name}: {value} vs {true}"
+
+
+@pytest.mark.parametrize("model", ALL_MODELS)
+def test_auto_start_needs_no_guess(model: str) -> None:
+    wild = {n: 1.0 for n in DEFAULT_TRUTH[model]}
+    calib = Calibration(
+        scenario(model, initial_guess="auto"), dataset=sim_log(model, records=1500, guess=wild)
+    )
+    res = calib.solve("gauss_newton")
+    assert res.converged, res.reason
+    assert_close(res.params, truth(model), rtol=0.02, atol=0.02)
+
+
+@pytest.mark.parametrize("model", ALL_MODELS)
+def test_mirrored_solution_maps_back_to_canonical_form(model: str) -> None:
+    m = get_model(model)
+    p = dict(DEFAULT_TRUTH[model])
+    fns = build(m, ProblemSpec(horizon=3))
+    columns = build_residual_data(fns, sim_log(model, records=100), ResidualOptions(horizon=3)).columns
+    # The base frame turned round: negate the travel-scale parameters, rotate the mount by π.
+    mirror = dict(p)
+    for n in (*m.turning_params, "sensor_x", "sensor_y"):
+        mirror[n] = -mirror[n]
+    if model == "diff_drive":
+        mirror["k_left"], mirror["k_right"] = -p["k_left"], -p["k_right"]
+    else:
+        mirror["steer_offset"] = p["steer_offset"] + np.pi
+    mirror["sensor_theta"] = p["sensor_theta"] + np.pi
+    x, xm = truth(model), np.array([mirror[n] for n in p])
+    e = np.asarray(fns.residual.map(columns.shape[1])(x, [], columns))
+    em = np.asarray(fns.residual.map(columns.shape[1])(xm, [], columns))
+    assert_close(em, e, rtol=1e-9, atol=1e-12)  # an exact symmetry of the model
+    canon = m.canonical(mirror)
+    assert_close([canon[n] for n in p], x, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("model", ALL_MODELS)
+def test_odometry_covariance_matches_monte_carlo(model: str) -> None:
+    """Each diagonal term of the final pose's covariance within 10 % of 2,000 Monte-Carlo runs."""
+    m = get_model(model)
+    fns = build(m, ProblemSpec())
+    ds = sim_log(model, records=300, seed=2)
+    u = m.inputs(ds, "start")
+    p = truth(model)
+    noise = {
+        "tricycle": {"traction_wheel": 2.5, "steering": 0.65},
+        "diff_drive": {"left_wheel": 1.0, "right_wheel": 1.0},
+    }
+    sigma = m.input_noise_std(ds, noise[model])
+    _, P = propagate(fns, p, u, np.zeros(3), sigma)
+    fold = fns.odometry_step.mapaccum("mc", u.shape[1])
+    reps, zero = np.repeat(p[:, None], u.shape[1], axis=1), np.zeros_like(u)
+    rng = np.random.default_rng(0)
+    ends = np.array(
+        [
+            np.asarray(fold(np.zeros(12), reps, u + rng.normal(0, 1, u.shape) * sigma[:, None], zero))[:3, -1]
+            for _ in range(2000)
+        ]
+    )
+    ratio = np.var(ends, axis=0) / np.diag(P[-1])
+    assert np.all(np.abs(ratio - 1.0) <= 0.10), ratio
+
+
+@pytest.mark.skipif(find_compiler() is None, reason="no C compiler found ($CC, cc, gcc or clang)")
+@pytest.mark.parametrize("model", ALL_MODELS)
+def test_c_export_equals_python(model: str, tmp_path: Path) -> None:
+    m = get_model(model)
+    problems = build_for_export(m, 3, "exact")
+    columns = build_residual_data(
+        problems[-1], sim_log(model, records=50), ResidualOptions(horizon=3)
+    ).columns
+    generate(problems, tmp_path, truth(model), columns[:, 10], f"test {model}")
+    lib = tmp_path / "lib.so"
+    subprocess.run(
+        [str(find_compiler()), "-O2", "-fPIC", "-shared", "-o", str(lib), "nlp_calib_residual.c", "-lm"],
+        cwd=tmp_path,
+        check=True,
+        capture_output=True,
+    )
+    rng = np.random.default_rng(4)
+    for fns in problems:
+        H = fns.spec.horizon
+        for exp in export_functions(fns):
+            ext = ca.external(exp.function.name(), str(lib))
+            for k in rng.choice(columns.shape[1], 5, replace=False):
+                U = columns[: m.input_names.__len__() * H, k].reshape(len(m.input_names), H, order="F")
+                args = (truth(model), U, columns[len(m.input_names) * 3 : len(m.input_names) * 3 + 3, k])
+                for a, b in zip(ext.call(list(args)), exp.function.call(list(args))):
+                    assert_close(
+                        np.asarray(a),
+                        np.asarray(b),
+                        rtol=1e-12,
+                        atol=1e-12 * max(float(np.abs(np.asarray(b)).max()), 1.0),
+                    )
