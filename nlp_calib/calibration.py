@@ -253,7 +253,12 @@ class Calibration:
         upper = np.array([b[n][1] if n in b else np.inf for n in self.fns.free])
         for name, lo, hi, x in zip(self.fns.free, lower, upper, self.x0):
             if not lo <= x <= hi:
-                raise ScenarioError(f"bounds.{name}: the initial guess {x:g} lies outside [{lo:g}, {hi:g}]")
+                sc = self.scenario
+                origin = "from initial_guess: auto" if sc.initial_guess == "auto" else "from the log header"
+                raise ScenarioError(
+                    f"{sc.path or sc.name}: bounds.{name}: the initial guess {x:g} lies outside "
+                    f"[{lo:g}, {hi:g}] (it comes {origin}); widen the bounds or set initial_guess.{name}"
+                )
         return lower, upper
 
     def solve(self, solver: str) -> SolverResult:
@@ -303,7 +308,9 @@ class Calibration:
             )
         p0 = np.array([self.initial[n] for n in self.fns.names])
         base, base_holdout = self.score(p0)
-        first = next(iter(reports.values())).result
+        # Observability at the first estimate with a finite cost (a solver may not have started).
+        results = [rep.result for rep in reports.values()]
+        first = next((r for r in results if np.isfinite(r.cost)), results[0])
         observability = analyse(self.evaluator, first.x, self.data.dataset.T_world_sensor)
         warnings = list(observability.warnings)
         warnings += [

@@ -107,9 +107,10 @@ def _out_dir(args: argparse.Namespace, name: str) -> Path:
 
 def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> int:
     from nlp_calib.calibration import Calibration
+    from nlp_calib.io.outdir import StagedOutput
     from nlp_calib.io.results import write_result
     from nlp_calib.io.scenario import load_scenario
-    from nlp_calib.report.handoff import write_handoff
+    from nlp_calib.report.handoff import CALIBRATION_FILE, URDF_FILE, write_handoff
     from nlp_calib.report.progress import Progress
     from nlp_calib.report.terminal import correlation_table, run_table, summary_table
 
@@ -126,16 +127,21 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
             print(run_table(run))
             print()
             print(correlation_table(run, next(iter(run.reports))))
-            written = [write_result(run, out), *write_handoff(run, out)]
-            if len(written) == 1:
-                print("warning: no solver converged; no calibration.yaml or URDF written", file=sys.stderr)
-            if args.report:
-                from nlp_calib.report.writer import write_report  # imports matplotlib
+            # Staged: an interrupted run leaves the previous run's files, never a mix of both.
+            with StagedOutput(out, owned=(CALIBRATION_FILE, URDF_FILE)) as stage:
+                written = [write_result(run, stage.path), *write_handoff(run, stage.path)]
+                if len(written) == 1:
+                    print(
+                        "warning: no solver converged; no calibration.yaml or URDF written", file=sys.stderr
+                    )
+                if args.report:
+                    from nlp_calib.report.writer import write_report  # imports matplotlib
 
-                progress.update(i, f"{scenario.name}: drawing the report")
-                written += write_report(calib, run, out)
-                progress.clear()
-            print("\n" + "\n".join(f"wrote {p}" for p in written) + "\n")
+                    progress.update(i, f"{scenario.name}: drawing the report")
+                    written += write_report(calib, run, stage.path)
+                    progress.clear()
+                stage.commit()
+            print("\n" + "\n".join(f"wrote {stage.final(p)}" for p in written) + "\n")
     if len(runs) > 1:
         print(summary_table(runs))
     return 0 if all(r.result.converged for run in runs for r in run.reports.values()) else 1
@@ -155,6 +161,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
+    from nlp_calib.io.files import prepare_output_dir
     from nlp_calib.io.simconfig import simulation_options
     from nlp_calib.simulate import simulate, write_simulation
 
@@ -173,6 +180,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         if getattr(args, k) is not None
     }
     opts = simulation_options(args.config, overrides)
+    if args.out.is_dir():
+        raise UsageError(f"--out {args.out} is a folder; give the path of the log file to write")
+    prepare_output_dir(args.out.parent)
     log_path, truth = write_simulation(simulate(opts), args.out)
     print(f"wrote {log_path} ({opts.records} records) and {truth}")
     return 0

@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from nlp_calib.errors import ScenarioError
 from nlp_calib.io.logfile import COUNTER_MODULUS, Dataset, is_absolute_encoder, wrapped_difference
 from nlp_calib.symbolic.builder import ProblemFunctions
 
@@ -128,4 +129,9 @@ def shift_encoders(dataset: Dataset, lag_s: float) -> tuple[Dataset, tuple[int, 
     ticks = np.stack(columns, axis=1).astype(np.int64)
     ticks.flags.writeable = False
     valid = np.flatnonzero((tq >= t[0]) & (tq <= t[-1]))
+    if valid.size < 2:
+        raise ScenarioError(
+            f"alignment.tracker_lag: a lag of {lag_s:g} s leaves fewer than 2 records of the "
+            f"{t[-1] - t[0]:.1f} s log; use a lag well below the log's duration"
+        )
     return replace(dataset, ticks=ticks), (int(valid[0]), int(valid[-1]) + 1)

@@ -69,6 +69,15 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
     fns = evaluator.fns
     names = fns.free
     ne = evaluator.normal_equations(x)
+    heading = np.unwrap(T_world_sensor[:, 2])
+    if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
+        return Observability(
+            condition_number=float("nan"),
+            std_reference={n: float("nan") for n in names},
+            weak=(),
+            heading_range_rad=float(np.ptp(heading)),
+            warnings=("observability not analysed: the residual is NaN or infinite at every estimate",),
+        )
     _, s, weight = evaluator.robust_terms(x)
     dof = max(3 * evaluator.n_residuals - len(names), 1)
     sigma2 = max(float(np.sum(weight * s)) / dof, 1e-300)
@@ -96,7 +105,6 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
         comps = {names[i]: round(float(v[i]), 3) for i in np.flatnonzero(np.abs(v) > 0.3)}
         weak.append(WeakDirection(float(std_dir[k]), comps))
     # The heading's range, not its summed steps: tracker noise adds up over thousands of steps.
-    heading = np.unwrap(T_world_sensor[:, 2])
     turning = float(np.ptp(heading))
     warnings = []
     if turning < MIN_TURNING:

@@ -82,11 +82,34 @@ def _pseudo_inverse(H: np.ndarray, scale: np.ndarray, rcond: float = 1e-10) -> t
     return inv, undetermined
 
 
+def not_available(evaluator: ProblemEvaluator) -> Uncertainty:
+    """No uncertainty at all (NaN) for an estimate where the residual is NaN or infinite."""
+    fns = evaluator.fns
+    n = len(fns.names)
+    free = np.array([name in fns.free for name in fns.names])
+    corr = np.full((n, n), np.nan)
+    corr[~free, :] = 0.0
+    corr[:, ~free] = 0.0
+    np.fill_diagonal(corr, 1.0)
+    return Uncertainty(
+        names=fns.names,
+        free=fns.free,
+        covariance=np.full((fns.n_free, fns.n_free), np.nan),
+        std=np.where(free, np.nan, 0.0),
+        correlation=corr,
+        noise={},
+        dof=0,
+    )
+
+
 def estimate(
     evaluator: ProblemEvaluator, x: np.ndarray, data: ResidualData, input_noise_std: np.ndarray
 ) -> Uncertainty:
     """Covariance of the estimate ``x`` fitted to ``data``, given the inputs' 1σ noise."""
     fns = evaluator.fns
+    ne = evaluator.normal_equations(x)
+    if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
+        return not_available(evaluator)
     n, N, H = fns.n_free, evaluator.n_residuals, data.horizon
     n_in = fns.n_inputs
     rows = fns.data_rows
@@ -141,9 +164,7 @@ def estimate(
     free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[
         [fns.names.index(f) for f in fns.free]
     ]
-    bread_inv, undetermined = _pseudo_inverse(
-        evaluator.normal_equations(x).H, reference_scales(fns.free, free_values)
-    )
+    bread_inv, undetermined = _pseudo_inverse(ne.H, reference_scales(fns.free, free_values))
     M = np.asarray(fns.tangent_map(x))
     cov = M @ bread_inv @ meat @ bread_inv @ M.T
     # A parameter the data do not determine has no finite variance; say so instead of a number.

@@ -9,6 +9,7 @@ pose) followed by one record per line::
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -17,6 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.errors import DatasetError
+from nlp_calib.io import logcheck
+from nlp_calib.io.logcheck import DroppedRecord, drop_summary
 
 #: uint32 counters wrap at 2**32 (not 2**32 - 1).
 COUNTER_MODULUS = 2**32
@@ -59,14 +62,6 @@ class LogHeader:
                 f"the log has no encoder called {name!r} (it lists {list(self.encoder_names)})",
             )
         return self.encoder_names.index(name)
-
-
-@dataclass(frozen=True)
-class DroppedRecord:
-    """A record left out by a non-strict read, with the line it came from and why."""
-
-    line: int
-    reason: str
 
 
 @dataclass(frozen=True)
@@ -130,12 +125,16 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def _numbers(text: str, path: str, line: int, what: str) -> list[float]:
+def _numbers(text: str, path: str, line: int, what: str, *, finite: bool = False) -> list[float]:
     cleaned = text.replace("[", " ").replace("]", " ").replace(",", " ")
     try:
-        return [float(tok) for tok in cleaned.split()]
+        values = [float(tok) for tok in cleaned.split()]
     except ValueError:
         raise DatasetError(path, line, f"{what}: expected numbers, got {text.strip()!r}") from None
+    # Header values are used as they are: NaN or infinity there is an error in any mode.
+    if finite and not all(math.isfinite(v) for v in values):
+        raise DatasetError(path, line, f"{what}: expected finite numbers, got {text.strip()!r}")
+    return values
 
 
 def _names(text: str) -> list[str]:
@@ -169,7 +168,7 @@ def _parse_header(lines: Sequence[tuple[int, str]], path: str) -> LogHeader:
     _, names_text = need("parameters")
     ln_vals, vals_text = need("parameter_values")
     names = [_PARAMETER_ALIASES.get(n.lower(), n.lower()) for n in _names(names_text)]
-    values = _numbers(vals_text, path, ln_vals, "#parameter_values")
+    values = _numbers(vals_text, path, ln_vals, "#parameter_values", finite=True)
     if len(values) != len(names):
         raise DatasetError(
             path,
@@ -178,19 +177,20 @@ def _parse_header(lines: Sequence[tuple[int, str]], path: str) -> LogHeader:
         )
     enc_names = tuple(_names(need("joints_max_enc")[1]))
     ln_enc, enc_text = need("joints_max_enc_values")
-    enc_max_f = _numbers(enc_text, path, ln_enc, "#joints_max_enc_values")
-    if len(enc_max_f) != len(enc_names) or any(v <= 0 or v != int(v) for v in enc_max_f):
+    enc_max_f = _numbers(enc_text, path, ln_enc, "#joints_max_enc_values", finite=True)
+    if len(enc_max_f) != len(enc_names) or any(not 0 < v <= 2**32 or v != int(v) for v in enc_max_f):
         raise DatasetError(
             path,
             ln_enc,
-            f"expected {len(enc_names)} positive integer encoder ranges, got {enc_text.strip()!r}",
+            f"expected {len(enc_names)} integer encoder ranges in [1, 2^32] (one per "
+            f"#joints_max_enc name), got {enc_text.strip()!r}",
         )
     for key in ("translation", "rotation"):
         if key not in pose_lines:
             raise DatasetError(path, None, f"header line '#\t{key}: [...]' of the sensor pose is missing")
     ln_t, t_text = pose_lines["translation"]
     ln_r, r_text = pose_lines["rotation"]
-    trans = _numbers(t_text, path, ln_t, "sensor translation")
+    trans = _numbers(t_text, path, ln_t, "sensor translation", finite=True)
     quat = _numbers(r_text, path, ln_r, "sensor rotation quaternion")
     if len(trans) != 3:
         raise DatasetError(path, ln_t, f"sensor translation: expected [x, y, z], got {t_text.strip()!r}")
@@ -229,18 +229,56 @@ def _split_record(text: str, path: str, line: int) -> dict[str, list[str]]:
     return parts
 
 
+_TIME = re.compile(r"(-?)([0-9]{1,10})(?:\.([0-9]*))?")
+_INT = re.compile(r"-?[0-9]{1,18}")
+#: Timestamps beyond this many seconds (year 2096) cannot be stored in int64 nanoseconds safely.
+_MAX_SECONDS = 4_000_000_000
+
+
 def _parse_time_ns(token: str, path: str, line: int) -> int:
-    whole, _, frac = token.partition(".")
-    if not (whole.lstrip("-").isdigit() and (frac == "" or frac.isdigit())):
-        raise DatasetError(path, line, f"time: expected seconds like 1668091584.821040869, got {token!r}")
-    return int(whole) * 1_000_000_000 + int((frac + "000000000")[:9])
+    m = _TIME.fullmatch(token)
+    if m is None or int(m.group(2)) >= _MAX_SECONDS:
+        raise DatasetError(
+            path,
+            line,
+            f"time: expected seconds like 1668091584.821040869, got {token!r}",
+        )
+    ns = int(m.group(2)) * 1_000_000_000 + int(((m.group(3) or "") + "000000000")[:9])
+    return -ns if m.group(1) else ns
+
+
+def _parse_record(body: str, path: str, lineno: int, n_enc: int) -> tuple[int, list[int], list[float]]:
+    """Time (ns), encoder readings and the six pose values of one record line."""
+    parts = _split_record(body, path, lineno)
+    expected = {"time:": 1, "ticks:": n_enc, "model_pose:": 3, "tracker_pose:": 3}
+    for key, count in expected.items():
+        got = parts.get(key)
+        if got is None or len(got) != count:
+            found = "none" if got is None else f"{len(got)}"
+            raise DatasetError(path, lineno, f"'{key}' needs {count} value(s), found {found}: {body[:80]!r}")
+    time_ns = _parse_time_ns(parts["time:"][0], path, lineno)
+    if not all(_INT.fullmatch(tok) for tok in parts["ticks:"]):
+        raise DatasetError(
+            path, lineno, f"ticks: expected {n_enc} integers of at most 18 digits, got {parts['ticks:']}"
+        )
+    values = []
+    for key in ("model_pose:", "tracker_pose:"):
+        try:  # plain numbers only: no brackets or commas inside a record
+            values += [float(tok) for tok in parts[key]]
+        except ValueError:
+            raise DatasetError(
+                path, lineno, f"{key[:-1]}: expected numbers, got {' '.join(parts[key])!r}"
+            ) from None
+    return time_ns, [int(tok) for tok in parts["ticks:"]], values
 
 
 def read_log(path: str | Path, *, strict: bool = True) -> Dataset:
     """Read a log file; malformed lines raise :class:`DatasetError` naming ``file:line``.
 
-    With ``strict=False`` records whose values are unusable (NaN, encoder out of range, time
-    going backwards) are dropped with a warning and listed in :attr:`Dataset.dropped`.
+    With ``strict=False`` records that cannot be read (too few fields, not numbers, a line cut
+    short) or used (NaN, encoder out of range, time not increasing, a counter jump no wheel can
+    make, see :mod:`nlp_calib.io.logcheck`) are dropped with one warning and listed in
+    :attr:`Dataset.dropped`; header problems are errors in either mode.
     """
     p = Path(path)
     try:
@@ -249,7 +287,7 @@ def read_log(path: str | Path, *, strict: bool = True) -> Dataset:
         raise DatasetError(
             str(p), None, "no such file; pass the log with --data or fix 'dataset' in the scenario"
         ) from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: a NUL in the path
         raise DatasetError(str(p), None, f"cannot read the log ({exc})") from None
     return parse_log(text.splitlines(), str(p), strict=strict)
 
@@ -264,53 +302,65 @@ def parse_log(lines: Iterable[str], path: str = "<log>", *, strict: bool = True)
             continue
         if stripped.startswith("#"):
             if record_lines:
-                raise DatasetError(path, lineno, "header line after the first record")
+                raise DatasetError(
+                    path, lineno, f"header line after the first record: {stripped[:80]!r}; one header per log"
+                )
             header_lines.append((lineno, stripped))
         else:
             record_lines.append((lineno, stripped))
     if not header_lines and not record_lines:
         raise DatasetError(path, None, "the file is empty; expected a '#' header and records")
     header = _parse_header(header_lines, path)
-    if len(record_lines) < 2:
+    if not record_lines:
         raise DatasetError(
-            path, None, f"expected at least 2 records after the header, found {len(record_lines)}"
+            path,
+            header_lines[-1][0],
+            "the file ends after the header: no records (expected lines 'time: ... ticks: ... "
+            "model_pose: ... tracker_pose: ...'; did the logger stop before its first record?)",
         )
 
-    n_enc = len(header.encoder_names)
-    times_ns: list[int] = []
-    values: list[list[float]] = []
-    ticks: list[list[int]] = []
+    # Unreadable lines and unusable values are collected first, so that a strict read reports the
+    # earliest problem in the file and a non-strict one drops every bad record.
+    problems: dict[int, str] = {}
+    rows: list[tuple[int, list[int], list[float]]] = []
     linenos: list[int] = []
     for lineno, body in record_lines:
-        parts = _split_record(body, path, lineno)
-        expected = {"time:": 1, "ticks:": n_enc, "model_pose:": 3, "tracker_pose:": 3}
-        for key, count in expected.items():
-            got = parts.get(key)
-            if got is None or len(got) != count:
-                found = "none" if got is None else f"{len(got)}"
-                raise DatasetError(
-                    path, lineno, f"'{key}' needs {count} value(s), found {found}: {body[:80]!r}"
-                )
-        times_ns.append(_parse_time_ns(parts["time:"][0], path, lineno))
         try:
-            ticks.append([int(tok) for tok in parts["ticks:"]])
-        except ValueError:
-            raise DatasetError(
-                path, lineno, f"ticks: expected {n_enc} integers, got {parts['ticks:']}"
-            ) from None
-        values.append(
-            _numbers(" ".join(parts["model_pose:"]), path, lineno, "model_pose")
-            + _numbers(" ".join(parts["tracker_pose:"]), path, lineno, "tracker_pose")
+            rows.append(_parse_record(body, path, lineno, len(header.encoder_names)))
+            linenos.append(lineno)
+        except DatasetError as exc:
+            last = lineno == record_lines[-1][0]
+            problems[lineno] = exc.problem + (
+                " (the last line: cut short by a crashed logger?)" if last else ""
+            )
+    t_ns = np.array([r[0] for r in rows], dtype=np.int64)
+    tick_arr = np.array([r[1] for r in rows], dtype=np.int64).reshape(len(rows), len(header.encoder_names))
+    poses = np.array([r[2] for r in rows], dtype=float).reshape(len(rows), 6)
+    lines_arr = np.array(linenos, dtype=np.int64)
+    limits = [
+        (name, vmax if is_absolute_encoder(name) else COUNTER_MODULUS)
+        for name, vmax in zip(header.encoder_names, header.encoder_max)
+    ]
+    bad = logcheck.value_problems(t_ns, tick_arr, poses, lines_arr, limits)
+    problems.update({int(lines_arr[i]): reason for i, reason in bad.items()})
+    keep = np.ones(len(rows), dtype=bool)
+    keep[list(bad)] = False
+    if strict and problems:
+        first = min(problems)
+        raise DatasetError(
+            path, first, f"{problems[first]} (set 'strict: false' in the scenario to drop such records)"
         )
-        linenos.append(lineno)
-
-    t_ns = np.array(times_ns, dtype=np.int64)
-    poses = np.array(values, dtype=float)
-    tick_arr = np.array(ticks, dtype=np.int64)
-    keep, dropped = _check_records(t_ns, tick_arr, poses, np.array(linenos), header, path, strict)
-    t_ns, tick_arr, poses = t_ns[keep], tick_arr[keep], poses[keep]
+    counters = [(j, name) for j, name in enumerate(header.encoder_names) if not is_absolute_encoder(name)]
+    problems.update(
+        logcheck.counter_drops(t_ns, tick_arr, lines_arr, keep, counters, path, strict, COUNTER_MODULUS)
+    )
+    t_ns, tick_arr, poses, lines_arr = t_ns[keep], tick_arr[keep], poses[keep], lines_arr[keep]
+    dropped = tuple(DroppedRecord(line, problems[line]) for line in sorted(problems))
     if t_ns.shape[0] < 2:
-        raise DatasetError(path, None, "fewer than 2 usable records remain after dropping bad ones")
+        why = f"; the first dropped: {dropped[0].line}: {dropped[0].reason}" if dropped else ""
+        raise DatasetError(path, None, f"expected at least 2 usable records, found {t_ns.shape[0]}{why}")
+    if dropped:
+        warnings.warn(f"{path}: {drop_summary(dropped, len(record_lines))}", stacklevel=2)
     return Dataset(
         path=path,
         header=header,
@@ -318,60 +368,9 @@ def parse_log(lines: Iterable[str], path: str = "<log>", *, strict: bool = True)
         ticks=_frozen(tick_arr),
         model_pose=_frozen(poses[:, 0:3]),
         T_world_sensor=_frozen(poses[:, 3:6]),
-        line_numbers=_frozen(np.array(linenos)[keep]),
-        dropped=tuple(dropped),
+        line_numbers=_frozen(lines_arr),
+        dropped=dropped,
     )
-
-
-def _check_records(
-    t_ns: np.ndarray,
-    ticks: np.ndarray,
-    poses: np.ndarray,
-    linenos: np.ndarray,
-    header: LogHeader,
-    path: str,
-    strict: bool,
-) -> tuple[np.ndarray, list[DroppedRecord]]:
-    """Value checks per record: the first failure raises (strict) or drops the record."""
-    n = t_ns.shape[0]
-    reasons: dict[int, str] = {}
-    bad_pose = ~np.isfinite(poses).all(axis=1)
-    for i in np.flatnonzero(bad_pose).tolist():
-        reasons.setdefault(int(i), "a pose holds NaN or infinity; expected finite numbers")
-    for j, (name, vmax) in enumerate(zip(header.encoder_names, header.encoder_max)):
-        limit = vmax if is_absolute_encoder(name) else COUNTER_MODULUS
-        out = (ticks[:, j] < 0) | (ticks[:, j] >= limit)
-        for i in np.flatnonzero(out).tolist():
-            reasons.setdefault(int(i), f"encoder {name!r} reads {ticks[i, j]}, outside [0, {limit})")
-    # Time must increase; compare against the last kept record so one glitch drops one record.
-    last: int | None = None
-    for i in range(n):
-        if i in reasons:
-            continue
-        if last is not None and t_ns[i] <= t_ns[last]:
-            what = "duplicates" if t_ns[i] == t_ns[last] else "goes back from"
-            reasons[i] = (
-                f"time {what} the previous record's (line {linenos[last]}); expected increasing timestamps"
-            )
-            continue
-        last = i
-    if reasons and strict:
-        first = min(reasons)
-        raise DatasetError(
-            path,
-            int(linenos[first]),
-            reasons[first] + " (set 'strict: false' in the scenario to drop such records)",
-        )
-    dropped = [DroppedRecord(int(linenos[i]), reasons[i]) for i in sorted(reasons)]
-    if dropped:
-        warnings.warn(
-            f"{path}: dropped {len(dropped)} unusable record(s), "
-            f"first at line {dropped[0].line}: {dropped[0].reason}",
-            stacklevel=3,
-        )
-    keep = np.ones(n, dtype=bool)
-    keep[list(reasons)] = False
-    return keep, dropped
 
 
 def is_absolute_encoder(encoder_name: str) -> bool:

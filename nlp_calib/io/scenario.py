@@ -144,6 +144,9 @@ def scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | No
 
 
 def _validate(sc: Scenario, source: str) -> None:
+    # The name becomes a folder under the output directory: a plain, non-empty file name.
+    if sc.name in ("", ".", "..") or any(c in sc.name for c in "/\\\0"):
+        fail(f"{source}: name", f"must be a plain folder name (no '/', '\\' or NUL), got {sc.name!r}")
     _check_choice(sc.model, MODELS, f"{source}: model")
     names = param_names(get_model(sc.model))
     _check_choice(sc.robust.kernel, KERNELS, f"{source}: robust.kernel")
@@ -189,6 +192,9 @@ def _validate(sc: Scenario, source: str) -> None:
         _check_choice(n, names, f"{source}: bounds")
         if not lo < hi:
             fail(f"{source}: bounds.{n}", f"needs lo < hi, got [{lo}, {hi}]")
+        guess = sc.initial_guess.get(n) if isinstance(sc.initial_guess, Mapping) else None
+        if guess is not None and not lo <= guess <= hi:
+            fail(f"{source}: bounds.{n}", f"the initial guess {guess:g} lies outside [{lo:g}, {hi:g}]")
     for n in sc.fixed:
         _check_choice(n, names, f"{source}: fixed")
     if len(set(sc.fixed)) == len(names):

@@ -48,7 +48,13 @@ def coerce(value: Any, tp: Any, where: str) -> Any:
             fail(where, f"expected an integer, got {value!r}")
         return value
     if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        # A YAML integer beyond float range would overflow float(): no usable number either.
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or (isinstance(value, int) and abs(value) > 1e308)
+            or not math.isfinite(value)
+        ):
             fail(where, f"expected a finite number, got {value!r}")
         return float(value)
     if tp is str:

@@ -6,6 +6,7 @@ import numpy as np
 
 from nlp_calib.analysis.metrics import TrajectoryMetrics
 from nlp_calib.calibration import CalibrationRun
+from nlp_calib.io.logcheck import drop_summary
 
 
 def _fmt(v: float, width: int = 12) -> str:
@@ -51,6 +52,11 @@ def run_table(run: CalibrationRun) -> str:
         lines.append(f"tracker lag estimated by the fit cost: {1e3 * run.tracker_lag_s:.1f} ms")
     elif run.tracker_lag_s:
         lines.append(f"tracker lag (from the scenario): {1e3 * run.tracker_lag_s:.1f} ms")
+    if run.dataset.dropped:
+        lines.append(
+            f"log: {drop_summary(run.dataset.dropped, run.dataset.n_records + len(run.dataset.dropped))} "
+            "(all listed in result.json under dataset.dropped_records)"
+        )
     if run.dropped_stationary:
         lines.append(f"dropped {run.dropped_stationary} windows without motion")
     lines.append("")

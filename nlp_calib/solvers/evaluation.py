@@ -16,6 +16,11 @@ from nlp_calib.symbolic.builder import ProblemFunctions, unpack_upper
 
 #: H is called singular when its Jacobi-scaled condition number exceeds this.
 SINGULAR_CONDITION = 1e12
+#: Why a solver did not start: the objective is not a number at the initial guess.
+NAN_START_REASON = (
+    "the residual is NaN or infinite at the initial guess (e.g. axis_length 0); check the data and "
+    "the initial guess"
+)
 SINGULAR_REASON = (
     "singular normal matrix: some parameters are not determined by the data (see the observability warnings)"
 )

@@ -14,7 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlp_calib.solvers.evaluation import SINGULAR_REASON, NormalEquations, ProblemEvaluator, is_singular
+from nlp_calib.solvers.evaluation import (
+    NAN_START_REASON,
+    SINGULAR_REASON,
+    NormalEquations,
+    ProblemEvaluator,
+    is_singular,
+)
 from nlp_calib.solvers.result import IterationRecord, SolverResult
 
 
@@ -78,7 +84,7 @@ def solve(
     converged, reason = False, ""
     iteration = 0
     if not np.isfinite(ne.cost) or not np.all(np.isfinite(ne.H)):
-        reason = "the residual is NaN or infinite at the initial guess; check the data and the initial guess"
+        reason = NAN_START_REASON
     else:
         while iteration < opts.max_iterations:
             iteration += 1

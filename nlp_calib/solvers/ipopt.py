@@ -16,8 +16,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from nlp_calib.errors import SolverError
-from nlp_calib.solvers.evaluation import SINGULAR_REASON, ProblemEvaluator, is_singular
+from nlp_calib.errors import ScenarioError
+from nlp_calib.solvers.evaluation import NAN_START_REASON, SINGULAR_REASON, ProblemEvaluator, is_singular
 from nlp_calib.solvers.result import IterationRecord, SolverResult
 
 HUBER_FORMULATIONS = ("direct", "lifted")
@@ -50,6 +50,11 @@ class IpoptOptions:
             raise ValueError("ipopt.max_iter must be >= 1 and ipopt.tol > 0")
 
 
+def _last_line(exc: BaseException) -> str:
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    return lines[-1].split(": ", 1)[-1] if lines else type(exc).__name__
+
+
 class IpoptSolver:
     """An ``nlpsol`` instance set up once for one evaluator; :meth:`solve` may be called often."""
 
@@ -58,7 +63,13 @@ class IpoptSolver:
         self.options = options or IpoptOptions()
         self.lifted = self.options.huber_formulation == "lifted" and evaluator.fns.spec.kernel == "huber"
         t0 = time.perf_counter()
-        self._solver = self._build()
+        try:
+            self._solver = self._build()
+        except RuntimeError as exc:  # CasADi checks the options when the solver is built
+            raise ScenarioError(
+                f"ipopt: IPOPT cannot be set up with these options ({_last_line(exc)}); "
+                "check ipopt.options and ipopt.linear_solver"
+            ) from None
         self.build_time_s = time.perf_counter() - t0
 
     def _ipopt_options(self) -> dict[str, Any]:
@@ -113,6 +124,9 @@ class IpoptSolver:
         ubx = np.full(n, np.inf) if upper is None else np.asarray(upper, dtype=float)
         x_init = np.asarray(x0, dtype=float)
         t0 = time.perf_counter()
+        if not np.isfinite(ev.cost(x0)):
+            # Reported like Gauss-Newton does, so that the other solver's result is not lost.
+            return self._not_started(np.asarray(x0, dtype=float), time.perf_counter() - t0)
         if self.lifted:
             _, s, _ = ev.robust_terms(x_init)
             w0 = np.ones(ev.n_padded)
@@ -120,11 +134,10 @@ class IpoptSolver:
             x_init = np.concatenate([x_init, w0])
             lbx = np.concatenate([lbx, np.full(ev.n_padded, _W_MIN)])
             ubx = np.concatenate([ubx, np.ones(ev.n_padded)])
-        if not np.isfinite(ev.cost(x0)):
-            raise SolverError(
-                "the residual is NaN or infinite at the initial guess; check the data and the initial guess"
-            )
-        sol = self._solver(x0=x_init, p=ev.data_parameter(), lbx=lbx, ubx=ubx)
+        try:
+            sol = self._solver(x0=x_init, p=ev.data_parameter(), lbx=lbx, ubx=ubx)
+        except RuntimeError as exc:  # CasADi reports a failed evaluation by raising
+            return self._not_started(np.asarray(x0, dtype=float), time.perf_counter() - t0, _last_line(exc))
         elapsed = time.perf_counter() - t0
         stats = self._solver.stats()
         x = np.asarray(sol["x"]).ravel()[:n]
@@ -172,5 +185,28 @@ class IpoptSolver:
                 "return_status": status,
                 "build_time_s": self.build_time_s,
                 "formulation": "lifted" if self.lifted else "direct",
+            },
+        )
+
+    def _not_started(self, x0: np.ndarray, elapsed: float, error: str | None = None) -> SolverResult:
+        """The result of a solve that could not run: the cost is not finite at ``x0``, or IPOPT
+        failed with ``error``; the parameters are the initial guess and flagged as not converged."""
+        ne = self.evaluator.normal_equations(x0)
+        return SolverResult(
+            solver="ipopt",
+            names=self.evaluator.fns.names,
+            params=self.evaluator.params(x0),
+            x=x0,
+            cost=ne.cost,
+            chi2=ne.chi2,
+            inliers=ne.inliers,
+            n_residuals=self.evaluator.n_residuals,
+            iterations=0,
+            converged=False,
+            reason=NAN_START_REASON if error is None else f"IPOPT failed: {error}",
+            time_s=elapsed,
+            stats={
+                "return_status": "not run" if error is None else "error",
+                "build_time_s": self.build_time_s,
             },
         )
