@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -63,3 +66,36 @@ def noiseless_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
         tracker_noise_theta=0.0,
         jitter_s=0.0,
     )
+
+
+def cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess[str]:
+    """Run ``python -m nlp_calib ARGS`` in a subprocess; returns the completed process."""
+    env = dict(os.environ, PYTHONWARNINGS="ignore")
+    return subprocess.run(
+        [sys.executable, "-m", "nlp_calib", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env=env,
+        timeout=300,
+    )
+
+
+# SE(2) written independently in numpy (homogeneous matrices), the reference the tests check
+# the CasADi expressions against.
+def mat(v: Sequence[float] | np.ndarray) -> np.ndarray:
+    """Homogeneous matrix of ``(x, y, theta)``."""
+    x, y, t = v
+    return np.array([[np.cos(t), -np.sin(t), x], [np.sin(t), np.cos(t), y], [0.0, 0.0, 1.0]])
+
+
+def vec(T: np.ndarray) -> np.ndarray:
+    """``(x, y, theta)`` of a homogeneous matrix."""
+    return np.array([T[0, 2], T[1, 2], np.arctan2(T[1, 0], T[0, 0])])
+
+
+def boxplus_numpy(x: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """Kinematic parameters plus delta; the sensor pose (last three) ``v2t(delta)·T``."""
+    out = x + delta
+    out[-3:] = vec(mat(delta[-3:]) @ mat(x[-3:]))
+    return out

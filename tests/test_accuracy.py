@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import SCENARIOS, assert_close
+from conftest import SCENARIOS, assert_close, mat, vec
 
 from nlp_calib.analysis.metrics import trajectory_metrics
 from nlp_calib.calibration import Calibration
@@ -20,15 +20,6 @@ from nlp_calib.symbolic.builder import ProblemSpec, build
 
 MODEL = get_model("tricycle")
 TRUTH = np.array([0.55, 0.0105, 1.5, -0.05, 1.6, 0.1, 0.05])
-
-
-def mat(v: np.ndarray) -> np.ndarray:
-    x, y, t = v
-    return np.array([[np.cos(t), -np.sin(t), x], [np.sin(t), np.cos(t), y], [0.0, 0.0, 1.0]])
-
-
-def vec(T: np.ndarray) -> np.ndarray:
-    return np.array([T[0, 2], T[1, 2], np.arctan2(T[1, 0], T[0, 0])])
 
 
 def base_increment(p: np.ndarray, revs: float, angle: float, exact: bool = True) -> np.ndarray:

@@ -3,12 +3,9 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
-from conftest import REPO, SCENARIOS
+from conftest import SCENARIOS, cli
 
 PARAMS = {
     "k_steer",
@@ -19,18 +16,6 @@ PARAMS = {
     "sensor_y",
     "sensor_theta",
 }
-
-
-def cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, PYTHONWARNINGS="ignore")
-    return subprocess.run(
-        [sys.executable, "-m", "nlp_calib", *args],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        env=env,
-        timeout=300,
-    )
 
 
 def test_run_demo_writes_result_matching_contract(tmp_path: Path) -> None:

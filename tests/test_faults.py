@@ -8,16 +8,15 @@ the point is what it returns. Logs come from the simulator, mutated line by line
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
 import warnings
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO, write_sim
+from conftest import cli as run_cli
+from conftest import write_sim
 
 from nlp_calib import cli
 from nlp_calib.calibration import Calibration
@@ -30,18 +29,6 @@ from nlp_calib.io.scenario import load_scenario
 from nlp_calib.simulate import SimulationOptions, simulate
 
 N_HEADER = 8  # '#' lines of a simulated log
-
-
-def run_cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, PYTHONWARNINGS="ignore")
-    return subprocess.run(
-        [sys.executable, "-m", "nlp_calib", *args],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        env=env,
-        timeout=300,
-    )
 
 
 def assert_one_line_error(proc: subprocess.CompletedProcess[str], code: int, *needles: str) -> str:

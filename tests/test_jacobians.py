@@ -4,28 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import assert_close
+from conftest import assert_close, boxplus_numpy
 
 from nlp_calib.models import get_model
 from nlp_calib.symbolic.builder import ProblemSpec, build
 
 MODEL = get_model("tricycle")
-
-
-def mat(v: np.ndarray) -> np.ndarray:
-    x, y, t = v
-    return np.array([[np.cos(t), -np.sin(t), x], [np.sin(t), np.cos(t), y], [0.0, 0.0, 1.0]])
-
-
-def vec(T: np.ndarray) -> np.ndarray:
-    return np.array([T[0, 2], T[1, 2], np.arctan2(T[1, 0], T[0, 0])])
-
-
-def boxplus_numpy(x: np.ndarray, delta: np.ndarray) -> np.ndarray:
-    """Kinematic parameters plus delta; sensor pose v2t(delta)·T, in plain numpy."""
-    out = x + delta
-    out[4:7] = vec(mat(delta[4:7]) @ mat(x[4:7]))
-    return out
 
 
 def random_state(

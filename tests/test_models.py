@@ -10,7 +10,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 import pytest
-from conftest import assert_close
+from conftest import assert_close, boxplus_numpy
 
 from nlp_calib.analysis.odometry import propagate
 from nlp_calib.calibration import Calibration
@@ -56,21 +56,6 @@ def scenario(model: str, **changes: object) -> Scenario:
         residual=ResidualOptions(horizon=5, steering_sample="mean"),
     )
     return dataclasses.replace(base, **changes)  # type: ignore[arg-type]
-
-
-def mat(v: np.ndarray) -> np.ndarray:
-    x, y, t = v
-    return np.array([[np.cos(t), -np.sin(t), x], [np.sin(t), np.cos(t), y], [0.0, 0.0, 1.0]])
-
-
-def vec(T: np.ndarray) -> np.ndarray:
-    return np.array([T[0, 2], T[1, 2], np.arctan2(T[1, 0], T[0, 0])])
-
-
-def boxplus_numpy(x: np.ndarray, delta: np.ndarray) -> np.ndarray:
-    out = x + delta
-    out[-3:] = vec(mat(delta[-3:]) @ mat(x[-3:]))
-    return out
 
 
 @pytest.mark.parametrize("model", ALL_MODELS)

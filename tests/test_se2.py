@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-from conftest import assert_close
+from conftest import assert_close, mat, vec
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -27,15 +27,6 @@ ARC = ca.Function(
     [d_sym, w_sym],
     [se2.arc(d_sym, w_sym), ca.jacobian(se2.arc(d_sym, w_sym), ca.vertcat(d_sym, w_sym))],
 )
-
-
-def mat(v: tuple[float, float, float]) -> np.ndarray:
-    x, y, t = v
-    return np.array([[np.cos(t), -np.sin(t), x], [np.sin(t), np.cos(t), y], [0.0, 0.0, 1.0]])
-
-
-def vec(T: np.ndarray) -> np.ndarray:
-    return np.array([T[0, 2], T[1, 2], np.arctan2(T[1, 0], T[0, 0])])
 
 
 def wrap(t: float) -> float:
