@@ -49,7 +49,7 @@ def test_header_values() -> None:
 
 
 def test_time_keeps_nanoseconds_relative_to_first() -> None:
-    ds = parse_log(lines(record("1668091584.821040869", 1, 1), record("1668091584.821040870", 1, 1)))
+    ds = parse_log(lines(record("1700000123.456789012", 1, 1), record("1700000123.456789013", 1, 1)))
     assert ds.time_s[0] == 0.0
     assert ds.time_s[1] == pytest.approx(1e-9, rel=1e-12)
 

@@ -241,7 +241,7 @@ def _parse_time_ns(token: str, path: str, line: int) -> int:
         raise DatasetError(
             path,
             line,
-            f"time: expected seconds like 1668091584.821040869, got {token!r}",
+            f"time: expected seconds like 1700000123.456789012, got {token!r}",
         )
     ns = int(m.group(2)) * 1_000_000_000 + int(((m.group(3) or "") + "000000000")[:9])
     return -ns if m.group(1) else ns
