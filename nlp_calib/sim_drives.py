@@ -13,7 +13,8 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from nlp_calib.io.logfile import COUNTER_MODULUS, LogHeader, wrapped_difference
+from nlp_calib.io.logfile import LogHeader
+from nlp_calib.numeric import COUNTER_MODULUS, wrap_angle, wrapped_difference
 
 if TYPE_CHECKING:
     from nlp_calib.simulate import SimulationOptions
@@ -58,11 +59,6 @@ DEFAULT_GUESS: dict[str, dict[str, float]] = {
 }
 #: Curvature (1/m) per unit of the turning profile for the differential drive.
 _DIFF_CURVATURE = 1.5
-
-
-def wrap(a: np.ndarray) -> np.ndarray:
-    """Angles onto (-π, π]."""
-    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
 
 
 def integrate_base(ds: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -157,7 +153,7 @@ class TricycleDrive:
         p = header.parameters
         s_max, t_max = header.encoder_max
         d = p["k_traction"] * wrapped_difference(ticks[:, 1]) / t_max
-        phi = p["k_steer"] * wrap(2 * np.pi * ticks[:-1, 0] / s_max) + p["steer_offset"]
+        phi = p["k_steer"] * wrap_angle(2 * np.pi * ticks[:-1, 0] / s_max) + p["steer_offset"]
         return _first_order(d * np.cos(phi), d * np.sin(phi) / p["axis_length"])
 
 

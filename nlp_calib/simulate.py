@@ -21,7 +21,8 @@ import numpy as np
 
 from nlp_calib.io.files import atomic_write_text
 from nlp_calib.io.logfile import LogHeader, format_log
-from nlp_calib.sim_drives import DEFAULT_GUESS, DEFAULT_TRUTH, DRIVES, integrate_base, wrap
+from nlp_calib.numeric import wrap_angle
+from nlp_calib.sim_drives import DEFAULT_GUESS, DEFAULT_TRUTH, DRIVES, integrate_base
 
 TRAJECTORIES = ("s_curves", "straight", "no_reversals")
 
@@ -176,7 +177,7 @@ def simulate(opts: SimulationOptions) -> SimulatedLog:
     outliers = rng.random(opts.records) < opts.outlier_fraction
     tracker[outliers, :2] += rng.normal(0.0, opts.outlier_magnitude, (int(outliers.sum()), 2))
     tracker[outliers, 2] += rng.normal(0.0, opts.outlier_magnitude, int(outliers.sum()))
-    tracker[:, 2] = wrap(tracker[:, 2])
+    tracker[:, 2] = wrap_angle(tracker[:, 2])
 
     ticks = drive.ticks(opts, {name: np.interp(t_s, t_fine, c) for name, c in channels.items()})
     header = drive.header(opts)

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlp_calib.errors import DatasetError
+from nlp_calib.numeric import wrapped_difference
 
 #: A jump is an increment beyond this many typical increments (see the module docstring).
 JUMP_FACTOR = 10.0
@@ -137,13 +138,6 @@ def _seconds(ns: int) -> str:
     return f"{sign}{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
 
 
-def wrapped_steps(ticks: np.ndarray, modulus: int) -> np.ndarray:
-    """Signed increments of a wrapping counter between consecutive readings."""
-    t = np.asarray(ticks, dtype=np.int64)
-    half = modulus // 2
-    return ((t[1:] - t[:-1] + half) % modulus) - half
-
-
 def _step(t: np.ndarray, a: int, b: int, modulus: int) -> int:
     half = modulus // 2
     return ((int(t[b]) - int(t[a]) + half) % modulus) - half
@@ -197,7 +191,7 @@ class CounterJump:
 
 def counter_jumps(ticks: np.ndarray, t_ns: np.ndarray, modulus: int) -> list[CounterJump]:
     """Every interval whose increment exceeds the plausible limit (records in time order)."""
-    steps = wrapped_steps(ticks, modulus)
+    steps = wrapped_difference(ticks, modulus)
     dt = np.diff(np.asarray(t_ns, dtype=np.int64)).astype(float)
     scale = counter_scale(steps, dt)
     if scale is None:

@@ -20,9 +20,7 @@ import numpy as np
 from nlp_calib.errors import DatasetError
 from nlp_calib.io import logcheck
 from nlp_calib.io.logcheck import DroppedRecord, drop_summary
-
-#: uint32 counters wrap at 2**32 (not 2**32 - 1).
-COUNTER_MODULUS = 2**32
+from nlp_calib.numeric import COUNTER_MODULUS, wrapped_difference
 
 #: Header parameter names mapped onto the package's parameter names.
 _PARAMETER_ALIASES = {
@@ -105,13 +103,6 @@ class Dataset:
             T_world_sensor=_frozen(self.T_world_sensor[sl]),
             line_numbers=_frozen(self.line_numbers[sl]),
         )
-
-
-def wrapped_difference(ticks: np.ndarray, modulus: int = COUNTER_MODULUS) -> np.ndarray:
-    """``d = ((t[k+1] - t[k] + m/2) mod m) - m/2``: the signed step of a wrapping counter."""
-    t = np.asarray(ticks, dtype=np.int64)
-    half = modulus // 2
-    return ((t[1:] - t[:-1] + half) % modulus) - half
 
 
 def yaw_from_quaternion(qx: float, qy: float, qz: float, qw: float) -> float:

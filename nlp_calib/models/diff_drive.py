@@ -17,6 +17,7 @@ from nlp_calib.analysis.initialization import hand_eye, robust_lstsq
 from nlp_calib.errors import ModelError
 from nlp_calib.io.logfile import Dataset
 from nlp_calib.models.base import QUANTISATION
+from nlp_calib.numeric import wrap_angle
 from nlp_calib.symbolic import se2
 
 LEFT_ENCODER = "left_wheel"
@@ -86,7 +87,7 @@ class DiffDrive:
                 p[n] = -p[n]
             p["sensor_theta"] += np.pi
         if "sensor_theta" not in fixed:
-            p["sensor_theta"] = float(np.pi - np.mod(np.pi - p["sensor_theta"], 2.0 * np.pi))
+            p["sensor_theta"] = float(wrap_angle(p["sensor_theta"]))
         return p
 
     def initial_guess(

@@ -17,15 +17,11 @@ from nlp_calib.analysis.initialization import hand_eye, robust_lstsq
 from nlp_calib.errors import ModelError
 from nlp_calib.io.logfile import Dataset
 from nlp_calib.models.base import QUANTISATION, STEERING_SAMPLES
+from nlp_calib.numeric import wrap_angle
 from nlp_calib.symbolic import se2
 
 STEERING_ENCODER = "steering"
 TRACTION_ENCODER = "traction_wheel"
-
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    """Onto (-π, π], matching the encoder convention that ticks above s_max/2 are negative."""
-    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
 
 
 class Tricycle:
@@ -75,13 +71,13 @@ class Tricycle:
         s_max = header.encoder_max[header.encoder_index(STEERING_ENCODER)]
         t_max = header.encoder_max[header.encoder_index(TRACTION_ENCODER)]
         revs = dataset.increments(TRACTION_ENCODER) / float(t_max)
-        angle = _wrap(2.0 * np.pi * dataset.encoder(STEERING_ENCODER) / float(s_max))
+        angle = wrap_angle(2.0 * np.pi * dataset.encoder(STEERING_ENCODER) / float(s_max))
         if steering_sample == "start":
             steer = angle[:-1]
         elif steering_sample == "end":
             steer = angle[1:]
         else:
-            steer = _wrap(angle[:-1] + 0.5 * _wrap(angle[1:] - angle[:-1]))
+            steer = wrap_angle(angle[:-1] + 0.5 * wrap_angle(angle[1:] - angle[:-1]))
         return np.vstack([revs, steer])
 
     def moving(self, inputs: np.ndarray) -> np.ndarray:
@@ -124,7 +120,7 @@ class Tricycle:
             p["steer_offset"] += np.pi
         for name in ("steer_offset", "sensor_theta"):
             if name not in fixed:
-                p[name] = float(_wrap(np.array(p[name])))
+                p[name] = float(wrap_angle(np.array(p[name])))
         return p
 
     def initial_guess(

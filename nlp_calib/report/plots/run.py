@@ -17,6 +17,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, MaxNLocator, NullLocator
 
+from nlp_calib.numeric import wrap_angle
 from nlp_calib.report.series import (
     ConvergenceSeries,
     ModelCheckSeries,
@@ -348,10 +349,6 @@ def residuals_png(series: ResidualSeries, title: str) -> bytes:
 # --- model check -----------------------------------------------------------------------------
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return np.arctan2(np.sin(a), np.cos(a))
-
-
 def model_check_png(series: ModelCheckSeries, title: str) -> bytes:
     """The log's vendor odometry against our model's base-link track, and their difference."""
     fig = Figure(figsize=(14, 6.2), layout="constrained")
@@ -383,7 +380,7 @@ def model_check_png(series: ModelCheckSeries, title: str) -> bytes:
     ax.legend(fontsize=8, loc="best")
     t = series.time_s - series.time_s[0]
     dpos = np.linalg.norm(o[:, :2] - v[:, :2], axis=1)
-    drot = _wrap(o[:, 2] - v[:, 2])
+    drot = wrap_angle(o[:, 2] - v[:, 2])
     driven = float(np.sum(np.linalg.norm(np.diff(v[:, :2], axis=0), axis=1)))
     ax_pos.plot(t, dpos, color="tab:blue")
     ax_pos.set_ylabel("position difference [m]")
