@@ -15,7 +15,6 @@ not steer the start. The result is refined by the usual solvers.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,9 +78,3 @@ def hand_eye(psi: np.ndarray, u: np.ndarray, z: np.ndarray, iterations: int = 8)
         r = (A @ q).reshape(M, 2)
         w = np.repeat(huber_weights(np.linalg.norm(r, axis=1)), 2)
     return HandEye(T_base_sensor=(float(q[0]), float(q[1]), float(np.arctan2(q[4], q[3]))), scale=float(q[2]))
-
-
-def grid_search(candidates: np.ndarray, cost: Callable[[float], float]) -> float:
-    """The candidate with the lowest cost."""
-    costs = np.array([cost(float(c)) for c in candidates])
-    return float(candidates[int(np.nanargmin(costs))])

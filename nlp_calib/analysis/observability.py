@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlp_calib.analysis.reference import reference_scale
+from nlp_calib.analysis.reference import reference_scales
 from nlp_calib.models.base import SENSOR_PARAMS
 from nlp_calib.solvers.evaluation import ProblemEvaluator
 
@@ -83,7 +83,7 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
     sigma2 = max(float(np.sum(weight * s)) / dof, 1e-300)
     params = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()
     value = dict(zip(fns.names, params))
-    R = np.array([reference_scale(n, value[n]) for n in names])
+    R = reference_scales(names, np.array([value[n] for n in names]))
     Hs = ne.H * np.outer(R, R) / sigma2
     lam, V = np.linalg.eigh(0.5 * (Hs + Hs.T))
     tiny = 1e-12 * max(float(lam[-1]), 1e-300)

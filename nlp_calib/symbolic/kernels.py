@@ -47,9 +47,6 @@ KERNELS: dict[str, KernelFn] = {
     "pseudo_huber": _pseudo_huber,
 }
 
-#: Kernels IPOPT may use directly with its convergence guarantees (C² everywhere).
-SMOOTH_KERNELS = frozenset({"none", "cauchy", "pseudo_huber"})
-
 
 def rho(kernel: str, s: ca.SX, delta: ca.SX) -> ca.SX:
     """ρ(s) of the named kernel."""
