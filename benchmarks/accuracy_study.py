@@ -18,8 +18,9 @@ import numpy as np
 
 from nlp_calib.analysis.faults import counter_reversals
 from nlp_calib.analysis.metrics import integrate, trajectory_metrics
-from nlp_calib.calibration import Calibration
-from nlp_calib.io.scenario import (
+from nlp_calib.outputs.progress import Progress
+from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline.scenario import (
     AlignmentOptions,
     InformationWeights,
     RobustOptions,
@@ -27,8 +28,7 @@ from nlp_calib.io.scenario import (
     ValidationOptions,
     load_scenario,
 )
-from nlp_calib.report.progress import Progress
-from nlp_calib.solvers.result import SolverResult
+from nlp_calib.solvers import SolverResult
 
 REPO = Path(__file__).resolve().parents[1]
 HOLDOUT = 0.4
@@ -84,7 +84,7 @@ def evaluate(sc: Scenario, solvers: tuple[str, ...] = ("gauss_newton",)) -> Eval
         result=gn,
         params=gn.param_dict(),
         chi2_per_residual=gn.chi2 / gn.n_residuals,
-        lag=full.tracker_lag_s,
+        lag=full.alignment.lag_s,
         ate={s: full.score(r.params)[0].ate_mean for s, r in results.items()},
         holdout=holdout,
         times=times,
@@ -270,7 +270,7 @@ def main() -> int:
         "them the tracker moved more than 5 mm, and the next increment is about double: the traction "
         "counter is often read stale, so a single 40 ms interval pairs the wrong motion with the wrong "
         "ticks. This is the timing jitter that biases H = 1 (section 1) and that longer windows average "
-        f"out. The fit cost also prefers encoders read {1e3 * calib.tracker_lag_s:.0f} ms before the "
+        f"out. The fit cost also prefers encoders read {1e3 * calib.alignment.lag_s:.0f} ms before the "
         "tracker pose (section 2).\n"
     )
     faults = counter_reversals(inc)

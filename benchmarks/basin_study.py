@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from nlp_calib.calibration import Calibration
-from nlp_calib.io.scenario import AlignmentOptions, load_scenario
-from nlp_calib.report.progress import Progress
+from nlp_calib.outputs.progress import Progress
+from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline.scenario import AlignmentOptions, load_scenario
 
 REPO = Path(__file__).resolve().parents[1]
 RANGES = {
@@ -54,7 +54,7 @@ def main() -> int:
     if args.data is not None:
         base = base.with_dataset(args.data)
     reference = Calibration(base)
-    lag = reference.tracker_lag_s
+    lag = reference.alignment.lag_s
     fixed_lag = dataclasses.replace(base, alignment=AlignmentOptions(tracker_lag=lag))
     best = reference.solve("gauss_newton")
     header_kt = reference.log.header.parameters["k_traction"]
@@ -68,7 +68,7 @@ def main() -> int:
         progress.update(i)
         guess = {n: float(rng.uniform(*r)) for n, r in RANGES.items()}
         guess["k_traction"] *= header_kt
-        calib = Calibration(dataclasses.replace(fixed_lag, initial_guess=guess), dataset=reference.log)
+        calib = Calibration(dataclasses.replace(fixed_lag, initial_guess=guess), log=reference.log)
         for s in SOLVERS:
             t0 = time.perf_counter()
             res = calib.solve(s)
@@ -79,7 +79,7 @@ def main() -> int:
             else:
                 misses.append(f"run {i}, {s}: {res.reason}; cost {res.cost:.4g} (best {best.cost:.4g})")
     progress.clear()
-    auto = Calibration(dataclasses.replace(fixed_lag, initial_guess="auto"), dataset=reference.log)
+    auto = Calibration(dataclasses.replace(fixed_lag, initial_guess="auto"), log=reference.log)
     auto_ok = {s: same_optimum(auto.solve(s).params, best.params) for s in SOLVERS}
 
     lines = [

@@ -44,13 +44,13 @@ def median_time(fn: Any, repeats: int) -> float:
 
 def run_case(spec: dict[str, Any]) -> dict[str, Any]:
     """One benchmark case (runs in a child process)."""
-    from nlp_calib.calibration import Calibration
-    from nlp_calib.io.logfile import read_log
-    from nlp_calib.io.scenario import AlignmentOptions, RobustOptions, load_scenario
+    from nlp_calib.models import load_log
+    from nlp_calib.pipeline import Calibration
+    from nlp_calib.pipeline.scenario import AlignmentOptions, RobustOptions, load_scenario
 
     out: dict[str, Any] = {"case": spec["case"], "records": None}
     t0 = time.perf_counter()
-    log = read_log(spec["log"])
+    log = load_log(spec["log"])
     out["read_s"] = time.perf_counter() - t0
     out["records"] = log.n_records
     sc = load_scenario(REPO / "scenarios" / spec["scenario"]).with_dataset(spec["log"])
@@ -59,11 +59,11 @@ def run_case(spec: dict[str, Any]) -> dict[str, Any]:
     )
     os.environ["NLP_CALIB_CACHE"] = spec["cache"]
     t0 = time.perf_counter()
-    calib = Calibration(sc, dataset=log)
+    calib = Calibration(sc, log=log)
     calib.solve("ipopt")  # compiles IPOPT's gradient and Hessian too
     out["setup_and_compile_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    calib = Calibration(sc, dataset=log)
+    calib = Calibration(sc, log=log)
     out["setup_warm_s"] = time.perf_counter() - t0
     out["residuals"] = calib.data.n_residuals
     ev = calib.evaluator
@@ -80,7 +80,7 @@ def run_case(spec: dict[str, Any]) -> dict[str, Any]:
     out["converged"] = bool(gn.converged and ip.converged)
 
     # Baselines on the same residual: plain least squares, where scipy's loss and ours coincide.
-    ls = Calibration(dataclasses.replace(sc, robust=RobustOptions("none", sc.robust.delta)), dataset=log)
+    ls = Calibration(dataclasses.replace(sc, robust=RobustOptions("none", sc.robust.delta)), log=log)
     out["gn_ls_ms"] = 1e3 * median_time(lambda: ls.solve("gauss_newton"), reps)
     if spec["scipy"]:
         out.update(scipy_baseline(ls))
@@ -164,7 +164,7 @@ int main(void) {
 
 def hardware_floor(n_trig: int, n_ops: int) -> dict[str, float]:
     """Per-residual floor from measured sin and multiply-add throughput of this machine."""
-    from nlp_calib.solvers.compiled import find_compiler
+    from nlp_calib.codegen.compiler import find_compiler
 
     cc = find_compiler()
     if cc is None:
@@ -195,7 +195,7 @@ def instruction_mix(f: Any) -> tuple[int, int]:
 
 
 def make_logs(folder: Path, sizes: list[int]) -> dict[int, Path]:
-    from nlp_calib.simulate import SimulationOptions, simulate, write_simulation
+    from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
 
     logs = {}
     for n in sizes:
@@ -222,7 +222,7 @@ def main() -> int:
     args = ap.parse_args()
     if args.case is not None:
         return child(args)
-    from nlp_calib.report.progress import Progress
+    from nlp_calib.outputs.progress import Progress
 
     real = args.data or next(
         (p / "shared/data/dataset.txt" for p in REPO.parents if (p / "shared/data/dataset.txt").is_file()),
@@ -289,7 +289,7 @@ def main() -> int:
         json.dumps({"meta": meta, "hardware_floor": floor, "cases": results}, indent=2) + "\n"
     )
     (args.out / "performance.md").write_text(report + "\n")
-    from nlp_calib.report.plots import scaling_png
+    from nlp_calib.outputs.plots import scaling_png
 
     (args.out / "performance.png").write_bytes(scaling_png(results))
     print(report)

@@ -11,7 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nlp_calib.simulate import SimulationOptions, simulate, write_simulation
+from nlp_calib.logs import Log, parse_log
+from nlp_calib.models import get_model
+from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"
@@ -47,6 +49,13 @@ def real_log() -> Path:
     if not REAL_LOG.is_file():
         pytest.skip(f"the real log is not at {REAL_LOG} (set NLP_CALIB_REAL_LOG to its path)")
     return REAL_LOG
+
+
+def parse_lines(
+    lines: Sequence[str], path: str = "<log>", *, strict: bool = True, model: str = "tricycle"
+) -> Log:
+    """``parse_log`` with the encoder kinds of ``model``."""
+    return parse_log(lines, get_model(model).encoder_kinds, path, strict=strict)
 
 
 def write_sim(tmp_path: Path, name: str = "sim.txt", **kwargs: object) -> Path:

@@ -7,16 +7,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import SCENARIOS, assert_close, mat, vec
+from conftest import SCENARIOS, assert_close, mat, parse_lines, vec
 
 from nlp_calib.analysis.metrics import trajectory_metrics
-from nlp_calib.calibration import Calibration
-from nlp_calib.data import ResidualOptions, build_residual_data, shift_encoders
-from nlp_calib.io.logfile import format_log, parse_log, read_log
-from nlp_calib.io.scenario import Scenario, ValidationOptions, load_scenario
-from nlp_calib.models import get_model
-from nlp_calib.simulate import SimulationOptions, simulate
-from nlp_calib.symbolic.builder import ProblemSpec, build
+from nlp_calib.logs import format_log, resample_encoders
+from nlp_calib.models import get_model, load_log
+from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline.scenario import Scenario, ValidationOptions, load_scenario
+from nlp_calib.problem import ProblemSpec, ResidualOptions, build, build_residual_data
+from nlp_calib.simulation import SimulationOptions, simulate
 
 MODEL = get_model("tricycle")
 TRUTH = np.array([0.55, 0.0105, 1.5, -0.05, 1.6, 0.1, 0.05])
@@ -60,7 +59,7 @@ def test_horizon_residual_equals_numpy_composition(H: int, exact: bool) -> None:
 
 def test_horizon_one_is_the_single_step_residual() -> None:
     """H = 1 windows are exactly the per-interval residuals of consecutive records."""
-    sim = parse_log(simulate(SimulationOptions(records=60, seed=2)).text().splitlines())
+    sim = parse_lines(simulate(SimulationOptions(records=60, seed=2)).text().splitlines())
     fns = build(MODEL, ProblemSpec(horizon=1))
     rd = build_residual_data(fns, sim, ResidualOptions(horizon=1))
     e = np.asarray(fns.residual.map(rd.n_residuals)(TRUTH, [], rd.columns))
@@ -74,7 +73,7 @@ def test_horizon_one_is_the_single_step_residual() -> None:
 def model_consistent_log(tmp_path: Path, records: int = 800) -> Path:
     """A log whose tracker poses are the truth model integrated (numpy) on its own encoder ticks."""
     sim = simulate(SimulationOptions(records=records, seed=9))
-    ds = parse_log(sim.text().splitlines())
+    ds = parse_lines(sim.text().splitlines())
     u = MODEL.inputs(ds, "start")
     T = mat(np.array([0.3, -0.2, 0.4]))
     S = mat(TRUTH[4:7])
@@ -89,7 +88,7 @@ def model_consistent_log(tmp_path: Path, records: int = 800) -> Path:
 
 
 def test_ate_of_truth_on_noiseless_log_is_zero(tmp_path: Path) -> None:
-    ds = read_log(model_consistent_log(tmp_path))
+    ds = load_log(model_consistent_log(tmp_path))
     fns = build(MODEL, ProblemSpec())
     m = trajectory_metrics(fns, TRUTH, MODEL.inputs(ds, "start"), ds.T_world_sensor)
     assert m.ate_max <= 1e-9, m
@@ -125,17 +124,17 @@ def test_stationary_windows_are_dropped_and_counted() -> None:
 
 
 def test_encoder_shift_by_whole_samples_reproduces_the_readings() -> None:
-    ds = read_log(SCENARIOS / "data" / "demo_tricycle.txt")
+    ds = load_log(SCENARIOS / "data" / "demo_tricycle.txt")
     t = ds.time_s
     lag = float(t[5] - t[4])  # not a whole sample everywhere: jitter; check the one record it is
-    shifted, valid = shift_encoders(ds, lag)
+    shifted, valid = resample_encoders(ds, lag, MODEL.encoder_kinds)
     assert valid[0] >= 1
     np.testing.assert_array_equal(shifted.ticks[5], ds.ticks[4])
-    assert shift_encoders(ds, 0.0)[0] is ds
+    assert resample_encoders(ds, 0.0, MODEL.encoder_kinds)[0] is ds
 
 
 def test_tracker_lag_is_recovered_from_a_simulated_log(tmp_path: Path) -> None:
-    from nlp_calib.simulate import write_simulation
+    from nlp_calib.simulation import write_simulation
 
     log, _ = write_simulation(
         simulate(SimulationOptions(records=1500, seed=4, latency_s=0.06, tracker_noise_xy=0.001)),
@@ -147,8 +146,8 @@ def test_tracker_lag_is_recovered_from_a_simulated_log(tmp_path: Path) -> None:
         alignment=dataclasses.replace(load_scenario(SCENARIOS / "demo.yaml").alignment, tracker_lag="auto"),
     )
     calib = Calibration(sc)
-    assert calib.lag_estimate is not None
-    assert calib.tracker_lag_s == pytest.approx(0.06, abs=0.012)
+    assert calib.alignment.estimate is not None
+    assert calib.alignment.lag_s == pytest.approx(0.06, abs=0.012)
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from conftest import REPO
 
-from nlp_calib.solvers.compiled import find_compiler
+from nlp_calib.codegen.compiler import find_compiler
 
 
 @pytest.mark.skipif(

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 from conftest import REPO, SCENARIOS, assert_close
 
-from nlp_calib.calibration import Calibration
-from nlp_calib.codegen import build_for_export, export_functions
-from nlp_calib.io.scenario import load_scenario
+from nlp_calib.codegen.compiler import find_compiler
+from nlp_calib.codegen.export import build_for_export, export_functions
 from nlp_calib.models import get_model
-from nlp_calib.solvers.compiled import find_compiler
+from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline.scenario import load_scenario
 
 COMPILER = find_compiler()
 needs_compiler = pytest.mark.skipif(
@@ -136,7 +136,7 @@ def test_compiled_backend_gives_the_interpreted_solution(
 
 
 def test_compiled_backend_falls_back_without_a_compiler(monkeypatch: pytest.MonkeyPatch) -> None:
-    import nlp_calib.solvers.compiled as compiled
+    import nlp_calib.solvers.backends.compiled as compiled
 
     monkeypatch.setattr(compiled, "find_compiler", lambda: None)
     sc = dataclasses.replace(load_scenario(SCENARIOS / "demo.yaml"), backend="compiled")

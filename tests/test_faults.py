@@ -16,17 +16,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import cli as run_cli
-from conftest import write_sim
+from conftest import parse_lines, write_sim
 
 from nlp_calib import cli
-from nlp_calib.calibration import Calibration
-from nlp_calib.errors import DatasetError, SolverError
-from nlp_calib.io import files
-from nlp_calib.io.logcheck import JUMP_FACTOR, counter_jumps
-from nlp_calib.io.logfile import COUNTER_MODULUS, parse_log, read_log
-from nlp_calib.io.outdir import MANIFEST_FILE
-from nlp_calib.io.scenario import load_scenario
-from nlp_calib.simulate import SimulationOptions, simulate
+from nlp_calib.core import files
+from nlp_calib.core.errors import DatasetError, SolverError
+from nlp_calib.core.numeric import COUNTER_MODULUS
+from nlp_calib.logs.checks import JUMP_FACTOR, counter_jumps
+from nlp_calib.models import load_log
+from nlp_calib.outputs.outdir import MANIFEST_FILE
+from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline.scenario import load_scenario
+from nlp_calib.simulation import SimulationOptions, simulate
 
 N_HEADER = 8  # '#' lines of a simulated log
 
@@ -161,7 +162,7 @@ def test_malformed_log_is_a_one_line_error_naming_file_and_line(
 def _parse_quietly(lines: list[str]) -> tuple[object, list[str]]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        ds = parse_log(lines, "log.txt", strict=False)
+        ds = parse_lines(lines, "log.txt", strict=False)
     return ds, [str(w.message) for w in caught]
 
 
@@ -204,7 +205,7 @@ def test_header_problems_are_errors_even_when_not_strict(log_lines: list[str]) -
 
 
 def test_a_glitched_traction_reading_is_dropped_alone(log_lines: list[str]) -> None:
-    clean = parse_log(log_lines)
+    clean = parse_lines(log_lines)
     for k in (0, 60, 61, len(log_lines) - N_HEADER - 1):  # first, middle, adjacent, last record
         lines = list(log_lines)
         lines[N_HEADER + k] = set_field(lines[N_HEADER + k], TRACTION, "4000000000")
@@ -242,11 +243,11 @@ def test_a_counter_reset_keeps_the_longest_part_of_the_log(log_lines: list[str])
 def test_simulated_logs_have_no_counter_jumps(seed: int, options: dict[str, object]) -> None:
     sim = simulate(SimulationOptions(records=800, seed=seed, **options))  # type: ignore[arg-type]
     assert counter_jumps(sim.ticks[:, 1], sim.time_ns, COUNTER_MODULUS) == []
-    parse_log(sim.text().splitlines())  # strict: no error
+    parse_lines(sim.text().splitlines())  # strict: no error
 
 
 def test_real_log_has_no_counter_jumps_but_a_ten_times_larger_step_is_one(real_log: Path) -> None:
-    ds = read_log(real_log)  # strict: the real log's own faults (records 561, 882, 1204) are in range
+    ds = load_log(real_log)  # strict: the real log's own faults (records 561, 882, 1204) are in range
     traction = ds.encoder("traction_wheel")
     t_ns = np.round(ds.time_s * 1e9).astype(np.int64)
     assert counter_jumps(traction, t_ns, COUNTER_MODULUS) == []
@@ -467,12 +468,12 @@ def test_interrupted_run_keeps_the_previous_result_and_leaves_no_partial_files(
     assert cli.main(["run", str(sc), "--out", str(out)]) == 0
     before = {name: (out / name).read_bytes() for name in listing(out)}
 
-    from nlp_calib.report import handoff
+    from nlp_calib.cli import commands
 
     def interrupted(*args: object) -> list[Path]:
         raise KeyboardInterrupt  # after result.json was written, before the hand-off files
 
-    monkeypatch.setattr(handoff, "write_handoff", interrupted)
+    monkeypatch.setattr(commands, "write_handoff", interrupted)
     assert cli.main(["run", str(sc), "--out", str(out)]) == 130
     assert {name: (out / name).read_bytes() for name in listing(out)} == before
     # And into a fresh folder: nothing at all, not even temporary files.

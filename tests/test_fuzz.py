@@ -3,7 +3,7 @@
 Inputs are mutated from a small simulated log, from the real log's lines (read at test time,
 when it is present) and from the demo scenario: characters deleted, tokens swapped, NaN and
 garbage inserted, lines truncated, duplicated, reordered; scenario keys given random values of
-random types. Whatever comes in, the result is a usable Dataset / Scenario or an
+random types. Whatever comes in, the result is a usable Log / Scenario or an
 :class:`NlpCalibError` (which the command line turns into one line and an exit code).
 """
 
@@ -18,14 +18,15 @@ from typing import Any
 
 import numpy as np
 import yaml
-from conftest import REAL_LOG, SCENARIOS
+from conftest import REAL_LOG, SCENARIOS, parse_lines
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from nlp_calib.errors import NlpCalibError
-from nlp_calib.io.logfile import Dataset, parse_log, read_log
-from nlp_calib.io.scenario import Scenario, load_scenario, scenario_from_mapping
-from nlp_calib.simulate import SimulationOptions, simulate
+from nlp_calib.core.errors import NlpCalibError
+from nlp_calib.logs import Log
+from nlp_calib.models import load_log
+from nlp_calib.pipeline.scenario import Scenario, load_scenario, scenario_from_mapping
+from nlp_calib.simulation import SimulationOptions, simulate
 
 FUZZ = settings(
     max_examples=200,
@@ -117,8 +118,8 @@ _mutations = st.lists(
 _N_HEADER = 8  # the '#' lines of the simulated log
 
 
-def _check_dataset(ds: Dataset) -> None:
-    """What a returned Dataset promises: enough records, finite poses, increasing time."""
+def _check_dataset(ds: Log) -> None:
+    """What a returned Log promises: enough records, finite poses, increasing time."""
     assert ds.n_records >= 2
     assert np.all(np.isfinite(ds.T_world_sensor)) and np.all(np.isfinite(ds.model_pose))
     assert np.all(np.diff(ds.time_s) > 0)
@@ -134,7 +135,7 @@ def test_mutated_logs_raise_only_package_errors(base: int, mutations: list[Any],
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            ds = parse_log(lines, "fuzz.txt", strict=strict)
+            ds = parse_lines(lines, "fuzz.txt", strict=strict)
         except NlpCalibError:
             return
     _check_dataset(ds)
@@ -163,7 +164,7 @@ def test_mutated_headers_raise_only_package_errors(edits: list[Any], strict: boo
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            ds = parse_log(header + records, "fuzz.txt", strict=strict)
+            ds = parse_lines(header + records, "fuzz.txt", strict=strict)
         except NlpCalibError:
             return
     _check_dataset(ds)
@@ -178,7 +179,7 @@ def test_arbitrary_text_files_raise_only_package_errors(text: str, strict: bool)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             with contextlib.suppress(NlpCalibError):
-                _check_dataset(read_log(path, strict=strict))
+                _check_dataset(load_log(path, strict=strict))
 
 
 _DEMO = yaml.safe_load((SCENARIOS / "demo.yaml").read_text())

@@ -7,7 +7,7 @@ import pytest
 from conftest import assert_close, boxplus_numpy
 
 from nlp_calib.models import get_model
-from nlp_calib.symbolic.builder import ProblemSpec, build
+from nlp_calib.problem import ProblemSpec, build
 
 MODEL = get_model("tricycle")
 

@@ -7,9 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import parse_lines
 
-from nlp_calib.errors import DatasetError
-from nlp_calib.io.logfile import parse_log, read_log, wrapped_difference
+from nlp_calib.core.errors import DatasetError
+from nlp_calib.core.numeric import wrapped_difference
+from nlp_calib.models import get_model, header_parameters, load_log
 
 HEADER = """#kinematic_model: traction_drive_wheel
 #parameters: [ Ksteer Ktraction axis_length steer_offset ]
@@ -31,10 +33,13 @@ def lines(*records: str) -> list[str]:
 
 
 def test_header_values() -> None:
-    ds = parse_log(lines(record("10.5", 290, 100), record("10.6", 291, 200)))
+    ds = parse_lines(lines(record("10.5", 290, 100), record("10.6", 291, 200)))
     h = ds.header
     assert h.kinematic_model == "traction_drive_wheel"
-    assert dict(h.parameters) == {
+    # The header keeps its own names; the model maps them onto its parameters.
+    raw = {"Ksteer": 0.1, "Ktraction": 0.0106141, "axis_length": 1.4, "steer_offset": 0.0}
+    assert dict(h.parameters) == raw
+    assert header_parameters(get_model("tricycle"), h) == {
         "k_steer": 0.1,
         "k_traction": 0.0106141,
         "axis_length": 1.4,
@@ -49,13 +54,13 @@ def test_header_values() -> None:
 
 
 def test_time_keeps_nanoseconds_relative_to_first() -> None:
-    ds = parse_log(lines(record("1700000123.456789012", 1, 1), record("1700000123.456789013", 1, 1)))
+    ds = parse_lines(lines(record("1700000123.456789012", 1, 1), record("1700000123.456789013", 1, 1)))
     assert ds.time_s[0] == 0.0
     assert ds.time_s[1] == pytest.approx(1e-9, rel=1e-12)
 
 
 def test_wraparound_increment_uses_modulus_2_pow_32() -> None:
-    ds = parse_log(lines(record("0.0", 1, 4294967290), record("0.1", 1, 5), record("0.2", 1, 2)))
+    ds = parse_lines(lines(record("0.0", 1, 4294967290), record("0.1", 1, 5), record("0.2", 1, 2)))
     # 4294967290 -> 5 is +11 ticks across the wrap; 5 -> 2 is 3 ticks backwards.
     np.testing.assert_array_equal(ds.increments("traction_wheel"), [11, -3])
 
@@ -65,12 +70,12 @@ def test_negative_increment_across_wrap_backwards() -> None:
 
 
 def test_model_pose_with_several_spaces() -> None:
-    ds = parse_log(lines(record("0.0", 1, 1, "0.132287    0.000139038  0.00210208"), record("0.1", 1, 2)))
+    ds = parse_lines(lines(record("0.0", 1, 1, "0.132287    0.000139038  0.00210208"), record("0.1", 1, 2)))
     np.testing.assert_array_equal(ds.model_pose[0], [0.132287, 0.000139038, 0.00210208])
 
 
 def test_arrays_are_read_only() -> None:
-    ds = parse_log(lines(record("0.0", 1, 1), record("0.1", 1, 2)))
+    ds = parse_lines(lines(record("0.0", 1, 1), record("0.1", 1, 2)))
     with pytest.raises(ValueError):
         ds.ticks[0, 0] = 5
 
@@ -80,24 +85,24 @@ def test_malformed_line_reports_file_and_line(tmp_path: Path) -> None:
     p = tmp_path / "bad.txt"
     p.write_text(text)
     with pytest.raises(DatasetError) as exc:
-        read_log(p)
+        load_log(p)
     assert f"{p}:10:" in str(exc.value)
     assert "'ticks:' needs 2 value(s), found 1" in str(exc.value)
 
 
 def test_non_numeric_field_is_named() -> None:
     with pytest.raises(DatasetError, match=r"<log>:9: tracker_pose: expected numbers"):
-        parse_log(lines(record("0.0", 1, 1).replace("0.1 0.2 0.3", "0.1 abc 0.3"), record("0.1", 1, 2)))
+        parse_lines(lines(record("0.0", 1, 1).replace("0.1 0.2 0.3", "0.1 abc 0.3"), record("0.1", 1, 2)))
 
 
 def test_missing_header_field() -> None:
     text = [ln for ln in lines(record("0.0", 1, 1), record("0.1", 1, 2)) if "joints_max_enc_values" not in ln]
     with pytest.raises(DatasetError, match="joints_max_enc_values"):
-        parse_log(text)
+        parse_lines(text)
 
 
 def test_real_log(real_log: Path) -> None:
-    ds = read_log(real_log)
+    ds = load_log(real_log)
     assert ds.n_records == 2434
     inc = ds.increments("traction_wheel")
     # The counter wraps once, between records 58 and 59 (0-based), going forwards.

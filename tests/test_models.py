@@ -10,19 +10,17 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 import pytest
-from conftest import assert_close, boxplus_numpy
+from conftest import assert_close, boxplus_numpy, parse_lines
 
 from nlp_calib.analysis.odometry import propagate
-from nlp_calib.calibration import Calibration
-from nlp_calib.codegen import build_for_export, export_functions, generate
-from nlp_calib.data import ResidualOptions, build_residual_data
-from nlp_calib.io.logfile import Dataset, parse_log
-from nlp_calib.io.scenario import RobustOptions, Scenario
+from nlp_calib.codegen.compiler import find_compiler
+from nlp_calib.codegen.export import build_for_export, export_functions, generate
+from nlp_calib.logs import Log
 from nlp_calib.models import MODELS, get_model
-from nlp_calib.sim_drives import DEFAULT_TRUTH
-from nlp_calib.simulate import SimulationOptions, simulate
-from nlp_calib.solvers.compiled import find_compiler
-from nlp_calib.symbolic.builder import ProblemSpec, build
+from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline.scenario import RobustOptions, Scenario
+from nlp_calib.problem import ProblemSpec, ResidualOptions, build, build_residual_data
+from nlp_calib.simulation import SimulationOptions, simulate
 
 ALL_MODELS = sorted(MODELS)
 # Stated tolerances, per parameter kind: gains 1 % (tricycle steering 2 %), lengths 2 %,
@@ -39,12 +37,12 @@ ABSOLUTE = {"steer_offset": 0.01, "sensor_x": 0.02, "sensor_y": 0.02, "sensor_th
 
 
 def truth(model: str) -> np.ndarray:
-    return np.array(list(DEFAULT_TRUTH[model].values()))
+    return np.array(list(get_model(model).drive.default_truth.values()))
 
 
-def sim_log(model: str, **kwargs: object) -> Dataset:
+def sim_log(model: str, **kwargs: object) -> Log:
     opts = {"records": 1000, "seed": 3, **kwargs}
-    return parse_log(simulate(SimulationOptions(model=model, **opts)).text().splitlines(), f"sim-{model}")  # type: ignore[arg-type]
+    return parse_lines(simulate(SimulationOptions(model=model, **opts)).text().splitlines(), f"sim-{model}")  # type: ignore[arg-type]
 
 
 def scenario(model: str, **changes: object) -> Scenario:
@@ -89,7 +87,7 @@ def test_manifold_jacobian_matches_central_differences(model: str) -> None:
 
 @pytest.mark.parametrize("model", ALL_MODELS)
 def test_solvers_agree_and_recover_truth(model: str) -> None:
-    calib = Calibration(scenario(model), dataset=sim_log(model, records=1500, outlier_fraction=0.01))
+    calib = Calibration(scenario(model), log=sim_log(model, records=1500, outlier_fraction=0.01))
     gn, ip = calib.solve("gauss_newton"), calib.solve("ipopt")
     for res in (gn, ip):
         assert res.converged, res.reason
@@ -102,10 +100,8 @@ def test_solvers_agree_and_recover_truth(model: str) -> None:
 
 @pytest.mark.parametrize("model", ALL_MODELS)
 def test_auto_start_needs_no_guess(model: str) -> None:
-    wild = {n: 1.0 for n in DEFAULT_TRUTH[model]}
-    calib = Calibration(
-        scenario(model, initial_guess="auto"), dataset=sim_log(model, records=1500, guess=wild)
-    )
+    wild = {n: 1.0 for n in get_model(model).drive.default_truth}
+    calib = Calibration(scenario(model, initial_guess="auto"), log=sim_log(model, records=1500, guess=wild))
     res = calib.solve("gauss_newton")
     assert res.converged, res.reason
     assert_close(res.params, truth(model), rtol=0.02, atol=0.02)
@@ -114,7 +110,7 @@ def test_auto_start_needs_no_guess(model: str) -> None:
 @pytest.mark.parametrize("model", ALL_MODELS)
 def test_mirrored_solution_maps_back_to_canonical_form(model: str) -> None:
     m = get_model(model)
-    p = dict(DEFAULT_TRUTH[model])
+    p = dict(get_model(model).drive.default_truth)
     fns = build(m, ProblemSpec(horizon=3))
     columns = build_residual_data(fns, sim_log(model, records=100), ResidualOptions(horizon=3)).columns
     # The base frame turned round: negate the travel-scale parameters, rotate the mount by π.

@@ -18,13 +18,13 @@ import yaml
 from conftest import REPO, SCENARIOS
 
 from nlp_calib import __version__
-from nlp_calib.calibration import Calibration
 from nlp_calib.cli import main
-from nlp_calib.io.scenario import SampleSelection, ValidationOptions, load_scenario
-from nlp_calib.report.handoff import CALIBRATION_FILE, URDF_FILE, write_handoff
-from nlp_calib.report.markdown import fmt_std, fmt_value
-from nlp_calib.report.progress import Progress
-from nlp_calib.solvers.gauss_newton import GaussNewtonOptions
+from nlp_calib.outputs.handoff import CALIBRATION_FILE, URDF_FILE, write_handoff
+from nlp_calib.outputs.markdown import fmt_std, fmt_value
+from nlp_calib.outputs.progress import Progress
+from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline.scenario import SampleSelection, ValidationOptions, load_scenario
+from nlp_calib.solvers import GaussNewtonOptions
 
 IMAGES = ("trajectory.png", "convergence.png", "residuals.png", "model_check.png")
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -142,7 +142,9 @@ def test_handoff_files_are_deterministic(tmp_path: Path) -> None:
 
 
 def test_no_converged_solver_writes_no_handoff_and_removes_stale_files(tmp_path: Path) -> None:
-    calib = _small_demo(solvers=("gauss_newton",), gauss_newton=GaussNewtonOptions(max_iterations=1))
+    calib = _small_demo(
+        solvers=("gauss_newton",), solver_options={"gauss_newton": GaussNewtonOptions(max_iterations=1)}
+    )
     run = calib.run()
     assert not run.reports["gauss_newton"].result.converged
     for name in (CALIBRATION_FILE, URDF_FILE):
@@ -152,7 +154,7 @@ def test_no_converged_solver_writes_no_handoff_and_removes_stale_files(tmp_path:
 
 
 def test_single_solver_report_with_holdout(tmp_path: Path) -> None:
-    from nlp_calib.report.writer import write_report
+    from nlp_calib.outputs.writer import write_report
 
     calib = _small_demo(solvers=("gauss_newton",), validation=ValidationOptions(holdout_fraction=0.3))
     run = calib.run()

@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 from conftest import SCENARIOS
 
-from nlp_calib.calibration import Calibration
-from nlp_calib.errors import ScenarioError
-from nlp_calib.io.scenario import load_scenario
+from nlp_calib.core.errors import ScenarioError
+from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline.scenario import load_scenario
 
 
 def write(tmp_path: Path, text: str) -> Path:

@@ -5,17 +5,17 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from conftest import SCENARIOS, assert_close
+from conftest import SCENARIOS, assert_close, parse_lines
 
-from nlp_calib.io.logfile import parse_log, read_log
-from nlp_calib.io.simconfig import simulation_options
-from nlp_calib.simulate import SimulationOptions, simulate
+from nlp_calib.models import load_log
+from nlp_calib.pipeline.simconfig import simulation_options
+from nlp_calib.simulation import SimulationOptions, simulate
 
 
 def test_shipped_demo_log_is_what_the_simulator_makes() -> None:
     opts = simulation_options(SCENARIOS / "data" / "demo_tricycle.sim.yaml", {})
-    fresh = parse_log(simulate(opts).text().splitlines())
-    shipped = read_log(SCENARIOS / "data" / "demo_tricycle.txt")
+    fresh = parse_lines(simulate(opts).text().splitlines())
+    shipped = load_log(SCENARIOS / "data" / "demo_tricycle.txt")
     np.testing.assert_array_equal(fresh.ticks, shipped.ticks)
     assert_close(fresh.T_world_sensor, shipped.T_world_sensor, rtol=0, atol=1e-8)
     assert_close(fresh.time_s, shipped.time_s, rtol=0, atol=1e-9)
@@ -31,7 +31,7 @@ def test_deterministic_for_a_seed() -> None:
 
 def test_traction_counter_wraps_and_reads_back(tmp_path: Path) -> None:
     sim = simulate(SimulationOptions(records=600, seed=1))
-    ds = parse_log(sim.text().splitlines())
+    ds = parse_lines(sim.text().splitlines())
     raw = ds.encoder("traction_wheel")
     assert raw.max() > 2**32 - 30000 and raw.min() < 30000  # it crossed the wrap
     inc = ds.increments("traction_wheel")

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from conftest import SCENARIOS, assert_close
 
-from nlp_calib.calibration import Calibration
-from nlp_calib.data import ResidualOptions
-from nlp_calib.io.scenario import RobustOptions, Scenario, load_scenario
-from nlp_calib.solvers.ipopt import IpoptOptions
+from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline.scenario import RobustOptions, Scenario, load_scenario
+from nlp_calib.problem import ResidualOptions
+from nlp_calib.solvers import IpoptOptions
 
 TRUTH_TOL = {  # absolute tolerances on a noiseless log
     "k_steer": 1e-3,
@@ -71,7 +71,7 @@ def test_solvers_agree_for_every_kernel(demo_scenario: Scenario, kernel: str) ->
 def test_lifted_huber_reaches_the_direct_optimum(demo_scenario: Scenario) -> None:
     sc = dataclasses.replace(demo_scenario, robust=RobustOptions(kernel="huber", delta=0.02))
     direct = Calibration.setup(sc).solve("ipopt")
-    lifted_sc = dataclasses.replace(sc, ipopt=IpoptOptions(huber_formulation="lifted"))
+    lifted_sc = sc.with_solver_options("ipopt", IpoptOptions(huber_formulation="lifted"))
     lifted = Calibration.setup(lifted_sc).solve("ipopt")
     assert lifted.stats["formulation"] == "lifted"
     agree(direct, lifted, params_rtol=1e-6, cost_rtol=1e-9)
@@ -118,9 +118,9 @@ def test_gauss_newton_reports_nan_instead_of_a_result(demo_scenario: Scenario) -
 
 
 def test_iteration_limit_is_not_convergence(demo_scenario: Scenario) -> None:
-    from nlp_calib.solvers.gauss_newton import GaussNewtonOptions
+    from nlp_calib.solvers import GaussNewtonOptions
 
-    sc = dataclasses.replace(demo_scenario, gauss_newton=GaussNewtonOptions(max_iterations=1))
+    sc = demo_scenario.with_solver_options("gauss_newton", GaussNewtonOptions(max_iterations=1))
     res = Calibration.setup(sc).solve("gauss_newton")
     assert not res.converged
     assert "iteration limit" in res.reason

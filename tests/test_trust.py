@@ -8,26 +8,27 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import SCENARIOS
+from conftest import SCENARIOS, parse_lines
 
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.observability import analyse
-from nlp_calib.calibration import Calibration
-from nlp_calib.data import ResidualOptions
-from nlp_calib.io.logfile import parse_log
-from nlp_calib.io.scenario import AlignmentOptions, Prior, RobustOptions, Scenario, load_scenario
-from nlp_calib.simulate import DEFAULT_TRUTH, SimulationOptions, simulate
+from nlp_calib.models import get_model
+from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline.scenario import AlignmentOptions, Prior, RobustOptions, Scenario, load_scenario
+from nlp_calib.problem import ResidualOptions
+from nlp_calib.simulation import SimulationOptions, simulate
 
-TRUTH = np.array(list(DEFAULT_TRUTH["tricycle"].values()))
-NAMES = tuple(DEFAULT_TRUTH["tricycle"])
+DEFAULT_TRUTH = get_model("tricycle").drive.default_truth
+TRUTH = np.array(list(DEFAULT_TRUTH.values()))
+NAMES = tuple(DEFAULT_TRUTH)
 # Stated tolerances: k_traction 1 %, axis_length 2 %, steer_offset 0.01 rad, sensor 2 cm / 0.01 rad.
 TOLERANCE = np.array([np.inf, 0.01 * TRUTH[1], 0.02 * TRUTH[2], 0.01, 0.02, 0.02, 0.01])
 TOLERANCE[0] = 0.02 * TRUTH[0]  # k_steer 2 %
 
 
 def sim_calibration(scenario: Scenario, **sim: object) -> Calibration:
-    ds = parse_log(simulate(SimulationOptions(**sim)).text().splitlines(), "sim")  # type: ignore[arg-type]
-    return Calibration(scenario, dataset=ds)
+    ds = parse_lines(simulate(SimulationOptions(**sim)).text().splitlines(), "sim")  # type: ignore[arg-type]
+    return Calibration(scenario, log=ds)
 
 
 def scenario(**changes: object) -> Scenario:
@@ -44,12 +45,12 @@ def scenario(**changes: object) -> Scenario:
 def test_recovers_truth_with_noise_outliers_wrap_and_latency(seed: int) -> None:
     sc = scenario(robust=RobustOptions("huber", 0.02), alignment=AlignmentOptions(tracker_lag="auto"))
     calib = sim_calibration(sc, records=2000, seed=seed, outlier_fraction=0.02, latency_s=0.05)
-    assert abs(calib.tracker_lag_s - 0.05) < 0.005
+    assert abs(calib.alignment.lag_s - 0.05) < 0.005
     assert calib.log.encoder("traction_wheel").max() > 2**32 - 30000  # the counter wrapped
     for solver in ("gauss_newton", "ipopt"):
         res = calib.solve(solver)
         assert res.converged, res.reason
-        u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.dataset))
+        u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.aligned))
         err = res.params - TRUTH
         assert np.all(np.abs(err) <= 3 * u.std), dict(zip(NAMES, err / u.std))
         assert np.all(np.abs(err) <= TOLERANCE), dict(zip(NAMES, err))
@@ -69,7 +70,7 @@ def test_uncertainty_is_consistent_over_independent_noise() -> None:
         calib = sim_calibration(sc, records=1000, seed=1000 + k)
         res = calib.solve("gauss_newton")
         assert res.converged, res.reason
-        u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.dataset))
+        u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.aligned))
         err = res.params - TRUTH
         nees[k] = err @ np.linalg.solve(u.covariance, err)
         covered += np.abs(err) <= 2 * u.std
@@ -83,7 +84,7 @@ def test_estimated_noise_matches_the_simulated_tracker_noise() -> None:
         scenario(), records=1500, seed=3, tracker_noise_xy=0.003, tracker_noise_theta=0.001
     )
     res = calib.solve("gauss_newton")
-    u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.dataset))
+    u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.aligned))
     assert u.noise["tracker_xy"] == pytest.approx(0.003, rel=0.1)
     assert u.noise["tracker_theta"] == pytest.approx(0.001, rel=0.1)
 
@@ -92,12 +93,12 @@ def test_straight_line_log_warns_about_turning_and_is_not_converged() -> None:
     calib = sim_calibration(scenario(), records=800, seed=2, trajectory="straight")
     res = calib.solve("gauss_newton")
     assert not res.converged and "singular normal matrix" in res.reason
-    obs = analyse(calib.evaluator, res.x, calib.data.dataset.T_world_sensor)
+    obs = analyse(calib.evaluator, res.x, calib.data.log.T_world_sensor)
     text = " ".join(obs.warnings)
     assert "no turning" in text
     for name in ("axis_length", "sensor_x", "sensor_y"):
         assert name in text
-    u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.dataset))
+    u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.aligned))
     std = u.std_dict()
     assert np.isinf(std["axis_length"]) and np.isinf(std["sensor_x"])
     assert np.isfinite(std["k_traction"]) and np.isfinite(std["sensor_theta"])
@@ -109,7 +110,7 @@ def test_well_excited_logs_raise_no_observability_warning(trajectory: str) -> No
     calib = sim_calibration(scenario(), records=1500, seed=1, trajectory=trajectory)
     res = calib.solve("gauss_newton")
     assert res.converged, res.reason
-    obs = analyse(calib.evaluator, res.x, calib.data.dataset.T_world_sensor)
+    obs = analyse(calib.evaluator, res.x, calib.data.log.T_world_sensor)
     assert obs.warnings == ()
     assert obs.condition_number < 1e4
     assert max(obs.std_reference.values()) < 5.0
@@ -120,10 +121,10 @@ def test_auto_initial_guess_reaches_the_header_optimum_on_the_real_log(real_log:
     sc = dataclasses.replace(sc, alignment=AlignmentOptions())
     header = Calibration(sc).solve("gauss_newton")
     auto = Calibration(dataclasses.replace(sc, initial_guess="auto"))
-    assert auto.auto_guess is not None
+    assert auto.start.auto is not None
     # The closed form alone lands close to the optimum in what the data determine best: the
     # traction scale, the sensor's lever arm and the turning gain k_steer / axis_length...
-    g, p = auto.auto_guess, header.param_dict()
+    g, p = auto.start.auto, header.param_dict()
     assert g["k_traction"] == pytest.approx(p["k_traction"], rel=0.05)
     assert g["sensor_x"] == pytest.approx(p["sensor_x"], abs=0.02)
     assert g["k_steer"] / g["axis_length"] == pytest.approx(p["k_steer"] / p["axis_length"], rel=0.05)
@@ -161,7 +162,7 @@ def test_fixed_parameter_stays_bit_identical_and_solvers_agree(demo: Scenario) -
         assert res.param_dict()["sensor_y"] == 0.07
     np.testing.assert_allclose(gn.params, ip.params, rtol=1e-6)
     assert gn.cost == pytest.approx(ip.cost, rel=1e-9)
-    u = unc.estimate(calib.evaluator, gn.x, calib.data, calib.model.input_noise_std(calib.dataset))
+    u = unc.estimate(calib.evaluator, gn.x, calib.data, calib.model.input_noise_std(calib.aligned))
     assert u.std_dict()["axis_length"] == 0.0 and u.std_dict()["k_steer"] > 0.0
 
 

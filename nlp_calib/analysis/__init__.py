@@ -1,0 +1,2 @@
+"""Analysis layer: what a result is worth: trajectory metrics, uncertainty, observability, odometry,
+time alignment and encoder faults."""

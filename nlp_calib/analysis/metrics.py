@@ -1,8 +1,8 @@
-"""Trajectory metrics (SPEC §7): ATE, hold-out ATE and RPE of the integrated sensor track.
+"""Trajectory metrics: ATE, hold-out ATE and RPE of the integrated sensor track.
 
 The calibrated sensor trajectory is dead reckoning ``T_{k+1} = T_k · h_k(X)`` started from the
 tracker's pose at the first record of the evaluated range; it is computed by folding the
-builder's ``integrate_step`` Function over the intervals (``mapaccum``), not by a Python loop.
+problem's ``integrate_step`` Function over the intervals (``mapaccum``), not by a Python loop.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from nlp_calib.symbolic.builder import ProblemFunctions
+from nlp_calib.problem import ProblemFunctions
 
 
 @dataclass(frozen=True)

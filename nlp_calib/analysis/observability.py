@@ -1,8 +1,8 @@
 """Which parameters the log determines, and which it does not, in words.
 
 The information matrix ``H/σ²`` is scaled by a reference precision per parameter (what a useful
-calibration must resolve: 1% of a gain or length, 1 cm of the sensor position, 5 mrad of an
-angle). A direction of the scaled matrix whose 1σ exceeds 5 reference units is weakly
+calibration must resolve, a fact of each model: e.g. 1% of a gain or length, 1 cm of the sensor
+position, 5 mrad of an angle). A direction of the scaled matrix whose 1σ exceeds 5 reference units is weakly
 observable; beyond 100, or with no information at all, it is not observable. The drive itself is
 checked too: a log that never turns cannot tell an axis length or a lever arm.
 """
@@ -13,9 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlp_calib.analysis.reference import reference_scales
-from nlp_calib.models.base import SENSOR_PARAMS
-from nlp_calib.solvers.evaluation import ProblemEvaluator
+from nlp_calib.models import SENSOR_PARAMS, reference_scales
+from nlp_calib.solvers import ProblemEvaluator
 
 #: A direction with 1σ beyond this many reference units is weakly observable...
 WEAK = 5.0
@@ -83,7 +82,7 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
     sigma2 = max(float(np.sum(weight * s)) / dof, 1e-300)
     params = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()
     value = dict(zip(fns.names, params))
-    R = reference_scales(names, np.array([value[n] for n in names]))
+    R = reference_scales(fns.model, names, np.array([value[n] for n in names]))
     Hs = ne.H * np.outer(R, R) / sigma2
     lam, V = np.linalg.eigh(0.5 * (Hs + Hs.T))
     tiny = 1e-12 * max(float(lam[-1]), 1e-300)

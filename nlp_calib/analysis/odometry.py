@@ -1,7 +1,7 @@
 """Calibrated odometry of the base link with its covariance, propagated interval by interval.
 
 ``T' = T·Δr(u)`` and ``P' = F·P·Fᵀ + G·diag(σ_u²)·Gᵀ`` with ``F = ∂T'/∂T`` and ``G = ∂T'/∂u``
-the symbolic Jacobians of the model's increment (the builder's ``odometry_step``), folded over
+the symbolic Jacobians of the model's increment (the problem's ``odometry_step``), folded over
 the intervals with ``mapaccum``. ``σ_u`` is the encoders' noise on the model inputs.
 """
 
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlp_calib.symbolic.builder import ProblemFunctions
+from nlp_calib.problem import ProblemFunctions
 
 
 @dataclass(frozen=True)

@@ -28,9 +28,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlp_calib.analysis.reference import reference_scales
-from nlp_calib.data import ResidualData
-from nlp_calib.solvers.evaluation import ProblemEvaluator
+from nlp_calib.models import reference_scales
+from nlp_calib.problem import ResidualData
+from nlp_calib.solvers import ProblemEvaluator
+
+#: The per-residual Functions the estimate maps over the data, per residual (not summed).
+FUNCTIONS = ("robust_terms", "sensitivities")
 
 
 @dataclass(frozen=True)
@@ -120,7 +123,7 @@ def estimate(
     )
     de_ddata = sens.reshape(3, -1, rows)[:, :N]  # (3, N, rows)
     J = jac.reshape(3, -1, n)[:, :N]  # (3, N, n)
-    poses = data.dataset.T_world_sensor
+    poses = data.log.T_world_sensor
     a_idx, b_idx = data.starts, data.starts + H
     Da, Db = (
         np.asarray(v).reshape(3, N, 3) for v in fns.between_jacobians.map(N)(poses[a_idx].T, poses[b_idx].T)
@@ -164,7 +167,7 @@ def estimate(
     free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[
         [fns.names.index(f) for f in fns.free]
     ]
-    bread_inv, undetermined = _pseudo_inverse(ne.H, reference_scales(fns.free, free_values))
+    bread_inv, undetermined = _pseudo_inverse(ne.H, reference_scales(fns.model, fns.free, free_values))
     M = np.asarray(fns.tangent_map(x))
     cov = M @ bread_inv @ meat @ bread_inv @ M.T
     # A parameter the data do not determine has no finite variance; say so instead of a number.

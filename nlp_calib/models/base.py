@@ -1,27 +1,43 @@
 """What a kinematic model provides to the rest of the package.
 
-A model is one small module: its parameter names, how raw encoder readings become per-interval
-inputs (numeric, once per dataset), and the symbolic base-link increment those inputs produce.
-The builder, both solvers, code generation and the reports use it only through this protocol.
+A model is one file: its parameter names and units, how the log header names them, which encoders
+it reads and of what kind, how raw readings become per-interval inputs (numeric, once per log),
+the symbolic base-link increment those inputs produce, the precision a useful calibration must
+reach, its closed-form start, its canonical form and the drive the simulator uses. Everything
+above this layer uses a model only through :class:`KinematicModel`; adding one is one file and
+one line in :mod:`nlp_calib.models`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Protocol
+from typing import TYPE_CHECKING, Literal, Protocol
 
 import casadi as ca
 import numpy as np
 
-from nlp_calib.io.logfile import Dataset
+from nlp_calib.logs import EncoderKind, Log, LogHeader
+
+if TYPE_CHECKING:
+    from nlp_calib.models.drives import Drive
 
 #: The sensor mounting pose ``T_base_sensor`` closes every parameter vector, in this order.
 SENSOR_PARAMS: tuple[str, str, str] = ("sensor_x", "sensor_y", "sensor_theta")
+SENSOR_UNITS: Mapping[str, str] = {"sensor_x": "m", "sensor_y": "m", "sensor_theta": "rad"}
 
 INTEGRATIONS = ("exact", "euler")
 #: 1σ of rounding to whole ticks (uniform over one tick).
 QUANTISATION = 1.0 / np.sqrt(12.0)
 STEERING_SAMPLES = ("start", "end", "mean")
+
+#: A reference precision: a fraction of the parameter's value, or an absolute amount in its unit.
+Reference = tuple[Literal["relative", "absolute"], float]
+#: What a useful calibration must resolve of the sensor pose: 1 cm and 5 mrad.
+SENSOR_REFERENCE: Mapping[str, Reference] = {
+    "sensor_x": ("absolute", 0.01),
+    "sensor_y": ("absolute", 0.01),
+    "sensor_theta": ("absolute", 0.005),
+}
 
 
 class KinematicModel(Protocol):
@@ -31,23 +47,37 @@ class KinematicModel(Protocol):
     name: str
     #: ``#kinematic_model:`` values of logs this model reads.
     log_names: tuple[str, ...]
-    #: Kinematic parameter names, in state order (the sensor pose follows them).
+    #: Kinematic parameter names, in state order (the sensor pose follows them), and their units.
     kinematic_params: tuple[str, ...]
+    units: Mapping[str, str]
+    #: Header (``#parameters``) spelling of each kinematic parameter, written by the simulator;
+    #: ``header_aliases`` maps every accepted spelling (lower case) onto a parameter name.
+    header_names: Mapping[str, str]
+    header_aliases: Mapping[str, str]
+    #: The encoders (``#joints_max_enc`` names) the model reads, in input order, with their kind.
+    encoder_kinds: Mapping[str, EncoderKind]
     #: Names of the per-interval inputs :meth:`inputs` returns, in row order.
     input_names: tuple[str, ...]
-    #: Encoder names (``#joints_max_enc``) the model reads.
-    encoders: tuple[str, ...]
     #: Kinematic parameters a log without turning cannot determine, and a note on what else.
     turning_params: tuple[str, ...]
     turning_note: str
     #: Plausible ranges, used to reject absurd initial guesses and as basin-study ranges.
     physical_ranges: Mapping[str, tuple[float, float]]
+    #: Precision a useful calibration must reach on each kinematic parameter.
+    reference: Mapping[str, Reference]
+    #: The kinematic parameters a one-line summary shows.
+    headline: tuple[str, ...]
+
+    @property
+    def drive(self) -> Drive:
+        """The simulator's independent numpy drive of this base."""
+        ...
 
     def increment(self, k: ca.SX, u: ca.SX, integration: str) -> ca.SX:
         """Base-link motion ``(x, y, theta)`` over one interval for parameters ``k``, inputs ``u``."""
         ...
 
-    def inputs(self, dataset: Dataset, steering_sample: str) -> np.ndarray:
+    def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
         """Per-interval inputs, ``(len(input_names), n_records - 1)``, from the raw encoders."""
         ...
 
@@ -55,9 +85,7 @@ class KinematicModel(Protocol):
         """Boolean mask of intervals in which the encoders report motion."""
         ...
 
-    def input_noise_std(
-        self, dataset: Dataset, encoder_noise: Mapping[str, float] | None = None
-    ) -> np.ndarray:
+    def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
         """1σ noise of each input row, from each encoder's noise in ticks (default: quantisation)."""
         ...
 
@@ -82,3 +110,34 @@ class KinematicModel(Protocol):
 def param_names(model: KinematicModel) -> tuple[str, ...]:
     """The full state order: kinematic parameters then the sensor pose."""
     return (*model.kinematic_params, *SENSOR_PARAMS)
+
+
+def param_units(model: KinematicModel) -> dict[str, str]:
+    """The unit of every parameter, in state order."""
+    return {**{n: model.units[n] for n in model.kinematic_params}, **SENSOR_UNITS}
+
+
+def encoders(model: KinematicModel) -> tuple[str, ...]:
+    """The encoder names the model reads, in input order."""
+    return tuple(model.encoder_kinds)
+
+
+def header_parameters(model: KinematicModel, header: LogHeader) -> dict[str, float]:
+    """The header's initial guess under the model's parameter names (unknown names left out)."""
+    out = {}
+    for name, value in header.parameters.items():
+        param = model.header_aliases.get(name.lower())
+        if param is not None:
+            out[param] = float(value)
+    return out
+
+
+def reference_scale(model: KinematicModel, name: str, value: float) -> float:
+    """The precision a calibration should reach on parameter ``name`` at ``value``."""
+    kind, amount = {**model.reference, **SENSOR_REFERENCE}.get(name, ("relative", 0.01))
+    return amount * max(abs(value), 1e-9) if kind == "relative" else amount
+
+
+def reference_scales(model: KinematicModel, names: tuple[str, ...], values: np.ndarray) -> np.ndarray:
+    """:func:`reference_scale` of each named parameter."""
+    return np.array([reference_scale(model, n, float(v)) for n, v in zip(names, values)])

@@ -13,27 +13,101 @@ from types import MappingProxyType
 import casadi as ca
 import numpy as np
 
-from nlp_calib.analysis.initialization import hand_eye, robust_lstsq
-from nlp_calib.errors import ModelError
-from nlp_calib.io.logfile import Dataset
-from nlp_calib.models.base import QUANTISATION
-from nlp_calib.numeric import wrap_angle
+from nlp_calib.core.errors import ModelError
+from nlp_calib.core.numeric import wrap_angle, wrapped_difference
+from nlp_calib.logs import EncoderKind, Log, LogHeader
+from nlp_calib.models.base import QUANTISATION, Reference
+from nlp_calib.models.drives import SimulationSettings, counter, cumulative, drive_header, first_order
+from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.symbolic import se2
 
 LEFT_ENCODER = "left_wheel"
 RIGHT_ENCODER = "right_wheel"
+#: Curvature (1/m) per unit of the simulator's turning profile.
+_SIM_CURVATURE = 1.5
+
+
+class DiffDriveDrive:
+    """Base moves at ``speed``, curvature ``1.5·turn`` per metre; encoders: left and right wheel."""
+
+    default_truth: Mapping[str, float] = MappingProxyType(
+        {
+            "k_left": 4.9e-4,
+            "k_right": 5.1e-4,
+            "baseline": 0.55,
+            "sensor_x": 0.3,
+            "sensor_y": -0.05,
+            "sensor_theta": 0.08,
+        }
+    )
+    default_guess: Mapping[str, float] = MappingProxyType(
+        {
+            "k_left": 5e-4,
+            "k_right": 5e-4,
+            "baseline": 0.5,
+            "sensor_x": 0.25,
+            "sensor_y": 0.0,
+            "sensor_theta": 0.0,
+        }
+    )
+
+    def steps(
+        self, opts: SimulationSettings, speed: np.ndarray, turn: np.ndarray, dt: np.ndarray, turn_start: float
+    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        ds = speed * dt
+        w = ds * _SIM_CURVATURE * turn
+        half = 0.5 * opts.truth["baseline"] * w
+        return ds, w, {"left": cumulative(ds - half), "right": cumulative(ds + half)}
+
+    def ticks(self, opts: SimulationSettings, channels: Mapping[str, np.ndarray]) -> np.ndarray:
+        t = opts.truth
+        left = counter(channels["left"], t["k_left"], opts.wrap_after_ticks)
+        right = counter(channels["right"], t["k_right"], 2 * opts.wrap_after_ticks)
+        return np.stack([left, right], axis=1)
+
+    def header(self, opts: SimulationSettings) -> LogHeader:
+        encoders = {LEFT_ENCODER: opts.wheel_ticks, RIGHT_ENCODER: opts.wheel_ticks}
+        return drive_header(opts, "differential_drive", DiffDrive.header_names, encoders)
+
+    def vendor_odometry(self, header: LogHeader, ticks: np.ndarray) -> np.ndarray:
+        p = {DiffDrive.header_aliases[n.lower()]: v for n, v in header.parameters.items()}
+        d_l = p["k_left"] * wrapped_difference(ticks[:, 0])
+        d_r = p["k_right"] * wrapped_difference(ticks[:, 1])
+        return first_order(0.5 * (d_l + d_r), (d_r - d_l) / p["baseline"])
 
 
 class DiffDrive:
-    """Differential-drive base; base link midway between the wheels, x forward."""
+    """Differential-drive base, parameters ``(k_left, k_right, baseline)`` then the sensor pose
+    ``(sensor_x, sensor_y, sensor_theta)``; base link midway between the wheels, x forward."""
 
     name: str = "diff_drive"
     log_names: tuple[str, ...] = ("differential_drive", "diff_drive")
     kinematic_params: tuple[str, ...] = ("k_left", "k_right", "baseline")
+    units: Mapping[str, str] = MappingProxyType(
+        {"k_left": "m per tick", "k_right": "m per tick", "baseline": "m"}
+    )
+    header_names: Mapping[str, str] = MappingProxyType(
+        {"k_left": "Kleft", "k_right": "Kright", "baseline": "baseline"}
+    )
+    header_aliases: Mapping[str, str] = MappingProxyType(
+        {
+            "kleft": "k_left",
+            "k_left": "k_left",
+            "kright": "k_right",
+            "k_right": "k_right",
+            "baseline": "baseline",
+            "base_line": "baseline",
+        }
+    )
     input_names: tuple[str, ...] = ("left_ticks", "right_ticks")
-    encoders: tuple[str, ...] = (LEFT_ENCODER, RIGHT_ENCODER)
+    encoder_kinds: Mapping[str, EncoderKind] = MappingProxyType(
+        {LEFT_ENCODER: "counter", RIGHT_ENCODER: "counter"}
+    )
     turning_params: tuple[str, ...] = ("baseline",)
     turning_note = ""
+    reference: Mapping[str, Reference] = MappingProxyType({})
+    headline: tuple[str, ...] = ("k_left", "baseline")
+    drive = DiffDriveDrive()
     physical_ranges: Mapping[str, tuple[float, float]] = MappingProxyType(
         {
             "k_left": (1e-7, 1.0),
@@ -54,24 +128,22 @@ class DiffDrive:
             return ca.vertcat(travel, 0.0, dtheta)
         return se2.arc(travel, dtheta)
 
-    def inputs(self, dataset: Dataset, steering_sample: str) -> np.ndarray:
+    def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
         """Rows: left and right wheel tick increments (``steering_sample`` does not apply)."""
-        missing = [e for e in self.encoders if e not in dataset.header.encoder_names]
+        missing = [e for e in self.encoder_kinds if e not in log.header.encoder_names]
         if missing:
             raise ModelError(
-                f"{dataset.path}: the differential-drive model needs encoders {list(self.encoders)}; "
-                f"the log has {list(dataset.header.encoder_names)}"
+                f"{log.path}: the differential-drive model needs encoders {list(self.encoder_kinds)}; "
+                f"the log has {list(log.header.encoder_names)}"
             )
-        return np.vstack([dataset.increments(LEFT_ENCODER), dataset.increments(RIGHT_ENCODER)]).astype(float)
+        return np.vstack([log.increments(LEFT_ENCODER), log.increments(RIGHT_ENCODER)]).astype(float)
 
     def moving(self, inputs: np.ndarray) -> np.ndarray:
         return np.asarray((inputs[0] != 0.0) | (inputs[1] != 0.0))
 
-    def input_noise_std(
-        self, dataset: Dataset, encoder_noise: Mapping[str, float] | None = None
-    ) -> np.ndarray:
+    def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
         """1σ of each increment in ticks (default: quantisation, ``1/√12``)."""
-        ticks = {**dict.fromkeys(self.encoders, QUANTISATION), **(encoder_noise or {})}
+        ticks = {**dict.fromkeys(self.encoder_kinds, QUANTISATION), **(encoder_noise or {})}
         return np.array([ticks[LEFT_ENCODER], ticks[RIGHT_ENCODER]])
 
     def canonical(self, params: Mapping[str, float], fixed: tuple[str, ...] = ()) -> dict[str, float]:

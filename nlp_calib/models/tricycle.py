@@ -1,8 +1,10 @@
-"""Front-tractor tricycle: the front wheel steers and drives (SPEC §3).
+"""Front-tractor tricycle: the front wheel steers and drives; base link at the rear-axle midpoint.
 
 Parameters ``(k_steer, k_traction, axis_length, steer_offset)``; inputs per interval
 ``(traction_revolutions, steering_angle)``: the unwrapped traction increment divided by
-``t_max``, and the steering encoder's angle ``wrap(2π·s/s_max)``.
+``t_max``, and the steering encoder's angle ``wrap(2π·s/s_max)``. The steering angle is
+``φ = k_steer·angle + steer_offset``, the front wheel travels ``d = k_traction·revolutions``, the
+base moves ``v = d·cos φ`` and turns ``ω = d·sin φ / axis_length`` (exact arc or Euler).
 """
 
 from __future__ import annotations
@@ -13,27 +15,110 @@ from types import MappingProxyType
 import casadi as ca
 import numpy as np
 
-from nlp_calib.analysis.initialization import hand_eye, robust_lstsq
-from nlp_calib.errors import ModelError
-from nlp_calib.io.logfile import Dataset
-from nlp_calib.models.base import QUANTISATION, STEERING_SAMPLES
-from nlp_calib.numeric import wrap_angle
+from nlp_calib.core.errors import ModelError
+from nlp_calib.core.numeric import wrap_angle, wrapped_difference
+from nlp_calib.logs import EncoderKind, Log, LogHeader
+from nlp_calib.models.base import QUANTISATION, STEERING_SAMPLES, Reference
+from nlp_calib.models.drives import SimulationSettings, counter, cumulative, drive_header, first_order
+from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.symbolic import se2
 
 STEERING_ENCODER = "steering"
 TRACTION_ENCODER = "traction_wheel"
 
 
+class TricycleDrive:
+    """Front wheel drives at ``speed`` and steers to ``turn`` (rad); encoders: steering, traction."""
+
+    default_truth: Mapping[str, float] = MappingProxyType(
+        {
+            "k_steer": 0.55,
+            "k_traction": 0.0105,
+            "axis_length": 1.5,
+            "steer_offset": -0.05,
+            "sensor_x": 1.6,
+            "sensor_y": 0.1,
+            "sensor_theta": 0.05,
+        }
+    )
+    default_guess: Mapping[str, float] = MappingProxyType(
+        {
+            "k_steer": 0.5,
+            "k_traction": 0.01,
+            "axis_length": 1.4,
+            "steer_offset": 0.0,
+            "sensor_x": 1.5,
+            "sensor_y": 0.0,
+            "sensor_theta": 0.0,
+        }
+    )
+
+    def steps(
+        self, opts: SimulationSettings, speed: np.ndarray, turn: np.ndarray, dt: np.ndarray, turn_start: float
+    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        d = speed * dt
+        ds, w = d * np.cos(turn), d * np.sin(turn) / opts.truth["axis_length"]
+        return ds, w, {"front": cumulative(d), "phi": np.concatenate([[turn_start], turn])}
+
+    def ticks(self, opts: SimulationSettings, channels: Mapping[str, np.ndarray]) -> np.ndarray:
+        t = opts.truth
+        s_max, t_max = opts.steering_ticks, opts.traction_ticks
+        steer = np.mod(
+            np.round((channels["phi"] - t["steer_offset"]) / t["k_steer"] * s_max / (2 * np.pi)), s_max
+        )
+        traction = counter(channels["front"], t["k_traction"] / t_max, opts.wrap_after_ticks)
+        return np.stack([steer.astype(np.int64), traction], axis=1)
+
+    def header(self, opts: SimulationSettings) -> LogHeader:
+        encoders = {STEERING_ENCODER: opts.steering_ticks, TRACTION_ENCODER: opts.traction_ticks}
+        return drive_header(opts, "traction_drive_wheel", Tricycle.header_names, encoders)
+
+    def vendor_odometry(self, header: LogHeader, ticks: np.ndarray) -> np.ndarray:
+        p = {Tricycle.header_aliases[n.lower()]: v for n, v in header.parameters.items()}
+        s_max, t_max = header.encoder_max
+        d = p["k_traction"] * wrapped_difference(ticks[:, 1]) / t_max
+        phi = p["k_steer"] * wrap_angle(2 * np.pi * ticks[:-1, 0] / s_max) + p["steer_offset"]
+        return first_order(d * np.cos(phi), d * np.sin(phi) / p["axis_length"])
+
+
 class Tricycle:
-    """Front-wheel-drive bicycle model of a tricycle; base link at the rear-axle midpoint."""
+    """Front-wheel-drive bicycle model of a tricycle, parameters ``(k_steer, k_traction,
+    axis_length, steer_offset)`` then the sensor pose ``(sensor_x, sensor_y, sensor_theta)``."""
 
     name: str = "tricycle"
     log_names: tuple[str, ...] = ("traction_drive_wheel", "tricycle")
     kinematic_params: tuple[str, ...] = ("k_steer", "k_traction", "axis_length", "steer_offset")
-    encoders: tuple[str, ...] = (STEERING_ENCODER, TRACTION_ENCODER)
+    units: Mapping[str, str] = MappingProxyType(
+        {"k_steer": "1", "k_traction": "m per t_max ticks", "axis_length": "m", "steer_offset": "rad"}
+    )
+    header_names: Mapping[str, str] = MappingProxyType(
+        {
+            "k_steer": "Ksteer",
+            "k_traction": "Ktraction",
+            "axis_length": "axis_length",
+            "steer_offset": "steer_offset",
+        }
+    )
+    header_aliases: Mapping[str, str] = MappingProxyType(
+        {
+            "ksteer": "k_steer",
+            "k_steer": "k_steer",
+            "ktraction": "k_traction",
+            "k_traction": "k_traction",
+            "axis_length": "axis_length",
+            "base_line": "axis_length",
+            "steer_offset": "steer_offset",
+        }
+    )
+    encoder_kinds: Mapping[str, EncoderKind] = MappingProxyType(
+        {STEERING_ENCODER: "absolute", TRACTION_ENCODER: "counter"}
+    )
     turning_params: tuple[str, ...] = ("axis_length",)
     turning_note = "the split between steering gain and offset"
     input_names: tuple[str, ...] = ("traction_revolutions", "steering_angle")
+    reference: Mapping[str, Reference] = MappingProxyType({"steer_offset": ("absolute", 0.005)})
+    headline: tuple[str, ...] = ("k_traction", "axis_length")
+    drive = TricycleDrive()
     physical_ranges: Mapping[str, tuple[float, float]] = MappingProxyType(
         {
             "k_steer": (0.01, 3.0),
@@ -57,21 +142,21 @@ class Tricycle:
             return ca.vertcat(v, 0.0, omega)
         return se2.arc(v, omega)
 
-    def inputs(self, dataset: Dataset, steering_sample: str) -> np.ndarray:
+    def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
         """Rows: traction revolutions ``Δt/t_max`` and the steering angle sampled as asked."""
-        header = dataset.header
+        header = log.header
         if steering_sample not in STEERING_SAMPLES:
             raise ModelError(f"steering_sample must be one of {STEERING_SAMPLES}, got {steering_sample!r}")
         for enc in (STEERING_ENCODER, TRACTION_ENCODER):
             if enc not in header.encoder_names:
                 raise ModelError(
-                    f"{dataset.path}: the tricycle model needs encoders {STEERING_ENCODER!r} and "
+                    f"{log.path}: the tricycle model needs encoders {STEERING_ENCODER!r} and "
                     f"{TRACTION_ENCODER!r}; the log has {list(header.encoder_names)}"
                 )
         s_max = header.encoder_max[header.encoder_index(STEERING_ENCODER)]
         t_max = header.encoder_max[header.encoder_index(TRACTION_ENCODER)]
-        revs = dataset.increments(TRACTION_ENCODER) / float(t_max)
-        angle = wrap_angle(2.0 * np.pi * dataset.encoder(STEERING_ENCODER) / float(s_max))
+        revs = log.increments(TRACTION_ENCODER) / float(t_max)
+        angle = wrap_angle(2.0 * np.pi * log.encoder(STEERING_ENCODER) / float(s_max))
         if steering_sample == "start":
             steer = angle[:-1]
         elif steering_sample == "end":
@@ -83,11 +168,9 @@ class Tricycle:
     def moving(self, inputs: np.ndarray) -> np.ndarray:
         return np.asarray(inputs[0] != 0.0)
 
-    def input_noise_std(
-        self, dataset: Dataset, encoder_noise: Mapping[str, float] | None = None
-    ) -> np.ndarray:
+    def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
         """1σ of each input from the encoders' noise in ticks (default: quantisation, ``1/√12``)."""
-        header = dataset.header
+        header = log.header
         s_max = header.encoder_max[header.encoder_index(STEERING_ENCODER)]
         t_max = header.encoder_max[header.encoder_index(TRACTION_ENCODER)]
         ticks = {**dict.fromkeys((TRACTION_ENCODER, STEERING_ENCODER), QUANTISATION), **(encoder_noise or {})}

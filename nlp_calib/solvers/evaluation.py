@@ -1,7 +1,7 @@
 """Numeric access to a built problem over one data matrix: what the solvers call.
 
-:class:`ProblemEvaluator` binds the mapped Functions of :mod:`nlp_calib.symbolic.builder` to the
-data once; each call then only copies the 7-vector in and the sums out.
+:class:`ProblemEvaluator` binds the mapped Functions of :mod:`nlp_calib.problem.functions` to the
+data once; each call then only copies the parameter vector in and the sums out.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from nlp_calib.solvers.backend import Backend, Buffered, pad_columns
-from nlp_calib.symbolic.builder import ProblemFunctions, unpack_upper
+from nlp_calib.problem import ProblemFunctions, unpack_upper
+from nlp_calib.solvers.backends import Backend, Buffered, pad_columns
 
 #: H is called singular when its Jacobi-scaled condition number exceeds this.
 SINGULAR_CONDITION = 1e12
@@ -106,8 +106,7 @@ class ProblemEvaluator:
 
     def mapped(self, name: str, *, reduce: bool, extra_mapped: tuple[str, ...] = ()) -> ca.Function:
         """The per-residual Function ``name`` mapped over the (padded) data columns."""
-        f = self.fns.per_residual()[name]
-        return self.backend.map(f, self.n_padded, ("data", *extra_mapped), reduce)
+        return self.backend.map(self.fns.function(name), self.n_padded, ("data", *extra_mapped), reduce)
 
     def normal_equations(self, x: np.ndarray) -> NormalEquations:
         h_upper, g, cost, chi2, inliers = self._normal(x=x)

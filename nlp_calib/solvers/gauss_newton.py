@@ -10,10 +10,13 @@ from the log's own initial guess where undamped Gauss-Newton diverges.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
+from nlp_calib.core.errors import OptionsError
 from nlp_calib.solvers.evaluation import (
     NAN_START_REASON,
     SINGULAR_REASON,
@@ -26,7 +29,7 @@ from nlp_calib.solvers.result import IterationRecord, SolverResult
 
 @dataclass(frozen=True)
 class GaussNewtonOptions:
-    """Stopping rules and damping (scenario key ``gauss_newton``).
+    """Stopping rules and damping of :class:`GaussNewton`.
 
     Stops when the undamped Gauss-Newton step predicts a relative cost decrease below
     ``function_tolerance`` (the optimum, to rounding), when the scaled gradient
@@ -43,7 +46,7 @@ class GaussNewtonOptions:
 
     def __post_init__(self) -> None:
         if self.max_iterations < 1:
-            raise ValueError("gauss_newton.max_iterations must be >= 1")
+            raise OptionsError(f"max_iterations must be >= 1, got {self.max_iterations}")
         for name in (
             "initial_damping",
             "function_tolerance",
@@ -51,7 +54,7 @@ class GaussNewtonOptions:
             "gradient_tolerance",
         ):
             if not getattr(self, name) > 0:
-                raise ValueError(f"gauss_newton.{name} must be > 0")
+                raise OptionsError(f"{name} must be > 0, got {getattr(self, name)}")
 
 
 #: λ beyond this means no step can reduce the cost any more.
@@ -69,6 +72,32 @@ def _decrement(ne: NormalEquations) -> float:
 def _scaled_gradient(ne: NormalEquations) -> float:
     d = np.sqrt(np.maximum(np.diag(ne.H), 1e-300))
     return float(np.max(np.abs(ne.g) / d)) if ne.g.size else 0.0
+
+
+class GaussNewton:
+    """Levenberg-Marquardt damped IRLS on the evaluator's normal equations (no bounds)."""
+
+    name: ClassVar[str] = "gauss_newton"
+    label: ClassVar[str] = "Gauss-Newton"
+    options_type: ClassVar[type] = GaussNewtonOptions
+    supports_bounds: ClassVar[bool] = False
+
+    def __init__(self, evaluator: ProblemEvaluator, options: GaussNewtonOptions | None = None) -> None:
+        self.evaluator = evaluator
+        self.options = options or GaussNewtonOptions()
+
+    @staticmethod
+    def functions(options: GaussNewtonOptions) -> tuple[str, ...]:
+        return ("normal_equations",)
+
+    def solve(
+        self,
+        x0: np.ndarray,
+        lower: np.ndarray | Sequence[float] | None = None,
+        upper: np.ndarray | Sequence[float] | None = None,
+    ) -> SolverResult:
+        """Minimise the robust cost from ``x0`` (free parameters); bounds are not used."""
+        return solve(self.evaluator, x0, self.options)
 
 
 def solve(
@@ -140,7 +169,7 @@ def solve(
     if converged and is_singular(ne.H):
         converged, reason = False, SINGULAR_REASON
     return SolverResult(
-        solver="gauss_newton",
+        solver=GaussNewton.name,
         names=evaluator.fns.names,
         params=evaluator.params(x),
         x=x,

@@ -1,6 +1,6 @@
-"""IPOPT on the same objective Gauss-Newton minimises (SPEC §6).
+"""IPOPT on the same objective Gauss-Newton minimises, with optional box bounds.
 
-The NLP's cost, gradient and Hessian are the mapped Functions of the builder, handed to
+The NLP's cost, gradient and Hessian are the problem's mapped Functions, handed to
 ``nlpsol`` as ``grad_f`` / ``hess_lag`` so that CasADi never re-derives them; the data enter as
 the NLP parameter ``p``. For Huber, ``huber_formulation: lifted`` solves the exact smooth
 Black–Rangarajan form ``min_{w∈(0,1]} w·s + δ²(1/w − 1)`` with one extra variable per residual.
@@ -11,12 +11,12 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
 
-from nlp_calib.errors import ScenarioError
+from nlp_calib.core.errors import OptionsError
 from nlp_calib.solvers.evaluation import NAN_START_REASON, SINGULAR_REASON, ProblemEvaluator, is_singular
 from nlp_calib.solvers.result import IterationRecord, SolverResult
 
@@ -29,7 +29,7 @@ _W_MIN = 1e-8
 
 @dataclass(frozen=True)
 class IpoptOptions:
-    """Scenario key ``ipopt``; ``options`` passes raw IPOPT options through (e.g. ``mu_init``)."""
+    """Options of :class:`Ipopt`; ``options`` passes raw IPOPT options through (e.g. ``mu_init``)."""
 
     huber_formulation: str = "direct"
     hessian: str = "exact"
@@ -41,13 +41,14 @@ class IpoptOptions:
 
     def __post_init__(self) -> None:
         if self.huber_formulation not in HUBER_FORMULATIONS:
-            raise ValueError(
-                f"ipopt.huber_formulation must be one of {HUBER_FORMULATIONS}, got {self.huber_formulation!r}"
+            raise OptionsError(
+                f"huber_formulation must be one of {', '.join(HUBER_FORMULATIONS)}, "
+                f"got {self.huber_formulation!r}"
             )
         if self.hessian not in HESSIANS:
-            raise ValueError(f"ipopt.hessian must be one of {HESSIANS}, got {self.hessian!r}")
+            raise OptionsError(f"hessian must be one of {', '.join(HESSIANS)}, got {self.hessian!r}")
         if self.max_iter < 1 or not self.tol > 0:
-            raise ValueError("ipopt.max_iter must be >= 1 and ipopt.tol > 0")
+            raise OptionsError(f"max_iter must be >= 1 and tol > 0, got {self.max_iter} and {self.tol}")
 
 
 def _last_line(exc: BaseException) -> str:
@@ -55,8 +56,18 @@ def _last_line(exc: BaseException) -> str:
     return lines[-1].split(": ", 1)[-1] if lines else type(exc).__name__
 
 
-class IpoptSolver:
+class Ipopt:
     """An ``nlpsol`` instance set up once for one evaluator; :meth:`solve` may be called often."""
+
+    name: ClassVar[str] = "ipopt"
+    label: ClassVar[str] = "IPOPT"
+    options_type: ClassVar[type] = IpoptOptions
+    supports_bounds: ClassVar[bool] = True
+
+    @staticmethod
+    def functions(options: IpoptOptions) -> tuple[str, ...]:
+        hessian = {"exact": "cost_hessian", "gauss_newton": "gauss_newton_hessian"}
+        return ("cost", "cost_gradient", *([hessian[options.hessian]] if options.hessian in hessian else []))
 
     def __init__(self, evaluator: ProblemEvaluator, options: IpoptOptions | None = None) -> None:
         self.evaluator = evaluator
@@ -66,9 +77,9 @@ class IpoptSolver:
         try:
             self._solver = self._build()
         except RuntimeError as exc:  # CasADi checks the options when the solver is built
-            raise ScenarioError(
-                f"ipopt: IPOPT cannot be set up with these options ({_last_line(exc)}); "
-                "check ipopt.options and ipopt.linear_solver"
+            raise OptionsError(
+                f"IPOPT cannot be set up with these options ({_last_line(exc)}); "
+                "check options and linear_solver"
             ) from None
         self.build_time_s = time.perf_counter() - t0
 
@@ -168,7 +179,7 @@ class IpoptSolver:
             )
         )
         return SolverResult(
-            solver="ipopt",
+            solver=Ipopt.name,
             names=ev.fns.names,
             params=ev.params(x),
             x=x,
@@ -193,7 +204,7 @@ class IpoptSolver:
         failed with ``error``; the parameters are the initial guess and flagged as not converged."""
         ne = self.evaluator.normal_equations(x0)
         return SolverResult(
-            solver="ipopt",
+            solver=Ipopt.name,
             names=self.evaluator.fns.names,
             params=self.evaluator.params(x0),
             x=x0,

@@ -1,4 +1,4 @@
-"""Robust kernels ρ(s) of the squared Mahalanobis norm ``s = eᵀΩe`` (SPEC §6).
+"""Robust kernels ρ(s) of the squared Mahalanobis norm ``s = eᵀΩe``.
 
 Each kernel is defined once, as a CasADi expression of ``s`` and the threshold ``delta`` (on the
 norm, so ``s = delta²`` is the switch). Both solvers use the same expression: Gauss-Newton takes
@@ -11,6 +11,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import casadi as ca
+
+from nlp_calib.core.errors import ProblemError
 
 KernelFn = Callable[[ca.SX, ca.SX], ca.SX]
 
@@ -56,7 +58,7 @@ def rho(kernel: str, s: ca.SX, delta: ca.SX) -> ca.SX:
 def kernel_function(kernel: str) -> ca.Function:
     """``(s, delta) -> (rho, weight)``: ρ(s) and the IRLS weight ρ'(s), one expression differentiated."""
     if kernel not in KERNELS:
-        raise KeyError(kernel)
+        raise ProblemError(f"unknown robust kernel {kernel!r}; valid kernels: {', '.join(KERNELS)}")
     s = ca.SX.sym("s")
     delta = ca.SX.sym("delta")
     r = rho(kernel, s, delta)

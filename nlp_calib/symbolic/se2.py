@@ -62,7 +62,7 @@ def between(a: Sym, b: Sym) -> Sym:
 
 
 def boxplus(T: Sym, delta: Sym) -> Sym:
-    """Left perturbation ``v2t(delta) · T`` (SPEC §5)."""
+    """Left perturbation ``v2t(delta) · T``: the sensor pose's box-plus."""
     return compose(delta, T)
 
 

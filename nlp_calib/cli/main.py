@@ -1,0 +1,62 @@
+"""The ``nlp-calib`` entry point: runs a command, prints warnings as they happen, maps errors to exit codes.
+
+Errors the user can fix print one line ``error: ...`` on stderr and exit with 2 (bad input) or
+1 (runtime failure); ``--debug`` shows the traceback instead.
+"""
+
+from __future__ import annotations
+
+import sys
+import traceback
+import warnings
+from collections.abc import Sequence
+from typing import TextIO
+
+from nlp_calib.cli.commands import COMMANDS
+from nlp_calib.cli.parser import build_parser
+from nlp_calib.core.errors import NlpCalibError
+
+
+def _show_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: TextIO | None = None,
+    line: str | None = None,
+) -> None:
+    """Print a warning at once, as one line (clearing a progress line on a terminal first)."""
+    stream = sys.stderr
+    clear = "\r\x1b[K" if getattr(stream, "isatty", lambda: False)() else ""
+    print(f"{clear}warning: {message}", file=stream)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the process exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv
+    try:
+        args = build_parser().parse_args(argv)
+        with warnings.catch_warnings():
+            warnings.simplefilter("always")
+            warnings.showwarning = _show_warning
+            return COMMANDS[args.command](args)
+    except NlpCalibError as exc:
+        if debug:
+            traceback.print_exc()
+        print(f"error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
+        sys.stderr.close()
+        return 1
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # an unexpected failure is still reported in one line
+        if debug:
+            traceback.print_exc()
+        print(
+            f"error: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)",
+            file=sys.stderr,
+        )
+        return 1

@@ -1,0 +1,22 @@
+"""Input layer: the robot log text format (reading, checking, writing) and encoder resampling.
+
+Knows no kinematic model: callers say which encoders are absolute and which are counters.
+"""
+
+from nlp_calib.logs.log import ENCODER_KINDS, DroppedRecord, EncoderKind, Log, LogHeader
+from nlp_calib.logs.reader import parse_log, read_log, yaw_from_quaternion
+from nlp_calib.logs.resample import resample_encoders
+from nlp_calib.logs.writer import format_log
+
+__all__ = [
+    "ENCODER_KINDS",
+    "DroppedRecord",
+    "EncoderKind",
+    "Log",
+    "LogHeader",
+    "format_log",
+    "parse_log",
+    "read_log",
+    "resample_encoders",
+    "yaw_from_quaternion",
+]

@@ -1,0 +1,39 @@
+"""Writing a log in the text format :func:`nlp_calib.logs.reader.read_log` reads."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nlp_calib.logs.log import LogHeader
+
+
+def format_log(
+    header: LogHeader,
+    time_ns: np.ndarray,
+    ticks: np.ndarray,
+    model_pose: np.ndarray,
+    T_world_sensor: np.ndarray,
+    digits: int = 9,
+) -> str:
+    """Render a log; poses with ``digits`` significant digits, header parameters as named there."""
+    names = list(header.parameters)
+    x, y, th = header.T_base_sensor
+    out = [
+        f"#kinematic_model: {header.kinematic_model}",
+        "#parameters: [ " + " ".join(names) + " ]",
+        "#parameter_values: " + " ".join(f"{header.parameters[n]:.9g}" for n in names),
+        "#joints_max_enc: [ " + " ".join(header.encoder_names) + " ]",
+        "#joints_max_enc_values: " + " ".join(str(v) for v in header.encoder_max),
+        f"#{header.sensor_frame} wrt base_link",
+        f"#\ttranslation:\t[ {x:.9g}, {y:.9g}, 0 ],",
+        f"#\trotation:\t [ 0, 0, {math.sin(th / 2):.9g}, {math.cos(th / 2):.9g} ]",
+    ]
+    for k in range(time_ns.shape[0]):
+        sec, ns = divmod(int(time_ns[k]), 1_000_000_000)
+        enc = " ".join(str(int(v)) for v in ticks[k])
+        mp = " ".join(f"{v:.{digits}g}" for v in model_pose[k])
+        tp = " ".join(f"{v:.{digits}g}" for v in T_world_sensor[k])
+        out.append(f"time: {sec}.{ns:09d} ticks: {enc} model_pose: {mp} tracker_pose: {tp}")
+    return "\n".join(out) + "\n"

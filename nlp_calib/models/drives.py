@@ -1,0 +1,109 @@
+"""What the simulator asks of a model's drive, and the numpy pieces the drives share.
+
+A drive turns speed and turning profiles into per-sub-step base increments and cumulative encoder
+channels, quantises those channels into log ticks, and writes the log header and the robot's own
+first-order odometry (``model_pose``). Drives are plain numpy, independent of the symbolic models
+on purpose: the simulator is the yardstick the models are checked against.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Protocol
+
+import numpy as np
+
+from nlp_calib.core.numeric import COUNTER_MODULUS
+from nlp_calib.logs import LogHeader
+
+
+class SimulationSettings(Protocol):
+    """The simulation options a drive reads (see ``nlp_calib.simulation.SimulationOptions``)."""
+
+    @property
+    def truth(self) -> Mapping[str, float]: ...
+    @property
+    def guess(self) -> Mapping[str, float]: ...
+    @property
+    def steering_ticks(self) -> int: ...
+    @property
+    def traction_ticks(self) -> int: ...
+    @property
+    def wheel_ticks(self) -> int: ...
+    @property
+    def wrap_after_ticks(self) -> int: ...
+
+
+class Drive(Protocol):
+    """A model's simulated base; ``default_truth`` / ``default_guess`` map every parameter."""
+
+    default_truth: Mapping[str, float]
+    default_guess: Mapping[str, float]
+
+    def steps(
+        self, opts: SimulationSettings, speed: np.ndarray, turn: np.ndarray, dt: np.ndarray, turn_start: float
+    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """Per sub-step arc length and turn of the base, and cumulative encoder channels."""
+        ...
+
+    def ticks(self, opts: SimulationSettings, channels: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The log's encoder readings ``(n, n_encoders)`` from the channels at the sample times."""
+        ...
+
+    def header(self, opts: SimulationSettings) -> LogHeader:
+        """The log header: the guess as the initial values, the encoder ranges."""
+        ...
+
+    def vendor_odometry(self, header: LogHeader, ticks: np.ndarray) -> np.ndarray:
+        """The robot's own first-order odometry with the header's parameters (``model_pose``)."""
+        ...
+
+
+def integrate_base(ds: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Base poses ``(n + 1, 3)`` from per-sub-step arcs of length ``ds`` turning by ``w``."""
+    theta = np.concatenate([[0.0], np.cumsum(w)])
+    small = np.abs(w) < 1e-9
+    w_safe = np.where(small, 1.0, w)
+    a = np.where(small, ds, ds * np.sin(w_safe) / w_safe)
+    b = np.where(small, 0.5 * ds * w, ds * (1.0 - np.cos(w_safe)) / w_safe)
+    c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
+    x = np.concatenate([[0.0], np.cumsum(c * a - s * b)])
+    y = np.concatenate([[0.0], np.cumsum(s * a + c * b)])
+    return np.stack([x, y, theta], axis=1)
+
+
+def cumulative(step: np.ndarray) -> np.ndarray:
+    """Running sum of ``step`` starting at 0 (one more element)."""
+    return np.concatenate([[0.0], np.cumsum(step)])
+
+
+def counter(distance: np.ndarray, metres_per_tick: float, wrap_after: int) -> np.ndarray:
+    """A uint32 wheel counter started ``wrap_after`` ticks below its wrap."""
+    raw = np.floor(distance / metres_per_tick).astype(np.int64)
+    return np.mod(raw + (COUNTER_MODULUS - wrap_after), COUNTER_MODULUS)
+
+
+def first_order(step: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
+    """Poses of first-order (Euler) dead reckoning: move ``step`` along the heading, then turn."""
+    theta = np.concatenate([[0.0], np.cumsum(dtheta)])
+    x = np.concatenate([[0.0], np.cumsum(step * np.cos(theta[:-1]))])
+    y = np.concatenate([[0.0], np.cumsum(step * np.sin(theta[:-1]))])
+    return np.stack([x, y, theta], axis=1)
+
+
+def drive_header(
+    opts: SimulationSettings,
+    kinematic_model: str,
+    header_names: Mapping[str, str],
+    encoders: Mapping[str, int],
+) -> LogHeader:
+    """A header with ``opts.guess`` as initial values (under ``header_names``) and ``encoders``' ranges."""
+    g = opts.guess
+    return LogHeader(
+        kinematic_model=kinematic_model,
+        parameters={header: float(g[name]) for name, header in header_names.items()},
+        encoder_names=tuple(encoders),
+        encoder_max=tuple(encoders.values()),
+        sensor_frame="laser",
+        T_base_sensor=(float(g["sensor_x"]), float(g["sensor_y"]), float(g["sensor_theta"])),
+    )

@@ -1,0 +1,147 @@
+"""Hand-off files a robot stack reads directly: ``calibration.yaml`` and a URDF joint snippet.
+
+"The" calibration is the first converged solver in the scenario's solver order; every solver's
+estimate is kept under ``solvers:`` as well. Numbers are taken from the same document as
+``result.json`` and written with full (repr) precision, so both files hold identical floats.
+Nothing time-dependent is written: the same run gives the same bytes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+from xml.etree import ElementTree as ET
+
+import yaml
+
+from nlp_calib.core.files import atomic_write_text
+from nlp_calib.core.version import __version__
+from nlp_calib.models import get_model, param_units
+from nlp_calib.outputs.results import result_document
+from nlp_calib.pipeline import CalibrationRun
+
+CALIBRATION_FILE = "calibration.yaml"
+URDF_FILE = "sensor_mount.urdf.xml"
+PARENT_FRAME = "base_link"
+
+
+def solver_order(run: CalibrationRun) -> list[str]:
+    """The run's solvers in the scenario's order, then any others in the order they ran."""
+    order = [s for s in run.scenario.solvers if s in run.reports]
+    return order + [s for s in run.reports if s not in order]
+
+
+def chosen_solver(run: CalibrationRun) -> str | None:
+    """The first converged solver in :func:`solver_order`, or None."""
+    return next((s for s in solver_order(run) if run.reports[s].result.converged), None)
+
+
+def _solver_entry(res: Mapping[str, Any]) -> dict[str, Any]:
+    keys = ("converged", "reason", "cost", "chi2", "inliers", "residuals", "iterations")
+    return {
+        **{k: res[k] for k in keys},
+        "parameters": res["params"],
+        "std": res["std"],
+        "correlation": res["correlation"],
+    }
+
+
+def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
+    """The ``calibration.yaml`` document, or None when no solver converged."""
+    solver = chosen_solver(run)
+    if solver is None:
+        return None
+    doc = result_document(run)
+    best = doc["solvers"][solver]
+    sc = run.scenario
+    ds = doc["dataset"]
+    return {
+        "tool": {"name": "nlp_calib", "version": __version__},
+        "scenario": {"name": sc.name, "path": None if sc.path is None else str(sc.path)},
+        "model": doc["model"],
+        "dataset": {
+            "path": ds["path"],
+            "records": ds["records"],
+            "used": ds["used"],
+            "fit": ds["fit"],
+            "tracker_lag_s": doc["alignment"]["tracker_lag_s"],
+        },
+        "solver": solver,
+        "solver_choice": "first converged solver in the order " + ", ".join(solver_order(run)),
+        "frames": {"parent": PARENT_FRAME, "sensor": run.log.header.sensor_frame},
+        "parameters": best["params"],
+        "std": best["std"],
+        "correlation": best["correlation"],
+        "units": param_units(get_model(sc.model)),
+        "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
+    }
+
+
+class _Dumper(yaml.SafeDumper):
+    """Block mappings, but flow-style lists of scalars (matrix rows, record ranges)."""
+
+    def ignore_aliases(self, data: Any) -> bool:
+        return True  # repeated blocks are written out in full: no &anchors for readers to resolve
+
+
+def _represent_list(dumper: yaml.SafeDumper, data: list[Any]) -> yaml.Node:
+    flow = all(not isinstance(v, (list, dict)) for v in data)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow)
+
+
+_Dumper.add_representer(list, _represent_list)
+
+
+def calibration_yaml(doc: Mapping[str, Any]) -> str:
+    """YAML text of a calibration document (a comment header, then the document)."""
+    head = (
+        f"# Wheeled-robot calibration by nlp_calib {doc['tool']['version']}, scenario "
+        f"{doc['scenario']['name']}.\n"
+        f"# 'parameters' are {doc['solver']}'s estimate ({doc['solver_choice']}); 'std' is 1 sigma.\n"
+        f"# sensor_x, sensor_y, sensor_theta: pose of the '{doc['frames']['sensor']}' frame in "
+        f"'{doc['frames']['parent']}'.\n"
+    )
+    body = yaml.dump(
+        dict(doc), Dumper=_Dumper, sort_keys=False, default_flow_style=False, allow_unicode=True, width=1000
+    )
+    return head + body
+
+
+def _comment_text(text: str) -> str:
+    return text.replace("--", "- -")  # '--' may not appear inside an XML comment
+
+
+def urdf_joint(run: CalibrationRun, solver: str) -> str:
+    """A URDF ``<joint>`` placing the sensor frame on ``base_link`` with ``solver``'s estimate."""
+    p = run.reports[solver].result.param_dict()
+    frame = run.log.header.sensor_frame
+    joint = ET.Element("joint", {"name": f"{PARENT_FRAME}_to_{frame}", "type": "fixed"})
+    ET.SubElement(joint, "parent", {"link": PARENT_FRAME})
+    ET.SubElement(joint, "child", {"link": frame})
+    ET.SubElement(
+        joint,
+        "origin",
+        {"xyz": f"{p['sensor_x']!r} {p['sensor_y']!r} 0", "rpy": f"0 0 {p['sensor_theta']!r}"},
+    )
+    ET.indent(joint, space="  ")
+    comment = _comment_text(
+        f" Sensor mounting pose calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
+        f"solver {solver}. Paste this joint into the robot's <robot> description; the link "
+        f"'{frame}' must be declared there. "
+    )
+    return f'<?xml version="1.0"?>\n<!--{comment}-->\n{ET.tostring(joint, encoding="unicode")}\n'
+
+
+def write_handoff(run: CalibrationRun, out_dir: Path) -> list[Path]:
+    """Write both hand-off files; with no converged solver, write none and remove stale ones."""
+    doc = calibration_dict(run)
+    cal, urdf = out_dir / CALIBRATION_FILE, out_dir / URDF_FILE
+    if doc is None:
+        # A robot stack must never pick up an older calibration next to a failed run's result.
+        cal.unlink(missing_ok=True)
+        urdf.unlink(missing_ok=True)
+        return []
+    atomic_write_text(cal, calibration_yaml(doc))
+    atomic_write_text(urdf, urdf_joint(run, doc["solver"]))
+    return [cal, urdf]

@@ -1,0 +1,173 @@
+"""``report.md``: one page that glues the figures to the solver comparison table."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from nlp_calib.analysis.metrics import TrajectoryMetrics
+from nlp_calib.core.version import __version__
+from nlp_calib.models import get_model, param_units
+from nlp_calib.outputs.handoff import CALIBRATION_FILE, URDF_FILE, chosen_solver, solver_order
+from nlp_calib.pipeline import CalibrationRun
+from nlp_calib.solvers import solver_label
+
+#: Figures in page order, with what to look for in each.
+FIGURES: tuple[tuple[str, str, str], ...] = (
+    (
+        "trajectory.png",
+        "Trajectory",
+        "The sensor track dead-reckoned from the tracker's first pose with the initial guess and with "
+        "each solver's estimate, against the tracker; right, each track's distance to the tracker over "
+        "time. A good calibration stays on the tracker's track; its remaining drift is what the "
+        "encoders cannot explain.",
+    ),
+    (
+        "convergence.png",
+        "Convergence",
+        "Gauss-Newton's cost and χ² per iteration (rejected Levenberg-Marquardt steps in red) and its "
+        "inlier count; IPOPT's objective, constraint violation and dual infeasibility per iteration. "
+        "The cost should fall and settle.",
+    ),
+    (
+        "residuals.png",
+        "Residuals",
+        "Histograms of the x, y and θ residual errors at the initial guess and at the estimate; the red "
+        "lines mark the robust kernel's threshold on each component. Samples beyond them are treated as "
+        "outliers.",
+    ),
+    (
+        "model_check.png",
+        "Kinematic model check",
+        "The log's `model_pose` (the vendor's base-link odometry) against our model integrated with the "
+        "log header's parameters. Close tracks validate the kinematic model; this uses no tracker data.",
+    ),
+)
+
+
+def fmt_value(v: float) -> str:
+    """A parameter value as the report prints it."""
+    return f"{v:.7g}"
+
+
+def fmt_std(v: float) -> str:
+    """A 1σ value as the report prints it."""
+    return f"{v:.2g}"
+
+
+def _cell(v: float | None, fmt: str = ".4g") -> str:
+    if v is None or not np.isfinite(v):
+        return "–"
+    return format(v, fmt)
+
+
+def _parameter_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
+    units = param_units(get_model(run.scenario.model))
+    names = list(run.reports[solvers[0]].result.names)
+    head = ["parameter", "unit", "initial"]
+    for s in solvers:
+        head += [solver_label(s), "± 1σ"]
+    pair = len(solvers) == 2
+    if pair:
+        head.append(f"{solver_label(solvers[0])} − {solver_label(solvers[1])}")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for n in names:
+        row = [f"`{n}`", units.get(n, ""), fmt_value(run.initial[n])]
+        for s in solvers:
+            rep = run.reports[s]
+            row += [fmt_value(rep.result.param_dict()[n]), fmt_std(rep.uncertainty.std_dict()[n])]
+        if pair:
+            a, b = (run.reports[s].result.param_dict()[n] for s in solvers)
+            row.append(f"{a - b:+.2e}")
+        lines.append("| " + " | ".join(row) + " |")
+    return lines
+
+
+def _metric_rows(
+    label: str, base: TrajectoryMetrics | None, per: list[TrajectoryMetrics | None]
+) -> list[str]:
+    rows = []
+    for key, what in (("ate_mean", "mean"), ("ate_max", "max"), ("ate_final", "final")):
+        cells = [_cell(getattr(m, key) if m is not None else None, ".4f") for m in [base, *per]]
+        rows.append(f"| {label} {what} [m] | " + " | ".join(cells) + " |")
+    return rows
+
+
+def _solver_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
+    reps = [run.reports[s] for s in solvers]
+    head = ["", "initial guess", *(solver_label(s) for s in solvers)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+
+    def row(label: str, cells: list[str], initial: str = "–") -> None:
+        lines.append(f"| {label} | {initial} | " + " | ".join(cells) + " |")
+
+    row("cost Σρ(s)", [_cell(r.result.cost, ".6g") for r in reps])
+    row("χ² = Σ eᵀΩe", [_cell(r.result.chi2, ".6g") for r in reps])
+    row("inliers", [f"{r.result.inliers} / {r.result.n_residuals}" for r in reps])
+    row("iterations", [str(r.result.iterations) for r in reps])
+    row("time [ms]", [f"{1e3 * r.result.time_s:.1f}" for r in reps])
+    row("converged", ["yes" if r.result.converged else f"**NO**: {r.result.reason}" for r in reps])
+    lines += _metric_rows("ATE", run.baseline, [r.metrics for r in reps])
+    row(
+        "RPE trans [m]",
+        [_cell(r.metrics.rpe_trans, ".4f") for r in reps],
+        _cell(run.baseline.rpe_trans, ".4f"),
+    )
+    row("RPE rot [rad]", [_cell(r.metrics.rpe_rot, ".4f") for r in reps], _cell(run.baseline.rpe_rot, ".4f"))
+    if run.baseline_holdout is not None:
+        lines += _metric_rows("hold-out ATE", run.baseline_holdout, [r.holdout for r in reps])
+    return lines
+
+
+def report_markdown(run: CalibrationRun, images: Sequence[str]) -> str:
+    """The Markdown page of a run; ``images`` are the figure files written beside it."""
+    sc = run.scenario
+    r = sc.residual
+    solvers = solver_order(run)
+    out = [f"# Calibration report: {sc.name}", ""]
+    lag = f"{1e3 * run.tracker_lag_s:.1f} ms" + (" (estimated)" if run.lag_estimate is not None else "")
+    out += [
+        f"- scenario: `{sc.path if sc.path is not None else sc.name}`, model `{sc.model}`, "
+        f"nlp_calib {__version__}",
+        f"- dataset: `{sc.dataset}`, records [{run.used[0]}, {run.used[1]}) of {run.log.n_records}, "
+        f"fitted on [{run.fit[0]}, {run.fit[1]})",
+        f"- residuals: {run.n_residuals} windows of horizon {r.horizon} (stride {r.stride}, "
+        f"{r.integration} integration); kernel {sc.robust.kernel}, δ = {sc.robust.delta:g}; "
+        f"tracker lag {lag}",
+        "",
+        "## Parameters",
+        "",
+        *_parameter_table(run, solvers),
+        "",
+        "## Solvers",
+        "",
+        "ATE: distance between the sensor track dead-reckoned from the tracker's first pose and the tracker; "
+        "RPE over windows of " + f"{run.baseline.rpe_window} records.",
+        "",
+        *_solver_table(run, solvers),
+        "",
+    ]
+    for s in solvers:
+        res = run.reports[s].result
+        if not res.converged:
+            out += [
+                f"> **{solver_label(s)} did not converge** ({res.reason}); do not use its parameters.",
+                "",
+            ]
+    out += [f"> warning: {w}" for w in run.warnings]
+    chosen = chosen_solver(run)
+    out += ["## Hand-off files", ""]
+    if chosen is None:
+        out.append("No solver converged, so no hand-off files were written.")
+    else:
+        out.append(
+            f"[`{CALIBRATION_FILE}`]({CALIBRATION_FILE}) and [`{URDF_FILE}`]({URDF_FILE}) carry "
+            f"{solver_label(chosen)}'s estimate (the first converged solver in the order "
+            f"{', '.join(solvers)})."
+        )
+    out.append("")
+    for file, heading, caption in FIGURES:
+        if file in images:
+            out += [f"## {heading}", "", caption, "", f"![{heading}]({file})", ""]
+    return "\n".join(out)

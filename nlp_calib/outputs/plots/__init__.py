@@ -1,0 +1,18 @@
+"""Figures as PNG bytes. The only package of nlp_calib that imports matplotlib.
+
+Figures are drawn on an explicit Agg canvas, so an interactive matplotlib session that imports
+this package keeps its own backend.
+"""
+
+from nlp_calib.outputs.plots.benchmark import scaling_png
+from nlp_calib.outputs.plots.odometry import odometry_png
+from nlp_calib.outputs.plots.run import convergence_png, model_check_png, residuals_png, trajectory_png
+
+__all__ = [
+    "convergence_png",
+    "model_check_png",
+    "odometry_png",
+    "residuals_png",
+    "scaling_png",
+    "trajectory_png",
+]

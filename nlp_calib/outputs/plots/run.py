@@ -1,0 +1,403 @@
+"""The run report's figures as PNG bytes (matplotlib lives only in this ``plots`` package).
+
+Figures are drawn on an explicit Agg canvas (``FigureCanvasAgg``) rather than through pyplot:
+no display is needed, no global figure state is kept, and the backend of an interactive session
+that imports this module is left alone (``matplotlib.use`` would switch it).
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.ticker import FuncFormatter, MaxNLocator, NullLocator
+
+from nlp_calib.core.numeric import wrap_angle
+from nlp_calib.outputs.series import (
+    ConvergenceSeries,
+    ModelCheckSeries,
+    ResidualSeries,
+    Track,
+    TrajectorySeries,
+)
+from nlp_calib.solvers import IterationRecord, solver_label
+
+DPI = 110
+#: Line styles per track, in drawing order: uncalibrated, first solver, second solver, ...
+_STYLES: tuple[Mapping[str, Any], ...] = (
+    {"color": "tab:orange", "linestyle": "-.", "linewidth": 1.2},
+    {"color": "tab:blue", "linestyle": "-", "linewidth": 1.6},
+    {"color": "tab:green", "linestyle": "--", "linewidth": 1.4},
+    {"color": "tab:purple", "linestyle": ":", "linewidth": 1.4},
+)
+_TRACKER: Mapping[str, Any] = {"color": "0.15", "linestyle": "-", "linewidth": 3.0, "alpha": 0.35}
+_PLAIN = FuncFormatter(lambda v, _: f"{v:g}")
+
+
+def figure_png(fig: Figure) -> bytes:
+    """The figure rendered to PNG bytes (no timestamp, so files are reproducible)."""
+    FigureCanvasAgg(fig)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI, metadata={"Software": None})
+    return buf.getvalue()
+
+
+def _plain_log_ticks(ax: Axes) -> None:
+    """Readable ticks on a log axis spanning less than a decade (where log ticks are sparse)."""
+    lo, hi = ax.get_ylim()
+    if lo > 0 and hi / lo < 10:
+        ax.yaxis.set_major_locator(MaxNLocator(6))
+        ax.yaxis.set_minor_locator(NullLocator())
+        ax.yaxis.set_major_formatter(_PLAIN)
+
+
+# --- trajectory ------------------------------------------------------------------------------
+
+
+def _far_outside(P: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """Whether a track strays beyond the box [lo, hi] by more than half its size."""
+    reach = 0.5 * float(np.max(hi - lo))
+    return bool(np.any(P[:, :2] < lo - reach) or np.any(P[:, :2] > hi + reach))
+
+
+def _label(track: Track, outside: bool) -> str:
+    parts = [track.label]
+    if track.ate_mean is not None:
+        parts.append(f"(ATE {track.ate_mean:.3f} m)")
+    if not track.converged:
+        parts.append("NOT CONVERGED")
+    if outside:
+        parts.append("[leaves the frame]")
+    return " ".join(parts)
+
+
+def trajectory_png(series: TrajectorySeries, title: str) -> bytes:
+    """Tracker track and dead-reckoned sensor tracks (equal axes), and their distance over time."""
+    fig = Figure(figsize=(14, 6.2), layout="constrained")
+    ax, ax_err = fig.subplots(1, 2, width_ratios=(1.35, 1))
+    tr = series.tracker.T_world_sensor
+    t = series.tracker.time_s - series.tracker.time_s[0]
+    ax.plot(tr[:, 0], tr[:, 1], label="tracker (measured sensor pose)", **_TRACKER)
+    # Frame the tracker and the calibrated tracks; a run-away track (the uncalibrated one on a
+    # real log drifts by tens of metres) is drawn but not allowed to shrink the others to a dot.
+    kept = [tr] + [tk.T_world_sensor for tk in series.tracks[1:] if tk.converged]
+    xy = np.concatenate([P[:, :2] for P in kept])
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    for track, style in zip(series.tracks, _STYLES):
+        P = track.T_world_sensor
+        outside = _far_outside(P, lo, hi)
+        ax.plot(
+            P[:, 0], P[:, 1], label=_label(track, outside), scalex=not outside, scaley=not outside, **style
+        )
+        if not outside:
+            ax.plot(P[-1, 0], P[-1, 1], marker="s", markersize=7, color=style["color"], linestyle="none")
+        err = np.linalg.norm(P[1:, :2] - tr[1:, :2], axis=1)  # record 0 is the shared start: 0
+        ax_err.plot(t[1:], np.where(err > 0, err, np.nan), label=track.label, **style)
+    ax.plot(tr[-1, 0], tr[-1, 1], marker="s", markersize=7, color="0.15", linestyle="none")
+    ax.plot(tr[0, 0], tr[0, 1], marker="o", markersize=9, color="black", linestyle="none", label="start")
+    ax.plot([], [], marker="s", color="0.4", linestyle="none", label="end (colour of each track)")
+    if series.holdout_start is not None:
+        k = series.holdout_start
+        ax.plot(
+            tr[k, 0],
+            tr[k, 1],
+            marker="^",
+            markersize=10,
+            color="red",
+            linestyle="none",
+            label="first hold-out record (not fitted)",
+        )
+        ax_err.axvline(t[k], color="red", linestyle=":", label="fitted | hold-out records")
+    # Plotting grows the data limits with every line; reset them to the framed tracks so the
+    # equal-aspect autoscale ignores a run-away track (fixed limits would fight the aspect).
+    pad = 0.03 * max(float(np.max(hi - lo)), 1e-3)
+    ax.dataLim.set_points(np.array([lo - pad, hi + pad]))
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.autoscale_view()
+    ax.set_xlabel("x in the tracker's world frame [m]")
+    ax.set_ylabel("y in the tracker's world frame [m]")
+    ax.set_title("sensor track: tracker vs dead reckoning from the tracker's first pose")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8, framealpha=0.85)
+    ax_err.set_yscale("log")
+    ax_err.set_xlabel("time since the first used record [s]")
+    ax_err.set_ylabel("distance to the tracker's position [m] (log scale)")
+    ax_err.set_title("position error of each dead-reckoned track")
+    ax_err.grid(True, which="both", alpha=0.3)
+    ax_err.legend(loc="lower right", fontsize=8)
+    fig.suptitle(title)
+    return figure_png(fig)
+
+
+# --- convergence -----------------------------------------------------------------------------
+
+
+def _int_iterations(ax: Axes) -> None:
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel("iteration")
+    ax.grid(True, which="both", alpha=0.3)
+
+
+def _positive(values: np.ndarray) -> np.ndarray:
+    """Values for a log axis: non-positive ones become NaN (not drawn)."""
+    v = np.asarray(values, dtype=float)
+    return np.where(v > 0, v, np.nan)
+
+
+def _status(series: ConvergenceSeries, name: str) -> str:
+    return "" if series.converged[name] else " — NOT CONVERGED"
+
+
+def _is_interior_point(history: Sequence[IterationRecord]) -> bool:
+    """Whether a history tracks constraint violation and dual infeasibility (IPOPT-like)."""
+    return any(np.isfinite(h.dual_infeasibility) for h in history)
+
+
+def _least_squares_axes(ax_cost: Axes, ax_in: Axes, series: ConvergenceSeries, name: str) -> None:
+    hist = series.histories[name]
+    it = np.array([h.iteration for h in hist])
+    acc = np.array([h.accepted for h in hist], dtype=bool)
+    cost = np.array([h.cost for h in hist])
+    chi2 = np.array([h.chi2 for h in hist])
+    ax_cost.plot(it[acc], _positive(cost[acc]), "o-", color="tab:blue", label="cost Σρ(s) (accepted steps)")
+    ax_cost.plot(
+        it[acc],
+        _positive(chi2[acc]),
+        "s--",
+        color="tab:purple",
+        markersize=4,
+        label="χ² = Σ eᵀΩe (accepted steps)",
+    )
+    if np.any(~acc):
+        ax_cost.plot(
+            it[~acc],
+            _positive(cost[~acc]),
+            "x",
+            color="red",
+            markersize=9,
+            mew=2,
+            label="rejected LM step: its cost (damping raised, x kept)",
+        )
+    ax_cost.set_yscale("log")
+    _plain_log_ticks(ax_cost)
+    ax_cost.set_ylabel("cost, χ² (log scale)")
+    ax_cost.set_title(f"{solver_label(name)}: cost and χ² per iteration{_status(series, name)}")
+    ax_cost.legend(fontsize=8)
+    _int_iterations(ax_cost)
+    inl = np.array([h.inliers for h in hist])[acc]
+    n = series.n_residuals
+    ax_in.plot(it[acc], inl, "o-", color="tab:blue", label="inliers (s = eᵀΩe ≤ δ²)")
+    ax_in.axhline(n, color="0.4", linestyle=":", label=f"all {n} residuals")
+    low = float(inl.min()) if inl.size else 0.0
+    pad = max(0.08 * (n - low), 2.0)
+    ax_in.set_ylim(max(low - pad, 0.0), n + pad)
+    ax_in.yaxis.set_major_locator(MaxNLocator(integer=True))
+    ax_in.set_ylabel("number of residuals")
+    ax_in.set_title(f"{solver_label(name)}: inliers per accepted iteration")
+    ax_in.legend(fontsize=8, loc="best")
+    _int_iterations(ax_in)
+
+
+def _interior_point_axes(ax_obj: Axes, ax_inf: Axes, series: ConvergenceSeries, name: str) -> None:
+    hist = series.histories[name]
+    it = np.array([h.iteration for h in hist])
+    obj = np.array([h.cost for h in hist])
+    ax_obj.plot(it, _positive(obj), "o-", color="tab:green", label="objective Σρ(s)")
+    ax_obj.set_yscale("log")
+    _plain_log_ticks(ax_obj)
+    ax_obj.set_ylabel("objective (log scale)")
+    ax_obj.set_title(f"{solver_label(name)}: objective per iteration{_status(series, name)}")
+    ax_obj.legend(fontsize=8)
+    _int_iterations(ax_obj)
+    pr = np.array([h.constraint_violation for h in hist])
+    du = np.array([h.dual_infeasibility for h in hist])
+    ax_inf.plot(
+        it, _positive(du), "s--", color="tab:olive", markersize=4, label="dual infeasibility (gradient)"
+    )
+    if np.any(pr > 0):
+        ax_inf.plot(it, _positive(pr), "o-", color="tab:red", label="constraint violation (0 not drawn)")
+    else:
+        # No constraints (or bounds kept strictly inside): a log axis cannot show the zeros.
+        ax_inf.plot([], [], "o-", color="tab:red", label="constraint violation: 0 at every iteration")
+    ax_inf.set_yscale("log")
+    ax_inf.set_ylabel("infeasibility (log scale)")
+    ax_inf.set_title(f"{solver_label(name)}: constraint violation and dual infeasibility")
+    ax_inf.legend(fontsize=8)
+    _int_iterations(ax_inf)
+
+
+def _excess_axes(ax: Axes, series: ConvergenceSeries, names: Sequence[str]) -> None:
+    """Each solver's cost above the lowest cost any solver reached: the rate and the agreement."""
+    costs = {}
+    for name in names:
+        hist = series.histories[name]
+        keep = [h for h in hist if h.accepted]
+        costs[name] = (np.array([h.iteration for h in keep]), np.array([h.cost for h in keep]))
+    best = min(float(np.nanmin(c)) for _, c in costs.values())
+    scale = max(abs(best), 1e-300)
+    for (name, (it, c)), style in zip(costs.items(), _STYLES[1:]):
+        ax.plot(
+            it,
+            _positive((c - best) / scale),
+            "o-",
+            color=style["color"],
+            label=solver_label(name),
+        )
+    ax.set_yscale("log")
+    ax.set_ylabel("(cost − lowest cost) / lowest cost")
+    ax.set_title(f"cost above the lowest cost any solver reached ({best:.6g}), log scale; zero is not drawn")
+    ax.legend(fontsize=8)
+    _int_iterations(ax)
+
+
+def convergence_png(series: ConvergenceSeries, title: str) -> bytes:
+    """Per solver, a column: Gauss-Newton cost/χ² and inliers; IPOPT objective and infeasibilities."""
+    names = [n for n in series.histories if series.histories[n]]
+    cols = max(len(names), 1)
+    fig = Figure(figsize=(6.5 * cols + 1, 11), layout="constrained")
+    grid = fig.add_gridspec(3, cols, height_ratios=(1, 1, 0.8))
+    for col, name in enumerate(names):
+        top, mid = fig.add_subplot(grid[0, col]), fig.add_subplot(grid[1, col])
+        if _is_interior_point(series.histories[name]):
+            _interior_point_axes(top, mid, series, name)
+        else:
+            _least_squares_axes(top, mid, series, name)
+    bottom = fig.add_subplot(grid[2, :])
+    if names:
+        _excess_axes(bottom, series, names)
+    else:
+        bottom.text(0.5, 0.5, "no iteration history recorded", ha="center", transform=bottom.transAxes)
+    fig.suptitle(title)
+    return figure_png(fig)
+
+
+# --- residuals -------------------------------------------------------------------------------
+
+
+def residuals_png(series: ResidualSeries, title: str) -> bytes:
+    """Histograms of the x, y, θ residual errors before and after calibration, kernel threshold marked."""
+    fig = Figure(figsize=(15, 5.6), layout="constrained")
+    axes = fig.subplots(1, 3)
+    solvers = list(series.after)
+    shown = solvers[:1] if series.solvers_agree else solvers
+    n = series.before.shape[1]
+    what = "kernel threshold" if series.kernel != "none" else "inlier threshold"
+    for i, (ax, comp, unit) in enumerate(zip(axes, ("x", "y", "θ"), ("m", "m", "rad"))):
+        thr = float(series.thresholds[i])
+        # A failed solve may leave NaN residuals; histograms take the finite ones.
+        data = [d[np.isfinite(d)] for d in [series.before[i]] + [series.after[s][i] for s in shown]]
+        # Show the threshold and the bulk of both distributions; values beyond fall in the edge bins.
+        R = max(1.25 * thr, *(float(np.quantile(np.abs(d), 0.995)) for d in data if d.size))
+        bins = np.linspace(-R, R, 101)
+        clip = R * (1.0 - 1e-9)
+        ax.hist(
+            np.clip(data[0], -clip, clip),
+            bins=bins,
+            histtype="stepfilled",
+            color="tab:orange",
+            alpha=0.35,
+            label=f"before: initial guess ({series.inliers_before}/{n} inliers)",
+        )
+        for s, d, style in zip(shown, data[1:], _STYLES[1:]):
+            same = ""
+            if series.solvers_agree and len(solvers) > 1:
+                same = f"; {', '.join(solver_label(o) for o in solvers[1:])} identical"
+            ax.hist(
+                np.clip(d, -clip, clip),
+                bins=bins,
+                histtype="step",
+                linewidth=1.8,
+                color=style["color"],
+                linestyle=style["linestyle"],
+                label=f"after: {solver_label(s)} ({series.inliers_after[s]}/{n} inliers{same})",
+            )
+        for sign in (-1.0, 1.0):
+            ax.axvline(
+                sign * thr,
+                color="red",
+                linestyle=":",
+                linewidth=1.6,
+                label=f"{what} ±δ/√Ω_ii (this component alone gives s = δ²)" if sign > 0 else None,
+            )
+        beyond = [int(np.sum(np.abs(d) > R)) for d in data]
+        if any(beyond):
+            ax.text(
+                0.02,
+                0.97,
+                f"edge bins include {beyond[0]} before / {sum(beyond[1:])} after\nbeyond ±{R:.3g} {unit}",
+                transform=ax.transAxes,
+                va="top",
+                fontsize=8,
+            )
+        after_out = int(np.sum(np.abs(data[1]) > thr)) if len(data) > 1 else 0
+        ax.set_yscale("log")
+        ax.set_ylim(bottom=0.7)
+        ax.set_xlabel(f"{comp} error [{unit}]")
+        ax.set_ylabel("residuals per bin (log scale)")
+        ax.set_title(
+            f"{comp}: threshold ±{thr:.3g} {unit}; {solver_label(shown[0])}: {after_out} beyond it",
+            fontsize=10,
+        )
+        ax.grid(True, which="major", alpha=0.3)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=9)
+    fig.suptitle(title)
+    return figure_png(fig)
+
+
+# --- model check -----------------------------------------------------------------------------
+
+
+def model_check_png(series: ModelCheckSeries, title: str) -> bytes:
+    """The log's vendor odometry against our model's base-link track, and their difference."""
+    fig = Figure(figsize=(14, 6.2), layout="constrained")
+    grid = fig.add_gridspec(2, 2, width_ratios=(1.2, 1))
+    ax = fig.add_subplot(grid[:, 0])
+    ax_pos = fig.add_subplot(grid[0, 1])
+    ax_rot = fig.add_subplot(grid[1, 1], sharex=ax_pos)
+    v, o = series.vendor, series.ours
+    ax.plot(v[:, 0], v[:, 1], label="vendor odometry (log's model_pose)", **_TRACKER)
+    ax.plot(
+        o[:, 0],
+        o[:, 1],
+        label=f"our model ({series.integration} integration)",
+        **{**_STYLES[2], "color": "tab:blue"},
+    )
+    ax.plot(v[0, 0], v[0, 1], marker="o", markersize=9, color="black", linestyle="none", label="start")
+    ax.plot(
+        v[-1, 0], v[-1, 1], marker="s", markersize=9, color="0.15", linestyle="none", label="end (vendor)"
+    )
+    ax.plot(
+        o[-1, 0], o[-1, 1], marker="s", markersize=5, color="tab:blue", linestyle="none", label="end (ours)"
+    )
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x in the odometry frame [m]")
+    ax.set_ylabel("y in the odometry frame [m]")
+    params = ", ".join(f"{k} = {val:g}" for k, val in series.params.items())
+    ax.set_title(f"base-link odometry with the log header's parameters\n{params}", fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    t = series.time_s - series.time_s[0]
+    dpos = np.linalg.norm(o[:, :2] - v[:, :2], axis=1)
+    drot = wrap_angle(o[:, 2] - v[:, 2])
+    driven = float(np.sum(np.linalg.norm(np.diff(v[:, :2], axis=0), axis=1)))
+    ax_pos.plot(t, dpos, color="tab:blue")
+    ax_pos.set_ylabel("position difference [m]")
+    ax_pos.set_title(
+        f"ours − vendor over {driven:.1f} m driven: position max {dpos.max():.3g} m, final {dpos[-1]:.3g} m",
+        fontsize=10,
+    )
+    ax_rot.plot(t, drot, color="tab:blue")
+    ax_rot.set_ylabel("heading difference [rad]")
+    ax_rot.set_title(f"heading max |Δθ| {np.abs(drot).max():.3g} rad", fontsize=10)
+    ax_rot.set_xlabel("time since the log's first record [s]")
+    for a in (ax_pos, ax_rot):
+        a.yaxis.set_major_formatter(_PLAIN)  # no offset/multiplier text that is easy to miss
+        a.grid(True, alpha=0.3)
+    fig.suptitle(title)
+    return figure_png(fig)

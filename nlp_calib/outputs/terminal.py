@@ -1,0 +1,152 @@
+"""Plain-text tables of a run for the terminal (the CLI prints them; nothing here prints)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nlp_calib.analysis.metrics import TrajectoryMetrics
+from nlp_calib.logs.checks import drop_summary
+from nlp_calib.models import get_model
+from nlp_calib.pipeline import CalibrationRun
+
+
+def _fmt(v: float, width: int = 12) -> str:
+    if not np.isfinite(v):
+        return f"{'-':>{width}}"
+    a = abs(v)
+    if a != 0 and (a < 1e-3 or a >= 1e5):
+        return f"{v:>{width}.4e}"
+    return f"{v:>{width}.6f}"
+
+
+def _row(label: str, cells: list[str], label_width: int = 26) -> str:
+    return f"{label:<{label_width}}" + "".join(cells)
+
+
+def _metric_rows(run: CalibrationRun, holdout: bool) -> list[tuple[str, str]]:
+    rows = [
+        ("ate_mean", "ATE mean [m]"),
+        ("ate_max", "ATE max [m]"),
+        ("ate_final", "ATE final [m]"),
+        ("rpe_trans", "RPE trans [m]"),
+        ("rpe_rot", "RPE rot [rad]"),
+    ]
+    return [(k, ("hold-out " if holdout else "") + label) for k, label in rows]
+
+
+def run_table(run: CalibrationRun) -> str:
+    """Parameters side by side (initial, each solver ± 1σ), solver figures and metrics."""
+    names = list(next(iter(run.reports.values())).result.names) if run.reports else list(run.initial)
+    solvers = list(run.reports)
+    w = 24
+    lines = []
+    sc = run.scenario
+    r = sc.residual
+    lines.append(
+        f"scenario {sc.name}: model {sc.model}, "
+        f"records [{run.used[0]}, {run.used[1]}) of {run.log.n_records}, "
+        f"fit on [{run.fit[0]}, {run.fit[1]}), {run.n_residuals} residuals "
+        f"(horizon {r.horizon}, stride {r.stride}, {r.integration}), "
+        f"kernel {sc.robust.kernel} δ={sc.robust.delta:g}"
+    )
+    if run.lag_estimate is not None:
+        lines.append(f"tracker lag estimated by the fit cost: {1e3 * run.tracker_lag_s:.1f} ms")
+    elif run.tracker_lag_s:
+        lines.append(f"tracker lag (from the scenario): {1e3 * run.tracker_lag_s:.1f} ms")
+    if run.log.dropped:
+        lines.append(
+            f"log: {drop_summary(run.log.dropped, run.log.n_records + len(run.log.dropped))} "
+            "(all listed in result.json under dataset.dropped_records)"
+        )
+    if run.dropped_stationary:
+        lines.append(f"dropped {run.dropped_stationary} windows without motion")
+    lines.append("")
+    lines.append(_row("parameter", [f"{'initial':>12}"] + [f"{s:>{w}}" for s in solvers]))
+    for n in names:
+        cells = [_fmt(run.initial[n])]
+        for s in solvers:
+            rep = run.reports[s]
+            v = rep.result.param_dict()[n]
+            sd = rep.uncertainty.std_dict()[n]
+            cells.append(f"{_fmt(v, 12)} ± {sd:<9.2g}")
+        lines.append(_row(n, cells))
+    if len(solvers) == 2:
+        a, b = (run.reports[s].result for s in solvers)
+        rel = np.max(np.abs(a.params - b.params) / np.maximum(np.abs(a.params), 1e-12))
+        lines.append(
+            f"max relative parameter difference {solvers[0]} vs {solvers[1]}: {rel:.2e}; "
+            f"cost difference {abs(a.cost - b.cost) / max(abs(a.cost), 1e-300):.2e} (relative)"
+        )
+    lines.append("")
+    blank = f"{'':>12}"
+    figures = [
+        ("cost", lambda s: _fmt(run.reports[s].result.cost, w)),
+        ("chi2", lambda s: _fmt(run.reports[s].result.chi2, w)),
+        (
+            "inliers",
+            lambda s: f"{run.reports[s].result.inliers:>{w - 6}d}/{run.reports[s].result.n_residuals:<5d}",
+        ),
+        ("iterations", lambda s: f"{run.reports[s].result.iterations:>{w}d}"),
+        ("time [ms]", lambda s: f"{1e3 * run.reports[s].result.time_s:>{w}.1f}"),
+        ("converged", lambda s: f"{'yes' if run.reports[s].result.converged else 'NO':>{w}}"),
+    ]
+    for label, cell in figures:
+        lines.append(_row(label, [blank] + [cell(s) for s in solvers]))
+    metric_sets: list[tuple[bool, TrajectoryMetrics | None]] = [(False, run.baseline)]
+    if run.baseline_holdout is not None:
+        metric_sets.append((True, run.baseline_holdout))
+    for holdout, base in metric_sets:
+        for key, label in _metric_rows(run, holdout):
+            cells = [_fmt(getattr(base, key))]
+            for s in solvers:
+                rep = run.reports[s]
+                m = rep.holdout if holdout else rep.metrics
+                cells.append(_fmt(getattr(m, key) if m is not None else float("nan"), w))
+            lines.append(_row(label, cells))
+    if run.observability is not None:
+        lines.append("")
+        lines.append(
+            f"observability: condition number {run.observability.condition_number:.3g} (Jacobi-scaled "
+            f"information matrix), heading range {run.observability.heading_range_rad:.2f} rad"
+        )
+        lines.extend(f"WARNING: {w}" for w in run.observability.warnings)
+    for s in solvers:
+        res = run.reports[s].result
+        if not res.converged:
+            lines.append(f"WARNING: {s} did not converge: {res.reason}. Do not use its parameters.")
+    return "\n".join(lines)
+
+
+def correlation_table(run: CalibrationRun, solver: str) -> str:
+    """The parameter correlation matrix of one solver's estimate."""
+    u = run.reports[solver].uncertainty
+    short = [n.replace("sensor_", "s_").replace("steer_offset", "offset")[:9] for n in u.names]
+    lines = [f"correlation ({solver}):", _row("", [f"{s:>10}" for s in short], 14)]
+    for n, row in zip(u.names, u.correlation):
+        lines.append(_row(n[:13], [f"{v:>10.3f}" for v in row], 14))
+    return "\n".join(lines)
+
+
+def summary_table(runs: list[CalibrationRun]) -> str:
+    """One line per scenario and solver: residual form, each model's headline parameters and
+    trajectory errors."""
+    headline: list[str] = []
+    for run in runs:
+        headline += [n for n in get_model(run.scenario.model).headline if n not in headline]
+    head = (
+        f"{'scenario':<22}{'solver':<14}{'H':>4}{'integr.':>8}"
+        + "".join(f"{n[:11]:>12}" for n in headline)
+        + f"{'ATE [m]':>10}{'hold-out':>10}{'conv':>6}"
+    )
+    lines = ["summary", head, "-" * len(head)]
+    for run in runs:
+        r = run.scenario.residual
+        for name, rep in run.reports.items():
+            p = rep.result.param_dict()
+            ho = f"{rep.holdout.ate_mean:>10.3f}" if rep.holdout is not None else f"{'-':>10}"
+            values = "".join(f"{p[n]:>12.6g}" if n in p else f"{'-':>12}" for n in headline)
+            lines.append(
+                f"{run.scenario.name[:21]:<22}{name:<14}{r.horizon:>4}{r.integration:>8}{values}"
+                f"{rep.metrics.ate_mean:>10.3f}{ho}{'yes' if rep.result.converged else 'NO':>6}"
+            )
+    return "\n".join(lines)

@@ -1,0 +1,202 @@
+"""A scenario set up once (:meth:`Calibration.setup`), then solved by any registered solver.
+
+Set-up chains the named steps of :mod:`nlp_calib.pipeline.steps`: load the log, select its
+records, build the problem's Functions, find the starting point, prepare the backend, weigh the
+priors, align the encoders to the tracker's clock and bind the evaluator to the fitted windows.
+Solving only calls the built Functions. :meth:`Calibration.run` adds what a user judges a result
+by: uncertainty, trajectory metrics and observability per solver, next to the uncalibrated
+baseline.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from nlp_calib.analysis import uncertainty as unc
+from nlp_calib.analysis.alignment import LagEstimate
+from nlp_calib.analysis.metrics import TrajectoryMetrics, trajectory_metrics
+from nlp_calib.analysis.observability import Observability, analyse
+from nlp_calib.analysis.odometry import OdometryTrack, propagate
+from nlp_calib.logs import Log
+from nlp_calib.pipeline import steps
+from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.solvers import Solver, SolverResult, get_solver
+
+
+@dataclass(frozen=True)
+class SolverReport:
+    """One solver's result with its uncertainty and trajectory metrics."""
+
+    result: SolverResult
+    uncertainty: unc.Uncertainty
+    metrics: TrajectoryMetrics
+    holdout: TrajectoryMetrics | None
+
+
+@dataclass(frozen=True)
+class CalibrationRun:
+    """Everything a run produced; ``baseline`` scores the initial guess.
+
+    ``log`` is the log as read (before any time alignment); ``used`` and ``fit`` are record
+    ranges of it.
+    """
+
+    scenario: Scenario
+    log: Log
+    used: tuple[int, int]
+    fit: tuple[int, int]
+    initial: Mapping[str, float]
+    baseline: TrajectoryMetrics
+    baseline_holdout: TrajectoryMetrics | None
+    reports: Mapping[str, SolverReport]
+    setup_time_s: float
+    n_residuals: int
+    dropped_stationary: int
+    tracker_lag_s: float = 0.0
+    lag_estimate: LagEstimate | None = None
+    observability: Observability | None = None
+    warnings: tuple[str, ...] = field(default=())
+
+
+class Calibration:
+    """A scenario ready to solve: log, Functions, data and evaluator built once.
+
+    ``log`` is the log as read; ``aligned`` the same records with the encoders re-sampled on the
+    tracker's clock (``log`` itself when the lag is 0); ``selected`` the used records of
+    ``aligned``.
+    """
+
+    def __init__(self, scenario: Scenario, log: Log | None = None) -> None:
+        t0 = time.perf_counter()
+        self.scenario = sc = scenario
+        self.model, self.log = steps.load(sc, log)
+        start, stop = steps.select(sc, self.log)
+        self.fns = steps.build_problem(sc, self.model)
+        self.start = steps.starting_point(sc, self.fns, self.log, start, steps.split(sc, start, stop))
+        self.backend = steps.prepare_backend(sc, self.fns)
+        binder = steps.Binder(
+            sc, self.fns, self.backend, self.start.x_fixed, steps.no_priors(self.fns.n_free)
+        )
+        priors, self.residual_sigma = steps.weigh_priors(
+            binder, self.log, start, steps.split(sc, start, stop), self.start.x0
+        )
+        self.binder = steps.with_priors(binder, priors)
+        self.alignment = steps.align(self.binder, self.log, start, stop, self.start.x0)
+        self.aligned = self.alignment.log
+        start, stop = max(start, self.alignment.valid[0]), min(stop, self.alignment.valid[1])
+        self.used = (start, stop)
+        self.selected = self.aligned.select(start, stop)
+        self.fit = (start, steps.split(sc, start, stop))
+        self.data, self.evaluator = self.binder.bind(self.aligned, *self.fit)
+        self.input_noise_std = self.model.input_noise_std(self.aligned, sc.encoder_noise)
+        self._solvers: dict[str, Solver] = {}
+        self.setup_time_s = time.perf_counter() - t0
+
+    @classmethod
+    def setup(cls, scenario: Scenario, data: str | Path | None = None, log: Log | None = None) -> Calibration:
+        """Build everything ``scenario`` needs (``data`` replaces its log path; ``log``, already read,
+        replaces reading it)."""
+        return cls(scenario.with_dataset(data) if data is not None else scenario, log)
+
+    @property
+    def initial(self) -> Mapping[str, float]:
+        """The starting values of every parameter."""
+        return self.start.initial
+
+    @property
+    def x0(self) -> np.ndarray:
+        """The starting values of the free parameters."""
+        return self.start.x0
+
+    def solver(self, name: str) -> Solver:
+        """The solver ``name`` set up on this calibration's evaluator (once)."""
+        if name not in self._solvers:
+            with steps.scenario_key(self.scenario, name):
+                self._solvers[name] = get_solver(name)(self.evaluator, self.scenario.options_for(name))
+        return self._solvers[name]
+
+    def solve(self, solver: str) -> SolverResult:
+        """Run one solver from the initial guess; the result is in the model's canonical form."""
+        result = self.solver(solver).solve(self.start.x0, self.start.lower, self.start.upper)
+        return self._canonical(result)
+
+    def _canonical(self, result: SolverResult) -> SolverResult:
+        """``result`` mapped onto the model's canonical form (same cost: an exact symmetry)."""
+        canon = self.model.canonical(result.param_dict(), self.fns.fixed)
+        params = np.array([canon[n] for n in self.fns.names])
+        if np.array_equal(params, result.params):
+            return result
+        x = np.array([canon[n] for n in self.fns.free])
+        return dataclasses.replace(result, params=params, x=x)
+
+    def score(self, params: np.ndarray) -> tuple[TrajectoryMetrics, TrajectoryMetrics | None]:
+        """Full-range and hold-out trajectory metrics of ``params``."""
+        inputs = self.model.inputs(self.selected, self.scenario.residual.steering_sample)
+        poses = self.selected.T_world_sensor
+        W = self.scenario.validation.rpe_window
+        full = trajectory_metrics(self.fns, params, inputs, poses, rpe_window=W)
+        holdout = None
+        split = self.fit[1] - self.used[0]
+        if self.fit[1] < self.used[1] - 1:
+            holdout = trajectory_metrics(self.fns, params, inputs, poses, start=split, rpe_window=W)
+        return full, holdout
+
+    def odometry(self, params: np.ndarray) -> OdometryTrack:
+        """Base-link odometry with ``params`` over the used records, with its propagated covariance,
+        started at the base pose the tracker's first pose implies."""
+        sel, fns = self.selected, self.fns
+        inputs = self.model.inputs(sel, self.scenario.residual.steering_sample)
+        T_world_base_0 = np.asarray(fns.base_from_sensor(sel.T_world_sensor[0], params)).ravel()
+        poses, cov = propagate(fns, params, inputs, T_world_base_0, self.input_noise_std)
+        return OdometryTrack(time_s=sel.time_s, T_world_base=poses, covariance=cov)
+
+    def base_reference(self, params: np.ndarray) -> np.ndarray:
+        """The base poses ``(n, 3)`` the tracker's sensor poses imply with ``params``' mounting pose."""
+        sel = self.selected
+        return np.asarray(self.fns.base_from_sensor.map(sel.n_records)(sel.T_world_sensor.T, params)).T
+
+    def run(self, solvers: Sequence[str] | None = None) -> CalibrationRun:
+        """Solve with each solver and score every result."""
+        reports: dict[str, SolverReport] = {}
+        for name in solvers or self.scenario.solvers:
+            result = self.solve(name)
+            full, holdout = self.score(result.params)
+            reports[name] = SolverReport(
+                result=result,
+                uncertainty=unc.estimate(self.evaluator, result.x, self.data, self.input_noise_std),
+                metrics=full,
+                holdout=holdout,
+            )
+        p0 = np.array([self.initial[n] for n in self.fns.names])
+        base, base_holdout = self.score(p0)
+        # Observability at the first estimate with a finite cost (a solver may not have started).
+        results = [rep.result for rep in reports.values()]
+        first = next((r for r in results if np.isfinite(r.cost)), results[0])
+        observability = analyse(self.evaluator, first.x, self.data.log.T_world_sensor)
+        warnings = list(observability.warnings)
+        warnings += [
+            f"{name}: {rep.result.reason}" for name, rep in reports.items() if not rep.result.converged
+        ]
+        return CalibrationRun(
+            scenario=self.scenario,
+            log=self.log,
+            used=self.used,
+            fit=self.fit,
+            initial=dict(self.initial),
+            baseline=base,
+            baseline_holdout=base_holdout,
+            reports=reports,
+            setup_time_s=self.setup_time_s,
+            n_residuals=self.data.n_residuals,
+            dropped_stationary=self.data.dropped_stationary,
+            tracker_lag_s=self.alignment.lag_s,
+            lag_estimate=self.alignment.estimate,
+            observability=observability,
+            warnings=tuple(warnings),
+        )

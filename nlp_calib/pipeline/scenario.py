@@ -1,0 +1,241 @@
+"""Scenario YAML files: frozen dataclasses, validated on load.
+
+Every section is a frozen dataclass; :func:`load_scenario` checks keys and types against the
+dataclass fields, so an unknown key, a wrong type or an inconsistent value is reported with its
+place in the file and the valid choices, before any computation starts. Each registered solver
+has a top-level block named after it, validated against its own options dataclass.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from nlp_calib.core.errors import ConfigError, ScenarioError
+from nlp_calib.models import MODELS, encoders, get_model, param_names
+from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES
+from nlp_calib.pipeline.config import coerce, fail, from_mapping, read_yaml
+from nlp_calib.problem import ResidualOptions
+from nlp_calib.solvers import SOLVERS
+from nlp_calib.solvers.backends import BACKENDS
+from nlp_calib.symbolic.kernels import KERNELS
+
+
+@dataclass(frozen=True)
+class SampleSelection:
+    """Records ``start:stop`` of the log; ``drop_stationary`` drops windows with no motion."""
+
+    start: int = 0
+    stop: int | None = None
+    drop_stationary: bool = False
+
+
+@dataclass(frozen=True)
+class RobustOptions:
+    """Kernel name and its threshold ``delta`` on the Mahalanobis norm ``sqrt(eᵀΩe)``."""
+
+    kernel: str = "huber"
+    delta: float = 0.05
+
+
+@dataclass(frozen=True)
+class InformationWeights:
+    """Diagonal of Ω: weight of the x/y error (1/m²) and of the angle error (1/rad²)."""
+
+    translation: float = 1.0
+    rotation: float = 1.0
+
+    def omega(self) -> tuple[float, float, float]:
+        return (self.translation, self.translation, self.rotation)
+
+
+@dataclass(frozen=True)
+class ValidationOptions:
+    """``holdout_fraction``: trailing fraction of the records kept out of the fit and scored."""
+
+    holdout_fraction: float | None = None
+    rpe_window: int = 25
+
+
+@dataclass(frozen=True)
+class AlignmentOptions:
+    """``tracker_lag``: seconds the tracker reports after the encoders, or ``auto`` to estimate
+    it by the fit cost over ``search`` at ``step``."""
+
+    tracker_lag: float | str = 0.0
+    search: tuple[float, float] = (-0.2, 0.2)
+    step: float = 0.01
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A Gaussian prior on one parameter."""
+
+    mean: float
+    std: float
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A calibration run: data, model, residual form, kernel, solvers and their options."""
+
+    name: str
+    dataset: Path
+    path: Path | None = None
+    model: str = "tricycle"
+    samples: SampleSelection = field(default_factory=SampleSelection)
+    initial_guess: str | Mapping[str, float] = "from_file"
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    robust: RobustOptions = field(default_factory=RobustOptions)
+    residual: ResidualOptions = field(default_factory=ResidualOptions)
+    information: InformationWeights = field(default_factory=InformationWeights)
+    solvers: tuple[str, ...] = tuple(SOLVERS)
+    #: Each solver's options, by solver name (the YAML block of that name); defaults when absent.
+    solver_options: Mapping[str, Any] = field(default_factory=dict)
+    validation: ValidationOptions = field(default_factory=ValidationOptions)
+    alignment: AlignmentOptions = field(default_factory=AlignmentOptions)
+    fixed: tuple[str, ...] = ()
+    priors: Mapping[str, Prior] = field(default_factory=dict)
+    encoder_noise: Mapping[str, float] = field(default_factory=dict)
+    strict: bool = True
+    backend: str = "interpreted"
+    threads: int = 1
+
+    def with_dataset(self, path: str | Path) -> Scenario:
+        """The same scenario on another log (``--data``)."""
+        return dataclasses.replace(self, dataset=Path(path))
+
+    def options_for(self, solver: str) -> Any:
+        """The options of ``solver``: the scenario's block, or the solver's defaults."""
+        options = self.solver_options.get(solver)
+        return options if options is not None else SOLVERS[solver].options_type()
+
+    def with_solver_options(self, solver: str, options: Any) -> Scenario:
+        """The same scenario with ``solver``'s options replaced."""
+        return dataclasses.replace(self, solver_options={**self.solver_options, solver: options})
+
+
+# Keys the YAML may hold at top level: the fields (but where the file was, and the solver
+# options, which come as one block per registered solver).
+_FIELDS = tuple(f.name for f in dataclasses.fields(Scenario) if f.name not in ("path", "solver_options"))
+_TOP_KEYS = (*_FIELDS, *SOLVERS)
+
+
+def _check_choice(value: str, choices: typing.Iterable[str], where: str) -> None:
+    choices = tuple(choices)
+    if value not in choices:
+        fail(where, f"{value!r} is not one of {', '.join(choices)}")
+
+
+def scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | None = None) -> Scenario:
+    """Validate a parsed YAML mapping; relative dataset paths resolve against ``base_dir``."""
+    try:
+        return _scenario_from_mapping(raw, source, base_dir, path)
+    except ConfigError as exc:
+        raise ScenarioError(str(exc)) from None
+
+
+def _scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | None) -> Scenario:
+    if not isinstance(raw, Mapping):
+        fail(
+            source,
+            f"expected a mapping of scenario keys ({', '.join(_TOP_KEYS)}), got {type(raw).__name__}",
+        )
+    for key in raw:
+        if key not in _TOP_KEYS:
+            fail(f"{source}: {key}", f"unknown key; valid keys are {', '.join(_TOP_KEYS)}")
+    if "dataset" not in raw:
+        fail(source, "the key 'dataset' (path of the log, relative to this file) is required")
+    hints = typing.get_type_hints(Scenario)
+    values = {k: coerce(v, hints[k], f"{source}: {k}") for k, v in raw.items() if k not in SOLVERS}
+    values["solver_options"] = {
+        k: from_mapping(SOLVERS[k].options_type, v, f"{source}: {k}") for k, v in raw.items() if k in SOLVERS
+    }
+    values.setdefault("name", Path(source).stem)
+    dataset = values["dataset"]
+    values["dataset"] = dataset if dataset.is_absolute() else base_dir / dataset
+    sc = Scenario(path=path, **values)
+    _validate(sc, source)
+    return sc
+
+
+def _validate(sc: Scenario, source: str) -> None:
+    # The name becomes a folder under the output directory: a plain, non-empty file name.
+    if sc.name in ("", ".", "..") or any(c in sc.name for c in "/\\\0"):
+        fail(f"{source}: name", f"must be a plain folder name (no '/', '\\' or NUL), got {sc.name!r}")
+    _check_choice(sc.model, MODELS, f"{source}: model")
+    names = param_names(get_model(sc.model))
+    _check_choice(sc.robust.kernel, KERNELS, f"{source}: robust.kernel")
+    if not sc.robust.delta > 0:
+        fail(f"{source}: robust.delta", f"must be > 0, got {sc.robust.delta}")
+    r = sc.residual
+    if r.horizon < 1 or r.stride < 1:
+        fail(
+            f"{source}: residual",
+            f"horizon and stride must be >= 1, got {r.horizon} and {r.stride}",
+        )
+    _check_choice(r.integration, INTEGRATIONS, f"{source}: residual.integration")
+    _check_choice(r.steering_sample, STEERING_SAMPLES, f"{source}: residual.steering_sample")
+    w = sc.information
+    if not (w.translation > 0 and w.rotation > 0):
+        fail(f"{source}: information", "translation and rotation weights must be > 0")
+    if not sc.solvers:
+        fail(f"{source}: solvers", f"list at least one of {', '.join(SOLVERS)}")
+    for s in sc.solvers:
+        _check_choice(s, SOLVERS, f"{source}: solvers")
+    _check_choice(sc.backend, BACKENDS, f"{source}: backend")
+    if not 1 <= sc.threads <= 64:
+        fail(f"{source}: threads", f"must lie in [1, 64], got {sc.threads}")
+    sel = sc.samples
+    if sel.start < 0 or (sel.stop is not None and sel.stop <= sel.start + 1):
+        fail(f"{source}: samples", f"need 0 <= start < stop - 1, got start={sel.start} stop={sel.stop}")
+    hf = sc.validation.holdout_fraction
+    if hf is not None and not 0.0 < hf < 1.0:
+        fail(f"{source}: validation.holdout_fraction", f"must lie in (0, 1), got {hf}")
+    al = sc.alignment
+    if isinstance(al.tracker_lag, str):
+        _check_choice(al.tracker_lag, ("auto",), f"{source}: alignment.tracker_lag")
+    if not (al.search[0] < al.search[1] and al.step > 0 and (al.search[1] - al.search[0]) / al.step <= 1000):
+        fail(f"{source}: alignment", "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
+    if sc.validation.rpe_window < 1:
+        fail(f"{source}: validation.rpe_window", "must be >= 1")
+    if isinstance(sc.initial_guess, str):
+        _check_choice(sc.initial_guess, ("from_file", "auto"), f"{source}: initial_guess")
+    else:
+        for n in sc.initial_guess:
+            _check_choice(n, names, f"{source}: initial_guess")
+    for n, (lo, hi) in sc.bounds.items():
+        _check_choice(n, names, f"{source}: bounds")
+        if not lo < hi:
+            fail(f"{source}: bounds.{n}", f"needs lo < hi, got [{lo}, {hi}]")
+        guess = sc.initial_guess.get(n) if isinstance(sc.initial_guess, Mapping) else None
+        if guess is not None and not lo <= guess <= hi:
+            fail(f"{source}: bounds.{n}", f"the initial guess {guess:g} lies outside [{lo:g}, {hi:g}]")
+    for n in sc.fixed:
+        _check_choice(n, names, f"{source}: fixed")
+    if len(set(sc.fixed)) == len(names):
+        fail(f"{source}: fixed", "every parameter is fixed; nothing is left to estimate")
+    for enc, ticks in sc.encoder_noise.items():
+        _check_choice(enc, encoders(get_model(sc.model)), f"{source}: encoder_noise")
+        if not ticks > 0:
+            fail(f"{source}: encoder_noise.{enc}", f"must be > 0 ticks, got {ticks}")
+    for n, prior in sc.priors.items():
+        _check_choice(n, names, f"{source}: priors")
+        if not prior.std > 0:
+            fail(f"{source}: priors.{n}.std", f"must be > 0, got {prior.std}")
+        if n in sc.fixed:
+            fail(f"{source}: priors.{n}", "a fixed parameter cannot also have a prior; drop one")
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file."""
+    p = Path(path)
+    try:
+        raw = read_yaml(p, "scenario")
+    except ConfigError as exc:
+        raise ScenarioError(str(exc)) from None
+    return scenario_from_mapping(raw, str(p), p.parent, p)

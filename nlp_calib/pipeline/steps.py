@@ -1,0 +1,298 @@
+"""The calibration's named steps: load, select, build, start, bind, weigh priors, align.
+
+Each step takes what it needs and returns an immutable record; :class:`~nlp_calib.pipeline.
+calibration.Calibration` chains them. This is also where library errors, raised in neutral words,
+are translated once into the scenario's language (:func:`scenario_key`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from nlp_calib.analysis import uncertainty
+from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
+from nlp_calib.core.errors import DatasetError, ModelError, OptionsError, ProblemError, ScenarioError
+from nlp_calib.logs import Log, resample_encoders
+from nlp_calib.models import SENSOR_PARAMS, KinematicModel, get_model, header_parameters, load_log
+from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.problem import ProblemFunctions, ProblemSpec, ResidualData, build, build_residual_data
+from nlp_calib.solvers import Priors, ProblemEvaluator, get_solver
+from nlp_calib.solvers.backends import Backend, BackendOptions, make_backend
+
+#: The solver the pipeline's own fits use (prior scaling, the tracker-lag search): the fastest.
+INTERNAL_SOLVER = "gauss_newton"
+
+
+@contextmanager
+def scenario_key(sc: Scenario, key: str, hint: str = "") -> Iterator[None]:
+    """Library errors raised inside become :class:`ScenarioError` naming the scenario's ``key``."""
+    try:
+        yield
+    except (ProblemError, OptionsError, ModelError) as exc:
+        raise ScenarioError(f"{sc.path or sc.name}: {key}: {exc}" + (f"; {hint}" if hint else "")) from None
+
+
+def load(sc: Scenario, log: Log | None = None) -> tuple[KinematicModel, Log]:
+    """The scenario's model and its log, read with the model's encoder kinds (or ``log`` as given)."""
+    with scenario_key(sc, "model"):
+        model = get_model(sc.model)
+    if log is not None:
+        if log.header.kinematic_model not in model.log_names:
+            raise ModelError(
+                f"{log.path}: the log is of kind {log.header.kinematic_model!r}, but the scenario's "
+                f"model {model.name!r} reads {', '.join(model.log_names)}"
+            )
+        return model, log
+    try:
+        return model, load_log(sc.dataset, model, strict=sc.strict)
+    except DatasetError as exc:
+        if exc.droppable:
+            raise exc.with_hint("set 'strict: false' in the scenario to drop such records") from None
+        if exc.line is None and exc.problem == "no such file":
+            raise exc.with_hint("pass the log with --data or fix 'dataset' in the scenario") from None
+        raise
+
+
+def select(sc: Scenario, log: Log) -> tuple[int, int]:
+    """The record range ``[start, stop)`` the scenario's ``samples`` ask for."""
+    n = log.n_records
+    start = sc.samples.start
+    stop = n if sc.samples.stop is None else sc.samples.stop
+    if stop > n or start >= stop - 1:
+        raise ScenarioError(f"samples: the range [{start}, {stop}) does not fit the log's {n} records")
+    return start, stop
+
+
+def split(sc: Scenario, start: int, stop: int) -> int:
+    """The first record of the hold-out (``stop`` when there is none)."""
+    hf = sc.validation.holdout_fraction
+    return stop if hf is None else start + round((1.0 - hf) * (stop - start))
+
+
+def build_problem(sc: Scenario, model: KinematicModel) -> ProblemFunctions:
+    """The problem's Functions for the scenario's residual form, kernel and fixed parameters."""
+    with scenario_key(sc, "residual"):
+        return build(
+            model,
+            ProblemSpec(
+                horizon=sc.residual.horizon,
+                integration=sc.residual.integration,
+                kernel=sc.robust.kernel,
+                fixed=sc.fixed,
+            ),
+        )
+
+
+def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[str, float]:
+    """The log header's values, overridden by the scenario's mapping (``auto`` fills in later)."""
+    guess = {n: v for n, v in header_parameters(model, log.header).items() if n in model.kinematic_params}
+    guess.update(zip(SENSOR_PARAMS, log.header.T_base_sensor))
+    if isinstance(sc.initial_guess, Mapping):
+        guess.update(sc.initial_guess)
+    needed = sc.fixed if sc.initial_guess == "auto" else (*model.kinematic_params, *SENSOR_PARAMS)
+    missing = [n for n in needed if n not in guess]
+    if missing:
+        raise ScenarioError(
+            f"the log header gives no initial value for {missing}; set them under initial_guess"
+        )
+    return guess
+
+
+@dataclass(frozen=True)
+class StartingPoint:
+    """Where the solvers start (free parameters ``x0``), the fixed values and the bounds."""
+
+    initial: Mapping[str, float]
+    auto: Mapping[str, float] | None
+    x0: np.ndarray
+    x_fixed: np.ndarray
+    lower: np.ndarray | None
+    upper: np.ndarray | None
+
+
+def auto_guess(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int) -> dict[str, float]:
+    """The model's closed-form estimate from the windows of records ``start:stop`` (no guess needed)."""
+    data = build_residual_data(fns, log.select(start, stop), sc.residual)
+    rows = fns.n_inputs * data.horizon
+    # Windows overlapping by three quarters carry nearly all the information at a fraction
+    # of the cost of every window.
+    step = max(1, data.horizon // (4 * sc.residual.stride))
+    columns = data.columns[:, ::step]
+    predict = fns.predict_window.map(columns.shape[1])
+
+    def base_motion(params: Mapping[str, float]) -> np.ndarray:
+        p = np.array([params[n] for n in fns.names])
+        return np.asarray(predict(p, columns))
+
+    return fns.model.initial_guess(columns[:rows], columns[rows : rows + 3], base_motion)
+
+
+def starting_point(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int) -> StartingPoint:
+    """Initial values (header, scenario, or ``auto`` from records ``start:stop``) and bounds."""
+    initial = initial_parameters(sc, fns.model, log)
+    auto = None
+    if sc.initial_guess == "auto":
+        auto = auto_guess(sc, fns, log, start, stop)
+        initial.update({n: v for n, v in auto.items() if n not in sc.fixed})
+    x0 = np.array([initial[n] for n in fns.free])
+    lower, upper = None, None
+    if sc.bounds:
+        lower = np.array([sc.bounds[n][0] if n in sc.bounds else -np.inf for n in fns.free])
+        upper = np.array([sc.bounds[n][1] if n in sc.bounds else np.inf for n in fns.free])
+        for name, lo, hi, x in zip(fns.free, lower, upper, x0):
+            if not lo <= x <= hi:
+                origin = "from initial_guess: auto" if sc.initial_guess == "auto" else "from the log header"
+                raise ScenarioError(
+                    f"{sc.path or sc.name}: bounds.{name}: the initial guess {x:g} lies outside "
+                    f"[{lo:g}, {hi:g}] (it comes {origin}); widen the bounds or set initial_guess.{name}"
+                )
+    return StartingPoint(
+        initial=initial,
+        auto=auto,
+        x0=x0,
+        x_fixed=np.array([initial[n] for n in fns.fixed]),
+        lower=lower,
+        upper=upper,
+    )
+
+
+def prepare_backend(sc: Scenario, fns: ProblemFunctions) -> Backend:
+    """The scenario's evaluation backend, with every Function its solvers and analyses map ready."""
+    with scenario_key(sc, "backend"):
+        backend = make_backend(BackendOptions(kind=sc.backend, threads=sc.threads))
+    summed = {"normal_equations", "cost"}
+    for name in sc.solvers:
+        summed.update(get_solver(name).functions(sc.options_for(name)))
+    requests = [(fns.function(n), ("data",), True) for n in sorted(summed)]
+    requests += [(fns.function(n), ("data",), False) for n in uncertainty.FUNCTIONS]
+    backend.prepare(requests)
+    return backend
+
+
+@dataclass(frozen=True)
+class Binder:
+    """Binds the problem to the windows of a record range: evaluators share everything else."""
+
+    scenario: Scenario
+    fns: ProblemFunctions
+    backend: Backend
+    x_fixed: np.ndarray
+    priors: Priors
+
+    def bind(self, log: Log, start: int, stop: int) -> tuple[ResidualData, ProblemEvaluator]:
+        """Residual data of records ``start:stop`` of ``log`` and an evaluator bound to it."""
+        sc = self.scenario
+        data = build_residual_data(
+            self.fns, log.select(start, stop), sc.residual, drop_stationary=sc.samples.drop_stationary
+        )
+        if data.n_residuals < self.fns.n_free:
+            raise ScenarioError(
+                f"only {data.n_residuals} residuals in records [{start}, {stop}) for "
+                f"{self.fns.n_free} parameters; widen 'samples' or shorten the horizon"
+            )
+        evaluator = ProblemEvaluator(
+            self.fns,
+            data.columns,
+            x_fixed=self.x_fixed,
+            omega=np.array(sc.information.omega()),
+            delta=sc.robust.delta,
+            priors=self.priors,
+            backend=self.backend,
+        )
+        return data, evaluator
+
+    def fit(self, evaluator: ProblemEvaluator, x0: np.ndarray) -> tuple[float, np.ndarray, bool]:
+        """The internal solver's cost, estimate and convergence from ``x0``."""
+        name = INTERNAL_SOLVER
+        with scenario_key(self.scenario, name):
+            res = get_solver(name)(evaluator, self.scenario.options_for(name)).solve(x0)
+        return res.cost, res.x, res.converged
+
+
+def no_priors(n_free: int) -> Priors:
+    return Priors(np.zeros(n_free), np.zeros(n_free))
+
+
+def weigh_priors(
+    binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray
+) -> tuple[Priors, float | None]:
+    """The scenario's priors weighed against the data in the data's own noise units.
+
+    The data term ``Σ ρ(eᵀΩe)`` is not divided by the residual variance σ², so a prior
+    ``((x − μ)/std)²`` enters multiplied by σ², which is estimated from a fit without priors.
+    Both solvers then minimise ``σ²·(data/σ² + priors)``: a MAP estimate. Returns the priors and σ.
+    """
+    sc, fns = binder.scenario, binder.fns
+    if not sc.priors:
+        return no_priors(fns.n_free), None
+    _, ev = binder.bind(log, start, stop)
+    _, x, _ = binder.fit(ev, x0)
+    _, s, weight = ev.robust_terms(x)
+    sigma = float(np.sqrt(float(np.sum(weight * s)) / max(3 * ev.n_residuals - fns.n_free, 1)))
+    return (
+        Priors(
+            mean=np.array([sc.priors[n].mean if n in sc.priors else 0.0 for n in fns.free]),
+            sqrt_info=np.array([sigma / sc.priors[n].std if n in sc.priors else 0.0 for n in fns.free]),
+        ),
+        sigma,
+    )
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """The tracker lag used, how it was found, and the log with encoders on the tracker's clock.
+
+    ``valid`` is the record range whose shifted times lie inside the log.
+    """
+
+    lag_s: float
+    estimate: LagEstimate | None
+    log: Log
+    valid: tuple[int, int]
+
+
+def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> LagEstimate:
+    """Grid search of the tracker lag by the internal solver's fit cost on a common record range."""
+    sc = binder.scenario
+    al = sc.alignment
+    kinds = binder.fns.model.encoder_kinds
+    reach = max(abs(al.search[0]), abs(al.search[1]))
+    t = log.time_s
+    first = max(start, int(np.searchsorted(t, t[0] + reach, side="left")))
+    last = min(stop, int(np.searchsorted(t, t[-1] - reach, side="right")))
+    fit_stop = split(sc, first, last)
+    x_start = x0
+
+    def fit_cost(lag: float) -> float:
+        nonlocal x_start
+        shifted, _ = resample_encoders(log, lag, kinds)
+        _, ev = binder.bind(shifted, first, fit_stop)
+        cost, x, converged = binder.fit(ev, x_start)
+        if not converged:
+            return float("nan")
+        x_start = x
+        return cost
+
+    return estimate_lag(fit_cost, al.search, al.step)
+
+
+def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Alignment:
+    """The scenario's tracker lag (given, or estimated when ``auto``) applied to the encoders."""
+    sc = binder.scenario
+    lag = sc.alignment.tracker_lag
+    estimate = None
+    if lag == "auto":
+        estimate = estimate_tracker_lag(binder, log, start, stop, x0)
+        lag = estimate.lag_s
+    with scenario_key(sc, "alignment.tracker_lag"):
+        aligned, valid = resample_encoders(log, float(lag), binder.fns.model.encoder_kinds)
+    return Alignment(lag_s=float(lag), estimate=estimate, log=aligned, valid=valid)
+
+
+def with_priors(binder: Binder, priors: Priors) -> Binder:
+    """The same binder with other priors."""
+    return replace(binder, priors=priors)

@@ -1,0 +1,12 @@
+"""Simulation layer: synthetic logs with known truth, written in the log text format."""
+
+from nlp_calib.simulation.simulate import (
+    TRAJECTORIES,
+    SimulatedLog,
+    SimulationOptions,
+    simulate,
+    truth_path,
+    write_simulation,
+)
+
+__all__ = ["TRAJECTORIES", "SimulatedLog", "SimulationOptions", "simulate", "truth_path", "write_simulation"]

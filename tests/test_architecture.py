@@ -1,0 +1,150 @@
+"""The package's architecture: layers read one way, no import cycles, and the house rules on imports."""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Iterator
+from pathlib import Path
+
+import grimp
+import pytest
+from conftest import REPO
+from importlinter import configuration
+from importlinter.application.use_cases import lint_imports
+
+PACKAGE = REPO / "nlp_calib"
+
+
+@pytest.fixture(scope="module")
+def graph() -> grimp.ImportGraph:
+    return grimp.build_graph("nlp_calib", cache_dir=None)
+
+
+def _modules() -> Iterator[tuple[str, Path, ast.Module]]:
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(REPO).with_suffix("")
+        name = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        yield name, path, ast.parse(path.read_text(encoding="utf-8"))
+
+
+def _strongly_connected(nodes: set[str], edges: dict[str, set[str]]) -> list[set[str]]:
+    """Tarjan's components of the directed graph (iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on_stack: set[str] = set()
+    stack: list[str] = []
+    components = []
+    for root in sorted(nodes):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(edges.get(root, ()))))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is None:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    comp = set()
+                    while True:
+                        top = stack.pop()
+                        on_stack.discard(top)
+                        comp.add(top)
+                        if top == node:
+                            break
+                    components.append(comp)
+            elif child not in index:
+                index[child] = low[child] = len(index)
+                stack.append(child)
+                on_stack.add(child)
+                work.append((child, iter(sorted(edges.get(child, ())))))
+            elif child in on_stack:
+                low[node] = min(low[node], index[child])
+    return components
+
+
+def test_import_linter_contracts_are_kept() -> None:
+    """The layers contract and the acyclic-siblings contract of pyproject.toml."""
+    configuration.configure()
+    assert lint_imports(config_filename=str(REPO / "pyproject.toml"), cache_dir=None, no_logo=True)
+
+
+def test_no_import_cycle_between_files(graph: grimp.ImportGraph) -> None:
+    modules = set(graph.modules)
+    edges = {m: set(graph.find_modules_directly_imported_by(m)) & modules for m in modules}
+    cycles = [c for c in _strongly_connected(modules, edges) if len(c) > 1]
+    assert cycles == []
+
+
+def test_no_import_cycle_between_packages(graph: grimp.ImportGraph) -> None:
+    def package(m: str) -> str:
+        return m if graph.find_children(m) else m.rpartition(".")[0]
+
+    packages = {package(m) for m in graph.modules}
+    edges: dict[str, set[str]] = {p: set() for p in packages}
+    for m in graph.modules:
+        for imported in graph.find_modules_directly_imported_by(m):
+            a, b = package(m), package(imported)
+            # A package may import its own children (re-exports); that is not a loop between packages.
+            if a != b and not b.startswith(a + ".") and not a.startswith(b + "."):
+                edges[a].add(b)
+    cycles = [c for c in _strongly_connected(packages, edges) if len(c) > 1]
+    assert cycles == []
+
+
+def test_no_module_imports_the_package_root(graph: grimp.ImportGraph) -> None:
+    """The root re-exports the public API; a module importing it would import every layer."""
+    assert graph.find_modules_that_directly_import("nlp_calib") == set()
+
+
+def test_matplotlib_is_imported_only_by_the_plotting_package() -> None:
+    users = set()
+    for name, _, tree in _modules():
+        for node in ast.walk(tree):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else []
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module]
+            if any(n.split(".")[0] == "matplotlib" for n in names):
+                users.add(name)
+    assert users and all(u.startswith("nlp_calib.outputs.plots") for u in users), users
+
+
+def test_only_the_command_line_prints() -> None:
+    printing = set()
+    for name, _, tree in _modules():
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "print":
+                printing.add(name)
+    assert printing and all(p.startswith("nlp_calib.cli") for p in printing), printing
+
+
+def test_derivatives_are_taken_only_where_the_problem_is_written() -> None:
+    """Jacobians, gradients and Hessians come from the problem and symbolic layers, once."""
+    derivative = {"jacobian", "gradient", "hessian", "jtimes", "forward", "reverse"}
+    takers = set()
+    for name, _, tree in _modules():
+        for node in ast.walk(tree):
+            if not (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)):
+                continue
+            if node.value.id == "ca" and node.attr in derivative:
+                takers.add(name)
+    assert takers and all(t.startswith(("nlp_calib.problem", "nlp_calib.symbolic")) for t in takers), takers
+
+
+def test_solvers_build_no_symbolic_expressions() -> None:
+    """Solvers call named Functions; at most thin MX wrappers around them (no SX expressions)."""
+    for name, _, tree in _modules():
+        if not name.startswith("nlp_calib.solvers"):
+            continue
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and node.attr == "SX":
+                pytest.fail(f"{name} builds SX expressions")
+
+
+def test_modules_stay_small() -> None:
+    sizes = {name: len(path.read_text(encoding="utf-8").splitlines()) for name, path, _ in _modules()}
+    assert max(sizes.values()) <= 430, sorted(sizes.items(), key=lambda kv: -kv[1])[:3]
