@@ -24,6 +24,8 @@ from nlp_calib.models.diff_drive import DiffDrive
 from nlp_calib.models.tricycle import Tricycle
 
 MODELS: dict[str, KinematicModel] = {m.name: m for m in (Tricycle(), DiffDrive())}
+#: The model a scenario or a simulation uses when it names none.
+DEFAULT_MODEL = next(iter(MODELS))
 
 
 def get_model(name: str) -> KinematicModel:
@@ -60,6 +62,7 @@ def load_log(path: str | Path, model: KinematicModel | None = None, *, strict: b
 
 
 __all__ = [
+    "DEFAULT_MODEL",
     "MODELS",
     "SENSOR_PARAMS",
     "KinematicModel",

@@ -50,6 +50,8 @@ class DiffDriveDrive:
             "sensor_theta": 0.0,
         }
     )
+    #: Counts per wheel turn: written to the header for information, not used by the model.
+    default_ranges: Mapping[str, int] = MappingProxyType({LEFT_ENCODER: 4096, RIGHT_ENCODER: 4096})
 
     def steps(
         self, opts: SimulationSettings, speed: np.ndarray, turn: np.ndarray, dt: np.ndarray, turn_start: float
@@ -66,8 +68,7 @@ class DiffDriveDrive:
         return np.stack([left, right], axis=1)
 
     def header(self, opts: SimulationSettings) -> LogHeader:
-        encoders = {LEFT_ENCODER: opts.wheel_ticks, RIGHT_ENCODER: opts.wheel_ticks}
-        return drive_header(opts, "differential_drive", DiffDrive.header_names, encoders)
+        return drive_header(opts, "differential_drive", DiffDrive.header_names)
 
     def vendor_odometry(self, header: LogHeader, ticks: np.ndarray) -> np.ndarray:
         p = {DiffDrive.header_aliases[n.lower()]: v for n, v in header.parameters.items()}

@@ -25,20 +25,18 @@ class SimulationSettings(Protocol):
     @property
     def guess(self) -> Mapping[str, float]: ...
     @property
-    def steering_ticks(self) -> int: ...
-    @property
-    def traction_ticks(self) -> int: ...
-    @property
-    def wheel_ticks(self) -> int: ...
+    def encoder_ranges(self) -> Mapping[str, int]: ...
     @property
     def wrap_after_ticks(self) -> int: ...
 
 
 class Drive(Protocol):
-    """A model's simulated base; ``default_truth`` / ``default_guess`` map every parameter."""
+    """A model's simulated base; ``default_truth`` / ``default_guess`` map every parameter,
+    ``default_ranges`` every encoder to its ``#joints_max_enc_values`` entry."""
 
     default_truth: Mapping[str, float]
     default_guess: Mapping[str, float]
+    default_ranges: Mapping[str, int]
 
     def steps(
         self, opts: SimulationSettings, speed: np.ndarray, turn: np.ndarray, dt: np.ndarray, turn_start: float
@@ -91,19 +89,14 @@ def first_order(step: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
     return np.stack([x, y, theta], axis=1)
 
 
-def drive_header(
-    opts: SimulationSettings,
-    kinematic_model: str,
-    header_names: Mapping[str, str],
-    encoders: Mapping[str, int],
-) -> LogHeader:
-    """A header with ``opts.guess`` as initial values (under ``header_names``) and ``encoders``' ranges."""
+def drive_header(opts: SimulationSettings, kinematic_model: str, header_names: Mapping[str, str]) -> LogHeader:
+    """A header with ``opts.guess`` as initial values (under ``header_names``) and the encoder ranges."""
     g = opts.guess
     return LogHeader(
         kinematic_model=kinematic_model,
         parameters={header: float(g[name]) for name, header in header_names.items()},
-        encoder_names=tuple(encoders),
-        encoder_max=tuple(encoders.values()),
+        encoder_names=tuple(opts.encoder_ranges),
+        encoder_max=tuple(opts.encoder_ranges.values()),
         sensor_frame="laser",
         T_base_sensor=(float(g["sensor_x"]), float(g["sensor_y"]), float(g["sensor_theta"])),
     )

@@ -28,7 +28,10 @@ TRACTION_ENCODER = "traction_wheel"
 
 
 class TricycleDrive:
-    """Front wheel drives at ``speed`` and steers to ``turn`` (rad); encoders: steering, traction."""
+    """Front wheel drives at ``speed`` and steers to ``turn`` (rad); encoders: steering, traction.
+
+    ``steering`` is absolute over ``s_max`` ticks a turn, ``traction_wheel`` counts ``t_max`` ticks
+    per ``k_traction`` metres."""
 
     default_truth: Mapping[str, float] = MappingProxyType(
         {
@@ -52,6 +55,7 @@ class TricycleDrive:
             "sensor_theta": 0.0,
         }
     )
+    default_ranges: Mapping[str, int] = MappingProxyType({STEERING_ENCODER: 8192, TRACTION_ENCODER: 5000})
 
     def steps(
         self, opts: SimulationSettings, speed: np.ndarray, turn: np.ndarray, dt: np.ndarray, turn_start: float
@@ -62,7 +66,7 @@ class TricycleDrive:
 
     def ticks(self, opts: SimulationSettings, channels: Mapping[str, np.ndarray]) -> np.ndarray:
         t = opts.truth
-        s_max, t_max = opts.steering_ticks, opts.traction_ticks
+        s_max, t_max = opts.encoder_ranges[STEERING_ENCODER], opts.encoder_ranges[TRACTION_ENCODER]
         steer = np.mod(
             np.round((channels["phi"] - t["steer_offset"]) / t["k_steer"] * s_max / (2 * np.pi)), s_max
         )
@@ -70,8 +74,7 @@ class TricycleDrive:
         return np.stack([steer.astype(np.int64), traction], axis=1)
 
     def header(self, opts: SimulationSettings) -> LogHeader:
-        encoders = {STEERING_ENCODER: opts.steering_ticks, TRACTION_ENCODER: opts.traction_ticks}
-        return drive_header(opts, "traction_drive_wheel", Tricycle.header_names, encoders)
+        return drive_header(opts, "traction_drive_wheel", Tricycle.header_names)
 
     def vendor_odometry(self, header: LogHeader, ticks: np.ndarray) -> np.ndarray:
         p = {Tricycle.header_aliases[n.lower()]: v for n, v in header.parameters.items()}

@@ -120,7 +120,7 @@ def run_table(run: CalibrationRun) -> str:
 def correlation_table(run: CalibrationRun, solver: str) -> str:
     """The parameter correlation matrix of one solver's estimate."""
     u = run.reports[solver].uncertainty
-    short = [n.replace("sensor_", "s_").replace("steer_offset", "offset")[:9] for n in u.names]
+    short = [n.replace("sensor_", "s_")[:9] for n in u.names]
     lines = [f"correlation ({solver}):", _row("", [f"{s:>10}" for s in short], 14)]
     for n, row in zip(u.names, u.correlation):
         lines.append(_row(n[:13], [f"{v:>10.3f}" for v in row], 14))

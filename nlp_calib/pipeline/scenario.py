@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from nlp_calib.core.errors import ConfigError, ScenarioError
-from nlp_calib.models import MODELS, encoders, get_model, param_names
+from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders, get_model, param_names
 from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES
 from nlp_calib.pipeline.config import coerce, fail, from_mapping, read_yaml
 from nlp_calib.problem import ResidualOptions
@@ -86,7 +86,7 @@ class Scenario:
     name: str
     dataset: Path
     path: Path | None = None
-    model: str = "tricycle"
+    model: str = DEFAULT_MODEL
     samples: SampleSelection = field(default_factory=SampleSelection)
     initial_guess: str | Mapping[str, float] = "from_file"
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
@@ -122,7 +122,11 @@ class Scenario:
 # Keys the YAML may hold at top level: the fields (but where the file was, and the solver
 # options, which come as one block per registered solver).
 _FIELDS = tuple(f.name for f in dataclasses.fields(Scenario) if f.name not in ("path", "solver_options"))
-_TOP_KEYS = (*_FIELDS, *SOLVERS)
+
+
+def top_level_keys() -> tuple[str, ...]:
+    """The keys a scenario file may hold at its top level, one block per registered solver included."""
+    return (*_FIELDS, *SOLVERS)
 
 
 def _check_choice(value: str, choices: typing.Iterable[str], where: str) -> None:
@@ -143,11 +147,11 @@ def _scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | N
     if not isinstance(raw, Mapping):
         fail(
             source,
-            f"expected a mapping of scenario keys ({', '.join(_TOP_KEYS)}), got {type(raw).__name__}",
+            f"expected a mapping of scenario keys ({', '.join(top_level_keys())}), got {type(raw).__name__}",
         )
     for key in raw:
-        if key not in _TOP_KEYS:
-            fail(f"{source}: {key}", f"unknown key; valid keys are {', '.join(_TOP_KEYS)}")
+        if key not in top_level_keys():
+            fail(f"{source}: {key}", f"unknown key; valid keys are {', '.join(top_level_keys())}")
     if "dataset" not in raw:
         fail(source, "the key 'dataset' (path of the log, relative to this file) is required")
     hints = typing.get_type_hints(Scenario)

@@ -22,7 +22,7 @@ from nlp_calib.core.errors import OptionsError
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import LogHeader, format_log
-from nlp_calib.models import MODELS
+from nlp_calib.models import DEFAULT_MODEL, MODELS
 from nlp_calib.models.drives import integrate_base
 
 TRAJECTORIES = ("s_curves", "straight", "no_reversals")
@@ -32,29 +32,27 @@ TRAJECTORIES = ("s_curves", "straight", "no_reversals")
 class SimulationOptions:
     """What to simulate. Angles in rad, lengths in m, times in s.
 
-    ``model``: ``tricycle`` or ``diff_drive``. ``trajectory``: ``s_curves`` (turns, stops and
-    reversals), ``straight`` (no turning) or ``no_reversals`` (turns and stops, always forward).
-    ``truth`` and ``guess`` map parameter names to values (``guess`` goes into the log header as
-    the initial guess); empty means the model's defaults. ``max_steer`` is the largest steering
-    angle (tricycle) or the largest curvature per metre travelled (differential drive).
-    ``steering_ticks`` / ``traction_ticks`` are the tricycle's encoder ranges, ``wheel_ticks``
-    the differential drive's counts per wheel turn (written to the header).
+    ``model``: a registered model (default: the first). ``trajectory``: ``s_curves`` (turns,
+    stops and reversals), ``straight`` (no turning) or ``no_reversals`` (turns and stops, always
+    forward). ``truth`` and ``guess`` map parameter names to values (``guess`` goes into the log
+    header as the initial guess); empty means the model's defaults. ``max_turn`` is the amplitude
+    of the turning profile, which each model's drive reads in its own way (see its ``steps``).
+    ``encoder_ranges`` maps encoder names to their ``#joints_max_enc_values`` (absolute range,
+    or counts per turn); empty means the model's defaults.
     """
 
     records: int = 1500
     seed: int = 0
-    model: str = "tricycle"
+    model: str = DEFAULT_MODEL
     trajectory: str = "s_curves"
     truth: Mapping[str, float] = field(default_factory=dict)
     guess: Mapping[str, float] = field(default_factory=dict)
-    steering_ticks: int = 8192
-    traction_ticks: int = 5000
-    wheel_ticks: int = 4096
+    encoder_ranges: Mapping[str, int] = field(default_factory=dict)
     rate_hz: float = 25.0
     jitter_s: float = 0.004
     substeps: int = 20
     max_speed: float = 0.6
-    max_steer: float = 0.6
+    max_turn: float = 0.6
     stop_fraction: float = 0.15
     tracker_noise_xy: float = 0.002
     tracker_noise_theta: float = 0.002
@@ -70,6 +68,7 @@ class SimulationOptions:
         # Fill in the model's defaults so the truth JSON records every value used.
         object.__setattr__(self, "truth", {**drive.default_truth, **self.truth})
         object.__setattr__(self, "guess", {**drive.default_guess, **self.guess})
+        object.__setattr__(self, "encoder_ranges", {**drive.default_ranges, **self.encoder_ranges})
         if self.trajectory not in TRAJECTORIES:
             raise OptionsError(f"trajectory must be one of {TRAJECTORIES}, got {self.trajectory!r}")
         if self.records < 3:
@@ -77,6 +76,12 @@ class SimulationOptions:
         unknown = sorted((set(self.truth) | set(self.guess)) - set(drive.default_truth))
         if unknown:
             raise OptionsError(f"unknown parameter(s) {unknown} for model {self.model!r}")
+        unknown = sorted(set(self.encoder_ranges) - set(drive.default_ranges))
+        if unknown or not all(isinstance(v, int) and 0 < v <= 2**32 for v in self.encoder_ranges.values()):
+            raise OptionsError(
+                f"encoder_ranges takes whole numbers in [1, 2^32] for {', '.join(drive.default_ranges)}, "
+                f"got {dict(self.encoder_ranges)}"
+            )
         if not 0.0 <= self.outlier_fraction < 1.0 or not 0.0 <= self.stop_fraction < 1.0:
             raise OptionsError("outlier_fraction and stop_fraction must lie in [0, 1)")
         if self.substeps < 1 or self.rate_hz <= 0 or self.jitter_s < 0 or self.latency_s < 0:
@@ -110,7 +115,7 @@ class SimulatedLog:
 def _profiles(
     opts: SimulationOptions, rng: np.random.Generator, duration: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Knot times, front-wheel speeds and steering angles; linear between knots."""
+    """Knot times, speeds and turning amplitudes; linear between knots."""
     n_knots = int(duration / 1.5) + 3
     t = np.concatenate([[0.0], np.cumsum(rng.uniform(1.0, 2.5, n_knots))])
     speed = rng.uniform(0.3, 1.0, t.size) * opts.max_speed
@@ -127,11 +132,11 @@ def _profiles(
         t, hold + 1, t[hold] + rng.uniform(0.5, 1.0, hold.size) * np.diff(t)[np.minimum(hold, t.size - 2)]
     )
     speed = np.insert(speed, hold + 1, 0.0)
-    steer = rng.uniform(-1.0, 1.0, t.size) * opts.max_steer
-    steer[hold + 1 + np.arange(hold.size)] = steer[hold + np.arange(hold.size)]
+    turn = rng.uniform(-1.0, 1.0, t.size) * opts.max_turn
+    turn[hold + 1 + np.arange(hold.size)] = turn[hold + np.arange(hold.size)]
     if opts.trajectory == "straight":
-        steer[:] = 0.0
-    return t, speed, steer
+        turn[:] = 0.0
+    return t, speed, turn
 
 
 def _sample_times(opts: SimulationOptions, rng: np.random.Generator) -> np.ndarray:

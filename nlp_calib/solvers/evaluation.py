@@ -18,7 +18,7 @@ from nlp_calib.solvers.backends import Backend, Buffered, pad_columns
 SINGULAR_CONDITION = 1e12
 #: Why a solver did not start: the objective is not a number at the initial guess.
 NAN_START_REASON = (
-    "the residual is NaN or infinite at the initial guess (e.g. axis_length 0); check the data and "
+    "the residual is NaN or infinite at the initial guess (e.g. a length of 0); check the data and "
     "the initial guess"
 )
 SINGULAR_REASON = (
