@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -13,6 +14,7 @@ import pytest
 
 from nlp_calib.logs import Log, parse_log
 from nlp_calib.models import get_model
+from nlp_calib.pipeline import Scenario, load_scenario
 from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
 
 REPO = Path(__file__).resolve().parents[1]
@@ -62,6 +64,18 @@ def write_sim(tmp_path: Path, name: str = "sim.txt", **kwargs: object) -> Path:
     """Simulate a log with the given options into ``tmp_path``; returns its path."""
     log, _ = write_simulation(simulate(SimulationOptions(**kwargs)), tmp_path / name)  # type: ignore[arg-type]
     return log
+
+
+@pytest.fixture(scope="session")
+def demo() -> Scenario:
+    """The shipped demo scenario (a simulated tricycle log with known truth)."""
+    return load_scenario(SCENARIOS / "demo.yaml")
+
+
+@pytest.fixture(scope="session")
+def small_demo(demo: Scenario) -> Scenario:
+    """The demo scenario on its first 500 records: the quick case of solver and report tests."""
+    return dataclasses.replace(demo, samples=dataclasses.replace(demo.samples, stop=500))
 
 
 @pytest.fixture(scope="session")

@@ -133,6 +133,7 @@ def test_encoder_shift_by_whole_samples_reproduces_the_readings() -> None:
     assert resample_encoders(ds, 0.0, MODEL.encoder_kinds)[0] is ds
 
 
+@pytest.mark.slow
 def test_tracker_lag_is_recovered_from_a_simulated_log(tmp_path: Path) -> None:
     from nlp_calib.simulation import write_simulation
 
@@ -172,6 +173,7 @@ def recommended(real_log: Path) -> tuple[Scenario, dict[str, float]]:
     reason="not reached: traction-counter faults at t = 26, 41, 56 s lose counts that no calibration "
     "can restore; the full-run ATE is 0.25 m (docs/accuracy.md, section 4)",
 )
+@pytest.mark.slow
 def test_recommended_real_scenario_full_run_ate_target(
     recommended: tuple[Scenario, dict[str, float]],
 ) -> None:
@@ -183,6 +185,7 @@ def test_recommended_real_scenario_full_run_ate_target(
     strict=True,
     reason="not reached: the hold-out ATE is 0.103 m against 0.10 m (docs/accuracy.md, section 3)",
 )
+@pytest.mark.slow
 def test_recommended_real_scenario_holdout_target(recommended: tuple[Scenario, dict[str, float]]) -> None:
     _, m = recommended
     assert m["holdout_gauss_newton"] <= 0.10 and m["holdout_ipopt"] <= 0.10

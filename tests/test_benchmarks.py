@@ -17,6 +17,7 @@ from nlp_calib.codegen.compiler import find_compiler
 @pytest.mark.skipif(
     find_compiler() is None, reason="no C compiler found: the benchmark measures the compiled backend"
 )
+@pytest.mark.slow
 def test_performance_benchmark_quick_run(tmp_path: Path) -> None:
     env = dict(os.environ, NLP_CALIB_CACHE=str(tmp_path / "cache"))
     proc = subprocess.run(

@@ -109,6 +109,7 @@ def test_shared_library_equals_python_on_random_inputs(generated: Path) -> None:
                     assert_close(a, b, rtol=1e-12, atol=1e-12 * max(np.abs(b).max(), 1.0))
 
 
+@pytest.mark.slow
 @needs_compiler
 @pytest.mark.parametrize("kernel", ["huber", "pseudo_huber"])
 def test_compiled_backend_gives_the_interpreted_solution(
@@ -145,6 +146,7 @@ def test_compiled_backend_falls_back_without_a_compiler(monkeypatch: pytest.Monk
     assert calib.backend.name == "interpreted"
 
 
+@pytest.mark.slow
 @needs_compiler
 def test_threaded_chunk_map_equals_serial(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("NLP_CALIB_CACHE", str(tmp_path / "cache"))

@@ -1,4 +1,4 @@
-"""Symbolic Jacobians against central finite differences (SPEC §5)."""
+"""Symbolic Jacobians against central finite differences, on the manifold perturbation."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The log reader (SPEC §2)."""
+"""The log reader: header, records, wraps, timestamps and errors."""
 
 from __future__ import annotations
 

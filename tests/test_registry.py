@@ -56,9 +56,13 @@ def test_a_model_registered_under_a_new_name_works_end_to_end(monkeypatch: pytes
 
     monkeypatch.setitem(MODELS, "trike", Trike())
     sim = simulate(SimulationOptions(model="trike", records=500, seed=5))
-    lines = sim.text().replace("#kinematic_model: traction_drive_wheel", "#kinematic_model: trike").splitlines()
+    lines = (
+        sim.text().replace("#kinematic_model: traction_drive_wheel", "#kinematic_model: trike").splitlines()
+    )
     log = parse_lines(lines, model="trike")
-    sc = scenario_from_mapping(_scenario("trike", "sim.txt", solvers=["gauss_newton"]), "trike.yaml", Path("."))
+    sc = scenario_from_mapping(
+        _scenario("trike", "sim.txt", solvers=["gauss_newton"]), "trike.yaml", Path(".")
+    )
     run = Calibration(sc, log=log).run()
     res = run.reports["gauss_newton"].result
     assert res.converged
@@ -111,7 +115,9 @@ def test_every_model_declares_all_its_facts() -> None:
         names = param_names(model)
         assert set(model.units) == set(model.kinematic_params)
         assert set(model.header_names) == set(model.kinematic_params)
-        assert {model.header_aliases[h.lower()] for h in model.header_names.values()} == set(model.kinematic_params)
+        assert {model.header_aliases[h.lower()] for h in model.header_names.values()} == set(
+            model.kinematic_params
+        )
         assert set(model.reference) <= set(model.kinematic_params)
         assert set(model.headline) <= set(model.kinematic_params)
         assert set(model.physical_ranges) == set(names)

@@ -23,7 +23,7 @@ from nlp_calib.outputs.handoff import CALIBRATION_FILE, URDF_FILE, write_handoff
 from nlp_calib.outputs.markdown import fmt_std, fmt_value
 from nlp_calib.outputs.progress import Progress
 from nlp_calib.pipeline import Calibration
-from nlp_calib.pipeline.scenario import SampleSelection, ValidationOptions, load_scenario
+from nlp_calib.pipeline.scenario import Scenario, ValidationOptions
 from nlp_calib.solvers import GaussNewtonOptions
 
 IMAGES = ("trajectory.png", "convergence.png", "residuals.png", "model_check.png")
@@ -126,24 +126,27 @@ def test_urdf_joint_parses_and_carries_the_sensor_pose(report_dir: Path, result:
     assert f"nlp_calib {__version__}" in (report_dir / URDF_FILE).read_text()
 
 
-def _small_demo(**changes: Any) -> Calibration:
-    sc = load_scenario(SCENARIOS / "demo.yaml")
-    return Calibration(dataclasses.replace(sc, samples=SampleSelection(stop=500), **changes))
+def _calibration(small_demo: Scenario, **changes: Any) -> Calibration:
+    return Calibration(dataclasses.replace(small_demo, **changes))
 
 
-def test_handoff_files_are_deterministic(tmp_path: Path) -> None:
+def test_handoff_files_are_deterministic(tmp_path: Path, small_demo: Scenario) -> None:
     texts = []
     for i in range(2):
         out = tmp_path / str(i)
-        paths = write_handoff(_small_demo(solvers=("gauss_newton",)).run(), out)
+        paths = write_handoff(_calibration(small_demo, solvers=("gauss_newton",)).run(), out)
         assert [p.name for p in paths] == [CALIBRATION_FILE, URDF_FILE]
         texts.append([p.read_bytes() for p in paths])
     assert texts[0] == texts[1]
 
 
-def test_no_converged_solver_writes_no_handoff_and_removes_stale_files(tmp_path: Path) -> None:
-    calib = _small_demo(
-        solvers=("gauss_newton",), solver_options={"gauss_newton": GaussNewtonOptions(max_iterations=1)}
+def test_no_converged_solver_writes_no_handoff_and_removes_stale_files(
+    tmp_path: Path, small_demo: Scenario
+) -> None:
+    calib = _calibration(
+        small_demo,
+        solvers=("gauss_newton",),
+        solver_options={"gauss_newton": GaussNewtonOptions(max_iterations=1)},
     )
     run = calib.run()
     assert not run.reports["gauss_newton"].result.converged
@@ -153,10 +156,12 @@ def test_no_converged_solver_writes_no_handoff_and_removes_stale_files(tmp_path:
     assert not (tmp_path / CALIBRATION_FILE).exists() and not (tmp_path / URDF_FILE).exists()
 
 
-def test_single_solver_report_with_holdout(tmp_path: Path) -> None:
+def test_single_solver_report_with_holdout(tmp_path: Path, small_demo: Scenario) -> None:
     from nlp_calib.outputs.writer import write_report
 
-    calib = _small_demo(solvers=("gauss_newton",), validation=ValidationOptions(holdout_fraction=0.3))
+    calib = _calibration(
+        small_demo, solvers=("gauss_newton",), validation=ValidationOptions(holdout_fraction=0.3)
+    )
     run = calib.run()
     paths = write_report(calib, run, tmp_path)
     assert [p.name for p in paths] == [*IMAGES, "report.md"]

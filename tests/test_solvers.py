@@ -38,6 +38,7 @@ def real_calibration(real_log: Path) -> Calibration:
     return Calibration.setup(load_scenario(SCENARIOS / "real_tricycle.yaml"), data=real_log)
 
 
+@pytest.mark.slow
 def test_real_log_solvers_agree(real_calibration: Calibration) -> None:
     gn = real_calibration.solve("gauss_newton")
     ip = real_calibration.solve("ipopt")
@@ -55,21 +56,15 @@ def test_single_step_seed_formulation_converges_from_header_guess(real_log: Path
     agree(calib.solve("gauss_newton"), calib.solve("ipopt"))
 
 
-@pytest.fixture(scope="module")
-def demo_scenario() -> Scenario:
-    sc = load_scenario(SCENARIOS / "demo.yaml")
-    return dataclasses.replace(sc, samples=dataclasses.replace(sc.samples, stop=500))
-
-
 @pytest.mark.parametrize("kernel", ["none", "huber", "cauchy", "pseudo_huber"])
-def test_solvers_agree_for_every_kernel(demo_scenario: Scenario, kernel: str) -> None:
-    sc = dataclasses.replace(demo_scenario, robust=RobustOptions(kernel=kernel, delta=0.03))
+def test_solvers_agree_for_every_kernel(small_demo: Scenario, kernel: str) -> None:
+    sc = dataclasses.replace(small_demo, robust=RobustOptions(kernel=kernel, delta=0.03))
     calib = Calibration.setup(sc)
     agree(calib.solve("gauss_newton"), calib.solve("ipopt"))
 
 
-def test_lifted_huber_reaches_the_direct_optimum(demo_scenario: Scenario) -> None:
-    sc = dataclasses.replace(demo_scenario, robust=RobustOptions(kernel="huber", delta=0.02))
+def test_lifted_huber_reaches_the_direct_optimum(small_demo: Scenario) -> None:
+    sc = dataclasses.replace(small_demo, robust=RobustOptions(kernel="huber", delta=0.02))
     direct = Calibration.setup(sc).solve("ipopt")
     lifted_sc = sc.with_solver_options("ipopt", IpoptOptions(huber_formulation="lifted"))
     lifted = Calibration.setup(lifted_sc).solve("ipopt")
@@ -78,10 +73,10 @@ def test_lifted_huber_reaches_the_direct_optimum(demo_scenario: Scenario) -> Non
     assert direct.inliers < direct.n_residuals  # the threshold is active, so the test means something
 
 
-def test_active_bound_is_respected_by_ipopt(demo_scenario: Scenario) -> None:
-    free = Calibration.setup(demo_scenario).solve("ipopt")
+def test_active_bound_is_respected_by_ipopt(small_demo: Scenario) -> None:
+    free = Calibration.setup(small_demo).solve("ipopt")
     hi = free.param_dict()["axis_length"] - 0.05
-    sc = dataclasses.replace(demo_scenario, bounds={"axis_length": (1.0, hi)})
+    sc = dataclasses.replace(small_demo, bounds={"axis_length": (1.0, hi)})
     bounded = Calibration.setup(sc).solve("ipopt")
     assert bounded.converged
     assert bounded.param_dict()["axis_length"] == pytest.approx(hi, abs=1e-7)
@@ -110,17 +105,17 @@ def test_recovers_truth_from_noiseless_log(noiseless_log: Path, integration: str
             )
 
 
-def test_gauss_newton_reports_nan_instead_of_a_result(demo_scenario: Scenario) -> None:
-    sc = dataclasses.replace(demo_scenario, initial_guess={"axis_length": 0.0})
+def test_gauss_newton_reports_nan_instead_of_a_result(small_demo: Scenario) -> None:
+    sc = dataclasses.replace(small_demo, initial_guess={"axis_length": 0.0})
     res = Calibration.setup(sc).solve("gauss_newton")
     assert not res.converged
     assert "NaN" in res.reason
 
 
-def test_iteration_limit_is_not_convergence(demo_scenario: Scenario) -> None:
+def test_iteration_limit_is_not_convergence(small_demo: Scenario) -> None:
     from nlp_calib.solvers import GaussNewtonOptions
 
-    sc = demo_scenario.with_solver_options("gauss_newton", GaussNewtonOptions(max_iterations=1))
+    sc = small_demo.with_solver_options("gauss_newton", GaussNewtonOptions(max_iterations=1))
     res = Calibration.setup(sc).solve("gauss_newton")
     assert not res.converged
     assert "iteration limit" in res.reason

@@ -41,6 +41,7 @@ def scenario(**changes: object) -> Scenario:
     return dataclasses.replace(base, **changes)  # type: ignore[arg-type]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_recovers_truth_with_noise_outliers_wrap_and_latency(seed: int) -> None:
     sc = scenario(robust=RobustOptions("huber", 0.02), alignment=AlignmentOptions(tracker_lag="auto"))
@@ -56,6 +57,7 @@ def test_recovers_truth_with_noise_outliers_wrap_and_latency(seed: int) -> None:
         assert np.all(np.abs(err) <= TOLERANCE), dict(zip(NAMES, err))
 
 
+@pytest.mark.slow
 def test_uncertainty_is_consistent_over_independent_noise() -> None:
     """NEES of the 7 parameters over 100 simulated logs matches χ²(7); 2σ covers 88-99 %.
 
@@ -143,15 +145,9 @@ def test_auto_initial_guess_on_a_simulated_log_needs_no_header() -> None:
     assert np.all(np.abs(res.params - TRUTH) <= TOLERANCE)
 
 
-@pytest.fixture(scope="module")
-def demo() -> Scenario:
-    sc = load_scenario(SCENARIOS / "demo.yaml")
-    return dataclasses.replace(sc, samples=dataclasses.replace(sc.samples, stop=600))
-
-
-def test_fixed_parameter_stays_bit_identical_and_solvers_agree(demo: Scenario) -> None:
+def test_fixed_parameter_stays_bit_identical_and_solvers_agree(small_demo: Scenario) -> None:
     sc = dataclasses.replace(
-        demo, fixed=("axis_length", "sensor_y"), initial_guess={"axis_length": 1.55, "sensor_y": 0.07}
+        small_demo, fixed=("axis_length", "sensor_y"), initial_guess={"axis_length": 1.55, "sensor_y": 0.07}
     )
     calib = Calibration(sc)
     assert calib.fns.free == ("k_steer", "k_traction", "steer_offset", "sensor_x", "sensor_theta")
@@ -166,10 +162,10 @@ def test_fixed_parameter_stays_bit_identical_and_solvers_agree(demo: Scenario) -
     assert u.std_dict()["axis_length"] == 0.0 and u.std_dict()["k_steer"] > 0.0
 
 
-def test_tight_prior_pulls_the_estimate_to_its_mean(demo: Scenario) -> None:
-    free = Calibration(demo).solve("gauss_newton").param_dict()["axis_length"]
+def test_tight_prior_pulls_the_estimate_to_its_mean(small_demo: Scenario) -> None:
+    free = Calibration(small_demo).solve("gauss_newton").param_dict()["axis_length"]
     mean = free + 0.1
-    sc = dataclasses.replace(demo, priors={"axis_length": Prior(mean=mean, std=1e-5)})
+    sc = dataclasses.replace(small_demo, priors={"axis_length": Prior(mean=mean, std=1e-5)})
     calib = Calibration(sc)
     gn, ip = calib.solve("gauss_newton"), calib.solve("ipopt")
     for res in (gn, ip):
@@ -177,5 +173,5 @@ def test_tight_prior_pulls_the_estimate_to_its_mean(demo: Scenario) -> None:
         assert res.param_dict()["axis_length"] == pytest.approx(mean, abs=1e-4)
     # A 1e-5 prior weighs 1e10: the problem is stiff, so agreement is to the usual 1e-4 criterion.
     np.testing.assert_allclose(gn.params, ip.params, rtol=1e-4)
-    loose = Calibration(dataclasses.replace(demo, priors={"axis_length": Prior(mean=mean, std=10.0)}))
+    loose = Calibration(dataclasses.replace(small_demo, priors={"axis_length": Prior(mean=mean, std=10.0)}))
     assert loose.solve("gauss_newton").param_dict()["axis_length"] == pytest.approx(free, abs=1e-3)
