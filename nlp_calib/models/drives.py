@@ -89,7 +89,9 @@ def first_order(step: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
     return np.stack([x, y, theta], axis=1)
 
 
-def drive_header(opts: SimulationSettings, kinematic_model: str, header_names: Mapping[str, str]) -> LogHeader:
+def drive_header(
+    opts: SimulationSettings, kinematic_model: str, header_names: Mapping[str, str]
+) -> LogHeader:
     """A header with ``opts.guess`` as initial values (under ``header_names``) and the encoder ranges."""
     g = opts.guess
     return LogHeader(
