@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import warnings
 import re
 import subprocess
 import sys
@@ -122,7 +123,7 @@ def test_compiled_backend_gives_the_interpreted_solution(
         samples=dataclasses.replace(sc.samples, stop=700),
         robust=dataclasses.replace(sc.robust, kernel=kernel),
     )
-    interpreted = Calibration(sc)
+    interpreted = Calibration(dataclasses.replace(sc, backend="interpreted"))
     compiled = Calibration(dataclasses.replace(sc, backend="compiled"))
     assert compiled.backend.name == "compiled"
     for solver in ("gauss_newton", "ipopt"):
@@ -136,14 +137,22 @@ def test_compiled_backend_gives_the_interpreted_solution(
     assert sorted(p.name for p in (tmp_path / "cache").glob("*.so")) == before
 
 
-def test_compiled_backend_falls_back_without_a_compiler(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_compiled_backend_falls_back_without_a_compiler_warning_once(monkeypatch: pytest.MonkeyPatch) -> None:
     import nlp_calib.solvers.backends.compiled as compiled
 
     monkeypatch.setattr(compiled, "find_compiler", lambda: None)
-    sc = dataclasses.replace(load_scenario(SCENARIOS / "demo.yaml"), backend="compiled")
-    with pytest.warns(UserWarning, match="needs a C compiler"):
-        calib = Calibration(sc)
-    assert calib.backend.name == "interpreted"
+    monkeypatch.setattr(compiled, "_warned_no_compiler", False)
+    sc = load_scenario(SCENARIOS / "demo.yaml")
+    assert sc.backend == "compiled"  # the default
+    sc = dataclasses.replace(sc, samples=dataclasses.replace(sc.samples, stop=300))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        calibs = [Calibration(sc), Calibration(sc)]
+    assert [str(w.message) for w in caught if "no C compiler found" in str(w.message)] == [
+        "no C compiler found (set $CC or install gcc or clang): evaluating with CasADi's interpreter, "
+        "several times slower; set 'backend: interpreted' to silence this"
+    ]
+    assert [c.backend.name for c in calibs] == ["interpreted", "interpreted"]
 
 
 @pytest.mark.slow

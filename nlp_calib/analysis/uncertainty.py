@@ -13,9 +13,14 @@ A residual is ``e_w ≈ E_w^a n_a + E_w^b n_b + Σ_j F_w^j m_j`` (``E = ∂e/∂
 ``F = ∂e/∂u``, both symbolic), the Gauss-Newton estimate moves by ``−H⁻¹ Σ_w L_w e_w`` with
 ``L_w = ρ'_w J_wᵀΩ``, so ``Cov = M H⁻¹ S H⁻¹ Mᵀ`` with ``S = Σ_p K_p Σ_p K_pᵀ + Σ_j Q_j Σ_u Q_jᵀ``,
 ``K_p`` and ``Q_j`` summing ``L_w E_w`` and ``L_w F_w`` over the windows that touch pose ``p`` or
-interval ``j``. The tracker's variances are estimated from the squared residuals by
-non-negative least squares (method of moments, corrected for the fitted degrees of freedom); the
-input noise is given. ``M`` maps the manifold perturbation to plain parameter coordinates.
+interval ``j``. Every interval ``j`` of a window moves its motion through the window's end alone:
+``F_w^j = ∂e_w/∂end · D_j`` with ``D_j`` the interval's own map (see
+:mod:`nlp_calib.problem.motion`), so ``Q_j = (Σ_{w ∋ j} L_w ∂e_w/∂end)·D_j`` and the input
+noise a window collects, ``Σ_j D_j Σ_u D_jᵀ``, are differences of running sums: the cost is
+linear in the number of windows whatever their length. The tracker's variances are estimated
+from the squared residuals by non-negative least squares (method of moments, corrected for the
+fitted degrees of freedom); the input noise is given. ``M`` maps the manifold perturbation to
+plain parameter coordinates.
 
 Assumptions: white tracker-pose noise explains the residuals beyond the given input noise (no
 timing error or slowly varying model error), and the problem is close to linear within a few σ.
@@ -32,7 +37,7 @@ from nlp_calib.models import reference_scales
 from nlp_calib.problem import ResidualData
 from nlp_calib.solvers import ProblemEvaluator
 
-#: The per-residual Functions the estimate maps over the data, per residual (not summed).
+#: The per-residual Functions the estimate evaluates, per residual (not summed).
 FUNCTIONS = ("robust_terms", "sensitivities")
 
 
@@ -105,6 +110,16 @@ def not_available(evaluator: ProblemEvaluator) -> Uncertainty:
     )
 
 
+def _accumulate(n: int, index: np.ndarray, values: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``out[i] += Σ values[w]`` over the ``w`` with ``index[w] == i`` (``values`` ``(N, ...)``)."""
+    out = np.zeros((n, *values.shape[1:])) if out is None else out
+    flat = values.reshape(values.shape[0], -1)
+    target = out.reshape(n, -1)
+    for k in range(flat.shape[1]):
+        target[:, k] += np.bincount(index, weights=flat[:, k], minlength=n)
+    return out
+
+
 def estimate(
     evaluator: ProblemEvaluator, x: np.ndarray, data: ResidualData, input_noise_std: np.ndarray
 ) -> Uncertainty:
@@ -113,49 +128,48 @@ def estimate(
     ne = evaluator.normal_equations(x)
     if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
         return not_available(evaluator)
-    n, N, H = fns.n_free, evaluator.n_residuals, data.horizon
-    n_in = fns.n_inputs
-    rows = fns.data_rows
-    e, s, weight, _ = evaluator.residual_terms(x)
-    sens, jac = (
-        np.asarray(v)
-        for v in evaluator.mapped("sensitivities", reduce=False)(x, evaluator.x_fixed, evaluator.data)
-    )
-    de_ddata = sens.reshape(3, -1, rows)[:, :N]  # (3, N, rows)
-    J = jac.reshape(3, -1, n)[:, :N]  # (3, N, n)
-    poses = data.log.T_world_sensor
-    a_idx, b_idx = data.starts, data.starts + H
+    n, N, n_in = fns.n_free, evaluator.n_residuals, fns.n_inputs
+    e, s, weight = evaluator.robust_terms(x)
+    sens = evaluator.sensitivities(x)
+    de_dend = sens.de_dend  # (N, 3, m)
+    m = de_dend.shape[2]
+    n_int = data.inputs.shape[1]
+    poses = data.T_world_sensor
+    a_idx, b_idx = data.starts, data.stops
     Da, Db = (
-        np.asarray(v).reshape(3, N, 3) for v in fns.between_jacobians.map(N)(poses[a_idx].T, poses[b_idx].T)
+        np.asarray(v).reshape(3, N, 3).transpose(1, 0, 2)
+        for v in fns.between_jacobians.map(N)(poses[a_idx].T, poses[b_idx].T)
     )
-    de_dz = de_ddata[:, :, n_in * H : n_in * H + 3]
-    Ea = np.einsum("cwk,kwl->wcl", de_dz, Da)  # (N, 3, 3)
-    Eb = np.einsum("cwk,kwl->wcl", de_dz, Db)
-    F = de_ddata[:, :, : n_in * H].reshape(3, N, H, n_in).transpose(1, 2, 0, 3)  # (N, H, 3, n_in)
+    Ea, Eb = sens.de_dz @ Da, sens.de_dz @ Db  # (N, 3, 3)
 
     # Input noise is known (encoder resolution, or set by the user); the tracker's two variances
     # follow from the squared residuals by the method of moments, on inliers only. Estimating the
     # input noise the same way is ill-posed: its share of the residuals is small, its effect on the
     # parameters is not (it does not telescope), so residual noise would masquerade as it.
     Sigma_in = np.asarray(input_noise_std, dtype=float) ** 2
+    D = sens.D if sens.D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
+    # The input noise each window's end collects, Σ_j D_j Σ_u D_jᵀ over its intervals.
+    running = np.zeros((n_int + 1, m, m))
+    np.cumsum(np.einsum("jki,i,jli->jkl", D, Sigma_in, D), axis=0, out=running[1:])
+    S_end = running[b_idx] - running[a_idx]
+    known = np.einsum("wck,wkl,wcl->wc", de_dend, S_end, de_dend)
     use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(N, dtype=bool)
     E2 = Ea**2 + Eb**2  # (N, 3, 3): per residual component c, pose component k
     coef = np.concatenate([E2[:, :, :2].sum(axis=2, keepdims=True), E2[:, :, 2:3]], axis=2)  # (N, 3, 2)
-    known = np.einsum("whci,i->wc", F**2, Sigma_in)
-    m = 3 * int(use.sum())
-    dof = max(m - n, 1)
-    var = nnls_small(coef[use].reshape(-1, 2), (e.T[use] ** 2 - known[use]).ravel()) * (m / dof)
+    mm = 3 * int(use.sum())
+    dof = max(mm - n, 1)
+    var = nnls_small(coef[use].reshape(-1, 2), (e.T[use] ** 2 - known[use]).ravel()) * (mm / dof)
     Sigma_pose = np.array([var[0], var[0], var[1]])
 
     Omega = evaluator.omega
-    L = weight[:, None, None] * np.einsum("cwi,c->wic", J, Omega)  # (N, n, 3)
-    n_poses = poses.shape[0]
-    K = np.zeros((n_poses, n, 3))
-    np.add.at(K, a_idx, np.einsum("wic,wcl->wil", L, Ea))
-    np.add.at(K, b_idx, np.einsum("wic,wcl->wil", L, Eb))
-    Q = np.zeros((data.inputs.shape[1], n, n_in))
-    intervals = data.starts[:, None] + np.arange(H)[None, :]
-    np.add.at(Q, intervals.ravel(), np.einsum("wic,whcl->whil", L, F).reshape(-1, n, n_in))
+    L = weight[:, None, None] * np.einsum("wci,c->wic", sens.J, Omega)  # (N, n, 3)
+    K = _accumulate(poses.shape[0], a_idx, L @ Ea)
+    _accumulate(poses.shape[0], b_idx, L @ Eb, K)
+    # Σ over the windows containing interval j of L_w ∂e_w/∂end: +at the first interval, −after the last.
+    G = L @ de_dend  # (N, n, m)
+    C = _accumulate(n_int + 1, a_idx, G)
+    _accumulate(n_int + 1, b_idx, -G, C)
+    Q = np.cumsum(C, axis=0)[:n_int] @ D  # (n_int, n, n_in)
     meat = np.einsum("pik,k,pjk->ij", K, Sigma_pose, K) + np.einsum("jik,k,jlk->il", Q, Sigma_in, Q)
     # Residuals beyond the kernel threshold are not explained by the noise model; their bounded
     # but non-zero pull is counted as it is, from their own scores.

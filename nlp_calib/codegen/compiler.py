@@ -25,9 +25,7 @@ CFLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fPIC", "-shared", "-Wno-i
 #: very large ones (a long horizon's exact Hessian) compile about twice as fast at -O1, for a
 #: small loss at run time; the solvers' inner loops get -O3.
 CFLAGS_COLD = ("-O1", "-fno-math-errno", "-fPIC", "-shared", "-Wno-int-conversion")
-HOT_FUNCTIONS = frozenset(
-    {"normal_equations", "cost", "cost_gradient", "cost_hessian", "gauss_newton_hessian"}
-)
+HOT_FUNCTIONS = frozenset({"normal_equations", "cost", "prefix_step", "prefix_value_step"})
 LARGE_FUNCTION = 20_000  # instructions
 
 

@@ -178,8 +178,10 @@ class Calibration:
         # Observability at the first estimate with a finite cost (a solver may not have started).
         results = [rep.result for rep in reports.values()]
         first = next((r for r in results if np.isfinite(r.cost)), results[0])
-        observability = analyse(self.evaluator, first.x, self.data.log.T_world_sensor)
+        observability = analyse(self.evaluator, first.x, self.data.T_world_sensor)
         warnings = list(observability.warnings)
+        if self.alignment.estimate is not None and self.alignment.estimate.at_edge:
+            warnings.append(steps.lag_at_edge(self.scenario, self.alignment.lag_s))
         warnings += [
             f"{name}: {rep.result.reason}" for name, rep in reports.items() if not rep.result.converged
         ]

@@ -102,7 +102,7 @@ class Scenario:
     priors: Mapping[str, Prior] = field(default_factory=dict)
     encoder_noise: Mapping[str, float] = field(default_factory=dict)
     strict: bool = True
-    backend: str = "interpreted"
+    backend: str = "compiled"
     threads: int = 1
 
     def with_dataset(self, path: str | Path) -> Scenario:

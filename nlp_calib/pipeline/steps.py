@@ -8,6 +8,7 @@ are translated once into the scenario's language (:func:`scenario_key`).
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 
@@ -15,13 +16,28 @@ import numpy as np
 
 from nlp_calib.analysis import uncertainty
 from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
-from nlp_calib.core.errors import DatasetError, ModelError, OptionsError, ProblemError, ScenarioError
+from nlp_calib.core.errors import (
+    DatasetError,
+    ModelError,
+    NlpCalibWarning,
+    OptionsError,
+    ProblemError,
+    ScenarioError,
+)
 from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.models import SENSOR_PARAMS, KinematicModel, get_model, header_parameters, load_log
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.problem import ProblemFunctions, ProblemSpec, ResidualData, build, build_residual_data
+from nlp_calib.problem import (
+    ProblemFunctions,
+    ProblemSpec,
+    ResidualData,
+    build,
+    build_residual_data,
+    interval_inputs,
+)
 from nlp_calib.solvers import Priors, ProblemEvaluator, get_solver
 from nlp_calib.solvers.backends import Backend, BackendOptions, make_backend
+from nlp_calib.solvers.evaluation import requests
 
 #: The solver the pipeline's own fits use (prior scaling, the tracker-lag search): the fastest.
 INTERNAL_SOLVER = "gauss_newton"
@@ -121,12 +137,12 @@ def auto_guess(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: 
     # Windows overlapping by three quarters carry nearly all the information at a fraction
     # of the cost of every window.
     step = max(1, data.horizon // (4 * sc.residual.stride))
-    columns = data.columns[:, ::step]
+    columns = data.columns_of(np.arange(0, data.n_residuals, step))
     predict = fns.predict_window.map(columns.shape[1])
 
     def base_motion(params: Mapping[str, float]) -> np.ndarray:
         p = np.array([params[n] for n in fns.names])
-        return np.asarray(predict(p, columns))
+        return np.asarray(predict(p, columns[:rows]))
 
     return fns.model.initial_guess(columns[:rows], columns[rows : rows + 3], base_motion)
 
@@ -164,12 +180,10 @@ def prepare_backend(sc: Scenario, fns: ProblemFunctions) -> Backend:
     """The scenario's evaluation backend, with every Function its solvers and analyses map ready."""
     with scenario_key(sc, "backend"):
         backend = make_backend(BackendOptions(kind=sc.backend, threads=sc.threads))
-    summed = {"normal_equations", "cost"}
+    names = {"normal_equations", "cost", *uncertainty.FUNCTIONS}
     for name in sc.solvers:
-        summed.update(get_solver(name).functions(sc.options_for(name)))
-    requests = [(fns.function(n), ("data",), True) for n in sorted(summed)]
-    requests += [(fns.function(n), ("data",), False) for n in uncertainty.FUNCTIONS]
-    backend.prepare(requests)
+        names.update(get_solver(name).functions(sc.options_for(name)))
+    backend.prepare(requests(fns, names))
     return backend
 
 
@@ -183,8 +197,11 @@ class Binder:
     x_fixed: np.ndarray
     priors: Priors
 
-    def bind(self, log: Log, start: int, stop: int) -> tuple[ResidualData, ProblemEvaluator]:
-        """Residual data of records ``start:stop`` of ``log`` and an evaluator bound to it."""
+    def bind(
+        self, log: Log, start: int, stop: int, evaluator: ProblemEvaluator | None = None
+    ) -> tuple[ResidualData, ProblemEvaluator]:
+        """Residual data of records ``start:stop`` of ``log`` and an evaluator bound to it (``evaluator``
+        re-bound, when given)."""
         sc = self.scenario
         data = build_residual_data(
             self.fns, log.select(start, stop), sc.residual, drop_stationary=sc.samples.drop_stationary
@@ -194,9 +211,12 @@ class Binder:
                 f"only {data.n_residuals} residuals in records [{start}, {stop}) for "
                 f"{self.fns.n_free} parameters; widen 'samples' or shorten the horizon"
             )
+        if evaluator is not None:
+            evaluator.bind(data)
+            return data, evaluator
         evaluator = ProblemEvaluator(
             self.fns,
-            data.columns,
+            data,
             x_fixed=self.x_fixed,
             omega=np.array(sc.information.omega()),
             delta=sc.robust.delta,
@@ -204,6 +224,12 @@ class Binder:
             backend=self.backend,
         )
         return data, evaluator
+
+    def inputs(self, log: Log, start: int, stop: int) -> np.ndarray:
+        """The interval inputs of records ``start:stop`` of ``log`` (what :meth:`bind` binds)."""
+        return interval_inputs(
+            self.fns.model, [log.select(start, stop)], self.scenario.residual.steering_sample
+        )
 
     def fit(self, evaluator: ProblemEvaluator, x0: np.ndarray) -> tuple[float, np.ndarray, bool]:
         """The internal solver's cost, estimate and convergence from ``x0``."""
@@ -256,7 +282,11 @@ class Alignment:
 
 
 def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> LagEstimate:
-    """Grid search of the tracker lag by the internal solver's fit cost on a common record range."""
+    """The tracker lag that minimises the internal solver's fit cost on a common record range.
+
+    One evaluator serves every lag: the windows and the tracker's motions stay, only the encoder
+    inputs are re-sampled (and, when stationary windows are dropped, the windows re-selected).
+    """
     sc = binder.scenario
     al = sc.alignment
     kinds = binder.fns.model.encoder_kinds
@@ -265,12 +295,16 @@ def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np
     first = max(start, int(np.searchsorted(t, t[0] + reach, side="left")))
     last = min(stop, int(np.searchsorted(t, t[-1] - reach, side="right")))
     fit_stop = split(sc, first, last)
+    _, ev = binder.bind(log, first, fit_stop)
     x_start = x0
 
     def fit_cost(lag: float) -> float:
         nonlocal x_start
         shifted, _ = resample_encoders(log, lag, kinds)
-        _, ev = binder.bind(shifted, first, fit_stop)
+        if sc.samples.drop_stationary:
+            binder.bind(shifted, first, fit_stop, evaluator=ev)
+        else:
+            ev.set_inputs(binder.inputs(shifted, first, fit_stop))
         cost, x, converged = binder.fit(ev, x_start)
         if not converged:
             return float("nan")
@@ -288,9 +322,21 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
     if lag == "auto":
         estimate = estimate_tracker_lag(binder, log, start, stop, x0)
         lag = estimate.lag_s
+        if estimate.at_edge:
+            warnings.warn(lag_at_edge(sc, estimate.lag_s), NlpCalibWarning, stacklevel=2)
     with scenario_key(sc, "alignment.tracker_lag"):
         aligned, valid = resample_encoders(log, float(lag), binder.fns.model.encoder_kinds)
     return Alignment(lag_s=float(lag), estimate=estimate, log=aligned, valid=valid)
+
+
+def lag_at_edge(sc: Scenario, lag_s: float) -> str:
+    """The warning for a tracker lag estimated at an end of the searched range."""
+    lo, hi = sc.alignment.search
+    return (
+        f"alignment.tracker_lag: the estimated lag {1e3 * lag_s:.1f} ms lies at the edge of the "
+        f"searched range [{lo:g}, {hi:g}] s, so the best lag may lie beyond it: widen "
+        "alignment.search, or check the log's timestamps (a gap or a jump in time misleads the estimate)"
+    )
 
 
 def with_priors(binder: Binder, priors: Priors) -> Binder:
