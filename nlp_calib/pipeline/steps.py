@@ -7,8 +7,8 @@ are translated once into the scenario's language (:func:`scenario_key`).
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
 import warnings
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 

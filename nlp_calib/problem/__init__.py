@@ -11,6 +11,7 @@ from nlp_calib.problem.functions import (
     ProblemSpec,
     build,
     unpack_upper,
+    upper_indices,
 )
 from nlp_calib.problem.windows import (
     ResidualData,
@@ -35,5 +36,6 @@ __all__ = [
     "build_residual_data",
     "interval_inputs",
     "unpack_upper",
+    "upper_indices",
     "window_starts",
 ]

@@ -356,14 +356,14 @@ def build(model: KinematicModel, spec: ProblemSpec) -> ProblemFunctions:
 
 
 @functools.cache
-def _upper_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
+def upper_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
     cols, rows = zip(*[(j, i) for j in range(n) for i in range(j + 1)]) if n else ((), ())
     return np.array(rows, dtype=np.intp), np.array(cols, dtype=np.intp)
 
 
 def unpack_upper(h_upper: np.ndarray, n: int) -> np.ndarray:
     """The symmetric ``n x n`` matrix whose upper triangle is stored column by column."""
-    rows, cols = _upper_indices(n)
+    rows, cols = upper_indices(n)
     H = np.empty((n, n))
     H[rows, cols] = np.ravel(h_upper)
     H[cols, rows] = np.ravel(h_upper)

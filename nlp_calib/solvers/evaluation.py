@@ -146,7 +146,11 @@ class ProblemEvaluator:
         """The per-residual Function ``name`` over the windows at ``x`` (bound on first use)."""
         order = ORDER[name]
         if name not in self._bound:
-            static = {"x_fixed": self.x_fixed, "omega": self.omega, "delta": self.delta}
+            static: dict[str, np.ndarray | float] = {
+                "x_fixed": self.x_fixed,
+                "omega": self.omega,
+                "delta": self.delta,
+            }
             bound = {"data": self.window_data, "motion": self.motion.buffer(order)}
             self._bound[name] = Buffered(self.mapped(name, reduce=name in SUMMED), static, bound)
         self.motion.update(order, x, self.x_fixed)

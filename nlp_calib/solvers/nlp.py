@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 import casadi as ca
 import numpy as np
 
-from nlp_calib.problem.functions import _upper_indices
+from nlp_calib.problem import upper_indices
 from nlp_calib.solvers.evaluation import ProblemEvaluator
 
 
@@ -44,7 +44,7 @@ class NumpyCallback(ca.Callback):
         name: str,
         ins: Sequence[tuple[str, ca.Sparsity]],
         outs: Sequence[tuple[str, ca.Sparsity]],
-        fn: Callable[..., list[np.ndarray | float]],
+        fn: Callable[..., Sequence[np.ndarray | float]],
         guard: Guard,
     ) -> None:
         ca.Callback.__init__(self)
@@ -74,7 +74,7 @@ class NumpyCallback(ca.Callback):
             try:
                 values = self._fn(*[np.asarray(a.nonzeros()) for a in args])
                 return [ca.DM(sp, np.ravel(v)) for (_, sp), v in zip(self._outs, values)]
-            except BaseException as exc:  # noqa: BLE001 - re-raised after the solve
+            except BaseException as exc:
                 self._guard.error = exc
         return [ca.DM(sp, np.nan) for _, sp in self._outs]
 
@@ -108,7 +108,7 @@ class NlpOracle:
         name: str,
         ins: list[tuple[str, ca.Sparsity]],
         outs: list[tuple[str, ca.Sparsity]],
-        fn: Callable[..., list[np.ndarray | float]],
+        fn: Callable[..., Sequence[np.ndarray | float]],
     ) -> NumpyCallback:
         return NumpyCallback(name, ins, outs, fn, self.guard)
 
@@ -122,7 +122,7 @@ class NlpOracle:
         """``M⁻¹``: plain coordinates from the manifold perturbation."""
         return np.linalg.inv(self.ev.tangent_map(x))
 
-    def _f(self, v: np.ndarray, _p: np.ndarray) -> list[float]:
+    def _f(self, v: np.ndarray, _p: np.ndarray) -> Sequence[np.ndarray | float]:
         if not self.lifted:
             return [self.ev.cost(v)]
         x, w = self._split(v)
@@ -131,7 +131,7 @@ class NlpOracle:
         cost = float(np.sum(w * s + d2 * (1.0 / w - 1.0)))
         return [cost + (self.ev.prior_terms(x)[0] if self.ev.priors.active else 0.0)]
 
-    def _grad(self, v: np.ndarray, _p: np.ndarray) -> list[np.ndarray | float]:
+    def _grad(self, v: np.ndarray, _p: np.ndarray) -> Sequence[np.ndarray | float]:
         ev = self.ev
         x, w = self._split(v)
         if self.exact:
@@ -152,10 +152,12 @@ class NlpOracle:
         cost = float(np.sum(w * s + d2 * (1.0 / w - 1.0))) + prior_cost
         return [cost, np.concatenate([grad_x, s - d2 / w**2])]
 
-    def _hess(self, v: np.ndarray, _p: np.ndarray, lam_f: np.ndarray, _lam_g: np.ndarray) -> list[np.ndarray]:
+    def _hess(
+        self, v: np.ndarray, _p: np.ndarray, lam_f: np.ndarray, _lam_g: np.ndarray
+    ) -> Sequence[np.ndarray | float]:
         ev = self.ev
         x, w = self._split(v)
-        rows, cols = _upper_indices(ev.fns.n_free)
+        rows, cols = upper_indices(ev.fns.n_free)
         if self.exact:
             return [float(lam_f[0]) * ev.cost_derivatives(x)[2][rows, cols]]
         Minv = self._plain(x)
@@ -173,7 +175,7 @@ class NlpOracle:
     def _hess_sparsity(self) -> ca.Sparsity:
         """Upper triangle: ``x``'s block, and per lifted weight its column of cross terms and diagonal."""
         n = self.ev.fns.n_free
-        rows, cols = (list(map(int, v)) for v in _upper_indices(n))
+        rows, cols = (list(map(int, v)) for v in upper_indices(n))
         if self.lifted:
             for k in range(self.ev.n_residuals):
                 rows += [*range(n), n + k]
