@@ -132,6 +132,7 @@ def test_compiled_backend_gives_the_interpreted_solution(
         assert_close(b.params, a.params, rtol=1e-10, atol=1e-14, what=solver)
         assert b.cost == pytest.approx(a.cost, rel=1e-10)
     # The second set-up reuses the cached shared objects: nothing new is compiled.
+    compiled.backend.wait()
     before = sorted(p.name for p in (tmp_path / "cache").glob("*.so"))
     Calibration(dataclasses.replace(sc, backend="compiled")).solve("gauss_newton")
     assert sorted(p.name for p in (tmp_path / "cache").glob("*.so")) == before

@@ -98,6 +98,9 @@ class Backend:
     def prepare(self, requests: Sequence[Request]) -> None:
         """Get ready to evaluate these Functions (nothing to do here)."""
 
+    def wait(self) -> None:
+        """Wait until what :meth:`prepare` started is ready (nothing to wait for here)."""
+
     def map(self, f: ca.Function, n: int, mapped_inputs: Sequence[str], reduce: bool) -> ca.Function:
         """``f`` over ``n`` columns of ``mapped_inputs``; outputs summed when ``reduce``."""
         reduce_in = [i for i in range(f.n_in()) if f.name_in(i) not in mapped_inputs]

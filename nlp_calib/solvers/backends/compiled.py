@@ -85,6 +85,13 @@ class CompiledBackend(Backend):
                 if key not in self._loaded and key not in self._pending:
                     self._pending[key] = _pool().submit(self._build, request)
 
+    def wait(self) -> None:
+        """Wait until everything :meth:`prepare` started has compiled."""
+        with self._lock:
+            pending = list(self._pending.values())
+        for future in pending:
+            future.result()
+
     def scan_chunk(self, step: ca.Function) -> ca.Function:
         return self._compile(Request(step, scan=True))
 
