@@ -99,12 +99,27 @@ def _blocks(chunks: Iterable[bytes]) -> Iterator[tuple[int, bytes, dict[int, int
         if len(carry) > MAX_LINE_BYTES:
             long_len, carry = len(carry), b""
         if body:
+            body = _cut_long_lines(body, line, long)
             yield line, body, long
             line += body.count(b"\n")
     if long_len >= 0:
         yield line, b"\n", {line: long_len}
     elif carry.rstrip(b"\r"):
         yield line, carry.rstrip(b"\r") + b"\n", {}
+
+
+def _cut_long_lines(body: bytes, line: int, long: dict[int, int]) -> bytes:
+    """``body`` with each line longer than :data:`MAX_LINE_BYTES` emptied (its length noted)."""
+    ends = np.flatnonzero(np.frombuffer(body, dtype=np.uint8) == 10)
+    lengths = np.diff(np.concatenate([[-1], ends])) - 1
+    too_long = np.flatnonzero(lengths > MAX_LINE_BYTES)
+    if not too_long.size:
+        return body
+    lines = body.split(b"\n")
+    for k in too_long.tolist():
+        long[line + k] = len(lines[k])
+        lines[k] = b""
+    return b"\n".join(lines)
 
 
 def _text_chunks(lines: Iterable[str]) -> Iterator[bytes]:
