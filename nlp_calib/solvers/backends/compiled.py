@@ -23,7 +23,13 @@ from pathlib import Path
 
 import casadi as ca
 
-from nlp_calib.codegen.compiler import compile_shared, compiler_flags, find_compiler, generate_source
+from nlp_calib.codegen.compiler import (
+    compile_shared,
+    compiler_flags,
+    find_compiler,
+    generate_source,
+    usable_cache_dir,
+)
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.solvers.backends.base import Backend, BackendOptions, Request, scan_chunk
 
@@ -163,4 +169,5 @@ def make_compiled_backend(options: BackendOptions) -> Backend:
                 stacklevel=2,
             )
         return Backend()
+    usable_cache_dir()  # a cache that cannot be written is named now, before any work
     return CompiledBackend(options, compiler)
