@@ -139,3 +139,18 @@ def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval() -> N
     assert not use.all()  # the outliers' own pull is exercised
     assert got.noise["tracker_xy"] == pytest.approx(np.sqrt(var[0]), rel=1e-9)
     assert_close(got.covariance, expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max())
+
+
+def test_faulty_intervals_and_records_drop_their_windows() -> None:
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=4))
+    log = sim_log("tricycle", 60, 6)
+    bad_intervals = np.zeros(59, dtype=bool)
+    bad_intervals[20] = True
+    bad_records = np.zeros(60, dtype=bool)
+    bad_records[40] = True
+    data = build_residual_data(
+        fns, log, ResidualOptions(horizon=4), bad_intervals=bad_intervals, bad_records=bad_records
+    )
+    spoiled = [s for s in range(56) if s <= 20 < s + 4 or s in (40, 36)]
+    assert data.dropped_faulty == len(spoiled) == 6
+    assert sorted(set(range(56)) - set(data.starts.tolist())) == spoiled

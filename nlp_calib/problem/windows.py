@@ -53,6 +53,7 @@ class ResidualData:
     z: np.ndarray
     horizon: int
     dropped_stationary: int
+    dropped_faulty: int = 0
 
     @property
     def log(self) -> Log:
@@ -142,9 +143,16 @@ def build_residual_data(
     options: ResidualOptions,
     *,
     drop_stationary: bool = False,
+    bad_intervals: np.ndarray | None = None,
+    bad_records: np.ndarray | None = None,
 ) -> ResidualData:
     """The windows of ``options`` over ``log`` (or several logs, end to end, no window crossing
-    from one into the next); ``drop_stationary`` drops windows in which no encoder moves."""
+    from one into the next).
+
+    Windows in which no encoder moves are dropped when ``drop_stationary``; windows that cross an
+    interval of ``bad_intervals`` (a mask over the intervals) or start or end at a record of
+    ``bad_records`` (over the records) are always dropped.
+    """
     if options.horizon != fns.spec.horizon:
         raise ProblemError(
             f"data horizon {options.horizon} does not match the built problem's {fns.spec.horizon}"
@@ -172,4 +180,12 @@ def build_residual_data(
     if drop_stationary and starts.size:
         keep = data.interval_counts(fns.model.moving(inputs)) > 0
         data = replace(data.select(keep), dropped_stationary=int((~keep).sum()))
+    faulty = np.zeros(data.n_residuals, dtype=bool)
+    if bad_intervals is not None and np.any(bad_intervals):
+        faulty |= data.interval_counts(bad_intervals) > 0
+    if bad_records is not None and np.any(bad_records):
+        bad = np.asarray(bad_records, dtype=bool)
+        faulty |= bad[data.starts] | bad[data.stops]
+    if faulty.any():
+        data = replace(data.select(~faulty), dropped_faulty=int(faulty.sum()))
     return data
