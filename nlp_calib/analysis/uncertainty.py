@@ -63,17 +63,26 @@ class Uncertainty:
 
 def nnls_small(A: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Non-negative least squares for a handful of unknowns (exhaustive active sets)."""
-    k = A.shape[1]
-    best, best_cost = np.zeros(k), float(y @ y)
+    return nnls_gram(A.T @ A, A.T @ y, float(y @ y))
+
+
+def nnls_gram(G: np.ndarray, h: np.ndarray, yy: float) -> np.ndarray:
+    """:func:`nnls_small` from ``G = AᵀA``, ``h = Aᵀy`` and ``yy = yᵀy`` (summed block by block)."""
+    k = G.shape[0]
+    best, best_cost = np.zeros(k), yy
     for size in range(1, k + 1):
         for cols in itertools.combinations(range(k), size):
-            sol, *_ = np.linalg.lstsq(A[:, cols], y, rcond=None)
+            c = list(cols)
+            try:
+                sol = np.linalg.solve(G[np.ix_(c, c)], h[c])
+            except np.linalg.LinAlgError:
+                continue
             if np.all(sol >= 0):
                 full = np.zeros(k)
-                full[list(cols)] = sol
-                r = A @ full - y
-                if r @ r < best_cost:
-                    best, best_cost = full, float(r @ r)
+                full[c] = sol
+                cost = yy - 2.0 * full @ h + full @ G @ full
+                if cost < best_cost:
+                    best, best_cost = full, cost
     return best
 
 
@@ -110,14 +119,24 @@ def not_available(evaluator: ProblemEvaluator) -> Uncertainty:
     )
 
 
-def _accumulate(n: int, index: np.ndarray, values: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """``out[i] += Σ values[w]`` over the ``w`` with ``index[w] == i`` (``values`` ``(N, ...)``)."""
-    out = np.zeros((n, *values.shape[1:])) if out is None else out
-    flat = values.reshape(values.shape[0], -1)
-    target = out.reshape(n, -1)
-    for k in range(flat.shape[1]):
-        target[:, k] += np.bincount(index, weights=flat[:, k], minlength=n)
-    return out
+#: Windows (or intervals) handled at a time: bounds the temporaries, whatever the log's length.
+STEP = 1 << 16
+
+
+def _add(out: np.ndarray, index: np.ndarray, values: np.ndarray, distinct: bool) -> None:
+    """``out[index[w]] += values[w]`` for every ``w`` (``distinct``: no index repeats)."""
+    if index.size and index[-1] - index[0] == index.size - 1 and distinct:
+        out[index[0] : index[-1] + 1] += values  # consecutive windows: a slice, no gather
+    elif distinct:
+        out[index] += values
+    else:
+        np.add.at(out, index, values)
+
+
+def _weighted_gram(A: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``Σ_p A_p diag(weights) A_pᵀ`` for ``A`` ``(P, n, k)``, as one matrix product."""
+    Aw = (A * np.sqrt(weights)).transpose(1, 0, 2).reshape(A.shape[1], -1)
+    return Aw @ Aw.T
 
 
 def estimate(
@@ -131,51 +150,61 @@ def estimate(
     n, N, n_in = fns.n_free, evaluator.n_residuals, fns.n_inputs
     e, s, weight = evaluator.robust_terms(x)
     sens = evaluator.sensitivities(x)
-    de_dend = sens.de_dend  # (N, 3, m)
-    m = de_dend.shape[2]
+    m = sens.de_dend.shape[2]
     n_int = data.inputs.shape[1]
     poses = data.T_world_sensor
     a_idx, b_idx = data.starts, data.stops
-    Da, Db = (
-        np.asarray(v).reshape(3, N, 3).transpose(1, 0, 2)
-        for v in fns.between_jacobians.map(N)(poses[a_idx].T, poses[b_idx].T)
-    )
-    Ea, Eb = sens.de_dz @ Da, sens.de_dz @ Db  # (N, 3, 3)
-
+    distinct = bool(np.all(np.diff(a_idx) > 0) and np.all(np.diff(b_idx) > 0))
+    Omega = evaluator.omega
     # Input noise is known (encoder resolution, or set by the user); the tracker's two variances
     # follow from the squared residuals by the method of moments, on inliers only. Estimating the
     # input noise the same way is ill-posed: its share of the residuals is small, its effect on the
     # parameters is not (it does not telescope), so residual noise would masquerade as it.
     Sigma_in = np.asarray(input_noise_std, dtype=float) ** 2
     D = sens.D if sens.D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
-    # The input noise each window's end collects, Σ_j D_j Σ_u D_jᵀ over its intervals.
+    # Running sums over the intervals of Σ_j D_j Σ_u D_jᵀ: the input noise a window's end collects.
     running = np.zeros((n_int + 1, m, m))
-    np.cumsum(np.einsum("jki,i,jli->jkl", D, Sigma_in, D), axis=0, out=running[1:])
-    S_end = running[b_idx] - running[a_idx]
-    known = np.einsum("wck,wkl,wcl->wc", de_dend, S_end, de_dend)
+    for lo in range(0, n_int, STEP):
+        hi = min(n_int, lo + STEP)
+        Dj = D[lo:hi]
+        part = (Dj * Sigma_in) @ Dj.transpose(0, 2, 1)
+        running[lo + 1 : hi + 1] = np.cumsum(part, axis=0) + running[lo]
     use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(N, dtype=bool)
-    E2 = Ea**2 + Eb**2  # (N, 3, 3): per residual component c, pose component k
-    coef = np.concatenate([E2[:, :, :2].sum(axis=2, keepdims=True), E2[:, :, 2:3]], axis=2)  # (N, 3, 2)
+    gram, proj, yy = np.zeros((2, 2)), np.zeros(2), 0.0
+    K = np.zeros((poses.shape[0], n, 3))
+    # Σ over the windows containing interval j of L_w ∂e_w/∂end: +at the first interval, −after the last.
+    C = np.zeros((n_int + 1, n, m))
+    outliers = np.zeros((n, n))
+    for lo in range(0, N, STEP):
+        w = slice(lo, min(N, lo + STEP))
+        a, b = a_idx[w], b_idx[w]
+        de_dz, de_dend = sens.de_dz[w], sens.de_dend[w]
+        Ea, Eb = de_dz @ sens.dz_da[w], de_dz @ sens.dz_db[w]  # (., 3, 3)
+        known = ((de_dend @ (running[b] - running[a])) * de_dend).sum(axis=2)
+        E2 = Ea**2 + Eb**2  # per residual component c, pose component k
+        coef = np.stack([E2[:, :, :2].sum(axis=2), E2[:, :, 2]], axis=2)  # (., 3, 2)
+        u = use[w]
+        A, y = coef[u].reshape(-1, 2), (e[:, w].T[u] ** 2 - known[u]).ravel()
+        gram, proj, yy = gram + A.T @ A, proj + A.T @ y, yy + float(y @ y)
+        L = weight[w, None, None] * sens.J[w].transpose(0, 2, 1) * Omega[None, None, :]  # (., n, 3)
+        _add(K, a, L @ Ea, distinct)
+        _add(K, b, L @ Eb, distinct)
+        G = L @ de_dend
+        _add(C, a, G, distinct)
+        _add(C, b, -G, distinct)
+        # Residuals beyond the kernel threshold are not explained by the noise model; their bounded
+        # but non-zero pull is counted as it is, from their own scores.
+        score = np.einsum("wic,cw->wi", L[~u], e[:, w][:, ~u])
+        outliers += score.T @ score
     mm = 3 * int(use.sum())
     dof = max(mm - n, 1)
-    var = nnls_small(coef[use].reshape(-1, 2), (e.T[use] ** 2 - known[use]).ravel()) * (mm / dof)
+    var = nnls_gram(gram, proj, yy) * (mm / dof)
     Sigma_pose = np.array([var[0], var[0], var[1]])
-
-    Omega = evaluator.omega
-    L = weight[:, None, None] * np.einsum("wci,c->wic", sens.J, Omega)  # (N, n, 3)
-    K = _accumulate(poses.shape[0], a_idx, L @ Ea)
-    _accumulate(poses.shape[0], b_idx, L @ Eb, K)
-    # Σ over the windows containing interval j of L_w ∂e_w/∂end: +at the first interval, −after the last.
-    G = L @ de_dend  # (N, n, m)
-    C = _accumulate(n_int + 1, a_idx, G)
-    _accumulate(n_int + 1, b_idx, -G, C)
-    Q = np.cumsum(C, axis=0)[:n_int] @ D  # (n_int, n, n_in)
-    meat = np.einsum("pik,k,pjk->ij", K, Sigma_pose, K) + np.einsum("jik,k,jlk->il", Q, Sigma_in, Q)
-    # Residuals beyond the kernel threshold are not explained by the noise model; their bounded
-    # but non-zero pull is counted as it is, from their own scores.
-    if not use.all():
-        g_out = np.einsum("wic,cw->iw", L[~use], e[:, ~use])
-        meat = meat + g_out @ g_out.T
+    meat = _weighted_gram(K, Sigma_pose) + outliers
+    np.cumsum(C, axis=0, out=C)
+    for lo in range(0, n_int, STEP):
+        Q = C[lo : min(n_int, lo + STEP)] @ D[lo : lo + STEP]  # (., n, n_in)
+        meat += _weighted_gram(Q, Sigma_in)
     if evaluator.priors.active:
         meat = meat + evaluator.prior_information(x)
     free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[

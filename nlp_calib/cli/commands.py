@@ -37,7 +37,7 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
         for i, scenario in enumerate(scenarios):
             out = _out_dir(args, scenario.name)
             progress.update(i, f"{scenario.name}: setting up and solving")
-            calib = Calibration.setup(scenario, data=args.data)
+            calib = Calibration.setup(scenario, data=args.data, solvers=solvers)
             run = calib.run(solvers)
             runs.append(run)
             progress.clear()

@@ -72,14 +72,17 @@ class Calibration:
     ``aligned``.
     """
 
-    def __init__(self, scenario: Scenario, log: Log | None = None) -> None:
+    def __init__(
+        self, scenario: Scenario, log: Log | None = None, solvers: Sequence[str] | None = None
+    ) -> None:
         t0 = time.perf_counter()
         self.scenario = sc = scenario
+        self.solvers = tuple(solvers or sc.solvers)
         self.model, self.log = steps.load(sc, log)
         start, stop = steps.select(sc, self.log)
         self.fns = steps.build_problem(sc, self.model)
         self.start = steps.starting_point(sc, self.fns, self.log, start, steps.split(sc, start, stop))
-        self.backend = steps.prepare_backend(sc, self.fns)
+        self.backend = steps.prepare_backend(sc, self.fns, self.solvers)
         binder = steps.Binder(
             sc, self.fns, self.backend, self.start.x_fixed, steps.no_priors(self.fns.n_free)
         )
@@ -94,15 +97,22 @@ class Calibration:
         self.selected = self.aligned.select(start, stop)
         self.fit = (start, steps.split(sc, start, stop))
         self.data, self.evaluator = self.binder.bind(self.aligned, *self.fit)
+        self.evaluator.prepare(steps.evaluated(sc, self.solvers))
         self.input_noise_std = self.model.input_noise_std(self.aligned, sc.encoder_noise)
         self._solvers: dict[str, Solver] = {}
         self.setup_time_s = time.perf_counter() - t0
 
     @classmethod
-    def setup(cls, scenario: Scenario, data: str | Path | None = None, log: Log | None = None) -> Calibration:
+    def setup(
+        cls,
+        scenario: Scenario,
+        data: str | Path | None = None,
+        log: Log | None = None,
+        solvers: Sequence[str] | None = None,
+    ) -> Calibration:
         """Build everything ``scenario`` needs (``data`` replaces its log path; ``log``, already read,
-        replaces reading it)."""
-        return cls(scenario.with_dataset(data) if data is not None else scenario, log)
+        replaces reading it; ``solvers``, the ones to get ready, the scenario's)."""
+        return cls(scenario.with_dataset(data) if data is not None else scenario, log, solvers)
 
     @property
     def initial(self) -> Mapping[str, float]:

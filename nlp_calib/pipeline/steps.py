@@ -8,7 +8,7 @@ are translated once into the scenario's language (:func:`scenario_key`).
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 
@@ -176,14 +176,20 @@ def starting_point(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, st
     )
 
 
-def prepare_backend(sc: Scenario, fns: ProblemFunctions) -> Backend:
-    """The scenario's evaluation backend, with every Function its solvers and analyses map ready."""
+def evaluated(sc: Scenario, solvers: Sequence[str]) -> set[str]:
+    """The per-residual Functions a run with ``solvers`` evaluates (the pipeline's own fits and
+    the analyses included)."""
+    names = {"normal_equations", "cost", *uncertainty.FUNCTIONS}
+    for name in solvers:
+        names.update(get_solver(name).functions(sc.options_for(name)))
+    return names
+
+
+def prepare_backend(sc: Scenario, fns: ProblemFunctions, solvers: Sequence[str]) -> Backend:
+    """The scenario's evaluation backend, getting ready every Function a run with ``solvers`` maps."""
     with scenario_key(sc, "backend"):
         backend = make_backend(BackendOptions(kind=sc.backend, threads=sc.threads))
-    names = {"normal_equations", "cost", *uncertainty.FUNCTIONS}
-    for name in sc.solvers:
-        names.update(get_solver(name).functions(sc.options_for(name)))
-    backend.prepare(requests(fns, names))
+    backend.prepare(requests(fns, evaluated(sc, solvers)))
     return backend
 
 

@@ -18,6 +18,7 @@ from nlp_calib.problem.windows import (
     ResidualOptions,
     build_residual_data,
     interval_inputs,
+    over_columns,
     window_starts,
 )
 
@@ -35,6 +36,7 @@ __all__ = [
     "build",
     "build_residual_data",
     "interval_inputs",
+    "over_columns",
     "unpack_upper",
     "upper_indices",
     "window_starts",

@@ -16,6 +16,7 @@ import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
+import casadi as ca
 import numpy as np
 
 from nlp_calib.core.errors import ProblemError
@@ -128,13 +129,34 @@ def interval_inputs(model: KinematicModel, logs: Sequence[Log], steering_sample:
     return np.ascontiguousarray(np.concatenate(parts, axis=1))
 
 
+#: Columns a helper Function is mapped over at a time (a map over a million columns is slow to build).
+BLOCK = 1 << 14
+
+
+def over_columns(f: ca.Function, *columns: np.ndarray) -> list[np.ndarray]:
+    """``f`` over the columns of ``columns`` (one column of each input per call), a block at a
+    time; each output as CasADi's map gives it, ``(rows, cols * n)``."""
+    n = columns[0].shape[1]
+    shapes = [f.size_out(i) for i in range(f.n_out())]
+    outs = [np.empty((r, c * n)) for r, c in shapes]
+    maps: dict[int, ca.Function] = {}
+    for lo in range(0, n, BLOCK):
+        hi = min(n, lo + BLOCK)
+        if hi - lo not in maps:
+            maps[hi - lo] = f.map(hi - lo)
+        res = maps[hi - lo](*[c[:, lo:hi] for c in columns])
+        for out, r, (_, c) in zip(outs, [res] if f.n_out() == 1 else res, shapes):
+            out[:, c * lo : c * hi] = np.asarray(r)
+    return outs
+
+
 def tracker_motions(
     fns: ProblemFunctions, T_world_sensor: np.ndarray, a: np.ndarray, b: np.ndarray
 ) -> np.ndarray:
     """``t2v(T(p_a)⁻¹·T(p_b))`` for each pair of records, ``(3, len(a))``."""
     if a.size == 0:
         return np.zeros((3, 0))
-    return np.asarray(fns.between.map(a.size)(T_world_sensor[a].T, T_world_sensor[b].T))
+    return over_columns(fns.between, T_world_sensor[a].T, T_world_sensor[b].T)[0]
 
 
 def build_residual_data(

@@ -9,14 +9,14 @@ analysis at the same estimate cost one evaluation.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 
 from nlp_calib.problem import ORDER, SUMMED, WINDOW_INPUTS, ProblemFunctions, ResidualData, unpack_upper
 from nlp_calib.solvers.backends import Backend, Buffered, Request, pad_columns
+from nlp_calib.solvers.blocks import BlockMap
 from nlp_calib.solvers.motion import WindowMotion
 
 #: H is called singular when its Jacobi-scaled condition number exceeds this.
@@ -76,12 +76,16 @@ class Priors:
 @dataclass(frozen=True)
 class Sensitivities:
     """Per residual ``w``: ``J`` ``(N, 3, n_free)``, ``de_dz`` ``(N, 3, 3)``, ``de_dend`` ``(N, 3, m)``
-    (see :class:`~nlp_calib.problem.ProblemFunctions`), and per interval ``j`` the map ``D``
-    ``(n_intervals, m, n_inputs)`` from its inputs to the end perturbation (``None``: identity)."""
+    (see :class:`~nlp_calib.problem.ProblemFunctions`) and the tracker motion's Jacobians with
+    respect to its first and last pose, ``dz_da`` and ``dz_db`` ``(N, 3, 3)``; per interval ``j``
+    the map ``D`` ``(n_intervals, m, n_inputs)`` from its inputs to the end perturbation
+    (``None``: identity)."""
 
     J: np.ndarray
     de_dz: np.ndarray
     de_dend: np.ndarray
+    dz_da: np.ndarray
+    dz_db: np.ndarray
     D: np.ndarray | None
 
 
@@ -138,33 +142,37 @@ class ProblemEvaluator:
         self.n_padded = self.backend.padded(self.n_residuals)
         self.window_data = pad_columns(data.data(), self.n_padded)
         self.motion = WindowMotion(self.fns, self.backend, data, self.n_padded)
-        self._bound: dict[str, Buffered] = {}
+        self._bound: dict[str, BlockMap] = {}
         self._last: tuple[bytes, NormalEquations] | None = None
         self._last_derivatives: tuple[bytes, tuple[float, np.ndarray, np.ndarray]] | None = None
 
-    def _call(self, name: str, x: np.ndarray) -> list[np.ndarray]:
-        """The per-residual Function ``name`` over the windows at ``x`` (bound on first use)."""
-        order = ORDER[name]
+    def prepare(self, names: Iterable[str]) -> None:
+        """Bind the per-residual Functions ``names`` now rather than at their first evaluation."""
+        for name in names:
+            if name in SUMMED or name == "robust_terms":
+                self._bind(name)
+
+    def _bind(self, name: str) -> BlockMap:
         if name not in self._bound:
-            static: dict[str, np.ndarray | float] = {
-                "x_fixed": self.x_fixed,
-                "omega": self.omega,
-                "delta": self.delta,
-            }
-            bound = {"data": self.window_data, "motion": self.motion.buffer(order)}
-            self._bound[name] = Buffered(self.mapped(name, reduce=name in SUMMED), static, bound)
-        self.motion.update(order, x, self.x_fixed)
-        return self._bound[name](x=x)
+            static: dict[str, np.ndarray | float] = {"x_fixed": self.x_fixed}
+            if name != "sensitivities":
+                static.update(omega=self.omega, delta=self.delta)
+            mapped = {"motion": self.motion.buffer(ORDER[name]), "data": self.window_data}
+            f = self.fns.function(name)
+            self._bound[name] = BlockMap(self.backend, f, mapped, static, name in SUMMED)
+        return self._bound[name]
+
+    def _call(self, name: str, x: np.ndarray) -> Sequence[np.ndarray]:
+        """The per-residual Function ``name`` over the windows at ``x`` (bound on first use)."""
+        bound = self._bind(name)
+        self.motion.update(ORDER[name], x, self.x_fixed)
+        return bound(x=x)
 
     def set_inputs(self, inputs: np.ndarray) -> None:
         """Re-evaluate the same windows on other interval inputs (nothing is rebuilt)."""
         self.data = self.data.with_inputs(inputs)
         self.motion.set_inputs(inputs)
         self._last = self._last_derivatives = None
-
-    def mapped(self, name: str, *, reduce: bool) -> ca.Function:
-        """The per-residual Function ``name`` mapped over the (padded) windows."""
-        return self.backend.map(self.fns.function(name), self.n_padded, WINDOW_INPUTS, reduce)
 
     def normal_equations(self, x: np.ndarray) -> NormalEquations:
         key = np.asarray(x, dtype=float).tobytes()
@@ -206,7 +214,7 @@ class ProblemEvaluator:
 
     def residual_terms(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`robust_terms` plus each residual's ``JᵀΩe`` ``(n_free, n)`` (manifold)."""
-        e, s, w, g = self._call("robust_terms", x)
+        e, s, w, g = (np.asarray(v) for v in self._call("robust_terms", x))
         n = self.n_residuals
         nf = self.fns.n_free
         return (
@@ -219,17 +227,30 @@ class ProblemEvaluator:
     def sensitivities(self, x: np.ndarray) -> Sensitivities:
         """What the noise propagation needs at ``x`` (see :class:`Sensitivities`)."""
         fns, N = self.fns, self.n_residuals
-        motion = self.motion.update(1, x, self.x_fixed)
-        outs = self.mapped("sensitivities", reduce=False)(x, self.x_fixed, motion, self.window_data)
-        J, de_dz, de_dend = (_per_column(v, self.n_padded, N) for v in outs)
+        J, de_dz, de_dend = (_per_column(v, self.n_padded, N) for v in self._call("sensitivities", x))
+        poses = self.data.T_world_sensor
+        ends = {
+            k: np.asfortranarray(poses[idx].T)
+            for k, idx in (("a", self.motion.starts), ("b", self.motion.stops))
+        }
+        # Cheap and evaluated once: the interpreter, by blocks and without copies.
+        dz = BlockMap(Backend(), fns.between_jacobians, ends, {}, reduce=False)()
+        dz_da, dz_db = (_per_column(v, self.n_padded, N) for v in dz)
         D = None
         if fns.prefix:
             m = self.motion
             n_pad = m.inputs.shape[1]
-            poses = m.poses(x, self.x_fixed)[:, :n_pad]
-            per = self.backend.map(fns.interval_sensitivity, n_pad, ("state", "u"), False)
-            D = _per_column(per(poses, x, self.x_fixed, m.inputs), n_pad, m.n_intervals)
-        return Sensitivities(J=J, de_dz=de_dz, de_dend=de_dend, D=D)
+            poses = m.poses(x, self.x_fixed)
+            per = BlockMap(
+                self.backend,
+                fns.interval_sensitivity,
+                {"state": poses[:, :n_pad], "u": m.inputs},
+                {"x_fixed": self.x_fixed},
+                reduce=False,
+            )
+            (D_all,) = per(x=x)
+            D = _per_column(D_all, n_pad, m.n_intervals)
+        return Sensitivities(J=J, de_dz=de_dz, de_dend=de_dend, dz_da=dz_da, dz_db=dz_db, D=D)
 
     def prior_information(self, x: np.ndarray) -> np.ndarray:
         """The priors' contribution ``J_pᵀJ_p`` to the normal matrix."""
@@ -253,7 +274,6 @@ class ProblemEvaluator:
         return np.asarray(self.fns.assemble(x, self.x_fixed)).ravel()
 
 
-def _per_column(value: ca.DM, n_columns: int, n: int) -> np.ndarray:
+def _per_column(value: np.ndarray, n_columns: int, n: int) -> np.ndarray:
     """A map's horizontally stacked ``(rows, cols)`` blocks as ``(n, rows, cols)`` (the first ``n``)."""
-    a = np.asarray(value)
-    return a.reshape(a.shape[0], n_columns, -1)[:, :n].transpose(1, 0, 2)
+    return value.reshape(value.shape[0], n_columns, -1)[:, :n].transpose(1, 0, 2)

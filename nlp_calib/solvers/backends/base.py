@@ -171,6 +171,10 @@ class Buffered:
         self.set(**inputs)
         self._eval()
 
+    def outputs(self) -> list[np.ndarray]:
+        """The bound output arrays, flat (valid until the next evaluation)."""
+        return self._out
+
     def __call__(self, **inputs: np.ndarray | float) -> list[np.ndarray]:
         self.evaluate(**inputs)
         return [
