@@ -350,9 +350,16 @@ class ProblemFunctions(TrajectoryFunctions):
         )
 
 
+_BUILT: dict[tuple[int, ProblemSpec], ProblemFunctions] = {}
+
+
 def build(model: KinematicModel, spec: ProblemSpec) -> ProblemFunctions:
-    """The Functions of the problem described by ``model`` and ``spec``."""
-    return ProblemFunctions(model, spec)
+    """The Functions of the problem described by ``model`` and ``spec`` (built once per process:
+    they hold no data, and the compiled backend keeps what it compiled for them)."""
+    key = (id(model), spec)  # the entry keeps the model alive, so its id stays its own
+    if key not in _BUILT:
+        _BUILT[key] = ProblemFunctions(model, spec)
+    return _BUILT[key]
 
 
 @functools.cache

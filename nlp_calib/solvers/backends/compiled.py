@@ -24,6 +24,7 @@ from pathlib import Path
 import casadi as ca
 
 from nlp_calib.codegen.compiler import (
+    cache_dir,
     compile_shared,
     compiler_flags,
     find_compiler,
@@ -43,17 +44,16 @@ class CompiledBackend(Backend):
         self.chunk = options.chunk
         self.threads = options.threads
         self.compiler = compiler
-        self._loaded: dict[tuple[str, ...], ca.Function] = {}
-        self._pending: dict[tuple[str, ...], Future[tuple[str, Path]]] = {}
-        self._lock = threading.Lock()
 
     def padded(self, n: int) -> int:
         return max(1, -(-n // self.chunk)) * self.chunk
 
-    @staticmethod
-    def _key(request: Request) -> tuple[str, ...]:
+    def _key(self, request: Request) -> tuple[object, ...]:
+        # The Function itself (problems are built once per model and spec), how it is chunked,
+        # compiled and where it is cached: every backend of the process shares what is loaded.
         f = request.function
-        return (f.name(), "scan") if request.scan else (f.name(), str(request.reduce), *request.mapped_inputs)
+        how = ("scan",) if request.scan else (str(request.reduce), *request.mapped_inputs)
+        return (id(f), *how, self.chunk, self.compiler, str(cache_dir()))
 
     def _chunk(self, request: Request) -> ca.Function:
         """The chunk Function of a request."""
@@ -74,27 +74,28 @@ class CompiledBackend(Backend):
     def _compile(self, request: Request) -> ca.Function:
         """The compiled chunk of a request, loaded (compiled at most once per content)."""
         key = self._key(request)
-        with self._lock:
-            if key in self._loaded:
-                return self._loaded[key]
-            pending = self._pending.pop(key, None)
+        with _LOCK:
+            if key in _LOADED:
+                return _LOADED[key][1]
+            pending = _PENDING.get(key)
         name, so = pending.result() if pending is not None else self._build(request)
         loaded = ca.external(name, str(so))
-        with self._lock:
-            return self._loaded.setdefault(key, loaded)
+        with _LOCK:
+            _PENDING.pop(key, None)
+            return _LOADED.setdefault(key, (request.function, loaded))[1]
 
     def prepare(self, requests: Sequence[Request]) -> None:
         """Start compiling the requests' chunks in the background, in this order."""
         for request in requests:
             key = self._key(request)
-            with self._lock:
-                if key not in self._loaded and key not in self._pending:
-                    self._pending[key] = _pool().submit(self._build, request)
+            with _LOCK:
+                if key not in _LOADED and key not in _PENDING:
+                    _PENDING[key] = _pool().submit(self._build, request)
 
     def wait(self) -> None:
         """Wait until everything :meth:`prepare` started has compiled."""
-        with self._lock:
-            pending = list(self._pending.values())
+        with _LOCK:
+            pending = list(_PENDING.values())
         for future in pending:
             future.result()
 
@@ -145,6 +146,10 @@ class CompiledBackend(Backend):
 
 _warned_no_compiler = False
 _POOL: ThreadPoolExecutor | None = None
+_LOCK = threading.Lock()
+#: Loaded chunks (with the Function they came from, which keeps its id valid) and compiles under way.
+_LOADED: dict[tuple[object, ...], tuple[ca.Function, ca.Function]] = {}
+_PENDING: dict[tuple[object, ...], Future[tuple[str, Path]]] = {}
 
 
 def _pool() -> ThreadPoolExecutor:
