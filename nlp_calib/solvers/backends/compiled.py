@@ -14,12 +14,15 @@ rest compiles, and waits only for a Function it needs that is not ready yet.
 
 from __future__ import annotations
 
+import atexit
 import os
+import queue
 import threading
 import warnings
-from collections.abc import Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 
@@ -145,18 +148,59 @@ class CompiledBackend(Backend):
 
 
 _warned_no_compiler = False
-_POOL: ThreadPoolExecutor | None = None
+_POOL: _Compilers | None = None
 _LOCK = threading.Lock()
 #: Loaded chunks (with the Function they came from, which keeps its id valid) and compiles under way.
 _LOADED: dict[tuple[object, ...], tuple[ca.Function, ca.Function]] = {}
 _PENDING: dict[tuple[object, ...], Future[tuple[str, Path]]] = {}
 
 
-def _pool() -> ThreadPoolExecutor:
-    """The compiler threads every backend of the process shares: one per core."""
+class _Compilers:
+    """Compile jobs on daemon threads, one per core. When the process ends (an error, or a run that
+    did not need everything it started), jobs not yet started are dropped and those under way are
+    let finish, so that exiting never waits for a compile nobody needs nor leaves one half done."""
+
+    def __init__(self, workers: int) -> None:
+        self._queue: queue.SimpleQueue[tuple[Future[Any], Callable[[], Any]]] = queue.SimpleQueue()
+        self._busy = 0
+        self._closing = False
+        self._cond = threading.Condition()
+        for k in range(workers):
+            threading.Thread(target=self._work, name=f"nlp_calib-cc-{k}", daemon=True).start()
+        atexit.register(self.close)
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Future[Any]:
+        future: Future[Any] = Future()
+        self._queue.put((future, lambda: fn(*args)))
+        return future
+
+    def _work(self) -> None:
+        while True:
+            future, job = self._queue.get()
+            with self._cond:
+                if self._closing or not future.set_running_or_notify_cancel():
+                    continue
+                self._busy += 1
+            try:
+                future.set_result(job())
+            except BaseException as exc:
+                future.set_exception(exc)
+            finally:
+                with self._cond:
+                    self._busy -= 1
+                    self._cond.notify_all()
+
+    def close(self) -> None:
+        with self._cond:
+            self._closing = True
+            self._cond.wait_for(lambda: self._busy == 0, timeout=60)
+
+
+def _pool() -> _Compilers:
+    """The compiler threads every backend of the process shares."""
     global _POOL
     if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=os.cpu_count() or 1, thread_name_prefix="nlp_calib-cc")
+        _POOL = _Compilers(os.cpu_count() or 1)
     return _POOL
 
 
