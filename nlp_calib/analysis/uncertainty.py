@@ -149,8 +149,10 @@ def estimate(
         return not_available(evaluator)
     n, N, n_in = fns.n_free, evaluator.n_residuals, fns.n_inputs
     e, s, weight = evaluator.robust_terms(x)
-    sens = evaluator.sensitivities(x)
-    m = sens.de_dend.shape[2]
+    blocks = evaluator.sensitivities(x)
+    first = next(blocks)
+    blocks = itertools.chain([first], blocks)
+    m = first[1].de_dend.shape[2]
     n_int = data.inputs.shape[1]
     poses = data.T_world_sensor
     a_idx, b_idx = data.starts, data.stops
@@ -161,7 +163,7 @@ def estimate(
     # input noise the same way is ill-posed: its share of the residuals is small, its effect on the
     # parameters is not (it does not telescope), so residual noise would masquerade as it.
     Sigma_in = np.asarray(input_noise_std, dtype=float) ** 2
-    D = sens.D if sens.D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
+    D = first[1].D if first[1].D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
     # Running sums over the intervals of Σ_j D_j Σ_u D_jᵀ: the input noise a window's end collects.
     running = np.zeros((n_int + 1, m, m))
     for lo in range(0, n_int, STEP):
@@ -175,21 +177,19 @@ def estimate(
     # Σ over the windows containing interval j of L_w ∂e_w/∂end: +at the first interval, −after the last.
     C = np.zeros((n_int + 1, n, m))
     outliers = np.zeros((n, n))
-    for lo in range(0, N, STEP):
-        w = slice(lo, min(N, lo + STEP))
+    for w, sens in blocks:
         a, b = a_idx[w], b_idx[w]
-        de_dz, de_dend = sens.de_dz[w], sens.de_dend[w]
-        Ea, Eb = de_dz @ sens.dz_da[w], de_dz @ sens.dz_db[w]  # (., 3, 3)
-        known = ((de_dend @ (running[b] - running[a])) * de_dend).sum(axis=2)
+        Ea, Eb = sens.de_dz @ sens.dz_da, sens.de_dz @ sens.dz_db  # (., 3, 3)
+        known = ((sens.de_dend @ (running[b] - running[a])) * sens.de_dend).sum(axis=2)
         E2 = Ea**2 + Eb**2  # per residual component c, pose component k
         coef = np.stack([E2[:, :, :2].sum(axis=2), E2[:, :, 2]], axis=2)  # (., 3, 2)
         u = use[w]
         A, y = coef[u].reshape(-1, 2), (e[:, w].T[u] ** 2 - known[u]).ravel()
         gram, proj, yy = gram + A.T @ A, proj + A.T @ y, yy + float(y @ y)
-        L = weight[w, None, None] * sens.J[w].transpose(0, 2, 1) * Omega[None, None, :]  # (., n, 3)
+        L = weight[w, None, None] * sens.J.transpose(0, 2, 1) * Omega[None, None, :]  # (., n, 3)
         _add(K, a, L @ Ea, distinct)
         _add(K, b, L @ Eb, distinct)
-        G = L @ de_dend
+        G = L @ sens.de_dend
         _add(C, a, G, distinct)
         _add(C, b, -G, distinct)
         # Residuals beyond the kernel threshold are not explained by the noise model; their bounded

@@ -9,7 +9,7 @@ them straight into full per-column arrays.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 
 import casadi as ca
 import numpy as np
@@ -66,3 +66,32 @@ class BlockMap:
             for total, out in zip(sums, block.outputs()):
                 total += out
         return [s.reshape(shape, order="F") if shape[1] > 1 else s for s, shape in zip(sums, self.shapes)]
+
+
+def stream(
+    backend: Backend,
+    f: ca.Function,
+    mapped: Mapping[str, np.ndarray],
+    static: Mapping[str, np.ndarray | float],
+    n: int | None = None,
+) -> Iterator[tuple[slice, list[np.ndarray]]]:
+    """``f`` over the columns of ``mapped``, one block at a time: each block's columns and its
+    outputs ``(rows, cols * block)`` (reused for the next block: copy what must outlive it). Only
+    the first ``n`` columns' blocks are evaluated. Memory stays one block's, however many columns."""
+    total = next(iter(mapped.values())).shape[1]
+    n = total if n is None else n
+    buffers: dict[int, Buffered] = {}
+    for lo in range(0, n, BLOCK):
+        hi = min(total, lo + BLOCK)
+        size = hi - lo
+        if size not in buffers:
+            buffers[size] = Buffered(backend.map(f, size, tuple(mapped), False), static)
+        buf = buffers[size]
+        for name, arr in mapped.items():
+            buf.rebind(name, arr[:, lo:hi])
+        buf.evaluate()
+        shapes = [f.size_out(i) for i in range(f.n_out())]
+        yield (
+            slice(lo, min(hi, n)),
+            [out.reshape(r, c * size, order="F") for out, (r, c) in zip(buf.outputs(), shapes)],
+        )

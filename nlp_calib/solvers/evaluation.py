@@ -9,14 +9,14 @@ analysis at the same estimate cost one evaluation.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from nlp_calib.problem import ORDER, SUMMED, WINDOW_INPUTS, ProblemFunctions, ResidualData, unpack_upper
 from nlp_calib.solvers.backends import Backend, Buffered, Request, pad_columns
-from nlp_calib.solvers.blocks import BlockMap
+from nlp_calib.solvers.blocks import BlockMap, stream
 from nlp_calib.solvers.motion import WindowMotion
 
 #: H is called singular when its Jacobi-scaled condition number exceeds this.
@@ -149,7 +149,7 @@ class ProblemEvaluator:
     def prepare(self, names: Iterable[str]) -> None:
         """Bind the per-residual Functions ``names`` now rather than at their first evaluation."""
         for name in names:
-            if name in SUMMED or name == "robust_terms":
+            if name != "sensitivities":
                 self._bind(name)
 
     def _bind(self, name: str) -> BlockMap:
@@ -224,18 +224,10 @@ class ProblemEvaluator:
             g.reshape(nf, -1, order="F")[:, :n],
         )
 
-    def sensitivities(self, x: np.ndarray) -> Sensitivities:
-        """What the noise propagation needs at ``x`` (see :class:`Sensitivities`)."""
+    def sensitivities(self, x: np.ndarray) -> Iterator[tuple[slice, Sensitivities]]:
+        """What the noise propagation needs at ``x``, a block of windows at a time (see
+        :class:`Sensitivities`; ``D`` covers every interval and is the same in each block)."""
         fns, N = self.fns, self.n_residuals
-        J, de_dz, de_dend = (_per_column(v, self.n_padded, N) for v in self._call("sensitivities", x))
-        poses = self.data.T_world_sensor
-        ends = {
-            k: np.asfortranarray(poses[idx].T)
-            for k, idx in (("a", self.motion.starts), ("b", self.motion.stops))
-        }
-        # Cheap and evaluated once: the interpreter, by blocks and without copies.
-        dz = BlockMap(Backend(), fns.between_jacobians, ends, {}, reduce=False)()
-        dz_da, dz_db = (_per_column(v, self.n_padded, N) for v in dz)
         D = None
         if fns.prefix:
             m = self.motion
@@ -250,7 +242,28 @@ class ProblemEvaluator:
             )
             (D_all,) = per(x=x)
             D = _per_column(D_all, n_pad, m.n_intervals)
-        return Sensitivities(J=J, de_dz=de_dz, de_dend=de_dend, dz_da=dz_da, dz_db=dz_db, D=D)
+        motion = self.motion.update(ORDER["sensitivities"], x, self.x_fixed)
+        own = stream(
+            self.backend,
+            fns.sensitivities,
+            {"motion": motion, "data": self.window_data},
+            {"x": x, "x_fixed": self.x_fixed},
+            N,
+        )
+        poses_wt = self.data.T_world_sensor
+        ends = {
+            k: np.asfortranarray(poses_wt[i].T)
+            for k, i in (("a", self.motion.starts), ("b", self.motion.stops))
+        }
+        # Cheap: the interpreter, a block at a time.
+        tracker = stream(Backend(), fns.between_jacobians, ends, {}, N)
+        for (w, (J, de_dz, de_dend)), (_, (dz_da, dz_db)) in zip(own, tracker):
+            size = J.shape[1] // fns.n_free
+            n = w.stop - w.start
+            J_, de_dz_, de_dend_, dz_da_, dz_db_ = (
+                _per_column(v, size, n) for v in (J, de_dz, de_dend, dz_da, dz_db)
+            )
+            yield w, Sensitivities(J=J_, de_dz=de_dz_, de_dend=de_dend_, dz_da=dz_da_, dz_db=dz_db_, D=D)
 
     def prior_information(self, x: np.ndarray) -> np.ndarray:
         """The priors' contribution ``J_pᵀJ_p`` to the normal matrix."""

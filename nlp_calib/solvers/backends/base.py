@@ -155,6 +155,12 @@ class Buffered:
         if inputs:
             self.set(**inputs)
 
+    def rebind(self, name: str, arr: np.ndarray) -> None:
+        """Bind input ``name`` to another caller-owned array of the same size."""
+        i = self.function.index_in(name)
+        self._in[name] = _memory(arr, self.function.nnz_in(i))
+        self._buf.set_arg(i, self._in[name].data)
+
     def set(self, **inputs: np.ndarray | float) -> None:
         """Copy values into the bound input arrays (column-major, as CasADi stores them)."""
         for name, value in inputs.items():
