@@ -82,7 +82,7 @@ class Calibration:
         start, stop = steps.select(sc, self.log)
         self.fns = steps.build_problem(sc, self.model)
         self.start = steps.starting_point(sc, self.fns, self.log, start, steps.split(sc, start, stop))
-        self.backend = steps.prepare_backend(sc, self.fns, self.solvers)
+        self.backend = steps.prepare_backend(sc, self.fns, self.solvers, stop - start)
         binder = steps.Binder(
             sc, self.fns, self.backend, self.start.x_fixed, steps.no_priors(self.fns.n_free)
         )

@@ -185,11 +185,12 @@ def evaluated(sc: Scenario, solvers: Sequence[str]) -> set[str]:
     return names
 
 
-def prepare_backend(sc: Scenario, fns: ProblemFunctions, solvers: Sequence[str]) -> Backend:
-    """The scenario's evaluation backend, getting ready every Function a run with ``solvers`` maps."""
+def prepare_backend(sc: Scenario, fns: ProblemFunctions, solvers: Sequence[str], n_records: int) -> Backend:
+    """The scenario's evaluation backend, getting ready every Function a run with ``solvers`` maps
+    over the windows of about ``n_records`` records."""
     with scenario_key(sc, "backend"):
         backend = make_backend(BackendOptions(kind=sc.backend, threads=sc.threads))
-    backend.prepare(requests(fns, evaluated(sc, solvers)))
+    backend.prepare(requests(fns, evaluated(sc, solvers), n_records // sc.residual.stride))
     return backend
 
 

@@ -89,12 +89,21 @@ class Sensitivities:
     D: np.ndarray | None
 
 
-def requests(fns: ProblemFunctions, names: Iterable[str]) -> list[Request]:
-    """What a backend compiles so that an evaluator can evaluate the per-residual Functions
-    ``names`` (the scans and the intervals' sensitivity of prefix problems included)."""
+#: Functions evaluated once or twice per run (the analyses'): compiling them pays from about this
+#: many windows on; below, the interpreter evaluates them in less time than a compiler takes.
+COMPILE_ANALYSES_FROM = 50_000
+_ANALYSES = ("robust_terms", "sensitivities")
+
+
+def requests(fns: ProblemFunctions, names: Iterable[str], n_windows: int) -> list[Request]:
+    """What a backend compiles so that an evaluator over about ``n_windows`` windows can evaluate
+    the per-residual Functions ``names`` (the scans and the intervals' sensitivity of prefix
+    problems included)."""
     out: list[Request] = []
     # In the order a run needs them: the internal fits, then the solvers, then the analyses.
     for name in sorted(set(names), key=_PRIORITY.index):
+        if name in _ANALYSES and n_windows < COMPILE_ANALYSES_FROM:
+            continue
         if fns.prefix:
             out.append(Request(fns.step(ORDER[name]), scan=True))
             if name == "sensitivities":
@@ -152,6 +161,11 @@ class ProblemEvaluator:
             if name != "sensitivities":
                 self._bind(name)
 
+    def _backend(self, name: str) -> Backend:
+        """Where ``name`` is evaluated: see :data:`COMPILE_ANALYSES_FROM`."""
+        small = self.n_residuals < COMPILE_ANALYSES_FROM
+        return Backend() if name in _ANALYSES and small else self.backend
+
     def _bind(self, name: str) -> BlockMap:
         if name not in self._bound:
             static: dict[str, np.ndarray | float] = {"x_fixed": self.x_fixed}
@@ -159,7 +173,7 @@ class ProblemEvaluator:
                 static.update(omega=self.omega, delta=self.delta)
             mapped = {"motion": self.motion.buffer(ORDER[name]), "data": self.window_data}
             f = self.fns.function(name)
-            self._bound[name] = BlockMap(self.backend, f, mapped, static, name in SUMMED)
+            self._bound[name] = BlockMap(self._backend(name), f, mapped, static, name in SUMMED)
         return self._bound[name]
 
     def _call(self, name: str, x: np.ndarray) -> Sequence[np.ndarray]:
@@ -234,7 +248,7 @@ class ProblemEvaluator:
             n_pad = m.inputs.shape[1]
             poses = m.poses(x, self.x_fixed)
             per = BlockMap(
-                self.backend,
+                self._backend("sensitivities"),
                 fns.interval_sensitivity,
                 {"state": poses[:, :n_pad], "u": m.inputs},
                 {"x_fixed": self.x_fixed},
@@ -244,7 +258,7 @@ class ProblemEvaluator:
             D = _per_column(D_all, n_pad, m.n_intervals)
         motion = self.motion.update(ORDER["sensitivities"], x, self.x_fixed)
         own = stream(
-            self.backend,
+            self._backend("sensitivities"),
             fns.sensitivities,
             {"motion": motion, "data": self.window_data},
             {"x": x, "x_fixed": self.x_fixed},
