@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 import re
 import subprocess
 import sys
@@ -167,3 +168,34 @@ def test_threaded_chunk_map_equals_serial(tmp_path: Path, monkeypatch: pytest.Mo
     assert_close(b.H, a.H, rtol=1e-12)
     assert_close(b.g, a.g, rtol=1e-12, atol=1e-15)
     assert b.cost == pytest.approx(a.cost, rel=1e-12)
+
+
+@needs_compiler
+def test_a_cache_path_that_cannot_hold_files_is_a_usage_error(tmp_path: Path) -> None:
+    blocker = tmp_path / "cache_file"
+    blocker.write_text("not a folder\n")
+    for cache in (blocker, blocker / "sub"):
+        env = dict(os.environ, NLP_CALIB_CACHE=str(cache), PYTHONWARNINGS="ignore")
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "nlp_calib",
+                "run",
+                str(SCENARIOS / "demo.yaml"),
+                "--out",
+                str(tmp_path / "o"),
+            ],
+            capture_output=True,
+            text=True,
+            env=env,
+            cwd=REPO,
+            timeout=300,
+        )
+        assert proc.returncode == 2, proc.stderr
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in proc.stderr
+        assert (
+            str(cache) in lines[0] and "NLP_CALIB_CACHE" in lines[0] and "not a writable folder" in lines[0]
+        )
+    assert blocker.read_text() == "not a folder\n"
