@@ -85,6 +85,14 @@ class KinematicModel(Protocol):
         """Boolean mask of intervals in which the encoders report motion."""
         ...
 
+    def travel_direction(self, inputs: np.ndarray) -> np.ndarray:
+        """Per interval: +1 when the base drives forward, -1 backward, 0 when it does not move."""
+        ...
+
+    def counter_rows(self, log: Log) -> dict[str, tuple[int, float]]:
+        """For each counter encoder: the input row it drives and the ticks per unit of that input."""
+        ...
+
     def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
         """1σ noise of each input row, from each encoder's noise in ticks (default: quantisation)."""
         ...

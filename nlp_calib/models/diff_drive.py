@@ -142,6 +142,14 @@ class DiffDrive:
     def moving(self, inputs: np.ndarray) -> np.ndarray:
         return np.asarray((inputs[0] != 0.0) | (inputs[1] != 0.0))
 
+    def travel_direction(self, inputs: np.ndarray) -> np.ndarray:
+        """The sign of the wheels' mean increment (0 when turning on the spot)."""
+        return np.sign(inputs[0] + inputs[1])
+
+    def counter_rows(self, log: Log) -> dict[str, tuple[int, float]]:
+        """Both counters drive their own row, in ticks."""
+        return {LEFT_ENCODER: (0, 1.0), RIGHT_ENCODER: (1, 1.0)}
+
     def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
         """1σ of each increment in ticks (default: quantisation, ``1/√12``)."""
         ticks = {**dict.fromkeys(self.encoder_kinds, QUANTISATION), **(encoder_noise or {})}

@@ -171,6 +171,14 @@ class Tricycle:
     def moving(self, inputs: np.ndarray) -> np.ndarray:
         return np.asarray(inputs[0] != 0.0)
 
+    def travel_direction(self, inputs: np.ndarray) -> np.ndarray:
+        """The sign of the traction increment (the front wheel never steers past 90°)."""
+        return np.sign(inputs[0])
+
+    def counter_rows(self, log: Log) -> dict[str, tuple[int, float]]:
+        """The traction counter drives row 0, in revolutions of ``t_max`` ticks."""
+        return {TRACTION_ENCODER: (0, float(log.header.encoder_range(TRACTION_ENCODER)))}
+
     def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
         """1σ of each input from the encoders' noise in ticks (default: quantisation, ``1/√12``)."""
         header = log.header

@@ -84,14 +84,44 @@ def _parameter_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
     return lines
 
 
-def _metric_rows(
-    label: str, base: TrajectoryMetrics | None, per: list[TrajectoryMetrics | None]
-) -> list[str]:
+def _metric_rows(prefix: str, base: TrajectoryMetrics, per: list[TrajectoryMetrics | None]) -> list[str]:
     rows = []
-    for key, what in (("ate_mean", "mean"), ("ate_max", "max"), ("ate_final", "final")):
-        cells = [_cell(getattr(m, key) if m is not None else None, ".4f") for m in [base, *per]]
-        rows.append(f"| {label} {what} [m] | " + " | ".join(cells) + " |")
+    for i, (label, value) in enumerate(base.figures()):
+        cells = [_cell(value, ".4f")] + [
+            _cell(m.figures()[i][1] if m is not None else None, ".4f") for m in per
+        ]
+        rows.append(f"| {prefix}{label} | " + " | ".join(cells) + " |")
     return rows
+
+
+def _faults_section(run: CalibrationRun) -> list[str]:
+    if run.findings is None:
+        return []
+    out = ["## Encoder and tracker faults", ""]
+    rep = run.findings.report
+    stale = sum(rep.stale.values())
+    if not rep.faults:
+        out += [
+            f"None found; {stale} stale counter readings that catch up at the next record (harmless).",
+            "",
+        ]
+        return out
+    done = {
+        "exclude": f"{run.dropped_faulty} residual windows that cross them were left out of the fit",
+        "repair": "their counts were repaired (below); windows at tracker jumps were left out",
+        "keep": "they were kept in the fit (`faults.handling: keep`)",
+    }[run.findings.handling]
+    out += [
+        f"{len(rep.faults)} found; {done}. The fault-robust figures restart dead reckoning from the "
+        f"tracker after each fault and leave its records out. {stale} stale counter readings that "
+        "catch up at the next record are harmless.",
+        "",
+        "| record | line | time [s] | kind | evidence |",
+        "|---|---|---|---|---|",
+    ]
+    out += [f"| {f.record} | {f.line} | {f.time_s:.2f} | {f.kind} | {f.evidence} |" for f in rep.faults]
+    out += ["", *(f"- repaired: {r}" for r in run.findings.repairs), ""]
+    return out
 
 
 def _solver_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
@@ -108,15 +138,9 @@ def _solver_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
     row("iterations", [str(r.result.iterations) for r in reps])
     row("time [ms]", [f"{1e3 * r.result.time_s:.1f}" for r in reps])
     row("converged", ["yes" if r.result.converged else f"**NO**: {r.result.reason}" for r in reps])
-    lines += _metric_rows("ATE", run.baseline, [r.metrics for r in reps])
-    row(
-        "RPE trans [m]",
-        [_cell(r.metrics.rpe_trans, ".4f") for r in reps],
-        _cell(run.baseline.rpe_trans, ".4f"),
-    )
-    row("RPE rot [rad]", [_cell(r.metrics.rpe_rot, ".4f") for r in reps], _cell(run.baseline.rpe_rot, ".4f"))
+    lines += _metric_rows("", run.baseline, [r.metrics for r in reps])
     if run.baseline_holdout is not None:
-        lines += _metric_rows("hold-out ATE", run.baseline_holdout, [r.holdout for r in reps])
+        lines += _metric_rows("hold-out ", run.baseline_holdout, [r.holdout for r in reps])
     return lines
 
 
@@ -142,11 +166,15 @@ def report_markdown(run: CalibrationRun, images: Sequence[str]) -> str:
         "",
         "## Solvers",
         "",
-        "ATE: distance between the sensor track dead-reckoned from the tracker's first pose and the tracker; "
-        "RPE over windows of " + f"{run.baseline.rpe_window} records.",
+        "Segment ATE: the sensor track dead-reckoned from the tracker, restarted after each fault, "
+        "against the tracker (aligned: after the best SE(2) alignment). RPE over 1 m and 5 m: the "
+        "relative pose error between records that far apart along the tracker's path, within one "
+        "fault-free segment. Full-run ATE: one track from the first record (a fault's lost counts "
+        f"stay in it). RPE over {run.baseline.rpe_window} records: the same over a fixed count of records.",
         "",
         *_solver_table(run, solvers),
         "",
+        *_faults_section(run),
     ]
     for s in solvers:
         res = run.reports[s].result

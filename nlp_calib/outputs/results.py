@@ -23,6 +23,20 @@ def _metrics_dict(full: TrajectoryMetrics, holdout: TrajectoryMetrics | None) ->
     return out
 
 
+def _faults_dict(run: CalibrationRun) -> dict[str, Any] | None:
+    if run.findings is None:
+        return None
+    rep = run.findings.report
+    return {
+        "handling": run.findings.handling,
+        "found": [f.as_dict() for f in rep.faults],
+        "windows_left_out": run.dropped_faulty,
+        "repairs": list(run.findings.repairs),
+        "stale_readings": dict(rep.stale),
+        "noise_ticks": dict(rep.noise_ticks),
+    }
+
+
 def _solver_dict(report: SolverReport) -> dict[str, Any]:
     r, u = report.result, report.uncertainty
     return {
@@ -72,6 +86,7 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         "initial_guess": sc.initial_guess if isinstance(sc.initial_guess, str) else "mapping",
         "baseline": {"metrics": _metrics_dict(run.baseline, run.baseline_holdout)},
         "solvers": {name: _solver_dict(rep) for name, rep in run.reports.items()},
+        "faults": _faults_dict(run),
         "observability": run.observability.as_dict() if run.observability is not None else None,
         "warnings": list(run.warnings),
     }

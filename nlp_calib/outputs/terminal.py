@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections import Counter
+
 import numpy as np
 
 from nlp_calib.analysis.metrics import TrajectoryMetrics
@@ -23,15 +25,26 @@ def _row(label: str, cells: list[str], label_width: int = 26) -> str:
     return f"{label:<{label_width}}" + "".join(cells)
 
 
-def _metric_rows(run: CalibrationRun, holdout: bool) -> list[tuple[str, str]]:
-    rows = [
-        ("ate_mean", "ATE mean [m]"),
-        ("ate_max", "ATE max [m]"),
-        ("ate_final", "ATE final [m]"),
-        ("rpe_trans", "RPE trans [m]"),
-        ("rpe_rot", "RPE rot [rad]"),
-    ]
-    return [(k, ("hold-out " if holdout else "") + label) for k, label in rows]
+def fault_lines(run: CalibrationRun) -> list[str]:
+    """What the fault check found and what was done about it, one line each."""
+    if run.findings is None:
+        return []
+    rep, handling = run.findings.report, run.findings.handling
+    stale = sum(rep.stale.values())
+    if not rep.faults:
+        return [f"faults: none found ({stale} stale counter readings that catch up: harmless)"]
+    kinds = Counter(f.kind for f in rep.faults)
+    what = ", ".join(f"{n} {k}" for k, n in kinds.items())
+    done = {
+        "exclude": f"{run.dropped_faulty} residual windows crossing them left out",
+        "repair": "counter faults repaired, windows at tracker jumps left out",
+        "keep": "kept in the fit (faults.handling: keep)",
+    }[handling]
+    lines = [f"faults: {len(rep.faults)} found ({what}); {done}; {stale} stale readings (harmless)"]
+    for f in rep.faults:
+        lines.append(f"  record {f.record} (line {f.line}, t = {f.time_s:.2f} s) {f.kind}: {f.evidence}")
+    lines += [f"  repaired: {r}" for r in run.findings.repairs]
+    return lines
 
 
 def run_table(run: CalibrationRun) -> str:
@@ -96,13 +109,16 @@ def run_table(run: CalibrationRun) -> str:
     if run.baseline_holdout is not None:
         metric_sets.append((True, run.baseline_holdout))
     for holdout, base in metric_sets:
-        for key, label in _metric_rows(run, holdout):
-            cells = [_fmt(getattr(base, key))]
-            for s in solvers:
-                rep = run.reports[s]
-                m = rep.holdout if holdout else rep.metrics
-                cells.append(_fmt(getattr(m, key) if m is not None else float("nan"), w))
-            lines.append(_row(label, cells))
+        if base is None:
+            continue
+        per_solver = [run.reports[s].holdout if holdout else run.reports[s].metrics for s in solvers]
+        for i, (label, value) in enumerate(base.figures()):
+            cells = [_fmt(value)]
+            cells += [_fmt(m.figures()[i][1] if m is not None else float("nan"), w) for m in per_solver]
+            lines.append(_row(("hold-out " if holdout else "") + label, cells))
+    faults = fault_lines(run)
+    if faults:
+        lines += ["", *faults]
     if run.observability is not None:
         lines.append("")
         lines.append(

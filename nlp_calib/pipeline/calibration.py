@@ -62,6 +62,8 @@ class CalibrationRun:
     lag_estimate: LagEstimate | None = None
     observability: Observability | None = None
     warnings: tuple[str, ...] = field(default=())
+    findings: steps.Findings | None = None
+    dropped_faulty: int = 0
 
 
 class Calibration:
@@ -86,13 +88,26 @@ class Calibration:
         priors, self.residual_sigma = steps.weigh_priors(
             binder, self.log, start, steps.split(sc, start, stop), self.start.x0
         )
-        self.binder = steps.with_priors(binder, priors)
-        self.alignment = steps.align(self.binder, self.log, start, stop, self.start.x0)
+        binder = steps.with_priors(binder, priors)
+        # Faults are judged on the log as read (re-sampling smears a faulty reading), then kept
+        # out of every later fit: the lag search's and the final one.
+        report = steps.find_faults(binder, self.log, start, stop, self.start.x0)
+        fitted_log, self.findings = steps.handle_faults(self.log, report, sc.faults.handling)
+        dt = steps.median_interval(self.log)
+        search = sc.alignment.search if sc.alignment.tracker_lag == "auto" else (0.0, 0.0)
+        reach = max(abs(search[0]), abs(search[1]))
+        search_binder = steps.exclude_faults(binder, self.findings, self.log.n_records, reach, dt)
+        self.alignment = steps.align(search_binder, fitted_log, start, stop, self.start.x0)
+        self.binder = steps.exclude_faults(
+            binder, self.findings, self.log.n_records, self.alignment.lag_s, dt
+        )
+        # Every detected fault shapes the fair figures, whatever the handling: like with like.
+        self.fault_masks = steps.fault_masks(report, self.log.n_records, self.alignment.lag_s, dt)
         self.aligned = self.alignment.log
         start, stop = max(start, self.alignment.valid[0]), min(stop, self.alignment.valid[1])
         self.used = (start, stop)
-        self.selected = self.aligned.select(start, stop)
         self.fit = (start, steps.split(sc, start, stop))
+        self.selected = self.aligned.select(start, stop)
         self.data, self.evaluator = self.binder.bind(self.aligned, *self.fit)
         self.input_noise_std = self.model.input_noise_std(self.aligned, sc.encoder_noise)
         self._solvers: dict[str, Solver] = {}
@@ -139,12 +154,14 @@ class Calibration:
         """Full-range and hold-out trajectory metrics of ``params``."""
         inputs = self.model.inputs(self.selected, self.scenario.residual.steering_sample)
         poses = self.selected.T_world_sensor
+        a, b = self.used
+        masks = {"bad_intervals": self.fault_masks[0][a : b - 1], "bad_records": self.fault_masks[1][a:b]}
         W = self.scenario.validation.rpe_window
-        full = trajectory_metrics(self.fns, params, inputs, poses, rpe_window=W)
+        full = trajectory_metrics(self.fns, params, inputs, poses, rpe_window=W, **masks)
         holdout = None
         split = self.fit[1] - self.used[0]
         if self.fit[1] < self.used[1] - 1:
-            holdout = trajectory_metrics(self.fns, params, inputs, poses, start=split, rpe_window=W)
+            holdout = trajectory_metrics(self.fns, params, inputs, poses, start=split, rpe_window=W, **masks)
         return full, holdout
 
     def odometry(self, params: np.ndarray) -> OdometryTrack:
@@ -199,4 +216,6 @@ class Calibration:
             lag_estimate=self.alignment.estimate,
             observability=observability,
             warnings=tuple(warnings),
+            findings=self.findings,
+            dropped_faulty=self.data.dropped_faulty,
         )

@@ -71,6 +71,21 @@ class AlignmentOptions:
     step: float = 0.01
 
 
+FAULT_HANDLINGS = ("exclude", "repair", "keep")
+
+
+@dataclass(frozen=True)
+class FaultOptions:
+    """What to do with encoder and tracker faults found in the log (every run looks for them).
+
+    ``exclude`` (default): drop every residual window that crosses a fault; ``repair``: correct
+    the counts of counter faults (and say what changed), drop windows at tracker jumps; ``keep``:
+    report the faults and fit every window.
+    """
+
+    handling: str = "exclude"
+
+
 @dataclass(frozen=True)
 class Prior:
     """A Gaussian prior on one parameter."""
@@ -98,6 +113,7 @@ class Scenario:
     solver_options: Mapping[str, Any] = field(default_factory=dict)
     validation: ValidationOptions = field(default_factory=ValidationOptions)
     alignment: AlignmentOptions = field(default_factory=AlignmentOptions)
+    faults: FaultOptions = field(default_factory=FaultOptions)
     fixed: tuple[str, ...] = ()
     priors: Mapping[str, Prior] = field(default_factory=dict)
     encoder_noise: Mapping[str, float] = field(default_factory=dict)
@@ -205,6 +221,7 @@ def _validate(sc: Scenario, source: str) -> None:
         _check_choice(al.tracker_lag, ("auto",), f"{source}: alignment.tracker_lag")
     if not (al.search[0] < al.search[1] and al.step > 0 and (al.search[1] - al.search[0]) / al.step <= 1000):
         fail(f"{source}: alignment", "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
+    _check_choice(sc.faults.handling, FAULT_HANDLINGS, f"{source}: faults.handling")
     if sc.validation.rpe_window < 1:
         fail(f"{source}: validation.rpe_window", "must be >= 1")
     if isinstance(sc.initial_guess, str):

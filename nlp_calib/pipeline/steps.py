@@ -15,6 +15,7 @@ import numpy as np
 
 from nlp_calib.analysis import uncertainty
 from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
+from nlp_calib.analysis.faults import FaultReport, check_log, repair
 from nlp_calib.core.errors import DatasetError, ModelError, OptionsError, ProblemError, ScenarioError
 from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.models import SENSOR_PARAMS, KinematicModel, get_model, header_parameters, load_log
@@ -182,12 +183,20 @@ class Binder:
     backend: Backend
     x_fixed: np.ndarray
     priors: Priors
+    #: Per interval / record of the whole log: windows must not cross / start or end at them.
+    bad_intervals: np.ndarray | None = None
+    bad_records: np.ndarray | None = None
 
     def bind(self, log: Log, start: int, stop: int) -> tuple[ResidualData, ProblemEvaluator]:
         """Residual data of records ``start:stop`` of ``log`` and an evaluator bound to it."""
         sc = self.scenario
         data = build_residual_data(
-            self.fns, log.select(start, stop), sc.residual, drop_stationary=sc.samples.drop_stationary
+            self.fns,
+            log.select(start, stop),
+            sc.residual,
+            drop_stationary=sc.samples.drop_stationary,
+            bad_intervals=None if self.bad_intervals is None else self.bad_intervals[start : stop - 1],
+            bad_records=None if self.bad_records is None else self.bad_records[start:stop],
         )
         if data.n_residuals < self.fns.n_free:
             raise ScenarioError(
@@ -280,6 +289,11 @@ def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np
     return estimate_lag(fit_cost, al.search, al.step)
 
 
+def median_interval(log: Log) -> float:
+    """The median time between records (s)."""
+    return float(np.median(np.diff(log.time_s))) if log.n_records > 1 else 1.0
+
+
 def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Alignment:
     """The scenario's tracker lag (given, or estimated when ``auto``) applied to the encoders."""
     sc = binder.scenario
@@ -296,3 +310,66 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
 def with_priors(binder: Binder, priors: Priors) -> Binder:
     """The same binder with other priors."""
     return replace(binder, priors=priors)
+
+
+@dataclass(frozen=True)
+class Findings:
+    """The faults found in the used records, how they were handled and what a repair changed."""
+
+    report: FaultReport
+    handling: str
+    repairs: tuple[str, ...] = ()
+
+
+def find_faults(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> FaultReport:
+    """Faults in records ``start:stop`` of ``log``, judged with a fit to all of its windows."""
+    _, ev = binder.bind(log, start, stop)
+    _, x, _ = binder.fit(ev, x0)
+    sel = log.select(start, stop)
+    model = binder.fns.model
+    inputs = model.inputs(sel, binder.scenario.residual.steering_sample)
+    report = check_log(binder.fns, ev.params(x), sel, inputs, model.counter_rows(sel))
+    return report.shifted(start, log)
+
+
+def handle_faults(log: Log, report: FaultReport, handling: str) -> tuple[Log, Findings]:
+    """The log to fit (repaired when ``handling`` asks for it) and what was found and done."""
+    if handling == "repair" and report.counter_faults:
+        log, repairs = repair(log, report)
+        return log, Findings(report, handling, repairs)
+    return log, Findings(report, handling)
+
+
+def exclude_faults(binder: Binder, findings: Findings, n_records: int, lag_s: float, dt_s: float) -> Binder:
+    """A binder that skips the windows the findings spoil on a log re-sampled by ``lag_s``.
+
+    Re-sampling the encoders by a lag spreads a faulty reading over the records within the lag,
+    so a fault's stretch is widened by that many records (plus one) on each side.
+    """
+    if findings.handling == "keep" or not findings.report.faults:
+        return binder
+    faults = findings.report.faults
+    if findings.handling == "repair":
+        faults = tuple(f for f in faults if f.kind == "tracker_jump")
+    bad_intervals, bad_records = fault_masks(replace(findings.report, faults=faults), n_records, lag_s, dt_s)
+    return replace(binder, bad_intervals=bad_intervals, bad_records=bad_records)
+
+
+def fault_masks(
+    report: FaultReport, n_records: int, lag_s: float, dt_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The intervals (widened by the records a lag re-samples across) and the tracker records the
+    findings mark as bad, per interval and per record of the whole log."""
+    reach = int(np.ceil(abs(lag_s) / dt_s)) + 1 if lag_s else 0
+    return dilate(report.bad_intervals(n_records - 1), reach), report.bad_records(n_records)
+
+
+def dilate(mask: np.ndarray, reach: int) -> np.ndarray:
+    """``mask`` widened by ``reach`` elements on each side of every true run."""
+    if reach <= 0 or not mask.any():
+        return mask
+    idx = np.flatnonzero(mask)
+    out = np.zeros_like(mask)
+    for i in idx:
+        out[max(i - reach, 0) : i + reach + 1] = True
+    return out

@@ -105,7 +105,8 @@ class ProblemFunctions:
     ``huber_lifted`` → the Black–Rangarajan term; ``sensitivities`` (x, x_fixed, data) →
     (∂e/∂data, J). Whole-problem: ``tangent_map`` x → ∂(x ⊞ Δ)/∂Δ at Δ = 0; ``prior`` → (H, g,
     cost, grad, hess) of Gaussian priors; ``assemble`` (x, x_fixed) → params. Full-parameter:
-    ``predict`` (params, u) → sensor motion over one interval; ``integrate_step``
+    ``predict`` (params, u) → sensor motion over one interval; ``interval_residual`` (params, u,
+    z) → (e, ∂e/∂u) of one interval; ``integrate_step``
     (T_world_sensor, params, u) → T_world_sensor · predict; ``predict_window`` (params, data);
     ``between`` (a, b) → t2v(a⁻¹b) and ``between_jacobians``; ``base_from_sensor``
     (T_world_sensor, params) → T_world_base; ``odometry_step`` (state = [T_world_base, vec P],
@@ -322,6 +323,21 @@ class ProblemFunctions:
         u1 = ca.SX.sym("u", self.n_inputs)
         h1 = predict_motion(self.model, params, ca.reshape(u1, self.n_inputs, 1), self.spec.integration)
         return params, u1, h1
+
+    @functools.cached_property
+    def interval_residual(self) -> ca.Function:
+        """(params, u, z) → (e, de_du): one interval's residual against the tracker's motion ``z``
+        and its derivative with respect to the interval's inputs (for checking encoder readings)."""
+        params, u1, h1 = self._full
+        z = ca.SX.sym("z", 3)
+        e1 = se2.between(z, h1)
+        return _fn(
+            "interval_residual",
+            [params, u1, z],
+            ["params", "u", "z"],
+            [e1, ca.jacobian(e1, u1)],
+            ["e", "de_du"],
+        )
 
     @functools.cached_property
     def predict(self) -> ca.Function:

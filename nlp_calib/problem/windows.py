@@ -40,6 +40,7 @@ class ResidualData:
     starts: np.ndarray
     horizon: int
     dropped_stationary: int
+    dropped_faulty: int = 0
 
     @property
     def n_residuals(self) -> int:
@@ -70,8 +71,15 @@ def build_residual_data(
     options: ResidualOptions,
     *,
     drop_stationary: bool = False,
+    bad_intervals: np.ndarray | None = None,
+    bad_records: np.ndarray | None = None,
 ) -> ResidualData:
-    """Stack the windows of ``log`` into the data matrix of ``fns``."""
+    """Stack the windows of ``log`` into the data matrix of ``fns``.
+
+    Windows without encoder motion are dropped when ``drop_stationary``; windows that cross an
+    interval of ``bad_intervals`` (per interval of ``log``) or start or end at a record of
+    ``bad_records`` (per record) are always dropped.
+    """
     if options.horizon != fns.spec.horizon:
         raise ProblemError(
             f"data horizon {options.horizon} does not match the built problem's {fns.spec.horizon}"
@@ -88,6 +96,13 @@ def build_residual_data(
         keep = moving[starts[:, None] + offsets[None, :]].any(axis=1)
         dropped = int((~keep).sum())
         starts = starts[keep]
+    faulty = np.zeros(starts.size, dtype=bool)
+    if bad_intervals is not None and np.any(bad_intervals):
+        bad = np.concatenate([[0], np.cumsum(np.asarray(bad_intervals, dtype=np.int64))])
+        faulty |= bad[starts + H] - bad[starts] > 0
+    if bad_records is not None and np.any(bad_records):
+        faulty |= np.asarray(bad_records)[starts] | np.asarray(bad_records)[starts + H]
+    starts = starts[~faulty]
     n_in = inputs.shape[0]
     columns = np.empty((fns.data_rows, starts.size), order="F")
     # Window inputs, interval-major: rows j*n_in:(j+1)*n_in hold interval starts+j.
@@ -102,4 +117,5 @@ def build_residual_data(
         starts=starts,
         horizon=H,
         dropped_stationary=dropped,
+        dropped_faulty=int(faulty.sum()),
     )

@@ -24,6 +24,7 @@ from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import LogHeader, format_log
 from nlp_calib.models import DEFAULT_MODEL, MODELS
 from nlp_calib.models.drives import integrate_base
+from nlp_calib.simulation.faults import COUNTER_FAULT_KINDS, InjectedFault, inject
 
 TRAJECTORIES = ("s_curves", "straight", "no_reversals")
 
@@ -60,6 +61,8 @@ class SimulationOptions:
     outlier_magnitude: float = 0.3
     latency_s: float = 0.0
     wrap_after_ticks: int = 20000
+    counter_faults: int = 0
+    counter_fault_kinds: tuple[str, ...] = COUNTER_FAULT_KINDS
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -84,6 +87,10 @@ class SimulationOptions:
             )
         if not 0.0 <= self.outlier_fraction < 1.0 or not 0.0 <= self.stop_fraction < 1.0:
             raise OptionsError("outlier_fraction and stop_fraction must lie in [0, 1)")
+        if self.counter_faults < 0 or not set(self.counter_fault_kinds) <= set(COUNTER_FAULT_KINDS):
+            raise OptionsError(
+                f"counter_faults must be >= 0 and counter_fault_kinds among {', '.join(COUNTER_FAULT_KINDS)}"
+            )
         if self.substeps < 1 or self.rate_hz <= 0 or self.jitter_s < 0 or self.latency_s < 0:
             raise OptionsError("substeps >= 1, rate_hz > 0, jitter_s >= 0 and latency_s >= 0 are required")
 
@@ -99,6 +106,7 @@ class SimulatedLog:
     T_world_sensor: np.ndarray
     T_world_base_true: np.ndarray
     options: SimulationOptions
+    faults: tuple[InjectedFault, ...] = ()
 
     def text(self) -> str:
         return format_log(self.header, self.time_ns, self.ticks, self.model_pose, self.T_world_sensor)
@@ -108,6 +116,7 @@ class SimulatedLog:
         return {
             "params": dict(self.options.truth),
             "options": opts,
+            "faults": [f.as_dict() for f in self.faults],
             "records": int(self.time_ns.size),
         }
 
@@ -188,6 +197,14 @@ def simulate(opts: SimulationOptions) -> SimulatedLog:
 
     ticks = drive.ticks(opts, {name: np.interp(t_s, t_fine, c) for name, c in channels.items()})
     header = drive.header(opts)
+    faults: tuple[InjectedFault, ...] = ()
+    if opts.counter_faults:
+        # Their own random stream: a log without faults stays the same for a seed.
+        counters = [n for n, kind in MODELS[opts.model].encoder_kinds.items() if kind == "counter"]
+        fault_rng = np.random.default_rng([opts.seed, 1])
+        ticks, faults = inject(
+            ticks, header.encoder_names, counters, opts.counter_faults, opts.counter_fault_kinds, fault_rng
+        )
     return SimulatedLog(
         header=header,
         time_ns=np.round(t_s * 1e9).astype(np.int64) + 1_700_000_000_000_000_000,
@@ -196,6 +213,7 @@ def simulate(opts: SimulationOptions) -> SimulatedLog:
         T_world_sensor=tracker,
         T_world_base_true=base_at_samples,
         options=opts,
+        faults=faults,
     )
 
 
