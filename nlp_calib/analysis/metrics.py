@@ -8,8 +8,8 @@ composed in one vectorised pass (linear in the number of records).
   counter fault loses counts for good, so from the first fault on this figure measures the fault,
   not the calibration, and it can rank parameter sets wrongly.
 - **Segment ATE**: the track restarted from the tracker after each fault, the fault's records left
-  out; ``aligned``: the same after the best SE(2) alignment of all segment records to the tracker
-  (what ``evo_ape --align`` computes on the exported files).
+  out; ``aligned``: the same after the best SE(2) alignment of each segment to the tracker (what
+  ``evo_ape --align`` computes on each exported segment), pooled over the segments.
 - **RPE over a distance** (1 m, 5 m): for every record, the record whose distance along the
   tracker's path is nearest that distance further on (within 10 %, pairs inside one segment, as
   ``evo_rpe --delta D --delta_unit m --all_pairs --pairs_from_reference`` chooses them); the
@@ -245,6 +245,7 @@ def trajectory_metrics(
     seg_err = np.linalg.norm(seg_track[scored, :2] - ref[scored, :2], axis=1)
     # A bad tracker pose is left out of the path too, as it is of the exported files.
     scored_parts = [a + np.flatnonzero(good[a:b]) for a, b in parts]
+    aligned = [aligned_errors(seg_track[idx], ref[idx]) for idx in scored_parts]
     rpe = {d: rpe_by_distance(seg_track, ref, scored_parts, d) for d in RPE_DISTANCES}
     return TrajectoryMetrics(
         ate_mean=float(err.mean()),
@@ -256,7 +257,7 @@ def trajectory_metrics(
         records=int(stop - start),
         ate=ErrorStats.of(err),
         segment_ate=ErrorStats.of(seg_err),
-        segment_ate_aligned=ErrorStats.of(aligned_errors(seg_track[scored], ref[scored])),
+        segment_ate_aligned=ErrorStats.of(np.concatenate(aligned) if aligned else np.zeros(0)),
         rpe_distance=rpe,
         segments=len(parts),
         distance_m=float(path_distance(ref)[-1]),

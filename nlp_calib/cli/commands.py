@@ -30,6 +30,19 @@ def _out_dir(args: argparse.Namespace, name: str) -> Path:
     return prepare_output_dir(args.out / name if len(args.scenario) > 1 else args.out)
 
 
+def _wrote(paths: Sequence[Path], out: Path) -> list[str]:
+    """One line per file written into ``out``, one per subfolder."""
+    lines, folders = [], {}
+    for p in paths:
+        rel = p.relative_to(out)
+        if len(rel.parts) > 1:
+            folders.setdefault(rel.parts[0], []).append(p)
+        else:
+            lines.append(f"wrote {p}")
+    lines += [f"wrote {out / name}/ ({len(files)} files)" for name, files in folders.items()]
+    return lines
+
+
 def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> int:
     scenarios = [load_scenario(p) for p in args.scenario]  # validate all before any work
     runs = []
@@ -58,7 +71,7 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
                     written += write_report(calib, run, stage.path)
                     progress.clear()
                 stage.commit()
-            print("\n" + "\n".join(f"wrote {stage.final(p)}" for p in written) + "\n")
+            print("\n" + "\n".join(_wrote([stage.final(p) for p in written], out)) + "\n")
     if len(runs) > 1:
         print(summary_table(runs))
     return 0 if all(r.result.converged for run in runs for r in run.reports.values()) else 1

@@ -76,7 +76,7 @@ def _parameter_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
         row = [f"`{n}`", units.get(n, ""), fmt_value(run.initial[n])]
         for s in solvers:
             rep = run.reports[s]
-            row += [fmt_value(rep.result.param_dict()[n]), fmt_std(rep.uncertainty.std_dict()[n])]
+            row += [fmt_value(rep.result.param_dict()[n]), fmt_std(run.std(s)[n])]
         if pair:
             a, b = (run.reports[s].result.param_dict()[n] for s in solvers)
             row.append(f"{a - b:+.2e}")

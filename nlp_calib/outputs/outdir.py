@@ -3,9 +3,10 @@
 A run writes its files into a staging folder inside the output folder (same file system) and
 :meth:`StagedOutput.commit` moves them into place only when all of them are complete, one
 ``os.replace`` each. The folder's manifest (:data:`MANIFEST_FILE`) lists the files the last run
-wrote; on commit, files of the previous run that this run did not write are removed — only
-files the manifest lists (the tool never deletes what it did not create), plus the names the
-caller owns outright (the hand-off files, which a robot stack must never pick up stale).
+wrote (plain names, or names inside one subfolder); on commit, files of the previous run that
+this run did not write are removed — only files the manifest lists (the tool never deletes what
+it did not create), plus the names the caller owns outright (the hand-off files, which a robot
+stack must never pick up stale).
 An interrupted or failed run leaves the previous run's files untouched and no temporary files.
 """
 
@@ -34,8 +35,14 @@ def previous_files(out_dir: Path) -> list[str]:
     files = doc.get("files") if isinstance(doc, dict) else None
     if not isinstance(files, list):
         return []
-    # Plain names only: a manifest must not point the clean-up outside the folder.
-    return [f for f in files if isinstance(f, str) and f and Path(f).name == f and f not in (".", "..")]
+    # Plain names, or a plain name inside a plain-named subfolder: a manifest must not point the
+    # clean-up outside the folder.
+    return [f for f in files if isinstance(f, str) and _plain_path(f)]
+
+
+def _plain_path(name: str) -> bool:
+    parts = name.split("/")
+    return 1 <= len(parts) <= 2 and all(p and Path(p).name == p and p not in (".", "..") for p in parts)
 
 
 class StagedOutput:
@@ -60,19 +67,29 @@ class StagedOutput:
 
     def final(self, staged: Path) -> Path:
         """Where a file written into the staging folder ends up."""
-        return self.out_dir / Path(staged).name
+        return self.out_dir / Path(staged).relative_to(self.path)
 
     def commit(self) -> list[Path]:
         """Move every staged file into the output folder, remove the previous run's leftovers and
         write the manifest; returns the final paths (in name order)."""
-        names = sorted(p.name for p in self.path.iterdir() if p.is_file())
+        names = sorted(
+            str(p.relative_to(self.path))
+            for p in [
+                *self.path.iterdir(),
+                *(q for d in self.path.iterdir() if d.is_dir() for q in d.iterdir()),
+            ]
+            if p.is_file()
+        )
         stale = (set(previous_files(self.out_dir)) | set(self.owned)) - set(names) - {MANIFEST_FILE}
         for name in names:
+            (self.out_dir / name).parent.mkdir(exist_ok=True)
             (self.path / name).replace(self.out_dir / name)
         for name in sorted(stale):
             old = self.out_dir / name
             if old.is_symlink() or old.is_file():  # never a folder someone put there
                 old.unlink(missing_ok=True)
+                if "/" in name and old.parent.is_dir() and not any(old.parent.iterdir()):
+                    old.parent.rmdir()
         manifest = {"tool": "nlp_calib", "files": names}
         atomic_write_text(self.out_dir / MANIFEST_FILE, json.dumps(manifest, indent=2) + "\n")
         self.discard()

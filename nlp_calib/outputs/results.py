@@ -37,11 +37,35 @@ def _faults_dict(run: CalibrationRun) -> dict[str, Any] | None:
     }
 
 
-def _solver_dict(report: SolverReport) -> dict[str, Any]:
+def _crossval_dict(run: CalibrationRun) -> dict[str, Any] | None:
+    cv = run.crossval
+    if cv is None:
+        return None
+    return {
+        "blocks": len(cv.folds),
+        "std_blocks": run.std_blocks(),
+        "spread": dict(zip(cv.names, map(float, cv.spread()))),
+        "heldout": {label: cv.heldout_mean(label) for label, _ in cv.folds[0].heldout.figures()[:4]}
+        if cv.folds and cv.folds[0].heldout is not None
+        else {},
+        "folds": [
+            {
+                "records": [f.first, f.stop],
+                "converged": f.converged,
+                "params": dict(zip(cv.names, map(float, f.params))),
+                "heldout": f.heldout.as_dict() if f.heldout is not None else None,
+            }
+            for f in cv.folds
+        ],
+    }
+
+
+def _solver_dict(run: CalibrationRun, name: str, report: SolverReport) -> dict[str, Any]:
     r, u = report.result, report.uncertainty
     return {
         "params": r.param_dict(),
-        "std": u.std_dict(),
+        "std": run.std(name),
+        "std_white_noise": u.std_dict(),
         "correlation": {"names": list(u.names), "matrix": np.round(u.correlation, 6).tolist()},
         "cost": r.cost,
         "chi2": r.chi2,
@@ -85,7 +109,8 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         "initial": dict(run.initial),
         "initial_guess": sc.initial_guess if isinstance(sc.initial_guess, str) else "mapping",
         "baseline": {"metrics": _metrics_dict(run.baseline, run.baseline_holdout)},
-        "solvers": {name: _solver_dict(rep) for name, rep in run.reports.items()},
+        "solvers": {name: _solver_dict(run, name, rep) for name, rep in run.reports.items()},
+        "crossvalidation": _crossval_dict(run),
         "faults": _faults_dict(run),
         "observability": run.observability.as_dict() if run.observability is not None else None,
         "warnings": list(run.warnings),

@@ -20,9 +20,11 @@ import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.alignment import LagEstimate
+from nlp_calib.analysis.crossval import CrossValidation, Fold, believed_std, blocks, combine
 from nlp_calib.analysis.metrics import TrajectoryMetrics, trajectory_metrics
 from nlp_calib.analysis.observability import Observability, analyse
 from nlp_calib.analysis.odometry import OdometryTrack, propagate
+from nlp_calib.core.errors import NlpCalibError
 from nlp_calib.logs import Log
 from nlp_calib.pipeline import steps
 from nlp_calib.pipeline.scenario import Scenario
@@ -64,6 +66,20 @@ class CalibrationRun:
     warnings: tuple[str, ...] = field(default=())
     findings: steps.Findings | None = None
     dropped_faulty: int = 0
+    crossval: CrossValidation | None = None
+
+    def std(self, solver: str) -> dict[str, float]:
+        """The 1σ to believe for ``solver``'s estimate: the larger of the white-noise σ and the
+        block cross-validation's jackknife σ (see :mod:`nlp_calib.analysis.crossval`)."""
+        u = self.reports[solver].uncertainty
+        blocked = self.crossval.std if self.crossval is not None else np.full(len(u.names), np.nan)
+        return dict(zip(u.names, map(float, believed_std(u.std, blocked))))
+
+    def std_blocks(self) -> dict[str, float] | None:
+        """The jackknife σ of the block cross-validation, when it has enough converged folds."""
+        if self.crossval is None or not self.crossval.available:
+            return None
+        return self.crossval.std_dict()
 
 
 class Calibration:
@@ -143,12 +159,16 @@ class Calibration:
 
     def _canonical(self, result: SolverResult) -> SolverResult:
         """``result`` mapped onto the model's canonical form (same cost: an exact symmetry)."""
-        canon = self.model.canonical(result.param_dict(), self.fns.fixed)
-        params = np.array([canon[n] for n in self.fns.names])
+        params = self.canonical_params(result.params)
         if np.array_equal(params, result.params):
             return result
-        x = np.array([canon[n] for n in self.fns.free])
+        x = params[[self.fns.names.index(n) for n in self.fns.free]]
         return dataclasses.replace(result, params=params, x=x)
+
+    def canonical_params(self, params: np.ndarray) -> np.ndarray:
+        """The full parameter vector ``params`` in the model's canonical form."""
+        canon = self.model.canonical(dict(zip(self.fns.names, map(float, params))), self.fns.fixed)
+        return np.array([canon[n] for n in self.fns.names])
 
     def score(self, params: np.ndarray) -> tuple[TrajectoryMetrics, TrajectoryMetrics | None]:
         """Full-range and hold-out trajectory metrics of ``params``."""
@@ -163,6 +183,45 @@ class Calibration:
         if self.fit[1] < self.used[1] - 1:
             holdout = trajectory_metrics(self.fns, params, inputs, poses, start=split, rpe_window=W, **masks)
         return full, holdout
+
+    def cross_validate(self, x: np.ndarray, k: int) -> CrossValidation:
+        """``k`` folds over the fitted records, each started from the estimate ``x`` (free parameters).
+
+        A fold leaves out every residual window that touches its block (so no window straddles the
+        held-out records), refits with the internal solver, and scores the block on its own: dead
+        reckoning restarted at the block's start and after each fault inside it.
+        """
+        first, stop = self.fit
+        n_intervals = self.aligned.n_records - 1
+        base = self.binder.bad_intervals
+        used0 = self.used[0]
+        inputs = self.model.inputs(self.selected, self.scenario.residual.steering_sample)
+        poses = self.selected.T_world_sensor
+        bad_i, bad_r = self.fault_masks
+        folds = []
+        for a, b in blocks(first, stop, k):
+            bad = np.zeros(n_intervals, dtype=bool) if base is None else base.copy()
+            bad[a : b - 1] = True
+            try:
+                _, ev = dataclasses.replace(self.binder, bad_intervals=bad).bind(self.aligned, first, stop)
+            except NlpCalibError:  # too few windows left without this block: the fold cannot be fitted
+                folds.append(Fold(a, b, np.full(len(self.fns.names), np.nan), False, None))
+                continue
+            _, x_k, converged = self.binder.fit(ev, x)
+            params = self.canonical_params(ev.params(x_k))
+            scores = trajectory_metrics(
+                self.fns,
+                params,
+                inputs,
+                poses,
+                start=a - used0,
+                stop=b - used0,
+                rpe_window=self.scenario.validation.rpe_window,
+                bad_intervals=bad_i[self.used[0] : self.used[1] - 1],
+                bad_records=bad_r[self.used[0] : self.used[1]],
+            )
+            folds.append(Fold(a, b, params, converged, scores))
+        return combine(self.fns.names, folds)
 
     def odometry(self, params: np.ndarray) -> OdometryTrack:
         """Base-link odometry with ``params`` over the used records, with its propagated covariance,
@@ -200,6 +259,10 @@ class Calibration:
         warnings += [
             f"{name}: {rep.result.reason}" for name, rep in reports.items() if not rep.result.converged
         ]
+        crossval = None
+        converged = [r for r in results if r.converged]
+        if converged and self.scenario.validation.blocks:
+            crossval = self.cross_validate(converged[0].x, self.scenario.validation.blocks)
         return CalibrationRun(
             scenario=self.scenario,
             log=self.log,
@@ -218,4 +281,5 @@ class Calibration:
             warnings=tuple(warnings),
             findings=self.findings,
             dropped_faulty=self.data.dropped_faulty,
+            crossval=crossval,
         )

@@ -55,10 +55,13 @@ class InformationWeights:
 
 @dataclass(frozen=True)
 class ValidationOptions:
-    """``holdout_fraction``: trailing fraction of the records kept out of the fit and scored."""
+    """``holdout_fraction``: trailing fraction of the records kept out of the fit and scored;
+    ``blocks``: contiguous blocks of the blocked cross-validation that gives the data-driven σ
+    (0: none); ``rpe_window``: records of the fixed-window RPE."""
 
     holdout_fraction: float | None = None
     rpe_window: int = 25
+    blocks: int = 10
 
 
 @dataclass(frozen=True)
@@ -222,6 +225,10 @@ def _validate(sc: Scenario, source: str) -> None:
     if not (al.search[0] < al.search[1] and al.step > 0 and (al.search[1] - al.search[0]) / al.step <= 1000):
         fail(f"{source}: alignment", "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
     _check_choice(sc.faults.handling, FAULT_HANDLINGS, f"{source}: faults.handling")
+    if sc.validation.blocks != 0 and not 2 <= sc.validation.blocks <= 100:
+        fail(
+            f"{source}: validation.blocks", f"must be 0 (none) or lie in [2, 100], got {sc.validation.blocks}"
+        )
     if sc.validation.rpe_window < 1:
         fail(f"{source}: validation.rpe_window", "must be >= 1")
     if isinstance(sc.initial_guess, str):
