@@ -230,7 +230,7 @@ def _counter_faults(
     catch_up = np.zeros(N, dtype=bool)
     catch_up[1:] = (ticks[1:] != 0) & (ticks[:-1] == 0)  # zero readings are judged with their catch-up
     large = (np.abs(c) > CANDIDATE_SIGMAS * sigma) & (ticks != 0)
-    candidates = np.flatnonzero(against | catch_up | large)
+    candidates: list[int] = np.flatnonzero(against | catch_up | large).tolist()
     firsts = {}
     for k in candidates:
         first = k
@@ -248,10 +248,10 @@ def _counter_faults(
         after = valid[(valid >= k + 1) & (valid <= hi)][:W]
         return _level(C, after) - _level(C, before)
 
-    step_sigma = max(robust_sigma(np.array([step(int(k)) for k in candidates])), sigma)
+    step_sigma = max(robust_sigma(np.array([step(k) for k in candidates])), sigma)
     # The most significant step first, so that the strongest faults bound their neighbours' levels.
     faults: list[Fault] = []
-    open_ = [int(k) for k in candidates]
+    open_ = list(candidates)
     while open_:
         threshold = np.array([AGAINST_SIGMAS if against[k] else FAULT_SIGMAS for k in open_]) * step_sigma
         score = np.abs([step(k) for k in open_]) / threshold

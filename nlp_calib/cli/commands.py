@@ -32,7 +32,8 @@ def _out_dir(args: argparse.Namespace, name: str) -> Path:
 
 def _wrote(paths: Sequence[Path], out: Path) -> list[str]:
     """One line per file written into ``out``, one per subfolder."""
-    lines, folders = [], {}
+    lines: list[str] = []
+    folders: dict[str, list[Path]] = {}
     for p in paths:
         rel = p.relative_to(out)
         if len(rel.parts) > 1:

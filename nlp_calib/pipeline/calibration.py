@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,8 +25,9 @@ from nlp_calib.analysis.crossval import CrossValidation, Fold, believed_std, blo
 from nlp_calib.analysis.metrics import TrajectoryMetrics, trajectory_metrics
 from nlp_calib.analysis.observability import Observability, analyse
 from nlp_calib.analysis.odometry import OdometryTrack, propagate
-from nlp_calib.core.errors import NlpCalibError
+from nlp_calib.core.errors import NlpCalibError, NlpCalibWarning
 from nlp_calib.logs import Log
+from nlp_calib.models import canonical
 from nlp_calib.pipeline import steps
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.solvers import Solver, SolverResult, get_solver
@@ -95,7 +97,14 @@ class Calibration:
         self.scenario = sc = scenario
         self.model, self.log = steps.load(sc, log)
         start, stop = steps.select(sc, self.log)
-        self.fns = steps.build_problem(sc, self.model)
+        self.held = steps.held(sc, self.model, self.log, start, steps.split(sc, start, stop))
+        for name, why in self.held.items():
+            warnings.warn(
+                f"{name} is held at its initial value: {why} in the fitted records",
+                NlpCalibWarning,
+                stacklevel=2,
+            )
+        self.fns = steps.build_problem(sc, self.model, tuple(self.held))
         self.start = steps.starting_point(sc, self.fns, self.log, start, steps.split(sc, start, stop))
         self.backend = steps.prepare_backend(sc, self.fns)
         binder = steps.Binder(
@@ -105,8 +114,9 @@ class Calibration:
             binder, self.log, start, steps.split(sc, start, stop), self.start.x0
         )
         binder = steps.with_priors(binder, priors)
-        # Faults are judged on the log as read (re-sampling smears a faulty reading), then kept
-        # out of every later fit: the lag search's and the final one.
+        # Faults are judged on the encoder readings as logged (re-sampling them would smear a
+        # faulty one): first against the tracker as logged, to keep them out of the lag search,
+        # then, once the lag is known, against the tracker re-sampled onto the encoders' clock.
         report = steps.find_faults(binder, self.log, start, stop, self.start.x0)
         fitted_log, self.findings = steps.handle_faults(self.log, report, sc.faults.handling)
         dt = steps.median_interval(self.log)
@@ -114,11 +124,15 @@ class Calibration:
         reach = max(abs(search[0]), abs(search[1]))
         search_binder = steps.exclude_faults(binder, self.findings, self.log.n_records, reach, dt)
         self.alignment = steps.align(search_binder, fitted_log, start, stop, self.start.x0)
-        self.binder = steps.exclude_faults(
-            binder, self.findings, self.log.n_records, self.alignment.lag_s, dt
-        )
+        lag = self.alignment.lag_s
+        if lag:
+            judge = steps.exclude_faults(binder, self.findings, self.log.n_records, lag, dt)
+            report = steps.find_faults(judge, self.log, start, stop, self.start.x0, lag)
+            fitted_log, self.findings = steps.handle_faults(self.log, report, sc.faults.handling)
+            self.alignment = steps.realign(self.alignment, fitted_log, self.model)
+        self.binder = steps.exclude_faults(binder, self.findings, self.log.n_records, lag, dt)
         # Every detected fault shapes the fair figures, whatever the handling: like with like.
-        self.fault_masks = steps.fault_masks(report, self.log.n_records, self.alignment.lag_s, dt)
+        self.fault_masks = steps.fault_masks(report, self.log.n_records, lag, dt)
         self.aligned = self.alignment.log
         start, stop = max(start, self.alignment.valid[0]), min(stop, self.alignment.valid[1])
         self.used = (start, stop)
@@ -167,7 +181,7 @@ class Calibration:
 
     def canonical_params(self, params: np.ndarray) -> np.ndarray:
         """The full parameter vector ``params`` in the model's canonical form."""
-        canon = self.model.canonical(dict(zip(self.fns.names, map(float, params))), self.fns.fixed)
+        canon = canonical(self.model, dict(zip(self.fns.names, map(float, params))), self.fns.fixed)
         return np.array([canon[n] for n in self.fns.names])
 
     def score(self, params: np.ndarray) -> tuple[TrajectoryMetrics, TrajectoryMetrics | None]:
@@ -175,13 +189,24 @@ class Calibration:
         inputs = self.model.inputs(self.selected, self.scenario.residual.steering_sample)
         poses = self.selected.T_world_sensor
         a, b = self.used
-        masks = {"bad_intervals": self.fault_masks[0][a : b - 1], "bad_records": self.fault_masks[1][a:b]}
+        bad_i, bad_r = self.fault_masks[0][a : b - 1], self.fault_masks[1][a:b]
         W = self.scenario.validation.rpe_window
-        full = trajectory_metrics(self.fns, params, inputs, poses, rpe_window=W, **masks)
+        full = trajectory_metrics(
+            self.fns, params, inputs, poses, rpe_window=W, bad_intervals=bad_i, bad_records=bad_r
+        )
         holdout = None
         split = self.fit[1] - self.used[0]
         if self.fit[1] < self.used[1] - 1:
-            holdout = trajectory_metrics(self.fns, params, inputs, poses, start=split, rpe_window=W, **masks)
+            holdout = trajectory_metrics(
+                self.fns,
+                params,
+                inputs,
+                poses,
+                start=split,
+                rpe_window=W,
+                bad_intervals=bad_i,
+                bad_records=bad_r,
+            )
         return full, holdout
 
     def cross_validate(self, x: np.ndarray, k: int) -> CrossValidation:
@@ -255,10 +280,9 @@ class Calibration:
         results = [rep.result for rep in reports.values()]
         first = next((r for r in results if np.isfinite(r.cost)), results[0])
         observability = analyse(self.evaluator, first.x, self.data.log.T_world_sensor)
-        warnings = list(observability.warnings)
-        warnings += [
-            f"{name}: {rep.result.reason}" for name, rep in reports.items() if not rep.result.converged
-        ]
+        notes = list(observability.warnings)
+        notes += [f"{name} held at its initial value: {why}" for name, why in self.held.items()]
+        notes += [f"{name}: {rep.result.reason}" for name, rep in reports.items() if not rep.result.converged]
         crossval = None
         converged = [r for r in results if r.converged]
         if converged and self.scenario.validation.blocks:
@@ -278,7 +302,7 @@ class Calibration:
             tracker_lag_s=self.alignment.lag_s,
             lag_estimate=self.alignment.estimate,
             observability=observability,
-            warnings=tuple(warnings),
+            warnings=tuple(notes),
             findings=self.findings,
             dropped_faulty=self.data.dropped_faulty,
             crossval=crossval,

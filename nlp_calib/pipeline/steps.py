@@ -17,7 +17,7 @@ from nlp_calib.analysis import uncertainty
 from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
 from nlp_calib.analysis.faults import FaultReport, check_log, repair
 from nlp_calib.core.errors import DatasetError, ModelError, OptionsError, ProblemError, ScenarioError
-from nlp_calib.logs import Log, resample_encoders
+from nlp_calib.logs import Log, resample_encoders, resample_tracker
 from nlp_calib.models import SENSOR_PARAMS, KinematicModel, get_model, header_parameters, load_log
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import ProblemFunctions, ProblemSpec, ResidualData, build, build_residual_data
@@ -74,7 +74,14 @@ def split(sc: Scenario, start: int, stop: int) -> int:
     return stop if hf is None else start + round((1.0 - hf) * (stop - start))
 
 
-def build_problem(sc: Scenario, model: KinematicModel) -> ProblemFunctions:
+def held(sc: Scenario, model: KinematicModel, log: Log, start: int, stop: int) -> dict[str, str]:
+    """Free parameters the records ``start:stop`` cannot determine at all, with the reason: the
+    fit holds them at their initial values (with a warning) instead of failing as singular."""
+    inputs = model.inputs(log.select(start, stop), sc.residual.steering_sample)
+    return {n: why for n, why in model.undetermined(inputs).items() if n not in sc.fixed}
+
+
+def build_problem(sc: Scenario, model: KinematicModel, also_fixed: tuple[str, ...] = ()) -> ProblemFunctions:
     """The problem's Functions for the scenario's residual form, kernel and fixed parameters."""
     with scenario_key(sc, "residual"):
         return build(
@@ -83,14 +90,17 @@ def build_problem(sc: Scenario, model: KinematicModel) -> ProblemFunctions:
                 horizon=sc.residual.horizon,
                 integration=sc.residual.integration,
                 kernel=sc.robust.kernel,
-                fixed=sc.fixed,
+                fixed=(*sc.fixed, *also_fixed),
             ),
         )
 
 
 def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[str, float]:
     """The log header's values, overridden by the scenario's mapping (``auto`` fills in later)."""
-    guess = {n: v for n, v in header_parameters(model, log.header).items() if n in model.kinematic_params}
+    guess = dict(model.defaults)
+    guess.update(
+        {n: v for n, v in header_parameters(model, log.header).items() if n in model.kinematic_params}
+    )
     guess.update(zip(SENSOR_PARAMS, log.header.T_base_sensor))
     if isinstance(sc.initial_guess, Mapping):
         guess.update(sc.initial_guess)
@@ -289,6 +299,12 @@ def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np
     return estimate_lag(fit_cost, al.search, al.step)
 
 
+def realign(alignment: Alignment, log: Log, model: KinematicModel) -> Alignment:
+    """The same alignment applied to another version of the log (e.g. a repaired one)."""
+    aligned, valid = resample_encoders(log, alignment.lag_s, model.encoder_kinds)
+    return replace(alignment, log=aligned, valid=valid)
+
+
 def median_interval(log: Log) -> float:
     """The median time between records (s)."""
     return float(np.median(np.diff(log.time_s))) if log.n_records > 1 else 1.0
@@ -321,11 +337,15 @@ class Findings:
     repairs: tuple[str, ...] = ()
 
 
-def find_faults(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> FaultReport:
-    """Faults in records ``start:stop`` of ``log``, judged with a fit to all of its windows."""
-    _, ev = binder.bind(log, start, stop)
+def find_faults(
+    binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray, lag_s: float = 0.0
+) -> FaultReport:
+    """Faults in records ``start:stop`` of ``log``, judged with a fit to its windows (those the
+    binder keeps) and, with a tracker ``lag_s``, against the tracker re-sampled onto the encoders'
+    clock: the encoder readings stay as logged, so a jump stays on its record."""
+    _, ev = binder.bind(resample_encoders(log, lag_s, binder.fns.model.encoder_kinds)[0], start, stop)
     _, x, _ = binder.fit(ev, x0)
-    sel = log.select(start, stop)
+    sel = resample_tracker(log, lag_s).select(start, stop)
     model = binder.fns.model
     inputs = model.inputs(sel, binder.scenario.residual.steering_sample)
     report = check_log(binder.fns, ev.params(x), sel, inputs, model.counter_rows(sel))
