@@ -233,9 +233,14 @@ def _counter_faults(
     candidates: list[int] = np.flatnonzero(against | catch_up | large).tolist()
     firsts = {}
     for k in candidates:
+        # The stretch runs back over the stall: readings that stayed put, or caught up only partly
+        # (short of the motion, in the fault's direction, by more than 2σ).
         first = k
-        while first > 0 and k - first < MAX_STALL and ticks[first - 1] == 0:
-            first -= 1
+        while first > 0 and k - first < MAX_STALL:
+            prev = first - 1
+            if not (ticks[prev] == 0 or (np.sign(c[prev]) == np.sign(c[k]) and abs(c[prev]) > 2.0 * sigma)):
+                break
+            first = prev
         firsts[int(k)] = int(first)
 
     accepted: list[tuple[int, int]] = []  # stretches (first, last) of the faults found so far
@@ -248,7 +253,13 @@ def _counter_faults(
         after = valid[(valid >= k + 1) & (valid <= hi)][:W]
         return _level(C, after) - _level(C, before)
 
-    step_sigma = max(robust_sigma(np.array([step(k) for k in candidates])), sigma)
+    # The noise of such a step, from steps taken everywhere along the log (faults are few there).
+    levels = C[valid]
+    if levels.size >= 2 * W:
+        medians = np.median(np.lib.stride_tricks.sliding_window_view(levels, W), axis=1)
+        step_sigma = max(robust_sigma(medians[W:] - medians[:-W]), sigma)
+    else:
+        step_sigma = max(robust_sigma(np.array([step(k) for k in candidates])), sigma)
     # The most significant step first, so that the strongest faults bound their neighbours' levels.
     faults: list[Fault] = []
     open_ = list(candidates)

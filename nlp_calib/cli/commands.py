@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -15,8 +16,8 @@ from nlp_calib.core.files import atomic_write_bytes, atomic_write_text, prepare_
 from nlp_calib.outputs.handoff import CALIBRATION_FILE, URDF_FILE, write_handoff
 from nlp_calib.outputs.outdir import StagedOutput
 from nlp_calib.outputs.progress import Progress
-from nlp_calib.outputs.results import write_result
-from nlp_calib.outputs.terminal import correlation_table, run_table, summary_table
+from nlp_calib.outputs.results import write_result, write_validation
+from nlp_calib.outputs.terminal import correlation_table, run_table, summary_table, validation_table
 from nlp_calib.pipeline import Calibration, load_scenario
 from nlp_calib.pipeline.export import write_c_export
 from nlp_calib.pipeline.simconfig import simulation_options
@@ -156,7 +157,28 @@ def _cmd_odometry(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_validate(args: argparse.Namespace) -> int:
+    if len(args.scenario) != 1:
+        raise UsageError("validate takes one scenario")
+    scenario = load_scenario(args.scenario[0])
+    blocks = args.blocks if args.blocks is not None else (scenario.validation.blocks or 10)
+    if not 2 <= blocks <= 100:
+        raise UsageError(f"--blocks must lie in [2, 100], got {blocks}")
+    scenario = dataclasses.replace(
+        scenario, validation=dataclasses.replace(scenario.validation, blocks=blocks)
+    )
+    out = _out_dir(args, scenario.name)
+    run = Calibration.setup(scenario, data=args.data).run(scenario.solvers[:1])
+    print(validation_table(run))
+    with StagedOutput(out) as stage:
+        written = [write_validation(run, stage.path)]
+        stage.commit()
+    print("\n" + "\n".join(_wrote([stage.final(p) for p in written], out)))
+    return 0 if run.crossval is not None and run.crossval.available else 1
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "validate": _cmd_validate,
     "odometry": _cmd_odometry,
     "run": _cmd_run,
     "compare": _cmd_compare,

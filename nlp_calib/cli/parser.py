@@ -62,6 +62,15 @@ def build_parser() -> argparse.ArgumentParser:
     p_cmp = sub.add_parser("compare", help="calibrate with every solver, side by side")
     _add_common(p_cmp)
 
+    p_val = sub.add_parser(
+        "validate",
+        help="cross-validate on contiguous blocks: fit without each block, score it, compare the σ",
+    )
+    _add_common(p_val)
+    p_val.add_argument(
+        "--blocks", type=int, default=None, help="contiguous blocks (default: validation.blocks, else 10)"
+    )
+
     p_cg = sub.add_parser("codegen", help="write C source and header of the residual and its Jacobian")
     p_cg.add_argument("scenario", type=Path, help="scenario YAML file (model, horizon, integration)")
     p_cg.add_argument("--out", type=Path, required=True, help="folder for the C files")

@@ -78,11 +78,13 @@ class TricycleReverse(Tricycle):
         return k[0] * (1.0 + k[4] * reversing) * u[1] + k[3]
 
     def undetermined(self, inputs: np.ndarray) -> dict[str, str]:
-        """``k_steer_reverse`` without enough reversing."""
-        n = int(np.sum(self.travel_direction(inputs) < 0))
-        if n >= MIN_REVERSING:
+        """``k_steer_reverse`` without enough driving in either direction (it compares the two)."""
+        direction = self.travel_direction(inputs)
+        counts = {"reversing": int(np.sum(direction < 0)), "forward driving": int(np.sum(direction > 0))}
+        short = [f"only {n} intervals of {what}" for what, n in counts.items() if n < MIN_REVERSING]
+        if not short:
             return {}
-        return {"k_steer_reverse": f"only {n} intervals of reversing (at least {MIN_REVERSING} are needed)"}
+        return {"k_steer_reverse": f"{' and '.join(short)} (at least {MIN_REVERSING} are needed)"}
 
     def initial_guess(
         self,

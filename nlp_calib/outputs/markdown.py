@@ -94,6 +94,48 @@ def _metric_rows(prefix: str, base: TrajectoryMetrics, per: list[TrajectoryMetri
     return rows
 
 
+def _uncertainty_section(run: CalibrationRun) -> list[str]:
+    cv, first = run.crossval, next(iter(run.reports), None)
+    if first is None:
+        return []
+    white = run.reports[first].uncertainty.std_dict()
+    blocked = run.std_blocks()
+    out = ["## Uncertainty and cross-validation", ""]
+    if blocked is None or cv is None:
+        return [
+            *out,
+            "The ± 1σ above is the white-noise σ only: a lower bound where timing or model errors are.",
+            "",
+        ]
+    out += [
+        "The ± 1σ above is the larger of two estimates: the **white-noise σ** (white tracker and encoder "
+        "noise propagated through the fit: a floor) and the **block σ**, the jackknife spread of "
+        f"{len(cv.converged)} fits that each leave one contiguous block of the records out (every error "
+        "that varies along the drive). Believe the larger one.",
+        "",
+        "| parameter | white-noise σ | block σ | ratio | spread of the block fits |",
+        "|---|---|---|---|---|",
+    ]
+    for n, spread in zip(cv.names, cv.spread()):
+        ratio = blocked[n] / white[n] if white[n] > 0 else float("nan")
+        cells = [fmt_std(white[n]), fmt_std(blocked[n]), _cell(ratio, ".1f"), fmt_std(spread)]
+        out.append(f"| `{n}` | " + " | ".join(cells) + " |")
+    labels = ("segment ATE mean [m]", "RPE over 1 m [m]")
+    held = "; ".join(f"{label} {cv.heldout_mean(label):.4f}" for label in labels)
+    out += ["", f"Each block scored by the fit without it (mean over the blocks): {held}."]
+    d = run.direction
+    if d is not None:
+        name, z = d.worst
+        verdict = "**disagree**" if d.significant else "agree"
+        out += [
+            "",
+            f"Fits on forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]}) driving "
+            f"{verdict}: the largest difference is `{name}`, {abs(z):.1f}σ of the difference (each part's "
+            "σ is the whole fit's, scaled by the square root of the whole's windows over the part's).",
+        ]
+    return [*out, ""]
+
+
 def _faults_section(run: CalibrationRun) -> list[str]:
     if run.findings is None:
         return []
@@ -175,6 +217,7 @@ def report_markdown(run: CalibrationRun, images: Sequence[str]) -> str:
         *_solver_table(run, solvers),
         "",
         *_faults_section(run),
+        *_uncertainty_section(run),
     ]
     for s in solvers:
         res = run.reports[s].result

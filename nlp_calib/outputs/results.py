@@ -111,6 +111,7 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         "baseline": {"metrics": _metrics_dict(run.baseline, run.baseline_holdout)},
         "solvers": {name: _solver_dict(run, name, rep) for name, rep in run.reports.items()},
         "crossvalidation": _crossval_dict(run),
+        "direction": run.direction.as_dict() if run.direction is not None else None,
         "faults": _faults_dict(run),
         "observability": run.observability.as_dict() if run.observability is not None else None,
         "warnings": list(run.warnings),
@@ -142,6 +143,30 @@ def result_document(run: CalibrationRun) -> dict[str, Any]:
     """The ``result.json`` document as plain JSON types, exactly as the file stores it."""
     doc: dict[str, Any] = json.loads(json.dumps(finite_or_null(result_dict(run)), default=_json_default))
     return doc
+
+
+VALIDATION_FILE = "validation.json"
+
+
+def write_validation(run: CalibrationRun, out_dir: Path) -> Path:
+    """Write ``out_dir/validation.json``: the blocked cross-validation and the direction check."""
+    solver = next(iter(run.reports))
+    doc = {
+        "scenario": run.scenario.name,
+        "tool": {"name": "nlp_calib", "version": __version__},
+        "solver": solver,
+        "params": run.reports[solver].result.param_dict(),
+        "std": run.std(solver),
+        "std_white_noise": run.reports[solver].uncertainty.std_dict(),
+        "crossvalidation": _crossval_dict(run),
+        "direction": run.direction.as_dict() if run.direction is not None else None,
+    }
+    path = out_dir / VALIDATION_FILE
+    text = json.dumps(
+        json.loads(json.dumps(finite_or_null(doc), default=_json_default)), indent=2, allow_nan=False
+    )
+    atomic_write_text(path, text + "\n")
+    return path
 
 
 def write_result(run: CalibrationRun, out_dir: Path) -> Path:

@@ -58,6 +58,20 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
     return lines
 
 
+def direction_lines(run: CalibrationRun) -> list[str]:
+    """How well fits on forward-only and on reverse-only driving agree."""
+    d = run.direction
+    if d is None:
+        return []
+    name, z = d.worst
+    verdict = (
+        f"DISAGREE: {name} by {abs(z):.1f}σ" if d.significant else f"agree within {abs(z):.1f}σ ({name})"
+    )
+    return [
+        f"direction: fits on forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]}) driving {verdict}"
+    ]
+
+
 def fault_lines(run: CalibrationRun) -> list[str]:
     """What the fault check found and what was done about it, one line each."""
     if run.findings is None:
@@ -153,6 +167,7 @@ def run_table(run: CalibrationRun) -> str:
     faults = fault_lines(run)
     if faults:
         lines += ["", *faults]
+    lines += direction_lines(run)
     if run.observability is not None:
         lines.append("")
         lines.append(
@@ -164,6 +179,32 @@ def run_table(run: CalibrationRun) -> str:
         res = run.reports[s].result
         if not res.converged:
             lines.append(f"WARNING: {s} did not converge: {res.reason}. Do not use its parameters.")
+    return "\n".join(lines)
+
+
+def validation_table(run: CalibrationRun) -> str:
+    """The folds of the blocked cross-validation, the two σ side by side, and the direction check."""
+    cv, solver = run.crossval, next(iter(run.reports))
+    if cv is None:
+        return "no cross-validation: too few converged fits"
+    names = list(cv.names)
+    short = [n.replace("sensor_", "s_")[:11] for n in names]
+    head = f"{'held-out records':<18}{'conv':>5}" + "".join(f"{s:>12}" for s in short)
+    head += f"{'segATE [m]':>12}{'RPE 1 m [m]':>12}"
+    lines = [f"cross-validation of {run.scenario.name} ({solver}), {len(cv.folds)} contiguous blocks:", head]
+    for f in cv.folds:
+        cells = "".join(f"{v:>12.6g}" for v in f.params)
+        m = f.heldout
+        scores = f"{m.segment_ate.mean:>12.4f}{m.rpe_distance[1.0].mean:>12.4f}" if m is not None else ""
+        lines.append(f"{f'[{f.first}, {f.stop})':<18}{'yes' if f.converged else 'NO':>5}{cells}{scores}")
+    full = run.reports[solver].result.params
+    lines.append(f"{'all records':<18}{'':>5}" + "".join(f"{v:>12.6g}" for v in full))
+    white = run.reports[solver].uncertainty.std
+    lines += ["", f"{'parameter':<18}{'white-noise σ':>14}{'block σ':>12}{'ratio':>8}{'spread':>12}"]
+    for n, w, b, sp in zip(names, white, cv.std, cv.spread()):
+        ratio = b / w if w > 0 else float("nan")
+        lines.append(f"{n:<18}{w:>14.3g}{b:>12.3g}{ratio:>8.1f}{sp:>12.3g}")
+    lines += ["", *uncertainty_lines(run), *direction_lines(run)]
     return "\n".join(lines)
 
 

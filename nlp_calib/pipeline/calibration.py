@@ -22,6 +22,7 @@ import numpy as np
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.alignment import LagEstimate
 from nlp_calib.analysis.crossval import CrossValidation, Fold, believed_std, blocks, combine
+from nlp_calib.analysis.direction import DirectionCheck, compare
 from nlp_calib.analysis.metrics import TrajectoryMetrics, trajectory_metrics
 from nlp_calib.analysis.observability import Observability, analyse
 from nlp_calib.analysis.odometry import OdometryTrack, propagate
@@ -30,7 +31,7 @@ from nlp_calib.logs import Log
 from nlp_calib.models import canonical
 from nlp_calib.pipeline import steps
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.solvers import Solver, SolverResult, get_solver
+from nlp_calib.solvers import Priors, Solver, SolverResult, get_solver
 
 
 @dataclass(frozen=True)
@@ -69,6 +70,7 @@ class CalibrationRun:
     findings: steps.Findings | None = None
     dropped_faulty: int = 0
     crossval: CrossValidation | None = None
+    direction: DirectionCheck | None = None
 
     def std(self, solver: str) -> dict[str, float]:
         """The 1σ to believe for ``solver``'s estimate: the larger of the white-noise σ and the
@@ -248,6 +250,45 @@ class Calibration:
             folds.append(Fold(a, b, params, converged, scores))
         return combine(self.fns.names, folds)
 
+    def direction_check(self, x: np.ndarray, std: np.ndarray) -> DirectionCheck | None:
+        """Forward-only and reverse-only fits from the estimate ``x``, compared in units of the
+        whole fit's honest σ ``std`` (model order); None without enough driving either way.
+
+        Parameters a direction cannot determine on its own are held at ``x``'s values there.
+        """
+        inputs = self.model.inputs(self.aligned, self.scenario.residual.steering_sample)
+        direction = self.model.travel_direction(inputs)
+        first, stop = self.fit
+        base = self.binder.bad_intervals
+        fits, windows, held = [], [], set()
+        for sign in (1, -1):
+            bad = (direction == -sign) if base is None else (base | (direction == -sign))
+            part = inputs[:, first : stop - 1][:, direction[first : stop - 1] == sign]
+            hold = [n for n in self.model.undetermined(part) if n in self.fns.free]
+            held |= set(hold)
+            priors = self.binder.priors
+            if hold:
+                idx = [self.fns.free.index(n) for n in hold]
+                mean, sqrt_info = priors.mean.copy(), priors.sqrt_info.copy()
+                mean[idx], sqrt_info[idx] = x[idx], 1e6  # stiff: held where it was
+                priors = Priors(mean, sqrt_info)
+            try:
+                data, ev = dataclasses.replace(self.binder, bad_intervals=bad, priors=priors).bind(
+                    self.aligned, first, stop
+                )
+            except NlpCalibError:  # too few windows in this direction
+                return None
+            if data.n_residuals < 10 * self.fns.n_free:
+                return None
+            _, x_part, converged = self.binder.fit(ev, x)
+            if not converged:
+                return None
+            fits.append(self.canonical_params(ev.params(x_part)))
+            windows.append(data.n_residuals)
+        return compare(
+            self.fns.names, fits[0], fits[1], (windows[0], windows[1]), self.data.n_residuals, std, held
+        )
+
     def odometry(self, params: np.ndarray) -> OdometryTrack:
         """Base-link odometry with ``params`` over the used records, with its propagated covariance,
         started at the base pose the tracker's first pose implies."""
@@ -287,6 +328,17 @@ class Calibration:
         converged = [r for r in results if r.converged]
         if converged and self.scenario.validation.blocks:
             crossval = self.cross_validate(converged[0].x, self.scenario.validation.blocks)
+        direction = None
+        if converged:
+            white = reports[converged[0].solver].uncertainty.std
+            std = believed_std(white, crossval.std if crossval is not None else np.full(white.size, np.nan))
+            direction = self.direction_check(converged[0].x, std)
+            if direction is not None and direction.significant:
+                name, z = direction.worst
+                notes.append(
+                    f"forward-only and reverse-only fits disagree: {name} by {abs(z):.1f}σ; the model misses "
+                    "something that depends on the direction of travel"
+                )
         return CalibrationRun(
             scenario=self.scenario,
             log=self.log,
@@ -306,4 +358,5 @@ class Calibration:
             findings=self.findings,
             dropped_faulty=self.data.dropped_faulty,
             crossval=crossval,
+            direction=direction,
         )
