@@ -1,10 +1,11 @@
-"""Whether forward and reverse driving tell the same story: separate fits compared in honest σ.
+"""Whether forward and reverse driving tell the same story: separate fits compared in their σ.
 
 A calibration fitted to forward-only windows and one fitted to reverse-only windows should agree
-within their uncertainty. Each part has fewer windows than the whole, so its σ is the whole fit's
-honest σ scaled by ``√(N_whole / N_part)``; the difference of the two is judged against
-``√(σ_forward² + σ_reverse²)``. A disagreement beyond :data:`SIGNIFICANT` of those σ means the
-model misses something that depends on the direction of travel.
+within their uncertainty. Each part's σ is the jackknife σ of blocks of that part alone (the whole
+fit's σ would not do: its blocks mix both directions, so it contains the very disagreement under
+test); the difference is judged against ``√(σ_forward² + σ_reverse²)``. A disagreement beyond
+:data:`SIGNIFICANT` of that means the model misses something that depends on the direction of
+travel.
 """
 
 from __future__ import annotations
@@ -57,13 +58,12 @@ def compare(
     forward: np.ndarray,
     reverse: np.ndarray,
     windows: tuple[int, int],
-    n_whole: int,
-    std_whole: np.ndarray,
+    std_forward: np.ndarray,
+    std_reverse: np.ndarray,
     held: set[str],
 ) -> DirectionCheck:
-    """The check of two part fits, given the whole fit's honest σ and the parameters held in a part."""
-    scale = np.sqrt(n_whole / np.maximum(np.array(windows, dtype=float), 1.0))
-    sigma = np.sqrt((std_whole * scale[0]) ** 2 + (std_whole * scale[1]) ** 2)
+    """The check of two part fits and their σ; parameters held in a part are not compared."""
+    sigma = np.sqrt(std_forward**2 + std_reverse**2)
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.where(sigma > 0, (forward - reverse) / sigma, np.nan)
     z = np.where([n in held for n in names], np.nan, z)

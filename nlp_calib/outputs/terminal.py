@@ -67,9 +67,8 @@ def direction_lines(run: CalibrationRun) -> list[str]:
     verdict = (
         f"DISAGREE: {name} by {abs(z):.1f}σ" if d.significant else f"agree within {abs(z):.1f}σ ({name})"
     )
-    return [
-        f"direction: fits on forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]}) driving {verdict}"
-    ]
+    counts = f"forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]})"
+    return [f"direction: fits on {counts} driving {verdict}"]
 
 
 def fault_lines(run: CalibrationRun) -> list[str]:

@@ -21,17 +21,17 @@ import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.alignment import LagEstimate
-from nlp_calib.analysis.crossval import CrossValidation, Fold, believed_std, blocks, combine
-from nlp_calib.analysis.direction import DirectionCheck, compare
+from nlp_calib.analysis.crossval import CrossValidation, believed_std
+from nlp_calib.analysis.direction import DirectionCheck
 from nlp_calib.analysis.metrics import TrajectoryMetrics, trajectory_metrics
 from nlp_calib.analysis.observability import Observability, analyse
 from nlp_calib.analysis.odometry import OdometryTrack, propagate
-from nlp_calib.core.errors import NlpCalibError, NlpCalibWarning
+from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import canonical
-from nlp_calib.pipeline import steps
+from nlp_calib.pipeline import steps, validation
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.solvers import Priors, Solver, SolverResult, get_solver
+from nlp_calib.solvers import Solver, SolverResult, get_solver
 
 
 @dataclass(frozen=True)
@@ -212,81 +212,39 @@ class Calibration:
         return full, holdout
 
     def cross_validate(self, x: np.ndarray, k: int) -> CrossValidation:
-        """``k`` folds over the fitted records, each started from the estimate ``x`` (free parameters).
-
-        A fold leaves out every residual window that touches its block (so no window straddles the
-        held-out records), refits with the internal solver, and scores the block on its own: dead
-        reckoning restarted at the block's start and after each fault inside it.
-        """
-        first, stop = self.fit
-        n_intervals = self.aligned.n_records - 1
-        base = self.binder.bad_intervals
-        used0 = self.used[0]
+        """``k`` folds over the fitted records from the estimate ``x`` (free parameters); each block
+        scored on its own: dead reckoning restarted at its start and after each fault inside it."""
         inputs = self.model.inputs(self.selected, self.scenario.residual.steering_sample)
-        poses = self.selected.T_world_sensor
-        bad_i, bad_r = self.fault_masks
-        folds = []
-        for a, b in blocks(first, stop, k):
-            bad = np.zeros(n_intervals, dtype=bool) if base is None else base.copy()
-            bad[a : b - 1] = True
-            try:
-                _, ev = dataclasses.replace(self.binder, bad_intervals=bad).bind(self.aligned, first, stop)
-            except NlpCalibError:  # too few windows left without this block: the fold cannot be fitted
-                folds.append(Fold(a, b, np.full(len(self.fns.names), np.nan), False, None))
-                continue
-            _, x_k, converged = self.binder.fit(ev, x)
-            params = self.canonical_params(ev.params(x_k))
-            scores = trajectory_metrics(
+        a0, b0 = self.used
+        bad_i, bad_r = self.fault_masks[0][a0 : b0 - 1], self.fault_masks[1][a0:b0]
+
+        def score(params: np.ndarray, a: int, b: int) -> TrajectoryMetrics:
+            return trajectory_metrics(
                 self.fns,
                 params,
                 inputs,
-                poses,
-                start=a - used0,
-                stop=b - used0,
+                self.selected.T_world_sensor,
+                start=a - a0,
+                stop=b - a0,
                 rpe_window=self.scenario.validation.rpe_window,
-                bad_intervals=bad_i[self.used[0] : self.used[1] - 1],
-                bad_records=bad_r[self.used[0] : self.used[1]],
+                bad_intervals=bad_i,
+                bad_records=bad_r,
             )
-            folds.append(Fold(a, b, params, converged, scores))
-        return combine(self.fns.names, folds)
 
-    def direction_check(self, x: np.ndarray, std: np.ndarray) -> DirectionCheck | None:
-        """Forward-only and reverse-only fits from the estimate ``x``, compared in units of the
-        whole fit's honest σ ``std`` (model order); None without enough driving either way.
+        return validation.cross_validate(
+            self.binder, self.aligned, self.fit, x, k, self.canonical_params, score
+        )
 
-        Parameters a direction cannot determine on its own are held at ``x``'s values there.
-        """
+    def direction_check(self, x: np.ndarray, k: int = 10) -> DirectionCheck | None:
+        """Forward-only and reverse-only fits from ``x``, compared in units of their own σ."""
         inputs = self.model.inputs(self.aligned, self.scenario.residual.steering_sample)
         direction = self.model.travel_direction(inputs)
-        first, stop = self.fit
-        base = self.binder.bad_intervals
-        fits, windows, held = [], [], set()
-        for sign in (1, -1):
-            bad = (direction == -sign) if base is None else (base | (direction == -sign))
-            part = inputs[:, first : stop - 1][:, direction[first : stop - 1] == sign]
-            hold = [n for n in self.model.undetermined(part) if n in self.fns.free]
-            held |= set(hold)
-            priors = self.binder.priors
-            if hold:
-                idx = [self.fns.free.index(n) for n in hold]
-                mean, sqrt_info = priors.mean.copy(), priors.sqrt_info.copy()
-                mean[idx], sqrt_info[idx] = x[idx], 1e6  # stiff: held where it was
-                priors = Priors(mean, sqrt_info)
-            try:
-                data, ev = dataclasses.replace(self.binder, bad_intervals=bad, priors=priors).bind(
-                    self.aligned, first, stop
-                )
-            except NlpCalibError:  # too few windows in this direction
-                return None
-            if data.n_residuals < 10 * self.fns.n_free:
-                return None
-            _, x_part, converged = self.binder.fit(ev, x)
-            if not converged:
-                return None
-            fits.append(self.canonical_params(ev.params(x_part)))
-            windows.append(data.n_residuals)
-        return compare(
-            self.fns.names, fits[0], fits[1], (windows[0], windows[1]), self.data.n_residuals, std, held
+
+        def undetermined(part: np.ndarray) -> dict[str, str]:
+            return self.model.undetermined(inputs[:, part])
+
+        return validation.direction_check(
+            self.binder, self.aligned, self.fit, x, direction, undetermined, k, self.canonical_params
         )
 
     def odometry(self, params: np.ndarray) -> OdometryTrack:
@@ -329,10 +287,8 @@ class Calibration:
         if converged and self.scenario.validation.blocks:
             crossval = self.cross_validate(converged[0].x, self.scenario.validation.blocks)
         direction = None
-        if converged:
-            white = reports[converged[0].solver].uncertainty.std
-            std = believed_std(white, crossval.std if crossval is not None else np.full(white.size, np.nan))
-            direction = self.direction_check(converged[0].x, std)
+        if converged and self.scenario.validation.blocks:
+            direction = self.direction_check(converged[0].x, self.scenario.validation.blocks)
             if direction is not None and direction.significant:
                 name, z = direction.worst
                 notes.append(
