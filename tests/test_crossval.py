@@ -43,7 +43,7 @@ def test_a_drive_without_reversing_holds_the_reverse_gain_with_a_warning() -> No
     with pytest.warns(
         NlpCalibWarning, match="k_steer_reverse is held at its initial value: only 0 intervals"
     ):
-        run, truth = _run("tricycle_reverse", sim, validation={"blocks": 0})
+        run, _ = _run("tricycle_reverse", sim, validation={"blocks": 0})
     res = run.reports["gauss_newton"].result  # type: ignore[attr-defined]
     assert res.converged, res.reason
     assert res.param_dict()["k_steer_reverse"] == 0.0  # held where it started

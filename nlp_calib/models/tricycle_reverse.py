@@ -1,12 +1,12 @@
-"""The tricycle with a steering gain of its own while the front wheel rolls backwards.
+"""The tricycle with a steering gain of its own while the base drives backwards.
 
 Parameters ``(k_steer, k_traction, axis_length, steer_offset, k_steer_reverse)`` then the sensor
 pose. The steering angle is ``φ = k_steer·(1 + k_steer_reverse·r)·angle + steer_offset`` with
 ``r = 1`` while the base drives backwards and 0 otherwise; the rest is the tricycle's. On the
-real robot's log, fits on forward-only and reverse-only driving disagree by 3–5σ; of the features
-tried (a traction gain, a steering offset or a steering gain per
-direction, a steering delay, a steering backlash), this one is the one blocked cross-validation
-on the fault-robust figures prefers (``docs/accuracy.md``). A drive without reversing cannot
+real robot's log, fits on forward-only and reverse-only driving disagree by 3–5 white-noise σ;
+of the one-parameter features tried (a traction gain, a steering offset or a steering gain per
+direction, a steering delay, a steering backlash), blocked cross-validation on the fault-robust
+figures prefers this one (``docs/accuracy.md``). A drive without reversing cannot
 determine ``k_steer_reverse``; it is then held at its initial value (0 unless given).
 """
 
