@@ -11,7 +11,7 @@ import pytest
 from conftest import assert_close, cli, mat, vec
 
 from nlp_calib.analysis.crossval import blocks, jackknife_std
-from nlp_calib.analysis.metrics import ErrorStats, distance_pairs, segments
+from nlp_calib.analysis.metrics import ErrorStats, aligned_errors, distance_pairs, segments
 from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
 
 
@@ -22,6 +22,17 @@ def test_segments_split_at_bad_intervals_and_drop_lone_records() -> None:
     # Records 6 and 7 lie inside the run 5..7; the fault intervals' end records start anew.
     assert segments(20, bad) == [(0, 6), (8, 13), (13, 20)]
     assert segments(1, None) == []
+
+
+def test_aligned_errors_undo_a_rigid_motion_and_pass_nan_through() -> None:
+    rng = np.random.default_rng(0)
+    ref = np.column_stack([rng.normal(size=(30, 2)), rng.normal(size=30)])
+    c, s = np.cos(0.7), np.sin(0.7)
+    est = ref.copy()
+    est[:, :2] = ref[:, :2] @ np.array([[c, -s], [s, c]]).T + [3.0, -1.0]
+    assert_close(aligned_errors(est, ref), np.zeros(30), atol=1e-12)
+    est[4, 0] = np.nan  # a diverged calibration: figures are NaN, not an exception
+    assert np.isnan(aligned_errors(est, ref)[4])
 
 
 def _evo_pairs(dist: np.ndarray, delta: float, tol: float) -> list[tuple[int, int]]:

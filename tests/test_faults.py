@@ -399,6 +399,9 @@ def test_nan_residual_is_reported_by_both_solvers(sim_log: Path, tmp_path: Path)
         assert all(v is None for v in doc["solvers"][solver]["std"].values())
     assert not (tmp_path / "out" / "calibration.yaml").exists()
     assert "no solver converged" in proc.stderr
+    # Judged by a model that gives NaN every interval would look faulty: the check says it did not run.
+    assert doc["faults"]["checked"] is False and doc["faults"]["found"] == []
+    assert "encoder faults not checked" in proc.stderr
 
 
 def test_iteration_limit_is_reported(sim_log: Path, tmp_path: Path) -> None:

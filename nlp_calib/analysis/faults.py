@@ -93,6 +93,8 @@ class FaultReport:
     faults: tuple[Fault, ...]
     stale: Mapping[str, int]
     noise_ticks: Mapping[str, float]
+    #: Why the log could not be checked ("" when it was).
+    unchecked: str = ""
 
     def shifted(self, offset: int, log: Log) -> FaultReport:
         """The same findings with record and interval indices moved by ``offset`` (into ``log``)."""

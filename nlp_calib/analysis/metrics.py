@@ -199,8 +199,8 @@ def rpe_by_distance(
 
 def aligned_errors(T_est: np.ndarray, T_ref: np.ndarray) -> np.ndarray:
     """Position errors after the best SE(2) alignment of the estimate's positions to the reference."""
-    if T_est.shape[0] < 2:
-        return np.linalg.norm(T_est[:, :2] - T_ref[:, :2], axis=1)
+    if T_est.shape[0] < 2 or not np.all(np.isfinite(T_est[:, :2])):
+        return np.linalg.norm(T_est[:, :2] - T_ref[:, :2], axis=1)  # NaN where the track is
     R, t = poses.align(T_est[:, :2], T_ref[:, :2])
     return np.linalg.norm(T_est[:, :2] @ R.T + t - T_ref[:, :2], axis=1)
 

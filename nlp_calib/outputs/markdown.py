@@ -142,6 +142,8 @@ def _faults_section(run: CalibrationRun) -> list[str]:
     out = ["## Encoder and tracker faults", ""]
     rep = run.findings.report
     stale = sum(rep.stale.values())
+    if rep.unchecked:
+        return [*out, f"Not checked: {rep.unchecked}.", ""]
     if not rep.faults:
         out += [
             f"None found; {stale} stale counter readings that catch up at the next record (harmless).",

@@ -29,6 +29,8 @@ def _faults_dict(run: CalibrationRun) -> dict[str, Any] | None:
     rep = run.findings.report
     return {
         "handling": run.findings.handling,
+        "checked": not rep.unchecked,
+        "unchecked_reason": rep.unchecked or None,
         "found": [f.as_dict() for f in rep.faults],
         "windows_left_out": run.dropped_faulty,
         "repairs": list(run.findings.repairs),

@@ -85,6 +85,8 @@ def fault_lines(run: CalibrationRun) -> list[str]:
         return []
     rep, handling = run.findings.report, run.findings.handling
     stale = sum(rep.stale.values())
+    if rep.unchecked:
+        return [f"faults: not checked: {rep.unchecked}"]
     if not rep.faults:
         return [f"faults: none found ({stale} stale counter readings that catch up: harmless)"]
     kinds = Counter(f.kind for f in rep.faults)

@@ -135,6 +135,8 @@ class Calibration:
         self.binder = steps.exclude_faults(binder, self.findings, self.log.n_records, lag, dt)
         # Every detected fault shapes the fair figures, whatever the handling: like with like.
         self.fault_masks = steps.fault_masks(report, self.log.n_records, lag, dt)
+        if report.unchecked:
+            warnings.warn(f"encoder faults not checked: {report.unchecked}", NlpCalibWarning, stacklevel=2)
         self.aligned = self.alignment.log
         start, stop = max(start, self.alignment.valid[0]), min(stop, self.alignment.valid[1])
         self.used = (start, stop)

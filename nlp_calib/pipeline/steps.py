@@ -209,9 +209,15 @@ class Binder:
             bad_records=None if self.bad_records is None else self.bad_records[start:stop],
         )
         if data.n_residuals < self.fns.n_free:
+            at_faults = (
+                f" ({data.dropped_faulty} windows crossing faults were left out; "
+                "'faults: {handling: keep}' fits them)"
+                if data.dropped_faulty
+                else ""
+            )
             raise ScenarioError(
                 f"only {data.n_residuals} residuals in records [{start}, {stop}) for "
-                f"{self.fns.n_free} parameters; widen 'samples' or shorten the horizon"
+                f"{self.fns.n_free} parameters; widen 'samples' or shorten the horizon{at_faults}"
             )
         evaluator = ProblemEvaluator(
             self.fns,
@@ -344,7 +350,11 @@ def find_faults(
     binder keeps) and, with a tracker ``lag_s``, against the tracker re-sampled onto the encoders'
     clock: the encoder readings stay as logged, so a jump stays on its record."""
     _, ev = binder.bind(resample_encoders(log, lag_s, binder.fns.model.encoder_kinds)[0], start, stop)
-    _, x, _ = binder.fit(ev, x0)
+    _, x, converged = binder.fit(ev, x0)
+    if not converged or not np.all(np.isfinite(x)):
+        # Judged by a wrong model every interval looks faulty; the solvers will say why.
+        why = "the fit that judges the encoders did not converge from the initial guess"
+        return FaultReport((), {}, {}, unchecked=why)
     sel = resample_tracker(log, lag_s).select(start, stop)
     model = binder.fns.model
     inputs = model.inputs(sel, binder.scenario.residual.steering_sample)
