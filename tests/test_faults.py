@@ -288,7 +288,10 @@ def sim_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 SCENARIO_CASES: dict[str, tuple[str, tuple[str, ...]]] = {
     "unreadable yaml": ("robust: {kernel: huber\n", ("case.yaml:", "not valid YAML")),
-    "wrong type": ("residual: {horizon: ten}\n", ("residual.horizon: expected an integer", "'ten'")),
+    "wrong type": (
+        "validation: {rpe_window: ten}\n",
+        ("validation.rpe_window: expected an integer", "'ten'"),
+    ),
     "unknown key": ("robustness: {}\n", ("robustness: unknown key", "valid keys are")),
     "empty bounds": ("bounds: {axis_length: []}\n", ("bounds.axis_length", "list of 2 values")),
     "inconsistent bounds": ("bounds: {axis_length: [3.0, 1.0]}\n", ("bounds.axis_length", "lo < hi")),

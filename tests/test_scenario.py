@@ -41,7 +41,7 @@ def test_unknown_nested_key(tmp_path: Path) -> None:
     ("text", "message"),
     [
         ("residual: {horizon: ten}\n", "residual.horizon: expected an integer"),
-        ("residual: {horizon: 0}\n", "horizon and stride must be >= 1"),
+        ("residual: {horizon: 0}\n", "residual.horizon: must be a whole number in [1, 200], got 0"),
         ("robust: {kernel: tukey}\n", "'tukey' is not one of"),
         ("robust: {delta: -1}\n", "robust.delta: must be > 0"),
         ("solvers: [gauss_newton, lbfgs]\n", "'lbfgs' is not one of gauss_newton, ipopt"),

@@ -14,6 +14,7 @@ from typing import TextIO
 
 from nlp_calib.cli.commands import COMMANDS
 from nlp_calib.cli.parser import build_parser
+from nlp_calib.core import interrupts
 from nlp_calib.core.errors import NlpCalibError
 
 
@@ -35,28 +36,41 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
-    try:
-        args = build_parser().parse_args(argv)
-        with warnings.catch_warnings():
-            warnings.simplefilter("always")
-            warnings.showwarning = _show_warning
-            return COMMANDS[args.command](args)
-    except NlpCalibError as exc:
-        if debug:
-            traceback.print_exc()
-        print(f"error: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
-        sys.stderr.close()
-        return 1
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
-    except Exception as exc:  # an unexpected failure is still reported in one line
-        if debug:
-            traceback.print_exc()
-        print(
-            f"error: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)",
-            file=sys.stderr,
-        )
-        return 1
+    with interrupts.handled():
+        try:
+            args = build_parser().parse_args(argv)
+            with warnings.catch_warnings():
+                warnings.simplefilter("always")
+                warnings.showwarning = _show_warning
+                return COMMANDS[args.command](args)
+        except NlpCalibError as exc:
+            if debug:
+                traceback.print_exc()
+            print(f"error: {exc}", file=sys.stderr)
+            return exc.exit_code
+        except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
+            sys.stderr.close()
+            return 1
+        except interrupts.Interrupted as exc:
+            print(f"error: interrupted ({exc.name}); the run's files were not written", file=sys.stderr)
+            return exc.exit_code
+        except KeyboardInterrupt:
+            print("error: interrupted; the run's files were not written", file=sys.stderr)
+            return 130
+        except OSError as exc:  # the system refused: a full disk, a permission, a vanished folder
+            if debug:
+                traceback.print_exc()
+            where = f"{exc.filename}: " if exc.filename else ""
+            print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
+            return 1
+        except MemoryError:
+            print("error: out of memory; select fewer records or a shorter horizon", file=sys.stderr)
+            return 1
+        except Exception as exc:  # an unexpected failure is still reported in one line
+            if debug:
+                traceback.print_exc()
+            print(
+                f"error: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)",
+                file=sys.stderr,
+            )
+            return 1
