@@ -161,16 +161,18 @@ class _Loader(yaml.SafeLoader):
             if key_node.tag == "tag:yaml.org,2002:merge":
                 continue
             key = self.construct_object(key_node, deep=True)
+            line = key_node.start_mark.line + 1
             try:
-                line = first_line.setdefault(key, key_node.start_mark.line + 1)
+                first = first_line.setdefault(key, -1)
             except TypeError:  # an unhashable key: the base class reports it
                 continue
-            if line != key_node.start_mark.line + 1:
+            if first != -1:
                 raise yaml.constructor.ConstructorError(
-                    problem=f"duplicate key {key!r} at lines {line} and {key_node.start_mark.line + 1}; "
+                    problem=f"duplicate key {key!r} at lines {first} and {line}; "
                     "YAML would keep only the last, so remove one",
                     problem_mark=key_node.start_mark,
                 )
+            first_line[key] = line
         return super().construct_mapping(node, deep=deep)
 
     def construct_yaml_int(self, node: yaml.ScalarNode) -> int:
