@@ -6,6 +6,7 @@ Errors the user can fix print one line ``error: ...`` on stderr and exit with 2 
 
 from __future__ import annotations
 
+import errno
 import sys
 import traceback
 import warnings
@@ -34,43 +35,53 @@ def _show_warning(
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    debug = "--debug" in argv
-    with interrupts.handled():
+    args_in = list(sys.argv[1:] if argv is None else argv)
+    # Called as a program (no argv): the handlers stay to the end, so a late signal cannot
+    # replace the exit code.
+    with interrupts.handled(restore=argv is not None):
         try:
-            args = build_parser().parse_args(argv)
-            with warnings.catch_warnings():
-                warnings.simplefilter("always")
-                warnings.showwarning = _show_warning
-                return COMMANDS[args.command](args)
-        except NlpCalibError as exc:
-            if debug:
-                traceback.print_exc()
-            print(f"error: {exc}", file=sys.stderr)
+            return _run(args_in)
+        except interrupts.Interrupted as exc:  # another signal while the first was reported
             return exc.exit_code
-        except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
-            sys.stderr.close()
-            return 1
-        except interrupts.Interrupted as exc:
-            print(f"error: interrupted ({exc.name}); the run's files were not written", file=sys.stderr)
-            return exc.exit_code
-        except KeyboardInterrupt:
-            print("error: interrupted; the run's files were not written", file=sys.stderr)
-            return 130
-        except OSError as exc:  # the system refused: a full disk, a permission, a vanished folder
-            if debug:
-                traceback.print_exc()
-            where = f"{exc.filename}: " if exc.filename else ""
-            print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
-            return 1
-        except MemoryError:
-            print("error: out of memory; select fewer records or a shorter horizon", file=sys.stderr)
-            return 1
-        except Exception as exc:  # an unexpected failure is still reported in one line
-            if debug:
-                traceback.print_exc()
-            print(
-                f"error: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)",
-                file=sys.stderr,
-            )
-            return 1
+
+
+def _run(argv: list[str]) -> int:
+    debug = "--debug" in argv
+    try:
+        args = build_parser().parse_args(argv)
+        with warnings.catch_warnings():
+            warnings.simplefilter("always")
+            warnings.showwarning = _show_warning
+            return COMMANDS[args.command](args)
+    except NlpCalibError as exc:
+        if debug:
+            traceback.print_exc()
+        print(f"error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
+        sys.stderr.close()
+        return 1
+    except interrupts.Interrupted as exc:
+        print(f"error: interrupted ({exc.name}); the run's files were not written", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("error: interrupted; the run's files were not written", file=sys.stderr)
+        return 130
+    except OSError as exc:  # the system refused: a full disk, a permission, a vanished folder
+        if debug:
+            traceback.print_exc()
+        where = f"{exc.filename}: " if exc.filename else ""
+        hint = "; free some space and run again" if exc.errno == errno.ENOSPC else ""
+        print(f"error: {where}{exc.strerror or exc}{hint}", file=sys.stderr)
+        return 1
+    except MemoryError:
+        print("error: out of memory; select fewer records or a shorter horizon", file=sys.stderr)
+        return 1
+    except Exception as exc:  # an unexpected failure is still reported in one line
+        if debug:
+            traceback.print_exc()
+        print(
+            f"error: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)",
+            file=sys.stderr,
+        )
+        return 1

@@ -64,9 +64,14 @@ def check() -> None:
 
 
 @contextlib.contextmanager
-def handled() -> Iterator[None]:
+def handled(*, restore: bool = True) -> Iterator[None]:
     """Turn :data:`SIGNALS` into :class:`Interrupted` inside the block (main thread only; elsewhere
-    the signal module cannot install handlers and the block runs unchanged)."""
+    the signal module cannot install handlers and the block runs unchanged).
+
+    ``restore=False`` (a program about to exit) ignores further signals instead: a second Ctrl-C
+    while the process exits (or while Python shuts down, which resets the handlers it installed
+    but not ignored signals) cannot replace its exit code or print a traceback.
+    """
     global _pending
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -79,8 +84,9 @@ def handled() -> Iterator[None]:
         yield
     finally:
         for s, old in previous.items():
-            signal.signal(s, old)
-        _pending = None
+            signal.signal(s, old if restore else signal.SIG_IGN)
+        if restore:
+            _pending = None
 
 
 @contextlib.contextmanager

@@ -45,11 +45,17 @@ _STAGING_PREFIX = ".nlp_calib_staging."
 LOCK_WAIT_S = 120.0
 
 
+def _plain_path(name: object) -> bool:
+    if not isinstance(name, str):
+        return False
+    parts = name.split("/")
+    return 1 <= len(parts) <= 2 and all(p and Path(p).name == p and p not in (".", "..") for p in parts)
+
+
 def _plain(names: object) -> list[str]:
-    # Plain names only: a manifest must not point the clean-up outside the folder.
-    if not isinstance(names, list):
-        return []
-    return [f for f in names if isinstance(f, str) and f and Path(f).name == f and f not in (".", "..")]
+    # Plain names, or a plain name inside a plain-named subfolder: a manifest must not point the
+    # clean-up outside the folder.
+    return [f for f in names if _plain_path(f)] if isinstance(names, list) else []
 
 
 def manifest_groups(out_dir: Path) -> dict[str, list[str]]:
@@ -81,6 +87,8 @@ def refuse_collisions(
     ours = set(previous_files(out_dir)) if tracked else set()
     for name in names:
         target = Path(out_dir) / name
+        if target.parent != Path(out_dir) and (target.parent.is_symlink() or target.parent.is_file()):
+            raise UsageError(f"{target.parent} is not a folder; move it away or choose another --out")
         if target.is_dir() and not target.is_symlink():
             raise UsageError(f"{target} is a folder; move it away or choose another --out")
         if (target.exists() or target.is_symlink()) and name not in ours and not force:
@@ -191,7 +199,13 @@ class StagedOutput:
 
     def final(self, staged: Path) -> Path:
         """Where a file written into the staging folder ends up."""
-        return self.out_dir / Path(staged).name
+        return self.out_dir / Path(staged).relative_to(self.path)
+
+    def _staged_names(self) -> list[str]:
+        """Files in the staging folder and in its subfolders (one level), as relative names."""
+        top = list(self.path.iterdir())
+        files = [*top, *(q for d in top if d.is_dir() and not d.is_symlink() for q in d.iterdir())]
+        return sorted(str(p.relative_to(self.path)) for p in files if p.is_file() and p.name != MANIFEST_FILE)
 
     def _write_manifest(self, groups: Mapping[str, list[str]]) -> None:
         files = sorted({f for names in groups.values() for f in names})
@@ -203,7 +217,7 @@ class StagedOutput:
         time and not now, and update the manifest; returns the final paths (in name order)."""
         with interrupts.deferred():
             interrupts.check()  # a signal some native code swallowed: keep the previous files
-            names = sorted(p.name for p in self.path.iterdir() if p.is_file() and p.name != MANIFEST_FILE)
+            names = self._staged_names()
             refuse_collisions(self.out_dir, names, tracked=self.group is not None, force=self.force)
             stale: list[str] = []
             if self.group is not None:
@@ -214,11 +228,14 @@ class StagedOutput:
                 # half-way never leaves a file of ours that the manifest does not claim.
                 self._write_manifest({**groups, self.group: sorted({*names, *stale})})
             for name in names:
+                (self.out_dir / name).parent.mkdir(exist_ok=True)
                 (self.path / name).replace(self.out_dir / name)
             for name in stale:
                 old = self.out_dir / name
                 if old.is_symlink() or old.is_file():  # never a folder someone put there
                     old.unlink(missing_ok=True)
+                    if "/" in name and old.parent.is_dir() and not any(old.parent.iterdir()):
+                        old.parent.rmdir()
             if self.group is not None:
                 with contextlib.suppress(OSError):  # the claim above stays true enough if this fails
                     self._write_manifest({**manifest_groups(self.out_dir), self.group: names})

@@ -330,7 +330,8 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
     lag = sc.alignment.tracker_lag
     estimate = None
     if lag == "auto":
-        estimate = estimate_tracker_lag(binder, log, start, stop, x0)
+        with scenario_key(sc, "alignment.search"):
+            estimate = estimate_tracker_lag(binder, log, start, stop, x0)
         lag = estimate.lag_s
     with scenario_key(sc, "alignment.tracker_lag"):
         aligned, valid = resample_encoders(log, float(lag), binder.fns.model.encoder_kinds)
