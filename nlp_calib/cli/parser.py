@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
@@ -27,6 +27,19 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         raise UsageError(f"{message} (see '{self.prog} --help')")
 
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        parsed, extra = super().parse_known_args(args, namespace)
+        # argparse drops a value "--" ("--records=--") and stores an empty list without calling
+        # the option's type: no value at all.
+        for action in self._actions:
+            if action.nargs is None and action.option_strings and getattr(parsed, action.dest, None) == []:
+                limit = getattr(action.type, "limit", None)
+                expected = f"must be {limit.describe()}" if limit is not None else "expected a value"
+                self.error(f"argument {'/'.join(action.option_strings)}: {expected}, got none")
+        return parsed, extra
+
 
 def _path(text: str) -> Path:
     """A path option: not empty (``--out ""`` would mean the current folder), no NUL."""
@@ -45,6 +58,7 @@ def _in(limit: Range) -> Callable[[str], int | float]:
             raise argparse.ArgumentTypeError(str(exc)) from None
 
     parse.__name__ = "number"
+    parse.limit = limit  # type: ignore[attr-defined]
     return parse
 
 
