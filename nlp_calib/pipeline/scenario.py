@@ -125,6 +125,13 @@ class Scenario:
 #: time and memory in proportion to H; the accuracy study's trajectory error flattens by H = 25.
 HORIZON = Range(1, 200, integer=True)
 STRIDE = Range(1, 1_000_000, integer=True)
+#: Numbers whose squares still fit a float with room to spare: beyond them a value is a typo, and
+#: the cost, its weights or the covariance would overflow (silently, or as a NaN result).
+MAGNITUDE = Range(-1e6, 1e6)
+DELTA = Range(0.0, 1e6, lo_open=True)
+WEIGHT = Range(0.0, 1e12, lo_open=True)
+TICKS = Range(0.0, 1e9, lo_open=True)
+PRIOR_STD = Range(1e-9, 1e6)
 _FINITE = Range(-math.inf, math.inf, lo_open=True, hi_open=True)
 
 
@@ -183,8 +190,7 @@ def _validate(sc: Scenario, source: str) -> None:
     _check_choice(sc.model, MODELS, f"{source}: model")
     names = param_names(get_model(sc.model))
     _check_choice(sc.robust.kernel, KERNELS, f"{source}: robust.kernel")
-    if not sc.robust.delta > 0:
-        fail(f"{source}: robust.delta", f"must be > 0, got {sc.robust.delta}")
+    _check_range(sc.robust.delta, DELTA, f"{source}: robust.delta")
     r = sc.residual
     for key, limit in (("horizon", HORIZON), ("stride", STRIDE)):
         reason = limit.problem(getattr(r, key))
@@ -192,9 +198,8 @@ def _validate(sc: Scenario, source: str) -> None:
             fail(f"{source}: residual.{key}", reason)
     _check_choice(r.integration, INTEGRATIONS, f"{source}: residual.integration")
     _check_choice(r.steering_sample, STEERING_SAMPLES, f"{source}: residual.steering_sample")
-    w = sc.information
-    if not (w.translation > 0 and w.rotation > 0):
-        fail(f"{source}: information", "translation and rotation weights must be > 0")
+    _check_range(sc.information.translation, WEIGHT, f"{source}: information.translation")
+    _check_range(sc.information.rotation, WEIGHT, f"{source}: information.rotation")
     if not sc.solvers:
         fail(f"{source}: solvers", f"list at least one of {', '.join(SOLVERS)}")
     for s in sc.solvers:
@@ -220,8 +225,9 @@ def _validate(sc: Scenario, source: str) -> None:
     if isinstance(sc.initial_guess, str):
         _check_choice(sc.initial_guess, ("from_file", "auto"), f"{source}: initial_guess")
     else:
-        for n in sc.initial_guess:
+        for n, value in sc.initial_guess.items():
             _check_choice(n, names, f"{source}: initial_guess")
+            _check_range(value, MAGNITUDE, f"{source}: initial_guess.{n}")
     for n, (lo, hi) in sc.bounds.items():
         _check_choice(n, names, f"{source}: bounds")
         if not lo < hi:
@@ -235,14 +241,19 @@ def _validate(sc: Scenario, source: str) -> None:
         fail(f"{source}: fixed", "every parameter is fixed; nothing is left to estimate")
     for enc, ticks in sc.encoder_noise.items():
         _check_choice(enc, encoders(get_model(sc.model)), f"{source}: encoder_noise")
-        if not ticks > 0:
-            fail(f"{source}: encoder_noise.{enc}", f"must be > 0 ticks, got {ticks}")
+        _check_range(ticks, TICKS, f"{source}: encoder_noise.{enc}")
     for n, prior in sc.priors.items():
         _check_choice(n, names, f"{source}: priors")
-        if not prior.std > 0:
-            fail(f"{source}: priors.{n}.std", f"must be > 0, got {prior.std}")
+        _check_range(prior.mean, MAGNITUDE, f"{source}: priors.{n}.mean")
+        _check_range(prior.std, PRIOR_STD, f"{source}: priors.{n}.std")
         if n in sc.fixed:
             fail(f"{source}: priors.{n}", "a fixed parameter cannot also have a prior; drop one")
+
+
+def _check_range(value: float, limit: Range, where: str) -> None:
+    reason = limit.problem(value)
+    if reason is not None:
+        fail(where, reason)
 
 
 def _check_passthrough(options: Any, where: str) -> None:
