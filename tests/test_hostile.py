@@ -252,8 +252,8 @@ def laughs(indent: str, levels: int = 9) -> str:
         ("dataset: x.txt\ninitial_guess:\n" + laughs("  "), "more than 20,000 values"),
         ("dataset: x.txt\nipopt:\n  options: &a {x: *a}\n", "an alias refers to a block that contains it"),
         ("dataset: x.txt\nipopt: {options: {x: " + "[" * 3000 + "]" * 3000 + "}}\n", "nested too deeply"),
-        ("dataset: x.txt\nfixed: [" + ",".join(["1"] * 30000) + "]\n", "more than 20,000 values"),
-        ("dataset: x.txt\n#" + "x" * 300_000 + "\n", "larger than 256 KiB"),
+        ("dataset: x.txt\nfixed: [" + ",".join(["1"] * 25000) + "]\n", "more than 20,000 values"),
+        ("dataset: x.txt\n#" + "x" * 70_000 + "\n", "larger than 64 KiB"),
         ("dataset: x.txt\nrobust: {delta: " + "9" * 5000 + "}\n", "a number with thousands of digits"),
     ],
 )
@@ -334,6 +334,20 @@ def test_two_scenarios_with_one_name_are_an_error(sim_log: Path, tmp_path: Path)
     proc = run_cli("run", str(a), str(b), "--out", str(out))
     assert_one_line_error(proc, 2, "two scenarios are named 'same'", "a.yaml", "b.yaml")
     assert_nothing_written(out)
+
+
+def test_a_second_scenario_that_cannot_run_stops_the_call_before_the_first_is_solved(
+    sim_log: Path, tmp_path: Path
+) -> None:
+    good = scenario(tmp_path, quick(sim_log), "good.yaml")
+    bad = scenario(
+        tmp_path, quick(sim_log).replace("horizon: 10", "horizon: 200") + "samples: {stop: 150}\n", "bad.yaml"
+    )
+    out = tmp_path / "out"
+    assert_one_line_error(
+        run_cli("run", str(good), str(bad), "--out", str(out)), 2, "bad.yaml", "residual.horizon"
+    )
+    assert not (out / "good" / "result.json").exists()
 
 
 def test_simulate_never_replaces_an_existing_log_without_force(sim_log: Path, tmp_path: Path) -> None:

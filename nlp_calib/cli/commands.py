@@ -22,7 +22,7 @@ from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.outputs.progress import Progress
 from nlp_calib.outputs.results import RESULT_FILE, write_result
 from nlp_calib.outputs.terminal import correlation_table, run_table, summary_table
-from nlp_calib.pipeline import Calibration, Scenario, load_scenario
+from nlp_calib.pipeline import Calibration, Scenario, load_scenario, steps
 from nlp_calib.pipeline.export import write_c_export
 from nlp_calib.pipeline.simconfig import simulation_options
 from nlp_calib.simulation import simulate, truth_path, write_simulation
@@ -49,6 +49,10 @@ def _out_dirs(args: argparse.Namespace, scenarios: Sequence[Scenario]) -> list[P
     return [prepare_output_dir(args.out)]
 
 
+def _with_data(sc: Scenario, data: Path | None) -> Scenario:
+    return sc.with_dataset(data) if data is not None else sc
+
+
 def _report_files() -> tuple[str, ...]:
     from nlp_calib.outputs import writer  # imports matplotlib
 
@@ -62,16 +66,17 @@ def _report_files() -> tuple[str, ...]:
 
 
 def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> int:
-    scenarios = [load_scenario(p) for p in args.scenario]  # validate all before any work
+    scenarios = [_with_data(load_scenario(p), args.data) for p in args.scenario]
     outs = _out_dirs(args, scenarios)
     names = [RESULT_FILE, CALIBRATION_FILE, URDF_FILE, *(_report_files() if args.report else ())]
     for out in outs:
         refuse_collisions(out, names, force=args.force)
+    logs = [steps.read_checked(sc) for sc in scenarios]  # every input checked before any work
     runs = []
     with Progress(len(scenarios), sys.stderr, label="scenarios") as progress:
-        for i, (scenario, out) in enumerate(zip(scenarios, outs)):
+        for i, (scenario, out, log) in enumerate(zip(scenarios, outs, logs)):
             progress.update(i, f"{scenario.name}: setting up and solving")
-            calib = Calibration.setup(scenario, data=args.data)
+            calib = Calibration.setup(scenario, log=log)
             run = calib.run(solvers)
             runs.append(run)
             progress.clear()
@@ -142,9 +147,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_codegen(args: argparse.Namespace) -> int:
-    scenario = load_scenario(args.scenario)
-    if args.data is not None:
-        scenario = scenario.with_dataset(args.data)
+    scenario = _with_data(load_scenario(args.scenario), args.data)
     with StagedOutput(prepare_output_dir(args.out), "codegen", force=args.force) as stage:
         final = [stage.final(p) for p in write_c_export(scenario, stage.path)]
         stage.commit()
@@ -156,10 +159,10 @@ def _cmd_codegen(args: argparse.Namespace) -> int:
 def _cmd_odometry(args: argparse.Namespace) -> int:
     if len(args.scenario) != 1:
         raise UsageError("odometry takes one scenario")
-    scenario = load_scenario(args.scenario[0])
+    scenario = _with_data(load_scenario(args.scenario[0]), args.data)
     (out,) = _out_dirs(args, [scenario])
     refuse_collisions(out, [ODOMETRY_CSV, *([ODOMETRY_PNG] if args.report else [])], force=args.force)
-    calib = Calibration.setup(scenario, data=args.data)
+    calib = Calibration.setup(scenario)
     result = calib.solve(args.solver)
     if not result.converged:
         raise SolverError(f"{args.solver} did not converge ({result.reason}); no odometry from it")

@@ -134,7 +134,7 @@ def keys_of(cls: type) -> str:
 
 
 #: A scenario or simulation config is a page of YAML; a larger file is not one.
-MAX_YAML_BYTES = 256 * 1024
+MAX_YAML_BYTES = 64 * 1024
 #: Values a document may hold once its aliases are expanded: ``*alias`` repeats a whole block, so
 #: a few lines can stand for billions of values ("billion laughs"); a scenario has a few hundred.
 MAX_YAML_VALUES = 20_000

@@ -53,7 +53,7 @@ def refuse_rejected_options(sc: Scenario, result: SolverResult) -> None:
     if status not in REJECTED_OPTIONS:
         return
     options = sc.options_for(result.solver)
-    linear = getattr(options, "linear_solver", None)
+    linear = getattr(options, "options", {}).get("linear_solver", getattr(options, "linear_solver", None))
     hint = f"; is linear_solver {linear!r} installed? (mumps always is)" if linear is not None else ""
     raise ScenarioError(
         f"{sc.path or sc.name}: {result.solver}: the solver rejected its options when it started "
@@ -80,6 +80,14 @@ def load(sc: Scenario, log: Log | None = None) -> tuple[KinematicModel, Log]:
         if exc.line is None and exc.problem == "no such file":
             raise exc.with_hint("pass the log with --data or fix 'dataset' in the scenario") from None
         raise
+
+
+def read_checked(sc: Scenario) -> Log:
+    """The scenario's log, read and checked against what costs nothing to check (samples, horizon):
+    several scenarios are all checked before the first is solved."""
+    _, log = load(sc)
+    select(sc, log)
+    return log
 
 
 def select(sc: Scenario, log: Log) -> tuple[int, int]:
