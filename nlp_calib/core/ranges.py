@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 
 class _Short(reprlib.Repr):
+    """``reprlib`` with integers shown by magnitude once they have more than 30 digits."""
+
     def repr_int(self, x: int, level: int) -> str:
         # repr() of an integer of more than 4300 digits raises; a message needs the magnitude only.
         if abs(x) < 10**30:
