@@ -92,7 +92,7 @@ def refuse_collisions(
         if target.is_dir() and not target.is_symlink():
             raise UsageError(f"{target} is a folder; move it away or choose another --out")
         if target.exists() and not target.is_file():  # e.g. /dev/null: never replaced, even forced
-            raise UsageError(f"{target} is not a regular file (a device, FIFO or socket); choose another path")
+            raise UsageError(f"{target} is not a regular file (a device, FIFO or socket); choose another")
         if (target.exists() or target.is_symlink()) and name not in ours and not force:
             raise UsageError(
                 f"{target} exists and was not written by nlp_calib; move it away, choose another "
