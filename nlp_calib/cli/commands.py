@@ -16,7 +16,7 @@ import numpy as np
 
 from nlp_calib.cli.parser import ALL_SOLVERS
 from nlp_calib.core.errors import SolverError, UsageError
-from nlp_calib.core.files import atomic_write_bytes, atomic_write_text, prepare_output_dir
+from nlp_calib.core.files import atomic_write_bytes, atomic_write_text, check_output_dir
 from nlp_calib.outputs.handoff import CALIBRATION_FILE, URDF_FILE, write_handoff
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.outputs.progress import Progress
@@ -43,10 +43,10 @@ def _out_dirs(args: argparse.Namespace, scenarios: Sequence[Scenario]) -> list[P
             )
         seen[sc.name] = sc
     if args.out is None:
-        return [prepare_output_dir(Path("out") / sc.name) for sc in scenarios]
+        return [check_output_dir(Path("out") / sc.name) for sc in scenarios]
     if len(scenarios) > 1:
-        return [prepare_output_dir(args.out / sc.name) for sc in scenarios]
-    return [prepare_output_dir(args.out)]
+        return [check_output_dir(args.out / sc.name) for sc in scenarios]
+    return [check_output_dir(args.out)]
 
 
 def _with_data(sc: Scenario, data: Path | None) -> Scenario:
@@ -135,7 +135,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     out: Path = args.out
     if out.is_dir() or out.name in ("", ".", ".."):
         raise UsageError(f"--out {out} is a folder; give the path of the log file to write")
-    folder = prepare_output_dir(out.parent)
+    folder = check_output_dir(out.parent)
     # The target may be the user's own log: never replaced without --force.
     refuse_collisions(folder, [out.name, truth_path(out).name], tracked=False, force=args.force)
     sim = simulate(opts)
@@ -148,7 +148,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 def _cmd_codegen(args: argparse.Namespace) -> int:
     scenario = _with_data(load_scenario(args.scenario), args.data)
-    with StagedOutput(prepare_output_dir(args.out), "codegen", force=args.force) as stage:
+    with StagedOutput(check_output_dir(args.out), "codegen", force=args.force) as stage:
         final = [stage.final(p) for p in write_c_export(scenario, stage.path)]
         stage.commit()
     for path in final:

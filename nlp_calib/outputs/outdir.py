@@ -177,6 +177,7 @@ class StagedOutput:
         return self._path
 
     def __enter__(self) -> StagedOutput:
+        self.out_dir.mkdir(parents=True, exist_ok=True)
         if self._lock.acquire():
             _remove_stale(self.out_dir)
         try:
