@@ -147,6 +147,22 @@ def test_a_signal_that_native_code_swallowed_still_ends_the_run() -> None:
     assert interrupts.pending() is None
 
 
+def test_a_signal_once_the_last_files_are_being_moved_no_longer_stops_the_run(
+    sim_log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    original = StagedOutput._write_manifest
+
+    def signalled(self: StagedOutput, groups: object) -> None:
+        os.kill(os.getpid(), signal.SIGTERM)  # in the middle of the commit
+        original(self, groups)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(StagedOutput, "_write_manifest", signalled)
+    assert cli.main(["run", str(scenario(tmp_path, quick(sim_log))), "--out", str(out)]) == 0
+    assert {"result.json", "calibration.yaml", MANIFEST_FILE} <= set(contents(out))
+    assert "interrupted" not in capsys.readouterr().err
+
+
 def test_signals_inside_a_commit_wait_until_every_file_is_in_place(tmp_path: Path) -> None:
     with interrupts.handled(), pytest.raises(interrupts.Interrupted):
         with interrupts.deferred():

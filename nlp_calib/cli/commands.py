@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.cli.parser import ALL_SOLVERS
+from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
 from nlp_calib.core.files import atomic_write_bytes, atomic_write_text, check_output_dir
 from nlp_calib.outputs.handoff import CALIBRATION_FILE, URDF_FILE, write_handoff
@@ -96,6 +97,8 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
                     progress.update(i, f"{scenario.name}: drawing the report")
                     written += write_report(calib, run, stage.path)
                     progress.clear()
+                if i == len(scenarios) - 1:
+                    interrupts.hold()  # what is complete stays complete: a later signal changes nothing
                 stage.commit()
             print("\n" + "\n".join(f"wrote {stage.final(p)}" for p in written) + "\n")
     if len(runs) > 1:
@@ -141,6 +144,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     sim = simulate(opts)
     with StagedOutput(folder, None, force=args.force) as stage:
         log_path, truth = write_simulation(sim, stage.path / out.name)
+        interrupts.hold()
         stage.commit()
     print(f"wrote {stage.final(log_path)} ({opts.records} records) and {stage.final(truth)}")
     return 0
@@ -150,6 +154,7 @@ def _cmd_codegen(args: argparse.Namespace) -> int:
     scenario = _with_data(load_scenario(args.scenario), args.data)
     with StagedOutput(check_output_dir(args.out), "codegen", force=args.force) as stage:
         final = [stage.final(p) for p in write_c_export(scenario, stage.path)]
+        interrupts.hold()
         stage.commit()
     for path in final:
         print(f"wrote {path}")
@@ -176,6 +181,7 @@ def _cmd_odometry(args: argparse.Namespace) -> int:
             title = f"{scenario.name}: calibrated odometry ({args.solver}), {args.sigma:g}σ ellipses"
             png = odometry_png(track, calib.base_reference(result.params), title, sigma=args.sigma)
             atomic_write_bytes(stage.path / ODOMETRY_PNG, png)
+        interrupts.hold()
         written = stage.commit()
     print(f"{args.solver}: {result.param_dict()}")
     print(

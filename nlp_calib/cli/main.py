@@ -62,10 +62,10 @@ def _run(argv: list[str]) -> int:
         sys.stderr.close()
         return 1
     except interrupts.Interrupted as exc:
-        print(f"error: interrupted ({exc.name}); the run's files were not written", file=sys.stderr)
+        print(f"error: interrupted ({exc.name}); the files in progress were discarded", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
-        print("error: interrupted; the run's files were not written", file=sys.stderr)
+        print("error: interrupted; the files in progress were discarded", file=sys.stderr)
         return 130
     except OSError as exc:  # the system refused: a full disk, a permission, a vanished folder
         if debug:

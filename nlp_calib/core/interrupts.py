@@ -10,7 +10,8 @@ checks for signals at every iteration, catches what the handler raises and retur
 (with a return status such as ``NonIpopt_Exception_Thrown``). The signal is therefore also
 recorded, and :func:`check` raises it again wherever a result is about to be used. Inside
 :func:`deferred` (moving finished files into place) a signal is only recorded, and raised when
-the block ends, so a set of files is never half replaced.
+the block ends, so a set of files is never half replaced; after :func:`hold` (the last files of a
+run are being moved into place) it is only recorded: the run has finished.
 """
 
 from __future__ import annotations
@@ -72,11 +73,12 @@ def handled(*, restore: bool = True) -> Iterator[None]:
     while the process exits (or while Python shuts down, which resets the handlers it installed
     but not ignored signals) cannot replace its exit code or print a traceback.
     """
-    global _pending
+    global _pending, _defer_depth
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous = {s: signal.getsignal(s) for s in SIGNALS}
+    depth = _defer_depth
     _pending = None
     try:
         for s in SIGNALS:
@@ -86,7 +88,15 @@ def handled(*, restore: bool = True) -> Iterator[None]:
         for s, old in previous.items():
             signal.signal(s, old if restore else signal.SIG_IGN)
         if restore:
-            _pending = None
+            _pending, _defer_depth = None, depth
+
+
+def hold() -> None:
+    """Only record signals from now to the end of :func:`handled`: the run's last files are about
+    to be moved into place, and a run whose files are all in place has finished. A signal that
+    came before is still raised by the next :func:`check`."""
+    global _defer_depth
+    _defer_depth += 1
 
 
 @contextlib.contextmanager
