@@ -181,8 +181,10 @@ class StagedOutput:
         if self._lock.acquire():
             _remove_stale(self.out_dir)
         try:
-            self._path = Path(tempfile.mkdtemp(prefix=_STAGING_PREFIX, dir=self.out_dir))
+            with interrupts.deferred():  # a signal between mkdir and here must not orphan the folder
+                self._path = Path(tempfile.mkdtemp(prefix=_STAGING_PREFIX, dir=self.out_dir))
         except BaseException:
+            self.discard()
             self._lock.release()
             raise
         return self
