@@ -163,6 +163,22 @@ def test_a_signal_once_the_last_files_are_being_moved_no_longer_stops_the_run(
     assert "interrupted" not in capsys.readouterr().err
 
 
+def test_a_signal_that_lands_in_a_finalizer_is_raised_where_the_program_can_unwind(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    class Dying:
+        def __del__(self) -> None:
+            os.kill(os.getpid(), signal.SIGINT)  # the handler runs inside the finalizer
+
+    deadline = time.monotonic() + 30
+    with interrupts.handled(), pytest.raises(interrupts.Interrupted):
+        Dying()
+        while time.monotonic() < deadline:
+            pass
+    assert time.monotonic() < deadline
+    assert "Exception ignored" not in capsys.readouterr().err
+
+
 def test_signals_inside_a_commit_wait_until_every_file_is_in_place(tmp_path: Path) -> None:
     with interrupts.handled(), pytest.raises(interrupts.Interrupted):
         with interrupts.deferred():

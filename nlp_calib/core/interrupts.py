@@ -11,13 +11,16 @@ checks for signals at every iteration, catches what the handler raises and retur
 recorded, and :func:`check` raises it again wherever a result is about to be used. Inside
 :func:`deferred` (moving finished files into place) a signal is only recorded, and raised when
 the block ends, so a set of files is never half replaced; after :func:`hold` (the last files of a
-run are being moved into place) it is only recorded: the run has finished.
+run are being moved into place) it is only recorded: the run has finished. A signal that lands in
+a finalizer or a weakref callback, where Python can only print the exception, is sent again.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from types import FrameType
@@ -27,6 +30,10 @@ SIGNALS = tuple(s for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGH
 
 _pending: int | None = None
 _defer_depth = 0
+#: Which block of :func:`handled` is running, and whether a signal's exception was lost in a
+#: finalizer since (see :func:`_unraisable`).
+_generation = 0
+_swallowed = False
 
 
 class Interrupted(KeyboardInterrupt):
@@ -53,6 +60,25 @@ def _handler(signum: int, frame: FrameType | None) -> None:
         raise Interrupted(_pending)
 
 
+def _unraisable(args: sys.UnraisableHookArgs) -> None:
+    """A signal whose exception was raised inside a finalizer or a weakref callback (where Python
+    can only print it) is sent again a moment later, to be raised where the program can unwind;
+    unless :func:`check` raised it first, or the block of :func:`handled` has ended."""
+    global _swallowed
+    if not isinstance(args.exc_value, Interrupted):
+        sys.__unraisablehook__(args)
+        return
+    _swallowed = True
+    timer = threading.Timer(0.01, _redeliver, (_generation, args.exc_value.signum))
+    timer.daemon = True
+    timer.start()
+
+
+def _redeliver(generation: int, signum: int) -> None:
+    if generation == _generation and _swallowed:
+        os.kill(os.getpid(), signum)
+
+
 def pending() -> int | None:
     """The signal received since :func:`handled` began, if any."""
     return _pending
@@ -60,7 +86,9 @@ def pending() -> int | None:
 
 def check() -> None:
     """Raise :class:`Interrupted` if a signal arrived, even one that native code swallowed."""
+    global _swallowed
     if _pending is not None:
+        _swallowed = False
         raise Interrupted(_pending)
 
 
@@ -73,21 +101,26 @@ def handled(*, restore: bool = True) -> Iterator[None]:
     while the process exits (or while Python shuts down, which resets the handlers it installed
     but not ignored signals) cannot replace its exit code or print a traceback.
     """
-    global _pending, _defer_depth
+    global _pending, _defer_depth, _generation, _swallowed
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous = {s: signal.getsignal(s) for s in SIGNALS}
+    previous_hook = sys.unraisablehook
     depth = _defer_depth
-    _pending = None
+    _pending, _swallowed = None, False
+    _generation += 1
     try:
+        sys.unraisablehook = _unraisable
         for s in SIGNALS:
             signal.signal(s, _handler)
         yield
     finally:
+        _generation += 1  # no signal is sent again once the block has ended
         for s, old in previous.items():
             signal.signal(s, old if restore else signal.SIG_IGN)
         if restore:
+            sys.unraisablehook = previous_hook
             _pending, _defer_depth = None, depth
 
 
