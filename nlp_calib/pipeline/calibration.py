@@ -26,6 +26,7 @@ from nlp_calib.analysis.direction import DirectionCheck
 from nlp_calib.analysis.metrics import TrajectoryMetrics, trajectory_metrics
 from nlp_calib.analysis.observability import Observability, analyse
 from nlp_calib.analysis.odometry import OdometryTrack, propagate
+from nlp_calib.core import interrupts
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import canonical
@@ -173,6 +174,8 @@ class Calibration:
     def solve(self, solver: str) -> SolverResult:
         """Run one solver from the initial guess; the result is in the model's canonical form."""
         result = self.solver(solver).solve(self.start.x0, self.start.lower, self.start.upper)
+        interrupts.check()  # IPOPT catches the signal that stops it and returns as if it had failed
+        steps.refuse_rejected_options(self.scenario, result)
         return self._canonical(result)
 
     def _canonical(self, result: SolverResult) -> SolverResult:

@@ -18,10 +18,17 @@ from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
 from nlp_calib.analysis.faults import FaultReport, check_log, repair
 from nlp_calib.core.errors import DatasetError, ModelError, OptionsError, ProblemError, ScenarioError
 from nlp_calib.logs import Log, resample_encoders, resample_tracker
-from nlp_calib.models import SENSOR_PARAMS, KinematicModel, get_model, header_parameters, load_log
+from nlp_calib.models import (
+    SENSOR_PARAMS,
+    KinematicModel,
+    get_model,
+    header_parameters,
+    load_log,
+    param_names,
+)
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import ProblemFunctions, ProblemSpec, ResidualData, build, build_residual_data
-from nlp_calib.solvers import Priors, ProblemEvaluator, get_solver
+from nlp_calib.solvers import Priors, ProblemEvaluator, SolverResult, get_solver
 from nlp_calib.solvers.backends import Backend, BackendOptions, make_backend
 
 #: The solver the pipeline's own fits use (prior scaling, the tracker-lag search): the fastest.
@@ -35,6 +42,24 @@ def scenario_key(sc: Scenario, key: str, hint: str = "") -> Iterator[None]:
         yield
     except (ProblemError, OptionsError, ModelError) as exc:
         raise ScenarioError(f"{sc.path or sc.name}: {key}: {exc}" + (f"; {hint}" if hint else "")) from None
+
+
+#: Return statuses with which a solver says its options, not the data, are at fault.
+REJECTED_OPTIONS = ("Invalid_Option",)
+
+
+def refuse_rejected_options(sc: Scenario, result: SolverResult) -> None:
+    """A solver that stopped because it rejected its options is an input error, not a result."""
+    status = result.stats.get("return_status")
+    if status not in REJECTED_OPTIONS:
+        return
+    options = sc.options_for(result.solver)
+    linear = getattr(options, "options", {}).get("linear_solver", getattr(options, "linear_solver", None))
+    hint = f"; is linear_solver {linear!r} installed? (mumps always is)" if linear is not None else ""
+    raise ScenarioError(
+        f"{sc.path or sc.name}: {result.solver}: the solver rejected its options when it started "
+        f"({status}){hint}; check {result.solver}.linear_solver and {result.solver}.options"
+    )
 
 
 def load(sc: Scenario, log: Log | None = None) -> tuple[KinematicModel, Log]:
@@ -58,6 +83,14 @@ def load(sc: Scenario, log: Log | None = None) -> tuple[KinematicModel, Log]:
         raise
 
 
+def read_checked(sc: Scenario) -> Log:
+    """The scenario's log, read and checked against what costs nothing to check (samples, horizon):
+    several scenarios are all checked before the first is solved."""
+    _, log = load(sc)
+    select(sc, log)
+    return log
+
+
 def select(sc: Scenario, log: Log) -> tuple[int, int]:
     """The record range ``[start, stop)`` the scenario's ``samples`` ask for."""
     n = log.n_records
@@ -65,7 +98,26 @@ def select(sc: Scenario, log: Log) -> tuple[int, int]:
     stop = n if sc.samples.stop is None else sc.samples.stop
     if stop > n or start >= stop - 1:
         raise ScenarioError(f"samples: the range [{start}, {stop}) does not fit the log's {n} records")
+    check_windows(sc, start, stop)
     return start, stop
+
+
+def check_windows(sc: Scenario, start: int, stop: int) -> None:
+    """Refuse, before anything is built, a horizon that leaves fewer windows than parameters."""
+    H, stride = sc.residual.horizon, sc.residual.stride
+    fit_stop = split(sc, start, stop)
+    intervals = fit_stop - start - 1
+    windows = 0 if intervals < H else (intervals - H) // stride + 1
+    n_free = len(param_names(get_model(sc.model))) - len(set(sc.fixed))
+    if windows >= n_free:
+        return
+    longest = intervals - (n_free - 1) * stride
+    fix = f"shorten residual.horizon to at most {longest}" if longest >= 1 else "select more samples"
+    raise ScenarioError(
+        f"{sc.path or sc.name}: residual.horizon {H} (stride {stride}) leaves {windows} residual "
+        f"window(s) in the {fit_stop - start} fitted records of samples [{start}, {stop}) for "
+        f"{n_free} parameters; {fix}, or widen samples"
+    )
 
 
 def split(sc: Scenario, start: int, stop: int) -> int:
@@ -322,7 +374,8 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
     lag = sc.alignment.tracker_lag
     estimate = None
     if lag == "auto":
-        estimate = estimate_tracker_lag(binder, log, start, stop, x0)
+        with scenario_key(sc, "alignment.search"):
+            estimate = estimate_tracker_lag(binder, log, start, stop, x0)
         lag = estimate.lag_s
     with scenario_key(sc, "alignment.tracker_lag"):
         aligned, valid = resample_encoders(log, float(lag), binder.fns.model.encoder_kinds)
