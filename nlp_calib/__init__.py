@@ -14,33 +14,91 @@ Layers, from inputs to outputs (each imports only from the ones before it): ``co
 
 from __future__ import annotations
 
-from nlp_calib.core.errors import (
-    CodegenError,
-    ConfigError,
-    DatasetError,
-    ModelError,
-    NlpCalibError,
-    NlpCalibWarning,
-    OptionsError,
-    ProblemError,
-    ScenarioError,
-    SolverError,
-    UsageError,
-)
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from nlp_calib.core.version import __version__
-from nlp_calib.logs import Log, LogHeader, read_log
-from nlp_calib.models import MODELS, KinematicModel, get_model, load_log
-from nlp_calib.pipeline import (
-    Calibration,
-    CalibrationRun,
-    Scenario,
-    SolverReport,
-    load_scenario,
-    scenario_from_mapping,
-)
-from nlp_calib.problem import ProblemFunctions, ProblemSpec, build
-from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
-from nlp_calib.solvers import SOLVERS, Solver, SolverResult, get_solver
+
+if TYPE_CHECKING:
+    from nlp_calib.core.errors import (
+        CodegenError,
+        ConfigError,
+        DatasetError,
+        ModelError,
+        NlpCalibError,
+        NlpCalibWarning,
+        OptionsError,
+        ProblemError,
+        ScenarioError,
+        SolverError,
+        UsageError,
+    )
+    from nlp_calib.logs import Log, LogHeader, read_log
+    from nlp_calib.models import MODELS, KinematicModel, get_model, load_log
+    from nlp_calib.pipeline import (
+        Calibration,
+        CalibrationRun,
+        Scenario,
+        SolverReport,
+        load_scenario,
+        scenario_from_mapping,
+    )
+    from nlp_calib.problem import ProblemFunctions, ProblemSpec, build
+    from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
+    from nlp_calib.solvers import SOLVERS, Solver, SolverResult, get_solver
+
+# The public API is imported when first used, not with the package: ``python -m nlp_calib``
+# installs its signal handlers before numpy and CasADi load, and light tools stay light.
+_EXPORTS: dict[str, str] = {
+    "Calibration": "nlp_calib.pipeline",
+    "CalibrationRun": "nlp_calib.pipeline",
+    "CodegenError": "nlp_calib.core.errors",
+    "ConfigError": "nlp_calib.core.errors",
+    "DatasetError": "nlp_calib.core.errors",
+    "KinematicModel": "nlp_calib.models",
+    "Log": "nlp_calib.logs",
+    "LogHeader": "nlp_calib.logs",
+    "MODELS": "nlp_calib.models",
+    "ModelError": "nlp_calib.core.errors",
+    "NlpCalibError": "nlp_calib.core.errors",
+    "NlpCalibWarning": "nlp_calib.core.errors",
+    "OptionsError": "nlp_calib.core.errors",
+    "ProblemError": "nlp_calib.core.errors",
+    "ProblemFunctions": "nlp_calib.problem",
+    "ProblemSpec": "nlp_calib.problem",
+    "SOLVERS": "nlp_calib.solvers",
+    "Scenario": "nlp_calib.pipeline",
+    "ScenarioError": "nlp_calib.core.errors",
+    "SimulationOptions": "nlp_calib.simulation",
+    "Solver": "nlp_calib.solvers",
+    "SolverError": "nlp_calib.core.errors",
+    "SolverReport": "nlp_calib.pipeline",
+    "SolverResult": "nlp_calib.solvers",
+    "UsageError": "nlp_calib.core.errors",
+    "build": "nlp_calib.problem",
+    "get_model": "nlp_calib.models",
+    "get_solver": "nlp_calib.solvers",
+    "load_log": "nlp_calib.models",
+    "load_scenario": "nlp_calib.pipeline",
+    "read_log": "nlp_calib.logs",
+    "scenario_from_mapping": "nlp_calib.pipeline",
+    "simulate": "nlp_calib.simulation",
+    "write_simulation": "nlp_calib.simulation",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'nlp_calib' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS})
+
 
 __all__ = [
     "MODELS",

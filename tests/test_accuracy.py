@@ -14,8 +14,13 @@ from nlp_calib.analysis.metrics import trajectory_metrics
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import format_log, resample_encoders
 from nlp_calib.models import get_model, load_log
-from nlp_calib.pipeline import Calibration
-from nlp_calib.pipeline.scenario import AlignmentOptions, Scenario, ValidationOptions, load_scenario
+from nlp_calib.pipeline import Calibration, CalibrationRun
+from nlp_calib.pipeline.scenario import (
+    AlignmentOptions,
+    SampleSelection,
+    ValidationOptions,
+    load_scenario,
+)
 from nlp_calib.problem import ProblemSpec, ResidualOptions, build, build_residual_data
 from nlp_calib.simulation import SimulationOptions, simulate
 
@@ -154,57 +159,93 @@ def test_tracker_lag_is_recovered_from_a_simulated_log(tmp_path: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def recommended(real_log: Path) -> tuple[Scenario, dict[str, float]]:
-    sc = load_scenario(SCENARIOS / "real_tricycle.yaml").with_dataset(real_log)
-    out: dict[str, float] = {}
-    full = Calibration(sc)
-    hold = Calibration(dataclasses.replace(sc, validation=ValidationOptions(holdout_fraction=0.4)))
-    for solver in ("gauss_newton", "ipopt"):
-        res = full.solve(solver)
+def recommended(real_log: Path) -> CalibrationRun:
+    """The recommended scenario on the real log, both solvers, as shipped."""
+    return Calibration(load_scenario(SCENARIOS / "real_tricycle.yaml").with_dataset(real_log)).run()
+
+
+@pytest.mark.slow
+def test_recommended_real_scenario_meets_the_fault_robust_targets(recommended: CalibrationRun) -> None:
+    """Segment ATE <= 0.07 m and RPE over 5 m <= 0.06 m for both solvers, which agree to 1e-4."""
+    for name, rep in recommended.reports.items():
+        assert rep.result.converged, rep.result.reason
+        assert rep.metrics.segment_ate.mean <= 0.07, name
+        assert rep.metrics.rpe_distance[5.0].mean <= 0.06, name
+        # ... where the uncalibrated robot is off by metres on both figures.
+        assert recommended.baseline.segment_ate.mean > 1.0
+        assert recommended.baseline.rpe_distance[5.0].mean > 1.0
+    gn, ip = (rep.result for rep in recommended.reports.values())
+    assert_close(ip.params, gn.params, rtol=1e-4)
+
+
+@pytest.fixture(scope="module")
+def k_traction_of_parts(recommended: CalibrationRun) -> list[float]:
+    """k_traction fitted on the first 60 %, the last 60 %, the middle half and after the faults."""
+    sc = dataclasses.replace(recommended.scenario, solvers=("gauss_newton",))
+    values = []
+    for a, b in ((0, 1460), (974, 2434), (608, 1825), (1220, 2434)):
+        part = dataclasses.replace(
+            sc,
+            samples=SampleSelection(start=a, stop=b),
+            validation=dataclasses.replace(sc.validation, blocks=0),
+            alignment=dataclasses.replace(sc.alignment, tracker_lag=recommended.tracker_lag_s),
+        )
+        res = Calibration(part).solve("gauss_newton")
         assert res.converged, res.reason
-        out[f"ate_{solver}"] = full.score(res.params)[0].ate_mean
-        res_h = hold.solve(solver)
-        holdout = hold.score(res_h.params)[1]
-        assert holdout is not None
-        out[f"holdout_{solver}"] = holdout.ate_mean
-    return sc, out
+        values.append(res.param_dict()["k_traction"])
+    return values
+
+
+@pytest.mark.slow
+def test_white_noise_sigma_alone_would_not_cover_the_parts(
+    recommended: CalibrationRun, k_traction_of_parts: list[float]
+) -> None:
+    """The parts disagree by far more than 3 white-noise σ; the block σ is several times larger."""
+    spread = max(k_traction_of_parts) - min(k_traction_of_parts)
+    honest = recommended.std("gauss_newton")["k_traction"]
+    white = recommended.reports["gauss_newton"].uncertainty.std_dict()["k_traction"]
+    assert spread / white > 10.0
+    assert honest > 3.0 * white
 
 
 @pytest.mark.xfail(
     strict=True,
-    reason="not reached: traction-counter faults at t = 26, 41, 56 s lose counts that no calibration "
-    "can restore; the full-run ATE is 0.25 m (docs/accuracy.md, section 4)",
+    reason="not reached: the spread is about 4 block σ; the parts that reverse much (up to 66 % of "
+    "intervals) give a lower traction gain, also with a gain per direction, so the gain changes slowly "
+    "along the drive and neighbouring blocks are not independent (docs/accuracy.md, section 5)",
 )
 @pytest.mark.slow
-def test_recommended_real_scenario_full_run_ate_target(
-    recommended: tuple[Scenario, dict[str, float]],
+def test_honest_sigma_covers_the_spread_of_fits_on_parts_of_the_log(
+    recommended: CalibrationRun, k_traction_of_parts: list[float]
 ) -> None:
-    _, m = recommended
-    assert m["ate_gauss_newton"] <= 0.15 and m["ate_ipopt"] <= 0.15
+    """The spread of the part fits is within 3 honest σ of the whole fit."""
+    spread = max(k_traction_of_parts) - min(k_traction_of_parts)
+    assert spread / recommended.std("gauss_newton")["k_traction"] <= 3.0
 
 
 @pytest.mark.xfail(
     strict=True,
-    reason="not reached: the hold-out ATE is 0.103 m against 0.10 m (docs/accuracy.md, section 3)",
+    reason="not reached: the leading 60 % of the real log holds 5 intervals of reversing, so the reverse "
+    "steering gain is held at 0 there and the last 40 %, mostly reversing, scores 0.12 m (docs/accuracy.md)",
 )
 @pytest.mark.slow
-def test_recommended_real_scenario_holdout_target(recommended: tuple[Scenario, dict[str, float]]) -> None:
-    _, m = recommended
-    assert m["holdout_gauss_newton"] <= 0.10 and m["holdout_ipopt"] <= 0.10
+def test_recommended_real_scenario_holdout_target(real_log: Path) -> None:
+    sc = load_scenario(SCENARIOS / "real_tricycle.yaml").with_dataset(real_log)
+    sc = dataclasses.replace(sc, validation=ValidationOptions(holdout_fraction=0.4, blocks=0))
+    for rep in Calibration(sc).run().reports.values():
+        assert rep.holdout is not None
+        assert rep.holdout.segment_ate.mean <= 0.09
 
 
-def test_recommended_real_scenario_does_not_regress(
-    recommended: tuple[Scenario, dict[str, float]], real_log: Path
+@pytest.mark.slow
+def test_seed_formulation_and_uncalibrated_robot_are_far_off(
+    recommended: CalibrationRun, real_log: Path
 ) -> None:
-    """Guards the figures measured in docs/accuracy.md (0.252 m and 0.103 m) against regressions."""
-    _, m = recommended
-    for solver in ("gauss_newton", "ipopt"):
-        assert m[f"ate_{solver}"] <= 0.26
-        assert m[f"holdout_{solver}"] <= 0.105
-    # The seed formulation's full-run error is an order of magnitude larger; the uncalibrated ~14 m.
+    """The seed formulation's error is an order of magnitude larger; the uncalibrated robot's ~14 m."""
     seed = Calibration(load_scenario(SCENARIOS / "real_tricycle_seed.yaml").with_dataset(real_log))
     res = seed.solve("gauss_newton")
-    assert 1.5 < seed.score(res.params)[0].ate_mean < 3.0
+    ours = recommended.reports["gauss_newton"].metrics.segment_ate.mean
+    assert seed.score(res.params)[0].segment_ate.mean > 10 * ours
     p0 = np.array([seed.initial[n] for n in seed.fns.names])
     assert 13.0 < seed.score(p0)[0].ate_mean < 15.0
 

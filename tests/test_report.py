@@ -83,8 +83,13 @@ def test_report_md_references_images_and_both_solvers_values(report_dir: Path, r
         assert cells[4] == fmt_std(solvers["gauss_newton"]["std"][name])
         assert cells[5] == fmt_value(solvers["ipopt"]["params"][name])
         assert cells[6] == fmt_std(solvers["ipopt"]["std"][name])
-    ate = f"{solvers['gauss_newton']['metrics']['ate_mean']:.4f}"
-    assert any(ln.startswith("| ATE mean [m] |") and ate in ln for ln in md.splitlines())
+    metrics = solvers["gauss_newton"]["metrics"]
+    for label, value in (
+        ("segment ATE mean [m]", metrics["segment_ate"]["mean"]),
+        ("RPE over 1 m [m]", metrics["rpe_1m"]["mean"]),
+        ("full-run ATE mean [m]", metrics["ate_mean"]),
+    ):
+        assert any(ln.startswith(f"| {label} |") and f"{value:.4f}" in ln for ln in md.splitlines()), label
     assert "calibration.yaml" in md and "Gauss-Newton's estimate" in md
 
 
@@ -164,12 +169,14 @@ def test_single_solver_report_with_holdout(tmp_path: Path, small_demo: Scenario)
     )
     run = calib.run()
     paths = write_report(calib, run, tmp_path)
-    assert [p.name for p in paths] == [*IMAGES, "report.md"]
+    assert [p.name for p in paths[:5]] == [*IMAGES, "report.md"]
+    tracks = {p.relative_to(tmp_path).as_posix() for p in paths[5:]}
+    assert {"trajectories/tracker.tum", "trajectories/gauss_newton.tum", "trajectories/README.md"} <= tracks
     for name in IMAGES:
         png_size(tmp_path / name)
     md = (tmp_path / "report.md").read_text()
-    holdout = f"{run.reports['gauss_newton'].holdout.ate_mean:.4f}"  # type: ignore[union-attr]
-    assert any(ln.startswith("| hold-out ATE mean [m] |") and holdout in ln for ln in md.splitlines())
+    holdout = f"{run.reports['gauss_newton'].holdout.segment_ate.mean:.4f}"  # type: ignore[union-attr]
+    assert any(ln.startswith("| hold-out segment ATE mean [m] |") and holdout in ln for ln in md.splitlines())
     assert "IPOPT" not in md.split("## Hand-off files")[0]
 
 

@@ -1,8 +1,22 @@
-"""Trajectory metrics: ATE, hold-out ATE and RPE of the integrated sensor track.
+"""Trajectory errors of a calibration: standard figures and fair ones on logs with faults.
 
-The calibrated sensor trajectory is dead reckoning ``T_{k+1} = T_k · h_k(X)`` started from the
-tracker's pose at the first record of the evaluated range; it is computed by folding the
-problem's ``integrate_step`` Function over the intervals (``mapaccum``), not by a Python loop.
+The calibrated sensor track is dead reckoning ``T_{k+1} = T_k · h_k(X)`` started from the
+tracker's pose; each step ``h_k`` comes from the problem's ``predict`` Function, and the steps are
+composed in one vectorised pass (linear in the number of records).
+
+- **ATE** (full run): the track started at the first record, against every tracker position. A
+  counter fault loses counts for good, so from the first fault on this figure measures the fault,
+  not the calibration, and it can rank parameter sets wrongly.
+- **Segment ATE**: the track restarted from the tracker after each fault, the fault's records left
+  out; ``aligned``: the same after the best SE(2) alignment of each segment to the tracker (what
+  ``evo_ape --align`` computes on each exported segment), pooled over the segments.
+- **RPE over a distance** (1 m, 5 m): for every record, the record whose distance along the
+  tracker's path is nearest that distance further on (within 10 %, pairs inside one segment, as
+  ``evo_rpe --delta D --delta_unit m --all_pairs --pairs_from_reference`` chooses them); the
+  error is the translation of ``(ref_i⁻¹·ref_j)⁻¹·(est_i⁻¹·est_j)``. Alignment does not change it.
+- **RPE over a window** of records, as before.
+
+Statistics are those evo reports: RMSE, mean, median, standard deviation, minimum and maximum.
 """
 
 from __future__ import annotations
@@ -11,15 +25,56 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from nlp_calib.core import poses
 from nlp_calib.problem import ProblemFunctions
+
+#: Distances (m) along the tracker's path over which the relative pose error is reported.
+RPE_DISTANCES = (1.0, 5.0)
+#: Relative tolerance on a pair's distance (evo's default).
+RPE_TOLERANCE = 0.1
+
+
+@dataclass(frozen=True)
+class ErrorStats:
+    """Statistics of a set of errors (m or rad), as evo reports them; NaN when there are none."""
+
+    rmse: float
+    mean: float
+    median: float
+    std: float
+    min: float
+    max: float
+    n: int
+
+    @classmethod
+    def of(cls, errors: np.ndarray) -> ErrorStats:
+        e = np.asarray(errors, dtype=float)
+        if e.size == 0:
+            nan = float("nan")
+            return cls(nan, nan, nan, nan, nan, nan, 0)
+        return cls(
+            rmse=float(np.sqrt(np.mean(e * e))),
+            mean=float(e.mean()),
+            median=float(np.median(e)),
+            std=float(e.std()),
+            min=float(e.min()),
+            max=float(e.max()),
+            n=int(e.size),
+        )
+
+    def as_dict(self) -> dict[str, float | int]:
+        return asdict(self)
 
 
 @dataclass(frozen=True)
 class TrajectoryMetrics:
-    """Position errors (m) of a dead-reckoned sensor track against the tracker.
+    """Position errors (m) of dead-reckoned sensor tracks against the tracker over ``records``.
 
-    ``ate_*``: absolute trajectory error over the range; ``rpe_trans`` / ``rpe_rot``: mean
-    relative pose error over windows of ``rpe_window`` records (m, rad).
+    ``ate_*``: the full-run track (``ate``: its statistics); ``rpe_trans`` / ``rpe_rot``: mean
+    relative pose error over windows of ``rpe_window`` records (m, rad); ``segment_ate`` and
+    ``segment_ate_aligned``: the track restarted after each fault; ``rpe_distance``: translation
+    error over each of :data:`RPE_DISTANCES` of travel (m → stats); ``segments``: the number of
+    fault-free stretches; ``distance_m``: the tracker's path length.
     """
 
     ate_mean: float
@@ -29,23 +84,125 @@ class TrajectoryMetrics:
     rpe_rot: float
     rpe_window: int
     records: int
+    ate: ErrorStats
+    segment_ate: ErrorStats
+    segment_ate_aligned: ErrorStats
+    rpe_distance: dict[float, ErrorStats]
+    segments: int
+    distance_m: float
 
-    def as_dict(self) -> dict[str, float | int]:
-        return asdict(self)
+    def figures(self) -> list[tuple[str, float]]:
+        """The figures a report shows, as (label with unit, value): fault-robust ones first."""
+        return [
+            ("segment ATE mean [m]", self.segment_ate.mean),
+            ("segment ATE aligned [m]", self.segment_ate_aligned.mean),
+            *((f"RPE over {d:g} m [m]", s.mean) for d, s in self.rpe_distance.items()),
+            ("full-run ATE mean [m]", self.ate_mean),
+            ("full-run ATE max [m]", self.ate_max),
+            (f"RPE over {self.rpe_window} records [m]", self.rpe_trans),
+            (f"RPE over {self.rpe_window} records [rad]", self.rpe_rot),
+        ]
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "ate_mean": self.ate_mean,
+            "ate_max": self.ate_max,
+            "ate_final": self.ate_final,
+            "rpe_trans": self.rpe_trans,
+            "rpe_rot": self.rpe_rot,
+            "rpe_window": self.rpe_window,
+            "records": self.records,
+            "ate": self.ate.as_dict(),
+            "segment_ate": self.segment_ate.as_dict(),
+            "segment_ate_aligned": self.segment_ate_aligned.as_dict(),
+            **{f"rpe_{d:g}m": s.as_dict() for d, s in self.rpe_distance.items()},
+            "segments": self.segments,
+            "distance_m": self.distance_m,
+        }
+
+
+def steps(fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray) -> np.ndarray:
+    """The predicted sensor motion ``h_k`` of every interval, ``(n_intervals, 3)``."""
+    n = inputs.shape[1]
+    if n == 0:
+        return np.zeros((0, 3))
+    return np.asarray(fns.predict.map(n)(np.asarray(params, dtype=float), inputs)).T
 
 
 def integrate(
     fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, T_world_sensor_0: np.ndarray
 ) -> np.ndarray:
     """Dead-reckoned sensor poses ``(n_intervals + 1, 3)`` from ``T_world_sensor_0``."""
-    n = inputs.shape[1]
-    out = np.empty((n + 1, 3))
-    out[0] = T_world_sensor_0
-    if n:
-        fold = fns.integrate_step.mapaccum("integrate", n)
-        P = np.repeat(np.asarray(params, dtype=float).reshape(-1, 1), n, axis=1)
-        out[1:] = np.asarray(fold(np.asarray(T_world_sensor_0, dtype=float), P, inputs)).T
+    return poses.accumulate(np.asarray(T_world_sensor_0, dtype=float), steps(fns, params, inputs))
+
+
+def segments(n_records: int, bad_intervals: np.ndarray | None) -> list[tuple[int, int]]:
+    """Record ranges ``[a, b)`` with no bad interval inside (at least two records each)."""
+    if bad_intervals is None or not np.any(bad_intervals):
+        return [(0, n_records)] if n_records >= 2 else []
+    out, a = [], 0
+    for k in np.flatnonzero(bad_intervals):
+        if k + 1 - a >= 2:
+            out.append((a, int(k) + 1))
+        a = int(k) + 1
+    if n_records - a >= 2:
+        out.append((a, n_records))
     return out
+
+
+def restarted(step: np.ndarray, T_ref: np.ndarray, parts: list[tuple[int, int]]) -> np.ndarray:
+    """Poses ``(n, 3)`` dead-reckoned within each part from the reference's pose at its start
+    (NaN outside the parts)."""
+    out = np.full(T_ref.shape, np.nan)
+    for a, b in parts:
+        out[a:b] = poses.accumulate(T_ref[a], step[a : b - 1])
+    return out
+
+
+def path_distance(T_ref: np.ndarray) -> np.ndarray:
+    """Distance travelled along the reference's positions up to each record (m)."""
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(T_ref[:, :2], axis=0), axis=1))])
+
+
+def distance_pairs(dist: np.ndarray, delta: float, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """For each index ``i``, the ``j > i`` whose ``dist[j] − dist[i]`` is nearest ``delta``, kept
+    when within ``tol`` (``dist`` is non-decreasing)."""
+    n = dist.size
+    if n < 2:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    i = np.arange(n - 1)
+    target = dist[i] + delta
+    j_hi = np.clip(np.searchsorted(dist, target, side="left"), i + 1, n - 1)
+    j_lo = np.clip(j_hi - 1, i + 1, n - 1)
+    # Among equal distances the first index wins, as an argmin over j > i does.
+    better_lo = np.abs(dist[j_lo] - target) <= np.abs(dist[j_hi] - target)
+    j = np.where(better_lo, j_lo, j_hi)
+    first = np.searchsorted(dist, dist[j], side="left")
+    j = np.maximum(first, i + 1)
+    keep = np.abs(dist[j] - target) <= tol
+    return i[keep], j[keep]
+
+
+def rpe_by_distance(
+    T_est: np.ndarray, T_ref: np.ndarray, parts: list[np.ndarray], delta: float
+) -> ErrorStats:
+    """Translation error over ``delta`` metres of the reference's path, pairs inside each part
+    (an array of record indices; the path runs through them in order)."""
+    errors = []
+    for idx in parts:
+        i, j = distance_pairs(path_distance(T_ref[idx]), delta, RPE_TOLERANCE * delta)
+        ref = poses.between(T_ref[idx[i]], T_ref[idx[j]])
+        est = poses.between(T_est[idx[i]], T_est[idx[j]])
+        errors.append(np.linalg.norm(poses.between(ref, est)[:, :2], axis=1))
+    return ErrorStats.of(np.concatenate(errors) if errors else np.zeros(0))
+
+
+def aligned_errors(T_est: np.ndarray, T_ref: np.ndarray) -> np.ndarray:
+    """Position errors after the best SE(2) alignment of the estimate's positions to the reference."""
+    if T_est.shape[0] < 2 or not np.all(np.isfinite(T_est[:, :2])):
+        return np.linalg.norm(T_est[:, :2] - T_ref[:, :2], axis=1)  # NaN where the track is
+    R, t = poses.align(T_est[:, :2], T_ref[:, :2])
+    return np.linalg.norm(T_est[:, :2] @ R.T + t - T_ref[:, :2], axis=1)
 
 
 def trajectory_metrics(
@@ -57,26 +214,51 @@ def trajectory_metrics(
     start: int = 0,
     stop: int | None = None,
     rpe_window: int = 25,
+    bad_intervals: np.ndarray | None = None,
+    bad_records: np.ndarray | None = None,
 ) -> TrajectoryMetrics:
-    """Metrics of the track integrated over records ``start:stop`` (interval ``k`` joins records k, k+1)."""
+    """Metrics of the tracks over records ``start:stop`` (interval ``k`` joins records k, k+1).
+
+    ``bad_intervals`` (per interval) and ``bad_records`` (per record) mark faults in the same
+    indexing as ``inputs`` and ``T_world_sensor``; they shape the fair figures only.
+    """
     stop = T_world_sensor.shape[0] if stop is None else stop
     if stop - start < 2:
         raise ValueError(f"need at least 2 records to score a trajectory, got {stop - start}")
-    track = integrate(fns, params, inputs[:, start : stop - 1], T_world_sensor[start])
-    truth = T_world_sensor[start:stop]
-    err = np.linalg.norm(track[:, :2] - truth[:, :2], axis=1)
+    ref = np.asarray(T_world_sensor[start:stop], dtype=float)
+    step = steps(fns, params, inputs[:, start : stop - 1])
+    track = poses.accumulate(ref[0], step)
+    err = np.linalg.norm(track[:, :2] - ref[:, :2], axis=1)
     W = min(rpe_window, stop - start - 1)
-    m = track.shape[0] - W
-    between = fns.between.map(m)
-    est = np.asarray(between(track[:-W].T, track[W:].T))
-    ref = np.asarray(between(truth[:-W].T, truth[W:].T))
-    diff = np.asarray(between(ref, est))
+    rel = poses.between(poses.between(ref[:-W], ref[W:]), poses.between(track[:-W], track[W:]))
+
+    bad_i = None if bad_intervals is None else np.asarray(bad_intervals[start : stop - 1], dtype=bool)
+    good = np.ones(stop - start, dtype=bool)
+    if bad_records is not None:
+        good &= ~np.asarray(bad_records[start:stop], dtype=bool)
+    parts = segments(stop - start, bad_i)
+    seg_track = restarted(step, ref, parts)
+    scored = np.zeros(stop - start, dtype=bool)
+    for a, b in parts:
+        scored[a:b] = True
+    scored &= good
+    seg_err = np.linalg.norm(seg_track[scored, :2] - ref[scored, :2], axis=1)
+    # A bad tracker pose is left out of the path too, as it is of the exported files.
+    scored_parts = [a + np.flatnonzero(good[a:b]) for a, b in parts]
+    aligned = [aligned_errors(seg_track[idx], ref[idx]) for idx in scored_parts]
+    rpe = {d: rpe_by_distance(seg_track, ref, scored_parts, d) for d in RPE_DISTANCES}
     return TrajectoryMetrics(
         ate_mean=float(err.mean()),
         ate_max=float(err.max()),
         ate_final=float(err[-1]),
-        rpe_trans=float(np.linalg.norm(diff[:2], axis=0).mean()),
-        rpe_rot=float(np.abs(diff[2]).mean()),
+        rpe_trans=float(np.linalg.norm(rel[:, :2], axis=1).mean()),
+        rpe_rot=float(np.abs(rel[:, 2]).mean()),
         rpe_window=int(W),
         records=int(stop - start),
+        ate=ErrorStats.of(err),
+        segment_ate=ErrorStats.of(seg_err),
+        segment_ate_aligned=ErrorStats.of(np.concatenate(aligned) if aligned else np.zeros(0)),
+        rpe_distance=rpe,
+        segments=len(parts),
+        distance_m=float(path_distance(ref)[-1]),
     )

@@ -6,6 +6,7 @@ Errors the user can fix print one line ``error: ...`` on stderr and exit with 2 
 
 from __future__ import annotations
 
+import errno
 import sys
 import traceback
 import warnings
@@ -14,6 +15,7 @@ from typing import TextIO
 
 from nlp_calib.cli.commands import COMMANDS
 from nlp_calib.cli.parser import build_parser
+from nlp_calib.core import interrupts
 from nlp_calib.core.errors import NlpCalibError
 
 
@@ -33,7 +35,17 @@ def _show_warning(
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    args_in = list(sys.argv[1:] if argv is None else argv)
+    # Called as a program (no argv): the handlers stay to the end, so a late signal cannot
+    # replace the exit code.
+    with interrupts.handled(restore=argv is not None):
+        try:
+            return _run(args_in)
+        except interrupts.Interrupted as exc:  # another signal while the first was reported
+            return exc.exit_code
+
+
+def _run(argv: list[str]) -> int:
     debug = "--debug" in argv
     try:
         args = build_parser().parse_args(argv)
@@ -49,9 +61,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
         sys.stderr.close()
         return 1
+    except interrupts.Interrupted as exc:
+        print(f"error: interrupted ({exc.name}); the files in progress were discarded", file=sys.stderr)
+        return exc.exit_code
     except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
+        print("error: interrupted; the files in progress were discarded", file=sys.stderr)
         return 130
+    except OSError as exc:  # the system refused: a full disk, a permission, a vanished folder
+        if debug:
+            traceback.print_exc()
+        where = f"{exc.filename}: " if exc.filename else ""
+        hint = "; free some space and run again" if exc.errno == errno.ENOSPC else ""
+        print(f"error: {where}{exc.strerror or exc}{hint}", file=sys.stderr)
+        return 1
+    except MemoryError:
+        print("error: out of memory; select fewer records or a shorter horizon", file=sys.stderr)
+        return 1
     except Exception as exc:  # an unexpected failure is still reported in one line
         if debug:
             traceback.print_exc()

@@ -39,15 +39,22 @@ def atomic_write_text(path: Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
-def prepare_output_dir(out: str | Path) -> Path:
-    """Create ``out`` if needed and check that it is writable."""
+def check_output_dir(out: str | Path) -> Path:
+    """Check that ``out`` is, or can be created as, a writable folder, without creating it: a run
+    that stops on bad input leaves no empty folders behind. (A probe file is created and removed
+    in the nearest folder that exists.)"""
     p = Path(out)
+    existing = p
+    while not (existing.exists() or existing.is_symlink()) and existing.parent != existing:
+        existing = existing.parent
     try:
-        p.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=p, prefix=".probe."):
+        if not existing.is_dir():
+            raise NotADirectoryError(20, "not a folder", str(existing))
+        with tempfile.NamedTemporaryFile(dir=existing, prefix=".probe."):
             pass
     except OSError as exc:
+        where = f"{existing}: " if existing != p else ""
         raise UsageError(
-            f"cannot write to the output folder {p} ({exc.strerror or exc}); choose another --out"
+            f"cannot write to the output folder {p} ({where}{exc.strerror or exc}); choose another --out"
         ) from None
     return p

@@ -5,7 +5,7 @@ Knows no kinematic model: callers say which encoders are absolute and which are 
 
 from nlp_calib.logs.log import ENCODER_KINDS, DroppedRecord, EncoderKind, Log, LogHeader
 from nlp_calib.logs.reader import parse_log, read_log, yaw_from_quaternion
-from nlp_calib.logs.resample import resample_encoders
+from nlp_calib.logs.resample import resample_encoders, resample_tracker
 from nlp_calib.logs.writer import format_log
 
 __all__ = [
@@ -18,5 +18,6 @@ __all__ = [
     "parse_log",
     "read_log",
     "resample_encoders",
+    "resample_tracker",
     "yaw_from_quaternion",
 ]

@@ -14,6 +14,7 @@ from nlp_calib.logs.reader import read_header
 from nlp_calib.models.base import (
     SENSOR_PARAMS,
     KinematicModel,
+    canonical,
     encoders,
     header_parameters,
     param_names,
@@ -22,8 +23,9 @@ from nlp_calib.models.base import (
 )
 from nlp_calib.models.diff_drive import DiffDrive
 from nlp_calib.models.tricycle import Tricycle
+from nlp_calib.models.tricycle_reverse import TricycleReverse
 
-MODELS: dict[str, KinematicModel] = {m.name: m for m in (Tricycle(), DiffDrive())}
+MODELS: dict[str, KinematicModel] = {m.name: m for m in (Tricycle(), DiffDrive(), TricycleReverse())}
 #: The model a scenario or a simulation uses when it names none.
 DEFAULT_MODEL = next(iter(MODELS))
 
@@ -66,6 +68,7 @@ __all__ = [
     "MODELS",
     "SENSOR_PARAMS",
     "KinematicModel",
+    "canonical",
     "encoders",
     "get_model",
     "header_parameters",

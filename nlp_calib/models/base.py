@@ -11,11 +11,13 @@ one line in :mod:`nlp_calib.models`.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, Protocol
 
 import casadi as ca
 import numpy as np
 
+from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 
 if TYPE_CHECKING:
@@ -38,6 +40,33 @@ SENSOR_REFERENCE: Mapping[str, Reference] = {
     "sensor_y": ("absolute", 0.01),
     "sensor_theta": ("absolute", 0.005),
 }
+
+
+@dataclass(frozen=True)
+class Symmetry:
+    """An exact symmetry of a model: ``negate`` and ``turn`` (+π) map a parameter set onto another
+    that predicts the same motion. The canonical form has ``sign`` > 0."""
+
+    description: str
+    sign: str
+    negate: tuple[str, ...]
+    turn: tuple[str, ...]
+
+    @property
+    def moves(self) -> frozenset[str]:
+        return frozenset((*self.negate, *self.turn))
+
+    def apply(self, params: Mapping[str, float]) -> dict[str, float]:
+        out = dict(params)
+        for n in self.negate:
+            out[n] = -out[n]
+        for n in self.turn:
+            out[n] += np.pi
+        return out
+
+
+#: The base frame turned round: the mounting pose rotated by π (a part of most symmetries).
+SENSOR_TURNED: tuple[tuple[str, ...], tuple[str, ...]] = (("sensor_x", "sensor_y"), ("sensor_theta",))
 
 
 class KinematicModel(Protocol):
@@ -67,6 +96,12 @@ class KinematicModel(Protocol):
     reference: Mapping[str, Reference]
     #: The kinematic parameters a one-line summary shows.
     headline: tuple[str, ...]
+    #: Values of kinematic parameters a log header need not carry (used when it does not).
+    defaults: Mapping[str, float]
+    #: The model's exact symmetries, applied in this order to reach the canonical form, and the
+    #: angles the canonical form wraps onto (-π, π].
+    symmetries: tuple[Symmetry, ...]
+    angle_params: tuple[str, ...]
 
     @property
     def drive(self) -> Drive:
@@ -85,13 +120,21 @@ class KinematicModel(Protocol):
         """Boolean mask of intervals in which the encoders report motion."""
         ...
 
-    def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
-        """1σ noise of each input row, from each encoder's noise in ticks (default: quantisation)."""
+    def travel_direction(self, inputs: np.ndarray) -> np.ndarray:
+        """Per interval: +1 when the base drives forward, -1 backward, 0 when it does not move."""
         ...
 
-    def canonical(self, params: Mapping[str, float], fixed: tuple[str, ...] = ()) -> dict[str, float]:
-        """The same physical calibration in the model's canonical form (positive gains, wrapped
-        angles); parameters in ``fixed`` are left as they are."""
+    def undetermined(self, inputs: np.ndarray) -> dict[str, str]:
+        """Kinematic parameters these inputs cannot determine at all, each with the reason (the
+        pipeline holds them at their initial value)."""
+        ...
+
+    def counter_rows(self, log: Log) -> dict[str, tuple[int, float]]:
+        """For each counter encoder: the input row it drives and the ticks per unit of that input."""
+        ...
+
+    def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
+        """1σ noise of each input row, from each encoder's noise in ticks (default: quantisation)."""
         ...
 
     def initial_guess(
@@ -105,6 +148,22 @@ class KinematicModel(Protocol):
         ``base_motion(params)`` evaluates the windows' base motion ``(3, M)`` for given parameters.
         """
         ...
+
+
+def canonical(
+    model: KinematicModel, params: Mapping[str, float], fixed: tuple[str, ...] = ()
+) -> dict[str, float]:
+    """The same physical calibration in the model's canonical form: each symmetry applied where its
+    sign parameter is negative, then the angles wrapped. A symmetry that would move a parameter in
+    ``fixed`` is skipped, and fixed angles are not wrapped."""
+    p = dict(params)
+    for sym in model.symmetries:
+        if p[sym.sign] < 0 and not sym.moves & set(fixed):
+            p = sym.apply(p)
+    for name in model.angle_params:
+        if name not in fixed:
+            p[name] = float(wrap_angle(p[name]))
+    return p
 
 
 def param_names(model: KinematicModel) -> tuple[str, ...]:

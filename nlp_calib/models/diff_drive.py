@@ -14,9 +14,9 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.core.errors import ModelError
-from nlp_calib.core.numeric import wrap_angle, wrapped_difference
+from nlp_calib.core.numeric import wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
-from nlp_calib.models.base import QUANTISATION, Reference
+from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, Reference, Symmetry
 from nlp_calib.models.drives import SimulationSettings, counter, cumulative, drive_header, first_order
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.symbolic import se2
@@ -108,6 +108,16 @@ class DiffDrive:
     turning_note = ""
     reference: Mapping[str, Reference] = MappingProxyType({})
     headline: tuple[str, ...] = ("k_left", "baseline")
+    defaults: Mapping[str, float] = MappingProxyType({})
+    symmetries: tuple[Symmetry, ...] = (
+        Symmetry(
+            "the base frame turned round",
+            "baseline",
+            ("k_left", "k_right", "baseline", *SENSOR_TURNED[0]),
+            SENSOR_TURNED[1],
+        ),
+    )
+    angle_params: tuple[str, ...] = ("sensor_theta",)
     drive = DiffDriveDrive()
     physical_ranges: Mapping[str, tuple[float, float]] = MappingProxyType(
         {
@@ -142,26 +152,22 @@ class DiffDrive:
     def moving(self, inputs: np.ndarray) -> np.ndarray:
         return np.asarray((inputs[0] != 0.0) | (inputs[1] != 0.0))
 
+    def travel_direction(self, inputs: np.ndarray) -> np.ndarray:
+        """The sign of the wheels' mean increment (0 when turning on the spot)."""
+        return np.sign(inputs[0] + inputs[1])
+
+    def undetermined(self, inputs: np.ndarray) -> dict[str, str]:
+        """None: every parameter can be determined (the observability analysis judges how well)."""
+        return {}
+
+    def counter_rows(self, log: Log) -> dict[str, tuple[int, float]]:
+        """Both counters drive their own row, in ticks."""
+        return {LEFT_ENCODER: (0, 1.0), RIGHT_ENCODER: (1, 1.0)}
+
     def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
         """1σ of each increment in ticks (default: quantisation, ``1/√12``)."""
         ticks = {**dict.fromkeys(self.encoder_kinds, QUANTISATION), **(encoder_noise or {})}
         return np.array([ticks[LEFT_ENCODER], ticks[RIGHT_ENCODER]])
-
-    def canonical(self, params: Mapping[str, float], fixed: tuple[str, ...] = ()) -> dict[str, float]:
-        """``baseline > 0`` and the sensor angle wrapped.
-
-        ``(k_left, k_right, baseline, T_base_sensor) → (−k_left, −k_right, −baseline,
-        R(π)·T_base_sensor)`` (the base frame turned round) is an exact symmetry of the model.
-        """
-        p = dict(params)
-        flip = {"k_left", "k_right", "baseline", "sensor_x", "sensor_y", "sensor_theta"}
-        if p["baseline"] < 0 and not flip & set(fixed):
-            for n in ("k_left", "k_right", "baseline", "sensor_x", "sensor_y"):
-                p[n] = -p[n]
-            p["sensor_theta"] += np.pi
-        if "sensor_theta" not in fixed:
-            p["sensor_theta"] = float(wrap_angle(p["sensor_theta"]))
-        return p
 
     def initial_guess(
         self,

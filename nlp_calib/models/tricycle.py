@@ -18,7 +18,7 @@ import numpy as np
 from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
-from nlp_calib.models.base import QUANTISATION, STEERING_SAMPLES, Reference
+from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, STEERING_SAMPLES, Reference, Symmetry
 from nlp_calib.models.drives import SimulationSettings, counter, cumulative, drive_header, first_order
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.symbolic import se2
@@ -62,14 +62,19 @@ class TricycleDrive:
     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         d = speed * dt
         ds, w = d * np.cos(turn), d * np.sin(turn) / opts.truth["axis_length"]
-        return ds, w, {"front": cumulative(d), "phi": np.concatenate([[turn_start], turn])}
+        channels = {"front": cumulative(d), "phi": np.concatenate([[turn_start], turn])}
+        channels["direction"] = np.concatenate([[0.0], np.sign(d)])
+        return ds, w, channels
+
+    def steering_gain(self, truth: Mapping[str, float], direction: np.ndarray) -> np.ndarray:
+        """The true steering gain at each sample, given the direction the wheel rolls there."""
+        return np.full(direction.shape, truth["k_steer"])
 
     def ticks(self, opts: SimulationSettings, channels: Mapping[str, np.ndarray]) -> np.ndarray:
         t = opts.truth
         s_max, t_max = opts.encoder_ranges[STEERING_ENCODER], opts.encoder_ranges[TRACTION_ENCODER]
-        steer = np.mod(
-            np.round((channels["phi"] - t["steer_offset"]) / t["k_steer"] * s_max / (2 * np.pi)), s_max
-        )
+        gain = self.steering_gain(t, np.sign(channels["direction"]))
+        steer = np.mod(np.round((channels["phi"] - t["steer_offset"]) / gain * s_max / (2 * np.pi)), s_max)
         traction = counter(channels["front"], t["k_traction"] / t_max, opts.wrap_after_ticks)
         return np.stack([steer.astype(np.int64), traction], axis=1)
 
@@ -77,7 +82,12 @@ class TricycleDrive:
         return drive_header(opts, "traction_drive_wheel", Tricycle.header_names)
 
     def vendor_odometry(self, header: LogHeader, ticks: np.ndarray) -> np.ndarray:
-        p = {Tricycle.header_aliases[n.lower()]: v for n, v in header.parameters.items()}
+        # The vendor's odometry knows the plain tricycle only.
+        p = {
+            Tricycle.header_aliases[n.lower()]: v
+            for n, v in header.parameters.items()
+            if n.lower() in Tricycle.header_aliases
+        }
         s_max, t_max = header.encoder_max
         d = p["k_traction"] * wrapped_difference(ticks[:, 1]) / t_max
         phi = p["k_steer"] * wrap_angle(2 * np.pi * ticks[:-1, 0] / s_max) + p["steer_offset"]
@@ -121,6 +131,19 @@ class Tricycle:
     input_names: tuple[str, ...] = ("traction_revolutions", "steering_angle")
     reference: Mapping[str, Reference] = MappingProxyType({"steer_offset": ("absolute", 0.005)})
     headline: tuple[str, ...] = ("k_traction", "axis_length")
+    defaults: Mapping[str, float] = MappingProxyType({})
+    symmetries: tuple[Symmetry, ...] = (
+        Symmetry(
+            "the base frame turned round",
+            "axis_length",
+            ("axis_length", *SENSOR_TURNED[0]),
+            ("steer_offset", *SENSOR_TURNED[1]),
+        ),
+        Symmetry(
+            "the wheel turned round, counting backwards", "k_traction", ("k_traction",), ("steer_offset",)
+        ),
+    )
+    angle_params: tuple[str, ...] = ("steer_offset", "sensor_theta")
     drive = TricycleDrive()
     physical_ranges: Mapping[str, tuple[float, float]] = MappingProxyType(
         {
@@ -134,10 +157,14 @@ class Tricycle:
         }
     )
 
+    def steering_angle(self, k: ca.SX, u: ca.SX) -> ca.SX:
+        """``φ = k_steer·angle + steer_offset``."""
+        return k[0] * u[1] + k[3]
+
     def increment(self, k: ca.SX, u: ca.SX, integration: str) -> ca.SX:
         """``v = d·cos φ``, ``ω = d·sin φ / L``; exact arc or Euler ``(v, 0, ω)``."""
-        k_steer, k_traction, axis_length, steer_offset = k[0], k[1], k[2], k[3]
-        phi = k_steer * u[1] + steer_offset
+        k_traction, axis_length = k[1], k[2]
+        phi = self.steering_angle(k, u)
         d = k_traction * u[0]
         v = d * ca.cos(phi)
         omega = d * ca.sin(phi) / axis_length
@@ -171,6 +198,18 @@ class Tricycle:
     def moving(self, inputs: np.ndarray) -> np.ndarray:
         return np.asarray(inputs[0] != 0.0)
 
+    def travel_direction(self, inputs: np.ndarray) -> np.ndarray:
+        """The sign of the traction increment (the front wheel never steers past 90°)."""
+        return np.sign(inputs[0])
+
+    def undetermined(self, inputs: np.ndarray) -> dict[str, str]:
+        """None: every parameter can be determined (the observability analysis judges how well)."""
+        return {}
+
+    def counter_rows(self, log: Log) -> dict[str, tuple[int, float]]:
+        """The traction counter drives row 0, in revolutions of ``t_max`` ticks."""
+        return {TRACTION_ENCODER: (0, float(log.header.encoder_range(TRACTION_ENCODER)))}
+
     def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
         """1σ of each input from the encoders' noise in ticks (default: quantisation, ``1/√12``)."""
         header = log.header
@@ -178,36 +217,6 @@ class Tricycle:
         t_max = header.encoder_max[header.encoder_index(TRACTION_ENCODER)]
         ticks = {**dict.fromkeys((TRACTION_ENCODER, STEERING_ENCODER), QUANTISATION), **(encoder_noise or {})}
         return np.array([ticks[TRACTION_ENCODER] / t_max, 2.0 * np.pi * ticks[STEERING_ENCODER] / s_max])
-
-    def canonical(self, params: Mapping[str, float], fixed: tuple[str, ...] = ()) -> dict[str, float]:
-        """The same physical calibration with ``k_traction > 0``, ``axis_length > 0`` and angles
-        wrapped onto (-π, π].
-
-        The model has two exact symmetries: ``(k_traction, steer_offset) → (−k_traction,
-        steer_offset + π)`` (the wheel turned round and counting backwards), and ``(axis_length,
-        steer_offset, T_base_sensor) → (−axis_length, steer_offset + π, R(π)·T_base_sensor)``
-        (the base frame turned round). A solver may land on either image; both mean the same robot.
-        Parameters in ``fixed`` are never changed, so a symmetry that would move them is skipped.
-        """
-        p = dict(params)
-        if p["axis_length"] < 0 and not {
-            "axis_length",
-            "steer_offset",
-            "sensor_x",
-            "sensor_y",
-            "sensor_theta",
-        } & set(fixed):
-            p["axis_length"] = -p["axis_length"]
-            p["steer_offset"] += np.pi
-            p["sensor_x"], p["sensor_y"] = -p["sensor_x"], -p["sensor_y"]
-            p["sensor_theta"] += np.pi
-        if p["k_traction"] < 0 and not {"k_traction", "steer_offset"} & set(fixed):
-            p["k_traction"] = -p["k_traction"]
-            p["steer_offset"] += np.pi
-        for name in ("steer_offset", "sensor_theta"):
-            if name not in fixed:
-                p[name] = float(wrap_angle(np.array(p[name])))
-        return p
 
     def initial_guess(
         self,

@@ -43,6 +43,7 @@ def _solver_entry(res: Mapping[str, Any]) -> dict[str, Any]:
         **{k: res[k] for k in keys},
         "parameters": res["params"],
         "std": res["std"],
+        "std_white_noise": res["std_white_noise"],
         "correlation": res["correlation"],
     }
 
@@ -72,6 +73,8 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "frames": {"parent": PARENT_FRAME, "sensor": run.log.header.sensor_frame},
         "parameters": best["params"],
         "std": best["std"],
+        "std_white_noise": best["std_white_noise"],
+        "std_blocks": (doc["crossvalidation"] or {}).get("std_blocks"),
         "correlation": best["correlation"],
         "units": param_units(get_model(sc.model)),
         "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
@@ -98,7 +101,9 @@ def calibration_yaml(doc: Mapping[str, Any]) -> str:
     head = (
         f"# Wheeled-robot calibration by nlp_calib {doc['tool']['version']}, scenario "
         f"{doc['scenario']['name']}.\n"
-        f"# 'parameters' are {doc['solver']}'s estimate ({doc['solver_choice']}); 'std' is 1 sigma.\n"
+        f"# 'parameters' are {doc['solver']}'s estimate ({doc['solver_choice']}); 'std' is the 1 sigma to\n"
+        "# believe: the larger of 'std_white_noise' (white tracker and encoder noise only: a floor) and\n"
+        "# 'std_blocks' (the spread of fits each without one block of the drive: every error that varies).\n"
         f"# sensor_x, sensor_y, sensor_theta: pose of the '{doc['frames']['sensor']}' frame in "
         f"'{doc['frames']['parent']}'.\n"
     )

@@ -76,7 +76,7 @@ def _parameter_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
         row = [f"`{n}`", units.get(n, ""), fmt_value(run.initial[n])]
         for s in solvers:
             rep = run.reports[s]
-            row += [fmt_value(rep.result.param_dict()[n]), fmt_std(rep.uncertainty.std_dict()[n])]
+            row += [fmt_value(rep.result.param_dict()[n]), fmt_std(run.std(s)[n])]
         if pair:
             a, b = (run.reports[s].result.param_dict()[n] for s in solvers)
             row.append(f"{a - b:+.2e}")
@@ -84,14 +84,88 @@ def _parameter_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
     return lines
 
 
-def _metric_rows(
-    label: str, base: TrajectoryMetrics | None, per: list[TrajectoryMetrics | None]
-) -> list[str]:
+def _metric_rows(prefix: str, base: TrajectoryMetrics, per: list[TrajectoryMetrics | None]) -> list[str]:
     rows = []
-    for key, what in (("ate_mean", "mean"), ("ate_max", "max"), ("ate_final", "final")):
-        cells = [_cell(getattr(m, key) if m is not None else None, ".4f") for m in [base, *per]]
-        rows.append(f"| {label} {what} [m] | " + " | ".join(cells) + " |")
+    for i, (label, value) in enumerate(base.figures()):
+        cells = [_cell(value, ".4f")] + [
+            _cell(m.figures()[i][1] if m is not None else None, ".4f") for m in per
+        ]
+        rows.append(f"| {prefix}{label} | " + " | ".join(cells) + " |")
     return rows
+
+
+def _uncertainty_section(run: CalibrationRun) -> list[str]:
+    cv, first = run.crossval, next(iter(run.reports), None)
+    if first is None:
+        return []
+    white = run.reports[first].uncertainty.std_dict()
+    blocked = run.std_blocks()
+    out = ["## Uncertainty and cross-validation", ""]
+    if blocked is None or cv is None:
+        return [
+            *out,
+            "The ± 1σ above is the white-noise σ only: a lower bound where timing or model errors are.",
+            "",
+        ]
+    out += [
+        "The ± 1σ above is the larger of two estimates: the **white-noise σ** (white tracker and encoder "
+        "noise propagated through the fit: a floor) and the **block σ**, the jackknife spread of "
+        f"{len(cv.converged)} fits that each leave one contiguous block of the records out (every error "
+        "that varies along the drive). Believe the larger one.",
+        "",
+        "| parameter | white-noise σ | block σ | ratio | spread of the block fits |",
+        "|---|---|---|---|---|",
+    ]
+    for n, spread in zip(cv.names, cv.spread()):
+        ratio = blocked[n] / white[n] if white[n] > 0 else float("nan")
+        cells = [fmt_std(white[n]), fmt_std(blocked[n]), _cell(ratio, ".1f"), fmt_std(spread)]
+        out.append(f"| `{n}` | " + " | ".join(cells) + " |")
+    labels = ("segment ATE mean [m]", "RPE over 1 m [m]")
+    held = "; ".join(f"{label} {cv.heldout_mean(label):.4f}" for label in labels)
+    out += ["", f"Each block scored by the fit without it (mean over the blocks): {held}."]
+    d = run.direction
+    if d is not None:
+        name, z = d.worst
+        verdict = "**disagree**" if d.significant else "agree"
+        out += [
+            "",
+            f"Fits on forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]}) driving "
+            f"{verdict}: the largest difference is `{name}`, {abs(z):.1f}σ of the difference (each part's "
+            "σ is the whole fit's, scaled by the square root of the whole's windows over the part's).",
+        ]
+    return [*out, ""]
+
+
+def _faults_section(run: CalibrationRun) -> list[str]:
+    if run.findings is None:
+        return []
+    out = ["## Encoder and tracker faults", ""]
+    rep = run.findings.report
+    stale = sum(rep.stale.values())
+    if rep.unchecked:
+        return [*out, f"Not checked: {rep.unchecked}.", ""]
+    if not rep.faults:
+        out += [
+            f"None found; {stale} stale counter readings that catch up at the next record (harmless).",
+            "",
+        ]
+        return out
+    done = {
+        "exclude": f"{run.dropped_faulty} residual windows that cross them were left out of the fit",
+        "repair": "their counts were repaired (below); windows at tracker jumps were left out",
+        "keep": "they were kept in the fit (`faults.handling: keep`)",
+    }[run.findings.handling]
+    out += [
+        f"{len(rep.faults)} found; {done}. The fault-robust figures restart dead reckoning from the "
+        f"tracker after each fault and leave its records out. {stale} stale counter readings that "
+        "catch up at the next record are harmless.",
+        "",
+        "| record | line | time [s] | kind | evidence |",
+        "|---|---|---|---|---|",
+    ]
+    out += [f"| {f.record} | {f.line} | {f.time_s:.2f} | {f.kind} | {f.evidence} |" for f in rep.faults]
+    out += ["", *(f"- repaired: {r}" for r in run.findings.repairs), ""]
+    return out
 
 
 def _solver_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
@@ -108,15 +182,9 @@ def _solver_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
     row("iterations", [str(r.result.iterations) for r in reps])
     row("time [ms]", [f"{1e3 * r.result.time_s:.1f}" for r in reps])
     row("converged", ["yes" if r.result.converged else f"**NO**: {r.result.reason}" for r in reps])
-    lines += _metric_rows("ATE", run.baseline, [r.metrics for r in reps])
-    row(
-        "RPE trans [m]",
-        [_cell(r.metrics.rpe_trans, ".4f") for r in reps],
-        _cell(run.baseline.rpe_trans, ".4f"),
-    )
-    row("RPE rot [rad]", [_cell(r.metrics.rpe_rot, ".4f") for r in reps], _cell(run.baseline.rpe_rot, ".4f"))
+    lines += _metric_rows("", run.baseline, [r.metrics for r in reps])
     if run.baseline_holdout is not None:
-        lines += _metric_rows("hold-out ATE", run.baseline_holdout, [r.holdout for r in reps])
+        lines += _metric_rows("hold-out ", run.baseline_holdout, [r.holdout for r in reps])
     return lines
 
 
@@ -142,11 +210,16 @@ def report_markdown(run: CalibrationRun, images: Sequence[str]) -> str:
         "",
         "## Solvers",
         "",
-        "ATE: distance between the sensor track dead-reckoned from the tracker's first pose and the tracker; "
-        "RPE over windows of " + f"{run.baseline.rpe_window} records.",
+        "Segment ATE: the sensor track dead-reckoned from the tracker, restarted after each fault, "
+        "against the tracker (aligned: after the best SE(2) alignment). RPE over 1 m and 5 m: the "
+        "relative pose error between records that far apart along the tracker's path, within one "
+        "fault-free segment. Full-run ATE: one track from the first record (a fault's lost counts "
+        f"stay in it). RPE over {run.baseline.rpe_window} records: the same over a fixed count of records.",
         "",
         *_solver_table(run, solvers),
         "",
+        *_faults_section(run),
+        *_uncertainty_section(run),
     ]
     for s in solvers:
         res = run.reports[s].result

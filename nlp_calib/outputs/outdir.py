@@ -1,79 +1,248 @@
-"""An output folder that never holds a half-written run or a mix of two runs' files.
+"""An output folder that never holds a half-written run, a mix of two runs' files, or a user's file
+overwritten or deleted.
 
 A run writes its files into a staging folder inside the output folder (same file system) and
 :meth:`StagedOutput.commit` moves them into place only when all of them are complete, one
-``os.replace`` each. The folder's manifest (:data:`MANIFEST_FILE`) lists the files the last run
-wrote; on commit, files of the previous run that this run did not write are removed — only
-files the manifest lists (the tool never deletes what it did not create), plus the names the
-caller owns outright (the hand-off files, which a robot stack must never pick up stale).
-An interrupted or failed run leaves the previous run's files untouched and no temporary files.
+``os.replace`` each, with signals held back until the last one is in place. The folder's manifest
+(:data:`MANIFEST_FILE`) lists the files nlp_calib wrote there, by group (``run`` for result and
+hand-off files and reports, ``odometry``, ``codegen``): a commit removes the files its own group
+wrote last time and did not write again (e.g. the report of an earlier ``--report`` run), and
+nothing else. A file the manifest does not list is the user's: a run that would overwrite it
+stops with an error naming it, unless ``force`` is given.
+
+While a run stages its files it holds a lock on the output folder (``flock`` on the folder
+itself, released by the kernel however the process ends), so two runs into one folder take
+turns, and any staging folder found while holding the lock belongs to a run that was killed
+(SIGKILL, power loss) and is removed. Without ``flock`` (not POSIX) stale folders are left alone.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import shutil
 import tempfile
-from collections.abc import Iterable
+import time
+import warnings
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from types import TracebackType
 
+from nlp_calib.core import interrupts
+from nlp_calib.core.errors import NlpCalibError, NlpCalibWarning, UsageError
 from nlp_calib.core.files import atomic_write_text
 
-#: The list of files the last run wrote into the folder.
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX
+    fcntl = None  # type: ignore[assignment]
+
+#: The list of files nlp_calib wrote into the folder.
 MANIFEST_FILE = ".nlp_calib_manifest.json"
 _STAGING_PREFIX = ".nlp_calib_staging."
+#: How long a run waits for another run that is writing into the same folder.
+LOCK_WAIT_S = 120.0
+
+
+def _plain_path(name: object) -> bool:
+    if not isinstance(name, str):
+        return False
+    parts = name.split("/")
+    return 1 <= len(parts) <= 2 and all(p and Path(p).name == p and p not in (".", "..") for p in parts)
+
+
+def _plain(names: object) -> list[str]:
+    # Plain names, or a plain name inside a plain-named subfolder: a manifest must not point the
+    # clean-up outside the folder.
+    return [f for f in names if _plain_path(f)] if isinstance(names, list) else []
+
+
+def manifest_groups(out_dir: Path) -> dict[str, list[str]]:
+    """The files the folder's manifest lists, by group; an unreadable or foreign manifest lists
+    nothing (a manifest without groups, from an earlier version, is the ``run`` group's)."""
+    try:
+        doc = json.loads((Path(out_dir) / MANIFEST_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    if not isinstance(doc, dict):
+        return {}
+    groups = doc.get("groups")
+    if isinstance(groups, dict):
+        return {str(g): _plain(files) for g, files in groups.items()}
+    return {"run": _plain(doc.get("files"))}
 
 
 def previous_files(out_dir: Path) -> list[str]:
-    """Names the folder's manifest lists; an unreadable or foreign manifest lists nothing."""
-    try:
-        doc = json.loads((out_dir / MANIFEST_FILE).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return []
-    files = doc.get("files") if isinstance(doc, dict) else None
-    if not isinstance(files, list):
-        return []
-    # Plain names only: a manifest must not point the clean-up outside the folder.
-    return [f for f in files if isinstance(f, str) and f and Path(f).name == f and f not in (".", "..")]
+    """Every name the folder's manifest lists (files nlp_calib wrote there)."""
+    return sorted({f for files in manifest_groups(out_dir).values() for f in files})
+
+
+def refuse_collisions(
+    out_dir: Path, names: Iterable[str], *, tracked: bool = True, force: bool = False
+) -> None:
+    """Raise :class:`UsageError` if writing ``names`` into ``out_dir`` would replace something that
+    is not nlp_calib's: a folder, or (unless ``force``) a file the manifest does not list (with
+    ``tracked=False`` every existing file counts as the user's)."""
+    ours = set(previous_files(out_dir)) if tracked else set()
+    for name in names:
+        target = Path(out_dir) / name
+        if target.parent != Path(out_dir) and (target.parent.is_symlink() or target.parent.is_file()):
+            raise UsageError(f"{target.parent} is not a folder; move it away or choose another --out")
+        if target.is_dir() and not target.is_symlink():
+            raise UsageError(f"{target} is a folder; move it away or choose another --out")
+        if target.exists() and not target.is_file():  # e.g. /dev/null: never replaced, even forced
+            raise UsageError(f"{target} is not a regular file (a device, FIFO or socket); choose another")
+        if (target.exists() or target.is_symlink()) and name not in ours and not force:
+            raise UsageError(
+                f"{target} exists and was not written by nlp_calib; move it away, choose another "
+                "--out, or pass --force to overwrite it"
+            )
+
+
+class _FolderLock:
+    """An exclusive ``flock`` on a folder, waited for at most :data:`LOCK_WAIT_S`."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+        self.fd: int | None = None
+
+    def acquire(self) -> bool:
+        """Take the lock; False where the platform has no ``flock``."""
+        if fcntl is None:
+            return False
+        fd = os.open(self.folder, os.O_RDONLY)
+        try:
+            deadline = time.monotonic() + LOCK_WAIT_S
+            warned = False
+            while True:
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    break
+                except BlockingIOError:
+                    if time.monotonic() > deadline:
+                        raise NlpCalibError(
+                            f"another nlp-calib run has been writing into {self.folder} for over "
+                            f"{LOCK_WAIT_S:g} s; try again when it has finished, or choose another --out"
+                        ) from None
+                    if not warned:
+                        warnings.warn(
+                            f"waiting for another nlp-calib run that is writing into {self.folder}",
+                            NlpCalibWarning,
+                            stacklevel=3,
+                        )
+                        warned = True
+                    time.sleep(0.05)
+        except BaseException:
+            os.close(fd)
+            raise
+        self.fd = fd
+        return True
+
+    def release(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)  # closing the descriptor releases the lock
+            self.fd = None
+
+
+def _remove_stale(out_dir: Path) -> None:
+    """Staging folders and temporary manifests of runs that died (called holding the lock)."""
+    for entry in out_dir.iterdir():
+        if entry.name.startswith(_STAGING_PREFIX) and entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        elif entry.name.startswith(f".{MANIFEST_FILE}.") and entry.name.endswith(".tmp") and entry.is_file():
+            entry.unlink(missing_ok=True)
 
 
 class StagedOutput:
-    """Write into :attr:`path`, then :meth:`commit`; leaving the ``with`` block discards the rest."""
+    """Write into :attr:`path`, then :meth:`commit`; leaving the ``with`` block discards the rest.
 
-    def __init__(self, out_dir: Path, owned: Iterable[str] = ()) -> None:
+    ``group`` names the files' owner in the manifest (None: no manifest, e.g. a simulated log
+    written into the user's own data folder, where every existing file is the user's); ``force``
+    allows replacing files nlp_calib did not write.
+    """
+
+    def __init__(self, out_dir: Path, group: str | None = "run", *, force: bool = False) -> None:
         self.out_dir = Path(out_dir)
-        self.owned = tuple(owned)
-        self.path = Path(tempfile.mkdtemp(prefix=_STAGING_PREFIX, dir=self.out_dir))
+        self.group = group
+        self.force = force
+        self._lock = _FolderLock(self.out_dir)
+        self._path: Path | None = None
+
+    @property
+    def path(self) -> Path:
+        """The staging folder (inside the ``with`` block)."""
+        if self._path is None:
+            raise RuntimeError("StagedOutput.path is only available inside its with block")
+        return self._path
 
     def __enter__(self) -> StagedOutput:
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        if self._lock.acquire():
+            _remove_stale(self.out_dir)
+        try:
+            with interrupts.deferred():  # a signal between mkdir and here must not orphan the folder
+                self._path = Path(tempfile.mkdtemp(prefix=_STAGING_PREFIX, dir=self.out_dir))
+        except BaseException:
+            self.discard()
+            self._lock.release()
+            raise
         return self
 
     def __exit__(
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
-        self.discard()
+        try:
+            self.discard()
+        finally:
+            self._lock.release()
 
     def discard(self) -> None:
         """Remove the staging folder and whatever is still in it."""
-        shutil.rmtree(self.path, ignore_errors=True)
+        if self._path is not None:
+            shutil.rmtree(self._path, ignore_errors=True)
 
     def final(self, staged: Path) -> Path:
         """Where a file written into the staging folder ends up."""
-        return self.out_dir / Path(staged).name
+        return self.out_dir / Path(staged).relative_to(self.path)
+
+    def _staged_names(self) -> list[str]:
+        """Files in the staging folder and in its subfolders (one level), as relative names."""
+        top = list(self.path.iterdir())
+        files = [*top, *(q for d in top if d.is_dir() and not d.is_symlink() for q in d.iterdir())]
+        return sorted(str(p.relative_to(self.path)) for p in files if p.is_file() and p.name != MANIFEST_FILE)
+
+    def _write_manifest(self, groups: Mapping[str, list[str]]) -> None:
+        files = sorted({f for names in groups.values() for f in names})
+        doc = {"tool": "nlp_calib", "files": files, "groups": {g: sorted(n) for g, n in groups.items()}}
+        atomic_write_text(self.out_dir / MANIFEST_FILE, json.dumps(doc, indent=2) + "\n")
 
     def commit(self) -> list[Path]:
-        """Move every staged file into the output folder, remove the previous run's leftovers and
-        write the manifest; returns the final paths (in name order)."""
-        names = sorted(p.name for p in self.path.iterdir() if p.is_file())
-        stale = (set(previous_files(self.out_dir)) | set(self.owned)) - set(names) - {MANIFEST_FILE}
-        for name in names:
-            (self.path / name).replace(self.out_dir / name)
-        for name in sorted(stale):
-            old = self.out_dir / name
-            if old.is_symlink() or old.is_file():  # never a folder someone put there
-                old.unlink(missing_ok=True)
-        manifest = {"tool": "nlp_calib", "files": names}
-        atomic_write_text(self.out_dir / MANIFEST_FILE, json.dumps(manifest, indent=2) + "\n")
+        """Move every staged file into the output folder, remove the files this group wrote last
+        time and not now, and update the manifest; returns the final paths (in name order)."""
+        with interrupts.deferred():
+            interrupts.check()  # a signal some native code swallowed: keep the previous files
+            names = self._staged_names()
+            refuse_collisions(self.out_dir, names, tracked=self.group is not None, force=self.force)
+            stale: list[str] = []
+            if self.group is not None:
+                groups = manifest_groups(self.out_dir)
+                others = {f for g, files in groups.items() if g != self.group for f in files}
+                stale = sorted(set(groups.get(self.group, [])) - set(names) - others - {MANIFEST_FILE})
+                # Listed before they are moved (and the stale ones until they are gone): a run killed
+                # half-way never leaves a file of ours that the manifest does not claim.
+                self._write_manifest({**groups, self.group: sorted({*names, *stale})})
+            for name in names:
+                (self.out_dir / name).parent.mkdir(exist_ok=True)
+                (self.path / name).replace(self.out_dir / name)
+            for name in stale:
+                old = self.out_dir / name
+                if old.is_symlink() or old.is_file():  # never a folder someone put there
+                    old.unlink(missing_ok=True)
+                    if "/" in name and old.parent.is_dir() and not any(old.parent.iterdir()):
+                        old.parent.rmdir()
+            if self.group is not None:
+                with contextlib.suppress(OSError):  # the claim above stays true enough if this fails
+                    self._write_manifest({**manifest_groups(self.out_dir), self.group: names})
         self.discard()
         return [self.out_dir / name for name in names]

@@ -23,11 +23,51 @@ def _metrics_dict(full: TrajectoryMetrics, holdout: TrajectoryMetrics | None) ->
     return out
 
 
-def _solver_dict(report: SolverReport) -> dict[str, Any]:
+def _faults_dict(run: CalibrationRun) -> dict[str, Any] | None:
+    if run.findings is None:
+        return None
+    rep = run.findings.report
+    return {
+        "handling": run.findings.handling,
+        "checked": not rep.unchecked,
+        "unchecked_reason": rep.unchecked or None,
+        "found": [f.as_dict() for f in rep.faults],
+        "windows_left_out": run.dropped_faulty,
+        "repairs": list(run.findings.repairs),
+        "stale_readings": dict(rep.stale),
+        "noise_ticks": dict(rep.noise_ticks),
+    }
+
+
+def _crossval_dict(run: CalibrationRun) -> dict[str, Any] | None:
+    cv = run.crossval
+    if cv is None:
+        return None
+    return {
+        "blocks": len(cv.folds),
+        "std_blocks": run.std_blocks(),
+        "spread": dict(zip(cv.names, map(float, cv.spread()))),
+        "heldout": {label: cv.heldout_mean(label) for label, _ in cv.folds[0].heldout.figures()[:4]}
+        if cv.folds and cv.folds[0].heldout is not None
+        else {},
+        "folds": [
+            {
+                "records": [f.first, f.stop],
+                "converged": f.converged,
+                "params": dict(zip(cv.names, map(float, f.params))),
+                "heldout": f.heldout.as_dict() if f.heldout is not None else None,
+            }
+            for f in cv.folds
+        ],
+    }
+
+
+def _solver_dict(run: CalibrationRun, name: str, report: SolverReport) -> dict[str, Any]:
     r, u = report.result, report.uncertainty
     return {
         "params": r.param_dict(),
-        "std": u.std_dict(),
+        "std": run.std(name),
+        "std_white_noise": u.std_dict(),
         "correlation": {"names": list(u.names), "matrix": np.round(u.correlation, 6).tolist()},
         "cost": r.cost,
         "chi2": r.chi2,
@@ -71,7 +111,10 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         "initial": dict(run.initial),
         "initial_guess": sc.initial_guess if isinstance(sc.initial_guess, str) else "mapping",
         "baseline": {"metrics": _metrics_dict(run.baseline, run.baseline_holdout)},
-        "solvers": {name: _solver_dict(rep) for name, rep in run.reports.items()},
+        "solvers": {name: _solver_dict(run, name, rep) for name, rep in run.reports.items()},
+        "crossvalidation": _crossval_dict(run),
+        "direction": run.direction.as_dict() if run.direction is not None else None,
+        "faults": _faults_dict(run),
         "observability": run.observability.as_dict() if run.observability is not None else None,
         "warnings": list(run.warnings),
     }
@@ -102,6 +145,30 @@ def result_document(run: CalibrationRun) -> dict[str, Any]:
     """The ``result.json`` document as plain JSON types, exactly as the file stores it."""
     doc: dict[str, Any] = json.loads(json.dumps(finite_or_null(result_dict(run)), default=_json_default))
     return doc
+
+
+VALIDATION_FILE = "validation.json"
+
+
+def write_validation(run: CalibrationRun, out_dir: Path) -> Path:
+    """Write ``out_dir/validation.json``: the blocked cross-validation and the direction check."""
+    solver = next(iter(run.reports))
+    doc = {
+        "scenario": run.scenario.name,
+        "tool": {"name": "nlp_calib", "version": __version__},
+        "solver": solver,
+        "params": run.reports[solver].result.param_dict(),
+        "std": run.std(solver),
+        "std_white_noise": run.reports[solver].uncertainty.std_dict(),
+        "crossvalidation": _crossval_dict(run),
+        "direction": run.direction.as_dict() if run.direction is not None else None,
+    }
+    path = out_dir / VALIDATION_FILE
+    text = json.dumps(
+        json.loads(json.dumps(finite_or_null(doc), default=_json_default)), indent=2, allow_nan=False
+    )
+    atomic_write_text(path, text + "\n")
+    return path
 
 
 def write_result(run: CalibrationRun, out_dir: Path) -> Path:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlp_calib.analysis.metrics import integrate
+from nlp_calib.analysis.metrics import integrate, restarted, segments, steps
 from nlp_calib.logs import Log
 from nlp_calib.models import SENSOR_PARAMS, header_parameters
 from nlp_calib.pipeline import Calibration, CalibrationRun
@@ -40,6 +40,10 @@ class TrajectorySeries:
     tracker: Track
     tracks: tuple[Track, ...]
     holdout_start: int | None
+    #: Faults as (index into the tracks, kind), and the first solver's track restarted from the
+    #: tracker after each of them (what the segment ATE scores; NaN inside a fault).
+    faults: tuple[tuple[int, str], ...] = ()
+    restarted: Track | None = None
 
 
 @dataclass(frozen=True)
@@ -94,10 +98,23 @@ def trajectory_series(calib: Calibration, run: CalibrationRun) -> TrajectorySeri
         track = integrate(calib.fns, rep.result.params, inputs, T0)
         tracks.append(Track(solver_label(name), track, t, rep.metrics.ate_mean, rep.result.converged))
     holdout = run.fit[1] - run.used[0] if run.fit[1] < run.used[1] - 1 else None
+    a, b = run.used
+    faults: tuple[tuple[int, str], ...] = ()
+    restart = None
+    if run.findings is not None and run.findings.report.faults:
+        faults = tuple((f.record - a, f.kind) for f in run.findings.report.faults if a <= f.record < b)
+        name, rep = next(iter(run.reports.items()))
+        parts = segments(b - a, calib.fault_masks[0][a : b - 1])
+        track = restarted(steps(calib.fns, rep.result.params, inputs), np.asarray(sel.T_world_sensor), parts)
+        restart = Track(
+            f"{solver_label(name)}, restarted after each fault", track, t, rep.metrics.segment_ate.mean
+        )
     return TrajectorySeries(
         tracker=Track("tracker", np.asarray(sel.T_world_sensor), t),
         tracks=tuple(tracks),
         holdout_start=holdout,
+        faults=faults,
+        restarted=restart,
     )
 
 

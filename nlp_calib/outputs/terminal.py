@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections import Counter
+
 import numpy as np
 
 from nlp_calib.analysis.metrics import TrajectoryMetrics
@@ -23,15 +25,82 @@ def _row(label: str, cells: list[str], label_width: int = 26) -> str:
     return f"{label:<{label_width}}" + "".join(cells)
 
 
-def _metric_rows(run: CalibrationRun, holdout: bool) -> list[tuple[str, str]]:
-    rows = [
-        ("ate_mean", "ATE mean [m]"),
-        ("ate_max", "ATE max [m]"),
-        ("ate_final", "ATE final [m]"),
-        ("rpe_trans", "RPE trans [m]"),
-        ("rpe_rot", "RPE rot [rad]"),
+def uncertainty_lines(run: CalibrationRun) -> list[str]:
+    """Which σ the table shows, and how the two estimates of it compare."""
+    blocked = run.std_blocks()
+    first = next(iter(run.reports), None)
+    if blocked is None or first is None:
+        return [
+            "1σ: white-noise σ only (no block cross-validation): a lower bound where timing, slip or "
+            "model errors are present"
+        ]
+    white = run.reports[first].uncertainty.std_dict()
+    ratio = {n: blocked[n] / white[n] for n in blocked if white[n] > 0 and np.isfinite(blocked[n])}
+    lo, hi = (min(ratio.values()), max(ratio.values())) if ratio else (float("nan"), float("nan"))
+    # A jackknife over ~10 blocks scatters by ~25 %: only a factor beyond 2 says something.
+    larger = [n for n, r in ratio.items() if r > 2.0]
+    cv = run.crossval
+    assert cv is not None
+    if len(larger) == len(ratio):
+        verdict = (
+            ": errors that vary along the drive (timing, slip, model error) outweigh white noise, so the "
+            "block σ is the one to believe"
+        )
+    elif larger:
+        verdict = (
+            f"; beyond 2× for {', '.join(larger)}: errors that vary along the drive (timing, slip, model "
+            "error) matter there"
+        )
+    else:
+        verdict = ": white noise explains the scatter, the two agree"
+    lines = [
+        f"1σ: the larger of the white-noise σ and the σ of {len(cv.converged)} fits each without one block "
+        f"of records (jackknife); the block σ is {lo:.1f}–{hi:.1f}× the white-noise σ" + verdict
     ]
-    return [(k, ("hold-out " if holdout else "") + label) for k, label in rows]
+    held = {label: cv.heldout_mean(label) for label in ("segment ATE mean [m]", "RPE over 1 m [m]")}
+    lines.append(
+        f"cross-validation over {len(cv.folds)} blocks: held-out segment ATE "
+        f"{held['segment ATE mean [m]']:.3f} m, RPE over 1 m {held['RPE over 1 m [m]']:.3f} m "
+        "(each block scored by the fit without it)"
+    )
+    return lines
+
+
+def direction_lines(run: CalibrationRun) -> list[str]:
+    """How well fits on forward-only and on reverse-only driving agree."""
+    d = run.direction
+    if d is None:
+        return []
+    name, z = d.worst
+    verdict = (
+        f"DISAGREE: {name} by {abs(z):.1f}σ" if d.significant else f"agree within {abs(z):.1f}σ ({name})"
+    )
+    counts = f"forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]})"
+    return [f"direction: fits on {counts} driving {verdict}"]
+
+
+def fault_lines(run: CalibrationRun) -> list[str]:
+    """What the fault check found and what was done about it, one line each."""
+    if run.findings is None:
+        return []
+    rep, handling = run.findings.report, run.findings.handling
+    stale = sum(rep.stale.values())
+    if rep.unchecked:
+        return [f"faults: not checked: {rep.unchecked}"]
+    if not rep.faults:
+        return [f"faults: none found ({stale} stale counter readings that catch up: harmless)"]
+    kinds = Counter(f.kind for f in rep.faults)
+    what = ", ".join(f"{n} {k}" for k, n in kinds.items())
+    done = {
+        "exclude": f"{run.dropped_faulty} residual windows crossing them left out",
+        "repair": "counter faults repaired, windows at tracker jumps left out",
+        "keep": "kept in the fit (faults.handling: keep)",
+    }[handling]
+    lines = [f"faults: {len(rep.faults)} found ({what}); {done}; {stale} stale readings (harmless)"]
+    for f in rep.faults:
+        lines.append(f"  record {f.record} (line {f.line}, t = {f.time_s:.2f} s) {f.kind}: {f.evidence}")
+    lines += [f"  repaired: {r}" for r in run.findings.repairs]
+    return lines
 
 
 def run_table(run: CalibrationRun) -> str:
@@ -67,9 +136,10 @@ def run_table(run: CalibrationRun) -> str:
         for s in solvers:
             rep = run.reports[s]
             v = rep.result.param_dict()[n]
-            sd = rep.uncertainty.std_dict()[n]
+            sd = run.std(s)[n]
             cells.append(f"{_fmt(v, 12)} ± {sd:<9.2g}")
         lines.append(_row(n, cells))
+    lines += uncertainty_lines(run)
     if len(solvers) == 2:
         a, b = (run.reports[s].result for s in solvers)
         rel = np.max(np.abs(a.params - b.params) / np.maximum(np.abs(a.params), 1e-12))
@@ -96,13 +166,17 @@ def run_table(run: CalibrationRun) -> str:
     if run.baseline_holdout is not None:
         metric_sets.append((True, run.baseline_holdout))
     for holdout, base in metric_sets:
-        for key, label in _metric_rows(run, holdout):
-            cells = [_fmt(getattr(base, key))]
-            for s in solvers:
-                rep = run.reports[s]
-                m = rep.holdout if holdout else rep.metrics
-                cells.append(_fmt(getattr(m, key) if m is not None else float("nan"), w))
-            lines.append(_row(label, cells))
+        if base is None:
+            continue
+        per_solver = [run.reports[s].holdout if holdout else run.reports[s].metrics for s in solvers]
+        for i, (label, value) in enumerate(base.figures()):
+            cells = [_fmt(value)]
+            cells += [_fmt(m.figures()[i][1] if m is not None else float("nan"), w) for m in per_solver]
+            lines.append(_row(("hold-out " if holdout else "") + label, cells))
+    faults = fault_lines(run)
+    if faults:
+        lines += ["", *faults]
+    lines += direction_lines(run)
     if run.observability is not None:
         lines.append("")
         lines.append(
@@ -114,6 +188,32 @@ def run_table(run: CalibrationRun) -> str:
         res = run.reports[s].result
         if not res.converged:
             lines.append(f"WARNING: {s} did not converge: {res.reason}. Do not use its parameters.")
+    return "\n".join(lines)
+
+
+def validation_table(run: CalibrationRun) -> str:
+    """The folds of the blocked cross-validation, the two σ side by side, and the direction check."""
+    cv, solver = run.crossval, next(iter(run.reports))
+    if cv is None:
+        return "no cross-validation: too few converged fits"
+    names = list(cv.names)
+    short = [n.replace("sensor_", "s_")[:11] for n in names]
+    head = f"{'held-out records':<18}{'conv':>5}" + "".join(f"{s:>12}" for s in short)
+    head += f"{'segATE [m]':>12}{'RPE 1 m [m]':>12}"
+    lines = [f"cross-validation of {run.scenario.name} ({solver}), {len(cv.folds)} contiguous blocks:", head]
+    for f in cv.folds:
+        cells = "".join(f"{v:>12.6g}" for v in f.params)
+        m = f.heldout
+        scores = f"{m.segment_ate.mean:>12.4f}{m.rpe_distance[1.0].mean:>12.4f}" if m is not None else ""
+        lines.append(f"{f'[{f.first}, {f.stop})':<18}{'yes' if f.converged else 'NO':>5}{cells}{scores}")
+    full = run.reports[solver].result.params
+    lines.append(f"{'all records':<18}{'':>5}" + "".join(f"{v:>12.6g}" for v in full))
+    white = run.reports[solver].uncertainty.std
+    lines += ["", f"{'parameter':<18}{'white-noise σ':>14}{'block σ':>12}{'ratio':>8}{'spread':>12}"]
+    for n, w, b, sp in zip(names, white, cv.std, cv.spread()):
+        ratio = b / w if w > 0 else float("nan")
+        lines.append(f"{n:<18}{w:>14.3g}{b:>12.3g}{ratio:>8.1f}{sp:>12.3g}")
+    lines += ["", *uncertainty_lines(run), *direction_lines(run)]
     return "\n".join(lines)
 
 

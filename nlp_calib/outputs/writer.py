@@ -12,6 +12,7 @@ from pathlib import Path
 from nlp_calib.core.files import atomic_write_bytes, atomic_write_text
 from nlp_calib.outputs import plots, series
 from nlp_calib.outputs.markdown import report_markdown
+from nlp_calib.outputs.trajectories import write_trajectories
 from nlp_calib.pipeline import Calibration, CalibrationRun
 
 TRAJECTORY_FILE = "trajectory.png"
@@ -62,4 +63,4 @@ def write_report(calib: Calibration, run: CalibrationRun, out_dir: Path) -> list
     report = out_dir / REPORT_FILE
     atomic_write_text(report, report_markdown(run, list(figures)) + "\n")
     written.append(report)
-    return written
+    return written + write_trajectories(calib, run, out_dir)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,11 +21,16 @@ import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.alignment import LagEstimate
+from nlp_calib.analysis.crossval import CrossValidation, believed_std
+from nlp_calib.analysis.direction import DirectionCheck
 from nlp_calib.analysis.metrics import TrajectoryMetrics, trajectory_metrics
 from nlp_calib.analysis.observability import Observability, analyse
 from nlp_calib.analysis.odometry import OdometryTrack, propagate
+from nlp_calib.core import interrupts
+from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
-from nlp_calib.pipeline import steps
+from nlp_calib.models import canonical
+from nlp_calib.pipeline import align, steps, validation
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.solvers import Solver, SolverResult, get_solver
 
@@ -62,6 +68,23 @@ class CalibrationRun:
     lag_estimate: LagEstimate | None = None
     observability: Observability | None = None
     warnings: tuple[str, ...] = field(default=())
+    findings: steps.Findings | None = None
+    dropped_faulty: int = 0
+    crossval: CrossValidation | None = None
+    direction: DirectionCheck | None = None
+
+    def std(self, solver: str) -> dict[str, float]:
+        """The 1σ to believe for ``solver``'s estimate: the larger of the white-noise σ and the
+        block cross-validation's jackknife σ (see :mod:`nlp_calib.analysis.crossval`)."""
+        u = self.reports[solver].uncertainty
+        blocked = self.crossval.std if self.crossval is not None else np.full(len(u.names), np.nan)
+        return dict(zip(u.names, map(float, believed_std(u.std, blocked))))
+
+    def std_blocks(self) -> dict[str, float] | None:
+        """The jackknife σ of the block cross-validation, when it has enough converged folds."""
+        if self.crossval is None or not self.crossval.available:
+            return None
+        return self.crossval.std_dict()
 
 
 class Calibration:
@@ -80,7 +103,14 @@ class Calibration:
         self.solvers = tuple(solvers or sc.solvers)
         self.model, self.log = steps.load(sc, log)
         start, stop = steps.select(sc, self.log)
-        self.fns = steps.build_problem(sc, self.model)
+        self.held = steps.held(sc, self.model, self.log, start, steps.split(sc, start, stop))
+        for name, why in self.held.items():
+            warnings.warn(
+                f"{name} is held at its initial value: {why} in the fitted records",
+                NlpCalibWarning,
+                stacklevel=2,
+            )
+        self.fns = steps.build_problem(sc, self.model, tuple(self.held))
         self.start = steps.starting_point(sc, self.fns, self.log, start, steps.split(sc, start, stop))
         self.backend = steps.prepare_backend(sc, self.fns, self.solvers, stop - start)
         binder = steps.Binder(
@@ -89,13 +119,33 @@ class Calibration:
         priors, self.residual_sigma = steps.weigh_priors(
             binder, self.log, start, steps.split(sc, start, stop), self.start.x0
         )
-        self.binder = steps.with_priors(binder, priors)
-        self.alignment = steps.align(self.binder, self.log, start, stop, self.start.x0)
+        binder = steps.with_priors(binder, priors)
+        # Faults are judged on the encoder readings as logged (re-sampling them would smear a
+        # faulty one): first against the tracker as logged, to keep them out of the lag search,
+        # then, once the lag is known, against the tracker re-sampled onto the encoders' clock.
+        report = steps.find_faults(binder, self.log, start, stop, self.start.x0)
+        fitted_log, self.findings = steps.handle_faults(self.log, report, sc.faults.handling)
+        dt = align.median_interval(self.log)
+        search = sc.alignment.search if sc.alignment.tracker_lag == "auto" else (0.0, 0.0)
+        reach = max(abs(search[0]), abs(search[1]))
+        search_binder = steps.exclude_faults(binder, self.findings, self.log.n_records, reach, dt)
+        self.alignment = align.align(search_binder, fitted_log, start, stop, self.start.x0)
+        lag = self.alignment.lag_s
+        if lag:
+            judge = steps.exclude_faults(binder, self.findings, self.log.n_records, lag, dt)
+            report = steps.find_faults(judge, self.log, start, stop, self.start.x0, lag)
+            fitted_log, self.findings = steps.handle_faults(self.log, report, sc.faults.handling)
+            self.alignment = align.realign(self.alignment, fitted_log, self.model)
+        self.binder = steps.exclude_faults(binder, self.findings, self.log.n_records, lag, dt)
+        # Every detected fault shapes the fair figures, whatever the handling: like with like.
+        self.fault_masks = steps.fault_masks(report, self.log.n_records, lag, dt)
+        if report.unchecked:
+            warnings.warn(f"encoder faults not checked: {report.unchecked}", NlpCalibWarning, stacklevel=2)
         self.aligned = self.alignment.log
         start, stop = max(start, self.alignment.valid[0]), min(stop, self.alignment.valid[1])
         self.used = (start, stop)
-        self.selected = self.aligned.select(start, stop)
         self.fit = (start, steps.split(sc, start, stop))
+        self.selected = self.aligned.select(start, stop)
         self.data, self.evaluator = self.binder.bind(self.aligned, *self.fit)
         self.evaluator.prepare(steps.evaluated(sc, self.solvers))
         self.input_noise_std = self.model.input_noise_std(self.aligned, sc.encoder_noise)
@@ -134,28 +184,83 @@ class Calibration:
     def solve(self, solver: str) -> SolverResult:
         """Run one solver from the initial guess; the result is in the model's canonical form."""
         result = self.solver(solver).solve(self.start.x0, self.start.lower, self.start.upper)
+        interrupts.check()  # IPOPT catches the signal that stops it and returns as if it had failed
+        steps.refuse_rejected_options(self.scenario, result)
         return self._canonical(result)
 
     def _canonical(self, result: SolverResult) -> SolverResult:
         """``result`` mapped onto the model's canonical form (same cost: an exact symmetry)."""
-        canon = self.model.canonical(result.param_dict(), self.fns.fixed)
-        params = np.array([canon[n] for n in self.fns.names])
+        params = self.canonical_params(result.params)
         if np.array_equal(params, result.params):
             return result
-        x = np.array([canon[n] for n in self.fns.free])
+        x = params[[self.fns.names.index(n) for n in self.fns.free]]
         return dataclasses.replace(result, params=params, x=x)
+
+    def canonical_params(self, params: np.ndarray) -> np.ndarray:
+        """The full parameter vector ``params`` in the model's canonical form."""
+        canon = canonical(self.model, dict(zip(self.fns.names, map(float, params))), self.fns.fixed)
+        return np.array([canon[n] for n in self.fns.names])
 
     def score(self, params: np.ndarray) -> tuple[TrajectoryMetrics, TrajectoryMetrics | None]:
         """Full-range and hold-out trajectory metrics of ``params``."""
         inputs = self.model.inputs(self.selected, self.scenario.residual.steering_sample)
         poses = self.selected.T_world_sensor
+        a, b = self.used
+        bad_i, bad_r = self.fault_masks[0][a : b - 1], self.fault_masks[1][a:b]
         W = self.scenario.validation.rpe_window
-        full = trajectory_metrics(self.fns, params, inputs, poses, rpe_window=W)
+        full = trajectory_metrics(
+            self.fns, params, inputs, poses, rpe_window=W, bad_intervals=bad_i, bad_records=bad_r
+        )
         holdout = None
         split = self.fit[1] - self.used[0]
         if self.fit[1] < self.used[1] - 1:
-            holdout = trajectory_metrics(self.fns, params, inputs, poses, start=split, rpe_window=W)
+            holdout = trajectory_metrics(
+                self.fns,
+                params,
+                inputs,
+                poses,
+                start=split,
+                rpe_window=W,
+                bad_intervals=bad_i,
+                bad_records=bad_r,
+            )
         return full, holdout
+
+    def cross_validate(self, x: np.ndarray, k: int) -> CrossValidation:
+        """``k`` folds over the fitted records from the estimate ``x`` (free parameters); each block
+        scored on its own: dead reckoning restarted at its start and after each fault inside it."""
+        inputs = self.model.inputs(self.selected, self.scenario.residual.steering_sample)
+        a0, b0 = self.used
+        bad_i, bad_r = self.fault_masks[0][a0 : b0 - 1], self.fault_masks[1][a0:b0]
+
+        def score(params: np.ndarray, a: int, b: int) -> TrajectoryMetrics:
+            return trajectory_metrics(
+                self.fns,
+                params,
+                inputs,
+                self.selected.T_world_sensor,
+                start=a - a0,
+                stop=b - a0,
+                rpe_window=self.scenario.validation.rpe_window,
+                bad_intervals=bad_i,
+                bad_records=bad_r,
+            )
+
+        return validation.cross_validate(
+            self.binder, self.aligned, self.fit, x, k, self.canonical_params, score
+        )
+
+    def direction_check(self, x: np.ndarray, k: int = 10) -> DirectionCheck | None:
+        """Forward-only and reverse-only fits from ``x``, compared in units of their own σ."""
+        inputs = self.model.inputs(self.aligned, self.scenario.residual.steering_sample)
+        direction = self.model.travel_direction(inputs)
+
+        def undetermined(part: np.ndarray) -> dict[str, str]:
+            return self.model.undetermined(inputs[:, part])
+
+        return validation.direction_check(
+            self.binder, self.aligned, self.fit, x, direction, undetermined, k, self.canonical_params
+        )
 
     def odometry(self, params: np.ndarray) -> OdometryTrack:
         """Base-link odometry with ``params`` over the used records, with its propagated covariance,
@@ -189,12 +294,24 @@ class Calibration:
         results = [rep.result for rep in reports.values()]
         first = next((r for r in results if np.isfinite(r.cost)), results[0])
         observability = analyse(self.evaluator, first.x, self.data.T_world_sensor)
-        warnings = list(observability.warnings)
+        notes = list(observability.warnings)
         if self.alignment.estimate is not None and self.alignment.estimate.at_edge:
-            warnings.append(steps.lag_at_edge(self.scenario, self.alignment.lag_s))
-        warnings += [
-            f"{name}: {rep.result.reason}" for name, rep in reports.items() if not rep.result.converged
-        ]
+            notes.append(align.lag_at_edge(self.scenario, self.alignment.lag_s))
+        notes += [f"{name} held at its initial value: {why}" for name, why in self.held.items()]
+        notes += [f"{name}: {rep.result.reason}" for name, rep in reports.items() if not rep.result.converged]
+        crossval = None
+        converged = [r for r in results if r.converged]
+        if converged and self.scenario.validation.blocks:
+            crossval = self.cross_validate(converged[0].x, self.scenario.validation.blocks)
+        direction = None
+        if converged and self.scenario.validation.blocks:
+            direction = self.direction_check(converged[0].x, self.scenario.validation.blocks)
+            if direction is not None and direction.significant:
+                name, z = direction.worst
+                notes.append(
+                    f"forward-only and reverse-only fits disagree: {name} by {abs(z):.1f}σ; the model misses "
+                    "something that depends on the direction of travel"
+                )
         return CalibrationRun(
             scenario=self.scenario,
             log=self.log,
@@ -210,5 +327,9 @@ class Calibration:
             tracker_lag_s=self.alignment.lag_s,
             lag_estimate=self.alignment.estimate,
             observability=observability,
-            warnings=tuple(warnings),
+            warnings=tuple(notes),
+            findings=self.findings,
+            dropped_faulty=self.data.dropped_faulty,
+            crossval=crossval,
+            direction=direction,
         )

@@ -9,6 +9,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import re
+import stat
 import types
 import typing
 from collections.abc import Mapping
@@ -18,10 +21,28 @@ from typing import Any, Union
 import yaml
 
 from nlp_calib.core.errors import ConfigError, NlpCalibError
+from nlp_calib.core.ranges import shown
+
+show = shown
+
+
+def key_name(key: Any) -> str:
+    """A mapping key as it appears in a message's place (``residual.horizon``)."""
+    return key if isinstance(key, str) and len(key) <= 60 and key.isprintable() else show(key)
 
 
 def fail(where: str, msg: str) -> typing.NoReturn:
     raise ConfigError(f"{where}: {msg}")
+
+
+def _shape_fits(value: Any, tp: Any) -> bool:
+    """Whether ``value`` is the kind of YAML node ``tp`` reads: a mapping, a list or a scalar."""
+    origin = typing.get_origin(tp)
+    if origin in (Mapping, dict) or tp is Mapping or dataclasses.is_dataclass(tp):
+        return isinstance(value, Mapping)
+    if origin is tuple:
+        return isinstance(value, (list, tuple))
+    return not isinstance(value, (Mapping, list, tuple))
 
 
 def coerce(value: Any, tp: Any, where: str) -> Any:
@@ -31,8 +52,14 @@ def coerce(value: Any, tp: Any, where: str) -> Any:
         args = typing.get_args(tp)
         if value is None and type(None) in args:
             return None
+        choices = [a for a in args if a is not type(None)]
+        # A mapping where a name or a mapping may stand is judged as a mapping only: its own
+        # error (e.g. a NaN inside it) is the one that says what to fix.
+        fitting = [a for a in choices if _shape_fits(value, a)]
+        if len(fitting) == 1:
+            return coerce(value, fitting[0], where)
         errors = []
-        for arg in (a for a in args if a is not type(None)):
+        for arg in fitting or choices:
             try:
                 return coerce(value, arg, where)
             except ConfigError as exc:
@@ -42,11 +69,11 @@ def coerce(value: Any, tp: Any, where: str) -> Any:
         return value
     if tp is bool:
         if not isinstance(value, bool):
-            fail(where, f"expected true or false, got {value!r}")
+            fail(where, f"expected true or false, got {show(value)}")
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            fail(where, f"expected an integer, got {value!r}")
+            fail(where, f"expected an integer, got {show(value)}")
         return value
     if tp is float:
         # A YAML integer beyond float range would overflow float(): no usable number either.
@@ -56,30 +83,30 @@ def coerce(value: Any, tp: Any, where: str) -> Any:
             or (isinstance(value, int) and abs(value) > 1e308)
             or not math.isfinite(value)
         ):
-            fail(where, f"expected a finite number, got {value!r}")
+            fail(where, f"expected a finite number, got {show(value)}")
         return float(value)
     if tp is str:
         if not isinstance(value, str):
-            fail(where, f"expected a string, got {value!r}")
+            fail(where, f"expected a string, got {show(value)}")
         return value
     if tp is Path:
         if not isinstance(value, str) or not value:
-            fail(where, f"expected a file path, got {value!r}")
+            fail(where, f"expected a file path, got {show(value)}")
         return Path(value)
     if origin is tuple:
         args = typing.get_args(tp)
         if not isinstance(value, (list, tuple)):
-            fail(where, f"expected a list, got {value!r}")
+            fail(where, f"expected a list, got {show(value)}")
         if len(args) == 2 and args[1] is Ellipsis:
             return tuple(coerce(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
         if len(value) != len(args):
-            fail(where, f"expected a list of {len(args)} values, got {value!r}")
+            fail(where, f"expected a list of {len(args)} values, got {show(value)}")
         return tuple(coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
     if origin in (Mapping, dict) or tp is Mapping:
         k_tp, v_tp = typing.get_args(tp)
         if not isinstance(value, Mapping):
-            fail(where, f"expected a mapping, got {value!r}")
-        return {coerce(k, k_tp, where): coerce(v, v_tp, f"{where}.{k}") for k, v in value.items()}
+            fail(where, f"expected a mapping, got {show(value)}")
+        return {coerce(k, k_tp, where): coerce(v, v_tp, f"{where}.{key_name(k)}") for k, v in value.items()}
     if dataclasses.is_dataclass(tp) and isinstance(tp, type):
         return from_mapping(tp, value, where)
     raise TypeError(f"unsupported annotation {tp!r} at {where}")  # programming error
@@ -89,12 +116,12 @@ def from_mapping(cls: type, value: Any, where: str) -> Any:
     if value is None:
         value = {}
     if not isinstance(value, Mapping):
-        fail(where, f"expected a mapping of {keys_of(cls)}, got {value!r}")
+        fail(where, f"expected a mapping of {keys_of(cls)}, got {show(value)}")
     hints = typing.get_type_hints(cls)
     names = [f.name for f in dataclasses.fields(cls)]
     for key in value:
         if key not in names:
-            fail(f"{where}.{key}", f"unknown key; valid keys are {', '.join(names)}")
+            fail(f"{where}.{key_name(key)}", f"unknown key; valid keys are {', '.join(names)}")
     kwargs = {k: coerce(v, hints[k], f"{where}.{k}") for k, v in value.items()}
     try:
         return cls(**kwargs)
@@ -106,18 +133,153 @@ def keys_of(cls: type) -> str:
     return ", ".join(f.name for f in dataclasses.fields(cls))
 
 
-def read_yaml(path: Path, what: str) -> Any:
-    """Parse a YAML file; unreadable files and syntax errors become one-line errors."""
+#: A scenario or simulation config is a page of YAML; a larger file is not one.
+MAX_YAML_BYTES = 64 * 1024
+#: Values a document may hold once its aliases are expanded: ``*alias`` repeats a whole block, so
+#: a few lines can stand for billions of values ("billion laughs"); a scenario has a few hundred.
+MAX_YAML_VALUES = 20_000
+
+# YAML 1.2's floats: PyYAML follows YAML 1.1, where a number needs a dot ("1.0e-2") and "1e-2"
+# is a string.
+_FLOAT = re.compile(
+    r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+    |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+    |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+    |[-+]?\.(?:inf|Inf|INF)
+    |\.(?:nan|NaN|NAN))$""",
+    re.X,
+)
+
+
+class _Loader(yaml.SafeLoader):
+    """Safe YAML with YAML 1.2 floats; a key given twice in one mapping is an error (YAML would
+    silently keep the last)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        first_line: dict[Any, int] = {}
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=True)
+            line = key_node.start_mark.line + 1
+            try:
+                first = first_line.setdefault(key, -1)
+            except TypeError:  # an unhashable key: the base class reports it
+                continue
+            if first != -1:
+                raise yaml.constructor.ConstructorError(
+                    problem=f"duplicate key {key!r} at lines {first} and {line}; "
+                    "YAML would keep only the last, so remove one",
+                    problem_mark=key_node.start_mark,
+                )
+            first_line[key] = line
+        return super().construct_mapping(node, deep=deep)
+
+    def construct_yaml_int(self, node: yaml.ScalarNode) -> int:
+        try:
+            return int(super().construct_yaml_int(node))
+        except ValueError:  # Python refuses to convert more than 4300 digits
+            raise yaml.constructor.ConstructorError(
+                problem="a number with thousands of digits", problem_mark=node.start_mark
+            ) from None
+
+
+_Loader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT, list("-+0123456789."))
+_Loader.add_constructor("tag:yaml.org,2002:int", _Loader.construct_yaml_int)
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []
+
+
+def _check_expanded_size(root: yaml.Node) -> str | None:
+    """Why the document is too large once aliases are expanded (None if it is not), without
+    expanding it: each node's size is counted once and shared by every alias to it."""
+    size: dict[int, int] = {}
+    entered: set[int] = set()
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, done = stack.pop()
+        key = id(node)
+        if done:
+            size[key] = min(1 + sum(size[id(c)] for c in _children(node)), MAX_YAML_VALUES + 1)
+            continue
+        if key in size:
+            continue
+        if key in entered:  # an alias inside the block it names
+            return "an alias refers to a block that contains it"
+        entered.add(key)
+        stack.append((node, True))
+        stack.extend((c, False) for c in _children(node) if id(c) not in size)
+    if size[id(root)] > MAX_YAML_VALUES:
+        return (
+            f"more than {MAX_YAML_VALUES:,} values, counting an aliased block (*name) each time "
+            "it is used; a scenario needs a few hundred"
+        )
+    return None
+
+
+def _read_bounded(path: Path, what: str) -> str:
+    """The text of a regular file of at most :data:`MAX_YAML_BYTES`, without blocking on a FIFO."""
     try:
-        text = path.read_text(encoding="utf-8")
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such {what} file") from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
         raise ConfigError(f"{path}: cannot read the {what} file ({exc})") from None
     try:
-        return yaml.safe_load(text)
+        mode = os.fstat(fd).st_mode
+        if stat.S_ISDIR(mode):
+            raise ConfigError(f"{path}: cannot read the {what} file (it is a folder)")
+        if not stat.S_ISREG(mode):
+            raise ConfigError(f"{path}: cannot read the {what} file (not a regular file: a FIFO or a device)")
+        with os.fdopen(fd, "rb", closefd=False) as fh:
+            data = fh.read(MAX_YAML_BYTES + 1)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the {what} file ({exc.strerror or exc})") from None
+    finally:
+        os.close(fd)
+    if len(data) > MAX_YAML_BYTES:
+        raise ConfigError(
+            f"{path}: the {what} file is larger than {MAX_YAML_BYTES // 1024} KiB; is it the right file?"
+        )
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{path}: cannot read the {what} file (not UTF-8 text: {exc.reason} at byte {exc.start})"
+        ) from None
+
+
+def parse_yaml(text: str, source: str) -> Any:
+    """Parse YAML text (see :class:`_Loader`) with its expanded size bounded; errors name ``source``."""
+    loader: _Loader | None = None
+    try:
+        loader = _Loader(text)  # checks the characters at once
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        problem = _check_expanded_size(node)
+        if problem is not None:
+            raise ConfigError(f"{source}: not a usable YAML document ({problem})")
+        return loader.construct_document(node)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
+        where = f"{source}:{mark.line + 1}" if mark is not None else source
         problem = getattr(exc, "problem", None) or "invalid YAML"
         raise ConfigError(f"{where}: not valid YAML ({problem})") from None
+    except RecursionError:
+        raise ConfigError(f"{source}: not a usable YAML document (nested too deeply)") from None
+    finally:
+        if loader is not None:
+            loader.dispose()
+
+
+def read_yaml(path: Path, what: str) -> Any:
+    """Parse a YAML file; unreadable, special or oversized files, syntax errors, duplicate keys and
+    alias bombs become one-line errors."""
+    return parse_yaml(_read_bounded(Path(path), what), str(path))

@@ -18,6 +18,7 @@ def write_c_export(sc: Scenario, out_dir: Path) -> list[Path]:
     The example program evaluates the log window with the most motion at the initial guess.
     """
     model, log = steps.load(sc)
+    steps.select(sc, log)  # the horizon must fit the log before anything is built
     initial = steps.initial_parameters(sc, model, log)
     with steps.scenario_key(sc, "residual"):
         problems = build_for_export(model, sc.residual.horizon, sc.residual.integration)

@@ -9,6 +9,7 @@ has a top-level block named after it, validated against its own options dataclas
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -16,9 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from nlp_calib.core.errors import ConfigError, ScenarioError
+from nlp_calib.core.ranges import Range
 from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders, get_model, param_names
 from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES
-from nlp_calib.pipeline.config import coerce, fail, from_mapping, read_yaml
+from nlp_calib.pipeline.config import coerce, fail, from_mapping, key_name, read_yaml, show
 from nlp_calib.problem import ResidualOptions
 from nlp_calib.solvers import SOLVERS
 from nlp_calib.solvers.backends import BACKENDS
@@ -55,10 +57,13 @@ class InformationWeights:
 
 @dataclass(frozen=True)
 class ValidationOptions:
-    """``holdout_fraction``: trailing fraction of the records kept out of the fit and scored."""
+    """``holdout_fraction``: trailing fraction of the records kept out of the fit and scored;
+    ``blocks``: contiguous blocks of the blocked cross-validation that gives the data-driven σ
+    (0: none); ``rpe_window``: records of the fixed-window RPE."""
 
     holdout_fraction: float | None = None
     rpe_window: int = 25
+    blocks: int = 10
 
 
 @dataclass(frozen=True)
@@ -69,6 +74,21 @@ class AlignmentOptions:
     tracker_lag: float | str = 0.0
     search: tuple[float, float] = (-0.2, 0.2)
     step: float = 0.01
+
+
+FAULT_HANDLINGS = ("exclude", "repair", "keep")
+
+
+@dataclass(frozen=True)
+class FaultOptions:
+    """What to do with encoder and tracker faults found in the log (every run looks for them).
+
+    ``exclude`` (default): drop every residual window that crosses a fault; ``repair``: correct
+    the counts of counter faults (and say what changed), drop windows at tracker jumps; ``keep``:
+    report the faults and fit every window.
+    """
+
+    handling: str = "exclude"
 
 
 @dataclass(frozen=True)
@@ -98,6 +118,7 @@ class Scenario:
     solver_options: Mapping[str, Any] = field(default_factory=dict)
     validation: ValidationOptions = field(default_factory=ValidationOptions)
     alignment: AlignmentOptions = field(default_factory=AlignmentOptions)
+    faults: FaultOptions = field(default_factory=FaultOptions)
     fixed: tuple[str, ...] = ()
     priors: Mapping[str, Prior] = field(default_factory=dict)
     encoder_noise: Mapping[str, float] = field(default_factory=dict)
@@ -117,6 +138,22 @@ class Scenario:
     def with_solver_options(self, solver: str, options: Any) -> Scenario:
         """The same scenario with ``solver``'s options replaced."""
         return dataclasses.replace(self, solver_options={**self.solver_options, solver: options})
+
+
+#: ``residual.horizon``: each window composes H steps symbolically, so building the problem costs
+#: time and memory in proportion to H; the accuracy study's trajectory error flattens by H = 25.
+HORIZON = Range(1, 200, integer=True)
+STRIDE = Range(1, 1_000_000, integer=True)
+#: ``validation.blocks`` (or 0: none): each block costs one more fit.
+BLOCKS = Range(2, 100, integer=True)
+#: Numbers whose squares still fit a float with room to spare: beyond them a value is a typo, and
+#: the cost, its weights or the covariance would overflow (silently, or as a NaN result).
+MAGNITUDE = Range(-1e6, 1e6)
+DELTA = Range(0.0, 1e6, lo_open=True)
+WEIGHT = Range(0.0, 1e12, lo_open=True)
+TICKS = Range(0.0, 1e9, lo_open=True)
+PRIOR_STD = Range(1e-9, 1e6)
+_FINITE = Range(-math.inf, math.inf, lo_open=True, hi_open=True)
 
 
 # Keys the YAML may hold at top level: the fields (but where the file was, and the solver
@@ -151,7 +188,7 @@ def _scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | N
         )
     for key in raw:
         if key not in top_level_keys():
-            fail(f"{source}: {key}", f"unknown key; valid keys are {', '.join(top_level_keys())}")
+            fail(f"{source}: {key_name(key)}", f"unknown key; valid keys are {', '.join(top_level_keys())}")
     if "dataset" not in raw:
         fail(source, "the key 'dataset' (path of the log, relative to this file) is required")
     hints = typing.get_type_hints(Scenario)
@@ -174,23 +211,22 @@ def _validate(sc: Scenario, source: str) -> None:
     _check_choice(sc.model, MODELS, f"{source}: model")
     names = param_names(get_model(sc.model))
     _check_choice(sc.robust.kernel, KERNELS, f"{source}: robust.kernel")
-    if not sc.robust.delta > 0:
-        fail(f"{source}: robust.delta", f"must be > 0, got {sc.robust.delta}")
+    _check_range(sc.robust.delta, DELTA, f"{source}: robust.delta")
     r = sc.residual
-    if r.horizon < 1 or r.stride < 1:
-        fail(
-            f"{source}: residual",
-            f"horizon and stride must be >= 1, got {r.horizon} and {r.stride}",
-        )
+    for key, limit in (("horizon", HORIZON), ("stride", STRIDE)):
+        reason = limit.problem(getattr(r, key))
+        if reason is not None:
+            fail(f"{source}: residual.{key}", reason)
     _check_choice(r.integration, INTEGRATIONS, f"{source}: residual.integration")
     _check_choice(r.steering_sample, STEERING_SAMPLES, f"{source}: residual.steering_sample")
-    w = sc.information
-    if not (w.translation > 0 and w.rotation > 0):
-        fail(f"{source}: information", "translation and rotation weights must be > 0")
+    _check_range(sc.information.translation, WEIGHT, f"{source}: information.translation")
+    _check_range(sc.information.rotation, WEIGHT, f"{source}: information.rotation")
     if not sc.solvers:
         fail(f"{source}: solvers", f"list at least one of {', '.join(SOLVERS)}")
     for s in sc.solvers:
         _check_choice(s, SOLVERS, f"{source}: solvers")
+    for s, options in sc.solver_options.items():
+        _check_passthrough(options, f"{source}: {s}")
     _check_choice(sc.backend, BACKENDS, f"{source}: backend")
     if not 1 <= sc.threads <= 64:
         fail(f"{source}: threads", f"must lie in [1, 64], got {sc.threads}")
@@ -205,13 +241,17 @@ def _validate(sc: Scenario, source: str) -> None:
         _check_choice(al.tracker_lag, ("auto",), f"{source}: alignment.tracker_lag")
     if not (al.search[0] < al.search[1] and al.step > 0 and (al.search[1] - al.search[0]) / al.step <= 1000):
         fail(f"{source}: alignment", "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
+    _check_choice(sc.faults.handling, FAULT_HANDLINGS, f"{source}: faults.handling")
+    if sc.validation.blocks != 0 and (why := BLOCKS.problem(sc.validation.blocks)):
+        fail(f"{source}: validation.blocks", f"0 (none) or {why}")
     if sc.validation.rpe_window < 1:
         fail(f"{source}: validation.rpe_window", "must be >= 1")
     if isinstance(sc.initial_guess, str):
         _check_choice(sc.initial_guess, ("from_file", "auto"), f"{source}: initial_guess")
     else:
-        for n in sc.initial_guess:
+        for n, value in sc.initial_guess.items():
             _check_choice(n, names, f"{source}: initial_guess")
+            _check_range(value, MAGNITUDE, f"{source}: initial_guess.{n}")
     for n, (lo, hi) in sc.bounds.items():
         _check_choice(n, names, f"{source}: bounds")
         if not lo < hi:
@@ -225,14 +265,37 @@ def _validate(sc: Scenario, source: str) -> None:
         fail(f"{source}: fixed", "every parameter is fixed; nothing is left to estimate")
     for enc, ticks in sc.encoder_noise.items():
         _check_choice(enc, encoders(get_model(sc.model)), f"{source}: encoder_noise")
-        if not ticks > 0:
-            fail(f"{source}: encoder_noise.{enc}", f"must be > 0 ticks, got {ticks}")
+        _check_range(ticks, TICKS, f"{source}: encoder_noise.{enc}")
     for n, prior in sc.priors.items():
         _check_choice(n, names, f"{source}: priors")
-        if not prior.std > 0:
-            fail(f"{source}: priors.{n}.std", f"must be > 0, got {prior.std}")
+        _check_range(prior.mean, MAGNITUDE, f"{source}: priors.{n}.mean")
+        _check_range(prior.std, PRIOR_STD, f"{source}: priors.{n}.std")
         if n in sc.fixed:
             fail(f"{source}: priors.{n}", "a fixed parameter cannot also have a prior; drop one")
+
+
+def _check_range(value: float, limit: Range, where: str) -> None:
+    reason = limit.problem(value)
+    if reason is not None:
+        fail(where, reason)
+
+
+def _check_passthrough(options: Any, where: str) -> None:
+    """Options a solver hands on to a library as they are (``ipopt.options``) must be plain
+    scalars: the library, not this package, would otherwise meet a list or a mapping."""
+    for f in dataclasses.fields(options):
+        value = getattr(options, f.name)
+        if not isinstance(value, Mapping):
+            continue
+        for k, v in value.items():
+            place = f"{where}.{f.name}.{key_name(k)}"
+            if not (isinstance(k, str) and k.isidentifier()):
+                fail(place, "option names are plain words (letters, digits, '_')")
+            if isinstance(v, (bool, str)) and len(str(v)) <= 1000:
+                continue
+            finite = Range(-(2**63), 2**63 - 1, integer=True) if isinstance(v, int) else _FINITE
+            if finite.problem(v) is not None:
+                fail(place, f"expected a finite number, a string or true/false, got {show(v)}")
 
 
 def load_scenario(path: str | Path) -> Scenario:

@@ -7,7 +7,6 @@ are translated once into the scenario's language (:func:`scenario_key`).
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -15,17 +14,23 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from nlp_calib.analysis import uncertainty
-from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
+from nlp_calib.analysis.faults import FaultReport, check_log, repair
 from nlp_calib.core.errors import (
     DatasetError,
     ModelError,
-    NlpCalibWarning,
     OptionsError,
     ProblemError,
     ScenarioError,
 )
-from nlp_calib.logs import Log, resample_encoders
-from nlp_calib.models import SENSOR_PARAMS, KinematicModel, get_model, header_parameters, load_log
+from nlp_calib.logs import Log, resample_encoders, resample_tracker
+from nlp_calib.models import (
+    SENSOR_PARAMS,
+    KinematicModel,
+    get_model,
+    header_parameters,
+    load_log,
+    param_names,
+)
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import (
     ProblemFunctions,
@@ -35,7 +40,7 @@ from nlp_calib.problem import (
     build_residual_data,
     interval_inputs,
 )
-from nlp_calib.solvers import Priors, ProblemEvaluator, get_solver
+from nlp_calib.solvers import Priors, ProblemEvaluator, SolverResult, get_solver
 from nlp_calib.solvers.backends import Backend, BackendOptions, make_backend
 from nlp_calib.solvers.evaluation import requests
 
@@ -50,6 +55,24 @@ def scenario_key(sc: Scenario, key: str, hint: str = "") -> Iterator[None]:
         yield
     except (ProblemError, OptionsError, ModelError) as exc:
         raise ScenarioError(f"{sc.path or sc.name}: {key}: {exc}" + (f"; {hint}" if hint else "")) from None
+
+
+#: Return statuses with which a solver says its options, not the data, are at fault.
+REJECTED_OPTIONS = ("Invalid_Option",)
+
+
+def refuse_rejected_options(sc: Scenario, result: SolverResult) -> None:
+    """A solver that stopped because it rejected its options is an input error, not a result."""
+    status = result.stats.get("return_status")
+    if status not in REJECTED_OPTIONS:
+        return
+    options = sc.options_for(result.solver)
+    linear = getattr(options, "options", {}).get("linear_solver", getattr(options, "linear_solver", None))
+    hint = f"; is linear_solver {linear!r} installed? (mumps always is)" if linear is not None else ""
+    raise ScenarioError(
+        f"{sc.path or sc.name}: {result.solver}: the solver rejected its options when it started "
+        f"({status}){hint}; check {result.solver}.linear_solver and {result.solver}.options"
+    )
 
 
 def load(sc: Scenario, log: Log | None = None) -> tuple[KinematicModel, Log]:
@@ -73,6 +96,14 @@ def load(sc: Scenario, log: Log | None = None) -> tuple[KinematicModel, Log]:
         raise
 
 
+def read_checked(sc: Scenario) -> Log:
+    """The scenario's log, read and checked against what costs nothing to check (samples, horizon):
+    several scenarios are all checked before the first is solved."""
+    _, log = load(sc)
+    select(sc, log)
+    return log
+
+
 def select(sc: Scenario, log: Log) -> tuple[int, int]:
     """The record range ``[start, stop)`` the scenario's ``samples`` ask for."""
     n = log.n_records
@@ -80,7 +111,26 @@ def select(sc: Scenario, log: Log) -> tuple[int, int]:
     stop = n if sc.samples.stop is None else sc.samples.stop
     if stop > n or start >= stop - 1:
         raise ScenarioError(f"samples: the range [{start}, {stop}) does not fit the log's {n} records")
+    check_windows(sc, start, stop)
     return start, stop
+
+
+def check_windows(sc: Scenario, start: int, stop: int) -> None:
+    """Refuse, before anything is built, a horizon that leaves fewer windows than parameters."""
+    H, stride = sc.residual.horizon, sc.residual.stride
+    fit_stop = split(sc, start, stop)
+    intervals = fit_stop - start - 1
+    windows = 0 if intervals < H else (intervals - H) // stride + 1
+    n_free = len(param_names(get_model(sc.model))) - len(set(sc.fixed))
+    if windows >= n_free:
+        return
+    longest = intervals - (n_free - 1) * stride
+    fix = f"shorten residual.horizon to at most {longest}" if longest >= 1 else "select more samples"
+    raise ScenarioError(
+        f"{sc.path or sc.name}: residual.horizon {H} (stride {stride}) leaves {windows} residual "
+        f"window(s) in the {fit_stop - start} fitted records of samples [{start}, {stop}) for "
+        f"{n_free} parameters; {fix}, or widen samples"
+    )
 
 
 def split(sc: Scenario, start: int, stop: int) -> int:
@@ -89,7 +139,14 @@ def split(sc: Scenario, start: int, stop: int) -> int:
     return stop if hf is None else start + round((1.0 - hf) * (stop - start))
 
 
-def build_problem(sc: Scenario, model: KinematicModel) -> ProblemFunctions:
+def held(sc: Scenario, model: KinematicModel, log: Log, start: int, stop: int) -> dict[str, str]:
+    """Free parameters the records ``start:stop`` cannot determine at all, with the reason: the
+    fit holds them at their initial values (with a warning) instead of failing as singular."""
+    inputs = model.inputs(log.select(start, stop), sc.residual.steering_sample)
+    return {n: why for n, why in model.undetermined(inputs).items() if n not in sc.fixed}
+
+
+def build_problem(sc: Scenario, model: KinematicModel, also_fixed: tuple[str, ...] = ()) -> ProblemFunctions:
     """The problem's Functions for the scenario's residual form, kernel and fixed parameters."""
     with scenario_key(sc, "residual"):
         return build(
@@ -98,14 +155,17 @@ def build_problem(sc: Scenario, model: KinematicModel) -> ProblemFunctions:
                 horizon=sc.residual.horizon,
                 integration=sc.residual.integration,
                 kernel=sc.robust.kernel,
-                fixed=sc.fixed,
+                fixed=(*sc.fixed, *also_fixed),
             ),
         )
 
 
 def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[str, float]:
     """The log header's values, overridden by the scenario's mapping (``auto`` fills in later)."""
-    guess = {n: v for n, v in header_parameters(model, log.header).items() if n in model.kinematic_params}
+    guess = dict(model.defaults)
+    guess.update(
+        {n: v for n, v in header_parameters(model, log.header).items() if n in model.kinematic_params}
+    )
     guess.update(zip(SENSOR_PARAMS, log.header.T_base_sensor))
     if isinstance(sc.initial_guess, Mapping):
         guess.update(sc.initial_guess)
@@ -203,6 +263,9 @@ class Binder:
     backend: Backend
     x_fixed: np.ndarray
     priors: Priors
+    #: Per interval / record of the whole log: windows must not cross / start or end at them.
+    bad_intervals: np.ndarray | None = None
+    bad_records: np.ndarray | None = None
 
     def bind(
         self, log: Log, start: int, stop: int, evaluator: ProblemEvaluator | None = None
@@ -211,12 +274,23 @@ class Binder:
         re-bound, when given)."""
         sc = self.scenario
         data = build_residual_data(
-            self.fns, log.select(start, stop), sc.residual, drop_stationary=sc.samples.drop_stationary
+            self.fns,
+            log.select(start, stop),
+            sc.residual,
+            drop_stationary=sc.samples.drop_stationary,
+            bad_intervals=None if self.bad_intervals is None else self.bad_intervals[start : stop - 1],
+            bad_records=None if self.bad_records is None else self.bad_records[start:stop],
         )
         if data.n_residuals < self.fns.n_free:
+            at_faults = (
+                f" ({data.dropped_faulty} windows crossing faults were left out; "
+                "'faults: {handling: keep}' fits them)"
+                if data.dropped_faulty
+                else ""
+            )
             raise ScenarioError(
                 f"only {data.n_residuals} residuals in records [{start}, {stop}) for "
-                f"{self.fns.n_free} parameters; widen 'samples' or shorten the horizon"
+                f"{self.fns.n_free} parameters; widen 'samples' or shorten the horizon{at_faults}"
             )
         if evaluator is not None:
             evaluator.bind(data)
@@ -275,77 +349,77 @@ def weigh_priors(
     )
 
 
-@dataclass(frozen=True)
-class Alignment:
-    """The tracker lag used, how it was found, and the log with encoders on the tracker's clock.
-
-    ``valid`` is the record range whose shifted times lie inside the log.
-    """
-
-    lag_s: float
-    estimate: LagEstimate | None
-    log: Log
-    valid: tuple[int, int]
-
-
-def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> LagEstimate:
-    """The tracker lag that minimises the internal solver's fit cost on a common record range.
-
-    One evaluator serves every lag: the windows and the tracker's motions stay, only the encoder
-    inputs are re-sampled (and, when stationary windows are dropped, the windows re-selected).
-    """
-    sc = binder.scenario
-    al = sc.alignment
-    kinds = binder.fns.model.encoder_kinds
-    reach = max(abs(al.search[0]), abs(al.search[1]))
-    t = log.time_s
-    first = max(start, int(np.searchsorted(t, t[0] + reach, side="left")))
-    last = min(stop, int(np.searchsorted(t, t[-1] - reach, side="right")))
-    fit_stop = split(sc, first, last)
-    _, ev = binder.bind(log, first, fit_stop)
-    x_start = x0
-
-    def fit_cost(lag: float) -> float:
-        nonlocal x_start
-        shifted, _ = resample_encoders(log, lag, kinds)
-        if sc.samples.drop_stationary:
-            binder.bind(shifted, first, fit_stop, evaluator=ev)
-        else:
-            ev.set_inputs(binder.inputs(shifted, first, fit_stop))
-        cost, x, converged = binder.fit(ev, x_start)
-        if not converged:
-            return float("nan")
-        x_start = x
-        return cost
-
-    return estimate_lag(fit_cost, al.search, al.step)
-
-
-def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Alignment:
-    """The scenario's tracker lag (given, or estimated when ``auto``) applied to the encoders."""
-    sc = binder.scenario
-    lag = sc.alignment.tracker_lag
-    estimate = None
-    if lag == "auto":
-        estimate = estimate_tracker_lag(binder, log, start, stop, x0)
-        lag = estimate.lag_s
-        if estimate.at_edge:
-            warnings.warn(lag_at_edge(sc, estimate.lag_s), NlpCalibWarning, stacklevel=2)
-    with scenario_key(sc, "alignment.tracker_lag"):
-        aligned, valid = resample_encoders(log, float(lag), binder.fns.model.encoder_kinds)
-    return Alignment(lag_s=float(lag), estimate=estimate, log=aligned, valid=valid)
-
-
-def lag_at_edge(sc: Scenario, lag_s: float) -> str:
-    """The warning for a tracker lag estimated at an end of the searched range."""
-    lo, hi = sc.alignment.search
-    return (
-        f"alignment.tracker_lag: the estimated lag {1e3 * lag_s:.1f} ms lies at the edge of the "
-        f"searched range [{lo:g}, {hi:g}] s, so the best lag may lie beyond it: widen "
-        "alignment.search, or check the log's timestamps (a gap or a jump in time misleads the estimate)"
-    )
-
-
 def with_priors(binder: Binder, priors: Priors) -> Binder:
     """The same binder with other priors."""
     return replace(binder, priors=priors)
+
+
+@dataclass(frozen=True)
+class Findings:
+    """The faults found in the used records, how they were handled and what a repair changed."""
+
+    report: FaultReport
+    handling: str
+    repairs: tuple[str, ...] = ()
+
+
+def find_faults(
+    binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray, lag_s: float = 0.0
+) -> FaultReport:
+    """Faults in records ``start:stop`` of ``log``, judged with a fit to its windows (those the
+    binder keeps) and, with a tracker ``lag_s``, against the tracker re-sampled onto the encoders'
+    clock: the encoder readings stay as logged, so a jump stays on its record."""
+    _, ev = binder.bind(resample_encoders(log, lag_s, binder.fns.model.encoder_kinds)[0], start, stop)
+    _, x, converged = binder.fit(ev, x0)
+    if not converged or not np.all(np.isfinite(x)):
+        # Judged by a wrong model every interval looks faulty; the solvers will say why.
+        why = "the fit that judges the encoders did not converge from the initial guess"
+        return FaultReport((), {}, {}, unchecked=why)
+    sel = resample_tracker(log, lag_s).select(start, stop)
+    model = binder.fns.model
+    inputs = model.inputs(sel, binder.scenario.residual.steering_sample)
+    report = check_log(binder.fns, ev.params(x), sel, inputs, model.counter_rows(sel))
+    return report.shifted(start, log)
+
+
+def handle_faults(log: Log, report: FaultReport, handling: str) -> tuple[Log, Findings]:
+    """The log to fit (repaired when ``handling`` asks for it) and what was found and done."""
+    if handling == "repair" and report.counter_faults:
+        log, repairs = repair(log, report)
+        return log, Findings(report, handling, repairs)
+    return log, Findings(report, handling)
+
+
+def exclude_faults(binder: Binder, findings: Findings, n_records: int, lag_s: float, dt_s: float) -> Binder:
+    """A binder that skips the windows the findings spoil on a log re-sampled by ``lag_s``.
+
+    Re-sampling the encoders by a lag spreads a faulty reading over the records within the lag,
+    so a fault's stretch is widened by that many records (plus one) on each side.
+    """
+    if findings.handling == "keep" or not findings.report.faults:
+        return binder
+    faults = findings.report.faults
+    if findings.handling == "repair":
+        faults = tuple(f for f in faults if f.kind == "tracker_jump")
+    bad_intervals, bad_records = fault_masks(replace(findings.report, faults=faults), n_records, lag_s, dt_s)
+    return replace(binder, bad_intervals=bad_intervals, bad_records=bad_records)
+
+
+def fault_masks(
+    report: FaultReport, n_records: int, lag_s: float, dt_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The intervals (widened by the records a lag re-samples across) and the tracker records the
+    findings mark as bad, per interval and per record of the whole log."""
+    reach = int(np.ceil(abs(lag_s) / dt_s)) + 1 if lag_s else 0
+    return dilate(report.bad_intervals(n_records - 1), reach), report.bad_records(n_records)
+
+
+def dilate(mask: np.ndarray, reach: int) -> np.ndarray:
+    """``mask`` widened by ``reach`` elements on each side of every true run."""
+    if reach <= 0 or not mask.any():
+        return mask
+    idx = np.flatnonzero(mask)
+    out = np.zeros_like(mask)
+    for i in idx:
+        out[max(i - reach, 0) : i + reach + 1] = True
+    return out

@@ -47,7 +47,8 @@ def predict_motion(model: KinematicModel, params: ca.SX, U: ca.SX, integration: 
 class TrajectoryFunctions:
     """Full-parameter Functions, built on first use; the host provides the layout attributes.
 
-    ``predict`` (params, u) → sensor motion over one interval; ``integrate_step``
+    ``predict`` (params, u) → sensor motion over one interval; ``interval_residual`` (params, u,
+    z) → (e, ∂e/∂u) of one interval; ``integrate_step``
     (T_world_sensor, params, u) → T_world_sensor · predict; ``predict_window`` (params, U) with
     ``U`` one window's inputs, interval after interval; ``base_from_sensor`` (T_world_sensor,
     params) → T_world_base; ``odometry_step`` (state = [T_world_base, vec P], params, u,
@@ -71,6 +72,21 @@ class TrajectoryFunctions:
         u1 = ca.SX.sym("u", self.n_inputs)
         h1 = predict_motion(self.model, params, ca.reshape(u1, self.n_inputs, 1), self.integration)
         return params, u1, h1
+
+    @functools.cached_property
+    def interval_residual(self) -> ca.Function:
+        """(params, u, z) → (e, de_du): one interval's residual against the tracker's motion ``z``
+        and its derivative with respect to the interval's inputs (for checking encoder readings)."""
+        params, u1, h1 = self._full
+        z = ca.SX.sym("z", 3)
+        e1 = se2.between(z, h1)
+        return fn(
+            "interval_residual",
+            [params, u1, z],
+            ["params", "u", "z"],
+            [e1, ca.jacobian(e1, u1)],
+            ["e", "de_du"],
+        )
 
     @functools.cached_property
     def predict(self) -> ca.Function:

@@ -1,6 +1,7 @@
 """Simulation layer: synthetic logs with known truth, written in the log text format."""
 
 from nlp_calib.simulation.simulate import (
+    LIMITS,
     TRAJECTORIES,
     SimulatedLog,
     SimulationOptions,
@@ -9,4 +10,12 @@ from nlp_calib.simulation.simulate import (
     write_simulation,
 )
 
-__all__ = ["TRAJECTORIES", "SimulatedLog", "SimulationOptions", "simulate", "truth_path", "write_simulation"]
+__all__ = [
+    "LIMITS",
+    "TRAJECTORIES",
+    "SimulatedLog",
+    "SimulationOptions",
+    "simulate",
+    "truth_path",
+    "write_simulation",
+]

@@ -11,6 +11,7 @@ is the yardstick the model is checked against. Deterministic for a given seed.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -21,11 +22,33 @@ import numpy as np
 from nlp_calib.core.errors import OptionsError
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.numeric import wrap_angle
+from nlp_calib.core.ranges import Range
 from nlp_calib.logs import LogHeader, format_log
 from nlp_calib.models import DEFAULT_MODEL, MODELS
 from nlp_calib.models.drives import integrate_base
+from nlp_calib.simulation.faults import COUNTER_FAULT_KINDS, InjectedFault, inject
 
 TRAJECTORIES = ("s_curves", "straight", "no_reversals")
+
+#: Accepted values of the numeric options (the command line checks its options against the same).
+#: Memory grows with ``records × substeps`` (about 200 bytes each).
+LIMITS: Mapping[str, Range] = {
+    "records": Range(3, 10**7, integer=True),
+    "seed": Range(0, 2**32 - 1, integer=True),
+    "rate_hz": Range(1.0, 1000.0),
+    "jitter_s": Range(0.0, 0.1),
+    "substeps": Range(1, 1000, integer=True),
+    "max_speed": Range(0.0, 10.0, lo_open=True),
+    "max_turn": Range(0.0, 1.5),
+    "stop_fraction": Range(0.0, 1.0, hi_open=True),
+    "tracker_noise_xy": Range(0.0, 1.0),
+    "tracker_noise_theta": Range(0.0, 1.0),
+    "outlier_fraction": Range(0.0, 1.0, hi_open=True),
+    "outlier_magnitude": Range(0.0, 100.0),
+    "latency_s": Range(0.0, 1.0),
+    "wrap_after_ticks": Range(0, 2**32 - 1, integer=True),
+    "counter_faults": Range(0, 1000, integer=True),
+}
 
 
 @dataclass(frozen=True)
@@ -60,32 +83,45 @@ class SimulationOptions:
     outlier_magnitude: float = 0.3
     latency_s: float = 0.0
     wrap_after_ticks: int = 20000
+    counter_faults: int = 0
+    counter_fault_kinds: tuple[str, ...] = COUNTER_FAULT_KINDS
 
     def __post_init__(self) -> None:
+        for name, limit in LIMITS.items():
+            reason = limit.problem(getattr(self, name))
+            if reason is not None:
+                raise OptionsError(f"{name} {reason}")
         if self.model not in MODELS:
             raise OptionsError(f"model must be one of {', '.join(MODELS)}, got {self.model!r}")
-        drive = MODELS[self.model].drive
+        model = MODELS[self.model]
+        drive = model.drive
         # Fill in the model's defaults so the truth JSON records every value used.
         object.__setattr__(self, "truth", {**drive.default_truth, **self.truth})
         object.__setattr__(self, "guess", {**drive.default_guess, **self.guess})
         object.__setattr__(self, "encoder_ranges", {**drive.default_ranges, **self.encoder_ranges})
         if self.trajectory not in TRAJECTORIES:
-            raise OptionsError(f"trajectory must be one of {TRAJECTORIES}, got {self.trajectory!r}")
-        if self.records < 3:
-            raise OptionsError("records must be >= 3")
+            raise OptionsError(
+                f"trajectory must be one of {', '.join(TRAJECTORIES)}, got {self.trajectory!r}"
+            )
         unknown = sorted((set(self.truth) | set(self.guess)) - set(drive.default_truth))
         if unknown:
             raise OptionsError(f"unknown parameter(s) {unknown} for model {self.model!r}")
+        for name, value in self.truth.items():
+            lo, hi = model.physical_ranges[name]
+            reason = Range(lo, hi).problem(value)
+            if reason is not None:
+                raise OptionsError(f"truth.{name} {reason} (the model's plausible range)")
+        for name, value in self.guess.items():
+            if Range(-math.inf, math.inf, lo_open=True, hi_open=True).problem(value) is not None:
+                raise OptionsError(f"guess.{name} must be a finite number, got {value!r}")
         unknown = sorted(set(self.encoder_ranges) - set(drive.default_ranges))
         if unknown or not all(isinstance(v, int) and 0 < v <= 2**32 for v in self.encoder_ranges.values()):
             raise OptionsError(
                 f"encoder_ranges takes whole numbers in [1, 2^32] for {', '.join(drive.default_ranges)}, "
                 f"got {dict(self.encoder_ranges)}"
             )
-        if not 0.0 <= self.outlier_fraction < 1.0 or not 0.0 <= self.stop_fraction < 1.0:
-            raise OptionsError("outlier_fraction and stop_fraction must lie in [0, 1)")
-        if self.substeps < 1 or self.rate_hz <= 0 or self.jitter_s < 0 or self.latency_s < 0:
-            raise OptionsError("substeps >= 1, rate_hz > 0, jitter_s >= 0 and latency_s >= 0 are required")
+        if not set(self.counter_fault_kinds) <= set(COUNTER_FAULT_KINDS):
+            raise OptionsError(f"counter_fault_kinds must be among {', '.join(COUNTER_FAULT_KINDS)}")
 
 
 @dataclass(frozen=True)
@@ -99,6 +135,7 @@ class SimulatedLog:
     T_world_sensor: np.ndarray
     T_world_base_true: np.ndarray
     options: SimulationOptions
+    faults: tuple[InjectedFault, ...] = ()
 
     def text(self) -> str:
         return format_log(self.header, self.time_ns, self.ticks, self.model_pose, self.T_world_sensor)
@@ -108,6 +145,7 @@ class SimulatedLog:
         return {
             "params": dict(self.options.truth),
             "options": opts,
+            "faults": [f.as_dict() for f in self.faults],
             "records": int(self.time_ns.size),
         }
 
@@ -188,6 +226,14 @@ def simulate(opts: SimulationOptions) -> SimulatedLog:
 
     ticks = drive.ticks(opts, {name: np.interp(t_s, t_fine, c) for name, c in channels.items()})
     header = drive.header(opts)
+    faults: tuple[InjectedFault, ...] = ()
+    if opts.counter_faults:
+        # Their own random stream: a log without faults stays the same for a seed.
+        counters = [n for n, kind in MODELS[opts.model].encoder_kinds.items() if kind == "counter"]
+        fault_rng = np.random.default_rng([opts.seed, 1])
+        ticks, faults = inject(
+            ticks, header.encoder_names, counters, opts.counter_faults, opts.counter_fault_kinds, fault_rng
+        )
     return SimulatedLog(
         header=header,
         time_ns=np.round(t_s * 1e9).astype(np.int64) + 1_700_000_000_000_000_000,
@@ -196,6 +242,7 @@ def simulate(opts: SimulationOptions) -> SimulatedLog:
         T_world_sensor=tracker,
         T_world_base_true=base_at_samples,
         options=opts,
+        faults=faults,
     )
 
 

@@ -101,6 +101,25 @@ def trajectory_png(series: TrajectorySeries, title: str) -> bytes:
     ax.plot(tr[-1, 0], tr[-1, 1], marker="s", markersize=7, color="0.15", linestyle="none")
     ax.plot(tr[0, 0], tr[0, 1], marker="o", markersize=9, color="black", linestyle="none", label="start")
     ax.plot([], [], marker="s", color="0.4", linestyle="none", label="end (colour of each track)")
+    if series.restarted is not None:
+        P = series.restarted.T_world_sensor
+        err = np.linalg.norm(P[1:, :2] - tr[1:, :2], axis=1)
+        ax_err.plot(
+            t[1:],
+            np.where(err > 0, err, np.nan),
+            color="tab:cyan",
+            linewidth=1.0,
+            label=f"{series.restarted.label} (segment ATE {series.restarted.ate_mean:.3f} m)",
+        )
+    labelled: set[str] = set()
+    for k, kind in series.faults:
+        tracker = kind == "tracker_jump"
+        what = "tracker jump (pose left out)" if tracker else "encoder fault (the fair track restarts)"
+        label = None if what in labelled else what
+        labelled.add(what)
+        style = {"marker": "d", "color": "magenta"} if tracker else {"marker": "X", "color": "red"}
+        ax.plot(tr[k, 0], tr[k, 1], markersize=10, linestyle="none", label=label, **style)
+        ax_err.axvline(t[k], color=style["color"], linewidth=0.8, alpha=0.6, label=label)
     if series.holdout_start is not None:
         k = series.holdout_start
         ax.plot(

@@ -1,0 +1,78 @@
+"""Blocked cross-validation, the honest σ, the direction check and parameters a drive cannot determine."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import SCENARIOS, cli, parse_lines
+
+from nlp_calib.core.errors import NlpCalibWarning
+from nlp_calib.models import get_model, param_names
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.simulation import SimulationOptions, simulate
+
+
+def _run(model: str, sim: SimulationOptions, **raw: object) -> tuple[object, np.ndarray]:
+    log = parse_lines(simulate(sim).text().splitlines(), "sim.txt", model=sim.model)
+    base = {"dataset": "sim.txt", "model": model, "solvers": ["gauss_newton"], "residual": {"horizon": 10}}
+    sc = scenario_from_mapping({**base, **raw}, "cv.yaml", Path("."))
+    truth = np.array([sim.truth.get(n, 0.0) for n in param_names(get_model(model))])
+    return Calibration(sc, log=log).run(), truth
+
+
+@pytest.mark.slow
+def test_direction_check_flags_a_direction_dependent_steering_gain() -> None:
+    """A drive whose steering is 8 % stronger in reverse: the plain tricycle's forward-only and
+    reverse-only fits disagree significantly; the model with that feature's agree."""
+    sim = SimulationOptions(model="tricycle_reverse", records=2400, seed=4, truth={"k_steer_reverse": 0.08})
+    plain, _ = _run("tricycle", sim)
+    assert plain.direction is not None and plain.direction.significant  # type: ignore[attr-defined]
+    assert any("disagree" in w for w in plain.warnings)  # type: ignore[attr-defined]
+    feature, truth = _run("tricycle_reverse", sim)
+    assert feature.direction is not None and not feature.direction.significant  # type: ignore[attr-defined]
+    res = feature.reports["gauss_newton"].result  # type: ignore[attr-defined]
+    sigma = np.array(list(feature.std("gauss_newton").values()))  # type: ignore[attr-defined]
+    assert np.all(np.abs(res.params - truth) <= 3.0 * sigma)
+
+
+def test_a_drive_without_reversing_holds_the_reverse_gain_with_a_warning() -> None:
+    sim = SimulationOptions(model="tricycle_reverse", records=1200, seed=2, trajectory="no_reversals")
+    with pytest.warns(
+        NlpCalibWarning, match="k_steer_reverse is held at its initial value: only 0 intervals"
+    ):
+        run, _ = _run("tricycle_reverse", sim, validation={"blocks": 0})
+    res = run.reports["gauss_newton"].result  # type: ignore[attr-defined]
+    assert res.converged, res.reason
+    assert res.param_dict()["k_steer_reverse"] == 0.0  # held where it started
+    assert run.reports["gauss_newton"].uncertainty.std_dict()["k_steer_reverse"] == 0.0  # type: ignore[attr-defined]
+
+
+def test_folds_leave_their_block_out_and_score_it() -> None:
+    sim = SimulationOptions(records=1200, seed=1)
+    run, _ = _run("tricycle", sim, validation={"blocks": 6})
+    cv = run.crossval  # type: ignore[attr-defined]
+    assert cv is not None and len(cv.folds) == 6 and cv.available
+    for fold in cv.folds:
+        assert fold.converged and fold.heldout is not None
+        assert fold.heldout.records == fold.stop - fold.first
+    # The block σ is the jackknife of the fold estimates.
+    P = np.array([f.params for f in cv.folds])
+    assert np.allclose(cv.std, np.sqrt(5 / 6 * ((P - P.mean(axis=0)) ** 2).sum(axis=0)))
+    # The σ to believe is never below the white-noise floor.
+    white = run.reports["gauss_newton"].uncertainty.std_dict()  # type: ignore[attr-defined]
+    assert all(run.std("gauss_newton")[n] >= white[n] for n in white)  # type: ignore[attr-defined]
+
+
+def test_validate_command_prints_the_folds_and_writes_validation_json(tmp_path: Path) -> None:
+    proc = cli("validate", str(SCENARIOS / "demo.yaml"), "--blocks", "5", "--out", str(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    assert "white-noise σ" in proc.stdout and "block σ" in proc.stdout and "held-out records" in proc.stdout
+    doc = json.loads((tmp_path / "validation.json").read_text())
+    assert len(doc["crossvalidation"]["folds"]) == 5
+    assert set(doc["std"]) == set(doc["params"]) == set(doc["std_white_noise"])
+    assert (
+        cli("validate", str(SCENARIOS / "demo.yaml"), "--blocks", "1", "--out", str(tmp_path)).returncode == 2
+    )

@@ -1,0 +1,179 @@
+"""Encoder and tracker faults: found by their inconsistency, kept out of the fit, with truth to check."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import SCENARIOS, parse_lines
+
+from nlp_calib.core.errors import ScenarioError
+from nlp_calib.core.numeric import wrapped_difference
+from nlp_calib.core.poses import between, compose
+from nlp_calib.logs import Log
+from nlp_calib.models import get_model, param_names
+from nlp_calib.pipeline import Calibration, Scenario, load_scenario, scenario_from_mapping
+from nlp_calib.problem import ProblemSpec, ResidualOptions, build, build_residual_data
+from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
+
+WRAP_16 = 2**16
+
+
+def scenario(model: str, **raw: object) -> Scenario:
+    """A quick scenario for simulated logs (the log itself is passed to Calibration)."""
+    base = {"dataset": "sim.txt", "model": model, "solvers": ["gauss_newton"], "validation": {"blocks": 0}}
+    base |= {"residual": {"horizon": 10}, "robust": {"kernel": "huber", "delta": 0.25}}
+    return scenario_from_mapping({**base, **raw}, "sim.yaml", Path("."))
+
+
+def sim(model: str, **options: object) -> tuple[Log, object]:
+    out = simulate(SimulationOptions(model=model, **{"records": 1500, **options}))  # type: ignore[arg-type]
+    return parse_lines(out.text().splitlines(), "sim.txt", model=model), out
+
+
+@pytest.fixture(scope="module")
+def real_findings(real_log: Path) -> Calibration:
+    sc = load_scenario(SCENARIOS / "real_tricycle.yaml").with_dataset(real_log)
+    sc = dataclasses.replace(sc, alignment=dataclasses.replace(sc.alignment, tracker_lag=0.049))
+    return Calibration(sc)
+
+
+def test_real_log_faults_are_its_four_wrapped_counter_readings(real_findings: Calibration) -> None:
+    report = real_findings.findings.report
+    assert [(f.kind, f.encoder, f.record) for f in report.faults] == [
+        ("stall_then_jump", "traction_wheel", r) for r in (562, 574, 883, 1205)
+    ]
+    for f in report.faults:
+        # Each loses exactly 2^16 counts: a 16-bit counter wrapped; the tracker's motion says so.
+        assert abs(f.implied - f.logged - WRAP_16) < 3.0 * f.noise, f
+        assert "2^16" in f.evidence and f"-{f.line})" in f.evidence  # names the lines
+    # No finding in the long stretch of reversing that follows, nor anywhere else.
+    model = real_findings.model
+    direction = model.travel_direction(model.inputs(real_findings.log, "start"))
+    first_reverse = int(np.flatnonzero(direction[1300:] < 0)[0]) + 1300
+    assert all(f.record < first_reverse for f in report.faults)
+
+
+def test_excluded_windows_cross_no_fault(real_findings: Calibration) -> None:
+    data = real_findings.data
+    H = data.horizon
+    first = real_findings.fit[0]
+    for f in real_findings.findings.report.faults:
+        # A window [s, s+H] crosses intervals s..s+H-1; none may touch a fault's stretch.
+        starts = data.starts + first
+        assert not np.any((starts <= f.last) & (starts + H > f.first))
+    assert data.dropped_faulty >= 4 * H
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", ["tricycle", "diff_drive"])
+def test_injected_faults_are_found_and_fault_free_logs_raise_none(model: str) -> None:
+    kinds = ("stall_then_jump", "reversal") if model == "tricycle" else ("reversal",)
+    injected = found = 0
+    for seed in range(3):
+        log, truth = sim(model, seed=seed, counter_faults=3, counter_fault_kinds=kinds)
+        report = Calibration(scenario(model), log=log).findings.report
+        detected = [f.record for f in report.counter_faults]
+        records = [f.record for f in truth.faults]  # type: ignore[attr-defined]
+        injected += len(records)
+        found += sum(any(abs(d - r) <= 2 for d in detected) for r in records)
+        assert all(any(abs(d - r) <= 8 for r in records) for d in detected), (seed, detected, records)
+        clean, _ = sim(model, seed=seed + 100)
+        assert Calibration(scenario(model), log=clean).findings.report.faults == ()
+    assert found / injected >= 0.95
+
+
+def test_tracker_outliers_are_tracker_jumps_not_counter_faults() -> None:
+    log, out = sim("tricycle", seed=5, outlier_fraction=0.01)
+    report = Calibration(scenario("tricycle"), log=log).findings.report
+    tr = out.options.truth  # type: ignore[attr-defined]
+    mount = np.array([tr["sensor_x"], tr["sensor_y"], tr["sensor_theta"]])
+    off = between(compose(out.T_world_base_true, mount), out.T_world_sensor)  # type: ignore[attr-defined]
+    outliers = set(np.flatnonzero(np.hypot(off[:, 0], off[:, 1]) > 0.05).tolist())
+    jumps = {f.record for f in report.faults if f.kind == "tracker_jump"}
+    assert report.counter_faults == ()
+    assert jumps <= outliers  # no false jump
+    assert len(jumps) >= 0.9 * len(outliers)
+
+
+def test_repair_restores_the_true_counts() -> None:
+    log, out = sim("tricycle", seed=2, counter_faults=2, counter_fault_kinds=("stall_then_jump",))
+    calib = Calibration(scenario("tricycle", faults={"handling": "repair"}), log=log)
+    assert len(calib.findings.repairs) == 2 and all("2^16" in r for r in calib.findings.repairs)
+    col = log.header.encoder_index("traction_wheel")
+    for f in out.faults:  # type: ignore[attr-defined]
+        fixed = wrapped_difference(calib.aligned.ticks[f.first : f.record + 1, col]).sum()
+        raw = wrapped_difference(log.ticks[f.first : f.record + 1, col]).sum()
+        assert raw == f.logged_ticks and fixed == f.true_ticks
+    # Nothing is left out of the fit: the counts are right again.
+    assert calib.data.dropped_faulty == 0
+
+
+def test_keep_reports_but_fits_every_window() -> None:
+    log, _ = sim("tricycle", seed=2, counter_faults=2)
+    keep = Calibration(scenario("tricycle", faults={"handling": "keep"}), log=log)
+    exclude = Calibration(scenario("tricycle"), log=log)
+    assert len(keep.findings.report.faults) == len(exclude.findings.report.faults) == 2
+    assert keep.data.dropped_faulty == 0 < exclude.data.dropped_faulty
+    assert keep.data.n_residuals == exclude.data.n_residuals + exclude.data.dropped_faulty
+
+
+@pytest.mark.slow
+def test_excluding_faults_removes_their_bias() -> None:
+    """Three faults in a simulated drive (with tracker latency): excluded, k_traction is within
+    0.1 % and every parameter within 3 honest σ of truth; kept, k_traction is off by more."""
+    model = get_model("tricycle_reverse")
+    log, out = sim("tricycle_reverse", seed=3, records=2400, counter_faults=3, latency_s=0.05)
+    truth = np.array([out.options.truth[n] for n in param_names(model)])  # type: ignore[attr-defined]
+    raw = {"residual": {"horizon": 25}, "alignment": {"tracker_lag": 0.05}, "validation": {"blocks": 10}}
+    errors = {}
+    for handling in ("exclude", "keep"):
+        run = Calibration(scenario("tricycle_reverse", **raw, faults={"handling": handling}), log=log).run()
+        res = run.reports["gauss_newton"].result
+        errors[handling] = abs(res.params[1] / truth[1] - 1.0)
+        if handling == "exclude":
+            sigma = np.array(list(run.std("gauss_newton").values()))
+            assert errors[handling] <= 1e-3
+            assert np.all(np.abs(res.params - truth) <= 3.0 * sigma)
+    assert errors["keep"] > 2.0 * errors["exclude"]
+
+
+def test_windows_crossing_bad_intervals_or_records_are_dropped() -> None:
+    log, _ = sim("tricycle", seed=1, records=200)
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=5))
+    bad_i = np.zeros(log.n_records - 1, dtype=bool)
+    bad_i[50:53] = True
+    bad_r = np.zeros(log.n_records, dtype=bool)
+    bad_r[120] = True
+    data = build_residual_data(fns, log, ResidualOptions(horizon=5), bad_intervals=bad_i, bad_records=bad_r)
+    s = data.starts
+    assert not np.any((s <= 52) & (s + 5 > 50))  # no window crosses intervals 50..52
+    assert not np.any((s == 120) | (s + 5 == 120))  # none starts or ends at record 120
+    assert data.dropped_faulty == 7 + 2 and data.n_residuals == 195 - 9
+
+
+def test_simulated_faults_are_recorded_in_the_truth_file(tmp_path: Path) -> None:
+    _, truth = write_simulation(
+        simulate(SimulationOptions(records=800, seed=4, counter_faults=2)), tmp_path / "f.txt"
+    )
+    faults = json.loads(truth.read_text())["faults"]
+    assert sorted(f["kind"] for f in faults) == ["reversal", "stall_then_jump"]
+    for f in faults:
+        assert f["logged_ticks"] != f["true_ticks"] and f["first"] <= f["record"] - 1
+
+
+def test_a_log_without_faults_is_unchanged_by_the_fault_options() -> None:
+    """The simulator's faults use their own random stream: the same seed gives the same log."""
+    a = simulate(SimulationOptions(records=300, seed=9)).text()
+    b = simulate(
+        SimulationOptions(records=300, seed=9, counter_faults=0, counter_fault_kinds=("reversal",))
+    ).text()
+    assert a == b
+
+
+def test_unknown_fault_handling_names_the_key_and_choices() -> None:
+    with pytest.raises(ScenarioError, match=r"faults\.handling: 'drop' is not one of exclude, repair, keep"):
+        scenario("tricycle", faults={"handling": "drop"})

@@ -1,0 +1,142 @@
+"""Fault-robust trajectory figures, checked against independent computations and the TUM export."""
+
+from __future__ import annotations
+
+import itertools
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import assert_close, cli, mat, vec
+
+from nlp_calib.analysis.crossval import blocks, jackknife_std
+from nlp_calib.analysis.metrics import ErrorStats, aligned_errors, distance_pairs, segments
+from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
+
+
+def test_segments_split_at_bad_intervals_and_drop_lone_records() -> None:
+    bad = np.zeros(19, dtype=bool)  # 20 records, 19 intervals
+    assert segments(20, bad) == [(0, 20)]
+    bad[[5, 6, 7, 12]] = True
+    # Records 6 and 7 lie inside the run 5..7; the fault intervals' end records start anew.
+    assert segments(20, bad) == [(0, 6), (8, 13), (13, 20)]
+    assert segments(1, None) == []
+
+
+def test_aligned_errors_undo_a_rigid_motion_and_pass_nan_through() -> None:
+    rng = np.random.default_rng(0)
+    ref = np.column_stack([rng.normal(size=(30, 2)), rng.normal(size=30)])
+    c, s = np.cos(0.7), np.sin(0.7)
+    est = ref.copy()
+    est[:, :2] = ref[:, :2] @ np.array([[c, -s], [s, c]]).T + [3.0, -1.0]
+    assert_close(aligned_errors(est, ref), np.zeros(30), atol=1e-12)
+    est[4, 0] = np.nan  # a diverged calibration: figures are NaN, not an exception
+    assert np.isnan(aligned_errors(est, ref)[4])
+
+
+def _evo_pairs(dist: np.ndarray, delta: float, tol: float) -> list[tuple[int, int]]:
+    """The all-pairs rule written out: for each i, the j > i nearest delta further on."""
+    pairs = []
+    for i in range(dist.size - 1):
+        rest = dist[i + 1 :] - dist[i]
+        j = int(np.argmin(np.abs(rest - delta)))
+        if abs(rest[j] - delta) <= tol:
+            pairs.append((i, i + 1 + j))
+    return pairs
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_distance_pairs_follow_the_all_pairs_rule(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    steps = np.where(rng.random(400) < 0.2, 0.0, rng.uniform(0.0, 0.05, 400))  # stops: equal distances
+    dist = np.concatenate([[0.0], np.cumsum(steps)])
+    for delta in (0.3, 1.0, 2.5):
+        i, j = distance_pairs(dist, delta, 0.1 * delta)
+        assert list(zip(i.tolist(), j.tolist())) == _evo_pairs(dist, delta, 0.1 * delta)
+
+
+def test_error_stats_are_evo_s() -> None:
+    e = np.array([0.1, 0.4, 0.2, 0.9])
+    s = ErrorStats.of(e)
+    assert_close(
+        [s.rmse, s.mean, s.median, s.std, s.min, s.max],
+        [np.sqrt(np.mean(e**2)), 0.4, 0.3, np.std(e), 0.1, 0.9],
+    )
+    assert ErrorStats.of(np.zeros(0)).n == 0
+
+
+def _read_tum(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    rows = np.loadtxt(path, ndmin=2)
+    theta = 2.0 * np.arctan2(rows[:, 6], rows[:, 7])
+    return rows[:, 0], np.column_stack([rows[:, 1], rows[:, 2], theta])
+
+
+def _aligned_errors(est: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Planar Umeyama without scale, written with homogeneous matrices."""
+    P, Q = est[:, :2], ref[:, :2]
+    cp, cq = P.mean(axis=0), Q.mean(axis=0)
+    U, _, Vt = np.linalg.svd((Q - cq).T @ (P - cp))
+    S = np.diag([1.0, np.linalg.det(U @ Vt)])
+    R = U @ S @ Vt
+    return np.linalg.norm((P - cp) @ R.T + cq - Q, axis=1)
+
+
+def _rpe(est: np.ndarray, ref: np.ndarray, delta: float) -> np.ndarray:
+    dist = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(ref[:, :2], axis=0), axis=1))])
+    out = []
+    for i, j in _evo_pairs(dist, delta, 0.1 * delta):
+        E = np.linalg.inv(np.linalg.inv(mat(ref[i])) @ mat(ref[j])) @ (
+            np.linalg.inv(mat(est[i])) @ mat(est[j])
+        )
+        out.append(np.hypot(*vec(E)[:2]))
+    return np.array(out)
+
+
+@pytest.mark.slow
+def test_tum_files_reproduce_the_reported_figures(tmp_path: Path) -> None:
+    """Read back every exported file and recompute ATE, segment ATE (raw and aligned) and RPE."""
+    log, _ = write_simulation(
+        simulate(SimulationOptions(records=1500, seed=6, counter_faults=2)), tmp_path / "f.txt"
+    )
+    sc = tmp_path / "s.yaml"
+    sc.write_text(
+        f"dataset: {log}\nsolvers: [gauss_newton]\nresidual: {{horizon: 10}}\n"
+        "robust: {kernel: huber, delta: 0.25}\nvalidation: {blocks: 0}\n"
+    )
+    out = tmp_path / "out"
+    proc = cli("run", str(sc), "--out", str(out), "--report")
+    assert proc.returncode == 0, proc.stderr
+    metrics = json.loads((out / "result.json").read_text())["solvers"]["gauss_newton"]["metrics"]
+    folder = out / "trajectories"
+    _, ref = _read_tum(folder / "tracker.tum")
+    _, est = _read_tum(folder / "gauss_newton.tum")
+    assert_close(np.linalg.norm(est[:, :2] - ref[:, :2], axis=1).mean(), metrics["ate_mean"], rtol=1e-6)
+    k = 1
+    ate, aligned, rpe1, rpe5 = [], [], [], []
+    while (folder / f"segment{k}_tracker.tum").exists():
+        t_ref, seg_ref = _read_tum(folder / f"segment{k}_tracker.tum")
+        t_est, seg_est = _read_tum(folder / f"segment{k}_gauss_newton.tum")
+        assert np.array_equal(t_ref, t_est)
+        assert_close(seg_est[0, :2], seg_ref[0, :2], atol=1e-9)  # restarted from the tracker
+        ate.append(np.linalg.norm(seg_est[:, :2] - seg_ref[:, :2], axis=1))
+        aligned.append(_aligned_errors(seg_est, seg_ref))
+        rpe1.append(_rpe(seg_est, seg_ref, 1.0))
+        rpe5.append(_rpe(seg_est, seg_ref, 5.0))
+        k += 1
+    assert k - 1 == metrics["segments"] >= 3  # two faults: three segments
+    assert_close(np.concatenate(ate).mean(), metrics["segment_ate"]["mean"], rtol=1e-6)
+    assert_close(np.concatenate(aligned).mean(), metrics["segment_ate_aligned"]["mean"], rtol=1e-6)
+    assert_close(np.concatenate(rpe1).mean(), metrics["rpe_1m"]["mean"], rtol=1e-6)
+    assert_close(np.concatenate(rpe5).mean(), metrics["rpe_5m"]["mean"], rtol=1e-6)
+    assert np.concatenate(rpe5).size == metrics["rpe_5m"]["n"]
+
+
+def test_jackknife_and_blocks() -> None:
+    est = np.array([[1.0, 10.0], [2.0, 10.0], [3.0, 13.0], [6.0, 11.0]])
+    K = est.shape[0]
+    expected = np.sqrt((K - 1) / K * ((est - est.mean(axis=0)) ** 2).sum(axis=0))
+    assert_close(jackknife_std(est), expected)
+    parts = blocks(2, 2434, 10)
+    assert parts[0][0] == 2 and parts[-1][1] == 2434 and len(parts) == 10
+    assert all(b == c for (_, b), (c, _) in itertools.pairwise(parts))
