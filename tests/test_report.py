@@ -26,7 +26,7 @@ from nlp_calib.pipeline import Calibration
 from nlp_calib.pipeline.scenario import Scenario, ValidationOptions
 from nlp_calib.solvers import GaussNewtonOptions
 
-IMAGES = ("trajectory.png", "convergence.png", "residuals.png", "model_check.png")
+IMAGES = ("trajectory.png", "convergence.png", "residuals.png", "residuals_time.png", "model_check.png")
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
@@ -169,8 +169,8 @@ def test_single_solver_report_with_holdout(tmp_path: Path, small_demo: Scenario)
     )
     run = calib.run()
     paths = write_report(calib, run, tmp_path)
-    assert [p.name for p in paths[:5]] == [*IMAGES, "report.md"]
-    tracks = {p.relative_to(tmp_path).as_posix() for p in paths[5:]}
+    assert [p.name for p in paths[:6]] == [*IMAGES, "report.md"]
+    tracks = {p.relative_to(tmp_path).as_posix() for p in paths[6:]}
     assert {"trajectories/tracker.tum", "trajectories/gauss_newton.tum", "trajectories/README.md"} <= tracks
     for name in IMAGES:
         png_size(tmp_path / name)
