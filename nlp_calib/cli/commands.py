@@ -19,7 +19,7 @@ from nlp_calib.cli.parser import ALL_SOLVERS
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
 from nlp_calib.core.files import atomic_write_bytes, atomic_write_text, check_output_dir
-from nlp_calib.outputs.handoff import CALIBRATION_FILE, URDF_FILE, write_handoff
+from nlp_calib.outputs.handoff import HANDOFF_FILES, write_handoff
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.outputs.progress import Progress
 from nlp_calib.outputs.results import (
@@ -121,7 +121,7 @@ def _wrote(paths: Sequence[Path], out: Path) -> list[str]:
 def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> int:
     scenarios = _load_with_data(args.scenario, args.data)
     outs = _out_dirs(args, scenarios)
-    names = [RESULT_FILE, CALIBRATION_FILE, URDF_FILE, *(_report_files() if args.report else ())]
+    names = [RESULT_FILE, *HANDOFF_FILES, *(_report_files() if args.report else ())]
     for out in outs:
         refuse_collisions(out, names, force=args.force)
     logs = [steps.read_checked(sc) for sc in scenarios]  # every input checked before any work
@@ -226,7 +226,7 @@ def _cmd_odometry(args: argparse.Namespace) -> int:
         raise UsageError("odometry takes one scenario")
     (scenario,) = _load_with_data(args.scenario, args.data)
     (out,) = _out_dirs(args, [scenario])
-    names = [RESULT_FILE, CALIBRATION_FILE, URDF_FILE, ODOMETRY_CSV, *([ODOMETRY_PNG] if args.report else [])]
+    names = [RESULT_FILE, *HANDOFF_FILES, ODOMETRY_CSV, *([ODOMETRY_PNG] if args.report else [])]
     refuse_collisions(out, names, force=args.force)
     calib = Calibration.setup(scenario, log=steps.read_checked(scenario))
     run = calib.run((args.solver,))

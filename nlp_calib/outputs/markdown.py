@@ -10,7 +10,14 @@ import numpy as np
 from nlp_calib.analysis.metrics import TrajectoryMetrics
 from nlp_calib.core.version import __version__
 from nlp_calib.models import get_model, param_units
-from nlp_calib.outputs.handoff import CALIBRATION_FILE, URDF_FILE, chosen_solver, solver_order
+from nlp_calib.outputs.handoff import (
+    CALIBRATION_FILE,
+    HANDOFF_FILES,
+    ROBOT_URDF_FILE,
+    URDF_FILE,
+    chosen_solver,
+    solver_order,
+)
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.pipeline import CalibrationRun
 from nlp_calib.solvers import solver_label
@@ -200,7 +207,7 @@ def _solver_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
 
 
 def _summary(run: CalibrationRun) -> list[str]:
-    written = [Path(CALIBRATION_FILE), Path(URDF_FILE)] if chosen_solver(run) is not None else []
+    written = [Path(f) for f in HANDOFF_FILES] if chosen_solver(run) is not None else []
     head, *rest = summary_lines(run, written)
     return [head, "", *(f"- {line.strip()}" for line in rest if not line.startswith("        "))]
 
@@ -256,7 +263,8 @@ def report_markdown(run: CalibrationRun, images: Sequence[str]) -> str:
         out.append("No solver converged, so no hand-off files were written.")
     else:
         out.append(
-            f"[`{CALIBRATION_FILE}`]({CALIBRATION_FILE}) and [`{URDF_FILE}`]({URDF_FILE}) carry "
+            f"[`{CALIBRATION_FILE}`]({CALIBRATION_FILE}), [`{URDF_FILE}`]({URDF_FILE}) and "
+            f"[`{ROBOT_URDF_FILE}`]({ROBOT_URDF_FILE}) carry "
             f"{solver_label(chosen)}'s estimate (the first converged solver in the order "
             f"{', '.join(solvers)})."
         )

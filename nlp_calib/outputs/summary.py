@@ -25,7 +25,13 @@ from nlp_calib.analysis.faults import count_kinds
 from nlp_calib.analysis.observability import NOT_OBSERVABLE, WEAK
 from nlp_calib.models import get_model, param_units
 from nlp_calib.models.base import reference_scale
-from nlp_calib.outputs.handoff import CALIBRATION_FILE, URDF_FILE, chosen_solver, solver_order
+from nlp_calib.outputs.handoff import (
+    CALIBRATION_FILE,
+    ROBOT_URDF_FILE,
+    URDF_FILE,
+    chosen_solver,
+    solver_order,
+)
 from nlp_calib.outputs.results import ODOMETRY_CSV
 from nlp_calib.pipeline import CalibrationRun
 
@@ -158,6 +164,8 @@ def _next_steps(run: CalibrationRun, level: str, files: Sequence[str]) -> list[s
         steps.append(f"{CALIBRATION_FILE}: the parameters with units and 1σ, for your robot's configuration")
     if URDF_FILE in files:
         steps.append(f"{URDF_FILE}: paste its <joint> into your robot's URDF (planar: z, roll, pitch 0)")
+    if ROBOT_URDF_FILE in files:
+        steps.append(f"{ROBOT_URDF_FILE}: the same joint in a complete robot description, for URDF tools")
     if ODOMETRY_CSV in files:
         steps.append(f"{ODOMETRY_CSV}: the base link's odometry with its covariance, one row per record")
     if "report.md" in files:
