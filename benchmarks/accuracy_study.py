@@ -81,6 +81,7 @@ class Backlash(Tricycle):
     )
     defaults: Mapping[str, float] = MappingProxyType({"steering_backlash": 0.0})
     input_names: tuple[str, ...] = (*Tricycle.input_names, "steering_turn")
+    input_units: Mapping[str, str] = MappingProxyType({**Tricycle.input_units, "steering_turn": "1"})
     symmetries: tuple[Symmetry, ...] = ()
 
     def inputs(self, log: Log, steering_sample: str) -> np.ndarray:

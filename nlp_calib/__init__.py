@@ -35,6 +35,7 @@ if TYPE_CHECKING:
     )
     from nlp_calib.logs import Log, LogHeader, read_log
     from nlp_calib.models import MODELS, KinematicModel, get_model, load_log
+    from nlp_calib.outputs.summary import Verdict, summary_lines, verdict
     from nlp_calib.pipeline import (
         Calibration,
         CalibrationRun,
@@ -75,6 +76,7 @@ _EXPORTS: dict[str, str] = {
     "SolverReport": "nlp_calib.pipeline",
     "SolverResult": "nlp_calib.solvers",
     "UsageError": "nlp_calib.core.errors",
+    "Verdict": "nlp_calib.outputs.summary",
     "build": "nlp_calib.problem",
     "get_model": "nlp_calib.models",
     "get_solver": "nlp_calib.solvers",
@@ -83,6 +85,8 @@ _EXPORTS: dict[str, str] = {
     "read_log": "nlp_calib.logs",
     "scenario_from_mapping": "nlp_calib.pipeline",
     "simulate": "nlp_calib.simulation",
+    "summary_lines": "nlp_calib.outputs.summary",
+    "verdict": "nlp_calib.outputs.summary",
     "write_simulation": "nlp_calib.simulation",
 }
 
@@ -126,6 +130,7 @@ __all__ = [
     "SolverReport",
     "SolverResult",
     "UsageError",
+    "Verdict",
     "__version__",
     "build",
     "get_model",
@@ -135,5 +140,7 @@ __all__ = [
     "read_log",
     "scenario_from_mapping",
     "simulate",
+    "summary_lines",
+    "verdict",
     "write_simulation",
 ]

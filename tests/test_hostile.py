@@ -345,7 +345,8 @@ def test_files_of_other_commands_are_not_removed_by_a_run(sim_log: Path, tmp_pat
     assert run_cli("run", sc, "--out", str(out)).returncode == 0
     assert {"odometry.csv", "result.json"} <= set(contents(out))
     groups = json.loads((out / MANIFEST_FILE).read_text())["groups"]
-    assert groups["odometry"] == ["odometry.csv"] and "result.json" in groups["run"]
+    # odometry writes the run's files too (it calibrates); a later run leaves its odometry.csv alone
+    assert "odometry.csv" in groups["odometry"] and "result.json" in groups["run"]
 
 
 def test_a_manifest_cannot_point_the_clean_up_outside_the_folder(sim_log: Path, tmp_path: Path) -> None:

@@ -13,20 +13,21 @@ from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree as ET
 
+import numpy as np
 import pytest
 import yaml
-from conftest import REPO, SCENARIOS
+from conftest import REPO, SCENARIOS, assert_close
 
 from nlp_calib import __version__
 from nlp_calib.cli import main
-from nlp_calib.outputs.handoff import CALIBRATION_FILE, URDF_FILE, write_handoff
+from nlp_calib.outputs.handoff import CALIBRATION_FILE, ROBOT_URDF_FILE, URDF_FILE, write_handoff
 from nlp_calib.outputs.markdown import fmt_std, fmt_value
 from nlp_calib.outputs.progress import Progress
 from nlp_calib.pipeline import Calibration
 from nlp_calib.pipeline.scenario import Scenario, ValidationOptions
 from nlp_calib.solvers import GaussNewtonOptions
 
-IMAGES = ("trajectory.png", "convergence.png", "residuals.png", "model_check.png")
+IMAGES = ("trajectory.png", "convergence.png", "residuals.png", "residuals_time.png", "model_check.png")
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
@@ -131,6 +132,26 @@ def test_urdf_joint_parses_and_carries_the_sensor_pose(report_dir: Path, result:
     assert f"nlp_calib {__version__}" in (report_dir / URDF_FILE).read_text()
 
 
+def test_robot_urdf_loads_in_yourdfpy_and_urdf_parser_py_with_result_json_numbers(
+    report_dir: Path, result: dict
+) -> None:
+    yourdfpy = pytest.importorskip("yourdfpy")
+    urdf = pytest.importorskip("urdf_parser_py.urdf")
+    p = result["solvers"]["gauss_newton"]["params"]
+    path = report_dir / ROBOT_URDF_FILE
+    robot = yourdfpy.URDF.load(str(path), load_meshes=False, build_scene_graph=True)
+    assert [j.name for j in robot.robot.joints] == ["base_link_to_laser"]
+    assert {link.name for link in robot.robot.links} == {"base_link", "laser"}
+    c, s = np.cos(p["sensor_theta"]), np.sin(p["sensor_theta"])
+    expected = np.array([[c, -s, 0, p["sensor_x"]], [s, c, 0, p["sensor_y"]], [0, 0, 1, 0], [0, 0, 0, 1]])
+    assert_close(robot.get_transform("laser", "base_link"), expected, rtol=0, atol=1e-15)
+    parsed = urdf.URDF.from_xml_string(path.read_text())
+    (joint,) = parsed.joints
+    assert (joint.parent, joint.child, joint.type) == ("base_link", "laser", "fixed")
+    assert joint.origin.xyz == [p["sensor_x"], p["sensor_y"], 0.0]
+    assert joint.origin.rpy == [0.0, 0.0, p["sensor_theta"]]
+
+
 def _calibration(small_demo: Scenario, **changes: Any) -> Calibration:
     return Calibration(dataclasses.replace(small_demo, **changes))
 
@@ -140,7 +161,7 @@ def test_handoff_files_are_deterministic(tmp_path: Path, small_demo: Scenario) -
     for i in range(2):
         out = tmp_path / str(i)
         paths = write_handoff(_calibration(small_demo, solvers=("gauss_newton",)).run(), out)
-        assert [p.name for p in paths] == [CALIBRATION_FILE, URDF_FILE]
+        assert [p.name for p in paths] == [CALIBRATION_FILE, URDF_FILE, ROBOT_URDF_FILE]
         texts.append([p.read_bytes() for p in paths])
     assert texts[0] == texts[1]
 
@@ -155,10 +176,10 @@ def test_no_converged_solver_writes_no_handoff_and_removes_stale_files(
     )
     run = calib.run()
     assert not run.reports["gauss_newton"].result.converged
-    for name in (CALIBRATION_FILE, URDF_FILE):
+    for name in (CALIBRATION_FILE, URDF_FILE, ROBOT_URDF_FILE):
         (tmp_path / name).write_text("stale")
     assert write_handoff(run, tmp_path) == []
-    assert not (tmp_path / CALIBRATION_FILE).exists() and not (tmp_path / URDF_FILE).exists()
+    assert not any((tmp_path / n).exists() for n in (CALIBRATION_FILE, URDF_FILE, ROBOT_URDF_FILE))
 
 
 def test_single_solver_report_with_holdout(tmp_path: Path, small_demo: Scenario) -> None:
@@ -169,8 +190,8 @@ def test_single_solver_report_with_holdout(tmp_path: Path, small_demo: Scenario)
     )
     run = calib.run()
     paths = write_report(calib, run, tmp_path)
-    assert [p.name for p in paths[:5]] == [*IMAGES, "report.md"]
-    tracks = {p.relative_to(tmp_path).as_posix() for p in paths[5:]}
+    assert [p.name for p in paths[:6]] == [*IMAGES, "report.md"]
+    tracks = {p.relative_to(tmp_path).as_posix() for p in paths[6:]}
     assert {"trajectories/tracker.tum", "trajectories/gauss_newton.tum", "trajectories/README.md"} <= tracks
     for name in IMAGES:
         png_size(tmp_path / name)

@@ -22,7 +22,8 @@ Stale readings that catch up are counted (``stale``) but harmless to horizon win
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections import Counter
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -84,6 +85,11 @@ class Fault:
         else:
             size = {"logged_ticks": self.logged, "implied_ticks": self.implied, "noise_ticks": self.noise}
         return {**where, **size, "evidence": self.evidence}
+
+
+def count_kinds(faults: Sequence[Fault]) -> str:
+    """``"4 stall_then_jump, 11 tracker_jump"``: how many faults of each kind, in order of appearance."""
+    return ", ".join(f"{n} {k}" for k, n in Counter(f.kind for f in faults).items())
 
 
 @dataclass(frozen=True)

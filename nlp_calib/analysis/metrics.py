@@ -74,7 +74,8 @@ class TrajectoryMetrics:
     relative pose error over windows of ``rpe_window`` records (m, rad); ``segment_ate`` and
     ``segment_ate_aligned``: the track restarted after each fault; ``rpe_distance``: translation
     error over each of :data:`RPE_DISTANCES` of travel (m → stats); ``segments``: the number of
-    fault-free stretches; ``distance_m``: the tracker's path length.
+    fault-free stretches; ``distance_m``: the tracker's path length. Poses marked bad (tracker
+    jumps) are left out of every figure and of the path length.
     """
 
     ate_mean: float
@@ -228,14 +229,17 @@ def trajectory_metrics(
     ref = np.asarray(T_world_sensor[start:stop], dtype=float)
     step = steps(fns, params, inputs[:, start : stop - 1])
     track = poses.accumulate(ref[0], step)
-    err = np.linalg.norm(track[:, :2] - ref[:, :2], axis=1)
-    W = min(rpe_window, stop - start - 1)
-    rel = poses.between(poses.between(ref[:-W], ref[W:]), poses.between(track[:-W], track[W:]))
-
     bad_i = None if bad_intervals is None else np.asarray(bad_intervals[start : stop - 1], dtype=bool)
     good = np.ones(stop - start, dtype=bool)
     if bad_records is not None:
         good &= ~np.asarray(bad_records[start:stop], dtype=bool)
+    # A bad tracker pose is the tracker's error, not the calibration's: left out of every figure.
+    err = np.linalg.norm(track[good, :2] - ref[good, :2], axis=1)
+    W = min(rpe_window, stop - start - 1)
+    pair = good[:-W] & good[W:]
+    rel = poses.between(
+        poses.between(ref[:-W][pair], ref[W:][pair]), poses.between(track[:-W][pair], track[W:][pair])
+    )
     parts = segments(stop - start, bad_i)
     seg_track = restarted(step, ref, parts)
     scored = np.zeros(stop - start, dtype=bool)
@@ -247,18 +251,19 @@ def trajectory_metrics(
     scored_parts = [a + np.flatnonzero(good[a:b]) for a, b in parts]
     aligned = [aligned_errors(seg_track[idx], ref[idx]) for idx in scored_parts]
     rpe = {d: rpe_by_distance(seg_track, ref, scored_parts, d) for d in RPE_DISTANCES}
+    ate = ErrorStats.of(err)
     return TrajectoryMetrics(
-        ate_mean=float(err.mean()),
-        ate_max=float(err.max()),
-        ate_final=float(err[-1]),
-        rpe_trans=float(np.linalg.norm(rel[:, :2], axis=1).mean()),
-        rpe_rot=float(np.abs(rel[:, 2]).mean()),
+        ate_mean=ate.mean,
+        ate_max=ate.max,
+        ate_final=float(err[-1]) if err.size else float("nan"),
+        rpe_trans=ErrorStats.of(np.linalg.norm(rel[:, :2], axis=1)).mean,
+        rpe_rot=ErrorStats.of(np.abs(rel[:, 2])).mean,
         rpe_window=int(W),
         records=int(stop - start),
-        ate=ErrorStats.of(err),
+        ate=ate,
         segment_ate=ErrorStats.of(seg_err),
         segment_ate_aligned=ErrorStats.of(np.concatenate(aligned) if aligned else np.zeros(0)),
         rpe_distance=rpe,
         segments=len(parts),
-        distance_m=float(path_distance(ref)[-1]),
+        distance_m=float(path_distance(ref[good])[-1]) if good.any() else 0.0,
     )

@@ -19,19 +19,24 @@ from nlp_calib.cli.parser import ALL_SOLVERS
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
 from nlp_calib.core.files import atomic_write_bytes, atomic_write_text, check_output_dir
-from nlp_calib.outputs.handoff import CALIBRATION_FILE, URDF_FILE, write_handoff
+from nlp_calib.outputs.handoff import HANDOFF_FILES, write_handoff
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.outputs.progress import Progress
-from nlp_calib.outputs.results import RESULT_FILE, VALIDATION_FILE, write_result, write_validation
+from nlp_calib.outputs.results import (
+    ODOMETRY_CSV,
+    ODOMETRY_PNG,
+    RESULT_FILE,
+    VALIDATION_FILE,
+    write_result,
+    write_validation,
+)
+from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.outputs.terminal import correlation_table, run_table, summary_table, validation_table
 from nlp_calib.pipeline import Calibration, Scenario, load_scenario, steps
 from nlp_calib.pipeline.export import write_c_export
 from nlp_calib.pipeline.simconfig import simulation_options
 from nlp_calib.simulation import simulate, truth_path, write_simulation
 from nlp_calib.solvers import SOLVERS
-
-ODOMETRY_CSV = "odometry.csv"
-ODOMETRY_PNG = "odometry.png"
 
 
 def _out_dirs(args: argparse.Namespace, scenarios: Sequence[Scenario]) -> list[Path]:
@@ -55,6 +60,37 @@ def _with_data(sc: Scenario, data: Path | None) -> Scenario:
     return sc.with_dataset(data) if data is not None else sc
 
 
+def _load_with_data(paths: Sequence[Path], data: Sequence[Path] | None) -> list[Scenario]:
+    """The scenarios, each on the log ``--data`` gives it: one ``PATH`` replaces the dataset that
+    every scenario names (never several different ones), ``NAME=PATH`` the named scenario's."""
+    scenarios = [load_scenario(p) for p in paths]
+    if not data:
+        return scenarios
+    names = {sc.name for sc in scenarios}
+    per_name: dict[str, Path] = {}
+    plain: list[Path] = []
+    for item in data:
+        name, sep, rest = str(item).partition("=")
+        if sep and name in names:
+            if name in per_name:
+                raise UsageError(f"--data gives scenario {name!r} two logs")
+            per_name[name] = Path(rest)
+        else:
+            plain.append(item)
+    if (plain and per_name) or len(plain) > 1:
+        raise UsageError("give --data once as PATH, or as NAME=PATH once per scenario, not both")
+    if plain:
+        shared = {sc.dataset.resolve() for sc in scenarios}
+        if len(shared) > 1:
+            listed = ", ".join(f"{sc.name}: {sc.dataset}" for sc in scenarios)
+            raise UsageError(
+                f"--data {plain[0]} would replace different logs ({listed}); give NAME=PATH for each "
+                "scenario to replace, or run them separately"
+            )
+        return [sc.with_dataset(plain[0]) for sc in scenarios]
+    return [sc.with_dataset(per_name[sc.name]) if sc.name in per_name else sc for sc in scenarios]
+
+
 def _report_files() -> tuple[str, ...]:
     from nlp_calib.outputs import writer  # imports matplotlib
 
@@ -62,6 +98,7 @@ def _report_files() -> tuple[str, ...]:
         writer.TRAJECTORY_FILE,
         writer.CONVERGENCE_FILE,
         writer.RESIDUALS_FILE,
+        writer.RESIDUALS_TIME_FILE,
         writer.MODEL_CHECK_FILE,
         writer.REPORT_FILE,
     )
@@ -82,9 +119,9 @@ def _wrote(paths: Sequence[Path], out: Path) -> list[str]:
 
 
 def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> int:
-    scenarios = [_with_data(load_scenario(p), args.data) for p in args.scenario]
+    scenarios = _load_with_data(args.scenario, args.data)
     outs = _out_dirs(args, scenarios)
-    names = [RESULT_FILE, CALIBRATION_FILE, URDF_FILE, *(_report_files() if args.report else ())]
+    names = [RESULT_FILE, *HANDOFF_FILES, *(_report_files() if args.report else ())]
     for out in outs:
         refuse_collisions(out, names, force=args.force)
     logs = [steps.read_checked(sc) for sc in scenarios]  # every input checked before any work
@@ -115,7 +152,9 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
                 if i == len(scenarios) - 1:
                     interrupts.hold()  # what is complete stays complete: a later signal changes nothing
                 stage.commit()
-            print("\n" + "\n".join(_wrote([stage.final(p) for p in written], out)) + "\n")
+            final = [stage.final(p) for p in written]
+            print("\n" + "\n".join(_wrote(final, out)) + "\n")
+            print("\n".join(summary_lines(run, final)) + "\n")
     if len(runs) > 1:
         print(summary_table(runs))
     return 0 if all(r.result.converged for run in runs for r in run.reports.values()) else 1
@@ -168,51 +207,69 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 def _cmd_codegen(args: argparse.Namespace) -> int:
     scenario = _with_data(load_scenario(args.scenario), args.data)
     with StagedOutput(check_output_dir(args.out), "codegen", force=args.force) as stage:
-        final = [stage.final(p) for p in write_c_export(scenario, stage.path)]
+        files, example = write_c_export(scenario, stage.path)
+        final = [stage.final(p) for p in files]
         interrupts.hold()
         stage.commit()
     for path in final:
         print(f"wrote {path}")
+    print(
+        f"\nexample.c evaluates the residual and its Jacobian at the parameters {example.params_from}, on "
+        f"{example.window}, and prints its largest difference from Python's values for the same call.\n"
+        f"build and run it: make -C {args.out} example && {args.out / 'example'}"
+    )
     return 0
 
 
 def _cmd_odometry(args: argparse.Namespace) -> int:
     if len(args.scenario) != 1:
         raise UsageError("odometry takes one scenario")
-    scenario = _with_data(load_scenario(args.scenario[0]), args.data)
+    (scenario,) = _load_with_data(args.scenario, args.data)
     (out,) = _out_dirs(args, [scenario])
-    refuse_collisions(out, [ODOMETRY_CSV, *([ODOMETRY_PNG] if args.report else [])], force=args.force)
-    calib = Calibration.setup(scenario)
-    result = calib.solve(args.solver)
+    names = [RESULT_FILE, *HANDOFF_FILES, ODOMETRY_CSV, *([ODOMETRY_PNG] if args.report else [])]
+    refuse_collisions(out, names, force=args.force)
+    calib = Calibration.setup(scenario, log=steps.read_checked(scenario))
+    run = calib.run((args.solver,))
+    print(run_table(run))
+    print()
+    print(correlation_table(run, args.solver))
+    result = run.reports[args.solver].result
     if not result.converged:
         raise SolverError(f"{args.solver} did not converge ({result.reason}); no odometry from it")
     track = calib.odometry(result.params)
     cov = track.covariance
     with StagedOutput(out, "odometry", force=args.force) as stage:
-        atomic_write_text(stage.path / ODOMETRY_CSV, track.csv())
+        written = [write_result(run, stage.path), *write_handoff(run, stage.path)]
+        written.append(stage.path / ODOMETRY_CSV)
+        atomic_write_text(written[-1], track.csv())
         if args.report:
             from nlp_calib.outputs.plots import odometry_png  # imports matplotlib
 
             title = f"{scenario.name}: calibrated odometry ({args.solver}), {args.sigma:g}σ ellipses"
             png = odometry_png(track, calib.base_reference(result.params), title, sigma=args.sigma)
-            atomic_write_bytes(stage.path / ODOMETRY_PNG, png)
+            written.append(stage.path / ODOMETRY_PNG)
+            atomic_write_bytes(written[-1], png)
         interrupts.hold()
-        written = stage.commit()
-    print(f"{args.solver}: {result.param_dict()}")
-    print(
-        f"final 1σ: x {1e3 * np.sqrt(cov[-1, 0, 0]):.3g} mm, y {1e3 * np.sqrt(cov[-1, 1, 1]):.3g} mm, "
-        f"θ {1e3 * np.sqrt(cov[-1, 2, 2]):.3g} mrad after {calib.selected.n_records} records "
-        f"(encoder noise per input: {', '.join(f'{v:.3g}' for v in calib.input_noise_std)})"
+        stage.commit()
+    final = [stage.final(p) for p in written]
+    noise = ", ".join(
+        f"{n} {v:.3g} {calib.model.input_units[n]}"
+        for n, v in zip(calib.model.input_names, calib.input_noise_std)
     )
-    for path in written:
-        print(f"wrote {path}")
+    print(
+        f"\nodometry over {calib.selected.n_records} records, final 1σ: "
+        f"x {1e3 * np.sqrt(cov[-1, 0, 0]):.3g} mm, y {1e3 * np.sqrt(cov[-1, 1, 1]):.3g} mm, "
+        f"θ {1e3 * np.sqrt(cov[-1, 2, 2]):.3g} mrad from encoder noise alone (per interval: {noise})"
+    )
+    print("\n" + "\n".join(_wrote(final, out)) + "\n")
+    print("\n".join(summary_lines(run, final)) + "\n")
     return 0
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     if len(args.scenario) != 1:
         raise UsageError("validate takes one scenario")
-    scenario = _with_data(load_scenario(args.scenario[0]), args.data)
+    (scenario,) = _load_with_data(args.scenario, args.data)
     blocks = args.blocks if args.blocks is not None else (scenario.validation.blocks or 10)
     scenario = dataclasses.replace(
         scenario, validation=dataclasses.replace(scenario.validation, blocks=blocks)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.ranges import Range
@@ -67,7 +67,36 @@ def _add_force(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--force", action="store_true", help=f"overwrite {what} that nlp_calib did not write")
 
 
-def _add_common(p: argparse.ArgumentParser) -> None:
+EXIT_CODES = (
+    "exit codes: 0 success; 1 a solver did not converge or the run failed; 2 bad input (scenario, log, "
+    "options: nothing is computed); 130, 143, 129 interrupted by SIGINT, SIGTERM, SIGHUP (the output "
+    "folder keeps the previous run's files)"
+)
+
+#: One or two example command lines per subcommand, shown by its --help.
+EXAMPLES: dict[str, tuple[str, ...]] = {
+    "run": (
+        "nlp-calib run scenarios/demo.yaml",
+        "nlp-calib run scenarios/real_tricycle.yaml --data /path/to/dataset.txt --report",
+    ),
+    "compare": (
+        "nlp-calib compare scenarios/demo.yaml --report",
+        "nlp-calib compare scenarios/real_tricycle.yaml scenarios/real_tricycle_seed.yaml "
+        "--data /path/to/dataset.txt",
+    ),
+    "validate": ("nlp-calib validate scenarios/demo.yaml --blocks 10",),
+    "odometry": ("nlp-calib odometry scenarios/demo.yaml --report --sigma 3",),
+    "codegen": ("nlp-calib codegen scenarios/demo.yaml --out c_export && make -C c_export example",),
+    "simulate": ("nlp-calib simulate --out my_drive.txt --records 2000 --seed 3 --latency 0.05",),
+}
+
+
+def _epilog(command: str) -> str:
+    lines = "\n".join(f"  {e}" for e in EXAMPLES[command])
+    return f"example{'s' if len(EXAMPLES[command]) > 1 else ''}:\n{lines}\n\n{EXIT_CODES}"
+
+
+def _add_common(p: argparse.ArgumentParser, report: str | None) -> None:
     p.add_argument(
         "scenario", type=Path, nargs="+", help="scenario YAML file(s); several are summarised side by side"
     )
@@ -78,27 +107,41 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         help="output folder (default: out/<scenario name>; with several scenarios, DIR/<scenario name>)",
     )
     p.add_argument(
-        "--data", type=_path, default=None, help="log file to use instead of the scenario's dataset"
+        "--data",
+        type=_path,
+        action="append",
+        default=None,
+        metavar="PATH|NAME=PATH",
+        help="log file to use instead of the scenario's dataset; with several scenarios, either all of "
+        "them name the same dataset, or give NAME=PATH once per scenario to replace",
     )
-    p.add_argument(
-        "--report",
-        action="store_true",
-        help="also draw trajectory, convergence, residual and model-check figures and report.md",
-    )
+    if report is not None:
+        p.add_argument("--report", action="store_true", help=report)
     _add_force(p, "files in the output folder")
+
+
+REPORT = (
+    "also draw the trajectory, convergence, residual and model-check figures, report.md and trajectories/"
+)
+
+
+def _sub(command: str) -> dict[str, Any]:
+    return {"epilog": _epilog(command), "formatter_class": argparse.RawDescriptionHelpFormatter}
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="nlp-calib",
         description="Calibrate a wheeled robot's kinematics and sensor mounting pose.",
+        epilog=f"example:\n  nlp-calib compare scenarios/demo.yaml --report\n\n{EXIT_CODES}",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"nlp_calib {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
-    p_run = sub.add_parser("run", help="calibrate with the scenario's solvers (or --solver)")
-    _add_common(p_run)
+    p_run = sub.add_parser("run", help="calibrate with the scenario's solvers (or --solver)", **_sub("run"))
+    _add_common(p_run, REPORT)
     p_run.add_argument(
         "--solver",
         choices=(*SOLVERS, *ALL_SOLVERS),
@@ -106,14 +149,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="solver to run (default: the scenario's solvers; 'all' or 'both': every solver)",
     )
 
-    p_cmp = sub.add_parser("compare", help="calibrate with every solver, side by side")
-    _add_common(p_cmp)
+    p_cmp = sub.add_parser("compare", help="calibrate with every solver, side by side", **_sub("compare"))
+    _add_common(p_cmp, REPORT)
 
     p_val = sub.add_parser(
         "validate",
         help="cross-validate on contiguous blocks: fit without each block, score it, compare the σ",
+        **_sub("validate"),
     )
-    _add_common(p_val)
+    _add_common(p_val, None)
     p_val.add_argument(
         "--blocks",
         type=_in(BLOCKS),
@@ -121,7 +165,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="contiguous blocks (default: validation.blocks, else 10)",
     )
 
-    p_cg = sub.add_parser("codegen", help="write C source and header of the residual and its Jacobian")
+    p_cg = sub.add_parser(
+        "codegen", help="write C source and header of the residual and its Jacobian", **_sub("codegen")
+    )
     p_cg.add_argument("scenario", type=Path, help="scenario YAML file (model, horizon, integration)")
     p_cg.add_argument("--out", type=_path, required=True, help="folder for the C files")
     p_cg.add_argument(
@@ -130,10 +176,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add_force(p_cg, "files in the output folder")
 
     p_odo = sub.add_parser(
-        "odometry", help="calibrate, then write the base-link odometry with its propagated covariance"
+        "odometry",
+        help="calibrate, then write the base-link odometry with its propagated covariance",
+        **_sub("odometry"),
     )
-    _add_common(p_odo)
-    p_odo.add_argument("--solver", choices=tuple(SOLVERS), default=next(iter(SOLVERS)))
+    _add_common(p_odo, "also draw odometry.png: the odometry with its σ ellipses against the tracker")
+    p_odo.add_argument(
+        "--solver",
+        choices=tuple(SOLVERS),
+        default=next(iter(SOLVERS)),
+        help=f"the solver whose calibration drives the odometry (default: {next(iter(SOLVERS))})",
+    )
     p_odo.add_argument(
         "--sigma",
         type=_in(SIGMA),
@@ -141,12 +194,19 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"ellipse size in σ for --report, {SIGMA.describe()} (default 3)",
     )
 
-    p_sim = sub.add_parser("simulate", help="write a synthetic log with known truth (truth JSON beside it)")
+    p_sim = sub.add_parser(
+        "simulate", help="write a synthetic log with known truth (truth JSON beside it)", **_sub("simulate")
+    )
     p_sim.add_argument("--out", type=_path, required=True, help="log file to write")
     _add_force(p_sim, "an existing log or truth file")
     p_sim.add_argument("--config", type=_path, default=None, help="YAML file of simulation options")
     p_sim.add_argument("--model", choices=tuple(MODELS), default=None, help=f"default: {next(iter(MODELS))}")
-    p_sim.add_argument("--trajectory", choices=TRAJECTORIES, default=None)
+    p_sim.add_argument(
+        "--trajectory",
+        choices=TRAJECTORIES,
+        default=None,
+        help="s_curves: turns, stops and reversals (default); straight: no turning; no_reversals",
+    )
     for flag, field, what in (
         ("--records", "records", "records to write"),
         ("--seed", "seed", "random seed"),

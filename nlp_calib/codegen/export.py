@@ -82,24 +82,37 @@ def _c_array(values: np.ndarray) -> str:
     return ", ".join(f"{v:.17g}" for v in np.ravel(values, order="F"))
 
 
-def example_source(
-    fns: ProblemFunctions, exported: ExportedFunction, params: np.ndarray, column: np.ndarray, origin: str
-) -> str:
-    """A C program that calls ``exported`` (a residual_jacobian) on one window and prints e and J."""
+@dataclass(frozen=True)
+class Example:
+    """What ``example.c`` evaluates: ``params`` (described by ``params_from``) on one window's
+    data ``column`` (described by ``window``)."""
+
+    params: np.ndarray
+    params_from: str
+    column: np.ndarray
+    window: str
+
+
+def example_source(fns: ProblemFunctions, exported: ExportedFunction, example: Example, origin: str) -> str:
+    """A C program that calls ``exported`` (a residual_jacobian) on one window, prints e and J, and
+    compares them with the values Python computes for the same call."""
     f = exported.function
     name = f.name()
     n, n_in, H = exported.n_params, exported.n_inputs, exported.horizon
+    params, column = example.params, example.column
     U = column[: n_in * H]
     z = column[n_in * H : n_in * H + 3]
+    e_py, J_py = (np.asarray(v) for v in f(params, U.reshape(n_in, H, order="F"), z))
     names = ", ".join(fns.names)
     return (
         _banner(f"Example: calling {name} from C.", origin)
-        + f"""#include <stdio.h>
+        + f"""#include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include "{BASENAME}.h"
 
 int main(void) {{
-  /* Parameters, in this order: {names}. */
+  /* Parameters ({example.params_from}), in this order: {names}. */
   const casadi_real params[{n}] = {{{_c_array(params)}}};
   /* Model inputs of the {H} interval(s), interval after interval: {", ".join(fns.model.input_names)}. */
   const casadi_real u[{n_in * H}] = {{{_c_array(U)}}};
@@ -117,8 +130,21 @@ int main(void) {{
   res[0] = e; res[1] = J;
   if ({name}(arg, res, iw, w, 0) != 0) {{ fprintf(stderr, "evaluation failed\\n"); return 1; }}
 
-  for (int i = 0; i < 3; ++i) printf("e %d %.17g\\n", i, e[i]);
-  for (int k = 0; k < {3 * n}; ++k) printf("J %d %.17g\\n", k, J[k]);
+  /* What Python computes for the same call (nlp_calib, CasADi's interpreter). */
+  const casadi_real e_python[3] = {{{_c_array(e_py)}}};
+  const casadi_real J_python[{3 * n}] = {{{_c_array(J_py)}}};
+  double de = 0.0, dJ = 0.0;
+  printf("window: {example.window}\\n");
+  printf("parameters: {example.params_from}\\n");
+  for (int i = 0; i < 3; ++i) {{
+    printf("e %d %.17g\\n", i, e[i]);
+    de = fmax(de, fabs(e[i] - e_python[i]));
+  }}
+  for (int k = 0; k < {3 * n}; ++k) {{
+    printf("J %d %.17g\\n", k, J[k]);
+    dJ = fmax(dJ, fabs(J[k] - J_python[k]));
+  }}
+  printf("largest difference from Python: e %.3g, J %.3g\\n", de, dJ);
   free(arg); free(res); free(iw); free(w);
   return 0;
 }}
@@ -136,7 +162,7 @@ lib{base}.so: {base}.c {base}.h
 
 
 def generate(
-    fns_by_horizon: list[ProblemFunctions], out_dir: Path, params: np.ndarray, column: np.ndarray, origin: str
+    fns_by_horizon: list[ProblemFunctions], out_dir: Path, example: Example, origin: str
 ) -> list[Path]:
     """Write ``nlp_calib_residual.{c,h}``, ``example.c`` and a Makefile into ``out_dir``."""
     exported = [e for fns in fns_by_horizon for e in export_functions(fns)]
@@ -159,11 +185,11 @@ def generate(
     with_tmp.rmdir()
     last = fns_by_horizon[-1]
     jac = next(e for e in exported if e.horizon == last.spec.horizon and "jacobian" in e.function.name())
-    example = out_dir / "example.c"
-    atomic_write_text(example, example_source(last, jac, params, column, origin))
+    program = out_dir / "example.c"
+    atomic_write_text(program, example_source(last, jac, example, origin))
     makefile = out_dir / "Makefile"
     atomic_write_text(makefile, MAKEFILE.format(base=BASENAME))
-    return [*written, example, makefile]
+    return [*written, program, makefile]
 
 
 def build_for_export(model: KinematicModel, horizon: int, integration: str) -> list[ProblemFunctions]:

@@ -85,8 +85,9 @@ class KinematicModel(Protocol):
     header_aliases: Mapping[str, str]
     #: The encoders (``#joints_max_enc`` names) the model reads, in input order, with their kind.
     encoder_kinds: Mapping[str, EncoderKind]
-    #: Names of the per-interval inputs :meth:`inputs` returns, in row order.
+    #: Names of the per-interval inputs :meth:`inputs` returns, in row order, and their units.
     input_names: tuple[str, ...]
+    input_units: Mapping[str, str]
     #: Kinematic parameters a log without turning cannot determine, and a note on what else.
     turning_params: tuple[str, ...]
     turning_note: str

@@ -101,6 +101,7 @@ class DiffDrive:
         }
     )
     input_names: tuple[str, ...] = ("left_ticks", "right_ticks")
+    input_units: Mapping[str, str] = MappingProxyType({"left_ticks": "ticks", "right_ticks": "ticks"})
     encoder_kinds: Mapping[str, EncoderKind] = MappingProxyType(
         {LEFT_ENCODER: "counter", RIGHT_ENCODER: "counter"}
     )

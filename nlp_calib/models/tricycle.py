@@ -129,6 +129,9 @@ class Tricycle:
     turning_params: tuple[str, ...] = ("axis_length",)
     turning_note = "the split between steering gain and offset"
     input_names: tuple[str, ...] = ("traction_revolutions", "steering_angle")
+    input_units: Mapping[str, str] = MappingProxyType(
+        {"traction_revolutions": "rev", "steering_angle": "rad"}
+    )
     reference: Mapping[str, Reference] = MappingProxyType({"steer_offset": ("absolute", 0.005)})
     headline: tuple[str, ...] = ("k_traction", "axis_length")
     defaults: Mapping[str, float] = MappingProxyType({})

@@ -23,6 +23,9 @@ from nlp_calib.pipeline import CalibrationRun
 
 CALIBRATION_FILE = "calibration.yaml"
 URDF_FILE = "sensor_mount.urdf.xml"
+ROBOT_URDF_FILE = "robot.urdf"
+#: Every file a converged run hands to the robot stack.
+HANDOFF_FILES = (CALIBRATION_FILE, URDF_FILE, ROBOT_URDF_FILE)
 PARENT_FRAME = "base_link"
 
 
@@ -117,8 +120,7 @@ def _comment_text(text: str) -> str:
     return text.replace("--", "- -")  # '--' may not appear inside an XML comment
 
 
-def urdf_joint(run: CalibrationRun, solver: str) -> str:
-    """A URDF ``<joint>`` placing the sensor frame on ``base_link`` with ``solver``'s estimate."""
+def _joint(run: CalibrationRun, solver: str) -> ET.Element:
     p = run.reports[solver].result.param_dict()
     frame = run.log.header.sensor_frame
     joint = ET.Element("joint", {"name": f"{PARENT_FRAME}_to_{frame}", "type": "fixed"})
@@ -129,24 +131,51 @@ def urdf_joint(run: CalibrationRun, solver: str) -> str:
         "origin",
         {"xyz": f"{p['sensor_x']!r} {p['sensor_y']!r} 0", "rpy": f"0 0 {p['sensor_theta']!r}"},
     )
-    ET.indent(joint, space="  ")
-    comment = _comment_text(
+    return joint
+
+
+def _xml(element: ET.Element, comment: str) -> str:
+    ET.indent(element, space="  ")
+    body = ET.tostring(element, encoding="unicode")
+    return f'<?xml version="1.0"?>\n<!--{_comment_text(comment)}-->\n{body}\n'
+
+
+def urdf_joint(run: CalibrationRun, solver: str) -> str:
+    """A URDF ``<joint>`` placing the sensor frame on ``base_link`` with ``solver``'s estimate."""
+    frame = run.log.header.sensor_frame
+    comment = (
         f" Sensor mounting pose calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
         f"solver {solver}. Paste this joint into the robot's <robot> description; the link "
         f"'{frame}' must be declared there. "
     )
-    return f'<?xml version="1.0"?>\n<!--{comment}-->\n{ET.tostring(joint, encoding="unicode")}\n'
+    return _xml(_joint(run, solver), comment)
+
+
+def urdf_robot(run: CalibrationRun, solver: str) -> str:
+    """A complete URDF: a ``<robot>`` with ``base_link``, the sensor's link and the calibrated joint."""
+    frame = run.log.header.sensor_frame
+    robot = ET.Element("robot", {"name": run.scenario.name})
+    ET.SubElement(robot, "link", {"name": PARENT_FRAME})
+    ET.SubElement(robot, "link", {"name": frame})
+    robot.append(_joint(run, solver))
+    comment = (
+        f" The sensor mount calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
+        f"solver {solver}. A complete robot description (base and sensor links, the fixed joint) "
+        f"that URDF tools load as it is; {URDF_FILE} holds the joint alone for pasting. "
+    )
+    return _xml(robot, comment)
 
 
 def write_handoff(run: CalibrationRun, out_dir: Path) -> list[Path]:
-    """Write both hand-off files; with no converged solver, write none and remove stale ones."""
+    """Write the hand-off files; with no converged solver, write none and remove stale ones."""
     doc = calibration_dict(run)
-    cal, urdf = out_dir / CALIBRATION_FILE, out_dir / URDF_FILE
+    cal, urdf, robot = out_dir / CALIBRATION_FILE, out_dir / URDF_FILE, out_dir / ROBOT_URDF_FILE
     if doc is None:
         # A robot stack must never pick up an older calibration next to a failed run's result.
-        cal.unlink(missing_ok=True)
-        urdf.unlink(missing_ok=True)
+        for path in (cal, urdf, robot):
+            path.unlink(missing_ok=True)
         return []
     atomic_write_text(cal, calibration_yaml(doc))
     atomic_write_text(urdf, urdf_joint(run, doc["solver"]))
-    return [cal, urdf]
+    atomic_write_text(robot, urdf_robot(run, doc["solver"]))
+    return [cal, urdf, robot]

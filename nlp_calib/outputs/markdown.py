@@ -3,13 +3,22 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
 from nlp_calib.analysis.metrics import TrajectoryMetrics
 from nlp_calib.core.version import __version__
 from nlp_calib.models import get_model, param_units
-from nlp_calib.outputs.handoff import CALIBRATION_FILE, URDF_FILE, chosen_solver, solver_order
+from nlp_calib.outputs.handoff import (
+    CALIBRATION_FILE,
+    HANDOFF_FILES,
+    ROBOT_URDF_FILE,
+    URDF_FILE,
+    chosen_solver,
+    solver_order,
+)
+from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.pipeline import CalibrationRun
 from nlp_calib.solvers import solver_label
 
@@ -33,9 +42,18 @@ FIGURES: tuple[tuple[str, str, str], ...] = (
     (
         "residuals.png",
         "Residuals",
-        "Histograms of the x, y and θ residual errors at the initial guess and at the estimate; the red "
+        "Histograms of the x, y and θ residual errors at the initial guess and at the estimate, binned "
+        "for the estimate's spread (the initial guess's larger errors fall in the edge bins); the red "
         "lines mark the robust kernel's threshold on each component. Samples beyond them are treated as "
         "outliers.",
+    ),
+    (
+        "residuals_time.png",
+        "Residuals over time",
+        "Each residual component of the written calibration at the time of its window, with the "
+        "kernel's threshold; red points lie beyond it. Shaded spans are the faults found (left out of "
+        "the fit). A fault, a stall or a timing problem shows here as a burst or a drift at one time; "
+        "a good calibration leaves noise centred on zero.",
     ),
     (
         "model_check.png",
@@ -188,6 +206,12 @@ def _solver_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
     return lines
 
 
+def _summary(run: CalibrationRun) -> list[str]:
+    written = [Path(f) for f in HANDOFF_FILES] if chosen_solver(run) is not None else []
+    head, *rest = summary_lines(run, written)
+    return [head, "", *(f"- {line.strip()}" for line in rest if not line.startswith("        "))]
+
+
 def report_markdown(run: CalibrationRun, images: Sequence[str]) -> str:
     """The Markdown page of a run; ``images`` are the figure files written beside it."""
     sc = run.scenario
@@ -203,6 +227,10 @@ def report_markdown(run: CalibrationRun, images: Sequence[str]) -> str:
         f"- residuals: {run.n_residuals} windows of horizon {r.horizon} (stride {r.stride}, "
         f"{r.integration} integration); kernel {sc.robust.kernel}, δ = {sc.robust.delta:g}; "
         f"tracker lag {lag}",
+        "",
+        "## Summary",
+        "",
+        *_summary(run),
         "",
         "## Parameters",
         "",
@@ -235,7 +263,8 @@ def report_markdown(run: CalibrationRun, images: Sequence[str]) -> str:
         out.append("No solver converged, so no hand-off files were written.")
     else:
         out.append(
-            f"[`{CALIBRATION_FILE}`]({CALIBRATION_FILE}) and [`{URDF_FILE}`]({URDF_FILE}) carry "
+            f"[`{CALIBRATION_FILE}`]({CALIBRATION_FILE}), [`{URDF_FILE}`]({URDF_FILE}) and "
+            f"[`{ROBOT_URDF_FILE}`]({ROBOT_URDF_FILE}) carry "
             f"{solver_label(chosen)}'s estimate (the first converged solver in the order "
             f"{', '.join(solvers)})."
         )

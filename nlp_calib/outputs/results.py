@@ -148,6 +148,8 @@ def result_document(run: CalibrationRun) -> dict[str, Any]:
 
 
 VALIDATION_FILE = "validation.json"
+ODOMETRY_CSV = "odometry.csv"
+ODOMETRY_PNG = "odometry.png"
 
 
 def write_validation(run: CalibrationRun, out_dir: Path) -> Path:

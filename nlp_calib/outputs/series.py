@@ -61,6 +61,19 @@ class ResidualSeries:
 
 
 @dataclass(frozen=True)
+class ResidualTimeSeries:
+    """One solver's residual errors ``(3, n)`` at their windows' start times, the kernel's
+    per-component thresholds, faults as ``(t_first, t_last, kind)`` and the hold-out's start time."""
+
+    solver: str
+    time_s: np.ndarray
+    errors: np.ndarray
+    thresholds: np.ndarray
+    faults: tuple[tuple[float, float, str], ...]
+    holdout_start_s: float | None
+
+
+@dataclass(frozen=True)
 class ModelCheckSeries:
     """The log's vendor odometry against our base-link model with the header's parameters."""
 
@@ -143,6 +156,29 @@ def residual_series(calib: Calibration, run: CalibrationRun) -> ResidualSeries:
         kernel=calib.scenario.robust.kernel,
         delta=ev.delta,
         solvers_agree=agree,
+    )
+
+
+def residual_time_series(calib: Calibration, run: CalibrationRun, solver: str) -> ResidualTimeSeries:
+    """``solver``'s residuals over the time of the fitted windows, with the faults' time spans."""
+    ev, data = calib.evaluator, calib.data
+    e, _, _ = ev.robust_terms(run.reports[solver].result.x)
+    log = calib.aligned
+    faults: tuple[tuple[float, float, str], ...] = ()
+    if run.findings is not None:
+        last = log.n_records - 1
+        faults = tuple(
+            (float(log.time_s[f.first]), float(log.time_s[min(f.last + 1, last)]), f.kind)
+            for f in run.findings.report.faults
+        )
+    holdout = float(log.time_s[run.fit[1]]) if run.fit[1] < run.used[1] - 1 else None
+    return ResidualTimeSeries(
+        solver=solver,
+        time_s=np.asarray(data.log.time_s)[data.starts],
+        errors=np.array(e),
+        thresholds=ev.delta / np.sqrt(np.asarray(ev.omega, dtype=float)),
+        faults=faults,
+        holdout_start_s=holdout,
     )
 
 

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from collections import Counter
-
 import numpy as np
 
+from nlp_calib.analysis.faults import count_kinds
 from nlp_calib.analysis.metrics import TrajectoryMetrics
 from nlp_calib.logs.checks import drop_summary
-from nlp_calib.models import get_model
+from nlp_calib.models import get_model, param_units
+from nlp_calib.outputs.summary import verdict
 from nlp_calib.pipeline import CalibrationRun
 
 
@@ -79,6 +79,10 @@ def direction_lines(run: CalibrationRun) -> list[str]:
     return [f"direction: fits on {counts} driving {verdict}"]
 
 
+#: Faults listed one per line; the rest are counted.
+SHOWN_FAULTS = 6
+
+
 def fault_lines(run: CalibrationRun) -> list[str]:
     """What the fault check found and what was done about it, one line each."""
     if run.findings is None:
@@ -89,17 +93,49 @@ def fault_lines(run: CalibrationRun) -> list[str]:
         return [f"faults: not checked: {rep.unchecked}"]
     if not rep.faults:
         return [f"faults: none found ({stale} stale counter readings that catch up: harmless)"]
-    kinds = Counter(f.kind for f in rep.faults)
-    what = ", ".join(f"{n} {k}" for k, n in kinds.items())
+    what = count_kinds(rep.faults)
     done = {
         "exclude": f"{run.dropped_faulty} residual windows crossing them left out",
         "repair": "counter faults repaired, windows at tracker jumps left out",
         "keep": "kept in the fit (faults.handling: keep)",
     }[handling]
     lines = [f"faults: {len(rep.faults)} found ({what}); {done}; {stale} stale readings (harmless)"]
-    for f in rep.faults:
+    # Encoder faults first: they bias a calibration; tracker jumps are many and each one harmless.
+    ordered = sorted(rep.faults, key=lambda f: (f.kind == "tracker_jump", f.record))
+    for f in ordered[:SHOWN_FAULTS]:
         lines.append(f"  record {f.record} (line {f.line}, t = {f.time_s:.2f} s) {f.kind}: {f.evidence}")
+    if len(ordered) > SHOWN_FAULTS:
+        rest = ordered[SHOWN_FAULTS:]
+        lines.append(
+            f"  ... {len(rest)} more ({count_kinds(rest)}): every one is in result.json under faults.found"
+        )
     lines += [f"  repaired: {r}" for r in run.findings.repairs]
+    return lines
+
+
+def error_stats_lines(run: CalibrationRun, solver: str) -> list[str]:
+    """``solver``'s trajectory errors with the statistics evo prints, beside the uncalibrated ones."""
+    m, b = run.reports[solver].metrics, run.baseline
+    rows = [
+        ("segment ATE [m]", m.segment_ate, b.segment_ate),
+        ("segment ATE aligned [m]", m.segment_ate_aligned, b.segment_ate_aligned),
+        *((f"RPE over {d:g} m [m]", s, b.rpe_distance[d]) for d, s in m.rpe_distance.items()),
+        ("full-run ATE [m]", m.ate, b.ate),
+    ]
+    head = f"{'':<26}" + "".join(f"{h:>10}" for h in ("rmse", "mean", "median", "std", "min", "max", "n"))
+    lines = [
+        f"trajectory errors of {solver} (statistics as evo reports them; bad tracker poses left out):",
+        head,
+    ]
+    for label, stats, base in rows:
+        cells = "".join(
+            f"{v:>10.4g}" for v in (stats.rmse, stats.mean, stats.median, stats.std, stats.min, stats.max)
+        )
+        lines.append(f"{label:<26}{cells}{stats.n:>10d}   (uncalibrated rmse {base.rmse:.4g})")
+    per_m = [f"RPE over {d:g} m: {100 * s.mean / d:.2g} % of the distance" for d, s in m.rpe_distance.items()]
+    if m.distance_m > 0:
+        per_m.append(f"full-run final error {100 * m.ate_final / m.distance_m:.2g} % of {m.distance_m:.1f} m")
+    lines.append("per metre driven: " + "; ".join(per_m))
     return lines
 
 
@@ -130,7 +166,8 @@ def run_table(run: CalibrationRun) -> str:
     if run.dropped_stationary:
         lines.append(f"dropped {run.dropped_stationary} windows without motion")
     lines.append("")
-    lines.append(_row("parameter", [f"{'initial':>12}"] + [f"{s:>{w}}" for s in solvers]))
+    units = param_units(get_model(sc.model))
+    lines.append(_row("parameter", [f"{'initial':>12}"] + [f"{s:>{w}}" for s in solvers] + ["  unit"]))
     for n in names:
         cells = [_fmt(run.initial[n])]
         for s in solvers:
@@ -138,7 +175,7 @@ def run_table(run: CalibrationRun) -> str:
             v = rep.result.param_dict()[n]
             sd = run.std(s)[n]
             cells.append(f"{_fmt(v, 12)} ± {sd:<9.2g}")
-        lines.append(_row(n, cells))
+        lines.append(_row(n, [*cells, f"  {units[n]}"]))
     lines += uncertainty_lines(run)
     if len(solvers) == 2:
         a, b = (run.reports[s].result for s in solvers)
@@ -173,6 +210,9 @@ def run_table(run: CalibrationRun) -> str:
             cells = [_fmt(value)]
             cells += [_fmt(m.figures()[i][1] if m is not None else float("nan"), w) for m in per_solver]
             lines.append(_row(("hold-out " if holdout else "") + label, cells))
+    chosen = next((s for s in solvers if run.reports[s].result.converged), None)
+    if chosen is not None:
+        lines += ["", *error_stats_lines(run, chosen)]
     faults = fault_lines(run)
     if faults:
         lines += ["", *faults]
@@ -228,25 +268,28 @@ def correlation_table(run: CalibrationRun, solver: str) -> str:
 
 
 def summary_table(runs: list[CalibrationRun]) -> str:
-    """One line per scenario and solver: residual form, each model's headline parameters and
-    trajectory errors."""
+    """One line per scenario and solver: residual form, each model's headline parameters, the
+    fault-robust trajectory errors and the scenario's verdict."""
     headline: list[str] = []
     for run in runs:
         headline += [n for n in get_model(run.scenario.model).headline if n not in headline]
     head = (
         f"{'scenario':<22}{'solver':<14}{'H':>4}{'integr.':>8}"
         + "".join(f"{n[:11]:>12}" for n in headline)
-        + f"{'ATE [m]':>10}{'hold-out':>10}{'conv':>6}"
+        + f"{'segATE [m]':>11}{'RPE 5 m':>9}{'hold-out':>10}{'conv':>6}  verdict"
     )
     lines = ["summary", head, "-" * len(head)]
     for run in runs:
         r = run.scenario.residual
+        level = verdict(run).level
         for name, rep in run.reports.items():
             p = rep.result.param_dict()
-            ho = f"{rep.holdout.ate_mean:>10.3f}" if rep.holdout is not None else f"{'-':>10}"
+            m = rep.metrics
+            ho = f"{rep.holdout.segment_ate.mean:>10.3f}" if rep.holdout is not None else f"{'-':>10}"
             values = "".join(f"{p[n]:>12.6g}" if n in p else f"{'-':>12}" for n in headline)
             lines.append(
                 f"{run.scenario.name[:21]:<22}{name:<14}{r.horizon:>4}{r.integration:>8}{values}"
-                f"{rep.metrics.ate_mean:>10.3f}{ho}{'yes' if rep.result.converged else 'NO':>6}"
+                f"{m.segment_ate.mean:>11.3f}{m.rpe_distance[5.0].mean:>9.3f}{ho}"
+                f"{'yes' if rep.result.converged else 'NO':>6}  {level}"
             )
     return "\n".join(lines)

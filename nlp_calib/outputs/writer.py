@@ -11,6 +11,7 @@ from pathlib import Path
 
 from nlp_calib.core.files import atomic_write_bytes, atomic_write_text
 from nlp_calib.outputs import plots, series
+from nlp_calib.outputs.handoff import chosen_solver
 from nlp_calib.outputs.markdown import report_markdown
 from nlp_calib.outputs.trajectories import write_trajectories
 from nlp_calib.pipeline import Calibration, CalibrationRun
@@ -18,6 +19,7 @@ from nlp_calib.pipeline import Calibration, CalibrationRun
 TRAJECTORY_FILE = "trajectory.png"
 CONVERGENCE_FILE = "convergence.png"
 RESIDUALS_FILE = "residuals.png"
+RESIDUALS_TIME_FILE = "residuals_time.png"
 MODEL_CHECK_FILE = "model_check.png"
 REPORT_FILE = "report.md"
 
@@ -33,6 +35,7 @@ def _titles(calib: Calibration, run: CalibrationRun) -> dict[str, str]:
         f"{sc.robust.kernel} δ = {sc.robust.delta:g})",
         RESIDUALS_FILE: f"{sc.name}: residual errors e = t2v(Z⁻¹·h) of the {run.n_residuals} windows "
         f"(horizon {r.horizon}), {fit}",
+        RESIDUALS_TIME_FILE: f"{sc.name}: residual errors over time, horizon {r.horizon}, {fit}",
         MODEL_CHECK_FILE: f"{sc.name}: kinematic model check on all {calib.log.n_records} records "
         f"of {Path(calib.log.path).name}",
     }
@@ -41,6 +44,7 @@ def _titles(calib: Calibration, run: CalibrationRun) -> dict[str, str]:
 def write_report(calib: Calibration, run: CalibrationRun, out_dir: Path) -> list[Path]:
     """Draw the four figures and ``report.md`` into ``out_dir``; returns the paths written."""
     titles = _titles(calib, run)
+    solver = chosen_solver(run) or next(iter(run.reports))
     figures: dict[str, Callable[[], bytes]] = {
         TRAJECTORY_FILE: lambda: plots.trajectory_png(
             series.trajectory_series(calib, run), titles[TRAJECTORY_FILE]
@@ -50,6 +54,9 @@ def write_report(calib: Calibration, run: CalibrationRun, out_dir: Path) -> list
         ),
         RESIDUALS_FILE: lambda: plots.residuals_png(
             series.residual_series(calib, run), titles[RESIDUALS_FILE]
+        ),
+        RESIDUALS_TIME_FILE: lambda: plots.residuals_time_png(
+            series.residual_time_series(calib, run, solver), titles[RESIDUALS_TIME_FILE]
         ),
         MODEL_CHECK_FILE: lambda: plots.model_check_png(
             series.model_check_series(calib), titles[MODEL_CHECK_FILE]

@@ -2,24 +2,28 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from nlp_calib.codegen.export import build_for_export, generate
+from nlp_calib.codegen.export import Example, build_for_export, generate
+from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.pipeline import steps
+from nlp_calib.pipeline.calibration import Calibration
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import build_residual_data
 
 
-def write_c_export(sc: Scenario, out_dir: Path) -> list[Path]:
+def write_c_export(sc: Scenario, out_dir: Path) -> tuple[list[Path], Example]:
     """Write the residual and its Jacobian as C (H = 1 and the scenario's horizon) into ``out_dir``.
 
-    The example program evaluates the log window with the most motion at the initial guess.
+    The example program evaluates the log window with the most motion at the scenario's calibrated
+    parameters (its first solver's; the initial guess if that does not converge) and compares the
+    result with Python's. Returns the files and what the example evaluates.
     """
     model, log = steps.load(sc)
     steps.select(sc, log)  # the horizon must fit the log before anything is built
-    initial = steps.initial_parameters(sc, model, log)
     with steps.scenario_key(sc, "residual"):
         problems = build_for_export(model, sc.residual.horizon, sc.residual.integration)
     last = problems[-1]
@@ -27,6 +31,24 @@ def write_c_export(sc: Scenario, out_dir: Path) -> list[Path]:
     windows = build_residual_data(last, log, sc.residual)
     # The example evaluates the window with the most motion: a standing robot's Jacobian is 0.
     busiest = int(np.argmax(np.abs(windows.columns[: last.n_inputs * H]).sum(axis=0)))
-    params = np.array([initial.get(n, 0.0) for n in last.names])
+    first = int(windows.starts[busiest])
+    lines = log.line_numbers[[first, first + H]]
+    window = (
+        f"records {first}-{first + H} (lines {lines[0]}-{lines[1]}) of {sc.dataset.name}, the busiest window"
+    )
+    calib = Calibration(sc, log)
+    solver = sc.solvers[0]
+    result = calib.solve(solver)
+    if result.converged:
+        values, params_from = result.param_dict(), f"calibrated by {solver}"
+    else:
+        warnings.warn(
+            f"{solver} did not converge ({result.reason}): example.c evaluates the initial guess",
+            NlpCalibWarning,
+            stacklevel=2,
+        )
+        values, params_from = dict(calib.initial), "the initial guess"
+    params = np.array([values[n] for n in last.names])
     origin = f"scenario {sc.name} (model {sc.model}, horizon {H}, {sc.residual.integration})"
-    return generate(problems, out_dir, params, windows.columns[:, busiest], origin)
+    example = Example(params, params_from, windows.columns[:, busiest], window)
+    return generate(problems, out_dir, example, origin), example

@@ -7,44 +7,27 @@ that imports this module is left alone (``matplotlib.use`` would switch it).
 
 from __future__ import annotations
 
-import io
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, MaxNLocator, NullLocator
 
 from nlp_calib.core.numeric import wrap_angle
+from nlp_calib.outputs.plots.style import STYLES, figure_png
 from nlp_calib.outputs.series import (
     ConvergenceSeries,
     ModelCheckSeries,
-    ResidualSeries,
     Track,
     TrajectorySeries,
 )
 from nlp_calib.solvers import IterationRecord, solver_label
 
-DPI = 110
-#: Line styles per track, in drawing order: uncalibrated, first solver, second solver, ...
-_STYLES: tuple[Mapping[str, Any], ...] = (
-    {"color": "tab:orange", "linestyle": "-.", "linewidth": 1.2},
-    {"color": "tab:blue", "linestyle": "-", "linewidth": 1.6},
-    {"color": "tab:green", "linestyle": "--", "linewidth": 1.4},
-    {"color": "tab:purple", "linestyle": ":", "linewidth": 1.4},
-)
+_STYLES = STYLES
 _TRACKER: Mapping[str, Any] = {"color": "0.15", "linestyle": "-", "linewidth": 3.0, "alpha": 0.35}
 _PLAIN = FuncFormatter(lambda v, _: f"{v:g}")
-
-
-def figure_png(fig: Figure) -> bytes:
-    """The figure rendered to PNG bytes (no timestamp, so files are reproducible)."""
-    FigureCanvasAgg(fig)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, metadata={"Software": None})
-    return buf.getvalue()
 
 
 def _plain_log_ticks(ax: Axes) -> None:
@@ -296,77 +279,6 @@ def convergence_png(series: ConvergenceSeries, title: str) -> bytes:
 
 
 # --- residuals -------------------------------------------------------------------------------
-
-
-def residuals_png(series: ResidualSeries, title: str) -> bytes:
-    """Histograms of the x, y, θ residual errors before and after calibration, kernel threshold marked."""
-    fig = Figure(figsize=(15, 5.6), layout="constrained")
-    axes = fig.subplots(1, 3)
-    solvers = list(series.after)
-    shown = solvers[:1] if series.solvers_agree else solvers
-    n = series.before.shape[1]
-    what = "kernel threshold" if series.kernel != "none" else "inlier threshold"
-    for i, (ax, comp, unit) in enumerate(zip(axes, ("x", "y", "θ"), ("m", "m", "rad"))):
-        thr = float(series.thresholds[i])
-        # A failed solve may leave NaN residuals; histograms take the finite ones.
-        data = [d[np.isfinite(d)] for d in [series.before[i]] + [series.after[s][i] for s in shown]]
-        # Show the threshold and the bulk of both distributions; values beyond fall in the edge bins.
-        R = max(1.25 * thr, *(float(np.quantile(np.abs(d), 0.995)) for d in data if d.size))
-        bins = np.linspace(-R, R, 101)
-        clip = R * (1.0 - 1e-9)
-        ax.hist(
-            np.clip(data[0], -clip, clip),
-            bins=bins,
-            histtype="stepfilled",
-            color="tab:orange",
-            alpha=0.35,
-            label=f"before: initial guess ({series.inliers_before}/{n} inliers)",
-        )
-        for s, d, style in zip(shown, data[1:], _STYLES[1:]):
-            same = ""
-            if series.solvers_agree and len(solvers) > 1:
-                same = f"; {', '.join(solver_label(o) for o in solvers[1:])} identical"
-            ax.hist(
-                np.clip(d, -clip, clip),
-                bins=bins,
-                histtype="step",
-                linewidth=1.8,
-                color=style["color"],
-                linestyle=style["linestyle"],
-                label=f"after: {solver_label(s)} ({series.inliers_after[s]}/{n} inliers{same})",
-            )
-        for sign in (-1.0, 1.0):
-            ax.axvline(
-                sign * thr,
-                color="red",
-                linestyle=":",
-                linewidth=1.6,
-                label=f"{what} ±δ/√Ω_ii (this component alone gives s = δ²)" if sign > 0 else None,
-            )
-        beyond = [int(np.sum(np.abs(d) > R)) for d in data]
-        if any(beyond):
-            ax.text(
-                0.02,
-                0.97,
-                f"edge bins include {beyond[0]} before / {sum(beyond[1:])} after\nbeyond ±{R:.3g} {unit}",
-                transform=ax.transAxes,
-                va="top",
-                fontsize=8,
-            )
-        after_out = int(np.sum(np.abs(data[1]) > thr)) if len(data) > 1 else 0
-        ax.set_yscale("log")
-        ax.set_ylim(bottom=0.7)
-        ax.set_xlabel(f"{comp} error [{unit}]")
-        ax.set_ylabel("residuals per bin (log scale)")
-        ax.set_title(
-            f"{comp}: threshold ±{thr:.3g} {unit}; {solver_label(shown[0])}: {after_out} beyond it",
-            fontsize=10,
-        )
-        ax.grid(True, which="major", alpha=0.3)
-    handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=9)
-    fig.suptitle(title)
-    return figure_png(fig)
 
 
 # --- model check -----------------------------------------------------------------------------

@@ -1,0 +1,210 @@
+"""What a newcomer reads: the closing verdict, evo-style figures, help, --data, odometry, plots."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import SCENARIOS, assert_close, cli, write_sim
+
+from nlp_calib.analysis.metrics import path_distance, trajectory_metrics
+from nlp_calib.cli.parser import build_parser
+from nlp_calib.models import get_model
+from nlp_calib.outputs.plots.residuals import BINS, _calibrated_range
+from nlp_calib.outputs.series import residual_series, residual_time_series
+from nlp_calib.outputs.summary import CAVEATS, GOOD, UNDETERMINED, verdict
+from nlp_calib.pipeline import Calibration, Scenario
+from nlp_calib.pipeline.scenario import FaultOptions, ValidationOptions
+from nlp_calib.problem import ProblemSpec, build
+
+SUBCOMMANDS = ("run", "compare", "validate", "odometry", "codegen", "simulate")
+
+
+def _scenario(tmp_path: Path, log: Path, extra: str = "") -> Path:
+    path = tmp_path / "sc.yaml"
+    path.write_text(f"name: sc\ndataset: {log}\nvalidation: {{blocks: 0}}\n{extra}")
+    return path
+
+
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, dict, Path]:
+    out = tmp_path_factory.mktemp("demo") / "out"
+    proc = cli("compare", str(SCENARIOS / "demo.yaml"), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout, json.loads((out / "result.json").read_text()), out
+
+
+def test_the_closing_summary_names_the_verdict_the_distance_and_the_files(
+    demo_run: tuple[str, dict, Path],
+) -> None:
+    stdout, doc, out = demo_run
+    summary = stdout[stdout.index("summary of demo") :]
+    distance = doc["solvers"]["gauss_newton"]["metrics"]["distance_m"]
+    assert f"the sensor travelled {distance:.1f} m" in summary
+    assert "verdict: GOOD:" in summary
+    assert "gauss_newton: converged" in summary and "the result written" in summary
+    for name in ("calibration.yaml", "sensor_mount.urdf.xml"):
+        assert re.search(rf"next: .*{name}|\n\s+{name}", summary), name
+        assert (out / name).is_file()
+    assert "nlp-calib codegen" in summary
+    # The figures the summary quotes are result.json's.
+    seg = doc["solvers"]["gauss_newton"]["metrics"]["segment_ate"]["mean"]
+    assert f"segment ATE {seg:.3g} m" in summary
+
+
+def test_no_output_prints_a_raw_python_structure(demo_run: tuple[str, dict, Path], tmp_path: Path) -> None:
+    odo = cli("odometry", str(SCENARIOS / "demo.yaml"), "--out", str(tmp_path / "odo"))
+    assert odo.returncode == 0, odo.stderr
+    for text in (demo_run[0], odo.stdout):
+        assert not re.search(r"\{'|\['|np\.float", text), text
+
+
+def test_the_distance_is_the_tracker_path_without_its_bad_poses(demo_run: tuple[str, dict, Path]) -> None:
+    _, doc, _ = demo_run
+    from nlp_calib.models import load_log
+
+    log = load_log(SCENARIOS / "data" / "demo_tricycle.txt", get_model("tricycle"))
+    bad = {f["record"] for f in doc["faults"]["found"] if f["kind"] == "tracker_jump"}
+    keep = np.array([i not in bad for i in range(log.n_records)])
+    expected = float(path_distance(log.T_world_sensor[keep])[-1])
+    assert doc["solvers"]["gauss_newton"]["metrics"]["distance_m"] == pytest.approx(expected, rel=1e-12)
+
+
+def test_full_run_figures_leave_out_a_bad_tracker_pose() -> None:
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=1))
+    p = np.array([0.5, 0.01, 1.5, 0.0, 1.0, 0.0, 0.0])
+    n = 60
+    inputs = np.vstack([np.full(n - 1, 1.0), np.full(n - 1, 0.1)])
+    from nlp_calib.analysis.metrics import integrate
+
+    ref = integrate(fns, p, inputs, np.zeros(3))
+    clean = trajectory_metrics(fns, p, inputs, ref)
+    ref_bad = ref.copy()
+    ref_bad[30, :2] += 5.0  # a gross tracker outlier
+    bad = np.zeros(n, dtype=bool)
+    bad[30] = True
+    flagged = trajectory_metrics(fns, p, inputs, ref_bad, bad_records=bad)
+    assert clean.ate.max == pytest.approx(0.0, abs=1e-12)
+    assert flagged.ate.max == pytest.approx(0.0, abs=1e-12) and flagged.ate.n == n - 1
+    assert flagged.distance_m == pytest.approx(float(path_distance(ref[~bad])[-1]), rel=1e-12)
+    assert trajectory_metrics(fns, p, inputs, ref_bad).ate.max == pytest.approx(np.hypot(5.0, 5.0), rel=1e-9)
+
+
+def test_verdicts_good_with_caveats_and_not_determined(tmp_path: Path, demo: Scenario) -> None:
+    run = Calibration(dataclasses.replace(demo, validation=ValidationOptions(blocks=0))).run(
+        ("gauss_newton",)
+    )
+    assert verdict(run).level == GOOD, verdict(run)
+
+    short = write_sim(tmp_path, "short.txt", records=700, seed=4)
+    v = verdict(Calibration.setup(_load(_scenario(tmp_path, short))).run(("gauss_newton",)))
+    assert v.level == CAVEATS and any("weakly observable" in r for r in v.reasons), v
+
+    faulty = write_sim(tmp_path, "faulty.txt", records=900, seed=5, counter_faults=3)
+    sc = dataclasses.replace(_load(_scenario(tmp_path, faulty)), faults=FaultOptions(handling="keep"))
+    v = verdict(Calibration.setup(sc).run(("gauss_newton",)))
+    assert v.level == CAVEATS and any("kept in the fit" in r for r in v.reasons), v
+
+    straight = write_sim(tmp_path, "straight.txt", records=300, seed=5, trajectory="straight")
+    v = verdict(Calibration.setup(_load(_scenario(tmp_path, straight))).run(("gauss_newton",)))
+    assert v.level == UNDETERMINED and any("not observable" in r for r in v.reasons), v
+
+
+def _load(path: Path) -> Scenario:
+    from nlp_calib.pipeline import load_scenario
+
+    return load_scenario(path)
+
+
+def test_data_with_scenarios_on_different_logs_is_refused(tmp_path: Path) -> None:
+    proc = cli(
+        "run",
+        str(SCENARIOS / "demo.yaml"),
+        str(SCENARIOS / "diff_drive_demo.yaml"),
+        "--data",
+        str(tmp_path / "x.txt"),
+        "--out",
+        str(tmp_path / "o"),
+    )
+    assert proc.returncode == 2
+    assert "would replace different logs" in proc.stderr and "NAME=PATH" in proc.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_data_name_equals_path_replaces_one_scenarios_log(tmp_path: Path) -> None:
+    other = write_sim(tmp_path, "other.txt", records=400, seed=8)
+    a = tmp_path / "a.yaml"
+    a.write_text(f"name: a\ndataset: {SCENARIOS / 'data' / 'demo_tricycle.txt'}\nvalidation: {{blocks: 0}}\n")
+    b = tmp_path / "b.yaml"
+    b.write_text(f"name: b\ndataset: {SCENARIOS / 'data' / 'demo_tricycle.txt'}\nvalidation: {{blocks: 0}}\n")
+    out = tmp_path / "o"
+    proc = cli("run", str(a), str(b), "--data", f"b={other}", "--out", str(out), "--solver", "gauss_newton")
+    assert proc.returncode == 0, proc.stderr
+    used = {n: json.loads((out / n / "result.json").read_text())["dataset"]["path"] for n in ("a", "b")}
+    assert used["a"].endswith("demo_tricycle.txt") and used["b"] == str(other)
+
+
+@pytest.mark.parametrize("command", SUBCOMMANDS)
+def test_every_help_has_an_example_the_exit_codes_and_text_for_each_option(command: str) -> None:
+    text = cli(command, "--help").stdout
+    assert "example" in text and f"nlp-calib {command}" in text
+    assert "exit codes: 0 success" in text
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    undocumented = [a.dest for a in sub.choices[command]._actions if not a.help]
+    assert undocumented == [], undocumented
+
+
+def test_odometry_writes_what_run_writes_with_units(tmp_path: Path) -> None:
+    out = tmp_path / "odo"
+    proc = cli("odometry", str(SCENARIOS / "demo.yaml"), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    for name in ("result.json", "calibration.yaml", "sensor_mount.urdf.xml", "odometry.csv"):
+        assert (out / name).is_file(), name
+    assert re.search(r"k_traction .* m per t_max ticks", proc.stdout)
+    assert "steering_angle" in proc.stdout and " rad" in proc.stdout and "verdict:" in proc.stdout
+
+
+def test_histograms_resolve_the_calibrated_spread(small_demo: Scenario) -> None:
+    calib = Calibration(small_demo)
+    run = calib.run(("gauss_newton",))
+    series = residual_series(calib, run)
+    for i in range(3):
+        after = series.after["gauss_newton"][i]
+        width = 2 * _calibrated_range([after], float(series.thresholds[i])) / (BINS - 1)
+        assert np.std(after) / width > 8  # the calibrated peak spans many bins, not five
+
+
+def test_residuals_over_time_mark_the_faults(tmp_path: Path) -> None:
+    log = write_sim(tmp_path, "faults.txt", records=1200, seed=6, counter_faults=3)
+    sc = dataclasses.replace(_load(_scenario(tmp_path, log)), validation=ValidationOptions(blocks=0))
+    calib = Calibration(sc)
+    run = calib.run(("gauss_newton",))
+    series = residual_time_series(calib, run, "gauss_newton")
+    assert series.errors.shape == (3, calib.data.n_residuals) == (3, series.time_s.size)
+    assert np.all(np.diff(series.time_s) > 0)
+    found = run.findings.report.faults  # type: ignore[union-attr]
+    assert len(series.faults) == len(found) >= 3
+    for (t0, t1, kind), f in zip(series.faults, found):
+        assert kind == f.kind and t0 <= f.time_s <= t1 + 1e-9
+        # No window crosses a fault left out of the fit.
+        assert not np.any((series.time_s > t0) & (series.time_s < t1))
+
+
+@pytest.mark.slow
+def test_codegen_example_evaluates_the_calibrated_parameters(tmp_path: Path, demo: Scenario) -> None:
+    out = tmp_path / "c"
+    proc = cli("codegen", str(SCENARIOS / "demo.yaml"), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert "calibrated by gauss_newton" in proc.stdout and "records " in proc.stdout
+    src = (out / "example.c").read_text()
+    m = re.search(r"params\[\d+\] = \{([^}]*)\}", src)
+    assert m
+    params = np.array([float(v) for v in m.group(1).split(",")])
+    expected = Calibration(demo).solve(demo.solvers[0]).params
+    assert_close(params, expected, rtol=1e-12)
+    assert re.search(r"window: records \d+-\d+ \(lines \d+-\d+\) of demo_tricycle.txt", src)
