@@ -246,9 +246,7 @@ class Calibration:
                 bad_records=bad_r,
             )
 
-        return validation.cross_validate(
-            self.binder, self.aligned, self.fit, x, k, self.canonical_params, score
-        )
+        return validation.cross_validate(self.binder, self.data, self.fit, x, k, self.canonical_params, score)
 
     def direction_check(self, x: np.ndarray, k: int = 10) -> DirectionCheck | None:
         """Forward-only and reverse-only fits from ``x``, compared in units of their own σ."""
@@ -259,7 +257,7 @@ class Calibration:
             return self.model.undetermined(inputs[:, part])
 
         return validation.direction_check(
-            self.binder, self.aligned, self.fit, x, direction, undetermined, k, self.canonical_params
+            self.binder, self.data, self.fit, x, direction, undetermined, k, self.canonical_params
         )
 
     def odometry(self, params: np.ndarray) -> OdometryTrack:

@@ -292,19 +292,22 @@ class Binder:
                 f"only {data.n_residuals} residuals in records [{start}, {stop}) for "
                 f"{self.fns.n_free} parameters; widen 'samples' or shorten the horizon{at_faults}"
             )
+        return data, self.evaluate(data, evaluator)
+
+    def evaluate(self, data: ResidualData, evaluator: ProblemEvaluator | None = None) -> ProblemEvaluator:
+        """An evaluator on the windows ``data`` (``evaluator`` re-bound, when given)."""
         if evaluator is not None:
             evaluator.bind(data)
-            return data, evaluator
-        evaluator = ProblemEvaluator(
+            return evaluator
+        return ProblemEvaluator(
             self.fns,
             data,
             x_fixed=self.x_fixed,
-            omega=np.array(sc.information.omega()),
-            delta=sc.robust.delta,
+            omega=np.array(self.scenario.information.omega()),
+            delta=self.scenario.robust.delta,
             priors=self.priors,
             backend=self.backend,
         )
-        return data, evaluator
 
     def inputs(self, log: Log, start: int, stop: int) -> np.ndarray:
         """The interval inputs of records ``start:stop`` of ``log`` (what :meth:`bind` binds)."""
