@@ -30,9 +30,11 @@ from nlp_calib.core import interrupts
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import canonical
+from nlp_calib.models.base import KinematicModel
 from nlp_calib.pipeline import align, steps, validation
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.solvers import Solver, SolverResult, get_solver
+from nlp_calib.problem import ProblemFunctions
+from nlp_calib.solvers import ProblemEvaluator, Solver, SolverResult, get_solver
 
 
 @dataclass(frozen=True)
@@ -87,7 +89,46 @@ class CalibrationRun:
         return self.crossval.std_dict()
 
 
-class Calibration:
+class Solving:
+    """Solving and the canonical form, for a set-up object with ``scenario``, ``model``, ``fns``,
+    ``start`` and ``evaluator`` (one log or several)."""
+
+    scenario: Scenario
+    model: KinematicModel
+    fns: ProblemFunctions
+    start: steps.StartingPoint
+    evaluator: ProblemEvaluator
+    _solvers: dict[str, Solver]
+
+    def solver(self, name: str) -> Solver:
+        """The solver ``name`` set up on this calibration's evaluator (once)."""
+        if name not in self._solvers:
+            with steps.scenario_key(self.scenario, name):
+                self._solvers[name] = get_solver(name)(self.evaluator, self.scenario.options_for(name))
+        return self._solvers[name]
+
+    def solve(self, solver: str) -> SolverResult:
+        """Run one solver from the initial guess; the result is in the model's canonical form."""
+        result = self.solver(solver).solve(self.start.x0, self.start.lower, self.start.upper)
+        interrupts.check()  # IPOPT catches the signal that stops it and returns as if it had failed
+        steps.refuse_rejected_options(self.scenario, result)
+        return self._canonical(result)
+
+    def _canonical(self, result: SolverResult) -> SolverResult:
+        """``result`` mapped onto the model's canonical form (same cost: an exact symmetry)."""
+        params = self.canonical_params(result.params)
+        if np.array_equal(params, result.params):
+            return result
+        x = params[[self.fns.names.index(n) for n in self.fns.free]]
+        return dataclasses.replace(result, params=params, x=x)
+
+    def canonical_params(self, params: np.ndarray) -> np.ndarray:
+        """The full parameter vector ``params`` in the model's canonical form."""
+        canon = canonical(self.model, dict(zip(self.fns.names, map(float, params))), self.fns.fixed)
+        return np.array([canon[n] for n in self.fns.names])
+
+
+class Calibration(Solving):
     """A scenario ready to solve: log, Functions, data and evaluator built once.
 
     ``log`` is the log as read; ``aligned`` the same records with the encoders re-sampled on the
@@ -173,33 +214,6 @@ class Calibration:
     def x0(self) -> np.ndarray:
         """The starting values of the free parameters."""
         return self.start.x0
-
-    def solver(self, name: str) -> Solver:
-        """The solver ``name`` set up on this calibration's evaluator (once)."""
-        if name not in self._solvers:
-            with steps.scenario_key(self.scenario, name):
-                self._solvers[name] = get_solver(name)(self.evaluator, self.scenario.options_for(name))
-        return self._solvers[name]
-
-    def solve(self, solver: str) -> SolverResult:
-        """Run one solver from the initial guess; the result is in the model's canonical form."""
-        result = self.solver(solver).solve(self.start.x0, self.start.lower, self.start.upper)
-        interrupts.check()  # IPOPT catches the signal that stops it and returns as if it had failed
-        steps.refuse_rejected_options(self.scenario, result)
-        return self._canonical(result)
-
-    def _canonical(self, result: SolverResult) -> SolverResult:
-        """``result`` mapped onto the model's canonical form (same cost: an exact symmetry)."""
-        params = self.canonical_params(result.params)
-        if np.array_equal(params, result.params):
-            return result
-        x = params[[self.fns.names.index(n) for n in self.fns.free]]
-        return dataclasses.replace(result, params=params, x=x)
-
-    def canonical_params(self, params: np.ndarray) -> np.ndarray:
-        """The full parameter vector ``params`` in the model's canonical form."""
-        canon = canonical(self.model, dict(zip(self.fns.names, map(float, params))), self.fns.fixed)
-        return np.array([canon[n] for n in self.fns.names])
 
     def score(self, params: np.ndarray) -> tuple[TrajectoryMetrics, TrajectoryMetrics | None]:
         """Full-range and hold-out trajectory metrics of ``params``."""

@@ -100,6 +100,16 @@ class Prior:
 
 
 @dataclass(frozen=True)
+class LogEntry:
+    """One log of a calibration from several (``datasets``): its path, and its own ``samples`` and
+    ``alignment`` where they differ from the scenario's."""
+
+    path: Path
+    samples: SampleSelection | None = None
+    alignment: AlignmentOptions | None = None
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A calibration run: data, model, residual form, kernel, solvers and their options."""
 
@@ -125,10 +135,28 @@ class Scenario:
     strict: bool = True
     backend: str = "compiled"
     threads: int = 1
+    #: Several logs calibrated together (``dataset`` is then the first of them).
+    datasets: tuple[LogEntry, ...] = ()
 
     def with_dataset(self, path: str | Path) -> Scenario:
         """The same scenario on another log (``--data``)."""
-        return dataclasses.replace(self, dataset=Path(path))
+        return dataclasses.replace(self, dataset=Path(path), datasets=())
+
+    def per_log(self) -> tuple[Scenario, ...]:
+        """One single-log scenario per entry of ``datasets`` (named after its log), with that log's
+        own samples and alignment."""
+        stems = [e.path.stem for e in self.datasets]
+        return tuple(
+            dataclasses.replace(
+                self,
+                name=stem if stems.count(stem) == 1 else f"{i + 1}_{stem}",
+                dataset=e.path,
+                datasets=(),
+                samples=e.samples or self.samples,
+                alignment=e.alignment or self.alignment,
+            )
+            for i, (stem, e) in enumerate(zip(stems, self.datasets))
+        )
 
     def options_for(self, solver: str) -> Any:
         """The options of ``solver``: the scenario's block, or the solver's defaults."""
@@ -189,8 +217,16 @@ def _scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | N
     for key in raw:
         if key not in top_level_keys():
             fail(f"{source}: {key_name(key)}", f"unknown key; valid keys are {', '.join(top_level_keys())}")
-    if "dataset" not in raw:
-        fail(source, "the key 'dataset' (path of the log, relative to this file) is required")
+    if ("dataset" in raw) == ("datasets" in raw):
+        fail(
+            source,
+            "give 'dataset' (path of the log, relative to this file) or 'datasets' (a list of them), not "
+            + ("both" if "dataset" in raw else "neither"),
+        )
+    raw = dict(raw)
+    if "datasets" in raw:
+        raw["datasets"] = _log_entries(raw["datasets"], f"{source}: datasets")
+        raw["dataset"] = raw["datasets"][0]["path"]
     hints = typing.get_type_hints(Scenario)
     values = {k: coerce(v, hints[k], f"{source}: {k}") for k, v in raw.items() if k not in SOLVERS}
     values["solver_options"] = {
@@ -199,9 +235,24 @@ def _scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | N
     values.setdefault("name", Path(source).stem)
     dataset = values["dataset"]
     values["dataset"] = dataset if dataset.is_absolute() else base_dir / dataset
+    values["datasets"] = tuple(
+        dataclasses.replace(e, path=e.path if e.path.is_absolute() else base_dir / e.path)
+        for e in values.get("datasets", ())
+    )
     sc = Scenario(path=path, **values)
     _validate(sc, source)
     return sc
+
+
+def _log_entries(value: Any, where: str) -> list[Any]:
+    """``datasets`` as mappings: a plain path stands for ``{path: ...}``."""
+    if not isinstance(value, (list, tuple)) or not value:
+        fail(
+            where,
+            "expected a non-empty list of log paths or {path, samples, alignment} mappings, "
+            f"got {show(value)}",
+        )
+    return [{"path": v} if isinstance(v, str) else v for v in value]
 
 
 def _validate(sc: Scenario, source: str) -> None:
@@ -230,17 +281,17 @@ def _validate(sc: Scenario, source: str) -> None:
     _check_choice(sc.backend, BACKENDS, f"{source}: backend")
     if not 1 <= sc.threads <= 64:
         fail(f"{source}: threads", f"must lie in [1, 64], got {sc.threads}")
-    sel = sc.samples
-    if sel.start < 0 or (sel.stop is not None and sel.stop <= sel.start + 1):
-        fail(f"{source}: samples", f"need 0 <= start < stop - 1, got start={sel.start} stop={sel.stop}")
+    for where, sel, al in [
+        (f"{source}: ", sc.samples, sc.alignment),
+        *((f"{source}: datasets[{i}].", e.samples, e.alignment) for i, e in enumerate(sc.datasets)),
+    ]:
+        if sel is not None and (sel.start < 0 or (sel.stop is not None and sel.stop <= sel.start + 1)):
+            fail(f"{where}samples", f"need 0 <= start < stop - 1, got start={sel.start} stop={sel.stop}")
+        if al is not None:
+            _check_alignment(al, f"{where}alignment")
     hf = sc.validation.holdout_fraction
     if hf is not None and not 0.0 < hf < 1.0:
         fail(f"{source}: validation.holdout_fraction", f"must lie in (0, 1), got {hf}")
-    al = sc.alignment
-    if isinstance(al.tracker_lag, str):
-        _check_choice(al.tracker_lag, ("auto",), f"{source}: alignment.tracker_lag")
-    if not (al.search[0] < al.search[1] and al.step > 0 and (al.search[1] - al.search[0]) / al.step <= 1000):
-        fail(f"{source}: alignment", "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
     _check_choice(sc.faults.handling, FAULT_HANDLINGS, f"{source}: faults.handling")
     if sc.validation.blocks != 0 and (why := BLOCKS.problem(sc.validation.blocks)):
         fail(f"{source}: validation.blocks", f"0 (none) or {why}")
@@ -272,6 +323,13 @@ def _validate(sc: Scenario, source: str) -> None:
         _check_range(prior.std, PRIOR_STD, f"{source}: priors.{n}.std")
         if n in sc.fixed:
             fail(f"{source}: priors.{n}", "a fixed parameter cannot also have a prior; drop one")
+
+
+def _check_alignment(al: AlignmentOptions, where: str) -> None:
+    if isinstance(al.tracker_lag, str):
+        _check_choice(al.tracker_lag, ("auto",), f"{where}.tracker_lag")
+    if not (al.search[0] < al.search[1] and al.step > 0 and (al.search[1] - al.search[0]) / al.step <= 1000):
+        fail(where, "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
 
 
 def _check_range(value: float, limit: Range, where: str) -> None:

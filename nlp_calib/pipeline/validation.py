@@ -24,6 +24,8 @@ from nlp_calib.solvers import Priors
 MIN_BLOCK_WINDOWS = 20
 
 Canonical = Callable[[np.ndarray], np.ndarray]
+#: Trajectory metrics of parameters on the records ``a:b``.
+Score = Callable[[np.ndarray, int, int], TrajectoryMetrics]
 
 
 def _fit(
@@ -50,7 +52,7 @@ def cross_validate(
     x: np.ndarray,
     k: int,
     canonical: Canonical,
-    score: Callable[[np.ndarray, int, int], TrajectoryMetrics],
+    score: Score,
 ) -> CrossValidation:
     """``k`` folds over the records ``fit``, each scored on its block by ``score(params, a, b)``."""
     folds = []
