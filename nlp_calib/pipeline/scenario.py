@@ -18,8 +18,10 @@ from typing import Any
 
 from nlp_calib.core.errors import ConfigError, ScenarioError
 from nlp_calib.core.ranges import Range
+from nlp_calib.logs.bag_reader import is_bag
 from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders, get_model, param_names
 from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES
+from nlp_calib.pipeline.bags import BagSource, check_joints, dataset_block
 from nlp_calib.pipeline.config import coerce, fail, from_mapping, key_name, read_yaml, show
 from nlp_calib.problem import ResidualOptions
 from nlp_calib.solvers import SOLVERS
@@ -125,10 +127,13 @@ class Scenario:
     strict: bool = True
     backend: str = "interpreted"
     threads: int = 1
+    #: How to read ``dataset`` when it is a bag (the ``dataset:`` block); None for a text log.
+    bag: BagSource | None = None
 
     def with_dataset(self, path: str | Path) -> Scenario:
-        """The same scenario on another log (``--data``)."""
-        return dataclasses.replace(self, dataset=Path(path))
+        """The same scenario on another log (``--data``); another bag is read with the same topics."""
+        bag = self.bag if is_bag(Path(path)) else None
+        return dataclasses.replace(self, dataset=Path(path), bag=bag)
 
     def options_for(self, solver: str) -> Any:
         """The options of ``solver``: the scenario's block, or the solver's defaults."""
@@ -158,7 +163,9 @@ _FINITE = Range(-math.inf, math.inf, lo_open=True, hi_open=True)
 
 # Keys the YAML may hold at top level: the fields (but where the file was, and the solver
 # options, which come as one block per registered solver).
-_FIELDS = tuple(f.name for f in dataclasses.fields(Scenario) if f.name not in ("path", "solver_options"))
+_FIELDS = tuple(
+    f.name for f in dataclasses.fields(Scenario) if f.name not in ("path", "solver_options", "bag")
+)
 
 
 def top_level_keys() -> tuple[str, ...]:
@@ -190,15 +197,16 @@ def _scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | N
         if key not in top_level_keys():
             fail(f"{source}: {key_name(key)}", f"unknown key; valid keys are {', '.join(top_level_keys())}")
     if "dataset" not in raw:
-        fail(source, "the key 'dataset' (path of the log, relative to this file) is required")
+        fail(source, "the key 'dataset' (path of the log, relative to this file, or a bag block) is required")
     hints = typing.get_type_hints(Scenario)
-    values = {k: coerce(v, hints[k], f"{source}: {k}") for k, v in raw.items() if k not in SOLVERS}
+    values = {
+        k: coerce(v, hints[k], f"{source}: {k}") for k, v in raw.items() if k not in (*SOLVERS, "dataset")
+    }
     values["solver_options"] = {
         k: from_mapping(SOLVERS[k].options_type, v, f"{source}: {k}") for k, v in raw.items() if k in SOLVERS
     }
     values.setdefault("name", Path(source).stem)
-    dataset = values["dataset"]
-    values["dataset"] = dataset if dataset.is_absolute() else base_dir / dataset
+    values["dataset"], values["bag"] = dataset_block(raw["dataset"], f"{source}: dataset", base_dir)
     sc = Scenario(path=path, **values)
     _validate(sc, source)
     return sc
@@ -210,6 +218,8 @@ def _validate(sc: Scenario, source: str) -> None:
         fail(f"{source}: name", f"must be a plain folder name (no '/', '\\' or NUL), got {sc.name!r}")
     _check_choice(sc.model, MODELS, f"{source}: model")
     names = param_names(get_model(sc.model))
+    if sc.bag is not None:
+        check_joints(sc.bag.joints, get_model(sc.model), f"{source}: dataset.joints")
     _check_choice(sc.robust.kernel, KERNELS, f"{source}: robust.kernel")
     _check_range(sc.robust.delta, DELTA, f"{source}: robust.delta")
     r = sc.residual
