@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nlp_calib.cli.import_bag import cmd_import_bag
 from nlp_calib.cli.parser import ALL_SOLVERS
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
@@ -342,4 +343,5 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "compare": _cmd_compare,
     "codegen": _cmd_codegen,
     "simulate": _cmd_simulate,
+    "import-bag": cmd_import_bag,
 }

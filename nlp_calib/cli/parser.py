@@ -10,7 +10,8 @@ from typing import Any, NoReturn
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.ranges import Range
 from nlp_calib.core.version import __version__
-from nlp_calib.models import MODELS
+from nlp_calib.logs.bag_reader import DEFAULT_MAX_GAP_S, MAX_GAP, TRACKER_TYPES
+from nlp_calib.models import MODELS, encoders
 from nlp_calib.pipeline.scenario import BLOCKS
 from nlp_calib.pipeline.simconfig import CLI_LIMITS
 from nlp_calib.simulation import TRAJECTORIES
@@ -47,6 +48,14 @@ def _path(text: str) -> Path:
     if not text or "\0" in text:
         raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
     return Path(text)
+
+
+def _names(text: str) -> tuple[str, ...]:
+    """A comma-separated list of names, none empty."""
+    names = tuple(n.strip() for n in text.split(","))
+    if not all(names):
+        raise argparse.ArgumentTypeError(f"expected names separated by commas, got {text!r}")
+    return names
 
 
 def _in(limit: Range) -> Callable[[str], int | float]:
@@ -88,6 +97,12 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "odometry": ("nlp-calib odometry scenarios/demo.yaml --report --sigma 3",),
     "codegen": ("nlp-calib codegen scenarios/demo.yaml --out c_export && make -C c_export example",),
     "simulate": ("nlp-calib simulate --out my_drive.txt --records 2000 --seed 3 --latency 0.05",),
+    "import-bag": (
+        "nlp-calib import-bag drive.bag --out drive.txt --model tricycle --joint-states /joint_states "
+        "--joints steer_joint,drive_joint --tracker /mocap/robot/pose",
+        "nlp-calib import-bag drive_ros2/ --out drive.txt --model diff_drive --joint-states /joint_states "
+        "--joints left_wheel_joint,right_wheel_joint --tracker /tf --tracker-frame robot --robot robot.yaml",
+    ),
 }
 
 
@@ -219,4 +234,58 @@ def build_parser() -> argparse.ArgumentParser:
         p_sim.add_argument(
             flag, type=_in(limit), default=None, dest=field, help=f"{what}: {limit.describe()}"
         )
+    _add_import_bag(sub)
     return parser
+
+
+def _add_import_bag(sub: Any) -> None:
+    p = sub.add_parser(
+        "import-bag",
+        help="convert a ROS 1 or ROS 2 bag (encoders and tracker) into a text log (docs/bags.md)",
+        **_sub("import-bag"),
+    )
+    orders = "; ".join(f"{name}: {','.join(encoders(m))}" for name, m in MODELS.items())
+    p.add_argument("bag", type=_path, help="a ROS 1 .bag file or a ROS 2 bag folder (sqlite3 or MCAP)")
+    p.add_argument("--out", type=_path, required=True, help="text log to write")
+    _add_force(p, "an existing log")
+    p.add_argument("--model", choices=tuple(MODELS), required=True, help="the robot's kinematic model")
+    p.add_argument(
+        "--joint-states",
+        required=True,
+        metavar="TOPIC",
+        help="sensor_msgs/msg/JointState topic with the raw encoder counts in position",
+    )
+    p.add_argument(
+        "--joints",
+        type=_names,
+        required=True,
+        metavar="NAME,NAME",
+        help=f"the JointState joints in the model's encoder order ({orders})",
+    )
+    p.add_argument(
+        "--tracker",
+        required=True,
+        metavar="TOPIC",
+        help=f"the tracked sensor's poses: {', '.join(TRACKER_TYPES)}",
+    )
+    p.add_argument(
+        "--tracker-frame",
+        default=None,
+        metavar="CHILD",
+        help="child frame of the tracked sensor's transforms (required on a TFMessage topic)",
+    )
+    p.add_argument(
+        "--robot",
+        type=_path,
+        default=None,
+        metavar="ROBOT.yaml",
+        help="initial guess, encoder ranges, nominal sensor pose for the header (default: the model's)",
+    )
+    p.add_argument(
+        "--max-gap",
+        type=_in(MAX_GAP),
+        default=DEFAULT_MAX_GAP_S,
+        metavar="S",
+        help=f"longest tracker gap an encoder message is interpolated across, {MAX_GAP.describe()} s "
+        f"(default {DEFAULT_MAX_GAP_S:g})",
+    )

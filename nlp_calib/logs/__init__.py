@@ -1,8 +1,11 @@
-"""Input layer: the robot log text format (reading, checking, writing) and encoder resampling.
+"""Input layer: the robot log text format (reading, checking, writing), ROS bags read into the same
+records, and encoder resampling.
 
 Knows no kinematic model: callers say which encoders are absolute and which are counters.
 """
 
+from nlp_calib.logs.bag_reader import BagError, BagTopics
+from nlp_calib.logs.bag_records import read_bag
 from nlp_calib.logs.log import ENCODER_KINDS, DroppedRecord, EncoderKind, Log, LogHeader
 from nlp_calib.logs.reader import parse_log, read_log, yaw_from_quaternion
 from nlp_calib.logs.resample import resample_encoders, resample_tracker
@@ -10,12 +13,15 @@ from nlp_calib.logs.writer import format_log
 
 __all__ = [
     "ENCODER_KINDS",
+    "BagError",
+    "BagTopics",
     "DroppedRecord",
     "EncoderKind",
     "Log",
     "LogHeader",
     "format_log",
     "parse_log",
+    "read_bag",
     "read_log",
     "resample_encoders",
     "resample_tracker",

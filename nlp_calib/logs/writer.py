@@ -15,9 +15,10 @@ def format_log(
     ticks: np.ndarray,
     model_pose: np.ndarray,
     T_world_sensor: np.ndarray,
-    digits: int = 9,
+    digits: int | None = 9,
 ) -> str:
-    """Render a log; poses with ``digits`` significant digits, header parameters as named there."""
+    """Render a log; poses with ``digits`` significant digits (None: the shortest text that reads back
+    as the same float), header parameters as named there."""
     names = list(header.parameters)
     x, y, th = header.T_base_sensor
     out = [
@@ -33,7 +34,11 @@ def format_log(
     for k in range(time_ns.shape[0]):
         sec, ns = divmod(int(time_ns[k]), 1_000_000_000)
         enc = " ".join(str(int(v)) for v in ticks[k])
-        mp = " ".join(f"{v:.{digits}g}" for v in model_pose[k])
-        tp = " ".join(f"{v:.{digits}g}" for v in T_world_sensor[k])
+        mp = " ".join(_number(v, digits) for v in model_pose[k])
+        tp = " ".join(_number(v, digits) for v in T_world_sensor[k])
         out.append(f"time: {sec}.{ns:09d} ticks: {enc} model_pose: {mp} tracker_pose: {tp}")
     return "\n".join(out) + "\n"
+
+
+def _number(v: float, digits: int | None) -> str:
+    return repr(float(v)) if digits is None else f"{v:.{digits}g}"

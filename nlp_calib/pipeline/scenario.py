@@ -18,8 +18,10 @@ from typing import Any
 
 from nlp_calib.core.errors import ConfigError, ScenarioError
 from nlp_calib.core.ranges import Range
+from nlp_calib.logs.bag_reader import is_bag
 from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders, get_model, param_names
 from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES
+from nlp_calib.pipeline.bags import BagSource, check_joints, dataset_block
 from nlp_calib.pipeline.config import coerce, fail, from_mapping, key_name, read_yaml, show
 from nlp_calib.problem import ResidualOptions
 from nlp_calib.solvers import SOLVERS
@@ -135,12 +137,15 @@ class Scenario:
     strict: bool = True
     backend: str = "compiled"
     threads: int = 1
+    #: How to read ``dataset`` when it is a bag (the ``dataset:`` block); None for a text log.
+    bag: BagSource | None = None
     #: Several logs calibrated together (``dataset`` is then the first of them).
     datasets: tuple[LogEntry, ...] = ()
 
     def with_dataset(self, path: str | Path) -> Scenario:
-        """The same scenario on another log (``--data``)."""
-        return dataclasses.replace(self, dataset=Path(path), datasets=())
+        """The same scenario on another log (``--data``); another bag is read with the same topics."""
+        bag = self.bag if is_bag(Path(path)) else None
+        return dataclasses.replace(self, dataset=Path(path), bag=bag, datasets=())
 
     def per_log(self) -> tuple[Scenario, ...]:
         """One single-log scenario per entry of ``datasets`` (named after its log), with that log's
@@ -186,7 +191,9 @@ _FINITE = Range(-math.inf, math.inf, lo_open=True, hi_open=True)
 
 # Keys the YAML may hold at top level: the fields (but where the file was, and the solver
 # options, which come as one block per registered solver).
-_FIELDS = tuple(f.name for f in dataclasses.fields(Scenario) if f.name not in ("path", "solver_options"))
+_FIELDS = tuple(
+    f.name for f in dataclasses.fields(Scenario) if f.name not in ("path", "solver_options", "bag")
+)
 
 
 def top_level_keys() -> tuple[str, ...]:
@@ -228,13 +235,14 @@ def _scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | N
         raw["datasets"] = _log_entries(raw["datasets"], f"{source}: datasets")
         raw["dataset"] = raw["datasets"][0]["path"]
     hints = typing.get_type_hints(Scenario)
-    values = {k: coerce(v, hints[k], f"{source}: {k}") for k, v in raw.items() if k not in SOLVERS}
+    values = {
+        k: coerce(v, hints[k], f"{source}: {k}") for k, v in raw.items() if k not in (*SOLVERS, "dataset")
+    }
     values["solver_options"] = {
         k: from_mapping(SOLVERS[k].options_type, v, f"{source}: {k}") for k, v in raw.items() if k in SOLVERS
     }
     values.setdefault("name", Path(source).stem)
-    dataset = values["dataset"]
-    values["dataset"] = dataset if dataset.is_absolute() else base_dir / dataset
+    values["dataset"], values["bag"] = dataset_block(raw["dataset"], f"{source}: dataset", base_dir)
     values["datasets"] = tuple(
         dataclasses.replace(e, path=e.path if e.path.is_absolute() else base_dir / e.path)
         for e in values.get("datasets", ())
@@ -261,6 +269,8 @@ def _validate(sc: Scenario, source: str) -> None:
         fail(f"{source}: name", f"must be a plain folder name (no '/', '\\' or NUL), got {sc.name!r}")
     _check_choice(sc.model, MODELS, f"{source}: model")
     names = param_names(get_model(sc.model))
+    if sc.bag is not None:
+        check_joints(sc.bag.joints, get_model(sc.model), f"{source}: dataset.joints")
     _check_choice(sc.robust.kernel, KERNELS, f"{source}: robust.kernel")
     _check_range(sc.robust.delta, DELTA, f"{source}: robust.delta")
     r = sc.residual

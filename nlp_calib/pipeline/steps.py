@@ -28,9 +28,9 @@ from nlp_calib.models import (
     KinematicModel,
     get_model,
     header_parameters,
-    load_log,
     param_names,
 )
+from nlp_calib.pipeline.bags import load_dataset
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import (
     ProblemFunctions,
@@ -87,7 +87,7 @@ def load(sc: Scenario, log: Log | None = None) -> tuple[KinematicModel, Log]:
             )
         return model, log
     try:
-        return model, load_log(sc.dataset, model, strict=sc.strict)
+        return model, load_dataset(sc.dataset, sc.bag, model, strict=sc.strict)
     except DatasetError as exc:
         if exc.droppable:
             raise exc.with_hint("set 'strict: false' in the scenario to drop such records") from None

@@ -1,0 +1,98 @@
+"""``ROBOT.yaml``: what a text log's header carries, for a bag, which has no header.
+
+The initial guess of the kinematic parameters, each encoder's range and the sensor's nominal pose
+and frame name; anything left out takes the model's default (the values its simulated robot
+uses), so a bag imports without the file and ``initial_guess: auto`` needs none of it. Validated on
+load like a scenario: unknown keys, wrong types and values the header cannot hold are one-line
+errors naming the file and the key.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from nlp_calib.core.errors import ConfigError
+from nlp_calib.core.ranges import Range
+from nlp_calib.logs import LogHeader
+from nlp_calib.models import KinematicModel, encoders
+from nlp_calib.pipeline.config import fail, from_mapping, read_yaml
+
+#: ``#joints_max_enc_values``: the text header's range of an encoder range.
+ENCODER_RANGE = Range(1, 2**32, integer=True)
+#: A parameter or a sensor coordinate beyond this is a typo (the scenario's own limit).
+MAGNITUDE = Range(-1e6, 1e6)
+_FRAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_./-]*")
+
+
+@dataclass(frozen=True)
+class RobotDescription:
+    """The keys of ``ROBOT.yaml``: ``initial_guess`` (kinematic parameters), ``encoder_ranges`` (ticks
+    per turn, by the model's encoder names), ``sensor_pose`` ``[x, y, theta]`` (m, m, rad) of the
+    sensor in the base frame and ``sensor_frame``, the sensor's frame name in the hand-off files."""
+
+    initial_guess: Mapping[str, float] = field(default_factory=dict)
+    encoder_ranges: Mapping[str, int] = field(default_factory=dict)
+    sensor_pose: tuple[float, float, float] | None = None
+    sensor_frame: str | None = None
+
+
+def load_robot(path: str | Path, model: KinematicModel) -> RobotDescription:
+    """Read and validate ``ROBOT.yaml`` for ``model``."""
+    source = str(path)
+    robot: RobotDescription = from_mapping(RobotDescription, read_yaml(Path(path), "robot"), source)
+    params, names = model.kinematic_params, encoders(model)
+    for name, value in robot.initial_guess.items():
+        if name not in params:
+            hint = (
+                "; give the sensor's pose as sensor_pose: [x, y, theta]" if name.startswith("sensor") else ""
+            )
+            fail(
+                f"{source}: initial_guess.{name}",
+                f"not a parameter of {model.name}: {', '.join(params)}{hint}",
+            )
+        _check(MAGNITUDE, value, f"{source}: initial_guess.{name}")
+    for name, ticks in robot.encoder_ranges.items():
+        if name not in names:
+            fail(f"{source}: encoder_ranges.{name}", f"not an encoder of {model.name}: {', '.join(names)}")
+        _check(ENCODER_RANGE, ticks, f"{source}: encoder_ranges.{name}")
+    for axis, value in zip(("x", "y", "theta"), robot.sensor_pose or ()):
+        _check(MAGNITUDE, value, f"{source}: sensor_pose.{axis}")
+    frame = robot.sensor_frame
+    if frame is not None and not _FRAME.fullmatch(frame):
+        fail(f"{source}: sensor_frame", f"a frame name of letters, digits and _./- , got {frame!r}")
+    return robot
+
+
+def _check(limit: Range, value: float, where: str) -> None:
+    reason = limit.problem(value)
+    if reason is not None:
+        fail(where, reason)
+
+
+def robot_header(
+    model: KinematicModel, robot: RobotDescription | None = None, sensor_frame: str | None = None
+) -> LogHeader:
+    """The header a text log of ``model`` would carry: ``robot``'s values over the model's defaults;
+    the sensor frame from ``robot``, else ``sensor_frame`` (the tracked frame), else ``sensor``."""
+    robot = robot or RobotDescription()
+    drive = model.drive
+    guess = {**drive.default_guess, **robot.initial_guess}
+    ranges = {**drive.default_ranges, **robot.encoder_ranges}
+    pose = robot.sensor_pose or tuple(float(guess[n]) for n in ("sensor_x", "sensor_y", "sensor_theta"))
+    frame = robot.sensor_frame or (sensor_frame or "").strip("/") or "sensor"
+    if not _FRAME.fullmatch(frame):
+        raise ConfigError(
+            f"the sensor frame {frame!r} cannot name a header's frame; set sensor_frame in ROBOT.yaml"
+        )
+    names = encoders(model)
+    return LogHeader(
+        kinematic_model=model.log_names[0],
+        parameters={model.header_names[n]: float(guess[n]) for n in model.kinematic_params},
+        encoder_names=names,
+        encoder_max=tuple(int(ranges[n]) for n in names),
+        sensor_frame=frame,
+        T_base_sensor=(float(pose[0]), float(pose[1]), float(pose[2])),
+    )
