@@ -32,7 +32,7 @@ from nlp_calib.core import poses
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
 from nlp_calib.logs import Log
 from nlp_calib.logs.log import frozen
-from nlp_calib.problem import ProblemFunctions
+from nlp_calib.problem import ProblemFunctions, over_columns
 
 #: A correction beyond this many robust standard deviations starts a candidate fault...
 CANDIDATE_SIGMAS = 6.0
@@ -257,8 +257,11 @@ def _counter_faults(
         # Levels never reach across a fault already found: it would lend its step to k.
         lo = max((last + 1 for first, last in accepted if last < firsts[k]), default=0)
         hi = min((first for first, last in accepted if first > k), default=N)
-        before = valid[(valid <= firsts[k]) & (valid >= lo)][-W:]
-        after = valid[(valid >= k + 1) & (valid <= hi)][:W]
+        # ``valid`` is sorted: the points in [lo, first] and in [k + 1, hi] are slices of it.
+        b0, b1 = np.searchsorted(valid, lo, "left"), np.searchsorted(valid, firsts[k], "right")
+        a0, a1 = np.searchsorted(valid, k + 1, "left"), np.searchsorted(valid, hi, "right")
+        before = valid[b0:b1][-W:]
+        after = valid[a0:a1][:W]
         return _level(C, after) - _level(C, before)
 
     # The noise of such a step, from steps taken everywhere along the log (faults are few there).
@@ -322,10 +325,12 @@ def _tracker_jumps(e: np.ndarray, z: np.ndarray, time_s: np.ndarray, lines: np.n
     Z, H = z.T, poses.compose(z.T, e.T)
     found: list[Fault] = []
     taken = np.zeros(N + 1, dtype=bool)
+    big = size >= 2.0 * FAULT_SIGMAS
     for gap in (1, 2):
-        for p in range(1, N - gap + 1):
+        # Only poses whose two neighbouring intervals both have large residuals can be off.
+        for p in (np.flatnonzero(big[: N - gap] & big[gap:]) + 1).tolist():
             first, last = p - 1, p + gap - 1  # intervals that meet at poses p..p+gap-1
-            if taken[p : p + gap].any() or min(size[first], size[last]) < 2.0 * FAULT_SIGMAS:
+            if taken[p : p + gap].any():
                 continue
             z_all, h_all = Z[first], H[first]
             for k in range(first + 1, last + 1):
@@ -370,10 +375,9 @@ def check_log(
     if N == 0:
         return FaultReport(faults=(), stale={}, noise_ticks={})
     poses = log.T_world_sensor
-    z = np.asarray(fns.between.map(N)(poses[:-1].T, poses[1:].T))
-    e, de_du = fns.interval_residual.map(N)(np.asarray(params, dtype=float), inputs, z)
-    e = np.asarray(e)
-    de_du = np.asarray(de_du).reshape(3, N, inputs.shape[0])
+    z = over_columns(fns.between, poses[:-1].T, poses[1:].T)[0]
+    e, de_du = over_columns(fns.interval_residual, inputs, z, fixed=[np.asarray(params, dtype=float)])
+    de_du = de_du.reshape(3, N, inputs.shape[0])
     return detect(e, de_du, z, inputs, counters, log.time_s, log.line_numbers)
 
 

@@ -133,9 +133,10 @@ def interval_inputs(model: KinematicModel, logs: Sequence[Log], steering_sample:
 BLOCK = 1 << 14
 
 
-def over_columns(f: ca.Function, *columns: np.ndarray) -> list[np.ndarray]:
+def over_columns(f: ca.Function, *columns: np.ndarray, fixed: Sequence[np.ndarray] = ()) -> list[np.ndarray]:
     """``f`` over the columns of ``columns`` (one column of each input per call), a block at a
-    time; each output as CasADi's map gives it, ``(rows, cols * n)``."""
+    time, its first inputs ``fixed`` the same for every column; each output as CasADi's map
+    gives it, ``(rows, cols * n)``."""
     n = columns[0].shape[1]
     shapes = [f.size_out(i) for i in range(f.n_out())]
     outs = [np.empty((r, c * n)) for r, c in shapes]
@@ -144,7 +145,7 @@ def over_columns(f: ca.Function, *columns: np.ndarray) -> list[np.ndarray]:
         hi = min(n, lo + BLOCK)
         if hi - lo not in maps:
             maps[hi - lo] = f.map(hi - lo)
-        res = maps[hi - lo](*[c[:, lo:hi] for c in columns])
+        res = maps[hi - lo](*fixed, *[c[:, lo:hi] for c in columns])
         for out, r, (_, c) in zip(outs, [res] if f.n_out() == 1 else res, shapes):
             out[:, c * lo : c * hi] = np.asarray(r)
     return outs
