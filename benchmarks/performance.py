@@ -1,344 +1,405 @@
-"""Performance benchmark: compiled nlp_calib against the seed method and scipy, 10^3..10^6 records.
+"""Performance benchmark: the shipped scenarios end to end, the solvers against fair baselines on the
+same objective and data, and runs on 10^4 to 10^6 simulated records.
 
-    python benchmarks/performance.py            # real log + simulated 10^4, 10^5, 10^6 records
-    python benchmarks/performance.py --quick    # small sizes only (the test suite's smoke test)
+    python benchmarks/performance.py                 # everything; prints a summary table
+    python benchmarks/performance.py --quick         # small sizes, 2 repeats (the tests' smoke run)
 
-Each case runs in its own process (so its peak memory is its own) and reports: the one-off
-build + compile time (cold cache) and the set-up time with a warm cache, one normal-equation
-evaluation over all records, a Gauss-Newton solve and an IPOPT solve (medians of repeated
-runs); side by side, in the same process, the seed documents' method (numpy, per-sample
-central-difference Jacobian in a Python loop) and ``scipy.optimize.least_squares`` on the same
-residual and loss (plain least squares, where both losses are the same). Writes
-``results/performance.{json,md}`` and ``results/performance.png`` (time against N, log-log).
+Every figure is a median over ``--repeats`` (default 7) interleaved repeats, with the load average
+recorded at the start and end of each section (the machine is shared: read the figures with it).
+End-to-end and scaling runs are fresh ``nlp-calib`` processes started by a launcher that does
+nothing else, so their peak RSS is their own (``getrusage(RUSAGE_CHILDREN)``); cold runs start
+from an empty compile cache, warm ones from a filled one. Solver times are measured in-process on
+the same windows: Gauss-Newton and IPOPT against ``scipy.optimize.least_squares`` (vectorised
+numpy residual with its analytic Jacobian, the same Huber objective; ``baselines.py``) and, when
+installed (``pip install .[bench]``), GTSAM and Ceres through their standard Python APIs.
+Writes ``results/performance.{json,md,png}``.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import os
 import platform
-import resource
+import shutil
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+# One BLAS thread, set before numpy loads: a baseline's BLAS threads left spinning after its call
+# would otherwise slow down whichever solver is timed next (every solver here is single-threaded).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(REPO))
+
+#: Runs a command and prints its wall time and the peak RSS of its process tree, nothing else.
+LAUNCHER = (
+    "import json, resource, subprocess, sys, time\n"
+    "t0 = time.perf_counter()\n"
+    "rc = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode\n"
+    "wall = time.perf_counter() - t0\n"
+    "peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0\n"
+    "print(json.dumps({'wall_s': wall, 'peak_mb': peak, 'rc': rc}))\n"
+)
+TARGETS = {
+    "compare real_tricycle.yaml, warm [s]": 1.5,
+    "compare real_tricycle.yaml, cold [s]": 3.0,
+    "real_tricycle GN [ms]": 15.0,
+    "real_tricycle IPOPT [ms]": 60.0,
+    "real_tricycle_seed GN [ms]": 5.0,
+    "real_tricycle_seed IPOPT [ms]": 25.0,
+    "scipy (per window) / GN, H=1 [x]": 10.0,
+    "scipy (per window) / GN, H=25 [x]": 30.0,
+    "scipy (prefix) / GN, H=1 [x]": 10.0,
+    "scipy (prefix) / GN, H=25 [x]": 30.0,
+    "10^6 records run --solver gauss_newton [s]": 15.0,
+    "10^6 records peak RSS [MB]": 1500.0,
+}
 
 
-def median_time(fn: Any, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
+def load() -> list[float]:
+    return [round(v, 2) for v in os.getloadavg()]
 
 
-def run_case(spec: dict[str, Any]) -> dict[str, Any]:
-    """One benchmark case (runs in a child process)."""
-    from nlp_calib.models import load_log
-    from nlp_calib.pipeline import Calibration
-    from nlp_calib.pipeline.scenario import AlignmentOptions, RobustOptions, load_scenario
-
-    out: dict[str, Any] = {"case": spec["case"], "records": None}
-    t0 = time.perf_counter()
-    log = load_log(spec["log"])
-    out["read_s"] = time.perf_counter() - t0
-    out["records"] = log.n_records
-    sc = load_scenario(REPO / "scenarios" / spec["scenario"]).with_dataset(spec["log"])
-    sc = dataclasses.replace(
-        sc, backend="compiled", alignment=AlignmentOptions(tracker_lag=spec.get("lag", 0.0))
+def launch(cmd: list[str], env: dict[str, str]) -> dict[str, Any]:
+    """Run ``cmd`` in a fresh launcher process; its wall time, peak RSS and exit code."""
+    out = subprocess.run(
+        [sys.executable, "-c", LAUNCHER, *cmd], capture_output=True, text=True, env=env, check=True
     )
-    os.environ["NLP_CALIB_CACHE"] = spec["cache"]
-    t0 = time.perf_counter()
-    calib = Calibration(sc, log=log)
-    calib.solve("ipopt")  # compiles IPOPT's gradient and Hessian too
-    out["setup_and_compile_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    calib = Calibration(sc, log=log)
-    out["setup_warm_s"] = time.perf_counter() - t0
-    out["residuals"] = calib.data.n_residuals
-    ev = calib.evaluator
-    n_eval = max(3, min(500, int(2e6 / max(ev.n_residuals, 1))))
-    out["eval_ms"] = 1e3 * median_time(lambda: ev.normal_equations(calib.x0), n_eval)
-    reps = spec["repeats"]
-    gn = calib.solve("gauss_newton")
-    out["gn_ms"] = 1e3 * median_time(lambda: calib.solve("gauss_newton"), reps)
-    out["gn_iterations"] = gn.iterations
-    ip = calib.solve("ipopt")
-    out["ipopt_ms"] = 1e3 * median_time(lambda: calib.solve("ipopt"), reps)
-    out["ipopt_iterations"] = ip.iterations
-    out["agree"] = float(np.max(np.abs(gn.params - ip.params) / np.abs(ip.params)))
-    out["converged"] = bool(gn.converged and ip.converged)
-
-    # Baselines on the same residual: plain least squares, where scipy's loss and ours coincide.
-    ls = Calibration(dataclasses.replace(sc, robust=RobustOptions("none", sc.robust.delta)), log=log)
-    out["gn_ls_ms"] = 1e3 * median_time(lambda: ls.solve("gauss_newton"), reps)
-    if spec["scipy"]:
-        out.update(scipy_baseline(ls))
-    if spec["seed"]:
-        out.update(seed_baseline(calib, sc.residual))
-    out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    n_trig, n_ops = instruction_mix(calib.fns.normal_equations)
-    out.update(ne_transcendental=n_trig, ne_arithmetic=n_ops)
-    out["ns_per_residual"] = 1e6 * out["eval_ms"] / calib.data.n_residuals
-    return out
+    return dict(json.loads(out.stdout))
 
 
-def scipy_baseline(calib: Any) -> dict[str, Any]:
-    """``scipy.optimize.least_squares`` (trf, 2-point Jacobian) on the compiled residual."""
-    from scipy.optimize import least_squares
-
-    ev = calib.evaluator
-    residual = ev.mapped("residual", reduce=False)
-    n = ev.n_residuals
-    data = ev.data
-
-    def fun(x: np.ndarray) -> np.ndarray:
-        return np.asarray(residual(x, ev.x_fixed, data))[:, :n].ravel(order="F")
-
-    sol = least_squares(fun, calib.x0, method="trf", x_scale="jac")
-    elapsed = median_time(lambda: least_squares(fun, calib.x0, method="trf", x_scale="jac"), 2)
-    ours = calib.solve("gauss_newton")
-    return {
-        "scipy_ms": 1e3 * elapsed,
-        "scipy_nfev": int(sol.nfev),
-        # scipy minimises ½Σe², with the sensor pose in plain coordinates: the same optimum.
-        "scipy_agree": float(np.max(np.abs(sol.x - ours.x) / np.abs(ours.x))),
-    }
+def cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "nlp_calib", *args]
 
 
-def seed_baseline(calib: Any, residual: Any) -> dict[str, Any]:
-    """The seed method: 10 undamped Gauss-Newton iterations with per-sample numeric Jacobians."""
-    import seed_method as sm
-
-    ds = calib.selected
-    inputs = calib.model.inputs(ds, residual.steering_sample)
-    P = ds.T_world_sensor
-    Z = [np.linalg.inv(sm.v2t(P[k])) @ sm.v2t(P[k + 1]) for k in range(inputs.shape[1])]
-    t0 = time.perf_counter()
-    sm.calibrate(calib.x0, inputs, Z, iterations=1)
-    per_iteration = time.perf_counter() - t0
-    return {"seed_iteration_ms": 1e3 * per_iteration, "seed_solve_ms": 1e4 * per_iteration}
+def med(values: list[float]) -> float:
+    return float(np.median(values)) if values else float("nan")
 
 
-MICRO_C = r"""
-#include <math.h>
-#include <stdio.h>
-#include <time.h>
-static double now(void) {
-  struct timespec t;
-  clock_gettime(CLOCK_MONOTONIC, &t);
-  return t.tv_sec + 1e-9 * t.tv_nsec;
-}
-int main(void) {
-  enum { N = 4000000 };
-  static double a[N];
-  for (int i = 0; i < N; ++i) a[i] = 1e-6 * i;
-  volatile double sink = 0.0;
-  double t0 = now(), s = 0.0;
-  for (int i = 0; i < N; ++i) s += sin(a[i]);
-  double t_sin = (now() - t0) / N;
-  sink += s;
-  t0 = now(); s = 0.0;
-  double p = 1.0, q = 0.5, r = 0.25, u = 0.125;
-  for (int i = 0; i < N; ++i) {
-    p = p * 0.999999 + a[i]; q = q * 0.999999 + a[i];
-    r = r * 0.999999 + a[i]; u = u * 0.999999 + a[i];
-  }
-  double t_op = (now() - t0) / (8.0 * N);
-  sink += p + q + r + u;
-  printf("%.6e %.6e\n", t_sin, t_op);
-  return sink == 12345.0;
-}
-"""
-
-
-def hardware_floor(n_trig: int, n_ops: int) -> dict[str, float]:
-    """Per-residual floor from measured sin and multiply-add throughput of this machine."""
-    from nlp_calib.codegen.compiler import find_compiler
-
-    cc = find_compiler()
-    if cc is None:
-        return {}
-    with tempfile.TemporaryDirectory() as tmp:
-        src, exe = Path(tmp) / "micro.c", Path(tmp) / "micro"
-        src.write_text(MICRO_C)
-        subprocess.run([cc, "-O2", "-fno-math-errno", str(src), "-o", str(exe), "-lm"], check=True)
-        t_sin, t_op = (
-            float(v) for v in subprocess.run([str(exe)], capture_output=True, text=True).stdout.split()
+def end_to_end(scenarios: list[tuple[str, list[str]]], repeats: int, tmp: Path) -> dict[str, Any]:
+    """``compare`` of each scenario, cold and warm cache, interleaved; wall, peak RSS, solver times."""
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
+    warm = tmp / "cache-warm"
+    for name, extra in scenarios:  # fill the warm cache (not timed)
+        launch(
+            cli("compare", str(REPO / "scenarios" / f"{name}.yaml"), *extra, "--out", str(tmp / "w")),
+            {**env, "NLP_CALIB_CACHE": str(warm)},
         )
+    runs: dict[str, dict[str, list[float]]] = {name: {} for name, _ in scenarios}
+    start = load()
+    for k in range(repeats):
+        for name, extra in scenarios:
+            for mode in ("cold", "warm"):
+                cache = tmp / f"cache-cold-{k}-{name}" if mode == "cold" else warm
+                out = tmp / f"out-{name}-{mode}"
+                r = launch(
+                    cli("compare", str(REPO / "scenarios" / f"{name}.yaml"), *extra, "--out", str(out)),
+                    {**env, "NLP_CALIB_CACHE": str(cache)},
+                )
+                if r["rc"] not in (0, 1):
+                    raise SystemExit(f"compare {name} failed with exit code {r['rc']}")
+                rec = runs[name]
+                rec.setdefault(f"{mode}_wall_s", []).append(r["wall_s"])
+                rec.setdefault(f"{mode}_peak_mb", []).append(r["peak_mb"])
+                if mode == "warm":
+                    doc = json.loads((out / "result.json").read_text())
+                    for solver, res in doc["solvers"].items():
+                        rec.setdefault(f"{solver}_ms", []).append(1e3 * res["time_s"])
+                if mode == "cold":
+                    shutil.rmtree(cache, ignore_errors=True)
     return {
-        "ns_per_trig": 1e9 * t_sin,
-        "ns_per_op": 1e9 * t_op,
-        "floor_ns_per_residual": 1e9 * (n_trig * t_sin + n_ops * t_op),
+        "load_start": start,
+        "load_end": load(),
+        "scenarios": {n: {k: med(v) for k, v in r.items()} for n, r in runs.items()},
     }
 
 
-def instruction_mix(f: Any) -> tuple[int, int]:
-    """(transcendental calls, other arithmetic instructions) of a CasADi SX Function."""
-    import casadi as ca
+def solver_cases(real: Path | None, quick: bool) -> list[tuple[str, Any]]:
+    """(label, scenario) of the in-process solver comparisons."""
+    from nlp_calib.pipeline.scenario import AlignmentOptions, load_scenario
 
-    trig = {ca.OP_SIN, ca.OP_COS, ca.OP_ATAN2, ca.OP_SQRT, ca.OP_TAN, ca.OP_LOG}
-    skip = {ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST, ca.OP_PARAMETER}
-    ids = [f.instruction_id(k) for k in range(f.n_instructions())]
-    n_trig = sum(i in trig for i in ids)
-    return n_trig, sum(i not in trig and i not in skip for i in ids)
+    if quick or real is None:
+        demo = load_scenario(REPO / "scenarios" / "demo.yaml")
+        seed = dataclasses.replace(demo, residual=dataclasses.replace(demo.residual, horizon=1))
+        return [("demo, H=1", seed), ("demo, H=10", demo)]
+    # The baselines are written for the tricycle model: the scenarios' windows on that model, with
+    # the lag the recommended scenario estimates, fixed (the solvers' own time is compared here).
+    seed = load_scenario(REPO / "scenarios" / "real_tricycle_seed.yaml").with_dataset(real)
+    rec = load_scenario(REPO / "scenarios" / "real_tricycle.yaml").with_dataset(real)
+    seed = dataclasses.replace(seed, model="tricycle")
+    rec = dataclasses.replace(rec, model="tricycle", alignment=AlignmentOptions(tracker_lag=0.049361))
+    return [("real_tricycle_seed (H=1)", seed), ("real_tricycle (H=25)", rec)]
 
 
-def make_logs(folder: Path, sizes: list[int]) -> dict[int, Path]:
-    from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
+def solvers(cases: list[tuple[str, Any]], repeats: int, per_factor: bool) -> dict[str, Any]:
+    """Our solvers and the baselines on each case's windows, interleaved repeats."""
+    start = load()
+    out = {label: compare_solvers(sc, repeats, per_factor) for label, sc in cases}
+    return {"load_start": start, "load_end": load(), "cases": out}
 
+
+def compare_solvers(sc: Any, repeats: int, per_factor: bool) -> dict[str, Any]:
+    """Median solve times of every solver on the windows of ``sc``, and how far each lands from
+    Gauss-Newton's optimum."""
+    import baselines
+
+    from nlp_calib.pipeline import Calibration
+
+    calib = Calibration(sc)
+    data, ev = calib.data, calib.evaluator
+    exact = sc.residual.integration == "exact"
+    windows = (data.inputs, data.starts, data.stops, data.z.T, exact)
+    prefix = baselines.NumpyTricycle(*windows, prefix=True)
+    composed = baselines.NumpyTricycle(*windows, prefix=False)
+    ours = calib.solve("gauss_newton")
+    runners: dict[str, Callable[[], np.ndarray]] = {
+        "gauss_newton": lambda: calib.solve("gauss_newton").x,
+        "ipopt": lambda: calib.solve("ipopt").x,
+        "scipy (numpy, prefix)": lambda: baselines.scipy_solve(prefix, calib.x0, ev.omega, ev.delta).x,
+        "scipy (numpy, per window)": lambda: baselines.scipy_solve(composed, calib.x0, ev.omega, ev.delta).x,
+    }
+    if per_factor and sc.residual.horizon == 1:
+        # One window per interval: each window's own interval (faulty ones are left out).
+        args = (data.inputs[:, data.starts], data.z.T, calib.x0, ev.omega, ev.delta, exact)
+        for name, module, fn in (
+            ("gtsam", "gtsam", baselines.gtsam_solve),
+            ("ceres", "pyceres", baselines.ceres_solve),
+        ):
+            try:
+                __import__(module)
+            except ImportError:
+                continue
+            runners[name] = functools.partial(fn, *args)
+    times: dict[str, list[float]] = {n: [] for n in runners}
+    agree: dict[str, dict[str, float]] = {}
+    for k in range(-1, repeats):  # the first round warms up (imports, first calls), untimed
+        for name, run in runners.items():
+            t0 = time.perf_counter()
+            x = run()
+            if k >= 0:
+                times[name].append(1e3 * (time.perf_counter() - t0))
+            else:
+                agree[name] = {
+                    "cost_rel": abs(ev.cost(x) - ours.cost) / ours.cost,
+                    "param_rel": float(np.max(np.abs(ev.params(x) - ours.params) / np.abs(ours.params))),
+                }
+    return {
+        "residuals": data.n_residuals,
+        "median_ms": {n: med(t) for n, t in times.items()},
+        "agreement": agree,
+    }
+
+
+def scaling(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
+    """``run --solver gauss_newton`` on simulated logs of each size: wall, peak RSS, GN time."""
+    env = dict(
+        os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore", NLP_CALIB_CACHE=str(tmp / "cache-scale")
+    )
     logs = {}
     for n in sizes:
-        # Coarse sub-steps keep a 10^6-record simulation in memory; accuracy is not measured here.
-        sim = simulate(SimulationOptions(records=n, seed=11, substeps=4 if n > 2e5 else 20))
-        logs[n], _ = write_simulation(sim, folder / f"sim_{n}.txt")
-    return logs
+        logs[n] = tmp / f"sim_{n}.txt"
+        # The library, not the command (which bounds --records); coarse sub-steps keep 10^6 records
+        # in memory (accuracy is not what is measured here).
+        code = (
+            "import sys; from pathlib import Path; from nlp_calib.simulation import SimulationOptions, "
+            "simulate, write_simulation; n = int(sys.argv[1]); write_simulation(simulate("
+            "SimulationOptions(records=n, seed=11, substeps=4 if n > 200000 else 20)), Path(sys.argv[2]))"
+        )
+        subprocess.run(
+            [sys.executable, "-c", code, str(n), str(logs[n])], env=env, check=True, capture_output=True
+        )
+    scenario = str(REPO / "scenarios" / "real_tricycle_seed.yaml")
+    launch(
+        cli(
+            "run",
+            scenario,
+            "--data",
+            str(logs[sizes[0]]),
+            "--solver",
+            "gauss_newton",
+            "--out",
+            str(tmp / "s"),
+        ),
+        env,
+    )
+    runs: dict[int, dict[str, list[float]]] = {n: {} for n in sizes}
+    start = load()
+    for _ in range(repeats):
+        for n in sizes:
+            out = tmp / f"scale-{n}"
+            r = launch(
+                cli("run", scenario, "--data", str(logs[n]), "--solver", "gauss_newton", "--out", str(out)),
+                env,
+            )
+            doc = json.loads((out / "result.json").read_text())
+            runs[n].setdefault("wall_s", []).append(r["wall_s"])
+            runs[n].setdefault("peak_mb", []).append(r["peak_mb"])
+            runs[n].setdefault("gn_ms", []).append(1e3 * doc["solvers"]["gauss_newton"]["time_s"])
+    cases = {str(n): {k: med(v) for k, v in runs[n].items()} for n in sizes}
+    slope = float(np.polyfit(np.log(sizes), np.log([cases[str(n)]["wall_s"] for n in sizes]), 1)[0])
+    return {"load_start": start, "load_end": load(), "sizes": cases, "wall_slope": slope}
 
 
-def child(args: argparse.Namespace) -> int:
-    spec = json.loads(args.case)
-    print(json.dumps(run_case(spec)))
-    return 0
+def environment() -> dict[str, Any]:
+    import casadi
+
+    cc = shutil.which(os.environ.get("CC") or "cc") or "none"
+    version = (
+        subprocess.run([cc, "--version"], capture_output=True, text=True).stdout.splitlines()[:1]
+        if cc != "none"
+        else []
+    )
+    cpu = (
+        next(
+            (
+                ln.split(":", 1)[1].strip()
+                for ln in Path("/proc/cpuinfo").read_text().splitlines()
+                if ln.startswith("model name")
+            ),
+            platform.processor(),
+        )
+        if Path("/proc/cpuinfo").exists()
+        else platform.processor()
+    )
+    return {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "casadi": casadi.__version__,
+        "numpy": np.__version__,
+        "compiler": version[0] if version else cc,
+    }
+
+
+def summary(doc: dict[str, Any]) -> tuple[str, dict[str, float]]:
+    """The report's tables and the figures each target is judged by."""
+    e2e, sol, scale = doc["end_to_end"], doc["solvers"], doc.get("scaling")
+    env = doc["environment"]
+    lines = [
+        f"Machine: {env['cpu']}, {env['cores']} cores; {env['compiler']}; Python {env['python']}, "
+        f"CasADi {env['casadi']}, numpy {env['numpy']}. Medians of {doc['repeats']} interleaved repeats.",
+        "",
+        "End to end, `nlp-calib compare SCENARIO` in a fresh process "
+        f"(load average {e2e['load_start']} → {e2e['load_end']}); solver times as the run reports them:",
+        "",
+        "| scenario | cold cache [s] | warm cache [s] | peak RSS [MB] | Gauss-Newton [ms] | IPOPT [ms] |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, r in e2e["scenarios"].items():
+        lines.append(
+            f"| {name} | {r['cold_wall_s']:.2f} | {r['warm_wall_s']:.2f} | {r['warm_peak_mb']:.0f} | "
+            f"{r.get('gauss_newton_ms', float('nan')):.1f} | {r.get('ipopt_ms', float('nan')):.1f} |"
+        )
+    lines += [
+        "",
+        "Solvers on the same windows and objective, in-process "
+        f"(load average {sol['load_start']} → {sol['load_end']}):",
+        "",
+        "| case | residuals | solver | median [ms] | × Gauss-Newton | cost vs GN (rel.) "
+        "| parameters vs GN (max rel.) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    figures: dict[str, float] = {}
+    for label, c in sol["cases"].items():
+        gn = c["median_ms"]["gauss_newton"]
+        for name, ms in c["median_ms"].items():
+            a = c["agreement"][name]
+            lines.append(
+                f"| {label} | {c['residuals']} | {name} | {ms:.1f} | {ms / gn:.1f} | {a['cost_rel']:.1e} "
+                f"| {a['param_rel']:.1e} |"
+            )
+        h = "H=1" if "H=1" in label else "H=25" if "H=25" in label else None
+        if h:
+            for kind in ("prefix", "per window"):
+                figures[f"scipy ({kind}) / GN, {h} [x]"] = c["median_ms"][f"scipy (numpy, {kind})"] / gn
+        scenario = label.split(" ")[0]
+        if scenario.startswith("real_tricycle"):
+            figures[f"{scenario} GN [ms]"] = gn
+            figures[f"{scenario} IPOPT [ms]"] = c["median_ms"]["ipopt"]
+    if scale:
+        lines += [
+            "",
+            "`run --solver gauss_newton` on simulated logs "
+            f"(load average {scale['load_start']} → {scale['load_end']}):",
+            "",
+            "| records | wall [s] | peak RSS [MB] | Gauss-Newton [ms] |",
+            "|---|---|---|---|",
+        ]
+        for n, r in scale["sizes"].items():
+            lines.append(f"| {int(n):,} | {r['wall_s']:.2f} | {r['peak_mb']:.0f} | {r['gn_ms']:.0f} |")
+        lines.append(f"\nWall time ∝ N^{scale['wall_slope']:.2f} over these sizes.")
+        if "1000000" in scale["sizes"]:
+            figures["10^6 records run --solver gauss_newton [s]"] = scale["sizes"]["1000000"]["wall_s"]
+            figures["10^6 records peak RSS [MB]"] = scale["sizes"]["1000000"]["peak_mb"]
+    r = e2e["scenarios"].get("real_tricycle")
+    if r:
+        figures["compare real_tricycle.yaml, warm [s]"] = r["warm_wall_s"]
+        figures["compare real_tricycle.yaml, cold [s]"] = r["cold_wall_s"]
+    lines += ["", "| target | measured | target | met |", "|---|---|---|---|"]
+    for name, target in TARGETS.items():
+        if name in figures:
+            v = figures[name]
+            met = v >= target if name.endswith("[x]") else v <= target
+            sign = "≥" if name.endswith("[x]") else "≤"
+            lines.append(f"| {name} | {v:.3g} | {sign} {target:g} | {'yes' if met else 'no'} |")
+    return "\n".join(lines), figures
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="small sizes only (smoke test)")
+    ap.add_argument("--quick", action="store_true", help="small sizes and 2 repeats (smoke test)")
     ap.add_argument(
-        "--data", type=Path, default=None, help="the real log (default: ../shared/data/dataset.txt)"
+        "--repeats", type=int, default=None, help="interleaved repeats (default 7; 2 with --quick)"
+    )
+    ap.add_argument(
+        "--data",
+        type=Path,
+        default=None,
+        help="the real log (default: shared/data/dataset.txt above the checkout)",
     )
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results")
-    ap.add_argument("--case", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
-    if args.case is not None:
-        return child(args)
-    from nlp_calib.outputs.progress import Progress
-
+    repeats = args.repeats or (2 if args.quick else 7)
     real = args.data or next(
         (p / "shared/data/dataset.txt" for p in REPO.parents if (p / "shared/data/dataset.txt").is_file()),
         None,
     )
-    sizes = [500, 2_000] if args.quick else [10_000, 100_000, 1_000_000]
-    repeats = 2 if args.quick else 5
-    results = []
-    with tempfile.TemporaryDirectory() as tmp:
-        tmpdir = Path(tmp)
-        logs = make_logs(tmpdir, sizes)
-        cases: list[dict[str, Any]] = []
-        if real is not None and not args.quick:
-            cases.append(
-                {
-                    "case": "real log, seed scenario (H=1)",
-                    "log": str(real),
-                    "scenario": "real_tricycle_seed.yaml",
-                    "seed": True,
-                    "scipy": True,
-                }
-            )
-            cases.append(
-                {
-                    "case": "real log, recommended (H=25)",
-                    "log": str(real),
-                    "scenario": "real_tricycle.yaml",
-                    "lag": 0.0494,
-                    "seed": False,
-                    "scipy": True,
-                }
-            )
-        for n, path in logs.items():
-            cases.append(
-                {
-                    "case": f"simulated, {n} records (H=1)",
-                    "log": str(path),
-                    "scenario": "real_tricycle_seed.yaml",
-                    "seed": n <= 10_000,
-                    "scipy": n <= 100_000,
-                }
-            )
-        progress = Progress(len(cases), sys.stderr, label="benchmark")
-        for i, case in enumerate(cases):
-            progress.update(i, case["case"])
-            case.update(repeats=repeats if case.get("scipy") else 3, cache=str(tmpdir / f"cache{i}"))
-            proc = subprocess.run(
-                [sys.executable, __file__, "--case", json.dumps(case)], capture_output=True, text=True
-            )
-            if proc.returncode != 0:
-                raise SystemExit(f"case {case['case']} failed:\n{proc.stderr[-2000:]}")
-            results.append(json.loads(proc.stdout.strip().splitlines()[-1]))
-        progress.clear()
-    first = results[0]
-    floor = hardware_floor(first["ne_transcendental"], first["ne_arithmetic"])
-    report = summarise(results, floor)
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        if args.quick or real is None:
+            scenarios: list[tuple[str, list[str]]] = [("demo", [])]
+        else:
+            scenarios = [(n, ["--data", str(real)]) for n in ("real_tricycle", "real_tricycle_seed")]
+            scenarios += [("demo", []), ("diff_drive_demo", [])]
+        print("end to end ...", file=sys.stderr)
+        doc: dict[str, Any] = {"environment": environment(), "repeats": repeats, "quick": args.quick}
+        doc["end_to_end"] = end_to_end(scenarios, repeats, tmp)
+        print("solvers ...", file=sys.stderr)
+        doc["solvers"] = solvers(solver_cases(real, args.quick), repeats, per_factor=not args.quick)
+        print("scaling ...", file=sys.stderr)
+        doc["scaling"] = scaling([2_000, 8_000] if args.quick else [10_000, 100_000, 1_000_000], repeats, tmp)
+    text, figures = summary(doc)
+    doc["figures"] = figures
     args.out.mkdir(parents=True, exist_ok=True)
-    meta = {
-        "machine": platform.processor() or platform.machine(),
-        "cpus": os.cpu_count(),
-        "python": platform.python_version(),
-    }
-    (args.out / "performance.json").write_text(
-        json.dumps({"meta": meta, "hardware_floor": floor, "cases": results}, indent=2) + "\n"
-    )
-    (args.out / "performance.md").write_text(report + "\n")
+    (args.out / "performance.json").write_text(json.dumps(doc, indent=2) + "\n")
+    (args.out / "performance.md").write_text(text + "\n")
     from nlp_calib.outputs.plots import scaling_png
 
-    (args.out / "performance.png").write_bytes(scaling_png(results))
-    print(report)
+    (args.out / "performance.png").write_bytes(scaling_png(doc["scaling"]["sizes"]))
+    print(text)
     return 0
-
-
-def summarise(results: list[dict[str, Any]], floor: dict[str, float]) -> str:
-    lines = [
-        "| case | residuals | compile + set-up (cold) [s] | set-up (warm) [s] | one NE eval [ms] | "
-        "GN [ms] (its) | IPOPT [ms] (its) | GN vs IPOPT | peak RSS [MB] |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in results:
-        lines.append(
-            f"| {r['case']} | {r['residuals']} | {r['setup_and_compile_s']:.2f} | {r['setup_warm_s']:.2f} | "
-            f"{r['eval_ms']:.3f} | {r['gn_ms']:.1f} ({r['gn_iterations']}) | "
-            f"{r['ipopt_ms']:.1f} ({r['ipopt_iterations']}) | "
-            f"{r['agree']:.1e} | {r['peak_rss_mb']:.0f} |"
-        )
-    lines += [
-        "",
-        "| case | ours, least squares [ms] | scipy least_squares [ms] | ratio | seed method [ms] | ratio |",
-        "|---|---|---|---|---|---|",
-    ]
-    for r in results:
-        scipy = f"{r['scipy_ms']:.0f} | {r['scipy_ms'] / r['gn_ls_ms']:.0f}×" if "scipy_ms" in r else "- | -"
-        seed = (
-            f"{r['seed_solve_ms']:.0f} | {r['seed_solve_ms'] / r['gn_ms']:.0f}×"
-            if "seed_solve_ms" in r
-            else "- | -"
-        )
-        lines.append(f"| {r['case']} | {r['gn_ls_ms']:.1f} | {scipy} | {seed} |")
-    sims = [r for r in results if r["case"].startswith("simulated")]
-    if len(sims) >= 2:
-        n = np.log([r["residuals"] for r in sims])
-        for key, label in (("gn_ms", "Gauss-Newton solve"), ("eval_ms", "one evaluation")):
-            slope = np.polyfit(n, np.log([r[key] for r in sims]), 1)[0]
-            lines.append(f"\n{label}: time ∝ N^{slope:.2f} over the simulated sizes.")
-    if floor:
-        r = results[0]
-        lines.append(
-            f"\nHardware floor ({r['case']}): one residual's normal-equation contribution is "
-            f"{r['ne_transcendental']} transcendental calls and {r['ne_arithmetic']} other operations; "
-            f"at {floor['ns_per_trig']:.1f} ns per sin and {floor['ns_per_op']:.2f} ns per multiply-add "
-            f"measured on this machine that is {floor['floor_ns_per_residual']:.0f} ns, against "
-            f"{r['ns_per_residual']:.0f} ns achieved "
-            f"({r['ns_per_residual'] / floor['floor_ns_per_residual']:.1f}× the floor)."
-        )
-    return "\n".join(lines)
 
 
 if __name__ == "__main__":

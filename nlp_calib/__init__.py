@@ -39,6 +39,8 @@ if TYPE_CHECKING:
     from nlp_calib.pipeline import (
         Calibration,
         CalibrationRun,
+        JointCalibration,
+        JointRun,
         Scenario,
         SolverReport,
         load_scenario,
@@ -53,6 +55,8 @@ if TYPE_CHECKING:
 _EXPORTS: dict[str, str] = {
     "Calibration": "nlp_calib.pipeline",
     "CalibrationRun": "nlp_calib.pipeline",
+    "JointCalibration": "nlp_calib.pipeline",
+    "JointRun": "nlp_calib.pipeline",
     "CodegenError": "nlp_calib.core.errors",
     "ConfigError": "nlp_calib.core.errors",
     "DatasetError": "nlp_calib.core.errors",
@@ -112,6 +116,8 @@ __all__ = [
     "CodegenError",
     "ConfigError",
     "DatasetError",
+    "JointCalibration",
+    "JointRun",
     "KinematicModel",
     "Log",
     "LogHeader",

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import casadi as ca
@@ -122,7 +124,7 @@ def test_compiled_backend_gives_the_interpreted_solution(
         samples=dataclasses.replace(sc.samples, stop=700),
         robust=dataclasses.replace(sc.robust, kernel=kernel),
     )
-    interpreted = Calibration(sc)
+    interpreted = Calibration(dataclasses.replace(sc, backend="interpreted"))
     compiled = Calibration(dataclasses.replace(sc, backend="compiled"))
     assert compiled.backend.name == "compiled"
     for solver in ("gauss_newton", "ipopt"):
@@ -131,19 +133,28 @@ def test_compiled_backend_gives_the_interpreted_solution(
         assert_close(b.params, a.params, rtol=1e-10, atol=1e-14, what=solver)
         assert b.cost == pytest.approx(a.cost, rel=1e-10)
     # The second set-up reuses the cached shared objects: nothing new is compiled.
+    compiled.backend.wait()
     before = sorted(p.name for p in (tmp_path / "cache").glob("*.so"))
     Calibration(dataclasses.replace(sc, backend="compiled")).solve("gauss_newton")
     assert sorted(p.name for p in (tmp_path / "cache").glob("*.so")) == before
 
 
-def test_compiled_backend_falls_back_without_a_compiler(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_compiled_backend_falls_back_without_a_compiler_warning_once(monkeypatch: pytest.MonkeyPatch) -> None:
     import nlp_calib.solvers.backends.compiled as compiled
 
     monkeypatch.setattr(compiled, "find_compiler", lambda: None)
-    sc = dataclasses.replace(load_scenario(SCENARIOS / "demo.yaml"), backend="compiled")
-    with pytest.warns(UserWarning, match="needs a C compiler"):
-        calib = Calibration(sc)
-    assert calib.backend.name == "interpreted"
+    monkeypatch.setattr(compiled, "_warned_no_compiler", False)
+    sc = load_scenario(SCENARIOS / "demo.yaml")
+    assert sc.backend == "compiled"  # the default
+    sc = dataclasses.replace(sc, samples=dataclasses.replace(sc.samples, stop=300))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        calibs = [Calibration(sc), Calibration(sc)]
+    assert [str(w.message) for w in caught if "no C compiler found" in str(w.message)] == [
+        "no C compiler found (set $CC or install gcc or clang): evaluating with CasADi's interpreter, "
+        "several times slower; set 'backend: interpreted' to silence this"
+    ]
+    assert [c.backend.name for c in calibs] == ["interpreted", "interpreted"]
 
 
 @pytest.mark.slow
@@ -157,3 +168,34 @@ def test_threaded_chunk_map_equals_serial(tmp_path: Path, monkeypatch: pytest.Mo
     assert_close(b.H, a.H, rtol=1e-12)
     assert_close(b.g, a.g, rtol=1e-12, atol=1e-15)
     assert b.cost == pytest.approx(a.cost, rel=1e-12)
+
+
+@needs_compiler
+def test_a_cache_path_that_cannot_hold_files_is_a_usage_error(tmp_path: Path) -> None:
+    blocker = tmp_path / "cache_file"
+    blocker.write_text("not a folder\n")
+    for cache in (blocker, blocker / "sub"):
+        env = dict(os.environ, NLP_CALIB_CACHE=str(cache), PYTHONWARNINGS="ignore")
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "nlp_calib",
+                "run",
+                str(SCENARIOS / "demo.yaml"),
+                "--out",
+                str(tmp_path / "o"),
+            ],
+            capture_output=True,
+            text=True,
+            env=env,
+            cwd=REPO,
+            timeout=300,
+        )
+        assert proc.returncode == 2, proc.stderr
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in proc.stderr
+        assert (
+            str(cache) in lines[0] and "NLP_CALIB_CACHE" in lines[0] and "not a writable folder" in lines[0]
+        )
+    assert blocker.read_text() == "not a folder\n"

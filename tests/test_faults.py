@@ -455,10 +455,10 @@ def test_second_run_into_the_same_folder_does_not_mix_files(sim_log: Path, tmp_p
     first = listing(out)
     assert {"trajectory.png", "report.md", "calibration.yaml", MANIFEST_FILE} <= first
     assert run_cli("run", str(sc), "--out", str(out)).returncode == 0
-    expected = {"result.json", "calibration.yaml", "sensor_mount.urdf.xml", MANIFEST_FILE, "notes.txt"}
-    assert listing(out) == expected
+    expected = {"result.json", "calibration.yaml", "sensor_mount.urdf.xml", "robot.urdf"}
+    assert listing(out) == expected | {MANIFEST_FILE, "notes.txt"}
     manifest = json.loads((out / MANIFEST_FILE).read_text())
-    assert manifest["files"] == ["calibration.yaml", "result.json", "sensor_mount.urdf.xml"]
+    assert manifest["files"] == sorted(expected)
     # A run where no solver converges removes the now stale hand-off files too.
     failing = scenario(
         tmp_path, sim_log, "solvers: [gauss_newton]\ngauss_newton: {max_iterations: 1}\n", "f.yaml"

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import assert_close, boxplus_numpy
+from conftest import assert_close, boxplus_numpy, parse_lines
 
 from nlp_calib.models import get_model
-from nlp_calib.problem import ProblemSpec, build
+from nlp_calib.problem import ProblemSpec, ResidualOptions, build, build_residual_data
+from nlp_calib.simulation import SimulationOptions, simulate
+from nlp_calib.solvers import ProblemEvaluator
 
 MODEL = get_model("tricycle")
 
@@ -57,52 +59,48 @@ def test_manifold_jacobian_matches_central_differences(integration: str, horizon
         assert np.all(np.isfinite(e))
 
 
-def test_cost_gradient_and_hessian_match_finite_differences() -> None:
-    fns = build(MODEL, ProblemSpec(horizon=3, kernel="pseudo_huber"))
-    rng = np.random.default_rng(5)
-    omega, delta = np.array([1.0, 1.0, 2.0]), 0.05
-    for _ in range(10):
-        x, data = random_state(rng, 3)
-        _, grad = (np.asarray(v).ravel() for v in fns.cost_gradient(x, [], omega, delta, data))
-        hess = np.asarray(fns.cost_hessian(x, [], omega, delta, data, 1.0))
-        eps = 1e-6
-        g_fd = np.zeros(7)
-        H_fd = np.zeros((7, 7))
-        for i in range(7):
-            d = np.zeros(7)
-            d[i] = eps
-            g_fd[i] = (
-                float(fns.cost(x + d, [], omega, delta, data))
-                - float(fns.cost(x - d, [], omega, delta, data))
-            ) / (2 * eps)
-            gp = np.asarray(fns.cost_gradient(x + d, [], omega, delta, data)[1]).ravel()
-            gm = np.asarray(fns.cost_gradient(x - d, [], omega, delta, data)[1]).ravel()
-            H_fd[:, i] = (gp - gm) / (2 * eps)
-        assert_close(grad, g_fd, rtol=1e-6, atol=1e-8 * np.abs(grad).max(), what="gradient")
-        assert_close(hess, np.triu(H_fd), rtol=1e-5, atol=1e-6 * np.abs(H_fd).max(), what="hessian")
+def small_evaluator(horizon: int, kernel: str, **sim: object) -> tuple[ProblemEvaluator, np.ndarray]:
+    """An interpreted evaluator on a short simulated log, and a point near its optimum."""
+    fns = build(MODEL, ProblemSpec(horizon=horizon, kernel=kernel))
+    log = parse_lines(simulate(SimulationOptions(records=120, seed=9, **sim)).text().splitlines())  # type: ignore[arg-type]
+    data = build_residual_data(fns, log, ResidualOptions(horizon=horizon))
+    ev = ProblemEvaluator(fns, data, x_fixed=np.zeros(0), omega=np.array([1.0, 1.0, 2.0]), delta=0.01)
+    x = np.array(list(MODEL.drive.default_truth.values())) * (1.0 + 0.02 * np.arange(7) / 7)
+    return ev, x
 
 
-def test_normal_equations_are_irls_of_the_cost() -> None:
+@pytest.mark.parametrize("horizon", [1, 4])
+def test_cost_gradient_and_hessian_match_finite_differences(horizon: int) -> None:
+    """The exact Hessian IPOPT gets, through the prefix jets for H > 1, against differences."""
+    ev, x = small_evaluator(horizon, "pseudo_huber")
+    cost, grad, hess = ev.cost_derivatives(x)
+    assert cost == pytest.approx(ev.cost(x), rel=1e-12)
+    g_fd, H_fd = np.zeros(7), np.zeros((7, 7))
+    for i in range(7):
+        d = np.zeros(7)
+        d[i] = 1e-6 * max(abs(x[i]), 1e-2)
+        g_fd[i] = (ev.cost(x + d) - ev.cost(x - d)) / (2 * d[i])
+        H_fd[:, i] = (ev.cost_derivatives(x + d)[1] - ev.cost_derivatives(x - d)[1]) / (2 * d[i])
+    assert_close(grad, g_fd, rtol=1e-5, atol=1e-6 * np.abs(grad).max(), what="gradient")
+    assert_close(hess, H_fd, rtol=1e-4, atol=1e-5 * np.abs(H_fd).max(), what="hessian")
+
+
+@pytest.mark.parametrize("horizon", [1, 3])
+def test_normal_equations_are_irls_of_the_cost(horizon: int) -> None:
     """2·g of the normal equations is the manifold gradient of the robust cost."""
-    fns = build(MODEL, ProblemSpec(horizon=2, kernel="huber"))
-    rng = np.random.default_rng(8)
-    omega, delta = np.ones(3), 0.02
-    x, data = random_state(rng, 2)
-    _, g, _, chi2, inliers = fns.normal_equations(x, [], omega, delta, data)
-    g = np.asarray(g)
-    eps = 1e-7
+    ev, x = small_evaluator(horizon, "huber", outlier_fraction=0.05)
+    ne = ev.normal_equations(x)
     g_fd = np.zeros(7)
     for i in range(7):
         d = np.zeros(7)
-        d[i] = eps
-        g_fd[i] = (
-            float(fns.cost(boxplus_numpy(x, d), [], omega, delta, data))
-            - float(fns.cost(boxplus_numpy(x, -d), [], omega, delta, data))
-        ) / (2 * eps)
-    assert_close(2 * g.ravel(), g_fd, rtol=1e-6)
-    e = np.asarray(fns.residual(x, [], data)).ravel()
-    assert float(chi2) == pytest.approx(e @ e)
-    assert float(inliers) == (1.0 if e @ e <= delta**2 else 0.0)
+        d[i] = 1e-6 * max(abs(x[i]), 1e-2)
+        g_fd[i] = (ev.cost(boxplus_numpy(x, d)) - ev.cost(boxplus_numpy(x, -d))) / (2 * d[i])
+    # Differences straddle some residuals' kink at s = δ²: allow their O(step) error.
+    assert_close(2 * ne.g.ravel(), g_fd, rtol=1e-5, atol=1e-6 * np.abs(g_fd).max())
+    e, s, _ = ev.robust_terms(x)
+    assert ne.chi2 == pytest.approx(float(np.sum(s)), rel=1e-12)
+    assert_close(s, np.einsum("cw,c,cw->w", e, ev.omega, e), rtol=1e-12)
+    assert ne.inliers == int(np.sum(s <= ev.delta**2)) and 0 < ne.inliers < s.size
 
 
 def test_fixed_parameters_leave_the_decision_vector() -> None:
@@ -110,4 +108,5 @@ def test_fixed_parameters_leave_the_decision_vector() -> None:
     assert fns.free == ("k_steer", "k_traction", "steer_offset", "sensor_x", "sensor_y")
     assert fns.normal_equations.size_in("x") == (5, 1)
     assert fns.normal_equations.size_out("H_upper") == (15, 1)  # 5 x 5, upper triangle
+    assert fns.cost_derivatives.size_out("hess_upper") == (15, 1)
     assert not fns.manifold_sensor

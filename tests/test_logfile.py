@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import parse_lines
 
-from nlp_calib.core.errors import DatasetError
+from nlp_calib.core.errors import DatasetError, NlpCalibWarning
 from nlp_calib.core.numeric import wrapped_difference
 from nlp_calib.models import get_model, header_parameters, load_log
 
@@ -112,3 +113,123 @@ def test_real_log(real_log: Path) -> None:
     assert np.abs(inc).max() < 40000
     assert 0.08 < np.mean(inc == 0) < 0.1
     assert ds.header.T_base_sensor == (1.5, 0.0, 0.0)
+
+
+# --- hostile files: streamed, bounded, and nothing doubtful passes silently -----------------------
+
+
+def write(tmp_path: Path, text: str | bytes, name: str = "log.txt") -> Path:
+    p = tmp_path / name
+    if isinstance(text, bytes):
+        p.write_bytes(text)
+    else:
+        p.write_text(text)
+    return p
+
+
+def two_records() -> str:
+    return HEADER + record("0.0", 1, 1) + "\n" + record("0.1", 2, 2) + "\n"
+
+
+def test_special_files_are_refused_without_blocking(tmp_path: Path) -> None:
+    fifo = tmp_path / "fifo.txt"
+    os.mkfifo(fifo)  # opening it for reading would block until a writer comes
+    for target in (fifo, tmp_path):
+        with pytest.raises(DatasetError, match="not a regular file") as exc:
+            load_log(target)
+        assert str(target) in str(exc.value)
+
+
+def test_a_utf8_byte_order_mark_is_skipped(tmp_path: Path) -> None:
+    plain = load_log(write(tmp_path, two_records()))
+    bom = load_log(write(tmp_path, b"\xef\xbb\xbf" + two_records().encode(), "bom.txt"))
+    np.testing.assert_array_equal(bom.ticks, plain.ticks)
+    assert bom.header == plain.header
+
+
+def test_windows_and_old_mac_line_ends_read_the_same(tmp_path: Path) -> None:
+    plain = load_log(write(tmp_path, two_records()))
+    for sep, name in (("\r\n", "crlf.txt"), ("\r", "cr.txt")):
+        other = load_log(write(tmp_path, two_records().replace("\n", sep).encode(), name))
+        np.testing.assert_array_equal(other.T_world_sensor, plain.T_world_sensor)
+        np.testing.assert_array_equal(other.line_numbers, plain.line_numbers)
+
+
+def test_a_header_key_given_twice_names_both_lines() -> None:
+    text = lines(record("0.0", 1, 1), record("0.1", 2, 2))
+    text.insert(5, "#parameter_values: 0.2 0.0106141 1.4 0")
+    with pytest.raises(
+        DatasetError, match=r"<log>:6: header line '#parameter_values:' appears twice, at lines 3 and 6"
+    ):
+        parse_lines(text)
+
+
+def test_a_tilted_sensor_rotation_is_named(tmp_path: Path) -> None:
+    roll90 = [math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)]
+    text = [
+        f"#\trotation:\t [ {', '.join(str(q) for q in roll90)} ]" if "rotation" in ln else ln
+        for ln in lines(record("0.0", 1, 1), record("0.1", 2, 2))
+    ]
+    with pytest.raises(
+        DatasetError, match=r"<log>:8: sensor rotation .* tilts the sensor 90.0° out of the plane"
+    ):
+        parse_lines(text)
+    with pytest.warns(NlpCalibWarning, match=r"<log>:8: sensor rotation .* tilts the sensor 90.0°"):
+        ds = parse_lines(text, strict=False)
+    assert ds.header.T_base_sensor[2] == pytest.approx(0.0)  # the yaw of a pure roll
+
+
+def test_implausible_magnitudes_are_named_not_solved(tmp_path: Path) -> None:
+    bad = record("0.1", 2, 2).replace("tracker_pose: 0.1 0.2 0.3", "tracker_pose: 1e308 0.2 0.3")
+    text = lines(record("0.0", 1, 1), bad, record("0.2", 3, 3))
+    with pytest.raises(
+        DatasetError, match=r"<log>:10: tracker_pose is 1e\+308 0.2 0.3; a value beyond ±1e\+06"
+    ):
+        parse_lines(text)
+    with pytest.warns(NlpCalibWarning, match="dropped 1 of 3 records"):
+        ds = parse_lines(text, strict=False)
+    assert [d.line for d in ds.dropped] == [10] and ds.n_records == 2
+    huge_mount = [
+        ln.replace("1.5, 0.25, 0", "2e7, 0.25, 0") for ln in lines(record("0.0", 1, 1), record("0.1", 2, 2))
+    ]
+    with pytest.raises(DatasetError, match=r"<log>:7: sensor translation 2e\+07 0.25 0: a value beyond"):
+        parse_lines(huge_mount)
+
+
+def test_a_line_too_long_for_a_record_is_named(tmp_path: Path) -> None:
+    text = two_records() + "x" * 200_000 + "\n" + record("0.2", 3, 3) + "\n"
+    with pytest.raises(DatasetError, match=r":11: a line of 200000 bytes; a record is one line"):
+        load_log(write(tmp_path, text))
+
+
+def test_garbage_stops_the_read_early(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A large file of garbage is not read to its end, strictly or not (bounded errors)."""
+    from nlp_calib.logs import reader
+
+    monkeypatch.setattr(reader, "BLOCK_BYTES", 1 << 16)
+    garbage = "".join(f"garbage line {k} with no record in it\n" for k in range(200_000))
+    path = write(tmp_path, HEADER + garbage)  # about 7 MB: over a hundred blocks
+    read: list[int] = []
+    chunks = reader._chunks
+
+    def counted(fh: object) -> object:
+        for chunk in chunks(fh):  # type: ignore[arg-type]
+            read.append(len(chunk))
+            yield chunk
+
+    monkeypatch.setattr(reader, "_chunks", counted)
+    with pytest.raises(DatasetError, match=r":9: a record starts with 'time:', got 'garbage'"):
+        load_log(path)
+    assert len(read) <= 3  # the header, the first block of records and the one after it
+    read.clear()
+    with pytest.raises(
+        DatasetError, match=r"record lines cannot be used \(the first, line 9: a record starts"
+    ):
+        load_log(path, strict=False)
+    assert sum(read) < path.stat().st_size / 10
+
+
+def test_too_many_header_lines_is_not_a_log(tmp_path: Path) -> None:
+    text = HEADER + "#\n" * 20_000 + two_records()
+    with pytest.raises(DatasetError, match="'#' lines before any record: not a log"):
+        load_log(write(tmp_path, text))

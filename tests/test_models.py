@@ -14,7 +14,7 @@ from conftest import assert_close, boxplus_numpy, parse_lines
 
 from nlp_calib.analysis.odometry import propagate
 from nlp_calib.codegen.compiler import find_compiler
-from nlp_calib.codegen.export import build_for_export, export_functions, generate
+from nlp_calib.codegen.export import Example, build_for_export, export_functions, generate
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import Log
 from nlp_calib.models import MODELS, canonical, get_model, param_names
@@ -173,7 +173,7 @@ def test_c_export_equals_python(model: str, tmp_path: Path) -> None:
     columns = build_residual_data(
         problems[-1], sim_log(model, records=50), ResidualOptions(horizon=3)
     ).columns
-    generate(problems, tmp_path, truth(model), columns[:, 10], f"test {model}")
+    generate(problems, tmp_path, Example(truth(model), "truth", columns[:, 10], "window 10"), f"test {model}")
     lib = tmp_path / "lib.so"
     subprocess.run(
         [str(find_compiler()), "-O2", "-fPIC", "-shared", "-o", str(lib), "nlp_calib_residual.c", "-lm"],

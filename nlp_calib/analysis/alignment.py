@@ -1,11 +1,17 @@
 """Time alignment: how much later the tracker reports a pose than the encoders read it.
 
-The lag is estimated the way any other parameter is: by the fit cost. For each lag on a grid
-the encoder inputs are re-sampled at ``t - lag`` (the tracker's measurements stay untouched, so
-costs are comparable), the problem is solved, and a parabola through the costs around the best
-grid point gives the estimate. Interpolating encoder readings at fractional sample offsets
-smooths them slightly, which makes the raw cost ripple with the sample period; the parabola
-fit over several periods averages that ripple out.
+The lag is estimated the way any other parameter is: by the fit cost. For a lag the encoder
+inputs are re-sampled at ``t - lag`` (the tracker's measurements stay untouched, so costs are
+comparable) and the problem is solved; a parabola through the costs on a grid of lags around the
+best one gives the estimate. Interpolating encoder readings at fractional sample offsets smooths
+them slightly, which makes the raw cost ripple with the sample period; the parabola fit over
+several periods averages that ripple out.
+
+Not every grid point needs a fit: a coarse pass over the grid brackets the valley, then only the
+neighbourhood of the best point is filled in, moving with it until the best point is also the
+best of its whole neighbourhood. The estimate is the same parabola through the same costs as a
+fit at every grid point would give, whenever the coarse pass finds the valley (a ripple shorter
+than the neighbourhood cannot hide it).
 """
 
 from __future__ import annotations
@@ -15,17 +21,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: Grid points on each side of the best one that the parabola is fitted through.
+HALF_WIDTH = 6
+#: Every this many grid points the coarse pass fits one.
+COARSE_STRIDE = 4
+
 
 @dataclass(frozen=True)
 class LagEstimate:
-    """The estimated lag (s) and the cost curve it came from."""
+    """The estimated lag (s), the costs of the lags fitted, and whether the best of them is at an
+    end of the searched range (then the true lag may lie beyond it)."""
 
     lag_s: float
     grid_s: tuple[float, ...]
     costs: tuple[float, ...]
+    at_edge: bool = False
 
     def as_dict(self) -> dict[str, object]:
-        return {"lag_s": self.lag_s, "grid_s": list(self.grid_s), "costs": list(self.costs)}
+        return {
+            "lag_s": self.lag_s,
+            "grid_s": list(self.grid_s),
+            "costs": [c if np.isfinite(c) else None for c in self.costs],
+            "at_edge": self.at_edge,
+        }
 
 
 def lag_grid(search: tuple[float, float], step: float) -> np.ndarray:
@@ -35,7 +53,7 @@ def lag_grid(search: tuple[float, float], step: float) -> np.ndarray:
     return lo + step * np.arange(n)
 
 
-def refine_minimum(grid: np.ndarray, costs: np.ndarray, half_width: int = 6) -> float:
+def refine_minimum(grid: np.ndarray, costs: np.ndarray, half_width: int = HALF_WIDTH) -> float:
     """Vertex of a least-squares parabola through the costs around the best grid point."""
     i = int(np.argmin(costs))
     lo, hi = max(0, i - half_width), min(grid.size, i + half_width + 1)
@@ -49,11 +67,28 @@ def refine_minimum(grid: np.ndarray, costs: np.ndarray, half_width: int = 6) -> 
 
 
 def estimate_lag(fit_cost: Callable[[float], float], search: tuple[float, float], step: float) -> LagEstimate:
-    """Minimise ``fit_cost(lag)`` over the grid, refined by a parabola."""
+    """Minimise ``fit_cost(lag)`` over the grid (coarse pass, then the best point's neighbourhood),
+    refined by a parabola. ``fit_cost`` returns NaN where the fit does not converge."""
     grid = lag_grid(search, step)
-    costs = np.array([fit_cost(float(lag)) for lag in grid])
-    finite = np.isfinite(costs)
-    if not finite.any():
-        return LagEstimate(0.0, tuple(grid.tolist()), tuple(costs.tolist()))
-    lag = refine_minimum(grid[finite], costs[finite])
-    return LagEstimate(round(lag, 6), tuple(grid.tolist()), tuple(costs.tolist()))
+    costs = np.full(grid.size, np.nan)
+    fitted = np.zeros(grid.size, dtype=bool)
+
+    def fit(indices: np.ndarray) -> None:
+        for i in indices[~fitted[indices]]:
+            costs[i] = fit_cost(float(grid[i]))
+            fitted[i] = True
+
+    fit(np.unique(np.r_[np.arange(0, grid.size, COARSE_STRIDE), grid.size - 1]))
+    while True:
+        usable = fitted & np.isfinite(costs)
+        if not usable.any():
+            return LagEstimate(0.0, tuple(grid[fitted].tolist()), tuple(costs[fitted].tolist()))
+        best = int(np.flatnonzero(usable)[np.argmin(costs[usable])])
+        around = np.arange(max(0, best - HALF_WIDTH), min(grid.size, best + HALF_WIDTH + 1))
+        if fitted[around].all():
+            break
+        fit(around)
+    keep = np.isfinite(costs[around])
+    lag = refine_minimum(grid[around][keep], costs[around][keep])
+    at_edge = best in (0, grid.size - 1)
+    return LagEstimate(round(lag, 6), tuple(grid[fitted].tolist()), tuple(costs[fitted].tolist()), at_edge)

@@ -13,9 +13,14 @@ A residual is ``e_w ≈ E_w^a n_a + E_w^b n_b + Σ_j F_w^j m_j`` (``E = ∂e/∂
 ``F = ∂e/∂u``, both symbolic), the Gauss-Newton estimate moves by ``−H⁻¹ Σ_w L_w e_w`` with
 ``L_w = ρ'_w J_wᵀΩ``, so ``Cov = M H⁻¹ S H⁻¹ Mᵀ`` with ``S = Σ_p K_p Σ_p K_pᵀ + Σ_j Q_j Σ_u Q_jᵀ``,
 ``K_p`` and ``Q_j`` summing ``L_w E_w`` and ``L_w F_w`` over the windows that touch pose ``p`` or
-interval ``j``. The tracker's variances are estimated from the squared residuals by
-non-negative least squares (method of moments, corrected for the fitted degrees of freedom); the
-input noise is given. ``M`` maps the manifold perturbation to plain parameter coordinates.
+interval ``j``. Every interval ``j`` of a window moves its motion through the window's end alone:
+``F_w^j = ∂e_w/∂end · D_j`` with ``D_j`` the interval's own map (see
+:mod:`nlp_calib.problem.motion`), so ``Q_j = (Σ_{w ∋ j} L_w ∂e_w/∂end)·D_j`` and the input
+noise a window collects, ``Σ_j D_j Σ_u D_jᵀ``, are differences of running sums: the cost is
+linear in the number of windows whatever their length. The tracker's variances are estimated
+from the squared residuals by non-negative least squares (method of moments, corrected for the
+fitted degrees of freedom); the input noise is given. ``M`` maps the manifold perturbation to
+plain parameter coordinates.
 
 Assumptions: white tracker-pose noise explains the residuals beyond the given input noise (no
 timing error or slowly varying model error), and the problem is close to linear within a few σ.
@@ -32,7 +37,7 @@ from nlp_calib.models import reference_scales
 from nlp_calib.problem import ResidualData
 from nlp_calib.solvers import ProblemEvaluator
 
-#: The per-residual Functions the estimate maps over the data, per residual (not summed).
+#: The per-residual Functions the estimate evaluates, per residual (not summed).
 FUNCTIONS = ("robust_terms", "sensitivities")
 
 
@@ -58,17 +63,26 @@ class Uncertainty:
 
 def nnls_small(A: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Non-negative least squares for a handful of unknowns (exhaustive active sets)."""
-    k = A.shape[1]
-    best, best_cost = np.zeros(k), float(y @ y)
+    return nnls_gram(A.T @ A, A.T @ y, float(y @ y))
+
+
+def nnls_gram(G: np.ndarray, h: np.ndarray, yy: float) -> np.ndarray:
+    """:func:`nnls_small` from ``G = AᵀA``, ``h = Aᵀy`` and ``yy = yᵀy`` (summed block by block)."""
+    k = G.shape[0]
+    best, best_cost = np.zeros(k), yy
     for size in range(1, k + 1):
         for cols in itertools.combinations(range(k), size):
-            sol, *_ = np.linalg.lstsq(A[:, cols], y, rcond=None)
+            c = list(cols)
+            try:
+                sol = np.linalg.solve(G[np.ix_(c, c)], h[c])
+            except np.linalg.LinAlgError:
+                continue
             if np.all(sol >= 0):
                 full = np.zeros(k)
-                full[list(cols)] = sol
-                r = A @ full - y
-                if r @ r < best_cost:
-                    best, best_cost = full, float(r @ r)
+                full[c] = sol
+                cost = yy - 2.0 * full @ h + full @ G @ full
+                if cost < best_cost:
+                    best, best_cost = full, cost
     return best
 
 
@@ -105,6 +119,26 @@ def not_available(evaluator: ProblemEvaluator) -> Uncertainty:
     )
 
 
+#: Windows (or intervals) handled at a time: bounds the temporaries, whatever the log's length.
+STEP = 1 << 16
+
+
+def _add(out: np.ndarray, index: np.ndarray, values: np.ndarray, distinct: bool) -> None:
+    """``out[index[w]] += values[w]`` for every ``w`` (``distinct``: no index repeats)."""
+    if index.size and index[-1] - index[0] == index.size - 1 and distinct:
+        out[index[0] : index[-1] + 1] += values  # consecutive windows: a slice, no gather
+    elif distinct:
+        out[index] += values
+    else:
+        np.add.at(out, index, values)
+
+
+def _weighted_gram(A: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``Σ_p A_p diag(weights) A_pᵀ`` for ``A`` ``(P, n, k)``, as one matrix product."""
+    Aw = (A * np.sqrt(weights)).transpose(1, 0, 2).reshape(A.shape[1], -1)
+    return Aw @ Aw.T
+
+
 def estimate(
     evaluator: ProblemEvaluator, x: np.ndarray, data: ResidualData, input_noise_std: np.ndarray
 ) -> Uncertainty:
@@ -113,55 +147,64 @@ def estimate(
     ne = evaluator.normal_equations(x)
     if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
         return not_available(evaluator)
-    n, N, H = fns.n_free, evaluator.n_residuals, data.horizon
-    n_in = fns.n_inputs
-    rows = fns.data_rows
-    e, s, weight, _ = evaluator.residual_terms(x)
-    sens, jac = (
-        np.asarray(v)
-        for v in evaluator.mapped("sensitivities", reduce=False)(x, evaluator.x_fixed, evaluator.data)
-    )
-    de_ddata = sens.reshape(3, -1, rows)[:, :N]  # (3, N, rows)
-    J = jac.reshape(3, -1, n)[:, :N]  # (3, N, n)
-    poses = data.log.T_world_sensor
-    a_idx, b_idx = data.starts, data.starts + H
-    Da, Db = (
-        np.asarray(v).reshape(3, N, 3) for v in fns.between_jacobians.map(N)(poses[a_idx].T, poses[b_idx].T)
-    )
-    de_dz = de_ddata[:, :, n_in * H : n_in * H + 3]
-    Ea = np.einsum("cwk,kwl->wcl", de_dz, Da)  # (N, 3, 3)
-    Eb = np.einsum("cwk,kwl->wcl", de_dz, Db)
-    F = de_ddata[:, :, : n_in * H].reshape(3, N, H, n_in).transpose(1, 2, 0, 3)  # (N, H, 3, n_in)
-
+    n, N, n_in = fns.n_free, evaluator.n_residuals, fns.n_inputs
+    e, s, weight = evaluator.robust_terms(x)
+    blocks = evaluator.sensitivities(x)
+    first = next(blocks)
+    blocks = itertools.chain([first], blocks)
+    m = first[1].de_dend.shape[2]
+    n_int = data.inputs.shape[1]
+    poses = data.T_world_sensor
+    a_idx, b_idx = data.starts, data.stops
+    distinct = bool(np.all(np.diff(a_idx) > 0) and np.all(np.diff(b_idx) > 0))
+    Omega = evaluator.omega
     # Input noise is known (encoder resolution, or set by the user); the tracker's two variances
     # follow from the squared residuals by the method of moments, on inliers only. Estimating the
     # input noise the same way is ill-posed: its share of the residuals is small, its effect on the
     # parameters is not (it does not telescope), so residual noise would masquerade as it.
     Sigma_in = np.asarray(input_noise_std, dtype=float) ** 2
+    D = first[1].D if first[1].D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
+    # Running sums over the intervals of Σ_j D_j Σ_u D_jᵀ: the input noise a window's end collects.
+    running = np.zeros((n_int + 1, m, m))
+    for lo in range(0, n_int, STEP):
+        hi = min(n_int, lo + STEP)
+        Dj = D[lo:hi]
+        part = (Dj * Sigma_in) @ Dj.transpose(0, 2, 1)
+        running[lo + 1 : hi + 1] = np.cumsum(part, axis=0) + running[lo]
     use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(N, dtype=bool)
-    E2 = Ea**2 + Eb**2  # (N, 3, 3): per residual component c, pose component k
-    coef = np.concatenate([E2[:, :, :2].sum(axis=2, keepdims=True), E2[:, :, 2:3]], axis=2)  # (N, 3, 2)
-    known = np.einsum("whci,i->wc", F**2, Sigma_in)
-    m = 3 * int(use.sum())
-    dof = max(m - n, 1)
-    var = nnls_small(coef[use].reshape(-1, 2), (e.T[use] ** 2 - known[use]).ravel()) * (m / dof)
+    gram, proj, yy = np.zeros((2, 2)), np.zeros(2), 0.0
+    K = np.zeros((poses.shape[0], n, 3))
+    # Σ over the windows containing interval j of L_w ∂e_w/∂end: +at the first interval, −after the last.
+    C = np.zeros((n_int + 1, n, m))
+    outliers = np.zeros((n, n))
+    for w, sens in blocks:
+        a, b = a_idx[w], b_idx[w]
+        Ea, Eb = sens.de_dz @ sens.dz_da, sens.de_dz @ sens.dz_db  # (., 3, 3)
+        known = ((sens.de_dend @ (running[b] - running[a])) * sens.de_dend).sum(axis=2)
+        E2 = Ea**2 + Eb**2  # per residual component c, pose component k
+        coef = np.stack([E2[:, :, :2].sum(axis=2), E2[:, :, 2]], axis=2)  # (., 3, 2)
+        u = use[w]
+        A, y = coef[u].reshape(-1, 2), (e[:, w].T[u] ** 2 - known[u]).ravel()
+        gram, proj, yy = gram + A.T @ A, proj + A.T @ y, yy + float(y @ y)
+        L = weight[w, None, None] * sens.J.transpose(0, 2, 1) * Omega[None, None, :]  # (., n, 3)
+        _add(K, a, L @ Ea, distinct)
+        _add(K, b, L @ Eb, distinct)
+        G = L @ sens.de_dend
+        _add(C, a, G, distinct)
+        _add(C, b, -G, distinct)
+        # Residuals beyond the kernel threshold are not explained by the noise model; their bounded
+        # but non-zero pull is counted as it is, from their own scores.
+        score = np.einsum("wic,cw->wi", L[~u], e[:, w][:, ~u])
+        outliers += score.T @ score
+    mm = 3 * int(use.sum())
+    dof = max(mm - n, 1)
+    var = nnls_gram(gram, proj, yy) * (mm / dof)
     Sigma_pose = np.array([var[0], var[0], var[1]])
-
-    Omega = evaluator.omega
-    L = weight[:, None, None] * np.einsum("cwi,c->wic", J, Omega)  # (N, n, 3)
-    n_poses = poses.shape[0]
-    K = np.zeros((n_poses, n, 3))
-    np.add.at(K, a_idx, np.einsum("wic,wcl->wil", L, Ea))
-    np.add.at(K, b_idx, np.einsum("wic,wcl->wil", L, Eb))
-    Q = np.zeros((data.inputs.shape[1], n, n_in))
-    intervals = data.starts[:, None] + np.arange(H)[None, :]
-    np.add.at(Q, intervals.ravel(), np.einsum("wic,whcl->whil", L, F).reshape(-1, n, n_in))
-    meat = np.einsum("pik,k,pjk->ij", K, Sigma_pose, K) + np.einsum("jik,k,jlk->il", Q, Sigma_in, Q)
-    # Residuals beyond the kernel threshold are not explained by the noise model; their bounded
-    # but non-zero pull is counted as it is, from their own scores.
-    if not use.all():
-        g_out = np.einsum("wic,cw->iw", L[~use], e[:, ~use])
-        meat = meat + g_out @ g_out.T
+    meat = _weighted_gram(K, Sigma_pose) + outliers
+    np.cumsum(C, axis=0, out=C)
+    for lo in range(0, n_int, STEP):
+        Q = C[lo : min(n_int, lo + STEP)] @ D[lo : lo + STEP]  # (., n, n_in)
+        meat += _weighted_gram(Q, Sigma_in)
     if evaluator.priors.active:
         meat = meat + evaluator.prior_information(x)
     free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[

@@ -20,6 +20,7 @@ from nlp_calib.cli.parser import ALL_SOLVERS
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
 from nlp_calib.core.files import atomic_write_bytes, atomic_write_text, check_output_dir
+from nlp_calib.logs import Log
 from nlp_calib.outputs.handoff import HANDOFF_FILES, write_handoff
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.outputs.progress import Progress
@@ -33,8 +34,9 @@ from nlp_calib.outputs.results import (
 )
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.outputs.terminal import correlation_table, run_table, summary_table, validation_table
-from nlp_calib.pipeline import Calibration, Scenario, load_scenario, steps
+from nlp_calib.pipeline import Calibration, CalibrationRun, Scenario, load_scenario, steps
 from nlp_calib.pipeline.export import write_c_export
+from nlp_calib.pipeline.joint import JointCalibration
 from nlp_calib.pipeline.simconfig import simulation_options
 from nlp_calib.simulation import simulate, truth_path, write_simulation
 from nlp_calib.solvers import SOLVERS
@@ -125,12 +127,17 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
     names = [RESULT_FILE, *HANDOFF_FILES, *(_report_files() if args.report else ())]
     for out in outs:
         refuse_collisions(out, names, force=args.force)
-    logs = [steps.read_checked(sc) for sc in scenarios]  # every input checked before any work
+    # Every input checked before any work.
+    logs = [[steps.read_checked(s) for s in (sc.per_log() or (sc,))] for sc in scenarios]
     runs = []
     with Progress(len(scenarios), sys.stderr, label="scenarios") as progress:
-        for i, (scenario, out, log) in enumerate(zip(scenarios, outs, logs)):
+        for i, (scenario, out, log_list) in enumerate(zip(scenarios, outs, logs)):
             progress.update(i, f"{scenario.name}: setting up and solving")
-            calib = Calibration.setup(scenario, log=log)
+            if scenario.datasets:
+                runs += _calibrate_joint(scenario, log_list, out, args, solvers, progress)
+                continue
+            log = log_list[0]
+            calib = Calibration.setup(scenario, log=log, solvers=solvers)
             run = calib.run(solvers)
             runs.append(run)
             progress.clear()
@@ -156,9 +163,50 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
             final = [stage.final(p) for p in written]
             print("\n" + "\n".join(_wrote(final, out)) + "\n")
             print("\n".join(summary_lines(run, final)) + "\n")
-    if len(runs) > 1:
+    if len(scenarios) > 1:
         print(summary_table(runs))
     return 0 if all(r.result.converged for run in runs for r in run.reports.values()) else 1
+
+
+def _calibrate_joint(
+    scenario: Scenario,
+    logs: Sequence[Log],
+    out: Path,
+    args: argparse.Namespace,
+    solvers: Sequence[str] | None,
+    progress: Progress,
+) -> list[CalibrationRun]:
+    """One calibration from several logs: the hand-off files in ``out``, each log's result (and
+    report) in ``out/<log>/``."""
+    calib = JointCalibration(scenario, logs, solvers)
+    joint = calib.run(solvers)
+    progress.clear()
+    parts = joint.parts
+    for part in parts:
+        print(f"log {part.scenario.name} ({part.scenario.dataset}), figures with the joint parameters")
+        print(run_table(part))
+        print()
+    print(correlation_table(parts[0], next(iter(joint.reports))))
+    print()
+    print(f"joint fit of {len(parts)} logs, {joint.n_residuals} windows; each log with the joint parameters:")
+    print(summary_table(list(parts)))
+    with StagedOutput(out, "run", force=args.force) as stage:
+        written = write_handoff(dataclasses.replace(parts[0], scenario=scenario), stage.path)
+        if not written:
+            print("warning: no solver converged; no calibration.yaml or URDF written", file=sys.stderr)
+        for part, pcalib in zip(parts, calib.parts):
+            folder = stage.path / part.scenario.name
+            folder.mkdir()
+            written.append(write_result(part, folder))
+            if args.report:
+                from nlp_calib.outputs.writer import write_report  # imports matplotlib
+
+                written += write_report(pcalib, part, folder)
+        stage.commit()
+    final = [stage.final(p) for p in written]
+    print("\n" + "\n".join(_wrote(final, out)) + "\n")
+    print("\n".join(summary_lines(parts[0], final)) + "\n")
+    return list(parts)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:

@@ -11,7 +11,7 @@ from nlp_calib.core.errors import UsageError
 from nlp_calib.core.ranges import Range
 from nlp_calib.core.version import __version__
 from nlp_calib.logs.bag_reader import DEFAULT_MAX_GAP_S, MAX_GAP, TRACKER_TYPES
-from nlp_calib.models import MODELS, encoders
+from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders
 from nlp_calib.pipeline.scenario import BLOCKS
 from nlp_calib.pipeline.simconfig import CLI_LIMITS
 from nlp_calib.simulation import TRAJECTORIES
@@ -98,10 +98,11 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "codegen": ("nlp-calib codegen scenarios/demo.yaml --out c_export && make -C c_export example",),
     "simulate": ("nlp-calib simulate --out my_drive.txt --records 2000 --seed 3 --latency 0.05",),
     "import-bag": (
-        "nlp-calib import-bag drive.bag --out drive.txt --model tricycle --joint-states /joint_states "
-        "--joints steer_joint,drive_joint --tracker /mocap/robot/pose",
-        "nlp-calib import-bag drive_ros2/ --out drive.txt --model diff_drive --joint-states /joint_states "
-        "--joints left_wheel_joint,right_wheel_joint --tracker /tf --tracker-frame robot --robot robot.yaml",
+        f"nlp-calib import-bag drive.bag --out drive.txt --model {DEFAULT_MODEL} --joint-states "
+        "/joint_states --joints steer_joint,drive_joint --tracker /mocap/robot/pose",
+        f"nlp-calib import-bag drive_ros2/ --out drive.txt --model {DEFAULT_MODEL} --joint-states "
+        "/joint_states --joints steer_joint,drive_joint --tracker /tf --tracker-frame robot "
+        "--robot robot.yaml",
     ),
 }
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import casadi as ca
 
-from nlp_calib.core.errors import CodegenError
+from nlp_calib.core.errors import CodegenError, OptionsError
 
 #: Optimisation flags for the generated code; -fno-math-errno lets sin/cos/sqrt inline.
 CFLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fPIC", "-shared", "-Wno-int-conversion")
@@ -25,9 +25,7 @@ CFLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fPIC", "-shared", "-Wno-i
 #: very large ones (a long horizon's exact Hessian) compile about twice as fast at -O1, for a
 #: small loss at run time; the solvers' inner loops get -O3.
 CFLAGS_COLD = ("-O1", "-fno-math-errno", "-fPIC", "-shared", "-Wno-int-conversion")
-HOT_FUNCTIONS = frozenset(
-    {"normal_equations", "cost", "cost_gradient", "cost_hessian", "gauss_newton_hessian"}
-)
+HOT_FUNCTIONS = frozenset({"normal_equations", "cost", "prefix_step", "prefix_value_step"})
 LARGE_FUNCTION = 20_000  # instructions
 
 
@@ -55,6 +53,22 @@ def cache_dir() -> Path:
         return Path(env)
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "nlp_calib"
+
+
+def usable_cache_dir() -> Path:
+    """:func:`cache_dir`, created if needed; an error naming it when it cannot hold files."""
+    folder = cache_dir()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise PermissionError("not writable")
+    except (OSError, ValueError) as exc:
+        reason = "a file is in the way" if folder.is_file() else getattr(exc, "strerror", None) or str(exc)
+        raise OptionsError(
+            f"the compile cache {folder} is not a writable folder ({reason}); set NLP_CALIB_CACHE to "
+            "a writable folder, or use the interpreted backend ('backend: interpreted')"
+        ) from None
+    return folder
 
 
 def compile_shared(source: str, name: str, compiler: str, flags: Sequence[str] = CFLAGS) -> Path:

@@ -1,7 +1,7 @@
 """Value checks of a log's records, and which records a non-strict read drops.
 
-:func:`value_problems` finds records whose values cannot be used: NaN or infinite poses,
-encoder readings outside their range, timestamps that do not increase.
+:func:`value_problems` finds records whose values cannot be used: NaN, infinite or implausibly
+large poses, encoder readings outside their range, timestamps that do not increase.
 
 A traction counter's increment between two records is the wheel's travel. A corrupted reading
 (a bit error, a garbled serial frame, a counter reset) shows up as an increment far beyond
@@ -31,6 +31,7 @@ import numpy as np
 
 from nlp_calib.core.errors import DatasetError
 from nlp_calib.core.numeric import wrapped_difference
+from nlp_calib.logs.header import MAX_MAGNITUDE
 from nlp_calib.logs.log import DroppedRecord
 
 #: A jump is an increment beyond this many typical increments (see the module docstring).
@@ -95,35 +96,54 @@ def value_problems(
     poses: np.ndarray,
     linenos: np.ndarray,
     encoders: Sequence[tuple[str, int]],
-) -> dict[int, str]:
-    """Unusable records (index -> reason): non-finite poses, readings outside ``[0, limit)``
-    (``encoders`` gives each column's name and limit), timestamps that do not increase."""
+    last: tuple[int, int] | None = None,
+) -> tuple[dict[int, str], tuple[int, int] | None]:
+    """Unusable records (index -> reason): non-finite or implausibly large poses, readings outside
+    ``[0, limit)`` (``encoders`` gives each column's name and limit), timestamps that do not
+    increase. ``last`` is the time and line of the last usable record before these (records come
+    in blocks); the same for these is returned."""
     reasons: dict[int, str] = {}
-    for i in np.flatnonzero(~np.isfinite(poses).all(axis=1)).tolist():
-        which = "tracker_pose" if not np.isfinite(poses[i, 3:6]).all() else "model_pose"
-        values = poses[i, 3:6] if which == "tracker_pose" else poses[i, 0:3]
-        reasons[int(i)] = (
-            f"{which} is {' '.join(str(v) for v in values)}; expected finite numbers "
-            "(a tracker that lost its target?)"
-        )
+    finite = np.isfinite(poses)
+    plausible = np.abs(np.where(finite, poses, 0.0)) <= MAX_MAGNITUDE
+    for i in np.flatnonzero(~(finite & plausible).all(axis=1)).tolist():
+        tracker = not (finite[i, 3:6] & plausible[i, 3:6]).all()
+        which, values = ("tracker_pose", poses[i, 3:6]) if tracker else ("model_pose", poses[i, 0:3])
+        text = " ".join(str(v) for v in values)
+        if np.isfinite(values).all():
+            reasons[i] = (
+                f"{which} is {text}; a value beyond ±{MAX_MAGNITUDE:g} (metres or radians) is not a "
+                "measurement (a corrupt reading?)"
+            )
+        else:
+            reasons[i] = f"{which} is {text}; expected finite numbers (a tracker that lost its target?)"
     for j, (name, limit) in enumerate(encoders):
         out = (ticks[:, j] < 0) | (ticks[:, j] >= limit)
         for i in np.flatnonzero(out).tolist():
             reasons.setdefault(int(i), f"encoder {name!r} reads {ticks[i, j]}, outside [0, {limit})")
-    # Time must increase; compare against the last kept record so one glitch drops one record.
-    last: int | None = None
-    for i in range(t_ns.shape[0]):
-        if i in reasons:
-            continue
-        if last is not None and t_ns[i] <= t_ns[last]:
-            what = "duplicates" if t_ns[i] == t_ns[last] else "goes back from"
-            reasons[i] = (
-                f"time {_seconds(int(t_ns[i]))} {what} the previous record's {_seconds(int(t_ns[last]))} "
-                f"(line {linenos[last]}); expected increasing timestamps"
-            )
-            continue
-        last = i
-    return reasons
+    # Time must increase; compare against the last kept record so one glitch drops one record. The
+    # last kept time is the running maximum (kept times increase), so this is one pass.
+    usable = np.ones(t_ns.shape[0], dtype=bool)
+    usable[list(reasons)] = False
+    idx = np.flatnonzero(usable)
+    t = t_ns[idx]
+    start_t, start_line = last if last is not None else (np.iinfo(np.int64).min, -1)
+    before = np.maximum.accumulate(np.concatenate([[start_t], t]))[:-1]
+    kept = t > before
+    # Where the running maximum was set: the last kept record before each one.
+    kept_at = np.maximum.accumulate(np.where(kept, np.arange(t.size), -1))
+    prior = np.concatenate([[-1], kept_at[:-1]])
+    for k in np.flatnonzero(~kept).tolist():
+        p = int(prior[k])
+        t_prev, line_prev = (int(t[p]), int(linenos[idx[p]])) if p >= 0 else (int(start_t), int(start_line))
+        what = "duplicates" if t[k] == t_prev else "goes back from"
+        reasons[int(idx[k])] = (
+            f"time {_seconds(int(t[k]))} {what} the previous record's {_seconds(t_prev)} "
+            f"(line {line_prev}); expected increasing timestamps"
+        )
+    if kept.any():
+        k = int(np.flatnonzero(kept)[-1])
+        last = (int(t[k]), int(linenos[idx[k]]))
+    return reasons, last
 
 
 def _seconds(ns: int) -> str:

@@ -71,6 +71,8 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
             "fit": ds["fit"],
             "tracker_lag_s": doc["alignment"]["tracker_lag_s"],
         },
+        # A joint fit: every log it was fitted to (the block above describes the first).
+        **({"datasets": [str(e.path) for e in sc.datasets]} if sc.datasets else {}),
         "solver": solver,
         "solver_choice": "first converged solver in the order " + ", ".join(solver_order(run)),
         "frames": {"parent": PARENT_FRAME, "sensor": run.log.header.sensor_frame},

@@ -5,11 +5,15 @@ messages that name the scenario key to fix.
 """
 
 from nlp_calib.pipeline.calibration import Calibration, CalibrationRun, SolverReport
-from nlp_calib.pipeline.scenario import Scenario, load_scenario, scenario_from_mapping
+from nlp_calib.pipeline.joint import JointCalibration, JointRun
+from nlp_calib.pipeline.scenario import LogEntry, Scenario, load_scenario, scenario_from_mapping
 
 __all__ = [
     "Calibration",
     "CalibrationRun",
+    "JointCalibration",
+    "JointRun",
+    "LogEntry",
     "Scenario",
     "SolverReport",
     "load_scenario",

@@ -30,9 +30,11 @@ from nlp_calib.core import interrupts
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import canonical
-from nlp_calib.pipeline import steps, validation
+from nlp_calib.models.base import KinematicModel
+from nlp_calib.pipeline import align, steps, validation
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.solvers import Solver, SolverResult, get_solver
+from nlp_calib.problem import ProblemFunctions
+from nlp_calib.solvers import ProblemEvaluator, Solver, SolverResult, get_solver
 
 
 @dataclass(frozen=True)
@@ -87,82 +89,16 @@ class CalibrationRun:
         return self.crossval.std_dict()
 
 
-class Calibration:
-    """A scenario ready to solve: log, Functions, data and evaluator built once.
+class Solving:
+    """Solving and the canonical form, for a set-up object with ``scenario``, ``model``, ``fns``,
+    ``start`` and ``evaluator`` (one log or several)."""
 
-    ``log`` is the log as read; ``aligned`` the same records with the encoders re-sampled on the
-    tracker's clock (``log`` itself when the lag is 0); ``selected`` the used records of
-    ``aligned``.
-    """
-
-    def __init__(self, scenario: Scenario, log: Log | None = None) -> None:
-        t0 = time.perf_counter()
-        self.scenario = sc = scenario
-        self.model, self.log = steps.load(sc, log)
-        start, stop = steps.select(sc, self.log)
-        self.held = steps.held(sc, self.model, self.log, start, steps.split(sc, start, stop))
-        for name, why in self.held.items():
-            warnings.warn(
-                f"{name} is held at its initial value: {why} in the fitted records",
-                NlpCalibWarning,
-                stacklevel=2,
-            )
-        self.fns = steps.build_problem(sc, self.model, tuple(self.held))
-        self.start = steps.starting_point(sc, self.fns, self.log, start, steps.split(sc, start, stop))
-        self.backend = steps.prepare_backend(sc, self.fns)
-        binder = steps.Binder(
-            sc, self.fns, self.backend, self.start.x_fixed, steps.no_priors(self.fns.n_free)
-        )
-        priors, self.residual_sigma = steps.weigh_priors(
-            binder, self.log, start, steps.split(sc, start, stop), self.start.x0
-        )
-        binder = steps.with_priors(binder, priors)
-        # Faults are judged on the encoder readings as logged (re-sampling them would smear a
-        # faulty one): first against the tracker as logged, to keep them out of the lag search,
-        # then, once the lag is known, against the tracker re-sampled onto the encoders' clock.
-        report = steps.find_faults(binder, self.log, start, stop, self.start.x0)
-        fitted_log, self.findings = steps.handle_faults(self.log, report, sc.faults.handling)
-        dt = steps.median_interval(self.log)
-        search = sc.alignment.search if sc.alignment.tracker_lag == "auto" else (0.0, 0.0)
-        reach = max(abs(search[0]), abs(search[1]))
-        search_binder = steps.exclude_faults(binder, self.findings, self.log.n_records, reach, dt)
-        self.alignment = steps.align(search_binder, fitted_log, start, stop, self.start.x0)
-        lag = self.alignment.lag_s
-        if lag:
-            judge = steps.exclude_faults(binder, self.findings, self.log.n_records, lag, dt)
-            report = steps.find_faults(judge, self.log, start, stop, self.start.x0, lag)
-            fitted_log, self.findings = steps.handle_faults(self.log, report, sc.faults.handling)
-            self.alignment = steps.realign(self.alignment, fitted_log, self.model)
-        self.binder = steps.exclude_faults(binder, self.findings, self.log.n_records, lag, dt)
-        # Every detected fault shapes the fair figures, whatever the handling: like with like.
-        self.fault_masks = steps.fault_masks(report, self.log.n_records, lag, dt)
-        if report.unchecked:
-            warnings.warn(f"encoder faults not checked: {report.unchecked}", NlpCalibWarning, stacklevel=2)
-        self.aligned = self.alignment.log
-        start, stop = max(start, self.alignment.valid[0]), min(stop, self.alignment.valid[1])
-        self.used = (start, stop)
-        self.fit = (start, steps.split(sc, start, stop))
-        self.selected = self.aligned.select(start, stop)
-        self.data, self.evaluator = self.binder.bind(self.aligned, *self.fit)
-        self.input_noise_std = self.model.input_noise_std(self.aligned, sc.encoder_noise)
-        self._solvers: dict[str, Solver] = {}
-        self.setup_time_s = time.perf_counter() - t0
-
-    @classmethod
-    def setup(cls, scenario: Scenario, data: str | Path | None = None, log: Log | None = None) -> Calibration:
-        """Build everything ``scenario`` needs (``data`` replaces its log path; ``log``, already read,
-        replaces reading it)."""
-        return cls(scenario.with_dataset(data) if data is not None else scenario, log)
-
-    @property
-    def initial(self) -> Mapping[str, float]:
-        """The starting values of every parameter."""
-        return self.start.initial
-
-    @property
-    def x0(self) -> np.ndarray:
-        """The starting values of the free parameters."""
-        return self.start.x0
+    scenario: Scenario
+    model: KinematicModel
+    fns: ProblemFunctions
+    start: steps.StartingPoint
+    evaluator: ProblemEvaluator
+    _solvers: dict[str, Solver]
 
     def solver(self, name: str) -> Solver:
         """The solver ``name`` set up on this calibration's evaluator (once)."""
@@ -190,6 +126,94 @@ class Calibration:
         """The full parameter vector ``params`` in the model's canonical form."""
         canon = canonical(self.model, dict(zip(self.fns.names, map(float, params))), self.fns.fixed)
         return np.array([canon[n] for n in self.fns.names])
+
+
+class Calibration(Solving):
+    """A scenario ready to solve: log, Functions, data and evaluator built once.
+
+    ``log`` is the log as read; ``aligned`` the same records with the encoders re-sampled on the
+    tracker's clock (``log`` itself when the lag is 0); ``selected`` the used records of
+    ``aligned``.
+    """
+
+    def __init__(
+        self, scenario: Scenario, log: Log | None = None, solvers: Sequence[str] | None = None
+    ) -> None:
+        t0 = time.perf_counter()
+        self.scenario = sc = scenario
+        self.solvers = tuple(solvers or sc.solvers)
+        self.model, self.log = steps.load(sc, log)
+        start, stop = steps.select(sc, self.log)
+        self.held = steps.held(sc, self.model, self.log, start, steps.split(sc, start, stop))
+        for name, why in self.held.items():
+            warnings.warn(
+                f"{name} is held at its initial value: {why} in the fitted records",
+                NlpCalibWarning,
+                stacklevel=2,
+            )
+        self.fns = steps.build_problem(sc, self.model, tuple(self.held))
+        self.start = steps.starting_point(sc, self.fns, self.log, start, steps.split(sc, start, stop))
+        self.backend = steps.prepare_backend(sc, self.fns, self.solvers, stop - start)
+        binder = steps.Binder(
+            sc, self.fns, self.backend, self.start.x_fixed, steps.no_priors(self.fns.n_free)
+        )
+        priors, self.residual_sigma = steps.weigh_priors(
+            binder, self.log, start, steps.split(sc, start, stop), self.start.x0
+        )
+        binder = steps.with_priors(binder, priors)
+        # Faults are judged on the encoder readings as logged (re-sampling them would smear a
+        # faulty one): first against the tracker as logged, to keep them out of the lag search,
+        # then, once the lag is known, against the tracker re-sampled onto the encoders' clock.
+        report = steps.find_faults(binder, self.log, start, stop, self.start.x0)
+        fitted_log, self.findings = steps.handle_faults(self.log, report, sc.faults.handling)
+        dt = align.median_interval(self.log)
+        search = sc.alignment.search if sc.alignment.tracker_lag == "auto" else (0.0, 0.0)
+        reach = max(abs(search[0]), abs(search[1]))
+        search_binder = steps.exclude_faults(binder, self.findings, self.log.n_records, reach, dt)
+        self.alignment = align.align(search_binder, fitted_log, start, stop, self.start.x0)
+        lag = self.alignment.lag_s
+        if lag:
+            judge = steps.exclude_faults(binder, self.findings, self.log.n_records, lag, dt)
+            report = steps.find_faults(judge, self.log, start, stop, self.start.x0, lag)
+            fitted_log, self.findings = steps.handle_faults(self.log, report, sc.faults.handling)
+            self.alignment = align.realign(self.alignment, fitted_log, self.model)
+        self.binder = steps.exclude_faults(binder, self.findings, self.log.n_records, lag, dt)
+        # Every detected fault shapes the fair figures, whatever the handling: like with like.
+        self.fault_masks = steps.fault_masks(report, self.log.n_records, lag, dt)
+        if report.unchecked:
+            warnings.warn(f"encoder faults not checked: {report.unchecked}", NlpCalibWarning, stacklevel=2)
+        self.aligned = self.alignment.log
+        start, stop = max(start, self.alignment.valid[0]), min(stop, self.alignment.valid[1])
+        self.used = (start, stop)
+        self.fit = (start, steps.split(sc, start, stop))
+        self.selected = self.aligned.select(start, stop)
+        self.data, self.evaluator = self.binder.bind(self.aligned, *self.fit)
+        self.evaluator.prepare(steps.evaluated(sc, self.solvers))
+        self.input_noise_std = self.model.input_noise_std(self.aligned, sc.encoder_noise)
+        self._solvers: dict[str, Solver] = {}
+        self.setup_time_s = time.perf_counter() - t0
+
+    @classmethod
+    def setup(
+        cls,
+        scenario: Scenario,
+        data: str | Path | None = None,
+        log: Log | None = None,
+        solvers: Sequence[str] | None = None,
+    ) -> Calibration:
+        """Build everything ``scenario`` needs (``data`` replaces its log path; ``log``, already read,
+        replaces reading it; ``solvers``, the ones to get ready, the scenario's)."""
+        return cls(scenario.with_dataset(data) if data is not None else scenario, log, solvers)
+
+    @property
+    def initial(self) -> Mapping[str, float]:
+        """The starting values of every parameter."""
+        return self.start.initial
+
+    @property
+    def x0(self) -> np.ndarray:
+        """The starting values of the free parameters."""
+        return self.start.x0
 
     def score(self, params: np.ndarray) -> tuple[TrajectoryMetrics, TrajectoryMetrics | None]:
         """Full-range and hold-out trajectory metrics of ``params``."""
@@ -236,9 +260,7 @@ class Calibration:
                 bad_records=bad_r,
             )
 
-        return validation.cross_validate(
-            self.binder, self.aligned, self.fit, x, k, self.canonical_params, score
-        )
+        return validation.cross_validate(self.binder, self.data, self.fit, x, k, self.canonical_params, score)
 
     def direction_check(self, x: np.ndarray, k: int = 10) -> DirectionCheck | None:
         """Forward-only and reverse-only fits from ``x``, compared in units of their own σ."""
@@ -249,7 +271,7 @@ class Calibration:
             return self.model.undetermined(inputs[:, part])
 
         return validation.direction_check(
-            self.binder, self.aligned, self.fit, x, direction, undetermined, k, self.canonical_params
+            self.binder, self.data, self.fit, x, direction, undetermined, k, self.canonical_params
         )
 
     def odometry(self, params: np.ndarray) -> OdometryTrack:
@@ -283,8 +305,10 @@ class Calibration:
         # Observability at the first estimate with a finite cost (a solver may not have started).
         results = [rep.result for rep in reports.values()]
         first = next((r for r in results if np.isfinite(r.cost)), results[0])
-        observability = analyse(self.evaluator, first.x, self.data.log.T_world_sensor)
+        observability = analyse(self.evaluator, first.x, self.data.T_world_sensor)
         notes = list(observability.warnings)
+        if self.alignment.estimate is not None and self.alignment.estimate.at_edge:
+            notes.append(align.lag_at_edge(self.scenario, self.alignment.lag_s))
         notes += [f"{name} held at its initial value: {why}" for name, why in self.held.items()]
         notes += [f"{name}: {rep.result.reason}" for name, rep in reports.items() if not rep.result.converged]
         crossval = None

@@ -102,6 +102,18 @@ class Prior:
 
 
 @dataclass(frozen=True)
+class LogEntry:
+    """One log of a calibration from several (``datasets``): its path, and its own ``samples`` and
+    ``alignment`` where they differ from the scenario's."""
+
+    path: Path
+    samples: SampleSelection | None = None
+    alignment: AlignmentOptions | None = None
+    #: How to read ``path`` when the entry is a bag block (docs/bags.md).
+    bag: BagSource | None = None
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A calibration run: data, model, residual form, kernel, solvers and their options."""
 
@@ -125,15 +137,34 @@ class Scenario:
     priors: Mapping[str, Prior] = field(default_factory=dict)
     encoder_noise: Mapping[str, float] = field(default_factory=dict)
     strict: bool = True
-    backend: str = "interpreted"
+    backend: str = "compiled"
     threads: int = 1
-    #: How to read ``dataset`` when it is a bag (the ``dataset:`` block); None for a text log.
+    #: Several logs calibrated together (``dataset`` is then the first of them).
+    datasets: tuple[LogEntry, ...] = ()
+    #: How to read ``dataset`` when it is a bag (a ``dataset:`` bag block); None for a text log.
     bag: BagSource | None = None
 
     def with_dataset(self, path: str | Path) -> Scenario:
         """The same scenario on another log (``--data``); another bag is read with the same topics."""
         bag = self.bag if is_bag(Path(path)) else None
-        return dataclasses.replace(self, dataset=Path(path), bag=bag)
+        return dataclasses.replace(self, dataset=Path(path), datasets=(), bag=bag)
+
+    def per_log(self) -> tuple[Scenario, ...]:
+        """One single-log scenario per entry of ``datasets`` (named after its log), with that log's
+        own samples and alignment."""
+        stems = [e.path.stem for e in self.datasets]
+        return tuple(
+            dataclasses.replace(
+                self,
+                name=stem if stems.count(stem) == 1 else f"{i + 1}_{stem}",
+                dataset=e.path,
+                datasets=(),
+                bag=e.bag,
+                samples=e.samples or self.samples,
+                alignment=e.alignment or self.alignment,
+            )
+            for i, (stem, e) in enumerate(zip(stems, self.datasets))
+        )
 
     def options_for(self, solver: str) -> Any:
         """The options of ``solver``: the scenario's block, or the solver's defaults."""
@@ -196,20 +227,55 @@ def _scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | N
     for key in raw:
         if key not in top_level_keys():
             fail(f"{source}: {key_name(key)}", f"unknown key; valid keys are {', '.join(top_level_keys())}")
-    if "dataset" not in raw:
-        fail(source, "the key 'dataset' (path of the log, relative to this file, or a bag block) is required")
+    if ("dataset" in raw) == ("datasets" in raw):
+        fail(
+            source,
+            "give 'dataset' (path of the log, relative to this file, or a bag block) or 'datasets' (a "
+            "list of them), not " + ("both" if "dataset" in raw else "neither"),
+        )
     hints = typing.get_type_hints(Scenario)
     values = {
-        k: coerce(v, hints[k], f"{source}: {k}") for k, v in raw.items() if k not in (*SOLVERS, "dataset")
+        k: coerce(v, hints[k], f"{source}: {k}")
+        for k, v in raw.items()
+        if k not in (*SOLVERS, "dataset", "datasets")
     }
     values["solver_options"] = {
         k: from_mapping(SOLVERS[k].options_type, v, f"{source}: {k}") for k, v in raw.items() if k in SOLVERS
     }
     values.setdefault("name", Path(source).stem)
-    values["dataset"], values["bag"] = dataset_block(raw["dataset"], f"{source}: dataset", base_dir)
+    if "datasets" in raw:
+        values["datasets"] = _log_entries(raw["datasets"], f"{source}: datasets", base_dir)
+        values["dataset"], values["bag"] = values["datasets"][0].path, values["datasets"][0].bag
+    else:
+        values["dataset"], values["bag"] = dataset_block(raw["dataset"], f"{source}: dataset", base_dir)
     sc = Scenario(path=path, **values)
     _validate(sc, source)
     return sc
+
+
+def _log_entries(value: Any, where: str, base_dir: Path) -> tuple[LogEntry, ...]:
+    """``datasets``: a plain path stands for ``{path: ...}``; an entry with ``bag`` is a bag block
+    (with its own ``samples`` and ``alignment`` if given); paths resolve against ``base_dir``."""
+    if not isinstance(value, (list, tuple)) or not value:
+        fail(
+            where,
+            "expected a non-empty list of log paths, {path, samples, alignment} mappings or bag blocks, "
+            f"got {show(value)}",
+        )
+    entries = []
+    for i, item in enumerate(value):
+        place = f"{where}[{i}]"
+        if isinstance(item, Mapping) and "bag" in item:
+            own = ("samples", "alignment")
+            block = {k: v for k, v in item.items() if k not in own}
+            path, bag = dataset_block(block, place, base_dir, also=own)
+            fields = {"path": str(path), **{k: v for k, v in item.items() if k in own}}
+            entries.append(dataclasses.replace(from_mapping(LogEntry, fields, place), bag=bag))
+            continue
+        entry = from_mapping(LogEntry, {"path": item} if isinstance(item, str) else item, place)
+        path = entry.path if entry.path.is_absolute() else base_dir / entry.path
+        entries.append(dataclasses.replace(entry, path=path))
+    return tuple(entries)
 
 
 def _validate(sc: Scenario, source: str) -> None:
@@ -218,8 +284,10 @@ def _validate(sc: Scenario, source: str) -> None:
         fail(f"{source}: name", f"must be a plain folder name (no '/', '\\' or NUL), got {sc.name!r}")
     _check_choice(sc.model, MODELS, f"{source}: model")
     names = param_names(get_model(sc.model))
-    if sc.bag is not None:
-        check_joints(sc.bag.joints, get_model(sc.model), f"{source}: dataset.joints")
+    bags = [(f"datasets[{i}]", e.bag) for i, e in enumerate(sc.datasets)] or [("dataset", sc.bag)]
+    for key, bag in bags:
+        if bag is not None:
+            check_joints(bag.joints, get_model(sc.model), f"{source}: {key}.joints")
     _check_choice(sc.robust.kernel, KERNELS, f"{source}: robust.kernel")
     _check_range(sc.robust.delta, DELTA, f"{source}: robust.delta")
     r = sc.residual
@@ -240,17 +308,17 @@ def _validate(sc: Scenario, source: str) -> None:
     _check_choice(sc.backend, BACKENDS, f"{source}: backend")
     if not 1 <= sc.threads <= 64:
         fail(f"{source}: threads", f"must lie in [1, 64], got {sc.threads}")
-    sel = sc.samples
-    if sel.start < 0 or (sel.stop is not None and sel.stop <= sel.start + 1):
-        fail(f"{source}: samples", f"need 0 <= start < stop - 1, got start={sel.start} stop={sel.stop}")
+    for where, sel, al in [
+        (f"{source}: ", sc.samples, sc.alignment),
+        *((f"{source}: datasets[{i}].", e.samples, e.alignment) for i, e in enumerate(sc.datasets)),
+    ]:
+        if sel is not None and (sel.start < 0 or (sel.stop is not None and sel.stop <= sel.start + 1)):
+            fail(f"{where}samples", f"need 0 <= start < stop - 1, got start={sel.start} stop={sel.stop}")
+        if al is not None:
+            _check_alignment(al, f"{where}alignment")
     hf = sc.validation.holdout_fraction
     if hf is not None and not 0.0 < hf < 1.0:
         fail(f"{source}: validation.holdout_fraction", f"must lie in (0, 1), got {hf}")
-    al = sc.alignment
-    if isinstance(al.tracker_lag, str):
-        _check_choice(al.tracker_lag, ("auto",), f"{source}: alignment.tracker_lag")
-    if not (al.search[0] < al.search[1] and al.step > 0 and (al.search[1] - al.search[0]) / al.step <= 1000):
-        fail(f"{source}: alignment", "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
     _check_choice(sc.faults.handling, FAULT_HANDLINGS, f"{source}: faults.handling")
     if sc.validation.blocks != 0 and (why := BLOCKS.problem(sc.validation.blocks)):
         fail(f"{source}: validation.blocks", f"0 (none) or {why}")
@@ -282,6 +350,13 @@ def _validate(sc: Scenario, source: str) -> None:
         _check_range(prior.std, PRIOR_STD, f"{source}: priors.{n}.std")
         if n in sc.fixed:
             fail(f"{source}: priors.{n}", "a fixed parameter cannot also have a prior; drop one")
+
+
+def _check_alignment(al: AlignmentOptions, where: str) -> None:
+    if isinstance(al.tracker_lag, str):
+        _check_choice(al.tracker_lag, ("auto",), f"{where}.tracker_lag")
+    if not (al.search[0] < al.search[1] and al.step > 0 and (al.search[1] - al.search[0]) / al.step <= 1000):
+        fail(where, "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
 
 
 def _check_range(value: float, limit: Range, where: str) -> None:

@@ -7,16 +7,21 @@ are translated once into the scenario's language (:func:`scenario_key`).
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from nlp_calib.analysis import uncertainty
-from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
 from nlp_calib.analysis.faults import FaultReport, check_log, repair
-from nlp_calib.core.errors import DatasetError, ModelError, OptionsError, ProblemError, ScenarioError
+from nlp_calib.core.errors import (
+    DatasetError,
+    ModelError,
+    OptionsError,
+    ProblemError,
+    ScenarioError,
+)
 from nlp_calib.logs import Log, resample_encoders, resample_tracker
 from nlp_calib.models import (
     SENSOR_PARAMS,
@@ -27,9 +32,17 @@ from nlp_calib.models import (
 )
 from nlp_calib.pipeline.bags import load_dataset
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.problem import ProblemFunctions, ProblemSpec, ResidualData, build, build_residual_data
+from nlp_calib.problem import (
+    ProblemFunctions,
+    ProblemSpec,
+    ResidualData,
+    build,
+    build_residual_data,
+    interval_inputs,
+)
 from nlp_calib.solvers import Priors, ProblemEvaluator, SolverResult, get_solver
 from nlp_calib.solvers.backends import Backend, BackendOptions, make_backend
+from nlp_calib.solvers.evaluation import requests
 
 #: The solver the pipeline's own fits use (prior scaling, the tracker-lag search): the fastest.
 INTERNAL_SOLVER = "gauss_newton"
@@ -184,12 +197,12 @@ def auto_guess(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: 
     # Windows overlapping by three quarters carry nearly all the information at a fraction
     # of the cost of every window.
     step = max(1, data.horizon // (4 * sc.residual.stride))
-    columns = data.columns[:, ::step]
+    columns = data.columns_of(np.arange(0, data.n_residuals, step))
     predict = fns.predict_window.map(columns.shape[1])
 
     def base_motion(params: Mapping[str, float]) -> np.ndarray:
         p = np.array([params[n] for n in fns.names])
-        return np.asarray(predict(p, columns))
+        return np.asarray(predict(p, columns[:rows]))
 
     return fns.model.initial_guess(columns[:rows], columns[rows : rows + 3], base_motion)
 
@@ -223,16 +236,21 @@ def starting_point(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, st
     )
 
 
-def prepare_backend(sc: Scenario, fns: ProblemFunctions) -> Backend:
-    """The scenario's evaluation backend, with every Function its solvers and analyses map ready."""
+def evaluated(sc: Scenario, solvers: Sequence[str]) -> set[str]:
+    """The per-residual Functions a run with ``solvers`` evaluates (the pipeline's own fits and
+    the analyses included)."""
+    names = {"normal_equations", "cost", *uncertainty.FUNCTIONS}
+    for name in solvers:
+        names.update(get_solver(name).functions(sc.options_for(name)))
+    return names
+
+
+def prepare_backend(sc: Scenario, fns: ProblemFunctions, solvers: Sequence[str], n_records: int) -> Backend:
+    """The scenario's evaluation backend, getting ready every Function a run with ``solvers`` maps
+    over the windows of about ``n_records`` records."""
     with scenario_key(sc, "backend"):
         backend = make_backend(BackendOptions(kind=sc.backend, threads=sc.threads))
-    summed = {"normal_equations", "cost"}
-    for name in sc.solvers:
-        summed.update(get_solver(name).functions(sc.options_for(name)))
-    requests = [(fns.function(n), ("data",), True) for n in sorted(summed)]
-    requests += [(fns.function(n), ("data",), False) for n in uncertainty.FUNCTIONS]
-    backend.prepare(requests)
+    backend.prepare(requests(fns, evaluated(sc, solvers), n_records // sc.residual.stride))
     return backend
 
 
@@ -249,8 +267,11 @@ class Binder:
     bad_intervals: np.ndarray | None = None
     bad_records: np.ndarray | None = None
 
-    def bind(self, log: Log, start: int, stop: int) -> tuple[ResidualData, ProblemEvaluator]:
-        """Residual data of records ``start:stop`` of ``log`` and an evaluator bound to it."""
+    def bind(
+        self, log: Log, start: int, stop: int, evaluator: ProblemEvaluator | None = None
+    ) -> tuple[ResidualData, ProblemEvaluator]:
+        """Residual data of records ``start:stop`` of ``log`` and an evaluator bound to it (``evaluator``
+        re-bound, when given)."""
         sc = self.scenario
         data = build_residual_data(
             self.fns,
@@ -271,16 +292,28 @@ class Binder:
                 f"only {data.n_residuals} residuals in records [{start}, {stop}) for "
                 f"{self.fns.n_free} parameters; widen 'samples' or shorten the horizon{at_faults}"
             )
-        evaluator = ProblemEvaluator(
+        return data, self.evaluate(data, evaluator)
+
+    def evaluate(self, data: ResidualData, evaluator: ProblemEvaluator | None = None) -> ProblemEvaluator:
+        """An evaluator on the windows ``data`` (``evaluator`` re-bound, when given)."""
+        if evaluator is not None:
+            evaluator.bind(data)
+            return evaluator
+        return ProblemEvaluator(
             self.fns,
-            data.columns,
+            data,
             x_fixed=self.x_fixed,
-            omega=np.array(sc.information.omega()),
-            delta=sc.robust.delta,
+            omega=np.array(self.scenario.information.omega()),
+            delta=self.scenario.robust.delta,
             priors=self.priors,
             backend=self.backend,
         )
-        return data, evaluator
+
+    def inputs(self, log: Log, start: int, stop: int) -> np.ndarray:
+        """The interval inputs of records ``start:stop`` of ``log`` (what :meth:`bind` binds)."""
+        return interval_inputs(
+            self.fns.model, [log.select(start, stop)], self.scenario.residual.steering_sample
+        )
 
     def fit(self, evaluator: ProblemEvaluator, x0: np.ndarray) -> tuple[float, np.ndarray, bool]:
         """The internal solver's cost, estimate and convergence from ``x0``."""
@@ -317,69 +350,6 @@ def weigh_priors(
         ),
         sigma,
     )
-
-
-@dataclass(frozen=True)
-class Alignment:
-    """The tracker lag used, how it was found, and the log with encoders on the tracker's clock.
-
-    ``valid`` is the record range whose shifted times lie inside the log.
-    """
-
-    lag_s: float
-    estimate: LagEstimate | None
-    log: Log
-    valid: tuple[int, int]
-
-
-def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> LagEstimate:
-    """Grid search of the tracker lag by the internal solver's fit cost on a common record range."""
-    sc = binder.scenario
-    al = sc.alignment
-    kinds = binder.fns.model.encoder_kinds
-    reach = max(abs(al.search[0]), abs(al.search[1]))
-    t = log.time_s
-    first = max(start, int(np.searchsorted(t, t[0] + reach, side="left")))
-    last = min(stop, int(np.searchsorted(t, t[-1] - reach, side="right")))
-    fit_stop = split(sc, first, last)
-    x_start = x0
-
-    def fit_cost(lag: float) -> float:
-        nonlocal x_start
-        shifted, _ = resample_encoders(log, lag, kinds)
-        _, ev = binder.bind(shifted, first, fit_stop)
-        cost, x, converged = binder.fit(ev, x_start)
-        if not converged:
-            return float("nan")
-        x_start = x
-        return cost
-
-    return estimate_lag(fit_cost, al.search, al.step)
-
-
-def realign(alignment: Alignment, log: Log, model: KinematicModel) -> Alignment:
-    """The same alignment applied to another version of the log (e.g. a repaired one)."""
-    aligned, valid = resample_encoders(log, alignment.lag_s, model.encoder_kinds)
-    return replace(alignment, log=aligned, valid=valid)
-
-
-def median_interval(log: Log) -> float:
-    """The median time between records (s)."""
-    return float(np.median(np.diff(log.time_s))) if log.n_records > 1 else 1.0
-
-
-def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Alignment:
-    """The scenario's tracker lag (given, or estimated when ``auto``) applied to the encoders."""
-    sc = binder.scenario
-    lag = sc.alignment.tracker_lag
-    estimate = None
-    if lag == "auto":
-        with scenario_key(sc, "alignment.search"):
-            estimate = estimate_tracker_lag(binder, log, start, stop, x0)
-        lag = estimate.lag_s
-    with scenario_key(sc, "alignment.tracker_lag"):
-        aligned, valid = resample_encoders(log, float(lag), binder.fns.model.encoder_kinds)
-    return Alignment(lag_s=float(lag), estimate=estimate, log=aligned, valid=valid)
 
 
 def with_priors(binder: Binder, priors: Priors) -> Binder:

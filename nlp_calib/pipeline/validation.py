@@ -1,9 +1,9 @@
 """Blocked cross-validation and the direction check: refits of a bound problem without some windows.
 
-Both take a :class:`~nlp_calib.pipeline.steps.Binder` (the problem bound to the fitted records),
-leave windows out through its ``bad_intervals`` and refit with the internal solver from the
-whole fit's estimate. A fold leaves out every window that touches its block of records, so no
-window straddles the held-out records.
+Both take a :class:`~nlp_calib.pipeline.steps.Binder` and the whole fit's windows ``data`` (records
+``fit`` of the log), select the windows a refit keeps and refit them with the internal solver
+from the whole fit's estimate: the windows are never built again. A fold leaves out every window
+that touches its block of records, so no window straddles the held-out records.
 """
 
 from __future__ import annotations
@@ -16,49 +16,50 @@ import numpy as np
 from nlp_calib.analysis.crossval import CrossValidation, Fold, blocks, combine, jackknife_std
 from nlp_calib.analysis.direction import DirectionCheck, compare
 from nlp_calib.analysis.metrics import TrajectoryMetrics
-from nlp_calib.core.errors import NlpCalibError
-from nlp_calib.logs import Log
 from nlp_calib.pipeline.steps import Binder
+from nlp_calib.problem import ResidualData
 from nlp_calib.solvers import Priors
 
 #: A fold needs this many windows of its part in the held-out block to count in a part's jackknife.
 MIN_BLOCK_WINDOWS = 20
 
 Canonical = Callable[[np.ndarray], np.ndarray]
+#: Trajectory metrics of parameters on the records ``a:b``.
+Score = Callable[[np.ndarray, int, int], TrajectoryMetrics]
 
 
 def _fit(
-    binder: Binder, log: Log, fit: tuple[int, int], bad: np.ndarray, x: np.ndarray
+    binder: Binder, data: ResidualData, fit: tuple[int, int], bad: np.ndarray, x: np.ndarray
 ) -> tuple[np.ndarray, bool, int]:
-    """Full parameters, convergence and window count of a refit without the ``bad`` intervals' windows."""
-    try:
-        data, ev = dataclasses.replace(binder, bad_intervals=bad).bind(log, *fit)
-    except NlpCalibError:  # too few windows left
+    """Full parameters, convergence and window count of a refit of ``data`` without the windows
+    that cross a ``bad`` interval (a mask over the whole log's intervals)."""
+    kept = data.select(data.interval_counts(bad[fit[0] : fit[1] - 1]) == 0)
+    if kept.n_residuals < binder.fns.n_free:
         return np.full(len(binder.fns.names), np.nan), False, 0
+    ev = binder.evaluate(kept)
     _, x_k, converged = binder.fit(ev, x)
-    return ev.params(x_k), converged, data.n_residuals
+    return ev.params(x_k), converged, kept.n_residuals
 
 
-def _base(binder: Binder, log: Log) -> np.ndarray:
-    base = binder.bad_intervals
-    return np.zeros(log.n_records - 1, dtype=bool) if base is None else base.copy()
+def _base(fit: tuple[int, int]) -> np.ndarray:
+    return np.zeros(fit[1] - 1, dtype=bool)
 
 
 def cross_validate(
     binder: Binder,
-    log: Log,
+    data: ResidualData,
     fit: tuple[int, int],
     x: np.ndarray,
     k: int,
     canonical: Canonical,
-    score: Callable[[np.ndarray, int, int], TrajectoryMetrics],
+    score: Score,
 ) -> CrossValidation:
     """``k`` folds over the records ``fit``, each scored on its block by ``score(params, a, b)``."""
     folds = []
     for a, b in blocks(*fit, k):
-        bad = _base(binder, log)
+        bad = _base(fit)
         bad[a : b - 1] = True
-        params, converged, n = _fit(binder, log, fit, bad, x)
+        params, converged, n = _fit(binder, data, fit, bad, x)
         if not n:
             folds.append(Fold(a, b, params, False, None))
             continue
@@ -69,7 +70,7 @@ def cross_validate(
 
 def direction_check(
     binder: Binder,
-    log: Log,
+    data: ResidualData,
     fit: tuple[int, int],
     x: np.ndarray,
     direction: np.ndarray,
@@ -98,7 +99,7 @@ def direction_check(
             mean, sqrt_info = binder.priors.mean.copy(), binder.priors.sqrt_info.copy()
             mean[idx], sqrt_info[idx] = x[idx], 1e6  # stiff: held where the whole fit put it
             part_binder = dataclasses.replace(binder, priors=Priors(mean, sqrt_info))
-        params, converged, n = _fit(part_binder, log, fit, _base(binder, log) | other, x)
+        params, converged, n = _fit(part_binder, data, fit, other, x)
         if not converged or n < 10 * fns.n_free:
             return None
         x_part = params[[fns.names.index(f) for f in fns.free]]
@@ -106,9 +107,9 @@ def direction_check(
         for a, b in blocks(first, stop, k):
             if np.sum(part[a : b - 1]) < MIN_BLOCK_WINDOWS:
                 continue  # a block without this direction's driving says nothing about it
-            bad = _base(binder, log) | other
+            bad = other.copy()
             bad[a : b - 1] = True
-            p_k, ok, _ = _fit(part_binder, log, fit, bad, x_part)
+            p_k, ok, _ = _fit(part_binder, data, fit, bad, x_part)
             if ok:
                 folds.append(canonical(p_k))
         estimates.append(canonical(params))

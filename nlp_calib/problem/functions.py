@@ -1,18 +1,21 @@
 """The named :class:`casadi.Function` objects of one calibration problem, written once.
 
-This is the only place where residuals, their Jacobians and Hessians are written. Solvers, code
-generation, metrics and reports all call the Functions built here.
+This is the only place where residuals, their Jacobians and the robust terms are written.
+Solvers, code generation, metrics and reports all call the Functions built here.
 
-:class:`ProblemFunctions` builds the residual, its manifold Jacobian and box-plus when it is
-created; every other Function is derived from those same expressions the first time a consumer
-asks for it (a run that never uses IPOPT never builds a Hessian).
+A residual compares a horizon window's predicted sensor motion with the tracker's:
+``e = t2v(Z⁻¹·T⁻¹·M·T)`` with ``Z = T(p_a)⁻¹T(p_b)`` the tracker's motion from record ``a`` to
+``b``, ``M`` the base motion the model predicts over the intervals between them and ``T`` the
+sensor mounting pose. Where ``M`` and ``∂M/∂x`` come from is :mod:`nlp_calib.problem.motion`'s
+business (directly from one interval's inputs when ``H = 1``, from prefix poses otherwise); every
+per-residual Function here is built once on top of it.
 
-Per-residual Functions take one column of the data matrix and give one residual's contribution;
-the evaluation backend maps them over the data (``Function.map``) with the sums taken inside the
-map. A data column is ``[u_0 … u_{H-1}, z, w]``: the model inputs of the ``H`` intervals of a
-horizon window, the measured sensor motion ``z = t2v(T(p_k)⁻¹T(p_{k+H}))`` and a weight ``w``
-(1 for a residual, 0 for padding). The decision vector ``x`` holds the free parameters only;
-fixed ones enter as ``x_fixed``, so fixing a parameter changes the Functions, not the solvers.
+Per-residual Functions take two mapped inputs: ``motion`` (the window's motion data, see
+:class:`~nlp_calib.problem.motion.MotionSymbols`) and ``data = [z, w]`` (the tracker's motion
+``z`` and the residual's weight ``w``: 1, or 0 for padding); the evaluation backend maps them
+over the windows with the sums taken inside the map. The decision vector ``x`` holds the free
+parameters only; fixed ones enter as ``x_fixed``, so fixing a parameter changes the Functions,
+not the solvers.
 """
 
 from __future__ import annotations
@@ -25,25 +28,26 @@ import numpy as np
 
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.models.base import INTEGRATIONS, SENSOR_PARAMS, KinematicModel, param_names
+from nlp_calib.problem import motion as motion_sources
+from nlp_calib.problem.trajectory import TrajectoryFunctions, fn, predict_motion, split_params
 from nlp_calib.symbolic import se2
 from nlp_calib.symbolic.kernels import KERNELS, kernel_function
 
 _CSE = {"cse": True}
 #: Inputs of every per-residual Function that takes the robust kernel's settings.
-COMMON_INPUTS = ("x", "x_fixed", "omega", "delta", "data")
-#: The per-residual Functions, by name (what a backend may be asked to map).
-PER_RESIDUAL = (
-    "residual",
-    "residual_jacobian",
-    "normal_equations",
-    "cost",
-    "cost_gradient",
-    "cost_hessian",
-    "gauss_newton_hessian",
-    "robust_terms",
-    "huber_lifted",
-    "sensitivities",
-)
+COMMON_INPUTS = ("x", "x_fixed", "omega", "delta", "motion", "data")
+#: The per-residual Functions, by name (what a backend maps over the windows).
+PER_RESIDUAL = ("normal_equations", "cost", "cost_derivatives", "robust_terms", "sensitivities")
+#: Those whose outputs are summed over the windows (the others give one block per window).
+SUMMED = ("normal_equations", "cost", "cost_derivatives")
+#: Their mapped inputs: the rest (parameters, kernel settings) are the same for every window.
+WINDOW_INPUTS = ("motion", "data")
+#: Rows of ``data``: the tracker's motion ``z`` and the weight ``w``.
+DATA_ROWS = 4
+#: The order of the motion's derivatives each per-residual Function needs.
+ORDER = {"normal_equations": 1, "cost": 0, "cost_derivatives": 2, "robust_terms": 1, "sensitivities": 1}
+#: The prefix scan's step of each order.
+STEPS = {0: "prefix_value_step", 1: "prefix_step", 2: "prefix_hessian_step"}
 
 
 @dataclass(frozen=True)
@@ -66,51 +70,23 @@ class ProblemSpec:
             raise ProblemError(f"unknown robust kernel {self.kernel!r}; valid kernels: {', '.join(KERNELS)}")
 
 
-def predict_motion(model: KinematicModel, params: ca.SX, U: ca.SX, integration: str) -> ca.SX:
-    """Sensor motion over consecutive intervals: ``T⁻¹ · Δr_0 ⋯ Δr_{H-1} · T``.
-
-    ``U`` holds one interval's inputs per column. Conjugating the composed base motion once
-    equals composing the conjugated per-interval motions, at a fraction of the cost.
-    """
-    k, T_base_sensor = _split_params(model, params)
-    motion_base = model.increment(k, U[:, 0], integration)
-    for j in range(1, U.shape[1]):
-        motion_base = se2.compose(motion_base, model.increment(k, U[:, j], integration))
-    return se2.conjugate(T_base_sensor, motion_base)
-
-
-def _split_params(model: KinematicModel, params: ca.SX) -> tuple[ca.SX, ca.SX]:
-    nk = len(model.kinematic_params)
-    return params[:nk], params[nk : nk + 3]
-
-
-def _fn(
-    name: str, ins: list[ca.SX], in_names: list[str], outs: list[ca.SX], out_names: list[str]
-) -> ca.Function:
-    # Dense outputs: buffers bind numpy memory to stored non-zeros only. Common subexpression
-    # elimination merges repeated sin/cos of the same angle (e.g. cos θ and cos(−θ)).
-    return ca.Function(name, ins, [ca.densify(o) for o in outs], in_names, out_names, _CSE)
-
-
-class ProblemFunctions:
+class ProblemFunctions(TrajectoryFunctions):
     """The Functions of one problem (model + :class:`ProblemSpec`), with the layout facts callers need.
 
-    Built at once: ``residual`` (x, x_fixed, data) → e; ``residual_jacobian`` → (e, J) with
-    J = ∂e(x ⊞ Δ)/∂Δ; ``boxplus`` (x, step) → x ⊞ step. Derived on first use, per residual
-    (inputs ``x, x_fixed, omega, delta, data``): ``normal_equations`` → (H_upper, g, cost, chi2,
-    inliers) with H = w·ρ'·JᵀΩJ (upper triangle, column by column, see :func:`unpack_upper`) and
-    g = w·ρ'·JᵀΩe; ``cost``; ``cost_gradient`` → (cost, grad) in plain coordinates;
-    ``cost_hessian`` → upper triangle of ∇²(λ·cost) and ``gauss_newton_hessian`` its Gauss-Newton
-    approximation ``λ·2·w·ρ'·JᵀΩJ``; ``robust_terms`` → (e, s, weight, score = w·ρ'·JᵀΩe);
-    ``huber_lifted`` → the Black–Rangarajan term; ``sensitivities`` (x, x_fixed, data) →
-    (∂e/∂data, J). Whole-problem: ``tangent_map`` x → ∂(x ⊞ Δ)/∂Δ at Δ = 0; ``prior`` → (H, g,
-    cost, grad, hess) of Gaussian priors; ``assemble`` (x, x_fixed) → params. Full-parameter:
-    ``predict`` (params, u) → sensor motion over one interval; ``interval_residual`` (params, u,
-    z) → (e, ∂e/∂u) of one interval; ``integrate_step``
-    (T_world_sensor, params, u) → T_world_sensor · predict; ``predict_window`` (params, data);
-    ``between`` (a, b) → t2v(a⁻¹b) and ``between_jacobians``; ``base_from_sensor``
-    (T_world_sensor, params) → T_world_base; ``odometry_step`` (state = [T_world_base, vec P],
-    params, u, input_std) → the base pose and its covariance propagated over one interval.
+    Per residual (inputs ``x, x_fixed, omega, delta, motion, data``, derived on first use; the
+    ``motion`` data of :data:`ORDER`'s order, see :meth:`motion_rows`): ``normal_equations`` →
+    (H_upper, g, cost, chi2, inliers) with H = w·ρ'·JᵀΩJ (upper triangle, column by column, see
+    :func:`unpack_upper`) and g = w·ρ'·JᵀΩe, J = ∂e(x ⊞ Δ)/∂Δ; ``cost`` → w·ρ;
+    ``cost_derivatives`` → (cost, gradient, upper triangle of the Hessian) of w·ρ in plain
+    coordinates; ``robust_terms`` → (e, s = eᵀΩe, ρ'(s), w·JᵀΩe); ``sensitivities`` (x, x_fixed,
+    motion, data) → (J, ∂e/∂z, ∂e/∂end) for the noise propagation. Prefix problems (``prefix``)
+    add the scans' steps (:data:`STEPS`, see :meth:`step`) and ``interval_sensitivity`` (see
+    :mod:`nlp_calib.problem.motion`). Whole-problem: ``boxplus`` (x, step) → x ⊞ step;
+    ``tangent_map`` x → ∂(x ⊞ Δ)/∂Δ at Δ = 0; ``prior`` → (H, g, cost, grad, hess) of Gaussian
+    priors; ``assemble`` (x, x_fixed) → params. The residual as defined, on one window's inputs
+    ``[u_0 … u_{H-1}, z, w]`` (the C export, and the reference the tests hold the windows to):
+    ``residual`` → e and ``residual_jacobian`` → (e, J). Full-parameter Functions: see
+    :class:`~nlp_calib.problem.trajectory.TrajectoryFunctions`.
     """
 
     def __init__(self, model: KinematicModel, spec: ProblemSpec) -> None:
@@ -121,25 +97,23 @@ class ProblemFunctions:
         self.spec = spec
         self.model = model
         self.names = names
+        self.integration = spec.integration
+        self.horizon = spec.horizon
         self.free = tuple(n for n in names if n not in spec.fixed)
         self.fixed = tuple(n for n in names if n in spec.fixed)
         if not self.free:
             raise ProblemError("every parameter is fixed; nothing to estimate")
-        n_in, H = len(model.input_names), spec.horizon
-        self.data_rows = n_in * H + 3 + 1
-
         free, fixed = self.free, self.fixed
         self._x = x = ca.SX.sym("x", len(free))
         self._x_fixed = x_fixed = ca.SX.sym("x_fixed", len(fixed))
         self._omega = ca.SX.sym("omega", 3)
         self._delta = ca.SX.sym("delta")
-        self._data = data = ca.SX.sym("data", self.data_rows)
+        self._data = ca.SX.sym("data", DATA_ROWS)
         self._params = ca.vertcat(
             *[x[free.index(n)] if n in free else x_fixed[fixed.index(n)] for n in names]
         )
-        self._U = ca.reshape(data[: n_in * H], n_in, H)
-        z = data[n_in * H : n_in * H + 3]
-        self._w = data[-1]
+        #: Places of the free kinematic parameters in ``x`` (the columns of a prefix Jacobian).
+        self.kinematic_columns = [free.index(n) for n in model.kinematic_params if n in free]
 
         # Box-plus: Euclidean for kinematic parameters; left SE(2) perturbation of the sensor pose
         # when all of it is free (a partly fixed pose has no group structure left to respect).
@@ -153,14 +127,8 @@ class ProblemFunctions:
         self.boxplus = ca.Function("boxplus", [x, step], [x_plus], ["x", "step"], ["x_next"], _CSE)
         # dx(x ⊞ Δ)/dΔ at Δ = 0 maps plain-coordinate Jacobians onto the manifold perturbation.
         self._M = ca.substitute(ca.jacobian(x_plus, step), step, ca.DM.zeros(len(free)))
-
-        self._e = se2.between(z, predict_motion(model, self._params, self._U, spec.integration))
-        self._J_plain = ca.jacobian(self._e, x)
-        self._J = ca.mtimes(self._J_plain, self._M)
-        self.residual = _fn("residual", [x, x_fixed, data], ["x", "x_fixed", "data"], [self._e], ["e"])
-        self.residual_jacobian = _fn(
-            "residual_jacobian", [x, x_fixed, data], ["x", "x_fixed", "data"], [self._e, self._J], ["e", "J"]
-        )
+        self._windows: dict[int, tuple[motion_sources.MotionSymbols, ca.SX, ca.SX]] = {}
+        self._steps: dict[int, ca.Function] = {}
 
     # --- layout facts ---------------------------------------------------------------------------
 
@@ -169,13 +137,18 @@ class ProblemFunctions:
         return len(self.free)
 
     @property
-    def n_inputs(self) -> int:
-        return len(self.model.input_names)
-
-    @property
     def manifold_sensor(self) -> bool:
         """True when the sensor pose is perturbed on SE(2) (all three components free)."""
         return all(n in self.free for n in SENSOR_PARAMS)
+
+    @property
+    def prefix(self) -> bool:
+        """True when windows take their motion from prefix poses (horizon > 1)."""
+        return self.spec.horizon > 1
+
+    def motion_rows(self, order: int) -> int:
+        """Rows of a window's motion data for Functions of derivative ``order`` (see :data:`ORDER`)."""
+        return self._source.rows(order)
 
     def function(self, name: str) -> ca.Function:
         """The per-residual Function ``name`` (one of :data:`PER_RESIDUAL`), built if needed."""
@@ -184,30 +157,70 @@ class ProblemFunctions:
         f: ca.Function = getattr(self, name)
         return f
 
-    # --- derived on first use -------------------------------------------------------------------
+    # --- the residual, from the window's motion ---------------------------------------------------
 
     @functools.cached_property
-    def _robust(self) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
-        """``s = eᵀΩe``, ρ(s), ρ'(s), the inlier flag and the weighted cost ``w·ρ``."""
-        e, omega, delta = self._e, self._omega, self._delta
+    def _source(self) -> motion_sources.MotionSource:
+        k = split_params(self.model, self._params)[0]
+        kinematic = fn("kinematic", [self._x, self._x_fixed], ["x", "x_fixed"], [k], ["k"])
+        return motion_sources.MotionSource(
+            self.model,
+            kinematic,
+            self._x,
+            self._x_fixed,
+            self.kinematic_columns,
+            self.n_inputs,
+            self.spec.integration,
+            self.prefix,
+        )
+
+    def _window(self, order: int) -> tuple[motion_sources.MotionSymbols, ca.SX, ca.SX]:
+        """The motion data, the perturbation ``h`` of ``x`` and the residual ``e(h)`` at ``order``."""
+        if order in self._windows:
+            return self._windows[order]
+        h = ca.SX.sym("h", self.n_free)
+        mo = self._source.window(h, order)
+        sensor = [self.free.index(n) for n in SENSOR_PARAMS if n in self.free]
+        x_moved = motion_sources.perturbed(self._x, h[sensor], sensor)
+        T_moved = split_params(self.model, ca.substitute(self._params, self._x, x_moved))[1]
+        e = se2.between(self._data[0:3], se2.conjugate(T_moved, mo.M))
+        self._windows[order] = (mo, h, e)
+        return mo, h, e
+
+    def _at_zero(self, mo: motion_sources.MotionSymbols, h: ca.SX, exprs: list[ca.SX]) -> list[ca.SX]:
+        """``exprs`` at ``h = 0`` (and the motion's end unperturbed)."""
+        out = ca.substitute(exprs, [h], [ca.DM.zeros(h.numel())])
+        if mo.end_zero is not None:
+            out = ca.substitute(out, [mo.end], [mo.end_zero])
+        return out
+
+    def _linear(self) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """Motion data, ``e`` and the manifold Jacobian ``J`` (first order)."""
+        mo, h, e_h = self._window(1)
+        e, J_plain = self._at_zero(mo, h, [e_h, ca.jacobian(e_h, h)])
+        return mo.data, e, ca.mtimes(J_plain, self._M)
+
+    def _robust(self, e: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+        """``s = eᵀΩe``, the weighted cost ``w·ρ(s)``, ρ'(s) and the inlier flag."""
+        w, omega, delta = self._data[3], self._omega, self._delta
         s = ca.dot(e, omega * e)
         rho, weight = kernel_function(self.spec.kernel)(s, delta)
-        inlier = ca.if_else(s <= delta * delta, 1.0, 0.0)
-        return s, rho, weight, inlier, self._w * rho
+        return s, w * rho, weight, ca.if_else(s <= delta * delta, 1.0, 0.0)
 
-    def _common(self) -> tuple[list[ca.SX], list[str]]:
-        return [self._x, self._x_fixed, self._omega, self._delta, self._data], list(COMMON_INPUTS)
+    def _ins(self, motion: ca.SX) -> tuple[list[ca.SX], list[str]]:
+        return [self._x, self._x_fixed, self._omega, self._delta, motion, self._data], list(COMMON_INPUTS)
 
     @functools.cached_property
     def normal_equations(self) -> ca.Function:
-        s, _, weight, inlier, cost = self._robust
-        J, e, w = self._J, self._e, self._w
+        motion, e, J = self._linear()
+        s, cost, weight, inlier = self._robust(e)
+        w = self._data[3]
         Omega = ca.diag(self._omega)
         # Only the upper triangle of the symmetric JᵀΩJ: fewer operations per residual and per sum.
         JtOJ = ca.mtimes([J.T, Omega, J])
-        H_upper = ca.vertcat(*[JtOJ[i, j] for j in range(self.n_free) for i in range(j + 1)])
-        ins, in_names = self._common()
-        return _fn(
+        H_upper = ca.vertcat(*[JtOJ[i, j] for i, j in motion_sources.pairs(self.n_free)])
+        ins, in_names = self._ins(motion)
+        return fn(
             "normal_equations",
             ins,
             in_names,
@@ -217,77 +230,65 @@ class ProblemFunctions:
 
     @functools.cached_property
     def cost(self) -> ca.Function:
-        ins, in_names = self._common()
-        return _fn("cost", ins, in_names, [self._robust[4]], ["cost"])
+        mo, h, e_h = self._window(0)
+        (e,) = self._at_zero(mo, h, [e_h])
+        ins, in_names = self._ins(mo.data)
+        return fn("cost", ins, in_names, [self._robust(e)[1]], ["cost"])
 
     @functools.cached_property
-    def cost_gradient(self) -> ca.Function:
-        cost = self._robust[4]
-        ins, in_names = self._common()
-        return _fn("cost_gradient", ins, in_names, [cost, ca.gradient(cost, self._x)], ["cost", "grad"])
-
-    @functools.cached_property
-    def _lam_f(self) -> ca.SX:
-        return ca.SX.sym("lam_f")
-
-    @functools.cached_property
-    def cost_hessian(self) -> ca.Function:
-        hess = ca.triu(
-            ca.hessian(self._lam_f * self._robust[4], self._x)[0]
-        )  # IPOPT reads the upper triangle
-        ins, in_names = self._common()
-        return ca.Function(
-            "cost_hessian", [*ins, self._lam_f], [ca.triu(ca.densify(hess))], [*in_names, "lam_f"], ["hess"]
-        )
-
-    @functools.cached_property
-    def gauss_newton_hessian(self) -> ca.Function:
-        weight, Jp, w = self._robust[2], self._J_plain, self._w
-        hess = self._lam_f * 2.0 * w * weight * ca.mtimes([Jp.T, ca.diag(self._omega), Jp])
-        ins, in_names = self._common()
-        return ca.Function(
-            "gauss_newton_hessian",
-            [*ins, self._lam_f],
-            [ca.triu(ca.densify(hess))],
-            [*in_names, "lam_f"],
-            ["hess"],
-            _CSE,
-        )
+    def cost_derivatives(self) -> ca.Function:
+        mo, h, e_h = self._window(2)
+        cost_h = self._robust(e_h)[1]
+        hess, grad = ca.hessian(cost_h, h)
+        upper = ca.vertcat(*[hess[i, j] for i, j in motion_sources.pairs(self.n_free)])
+        cost, grad, upper = self._at_zero(mo, h, [cost_h, grad, upper])
+        ins, in_names = self._ins(mo.data)
+        return fn("cost_derivatives", ins, in_names, [cost, grad, upper], ["cost", "grad", "hess_upper"])
 
     @functools.cached_property
     def robust_terms(self) -> ca.Function:
-        s, _, weight, _, _ = self._robust
-        J, e, w = self._J, self._e, self._w
-        ins, in_names = self._common()
-        return _fn(
+        motion, e, J = self._linear()
+        s, _, weight, _ = self._robust(e)
+        ins, in_names = self._ins(motion)
+        return fn(
             "robust_terms",
             ins,
             in_names,
-            [e, s, weight, w * weight * ca.mtimes([J.T, ca.diag(self._omega), e])],
-            ["e", "s", "weight", "score"],
+            [e, s, weight, self._data[3] * ca.mtimes([J.T, ca.diag(self._omega), e])],
+            ["e", "s", "weight", "JtOe"],
         )
-
-    @functools.cached_property
-    def huber_lifted(self) -> ca.Function:
-        s, delta = self._robust[0], self._delta
-        w_lift = ca.SX.sym("w_lift")
-        lifted = self._w * (w_lift * s + delta * delta * (1.0 / w_lift - 1.0))
-        ins, in_names = self._common()
-        return _fn("huber_lifted", [*ins, w_lift], [*in_names, "w_lift"], [lifted], ["cost"])
 
     @functools.cached_property
     def sensitivities(self) -> ca.Function:
-        return _fn(
-            "sensitivities",
-            [self._x, self._x_fixed, self._data],
-            ["x", "x_fixed", "data"],
-            [ca.jacobian(self._e, self._data), self._J],
-            ["de_ddata", "J"],
+        mo, h, e_h = self._window(1)
+        J_plain, de_dz, de_dend = self._at_zero(
+            mo, h, [ca.jacobian(e_h, h), ca.jacobian(e_h, self._data[0:3]), ca.jacobian(e_h, mo.end)]
         )
+        return fn(
+            "sensitivities",
+            [self._x, self._x_fixed, mo.data, self._data],
+            ["x", "x_fixed", "motion", "data"],
+            [ca.mtimes(J_plain, self._M), de_dz, de_dend],
+            ["J", "de_dz", "de_dend"],
+        )
+
+    # --- prefix scans -----------------------------------------------------------------------------
+
+    def step(self, order: int) -> ca.Function:
+        """The prefix scan's step for motion data of ``order`` (prefix problems)."""
+        if order not in self._steps:
+            self._steps[order] = self._source.step(order)
+        return self._steps[order]
+
+    @functools.cached_property
+    def interval_sensitivity(self) -> ca.Function:
+        return self._source.interval_sensitivity()
+
+    # --- whole problem --------------------------------------------------------------------------
 
     @functools.cached_property
     def tangent_map(self) -> ca.Function:
-        return _fn("tangent_map", [self._x], ["x"], [self._M], ["M"])
+        return fn("tangent_map", [self._x], ["x"], [self._M], ["M"])
 
     @functools.cached_property
     def prior(self) -> ca.Function:
@@ -298,7 +299,7 @@ class ProblemFunctions:
         r_prior = sqrt_info * (x - mean)
         J_prior = ca.mtimes(ca.jacobian(r_prior, x), self._M)
         cost_prior = ca.dot(r_prior, r_prior)
-        return _fn(
+        return fn(
             "prior",
             [x, mean, sqrt_info],
             ["x", "mean", "sqrt_info"],
@@ -314,128 +315,62 @@ class ProblemFunctions:
 
     @functools.cached_property
     def assemble(self) -> ca.Function:
-        return _fn("assemble", [self._x, self._x_fixed], ["x", "x_fixed"], [self._params], ["params"])
+        return fn("assemble", [self._x, self._x_fixed], ["x", "x_fixed"], [self._params], ["params"])
+
+    # --- the residual as defined, on one window's inputs -------------------------------------------
+
+    @property
+    def column_rows(self) -> int:
+        """Rows of one window's column ``[u_0 … u_{H-1}, z, w]`` (see :meth:`ResidualData.columns`)."""
+        return self.n_inputs * self.spec.horizon + DATA_ROWS
 
     @functools.cached_property
-    def _full(self) -> tuple[ca.SX, ca.SX, ca.SX]:
-        """Full-parameter symbols: params, one interval's inputs and the sensor motion over it."""
-        params = ca.SX.sym("params", len(self.names))
-        u1 = ca.SX.sym("u", self.n_inputs)
-        h1 = predict_motion(self.model, params, ca.reshape(u1, self.n_inputs, 1), self.spec.integration)
-        return params, u1, h1
+    def _reference(self) -> tuple[ca.SX, ca.SX, ca.SX]:
+        column = ca.SX.sym("data", self.column_rows)
+        n_in, H = self.n_inputs, self.spec.horizon
+        U = ca.reshape(column[: n_in * H], n_in, H)
+        z = column[n_in * H : n_in * H + 3]
+        e = se2.between(z, predict_motion(self.model, self._params, U, self.spec.integration))
+        return column, e, ca.mtimes(ca.jacobian(e, self._x), self._M)
 
     @functools.cached_property
-    def interval_residual(self) -> ca.Function:
-        """(params, u, z) → (e, de_du): one interval's residual against the tracker's motion ``z``
-        and its derivative with respect to the interval's inputs (for checking encoder readings)."""
-        params, u1, h1 = self._full
-        z = ca.SX.sym("z", 3)
-        e1 = se2.between(z, h1)
-        return _fn(
-            "interval_residual",
-            [params, u1, z],
-            ["params", "u", "z"],
-            [e1, ca.jacobian(e1, u1)],
-            ["e", "de_du"],
+    def residual(self) -> ca.Function:
+        column, e, _ = self._reference
+        return fn("residual", [self._x, self._x_fixed, column], ["x", "x_fixed", "data"], [e], ["e"])
+
+    @functools.cached_property
+    def residual_jacobian(self) -> ca.Function:
+        column, e, J = self._reference
+        return fn(
+            "residual_jacobian",
+            [self._x, self._x_fixed, column],
+            ["x", "x_fixed", "data"],
+            [e, J],
+            ["e", "J"],
         )
 
-    @functools.cached_property
-    def predict(self) -> ca.Function:
-        params, u1, h1 = self._full
-        return _fn("predict", [params, u1], ["params", "u"], [h1], ["motion"])
 
-    @functools.cached_property
-    def integrate_step(self) -> ca.Function:
-        params, u1, h1 = self._full
-        T_ws = ca.SX.sym("T_world_sensor", 3)
-        return _fn(
-            "integrate_step",
-            [T_ws, params, u1],
-            ["T_world_sensor", "params", "u"],
-            [se2.compose(T_ws, h1)],
-            ["T_world_sensor_next"],
-        )
-
-    @functools.cached_property
-    def base_from_sensor(self) -> ca.Function:
-        params = self._full[0]
-        T_ws = ca.SX.sym("T_world_sensor", 3)
-        T_base_sensor = _split_params(self.model, params)[1]
-        return _fn(
-            "base_from_sensor",
-            [T_ws, params],
-            ["T_world_sensor", "params"],
-            [se2.compose(T_ws, se2.inverse(T_base_sensor))],
-            ["T_world_base"],
-        )
-
-    @functools.cached_property
-    def odometry_step(self) -> ca.Function:
-        """P' = F·P·Fᵀ + G·diag(σ_u²)·Gᵀ with F = ∂T'/∂T and G = ∂T'/∂u."""
-        params, u1, _ = self._full
-        state = ca.SX.sym("state", 12)
-        T_wb, P = state[:3], ca.reshape(state[3:], 3, 3)
-        input_std = ca.SX.sym("input_std", self.n_inputs)
-        k_sym, _ = _split_params(self.model, params)
-        T_wb_next = se2.compose(T_wb, self.model.increment(k_sym, u1, self.spec.integration))
-        F, G = ca.jacobian(T_wb_next, T_wb), ca.jacobian(T_wb_next, u1)
-        P_next = ca.mtimes([F, P, F.T]) + ca.mtimes([G, ca.diag(input_std**2), G.T])
-        return _fn(
-            "odometry_step",
-            [state, params, u1, input_std],
-            ["state", "params", "u", "input_std"],
-            [ca.vertcat(T_wb_next, ca.reshape(P_next, 9, 1))],
-            ["state_next"],
-        )
-
-    @functools.cached_property
-    def predict_window(self) -> ca.Function:
-        params = self._full[0]
-        U = ca.reshape(self._data[: self.n_inputs * self.spec.horizon], self.n_inputs, self.spec.horizon)
-        return _fn(
-            "predict_window",
-            [params, self._data],
-            ["params", "data"],
-            [predict_motion(self.model, params, U, self.spec.integration)],
-            ["motion"],
-        )
-
-    @functools.cached_property
-    def _pose_pair(self) -> tuple[ca.SX, ca.SX, ca.SX]:
-        a, b = ca.SX.sym("a", 3), ca.SX.sym("b", 3)
-        return a, b, se2.between(a, b)
-
-    @functools.cached_property
-    def between(self) -> ca.Function:
-        a, b, motion = self._pose_pair
-        return _fn("between", [a, b], ["a", "b"], [motion], ["motion"])
-
-    @functools.cached_property
-    def between_jacobians(self) -> ca.Function:
-        a, b, motion = self._pose_pair
-        return _fn(
-            "between_jacobians",
-            [a, b],
-            ["a", "b"],
-            [ca.jacobian(motion, a), ca.jacobian(motion, b)],
-            ["dmotion_da", "dmotion_db"],
-        )
+_BUILT: dict[tuple[int, ProblemSpec], ProblemFunctions] = {}
 
 
 def build(model: KinematicModel, spec: ProblemSpec) -> ProblemFunctions:
-    """The Functions of the problem described by ``model`` and ``spec``."""
-    return ProblemFunctions(model, spec)
+    """The Functions of the problem described by ``model`` and ``spec`` (built once per process:
+    they hold no data, and the compiled backend keeps what it compiled for them)."""
+    key = (id(model), spec)  # the entry keeps the model alive, so its id stays its own
+    if key not in _BUILT:
+        _BUILT[key] = ProblemFunctions(model, spec)
+    return _BUILT[key]
 
 
 @functools.cache
-def _upper_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
+def upper_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
     cols, rows = zip(*[(j, i) for j in range(n) for i in range(j + 1)]) if n else ((), ())
     return np.array(rows, dtype=np.intp), np.array(cols, dtype=np.intp)
 
 
 def unpack_upper(h_upper: np.ndarray, n: int) -> np.ndarray:
     """The symmetric ``n x n`` matrix whose upper triangle is stored column by column."""
-    rows, cols = _upper_indices(n)
+    rows, cols = upper_indices(n)
     H = np.empty((n, n))
     H[rows, cols] = np.ravel(h_upper)
     H[cols, rows] = np.ravel(h_upper)

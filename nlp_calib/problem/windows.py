@@ -1,19 +1,28 @@
-"""From a :class:`~nlp_calib.logs.Log` to the data matrix the problem Functions are mapped over.
+"""From logs to the windows a fit is made of: which records each residual spans, and its data.
 
-Each column is one horizon window ``[u_0 … u_{H-1}, z, w]`` (see :mod:`nlp_calib.problem.functions`):
-the model inputs of ``H`` consecutive intervals starting at record ``k``, the tracker's motion
-``z = t2v(T(p_k)⁻¹·T(p_{k+H}))`` over the same records and the residual's weight.
+One or several logs are laid end to end: their records are numbered consecutively (log ``i``'s
+record ``r`` is record ``offsets[i] + r``), and interval ``j`` joins records ``j`` and ``j + 1``.
+The interval joining one log's last record to the next log's first is zero and belongs to no
+window. A window is any pair of records ``start < stop`` of one log; its residual compares the
+motion the model predicts over intervals ``start … stop - 1`` with the tracker's motion
+``z = t2v(T(p_start)⁻¹·T(p_stop))``. The evaluator integrates the intervals once per evaluation
+(see :mod:`nlp_calib.problem.motion`), so the windows are only a list of pairs: dropping some, or
+adding another log's, is a matter of selecting pairs.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
+import casadi as ca
 import numpy as np
 
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.logs import Log
-from nlp_calib.problem.functions import ProblemFunctions
+from nlp_calib.models.base import KinematicModel
+from nlp_calib.problem.functions import DATA_ROWS, ProblemFunctions
 
 
 @dataclass(frozen=True)
@@ -28,34 +37,79 @@ class ResidualOptions:
 
 @dataclass(frozen=True)
 class ResidualData:
-    """The data matrix of one fit, and where its windows sit in the log.
+    """The windows of one fit and the data they are evaluated on (records numbered as above).
 
-    ``columns`` is ``(data_rows, n_residuals)``; ``starts`` the first record of each window,
-    relative to ``log``; ``inputs`` the per-interval inputs of every interval of ``log``.
+    ``inputs`` ``(n_inputs, n_records - 1)`` holds every interval's model inputs; ``T_world_sensor``
+    ``(n_records, 3)`` the tracker's poses; ``starts`` / ``stops`` the first and last record of
+    each window; ``z`` ``(3, n_residuals)`` the tracker's motion over each window. ``offsets`` is
+    the first record of each of ``logs``.
     """
 
-    log: Log
+    logs: tuple[Log, ...]
+    offsets: tuple[int, ...]
     inputs: np.ndarray
-    columns: np.ndarray
+    T_world_sensor: np.ndarray
     starts: np.ndarray
+    stops: np.ndarray
+    z: np.ndarray
     horizon: int
     dropped_stationary: int
     dropped_faulty: int = 0
 
     @property
+    def log(self) -> Log:
+        """The log of a single-log fit."""
+        if len(self.logs) != 1:
+            raise ProblemError(f"these windows come from {len(self.logs)} logs, not one")
+        return self.logs[0]
+
+    @property
     def n_residuals(self) -> int:
-        return int(self.columns.shape[1])
+        return int(self.starts.size)
 
+    @property
+    def n_records(self) -> int:
+        return int(self.T_world_sensor.shape[0])
 
-def tracker_motions(
-    fns: ProblemFunctions, T_world_sensor: np.ndarray, starts: np.ndarray, horizon: int
-) -> np.ndarray:
-    """``t2v(T(p_k)⁻¹·T(p_{k+H}))`` for each ``k`` in ``starts``, ``(3, len(starts))``."""
-    if starts.size == 0:
-        return np.zeros((3, 0))
-    a = T_world_sensor[starts].T
-    b = T_world_sensor[starts + horizon].T
-    return np.asarray(fns.between.map(starts.size)(a, b))
+    def data(self) -> np.ndarray:
+        """The per-window ``data = [z, w]`` matrix ``(4, n_residuals)``, column-major."""
+        out = np.empty((DATA_ROWS, self.n_residuals), order="F")
+        out[0:3] = self.z
+        out[3] = 1.0
+        return out
+
+    def interval_counts(self, flagged: np.ndarray) -> np.ndarray:
+        """How many of each window's intervals ``flagged`` (a mask over the intervals) marks."""
+        c = np.concatenate([[0], np.cumsum(np.asarray(flagged, dtype=np.int64))])
+        return c[self.stops] - c[self.starts]
+
+    def select(self, keep: np.ndarray) -> ResidualData:
+        """The windows ``keep`` (a mask or indices) marks, in order."""
+        return replace(self, starts=self.starts[keep], stops=self.stops[keep], z=self.z[:, keep])
+
+    def with_inputs(self, inputs: np.ndarray) -> ResidualData:
+        """The same windows and tracker motions on other interval inputs (e.g. re-sampled encoders)."""
+        if inputs.shape != self.inputs.shape:
+            raise ProblemError(f"inputs of shape {inputs.shape} do not fit {self.inputs.shape}")
+        return replace(self, inputs=inputs)
+
+    def columns_of(self, windows: np.ndarray | slice) -> np.ndarray:
+        """One column ``[u_0 … u_{H-1}, z, w]`` per window, as the defining ``residual`` takes it."""
+        starts, lengths = self.starts[windows], self.stops[windows] - self.starts[windows]
+        if np.any(lengths != self.horizon):
+            raise ProblemError(f"only windows of {self.horizon} intervals have a column layout")
+        n_in, H = self.inputs.shape[0], self.horizon
+        out = np.empty((n_in * H + DATA_ROWS, starts.size), order="F")
+        for j in range(H):
+            out[j * n_in : (j + 1) * n_in] = self.inputs[:, starts + j]
+        out[n_in * H : n_in * H + 3] = self.z[:, windows]
+        out[-1] = 1.0
+        return out
+
+    @functools.cached_property
+    def columns(self) -> np.ndarray:
+        """:meth:`columns_of` every window (``H`` times the size of the data: tests and export only)."""
+        return self.columns_of(slice(None))
 
 
 def window_starts(n_intervals: int, horizon: int, stride: int) -> np.ndarray:
@@ -65,57 +119,95 @@ def window_starts(n_intervals: int, horizon: int, stride: int) -> np.ndarray:
     return np.arange(0, n_intervals - horizon + 1, stride, dtype=np.int64)
 
 
+def interval_inputs(model: KinematicModel, logs: Sequence[Log], steering_sample: str) -> np.ndarray:
+    """Every interval's inputs of ``logs`` laid end to end (zeros between two logs)."""
+    parts = []
+    for i, log in enumerate(logs):
+        if i:
+            parts.append(np.zeros((len(model.input_names), 1)))
+        parts.append(model.inputs(log, steering_sample))
+    return np.ascontiguousarray(np.concatenate(parts, axis=1))
+
+
+#: Columns a helper Function is mapped over at a time (a map over a million columns is slow to build).
+BLOCK = 1 << 14
+
+
+def over_columns(f: ca.Function, *columns: np.ndarray) -> list[np.ndarray]:
+    """``f`` over the columns of ``columns`` (one column of each input per call), a block at a
+    time; each output as CasADi's map gives it, ``(rows, cols * n)``."""
+    n = columns[0].shape[1]
+    shapes = [f.size_out(i) for i in range(f.n_out())]
+    outs = [np.empty((r, c * n)) for r, c in shapes]
+    maps: dict[int, ca.Function] = {}
+    for lo in range(0, n, BLOCK):
+        hi = min(n, lo + BLOCK)
+        if hi - lo not in maps:
+            maps[hi - lo] = f.map(hi - lo)
+        res = maps[hi - lo](*[c[:, lo:hi] for c in columns])
+        for out, r, (_, c) in zip(outs, [res] if f.n_out() == 1 else res, shapes):
+            out[:, c * lo : c * hi] = np.asarray(r)
+    return outs
+
+
+def tracker_motions(
+    fns: ProblemFunctions, T_world_sensor: np.ndarray, a: np.ndarray, b: np.ndarray
+) -> np.ndarray:
+    """``t2v(T(p_a)⁻¹·T(p_b))`` for each pair of records, ``(3, len(a))``."""
+    if a.size == 0:
+        return np.zeros((3, 0))
+    return over_columns(fns.between, T_world_sensor[a].T, T_world_sensor[b].T)[0]
+
+
 def build_residual_data(
     fns: ProblemFunctions,
-    log: Log,
+    log: Log | Sequence[Log],
     options: ResidualOptions,
     *,
     drop_stationary: bool = False,
     bad_intervals: np.ndarray | None = None,
     bad_records: np.ndarray | None = None,
 ) -> ResidualData:
-    """Stack the windows of ``log`` into the data matrix of ``fns``.
+    """The windows of ``options`` over ``log`` (or several logs, end to end, no window crossing
+    from one into the next).
 
-    Windows without encoder motion are dropped when ``drop_stationary``; windows that cross an
-    interval of ``bad_intervals`` (per interval of ``log``) or start or end at a record of
-    ``bad_records`` (per record) are always dropped.
+    Windows in which no encoder moves are dropped when ``drop_stationary``; windows that cross an
+    interval of ``bad_intervals`` (a mask over the intervals) or start or end at a record of
+    ``bad_records`` (over the records) are always dropped.
     """
     if options.horizon != fns.spec.horizon:
         raise ProblemError(
             f"data horizon {options.horizon} does not match the built problem's {fns.spec.horizon}"
         )
-    model = fns.model
-    inputs = model.inputs(log, options.steering_sample)
-    n_intervals = inputs.shape[1]
+    logs = (log,) if isinstance(log, Log) else tuple(log)
     H = options.horizon
-    starts = window_starts(n_intervals, H, options.stride)
-    offsets = np.arange(H)
-    dropped = 0
-    if drop_stationary and starts.size:
-        moving = model.moving(inputs)
-        keep = moving[starts[:, None] + offsets[None, :]].any(axis=1)
-        dropped = int((~keep).sum())
-        starts = starts[keep]
-    faulty = np.zeros(starts.size, dtype=bool)
-    if bad_intervals is not None and np.any(bad_intervals):
-        bad = np.concatenate([[0], np.cumsum(np.asarray(bad_intervals, dtype=np.int64))])
-        faulty |= bad[starts + H] - bad[starts] > 0
-    if bad_records is not None and np.any(bad_records):
-        faulty |= np.asarray(bad_records)[starts] | np.asarray(bad_records)[starts + H]
-    starts = starts[~faulty]
-    n_in = inputs.shape[0]
-    columns = np.empty((fns.data_rows, starts.size), order="F")
-    # Window inputs, interval-major: rows j*n_in:(j+1)*n_in hold interval starts+j.
-    for j in range(H):
-        columns[j * n_in : (j + 1) * n_in, :] = inputs[:, starts + j]
-    columns[n_in * H : n_in * H + 3, :] = tracker_motions(fns, log.T_world_sensor, starts, H)
-    columns[-1, :] = 1.0
-    return ResidualData(
-        log=log,
+    offsets = tuple(int(v) for v in np.cumsum([0, *(lg.n_records for lg in logs)])[:-1])
+    inputs = interval_inputs(fns.model, logs, options.steering_sample)
+    starts = np.concatenate(
+        [o + window_starts(lg.n_records - 1, H, options.stride) for o, lg in zip(offsets, logs)]
+    ).astype(np.int64)
+    poses = np.ascontiguousarray(np.concatenate([lg.T_world_sensor for lg in logs]))
+    stops = starts + H
+    data = ResidualData(
+        logs=logs,
+        offsets=offsets,
         inputs=inputs,
-        columns=columns,
+        T_world_sensor=poses,
         starts=starts,
+        stops=stops,
+        z=tracker_motions(fns, poses, starts, stops),
         horizon=H,
-        dropped_stationary=dropped,
-        dropped_faulty=int(faulty.sum()),
+        dropped_stationary=0,
     )
+    if drop_stationary and starts.size:
+        keep = data.interval_counts(fns.model.moving(inputs)) > 0
+        data = replace(data.select(keep), dropped_stationary=int((~keep).sum()))
+    faulty = np.zeros(data.n_residuals, dtype=bool)
+    if bad_intervals is not None and np.any(bad_intervals):
+        faulty |= data.interval_counts(bad_intervals) > 0
+    if bad_records is not None and np.any(bad_records):
+        bad = np.asarray(bad_records, dtype=bool)
+        faulty |= bad[data.starts] | bad[data.stops]
+    if faulty.any():
+        data = replace(data.select(~faulty), dropped_faulty=int(faulty.sum()))
+    return data

@@ -1,18 +1,23 @@
-"""Numeric access to a built problem over one data matrix: what the solvers call.
+"""Numeric access to a built problem over one set of windows: what the solvers call.
 
 :class:`ProblemEvaluator` binds the mapped Functions of :mod:`nlp_calib.problem.functions` to the
-data once; each call then only copies the parameter vector in and the sums out.
+windows once; each call then integrates the intervals if the problem needs it
+(:mod:`nlp_calib.solvers.motion`), copies the parameter vector in and the sums out. The last
+normal equations are kept: a solver's accepted trial point, the uncertainty and the observability
+analysis at the same estimate cost one evaluation.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 
-from nlp_calib.problem import ProblemFunctions, unpack_upper
-from nlp_calib.solvers.backends import Backend, Buffered, pad_columns
+from nlp_calib.problem import ORDER, SUMMED, WINDOW_INPUTS, ProblemFunctions, ResidualData, unpack_upper
+from nlp_calib.solvers.backends import Backend, Buffered, Request, pad_columns
+from nlp_calib.solvers.blocks import BlockMap, stream
+from nlp_calib.solvers.motion import WindowMotion
 
 #: H is called singular when its Jacobi-scaled condition number exceeds this.
 SINGULAR_CONDITION = 1e12
@@ -68,13 +73,58 @@ class Priors:
         return bool(np.any(self.sqrt_info != 0.0))
 
 
+@dataclass(frozen=True)
+class Sensitivities:
+    """Per residual ``w``: ``J`` ``(N, 3, n_free)``, ``de_dz`` ``(N, 3, 3)``, ``de_dend`` ``(N, 3, m)``
+    (see :class:`~nlp_calib.problem.ProblemFunctions`) and the tracker motion's Jacobians with
+    respect to its first and last pose, ``dz_da`` and ``dz_db`` ``(N, 3, 3)``; per interval ``j``
+    the map ``D`` ``(n_intervals, m, n_inputs)`` from its inputs to the end perturbation
+    (``None``: identity)."""
+
+    J: np.ndarray
+    de_dz: np.ndarray
+    de_dend: np.ndarray
+    dz_da: np.ndarray
+    dz_db: np.ndarray
+    D: np.ndarray | None
+
+
+#: Functions evaluated once or twice per run (the analyses'): compiling them pays from about this
+#: many windows on; below, the interpreter evaluates them in less time than a compiler takes.
+COMPILE_ANALYSES_FROM = 50_000
+_ANALYSES = ("robust_terms", "sensitivities")
+
+
+def requests(fns: ProblemFunctions, names: Iterable[str], n_windows: int) -> list[Request]:
+    """What a backend compiles so that an evaluator over about ``n_windows`` windows can evaluate
+    the per-residual Functions ``names`` (the scans and the intervals' sensitivity of prefix
+    problems included)."""
+    out: list[Request] = []
+    # In the order a run needs them: the internal fits, then the solvers, then the analyses.
+    for name in sorted(set(names), key=_PRIORITY.index):
+        if name in _ANALYSES and n_windows < COMPILE_ANALYSES_FROM:
+            continue
+        if fns.prefix:
+            out.append(Request(fns.step(ORDER[name]), scan=True))
+            if name == "sensitivities":
+                out += [
+                    Request(fns.step(0), scan=True),
+                    Request(fns.interval_sensitivity, ("state", "u"), False),
+                ]
+        out.append(Request(fns.function(name), WINDOW_INPUTS, name in SUMMED))
+    return list({(r.function.name(), r.scan): r for r in out}.values())
+
+
+_PRIORITY = ("normal_equations", "cost", "cost_derivatives", "robust_terms", "sensitivities")
+
+
 class ProblemEvaluator:
-    """The problem's Functions mapped over one data matrix, ready to call with a free vector."""
+    """The problem's Functions mapped over the windows of ``data``, ready to call with a free vector."""
 
     def __init__(
         self,
         fns: ProblemFunctions,
-        columns: np.ndarray,
+        data: ResidualData,
         *,
         x_fixed: np.ndarray,
         omega: np.ndarray,
@@ -84,44 +134,92 @@ class ProblemEvaluator:
     ) -> None:
         self.fns = fns
         self.backend = backend or Backend()
-        self.n_residuals = int(columns.shape[1])
-        self.n_padded = self.backend.padded(self.n_residuals)
-        self.data = pad_columns(columns, self.n_padded)
         self.x_fixed = np.asarray(x_fixed, dtype=float)
         self.omega = np.asarray(omega, dtype=float)
         self.delta = float(delta)
         n = fns.n_free
         self.priors = priors or Priors(np.zeros(n), np.zeros(n))
-        self._static: dict[str, np.ndarray | float] = {
-            "x_fixed": self.x_fixed,
-            "omega": self.omega,
-            "delta": self.delta,
-            "data": self.data,
-        }
-        self._normal = Buffered(self.mapped("normal_equations", reduce=True), self._static)
-        self._cost = Buffered(self.mapped("cost", reduce=True), self._static)
-        self._terms: Buffered | None = None
         self._prior = Buffered(fns.prior, {"mean": self.priors.mean, "sqrt_info": self.priors.sqrt_info})
         self._boxplus = Buffered(fns.boxplus)
+        self._tangent = Buffered(fns.tangent_map)
+        self.bind(data)
 
-    def mapped(self, name: str, *, reduce: bool, extra_mapped: tuple[str, ...] = ()) -> ca.Function:
-        """The per-residual Function ``name`` mapped over the (padded) data columns."""
-        return self.backend.map(self.fns.function(name), self.n_padded, ("data", *extra_mapped), reduce)
+    def bind(self, data: ResidualData) -> None:
+        """Evaluate on the windows of ``data`` from now on."""
+        self.data = data
+        self.n_residuals = data.n_residuals
+        self.n_padded = self.backend.padded(self.n_residuals)
+        self.window_data = pad_columns(data.data(), self.n_padded)
+        self.motion = WindowMotion(self.fns, self.backend, data, self.n_padded)
+        self._bound: dict[str, BlockMap] = {}
+        self._last: tuple[bytes, NormalEquations] | None = None
+        self._last_derivatives: tuple[bytes, tuple[float, np.ndarray, np.ndarray]] | None = None
+
+    def prepare(self, names: Iterable[str]) -> None:
+        """Bind the per-residual Functions ``names`` now rather than at their first evaluation."""
+        for name in names:
+            if name != "sensitivities":
+                self._bind(name)
+
+    def _backend(self, name: str) -> Backend:
+        """Where ``name`` is evaluated: see :data:`COMPILE_ANALYSES_FROM`."""
+        small = self.n_residuals < COMPILE_ANALYSES_FROM
+        return Backend() if name in _ANALYSES and small else self.backend
+
+    def _bind(self, name: str) -> BlockMap:
+        if name not in self._bound:
+            static: dict[str, np.ndarray | float] = {"x_fixed": self.x_fixed}
+            if name != "sensitivities":
+                static.update(omega=self.omega, delta=self.delta)
+            mapped = {"motion": self.motion.buffer(ORDER[name]), "data": self.window_data}
+            f = self.fns.function(name)
+            self._bound[name] = BlockMap(self._backend(name), f, mapped, static, name in SUMMED)
+        return self._bound[name]
+
+    def _call(self, name: str, x: np.ndarray) -> Sequence[np.ndarray]:
+        """The per-residual Function ``name`` over the windows at ``x`` (bound on first use)."""
+        bound = self._bind(name)
+        self.motion.update(ORDER[name], x, self.x_fixed)
+        return bound(x=x)
+
+    def set_inputs(self, inputs: np.ndarray) -> None:
+        """Re-evaluate the same windows on other interval inputs (nothing is rebuilt)."""
+        self.data = self.data.with_inputs(inputs)
+        self.motion.set_inputs(inputs)
+        self._last = self._last_derivatives = None
 
     def normal_equations(self, x: np.ndarray) -> NormalEquations:
-        h_upper, g, cost, chi2, inliers = self._normal(x=x)
+        key = np.asarray(x, dtype=float).tobytes()
+        if self._last is not None and self._last[0] == key:
+            return self._last[1]
+        h_upper, g, cost, chi2, inliers = self._call("normal_equations", x)
         H, cost_f = unpack_upper(h_upper, self.fns.n_free), float(cost[0])
         if self.priors.active:
             Hp, gp, cp, _, _ = self._prior(x=x)
             H, g, cost_f = H + Hp, g + gp, cost_f + float(cp[0])
-        return NormalEquations(H=H, g=g, cost=cost_f, chi2=float(chi2[0]), inliers=round(float(inliers[0])))
+        ne = NormalEquations(H=H, g=g, cost=cost_f, chi2=float(chi2[0]), inliers=round(float(inliers[0])))
+        self._last = (key, ne)
+        return ne
 
     def cost(self, x: np.ndarray) -> float:
-        (cost,) = self._cost(x=x)
+        (cost,) = self._call("cost", x)
         c = float(cost[0])
         if self.priors.active:
             c += float(self._prior(x=x)[2][0])
         return c
+
+    def cost_derivatives(self, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """The objective, its gradient and its exact Hessian ``(n, n)`` in plain coordinates."""
+        key = np.asarray(x, dtype=float).tobytes()
+        if self._last_derivatives is not None and self._last_derivatives[0] == key:
+            return self._last_derivatives[1]
+        cost, grad, h_upper = self._call("cost_derivatives", x)
+        out = (float(cost[0]), grad.ravel(), unpack_upper(h_upper, self.fns.n_free))
+        if self.priors.active:
+            c, g, H = self.prior_terms(x)
+            out = (out[0] + c, out[1] + g, out[2] + H)
+        self._last_derivatives = (key, out)
+        return out
 
     def robust_terms(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per residual: error ``(3, n)``, ``s = eᵀΩe`` and the IRLS weight ρ'(s)."""
@@ -129,10 +227,8 @@ class ProblemEvaluator:
         return e, s, w
 
     def residual_terms(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`robust_terms` plus each residual's score ``ρ'·JᵀΩe``, ``(n_free, n)``."""
-        if self._terms is None:
-            self._terms = Buffered(self.mapped("robust_terms", reduce=False), self._static)
-        e, s, w, g = self._terms(x=x)
+        """:meth:`robust_terms` plus each residual's ``JᵀΩe`` ``(n_free, n)`` (manifold)."""
+        e, s, w, g = (np.asarray(v) for v in self._call("robust_terms", x))
         n = self.n_residuals
         nf = self.fns.n_free
         return (
@@ -142,9 +238,59 @@ class ProblemEvaluator:
             g.reshape(nf, -1, order="F")[:, :n],
         )
 
+    def sensitivities(self, x: np.ndarray) -> Iterator[tuple[slice, Sensitivities]]:
+        """What the noise propagation needs at ``x``, a block of windows at a time (see
+        :class:`Sensitivities`; ``D`` covers every interval and is the same in each block)."""
+        fns, N = self.fns, self.n_residuals
+        D = None
+        if fns.prefix:
+            m = self.motion
+            n_pad = m.inputs.shape[1]
+            poses = m.poses(x, self.x_fixed)
+            per = BlockMap(
+                self._backend("sensitivities"),
+                fns.interval_sensitivity,
+                {"state": poses[:, :n_pad], "u": m.inputs},
+                {"x_fixed": self.x_fixed},
+                reduce=False,
+            )
+            (D_all,) = per(x=x)
+            D = _per_column(D_all, n_pad, m.n_intervals)
+        motion = self.motion.update(ORDER["sensitivities"], x, self.x_fixed)
+        own = stream(
+            self._backend("sensitivities"),
+            fns.sensitivities,
+            {"motion": motion, "data": self.window_data},
+            {"x": x, "x_fixed": self.x_fixed},
+            N,
+        )
+        poses_wt = self.data.T_world_sensor
+        ends = {
+            k: np.asfortranarray(poses_wt[i].T)
+            for k, i in (("a", self.motion.starts), ("b", self.motion.stops))
+        }
+        # Cheap: the interpreter, a block at a time.
+        tracker = stream(Backend(), fns.between_jacobians, ends, {}, N)
+        for (w, (J, de_dz, de_dend)), (_, (dz_da, dz_db)) in zip(own, tracker):
+            size = J.shape[1] // fns.n_free
+            n = w.stop - w.start
+            J_, de_dz_, de_dend_, dz_da_, dz_db_ = (
+                _per_column(v, size, n) for v in (J, de_dz, de_dend, dz_da, dz_db)
+            )
+            yield w, Sensitivities(J=J_, de_dz=de_dz_, de_dend=de_dend_, dz_da=dz_da_, dz_db=dz_db_, D=D)
+
     def prior_information(self, x: np.ndarray) -> np.ndarray:
         """The priors' contribution ``J_pᵀJ_p`` to the normal matrix."""
         return self._prior(x=x)[0]
+
+    def prior_terms(self, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """The priors' cost, gradient and Hessian in plain coordinates."""
+        _, _, cost, grad, hess = self._prior(x=x)
+        return float(cost[0]), grad.ravel(), hess
+
+    def tangent_map(self, x: np.ndarray) -> np.ndarray:
+        """``∂(x ⊞ Δ)/∂Δ`` at ``Δ = 0``: maps the manifold perturbation to plain coordinates."""
+        return self._tangent(x=x)[0]
 
     def boxplus(self, x: np.ndarray, step: np.ndarray) -> np.ndarray:
         (x_next,) = self._boxplus(x=x, step=step)
@@ -154,41 +300,7 @@ class ProblemEvaluator:
         """Full parameter vector (free and fixed, in model order)."""
         return np.asarray(self.fns.assemble(x, self.x_fixed)).ravel()
 
-    # --- IPOPT: Functions of (x, p) with the data passed as the parameter p -------------------
 
-    def data_parameter(self) -> np.ndarray:
-        """The NLP parameter vector ``p``: the padded data matrix, column-major."""
-        return self.data.ravel(order="F")
-
-    def nlp_functions(self, hessian: str = "exact") -> tuple[ca.Function, ca.Function, ca.Function]:
-        """``f(x, p)``, ``grad_f(x, p) -> (f, grad)`` and ``hess_lag(x, p, lam_f, lam_g)``.
-
-        Thin MX wrappers around the mapped Functions; nothing is differentiated here.
-        """
-        n = self.fns.n_free
-        x = ca.MX.sym("x", n)
-        p = ca.MX.sym("p", self.data.size)
-        lam_f = ca.MX.sym("lam_f")
-        lam_g = ca.MX.sym("lam_g", 0)
-        data = ca.reshape(p, self.data.shape[0], self.data.shape[1])
-        static = [ca.DM(self.x_fixed), ca.DM(self.omega), self.delta]
-        prior = self.fns.prior(x, self.priors.mean, self.priors.sqrt_info)
-        use_prior = self.priors.active
-        cost = self.mapped("cost", reduce=True)(x, *static, data)
-        cost_grad = self.mapped("cost_gradient", reduce=True)(x, *static, data)
-        hess_name = "gauss_newton_hessian" if hessian == "gauss_newton" else "cost_hessian"
-        hess = self.mapped(hess_name, reduce=True)(x, *static, data, lam_f)
-        if use_prior:
-            cost = cost + prior[2]
-            cost_grad = [cost_grad[0] + prior[2], cost_grad[1] + prior[3]]
-            hess = hess + ca.triu(lam_f * prior[4])
-        f = ca.Function("f", [x, p], [cost], ["x", "p"], ["f"])
-        grad_f = ca.Function("grad_f", [x, p], cost_grad, ["x", "p"], ["f", "grad_f_x"])
-        hess_lag = ca.Function(
-            "hess_lag",
-            [x, p, lam_f, lam_g],
-            [hess],
-            ["x", "p", "lam_f", "lam_g"],
-            ["hess_gamma_x_x"],
-        )
-        return f, grad_f, hess_lag
+def _per_column(value: np.ndarray, n_columns: int, n: int) -> np.ndarray:
+    """A map's horizontally stacked ``(rows, cols)`` blocks as ``(n, rows, cols)`` (the first ``n``)."""
+    return value.reshape(value.shape[0], n_columns, -1)[:, :n].transpose(1, 0, 2)

@@ -1,9 +1,12 @@
 """IPOPT on the same objective Gauss-Newton minimises, with optional box bounds.
 
-The NLP's cost, gradient and Hessian are the problem's mapped Functions, handed to
-``nlpsol`` as ``grad_f`` / ``hess_lag`` so that CasADi never re-derives them; the data enter as
-the NLP parameter ``p``. For Huber, ``huber_formulation: lifted`` solves the exact smooth
-Black–Rangarajan form ``min_{w∈(0,1]} w·s + δ²(1/w − 1)`` with one extra variable per residual.
+The NLP's cost, gradient and Hessian are answered by the evaluator's Functions
+(:mod:`nlp_calib.solvers.nlp`), handed to ``nlpsol`` as ``grad_f`` / ``hess_lag`` so that CasADi
+never re-derives them. The Hessian is exact (the problem's ``cost_derivatives``), Gauss-Newton's
+(``JᵀΩJ`` weighted by the kernel) or IPOPT's limited-memory approximation. For Huber,
+``huber_formulation: lifted`` solves the exact smooth Black–Rangarajan form
+``min_{w∈(0,1]} w·s + δ²(1/w − 1)`` with one extra variable per residual (its parameter block of
+the Hessian is Gauss-Newton's).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import numpy as np
 
 from nlp_calib.core.errors import OptionsError
 from nlp_calib.solvers.evaluation import NAN_START_REASON, SINGULAR_REASON, ProblemEvaluator, is_singular
+from nlp_calib.solvers.nlp import NlpOracle
 from nlp_calib.solvers.result import IterationRecord, SolverResult
 
 HUBER_FORMULATIONS = ("direct", "lifted")
@@ -66,8 +70,9 @@ class Ipopt:
 
     @staticmethod
     def functions(options: IpoptOptions) -> tuple[str, ...]:
-        hessian = {"exact": "cost_hessian", "gauss_newton": "gauss_newton_hessian"}
-        return ("cost", "cost_gradient", *([hessian[options.hessian]] if options.hessian in hessian else []))
+        if options.huber_formulation == "lifted":
+            return ("cost", "normal_equations", "robust_terms")
+        return ("cost", "cost_derivatives" if options.hessian == "exact" else "normal_equations")
 
     def __init__(self, evaluator: ProblemEvaluator, options: IpoptOptions | None = None) -> None:
         self.evaluator = evaluator
@@ -99,28 +104,16 @@ class Ipopt:
         return opts
 
     def _build(self) -> ca.Function:
-        ev = self.evaluator
         opts = self._ipopt_options()
-        if not self.lifted:
-            f, grad_f, hess_lag = ev.nlp_functions(self.options.hessian)
-            x = ca.MX.sym("x", ev.fns.n_free)
-            p = ca.MX.sym("p", ev.data.size)
-            nlp = {"x": x, "p": p, "f": f(x, p)}
-            opts.update({"grad_f": grad_f, "no_nlp_grad": True, "calc_lam_p": False})
-            if self.options.hessian != "limited_memory":
-                opts["hess_lag"] = hess_lag
-            return ca.nlpsol("ipopt_direct", "ipopt", nlp, opts)
-        n, N = ev.fns.n_free, ev.n_padded
-        x = ca.MX.sym("x", n)
-        w = ca.MX.sym("w_lift", N)
-        p = ca.MX.sym("p", ev.data.size)
-        data = ca.reshape(p, ev.data.shape[0], N)
-        lifted = ev.mapped("huber_lifted", reduce=True, extra_mapped=("w_lift",))
-        cost = lifted(x, ca.DM(ev.x_fixed), ca.DM(ev.omega), ev.delta, data, w.T)
-        if ev.priors.active:
-            cost = cost + ev.fns.prior(x, ev.priors.mean, ev.priors.sqrt_info)[2]
-        nlp = {"x": ca.vertcat(x, w), "p": p, "f": cost}
-        return ca.nlpsol("ipopt_lifted", "ipopt", nlp, opts)
+        exact = self.options.hessian == "exact" and not self.lifted
+        self._oracle = oracle = NlpOracle(self.evaluator, self.lifted, exact)
+        x = ca.MX.sym("x", oracle.n_x)
+        p = ca.MX.sym("p", 0)
+        nlp = {"x": x, "p": p, "f": oracle.f(x, p)}
+        opts.update({"grad_f": oracle.grad_f, "no_nlp_grad": True, "calc_lam_p": False})
+        if self.options.hessian != "limited_memory":
+            opts["hess_lag"] = oracle.hess_lag
+        return ca.nlpsol("ipopt_lifted" if self.lifted else "ipopt_direct", "ipopt", nlp, opts)
 
     def solve(
         self,
@@ -140,15 +133,16 @@ class Ipopt:
             return self._not_started(np.asarray(x0, dtype=float), time.perf_counter() - t0)
         if self.lifted:
             _, s, _ = ev.robust_terms(x_init)
-            w0 = np.ones(ev.n_padded)
-            w0[: s.size] = np.clip(ev.delta / np.sqrt(np.maximum(s, 1e-300)), _W_MIN, 1.0)
+            w0 = np.clip(ev.delta / np.sqrt(np.maximum(s, 1e-300)), _W_MIN, 1.0)
             x_init = np.concatenate([x_init, w0])
-            lbx = np.concatenate([lbx, np.full(ev.n_padded, _W_MIN)])
-            ubx = np.concatenate([ubx, np.ones(ev.n_padded)])
+            lbx = np.concatenate([lbx, np.full(ev.n_residuals, _W_MIN)])
+            ubx = np.concatenate([ubx, np.ones(ev.n_residuals)])
         try:
-            sol = self._solver(x0=x_init, p=ev.data_parameter(), lbx=lbx, ubx=ubx)
+            sol = self._solver(x0=x_init, lbx=lbx, ubx=ubx)
         except RuntimeError as exc:  # CasADi reports a failed evaluation by raising
+            self._oracle.guard.reraise()
             return self._not_started(np.asarray(x0, dtype=float), time.perf_counter() - t0, _last_line(exc))
+        self._oracle.guard.reraise()
         elapsed = time.perf_counter() - t0
         stats = self._solver.stats()
         x = np.asarray(sol["x"]).ravel()[:n]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from nlp_calib.solvers.backends.base import BACKENDS, Backend, BackendOptions, Buffered, pad_columns
+from nlp_calib.solvers.backends.base import BACKENDS, Backend, BackendOptions, Buffered, Request, pad_columns
 from nlp_calib.solvers.backends.compiled import CompiledBackend, make_compiled_backend
 
 
@@ -19,6 +19,7 @@ __all__ = [
     "BackendOptions",
     "Buffered",
     "CompiledBackend",
+    "Request",
     "make_backend",
     "pad_columns",
 ]

@@ -1,8 +1,10 @@
-"""The interpreted evaluation backend: maps per-residual Functions over the data, called without copies.
+"""The interpreted evaluation backend: maps per-residual Functions over the windows and folds the
+prefix scans over the intervals, called without copies.
 
 Two measured facts shape this module: most of a naive call's time is the numpy<->DM conversion,
 which ``Function.buffer()`` removes by binding numpy memory once; and summing inside the map
-(``reduce_out``) beats returning per-sample blocks to numpy.
+(``reduce_out``) beats returning per-sample blocks to numpy. Scans fold a step over chunks of
+:data:`SCAN_CHUNK` intervals, each chunk one expression, and the chunks over the data.
 """
 
 from __future__ import annotations
@@ -16,13 +18,15 @@ import numpy as np
 from nlp_calib.core.errors import OptionsError
 
 BACKENDS = ("interpreted", "compiled")
+#: Intervals one call of a scan's chunk integrates.
+SCAN_CHUNK = 64
 
 
 @dataclass(frozen=True)
 class BackendOptions:
-    """``kind``: ``interpreted`` (CasADi's VM) or ``compiled`` (generated C, cached on disk)."""
+    """``kind``: ``compiled`` (generated C, cached on disk; the default) or ``interpreted`` (CasADi's VM)."""
 
-    kind: str = "interpreted"
+    kind: str = "compiled"
     chunk: int = 64
     threads: int = 1
 
@@ -31,17 +35,71 @@ class BackendOptions:
             raise OptionsError(f"the backend must be one of {', '.join(BACKENDS)}, got {self.kind!r}")
 
 
+@dataclass(frozen=True)
+class Request:
+    """A Function a backend should get ready: mapped over windows (``mapped_inputs``, summed when
+    ``reduce``), or, with ``scan``, a step folded over intervals."""
+
+    function: ca.Function
+    mapped_inputs: tuple[str, ...] = ()
+    reduce: bool = False
+    scan: bool = False
+
+
+def scan_chunk(step: ca.Function, chunk: int) -> ca.Function:
+    """``step`` (state, x, x_fixed, u) → state' folded over ``chunk`` intervals:
+    (state, x, x_fixed, U) → (the last state, every state ``(n_state, chunk)``)."""
+    acc = step.mapaccum(f"{step.name()}_acc", chunk)
+    state = ca.MX.sym("state", step.sparsity_in(0))
+    x = ca.MX.sym("x", step.sparsity_in(1))
+    x_fixed = ca.MX.sym("x_fixed", step.sparsity_in(2))
+    U = ca.MX.sym("u", step.size1_in(3), chunk)
+    states = acc(state, ca.repmat(x, 1, chunk), ca.repmat(x_fixed, 1, chunk), U)
+    return ca.Function(
+        f"{step.name()}_chunk{chunk}",
+        [state, x, x_fixed, U],
+        [states[:, -1], states],
+        ["state", "x", "x_fixed", "u"],
+        ["last", "states"],
+    )
+
+
+def fold_chunks(chunk_fn: ca.Function, chunks: int) -> ca.Function:
+    """A scan's chunk folded over ``chunks`` chunks: (state, x, x_fixed, U) → states."""
+    acc = chunk_fn.mapaccum(f"{chunk_fn.name()}_x{chunks}", chunks)
+    state = ca.MX.sym("state", chunk_fn.sparsity_in(0))
+    x = ca.MX.sym("x", chunk_fn.sparsity_in(1))
+    x_fixed = ca.MX.sym("x_fixed", chunk_fn.sparsity_in(2))
+    U = ca.MX.sym("u", chunk_fn.size1_in(3), chunk_fn.size2_in(3) * chunks)
+    _, states = acc(state, ca.repmat(x, 1, chunks), ca.repmat(x_fixed, 1, chunks), U)
+    return ca.Function(
+        f"{chunk_fn.name()}_scan",
+        [state, x, x_fixed, U],
+        [states],
+        ["state", "x", "x_fixed", "u"],
+        ["states"],
+    )
+
+
 class Backend:
-    """Maps a per-residual Function over ``n`` data columns (interpreted)."""
+    """Maps a per-residual Function over ``n`` windows and folds scans over intervals (interpreted)."""
 
     name = "interpreted"
+    chunk = SCAN_CHUNK
 
     def padded(self, n: int) -> int:
-        """Number of columns the mapped Functions take for ``n`` residuals."""
+        """Number of windows the mapped Functions take for ``n`` residuals."""
         return max(n, 1)
 
-    def prepare(self, requests: Sequence[tuple[ca.Function, Sequence[str], bool]]) -> None:
-        """Get ready to map these ``(function, mapped_inputs, reduce)`` (nothing to do here)."""
+    def padded_intervals(self, n: int) -> int:
+        """Number of intervals a scan takes for ``n`` intervals (a whole number of chunks)."""
+        return max(1, -(-n // self.chunk)) * self.chunk
+
+    def prepare(self, requests: Sequence[Request]) -> None:
+        """Get ready to evaluate these Functions (nothing to do here)."""
+
+    def wait(self) -> None:
+        """Wait until what :meth:`prepare` started is ready (nothing to wait for here)."""
 
     def map(self, f: ca.Function, n: int, mapped_inputs: Sequence[str], reduce: bool) -> ca.Function:
         """``f`` over ``n`` columns of ``mapped_inputs``; outputs summed when ``reduce``."""
@@ -49,19 +107,46 @@ class Backend:
         reduce_out = list(range(f.n_out())) if reduce else []
         return f.map(f"{f.name()}_map", "serial", n, reduce_in, reduce_out)
 
+    def scan(self, step: ca.Function, n: int) -> ca.Function:
+        """``step`` folded over ``n`` intervals (a multiple of the chunk): (state, x, x_fixed, U) → states."""
+        return fold_chunks(self.scan_chunk(step), n // self.chunk)
+
+    def scan_chunk(self, step: ca.Function) -> ca.Function:
+        # One SX expression per chunk: the VM then runs it without a call per interval.
+        return scan_chunk(step, self.chunk).expand()
+
 
 class Buffered:
     """A Function with numpy arrays bound to every input and output (``Function.buffer``).
 
     Inputs keep their values between calls; :meth:`__call__` updates the given ones, evaluates
-    and returns the outputs as arrays shaped like the Function's outputs (copies).
+    and returns the outputs as arrays shaped like the Function's outputs (copies). ``bound``
+    binds caller-owned arrays instead (contiguous, float64, the exact size): inputs the caller
+    updates in place, or outputs written straight into the caller's memory.
     """
 
-    def __init__(self, f: ca.Function, inputs: Mapping[str, np.ndarray | float] | None = None) -> None:
+    def __init__(
+        self,
+        f: ca.Function,
+        inputs: Mapping[str, np.ndarray | float] | None = None,
+        bound: Mapping[str, np.ndarray] | None = None,
+    ) -> None:
         self.function = f
         self._buf, self._eval = f.buffer()
-        self._in = {f.name_in(i): np.zeros(f.nnz_in(i)) for i in range(f.n_in())}
-        self._out = [np.zeros(f.nnz_out(i)) for i in range(f.n_out())]
+        bound = dict(bound or {})
+        out_names = [f.name_out(i) for i in range(f.n_out())]
+        self._in = {
+            f.name_in(i): _memory(bound.pop(f.name_in(i)), f.nnz_in(i))
+            if f.name_in(i) in bound
+            else np.zeros(f.nnz_in(i))
+            for i in range(f.n_in())
+        }
+        self._out = [
+            _memory(bound.pop(name), f.nnz_out(i)) if name in bound else np.zeros(f.nnz_out(i))
+            for i, name in enumerate(out_names)
+        ]
+        if bound:
+            raise KeyError(f"{f.name()} has no input or output {sorted(bound)}")
         self._shapes = [f.size_out(i) for i in range(f.n_out())]
         for i in range(f.n_in()):
             self._buf.set_arg(i, self._in[f.name_in(i)].data)
@@ -69,6 +154,12 @@ class Buffered:
             self._buf.set_res(i, arr.data)
         if inputs:
             self.set(**inputs)
+
+    def rebind(self, name: str, arr: np.ndarray) -> None:
+        """Bind input ``name`` to another caller-owned array of the same size."""
+        i = self.function.index_in(name)
+        self._in[name] = _memory(arr, self.function.nnz_in(i))
+        self._buf.set_arg(i, self._in[name].data)
 
     def set(self, **inputs: np.ndarray | float) -> None:
         """Copy values into the bound input arrays (column-major, as CasADi stores them)."""
@@ -81,13 +172,29 @@ class Buffered:
                 )
             target[:] = flat
 
-    def __call__(self, **inputs: np.ndarray | float) -> list[np.ndarray]:
+    def evaluate(self, **inputs: np.ndarray | float) -> None:
+        """Update the given inputs and evaluate, leaving the results in the bound memory."""
         self.set(**inputs)
         self._eval()
+
+    def outputs(self) -> list[np.ndarray]:
+        """The bound output arrays, flat (valid until the next evaluation)."""
+        return self._out
+
+    def __call__(self, **inputs: np.ndarray | float) -> list[np.ndarray]:
+        self.evaluate(**inputs)
         return [
             out.reshape(shape, order="F").copy() if shape[1] > 1 else out.copy()
             for out, shape in zip(self._out, self._shapes)
         ]
+
+
+def _memory(arr: np.ndarray, size: int) -> np.ndarray:
+    """The flat view of a caller-owned array that a buffer binds (no copy)."""
+    flat = arr.reshape(-1, order="F")
+    if flat.dtype != np.float64 or flat.size != size or not np.shares_memory(flat, arr):
+        raise ValueError(f"cannot bind an array of {arr.size} {arr.dtype} values to {size} values")
+    return flat
 
 
 def pad_columns(columns: np.ndarray, n_pad: int) -> np.ndarray:

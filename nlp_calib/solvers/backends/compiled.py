@@ -1,29 +1,45 @@
-"""Compiled evaluation backend: generated C for each per-residual Function, cached on disk.
+"""Compiled evaluation backend: generated C for each per-residual Function and scan, cached on disk.
 
-Each per-residual Function is mapped over a fixed chunk of columns (sums taken inside the map),
-generated as C by CasADi's code generator, compiled once with the system C compiler and loaded
-with ``casadi.external`` (:mod:`nlp_calib.codegen.compiler`, cached by content). Data of any size
-is then a map of that compiled chunk over the number of chunks it needs (padded with zero-weight
-columns), so nothing is compiled per data size. The chunk map can run on several threads.
+Each per-residual Function is mapped over a fixed chunk of windows (sums taken inside the map),
+each scan step folded over a fixed chunk of intervals; the chunk is generated as C by CasADi's
+code generator, compiled once with the system C compiler and loaded with ``casadi.external``
+(:mod:`nlp_calib.codegen.compiler`, cached by content). Data of any size is then a map (or, for
+scans, a fold) of that compiled chunk over the number of chunks it needs (padded), so nothing is
+compiled per data size. The chunk map can run on several threads.
+
+:meth:`CompiledBackend.prepare` starts the compilers in the background, one per core, in the
+order asked (what the first steps need first) and returns at once: the run goes on while the
+rest compiles, and waits only for a Function it needs that is not ready yet.
 """
 
 from __future__ import annotations
 
+import atexit
 import os
+import queue
 import threading
 import warnings
-from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future
+from pathlib import Path
+from typing import Any
 
 import casadi as ca
 
-from nlp_calib.codegen.compiler import compile_shared, compiler_flags, find_compiler, generate_source
+from nlp_calib.codegen.compiler import (
+    cache_dir,
+    compile_shared,
+    compiler_flags,
+    find_compiler,
+    generate_source,
+    usable_cache_dir,
+)
 from nlp_calib.core.errors import NlpCalibWarning
-from nlp_calib.solvers.backends.base import Backend, BackendOptions
+from nlp_calib.solvers.backends.base import Backend, BackendOptions, Request, scan_chunk
 
 
 class CompiledBackend(Backend):
-    """Maps per-residual Functions through compiled chunks (see the module docstring)."""
+    """Maps and folds compiled chunks (see the module docstring)."""
 
     name = "compiled"
 
@@ -31,45 +47,67 @@ class CompiledBackend(Backend):
         self.chunk = options.chunk
         self.threads = options.threads
         self.compiler = compiler
-        self._loaded: dict[tuple[str, bool, tuple[str, ...]], ca.Function] = {}
-        self._lock = threading.Lock()
 
     def padded(self, n: int) -> int:
         return max(1, -(-n // self.chunk)) * self.chunk
 
-    def _chunk_map(
-        self, f: ca.Function, mapped_inputs: Sequence[str], reduce: bool
-    ) -> tuple[ca.Function, tuple[str, ...]]:
-        """``f`` mapped over one chunk (sums inside when ``reduce``) and the flags to compile it with."""
-        reduce_in = [i for i in range(f.n_in()) if f.name_in(i) not in mapped_inputs]
-        reduce_out = list(range(f.n_out())) if reduce else []
-        name = f"{f.name()}_chunk{self.chunk}{'_sum' if reduce else ''}"
-        return f.map(name, "serial", self.chunk, reduce_in, reduce_out), compiler_flags(f)
+    def _key(self, request: Request) -> tuple[object, ...]:
+        # The Function itself (problems are built once per model and spec), how it is chunked,
+        # compiled and where it is cached: every backend of the process shares what is loaded.
+        f = request.function
+        how = ("scan",) if request.scan else (str(request.reduce), *request.mapped_inputs)
+        return (id(f), *how, self.chunk, self.compiler, str(cache_dir()))
 
-    def chunk_function(self, f: ca.Function, mapped_inputs: Sequence[str], reduce: bool) -> ca.Function:
-        """``f`` mapped over one chunk of columns, compiled and loaded (cached per Function)."""
-        key = (f.name(), reduce, tuple(mapped_inputs))
-        with self._lock:
-            if key not in self._loaded:
-                fc, flags = self._chunk_map(f, mapped_inputs, reduce)
-                so = compile_shared(generate_source(fc), fc.name(), self.compiler, flags)
-                self._loaded[key] = ca.external(fc.name(), str(so))
-            return self._loaded[key]
+    def _chunk(self, request: Request) -> ca.Function:
+        """The chunk Function of a request."""
+        f = request.function
+        if request.scan:
+            return scan_chunk(f, self.chunk)
+        reduce_in = [i for i in range(f.n_in()) if f.name_in(i) not in request.mapped_inputs]
+        reduce_out = list(range(f.n_out())) if request.reduce else []
+        name = f"{f.name()}_chunk{self.chunk}{'_sum' if request.reduce else ''}"
+        return f.map(name, "serial", self.chunk, reduce_in, reduce_out)
 
-    def prepare(self, requests: Sequence[tuple[ca.Function, Sequence[str], bool]]) -> None:
-        """Compile several chunk functions at once, one compiler process per core."""
+    def _build(self, request: Request) -> tuple[str, Path]:
+        """Generate and compile (or find in the cache) a request's chunk: its name and shared object."""
+        fc = self._chunk(request)
+        flags = compiler_flags(request.function)
+        return fc.name(), compile_shared(generate_source(fc), fc.name(), self.compiler, flags)
 
-        def compile_one(f: ca.Function, mapped_inputs: Sequence[str], reduce: bool) -> None:
-            fc, flags = self._chunk_map(f, mapped_inputs, reduce)
-            compile_shared(generate_source(fc), fc.name(), self.compiler, flags)
+    def _compile(self, request: Request) -> ca.Function:
+        """The compiled chunk of a request, loaded (compiled at most once per content)."""
+        key = self._key(request)
+        with _LOCK:
+            if key in _LOADED:
+                return _LOADED[key][1]
+            pending = _PENDING.get(key)
+        name, so = pending.result() if pending is not None else self._build(request)
+        loaded = ca.external(name, str(so))
+        with _LOCK:
+            _PENDING.pop(key, None)
+            return _LOADED.setdefault(key, (request.function, loaded))[1]
 
-        with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
-            for future in [pool.submit(compile_one, *r) for r in requests]:
-                future.result()
+    def prepare(self, requests: Sequence[Request]) -> None:
+        """Start compiling the requests' chunks in the background, in this order."""
+        for request in requests:
+            key = self._key(request)
+            with _LOCK:
+                if key not in _LOADED and key not in _PENDING:
+                    _PENDING[key] = _pool().submit(self._build, request)
+
+    def wait(self) -> None:
+        """Wait until everything :meth:`prepare` started has compiled."""
+        with _LOCK:
+            pending = list(_PENDING.values())
+        for future in pending:
+            future.result()
+
+    def scan_chunk(self, step: ca.Function) -> ca.Function:
+        return self._compile(Request(step, scan=True))
 
     def map(self, f: ca.Function, n: int, mapped_inputs: Sequence[str], reduce: bool) -> ca.Function:
         chunks = n // self.chunk
-        fc = self.chunk_function(f, mapped_inputs, reduce)
+        fc = self._compile(Request(f, tuple(mapped_inputs), reduce))
         reduce_in = [i for i in range(f.n_in()) if f.name_in(i) not in mapped_inputs]
         reduce_out = list(range(f.n_out())) if reduce else []
         if self.threads <= 1 or chunks <= 1:
@@ -109,15 +147,76 @@ class CompiledBackend(Backend):
         )
 
 
+_warned_no_compiler = False
+_POOL: _Compilers | None = None
+_LOCK = threading.Lock()
+#: Loaded chunks (with the Function they came from, which keeps its id valid) and compiles under way.
+_LOADED: dict[tuple[object, ...], tuple[ca.Function, ca.Function]] = {}
+_PENDING: dict[tuple[object, ...], Future[tuple[str, Path]]] = {}
+
+
+class _Compilers:
+    """Compile jobs on daemon threads, one per core. When the process ends (an error, or a run that
+    did not need everything it started), jobs not yet started are dropped and those under way are
+    let finish, so that exiting never waits for a compile nobody needs nor leaves one half done."""
+
+    def __init__(self, workers: int) -> None:
+        self._queue: queue.SimpleQueue[tuple[Future[Any], Callable[[], Any]]] = queue.SimpleQueue()
+        self._busy = 0
+        self._closing = False
+        self._cond = threading.Condition()
+        for k in range(workers):
+            threading.Thread(target=self._work, name=f"nlp_calib-cc-{k}", daemon=True).start()
+        atexit.register(self.close)
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Future[Any]:
+        future: Future[Any] = Future()
+        self._queue.put((future, lambda: fn(*args)))
+        return future
+
+    def _work(self) -> None:
+        while True:
+            future, job = self._queue.get()
+            with self._cond:
+                if self._closing or not future.set_running_or_notify_cancel():
+                    continue
+                self._busy += 1
+            try:
+                future.set_result(job())
+            except BaseException as exc:
+                future.set_exception(exc)
+            finally:
+                with self._cond:
+                    self._busy -= 1
+                    self._cond.notify_all()
+
+    def close(self) -> None:
+        with self._cond:
+            self._closing = True
+            self._cond.wait_for(lambda: self._busy == 0, timeout=60)
+
+
+def _pool() -> _Compilers:
+    """The compiler threads every backend of the process shares."""
+    global _POOL
+    if _POOL is None:
+        _POOL = _Compilers(os.cpu_count() or 1)
+    return _POOL
+
+
 def make_compiled_backend(options: BackendOptions) -> Backend:
-    """The compiled backend, or the interpreted one with a warning when no C compiler exists."""
+    """The compiled backend, or the interpreted one with a warning (once) when no C compiler exists."""
+    global _warned_no_compiler
     compiler = find_compiler()
     if compiler is None:
-        warnings.warn(
-            "backend 'compiled' needs a C compiler (set $CC or install gcc/clang); "
-            "falling back to the interpreted backend",
-            NlpCalibWarning,
-            stacklevel=2,
-        )
+        if not _warned_no_compiler:
+            _warned_no_compiler = True
+            warnings.warn(
+                "no C compiler found (set $CC or install gcc or clang): evaluating with CasADi's "
+                "interpreter, several times slower; set 'backend: interpreted' to silence this",
+                NlpCalibWarning,
+                stacklevel=2,
+            )
         return Backend()
+    usable_cache_dir()  # a cache that cannot be written is named now, before any work
     return CompiledBackend(options, compiler)

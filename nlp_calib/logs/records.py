@@ -1,0 +1,226 @@
+"""Record lines read a block at a time: structure with numpy, numbers without a per-line parser.
+
+A record is ``time: <s.ns> ticks: <e_0> … model_pose: <x> <y> <θ> tracker_pose: <x> <y> <θ>``.
+:func:`parse_block` finds the lines and tokens of a block of whole lines from its bytes'
+whitespace, checks the labels and the characters of every number where a well-formed record has
+them, all as array operations, and converts the numbers in one pass each (the time to integer
+nanoseconds, counters to integers, poses with Python's own ``float``, so they are the same
+doubles as ever). A line it cannot read that way (a field missing or out of order, a character
+outside printable ASCII, a malformed number, a comment) is handed back by number, for the
+per-line reader to give its exact reason or to read it after all.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.core.errors import DatasetError
+
+LABELS = (b"time:", b"ticks:", b"model_pose:", b"tracker_pose:")
+_RECORD_KEYS = ("time:", "ticks:", "model_pose:", "tracker_pose:")
+
+#: Bytes ``bytes.split`` treats as whitespace.
+_WS = np.zeros(256, dtype=bool)
+_WS[[9, 10, 11, 12, 13, 32]] = True
+#: Bytes a fast-path line may hold: printable ASCII, tab (newlines are removed before).
+_PLAIN = np.zeros(256, dtype=bool)
+_PLAIN[32:127] = True
+_PLAIN[9] = True
+#: Timestamps beyond this many seconds (year 2096) cannot be stored in int64 nanoseconds safely.
+MAX_SECONDS = 4_000_000_000
+
+
+@dataclass(frozen=True)
+class Block:
+    """What a block of lines held: records read (line numbers, time in ns, counter readings,
+    the six pose values), and the lines left to the per-line reader (``others``) with, among them,
+    those whose first token starts with ``#`` (``comments``)."""
+
+    lines: np.ndarray
+    t_ns: np.ndarray
+    ticks: np.ndarray
+    poses: np.ndarray
+    others: np.ndarray
+    comments: np.ndarray
+
+
+def _counts(flag: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """How many bytes ``flag`` marks in each token."""
+    c = np.zeros(flag.size + 1, dtype=np.int32)  # a block is far below 2^31 bytes
+    np.cumsum(flag.view(np.uint8), dtype=np.int32, out=c[1:])
+    return c[ends] - c[starts]
+
+
+def _integer_form(arr: np.ndarray, digit: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Tokens of the form ``-?[0-9]+`` (no other sign, no spaces, no underscores)."""
+    neg = arr[starts] == 45
+    n_digits = _counts(digit, starts, ends)
+    return (n_digits == ends - starts - neg) & (n_digits >= 1)
+
+
+def _time_ns(token: bytes) -> int:
+    """``-?[0-9]{1,10}(.[0-9]*)?`` as nanoseconds (digits beyond the ninth dropped); -1 marks
+    a token that is not one (a time cannot be negative and that far from 0 at once)."""
+    neg = token[:1] == b"-"
+    whole, _, frac = (token[1:] if neg else token).partition(b".")
+    if not 1 <= len(whole) <= 10 or int(whole) >= MAX_SECONDS:
+        return _NOT_A_TIME
+    ns = int(whole) * 1_000_000_000 + int((frac + b"000000000")[:9])
+    return -ns if neg else ns
+
+
+_NOT_A_TIME = -(2**62)
+
+
+def _floats(tokens: list[bytes], index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Python's ``float`` of ``tokens[index]``, and which could be read."""
+    picked = [tokens[i] for i in index.tolist()]
+    try:
+        return np.fromiter(map(float, picked), dtype=float, count=len(picked)), np.ones(len(picked), bool)
+    except ValueError:
+        values, ok = np.zeros(len(picked)), np.ones(len(picked), bool)
+        for k, tok in enumerate(picked):
+            try:
+                values[k] = float(tok)
+            except ValueError:
+                ok[k] = False
+        return values, ok
+
+
+def _label_at(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, label: bytes) -> np.ndarray:
+    ok = ends - starts == len(label)
+    last = arr.size - 1
+    for i, ch in enumerate(label):
+        ok &= arr[np.minimum(starts + i, last)] == ch
+    return ok
+
+
+def parse_block(blob: bytes, first_line: int, n_encoders: int) -> Block:
+    """The records of ``blob`` (whole lines joined by ``\\n``; line ``first_line`` first)."""
+    arr = np.frombuffer(blob, dtype=np.uint8)
+    nl = np.flatnonzero(arr == 10)
+    n_lines = nl.size + (1 if arr.size and arr[-1] != 10 else 0)
+    ws = _WS[arr]
+    before = np.concatenate([[True], ws[:-1]])
+    after = np.concatenate([ws[1:], [True]])
+    tok_start = np.flatnonzero(~ws & before)
+    tok_end = np.flatnonzero(~ws & after) + 1
+    tok_line = np.searchsorted(nl, tok_start)
+    counts = np.bincount(tok_line, minlength=n_lines)
+    first_tok = np.cumsum(counts) - counts
+    odd = np.zeros(n_lines, dtype=bool)
+    odd[np.unique(np.searchsorted(nl, np.flatnonzero(~_PLAIN[arr] & (arr != 10))))] = True
+
+    K = 11 + n_encoders
+    cand = np.flatnonzero((counts == K) & ~odd)
+    t0 = first_tok[cand]
+    layout = {0: LABELS[0], 2: LABELS[1], 3 + n_encoders: LABELS[2], 7 + n_encoders: LABELS[3]}
+    good = np.ones(cand.size, dtype=bool)
+    for offset, label in layout.items():
+        good &= _label_at(arr, tok_start[t0 + offset], tok_end[t0 + offset], label)
+    digit = (arr >= 48) & (arr <= 57)
+    tokens = blob.split()
+    # Time: digits with at most one dot (what else the form allows is checked as it is read).
+    ts, te = tok_start[t0 + 1], tok_end[t0 + 1]
+    neg = arr[ts] == 45
+    n_digits, n_dots = _counts(digit, ts, te), _counts(arr == 46, ts, te)
+    good &= (n_digits + n_dots == te - ts - neg) & (n_dots <= 1) & (n_digits >= 1) & (te - ts <= 32)
+    t_ns = np.zeros(cand.size, dtype=np.int64)
+    t_ns[good] = np.fromiter(map(_time_ns, [tokens[i] for i in (t0[good] + 1).tolist()]), np.int64)
+    good &= t_ns != _NOT_A_TIME
+    tick_cols = (t0[:, None] + 3 + np.arange(n_encoders)[None, :]).ravel()
+    tick_ok = _integer_form(arr, digit, tok_start[tick_cols], tok_end[tick_cols])
+    tick_ok &= tok_end[tick_cols] - tok_start[tick_cols] - (arr[tok_start[tick_cols]] == 45) <= 18
+    good &= tick_ok.reshape(-1, n_encoders).all(axis=1)
+    tick_cols = tick_cols.reshape(-1, n_encoders)[good].ravel()
+    ticks = np.fromiter(map(int, [tokens[i] for i in tick_cols.tolist()]), np.int64, tick_cols.size)
+    pose_offsets = np.array([4, 5, 6, 8, 9, 10]) + n_encoders
+    pose_cols = (t0[good][:, None] + pose_offsets[None, :]).ravel()
+    poses, readable = _floats(tokens, pose_cols)
+    ok = readable.reshape(-1, 6).all(axis=1)
+    kept = np.flatnonzero(good)[ok]
+    good[:] = False
+    good[kept] = True
+    ticks, poses = ticks.reshape(-1, n_encoders)[ok], poses.reshape(-1, 6)[ok]
+    t_ns = t_ns[good]
+
+    blank = counts == 0
+    fast = np.zeros(n_lines, dtype=bool)
+    fast[cand[good]] = True
+    others = np.flatnonzero(~fast & ~blank)
+    hash_first = np.zeros(n_lines, dtype=bool)
+    has_tok = counts > 0
+    hash_first[has_tok] = arr[tok_start[first_tok[has_tok]]] == 35
+    return Block(
+        lines=first_line + cand[good],
+        t_ns=t_ns,
+        ticks=ticks,
+        poses=poses,
+        others=first_line + others,
+        comments=first_line + np.flatnonzero(hash_first & ~blank),
+    )
+
+
+# --- one line at a time: the lines parse_block leaves ---------------------------------------------
+
+
+def _split_record(text: str, path: str, line: int) -> dict[str, list[str]]:
+    tokens = text.split()
+    parts: dict[str, list[str]] = {}
+    current: str | None = None
+    for tok in tokens:
+        if tok.endswith(":"):
+            if tok not in _RECORD_KEYS:
+                raise DatasetError(
+                    path, line, f"unknown field {tok[:80]!r}; a record has {' '.join(_RECORD_KEYS)}"
+                )
+            current = tok
+            parts[current] = []
+        elif current is None:
+            raise DatasetError(path, line, f"a record starts with 'time:', got {tok[:80]!r}")
+        else:
+            parts[current].append(tok)
+    return parts
+
+
+_TIME = re.compile(r"(-?)([0-9]{1,10})(?:\.([0-9]*))?")
+_INT = re.compile(r"-?[0-9]{1,18}")
+
+
+def _parse_time_ns(token: str, path: str, line: int) -> int:
+    m = _TIME.fullmatch(token)
+    if m is None or int(m.group(2)) >= MAX_SECONDS:
+        raise DatasetError(
+            path, line, f"time: expected seconds like 1700000123.456789012, got {token[:80]!r}"
+        )
+    ns = int(m.group(2)) * 1_000_000_000 + int(((m.group(3) or "") + "000000000")[:9])
+    return -ns if m.group(1) else ns
+
+
+def parse_line(body: str, path: str, lineno: int, n_enc: int) -> tuple[int, list[int], list[float]]:
+    """Time (ns), encoder readings and the six pose values of one record line, or the reason
+    it is not one (:class:`DatasetError`)."""
+    parts = _split_record(body, path, lineno)
+    expected = {"time:": 1, "ticks:": n_enc, "model_pose:": 3, "tracker_pose:": 3}
+    for key, count in expected.items():
+        got = parts.get(key)
+        if got is None or len(got) != count:
+            found = "none" if got is None else f"{len(got)}"
+            raise DatasetError(path, lineno, f"'{key}' needs {count} value(s), found {found}: {body[:80]!r}")
+    time_ns = _parse_time_ns(parts["time:"][0], path, lineno)
+    if not all(_INT.fullmatch(tok) for tok in parts["ticks:"]):
+        raise DatasetError(
+            path, lineno, f"ticks: expected {n_enc} integers of at most 18 digits, got {parts['ticks:']}"
+        )
+    values = []
+    for key in ("model_pose:", "tracker_pose:"):
+        try:  # plain numbers only: no brackets or commas inside a record
+            values += [float(tok) for tok in parts[key]]
+        except ValueError:
+            raise DatasetError(
+                path, lineno, f"{key[:-1]}: expected numbers, got {' '.join(parts[key])[:80]!r}"
+            ) from None
+    return time_ns, [int(tok) for tok in parts["ticks:"]], values

@@ -1,0 +1,175 @@
+"""Full-parameter Functions of a problem: one interval's motion, dead reckoning, odometry with
+covariance, a window's motion, and SE(2) ``between`` with its Jacobians.
+
+They take the full parameter vector (free and fixed, in model order) rather than the free one,
+because trajectories, metrics, reports and the closed-form start evaluate a given calibration.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import casadi as ca
+
+from nlp_calib.models.base import KinematicModel
+from nlp_calib.symbolic import se2
+
+_CSE = {"cse": True}
+
+
+def fn(
+    name: str, ins: list[ca.SX], in_names: list[str], outs: list[ca.SX], out_names: list[str]
+) -> ca.Function:
+    # Dense outputs: buffers bind numpy memory to stored non-zeros only. Common subexpression
+    # elimination merges repeated sin/cos of the same angle (e.g. cos θ and cos(−θ)).
+    return ca.Function(name, ins, [ca.densify(o) for o in outs], in_names, out_names, _CSE)
+
+
+def split_params(model: KinematicModel, params: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """Kinematic parameters and ``T_base_sensor`` of a full parameter vector."""
+    nk = len(model.kinematic_params)
+    return params[:nk], params[nk : nk + 3]
+
+
+def predict_motion(model: KinematicModel, params: ca.SX, U: ca.SX, integration: str) -> ca.SX:
+    """Sensor motion over consecutive intervals: ``T⁻¹ · Δr_0 ⋯ Δr_{H-1} · T``.
+
+    ``U`` holds one interval's inputs per column. Conjugating the composed base motion once
+    equals composing the conjugated per-interval motions, at a fraction of the cost.
+    """
+    k, T_base_sensor = split_params(model, params)
+    motion_base = model.increment(k, U[:, 0], integration)
+    for j in range(1, U.shape[1]):
+        motion_base = se2.compose(motion_base, model.increment(k, U[:, j], integration))
+    return se2.conjugate(T_base_sensor, motion_base)
+
+
+class TrajectoryFunctions:
+    """Full-parameter Functions, built on first use; the host provides the layout attributes.
+
+    ``predict`` (params, u) → sensor motion over one interval; ``interval_residual`` (params, u,
+    z) → (e, ∂e/∂u) of one interval; ``integrate_step``
+    (T_world_sensor, params, u) → T_world_sensor · predict; ``predict_window`` (params, U) with
+    ``U`` one window's inputs, interval after interval; ``base_from_sensor`` (T_world_sensor,
+    params) → T_world_base; ``odometry_step`` (state = [T_world_base, vec P], params, u,
+    input_std) → the base pose and its covariance propagated over one interval; ``between``
+    (a, b) → t2v(a⁻¹b) and ``between_jacobians``.
+    """
+
+    model: KinematicModel
+    names: tuple[str, ...]
+    integration: str
+    horizon: int
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.model.input_names)
+
+    @functools.cached_property
+    def _full(self) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """Full-parameter symbols: params, one interval's inputs and the sensor motion over it."""
+        params = ca.SX.sym("params", len(self.names))
+        u1 = ca.SX.sym("u", self.n_inputs)
+        h1 = predict_motion(self.model, params, ca.reshape(u1, self.n_inputs, 1), self.integration)
+        return params, u1, h1
+
+    @functools.cached_property
+    def interval_residual(self) -> ca.Function:
+        """(params, u, z) → (e, de_du): one interval's residual against the tracker's motion ``z``
+        and its derivative with respect to the interval's inputs (for checking encoder readings)."""
+        params, u1, h1 = self._full
+        z = ca.SX.sym("z", 3)
+        e1 = se2.between(z, h1)
+        return fn(
+            "interval_residual",
+            [params, u1, z],
+            ["params", "u", "z"],
+            [e1, ca.jacobian(e1, u1)],
+            ["e", "de_du"],
+        )
+
+    @functools.cached_property
+    def predict(self) -> ca.Function:
+        params, u1, h1 = self._full
+        return fn("predict", [params, u1], ["params", "u"], [h1], ["motion"])
+
+    @functools.cached_property
+    def integrate_step(self) -> ca.Function:
+        params, u1, h1 = self._full
+        T_ws = ca.SX.sym("T_world_sensor", 3)
+        return fn(
+            "integrate_step",
+            [T_ws, params, u1],
+            ["T_world_sensor", "params", "u"],
+            [se2.compose(T_ws, h1)],
+            ["T_world_sensor_next"],
+        )
+
+    @functools.cached_property
+    def base_from_sensor(self) -> ca.Function:
+        params = self._full[0]
+        T_ws = ca.SX.sym("T_world_sensor", 3)
+        T_base_sensor = split_params(self.model, params)[1]
+        return fn(
+            "base_from_sensor",
+            [T_ws, params],
+            ["T_world_sensor", "params"],
+            [se2.compose(T_ws, se2.inverse(T_base_sensor))],
+            ["T_world_base"],
+        )
+
+    @functools.cached_property
+    def odometry_step(self) -> ca.Function:
+        """P' = F·P·Fᵀ + G·diag(σ_u²)·Gᵀ with F = ∂T'/∂T and G = ∂T'/∂u."""
+        params, u1, _ = self._full
+        state = ca.SX.sym("state", 12)
+        T_wb, P = state[:3], ca.reshape(state[3:], 3, 3)
+        input_std = ca.SX.sym("input_std", self.n_inputs)
+        k_sym, _ = split_params(self.model, params)
+        T_wb_next = se2.compose(T_wb, self.model.increment(k_sym, u1, self.integration))
+        F, G = ca.jacobian(T_wb_next, T_wb), ca.jacobian(T_wb_next, u1)
+        P_next = ca.mtimes([F, P, F.T]) + ca.mtimes([G, ca.diag(input_std**2), G.T])
+        return fn(
+            "odometry_step",
+            [state, params, u1, input_std],
+            ["state", "params", "u", "input_std"],
+            [ca.vertcat(T_wb_next, ca.reshape(P_next, 9, 1))],
+            ["state_next"],
+        )
+
+    @functools.cached_property
+    def predict_window(self) -> ca.Function:
+        params = self._full[0]
+        U = ca.SX.sym("U", self.n_inputs * self.horizon)
+        return fn(
+            "predict_window",
+            [params, U],
+            ["params", "U"],
+            [
+                predict_motion(
+                    self.model, params, ca.reshape(U, self.n_inputs, self.horizon), self.integration
+                )
+            ],
+            ["motion"],
+        )
+
+    @functools.cached_property
+    def _pose_pair(self) -> tuple[ca.SX, ca.SX, ca.SX]:
+        a, b = ca.SX.sym("a", 3), ca.SX.sym("b", 3)
+        return a, b, se2.between(a, b)
+
+    @functools.cached_property
+    def between(self) -> ca.Function:
+        a, b, motion = self._pose_pair
+        return fn("between", [a, b], ["a", "b"], [motion], ["motion"])
+
+    @functools.cached_property
+    def between_jacobians(self) -> ca.Function:
+        a, b, motion = self._pose_pair
+        return fn(
+            "between_jacobians",
+            [a, b],
+            ["a", "b"],
+            [ca.jacobian(motion, a), ca.jacobian(motion, b)],
+            ["dmotion_da", "dmotion_db"],
+        )

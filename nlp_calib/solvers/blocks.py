@@ -1,0 +1,97 @@
+"""A per-column Function evaluated over many columns, a block at a time.
+
+Mapping a Function over a million columns at once costs seconds to build (CasADi's map grows with
+its size) and needs every output in one piece. :class:`BlockMap` maps it over blocks of
+:data:`BLOCK` columns instead (at most two map sizes, built once), binds each block's buffers to
+column slices of the caller's arrays (no copies) and either sums the blocks' outputs or writes
+them straight into full per-column arrays.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+from nlp_calib.solvers.backends import Backend, Buffered
+
+#: Columns per block: a multiple of every backend's chunk.
+BLOCK = 1 << 14
+
+
+class BlockMap:
+    """``f`` over the ``n`` columns of ``mapped`` (arrays ``(rows, n)``, column-major), with the
+    other inputs in ``static``; outputs summed over the columns when ``reduce``."""
+
+    def __init__(
+        self,
+        backend: Backend,
+        f: ca.Function,
+        mapped: Mapping[str, np.ndarray],
+        static: Mapping[str, np.ndarray | float],
+        reduce: bool,
+    ) -> None:
+        self.reduce = reduce
+        n = next(iter(mapped.values())).shape[1]
+        names = tuple(mapped)
+        self.out_names = [f.name_out(i) for i in range(f.n_out())]
+        self.shapes = [f.size_out(i) for i in range(f.n_out())]
+        # Unreduced outputs: one (rows, cols * n) array each, column-major like CasADi's map.
+        self.full = [] if reduce else [np.zeros((r, c * n), order="F") for r, c in self.shapes]
+        maps: dict[int, ca.Function] = {}
+        self.blocks: list[Buffered] = []
+        for lo in range(0, n, BLOCK):
+            hi = min(n, lo + BLOCK)
+            if hi - lo not in maps:
+                maps[hi - lo] = backend.map(f, hi - lo, names, reduce)
+            bound = {k: v[:, lo:hi] for k, v in mapped.items()}
+            if not reduce:
+                bound.update(
+                    {
+                        name: out[:, c * lo : c * hi]
+                        for name, out, (_, c) in zip(self.out_names, self.full, self.shapes)
+                    }
+                )
+            self.blocks.append(Buffered(maps[hi - lo], static, bound))
+
+    def __call__(self, **inputs: np.ndarray | float) -> Sequence[np.ndarray]:
+        """Evaluate every block; the summed outputs (shaped like ``f``'s), or the full arrays."""
+        for block in self.blocks:
+            block.evaluate(**inputs)
+        if not self.reduce:
+            return self.full
+        sums = [np.zeros(r * c) for r, c in self.shapes]
+        for block in self.blocks:
+            for total, out in zip(sums, block.outputs()):
+                total += out
+        return [s.reshape(shape, order="F") if shape[1] > 1 else s for s, shape in zip(sums, self.shapes)]
+
+
+def stream(
+    backend: Backend,
+    f: ca.Function,
+    mapped: Mapping[str, np.ndarray],
+    static: Mapping[str, np.ndarray | float],
+    n: int | None = None,
+) -> Iterator[tuple[slice, list[np.ndarray]]]:
+    """``f`` over the columns of ``mapped``, one block at a time: each block's columns and its
+    outputs ``(rows, cols * block)`` (reused for the next block: copy what must outlive it). Only
+    the first ``n`` columns' blocks are evaluated. Memory stays one block's, however many columns."""
+    total = next(iter(mapped.values())).shape[1]
+    n = total if n is None else n
+    buffers: dict[int, Buffered] = {}
+    for lo in range(0, n, BLOCK):
+        hi = min(total, lo + BLOCK)
+        size = hi - lo
+        if size not in buffers:
+            buffers[size] = Buffered(backend.map(f, size, tuple(mapped), False), static)
+        buf = buffers[size]
+        for name, arr in mapped.items():
+            buf.rebind(name, arr[:, lo:hi])
+        buf.evaluate()
+        shapes = [f.size_out(i) for i in range(f.n_out())]
+        yield (
+            slice(lo, min(hi, n)),
+            [out.reshape(r, c * size, order="F") for out, (r, c) in zip(buf.outputs(), shapes)],
+        )

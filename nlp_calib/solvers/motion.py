@@ -1,0 +1,102 @@
+"""The windows' motion data at a parameter vector: what the per-residual Functions are mapped over.
+
+Direct problems (``H = 1``) take each window's interval inputs, fixed once the data are bound.
+Prefix problems integrate every interval once per parameter vector with the problem's scan of
+the order asked for (values, first or second derivatives; see :mod:`nlp_calib.problem.motion`)
+and gather each window's prefix jets at its first and last record; each order keeps its result
+for the last ``x`` it was asked for.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nlp_calib.problem import ProblemFunctions, ResidualData
+from nlp_calib.solvers.backends import Backend, Buffered
+
+
+def padded_index(index: np.ndarray, n: int) -> np.ndarray:
+    """``index`` padded to ``n`` entries with copies of its first (padding windows weigh 0)."""
+    out = np.full(n, index[0] if index.size else 0, dtype=np.intp)
+    out[: index.size] = index
+    return out
+
+
+class _Scan:
+    """One order's prefix scan, its prefix jets and the windows' gathered motion data."""
+
+    def __init__(
+        self, fns: ProblemFunctions, backend: Backend, order: int, inputs: np.ndarray, ends: np.ndarray
+    ):
+        step = fns.step(order)
+        rows = step.nnz_in(0)
+        n_pad = inputs.shape[1]
+        # Column r: the jet after r intervals; column 0 the identity (zeros).
+        self.poses = np.zeros((rows, n_pad + 1), order="F")
+        self.motion = np.zeros((2 * rows, ends.size // 2), order="F")
+        self._ends = ends
+        self._scan = Buffered(
+            backend.scan(step, n_pad),
+            {"state": np.zeros(rows)},
+            bound={"u": inputs, "states": self.poses[:, 1:]},
+        )
+        self.at: bytes | None = None
+
+    def update(self, key: bytes, x: np.ndarray, x_fixed: np.ndarray) -> np.ndarray:
+        if self.at != key:
+            self._scan.evaluate(x=x, x_fixed=x_fixed)
+            rows = self.poses.shape[0]
+            np.take(self.poses, self._ends, axis=1, out=self.motion.reshape(rows, -1, order="F"), mode="clip")
+            self.at = key
+        return self.motion
+
+
+class WindowMotion:
+    """Motion data of the windows of ``data`` (padded to ``n_padded``) at any derivative order."""
+
+    def __init__(self, fns: ProblemFunctions, backend: Backend, data: ResidualData, n_padded: int) -> None:
+        self.fns = fns
+        self.backend = backend
+        self.prefix = fns.prefix
+        self.starts = padded_index(data.starts, n_padded)
+        self.stops = padded_index(data.stops, n_padded)
+        self.n_intervals = data.inputs.shape[1]
+        if not self.prefix:
+            self.direct = np.zeros((fns.motion_rows(1), n_padded), order="F")
+            self.set_inputs(data.inputs)
+            return
+        self.inputs = np.zeros((fns.n_inputs, backend.padded_intervals(self.n_intervals)), order="F")
+        # A window's motion is its prefix jets at its first and last record, side by side.
+        self._ends = np.empty(2 * n_padded, dtype=np.intp)
+        self._ends[0::2], self._ends[1::2] = self.starts, self.stops
+        self._scans: dict[int, _Scan] = {}
+        self.set_inputs(data.inputs)
+
+    def buffer(self, order: int) -> np.ndarray:
+        """The array the motion data of ``order`` are kept in (what a Function binds)."""
+        if not self.prefix:
+            return self.direct
+        if order not in self._scans:
+            self._scans[order] = _Scan(self.fns, self.backend, order, self.inputs, self._ends)
+        return self._scans[order].motion
+
+    def set_inputs(self, inputs: np.ndarray) -> None:
+        """New interval inputs for the same windows (e.g. encoders re-sampled on another clock)."""
+        if not self.prefix:
+            self.direct[:] = inputs[:, self.starts]
+            return
+        self.inputs[:, : self.n_intervals] = inputs
+        for scan in self._scans.values():
+            scan.at = None
+
+    def update(self, order: int, x: np.ndarray, x_fixed: np.ndarray) -> np.ndarray:
+        """The windows' motion data of ``order`` at ``x``."""
+        if not self.prefix:
+            return self.direct
+        self.buffer(order)
+        return self._scans[order].update(np.asarray(x, dtype=float).tobytes(), x, x_fixed)
+
+    def poses(self, x: np.ndarray, x_fixed: np.ndarray) -> np.ndarray:
+        """Prefix poses at ``x``, ``(3, padded intervals + 1)`` (prefix problems)."""
+        self.update(0, x, x_fixed)
+        return self._scans[0].poses

@@ -1,0 +1,138 @@
+"""Several logs in one calibration (``datasets``): windows stay inside their log, each log keeps its
+own samples, lag and faults, and two drives together beat either alone."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import cli
+
+from nlp_calib.core.errors import ScenarioError
+from nlp_calib.pipeline import Calibration, JointCalibration, scenario_from_mapping
+from nlp_calib.pipeline.calibration import CalibrationRun
+from nlp_calib.problem import build_residual_data
+from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
+
+BASE: dict[str, Any] = {
+    "model": "tricycle",
+    "initial_guess": "auto",
+    "residual": {"horizon": 10},
+    "solvers": ["gauss_newton"],
+}
+
+
+def drives(folder: Path, seed: int, records: int = 800) -> tuple[list[Path], dict[str, float]]:
+    """Two simulated drives of one robot: S-curves with reversing, and forward-only driving."""
+    paths = []
+    truth: dict[str, float] = {}
+    for i, trajectory in enumerate(("s_curves", "no_reversals")):
+        path = folder / f"drive{i}_{seed}.txt"
+        opts = SimulationOptions(records=records, seed=10 * seed + i, trajectory=trajectory)
+        _, truth_file = write_simulation(simulate(opts), path)
+        truth = json.loads(Path(truth_file).read_text())["params"]
+        paths.append(path)
+    return paths, truth
+
+
+def single(path: Path) -> CalibrationRun:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return Calibration(scenario_from_mapping({**BASE, "dataset": str(path)}, "s", path.parent)).run()
+
+
+def joint(paths: list[Any], folder: Path, **extra: Any) -> CalibrationRun:
+    sc = scenario_from_mapping({**BASE, "datasets": paths, **extra}, "j", folder)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return JointCalibration(sc).run().parts[0]
+
+
+def test_windows_never_cross_from_one_log_into_the_next(tmp_path: Path) -> None:
+    (a, b), _ = drives(tmp_path, 0, records=120)
+    sc = scenario_from_mapping({**BASE, "datasets": [str(a), str(b)]}, "j", tmp_path)
+    calib = JointCalibration(sc)
+    data = calib.data
+    assert len(data.logs) == 2
+    boundary = data.offsets[1]
+    assert np.all((data.stops < boundary) | (data.starts >= boundary))
+    # Every window of the joint fit is one of a log's own windows, with the same tracker motion.
+    for part, offset in zip(calib.parts, data.offsets):
+        own = build_residual_data(calib.fns, part.aligned.select(*part.fit), sc.residual)
+        mine = (data.starts >= offset) & (data.starts < offset + own.n_records)
+        np.testing.assert_array_equal(data.starts[mine] - offset, own.starts)
+        np.testing.assert_allclose(data.z[:, mine], own.z, rtol=0, atol=1e-15)
+
+
+def test_each_log_keeps_its_own_samples_and_lag(tmp_path: Path) -> None:
+    (a, b), _ = drives(tmp_path, 1, records=300)
+    entries = [str(a), {"path": str(b), "samples": {"start": 100}, "alignment": {"tracker_lag": 0.04}}]
+    sc = scenario_from_mapping({**BASE, "datasets": entries}, "j", tmp_path)
+    calib = JointCalibration(sc)
+    assert [p.used[0] for p in calib.parts] == [0, 100]
+    assert [p.alignment.lag_s for p in calib.parts] == [0.0, 0.04]
+    assert calib.data.n_records == sum(p.fit[1] - p.fit[0] for p in calib.parts)
+
+
+def test_two_drives_together_recover_truth_better_with_a_smaller_honest_sigma(tmp_path: Path) -> None:
+    """Over three seeds: the joint fit's error (in units of its own honest σ) is below either
+    single-log fit's, and its honest σ is smaller than either single fit's for every parameter."""
+    errors: list[list[float]] = []
+    sigma: dict[str, list[np.ndarray]] = {"a": [], "b": [], "joint": []}
+    for seed in range(3):
+        paths, truth = drives(tmp_path, seed)
+        runs = {
+            "a": single(paths[0]),
+            "b": single(paths[1]),
+            "joint": joint([str(p) for p in paths], tmp_path),
+        }
+        for run in runs.values():
+            assert run.reports["gauss_newton"].result.converged
+        names = list(runs["joint"].std("gauss_newton"))
+        scale = np.array([runs["joint"].std("gauss_newton")[n] for n in names])
+        row = []
+        for key, run in runs.items():
+            p = run.reports["gauss_newton"].result.param_dict()
+            row.append(float(np.sum(((np.array([p[n] - truth[n] for n in names])) / scale) ** 2)))
+            sigma[key].append(np.array([run.std("gauss_newton")[n] for n in names]))
+        errors.append(row)
+    total = np.sum(errors, axis=0)  # a χ²-like sum over seeds and parameters: a, b, joint
+    assert total[2] <= min(total[0], total[1]), total
+    mean = {k: np.mean(v, axis=0) for k, v in sigma.items()}
+    assert np.all(mean["joint"] < np.minimum(mean["a"], mean["b"])), mean
+
+
+def test_datasets_and_dataset_together_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(ScenarioError, match=r"'dataset' .* or 'datasets'.* not both"):
+        scenario_from_mapping({**BASE, "dataset": "a.txt", "datasets": ["b.txt"]}, "j", tmp_path)
+    with pytest.raises(ScenarioError, match="not neither"):
+        scenario_from_mapping(dict(BASE), "j", tmp_path)
+    with pytest.raises(ScenarioError, match=r"datasets\[1\]\.samples"):
+        scenario_from_mapping(
+            {**BASE, "datasets": ["a.txt", {"path": "b.txt", "samples": {"start": -1}}]}, "j", tmp_path
+        )
+    with pytest.raises(ScenarioError, match="non-empty list"):
+        scenario_from_mapping({**BASE, "datasets": []}, "j", tmp_path)
+
+
+def test_run_writes_the_joint_hand_off_and_each_logs_result(tmp_path: Path) -> None:
+    drives(tmp_path, 2, records=300)
+    sc = tmp_path / "joint.yaml"
+    sc.write_text(
+        "name: joint\ndatasets: [drive0_2.txt, drive1_2.txt]\nmodel: tricycle\ninitial_guess: auto\n"
+        "residual: {horizon: 10}\nsolvers: [gauss_newton]\n"
+    )
+    out = tmp_path / "out"
+    proc = cli("run", str(sc), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert "joint fit of 2 logs" in proc.stdout
+    results = [json.loads((out / name / "result.json").read_text()) for name in ("drive0_2", "drive1_2")]
+    calibration = (out / "calibration.yaml").read_text()
+    params = [r["solvers"]["gauss_newton"]["params"] for r in results]
+    assert params[0] == params[1]  # one set of parameters for both logs
+    for name, value in params[0].items():
+        assert f"{value!r}"[:8] in calibration or name not in calibration

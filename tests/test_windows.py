@@ -1,0 +1,156 @@
+"""Windows from prefix poses: the fast path equals the residual as defined, window by window, for
+any selection of windows and several logs; the linear-time uncertainty equals the direct sum."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+from conftest import assert_close, parse_lines
+
+from nlp_calib.analysis import uncertainty as unc
+from nlp_calib.logs import Log
+from nlp_calib.models import get_model
+from nlp_calib.problem import ProblemFunctions, ProblemSpec, ResidualOptions, build, build_residual_data
+from nlp_calib.simulation import SimulationOptions, simulate
+from nlp_calib.solvers import ProblemEvaluator
+
+
+def sim_log(model: str, records: int, seed: int, **kwargs: object) -> Log:
+    text = simulate(SimulationOptions(model=model, records=records, seed=seed, **kwargs)).text()  # type: ignore[arg-type]
+    return parse_lines(text.splitlines(), model=model)
+
+
+def truth(model: str) -> np.ndarray:
+    return np.array(list(get_model(model).drive.default_truth.values()))
+
+
+def evaluator(
+    fns: ProblemFunctions, data: object, x_fixed: np.ndarray, delta: float = 0.05
+) -> ProblemEvaluator:
+    return ProblemEvaluator(fns, data, x_fixed=x_fixed, omega=np.array([1.0, 2.0, 3.0]), delta=delta)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("model", ["tricycle", "diff_drive"])
+@pytest.mark.parametrize("horizon", [1, 4])
+@pytest.mark.parametrize("fixed", [(), ("sensor_theta",)])
+def test_windows_match_the_defining_residual_for_any_selection(
+    model: str, horizon: int, fixed: tuple[str, ...]
+) -> None:
+    m = get_model(model)
+    fns = build(m, ProblemSpec(horizon=horizon, fixed=fixed))
+    data = build_residual_data(fns, sim_log(model, 150, 1), ResidualOptions(horizon=horizon, stride=2))
+    rng = np.random.default_rng(0)
+    data = data.select(np.sort(rng.choice(data.n_residuals, data.n_residuals // 2, replace=False)))
+    p = truth(model) * rng.uniform(0.9, 1.1, len(fns.names))
+    x = np.array([v for n, v in zip(fns.names, p) if n not in fixed])
+    x_fixed = np.array([v for n, v in zip(fns.names, p) if n in fixed])
+    ev = evaluator(fns, data, x_fixed)
+    e, _, _ = ev.robust_terms(x)
+    J = np.concatenate([blk.J for _, blk in ev.sensitivities(x)])
+    columns = data.columns
+    e_ref, J_ref = (np.asarray(v) for v in fns.residual_jacobian.map(data.n_residuals)(x, x_fixed, columns))
+    assert_close(e, e_ref, rtol=1e-9, atol=1e-12, what="e")
+    J_ref = J_ref.reshape(3, data.n_residuals, -1).transpose(1, 0, 2)
+    assert_close(J, J_ref, rtol=1e-8, atol=1e-10 * np.abs(J_ref).max(), what="J")
+
+
+def test_two_logs_end_to_end_are_the_sum_of_each_log() -> None:
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=5))
+    opts = ResidualOptions(horizon=5)
+    a, b = sim_log("tricycle", 120, 2), sim_log("tricycle", 90, 3, latency_s=0.01)
+    both = build_residual_data(fns, [a, b], opts)
+    assert both.offsets == (0, 120) and both.n_records == 210
+    # No window crosses from one log into the next.
+    assert np.all((both.stops < 120) | (both.starts >= 120))
+    assert both.n_residuals == (120 - 5) + (90 - 5)
+    x = truth("tricycle") * 1.02
+    ne = [
+        evaluator(fns, d, np.zeros(0)).normal_equations(x)
+        for d in (both, *(build_residual_data(fns, lg, opts) for lg in (a, b)))
+    ]
+    assert_close(ne[0].H, ne[1].H + ne[2].H, rtol=1e-10)
+    assert_close(ne[0].g, ne[1].g + ne[2].g, rtol=1e-10, atol=1e-14)
+    assert ne[0].cost == pytest.approx(ne[1].cost + ne[2].cost, rel=1e-12)
+
+
+def test_windows_touching_flagged_intervals_can_be_dropped() -> None:
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=3))
+    data = build_residual_data(fns, sim_log("tricycle", 50, 4), ResidualOptions(horizon=3))
+    flagged = np.zeros(data.inputs.shape[1], dtype=bool)
+    flagged[[10, 30]] = True
+    counts = data.interval_counts(flagged)
+    assert counts.tolist() == [int(s <= 10 < e) + int(s <= 30 < e) for s, e in zip(data.starts, data.stops)]
+    kept = data.select(counts == 0)
+    assert kept.n_residuals == data.n_residuals - 6
+    assert_close(kept.z, data.z[:, counts == 0], rtol=0.0)
+
+
+def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval() -> None:
+    """The running-sum propagation against the direct O(N·H) sum over each window's intervals."""
+    model, H = get_model("tricycle"), 6
+    fns = build(model, ProblemSpec(horizon=H, kernel="huber"))
+    log = sim_log("tricycle", 300, 5, outlier_fraction=0.03)
+    data = build_residual_data(fns, log, ResidualOptions(horizon=H))
+    ev = evaluator(fns, data, np.zeros(0), delta=0.05)
+    x = truth("tricycle") * 1.001
+    sigma_in = np.array([2e-4, 3e-3])
+    got = unc.estimate(ev, x, data, sigma_in)
+
+    # Reference: derivatives of the defining residual with respect to each window's own data.
+    N, n_in, n = data.n_residuals, fns.n_inputs, fns.n_free
+    col = ca.SX.sym("col", fns.column_rows)
+    e_col = fns.residual(x, [], col)
+    d_col = ca.Function("d", [col], [ca.jacobian(e_col, col)]).map(N)
+    D = np.asarray(d_col(data.columns)).reshape(3, N, -1)
+    e, J = (np.asarray(v) for v in fns.residual_jacobian.map(N)(x, [], data.columns))
+    J = J.reshape(3, N, n)
+    s = np.einsum("cw,c,cw->w", e, ev.omega, e)
+    weight = np.minimum(1.0, ev.delta / np.sqrt(s))
+    poses = data.T_world_sensor
+    Da, Db = (
+        np.asarray(v).reshape(3, N, 3)
+        for v in fns.between_jacobians.map(N)(poses[data.starts].T, poses[data.stops].T)
+    )
+    de_dz = D[:, :, n_in * H : n_in * H + 3]
+    Ea, Eb = np.einsum("cwk,kwl->wcl", de_dz, Da), np.einsum("cwk,kwl->wcl", de_dz, Db)
+    F = D[:, :, : n_in * H].reshape(3, N, H, n_in).transpose(1, 2, 0, 3)
+    use = s <= ev.delta**2
+    E2 = Ea**2 + Eb**2
+    coef = np.concatenate([E2[:, :, :2].sum(axis=2, keepdims=True), E2[:, :, 2:3]], axis=2)
+    known = np.einsum("whci,i->wc", F**2, sigma_in**2)
+    m = 3 * int(use.sum())
+    var = unc.nnls_small(coef[use].reshape(-1, 2), (e.T[use] ** 2 - known[use]).ravel()) * (m / (m - n))
+    L = weight[:, None, None] * np.einsum("cwi,c->wic", J, ev.omega)
+    K = np.zeros((data.n_records, n, 3))
+    np.add.at(K, data.starts, np.einsum("wic,wcl->wil", L, Ea))
+    np.add.at(K, data.stops, np.einsum("wic,wcl->wil", L, Eb))
+    Q = np.zeros((data.inputs.shape[1], n, n_in))
+    intervals = data.starts[:, None] + np.arange(H)[None, :]
+    np.add.at(Q, intervals.ravel(), np.einsum("wic,whcl->whil", L, F).reshape(-1, n, n_in))
+    Sigma_pose = np.array([var[0], var[0], var[1]])
+    meat = np.einsum("pik,k,pjk->ij", K, Sigma_pose, K) + np.einsum("jik,k,jlk->il", Q, sigma_in**2, Q)
+    g_out = np.einsum("wic,cw->iw", L[~use], e[:, ~use])
+    meat += g_out @ g_out.T
+    bread = np.linalg.inv(ev.normal_equations(x).H)
+    M = np.asarray(fns.tangent_map(x))
+    expected = M @ bread @ meat @ bread @ M.T
+
+    assert not use.all()  # the outliers' own pull is exercised
+    assert got.noise["tracker_xy"] == pytest.approx(np.sqrt(var[0]), rel=1e-9)
+    assert_close(got.covariance, expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max())
+
+
+def test_faulty_intervals_and_records_drop_their_windows() -> None:
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=4))
+    log = sim_log("tricycle", 60, 6)
+    bad_intervals = np.zeros(59, dtype=bool)
+    bad_intervals[20] = True
+    bad_records = np.zeros(60, dtype=bool)
+    bad_records[40] = True
+    data = build_residual_data(
+        fns, log, ResidualOptions(horizon=4), bad_intervals=bad_intervals, bad_records=bad_records
+    )
+    spoiled = [s for s in range(56) if s <= 20 < s + 4 or s in (40, 36)]
+    assert data.dropped_faulty == len(spoiled) == 6
+    assert sorted(set(range(56)) - set(data.starts.tolist())) == spoiled
