@@ -619,6 +619,19 @@ def test_several_bags_calibrate_together_as_their_text_logs(
     assert_close(list(bag.param_dict().values()), list(text.param_dict().values()), rtol=1e-6, what="joint")
 
 
+def test_a_bad_bag_entry_of_datasets_names_its_place(tmp_path: Path) -> None:
+    topics = "joint_states: /js, tracker: /t"
+    for entry, pattern in [
+        (f"{{bag: x.bag, {topics}, joints: [a], samples: {{start: 5}}}}", r"datasets\[1\]\.joints: 1 joint"),
+        (
+            f"{{bag: x.bag, {topics}, joints: [a, b], sampels: {{start: 5}}}}",
+            r"datasets\[1\]\.sampels: unknown key; a bag block has bag, .*, max_gap, samples, alignment",
+        ),
+    ]:
+        with pytest.raises(ScenarioError, match=pattern):
+            load_scenario(_scenario(tmp_path, f"datasets: [a.txt, {entry}]"))
+
+
 # --- the command line --------------------------------------------------------------------------
 
 

@@ -139,15 +139,15 @@ class Scenario:
     strict: bool = True
     backend: str = "compiled"
     threads: int = 1
+    #: How to read ``dataset`` when it is a bag (the ``dataset:`` block); None for a text log.
+    bag: BagSource | None = None
     #: Several logs calibrated together (``dataset`` is then the first of them).
     datasets: tuple[LogEntry, ...] = ()
-    #: How to read ``dataset`` when it is a bag (a ``dataset:`` bag block); None for a text log.
-    bag: BagSource | None = None
 
     def with_dataset(self, path: str | Path) -> Scenario:
         """The same scenario on another log (``--data``); another bag is read with the same topics."""
         bag = self.bag if is_bag(Path(path)) else None
-        return dataclasses.replace(self, dataset=Path(path), datasets=(), bag=bag)
+        return dataclasses.replace(self, dataset=Path(path), bag=bag, datasets=())
 
     def per_log(self) -> tuple[Scenario, ...]:
         """One single-log scenario per entry of ``datasets`` (named after its log), with that log's
