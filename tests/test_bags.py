@@ -3,7 +3,6 @@ own writers, read back as logs and calibrated; the pairing rule, the wraps and e
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 from collections.abc import Callable, Iterable, Sequence
@@ -18,14 +17,13 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from nlp_calib.cli.parser import build_parser
 from nlp_calib.core.errors import ConfigError, ScenarioError, UsageError
 from nlp_calib.core.numeric import COUNTER_MODULUS
 from nlp_calib.logs import Log, read_log
 from nlp_calib.logs.bag_reader import BagError, BagTopics
 from nlp_calib.logs.bag_records import read_bag_records
 from nlp_calib.models import get_model, load_log
-from nlp_calib.pipeline import Calibration, load_scenario
+from nlp_calib.pipeline import Calibration, JointCalibration, load_scenario, scenario_from_mapping
 from nlp_calib.pipeline.bags import BagSource, load_dataset
 from nlp_calib.simulation import truth_path
 
@@ -595,6 +593,48 @@ def test_data_swaps_bags_keeping_the_topics_and_a_bare_bag_asks_for_them(
         Calibration(bare)
 
 
+def test_several_bags_calibrate_together_as_their_text_logs(
+    drive: tuple[Path, Log], bags: dict[str, Path], tmp_path: Path
+) -> None:
+    """``datasets:`` with a bag block (its own samples) and a bag of a second drive: the joint fit is
+    the joint fit of the text logs."""
+    path, _ = drive
+    other = write_sim(tmp_path, "other.txt", records=300, seed=4, trajectory="no_reversals")
+    other_bag = write_bag(
+        tmp_path / "other", "ros1", drive_messages(load_log(other, TRICYCLE), _start_ns(other))
+    )
+    topics = {"joint_states": "/joint_states", "joints": list(JOINTS), "tracker": "/tracker/pose"}
+    runs = []
+    for first, second in (
+        ({"path": str(path), "samples": {"start": 20}}, str(other)),
+        ({"bag": str(bags["mcap"]), **topics, "samples": {"start": 20}}, {"bag": str(other_bag), **topics}),
+    ):
+        raw = {"model": "tricycle", "solvers": ["gauss_newton"], "validation": {"blocks": 0}}
+        sc = scenario_from_mapping({**raw, "datasets": [first, second]}, "joint", tmp_path)
+        run = JointCalibration(sc).run()
+        assert [p.log.n_records for p in run.parts] == [400, 300]  # both logs, whole
+        runs.append(run.reports["gauss_newton"].result)
+    text, bag = runs
+    assert text.converged and bag.converged
+    a, e = np.array(list(bag.param_dict().values())), np.array(list(text.param_dict().values()))
+    rel = float(np.max(np.abs(a - e) / np.maximum(np.abs(e), 1e-3)))
+    print(f"two bags in datasets: largest relative difference from the text logs' joint fit: {rel:.2e}")
+    assert rel <= 1e-6, rel
+
+
+def test_a_bad_bag_entry_of_datasets_names_its_place(tmp_path: Path) -> None:
+    topics = "joint_states: /js, tracker: /t"
+    for entry, pattern in [
+        (f"{{bag: x.bag, {topics}, joints: [a], samples: {{start: 5}}}}", r"datasets\[1\]\.joints: 1 joint"),
+        (
+            f"{{bag: x.bag, {topics}, joints: [a, b], sampels: {{start: 5}}}}",
+            r"datasets\[1\]\.sampels: unknown key; a bag block has bag, .*, max_gap, samples, alignment",
+        ),
+    ]:
+        with pytest.raises(ScenarioError, match=pattern):
+            load_scenario(_scenario(tmp_path, f"datasets: [a.txt, {entry}]"))
+
+
 # --- the command line --------------------------------------------------------------------------
 
 
@@ -621,13 +661,6 @@ def test_import_bag_writes_a_text_log_that_reads_back_as_the_bag(
     missing = cli(*[a if a != "/tracker/pose" else "/mocap" for a in args], "--force")
     assert missing.returncode == 2 and len(missing.stderr.strip().splitlines()) == 1
     assert "tracker: the bag has no topic '/mocap'; name one of its topics: /tracker/pose" in missing.stderr
-
-
-def test_import_bag_help_has_an_example_the_exit_codes_and_text_for_each_option() -> None:
-    text = cli("import-bag", "--help").stdout
-    assert "nlp-calib import-bag drive.bag --out drive.txt" in text and "exit codes: 0 success" in text
-    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
-    assert [a.dest for a in sub.choices["import-bag"]._actions if not a.help] == []
 
 
 def test_compare_runs_on_a_scenario_that_names_a_bag(bags: dict[str, Path], tmp_path: Path) -> None:

@@ -22,7 +22,7 @@ from nlp_calib.pipeline import Calibration, Scenario
 from nlp_calib.pipeline.scenario import FaultOptions, ValidationOptions
 from nlp_calib.problem import ProblemSpec, build
 
-SUBCOMMANDS = ("run", "compare", "validate", "odometry", "codegen", "simulate")
+SUBCOMMANDS = ("run", "compare", "validate", "odometry", "codegen", "simulate", "import-bag")
 
 
 def _scenario(tmp_path: Path, log: Path, extra: str = "") -> Path:

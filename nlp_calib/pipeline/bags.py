@@ -47,14 +47,17 @@ def _resolved(path: Path, base_dir: Path) -> Path:
     return path if path.is_absolute() else base_dir / path
 
 
-def dataset_block(raw: Any, where: str, base_dir: Path) -> tuple[Path, BagSource | None]:
-    """A scenario's ``dataset``: a log's path, or a bag block; paths resolve against ``base_dir``."""
+def dataset_block(
+    raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()
+) -> tuple[Path, BagSource | None]:
+    """A scenario's ``dataset``: a log's path, or a bag block; paths resolve against ``base_dir``.
+    ``also``: keys the caller takes out of the block first, named among the valid ones."""
     if not isinstance(raw, Mapping):
         return _resolved(coerce(raw, Path, where), base_dir), None
     valid = ("bag", *BagSource.__dataclass_fields__)
     for key in raw:
         if key not in valid:
-            fail(f"{where}.{key_name(key)}", f"unknown key; a bag block has {', '.join(valid)}")
+            fail(f"{where}.{key_name(key)}", f"unknown key; a bag block has {', '.join((*valid, *also))}")
     missing = [k for k in REQUIRED if k not in raw]
     if missing:
         fail(where, f"a bag block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} (docs/bags.md)")

@@ -109,6 +109,8 @@ class LogEntry:
     path: Path
     samples: SampleSelection | None = None
     alignment: AlignmentOptions | None = None
+    #: How to read ``path`` when the entry is a bag block (docs/bags.md).
+    bag: BagSource | None = None
 
 
 @dataclass(frozen=True)
@@ -157,6 +159,7 @@ class Scenario:
                 name=stem if stems.count(stem) == 1 else f"{i + 1}_{stem}",
                 dataset=e.path,
                 datasets=(),
+                bag=e.bag,
                 samples=e.samples or self.samples,
                 alignment=e.alignment or self.alignment,
             )
@@ -227,40 +230,52 @@ def _scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | N
     if ("dataset" in raw) == ("datasets" in raw):
         fail(
             source,
-            "give 'dataset' (path of the log, relative to this file) or 'datasets' (a list of them), not "
-            + ("both" if "dataset" in raw else "neither"),
+            "give 'dataset' (path of the log, relative to this file, or a bag block) or 'datasets' (a "
+            "list of them), not " + ("both" if "dataset" in raw else "neither"),
         )
-    raw = dict(raw)
-    if "datasets" in raw:
-        raw["datasets"] = _log_entries(raw["datasets"], f"{source}: datasets")
-        raw["dataset"] = raw["datasets"][0]["path"]
     hints = typing.get_type_hints(Scenario)
     values = {
-        k: coerce(v, hints[k], f"{source}: {k}") for k, v in raw.items() if k not in (*SOLVERS, "dataset")
+        k: coerce(v, hints[k], f"{source}: {k}")
+        for k, v in raw.items()
+        if k not in (*SOLVERS, "dataset", "datasets")
     }
     values["solver_options"] = {
         k: from_mapping(SOLVERS[k].options_type, v, f"{source}: {k}") for k, v in raw.items() if k in SOLVERS
     }
     values.setdefault("name", Path(source).stem)
-    values["dataset"], values["bag"] = dataset_block(raw["dataset"], f"{source}: dataset", base_dir)
-    values["datasets"] = tuple(
-        dataclasses.replace(e, path=e.path if e.path.is_absolute() else base_dir / e.path)
-        for e in values.get("datasets", ())
-    )
+    if "datasets" in raw:
+        values["datasets"] = _log_entries(raw["datasets"], f"{source}: datasets", base_dir)
+        values["dataset"], values["bag"] = values["datasets"][0].path, values["datasets"][0].bag
+    else:
+        values["dataset"], values["bag"] = dataset_block(raw["dataset"], f"{source}: dataset", base_dir)
     sc = Scenario(path=path, **values)
     _validate(sc, source)
     return sc
 
 
-def _log_entries(value: Any, where: str) -> list[Any]:
-    """``datasets`` as mappings: a plain path stands for ``{path: ...}``."""
+def _log_entries(value: Any, where: str, base_dir: Path) -> tuple[LogEntry, ...]:
+    """``datasets``: a plain path stands for ``{path: ...}``; an entry with ``bag`` is a bag block
+    (with its own ``samples`` and ``alignment`` if given); paths resolve against ``base_dir``."""
     if not isinstance(value, (list, tuple)) or not value:
         fail(
             where,
-            "expected a non-empty list of log paths or {path, samples, alignment} mappings, "
+            "expected a non-empty list of log paths, {path, samples, alignment} mappings or bag blocks, "
             f"got {show(value)}",
         )
-    return [{"path": v} if isinstance(v, str) else v for v in value]
+    entries = []
+    for i, item in enumerate(value):
+        place = f"{where}[{i}]"
+        if isinstance(item, Mapping) and "bag" in item:
+            own = ("samples", "alignment")
+            block = {k: v for k, v in item.items() if k not in own}
+            path, bag = dataset_block(block, place, base_dir, also=own)
+            fields = {"path": str(path), **{k: v for k, v in item.items() if k in own}}
+            entries.append(dataclasses.replace(from_mapping(LogEntry, fields, place), bag=bag))
+            continue
+        entry = from_mapping(LogEntry, {"path": item} if isinstance(item, str) else item, place)
+        path = entry.path if entry.path.is_absolute() else base_dir / entry.path
+        entries.append(dataclasses.replace(entry, path=path))
+    return tuple(entries)
 
 
 def _validate(sc: Scenario, source: str) -> None:
@@ -269,8 +284,10 @@ def _validate(sc: Scenario, source: str) -> None:
         fail(f"{source}: name", f"must be a plain folder name (no '/', '\\' or NUL), got {sc.name!r}")
     _check_choice(sc.model, MODELS, f"{source}: model")
     names = param_names(get_model(sc.model))
-    if sc.bag is not None:
-        check_joints(sc.bag.joints, get_model(sc.model), f"{source}: dataset.joints")
+    bags = [(f"datasets[{i}]", e.bag) for i, e in enumerate(sc.datasets)] or [("dataset", sc.bag)]
+    for key, bag in bags:
+        if bag is not None:
+            check_joints(bag.joints, get_model(sc.model), f"{source}: {key}.joints")
     _check_choice(sc.robust.kernel, KERNELS, f"{source}: robust.kernel")
     _check_range(sc.robust.delta, DELTA, f"{source}: robust.delta")
     r = sc.residual
