@@ -306,9 +306,7 @@ class Calibration(Solving):
         results = [rep.result for rep in reports.values()]
         first = next((r for r in results if np.isfinite(r.cost)), results[0])
         observability = analyse(self.evaluator, first.x, self.data.T_world_sensor)
-        notes = list(observability.warnings)
-        if self.alignment.estimate is not None and self.alignment.estimate.at_edge:
-            notes.append(align.lag_at_edge(self.scenario, self.alignment.lag_s))
+        notes = list(observability.warnings) + self.lag_notes()
         notes += [f"{name} held at its initial value: {why}" for name, why in self.held.items()]
         notes += [f"{name}: {rep.result.reason}" for name, rep in reports.items() if not rep.result.converged]
         crossval = None
@@ -324,14 +322,34 @@ class Calibration(Solving):
                     f"forward-only and reverse-only fits disagree: {name} by {abs(z):.1f}σ; the model misses "
                     "something that depends on the direction of travel"
                 )
+        return self.as_run(reports, (base, base_holdout), observability, notes, crossval, direction)
+
+    def lag_notes(self) -> list[str]:
+        """What the time alignment found worth saying: a lag at the edge of its search."""
+        if self.alignment.estimate is not None and self.alignment.estimate.at_edge:
+            return [align.lag_at_edge(self.scenario, self.alignment.lag_s)]
+        return []
+
+    def as_run(
+        self,
+        reports: Mapping[str, SolverReport],
+        baseline: tuple[TrajectoryMetrics, TrajectoryMetrics | None],
+        observability: Observability,
+        notes: Sequence[str],
+        crossval: CrossValidation | None,
+        direction: DirectionCheck | None,
+        initial: Mapping[str, float] | None = None,
+    ) -> CalibrationRun:
+        """A run of this log from solver ``reports`` (a joint fit's, or its own) and the
+        ``initial`` values they started from (its own)."""
         return CalibrationRun(
             scenario=self.scenario,
             log=self.log,
             used=self.used,
             fit=self.fit,
-            initial=dict(self.initial),
-            baseline=base,
-            baseline_holdout=base_holdout,
+            initial=dict(self.initial if initial is None else initial),
+            baseline=baseline[0],
+            baseline_holdout=baseline[1],
             reports=reports,
             setup_time_s=self.setup_time_s,
             n_residuals=self.data.n_residuals,

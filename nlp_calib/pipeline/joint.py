@@ -23,7 +23,7 @@ from nlp_calib.analysis.metrics import TrajectoryMetrics, trajectory_metrics
 from nlp_calib.analysis.observability import Observability, analyse
 from nlp_calib.core.errors import ScenarioError
 from nlp_calib.logs import Log
-from nlp_calib.pipeline import align, steps, validation
+from nlp_calib.pipeline import steps, validation
 from nlp_calib.pipeline.calibration import Calibration, CalibrationRun, SolverReport, Solving
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import build_residual_data
@@ -191,29 +191,10 @@ class JointCalibration(Solving):
             for name, r in results.items():
                 full, holdout = part.score(r.params)
                 reports[name] = SolverReport(r, uncertainties[name], full, holdout)
-            base, base_holdout = part.score(p0)
+            notes_part = notes + part.lag_notes()
+            base = part.score(p0)
             parts.append(
-                CalibrationRun(
-                    scenario=part.scenario,
-                    log=part.log,
-                    used=part.used,
-                    fit=part.fit,
-                    initial=self.initial,
-                    baseline=base,
-                    baseline_holdout=base_holdout,
-                    reports=reports,
-                    setup_time_s=self.setup_time_s,
-                    n_residuals=part.data.n_residuals,
-                    dropped_stationary=part.data.dropped_stationary,
-                    tracker_lag_s=part.alignment.lag_s,
-                    lag_estimate=part.alignment.estimate,
-                    observability=observability,
-                    warnings=tuple(notes + part_notes(part)),
-                    findings=part.findings,
-                    dropped_faulty=part.data.dropped_faulty,
-                    crossval=crossval,
-                    direction=direction,
-                )
+                part.as_run(reports, base, observability, notes_part, crossval, direction, self.initial)
             )
         return JointRun(
             scenario=sc,
@@ -224,10 +205,3 @@ class JointCalibration(Solving):
             observability=observability,
             warnings=tuple(notes),
         )
-
-
-def part_notes(part: Calibration) -> list[str]:
-    """What a log's own set-up found worth saying (a tracker lag at the edge of its search)."""
-    if part.alignment.estimate is not None and part.alignment.estimate.at_edge:
-        return [align.lag_at_edge(part.scenario, part.alignment.lag_s)]
-    return []
