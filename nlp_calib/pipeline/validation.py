@@ -9,7 +9,11 @@ that touches its block of records, so no window straddles the held-out records.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+import functools
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
 
 import numpy as np
 
@@ -19,6 +23,12 @@ from nlp_calib.analysis.metrics import TrajectoryMetrics
 from nlp_calib.pipeline.steps import Binder
 from nlp_calib.problem import ResidualData
 from nlp_calib.solvers import Priors
+
+#: Refits run at once (each holds its own evaluator's buffers: memory grows with this).
+MAX_THREADS = 2
+
+T = TypeVar("T")
+R = TypeVar("R")
 
 #: A fold needs this many windows of its part in the held-out block to count in a part's jackknife.
 MIN_BLOCK_WINDOWS = 20
@@ -41,6 +51,35 @@ def _fit(
     return ev.params(x_k), converged, kept.n_residuals
 
 
+def on_threads(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
+    """``fn`` of each item, in order, on up to :data:`MAX_THREADS` threads: the refits are
+    independent and CasADi lets go of the interpreter lock while it evaluates, so they overlap."""
+    workers = min(len(items), os.cpu_count() or 1, MAX_THREADS)
+    if workers <= 1:
+        return [fn(item) for item in items]
+    pool = ThreadPoolExecutor(workers, thread_name_prefix="refit")
+    try:
+        return list(pool.map(fn, items))
+    finally:
+        # Interrupted: refits not yet started are dropped, the running ones end on their own.
+        pool.shutdown(wait=False, cancel_futures=True)
+
+
+def _part_fold(
+    block: tuple[int, int],
+    binder: Binder,
+    data: ResidualData,
+    fit: tuple[int, int],
+    other: np.ndarray,
+    x: np.ndarray,
+) -> np.ndarray | None:
+    """A direction's refit without the records ``block`` (None when it does not converge)."""
+    bad = other.copy()
+    bad[block[0] : block[1] - 1] = True
+    params, converged, _ = _fit(binder, data, fit, bad, x)
+    return params if converged else None
+
+
 def _base(fit: tuple[int, int]) -> np.ndarray:
     return np.zeros(fit[1] - 1, dtype=bool)
 
@@ -55,17 +94,18 @@ def cross_validate(
     score: Score,
 ) -> CrossValidation:
     """``k`` folds over the records ``fit``, each scored on its block by ``score(params, a, b)``."""
-    folds = []
-    for a, b in blocks(*fit, k):
+
+    def fold(block: tuple[int, int]) -> Fold:
+        a, b = block
         bad = _base(fit)
         bad[a : b - 1] = True
         params, converged, n = _fit(binder, data, fit, bad, x)
         if not n:
-            folds.append(Fold(a, b, params, False, None))
-            continue
+            return Fold(a, b, params, False, None)
         params = canonical(params)
-        folds.append(Fold(a, b, params, converged, score(params, a, b)))
-    return combine(binder.fns.names, folds)
+        return Fold(a, b, params, converged, score(params, a, b))
+
+    return combine(binder.fns.names, on_threads(fold, blocks(*fit, k)))
 
 
 def direction_check(
@@ -103,15 +143,11 @@ def direction_check(
         if not converged or n < 10 * fns.n_free:
             return None
         x_part = params[[fns.names.index(f) for f in fns.free]]
-        folds = []
-        for a, b in blocks(first, stop, k):
-            if np.sum(part[a : b - 1]) < MIN_BLOCK_WINDOWS:
-                continue  # a block without this direction's driving says nothing about it
-            bad = other.copy()
-            bad[a : b - 1] = True
-            p_k, ok, _ = _fit(part_binder, data, fit, bad, x_part)
-            if ok:
-                folds.append(canonical(p_k))
+
+        # A block without this direction's driving says nothing about it.
+        driven = [(a, b) for a, b in blocks(first, stop, k) if np.sum(part[a : b - 1]) >= MIN_BLOCK_WINDOWS]
+        fold = functools.partial(_part_fold, binder=part_binder, data=data, fit=fit, other=other, x=x_part)
+        folds = [canonical(p) for p in on_threads(fold, driven) if p is not None]
         estimates.append(canonical(params))
         sigmas.append(jackknife_std(np.array(folds)) if len(folds) >= 3 else np.full(len(fns.names), np.nan))
         windows.append(n)
