@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from conftest import cli
 
-from nlp_calib.core.errors import ScenarioError
+from nlp_calib.core.errors import DatasetError, ScenarioError
 from nlp_calib.pipeline import Calibration, JointCalibration, scenario_from_mapping
 from nlp_calib.pipeline.calibration import CalibrationRun
 from nlp_calib.problem import build_residual_data
@@ -136,3 +136,21 @@ def test_run_writes_the_joint_hand_off_and_each_logs_result(tmp_path: Path) -> N
     assert params[0] == params[1]  # one set of parameters for both logs
     for name, value in params[0].items():
         assert f"{value!r}"[:8] in calibration or name not in calibration
+
+
+def test_records_fitted_twice_are_refused_and_errors_name_the_entry(tmp_path: Path) -> None:
+    (a, b), _ = drives(tmp_path, 3, records=120)
+    with pytest.raises(ScenarioError, match=r"datasets\[1\]: records also in datasets\[0\]"):
+        scenario_from_mapping(
+            {**BASE, "datasets": [str(a), {"path": str(a), "samples": {"start": 60}}]}, "j", tmp_path
+        )
+    halves = [{"path": str(a), "samples": {"stop": 60}}, {"path": str(a), "samples": {"start": 60}}]
+    assert len(scenario_from_mapping({**BASE, "datasets": halves}, "j", tmp_path).per_log()) == 2
+    short = scenario_from_mapping(
+        {**BASE, "datasets": [str(a), {"path": str(b), "samples": {"start": 118}}]}, "j", tmp_path
+    )
+    with pytest.raises(ScenarioError, match=r"datasets\[1\] \(drive1_3\.txt\): residual\.horizon"):
+        JointCalibration(short)
+    missing = scenario_from_mapping({**BASE, "datasets": [str(a), "nope.txt"]}, "j", tmp_path)
+    with pytest.raises(DatasetError, match=r"fix 'datasets\[1\]'"):
+        JointCalibration(missing)

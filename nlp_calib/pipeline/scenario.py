@@ -143,6 +143,8 @@ class Scenario:
     bag: BagSource | None = None
     #: Several logs calibrated together (``dataset`` is then the first of them).
     datasets: tuple[LogEntry, ...] = ()
+    #: Where a single-log part of ``datasets`` comes from in its file (``datasets[1]``).
+    origin: str | None = None
 
     def with_dataset(self, path: str | Path) -> Scenario:
         """The same scenario on another log (``--data``); another bag is read with the same topics."""
@@ -159,6 +161,7 @@ class Scenario:
                 name=stem if stems.count(stem) == 1 else f"{i + 1}_{stem}",
                 dataset=e.path,
                 datasets=(),
+                origin=f"datasets[{i}]",
                 bag=e.bag,
                 samples=e.samples or self.samples,
                 alignment=e.alignment or self.alignment,
@@ -195,7 +198,7 @@ _FINITE = Range(-math.inf, math.inf, lo_open=True, hi_open=True)
 # Keys the YAML may hold at top level: the fields (but where the file was, and the solver
 # options, which come as one block per registered solver).
 _FIELDS = tuple(
-    f.name for f in dataclasses.fields(Scenario) if f.name not in ("path", "solver_options", "bag")
+    f.name for f in dataclasses.fields(Scenario) if f.name not in ("path", "solver_options", "bag", "origin")
 )
 
 
@@ -316,6 +319,19 @@ def _validate(sc: Scenario, source: str) -> None:
             fail(f"{where}samples", f"need 0 <= start < stop - 1, got start={sel.start} stop={sel.stop}")
         if al is not None:
             _check_alignment(al, f"{where}alignment")
+    ranges = [(e.path.resolve(), e.samples or sc.samples) for e in sc.datasets]
+    for i, (path, sel) in enumerate(ranges):
+        for j, (other, sel_j) in enumerate(ranges[:i]):
+            if (
+                path == other
+                and sel.start < (sel_j.stop or math.inf)
+                and sel_j.start < (sel.stop or math.inf)
+            ):
+                fail(
+                    f"{source}: datasets[{i}]",
+                    f"records also in datasets[{j}] ({sc.datasets[i].path}): records fitted twice would "
+                    "count as two drives and shrink the σ; give the entries samples that do not overlap",
+                )
     hf = sc.validation.holdout_fraction
     if hf is not None and not 0.0 < hf < 1.0:
         fail(f"{source}: validation.holdout_fraction", f"must lie in (0, 1), got {hf}")

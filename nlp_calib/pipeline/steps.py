@@ -92,7 +92,8 @@ def load(sc: Scenario, log: Log | None = None) -> tuple[KinematicModel, Log]:
         if exc.droppable:
             raise exc.with_hint("set 'strict: false' in the scenario to drop such records") from None
         if exc.line is None and exc.problem == "no such file":
-            raise exc.with_hint("pass the log with --data or fix 'dataset' in the scenario") from None
+            key = sc.origin or "dataset"
+            raise exc.with_hint(f"pass the log with --data or fix '{key}' in the scenario") from None
         raise
 
 
@@ -126,8 +127,9 @@ def check_windows(sc: Scenario, start: int, stop: int) -> None:
         return
     longest = intervals - (n_free - 1) * stride
     fix = f"shorten residual.horizon to at most {longest}" if longest >= 1 else "select more samples"
+    part = f"{sc.origin} ({sc.dataset.name}): " if sc.origin else ""
     raise ScenarioError(
-        f"{sc.path or sc.name}: residual.horizon {H} (stride {stride}) leaves {windows} residual "
+        f"{sc.path or sc.name}: {part}residual.horizon {H} (stride {stride}) leaves {windows} residual "
         f"window(s) in the {fit_stop - start} fitted records of samples [{start}, {stop}) for "
         f"{n_free} parameters; {fix}, or widen samples"
     )
