@@ -376,7 +376,7 @@ def check_log(
         return FaultReport(faults=(), stale={}, noise_ticks={})
     poses = log.T_world_sensor
     z = over_columns(fns.between, poses[:-1].T, poses[1:].T)[0]
-    e, de_du = over_columns(fns.interval_residual, inputs, z, fixed=[np.asarray(params, dtype=float)])
+    e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
     de_du = de_du.reshape(3, N, inputs.shape[0])
     return detect(e, de_du, z, inputs, counters, log.time_s, log.line_numbers)
 

@@ -33,7 +33,7 @@ from nlp_calib.models import canonical
 from nlp_calib.models.base import KinematicModel
 from nlp_calib.pipeline import align, steps, validation
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.problem import ProblemFunctions
+from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.solvers import ProblemEvaluator, Solver, SolverResult, get_solver
 
 
@@ -286,7 +286,7 @@ class Calibration(Solving):
     def base_reference(self, params: np.ndarray) -> np.ndarray:
         """The base poses ``(n, 3)`` the tracker's sensor poses imply with ``params``' mounting pose."""
         sel = self.selected
-        return np.asarray(self.fns.base_from_sensor.map(sel.n_records)(sel.T_world_sensor.T, params)).T
+        return over_columns(self.fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
 
     def run(self, solvers: Sequence[str] | None = None) -> CalibrationRun:
         """Solve with each solver and score every result."""

@@ -39,6 +39,7 @@ from nlp_calib.problem import (
     build,
     build_residual_data,
     interval_inputs,
+    over_columns,
 )
 from nlp_calib.solvers import Priors, ProblemEvaluator, SolverResult, get_solver
 from nlp_calib.solvers.backends import Backend, BackendOptions, make_backend
@@ -200,11 +201,9 @@ def auto_guess(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: 
     # of the cost of every window.
     step = max(1, data.horizon // (4 * sc.residual.stride))
     columns = data.columns_of(np.arange(0, data.n_residuals, step))
-    predict = fns.predict_window.map(columns.shape[1])
 
     def base_motion(params: Mapping[str, float]) -> np.ndarray:
-        p = np.array([params[n] for n in fns.names])
-        return np.asarray(predict(p, columns[:rows]))
+        return over_columns(fns.predict_window, np.array([params[n] for n in fns.names]), columns[:rows])[0]
 
     return fns.model.initial_guess(columns[:rows], columns[rows : rows + 3], base_motion)
 

@@ -133,19 +133,22 @@ def interval_inputs(model: KinematicModel, logs: Sequence[Log], steering_sample:
 BLOCK = 1 << 14
 
 
-def over_columns(f: ca.Function, *columns: np.ndarray, fixed: Sequence[np.ndarray] = ()) -> list[np.ndarray]:
-    """``f`` over the columns of ``columns`` (one column of each input per call), a block at a
-    time, its first inputs ``fixed`` the same for every column; each output as CasADi's map
-    gives it, ``(rows, cols * n)``."""
-    n = columns[0].shape[1]
+@functools.lru_cache(maxsize=32)
+def _mapped(f: ca.Function, n: int) -> ca.Function:
+    """``f`` mapped over ``n`` columns, built once per Function and size."""
+    return f.map(n)
+
+
+def over_columns(f: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
+    """``f`` over the columns of its 2-D arguments (one column of each per call), a block at a
+    time; a 1-D argument is the same for every column. Each output as CasADi's map gives it,
+    ``(rows, cols * n)``."""
+    n = next(a.shape[1] for a in args if a.ndim == 2)
     shapes = [f.size_out(i) for i in range(f.n_out())]
     outs = [np.empty((r, c * n)) for r, c in shapes]
-    maps: dict[int, ca.Function] = {}
     for lo in range(0, n, BLOCK):
         hi = min(n, lo + BLOCK)
-        if hi - lo not in maps:
-            maps[hi - lo] = f.map(hi - lo)
-        res = maps[hi - lo](*fixed, *[c[:, lo:hi] for c in columns])
+        res = _mapped(f, hi - lo)(*[a[:, lo:hi] if a.ndim == 2 else a for a in args])
         for out, r, (_, c) in zip(outs, [res] if f.n_out() == 1 else res, shapes):
             out[:, c * lo : c * hi] = np.asarray(r)
     return outs
