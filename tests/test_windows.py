@@ -11,7 +11,14 @@ from conftest import assert_close, parse_lines
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.logs import Log
 from nlp_calib.models import get_model
-from nlp_calib.problem import ProblemFunctions, ProblemSpec, ResidualOptions, build, build_residual_data
+from nlp_calib.problem import (
+    ProblemFunctions,
+    ProblemSpec,
+    ResidualOptions,
+    build,
+    build_residual_data,
+    joined,
+)
 from nlp_calib.simulation import SimulationOptions, simulate
 from nlp_calib.solvers import ProblemEvaluator
 
@@ -72,6 +79,17 @@ def test_two_logs_end_to_end_are_the_sum_of_each_log() -> None:
     assert_close(ne[0].H, ne[1].H + ne[2].H, rtol=1e-10)
     assert_close(ne[0].g, ne[1].g + ne[2].g, rtol=1e-10, atol=1e-14)
     assert ne[0].cost == pytest.approx(ne[1].cost + ne[2].cost, rel=1e-12)
+
+
+def test_joining_each_logs_windows_equals_building_them_end_to_end() -> None:
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=5))
+    opts = ResidualOptions(horizon=5, stride=2)
+    logs = [sim_log("tricycle", 120, 2), sim_log("tricycle", 90, 3), sim_log("tricycle", 60, 4)]
+    built = build_residual_data(fns, logs, opts)
+    glued = joined([build_residual_data(fns, lg, opts) for lg in logs])
+    assert glued.offsets == built.offsets and glued.n_records == built.n_records
+    for name in ("inputs", "T_world_sensor", "starts", "stops", "z"):
+        np.testing.assert_array_equal(getattr(glued, name), getattr(built, name), err_msg=name)
 
 
 def test_windows_touching_flagged_intervals_can_be_dropped() -> None:

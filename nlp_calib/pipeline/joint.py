@@ -26,7 +26,7 @@ from nlp_calib.logs import Log
 from nlp_calib.pipeline import steps, validation
 from nlp_calib.pipeline.calibration import Calibration, CalibrationRun, SolverReport, Solving
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.problem import build_residual_data
+from nlp_calib.problem import joined
 from nlp_calib.solvers import Solver
 
 
@@ -51,16 +51,6 @@ class JointRun:
     def std(self, solver: str) -> dict[str, float]:
         """The 1σ to believe for ``solver``'s joint estimate (see :meth:`CalibrationRun.std`)."""
         return self.parts[0].std(solver)
-
-
-def _masks(part: Calibration) -> tuple[np.ndarray, np.ndarray]:
-    """The intervals and records of ``part``'s fitted range its own fit leaves out."""
-    a, b = part.fit
-    bad_i, bad_r = part.binder.bad_intervals, part.binder.bad_records
-    n = part.aligned.n_records
-    bad_i = np.zeros(n - 1, dtype=bool) if bad_i is None else bad_i
-    bad_r = np.zeros(n, dtype=bool) if bad_r is None else bad_r
-    return bad_i[a : b - 1], bad_r[a:b]
 
 
 def _joined(pieces: Sequence[np.ndarray], joint: bool) -> np.ndarray:
@@ -101,20 +91,8 @@ class JointCalibration(Solving):
         # The priors are weighed in the first log's noise units (see steps.weigh_priors).
         priors, _ = steps.weigh_priors(binder, first.log, first.used[0], split, self.start.x0)
         self.binder = steps.with_priors(binder, priors)
-        masks = [_masks(p) for p in self.parts]
-        self.data = build_residual_data(
-            self.fns,
-            [p.aligned.select(*p.fit) for p in self.parts],
-            sc.residual,
-            drop_stationary=sc.samples.drop_stationary,
-            bad_intervals=_joined([m[0] for m in masks], False),
-            bad_records=_joined([m[1] for m in masks], False),
-        )
-        if self.data.n_residuals < self.fns.n_free:
-            raise ScenarioError(
-                f"only {self.data.n_residuals} residuals in {len(self.parts)} logs for "
-                f"{self.fns.n_free} parameters; widen 'samples' or shorten the horizon"
-            )
+        # Each log's own windows (its samples, faults and lag), laid end to end.
+        self.data = joined([p.data for p in self.parts])
         self.evaluator = self.binder.evaluate(self.data)
         self.evaluator.prepare(steps.evaluated(sc, self.solvers))
         # The same robot: the encoders' noise is the largest any log's header implies.

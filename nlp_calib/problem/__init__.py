@@ -18,6 +18,7 @@ from nlp_calib.problem.windows import (
     ResidualOptions,
     build_residual_data,
     interval_inputs,
+    joined,
     over_columns,
     window_starts,
 )
@@ -36,6 +37,7 @@ __all__ = [
     "build",
     "build_residual_data",
     "interval_inputs",
+    "joined",
     "over_columns",
     "unpack_upper",
     "upper_indices",

@@ -163,6 +163,28 @@ def tracker_motions(
     return over_columns(fns.between, T_world_sensor[a].T, T_world_sensor[b].T)[0]
 
 
+def joined(parts: Sequence[ResidualData]) -> ResidualData:
+    """The windows of several fits' data laid end to end, as :func:`build_residual_data` lays
+    logs: each part's records after the previous part's, a zero interval between them."""
+    if len({p.horizon for p in parts}) != 1:
+        raise ProblemError(f"parts of horizons {sorted({p.horizon for p in parts})} cannot be joined")
+    offsets = np.cumsum([0, *(p.n_records for p in parts)])[:-1]
+    gap = np.zeros((parts[0].inputs.shape[0], 1))
+    inputs = [x for i, p in enumerate(parts) for x in ([gap, p.inputs] if i else [p.inputs])]
+    return ResidualData(
+        logs=tuple(log for p in parts for log in p.logs),
+        offsets=tuple(int(o + q) for o, p in zip(offsets, parts) for q in p.offsets),
+        inputs=np.ascontiguousarray(np.concatenate(inputs, axis=1)),
+        T_world_sensor=np.ascontiguousarray(np.concatenate([p.T_world_sensor for p in parts])),
+        starts=np.concatenate([p.starts + o for p, o in zip(parts, offsets)]),
+        stops=np.concatenate([p.stops + o for p, o in zip(parts, offsets)]),
+        z=np.concatenate([p.z for p in parts], axis=1),
+        horizon=parts[0].horizon,
+        dropped_stationary=sum(p.dropped_stationary for p in parts),
+        dropped_faulty=sum(p.dropped_faulty for p in parts),
+    )
+
+
 def build_residual_data(
     fns: ProblemFunctions,
     log: Log | Sequence[Log],
