@@ -134,7 +134,8 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
         for i, (scenario, out, log_list) in enumerate(zip(scenarios, outs, logs)):
             progress.update(i, f"{scenario.name}: setting up and solving")
             if scenario.datasets:
-                runs += _calibrate_joint(scenario, log_list, out, args, solvers, progress)
+                last = i == len(scenarios) - 1
+                runs += _calibrate_joint(scenario, log_list, out, args, solvers, progress, last)
                 continue
             log = log_list[0]
             calib = Calibration.setup(scenario, log=log, solvers=solvers)
@@ -144,28 +145,42 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
             print(run_table(run))
             print()
             print(correlation_table(run, next(iter(run.reports))))
-            # Staged: an interrupted run leaves the previous run's files, never a mix of both.
-            with StagedOutput(out, "run", force=args.force) as stage:
-                written = [write_result(run, stage.path), *write_handoff(run, stage.path)]
-                if len(written) == 1:
-                    print(
-                        "warning: no solver converged; no calibration.yaml or URDF written", file=sys.stderr
-                    )
-                if args.report:
-                    from nlp_calib.outputs.writer import write_report  # imports matplotlib
-
-                    progress.update(i, f"{scenario.name}: drawing the report")
-                    written += write_report(calib, run, stage.path)
-                    progress.clear()
-                if i == len(scenarios) - 1:
-                    interrupts.hold()  # what is complete stays complete: a later signal changes nothing
-                stage.commit()
-            final = [stage.final(p) for p in written]
+            progress.update(i, f"{scenario.name}: writing the results")
+            final = _write_outputs(out, args, run, [(run, calib, "")], last=i == len(scenarios) - 1)
+            progress.clear()
             print("\n" + "\n".join(_wrote(final, out)) + "\n")
             print("\n".join(summary_lines(run, final)) + "\n")
     if len(scenarios) > 1:
         print(summary_table(runs))
     return 0 if all(r.result.converged for run in runs for r in run.reports.values()) else 1
+
+
+def _write_outputs(
+    out: Path,
+    args: argparse.Namespace,
+    handoff: CalibrationRun,
+    pieces: Sequence[tuple[CalibrationRun, Calibration, str]],
+    last: bool,
+) -> list[Path]:
+    """The hand-off files of ``handoff`` in ``out``, and each piece's ``result.json`` (and report)
+    in its subfolder (``""``: ``out`` itself); returns the final paths. Staged: an interrupted
+    run leaves the previous run's files, never a mix of both."""
+    with StagedOutput(out, "run", force=args.force) as stage:
+        written = write_handoff(handoff, stage.path)
+        if not written:
+            print("warning: no solver converged; no calibration.yaml or URDF written", file=sys.stderr)
+        for run, calib, sub in pieces:
+            folder = stage.path / sub
+            folder.mkdir(exist_ok=True)
+            written.append(write_result(run, folder))
+            if args.report:
+                from nlp_calib.outputs.writer import write_report  # imports matplotlib
+
+                written += write_report(calib, run, folder)
+        if last:
+            interrupts.hold()  # what is complete stays complete: a later signal changes nothing
+        stage.commit()
+    return [stage.final(p) for p in written]
 
 
 def _calibrate_joint(
@@ -175,6 +190,7 @@ def _calibrate_joint(
     args: argparse.Namespace,
     solvers: Sequence[str] | None,
     progress: Progress,
+    last: bool,
 ) -> list[CalibrationRun]:
     """One calibration from several logs: the hand-off files in ``out``, each log's result (and
     report) in ``out/<log>/``."""
@@ -190,20 +206,8 @@ def _calibrate_joint(
     print()
     print(f"joint fit of {len(parts)} logs, {joint.n_residuals} windows; each log with the joint parameters:")
     print(summary_table(list(parts)))
-    with StagedOutput(out, "run", force=args.force) as stage:
-        written = write_handoff(dataclasses.replace(parts[0], scenario=scenario), stage.path)
-        if not written:
-            print("warning: no solver converged; no calibration.yaml or URDF written", file=sys.stderr)
-        for part, pcalib in zip(parts, calib.parts):
-            folder = stage.path / part.scenario.name
-            folder.mkdir()
-            written.append(write_result(part, folder))
-            if args.report:
-                from nlp_calib.outputs.writer import write_report  # imports matplotlib
-
-                written += write_report(pcalib, part, folder)
-        stage.commit()
-    final = [stage.final(p) for p in written]
+    pieces = [(part, pcalib, part.scenario.name) for part, pcalib in zip(parts, calib.parts)]
+    final = _write_outputs(out, args, dataclasses.replace(parts[0], scenario=scenario), pieces, last)
     print("\n" + "\n".join(_wrote(final, out)) + "\n")
     print("\n".join(summary_lines(parts[0], final)) + "\n")
     return list(parts)
