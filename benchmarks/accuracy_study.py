@@ -27,7 +27,8 @@ from nlp_calib.models.base import Symmetry
 from nlp_calib.models.tricycle import Tricycle
 from nlp_calib.models.tricycle_reverse import MIN_REVERSING
 from nlp_calib.outputs.progress import Progress
-from nlp_calib.pipeline import Calibration, CalibrationRun, Scenario, load_scenario
+from nlp_calib.pipeline import Calibration
+from nlp_calib.results import CalibrationRun, Scenario, load_scenario
 
 REPO = Path(__file__).resolve().parents[1]
 HOLDOUT = 0.4
@@ -155,8 +156,8 @@ def score(sc: Scenario, holdout: bool = True) -> Scored:
     elapsed = time.perf_counter() - t0
     ho = float("nan")
     if holdout:
-        split = dataclasses.replace(
-            sc, validation=dataclasses.replace(sc.validation, holdout_fraction=HOLDOUT, blocks=0)
+        split = sc.with_options(
+            validation=dataclasses.replace(sc.validation, holdout_fraction=HOLDOUT, blocks=0)
         )
         h = next(iter(Calibration(split).run().reports.values())).holdout
         ho = h.segment_ate.mean if h is not None else float("nan")
@@ -189,7 +190,7 @@ def main() -> int:
     base = load_scenario(REPO / "scenarios" / "real_tricycle.yaml")
     if args.data is not None:
         base = base.with_dataset(args.data)
-    base = dataclasses.replace(base, solvers=("gauss_newton",))
+    base = base.with_options(solvers=("gauss_newton",))
     t_start = time.perf_counter()
     progress = Progress(30, sys.stderr, label="accuracy study")
     step = iter(range(1000))
@@ -212,13 +213,13 @@ def main() -> int:
     # 1. Faults ----------------------------------------------------------------------------------
     progress.update(next(step), "faults")
     handled = {
-        h: score(dataclasses.replace(base, faults=dataclasses.replace(base.faults, handling=h)))
+        h: score(base.with_options(faults=dataclasses.replace(base.data.faults, handling=h)))
         for h in ("exclude", "repair", "keep")
     }
     rec = handled["exclude"]
     findings = rec.run.findings
     assert findings is not None
-    u = rec.calib.model.inputs(rec.calib.aligned, base.residual.steering_sample)
+    u = rec.calib.model.inputs(rec.calib.aligned, base.objective.residual.steering_sample)
     # Where sustained reversing starts: the first run of a second (25 intervals) of it.
     rev = np.convolve(rec.calib.model.travel_direction(u) < 0, np.ones(25), "valid") == 25
     t_rev = float(rec.calib.aligned.time_s[np.argmax(rev)]) if rev.any() else float("nan")
@@ -263,8 +264,8 @@ def main() -> int:
     for H in (1, 5, 10, 25, 50):
         for integ in ("exact", "euler"):
             progress.update(next(step), f"H={H} {integ}")
-            sc = dataclasses.replace(
-                base, residual=dataclasses.replace(base.residual, horizon=H, integration=integ)
+            sc = base.with_options(
+                residual=dataclasses.replace(base.objective.residual, horizon=H, integration=integ)
             )
             s = score(sc, holdout=False)
             w(row(f"{H} | {integ} | {s.report.result.param_dict()['k_traction']:.6f}", s))
@@ -287,10 +288,9 @@ def main() -> int:
         ("cauchy", 0.1, "auto"),
     ):
         progress.update(next(step), f"{kernel} {delta} {lag}")
-        sc = dataclasses.replace(
-            base,
-            robust=dataclasses.replace(base.robust, kernel=kernel, delta=delta),
-            alignment=dataclasses.replace(base.alignment, tracker_lag=lag),
+        sc = base.with_options(
+            robust=dataclasses.replace(base.objective.robust, kernel=kernel, delta=delta),
+            alignment=dataclasses.replace(base.log.alignment, tracker_lag=lag),
         )
         s = score(sc, holdout=False)
         shown = f"auto: {1e3 * s.calib.alignment.lag_s:.1f} ms" if lag == "auto" else "0"
@@ -299,7 +299,7 @@ def main() -> int:
 
     # 4. Forward and reverse ---------------------------------------------------------------------
     w("## 4. Forward and reverse driving\n")
-    plain = score(dataclasses.replace(base, model="tricycle"))
+    plain = score(base.with_options(model="tricycle"))
     d = plain.run.direction
     if d is not None:
         w(
@@ -322,7 +322,7 @@ def main() -> int:
         progress.update(next(step), label)
         name = label.replace(" ", "_")
         prototype(name, extra, steering, travel)
-        s = score(dataclasses.replace(base, model=name))
+        s = score(base.with_options(model=name))
         p, sd = s.report.result.param_dict(), s.run.std("gauss_newton")
         w(row(f"{label} | " + ", ".join(f"{e} {p[e]:+.4f} ± {sd[e]:.4f}" for e in extra), s))
     rev = handled["exclude"]
@@ -335,7 +335,7 @@ def main() -> int:
         )
     )
     MODELS[Backlash.name] = Backlash()
-    s = score(dataclasses.replace(base, model=Backlash.name))
+    s = score(base.with_options(model=Backlash.name))
     p_b, sd_b = s.report.result.param_dict(), s.run.std("gauss_newton")
     w(
         row(
@@ -346,8 +346,8 @@ def main() -> int:
     )
     for sample, label in (("mean", "steering delay ½ interval"), ("end", "steering delay 1 interval")):
         progress.update(next(step), label)
-        sc = dataclasses.replace(
-            base, model="tricycle", residual=dataclasses.replace(base.residual, steering_sample=sample)
+        sc = base.with_options(
+            model="tricycle", residual=dataclasses.replace(base.objective.residual, steering_sample=sample)
         )
         w(row(f"{label} | (steering_sample: {sample})", score(sc, holdout=False)))
     w(
@@ -360,7 +360,7 @@ def main() -> int:
 
     # 5. Targets ---------------------------------------------------------------------------------
     progress.update(next(step), "targets")
-    both = score(dataclasses.replace(base, solvers=("gauss_newton", "ipopt")), holdout=False)
+    both = score(base.with_options(solvers=("gauss_newton", "ipopt")), holdout=False)
     gn, ip = (r.result for r in both.run.reports.values())
     agree = float(np.max(np.abs(gn.params - ip.params) / np.maximum(np.abs(gn.params), 1e-12)))
     parts = {
@@ -374,16 +374,15 @@ def main() -> int:
     k_parts_variant: dict[str, float] = {}
     for label, (a, b) in parts.items():
         progress.update(next(step), label)
-        sc = dataclasses.replace(
-            base,
-            samples=dataclasses.replace(base.samples, start=a, stop=b),
+        sc = base.with_options(
+            samples=dataclasses.replace(base.log.samples, start=a, stop=b),
             validation=dataclasses.replace(base.validation, blocks=0),
-            alignment=dataclasses.replace(base.alignment, tracker_lag=rec.calib.alignment.lag_s),
+            alignment=dataclasses.replace(base.log.alignment, tracker_lag=rec.calib.alignment.lag_s),
         )
         k_parts[label] = Calibration(sc).solve("gauss_newton").param_dict()["k_traction"]
-        fit = Calibration(dataclasses.replace(sc, model=variant)).solve("gauss_newton")
+        fit = Calibration(sc.with_options(model=variant)).solve("gauss_newton")
         k_parts_variant[label] = fit.param_dict()["k_traction"]
-    sigma_variant = score(dataclasses.replace(base, model=variant), holdout=False).run.std("gauss_newton")
+    sigma_variant = score(base.with_options(model=variant), holdout=False).run.std("gauss_newton")
     sigma_k = rec.run.std("gauss_newton")["k_traction"]
     spread = max(k_parts.values()) - min(k_parts.values())
     m = rec.report.metrics

@@ -55,7 +55,7 @@ def main() -> int:
         base = base.with_dataset(args.data)
     reference = Calibration(base)
     lag = reference.alignment.lag_s
-    fixed_lag = dataclasses.replace(base, alignment=AlignmentOptions(tracker_lag=lag))
+    fixed_lag = base.with_options(alignment=AlignmentOptions(tracker_lag=lag))
     best = reference.solve("gauss_newton")
     header_kt = reference.log.header.parameters["k_traction"]
     rng = np.random.default_rng(args.seed)
@@ -68,7 +68,7 @@ def main() -> int:
         progress.update(i)
         guess = {n: float(rng.uniform(*r)) for n, r in RANGES.items()}
         guess["k_traction"] *= header_kt
-        calib = Calibration(dataclasses.replace(fixed_lag, initial_guess=guess), log=reference.log)
+        calib = Calibration(fixed_lag.with_options(initial_guess=guess), log=reference.log)
         for s in SOLVERS:
             t0 = time.perf_counter()
             res = calib.solve(s)
@@ -79,7 +79,7 @@ def main() -> int:
             else:
                 misses.append(f"run {i}, {s}: {res.reason}; cost {res.cost:.4g} (best {best.cost:.4g})")
     progress.clear()
-    auto = Calibration(dataclasses.replace(fixed_lag, initial_guess="auto"), log=reference.log)
+    auto = Calibration(fixed_lag.with_options(initial_guess="auto"), log=reference.log)
     auto_ok = {s: same_optimum(auto.solve(s).params, best.params) for s in SOLVERS}
 
     lines = [

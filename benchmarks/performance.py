@@ -132,13 +132,13 @@ def solver_cases(real: Path | None, quick: bool) -> list[tuple[str, Any]]:
 
     if quick or real is None:
         demo = load_scenario(REPO / "scenarios" / "demo.yaml")
-        seed = dataclasses.replace(demo, residual=dataclasses.replace(demo.residual, horizon=1))
+        seed = demo.with_options(residual=dataclasses.replace(demo.objective.residual, horizon=1))
         return [("demo, H=1", seed), ("demo, H=10", demo)]
     # The baselines are written for the tricycle model: the scenarios' windows on that model, with
     # the lag the recommended scenario estimates, fixed (the solvers' own time is compared here).
     seed = load_scenario(REPO / "scenarios" / "real_tricycle_seed.yaml").with_dataset(real)
     rec = load_scenario(REPO / "scenarios" / "real_tricycle.yaml").with_dataset(real)
-    seed = dataclasses.replace(seed, model="tricycle")
+    seed = seed.with_options(model="tricycle")
     rec = dataclasses.replace(rec, model="tricycle", alignment=AlignmentOptions(tracker_lag=0.049361))
     return [("real_tricycle_seed (H=1)", seed), ("real_tricycle (H=25)", rec)]
 
@@ -159,7 +159,7 @@ def compare_solvers(sc: Any, repeats: int, per_factor: bool) -> dict[str, Any]:
 
     calib = Calibration(sc)
     data, ev = calib.data, calib.evaluator
-    exact = sc.residual.integration == "exact"
+    exact = sc.objective.residual.integration == "exact"
     windows = (data.inputs, data.starts, data.stops, data.z.T, exact)
     prefix = baselines.NumpyTricycle(*windows, prefix=True)
     composed = baselines.NumpyTricycle(*windows, prefix=False)
@@ -170,7 +170,7 @@ def compare_solvers(sc: Any, repeats: int, per_factor: bool) -> dict[str, Any]:
         "scipy (numpy, prefix)": lambda: baselines.scipy_solve(prefix, calib.x0, ev.omega, ev.delta).x,
         "scipy (numpy, per window)": lambda: baselines.scipy_solve(composed, calib.x0, ev.omega, ev.delta).x,
     }
-    if per_factor and sc.residual.horizon == 1:
+    if per_factor and sc.objective.residual.horizon == 1:
         # One window per interval: each window's own interval (faulty ones are left out).
         args = (data.inputs[:, data.starts], data.z.T, calib.x0, ev.omega, ev.delta, exact)
         for name, module, fn in (

@@ -34,29 +34,29 @@ if TYPE_CHECKING:
         UsageError,
     )
     from nlp_calib.logs import Log, LogHeader, read_log
-    from nlp_calib.models import MODELS, KinematicModel, get_model, load_log
-    from nlp_calib.outputs.summary import Verdict, summary_lines, verdict
+    from nlp_calib.models import MODELS, KinematicModel, get_model
+    from nlp_calib.outputs.summary import summary_lines
     from nlp_calib.pipeline import (
         Calibration,
-        CalibrationRun,
         JointCalibration,
-        JointRun,
         Scenario,
-        SolverReport,
+        Wanted,
         load_scenario,
         scenario_from_mapping,
     )
     from nlp_calib.problem import ProblemFunctions, ProblemSpec, build
+    from nlp_calib.results import CalibrationRun, JointRun, SolverReport, Verdict
     from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
+    from nlp_calib.sources import load_log
     from nlp_calib.solvers import SOLVERS, Solver, SolverResult, get_solver
 
 # The public API is imported when first used, not with the package: ``python -m nlp_calib``
 # installs its signal handlers before numpy and CasADi load, and light tools stay light.
 _EXPORTS: dict[str, str] = {
     "Calibration": "nlp_calib.pipeline",
-    "CalibrationRun": "nlp_calib.pipeline",
+    "CalibrationRun": "nlp_calib.results",
     "JointCalibration": "nlp_calib.pipeline",
-    "JointRun": "nlp_calib.pipeline",
+    "JointRun": "nlp_calib.results",
     "CodegenError": "nlp_calib.core.errors",
     "ConfigError": "nlp_calib.core.errors",
     "DatasetError": "nlp_calib.core.errors",
@@ -77,20 +77,20 @@ _EXPORTS: dict[str, str] = {
     "SimulationOptions": "nlp_calib.simulation",
     "Solver": "nlp_calib.solvers",
     "SolverError": "nlp_calib.core.errors",
-    "SolverReport": "nlp_calib.pipeline",
+    "SolverReport": "nlp_calib.results",
     "SolverResult": "nlp_calib.solvers",
     "UsageError": "nlp_calib.core.errors",
-    "Verdict": "nlp_calib.outputs.summary",
+    "Verdict": "nlp_calib.results",
+    "Wanted": "nlp_calib.pipeline",
     "build": "nlp_calib.problem",
     "get_model": "nlp_calib.models",
     "get_solver": "nlp_calib.solvers",
-    "load_log": "nlp_calib.models",
+    "load_log": "nlp_calib.sources",
     "load_scenario": "nlp_calib.pipeline",
     "read_log": "nlp_calib.logs",
     "scenario_from_mapping": "nlp_calib.pipeline",
     "simulate": "nlp_calib.simulation",
     "summary_lines": "nlp_calib.outputs.summary",
-    "verdict": "nlp_calib.outputs.summary",
     "write_simulation": "nlp_calib.simulation",
 }
 
@@ -137,6 +137,7 @@ __all__ = [
     "SolverResult",
     "UsageError",
     "Verdict",
+    "Wanted",
     "__version__",
     "build",
     "get_model",
@@ -147,6 +148,5 @@ __all__ = [
     "scenario_from_mapping",
     "simulate",
     "summary_lines",
-    "verdict",
     "write_simulation",
 ]

@@ -75,7 +75,7 @@ def demo() -> Scenario:
 @pytest.fixture(scope="session")
 def small_demo(demo: Scenario) -> Scenario:
     """The demo scenario on its first 500 records: the quick case of solver and report tests."""
-    return dataclasses.replace(demo, samples=dataclasses.replace(demo.samples, stop=500))
+    return demo.with_options(samples=dataclasses.replace(demo.log.samples, stop=500))
 
 
 @pytest.fixture(scope="session")

@@ -13,8 +13,10 @@ from nlp_calib.analysis.alignment import estimate_lag, lag_grid, refine_minimum
 from nlp_calib.analysis.metrics import trajectory_metrics
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import format_log, resample_encoders
-from nlp_calib.models import get_model, load_log
-from nlp_calib.pipeline import Calibration, CalibrationRun
+from nlp_calib.models import get_model
+from nlp_calib.sources import load_log
+from nlp_calib.pipeline import Calibration
+from nlp_calib.results import CalibrationRun
 from nlp_calib.pipeline.scenario import (
     AlignmentOptions,
     SampleSelection,
@@ -113,8 +115,8 @@ def test_ate_does_not_depend_on_where_the_record_range_starts(tmp_path: Path) ->
     cut = tmp_path / "cut.txt"
     cut.write_text("\n".join(header + records[300:]) + "\n")
     sc = load_scenario(SCENARIOS / "demo.yaml")
-    later = Calibration(dataclasses.replace(sc, samples=dataclasses.replace(sc.samples, start=300)))
-    fresh = Calibration(dataclasses.replace(sc, dataset=cut))
+    later = Calibration(sc.with_options(samples=dataclasses.replace(sc.log.samples, start=300)))
+    fresh = Calibration(sc.with_options(dataset=cut))
     p = np.array([later.initial[n] for n in later.fns.names]) * 1.01
     a, _ = later.score(p)
     b, _ = fresh.score(p)
@@ -125,7 +127,7 @@ def test_ate_does_not_depend_on_where_the_record_range_starts(tmp_path: Path) ->
 def test_stationary_windows_are_dropped_and_counted() -> None:
     sc = load_scenario(SCENARIOS / "demo.yaml")
     keep = Calibration(sc)
-    drop = Calibration(dataclasses.replace(sc, samples=dataclasses.replace(sc.samples, drop_stationary=True)))
+    drop = Calibration(sc.with_options(samples=dataclasses.replace(sc.log.samples, drop_stationary=True)))
     assert drop.data.dropped_stationary > 0
     assert drop.data.n_residuals + drop.data.dropped_stationary == keep.data.n_residuals
 
@@ -148,10 +150,11 @@ def test_tracker_lag_is_recovered_from_a_simulated_log(tmp_path: Path) -> None:
         simulate(SimulationOptions(records=1500, seed=4, latency_s=0.06, tracker_noise_xy=0.001)),
         tmp_path / "lag.txt",
     )
-    sc = dataclasses.replace(
-        load_scenario(SCENARIOS / "demo.yaml"),
+    sc = load_scenario(SCENARIOS / "demo.yaml").with_options(
         dataset=log,
-        alignment=dataclasses.replace(load_scenario(SCENARIOS / "demo.yaml").alignment, tracker_lag="auto"),
+        alignment=dataclasses.replace(
+            load_scenario(SCENARIOS / "demo.yaml").log.alignment, tracker_lag="auto"
+        ),
     )
     calib = Calibration(sc)
     assert calib.alignment.estimate is not None
@@ -181,14 +184,13 @@ def test_recommended_real_scenario_meets_the_fault_robust_targets(recommended: C
 @pytest.fixture(scope="module")
 def k_traction_of_parts(recommended: CalibrationRun) -> list[float]:
     """k_traction fitted on the first 60 %, the last 60 %, the middle half and after the faults."""
-    sc = dataclasses.replace(recommended.scenario, solvers=("gauss_newton",))
+    sc = recommended.scenario.with_options(solvers=("gauss_newton",))
     values = []
     for a, b in ((0, 1460), (974, 2434), (608, 1825), (1220, 2434)):
-        part = dataclasses.replace(
-            sc,
+        part = sc.with_options(
             samples=SampleSelection(start=a, stop=b),
             validation=dataclasses.replace(sc.validation, blocks=0),
-            alignment=dataclasses.replace(sc.alignment, tracker_lag=recommended.tracker_lag_s),
+            alignment=dataclasses.replace(sc.log.alignment, tracker_lag=recommended.tracker_lag_s),
         )
         res = Calibration(part).solve("gauss_newton")
         assert res.converged, res.reason
@@ -231,7 +233,7 @@ def test_honest_sigma_covers_the_spread_of_fits_on_parts_of_the_log(
 @pytest.mark.slow
 def test_recommended_real_scenario_holdout_target(real_log: Path) -> None:
     sc = load_scenario(SCENARIOS / "real_tricycle.yaml").with_dataset(real_log)
-    sc = dataclasses.replace(sc, validation=ValidationOptions(holdout_fraction=0.4, blocks=0))
+    sc = sc.with_options(validation=ValidationOptions(holdout_fraction=0.4, blocks=0))
     for rep in Calibration(sc).run().reports.values():
         assert rep.holdout is not None
         assert rep.holdout.segment_ate.mean <= 0.09
@@ -276,8 +278,7 @@ def test_lag_search_gives_the_full_grid_estimate_with_fewer_fits() -> None:
 
 def test_lag_at_the_edge_of_its_search_range_is_named() -> None:
     sim = simulate(SimulationOptions(records=600, seed=4, latency_s=0.25, tracker_noise_xy=0.001))
-    sc = dataclasses.replace(
-        load_scenario(SCENARIOS / "demo.yaml"),
+    sc = load_scenario(SCENARIOS / "demo.yaml").with_options(
         solvers=("gauss_newton",),
         alignment=AlignmentOptions(tracker_lag="auto", search=(-0.1, 0.1), step=0.01),
     )

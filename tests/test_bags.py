@@ -3,6 +3,8 @@ own writers, read back as logs and calibrated; the pairing rule, the wraps and e
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 import math
 from collections.abc import Callable, Iterable, Sequence
@@ -22,9 +24,10 @@ from nlp_calib.core.numeric import COUNTER_MODULUS
 from nlp_calib.logs import Log, read_log
 from nlp_calib.logs.bag_reader import BagError, BagTopics
 from nlp_calib.logs.bag_records import read_bag_records
-from nlp_calib.models import get_model, load_log
+from nlp_calib.models import get_model
+from nlp_calib.sources import load_log
 from nlp_calib.pipeline import Calibration, JointCalibration, load_scenario, scenario_from_mapping
-from nlp_calib.pipeline.bags import BagSource, load_dataset
+from nlp_calib.sources import BagSource, TextSource
 from nlp_calib.simulation import truth_path
 
 FORMATS = ("ros1", "sqlite3", "mcap")
@@ -211,7 +214,7 @@ def test_the_bag_reads_as_the_text_log_record_for_record(
 ) -> None:
     _, log = drive
     for fmt, bag in bags.items():
-        got = load_dataset(bag, BagSource("/joint_states", JOINTS, "/tracker/pose"), TRICYCLE, strict=True)
+        got = BagSource(bag, "/joint_states", JOINTS, "/tracker/pose").read(TRICYCLE, strict=True)
         assert np.array_equal(got.ticks, log.ticks), fmt
         assert np.array_equal(got.time_s, log.time_s), fmt
         assert np.array_equal(got.T_world_sensor[:, :2], log.T_world_sensor[:, :2]), fmt
@@ -291,7 +294,7 @@ def test_encoder_messages_take_the_tracker_pose_interpolated_at_their_stamps(tmp
     assert (p.before, p.after) == (before, after) == (3, 3)
     assert p.in_gaps == 65 - len(kept) - before - after > 0
     with pytest.warns(UserWarning, match=r"in tracker gaps over 0\.1 s"):
-        load_dataset(bag, BagSource("/js", JOINTS, "/pose"), TRICYCLE, strict=True)
+        BagSource(bag, "/js", JOINTS, "/pose").read(TRICYCLE, strict=True)
 
 
 # --- tracker message types ----------------------------------------------------------------------
@@ -327,8 +330,8 @@ def test_transforms_tf_and_odometry_give_the_poses_of_the_tracked_frame(
 ) -> None:
     path, log = diff_drive
     bag = _tracker_bag(tmp_path, path, log, kind, fmt="ros1" if kind == TF else "mcap")
-    source = BagSource("/joint_states", ("left", "right"), topic, tracker_frame="robot_marker")
-    got = load_dataset(bag, source, get_model("diff_drive"), strict=True)
+    source = BagSource(bag, "/joint_states", ("left", "right"), topic, tracker_frame="robot_marker")
+    got = source.read(get_model("diff_drive"), strict=True)
     assert np.array_equal(got.ticks, log.ticks) and np.array_equal(got.time_s, log.time_s)
     assert_close(got.T_world_sensor, log.T_world_sensor, rtol=0, atol=1e-15, what=kind)
     assert got.header.sensor_frame == "robot_marker"
@@ -353,7 +356,7 @@ def test_a_tf_topic_needs_the_tracked_frame_and_lists_the_frames(
         ),
     ]:
         with pytest.raises(BagError, match=pattern) as exc:
-            load_dataset(bag, BagSource("/joint_states", ("left", "right"), "/tf", frame), dd, strict=True)
+            BagSource(bag, "/joint_states", ("left", "right"), "/tf", frame).read(dd, strict=True)
         assert "\n" not in str(exc.value)
 
 
@@ -491,7 +494,9 @@ def test_a_dataset_block_with_robot_yaml_calibrates_as_the_text_log(tmp_path: Pa
     )
     bag_sc = load_scenario(_scenario(sub, _bag_block(Path("drive"), ", robot: robot.yaml")))
     assert (
-        bag_sc.dataset == sub / "drive" and bag_sc.bag is not None and bag_sc.bag.robot == sub / "robot.yaml"
+        bag_sc.dataset == sub / "drive"
+        and isinstance(bag_sc.log.source, BagSource)
+        and bag_sc.log.source.robot == sub / "robot.yaml"
     )
     got, expected = (
         Calibration(sc) for sc in (bag_sc, load_scenario(_scenario(tmp_path, f"dataset: {path}", "text")))
@@ -583,9 +588,9 @@ def test_data_swaps_bags_keeping_the_topics_and_a_bare_bag_asks_for_them(
     path, log = drive
     sc = load_scenario(_scenario(tmp_path, _bag_block(bags["ros1"])))
     moved = sc.with_dataset(bags["mcap"])
-    assert moved.bag == sc.bag and moved.dataset == bags["mcap"]
+    assert moved.log.source == dataclasses.replace(sc.log.source, bag=bags["mcap"])  # the same topics
     assert np.array_equal(Calibration(moved).log.ticks, log.ticks)
-    assert sc.with_dataset(path).bag is None  # a text log needs no topics
+    assert isinstance(sc.with_dataset(path).log.source, TextSource)  # a text log needs no topics
     bare = load_scenario(_scenario(tmp_path, f"dataset: {bags['sqlite3']}"))
     with pytest.raises(
         UsageError, match=r"a ROS bag; name its topics in a dataset block \(bag, joint_states, joints"
@@ -649,9 +654,7 @@ def test_import_bag_writes_a_text_log_that_reads_back_as_the_bag(
     assert proc.returncode == 0, proc.stderr
     assert "400 of 400 encoder messages paired" in proc.stdout and "note: no --robot" in proc.stdout
     back = read_log(out, TRICYCLE.encoder_kinds)
-    direct = load_dataset(
-        bags["sqlite3"], BagSource("/joint_states", JOINTS, "/tracker/pose"), TRICYCLE, strict=True
-    )
+    direct = BagSource(bags["sqlite3"], "/joint_states", JOINTS, "/tracker/pose").read(TRICYCLE, strict=True)
     for field in ("time_s", "ticks", "T_world_sensor", "model_pose"):
         assert np.array_equal(getattr(back, field), getattr(direct, field)), field
     assert np.array_equal(back.ticks, log.ticks) and back.header == direct.header

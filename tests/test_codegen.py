@@ -119,13 +119,12 @@ def test_compiled_backend_gives_the_interpreted_solution(
 ) -> None:
     monkeypatch.setenv("NLP_CALIB_CACHE", str(tmp_path / "cache"))
     sc = load_scenario(SCENARIOS / "demo.yaml")
-    sc = dataclasses.replace(
-        sc,
-        samples=dataclasses.replace(sc.samples, stop=700),
-        robust=dataclasses.replace(sc.robust, kernel=kernel),
+    sc = sc.with_options(
+        samples=dataclasses.replace(sc.log.samples, stop=700),
+        robust=dataclasses.replace(sc.objective.robust, kernel=kernel),
     )
-    interpreted = Calibration(dataclasses.replace(sc, backend="interpreted"))
-    compiled = Calibration(dataclasses.replace(sc, backend="compiled"))
+    interpreted = Calibration(sc.with_options(backend="interpreted"))
+    compiled = Calibration(sc.with_options(backend="compiled"))
     assert compiled.backend.name == "compiled"
     for solver in ("gauss_newton", "ipopt"):
         a, b = interpreted.solve(solver), compiled.solve(solver)
@@ -135,7 +134,7 @@ def test_compiled_backend_gives_the_interpreted_solution(
     # The second set-up reuses the cached shared objects: nothing new is compiled.
     compiled.backend.wait()
     before = sorted(p.name for p in (tmp_path / "cache").glob("*.so"))
-    Calibration(dataclasses.replace(sc, backend="compiled")).solve("gauss_newton")
+    Calibration(sc.with_options(backend="compiled")).solve("gauss_newton")
     assert sorted(p.name for p in (tmp_path / "cache").glob("*.so")) == before
 
 
@@ -145,8 +144,8 @@ def test_compiled_backend_falls_back_without_a_compiler_warning_once(monkeypatch
     monkeypatch.setattr(compiled, "find_compiler", lambda: None)
     monkeypatch.setattr(compiled, "_warned_no_compiler", False)
     sc = load_scenario(SCENARIOS / "demo.yaml")
-    assert sc.backend == "compiled"  # the default
-    sc = dataclasses.replace(sc, samples=dataclasses.replace(sc.samples, stop=300))
+    assert sc.compute.backend == "compiled"  # the default
+    sc = sc.with_options(samples=dataclasses.replace(sc.log.samples, stop=300))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         calibs = [Calibration(sc), Calibration(sc)]
@@ -161,9 +160,9 @@ def test_compiled_backend_falls_back_without_a_compiler_warning_once(monkeypatch
 @needs_compiler
 def test_threaded_chunk_map_equals_serial(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("NLP_CALIB_CACHE", str(tmp_path / "cache"))
-    sc = dataclasses.replace(load_scenario(SCENARIOS / "demo.yaml"), backend="compiled")
+    sc = load_scenario(SCENARIOS / "demo.yaml").with_options(backend="compiled")
     serial = Calibration(sc)
-    threaded = Calibration(dataclasses.replace(sc, threads=2))
+    threaded = Calibration(sc.with_options(threads=2))
     a, b = serial.evaluator.normal_equations(serial.x0), threaded.evaluator.normal_equations(threaded.x0)
     assert_close(b.H, a.H, rtol=1e-12)
     assert_close(b.g, a.g, rtol=1e-12, atol=1e-15)

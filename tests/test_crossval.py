@@ -53,7 +53,7 @@ def test_a_drive_without_reversing_holds_the_reverse_gain_with_a_warning() -> No
 def test_folds_leave_their_block_out_and_score_it() -> None:
     sim = SimulationOptions(records=1200, seed=1)
     run, _ = _run("tricycle", sim, validation={"blocks": 6})
-    cv = run.crossval  # type: ignore[attr-defined]
+    cv = run.checks.crossval
     assert cv is not None and len(cv.folds) == 6 and cv.available
     for fold in cv.folds:
         assert fold.converged and fold.heldout is not None

@@ -37,7 +37,7 @@ def sim(model: str, **options: object) -> tuple[Log, object]:
 @pytest.fixture(scope="module")
 def real_findings(real_log: Path) -> Calibration:
     sc = load_scenario(SCENARIOS / "real_tricycle.yaml").with_dataset(real_log)
-    sc = dataclasses.replace(sc, alignment=dataclasses.replace(sc.alignment, tracker_lag=0.049))
+    sc = sc.with_options(alignment=dataclasses.replace(sc.log.alignment, tracker_lag=0.049))
     return Calibration(sc)
 
 

@@ -12,6 +12,7 @@ import subprocess
 import warnings
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -23,9 +24,10 @@ from nlp_calib.core import files
 from nlp_calib.core.errors import DatasetError, SolverError
 from nlp_calib.core.numeric import COUNTER_MODULUS
 from nlp_calib.logs.checks import JUMP_FACTOR, counter_jumps
-from nlp_calib.models import load_log
+from nlp_calib.sources import load_log
 from nlp_calib.outputs.outdir import MANIFEST_FILE
 from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.scenario import load_scenario
 from nlp_calib.simulation import SimulationOptions, simulate
 
@@ -357,19 +359,19 @@ def test_runtime_failure_exits_1_in_one_line_and_debug_shows_the_traceback(
 ) -> None:
     sc = scenario(tmp_path, sim_log, "solvers: [gauss_newton]\n")
 
-    def broken(self: Calibration, solver: str) -> None:
+    def broken(self: Fit, solver: str) -> None:
         raise SolverError(f"{solver} could not run")
 
-    monkeypatch.setattr(Calibration, "solve", broken)
+    monkeypatch.setattr(Fit, "solve", broken)
     assert cli.main(["run", str(sc), "--out", str(tmp_path / "out")]) == 1
     err = capsys.readouterr().err
     assert err == "error: gauss_newton could not run\n"
     assert_nothing_written(tmp_path / "out")
 
-    def crash(self: Calibration, solver: str) -> None:
+    def crash(self: Fit, solver: str) -> None:
         raise ZeroDivisionError("boom")
 
-    monkeypatch.setattr(Calibration, "solve", crash)
+    monkeypatch.setattr(Fit, "solve", crash)
     assert cli.main(["run", str(sc), "--out", str(tmp_path / "out")]) == 1
     err = capsys.readouterr().err
     assert err.startswith("error: internal error: ZeroDivisionError: boom") and "Traceback" not in err
@@ -476,12 +478,15 @@ def test_interrupted_run_keeps_the_previous_result_and_leaves_no_partial_files(
     assert cli.main(["run", str(sc), "--out", str(out)]) == 0
     before = {name: (out / name).read_bytes() for name in listing(out)}
 
-    from nlp_calib.cli import commands
+    from nlp_calib.outputs import registry
 
-    def interrupted(*args: object) -> list[Path]:
+    real = registry.write
+
+    def interrupted(outputs: Any, runs: Any, top: Any, options: Any) -> list[Path]:
+        real([o for o in outputs if o.group == "result"], runs, top, options)
         raise KeyboardInterrupt  # after result.json was written, before the hand-off files
 
-    monkeypatch.setattr(commands, "write_handoff", interrupted)
+    monkeypatch.setattr(registry, "write", interrupted)
     assert cli.main(["run", str(sc), "--out", str(out)]) == 130
     assert {name: (out / name).read_bytes() for name in listing(out)} == before
     # And into a fresh folder: nothing at all, not even temporary files.

@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 from nlp_calib.core.errors import NlpCalibError
 from nlp_calib.logs import Log
-from nlp_calib.models import load_log
+from nlp_calib.sources import load_log
 from nlp_calib.pipeline.scenario import Scenario, load_scenario, scenario_from_mapping
 from nlp_calib.simulation import SimulationOptions, simulate
 

@@ -25,8 +25,9 @@ from nlp_calib import cli
 from nlp_calib.cli.parser import SIGMA, build_parser
 from nlp_calib.core.errors import NlpCalibError, ScenarioError, UsageError
 from nlp_calib.core.ranges import Range
-from nlp_calib.pipeline.config import MAX_YAML_VALUES, parse_yaml
-from nlp_calib.pipeline.scenario import HORIZON, STRIDE, Scenario, load_scenario
+from nlp_calib.core.config import MAX_YAML_VALUES, parse_yaml
+from nlp_calib.pipeline.scenario import Scenario, load_scenario
+from nlp_calib.problem.windows import HORIZON, STRIDE
 from nlp_calib.pipeline.simconfig import CLI_LIMITS, simulation_options
 
 FUZZ = settings(
@@ -221,11 +222,16 @@ def test_nested_scenario_blocks_load_or_raise_a_scenario_error(text: str) -> Non
             assert "\n" not in str(exc)
             return
     # What a loaded scenario promises whatever the file said.
-    assert HORIZON.problem(sc.residual.horizon) is None and STRIDE.problem(sc.residual.stride) is None
-    assert sc.robust.delta > 0 and math.isfinite(sc.robust.delta)
-    for lo, hi in sc.bounds.values():
+    assert (
+        HORIZON.problem(sc.objective.residual.horizon) is None
+        and STRIDE.problem(sc.objective.residual.stride) is None
+    )
+    assert sc.objective.robust.delta > 0 and math.isfinite(sc.objective.robust.delta)
+    for lo, hi in sc.parameters.bounds.values():
         assert lo < hi
-    for value in sc.initial_guess.values() if isinstance(sc.initial_guess, dict) else []:
+    for value in (
+        sc.parameters.initial_guess.values() if isinstance(sc.parameters.initial_guess, dict) else []
+    ):
         assert math.isfinite(value)
     for options in sc.solver_options.values():
         for value in getattr(options, "options", {}).values():

@@ -62,7 +62,7 @@ def test_windows_never_cross_from_one_log_into_the_next(tmp_path: Path) -> None:
     assert np.all((data.stops < boundary) | (data.starts >= boundary))
     # Every window of the joint fit is one of a log's own windows, with the same tracker motion.
     for part, offset in zip(calib.parts, data.offsets):
-        own = build_residual_data(calib.fns, part.aligned.select(*part.fit), sc.residual)
+        own = build_residual_data(calib.fns, part.aligned.select(*part.fit), sc.objective.residual)
         mine = (data.starts >= offset) & (data.starts < offset + own.n_records)
         np.testing.assert_array_equal(data.starts[mine] - offset, own.starts)
         np.testing.assert_allclose(data.z[:, mine], own.z, rtol=0, atol=1e-15)

@@ -12,7 +12,8 @@ from conftest import parse_lines
 
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning
 from nlp_calib.core.numeric import wrapped_difference
-from nlp_calib.models import get_model, header_parameters, load_log
+from nlp_calib.models import get_model, header_parameters
+from nlp_calib.sources import load_log
 
 HEADER = """#kinematic_model: traction_drive_wheel
 #parameters: [ Ksteer Ktraction axis_length steer_offset ]

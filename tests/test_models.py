@@ -54,14 +54,14 @@ def sim_log(model: str, **kwargs: object) -> Log:
 
 
 def scenario(model: str, **changes: object) -> Scenario:
-    base = Scenario(
+    base = Scenario.of(
         name=model,
         dataset=Path("sim"),
         model=model,
         robust=RobustOptions("huber", 0.05),
         residual=ResidualOptions(horizon=5, steering_sample="mean"),
     )
-    return dataclasses.replace(base, **changes)  # type: ignore[arg-type]
+    return base.with_options(**changes)  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("model", ALL_MODELS)

@@ -16,9 +16,8 @@ from nlp_calib.analysis.metrics import path_distance, trajectory_metrics
 from nlp_calib.cli.parser import build_parser
 from nlp_calib.models import get_model
 from nlp_calib.outputs.plots.residuals import BINS, _calibrated_range
-from nlp_calib.outputs.series import residual_series, residual_time_series
-from nlp_calib.outputs.summary import CAVEATS, GOOD, UNDETERMINED, verdict
-from nlp_calib.pipeline import Calibration, Scenario
+from nlp_calib.pipeline import Calibration, Scenario, Wanted
+from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
 from nlp_calib.pipeline.scenario import FaultOptions, ValidationOptions
 from nlp_calib.problem import ProblemSpec, build
 
@@ -66,7 +65,7 @@ def test_no_output_prints_a_raw_python_structure(demo_run: tuple[str, dict, Path
 
 def test_the_distance_is_the_tracker_path_without_its_bad_poses(demo_run: tuple[str, dict, Path]) -> None:
     _, doc, _ = demo_run
-    from nlp_calib.models import load_log
+    from nlp_calib.sources import load_log
 
     log = load_log(SCENARIOS / "data" / "demo_tricycle.txt", get_model("tricycle"))
     bad = {f["record"] for f in doc["faults"]["found"] if f["kind"] == "tracker_jump"}
@@ -96,22 +95,20 @@ def test_full_run_figures_leave_out_a_bad_tracker_pose() -> None:
 
 
 def test_verdicts_good_with_caveats_and_not_determined(tmp_path: Path, demo: Scenario) -> None:
-    run = Calibration(dataclasses.replace(demo, validation=ValidationOptions(blocks=0))).run(
-        ("gauss_newton",)
-    )
-    assert verdict(run).level == GOOD, verdict(run)
+    run = Calibration(demo.with_options(validation=ValidationOptions(blocks=0))).run(("gauss_newton",))
+    assert run.verdict.level == GOOD, run.verdict
 
     short = write_sim(tmp_path, "short.txt", records=700, seed=4)
-    v = verdict(Calibration.setup(_load(_scenario(tmp_path, short))).run(("gauss_newton",)))
+    v = Calibration.setup(_load(_scenario(tmp_path, short))).run(("gauss_newton",)).verdict
     assert v.level == CAVEATS and any("weakly observable" in r for r in v.reasons), v
 
     faulty = write_sim(tmp_path, "faulty.txt", records=900, seed=5, counter_faults=3)
-    sc = dataclasses.replace(_load(_scenario(tmp_path, faulty)), faults=FaultOptions(handling="keep"))
-    v = verdict(Calibration.setup(sc).run(("gauss_newton",)))
+    sc = _load(_scenario(tmp_path, faulty)).with_options(faults=FaultOptions(handling="keep"))
+    v = Calibration.setup(sc).run(("gauss_newton",)).verdict
     assert v.level == CAVEATS and any("kept in the fit" in r for r in v.reasons), v
 
     straight = write_sim(tmp_path, "straight.txt", records=300, seed=5, trajectory="straight")
-    v = verdict(Calibration.setup(_load(_scenario(tmp_path, straight))).run(("gauss_newton",)))
+    v = Calibration.setup(_load(_scenario(tmp_path, straight))).run(("gauss_newton",)).verdict
     assert v.level == UNDETERMINED and any("not observable" in r for r in v.reasons), v
 
 
@@ -170,9 +167,8 @@ def test_odometry_writes_what_run_writes_with_units(tmp_path: Path) -> None:
 
 
 def test_histograms_resolve_the_calibrated_spread(small_demo: Scenario) -> None:
-    calib = Calibration(small_demo)
-    run = calib.run(("gauss_newton",))
-    series = residual_series(calib, run)
+    run = Calibration(small_demo).run(("gauss_newton",), Wanted(series=True))
+    series = run.require_series().residuals
     for i in range(3):
         after = series.after["gauss_newton"][i]
         width = 2 * _calibrated_range([after], float(series.thresholds[i])) / (BINS - 1)
@@ -181,18 +177,20 @@ def test_histograms_resolve_the_calibrated_spread(small_demo: Scenario) -> None:
 
 def test_residuals_over_time_mark_the_faults(tmp_path: Path) -> None:
     log = write_sim(tmp_path, "faults.txt", records=1200, seed=6, counter_faults=3)
-    sc = dataclasses.replace(_load(_scenario(tmp_path, log)), validation=ValidationOptions(blocks=0))
+    sc = _load(_scenario(tmp_path, log)).with_options(validation=ValidationOptions(blocks=0))
     calib = Calibration(sc)
-    run = calib.run(("gauss_newton",))
-    series = residual_time_series(calib, run, "gauss_newton")
-    assert series.errors.shape == (3, calib.data.n_residuals) == (3, series.time_s.size)
-    assert np.all(np.diff(series.time_s) > 0)
-    found = run.findings.report.faults  # type: ignore[union-attr]
-    assert len(series.faults) == len(found) >= 3
-    for (t0, t1, kind), f in zip(series.faults, found):
-        assert kind == f.kind and t0 <= f.time_s <= t1 + 1e-9
+    run = calib.run(("gauss_newton",), Wanted(series=True))
+    series = run.require_series()
+    errors, time_s = series.residuals.after["gauss_newton"], series.residuals.time_s
+    assert errors.shape == (3, calib.data.n_residuals) == (3, time_s.size)
+    assert np.all(np.diff(time_s) > 0)
+    found = run.checks.findings.report.faults  # type: ignore[union-attr]
+    assert len(series.fault_spans) == len(found) >= 3
+    for span, f in zip(series.fault_spans, found):
+        t0, t1 = span.first_s, span.last_s
+        assert span.kind == f.kind and t0 <= f.time_s <= t1 + 1e-9
         # No window crosses a fault left out of the fit.
-        assert not np.any((series.time_s > t0) & (series.time_s < t1))
+        assert not np.any((time_s > t0) & (time_s < t1))
 
 
 @pytest.mark.slow

@@ -20,14 +20,27 @@ from conftest import REPO, SCENARIOS, assert_close
 
 from nlp_calib import __version__
 from nlp_calib.cli import main
-from nlp_calib.outputs.handoff import CALIBRATION_FILE, ROBOT_URDF_FILE, URDF_FILE, write_handoff
+from nlp_calib.outputs import registry
 from nlp_calib.outputs.markdown import fmt_std, fmt_value
 from nlp_calib.outputs.progress import Progress
-from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline import Calibration, Wanted
+from nlp_calib.results import CalibrationRun
 from nlp_calib.pipeline.scenario import Scenario, ValidationOptions
 from nlp_calib.solvers import GaussNewtonOptions
 
 IMAGES = ("trajectory.png", "convergence.png", "residuals.png", "residuals_time.png", "model_check.png")
+CALIBRATION_FILE, URDF_FILE, ROBOT_URDF_FILE = "calibration.yaml", "sensor_mount.urdf.xml", "robot.urdf"
+
+
+def write_handoff(run: CalibrationRun, out: Path) -> list[Path]:
+    """The hand-off files of ``run``, written as a run writes them."""
+    return _write(run, out, "handoff")
+
+
+def _write(run: CalibrationRun, out: Path, group: str) -> list[Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    outputs = registry.selected((group,), report=True)
+    return registry.write(outputs, [(run, out)], (run, out), registry.OutputOptions())
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
@@ -153,7 +166,7 @@ def test_robot_urdf_loads_in_yourdfpy_and_urdf_parser_py_with_result_json_number
 
 
 def _calibration(small_demo: Scenario, **changes: Any) -> Calibration:
-    return Calibration(dataclasses.replace(small_demo, **changes))
+    return Calibration(small_demo.with_options(**changes))
 
 
 def test_handoff_files_are_deterministic(tmp_path: Path, small_demo: Scenario) -> None:
@@ -183,13 +196,11 @@ def test_no_converged_solver_writes_no_handoff_and_removes_stale_files(
 
 
 def test_single_solver_report_with_holdout(tmp_path: Path, small_demo: Scenario) -> None:
-    from nlp_calib.outputs.writer import write_report
-
     calib = _calibration(
         small_demo, solvers=("gauss_newton",), validation=ValidationOptions(holdout_fraction=0.3)
     )
-    run = calib.run()
-    paths = write_report(calib, run, tmp_path)
+    run = calib.run(wanted=Wanted(series=True))
+    paths = _write(run, tmp_path, "figures")
     assert [p.name for p in paths[:6]] == [*IMAGES, "report.md"]
     tracks = {p.relative_to(tmp_path).as_posix() for p in paths[6:]}
     assert {"trajectories/tracker.tum", "trajectories/gauss_newton.tum", "trajectories/README.md"} <= tracks

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from conftest import SCENARIOS, assert_close, parse_lines
 
-from nlp_calib.models import load_log
+from nlp_calib.sources import load_log
 from nlp_calib.pipeline.simconfig import simulation_options
 from nlp_calib.simulation import SimulationOptions, simulate
 

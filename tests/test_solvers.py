@@ -51,22 +51,22 @@ def test_real_log_solvers_agree(real_calibration: Calibration) -> None:
 
 def test_single_step_seed_formulation_converges_from_header_guess(real_log: Path) -> None:
     sc = load_scenario(SCENARIOS / "real_tricycle.yaml")
-    sc = dataclasses.replace(sc, residual=ResidualOptions(horizon=1, integration="euler"))
+    sc = sc.with_options(residual=ResidualOptions(horizon=1, integration="euler"))
     calib = Calibration.setup(sc, data=real_log)
     agree(calib.solve("gauss_newton"), calib.solve("ipopt"))
 
 
 @pytest.mark.parametrize("kernel", ["none", "huber", "cauchy", "pseudo_huber"])
 def test_solvers_agree_for_every_kernel(small_demo: Scenario, kernel: str) -> None:
-    sc = dataclasses.replace(small_demo, robust=RobustOptions(kernel=kernel, delta=0.03))
+    sc = small_demo.with_options(robust=RobustOptions(kernel=kernel, delta=0.03))
     calib = Calibration.setup(sc)
     agree(calib.solve("gauss_newton"), calib.solve("ipopt"))
 
 
 def test_lifted_huber_reaches_the_direct_optimum(small_demo: Scenario) -> None:
     # The tracker outliers are kept in the fit (not left out as faults) so the kernel meets them.
-    sc = dataclasses.replace(
-        small_demo, robust=RobustOptions(kernel="huber", delta=0.02), faults=FaultOptions(handling="keep")
+    sc = small_demo.with_options(
+        robust=RobustOptions(kernel="huber", delta=0.02), faults=FaultOptions(handling="keep")
     )
     direct = Calibration.setup(sc).solve("ipopt")
     lifted_sc = sc.with_solver_options("ipopt", IpoptOptions(huber_formulation="lifted"))
@@ -79,7 +79,7 @@ def test_lifted_huber_reaches_the_direct_optimum(small_demo: Scenario) -> None:
 def test_active_bound_is_respected_by_ipopt(small_demo: Scenario) -> None:
     free = Calibration.setup(small_demo).solve("ipopt")
     hi = free.param_dict()["axis_length"] - 0.05
-    sc = dataclasses.replace(small_demo, bounds={"axis_length": (1.0, hi)})
+    sc = small_demo.with_options(bounds={"axis_length": (1.0, hi)})
     bounded = Calibration.setup(sc).solve("ipopt")
     assert bounded.converged
     assert bounded.param_dict()["axis_length"] == pytest.approx(hi, abs=1e-7)
@@ -88,7 +88,7 @@ def test_active_bound_is_respected_by_ipopt(small_demo: Scenario) -> None:
 
 @pytest.mark.parametrize("integration", ["exact", "euler"])
 def test_recovers_truth_from_noiseless_log(noiseless_log: Path, integration: str) -> None:
-    sc = Scenario(
+    sc = Scenario.of(
         name="noiseless",
         dataset=noiseless_log,
         robust=RobustOptions(kernel="none"),
@@ -109,7 +109,7 @@ def test_recovers_truth_from_noiseless_log(noiseless_log: Path, integration: str
 
 
 def test_gauss_newton_reports_nan_instead_of_a_result(small_demo: Scenario) -> None:
-    sc = dataclasses.replace(small_demo, initial_guess={"axis_length": 0.0})
+    sc = small_demo.with_options(initial_guess={"axis_length": 0.0})
     res = Calibration.setup(sc).solve("gauss_newton")
     assert not res.converged
     assert "NaN" in res.reason

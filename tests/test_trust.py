@@ -32,13 +32,13 @@ def sim_calibration(scenario: Scenario, **sim: object) -> Calibration:
 
 
 def scenario(**changes: object) -> Scenario:
-    base = Scenario(
+    base = Scenario.of(
         name="sim",
         dataset=Path("sim"),
         robust=RobustOptions("none"),
         residual=ResidualOptions(horizon=10, stride=1, steering_sample="mean"),
     )
-    return dataclasses.replace(base, **changes)  # type: ignore[arg-type]
+    return base.with_options(**changes)  # type: ignore[arg-type]
 
 
 @pytest.mark.slow
@@ -120,9 +120,9 @@ def test_well_excited_logs_raise_no_observability_warning(trajectory: str) -> No
 
 def test_auto_initial_guess_reaches_the_header_optimum_on_the_real_log(real_log: Path) -> None:
     sc = load_scenario(SCENARIOS / "real_tricycle.yaml").with_dataset(real_log)
-    sc = dataclasses.replace(sc, alignment=AlignmentOptions())
+    sc = sc.with_options(alignment=AlignmentOptions())
     header = Calibration(sc).solve("gauss_newton")
-    auto = Calibration(dataclasses.replace(sc, initial_guess="auto"))
+    auto = Calibration(sc.with_options(initial_guess="auto"))
     assert auto.start.auto is not None
     # The closed form alone lands close to the optimum in what the data determine best: the
     # traction scale, the sensor's lever arm and the turning gain k_steer / axis_length...
@@ -146,8 +146,8 @@ def test_auto_initial_guess_on_a_simulated_log_needs_no_header() -> None:
 
 
 def test_fixed_parameter_stays_bit_identical_and_solvers_agree(small_demo: Scenario) -> None:
-    sc = dataclasses.replace(
-        small_demo, fixed=("axis_length", "sensor_y"), initial_guess={"axis_length": 1.55, "sensor_y": 0.07}
+    sc = small_demo.with_options(
+        fixed=("axis_length", "sensor_y"), initial_guess={"axis_length": 1.55, "sensor_y": 0.07}
     )
     calib = Calibration(sc)
     assert calib.fns.free == ("k_steer", "k_traction", "steer_offset", "sensor_x", "sensor_theta")
@@ -165,7 +165,7 @@ def test_fixed_parameter_stays_bit_identical_and_solvers_agree(small_demo: Scena
 def test_tight_prior_pulls_the_estimate_to_its_mean(small_demo: Scenario) -> None:
     free = Calibration(small_demo).solve("gauss_newton").param_dict()["axis_length"]
     mean = free + 0.1
-    sc = dataclasses.replace(small_demo, priors={"axis_length": Prior(mean=mean, std=1e-5)})
+    sc = small_demo.with_options(priors={"axis_length": Prior(mean=mean, std=1e-5)})
     calib = Calibration(sc)
     gn, ip = calib.solve("gauss_newton"), calib.solve("ipopt")
     for res in (gn, ip):
@@ -173,5 +173,5 @@ def test_tight_prior_pulls_the_estimate_to_its_mean(small_demo: Scenario) -> Non
         assert res.param_dict()["axis_length"] == pytest.approx(mean, abs=1e-4)
     # A 1e-5 prior weighs 1e10: the problem is stiff, so agreement is to the usual 1e-4 criterion.
     np.testing.assert_allclose(gn.params, ip.params, rtol=1e-4)
-    loose = Calibration(dataclasses.replace(small_demo, priors={"axis_length": Prior(mean=mean, std=10.0)}))
+    loose = Calibration(small_demo.with_options(priors={"axis_length": Prior(mean=mean, std=10.0)}))
     assert loose.solve("gauss_newton").param_dict()["axis_length"] == pytest.approx(free, abs=1e-3)

@@ -17,33 +17,14 @@ than the neighbourhood cannot hide it).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
-
 import numpy as np
+
+from nlp_calib.results.checks import LagEstimate
 
 #: Grid points on each side of the best one that the parabola is fitted through.
 HALF_WIDTH = 6
 #: Every this many grid points the coarse pass fits one.
 COARSE_STRIDE = 4
-
-
-@dataclass(frozen=True)
-class LagEstimate:
-    """The estimated lag (s), the costs of the lags fitted, and whether the best of them is at an
-    end of the searched range (then the true lag may lie beyond it)."""
-
-    lag_s: float
-    grid_s: tuple[float, ...]
-    costs: tuple[float, ...]
-    at_edge: bool = False
-
-    def as_dict(self) -> dict[str, object]:
-        return {
-            "lag_s": self.lag_s,
-            "grid_s": list(self.grid_s),
-            "costs": [c if np.isfinite(c) else None for c in self.costs],
-            "at_edge": self.at_edge,
-        }
 
 
 def lag_grid(search: tuple[float, float], step: float) -> np.ndarray:

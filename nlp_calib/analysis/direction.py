@@ -10,47 +10,9 @@ travel.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-#: A difference beyond this many σ is reported as significant.
-SIGNIFICANT = 3.0
-
-
-@dataclass(frozen=True)
-class DirectionCheck:
-    """Forward-only and reverse-only estimates (model order), their windows, and the differences
-    in units of their σ (NaN for parameters held in either part)."""
-
-    names: tuple[str, ...]
-    forward: np.ndarray
-    reverse: np.ndarray
-    windows: tuple[int, int]
-    z: np.ndarray
-
-    @property
-    def worst(self) -> tuple[str, float]:
-        """The parameter that disagrees most, and by how many σ."""
-        if not np.any(np.isfinite(self.z)):
-            return "", float("nan")
-        i = int(np.nanargmax(np.abs(self.z)))
-        return self.names[i], float(self.z[i])
-
-    @property
-    def significant(self) -> bool:
-        return bool(np.nanmax(np.abs(self.z), initial=0.0) > SIGNIFICANT)
-
-    def as_dict(self) -> dict[str, object]:
-        return {
-            "windows": {"forward": self.windows[0], "reverse": self.windows[1]},
-            "forward": dict(zip(self.names, map(float, self.forward))),
-            "reverse": dict(zip(self.names, map(float, self.reverse))),
-            "difference_in_sigma": {
-                n: (None if not np.isfinite(v) else float(v)) for n, v in zip(self.names, self.z)
-            },
-            "significant": self.significant,
-        }
+from nlp_calib.results.checks import DirectionCheck
 
 
 def compare(

@@ -9,58 +9,14 @@ checked too: a log that never turns cannot tell an axis length or a lever arm.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from nlp_calib.models import SENSOR_PARAMS, reference_scales
+from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, Observability, WeakDirection
 from nlp_calib.solvers import ProblemEvaluator
 
-#: A direction with 1σ beyond this many reference units is weakly observable...
-WEAK = 5.0
-#: ...and beyond this many, not observable.
-NOT_OBSERVABLE = 100.0
 #: Range of the sensor's heading (rad) below which the log counts as not turning.
 MIN_TURNING = 0.3
-
-
-@dataclass(frozen=True)
-class WeakDirection:
-    """A poorly determined combination of parameters and its 1σ in reference units."""
-
-    std_reference: float
-    components: dict[str, float]
-
-    def words(self) -> str:
-        names = sorted(self.components, key=lambda n: -abs(self.components[n]))
-        if self.std_reference > NOT_OBSERVABLE:
-            verb = "is" if len(names) == 1 else "are"
-            return f"{', '.join(names)} {verb} not observable from this log"
-        if len(names) == 1:
-            return f"{names[0]} is only weakly observable"
-        return f"{', '.join(names)} are only weakly observable apart (one combination of them is loose)"
-
-
-@dataclass(frozen=True)
-class Observability:
-    """Condition of the information matrix, weak directions and excitation warnings."""
-
-    condition_number: float
-    std_reference: dict[str, float]
-    weak: tuple[WeakDirection, ...]
-    heading_range_rad: float
-    warnings: tuple[str, ...]
-
-    def as_dict(self) -> dict[str, object]:
-        return {
-            "condition_number": self.condition_number,
-            "std_in_reference_units": self.std_reference,
-            "weak_directions": [
-                {"std_in_reference_units": w.std_reference, "components": w.components} for w in self.weak
-            ],
-            "heading_range_rad": self.heading_range_rad,
-            "warnings": list(self.warnings),
-        }
 
 
 def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarray) -> Observability:

@@ -7,38 +7,10 @@ the intervals with ``mapaccum``. ``σ_u`` is the encoders' noise on the model in
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from nlp_calib.problem import ProblemFunctions
-
-
-@dataclass(frozen=True)
-class OdometryTrack:
-    """Base-link poses ``(n, 3)`` ordered ``(x, y, theta)`` and covariances ``(n, 3, 3)``."""
-
-    time_s: np.ndarray
-    T_world_base: np.ndarray
-    covariance: np.ndarray
-
-    def csv(self) -> str:
-        """One row per record: time, pose and the upper triangle of the covariance."""
-        head = "time_s,x,y,theta,var_x,cov_xy,cov_xtheta,var_y,cov_ytheta,var_theta"
-        P = self.covariance
-        cols = np.column_stack(
-            [
-                self.time_s,
-                self.T_world_base,
-                P[:, 0, 0],
-                P[:, 0, 1],
-                P[:, 0, 2],
-                P[:, 1, 1],
-                P[:, 1, 2],
-                P[:, 2, 2],
-            ]
-        )
-        return head + "\n" + "\n".join(",".join(f"{v:.10g}" for v in row) for row in cols) + "\n"
+from nlp_calib.results.series import OdometryTrack
 
 
 def propagate(

@@ -29,36 +29,15 @@ timing error or slowly varying model error), and the problem is close to linear 
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
-
 import numpy as np
 
 from nlp_calib.models import reference_scales
 from nlp_calib.problem import ResidualData
+from nlp_calib.results.uncertainty import Uncertainty
 from nlp_calib.solvers import ProblemEvaluator
 
 #: The per-residual Functions the estimate evaluates, per residual (not summed).
 FUNCTIONS = ("robust_terms", "sensitivities")
-
-
-@dataclass(frozen=True)
-class Uncertainty:
-    """Covariance of the free parameters (plain coordinates) and the noise it was built from.
-
-    ``std`` and ``correlation`` cover all parameters in model order; fixed ones have std 0 and
-    correlation 0 with the rest. ``noise`` holds the estimated 1σ of each source.
-    """
-
-    names: tuple[str, ...]
-    free: tuple[str, ...]
-    covariance: np.ndarray
-    std: np.ndarray
-    correlation: np.ndarray
-    noise: dict[str, float]
-    dof: int
-
-    def std_dict(self) -> dict[str, float]:
-        return {n: float(s) for n, s in zip(self.names, self.std)}
 
 
 def nnls_small(A: np.ndarray, y: np.ndarray) -> np.ndarray:

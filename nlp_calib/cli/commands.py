@@ -19,25 +19,18 @@ from nlp_calib.cli.import_bag import cmd_import_bag
 from nlp_calib.cli.parser import ALL_SOLVERS
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
-from nlp_calib.core.files import atomic_write_bytes, atomic_write_text, check_output_dir
+from nlp_calib.core.files import check_output_dir
 from nlp_calib.logs import Log
-from nlp_calib.outputs.handoff import HANDOFF_FILES, write_handoff
+from nlp_calib.outputs import registry
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.outputs.progress import Progress
-from nlp_calib.outputs.results import (
-    ODOMETRY_CSV,
-    ODOMETRY_PNG,
-    RESULT_FILE,
-    VALIDATION_FILE,
-    write_result,
-    write_validation,
-)
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.outputs.terminal import correlation_table, run_table, summary_table, validation_table
-from nlp_calib.pipeline import Calibration, CalibrationRun, Scenario, load_scenario, steps
+from nlp_calib.pipeline import Calibration, JointCalibration, Scenario, Wanted, load_scenario
 from nlp_calib.pipeline.export import write_c_export
-from nlp_calib.pipeline.joint import JointCalibration
+from nlp_calib.pipeline.prepare import read_checked
 from nlp_calib.pipeline.simconfig import simulation_options
+from nlp_calib.results import CalibrationRun
 from nlp_calib.simulation import simulate, truth_path, write_simulation
 from nlp_calib.solvers import SOLVERS
 
@@ -94,19 +87,6 @@ def _load_with_data(paths: Sequence[Path], data: Sequence[Path] | None) -> list[
     return [sc.with_dataset(per_name[sc.name]) if sc.name in per_name else sc for sc in scenarios]
 
 
-def _report_files() -> tuple[str, ...]:
-    from nlp_calib.outputs import writer  # imports matplotlib
-
-    return (
-        writer.TRAJECTORY_FILE,
-        writer.CONVERGENCE_FILE,
-        writer.RESIDUALS_FILE,
-        writer.RESIDUALS_TIME_FILE,
-        writer.MODEL_CHECK_FILE,
-        writer.REPORT_FILE,
-    )
-
-
 def _wrote(paths: Sequence[Path], out: Path) -> list[str]:
     """One line per file written into ``out``, one per subfolder."""
     lines: list[str] = []
@@ -121,63 +101,69 @@ def _wrote(paths: Sequence[Path], out: Path) -> list[str]:
     return lines
 
 
+#: The output groups each calibrating command writes.
+CALIBRATE = ("result", "handoff", "figures")
+
+
 def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> int:
     scenarios = _load_with_data(args.scenario, args.data)
     outs = _out_dirs(args, scenarios)
-    names = [RESULT_FILE, *HANDOFF_FILES, *(_report_files() if args.report else ())]
+    outputs = registry.selected(CALIBRATE, args.report)
     for out in outs:
-        refuse_collisions(out, names, force=args.force)
+        refuse_collisions(out, [o.name for o in outputs], force=args.force)
     # Every input checked before any work.
-    logs = [[steps.read_checked(s) for s in (sc.per_log() or (sc,))] for sc in scenarios]
-    runs = []
+    logs = [[read_checked(s) for s in sc.per_log()] for sc in scenarios]
+    runs: list[CalibrationRun] = []
+    wanted = Wanted(series=args.report)
     with Progress(len(scenarios), sys.stderr, label="scenarios") as progress:
         for i, (scenario, out, log_list) in enumerate(zip(scenarios, outs, logs)):
             progress.update(i, f"{scenario.name}: setting up and solving")
-            if scenario.datasets:
-                last = i == len(scenarios) - 1
-                runs += _calibrate_joint(scenario, log_list, out, args, solvers, progress, last)
+            last = i == len(scenarios) - 1
+            if scenario.data.joint:
+                runs += _calibrate_joint(scenario, log_list, out, args, (solvers, outputs), progress, last)
                 continue
-            log = log_list[0]
-            calib = Calibration.setup(scenario, log=log, solvers=solvers)
-            run = calib.run(solvers)
+            run = Calibration.setup(scenario, log=log_list[0], solvers=solvers).run(solvers, wanted)
             runs.append(run)
             progress.clear()
             print(run_table(run))
             print()
             print(correlation_table(run, next(iter(run.reports))))
             progress.update(i, f"{scenario.name}: writing the results")
-            final = _write_outputs(out, args, run, [(run, calib, "")], last=i == len(scenarios) - 1)
+            final = _write_outputs(out, args, outputs, [(run, "")], (run, last))
             progress.clear()
-            print("\n" + "\n".join(_wrote(final, out)) + "\n")
-            print("\n".join(summary_lines(run, final)) + "\n")
+            _closing(run, final, out)
     if len(scenarios) > 1:
         print(summary_table(runs))
     return 0 if all(r.result.converged for run in runs for r in run.reports.values()) else 1
 
 
+def _closing(run: CalibrationRun, final: Sequence[Path], out: Path) -> None:
+    """The files written and the closing summary."""
+    print("\n" + "\n".join(_wrote(final, out)) + "\n")
+    names = list(dict.fromkeys(p.name for p in final))
+    print("\n".join(summary_lines(run, registry.next_steps(names))) + "\n")
+
+
 def _write_outputs(
     out: Path,
     args: argparse.Namespace,
-    handoff: CalibrationRun,
-    pieces: Sequence[tuple[CalibrationRun, Calibration, str]],
-    last: bool,
+    outputs: Sequence[registry.Output],
+    pieces: Sequence[tuple[CalibrationRun, str]],
+    top: tuple[CalibrationRun, bool],
+    group: str = "run",
 ) -> list[Path]:
-    """The hand-off files of ``handoff`` in ``out``, and each piece's ``result.json`` (and report)
-    in its subfolder (``""``: ``out`` itself); returns the final paths. Staged: an interrupted
-    run leaves the previous run's files, never a mix of both."""
-    with StagedOutput(out, "run", force=args.force) as stage:
-        written = write_handoff(handoff, stage.path)
-        if not written:
+    """``outputs`` of each piece's run in its subfolder (``""``: ``out`` itself), those of the whole
+    calibration once in ``out`` for ``top``'s run; returns the final paths. Staged: an interrupted
+    run leaves the previous run's files, never a mix of both. ``top[1]``: the last of the runs;
+    ``group``: the output folder's manifest group the files belong to."""
+    options = registry.OutputOptions(sigma=getattr(args, "sigma", 3.0))
+    with StagedOutput(out, group, force=args.force) as stage:
+        runs = [(run, stage.path / sub) for run, sub in pieces]
+        written = registry.write(outputs, runs, (top[0], stage.path), options)
+        handoff = registry.names(("handoff",))
+        if any(o.group == "handoff" for o in outputs) and not any(p.name in handoff for p in written):
             print("warning: no solver converged; no calibration.yaml or URDF written", file=sys.stderr)
-        for run, calib, sub in pieces:
-            folder = stage.path / sub
-            folder.mkdir(exist_ok=True)
-            written.append(write_result(run, folder))
-            if args.report:
-                from nlp_calib.outputs.writer import write_report  # imports matplotlib
-
-                written += write_report(calib, run, folder)
-        if last:
+        if top[1]:
             interrupts.hold()  # what is complete stays complete: a later signal changes nothing
         stage.commit()
     return [stage.final(p) for p in written]
@@ -188,14 +174,14 @@ def _calibrate_joint(
     logs: Sequence[Log],
     out: Path,
     args: argparse.Namespace,
-    solvers: Sequence[str] | None,
+    what: tuple[Sequence[str] | None, Sequence[registry.Output]],
     progress: Progress,
     last: bool,
 ) -> list[CalibrationRun]:
     """One calibration from several logs: the hand-off files in ``out``, each log's result (and
     report) in ``out/<log>/``."""
-    calib = JointCalibration(scenario, logs, solvers)
-    joint = calib.run(solvers)
+    solvers, outputs = what
+    joint = JointCalibration(scenario, logs, solvers).run(solvers, Wanted(series=args.report))
     progress.clear()
     parts = joint.parts
     for part in parts:
@@ -206,10 +192,10 @@ def _calibrate_joint(
     print()
     print(f"joint fit of {len(parts)} logs, {joint.n_residuals} windows; each log with the joint parameters:")
     print(summary_table(list(parts)))
-    pieces = [(part, pcalib, part.scenario.name) for part, pcalib in zip(parts, calib.parts)]
-    final = _write_outputs(out, args, dataclasses.replace(parts[0], scenario=scenario), pieces, last)
-    print("\n" + "\n".join(_wrote(final, out)) + "\n")
-    print("\n".join(summary_lines(parts[0], final)) + "\n")
+    handoff = dataclasses.replace(parts[0], scenario=joint.scenario)
+    pieces = [(part, part.scenario.name) for part in parts]
+    final = _write_outputs(out, args, outputs, pieces, (handoff, last))
+    _closing(parts[0], final, out)
     return list(parts)
 
 
@@ -279,43 +265,28 @@ def _cmd_odometry(args: argparse.Namespace) -> int:
         raise UsageError("odometry takes one scenario")
     (scenario,) = _load_with_data(args.scenario, args.data)
     (out,) = _out_dirs(args, [scenario])
-    names = [RESULT_FILE, *HANDOFF_FILES, ODOMETRY_CSV, *([ODOMETRY_PNG] if args.report else [])]
-    refuse_collisions(out, names, force=args.force)
-    calib = Calibration.setup(scenario, log=steps.read_checked(scenario))
-    run = calib.run((args.solver,))
+    outputs = registry.selected(("result", "handoff", "odometry"), args.report)
+    refuse_collisions(out, [o.name for o in outputs], force=args.force)
+    calib = Calibration.setup(scenario, log=read_checked(scenario))
+    run = calib.run((args.solver,), Wanted(odometry=args.solver))
     print(run_table(run))
     print()
     print(correlation_table(run, args.solver))
     result = run.reports[args.solver].result
-    if not result.converged:
+    if not result.converged or run.odometry is None:
         raise SolverError(f"{args.solver} did not converge ({result.reason}); no odometry from it")
-    track = calib.odometry(result.params)
-    cov = track.covariance
-    with StagedOutput(out, "odometry", force=args.force) as stage:
-        written = [write_result(run, stage.path), *write_handoff(run, stage.path)]
-        written.append(stage.path / ODOMETRY_CSV)
-        atomic_write_text(written[-1], track.csv())
-        if args.report:
-            from nlp_calib.outputs.plots import odometry_png  # imports matplotlib
-
-            title = f"{scenario.name}: calibrated odometry ({args.solver}), {args.sigma:g}σ ellipses"
-            png = odometry_png(track, calib.base_reference(result.params), title, sigma=args.sigma)
-            written.append(stage.path / ODOMETRY_PNG)
-            atomic_write_bytes(written[-1], png)
-        interrupts.hold()
-        stage.commit()
-    final = [stage.final(p) for p in written]
+    final = _write_outputs(out, args, outputs, [(run, "")], (run, True), "odometry")
+    cov = run.odometry.covariance
     noise = ", ".join(
         f"{n} {v:.3g} {calib.model.input_units[n]}"
-        for n, v in zip(calib.model.input_names, calib.input_noise_std)
+        for n, v in zip(calib.model.input_names, calib.stages.windows.input_noise_std)
     )
     print(
-        f"\nodometry over {calib.selected.n_records} records, final 1σ: "
+        f"\nodometry over {run.odometry.time_s.size} records, final 1σ: "
         f"x {1e3 * np.sqrt(cov[-1, 0, 0]):.3g} mm, y {1e3 * np.sqrt(cov[-1, 1, 1]):.3g} mm, "
         f"θ {1e3 * np.sqrt(cov[-1, 2, 2]):.3g} mrad from encoder noise alone (per interval: {noise})"
     )
-    print("\n" + "\n".join(_wrote(final, out)) + "\n")
-    print("\n".join(summary_lines(run, final)) + "\n")
+    _closing(run, final, out)
     return 0
 
 
@@ -328,16 +299,14 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         scenario, validation=dataclasses.replace(scenario.validation, blocks=blocks)
     )
     (out,) = _out_dirs(args, [scenario])
-    refuse_collisions(out, [VALIDATION_FILE], force=args.force)
-    run = Calibration.setup(scenario, log=steps.read_checked(scenario)).run(scenario.solvers[:1])
+    outputs = registry.selected(("validation",), report=False)
+    refuse_collisions(out, [o.name for o in outputs], force=args.force)
+    run = Calibration.setup(scenario, log=read_checked(scenario)).run(scenario.solvers[:1])
     print(validation_table(run))
-    with StagedOutput(out, "validate", force=args.force) as stage:
-        atomic = write_validation(run, stage.path)
-        interrupts.hold()
-        written = stage.commit()
-    assert written == [stage.final(atomic)]
+    written = _write_outputs(out, args, outputs, [(run, "")], (run, True), "validate")
     print("\n" + "\n".join(_wrote(written, out)))
-    return 0 if run.crossval is not None and run.crossval.available else 1
+    cv = run.checks.crossval
+    return 0 if cv is not None and cv.available else 1
 
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {

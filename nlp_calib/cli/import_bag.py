@@ -10,20 +10,20 @@ from nlp_calib.core.files import atomic_write_text, check_output_dir
 from nlp_calib.logs.reader import parse_log
 from nlp_calib.models import get_model
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
-from nlp_calib.pipeline.bags import BagSource, import_bag
+from nlp_calib.sources import BagSource
 
 
 def cmd_import_bag(args: argparse.Namespace) -> int:
     model = get_model(args.model)
     source = BagSource(
-        args.joint_states, args.joints, args.tracker, args.tracker_frame, args.robot, args.max_gap
+        args.bag, args.joint_states, args.joints, args.tracker, args.tracker_frame, args.robot, args.max_gap
     )
     out = args.out
     if out.is_dir() or out.name in ("", ".", ".."):
         raise UsageError(f"--out {out} is a folder; give the path of the log file to write")
     folder = check_output_dir(out.parent)
     refuse_collisions(folder, [out.name], tracked=False, force=args.force)  # it may be the user's log
-    header, records = import_bag(args.bag, source, model)
+    header, records = source.records(model)
     text = records.text(header, model.encoder_kinds)
     # Read back as a run will read it: records a strict read refuses are named now, as warnings.
     log = parse_log(text.splitlines(), model.encoder_kinds, str(out), strict=False)

@@ -62,6 +62,16 @@ class OptionsError(UsageError):
     """A solver or backend option has a value outside its accepted range."""
 
 
+class FieldError(OptionsError):
+    """One option's value is not accepted. ``field`` names the option; whoever reads it from a
+    file adds the file and the place (``scenario.yaml: residual.horizon: ...``)."""
+
+    def __init__(self, field: str, reason: str) -> None:
+        super().__init__(f"{field}: {reason}")
+        self.field = field
+        self.reason = reason
+
+
 class SolverError(NlpCalibError):
     """A solver could not run at all (as opposed to running and not converging)."""
 

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import math
 import reprlib
+from collections.abc import Iterable
 from dataclasses import dataclass
+
+from nlp_calib.core.errors import FieldError
 
 
 class _Short(reprlib.Repr):
@@ -72,3 +75,17 @@ class Range:
         if self.problem(value) is not None:
             raise ValueError(f"must be {self.describe()}, got {text!r}")
         return value
+
+
+def check_range(field: str, value: object, limit: Range) -> None:
+    """Raise :class:`FieldError` naming ``field`` when ``value`` lies outside ``limit``."""
+    reason = limit.problem(value)
+    if reason is not None:
+        raise FieldError(field, reason)
+
+
+def check_choice(field: str, value: object, choices: Iterable[str]) -> None:
+    """Raise :class:`FieldError` naming ``field`` when ``value`` is not one of ``choices``."""
+    choices = tuple(choices)
+    if value not in choices:
+        raise FieldError(field, f"{shown(value)} is not one of {', '.join(choices)}")

@@ -17,27 +17,13 @@ import yaml
 
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.version import __version__
-from nlp_calib.models import get_model, param_units
 from nlp_calib.outputs.results import result_document
-from nlp_calib.pipeline import CalibrationRun
+from nlp_calib.results import CalibrationRun
 
 CALIBRATION_FILE = "calibration.yaml"
 URDF_FILE = "sensor_mount.urdf.xml"
 ROBOT_URDF_FILE = "robot.urdf"
-#: Every file a converged run hands to the robot stack.
-HANDOFF_FILES = (CALIBRATION_FILE, URDF_FILE, ROBOT_URDF_FILE)
 PARENT_FRAME = "base_link"
-
-
-def solver_order(run: CalibrationRun) -> list[str]:
-    """The run's solvers in the scenario's order, then any others in the order they ran."""
-    order = [s for s in run.scenario.solvers if s in run.reports]
-    return order + [s for s in run.reports if s not in order]
-
-
-def chosen_solver(run: CalibrationRun) -> str | None:
-    """The first converged solver in :func:`solver_order`, or None."""
-    return next((s for s in solver_order(run) if run.reports[s].result.converged), None)
 
 
 def _solver_entry(res: Mapping[str, Any]) -> dict[str, Any]:
@@ -53,7 +39,7 @@ def _solver_entry(res: Mapping[str, Any]) -> dict[str, Any]:
 
 def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
     """The ``calibration.yaml`` document, or None when no solver converged."""
-    solver = chosen_solver(run)
+    solver = run.chosen_solver()
     if solver is None:
         return None
     doc = result_document(run)
@@ -62,7 +48,7 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
     ds = doc["dataset"]
     return {
         "tool": {"name": "nlp_calib", "version": __version__},
-        "scenario": {"name": sc.name, "path": None if sc.path is None else str(sc.path)},
+        "scenario": {"name": sc.name, "path": sc.path},
         "model": doc["model"],
         "dataset": {
             "path": ds["path"],
@@ -72,16 +58,16 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
             "tracker_lag_s": doc["alignment"]["tracker_lag_s"],
         },
         # A joint fit: every log it was fitted to (the block above describes the first).
-        **({"datasets": [str(e.path) for e in sc.datasets]} if sc.datasets else {}),
+        **({"datasets": list(sc.datasets)} if sc.datasets else {}),
         "solver": solver,
-        "solver_choice": "first converged solver in the order " + ", ".join(solver_order(run)),
-        "frames": {"parent": PARENT_FRAME, "sensor": run.log.header.sensor_frame},
+        "solver_choice": "first converged solver in the order " + ", ".join(run.solver_order()),
+        "frames": {"parent": PARENT_FRAME, "sensor": run.log.sensor_frame},
         "parameters": best["params"],
         "std": best["std"],
         "std_white_noise": best["std_white_noise"],
         "std_blocks": (doc["crossvalidation"] or {}).get("std_blocks"),
         "correlation": best["correlation"],
-        "units": param_units(get_model(sc.model)),
+        "units": dict(sc.units),
         "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
     }
 
@@ -124,7 +110,7 @@ def _comment_text(text: str) -> str:
 
 def _joint(run: CalibrationRun, solver: str) -> ET.Element:
     p = run.reports[solver].result.param_dict()
-    frame = run.log.header.sensor_frame
+    frame = run.log.sensor_frame
     joint = ET.Element("joint", {"name": f"{PARENT_FRAME}_to_{frame}", "type": "fixed"})
     ET.SubElement(joint, "parent", {"link": PARENT_FRAME})
     ET.SubElement(joint, "child", {"link": frame})
@@ -144,7 +130,7 @@ def _xml(element: ET.Element, comment: str) -> str:
 
 def urdf_joint(run: CalibrationRun, solver: str) -> str:
     """A URDF ``<joint>`` placing the sensor frame on ``base_link`` with ``solver``'s estimate."""
-    frame = run.log.header.sensor_frame
+    frame = run.log.sensor_frame
     comment = (
         f" Sensor mounting pose calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
         f"solver {solver}. Paste this joint into the robot's <robot> description; the link "
@@ -155,7 +141,7 @@ def urdf_joint(run: CalibrationRun, solver: str) -> str:
 
 def urdf_robot(run: CalibrationRun, solver: str) -> str:
     """A complete URDF: a ``<robot>`` with ``base_link``, the sensor's link and the calibrated joint."""
-    frame = run.log.header.sensor_frame
+    frame = run.log.sensor_frame
     robot = ET.Element("robot", {"name": run.scenario.name})
     ET.SubElement(robot, "link", {"name": PARENT_FRAME})
     ET.SubElement(robot, "link", {"name": frame})
@@ -168,16 +154,35 @@ def urdf_robot(run: CalibrationRun, solver: str) -> str:
     return _xml(robot, comment)
 
 
-def write_handoff(run: CalibrationRun, out_dir: Path) -> list[Path]:
-    """Write the hand-off files; with no converged solver, write none and remove stale ones."""
+def _none(path: Path) -> list[Path]:
+    """No hand-off file: a robot stack must never pick up an older calibration next to a failed
+    run's result."""
+    path.unlink(missing_ok=True)
+    return []
+
+
+def write_calibration(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
+    """``calibration.yaml``, when a solver converged."""
     doc = calibration_dict(run)
-    cal, urdf, robot = out_dir / CALIBRATION_FILE, out_dir / URDF_FILE, out_dir / ROBOT_URDF_FILE
     if doc is None:
-        # A robot stack must never pick up an older calibration next to a failed run's result.
-        for path in (cal, urdf, robot):
-            path.unlink(missing_ok=True)
-        return []
-    atomic_write_text(cal, calibration_yaml(doc))
-    atomic_write_text(urdf, urdf_joint(run, doc["solver"]))
-    atomic_write_text(robot, urdf_robot(run, doc["solver"]))
-    return [cal, urdf, robot]
+        return _none(folder / name)
+    atomic_write_text(folder / name, calibration_yaml(doc))
+    return [folder / name]
+
+
+def write_joint(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
+    """The URDF joint alone, when a solver converged."""
+    solver = run.chosen_solver()
+    if solver is None:
+        return _none(folder / name)
+    atomic_write_text(folder / name, urdf_joint(run, solver))
+    return [folder / name]
+
+
+def write_robot(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
+    """A complete robot description with the calibrated joint, when a solver converged."""
+    solver = run.chosen_solver()
+    if solver is None:
+        return _none(folder / name)
+    atomic_write_text(folder / name, urdf_robot(run, solver))
+    return [folder / name]

@@ -7,20 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-from nlp_calib.analysis.metrics import TrajectoryMetrics
+from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.version import __version__
-from nlp_calib.models import get_model, param_units
-from nlp_calib.outputs.handoff import (
-    CALIBRATION_FILE,
-    HANDOFF_FILES,
-    ROBOT_URDF_FILE,
-    URDF_FILE,
-    chosen_solver,
-    solver_order,
-)
 from nlp_calib.outputs.summary import summary_lines
-from nlp_calib.pipeline import CalibrationRun
-from nlp_calib.solvers import solver_label
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.figures import TrajectoryMetrics
 
 #: Figures in page order, with what to look for in each.
 FIGURES: tuple[tuple[str, str, str], ...] = (
@@ -81,14 +72,14 @@ def _cell(v: float | None, fmt: str = ".4g") -> str:
 
 
 def _parameter_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
-    units = param_units(get_model(run.scenario.model))
+    units, label = run.scenario.units, run.scenario.label
     names = list(run.reports[solvers[0]].result.names)
     head = ["parameter", "unit", "initial"]
     for s in solvers:
-        head += [solver_label(s), "± 1σ"]
+        head += [label(s), "± 1σ"]
     pair = len(solvers) == 2
     if pair:
-        head.append(f"{solver_label(solvers[0])} − {solver_label(solvers[1])}")
+        head.append(f"{label(solvers[0])} − {label(solvers[1])}")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for n in names:
         row = [f"`{n}`", units.get(n, ""), fmt_value(run.initial[n])]
@@ -113,7 +104,7 @@ def _metric_rows(prefix: str, base: TrajectoryMetrics, per: list[TrajectoryMetri
 
 
 def _uncertainty_section(run: CalibrationRun) -> list[str]:
-    cv, first = run.crossval, next(iter(run.reports), None)
+    cv, first = run.checks.crossval, next(iter(run.reports), None)
     if first is None:
         return []
     white = run.reports[first].uncertainty.std_dict()
@@ -141,7 +132,7 @@ def _uncertainty_section(run: CalibrationRun) -> list[str]:
     labels = ("segment ATE mean [m]", "RPE over 1 m [m]")
     held = "; ".join(f"{label} {cv.heldout_mean(label):.4f}" for label in labels)
     out += ["", f"Each block scored by the fit without it (mean over the blocks): {held}."]
-    d = run.direction
+    d = run.checks.direction
     if d is not None:
         name, z = d.worst
         verdict = "**disagree**" if d.significant else "agree"
@@ -155,10 +146,11 @@ def _uncertainty_section(run: CalibrationRun) -> list[str]:
 
 
 def _faults_section(run: CalibrationRun) -> list[str]:
-    if run.findings is None:
+    findings = run.checks.findings
+    if findings is None:
         return []
     out = ["## Encoder and tracker faults", ""]
-    rep = run.findings.report
+    rep = findings.report
     stale = sum(rep.stale.values())
     if rep.unchecked:
         return [*out, f"Not checked: {rep.unchecked}.", ""]
@@ -169,10 +161,10 @@ def _faults_section(run: CalibrationRun) -> list[str]:
         ]
         return out
     done = {
-        "exclude": f"{run.dropped_faulty} residual windows that cross them were left out of the fit",
+        "exclude": f"{run.data.dropped_faulty} residual windows that cross them were left out of the fit",
         "repair": "their counts were repaired (below); windows at tracker jumps were left out",
         "keep": "they were kept in the fit (`faults.handling: keep`)",
-    }[run.findings.handling]
+    }[findings.handling]
     out += [
         f"{len(rep.faults)} found; {done}. The fault-robust figures restart dead reckoning from the "
         f"tracker after each fault and leave its records out. {stale} stale counter readings that "
@@ -182,13 +174,13 @@ def _faults_section(run: CalibrationRun) -> list[str]:
         "|---|---|---|---|---|",
     ]
     out += [f"| {f.record} | {f.line} | {f.time_s:.2f} | {f.kind} | {f.evidence} |" for f in rep.faults]
-    out += ["", *(f"- repaired: {r}" for r in run.findings.repairs), ""]
+    out += ["", *(f"- repaired: {r}" for r in findings.repairs), ""]
     return out
 
 
 def _solver_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
     reps = [run.reports[s] for s in solvers]
-    head = ["", "initial guess", *(solver_label(s) for s in solvers)]
+    head = ["", "initial guess", *(run.scenario.label(s) for s in solvers)]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 
     def row(label: str, cells: list[str], initial: str = "–") -> None:
@@ -206,31 +198,54 @@ def _solver_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
     return lines
 
 
-def _summary(run: CalibrationRun) -> list[str]:
-    written = [Path(f) for f in HANDOFF_FILES] if chosen_solver(run) is not None else []
-    head, *rest = summary_lines(run, written)
+def _summary(run: CalibrationRun, next_steps: Sequence[str]) -> list[str]:
+    head, *rest = summary_lines(run, next_steps)
     return [head, "", *(f"- {line.strip()}" for line in rest if not line.startswith("        "))]
 
 
-def report_markdown(run: CalibrationRun, images: Sequence[str]) -> str:
-    """The Markdown page of a run; ``images`` are the figure files written beside it."""
-    sc = run.scenario
-    r = sc.residual
-    solvers = solver_order(run)
-    out = [f"# Calibration report: {sc.name}", ""]
-    lag = f"{1e3 * run.tracker_lag_s:.1f} ms" + (" (estimated)" if run.lag_estimate is not None else "")
-    out += [
+def _header(run: CalibrationRun) -> list[str]:
+    sc, data = run.scenario, run.data
+    r, robust = sc.residual, sc.robust
+    lag = f"{1e3 * data.tracker_lag_s:.1f} ms" + (" (estimated)" if data.lag_estimate is not None else "")
+    return [
+        f"# Calibration report: {sc.name}",
+        "",
         f"- scenario: `{sc.path if sc.path is not None else sc.name}`, model `{sc.model}`, "
         f"nlp_calib {__version__}",
-        f"- dataset: `{sc.dataset}`, records [{run.used[0]}, {run.used[1]}) of {run.log.n_records}, "
-        f"fitted on [{run.fit[0]}, {run.fit[1]})",
-        f"- residuals: {run.n_residuals} windows of horizon {r.horizon} (stride {r.stride}, "
-        f"{r.integration} integration); kernel {sc.robust.kernel}, δ = {sc.robust.delta:g}; "
+        f"- dataset: `{sc.dataset}`, records [{data.used[0]}, {data.used[1]}) of {run.log.records}, "
+        f"fitted on [{data.fit[0]}, {data.fit[1]})",
+        f"- residuals: {data.n_residuals} windows of horizon {r['horizon']} (stride {r['stride']}, "
+        f"{r['integration']} integration); kernel {robust['kernel']}, δ = {robust['delta']:g}; "
         f"tracker lag {lag}",
+    ]
+
+
+def _handoff_section(run: CalibrationRun, handoff: Sequence[str]) -> list[str]:
+    chosen = run.chosen_solver()
+    out = ["## Hand-off files", ""]
+    if chosen is None or not handoff:
+        out.append("No solver converged, so no hand-off files were written.")
+    else:
+        files = ", ".join(f"[`{f}`]({f})" for f in handoff[:-1]) + f" and [`{handoff[-1]}`]({handoff[-1]})"
+        out.append(
+            f"{files} carry {run.scenario.label(chosen)}'s estimate (the first converged solver in the "
+            f"order {', '.join(run.solver_order())})."
+        )
+    return [*out, ""]
+
+
+def report_markdown(
+    run: CalibrationRun, images: Sequence[str], handoff: Sequence[str] = (), next_steps: Sequence[str] = ()
+) -> str:
+    """The Markdown page of a run; ``images`` are the figure files written beside it, ``handoff``
+    the hand-off files of the calibration and ``next_steps`` what the summary says of them."""
+    solvers = run.solver_order()
+    out = _header(run)
+    out += [
         "",
         "## Summary",
         "",
-        *_summary(run),
+        *_summary(run, next_steps),
         "",
         "## Parameters",
         "",
@@ -253,23 +268,21 @@ def report_markdown(run: CalibrationRun, images: Sequence[str]) -> str:
         res = run.reports[s].result
         if not res.converged:
             out += [
-                f"> **{solver_label(s)} did not converge** ({res.reason}); do not use its parameters.",
+                f"> **{run.scenario.label(s)} did not converge** ({res.reason}); do not use its parameters.",
                 "",
             ]
     out += [f"> warning: {w}" for w in run.warnings]
-    chosen = chosen_solver(run)
-    out += ["## Hand-off files", ""]
-    if chosen is None:
-        out.append("No solver converged, so no hand-off files were written.")
-    else:
-        out.append(
-            f"[`{CALIBRATION_FILE}`]({CALIBRATION_FILE}), [`{URDF_FILE}`]({URDF_FILE}) and "
-            f"[`{ROBOT_URDF_FILE}`]({ROBOT_URDF_FILE}) carry "
-            f"{solver_label(chosen)}'s estimate (the first converged solver in the order "
-            f"{', '.join(solvers)})."
-        )
-    out.append("")
+    out += _handoff_section(run, handoff)
     for file, heading, caption in FIGURES:
         if file in images:
             out += [f"## {heading}", "", caption, "", f"![{heading}]({file})", ""]
     return "\n".join(out)
+
+
+def write_report(
+    run: CalibrationRun, folder: Path, name: str, handoff: Sequence[str], next_steps: Sequence[str]
+) -> list[Path]:
+    """Write ``report.md`` beside the figures already in ``folder``."""
+    images = [file for file, _, _ in FIGURES if (folder / file).exists()]
+    atomic_write_text(folder / name, report_markdown(run, images, handoff, next_steps) + "\n")
+    return [folder / name]

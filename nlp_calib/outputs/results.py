@@ -8,12 +8,10 @@ from typing import Any
 
 import numpy as np
 
-from nlp_calib.analysis.metrics import TrajectoryMetrics
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.version import __version__
-from nlp_calib.pipeline import CalibrationRun, SolverReport
-
-RESULT_FILE = "result.json"
+from nlp_calib.results import CalibrationRun, SolverReport
+from nlp_calib.results.figures import TrajectoryMetrics
 
 
 def _metrics_dict(full: TrajectoryMetrics, holdout: TrajectoryMetrics | None) -> dict[str, Any]:
@@ -24,23 +22,24 @@ def _metrics_dict(full: TrajectoryMetrics, holdout: TrajectoryMetrics | None) ->
 
 
 def _faults_dict(run: CalibrationRun) -> dict[str, Any] | None:
-    if run.findings is None:
+    findings = run.checks.findings
+    if findings is None:
         return None
-    rep = run.findings.report
+    rep = findings.report
     return {
-        "handling": run.findings.handling,
+        "handling": findings.handling,
         "checked": not rep.unchecked,
         "unchecked_reason": rep.unchecked or None,
         "found": [f.as_dict() for f in rep.faults],
-        "windows_left_out": run.dropped_faulty,
-        "repairs": list(run.findings.repairs),
+        "windows_left_out": run.data.dropped_faulty,
+        "repairs": list(findings.repairs),
         "stale_readings": dict(rep.stale),
         "noise_ticks": dict(rep.noise_ticks),
     }
 
 
 def _crossval_dict(run: CalibrationRun) -> dict[str, Any] | None:
-    cv = run.crossval
+    cv = run.checks.crossval
     if cv is None:
         return None
     return {
@@ -88,35 +87,36 @@ def _solver_dict(run: CalibrationRun, name: str, report: SolverReport) -> dict[s
 
 def result_dict(run: CalibrationRun) -> dict[str, Any]:
     """The ``result.json`` document of a run."""
-    sc = run.scenario
+    sc, data, checks = run.scenario, run.data, run.checks
     return {
         "scenario": sc.name,
         "tool": {"name": "nlp_calib", "version": __version__},
         "model": sc.model,
         "dataset": {
-            "path": str(sc.dataset),
-            "records": run.log.n_records,
-            "used": list(run.used),
-            "fit": list(run.fit),
-            "residuals": run.n_residuals,
-            "dropped_stationary": run.dropped_stationary,
+            "path": run.log.path,
+            "records": run.log.records,
+            "used": list(data.used),
+            "fit": list(data.fit),
+            "residuals": data.n_residuals,
+            "dropped_stationary": data.dropped_stationary,
             "dropped_records": [{"line": d.line, "reason": d.reason} for d in run.log.dropped],
         },
-        "residual": dict(sc.residual.__dict__),
-        "robust": dict(sc.robust.__dict__),
+        "residual": dict(sc.residual),
+        "robust": dict(sc.robust),
         "alignment": {
-            "tracker_lag_s": run.tracker_lag_s,
-            "estimate": run.lag_estimate.as_dict() if run.lag_estimate is not None else None,
+            "tracker_lag_s": data.tracker_lag_s,
+            "estimate": data.lag_estimate.as_dict() if data.lag_estimate is not None else None,
         },
         "initial": dict(run.initial),
-        "initial_guess": sc.initial_guess if isinstance(sc.initial_guess, str) else "mapping",
+        "initial_guess": sc.initial_guess,
         "baseline": {"metrics": _metrics_dict(run.baseline, run.baseline_holdout)},
         "solvers": {name: _solver_dict(run, name, rep) for name, rep in run.reports.items()},
         "crossvalidation": _crossval_dict(run),
-        "direction": run.direction.as_dict() if run.direction is not None else None,
+        "direction": checks.direction.as_dict() if checks.direction is not None else None,
         "faults": _faults_dict(run),
-        "observability": run.observability.as_dict() if run.observability is not None else None,
+        "observability": checks.observability.as_dict() if checks.observability is not None else None,
         "warnings": list(run.warnings),
+        "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
     }
 
 
@@ -147,13 +147,8 @@ def result_document(run: CalibrationRun) -> dict[str, Any]:
     return doc
 
 
-VALIDATION_FILE = "validation.json"
-ODOMETRY_CSV = "odometry.csv"
-ODOMETRY_PNG = "odometry.png"
-
-
-def write_validation(run: CalibrationRun, out_dir: Path) -> Path:
-    """Write ``out_dir/validation.json``: the blocked cross-validation and the direction check."""
+def write_validation(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
+    """Write ``validation.json``: the blocked cross-validation and the direction check."""
     solver = next(iter(run.reports))
     doc = {
         "scenario": run.scenario.name,
@@ -163,19 +158,27 @@ def write_validation(run: CalibrationRun, out_dir: Path) -> Path:
         "std": run.std(solver),
         "std_white_noise": run.reports[solver].uncertainty.std_dict(),
         "crossvalidation": _crossval_dict(run),
-        "direction": run.direction.as_dict() if run.direction is not None else None,
+        "direction": run.checks.direction.as_dict() if run.checks.direction is not None else None,
     }
-    path = out_dir / VALIDATION_FILE
+    path = folder / name
     text = json.dumps(
         json.loads(json.dumps(finite_or_null(doc), default=_json_default)), indent=2, allow_nan=False
     )
     atomic_write_text(path, text + "\n")
-    return path
+    return [path]
 
 
-def write_result(run: CalibrationRun, out_dir: Path) -> Path:
-    """Write ``out_dir/result.json`` atomically and return its path."""
-    path = out_dir / RESULT_FILE
+def write_result(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
+    """Write ``result.json`` atomically."""
+    path = folder / name
     text = json.dumps(result_document(run), indent=2, allow_nan=False)
     atomic_write_text(path, text + "\n")
-    return path
+    return [path]
+
+
+def write_odometry(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
+    """Write the calibrated odometry with its covariance as CSV, one row per record."""
+    if run.odometry is None:
+        return []
+    atomic_write_text(folder / name, run.odometry.csv())
+    return [folder / name]

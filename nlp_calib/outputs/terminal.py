@@ -4,12 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from nlp_calib.analysis.faults import count_kinds
-from nlp_calib.analysis.metrics import TrajectoryMetrics
-from nlp_calib.logs.checks import drop_summary
-from nlp_calib.models import get_model, param_units
-from nlp_calib.outputs.summary import verdict
-from nlp_calib.pipeline import CalibrationRun
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.faults import count_kinds
+from nlp_calib.results.figures import TrajectoryMetrics
 
 
 def _fmt(v: float, width: int = 12) -> str:
@@ -39,7 +36,7 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
     lo, hi = (min(ratio.values()), max(ratio.values())) if ratio else (float("nan"), float("nan"))
     # A jackknife over ~10 blocks scatters by ~25 %: only a factor beyond 2 says something.
     larger = [n for n, r in ratio.items() if r > 2.0]
-    cv = run.crossval
+    cv = run.checks.crossval
     assert cv is not None
     if len(larger) == len(ratio):
         verdict = (
@@ -68,7 +65,7 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
 
 def direction_lines(run: CalibrationRun) -> list[str]:
     """How well fits on forward-only and on reverse-only driving agree."""
-    d = run.direction
+    d = run.checks.direction
     if d is None:
         return []
     name, z = d.worst
@@ -85,9 +82,10 @@ SHOWN_FAULTS = 6
 
 def fault_lines(run: CalibrationRun) -> list[str]:
     """What the fault check found and what was done about it, one line each."""
-    if run.findings is None:
+    findings = run.checks.findings
+    if findings is None:
         return []
-    rep, handling = run.findings.report, run.findings.handling
+    rep, handling = findings.report, findings.handling
     stale = sum(rep.stale.values())
     if rep.unchecked:
         return [f"faults: not checked: {rep.unchecked}"]
@@ -95,7 +93,7 @@ def fault_lines(run: CalibrationRun) -> list[str]:
         return [f"faults: none found ({stale} stale counter readings that catch up: harmless)"]
     what = count_kinds(rep.faults)
     done = {
-        "exclude": f"{run.dropped_faulty} residual windows crossing them left out",
+        "exclude": f"{run.data.dropped_faulty} residual windows crossing them left out",
         "repair": "counter faults repaired, windows at tracker jumps left out",
         "keep": "kept in the fit (faults.handling: keep)",
     }[handling]
@@ -109,7 +107,7 @@ def fault_lines(run: CalibrationRun) -> list[str]:
         lines.append(
             f"  ... {len(rest)} more ({count_kinds(rest)}): every one is in result.json under faults.found"
         )
-    lines += [f"  repaired: {r}" for r in run.findings.repairs]
+    lines += [f"  repaired: {r}" for r in findings.repairs]
     return lines
 
 
@@ -139,77 +137,84 @@ def error_stats_lines(run: CalibrationRun, solver: str) -> list[str]:
     return lines
 
 
-def run_table(run: CalibrationRun) -> str:
-    """Parameters side by side (initial, each solver ± 1σ), solver figures and metrics."""
-    names = list(next(iter(run.reports.values())).result.names) if run.reports else list(run.initial)
-    solvers = list(run.reports)
-    w = 24
-    lines = []
-    sc = run.scenario
-    r = sc.residual
-    lines.append(
-        f"scenario {sc.name}: model {sc.model}, "
-        f"records [{run.used[0]}, {run.used[1]}) of {run.log.n_records}, "
-        f"fit on [{run.fit[0]}, {run.fit[1]}), {run.n_residuals} residuals "
-        f"(horizon {r.horizon}, stride {r.stride}, {r.integration}), "
-        f"kernel {sc.robust.kernel} δ={sc.robust.delta:g}"
+def _dropped_line(run: CalibrationRun) -> str:
+    """One line on the records a non-strict read dropped: how many, where, and the first reason."""
+    dropped = run.log.dropped
+    shown = ", ".join(str(d.line) for d in dropped[:5]) + (", ..." if len(dropped) > 5 else "")
+    return (
+        f"log: dropped {len(dropped)} of {run.log.records + len(dropped)} records (strict: false) at "
+        f"line(s) {shown}; line {dropped[0].line}: {dropped[0].reason} "
+        "(all listed in result.json under dataset.dropped_records)"
     )
-    if run.lag_estimate is not None:
-        lines.append(f"tracker lag estimated by the fit cost: {1e3 * run.tracker_lag_s:.1f} ms")
-    elif run.tracker_lag_s:
-        lines.append(f"tracker lag (from the scenario): {1e3 * run.tracker_lag_s:.1f} ms")
+
+
+def _header_lines(run: CalibrationRun) -> list[str]:
+    sc, data = run.scenario, run.data
+    r, robust = sc.residual, sc.robust
+    lines = [
+        f"scenario {sc.name}: model {sc.model}, "
+        f"records [{data.used[0]}, {data.used[1]}) of {run.log.records}, "
+        f"fit on [{data.fit[0]}, {data.fit[1]}), {data.n_residuals} residuals "
+        f"(horizon {r['horizon']}, stride {r['stride']}, {r['integration']}), "
+        f"kernel {robust['kernel']} δ={robust['delta']:g}"
+    ]
+    if data.lag_estimate is not None:
+        lines.append(f"tracker lag estimated by the fit cost: {1e3 * data.tracker_lag_s:.1f} ms")
+    elif data.tracker_lag_s:
+        lines.append(f"tracker lag (from the scenario): {1e3 * data.tracker_lag_s:.1f} ms")
     if run.log.dropped:
-        lines.append(
-            f"log: {drop_summary(run.log.dropped, run.log.n_records + len(run.log.dropped))} "
-            "(all listed in result.json under dataset.dropped_records)"
-        )
-    if run.dropped_stationary:
-        lines.append(f"dropped {run.dropped_stationary} windows without motion")
-    lines.append("")
-    units = param_units(get_model(sc.model))
-    lines.append(_row("parameter", [f"{'initial':>12}"] + [f"{s:>{w}}" for s in solvers] + ["  unit"]))
+        lines.append(_dropped_line(run))
+    if data.dropped_stationary:
+        lines.append(f"dropped {data.dropped_stationary} windows without motion")
+    return [*lines, ""]
+
+
+def _parameter_lines(run: CalibrationRun, solvers: list[str], w: int) -> list[str]:
+    names = list(next(iter(run.reports.values())).result.names) if run.reports else list(run.initial)
+    units = run.scenario.units
+    lines = [_row("parameter", [f"{'initial':>12}"] + [f"{s:>{w}}" for s in solvers] + ["  unit"])]
     for n in names:
         cells = [_fmt(run.initial[n])]
         for s in solvers:
-            rep = run.reports[s]
-            v = rep.result.param_dict()[n]
-            sd = run.std(s)[n]
-            cells.append(f"{_fmt(v, 12)} ± {sd:<9.2g}")
+            v = run.reports[s].result.param_dict()[n]
+            cells.append(f"{_fmt(v, 12)} ± {run.std(s)[n]:<9.2g}")
         lines.append(_row(n, [*cells, f"  {units[n]}"]))
     lines += uncertainty_lines(run)
     if len(solvers) == 2:
         a, b = (run.reports[s].result for s in solvers)
-        rel = np.max(np.abs(a.params - b.params) / np.maximum(np.abs(a.params), 1e-12))
         lines.append(
-            f"max relative parameter difference {solvers[0]} vs {solvers[1]}: {rel:.2e}; "
+            f"max relative parameter difference {solvers[0]} vs {solvers[1]}: "
+            f"{run.relative_difference(*solvers):.2e}; "
             f"cost difference {abs(a.cost - b.cost) / max(abs(a.cost), 1e-300):.2e} (relative)"
         )
-    lines.append("")
-    blank = f"{'':>12}"
+    return [*lines, ""]
+
+
+def _solver_lines(run: CalibrationRun, solvers: list[str], w: int) -> list[str]:
+    res = {s: run.reports[s].result for s in solvers}
     figures = [
-        ("cost", lambda s: _fmt(run.reports[s].result.cost, w)),
-        ("chi2", lambda s: _fmt(run.reports[s].result.chi2, w)),
-        (
-            "inliers",
-            lambda s: f"{run.reports[s].result.inliers:>{w - 6}d}/{run.reports[s].result.n_residuals:<5d}",
-        ),
-        ("iterations", lambda s: f"{run.reports[s].result.iterations:>{w}d}"),
-        ("time [ms]", lambda s: f"{1e3 * run.reports[s].result.time_s:>{w}.1f}"),
-        ("converged", lambda s: f"{'yes' if run.reports[s].result.converged else 'NO':>{w}}"),
+        ("cost", lambda s: _fmt(res[s].cost, w)),
+        ("chi2", lambda s: _fmt(res[s].chi2, w)),
+        ("inliers", lambda s: f"{res[s].inliers:>{w - 6}d}/{res[s].n_residuals:<5d}"),
+        ("iterations", lambda s: f"{res[s].iterations:>{w}d}"),
+        ("time [ms]", lambda s: f"{1e3 * res[s].time_s:>{w}.1f}"),
+        ("converged", lambda s: f"{'yes' if res[s].converged else 'NO':>{w}}"),
     ]
-    for label, cell in figures:
-        lines.append(_row(label, [blank] + [cell(s) for s in solvers]))
-    metric_sets: list[tuple[bool, TrajectoryMetrics | None]] = [(False, run.baseline)]
+    lines = [_row(label, [f"{'':>12}"] + [cell(s) for s in solvers]) for label, cell in figures]
+    metric_sets: list[tuple[bool, TrajectoryMetrics]] = [(False, run.baseline)]
     if run.baseline_holdout is not None:
         metric_sets.append((True, run.baseline_holdout))
     for holdout, base in metric_sets:
-        if base is None:
-            continue
         per_solver = [run.reports[s].holdout if holdout else run.reports[s].metrics for s in solvers]
         for i, (label, value) in enumerate(base.figures()):
             cells = [_fmt(value)]
             cells += [_fmt(m.figures()[i][1] if m is not None else float("nan"), w) for m in per_solver]
             lines.append(_row(("hold-out " if holdout else "") + label, cells))
+    return lines
+
+
+def _check_lines(run: CalibrationRun, solvers: list[str]) -> list[str]:
+    lines: list[str] = []
     chosen = next((s for s in solvers if run.reports[s].result.converged), None)
     if chosen is not None:
         lines += ["", *error_stats_lines(run, chosen)]
@@ -217,23 +222,31 @@ def run_table(run: CalibrationRun) -> str:
     if faults:
         lines += ["", *faults]
     lines += direction_lines(run)
-    if run.observability is not None:
+    obs = run.checks.observability
+    if obs is not None:
         lines.append("")
         lines.append(
-            f"observability: condition number {run.observability.condition_number:.3g} (Jacobi-scaled "
-            f"information matrix), heading range {run.observability.heading_range_rad:.2f} rad"
+            f"observability: condition number {obs.condition_number:.3g} (Jacobi-scaled "
+            f"information matrix), heading range {obs.heading_range_rad:.2f} rad"
         )
-        lines.extend(f"WARNING: {w}" for w in run.observability.warnings)
+        lines.extend(f"WARNING: {w}" for w in obs.warnings)
     for s in solvers:
         res = run.reports[s].result
         if not res.converged:
             lines.append(f"WARNING: {s} did not converge: {res.reason}. Do not use its parameters.")
-    return "\n".join(lines)
+    return lines
+
+
+def run_table(run: CalibrationRun) -> str:
+    """Parameters side by side (initial, each solver ± 1σ), solver figures and metrics."""
+    solvers, w = list(run.reports), 24
+    lines = _header_lines(run) + _parameter_lines(run, solvers, w) + _solver_lines(run, solvers, w)
+    return "\n".join(lines + _check_lines(run, solvers))
 
 
 def validation_table(run: CalibrationRun) -> str:
     """The folds of the blocked cross-validation, the two σ side by side, and the direction check."""
-    cv, solver = run.crossval, next(iter(run.reports))
+    cv, solver = run.checks.crossval, next(iter(run.reports))
     if cv is None:
         return "no cross-validation: too few converged fits"
     names = list(cv.names)
@@ -272,7 +285,7 @@ def summary_table(runs: list[CalibrationRun]) -> str:
     fault-robust trajectory errors and the scenario's verdict."""
     headline: list[str] = []
     for run in runs:
-        headline += [n for n in get_model(run.scenario.model).headline if n not in headline]
+        headline += [n for n in run.scenario.headline if n not in headline]
     head = (
         f"{'scenario':<22}{'solver':<14}{'H':>4}{'integr.':>8}"
         + "".join(f"{n[:11]:>12}" for n in headline)
@@ -281,14 +294,14 @@ def summary_table(runs: list[CalibrationRun]) -> str:
     lines = ["summary", head, "-" * len(head)]
     for run in runs:
         r = run.scenario.residual
-        level = verdict(run).level
+        level = run.verdict.level
         for name, rep in run.reports.items():
             p = rep.result.param_dict()
             m = rep.metrics
             ho = f"{rep.holdout.segment_ate.mean:>10.3f}" if rep.holdout is not None else f"{'-':>10}"
             values = "".join(f"{p[n]:>12.6g}" if n in p else f"{'-':>12}" for n in headline)
             lines.append(
-                f"{run.scenario.name[:21]:<22}{name:<14}{r.horizon:>4}{r.integration:>8}{values}"
+                f"{run.scenario.name[:21]:<22}{name:<14}{r['horizon']:>4}{r['integration']:>8}{values}"
                 f"{m.segment_ate.mean:>11.3f}{m.rpe_distance[5.0].mean:>9.3f}{ho}"
                 f"{'yes' if rep.result.converged else 'NO':>6}  {level}"
             )

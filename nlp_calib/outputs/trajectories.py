@@ -14,17 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from nlp_calib.analysis.metrics import (
-    RPE_DISTANCES,
-    ErrorStats,
-    aligned_errors,
-    restarted,
-    rpe_by_distance,
-    segments,
-    steps,
-)
 from nlp_calib.core.files import atomic_write_text
-from nlp_calib.pipeline import Calibration, CalibrationRun
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.figures import RPE_DISTANCES
+from nlp_calib.results.series import SegmentFigures
 
 FOLDER = "trajectories"
 
@@ -37,31 +30,21 @@ def tum_text(time_s: np.ndarray, T: np.ndarray) -> str:
     return "".join(" ".join(f"{v:.9f}" for v in row) + "\n" for row in cols)
 
 
-def write_trajectories(calib: Calibration, run: CalibrationRun, out_dir: Path) -> list[Path]:
-    """Write the TUM files and their README into ``out_dir/trajectories``; returns their paths."""
-    folder = out_dir / FOLDER
-    a, b = run.used
-    sel = calib.selected
-    t, ref = sel.time_s, np.asarray(sel.T_world_sensor)
-    inputs = calib.model.inputs(sel, run.scenario.residual.steering_sample)
-    good = ~calib.fault_masks[1][a:b]
-    parts = [(p, q) for p, q in segments(b - a, calib.fault_masks[0][a : b - 1])]
+def write_trajectories(run: CalibrationRun, out_dir: Path, name: str = FOLDER) -> list[Path]:
+    """Write the TUM files and their README into ``out_dir/name``; returns their paths."""
+    folder = out_dir / name
+    tracks = run.require_series().tracks
+    t, ref = tracks.time_s, tracks.tracker
     written: dict[str, str] = {"tracker.tum": tum_text(t, ref)}
-    table = []
-    for name, rep in run.reports.items():
-        step = steps(calib.fns, rep.result.params, inputs)
-        full = restarted(step, ref, [(0, b - a)])
-        written[f"{name}.tum"] = tum_text(t, full)
-        track = restarted(step, ref, parts)
-        for k, (p, q) in enumerate(parts, start=1):
-            idx = p + np.flatnonzero(good[p:q])
-            written[f"segment{k}_{name}.tum"] = tum_text(t[idx], track[idx])
+    for track in tracks.tracks:
+        if track.solver is not None:
+            written[f"{track.solver}.tum"] = tum_text(t, track.T_world_sensor)
+    for solver, track in tracks.restarted.items():
+        for k, (p, q) in enumerate(tracks.parts, start=1):
+            idx = p + np.flatnonzero(tracks.good[p:q])
+            written[f"segment{k}_{solver}.tum"] = tum_text(t[idx], track[idx])
             written.setdefault(f"segment{k}_tracker.tum", tum_text(t[idx], ref[idx]))
-            ate = ErrorStats.of(np.linalg.norm(track[idx, :2] - ref[idx, :2], axis=1))
-            aligned = ErrorStats.of(aligned_errors(track[idx], ref[idx]))
-            rpe = [rpe_by_distance(track, ref, [idx], d) for d in RPE_DISTANCES]
-            table.append((name, k, len(idx), ate, aligned, rpe))
-    written["README.md"] = _readme(run, table)
+    written["README.md"] = _readme(run, tracks.segments)
     paths = []
     for file, text in written.items():
         atomic_write_text(folder / file, text)
@@ -69,9 +52,7 @@ def write_trajectories(calib: Calibration, run: CalibrationRun, out_dir: Path) -
     return paths
 
 
-def _readme(
-    run: CalibrationRun, table: list[tuple[str, int, int, ErrorStats, ErrorStats, list[ErrorStats]]]
-) -> str:
+def _readme(run: CalibrationRun, table: tuple[SegmentFigures, ...]) -> str:
     solvers = list(run.reports)
     first = solvers[0]
     rpe_cols = " | ".join(f"RPE {d:g} m mean (pairs)" for d in RPE_DISTANCES)
@@ -102,9 +83,10 @@ def _readme(
         f"| solver | segment | poses | ATE mean | ATE rmse | aligned ATE mean | {rpe_cols} |",
         "|---|---|---|---|---|---|" + "---|" * len(RPE_DISTANCES),
     ]
-    for name, k, n, ate, aligned, rpe in table:
-        cells = " | ".join(f"{s.mean:.6f} ({s.n})" for s in rpe)
+    for row in table:
+        cells = " | ".join(f"{s.mean:.6f} ({s.n})" for s in row.rpe)
         lines.append(
-            f"| {name} | {k} | {n} | {ate.mean:.6f} | {ate.rmse:.6f} | {aligned.mean:.6f} | {cells} |"
+            f"| {row.solver} | {row.segment} | {row.poses} | {row.ate.mean:.6f} | {row.ate.rmse:.6f} "
+            f"| {row.aligned.mean:.6f} | {cells} |"
         )
     return "\n".join(lines) + "\n"

@@ -1,21 +1,22 @@
-"""Pipeline layer: scenario configuration and the calibration as named steps.
+"""Pipeline layer: scenario configuration and the calibration as named stages.
 
-The only layer that speaks scenario language: library errors from below are translated here into
-messages that name the scenario key to fix.
+The stages, in order: prepare (:mod:`.prepare`), build (:mod:`.build`), screen (:mod:`.screen`),
+align (:mod:`.align`), bind (:mod:`.windows`), fit (:mod:`.fit`), analyse (:mod:`.analyse`) and
+assemble (:mod:`.assemble`); :mod:`.calibration` chains them for one log or several. The only
+layer that speaks scenario language: library errors from below are translated here into
+messages that name the scenario key to fix (:mod:`.keys`).
 """
 
-from nlp_calib.pipeline.calibration import Calibration, CalibrationRun, SolverReport
-from nlp_calib.pipeline.joint import JointCalibration, JointRun
+from nlp_calib.pipeline.analyse import Wanted
+from nlp_calib.pipeline.calibration import Calibration, JointCalibration
 from nlp_calib.pipeline.scenario import LogEntry, Scenario, load_scenario, scenario_from_mapping
 
 __all__ = [
     "Calibration",
-    "CalibrationRun",
     "JointCalibration",
-    "JointRun",
     "LogEntry",
     "Scenario",
-    "SolverReport",
+    "Wanted",
     "load_scenario",
     "scenario_from_mapping",
 ]

@@ -17,7 +17,9 @@ from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.models import KinematicModel
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.pipeline.steps import Binder, scenario_key, split
+from nlp_calib.pipeline.build import Binder
+from nlp_calib.pipeline.keys import scenario_key
+from nlp_calib.pipeline.prepare import split
 
 
 @dataclass(frozen=True)
@@ -40,7 +42,7 @@ def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np
     inputs are re-sampled (and, when stationary windows are dropped, the windows re-selected).
     """
     sc = binder.scenario
-    al = sc.alignment
+    al = sc.log.alignment
     kinds = binder.fns.model.encoder_kinds
     reach = max(abs(al.search[0]), abs(al.search[1]))
     t = log.time_s
@@ -53,7 +55,7 @@ def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np
     def fit_cost(lag: float) -> float:
         nonlocal x_start
         shifted, _ = resample_encoders(log, lag, kinds)
-        if sc.samples.drop_stationary:
+        if sc.log.samples.drop_stationary:
             binder.bind(shifted, first, fit_stop, evaluator=ev)
         else:
             ev.set_inputs(binder.inputs(shifted, first, fit_stop))
@@ -72,15 +74,10 @@ def realign(alignment: Alignment, log: Log, model: KinematicModel) -> Alignment:
     return replace(alignment, log=aligned, valid=valid)
 
 
-def median_interval(log: Log) -> float:
-    """The median time between records (s)."""
-    return float(np.median(np.diff(log.time_s))) if log.n_records > 1 else 1.0
-
-
 def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Alignment:
     """The scenario's tracker lag (given, or estimated when ``auto``) applied to the encoders."""
     sc = binder.scenario
-    lag = sc.alignment.tracker_lag
+    lag = sc.log.alignment.tracker_lag
     estimate = None
     if lag == "auto":
         with scenario_key(sc, "alignment.search"):
@@ -95,7 +92,7 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
 
 def lag_at_edge(sc: Scenario, lag_s: float) -> str:
     """The warning for a tracker lag estimated at an end of the searched range."""
-    lo, hi = sc.alignment.search
+    lo, hi = sc.log.alignment.search
     return (
         f"alignment.tracker_lag: the estimated lag {1e3 * lag_s:.1f} ms lies at the edge of the "
         f"searched range [{lo:g}, {hi:g}] s, so the best lag may lie beyond it: widen "

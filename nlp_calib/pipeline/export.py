@@ -9,7 +9,8 @@ import numpy as np
 
 from nlp_calib.codegen.export import Example, build_for_export, generate
 from nlp_calib.core.errors import NlpCalibWarning
-from nlp_calib.pipeline import steps
+from nlp_calib.pipeline.keys import scenario_key
+from nlp_calib.pipeline.prepare import read, select
 from nlp_calib.pipeline.calibration import Calibration
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import build_residual_data
@@ -22,13 +23,13 @@ def write_c_export(sc: Scenario, out_dir: Path) -> tuple[list[Path], Example]:
     parameters (its first solver's; the initial guess if that does not converge) and compares the
     result with Python's. Returns the files and what the example evaluates.
     """
-    model, log = steps.load(sc)
-    steps.select(sc, log)  # the horizon must fit the log before anything is built
-    with steps.scenario_key(sc, "residual"):
-        problems = build_for_export(model, sc.residual.horizon, sc.residual.integration)
+    model, log = read(sc)
+    select(sc, log)  # the horizon must fit the log before anything is built
+    with scenario_key(sc, "residual"):
+        problems = build_for_export(model, sc.objective.residual.horizon, sc.objective.residual.integration)
     last = problems[-1]
     H = last.spec.horizon
-    windows = build_residual_data(last, log, sc.residual)
+    windows = build_residual_data(last, log, sc.objective.residual)
     # The example evaluates the window with the most motion: a standing robot's Jacobian is 0.
     busiest = int(np.argmax(np.abs(windows.columns[: last.n_inputs * H]).sum(axis=0)))
     first = int(windows.starts[busiest])
@@ -49,6 +50,6 @@ def write_c_export(sc: Scenario, out_dir: Path) -> tuple[list[Path], Example]:
         )
         values, params_from = dict(calib.initial), "the initial guess"
     params = np.array([values[n] for n in last.names])
-    origin = f"scenario {sc.name} (model {sc.model}, horizon {H}, {sc.residual.integration})"
+    origin = f"scenario {sc.name} (model {sc.model}, horizon {H}, {sc.objective.residual.integration})"
     example = Example(params, params_from, windows.columns[:, busiest], window)
     return generate(problems, out_dir, example, origin), example

@@ -1,9 +1,13 @@
-"""Scenario YAML files: frozen dataclasses, validated on load.
+"""Scenario YAML files: frozen dataclasses, validated once, on load.
 
-Every section is a frozen dataclass; :func:`load_scenario` checks keys and types against the
-dataclass fields, so an unknown key, a wrong type or an inconsistent value is reported with its
-place in the file and the valid choices, before any computation starts. Each registered solver
-has a top-level block named after it, validated against its own options dataclass.
+A scenario file is flat (``residual:``, ``samples:``, ``gauss_newton:`` ... at its top level); in
+memory its keys are grouped by what they decide (:class:`Scenario`). Every option dataclass checks
+its own values when it is made, in neutral words naming the field; :func:`load_scenario` adds the
+file and the place, so an unknown key, a wrong type or a value out of range is one line saying
+where to fix it, before any computation starts. What can only be checked against the model (a
+parameter name, an encoder name, bounds around the initial guess) is checked once the whole
+scenario is read (:func:`check_against_model`). Each registered solver has a top-level block
+named after it, validated against its own options dataclass.
 """
 
 from __future__ import annotations
@@ -16,17 +20,31 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from nlp_calib.core.errors import ConfigError, ScenarioError
-from nlp_calib.core.ranges import Range
-from nlp_calib.logs.bag_reader import is_bag
+from nlp_calib.core.config import coerce, fail, from_mapping, key_name, read_yaml
+from nlp_calib.core.errors import ConfigError, FieldError, ScenarioError
+from nlp_calib.core.ranges import Range, check_choice, check_range, shown
 from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders, get_model, param_names
-from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES
-from nlp_calib.pipeline.bags import BagSource, check_joints, dataset_block
-from nlp_calib.pipeline.config import coerce, fail, from_mapping, key_name, read_yaml, show
 from nlp_calib.problem import ResidualOptions
 from nlp_calib.solvers import SOLVERS
 from nlp_calib.solvers.backends import BACKENDS
+from nlp_calib.sources import BagSource, DatasetSource, TextSource, moved, parse_source
+from nlp_calib.sources.bag import check_joints
 from nlp_calib.symbolic.kernels import KERNELS
+
+#: ``validation.blocks`` (or 0: none): each block costs one more fit.
+BLOCKS = Range(2, 100, integer=True)
+#: Numbers whose squares still fit a float with room to spare: beyond them a value is a typo, and
+#: the cost, its weights or the covariance would overflow (silently, or as a NaN result).
+MAGNITUDE = Range(-1e6, 1e6)
+DELTA = Range(0.0, 1e6, lo_open=True)
+WEIGHT = Range(0.0, 1e12, lo_open=True)
+TICKS = Range(0.0, 1e9, lo_open=True)
+PRIOR_STD = Range(1e-9, 1e6)
+THREADS = Range(1, 64, integer=True)
+RPE_WINDOW = Range(1, 1_000_000, integer=True)
+_FINITE = Range(-math.inf, math.inf, lo_open=True, hi_open=True)
+FAULT_HANDLINGS = ("exclude", "repair", "keep")
+INITIAL_GUESSES = ("from_file", "auto")
 
 
 @dataclass(frozen=True)
@@ -37,6 +55,10 @@ class SampleSelection:
     stop: int | None = None
     drop_stationary: bool = False
 
+    def __post_init__(self) -> None:
+        if self.start < 0 or (self.stop is not None and self.stop <= self.start + 1):
+            raise FieldError("start", f"need 0 <= start < stop - 1, got start={self.start} stop={self.stop}")
+
 
 @dataclass(frozen=True)
 class RobustOptions:
@@ -45,6 +67,10 @@ class RobustOptions:
     kernel: str = "huber"
     delta: float = 0.05
 
+    def __post_init__(self) -> None:
+        check_choice("kernel", self.kernel, KERNELS)
+        check_range("delta", self.delta, DELTA)
+
 
 @dataclass(frozen=True)
 class InformationWeights:
@@ -52,6 +78,10 @@ class InformationWeights:
 
     translation: float = 1.0
     rotation: float = 1.0
+
+    def __post_init__(self) -> None:
+        check_range("translation", self.translation, WEIGHT)
+        check_range("rotation", self.rotation, WEIGHT)
 
     def omega(self) -> tuple[float, float, float]:
         return (self.translation, self.translation, self.rotation)
@@ -67,6 +97,14 @@ class ValidationOptions:
     rpe_window: int = 25
     blocks: int = 10
 
+    def __post_init__(self) -> None:
+        hf = self.holdout_fraction
+        if hf is not None and not 0.0 < hf < 1.0:
+            raise FieldError("holdout_fraction", f"must lie in (0, 1), got {hf}")
+        if self.blocks != 0 and (why := BLOCKS.problem(self.blocks)):
+            raise FieldError("blocks", f"0 (none) or {why}")
+        check_range("rpe_window", self.rpe_window, RPE_WINDOW)
+
 
 @dataclass(frozen=True)
 class AlignmentOptions:
@@ -77,8 +115,12 @@ class AlignmentOptions:
     search: tuple[float, float] = (-0.2, 0.2)
     step: float = 0.01
 
-
-FAULT_HANDLINGS = ("exclude", "repair", "keep")
+    def __post_init__(self) -> None:
+        if isinstance(self.tracker_lag, str):
+            check_choice("tracker_lag", self.tracker_lag, ("auto",))
+        lo, hi = self.search
+        if not (lo < hi and self.step > 0 and (hi - lo) / self.step <= 1000):
+            raise FieldError("search", "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
 
 
 @dataclass(frozen=True)
@@ -92,6 +134,9 @@ class FaultOptions:
 
     handling: str = "exclude"
 
+    def __post_init__(self) -> None:
+        check_choice("handling", self.handling, FAULT_HANDLINGS)
+
 
 @dataclass(frozen=True)
 class Prior:
@@ -100,73 +145,168 @@ class Prior:
     mean: float
     std: float
 
+    def __post_init__(self) -> None:
+        check_range("mean", self.mean, MAGNITUDE)
+        check_range("std", self.std, PRIOR_STD)
+
 
 @dataclass(frozen=True)
 class LogEntry:
-    """One log of a calibration from several (``datasets``): its path, and its own ``samples`` and
-    ``alignment`` where they differ from the scenario's."""
+    """One log of a calibration: where its records come from, and its ``samples`` and
+    ``alignment`` (its own, or the scenario's)."""
 
-    path: Path
-    samples: SampleSelection | None = None
-    alignment: AlignmentOptions | None = None
-    #: How to read ``path`` when the entry is a bag block (docs/bags.md).
-    bag: BagSource | None = None
+    source: DatasetSource
+    samples: SampleSelection = field(default_factory=SampleSelection)
+    alignment: AlignmentOptions = field(default_factory=AlignmentOptions)
+
+    @property
+    def path(self) -> Path:
+        return self.source.path
+
+
+@dataclass(frozen=True)
+class DataOptions:
+    """The logs (one, or several fitted together: ``datasets``), how strictly they are read, the
+    encoders' noise (ticks) and what to do with faults."""
+
+    logs: tuple[LogEntry, ...]
+    joint: bool = False
+    strict: bool = True
+    encoder_noise: Mapping[str, float] = field(default_factory=dict)
+    faults: FaultOptions = field(default_factory=FaultOptions)
+
+    def __post_init__(self) -> None:
+        for enc, ticks in self.encoder_noise.items():
+            check_range(f"encoder_noise.{enc}", ticks, TICKS)
+
+
+@dataclass(frozen=True)
+class ObjectiveOptions:
+    """What the fit minimises: the residual form, the robust kernel and the information weights."""
+
+    residual: ResidualOptions = field(default_factory=ResidualOptions)
+    robust: RobustOptions = field(default_factory=RobustOptions)
+    information: InformationWeights = field(default_factory=InformationWeights)
+
+
+@dataclass(frozen=True)
+class ParameterOptions:
+    """Where the parameters start (``from_file``, ``auto`` or values), bounds, fixed ones, priors."""
+
+    initial_guess: str | Mapping[str, float] = "from_file"
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    fixed: tuple[str, ...] = ()
+    priors: Mapping[str, Prior] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.initial_guess, str):
+            check_choice("initial_guess", self.initial_guess, INITIAL_GUESSES)
+        else:
+            for n, value in self.initial_guess.items():
+                check_range(f"initial_guess.{n}", value, MAGNITUDE)
+        for n, (lo, hi) in self.bounds.items():
+            if not lo < hi:
+                raise FieldError(f"bounds.{n}", f"needs lo < hi, got [{lo}, {hi}]")
+            guess = self.guess(n)
+            if guess is not None and not lo <= guess <= hi:
+                raise FieldError(f"bounds.{n}", f"the initial guess {guess:g} lies outside [{lo:g}, {hi:g}]")
+        for n in self.priors:
+            if n in self.fixed:
+                raise FieldError(f"priors.{n}", "a fixed parameter cannot also have a prior; drop one")
+
+    def guess(self, name: str) -> float | None:
+        """The scenario's own initial value of ``name``, if it gives one."""
+        return self.initial_guess.get(name) if isinstance(self.initial_guess, Mapping) else None
+
+
+@dataclass(frozen=True)
+class ComputeOptions:
+    """How the problem's Functions are evaluated: ``backend`` and ``threads``."""
+
+    backend: str = "compiled"
+    threads: int = 1
+
+    def __post_init__(self) -> None:
+        check_choice("backend", self.backend, BACKENDS)
+        check_range("threads", self.threads, THREADS)
 
 
 @dataclass(frozen=True)
 class Scenario:
-    """A calibration run: data, model, residual form, kernel, solvers and their options."""
+    """A calibration run: its data, model, objective, parameters, solvers and checks.
+
+    ``path`` is the file it was read from; ``origin`` names, for a single-log part of a
+    calibration from several logs, where that log comes from in the file (``datasets[1]``).
+    """
 
     name: str
-    dataset: Path
+    data: DataOptions
     path: Path | None = None
+    origin: str | None = None
     model: str = DEFAULT_MODEL
-    samples: SampleSelection = field(default_factory=SampleSelection)
-    initial_guess: str | Mapping[str, float] = "from_file"
-    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
-    robust: RobustOptions = field(default_factory=RobustOptions)
-    residual: ResidualOptions = field(default_factory=ResidualOptions)
-    information: InformationWeights = field(default_factory=InformationWeights)
+    objective: ObjectiveOptions = field(default_factory=ObjectiveOptions)
+    parameters: ParameterOptions = field(default_factory=ParameterOptions)
     solvers: tuple[str, ...] = tuple(SOLVERS)
     #: Each solver's options, by solver name (the YAML block of that name); defaults when absent.
     solver_options: Mapping[str, Any] = field(default_factory=dict)
     validation: ValidationOptions = field(default_factory=ValidationOptions)
-    alignment: AlignmentOptions = field(default_factory=AlignmentOptions)
-    faults: FaultOptions = field(default_factory=FaultOptions)
-    fixed: tuple[str, ...] = ()
-    priors: Mapping[str, Prior] = field(default_factory=dict)
-    encoder_noise: Mapping[str, float] = field(default_factory=dict)
-    strict: bool = True
-    backend: str = "compiled"
-    threads: int = 1
-    #: How to read ``dataset`` when it is a bag (the ``dataset:`` block); None for a text log.
-    bag: BagSource | None = None
-    #: Several logs calibrated together (``dataset`` is then the first of them).
-    datasets: tuple[LogEntry, ...] = ()
-    #: Where a single-log part of ``datasets`` comes from in its file (``datasets[1]``).
-    origin: str | None = None
+    compute: ComputeOptions = field(default_factory=ComputeOptions)
+
+    @classmethod
+    def of(cls, name: str, dataset: str | Path, **flat: Any) -> Scenario:
+        """A scenario made in code: a text log at ``dataset`` and the top-level keys of a scenario
+        file as values of their types (``residual=ResidualOptions(horizon=5)``)."""
+        data = DataOptions(logs=(LogEntry(TextSource(Path(dataset))),))
+        return cls(name=name, data=data).with_options(**flat)
+
+    @property
+    def log(self) -> LogEntry:
+        """The log of a single-log scenario (the first of several)."""
+        return self.data.logs[0]
+
+    @property
+    def dataset(self) -> Path:
+        """The path of the (first) log."""
+        return self.log.path
 
     def with_dataset(self, path: str | Path) -> Scenario:
         """The same scenario on another log (``--data``); another bag is read with the same topics."""
-        bag = self.bag if is_bag(Path(path)) else None
-        return dataclasses.replace(self, dataset=Path(path), bag=bag, datasets=())
+        entry = dataclasses.replace(self.log, source=moved(self.log.source, Path(path)))
+        return dataclasses.replace(self, data=dataclasses.replace(self.data, logs=(entry,), joint=False))
+
+    def with_options(self, **flat: Any) -> Scenario:
+        """The same scenario with top-level keys of its file replaced by values of their types
+        (``samples=SampleSelection(...)``): ``samples`` and ``alignment`` apply to every log."""
+        sc = self
+        for key, value in flat.items():
+            if key == "dataset":
+                sc = sc.with_dataset(value)
+                continue
+            if key in ("samples", "alignment"):
+                logs = tuple(dataclasses.replace(e, **{key: value}) for e in sc.data.logs)
+                sc = dataclasses.replace(sc, data=dataclasses.replace(sc.data, logs=logs))
+                continue
+            group = _GROUP_OF.get(key)
+            if group is None:
+                sc = dataclasses.replace(sc, **{key: value})
+                continue
+            inner = dataclasses.replace(getattr(sc, group), **{key: value})
+            sc = dataclasses.replace(sc, **{group: inner})
+        return sc
 
     def per_log(self) -> tuple[Scenario, ...]:
-        """One single-log scenario per entry of ``datasets`` (named after its log), with that log's
-        own samples and alignment."""
-        stems = [e.path.stem for e in self.datasets]
+        """One single-log scenario per log, named after its log (numbered when names repeat)."""
+        if not self.data.joint:
+            return (self,)
+        stems = [e.path.stem for e in self.data.logs]
         return tuple(
             dataclasses.replace(
                 self,
                 name=stem if stems.count(stem) == 1 else f"{i + 1}_{stem}",
-                dataset=e.path,
-                datasets=(),
+                data=dataclasses.replace(self.data, logs=(e,), joint=False),
                 origin=f"datasets[{i}]",
-                bag=e.bag,
-                samples=e.samples or self.samples,
-                alignment=e.alignment or self.alignment,
             )
-            for i, (stem, e) in enumerate(zip(stems, self.datasets))
+            for i, (stem, e) in enumerate(zip(stems, self.data.logs))
         )
 
     def options_for(self, solver: str) -> Any:
@@ -178,55 +318,43 @@ class Scenario:
         """The same scenario with ``solver``'s options replaced."""
         return dataclasses.replace(self, solver_options={**self.solver_options, solver: options})
 
-
-#: ``residual.horizon``: each window composes H steps symbolically, so building the problem costs
-#: time and memory in proportion to H; the accuracy study's trajectory error flattens by H = 25.
-HORIZON = Range(1, 200, integer=True)
-STRIDE = Range(1, 1_000_000, integer=True)
-#: ``validation.blocks`` (or 0: none): each block costs one more fit.
-BLOCKS = Range(2, 100, integer=True)
-#: Numbers whose squares still fit a float with room to spare: beyond them a value is a typo, and
-#: the cost, its weights or the covariance would overflow (silently, or as a NaN result).
-MAGNITUDE = Range(-1e6, 1e6)
-DELTA = Range(0.0, 1e6, lo_open=True)
-WEIGHT = Range(0.0, 1e12, lo_open=True)
-TICKS = Range(0.0, 1e9, lo_open=True)
-PRIOR_STD = Range(1e-9, 1e6)
-_FINITE = Range(-math.inf, math.inf, lo_open=True, hi_open=True)
+    def where(self) -> str:
+        """How messages name this scenario (its file, or its name), with the log of a part."""
+        part = f": {self.origin} ({self.dataset.name})" if self.origin else ""
+        return f"{self.path or self.name}{part}"
 
 
-# Keys the YAML may hold at top level: the fields (but where the file was, and the solver
-# options, which come as one block per registered solver).
-_FIELDS = tuple(
-    f.name for f in dataclasses.fields(Scenario) if f.name not in ("path", "solver_options", "bag", "origin")
-)
+#: The group of each top-level key of a scenario file that is not a field of :class:`Scenario`
+#: itself (``dataset``, ``datasets``, ``samples`` and ``alignment`` make the logs).
+_GROUP_OF: Mapping[str, str] = {
+    **{f.name: "data" for f in dataclasses.fields(DataOptions) if f.name not in ("logs", "joint")},
+    **{f.name: "objective" for f in dataclasses.fields(ObjectiveOptions)},
+    **{f.name: "parameters" for f in dataclasses.fields(ParameterOptions)},
+    **{f.name: "compute" for f in dataclasses.fields(ComputeOptions)},
+}
+_LOG_KEYS = ("dataset", "datasets", "samples", "alignment")
+_OWN_KEYS = ("name", "model", "solvers", "validation")
 
 
 def top_level_keys() -> tuple[str, ...]:
     """The keys a scenario file may hold at its top level, one block per registered solver included."""
-    return (*_FIELDS, *SOLVERS)
-
-
-def _check_choice(value: str, choices: typing.Iterable[str], where: str) -> None:
-    choices = tuple(choices)
-    if value not in choices:
-        fail(where, f"{value!r} is not one of {', '.join(choices)}")
+    return (*_OWN_KEYS, *_LOG_KEYS, *_GROUP_OF, *SOLVERS)
 
 
 def scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | None = None) -> Scenario:
     """Validate a parsed YAML mapping; relative dataset paths resolve against ``base_dir``."""
     try:
-        return _scenario_from_mapping(raw, source, base_dir, path)
+        sc = _scenario(raw, source, base_dir, path)
+        check_against_model(sc, source)
     except ConfigError as exc:
         raise ScenarioError(str(exc)) from None
+    return sc
 
 
-def _scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | None) -> Scenario:
+def _check_keys(raw: Any, source: str) -> None:
     if not isinstance(raw, Mapping):
-        fail(
-            source,
-            f"expected a mapping of scenario keys ({', '.join(top_level_keys())}), got {type(raw).__name__}",
-        )
+        keys = ", ".join(top_level_keys())
+        fail(source, f"expected a mapping of scenario keys ({keys}), got {type(raw).__name__}")
     for key in raw:
         if key not in top_level_keys():
             fail(f"{source}: {key_name(key)}", f"unknown key; valid keys are {', '.join(top_level_keys())}")
@@ -236,90 +364,143 @@ def _scenario_from_mapping(raw: Any, source: str, base_dir: Path, path: Path | N
             "give 'dataset' (path of the log, relative to this file, or a bag block) or 'datasets' (a "
             "list of them), not " + ("both" if "dataset" in raw else "neither"),
         )
+
+
+def _group(cls: type, raw: Mapping[str, Any], source: str, **given: Any) -> Any:
+    """The group dataclass ``cls`` made of the top-level keys of ``raw`` that belong to it (and of
+    the ``given`` values, already of their types)."""
+    hints = typing.get_type_hints(cls)
+    values = {k: coerce(raw[k], hints[k], f"{source}: {k}") for k in hints if k in raw and k not in given}
+    try:
+        return cls(**values, **given)
+    except FieldError as exc:
+        fail(f"{source}: {exc.field}", exc.reason)
+
+
+def _scenario(raw: Any, source: str, base_dir: Path, path: Path | None) -> Scenario:
+    _check_keys(raw, source)
     hints = typing.get_type_hints(Scenario)
-    values = {
-        k: coerce(v, hints[k], f"{source}: {k}")
-        for k, v in raw.items()
-        if k not in (*SOLVERS, "dataset", "datasets")
-    }
-    values["solver_options"] = {
+    own = {k: coerce(raw[k], hints[k], f"{source}: {k}") for k in _OWN_KEYS if k in raw}
+    own.setdefault("name", Path(source).stem)
+    options = {
         k: from_mapping(SOLVERS[k].options_type, v, f"{source}: {k}") for k, v in raw.items() if k in SOLVERS
     }
-    values.setdefault("name", Path(source).stem)
-    if "datasets" in raw:
-        values["datasets"] = _log_entries(raw["datasets"], f"{source}: datasets", base_dir)
-        values["dataset"], values["bag"] = values["datasets"][0].path, values["datasets"][0].bag
-    else:
-        values["dataset"], values["bag"] = dataset_block(raw["dataset"], f"{source}: dataset", base_dir)
-    sc = Scenario(path=path, **values)
-    _validate(sc, source)
-    return sc
+    logs = _log_entries(raw, source, base_dir)
+    return Scenario(
+        path=path,
+        data=_group(DataOptions, raw, source, logs=logs, joint="datasets" in raw),
+        objective=_group(ObjectiveOptions, raw, source),
+        parameters=_group(ParameterOptions, raw, source),
+        compute=_group(ComputeOptions, raw, source),
+        solver_options=options,
+        **own,
+    )
 
 
-def _log_entries(value: Any, where: str, base_dir: Path) -> tuple[LogEntry, ...]:
-    """``datasets``: a plain path stands for ``{path: ...}``; an entry with ``bag`` is a bag block
-    (with its own ``samples`` and ``alignment`` if given); paths resolve against ``base_dir``."""
+def _log_entries(raw: Mapping[str, Any], source: str, base_dir: Path) -> tuple[LogEntry, ...]:
+    """The logs: ``dataset`` (one source) or ``datasets`` (a list of sources, each a path, a
+    ``{path, samples, alignment}`` mapping or a source block with its own samples and alignment)."""
+    samples = coerce(raw.get("samples"), SampleSelection, f"{source}: samples")
+    alignment = coerce(raw.get("alignment"), AlignmentOptions, f"{source}: alignment")
+    if "dataset" in raw:
+        return (LogEntry(parse_source(raw["dataset"], f"{source}: dataset", base_dir), samples, alignment),)
+    where = f"{source}: datasets"
+    value = raw["datasets"]
     if not isinstance(value, (list, tuple)) or not value:
         fail(
             where,
             "expected a non-empty list of log paths, {path, samples, alignment} mappings or bag blocks, "
-            f"got {show(value)}",
+            f"got {type(value).__name__}",
         )
-    entries = []
-    for i, item in enumerate(value):
-        place = f"{where}[{i}]"
-        if isinstance(item, Mapping) and "bag" in item:
-            own = ("samples", "alignment")
-            block = {k: v for k, v in item.items() if k not in own}
-            path, bag = dataset_block(block, place, base_dir, also=own)
-            fields = {"path": str(path), **{k: v for k, v in item.items() if k in own}}
-            entries.append(dataclasses.replace(from_mapping(LogEntry, fields, place), bag=bag))
-            continue
-        entry = from_mapping(LogEntry, {"path": item} if isinstance(item, str) else item, place)
-        path = entry.path if entry.path.is_absolute() else base_dir / entry.path
-        entries.append(dataclasses.replace(entry, path=path))
-    return tuple(entries)
+    return tuple(
+        _log_entry(item, f"{where}[{i}]", base_dir, samples, alignment) for i, item in enumerate(value)
+    )
 
 
-def _validate(sc: Scenario, source: str) -> None:
+def _log_entry(
+    item: Any, place: str, base_dir: Path, samples: SampleSelection, alignment: AlignmentOptions
+) -> LogEntry:
+    own = ("samples", "alignment")
+    block: Any = item
+    if isinstance(item, Mapping):
+        block = {k: v for k, v in item.items() if k not in own}
+        if set(block) == {"path"}:
+            block = block["path"]
+    return LogEntry(
+        source=parse_source(block, place, base_dir, own),
+        samples=coerce(item["samples"], SampleSelection, f"{place}.samples")
+        if _has(item, "samples")
+        else samples,
+        alignment=coerce(item["alignment"], AlignmentOptions, f"{place}.alignment")
+        if _has(item, "alignment")
+        else alignment,
+    )
+
+
+def _has(item: Any, key: str) -> bool:
+    return isinstance(item, Mapping) and key in item
+
+
+def check_against_model(sc: Scenario, source: str) -> None:
+    """What only the model can tell: names of parameters and encoders, bag joints, the solvers'
+    capabilities, and logs fitted twice."""
+    _check_name(sc, source)
+    try:
+        check_choice("model", sc.model, MODELS)
+    except FieldError as exc:
+        fail(f"{source}: {exc.field}", exc.reason)
+    model = get_model(sc.model)
+    _check_parameter_names(sc.parameters, param_names(model), source)
+    for enc in sc.data.encoder_noise:
+        _choice(enc, encoders(model), f"{source}: encoder_noise")
+    for i, entry in enumerate(sc.data.logs):
+        if isinstance(entry.source, BagSource):
+            key = f"datasets[{i}]" if sc.data.joint else "dataset"
+            check_joints(entry.source.joints, model, f"{source}: {key}.joints")
+    _check_solvers(sc, source)
+    _check_overlaps(sc, source)
+
+
+def _choice(value: str, choices: typing.Iterable[str], where: str) -> None:
+    choices = tuple(choices)
+    if value not in choices:
+        fail(where, f"{value!r} is not one of {', '.join(choices)}")
+
+
+def _check_name(sc: Scenario, source: str) -> None:
     # The name becomes a folder under the output directory: a plain, non-empty file name.
     if sc.name in ("", ".", "..") or any(c in sc.name for c in "/\\\0"):
         fail(f"{source}: name", f"must be a plain folder name (no '/', '\\' or NUL), got {sc.name!r}")
-    _check_choice(sc.model, MODELS, f"{source}: model")
-    names = param_names(get_model(sc.model))
-    bags = [(f"datasets[{i}]", e.bag) for i, e in enumerate(sc.datasets)] or [("dataset", sc.bag)]
-    for key, bag in bags:
-        if bag is not None:
-            check_joints(bag.joints, get_model(sc.model), f"{source}: {key}.joints")
-    _check_choice(sc.robust.kernel, KERNELS, f"{source}: robust.kernel")
-    _check_range(sc.robust.delta, DELTA, f"{source}: robust.delta")
-    r = sc.residual
-    for key, limit in (("horizon", HORIZON), ("stride", STRIDE)):
-        reason = limit.problem(getattr(r, key))
-        if reason is not None:
-            fail(f"{source}: residual.{key}", reason)
-    _check_choice(r.integration, INTEGRATIONS, f"{source}: residual.integration")
-    _check_choice(r.steering_sample, STEERING_SAMPLES, f"{source}: residual.steering_sample")
-    _check_range(sc.information.translation, WEIGHT, f"{source}: information.translation")
-    _check_range(sc.information.rotation, WEIGHT, f"{source}: information.rotation")
+
+
+def _check_parameter_names(p: ParameterOptions, names: tuple[str, ...], source: str) -> None:
+    if isinstance(p.initial_guess, Mapping):
+        for n in p.initial_guess:
+            _choice(n, names, f"{source}: initial_guess")
+    for key, given in (("bounds", p.bounds), ("fixed", p.fixed), ("priors", p.priors)):
+        for n in given:
+            _choice(n, names, f"{source}: {key}")
+    if len(set(p.fixed)) == len(names):
+        fail(f"{source}: fixed", "every parameter is fixed; nothing is left to estimate")
+
+
+def _check_solvers(sc: Scenario, source: str) -> None:
     if not sc.solvers:
         fail(f"{source}: solvers", f"list at least one of {', '.join(SOLVERS)}")
     for s in sc.solvers:
-        _check_choice(s, SOLVERS, f"{source}: solvers")
+        _choice(s, SOLVERS, f"{source}: solvers")
+        if sc.parameters.bounds and not SOLVERS[s].supports_bounds:
+            fail(
+                f"{source}: bounds",
+                f"{s} cannot honour bounds; remove {s} from 'solvers' or the bounds "
+                f"(solvers that honour bounds: {', '.join(n for n, c in SOLVERS.items() if c.supports_bounds)})",
+            )
     for s, options in sc.solver_options.items():
         _check_passthrough(options, f"{source}: {s}")
-    _check_choice(sc.backend, BACKENDS, f"{source}: backend")
-    if not 1 <= sc.threads <= 64:
-        fail(f"{source}: threads", f"must lie in [1, 64], got {sc.threads}")
-    for where, sel, al in [
-        (f"{source}: ", sc.samples, sc.alignment),
-        *((f"{source}: datasets[{i}].", e.samples, e.alignment) for i, e in enumerate(sc.datasets)),
-    ]:
-        if sel is not None and (sel.start < 0 or (sel.stop is not None and sel.stop <= sel.start + 1)):
-            fail(f"{where}samples", f"need 0 <= start < stop - 1, got start={sel.start} stop={sel.stop}")
-        if al is not None:
-            _check_alignment(al, f"{where}alignment")
-    ranges = [(e.path.resolve(), e.samples or sc.samples) for e in sc.datasets]
+
+
+def _check_overlaps(sc: Scenario, source: str) -> None:
+    ranges = [(e.path.resolve(), e.samples) for e in sc.data.logs]
     for i, (path, sel) in enumerate(ranges):
         for j, (other, sel_j) in enumerate(ranges[:i]):
             if (
@@ -329,56 +510,9 @@ def _validate(sc: Scenario, source: str) -> None:
             ):
                 fail(
                     f"{source}: datasets[{i}]",
-                    f"records also in datasets[{j}] ({sc.datasets[i].path}): records fitted twice would "
+                    f"records also in datasets[{j}] ({sc.data.logs[i].path}): records fitted twice would "
                     "count as two drives and shrink the σ; give the entries samples that do not overlap",
                 )
-    hf = sc.validation.holdout_fraction
-    if hf is not None and not 0.0 < hf < 1.0:
-        fail(f"{source}: validation.holdout_fraction", f"must lie in (0, 1), got {hf}")
-    _check_choice(sc.faults.handling, FAULT_HANDLINGS, f"{source}: faults.handling")
-    if sc.validation.blocks != 0 and (why := BLOCKS.problem(sc.validation.blocks)):
-        fail(f"{source}: validation.blocks", f"0 (none) or {why}")
-    if sc.validation.rpe_window < 1:
-        fail(f"{source}: validation.rpe_window", "must be >= 1")
-    if isinstance(sc.initial_guess, str):
-        _check_choice(sc.initial_guess, ("from_file", "auto"), f"{source}: initial_guess")
-    else:
-        for n, value in sc.initial_guess.items():
-            _check_choice(n, names, f"{source}: initial_guess")
-            _check_range(value, MAGNITUDE, f"{source}: initial_guess.{n}")
-    for n, (lo, hi) in sc.bounds.items():
-        _check_choice(n, names, f"{source}: bounds")
-        if not lo < hi:
-            fail(f"{source}: bounds.{n}", f"needs lo < hi, got [{lo}, {hi}]")
-        guess = sc.initial_guess.get(n) if isinstance(sc.initial_guess, Mapping) else None
-        if guess is not None and not lo <= guess <= hi:
-            fail(f"{source}: bounds.{n}", f"the initial guess {guess:g} lies outside [{lo:g}, {hi:g}]")
-    for n in sc.fixed:
-        _check_choice(n, names, f"{source}: fixed")
-    if len(set(sc.fixed)) == len(names):
-        fail(f"{source}: fixed", "every parameter is fixed; nothing is left to estimate")
-    for enc, ticks in sc.encoder_noise.items():
-        _check_choice(enc, encoders(get_model(sc.model)), f"{source}: encoder_noise")
-        _check_range(ticks, TICKS, f"{source}: encoder_noise.{enc}")
-    for n, prior in sc.priors.items():
-        _check_choice(n, names, f"{source}: priors")
-        _check_range(prior.mean, MAGNITUDE, f"{source}: priors.{n}.mean")
-        _check_range(prior.std, PRIOR_STD, f"{source}: priors.{n}.std")
-        if n in sc.fixed:
-            fail(f"{source}: priors.{n}", "a fixed parameter cannot also have a prior; drop one")
-
-
-def _check_alignment(al: AlignmentOptions, where: str) -> None:
-    if isinstance(al.tracker_lag, str):
-        _check_choice(al.tracker_lag, ("auto",), f"{where}.tracker_lag")
-    if not (al.search[0] < al.search[1] and al.step > 0 and (al.search[1] - al.search[0]) / al.step <= 1000):
-        fail(where, "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
-
-
-def _check_range(value: float, limit: Range, where: str) -> None:
-    reason = limit.problem(value)
-    if reason is not None:
-        fail(where, reason)
 
 
 def _check_passthrough(options: Any, where: str) -> None:
@@ -396,7 +530,7 @@ def _check_passthrough(options: Any, where: str) -> None:
                 continue
             finite = Range(-(2**63), 2**63 - 1, integer=True) if isinstance(v, int) else _FINITE
             if finite.problem(v) is not None:
-                fail(place, f"expected a finite number, a string or true/false, got {show(v)}")
+                fail(place, f"expected a finite number, a string or true/false, got {shown(v)}")
 
 
 def load_scenario(path: str | Path) -> Scenario:

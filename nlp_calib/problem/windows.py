@@ -20,19 +20,34 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.core.errors import ProblemError
+from nlp_calib.core.ranges import Range, check_choice, check_range
 from nlp_calib.logs import Log
-from nlp_calib.models.base import KinematicModel
+from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES, KinematicModel
 from nlp_calib.problem.functions import DATA_ROWS, ProblemFunctions
+
+
+#: ``horizon``: each window composes H steps symbolically, so building the problem costs time and
+#: memory in proportion to H; the accuracy study's trajectory error flattens by H = 25.
+HORIZON = Range(1, 200, integer=True)
+STRIDE = Range(1, 1_000_000, integer=True)
 
 
 @dataclass(frozen=True)
 class ResidualOptions:
-    """How residuals are formed (scenario key ``residual``)."""
+    """How residuals are formed (scenario key ``residual``): windows of ``horizon`` intervals every
+    ``stride`` records, the model integrated ``exact`` or ``euler``, and where in an interval an
+    angle reading is taken (``steering_sample``: at its ``start``, ``end`` or ``mean``)."""
 
     horizon: int = 1
     stride: int = 1
     integration: str = "exact"
     steering_sample: str = "start"
+
+    def __post_init__(self) -> None:
+        check_range("horizon", self.horizon, HORIZON)
+        check_range("stride", self.stride, STRIDE)
+        check_choice("integration", self.integration, INTEGRATIONS)
+        check_choice("steering_sample", self.steering_sample, STEERING_SAMPLES)
 
 
 @dataclass(frozen=True)

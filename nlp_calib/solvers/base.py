@@ -13,7 +13,7 @@ from typing import Any, ClassVar, Protocol
 import numpy as np
 
 from nlp_calib.solvers.evaluation import ProblemEvaluator
-from nlp_calib.solvers.result import SolverResult
+from nlp_calib.results.solver import SolverResult
 
 
 class Solver(Protocol):

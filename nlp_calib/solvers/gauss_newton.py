@@ -14,6 +14,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
+from numpy.typing import ArrayLike
+
 import numpy as np
 
 from nlp_calib.core.errors import OptionsError
@@ -24,7 +26,7 @@ from nlp_calib.solvers.evaluation import (
     ProblemEvaluator,
     is_singular,
 )
-from nlp_calib.solvers.result import IterationRecord, SolverResult
+from nlp_calib.results.solver import IterationRecord, SolverResult
 
 
 @dataclass(frozen=True)
@@ -74,13 +76,120 @@ def _scaled_gradient(ne: NormalEquations) -> float:
     return float(np.max(np.abs(ne.g) / d)) if ne.g.size else 0.0
 
 
+@dataclass(frozen=True)
+class Box:
+    """Bounds on the free parameters (±inf where there are none). A coordinate at a bound whose
+    gradient pushes it outwards is held for the step (the active set), and every trial point is
+    projected back into the box: projected Levenberg-Marquardt."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+
+    @classmethod
+    def of(cls, n: int, lower: ArrayLike | None, upper: ArrayLike | None) -> Box | None:
+        """The box of ``n`` parameters, or None when neither bound is given."""
+        if lower is None and upper is None:
+            return None
+        lo = np.full(n, -np.inf) if lower is None else np.asarray(lower, dtype=float)
+        hi = np.full(n, np.inf) if upper is None else np.asarray(upper, dtype=float)
+        return cls(lo, hi)
+
+    def free(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """The coordinates a step may move: not at a bound the descent direction pushes against."""
+        return ~(((x <= self.lower) & (g > 0)) | ((x >= self.upper) & (g < 0)))
+
+    def project(self, x: np.ndarray) -> np.ndarray:
+        return np.clip(x, self.lower, self.upper)
+
+
+def _restricted(ne: NormalEquations, free: np.ndarray | None) -> NormalEquations:
+    """The normal equations of the ``free`` coordinates alone (all of them when None)."""
+    if free is None:
+        return ne
+    return NormalEquations(ne.H[np.ix_(free, free)], ne.g[free], ne.cost, ne.chi2, ne.inliers)
+
+
+class _Iteration:
+    """The state of one run of the damped iteration: the point, its normal equations, λ and ν."""
+
+    def __init__(self, evaluator: ProblemEvaluator, x: np.ndarray, opts: GaussNewtonOptions, box: Box | None):
+        self.evaluator, self.opts, self.box = evaluator, opts, box
+        self.x = x
+        self.ne = evaluator.normal_equations(x)
+        self.lam, self.nu = opts.initial_damping, 2.0
+        self.history = [IterationRecord(0, self.ne.cost, self.ne.chi2, self.ne.inliers, 0.0, self.lam)]
+
+    def restricted(self) -> tuple[NormalEquations, np.ndarray | None]:
+        free = None if self.box is None else self.box.free(self.x, self.ne.g)
+        return _restricted(self.ne, free), free
+
+    def step(self, iteration: int) -> tuple[bool, str, bool] | None:
+        """One iteration; when it ends the run: converged, the reason, and whether it counts as an
+        iteration (a test before any step does not). None otherwise."""
+        opts = self.opts
+        ne, free = self.restricted()
+        if _scaled_gradient(ne) < opts.gradient_tolerance * max(1.0, np.sqrt(ne.cost)):
+            return True, "gradient below tolerance", False
+        D = np.maximum(np.diag(ne.H), 1e-12 * max(float(np.max(np.diag(ne.H))), 1e-300))
+        try:
+            part = np.linalg.solve(ne.H + self.lam * np.diag(D), -ne.g)
+        except np.linalg.LinAlgError:
+            return False, "singular damped normal matrix", True
+        if _decrement(ne) <= opts.function_tolerance * ne.cost:
+            # Even the undamped step could not lower the cost by more than its rounding.
+            return True, "Gauss-Newton decrement below tolerance", False
+        predicted = -(2.0 * ne.g @ part + part @ ne.H @ part)
+        step = part
+        if free is not None:
+            step = np.zeros(free.size)
+            step[free] = part
+        return self._try(iteration, step, predicted)
+
+    def _try(self, iteration: int, step: np.ndarray, predicted: float) -> tuple[bool, str, bool] | None:
+        """Move to ``x ⊞ step`` if the true cost falls; adapt λ either way."""
+        opts, ne = self.opts, self.ne
+        step_norm = float(np.linalg.norm(step))
+        x_new = self.evaluator.boxplus(self.x, step)
+        if self.box is not None:
+            x_new = self.box.project(x_new)
+        # The trial point's normal equations carry its cost: most steps are accepted, so one
+        # evaluation per iteration is cheaper than a cost-only check followed by another.
+        ne_new = self.evaluator.normal_equations(x_new)
+        gain = (ne.cost - ne_new.cost) / predicted
+        if np.isfinite(ne_new.cost) and gain > 0:
+            decrease = ne.cost - ne_new.cost
+            self.x, self.ne = x_new, ne_new
+            self.lam *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
+            self.nu = 2.0
+            self.history.append(
+                IterationRecord(iteration, ne_new.cost, ne_new.chi2, ne_new.inliers, step_norm, self.lam)
+            )
+            tol = opts.step_tolerance
+            small_step = bool(np.all(np.abs(step) <= tol * (np.abs(self.x) + tol)))
+            if decrease <= opts.function_tolerance * ne_new.cost and small_step and self.lam < 1.0:
+                return True, "cost and step below tolerance", True
+            return None
+        self.history.append(
+            IterationRecord(iteration, ne_new.cost, step_norm=step_norm, damping=self.lam, accepted=False)
+        )
+        self.lam *= self.nu
+        self.nu *= 2.0
+        if self.lam > _MAX_DAMPING:
+            ne_free, _ = self.restricted()
+            small = _scaled_gradient(ne_free) < 1e3 * opts.gradient_tolerance * max(
+                1.0, np.sqrt(ne_free.cost)
+            )
+            return small, "no further decrease possible" + ("" if small else " (gradient not small)"), True
+        return None
+
+
 class GaussNewton:
-    """Levenberg-Marquardt damped IRLS on the evaluator's normal equations (no bounds)."""
+    """Levenberg-Marquardt damped IRLS on the evaluator's normal equations; bounds by projection."""
 
     name: ClassVar[str] = "gauss_newton"
     label: ClassVar[str] = "Gauss-Newton"
     options_type: ClassVar[type] = GaussNewtonOptions
-    supports_bounds: ClassVar[bool] = False
+    supports_bounds: ClassVar[bool] = True
 
     def __init__(self, evaluator: ProblemEvaluator, options: GaussNewtonOptions | None = None) -> None:
         self.evaluator = evaluator
@@ -96,83 +205,42 @@ class GaussNewton:
         lower: np.ndarray | Sequence[float] | None = None,
         upper: np.ndarray | Sequence[float] | None = None,
     ) -> SolverResult:
-        """Minimise the robust cost from ``x0`` (free parameters); bounds are not used."""
-        return solve(self.evaluator, x0, self.options)
+        """Minimise the robust cost from ``x0`` (free parameters) within the bounds, if any."""
+        return solve(self.evaluator, x0, self.options, lower, upper)
 
 
 def solve(
-    evaluator: ProblemEvaluator, x0: np.ndarray, options: GaussNewtonOptions | None = None
+    evaluator: ProblemEvaluator,
+    x0: np.ndarray,
+    options: GaussNewtonOptions | None = None,
+    lower: ArrayLike | None = None,
+    upper: ArrayLike | None = None,
 ) -> SolverResult:
-    """Minimise the robust cost from ``x0`` (free parameters)."""
+    """Minimise the robust cost from ``x0`` (free parameters), within ``[lower, upper]`` if given."""
     opts = options or GaussNewtonOptions()
     t0 = time.perf_counter()
     x = np.asarray(x0, dtype=float).copy()
-    ne = evaluator.normal_equations(x)
-    history = [IterationRecord(0, ne.cost, ne.chi2, ne.inliers, 0.0, opts.initial_damping)]
-    lam, nu = opts.initial_damping, 2.0
-    converged, reason = False, ""
-    iteration = 0
-    if not np.isfinite(ne.cost) or not np.all(np.isfinite(ne.H)):
+    state = _Iteration(evaluator, x, opts, Box.of(x.size, lower, upper))
+    converged, reason, iteration = False, "", 0
+    if not np.isfinite(state.ne.cost) or not np.all(np.isfinite(state.ne.H)):
         reason = NAN_START_REASON
     else:
+        reason = f"iteration limit ({opts.max_iterations}) reached before convergence"
         while iteration < opts.max_iterations:
             iteration += 1
-            if _scaled_gradient(ne) < opts.gradient_tolerance * max(1.0, np.sqrt(ne.cost)):
-                converged, reason = True, "gradient below tolerance"
-                iteration -= 1
+            ended = state.step(iteration)
+            if ended is not None:
+                converged, reason, counted = ended
+                iteration -= not counted
                 break
-            D = np.maximum(np.diag(ne.H), 1e-12 * max(float(np.max(np.diag(ne.H))), 1e-300))
-            try:
-                step = np.linalg.solve(ne.H + lam * np.diag(D), -ne.g)
-            except np.linalg.LinAlgError:
-                reason = "singular damped normal matrix"
-                break
-            if _decrement(ne) <= opts.function_tolerance * ne.cost:
-                # Even the undamped step could not lower the cost by more than its rounding.
-                converged, reason = True, "Gauss-Newton decrement below tolerance"
-                iteration -= 1
-                break
-            predicted = -(2.0 * ne.g @ step + step @ ne.H @ step)
-            step_norm = float(np.linalg.norm(step))
-            x_new = evaluator.boxplus(x, step)
-            # The trial point's normal equations carry its cost: most steps are accepted, so one
-            # evaluation per iteration is cheaper than a cost-only check followed by another.
-            ne_new = evaluator.normal_equations(x_new)
-            cost_new = ne_new.cost
-            gain = (ne.cost - cost_new) / predicted
-            if np.isfinite(cost_new) and gain > 0:
-                decrease = ne.cost - cost_new
-                x, ne = x_new, ne_new
-                lam *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
-                nu = 2.0
-                history.append(IterationRecord(iteration, ne.cost, ne.chi2, ne.inliers, step_norm, lam))
-                small_step = bool(
-                    np.all(np.abs(step) <= opts.step_tolerance * (np.abs(x) + opts.step_tolerance))
-                )
-                if decrease <= opts.function_tolerance * ne.cost and small_step and lam < 1.0:
-                    converged, reason = True, "cost and step below tolerance"
-                    break
-            else:
-                history.append(
-                    IterationRecord(iteration, cost_new, step_norm=step_norm, damping=lam, accepted=False)
-                )
-                lam *= nu
-                nu *= 2.0
-                if lam > _MAX_DAMPING:
-                    converged = _scaled_gradient(ne) < 1e3 * opts.gradient_tolerance * max(
-                        1.0, np.sqrt(ne.cost)
-                    )
-                    reason = "no further decrease possible" + ("" if converged else " (gradient not small)")
-                    break
-        else:
-            reason = f"iteration limit ({opts.max_iterations}) reached before convergence"
+    ne = state.ne
     if converged and is_singular(ne.H):
         converged, reason = False, SINGULAR_REASON
     return SolverResult(
         solver=GaussNewton.name,
         names=evaluator.fns.names,
-        params=evaluator.params(x),
-        x=x,
+        params=evaluator.params(state.x),
+        x=state.x,
         cost=ne.cost,
         chi2=ne.chi2,
         inliers=ne.inliers,
@@ -181,5 +249,5 @@ def solve(
         converged=converged,
         reason=reason,
         time_s=time.perf_counter() - t0,
-        history=tuple(history),
+        history=tuple(state.history),
     )

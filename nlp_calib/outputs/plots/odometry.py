@@ -6,7 +6,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
 
-from nlp_calib.analysis.odometry import OdometryTrack
+from nlp_calib.results.series import OdometryTrack
 from nlp_calib.outputs.plots.run import figure_png
 
 

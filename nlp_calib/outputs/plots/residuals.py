@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from nlp_calib.outputs.plots.style import STYLES, figure_png
-from nlp_calib.outputs.series import ResidualSeries, ResidualTimeSeries
-from nlp_calib.solvers import solver_label
+from nlp_calib.results.series import ResidualSeries, RunSeries
 
 #: Bins across the calibrated residuals' range: the calibrated peak spans tens of bins.
 BINS = 81
@@ -27,7 +28,7 @@ def _threshold_note(threshold: float, R: float) -> str:
     return "" if threshold <= R else ", off the scale"
 
 
-def residuals_png(series: ResidualSeries, title: str) -> bytes:
+def residuals_png(series: ResidualSeries, labels: Mapping[str, str], title: str) -> bytes:
     """Histograms of the x, y, θ residual errors before and after calibration, kernel threshold
     marked; the bins cover the calibrated spread, so the initial guess's wider errors pile up in
     the edge bins (counted on each panel)."""
@@ -55,7 +56,7 @@ def residuals_png(series: ResidualSeries, title: str) -> bytes:
         for s, d, style in zip(shown, data[1:], STYLES[1:]):
             same = ""
             if series.solvers_agree and len(solvers) > 1:
-                same = f"; {', '.join(solver_label(o) for o in solvers[1:])} identical"
+                same = f"; {', '.join(labels.get(o, o) for o in solvers[1:])} identical"
             ax.hist(
                 np.clip(d, -clip, clip),
                 bins=bins,
@@ -63,7 +64,7 @@ def residuals_png(series: ResidualSeries, title: str) -> bytes:
                 linewidth=1.8,
                 color=style["color"],
                 linestyle=style["linestyle"],
-                label=f"after: {solver_label(s)} ({series.inliers_after[s]}/{n} inliers{same})",
+                label=f"after: {labels.get(s, s)} ({series.inliers_after[s]}/{n} inliers{same})",
             )
         for sign in (-1.0, 1.0) if thr <= R else ():
             ax.axvline(
@@ -100,24 +101,25 @@ def residuals_png(series: ResidualSeries, title: str) -> bytes:
     return figure_png(fig)
 
 
-def residuals_time_png(series: ResidualTimeSeries, title: str) -> bytes:
-    """Each residual component over the time of its window, with the kernel's threshold, the
-    residuals beyond it, the faults (left out of the fit) and the hold-out marked."""
+def residuals_time_png(series: RunSeries, solver: str, solver_name: str, title: str) -> bytes:
+    """``solver``'s residual components over the time of their windows, with the kernel's
+    threshold, the residuals beyond it, the faults (left out of the fit) and the hold-out marked."""
     fig = Figure(figsize=(15, 8.5), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
-    t = series.time_s
+    t = series.residuals.time_s
+    errors, thresholds = series.residuals.after[solver], series.residuals.thresholds
     # The line breaks where windows were left out, rather than bridging the gap.
     gap = np.flatnonzero(np.diff(t) > 3 * np.median(np.diff(t))) + 1 if t.size > 2 else np.zeros(0, int)
     t_line = np.insert(t.astype(float), gap, np.nan)
     for i, (ax, (comp, unit)) in enumerate(zip(axes, _COMPONENTS)):
-        e, thr = series.errors[i], float(series.thresholds[i])
+        e, thr = errors[i], float(thresholds[i])
         out = np.abs(e) > thr
         ax.plot(
             t_line,
             np.insert(e.astype(float), gap, np.nan),
             color="tab:blue",
             linewidth=0.8,
-            label=f"{solver_label(series.solver)}'s residual",
+            label=f"{solver_name}'s residual",
         )
         ax.plot(t[out], e[out], "o", color="red", markersize=3, label=f"beyond the threshold ({out.sum()})")
         finite = e[np.isfinite(e)]
@@ -132,7 +134,8 @@ def residuals_time_png(series: ResidualTimeSeries, title: str) -> bytes:
                     label="±δ/√Ω_ii" if sign > 0 else None,
                 )
         kinds_shown: set[str] = set()
-        for t0, t1, kind in series.faults:
+        for span in series.fault_spans:
+            t0, t1, kind = span.first_s, span.last_s, span.kind
             colour = _FAULT_COLOURS.get(kind, "tab:orange")
             label = f"{kind} (left out)" if kind not in kinds_shown else None
             kinds_shown.add(kind)

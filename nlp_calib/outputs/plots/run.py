@@ -8,6 +8,7 @@ that imports this module is left alone (``matplotlib.use`` would switch it).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -17,13 +18,8 @@ from matplotlib.ticker import FuncFormatter, MaxNLocator, NullLocator
 
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.outputs.plots.style import STYLES, figure_png
-from nlp_calib.outputs.series import (
-    ConvergenceSeries,
-    ModelCheckSeries,
-    Track,
-    TrajectorySeries,
-)
-from nlp_calib.solvers import IterationRecord, solver_label
+from nlp_calib.results import IterationRecord
+from nlp_calib.results.series import ModelCheckSeries, Track, TrackSeries
 
 _STYLES = STYLES
 _TRACKER: Mapping[str, Any] = {"color": "0.15", "linestyle": "-", "linewidth": 3.0, "alpha": 0.35}
@@ -39,6 +35,17 @@ def _plain_log_ticks(ax: Axes) -> None:
         ax.yaxis.set_major_formatter(_PLAIN)
 
 
+@dataclass(frozen=True)
+class ConvergenceSeries:
+    """Iteration histories per solver, their display labels, whether each converged, and the
+    number of residuals (for the inlier axis)."""
+
+    histories: Mapping[str, tuple[IterationRecord, ...]]
+    labels: Mapping[str, str]
+    n_residuals: int
+    converged: Mapping[str, bool]
+
+
 # --- trajectory ------------------------------------------------------------------------------
 
 
@@ -49,9 +56,7 @@ def _far_outside(P: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
 
 
 def _label(track: Track, outside: bool) -> str:
-    parts = [track.label]
-    if track.ate_mean is not None:
-        parts.append(f"(ATE {track.ate_mean:.3f} m)")
+    parts = [track.label, f"(ATE {track.ate_mean:.3f} m)"]
     if not track.converged:
         parts.append("NOT CONVERGED")
     if outside:
@@ -59,12 +64,13 @@ def _label(track: Track, outside: bool) -> str:
     return " ".join(parts)
 
 
-def trajectory_png(series: TrajectorySeries, title: str) -> bytes:
-    """Tracker track and dead-reckoned sensor tracks (equal axes), and their distance over time."""
+def trajectory_png(series: TrackSeries, restarted: Track | None, title: str) -> bytes:
+    """Tracker track and dead-reckoned sensor tracks (equal axes), and their distance over time;
+    ``restarted``: a track restarted after each fault, its distance drawn too."""
     fig = Figure(figsize=(14, 6.2), layout="constrained")
     ax, ax_err = fig.subplots(1, 2, width_ratios=(1.35, 1))
-    tr = series.tracker.T_world_sensor
-    t = series.tracker.time_s - series.tracker.time_s[0]
+    tr = series.tracker
+    t = series.time_s - series.time_s[0]
     ax.plot(tr[:, 0], tr[:, 1], label="tracker (measured sensor pose)", **_TRACKER)
     # Frame the tracker and the calibrated tracks; a run-away track (the uncalibrated one on a
     # real log drifts by tens of metres) is drawn but not allowed to shrink the others to a dot.
@@ -84,15 +90,15 @@ def trajectory_png(series: TrajectorySeries, title: str) -> bytes:
     ax.plot(tr[-1, 0], tr[-1, 1], marker="s", markersize=7, color="0.15", linestyle="none")
     ax.plot(tr[0, 0], tr[0, 1], marker="o", markersize=9, color="black", linestyle="none", label="start")
     ax.plot([], [], marker="s", color="0.4", linestyle="none", label="end (colour of each track)")
-    if series.restarted is not None:
-        P = series.restarted.T_world_sensor
+    if restarted is not None:
+        P = restarted.T_world_sensor
         err = np.linalg.norm(P[1:, :2] - tr[1:, :2], axis=1)
         ax_err.plot(
             t[1:],
             np.where(err > 0, err, np.nan),
             color="tab:cyan",
             linewidth=1.0,
-            label=f"{series.restarted.label} (segment ATE {series.restarted.ate_mean:.3f} m)",
+            label=f"{restarted.label} (segment ATE {restarted.ate_mean:.3f} m)",
         )
     labelled: set[str] = set()
     for k, kind in series.faults:
@@ -188,7 +194,7 @@ def _least_squares_axes(ax_cost: Axes, ax_in: Axes, series: ConvergenceSeries, n
     ax_cost.set_yscale("log")
     _plain_log_ticks(ax_cost)
     ax_cost.set_ylabel("cost, χ² (log scale)")
-    ax_cost.set_title(f"{solver_label(name)}: cost and χ² per iteration{_status(series, name)}")
+    ax_cost.set_title(f"{series.labels.get(name, name)}: cost and χ² per iteration{_status(series, name)}")
     ax_cost.legend(fontsize=8)
     _int_iterations(ax_cost)
     inl = np.array([h.inliers for h in hist])[acc]
@@ -200,7 +206,7 @@ def _least_squares_axes(ax_cost: Axes, ax_in: Axes, series: ConvergenceSeries, n
     ax_in.set_ylim(max(low - pad, 0.0), n + pad)
     ax_in.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax_in.set_ylabel("number of residuals")
-    ax_in.set_title(f"{solver_label(name)}: inliers per accepted iteration")
+    ax_in.set_title(f"{series.labels.get(name, name)}: inliers per accepted iteration")
     ax_in.legend(fontsize=8, loc="best")
     _int_iterations(ax_in)
 
@@ -213,7 +219,7 @@ def _interior_point_axes(ax_obj: Axes, ax_inf: Axes, series: ConvergenceSeries, 
     ax_obj.set_yscale("log")
     _plain_log_ticks(ax_obj)
     ax_obj.set_ylabel("objective (log scale)")
-    ax_obj.set_title(f"{solver_label(name)}: objective per iteration{_status(series, name)}")
+    ax_obj.set_title(f"{series.labels.get(name, name)}: objective per iteration{_status(series, name)}")
     ax_obj.legend(fontsize=8)
     _int_iterations(ax_obj)
     pr = np.array([h.constraint_violation for h in hist])
@@ -228,7 +234,7 @@ def _interior_point_axes(ax_obj: Axes, ax_inf: Axes, series: ConvergenceSeries, 
         ax_inf.plot([], [], "o-", color="tab:red", label="constraint violation: 0 at every iteration")
     ax_inf.set_yscale("log")
     ax_inf.set_ylabel("infeasibility (log scale)")
-    ax_inf.set_title(f"{solver_label(name)}: constraint violation and dual infeasibility")
+    ax_inf.set_title(f"{series.labels.get(name, name)}: constraint violation and dual infeasibility")
     ax_inf.legend(fontsize=8)
     _int_iterations(ax_inf)
 
@@ -248,7 +254,7 @@ def _excess_axes(ax: Axes, series: ConvergenceSeries, names: Sequence[str]) -> N
             _positive((c - best) / scale),
             "o-",
             color=style["color"],
-            label=solver_label(name),
+            label=series.labels.get(name, name),
         )
     ax.set_yscale("log")
     ax.set_ylabel("(cost − lowest cost) / lowest cost")

@@ -20,7 +20,7 @@ from typing import Any, Union
 
 import yaml
 
-from nlp_calib.core.errors import ConfigError, NlpCalibError
+from nlp_calib.core.errors import ConfigError, FieldError, NlpCalibError
 from nlp_calib.core.ranges import shown
 
 show = shown
@@ -125,6 +125,8 @@ def from_mapping(cls: type, value: Any, where: str) -> Any:
     kwargs = {k: coerce(v, hints[k], f"{where}.{k}") for k, v in value.items()}
     try:
         return cls(**kwargs)
+    except FieldError as exc:
+        fail(f"{where}.{exc.field}", exc.reason)
     except (ValueError, TypeError, NlpCalibError) as exc:
         fail(where, str(exc))
 

@@ -18,7 +18,7 @@ from nlp_calib.core.errors import ConfigError
 from nlp_calib.core.ranges import Range
 from nlp_calib.logs import LogHeader
 from nlp_calib.models import KinematicModel, encoders
-from nlp_calib.pipeline.config import fail, from_mapping, read_yaml
+from nlp_calib.core.config import fail, from_mapping, read_yaml
 
 #: ``#joints_max_enc_values``: the text header's range of an encoder range.
 ENCODER_RANGE = Range(1, 2**32, integer=True)

@@ -1,4 +1,4 @@
-"""The result structure both solvers return."""
+"""What a solve produced: the record every solver returns."""
 
 from __future__ import annotations
 

@@ -1,0 +1,96 @@
+"""The verdict on a run: is the calibration good, usable with caveats, or not determined, and why.
+
+The rules a reader can check:
+
+- **not determined**: no solver converged, or the drive leaves a parameter undetermined (its σ
+  is infinite, or a direction of the information matrix is beyond
+  :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` reference units);
+- **usable with caveats**: converged and determined, but something needs a look first: a weakly
+  observable direction, a parameter whose σ to believe exceeds
+  :data:`~nlp_calib.results.checks.WEAK` times the precision a useful calibration needs,
+  solvers that disagree, a parameter held at its initial value, forward and reverse driving that
+  disagree, faults kept in the fit or not checked, or no gain over the initial guess;
+- **good**: none of these.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nlp_calib.models import KinematicModel
+from nlp_calib.models.base import reference_scale
+from nlp_calib.results import CalibrationRun, Verdict
+from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
+from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
+
+#: Relative parameter difference beyond which two converged solvers disagree.
+AGREE = 1e-4
+
+
+def _loose(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]:
+    """Parameters known too loosely, in words."""
+    params = run.reports[solver].result.param_dict()
+    out = []
+    obs = run.checks.observability
+    if obs is not None:
+        out += [w.words() for w in obs.weak if w.std_reference <= NOT_OBSERVABLE]
+    for name, sd in run.std(solver).items():
+        ref = reference_scale(model, name, params[name])
+        if sd > WEAK * ref:
+            unit = run.scenario.units[name]
+            out.append(f"{name} is known only to ±{sd:.2g} {unit} (over {WEAK:g}× the {ref:.2g} needed)")
+    return out
+
+
+def _checks(run: CalibrationRun) -> list[str]:
+    """What the checks found that needs a look, in words."""
+    out = [w for w in run.warnings if " held at its initial value" in w]
+    direction, findings = run.checks.direction, run.checks.findings
+    if direction is not None and direction.significant:
+        name, z = direction.worst
+        out.append(f"forward and reverse driving disagree ({name} by {abs(z):.1f}σ)")
+    if findings is not None:
+        rep = findings.report
+        if rep.unchecked:
+            out.append("encoder faults not checked")
+        elif rep.faults and findings.handling == "keep":
+            out.append(f"{len(rep.faults)} faults kept in the fit (faults.handling: keep)")
+    return out
+
+
+def caveats(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]:
+    """Why ``solver``'s converged, determined estimate needs a look before it is used."""
+    out = _loose(run, solver, model)
+    converged = [s for s in run.solver_order() if run.reports[s].result.converged]
+    for other in converged[1:]:
+        if (d := run.relative_difference(solver, other)) > AGREE:
+            out.append(f"{solver} and {other} disagree by {d:.1e} (relative)")
+    out += _checks(run)
+    ours, base = run.reports[solver].metrics.segment_ate.mean, run.baseline.segment_ate.mean
+    if np.isfinite(base) and not ours < base:
+        out.append(f"no better than the initial guess (segment ATE {ours:.3g} m against {base:.3g} m)")
+    return out
+
+
+def verdict(run: CalibrationRun, model: KinematicModel) -> Verdict:
+    """The run's verdict and why (see the module's rules)."""
+    solver = run.chosen_solver()
+    obs = run.checks.observability
+    loose = [w.words() for w in obs.weak if w.std_reference > NOT_OBSERVABLE] if obs is not None else []
+    if solver is None:
+        failures = dict.fromkeys(run.reports[s].result.reason for s in run.solver_order())
+        return Verdict(UNDETERMINED, (*loose, *(f"no solver converged: {r}" for r in failures)))
+    missing = [n for n, sd in run.std(solver).items() if not np.isfinite(sd)]
+    if missing or loose:
+        why = loose or [f"{', '.join(missing)} not determined by this drive"]
+        return Verdict(UNDETERMINED, tuple(why))
+    found = caveats(run, solver, model)
+    if found:
+        return Verdict(CAVEATS, tuple(found))
+    rep = run.reports[solver]
+    gain = run.baseline.segment_ate.mean / max(rep.metrics.segment_ate.mean, 1e-12)
+    reasons = [f"{solver} converged", "every parameter determined to the precision a calibration needs"]
+    if len([s for s in run.reports if run.reports[s].result.converged]) > 1:
+        reasons.append("the solvers agree")
+    reasons.append(f"{gain:.0f}× closer to the tracker than the initial guess")
+    return Verdict(GOOD, tuple(reasons))

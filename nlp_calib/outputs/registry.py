@@ -1,0 +1,130 @@
+"""Every file a run can write, in one registry: its name, what it is for, when it is written.
+
+A command picks the groups it writes (``result``, ``handoff``, ``figures``, ``odometry``,
+``validation``); ``--report`` adds the entries marked ``report``. The same entries give the
+names a run checks for collisions before it computes, the writers it calls, and the lines the
+closing summary says of each file. Adding an output is one module with a writer
+``(run, folder, name, options) -> [paths]`` and one entry in :data:`OUTPUTS`.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Collection, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from nlp_calib.outputs import handoff, markdown, results, trajectories
+from nlp_calib.results import CalibrationRun
+
+
+@dataclass(frozen=True)
+class OutputOptions:
+    """What a user says about the outputs on the command line: ``sigma`` of the drawn ellipses."""
+
+    sigma: float = 3.0
+
+
+Writer = Callable[[CalibrationRun, Path, str, OutputOptions], list[Path]]
+
+
+@dataclass(frozen=True)
+class Output:
+    """One file (or folder) a run writes.
+
+    ``group``: which commands write it; ``report``: only with ``--report``; ``per_log``: one per log
+    (a joint run writes it into each log's folder) or, when False, once per calibration into the
+    top folder; ``next_step``: what the closing summary says of it ("" for nothing).
+    """
+
+    name: str
+    group: str
+    write: Writer
+    report: bool = False
+    per_log: bool = True
+    next_step: str = ""
+
+
+def _plain(function: Callable[[CalibrationRun, Path, str], list[Path]]) -> Writer:
+    """A writer that needs no options."""
+    return lambda run, folder, name, options: function(run, folder, name)
+
+
+def _figure(function: str) -> Writer:
+    """A figure's writer, importing matplotlib only when a figure is drawn."""
+
+    def write(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
+        drawn: list[Path] = getattr(importlib.import_module("nlp_calib.outputs.figures"), function)(
+            run, folder, name
+        )
+        return drawn
+
+    return write
+
+
+def _odometry_png(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
+    figures: Any = importlib.import_module("nlp_calib.outputs.figures")
+    drawn: list[Path] = figures.odometry(run, folder, name, sigma=options.sigma)
+    return drawn
+
+
+def _report(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
+    files = names(("handoff",)) if run.chosen_solver() is not None else []
+    return markdown.write_report(run, folder, name, files, next_steps(files))
+
+
+OUTPUTS: tuple[Output, ...] = (
+    Output("calibration.yaml", "handoff", _plain(handoff.write_calibration), per_log=False,
+           next_step="the parameters with units and 1σ, for your robot's configuration"),
+    Output("sensor_mount.urdf.xml", "handoff", _plain(handoff.write_joint), per_log=False,
+           next_step="paste its <joint> into your robot's URDF (planar: z, roll, pitch 0)"),
+    Output("robot.urdf", "handoff", _plain(handoff.write_robot), per_log=False,
+           next_step="the same joint in a complete robot description, for URDF tools"),
+    Output("result.json", "result", _plain(results.write_result)),
+    Output("odometry.csv", "odometry", _plain(results.write_odometry),
+           next_step="the base link's odometry with its covariance, one row per record"),
+    Output("odometry.png", "odometry", _odometry_png, report=True),
+    Output("validation.json", "validation", _plain(results.write_validation)),
+    Output("trajectory.png", "figures", _figure("trajectory"), report=True),
+    Output("convergence.png", "figures", _figure("convergence"), report=True),
+    Output("residuals.png", "figures", _figure("residuals"), report=True),
+    Output("residuals_time.png", "figures", _figure("residuals_time"), report=True),
+    Output("model_check.png", "figures", _figure("model_check"), report=True),
+    Output("report.md", "figures", _report, report=True,
+           next_step="the figures and tables of this run on one page"),
+    Output(trajectories.FOLDER, "figures", _plain(trajectories.write_trajectories), report=True),
+)  # fmt: skip
+
+
+def selected(groups: Collection[str], report: bool) -> tuple[Output, ...]:
+    """The outputs of ``groups``, those needing ``--report`` only with ``report``."""
+    return tuple(o for o in OUTPUTS if o.group in groups and (report or not o.report))
+
+
+def names(groups: Collection[str], report: bool = False) -> list[str]:
+    """The file names the outputs of ``groups`` write."""
+    return [o.name for o in selected(groups, report)]
+
+
+def next_steps(files: Sequence[str]) -> list[str]:
+    """What the closing summary says of each of ``files`` that has something to say."""
+    said = {o.name: o.next_step for o in OUTPUTS if o.next_step}
+    return [f"{name}: {said[name]}" for name in files if name in said]
+
+
+def write(
+    outputs: Sequence[Output],
+    runs: Sequence[tuple[CalibrationRun, Path]],
+    top: tuple[CalibrationRun, Path],
+    options: OutputOptions,
+) -> list[Path]:
+    """Write ``outputs``: those per log for each ``(run, folder)`` of ``runs``, the others once for
+    the calibration ``top`` (its run and folder). Returns the paths written, in that order."""
+    written: list[Path] = []
+    for output in outputs:
+        targets = runs if output.per_log else [top]
+        for run, folder in targets:
+            folder.mkdir(exist_ok=True)
+            written += output.write(run, folder, output.name, options)
+    return written

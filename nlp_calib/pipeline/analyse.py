@@ -1,0 +1,321 @@
+"""The analyse stage: what the fitted estimates are worth, computed once and kept in the result.
+
+For the fit (one log, or several end to end): each solver's uncertainty, the observability, the
+blocked cross-validation and the forward/reverse comparison. For each log: the fair figures of
+each estimate and of the initial guess, and, when asked for, the series behind the figures
+(tracks, residuals before and after, fault zones, the model check) and the odometry with its
+covariance. The outputs only format what this stage computed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.analysis import uncertainty as unc
+from nlp_calib.analysis.metrics import integrate, segments, trajectory_metrics
+from nlp_calib.analysis.observability import analyse as observability_of
+from nlp_calib.analysis.odometry import propagate
+from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
+from nlp_calib.models import SENSOR_PARAMS, header_parameters
+from nlp_calib.pipeline import validation
+from nlp_calib.pipeline.fit import Fit
+from nlp_calib.pipeline.prepare import PreparedLog
+from nlp_calib.pipeline.windows import LogWindows
+from nlp_calib.problem import ProblemFunctions, over_columns
+from nlp_calib.results import SolverResult
+from nlp_calib.results.checks import CrossValidation, DirectionCheck, Observability
+from nlp_calib.results.faults import Findings
+from nlp_calib.results.figures import TrajectoryMetrics
+from nlp_calib.results.series import (
+    FaultSpan,
+    ModelCheckSeries,
+    OdometryTrack,
+    ResidualSeries,
+    RunSeries,
+    Track,
+    TrackSeries,
+)
+from nlp_calib.results.uncertainty import Uncertainty
+
+#: A figure of one parameter set on one log: full range and hold-out.
+Scores = tuple[TrajectoryMetrics, TrajectoryMetrics | None]
+
+
+@dataclass(frozen=True)
+class FitAnalysis:
+    """What the fit's estimates are worth, whatever log they are scored on."""
+
+    uncertainty: Mapping[str, Uncertainty]
+    observability: Observability
+    crossval: CrossValidation | None
+    direction: DirectionCheck | None
+
+
+@dataclass(frozen=True)
+class LogAnalysis:
+    """One log's figures: each solver's and the initial guess's scores, its series and odometry."""
+
+    scores: Mapping[str, Scores]
+    baseline: Scores
+    series: RunSeries | None
+    odometry: OdometryTrack | None
+
+
+@dataclass(frozen=True)
+class Scorer:
+    """Fair figures of parameter sets over records of one stretch of data (one log's used records,
+    or several logs' fitted records end to end); record ``r`` of the whole fit is ``r - offset``."""
+
+    fns: ProblemFunctions
+    inputs: np.ndarray
+    T_world_sensor: np.ndarray
+    bad_intervals: np.ndarray
+    bad_records: np.ndarray
+    offset: int
+    rpe_window: int
+
+    def __call__(self, params: np.ndarray, a: int | None = None, b: int | None = None) -> TrajectoryMetrics:
+        """The figures of ``params`` over records ``[a, b)`` (all of them by default)."""
+        return trajectory_metrics(
+            self.fns,
+            params,
+            self.inputs,
+            self.T_world_sensor,
+            start=0 if a is None else a - self.offset,
+            stop=None if b is None else b - self.offset,
+            rpe_window=self.rpe_window,
+            bad_intervals=self.bad_intervals,
+            bad_records=self.bad_records,
+        )
+
+
+def log_scorer(fns: ProblemFunctions, windows: LogWindows, steering_sample: str, rpe_window: int) -> Scorer:
+    """The scorer over one log's used records."""
+    bad_i, bad_r = windows.masks()
+    inputs = windows.inputs(steering_sample)
+    poses = windows.selected.T_world_sensor
+    return Scorer(fns, inputs, poses, bad_i, bad_r, windows.used[0], rpe_window)
+
+
+def scores(scorer: Scorer, windows: LogWindows, params: np.ndarray) -> Scores:
+    """Full-range and hold-out figures of ``params`` on one log."""
+    holdout = None
+    if windows.fit[1] < windows.used[1] - 1:
+        holdout = scorer(params, windows.fit[1])
+    return scorer(params), holdout
+
+
+def analyse_fit(
+    fit: Fit, results: Mapping[str, SolverResult], noise: np.ndarray, blocks: Scorer
+) -> FitAnalysis:
+    """Uncertainty of each result; observability at the first estimate with a finite cost (a solver
+    may not have started); cross-validation and the direction check from the first converged one,
+    with each held-out block scored by ``blocks``."""
+    ev, data = fit.evaluator, fit.data
+    uncertainty = {name: unc.estimate(ev, r.x, data, noise) for name, r in results.items()}
+    finite = [r for r in results.values() if np.isfinite(r.cost)] or list(results.values())
+    observability = observability_of(ev, finite[0].x, data.T_world_sensor)
+    converged = [r for r in results.values() if r.converged]
+    k = fit.problem.binder.scenario.validation.blocks
+    if not converged or not k:
+        return FitAnalysis(uncertainty, observability, None, None)
+    binder, x = fit.problem.binder, converged[0].x
+    # Blocks are numbered as the scorer's records: the fitted records start at its offset.
+    span = (blocks.offset, blocks.offset + data.n_records)
+    crossval = validation.cross_validate(binder, data, span, x, k, fit.canonical_params, blocks)
+    inputs = np.concatenate([np.zeros((data.inputs.shape[0], span[0])), data.inputs], axis=1)
+    model = fit.fns.model
+    direction = validation.direction_check(
+        binder,
+        data,
+        span,
+        x,
+        model.travel_direction(inputs),
+        lambda part: model.undetermined(inputs[:, part]),
+        k,
+        fit.canonical_params,
+    )
+    return FitAnalysis(uncertainty, observability, crossval, direction)
+
+
+def residual_series(fit: Fit, results: Mapping[str, SolverResult], windows: np.ndarray) -> ResidualSeries:
+    """The residuals of the windows ``windows`` of the fit at the initial guess and at each estimate.
+
+    Each evaluation's errors are copied at once: the evaluator reuses its buffers."""
+    ev = fit.evaluator
+    e0, s0, _ = ev.robust_terms(fit.problem.start.x0)
+    before, inliers_before = np.array(e0[:, windows]), int(np.sum(s0[windows] <= ev.delta**2))
+    after: dict[str, np.ndarray] = {}
+    inliers: dict[str, int] = {}
+    for name, r in results.items():
+        e, s, _ = ev.robust_terms(r.x)
+        after[name] = np.array(e[:, windows])
+        inliers[name] = int(np.sum(s[windows] <= ev.delta**2))
+    errs = list(after.values())
+    scale = max((float(np.max(np.abs(e))) for e in errs if e.size), default=0.0)
+    # Solvers that met the same optimum give residual sets indistinguishable in a histogram.
+    agree = len(errs) > 1 and all(
+        np.allclose(e, errs[0], rtol=0.0, atol=1e-6 * max(scale, 1e-12)) for e in errs
+    )
+    sc = fit.problem.binder.scenario
+    return ResidualSeries(
+        time_s=np.zeros(0),
+        before=before,
+        after=after,
+        inliers_before=inliers_before,
+        inliers_after=inliers,
+        thresholds=ev.delta / np.sqrt(np.asarray(ev.omega, dtype=float)),
+        kernel=sc.objective.robust.kernel,
+        delta=ev.delta,
+        solvers_agree=agree,
+    )
+
+
+@dataclass(frozen=True)
+class LogView:
+    """One log as the analyse stage sees it: as read, its windows, its scorer and its faults."""
+
+    prepared: PreparedLog
+    windows: LogWindows
+    scorer: Scorer
+    findings: Findings
+    #: Its place among the fit's logs (0 for a single log).
+    part: int = 0
+
+
+def _window_times(fit: Fit, part: int) -> tuple[np.ndarray, np.ndarray]:
+    """The fit's windows that belong to log ``part`` (indices) and their start times."""
+    data = fit.data
+    owner = np.searchsorted(np.asarray(data.offsets), data.starts, side="right") - 1
+    idx = np.flatnonzero(owner == part)
+    local = data.starts[idx] - data.offsets[part]
+    return idx, np.asarray(data.logs[part].time_s)[local]
+
+
+def track_series(
+    fit: Fit,
+    results: Mapping[str, SolverResult],
+    view: LogView,
+    figures: LogAnalysis,
+    labels: Mapping[str, str],
+) -> TrackSeries:
+    """The tracker's poses and the tracks of the initial guess and of every estimate over one
+    log's used records, restarted after each fault as the segment ATE scores them."""
+    windows, inputs = view.windows, view.scorer.inputs
+    ref = np.asarray(windows.selected.T_world_sensor)
+    bad_i, bad_r = windows.masks()
+    parts = tuple(segments(ref.shape[0], bad_i))
+    p0 = np.array([fit.problem.start.initial[n] for n in fit.fns.names])
+    initial = dead_reckoned(fit.fns, p0, inputs, ref, parts)[0]
+    tracks = [Track("uncalibrated (initial guess)", None, initial, figures.baseline[0].ate_mean)]
+    again: dict[str, np.ndarray] = {}
+    rows = []
+    for name, r in results.items():
+        full, again[name] = dead_reckoned(fit.fns, r.params, inputs, ref, parts)
+        tracks.append(
+            Track(labels.get(name, name), name, full, figures.scores[name][0].ate_mean, r.converged)
+        )
+        rows += segment_figures(name, again[name], ref, parts, ~bad_r)
+    a, b = windows.used
+    return TrackSeries(
+        time_s=np.asarray(windows.selected.time_s),
+        tracker=ref,
+        good=~bad_r,
+        parts=parts,
+        tracks=tuple(tracks),
+        restarted=again,
+        faults=tuple((f.record - a, f.kind) for f in view.findings.report.faults if a <= f.record < b),
+        holdout_start=windows.fit[1] - a if windows.fit[1] < b - 1 else None,
+        segments=tuple(rows),
+    )
+
+
+def model_check(fit: Fit, prepared: PreparedLog) -> ModelCheckSeries | None:
+    """Our model's base-link track with the log header's parameters next to the vendor's odometry
+    (``model_pose``), on the records as logged (the vendor integrated the encoders as logged);
+    None when the log carries no vendor odometry."""
+    log, model = prepared.log, prepared.model
+    vendor = np.asarray(log.model_pose, dtype=float)
+    if not np.any(vendor):
+        return None
+    header = header_parameters(model, log.header)
+    initial = fit.problem.start.initial
+    params = {n: float(header.get(n, initial[n])) for n in model.kinematic_params}
+    params.update(dict.fromkeys(SENSOR_PARAMS, 0.0))
+    p = np.array([params[n] for n in fit.fns.names])
+    residual = prepared.scenario.objective.residual
+    inputs = model.inputs(log, residual.steering_sample)
+    ours = integrate(fit.fns, p, inputs, vendor[0])
+    kinematic = {n: params[n] for n in model.kinematic_params}
+    return ModelCheckSeries(np.asarray(log.time_s), vendor, ours, residual.integration, kinematic)
+
+
+def run_series(
+    fit: Fit,
+    results: Mapping[str, SolverResult],
+    view: LogView,
+    figures: LogAnalysis,
+    labels: Mapping[str, str],
+) -> RunSeries:
+    """Everything one log's figures and trajectory files show."""
+    windows = view.windows
+    idx, times = _window_times(fit, view.part)
+    residuals = dataclasses.replace(residual_series(fit, results, idx), time_s=times)
+    t = np.asarray(windows.aligned.time_s)
+    last = t.size - 1
+    spans = tuple(
+        FaultSpan(float(t[f.first]), float(t[min(f.last + 1, last)]), f.kind)
+        for f in view.findings.report.faults
+    )
+    holdout = float(t[windows.fit[1]]) if windows.fit[1] < windows.used[1] - 1 else None
+    tracks = track_series(fit, results, view, figures, labels)
+    return RunSeries(tracks, residuals, spans, holdout, model_check(fit, view.prepared))
+
+
+def odometry(fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str) -> OdometryTrack:
+    """Base-link odometry with ``params`` over the used records, with its propagated covariance,
+    started at the base pose the tracker's first pose implies, beside the base poses the tracker
+    implies throughout."""
+    sel, fns = windows.selected, fit.fns
+    inputs = windows.inputs(steering_sample)
+    T_world_base_0 = np.asarray(fns.base_from_sensor(sel.T_world_sensor[0], params)).ravel()
+    poses, cov = propagate(fns, params, inputs, T_world_base_0, windows.input_noise_std)
+    reference = over_columns(fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
+    return OdometryTrack(np.asarray(sel.time_s), poses, cov, reference)
+
+
+@dataclass(frozen=True)
+class Wanted:
+    """What the analyse stage computes beyond the figures: the series behind a report, and the
+    odometry of one solver's estimate."""
+
+    series: bool = False
+    odometry: str | None = None
+
+
+def analyse_log(
+    fit: Fit,
+    results: Mapping[str, SolverResult],
+    view: LogView,
+    wanted: Wanted,
+    labels: Mapping[str, str],
+) -> LogAnalysis:
+    """One log's figures with the fit's estimates (and its series and odometry when wanted)."""
+    windows, scorer = view.windows, view.scorer
+    p0 = np.array([fit.problem.start.initial[n] for n in fit.fns.names])
+    figures = LogAnalysis(
+        scores={name: scores(scorer, windows, r.params) for name, r in results.items()},
+        baseline=scores(scorer, windows, p0),
+        series=None,
+        odometry=None,
+    )
+    series = run_series(fit, results, view, figures, labels) if wanted.series else None
+    odo = None
+    if wanted.odometry is not None and wanted.odometry in results:
+        steering = view.prepared.scenario.objective.residual.steering_sample
+        odo = odometry(fit, windows, results[wanted.odometry].params, steering)
+    return dataclasses.replace(figures, series=series, odometry=odo)

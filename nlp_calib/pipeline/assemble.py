@@ -1,0 +1,138 @@
+"""The assemble stage: the result of a run, self-contained, with its notes and its verdict.
+
+One log's run and a run over several logs are assembled by the same functions: a joint run is
+one run per log, each with the joint estimates and checks beside that log's own figures.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+
+from nlp_calib.analysis.verdict import verdict
+from nlp_calib.models import KinematicModel, param_units
+from nlp_calib.pipeline.align import Alignment, lag_at_edge
+from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis
+from nlp_calib.pipeline.prepare import PreparedLog
+from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.pipeline.windows import LogWindows
+from nlp_calib.results import (
+    CalibrationRun,
+    Checks,
+    DataInfo,
+    DroppedLine,
+    Encoder,
+    LogInfo,
+    ScenarioInfo,
+    SolverReport,
+    SolverResult,
+    Verdict,
+)
+from nlp_calib.results.faults import Findings
+from nlp_calib.solvers import solver_label
+
+
+def scenario_info(sc: Scenario, model: KinematicModel) -> ScenarioInfo:
+    """What the outputs say about ``sc``."""
+    joint = sc.data.joint
+    return ScenarioInfo(
+        name=sc.name,
+        path=None if sc.path is None else str(sc.path),
+        model=sc.model,
+        units=param_units(model),
+        headline=tuple(model.headline),
+        dataset=str(sc.dataset),
+        datasets=tuple(str(e.path) for e in sc.data.logs) if joint else (),
+        solvers=sc.solvers,
+        labels={name: solver_label(name) for name in sc.solvers},
+        residual=dataclasses.asdict(sc.objective.residual),
+        robust=dataclasses.asdict(sc.objective.robust),
+        initial_guess=sc.parameters.initial_guess
+        if isinstance(sc.parameters.initial_guess, str)
+        else "mapping",
+    )
+
+
+def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
+    """What the outputs say about a log as read."""
+    log, model = prepared.log, prepared.model
+    kinds = model.encoder_kinds
+    encoders = tuple(
+        Encoder(name, kinds.get(name, "counter"), "ticks", int(vmax))
+        for name, vmax in zip(log.header.encoder_names, log.header.encoder_max)
+    )
+    t = log.time_s[windows.used[0] : windows.used[1]]
+    return LogInfo(
+        path=str(prepared.scenario.dataset),
+        records=log.n_records,
+        dropped=tuple(DroppedLine(d.line, d.reason) for d in log.dropped),
+        sensor_frame=log.header.sensor_frame,
+        encoders=encoders,
+        duration_s=float(t[-1] - t[0]) if t.size else 0.0,
+    )
+
+
+def data_info(windows: LogWindows, alignment: Alignment) -> DataInfo:
+    """What of a log the fit used."""
+    data = windows.data
+    return DataInfo(
+        used=windows.used,
+        fit=windows.fit,
+        n_residuals=data.n_residuals,
+        dropped_stationary=data.dropped_stationary,
+        dropped_faulty=data.dropped_faulty,
+        tracker_lag_s=alignment.lag_s,
+        lag_estimate=alignment.estimate,
+    )
+
+
+def fit_notes(results: Mapping[str, SolverResult], fitted: FitAnalysis, held: Mapping[str, str]) -> list[str]:
+    """What the fit found worth saying, whatever log it is read for."""
+    notes = list(fitted.observability.warnings)
+    notes += [f"{name} held at its initial value: {why}" for name, why in held.items()]
+    notes += [f"{name}: {r.reason}" for name, r in results.items() if not r.converged]
+    if fitted.direction is not None and fitted.direction.significant:
+        name, z = fitted.direction.worst
+        notes.append(
+            f"forward-only and reverse-only fits disagree: {name} by {abs(z):.1f}σ; the model misses "
+            "something that depends on the direction of travel"
+        )
+    return notes
+
+
+def lag_notes(sc: Scenario, alignment: Alignment) -> list[str]:
+    """What a log's time alignment found worth saying: a lag at the edge of its search."""
+    if alignment.estimate is not None and alignment.estimate.at_edge:
+        return [lag_at_edge(sc, alignment.lag_s)]
+    return []
+
+
+def assemble_run(
+    scenario: ScenarioInfo,
+    log: tuple[PreparedLog, LogWindows, Alignment, Findings],
+    initial: Mapping[str, float],
+    results: Mapping[str, SolverResult],
+    fitted: FitAnalysis,
+    figures: LogAnalysis,
+    notes: Sequence[str],
+) -> CalibrationRun:
+    """One log's run: the fit's estimates and checks beside this log's figures, with its verdict."""
+    prepared, windows, alignment, findings = log
+    reports = {
+        name: SolverReport(r, fitted.uncertainty[name], *figures.scores[name]) for name, r in results.items()
+    }
+    run = CalibrationRun(
+        scenario=scenario,
+        log=log_info(prepared, windows),
+        data=data_info(windows, alignment),
+        initial=dict(initial),
+        baseline=figures.baseline[0],
+        baseline_holdout=figures.baseline[1],
+        reports=reports,
+        checks=Checks(fitted.observability, fitted.crossval, fitted.direction, findings),
+        warnings=(*notes, *lag_notes(prepared.scenario, alignment)),
+        verdict=Verdict("", ()),
+        series=figures.series,
+        odometry=figures.odometry,
+    )
+    return dataclasses.replace(run, verdict=verdict(run, prepared.model))

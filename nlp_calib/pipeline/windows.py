@@ -1,0 +1,71 @@
+"""The bind stage: a log's residual windows on the tracker's clock, clear of its faults.
+
+The records used are those the selection asks for whose re-sampled encoder readings lie inside the
+log; the fitted ones end where the hold-out starts. Everything a log's figures are computed on
+(its used records, the masks of its faults) is kept with its windows.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.core.errors import NlpCalibWarning
+from nlp_calib.logs import Log
+from nlp_calib.pipeline.align import Alignment
+from nlp_calib.pipeline.build import Binder, Problem
+from nlp_calib.pipeline.prepare import PreparedLog, split
+from nlp_calib.pipeline.screen import Screening, exclude_faults, median_interval
+from nlp_calib.problem import ResidualData
+
+
+@dataclass(frozen=True)
+class LogWindows:
+    """A log's fitted windows and what its figures need: the records ``used`` and ``fit`` of the
+    aligned log, its fault masks (per interval and per record of the whole log), the binder that
+    keeps its windows clear of faults and each model input's noise (1σ)."""
+
+    aligned: Log
+    used: tuple[int, int]
+    fit: tuple[int, int]
+    data: ResidualData
+    binder: Binder
+    bad_intervals: np.ndarray
+    bad_records: np.ndarray
+    input_noise_std: np.ndarray
+
+    @property
+    def selected(self) -> Log:
+        """The used records of the aligned log."""
+        return self.aligned.select(*self.used)
+
+    def inputs(self, steering_sample: str) -> np.ndarray:
+        """The model inputs of every interval of the used records."""
+        return self.binder.fns.model.inputs(self.selected, steering_sample)
+
+    def masks(self) -> tuple[np.ndarray, np.ndarray]:
+        """The fault masks over the used intervals and records."""
+        a, b = self.used
+        return self.bad_intervals[a : b - 1], self.bad_records[a:b]
+
+
+def bind_windows(
+    problem: Problem, prepared: PreparedLog, screening: Screening, alignment: Alignment
+) -> LogWindows:
+    """The windows of the fitted records of ``prepared``'s log, aligned and screened."""
+    sc, log = prepared.scenario, prepared.log
+    binder = exclude_faults(
+        problem.binder, screening.findings, log.n_records, alignment.lag_s, median_interval(log)
+    )
+    report = screening.findings.report
+    if report.unchecked:
+        warnings.warn(f"encoder faults not checked: {report.unchecked}", NlpCalibWarning, stacklevel=3)
+    start, stop = max(prepared.start, alignment.valid[0]), min(prepared.stop, alignment.valid[1])
+    fit = (start, split(sc, start, stop))
+    data = binder.windows(alignment.log, *fit)
+    noise = problem.model.input_noise_std(alignment.log, sc.data.encoder_noise)
+    return LogWindows(
+        alignment.log, (start, stop), fit, data, binder, screening.bad_intervals, screening.bad_records, noise
+    )

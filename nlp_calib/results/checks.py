@@ -1,0 +1,174 @@
+"""What a run's checks found: cross-validation, the direction check, the tracker lag, observability.
+
+The checks are computed by :mod:`nlp_calib.analysis` (refits, lag search, information matrix);
+these records hold what they found, with the thresholds that decide how it reads.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.results.figures import TrajectoryMetrics
+
+#: With fewer converged folds than this the jackknife σ is not reported.
+MIN_FOLDS = 5
+
+
+@dataclass(frozen=True)
+class Fold:
+    """One fold: the held-out records ``[first, stop)``, the estimate without them and its scores."""
+
+    first: int
+    stop: int
+    params: np.ndarray
+    converged: bool
+    heldout: TrajectoryMetrics | None
+
+
+@dataclass(frozen=True)
+class CrossValidation:
+    """The folds of a blocked cross-validation and the jackknife σ of every parameter (model order)."""
+
+    names: tuple[str, ...]
+    folds: tuple[Fold, ...]
+    std: np.ndarray
+
+    @property
+    def converged(self) -> tuple[Fold, ...]:
+        return tuple(f for f in self.folds if f.converged)
+
+    @property
+    def available(self) -> bool:
+        return len(self.converged) >= MIN_FOLDS
+
+    def spread(self) -> np.ndarray:
+        """Largest minus smallest estimate of each parameter over the converged folds."""
+        P = np.array([f.params for f in self.converged])
+        return np.ptp(P, axis=0) if P.size else np.full(len(self.names), np.nan)
+
+    def std_dict(self) -> dict[str, float]:
+        return {n: float(s) for n, s in zip(self.names, self.std)}
+
+    def heldout_mean(self, figure: str) -> float:
+        """The mean of one held-out figure over the folds, weighted by the records each scores."""
+        values, weights = [], []
+        for f in self.converged:
+            if f.heldout is not None:
+                values.append(dict(f.heldout.figures())[figure])
+                weights.append(f.heldout.records)
+        ok = np.isfinite(values)
+        return (
+            float(np.average(np.array(values)[ok], weights=np.array(weights)[ok]))
+            if np.any(ok)
+            else float("nan")
+        )
+
+
+def believed_std(white: np.ndarray, blocked: np.ndarray) -> np.ndarray:
+    """The σ to believe: the larger of the white-noise σ (a floor) and the jackknife σ."""
+    return np.where(np.isfinite(blocked), np.fmax(white, blocked), white)
+
+
+#: A difference beyond this many σ is reported as significant.
+SIGNIFICANT = 3.0
+
+
+@dataclass(frozen=True)
+class DirectionCheck:
+    """Forward-only and reverse-only estimates (model order), their windows, and the differences
+    in units of their σ (NaN for parameters held in either part)."""
+
+    names: tuple[str, ...]
+    forward: np.ndarray
+    reverse: np.ndarray
+    windows: tuple[int, int]
+    z: np.ndarray
+
+    @property
+    def worst(self) -> tuple[str, float]:
+        """The parameter that disagrees most, and by how many σ."""
+        if not np.any(np.isfinite(self.z)):
+            return "", float("nan")
+        i = int(np.nanargmax(np.abs(self.z)))
+        return self.names[i], float(self.z[i])
+
+    @property
+    def significant(self) -> bool:
+        return bool(np.nanmax(np.abs(self.z), initial=0.0) > SIGNIFICANT)
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "windows": {"forward": self.windows[0], "reverse": self.windows[1]},
+            "forward": dict(zip(self.names, map(float, self.forward))),
+            "reverse": dict(zip(self.names, map(float, self.reverse))),
+            "difference_in_sigma": {
+                n: (None if not np.isfinite(v) else float(v)) for n, v in zip(self.names, self.z)
+            },
+            "significant": self.significant,
+        }
+
+
+@dataclass(frozen=True)
+class LagEstimate:
+    """The estimated lag (s), the costs of the lags fitted, and whether the best of them is at an
+    end of the searched range (then the true lag may lie beyond it)."""
+
+    lag_s: float
+    grid_s: tuple[float, ...]
+    costs: tuple[float, ...]
+    at_edge: bool = False
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "lag_s": self.lag_s,
+            "grid_s": list(self.grid_s),
+            "costs": [c if np.isfinite(c) else None for c in self.costs],
+            "at_edge": self.at_edge,
+        }
+
+
+#: A direction with 1σ beyond this many reference units is weakly observable...
+WEAK = 5.0
+#: ...and beyond this many, not observable.
+NOT_OBSERVABLE = 100.0
+
+
+@dataclass(frozen=True)
+class WeakDirection:
+    """A poorly determined combination of parameters and its 1σ in reference units."""
+
+    std_reference: float
+    components: dict[str, float]
+
+    def words(self) -> str:
+        names = sorted(self.components, key=lambda n: -abs(self.components[n]))
+        if self.std_reference > NOT_OBSERVABLE:
+            verb = "is" if len(names) == 1 else "are"
+            return f"{', '.join(names)} {verb} not observable from this log"
+        if len(names) == 1:
+            return f"{names[0]} is only weakly observable"
+        return f"{', '.join(names)} are only weakly observable apart (one combination of them is loose)"
+
+
+@dataclass(frozen=True)
+class Observability:
+    """Condition of the information matrix, weak directions and excitation warnings."""
+
+    condition_number: float
+    std_reference: dict[str, float]
+    weak: tuple[WeakDirection, ...]
+    heading_range_rad: float
+    warnings: tuple[str, ...]
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "condition_number": self.condition_number,
+            "std_in_reference_units": self.std_reference,
+            "weak_directions": [
+                {"std_in_reference_units": w.std_reference, "components": w.components} for w in self.weak
+            ],
+            "heading_range_rad": self.heading_range_rad,
+            "warnings": list(self.warnings),
+        }

@@ -1,0 +1,111 @@
+"""Faults found in a log: stretches of data no calibration can explain, and what was done with them.
+
+:mod:`nlp_calib.analysis.faults` finds them; these records say where they are, how large, the
+evidence in words, and how the fit handled them.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Fault:
+    """A stretch of intervals ``first..last`` (interval k joins records k and k+1) whose data are wrong.
+
+    ``record`` is the record whose reading shows the fault (for a tracker jump: the bad pose);
+    ``logged`` and ``implied`` are the encoder's total increment over the stretch as logged and as
+    the tracker's motion implies, ``noise`` the 1σ of ``implied`` (ticks; for a tracker jump:
+    0, the pose's position error and the tracker's noise, in m).
+    """
+
+    kind: str
+    encoder: str | None
+    first: int
+    last: int
+    record: int
+    time_s: float
+    line: int
+    logged: float
+    implied: float
+    noise: float
+    evidence: str
+
+    def as_dict(self) -> dict[str, object]:
+        where = {
+            "kind": self.kind,
+            "encoder": self.encoder,
+            "record": self.record,
+            "line": self.line,
+            "time_s": self.time_s,
+            "intervals": [self.first, self.last],
+        }
+        if self.kind == "tracker_jump":
+            size = {"offset_m": self.implied, "noise_m": self.noise}
+        else:
+            size = {"logged_ticks": self.logged, "implied_ticks": self.implied, "noise_ticks": self.noise}
+        return {**where, **size, "evidence": self.evidence}
+
+
+def count_kinds(faults: Sequence[Fault]) -> str:
+    """``"4 stall_then_jump, 11 tracker_jump"``: how many faults of each kind, in order of appearance."""
+    return ", ".join(f"{n} {k}" for k, n in Counter(f.kind for f in faults).items())
+
+
+@dataclass(frozen=True)
+class FaultReport:
+    """The faults found in a log, and the harmless stale readings counted per encoder."""
+
+    faults: tuple[Fault, ...]
+    stale: Mapping[str, int]
+    noise_ticks: Mapping[str, float]
+    #: Why the log could not be checked ("" when it was).
+    unchecked: str = ""
+
+    def shifted(self, offset: int, line_numbers: np.ndarray) -> FaultReport:
+        """The same findings with record and interval indices moved by ``offset``; ``line_numbers``
+        are the log lines of the records the indices then refer to."""
+        moved = tuple(
+            replace(
+                f,
+                first=f.first + offset,
+                last=f.last + offset,
+                record=f.record + offset,
+                line=int(line_numbers[f.record + offset]),
+            )
+            for f in self.faults
+        )
+        return replace(self, faults=moved)
+
+    @property
+    def counter_faults(self) -> tuple[Fault, ...]:
+        return tuple(f for f in self.faults if f.kind != "tracker_jump")
+
+    def bad_intervals(self, n_intervals: int) -> np.ndarray:
+        """Mask of intervals a residual window must not cross (counter faults)."""
+        mask = np.zeros(n_intervals, dtype=bool)
+        for f in self.faults:
+            if f.kind != "tracker_jump":
+                mask[max(f.first, 0) : min(f.last + 1, n_intervals)] = True
+        return mask
+
+    def bad_records(self, n_records: int) -> np.ndarray:
+        """Mask of records a residual window must not start or end at (tracker jumps)."""
+        mask = np.zeros(n_records, dtype=bool)
+        for f in self.faults:
+            if f.kind == "tracker_jump" and 0 <= f.record < n_records:
+                mask[f.record] = True
+        return mask
+
+
+@dataclass(frozen=True)
+class Findings:
+    """The faults found in the used records, how they were handled and what a repair changed."""
+
+    report: FaultReport
+    handling: str
+    repairs: tuple[str, ...] = ()

@@ -1,0 +1,227 @@
+"""A calibration's result: one self-contained record of what a run found, for one log or several.
+
+Everything the outputs show is here, computed by the pipeline's analyse stage: the estimates and
+their uncertainty, the fair figures, the checks, the verdict and (when asked for) the series
+behind the figures. Nothing refers back to the objects that computed it, so a result read back
+from its stored form (:meth:`CalibrationRun.to_data`, :meth:`CalibrationRun.from_data`) writes
+the same files.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from nlp_calib.core.errors import UsageError
+from nlp_calib.results import codec
+from nlp_calib.results.checks import CrossValidation, DirectionCheck, LagEstimate, Observability, believed_std
+from nlp_calib.results.faults import Findings
+from nlp_calib.results.figures import TrajectoryMetrics
+from nlp_calib.results.series import OdometryTrack, RunSeries
+from nlp_calib.results.solver import SolverResult
+from nlp_calib.results.uncertainty import Uncertainty
+
+
+@dataclass(frozen=True)
+class ScenarioInfo:
+    """What the outputs say about the scenario: its name and file, the model with its units and
+    headline parameters, the log(s), the solvers (in order, with display labels) and the residual
+    form and kernel as the scenario set them."""
+
+    name: str
+    path: str | None
+    model: str
+    units: Mapping[str, str]
+    headline: tuple[str, ...]
+    dataset: str
+    datasets: tuple[str, ...]
+    solvers: tuple[str, ...]
+    labels: Mapping[str, str]
+    residual: Mapping[str, Any]
+    robust: Mapping[str, Any]
+    initial_guess: str
+
+    def label(self, solver: str) -> str:
+        """The display name of ``solver``."""
+        return self.labels.get(solver, solver)
+
+
+@dataclass(frozen=True)
+class Encoder:
+    """An encoder as the log describes it: its name, kind (``absolute`` or ``counter``), unit and
+    range (readings per turn; 0 when the readings are angles)."""
+
+    name: str
+    kind: str
+    unit: str
+    range: int
+
+
+@dataclass(frozen=True)
+class DroppedLine:
+    """A record left out while reading, with its line (or message) and why."""
+
+    line: int
+    reason: str
+
+
+@dataclass(frozen=True)
+class LogInfo:
+    """The log as read: its source, records, what was dropped while reading, the sensor's frame,
+    the encoders, and the duration of the records used (s)."""
+
+    path: str
+    records: int
+    dropped: tuple[DroppedLine, ...]
+    sensor_frame: str
+    encoders: tuple[Encoder, ...]
+    duration_s: float
+
+
+@dataclass(frozen=True)
+class DataInfo:
+    """What of the log the fit used: record ranges ``used`` and ``fit`` (the hold-out follows),
+    the residual windows fitted and left out, and the tracker lag applied."""
+
+    used: tuple[int, int]
+    fit: tuple[int, int]
+    n_residuals: int
+    dropped_stationary: int
+    dropped_faulty: int
+    tracker_lag_s: float
+    lag_estimate: LagEstimate | None
+
+
+@dataclass(frozen=True)
+class Checks:
+    """What the run's checks found: observability, blocked cross-validation, the forward/reverse
+    comparison and the faults (any may be absent when it could not run)."""
+
+    observability: Observability | None
+    crossval: CrossValidation | None
+    direction: DirectionCheck | None
+    findings: Findings | None
+
+
+@dataclass(frozen=True)
+class SolverReport:
+    """One solver's result with its uncertainty and trajectory metrics (full range and hold-out)."""
+
+    result: SolverResult
+    uncertainty: Uncertainty
+    metrics: TrajectoryMetrics
+    holdout: TrajectoryMetrics | None
+
+
+#: The verdict's levels.
+GOOD = "good"
+CAVEATS = "usable with caveats"
+UNDETERMINED = "not determined"
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """``level`` (:data:`GOOD`, :data:`CAVEATS`, :data:`UNDETERMINED`) and its reasons."""
+
+    level: str
+    reasons: tuple[str, ...]
+
+    def line(self) -> str:
+        return f"{self.level.upper()}: " + "; ".join(self.reasons)
+
+
+@dataclass(frozen=True)
+class CalibrationRun:
+    """Everything a run produced for one log; ``baseline`` scores the initial guess.
+
+    In a calibration from several logs, each log's run carries the joint estimates beside that
+    log's own figures.
+    """
+
+    scenario: ScenarioInfo
+    log: LogInfo
+    data: DataInfo
+    initial: Mapping[str, float]
+    baseline: TrajectoryMetrics
+    baseline_holdout: TrajectoryMetrics | None
+    reports: Mapping[str, SolverReport]
+    checks: Checks
+    warnings: tuple[str, ...]
+    verdict: Verdict
+    series: RunSeries | None = None
+    odometry: OdometryTrack | None = None
+
+    def std(self, solver: str) -> dict[str, float]:
+        """The 1σ to believe for ``solver``'s estimate: the larger of the white-noise σ and the
+        block cross-validation's jackknife σ."""
+        u = self.reports[solver].uncertainty
+        cv = self.checks.crossval
+        blocked = cv.std if cv is not None else np.full(len(u.names), np.nan)
+        return dict(zip(u.names, map(float, believed_std(u.std, blocked))))
+
+    def std_blocks(self) -> dict[str, float] | None:
+        """The jackknife σ of the block cross-validation, when it has enough converged folds."""
+        cv = self.checks.crossval
+        if cv is None or not cv.available:
+            return None
+        return cv.std_dict()
+
+    def solver_order(self) -> list[str]:
+        """The run's solvers in the scenario's order, then any others in the order they ran."""
+        order = [s for s in self.scenario.solvers if s in self.reports]
+        return order + [s for s in self.reports if s not in order]
+
+    def chosen_solver(self) -> str | None:
+        """ "The" calibration: the first converged solver in :meth:`solver_order`, or None."""
+        return next((s for s in self.solver_order() if self.reports[s].result.converged), None)
+
+    def require_series(self) -> RunSeries:
+        """The series behind the figures, which a run computes only when asked for them."""
+        if self.series is None:
+            raise UsageError(f"the result of {self.scenario.name} holds no figure data; run it with --report")
+        return self.series
+
+    def relative_difference(self, a: str, b: str) -> float:
+        """The largest relative difference between solvers ``a``'s and ``b``'s parameters."""
+        pa, pb = self.reports[a].result.params, self.reports[b].result.params
+        return float(np.max(np.abs(pa - pb) / np.maximum(np.abs(pa), 1e-12)))
+
+    def to_data(self) -> Any:
+        """The run as JSON types (see :mod:`nlp_calib.results.codec`)."""
+        return codec.to_data(self)
+
+    @classmethod
+    def from_data(cls, data: Any) -> CalibrationRun:
+        """The run :meth:`to_data` stored."""
+        return codec.load(cls, data)
+
+
+@dataclass(frozen=True)
+class JointRun:
+    """A calibration from several logs: ``parts`` holds one run per log, each carrying the joint
+    estimates (same parameters, uncertainty and checks) beside that log's own figures."""
+
+    scenario: ScenarioInfo
+    parts: tuple[CalibrationRun, ...]
+    n_residuals: int
+    checks: Checks
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def reports(self) -> Mapping[str, SolverReport]:
+        """The joint results by solver (the trajectory metrics are the first log's)."""
+        return self.parts[0].reports
+
+    def std(self, solver: str) -> dict[str, float]:
+        """The 1σ to believe for ``solver``'s joint estimate (see :meth:`CalibrationRun.std`)."""
+        return self.parts[0].std(solver)
+
+    def to_data(self) -> Any:
+        return codec.to_data(self)
+
+    @classmethod
+    def from_data(cls, data: Any) -> JointRun:
+        return codec.load(cls, data)

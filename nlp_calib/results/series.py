@@ -1,0 +1,127 @@
+"""The numbers behind a run's figures and trajectory files, carried in the result.
+
+Computed once, in the analyse stage (:mod:`nlp_calib.pipeline.analyse`), from the same Functions
+the solvers and the metrics use; the outputs only draw and format them, so a report can be
+written from a stored result alone.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.results.figures import ErrorStats
+
+
+@dataclass(frozen=True)
+class Track:
+    """A labelled sensor track ``(n, 3)`` over the used records; ``solver`` is None for the initial
+    guess; ``ate_mean`` is its full-run ATE (m)."""
+
+    label: str
+    solver: str | None
+    T_world_sensor: np.ndarray
+    ate_mean: float
+    converged: bool = True
+
+
+@dataclass(frozen=True)
+class SegmentFigures:
+    """One solver's figures on one fault-free segment (what ``evo`` reproduces on its TUM files)."""
+
+    solver: str
+    segment: int
+    poses: int
+    ate: ErrorStats
+    aligned: ErrorStats
+    rpe: tuple[ErrorStats, ...]
+
+
+@dataclass(frozen=True)
+class TrackSeries:
+    """The tracker's poses and the dead-reckoned tracks over the used records.
+
+    ``good`` marks the tracker poses not flagged bad; ``parts`` are the fault-free segments
+    ``[p, q)`` (indices into the tracks); ``restarted`` holds each solver's track restarted from
+    the tracker at the start of every part (what the segment ATE scores); ``faults`` are
+    ``(index, kind)``; ``holdout_start`` the index of the first record kept out of the fit.
+    """
+
+    time_s: np.ndarray
+    tracker: np.ndarray
+    good: np.ndarray
+    parts: tuple[tuple[int, int], ...]
+    tracks: tuple[Track, ...]
+    restarted: Mapping[str, np.ndarray]
+    faults: tuple[tuple[int, str], ...]
+    holdout_start: int | None
+    segments: tuple[SegmentFigures, ...]
+
+
+@dataclass(frozen=True)
+class ResidualSeries:
+    """Per-window errors ``(3, n)`` at the initial guess and at each solver's estimate, with the
+    kernel's per-component thresholds and the windows' start times."""
+
+    time_s: np.ndarray
+    before: np.ndarray
+    after: Mapping[str, np.ndarray]
+    inliers_before: int
+    inliers_after: Mapping[str, int]
+    thresholds: np.ndarray
+    kernel: str
+    delta: float
+    solvers_agree: bool
+
+
+@dataclass(frozen=True)
+class ModelCheckSeries:
+    """The log's vendor odometry against our base-link model with the header's parameters."""
+
+    time_s: np.ndarray
+    vendor: np.ndarray
+    ours: np.ndarray
+    integration: str
+    params: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class OdometryTrack:
+    """Base-link poses ``(n, 3)`` ordered ``(x, y, theta)`` and covariances ``(n, 3, 3)``."""
+
+    time_s: np.ndarray
+    T_world_base: np.ndarray
+    covariance: np.ndarray
+    #: The base poses the tracker implies with the calibrated mount, for comparison.
+    reference: np.ndarray | None = None
+
+    def csv(self) -> str:
+        """One row per record: time, pose and the upper triangle of the covariance."""
+        head = "time_s,x,y,theta,var_x,cov_xy,cov_xtheta,var_y,cov_ytheta,var_theta"
+        P = self.covariance
+        upper = [P[:, i, j] for i in range(3) for j in range(i, 3)]
+        cols = np.column_stack([self.time_s, self.T_world_base, *upper])
+        return head + "\n" + "\n".join(",".join(f"{v:.10g}" for v in row) for row in cols) + "\n"
+
+
+@dataclass(frozen=True)
+class FaultSpan:
+    """A fault's time span (s) and kind, for figures over time."""
+
+    first_s: float
+    last_s: float
+    kind: str
+
+
+@dataclass(frozen=True)
+class RunSeries:
+    """Everything a log's figures and trajectory files show; ``model_check`` is None when the log
+    carries no vendor odometry."""
+
+    tracks: TrackSeries
+    residuals: ResidualSeries
+    fault_spans: tuple[FaultSpan, ...]
+    holdout_start_s: float | None
+    model_check: ModelCheckSeries | None

@@ -1,0 +1,110 @@
+"""A ROS 1 or ROS 2 bag as a dataset: the ``dataset:`` block that names its topics, read as a log.
+
+The bag is read and paired on every run exactly as ``nlp-calib import-bag`` would write it
+(:mod:`nlp_calib.logs.bag_records`), with a header from ``ROBOT.yaml`` or the model's defaults.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, ClassVar
+
+from nlp_calib.core.config import coerce, fail, from_mapping, key_name
+from nlp_calib.core.errors import ConfigError
+from nlp_calib.logs import Log, LogHeader
+from nlp_calib.logs.bag_reader import DEFAULT_MAX_GAP_S, BagTopics, is_bag
+from nlp_calib.logs.bag_records import BagRecords, read_bag, read_bag_records
+from nlp_calib.models import KinematicModel, encoders
+from nlp_calib.sources.robot import load_robot, robot_header
+
+#: The keys a ``dataset:`` bag block must have.
+REQUIRED = ("bag", "joint_states", "joints", "tracker")
+
+
+def _resolved(path: Path, base_dir: Path) -> Path:
+    return path if path.is_absolute() else base_dir / path
+
+
+@dataclass(frozen=True)
+class BagSource:
+    """A bag (``bag``) and how to read it: the topics, the joints in the model's encoder order, the
+    tracked frame, ``ROBOT.yaml`` and the pairing's ``max_gap`` (s)."""
+
+    kind: ClassVar[str] = "bag"
+    record_word: ClassVar[str] = "record"
+    bag: Path
+    joint_states: str
+    joints: tuple[str, ...]
+    tracker: str
+    tracker_frame: str | None = None
+    robot: Path | None = None
+    max_gap: float = DEFAULT_MAX_GAP_S
+
+    def __post_init__(self) -> None:
+        self.topics()  # validates the topic fields
+
+    @property
+    def path(self) -> Path:
+        return self.bag
+
+    def topics(self) -> BagTopics:
+        return BagTopics(self.joint_states, self.joints, self.tracker, self.tracker_frame, self.max_gap)
+
+    def files(self) -> tuple[Path, ...]:
+        return (self.bag,) if self.robot is None else (self.bag, self.robot)
+
+    def stamps(self) -> str:
+        return f"the header stamps of {self.joint_states} and {self.tracker}"
+
+    def header(self, model: KinematicModel) -> LogHeader:
+        """The header the bag's records get: ``ROBOT.yaml``'s values over the model's defaults."""
+        robot = load_robot(self.robot, model) if self.robot is not None else None
+        return robot_header(model, robot, self.tracker_frame)
+
+    def read(self, model: KinematicModel, *, strict: bool) -> Log:
+        check_joints(self.joints, model, "dataset.joints")
+        return read_bag(self.bag, self.topics(), self.header(model), model.encoder_kinds, strict=strict)
+
+    def records(self, model: KinematicModel) -> tuple[LogHeader, BagRecords]:
+        """The header and the paired records, ready to be written as a text log (``import-bag``)."""
+        check_joints(self.joints, model, "joints")
+        return self.header(model), read_bag_records(self.bag, self.topics())
+
+    def moved(self, path: Path) -> BagSource:
+        return replace(self, bag=path)
+
+    @classmethod
+    def claims(cls, raw: Any) -> bool:
+        return isinstance(raw, Mapping) and "bag" in raw
+
+    @classmethod
+    def accepts(cls, path: Path) -> bool:
+        return is_bag(path)
+
+    @classmethod
+    def parse(cls, raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> BagSource:
+        valid = [f.name for f in dataclasses.fields(cls)]
+        for key in raw:
+            if key not in valid:
+                fail(f"{where}.{key_name(key)}", f"unknown key; a bag block has {', '.join((*valid, *also))}")
+        missing = [k for k in REQUIRED if k not in raw]
+        if missing:
+            fail(
+                where, f"a bag block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} (docs/bags.md)"
+            )
+        source: BagSource = from_mapping(cls, raw, where)
+        robot = None if source.robot is None else _resolved(source.robot, base_dir)
+        return replace(source, bag=_resolved(coerce(raw["bag"], Path, f"{where}.bag"), base_dir), robot=robot)
+
+
+def check_joints(joints: tuple[str, ...], model: KinematicModel, where: str) -> None:
+    """One joint per encoder of ``model``, in its order."""
+    names = encoders(model)
+    if len(joints) != len(names):
+        raise ConfigError(
+            f"{where}: {len(joints)} joint(s) ({', '.join(joints)}) for the {len(names)} encoders of "
+            f"{model.name}; name one joint per encoder, in this order: {', '.join(names)}"
+        )

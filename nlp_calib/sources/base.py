@@ -1,0 +1,60 @@
+"""What a dataset source is: the records of one log, from wherever they are kept.
+
+A source is a frozen dataclass parsed from a scenario's ``dataset:`` entry (validated once, on
+load) that reads its records into a :class:`~nlp_calib.logs.Log` for a model. Adding a source is
+one module with such a class and one entry in :data:`nlp_calib.sources.SOURCES`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, ClassVar, Protocol
+
+from nlp_calib.logs import Log
+from nlp_calib.models import KinematicModel
+
+
+class DatasetSource(Protocol):
+    """One log's records: where they are, what their stamps are, how to read them."""
+
+    #: The registry name (``text``, ``bag``...).
+    kind: ClassVar[str]
+    #: What one record is called in messages (a text log's ``line``, a bag's ``message``).
+    record_word: ClassVar[str]
+
+    @property
+    def path(self) -> Path:
+        """The file or folder that names the log (in messages and output folder names)."""
+        ...
+
+    def files(self) -> tuple[Path, ...]:
+        """Every file or folder the source reads (to tell logs apart and to never overwrite one)."""
+        ...
+
+    def stamps(self) -> str:
+        """Which clock the records' times come from, in words."""
+        ...
+
+    def read(self, model: KinematicModel, *, strict: bool) -> Log:
+        """The records, read for ``model`` (``strict``: refuse a bad record instead of dropping it)."""
+        ...
+
+    def moved(self, path: Path) -> DatasetSource:
+        """The same reading of another file (``--data``)."""
+        ...
+
+    @classmethod
+    def claims(cls, raw: Any) -> bool:
+        """Whether the scenario's ``dataset`` entry ``raw`` (YAML) describes this kind of source."""
+        ...
+
+    @classmethod
+    def accepts(cls, path: Path) -> bool:
+        """Whether a path alone (``--data PATH``) can be read by this kind of source."""
+        ...
+
+    @classmethod
+    def parse(cls, raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> DatasetSource:
+        """The source ``raw`` describes; paths resolve against ``base_dir``, errors name ``where``;
+        ``also``: keys the caller took out of the entry first, named among the valid ones."""
+        ...

@@ -1,0 +1,74 @@
+"""The text log: a ``#`` header and one record per line (docs/log-format.md)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+from nlp_calib.core.config import coerce
+from nlp_calib.core.errors import ModelError, UsageError
+from nlp_calib.logs import Log, read_log
+from nlp_calib.logs.bag_reader import is_bag
+from nlp_calib.logs.reader import read_header
+from nlp_calib.models import KinematicModel, model_for_log
+
+
+def load_log(path: str | Path, model: KinematicModel | None = None, *, strict: bool = True) -> Log:
+    """Read a text log with ``model``'s encoder kinds (default: the model its header names).
+
+    Raises :class:`ModelError` when the header names a kind of robot ``model`` does not read.
+    """
+    kind = read_header(path).kinematic_model
+    if model is None:
+        model = model_for_log(kind)
+    elif kind not in model.log_names:
+        raise ModelError(
+            f"{path}: the log is of kind {kind!r}, but the model {model.name!r} reads "
+            f"{', '.join(model.log_names)}"
+        )
+    return read_log(path, model.encoder_kinds, strict=strict)
+
+
+@dataclass(frozen=True)
+class TextSource:
+    """A text log at ``path`` (a scenario's ``dataset: PATH``)."""
+
+    kind: ClassVar[str] = "text"
+    record_word: ClassVar[str] = "line"
+    file: Path
+
+    @property
+    def path(self) -> Path:
+        return self.file
+
+    def files(self) -> tuple[Path, ...]:
+        return (self.file,)
+
+    def stamps(self) -> str:
+        return "the log's own time column"
+
+    def read(self, model: KinematicModel, *, strict: bool) -> Log:
+        if is_bag(self.file):
+            raise UsageError(
+                f"{self.file}: a ROS bag; name its topics in a dataset block (bag, joint_states, joints, "
+                "tracker; docs/bags.md) or convert it with nlp-calib import-bag"
+            )
+        return load_log(self.file, model, strict=strict)
+
+    def moved(self, path: Path) -> TextSource:
+        return TextSource(path)
+
+    @classmethod
+    def claims(cls, raw: Any) -> bool:
+        return not isinstance(raw, Mapping)
+
+    @classmethod
+    def accepts(cls, path: Path) -> bool:
+        return True
+
+    @classmethod
+    def parse(cls, raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> TextSource:
+        path: Path = coerce(raw, Path, where)
+        return TextSource(path if path.is_absolute() else base_dir / path)
