@@ -27,8 +27,8 @@ from nlp_calib.models.base import Symmetry
 from nlp_calib.models.tricycle import Tricycle
 from nlp_calib.models.tricycle_reverse import MIN_REVERSING
 from nlp_calib.outputs.progress import Progress
-from nlp_calib.pipeline import Calibration
-from nlp_calib.results import CalibrationRun, Scenario, load_scenario
+from nlp_calib.pipeline import Calibration, Scenario, load_scenario
+from nlp_calib.results import CalibrationRun
 
 REPO = Path(__file__).resolve().parents[1]
 HOLDOUT = 0.4
@@ -146,7 +146,11 @@ class Scored:
         return dict(self.report.metrics.figures())[label]
 
     def cv(self, label: str) -> float:
-        return self.run.crossval.heldout_mean(label) if self.run.crossval is not None else float("nan")
+        return (
+            self.run.checks.crossval.heldout_mean(label)
+            if self.run.checks.crossval is not None
+            else float("nan")
+        )
 
 
 def score(sc: Scenario, holdout: bool = True) -> Scored:
@@ -217,7 +221,7 @@ def main() -> int:
         for h in ("exclude", "repair", "keep")
     }
     rec = handled["exclude"]
-    findings = rec.run.findings
+    findings = rec.run.checks.findings
     assert findings is not None
     u = rec.calib.model.inputs(rec.calib.aligned, base.objective.residual.steering_sample)
     # Where sustained reversing starts: the first run of a second (25 intervals) of it.
@@ -300,7 +304,7 @@ def main() -> int:
     # 4. Forward and reverse ---------------------------------------------------------------------
     w("## 4. Forward and reverse driving\n")
     plain = score(base.with_options(model="tricycle"))
-    d = plain.run.direction
+    d = plain.run.checks.direction
     if d is not None:
         w(
             f"With the plain tricycle, fits on forward-only ({d.windows[0]} windows) and reverse-only "
@@ -390,7 +394,7 @@ def main() -> int:
     w(
         f"`scenarios/real_tricycle.yaml`: model `tricycle_reverse`, horizon 25, Huber δ = 0.25, tracker "
         f"lag estimated ({1e3 * rec.calib.alignment.lag_s:.1f} ms), faults excluded "
-        f"({rec.run.dropped_faulty} windows).\n"
+        f"({rec.run.data.dropped_faulty} windows).\n"
     )
     w("| figure | target | measured | met |")
     w("|---|---|---|---|")
@@ -439,7 +443,7 @@ def main() -> int:
         "honest figure for new driving of the same kind.\n"
     )
     honest, white = rec.run.std("gauss_newton"), rec.report.uncertainty.std_dict()
-    d_rec = rec.run.direction
+    d_rec = rec.run.checks.direction
     direction_verdict = (
         f"largest difference {abs(d_rec.worst[1]):.1f}σ, in `{d_rec.worst[0]}`" if d_rec else "not checked"
     )

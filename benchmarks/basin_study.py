@@ -14,7 +14,6 @@ Writes docs/basin.md and prints a summary.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 from pathlib import Path

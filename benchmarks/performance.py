@@ -139,7 +139,7 @@ def solver_cases(real: Path | None, quick: bool) -> list[tuple[str, Any]]:
     seed = load_scenario(REPO / "scenarios" / "real_tricycle_seed.yaml").with_dataset(real)
     rec = load_scenario(REPO / "scenarios" / "real_tricycle.yaml").with_dataset(real)
     seed = seed.with_options(model="tricycle")
-    rec = dataclasses.replace(rec, model="tricycle", alignment=AlignmentOptions(tracker_lag=0.049361))
+    rec = rec.with_options(model="tricycle", alignment=AlignmentOptions(tracker_lag=0.049361))
     return [("real_tricycle_seed (H=1)", seed), ("real_tricycle (H=25)", rec)]
 
 

@@ -47,8 +47,8 @@ if TYPE_CHECKING:
     from nlp_calib.problem import ProblemFunctions, ProblemSpec, build
     from nlp_calib.results import CalibrationRun, JointRun, SolverReport, Verdict
     from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
-    from nlp_calib.sources import load_log
     from nlp_calib.solvers import SOLVERS, Solver, SolverResult, get_solver
+    from nlp_calib.sources import load_log
 
 # The public API is imported when first used, not with the package: ``python -m nlp_calib``
 # installs its signal handlers before numpy and CasADi load, and light tools stay light.

@@ -14,9 +14,7 @@ from nlp_calib.analysis.metrics import trajectory_metrics
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import format_log, resample_encoders
 from nlp_calib.models import get_model
-from nlp_calib.sources import load_log
 from nlp_calib.pipeline import Calibration
-from nlp_calib.results import CalibrationRun
 from nlp_calib.pipeline.scenario import (
     AlignmentOptions,
     SampleSelection,
@@ -24,7 +22,9 @@ from nlp_calib.pipeline.scenario import (
     load_scenario,
 )
 from nlp_calib.problem import ProblemSpec, ResidualOptions, build, build_residual_data
+from nlp_calib.results import CalibrationRun
 from nlp_calib.simulation import SimulationOptions, simulate
+from nlp_calib.sources import load_log
 
 MODEL = get_model("tricycle")
 TRUTH = np.array([0.55, 0.0105, 1.5, -0.05, 1.6, 0.1, 0.05])
@@ -182,15 +182,16 @@ def test_recommended_real_scenario_meets_the_fault_robust_targets(recommended: C
 
 
 @pytest.fixture(scope="module")
-def k_traction_of_parts(recommended: CalibrationRun) -> list[float]:
+def k_traction_of_parts(recommended: CalibrationRun, real_log: Path) -> list[float]:
     """k_traction fitted on the first 60 %, the last 60 %, the middle half and after the faults."""
-    sc = recommended.scenario.with_options(solvers=("gauss_newton",))
+    sc = load_scenario(SCENARIOS / "real_tricycle.yaml").with_dataset(real_log)
+    sc = sc.with_options(solvers=("gauss_newton",))
     values = []
     for a, b in ((0, 1460), (974, 2434), (608, 1825), (1220, 2434)):
         part = sc.with_options(
             samples=SampleSelection(start=a, stop=b),
             validation=dataclasses.replace(sc.validation, blocks=0),
-            alignment=dataclasses.replace(sc.log.alignment, tracker_lag=recommended.tracker_lag_s),
+            alignment=dataclasses.replace(sc.log.alignment, tracker_lag=recommended.data.tracker_lag_s),
         )
         res = Calibration(part).solve("gauss_newton")
         assert res.converged, res.reason

@@ -4,7 +4,6 @@ own writers, read back as logs and calibrated; the pairing rule, the wraps and e
 from __future__ import annotations
 
 import dataclasses
-
 import json
 import math
 from collections.abc import Callable, Iterable, Sequence
@@ -25,10 +24,9 @@ from nlp_calib.logs import Log, read_log
 from nlp_calib.logs.bag_reader import BagError, BagTopics
 from nlp_calib.logs.bag_records import read_bag_records
 from nlp_calib.models import get_model
-from nlp_calib.sources import load_log
 from nlp_calib.pipeline import Calibration, JointCalibration, load_scenario, scenario_from_mapping
-from nlp_calib.sources import BagSource, TextSource
 from nlp_calib.simulation import truth_path
+from nlp_calib.sources import BagSource, TextSource, load_log
 
 FORMATS = ("ros1", "sqlite3", "mcap")
 JOINTS = ("front_steer", "front_drive")  # the tricycle's encoders, steering then traction
@@ -617,7 +615,7 @@ def test_several_bags_calibrate_together_as_their_text_logs(
         raw = {"model": "tricycle", "solvers": ["gauss_newton"], "validation": {"blocks": 0}}
         sc = scenario_from_mapping({**raw, "datasets": [first, second]}, "joint", tmp_path)
         run = JointCalibration(sc).run()
-        assert [p.log.n_records for p in run.parts] == [400, 300]  # both logs, whole
+        assert [p.log.records for p in run.parts] == [400, 300]  # both logs, whole
         runs.append(run.reports["gauss_newton"].result)
     text, bag = runs
     assert text.converged and bag.converged

@@ -29,10 +29,10 @@ def test_direction_check_flags_a_direction_dependent_steering_gain() -> None:
     reverse-only fits disagree significantly; the model with that feature's agree."""
     sim = SimulationOptions(model="tricycle_reverse", records=2400, seed=4, truth={"k_steer_reverse": 0.08})
     plain, _ = _run("tricycle", sim)
-    assert plain.direction is not None and plain.direction.significant  # type: ignore[attr-defined]
+    assert plain.checks.direction is not None and plain.checks.direction.significant  # type: ignore[attr-defined]
     assert any("disagree" in w for w in plain.warnings)  # type: ignore[attr-defined]
     feature, truth = _run("tricycle_reverse", sim)
-    assert feature.direction is not None and not feature.direction.significant  # type: ignore[attr-defined]
+    assert feature.checks.direction is not None and not feature.checks.direction.significant  # type: ignore[attr-defined]
     res = feature.reports["gauss_newton"].result  # type: ignore[attr-defined]
     sigma = np.array(list(feature.std("gauss_newton").values()))  # type: ignore[attr-defined]
     assert np.all(np.abs(res.params - truth) <= 3.0 * sigma)

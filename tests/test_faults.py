@@ -24,12 +24,12 @@ from nlp_calib.core import files
 from nlp_calib.core.errors import DatasetError, SolverError
 from nlp_calib.core.numeric import COUNTER_MODULUS
 from nlp_calib.logs.checks import JUMP_FACTOR, counter_jumps
-from nlp_calib.sources import load_log
 from nlp_calib.outputs.outdir import MANIFEST_FILE
 from nlp_calib.pipeline import Calibration
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.scenario import load_scenario
 from nlp_calib.simulation import SimulationOptions, simulate
+from nlp_calib.sources import load_log
 
 N_HEADER = 8  # '#' lines of a simulated log
 

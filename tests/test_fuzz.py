@@ -24,9 +24,9 @@ from hypothesis import strategies as st
 
 from nlp_calib.core.errors import NlpCalibError
 from nlp_calib.logs import Log
-from nlp_calib.sources import load_log
 from nlp_calib.pipeline.scenario import Scenario, load_scenario, scenario_from_mapping
 from nlp_calib.simulation import SimulationOptions, simulate
+from nlp_calib.sources import load_log
 
 FUZZ = settings(
     max_examples=200,

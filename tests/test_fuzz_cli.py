@@ -23,12 +23,12 @@ from hypothesis import strategies as st
 
 from nlp_calib import cli
 from nlp_calib.cli.parser import SIGMA, build_parser
+from nlp_calib.core.config import MAX_YAML_VALUES, parse_yaml
 from nlp_calib.core.errors import NlpCalibError, ScenarioError, UsageError
 from nlp_calib.core.ranges import Range
-from nlp_calib.core.config import MAX_YAML_VALUES, parse_yaml
 from nlp_calib.pipeline.scenario import Scenario, load_scenario
-from nlp_calib.problem.windows import HORIZON, STRIDE
 from nlp_calib.pipeline.simconfig import CLI_LIMITS, simulation_options
+from nlp_calib.problem.windows import HORIZON, STRIDE
 
 FUZZ = settings(
     max_examples=150,

@@ -26,11 +26,11 @@ from test_faults import assert_nothing_written, assert_one_line_error
 
 from nlp_calib import cli
 from nlp_calib.core import interrupts
+from nlp_calib.core.config import parse_yaml
 from nlp_calib.core.errors import NlpCalibError, NlpCalibWarning, ScenarioError
 from nlp_calib.outputs import outdir
 from nlp_calib.outputs.outdir import MANIFEST_FILE, StagedOutput
 from nlp_calib.pipeline import Calibration, load_scenario, scenario_from_mapping
-from nlp_calib.core.config import parse_yaml
 from nlp_calib.solvers.evaluation import ProblemEvaluator
 
 DEMO_LOG = SCENARIOS / "data" / "demo_tricycle.txt"

@@ -3,7 +3,6 @@ covariance, symmetries and the data-driven start."""
 
 from __future__ import annotations
 
-import dataclasses
 import subprocess
 from pathlib import Path
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import re
 from pathlib import Path
@@ -17,9 +16,9 @@ from nlp_calib.cli.parser import build_parser
 from nlp_calib.models import get_model
 from nlp_calib.outputs.plots.residuals import BINS, _calibrated_range
 from nlp_calib.pipeline import Calibration, Scenario, Wanted
-from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
 from nlp_calib.pipeline.scenario import FaultOptions, ValidationOptions
 from nlp_calib.problem import ProblemSpec, build
+from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
 
 SUBCOMMANDS = ("run", "compare", "validate", "odometry", "codegen", "simulate", "import-bag")
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import json
 import os
@@ -24,8 +23,8 @@ from nlp_calib.outputs import registry
 from nlp_calib.outputs.markdown import fmt_std, fmt_value
 from nlp_calib.outputs.progress import Progress
 from nlp_calib.pipeline import Calibration, Wanted
-from nlp_calib.results import CalibrationRun
 from nlp_calib.pipeline.scenario import Scenario, ValidationOptions
+from nlp_calib.results import CalibrationRun
 from nlp_calib.solvers import GaussNewtonOptions
 
 IMAGES = ("trajectory.png", "convergence.png", "residuals.png", "residuals_time.png", "model_check.png")
@@ -41,6 +40,8 @@ def _write(run: CalibrationRun, out: Path, group: str) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     outputs = registry.selected((group,), report=True)
     return registry.write(outputs, [(run, out)], (run, out), registry.OutputOptions())
+
+
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 

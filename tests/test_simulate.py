@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 from conftest import SCENARIOS, assert_close, parse_lines
 
-from nlp_calib.sources import load_log
 from nlp_calib.pipeline.simconfig import simulation_options
 from nlp_calib.simulation import SimulationOptions, simulate
+from nlp_calib.sources import load_log
 
 
 def test_shipped_demo_log_is_what_the_simulator_makes() -> None:

@@ -17,6 +17,7 @@ than the neighbourhood cannot hide it).
 from __future__ import annotations
 
 from collections.abc import Callable
+
 import numpy as np
 
 from nlp_calib.results.checks import LagEstimate

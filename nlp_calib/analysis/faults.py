@@ -22,8 +22,7 @@ Stale readings that catch up are counted (``stale``) but harmless to horizon win
 
 from __future__ import annotations
 
-from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import replace
 
 import numpy as np

@@ -10,7 +10,6 @@ from __future__ import annotations
 import numpy as np
 
 from nlp_calib.problem import ProblemFunctions
-from nlp_calib.results.series import OdometryTrack
 
 
 def propagate(

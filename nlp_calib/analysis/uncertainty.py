@@ -29,6 +29,7 @@ timing error or slowly varying model error), and the problem is close to linear 
 from __future__ import annotations
 
 import itertools
+
 import numpy as np
 
 from nlp_calib.models import reference_scales

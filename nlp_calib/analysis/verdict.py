@@ -20,8 +20,8 @@ import numpy as np
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.base import reference_scale
 from nlp_calib.results import CalibrationRun, Verdict
-from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
 from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
+from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
 
 #: Relative parameter difference beyond which two converged solvers disagree.
 AGREE = 1e-4

@@ -12,7 +12,7 @@ from nlp_calib.core.ranges import Range
 from nlp_calib.core.version import __version__
 from nlp_calib.logs.bag_reader import DEFAULT_MAX_GAP_S, MAX_GAP, TRACKER_TYPES
 from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders
-from nlp_calib.pipeline.scenario import BLOCKS
+from nlp_calib.pipeline.options import BLOCKS
 from nlp_calib.pipeline.simconfig import CLI_LIMITS
 from nlp_calib.simulation import TRAJECTORIES
 from nlp_calib.solvers import SOLVERS

@@ -10,7 +10,7 @@ one line in :mod:`nlp_calib.models`.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, Protocol
 
@@ -149,6 +149,18 @@ class KinematicModel(Protocol):
         ``base_motion(params)`` evaluates the windows' base motion ``(3, M)`` for given parameters.
         """
         ...
+
+
+def named(names: Sequence[str], vector: ca.SX) -> dict[str, ca.SX]:
+    """The entries of a symbolic ``vector`` by name (``names`` in its order): models write their
+    expressions with parameter and input names, never positions."""
+    return {name: vector[i] for i, name in enumerate(names)}
+
+
+def rows_by_name(names: Sequence[str], U: np.ndarray) -> dict[str, np.ndarray]:
+    """The rows of each named input in horizon windows ``U`` (``len(names)·H`` rows, the inputs of
+    each interval in turn)."""
+    return {name: U[i :: len(names)] for i, name in enumerate(names)}
 
 
 def canonical(

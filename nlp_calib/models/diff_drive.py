@@ -16,7 +16,7 @@ import numpy as np
 from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
-from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, Reference, Symmetry
+from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, Reference, Symmetry, named, rows_by_name
 from nlp_calib.models.drives import SimulationSettings, counter, cumulative, drive_header, first_order
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.symbolic import se2
@@ -133,9 +133,10 @@ class DiffDrive:
 
     def increment(self, k: ca.SX, u: ca.SX, integration: str) -> ca.SX:
         """Travel ``(d_r + d_l)/2`` turning by ``(d_r − d_l)/baseline``; exact arc or Euler."""
-        d_left, d_right = k[0] * u[0], k[1] * u[1]
+        p, ticks = named(self.kinematic_params, k), named(self.input_names, u)
+        d_left, d_right = p["k_left"] * ticks["left_ticks"], p["k_right"] * ticks["right_ticks"]
         travel = 0.5 * (d_left + d_right)
-        dtheta = (d_right - d_left) / k[2]
+        dtheta = (d_right - d_left) / p["baseline"]
         if integration == "euler":
             return ca.vertcat(travel, 0.0, dtheta)
         return se2.arc(travel, dtheta)
@@ -177,7 +178,8 @@ class DiffDrive:
         base_motion: Callable[[Mapping[str, float]], np.ndarray],
     ) -> dict[str, float]:
         """Closed form: ``Δθ = (k_right/b)·ΣΔr − (k_left/b)·ΣΔl`` is linear; hand-eye gives ``b``."""
-        left, right = U[0::2].sum(0), U[1::2].sum(0)
+        rows = rows_by_name(self.input_names, U)
+        left, right = rows["left_ticks"].sum(0), rows["right_ticks"].sum(0)
         alpha, beta = robust_lstsq(np.stack([right, -left], 1), z[2])
         unit = {"k_left": float(beta), "k_right": float(alpha), "baseline": 1.0}
         unit.update({"sensor_x": 0.0, "sensor_y": 0.0, "sensor_theta": 0.0})

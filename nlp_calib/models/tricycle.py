@@ -18,7 +18,15 @@ import numpy as np
 from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
-from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, STEERING_SAMPLES, Reference, Symmetry
+from nlp_calib.models.base import (
+    QUANTISATION,
+    SENSOR_TURNED,
+    STEERING_SAMPLES,
+    Reference,
+    Symmetry,
+    named,
+    rows_by_name,
+)
 from nlp_calib.models.drives import SimulationSettings, counter, cumulative, drive_header, first_order
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.symbolic import se2
@@ -162,13 +170,15 @@ class Tricycle:
 
     def steering_angle(self, k: ca.SX, u: ca.SX) -> ca.SX:
         """``φ = k_steer·angle + steer_offset``."""
-        return k[0] * u[1] + k[3]
+        p, inputs = named(self.kinematic_params, k), named(self.input_names, u)
+        return p["k_steer"] * inputs["steering_angle"] + p["steer_offset"]
 
     def increment(self, k: ca.SX, u: ca.SX, integration: str) -> ca.SX:
         """``v = d·cos φ``, ``ω = d·sin φ / L``; exact arc or Euler ``(v, 0, ω)``."""
-        k_traction, axis_length = k[1], k[2]
+        p, inputs = named(self.kinematic_params, k), named(self.input_names, u)
+        k_traction, axis_length = p["k_traction"], p["axis_length"]
         phi = self.steering_angle(k, u)
-        d = k_traction * u[0]
+        d = k_traction * inputs["traction_revolutions"]
         v = d * ca.cos(phi)
         omega = d * ca.sin(phi) / axis_length
         if integration == "euler":
@@ -233,7 +243,8 @@ class Tricycle:
         (``Δθ = c·Σ r·sin(k_steer·a + offset)``: a 1-D search over ``k_steer``, linear in the
         rest); the hand-eye step then gives the sensor pose and ``k_traction``.
         """
-        revs, angle = U[0::2], U[1::2]
+        rows = rows_by_name(self.input_names, U)
+        revs, angle = rows["traction_revolutions"], rows["steering_angle"]
         dtheta = z[2]
 
         def design(k_steer: float) -> np.ndarray:

@@ -18,7 +18,7 @@ from types import MappingProxyType
 import casadi as ca
 import numpy as np
 
-from nlp_calib.models.base import Reference, Symmetry
+from nlp_calib.models.base import Reference, Symmetry, named
 from nlp_calib.models.tricycle import Tricycle, TricycleDrive
 
 #: With fewer reversing intervals than this, ``k_steer_reverse`` is held (about 2 s of driving).
@@ -73,9 +73,11 @@ class TricycleReverse(Tricycle):
         The base reverses when ``d·cos φ₀ < 0`` (``d`` the wheel's travel, ``φ₀`` the angle
         without the reverse term): unchanged by turning the wheel round.
         """
-        phi0 = k[0] * u[1] + k[3]
-        reversing = ca.if_else(k[1] * u[0] * ca.cos(phi0) < 0, 1.0, 0.0)
-        return k[0] * (1.0 + k[4] * reversing) * u[1] + k[3]
+        p, inputs = named(self.kinematic_params, k), named(self.input_names, u)
+        angle = inputs["steering_angle"]
+        phi0 = p["k_steer"] * angle + p["steer_offset"]
+        reversing = ca.if_else(p["k_traction"] * inputs["traction_revolutions"] * ca.cos(phi0) < 0, 1.0, 0.0)
+        return p["k_steer"] * (1.0 + p["k_steer_reverse"] * reversing) * angle + p["steer_offset"]
 
     def undetermined(self, inputs: np.ndarray) -> dict[str, str]:
         """``k_steer_reverse`` without enough driving in either direction (it compares the two)."""

@@ -11,8 +11,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from nlp_calib.results import CalibrationRun
-from nlp_calib.results.run import CAVEATS, UNDETERMINED
 from nlp_calib.results.faults import count_kinds
+from nlp_calib.results.run import CAVEATS, UNDETERMINED
 
 
 def _faults_line(run: CalibrationRun) -> str:
@@ -82,8 +82,8 @@ def summary_lines(run: CalibrationRun, files: Sequence[str] = ()) -> list[str]:
     and next steps; ``files`` say what each file the run wrote is for (``name: what``)."""
     used = run.data.used
     lines = [
-        f"summary of {run.scenario.name}: model {run.scenario.model}, {used[1] - used[0]} records "
-        f"over {run.log.duration_s:.1f} s; the sensor travelled {run.baseline.distance_m:.1f} m (tracker path)"
+        f"summary of {run.scenario.name}: model {run.scenario.model}, {used[1] - used[0]} records over "
+        f"{run.log.duration_s:.1f} s; the sensor travelled {run.baseline.distance_m:.1f} m (tracker path)"
     ]
     chosen = run.chosen_solver()
     for s in run.solver_order():

@@ -39,10 +39,10 @@ def write_trajectories(run: CalibrationRun, out_dir: Path, name: str = FOLDER) -
     for track in tracks.tracks:
         if track.solver is not None:
             written[f"{track.solver}.tum"] = tum_text(t, track.T_world_sensor)
-    for solver, track in tracks.restarted.items():
+    for solver, again in tracks.restarted.items():
         for k, (p, q) in enumerate(tracks.parts, start=1):
             idx = p + np.flatnonzero(tracks.good[p:q])
-            written[f"segment{k}_{solver}.tum"] = tum_text(t[idx], track[idx])
+            written[f"segment{k}_{solver}.tum"] = tum_text(t[idx], again[idx])
             written.setdefault(f"segment{k}_tracker.tum", tum_text(t[idx], ref[idx]))
     written["README.md"] = _readme(run, tracks.segments)
     paths = []

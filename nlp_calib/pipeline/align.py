@@ -16,10 +16,10 @@ from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.models import KinematicModel
-from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.build import Binder
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.prepare import split
+from nlp_calib.pipeline.scenario import Scenario
 
 
 @dataclass(frozen=True)

@@ -9,9 +9,9 @@ import numpy as np
 
 from nlp_calib.codegen.export import Example, build_for_export, generate
 from nlp_calib.core.errors import NlpCalibWarning
+from nlp_calib.pipeline.calibration import Calibration
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.prepare import read, select
-from nlp_calib.pipeline.calibration import Calibration
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import build_residual_data
 

@@ -22,213 +22,46 @@ from typing import Any
 
 from nlp_calib.core.config import coerce, fail, from_mapping, key_name, read_yaml
 from nlp_calib.core.errors import ConfigError, FieldError, ScenarioError
-from nlp_calib.core.ranges import Range, check_choice, check_range, shown
+from nlp_calib.core.ranges import Range, check_choice, shown
 from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders, get_model, param_names
-from nlp_calib.problem import ResidualOptions
+from nlp_calib.pipeline.options import (
+    AlignmentOptions,
+    ComputeOptions,
+    DataOptions,
+    FaultOptions,
+    InformationWeights,
+    LogEntry,
+    ObjectiveOptions,
+    ParameterOptions,
+    Prior,
+    RobustOptions,
+    SampleSelection,
+    ValidationOptions,
+)
 from nlp_calib.solvers import SOLVERS
-from nlp_calib.solvers.backends import BACKENDS
-from nlp_calib.sources import BagSource, DatasetSource, TextSource, moved, parse_source
+from nlp_calib.sources import BagSource, TextSource, moved, parse_source
 from nlp_calib.sources.bag import check_joints
-from nlp_calib.symbolic.kernels import KERNELS
 
-#: ``validation.blocks`` (or 0: none): each block costs one more fit.
-BLOCKS = Range(2, 100, integer=True)
-#: Numbers whose squares still fit a float with room to spare: beyond them a value is a typo, and
-#: the cost, its weights or the covariance would overflow (silently, or as a NaN result).
-MAGNITUDE = Range(-1e6, 1e6)
-DELTA = Range(0.0, 1e6, lo_open=True)
-WEIGHT = Range(0.0, 1e12, lo_open=True)
-TICKS = Range(0.0, 1e9, lo_open=True)
-PRIOR_STD = Range(1e-9, 1e6)
-THREADS = Range(1, 64, integer=True)
-RPE_WINDOW = Range(1, 1_000_000, integer=True)
+#: Numbers a library may be handed as they are (``ipopt.options``).
 _FINITE = Range(-math.inf, math.inf, lo_open=True, hi_open=True)
-FAULT_HANDLINGS = ("exclude", "repair", "keep")
-INITIAL_GUESSES = ("from_file", "auto")
 
-
-@dataclass(frozen=True)
-class SampleSelection:
-    """Records ``start:stop`` of the log; ``drop_stationary`` drops windows with no motion."""
-
-    start: int = 0
-    stop: int | None = None
-    drop_stationary: bool = False
-
-    def __post_init__(self) -> None:
-        if self.start < 0 or (self.stop is not None and self.stop <= self.start + 1):
-            raise FieldError("start", f"need 0 <= start < stop - 1, got start={self.start} stop={self.stop}")
-
-
-@dataclass(frozen=True)
-class RobustOptions:
-    """Kernel name and its threshold ``delta`` on the Mahalanobis norm ``sqrt(eᵀΩe)``."""
-
-    kernel: str = "huber"
-    delta: float = 0.05
-
-    def __post_init__(self) -> None:
-        check_choice("kernel", self.kernel, KERNELS)
-        check_range("delta", self.delta, DELTA)
-
-
-@dataclass(frozen=True)
-class InformationWeights:
-    """Diagonal of Ω: weight of the x/y error (1/m²) and of the angle error (1/rad²)."""
-
-    translation: float = 1.0
-    rotation: float = 1.0
-
-    def __post_init__(self) -> None:
-        check_range("translation", self.translation, WEIGHT)
-        check_range("rotation", self.rotation, WEIGHT)
-
-    def omega(self) -> tuple[float, float, float]:
-        return (self.translation, self.translation, self.rotation)
-
-
-@dataclass(frozen=True)
-class ValidationOptions:
-    """``holdout_fraction``: trailing fraction of the records kept out of the fit and scored;
-    ``blocks``: contiguous blocks of the blocked cross-validation that gives the data-driven σ
-    (0: none); ``rpe_window``: records of the fixed-window RPE."""
-
-    holdout_fraction: float | None = None
-    rpe_window: int = 25
-    blocks: int = 10
-
-    def __post_init__(self) -> None:
-        hf = self.holdout_fraction
-        if hf is not None and not 0.0 < hf < 1.0:
-            raise FieldError("holdout_fraction", f"must lie in (0, 1), got {hf}")
-        if self.blocks != 0 and (why := BLOCKS.problem(self.blocks)):
-            raise FieldError("blocks", f"0 (none) or {why}")
-        check_range("rpe_window", self.rpe_window, RPE_WINDOW)
-
-
-@dataclass(frozen=True)
-class AlignmentOptions:
-    """``tracker_lag``: seconds the tracker reports after the encoders, or ``auto`` to estimate
-    it by the fit cost over ``search`` at ``step``."""
-
-    tracker_lag: float | str = 0.0
-    search: tuple[float, float] = (-0.2, 0.2)
-    step: float = 0.01
-
-    def __post_init__(self) -> None:
-        if isinstance(self.tracker_lag, str):
-            check_choice("tracker_lag", self.tracker_lag, ("auto",))
-        lo, hi = self.search
-        if not (lo < hi and self.step > 0 and (hi - lo) / self.step <= 1000):
-            raise FieldError("search", "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
-
-
-@dataclass(frozen=True)
-class FaultOptions:
-    """What to do with encoder and tracker faults found in the log (every run looks for them).
-
-    ``exclude`` (default): drop every residual window that crosses a fault; ``repair``: correct
-    the counts of counter faults (and say what changed), drop windows at tracker jumps; ``keep``:
-    report the faults and fit every window.
-    """
-
-    handling: str = "exclude"
-
-    def __post_init__(self) -> None:
-        check_choice("handling", self.handling, FAULT_HANDLINGS)
-
-
-@dataclass(frozen=True)
-class Prior:
-    """A Gaussian prior on one parameter."""
-
-    mean: float
-    std: float
-
-    def __post_init__(self) -> None:
-        check_range("mean", self.mean, MAGNITUDE)
-        check_range("std", self.std, PRIOR_STD)
-
-
-@dataclass(frozen=True)
-class LogEntry:
-    """One log of a calibration: where its records come from, and its ``samples`` and
-    ``alignment`` (its own, or the scenario's)."""
-
-    source: DatasetSource
-    samples: SampleSelection = field(default_factory=SampleSelection)
-    alignment: AlignmentOptions = field(default_factory=AlignmentOptions)
-
-    @property
-    def path(self) -> Path:
-        return self.source.path
-
-
-@dataclass(frozen=True)
-class DataOptions:
-    """The logs (one, or several fitted together: ``datasets``), how strictly they are read, the
-    encoders' noise (ticks) and what to do with faults."""
-
-    logs: tuple[LogEntry, ...]
-    joint: bool = False
-    strict: bool = True
-    encoder_noise: Mapping[str, float] = field(default_factory=dict)
-    faults: FaultOptions = field(default_factory=FaultOptions)
-
-    def __post_init__(self) -> None:
-        for enc, ticks in self.encoder_noise.items():
-            check_range(f"encoder_noise.{enc}", ticks, TICKS)
-
-
-@dataclass(frozen=True)
-class ObjectiveOptions:
-    """What the fit minimises: the residual form, the robust kernel and the information weights."""
-
-    residual: ResidualOptions = field(default_factory=ResidualOptions)
-    robust: RobustOptions = field(default_factory=RobustOptions)
-    information: InformationWeights = field(default_factory=InformationWeights)
-
-
-@dataclass(frozen=True)
-class ParameterOptions:
-    """Where the parameters start (``from_file``, ``auto`` or values), bounds, fixed ones, priors."""
-
-    initial_guess: str | Mapping[str, float] = "from_file"
-    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
-    fixed: tuple[str, ...] = ()
-    priors: Mapping[str, Prior] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        if isinstance(self.initial_guess, str):
-            check_choice("initial_guess", self.initial_guess, INITIAL_GUESSES)
-        else:
-            for n, value in self.initial_guess.items():
-                check_range(f"initial_guess.{n}", value, MAGNITUDE)
-        for n, (lo, hi) in self.bounds.items():
-            if not lo < hi:
-                raise FieldError(f"bounds.{n}", f"needs lo < hi, got [{lo}, {hi}]")
-            guess = self.guess(n)
-            if guess is not None and not lo <= guess <= hi:
-                raise FieldError(f"bounds.{n}", f"the initial guess {guess:g} lies outside [{lo:g}, {hi:g}]")
-        for n in self.priors:
-            if n in self.fixed:
-                raise FieldError(f"priors.{n}", "a fixed parameter cannot also have a prior; drop one")
-
-    def guess(self, name: str) -> float | None:
-        """The scenario's own initial value of ``name``, if it gives one."""
-        return self.initial_guess.get(name) if isinstance(self.initial_guess, Mapping) else None
-
-
-@dataclass(frozen=True)
-class ComputeOptions:
-    """How the problem's Functions are evaluated: ``backend`` and ``threads``."""
-
-    backend: str = "compiled"
-    threads: int = 1
-
-    def __post_init__(self) -> None:
-        check_choice("backend", self.backend, BACKENDS)
-        check_range("threads", self.threads, THREADS)
+__all__ = [
+    "AlignmentOptions",
+    "ComputeOptions",
+    "DataOptions",
+    "FaultOptions",
+    "InformationWeights",
+    "LogEntry",
+    "ObjectiveOptions",
+    "ParameterOptions",
+    "Prior",
+    "RobustOptions",
+    "SampleSelection",
+    "Scenario",
+    "ValidationOptions",
+    "load_scenario",
+    "scenario_from_mapping",
+]
 
 
 @dataclass(frozen=True)
@@ -487,13 +320,14 @@ def _check_parameter_names(p: ParameterOptions, names: tuple[str, ...], source: 
 def _check_solvers(sc: Scenario, source: str) -> None:
     if not sc.solvers:
         fail(f"{source}: solvers", f"list at least one of {', '.join(SOLVERS)}")
+    bounded = ", ".join(n for n, c in SOLVERS.items() if c.supports_bounds)
     for s in sc.solvers:
         _choice(s, SOLVERS, f"{source}: solvers")
         if sc.parameters.bounds and not SOLVERS[s].supports_bounds:
             fail(
                 f"{source}: bounds",
                 f"{s} cannot honour bounds; remove {s} from 'solvers' or the bounds "
-                f"(solvers that honour bounds: {', '.join(n for n, c in SOLVERS.items() if c.supports_bounds)})",
+                f"(solvers that honour bounds: {bounded})",
             )
     for s, options in sc.solver_options.items():
         _check_passthrough(options, f"{source}: {s}")

@@ -6,8 +6,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from nlp_calib.core.ranges import Range
 from nlp_calib.core.config import fail, from_mapping, read_yaml
+from nlp_calib.core.ranges import Range
 from nlp_calib.simulation import LIMITS, SimulationOptions
 
 #: What a user may ask of ``nlp-calib simulate``: the simulator's own limits, with the size of one

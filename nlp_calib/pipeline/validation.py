@@ -19,10 +19,10 @@ import numpy as np
 
 from nlp_calib.analysis.crossval import blocks, combine, jackknife_std
 from nlp_calib.analysis.direction import compare
-from nlp_calib.results.checks import CrossValidation, DirectionCheck, Fold
-from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.pipeline.build import Binder
 from nlp_calib.problem import ResidualData
+from nlp_calib.results.checks import CrossValidation, DirectionCheck, Fold
+from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.solvers import Priors
 
 #: Refits run at once (each holds its own evaluator's buffers: memory grows with this).

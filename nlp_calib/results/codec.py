@@ -77,7 +77,7 @@ def _from_array(data: Mapping[str, Any]) -> np.ndarray:
 
 def _scalar(tp: Any, data: Any) -> Any:
     if tp is float:
-        return _NON_FINITE[data] if isinstance(data, str) else float(data)
+        return _NON_FINITE[data] if isinstance(data, str) and data in _NON_FINITE else float(data)
     if tp is int:
         return int(data)
     if tp is Path:
@@ -103,10 +103,10 @@ def from_data(tp: Any, data: Any) -> Any:
         hints = _hints(tp)
         return tp(**{k: from_data(hints[k], v) for k, v in data.items()})
     if origin is tuple:
-        args = typing.get_args(tp)
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(from_data(args[0], v) for v in data)
-        return tuple(from_data(a, v) for a, v in zip(args, data))
+        items = typing.get_args(tp)
+        if len(items) == 2 and items[1] is Ellipsis:
+            return tuple(from_data(items[0], v) for v in data)
+        return tuple(from_data(a, v) for a, v in zip(items, data))
     if origin in (Mapping, dict) or tp in (Mapping, dict):
         k_tp, v_tp = typing.get_args(tp) or (Any, Any)
         return {_scalar(k_tp, k): from_data(v_tp, v) for k, v in data.items()}

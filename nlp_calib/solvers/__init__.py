@@ -7,11 +7,11 @@ in :data:`SOLVERS`; scenarios, the command line and the reports read the registr
 from __future__ import annotations
 
 from nlp_calib.core.errors import OptionsError
+from nlp_calib.results.solver import IterationRecord, SolverResult
 from nlp_calib.solvers.base import Solver
 from nlp_calib.solvers.evaluation import Priors, ProblemEvaluator
 from nlp_calib.solvers.gauss_newton import GaussNewton, GaussNewtonOptions
 from nlp_calib.solvers.ipopt import Ipopt, IpoptOptions
-from nlp_calib.results.solver import IterationRecord, SolverResult
 
 SOLVERS: dict[str, type[Solver]] = {s.name: s for s in (GaussNewton, Ipopt)}
 

@@ -12,8 +12,8 @@ from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from nlp_calib.solvers.evaluation import ProblemEvaluator
 from nlp_calib.results.solver import SolverResult
+from nlp_calib.solvers.evaluation import ProblemEvaluator
 
 
 class Solver(Protocol):

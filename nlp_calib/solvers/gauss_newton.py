@@ -14,11 +14,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
+import numpy as np
 from numpy.typing import ArrayLike
 
-import numpy as np
-
 from nlp_calib.core.errors import OptionsError
+from nlp_calib.results.solver import IterationRecord, SolverResult
 from nlp_calib.solvers.evaluation import (
     NAN_START_REASON,
     SINGULAR_REASON,
@@ -26,7 +26,6 @@ from nlp_calib.solvers.evaluation import (
     ProblemEvaluator,
     is_singular,
 )
-from nlp_calib.results.solver import IterationRecord, SolverResult
 
 
 @dataclass(frozen=True)

@@ -20,9 +20,9 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.core.errors import OptionsError
+from nlp_calib.results.solver import IterationRecord, SolverResult
 from nlp_calib.solvers.evaluation import NAN_START_REASON, SINGULAR_REASON, ProblemEvaluator, is_singular
 from nlp_calib.solvers.nlp import NlpOracle
-from nlp_calib.results.solver import IterationRecord, SolverResult
 
 HUBER_FORMULATIONS = ("direct", "lifted")
 HESSIANS = ("exact", "gauss_newton", "limited_memory")

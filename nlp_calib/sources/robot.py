@@ -14,11 +14,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from nlp_calib.core.config import fail, from_mapping, read_yaml
 from nlp_calib.core.errors import ConfigError
 from nlp_calib.core.ranges import Range
 from nlp_calib.logs import LogHeader
 from nlp_calib.models import KinematicModel, encoders
-from nlp_calib.core.config import fail, from_mapping, read_yaml
 
 #: ``#joints_max_enc_values``: the text header's range of an encoder range.
 ENCODER_RANGE = Range(1, 2**32, integer=True)

@@ -6,8 +6,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
 
-from nlp_calib.results.series import OdometryTrack
 from nlp_calib.outputs.plots.run import figure_png
+from nlp_calib.results.series import OdometryTrack
 
 
 def odometry_png(
