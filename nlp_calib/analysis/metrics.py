@@ -161,8 +161,6 @@ def trajectory_metrics(
     rpe = {d: rpe_by_distance(seg_track, ref, scored_parts, d) for d in RPE_DISTANCES}
     ate = ErrorStats.of(err)
     return TrajectoryMetrics(
-        ate_mean=ate.mean,
-        ate_max=ate.max,
         ate_final=float(err[-1]) if err.size else float("nan"),
         rpe_trans=ErrorStats.of(np.linalg.norm(rel[:, :2], axis=1)).mean,
         rpe_rot=ErrorStats.of(np.abs(rel[:, 2])).mean,

@@ -155,69 +155,92 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"nlp_calib {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for add in (
+        _add_run,
+        _add_compare,
+        _add_validate,
+        _add_codegen,
+        _add_odometry,
+        _add_simulate,
+        _add_import_bag,
+    ):
+        add(sub)
+    return parser
 
-    p_run = sub.add_parser("run", help="calibrate with the scenario's solvers (or --solver)", **_sub("run"))
-    _add_common(p_run, REPORT)
-    p_run.add_argument(
+
+def _add_run(sub: Any) -> None:
+    p = sub.add_parser("run", help="calibrate with the scenario's solvers (or --solver)", **_sub("run"))
+    _add_common(p, REPORT)
+    p.add_argument(
         "--solver",
         choices=(*SOLVERS, *ALL_SOLVERS),
         default=None,
         help="solver to run (default: the scenario's solvers; 'all' or 'both': every solver)",
     )
 
-    p_cmp = sub.add_parser("compare", help="calibrate with every solver, side by side", **_sub("compare"))
-    _add_common(p_cmp, REPORT)
 
-    p_val = sub.add_parser(
+def _add_compare(sub: Any) -> None:
+    p = sub.add_parser("compare", help="calibrate with every solver, side by side", **_sub("compare"))
+    _add_common(p, REPORT)
+
+
+def _add_validate(sub: Any) -> None:
+    p = sub.add_parser(
         "validate",
         help="cross-validate on contiguous blocks: fit without each block, score it, compare the σ",
         **_sub("validate"),
     )
-    _add_common(p_val, None)
-    p_val.add_argument(
+    _add_common(p, None)
+    p.add_argument(
         "--blocks",
         type=_in(BLOCKS),
         default=None,
         help="contiguous blocks (default: validation.blocks, else 10)",
     )
 
-    p_cg = sub.add_parser(
+
+def _add_codegen(sub: Any) -> None:
+    p = sub.add_parser(
         "codegen", help="write C source and header of the residual and its Jacobian", **_sub("codegen")
     )
-    p_cg.add_argument("scenario", type=Path, help="scenario YAML file (model, horizon, integration)")
-    p_cg.add_argument("--out", type=_path, required=True, help="folder for the C files")
-    p_cg.add_argument(
+    p.add_argument("scenario", type=Path, help="scenario YAML file (model, horizon, integration)")
+    p.add_argument("--out", type=_path, required=True, help="folder for the C files")
+    p.add_argument(
         "--data", type=_path, default=None, help="log file to use instead of the scenario's dataset"
     )
-    _add_force(p_cg, "files in the output folder")
+    _add_force(p, "files in the output folder")
 
-    p_odo = sub.add_parser(
+
+def _add_odometry(sub: Any) -> None:
+    p = sub.add_parser(
         "odometry",
         help="calibrate, then write the base-link odometry with its propagated covariance",
         **_sub("odometry"),
     )
-    _add_common(p_odo, "also draw odometry.png: the odometry with its σ ellipses against the tracker")
-    p_odo.add_argument(
+    _add_common(p, "also draw odometry.png: the odometry with its σ ellipses against the tracker")
+    p.add_argument(
         "--solver",
         choices=tuple(SOLVERS),
         default=next(iter(SOLVERS)),
         help=f"the solver whose calibration drives the odometry (default: {next(iter(SOLVERS))})",
     )
-    p_odo.add_argument(
+    p.add_argument(
         "--sigma",
         type=_in(SIGMA),
         default=3.0,
         help=f"ellipse size in σ for --report, {SIGMA.describe()} (default 3)",
     )
 
-    p_sim = sub.add_parser(
+
+def _add_simulate(sub: Any) -> None:
+    p = sub.add_parser(
         "simulate", help="write a synthetic log with known truth (truth JSON beside it)", **_sub("simulate")
     )
-    p_sim.add_argument("--out", type=_path, required=True, help="log file to write")
-    _add_force(p_sim, "an existing log or truth file")
-    p_sim.add_argument("--config", type=_path, default=None, help="YAML file of simulation options")
-    p_sim.add_argument("--model", choices=tuple(MODELS), default=None, help=f"default: {next(iter(MODELS))}")
-    p_sim.add_argument(
+    p.add_argument("--out", type=_path, required=True, help="log file to write")
+    _add_force(p, "an existing log or truth file")
+    p.add_argument("--config", type=_path, default=None, help="YAML file of simulation options")
+    p.add_argument("--model", choices=tuple(MODELS), default=None, help=f"default: {next(iter(MODELS))}")
+    p.add_argument(
         "--trajectory",
         choices=TRAJECTORIES,
         default=None,
@@ -232,11 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
         ("--latency", "latency_s", "tracker latency, s"),
     ):
         limit = CLI_LIMITS[field]
-        p_sim.add_argument(
-            flag, type=_in(limit), default=None, dest=field, help=f"{what}: {limit.describe()}"
-        )
-    _add_import_bag(sub)
-    return parser
+        p.add_argument(flag, type=_in(limit), default=None, dest=field, help=f"{what}: {limit.describe()}")
 
 
 def _add_import_bag(sub: Any) -> None:

@@ -234,6 +234,15 @@ def _handoff_section(run: CalibrationRun, handoff: Sequence[str]) -> list[str]:
     return [*out, ""]
 
 
+_FIGURES_TEXT = (
+    "Segment ATE: the sensor track dead-reckoned from the tracker, restarted after each fault, "
+    "against the tracker (aligned: after the best SE(2) alignment). RPE over 1 m and 5 m: the "
+    "relative pose error between records that far apart along the tracker's path, within one "
+    "fault-free segment. Full-run ATE: one track from the first record (a fault's lost counts "
+    "stay in it). RPE over {window} records: the same over a fixed count of records."
+)
+
+
 def report_markdown(
     run: CalibrationRun, images: Sequence[str], handoff: Sequence[str] = (), next_steps: Sequence[str] = ()
 ) -> str:
@@ -241,29 +250,10 @@ def report_markdown(
     the hand-off files of the calibration and ``next_steps`` what the summary says of them."""
     solvers = run.solver_order()
     out = _header(run)
-    out += [
-        "",
-        "## Summary",
-        "",
-        *_summary(run, next_steps),
-        "",
-        "## Parameters",
-        "",
-        *_parameter_table(run, solvers),
-        "",
-        "## Solvers",
-        "",
-        "Segment ATE: the sensor track dead-reckoned from the tracker, restarted after each fault, "
-        "against the tracker (aligned: after the best SE(2) alignment). RPE over 1 m and 5 m: the "
-        "relative pose error between records that far apart along the tracker's path, within one "
-        "fault-free segment. Full-run ATE: one track from the first record (a fault's lost counts "
-        f"stay in it). RPE over {run.baseline.rpe_window} records: the same over a fixed count of records.",
-        "",
-        *_solver_table(run, solvers),
-        "",
-        *_faults_section(run),
-        *_uncertainty_section(run),
-    ]
+    out += ["", "## Summary", "", *_summary(run, next_steps), ""]
+    out += ["## Parameters", "", *_parameter_table(run, solvers), ""]
+    out += ["## Solvers", "", _FIGURES_TEXT.format(window=run.baseline.rpe_window), ""]
+    out += [*_solver_table(run, solvers), "", *_faults_section(run), *_uncertainty_section(run)]
     for s in solvers:
         res = run.reports[s].result
         if not res.converged:

@@ -53,7 +53,7 @@ class ErrorStats:
 class TrajectoryMetrics:
     """Position errors (m) of dead-reckoned sensor tracks against the tracker over ``records``.
 
-    ``ate_*``: the full-run track (``ate``: its statistics); ``rpe_trans`` / ``rpe_rot``: mean
+    ``ate``, ``ate_final``: the full-run track's statistics and final error; ``rpe_trans`` / ``rpe_rot``: mean
     relative pose error over windows of ``rpe_window`` records (m, rad); ``segment_ate`` and
     ``segment_ate_aligned``: the track restarted after each fault; ``rpe_distance``: translation
     error over each of :data:`RPE_DISTANCES` of travel (m → stats); ``segments``: the number of
@@ -61,8 +61,6 @@ class TrajectoryMetrics:
     jumps) are left out of every figure and of the path length.
     """
 
-    ate_mean: float
-    ate_max: float
     ate_final: float
     rpe_trans: float
     rpe_rot: float
@@ -74,6 +72,14 @@ class TrajectoryMetrics:
     rpe_distance: dict[float, ErrorStats]
     segments: int
     distance_m: float
+
+    @property
+    def ate_mean(self) -> float:
+        return self.ate.mean
+
+    @property
+    def ate_max(self) -> float:
+        return self.ate.max
 
     def figures(self) -> list[tuple[str, float]]:
         """The figures a report shows, as (label with unit, value): fault-robust ones first."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
@@ -28,73 +29,72 @@ def _threshold_note(threshold: float, R: float) -> str:
     return "" if threshold <= R else ", off the scale"
 
 
-def residuals_png(series: ResidualSeries, labels: Mapping[str, str], title: str) -> bytes:
-    """Histograms of the x, y, θ residual errors before and after calibration, kernel threshold
-    marked; the bins cover the calibrated spread, so the initial guess's wider errors pile up in
-    the edge bins (counted on each panel)."""
-    fig = Figure(figsize=(15, 5.6), layout="constrained")
-    axes = fig.subplots(1, 3)
+def _histograms(
+    ax: Axes, series: ResidualSeries, i: int, names: Mapping[str, str]
+) -> tuple[list[np.ndarray], float]:
+    """Component ``i``'s histograms before and after; returns the finite data and the bins' range."""
     solvers = list(series.after)
     shown = solvers[:1] if series.solvers_agree else solvers
     n = series.before.shape[1]
-    what = "kernel threshold" if series.kernel != "none" else "inlier threshold"
-    for i, (ax, (comp, unit)) in enumerate(zip(axes, _COMPONENTS)):
-        thr = float(series.thresholds[i])
-        # A failed solve may leave NaN residuals; histograms take the finite ones.
-        data = [d[np.isfinite(d)] for d in [series.before[i]] + [series.after[s][i] for s in shown]]
-        R = _calibrated_range(data[1:], thr)
-        bins = np.linspace(-R, R, BINS)
-        clip = R * (1.0 - 1e-9)
+    thr = float(series.thresholds[i])
+    # A failed solve may leave NaN residuals; histograms take the finite ones.
+    data = [d[np.isfinite(d)] for d in [series.before[i]] + [series.after[s][i] for s in shown]]
+    R = _calibrated_range(data[1:], thr)
+    bins = np.linspace(-R, R, BINS).tolist()
+    clip = R * (1.0 - 1e-9)
+    before = f"before: initial guess ({series.inliers_before}/{n} inliers)"
+    ax.hist(
+        np.clip(data[0], -clip, clip),
+        bins=bins,
+        histtype="stepfilled",
+        color="tab:orange",
+        alpha=0.35,
+        label=before,
+    )
+    same = ""
+    if series.solvers_agree and len(solvers) > 1:
+        same = f"; {', '.join(names.get(o, o) for o in solvers[1:])} identical"
+    for s, d, style in zip(shown, data[1:], STYLES[1:]):
+        label = f"after: {names.get(s, s)} ({series.inliers_after[s]}/{n} inliers{same})"
         ax.hist(
-            np.clip(data[0], -clip, clip),
-            bins=bins,
-            histtype="stepfilled",
-            color="tab:orange",
-            alpha=0.35,
-            label=f"before: initial guess ({series.inliers_before}/{n} inliers)",
-        )
-        for s, d, style in zip(shown, data[1:], STYLES[1:]):
-            same = ""
-            if series.solvers_agree and len(solvers) > 1:
-                same = f"; {', '.join(labels.get(o, o) for o in solvers[1:])} identical"
-            ax.hist(
-                np.clip(d, -clip, clip),
-                bins=bins,
-                histtype="step",
-                linewidth=1.8,
-                color=style["color"],
-                linestyle=style["linestyle"],
-                label=f"after: {labels.get(s, s)} ({series.inliers_after[s]}/{n} inliers{same})",
-            )
-        for sign in (-1.0, 1.0) if thr <= R else ():
-            ax.axvline(
-                sign * thr,
-                color="red",
-                linestyle=":",
-                linewidth=1.6,
-                label=f"{what} ±δ/√Ω_ii (this component alone gives s = δ²)" if sign > 0 else None,
-            )
-        beyond = [int(np.sum(np.abs(d) > R)) for d in data]
-        if any(beyond):
-            ax.text(
-                0.02,
-                0.97,
-                f"edge bins include {beyond[0]} before / {sum(beyond[1:])} after\nbeyond ±{R:.3g} {unit}",
-                transform=ax.transAxes,
-                va="top",
-                fontsize=8,
-            )
-        after_out = int(np.sum(np.abs(data[1]) > thr)) if len(data) > 1 else 0
-        ax.set_yscale("log")
-        ax.set_ylim(bottom=0.7)
-        ax.xaxis.set_major_locator(MaxNLocator(7))
-        ax.set_xlabel(f"{comp} error [{unit}] (bins {2 * R / (BINS - 1):.2g} {unit} wide)")
-        ax.set_ylabel("residuals per bin (log scale)")
-        ax.set_title(
-            f"{comp}: {what} ±{thr:.3g} {unit}{_threshold_note(thr, R)}; {after_out} beyond it",
-            fontsize=10,
-        )
-        ax.grid(True, which="major", alpha=0.3)
+            np.clip(d, -clip, clip), bins=bins, histtype="step", linewidth=1.8,
+            color=style["color"], linestyle=style["linestyle"], label=label,
+        )  # fmt: skip
+    return data, R
+
+
+def _panel(ax: Axes, series: ResidualSeries, i: int, names: Mapping[str, str]) -> None:
+    """One component: histograms, the kernel's threshold, what the edge bins hold."""
+    comp, unit = _COMPONENTS[i]
+    what = "kernel threshold" if series.kernel != "none" else "inlier threshold"
+    thr = float(series.thresholds[i])
+    data, R = _histograms(ax, series, i, names)
+    for sign in (-1.0, 1.0) if thr <= R else ():
+        label = f"{what} ±δ/√Ω_ii (this component alone gives s = δ²)" if sign > 0 else None
+        ax.axvline(sign * thr, color="red", linestyle=":", linewidth=1.6, label=label)
+    beyond = [int(np.sum(np.abs(d) > R)) for d in data]
+    if any(beyond):
+        text = f"edge bins include {beyond[0]} before / {sum(beyond[1:])} after\nbeyond ±{R:.3g} {unit}"
+        ax.text(0.02, 0.97, text, transform=ax.transAxes, va="top", fontsize=8)
+    after_out = int(np.sum(np.abs(data[1]) > thr)) if len(data) > 1 else 0
+    ax.set_yscale("log")
+    ax.set_ylim(bottom=0.7)
+    ax.xaxis.set_major_locator(MaxNLocator(7))
+    ax.set_xlabel(f"{comp} error [{unit}] (bins {2 * R / (BINS - 1):.2g} {unit} wide)")
+    ax.set_ylabel("residuals per bin (log scale)")
+    note = _threshold_note(thr, R)
+    ax.set_title(f"{comp}: {what} ±{thr:.3g} {unit}{note}; {after_out} beyond it", fontsize=10)
+    ax.grid(True, which="major", alpha=0.3)
+
+
+def residuals_png(series: ResidualSeries, names: Mapping[str, str], title: str) -> bytes:
+    """Histograms of the x, y, θ residual errors before and after calibration, kernel threshold
+    marked; the bins cover the calibrated spread, so the initial guess's wider errors pile up in
+    the edge bins (counted on each panel). ``names``: the solvers' display names."""
+    fig = Figure(figsize=(15, 5.6), layout="constrained")
+    axes = fig.subplots(1, 3)
+    for i, ax in enumerate(axes):
+        _panel(ax, series, i, names)
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=9)
     fig.suptitle(title)

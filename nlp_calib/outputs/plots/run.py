@@ -64,13 +64,10 @@ def _label(track: Track, outside: bool) -> str:
     return " ".join(parts)
 
 
-def trajectory_png(series: TrackSeries, restarted: Track | None, title: str) -> bytes:
-    """Tracker track and dead-reckoned sensor tracks (equal axes), and their distance over time;
-    ``restarted``: a track restarted after each fault, its distance drawn too."""
-    fig = Figure(figsize=(14, 6.2), layout="constrained")
-    ax, ax_err = fig.subplots(1, 2, width_ratios=(1.35, 1))
-    tr = series.tracker
-    t = series.time_s - series.time_s[0]
+def _tracks(ax: Axes, ax_err: Axes, series: TrackSeries) -> tuple[np.ndarray, np.ndarray]:
+    """Draw every track and its distance to the tracker; returns the box that frames the tracker
+    and the converged tracks."""
+    tr, t = series.tracker, series.time_s - series.time_s[0]
     ax.plot(tr[:, 0], tr[:, 1], label="tracker (measured sensor pose)", **_TRACKER)
     # Frame the tracker and the calibrated tracks; a run-away track (the uncalibrated one on a
     # real log drifts by tens of metres) is drawn but not allowed to shrink the others to a dot.
@@ -90,37 +87,44 @@ def trajectory_png(series: TrackSeries, restarted: Track | None, title: str) -> 
     ax.plot(tr[-1, 0], tr[-1, 1], marker="s", markersize=7, color="0.15", linestyle="none")
     ax.plot(tr[0, 0], tr[0, 1], marker="o", markersize=9, color="black", linestyle="none", label="start")
     ax.plot([], [], marker="s", color="0.4", linestyle="none", label="end (colour of each track)")
+    return lo, hi
+
+
+def _marks(ax: Axes, ax_err: Axes, series: TrackSeries, restarted: Track | None) -> None:
+    """The track restarted after each fault, the faults and the first hold-out record."""
+    tr, t = series.tracker, series.time_s - series.time_s[0]
     if restarted is not None:
         P = restarted.T_world_sensor
         err = np.linalg.norm(P[1:, :2] - tr[1:, :2], axis=1)
-        ax_err.plot(
-            t[1:],
-            np.where(err > 0, err, np.nan),
-            color="tab:cyan",
-            linewidth=1.0,
-            label=f"{restarted.label} (segment ATE {restarted.ate_mean:.3f} m)",
-        )
+        fair = f"{restarted.label} (segment ATE {restarted.ate_mean:.3f} m)"
+        ax_err.plot(t[1:], np.where(err > 0, err, np.nan), color="tab:cyan", linewidth=1.0, label=fair)
     labelled: set[str] = set()
     for k, kind in series.faults:
         tracker = kind == "tracker_jump"
         what = "tracker jump (pose left out)" if tracker else "encoder fault (the fair track restarts)"
         label = None if what in labelled else what
         labelled.add(what)
-        style = {"marker": "d", "color": "magenta"} if tracker else {"marker": "X", "color": "red"}
+        style: dict[str, Any] = (
+            {"marker": "d", "color": "magenta"} if tracker else {"marker": "X", "color": "red"}
+        )
         ax.plot(tr[k, 0], tr[k, 1], markersize=10, linestyle="none", label=label, **style)
         ax_err.axvline(t[k], color=style["color"], linewidth=0.8, alpha=0.6, label=label)
     if series.holdout_start is not None:
         k = series.holdout_start
         ax.plot(
-            tr[k, 0],
-            tr[k, 1],
-            marker="^",
-            markersize=10,
-            color="red",
-            linestyle="none",
+            tr[k, 0], tr[k, 1], marker="^", markersize=10, color="red", linestyle="none",
             label="first hold-out record (not fitted)",
-        )
+        )  # fmt: skip
         ax_err.axvline(t[k], color="red", linestyle=":", label="fitted | hold-out records")
+
+
+def trajectory_png(series: TrackSeries, restarted: Track | None, title: str) -> bytes:
+    """Tracker track and dead-reckoned sensor tracks (equal axes), and their distance over time;
+    ``restarted``: a track restarted after each fault, its distance drawn too."""
+    fig = Figure(figsize=(14, 6.2), layout="constrained")
+    ax, ax_err = fig.subplots(1, 2, width_ratios=(1.35, 1))
+    lo, hi = _tracks(ax, ax_err, series)
+    _marks(ax, ax_err, series, restarted)
     # Plotting grows the data limits with every line; reset them to the framed tracks so the
     # equal-aspect autoscale ignores a run-away track (fixed limits would fight the aspect).
     pad = 0.03 * max(float(np.max(hi - lo)), 1e-3)
