@@ -77,6 +77,12 @@ class Range:
         return value
 
 
+#: A parameter, a guess or a sensor coordinate beyond this is a typo: the squares of such numbers
+#: still fit a float with room to spare, so the cost, its weights and the covariance cannot
+#: overflow (silently, or as a NaN result).
+MAGNITUDE = Range(-1e6, 1e6)
+
+
 def check_range(field: str, value: object, limit: Range) -> None:
     """Raise :class:`FieldError` naming ``field`` when ``value`` lies outside ``limit``."""
     reason = limit.problem(value)

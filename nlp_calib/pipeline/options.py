@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from nlp_calib.core.errors import FieldError
-from nlp_calib.core.ranges import Range, check_choice, check_range
+from nlp_calib.core.ranges import MAGNITUDE, Range, check_choice, check_range
 from nlp_calib.problem import ResidualOptions
 from nlp_calib.solvers.backends import BACKENDS
 from nlp_calib.sources import DatasetSource
@@ -17,9 +17,6 @@ from nlp_calib.symbolic.kernels import KERNELS
 
 #: ``validation.blocks`` (or 0: none): each block costs one more fit.
 BLOCKS = Range(2, 100, integer=True)
-#: Numbers whose squares still fit a float with room to spare: beyond them a value is a typo, and
-#: the cost, its weights or the covariance would overflow (silently, or as a NaN result).
-MAGNITUDE = Range(-1e6, 1e6)
 DELTA = Range(0.0, 1e6, lo_open=True)
 WEIGHT = Range(0.0, 1e12, lo_open=True)
 TICKS = Range(0.0, 1e9, lo_open=True)

@@ -23,11 +23,8 @@ from nlp_calib.core.errors import ProblemError
 from nlp_calib.core.ranges import Range, check_choice, check_range
 from nlp_calib.logs import Log
 from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES, KinematicModel
-from nlp_calib.problem.functions import DATA_ROWS, ProblemFunctions
+from nlp_calib.problem.functions import DATA_ROWS, HORIZON, ProblemFunctions
 
-#: ``horizon``: each window composes H steps symbolically, so building the problem costs time and
-#: memory in proportion to H; the accuracy study's trajectory error flattens by H = 25.
-HORIZON = Range(1, 200, integer=True)
 STRIDE = Range(1, 1_000_000, integer=True)
 
 

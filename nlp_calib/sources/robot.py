@@ -16,14 +16,12 @@ from pathlib import Path
 
 from nlp_calib.core.config import fail, from_mapping, read_yaml
 from nlp_calib.core.errors import ConfigError
-from nlp_calib.core.ranges import Range
+from nlp_calib.core.ranges import MAGNITUDE, Range
 from nlp_calib.logs import LogHeader
 from nlp_calib.models import KinematicModel, encoders
 
 #: ``#joints_max_enc_values``: the text header's range of an encoder range.
 ENCODER_RANGE = Range(1, 2**32, integer=True)
-#: A parameter or a sensor coordinate beyond this is a typo (the scenario's own limit).
-MAGNITUDE = Range(-1e6, 1e6)
 _FRAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_./-]*")
 
 
