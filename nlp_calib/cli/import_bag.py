@@ -7,7 +7,7 @@ import argparse
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import atomic_write_text, check_output_dir, refuse_input_alias
-from nlp_calib.logs.bag_reader import bag_root
+from nlp_calib.logs.bag_files import bag_root
 from nlp_calib.logs.reader import parse_log
 from nlp_calib.models import get_model
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions

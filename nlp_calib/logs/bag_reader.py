@@ -17,21 +17,20 @@ whose ``nanosec`` is not below 10⁹ is no time at all: the bag is refused.
 from __future__ import annotations
 
 import math
-import os
-import stat
 from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from nlp_calib.core.errors import DatasetError, UsageError
-from nlp_calib.core.files import kind_of, note_input
+from nlp_calib.core.errors import UsageError
 from nlp_calib.core.ranges import Range
+from nlp_calib.logs.bag_files import DAMAGED, BagError, is_bag, messages, opened, why
 from nlp_calib.logs.reader import yaw_from_quaternion
+
+__all__ = ["BagError", "BagTopics", "Drops", "Stamped", "is_bag", "read_topics"]
 
 ENCODER_TYPE = "sensor_msgs/msg/JointState"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
@@ -41,8 +40,6 @@ TF_TYPE = "tf2_msgs/msg/TFMessage"
 TRACKER_TYPES = (POSE_TYPE, TRANSFORM_TYPE, ODOMETRY_TYPE, TF_TYPE)
 #: Types whose messages name the frame they follow (``child_frame_id``).
 _FRAMED = (TRANSFORM_TYPE, ODOMETRY_TYPE, TF_TYPE)
-#: Files that belong to a ROS 2 bag folder (the folder holds ``metadata.yaml`` beside them).
-_ROS2_FILES = (".db3", ".mcap")
 #: Default of :attr:`BagTopics.max_gap`: a tracker at 10 Hz or faster brackets every encoder message.
 DEFAULT_MAX_GAP_S = 0.1
 MAX_GAP = Range(0.0, 10.0, lo_open=True)
@@ -50,20 +47,6 @@ MAX_GAP = Range(0.0, 10.0, lo_open=True)
 #: publisher that scales it); closer ones are normalised. Float rounding stays below 1e-6.
 QUATERNION_TOLERANCE = 1e-3
 _ROUNDING = 1e-6
-#: Entries of a folder looked at for special files before it is opened as a ROS 2 bag.
-_MAX_FOLDER_ENTRIES = 10_000
-_DAMAGED = "the file is damaged: copy it again, or repair it (rosbag reindex, ros2 bag reindex)"
-_HOW_TO_OPEN = "a ROS 1 bag is a .bag file, a ROS 2 bag a folder with metadata.yaml or its .db3 or .mcap file"
-_INSTALL = "reading bags needs rosbags: install the ros extra: pip install 'nlp_calib[ros]'"
-
-
-class BagError(DatasetError):
-    """A bag that cannot be opened or lacks what the import needs; the message lists what it has."""
-
-    def __init__(self, path: Path | str, problem: str) -> None:
-        # Names and types come from the bag: a damaged one can hold any character.
-        one_line = "".join(c if c.isprintable() else repr(c)[1:-1] for c in problem)
-        super().__init__(str(path), None, one_line)
 
 
 @dataclass(frozen=True)
@@ -98,7 +81,9 @@ class BagTopics:
 #: Why messages were dropped, as :class:`Drops` counts them.
 MALFORMED_JOINTS = "JointState messages whose position and name lists differ in length or name a joint twice"
 OTHER_JOINTS = "JointState messages without the joints (another publisher on the topic?)"
-NOT_A_ROTATION = f"tracker poses whose quaternion is not a rotation (zero, or norm off 1 by over {QUATERNION_TOLERANCE:g})"
+NOT_A_ROTATION = (
+    f"tracker poses whose quaternion is not a rotation (zero, or norm off 1 by over {QUATERNION_TOLERANCE:g})"
+)
 NORMALISED = "tracker quaternions normalised (norm off 1 by less than that)"
 
 
@@ -129,80 +114,6 @@ class Stamped:
     @property
     def n(self) -> int:
         return int(self.stamp_ns.shape[0])
-
-
-def is_bag(path: Path) -> bool:
-    """Whether ``path`` names a bag rather than a text log (by its name, or a ROS 2 bag folder)."""
-    return path.suffix in (".bag", *_ROS2_FILES) or (path / "metadata.yaml").is_file()
-
-
-def _rosbags(path: Path) -> tuple[Any, Any]:
-    try:
-        from rosbags.highlevel import AnyReader
-        from rosbags.typesys import Stores, get_typestore
-    except ImportError:
-        raise BagError(path, _INSTALL) from None
-    # Old ROS 2 bags carry no message definitions; the standard messages read them.
-    return AnyReader, get_typestore(Stores.LATEST)
-
-
-def bag_root(path: Path) -> Path:
-    """The path rosbags opens: a ROS 2 bag's folder also when its .db3 or .mcap file is named.
-    Anything but regular files and folders is refused before it is opened (a FIFO would block);
-    the bag (its folder and files) is noted as an input, so that no output can replace it."""
-    try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError:
-        raise BagError(path, "no such file") from None
-    except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
-        raise BagError(path, f"cannot read the bag ({getattr(exc, 'strerror', None) or exc})") from None
-    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
-        raise BagError(path, f"is {kind_of(mode)}, not a bag; {_HOW_TO_OPEN}")
-    root = path
-    if path.suffix in _ROS2_FILES and (path.parent / "metadata.yaml").exists():
-        root = path.parent
-    if root.is_dir():
-        _check_folder(path, root)
-    note_input(root)
-    return root
-
-
-def _check_folder(path: Path, root: Path) -> None:
-    """A ROS 2 bag folder holds regular files (and folders) only, metadata.yaml among them."""
-    try:
-        with os.scandir(root) as entries:
-            for k, entry in enumerate(entries):
-                if k >= _MAX_FOLDER_ENTRIES:
-                    raise BagError(path, f"{root} holds over {_MAX_FOLDER_ENTRIES} entries; is it a bag folder?")
-                mode = entry.stat().st_mode
-                if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
-                    raise BagError(
-                        path, f"{entry.path} is {kind_of(mode)}; a bag folder holds regular files only"
-                    )
-                if stat.S_ISREG(mode):
-                    note_input(Path(entry.path))
-    except OSError as exc:
-        raise BagError(path, f"cannot read the bag folder ({exc.strerror or exc})") from None
-    if not (root / "metadata.yaml").is_file():
-        raise BagError(path, f"a folder without metadata.yaml is not a ROS 2 bag ({_HOW_TO_OPEN})")
-
-
-@contextmanager
-def opened(path: Path) -> Iterator[Any]:
-    """An open ``rosbags`` reader of the bag at ``path``; any failure to open it is a :class:`BagError`."""
-    reader_type, typestore = _rosbags(path)
-    root = bag_root(path)
-    try:
-        reader = reader_type([root], default_typestore=typestore)
-        reader.open()
-    except Exception as exc:  # rosbags raises many kinds on a file that is not a bag
-        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise BagError(path, f"cannot open the bag ({why}); {_HOW_TO_OPEN}; if it is one, {_DAMAGED}") from None
-    try:
-        yield reader
-    finally:
-        with suppress(Exception):  # a damaged bag may fail to close too; its error is the one to show
-            reader.close()
 
 
 def _listing(topics: Mapping[str, str], wanted: Sequence[str]) -> str:
@@ -300,7 +211,7 @@ def read_topics(path: str | Path, topics: BagTopics) -> tuple[Stamped, Stamped]:
         try:
             available = {name: info.msgtype or "mixed types" for name, info in reader.topics.items()}
         except Exception as exc:  # a damaged metadata.yaml or index gets this far in rosbags
-            raise BagError(p, f"cannot read the bag's topics ({_why(exc)}); {_DAMAGED}") from None
+            raise BagError(p, f"cannot read the bag's topics ({why(exc)}); {DAMAGED}") from None
         _check_topic(p, available, topics.joint_states, "joint_states", (ENCODER_TYPE,))
         tracker_type = _check_topic(p, available, topics.tracker, "tracker", TRACKER_TYPES)
         if topics.tracker_frame is not None and tracker_type not in _FRAMED:
@@ -319,45 +230,9 @@ def read_topics(path: str | Path, topics: BagTopics) -> tuple[Stamped, Stamped]:
         return _collect(reader, p, topics, tracker_type)
 
 
-def _messages(reader: Any, p: Path, topics: Sequence[str]) -> Iterator[tuple[Any, int, Any]]:
-    """The messages on ``topics``, decoded, with their connections and record times; a bag that
-    cannot be read on (damaged in the middle) is a :class:`BagError`."""
-    n = 0
-    try:
-        stream = reader.messages(connections=[c for c in reader.connections if c.topic in topics])
-    except Exception as exc:
-        raise BagError(p, f"cannot read the bag's messages ({_why(exc)}); {_DAMAGED}") from None
-    while True:
-        try:
-            conn, recorded, raw = next(stream)
-        except StopIteration:
-            return
-        except Exception as exc:  # rosbags' ReaderError, or a struct or zlib error on damaged bytes
-            raise BagError(
-                p,
-                f"cannot read the bag past message {n} of {', '.join(map(repr, topics))} ({_why(exc)}); "
-                f"{_DAMAGED}",
-            ) from None
-        n += 1
-        yield conn, recorded, _decoded(reader, p, conn, raw)
-
-
-def _why(exc: BaseException) -> str:
-    text = str(exc).strip().splitlines()
-    return f"{type(exc).__name__}: {text[0][:200]}" if text else type(exc).__name__
-
-
-def _decoded(reader: Any, p: Path, conn: Any, raw: bytes) -> Any:
-    try:
-        return reader.deserialize(raw, conn.msgtype)
-    except Exception as exc:  # rosbags' own error, or a struct error on a truncated message
-        why = f"a message on {conn.topic!r} cannot be decoded ({_why(exc)})"
-        raise BagError(p, f"{why}; {_DAMAGED}") from None
-
-
 def _child_frames(reader: Any, p: Path, topic: str) -> set[str]:
     frames: set[str] = set()
-    for conn, _, msg in _messages(reader, p, (topic,)):
+    for conn, _, msg in messages(reader, p, (topic,)):
         frames.update(_frame(pose[0]) for pose in _tracker_poses(msg, conn.msgtype))
     return frames
 
@@ -368,7 +243,7 @@ def _collect(reader: Any, p: Path, topics: BagTopics, tracker_type: str) -> tupl
     names_seen: set[str] = set()
     frames_seen: set[str] = set()
     number: Counter[str] = Counter()
-    for conn, recorded, msg in _messages(reader, p, (topics.joint_states, topics.tracker)):
+    for conn, recorded, msg in messages(reader, p, (topics.joint_states, topics.tracker)):
         number[conn.topic] += 1
         if conn.topic == topics.joint_states:
             _add_counts(p, msg, topics, number[conn.topic], recorded, enc, names_seen)

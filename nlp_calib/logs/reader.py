@@ -55,11 +55,15 @@ def _open(p: Path) -> BinaryIO:
     try:
         return open_regular(p)
     except SpecialFileError as exc:
-        raise DatasetError(str(p), None, f"is {exc.kind}, not a regular file; pass the log file itself") from None
+        raise DatasetError(
+            str(p), None, f"is {exc.kind}, not a regular file; pass the log file itself"
+        ) from None
     except FileNotFoundError:
         raise DatasetError(str(p), None, "no such file") from None
     except IsADirectoryError:
-        raise DatasetError(str(p), None, "is a folder, not a regular file; pass the log file itself") from None
+        raise DatasetError(
+            str(p), None, "is a folder, not a regular file; pass the log file itself"
+        ) from None
     except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
         raise DatasetError(str(p), None, f"cannot read the log ({exc})") from None
 

@@ -289,7 +289,9 @@ class StagedOutput:
         }
         atomic_write_text(self.out_dir / MANIFEST_FILE, json.dumps(doc, indent=2) + "\n")
 
-    def _stale(self, names: list[str], groups: Mapping[str, list[str]], digests: Mapping[str, str]) -> list[str]:
+    def _stale(
+        self, names: list[str], groups: Mapping[str, list[str]], digests: Mapping[str, str]
+    ) -> list[str]:
         """The files this group wrote last time and not now, that the clean-up removes: never one
         reached through a symbolic link, never an input; a changed one stops the run (unless
         ``force``)."""

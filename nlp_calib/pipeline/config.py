@@ -192,8 +192,6 @@ class _Loader(yaml.SafeLoader):
     """Safe YAML read as YAML 1.2 (core schema), with the forms YAML 1.1 reads as another number
     refused; a key given twice in one mapping is an error (YAML would silently keep the last)."""
 
-    yaml_implicit_resolvers: dict[Any, Any] = {}
-
     def resolve(self, kind: Any, value: Any, implicit: Any) -> Any:
         tag = super().resolve(kind, value, implicit)
         if kind is yaml.ScalarNode and implicit[0] and _yaml11_reading(value, tag) is not None:
@@ -240,6 +238,8 @@ class _Loader(yaml.SafeLoader):
         )
 
 
+# YAML 1.2's resolvers only: none of the YAML 1.1 ones SafeLoader would otherwise inherit.
+_Loader.yaml_implicit_resolvers = {}
 for _tag, _pattern, _first in [
     ("tag:yaml.org,2002:bool", r"^(?:true|True|TRUE|false|False|FALSE)$", "tTfF"),
     ("tag:yaml.org,2002:null", r"^(?:~|null|Null|NULL|)$", ["~", "n", "N", ""]),
@@ -298,7 +298,9 @@ def _read_bounded(path: Path, what: str) -> str:
         shown_kind = "it is a folder" if exc.kind == "a folder" else f"not a regular file: {exc.kind}"
         raise ConfigError(f"{path}: cannot read the {what} file ({shown_kind})") from None
     except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
-        raise ConfigError(f"{path}: cannot read the {what} file ({getattr(exc, 'strerror', None) or exc})") from None
+        raise ConfigError(
+            f"{path}: cannot read the {what} file ({getattr(exc, 'strerror', None) or exc})"
+        ) from None
     if len(data) > MAX_YAML_BYTES:
         raise ConfigError(
             f"{path}: the {what} file is larger than {MAX_YAML_BYTES // 1024} KiB; is it the right file?"
