@@ -68,10 +68,16 @@ def forget_inputs() -> None:
     _inputs.clear()
 
 
+def identity(path: Path) -> tuple[int, int]:
+    """``(device, inode)`` of what ``path`` names, through links: one key for every name of a file
+    (a hard link, a symbolic link, ``..``), where its path would give several."""
+    st = os.stat(path)
+    return st.st_dev, st.st_ino
+
+
 def note_input(path: Path) -> None:
     """Note ``path`` (a file or a folder, e.g. a bag's) as an input of this run."""
-    st = os.stat(path)
-    _inputs[(st.st_dev, st.st_ino)] = Path(os.path.abspath(path))
+    _inputs[identity(path)] = Path(os.path.abspath(path))
 
 
 def _noted(st: os.stat_result) -> Path | None:
@@ -98,7 +104,7 @@ def aliased_input(target: Path) -> Path | None:
             continue
         if found is not None:
             return found
-    folder = Path(os.path.abspath(target)).parent
+    folder = Path(os.path.realpath(Path(target).parent))
     for parent in (folder, *folder.parents):
         try:
             st = os.stat(parent)

@@ -37,7 +37,13 @@ from types import TracebackType
 
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import NlpCalibError, NlpCalibWarning, UsageError
-from nlp_calib.core.files import RESERVED_PREFIX, atomic_write_text, refuse_input_alias, reserved_part
+from nlp_calib.core.files import (
+    RESERVED_PREFIX,
+    aliased_input,
+    atomic_write_text,
+    refuse_input_alias,
+    reserved_part,
+)
 
 try:
     import fcntl
@@ -293,15 +299,16 @@ class StagedOutput:
         self, names: list[str], groups: Mapping[str, list[str]], digests: Mapping[str, str]
     ) -> list[str]:
         """The files this group wrote last time and not now, that the clean-up removes: never one
-        reached through a symbolic link, never an input; a changed one stops the run (unless
-        ``force``)."""
+        reached through a symbolic link, nor an input of the run (both are left, and no longer
+        claimed); a changed one stops the run (unless ``force``)."""
         others = {f for g, files in groups.items() if g != self.group for f in files}
         stale = []
         for name in sorted(set(groups.get(str(self.group), [])) - set(names) - others - {MANIFEST_FILE}):
             parent = (self.out_dir / name).parent
             if parent != self.out_dir and (parent.is_symlink() or not parent.is_dir()):
                 continue  # the user put a link (or a file) where our subfolder was: not ours to follow
-            refuse_input_alias(self.out_dir / name)
+            if aliased_input(self.out_dir / name) is not None:
+                continue
             if not self.force and _edited(self.out_dir, name, digests):
                 raise _edited_error(self.out_dir / name)
             stale.append(name)
