@@ -940,7 +940,7 @@ def output_replaced_by_link(w: World, tmp: Path) -> Expect:
     return Expect(run_out(sc, out), (2,), needles, keep=(tmp / "elsewhere.yaml", out / "calibration.yaml"))
 
 
-_REPLACES, _INSIDE = "would replace", "is inside"
+_REPLACES, _INSIDE = "an input of this run", "is inside"
 ALIAS_CASES = [
     (
         "import-bag B.bag --out B.bag --force",

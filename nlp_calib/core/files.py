@@ -123,8 +123,10 @@ def refuse_input_alias(target: Path) -> None:
         return
     if stat.S_ISDIR(os.stat(found).st_mode):
         how = f"is inside {found}, a folder this run reads (a bag's)"
+    elif found == Path(os.path.abspath(target)):
+        how = "is an input of this run"
     else:
-        how = f"would replace {found}, which this run reads"
+        how = f"is another name of {found}, an input of this run"
     raise UsageError(f"{target} {how}; choose an output path that is none of the run's inputs")
 
 
