@@ -6,7 +6,8 @@ import argparse
 
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import UsageError
-from nlp_calib.core.files import atomic_write_text, check_output_dir
+from nlp_calib.core.files import atomic_write_text, check_output_dir, refuse_input_alias
+from nlp_calib.logs.bag_files import bag_root
 from nlp_calib.logs.reader import parse_log
 from nlp_calib.models import get_model
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
@@ -22,6 +23,8 @@ def cmd_import_bag(args: argparse.Namespace) -> int:
     if out.is_dir() or out.name in ("", ".", ".."):
         raise UsageError(f"--out {out} is a folder; give the path of the log file to write")
     folder = check_output_dir(out.parent)
+    bag_root(args.bag)  # a bag, not a FIFO; noted as an input: the log is never written over it
+    refuse_input_alias(out)
     refuse_collisions(folder, [out.name], tracked=False, force=args.force)  # it may be the user's log
     header, records = source.records(model)
     text = records.text(header, model.encoder_kinds)

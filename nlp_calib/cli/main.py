@@ -17,6 +17,7 @@ from nlp_calib.cli.commands import COMMANDS
 from nlp_calib.cli.parser import build_parser
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import NlpCalibError
+from nlp_calib.core.files import forget_inputs
 
 
 def _show_warning(
@@ -47,6 +48,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _run(argv: list[str]) -> int:
     debug = "--debug" in argv
+    forget_inputs()  # each command protects its own inputs from its outputs
     try:
         args = build_parser().parse_args(argv)
         with warnings.catch_warnings():

@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 import re
-import stat
 import types
 import typing
 from collections.abc import Mapping
@@ -21,6 +19,7 @@ from typing import Any, Union
 import yaml
 
 from nlp_calib.core.errors import ConfigError, FieldError, NlpCalibError
+from nlp_calib.core.files import SpecialFileError, open_regular
 from nlp_calib.core.ranges import shown
 
 show = shown
@@ -141,21 +140,65 @@ MAX_YAML_BYTES = 64 * 1024
 #: a few lines can stand for billions of values ("billion laughs"); a scenario has a few hundred.
 MAX_YAML_VALUES = 20_000
 
-# YAML 1.2's floats: PyYAML follows YAML 1.1, where a number needs a dot ("1.0e-2") and "1e-2"
-# is a string.
+# YAML 1.2's core schema. PyYAML follows YAML 1.1, where "010" is octal (8), "1:30" sexagesimal
+# (90), "1_000" a thousand, "yes"/"on" booleans and "1e-2" a string.
+_INT = re.compile(r"^(?:[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+)$")
 _FLOAT = re.compile(
-    r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
-    |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
-    |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
-    |[-+]?\.(?:inf|Inf|INF)
-    |\.(?:nan|NaN|NAN))$""",
-    re.X,
+    r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$"
 )
+_INT_TAG, _FLOAT_TAG = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float"
+#: The tag of a plain scalar that YAML 1.1 and YAML 1.2 read as different values.
+_AMBIGUOUS_TAG = "tag:nlp_calib,2024:ambiguous"
+_STR_TAG = "tag:yaml.org,2002:str"
+_YAML11 = yaml.resolver.Resolver()
+_VALUES = yaml.constructor.SafeConstructor()
+
+
+def _yaml12_int(text: str) -> int:
+    body = text.lstrip("+-")
+    sign = -1 if text.startswith("-") else 1
+    if body.startswith(("0o", "0x")):
+        return int(body[2:], 8 if body[1] == "o" else 16)
+    return sign * int(body)
+
+
+def _yaml12_value(text: str, tag: str) -> Any:
+    if tag == _INT_TAG:
+        return _yaml12_int(text)
+    if tag == _FLOAT_TAG:
+        return _VALUES.construct_yaml_float(yaml.ScalarNode(tag, text))
+    return text if tag == _STR_TAG else None
+
+
+def _yaml11_reading(text: str, tag12: str) -> float | None:
+    """The number YAML 1.1 reads the plain scalar ``text`` as, when YAML 1.2 reads it otherwise
+    (None when both agree, or 1.1 reads no number)."""
+    tag11 = _YAML11.resolve(yaml.ScalarNode, text, (True, False))
+    if tag11 not in (_INT_TAG, _FLOAT_TAG) or tag12 not in (_INT_TAG, _FLOAT_TAG, _STR_TAG):
+        return None
+    try:
+        node = yaml.ScalarNode(tag11, text)
+        v11 = _VALUES.construct_yaml_int(node) if tag11 == _INT_TAG else _VALUES.construct_yaml_float(node)
+        v12 = _yaml12_value(text, tag12)
+    except ValueError:  # thousands of digits: the int constructor says so
+        return None
+    same = v11 == v12 or (isinstance(v12, float) and math.isnan(v11) and math.isnan(v12))
+    return None if same else v11
+
+
+class _AmbiguousScalar(yaml.constructor.ConstructorError):
+    """A plain scalar that YAML 1.1 and YAML 1.2 read differently."""
 
 
 class _Loader(yaml.SafeLoader):
-    """Safe YAML with YAML 1.2 floats; a key given twice in one mapping is an error (YAML would
-    silently keep the last)."""
+    """Safe YAML read as YAML 1.2 (core schema), with the forms YAML 1.1 reads as another number
+    refused; a key given twice in one mapping is an error (YAML would silently keep the last)."""
+
+    def resolve(self, kind: Any, value: Any, implicit: Any) -> Any:
+        tag = super().resolve(kind, value, implicit)
+        if kind is yaml.ScalarNode and implicit[0] and _yaml11_reading(value, tag) is not None:
+            return _AMBIGUOUS_TAG
+        return tag
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
         first_line: dict[Any, int] = {}
@@ -179,15 +222,36 @@ class _Loader(yaml.SafeLoader):
 
     def construct_yaml_int(self, node: yaml.ScalarNode) -> int:
         try:
-            return int(super().construct_yaml_int(node))
+            return _yaml12_int(str(self.construct_scalar(node)))
         except ValueError:  # Python refuses to convert more than 4300 digits
             raise yaml.constructor.ConstructorError(
                 problem="a number with thousands of digits", problem_mark=node.start_mark
             ) from None
 
+    def construct_ambiguous(self, node: yaml.ScalarNode) -> Any:
+        text = str(node.value)
+        tag12 = super().resolve(yaml.ScalarNode, text, (True, False))
+        v12 = _yaml12_value(text, tag12)
+        reads = f"the text {text!r}" if isinstance(v12, str) else f"{v12!r}"
+        raise _AmbiguousScalar(
+            problem=f"{text} is {_yaml11_reading(text, tag12)!r} in YAML 1.1 but {reads} in YAML 1.2; "
+            "write the number you mean in plain decimal, or quote it if it is text",
+            problem_mark=node.start_mark,
+        )
 
-_Loader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT, list("-+0123456789."))
-_Loader.add_constructor("tag:yaml.org,2002:int", _Loader.construct_yaml_int)
+
+# YAML 1.2's resolvers only: none of the YAML 1.1 ones SafeLoader would otherwise inherit.
+_Loader.yaml_implicit_resolvers = {}
+for _tag, _pattern, _first in [
+    ("tag:yaml.org,2002:bool", r"^(?:true|True|TRUE|false|False|FALSE)$", "tTfF"),
+    ("tag:yaml.org,2002:null", r"^(?:~|null|Null|NULL|)$", ["~", "n", "N", ""]),
+    (_INT_TAG, _INT.pattern, "-+0123456789"),
+    (_FLOAT_TAG, _FLOAT.pattern, "-+0123456789."),
+    ("tag:yaml.org,2002:merge", r"^(?:<<)$", "<"),
+]:
+    _Loader.add_implicit_resolver(_tag, re.compile(_pattern), list(_first))
+_Loader.add_constructor(_INT_TAG, _Loader.construct_yaml_int)
+_Loader.add_constructor(_AMBIGUOUS_TAG, _Loader.construct_ambiguous)
 
 
 def _children(node: yaml.Node) -> list[yaml.Node]:
@@ -228,23 +292,17 @@ def _check_expanded_size(root: yaml.Node) -> str | None:
 def _read_bounded(path: Path, what: str) -> str:
     """The text of a regular file of at most :data:`MAX_YAML_BYTES`, without blocking on a FIFO."""
     try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with open_regular(path) as fh:
+            data = fh.read(MAX_YAML_BYTES + 1)
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such {what} file") from None
+    except SpecialFileError as exc:
+        shown_kind = "it is a folder" if exc.kind == "a folder" else f"not a regular file: {exc.kind}"
+        raise ConfigError(f"{path}: cannot read the {what} file ({shown_kind})") from None
     except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
-        raise ConfigError(f"{path}: cannot read the {what} file ({exc})") from None
-    try:
-        mode = os.fstat(fd).st_mode
-        if stat.S_ISDIR(mode):
-            raise ConfigError(f"{path}: cannot read the {what} file (it is a folder)")
-        if not stat.S_ISREG(mode):
-            raise ConfigError(f"{path}: cannot read the {what} file (not a regular file: a FIFO or a device)")
-        with os.fdopen(fd, "rb", closefd=False) as fh:
-            data = fh.read(MAX_YAML_BYTES + 1)
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the {what} file ({exc.strerror or exc})") from None
-    finally:
-        os.close(fd)
+        raise ConfigError(
+            f"{path}: cannot read the {what} file ({getattr(exc, 'strerror', None) or exc})"
+        ) from None
     if len(data) > MAX_YAML_BYTES:
         raise ConfigError(
             f"{path}: the {what} file is larger than {MAX_YAML_BYTES // 1024} KiB; is it the right file?"
@@ -269,6 +327,9 @@ def parse_yaml(text: str, source: str) -> Any:
         if problem is not None:
             raise ConfigError(f"{source}: not a usable YAML document ({problem})")
         return loader.construct_document(node)
+    except _AmbiguousScalar as exc:
+        line = f":{exc.problem_mark.line + 1}" if exc.problem_mark is not None else ""
+        raise ConfigError(f"{source}{line}: ambiguous YAML ({exc.problem})") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark is not None else source

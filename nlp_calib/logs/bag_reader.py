@@ -5,22 +5,32 @@ when a bag is opened. Encoders come from ``sensor_msgs/msg/JointState`` (raw cou
 ``position``), the tracker from a pose, transform, odometry or TF topic; each message's time is
 its header stamp. A problem with the bag, a topic or a message is one :class:`BagError` line that
 lists what the bag does hold.
+
+Nothing but a regular file (or a folder of them) is opened as a bag: a FIFO, socket or device is
+refused before it can block. Messages that are not what they claim are dropped and counted
+(:class:`Drops`): a JointState whose ``position`` and ``name`` differ in length or that names a
+joint twice, a tracker pose whose quaternion is not a rotation (zero, or a norm off 1 by more
+than :data:`QUATERNION_TOLERANCE`; one off by less is normalised and counted). A header stamp
+whose ``nanosec`` is not below 10⁹ is no time at all: the bag is refused.
 """
 
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from nlp_calib.core.errors import DatasetError, UsageError
+from nlp_calib.core.errors import UsageError
 from nlp_calib.core.ranges import Range
+from nlp_calib.logs.bag_files import DAMAGED, BagError, is_bag, messages, opened, why
 from nlp_calib.logs.reader import yaw_from_quaternion
+
+__all__ = ["BagError", "BagTopics", "Drops", "Stamped", "is_bag", "read_topics"]
 
 ENCODER_TYPE = "sensor_msgs/msg/JointState"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
@@ -30,20 +40,13 @@ TF_TYPE = "tf2_msgs/msg/TFMessage"
 TRACKER_TYPES = (POSE_TYPE, TRANSFORM_TYPE, ODOMETRY_TYPE, TF_TYPE)
 #: Types whose messages name the frame they follow (``child_frame_id``).
 _FRAMED = (TRANSFORM_TYPE, ODOMETRY_TYPE, TF_TYPE)
-#: Files that belong to a ROS 2 bag folder (the folder holds ``metadata.yaml`` beside them).
-_ROS2_FILES = (".db3", ".mcap")
 #: Default of :attr:`BagTopics.max_gap`: a tracker at 10 Hz or faster brackets every encoder message.
 DEFAULT_MAX_GAP_S = 0.1
 MAX_GAP = Range(0.0, 10.0, lo_open=True)
-_HOW_TO_OPEN = "a ROS 1 bag is a .bag file, a ROS 2 bag a folder with metadata.yaml or its .db3 or .mcap file"
-_INSTALL = "reading bags needs rosbags: install the ros extra: pip install 'nlp_calib[ros]'"
-
-
-class BagError(DatasetError):
-    """A bag that cannot be opened or lacks what the import needs; the message lists what it has."""
-
-    def __init__(self, path: Path | str, problem: str) -> None:
-        super().__init__(str(path), None, problem)
+#: A quaternion whose norm is off 1 by more than this is not a rotation (a lost target's zeros, a
+#: publisher that scales it); closer ones are normalised. Float rounding stays below 1e-6.
+QUATERNION_TOLERANCE = 1e-3
+_ROUNDING = 1e-6
 
 
 @dataclass(frozen=True)
@@ -75,6 +78,30 @@ class BagTopics:
             raise UsageError(f"max_gap (seconds) {reason}")
 
 
+#: Why messages were dropped, as :class:`Drops` counts them.
+MALFORMED_JOINTS = "JointState messages whose position and name lists differ in length or name a joint twice"
+OTHER_JOINTS = "JointState messages without the joints (another publisher on the topic?)"
+NOT_A_ROTATION = (
+    f"tracker poses whose quaternion is not a rotation (zero, or norm off 1 by over {QUATERNION_TOLERANCE:g})"
+)
+NORMALISED = "tracker quaternions normalised (norm off 1 by less than that)"
+
+
+@dataclass(frozen=True)
+class Drops:
+    """Messages a topic held that the import did not use as they were, by reason (the reasons
+    above); ``worrying`` are those a user must hear about (all but another publisher's)."""
+
+    counts: Mapping[str, int] = field(default_factory=dict)
+
+    def describe(self) -> str:
+        return ", ".join(f"{n} {why}" for why, n in self.counts.items() if n)
+
+    @property
+    def worrying(self) -> bool:
+        return any(n for why, n in self.counts.items() if why != OTHER_JOINTS)
+
+
 @dataclass(frozen=True)
 class Stamped:
     """A topic's messages in bag order: stamps (ns) and one row of values per message."""
@@ -82,53 +109,11 @@ class Stamped:
     topic: str
     stamp_ns: np.ndarray
     values: np.ndarray
+    drops: Drops = field(default_factory=Drops)
 
     @property
     def n(self) -> int:
         return int(self.stamp_ns.shape[0])
-
-
-def is_bag(path: Path) -> bool:
-    """Whether ``path`` names a bag rather than a text log (by its name, or a ROS 2 bag folder)."""
-    return path.suffix in (".bag", *_ROS2_FILES) or (path / "metadata.yaml").is_file()
-
-
-def _rosbags(path: Path) -> tuple[Any, Any]:
-    try:
-        from rosbags.highlevel import AnyReader
-        from rosbags.typesys import Stores, get_typestore
-    except ImportError:
-        raise BagError(path, _INSTALL) from None
-    # Old ROS 2 bags carry no message definitions; the standard messages read them.
-    return AnyReader, get_typestore(Stores.LATEST)
-
-
-def _bag_root(path: Path) -> Path:
-    """The path rosbags opens: a ROS 2 bag's folder also when its .db3 or .mcap file is named."""
-    if not (path.exists() or path.is_symlink()):
-        raise BagError(path, "no such file")
-    if path.suffix in _ROS2_FILES and (path.parent / "metadata.yaml").is_file():
-        return path.parent
-    if path.is_dir() and not (path / "metadata.yaml").is_file():
-        raise BagError(path, f"a folder without metadata.yaml is not a ROS 2 bag ({_HOW_TO_OPEN})")
-    return path
-
-
-@contextmanager
-def opened(path: Path) -> Iterator[Any]:
-    """An open ``rosbags`` reader of the bag at ``path``; any failure to open it is a :class:`BagError`."""
-    reader_type, typestore = _rosbags(path)
-    root = _bag_root(path)
-    try:
-        reader = reader_type([root], default_typestore=typestore)
-        reader.open()
-    except Exception as exc:  # rosbags raises many kinds on a file that is not a bag
-        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise BagError(path, f"cannot open the bag ({why}); {_HOW_TO_OPEN}") from None
-    try:
-        yield reader
-    finally:
-        reader.close()
 
 
 def _listing(topics: Mapping[str, str], wanted: Sequence[str]) -> str:
@@ -152,39 +137,52 @@ def _check_topic(path: Path, topics: Mapping[str, str], name: str, key: str, wan
     return topics[name]
 
 
-def _stamp_ns(header: Any) -> int:
-    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+def _stamp_ns(p: Path, header: Any, topic: str, number: int) -> int:
+    sec, nanosec = int(header.stamp.sec), int(header.stamp.nanosec)
+    if not 0 <= nanosec < 1_000_000_000:
+        raise BagError(
+            p,
+            f"message {number} on {topic!r} has header stamp sec {sec}, nanosec {nanosec}: nanosec must "
+            "lie in [0, 10^9); the publisher writes invalid times (fix its stamps, or leave the topic out)",
+        )
+    return sec * 1_000_000_000 + nanosec
 
 
 def _frame(name: str) -> str:
     return name.strip().lstrip("/")  # ROS 1 tf frames were often written with a leading '/'
 
 
-def _pose(position: Any, orientation: Any) -> tuple[float, float, float]:
-    """SE(2) of a 3-D pose: x, y and the heading about the vertical axis."""
-    q = orientation
-    return float(position.x), float(position.y), yaw_from_quaternion(q.x, q.y, q.z, q.w)
+def _unit(orientation: Any) -> tuple[list[float] | None, bool]:
+    """The quaternion ``(x, y, z, w)`` scaled to norm 1, and whether that changed more than its
+    rounding; None when it is not a rotation (see :data:`QUATERNION_TOLERANCE`)."""
+    q = [float(orientation.x), float(orientation.y), float(orientation.z), float(orientation.w)]
+    norm = math.hypot(*q)  # no overflow on huge components; NaN if any is NaN
+    if not abs(norm - 1.0) <= QUATERNION_TOLERANCE:
+        return None, False
+    return [c / norm for c in q], abs(norm - 1.0) > _ROUNDING
 
 
-def _tracker_poses(msg: Any, msgtype: str) -> Iterator[tuple[str, Any, tuple[float, float, float]]]:
-    """Each pose a tracker message holds: (child frame, header, pose)."""
+def _tracker_poses(msg: Any, msgtype: str) -> Iterator[tuple[str, Any, Any, Any]]:
+    """Each pose a tracker message holds: (child frame, header, position, orientation)."""
     if msgtype == POSE_TYPE:
-        yield "", msg.header, _pose(msg.pose.position, msg.pose.orientation)
+        yield "", msg.header, msg.pose.position, msg.pose.orientation
     elif msgtype == ODOMETRY_TYPE:
-        yield msg.child_frame_id, msg.header, _pose(msg.pose.pose.position, msg.pose.pose.orientation)
+        yield msg.child_frame_id, msg.header, msg.pose.pose.position, msg.pose.pose.orientation
     else:
         for tf in msg.transforms if msgtype == TF_TYPE else [msg]:
-            yield tf.child_frame_id, tf.header, _pose(tf.transform.translation, tf.transform.rotation)
+            yield tf.child_frame_id, tf.header, tf.transform.translation, tf.transform.rotation
 
 
 class _Collector:
-    """Stamps, record times and values of one topic, turned into :class:`Stamped` at the end."""
+    """Stamps, record times and values of one topic, turned into :class:`Stamped` at the end;
+    ``drops`` counts the messages not used as they were, by reason."""
 
     def __init__(self, topic: str) -> None:
         self.topic = topic
         self.stamps: list[int] = []
         self.recorded: list[int] = []
         self.rows: list[Sequence[float]] = []
+        self.drops: Counter[str] = Counter()
 
     def add(self, stamp: int, recorded: int, row: Sequence[float]) -> None:
         self.stamps.append(stamp)
@@ -192,23 +190,28 @@ class _Collector:
         self.rows.append(row)
 
     def result(self, path: Path, key: str, width: int, what: str) -> Stamped:
+        drops = Drops({why: n for why, n in self.drops.items() if n})
         if len(self.rows) < 2:
+            dropped = f"; dropped: {drops.describe()}" if drops.counts else ""
             raise BagError(
                 path,
-                f"{key}: topic {self.topic!r} has {len(self.rows)} usable message(s){what}; the import "
-                "needs at least 2 (is it the right topic, and does the bag cover the drive?)",
+                f"{key}: topic {self.topic!r} has {len(self.rows)} usable message(s){what}{dropped}; the "
+                "import needs at least 2 (is it the right topic, and does the bag cover the drive?)",
             )
         # A publisher that leaves every stamp at zero: the bag's record times are the only clock.
         stamps = self.stamps if any(self.stamps) else self.recorded
         values = np.array(self.rows, dtype=float).reshape(len(self.rows), width)
-        return Stamped(self.topic, np.array(stamps, dtype=np.int64), values)
+        return Stamped(self.topic, np.array(stamps, dtype=np.int64), values, drops)
 
 
 def read_topics(path: str | Path, topics: BagTopics) -> tuple[Stamped, Stamped]:
     """The encoder counts (columns in ``topics.joints`` order) and the tracker's ``(x, y, θ)``."""
     p = Path(path)
     with opened(p) as reader:
-        available = {name: info.msgtype or "mixed types" for name, info in reader.topics.items()}
+        try:
+            available = {name: info.msgtype or "mixed types" for name, info in reader.topics.items()}
+        except Exception as exc:  # a damaged metadata.yaml or index gets this far in rosbags
+            raise BagError(p, f"cannot read the bag's topics ({why(exc)}); {DAMAGED}") from None
         _check_topic(p, available, topics.joint_states, "joint_states", (ENCODER_TYPE,))
         tracker_type = _check_topic(p, available, topics.tracker, "tracker", TRACKER_TYPES)
         if topics.tracker_frame is not None and tracker_type not in _FRAMED:
@@ -227,19 +230,10 @@ def read_topics(path: str | Path, topics: BagTopics) -> tuple[Stamped, Stamped]:
         return _collect(reader, p, topics, tracker_type)
 
 
-def _decoded(reader: Any, p: Path, conn: Any, raw: bytes) -> Any:
-    try:
-        return reader.deserialize(raw, conn.msgtype)
-    except Exception as exc:  # rosbags' own error, or a struct error on a truncated message
-        why = f"a message on {conn.topic!r} cannot be decoded ({exc})"
-        raise BagError(p, f"{why}; is the bag damaged?") from None
-
-
 def _child_frames(reader: Any, p: Path, topic: str) -> set[str]:
-    conns = [c for c in reader.connections if c.topic == topic]
     frames: set[str] = set()
-    for conn, _, raw in reader.messages(connections=conns):
-        frames.update(_frame(f) for f, _, _ in _tracker_poses(_decoded(reader, p, conn, raw), conn.msgtype))
+    for conn, _, msg in messages(reader, p, (topic,)):
+        frames.update(_frame(pose[0]) for pose in _tracker_poses(msg, conn.msgtype))
     return frames
 
 
@@ -248,20 +242,13 @@ def _collect(reader: Any, p: Path, topics: BagTopics, tracker_type: str) -> tupl
     enc, trk = _Collector(topics.joint_states), _Collector(topics.tracker)
     names_seen: set[str] = set()
     frames_seen: set[str] = set()
-    n_joint_states = 0
-    conns = [c for c in reader.connections if c.topic in (topics.joint_states, topics.tracker)]
-    for conn, recorded, raw in reader.messages(connections=conns):
-        msg = _decoded(reader, p, conn, raw)
+    number: Counter[str] = Counter()
+    for conn, recorded, msg in messages(reader, p, (topics.joint_states, topics.tracker)):
+        number[conn.topic] += 1
         if conn.topic == topics.joint_states:
-            n_joint_states += 1
-            row = _counts(p, msg, topics, n_joint_states, names_seen)
-            if row is not None:
-                enc.add(_stamp_ns(msg.header), recorded, row)
-            continue
-        for frame, header, pose in _tracker_poses(msg, tracker_type):
-            frames_seen.add(_frame(frame))
-            if want is None or _frame(frame) == want:
-                trk.add(_stamp_ns(header), recorded, pose)
+            _add_counts(p, msg, topics, number[conn.topic], recorded, enc, names_seen)
+        else:
+            _add_poses(p, msg, tracker_type, want, number[conn.topic], recorded, trk, frames_seen)
     if not enc.rows and not set(topics.joints) <= names_seen:
         raise BagError(
             p,
@@ -269,7 +256,7 @@ def _collect(reader: Any, p: Path, topics: BagTopics, tracker_type: str) -> tupl
             f"names present: {', '.join(sorted(names_seen)) or 'none'} (give them in the model's "
             "encoder order)",
         )
-    if want is not None and not trk.rows and frames_seen:
+    if want is not None and not trk.rows and frames_seen and not trk.drops:
         raise BagError(
             p,
             f"tracker_frame: no pose on {topics.tracker!r} has child frame {want!r}; the child frames "
@@ -282,14 +269,44 @@ def _collect(reader: Any, p: Path, topics: BagTopics, tracker_type: str) -> tupl
     )
 
 
-def _counts(p: Path, msg: Any, topics: BagTopics, number: int, names_seen: set[str]) -> list[float] | None:
-    """The raw counts of ``topics.joints`` in one JointState message (None if it lacks them: another
-    publisher on the same topic)."""
+def _add_poses(
+    p: Path,
+    msg: Any,
+    msgtype: str,
+    want: str | None,
+    number: int,
+    recorded: int,
+    trk: _Collector,
+    frames_seen: set[str],
+) -> None:
+    """The poses of one tracker message of the tracked frame (all of them: ``want`` None)."""
+    for frame, header, position, orientation in _tracker_poses(msg, msgtype):
+        frames_seen.add(_frame(frame))
+        if want is not None and _frame(frame) != want:
+            continue
+        q, normalised = _unit(orientation)
+        if q is None:
+            trk.drops[NOT_A_ROTATION] += 1
+            continue
+        trk.drops[NORMALISED] += normalised
+        pose = (float(position.x), float(position.y), yaw_from_quaternion(*q))
+        trk.add(_stamp_ns(p, header, trk.topic, number), recorded, pose)
+
+
+def _add_counts(
+    p: Path, msg: Any, topics: BagTopics, number: int, recorded: int, enc: _Collector, names_seen: set[str]
+) -> None:
+    """The raw counts of ``topics.joints`` in one JointState message; a message without them
+    (another publisher on the same topic) or malformed is counted, not used."""
     names = list(msg.name)
     names_seen.update(names)
     position = np.asarray(msg.position, dtype=float)
-    if position.shape[0] != len(names) or not set(topics.joints) <= set(names):
-        return None
+    if not set(topics.joints) <= set(names):
+        enc.drops[OTHER_JOINTS] += 1
+        return
+    if position.shape != (len(names),) or len(set(names)) != len(names):
+        enc.drops[MALFORMED_JOINTS] += 1
+        return
     row = [float(position[names.index(j)]) for j in topics.joints]
     for joint, value in zip(topics.joints, row):
         # Counts beyond 2^53 are no longer whole numbers in a float64: none can be trusted.
@@ -299,4 +316,4 @@ def _counts(p: Path, msg: Any, topics: BagTopics, number: int, names_seen: set[s
                 f"joint {joint!r} reads {value!r} in message {number} on {topics.joint_states!r}; the "
                 "import needs raw encoder counts (whole numbers) in JointState.position, not angles",
             )
-    return row
+    enc.add(_stamp_ns(p, msg.header, topics.joint_states, number), recorded, row)

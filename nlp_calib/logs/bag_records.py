@@ -24,14 +24,14 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrap_angle
-from nlp_calib.logs.bag_reader import BagError, BagTopics, Stamped, read_topics
+from nlp_calib.logs.bag_reader import BagError, BagTopics, Drops, Stamped, read_topics
 from nlp_calib.logs.log import EncoderKind, Log, LogHeader
 from nlp_calib.logs.reader import parse_log
 from nlp_calib.logs.writer import format_log
@@ -39,7 +39,9 @@ from nlp_calib.logs.writer import format_log
 
 @dataclass(frozen=True)
 class Pairing:
-    """How many encoder messages found a tracker pose, and where the others were."""
+    """How many encoder messages found a tracker pose, where the others were, and the messages
+    the import did not use as they were (``drops``: malformed JointStates, quaternions that are
+    no rotation or were normalised)."""
 
     encoder_messages: int
     tracker_poses: int
@@ -47,6 +49,7 @@ class Pairing:
     after: int
     in_gaps: int
     max_gap_s: float
+    drops: Drops = field(default_factory=Drops)
 
     @property
     def paired(self) -> int:
@@ -57,9 +60,10 @@ class Pairing:
             f"{self.before} before the first tracker pose, {self.after} after the last, {self.in_gaps} "
             f"in tracker gaps over {self.max_gap_s:g} s"
         )
+        dropped = f"; not used as they were: {self.drops.describe()}" if self.drops.counts else ""
         return (
             f"{self.paired} of {self.encoder_messages} encoder messages paired with the tracker's "
-            f"{self.tracker_poses} poses ({left})"
+            f"{self.tracker_poses} poses ({left}){dropped}"
         )
 
 
@@ -86,8 +90,9 @@ def pair(encoders: Stamped, tracker: Stamped, max_gap_s: float) -> tuple[np.ndar
     out[exact] = poses[at][exact]  # a shared stamp takes the tracker's pose as it is
     before = int(np.sum(t < ts[0]))
     after = int(np.sum(t > ts[-1]))
+    drops = Drops({**encoders.drops.counts, **tracker.drops.counts})
     summary = Pairing(
-        encoders.n, int(ts.shape[0]), before, after, int(np.sum(~ok)) - before - after, max_gap_s
+        encoders.n, int(ts.shape[0]), before, after, int(np.sum(~ok)) - before - after, max_gap_s, drops
     )
     return np.flatnonzero(ok), out[ok], summary
 
@@ -155,8 +160,9 @@ def read_bag(
     strict: bool = True,
 ) -> Log:
     """A bag read as a :class:`Log` with ``header`` (a bag has none): the same checks, drops and errors
-    as the text log ``import-bag`` writes from it; a warning says when tracker gaps left messages out."""
+    as the text log ``import-bag`` writes from it; a warning says when tracker gaps left messages out
+    or messages were dropped or changed (:class:`~nlp_calib.logs.bag_reader.Drops`)."""
     records = read_bag_records(path, topics)
-    if records.pairing.in_gaps:
+    if records.pairing.in_gaps or records.pairing.drops.worrying:
         warnings.warn(f"{path}: {records.pairing.describe()}", NlpCalibWarning, stacklevel=2)
     return records.log(header, encoder_kinds, strict=strict)

@@ -33,6 +33,7 @@ from nlp_calib.core.errors import DatasetError
 from nlp_calib.core.numeric import wrapped_difference
 from nlp_calib.logs.header import MAX_MAGNITUDE
 from nlp_calib.logs.log import DroppedRecord
+from nlp_calib.logs.writer import format_time
 
 #: A jump is an increment beyond this many typical increments (see the module docstring).
 JUMP_FACTOR = 10.0
@@ -137,18 +138,13 @@ def value_problems(
         t_prev, line_prev = (int(t[p]), int(linenos[idx[p]])) if p >= 0 else (int(start_t), int(start_line))
         what = "duplicates" if t[k] == t_prev else "goes back from"
         reasons[int(idx[k])] = (
-            f"time {_seconds(int(t[k]))} {what} the previous record's {_seconds(t_prev)} "
+            f"time {format_time(int(t[k]))} {what} the previous record's {format_time(t_prev)} "
             f"(line {line_prev}); expected increasing timestamps"
         )
     if kept.any():
         k = int(np.flatnonzero(kept)[-1])
         last = (int(t[k]), int(linenos[idx[k]]))
     return reasons, last
-
-
-def _seconds(ns: int) -> str:
-    sign, ns = ("-", -ns) if ns < 0 else ("", ns)
-    return f"{sign}{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
 
 
 def _step(t: np.ndarray, a: int, b: int, modulus: int) -> int:

@@ -19,8 +19,6 @@ The reader knows no model: the caller says which encoders are absolute and which
 
 from __future__ import annotations
 
-import os
-import stat
 import warnings
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
@@ -29,6 +27,7 @@ from typing import BinaryIO
 import numpy as np
 
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning
+from nlp_calib.core.files import SpecialFileError, open_regular
 from nlp_calib.core.numeric import COUNTER_MODULUS
 from nlp_calib.logs.checks import counter_drops, drop_summary, value_problems
 from nlp_calib.logs.header import parse_header, yaw_from_quaternion
@@ -54,13 +53,17 @@ _BOM = b"\xef\xbb\xbf"
 def _open(p: Path) -> BinaryIO:
     """The log opened for reading; special files are refused before they can block."""
     try:
-        mode = os.stat(p).st_mode
-        if not stat.S_ISREG(mode):
-            what = "a folder" if stat.S_ISDIR(mode) else "a FIFO, socket or device"
-            raise DatasetError(str(p), None, f"is {what}, not a regular file; pass the log file itself")
-        return p.open("rb")
+        return open_regular(p)
+    except SpecialFileError as exc:
+        raise DatasetError(
+            str(p), None, f"is {exc.kind}, not a regular file; pass the log file itself"
+        ) from None
     except FileNotFoundError:
         raise DatasetError(str(p), None, "no such file") from None
+    except IsADirectoryError:
+        raise DatasetError(
+            str(p), None, "is a folder, not a regular file; pass the log file itself"
+        ) from None
     except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
         raise DatasetError(str(p), None, f"cannot read the log ({exc})") from None
 

@@ -32,12 +32,18 @@ def format_log(
         f"#\trotation:\t [ 0, 0, {math.sin(th / 2):.9g}, {math.cos(th / 2):.9g} ]",
     ]
     for k in range(time_ns.shape[0]):
-        sec, ns = divmod(int(time_ns[k]), 1_000_000_000)
         enc = " ".join(str(int(v)) for v in ticks[k])
         mp = " ".join(_number(v, digits) for v in model_pose[k])
         tp = " ".join(_number(v, digits) for v in T_world_sensor[k])
-        out.append(f"time: {sec}.{ns:09d} ticks: {enc} model_pose: {mp} tracker_pose: {tp}")
+        out.append(f"time: {format_time(int(time_ns[k]))} ticks: {enc} model_pose: {mp} tracker_pose: {tp}")
     return "\n".join(out) + "\n"
+
+
+def format_time(t_ns: int) -> str:
+    """``t_ns`` as the text format's seconds: sign, whole seconds, nine decimals (−1.5 s is
+    ``-1.500000000``, as the reader reads it, not ``-2.500000000``)."""
+    sec, ns = divmod(abs(t_ns), 1_000_000_000)
+    return f"{'-' if t_ns < 0 else ''}{sec}.{ns:09d}"
 
 
 def _number(v: float, digits: int | None) -> str:

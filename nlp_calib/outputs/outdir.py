@@ -8,7 +8,12 @@ A run writes its files into a staging folder inside the output folder (same file
 hand-off files and reports, ``odometry``, ``codegen``): a commit removes the files its own group
 wrote last time and did not write again (e.g. the report of an earlier ``--report`` run), and
 nothing else. A file the manifest does not list is the user's: a run that would overwrite it
-stops with an error naming it, unless ``force`` is given.
+stops with an error naming it, unless ``force`` is given. The manifest also holds each file's
+SHA-256: a file of ours that was changed since (an annotated ``report.md``, an edited
+``example.c``) is the user's work, and a run that would replace or remove it stops the same way.
+No output may be an input of the run (the log, the scenario, a bag or a file in a bag's folder,
+also through a link), not even with ``force``; names starting ``.nlp_calib_`` are the tool's own
+and refused as outputs; the clean-up never follows a symbolic link.
 
 While a run stages its files it holds a lock on the output folder (``flock`` on the folder
 itself, released by the kernel however the process ends), so two runs into one folder take
@@ -19,6 +24,7 @@ turns, and any staging folder found while holding the lock belongs to a run that
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import shutil
@@ -31,7 +37,13 @@ from types import TracebackType
 
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import NlpCalibError, NlpCalibWarning, UsageError
-from nlp_calib.core.files import atomic_write_text
+from nlp_calib.core.files import (
+    RESERVED_PREFIX,
+    aliased_input,
+    atomic_write_text,
+    refuse_input_alias,
+    reserved_part,
+)
 
 try:
     import fcntl
@@ -40,7 +52,7 @@ except ImportError:  # pragma: no cover - not POSIX
 
 #: The list of files nlp_calib wrote into the folder.
 MANIFEST_FILE = ".nlp_calib_manifest.json"
-_STAGING_PREFIX = ".nlp_calib_staging."
+_STAGING_PREFIX = f"{RESERVED_PREFIX}staging."
 #: How long a run waits for another run that is writing into the same folder.
 LOCK_WAIT_S = 120.0
 
@@ -58,19 +70,44 @@ def _plain(names: object) -> list[str]:
     return [f for f in names if _plain_path(f)] if isinstance(names, list) else []
 
 
-def manifest_groups(out_dir: Path) -> dict[str, list[str]]:
-    """The files the folder's manifest lists, by group; an unreadable or foreign manifest lists
-    nothing (a manifest without groups, from an earlier version, is the ``run`` group's)."""
+def _manifest(out_dir: Path) -> dict[str, object]:
     try:
         doc = json.loads((Path(out_dir) / MANIFEST_FILE).read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return {}
-    if not isinstance(doc, dict):
-        return {}
+    return doc if isinstance(doc, dict) else {}
+
+
+def manifest_groups(out_dir: Path) -> dict[str, list[str]]:
+    """The files the folder's manifest lists, by group; an unreadable or foreign manifest lists
+    nothing (a manifest without groups, from an earlier version, is the ``run`` group's)."""
+    doc = _manifest(out_dir)
     groups = doc.get("groups")
     if isinstance(groups, dict):
         return {str(g): _plain(files) for g, files in groups.items()}
-    return {"run": _plain(doc.get("files"))}
+    return {"run": _plain(doc.get("files"))} if doc else {}
+
+
+def manifest_digests(out_dir: Path) -> dict[str, str]:
+    """The SHA-256 of each file as nlp_calib wrote it (none from an earlier version's manifest)."""
+    digests = _manifest(out_dir).get("sha256")
+    if not isinstance(digests, dict):
+        return {}
+    return {k: v for k, v in digests.items() if _plain_path(k) and isinstance(v, str)}
+
+
+def digest(path: Path) -> str | None:
+    """The SHA-256 of a regular file (None for a link, a folder or a file that cannot be read)."""
+    try:
+        if path.is_symlink() or not path.is_file():
+            return None
+        h = hashlib.sha256()
+        with path.open("rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                h.update(chunk)
+        return h.hexdigest()
+    except OSError:
+        return None
 
 
 def previous_files(out_dir: Path) -> list[str]:
@@ -78,26 +115,59 @@ def previous_files(out_dir: Path) -> list[str]:
     return sorted({f for files in manifest_groups(out_dir).values() for f in files})
 
 
+def _edited(out_dir: Path, name: str, digests: Mapping[str, str]) -> bool:
+    """Whether our file ``name`` was changed since it was written (by the digest the manifest holds)."""
+    target = Path(out_dir) / name
+    recorded = digests.get(name)
+    return recorded is not None and (target.exists() or target.is_symlink()) and digest(target) != recorded
+
+
+def _edited_error(target: Path) -> UsageError:
+    return UsageError(
+        f"{target} was changed since nlp_calib wrote it (an annotated or edited copy); move it away "
+        "to keep it, or pass --force to let the run replace or remove it"
+    )
+
+
+def _check_name(out_dir: Path, name: str) -> Path:
+    """``out_dir / name``, after the checks no ``force`` lifts: not a name of the tool's own, not an
+    input of the run, not inside a link or a file."""
+    target = Path(out_dir) / name
+    if (part := reserved_part(name)) is not None:
+        raise UsageError(
+            f"{target}: {part!r} is named like nlp_calib's own staging files ({RESERVED_PREFIX}*), "
+            "which runs remove; rename the log or scenario it is named after"
+        )
+    refuse_input_alias(target)
+    if target.parent != Path(out_dir) and (target.parent.is_symlink() or target.parent.is_file()):
+        raise UsageError(f"{target.parent} is not a folder; move it away or choose another --out")
+    if target.is_dir() and not target.is_symlink():
+        raise UsageError(f"{target} is a folder; move it away or choose another --out")
+    if target.exists() and not target.is_file():  # e.g. /dev/null: never replaced, even forced
+        raise UsageError(f"{target} is not a regular file (a device, FIFO or socket); choose another")
+    return target
+
+
 def refuse_collisions(
     out_dir: Path, names: Iterable[str], *, tracked: bool = True, force: bool = False
 ) -> None:
     """Raise :class:`UsageError` if writing ``names`` into ``out_dir`` would replace something that
-    is not nlp_calib's: a folder, or (unless ``force``) a file the manifest does not list (with
-    ``tracked=False`` every existing file counts as the user's)."""
+    is not nlp_calib's: an input of the run, a folder, or (unless ``force``) a file the manifest
+    does not list or one changed since it was written (with ``tracked=False`` every existing file
+    counts as the user's)."""
     ours = set(previous_files(out_dir)) if tracked else set()
+    digests = manifest_digests(out_dir) if tracked else {}
     for name in names:
-        target = Path(out_dir) / name
-        if target.parent != Path(out_dir) and (target.parent.is_symlink() or target.parent.is_file()):
-            raise UsageError(f"{target.parent} is not a folder; move it away or choose another --out")
-        if target.is_dir() and not target.is_symlink():
-            raise UsageError(f"{target} is a folder; move it away or choose another --out")
-        if target.exists() and not target.is_file():  # e.g. /dev/null: never replaced, even forced
-            raise UsageError(f"{target} is not a regular file (a device, FIFO or socket); choose another")
-        if (target.exists() or target.is_symlink()) and name not in ours and not force:
+        target = _check_name(out_dir, name)
+        if force or not (target.exists() or target.is_symlink()):
+            continue
+        if name not in ours:
             raise UsageError(
                 f"{target} exists and was not written by nlp_calib; move it away, choose another "
                 "--out, or pass --force to overwrite it"
             )
+        if _edited(out_dir, name, digests):
+            raise _edited_error(target)
 
 
 class _FolderLock:
@@ -168,6 +238,8 @@ class StagedOutput:
         self.force = force
         self._lock = _FolderLock(self.out_dir)
         self._path: Path | None = None
+        #: The SHA-256 of each file the manifest will list (set by :meth:`commit`).
+        self._digests: dict[str, str] = {}
 
     @property
     def path(self) -> Path:
@@ -214,8 +286,33 @@ class StagedOutput:
 
     def _write_manifest(self, groups: Mapping[str, list[str]]) -> None:
         files = sorted({f for names in groups.values() for f in names})
-        doc = {"tool": "nlp_calib", "files": files, "groups": {g: sorted(n) for g, n in groups.items()}}
+        digests = self._digests
+        doc = {
+            "tool": "nlp_calib",
+            "files": files,
+            "groups": {g: sorted(n) for g, n in groups.items()},
+            "sha256": {f: digests[f] for f in files if f in digests},
+        }
         atomic_write_text(self.out_dir / MANIFEST_FILE, json.dumps(doc, indent=2) + "\n")
+
+    def _stale(
+        self, names: list[str], groups: Mapping[str, list[str]], digests: Mapping[str, str]
+    ) -> list[str]:
+        """The files this group wrote last time and not now, that the clean-up removes: never one
+        reached through a symbolic link, nor an input of the run (both are left, and no longer
+        claimed); a changed one stops the run (unless ``force``)."""
+        others = {f for g, files in groups.items() if g != self.group for f in files}
+        stale = []
+        for name in sorted(set(groups.get(str(self.group), [])) - set(names) - others - {MANIFEST_FILE}):
+            parent = (self.out_dir / name).parent
+            if parent != self.out_dir and (parent.is_symlink() or not parent.is_dir()):
+                continue  # the user put a link (or a file) where our subfolder was: not ours to follow
+            if aliased_input(self.out_dir / name) is not None:
+                continue
+            if not self.force and _edited(self.out_dir, name, digests):
+                raise _edited_error(self.out_dir / name)
+            stale.append(name)
+        return stale
 
     def commit(self) -> list[Path]:
         """Move every staged file into the output folder, remove the files this group wrote last
@@ -227,8 +324,10 @@ class StagedOutput:
             stale: list[str] = []
             if self.group is not None:
                 groups = manifest_groups(self.out_dir)
-                others = {f for g, files in groups.items() if g != self.group for f in files}
-                stale = sorted(set(groups.get(self.group, [])) - set(names) - others - {MANIFEST_FILE})
+                digests = manifest_digests(self.out_dir)
+                stale = self._stale(names, groups, digests)
+                digests.update({n: d for n in names if (d := digest(self.path / n)) is not None})
+                self._digests = digests
                 # Listed before they are moved (and the stale ones until they are gone): a run killed
                 # half-way never leaves a file of ours that the manifest does not claim.
                 self._write_manifest({**groups, self.group: sorted({*names, *stale})})

@@ -29,6 +29,18 @@ HESSIANS = ("exact", "gauss_newton", "limited_memory")
 _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 #: Lower bound of the lifted weights: keeps δ²/w finite; far below any weight at the optimum.
 _W_MIN = 1e-8
+#: IPOPT options that make it read or write files, or load a library, by name of its own: the
+#: run's files are written only through its staged output folder, and nothing but the scenario
+#: sets IPOPT's options (no ``ipopt.opt`` from the working folder is read, see ``_ipopt_options``).
+FILE_OPTIONS = {
+    "output_file": "it writes IPOPT's log into that file, outside the run's output folder",
+    "file_print_level": "it only sets the detail of output_file's log",
+    "file_append": "it only applies to output_file's log",
+    "option_file_name": "it reads options from a file that is not the scenario; put them in ipopt.options",
+    "print_options_documentation": "it prints IPOPT's whole option reference into the run's output",
+    "hsllib": "it loads a library from a path; install HSL where IPOPT finds it by default",
+    "pardisolib": "it loads a library from a path; install Pardiso where IPOPT finds it by default",
+}
 
 
 @dataclass(frozen=True)
@@ -53,6 +65,9 @@ class IpoptOptions:
             raise OptionsError(f"hessian must be one of {', '.join(HESSIANS)}, got {self.hessian!r}")
         if self.max_iter < 1 or not self.tol > 0:
             raise OptionsError(f"max_iter must be >= 1 and tol > 0, got {self.max_iter} and {self.tol}")
+        for key in self.options:
+            if key in FILE_OPTIONS:
+                raise OptionsError(f"options.{key}: not allowed ({FILE_OPTIONS[key]}); remove it")
 
 
 def _last_line(exc: BaseException) -> str:
@@ -97,6 +112,8 @@ class Ipopt:
             "ipopt.sb": "yes",
             "ipopt.linear_solver": o.linear_solver,
             "print_time": False,
+            # An empty name: IPOPT reads no ipopt.opt from the working folder.
+            "ipopt.option_file_name": "",
         }
         if o.hessian == "limited_memory":
             opts["ipopt.hessian_approximation"] = "limited-memory"
