@@ -40,9 +40,9 @@ from hostile3_corpus import (
 )
 from test_bags import drive_messages, write_bag
 
+from nlp_calib.core.config import parse_yaml
 from nlp_calib.logs.writer import format_time
 from nlp_calib.models import get_model, load_log
-from nlp_calib.pipeline.config import parse_yaml
 from nlp_calib.solvers.ipopt import Ipopt, IpoptOptions
 
 #: (class, name) -> seconds, filled as the cases run and reported by the last test.
@@ -119,11 +119,9 @@ def test_ipopt_is_told_to_read_no_options_file() -> None:
     assert solver._ipopt_options()["ipopt.option_file_name"] == ""
 
 
-# ----------------------------------------------------------------------------- for the pipeline
-# What these ask belongs to the pipeline (issue 19 moves it); they fail today and are kept as
-# strict xfails so the wiring can be checked when it lands.
-
-PIPELINE = "needs pipeline stage, issue 24"
+# ------------------------------------------------------------------------ one log, one answer
+# What these ask belongs to the pipeline's stages: the scenario's check of the logs, the per-log
+# folders and the verdict that holds back a mirror image.
 
 
 def _joint_run(world: World, tmp: Path, entries: Sequence[str]) -> Outcome:
@@ -131,14 +129,12 @@ def _joint_run(world: World, tmp: Path, entries: Sequence[str]) -> Outcome:
     return run_in_process(["run", str(sc), "--out", str(tmp / "out")], tmp)
 
 
-@pytest.mark.xfail(strict=True, reason=PIPELINE)
 def test_the_same_log_through_a_hard_link_is_one_log(world: World, tmp_path: Path) -> None:
     os.link(world.log_path, tmp_path / "again.txt")
     outcome = _joint_run(world, tmp_path, [str(world.log_path), str(tmp_path / "again.txt")])
     judge(Expect([], (2,), ("datasets[1]", "again.txt", "the same log as datasets[0]")), outcome)
 
 
-@pytest.mark.xfail(strict=True, reason=PIPELINE)
 def test_a_bag_folder_and_its_own_db3_are_one_log(world: World, tmp_path: Path) -> None:
     folder = world.bags["sqlite3"]
     (db3,) = folder.glob("*.db3")
@@ -146,7 +142,6 @@ def test_a_bag_folder_and_its_own_db3_are_one_log(world: World, tmp_path: Path) 
     judge(Expect([], (2,), ("datasets[1]", "the same log as datasets[0]")), outcome)
 
 
-@pytest.mark.xfail(strict=True, reason=PIPELINE)
 def test_per_log_folders_are_unique_and_name_their_logs(world: World, tmp_path: Path) -> None:
     paths = [tmp_path / "a" / "drive.txt", tmp_path / "b" / "drive.txt", tmp_path / "c" / "1_drive.txt"]
     for k, path in enumerate(paths):
@@ -159,7 +154,6 @@ def test_per_log_folders_are_unique_and_name_their_logs(world: World, tmp_path: 
     assert len(results) == 3 and datasets == {str(p) for p in paths}, results
 
 
-@pytest.mark.xfail(strict=True, reason=PIPELINE)
 def test_swapped_wheel_joints_name_the_cause_and_write_no_hand_off(tmp_path: Path) -> None:
     path = write_sim(tmp_path, "dd.txt", records=400, seed=2, model="diff_drive")
     log = load_log(path, get_model("diff_drive"))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Hashable
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -101,6 +102,9 @@ class MemorySource:
 
     def stamps(self) -> str:
         return "the stored log's times"
+
+    def identity(self) -> Hashable:
+        return ("memory", self.name)
 
     def read(self, model: KinematicModel, *, strict: bool) -> Log:
         return self.LOGS[self.name]

@@ -2,6 +2,8 @@
 
 The rules a reader can check:
 
+- **not determined**, and no hand-off file written: the estimate cannot be a real robot of its
+  kind although it fits the data (a mirror image, e.g. swapped wheel encoders; the model says);
 - **not determined**: no solver converged, or the drive leaves a parameter undetermined (its σ
   is infinite, or a direction of the information matrix is beyond
   :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` reference units);
@@ -72,9 +74,12 @@ def caveats(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str
     return out
 
 
-def verdict(run: CalibrationRun, model: KinematicModel) -> Verdict:
-    """The run's verdict and why (see the module's rules)."""
+def verdict(run: CalibrationRun, model: KinematicModel, hint: str = "") -> Verdict:
+    """The run's verdict and why (see the module's rules); ``hint``: what the data source says of
+    a mirror image's likely cause (e.g. the joints' order it was given)."""
     solver = run.chosen_solver()
+    if solver is not None and (mirror := model.implausible(run.reports[solver].result.param_dict())):
+        return Verdict(UNDETERMINED, (mirror + hint,), handoff=False)
     obs = run.checks.observability
     loose = [w.words() for w in obs.weak if w.std_reference > NOT_OBSERVABLE] if obs is not None else []
     if solver is None:

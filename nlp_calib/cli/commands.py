@@ -110,7 +110,7 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
     outs = _out_dirs(args, scenarios)
     outputs = registry.selected(CALIBRATE, args.report)
     for out in outs:
-        refuse_collisions(out, [o.name for o in outputs], force=args.force)
+        refuse_collisions(out, registry.files(outputs), force=args.force)
     # Every input checked before any work.
     logs = [[read_checked(s) for s in sc.per_log()] for sc in scenarios]
     runs: list[CalibrationRun] = []
@@ -134,7 +134,8 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
             _closing(run, final, out)
     if len(scenarios) > 1:
         print(summary_table(runs))
-    return 0 if all(r.result.converged for run in runs for r in run.reports.values()) else 1
+    converged = all(r.result.converged for run in runs for r in run.reports.values())
+    return 0 if converged and all(run.verdict.handoff for run in runs) else 1
 
 
 def _closing(run: CalibrationRun, final: Sequence[Path], out: Path) -> None:
@@ -162,7 +163,8 @@ def _write_outputs(
         written = registry.write(outputs, runs, (top[0], stage.path), options)
         handoff = registry.names(("handoff",))
         if any(o.group == "handoff" for o in outputs) and not any(p.name in handoff for p in written):
-            print("warning: no solver converged; no calibration.yaml or URDF written", file=sys.stderr)
+            why = "no solver converged" if top[0].chosen_solver() is None else top[0].verdict.line()
+            print(f"warning: no calibration.yaml or URDF written: {why}", file=sys.stderr)
         if top[1]:
             interrupts.hold()  # what is complete stays complete: a later signal changes nothing
         stage.commit()
@@ -266,7 +268,7 @@ def _cmd_odometry(args: argparse.Namespace) -> int:
     (scenario,) = _load_with_data(args.scenario, args.data)
     (out,) = _out_dirs(args, [scenario])
     outputs = registry.selected(("result", "handoff", "odometry"), args.report)
-    refuse_collisions(out, [o.name for o in outputs], force=args.force)
+    refuse_collisions(out, registry.files(outputs), force=args.force)
     calib = Calibration.setup(scenario, log=read_checked(scenario))
     run = calib.run((args.solver,), Wanted(odometry=args.solver))
     print(run_table(run))
@@ -300,7 +302,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     )
     (out,) = _out_dirs(args, [scenario])
     outputs = registry.selected(("validation",), report=False)
-    refuse_collisions(out, [o.name for o in outputs], force=args.force)
+    refuse_collisions(out, registry.files(outputs), force=args.force)
     run = Calibration.setup(scenario, log=read_checked(scenario)).run(scenario.solvers[:1])
     print(validation_table(run))
     written = _write_outputs(out, args, outputs, [(run, "")], (run, True), "validate")

@@ -134,6 +134,11 @@ class KinematicModel(Protocol):
         """For each counter encoder: the input row it drives and the ticks per unit of that input."""
         ...
 
+    def implausible(self, params: Mapping[str, float]) -> str:
+        """Why an estimate cannot be a real robot of this kind even though it fits the data (a mirror
+        image: e.g. swapped wheel encoders), with the likely cause; "" when it can."""
+        ...
+
     def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
         """1σ noise of each input row, from each encoder's noise in ticks (default: quantisation)."""
         ...

@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.core.errors import ModelError
-from nlp_calib.core.numeric import wrapped_difference
+from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, Reference, Symmetry, named, rows_by_name
 from nlp_calib.models.drives import SimulationSettings, counter, cumulative, drive_header, first_order
@@ -161,6 +161,19 @@ class DiffDrive:
     def undetermined(self, inputs: np.ndarray) -> dict[str, str]:
         """None: every parameter can be determined (the observability analysis judges how well)."""
         return {}
+
+    def implausible(self, params: Mapping[str, float]) -> str:
+        """Both wheel gains negative: the mirror image of the robot, which fits a log whose left and
+        right encoders are swapped exactly (the sensor then faces backwards)."""
+        if params["k_left"] >= 0 or params["k_right"] >= 0:
+            return ""
+        facing = "backwards" if abs(wrap_angle(params["sensor_theta"])) > np.pi / 2 else "forwards"
+        return (
+            f"k_left and k_right came out negative ({params['k_left']:.3g}, {params['k_right']:.3g}) and "
+            f"the sensor faces {facing}: the mirror image of the robot, which is what swapped left and "
+            f"right wheel joints (or encoders counting backwards) give; give the joints in the order "
+            f"{LEFT_ENCODER}, {RIGHT_ENCODER}"
+        )
 
     def counter_rows(self, log: Log) -> dict[str, tuple[int, float]]:
         """Both counters drive their own row, in ticks."""

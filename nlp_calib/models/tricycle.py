@@ -219,6 +219,10 @@ class Tricycle:
         """None: every parameter can be determined (the observability analysis judges how well)."""
         return {}
 
+    def implausible(self, params: Mapping[str, float]) -> str:
+        """Never: the canonical form turns every mirror image of the tricycle into the robot itself."""
+        return ""
+
     def counter_rows(self, log: Log) -> dict[str, tuple[int, float]]:
         """The traction counter drives row 0, in revolutions of ``t_max`` ticks."""
         return {TRACTION_ENCODER: (0, float(log.header.encoder_range(TRACTION_ENCODER)))}

@@ -38,8 +38,8 @@ def _solver_entry(res: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
-    """The ``calibration.yaml`` document, or None when no solver converged."""
-    solver = run.chosen_solver()
+    """The ``calibration.yaml`` document, or None when no estimate is handed off."""
+    solver = run.handoff_solver()
     if solver is None:
         return None
     doc = result_document(run)
@@ -162,7 +162,7 @@ def _none(path: Path) -> list[Path]:
 
 
 def write_calibration(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
-    """``calibration.yaml``, when a solver converged."""
+    """``calibration.yaml``, when an estimate is handed off."""
     doc = calibration_dict(run)
     if doc is None:
         return _none(folder / name)
@@ -171,8 +171,8 @@ def write_calibration(run: CalibrationRun, folder: Path, name: str) -> list[Path
 
 
 def write_joint(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
-    """The URDF joint alone, when a solver converged."""
-    solver = run.chosen_solver()
+    """The URDF joint alone, when an estimate is handed off."""
+    solver = run.handoff_solver()
     if solver is None:
         return _none(folder / name)
     atomic_write_text(folder / name, urdf_joint(run, solver))
@@ -180,8 +180,8 @@ def write_joint(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
 
 
 def write_robot(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
-    """A complete robot description with the calibrated joint, when a solver converged."""
-    solver = run.chosen_solver()
+    """A complete robot description with the calibrated joint, when an estimate is handed off."""
+    solver = run.handoff_solver()
     if solver is None:
         return _none(folder / name)
     atomic_write_text(folder / name, urdf_robot(run, solver))

@@ -44,6 +44,8 @@ class Output:
     report: bool = False
     per_log: bool = True
     next_step: str = ""
+    #: A folder of files (its files, not the folder, are checked for collisions as they are written).
+    folder: bool = False
 
 
 def _plain(function: Callable[[CalibrationRun, Path, str], list[Path]]) -> Writer:
@@ -70,7 +72,7 @@ def _odometry_png(run: CalibrationRun, folder: Path, name: str, options: OutputO
 
 
 def _report(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
-    files = names(("handoff",)) if run.chosen_solver() is not None else []
+    files = names(("handoff",)) if run.handoff_solver() is not None else []
     return markdown.write_report(run, folder, name, files, next_steps(files))
 
 
@@ -93,7 +95,7 @@ OUTPUTS: tuple[Output, ...] = (
     Output("model_check.png", "figures", _figure("model_check"), report=True),
     Output("report.md", "figures", _report, report=True,
            next_step="the figures and tables of this run on one page"),
-    Output(trajectories.FOLDER, "figures", _plain(trajectories.write_trajectories), report=True),
+    Output(trajectories.FOLDER, "figures", _plain(trajectories.write_trajectories), report=True, folder=True),
 )  # fmt: skip
 
 
@@ -105,6 +107,11 @@ def selected(groups: Collection[str], report: bool) -> tuple[Output, ...]:
 def names(groups: Collection[str], report: bool = False) -> list[str]:
     """The file names the outputs of ``groups`` write."""
     return [o.name for o in selected(groups, report)]
+
+
+def files(outputs: Sequence[Output]) -> list[str]:
+    """The names of the single files among ``outputs`` (what a run checks before any work)."""
+    return [o.name for o in outputs if not o.folder]
 
 
 def next_steps(files: Sequence[str]) -> list[str]:

@@ -30,6 +30,7 @@ from nlp_calib.results import (
 )
 from nlp_calib.results.faults import Findings
 from nlp_calib.solvers import solver_label
+from nlp_calib.sources import BagSource
 
 
 def scenario_info(sc: Scenario, model: KinematicModel) -> ScenarioInfo:
@@ -135,4 +136,10 @@ def assemble_run(
         series=figures.series,
         odometry=figures.odometry,
     )
-    return dataclasses.replace(run, verdict=verdict(run, prepared.model))
+    source = prepared.scenario.log.source
+    hint = (
+        f" (this scenario gives joints: [{', '.join(source.joints)}])"
+        if isinstance(source, BagSource)
+        else ""
+    )
+    return dataclasses.replace(run, verdict=verdict(run, prepared.model, hint))

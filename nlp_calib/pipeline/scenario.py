@@ -131,15 +131,15 @@ class Scenario:
         """One single-log scenario per log, named after its log (numbered when names repeat)."""
         if not self.data.joint:
             return (self,)
-        stems = [e.path.stem for e in self.data.logs]
+        names = log_names([e.path for e in self.data.logs])
         return tuple(
             dataclasses.replace(
                 self,
-                name=stem if stems.count(stem) == 1 else f"{i + 1}_{stem}",
+                name=name,
                 data=dataclasses.replace(self.data, logs=(e,), joint=False),
                 origin=f"datasets[{i}]",
             )
-            for i, (stem, e) in enumerate(zip(stems, self.data.logs))
+            for i, (name, e) in enumerate(zip(names, self.data.logs))
         )
 
     def options_for(self, solver: str) -> Any:
@@ -155,6 +155,22 @@ class Scenario:
         """How messages name this scenario (its file, or its name), with the log of a part."""
         part = f": {self.origin} ({self.dataset.name})" if self.origin else ""
         return f"{self.path or self.name}{part}"
+
+
+def log_names(paths: list[Path]) -> list[str]:
+    """A folder name for each log, unique and recognisable: the file's stem; where stems repeat,
+    its folder's name first (``a-drive``); where that repeats too (one file twice), its place in
+    the list (``1_drive``); never hidden (a leading dot would hide it, or take the staging prefix)."""
+    stems = [p.stem.lstrip(".") or "log" for p in paths]
+    names = [s if stems.count(s) == 1 else f"{p.parent.name.lstrip('.')}-{s}" for p, s in zip(paths, stems)]
+    names = [n if names.count(n) == 1 else f"{i + 1}_{stems[i]}" for i, n in enumerate(names)]
+    unique: list[str] = []
+    for n in names:
+        name, k = n, 2
+        while name in unique:
+            name, k = f"{n}_{k}", k + 1
+        unique.append(name)
+    return unique
 
 
 #: The group of each top-level key of a scenario file that is not a field of :class:`Scenario`
@@ -334,18 +350,17 @@ def _check_solvers(sc: Scenario, source: str) -> None:
 
 
 def _check_overlaps(sc: Scenario, source: str) -> None:
-    ranges = [(e.path.resolve(), e.samples) for e in sc.data.logs]
-    for i, (path, sel) in enumerate(ranges):
+    """One log is one log, whatever it is called: entries of one file may not share records."""
+    logs = sc.data.logs
+    ranges = [(e.source.identity(), e.samples) for e in logs]
+    for i, (log, sel) in enumerate(ranges):
         for j, (other, sel_j) in enumerate(ranges[:i]):
-            if (
-                path == other
-                and sel.start < (sel_j.stop or math.inf)
-                and sel_j.start < (sel.stop or math.inf)
-            ):
+            if log == other and sel.start < (sel_j.stop or math.inf) and sel_j.start < (sel.stop or math.inf):
                 fail(
                     f"{source}: datasets[{i}]",
-                    f"records also in datasets[{j}] ({sc.data.logs[i].path}): records fitted twice would "
-                    "count as two drives and shrink the σ; give the entries samples that do not overlap",
+                    f"records also in datasets[{j}] ({logs[i].path} is the same log as datasets[{j}], "
+                    f"{logs[j].path}): records fitted twice would count as two drives and shrink the σ; "
+                    "give the entries samples that do not overlap",
                 )
 
 

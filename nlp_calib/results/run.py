@@ -128,6 +128,9 @@ class Verdict:
 
     level: str
     reasons: tuple[str, ...]
+    #: False when the estimate must not reach a robot although a solver converged (it cannot be a
+    #: real robot of its kind): no hand-off file is written.
+    handoff: bool = True
 
     def line(self) -> str:
         return f"{self.level.upper()}: " + "; ".join(self.reasons)
@@ -188,6 +191,11 @@ class CalibrationRun:
         """The largest relative difference between solvers ``a``'s and ``b``'s parameters."""
         pa, pb = self.reports[a].result.params, self.reports[b].result.params
         return float(np.max(np.abs(pa - pb) / np.maximum(np.abs(pa), 1e-12)))
+
+    def handoff_solver(self) -> str | None:
+        """The solver whose estimate the hand-off files carry: the chosen one, unless the verdict
+        holds the hand-off back."""
+        return self.chosen_solver() if self.verdict.handoff else None
 
     def to_data(self) -> Any:
         """The run as JSON types (see :mod:`nlp_calib.results.codec`)."""

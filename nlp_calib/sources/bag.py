@@ -7,17 +7,19 @@ The bag is read and paired on every run exactly as ``nlp-calib import-bag`` woul
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Hashable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
 from nlp_calib.core.config import coerce, fail, from_mapping, key_name
-from nlp_calib.core.errors import ConfigError
+from nlp_calib.core.errors import ConfigError, DatasetError
 from nlp_calib.logs import Log, LogHeader
+from nlp_calib.logs.bag_files import bag_root
 from nlp_calib.logs.bag_reader import DEFAULT_MAX_GAP_S, BagTopics, is_bag
 from nlp_calib.logs.bag_records import BagRecords, read_bag, read_bag_records
 from nlp_calib.models import KinematicModel, encoders
+from nlp_calib.sources.base import file_identity
 from nlp_calib.sources.robot import load_robot, robot_header
 
 #: The keys a ``dataset:`` bag block must have.
@@ -58,6 +60,13 @@ class BagSource:
 
     def stamps(self) -> str:
         return f"the header stamps of {self.joint_states} and {self.tracker}"
+
+    def identity(self) -> Hashable:
+        """A ROS 2 bag's folder also when its .db3 or .mcap file is named: one bag, one log."""
+        try:
+            return file_identity(bag_root(self.bag))
+        except DatasetError:
+            return file_identity(self.bag)
 
     def header(self, model: KinematicModel) -> LogHeader:
         """The header the bag's records get: ``ROBOT.yaml``'s values over the model's defaults."""

@@ -7,9 +7,11 @@ one module with such a class and one entry in :data:`nlp_calib.sources.SOURCES`.
 
 from __future__ import annotations
 
+from collections.abc import Hashable
 from pathlib import Path
 from typing import Any, ClassVar, Protocol
 
+from nlp_calib.core import files
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel
 
@@ -35,6 +37,11 @@ class DatasetSource(Protocol):
         """Which clock the records' times come from, in words."""
         ...
 
+    def identity(self) -> Hashable:
+        """What tells this log from every other whatever it is called: the device and inode of
+        the file it reads (links and ``..`` are one file), or its resolved path when missing."""
+        ...
+
     def read(self, model: KinematicModel, *, strict: bool) -> Log:
         """The records, read for ``model`` (``strict``: refuse a bad record instead of dropping it)."""
         ...
@@ -58,3 +65,12 @@ class DatasetSource(Protocol):
         """The source ``raw`` describes; paths resolve against ``base_dir``, errors name ``where``;
         ``also``: keys the caller took out of the entry first, named among the valid ones."""
         ...
+
+
+def file_identity(path: Path) -> Hashable:
+    """The device and inode of ``path``, or its resolved path when it cannot be read (the read
+    that follows says why)."""
+    try:
+        return files.identity(path)
+    except (OSError, ValueError):
+        return path.resolve()

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Hashable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -13,6 +13,7 @@ from nlp_calib.logs import Log, read_log
 from nlp_calib.logs.bag_reader import is_bag
 from nlp_calib.logs.reader import read_header
 from nlp_calib.models import KinematicModel, model_for_log
+from nlp_calib.sources.base import file_identity
 
 
 def load_log(path: str | Path, model: KinematicModel | None = None, *, strict: bool = True) -> Log:
@@ -48,6 +49,9 @@ class TextSource:
 
     def stamps(self) -> str:
         return "the log's own time column"
+
+    def identity(self) -> Hashable:
+        return file_identity(self.file)
 
     def read(self, model: KinematicModel, *, strict: bool) -> Log:
         if is_bag(self.file):
