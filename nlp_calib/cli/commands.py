@@ -109,10 +109,11 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
     scenarios = _load_with_data(args.scenario, args.data)
     outs = _out_dirs(args, scenarios)
     outputs = registry.selected(CALIBRATE, args.report)
+    # Every input read and checked before any work; read first, so that an output over an input
+    # is refused now, not after the solve.
+    logs = [[read_checked(s) for s in sc.per_log()] for sc in scenarios]
     for out in outs:
         refuse_collisions(out, registry.files(outputs), force=args.force)
-    # Every input checked before any work.
-    logs = [[read_checked(s) for s in sc.per_log()] for sc in scenarios]
     runs: list[CalibrationRun] = []
     wanted = Wanted(series=args.report)
     with Progress(len(scenarios), sys.stderr, label="scenarios") as progress:
@@ -268,8 +269,9 @@ def _cmd_odometry(args: argparse.Namespace) -> int:
     (scenario,) = _load_with_data(args.scenario, args.data)
     (out,) = _out_dirs(args, [scenario])
     outputs = registry.selected(("result", "handoff", "odometry"), args.report)
+    log = read_checked(scenario)
     refuse_collisions(out, registry.files(outputs), force=args.force)
-    calib = Calibration.setup(scenario, log=read_checked(scenario))
+    calib = Calibration.setup(scenario, log=log)
     run = calib.run((args.solver,), Wanted(odometry=args.solver))
     print(run_table(run))
     print()
@@ -302,8 +304,9 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     )
     (out,) = _out_dirs(args, [scenario])
     outputs = registry.selected(("validation",), report=False)
+    log = read_checked(scenario)
     refuse_collisions(out, registry.files(outputs), force=args.force)
-    run = Calibration.setup(scenario, log=read_checked(scenario)).run(scenario.solvers[:1])
+    run = Calibration.setup(scenario, log=log).run(scenario.solvers[:1])
     print(validation_table(run))
     written = _write_outputs(out, args, outputs, [(run, "")], (run, True), "validate")
     print("\n" + "\n".join(_wrote(written, out)))
