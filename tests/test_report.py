@@ -175,7 +175,7 @@ def test_handoff_files_are_deterministic(tmp_path: Path, small_demo: Scenario) -
     for i in range(2):
         out = tmp_path / str(i)
         paths = write_handoff(_calibration(small_demo, solvers=("gauss_newton",)).run(), out)
-        assert [p.name for p in paths] == [CALIBRATION_FILE, URDF_FILE, ROBOT_URDF_FILE]
+        assert [p.name for p in paths] == [CALIBRATION_FILE, URDF_FILE, ROBOT_URDF_FILE, "ros2_control.yaml"]
         texts.append([p.read_bytes() for p in paths])
     assert texts[0] == texts[1]
 

@@ -134,6 +134,14 @@ class KinematicModel(Protocol):
         """For each counter encoder: the input row it drives and the ticks per unit of that input."""
         ...
 
+    def controller(
+        self, params: Mapping[str, float], ranges: Mapping[str, int]
+    ) -> tuple[str, dict[str, float], dict[str, str], str]:
+        """The ros2_control controller of this base, its parameters from ``params`` (and each
+        encoder's ``ranges``: ticks per turn), where each kinematic parameter with no place among
+        them belongs, and what the values assume of the encoders."""
+        ...
+
     def implausible(self, params: Mapping[str, float]) -> str:
         """Why an estimate cannot be a real robot of this kind even though it fits the data (a mirror
         image: e.g. swapped wheel encoders), with the likely cause; "" when it can."""

@@ -162,6 +162,25 @@ class DiffDrive:
         """None: every parameter can be determined (the observability analysis judges how well)."""
         return {}
 
+    def controller(
+        self, params: Mapping[str, float], ranges: Mapping[str, int]
+    ) -> tuple[str, dict[str, float], dict[str, str], str]:
+        """``diff_drive_controller``: each wheel's radius is its travel per tick times the ticks per
+        turn over 2π; the controller takes their mean and each wheel's multiplier of it."""
+        left = params["k_left"] * ranges[LEFT_ENCODER] / (2.0 * np.pi)
+        right = params["k_right"] * ranges[RIGHT_ENCODER] / (2.0 * np.pi)
+        radius = 0.5 * (left + right)
+        parameters = {
+            "wheel_separation": params["baseline"],
+            "wheel_radius": radius,
+            "wheel_separation_multiplier": 1.0,
+            "left_wheel_radius_multiplier": left / radius,
+            "right_wheel_radius_multiplier": right / radius,
+        }
+        turns = f"{ranges[LEFT_ENCODER]}, {ranges[RIGHT_ENCODER]}"
+        assumes = f"the wheel radii take the encoder ranges ({turns} ticks) as one wheel turn each"
+        return "diff_drive_controller", parameters, {}, assumes
+
     def implausible(self, params: Mapping[str, float]) -> str:
         """Both wheel gains negative: the mirror image of the robot, which fits a log whose left and
         right encoders are swapped exactly (the sensor then faces backwards)."""

@@ -35,6 +35,16 @@ STEERING_ENCODER = "steering"
 TRACTION_ENCODER = "traction_wheel"
 
 
+#: Where a tricycle's steering parameters go in a ros2_control robot: the hardware interface's
+#: transmission of the steering joint, ``joint = actuator / mechanical_reduction + offset``.
+STEERING_PLACES: Mapping[str, str] = MappingProxyType(
+    {
+        "k_steer": "the steering joint's transmission (SimpleTransmission): mechanical_reduction = 1/k_steer",
+        "steer_offset": "the steering joint's transmission (SimpleTransmission): offset = steer_offset",
+    }
+)
+
+
 class TricycleDrive:
     """Front wheel drives at ``speed`` and steers to ``turn`` (rad); encoders: steering, traction.
 
@@ -218,6 +228,21 @@ class Tricycle:
     def undetermined(self, inputs: np.ndarray) -> dict[str, str]:
         """None: every parameter can be determined (the observability analysis judges how well)."""
         return {}
+
+    def controller(
+        self, params: Mapping[str, float], ranges: Mapping[str, int]
+    ) -> tuple[str, dict[str, float], dict[str, str], str]:
+        """``tricycle_controller``: the wheelbase is the axis length, the traction wheel's radius its
+        travel per revolution over 2π; the steering gain and offset belong to the steering joint's
+        transmission."""
+        radius = params["k_traction"] / (2.0 * np.pi)
+        parameters = {"wheelbase": params["axis_length"], "wheel_radius": radius}
+        t_max = ranges.get(TRACTION_ENCODER)
+        assumes = (
+            f"wheel_radius takes the traction encoder's range ({t_max} ticks) as one wheel turn, as the "
+            f"model reads it; if your hardware counts N ticks a turn, it is k_traction·N/({t_max}·2π)"
+        )
+        return "tricycle_controller", parameters, dict(STEERING_PLACES), assumes
 
     def implausible(self, params: Mapping[str, float]) -> str:
         """Never: the canonical form turns every mirror image of the tricycle into the robot itself."""

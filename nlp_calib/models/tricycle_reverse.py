@@ -79,6 +79,17 @@ class TricycleReverse(Tricycle):
         reversing = ca.if_else(p["k_traction"] * inputs["traction_revolutions"] * ca.cos(phi0) < 0, 1.0, 0.0)
         return p["k_steer"] * (1.0 + p["k_steer_reverse"] * reversing) * angle + p["steer_offset"]
 
+    def controller(
+        self, params: Mapping[str, float], ranges: Mapping[str, int]
+    ) -> tuple[str, dict[str, float], dict[str, str], str]:
+        """The tricycle's, with the reverse gain, which no ros2_control component models."""
+        name, parameters, places, assumes = super().controller(params, ranges)
+        places["k_steer_reverse"] = (
+            "no ros2_control parameter: the steering gain is k_steer·(1 + k_steer_reverse) while the base "
+            "reverses; apply it in the hardware interface where the direction is known"
+        )
+        return name, parameters, places, assumes
+
     def undetermined(self, inputs: np.ndarray) -> dict[str, str]:
         """``k_steer_reverse`` without enough driving in either direction (it compares the two)."""
         direction = self.travel_direction(inputs)

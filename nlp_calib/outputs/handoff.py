@@ -68,6 +68,12 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "std_blocks": (doc["crossvalidation"] or {}).get("std_blocks"),
         "correlation": best["correlation"],
         "units": dict(sc.units),
+        # The units "per t_max ticks" and "per tick" refer to these encoders' ranges.
+        "encoders": [
+            {"name": e.name, "kind": e.kind, "unit": e.unit, "ticks_per_turn": e.range}
+            for e in run.log.encoders
+        ],
+        "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
         "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
     }
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from nlp_calib.outputs import handoff, markdown, results, trajectories
+from nlp_calib.outputs import handoff, markdown, results, ros2_control, trajectories
 from nlp_calib.results import CalibrationRun
 
 
@@ -83,6 +83,8 @@ OUTPUTS: tuple[Output, ...] = (
            next_step="paste its <joint> into your robot's URDF (planar: z, roll, pitch 0)"),
     Output("robot.urdf", "handoff", _plain(handoff.write_robot), per_log=False,
            next_step="the same joint in a complete robot description, for URDF tools"),
+    Output("ros2_control.yaml", "handoff", _plain(ros2_control.write_ros2_control), per_log=False,
+           next_step="the controller's parameters (wheel radius, separation or wheelbase) for ros2_control"),
     Output("result.json", "result", _plain(results.write_result)),
     Output("odometry.csv", "odometry", _plain(results.write_odometry),
            next_step="the base link's odometry with its covariance, one row per record"),

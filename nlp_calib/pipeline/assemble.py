@@ -9,6 +9,9 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 
+import numpy as np
+
+from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.models import KinematicModel, param_units
 from nlp_calib.pipeline.align import Alignment, lag_at_edge
@@ -28,6 +31,7 @@ from nlp_calib.results import (
     SolverResult,
     Verdict,
 )
+from nlp_calib.results.checks import believed_std
 from nlp_calib.results.faults import Findings
 from nlp_calib.solvers import solver_label
 from nlp_calib.sources import BagSource
@@ -108,6 +112,19 @@ def lag_notes(sc: Scenario, alignment: Alignment) -> list[str]:
     return []
 
 
+def _report(
+    prepared: PreparedLog, name: str, result: SolverResult, fitted: FitAnalysis, figures: LogAnalysis
+) -> SolverReport:
+    """One solver's report, with its estimate in the controller's terms."""
+    u = fitted.uncertainty[name]
+    blocked = fitted.crossval.std if fitted.crossval is not None else np.full(len(u.names), np.nan)
+    header = prepared.log.header
+    ranges = dict(zip(header.encoder_names, header.encoder_max))
+    std = believed_std(u.std, blocked)
+    controller = controller_params(prepared.model, result.names, result.params, std, u.correlation, ranges)
+    return SolverReport(result, u, *figures.scores[name], controller)
+
+
 def assemble_run(
     scenario: ScenarioInfo,
     log: tuple[PreparedLog, LogWindows, Alignment, Findings],
@@ -119,9 +136,7 @@ def assemble_run(
 ) -> CalibrationRun:
     """One log's run: the fit's estimates and checks beside this log's figures, with its verdict."""
     prepared, windows, alignment, findings = log
-    reports = {
-        name: SolverReport(r, fitted.uncertainty[name], *figures.scores[name]) for name, r in results.items()
-    }
+    reports = {name: _report(prepared, name, r, fitted, figures) for name, r in results.items()}
     run = CalibrationRun(
         scenario=scenario,
         log=log_info(prepared, windows),

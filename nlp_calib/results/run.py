@@ -20,6 +20,7 @@ from nlp_calib.results import codec
 from nlp_calib.results.checks import CrossValidation, DirectionCheck, LagEstimate, Observability, believed_std
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
+from nlp_calib.results.handoff import ControllerParams
 from nlp_calib.results.series import OdometryTrack, RunSeries
 from nlp_calib.results.solver import SolverResult
 from nlp_calib.results.uncertainty import Uncertainty
@@ -114,6 +115,8 @@ class SolverReport:
     uncertainty: Uncertainty
     metrics: TrajectoryMetrics
     holdout: TrajectoryMetrics | None
+    #: The estimate in the robot stack's terms (its ros2_control controller's parameters).
+    controller: ControllerParams | None = None
 
 
 #: The verdict's levels.

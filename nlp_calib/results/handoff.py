@@ -1,0 +1,35 @@
+"""What the robot stack's own configuration takes from a calibration: the controller's parameters.
+
+The model says how its parameters map onto a ros2_control controller's (``diff_drive_controller``,
+``tricycle_controller``) and where those with no place there belong; the analyse stage adds each
+value's 1σ; ``ros2_control.yaml`` only formats this record.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Placement:
+    """A calibrated value with no place among the controller's parameters, and where it belongs."""
+
+    name: str
+    value: float
+    std: float
+    unit: str
+    where: str
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    """A ros2_control controller's parameters (name → value, and 1σ), and the rest of the
+    calibration with where each belongs."""
+
+    controller: str
+    parameters: Mapping[str, float]
+    std: Mapping[str, float]
+    elsewhere: tuple[Placement, ...]
+    #: What the values assume of the encoders (e.g. a counter's range being one wheel turn).
+    assumes: str = ""
