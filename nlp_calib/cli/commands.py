@@ -21,7 +21,7 @@ from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
 from nlp_calib.core.files import check_output_dir
 from nlp_calib.logs import Log
-from nlp_calib.outputs import registry
+from nlp_calib.outputs import registry, urdf
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.outputs.progress import Progress
 from nlp_calib.outputs.summary import summary_lines
@@ -105,7 +105,15 @@ def _wrote(paths: Sequence[Path], out: Path) -> list[str]:
 CALIBRATE = ("result", "handoff", "figures")
 
 
+def _robot_urdf(args: argparse.Namespace) -> None:
+    """The user's URDF (``--urdf``), read and checked before any work (``args.robot_urdf``)."""
+    if (args.urdf is None) != (args.sensor_link is None):
+        raise UsageError("give --urdf and --sensor-link together: the URDF and the sensor's link in it")
+    args.robot_urdf = None if args.urdf is None else urdf.load(args.urdf, args.sensor_link)
+
+
 def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> int:
+    _robot_urdf(args)
     scenarios = _load_with_data(args.scenario, args.data)
     outs = _out_dirs(args, scenarios)
     outputs = registry.selected(CALIBRATE, args.report)
@@ -158,7 +166,11 @@ def _write_outputs(
     calibration once in ``out`` for ``top``'s run; returns the final paths. Staged: an interrupted
     run leaves the previous run's files, never a mix of both. ``top[1]``: the last of the runs;
     ``group``: the output folder's manifest group the files belong to."""
-    options = registry.OutputOptions(sigma=getattr(args, "sigma", 3.0))
+    options = registry.OutputOptions(
+        sigma=getattr(args, "sigma", 3.0),
+        urdf=getattr(args, "robot_urdf", None),
+        sensor_link=getattr(args, "sensor_link", None),
+    )
     with StagedOutput(out, group, force=args.force) as stage:
         runs = [(run, stage.path / sub) for run, sub in pieces]
         written = registry.write(outputs, runs, (top[0], stage.path), options)
@@ -266,6 +278,7 @@ def _cmd_codegen(args: argparse.Namespace) -> int:
 def _cmd_odometry(args: argparse.Namespace) -> int:
     if len(args.scenario) != 1:
         raise UsageError("odometry takes one scenario")
+    _robot_urdf(args)
     (scenario,) = _load_with_data(args.scenario, args.data)
     (out,) = _out_dirs(args, [scenario])
     outputs = registry.selected(("result", "handoff", "odometry"), args.report)

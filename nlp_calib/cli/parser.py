@@ -136,6 +136,22 @@ def _add_common(p: argparse.ArgumentParser, report: str | None) -> None:
     _add_force(p, "files in the output folder")
 
 
+def _add_urdf(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--urdf",
+        type=_path,
+        default=None,
+        help="your robot's URDF: robot.urdf is written as that file with the sensor's joint re-posed "
+        "(x, y, yaw calibrated; z, roll, pitch and everything else kept); needs --sensor-link",
+    )
+    p.add_argument(
+        "--sensor-link",
+        default=None,
+        metavar="LINK",
+        help="the sensor's link in --urdf (the child of the joint to re-pose)",
+    )
+
+
 REPORT = (
     "also draw the trajectory, convergence, residual and model-check figures, report.md and trajectories/"
 )
@@ -171,6 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_run(sub: Any) -> None:
     p = sub.add_parser("run", help="calibrate with the scenario's solvers (or --solver)", **_sub("run"))
     _add_common(p, REPORT)
+    _add_urdf(p)
     p.add_argument(
         "--solver",
         choices=(*SOLVERS, *ALL_SOLVERS),
@@ -182,6 +199,7 @@ def _add_run(sub: Any) -> None:
 def _add_compare(sub: Any) -> None:
     p = sub.add_parser("compare", help="calibrate with every solver, side by side", **_sub("compare"))
     _add_common(p, REPORT)
+    _add_urdf(p)
 
 
 def _add_validate(sub: Any) -> None:
@@ -218,6 +236,7 @@ def _add_odometry(sub: Any) -> None:
         **_sub("odometry"),
     )
     _add_common(p, "also draw odometry.png: the odometry with its σ ellipses against the tracker")
+    _add_urdf(p)
     p.add_argument(
         "--solver",
         choices=tuple(SOLVERS),

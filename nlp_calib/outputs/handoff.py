@@ -15,8 +15,9 @@ from xml.etree import ElementTree as ET
 
 import yaml
 
-from nlp_calib.core.files import atomic_write_text
+from nlp_calib.core.files import atomic_write_bytes, atomic_write_text
 from nlp_calib.core.version import __version__
+from nlp_calib.outputs import urdf
 from nlp_calib.outputs.results import result_document
 from nlp_calib.results import CalibrationRun
 
@@ -182,6 +183,20 @@ def write_joint(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
     if solver is None:
         return _none(folder / name)
     atomic_write_text(folder / name, urdf_joint(run, solver))
+    return [folder / name]
+
+
+def write_users_robot(
+    run: CalibrationRun, folder: Path, name: str, description: urdf.Description, link: str
+) -> list[Path]:
+    """The user's own robot description with ``link``'s joint re-posed, when an estimate is handed off."""
+    solver = run.handoff_solver()
+    if solver is None:
+        return _none(folder / name)
+    p = run.reports[solver].result.param_dict()
+    atomic_write_bytes(
+        folder / name, urdf.reposed(description, link, p["sensor_x"], p["sensor_y"], p["sensor_theta"])
+    )
     return [folder / name]
 
 

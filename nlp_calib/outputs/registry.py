@@ -15,15 +15,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from nlp_calib.outputs import handoff, markdown, results, ros2_control, trajectories
+from nlp_calib.outputs import handoff, markdown, results, ros2_control, trajectories, urdf
 from nlp_calib.results import CalibrationRun
 
 
 @dataclass(frozen=True)
 class OutputOptions:
-    """What a user says about the outputs on the command line: ``sigma`` of the drawn ellipses."""
+    """What a user says about the outputs on the command line: ``sigma`` of the drawn ellipses,
+    the robot's own URDF and the sensor's link in it (``robot.urdf`` re-poses that joint)."""
 
     sigma: float = 3.0
+    urdf: urdf.Description | None = None
+    sensor_link: str | None = None
 
 
 Writer = Callable[[CalibrationRun, Path, str, OutputOptions], list[Path]]
@@ -71,6 +74,12 @@ def _odometry_png(run: CalibrationRun, folder: Path, name: str, options: OutputO
     return drawn
 
 
+def _robot(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
+    if options.urdf is None or options.sensor_link is None:
+        return handoff.write_robot(run, folder, name)
+    return handoff.write_users_robot(run, folder, name, options.urdf, options.sensor_link)
+
+
 def _report(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
     files = names(("handoff",)) if run.handoff_solver() is not None else []
     return markdown.write_report(run, folder, name, files, next_steps(files))
@@ -81,8 +90,8 @@ OUTPUTS: tuple[Output, ...] = (
            next_step="the parameters with units and 1σ, for your robot's configuration"),
     Output("sensor_mount.urdf.xml", "handoff", _plain(handoff.write_joint), per_log=False,
            next_step="paste its <joint> into your robot's URDF (planar: z, roll, pitch 0)"),
-    Output("robot.urdf", "handoff", _plain(handoff.write_robot), per_log=False,
-           next_step="the same joint in a complete robot description, for URDF tools"),
+    Output("robot.urdf", "handoff", _robot, per_log=False,
+           next_step="the same joint in a complete robot description (with --urdf: yours), for URDF tools"),
     Output("ros2_control.yaml", "handoff", _plain(ros2_control.write_ros2_control), per_log=False,
            next_step="the controller's parameters (wheel radius, separation or wheelbase) for ros2_control"),
     Output("result.json", "result", _plain(results.write_result)),

@@ -1,0 +1,156 @@
+"""The answer in the robot stack's terms: ros2_control parameters and the user's own URDF re-posed."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from conftest import SCENARIOS, cli
+
+from nlp_calib.core.errors import UsageError
+from nlp_calib.outputs import urdf
+
+ROBOT = """<?xml version="1.0"?>
+<!-- my robot, hand written: this comment and every byte but the laser's origin stay -->
+<robot name="trike">
+  <link name="base_link"/>
+  <link name="chassis"/>
+  <link name="laser"><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>
+  <link name="front_wheel"/>
+  <joint name="base_to_chassis" type="fixed">
+    <parent link="base_link"/>
+    <child link="chassis"/>
+    <origin xyz="0.2 0 0.1" rpy="0 0 0.1"/>
+  </joint>
+  <joint name="chassis_to_laser" type="fixed">
+    <parent link="chassis"/>   <child link="laser"/>
+    <origin rpy="0.02 -0.05 0" xyz="1.2 0.05 0.4" />
+  </joint>
+  <joint name="steer" type="revolute">
+    <parent link="base_link"/><child link="front_wheel"/>
+    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/>
+  </joint>
+</robot>
+"""
+
+
+@pytest.fixture(scope="module")
+def handed_off(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, Path]:
+    tmp = tmp_path_factory.mktemp("ros2")
+    robot = tmp / "robot_in.urdf"
+    robot.write_text(ROBOT)
+    out = tmp / "out"
+    sc = tmp / "demo.yaml"
+    sc.write_text((SCENARIOS / "demo.yaml").read_text().replace("data/", f"{SCENARIOS / 'data'}/"))
+    proc = cli(
+        "run",
+        str(sc),
+        "--out",
+        str(out),
+        "--solver",
+        "gauss_newton",
+        "--urdf",
+        str(robot),
+        "--sensor-link",
+        "laser",
+    )
+    assert proc.returncode == 0, proc.stderr
+    return out, json.loads((out / "result.json").read_text()), robot
+
+
+def _pose(T: np.ndarray) -> tuple[float, float, float, float]:
+    return float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), float(np.arctan2(T[1, 0], T[0, 0]))
+
+
+def test_the_tricycle_controller_gets_its_parameters(handed_off: tuple[Path, dict, Path]) -> None:
+    out, result, _ = handed_off
+    p = result["solvers"]["gauss_newton"]["params"]
+    doc = yaml.safe_load((out / "ros2_control.yaml").read_text())
+    params = doc["tricycle_controller"]["ros__parameters"]
+    assert params == pytest.approx(
+        {"wheelbase": p["axis_length"], "wheel_radius": p["k_traction"] / (2 * np.pi)}
+    )
+    text = (out / "ros2_control.yaml").read_text()
+    assert (
+        "k_steer = " in text
+        and "mechanical_reduction = 1/k_steer" in text
+        and "offset = steer_offset" in text
+    )
+    cal = yaml.safe_load((out / "calibration.yaml").read_text())
+    assert [e["name"] for e in cal["encoders"]] == ["steering", "traction_wheel"]
+    assert cal["verdict"]["level"] == result["verdict"]["level"]
+
+
+def test_the_users_urdf_is_re_posed_and_nothing_else_changes(handed_off: tuple[Path, dict, Path]) -> None:
+    import yourdfpy
+
+    out, result, robot = handed_off
+    p = result["solvers"]["gauss_newton"]["params"]
+    before, after = robot.read_text().splitlines(), (out / "robot.urdf").read_text().splitlines()
+    changed = [i for i, (a, b) in enumerate(zip(before, after)) if a != b]
+    assert len(before) == len(after) and len(changed) == 1 and "<origin" in after[changed[0]]
+    old = yourdfpy.URDF.load(str(robot)).get_transform("laser", "base_link")
+    new = yourdfpy.URDF.load(str(out / "robot.urdf")).get_transform("laser", "base_link")
+    x, y, z, yaw = _pose(new)
+    assert (x, y, yaw) == pytest.approx((p["sensor_x"], p["sensor_y"], p["sensor_theta"]), abs=1e-12)
+    assert z == pytest.approx(old[2, 3], abs=1e-12)
+    # Roll and pitch of the sensor in base_link are kept: the last row of Rz(yaw)·Ry(pitch)·Rx(roll)
+    # does not depend on the yaw.
+    assert new[2, :3] == pytest.approx(old[2, :3], abs=1e-12)
+
+
+def test_the_re_posed_urdf_loads_in_urdf_parser_py(handed_off: tuple[Path, dict, Path]) -> None:
+    from urdf_parser_py.urdf import URDF
+
+    out, _, _ = handed_off
+    model = URDF.from_xml_string((out / "robot.urdf").read_bytes())
+    assert {j.name for j in model.joints} == {"base_to_chassis", "chassis_to_laser", "steer"}
+
+
+@pytest.mark.parametrize(
+    ("link", "message"),
+    [
+        ("lidar", r"no joint has the child link 'lidar' \(--sensor-link\); links with a joint: chassis"),
+        ("front_wheel_child", r"no joint has the child link"),
+    ],
+)
+def test_a_link_without_a_joint_is_refused_naming_the_links(tmp_path: Path, link: str, message: str) -> None:
+    (tmp_path / "r.urdf").write_text(ROBOT)
+    with pytest.raises(UsageError, match=message):
+        urdf.load(tmp_path / "r.urdf", link)
+
+
+def test_a_movable_joint_above_the_sensor_is_refused(tmp_path: Path) -> None:
+    mount = '<joint name="cam_mount" type="fixed"><parent link="front_wheel"/><child link="cam"/></joint>'
+    text = ROBOT.replace("</robot>", f'<link name="cam"/>{mount}\n</robot>')
+    (tmp_path / "r.urdf").write_text(text)
+    with pytest.raises(UsageError, match=r"revolute joint 'steer'.*below fixed joints"):
+        urdf.load(tmp_path / "r.urdf", "cam")
+
+
+def test_urdf_without_sensor_link_is_a_usage_error_before_any_work(tmp_path: Path) -> None:
+    (tmp_path / "r.urdf").write_text(ROBOT)
+    proc = cli(
+        "run", str(SCENARIOS / "demo.yaml"), "--out", str(tmp_path / "o"), "--urdf", str(tmp_path / "r.urdf")
+    )
+    assert proc.returncode == 2 and "give --urdf and --sensor-link together" in proc.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_diff_drive_controller_gets_radii_from_the_ticks_per_turn(tmp_path: Path) -> None:
+    out = tmp_path / "dd"
+    proc = cli("run", str(SCENARIOS / "diff_drive_demo.yaml"), "--out", str(out), "--solver", "gauss_newton")
+    assert proc.returncode == 0, proc.stderr
+    p = json.loads((out / "result.json").read_text())["solvers"]["gauss_newton"]["params"]
+    ticks = [e["ticks_per_turn"] for e in yaml.safe_load((out / "calibration.yaml").read_text())["encoders"]]
+    left, right = (k * n / (2 * np.pi) for k, n in zip((p["k_left"], p["k_right"]), ticks))
+    params = yaml.safe_load((out / "ros2_control.yaml").read_text())["diff_drive_controller"][
+        "ros__parameters"
+    ]
+    r = params["wheel_radius"]
+    assert r * params["left_wheel_radius_multiplier"] == pytest.approx(left, rel=1e-12)
+    assert r * params["right_wheel_radius_multiplier"] == pytest.approx(right, rel=1e-12)
+    assert params["wheel_separation"] * params["wheel_separation_multiplier"] == pytest.approx(p["baseline"])
