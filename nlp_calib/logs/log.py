@@ -61,7 +61,8 @@ class Log:
 
     ``ticks`` holds the raw encoder readings (columns in ``header.encoder_names`` order),
     ``T_world_sensor`` the tracker poses and ``model_pose`` the vendor odometry, both
-    ``(x, y, theta)`` per row. ``time_s`` is relative to the first record of the file.
+    ``(x, y, theta)`` per row. ``time_s`` is relative to the first record of the file, whose own
+    stamp on the log's clock is ``start_ns`` (ns).
     """
 
     path: str
@@ -72,6 +73,7 @@ class Log:
     T_world_sensor: np.ndarray
     line_numbers: np.ndarray
     dropped: tuple[DroppedRecord, ...] = field(default=())
+    start_ns: int = 0
 
     @property
     def n_records(self) -> int:

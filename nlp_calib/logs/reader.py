@@ -368,4 +368,5 @@ class _RecordReader:
             T_world_sensor=frozen(poses[:, 3:6]),
             line_numbers=frozen(lines_arr),
             dropped=dropped,
+            start_ns=int(t_ns[0]),
         )

@@ -5,7 +5,8 @@ dead reckoning over the used records, and, per fault-free segment, the tracker's
 tracker poses left out) and each solver's track restarted from the tracker at the segment's
 start. ``README.md`` beside them gives the evo commands and the figures they reproduce. A TUM
 line is ``time x y z qx qy qz qw``: the planar pose with z = 0 and the heading as a quaternion
-about z; times are seconds since the log's first record.
+about z; times are stamps on the log's own clock (the first record's stamp plus the time since it),
+so ``evo`` matches them with the recording's own topics.
 """
 
 from __future__ import annotations
@@ -22,28 +23,36 @@ from nlp_calib.results.series import SegmentFigures
 FOLDER = "trajectories"
 
 
-def tum_text(time_s: np.ndarray, T: np.ndarray) -> str:
-    """TUM lines of poses ``T`` (n, 3) at ``time_s``."""
+def stamps(time_s: np.ndarray, start_ns: int) -> list[str]:
+    """Each time (s since the first record) as a stamp on the log's clock, to the nanosecond."""
+    ns = start_ns + np.round(np.asarray(time_s) * 1e9).astype(np.int64)
+    return [f"{'-' if v < 0 else ''}{abs(v) // 10**9}.{abs(v) % 10**9:09d}" for v in ns.tolist()]
+
+
+def tum_text(time_s: np.ndarray, T: np.ndarray, start_ns: int = 0) -> str:
+    """TUM lines of poses ``T`` (n, 3) at ``time_s`` after the stamp ``start_ns``."""
     half = 0.5 * T[:, 2]
     zeros = np.zeros(T.shape[0])
-    cols = np.column_stack([time_s, T[:, 0], T[:, 1], zeros, zeros, zeros, np.sin(half), np.cos(half)])
-    return "".join(" ".join(f"{v:.9f}" for v in row) + "\n" for row in cols)
+    cols = np.column_stack([T[:, 0], T[:, 1], zeros, zeros, zeros, np.sin(half), np.cos(half)])
+    return "".join(
+        f"{t} " + " ".join(f"{v:.9f}" for v in row) + "\n" for t, row in zip(stamps(time_s, start_ns), cols)
+    )
 
 
 def write_trajectories(run: CalibrationRun, out_dir: Path, name: str = FOLDER) -> list[Path]:
     """Write the TUM files and their README into ``out_dir/name``; returns their paths."""
     folder = out_dir / name
     tracks = run.require_series().tracks
-    t, ref = tracks.time_s, tracks.tracker
-    written: dict[str, str] = {"tracker.tum": tum_text(t, ref)}
+    t, ref, t0 = tracks.time_s, tracks.tracker, run.log.start_ns
+    written: dict[str, str] = {"tracker.tum": tum_text(t, ref, t0)}
     for track in tracks.tracks:
         if track.solver is not None:
-            written[f"{track.solver}.tum"] = tum_text(t, track.T_world_sensor)
+            written[f"{track.solver}.tum"] = tum_text(t, track.T_world_sensor, t0)
     for solver, again in tracks.restarted.items():
         for k, (p, q) in enumerate(tracks.parts, start=1):
             idx = p + np.flatnonzero(tracks.good[p:q])
-            written[f"segment{k}_{solver}.tum"] = tum_text(t[idx], again[idx])
-            written.setdefault(f"segment{k}_tracker.tum", tum_text(t[idx], ref[idx]))
+            written[f"segment{k}_{solver}.tum"] = tum_text(t[idx], again[idx], t0)
+            written.setdefault(f"segment{k}_tracker.tum", tum_text(t[idx], ref[idx], t0))
     written["README.md"] = _readme(run, tracks.segments)
     paths = []
     for file, text in written.items():

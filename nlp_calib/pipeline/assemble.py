@@ -73,6 +73,7 @@ def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
         dropped=tuple(DroppedLine(d.line, d.reason) for d in log.dropped),
         sensor_frame=log.header.sensor_frame,
         encoders=encoders,
+        start_ns=log.start_ns,
         duration_s=float(t[-1] - t[0]) if t.size else 0.0,
     )
 

@@ -72,13 +72,15 @@ class DroppedLine:
 @dataclass(frozen=True)
 class LogInfo:
     """The log as read: its source, records, what was dropped while reading, the sensor's frame,
-    the encoders, and the duration of the records used (s)."""
+    the encoders, the stamp of its first record on its own clock (ns; every time in the result is
+    relative to it) and the duration of the records used (s)."""
 
     path: str
     records: int
     dropped: tuple[DroppedLine, ...]
     sensor_frame: str
     encoders: tuple[Encoder, ...]
+    start_ns: int
     duration_s: float
 
 
