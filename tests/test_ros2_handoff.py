@@ -154,3 +154,42 @@ def test_the_diff_drive_controller_gets_radii_from_the_ticks_per_turn(tmp_path: 
     assert r * params["left_wheel_radius_multiplier"] == pytest.approx(left, rel=1e-12)
     assert r * params["right_wheel_radius_multiplier"] == pytest.approx(right, rel=1e-12)
     assert params["wheel_separation"] * params["wheel_separation_multiplier"] == pytest.approx(p["baseline"])
+
+
+@pytest.mark.slow
+def test_the_odometry_covariance_covers_the_drift_on_simulated_truth() -> None:
+    """The input noise calibrated on a log's drift against its tracker: the propagated 2σ covers at
+    least 90 % of the odometry's drift from the true base poses (mean over six fresh drives), where
+    the encoders' quantisation alone covers a small share."""
+    from nlp_calib.analysis.metrics import segments
+    from nlp_calib.analysis.odometry import drift_coverage, segment_drift
+    from nlp_calib.logs.reader import parse_log
+    from nlp_calib.models import get_model
+    from nlp_calib.pipeline import Calibration, Scenario, Wanted
+    from nlp_calib.pipeline.options import ValidationOptions
+    from nlp_calib.simulation import SimulationOptions, simulate
+
+    model = get_model("tricycle")
+    calibrated, quantisation = [], []
+    for seed in range(11, 17):
+        sim = simulate(SimulationOptions(model="tricycle", records=2000, seed=seed))
+        log = parse_log(sim.text().splitlines(), model.encoder_kinds, "sim")
+        sc = Scenario.of("s", "sim.txt", solvers=("gauss_newton",), validation=ValidationOptions(blocks=0))
+        calib = Calibration(sc, log=log)
+        run = calib.run(wanted=Wanted(odometry="gauss_newton"))
+        assert run.odometry is not None
+        w = calib.stages.windows
+        truth = sim.T_world_base_true[w.used[0] : w.used[1]]
+        inputs = w.inputs(sc.objective.residual.steering_sample)
+        params = run.reports["gauss_newton"].result.params
+        drift = segment_drift(
+            calib.fns, params, inputs, truth, segments(len(truth), w.masks()[0]), np.ones(len(truth), bool)
+        )
+        calibrated.append(
+            drift_coverage(drift, np.array(list(run.odometry.input_noise.values())), np.zeros(2))
+        )
+        quantisation.append(
+            drift_coverage(drift, np.array(list(run.odometry.quantisation.values())), np.zeros(2))
+        )
+    assert np.mean(calibrated) >= 0.9, calibrated
+    assert np.mean(quantisation) < 0.5, quantisation

@@ -7,8 +7,14 @@ the intervals with ``mapaccum``. ``σ_u`` is the encoders' noise on the model in
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
+
 import numpy as np
 
+from nlp_calib.analysis.uncertainty import nnls_small
+from nlp_calib.core import poses
+from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.problem import ProblemFunctions
 
 
@@ -32,3 +38,126 @@ def propagate(
         sig = np.repeat(np.asarray(input_std, dtype=float).reshape(-1, 1), n, axis=1)
         states[1:] = np.asarray(fold(state0, reps, inputs, sig)).T
     return states[:, :3], states[:, 3:].reshape(-1, 3, 3, order="F")
+
+
+#: Segment lengths (records) over which the odometry's drift is compared with the tracker's.
+DRIFT_LENGTHS = (25, 100, 400)
+
+
+def _unit_covariances(
+    fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, T_world_base_0: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The dead-reckoned base track ``(n + 1, 3)`` and, for each input row at unit noise, the
+    covariance of every pose from the start ``(n_inputs, n + 1, 3, 3)``: the covariance is linear in
+    each input's variance, so any noise level's is a weighted sum of these."""
+    n_in = inputs.shape[0]
+    covs = []
+    track = np.zeros((inputs.shape[1] + 1, 3))
+    for k in range(n_in):
+        track, cov = propagate(fns, params, inputs, T_world_base_0, np.eye(n_in)[k])
+        covs.append(cov)
+    return track, np.stack(covs)
+
+
+def _start_jacobian(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``∂(T_a ⊕ M)/∂T_a`` in world axes, for ``T_a ⊕ M`` at ``b``: the start's error carried along."""
+    F = np.eye(3)
+    F[0, 2], F[1, 2] = -(b[1] - a[1]), b[0] - a[0]
+    return F
+
+
+def _segment(P: np.ndarray, est: np.ndarray, i: int, j: int, turn: float) -> np.ndarray:
+    """The covariance of pose ``j`` dead-reckoned from pose ``i`` (its covariance taken away), in
+    world axes turned by ``turn``: ``P_j − F·P_i·Fᵀ`` with ``F = ∂T_j/∂T_i``."""
+    F = _start_jacobian(est[i], est[j])
+    Pij = P[..., j, :, :] - F @ P[..., i, :, :] @ F.T
+    c, s = np.cos(turn), np.sin(turn)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return R @ Pij @ R.T
+
+
+def _tracker_terms(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """The error's covariance per unit variance of the tracker's position and of its heading, at
+    both ends of a segment restarted from the tracker: ``(2, 3, 3)``."""
+    F = _start_jacobian(start, end)
+    out = []
+    for unit in (np.diag([1.0, 1.0, 0.0]), np.diag([0.0, 0.0, 1.0])):
+        out.append(F @ unit @ F.T + unit)
+    return np.array(out)
+
+
+@dataclass(frozen=True)
+class Drift:
+    """Segments of the odometry against a reference: each error ``(S, 3)``, each input's unit-noise
+    covariance of it ``(S, n_inputs, 3, 3)``, and the reference's own noise terms ``(S, 2, 3, 3)``
+    (per unit variance of its position and of its heading, see :func:`_tracker_terms`)."""
+
+    errors: np.ndarray
+    covs: np.ndarray
+    terms: np.ndarray
+
+
+def segment_drift(
+    fns: ProblemFunctions,
+    params: np.ndarray,
+    inputs: np.ndarray,
+    T_world_base: np.ndarray,
+    parts: Sequence[tuple[int, int]],
+    good: np.ndarray,
+) -> Drift:
+    """The odometry against the reference base poses over segments of :data:`DRIFT_LENGTHS`
+    records inside each fault-free part (half-overlapping, ends at good reference poses), each
+    restarted from the reference at its start."""
+    errors, covs, terms = [], [], []
+    for a, b in parts:
+        if b - a < 2:
+            continue
+        ref = T_world_base[a:b]
+        est, P = _unit_covariances(fns, params, inputs[:, a : b - 1], ref[0])
+        for L in DRIFT_LENGTHS:
+            for i in range(0, b - a - L, max(L // 2, 1)):
+                j = i + L
+                if not (good[a + i] and good[a + j]):
+                    continue
+                again = poses.compose(ref[i], poses.between(est[i], est[j]))
+                errors.append(np.r_[again[:2] - ref[j, :2], wrap_angle(again[2] - ref[j, 2])])
+                covs.append(_segment(P, est, i, j, ref[i, 2] - est[i, 2]))
+                terms.append(_tracker_terms(ref[i], again))
+    n_in = inputs.shape[0]
+    if not errors:
+        return Drift(np.zeros((0, 3)), np.zeros((0, n_in, 3, 3)), np.zeros((0, 2, 3, 3)))
+    return Drift(np.array(errors), np.array(covs), np.array(terms))
+
+
+def drift_noise(drift: Drift, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each input's 1σ noise per interval whose propagated covariance explains the observed drift,
+    never below ``floor`` (the encoders' quantisation), and the reference's own position and
+    heading variances: the method of moments, the squared errors against the unit covariances'
+    diagonals and the reference's noise terms, by non-negative least squares."""
+    n_in = drift.covs.shape[1]
+    errors = drift.errors
+    if errors.shape[0] < 3 * (n_in + 2):
+        return np.asarray(floor, dtype=float), np.zeros(2)
+    units = np.concatenate([drift.covs, drift.terms], axis=1)  # (S, n_in + 2, 3, 3)
+    A = np.concatenate([np.diagonal(units, axis1=2, axis2=3)[:, :, c] for c in range(3)])
+    y = np.concatenate([errors[:, c] ** 2 for c in range(3)])
+    # A squared error's spread grows with its expected value (a χ² with one degree of freedom):
+    # each equation is weighted by the inverse of its prediction, refined a few times.
+    predicted = np.repeat([max(float(np.mean(errors[:, c] ** 2)), 1e-300) for c in range(3)], len(errors))
+    var = np.zeros(A.shape[1])
+    for _ in range(4):
+        w = 1.0 / np.maximum(predicted, 1e-6 * float(np.max(predicted)))
+        var = nnls_small(A * w[:, None], y * w)
+        predicted = A @ var
+    return np.maximum(np.sqrt(var[:n_in]), floor), var[n_in:]
+
+
+def drift_coverage(drift: Drift, noise: np.ndarray, reference_var: np.ndarray, k: float = 2.0) -> float:
+    """The share of segment errors (each component) within ``k`` σ of the odometry's propagated
+    covariance with ``noise`` (and the reference's own noise, ``reference_var``: zero against truth)."""
+    if drift.errors.shape[0] == 0:
+        return float("nan")
+    weights = np.concatenate([np.asarray(noise, dtype=float) ** 2, reference_var])
+    P = np.einsum("k,skij->sij", weights, np.concatenate([drift.covs, drift.terms], axis=1))
+    sigma = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
+    return float(np.mean(np.abs(drift.errors) <= k * sigma))

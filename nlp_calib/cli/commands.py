@@ -293,15 +293,18 @@ def _cmd_odometry(args: argparse.Namespace) -> int:
     if not result.converged or run.odometry is None:
         raise SolverError(f"{args.solver} did not converge ({result.reason}); no odometry from it")
     final = _write_outputs(out, args, outputs, [(run, "")], (run, True), "odometry")
-    cov = run.odometry.covariance
+    odo = run.odometry
+    cov = odo.covariance
+    units = calib.model.input_units
     noise = ", ".join(
-        f"{n} {v:.3g} {calib.model.input_units[n]}"
-        for n, v in zip(calib.model.input_names, calib.stages.windows.input_noise_std)
+        f"{n} {v:.3g} {units[n]} (quantisation {odo.quantisation[n]:.3g})" for n, v in odo.input_noise.items()
     )
     print(
-        f"\nodometry over {run.odometry.time_s.size} records, final 1σ: "
+        f"\nodometry over {odo.time_s.size} records, final 1σ: "
         f"x {1e3 * np.sqrt(cov[-1, 0, 0]):.3g} mm, y {1e3 * np.sqrt(cov[-1, 1, 1]):.3g} mm, "
-        f"θ {1e3 * np.sqrt(cov[-1, 2, 2]):.3g} mrad from encoder noise alone (per interval: {noise})"
+        f"θ {1e3 * np.sqrt(cov[-1, 2, 2]):.3g} mrad from each input's noise per interval, calibrated on this "
+        f"log's drift against the tracker: {noise}; {100 * odo.coverage:.0f} % of that drift over segments "
+        "lies within the propagated 2σ"
     )
     _closing(run, final, out)
     return 0

@@ -18,7 +18,7 @@ import numpy as np
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.metrics import integrate, segments, trajectory_metrics
 from nlp_calib.analysis.observability import analyse as observability_of
-from nlp_calib.analysis.odometry import propagate
+from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
 from nlp_calib.models import SENSOR_PARAMS, header_parameters
 from nlp_calib.pipeline import validation
@@ -277,15 +277,27 @@ def run_series(
 
 
 def odometry(fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str) -> OdometryTrack:
-    """Base-link odometry with ``params`` over the used records, with its propagated covariance,
-    started at the base pose the tracker's first pose implies, beside the base poses the tracker
-    implies throughout."""
+    """Base-link odometry with ``params`` over the used records, started at the base pose the
+    tracker's first pose implies, beside the base poses the tracker implies throughout; its
+    covariance propagated from each input's noise calibrated on the drift this log shows against
+    the tracker (never below the encoders' quantisation)."""
     sel, fns = windows.selected, fit.fns
     inputs = windows.inputs(steering_sample)
-    T_world_base_0 = np.asarray(fns.base_from_sensor(sel.T_world_sensor[0], params)).ravel()
-    poses, cov = propagate(fns, params, inputs, T_world_base_0, windows.input_noise_std)
     reference = over_columns(fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
-    return OdometryTrack(np.asarray(sel.time_s), poses, cov, reference)
+    bad_i, bad_r = windows.masks()
+    drift = segment_drift(fns, params, inputs, reference, segments(reference.shape[0], bad_i), ~bad_r)
+    noise, reference_var = drift_noise(drift, windows.input_noise_std)
+    track, cov = propagate(fns, params, inputs, reference[0], noise)
+    names = fns.model.input_names
+    return OdometryTrack(
+        np.asarray(sel.time_s),
+        track,
+        cov,
+        reference,
+        input_noise=dict(zip(names, map(float, noise))),
+        quantisation=dict(zip(names, map(float, windows.input_noise_std))),
+        coverage=drift_coverage(drift, noise, reference_var),
+    )
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ written from a stored result alone.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -89,13 +89,20 @@ class ModelCheckSeries:
 
 @dataclass(frozen=True)
 class OdometryTrack:
-    """Base-link poses ``(n, 3)`` ordered ``(x, y, theta)`` and covariances ``(n, 3, 3)``."""
+    """Base-link poses ``(n, 3)`` ordered ``(x, y, theta)`` and covariances ``(n, 3, 3)``.
+
+    ``reference``: the base poses the tracker implies with the calibrated mount; ``input_noise``:
+    each model input's 1σ per interval the covariance is propagated from (calibrated on the drift
+    against the tracker, never below ``quantisation``, the encoders' resolution alone);
+    ``coverage``: the share of that drift, over segments, within the propagated 2σ."""
 
     time_s: np.ndarray
     T_world_base: np.ndarray
     covariance: np.ndarray
-    #: The base poses the tracker implies with the calibrated mount, for comparison.
     reference: np.ndarray | None = None
+    input_noise: Mapping[str, float] = field(default_factory=dict)
+    quantisation: Mapping[str, float] = field(default_factory=dict)
+    coverage: float = float("nan")
 
     def csv(self) -> str:
         """One row per record: time, pose and the upper triangle of the covariance."""

@@ -62,7 +62,7 @@ def odometry_png(
     ax_s.plot(track.time_s, 1e3 * std[:, 2], label="σ θ [mrad]")
     ax_s.set_xlabel("time since the first record [s]")
     ax_s.set_ylabel("1σ (mm, mrad)")
-    ax_s.set_title("growth of the odometry's uncertainty from the encoders' noise")
+    ax_s.set_title("growth of the odometry's uncertainty (input noise calibrated on its drift)")
     ax_s.grid(True, alpha=0.3)
     ax_s.legend(fontsize=8)
     fig.suptitle(title)
