@@ -19,6 +19,7 @@ from typing import Any, ClassVar
 import casadi as ca
 import numpy as np
 
+from nlp_calib.core import memory
 from nlp_calib.core.errors import OptionsError
 from nlp_calib.solvers.evaluation import NAN_START_REASON, SINGULAR_REASON, ProblemEvaluator, is_singular
 from nlp_calib.solvers.nlp import NlpOracle
@@ -29,6 +30,9 @@ HESSIANS = ("exact", "gauss_newton", "limited_memory")
 _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 #: Lower bound of the lifted weights: keeps δ²/w finite; far below any weight at the optimum.
 _W_MIN = 1e-8
+#: Address space a solve needs free: the 128 MiB work buffer of the OpenBLAS under MUMPS (which
+#: retries forever, deaf to signals, when it cannot get it) and room for MUMPS's own workspace.
+_ADDRESS_SPACE = 136 << 20
 
 
 @dataclass(frozen=True)
@@ -67,6 +71,7 @@ class Ipopt:
     label: ClassVar[str] = "IPOPT"
     options_type: ClassVar[type] = IpoptOptions
     supports_bounds: ClassVar[bool] = True
+    _buffer_held: ClassVar[bool] = False
 
     @staticmethod
     def functions(options: IpoptOptions) -> tuple[str, ...]:
@@ -111,6 +116,8 @@ class Ipopt:
         p = ca.MX.sym("p", 0)
         nlp = {"x": x, "p": p, "f": oracle.f(x, p)}
         opts.update({"grad_f": oracle.grad_f, "no_nlp_grad": True, "calc_lam_p": False})
+        # After a signal the callbacks answer NaN until IPOPT gives up: no CasADi warning for each.
+        opts["show_eval_warnings"] = False
         if self.options.hessian != "limited_memory":
             opts["hess_lag"] = oracle.hess_lag
         return ca.nlpsol("ipopt_lifted" if self.lifted else "ipopt_direct", "ipopt", nlp, opts)
@@ -137,8 +144,12 @@ class Ipopt:
             x_init = np.concatenate([x_init, w0])
             lbx = np.concatenate([lbx, np.full(ev.n_residuals, _W_MIN)])
             ubx = np.concatenate([ubx, np.ones(ev.n_residuals)])
+        if not Ipopt._buffer_held:
+            fix = "solve with gauss_newton alone (solvers: [gauss_newton])"
+            memory.require_address_space(_ADDRESS_SPACE, "IPOPT's linear algebra", fix)
         try:
             sol = self._solver(x0=x_init, lbx=lbx, ubx=ubx)
+            Ipopt._buffer_held = True  # OpenBLAS keeps its buffer: later solves need no more room
         except RuntimeError as exc:  # CasADi reports a failed evaluation by raising
             self._oracle.guard.reraise()
             return self._not_started(np.asarray(x0, dtype=float), time.perf_counter() - t0, _last_line(exc))
