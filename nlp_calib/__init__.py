@@ -14,30 +14,28 @@ Layers, from inputs to outputs (each imports only from the ones before it): ``co
 
 from __future__ import annotations
 
-import importlib
-import itertools
 import sys
-from typing import TYPE_CHECKING, Any
-
-from nlp_calib.core.version import __version__
 
 
 def _started_as_the_command() -> bool:
     """``python -m nlp_calib`` (while the module is located, ``sys.argv[0]`` is ``-m``) or the
     ``nlp-calib`` script."""
     argv0 = sys.argv[0] if sys.argv else ""
-    orig = [*getattr(sys, "orig_argv", ()), ""]
-    as_module = argv0 == "-m" and any(
-        a == "-mnlp_calib" or (a == "-m" and b == "nlp_calib") for a, b in itertools.pairwise(orig)
-    )
+    line = " ".join(getattr(sys, "orig_argv", ())) + " "
+    as_module = argv0 == "-m" and (" -m nlp_calib " in line or " -mnlp_calib " in line)
     return as_module or argv0.replace("\\", "/").rsplit("/", 1)[-1] in ("nlp-calib", "nlp-calib.exe")
 
 
-if _started_as_the_command():  # a signal from here on ends the command quietly (see core/interrupts)
+# The command's first instruction: a signal from here on ends it quietly (core/interrupts.py).
+if _started_as_the_command():
     from nlp_calib.core import interrupts as _interrupts
 
     _interrupts.install()
 
+import importlib  # noqa: E402
+from typing import TYPE_CHECKING, Any  # noqa: E402
+
+from nlp_calib.core.version import __version__  # noqa: E402
 
 if TYPE_CHECKING:
     from nlp_calib.core.errors import (

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nlp_calib.cli.explain import no_crossvalidation
 from nlp_calib.cli.import_bag import cmd_import_bag
 from nlp_calib.cli.parser import ALL_SOLVERS
 from nlp_calib.core import interrupts
@@ -337,7 +338,10 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         written = stage.commit()
     assert written == [stage.final(atomic)]
     print("\n" + "\n".join(_wrote(written, out)))
-    return 0 if run.crossval is not None and run.crossval.available else 1
+    if run.crossval is None or not run.crossval.available:
+        print(f"error: {no_crossvalidation(run, blocks)}", file=sys.stderr)
+        return 1
+    return 0
 
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {

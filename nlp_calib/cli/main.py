@@ -57,6 +57,8 @@ def _run(argv: list[str]) -> int:
         args = build_parser().parse_args(argv)
         with warnings.catch_warnings():
             warnings.simplefilter("always")
+            # A file an interrupted import left open is Python's business, not the user's.
+            warnings.simplefilter("ignore", ResourceWarning)
             warnings.showwarning = _show_warning
             return COMMANDS[args.command](args)
     except BaseException as exc:

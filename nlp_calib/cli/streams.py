@@ -5,9 +5,11 @@ A command prints its tables before it writes its files. A reader that closes the
 (``PYTHONIOENCODING=ascii``, ``LC_ALL=C``) would otherwise end the run with an exception and
 lose a calibration that succeeded. Through :func:`guarded`, text the stream cannot encode is
 spelled in plain characters (``σ`` → ``sigma``) or replaced by ``?``, and output to a closed pipe
-is dropped (the descriptor is pointed at the null device, so nothing fails later either, not
-even the flush at exit); the command then runs to its end and :func:`guarded` returns a one-line
-note of what was degraded, for stderr.
+(or output the system refuses, e.g. a file on a full disk) is dropped; its descriptor is then
+pointed at the null device, so nothing fails later either, not even the flush at exit. The
+command runs to its end, and one line on stderr says what the terminal did not get. Once a
+signal has arrived, CasADi's warnings (which echo it from inside the solver) are not shown: the
+run's one line says it was interrupted.
 """
 
 from __future__ import annotations
@@ -18,8 +20,10 @@ import errno
 import os
 import sys
 import unicodedata
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any, TextIO
+
+from nlp_calib.core import interrupts
 
 #: Plain spellings of the characters the tool prints, for a stream that cannot encode them.
 SPELLINGS = {
@@ -76,15 +80,24 @@ codecs.register_error(_ERRORS, _spell)
 
 
 class _Guarded:
-    """A text stream whose writes never raise for an encoding or a closed pipe (see the module)."""
+    """A text stream whose writes never raise for an encoding or a closed pipe (see the module);
+    text ``drop`` holds for is not written (nor the line end that follows it)."""
 
-    def __init__(self, stream: TextIO) -> None:
+    def __init__(self, stream: TextIO, drop: Callable[[str], bool] | None = None) -> None:
         self._stream = stream
-        self.closed_early = False
+        self._drop = drop
+        self._dropped = False
+        #: Why output stopped (None: it did not): the reader went away, or the system refused.
+        self.lost: OSError | None = None
         self.degraded = False
 
     def write(self, text: str) -> int:
-        if self.closed_early:
+        if self._drop is not None:
+            dropped, self._dropped = self._dropped, False
+            if self._drop(text) or (dropped and text == "\n"):
+                self._dropped = True
+                return len(text)
+        if self.lost is not None:
             return len(text)
         try:
             return self._stream.write(text)
@@ -97,7 +110,7 @@ class _Guarded:
             return self._closed(exc, len(text))
 
     def flush(self) -> None:
-        if not self.closed_early:
+        if self.lost is None:
             self._attempt(self._stream.flush, 0)
 
     def _attempt(self, action: Any, size: int) -> int:
@@ -108,10 +121,9 @@ class _Guarded:
         return size
 
     def _closed(self, exc: OSError, size: int) -> int:
-        """The reader went away: drop this and all later output (any other error is raised)."""
-        if exc.errno not in (errno.EPIPE, errno.EINVAL, errno.ECONNRESET):
-            raise exc
-        self.closed_early = True
+        """The reader went away, or the system refused the text (a full disk): drop this and all
+        later output; the work goes on."""
+        self.lost = exc
         with contextlib.suppress(OSError, ValueError, AttributeError):
             null = os.open(os.devnull, os.O_WRONLY)
             os.dup2(null, self._stream.fileno())  # the unflushed rest, flushed at exit, goes nowhere
@@ -127,7 +139,8 @@ def guarded() -> Iterator[None]:
     """Guard ``sys.stdout`` and ``sys.stderr`` inside the block; when it ends, one line on stderr
     for each way the terminal text was degraded (nothing when nothing was lost)."""
     originals = sys.stdout, sys.stderr
-    out, err = (_Guarded(s) if s is not None else None for s in originals)
+    out = _Guarded(originals[0]) if originals[0] is not None else None
+    err = _Guarded(originals[1], _echo_of_a_signal) if originals[1] is not None else None
     sys.stdout, sys.stderr = out, err
     try:
         yield
@@ -143,13 +156,18 @@ def guarded() -> Iterator[None]:
             sys.stdout, sys.stderr = originals
 
 
+def _echo_of_a_signal(text: str) -> bool:
+    """CasADi's warnings once a signal arrived: the exception the signal raised in its callbacks,
+    or the NaN they answer from then on, not news to the user."""
+    return interrupts.pending() is not None and text.startswith("CasADi - ")
+
+
 def _notes(out: _Guarded | None, err: _Guarded | None) -> list[str]:
     notes = []
-    if out is not None and out.closed_early:
-        notes.append(
-            "note: stdout was closed before the command finished (a pipe into head?); the rest of "
-            "its terminal output was dropped"
-        )
+    if out is not None and out.lost is not None:
+        closed = out.lost.errno in (errno.EPIPE, errno.EINVAL, errno.ECONNRESET)
+        why = "was closed (a pipe into head?)" if closed else f"failed ({out.lost.strerror or out.lost})"
+        notes.append(f"note: stdout {why} before the command finished; the rest of its output was dropped")
     if any(s is not None and s.degraded for s in (out, err)):
         notes.append(
             "note: the terminal's encoding cannot show some characters (sigma, times); they are "

@@ -371,8 +371,17 @@ def _validate(sc: Scenario, source: str) -> None:
 def _check_alignment(al: AlignmentOptions, where: str) -> None:
     if isinstance(al.tracker_lag, str):
         _check_choice(al.tracker_lag, ("auto",), f"{where}.tracker_lag")
-    if not (al.search[0] < al.search[1] and al.step > 0 and (al.search[1] - al.search[0]) / al.step <= 1000):
-        fail(where, "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
+    lo, hi = al.search
+    if not lo < hi:
+        fail(f"{where}.search", f"needs [lo, hi] with lo < hi, got [{lo:g}, {hi:g}]")
+    if not al.step > 0:
+        fail(f"{where}.step", f"must be > 0 s, got {al.step:g}")
+    if (hi - lo) / al.step > 1000:
+        fail(
+            f"{where}.step",
+            f"{al.step:g} s over search [{lo:g}, {hi:g}] makes {(hi - lo) / al.step:.0f} lags to fit, more "
+            f"than 1000; use a step of at least {(hi - lo) / 1000:.3g} s or a narrower search",
+        )
 
 
 def _check_range(value: float, limit: Range, where: str) -> None:

@@ -116,8 +116,6 @@ class Ipopt:
         p = ca.MX.sym("p", 0)
         nlp = {"x": x, "p": p, "f": oracle.f(x, p)}
         opts.update({"grad_f": oracle.grad_f, "no_nlp_grad": True, "calc_lam_p": False})
-        # After a signal the callbacks answer NaN until IPOPT gives up: no CasADi warning for each.
-        opts["show_eval_warnings"] = False
         if self.options.hessian != "limited_memory":
             opts["hess_lag"] = oracle.hess_lag
         return ca.nlpsol("ipopt_lifted" if self.lifted else "ipopt_direct", "ipopt", nlp, opts)
