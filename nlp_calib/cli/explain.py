@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from nlp_calib.analysis.crossval import MIN_FOLDS
+from nlp_calib.analysis.crossval import blocks as cut_blocks
 from nlp_calib.pipeline import CalibrationRun
 
 
@@ -11,6 +12,13 @@ def no_crossvalidation(run: CalibrationRun, blocks: int) -> str:
     sc = run.scenario
     where = f"{sc.path or sc.name}: {sc.dataset.name}"
     first, stop = run.fit
+    made = len(cut_blocks(first, stop, blocks))
+    if made < MIN_FOLDS:
+        return (
+            f"{where}: the log is too short to cross-validate: its {stop - first} fitted records make "
+            f"{made} block(s) of at least 2 records where validation.blocks asks for {blocks}, and "
+            f"{MIN_FOLDS} fits are needed; use a longer log (or wider samples)"
+        )
     if run.crossval is None:
         solver, report = next(iter(run.reports.items()))
         return (
@@ -18,12 +26,6 @@ def no_crossvalidation(run: CalibrationRun, blocks: int) -> str:
             "there is nothing to cross-validate; see the run's warnings, or use a longer log"
         )
     folds = run.crossval.folds
-    if len(folds) < MIN_FOLDS:
-        return (
-            f"{where}: the log is too short to cross-validate: its {stop - first} fitted records make "
-            f"{len(folds)} block(s) of at least 2 records where validation.blocks asks for {blocks}, and "
-            f"{MIN_FOLDS} fits are needed; use a longer log (or wider samples)"
-        )
     converged = sum(f.converged for f in folds)
     return (
         f"{where}: only {converged} of {len(folds)} cross-validation fits converged ({MIN_FOLDS} are "

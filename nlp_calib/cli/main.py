@@ -47,7 +47,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return exc.exit_code
         # A signal some library swallowed before the run's last files were complete decides.
         late = interrupts.exit_code()
-        return code if late is None else late
+        if late is None:
+            return code
+        return late if interrupts.was_reported() else _report(interrupts.Interrupted(late - 128), False)
 
 
 def _run(argv: list[str]) -> int:

@@ -130,6 +130,11 @@ def reported() -> None:
     _reported = True
 
 
+def was_reported() -> bool:
+    """Whether :func:`reported` was called since :func:`handled` began."""
+    return _reported
+
+
 def check() -> None:
     """Raise :class:`Interrupted` if a signal arrived, even one that native code swallowed."""
     global _swallowed
@@ -149,7 +154,7 @@ def handled(*, restore: bool = True, watchdog: bool = False) -> Iterator[None]:
     arrived before the block (while the program started) stays recorded. ``watchdog`` (a
     program) ends the process :data:`GRACE_S` seconds after a signal it did not end on.
     """
-    global _pending, _defer_depth, _generation, _swallowed, _active
+    global _pending, _defer_depth, _generation, _swallowed, _active, _reported
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -158,7 +163,7 @@ def handled(*, restore: bool = True, watchdog: bool = False) -> Iterator[None]:
     depth = _defer_depth
     if restore:
         _pending = None
-    _swallowed = False
+    _swallowed = _reported = False
     _generation += 1
     wakeup = _Watchdog.start() if watchdog else None
     try:
