@@ -46,7 +46,7 @@ LARGE_FUNCTION = 20_000  # instructions
 #: Seconds a compiler gets for the tiny test file (a working one needs a fraction of a second).
 PROBE_TIMEOUT_S = 3.0
 #: Seconds a real compile gets: this much, plus :data:`COMPILE_S_PER_KB` per kB of source.
-COMPILE_TIMEOUT_S = 120.0
+COMPILE_TIMEOUT_S = 60.0
 COMPILE_S_PER_KB = 0.05
 #: Part of every key: entries written in another layout are never read.
 _ENTRY_FORMAT = "sealed-1"
