@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import sys
-
 from nlp_calib.core import interrupts, memory
 
 
@@ -20,9 +18,8 @@ def run() -> int:
         code = interrupts.exit_code()
         if code is not None:
             return code
-        if isinstance(exc, MemoryError):  # the libraries did not fit (ulimit -v)
-            print(f"error: {memory.OUT_OF_MEMORY}", file=sys.stderr)
-            return 1
+        if isinstance(exc, MemoryError):  # the libraries did not fit (ulimit -v): one line, exit 1
+            raise SystemExit(f"error: {memory.OUT_OF_MEMORY}") from None
         raise
 
 

@@ -482,7 +482,7 @@ def test_validate_on_too_short_a_log_says_so(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("block", "needles"),
     [
-        ("samples: {start: 500}", ("case.yaml: samples: the range [500, 300)", "sim.txt", "samples.stop")),
+        ("samples: {start: 500}", ("case.yaml: samples: [500, 300) exceeds the log's 300 records",)),
         (
             "alignment: {tracker_lag: auto, search: [-100, 100]}",
             ("case.yaml: alignment.step: 0.01 s over search [-100, 100] makes 20000 lags", "at least 0.2 s"),

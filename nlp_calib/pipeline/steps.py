@@ -112,10 +112,7 @@ def select(sc: Scenario, log: Log) -> tuple[int, int]:
     start = sc.samples.start
     stop = n if sc.samples.stop is None else sc.samples.stop
     if stop > n or start >= stop - 1:
-        raise ScenarioError(
-            f"{sc.path or sc.name}: samples: the range [{start}, {stop}) does not fit the {n} records of "
-            f"{sc.dataset.name}; keep samples.start and samples.stop within [0, {n}]"
-        )
+        raise ScenarioError(f"{sc.path or sc.name}: samples: [{start}, {stop}) exceeds the log's {n} records")
     check_windows(sc, start, stop)
     return start, stop
 
