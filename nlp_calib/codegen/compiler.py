@@ -26,6 +26,7 @@ import signal
 import subprocess
 import tempfile
 import threading
+import time
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -97,7 +98,18 @@ def usable_cache_dir() -> Path:
             f"the compile cache {folder} is not a writable folder ({reason}); set NLP_CALIB_CACHE to "
             "a writable folder, or use the interpreted backend ('backend: interpreted')"
         ) from None
+    _remove_leftovers(folder)
     return folder
+
+
+def _remove_leftovers(folder: Path) -> None:
+    """Remove the temporary folders of compiles that a killed process left behind (an hour old:
+    a live compile takes seconds)."""
+    cutoff = time.time() - 3600
+    for tmp in [*folder.glob(".build-*"), *folder.glob(".probe-*")]:
+        with contextlib.suppress(OSError):
+            if tmp.is_dir() and not tmp.is_symlink() and tmp.stat().st_mtime < cutoff:
+                shutil.rmtree(tmp, ignore_errors=True)
 
 
 def entry_key(source: str, compiler: str, flags: Sequence[str]) -> str:
@@ -143,18 +155,24 @@ def compile_shared(
     if problem != "missing":
         _warn_damaged(folder, target.name, problem)
     check_compiler(compiler)
-    folder.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=folder, prefix=".build-") as tmp:
-        src = Path(tmp) / f"{name}.c"
-        src.write_text(source)
-        out = Path(tmp) / f"{name}.so"
-        timeout = COMPILE_TIMEOUT_S + COMPILE_S_PER_KB * len(source) / 1000
-        run_compiler([compiler, *flags, str(src), "-o", str(out), "-lm"], timeout, f"compiling {name}")
-        body = out.read_bytes()
-        with out.open("ab") as fh:
-            fh.write(_seal(key, body))
-        os.replace(out, target)  # atomic: concurrent processes never load a half-written file
+    try:
+        with tempfile.TemporaryDirectory(dir=folder, prefix=".build-") as tmp:
+            src = Path(tmp) / f"{name}.c"
+            src.write_text(source)
+            out = Path(tmp) / f"{name}.so"
+            timeout = COMPILE_TIMEOUT_S + COMPILE_S_PER_KB * len(source) / 1000
+            run_compiler([compiler, *flags, str(src), "-o", str(out), "-lm"], timeout, f"compiling {name}")
+            body = out.read_bytes()
+            with out.open("ab") as fh:
+                fh.write(_seal(key, body))
+            os.replace(out, target)  # atomic: concurrent processes never load a half-written file
+    except OSError as exc:  # a full disk, a folder gone: the caller can still interpret
+        raise _unwritable(folder, exc) from None
     return target
+
+
+def _unwritable(folder: Path, exc: OSError) -> CodegenError:
+    return CodegenError(f"writing into the compile cache {folder} failed ({exc.strerror or exc})")
 
 
 def _warn_damaged(folder: Path, name: str, problem: str) -> None:
@@ -175,7 +193,10 @@ def check_compiler(compiler: str) -> None:
     this process can load, within :data:`PROBE_TIMEOUT_S` (tried once per process)."""
     with _probe_lock:  # one test compile per compiler, whichever thread asks first
         if compiler not in _probed:
-            _probed[compiler] = _probe(compiler)
+            try:
+                _probed[compiler] = _probe(compiler)
+            except OSError as exc:  # not remembered: a full disk may have room again
+                raise _unwritable(cache_dir(), exc) from None
         problem = _probed[compiler]
     if problem is not None:
         raise CodegenError(problem)
@@ -231,8 +252,10 @@ def run_compiler(command: list[str], timeout: float, what: str) -> None:
         with _lock:
             _running.discard(proc)
     if proc.returncode != 0:
-        detail = (err or "").strip()[:500] or f"exit status {proc.returncode}"
-        raise CodegenError(f"{what} with {command[0]} failed: {detail}")
+        lines = [ln.strip() for ln in (err or "").splitlines() if ln.strip()]
+        # One line: the compiler's first error, else its last word, else its exit status.
+        detail = next((ln for ln in lines if "error" in ln), lines[-1] if lines else "")[:300]
+        raise CodegenError(f"{what} with {command[0]} failed: {detail or f'exit status {proc.returncode}'}")
 
 
 def _stop(proc: subprocess.Popen[str]) -> None:

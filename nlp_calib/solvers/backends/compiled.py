@@ -254,7 +254,7 @@ def _fall_back(compiler: str, reason: str) -> None:
         _warned_fallback.add(compiler)
     warnings.warn(
         f"{reason.rstrip('.')}: evaluating with CasADi's interpreter instead, several times slower; "
-        "set $CC to a working C compiler, or set 'backend: interpreted' to silence this",
+        "fix the compiler ($CC) or what it needs, or set 'backend: interpreted' to silence this",
         NlpCalibWarning,
         stacklevel=4,
     )
