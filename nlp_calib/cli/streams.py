@@ -81,22 +81,23 @@ codecs.register_error(_ERRORS, _spell)
 
 class _Guarded:
     """A text stream whose writes never raise for an encoding or a closed pipe (see the module);
-    text ``drop`` holds for is not written (nor the line end that follows it)."""
+    a line whose first piece ``drop`` holds for is not written (pieces to its end included)."""
 
     def __init__(self, stream: TextIO, drop: Callable[[str], bool] | None = None) -> None:
         self._stream = stream
         self._drop = drop
-        self._dropped = False
+        self._dropping = False
         #: Why output stopped (None: it did not): the reader went away, or the system refused.
         self.lost: OSError | None = None
         self.degraded = False
 
     def write(self, text: str) -> int:
         if self._drop is not None:
-            dropped, self._dropped = self._dropped, False
-            if self._drop(text) or (dropped and text == "\n"):
-                self._dropped = True
-                return len(text)
+            self._dropping = self._dropping or self._drop(text)
+            if self._dropping:
+                _, newline, rest = text.partition("\n")
+                self._dropping = not newline
+                return len(text) - len(rest) + (self.write(rest) if rest else 0)
         if self.lost is not None:
             return len(text)
         try:
