@@ -62,6 +62,11 @@ class Log:
     ``ticks`` holds the raw encoder readings (columns in ``header.encoder_names`` order),
     ``T_world_sensor`` the tracker poses and ``model_pose`` the vendor odometry, both
     ``(x, y, theta)`` per row. ``time_s`` is relative to the first record of the file.
+
+    A 3-D tracker (a camera's own trajectory) fills ``T_world_sensor_3d`` too, ``(x, y, z, qx, qy,
+    qz, qw)`` per row in its own world frame and units; ``T_world_sensor`` then holds its levelled
+    planar track (see :func:`nlp_calib.logs.camera.planar_track`), so every planar consumer keeps
+    working. ``None`` for a planar log.
     """
 
     path: str
@@ -72,6 +77,7 @@ class Log:
     T_world_sensor: np.ndarray
     line_numbers: np.ndarray
     dropped: tuple[DroppedRecord, ...] = field(default=())
+    T_world_sensor_3d: np.ndarray | None = None
 
     @property
     def n_records(self) -> int:
@@ -95,6 +101,7 @@ class Log:
             model_pose=frozen(self.model_pose[sl]),
             T_world_sensor=frozen(self.T_world_sensor[sl]),
             line_numbers=frozen(self.line_numbers[sl]),
+            T_world_sensor_3d=None if self.T_world_sensor_3d is None else frozen(self.T_world_sensor_3d[sl]),
         )
 
 
