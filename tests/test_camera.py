@@ -170,9 +170,19 @@ def test_monocular_poses_give_the_scale_with_one_known_length(monocular: Fit) ->
     assert abs(monocular.start.params["scale"] / truth["scale"] - 1.0) < 0.01
 
 
-def test_a_free_scale_with_every_length_free_is_refused() -> None:
+def test_a_free_scale_with_every_length_free_is_refused(monocular: Fit) -> None:
+    """Every length, the lever arm and the scale times one factor ``c`` predict the same motions
+    with every translation error times ``c``: without a known length the cost falls as ``c → 0``."""
+    fns = build(get_model(DIFF), ProblemSpec(sensor="3d", scale="free"))
     with pytest.raises(ProblemError, match=r"^a free scale needs one known length: fix one of k_left, k_right, baseline"):
-        build(get_model(DIFF), ProblemSpec(sensor="3d", scale="free"))
+        camera_initial_guess(fns, monocular.data, known={"sensor_z": 0.3, "baseline": 0.45})
+    x = np.array([monocular.params()[n] for n in fns.free])
+    ev = ProblemEvaluator(fns, monocular.evaluator.data, x_fixed=np.array([0.3]), omega=np.ones(6), delta=1.0)
+    lengths = np.isin(fns.free, ["k_left", "k_right", "baseline", "sensor_x", "sensor_y", "scale"])
+    errors = [ev.robust_terms(np.where(lengths, c * x, x))[0].copy() for c in (1.0, 0.5)]
+    assert_close(errors[1][:3], 0.5 * errors[0][:3], rtol=1e-6, atol=1e-15)
+    assert_close(errors[1][3:], errors[0][3:], rtol=1e-9, atol=1e-15)
+    assert ev.cost(np.where(lengths, 0.5 * x, x)) < ev.cost(x)
     with pytest.raises(ProblemError, match="a free scale needs a 3-D sensor"):
         ProblemSpec(scale="free")
     with pytest.raises(ProblemError, match="sensor must be one of planar, 3d"):

@@ -23,6 +23,7 @@ from nlp_calib.models.camera_start import (
     camera_start,
     rotation_vectors,
 )
+from nlp_calib.models.mount import length_params
 from nlp_calib.problem.functions import ProblemFunctions, ProblemSpec, build
 from nlp_calib.problem.sensors import Mount3D
 from nlp_calib.problem.windows import ResidualData, over_columns
@@ -58,6 +59,14 @@ def camera_initial_guess(
     """Every parameter of ``fns`` (a ``3d`` problem) from the records of ``data``, no guess needed;
     ``known`` holds the held values (``sensor_z``; with a free scale, one length in metres)."""
     sensor = _mount(fns)
+    lengths = length_params(fns.model)
+    if sensor.scale_free and not any(n in fns.fixed for n in lengths):
+        # Every length times c, the mount's translation times c and the scale over c predict the
+        # same motions: one length must be held at its value in metres.
+        raise ProblemError(
+            f"a free scale needs one known length: fix one of {', '.join(lengths)} at its measured "
+            "value (the trajectory's scale and every length are otherwise one unknown)"
+        )
     a, b = start_windows(data, span_s)
     span = int(b[0] - a[0]) if a.size else 1
     if a.size == 0 or any(log.n_records <= span for log in data.logs):

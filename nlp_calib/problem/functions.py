@@ -30,7 +30,6 @@ import numpy as np
 
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.models.base import INTEGRATIONS, KinematicModel
-from nlp_calib.models.mount import SCALE_PARAM, length_params
 from nlp_calib.problem import motion as motion_sources
 from nlp_calib.problem.sensors import sensor_for
 from nlp_calib.problem.trajectory import TrajectoryFunctions, base_motion, fn, split_params
@@ -114,7 +113,6 @@ class ProblemFunctions(TrajectoryFunctions):
         self.fixed = tuple(n for n in names if n in held)
         if not self.free:
             raise ProblemError("every parameter is fixed; nothing to estimate")
-        _check_scale_gauge(model, self.free)
         free, fixed = self.free, self.fixed
         self._x = x = ca.SX.sym("x", len(free))
         self._x_fixed = x_fixed = ca.SX.sym("x_fixed", len(fixed))
@@ -373,17 +371,6 @@ class ProblemFunctions(TrajectoryFunctions):
             ["x", "x_fixed", "data"],
             [e, J],
             ["e", "J"],
-        )
-
-
-def _check_scale_gauge(model: KinematicModel, free: tuple[str, ...]) -> None:
-    """Refuse a free scale with every length free: scaling all lengths, the mount's translation and
-    ``1/scale`` together predicts the same motion, so nothing would fix the scale."""
-    lengths = length_params(model)
-    if SCALE_PARAM in free and lengths and all(n in free for n in lengths):
-        raise ProblemError(
-            f"a free scale needs one known length: fix one of {', '.join(lengths)} at its measured "
-            "value (the trajectory's scale and every length are otherwise one unknown)"
         )
 
 
