@@ -12,16 +12,31 @@ from conftest import assert_close
 
 from nlp_calib.analysis import observability, uncertainty
 from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
+from nlp_calib.analysis.metrics import SPATIAL, geometry, trajectory_metrics
 from nlp_calib.core import poses3d
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.logs import CameraRecording, camera_log, pair, read_joints_csv, read_tum
 from nlp_calib.models import get_model
 from nlp_calib.models.camera_start import REASONS, CameraStart, camera_start
 from nlp_calib.models.joints import joint_map
-from nlp_calib.problem import ProblemSpec, ResidualData, ResidualOptions, build, build_residual_data, over_columns
+from nlp_calib.problem import (
+    ProblemSpec,
+    ResidualData,
+    ResidualOptions,
+    build,
+    build_residual_data,
+    over_columns,
+)
 from nlp_calib.problem.camera import camera_initial_guess, fit_selection, start_windows
 from nlp_calib.problem.functions import ProblemFunctions
-from nlp_calib.simulation.camera import CameraSimulation, CameraSimulationOptions, simulate_camera, write_camera_simulation
+from nlp_calib.simulation.camera import (
+    CameraNoise,
+    CameraSimulation,
+    CameraSimulationOptions,
+    DriveShape,
+    simulate_camera,
+    write_camera_simulation,
+)
 from nlp_calib.solvers import ProblemEvaluator, SolverResult, get_solver
 from nlp_calib.solvers.gauss_newton import GaussNewtonOptions
 from nlp_calib.solvers.ipopt import IpoptOptions
@@ -56,8 +71,8 @@ def record(tmp: Path, **options: object) -> tuple[CameraSimulation, CameraRecord
 
 def information(sim: CameraSimulation) -> np.ndarray:
     """Ω of the recording's pose noise (1 mm and 1 mrad when noise-free: only a weighting then)."""
-    s_t = max(sim.options.position_noise, 1e-3) * np.sqrt(2.0)
-    s_r = max(sim.options.rotation_noise, 1e-3) * np.sqrt(2.0)
+    s_t = max(sim.options.noise.position, 1e-3) * np.sqrt(2.0)
+    s_r = max(sim.options.noise.rotation, 1e-3) * np.sqrt(2.0)
     return np.array([s_t**-2] * 3 + [s_r**-2] * 3)
 
 
@@ -74,11 +89,15 @@ def fit(
     model = get_model(sim.options.model)
     rows = joint_map(model.name).rows
     fns = build(model, ProblemSpec(horizon=horizon, sensor="3d", scale=scale, kernel="none", fixed=fixed))
-    data = build_residual_data(fns, camera_log(rec, model.log_names[0]), ResidualOptions(horizon=horizon), inputs=rec.inputs(rows))
+    data = build_residual_data(
+        fns, camera_log(rec, model.log_names[0]), ResidualOptions(horizon=horizon), inputs=rec.inputs(rows)
+    )
     known = {n: sim.truth[n] for n in ("sensor_z", *fixed)}
     start = camera_initial_guess(fns, data, known=known)
     x0 = np.array([start.params[n] for n in fns.free])
-    ev = ProblemEvaluator(fns, data, x_fixed=np.array([known[n] for n in fns.fixed]), omega=information(sim), delta=1.0)
+    ev = ProblemEvaluator(
+        fns, data, x_fixed=np.array([known[n] for n in fns.fixed]), omega=information(sim), delta=1.0
+    )
     gn = get_solver("gauss_newton")(ev, GaussNewtonOptions())
     estimate = None
     if lag is None:
@@ -174,7 +193,9 @@ def test_a_free_scale_with_every_length_free_is_refused(monocular: Fit) -> None:
     """Every length, the lever arm and the scale times one factor ``c`` predict the same motions
     with every translation error times ``c``: without a known length the cost falls as ``c → 0``."""
     fns = build(get_model(DIFF), ProblemSpec(sensor="3d", scale="free"))
-    with pytest.raises(ProblemError, match=r"^a free scale needs one known length: fix one of k_left, k_right, baseline"):
+    with pytest.raises(
+        ProblemError, match=r"^a free scale needs one known length: fix one of k_left, k_right, baseline"
+    ):
         camera_initial_guess(fns, monocular.data, known={"sensor_z": 0.3, "baseline": 0.45})
     x = np.array([monocular.params()[n] for n in fns.free])
     ev = ProblemEvaluator(fns, monocular.evaluator.data, x_fixed=np.array([0.3]), omega=np.ones(6), delta=1.0)
@@ -202,10 +223,12 @@ def test_windows_equal_the_defining_residual_and_jacobians_match_finite_differen
 ) -> None:
     """The mapped windows (prefix scans for H > 1) give the defining residual, and its Jacobian is
     the derivative along box-plus steps (SO(3) on the mount's rotation)."""
-    sim, rec = record(tmp_path, duration_s=8.0, position_noise=0.002, rotation_noise=0.003, scale=2.0)
+    sim, rec = record(tmp_path, duration_s=8.0, noise=CameraNoise(0.002, 0.003), scale=2.0)
     fixed = ("baseline",) if scale == "free" else ()
     fns = build(get_model(DIFF), ProblemSpec(horizon=horizon, sensor="3d", scale=scale, fixed=fixed))
-    data = build_residual_data(fns, camera_log(rec, "x"), ResidualOptions(horizon=horizon), inputs=rec.inputs(joint_map(DIFF).rows))
+    data = build_residual_data(
+        fns, camera_log(rec, "x"), ResidualOptions(horizon=horizon), inputs=rec.inputs(joint_map(DIFF).rows)
+    )
     rng = np.random.default_rng(horizon)
     x = np.array([sim.truth[n] for n in fns.free]) * (1 + rng.normal(0, 0.02, fns.n_free))
     x_fixed = np.array([sim.truth[n] for n in fns.fixed])
@@ -227,7 +250,7 @@ def test_windows_equal_the_defining_residual_and_jacobians_match_finite_differen
 
 def test_every_model_with_a_joint_map_recovers_its_truth(tmp_path: Path) -> None:
     """The tricycle's own planar start, levelled by the camera's floor normal, then Gauss-Newton."""
-    sim, rec = record(tmp_path, model="tricycle", duration_s=60.0, max_turn=0.5)
+    sim, rec = record(tmp_path, model="tricycle", duration_s=60.0, drive=DriveShape(max_turn=0.5))
     out = fit(sim, rec, lag=0.0)
     assert out.result.converged
     params, truth = out.params(), sim.truth
@@ -237,9 +260,11 @@ def test_every_model_with_a_joint_map_recovers_its_truth(tmp_path: Path) -> None
 
 
 def test_too_little_rotation_to_see_the_floor_normal_is_one_line(tmp_path: Path) -> None:
-    sim, rec = record(tmp_path, trajectory="straight", duration_s=20.0)
+    _sim, rec = record(tmp_path, drive=DriveShape("straight"), duration_s=20.0)
     fns = build(get_model(DIFF), ProblemSpec(sensor="3d"))
-    data = build_residual_data(fns, camera_log(rec, "x"), ResidualOptions(), inputs=rec.inputs(joint_map(DIFF).rows))
+    data = build_residual_data(
+        fns, camera_log(rec, "x"), ResidualOptions(), inputs=rec.inputs(joint_map(DIFF).rows)
+    )
     with pytest.raises(ProblemError) as exc:
         camera_initial_guess(fns, data, known={"sensor_z": 0.3})
     msg = str(exc.value)
@@ -249,9 +274,11 @@ def test_too_little_rotation_to_see_the_floor_normal_is_one_line(tmp_path: Path)
 
 
 def test_uneven_floor_and_reversed_turns_are_dropped_by_reason(tmp_path: Path) -> None:
-    sim, rec = record(tmp_path, duration_s=60.0, floor_tilt=0.05)
+    _sim, rec = record(tmp_path, duration_s=60.0, noise=CameraNoise(floor_tilt=0.05))
     fns = build(get_model(DIFF), ProblemSpec(sensor="3d"))
-    data = build_residual_data(fns, camera_log(rec, "x"), ResidualOptions(), inputs=rec.inputs(joint_map(DIFF).rows))
+    data = build_residual_data(
+        fns, camera_log(rec, "x"), ResidualOptions(), inputs=rec.inputs(joint_map(DIFF).rows)
+    )
     start = camera_initial_guess(fns, data, known={"sensor_z": 0.3})
     assert start.selection.counts()["axis_off_normal"] > 0
     # Camera motions turned the other way (a timing error where the turning changes) are found.
@@ -289,7 +316,7 @@ def test_realistic_noise_truth_within_three_white_noise_sigma(tmp_path: Path) ->
     seeds = range(12)
     inside = []
     for seed in seeds:
-        sim, rec = record(tmp_path, **TARGET, seed=seed, position_noise=1e-3, rotation_noise=np.radians(0.1))  # type: ignore[arg-type]
+        sim, rec = record(tmp_path, **TARGET, seed=seed, noise=CameraNoise(1e-3, np.radians(0.1)))  # type: ignore[arg-type]
         out = fit(sim, rec)
         assert out.result.converged
         unc = uncertainty.estimate(out.evaluator, out.result.x, out.data, np.zeros(out.fns.n_inputs))
@@ -298,3 +325,16 @@ def test_realistic_noise_truth_within_three_white_noise_sigma(tmp_path: Path) ->
         z = [abs(params[n] - sim.truth[n]) / unc.std[out.fns.names.index(n)] for n in out.fns.free]
         inside.append(max(z) <= 3.0)
     assert np.mean(inside) >= 0.9, inside
+
+
+def test_trajectory_metrics_of_the_camera_track_in_3d(target: Fit) -> None:
+    """ATE and RPE of the dead-reckoned camera track against the camera's own poses, in 3-D."""
+    assert geometry(target.fns) is SPATIAL
+    inputs = target.evaluator.data.inputs
+    poses = target.data.T_world_sensor
+    calibrated = trajectory_metrics(target.fns, target.evaluator.params(target.result.x), inputs, poses)
+    start = np.array([target.start.params[n] for n in target.fns.names])
+    started = trajectory_metrics(target.fns, start, inputs, poses)
+    assert calibrated.records == poses.shape[0] and calibrated.distance_m > 5.0
+    assert calibrated.ate.rmse < 1e-3 < started.ate.rmse
+    assert calibrated.rpe_rot < 1e-6 and calibrated.segment_ate_aligned.mean <= calibrated.ate.mean

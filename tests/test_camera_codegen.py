@@ -30,7 +30,7 @@ def exported(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list]:
     return out, [e for fns in problems for e in export_functions(fns)]
 
 
-def test_the_3d_export_takes_every_parameter_and_differentiates_the_estimated_ones(exported) -> None:  # noqa: ANN001
+def test_the_3d_export_takes_every_parameter_and_differentiates_the_estimated_ones(exported) -> None:
     _, functions = exported
     jac = next(e for e in functions if "jacobian" in e.function.name() and e.horizon == 4)
     assert (jac.n_params, jac.n_free, jac.error_rows, jac.z_rows) == (10, 9, 6, 7)
@@ -40,7 +40,7 @@ def test_the_3d_export_takes_every_parameter_and_differentiates_the_estimated_on
 
 
 @needs_compiler
-def test_compiled_3d_residual_equals_python(exported) -> None:  # noqa: ANN001
+def test_compiled_3d_residual_equals_python(exported) -> None:
     out, functions = exported
     lib = out / "lib3d.so"
     subprocess.run(
@@ -55,11 +55,18 @@ def test_compiled_3d_residual_equals_python(exported) -> None:  # noqa: ANN001
             u = rng.uniform(-3, 3, (2, exp.horizon))
             z = np.r_[rng.normal(0, 0.3, 3), poses3d.rotvec_to_quat(rng.normal(0, 0.3, 3))]
             got, want = ext(params, u, z), exp.function(params, u, z)
-            for a, b in zip(got if exp.function.n_out() > 1 else [got], want if exp.function.n_out() > 1 else [want]):
+            for a, b in zip(
+                got if exp.function.n_out() > 1 else [got], want if exp.function.n_out() > 1 else [want]
+            ):
                 a, b = np.asarray(a), np.asarray(b)
                 assert_close(a, b, rtol=1e-12, atol=1e-12 * max(np.abs(b).max(), 1.0))
     exe = out / "example"
-    subprocess.run([str(COMPILER), "-O2", "-o", str(exe), "example.c", "nlp_calib_residual.c", "-lm"], cwd=out, check=True, timeout=300)
+    subprocess.run(
+        [str(COMPILER), "-O2", "-o", str(exe), "example.c", "nlp_calib_residual.c", "-lm"],
+        cwd=out,
+        check=True,
+        timeout=300,
+    )
     printed = subprocess.run([str(exe)], capture_output=True, text=True, check=True, timeout=60).stdout
     diff = printed.strip().splitlines()[-1]
     assert diff.startswith("largest difference from Python: e ")

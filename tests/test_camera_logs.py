@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 import warnings
 from pathlib import Path
 
@@ -58,10 +57,8 @@ def test_tum_with_another_number_of_columns_names_file_and_line(tmp_path: Path, 
     p = write(tmp_path, "a.tum", "\n".join(bad) + "\n")
     with pytest.raises(DatasetError) as exc:
         read_tum(p)
-    assert re.fullmatch(
-        rf"{re.escape(str(p))}:3: has {columns} columns; a TUM line is 'timestamp tx ty tz qx qy qz qw' \(8 numbers\)",
-        one_line_error(exc),
-    )
+    layout = "'timestamp tx ty tz qx qy qz qw' (8 numbers)"
+    assert one_line_error(exc) == f"{p}:3: has {columns} columns; a TUM line is {layout}"
 
 
 def test_tum_quaternion_far_from_unit_is_refused(tmp_path: Path) -> None:
@@ -72,7 +69,9 @@ def test_tum_quaternion_far_from_unit_is_refused(tmp_path: Path) -> None:
 
 
 def test_tum_quaternion_close_to_unit_is_normalised_with_one_warning(tmp_path: Path) -> None:
-    p = write(tmp_path, "a.tum", GOOD_TUM.replace("0 0 0 1\n", "0 0 0 1.001\n").replace("0.99995\n", "0.99795\n"))
+    p = write(
+        tmp_path, "a.tum", GOOD_TUM.replace("0 0 0 1\n", "0 0 0 1.001\n").replace("0.99995\n", "0.99795\n")
+    )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         traj = read_tum(p)
@@ -91,7 +90,9 @@ def test_tum_timestamps_out_of_order_are_refused(tmp_path: Path, old: str, new: 
     assert msg.startswith(f"{p}:4: timestamp") and "previous one" in msg and "on line 3" in msg
 
 
-@pytest.mark.parametrize(("field", "why"), [("nan", "non-finite"), ("inf", "non-finite"), ("x1", "not a number")])
+@pytest.mark.parametrize(
+    ("field", "why"), [("nan", "non-finite"), ("inf", "non-finite"), ("x1", "not a number")]
+)
 def test_tum_values_that_are_not_finite_numbers_are_refused(tmp_path: Path, field: str, why: str) -> None:
     p = write(tmp_path, "a.tum", GOOD_TUM.replace("0.01 0 0 0", f"{field} 0 0 0"))
     with pytest.raises(DatasetError) as exc:
@@ -130,7 +131,11 @@ def test_joint_csv_is_read_by_name(tmp_path: Path) -> None:
     [
         (GOOD_CSV.replace("time,left", "stamp,left"), 1, "expected a header row 'time,<joint>"),
         (GOOD_CSV.replace("left,right", "left,left"), 1, "non-empty and distinct"),
-        (GOOD_CSV.replace("10.01,0.1,0.2", "10.01,0.1"), 3, "has 2 fields; expected 3 comma-separated numbers"),
+        (
+            GOOD_CSV.replace("10.01,0.1,0.2", "10.01,0.1"),
+            3,
+            "has 2 fields; expected 3 comma-separated numbers",
+        ),
         (GOOD_CSV.replace("10.02,0.3", "10.02,nan"), 4, "non-finite"),
         (GOOD_CSV.replace("10.03", "10.02"), 5, "is not after the previous one"),
     ],
@@ -145,7 +150,9 @@ def test_joint_csv_errors_name_file_and_line(tmp_path: Path, text: str, line: in
 
 def _joints(tmp_path: Path, t0: float = 99.9, n: int = 200) -> Path:
     t = t0 + 0.01 * np.arange(n)
-    return write(tmp_path, "j.csv", format_joints_csv(t, ("left", "right"), np.column_stack([3 * t, -t**2])))
+    return write(
+        tmp_path, "j.csv", format_joints_csv(t, ("left", "right"), np.column_stack([3 * t, -(t**2)]))
+    )
 
 
 def test_pairing_interpolates_joints_at_shifted_stamps(tmp_path: Path) -> None:

@@ -82,7 +82,7 @@ def pose_of(t: tuple, phi: tuple) -> np.ndarray:
     return np.concatenate([t, poses3d.matrix_to_quat(T[:3, :3])])
 
 
-def fn(name: str, n_in: list[int], build) -> ca.Function:  # noqa: ANN001
+def fn(name: str, n_in: list[int], build) -> ca.Function:
     syms = [ca.SX.sym(f"a{i}", n) for i, n in enumerate(n_in)]
     return ca.Function(name, syms, [build(*syms)])
 
@@ -167,7 +167,7 @@ def test_conjugate_of_a_lifted_planar_motion(t: tuple, phi: tuple, m: tuple) -> 
     assert_close(matrix(call(CONJUGATE, X, m)), expected, atol=1e-9)
 
 
-def _derivatives(build, n: int) -> ca.Function:  # noqa: ANN001
+def _derivatives(build, n: int) -> ca.Function:
     x = ca.SX.sym("x", n)
     y = build(x)
     return ca.Function("d", [x], [y, ca.jacobian(y, x), ca.hessian(ca.sumsqr(y), x)[0]])
@@ -182,7 +182,7 @@ def _derivatives(build, n: int) -> ca.Function:  # noqa: ANN001
         ("so3_log", se3.so3_log, 4, np.array([0, 0, 0, 1.0])),
     ],
 )
-def test_values_and_derivatives_are_finite_and_exact_at_exactly_zero_angle(name, build, n, at) -> None:  # noqa: ANN001
+def test_values_and_derivatives_are_finite_and_exact_at_exactly_zero_angle(name, build, n, at) -> None:
     """At zero angle the series branch must give the identity's value, the identity Jacobian of the
     chart (no 0/0, no square root's derivative at 0) and a finite Hessian."""
     value, J, H = (np.asarray(v) for v in _derivatives(build, n)(at))
@@ -191,9 +191,10 @@ def test_values_and_derivatives_are_finite_and_exact_at_exactly_zero_angle(name,
     for k in range(n):
         step = np.zeros(n)
         step[k] = eps
-        fd = (np.asarray(_derivatives(build, n)(at + step)[0]) - np.asarray(_derivatives(build, n)(at - step)[0])) / (
-            2 * eps
-        )
+        fd = (
+            np.asarray(_derivatives(build, n)(at + step)[0])
+            - np.asarray(_derivatives(build, n)(at - step)[0])
+        ) / (2 * eps)
         assert_close(J[:, k], fd.ravel(), atol=1e-8, what=f"{name} column {k}")
 
 
@@ -209,7 +210,11 @@ def test_series_and_closed_forms_agree_across_the_switch(angle: float, axis: tup
     J = np.asarray(d(xi)[1])
     eps = 1e-6
     fd = np.stack(
-        [(np.asarray(d(xi + eps * e)[0]) - np.asarray(d(xi - eps * e)[0])).ravel() / (2 * eps) for e in np.eye(6)], 1
+        [
+            (np.asarray(d(xi + eps * e)[0]) - np.asarray(d(xi - eps * e)[0])).ravel() / (2 * eps)
+            for e in np.eye(6)
+        ],
+        1,
     )
     assert_close(J, fd, atol=1e-8)
     assert_close(call(LOG, call(EXP, xi)), xi, atol=1e-14)

@@ -133,7 +133,9 @@ def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``a · b`` for pose vectors ``(x, y, z, qx, qy, qz, qw)``."""
-    return np.concatenate([a[..., :3] + rotate(a[..., 3:], b[..., :3]), quat_multiply(a[..., 3:], b[..., 3:])], -1)
+    return np.concatenate(
+        [a[..., :3] + rotate(a[..., 3:], b[..., :3]), quat_multiply(a[..., 3:], b[..., 3:])], -1
+    )
 
 
 def inverse(a: np.ndarray) -> np.ndarray:

@@ -24,8 +24,8 @@ def data_lines(path: str | Path) -> Iterator[tuple[int, str]]:
     except UnicodeDecodeError as exc:
         line = raw[: exc.start].count(b"\n") + 1
         raise DatasetError(str(p), line, "is not UTF-8 text; expected a text table") from None
-    for number, line in enumerate(text.removeprefix(_BOM).splitlines(), start=1):
-        stripped = line.strip()
+    for number, content in enumerate(text.removeprefix(_BOM).splitlines(), start=1):
+        stripped = content.strip()
         if stripped and not stripped.startswith("#"):
             yield number, stripped
 
@@ -39,7 +39,9 @@ def numbers(path: str, line: int, fields: Sequence[str], layout: str) -> list[fl
         except ValueError:
             raise DatasetError(path, line, f"{field!r} is not a number; expected {layout}") from None
         if not np.isfinite(value):
-            raise DatasetError(path, line, f"holds a non-finite value ({field}); every value must be a finite number")
+            raise DatasetError(
+                path, line, f"holds a non-finite value ({field}); every value must be a finite number"
+            )
         out.append(value)
     return out
 

@@ -59,7 +59,9 @@ def read_tum(path: str | Path) -> Trajectory3D:
         rows.append(numbers(p, number, fields, LAYOUT))
         lines.append(number)
     if len(rows) < 2:
-        raise DatasetError(p, None, f"holds {len(rows)} pose(s); a trajectory needs at least 2 lines of {LAYOUT}")
+        raise DatasetError(
+            p, None, f"holds {len(rows)} pose(s); a trajectory needs at least 2 lines of {LAYOUT}"
+        )
     table = np.array(rows)
     line_numbers = np.array(lines, dtype=np.int64)
     check_time_order(p, table[:, 0], line_numbers)
@@ -95,4 +97,6 @@ def unit_quaternions(path: str, q: np.ndarray, line_numbers: np.ndarray) -> np.n
 def format_tum(time_s: np.ndarray, poses: np.ndarray) -> str:
     """TUM text of poses ``(n, 7)`` at stamps ``time_s``."""
     table = np.column_stack([time_s, poses])
-    return "".join(" ".join(f"{v:.9f}" if i == 0 else f"{v:.15g}" for i, v in enumerate(row)) + "\n" for row in table)
+    return "".join(
+        " ".join(f"{v:.9f}" if i == 0 else f"{v:.15g}" for i, v in enumerate(row)) + "\n" for row in table
+    )

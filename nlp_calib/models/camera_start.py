@@ -170,13 +170,19 @@ def _planar(
 
 
 def _assemble(
-    model: KinematicModel, planar: Mapping[str, float], tilt: tuple[float, float], known: Mapping[str, float], scale_free: bool
+    model: KinematicModel,
+    planar: Mapping[str, float],
+    tilt: tuple[float, float],
+    known: Mapping[str, float],
+    scale_free: bool,
 ) -> dict[str, float]:
     """The 3-D parameters from the planar start, the roll and pitch and the known values."""
     x, y, yaw = (planar[n] for n in SENSOR_PARAMS)
     out = {n: float(planar[n]) for n in model.kinematic_params}
     out.update(sensor_x=x, sensor_y=y, sensor_z=float(known.get(HELD_PARAMS[0], 0.0)))
-    out.update(sensor_roll=tilt[0], sensor_pitch=tilt[1], sensor_yaw=float(np.arctan2(np.sin(yaw), np.cos(yaw))))
+    out.update(
+        sensor_roll=tilt[0], sensor_pitch=tilt[1], sensor_yaw=float(np.arctan2(np.sin(yaw), np.cos(yaw)))
+    )
     if not scale_free:
         return out
     lengths = length_params(model)

@@ -23,7 +23,14 @@ class _Units(Protocol):
 
 
 #: The 3-D mount closes a 3-D sensor's parameter vector, in this order.
-MOUNT_PARAMS: tuple[str, ...] = ("sensor_x", "sensor_y", "sensor_z", "sensor_roll", "sensor_pitch", "sensor_yaw")
+MOUNT_PARAMS: tuple[str, ...] = (
+    "sensor_x",
+    "sensor_y",
+    "sensor_z",
+    "sensor_roll",
+    "sensor_pitch",
+    "sensor_yaw",
+)
 #: The mount's rotation angles (perturbed together on SO(3) when all three are free).
 MOUNT_ANGLES: tuple[str, str, str] = ("sensor_roll", "sensor_pitch", "sensor_yaw")
 #: Not observable from planar driving: always held at its given value.

@@ -81,7 +81,9 @@ def camera_initial_guess(
     def base_motion(params: Mapping[str, float]) -> np.ndarray:
         return over_columns(planar.predict_window, np.array([params[n] for n in planar.names]), U)[0]
 
-    return camera_start(fns.model, U, z, base_motion, scale_free=sensor.scale_free, known=known, options=options)
+    return camera_start(
+        fns.model, U, z, base_motion, scale_free=sensor.scale_free, known=known, options=options
+    )
 
 
 def fit_selection(

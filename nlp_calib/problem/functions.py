@@ -31,7 +31,7 @@ import numpy as np
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.models.base import INTEGRATIONS, KinematicModel
 from nlp_calib.problem import motion as motion_sources
-from nlp_calib.problem.sensors import sensor_for
+from nlp_calib.problem.sensors import Sensor, sensor_for
 from nlp_calib.problem.trajectory import TrajectoryFunctions, base_motion, fn, split_params
 from nlp_calib.symbolic.kernels import KERNELS, kernel_function
 
@@ -98,7 +98,7 @@ class ProblemFunctions(TrajectoryFunctions):
     """
 
     def __init__(self, model: KinematicModel, spec: ProblemSpec) -> None:
-        self.sensor = sensor = sensor_for(spec.sensor, spec.scale)
+        sensor = sensor_for(spec.sensor, spec.scale)
         names = (*model.kinematic_params, *sensor.params)
         unknown = [n for n in spec.fixed if n not in names]
         if unknown:
@@ -142,6 +142,11 @@ class ProblemFunctions(TrajectoryFunctions):
     @property
     def n_free(self) -> int:
         return len(self.free)
+
+    @property
+    def sensor(self) -> Sensor:
+        """What the tracker measures and how the mount enters (see :mod:`~nlp_calib.problem.sensors`)."""
+        return sensor_for(self.spec.sensor, self.spec.scale)
 
     @property
     def manifold_sensor(self) -> bool:

@@ -156,7 +156,9 @@ class Mount3D:
         """The camera's unwrapped rotation about the floor normal (the principal axis of its
         rotations relative to the first pose) at each pose (rad)."""
         q0 = T_world_sensor[0, 3:7]
-        phi = poses3d.quat_to_rotvec(poses3d.quat_multiply(poses3d.quat_conjugate(q0), T_world_sensor[:, 3:7]))
+        phi = poses3d.quat_to_rotvec(
+            poses3d.quat_multiply(poses3d.quat_conjugate(q0), T_world_sensor[:, 3:7])
+        )
         _, vecs = np.linalg.eigh(phi.T @ phi)
         return np.unwrap(phi @ vecs[:, -1])
 
@@ -173,6 +175,8 @@ def sensor_for(kind: str, scale: str) -> Sensor:
         raise ProblemError(f"scale must be one of {', '.join(SCALES)}, got {scale!r}")
     if kind == "planar":
         if scale == "free":
-            raise ProblemError("a free scale needs a 3-D sensor (sensor: 3d); planar tracker poses are metric")
+            raise ProblemError(
+                "a free scale needs a 3-D sensor (sensor: 3d); planar tracker poses are metric"
+            )
         return PlanarSensor()
     return Mount3D(scale == "free")

@@ -64,10 +64,14 @@ class TrajectoryFunctions:
     """
 
     model: KinematicModel
-    sensor: Sensor
     names: tuple[str, ...]
     integration: str
     horizon: int
+
+    @property
+    def sensor(self) -> Sensor:
+        """The host's sensor (see :mod:`~nlp_calib.problem.sensors`)."""
+        raise NotImplementedError
 
     @property
     def n_inputs(self) -> int:
@@ -78,7 +82,9 @@ class TrajectoryFunctions:
         """Full-parameter symbols: params, one interval's inputs and the sensor motion over it."""
         params = ca.SX.sym("params", len(self.names))
         u1 = ca.SX.sym("u", self.n_inputs)
-        h1 = predict_motion(self.model, self.sensor, params, ca.reshape(u1, self.n_inputs, 1), self.integration)
+        h1 = predict_motion(
+            self.model, self.sensor, params, ca.reshape(u1, self.n_inputs, 1), self.integration
+        )
         return params, u1, h1
 
     @functools.cached_property

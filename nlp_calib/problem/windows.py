@@ -192,7 +192,9 @@ def tracker_poses(fns: ProblemFunctions, log: Log) -> np.ndarray:
     if fns.sensor.pose_rows == 3:
         return log.T_world_sensor
     if log.T_world_sensor_3d is None:
-        raise ProblemError(f"{log.path}: a 3-D sensor's problem needs 3-D tracker poses; the log has planar ones")
+        raise ProblemError(
+            f"{log.path}: a 3-D sensor's problem needs 3-D tracker poses; the log has planar ones"
+        )
     return log.T_world_sensor_3d
 
 

@@ -54,13 +54,55 @@ LIMITS: Mapping[str, Range] = {
     "joint_rate_hz": Range(1.0, 1000.0),
     "stamp_offset_s": Range(-1.0, 1.0),
     "scale": Range(0.0, 1e6, lo_open=True),
-    "position_noise": Range(0.0, 1.0),
-    "rotation_noise": Range(0.0, 1.0),
-    "floor_tilt": Range(0.0, 0.3),
+}
+DRIVE_LIMITS: Mapping[str, Range] = {
     "max_speed": Range(0.0, 10.0, lo_open=True),
     "max_turn": Range(0.0, 1.5),
     "stop_fraction": Range(0.0, 1.0, hi_open=True),
 }
+NOISE_LIMITS: Mapping[str, Range] = {
+    "position": Range(0.0, 1.0),
+    "rotation": Range(0.0, 1.0),
+    "floor_tilt": Range(0.0, 0.3),
+}
+
+
+def _check(options: object, limits: Mapping[str, Range], prefix: str = "") -> None:
+    for name, limit in limits.items():
+        reason = limit.problem(getattr(options, name))
+        if reason is not None:
+            raise OptionsError(f"{prefix}{name} {reason}")
+
+
+@dataclass(frozen=True)
+class DriveShape:
+    """How the base drives: ``trajectory`` (``s_curves``, ``straight``, ``no_reversals``), speed
+    (m/s), turning amplitude and the fraction of stops (as :mod:`nlp_calib.simulation.simulate`)."""
+
+    trajectory: str = "s_curves"
+    max_speed: float = 0.5
+    max_turn: float = 0.6
+    stop_fraction: float = 0.1
+
+    def __post_init__(self) -> None:
+        _check(self, DRIVE_LIMITS, "drive.")
+        if self.trajectory not in TRAJECTORIES:
+            raise OptionsError(
+                f"drive.trajectory must be one of {', '.join(TRAJECTORIES)}, got {self.trajectory!r}"
+            )
+
+
+@dataclass(frozen=True)
+class CameraNoise:
+    """1σ white noise of each pose (``position`` in m, ``rotation`` in rad, on the right) and the
+    uneven floor's largest tilt of the base (rad)."""
+
+    position: float = 0.0
+    rotation: float = 0.0
+    floor_tilt: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check(self, NOISE_LIMITS, "noise.")
 
 
 @dataclass(frozen=True)
@@ -72,28 +114,18 @@ class CameraSimulationOptions:
     model: str = next(iter(JOINT_MAPS))
     duration_s: float = 60.0
     seed: int = 0
-    trajectory: str = "s_curves"
     truth: Mapping[str, float] = field(default_factory=dict)
     image_rate_hz: float = 50.0
     joint_rate_hz: float = 100.0
     stamp_offset_s: float = 0.0
     scale: float = 1.0
-    position_noise: float = 0.0
-    rotation_noise: float = 0.0
-    floor_tilt: float = 0.0
-    max_speed: float = 0.5
-    max_turn: float = 0.6
-    stop_fraction: float = 0.1
+    noise: CameraNoise = CameraNoise()
+    drive: DriveShape = DriveShape()
 
     def __post_init__(self) -> None:
-        for name, limit in LIMITS.items():
-            reason = limit.problem(getattr(self, name))
-            if reason is not None:
-                raise OptionsError(f"{name} {reason}")
+        _check(self, LIMITS)
         if self.model not in MODELS:
             raise OptionsError(f"model must be one of {', '.join(MODELS)}, got {self.model!r}")
-        if self.trajectory not in TRAJECTORIES:
-            raise OptionsError(f"trajectory must be one of {', '.join(TRAJECTORIES)}, got {self.trajectory!r}")
         defaults = {**joint_map(self.model).default_truth, **DEFAULT_MOUNT}
         unknown = sorted(set(self.truth) - set(defaults))
         if unknown:
@@ -161,12 +193,16 @@ def _base_motion(
     opts: CameraSimulationOptions, rng: np.random.Generator, t_fine: np.ndarray
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Planar base poses ``(n, 3)`` on the fine grid and the drive's channels there."""
-    knots = drive_profiles(opts, rng, float(t_fine[-1] - t_fine[0]) + 1.0)
+    knots = drive_profiles(opts.drive, rng, float(t_fine[-1] - t_fine[0]) + 1.0)
     kt, kv, ks = knots
     t_mid = 0.5 * (t_fine[1:] + t_fine[:-1]) - t_fine[0]
     drive = MODELS[opts.model].drive
     ds, w, channels = drive.steps(
-        _DriveSettings(opts.truth), np.interp(t_mid, kt, kv), np.interp(t_mid, kt, ks), np.diff(t_fine), float(ks[0])
+        _DriveSettings(opts.truth),
+        np.interp(t_mid, kt, kv),
+        np.interp(t_mid, kt, ks),
+        np.diff(t_fine),
+        float(ks[0]),
     )
     return integrate_base(ds, w), channels
 
@@ -181,7 +217,7 @@ def simulate_camera(opts: CameraSimulationOptions) -> CameraSimulation:
     at_images = np.searchsorted(t_fine, t_images)
     at_joints = np.searchsorted(t_fine, t_joints)
     base = poses3d.from_planar(planar[at_images])
-    tilt = _tilt(rng, t_images, opts.floor_tilt)
+    tilt = _tilt(rng, t_images, opts.noise.floor_tilt)
     rpy = np.column_stack([tilt, planar[at_images, 2]])
     base[:, 3:] = poses3d.matrix_to_quat(poses3d.rpy_to_matrix(rpy))
     mount = poses3d.mount_pose(np.array([opts.truth[n] for n in MOUNT_PARAMS]))
@@ -205,8 +241,8 @@ def _noisy(rng: np.random.Generator, poses: np.ndarray, opts: CameraSimulationOp
     """Poses with white noise: position in the world frame, rotation on the right."""
     out = poses.copy()
     n = poses.shape[0]
-    out[:, :3] += rng.normal(0.0, opts.position_noise, (n, 3))
-    turn = poses3d.rotvec_to_quat(rng.normal(0.0, opts.rotation_noise, (n, 3)))
+    out[:, :3] += rng.normal(0.0, opts.noise.position, (n, 3))
+    turn = poses3d.rotvec_to_quat(rng.normal(0.0, opts.noise.rotation, (n, 3)))
     out[:, 3:] = poses3d.quat_multiply(out[:, 3:], turn)
     return out
 

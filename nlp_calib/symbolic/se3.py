@@ -110,7 +110,9 @@ def so3_exp(phi: Sym) -> Sym:
     theta2 = ca.dot(phi, phi)
     small = _small(theta2)
     theta = _safe_sqrt(theta2, small)
-    half_sinc = ca.if_else(small, 0.5 * (1.0 - theta2 / 24.0 * (1.0 - theta2 / 80.0)), ca.sin(0.5 * theta) / theta)
+    half_sinc = ca.if_else(
+        small, 0.5 * (1.0 - theta2 / 24.0 * (1.0 - theta2 / 80.0)), ca.sin(0.5 * theta) / theta
+    )
     cos_half = ca.if_else(small, 1.0 - theta2 / 8.0 * (1.0 - theta2 / 48.0), ca.cos(0.5 * theta))
     return ca.vertcat(half_sinc * phi, cos_half)
 
@@ -205,7 +207,9 @@ def exp(xi: Sym) -> Sym:
     small = _small(theta2)
     theta = _safe_sqrt(theta2, small)
     a = ca.if_else(small, 0.5 - theta2 / 24.0 * (1.0 - theta2 / 30.0), (1.0 - ca.cos(theta)) / theta2)
-    b = ca.if_else(small, (1.0 - theta2 / 20.0 * (1.0 - theta2 / 42.0)) / 6.0, (theta - ca.sin(theta)) / (theta2 * theta))
+    b = ca.if_else(
+        small, (1.0 - theta2 / 20.0 * (1.0 - theta2 / 42.0)) / 6.0, (theta - ca.sin(theta)) / (theta2 * theta)
+    )
     cross = ca.cross(phi, rho)
     t = rho + a * cross + b * ca.cross(phi, cross)
     return ca.vertcat(t, so3_exp(phi))
