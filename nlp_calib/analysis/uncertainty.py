@@ -158,9 +158,7 @@ def estimate(
     poses = data.T_world_sensor
     a_idx, b_idx = data.starts, data.stops
     distinct = bool(np.all(np.diff(a_idx) > 0) and np.all(np.diff(b_idx) > 0))
-    Omega = evaluator.omega
-    groups = fns.sensor.noise_groups
-    n_noise = sum(len(g) for g in groups)
+    Omega, groups = evaluator.omega, fns.sensor.noise_groups
     # Input noise is known (encoder resolution, or set by the user); the tracker's two variances
     # follow from the squared residuals by the method of moments, on inliers only. Estimating the
     # input noise the same way is ill-posed: its share of the residuals is small, its effect on the
@@ -176,7 +174,7 @@ def estimate(
         running[lo + 1 : hi + 1] = np.cumsum(part, axis=0) + running[lo]
     use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(N, dtype=bool)
     gram, proj, yy = np.zeros((len(groups), len(groups))), np.zeros(len(groups)), 0.0
-    K = np.zeros((poses.shape[0], n, n_noise))
+    K = np.zeros((poses.shape[0], n, sum(len(g) for g in groups)))
     # Σ over the windows containing interval j of L_w ∂e_w/∂end: +at the first interval, −after the last.
     C = np.zeros((n_int + 1, n, m))
     outliers = np.zeros((n, n))
