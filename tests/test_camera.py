@@ -3,12 +3,16 @@ at the level below the pipeline (simulated recordings with known truth)."""
 
 from __future__ import annotations
 
+import os
+import re
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import assert_close
+from conftest import REPO, assert_close
 
 from nlp_calib.analysis import observability, uncertainty
 from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
@@ -338,3 +342,36 @@ def test_trajectory_metrics_of_the_camera_track_in_3d(target: Fit) -> None:
     assert calibrated.records == poses.shape[0] and calibrated.distance_m > 5.0
     assert calibrated.ate.rmse < 1e-3 < started.ate.rmse
     assert calibrated.rpe_rot < 1e-6 and calibrated.segment_ate_aligned.mean <= calibrated.ate.mean
+
+
+def test_the_example_of_docs_camera_runs_and_recovers_the_truth(tmp_path: Path) -> None:
+    text = (REPO / "docs" / "camera.md").read_text(encoding="utf-8")
+    code = re.search(r"## From files to a calibration\n\n```python\n(.*?)```", text, re.S)
+    assert code is not None
+    proc = subprocess.run(
+        [sys.executable, "-c", code.group(1)],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[0].startswith("lag 0.01 converged True dropped {'not_finite': 0")
+    for line in lines[1:]:
+        name, value, *_, truth = line.split()
+        assert abs(float(value) - float(truth)) <= 1e-4 * max(abs(float(truth)), 1.0), name
+
+
+def test_uncertainty_of_horizon_windows_estimates_the_pose_noise(tmp_path: Path) -> None:
+    """Windows of several intervals (prefix scans, correlated through shared poses and intervals)."""
+    sim, rec = record(tmp_path, duration_s=30.0, noise=CameraNoise(2e-3, 2e-3))
+    out = fit(sim, rec, horizon=5, lag=0.0)
+    assert out.result.converged
+    unc = uncertainty.estimate(out.evaluator, out.result.x, out.data, np.full(out.fns.n_inputs, 1e-6))
+    assert unc.noise["tracker_xyz"] == pytest.approx(2e-3, rel=0.1)
+    assert unc.noise["tracker_rotation"] == pytest.approx(2e-3, rel=0.1)
+    free = [out.fns.names.index(n) for n in out.fns.free]
+    assert np.all(np.isfinite(unc.std[free])) and np.all(unc.std[free] > 0)
+    assert unc.std[out.fns.names.index("sensor_z")] == 0.0
