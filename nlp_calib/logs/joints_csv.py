@@ -1,7 +1,7 @@
 """A joint log as CSV: a header row ``time,<joint>,<joint>,…`` then one row per sample.
 
 Times in seconds, joint positions in radians (a wheel's angle grows without wrapping as it
-turns; a steering joint's is its angle); ``#`` lines are comments. Rows with another number of
+turns; a joint that steers gives its angle); ``#`` lines are comments. Rows with another number of
 fields, values that are not finite numbers and times that do not increase are refused with the
 file and the line.
 """
