@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nlp_calib.models import SENSOR_PARAMS, reference_scales
+from nlp_calib.models import reference_scales
 from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, Observability, WeakDirection
 from nlp_calib.solvers import ProblemEvaluator
 
@@ -24,7 +24,7 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
     fns = evaluator.fns
     names = fns.free
     ne = evaluator.normal_equations(x)
-    heading = np.unwrap(T_world_sensor[:, 2])
+    heading = fns.sensor.heading(T_world_sensor)
     if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
         return Observability(
             condition_number=float("nan"),
@@ -34,7 +34,7 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
             warnings=("observability not analysed: the residual is NaN or infinite at every estimate",),
         )
     _, s, weight = evaluator.robust_terms(x)
-    dof = max(3 * evaluator.n_residuals - len(names), 1)
+    dof = max(fns.error_rows * evaluator.n_residuals - len(names), 1)
     sigma2 = max(float(np.sum(weight * s)) / dof, 1e-300)
     params = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()
     value = dict(zip(fns.names, params))
@@ -64,7 +64,7 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
     warnings = []
     if turning < MIN_TURNING:
         model = fns.model
-        lever = [n for n in (*model.turning_params, *SENSOR_PARAMS[:2]) if n in names]
+        lever = [n for n in (*model.turning_params, *fns.sensor.turning) if n in names]
         what = ", ".join(lever) + (f" and {model.turning_note}" if model.turning_note else "")
         warnings.append(
             f"no turning: the sensor's heading spans only {turning:.2f} rad over the whole log, so "

@@ -6,7 +6,8 @@ both ways: tracker noise largely cancels along a chain of windows (consecutive e
 telescope), input noise is counted several times. So the covariance is propagated from the
 sources instead, to first order:
 
-- each tracker pose carries white noise ``diag(σ_t², σ_t², σ_θ²)``;
+- each tracker pose carries white noise ``diag(σ_t², σ_t², σ_θ²)`` (a 3-D pose: ``σ_t²`` on each
+  coordinate of its position, ``σ_r²`` on each component of a rotation on the right);
 - each interval's model inputs carry white noise ``diag(σ_u²)`` (encoder quantisation by default).
 
 A residual is ``e_w ≈ E_w^a n_a + E_w^b n_b + Σ_j F_w^j m_j`` (``E = ∂e/∂z·∂z/∂p`` and
@@ -137,7 +138,7 @@ def estimate(
     poses = data.T_world_sensor
     a_idx, b_idx = data.starts, data.stops
     distinct = bool(np.all(np.diff(a_idx) > 0) and np.all(np.diff(b_idx) > 0))
-    Omega = evaluator.omega
+    Omega, groups = evaluator.omega, fns.sensor.noise_groups
     # Input noise is known (encoder resolution, or set by the user); the tracker's two variances
     # follow from the squared residuals by the method of moments, on inliers only. Estimating the
     # input noise the same way is ill-posed: its share of the residuals is small, its effect on the
@@ -152,21 +153,21 @@ def estimate(
         part = (Dj * Sigma_in) @ Dj.transpose(0, 2, 1)
         running[lo + 1 : hi + 1] = np.cumsum(part, axis=0) + running[lo]
     use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(N, dtype=bool)
-    gram, proj, yy = np.zeros((2, 2)), np.zeros(2), 0.0
-    K = np.zeros((poses.shape[0], n, 3))
+    gram, proj, yy = np.zeros((len(groups), len(groups))), np.zeros(len(groups)), 0.0
+    K = np.zeros((poses.shape[0], n, sum(len(g) for g in groups)))
     # Σ over the windows containing interval j of L_w ∂e_w/∂end: +at the first interval, −after the last.
     C = np.zeros((n_int + 1, n, m))
     outliers = np.zeros((n, n))
     for w, sens in blocks:
         a, b = a_idx[w], b_idx[w]
-        Ea, Eb = sens.de_dz @ sens.dz_da, sens.de_dz @ sens.dz_db  # (., 3, 3)
+        Ea, Eb = sens.de_dz @ sens.dz_da, sens.de_dz @ sens.dz_db  # (., error rows, pose noise)
         known = ((sens.de_dend @ (running[b] - running[a])) * sens.de_dend).sum(axis=2)
         E2 = Ea**2 + Eb**2  # per residual component c, pose component k
-        coef = np.stack([E2[:, :, :2].sum(axis=2), E2[:, :, 2]], axis=2)  # (., 3, 2)
+        coef = np.stack([E2[:, :, list(g)].sum(axis=2) for g in groups], axis=2)  # (., rows, groups)
         u = use[w]
-        A, y = coef[u].reshape(-1, 2), (e[:, w].T[u] ** 2 - known[u]).ravel()
+        A, y = coef[u].reshape(-1, len(groups)), (e[:, w].T[u] ** 2 - known[u]).ravel()
         gram, proj, yy = gram + A.T @ A, proj + A.T @ y, yy + float(y @ y)
-        L = weight[w, None, None] * sens.J.transpose(0, 2, 1) * Omega[None, None, :]  # (., n, 3)
+        L = weight[w, None, None] * sens.J.transpose(0, 2, 1) * Omega[None, None, :]  # (., n, rows)
         _add(K, a, L @ Ea, distinct)
         _add(K, b, L @ Eb, distinct)
         G = L @ sens.de_dend
@@ -176,10 +177,10 @@ def estimate(
         # but non-zero pull is counted as it is, from their own scores.
         score = np.einsum("wic,cw->wi", L[~u], e[:, w][:, ~u])
         outliers += score.T @ score
-    mm = 3 * int(use.sum())
+    mm = fns.error_rows * int(use.sum())
     dof = max(mm - n, 1)
     var = nnls_gram(gram, proj, yy) * (mm / dof)
-    Sigma_pose = np.array([var[0], var[0], var[1]])
+    Sigma_pose = np.concatenate([np.full(len(g), v) for g, v in zip(groups, var)])
     meat = _weighted_gram(K, Sigma_pose) + outliers
     np.cumsum(C, axis=0, out=C)
     for lo in range(0, n_int, STEP):
@@ -207,7 +208,7 @@ def estimate(
     corr[~np.isfinite(corr)] = 0.0
     for i in idx:
         corr[i, i] = 1.0
-    noise = {"tracker_xy": float(np.sqrt(var[0])), "tracker_theta": float(np.sqrt(var[1]))}
+    noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
     noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
     return Uncertainty(
         names=names, free=fns.free, covariance=cov, std=std, correlation=corr, noise=noise, dof=dof

@@ -6,6 +6,11 @@ major like all CasADi data. ``J`` is the Jacobian with respect to the manifold p
 sensor pose perturbed on the left: ``v2t(Δ)·T_base_sensor``). Both the single-step (H = 1) and
 the scenario's horizon variant are written, with a header, an ``example.c`` that calls them and
 a Makefile.
+
+A 3-D sensor's problem exports ``(params[n], u[n_in x H], z[7]) -> (e[6], J[6 x m])``: ``z`` the
+camera's motion ``(x, y, z, qx, qy, qz, qw)``, ``e`` its ``Log`` error and ``J`` the columns of the
+parameters the problem estimates (``m = n − 1``: ``sensor_z`` never enters the residual), the
+mount's rotation perturbed on SO(3) from the left (see :mod:`nlp_calib.problem.sensors`).
 """
 
 from __future__ import annotations
@@ -34,26 +39,31 @@ class ExportedFunction:
     horizon: int
     n_params: int
     n_inputs: int
+    n_free: int
+    error_rows: int
+    z_rows: int
 
 
 def export_functions(fns: ProblemFunctions) -> list[ExportedFunction]:
     """``residual`` and ``residual_jacobian`` of ``fns`` with a C-friendly signature."""
-    if fns.fixed:
+    if fns.spec.fixed:
         raise ProblemError("export a problem without fixed parameters (the C caller passes all of them)")
-    H, n_in, n = fns.spec.horizon, fns.n_inputs, fns.n_free
+    H, n_in, n = fns.spec.horizon, fns.n_inputs, len(fns.names)
     params = ca.SX.sym("params", n)
+    x, x_fixed = params, ca.SX(0, 1)
+    if fns.fixed:  # held by the problem itself (a 3-D mount's sensor_z): passed, not differentiated
+        x = ca.vertcat(*[params[fns.names.index(f)] for f in fns.free])
+        x_fixed = ca.vertcat(*[params[fns.names.index(f)] for f in fns.fixed])
     U = ca.SX.sym("u", n_in, H)
-    z = ca.SX.sym("z", 3)
+    z = ca.SX.sym("z", fns.sensor.z_rows)
     data = ca.vertcat(ca.reshape(U, n_in * H, 1), z, 1.0)
-    e = fns.residual(params, ca.SX(0, 1), data)
-    e_j, J = fns.residual_jacobian(params, ca.SX(0, 1), data)
+    e = fns.residual(x, x_fixed, data)
+    e_j, J = fns.residual_jacobian(x, x_fixed, data)
     suffix = f"_h{H}"
+    sizes = (H, n, n_in, fns.n_free, fns.error_rows, fns.sensor.z_rows)
     return [
         ExportedFunction(
-            ca.Function(f"{PREFIX}residual{suffix}", [params, U, z], [e], ["params", "u", "z"], ["e"]),
-            H,
-            n,
-            n_in,
+            ca.Function(f"{PREFIX}residual{suffix}", [params, U, z], [e], ["params", "u", "z"], ["e"]), *sizes
         ),
         ExportedFunction(
             ca.Function(
@@ -63,9 +73,7 @@ def export_functions(fns: ProblemFunctions) -> list[ExportedFunction]:
                 ["params", "u", "z"],
                 ["e", "J"],
             ),
-            H,
-            n,
-            n_in,
+            *sizes,
         ),
     ]
 
@@ -93,15 +101,21 @@ class Example:
     window: str
 
 
+#: What ``z`` holds, by its rows (a planar or a 3-D sensor).
+_MOTION = {
+    3: "t2v(T(p_k)^-1 T(p_k+H)): x, y, theta",
+    7: "T(p_k)^-1 T(p_k+H): x, y, z, qx, qy, qz, qw (the sensor's frame at k)",
+}
+
+
 def example_source(fns: ProblemFunctions, exported: ExportedFunction, example: Example, origin: str) -> str:
     """A C program that calls ``exported`` (a residual_jacobian) on one window, prints e and J, and
     compares them with the values Python computes for the same call."""
-    f = exported.function
-    name = f.name()
-    n, n_in, H = exported.n_params, exported.n_inputs, exported.horizon
+    f, name = exported.function, exported.function.name()
+    n, n_in, H, zr = exported.n_params, exported.n_inputs, exported.horizon, exported.z_rows
+    r, nj = exported.error_rows, exported.error_rows * exported.n_free
     params, column = example.params, example.column
-    U = column[: n_in * H]
-    z = column[n_in * H : n_in * H + 3]
+    U, z = column[: n_in * H], column[n_in * H : n_in * H + zr]
     e_py, J_py = (np.asarray(v) for v in f(params, U.reshape(n_in, H, order="F"), z))
     names = ", ".join(fns.names)
     return (
@@ -116,9 +130,9 @@ int main(void) {{
   const casadi_real params[{n}] = {{{_c_array(params)}}};
   /* Model inputs of the {H} interval(s), interval after interval: {", ".join(fns.model.input_names)}. */
   const casadi_real u[{n_in * H}] = {{{_c_array(U)}}};
-  /* Measured sensor motion t2v(T(p_k)^-1 T(p_k+H)): x, y, theta. */
-  const casadi_real z[3] = {{{_c_array(z)}}};
-  casadi_real e[3], J[{3 * n}]; /* J is column-major: J[i + 3*j] = de_i/ddelta_j */
+  /* Measured sensor motion {_MOTION[zr]}. */
+  const casadi_real z[{zr}] = {{{_c_array(z)}}};
+  casadi_real e[{r}], J[{nj}]; /* J is column-major: J[i + {r}*j] = de_i/ddelta_j */
 
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   {name}_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
@@ -131,16 +145,16 @@ int main(void) {{
   if ({name}(arg, res, iw, w, 0) != 0) {{ fprintf(stderr, "evaluation failed\\n"); return 1; }}
 
   /* What Python computes for the same call (nlp_calib, CasADi's interpreter). */
-  const casadi_real e_python[3] = {{{_c_array(e_py)}}};
-  const casadi_real J_python[{3 * n}] = {{{_c_array(J_py)}}};
+  const casadi_real e_python[{r}] = {{{_c_array(e_py)}}};
+  const casadi_real J_python[{nj}] = {{{_c_array(J_py)}}};
   double de = 0.0, dJ = 0.0;
   printf("window: {example.window}\\n");
   printf("parameters: {example.params_from}\\n");
-  for (int i = 0; i < 3; ++i) {{
+  for (int i = 0; i < {r}; ++i) {{
     printf("e %d %.17g\\n", i, e[i]);
     de = fmax(de, fabs(e[i] - e_python[i]));
   }}
-  for (int k = 0; k < {3 * n}; ++k) {{
+  for (int k = 0; k < {nj}; ++k) {{
     printf("J %d %.17g\\n", k, J[k]);
     dJ = fmax(dJ, fabs(J[k] - J_python[k]));
   }}
@@ -192,6 +206,12 @@ def generate(
     return [*written, program, makefile]
 
 
-def build_for_export(model: KinematicModel, horizon: int, integration: str) -> list[ProblemFunctions]:
-    """The single-step problem and, when different, the ``horizon`` one, without fixed parameters."""
-    return [build(model, ProblemSpec(horizon=H, integration=integration)) for H in sorted({1, horizon})]
+def build_for_export(
+    model: KinematicModel, horizon: int, integration: str, sensor: str = "planar", scale: str = "fixed"
+) -> list[ProblemFunctions]:
+    """The single-step problem and, when different, the ``horizon`` one, without fixed parameters
+    (beyond those the sensor always holds)."""
+    return [
+        build(model, ProblemSpec(horizon=H, integration=integration, sensor=sensor, scale=scale))
+        for H in sorted({1, horizon})
+    ]

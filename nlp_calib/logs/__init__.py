@@ -6,23 +6,37 @@ Knows no kinematic model: callers say which encoders are absolute and which are 
 
 from nlp_calib.logs.bag_reader import BagError, BagTopics
 from nlp_calib.logs.bag_records import read_bag
+from nlp_calib.logs.camera import CameraRecording, JointInput, camera_log, pair, planar_track
+from nlp_calib.logs.joints_csv import JointLog, format_joints_csv, read_joints_csv
 from nlp_calib.logs.log import ENCODER_KINDS, DroppedRecord, EncoderKind, Log, LogHeader
 from nlp_calib.logs.reader import parse_log, read_log, yaw_from_quaternion
 from nlp_calib.logs.resample import resample_encoders, resample_tracker
+from nlp_calib.logs.tum import Trajectory3D, format_tum, read_tum
 from nlp_calib.logs.writer import format_log
 
 __all__ = [
     "ENCODER_KINDS",
     "BagError",
     "BagTopics",
+    "CameraRecording",
     "DroppedRecord",
     "EncoderKind",
+    "JointInput",
+    "JointLog",
     "Log",
     "LogHeader",
+    "Trajectory3D",
+    "camera_log",
+    "format_joints_csv",
     "format_log",
+    "format_tum",
+    "pair",
     "parse_log",
+    "planar_track",
     "read_bag",
+    "read_joints_csv",
     "read_log",
+    "read_tum",
     "resample_encoders",
     "resample_tracker",
     "yaw_from_quaternion",

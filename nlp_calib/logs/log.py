@@ -63,6 +63,12 @@ class Log:
     ``T_world_sensor`` the tracker poses and ``model_pose`` the vendor odometry, both
     ``(x, y, theta)`` per row. ``time_s`` is relative to the first record of the file, whose own
     stamp on the log's clock is ``start_ns`` (ns).
+    ``(x, y, theta)`` per row. ``time_s`` is relative to the first record of the file.
+
+    A 3-D tracker (a camera's own trajectory) fills ``T_world_sensor_3d`` too, ``(x, y, z, qx, qy,
+    qz, qw)`` per row in its own world frame and units; ``T_world_sensor`` then holds its levelled
+    planar track (see :func:`nlp_calib.logs.camera.planar_track`), so every planar consumer keeps
+    working. ``None`` for a planar log.
     """
 
     path: str
@@ -74,6 +80,7 @@ class Log:
     line_numbers: np.ndarray
     dropped: tuple[DroppedRecord, ...] = field(default=())
     start_ns: int = 0
+    T_world_sensor_3d: np.ndarray | None = None
 
     @property
     def n_records(self) -> int:
@@ -97,6 +104,7 @@ class Log:
             model_pose=frozen(self.model_pose[sl]),
             T_world_sensor=frozen(self.T_world_sensor[sl]),
             line_numbers=frozen(self.line_numbers[sl]),
+            T_world_sensor_3d=None if self.T_world_sensor_3d is None else frozen(self.T_world_sensor_3d[sl]),
         )
 
 

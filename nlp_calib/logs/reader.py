@@ -50,8 +50,8 @@ _BOM = b"\xef\xbb\xbf"
 # --- the stream -------------------------------------------------------------------------------
 
 
-def _open(p: Path) -> BinaryIO:
-    """The log opened for reading; special files are refused before they can block."""
+def open_log(p: Path) -> BinaryIO:
+    """A log file opened for reading; special files are refused before they can block."""
     try:
         return open_regular(p)
     except SpecialFileError as exc:
@@ -179,7 +179,7 @@ def _chain(
 def read_header(path: str | Path) -> LogHeader:
     """The header of a log file (its ``#`` lines up to the first record)."""
     p = Path(path)
-    with _open(p) as fh:
+    with open_log(p) as fh:
         header, _ = _split_header(_blocks(_chunks(fh)), str(p))
     if not header:
         raise DatasetError(
@@ -199,7 +199,7 @@ def read_log(path: str | Path, encoder_kinds: Mapping[str, EncoderKind], *, stri
     :attr:`Log.dropped`; header problems are errors in either mode.
     """
     p = Path(path)
-    with _open(p) as fh:
+    with open_log(p) as fh:
         return _parse(_blocks(_chunks(fh)), encoder_kinds, str(p), strict)
 
 

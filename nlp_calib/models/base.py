@@ -19,6 +19,7 @@ import numpy as np
 
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log, LogHeader
+from nlp_calib.models.mount import MOUNT_REFERENCE
 
 if TYPE_CHECKING:
     from nlp_calib.models.drives import Drive
@@ -219,7 +220,7 @@ def header_parameters(model: KinematicModel, header: LogHeader) -> dict[str, flo
 
 def reference_scale(model: KinematicModel, name: str, value: float) -> float:
     """The precision a calibration should reach on parameter ``name`` at ``value``."""
-    kind, amount = {**model.reference, **SENSOR_REFERENCE}.get(name, ("relative", 0.01))
+    kind, amount = {**model.reference, **MOUNT_REFERENCE, **SENSOR_REFERENCE}.get(name, ("relative", 0.01))
     return amount * max(abs(value), 1e-9) if kind == "relative" else amount
 
 

@@ -7,12 +7,14 @@ A residual compares a horizon window's predicted sensor motion with the tracker'
 ``e = t2v(Z⁻¹·T⁻¹·M·T)`` with ``Z = T(p_a)⁻¹T(p_b)`` the tracker's motion from record ``a`` to
 ``b``, ``M`` the base motion the model predicts over the intervals between them and ``T`` the
 sensor mounting pose. Where ``M`` and ``∂M/∂x`` come from is :mod:`nlp_calib.problem.motion`'s
-business (directly from one interval's inputs when ``H = 1``, from prefix poses otherwise); every
-per-residual Function here is built once on top of it.
+business (directly from one interval's inputs when ``H = 1``, from prefix poses otherwise); what
+the sensor measures (a planar pose, or a 3-D one: ``e = Log((s·Z)⁻¹·T⁻¹·lift(M)·T)``, 6 rows) is
+:mod:`nlp_calib.problem.sensors`'; every per-residual Function here is built once on top of both.
 
 Per-residual Functions take two mapped inputs: ``motion`` (the window's motion data, see
 :class:`~nlp_calib.problem.motion.MotionSymbols`) and ``data = [z, w]`` (the tracker's motion
-``z`` and the residual's weight ``w``: 1, or 0 for padding); the evaluation backend maps them
+``z``, :attr:`ProblemFunctions.data_rows` − 1 rows, and the residual's weight ``w``: 1, or 0 for
+padding); the evaluation backend maps them
 over the windows with the sums taken inside the map. The decision vector ``x`` holds the free
 parameters only; fixed ones enter as ``x_fixed``, so fixing a parameter changes the Functions,
 not the solvers.
@@ -28,10 +30,10 @@ import numpy as np
 
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.core.ranges import Range, check_choice, check_range
-from nlp_calib.models.base import INTEGRATIONS, SENSOR_PARAMS, KinematicModel, param_names
+from nlp_calib.models.base import INTEGRATIONS, KinematicModel
 from nlp_calib.problem import motion as motion_sources
-from nlp_calib.problem.trajectory import TrajectoryFunctions, fn, predict_motion, split_params
-from nlp_calib.symbolic import se2
+from nlp_calib.problem.sensors import Sensor, sensor_for
+from nlp_calib.problem.trajectory import TrajectoryFunctions, base_motion, fn, split_params
 from nlp_calib.symbolic.kernels import KERNELS, kernel_function
 
 _CSE = {"cse": True}
@@ -43,7 +45,8 @@ PER_RESIDUAL = ("normal_equations", "cost", "cost_derivatives", "robust_terms", 
 SUMMED = ("normal_equations", "cost", "cost_derivatives")
 #: Their mapped inputs: the rest (parameters, kernel settings) are the same for every window.
 WINDOW_INPUTS = ("motion", "data")
-#: Rows of ``data``: the tracker's motion ``z`` and the weight ``w``.
+#: Rows of a planar problem's ``data``: the tracker's motion ``z`` and the weight ``w`` (any
+#: problem: :attr:`ProblemFunctions.data_rows`).
 DATA_ROWS = 4
 #: The order of the motion's derivatives each per-residual Function needs.
 ORDER = {"normal_equations": 1, "cost": 0, "cost_derivatives": 2, "robust_terms": 1, "sensitivities": 1}
@@ -64,8 +67,13 @@ class ProblemSpec:
     integration: str = "exact"
     kernel: str = "huber"
     fixed: tuple[str, ...] = ()
+    #: What the tracker measures: ``planar`` poses or ``3d`` ones (see :mod:`~nlp_calib.problem.sensors`).
+    sensor: str = "planar"
+    #: ``free``: 3-D poses known up to scale (monocular visual odometry): ``scale`` is estimated.
+    scale: str = "fixed"
 
     def __post_init__(self) -> None:
+        sensor_for(self.sensor, self.scale)
         check_range("horizon", self.horizon, HORIZON)
         check_choice("integration", self.integration, INTEGRATIONS)
         check_choice("kernel", self.kernel, KERNELS)
@@ -91,7 +99,8 @@ class ProblemFunctions(TrajectoryFunctions):
     """
 
     def __init__(self, model: KinematicModel, spec: ProblemSpec) -> None:
-        names = param_names(model)
+        sensor = sensor_for(spec.sensor, spec.scale)
+        names = (*model.kinematic_params, *sensor.params)
         unknown = [n for n in spec.fixed if n not in names]
         if unknown:
             raise ProblemError(f"cannot fix unknown parameter(s) {unknown}; parameters are {list(names)}")
@@ -100,31 +109,29 @@ class ProblemFunctions(TrajectoryFunctions):
         self.names = names
         self.integration = spec.integration
         self.horizon = spec.horizon
-        self.free = tuple(n for n in names if n not in spec.fixed)
-        self.fixed = tuple(n for n in names if n in spec.fixed)
+        held = {*spec.fixed, *sensor.held}
+        self.free = tuple(n for n in names if n not in held)
+        self.fixed = tuple(n for n in names if n in held)
         if not self.free:
             raise ProblemError("every parameter is fixed; nothing to estimate")
         free, fixed = self.free, self.fixed
         self._x = x = ca.SX.sym("x", len(free))
         self._x_fixed = x_fixed = ca.SX.sym("x_fixed", len(fixed))
-        self._omega = ca.SX.sym("omega", 3)
+        self._omega = ca.SX.sym("omega", sensor.error_rows)
         self._delta = ca.SX.sym("delta")
-        self._data = ca.SX.sym("data", DATA_ROWS)
+        self._data = ca.SX.sym("data", self.data_rows)
         self._params = ca.vertcat(
             *[x[free.index(n)] if n in free else x_fixed[fixed.index(n)] for n in names]
         )
         #: Places of the free kinematic parameters in ``x`` (the columns of a prefix Jacobian).
         self.kinematic_columns = [free.index(n) for n in model.kinematic_params if n in free]
 
-        # Box-plus: Euclidean for kinematic parameters; left SE(2) perturbation of the sensor pose
-        # when all of it is free (a partly fixed pose has no group structure left to respect).
+        # Box-plus: Euclidean for kinematic parameters; the sensor's own for its mount (planar: a
+        # left SE(2) perturbation when all of it is free; a partly fixed pose has no group
+        # structure left to respect).
         step = ca.SX.sym("step", len(free))
         x_plus = ca.SX(step + x)
-        if self.manifold_sensor:
-            idx = [free.index(n) for n in SENSOR_PARAMS]
-            T_new = se2.boxplus(x[idx], step[idx])
-            for j, i in enumerate(idx):
-                x_plus[i] = T_new[j]
+        sensor.boxplus(free, x, step, x_plus)
         self.boxplus = ca.Function("boxplus", [x, step], [x_plus], ["x", "step"], ["x_next"], _CSE)
         # dx(x ⊞ Δ)/dΔ at Δ = 0 maps plain-coordinate Jacobians onto the manifold perturbation.
         self._M = ca.substitute(ca.jacobian(x_plus, step), step, ca.DM.zeros(len(free)))
@@ -138,9 +145,24 @@ class ProblemFunctions(TrajectoryFunctions):
         return len(self.free)
 
     @property
+    def sensor(self) -> Sensor:
+        """What the tracker measures and how the mount enters (see :mod:`~nlp_calib.problem.sensors`)."""
+        return sensor_for(self.spec.sensor, self.spec.scale)
+
+    @property
     def manifold_sensor(self) -> bool:
-        """True when the sensor pose is perturbed on SE(2) (all three components free)."""
-        return all(n in self.free for n in SENSOR_PARAMS)
+        """True when the sensor's mount is perturbed on its group (see :mod:`~nlp_calib.problem.sensors`)."""
+        return self.sensor.manifold(self.free)
+
+    @property
+    def data_rows(self) -> int:
+        """Rows of a window's ``data = [z, w]``."""
+        return self.sensor.z_rows + 1
+
+    @property
+    def error_rows(self) -> int:
+        """Rows of a residual ``e`` (and of ``omega``)."""
+        return self.sensor.error_rows
 
     @property
     def prefix(self) -> bool:
@@ -162,7 +184,7 @@ class ProblemFunctions(TrajectoryFunctions):
 
     @functools.cached_property
     def _source(self) -> motion_sources.MotionSource:
-        k = split_params(self.model, self._params)[0]
+        k = split_params(self.model, self.sensor, self._params)[0]
         kinematic = fn("kinematic", [self._x, self._x_fixed], ["x", "x_fixed"], [k], ["k"])
         return motion_sources.MotionSource(
             self.model,
@@ -181,10 +203,10 @@ class ProblemFunctions(TrajectoryFunctions):
             return self._windows[order]
         h = ca.SX.sym("h", self.n_free)
         mo = self._source.window(h, order)
-        sensor = [self.free.index(n) for n in SENSOR_PARAMS if n in self.free]
+        sensor = [self.free.index(n) for n in self.sensor.params if n in self.free]
         x_moved = motion_sources.perturbed(self._x, h[sensor], sensor)
-        T_moved = split_params(self.model, ca.substitute(self._params, self._x, x_moved))[1]
-        e = se2.between(self._data[0:3], se2.conjugate(T_moved, mo.M))
+        T_moved = split_params(self.model, self.sensor, ca.substitute(self._params, self._x, x_moved))[1]
+        e = self.sensor.residual(self._data[0 : self.sensor.z_rows], T_moved, mo.M)
         self._windows[order] = (mo, h, e)
         return mo, h, e
 
@@ -203,7 +225,7 @@ class ProblemFunctions(TrajectoryFunctions):
 
     def _robust(self, e: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
         """``s = eᵀΩe``, the weighted cost ``w·ρ(s)``, ρ'(s) and the inlier flag."""
-        w, omega, delta = self._data[3], self._omega, self._delta
+        w, omega, delta = self._data[self.sensor.z_rows], self._omega, self._delta
         s = ca.dot(e, omega * e)
         rho, weight = kernel_function(self.spec.kernel)(s, delta)
         return s, w * rho, weight, ca.if_else(s <= delta * delta, 1.0, 0.0)
@@ -215,7 +237,7 @@ class ProblemFunctions(TrajectoryFunctions):
     def normal_equations(self) -> ca.Function:
         motion, e, J = self._linear()
         s, cost, weight, inlier = self._robust(e)
-        w = self._data[3]
+        w = self._data[self.sensor.z_rows]
         Omega = ca.diag(self._omega)
         # Only the upper triangle of the symmetric JᵀΩJ: fewer operations per residual and per sum.
         JtOJ = ca.mtimes([J.T, Omega, J])
@@ -255,7 +277,7 @@ class ProblemFunctions(TrajectoryFunctions):
             "robust_terms",
             ins,
             in_names,
-            [e, s, weight, self._data[3] * ca.mtimes([J.T, ca.diag(self._omega), e])],
+            [e, s, weight, self._data[self.sensor.z_rows] * ca.mtimes([J.T, ca.diag(self._omega), e])],
             ["e", "s", "weight", "JtOe"],
         )
 
@@ -263,7 +285,13 @@ class ProblemFunctions(TrajectoryFunctions):
     def sensitivities(self) -> ca.Function:
         mo, h, e_h = self._window(1)
         J_plain, de_dz, de_dend = self._at_zero(
-            mo, h, [ca.jacobian(e_h, h), ca.jacobian(e_h, self._data[0:3]), ca.jacobian(e_h, mo.end)]
+            mo,
+            h,
+            [
+                ca.jacobian(e_h, h),
+                ca.jacobian(e_h, self._data[0 : self.sensor.z_rows]),
+                ca.jacobian(e_h, mo.end),
+            ],
         )
         return fn(
             "sensitivities",
@@ -323,15 +351,16 @@ class ProblemFunctions(TrajectoryFunctions):
     @property
     def column_rows(self) -> int:
         """Rows of one window's column ``[u_0 … u_{H-1}, z, w]`` (see :meth:`ResidualData.columns`)."""
-        return self.n_inputs * self.spec.horizon + DATA_ROWS
+        return self.n_inputs * self.spec.horizon + self.data_rows
 
     @functools.cached_property
     def _reference(self) -> tuple[ca.SX, ca.SX, ca.SX]:
         column = ca.SX.sym("data", self.column_rows)
         n_in, H = self.n_inputs, self.spec.horizon
         U = ca.reshape(column[: n_in * H], n_in, H)
-        z = column[n_in * H : n_in * H + 3]
-        e = se2.between(z, predict_motion(self.model, self._params, U, self.spec.integration))
+        z = column[n_in * H : n_in * H + self.sensor.z_rows]
+        k, mount = split_params(self.model, self.sensor, self._params)
+        e = self.sensor.residual(z, mount, base_motion(self.model, k, U, self.spec.integration))
         return column, e, ca.mtimes(ca.jacobian(e, self._x), self._M)
 
     @functools.cached_property

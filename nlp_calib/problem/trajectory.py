@@ -3,6 +3,8 @@ covariance, a window's motion, and SE(2) ``between`` with its Jacobians.
 
 They take the full parameter vector (free and fixed, in model order) rather than the free one,
 because trajectories, metrics, reports and the closed-form start evaluate a given calibration.
+Poses and motions are in the sensor's layout (:mod:`nlp_calib.problem.sensors`): ``(x, y, theta)``
+for a planar sensor, ``(x, y, z, qx, qy, qz, qw)`` in the trajectory's own units for a 3-D one.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import functools
 import casadi as ca
 
 from nlp_calib.models.base import KinematicModel
+from nlp_calib.problem.sensors import Sensor
 from nlp_calib.symbolic import se2
 
 _CSE = {"cse": True}
@@ -25,23 +28,27 @@ def fn(
     return ca.Function(name, ins, [ca.densify(o) for o in outs], in_names, out_names, _CSE)
 
 
-def split_params(model: KinematicModel, params: ca.SX) -> tuple[ca.SX, ca.SX]:
-    """Kinematic parameters and ``T_base_sensor`` of a full parameter vector."""
+def split_params(model: KinematicModel, sensor: Sensor, params: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """Kinematic parameters and the sensor's mount (``T_base_sensor``, then the scale when
+    free) of a full parameter vector."""
     nk = len(model.kinematic_params)
-    return params[:nk], params[nk : nk + 3]
+    return params[:nk], params[nk : nk + len(sensor.params)]
 
 
-def predict_motion(model: KinematicModel, params: ca.SX, U: ca.SX, integration: str) -> ca.SX:
-    """Sensor motion over consecutive intervals: ``T⁻¹ · Δr_0 ⋯ Δr_{H-1} · T``.
-
-    ``U`` holds one interval's inputs per column. Conjugating the composed base motion once
-    equals composing the conjugated per-interval motions, at a fraction of the cost.
-    """
-    k, T_base_sensor = split_params(model, params)
+def base_motion(model: KinematicModel, k: ca.SX, U: ca.SX, integration: str) -> ca.SX:
+    """Base motion over consecutive intervals ``Δr_0 ⋯ Δr_{H-1}`` (``U``: one interval's inputs
+    per column). Conjugating it once by the mount equals composing the conjugated per-interval
+    motions, at a fraction of the cost."""
     motion_base = model.increment(k, U[:, 0], integration)
     for j in range(1, U.shape[1]):
         motion_base = se2.compose(motion_base, model.increment(k, U[:, j], integration))
-    return se2.conjugate(T_base_sensor, motion_base)
+    return motion_base
+
+
+def predict_motion(model: KinematicModel, sensor: Sensor, params: ca.SX, U: ca.SX, integration: str) -> ca.SX:
+    """Sensor motion over consecutive intervals: ``T⁻¹ · Δr_0 ⋯ Δr_{H-1} · T``."""
+    k, mount = split_params(model, sensor, params)
+    return sensor.predict(mount, base_motion(model, k, U, integration))
 
 
 class TrajectoryFunctions:
@@ -62,6 +69,11 @@ class TrajectoryFunctions:
     horizon: int
 
     @property
+    def sensor(self) -> Sensor:
+        """The host's sensor (see :mod:`~nlp_calib.problem.sensors`)."""
+        raise NotImplementedError
+
+    @property
     def n_inputs(self) -> int:
         return len(self.model.input_names)
 
@@ -70,16 +82,20 @@ class TrajectoryFunctions:
         """Full-parameter symbols: params, one interval's inputs and the sensor motion over it."""
         params = ca.SX.sym("params", len(self.names))
         u1 = ca.SX.sym("u", self.n_inputs)
-        h1 = predict_motion(self.model, params, ca.reshape(u1, self.n_inputs, 1), self.integration)
+        h1 = predict_motion(
+            self.model, self.sensor, params, ca.reshape(u1, self.n_inputs, 1), self.integration
+        )
         return params, u1, h1
 
     @functools.cached_property
     def interval_residual(self) -> ca.Function:
         """(params, u, z) → (e, de_du): one interval's residual against the tracker's motion ``z``
         and its derivative with respect to the interval's inputs (for checking encoder readings)."""
-        params, u1, h1 = self._full
-        z = ca.SX.sym("z", 3)
-        e1 = se2.between(z, h1)
+        params, u1, _ = self._full
+        z = ca.SX.sym("z", self.sensor.z_rows)
+        k, mount = split_params(self.model, self.sensor, params)
+        M1 = base_motion(self.model, k, ca.reshape(u1, self.n_inputs, 1), self.integration)
+        e1 = self.sensor.residual(z, mount, M1)
         return fn(
             "interval_residual",
             [params, u1, z],
@@ -96,25 +112,25 @@ class TrajectoryFunctions:
     @functools.cached_property
     def integrate_step(self) -> ca.Function:
         params, u1, h1 = self._full
-        T_ws = ca.SX.sym("T_world_sensor", 3)
+        T_ws = ca.SX.sym("T_world_sensor", self.sensor.pose_rows)
         return fn(
             "integrate_step",
             [T_ws, params, u1],
             ["T_world_sensor", "params", "u"],
-            [se2.compose(T_ws, h1)],
+            [self.sensor.compose(T_ws, h1)],
             ["T_world_sensor_next"],
         )
 
     @functools.cached_property
     def base_from_sensor(self) -> ca.Function:
         params = self._full[0]
-        T_ws = ca.SX.sym("T_world_sensor", 3)
-        T_base_sensor = split_params(self.model, params)[1]
+        T_ws = ca.SX.sym("T_world_sensor", self.sensor.pose_rows)
+        T_base_sensor = split_params(self.model, self.sensor, params)[1]
         return fn(
             "base_from_sensor",
             [T_ws, params],
             ["T_world_sensor", "params"],
-            [se2.compose(T_ws, se2.inverse(T_base_sensor))],
+            [self.sensor.base_from_sensor(T_ws, T_base_sensor)],
             ["T_world_base"],
         )
 
@@ -125,7 +141,7 @@ class TrajectoryFunctions:
         state = ca.SX.sym("state", 12)
         T_wb, P = state[:3], ca.reshape(state[3:], 3, 3)
         input_std = ca.SX.sym("input_std", self.n_inputs)
-        k_sym, _ = split_params(self.model, params)
+        k_sym, _ = split_params(self.model, self.sensor, params)
         T_wb_next = se2.compose(T_wb, self.model.increment(k_sym, u1, self.integration))
         F, G = ca.jacobian(T_wb_next, T_wb), ca.jacobian(T_wb_next, u1)
         P_next = ca.mtimes([F, P, F.T]) + ca.mtimes([G, ca.diag(input_std**2), G.T])
@@ -147,7 +163,11 @@ class TrajectoryFunctions:
             ["params", "U"],
             [
                 predict_motion(
-                    self.model, params, ca.reshape(U, self.n_inputs, self.horizon), self.integration
+                    self.model,
+                    self.sensor,
+                    params,
+                    ca.reshape(U, self.n_inputs, self.horizon),
+                    self.integration,
                 )
             ],
             ["motion"],
@@ -155,8 +175,8 @@ class TrajectoryFunctions:
 
     @functools.cached_property
     def _pose_pair(self) -> tuple[ca.SX, ca.SX, ca.SX]:
-        a, b = ca.SX.sym("a", 3), ca.SX.sym("b", 3)
-        return a, b, se2.between(a, b)
+        a, b = ca.SX.sym("a", self.sensor.pose_rows), ca.SX.sym("b", self.sensor.pose_rows)
+        return a, b, self.sensor.between(a, b)
 
     @functools.cached_property
     def between(self) -> ca.Function:
@@ -165,11 +185,11 @@ class TrajectoryFunctions:
 
     @functools.cached_property
     def between_jacobians(self) -> ca.Function:
-        a, b, motion = self._pose_pair
+        a, b, _ = self._pose_pair
         return fn(
             "between_jacobians",
             [a, b],
             ["a", "b"],
-            [ca.jacobian(motion, a), ca.jacobian(motion, b)],
+            list(self.sensor.between_jacobians(a, b)),
             ["dmotion_da", "dmotion_db"],
         )

@@ -23,7 +23,7 @@ from nlp_calib.core.errors import ProblemError
 from nlp_calib.core.ranges import Range, check_choice, check_range
 from nlp_calib.logs import Log
 from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES, KinematicModel
-from nlp_calib.problem.functions import DATA_ROWS, HORIZON, ProblemFunctions
+from nlp_calib.problem.functions import HORIZON, ProblemFunctions
 
 STRIDE = Range(1, 1_000_000, integer=True)
 
@@ -51,9 +51,10 @@ class ResidualData:
     """The windows of one fit and the data they are evaluated on (records numbered as above).
 
     ``inputs`` ``(n_inputs, n_records - 1)`` holds every interval's model inputs; ``T_world_sensor``
-    ``(n_records, 3)`` the tracker's poses; ``starts`` / ``stops`` the first and last record of
-    each window; ``z`` ``(3, n_residuals)`` the tracker's motion over each window. ``offsets`` is
-    the first record of each of ``logs``.
+    ``(n_records, pose rows)`` the tracker's poses (in the sensor's layout: ``(x, y, theta)``, or
+    ``(x, y, z, qx, qy, qz, qw)`` for a 3-D sensor); ``starts`` / ``stops`` the first and last
+    record of each window; ``z`` ``(z rows, n_residuals)`` the tracker's motion over each window.
+    ``offsets`` is the first record of each of ``logs``.
     """
 
     logs: tuple[Log, ...]
@@ -83,10 +84,11 @@ class ResidualData:
         return int(self.T_world_sensor.shape[0])
 
     def data(self) -> np.ndarray:
-        """The per-window ``data = [z, w]`` matrix ``(4, n_residuals)``, column-major."""
-        out = np.empty((DATA_ROWS, self.n_residuals), order="F")
-        out[0:3] = self.z
-        out[3] = 1.0
+        """The per-window ``data = [z, w]`` matrix ``(z rows + 1, n_residuals)``, column-major."""
+        rows = self.z.shape[0]
+        out = np.empty((rows + 1, self.n_residuals), order="F")
+        out[0:rows] = self.z
+        out[rows] = 1.0
         return out
 
     def interval_counts(self, flagged: np.ndarray) -> np.ndarray:
@@ -109,11 +111,11 @@ class ResidualData:
         starts, lengths = self.starts[windows], self.stops[windows] - self.starts[windows]
         if np.any(lengths != self.horizon):
             raise ProblemError(f"only windows of {self.horizon} intervals have a column layout")
-        n_in, H = self.inputs.shape[0], self.horizon
-        out = np.empty((n_in * H + DATA_ROWS, starts.size), order="F")
+        n_in, H, rows = self.inputs.shape[0], self.horizon, self.z.shape[0]
+        out = np.empty((n_in * H + rows + 1, starts.size), order="F")
         for j in range(H):
             out[j * n_in : (j + 1) * n_in] = self.inputs[:, starts + j]
-        out[n_in * H : n_in * H + 3] = self.z[:, windows]
+        out[n_in * H : n_in * H + rows] = self.z[:, windows]
         out[-1] = 1.0
         return out
 
@@ -168,9 +170,9 @@ def over_columns(f: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
 def tracker_motions(
     fns: ProblemFunctions, T_world_sensor: np.ndarray, a: np.ndarray, b: np.ndarray
 ) -> np.ndarray:
-    """``t2v(T(p_a)⁻¹·T(p_b))`` for each pair of records, ``(3, len(a))``."""
+    """The tracker's motion ``T(p_a)⁻¹·T(p_b)`` for each pair of records, ``(z rows, len(a))``."""
     if a.size == 0:
-        return np.zeros((3, 0))
+        return np.zeros((fns.sensor.z_rows, 0))
     return over_columns(fns.between, T_world_sensor[a].T, T_world_sensor[b].T)[0]
 
 
@@ -196,6 +198,17 @@ def joined(parts: Sequence[ResidualData]) -> ResidualData:
     )
 
 
+def tracker_poses(fns: ProblemFunctions, log: Log) -> np.ndarray:
+    """The log's tracker poses in the layout of the problem's sensor."""
+    if fns.sensor.pose_rows == 3:
+        return log.T_world_sensor
+    if log.T_world_sensor_3d is None:
+        raise ProblemError(
+            f"{log.path}: a 3-D sensor's problem needs 3-D tracker poses; the log has planar ones"
+        )
+    return log.T_world_sensor_3d
+
+
 def build_residual_data(
     fns: ProblemFunctions,
     log: Log | Sequence[Log],
@@ -204,13 +217,16 @@ def build_residual_data(
     drop_stationary: bool = False,
     bad_intervals: np.ndarray | None = None,
     bad_records: np.ndarray | None = None,
+    inputs: np.ndarray | None = None,
 ) -> ResidualData:
     """The windows of ``options`` over ``log`` (or several logs, end to end, no window crossing
     from one into the next).
 
     Windows in which no encoder moves are dropped when ``drop_stationary``; windows that cross an
     interval of ``bad_intervals`` (a mask over the intervals) or start or end at a record of
-    ``bad_records`` (over the records) are always dropped.
+    ``bad_records`` (over the records) are always dropped. ``inputs`` gives the intervals' model
+    inputs (laid out as :func:`interval_inputs` lays them) when they do not come from the logs'
+    encoders, e.g. joint positions paired with a camera's images.
     """
     if options.horizon != fns.spec.horizon:
         raise ProblemError(
@@ -219,11 +235,14 @@ def build_residual_data(
     logs = (log,) if isinstance(log, Log) else tuple(log)
     H = options.horizon
     offsets = tuple(int(v) for v in np.cumsum([0, *(lg.n_records for lg in logs)])[:-1])
-    inputs = interval_inputs(fns.model, logs, options.steering_sample)
+    if inputs is None:
+        inputs = interval_inputs(fns.model, logs, options.steering_sample)
+    elif inputs.shape != (fns.n_inputs, sum(lg.n_records for lg in logs) - 1):
+        raise ProblemError(f"inputs of shape {inputs.shape} do not fit the logs' intervals")
     starts = np.concatenate(
         [o + window_starts(lg.n_records - 1, H, options.stride) for o, lg in zip(offsets, logs)]
     ).astype(np.int64)
-    poses = np.ascontiguousarray(np.concatenate([lg.T_world_sensor for lg in logs]))
+    poses = np.ascontiguousarray(np.concatenate([tracker_poses(fns, lg) for lg in logs]))
     stops = starts + H
     data = ResidualData(
         logs=logs,
@@ -239,6 +258,13 @@ def build_residual_data(
     if drop_stationary and starts.size:
         keep = data.interval_counts(fns.model.moving(inputs)) > 0
         data = replace(data.select(keep), dropped_stationary=int((~keep).sum()))
+    return _without_faults(data, bad_intervals, bad_records)
+
+
+def _without_faults(
+    data: ResidualData, bad_intervals: np.ndarray | None, bad_records: np.ndarray | None
+) -> ResidualData:
+    """``data`` without the windows that cross a bad interval or start or end at a bad record."""
     faulty = np.zeros(data.n_residuals, dtype=bool)
     if bad_intervals is not None and np.any(bad_intervals):
         faulty |= data.interval_counts(bad_intervals) > 0

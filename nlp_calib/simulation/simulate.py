@@ -15,7 +15,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -150,8 +150,21 @@ class SimulatedLog:
         }
 
 
-def _profiles(
-    opts: SimulationOptions, rng: np.random.Generator, duration: float
+class ProfileSettings(Protocol):
+    """The options :func:`drive_profiles` reads."""
+
+    @property
+    def trajectory(self) -> str: ...
+    @property
+    def max_speed(self) -> float: ...
+    @property
+    def max_turn(self) -> float: ...
+    @property
+    def stop_fraction(self) -> float: ...
+
+
+def drive_profiles(
+    opts: ProfileSettings, rng: np.random.Generator, duration: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Knot times, speeds and turning amplitudes; linear between knots."""
     n_knots = int(duration / 1.5) + 3
@@ -198,7 +211,7 @@ def simulate(opts: SimulationOptions) -> SimulatedLog:
     rng = np.random.default_rng(opts.seed)
     truth = opts.truth
     t_s = _sample_times(opts, rng)
-    knots = _profiles(opts, rng, float(t_s[-1]) + opts.latency_s + 1.0)
+    knots = drive_profiles(opts, rng, float(t_s[-1]) + opts.latency_s + 1.0)
     # Fine grid: sub-steps between samples, starting early enough to cover the latency.
     t0 = -opts.latency_s
     base_grid = np.concatenate([[t0], t_s]) if opts.latency_s > 0 else t_s

@@ -75,9 +75,11 @@ class Priors:
 
 @dataclass(frozen=True)
 class Sensitivities:
-    """Per residual ``w``: ``J`` ``(N, 3, n_free)``, ``de_dz`` ``(N, 3, 3)``, ``de_dend`` ``(N, 3, m)``
-    (see :class:`~nlp_calib.problem.ProblemFunctions`) and the tracker motion's Jacobians with
-    respect to its first and last pose, ``dz_da`` and ``dz_db`` ``(N, 3, 3)``; per interval ``j``
+    """Per residual ``w``: ``J`` ``(N, r, n_free)``, ``de_dz`` ``(N, r, z)``, ``de_dend`` ``(N, r, m)``
+    (see :class:`~nlp_calib.problem.ProblemFunctions`; ``r`` error rows, ``z`` rows of a tracker
+    motion: 3 and 3 for a planar sensor, 6 and 7 for a 3-D one) and the tracker motion's
+    Jacobians with respect to its first and last pose's noise, ``dz_da`` and ``dz_db`` ``(N, z, p)``
+    (``p`` = 3 or 6); per interval ``j``
     the map ``D`` ``(n_intervals, m, n_inputs)`` from its inputs to the end perturbation
     (``None``: identity)."""
 
@@ -222,7 +224,7 @@ class ProblemEvaluator:
         return out
 
     def robust_terms(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Per residual: error ``(3, n)``, ``s = eᵀΩe`` and the IRLS weight ρ'(s)."""
+        """Per residual: error ``(error rows, n)``, ``s = eᵀΩe`` and the IRLS weight ρ'(s)."""
         e, s, w, _ = self.residual_terms(x)
         return e, s, w
 
@@ -232,7 +234,7 @@ class ProblemEvaluator:
         n = self.n_residuals
         nf = self.fns.n_free
         return (
-            e.reshape(3, -1, order="F")[:, :n],
+            e.reshape(self.fns.error_rows, -1, order="F")[:, :n],
             s.ravel()[:n],
             w.ravel()[:n],
             g.reshape(nf, -1, order="F")[:, :n],

@@ -1,0 +1,183 @@
+"""Numeric SE(3) on arrays of pose vectors ``(x, y, z, qx, qy, qz, qw)``, one pose per row (numpy only).
+
+Quaternions are Hamilton, ordered ``(qx, qy, qz, qw)`` as TUM files, ROS messages and evo write
+them; rotation vectors ``φ`` are axis times angle. Roll, pitch and yaw follow URDF (fixed axes):
+``R = Rz(yaw)·Ry(pitch)·Rx(roll)``. The symbolic twins live in :mod:`nlp_calib.symbolic.se3`;
+these serve readers, the simulator, the closed-form start and post-processing, vectorised.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Below this rotation angle (rad) series replace the closed forms that divide by it.
+SMALL_ANGLE = 1e-6
+
+
+def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a ⊗ b`` row by row."""
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ],
+        axis=-1,
+    )
+
+
+def quat_conjugate(q: np.ndarray) -> np.ndarray:
+    """The inverse rotation of unit quaternions."""
+    return q * np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions."""
+    x, y, z, w = np.moveaxis(q, -1, 0)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=-1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def matrix_to_quat(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions (``qw >= 0``) of rotation matrices, by the largest of the four pivots."""
+    R = np.asarray(R, dtype=float)
+    t = np.stack(
+        [
+            1 + R[..., 0, 0] - R[..., 1, 1] - R[..., 2, 2],
+            1 - R[..., 0, 0] + R[..., 1, 1] - R[..., 2, 2],
+            1 - R[..., 0, 0] - R[..., 1, 1] + R[..., 2, 2],
+            1 + R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2],
+        ],
+        axis=-1,
+    )
+    k = np.argmax(t, axis=-1)
+    s = 0.5 / np.sqrt(np.take_along_axis(t, k[..., None], axis=-1)[..., 0])
+    d = {
+        "yz": R[..., 2, 1] - R[..., 1, 2],
+        "zx": R[..., 0, 2] - R[..., 2, 0],
+        "xy": R[..., 1, 0] - R[..., 0, 1],
+        "xy+": R[..., 0, 1] + R[..., 1, 0],
+        "xz+": R[..., 0, 2] + R[..., 2, 0],
+        "yz+": R[..., 1, 2] + R[..., 2, 1],
+    }
+    tk = 0.25 / s
+    rows = [
+        np.stack([tk, d["xy+"] * s, d["xz+"] * s, d["yz"] * s], axis=-1),
+        np.stack([d["xy+"] * s, tk, d["yz+"] * s, d["zx"] * s], axis=-1),
+        np.stack([d["xz+"] * s, d["yz+"] * s, tk, d["xy"] * s], axis=-1),
+        np.stack([d["yz"] * s, d["zx"] * s, d["xy"] * s, tk], axis=-1),
+    ]
+    q = np.choose(k[..., None], rows)
+    return q * np.where(q[..., 3:4] < 0, -1.0, 1.0)
+
+
+def rotvec_to_quat(phi: np.ndarray) -> np.ndarray:
+    """``Exp(φ)`` as unit quaternions."""
+    phi = np.asarray(phi, dtype=float)
+    theta = np.linalg.norm(phi, axis=-1, keepdims=True)
+    small = theta < SMALL_ANGLE
+    safe = np.where(small, 1.0, theta)
+    half = np.where(small, 0.5 - theta**2 / 48.0, np.sin(0.5 * safe) / safe)
+    return np.concatenate([half * phi, np.cos(0.5 * theta)], axis=-1)
+
+
+def quat_to_rotvec(q: np.ndarray) -> np.ndarray:
+    """``Log(q)``: rotation vectors of angle in ``[0, π]`` (``q`` and ``−q`` give the same)."""
+    q = np.asarray(q, dtype=float)
+    q = q * np.where(q[..., 3:4] < 0, -1.0, 1.0)
+    s = np.linalg.norm(q[..., :3], axis=-1, keepdims=True)
+    w = q[..., 3:4]
+    small = s < SMALL_ANGLE
+    w_small = np.where(small, w, 1.0)
+    series = 2.0 / w_small * (1.0 - s * s / (3.0 * w_small * w_small))
+    factor = np.where(small, series, 2.0 * np.arctan2(s, w) / np.where(small, 1.0, s))
+    return factor * q[..., :3]
+
+
+def rpy_to_matrix(rpy: np.ndarray) -> np.ndarray:
+    """``Rz(yaw)·Ry(pitch)·Rx(roll)`` of ``(roll, pitch, yaw)`` rows (URDF)."""
+    r, p, y = np.moveaxis(np.asarray(rpy, dtype=float), -1, 0)
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    return np.stack(
+        [
+            np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], axis=-1),
+            np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], axis=-1),
+            np.stack([-sp, cp * sr, cp * cr], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
+    """``(roll, pitch, yaw)`` with pitch in ``[−π/2, π/2]`` (URDF; undefined at pitch ±π/2)."""
+    R = np.asarray(R, dtype=float)
+    roll = np.arctan2(R[..., 2, 1], R[..., 2, 2])
+    pitch = np.arctan2(-R[..., 2, 0], np.hypot(R[..., 2, 1], R[..., 2, 2]))
+    yaw = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    return np.stack([roll, pitch, yaw], axis=-1)
+
+
+def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``R(q)·v`` row by row."""
+    return np.einsum("...ij,...j->...i", quat_to_matrix(q), v)
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a · b`` for pose vectors ``(x, y, z, qx, qy, qz, qw)``."""
+    return np.concatenate(
+        [a[..., :3] + rotate(a[..., 3:], b[..., :3]), quat_multiply(a[..., 3:], b[..., 3:])], -1
+    )
+
+
+def inverse(a: np.ndarray) -> np.ndarray:
+    """``a⁻¹`` for pose vectors."""
+    qi = quat_conjugate(a[..., 3:])
+    return np.concatenate([-rotate(qi, a[..., :3]), qi], axis=-1)
+
+
+def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a⁻¹ · b`` row by row: the motion from ``a`` to ``b`` in ``a``'s frame."""
+    return compose(inverse(a), b)
+
+
+def accumulate(start: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Poses ``(n + 1, 7)`` of ``start · steps[0] · … · steps[n-1]`` (a sequential pass)."""
+    out = np.empty((steps.shape[0] + 1, 7))
+    out[0] = start
+    for k in range(steps.shape[0]):
+        out[k + 1] = compose(out[k], steps[k])
+    out[:, 3:] /= np.linalg.norm(out[:, 3:], axis=1, keepdims=True)
+    return out
+
+
+def from_planar(T: np.ndarray) -> np.ndarray:
+    """Planar poses ``(x, y, theta)`` lifted to pose vectors (``z = 0``, rotation about z)."""
+    T = np.asarray(T, dtype=float)
+    zero = np.zeros(T.shape[:-1])
+    half = 0.5 * T[..., 2]
+    return np.stack([T[..., 0], T[..., 1], zero, zero, zero, np.sin(half), np.cos(half)], axis=-1)
+
+
+def mount_pose(mount: np.ndarray) -> np.ndarray:
+    """The pose vector of a mount ``(x, y, z, roll, pitch, yaw)``."""
+    mount = np.asarray(mount, dtype=float)
+    return np.concatenate([mount[..., :3], matrix_to_quat(rpy_to_matrix(mount[..., 3:6]))], axis=-1)
+
+
+def align(est: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation ``R`` (3×3) and translation ``t`` minimising ``Σ |R·est + t − ref|²`` (Umeyama,
+    no scale, a proper rotation)."""
+    mu_e, mu_r = est.mean(axis=0), ref.mean(axis=0)
+    U, _, Vt = np.linalg.svd((ref - mu_r).T @ (est - mu_e))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0])
+    R = U @ D @ Vt
+    return R, mu_r - R @ mu_e
