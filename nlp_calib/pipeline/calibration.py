@@ -161,9 +161,8 @@ class Calibration(Solving):
             binder, self.log, start, steps.split(sc, start, stop), self.start.x0
         )
         binder = steps.with_priors(binder, priors)
-        # Faults are judged on the encoder readings as logged (re-sampling them would smear a
-        # faulty one): first against the tracker as logged, to keep them out of the lag search,
-        # then, once the lag is known, against the tracker re-sampled onto the encoders' clock.
+        # Faults are screened once, on the records as logged (re-sampling would smear a bad
+        # reading into its neighbours), before the lag search, which they are kept out of.
         report = steps.find_faults(binder, self.log, start, stop, self.start.x0)
         fitted_log, self.findings = steps.handle_faults(self.log, report, sc.faults.handling)
         dt = align.median_interval(self.log)
@@ -172,11 +171,6 @@ class Calibration(Solving):
         search_binder = steps.exclude_faults(binder, self.findings, self.log.n_records, reach, dt)
         self.alignment = align.align(search_binder, fitted_log, start, stop, self.start.x0)
         lag = self.alignment.lag_s
-        if lag:
-            judge = steps.exclude_faults(binder, self.findings, self.log.n_records, lag, dt)
-            report = steps.find_faults(judge, self.log, start, stop, self.start.x0, lag)
-            fitted_log, self.findings = steps.handle_faults(self.log, report, sc.faults.handling)
-            self.alignment = align.realign(self.alignment, fitted_log, self.model)
         self.binder = steps.exclude_faults(binder, self.findings, self.log.n_records, lag, dt)
         # Every detected fault shapes the fair figures, whatever the handling: like with like.
         self.fault_masks = steps.fault_masks(report, self.log.n_records, lag, dt)

@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from nlp_calib.analysis import uncertainty
-from nlp_calib.analysis.faults import FaultReport, check_log, repair
+from nlp_calib.analysis.faults import FaultReport, repair, screen
 from nlp_calib.core.errors import (
     DatasetError,
     ModelError,
@@ -22,7 +22,7 @@ from nlp_calib.core.errors import (
     ProblemError,
     ScenarioError,
 )
-from nlp_calib.logs import Log, resample_encoders, resample_tracker
+from nlp_calib.logs import Log
 from nlp_calib.models import (
     SENSOR_PARAMS,
     KinematicModel,
@@ -367,23 +367,23 @@ class Findings:
     repairs: tuple[str, ...] = ()
 
 
-def find_faults(
-    binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray, lag_s: float = 0.0
-) -> FaultReport:
-    """Faults in records ``start:stop`` of ``log``, judged with a fit to its windows (those the
-    binder keeps) and, with a tracker ``lag_s``, against the tracker re-sampled onto the encoders'
-    clock: the encoder readings stay as logged, so a jump stays on its record."""
-    _, ev = binder.bind(resample_encoders(log, lag_s, binder.fns.model.encoder_kinds)[0], start, stop)
-    _, x, converged = binder.fit(ev, x0)
-    if not converged or not np.all(np.isfinite(x)):
-        # Judged by a wrong model every interval looks faulty; the solvers will say why.
-        why = "the fit that judges the encoders did not converge from the initial guess"
-        return FaultReport((), {}, {}, unchecked=why)
-    sel = resample_tracker(log, lag_s).select(start, stop)
-    model = binder.fns.model
-    inputs = model.inputs(sel, binder.scenario.residual.steering_sample)
-    report = check_log(binder.fns, ev.params(x), sel, inputs, model.counter_rows(sel))
-    return report.shifted(start, log)
+def find_faults(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> FaultReport:
+    """Faults in records ``start:stop`` of ``log`` as logged (nothing re-sampled), the counters
+    judged with a fit to the windows the binder keeps and the streams' own glitches spoil not, at
+    the scenario's tracker lag (or, when it is estimated, the screen's own estimate in its range)."""
+
+    def judge(bad_intervals: np.ndarray, bad_records: np.ndarray) -> np.ndarray | None:
+        masks = np.zeros(log.n_records - 1, dtype=bool), np.zeros(log.n_records, dtype=bool)
+        masks[0][start : stop - 1], masks[1][start:stop] = bad_intervals, bad_records
+        masked = replace(binder, bad_intervals=masks[0], bad_records=masks[1])
+        _, ev = masked.bind(log, start, stop)
+        _, x, converged = masked.fit(ev, x0)
+        return ev.params(x) if converged and np.all(np.isfinite(x)) else None
+
+    al = binder.scenario.alignment
+    lag = al.search if al.tracker_lag == "auto" else float(al.tracker_lag)
+    sample = binder.scenario.residual.steering_sample
+    return screen(binder.fns, log.select(start, stop), sample, lag, judge).shifted(start, log)
 
 
 def handle_faults(log: Log, report: FaultReport, handling: str) -> tuple[Log, Findings]:
