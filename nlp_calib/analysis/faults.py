@@ -161,6 +161,20 @@ def _angle_ticks(log: Log, col: int) -> np.ndarray:
     return np.unwrap(2.0 * np.pi * log.ticks[:, col] / vmax) * vmax / (2.0 * np.pi)
 
 
+def _fault(
+    log: Log,
+    kind: str,
+    encoder: str | None,
+    intervals: tuple[int, int],
+    record: int,
+    size: tuple[float, float, float],
+    evidence: str,
+) -> Fault:
+    """A fault at ``record`` of ``log`` over ``intervals``; ``size`` is (logged, implied, noise)."""
+    t, line = float(log.time_s[record]), int(log.line_numbers[record])
+    return Fault(kind, encoder, intervals[0], intervals[1], record, t, line, *size, evidence)
+
+
 def tracker_faults(log: Log) -> list[Fault]:
     """Tracker poses off the path their neighbours agree on (see :mod:`nlp_calib.analysis.streams`)."""
     T, t, lines = _unwrapped_poses(log), log.time_s, log.line_numbers
@@ -176,86 +190,60 @@ def tracker_faults(log: Log) -> list[Fault]:
                 f"{g.score:.0f}× the tracker's scatter)"
             )
             found.append(
-                Fault(
-                    "tracker_jump",
-                    None,
-                    g.first - 1,
-                    g.last,
-                    q,
-                    float(t[q]),
-                    int(lines[q]),
-                    0.0,
-                    off,
-                    noise,
-                    evidence,
-                )
+                _fault(log, "tracker_jump", None, (g.first - 1, g.last), q, (0.0, off, noise), evidence)
             )
     return found
 
 
+def _stuck(log: Log, col: int, y: np.ndarray, moving: np.ndarray | None) -> list[Fault]:
+    """An absolute encoder's readings that held while the robot moved, then caught up at once."""
+    name, lines, t = log.header.encoder_names[col], log.line_numbers, log.time_s
+    found = []
+    for first, last, jump in stuck_runs(t, y, STUCK_FLOOR_TICKS, moving):
+        r = first + 1
+        evidence = (
+            f"{name!r} holds {log.ticks[first, col]} ticks over records {first}-{last} (lines "
+            f"{lines[first]}-{lines[last]}) while the robot moves, then jumps by {jump:+.0f} ticks at "
+            f"record {last + 1}: the reading was stuck"
+        )
+        implied = y[first] + jump * (t[r] - t[first]) / max(t[last + 1] - t[first], 1e-9)
+        found.append(_fault(log, "steering_stuck", name, (first, last), r, (y[r], implied, 1.0), evidence))
+    return found
+
+
+def _spikes(log: Log, col: int, y: np.ndarray, usable: np.ndarray) -> list[Fault]:
+    """An absolute encoder's readings that leave the span of their neighbours for one record."""
+    name, lines, t = log.header.encoder_names[col], log.line_numbers, log.time_s
+    sc = scatter(t, y, 1.0)
+    least = SPIKE_MIN_ANGLE * log.header.encoder_max[col] / (2.0 * np.pi)
+    found = []
+    for g in off_neighbours(t, y, sc, usable, excursion=least, max_group=1):
+        r, off = g.first, float(g.offset[0])
+        evidence = (
+            f"{name!r} reads {log.ticks[r, col]} ticks at record {r} (line {lines[r]}), {off:+.0f} "
+            "ticks off the span of its neighbours, which agree with each other: a one-record spike"
+        )
+        size = (float(y[r]), float(y[r] - off), float(sc.floor[0]))
+        found.append(_fault(log, "steering_spike", name, (r - 1, r), r, size, evidence))
+    return found
+
+
 def absolute_faults(log: Log, kinds: Mapping[str, EncoderKind]) -> list[Fault]:
-    """One-record spikes and stuck readings of the log's absolute encoders (judged while it moves)."""
-    t, lines, header = log.time_s, log.line_numbers, log.header
-    counters = [j for j, n in enumerate(header.encoder_names) if kinds.get(n) == "counter"]
+    """Stuck readings (judged while the robot moves: a counter's increment) and one-record spikes
+    of the log's absolute encoders."""
+    names = log.header.encoder_names
+    counters = [j for j, n in enumerate(names) if kinds.get(n) == "counter"]
     moving = (
         np.any([wrapped_difference(log.ticks[:, j]) != 0 for j in counters], axis=0) if counters else None
     )
     found = []
-    for col, name in enumerate(header.encoder_names):
-        if kinds.get(name) != "absolute":
-            continue
+    for col in (j for j, n in enumerate(names) if kinds.get(n) == "absolute"):
         y = _angle_ticks(log, col)
+        stuck = _stuck(log, col, y, moving)
         usable = np.ones(log.n_records, dtype=bool)
-        for first, last, jump in stuck_runs(t, y, STUCK_FLOOR_TICKS, moving):
-            usable[first + 1 : last + 1] = False
-            r = first + 1
-            evidence = (
-                f"{name!r} holds {y[first] % header.encoder_max[col]:.0f} ticks over records {first}-{last} "
-                f"(lines {lines[first]}-{lines[last]}) while the robot moves, then jumps by {jump:+.0f} "
-                f"ticks at record {last + 1}: the reading was stuck"
-            )
-            implied = y[first] + jump * (t[r] - t[first]) / max(t[last + 1] - t[first], 1e-9)
-            found.append(
-                Fault(
-                    "steering_stuck",
-                    name,
-                    first,
-                    last,
-                    r,
-                    float(t[r]),
-                    int(lines[r]),
-                    y[r],
-                    implied,
-                    1.0,
-                    evidence,
-                )
-            )
-        sc = scatter(t, y, 1.0)
-        least = SPIKE_MIN_ANGLE * header.encoder_max[col] / (2.0 * np.pi)
-        for g in off_neighbours(t, y, sc, usable, excursion=least, max_group=1):
-            r = g.first
-            evidence = (
-                f"{name!r} reads {log.ticks[r, col]} ticks at record {r} (line {lines[r]}), "
-                f"{float(g.offset[0]):+.0f} ticks off the span of its neighbours, which agree with "
-                "each other: a one-record spike"
-            )
-            noise = float(sc.floor[0])
-            logged, implied = float(y[r]), float(y[r] - g.offset[0])
-            found.append(
-                Fault(
-                    "steering_spike",
-                    name,
-                    r - 1,
-                    r,
-                    r,
-                    float(t[r]),
-                    int(lines[r]),
-                    logged,
-                    implied,
-                    noise,
-                    evidence,
-                )
-            )
+        for f in stuck:
+            usable[f.record : f.last + 1] = False
+        found += stuck + _spikes(log, col, y, usable)
     return found
 
 
@@ -314,28 +302,14 @@ def counter_faults(
     e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
     de_du = de_du.reshape(3, N, inputs.shape[0])
     screens, lag_s = screen_counters(e, de_du, inputs, counters, log.time_s, lag)
-    t, lines = log.time_s, log.line_numbers
+    lines = log.line_numbers
     faults = []
     for name, sc in screens.items():
         for f in sc.findings:
             k = f.last
             records = f"records {f.first}-{k + 1} (lines {lines[f.first]}-{lines[k + 1]})"
             why = _evidence(f.kind, f"counter {name!r}", f.logged, f.implied, f.noise, records)
-            faults.append(
-                Fault(
-                    f.kind,
-                    name,
-                    f.first,
-                    k,
-                    k + 1,
-                    float(t[k + 1]),
-                    int(lines[k + 1]),
-                    f.logged,
-                    f.implied,
-                    f.noise,
-                    why,
-                )
-            )
+            faults.append(_fault(log, f.kind, name, (f.first, k), k + 1, (f.logged, f.implied, f.noise), why))
     stale = {n: sc.stale for n, sc in screens.items()}
     noise = {n: sc.noise for n, sc in screens.items()}
     return FaultReport(tuple(faults), stale, noise, lag_s=lag_s)

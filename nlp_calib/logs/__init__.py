@@ -8,7 +8,7 @@ from nlp_calib.logs.bag_reader import BagError, BagTopics
 from nlp_calib.logs.bag_records import read_bag
 from nlp_calib.logs.log import ENCODER_KINDS, DroppedRecord, EncoderKind, Log, LogHeader
 from nlp_calib.logs.reader import parse_log, read_log, yaw_from_quaternion
-from nlp_calib.logs.resample import resample_encoders, resample_tracker
+from nlp_calib.logs.resample import resample_encoders
 from nlp_calib.logs.writer import format_log
 
 __all__ = [
@@ -24,6 +24,5 @@ __all__ = [
     "read_bag",
     "read_log",
     "resample_encoders",
-    "resample_tracker",
     "yaw_from_quaternion",
 ]

@@ -44,24 +44,3 @@ def resample_encoders(
     ticks = np.stack(columns, axis=1).astype(np.int64)
     ticks.flags.writeable = False
     return replace(log, ticks=ticks), (int(valid[0]), int(valid[-1]) + 1)
-
-
-def resample_tracker(log: Log, lag_s: float) -> Log:
-    """Tracker poses re-sampled at ``t + lag_s``: the pose the tracker reported for each record's time.
-
-    The counterpart of :func:`resample_encoders` that leaves the encoder readings as logged (a
-    counter's jump stays on its record). Positions and the unwrapped heading are interpolated;
-    outside the log the first or last pose is held.
-    """
-    if lag_s == 0.0:
-        return log
-    t = log.time_s
-    T = np.asarray(log.T_world_sensor, dtype=float)
-    heading = np.unwrap(T[:, 2])
-    tq = t + lag_s
-    shifted = np.stack(
-        [np.interp(tq, t, T[:, 0]), np.interp(tq, t, T[:, 1]), np.interp(tq, t, heading)], axis=1
-    )
-    shifted[:, 2] = np.arctan2(np.sin(shifted[:, 2]), np.cos(shifted[:, 2]))
-    shifted.flags.writeable = False
-    return replace(log, T_world_sensor=shifted)

@@ -157,6 +157,8 @@ class SimulatedLog:
     T_world_base_true: np.ndarray
     options: SimulationOptions
     faults: tuple[InjectedFault, ...] = ()
+    #: Per record, whether its tracker pose took in a gross outlier (paired: either bracket).
+    tracker_outliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     def text(self) -> str:
         return format_log(self.header, self.time_ns, self.ticks, self.model_pose, self.T_world_sensor)
@@ -167,6 +169,7 @@ class SimulatedLog:
             "params": dict(self.options.truth),
             "options": opts,
             "faults": [f.as_dict() for f in self.faults],
+            "tracker_outliers": np.flatnonzero(self.tracker_outliers).tolist(),
             "records": int(self.time_ns.size),
         }
 
@@ -249,9 +252,11 @@ def _motion(opts: SimulationOptions, knots: tuple[np.ndarray, ...], grid: np.nda
     return _Motion(t_fine, integrate_base(ds, w), channels)
 
 
-def _tracker(opts: SimulationOptions, motion: _Motion, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def _tracker(
+    opts: SimulationOptions, motion: _Motion, t: np.ndarray, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """The tracker's poses reported at times ``t``: the sensor ``latency_s`` earlier, with noise and
-    gross outliers."""
+    gross outliers (and which poses are outliers)."""
     truth, n = opts.truth, t.size
     mount = (truth["sensor_x"], truth["sensor_y"], truth["sensor_theta"])
     tracker = _sensor_pose(motion.base_at(t - opts.latency_s), mount)
@@ -261,7 +266,7 @@ def _tracker(opts: SimulationOptions, motion: _Motion, t: np.ndarray, rng: np.ra
     tracker[outliers, :2] += rng.normal(0.0, opts.outlier_magnitude, (int(outliers.sum()), 2))
     tracker[outliers, 2] += rng.normal(0.0, opts.outlier_magnitude, int(outliers.sum()))
     tracker[:, 2] = wrap_angle(tracker[:, 2])
-    return tracker
+    return tracker, outliers
 
 
 def _own_clock(opts: SimulationOptions, t_enc: np.ndarray) -> np.ndarray:
@@ -275,22 +280,21 @@ def _own_clock(opts: SimulationOptions, t_enc: np.ndarray) -> np.ndarray:
 
 def _records(
     opts: SimulationOptions, rng: np.random.Generator, t_enc: np.ndarray, knots: tuple[np.ndarray, ...]
-) -> tuple[np.ndarray, np.ndarray, _Motion]:
-    """Record times, the tracker's pose at each and the motion: one record per encoder sample
-    with the tracker sampled alongside, or, on its own clock, paired as a bag import pairs them."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, _Motion]:
+    """Record times, the tracker's pose at each, which took in an outlier, and the motion: one
+    record per encoder sample with the tracker sampled alongside, or, on its own clock, paired
+    as a bag import pairs them."""
     if not opts.tracker_rate_hz:
         motion = _motion(opts, knots, t_enc)
-        return t_enc, _tracker(opts, motion, t_enc, rng), motion
+        return (t_enc, *_tracker(opts, motion, t_enc, rng), motion)
     t_trk = _own_clock(opts, t_enc)
     motion = _motion(opts, knots, np.union1d(t_enc, t_trk[t_trk > t_enc[-1]]))
-    poses = _tracker(opts, motion, t_trk, np.random.default_rng([opts.seed, 3]))
+    poses, outliers = _tracker(opts, motion, t_trk, np.random.default_rng([opts.seed, 3]))
     ns = lambda t: np.round(t * 1e9).astype(np.int64)  # noqa: E731
-    index, paired, _ = pair(
-        Stamped("joints", ns(t_enc), np.zeros((t_enc.size, 0))),
-        Stamped("tracker", ns(t_trk), poses),
-        DEFAULT_MAX_GAP_S,
-    )
-    return t_enc[index], paired, motion
+    joints = Stamped("joints", ns(t_enc), np.zeros((t_enc.size, 0)))
+    index, paired, _ = pair(joints, Stamped("tracker", ns(t_trk), poses), DEFAULT_MAX_GAP_S)
+    t_s = t_enc[index]
+    return t_s, paired, np.interp(t_s, t_trk, outliers.astype(float)) > 0, motion
 
 
 def simulate(opts: SimulationOptions) -> SimulatedLog:
@@ -298,7 +302,7 @@ def simulate(opts: SimulationOptions) -> SimulatedLog:
     rng = np.random.default_rng(opts.seed)
     t_enc = _sample_times(opts.records, opts.rate_hz, opts.jitter_s, rng)
     knots = _profiles(opts, rng, float(t_enc[-1]) + opts.latency_s + 1.0)
-    t_s, tracker, motion = _records(opts, rng, t_enc, knots)
+    t_s, tracker, outliers, motion = _records(opts, rng, t_enc, knots)
     drive = MODELS[opts.model].drive
     ticks = drive.ticks(opts, {name: np.interp(t_s, motion.t, c) for name, c in motion.channels.items()})
     header = drive.header(opts)
@@ -312,6 +316,7 @@ def simulate(opts: SimulationOptions) -> SimulatedLog:
         T_world_base_true=motion.base_at(t_s),
         options=opts,
         faults=faults,
+        tracker_outliers=outliers,
     )
 
 
