@@ -41,6 +41,25 @@ class DirectionCheck:
     def significant(self) -> bool:
         return bool(np.nanmax(np.abs(self.z), initial=0.0) > SIGNIFICANT)
 
+    @property
+    def compared(self) -> bool:
+        """Whether any parameter could be compared (a σ in both parts, held in neither)."""
+        return bool(np.any(np.isfinite(self.z)))
+
+    def words(self) -> str:
+        """The verdict in words: agree within, disagree by, or could not compare (and why)."""
+        if not self.compared:
+            return (
+                "could not be compared: no parameter has a σ in both parts (each part's σ needs at "
+                "least 3 blocks with 20 or more windows of its driving)"
+            )
+        name, z = self.worst
+        return (
+            f"DISAGREE: {name} by {abs(z):.1f}σ"
+            if self.significant
+            else f"agree within {abs(z):.1f}σ ({name})"
+        )
+
     def as_dict(self) -> dict[str, object]:
         return {
             "windows": {"forward": self.windows[0], "reverse": self.windows[1]},

@@ -1,10 +1,12 @@
 """The verdict on a run and the closing summary: is the calibration good, what was written, what next.
 
-The verdict is one of three levels, decided by rules a reader can check:
+The verdict is one of four levels, decided by rules a reader can check:
 
 - **not determined**: no solver converged, or the drive leaves a parameter undetermined (its σ
   is infinite, or a direction of the information matrix is beyond
   :data:`~nlp_calib.analysis.observability.NOT_OBSERVABLE` reference units);
+- **not usable**: converged and determined, but farther from the tracker than the initial guess
+  (segment ATE): whatever else holds, such a calibration is not to be used;
 - **usable with caveats**: converged and determined, but something needs a look first: a weakly
   observable direction, a parameter whose σ to believe exceeds
   :data:`~nlp_calib.analysis.observability.WEAK` times the precision a useful calibration needs,
@@ -38,6 +40,7 @@ from nlp_calib.pipeline import CalibrationRun
 GOOD = "good"
 CAVEATS = "usable with caveats"
 UNDETERMINED = "not determined"
+NOT_USABLE = "not usable"
 #: Relative parameter difference beyond which two converged solvers disagree.
 AGREE = 1e-4
 
@@ -104,6 +107,12 @@ def verdict(run: CalibrationRun) -> Verdict:
     if missing or loose:
         why = loose or [f"{', '.join(missing)} not determined by this drive"]
         return Verdict(UNDETERMINED, tuple(why))
+    ours, base = run.reports[solver].metrics.segment_ate.mean, run.baseline.segment_ate.mean
+    if ours > base:
+        return Verdict(
+            NOT_USABLE,
+            (f"worse than the initial guess (segment ATE {ours:.3g} m against {base:.3g} m uncalibrated)",),
+        )
     caveats = _caveats(run, solver)
     if caveats:
         return Verdict(CAVEATS, tuple(caveats))
@@ -174,7 +183,7 @@ def _next_steps(run: CalibrationRun, level: str, files: Sequence[str]) -> list[s
         steps.append(
             f"C code of the residual and its Jacobian: nlp-calib codegen {run.scenario.path} --out DIR"
         )
-    if level == UNDETERMINED:
+    if level in (UNDETERMINED, NOT_USABLE):
         obs = run.observability
         hints = [w for w in obs.warnings if "drive" in w] if obs is not None else []
         steps.append(

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
+from nlp_calib.analysis.consistency import ConsistencyCheck, compare_logs
 from nlp_calib.analysis.crossval import CrossValidation
 from nlp_calib.analysis.direction import DirectionCheck
 from nlp_calib.analysis.metrics import TrajectoryMetrics, trajectory_metrics
@@ -183,3 +184,16 @@ class JointCalibration(Solving):
             observability=observability,
             warnings=tuple(notes),
         )
+
+
+def consistency(joint: JointRun, own: Sequence[CalibrationRun], solver: str) -> ConsistencyCheck:
+    """Each log's own fit (``own``, one run per log in the joint run's order) against the joint
+    fit, in honest σ (see :mod:`nlp_calib.analysis.consistency`)."""
+    result = joint.reports[solver].result
+    std = joint.std(solver)
+    logs = [run.log.path for run in own]
+    estimates = np.array([run.reports[solver].result.params for run in own])
+    stds = np.array([[run.std(solver)[n] for n in result.names] for run in own])
+    return compare_logs(
+        result.names, logs, result.params, np.array([std[n] for n in result.names]), estimates, stds
+    )
