@@ -159,21 +159,37 @@ def _resolve(
     threshold, excursion, max_group = limits
     usable = usable.copy()
     found: list[OffGroup] = []
+
+    def score(first: int, last: int) -> tuple[float, np.ndarray] | None:
+        around = _outside(usable, first, last)
+        if around is None:
+            return None
+        s, off = _scores(t, y, sc, tuple(around[:, None]), np.arange(first, last + 1)[None, :], excursion)
+        return float(s[0]), off[0]
+
     while True:
         best: tuple[float, int, int, np.ndarray] | None = None
         for g in range(1, int(max_group) + 1):
             for p in range(span[0], span[1] - g + 2):
-                if not usable[p : p + g].all() or (around := _outside(usable, p, p + g - 1)) is None:
-                    continue
-                s, off = _scores(t, y, sc, tuple(around[:, None]), np.arange(p, p + g)[None, :], excursion)
-                if s[0] > threshold and (best is None or s[0] > best[0]):
-                    best = (float(s[0]), p, p + g - 1, off[0])
+                if usable[p : p + g].all() and (s := score(p, p + g - 1)) is not None and s[0] > threshold:
+                    best = (s[0], p, p + g - 1, s[1]) if best is None or s[0] > best[0] else best
             if best is not None:
                 break
         if best is None:
-            return sorted(found, key=lambda f: f.first)
+            break
         usable[best[1] : best[2] + 1] = False
         found.append(OffGroup(best[1], best[2], best[0], best[3]))
+    # A group may have taken in a sound neighbour of a bad reading: give back an end record that
+    # is not off the records around it once every other bad reading is left out.
+    trimmed = []
+    for f in found:
+        a, b = f.first, f.last
+        for end in (a, b):
+            if b > a and (s := score(end, end)) is not None and s[0] <= threshold:
+                usable[end] = True
+                a, b = (a + 1, b) if end == a else (a, b - 1)
+        trimmed.append(OffGroup(a, b, f.score, f.offset))
+    return sorted(trimmed, key=lambda f: f.first)
 
 
 def off_neighbours(

@@ -388,7 +388,7 @@ def find_faults(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray)
 
 def handle_faults(log: Log, report: FaultReport, handling: str) -> tuple[Log, Findings]:
     """The log to fit (repaired when ``handling`` asks for it) and what was found and done."""
-    if handling == "repair" and report.counter_faults:
+    if handling == "repair" and report.encoder_faults:
         log, repairs = repair(log, report)
         return log, Findings(report, handling, repairs)
     return log, Findings(report, handling)
