@@ -120,7 +120,12 @@ def test_well_excited_logs_raise_no_observability_warning(trajectory: str) -> No
 
 def test_auto_initial_guess_reaches_the_header_optimum_on_the_real_log(real_log: Path) -> None:
     sc = load_scenario(SCENARIOS / "real_tricycle.yaml").with_dataset(real_log)
-    sc = dataclasses.replace(sc, alignment=AlignmentOptions())
+    # The closed form as this test was written for it: the steering read at each interval's start
+    # (the shipped scenario now reads it at the middle; the closed form then lands 8 % off in
+    # k_traction, and the refinement below reaches the same optimum all the same).
+    sc = dataclasses.replace(
+        sc, alignment=AlignmentOptions(), residual=dataclasses.replace(sc.residual, steering_sample="start")
+    )
     header = Calibration(sc).solve("gauss_newton")
     auto = Calibration(dataclasses.replace(sc, initial_guess="auto"))
     assert auto.start.auto is not None

@@ -134,7 +134,8 @@ def _scores(
     hi, lo = np.maximum(y[l1], y[r1])[:, None], np.minimum(y[l1], y[r1])[:, None]
     beyond = np.linalg.norm(np.maximum(ym - hi, 0.0) + np.maximum(lo - ym, 0.0), axis=-1).max(axis=1)
     worst = np.argmax(size(ym - C, 1.0), axis=1)
-    return np.where(beyond > excursion, score, 0.0), (ym - C)[np.arange(m.shape[0]), worst]
+    departs = beyond > excursion if excursion > 0 else True
+    return np.where(departs, score, 0.0), (ym - C)[np.arange(m.shape[0]), worst]
 
 
 def _outside(usable: np.ndarray, first: int, last: int) -> np.ndarray | None:
@@ -154,8 +155,9 @@ def _resolve(
     usable: np.ndarray,
     limits: tuple[float, float, int],
 ) -> list[OffGroup]:
-    """The groups off their neighbours among the records ``span``: the smallest groups first, the
-    strongest of a size first, each judged against the nearest usable records not already found."""
+    """The groups off their neighbours among the records ``span``: the strongest first, each judged
+    against the nearest usable records not already found; then each group's ends that are not off
+    on their own are given back."""
     threshold, excursion, max_group = limits
     usable = usable.copy()
     found: list[OffGroup] = []
@@ -173,21 +175,30 @@ def _resolve(
             for p in range(span[0], span[1] - g + 2):
                 if usable[p : p + g].all() and (s := score(p, p + g - 1)) is not None and s[0] > threshold:
                     best = (s[0], p, p + g - 1, s[1]) if best is None or s[0] > best[0] else best
-            if best is not None:
-                break
         if best is None:
             break
         usable[best[1] : best[2] + 1] = False
         found.append(OffGroup(best[1], best[2], best[0], best[3]))
+
+    def chord(e: int, f: OffGroup) -> float:
+        """How far record ``e`` is off the chord between the nearest usable records around its group."""
+        around = _outside(usable, f.first, f.last)
+        if around is None:
+            return np.inf
+        a, b = around[1], around[2]
+        slope = (y[b] - y[a]) / max(t[b] - t[a], 1e-12)
+        miss = y[e] - (y[a] + slope * (t[e] - t[a]))
+        return float(np.sqrt(np.sum((miss / sc.at(np.abs(slope))) ** 2)))
+
     # A group may have taken in a sound neighbour of a bad reading: give back an end record that
-    # is not off the records around it once every other bad reading is left out.
+    # lies on the chord between the records around the group.
     trimmed = []
     for f in found:
         a, b = f.first, f.last
-        for end in (a, b):
-            if b > a and (s := score(end, end)) is not None and s[0] <= threshold:
-                usable[end] = True
-                a, b = (a + 1, b) if end == a else (a, b - 1)
+        while b > a and chord(a, f) <= threshold:
+            usable[a], a = True, a + 1
+        while b > a and chord(b, f) <= threshold:
+            usable[b], b = True, b - 1
         trimmed.append(OffGroup(a, b, f.score, f.offset))
     return sorted(trimmed, key=lambda f: f.first)
 

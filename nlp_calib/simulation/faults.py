@@ -69,13 +69,15 @@ def inject(
         # A stretch of steady motion in one direction (every interval of it moves the counter), at
         # least at the log's typical speed: a fault in a creep is no fault a tracker can see.
         typical = float(np.median(np.abs(step[step != 0]))) if np.any(step) else 0.0
+        # The fault's own interval and the one after it move the same way too: at a reversal, a
+        # fault would be a reversal a record late.
         steady = np.array(
             [
                 r >= stall + 2
                 and not taken[r - stall - 2 : r + 2].any()
-                and abs(np.sign(step[r - stall - 2 : r]).sum()) == stall + 2
+                and abs(np.sign(step[r - stall - 2 : r + 2]).sum()) == stall + 4
                 and abs(step[r]) >= typical
-                for r in range(out.shape[0] - 1)
+                for r in range(out.shape[0] - 2)
             ]
         )
         places = np.flatnonzero(steady)
