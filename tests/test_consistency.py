@@ -7,6 +7,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import parse_lines, write_sim
 
 from nlp_calib.analysis.consistency import SIGNIFICANT, compare_logs
@@ -21,9 +22,10 @@ NAMES = ("a", "b")
 
 def test_against_the_joint_fit_two_logs_differ_as_they_differ_from_each_other() -> None:
     """For estimates combined by their information, each log's difference to the joint fit in σ
-    of that difference is the two logs' difference in σ of theirs (independent computation)."""
+    of that difference is the two logs' difference in σ of theirs (independent computation; logs
+    of equal information, where the floor on that σ does not bind)."""
     own = np.array([[1.0, 5.0], [1.6, 5.1]])
-    std = np.array([[0.1, 0.2], [0.05, 0.4]])
+    std = np.array([[0.1, 0.2], [0.1, 0.2]])
     w = 1.0 / std**2
     joint = np.sum(w * own, axis=0) / np.sum(w, axis=0)
     std_joint = 1.0 / np.sqrt(np.sum(w, axis=0))
@@ -37,6 +39,17 @@ def test_against_the_joint_fit_two_logs_differ_as_they_differ_from_each_other() 
         ("y.txt", "a"),
     ]
     assert "a differ in x.txt, y.txt" in check.words()
+
+
+def test_a_log_holding_most_of_the_information_is_compared_conservatively() -> None:
+    """Where the joint σ comes close to a log's own, the σ of their difference is at least the
+    log's share of its own variance: never a division by a vanishing difference of variances."""
+    own, std = np.array([[1.0], [1.3]]), np.array([[0.1], [1.0]])
+    w = 1.0 / std**2
+    joint = np.sum(w * own, axis=0) / np.sum(w, axis=0)
+    check = compare_logs(("a",), ("x.txt", "y.txt"), joint, 1.0 / np.sqrt(np.sum(w, axis=0)), own, std)
+    assert abs(check.z[0, 0]) == pytest.approx(abs(own[0, 0] - joint[0]) / (0.1 / np.sqrt(2.0)), rel=1e-12)
+    assert abs(check.z[0, 0]) < abs(own[0, 0] - own[1, 0]) / np.sqrt(np.sum(std**2))
 
 
 def test_held_parameters_are_not_compared_and_nothing_to_compare_is_said() -> None:

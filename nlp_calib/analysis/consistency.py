@@ -6,8 +6,10 @@ joint fit contains the log's own data, so the two are correlated: for estimates 
 their information, ``var(own − joint) = σ_own² − σ_joint²`` (two logs: the difference to the
 joint fit in these units is exactly the difference between the two logs in units of
 ``√(σ_a² + σ_b²)``). The σ are the honest ones (the larger of the white-noise and the block
-jackknife σ); where the joint σ is not the smaller (the joint fit's blocks disagree among
-themselves), the log's own σ alone is used, which understates the difference.
+jackknife σ), each estimated from ten blocks: their difference is unreliable where the joint σ
+comes close to the log's own (a parameter the other logs barely inform, or joint blocks that
+disagree among themselves), so the variance of the difference is taken as at least the log's
+share ``σ_own² / n_logs`` (below what logs of equal information give, ``σ_own²·(1 − 1/n)``).
 
 A difference beyond :data:`SIGNIFICANT` of that in any parameter of any log says the logs do
 not come from one robot (or one of them is not what it seems): the joint result is then not to
@@ -136,8 +138,9 @@ def compare_logs(
         np.atleast_2d(np.asarray(std_own, dtype=float)),
     )
     joint, std_joint = np.asarray(joint, dtype=float), np.asarray(std_joint, dtype=float)
-    var = std_own**2 - std_joint[None, :] ** 2
-    var = np.where(var > 0, var, std_own**2)
+    # The difference of two estimated variances is unreliable where the joint fit is barely more
+    # certain than the log's own: never less than the log's share of its own variance.
+    var = np.maximum(std_own**2 - std_joint[None, :] ** 2, std_own**2 / max(own.shape[0], 2))
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.where(np.isfinite(var) & (var > 0), (own - joint[None, :]) / np.sqrt(var), np.nan)
     for i, h in enumerate(held):

@@ -48,7 +48,10 @@ TRACKER_KINDS = ("tracker_jump",)
 SPIKE_MIN_ANGLE = 0.03
 STUCK_FLOOR_TICKS = 3.0
 #: The longest group of tracker records judged as one glitch; an absolute encoder's is one record.
+#: A glitch of the tracker leaves the span of its near neighbours by this many times its scatter
+#: at rest (a corner cut by a slow tracker interpolated onto faster records stays inside it).
 TRACKER_GROUP = 4
+TRACKER_EXCURSION = 3.0
 
 
 @dataclass(frozen=True)
@@ -181,7 +184,7 @@ def tracker_faults(log: Log) -> list[Fault]:
     sc = scatter(t, T)
     noise = float(np.hypot(sc.floor[0], sc.floor[1]))
     found = []
-    for g in off_neighbours(t, T, sc, max_group=TRACKER_GROUP):
+    for g in off_neighbours(t, T, sc, excursion=TRACKER_EXCURSION * sc.floor, max_group=TRACKER_GROUP):
         off = float(np.hypot(g.offset[0], g.offset[1]))
         for q in range(g.first, g.last + 1):
             evidence = (

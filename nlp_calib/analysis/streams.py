@@ -3,16 +3,21 @@
 A tracker pose or an absolute encoder's reading that is off for one record (or a few, when the
 log's records interpolate a slower stream) departs from every path its neighbours allow. A
 genuine motion does not: the neighbours on one side continue into it (a stop, a reversal or a
-start is a kink, explained by the straight line through the two records on one side of it), or
-the straight line between the neighbours on both sides passes through it. A group of ``g``
-records is therefore judged by three predictions from the two records on each side: the line
-through the left pair carried forward (``L``), the line through the right pair carried back
-(``R``) and the chord between the nearest outside records (``B``). Its score is the smallest of
-the chord's largest miss and, over every split of the group into a left and a right part, the
-larger of ``L``'s miss on the left part and ``R``'s on the right: a single kink anywhere in the
-group costs nothing, an off reading misses every prediction. Misses are in units of the
-stream's own scatter about the chord (a robust standard deviation over the log), the one-sided
-lines' twice that (their noise, for records evenly spaced).
+start is a kink, explained by the straight line through the two records on one side of it, or by
+the two lines meeting between records), or the straight line between the neighbours on both sides
+passes through it. A group of ``g`` records is therefore judged by predictions from the two
+records on each side: the line through the left pair carried forward (``L``), the line through
+the right pair carried back (``R``), the two meeting where they come closest (one kink), and the
+chord between the nearest outside records (``B``). Its score is the smallest of the chord's
+largest miss, the kinked path's, and, over every split of the group into a left and a right
+part, the larger of ``L``'s miss on the left part and ``R``'s on the right: a single kink
+anywhere costs nothing, an off reading misses every prediction. Misses are in units of the
+stream's scatter about the chord between adjacent neighbours (robust, over the log; growing with
+the rate of change where readings are late or early), times each prediction's own noise (a line
+carried further from its two records is the less certain). A glitch must also leave the span of
+its near neighbours: a corner cut by a slow tracker interpolated onto faster records stays inside
+it. Groups are taken strongest first; a sound record a group took in beside or between bad ones,
+one that lies on the chord between the records around the group, is given back.
 
 A stuck absolute encoder is another glitch of its own stream: its reading holds for several
 records while the thing it measures moves on, then jumps to where it is. A genuine hold ends
@@ -31,8 +36,6 @@ OFF_SIGMAS = 10.0
 #: Longest run of consecutive records judged as one group (a slow stream interpolated onto the
 #: records of a faster one spreads one bad reading over about twice the rate ratio).
 MAX_GROUP = 4
-#: A one-sided line's noise in units of the chord's (evenly spaced records: √6 / √1.5).
-ONE_SIDED = 2.0
 #: Records a stuck reading must hold (the first reading and at least two repeats of it).
 MIN_STUCK = 3
 #: A catch-up is a jump when it exceeds this many times the motion per record around it.
@@ -94,13 +97,20 @@ class OffGroup:
     offset: np.ndarray
 
 
+def _spread(t: np.ndarray, a: np.ndarray, b: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """The noise of a reading's miss from the line through records ``a`` and ``b`` (P,) at times
+    ``at`` (P, g), in units of a reading's miss from the chord midway between its neighbours."""
+    s = (at - t[a][:, None]) / np.maximum(t[b] - t[a], 1e-12)[:, None]
+    return np.sqrt(((1.0 - s) ** 2 + s**2 + 1.0) / 1.5)
+
+
 def _scores(
     t: np.ndarray,
     y: np.ndarray,
     sc: Scatter,
     outside: tuple[np.ndarray, ...],
     m: np.ndarray,
-    excursion: float,
+    excursion: np.ndarray | float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Scores of groups of records ``m`` ``(P, g)``, each between the outside records ``(l2, l1,
     r1, r2)`` ``(P,)`` (see the module docstring), and each group's largest chord miss ``(P, d)``."""
@@ -119,22 +129,30 @@ def _scores(
     bb = np.sum(B * B, axis=1)
     kink = np.where(bb > 0, -np.sum(A * B, axis=1) / np.where(bb > 0, bb, 1.0), t[l1])
     kink = np.clip(kink, t[l1], t[r1])
-    K = np.where((tm <= kink[:, None])[..., None], L, R)
+    before = tm <= kink[:, None]
+    K = np.where(before[..., None], L, R)
     ym = y[m]
+    # Each prediction's noise, in units of the chord's between adjacent neighbours: lines carried
+    # further from the two records that define them are the less certain.
+    fL, fR, fC = _spread(t, l2, l1, tm), _spread(t, r1, r2, tm), _spread(t, l1, r1, tm)
 
-    def size(D: np.ndarray, k: float) -> np.ndarray:
-        return np.sqrt(np.sum((D / (k * sigma[:, None])) ** 2, axis=-1))
+    def size(D: np.ndarray, k: np.ndarray) -> np.ndarray:
+        return np.sqrt(np.sum((D / (k[..., None] * sigma[:, None])) ** 2, axis=-1))
 
-    left = np.maximum.accumulate(size(ym - L, ONE_SIDED), axis=1)  # left[:, j]: worst of 0..j
-    right = np.maximum.accumulate(size(ym - R, ONE_SIDED)[:, ::-1], axis=1)[:, ::-1]
+    left = np.maximum.accumulate(size(ym - L, fL), axis=1)  # left[:, j]: worst of 0..j
+    right = np.maximum.accumulate(size(ym - R, fR)[:, ::-1], axis=1)[:, ::-1]
     zero = np.zeros((m.shape[0], 1))
     split = np.maximum(np.hstack([zero, left]), np.hstack([right, zero])).min(axis=1)
-    score = np.minimum.reduce([size(ym - C, 1.0).max(axis=1), size(ym - K, ONE_SIDED).max(axis=1), split])
+    kinked = size(ym - K, np.where(before, fL, fR)).max(axis=1)
+    score = np.minimum.reduce([size(ym - C, fC).max(axis=1), kinked, split])
     # How far the group leaves the span of its near neighbours: a reading that departs and returns.
     hi, lo = np.maximum(y[l1], y[r1])[:, None], np.minimum(y[l1], y[r1])[:, None]
-    beyond = np.linalg.norm(np.maximum(ym - hi, 0.0) + np.maximum(lo - ym, 0.0), axis=-1).max(axis=1)
-    worst = np.argmax(size(ym - C, 1.0), axis=1)
-    departs = beyond > excursion if excursion > 0 else True
+    least = np.broadcast_to(np.asarray(excursion, dtype=float), (y.shape[1],))
+    departs = np.ones(m.shape[0], dtype=bool)
+    if np.any(least > 0):
+        beyond = (np.maximum(ym - hi, 0.0) + np.maximum(lo - ym, 0.0)) / np.where(least > 0, least, np.inf)
+        departs = np.sqrt(np.sum(beyond**2, axis=-1)).max(axis=1) > 1.0
+    worst = np.argmax(size(ym - C, fC), axis=1)
     return np.where(departs, score, 0.0), (ym - C)[np.arange(m.shape[0]), worst]
 
 
@@ -153,7 +171,7 @@ def _resolve(
     sc: Scatter,
     span: tuple[int, int],
     usable: np.ndarray,
-    limits: tuple[float, float, int],
+    limits: tuple[float, np.ndarray | float, int],
 ) -> list[OffGroup]:
     """The groups off their neighbours among the records ``span``: the strongest first, each judged
     against the nearest usable records not already found; then each group's ends that are not off
@@ -190,17 +208,17 @@ def _resolve(
         miss = y[e] - (y[a] + slope * (t[e] - t[a]))
         return float(np.sqrt(np.sum((miss / sc.at(np.abs(slope))) ** 2)))
 
-    # A group may have taken in a sound neighbour of a bad reading: give back an end record that
-    # lies on the chord between the records around the group.
-    trimmed = []
+    # A group may have taken in a sound record beside or between bad ones: give back every record
+    # that lies on the chord between the records around its group.
+    kept = []
     for f in found:
-        a, b = f.first, f.last
-        while b > a and chord(a, f) <= threshold:
-            usable[a], a = True, a + 1
-        while b > a and chord(b, f) <= threshold:
-            usable[b], b = True, b - 1
-        trimmed.append(OffGroup(a, b, f.score, f.offset))
-    return sorted(trimmed, key=lambda f: f.first)
+        off = [e for e in range(f.first, f.last + 1) if chord(e, f) > threshold]
+        usable[f.first : f.last + 1] = True
+        usable[off] = False
+        for run in np.split(np.array(off, dtype=int), np.flatnonzero(np.diff(off) > 1) + 1):
+            if run.size:
+                kept.append(OffGroup(int(run[0]), int(run[-1]), f.score, f.offset))
+    return sorted(kept, key=lambda f: f.first)
 
 
 def off_neighbours(
@@ -209,7 +227,7 @@ def off_neighbours(
     sc: Scatter,
     usable: np.ndarray | None = None,
     threshold: float = OFF_SIGMAS,
-    excursion: float = 0.0,
+    excursion: np.ndarray | float = 0.0,
     max_group: int = MAX_GROUP,
 ) -> list[OffGroup]:
     """The groups of records of the signal ``y`` ``(n, d)`` at times ``t`` that are off their
