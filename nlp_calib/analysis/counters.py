@@ -46,9 +46,6 @@ MAX_STALL = 25
 #: judged by its speed over this many moving intervals on either side.
 OWN_SHARE = 0.5
 OWN_INTERVALS = 3
-#: A count off by less than this many of the counter's typical increments is not told from the
-#: timing of a genuine reversal (the tracker's and the counter's clocks agree only to a record).
-MIN_RECORDS = 1.5
 #: Step of the grid of lags the screen tries when the lag is to be estimated (s), and where its
 #: loss turns from quadratic to linear (units of scatter: a fault weighs no more than its size).
 LAG_STEP = 0.002
@@ -195,7 +192,6 @@ def screen_counter(ticks: np.ndarray, c: np.ndarray, time_s: np.ndarray) -> Coun
         return _level(C, valid[a0:a1][:W]) - _level(C, valid[b0:b1][-W:])
 
     step_sigma = _step_noise(C, valid, np.array([step(k) for k in open_]), sigma)
-    typical = float(np.median(np.abs(ticks[ticks != 0]))) if np.any(ticks != 0) else 0.0
     found: list[CounterFinding] = []
     # The most significant step first, so that the strongest faults bound their neighbours' levels.
     while open_:
@@ -209,8 +205,6 @@ def screen_counter(ticks: np.ndarray, c: np.ndarray, time_s: np.ndarray) -> Coun
         i = int(np.nanargmax(score))
         k = open_.pop(i)
         first = firsts[k]
-        if abs(steps[i]) < MIN_RECORDS * typical:
-            continue  # within a record's motion: a reversal's timing, not counts lost
         if not any(d * steps[i] >= OWN_SHARE * steps[i] ** 2 for d in own_deficits(ticks, time_s, first, k)):
             continue  # the counter's own history runs smoothly through: the tracker is off, not it
         accepted.append((first, k))
