@@ -6,7 +6,7 @@ to the stream that explains it:
 - a **tracker** pose off the path its neighbours agree on is the tracker's own glitch
   (``tracker_jump``; :mod:`nlp_calib.analysis.streams`): a stop, a reversal or a start is a kink
   the neighbours on one side continue into, and is never one;
-- an **absolute encoder** (a steering angle) that leaves the span of its neighbours for one record
+- an **absolute encoder** (e.g. a wheel's angle) that leaves the span of its neighbours for one record
   and returns (``steering_spike``), or holds its reading while the robot moves and then catches
   up in one jump (``steering_stuck``), is that encoder's own glitch;
 - a **counter** whose count over a stretch of records is wrong in total, as its own history shows

@@ -5,9 +5,9 @@ few samples, then its catch-up increment loses 2¹⁶ ticks, as a 16-bit counter
 logger does; the count is off from then on) and ``reversal`` (one increment against the motion,
 not made up afterwards). They are placed in steady motion at the log's typical speed or more.
 
-An absolute (steering) encoder's glitches: ``steering_spike`` (one reading off by 0.1–0.5 rad of
+An absolute encoder's glitches (a wheel's angle): ``steering_spike`` (one reading off by 0.1–0.5 rad of
 the encoder's angle, either way, while the robot moves) and ``steering_stuck`` (the reading holds
-for 4–8 records while the robot moves and the steering turns steadily by at least 0.05 rad, then
+for 4–8 records while the robot moves and the angle turns steadily by at least 0.05 rad, then
 reads right again).
 """
 
@@ -154,7 +154,7 @@ def _fits(
     kind: str, r: int, length: int, taken: np.ndarray, moving: np.ndarray, step: np.ndarray, vmax: int
 ) -> bool:
     """Whether a glitch of ``kind`` may start at record ``r``: clear, the robot moving, and for a stuck
-    run a steady turn of the steering that the run hides (``step``: its increments, ticks)."""
+    run a steady turn of the angle that the run hides (``step``: its increments, ticks)."""
     if taken[r - 2 : r + length + 2].any() or not moving[r - 1 : r + length].all():
         return False
     if kind == "steering_spike":

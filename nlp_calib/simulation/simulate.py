@@ -323,7 +323,7 @@ def simulate(opts: SimulationOptions) -> SimulatedLog:
 def inject_faults(
     opts: SimulationOptions, header: LogHeader, ticks: np.ndarray
 ) -> tuple[np.ndarray, tuple[InjectedFault, ...]]:
-    """``ticks`` with the options' counter faults, steering spikes and stuck steering readings,
+    """``ticks`` with the options' counter faults, spikes and stuck readings of an absolute encoder,
     each kind from a random stream of its own (a log without faults stays the same for a seed)."""
     kinds = MODELS[opts.model].encoder_kinds
     faults: tuple[InjectedFault, ...] = ()
