@@ -187,9 +187,10 @@ def tracker_faults(log: Log) -> list[Fault]:
     for g in off_neighbours(t, T, sc, excursion=TRACKER_EXCURSION * sc.floor, max_group=TRACKER_GROUP):
         off = float(np.hypot(g.offset[0], g.offset[1]))
         for q in range(g.first, g.last + 1):
+            group = f"records {g.first}-{g.last} " if g.last > g.first else ""
             evidence = (
                 f"the tracker pose at record {q} (line {lines[q]}) is off the path its neighbours agree "
-                f"on (records {g.first}-{g.last} by up to {off:.3f} m and {abs(g.offset[2]):.3f} rad, "
+                f"on ({group}by up to {off:.3f} m and {abs(g.offset[2]):.3f} rad, "
                 f"{g.score:.0f}× the tracker's scatter)"
             )
             found.append(
@@ -224,7 +225,7 @@ def _spikes(log: Log, col: int, y: np.ndarray, usable: np.ndarray) -> list[Fault
         r, off = g.first, float(g.offset[0])
         evidence = (
             f"{name!r} reads {log.ticks[r, col]} ticks at record {r} (line {lines[r]}), {off:+.0f} "
-            "ticks off the span of its neighbours, which agree with each other: a one-record spike"
+            "ticks off the line between its neighbours, which agree with each other: a one-record spike"
         )
         size = (float(y[r]), float(y[r] - off), float(sc.floor[0]))
         found.append(_fault(log, "steering_spike", name, (r - 1, r), r, size, evidence))
