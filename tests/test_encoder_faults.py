@@ -177,3 +177,86 @@ def test_a_log_without_faults_is_unchanged_by_the_fault_options() -> None:
 def test_unknown_fault_handling_names_the_key_and_choices() -> None:
     with pytest.raises(ScenarioError, match=r"faults\.handling: 'drop' is not one of exclude, repair, keep"):
         scenario("tricycle", faults={"handling": "drop"})
+
+
+RECOMMENDED = {
+    "residual": {"horizon": 25, "steering_sample": "mean"},
+    "alignment": {"tracker_lag": "auto"},
+}
+
+
+def test_steering_glitches_are_found_and_put_down_to_the_steering() -> None:
+    log, out = sim(
+        "tricycle",
+        seed=3,
+        records=1500,
+        counter_faults=2,
+        steering_spikes=3,
+        steering_stuck=2,
+        latency_s=0.05,
+    )
+    report = Calibration(scenario("tricycle", **RECOMMENDED), log=log).findings.report
+    injected = {(f.kind, f.record) for f in out.faults}  # type: ignore[attr-defined]
+    assert sorted(k for k, _ in injected).count("steering_spike") == 3
+    found = {(f.kind, f.record) for f in report.encoder_faults}
+    for kind, record in injected:
+        steering = kind.startswith("steering")
+        assert any(
+            abs(r - record) <= 2 and (k == kind if steering else not k.startswith("steering"))
+            for k, r in found
+        ), (kind, record, found)
+    assert len(found) == len(injected)
+    assert not [f for f in report.faults if f.kind == "tracker_jump"]  # never blamed on the tracker
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_no_encoder_fault_at_abrupt_reversals_next_to_tracker_outliers(seed: int) -> None:
+    log, out = sim(
+        "tricycle_reverse",
+        seed=seed,
+        records=2000,
+        reversals="abrupt",
+        outlier_fraction=0.015,
+        latency_s=0.05,
+    )
+    report = Calibration(scenario("tricycle_reverse", **RECOMMENDED), log=log).findings.report
+    assert report.encoder_faults == ()
+    jumps = {f.record for f in report.faults if f.kind == "tracker_jump"}
+    assert jumps <= set(np.flatnonzero(out.tracker_outliers).tolist())  # type: ignore[attr-defined]
+
+
+def test_unsynchronised_streams_paired_as_a_bag_raise_no_encoder_fault() -> None:
+    """Encoders at 50 Hz, the tracker at 30 Hz on its own clock with outliers, interpolated onto
+    the encoders' records: an outlier spreads over the records between its neighbours."""
+    log, out = sim(
+        "tricycle",
+        seed=4,
+        records=3000,
+        rate_hz=50.0,
+        tracker_rate_hz=30.0,
+        outlier_fraction=0.015,
+        latency_s=0.05,
+    )
+    report = Calibration(scenario("tricycle", **RECOMMENDED), log=log).findings.report
+    assert report.encoder_faults == ()
+    touched = set(np.flatnonzero(out.tracker_outliers).tolist())  # type: ignore[attr-defined]
+    jumps = {f.record for f in report.faults if f.kind == "tracker_jump"}
+    assert jumps <= touched and len(jumps) >= 0.7 * len(touched)
+
+
+def test_repair_interpolates_steering_glitches() -> None:
+    log, out = sim("tricycle", seed=5, steering_spikes=2, steering_stuck=1)
+    calib = Calibration(scenario("tricycle", faults={"handling": "repair"}), log=log)
+    assert len(calib.findings.repairs) == 3 and calib.data.dropped_faulty == 0
+    clean, _ = sim("tricycle", seed=5)
+    col = log.header.encoder_index("steering")
+    for f in out.faults:  # type: ignore[attr-defined]
+        # Back within a few ticks of the true reading (interpolated from its neighbours).
+        assert abs(int(calib.aligned.ticks[f.record, col]) - int(clean.ticks[f.record, col])) <= 12
+
+
+@pytest.mark.parametrize("options", [{}, {"reversals": "abrupt"}, {"rate_hz": 50.0, "tracker_rate_hz": 30.0}])
+def test_the_tracker_lag_is_estimated_within_3_ms(options: dict[str, object]) -> None:
+    log, _ = sim("tricycle", seed=6, records=2000, latency_s=0.05, **options)
+    calib = Calibration(scenario("tricycle", **RECOMMENDED), log=log)
+    assert calib.alignment.lag_s == pytest.approx(0.05, abs=0.003)

@@ -3,6 +3,7 @@ fixed parameters and priors (issue: trustworthy estimates)."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -119,7 +120,13 @@ def test_well_excited_logs_raise_no_observability_warning(trajectory: str) -> No
 
 def test_auto_initial_guess_reaches_the_header_optimum_on_the_real_log(real_log: Path) -> None:
     sc = load_scenario(SCENARIOS / "real_tricycle.yaml").with_dataset(real_log)
-    sc = sc.with_options(alignment=AlignmentOptions())
+    # The closed form as this test was written for it: the steering read at each interval's start
+    # (the shipped scenario now reads it at the middle; the closed form then lands 8 % off in
+    # k_traction, and the refinement below reaches the same optimum all the same).
+    sc = sc.with_options(
+        alignment=AlignmentOptions(),
+        residual=dataclasses.replace(sc.objective.residual, steering_sample="start"),
+    )
     header = Calibration(sc).solve("gauss_newton")
     auto = Calibration(sc.with_options(initial_guess="auto"))
     assert auto.start.auto is not None

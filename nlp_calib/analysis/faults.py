@@ -1,76 +1,183 @@
 """Encoder and tracker faults: data no calibration can explain, found by its own inconsistency.
 
-Each interval's encoder increments are checked against the tracker's motion over the same
-interval, through the calibrated model: linearising the interval's residual ``e(u)`` in its
-inputs gives, per counter encoder, the correction ``c`` (in ticks) that would make the reading
-agree with the tracker. For a sound reading ``c`` is noise (tracker noise, timing jitter). A
-counter that reads stale for a few samples shows ``+c`` over the stall and ``−c`` when it catches
-up: the running sum of the corrections returns. A **fault** is a correction that persists: the
-counts over a stretch of records are wrong in total, so every residual window crossing it is
-wrong. Kinds:
+The records are screened as logged, before anything is re-sampled, and each mismatch is put down
+to the stream that explains it:
 
-- ``stall_then_jump``: the counter reads stale, then jumps with the wrong sign (on the real robot,
-  the catch-up increment lost 2¹⁶ ticks: a 16-bit counter wrapped in the logger);
-- ``reversal``: a single increment against the motion the tracker shows, not made up afterwards;
-- ``counter_jump``: counts gained or lost in the direction of motion, not made up afterwards;
-- ``tracker_jump``: one tracker pose off the motion of its neighbours (the two intervals around
-  it disagree with the encoders in opposite directions).
+- a **tracker** pose off the path its neighbours agree on is the tracker's own glitch
+  (``tracker_jump``; :mod:`nlp_calib.analysis.streams`): a stop, a reversal or a start is a kink
+  the neighbours on one side continue into, and is never one;
+- an **absolute encoder** (e.g. a wheel's angle) that leaves the span of its neighbours for one record
+  and returns (``steering_spike``), or holds its reading while the robot moves and then catches
+  up in one jump (``steering_stuck``), is that encoder's own glitch;
+- a **counter** whose count over a stretch of records is wrong in total, as its own history shows
+  and the tracker's motion over several intervals confirms through the calibrated model
+  (:mod:`nlp_calib.analysis.counters`): ``stall_then_jump`` (the counter reads stale, then its
+  catch-up is off; on the real robot by 2¹⁶ ticks, a 16-bit counter wrapped in the logger),
+  ``reversal`` (one increment against the motion, not made up afterwards) and ``counter_jump``
+  (counts gained or lost in the direction of motion, not made up afterwards).
 
-Genuine reversing, stops and counter wraps are consistent with the tracker and are not flagged.
-Stale readings that catch up are counted (``stale``) but harmless to horizon windows.
+The counters are judged with a fit that leaves out the tracker's and the absolute encoders'
+glitches, against readings with those glitches interpolated over, so that one stream's glitch is
+never blamed on another. Stale readings that catch up are counted (``stale``) but harmless to
+horizon windows.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
 
-from nlp_calib.core import poses
-from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
-from nlp_calib.logs import Log
+from nlp_calib.analysis.counters import screen_counters
+from nlp_calib.analysis.streams import off_neighbours, scatter, stuck_runs
+from nlp_calib.core.numeric import COUNTER_MODULUS, wrap_angle, wrapped_difference
+from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.logs.log import frozen
 from nlp_calib.problem import ProblemFunctions, over_columns
-from nlp_calib.results.faults import Fault, FaultReport
+from nlp_calib.results.faults import (
+    ABSOLUTE_KINDS,
+    TRACKER_KINDS,
+    Fault,
+    FaultReport,
+)
 
-#: A correction beyond this many robust standard deviations starts a candidate fault...
-CANDIDATE_SIGMAS = 6.0
-#: ...which is a fault when the running sum of corrections steps by more than this many
-#: standard deviations of such steps across its stretch (:data:`PERSIST_INTERVALS` either side),
-#: or by more than :data:`AGAINST_SIGMAS` when the reading contradicts the tracker's direction
-#: (itself evidence: a sound counter never does).
-FAULT_SIGMAS = 6.0
-AGAINST_SIGMAS = 4.0
-PERSIST_INTERVALS = 10
-#: Longest stall a fault's stretch extends back over.
-MAX_STALL = 25
 #: A 16-bit counter wraps after this many ticks (named in the evidence when the deficit matches).
 WRAP_16 = 2**16
+#: An absolute encoder's glitch must leave the span of its neighbours by this angle (rad): less
+#: is not told from a sharp turn of the thing it measures. A stuck reading must catch up by more
+#: than this many ticks.
+SPIKE_MIN_ANGLE = 0.03
+STUCK_FLOOR_TICKS = 3.0
+#: The longest group of tracker records judged as one glitch; an absolute encoder's is one record.
+#: A glitch of the tracker leaves the span of its near neighbours by this many times its scatter
+#: at rest (a corner cut by a slow tracker interpolated onto faster records stays inside it).
+TRACKER_GROUP = 4
+TRACKER_EXCURSION = 3.0
 
 
-def robust_sigma(x: np.ndarray) -> float:
-    """1.4826 × the median absolute deviation (a standard deviation that ignores outliers)."""
-    x = np.asarray(x, dtype=float)
-    x = x[np.isfinite(x)]
-    if x.size == 0:
-        return float("nan")
-    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+def _unwrapped_poses(log: Log) -> np.ndarray:
+    T = np.array(log.T_world_sensor, dtype=float)
+    T[:, 2] = np.unwrap(T[:, 2])
+    return T
 
 
-def counter_corrections(e: np.ndarray, de_du: np.ndarray, rows: list[int], scale: np.ndarray) -> np.ndarray:
-    """Per interval, the counter increments (ticks) that best explain each residual ``e`` (3, N).
+def _angle_ticks(log: Log, col: int) -> np.ndarray:
+    """An absolute encoder's readings unwrapped across its range (ticks, float)."""
+    vmax = log.header.encoder_max[col]
+    return np.unwrap(2.0 * np.pi * log.ticks[:, col] / vmax) * vmax / (2.0 * np.pi)
 
-    ``de_du`` is (3, N, n_in); the corrections of the counter ``rows`` solve the weighted least
-    squares ``min |e + de_du·c|²`` with each residual component weighted by its robust scatter.
-    """
-    w = 1.0 / np.maximum([robust_sigma(e[i]) for i in range(3)], 1e-12) ** 2
-    G = de_du[:, :, rows]  # (3, N, m)
-    A = np.einsum("inj,i,ink->njk", G, w, G)
-    b = -np.einsum("inj,i,in->nj", G, w, e)
-    A = A + 1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] * np.eye(len(rows))
-    c = np.linalg.solve(A, b[:, :, None])[:, :, 0]  # (N, m) in input units
-    return c * scale[None, :]
+
+def _fault(
+    log: Log,
+    kind: str,
+    encoder: str | None,
+    intervals: tuple[int, int],
+    record: int,
+    size: tuple[float, float, float],
+    evidence: str,
+) -> Fault:
+    """A fault at ``record`` of ``log`` over ``intervals``; ``size`` is (logged, implied, noise)."""
+    t, line = float(log.time_s[record]), int(log.line_numbers[record])
+    return Fault(kind, encoder, intervals[0], intervals[1], record, t, line, *size, evidence)
+
+
+def tracker_faults(log: Log) -> list[Fault]:
+    """Tracker poses off the path their neighbours agree on (see :mod:`nlp_calib.analysis.streams`)."""
+    T, t, lines = _unwrapped_poses(log), log.time_s, log.line_numbers
+    sc = scatter(t, T)
+    noise = float(np.hypot(sc.floor[0], sc.floor[1]))
+    found = []
+    for g in off_neighbours(t, T, sc, excursion=TRACKER_EXCURSION * sc.floor, max_group=TRACKER_GROUP):
+        off = float(np.hypot(g.offset[0], g.offset[1]))
+        for q in range(g.first, g.last + 1):
+            group = f"records {g.first}-{g.last} " if g.last > g.first else ""
+            evidence = (
+                f"the tracker pose at record {q} (line {lines[q]}) is off the path its neighbours agree "
+                f"on ({group}by up to {off:.3f} m and {abs(g.offset[2]):.3f} rad, "
+                f"{g.score:.0f}× the tracker's scatter)"
+            )
+            found.append(
+                _fault(log, "tracker_jump", None, (g.first - 1, g.last), q, (0.0, off, noise), evidence)
+            )
+    return found
+
+
+def _stuck(log: Log, col: int, y: np.ndarray, moving: np.ndarray | None) -> list[Fault]:
+    """An absolute encoder's readings that held while the robot moved, then caught up at once."""
+    name, lines, t = log.header.encoder_names[col], log.line_numbers, log.time_s
+    found = []
+    for first, last, jump in stuck_runs(t, y, STUCK_FLOOR_TICKS, moving):
+        r = first + 1
+        evidence = (
+            f"{name!r} holds {log.ticks[first, col]} ticks over records {first}-{last} (lines "
+            f"{lines[first]}-{lines[last]}) while the robot moves, then jumps by {jump:+.0f} ticks at "
+            f"record {last + 1}: the reading was stuck"
+        )
+        implied = y[first] + jump * (t[r] - t[first]) / max(t[last + 1] - t[first], 1e-9)
+        found.append(_fault(log, "steering_stuck", name, (first, last), r, (y[r], implied, 1.0), evidence))
+    return found
+
+
+def _spikes(log: Log, col: int, y: np.ndarray, usable: np.ndarray) -> list[Fault]:
+    """An absolute encoder's readings that leave the span of their neighbours for one record."""
+    name, lines, t = log.header.encoder_names[col], log.line_numbers, log.time_s
+    sc = scatter(t, y, 1.0)
+    least = SPIKE_MIN_ANGLE * log.header.encoder_max[col] / (2.0 * np.pi)
+    found = []
+    for g in off_neighbours(t, y, sc, usable, excursion=least, max_group=1):
+        r, off = g.first, float(g.offset[0])
+        evidence = (
+            f"{name!r} reads {log.ticks[r, col]} ticks at record {r} (line {lines[r]}), {off:+.0f} "
+            "ticks off the line between its neighbours, which agree with each other: a one-record spike"
+        )
+        size = (float(y[r]), float(y[r] - off), float(sc.floor[0]))
+        found.append(_fault(log, "steering_spike", name, (r - 1, r), r, size, evidence))
+    return found
+
+
+def absolute_faults(log: Log, kinds: Mapping[str, EncoderKind]) -> list[Fault]:
+    """Stuck readings (judged while the robot moves: a counter's increment) and one-record spikes
+    of the log's absolute encoders."""
+    names = log.header.encoder_names
+    counters = [j for j, n in enumerate(names) if kinds.get(n) == "counter"]
+    moving = (
+        np.any([wrapped_difference(log.ticks[:, j]) != 0 for j in counters], axis=0) if counters else None
+    )
+    found = []
+    for col in (j for j, n in enumerate(names) if kinds.get(n) == "absolute"):
+        y = _angle_ticks(log, col)
+        stuck = _stuck(log, col, y, moving)
+        usable = np.ones(log.n_records, dtype=bool)
+        for f in stuck:
+            usable[f.record : f.last + 1] = False
+        found += stuck + _spikes(log, col, y, usable)
+    return found
+
+
+def cleaned(log: Log, faults: Sequence[Fault]) -> Log:
+    """``log`` with the tracker's and the absolute encoders' glitches interpolated over (in time,
+    from the readings around them), so that they mislead no judgement of another stream."""
+    t = log.time_s
+    bad_pose = np.zeros(log.n_records, dtype=bool)
+    ticks = np.array(log.ticks, dtype=np.int64)
+    for f in faults:
+        if f.kind in TRACKER_KINDS:
+            bad_pose[f.record] = True
+        elif f.kind in ABSOLUTE_KINDS and f.encoder is not None:
+            col = log.header.encoder_index(f.encoder)
+            vmax = log.header.encoder_max[col]
+            bad = np.zeros(log.n_records, dtype=bool)
+            bad[f.record : (f.last + 1 if f.kind == "steering_stuck" else f.record + 1)] = True
+            y = _angle_ticks(log, col)
+            ticks[bad, col] = np.mod(np.round(np.interp(t[bad], t[~bad], y[~bad])), vmax)
+    T = np.array(log.T_world_sensor, dtype=float)
+    if bad_pose.any() and (~bad_pose).sum() >= 2:
+        U = _unwrapped_poses(log)
+        for j in range(3):
+            T[bad_pose, j] = np.interp(t[bad_pose], t[~bad_pose], U[~bad_pose, j])
+        T[:, 2] = wrap_angle(T[:, 2])
+    return replace(log, ticks=frozen(ticks), T_world_sensor=frozen(T))
 
 
 def _evidence(kind: str, name: str, logged: float, implied: float, noise: float, records: str) -> str:
@@ -85,221 +192,70 @@ def _evidence(kind: str, name: str, logged: float, implied: float, noise: float,
     return text + ("; the counter was stale before the jump" if kind == "stall_then_jump" else "")
 
 
-def detect(
-    e: np.ndarray,
-    de_du: np.ndarray,
-    z: np.ndarray,
-    logged: np.ndarray,
-    counters: Mapping[str, tuple[int, float]],
-    time_s: np.ndarray,
-    lines: np.ndarray,
-) -> FaultReport:
-    """Faults among the N intervals whose residuals ``e`` (3, N), ``de_du`` (3, N, n_in) and
-    tracker motions ``z`` (3, N) are given.
-
-    ``logged`` holds the inputs (n_in, N); ``counters`` each counter's input row and ticks per
-    unit; ``time_s`` and ``lines`` describe the N + 1 records. Tracker jumps are found first and
-    the intervals around them left out of the counters' checks.
-    """
-    N = e.shape[1]
-    jumps = _tracker_jumps(e, z, time_s, lines)
-    spoiled = np.zeros(N, dtype=bool)
-    for f in jumps:
-        spoiled[f.first : f.last + 1] = True
-    faults: list[Fault] = list(jumps)
-    stale: dict[str, int] = {}
-    noise: dict[str, float] = {}
-    names = list(counters)
-    if N and names:
-        rows = [counters[n][0] for n in names]
-        scale = np.array([counters[n][1] for n in names])
-        corrections = counter_corrections(e[:, ~spoiled], de_du[:, ~spoiled], rows, scale)
-        for j, name in enumerate(names):
-            ticks = logged[rows[j]] * scale[j]
-            c = np.zeros(N)
-            c[~spoiled] = corrections[:, j]  # a bad tracker pose says nothing about the counter
-            found, n_stale, sigma = _counter_faults(name, ticks, c, time_s, lines)
-            faults += found
-            stale[name] = n_stale
-            noise[name] = sigma
-    faults.sort(key=lambda f: (f.first, f.kind))
-    return FaultReport(faults=tuple(faults), stale=stale, noise_ticks=noise)
-
-
-def _level(C: np.ndarray, idx: np.ndarray) -> float:
-    """The running sum's level over indices ``idx``: their median (NaN for fewer than two)."""
-    return float(np.median(C[idx])) if idx.size >= 2 else float("nan")
-
-
-def _counter_faults(
-    name: str, ticks: np.ndarray, c: np.ndarray, time_s: np.ndarray, lines: np.ndarray
-) -> tuple[list[Fault], int, float]:
-    N = c.size
-    implied = ticks + c
-    sigma = robust_sigma(c)
-    if not np.isfinite(sigma) or sigma <= 0:
-        return [], 0, sigma
-    # The running sum of the corrections is flat with noise, ramps while the counter reads stale
-    # and returns when it catches up, and steps where counts were lost or gained. Its level is
-    # read only right after a non-zero reading (no stall pending), as a median over
-    # PERSIST_INTERVALS such points before and after a stretch, which a short burst does not move.
-    C = np.concatenate([[0.0], np.cumsum(c)])  # C[k] = sum of c over intervals < k
-    valid = np.concatenate([[0], np.flatnonzero(ticks != 0) + 1])
-    W = PERSIST_INTERVALS
-    against = (np.sign(ticks) == -np.sign(implied)) & (ticks != 0) & (np.abs(c) > 3.0 * sigma)
-    catch_up = np.zeros(N, dtype=bool)
-    catch_up[1:] = (ticks[1:] != 0) & (ticks[:-1] == 0)  # zero readings are judged with their catch-up
-    large = (np.abs(c) > CANDIDATE_SIGMAS * sigma) & (ticks != 0)
-    candidates: list[int] = np.flatnonzero(against | catch_up | large).tolist()
-    firsts = {}
-    for k in candidates:
-        # The stretch runs back over the stall: readings that stayed put, or caught up only partly
-        # (short of the motion, in the fault's direction, by more than 2σ).
-        first = k
-        while first > 0 and k - first < MAX_STALL:
-            prev = first - 1
-            if not (ticks[prev] == 0 or (np.sign(c[prev]) == np.sign(c[k]) and abs(c[prev]) > 2.0 * sigma)):
-                break
-            first = prev
-        firsts[int(k)] = int(first)
-
-    accepted: list[tuple[int, int]] = []  # stretches (first, last) of the faults found so far
-
-    def step(k: int) -> float:
-        # Levels never reach across a fault already found: it would lend its step to k.
-        lo = max((last + 1 for first, last in accepted if last < firsts[k]), default=0)
-        hi = min((first for first, last in accepted if first > k), default=N)
-        # ``valid`` is sorted: the points in [lo, first] and in [k + 1, hi] are slices of it.
-        b0, b1 = np.searchsorted(valid, lo, "left"), np.searchsorted(valid, firsts[k], "right")
-        a0, a1 = np.searchsorted(valid, k + 1, "left"), np.searchsorted(valid, hi, "right")
-        before = valid[b0:b1][-W:]
-        after = valid[a0:a1][:W]
-        return _level(C, after) - _level(C, before)
-
-    # The noise of such a step, from steps taken everywhere along the log (faults are few there).
-    levels = C[valid]
-    if levels.size >= 2 * W:
-        medians = np.median(np.lib.stride_tricks.sliding_window_view(levels, W), axis=1)
-        step_sigma = max(robust_sigma(medians[W:] - medians[:-W]), sigma)
-    else:
-        step_sigma = max(robust_sigma(np.array([step(k) for k in candidates])), sigma)
-    # The most significant step first, so that the strongest faults bound their neighbours' levels.
-    faults: list[Fault] = []
-    open_ = list(candidates)
-    while open_:
-        threshold = np.array([AGAINST_SIGMAS if against[k] else FAULT_SIGMAS for k in open_]) * step_sigma
-        score = np.abs([step(k) for k in open_]) / threshold
-        if not np.any(score > 1.0):
-            break
-        k = open_.pop(int(np.nanargmax(score)))
-        first = firsts[k]
-        accepted.append((first, k))
-        total_logged = float(np.sum(ticks[first : k + 1]))
-        total_implied = float(np.sum(implied[first : k + 1]))
-        open_ = [j for j in open_ if not first <= j <= k and not firsts[j] <= k < j]
-        zone_noise = float(sigma * np.sqrt(k + 1 - first))
-        kind = "stall_then_jump" if first < k else ("reversal" if against[k] else "counter_jump")
-        records = f"records {first}-{k + 1} (lines {lines[first]}-{lines[k + 1]})"
-        faults.append(
-            Fault(
-                kind=kind,
-                encoder=name,
-                first=first,
-                last=k,
-                record=k + 1,
-                time_s=float(time_s[k + 1]),
-                line=int(lines[k + 1]),
-                logged=total_logged,
-                implied=total_implied,
-                noise=zone_noise,
-                evidence=_evidence(
-                    kind, f"counter {name!r}", total_logged, total_implied, zone_noise, records
-                ),
-            )
-        )
-    faulty = np.zeros(N, dtype=bool)
-    for f in faults:
-        faulty[f.first : f.last + 1] = True
-    n_stale = int(np.sum((ticks == 0) & (np.abs(implied) > 3.0 * sigma) & ~faulty))
-    return sorted(faults, key=lambda f: f.first), n_stale, sigma
-
-
-def _tracker_jumps(e: np.ndarray, z: np.ndarray, time_s: np.ndarray, lines: np.ndarray) -> list[Fault]:
-    """Tracker poses (one, or two in a row) off the motion both neighbouring intervals show.
-
-    Around a bad pose the residuals of the intervals that meet at it are large, while the residual
-    of the merged interval that skips it (tracker motion ``z`` and predicted motion ``h = z·e``
-    composed over the intervals) is small.
-    """
-    N = e.shape[1]
-    sig = np.maximum([robust_sigma(e[i]) for i in range(3)], 1e-12)
-    size = np.linalg.norm(e / sig[:, None], axis=0)
-    Z, H = z.T, poses.compose(z.T, e.T)
-    found: list[Fault] = []
-    taken = np.zeros(N + 1, dtype=bool)
-    big = size >= 2.0 * FAULT_SIGMAS
-    for gap in (1, 2):
-        # Only poses whose two neighbouring intervals both have large residuals can be off.
-        for p in (np.flatnonzero(big[: N - gap] & big[gap:]) + 1).tolist():
-            first, last = p - 1, p + gap - 1  # intervals that meet at poses p..p+gap-1
-            if taken[p : p + gap].any():
-                continue
-            z_all, h_all = Z[first], H[first]
-            for k in range(first + 1, last + 1):
-                z_all, h_all = poses.compose(z_all, Z[k]), poses.compose(h_all, H[k])
-            merged = np.linalg.norm(poses.between(z_all, h_all) / (sig * np.sqrt(gap + 1)))
-            if merged > 0.3 * min(size[first], size[last]):
-                continue
-            taken[p : p + gap] = True
-            for q in range(p, p + gap):
-                off = poses.between(H[q - 1], Z[q - 1]) if q == p else poses.between(Z[q], H[q])
-                found.append(
-                    Fault(
-                        kind="tracker_jump",
-                        encoder=None,
-                        first=first,
-                        last=last,
-                        record=q,
-                        time_s=float(time_s[q]),
-                        line=int(lines[q]),
-                        logged=0.0,
-                        implied=float(np.hypot(off[0], off[1])),
-                        noise=float(np.hypot(sig[0], sig[1])),
-                        evidence=(
-                            f"the tracker pose at record {q} (line {lines[q]}) is about "
-                            f"{np.hypot(off[0], off[1]):.3f} m and {abs(off[2]):.3f} rad off the motion "
-                            f"of its neighbours, which agree with the encoders across it"
-                        ),
-                    )
-                )
-    return found
-
-
-def check_log(
+def counter_faults(
     fns: ProblemFunctions,
     params: np.ndarray,
     log: Log,
     inputs: np.ndarray,
-    counters: Mapping[str, tuple[int, float]],
+    lag: float | tuple[float, float],
 ) -> FaultReport:
-    """The faults of ``log`` (every interval) given calibrated ``params`` and the model ``inputs``."""
+    """The counter faults of ``log`` (every interval) given calibrated ``params``, the model
+    ``inputs`` and the tracker ``lag`` (s, or a range to estimate it in)."""
     N = inputs.shape[1]
+    counters = fns.model.counter_rows(log)
     if N == 0:
         return FaultReport(faults=(), stale={}, noise_ticks={})
-    poses = log.T_world_sensor
-    z = over_columns(fns.between, poses[:-1].T, poses[1:].T)[0]
+    T = log.T_world_sensor
+    z = over_columns(fns.between, T[:-1].T, T[1:].T)[0]
     e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
     de_du = de_du.reshape(3, N, inputs.shape[0])
-    return detect(e, de_du, z, inputs, counters, log.time_s, log.line_numbers)
+    screens, lag_s = screen_counters(e, de_du, inputs, counters, log.time_s, lag)
+    lines = log.line_numbers
+    faults = []
+    for name, sc in screens.items():
+        for f in sc.findings:
+            k = f.last
+            records = f"records {f.first}-{k + 1} (lines {lines[f.first]}-{lines[k + 1]})"
+            why = _evidence(f.kind, f"counter {name!r}", f.logged, f.implied, f.noise, records)
+            faults.append(_fault(log, f.kind, name, (f.first, k), k + 1, (f.logged, f.implied, f.noise), why))
+    stale = {n: sc.stale for n, sc in screens.items()}
+    noise = {n: sc.noise for n, sc in screens.items()}
+    return FaultReport(tuple(faults), stale, noise, lag_s=lag_s)
+
+
+#: Fits the model leaving out the windows the masks (per interval, per record) spoil; its
+#: parameters, or None when the fit does not converge.
+Judge = Callable[[np.ndarray, np.ndarray], np.ndarray | None]
+
+
+def screen(
+    fns: ProblemFunctions, log: Log, steering_sample: str, lag: float | tuple[float, float], judge: Judge
+) -> FaultReport:
+    """Every fault of ``log``: the tracker's and the absolute encoders' glitches from each stream
+    alone, then the counters' against a fit (``judge``) that leaves those glitches out, on readings
+    with them interpolated over, at the tracker ``lag`` (s, or a range to estimate it in)."""
+    model, n = fns.model, log.n_records
+    glitches = tuple(tracker_faults(log) + absolute_faults(log, model.encoder_kinds))
+    report = FaultReport(glitches, {}, {})
+    params = judge(report.bad_intervals(n - 1), report.bad_records(n))
+    if params is None:
+        # Judged by a wrong model every interval looks faulty; the solvers will say why.
+        why = "the fit that judges the encoders did not converge from the initial guess"
+        return replace(report, unchecked=why)
+    clean = cleaned(log, glitches)
+    counters = counter_faults(fns, params, clean, model.inputs(clean, steering_sample), lag)
+    faults = tuple(sorted(glitches + counters.faults, key=lambda f: (f.first, f.kind)))
+    return replace(counters, faults=faults)
 
 
 def repair(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]:
-    """``log`` with the counts of its counter faults corrected, and one line per change.
+    """``log`` with its encoder faults corrected, and one line per change.
 
-    A deficit within 3σ of a multiple of 2¹⁶ ticks is corrected by exactly that multiple (a
-    wrapped 16-bit counter); any other by the tracker-implied amount, rounded. The correction is
+    A counter's deficit within 3σ of a multiple of 2¹⁶ ticks is corrected by exactly that multiple
+    (a wrapped 16-bit counter); any other by the tracker-implied amount, rounded. The correction is
     added to the reading that shows the fault and to every later one, so the total over the
-    fault's stretch becomes right; the stalled readings before it are left as they are.
+    fault's stretch becomes right; the stalled readings before it are left as they are. An absolute
+    encoder's spike or stuck readings are interpolated from the readings around them.
     """
     ticks = np.array(log.ticks, dtype=np.int64)
     changes = []
@@ -318,4 +274,11 @@ def repair(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]:
             f"{before + correction:+d} ticks ({how}; the tracker's motion implied "
             f"{f.implied - f.logged:+.0f} ± {f.noise:.0f} more over records {f.first}-{f.record})"
         )
-    return replace(log, ticks=frozen(ticks)), tuple(changes)
+    absolute = [f for f in report.faults if f.kind in ABSOLUTE_KINDS]
+    fixed = cleaned(replace(log, ticks=frozen(ticks)), absolute)
+    for f in absolute:
+        what = "spike" if f.kind == "steering_spike" else "stuck readings"
+        changes.append(
+            f"{f.encoder!r} at record {f.record} (line {f.line}): {what} interpolated from its neighbours"
+        )
+    return replace(log, ticks=fixed.ticks), tuple(changes)

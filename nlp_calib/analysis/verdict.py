@@ -7,6 +7,9 @@ The rules a reader can check:
 - **not determined**: no solver converged, or the drive leaves a parameter undetermined (its σ
   is infinite, or a direction of the information matrix is beyond
   :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` reference units);
+- **not usable**: converged and determined, but farther from the tracker than the initial guess
+  (segment ATE), or, fitted to several logs, some log's own fit disagrees with theirs beyond their
+  honest σ (they are not one robot): whatever else holds, such a calibration is not to be used;
 - **usable with caveats**: converged and determined, but something needs a look first: a weakly
   observable direction, a parameter whose σ to believe exceeds
   :data:`~nlp_calib.results.checks.WEAK` times the precision a useful calibration needs,
@@ -23,7 +26,7 @@ from nlp_calib.models import KinematicModel
 from nlp_calib.models.base import reference_scale
 from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
-from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
+from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
 
 #: Relative parameter difference beyond which two converged solvers disagree.
 AGREE = 1e-4
@@ -89,6 +92,15 @@ def verdict(run: CalibrationRun, model: KinematicModel, hint: str = "") -> Verdi
     if missing or loose:
         why = loose or [f"{', '.join(missing)} not determined by this drive"]
         return Verdict(UNDETERMINED, tuple(why))
+    check = run.checks.consistency
+    if check is not None and check.significant:
+        return Verdict(NOT_USABLE, (check.words(),))
+    ours, base = run.reports[solver].metrics.segment_ate.mean, run.baseline.segment_ate.mean
+    if ours > base:
+        return Verdict(
+            NOT_USABLE,
+            (f"worse than the initial guess (segment ATE {ours:.3g} m against {base:.3g} m uncalibrated)",),
+        )
     found = caveats(run, solver, model)
     if found:
         return Verdict(CAVEATS, tuple(found))

@@ -10,7 +10,7 @@ from nlp_calib.logs.camera import CameraRecording, JointInput, camera_log, pair,
 from nlp_calib.logs.joints_csv import JointLog, format_joints_csv, read_joints_csv
 from nlp_calib.logs.log import ENCODER_KINDS, DroppedRecord, EncoderKind, Log, LogHeader
 from nlp_calib.logs.reader import parse_log, read_log, yaw_from_quaternion
-from nlp_calib.logs.resample import resample_encoders, resample_tracker
+from nlp_calib.logs.resample import resample_encoders
 from nlp_calib.logs.tum import Trajectory3D, format_tum, read_tum
 from nlp_calib.logs.writer import format_log
 
@@ -38,6 +38,5 @@ __all__ = [
     "read_log",
     "read_tum",
     "resample_encoders",
-    "resample_tracker",
     "yaw_from_quaternion",
 ]

@@ -13,20 +13,27 @@ from nlp_calib.logs.log import EncoderKind, Log
 
 
 def resample_encoders(
-    log: Log, lag_s: float, kinds: Mapping[str, EncoderKind]
+    log: Log,
+    lag_s: float,
+    kinds: Mapping[str, EncoderKind],
+    delays: Mapping[str, float] | None = None,
 ) -> tuple[Log, tuple[int, int]]:
     """Encoder readings re-sampled at ``t - lag_s``: the tracker reports ``lag_s`` after the encoders.
 
     Shifting the inputs rather than the tracker keeps the measurements, and so the cost, comparable
     across lags. Counters are interpolated on their unwrapped cumulative count, absolute encoders on
-    their unwrapped angle. Returns the log and the record range ``[first, stop)`` whose shifted
-    times lie inside the log (outside it the readings are clamped and must not be used).
+    their unwrapped angle. ``delays`` reads an encoder that much later still (s, by name): a stream
+    whose effect lags its readings. Returns the log and the record
+    range ``[first, stop)`` whose shifted times lie inside the log (outside it the readings are
+    clamped and must not be used).
     """
-    if lag_s == 0.0:
+    delays = delays or {}
+    if lag_s == 0.0 and not any(delays.values()):
         return log, (0, log.n_records)
     t = log.time_s
     tq = t - lag_s
-    valid = np.flatnonzero((tq >= t[0]) & (tq <= t[-1]))
+    late = [delays.get(name, 0.0) for name in log.header.encoder_names]
+    valid = np.flatnonzero((tq - max(late) >= t[0]) & (tq - min(late) <= t[-1]))
     if valid.size < 2:
         raise ProblemError(
             f"a lag of {lag_s:g} s leaves fewer than 2 records of the {t[-1] - t[0]:.1f} s log; "
@@ -34,34 +41,13 @@ def resample_encoders(
         )
     columns = []
     for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
-        raw = log.ticks[:, j]
+        raw, when = log.ticks[:, j], tq - delays.get(name, 0.0)
         if kinds.get(name) == "absolute":
             turns = np.unwrap(2.0 * np.pi * raw / vmax) / (2.0 * np.pi)
-            columns.append(np.mod(np.round(np.interp(tq, t, turns) * vmax), vmax))
+            columns.append(np.mod(np.round(np.interp(when, t, turns) * vmax), vmax))
         else:
             count = np.concatenate([[0], np.cumsum(wrapped_difference(raw))]).astype(float)
-            columns.append(np.mod(np.round(np.interp(tq, t, count)) + raw[0], COUNTER_MODULUS))
+            columns.append(np.mod(np.round(np.interp(when, t, count)) + raw[0], COUNTER_MODULUS))
     ticks = np.stack(columns, axis=1).astype(np.int64)
     ticks.flags.writeable = False
     return replace(log, ticks=ticks), (int(valid[0]), int(valid[-1]) + 1)
-
-
-def resample_tracker(log: Log, lag_s: float) -> Log:
-    """Tracker poses re-sampled at ``t + lag_s``: the pose the tracker reported for each record's time.
-
-    The counterpart of :func:`resample_encoders` that leaves the encoder readings as logged (a
-    counter's jump stays on its record). Positions and the unwrapped heading are interpolated;
-    outside the log the first or last pose is held.
-    """
-    if lag_s == 0.0:
-        return log
-    t = log.time_s
-    T = np.asarray(log.T_world_sensor, dtype=float)
-    heading = np.unwrap(T[:, 2])
-    tq = t + lag_s
-    shifted = np.stack(
-        [np.interp(tq, t, T[:, 0]), np.interp(tq, t, T[:, 1]), np.interp(tq, t, heading)], axis=1
-    )
-    shifted[:, 2] = np.arctan2(np.sin(shifted[:, 2]), np.cos(shifted[:, 2]))
-    shifted.flags.writeable = False
-    return replace(log, T_world_sensor=shifted)

@@ -133,7 +133,9 @@ def _uncertainty_section(run: CalibrationRun) -> list[str]:
     held = "; ".join(f"{label} {cv.heldout_mean(label):.4f}" for label in labels)
     out += ["", f"Each block scored by the fit without it (mean over the blocks): {held}."]
     d = run.checks.direction
-    if d is not None:
+    if d is not None and not d.compared:
+        out += ["", f"Fits on forward-only and reverse-only driving {d.words()}."]
+    elif d is not None:
         name, z = d.worst
         verdict = "**disagree**" if d.significant else "agree"
         out += [

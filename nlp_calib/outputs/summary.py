@@ -12,7 +12,7 @@ import numpy as np
 
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.faults import count_kinds
-from nlp_calib.results.run import CAVEATS, UNDETERMINED
+from nlp_calib.results.run import CAVEATS, NOT_USABLE, UNDETERMINED
 
 
 def _faults_line(run: CalibrationRun) -> str:
@@ -64,7 +64,7 @@ def _next_steps(run: CalibrationRun, level: str, files: Sequence[str]) -> list[s
         steps.append(
             f"C code of the residual and its Jacobian: nlp-calib codegen {run.scenario.path} --out DIR"
         )
-    if level == UNDETERMINED:
+    if level in (UNDETERMINED, NOT_USABLE):
         obs = run.checks.observability
         hints = [w for w in obs.warnings if "drive" in w] if obs is not None else []
         steps.append(

@@ -68,12 +68,8 @@ def direction_lines(run: CalibrationRun) -> list[str]:
     d = run.checks.direction
     if d is None:
         return []
-    name, z = d.worst
-    verdict = (
-        f"DISAGREE: {name} by {abs(z):.1f}σ" if d.significant else f"agree within {abs(z):.1f}σ ({name})"
-    )
     counts = f"forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]})"
-    return [f"direction: fits on {counts} driving {verdict}"]
+    return [f"direction: fits on {counts} driving {d.words()}"]
 
 
 #: Faults listed one per line; the rest are counted.

@@ -8,14 +8,13 @@ decides which lags to fit.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log, resample_encoders
-from nlp_calib.models import KinematicModel
 from nlp_calib.pipeline.build import Binder
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.prepare import split
@@ -66,12 +65,6 @@ def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np
         return cost
 
     return estimate_lag(fit_cost, al.search, al.step)
-
-
-def realign(alignment: Alignment, log: Log, model: KinematicModel) -> Alignment:
-    """The same alignment applied to another version of the log (e.g. a repaired one)."""
-    aligned, valid = resample_encoders(log, alignment.lag_s, model.encoder_kinds)
-    return replace(alignment, log=aligned, valid=valid)
 
 
 def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Alignment:

@@ -27,7 +27,7 @@ from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.windows import LogWindows
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.results import SolverResult
-from nlp_calib.results.checks import CrossValidation, DirectionCheck, Observability
+from nlp_calib.results.checks import ConsistencyCheck, CrossValidation, DirectionCheck, Observability
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.series import (
@@ -53,6 +53,8 @@ class FitAnalysis:
     observability: Observability
     crossval: CrossValidation | None
     direction: DirectionCheck | None
+    #: For several logs: each log's own fit against theirs.
+    consistency: ConsistencyCheck | None = None
 
 
 @dataclass(frozen=True)

@@ -146,7 +146,7 @@ def assemble_run(
         baseline=figures.baseline[0],
         baseline_holdout=figures.baseline[1],
         reports=reports,
-        checks=Checks(fitted.observability, fitted.crossval, fitted.direction, findings),
+        checks=Checks(fitted.observability, fitted.crossval, fitted.direction, findings, fitted.consistency),
         warnings=(*notes, *lag_notes(prepared.scenario, alignment)),
         verdict=Verdict("", ()),
         series=figures.series,

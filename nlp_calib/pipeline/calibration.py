@@ -10,16 +10,20 @@ runs on it, and the same analyse and assemble stages turn the estimates into a s
 
 from __future__ import annotations
 
+import dataclasses
 import time
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from nlp_calib.analysis.consistency import compare_logs
+from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel
-from nlp_calib.pipeline.align import Alignment, align, realign
+from nlp_calib.pipeline.align import Alignment, align
 from nlp_calib.pipeline.analyse import (
     FitAnalysis,
     LogView,
@@ -40,6 +44,7 @@ from nlp_calib.pipeline.screen import Screening, exclude_faults, median_interval
 from nlp_calib.pipeline.windows import LogWindows, bind_windows
 from nlp_calib.problem import ProblemFunctions, ResidualData, joined
 from nlp_calib.results import CalibrationRun, Checks, JointRun, SolverResult
+from nlp_calib.results.checks import ConsistencyCheck, believed_std
 from nlp_calib.results.faults import Findings
 from nlp_calib.solvers import ProblemEvaluator
 from nlp_calib.solvers.backends import Backend
@@ -80,11 +85,7 @@ def align_stage(problem: Problem, prepared: PreparedLog, screening: Screening) -
 
 
 def setup_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> LogSetup:
-    """Prepare, build, screen, align and bind one log (``log``: already read, or None).
-
-    Faults are screened first against the tracker as logged, to keep them out of the lag search,
-    then, once a lag is known, again against the tracker re-sampled onto the encoders' clock.
-    """
+    """Prepare, build, screen, align and bind one log (``log``: already read, or None)."""
     prepared = prepare(sc, log)
     read = prepared.log
     records = (prepared.start, prepared.stop)
@@ -92,15 +93,8 @@ def setup_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> LogSetup
     problem = build_stage(
         sc, prepared.model, tuple(prepared.held), start_from, solvers, records[1] - records[0]
     )
-    x0 = problem.start.x0
-    screening = screen(problem.binder, read, records, x0)
+    screening = screen(problem.binder, read, records, problem.start.x0)
     alignment = align_stage(problem, prepared, screening)
-    if alignment.lag_s:
-        judge = exclude_faults(
-            problem.binder, screening.findings, read.n_records, alignment.lag_s, median_interval(read)
-        )
-        screening = screen(judge, read, records, x0, alignment.lag_s)
-        alignment = realign(alignment, screening.fitted_log, prepared.model)
     windows = bind_windows(problem, prepared, screening, alignment)
     return LogSetup(prepared, problem, screening, alignment, windows)
 
@@ -254,12 +248,23 @@ class JointCalibration:
         given: Sequence[Log | None] = list(logs) if logs is not None else [None] * len(per_log)
         self.parts = [setup_log(s, log, self.solvers) for s, log in zip(per_log, given)]
         first = self.parts[0]
-        # A parameter is held only when no log determines it.
-        held = [n for n in first.prepared.held if all(n in p.prepared.held for p in self.parts)]
+        data = joined([p.windows.data for p in self.parts])
+        # A parameter is held only when the logs together do not determine it (two logs that each
+        # reverse a little may together reverse enough).
+        model = first.prepared.model
+        self.held = {
+            n: why for n, why in model.undetermined(data.inputs).items() if n not in sc.parameters.fixed
+        }
+        for name, why in self.held.items():
+            warnings.warn(
+                f"{name} is held at its initial value: {why} in the logs' fitted records",
+                NlpCalibWarning,
+                stacklevel=2,
+            )
         n_records = sum(p.fit[1] - p.fit[0] for p in self.parts)
         start_from = (first.prepared.log, first.used[0], first.fit[1])
-        problem = build_stage(sc, first.prepared.model, held, start_from, self.solvers, n_records)
-        self.fitting = Fit(problem, joined([p.windows.data for p in self.parts]), self.solvers)
+        problem = build_stage(sc, model, tuple(self.held), start_from, self.solvers, n_records)
+        self.fitting = Fit(problem, data, self.solvers)
         self.setup_time_s = time.perf_counter() - t0
 
     @property
@@ -278,33 +283,94 @@ class JointCalibration:
         return self.fitting.solve(solver)
 
     def run(self, solvers: Sequence[str] | None = None, wanted: Wanted | None = None) -> JointRun:
-        """Fit with each solver on every log's windows; score the result on each log."""
-        fitted, notes, parts = _run(self.scenario, self.fitting, self.parts, solvers, wanted or Wanted())
+        """Fit with each solver on every log's windows, and each log on its own to check that they
+        tell one robot's story; score the result on each log."""
+        sc, fitting, names = self.scenario, self.fitting, tuple(solvers or self.scenario.solvers)
+        results, fitted, notes = _fit(fitting, self.parts, names, self.held)
+        own = [
+            _run(sc, Fit(p.problem, p.windows.data, names), [p], names, Wanted())[2][0] for p in self.parts
+        ]
+        check = consistency(results, fitted, own)
+        if check is not None and check.significant:
+            notes.append(check.words())
+        fitted = dataclasses.replace(fitted, consistency=check)
+        parts = _assemble(fitting, self.parts, results, fitted, notes, wanted or Wanted())
         return JointRun(
-            scenario=scenario_info(self.scenario, self.model),
+            scenario=scenario_info(sc, self.model),
             parts=tuple(parts),
-            n_residuals=self.fitting.data.n_residuals,
-            checks=Checks(fitted.observability, fitted.crossval, fitted.direction, None),
+            n_residuals=fitting.data.n_residuals,
+            checks=Checks(fitted.observability, fitted.crossval, fitted.direction, None, check),
             warnings=tuple(notes),
         )
+
+
+def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
+    """One log of several fitted on its own (its stages' windows and problem, nothing built again)."""
+    return _run(
+        part.prepared.scenario, Fit(part.problem, part.windows.data, solvers), [part], solvers, Wanted()
+    )[2][0]
+
+
+def consistency(
+    results: Mapping[str, SolverResult], fitted: FitAnalysis, own: Sequence[CalibrationRun]
+) -> ConsistencyCheck | None:
+    """Each log's own fit (``own``, in the joint fit's order of logs) against the joint fit, in
+    their σ to believe, for the first solver that converged in the joint fit."""
+    solver = next((name for name, r in results.items() if r.converged), None)
+    if solver is None:
+        return None
+    result, u = results[solver], fitted.uncertainty[solver]
+    blocked = fitted.crossval.std if fitted.crossval is not None else np.full(len(u.names), np.nan)
+    nan = np.full(len(result.names), np.nan)
+    estimates, stds = [], []
+    for run in own:
+        mine = run.reports[solver]
+        ok = mine.result.converged
+        estimates.append(mine.result.params if ok else nan)
+        stds.append(np.array([run.std(solver)[n] for n in result.names]) if ok else nan)
+    logs = [run.log.path for run in own]
+    return compare_logs(
+        result.names, logs, result.params, believed_std(u.std, blocked), np.array(estimates), np.array(stds)
+    )
+
+
+def _fit(
+    fitting: Fit, parts: Sequence[LogSetup], solvers: Sequence[str], held: Mapping[str, str]
+) -> tuple[dict[str, SolverResult], FitAnalysis, list[str]]:
+    """The fit stage and the fit's analysis over ``parts`` (one log, or several end to end);
+    ``held``: the parameters held because the fitted records do not determine them."""
+    results = {name: fitting.solve(name) for name in solvers}
+    noise = np.max([p.windows.input_noise_std for p in parts], axis=0)
+    fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data))
+    return results, fitted, fit_notes(results, fitted, held)
+
+
+def _assemble(
+    fitting: Fit,
+    parts: Sequence[LogSetup],
+    results: Mapping[str, SolverResult],
+    fitted: FitAnalysis,
+    notes: Sequence[str],
+    wanted: Wanted,
+) -> list[CalibrationRun]:
+    """Each log's figures (analyse) and its run (assemble) with the fit's estimates and checks."""
+    runs = []
+    for i, part in enumerate(parts):
+        sc = part.prepared.scenario
+        info = scenario_info(sc, fitting.fns.model)
+        scorer = log_scorer(
+            fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window
+        )
+        view = LogView(part.prepared, part.windows, scorer, part.screening.findings, i)
+        figures = analyse_log(fitting, results, view, wanted, info.labels)
+        stage = (part.prepared, part.windows, part.alignment, part.screening.findings)
+        runs.append(assemble_run(info, stage, fitting.problem.start.initial, results, fitted, figures, notes))
+    return runs
 
 
 def _run(
     sc: Scenario, fitting: Fit, parts: Sequence[LogSetup], solvers: Sequence[str] | None, wanted: Wanted
 ) -> tuple[FitAnalysis, list[str], list[CalibrationRun]]:
     """The fit, analyse and assemble stages over ``parts`` (one log, or several end to end)."""
-    results = {name: fitting.solve(name) for name in solvers or sc.solvers}
-    noise = np.max([p.windows.input_noise_std for p in parts], axis=0)
-    fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data))
-    held = {n: why for n, why in parts[0].prepared.held.items() if n in fitting.fns.fixed}
-    notes = fit_notes(results, fitted, held)
-    runs = []
-    for i, part in enumerate(parts):
-        info = scenario_info(part.prepared.scenario, fitting.fns.model)
-        steering = part.prepared.scenario.objective.residual.steering_sample
-        scorer = log_scorer(fitting.fns, part.windows, steering, sc.validation.rpe_window)
-        view = LogView(part.prepared, part.windows, scorer, part.screening.findings, i)
-        figures = analyse_log(fitting, results, view, wanted, info.labels)
-        stage = (part.prepared, part.windows, part.alignment, part.screening.findings)
-        runs.append(assemble_run(info, stage, fitting.problem.start.initial, results, fitted, figures, notes))
-    return fitted, notes, runs
+    results, fitted, notes = _fit(fitting, parts, tuple(solvers or sc.solvers), parts[0].prepared.held)
+    return fitted, notes, _assemble(fitting, parts, results, fitted, notes, wanted)

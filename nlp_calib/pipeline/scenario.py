@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import typing
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -107,6 +107,12 @@ class Scenario:
         entry = dataclasses.replace(self.log, source=moved(self.log.source, Path(path)))
         return dataclasses.replace(self, data=dataclasses.replace(self.data, logs=(entry,), joint=False))
 
+    def with_datasets(self, paths: Sequence[str | Path]) -> Scenario:
+        """The same scenario on several logs fitted together (``datasets:``), each read as this
+        scenario's log is and with its ``samples`` and ``alignment``."""
+        entries = tuple(dataclasses.replace(self.log, source=moved(self.log.source, Path(p))) for p in paths)
+        return dataclasses.replace(self, data=dataclasses.replace(self.data, logs=entries, joint=True))
+
     def with_options(self, **flat: Any) -> Scenario:
         """The same scenario with top-level keys of its file replaced by values of their types
         (``samples=SampleSelection(...)``): ``samples`` and ``alignment`` apply to every log."""
@@ -114,6 +120,9 @@ class Scenario:
         for key, value in flat.items():
             if key == "dataset":
                 sc = sc.with_dataset(value)
+                continue
+            if key == "datasets":
+                sc = sc.with_datasets(value)
                 continue
             if key in ("samples", "alignment"):
                 logs = tuple(dataclasses.replace(e, **{key: value}) for e in sc.data.logs)

@@ -1,7 +1,9 @@
 """The screen stage: encoder and tracker faults found in a log, and how the fit is kept clear of them.
 
-Faults are judged on the encoder readings as logged (re-sampling them would smear a faulty one),
-with a fit of the log's windows by the internal solver.
+Faults are screened once, on the records as logged (re-sampling would smear a bad reading into its
+neighbours), before the lag search, which they are kept out of; each mismatch is put down to the
+stream that explains it (:mod:`nlp_calib.analysis.faults`), the counters judged with a fit of the
+log's windows by the internal solver.
 """
 
 from __future__ import annotations
@@ -10,34 +12,37 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from nlp_calib.analysis.faults import check_log, repair
-from nlp_calib.logs import Log, resample_encoders, resample_tracker
+from nlp_calib.analysis.faults import repair
+from nlp_calib.analysis.faults import screen as screen_log
+from nlp_calib.logs import Log
 from nlp_calib.pipeline.build import Binder
-from nlp_calib.results.faults import FaultReport, Findings
+from nlp_calib.results.faults import TRACKER_KINDS, FaultReport, Findings
 
 
-def find_faults(
-    binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray, lag_s: float = 0.0
-) -> FaultReport:
-    """Faults in records ``start:stop`` of ``log``, judged with a fit to its windows (those the
-    binder keeps) and, with a tracker ``lag_s``, against the tracker re-sampled onto the encoders'
-    clock: the encoder readings stay as logged, so a jump stays on its record."""
-    _, ev = binder.bind(resample_encoders(log, lag_s, binder.fns.model.encoder_kinds)[0], start, stop)
-    _, x, converged = binder.fit(ev, x0)
-    if not converged or not np.all(np.isfinite(x)):
-        # Judged by a wrong model every interval looks faulty; the solvers will say why.
-        why = "the fit that judges the encoders did not converge from the initial guess"
-        return FaultReport((), {}, {}, unchecked=why)
-    sel = resample_tracker(log, lag_s).select(start, stop)
-    model = binder.fns.model
-    inputs = model.inputs(sel, binder.scenario.objective.residual.steering_sample)
-    report = check_log(binder.fns, ev.params(x), sel, inputs, model.counter_rows(sel))
+def find_faults(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> FaultReport:
+    """Faults in records ``start:stop`` of ``log`` as logged (nothing re-sampled), the counters
+    judged with a fit to the windows the binder keeps and the streams' own glitches spoil not, at
+    the scenario's tracker lag (or, when it is estimated, the screen's own estimate in its range)."""
+
+    def judge(bad_intervals: np.ndarray, bad_records: np.ndarray) -> np.ndarray | None:
+        masks = np.zeros(log.n_records - 1, dtype=bool), np.zeros(log.n_records, dtype=bool)
+        masks[0][start : stop - 1], masks[1][start:stop] = bad_intervals, bad_records
+        masked = replace(binder, bad_intervals=masks[0], bad_records=masks[1])
+        _, ev = masked.bind(log, start, stop)
+        _, x, converged = masked.fit(ev, x0)
+        return ev.params(x) if converged and np.all(np.isfinite(x)) else None
+
+    sc = binder.scenario
+    al = sc.log.alignment
+    lag = al.search if al.tracker_lag == "auto" else float(al.tracker_lag)
+    sample = sc.objective.residual.steering_sample
+    report = screen_log(binder.fns, log.select(start, stop), sample, lag, judge)
     return report.shifted(start, log.line_numbers)
 
 
 def handle_faults(log: Log, report: FaultReport, handling: str) -> tuple[Log, Findings]:
     """The log to fit (repaired when ``handling`` asks for it) and what was found and done."""
-    if handling == "repair" and report.counter_faults:
+    if handling == "repair" and report.encoder_faults:
         log, repairs = repair(log, report)
         return log, Findings(report, handling, repairs)
     return log, Findings(report, handling)
@@ -73,31 +78,24 @@ def exclude_faults(binder: Binder, findings: Findings, n_records: int, lag_s: fl
         return binder
     faults = findings.report.faults
     if findings.handling == "repair":
-        faults = tuple(f for f in faults if f.kind == "tracker_jump")
+        faults = tuple(f for f in faults if f.kind in TRACKER_KINDS)
     bad_intervals, bad_records = fault_masks(replace(findings.report, faults=faults), n_records, lag_s, dt_s)
     return replace(binder, bad_intervals=bad_intervals, bad_records=bad_records)
 
 
 @dataclass(frozen=True)
 class Screening:
-    """What the screen found in a log at a given tracker lag, the log to fit (repaired when the
-    scenario asks) and the masks of what every fair figure leaves out."""
+    """What the screen found in a log, and the log to fit (repaired when the scenario asks)."""
 
-    lag_s: float
     findings: Findings
     fitted_log: Log
-    bad_intervals: np.ndarray
-    bad_records: np.ndarray
 
 
-def screen(
-    binder: Binder, log: Log, records: tuple[int, int], x0: np.ndarray, lag_s: float = 0.0
-) -> Screening:
-    """Screen records ``[start, stop)`` of ``log`` for faults with the tracker ``lag_s`` applied."""
-    report = find_faults(binder, log, *records, x0, lag_s)
+def screen(binder: Binder, log: Log, records: tuple[int, int], x0: np.ndarray) -> Screening:
+    """Screen records ``[start, stop)`` of ``log`` for faults."""
+    report = find_faults(binder, log, *records, x0)
     fitted, findings = handle_faults(log, report, binder.scenario.data.faults.handling)
-    masks = fault_masks(report, log.n_records, lag_s, median_interval(log))
-    return Screening(lag_s, findings, fitted, *masks)
+    return Screening(findings, fitted)
 
 
 def median_interval(log: Log) -> float:

@@ -17,7 +17,7 @@ from nlp_calib.logs import Log
 from nlp_calib.pipeline.align import Alignment
 from nlp_calib.pipeline.build import Binder, Problem
 from nlp_calib.pipeline.prepare import PreparedLog, split
-from nlp_calib.pipeline.screen import Screening, exclude_faults, median_interval
+from nlp_calib.pipeline.screen import Screening, exclude_faults, fault_masks, median_interval
 from nlp_calib.problem import ResidualData
 
 
@@ -56,16 +56,15 @@ def bind_windows(
 ) -> LogWindows:
     """The windows of the fitted records of ``prepared``'s log, aligned and screened."""
     sc, log = prepared.scenario, prepared.log
-    binder = exclude_faults(
-        problem.binder, screening.findings, log.n_records, alignment.lag_s, median_interval(log)
-    )
+    dt = median_interval(log)
+    binder = exclude_faults(problem.binder, screening.findings, log.n_records, alignment.lag_s, dt)
     report = screening.findings.report
+    # Every detected fault shapes the fair figures, whatever the handling: like with like.
+    bad_intervals, bad_records = fault_masks(report, log.n_records, alignment.lag_s, dt)
     if report.unchecked:
         warnings.warn(f"encoder faults not checked: {report.unchecked}", NlpCalibWarning, stacklevel=3)
     start, stop = max(prepared.start, alignment.valid[0]), min(prepared.stop, alignment.valid[1])
     fit = (start, split(sc, start, stop))
     data = binder.windows(alignment.log, *fit)
     noise = problem.model.input_noise_std(alignment.log, sc.data.encoder_noise)
-    return LogWindows(
-        alignment.log, (start, stop), fit, data, binder, screening.bad_intervals, screening.bad_records, noise
-    )
+    return LogWindows(alignment.log, (start, stop), fit, data, binder, bad_intervals, bad_records, noise)

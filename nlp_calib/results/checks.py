@@ -98,6 +98,25 @@ class DirectionCheck:
     def significant(self) -> bool:
         return bool(np.nanmax(np.abs(self.z), initial=0.0) > SIGNIFICANT)
 
+    @property
+    def compared(self) -> bool:
+        """Whether any parameter could be compared (a σ in both parts, held in neither)."""
+        return bool(np.any(np.isfinite(self.z)))
+
+    def words(self) -> str:
+        """The verdict in words: agree within, disagree by, or could not compare (and why)."""
+        if not self.compared:
+            return (
+                "could not be compared: no parameter has a σ in both parts (each part's σ needs at "
+                "least 3 blocks with 20 or more windows of its driving)"
+            )
+        name, z = self.worst
+        return (
+            f"DISAGREE: {name} by {abs(z):.1f}σ"
+            if self.significant
+            else f"agree within {abs(z):.1f}σ ({name})"
+        )
+
     def as_dict(self) -> dict[str, object]:
         return {
             "windows": {"forward": self.windows[0], "reverse": self.windows[1]},
@@ -171,4 +190,99 @@ class Observability:
             ],
             "heading_range_rad": self.heading_range_rad,
             "warnings": list(self.warnings),
+        }
+
+
+#: A difference beyond this many σ (of the difference) is reported as a disagreement.
+CONSISTENCY_SIGMAS = 4.0
+
+
+@dataclass(frozen=True)
+class Disagreement:
+    """One log's own estimate of a parameter off the joint one by ``z`` σ."""
+
+    log: str
+    parameter: str
+    own: float
+    joint: float
+    z: float
+
+
+@dataclass(frozen=True)
+class ConsistencyCheck:
+    """Each log's own estimates (rows, model order) against the joint ones, and the differences
+    in σ of the difference (NaN where a parameter is held in either fit or has no σ)."""
+
+    names: tuple[str, ...]
+    logs: tuple[str, ...]
+    joint: np.ndarray
+    own: np.ndarray
+    z: np.ndarray
+
+    @property
+    def compared(self) -> bool:
+        """Whether any parameter of any log could be compared."""
+        return bool(np.any(np.isfinite(self.z)))
+
+    @property
+    def worst(self) -> Disagreement | None:
+        """The largest difference, or None when nothing could be compared."""
+        if not self.compared:
+            return None
+        i, j = np.unravel_index(int(np.nanargmax(np.abs(self.z))), self.z.shape)
+        return self._at(int(i), int(j))
+
+    @property
+    def disagreements(self) -> tuple[Disagreement, ...]:
+        """Every difference beyond :data:`CONSISTENCY_SIGMAS`, the largest first."""
+        with np.errstate(invalid="ignore"):
+            where = np.argwhere(np.abs(self.z) > CONSISTENCY_SIGMAS)
+        found = [self._at(int(i), int(j)) for i, j in where]
+        return tuple(sorted(found, key=lambda d: -abs(d.z)))
+
+    @property
+    def significant(self) -> bool:
+        return bool(self.disagreements)
+
+    def _at(self, i: int, j: int) -> Disagreement:
+        return Disagreement(
+            self.logs[i], self.names[j], float(self.own[i, j]), float(self.joint[j]), float(self.z[i, j])
+        )
+
+    def words(self) -> str:
+        """One line: which logs disagree on which parameters, that they agree, or that nothing
+        could be compared."""
+        if not self.compared:
+            return (
+                "each log's own fit could not be compared with the joint fit (no parameter with a σ in both)"
+            )
+        if not self.significant:
+            w = self.worst
+            assert w is not None
+            return (
+                f"each log's own fit agrees with the joint fit within {abs(w.z):.1f}σ "
+                f"(largest: {w.parameter} in {w.log})"
+            )
+        worst = self.disagreements
+        logs = sorted({d.log for d in worst}, key=self.logs.index)
+        params = list(dict.fromkeys(d.parameter for d in worst))
+        detail = "; ".join(
+            f"{d.parameter} in {d.log}: {d.own:.6g} against {d.joint:.6g} jointly ({d.z:+.1f}σ)"
+            for d in worst[:3]
+        )
+        return (
+            f"the logs do not agree on one robot: {', '.join(params)} differ in {', '.join(logs)} beyond "
+            f"{CONSISTENCY_SIGMAS:g}σ ({detail})"
+        )
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "logs": list(self.logs),
+            "joint": dict(zip(self.names, map(float, self.joint))),
+            "own": {log: dict(zip(self.names, map(float, row))) for log, row in zip(self.logs, self.own)},
+            "difference_in_sigma": {
+                log: {n: (None if not np.isfinite(v) else float(v)) for n, v in zip(self.names, row)}
+                for log, row in zip(self.logs, self.z)
+            },
+            "significant": self.significant,
         }

@@ -12,15 +12,20 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+COUNTER_KINDS = ("stall_then_jump", "reversal", "counter_jump")
+ABSOLUTE_KINDS = ("steering_spike", "steering_stuck")
+TRACKER_KINDS = ("tracker_jump",)
+
 
 @dataclass(frozen=True)
 class Fault:
     """A stretch of intervals ``first..last`` (interval k joins records k and k+1) whose data are wrong.
 
-    ``record`` is the record whose reading shows the fault (for a tracker jump: the bad pose);
-    ``logged`` and ``implied`` are the encoder's total increment over the stretch as logged and as
-    the tracker's motion implies, ``noise`` the 1σ of ``implied`` (ticks; for a tracker jump:
-    0, the pose's position error and the tracker's noise, in m).
+    ``record`` is the record whose reading shows the fault (for a tracker jump: the bad pose; for
+    a stuck reading: its first repeat); ``logged`` and ``implied`` are the encoder's total
+    increment over the stretch as logged and as the tracker's motion implies (for an absolute
+    encoder: its reading and the one its neighbours imply), ``noise`` the 1σ of ``implied``
+    (ticks; for a tracker jump: 0, the pose's position error and the tracker's noise, in m).
     """
 
     kind: str
@@ -44,7 +49,7 @@ class Fault:
             "time_s": self.time_s,
             "intervals": [self.first, self.last],
         }
-        if self.kind == "tracker_jump":
+        if self.kind in TRACKER_KINDS:
             size = {"offset_m": self.implied, "noise_m": self.noise}
         else:
             size = {"logged_ticks": self.logged, "implied_ticks": self.implied, "noise_ticks": self.noise}
@@ -58,13 +63,18 @@ def count_kinds(faults: Sequence[Fault]) -> str:
 
 @dataclass(frozen=True)
 class FaultReport:
-    """The faults found in a log, and the harmless stale readings counted per encoder."""
+    """The faults found in a log, and the harmless stale readings counted per encoder.
+
+    ``lag_s`` is the tracker lag the counters were judged at (the scenario's, or the screen's own
+    estimate when the lag is to be estimated; None when they were not judged).
+    """
 
     faults: tuple[Fault, ...]
     stale: Mapping[str, int]
     noise_ticks: Mapping[str, float]
-    #: Why the log could not be checked ("" when it was).
+    #: Why the log's counters could not be checked ("" when they were).
     unchecked: str = ""
+    lag_s: float | None = None
 
     def shifted(self, offset: int, line_numbers: np.ndarray) -> FaultReport:
         """The same findings with record and interval indices moved by ``offset``; ``line_numbers``
@@ -83,21 +93,25 @@ class FaultReport:
 
     @property
     def counter_faults(self) -> tuple[Fault, ...]:
-        return tuple(f for f in self.faults if f.kind != "tracker_jump")
+        return tuple(f for f in self.faults if f.kind in COUNTER_KINDS)
+
+    @property
+    def encoder_faults(self) -> tuple[Fault, ...]:
+        """The counters' and the absolute encoders' faults (all but the tracker's)."""
+        return tuple(f for f in self.faults if f.kind not in TRACKER_KINDS)
 
     def bad_intervals(self, n_intervals: int) -> np.ndarray:
-        """Mask of intervals a residual window must not cross (counter faults)."""
+        """Mask of intervals a residual window must not cross (encoder faults)."""
         mask = np.zeros(n_intervals, dtype=bool)
-        for f in self.faults:
-            if f.kind != "tracker_jump":
-                mask[max(f.first, 0) : min(f.last + 1, n_intervals)] = True
+        for f in self.encoder_faults:
+            mask[max(f.first, 0) : min(f.last + 1, n_intervals)] = True
         return mask
 
     def bad_records(self, n_records: int) -> np.ndarray:
         """Mask of records a residual window must not start or end at (tracker jumps)."""
         mask = np.zeros(n_records, dtype=bool)
         for f in self.faults:
-            if f.kind == "tracker_jump" and 0 <= f.record < n_records:
+            if f.kind in TRACKER_KINDS and 0 <= f.record < n_records:
                 mask[f.record] = True
         return mask
 

@@ -17,7 +17,14 @@ import numpy as np
 
 from nlp_calib.core.errors import UsageError
 from nlp_calib.results import codec
-from nlp_calib.results.checks import CrossValidation, DirectionCheck, LagEstimate, Observability, believed_std
+from nlp_calib.results.checks import (
+    ConsistencyCheck,
+    CrossValidation,
+    DirectionCheck,
+    LagEstimate,
+    Observability,
+    believed_std,
+)
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import ControllerParams
@@ -101,12 +108,14 @@ class DataInfo:
 @dataclass(frozen=True)
 class Checks:
     """What the run's checks found: observability, blocked cross-validation, the forward/reverse
-    comparison and the faults (any may be absent when it could not run)."""
+    comparison, the faults and, for several logs fitted together, whether each log's own fit
+    agrees with theirs (any may be absent when it could not run)."""
 
     observability: Observability | None
     crossval: CrossValidation | None
     direction: DirectionCheck | None
     findings: Findings | None
+    consistency: ConsistencyCheck | None = None
 
 
 @dataclass(frozen=True)
@@ -125,11 +134,13 @@ class SolverReport:
 GOOD = "good"
 CAVEATS = "usable with caveats"
 UNDETERMINED = "not determined"
+NOT_USABLE = "not usable"
 
 
 @dataclass(frozen=True)
 class Verdict:
-    """``level`` (:data:`GOOD`, :data:`CAVEATS`, :data:`UNDETERMINED`) and its reasons."""
+    """``level`` (:data:`GOOD`, :data:`CAVEATS`, :data:`NOT_USABLE`, :data:`UNDETERMINED`) and its
+    reasons."""
 
     level: str
     reasons: tuple[str, ...]

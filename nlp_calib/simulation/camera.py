@@ -83,6 +83,7 @@ class DriveShape:
     max_speed: float = 0.5
     max_turn: float = 0.6
     stop_fraction: float = 0.1
+    reversals: str = "smooth"
 
     def __post_init__(self) -> None:
         _check(self, DRIVE_LIMITS, "drive.")

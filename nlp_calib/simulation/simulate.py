@@ -24,11 +24,16 @@ from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.core.ranges import Range
 from nlp_calib.logs import LogHeader, format_log
+from nlp_calib.logs.bag_reader import DEFAULT_MAX_GAP_S, Stamped
+from nlp_calib.logs.bag_records import pair
 from nlp_calib.models import DEFAULT_MODEL, MODELS
 from nlp_calib.models.drives import integrate_base
-from nlp_calib.simulation.faults import COUNTER_FAULT_KINDS, InjectedFault, inject
+from nlp_calib.simulation.faults import COUNTER_FAULT_KINDS, InjectedFault, inject, inject_glitches
 
 TRAJECTORIES = ("s_curves", "straight", "no_reversals")
+#: How the speed changes sign: through zero over seconds, or within :data:`ABRUPT_S`.
+REVERSALS = ("smooth", "abrupt")
+ABRUPT_S = 0.02
 
 #: Accepted values of the numeric options (the command line checks its options against the same).
 #: Memory grows with ``records × substeps`` (about 200 bytes each).
@@ -48,6 +53,10 @@ LIMITS: Mapping[str, Range] = {
     "latency_s": Range(0.0, 1.0),
     "wrap_after_ticks": Range(0, 2**32 - 1, integer=True),
     "counter_faults": Range(0, 1000, integer=True),
+    "tracker_rate_hz": Range(0.0, 1000.0),
+    "tracker_jitter_s": Range(0.0, 0.1),
+    "steering_spikes": Range(0, 1000, integer=True),
+    "steering_stuck": Range(0, 1000, integer=True),
 }
 
 
@@ -61,7 +70,12 @@ class SimulationOptions:
     header as the initial guess); empty means the model's defaults. ``max_turn`` is the amplitude
     of the turning profile, which each model's drive reads in its own way (see its ``steps``).
     ``encoder_ranges`` maps encoder names to their ``#joints_max_enc_values`` (absolute range,
-    or counts per turn); empty means the model's defaults.
+    or counts per turn); empty means the model's defaults. ``reversals``: ``smooth`` (the speed
+    passes through zero over seconds) or ``abrupt`` (within 20 ms). ``tracker_rate_hz`` > 0 puts
+    the tracker on a clock of its own (that rate, ``tracker_jitter_s``, a random phase); its poses
+    are then paired with the encoders' records as a bag import pairs them (interpolated at each
+    encoder stamp). ``counter_faults``, ``steering_spikes`` and ``steering_stuck`` inject that many
+    faults of each kind (:mod:`nlp_calib.simulation.faults`).
     """
 
     records: int = 1500
@@ -85,6 +99,11 @@ class SimulationOptions:
     wrap_after_ticks: int = 20000
     counter_faults: int = 0
     counter_fault_kinds: tuple[str, ...] = COUNTER_FAULT_KINDS
+    reversals: str = "smooth"
+    tracker_rate_hz: float = 0.0
+    tracker_jitter_s: float = 0.004
+    steering_spikes: int = 0
+    steering_stuck: int = 0
 
     def __post_init__(self) -> None:
         for name, limit in LIMITS.items():
@@ -120,6 +139,8 @@ class SimulationOptions:
                 f"encoder_ranges takes whole numbers in [1, 2^32] for {', '.join(drive.default_ranges)}, "
                 f"got {dict(self.encoder_ranges)}"
             )
+        if self.reversals not in REVERSALS:
+            raise OptionsError(f"reversals must be one of {', '.join(REVERSALS)}, got {self.reversals!r}")
         if not set(self.counter_fault_kinds) <= set(COUNTER_FAULT_KINDS):
             raise OptionsError(f"counter_fault_kinds must be among {', '.join(COUNTER_FAULT_KINDS)}")
 
@@ -136,6 +157,8 @@ class SimulatedLog:
     T_world_base_true: np.ndarray
     options: SimulationOptions
     faults: tuple[InjectedFault, ...] = ()
+    #: Per record, whether its tracker pose took in a gross outlier (paired: either bracket).
+    tracker_outliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     def text(self) -> str:
         return format_log(self.header, self.time_ns, self.ticks, self.model_pose, self.T_world_sensor)
@@ -146,6 +169,7 @@ class SimulatedLog:
             "params": dict(self.options.truth),
             "options": opts,
             "faults": [f.as_dict() for f in self.faults],
+            "tracker_outliers": np.flatnonzero(self.tracker_outliers).tolist(),
             "records": int(self.time_ns.size),
         }
 
@@ -161,6 +185,8 @@ class ProfileSettings(Protocol):
     def max_turn(self) -> float: ...
     @property
     def stop_fraction(self) -> float: ...
+    @property
+    def reversals(self) -> str: ...
 
 
 def drive_profiles(
@@ -187,12 +213,18 @@ def drive_profiles(
     turn[hold + 1 + np.arange(hold.size)] = turn[hold + np.arange(hold.size)]
     if opts.trajectory == "straight":
         turn[:] = 0.0
+    if opts.reversals == "abrupt":
+        # Keep the speed until just before the next knot, then change sign within ABRUPT_S.
+        flip = np.flatnonzero(speed[:-1] * speed[1:] < 0)
+        at = t[flip + 1] - ABRUPT_S
+        turn = np.insert(turn, flip + 1, np.interp(at, t, turn))
+        t, speed = np.insert(t, flip + 1, at), np.insert(speed, flip + 1, speed[flip])
     return t, speed, turn
 
 
-def _sample_times(opts: SimulationOptions, rng: np.random.Generator) -> np.ndarray:
-    dt = 1.0 / opts.rate_hz + rng.normal(0.0, opts.jitter_s, opts.records - 1)
-    dt = np.clip(dt, 0.25 / opts.rate_hz, None)
+def _sample_times(n: int, rate_hz: float, jitter_s: float, rng: np.random.Generator) -> np.ndarray:
+    dt = 1.0 / rate_hz + rng.normal(0.0, jitter_s, n - 1)
+    dt = np.clip(dt, 0.25 / rate_hz, None)
     return np.concatenate([[0.0], np.cumsum(dt)])
 
 
@@ -206,57 +238,123 @@ def _sensor_pose(base: np.ndarray, mount: tuple[float, float, float]) -> np.ndar
     return np.stack([base[:, 0] + c * mx - s * my, base[:, 1] + s * mx + c * my, base[:, 2] + mth], axis=1)
 
 
-def simulate(opts: SimulationOptions) -> SimulatedLog:
-    """Simulate a drive and the log it would produce."""
-    rng = np.random.default_rng(opts.seed)
-    truth = opts.truth
-    t_s = _sample_times(opts, rng)
-    knots = drive_profiles(opts, rng, float(t_s[-1]) + opts.latency_s + 1.0)
-    # Fine grid: sub-steps between samples, starting early enough to cover the latency.
+@dataclass(frozen=True)
+class _Motion:
+    """The robot's continuous motion: base poses and encoder channels on a fine time grid."""
+
+    t: np.ndarray
+    poses: np.ndarray
+    channels: dict[str, np.ndarray]
+
+    def base_at(self, t: np.ndarray) -> np.ndarray:
+        return _pose_at(self.t, self.poses, t)
+
+
+def _motion(opts: SimulationOptions, knots: tuple[np.ndarray, ...], grid: np.ndarray) -> _Motion:
+    """The drive over sub-steps between the times ``grid``, starting early enough for the latency."""
     t0 = -opts.latency_s
-    base_grid = np.concatenate([[t0], t_s]) if opts.latency_s > 0 else t_s
+    base_grid = np.concatenate([[t0], grid]) if opts.latency_s > 0 else grid
     frac = np.arange(opts.substeps) / opts.substeps
     t_fine = np.concatenate(
         [(base_grid[:-1, None] + np.diff(base_grid)[:, None] * frac).ravel(), base_grid[-1:]]
     )
-    drive = MODELS[opts.model].drive
     kt, kv, ks = knots
     t_mid = 0.5 * (t_fine[1:] + t_fine[:-1]) - t0
+    drive = MODELS[opts.model].drive
     ds, w, channels = drive.steps(
         opts, np.interp(t_mid, kt, kv), np.interp(t_mid, kt, ks), np.diff(t_fine), float(ks[0])
     )
-    poses = integrate_base(ds, w)
+    return _Motion(t_fine, integrate_base(ds, w), channels)
 
-    base_at_samples = _pose_at(t_fine, poses, t_s)
+
+def _tracker(
+    opts: SimulationOptions, motion: _Motion, t: np.ndarray, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """The tracker's poses reported at times ``t``: the sensor ``latency_s`` earlier, with noise and
+    gross outliers (and which poses are outliers)."""
+    truth, n = opts.truth, t.size
     mount = (truth["sensor_x"], truth["sensor_y"], truth["sensor_theta"])
-    tracker = _sensor_pose(_pose_at(t_fine, poses, t_s - opts.latency_s), mount)
-    tracker[:, :2] += rng.normal(0.0, opts.tracker_noise_xy, (opts.records, 2))
-    tracker[:, 2] += rng.normal(0.0, opts.tracker_noise_theta, opts.records)
-    outliers = rng.random(opts.records) < opts.outlier_fraction
+    tracker = _sensor_pose(motion.base_at(t - opts.latency_s), mount)
+    tracker[:, :2] += rng.normal(0.0, opts.tracker_noise_xy, (n, 2))
+    tracker[:, 2] += rng.normal(0.0, opts.tracker_noise_theta, n)
+    outliers = rng.random(n) < opts.outlier_fraction
     tracker[outliers, :2] += rng.normal(0.0, opts.outlier_magnitude, (int(outliers.sum()), 2))
     tracker[outliers, 2] += rng.normal(0.0, opts.outlier_magnitude, int(outliers.sum()))
     tracker[:, 2] = wrap_angle(tracker[:, 2])
+    return tracker, outliers
 
-    ticks = drive.ticks(opts, {name: np.interp(t_s, t_fine, c) for name, c in channels.items()})
+
+def _own_clock(opts: SimulationOptions, t_enc: np.ndarray) -> np.ndarray:
+    """The tracker's own sample times over the encoders' span: its rate and jitter, a random phase."""
+    rng = np.random.default_rng([opts.seed, 2])
+    n = int(np.ceil(t_enc[-1] * opts.tracker_rate_hz)) + 2
+    return rng.uniform(0.0, 1.0 / opts.tracker_rate_hz) + _sample_times(
+        n, opts.tracker_rate_hz, opts.tracker_jitter_s, rng
+    )
+
+
+def _records(
+    opts: SimulationOptions, rng: np.random.Generator, t_enc: np.ndarray, knots: tuple[np.ndarray, ...]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, _Motion]:
+    """Record times, the tracker's pose at each, which took in an outlier, and the motion: one
+    record per encoder sample with the tracker sampled alongside, or, on its own clock, paired
+    as a bag import pairs them."""
+    if not opts.tracker_rate_hz:
+        motion = _motion(opts, knots, t_enc)
+        return (t_enc, *_tracker(opts, motion, t_enc, rng), motion)
+    t_trk = _own_clock(opts, t_enc)
+    motion = _motion(opts, knots, np.union1d(t_enc, t_trk[t_trk > t_enc[-1]]))
+    poses, outliers = _tracker(opts, motion, t_trk, np.random.default_rng([opts.seed, 3]))
+    ns = lambda t: np.round(t * 1e9).astype(np.int64)  # noqa: E731
+    joints = Stamped("joints", ns(t_enc), np.zeros((t_enc.size, 0)))
+    index, paired, _ = pair(joints, Stamped("tracker", ns(t_trk), poses), DEFAULT_MAX_GAP_S)
+    t_s = t_enc[index]
+    return t_s, paired, np.interp(t_s, t_trk, outliers.astype(float)) > 0, motion
+
+
+def simulate(opts: SimulationOptions) -> SimulatedLog:
+    """Simulate a drive and the log it would produce."""
+    rng = np.random.default_rng(opts.seed)
+    t_enc = _sample_times(opts.records, opts.rate_hz, opts.jitter_s, rng)
+    knots = drive_profiles(opts, rng, float(t_enc[-1]) + opts.latency_s + 1.0)
+    t_s, tracker, outliers, motion = _records(opts, rng, t_enc, knots)
+    drive = MODELS[opts.model].drive
+    ticks = drive.ticks(opts, {name: np.interp(t_s, motion.t, c) for name, c in motion.channels.items()})
     header = drive.header(opts)
-    faults: tuple[InjectedFault, ...] = ()
-    if opts.counter_faults:
-        # Their own random stream: a log without faults stays the same for a seed.
-        counters = [n for n, kind in MODELS[opts.model].encoder_kinds.items() if kind == "counter"]
-        fault_rng = np.random.default_rng([opts.seed, 1])
-        ticks, faults = inject(
-            ticks, header.encoder_names, counters, opts.counter_faults, opts.counter_fault_kinds, fault_rng
-        )
+    ticks, faults = inject_faults(opts, header, ticks)
     return SimulatedLog(
         header=header,
         time_ns=np.round(t_s * 1e9).astype(np.int64) + 1_700_000_000_000_000_000,
         ticks=ticks,
         model_pose=drive.vendor_odometry(header, ticks),
         T_world_sensor=tracker,
-        T_world_base_true=base_at_samples,
+        T_world_base_true=motion.base_at(t_s),
         options=opts,
         faults=faults,
+        tracker_outliers=outliers,
     )
+
+
+def inject_faults(
+    opts: SimulationOptions, header: LogHeader, ticks: np.ndarray
+) -> tuple[np.ndarray, tuple[InjectedFault, ...]]:
+    """``ticks`` with the options' counter faults, spikes and stuck readings of an absolute encoder,
+    each kind from a random stream of its own (a log without faults stays the same for a seed)."""
+    kinds = MODELS[opts.model].encoder_kinds
+    faults: tuple[InjectedFault, ...] = ()
+    if opts.counter_faults:
+        counters = [n for n, kind in kinds.items() if kind == "counter"]
+        fault_rng = np.random.default_rng([opts.seed, 1])
+        ticks, faults = inject(
+            ticks, header.encoder_names, counters, opts.counter_faults, opts.counter_fault_kinds, fault_rng
+        )
+    absolute = [n for n, kind in kinds.items() if kind == "absolute"]
+    if absolute and (opts.steering_spikes or opts.steering_stuck):
+        glitch_rng = np.random.default_rng([opts.seed, 4])
+        counts = (opts.steering_spikes, opts.steering_stuck)
+        ticks, glitches = inject_glitches(ticks, header, absolute[0], counts, faults, glitch_rng)
+        faults = tuple(sorted(faults + glitches, key=lambda f: f.record))
+    return ticks, faults
 
 
 def truth_path(log_path: Path) -> Path:

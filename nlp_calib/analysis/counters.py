@@ -1,0 +1,244 @@
+"""Counter faults: counts lost or gained, shown by the counter's own history and confirmed by the
+tracker over several intervals.
+
+Each interval's residual, linearised in its inputs, gives per counter the correction ``c`` (in
+ticks) that would make the reading agree with the tracker's motion over the interval. Summed,
+the corrections give the count the tracker implies at each record. The tracker reports its poses
+some time after the encoders read (the tracker lag), so the implied count is compared with the
+logged one at the lag: the implied count is read ``lag`` later on the tracker's clock, between
+records (the tracker's own glitches are taken out before, so nothing bad is spread). The lag is
+the scenario's, or, when it is to be estimated, the one in its search range that makes the two
+counts agree best: the screen runs before the lag is estimated, on the records as logged.
+
+The difference between the counts is flat with noise, ramps while the counter reads stale and
+returns when it catches up, and steps where counts were lost or gained. Its level is read only
+right after a non-zero reading (no stall pending), as a median over :data:`PERSIST_INTERVALS`
+such points before and after a stretch, which a short burst does not move. A **fault** is a step
+beyond :data:`FAULT_SIGMAS` standard deviations of such steps along the log (or
+:data:`AGAINST_SIGMAS` when the reading contradicts the tracker's direction) that the counter's
+own history shows too: its count over the stretch is short of what its own speed just before and
+after implies, in the same direction, by at least half as much. A genuine stop, reversal or wrap
+agrees with the tracker once the lag is allowed for; a tracker that freezes or jumps leaves the
+counter's history smooth: neither is a counter fault.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.analysis.streams import robust_sigma
+
+#: A correction beyond this many robust standard deviations starts a candidate fault...
+CANDIDATE_SIGMAS = 6.0
+#: ...which is a fault when the level steps by more than this many standard deviations of such
+#: steps across its stretch (:data:`PERSIST_INTERVALS` either side), or by more than
+#: :data:`AGAINST_SIGMAS` when the reading contradicts the tracker's direction (itself evidence:
+#: a sound counter never does).
+FAULT_SIGMAS = 6.0
+AGAINST_SIGMAS = 4.0
+PERSIST_INTERVALS = 10
+#: Longest stall a fault's stretch extends back over.
+MAX_STALL = 25
+#: The counter's own history must show at least this share of the deficit the tracker shows,
+#: judged by its speed over this many moving intervals on either side.
+OWN_SHARE = 0.5
+OWN_INTERVALS = 3
+#: Step of the grid of lags the screen tries when the lag is to be estimated (s), and where its
+#: loss turns from quadratic to linear (units of scatter: a fault weighs no more than its size).
+LAG_STEP = 0.002
+HUBER = 3.0
+
+
+@dataclass(frozen=True)
+class CounterFinding:
+    """A counter fault over intervals ``first..last`` (``last + 1`` the record showing it): the
+    counter's total over them as logged and as the tracker implies, and the latter's 1σ (ticks)."""
+
+    kind: str
+    first: int
+    last: int
+    logged: float
+    implied: float
+    noise: float
+
+
+@dataclass(frozen=True)
+class CounterScreen:
+    """A counter's faults, its stale readings that caught up, and its per-interval noise (ticks)."""
+
+    findings: tuple[CounterFinding, ...]
+    stale: int
+    noise: float
+
+
+def counter_corrections(e: np.ndarray, de_du: np.ndarray, rows: list[int], scale: np.ndarray) -> np.ndarray:
+    """Per interval, the counter increments (ticks) that best explain each residual ``e`` (3, N).
+
+    ``de_du`` is (3, N, n_in); the corrections of the counter ``rows`` solve the weighted least
+    squares ``min |e + de_du·c|²`` with each residual component weighted by its robust scatter.
+    """
+    w = 1.0 / np.maximum([robust_sigma(e[i]) for i in range(3)], 1e-12) ** 2
+    G = de_du[:, :, rows]  # (3, N, m)
+    A = np.einsum("inj,i,ink->njk", G, w, G)
+    b = -np.einsum("inj,i,in->nj", G, w, e)
+    A = A + 1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] * np.eye(len(rows))
+    c = np.linalg.solve(A, b[:, :, None])[:, :, 0]  # (N, m) in input units
+    return c * scale[None, :]
+
+
+def at_lag(time_s: np.ndarray, ticks: np.ndarray, c: np.ndarray, lag_s: float) -> np.ndarray:
+    """Corrections with the tracker-implied count read ``lag_s`` later than the logged one."""
+    logged = np.concatenate([[0.0], np.cumsum(ticks)])
+    implied = logged + np.concatenate([[0.0], np.cumsum(c)])
+    shifted = np.interp(time_s + lag_s, time_s, implied)
+    return np.diff(shifted) - ticks
+
+
+def screen_lag(
+    time_s: np.ndarray, ticks: list[np.ndarray], c: np.ndarray, lag: float | tuple[float, float]
+) -> float:
+    """``lag`` when given; else the lag in the range ``lag`` at which the counters' increments
+    ``ticks``, read that much earlier, best match those the tracker implies (``ticks + c``, c
+    ``(N, m)``): Huber's loss, each counter in units of its corrections' scatter at no lag.
+
+    The counters are the ones interpolated here, not the tracker-implied counts: those carry the
+    tracker's noise, which interpolation between records would smooth the more the further the
+    lag falls between two records, and the smoothing, not the lag, would decide.
+    """
+    if not isinstance(lag, tuple):
+        return float(lag)
+    lo, hi = lag
+    grid = lo + LAG_STEP * np.arange(int(np.floor((hi - lo) / LAG_STEP + 1e-9)) + 1)
+    cost = np.zeros(grid.size)
+    for j, x in enumerate(ticks):
+        unit = max(robust_sigma(c[:, j]), 1e-12)
+        count = np.concatenate([[0.0], np.cumsum(x)])
+        for i, g in enumerate(grid):
+            r = np.abs(np.diff(np.interp(time_s - g, time_s, count)) - x - c[:, j]) / unit
+            cost[i] += np.sum(np.where(r < HUBER, 0.5 * r * r, HUBER * r - 0.5 * HUBER**2))
+    return float(grid[int(np.argmin(cost))])
+
+
+def _level(C: np.ndarray, idx: np.ndarray) -> float:
+    """The level over indices ``idx``: their median (NaN for fewer than two)."""
+    return float(np.median(C[idx])) if idx.size >= 2 else float("nan")
+
+
+def _stretches(ticks: np.ndarray, c: np.ndarray, candidates: list[int], sigma: float) -> dict[int, int]:
+    """Per candidate interval, the first interval of its stretch: back over the stall before it
+    (readings that stayed put, or caught up only partly, short in the fault's direction by 2σ)."""
+    firsts = {}
+    for k in candidates:
+        first = k
+        while first > 0 and k - first < MAX_STALL:
+            prev = first - 1
+            if not (ticks[prev] == 0 or (np.sign(c[prev]) == np.sign(c[k]) and abs(c[prev]) > 2.0 * sigma)):
+                break
+            first = prev
+        firsts[int(k)] = int(first)
+    return firsts
+
+
+def own_deficits(ticks: np.ndarray, time_s: np.ndarray, first: int, last: int) -> list[float]:
+    """The counts the counter's own speed implies over intervals ``first..last``, less those it
+    logged: at its speed just before, just after (medians over :data:`OWN_INTERVALS` moving
+    intervals) and their mean (the robot may change speed or direction on either side)."""
+    speed = ticks / np.maximum(np.diff(time_s), 1e-9)
+    span = float(time_s[last + 1] - time_s[first])
+    before, after = speed[:first][ticks[:first] != 0], speed[last + 1 :][ticks[last + 1 :] != 0]
+    sides = [float(np.median(s)) for s in (before[-OWN_INTERVALS:], after[:OWN_INTERVALS]) if s.size]
+    rates = sides + ([float(np.mean(sides))] if len(sides) == 2 else [])
+    return [r * span - float(np.sum(ticks[first : last + 1])) for r in rates]
+
+
+def _step_noise(C: np.ndarray, valid: np.ndarray, fallback: np.ndarray, sigma: float) -> float:
+    """The noise of a level step, from steps taken everywhere along the log (faults are few)."""
+    W = PERSIST_INTERVALS
+    levels = C[valid]
+    if levels.size >= 2 * W:
+        medians = np.median(np.lib.stride_tricks.sliding_window_view(levels, W), axis=1)
+        return max(robust_sigma(medians[W:] - medians[:-W]), sigma)
+    return max(robust_sigma(fallback), sigma)
+
+
+def screen_counter(ticks: np.ndarray, c: np.ndarray, time_s: np.ndarray) -> CounterScreen:
+    """The faults of one counter, its increments ``ticks`` (N,) against the corrections ``c`` (N,)
+    the tracker implies at the lag (see the module docstring); ``time_s`` the N + 1 record times."""
+    N = c.size
+    implied = ticks + c
+    sigma = robust_sigma(c)
+    if not np.isfinite(sigma) or sigma <= 0:
+        return CounterScreen((), 0, sigma)
+    C = np.concatenate([[0.0], np.cumsum(c)])  # C[k] = sum of c over intervals < k
+    valid = np.concatenate([[0], np.flatnonzero(ticks != 0) + 1])
+    W = PERSIST_INTERVALS
+    against = (np.sign(ticks) == -np.sign(implied)) & (ticks != 0) & (np.abs(c) > 3.0 * sigma)
+    catch_up = np.zeros(N, dtype=bool)
+    catch_up[1:] = (ticks[1:] != 0) & (ticks[:-1] == 0)  # zero readings are judged with their catch-up
+    large = (np.abs(c) > CANDIDATE_SIGMAS * sigma) & (ticks != 0)
+    open_: list[int] = np.flatnonzero(against | catch_up | large).tolist()
+    firsts = _stretches(ticks, c, open_, sigma)
+    accepted: list[tuple[int, int]] = []  # stretches (first, last) of the faults found so far
+
+    def step(k: int) -> float:
+        # Levels never reach across a fault already found: it would lend its step to k.
+        lo = max((last + 1 for first, last in accepted if last < firsts[k]), default=0)
+        hi = min((first for first, last in accepted if first > k), default=N)
+        b0, b1 = np.searchsorted(valid, lo, "left"), np.searchsorted(valid, firsts[k], "right")
+        a0, a1 = np.searchsorted(valid, k + 1, "left"), np.searchsorted(valid, hi, "right")
+        return _level(C, valid[a0:a1][:W]) - _level(C, valid[b0:b1][-W:])
+
+    step_sigma = _step_noise(C, valid, np.array([step(k) for k in open_]), sigma)
+    found: list[CounterFinding] = []
+    # The most significant step first, so that the strongest faults bound their neighbours' levels.
+    while open_:
+        steps = np.array([step(k) for k in open_])
+        # Across a stall the level wanders by the corrections of the stalled intervals too.
+        noise = np.hypot(step_sigma, sigma * np.sqrt([k - firsts[k] for k in open_]))
+        limit = np.array([AGAINST_SIGMAS if against[k] else FAULT_SIGMAS for k in open_]) * noise
+        score = np.abs(steps) / limit
+        if not np.any(score > 1.0):
+            break
+        i = int(np.nanargmax(score))
+        k = open_.pop(i)
+        first = firsts[k]
+        if not any(d * steps[i] >= OWN_SHARE * steps[i] ** 2 for d in own_deficits(ticks, time_s, first, k)):
+            continue  # the counter's own history runs smoothly through: the tracker is off, not it
+        accepted.append((first, k))
+        open_ = [j for j in open_ if not first <= j <= k and not firsts[j] <= k < j]
+        kind = "stall_then_jump" if first < k else ("reversal" if against[k] else "counter_jump")
+        total = (float(np.sum(ticks[first : k + 1])), float(np.sum(implied[first : k + 1])))
+        found.append(CounterFinding(kind, first, k, *total, float(sigma * np.sqrt(k + 1 - first))))
+    faulty = np.zeros(N, dtype=bool)
+    for f in found:
+        faulty[f.first : f.last + 1] = True
+    n_stale = int(np.sum((ticks == 0) & (np.abs(implied) > 3.0 * sigma) & ~faulty))
+    return CounterScreen(tuple(sorted(found, key=lambda f: f.first)), n_stale, sigma)
+
+
+def screen_counters(
+    e: np.ndarray,
+    de_du: np.ndarray,
+    logged: np.ndarray,
+    counters: Mapping[str, tuple[int, float]],
+    time_s: np.ndarray,
+    lag: float | tuple[float, float],
+) -> tuple[dict[str, CounterScreen], float]:
+    """Each counter's screen from the N intervals' residuals ``e`` (3, N) and ``de_du`` (3, N,
+    n_in) and inputs ``logged`` (n_in, N); ``counters`` maps names to input row and ticks per unit.
+    Also the lag used (given, or estimated when ``lag`` is a range)."""
+    names = list(counters)
+    if not names or e.shape[1] == 0:
+        return {}, float(lag) if not isinstance(lag, tuple) else 0.0
+    rows = [counters[n][0] for n in names]
+    scale = np.array([counters[n][1] for n in names])
+    corrections = counter_corrections(e, de_du, rows, scale)
+    ticks = [logged[r] * s for r, s in zip(rows, scale)]
+    lag_s = screen_lag(time_s, ticks, corrections, lag)
+    out = {}
+    for j, name in enumerate(names):
+        out[name] = screen_counter(ticks[j], at_lag(time_s, ticks[j], corrections[:, j], lag_s), time_s)
+    return out, lag_s

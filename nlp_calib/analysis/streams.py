@@ -1,0 +1,292 @@
+"""Glitches one stream shows on its own: a reading off the path its neighbours agree on.
+
+A tracker pose or an absolute encoder's reading that is off for one record (or a few, when the
+log's records interpolate a slower stream) departs from every path its neighbours allow. A
+genuine motion does not: the neighbours on one side continue into it (a stop, a reversal or a
+start is a kink, explained by the straight line through the two records on one side of it, or by
+the two lines meeting between records), or the straight line between the neighbours on both sides
+passes through it. A group of ``g`` records is therefore judged by predictions from the two
+records on each side: the line through the left pair carried forward (``L``), the line through
+the right pair carried back (``R``), the two meeting where they come closest (one kink), and the
+chord between the nearest outside records (``B``). Its score is the smallest of the chord's
+largest miss, the kinked path's, and, over every split of the group into a left and a right
+part, the larger of ``L``'s miss on the left part and ``R``'s on the right: a single kink
+anywhere costs nothing, an off reading misses every prediction. Misses are in units of the
+stream's scatter about the chord between adjacent neighbours (robust, over the log; growing with
+the rate of change where readings are late or early), times each prediction's own noise (a line
+carried further from its two records is the less certain). A glitch must also leave the span of
+its near neighbours: a corner cut by a slow tracker interpolated onto faster records stays inside
+it. Groups are taken strongest first; a sound record a group took in beside or between bad ones,
+one that lies on the chord between the records around the group, is given back.
+
+A stuck absolute encoder is another glitch of its own stream: its reading holds for several
+records while the thing it measures moves on, then jumps to where it is. A genuine hold ends
+with a start no faster than the motion that follows it; a stuck reading ends with a catch-up of
+the whole motion it missed (:func:`stuck_runs`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: A group scoring above this many units of its stream's scatter is off its neighbours.
+OFF_SIGMAS = 10.0
+#: Longest run of consecutive records judged as one group (a slow stream interpolated onto the
+#: records of a faster one spreads one bad reading over about twice the rate ratio).
+MAX_GROUP = 4
+#: Records a stuck reading must hold (the first reading and at least two repeats of it).
+MIN_STUCK = 3
+#: A catch-up is a jump when it exceeds this many times the motion per record around it.
+CATCH_UP_FACTOR = 2.5
+
+
+def robust_sigma(x: np.ndarray) -> float:
+    """1.4826 × the median absolute deviation (a standard deviation that ignores outliers)."""
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return float("nan")
+    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
+@dataclass(frozen=True)
+class Scatter:
+    """A stream's scatter about the chord between a reading's neighbours, per component: ``floor``
+    at rest, growing with the rate of change by ``timing`` (s: the readings' timing noise)."""
+
+    floor: np.ndarray
+    timing: np.ndarray
+
+    def at(self, rate: np.ndarray) -> np.ndarray:
+        return np.sqrt(self.floor**2 + (self.timing * rate) ** 2)
+
+
+def scatter(t: np.ndarray, y: np.ndarray, resolution: np.ndarray | float = 0.0) -> Scatter:
+    """The scatter of ``y`` ``(n, d)`` about its chords: robust over the slowest quarter of the
+    records at rest (at least ``resolution``, a reading's step), and relative to the rate over the
+    fastest half."""
+    y = np.asarray(y, dtype=float).reshape(len(t), -1)
+    d = y.shape[1]
+    res = np.broadcast_to(np.asarray(resolution, dtype=float), (d,))
+    if len(t) < 5:
+        return Scatter(res.copy(), np.zeros(d))
+    span = np.maximum(t[2:] - t[:-2], 1e-12)[:, None]
+    s = (t[1:-1] - t[:-2])[:, None] / span
+    miss = y[1:-1] - (y[:-2] + s * (y[2:] - y[:-2]))
+    rate = np.abs(y[2:] - y[:-2]) / span
+    floor, timing = np.empty(d), np.zeros(d)
+    for c in range(d):
+        slow = rate[:, c] <= np.percentile(rate[:, c], 25)
+        floor[c] = max(robust_sigma(miss[slow, c]), res[c])
+        fast = rate[:, c] >= max(np.median(rate[:, c]), 1e-12)
+        if np.sum(fast) >= 10:
+            timing[c] = robust_sigma(miss[fast, c] / rate[fast, c])
+    return Scatter(floor, timing)
+
+
+@dataclass(frozen=True)
+class OffGroup:
+    """Records ``first..last`` off their neighbours by ``score`` units of scatter; ``offset`` is
+    the reading's departure from the chord between the neighbours where it is largest."""
+
+    first: int
+    last: int
+    score: float
+    offset: np.ndarray
+
+
+def _spread(t: np.ndarray, a: np.ndarray, b: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """The noise of a reading's miss from the line through records ``a`` and ``b`` (P,) at times
+    ``at`` (P, g), in units of a reading's miss from the chord midway between its neighbours."""
+    s = (at - t[a][:, None]) / np.maximum(t[b] - t[a], 1e-12)[:, None]
+    return np.sqrt(((1.0 - s) ** 2 + s**2 + 1.0) / 1.5)
+
+
+def _scores(
+    t: np.ndarray,
+    y: np.ndarray,
+    sc: Scatter,
+    outside: tuple[np.ndarray, ...],
+    m: np.ndarray,
+    excursion: np.ndarray | float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Scores of groups of records ``m`` ``(P, g)``, each between the outside records ``(l2, l1,
+    r1, r2)`` ``(P,)`` (see the module docstring), and each group's largest chord miss ``(P, d)``."""
+    l2, l1, r1, r2 = outside
+    tm = t[m]
+    vL = (y[l1] - y[l2]) / np.maximum(t[l1] - t[l2], 1e-12)[:, None]
+    vR = (y[r2] - y[r1]) / np.maximum(t[r2] - t[r1], 1e-12)[:, None]
+    L = y[l1][:, None] + vL[:, None] * (tm - t[l1][:, None])[..., None]
+    R = y[r1][:, None] + vR[:, None] * (tm - t[r1][:, None])[..., None]
+    chord = (y[r1] - y[l1]) / np.maximum(t[r1] - t[l1], 1e-12)[:, None]
+    C = y[l1][:, None] + chord[:, None] * (tm - t[l1][:, None])[..., None]
+    sigma = sc.at(np.maximum(np.abs(vL), np.abs(vR)))
+    # A kink where the two lines come closest (in units of scatter), between the near neighbours.
+    A = (y[l1] - vL * t[l1][:, None] - y[r1] + vR * t[r1][:, None]) / sigma
+    B = (vL - vR) / sigma
+    bb = np.sum(B * B, axis=1)
+    kink = np.where(bb > 0, -np.sum(A * B, axis=1) / np.where(bb > 0, bb, 1.0), t[l1])
+    kink = np.clip(kink, t[l1], t[r1])
+    before = tm <= kink[:, None]
+    K = np.where(before[..., None], L, R)
+    ym = y[m]
+    # Each prediction's noise, in units of the chord's between adjacent neighbours: lines carried
+    # further from the two records that define them are the less certain.
+    fL, fR, fC = _spread(t, l2, l1, tm), _spread(t, r1, r2, tm), _spread(t, l1, r1, tm)
+
+    def size(D: np.ndarray, k: np.ndarray) -> np.ndarray:
+        return np.sqrt(np.sum((D / (k[..., None] * sigma[:, None])) ** 2, axis=-1))
+
+    left = np.maximum.accumulate(size(ym - L, fL), axis=1)  # left[:, j]: worst of 0..j
+    right = np.maximum.accumulate(size(ym - R, fR)[:, ::-1], axis=1)[:, ::-1]
+    zero = np.zeros((m.shape[0], 1))
+    split = np.maximum(np.hstack([zero, left]), np.hstack([right, zero])).min(axis=1)
+    kinked = size(ym - K, np.where(before, fL, fR)).max(axis=1)
+    score = np.minimum.reduce([size(ym - C, fC).max(axis=1), kinked, split])
+    # How far the group leaves the span of its near neighbours: a reading that departs and returns.
+    hi, lo = np.maximum(y[l1], y[r1])[:, None], np.minimum(y[l1], y[r1])[:, None]
+    least = np.broadcast_to(np.asarray(excursion, dtype=float), (y.shape[1],))
+    departs = np.ones(m.shape[0], dtype=bool)
+    if np.any(least > 0):
+        beyond = (np.maximum(ym - hi, 0.0) + np.maximum(lo - ym, 0.0)) / np.where(least > 0, least, np.inf)
+        departs = np.sqrt(np.sum(beyond**2, axis=-1)).max(axis=1) > 1.0
+    worst = np.argmax(size(ym - C, fC), axis=1)
+    return np.where(departs, score, 0.0), (ym - C)[np.arange(m.shape[0]), worst]
+
+
+def _outside(usable: np.ndarray, first: int, last: int) -> np.ndarray | None:
+    """The two nearest usable records before ``first`` and after ``last`` (None at a log end)."""
+    before = np.flatnonzero(usable[:first])[-2:]
+    after = np.flatnonzero(usable[last + 1 :])[:2] + last + 1
+    if before.size < 2 or after.size < 2:
+        return None
+    return np.array([before[0], before[1], after[0], after[1]])
+
+
+def _resolve(
+    t: np.ndarray,
+    y: np.ndarray,
+    sc: Scatter,
+    span: tuple[int, int],
+    usable: np.ndarray,
+    limits: tuple[float, np.ndarray | float, int],
+) -> list[OffGroup]:
+    """The groups off their neighbours among the records ``span``: the strongest first, each judged
+    against the nearest usable records not already found; then each group's ends that are not off
+    on their own are given back."""
+    threshold, excursion, max_group = limits
+    usable = usable.copy()
+    found: list[OffGroup] = []
+
+    def score(first: int, last: int) -> tuple[float, np.ndarray] | None:
+        around = _outside(usable, first, last)
+        if around is None:
+            return None
+        s, off = _scores(t, y, sc, tuple(around[:, None]), np.arange(first, last + 1)[None, :], excursion)
+        return float(s[0]), off[0]
+
+    while True:
+        best: tuple[float, int, int, np.ndarray] | None = None
+        for g in range(1, int(max_group) + 1):
+            for p in range(span[0], span[1] - g + 2):
+                if usable[p : p + g].all() and (s := score(p, p + g - 1)) is not None and s[0] > threshold:
+                    best = (s[0], p, p + g - 1, s[1]) if best is None or s[0] > best[0] else best
+        if best is None:
+            break
+        usable[best[1] : best[2] + 1] = False
+        found.append(OffGroup(best[1], best[2], best[0], best[3]))
+
+    def chord(e: int, f: OffGroup) -> float:
+        """How far record ``e`` is off the chord between the nearest usable records around its group."""
+        around = _outside(usable, f.first, f.last)
+        if around is None:
+            return np.inf
+        a, b = around[1], around[2]
+        slope = (y[b] - y[a]) / max(t[b] - t[a], 1e-12)
+        miss = y[e] - (y[a] + slope * (t[e] - t[a]))
+        return float(np.sqrt(np.sum((miss / sc.at(np.abs(slope))) ** 2)))
+
+    # A group may have taken in a sound record beside or between bad ones: give back every record
+    # that lies on the chord between the records around its group.
+    kept = []
+    for f in found:
+        off = [e for e in range(f.first, f.last + 1) if chord(e, f) > threshold]
+        usable[f.first : f.last + 1] = True
+        usable[off] = False
+        for run in np.split(np.array(off, dtype=int), np.flatnonzero(np.diff(off) > 1) + 1):
+            if run.size:
+                kept.append(OffGroup(int(run[0]), int(run[-1]), f.score, f.offset))
+    return sorted(kept, key=lambda f: f.first)
+
+
+def off_neighbours(
+    t: np.ndarray,
+    y: np.ndarray,
+    sc: Scatter,
+    usable: np.ndarray | None = None,
+    threshold: float = OFF_SIGMAS,
+    excursion: np.ndarray | float = 0.0,
+    max_group: int = MAX_GROUP,
+) -> list[OffGroup]:
+    """The groups of records of the signal ``y`` ``(n, d)`` at times ``t`` that are off their
+    neighbours (see the module docstring); records not ``usable`` are neither judged nor used."""
+    y = np.asarray(y, dtype=float).reshape(len(t), -1)
+    n = len(t)
+    usable = np.ones(n, dtype=bool) if usable is None else np.asarray(usable, dtype=bool)
+    idx = np.flatnonzero(usable)
+    candidate = np.zeros(n, dtype=bool)
+    for g in range(1, max_group + 1):
+        # First pass: every group of g usable records with its adjacent usable neighbours.
+        P = idx.size - g - 3
+        if P <= 0:
+            continue
+        m = idx[np.arange(2, 2 + P)[:, None] + np.arange(g)[None, :]]
+        outside = (idx[:P], idx[1 : P + 1], idx[2 + g : 2 + g + P], idx[3 + g : 3 + g + P])
+        s, _ = _scores(t, y, sc, outside, m, excursion)
+        candidate[m[s > threshold].ravel()] = True
+    if not candidate.any():
+        return []
+    # Clusters of candidates, with the records whose neighbours they are, resolved one by one.
+    where = np.flatnonzero(candidate)
+    found: list[OffGroup] = []
+    for run in np.split(where, np.flatnonzero(np.diff(where) > 2 * max_group) + 1):
+        span = (max(int(run[0]) - max_group, 0), min(int(run[-1]) + max_group, n - 1))
+        found += _resolve(t, y, sc, span, usable, (threshold, excursion, max_group))
+    return found
+
+
+def stuck_runs(
+    t: np.ndarray, readings: np.ndarray, floor: float, moving: np.ndarray | None = None
+) -> list[tuple[int, int, float]]:
+    """Runs of records ``first..last`` whose reading held (``first`` is the last one read, the
+    repeats follow) and then caught up by ``jump`` (reading units) at ``last + 1``, more than
+    :data:`CATCH_UP_FACTOR` times the motion per record around it and more than ``floor``; with
+    ``moving`` (per interval), only runs over which the robot moved (a reading held while it
+    stands still misleads nothing)."""
+    y = np.asarray(readings, dtype=float)
+    n = y.size
+    step = np.diff(y)
+    held = np.concatenate([[False], step == 0])  # held[k]: record k repeats record k - 1
+    found = []
+    k = 1
+    while k < n:
+        if not held[k]:
+            k += 1
+            continue
+        first = k - 1
+        while k < n and held[k]:
+            k += 1
+        last = k - 1  # records first..last read the same
+        if last - first + 1 < MIN_STUCK or last + 2 >= n or first < 1:
+            continue
+        if moving is not None and np.mean(moving[first:last]) < 0.5:
+            continue
+        dt = t[last + 1] - t[last]
+        around = [abs(step[first - 1]) / max(t[first] - t[first - 1], 1e-12)]
+        around += [abs(step[j]) / max(t[j + 1] - t[j], 1e-12) for j in range(last + 1, min(last + 3, n - 1))]
+        jump = float(step[last])
+        if abs(jump) > max(CATCH_UP_FACTOR * max(around) * dt, floor):
+            found.append((first, last, jump))
+    return found

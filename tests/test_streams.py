@@ -1,0 +1,127 @@
+"""Each stream's own glitches, told from genuine motion: the tracker's and an absolute encoder's
+readings off their neighbours, stuck readings, and the counter screen's lag."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nlp_calib.analysis.counters import at_lag, screen_counter, screen_lag
+from nlp_calib.analysis.streams import Scatter, off_neighbours, scatter, stuck_runs
+
+
+def _times(n: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.concatenate([[0.0], np.cumsum(0.04 + rng.normal(0.0, 0.004, n - 1))])
+
+
+def _path(t: np.ndarray, kinks: list[tuple[float, float]]) -> np.ndarray:
+    """A 1-D position moving at piecewise constant speed: ``(time, new speed)`` changes."""
+    speed = np.full(t.size, 0.5)
+    for when, v in kinks:
+        speed[t >= when] = v
+    # Exact integral of the piecewise constant speed (the kink falls between records).
+    grid = np.linspace(0.0, t[-1], 200001)
+    v = np.full(grid.size, 0.5)
+    for when, s in kinks:
+        v[grid >= when] = s
+    x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(grid))])
+    return np.interp(t, grid, x)
+
+
+def test_abrupt_reversals_and_stops_between_records_are_not_off_their_neighbours() -> None:
+    t = _times(400)
+    x = _path(t, [(3.017, -0.6), (5.551, 0.0), (7.009, 0.6), (9.983, -0.6), (12.0, 0.6)])
+    y = x + np.random.default_rng(1).normal(0.0, 0.002, t.size)
+    assert off_neighbours(t, y, scatter(t, y)) == []
+
+
+@pytest.mark.parametrize("group", [1, 2, 3])
+def test_a_reading_off_its_neighbours_is_found_with_its_size(group: int) -> None:
+    t = _times(400)
+    y = _path(t, [(3.017, -0.6), (9.983, 0.6)]) + np.random.default_rng(2).normal(0.0, 0.002, t.size)
+    # One bad reading, or a slow stream's bad reading interpolated onto a faster one's records.
+    offsets = {1: [0.2], 2: [0.12, 0.18], 3: [0.1, 0.2, 0.1]}[group]
+    y[200 : 200 + group] += offsets
+    found = off_neighbours(t, y, scatter(t, y))
+    assert [(g.first, g.last) for g in found] == [(200, 200 + group - 1)]
+    assert found[0].offset[0] == pytest.approx(max(offsets), abs=0.02)
+
+
+def test_the_scatter_grows_with_the_rate_when_readings_are_late() -> None:
+    """Readings taken a random few ms off their stamps: the scatter's timing term finds it."""
+    t = _times(2000)
+    rng = np.random.default_rng(3)
+    speed = np.where((t // 2.0) % 2 == 0, 1.0, 0.05)
+    truth = lambda tq: np.interp(tq, t, np.concatenate([[0.0], np.cumsum(speed[:-1] * np.diff(t))]))  # noqa: E731
+    y = truth(t + rng.normal(0.0, 0.005, t.size))
+    sc = scatter(t, y)
+    assert 0.002 < sc.timing[0] < 0.01  # of the order of the readings' 5 ms timing noise
+    assert sc.floor[0] < 0.2 * sc.timing[0] * 1.0
+
+
+def test_a_spike_must_leave_the_span_of_its_neighbours() -> None:
+    t = _times(50)
+    y = np.concatenate([np.zeros(20), np.arange(30) * 10.0])  # a hold, then a fast steady turn
+    ahead = y.copy()
+    ahead[30] += 8.0  # ahead of the motion but inside the span of its neighbours: not a spike
+    sc = Scatter(np.array([1.0]), np.array([0.0]))
+    assert off_neighbours(t, ahead, sc, excursion=4.0, max_group=1) == []
+    ahead[30] += 40.0
+    assert [g.first for g in off_neighbours(t, ahead, sc, excursion=4.0, max_group=1)] == [30]
+
+
+def test_stuck_readings_while_moving_are_found_a_hold_at_rest_or_a_start_is_not() -> None:
+    t = np.arange(60) * 0.04
+    y = np.concatenate([np.zeros(20), np.arange(40) * 5.0])  # held still, then turns at 5 a record
+    stuck = y.copy()
+    stuck[41:46] = stuck[40]  # stuck for 5 records while turning, reads right again at 46
+    moving = np.ones(59, dtype=bool)
+    assert stuck_runs(t, y, 3.0, moving) == []  # the genuine hold ends with a start, not a jump
+    assert stuck_runs(t, stuck, 3.0, moving) == [(40, 45, 30.0)]
+    at_rest = moving.copy()
+    at_rest[38:47] = False
+    assert stuck_runs(t, stuck, 3.0, at_rest) == []
+
+
+def _counter(lag: float, n: int = 3000, seed: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A counter's increments and the tracker's implied ones ``lag`` late, with tracker noise."""
+    t = _times(n, seed)
+    rng = np.random.default_rng(seed)
+    knots = np.arange(0.0, t[-1] + 3.0, 1.5)
+    v = np.interp(t, knots, rng.uniform(-8000.0, 8000.0, knots.size) / 0.04)  # ticks per second
+    grid = np.linspace(-1.0, t[-1] + 1.0, 400001)
+    count = np.cumsum(np.interp(grid, t, v)) * (grid[1] - grid[0])
+    logged = np.round(np.interp(t, grid, count))
+    implied = np.interp(t - lag, grid, count) + rng.normal(0.0, 500.0, t.size)
+    ticks = np.diff(logged)
+    return t, ticks, np.diff(implied) - ticks
+
+
+def test_the_screen_finds_the_lag_at_which_the_counts_agree() -> None:
+    """Roughly: the screen needs the lag only to keep a reversal's count from stepping (the fit
+    estimates it to the millisecond afterwards); a fault it does not mistake for the lag."""
+    t, ticks, c = _counter(0.05)
+    assert screen_lag(t, [ticks], c[:, None], (-0.2, 0.2)) == pytest.approx(0.05, abs=0.01)
+    lost = ticks.copy()
+    lost[1500] -= 2**16
+    assert screen_lag(t, [lost], (c + ticks - lost)[:, None], (-0.2, 0.2)) == pytest.approx(0.05, abs=0.01)
+
+
+def test_a_reversal_is_no_fault_at_the_lag_but_a_lost_count_is() -> None:
+    t, ticks, c = _counter(0.05)
+    assert screen_counter(ticks, at_lag(t, ticks, c, 0.05), t).findings == ()
+    lost = ticks.copy()
+    lost[1500] -= 2**16  # 2^16 counts lost at one record
+    found = screen_counter(lost, at_lag(t, lost, c + ticks - lost, 0.05), t).findings
+    assert [(f.kind, f.last) for f in found] in ([("counter_jump", 1500)], [("reversal", 1500)])
+    assert found[0].implied - found[0].logged == pytest.approx(2**16, abs=5 * found[0].noise)
+
+
+def test_a_tracker_that_jumps_for_good_is_not_blamed_on_the_counter() -> None:
+    """The tracker's count steps while the counter runs smoothly on: the counter's own history
+    clears it."""
+    t, ticks, c = _counter(0.0)
+    shifted = c.copy()
+    shifted[1500] += 2**16
+    assert screen_counter(ticks, shifted, t).findings == ()
