@@ -19,11 +19,14 @@ def resample_encoders(
 
     Shifting the inputs rather than the tracker keeps the measurements, and so the cost, comparable
     across lags. Counters are interpolated on their unwrapped cumulative count, absolute encoders on
-    their unwrapped angle. Returns the log and the record range ``[first, stop)`` whose shifted
+    their unwrapped angle; joints in radians are re-sampled from their own stream, at its own stamps
+    (:attr:`Log.joint_stream`), never from values already interpolated. Returns the log and the record range ``[first, stop)`` whose shifted
     times lie inside the log (outside it the readings are clamped and must not be used).
     """
     if lag_s == 0.0:
         return log, (0, log.n_records)
+    if log.joint_stream is not None:
+        return _joints_resampled(log, lag_s)
     t = log.time_s
     tq = t - lag_s
     valid = np.flatnonzero((tq >= t[0]) & (tq <= t[-1]))
@@ -44,6 +47,20 @@ def resample_encoders(
     ticks = np.stack(columns, axis=1).astype(np.int64)
     ticks.flags.writeable = False
     return replace(log, ticks=ticks), (int(valid[0]), int(valid[-1]) + 1)
+
+
+def _joints_resampled(log: Log, lag_s: float) -> tuple[Log, tuple[int, int]]:
+    """Joints in radians re-sampled from their own stream (at its own stamps) at ``t - lag_s``."""
+    stream = log.joint_stream
+    assert stream is not None
+    tq = log.time_s - lag_s
+    valid = np.flatnonzero(stream.covers(tq))
+    if valid.size < 2:
+        raise ProblemError(
+            f"a lag of {lag_s:g} s leaves fewer than 2 records inside the joints' "
+            f"{stream.time_s[-1] - stream.time_s[0]:.1f} s stream; use a lag well below the log's duration"
+        )
+    return replace(log, joint_positions=stream.at(tq)), (int(valid[0]), int(valid[-1]) + 1)
 
 
 def resample_tracker(log: Log, lag_s: float) -> Log:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from nlp_calib.core.errors import DatasetError, ModelError, NlpCalibWarning, ScenarioError
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, get_model, param_names
+from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario
 
@@ -34,9 +35,16 @@ class PreparedLog:
 
 
 def read(sc: Scenario, log: Log | None = None) -> tuple[KinematicModel, Log]:
-    """The scenario's model and its (first) log read from its source (or ``log`` as given)."""
+    """The scenario's model, in the form the log's encoder units call for, and its (first) log read
+    from its source (or ``log`` as given)."""
     with scenario_key(sc, "model"):
-        model = get_model(sc.model)
+        get_model(sc.model)
+    model, log = _read(sc, log)
+    return in_units(model, log.header.encoder_units), log
+
+
+def _read(sc: Scenario, log: Log | None) -> tuple[KinematicModel, Log]:
+    model = sc.model_form()
     if log is not None:
         if log.header.kinematic_model not in model.log_names:
             raise ModelError(
