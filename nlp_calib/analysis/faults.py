@@ -27,6 +27,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from nlp_calib.analysis.joint_repair import repair_joints
 from nlp_calib.core import poses
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
 from nlp_calib.logs import Log
@@ -73,8 +74,16 @@ def counter_corrections(e: np.ndarray, de_du: np.ndarray, rows: list[int], scale
     return c * scale[None, :]
 
 
-def _evidence(kind: str, name: str, logged: float, implied: float, noise: float, records: str) -> str:
+def _evidence(
+    kind: str, name: str, logged: float, implied: float, noise: float, records: str, unit: str = "ticks"
+) -> str:
     deficit = implied - logged
+    if unit != "ticks":  # rescaled readings (joint angles): no counter width to name
+        text = (
+            f"{name} reads {logged:+.4g} {unit} over {records}; the tracker's motion implies "
+            f"{implied:+.4g} ± {noise:.2g}: {deficit:+.4g} {unit} unexplained"
+        )
+        return text + ("; the joint stood still before the jump" if kind == "stall_then_jump" else "")
     text = (
         f"{name} reads {logged:+.0f} ticks over {records}; the tracker's motion implies "
         f"{implied:+.0f} ± {noise:.0f}: {deficit:+.0f} ticks unexplained"
@@ -93,13 +102,15 @@ def detect(
     counters: Mapping[str, tuple[int, float]],
     time_s: np.ndarray,
     lines: np.ndarray,
+    unit: str = "ticks",
 ) -> FaultReport:
     """Faults among the N intervals whose residuals ``e`` (3, N), ``de_du`` (3, N, n_in) and
     tracker motions ``z`` (3, N) are given.
 
-    ``logged`` holds the inputs (n_in, N); ``counters`` each counter's input row and ticks per
-    unit; ``time_s`` and ``lines`` describe the N + 1 records. Tracker jumps are found first and
-    the intervals around them left out of the counters' checks.
+    ``logged`` holds the inputs (n_in, N); ``counters`` each counter's input row and readings per
+    unit, in ``unit`` (``ticks``, or ``rad`` for joints in radians); ``time_s`` and ``lines``
+    describe the N + 1 records. Tracker jumps are found first and the intervals around them left
+    out of the counters' checks.
     """
     N = e.shape[1]
     jumps = _tracker_jumps(e, z, time_s, lines)
@@ -118,7 +129,7 @@ def detect(
             ticks = logged[rows[j]] * scale[j]
             c = np.zeros(N)
             c[~spoiled] = corrections[:, j]  # a bad tracker pose says nothing about the counter
-            found, n_stale, sigma = _counter_faults(name, ticks, c, time_s, lines)
+            found, n_stale, sigma = _counter_faults(name, ticks, c, time_s, lines, unit)
             faults += found
             stale[name] = n_stale
             noise[name] = sigma
@@ -132,7 +143,7 @@ def _level(C: np.ndarray, idx: np.ndarray) -> float:
 
 
 def _counter_faults(
-    name: str, ticks: np.ndarray, c: np.ndarray, time_s: np.ndarray, lines: np.ndarray
+    name: str, ticks: np.ndarray, c: np.ndarray, time_s: np.ndarray, lines: np.ndarray, unit: str = "ticks"
 ) -> tuple[list[Fault], int, float]:
     N = c.size
     implied = ticks + c
@@ -213,7 +224,7 @@ def _counter_faults(
                 implied=total_implied,
                 noise=zone_noise,
                 evidence=_evidence(
-                    kind, f"counter {name!r}", total_logged, total_implied, zone_noise, records
+                    kind, f"counter {name!r}", total_logged, total_implied, zone_noise, records, unit
                 ),
             )
         )
@@ -290,7 +301,8 @@ def check_log(
     z = over_columns(fns.between, poses[:-1].T, poses[1:].T)[0]
     e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
     de_du = de_du.reshape(3, N, inputs.shape[0])
-    return detect(e, de_du, z, inputs, counters, log.time_s, log.line_numbers)
+    unit = "rad" if log.header.encoder_units == "radians" else "ticks"
+    return detect(e, de_du, z, inputs, counters, log.time_s, log.line_numbers, unit)
 
 
 def repair(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]:
@@ -299,8 +311,11 @@ def repair(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]:
     A deficit within 3σ of a multiple of 2¹⁶ ticks is corrected by exactly that multiple (a
     wrapped 16-bit counter); any other by the tracker-implied amount, rounded. The correction is
     added to the reading that shows the fault and to every later one, so the total over the
-    fault's stretch becomes right; the stalled readings before it are left as they are.
+    fault's stretch becomes right; the stalled readings before it are left as they are. Joints in
+    radians are corrected by the tracker-implied amount (:mod:`nlp_calib.analysis.joint_repair`).
     """
+    if log.joint_stream is not None:
+        return repair_joints(log, report)
     ticks = np.array(log.ticks, dtype=np.int64)
     changes = []
     for f in report.counter_faults:

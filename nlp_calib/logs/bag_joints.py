@@ -26,7 +26,9 @@ import numpy as np
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs.bag_reader import BagError, BagTopics, Drops, Stamped, read_topics
+from nlp_calib.logs.joint_log import format_joint_csv
 from nlp_calib.logs.log import JointStream, Log, LogHeader, frozen
+from nlp_calib.logs.tum_poses import format_tum_poses
 
 #: A joint's positions are quantised when at least this share of its steps are whole multiples
 #: of its smallest step (to 1 %).
@@ -161,29 +163,33 @@ def at_tracker(joint_ns: np.ndarray, tracker: Stamped, max_gap_s: float) -> tupl
 
 def read_joint_bag(path: str | Path, topics: BagTopics, header: LogHeader) -> Log:
     """A bag's joints in radians and its tracker as a :class:`Log` timed by the tracker (see the
-    module docstring); a warning says when poses fell in joint gaps or messages were dropped."""
+    module docstring)."""
     p = Path(path)
     joints, tracker = read_topics(p, topics)
     shift = clock_shift_ns(p, joints, tracker, topics.clock_offset)
-    joints = Stamped(joints.topic, joints.stamp_ns + shift, joints.values, joints.drops, joints.recorded_ns)
+    joints = replace(joints, stamp_ns=joints.stamp_ns + shift)
+    return timed_by_tracker(p, joints, tracker, topics.joints, topics.max_gap, header)
+
+
+def timed_by_tracker(
+    p: Path, joints: Stamped, tracker: Stamped, names: tuple[str, ...], max_gap_s: float, header: LogHeader
+) -> Log:
+    """The log of ``joints`` (each joint's position, then its velocity; NaN where absent) and of
+    ``tracker`` (``x, y, θ, z``), a record at each tracker pose the joints cover; a warning says when
+    poses fell in joint gaps, joints were integrated or messages were dropped."""
     check_overlap(p, joints, tracker)
-    joint_ns, positions, integrated = joint_positions(p, joints, topics.joints)
-    index, timing = at_tracker(joint_ns, tracker, topics.max_gap)
+    joint_ns, positions, integrated = joint_positions(p, joints, names)
+    index, timing = at_tracker(joint_ns, tracker, max_gap_s)
     drops = Drops({**joints.drops.counts, **tracker.drops.counts})
     timing = replace(timing, integrated=tuple(integrated), drops=drops)
     if timing.kept < 2:
         raise BagError(p, f"{timing.describe()}; at least 2 are needed")
     if timing.in_gaps or drops.worrying or integrated:
-        warnings.warn(f"{p}: {timing.describe()}", NlpCalibWarning, stacklevel=2)
+        warnings.warn(f"{p}: {timing.describe()}", NlpCalibWarning, stacklevel=3)
     stamps = tracker.stamp_ns[index]
     start_ns = int(stamps[0])
-    stream = JointStream(
-        frozen((joint_ns - start_ns).astype(float) * 1e-9),
-        frozen(positions),
-        tuple(
-            0.0 if name in integrated else resolution(positions[:, j]) for j, name in enumerate(topics.joints)
-        ),
-    )
+    steps = [0.0 if n in integrated else resolution(positions[:, j]) for j, n in enumerate(names)]
+    stream = JointStream(frozen((joint_ns - start_ns).astype(float) * 1e-9), frozen(positions), tuple(steps))
     time_s = frozen((stamps - start_ns).astype(float) * 1e-9)
     poses = np.array(tracker.values[index, :3], dtype=float)
     poses[:, 2] = wrap_angle(poses[:, 2])
@@ -201,3 +207,23 @@ def read_joint_bag(path: str | Path, topics: BagTopics, header: LogHeader) -> Lo
         joint_stream=stream,
         tracker_z=frozen(np.array(tracker.values[index, 3], dtype=float)),
     )
+
+
+def joint_files(path: str | Path, topics: BagTopics) -> tuple[str, str, str]:
+    """A bag's joints in radians as a CSV joint log and its tracker's poses as a TUM trajectory, on
+    the tracker's clock (the joints' stamps shifted by the clock offset), and what was written."""
+    p = Path(path)
+    joints, tracker = read_topics(p, topics)
+    joints = replace(
+        joints, stamp_ns=joints.stamp_ns + clock_shift_ns(p, joints, tracker, topics.clock_offset)
+    )
+    joint_ns, positions, integrated = joint_positions(p, joints, topics.joints)
+    order = np.argsort(tracker.stamp_ns, kind="stable")
+    ts = tracker.stamp_ns[order]
+    first = np.concatenate([[True], np.diff(ts) > 0])
+    poses = tracker.values[order][first]
+    velocity = f" ({', '.join(integrated)} integrated from velocities)" if integrated else ""
+    summary = (
+        f"{joint_ns.size} joint messages{velocity} and {int(first.sum())} tracker poses, each on its clock"
+    )
+    return format_joint_csv(joint_ns, topics.joints, positions), format_tum_poses(ts[first], poses), summary

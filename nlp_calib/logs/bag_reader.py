@@ -5,8 +5,9 @@ when a bag is opened. Encoders come from ``sensor_msgs/msg/JointState`` (raw cou
 ``position``, or joint positions in radians, or only velocities in rad/s, integrated later), the
 tracker from a pose, transform, odometry or TF topic (its position's z kept beside the planar pose);
 each message's time is its header stamp, or the bag's record time for a topic named in
-:attr:`BagTopics.receive` or whose header stamps are all zero (said in a warning). A problem with the bag, a topic or a message is one :class:`BagError` line that
-lists what the bag does hold.
+:attr:`BagTopics.receive` or whose header stamps are all zero (said in a warning). A problem
+with the bag, a topic or a message is one :class:`BagError` line that lists what the bag does
+hold.
 
 Nothing but a regular file (or a folder of them) is opened as a bag: a FIFO, socket or device is
 refused before it can block. Messages that are not what they claim are dropped and counted
@@ -360,8 +361,8 @@ def _add_joints(
             raise BagError(
                 p,
                 f"joint {joint!r} reads {value!r} in message {number} on {topics.joint_states!r}; the "
-                "import needs raw encoder counts (whole numbers) in JointState.position with "
-                "joint_units: counts; leave joint_units out to read angles in radians",
+                "import needs raw encoder counts (whole numbers) in JointState.position, not angles, with "
+                "joint_units: counts (leave joint_units out to read joint positions in radians)",
             )
     enc.add(_stamp_ns(p, msg.header, topics.joint_states, number), recorded, row)
 

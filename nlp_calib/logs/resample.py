@@ -20,8 +20,9 @@ def resample_encoders(
     Shifting the inputs rather than the tracker keeps the measurements, and so the cost, comparable
     across lags. Counters are interpolated on their unwrapped cumulative count, absolute encoders on
     their unwrapped angle; joints in radians are re-sampled from their own stream, at its own stamps
-    (:attr:`Log.joint_stream`), never from values already interpolated. Returns the log and the record range ``[first, stop)`` whose shifted
-    times lie inside the log (outside it the readings are clamped and must not be used).
+    (:attr:`Log.joint_stream`), never from values already interpolated. Returns the log and the
+    record range ``[first, stop)`` whose shifted times lie inside the log (outside it the readings
+    are clamped and must not be used).
     """
     if lag_s == 0.0:
         return log, (0, log.n_records)

@@ -71,7 +71,7 @@ class DiffDriveDrive:
         }
     )
     #: Counts per wheel turn: written to the header for information, not used by the model.
-    default_ranges: Mapping[str, float] = MappingProxyType({LEFT_ENCODER: 4096, RIGHT_ENCODER: 4096})
+    default_ranges: Mapping[str, int] = MappingProxyType({LEFT_ENCODER: 4096, RIGHT_ENCODER: 4096})
 
     def steps(
         self, opts: SimulationSettings, speed: np.ndarray, turn: np.ndarray, dt: np.ndarray, turn_start: float

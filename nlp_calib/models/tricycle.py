@@ -93,7 +93,7 @@ class TricycleDrive:
             "sensor_theta": 0.0,
         }
     )
-    default_ranges: Mapping[str, float] = MappingProxyType({STEERING_ENCODER: 8192, TRACTION_ENCODER: 5000})
+    default_ranges: Mapping[str, int] = MappingProxyType({STEERING_ENCODER: 8192, TRACTION_ENCODER: 5000})
 
     def steps(
         self, opts: SimulationSettings, speed: np.ndarray, turn: np.ndarray, dt: np.ndarray, turn_start: float

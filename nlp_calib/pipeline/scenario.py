@@ -40,8 +40,9 @@ from nlp_calib.pipeline.options import (
     ValidationOptions,
 )
 from nlp_calib.solvers import SOLVERS
-from nlp_calib.sources import BagSource, TextSource, moved, parse_source
+from nlp_calib.sources import BagSource, JointLogSource, TextSource, moved, parse_source
 from nlp_calib.sources.bag import check_joints
+from nlp_calib.sources.joints import check_encoders
 
 #: Numbers a library may be handed as they are (``ipopt.options``).
 _FINITE = Range(-math.inf, math.inf, lo_open=True, hi_open=True)
@@ -310,9 +311,11 @@ def check_against_model(sc: Scenario, source: str) -> None:
     for enc in sc.data.encoder_noise:
         _choice(enc, encoders(model), f"{source}: encoder_noise")
     for i, entry in enumerate(sc.data.logs):
+        key = f"datasets[{i}]" if sc.data.joint else "dataset"
         if isinstance(entry.source, BagSource):
-            key = f"datasets[{i}]" if sc.data.joint else "dataset"
             check_joints(entry.source.joints, model, f"{source}: {key}.joints")
+        if isinstance(entry.source, JointLogSource):
+            check_encoders(entry.source.encoders, model, f"{source}: {key}.encoders")
     _check_solvers(sc, source)
     _check_overlaps(sc, source)
 

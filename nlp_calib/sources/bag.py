@@ -43,7 +43,8 @@ def receive_topics(stamps: str | Mapping[str, str], topics: tuple[str, ...], whe
             raise ConfigError(f"{where}.stamps: {topic}: {how!r} is not one of {', '.join(STAMPS)}")
         if topic not in topics:
             raise ConfigError(
-                f"{where}.stamps: {topic!r} is neither the joint_states nor the tracker topic ({', '.join(topics)})"
+                f"{where}.stamps: {topic!r} is neither the joint_states nor the tracker topic "
+                f"({', '.join(topics)})"
             )
     return tuple(t for t, how in per_topic.items() if how == "receive")
 
