@@ -4,9 +4,10 @@ Written into ``trajectories/`` with ``--report``: the tracker's poses and each s
 dead reckoning over the used records, and, per fault-free segment, the tracker's poses (bad
 tracker poses left out) and each solver's track restarted from the tracker at the segment's
 start. ``README.md`` beside them gives the evo commands and the figures they reproduce. A TUM
-line is ``time x y z qx qy qz qw``: the planar pose with z = 0 and the heading as a quaternion
-about z; times are stamps on the log's own clock (the first record's stamp plus the time since it),
-so ``evo`` matches them with the recording's own topics.
+line is ``time x y z qx qy qz qw``: the planar pose at the tracker's height (its z where the source
+has one, a bag's pose topic; else 0) and the heading as a quaternion about z; times are stamps on
+the log's own clock (the first record's stamp plus the time since it), so ``evo`` compares them with
+the recording's own pose topic directly, with no time offset and no projection onto the plane.
 """
 
 from __future__ import annotations
@@ -29,11 +30,13 @@ def stamps(time_s: np.ndarray, start_ns: int) -> list[str]:
     return [f"{'-' if v < 0 else ''}{abs(v) // 10**9}.{abs(v) % 10**9:09d}" for v in ns.tolist()]
 
 
-def tum_text(time_s: np.ndarray, T: np.ndarray, start_ns: int = 0) -> str:
-    """TUM lines of poses ``T`` (n, 3) at ``time_s`` after the stamp ``start_ns``."""
+def tum_text(time_s: np.ndarray, T: np.ndarray, start_ns: int = 0, z: np.ndarray | None = None) -> str:
+    """TUM lines of poses ``T`` (n, 3) at ``time_s`` after the stamp ``start_ns``, at heights ``z``
+    (default 0)."""
     half = 0.5 * T[:, 2]
     zeros = np.zeros(T.shape[0])
-    cols = np.column_stack([T[:, 0], T[:, 1], zeros, zeros, zeros, np.sin(half), np.cos(half)])
+    height = zeros if z is None else np.asarray(z, dtype=float)
+    cols = np.column_stack([T[:, 0], T[:, 1], height, zeros, zeros, np.sin(half), np.cos(half)])
     return "".join(
         f"{t} " + " ".join(f"{v:.9f}" for v in row) + "\n" for t, row in zip(stamps(time_s, start_ns), cols)
     )
@@ -43,16 +46,17 @@ def write_trajectories(run: CalibrationRun, out_dir: Path, name: str = FOLDER) -
     """Write the TUM files and their README into ``out_dir/name``; returns their paths."""
     folder = out_dir / name
     tracks = run.require_series().tracks
-    t, ref, t0 = tracks.time_s, tracks.tracker, run.log.start_ns
-    written: dict[str, str] = {"tracker.tum": tum_text(t, ref, t0)}
+    t, ref, t0, z = tracks.time_s, tracks.tracker, run.log.start_ns, tracks.tracker_z
+    written: dict[str, str] = {"tracker.tum": tum_text(t, ref, t0, z)}
     for track in tracks.tracks:
         if track.solver is not None:
-            written[f"{track.solver}.tum"] = tum_text(t, track.T_world_sensor, t0)
+            written[f"{track.solver}.tum"] = tum_text(t, track.T_world_sensor, t0, z)
     for solver, again in tracks.restarted.items():
         for k, (p, q) in enumerate(tracks.parts, start=1):
             idx = p + np.flatnonzero(tracks.good[p:q])
-            written[f"segment{k}_{solver}.tum"] = tum_text(t[idx], again[idx], t0)
-            written.setdefault(f"segment{k}_tracker.tum", tum_text(t[idx], ref[idx], t0))
+            z_k = None if z is None else z[idx]
+            written[f"segment{k}_{solver}.tum"] = tum_text(t[idx], again[idx], t0, z_k)
+            written.setdefault(f"segment{k}_tracker.tum", tum_text(t[idx], ref[idx], t0, z_k))
     written["README.md"] = _readme(run, tracks.segments)
     paths = []
     for file, text in written.items():

@@ -231,6 +231,7 @@ def track_series(
         faults=tuple((f.record - a, f.kind) for f in view.findings.report.faults if a <= f.record < b),
         holdout_start=windows.fit[1] - a if windows.fit[1] < b - 1 else None,
         segments=tuple(rows),
+        tracker_z=windows.selected.tracker_z,
     )
 
 

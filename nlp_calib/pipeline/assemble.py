@@ -76,6 +76,7 @@ def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
         encoders=encoders,
         start_ns=log.start_ns,
         duration_s=float(t[-1] - t[0]) if t.size else 0.0,
+        sensor_z_roll_pitch=log.header.sensor_z_roll_pitch,
     )
 
 
