@@ -147,15 +147,57 @@ def pose_stamped(ns: int, pose: Sequence[float], z: float) -> Callable[[Any], An
     return build
 
 
-def messages(rec: Recording, joint_shift_ns: int = 0, velocities: bool = False) -> list[Message]:
-    """The recording as messages, recorded 2 ms after their stamps (the joints' stamps shifted by
-    ``joint_shift_ns``: another clock); ``velocities``: the wheels publish only their velocity."""
-    out: list[Message] = []
-    for k, ns in enumerate(rec.joint_ns.tolist()):
-        stamp = ns + joint_shift_ns
-        out.append(
-            ("/joint_states", JS, ns + 2_000_000, joint_state(stamp, rec.joint_names, rec.joints[k].tolist()))
+#: The nominal mount ``/tf_static`` gives (x, y, z, roll, pitch, yaw): near the truth, not on it.
+NOMINAL_MOUNT = (0.8, -0.1, SENSOR_Z, 0.01, -0.02, 0.05)
+
+
+def tf_static(ns: int, parent: str, child: str, mount: Sequence[float]) -> Callable[[Any], Any]:
+    """A TFMessage with one fixed transform (URDF angles: ``R = Rz(yaw)·Ry(pitch)·Rx(roll)``)."""
+    x, y, z, roll, pitch, yaw = mount
+    cr, sr, cp, sp = math.cos(roll / 2), math.sin(roll / 2), math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    q = (
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+        cr * cp * cy + sr * sp * sy,
+    )
+
+    def build(ts: Any) -> Any:
+        v = ts.types["geometry_msgs/msg/Vector3"](x=x, y=y, z=z)
+        r = ts.types["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])
+        tf = ts.types["geometry_msgs/msg/Transform"](translation=v, rotation=r)
+        stamped = ts.types["geometry_msgs/msg/TransformStamped"](
+            header=_header(ts, ns, parent), child_frame_id=child, transform=tf
         )
+        return ts.types["tf2_msgs/msg/TFMessage"](transforms=[stamped])
+
+    return build
+
+
+def messages(
+    rec: Recording, joint_shift_ns: int = 0, velocities: bool = False, zero_stamps: bool = False
+) -> list[Message]:
+    """The recording as messages, recorded 2 ms after their stamps, with the nominal mount on
+    ``/tf_static`` (``base_link`` to ``mocap_marker``). ``joint_shift_ns``: the joints' stamps on
+    another clock; ``velocities``: the wheels publish only their velocities (central differences);
+    ``zero_stamps``: the joints' header stamps are all zero."""
+    out: list[Message] = [
+        (
+            "/tf_static",
+            "tf2_msgs/msg/TFMessage",
+            int(rec.tracker_ns[0]) - 10**9,
+            tf_static(int(rec.tracker_ns[0]), "base_link", "mocap_marker", NOMINAL_MOUNT),
+        )
+    ]
+    rates = np.gradient(rec.joints, rec.joint_ns * 1e-9, axis=0)
+    for k, ns in enumerate(rec.joint_ns.tolist()):
+        stamp = 0 if zero_stamps else ns + joint_shift_ns
+        if velocities:
+            build = joint_state(stamp, rec.joint_names, [], rates[k].tolist())
+        else:
+            build = joint_state(stamp, rec.joint_names, rec.joints[k].tolist())
+        out.append(("/joint_states", JS, ns + 2_000_000, build))
     for k, ns in enumerate(rec.tracker_ns.tolist()):
         build = pose_stamped(ns, rec.tracker[k].tolist(), float(rec.tracker_z[k]))
         out.append(("/mocap/robot/pose", POSE, ns + 2_000_000, build))

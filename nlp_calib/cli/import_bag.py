@@ -23,8 +23,10 @@ from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.sources import BagSource
 
 
-def _stamps(given: list[str]) -> str | Mapping[str, str]:
+def _stamps(given: list[str] | None) -> str | Mapping[str, str]:
     """``--stamps``: ``header``/``receive`` for every topic, or ``TOPIC=how`` for one."""
+    if not given:
+        return "header"
     if len(given) == 1 and "=" not in given[0]:
         return given[0]
     out = {}

@@ -348,7 +348,7 @@ def _add_import_timing(p: Any) -> None:
     p.add_argument(
         "--stamps",
         action="append",
-        default=[],
+        default=None,
         metavar="[TOPIC=]header|receive",
         help="time a topic (or both) by the bag's record times instead of its header stamps",
     )

@@ -6,7 +6,7 @@ Knows no kinematic model: callers say which encoders are absolute and which are 
 
 from nlp_calib.logs.bag_reader import BagError, BagTopics
 from nlp_calib.logs.bag_records import read_bag
-from nlp_calib.logs.log import ENCODER_KINDS, DroppedRecord, EncoderKind, Log, LogHeader
+from nlp_calib.logs.log import ENCODER_KINDS, DroppedRecord, EncoderKind, JointStream, Log, LogHeader
 from nlp_calib.logs.reader import parse_log, read_log, yaw_from_quaternion
 from nlp_calib.logs.resample import resample_encoders, resample_tracker
 from nlp_calib.logs.writer import format_log
@@ -17,6 +17,7 @@ __all__ = [
     "BagTopics",
     "DroppedRecord",
     "EncoderKind",
+    "JointStream",
     "Log",
     "LogHeader",
     "format_log",

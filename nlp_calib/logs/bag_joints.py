@@ -189,7 +189,9 @@ def timed_by_tracker(
     stamps = tracker.stamp_ns[index]
     start_ns = int(stamps[0])
     steps = [0.0 if n in integrated else resolution(positions[:, j]) for j, n in enumerate(names)]
-    stream = JointStream(frozen((joint_ns - start_ns).astype(float) * 1e-9), frozen(positions), tuple(steps))
+    by_velocity = tuple(e for e, n in zip(header.encoder_names, names) if n in integrated)
+    stream_s = frozen((joint_ns - start_ns).astype(float) * 1e-9)
+    stream = JointStream(stream_s, frozen(positions), tuple(steps), by_velocity)
     time_s = frozen((stamps - start_ns).astype(float) * 1e-9)
     poses = np.array(tracker.values[index, :3], dtype=float)
     poses[:, 2] = wrap_angle(poses[:, 2])

@@ -68,11 +68,13 @@ class LogHeader:
 class JointStream:
     """Joint positions (rad, ``(n, n_joints)`` in the header's encoder order) on the joints' own
     clock: ``time_s`` on the log's time axis. ``resolution`` is each joint's smallest step (rad;
-    0 when its positions are not quantised), the floor of its noise."""
+    0 when its positions are not quantised), the floor of its noise; ``integrated`` names the
+    encoders whose positions were integrated from velocities (known only up to their start)."""
 
     time_s: np.ndarray
     positions: np.ndarray
     resolution: tuple[float, ...]
+    integrated: tuple[str, ...] = ()
 
     def at(self, t: np.ndarray) -> np.ndarray:
         """The positions interpolated at times ``t`` (held at the ends outside the stream)."""

@@ -206,6 +206,13 @@ class InRadians:
                 f"{log.path}: the {self.name} model needs joints read as {list(self.encoder_kinds)}; "
                 f"the log has {list(log.header.encoder_names)}"
             )
+        stream = log.joint_stream
+        lost = [e for e in (stream.integrated if stream else ()) if self.encoder_kinds[e] == "absolute"]
+        if lost:
+            raise ModelError(
+                f"{log.path}: the joint read as {lost[0]!r} publishes only its velocity; an angle cannot be "
+                "integrated from velocities (its start is unknown): publish its position"
+            )
         rows = []
         for name in self.model.input_names:
             encoder = self.form.inputs[name].encoder
@@ -253,11 +260,13 @@ class InRadians:
     def controller(
         self, params: Mapping[str, float], ranges: Mapping[str, float]
     ) -> tuple[str, dict[str, float], dict[str, str], str]:
-        """The model's controller with every wheel turn 2π of its joint: the radii are the
-        parameters themselves."""
+        """The model's controller with every wheel turn 2π of its joint; a controller parameter
+        that is one of the model's own (same name: ``wheel_radius``, ``wheelbase``...) is the
+        parameter itself, not its round trip through the counts form."""
         turns = dict.fromkeys(self.encoder_kinds, 2.0 * np.pi)
         name, parameters, places, _ = self.model.controller(self.to_counts(params), turns)
-        return name, parameters, {self.rename(n): self.words(w) for n, w in places.items()}, ASSUMES
+        own = {n: float(params[n]) if n in params else v for n, v in parameters.items()}
+        return name, own, {self.rename(n): self.words(w) for n, w in places.items()}, ASSUMES
 
     def implausible(self, params: Mapping[str, float]) -> str:
         return self.words(self.model.implausible(self.to_counts(params)))

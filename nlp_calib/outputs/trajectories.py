@@ -1,7 +1,8 @@
 """Trajectories as TUM files, so that evo (``evo_ape``, ``evo_rpe``) reproduces the reported figures.
 
 Written into ``trajectories/`` with ``--report``: the tracker's poses and each solver's full-run
-dead reckoning over the used records, and, per fault-free segment, the tracker's poses (bad
+dead reckoning over the used records (bad tracker poses left out, as the figures leave them out),
+and, per fault-free segment, the tracker's poses (bad
 tracker poses left out) and each solver's track restarted from the tracker at the segment's
 start. ``README.md`` beside them gives the evo commands and the figures they reproduce. A TUM
 line is ``time x y z qx qy qz qw``: the planar pose at the tracker's height (its z where the source
@@ -47,10 +48,13 @@ def write_trajectories(run: CalibrationRun, out_dir: Path, name: str = FOLDER) -
     folder = out_dir / name
     tracks = run.require_series().tracks
     t, ref, t0, z = tracks.time_s, tracks.tracker, run.log.start_ns, tracks.tracker_z
-    written: dict[str, str] = {"tracker.tum": tum_text(t, ref, t0, z)}
+    # Bad tracker poses are left out of every file, as they are of every figure.
+    good = np.flatnonzero(tracks.good)
+    z_good = None if z is None else z[good]
+    written: dict[str, str] = {"tracker.tum": tum_text(t[good], ref[good], t0, z_good)}
     for track in tracks.tracks:
         if track.solver is not None:
-            written[f"{track.solver}.tum"] = tum_text(t, track.T_world_sensor, t0, z)
+            written[f"{track.solver}.tum"] = tum_text(t[good], track.T_world_sensor[good], t0, z_good)
     for solver, again in tracks.restarted.items():
         for k, (p, q) in enumerate(tracks.parts, start=1):
             idx = p + np.flatnonzero(tracks.good[p:q])
@@ -72,7 +76,7 @@ def _readme(run: CalibrationRun, table: tuple[SegmentFigures, ...]) -> str:
     lines = [
         f"# Trajectories of {run.scenario.name} (TUM format)",
         "",
-        "- `tracker.tum`: the tracker's sensor poses over the used records; "
+        "- `tracker.tum`: the tracker's sensor poses over the used records (bad ones left out); "
         + ", ".join(f"`{s}.tum`" for s in solvers)
         + ": each solver's sensor track dead-reckoned from the tracker's first pose (full run).",
         "- `segment<k>_tracker.tum`, `segment<k>_<solver>.tum`: each fault-free segment, the track "
