@@ -612,7 +612,12 @@ def test_several_bags_calibrate_together_as_their_text_logs(
     other_bag = write_bag(
         tmp_path / "other", "ros1", drive_messages(load_log(other, TRICYCLE), _start_ns(other))
     )
-    topics = {"joint_states": "/joint_states", "joints": list(JOINTS), "tracker": "/tracker/pose"}
+    topics = {
+        "joint_states": "/joint_states",
+        "joints": list(JOINTS),
+        "tracker": "/tracker/pose",
+        "joint_units": "counts",
+    }
     runs = []
     for first, second in (
         ({"path": str(path), "samples": {"start": 20}}, str(other)),

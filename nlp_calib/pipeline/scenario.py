@@ -305,7 +305,6 @@ def check_against_model(sc: Scenario, source: str) -> None:
         check_choice("model", sc.model, MODELS)
     except FieldError as exc:
         fail(f"{source}: {exc.field}", exc.reason)
-    _check_units(sc, source)
     model = sc.model_form()
     _check_parameter_names(sc.parameters, param_names(model), source)
     for enc in sc.data.encoder_noise:
@@ -316,6 +315,7 @@ def check_against_model(sc: Scenario, source: str) -> None:
             check_joints(entry.source.joints, model, f"{source}: {key}.joints")
         if isinstance(entry.source, JointLogSource):
             check_encoders(entry.source.encoders, model, f"{source}: {key}.encoders")
+    _check_units(sc, source)
     _check_solvers(sc, source)
     _check_overlaps(sc, source)
 
