@@ -14,10 +14,28 @@ Layers, from inputs to outputs (each imports only from the ones before it): ``co
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+import sys
 
-from nlp_calib.core.version import __version__
+
+def _started_as_the_command() -> bool:
+    """``python -m nlp_calib`` (while the module is located, ``sys.argv[0]`` is ``-m``) or the
+    ``nlp-calib`` script."""
+    argv0 = sys.argv[0] if sys.argv else ""
+    line = " ".join(getattr(sys, "orig_argv", ())) + " "
+    as_module = argv0 == "-m" and (" -m nlp_calib " in line or " -mnlp_calib " in line)
+    return as_module or argv0.replace("\\", "/").rsplit("/", 1)[-1] in ("nlp-calib", "nlp-calib.exe")
+
+
+# The command's first instruction: a signal from here on ends it quietly (core/interrupts.py).
+if _started_as_the_command():
+    from nlp_calib.core import interrupts as _interrupts
+
+    _interrupts.install()
+
+import importlib  # noqa: E402
+from typing import TYPE_CHECKING, Any  # noqa: E402
+
+from nlp_calib.core.version import __version__  # noqa: E402
 
 if TYPE_CHECKING:
     from nlp_calib.core.errors import (

@@ -2,22 +2,25 @@
 
 from __future__ import annotations
 
-import signal
-from types import FrameType
-
-
-def _quit(signum: int, frame: FrameType | None) -> None:
-    raise SystemExit(128 + signum)
+from nlp_calib.core import interrupts, memory
 
 
 def run() -> int:
-    """The command, with a signal while its libraries load (numpy, CasADi) ending it quietly like a
-    signal later does; the command line installs its own handlers once it runs."""
-    for s in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(s, _quit)
-    from nlp_calib.cli import main
+    """The command. A signal while its libraries load (numpy, CasADi) ends it quietly with
+    ``128 + signal``, like a signal later does, even if a library swallowed the exception."""
+    interrupts.install()
+    memory.fit_to_limit()
+    try:
+        from nlp_calib.cli import main
 
-    return main()
+        return main()
+    except BaseException as exc:
+        code = interrupts.exit_code()
+        if code is not None:
+            return code
+        if isinstance(exc, MemoryError):  # the libraries did not fit (ulimit -v): one line, exit 1
+            raise SystemExit(f"error: {memory.OUT_OF_MEMORY}") from None
+        raise
 
 
 if __name__ == "__main__":

@@ -457,7 +457,7 @@ def test_second_run_into_the_same_folder_does_not_mix_files(sim_log: Path, tmp_p
     first = listing(out)
     assert {"trajectory.png", "report.md", "calibration.yaml", MANIFEST_FILE} <= first
     assert run_cli("run", str(sc), "--out", str(out)).returncode == 0
-    expected = {"result.json", "calibration.yaml", "sensor_mount.urdf.xml", "robot.urdf"}
+    expected = {"result.json", "calibration.yaml", "sensor_mount.urdf.xml", "robot.urdf", "ros2_control.yaml"}
     assert listing(out) == expected | {MANIFEST_FILE, "notes.txt"}
     manifest = json.loads((out / MANIFEST_FILE).read_text())
     assert manifest["files"] == sorted(expected)

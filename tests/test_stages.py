@@ -176,3 +176,12 @@ def test_a_new_source_and_a_new_output_are_one_class_and_one_registry_line_each(
     assert main(["run", str(path), "--out", str(tmp_path / "out2"), "--solver", "gauss_newton"]) == 2
     assert "params.txt" in capsys.readouterr().err
     assert (tmp_path / "out2" / "params.txt").read_text() == "mine"
+
+
+def test_a_lag_search_where_no_fit_converges_says_so_naming_its_key(tmp_path: Path) -> None:
+    sc = load_scenario(SCENARIOS / "demo.yaml")
+    far = dataclasses.replace(sc.log.alignment, tracker_lag="auto", search=(5.0, 5.5), step=0.05)
+    with pytest.raises(
+        ScenarioError, match=r"alignment\.search: .*no lag in \[5, 5\.5\] s gave a fit that converged"
+    ):
+        Calibration(sc.with_options(alignment=far, samples=dataclasses.replace(sc.log.samples, stop=300)))

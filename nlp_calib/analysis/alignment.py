@@ -20,6 +20,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from nlp_calib.core.errors import ProblemError
 from nlp_calib.results.checks import LagEstimate
 
 #: Grid points on each side of the best one that the parabola is fitted through.
@@ -64,7 +65,10 @@ def estimate_lag(fit_cost: Callable[[float], float], search: tuple[float, float]
     while True:
         usable = fitted & np.isfinite(costs)
         if not usable.any():
-            return LagEstimate(0.0, tuple(grid[fitted].tolist()), tuple(costs[fitted].tolist()))
+            raise ProblemError(
+                f"no lag in [{search[0]:g}, {search[1]:g}] s gave a fit that converged; check the initial "
+                "guess (or use initial_guess: auto), or search around the lag the log's clocks allow"
+            )
         best = int(np.flatnonzero(usable)[np.argmin(costs[usable])])
         around = np.arange(max(0, best - HALF_WIDTH), min(grid.size, best + HALF_WIDTH + 1))
         if fitted[around].all():

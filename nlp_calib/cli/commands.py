@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nlp_calib.cli.explain import no_crossvalidation
 from nlp_calib.cli.import_bag import cmd_import_bag
 from nlp_calib.cli.parser import ALL_SOLVERS
 from nlp_calib.core import interrupts
@@ -327,7 +328,10 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     written = _write_outputs(out, args, outputs, [(run, "")], (run, True), "validate")
     print("\n" + "\n".join(_wrote(written, out)))
     cv = run.checks.crossval
-    return 0 if cv is not None and cv.available else 1
+    if cv is None or not cv.available:
+        print(f"error: {no_crossvalidation(run, blocks)}", file=sys.stderr)
+        return 1
+    return 0
 
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {

@@ -13,9 +13,10 @@ import warnings
 from collections.abc import Sequence
 from typing import TextIO
 
+from nlp_calib.cli import streams
 from nlp_calib.cli.commands import COMMANDS
 from nlp_calib.cli.parser import build_parser
-from nlp_calib.core import interrupts
+from nlp_calib.core import interrupts, memory
 from nlp_calib.core.errors import NlpCalibError
 from nlp_calib.core.files import forget_inputs
 
@@ -37,53 +38,74 @@ def _show_warning(
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
     args_in = list(sys.argv[1:] if argv is None else argv)
+    program = argv is None
     # Called as a program (no argv): the handlers stay to the end, so a late signal cannot
-    # replace the exit code.
-    with interrupts.handled(restore=argv is not None):
+    # replace the exit code, and a watchdog ends a process that native code keeps from stopping.
+    with interrupts.handled(restore=not program, watchdog=program), streams.guarded():
         try:
-            return _run(args_in)
+            code = _run(args_in)
         except interrupts.Interrupted as exc:  # another signal while the first was reported
             return exc.exit_code
+        # A signal some library swallowed before the run's last files were complete decides.
+        late = interrupts.exit_code()
+        if late is None:
+            return code
+        return late if interrupts.was_reported() else _report(interrupts.Interrupted(late - 128), False)
 
 
 def _run(argv: list[str]) -> int:
     debug = "--debug" in argv
     forget_inputs()  # each command protects its own inputs from its outputs
     try:
+        interrupts.check()  # a signal while the program started
         args = build_parser().parse_args(argv)
         with warnings.catch_warnings():
             warnings.simplefilter("always")
+            # A file an interrupted import left open is Python's business, not the user's.
+            warnings.simplefilter("ignore", ResourceWarning)
             warnings.showwarning = _show_warning
             return COMMANDS[args.command](args)
-    except NlpCalibError as exc:
-        if debug:
-            traceback.print_exc()
-        print(f"error: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
-        sys.stderr.close()
-        return 1
-    except interrupts.Interrupted as exc:
+    except BaseException as exc:
+        if isinstance(exc, SystemExit):  # argparse: --help, --version, a usage error
+            raise
+        return _report(exc, debug)
+
+
+def _report(exc: BaseException, debug: bool) -> int:
+    """Print one line for what ended the command; its exit code."""
+    signum = interrupts.pending()
+    if signum is not None and interrupts.exit_code() is not None:
+        # Whatever ended the run after a signal (an error CasADi made of the exception the
+        # signal raised in a callback, say) is the signal's doing.
+        exc = exc if isinstance(exc, interrupts.Interrupted) else interrupts.Interrupted(signum)
+    if isinstance(exc, interrupts.Interrupted):
         print(f"error: interrupted ({exc.name}); the files in progress were discarded", file=sys.stderr)
+        interrupts.reported()
         return exc.exit_code
-    except KeyboardInterrupt:
+    if isinstance(exc, KeyboardInterrupt):
         print("error: interrupted; the files in progress were discarded", file=sys.stderr)
         return 130
-    except OSError as exc:  # the system refused: a full disk, a permission, a vanished folder
-        if debug:
-            traceback.print_exc()
+    if debug:
+        traceback.print_exception(exc)
+    if isinstance(exc, NlpCalibError):
+        print(f"error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    if isinstance(exc, OSError):  # the system refused: a full disk, a permission, a vanished folder
         where = f"{exc.filename}: " if exc.filename else ""
         hint = "; free some space and run again" if exc.errno == errno.ENOSPC else ""
         print(f"error: {where}{exc.strerror or exc}{hint}", file=sys.stderr)
         return 1
-    except MemoryError:
-        print("error: out of memory; select fewer records or a shorter horizon", file=sys.stderr)
+    if isinstance(exc, MemoryError) or (isinstance(exc, RuntimeError) and "std::bad_alloc" in str(exc)):
+        print(f"error: {memory.OUT_OF_MEMORY}", file=sys.stderr)
         return 1
-    except Exception as exc:  # an unexpected failure is still reported in one line
-        if debug:
-            traceback.print_exc()
-        print(
-            f"error: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)",
-            file=sys.stderr,
-        )
+    if isinstance(exc, RuntimeError) and "can't start new thread" in str(exc):
+        print(f"error: {memory.NO_THREAD}", file=sys.stderr)
         return 1
+    if not isinstance(exc, Exception):
+        raise exc
+    # An unexpected failure is still reported in one line.
+    print(
+        f"error: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)",
+        file=sys.stderr,
+    )
+    return 1

@@ -44,36 +44,31 @@ def _shape_fits(value: Any, tp: Any) -> bool:
     return not isinstance(value, (Mapping, list, tuple))
 
 
-def coerce(value: Any, tp: Any, where: str) -> Any:
-    """Check ``value`` against the annotation ``tp`` and convert it (YAML ints to floats...)."""
-    origin = typing.get_origin(tp)
-    if origin in (Union, types.UnionType):
-        args = typing.get_args(tp)
-        if value is None and type(None) in args:
-            return None
-        choices = [a for a in args if a is not type(None)]
-        # A mapping where a name or a mapping may stand is judged as a mapping only: its own
-        # error (e.g. a NaN inside it) is the one that says what to fix.
-        fitting = [a for a in choices if _shape_fits(value, a)]
-        if len(fitting) == 1:
-            return coerce(value, fitting[0], where)
-        errors = []
-        for arg in fitting or choices:
-            try:
-                return coerce(value, arg, where)
-            except ConfigError as exc:
-                errors.append(str(exc).split(": ", 1)[-1])
-        fail(where, " or ".join(errors))
-    if tp is Any:
-        return value
-    if tp is bool:
-        if not isinstance(value, bool):
-            fail(where, f"expected true or false, got {show(value)}")
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            fail(where, f"expected an integer, got {show(value)}")
-        return value
+def _union(value: Any, tp: Any, where: str) -> Any:
+    args = typing.get_args(tp)
+    if value is None and type(None) in args:
+        return None
+    choices = [a for a in args if a is not type(None)]
+    # A mapping where a name or a mapping may stand is judged as a mapping only: its own error
+    # (e.g. a NaN inside it) is the one that says what to fix.
+    fitting = [a for a in choices if _shape_fits(value, a)]
+    if len(fitting) == 1:
+        return coerce(value, fitting[0], where)
+    errors = []
+    for arg in fitting or choices:
+        try:
+            return coerce(value, arg, where)
+        except ConfigError as exc:
+            errors.append(str(exc).split(": ", 1)[-1])
+    fail(where, " or ".join(errors))
+
+
+def _scalar(value: Any, tp: Any, where: str) -> Any:
+    """A YAML scalar as ``bool``, ``int``, ``float``, ``str`` or ``Path``."""
+    if tp is bool and not isinstance(value, bool):
+        fail(where, f"expected true or false, got {show(value)}")
+    if tp is int and (isinstance(value, bool) or not isinstance(value, int)):
+        fail(where, f"expected an integer, got {show(value)}")
     if tp is float:
         # A YAML integer beyond float range would overflow float(): no usable number either.
         if (
@@ -84,23 +79,37 @@ def coerce(value: Any, tp: Any, where: str) -> Any:
         ):
             fail(where, f"expected a finite number, got {show(value)}")
         return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            fail(where, f"expected a string, got {show(value)}")
-        return value
+    if tp is str and not isinstance(value, str):
+        fail(where, f"expected a string, got {show(value)}")
     if tp is Path:
         if not isinstance(value, str) or not value:
             fail(where, f"expected a file path, got {show(value)}")
         return Path(value)
+    return value
+
+
+def _sequence(value: Any, tp: Any, where: str) -> tuple[Any, ...]:
+    args = typing.get_args(tp)
+    if not isinstance(value, (list, tuple)):
+        fail(where, f"expected a list, got {show(value)}")
+    if len(args) == 2 and args[1] is Ellipsis:
+        return tuple(coerce(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
+    if len(value) != len(args):
+        fail(where, f"expected a list of {len(args)} values, got {show(value)}")
+    return tuple(coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+
+
+def coerce(value: Any, tp: Any, where: str) -> Any:
+    """Check ``value`` against the annotation ``tp`` and convert it (YAML ints to floats...)."""
+    origin = typing.get_origin(tp)
+    if origin in (Union, types.UnionType):
+        return _union(value, tp, where)
+    if tp is Any:
+        return value
+    if tp in (bool, int, float, str, Path):
+        return _scalar(value, tp, where)
     if origin is tuple:
-        args = typing.get_args(tp)
-        if not isinstance(value, (list, tuple)):
-            fail(where, f"expected a list, got {show(value)}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(coerce(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
-        if len(value) != len(args):
-            fail(where, f"expected a list of {len(args)} values, got {show(value)}")
-        return tuple(coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+        return _sequence(value, tp, where)
     if origin in (Mapping, dict) or tp is Mapping:
         k_tp, v_tp = typing.get_args(tp)
         if not isinstance(value, Mapping):

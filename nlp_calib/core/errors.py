@@ -80,5 +80,9 @@ class CodegenError(NlpCalibError):
     """C code could not be generated or compiled."""
 
 
+class ResourceError(NlpCalibError):
+    """The process lacks a resource the run needs (address space under ``ulimit -v``)."""
+
+
 class NlpCalibWarning(UserWarning):
     """Something the user should know about a result that is still usable (the CLI prints it)."""

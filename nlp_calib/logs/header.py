@@ -66,11 +66,12 @@ def _doubtful(path: str, line: int, problem: str, strict: bool) -> None:
     warnings.warn(f"{path}:{line}: {problem}", NlpCalibWarning, stacklevel=4)
 
 
-def parse_header(
-    lines: Sequence[tuple[int, str]], path: str, *, strict: bool = True, checks: bool = True
-) -> LogHeader:
-    """The header of the ``(line number, text)`` lines; ``checks`` names doubtful values."""
-    fields: dict[str, tuple[int, str]] = {}
+_Fields = dict[str, tuple[int, str]]
+
+
+def _fields(lines: Sequence[tuple[int, str]], path: str) -> tuple[_Fields, str]:
+    """Each known header key's (line, text), and the sensor's frame name (``#<frame> wrt ...``)."""
+    fields: _Fields = {}
     sensor_frame = "sensor"
     frame_line: int | None = None
     for lineno, raw in lines:
@@ -93,72 +94,96 @@ def parse_header(
                 f"header line '#{key}:' appears twice, at lines {fields[key][0]} and {lineno}; keep one",
             )
         fields[key] = (lineno, value)
+    return fields, sensor_frame
 
-    def need(key: str) -> tuple[int, str]:
-        if key not in fields:
-            if key in ("translation", "rotation"):
-                raise DatasetError(path, None, f"header line '#\t{key}: [...]' of the sensor pose is missing")
-            raise DatasetError(path, None, f"header line '#{key}: ...' is missing")
-        return fields[key]
 
-    model = need("kinematic_model")[1].strip()
-    _, names_text = need("parameters")
-    ln_vals, vals_text = need("parameter_values")
-    names = _names(names_text)
+def _need(fields: _Fields, key: str, path: str) -> tuple[int, str]:
+    if key not in fields:
+        if key in ("translation", "rotation"):
+            raise DatasetError(path, None, f"header line '#\t{key}: [...]' of the sensor pose is missing")
+        raise DatasetError(path, None, f"header line '#{key}: ...' is missing")
+    return fields[key]
+
+
+def _parameters(fields: _Fields, path: str) -> tuple[int, list[str], list[float]]:
+    names = _names(_need(fields, "parameters", path)[1])
+    ln_vals, vals_text = _need(fields, "parameter_values", path)
     values = _numbers(vals_text, path, ln_vals, "#parameter_values", finite=True)
     if len(values) != len(names):
         raise DatasetError(
-            path,
-            ln_vals,
-            f"#parameter_values has {len(values)} numbers, #parameters names {len(names)}",
+            path, ln_vals, f"#parameter_values has {len(values)} numbers, #parameters names {len(names)}"
         )
-    enc_names = tuple(_names(need("joints_max_enc")[1]))
-    ln_enc, enc_text = need("joints_max_enc_values")
-    enc_max_f = _numbers(enc_text, path, ln_enc, "#joints_max_enc_values", finite=True)
-    if len(enc_max_f) != len(enc_names) or any(not 0 < v <= 2**32 or v != int(v) for v in enc_max_f):
+    return ln_vals, names, values
+
+
+def _encoders(fields: _Fields, path: str) -> tuple[tuple[str, ...], tuple[int, ...]]:
+    enc_names = tuple(_names(_need(fields, "joints_max_enc", path)[1]))
+    ln_enc, enc_text = _need(fields, "joints_max_enc_values", path)
+    enc_max = _numbers(enc_text, path, ln_enc, "#joints_max_enc_values", finite=True)
+    if len(enc_max) != len(enc_names) or any(not 0 < v <= 2**32 or v != int(v) for v in enc_max):
         raise DatasetError(
             path,
             ln_enc,
             f"expected {len(enc_names)} integer encoder ranges in [1, 2^32] (one per "
             f"#joints_max_enc name), got {enc_text.strip()!r}",
         )
-    ln_t, t_text = need("translation")
-    ln_r, r_text = need("rotation")
+    return enc_names, tuple(int(v) for v in enc_max)
+
+
+def _sensor_pose(fields: _Fields, path: str) -> tuple[int, list[float], int, str, list[float]]:
+    ln_t, t_text = _need(fields, "translation", path)
+    ln_r, r_text = _need(fields, "rotation", path)
     trans = _numbers(t_text, path, ln_t, "sensor translation", finite=True)
     quat = _numbers(r_text, path, ln_r, "sensor rotation quaternion")
     if len(trans) != 3:
         raise DatasetError(path, ln_t, f"sensor translation: expected [x, y, z], got {t_text.strip()!r}")
     if len(quat) != 4 or not math.isclose(math.fsum(q * q for q in quat), 1.0, rel_tol=1e-3):
         raise DatasetError(
-            path,
-            ln_r,
-            f"sensor rotation: expected a unit quaternion [x, y, z, w], got {r_text.strip()!r}",
+            path, ln_r, f"sensor rotation: expected a unit quaternion [x, y, z, w], got {r_text.strip()!r}"
         )
-    if checks:
-        for ln, what, vals in ((ln_vals, "#parameter_values", values), (ln_t, "sensor translation", trans)):
-            if any(abs(v) > MAX_MAGNITUDE for v in vals):
-                _doubtful(
-                    path,
-                    ln,
-                    f"{what} {' '.join(f'{v:g}' for v in vals)}: a value beyond ±{MAX_MAGNITUDE:g} "
-                    "(metres, radians or gain) is not plausible; check the header",
-                    strict,
-                )
-        tilt = tilt_deg(*quat)
-        if tilt > MAX_TILT_DEG:
+    return ln_t, trans, ln_r, r_text, quat
+
+
+def _check_plausible(fields: _Fields, path: str, strict: bool) -> None:
+    """Values that can be used but are probably wrong: an error when reading strictly."""
+    ln_vals, _, values = _parameters(fields, path)
+    ln_t, trans, ln_r, r_text, quat = _sensor_pose(fields, path)
+    for ln, what, vals in ((ln_vals, "#parameter_values", values), (ln_t, "sensor translation", trans)):
+        if any(abs(v) > MAX_MAGNITUDE for v in vals):
             _doubtful(
                 path,
-                ln_r,
-                f"sensor rotation {r_text.strip()!r} tilts the sensor {tilt:.1f}° out of the plane "
-                f"(roll or pitch); the calibration is planar and uses only its yaw, "
-                f"{yaw_from_quaternion(*quat):.4f} rad",
+                ln,
+                f"{what} {' '.join(f'{v:g}' for v in vals)}: a value beyond ±{MAX_MAGNITUDE:g} "
+                "(metres, radians or gain) is not plausible; check the header",
                 strict,
             )
+    tilt = tilt_deg(*quat)
+    if tilt > MAX_TILT_DEG:
+        _doubtful(
+            path,
+            ln_r,
+            f"sensor rotation {r_text.strip()!r} tilts the sensor {tilt:.1f}° out of the plane (roll or "
+            f"pitch); the calibration is planar and uses only its yaw, {yaw_from_quaternion(*quat):.4f} rad",
+            strict,
+        )
+
+
+def parse_header(
+    lines: Sequence[tuple[int, str]], path: str, *, strict: bool = True, checks: bool = True
+) -> LogHeader:
+    """The header of the ``(line number, text)`` lines; ``checks`` names doubtful values."""
+    fields, sensor_frame = _fields(lines, path)
+    model = _need(fields, "kinematic_model", path)[1].strip()
+    _, names, values = _parameters(fields, path)
+    enc_names, enc_max = _encoders(fields, path)
+    _, trans, _, _, quat = _sensor_pose(fields, path)
+    if checks:
+        _check_plausible(fields, path, strict)
     return LogHeader(
         kinematic_model=model,
         parameters=dict(zip(names, values)),
         encoder_names=enc_names,
-        encoder_max=tuple(int(v) for v in enc_max_f),
+        encoder_max=enc_max,
         sensor_frame=sensor_frame,
         T_base_sensor=(trans[0], trans[1], yaw_from_quaternion(*quat)),
     )

@@ -98,9 +98,9 @@ def _label_at(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, label: byte
     return ok
 
 
-def parse_block(blob: bytes, first_line: int, n_encoders: int) -> Block:
-    """The records of ``blob`` (whole lines joined by ``\\n``; line ``first_line`` first)."""
-    arr = np.frombuffer(blob, dtype=np.uint8)
+def _tokenise(arr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every token's start and end, each line's token count and first token, and the lines with a
+    character no record holds."""
     nl = np.flatnonzero(arr == 10)
     n_lines = nl.size + (1 if arr.size and arr[-1] != 10 else 0)
     ws = _WS[arr]
@@ -108,11 +108,17 @@ def parse_block(blob: bytes, first_line: int, n_encoders: int) -> Block:
     after = np.concatenate([ws[1:], [True]])
     tok_start = np.flatnonzero(~ws & before)
     tok_end = np.flatnonzero(~ws & after) + 1
-    tok_line = np.searchsorted(nl, tok_start)
-    counts = np.bincount(tok_line, minlength=n_lines)
-    first_tok = np.cumsum(counts) - counts
+    counts = np.bincount(np.searchsorted(nl, tok_start), minlength=n_lines)
     odd = np.zeros(n_lines, dtype=bool)
     odd[np.unique(np.searchsorted(nl, np.flatnonzero(~_PLAIN[arr] & (arr != 10))))] = True
+    return tok_start, tok_end, counts, np.cumsum(counts) - counts, odd
+
+
+def parse_block(blob: bytes, first_line: int, n_encoders: int) -> Block:
+    """The records of ``blob`` (whole lines joined by ``\\n``; line ``first_line`` first)."""
+    arr = np.frombuffer(blob, dtype=np.uint8)
+    tok_start, tok_end, counts, first_tok, odd = _tokenise(arr)
+    n_lines = counts.size
 
     K = 11 + n_encoders
     cand = np.flatnonzero((counts == K) & ~odd)

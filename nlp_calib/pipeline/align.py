@@ -94,7 +94,7 @@ def lag_at_edge(sc: Scenario, lag_s: float) -> str:
     """The warning for a tracker lag estimated at an end of the searched range."""
     lo, hi = sc.log.alignment.search
     return (
-        f"alignment.tracker_lag: the estimated lag {1e3 * lag_s:.1f} ms lies at the edge of the "
-        f"searched range [{lo:g}, {hi:g}] s, so the best lag may lie beyond it: widen "
+        f"{sc.path or sc.name}: alignment.tracker_lag: the estimated lag {1e3 * lag_s:.1f} ms lies at the "
+        f"edge of the searched range [{lo:g}, {hi:g}] s, so the best lag may lie beyond it: widen "
         "alignment.search, or check the log's timestamps (a gap or a jump in time misleads the estimate)"
     )

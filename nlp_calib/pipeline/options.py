@@ -100,8 +100,16 @@ class AlignmentOptions:
         if isinstance(self.tracker_lag, str):
             check_choice("tracker_lag", self.tracker_lag, ("auto",))
         lo, hi = self.search
-        if not (lo < hi and self.step > 0 and (hi - lo) / self.step <= 1000):
-            raise FieldError("search", "needs search [lo, hi] with lo < hi and 0 < step, at most 1000 steps")
+        if not lo < hi:
+            raise FieldError("search", f"needs [lo, hi] with lo < hi, got [{lo:g}, {hi:g}]")
+        if not self.step > 0:
+            raise FieldError("step", f"must be > 0 s, got {self.step:g}")
+        if (hi - lo) / self.step > 1000:
+            raise FieldError(
+                "step",
+                f"{self.step:g} s over search [{lo:g}, {hi:g}] makes {(hi - lo) / self.step:.0f} lags to "
+                f"fit, more than 1000; use a step of at least {(hi - lo) / 1000:.3g} s or a narrower search",
+            )
 
 
 @dataclass(frozen=True)

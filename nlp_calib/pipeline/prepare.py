@@ -81,7 +81,7 @@ def select(sc: Scenario, log: Log) -> tuple[int, int]:
     start = samples.start
     stop = n if samples.stop is None else samples.stop
     if stop > n or start >= stop - 1:
-        raise ScenarioError(f"samples: the range [{start}, {stop}) does not fit the log's {n} records")
+        raise ScenarioError(f"{sc.path or sc.name}: samples: [{start}, {stop}) exceeds the log's {n} records")
     check_windows(sc, start, stop)
     return start, stop
 

@@ -19,6 +19,7 @@ from typing import Any, ClassVar
 import casadi as ca
 import numpy as np
 
+from nlp_calib.core import memory
 from nlp_calib.core.errors import OptionsError
 from nlp_calib.results.solver import IterationRecord, SolverResult
 from nlp_calib.solvers.evaluation import NAN_START_REASON, SINGULAR_REASON, ProblemEvaluator, is_singular
@@ -41,6 +42,10 @@ FILE_OPTIONS = {
     "hsllib": "it loads a library from a path; install HSL where IPOPT finds it by default",
     "pardisolib": "it loads a library from a path; install Pardiso where IPOPT finds it by default",
 }
+
+#: Address space a solve needs free: the 128 MiB work buffer of the OpenBLAS under MUMPS (which
+#: retries forever, deaf to signals, when it cannot get it) and room for MUMPS's own workspace.
+_ADDRESS_SPACE = 136 << 20
 
 
 @dataclass(frozen=True)
@@ -82,6 +87,7 @@ class Ipopt:
     label: ClassVar[str] = "IPOPT"
     options_type: ClassVar[type] = IpoptOptions
     supports_bounds: ClassVar[bool] = True
+    _buffer_held: ClassVar[bool] = False
 
     @staticmethod
     def functions(options: IpoptOptions) -> tuple[str, ...]:
@@ -154,8 +160,12 @@ class Ipopt:
             x_init = np.concatenate([x_init, w0])
             lbx = np.concatenate([lbx, np.full(ev.n_residuals, _W_MIN)])
             ubx = np.concatenate([ubx, np.ones(ev.n_residuals)])
+        if not Ipopt._buffer_held:
+            fix = "solve with gauss_newton alone (solvers: [gauss_newton])"
+            memory.require_address_space(_ADDRESS_SPACE, "IPOPT's linear algebra", fix)
         try:
             sol = self._solver(x0=x_init, lbx=lbx, ubx=ubx)
+            Ipopt._buffer_held = True  # OpenBLAS keeps its buffer: later solves need no more room
         except RuntimeError as exc:  # CasADi reports a failed evaluation by raising
             self._oracle.guard.reraise()
             return self._not_started(np.asarray(x0, dtype=float), time.perf_counter() - t0, _last_line(exc))

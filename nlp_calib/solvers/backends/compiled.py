@@ -10,11 +10,17 @@ compiled per data size. The chunk map can run on several threads.
 :meth:`CompiledBackend.prepare` starts the compilers in the background, one per core, in the
 order asked (what the first steps need first) and returns at once: the run goes on while the
 rest compiles, and waits only for a Function it needs that is not ready yet.
+
+Nothing the compiler or the cache does can end a run: a cached file that does not load is
+compiled again, and a compiler that fails, hangs past its timeout or writes something that does
+not load leaves that Function (and, once it has hung, every later one) to CasADi's interpreter,
+with one warning.
 """
 
 from __future__ import annotations
 
 import atexit
+import contextlib
 import os
 import queue
 import threading
@@ -32,9 +38,11 @@ from nlp_calib.codegen.compiler import (
     compiler_flags,
     find_compiler,
     generate_source,
+    stop_compilers,
     usable_cache_dir,
 )
-from nlp_calib.core.errors import NlpCalibWarning
+from nlp_calib.core import interrupts
+from nlp_calib.core.errors import CodegenError, NlpCalibWarning
 from nlp_calib.solvers.backends.base import Backend, BackendOptions, Request, scan_chunk
 
 
@@ -68,11 +76,14 @@ class CompiledBackend(Backend):
         name = f"{f.name()}_chunk{self.chunk}{'_sum' if request.reduce else ''}"
         return f.map(name, "serial", self.chunk, reduce_in, reduce_out)
 
-    def _build(self, request: Request) -> tuple[str, Path]:
+    def _build(self, request: Request, rebuild: bool = False) -> tuple[str, Path]:
         """Generate and compile (or find in the cache) a request's chunk: its name and shared object."""
+        if self.compiler in _BROKEN:
+            raise CodegenError(_BROKEN[self.compiler])
         fc = self._chunk(request)
         flags = compiler_flags(request.function)
-        return fc.name(), compile_shared(generate_source(fc), fc.name(), self.compiler, flags)
+        so = compile_shared(generate_source(fc), fc.name(), self.compiler, flags, rebuild=rebuild)
+        return fc.name(), so
 
     def _compile(self, request: Request) -> ca.Function:
         """The compiled chunk of a request, loaded (compiled at most once per content)."""
@@ -81,11 +92,31 @@ class CompiledBackend(Backend):
             if key in _LOADED:
                 return _LOADED[key][1]
             pending = _PENDING.get(key)
-        name, so = pending.result() if pending is not None else self._build(request)
-        loaded = ca.external(name, str(so))
+        loaded = self._load(request, pending)
         with _LOCK:
             _PENDING.pop(key, None)
             return _LOADED.setdefault(key, (request.function, loaded))[1]
+
+    def _load(self, request: Request, pending: Future[tuple[str, Path]] | None) -> ca.Function:
+        """The request's chunk from its shared object; compiled again once if that does not load,
+        then interpreted (with a warning) if the compiler cannot make one that does."""
+        try:
+            name, so = pending.result() if pending is not None else self._build(request)
+            try:
+                return ca.external(name, str(so))
+            except RuntimeError:  # checked whole, yet not loadable: compile it once more
+                name, so = self._build(request, rebuild=True)
+                try:
+                    return ca.external(name, str(so))
+                except RuntimeError as exc:
+                    raise CodegenError(
+                        f"the C compiler {self.compiler} wrote {so.name}, which does not load "
+                        f"({str(exc).strip().splitlines()[-1][:200]})"
+                    ) from None
+        except CodegenError as exc:
+            _fall_back(self.compiler, str(exc))
+            fc = self._chunk(request)
+            return fc.expand() if request.scan else fc
 
     def prepare(self, requests: Sequence[Request]) -> None:
         """Start compiling the requests' chunks in the background, in this order."""
@@ -96,11 +127,13 @@ class CompiledBackend(Backend):
                     _PENDING[key] = _pool().submit(self._build, request)
 
     def wait(self) -> None:
-        """Wait until everything :meth:`prepare` started has compiled."""
+        """Wait until everything :meth:`prepare` started has compiled (or failed to: a failure is
+        dealt with when the Function is loaded)."""
         with _LOCK:
             pending = list(_PENDING.values())
         for future in pending:
-            future.result()
+            with contextlib.suppress(CodegenError):
+                future.result()
 
     def scan_chunk(self, step: ca.Function) -> ca.Function:
         return self._compile(Request(step, scan=True))
@@ -148,6 +181,9 @@ class CompiledBackend(Backend):
 
 
 _warned_no_compiler = False
+#: Compilers found unable to make a loadable shared object in time, with the reason.
+_BROKEN: dict[str, str] = {}
+_warned_fallback: set[str] = set()
 _POOL: _Compilers | None = None
 _LOCK = threading.Lock()
 #: Loaded chunks (with the Function they came from, which keeps its id valid) and compiles under way.
@@ -193,6 +229,9 @@ class _Compilers:
     def close(self) -> None:
         with self._cond:
             self._closing = True
+        if interrupts.pending() is not None:  # the run was interrupted: nobody needs these compiles
+            stop_compilers()
+        with self._cond:
             self._cond.wait_for(lambda: self._busy == 0, timeout=60)
 
 
@@ -202,6 +241,23 @@ def _pool() -> _Compilers:
     if _POOL is None:
         _POOL = _Compilers(os.cpu_count() or 1)
     return _POOL
+
+
+def _fall_back(compiler: str, reason: str) -> None:
+    """Warn once per compiler that Functions are evaluated by the interpreter; a compiler that
+    hung is not asked again (each compile would take as long)."""
+    with _LOCK:
+        if "did not finish within" in reason:
+            _BROKEN.setdefault(compiler, reason)
+        if compiler in _warned_fallback:
+            return
+        _warned_fallback.add(compiler)
+    warnings.warn(
+        f"{reason.rstrip('.')}: evaluating with CasADi's interpreter instead, several times slower; "
+        "fix the compiler ($CC) or what it needs, or set 'backend: interpreted' to silence this",
+        NlpCalibWarning,
+        stacklevel=4,
+    )
 
 
 def make_compiled_backend(options: BackendOptions) -> Backend:
