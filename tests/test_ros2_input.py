@@ -381,3 +381,33 @@ def test_evo_reproduces_the_reported_ate_against_the_bags_own_topic(
     print(f"evo {evo.__version__}: ATE mean {mean:.9f} m against the bag's topic; reported {reported:.9f} m")
     assert estimate.num_poses == doc["solvers"]["gauss_newton"]["metrics"]["ate"]["n"]
     assert math.isclose(mean, reported, rel_tol=1e-6)
+
+
+def test_the_tracker_lag_is_found_on_the_joints_own_stamps(recording: rb.Recording, tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    late = replace(recording, tracker_ns=recording.tracker_ns + 30_000_000)  # poses stamped 30 ms late
+    bag = rb.write(late, tmp_path / "late", "mcap")
+    extra = "alignment: {tracker_lag: auto, search: [-0.05, 0.08], step: 0.005}\n"
+    cal = Calibration(load_scenario(_scenario(tmp_path, rb.dataset_block(bag, late), extra)))
+    print(f"tracker lag estimated {1e3 * cal.alignment.lag_s:.2f} ms (stamped 30 ms late)")
+    assert abs(cal.alignment.lag_s - 0.030) < 0.003
+    _assert_recovered(cal.run().reports["gauss_newton"].result.param_dict(), recording.truth)
+
+
+def test_a_wheel_fault_is_told_in_radians_never_in_counter_widths(
+    recording: rb.Recording, tmp_path: Path
+) -> None:
+    from dataclasses import replace
+
+    joints = recording.joints.copy()
+    jump = np.searchsorted(recording.joint_ns, recording.joint_ns[0] + 30 * 10**9)
+    joints[jump:, 1] += 3.0  # the wheel's angle jumps by 3 rad and stays there
+    bag = rb.write(replace(recording, joints=joints), tmp_path / "jump", "sqlite3")
+    cal = Calibration(load_scenario(_scenario(tmp_path, rb.dataset_block(bag, recording))))
+    counter = cal.findings.report.counter_faults
+    assert [f.encoder for f in counter] == ["traction_wheel"]
+    evidence = counter[0].evidence
+    print(evidence)
+    assert "rad" in evidence and "2^16" not in evidence and "ticks" not in evidence
+    assert abs(counter[0].implied - counter[0].logged + 3.0) < 0.1  # the tracker implies 3 rad less
