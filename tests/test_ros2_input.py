@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,9 @@ from nlp_calib.core.errors import ModelError, NlpCalibWarning, ScenarioError
 from nlp_calib.logs import BagError, JointStream, Log, resample_encoders
 from nlp_calib.logs.joint_log import read_joint_csv
 from nlp_calib.models import canonical, get_model
+from nlp_calib.outputs.handoff import urdf_joint
 from nlp_calib.pipeline import Calibration, load_scenario
+from nlp_calib.pipeline.build import initial_parameters
 from nlp_calib.sources import BagSource
 from nlp_calib.sources.robot import robot_header
 
@@ -291,7 +294,9 @@ def test_a_horizon_in_seconds_and_a_short_one_at_a_high_rate(
         Calibration(short)
 
 
-def test_tf_static_gives_the_nominal_mount(recording: rb.Recording, bags: dict[str, Path]) -> None:
+def test_tf_static_gives_the_nominal_mount(
+    recording: rb.Recording, bags: dict[str, Path], tmp_path: Path
+) -> None:
     source = BagSource(
         bags["sqlite3"],
         "/joint_states",
@@ -308,6 +313,20 @@ def test_tf_static_gives_the_nominal_mount(recording: rb.Recording, bags: dict[s
         TRICYCLE
     )
     assert plain.sensor_z_roll_pitch is None  # no sensor frame named: nothing to look up
+    block = rb.dataset_block(bags["sqlite3"], recording, ", sensor_frame: mocap_marker")
+    sc = load_scenario(_scenario(tmp_path, block, name="mounted"))
+    cal = Calibration(sc)
+    assert [cal.initial[n] for n in ("sensor_x", "sensor_y", "sensor_theta")] != [x, y, yaw]  # auto
+    run = cal.run()
+    joint = urdf_joint(run, "gauss_newton")
+    p = run.reports["gauss_newton"].result.param_dict()
+    origin = dict(re.findall(r'(xyz|rpy)="([^"]*)"', joint))
+    xyz, rpy = (np.array(origin[k].split(), dtype=float) for k in ("xyz", "rpy"))
+    # x, y, yaw calibrated; z, roll, pitch the nominal mount's (through a quaternion and back)
+    assert np.allclose(xyz, [p["sensor_x"], p["sensor_y"], z], rtol=0, atol=1e-12)
+    assert np.allclose(rpy, [roll, pitch, p["sensor_theta"]], rtol=0, atol=1e-12)
+    initial = initial_parameters(sc.with_options(initial_guess="from_file"), cal.model, cal.log)
+    assert [initial[n] for n in ("sensor_x", "sensor_y", "sensor_theta")] == [x, y, yaw]
 
 
 # --- the CSV joint log and the tracker's TUM file -------------------------------------------------
@@ -411,3 +430,28 @@ def test_a_wheel_fault_is_told_in_radians_never_in_counter_widths(
     print(evidence)
     assert "rad" in evidence and "2^16" not in evidence and "ticks" not in evidence
     assert abs(counter[0].implied - counter[0].logged + 3.0) < 0.1  # the tracker implies 3 rad less
+
+
+def test_logs_fitted_together_take_one_record_horizon() -> None:
+    from types import SimpleNamespace
+
+    from nlp_calib.pipeline.prepare import joint_residual
+    from nlp_calib.problem import ResidualOptions
+
+    def part(rate: float, horizon: int) -> SimpleNamespace:
+        sc = SimpleNamespace(
+            objective=SimpleNamespace(residual=ResidualOptions(horizon=horizon)),
+            log=SimpleNamespace(samples=SimpleNamespace(start=0, stop=None)),
+        )
+        return SimpleNamespace(scenario=sc, log=SimpleNamespace(time_s=np.arange(500) / rate))
+
+    def joint(residual: ResidualOptions) -> SimpleNamespace:
+        return SimpleNamespace(objective=SimpleNamespace(residual=residual), path=None, name="j")
+
+    with pytest.raises(
+        ScenarioError, match=r"horizon_s 0\.5 s is 60 records, 0\.5 s on datasets\[0\], 12 records"
+    ):
+        joint_residual(joint(ResidualOptions(horizon_s=0.5)), [part(120.0, 60), part(25.0, 12)])  # type: ignore[arg-type]
+    with pytest.warns(NlpCalibWarning, match=r"residual\.horizon 25 records spans very different durations"):
+        got = joint_residual(joint(ResidualOptions(horizon=25)), [part(120.0, 25), part(25.0, 25)])  # type: ignore[arg-type]
+    assert got.horizon == 25

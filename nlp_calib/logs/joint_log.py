@@ -1,7 +1,7 @@
 """A joint log as CSV: a header row ``time,<joint>,<joint>,…`` then one row per sample.
 
 Times in seconds (read to the nanosecond), joint positions in radians as ROS publishes them
-(REP 103: a wheel's angle grows without wrapping as it turns; a steering joint's is its angle);
+(REP 103: a wheel's angle grows without wrapping as it turns; an absolute joint's is its angle);
 ``#`` lines are comments. A row with another number of fields, a value that is not a finite
 number and a time that does not increase are refused with the file and the line.
 """

@@ -114,12 +114,13 @@ class BagSource:
 
     def header(self, model: KinematicModel) -> LogHeader:
         """The header the bag's records get (for ``model`` in the joints' units): ``ROBOT.yaml``'s
-        values, else the sensor's mount on ``/tf_static``, over the model's defaults."""
+        values, else (joints in radians) the sensor's mount on ``/tf_static``, over the model's
+        defaults. Raw counts keep the header they always had."""
         model = in_units(model, self.joint_units)
         robot = load_robot(self.robot, model) if self.robot is not None else None
         frame = (robot.sensor_frame if robot else None) or self.sensor_frame or self.tracker_frame
         mount = None
-        if (robot is None or robot.sensor_pose is None) and frame:
+        if self.joint_units == "radians" and (robot is None or robot.sensor_pose is None) and frame:
             mount = static_mount(bag_root(self.bag), self.base_frame, frame)
         return robot_header(model, robot, frame, mount)
 

@@ -78,4 +78,8 @@ def file_identity(path: Path) -> Hashable:
     try:
         return files.identity(path)
     except (OSError, ValueError):
+        pass
+    try:
         return path.resolve()
+    except (OSError, ValueError):  # a NUL in the path: no file has it; the read says so
+        return str(path)
