@@ -76,7 +76,7 @@ def test_a_recording_calibrates_in_robot_units_with_only_topics_and_joints(
     for name, value in params.items():
         t = recording.truth[name]
         print(
-            f"{fmt} {name}: {value:.6g} (truth {t:.6g}; off by {value - t:+.2e}, {(value - t) / t:+.2e} of it)"
+            f"{fmt} {name}: {value:.6g} (truth {t:.6g}; off by {value - t:+.2e}, {(value - t) / t:+.2e} rel.)"
         )
     _assert_recovered(params, recording.truth)
     faults = doc["faults"]["found"]
