@@ -158,11 +158,13 @@ def scenario(folder: Path, dataset: str, extra: str = "", name: str = "case.yaml
 
 def bag_mapping(bag: Path) -> str:
     joints = ", ".join(JOINTS)
-    return f"{{bag: '{bag}', joint_states: /joint_states, joints: [{joints}], tracker: /tracker/pose}}"
+    topics = "joint_states: /joint_states, tracker: /tracker/pose, joint_units: counts"
+    return f"{{bag: '{bag}', {topics}, joints: [{joints}]}}"
 
 
 def import_bag(bag: Path | str, out: Path, *extra: str) -> list[str]:
     topics = ["--joint-states", "/joint_states", "--joints", ",".join(JOINTS), "--tracker", "/tracker/pose"]
+    topics += ["--joint-units", "counts"]
     return ["import-bag", str(bag), "--out", str(out), "--model", "tricycle", *topics, *extra]
 
 

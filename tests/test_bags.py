@@ -180,7 +180,7 @@ def _scenario(folder: Path, dataset: str, name: str = "sc") -> Path:
 def _bag_block(bag: Path, extra: str = "") -> str:
     return (
         f"dataset: {{bag: {bag}, joint_states: /joint_states, joints: [{', '.join(JOINTS)}], "
-        f"tracker: /tracker/pose{extra}}}"
+        f"tracker: /tracker/pose, joint_units: counts{extra}}}"
     )
 
 
@@ -212,7 +212,9 @@ def test_the_bag_reads_as_the_text_log_record_for_record(
 ) -> None:
     _, log = drive
     for fmt, bag in bags.items():
-        got = BagSource(bag, "/joint_states", JOINTS, "/tracker/pose").read(TRICYCLE, strict=True)
+        got = BagSource(bag, "/joint_states", JOINTS, "/tracker/pose", joint_units="counts").read(
+            TRICYCLE, strict=True
+        )
         assert np.array_equal(got.ticks, log.ticks), fmt
         assert np.array_equal(got.time_s, log.time_s), fmt
         assert np.array_equal(got.T_world_sensor[:, :2], log.T_world_sensor[:, :2]), fmt
@@ -292,7 +294,7 @@ def test_encoder_messages_take_the_tracker_pose_interpolated_at_their_stamps(tmp
     assert (p.before, p.after) == (before, after) == (3, 3)
     assert p.in_gaps == 65 - len(kept) - before - after > 0
     with pytest.warns(UserWarning, match=r"in tracker gaps over 0\.1 s"):
-        BagSource(bag, "/js", JOINTS, "/pose").read(TRICYCLE, strict=True)
+        BagSource(bag, "/js", JOINTS, "/pose", joint_units="counts").read(TRICYCLE, strict=True)
 
 
 # --- tracker message types ----------------------------------------------------------------------
@@ -328,7 +330,9 @@ def test_transforms_tf_and_odometry_give_the_poses_of_the_tracked_frame(
 ) -> None:
     path, log = diff_drive
     bag = _tracker_bag(tmp_path, path, log, kind, fmt="ros1" if kind == TF else "mcap")
-    source = BagSource(bag, "/joint_states", ("left", "right"), topic, tracker_frame="robot_marker")
+    source = BagSource(
+        bag, "/joint_states", ("left", "right"), topic, tracker_frame="robot_marker", joint_units="counts"
+    )
     got = source.read(get_model("diff_drive"), strict=True)
     assert np.array_equal(got.ticks, log.ticks) and np.array_equal(got.time_s, log.time_s)
     assert_close(got.T_world_sensor, log.T_world_sensor, rtol=0, atol=1e-15, what=kind)
@@ -354,7 +358,9 @@ def test_a_tf_topic_needs_the_tracked_frame_and_lists_the_frames(
         ),
     ]:
         with pytest.raises(BagError, match=pattern) as exc:
-            BagSource(bag, "/joint_states", ("left", "right"), "/tf", frame).read(dd, strict=True)
+            BagSource(bag, "/joint_states", ("left", "right"), "/tf", frame, joint_units="counts").read(
+                dd, strict=True
+            )
         assert "\n" not in str(exc.value)
 
 
@@ -606,7 +612,12 @@ def test_several_bags_calibrate_together_as_their_text_logs(
     other_bag = write_bag(
         tmp_path / "other", "ros1", drive_messages(load_log(other, TRICYCLE), _start_ns(other))
     )
-    topics = {"joint_states": "/joint_states", "joints": list(JOINTS), "tracker": "/tracker/pose"}
+    topics = {
+        "joint_states": "/joint_states",
+        "joints": list(JOINTS),
+        "tracker": "/tracker/pose",
+        "joint_units": "counts",
+    }
     runs = []
     for first, second in (
         ({"path": str(path), "samples": {"start": 20}}, str(other)),
@@ -631,7 +642,7 @@ def test_a_bad_bag_entry_of_datasets_names_its_place(tmp_path: Path) -> None:
         (f"{{bag: x.bag, {topics}, joints: [a], samples: {{start: 5}}}}", r"datasets\[1\]\.joints: 1 joint"),
         (
             f"{{bag: x.bag, {topics}, joints: [a, b], sampels: {{start: 5}}}}",
-            r"datasets\[1\]\.sampels: unknown key; a bag block has bag, .*, max_gap, samples, alignment",
+            r"datasets\[1\]\.sampels: unknown key; a bag block has bag, .*, base_frame, samples, alignment",
         ),
     ]:
         with pytest.raises(ScenarioError, match=pattern):
@@ -648,11 +659,14 @@ def test_import_bag_writes_a_text_log_that_reads_back_as_the_bag(
     out = tmp_path / "imported.txt"
     args = ["import-bag", str(bags["sqlite3"]), "--out", str(out), "--model", "tricycle"]
     args += ["--joint-states", "/joint_states", "--joints", ",".join(JOINTS), "--tracker", "/tracker/pose"]
+    args += ["--joint-units", "counts"]
     proc = cli(*args)
     assert proc.returncode == 0, proc.stderr
     assert "400 of 400 encoder messages paired" in proc.stdout and "note: no --robot" in proc.stdout
     back = read_log(out, TRICYCLE.encoder_kinds)
-    direct = BagSource(bags["sqlite3"], "/joint_states", JOINTS, "/tracker/pose").read(TRICYCLE, strict=True)
+    direct = BagSource(bags["sqlite3"], "/joint_states", JOINTS, "/tracker/pose", joint_units="counts").read(
+        TRICYCLE, strict=True
+    )
     for field in ("time_s", "ticks", "T_world_sensor", "model_pose"):
         assert np.array_equal(getattr(back, field), getattr(direct, field)), field
     assert np.array_equal(back.ticks, log.ticks) and back.header == direct.header

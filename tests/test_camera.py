@@ -19,7 +19,7 @@ from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
 from nlp_calib.analysis.metrics import SPATIAL, geometry, trajectory_metrics
 from nlp_calib.core import poses3d
 from nlp_calib.core.errors import ProblemError
-from nlp_calib.logs import CameraRecording, camera_log, pair, read_joints_csv, read_tum
+from nlp_calib.logs import CameraRecording, camera_log, pair, read_joint_csv, read_tum
 from nlp_calib.models import get_model
 from nlp_calib.models.camera_start import REASONS, CameraStart, camera_start
 from nlp_calib.models.joints import joint_map
@@ -70,7 +70,7 @@ def record(tmp: Path, **options: object) -> tuple[CameraSimulation, CameraRecord
     """Simulate, write the files, and read them back as a camera user would."""
     sim = simulate_camera(CameraSimulationOptions(**options))  # type: ignore[arg-type]
     tum, joints, _ = write_camera_simulation(sim, tmp / "cam.tum")
-    return sim, pair(read_tum(tum), read_joints_csv(joints), reach_s=0.05)
+    return sim, pair(read_tum(tum), read_joint_csv(joints), reach_s=0.05)
 
 
 def information(sim: CameraSimulation) -> np.ndarray:

@@ -161,7 +161,8 @@ def test_swapped_wheel_joints_name_the_cause_and_write_no_hand_off(tmp_path: Pat
     sc = tmp_path / "swapped.yaml"
     sc.write_text(
         f"dataset: {{bag: {bag}, joint_states: /joint_states, joints: [right, left], "
-        "tracker: /tracker/pose}\nmodel: diff_drive\ninitial_guess: auto\nsolvers: [gauss_newton]\n"
+        "tracker: /tracker/pose, joint_units: counts}\n"
+        "model: diff_drive\ninitial_guess: auto\nsolvers: [gauss_newton]\n"
         "validation: {blocks: 0}\n"
     )
     outcome = run_in_process(["run", str(sc), "--out", str(tmp_path / "out")], tmp_path)

@@ -90,6 +90,7 @@ class MemorySource:
 
     kind: ClassVar[str] = "memory"
     record_word: ClassVar[str] = "record"
+    joint_units: ClassVar[str] = "counts"
     LOGS: ClassVar[dict[str, Log]] = {}
     name: str
 
@@ -100,7 +101,7 @@ class MemorySource:
     def files(self) -> tuple[Path, ...]:
         return ()
 
-    def stamps(self) -> str:
+    def clock(self) -> str:
         return "the stored log's times"
 
     def identity(self) -> Hashable:

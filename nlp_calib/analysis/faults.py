@@ -30,6 +30,8 @@ from dataclasses import replace
 import numpy as np
 
 from nlp_calib.analysis.counters import screen_counters
+from nlp_calib.analysis.joint_repair import repair_joints
+from nlp_calib.analysis.readings import Readings, in_radians, interpolated_over, readings, turning
 from nlp_calib.analysis.streams import off_neighbours, scatter, stuck_runs
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
@@ -46,9 +48,9 @@ from nlp_calib.results.faults import (
 WRAP_16 = 2**16
 #: An absolute encoder's glitch must leave the span of its neighbours by this angle (rad): less
 #: is not told from a sharp turn of the thing it measures. A stuck reading must catch up by more
-#: than this many ticks.
+#: than this many of its smallest steps (ticks; a joint's resolution).
 SPIKE_MIN_ANGLE = 0.03
-STUCK_FLOOR_TICKS = 3.0
+STUCK_FLOOR_STEPS = 3.0
 #: The longest group of tracker records judged as one glitch; an absolute encoder's is one record.
 #: A glitch of the tracker leaves the span of its near neighbours by this many times its scatter
 #: at rest (a corner cut by a slow tracker interpolated onto faster records stays inside it).
@@ -60,12 +62,6 @@ def _unwrapped_poses(log: Log) -> np.ndarray:
     T = np.array(log.T_world_sensor, dtype=float)
     T[:, 2] = np.unwrap(T[:, 2])
     return T
-
-
-def _angle_ticks(log: Log, col: int) -> np.ndarray:
-    """An absolute encoder's readings unwrapped across its range (ticks, float)."""
-    vmax = log.header.encoder_max[col]
-    return np.unwrap(2.0 * np.pi * log.ticks[:, col] / vmax) * vmax / (2.0 * np.pi)
 
 
 def _fault(
@@ -103,36 +99,36 @@ def tracker_faults(log: Log) -> list[Fault]:
     return found
 
 
-def _stuck(log: Log, col: int, y: np.ndarray, moving: np.ndarray | None) -> list[Fault]:
+def _stuck(log: Log, r: Readings, moving: np.ndarray | None) -> list[Fault]:
     """An absolute encoder's readings that held while the robot moved, then caught up at once."""
-    name, lines, t = log.header.encoder_names[col], log.line_numbers, log.time_s
+    name, lines, t, y = r.name, log.line_numbers, log.time_s, r.values
     found = []
-    for first, last, jump in stuck_runs(t, y, STUCK_FLOOR_TICKS, moving):
-        r = first + 1
+    for first, last, jump in stuck_runs(t, y, STUCK_FLOOR_STEPS * r.step, moving):
+        k = first + 1
         evidence = (
-            f"{name!r} holds {log.ticks[first, col]} ticks over records {first}-{last} (lines "
-            f"{lines[first]}-{lines[last]}) while the robot moves, then jumps by {jump:+.0f} ticks at "
-            f"record {last + 1}: the reading was stuck"
+            f"{name!r} holds {r.shown(y[first])} over records {first}-{last} (lines "
+            f"{lines[first]}-{lines[last]}) while the robot moves, then jumps by {r.shown(jump, True)} "
+            f"at record {last + 1}: the reading was stuck"
         )
-        implied = y[first] + jump * (t[r] - t[first]) / max(t[last + 1] - t[first], 1e-9)
-        found.append(_fault(log, "steering_stuck", name, (first, last), r, (y[r], implied, 1.0), evidence))
+        implied = y[first] + jump * (t[k] - t[first]) / max(t[last + 1] - t[first], 1e-9)
+        size = (float(y[k]), float(implied), r.step)
+        found.append(_fault(log, "steering_stuck", name, (first, last), k, size, evidence))
     return found
 
 
-def _spikes(log: Log, col: int, y: np.ndarray, usable: np.ndarray) -> list[Fault]:
+def _spikes(log: Log, r: Readings, usable: np.ndarray) -> list[Fault]:
     """An absolute encoder's readings that leave the span of their neighbours for one record."""
-    name, lines, t = log.header.encoder_names[col], log.line_numbers, log.time_s
-    sc = scatter(t, y, 1.0)
-    least = SPIKE_MIN_ANGLE * log.header.encoder_max[col] / (2.0 * np.pi)
+    lines, t, y = log.line_numbers, log.time_s, r.values
+    sc = scatter(t, y, r.step)
     found = []
-    for g in off_neighbours(t, y, sc, usable, excursion=least, max_group=1):
-        r, off = g.first, float(g.offset[0])
+    for g in off_neighbours(t, y, sc, usable, excursion=SPIKE_MIN_ANGLE * r.per_radian, max_group=1):
+        k, off = g.first, float(g.offset[0])
         evidence = (
-            f"{name!r} reads {log.ticks[r, col]} ticks at record {r} (line {lines[r]}), {off:+.0f} "
-            "ticks off the line between its neighbours, which agree with each other: a one-record spike"
+            f"{r.name!r} reads {r.shown(y[k])} at record {k} (line {lines[k]}), {r.shown(off, True)} off "
+            "the line between its neighbours, which agree with each other: a one-record spike"
         )
-        size = (float(y[r]), float(y[r] - off), float(sc.floor[0]))
-        found.append(_fault(log, "steering_spike", name, (r - 1, r), r, size, evidence))
+        size = (float(y[k]), float(y[k] - off), float(sc.floor[0]))
+        found.append(_fault(log, "steering_spike", r.name, (k - 1, k), k, size, evidence))
     return found
 
 
@@ -140,48 +136,49 @@ def absolute_faults(log: Log, kinds: Mapping[str, EncoderKind]) -> list[Fault]:
     """Stuck readings (judged while the robot moves: a counter's increment) and one-record spikes
     of the log's absolute encoders."""
     names = log.header.encoder_names
-    counters = [j for j, n in enumerate(names) if kinds.get(n) == "counter"]
-    moving = (
-        np.any([wrapped_difference(log.ticks[:, j]) != 0 for j in counters], axis=0) if counters else None
-    )
+    moving = turning(log, [n for n in names if kinds.get(n) == "counter"])
     found = []
-    for col in (j for j, n in enumerate(names) if kinds.get(n) == "absolute"):
-        y = _angle_ticks(log, col)
-        stuck = _stuck(log, col, y, moving)
+    for name in (n for n in names if kinds.get(n) == "absolute"):
+        r = readings(log, name)
+        stuck = _stuck(log, r, moving)
         usable = np.ones(log.n_records, dtype=bool)
         for f in stuck:
             usable[f.record : f.last + 1] = False
-        found += stuck + _spikes(log, col, y, usable)
+        found += stuck + _spikes(log, r, usable)
     return found
 
 
 def cleaned(log: Log, faults: Sequence[Fault]) -> Log:
     """``log`` with the tracker's and the absolute encoders' glitches interpolated over (in time,
     from the readings around them), so that they mislead no judgement of another stream."""
-    t = log.time_s
+    t, out = log.time_s, log
     bad_pose = np.zeros(log.n_records, dtype=bool)
-    ticks = np.array(log.ticks, dtype=np.int64)
     for f in faults:
         if f.kind in TRACKER_KINDS:
             bad_pose[f.record] = True
         elif f.kind in ABSOLUTE_KINDS and f.encoder is not None:
-            col = log.header.encoder_index(f.encoder)
-            vmax = log.header.encoder_max[col]
             bad = np.zeros(log.n_records, dtype=bool)
             bad[f.record : (f.last + 1 if f.kind == "steering_stuck" else f.record + 1)] = True
-            y = _angle_ticks(log, col)
-            ticks[bad, col] = np.mod(np.round(np.interp(t[bad], t[~bad], y[~bad])), vmax)
-    T = np.array(log.T_world_sensor, dtype=float)
-    if bad_pose.any() and (~bad_pose).sum() >= 2:
-        U = _unwrapped_poses(log)
-        for j in range(3):
-            T[bad_pose, j] = np.interp(t[bad_pose], t[~bad_pose], U[~bad_pose, j])
-        T[:, 2] = wrap_angle(T[:, 2])
-    return replace(log, ticks=frozen(ticks), T_world_sensor=frozen(T))
+            out = interpolated_over(out, f.encoder, bad)
+    if not bad_pose.any() or (~bad_pose).sum() < 2:
+        return out
+    T, U = np.array(log.T_world_sensor, dtype=float), _unwrapped_poses(log)
+    for j in range(3):
+        T[bad_pose, j] = np.interp(t[bad_pose], t[~bad_pose], U[~bad_pose, j])
+    T[:, 2] = wrap_angle(T[:, 2])
+    return replace(out, T_world_sensor=frozen(T))
 
 
-def _evidence(kind: str, name: str, logged: float, implied: float, noise: float, records: str) -> str:
+def _evidence(
+    kind: str, name: str, logged: float, implied: float, noise: float, records: str, unit: str
+) -> str:
     deficit = implied - logged
+    if unit != "ticks":  # joint angles: no counter width to name
+        text = (
+            f"{name} reads {logged:+.4g} {unit} over {records}; the tracker's motion implies "
+            f"{implied:+.4g} ± {noise:.2g}: {deficit:+.4g} {unit} unexplained"
+        )
+        return text + ("; the joint stood still before the jump" if kind == "stall_then_jump" else "")
     text = (
         f"{name} reads {logged:+.0f} ticks over {records}; the tracker's motion implies "
         f"{implied:+.0f} ± {noise:.0f}: {deficit:+.0f} ticks unexplained"
@@ -210,13 +207,13 @@ def counter_faults(
     e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
     de_du = de_du.reshape(3, N, inputs.shape[0])
     screens, lag_s = screen_counters(e, de_du, inputs, counters, log.time_s, lag)
-    lines = log.line_numbers
+    lines, unit = log.line_numbers, "rad" if in_radians(log) else "ticks"
     faults = []
     for name, sc in screens.items():
         for f in sc.findings:
             k = f.last
             records = f"records {f.first}-{k + 1} (lines {lines[f.first]}-{lines[k + 1]})"
-            why = _evidence(f.kind, f"counter {name!r}", f.logged, f.implied, f.noise, records)
+            why = _evidence(f.kind, f"counter {name!r}", f.logged, f.implied, f.noise, records, unit)
             faults.append(_fault(log, f.kind, name, (f.first, k), k + 1, (f.logged, f.implied, f.noise), why))
     stale = {n: sc.stale for n, sc in screens.items()}
     noise = {n: sc.noise for n, sc in screens.items()}
@@ -255,8 +252,22 @@ def repair(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]:
     (a wrapped 16-bit counter); any other by the tracker-implied amount, rounded. The correction is
     added to the reading that shows the fault and to every later one, so the total over the
     fault's stretch becomes right; the stalled readings before it are left as they are. An absolute
-    encoder's spike or stuck readings are interpolated from the readings around them.
+    encoder's spike or stuck readings are interpolated from the readings around them. Joints in
+    radians have no counter width: their counters take the tracker-implied amount
+    (:mod:`nlp_calib.analysis.joint_repair`).
     """
+    fixed, changes = repair_joints(log, report) if in_radians(log) else _repair_counts(log, report)
+    absolute = [f for f in report.faults if f.kind in ABSOLUTE_KINDS]
+    for f in absolute:
+        what = "spike" if f.kind == "steering_spike" else "stuck readings"
+        changes += (
+            f"{f.encoder!r} at record {f.record} (line {f.line}): {what} interpolated from its neighbours",
+        )
+    return cleaned(fixed, absolute), changes
+
+
+def _repair_counts(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]:
+    """``log`` with its counters' faults corrected (see :func:`repair`), one line per change."""
     ticks = np.array(log.ticks, dtype=np.int64)
     changes = []
     for f in report.counter_faults:
@@ -274,11 +285,4 @@ def repair(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]:
             f"{before + correction:+d} ticks ({how}; the tracker's motion implied "
             f"{f.implied - f.logged:+.0f} ± {f.noise:.0f} more over records {f.first}-{f.record})"
         )
-    absolute = [f for f in report.faults if f.kind in ABSOLUTE_KINDS]
-    fixed = cleaned(replace(log, ticks=frozen(ticks)), absolute)
-    for f in absolute:
-        what = "spike" if f.kind == "steering_spike" else "stuck readings"
-        changes.append(
-            f"{f.encoder!r} at record {f.record} (line {f.line}): {what} interpolated from its neighbours"
-        )
-    return replace(log, ticks=fixed.ticks), tuple(changes)
+    return replace(log, ticks=frozen(ticks)), tuple(changes)

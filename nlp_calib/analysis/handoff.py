@@ -17,7 +17,7 @@ from nlp_calib.results.handoff import ControllerParams, Placement
 
 
 def _values(
-    model: KinematicModel, names: Sequence[str], p: np.ndarray, ranges: Mapping[str, int]
+    model: KinematicModel, names: Sequence[str], p: np.ndarray, ranges: Mapping[str, float]
 ) -> np.ndarray:
     _, parameters, _, _ = model.controller(dict(zip(names, map(float, p))), ranges)
     return np.array(list(parameters.values()))
@@ -29,7 +29,7 @@ def controller_params(
     params: np.ndarray,
     std: np.ndarray,
     correlation: np.ndarray,
-    ranges: Mapping[str, int],
+    ranges: Mapping[str, float],
 ) -> ControllerParams:
     """``model``'s controller parameters at ``params`` (in ``names`` order) with their 1σ."""
     values = dict(zip(names, map(float, params)))

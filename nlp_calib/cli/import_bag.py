@@ -1,39 +1,84 @@
-"""``nlp-calib import-bag``: a ROS bag's encoders and tracker written as a text log."""
+"""``nlp-calib import-bag``: a ROS bag's joints and tracker written as files a scenario reads.
+
+Joints in radians (the default) are written as they were published, each stream on its own clock:
+the joints as a CSV joint log at ``--out`` and the tracker's poses as a TUM file beside it (same
+name, ``.tum``), which a scenario reads as ``dataset: {joints: …, poses: …, encoders: …}`` exactly
+as it reads the bag. Raw counts (``--joint-units counts``) are paired into a text log.
+"""
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Mapping
+from pathlib import Path
 
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import atomic_write_text, check_output_dir, refuse_input_alias
 from nlp_calib.logs.bag_files import bag_root
+from nlp_calib.logs.bag_joints import joint_files
 from nlp_calib.logs.reader import parse_log
-from nlp_calib.models import get_model
+from nlp_calib.models import encoders, get_model
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.sources import BagSource
+
+
+def _stamps(given: list[str] | None) -> str | Mapping[str, str]:
+    """``--stamps``: ``header``/``receive`` for every topic, or ``TOPIC=how`` for one."""
+    if not given:
+        return "header"
+    if len(given) == 1 and "=" not in given[0]:
+        return given[0]
+    out = {}
+    for item in given:
+        topic, sep, how = item.rpartition("=")
+        if not sep:
+            raise UsageError(
+                f"--stamps {item}: give header or receive once, or TOPIC=header|receive per topic"
+            )
+        out[topic] = how
+    return out or "header"
+
+
+def _write(folder: Path, texts: Mapping[str, str], force: bool) -> StagedOutput:
+    with StagedOutput(folder, None, force=force) as stage:
+        for name, text in texts.items():
+            atomic_write_text(stage.path / name, text)
+        interrupts.hold()
+        stage.commit()
+    return stage
 
 
 def cmd_import_bag(args: argparse.Namespace) -> int:
     model = get_model(args.model)
     source = BagSource(
-        args.bag, args.joint_states, args.joints, args.tracker, args.tracker_frame, args.robot, args.max_gap
+        args.bag,
+        args.joint_states,
+        args.joints,
+        args.tracker,
+        args.tracker_frame,
+        args.robot,
+        args.max_gap,
+        args.joint_units,
+        _stamps(args.stamps),
+        args.clock_offset,
     )
     out = args.out
     if out.is_dir() or out.name in ("", ".", ".."):
         raise UsageError(f"--out {out} is a folder; give the path of the log file to write")
     folder = check_output_dir(out.parent)
     bag_root(args.bag)  # a bag, not a FIFO; noted as an input: the log is never written over it
-    refuse_input_alias(out)
-    refuse_collisions(folder, [out.name], tracked=False, force=args.force)  # it may be the user's log
+    names = [out.name] if args.joint_units == "counts" else [out.name, out.with_suffix(".tum").name]
+    for name in names:
+        refuse_input_alias(folder / name)
+    refuse_collisions(folder, names, tracked=False, force=args.force)  # it may be the user's log
+    if args.joint_units == "radians":
+        return _import_radians(args, source, folder, names)
     header, records = source.records(model)
     text = records.text(header, model.encoder_kinds)
     # Read back as a run will read it: records a strict read refuses are named now, as warnings.
     log = parse_log(text.splitlines(), model.encoder_kinds, str(out), strict=False)
-    with StagedOutput(folder, None, force=args.force) as stage:
-        atomic_write_text(stage.path / out.name, text)
-        interrupts.hold()
-        stage.commit()
+    stage = _write(folder, {out.name: text}, args.force)
     print(f"read {args.bag}: {records.pairing.describe()}")
     print(f"wrote {stage.final(stage.path / out.name)} ({log.n_records} records over {log.time_s[-1]:.1f} s)")
     if args.robot is None:
@@ -43,4 +88,16 @@ def cmd_import_bag(args: argparse.Namespace) -> int:
             f"note: no --robot: the header holds {model.name}'s defaults (initial guess {guess}; encoder "
             f"ranges {ranges}); give your robot's in ROBOT.yaml, or use 'initial_guess: auto'"
         )
+    return 0
+
+
+def _import_radians(args: argparse.Namespace, source: BagSource, folder: Path, names: list[str]) -> int:
+    model = get_model(args.model)
+    csv_text, tum_text, summary = joint_files(args.bag, source.topics())
+    stage = _write(folder, dict(zip(names, (csv_text, tum_text))), args.force)
+    joints, poses = (stage.final(stage.path / n) for n in names)
+    print(f"read {args.bag}: {summary}")
+    print(f"wrote {joints} (the joints in radians) and {poses} (the tracker's poses)")
+    pairs = ", ".join(f"{e}: {j}" for e, j in zip(encoders(model), args.joints))
+    print(f"a scenario reads them as: dataset: {{joints: {joints}, poses: {poses}, encoders: {{{pairs}}}}}")
     return 0

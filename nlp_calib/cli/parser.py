@@ -10,7 +10,7 @@ from typing import Any, NoReturn
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.ranges import Range
 from nlp_calib.core.version import __version__
-from nlp_calib.logs.bag_reader import DEFAULT_MAX_GAP_S, MAX_GAP, TRACKER_TYPES
+from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, JOINT_UNITS, MAX_GAP, TRACKER_TYPES
 from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders
 from nlp_calib.pipeline.options import BLOCKS
 from nlp_calib.pipeline.simconfig import CLI_LIMITS
@@ -280,19 +280,25 @@ def _add_simulate(sub: Any) -> None:
 def _add_import_bag(sub: Any) -> None:
     p = sub.add_parser(
         "import-bag",
-        help="convert a ROS 1 or ROS 2 bag (encoders and tracker) into a text log (docs/bags.md)",
+        help="convert a ROS 1 or ROS 2 bag (joints and tracker) into a CSV joint log and a TUM file, or a "
+        "text log of raw counts (docs/bags.md)",
         **_sub("import-bag"),
     )
     orders = "; ".join(f"{name}: {','.join(encoders(m))}" for name, m in MODELS.items())
     p.add_argument("bag", type=_path, help="a ROS 1 .bag file or a ROS 2 bag folder (sqlite3 or MCAP)")
-    p.add_argument("--out", type=_path, required=True, help="text log to write")
+    p.add_argument(
+        "--out",
+        type=_path,
+        required=True,
+        help="joint log (.csv; the tracker beside it as .tum) or text log to write",
+    )
     _add_force(p, "an existing log")
     p.add_argument("--model", choices=tuple(MODELS), required=True, help="the robot's kinematic model")
     p.add_argument(
         "--joint-states",
         required=True,
         metavar="TOPIC",
-        help="sensor_msgs/msg/JointState topic with the raw encoder counts in position",
+        help="sensor_msgs/msg/JointState topic with the joints' positions (or velocities)",
     )
     p.add_argument(
         "--joints",
@@ -325,6 +331,38 @@ def _add_import_bag(sub: Any) -> None:
         type=_in(MAX_GAP),
         default=DEFAULT_MAX_GAP_S,
         metavar="S",
-        help=f"longest tracker gap an encoder message is interpolated across, {MAX_GAP.describe()} s "
+        help=f"longest gap of one topic the other's time is interpolated across, {MAX_GAP.describe()} s "
         f"(default {DEFAULT_MAX_GAP_S:g})",
     )
+    _add_import_timing(p)
+
+
+def _add_import_timing(p: Any) -> None:
+    p.add_argument(
+        "--joint-units",
+        choices=JOINT_UNITS,
+        default="radians",
+        help="what JointState.position holds: radians (REP 103, the default: writes the joints as a CSV "
+        "joint log and the tracker as a TUM file) or raw counts (writes a text log)",
+    )
+    p.add_argument(
+        "--stamps",
+        action="append",
+        default=None,
+        metavar="[TOPIC=]header|receive",
+        help="time a topic (or both) by the bag's record times instead of its header stamps",
+    )
+    p.add_argument(
+        "--clock-offset",
+        type=_offset,
+        default=0.0,
+        metavar="S|auto",
+        help="seconds added to the joints' stamps (another clock), or auto to estimate it from record times",
+    )
+
+
+def _offset(text: str) -> float | str:
+    if text == "auto":
+        return text
+    value = _in(CLOCK_OFFSET)(text)
+    return float(value)

@@ -7,8 +7,8 @@ Knows no kinematic model: callers say which encoders are absolute and which are 
 from nlp_calib.logs.bag_reader import BagError, BagTopics
 from nlp_calib.logs.bag_records import read_bag
 from nlp_calib.logs.camera import CameraRecording, JointInput, camera_log, pair, planar_track
-from nlp_calib.logs.joints_csv import JointLog, format_joints_csv, read_joints_csv
-from nlp_calib.logs.log import ENCODER_KINDS, DroppedRecord, EncoderKind, Log, LogHeader
+from nlp_calib.logs.joint_log import JointTable, format_joint_csv, read_joint_csv
+from nlp_calib.logs.log import ENCODER_KINDS, DroppedRecord, EncoderKind, JointStream, Log, LogHeader
 from nlp_calib.logs.reader import parse_log, read_log, yaw_from_quaternion
 from nlp_calib.logs.resample import resample_encoders
 from nlp_calib.logs.tum import Trajectory3D, format_tum, read_tum
@@ -22,19 +22,20 @@ __all__ = [
     "DroppedRecord",
     "EncoderKind",
     "JointInput",
-    "JointLog",
+    "JointStream",
+    "JointTable",
     "Log",
     "LogHeader",
     "Trajectory3D",
     "camera_log",
-    "format_joints_csv",
+    "format_joint_csv",
     "format_log",
     "format_tum",
     "pair",
     "parse_log",
     "planar_track",
     "read_bag",
-    "read_joints_csv",
+    "read_joint_csv",
     "read_log",
     "read_tum",
     "resample_encoders",

@@ -2,9 +2,12 @@
 
 ``rosbags`` is pure Python but optional (``pip install 'nlp_calib[ros]'``): it is imported only
 when a bag is opened. Encoders come from ``sensor_msgs/msg/JointState`` (raw counts in
-``position``), the tracker from a pose, transform, odometry or TF topic; each message's time is
-its header stamp. A problem with the bag, a topic or a message is one :class:`BagError` line that
-lists what the bag does hold.
+``position``, or joint positions in radians, or only velocities in rad/s, integrated later), the
+tracker from a pose, transform, odometry or TF topic (the planar pose, then the full 3-D pose);
+each message's time is its header stamp, or the bag's record time for a topic named in
+:attr:`BagTopics.receive` or whose header stamps are all zero (said in a warning). A problem
+with the bag, a topic or a message is one :class:`BagError` line that lists what the bag does
+hold.
 
 Nothing but a regular file (or a folder of them) is opened as a bag: a FIFO, socket or device is
 refused before it can block. Messages that are not what they claim are dropped and counted
@@ -17,6 +20,7 @@ whose ``nanosec`` is not below 10⁹ is no time at all: the bag is refused.
 from __future__ import annotations
 
 import math
+import warnings
 from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -25,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from nlp_calib.core.errors import UsageError
+from nlp_calib.core.errors import NlpCalibWarning, UsageError
 from nlp_calib.core.ranges import Range
 from nlp_calib.logs.bag_files import DAMAGED, BagError, is_bag, messages, opened, why
 from nlp_calib.logs.reader import yaw_from_quaternion
@@ -40,9 +44,15 @@ TF_TYPE = "tf2_msgs/msg/TFMessage"
 TRACKER_TYPES = (POSE_TYPE, TRANSFORM_TYPE, ODOMETRY_TYPE, TF_TYPE)
 #: Types whose messages name the frame they follow (``child_frame_id``).
 _FRAMED = (TRANSFORM_TYPE, ODOMETRY_TYPE, TF_TYPE)
+#: What a tracker pose holds: the planar pose (its yaw), then the 3-D pose as published.
+TRACKER_COLUMNS = ("x", "y", "yaw", "z", "qx", "qy", "qz", "qw")
 #: Default of :attr:`BagTopics.max_gap`: a tracker at 10 Hz or faster brackets every encoder message.
 DEFAULT_MAX_GAP_S = 0.1
+#: What a JointState's positions hold (``counts``: raw encoder counts; ``radians``: REP 103).
+JOINT_UNITS = ("counts", "radians")
 MAX_GAP = Range(0.0, 10.0, lo_open=True)
+#: A clock offset of up to a century: time since boot against the epoch.
+CLOCK_OFFSET = Range(-4e9, 4e9)
 #: A quaternion whose norm is off 1 by more than this is not a rotation (a lost target's zeros, a
 #: publisher that scales it); closer ones are normalised. Float rounding stays below 1e-6.
 QUATERNION_TOLERANCE = 1e-3
@@ -55,7 +65,11 @@ class BagTopics:
 
     ``joints`` names the JointState entries in the model's encoder order; ``tracker_frame`` picks
     the transforms whose child frame it is (required on a TF topic); ``max_gap`` (s) is the longest
-    stretch between two tracker poses an encoder message is interpolated across.
+    stretch between two messages of one topic that the other's time is interpolated across.
+    ``joint_units`` says what ``JointState.position`` holds; ``receive`` names the topics timed by
+    the bag's record times instead of their header stamps; ``clock_offset`` (s, or ``auto``:
+    estimated from the record times) is added to the joints' stamps to put them on the tracker's
+    clock.
     """
 
     joint_states: str
@@ -63,6 +77,9 @@ class BagTopics:
     tracker: str
     tracker_frame: str | None = None
     max_gap: float = DEFAULT_MAX_GAP_S
+    joint_units: str = "counts"
+    receive: tuple[str, ...] = ()
+    clock_offset: float | str = 0.0
 
     def __post_init__(self) -> None:
         for key in ("joint_states", "tracker"):
@@ -76,6 +93,19 @@ class BagTopics:
             raise UsageError("tracker_frame: name the tracked frame, got an empty name")
         if (reason := MAX_GAP.problem(self.max_gap)) is not None:
             raise UsageError(f"max_gap (seconds) {reason}")
+        if self.joint_units not in JOINT_UNITS:
+            raise UsageError(f"joint_units: one of {', '.join(JOINT_UNITS)}, got {self.joint_units!r}")
+        for topic in self.receive:
+            if topic not in (self.joint_states, self.tracker):
+                raise UsageError(
+                    f"stamps: {topic!r} is neither the joint_states nor the tracker topic "
+                    f"({self.joint_states}, {self.tracker})"
+                )
+        offset = self.clock_offset
+        if isinstance(offset, str) and offset != "auto":
+            raise UsageError(f"clock_offset: seconds, or auto to estimate it, got {offset!r}")
+        if not isinstance(offset, str) and (reason := CLOCK_OFFSET.problem(offset)) is not None:
+            raise UsageError(f"clock_offset (seconds) {reason}")
 
 
 #: Why messages were dropped, as :class:`Drops` counts them.
@@ -104,12 +134,14 @@ class Drops:
 
 @dataclass(frozen=True)
 class Stamped:
-    """A topic's messages in bag order: stamps (ns) and one row of values per message."""
+    """A topic's messages in bag order: stamps (ns), one row of values per message, and the bag's
+    record time of each (ns)."""
 
     topic: str
     stamp_ns: np.ndarray
     values: np.ndarray
     drops: Drops = field(default_factory=Drops)
+    recorded_ns: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -189,7 +221,7 @@ class _Collector:
         self.recorded.append(recorded)
         self.rows.append(row)
 
-    def result(self, path: Path, key: str, width: int, what: str) -> Stamped:
+    def result(self, path: Path, key: str, width: int, what: str, receive: bool = False) -> Stamped:
         drops = Drops({why: n for why, n in self.drops.items() if n})
         if len(self.rows) < 2:
             dropped = f"; dropped: {drops.describe()}" if drops.counts else ""
@@ -198,14 +230,25 @@ class _Collector:
                 f"{key}: topic {self.topic!r} has {len(self.rows)} usable message(s){what}{dropped}; the "
                 "import needs at least 2 (is it the right topic, and does the bag cover the drive?)",
             )
-        # A publisher that leaves every stamp at zero: the bag's record times are the only clock.
-        stamps = self.stamps if any(self.stamps) else self.recorded
+        stamps = self.recorded if receive else self.stamps
+        if not receive and not any(self.stamps):
+            # A publisher that leaves every stamp at zero: the bag's record times are the only clock.
+            warnings.warn(
+                f"{path}: every header stamp on {self.topic!r} is zero; its messages are timed by the "
+                f"bag's record times instead (say so with stamps: {{{self.topic}: receive}})",
+                NlpCalibWarning,
+                stacklevel=4,
+            )
+            stamps = self.recorded
         values = np.array(self.rows, dtype=float).reshape(len(self.rows), width)
-        return Stamped(self.topic, np.array(stamps, dtype=np.int64), values, drops)
+        recorded = np.array(self.recorded, dtype=np.int64)
+        return Stamped(self.topic, np.array(stamps, dtype=np.int64), values, drops, recorded)
 
 
 def read_topics(path: str | Path, topics: BagTopics) -> tuple[Stamped, Stamped]:
-    """The encoder counts (columns in ``topics.joints`` order) and the tracker's ``(x, y, θ)``."""
+    """The encoder readings (columns in ``topics.joints`` order: counts; or, for radians, each
+    joint's position then each joint's velocity, NaN where a message has none) and the tracker's
+    poses, :data:`TRACKER_COLUMNS`."""
     p = Path(path)
     with opened(p) as reader:
         try:
@@ -246,7 +289,7 @@ def _collect(reader: Any, p: Path, topics: BagTopics, tracker_type: str) -> tupl
     for conn, recorded, msg in messages(reader, p, (topics.joint_states, topics.tracker)):
         number[conn.topic] += 1
         if conn.topic == topics.joint_states:
-            _add_counts(p, msg, topics, number[conn.topic], recorded, enc, names_seen)
+            _add_joints(p, msg, topics, number[conn.topic], recorded, enc, names_seen)
         else:
             _add_poses(p, msg, tracker_type, want, number[conn.topic], recorded, trk, frames_seen)
     if not enc.rows and not set(topics.joints) <= names_seen:
@@ -263,9 +306,11 @@ def _collect(reader: Any, p: Path, topics: BagTopics, tracker_type: str) -> tupl
             f"present: {', '.join(sorted(frames_seen))}",
         )
     frame = f" with child frame {want!r}" if want is not None else ""
+    width = len(topics.joints) * (1 if topics.joint_units == "counts" else 2)
+    holding = f" holding {', '.join(topics.joints)}"
     return (
-        enc.result(p, "joint_states", len(topics.joints), f" holding {', '.join(topics.joints)}"),
-        trk.result(p, "tracker", 3, frame),
+        enc.result(p, "joint_states", width, holding, topics.joint_states in topics.receive),
+        trk.result(p, "tracker", len(TRACKER_COLUMNS), frame, topics.tracker in topics.receive),
     )
 
 
@@ -289,20 +334,24 @@ def _add_poses(
             trk.drops[NOT_A_ROTATION] += 1
             continue
         trk.drops[NORMALISED] += normalised
-        pose = (float(position.x), float(position.y), yaw_from_quaternion(*q))
+        pose = (float(position.x), float(position.y), yaw_from_quaternion(*q), float(position.z), *q)
         trk.add(_stamp_ns(p, header, trk.topic, number), recorded, pose)
 
 
-def _add_counts(
+def _add_joints(
     p: Path, msg: Any, topics: BagTopics, number: int, recorded: int, enc: _Collector, names_seen: set[str]
 ) -> None:
-    """The raw counts of ``topics.joints`` in one JointState message; a message without them
-    (another publisher on the same topic) or malformed is counted, not used."""
+    """The readings of ``topics.joints`` in one JointState message; a message without them
+    (another publisher on the same topic) or malformed is counted, not used. Joints in radians
+    may come as positions, velocities or both (either list may be empty)."""
     names = list(msg.name)
     names_seen.update(names)
     position = np.asarray(msg.position, dtype=float)
     if not set(topics.joints) <= set(names):
         enc.drops[OTHER_JOINTS] += 1
+        return
+    if topics.joint_units == "radians":
+        _add_angles(p, msg, topics, number, recorded, enc, names)
         return
     if position.shape != (len(names),) or len(set(names)) != len(names):
         enc.drops[MALFORMED_JOINTS] += 1
@@ -314,6 +363,23 @@ def _add_counts(
             raise BagError(
                 p,
                 f"joint {joint!r} reads {value!r} in message {number} on {topics.joint_states!r}; the "
-                "import needs raw encoder counts (whole numbers) in JointState.position, not angles",
+                "import needs raw encoder counts (whole numbers) in JointState.position, not angles, with "
+                "joint_units: counts (leave joint_units out to read joint positions in radians)",
             )
     enc.add(_stamp_ns(p, msg.header, topics.joint_states, number), recorded, row)
+
+
+def _add_angles(
+    p: Path, msg: Any, topics: BagTopics, number: int, recorded: int, enc: _Collector, names: list[str]
+) -> None:
+    """Each joint's position and velocity (NaN where the message has none) in one JointState."""
+    position = np.asarray(msg.position, dtype=float)
+    velocity = np.asarray(msg.velocity, dtype=float)
+    sizes_ok = position.shape[0] in (0, len(names)) and velocity.shape[0] in (0, len(names))
+    if not sizes_ok or len(set(names)) != len(names) or position.size + velocity.size == 0:
+        enc.drops[MALFORMED_JOINTS] += 1
+        return
+    index = [names.index(j) for j in topics.joints]
+    pos = [float(position[i]) if position.size else math.nan for i in index]
+    vel = [float(velocity[i]) if velocity.size else math.nan for i in index]
+    enc.add(_stamp_ns(p, msg.header, topics.joint_states, number), recorded, pos + vel)

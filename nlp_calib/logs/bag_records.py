@@ -24,13 +24,14 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrap_angle
+from nlp_calib.logs.bag_joints import clock_shift_ns
 from nlp_calib.logs.bag_reader import BagError, BagTopics, Drops, Stamped, read_topics
 from nlp_calib.logs.log import EncoderKind, Log, LogHeader
 from nlp_calib.logs.reader import parse_log
@@ -128,6 +129,13 @@ class BagRecords:
 def read_bag_records(path: str | Path, topics: BagTopics) -> BagRecords:
     """Read and pair a bag's encoder and tracker messages (see the module docstring for the rule)."""
     encoders, tracker = read_topics(path, topics)
+    encoders = replace(
+        encoders,
+        stamp_ns=encoders.stamp_ns + clock_shift_ns(Path(path), encoders, tracker, topics.clock_offset),
+    )
+    tracker = replace(
+        tracker, values=tracker.values[:, :3]
+    )  # the planar pose (z is kept for joints in radians)
     index, poses, summary = pair(encoders, tracker, topics.max_gap)
     if index.shape[0] < 2:
         span = (

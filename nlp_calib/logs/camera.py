@@ -19,7 +19,7 @@ import numpy as np
 
 from nlp_calib.core import poses3d
 from nlp_calib.core.errors import DatasetError
-from nlp_calib.logs.joints_csv import JointLog
+from nlp_calib.logs.joint_log import JointTable
 from nlp_calib.logs.log import Log, LogHeader, frozen
 from nlp_calib.logs.tum import Trajectory3D
 
@@ -42,7 +42,7 @@ class CameraRecording:
     images fell outside it."""
 
     images: Trajectory3D
-    joints: JointLog
+    joints: JointTable
     outside: int
 
     @property
@@ -54,7 +54,7 @@ class CameraRecording:
         return interval_inputs(self.joints, self.images.time_s - lag_s, rows)
 
 
-def pair(images: Trajectory3D, joints: JointLog, reach_s: float = 0.0) -> CameraRecording:
+def pair(images: Trajectory3D, joints: JointTable, reach_s: float = 0.0) -> CameraRecording:
     """The images whose stamps, shifted by up to ``reach_s`` either way, lie inside the joints'
     span. Raises :class:`DatasetError` when fewer than two do."""
     lo, hi = joints.time_s[0] + reach_s, joints.time_s[-1] - reach_s
@@ -74,7 +74,7 @@ def pair(images: Trajectory3D, joints: JointLog, reach_s: float = 0.0) -> Camera
     return CameraRecording(images.select(keep), joints, int(images.n_poses - keep.size))
 
 
-def positions_at(joints: JointLog, names: Sequence[str], stamps: np.ndarray) -> np.ndarray:
+def positions_at(joints: JointTable, names: Sequence[str], stamps: np.ndarray) -> np.ndarray:
     """Joint positions ``(len(names), len(stamps))`` interpolated linearly at ``stamps``."""
     t = joints.time_s
     if stamps.size and (stamps[0] < t[0] or stamps[-1] > t[-1]):
@@ -87,7 +87,7 @@ def positions_at(joints: JointLog, names: Sequence[str], stamps: np.ndarray) -> 
     return np.stack([np.interp(stamps, t, joints.column(n)) for n in names])
 
 
-def interval_inputs(joints: JointLog, stamps: np.ndarray, rows: Sequence[JointInput]) -> np.ndarray:
+def interval_inputs(joints: JointTable, stamps: np.ndarray, rows: Sequence[JointInput]) -> np.ndarray:
     """Each interval's inputs between consecutive ``stamps``, one row per :class:`JointInput`."""
     at = positions_at(joints, [r.joint for r in rows], np.asarray(stamps, dtype=float))
     out = np.empty((len(rows), at.shape[1] - 1))
@@ -140,7 +140,7 @@ def camera_log(recording: CameraRecording, kinematic_model: str, sensor_frame: s
     return Log(
         path=images.path,
         header=header,
-        time_s=frozen(images.time_s - images.time_s[0]),
+        time_s=frozen((images.time_ns - images.time_ns[0]).astype(float) * 1e-9),
         ticks=frozen(np.zeros((n, 0), dtype=np.int64)),
         model_pose=frozen(np.zeros((n, 3))),
         T_world_sensor=frozen(planar_track(images.poses)),

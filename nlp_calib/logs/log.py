@@ -15,6 +15,11 @@ from nlp_calib.core.numeric import wrapped_difference
 #: ``counter`` readings are a uint32 count that wraps at 2³² (a wheel).
 EncoderKind = Literal["absolute", "counter"]
 ENCODER_KINDS: tuple[EncoderKind, ...] = ("absolute", "counter")
+#: What an encoder reading is: a raw ``counts`` reading (the text format's integers) or a joint
+#: position in ``radians`` as ROS publishes it (REP 103: a wheel's angle grows without wrapping,
+#: a steering joint's is its angle).
+EncoderUnits = Literal["counts", "radians"]
+ENCODER_UNITS: tuple[EncoderUnits, ...] = ("counts", "radians")
 
 
 @dataclass(frozen=True)
@@ -30,7 +35,9 @@ class LogHeader:
     """What the ``#`` lines say: model, initial guess, encoders, nominal ``T_base_sensor``.
 
     ``parameters`` keeps the header's own names (the model maps them onto its parameter names);
-    ``T_base_sensor`` is ordered ``(x, y, theta)``.
+    ``T_base_sensor`` is ordered ``(x, y, theta)``. ``encoder_units`` says what the readings are
+    (``encoder_max`` is 0 for joints in radians); ``sensor_z_roll_pitch`` is the nominal mount's
+    height, roll and pitch where a source knows them (a bag's ``/tf_static``).
     """
 
     kinematic_model: str
@@ -39,6 +46,8 @@ class LogHeader:
     encoder_max: tuple[int, ...]
     sensor_frame: str
     T_base_sensor: tuple[float, float, float]
+    encoder_units: EncoderUnits = "counts"
+    sensor_z_roll_pitch: tuple[float, float, float] | None = None
 
     def encoder_index(self, name: str) -> int:
         """Column of the encoder called ``name`` in :attr:`Log.ticks`."""
@@ -56,6 +65,28 @@ class LogHeader:
 
 
 @dataclass(frozen=True)
+class JointStream:
+    """Joint positions (rad, ``(n, n_joints)`` in the header's encoder order) on the joints' own
+    clock: ``time_s`` on the log's time axis. ``resolution`` is each joint's smallest step (rad;
+    0 when its positions are not quantised), the floor of its noise; ``integrated`` names the
+    encoders whose positions were integrated from velocities (known only up to their start)."""
+
+    time_s: np.ndarray
+    positions: np.ndarray
+    resolution: tuple[float, ...]
+    integrated: tuple[str, ...] = ()
+
+    def at(self, t: np.ndarray) -> np.ndarray:
+        """The positions interpolated at times ``t`` (held at the ends outside the stream)."""
+        cols = [np.interp(t, self.time_s, self.positions[:, j]) for j in range(self.positions.shape[1])]
+        return frozen(np.stack(cols, axis=1).reshape(np.shape(t)[0], self.positions.shape[1]))
+
+    def covers(self, t: np.ndarray) -> np.ndarray:
+        """Which of the times ``t`` lie inside the stream."""
+        return (t >= self.time_s[0]) & (t <= self.time_s[-1])
+
+
+@dataclass(frozen=True)
 class Log:
     """An immutable robot log: per-record arrays of equal length ``n_records``.
 
@@ -63,12 +94,17 @@ class Log:
     ``T_world_sensor`` the tracker poses and ``model_pose`` the vendor odometry, both
     ``(x, y, theta)`` per row. ``time_s`` is relative to the first record of the file, whose own
     stamp on the log's clock is ``start_ns`` (ns).
-    ``(x, y, theta)`` per row. ``time_s`` is relative to the first record of the file.
 
-    A 3-D tracker (a camera's own trajectory) fills ``T_world_sensor_3d`` too, ``(x, y, z, qx, qy,
-    qz, qw)`` per row in its own world frame and units; ``T_world_sensor`` then holds its levelled
-    planar track (see :func:`nlp_calib.logs.camera.planar_track`), so every planar consumer keeps
-    working. ``None`` for a planar log.
+    A log of joints in radians (``header.encoder_units``) has no counts (``ticks`` has no
+    columns): ``joint_positions`` holds each joint's position at the records, interpolated from
+    ``joint_stream``, the joints as published on their own clock (re-sampled from there when the
+    tracker's clock is shifted).
+
+    A tracker that reports 3-D poses (a bag's motion capture, a camera's own trajectory) fills
+    ``T_world_sensor_3d`` too, ``(x, y, z, qx, qy, qz, qw)`` per row in its own world frame and
+    units; ``T_world_sensor`` is then its planar track (the pose's yaw for a tracker whose world
+    is level, the levelled track of :func:`nlp_calib.logs.camera.planar_track` for a camera).
+    ``None`` for a planar tracker.
     """
 
     path: str
@@ -80,6 +116,8 @@ class Log:
     line_numbers: np.ndarray
     dropped: tuple[DroppedRecord, ...] = field(default=())
     start_ns: int = 0
+    joint_positions: np.ndarray | None = None
+    joint_stream: JointStream | None = None
     T_world_sensor_3d: np.ndarray | None = None
 
     @property
@@ -94,6 +132,12 @@ class Log:
         """Signed increments of a counter (wrapping uint32), ``(n_records - 1,)``."""
         return wrapped_difference(self.encoder(name))
 
+    def joint_position(self, name: str) -> np.ndarray:
+        """The position (rad) of the joint read as encoder ``name`` at each record."""
+        if self.joint_positions is None:
+            raise DatasetError(self.path, None, "holds raw encoder counts, not joint positions in radians")
+        return self.joint_positions[:, self.header.encoder_index(name)]
+
     def select(self, start: int, stop: int) -> Log:
         """The records ``start:stop`` (time stays relative to the file's first record)."""
         sl = slice(start, stop)
@@ -104,8 +148,13 @@ class Log:
             model_pose=frozen(self.model_pose[sl]),
             T_world_sensor=frozen(self.T_world_sensor[sl]),
             line_numbers=frozen(self.line_numbers[sl]),
-            T_world_sensor_3d=None if self.T_world_sensor_3d is None else frozen(self.T_world_sensor_3d[sl]),
+            joint_positions=_rows(self.joint_positions, sl),
+            T_world_sensor_3d=_rows(self.T_world_sensor_3d, sl),
         )
+
+
+def _rows(a: np.ndarray | None, sl: slice) -> np.ndarray | None:
+    return None if a is None else frozen(a[sl])
 
 
 def frozen(a: np.ndarray) -> np.ndarray:

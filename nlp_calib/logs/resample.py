@@ -9,7 +9,7 @@ import numpy as np
 
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
-from nlp_calib.logs.log import EncoderKind, Log
+from nlp_calib.logs.log import EncoderKind, Log, frozen
 
 
 def resample_encoders(
@@ -22,17 +22,19 @@ def resample_encoders(
 
     Shifting the inputs rather than the tracker keeps the measurements, and so the cost, comparable
     across lags. Counters are interpolated on their unwrapped cumulative count, absolute encoders on
-    their unwrapped angle. ``delays`` reads an encoder that much later still (s, by name): a stream
-    whose effect lags its readings. Returns the log and the record
-    range ``[first, stop)`` whose shifted times lie inside the log (outside it the readings are
-    clamped and must not be used).
+    their unwrapped angle; joints in radians are re-sampled from their own stream, at its own stamps
+    (:attr:`Log.joint_stream`), never from values already interpolated. Returns the log and the
+    record range ``[first, stop)`` whose shifted times lie inside the log (outside it the readings
+    are clamped and must not be used). ``delays`` reads an encoder that much later still (s, by
+    name): a stream whose effect lags its readings.
     """
-    delays = delays or {}
-    if lag_s == 0.0 and not any(delays.values()):
+    late = [(delays or {}).get(name, 0.0) for name in log.header.encoder_names]
+    if lag_s == 0.0 and not any(late):
         return log, (0, log.n_records)
+    if log.joint_stream is not None:
+        return _joints_resampled(log, lag_s, late)
     t = log.time_s
     tq = t - lag_s
-    late = [delays.get(name, 0.0) for name in log.header.encoder_names]
     valid = np.flatnonzero((tq - max(late) >= t[0]) & (tq - min(late) <= t[-1]))
     if valid.size < 2:
         raise ProblemError(
@@ -41,7 +43,7 @@ def resample_encoders(
         )
     columns = []
     for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
-        raw, when = log.ticks[:, j], tq - delays.get(name, 0.0)
+        raw, when = log.ticks[:, j], tq - late[j]
         if kinds.get(name) == "absolute":
             turns = np.unwrap(2.0 * np.pi * raw / vmax) / (2.0 * np.pi)
             columns.append(np.mod(np.round(np.interp(when, t, turns) * vmax), vmax))
@@ -51,3 +53,19 @@ def resample_encoders(
     ticks = np.stack(columns, axis=1).astype(np.int64)
     ticks.flags.writeable = False
     return replace(log, ticks=ticks), (int(valid[0]), int(valid[-1]) + 1)
+
+
+def _joints_resampled(log: Log, lag_s: float, late: list[float]) -> tuple[Log, tuple[int, int]]:
+    """Joints in radians re-sampled from their own stream (at its own stamps) at ``t - lag_s``,
+    each joint ``late`` (s) later still."""
+    stream = log.joint_stream
+    assert stream is not None
+    tq = log.time_s - lag_s
+    valid = np.flatnonzero(stream.covers(tq - max(late)) & stream.covers(tq - min(late)))
+    if valid.size < 2:
+        raise ProblemError(
+            f"a lag of {lag_s:g} s leaves fewer than 2 records inside the joints' "
+            f"{stream.time_s[-1] - stream.time_s[0]:.1f} s stream; use a lag well below the log's duration"
+        )
+    positions = np.stack([stream.at(tq - d)[:, j] for j, d in enumerate(late)], axis=1)
+    return replace(log, joint_positions=frozen(positions)), (int(valid[0]), int(valid[-1]) + 1)

@@ -1,11 +1,12 @@
 """A 3-D trajectory in the TUM format: one pose per line, ``timestamp tx ty tz qx qy qz qw``.
 
-Timestamps in seconds, translation in the trajectory's own units (metres, or any unit when the
-scale is unknown), the rotation as a unit quaternion ``qx qy qz qw``, in the trajectory's own
-world frame; ``#`` lines are comments. This is what ORB-SLAM, VINS and ``evo`` write. Quaternions
-whose norm is within :data:`NORM_TOLERANCE` of 1 are normalised (one warning for the file);
-beyond it they are refused, as are lines with another number of columns, values that are not
-finite numbers and timestamps that do not increase.
+Timestamps in seconds (read to the nanosecond), translation in the trajectory's own units (metres,
+or any unit when a camera's scale is unknown), the rotation as a unit quaternion ``qx qy qz qw``,
+in the trajectory's own world frame; ``#`` lines are comments. This is what ``evo``, ORB-SLAM,
+VINS and most motion-capture exports write. Quaternions whose norm is within
+:data:`NORM_TOLERANCE` of 1 are normalised (one warning for the file); beyond it they are
+refused, as are lines with another number of columns, values that are not finite numbers and
+timestamps that do not increase, each with the file and the line.
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ import numpy as np
 
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning
 from nlp_calib.logs.log import frozen
-from nlp_calib.logs.tables import check_time_order, data_lines, numbers
+from nlp_calib.logs.reader import yaw_from_quaternion
+from nlp_calib.logs.text_tables import check_increasing, data_lines, numbers, seconds, stamp_ns
 
 LAYOUT = "'timestamp tx ty tz qx qy qz qw' (8 numbers)"
 #: A quaternion norm further than this from 1 is an error, not rounding.
@@ -29,45 +31,56 @@ NORM_ROUNDING = 1e-9
 
 @dataclass(frozen=True)
 class Trajectory3D:
-    """Poses ``(n, 7)`` ``(x, y, z, qx, qy, qz, qw)`` at absolute stamps ``time_s`` (s), with the
+    """Poses ``(n, 7)`` ``(x, y, z, qx, qy, qz, qw)`` at stamps ``time_ns`` (int64 ns), with the
     file's line of each."""
 
     path: str
-    time_s: np.ndarray
+    time_ns: np.ndarray
     poses: np.ndarray
     line_numbers: np.ndarray
 
     @property
     def n_poses(self) -> int:
-        return int(self.time_s.size)
+        return int(self.time_ns.size)
+
+    @property
+    def time_s(self) -> np.ndarray:
+        """The stamps in seconds (absolute: float64 keeps them to about 0.2 µs)."""
+        return self.time_ns.astype(float) * 1e-9
 
     def select(self, keep: np.ndarray) -> Trajectory3D:
         """The poses ``keep`` (a mask or indices) marks, in order."""
         return Trajectory3D(
-            self.path, frozen(self.time_s[keep]), frozen(self.poses[keep]), frozen(self.line_numbers[keep])
+            self.path, frozen(self.time_ns[keep]), frozen(self.poses[keep]), frozen(self.line_numbers[keep])
         )
+
+    def planar_and_3d(self) -> np.ndarray:
+        """``(n, 8)``: the planar pose ``(x, y, yaw)`` of a tracker whose world is level, then the
+        3-D pose as written (the layout of a bag's tracker poses)."""
+        yaw = [yaw_from_quaternion(*q) for q in self.poses[:, 3:].tolist()]
+        return np.column_stack([self.poses[:, :2], yaw, self.poses])
 
 
 def read_tum(path: str | Path) -> Trajectory3D:
     """Read a TUM trajectory; a malformed line raises :class:`DatasetError` naming ``file:line``."""
     p = str(path)
-    rows, lines = [], []
+    stamps, rows, lines = [], [], []
     for number, text in data_lines(path):
         fields = text.split()
         if len(fields) != 8:
             raise DatasetError(p, number, f"has {len(fields)} columns; a TUM line is {LAYOUT}")
-        rows.append(numbers(p, number, fields, LAYOUT))
+        rows.append(numbers(p, number, fields[1:], LAYOUT))
+        stamps.append(stamp_ns(fields[0], p, number))
         lines.append(number)
     if len(rows) < 2:
         raise DatasetError(
             p, None, f"holds {len(rows)} pose(s); a trajectory needs at least 2 lines of {LAYOUT}"
         )
-    table = np.array(rows)
-    line_numbers = np.array(lines, dtype=np.int64)
-    check_time_order(p, table[:, 0], line_numbers)
-    poses = table[:, 1:]
+    time_ns, line_numbers = np.array(stamps, dtype=np.int64), np.array(lines, dtype=np.int64)
+    check_increasing(p, time_ns, line_numbers)
+    poses = np.array(rows, dtype=float)
     poses[:, 3:] = unit_quaternions(p, poses[:, 3:], line_numbers)
-    return Trajectory3D(p, frozen(table[:, 0]), frozen(poses), frozen(line_numbers))
+    return Trajectory3D(p, frozen(time_ns), frozen(poses), frozen(line_numbers))
 
 
 def unit_quaternions(path: str, q: np.ndarray, line_numbers: np.ndarray) -> np.ndarray:
@@ -94,9 +107,9 @@ def unit_quaternions(path: str, q: np.ndarray, line_numbers: np.ndarray) -> np.n
     return q / norm[:, None]
 
 
-def format_tum(time_s: np.ndarray, poses: np.ndarray) -> str:
-    """TUM text of poses ``(n, 7)`` at stamps ``time_s``."""
-    table = np.column_stack([time_s, poses])
+def format_tum(time_ns: np.ndarray, poses: np.ndarray) -> str:
+    """TUM text of poses ``(n, 7)`` at stamps ``time_ns`` (int ns), every value exact."""
     return "".join(
-        " ".join(f"{v:.9f}" if i == 0 else f"{v:.15g}" for i, v in enumerate(row)) + "\n" for row in table
+        " ".join([seconds(int(t)), *(repr(float(v)) for v in row)]) + "\n"
+        for t, row in zip(np.asarray(time_ns).tolist(), np.asarray(poses, dtype=float))
     )

@@ -74,36 +74,53 @@ class KinematicModel(Protocol):
     """A wheeled base: parameters, encoder inputs and the symbolic SE(2) increment."""
 
     #: Name used in scenarios (``model:``).
-    name: str
+    @property
+    def name(self) -> str: ...
     #: ``#kinematic_model:`` values of logs this model reads.
-    log_names: tuple[str, ...]
+    @property
+    def log_names(self) -> tuple[str, ...]: ...
     #: Kinematic parameter names, in state order (the sensor pose follows them), and their units.
-    kinematic_params: tuple[str, ...]
-    units: Mapping[str, str]
+    @property
+    def kinematic_params(self) -> tuple[str, ...]: ...
+    @property
+    def units(self) -> Mapping[str, str]: ...
     #: Header (``#parameters``) spelling of each kinematic parameter, written by the simulator;
     #: ``header_aliases`` maps every accepted spelling (lower case) onto a parameter name.
-    header_names: Mapping[str, str]
-    header_aliases: Mapping[str, str]
+    @property
+    def header_names(self) -> Mapping[str, str]: ...
+    @property
+    def header_aliases(self) -> Mapping[str, str]: ...
     #: The encoders (``#joints_max_enc`` names) the model reads, in input order, with their kind.
-    encoder_kinds: Mapping[str, EncoderKind]
+    @property
+    def encoder_kinds(self) -> Mapping[str, EncoderKind]: ...
     #: Names of the per-interval inputs :meth:`inputs` returns, in row order, and their units.
-    input_names: tuple[str, ...]
-    input_units: Mapping[str, str]
+    @property
+    def input_names(self) -> tuple[str, ...]: ...
+    @property
+    def input_units(self) -> Mapping[str, str]: ...
     #: Kinematic parameters a log without turning cannot determine, and a note on what else.
-    turning_params: tuple[str, ...]
-    turning_note: str
+    @property
+    def turning_params(self) -> tuple[str, ...]: ...
+    @property
+    def turning_note(self) -> str: ...
     #: Plausible ranges, used to reject absurd initial guesses and as basin-study ranges.
-    physical_ranges: Mapping[str, tuple[float, float]]
+    @property
+    def physical_ranges(self) -> Mapping[str, tuple[float, float]]: ...
     #: Precision a useful calibration must reach on each kinematic parameter.
-    reference: Mapping[str, Reference]
+    @property
+    def reference(self) -> Mapping[str, Reference]: ...
     #: The kinematic parameters a one-line summary shows.
-    headline: tuple[str, ...]
+    @property
+    def headline(self) -> tuple[str, ...]: ...
     #: Values of kinematic parameters a log header need not carry (used when it does not).
-    defaults: Mapping[str, float]
+    @property
+    def defaults(self) -> Mapping[str, float]: ...
     #: The model's exact symmetries, applied in this order to reach the canonical form, and the
     #: angles the canonical form wraps onto (-π, π].
-    symmetries: tuple[Symmetry, ...]
-    angle_params: tuple[str, ...]
+    @property
+    def symmetries(self) -> tuple[Symmetry, ...]: ...
+    @property
+    def angle_params(self) -> tuple[str, ...]: ...
 
     @property
     def drive(self) -> Drive:
@@ -136,11 +153,16 @@ class KinematicModel(Protocol):
         ...
 
     def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, int]
+        self, params: Mapping[str, float], ranges: Mapping[str, float]
     ) -> tuple[str, dict[str, float], dict[str, str], str]:
         """The ros2_control controller of this base, its parameters from ``params`` (and each
-        encoder's ``ranges``: ticks per turn), where each kinematic parameter with no place among
-        them belongs, and what the values assume of the encoders."""
+        encoder's ``ranges``: readings per turn), where each kinematic parameter with no place
+        among them belongs, and what the values assume of the encoders."""
+        ...
+
+    def in_radians(self) -> KinematicModel:
+        """The same base read from joint positions in radians, its parameters in robot units
+        (:mod:`nlp_calib.models.radians`)."""
         ...
 
     def implausible(self, params: Mapping[str, float]) -> str:
@@ -175,6 +197,16 @@ def rows_by_name(names: Sequence[str], U: np.ndarray) -> dict[str, np.ndarray]:
     """The rows of each named input in horizon windows ``U`` (``len(names)·H`` rows, the inputs of
     each interval in turn)."""
     return {name: U[i :: len(names)] for i, name in enumerate(names)}
+
+
+def sampled_angle(angle: np.ndarray, steering_sample: str) -> np.ndarray:
+    """Per interval, an angle read at each record (rad), taken at the interval's ``start``, its
+    ``end`` or the ``mean`` of both (along the shorter arc)."""
+    if steering_sample == "start":
+        return angle[:-1]
+    if steering_sample == "end":
+        return angle[1:]
+    return wrap_angle(angle[:-1] + 0.5 * wrap_angle(angle[1:] - angle[:-1]))
 
 
 def canonical(

@@ -19,12 +19,32 @@ from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, Reference, Symmetry, named, rows_by_name
 from nlp_calib.models.drives import SimulationSettings, counter, cumulative, drive_header, first_order
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
+from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
 
 LEFT_ENCODER = "left_wheel"
 RIGHT_ENCODER = "right_wheel"
 #: Curvature (1/m) per unit of the simulator's turning profile.
 _SIM_CURVATURE = 1.5
+
+
+#: The differential drive read from joint positions in radians: each wheel's radius (its travel is
+#: radius × Δangle) and the wheel separation, as ``diff_drive_controller`` names them.
+RADIANS = RadiansForm(
+    params=MappingProxyType(
+        {
+            "k_left": Renamed("left_wheel_radius", "m"),
+            "k_right": Renamed("right_wheel_radius", "m"),
+            "baseline": Renamed("wheel_separation", "m"),
+        }
+    ),
+    inputs=MappingProxyType(
+        {
+            "left_ticks": Renamed("left_angle", "rad", 1.0, LEFT_ENCODER),
+            "right_ticks": Renamed("right_angle", "rad", 1.0, RIGHT_ENCODER),
+        }
+    ),
+)
 
 
 class DiffDriveDrive:
@@ -163,7 +183,7 @@ class DiffDrive:
         return {}
 
     def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, int]
+        self, params: Mapping[str, float], ranges: Mapping[str, float]
     ) -> tuple[str, dict[str, float], dict[str, str], str]:
         """``diff_drive_controller``: each wheel's radius is its travel per tick times the ticks per
         turn over 2π; the controller takes their mean and each wheel's multiplier of it."""
@@ -180,6 +200,10 @@ class DiffDrive:
         turns = f"{ranges[LEFT_ENCODER]}, {ranges[RIGHT_ENCODER]}"
         assumes = f"the wheel radii take the encoder ranges ({turns} ticks) as one wheel turn each"
         return "diff_drive_controller", parameters, {}, assumes
+
+    def in_radians(self) -> InRadians:
+        """The differential drive read from joint positions in radians (:data:`RADIANS`)."""
+        return InRadians(self, RADIANS)
 
     def implausible(self, params: Mapping[str, float]) -> str:
         """Both wheel gains negative: the mirror image of the robot, which fits a log whose left and

@@ -18,8 +18,11 @@ from typing import Literal, Protocol
 class _Units(Protocol):
     """What :func:`length_params` reads of a model (no import of the model protocol: base imports us)."""
 
-    kinematic_params: tuple[str, ...]
-    units: Mapping[str, str]
+    @property
+    def kinematic_params(self) -> tuple[str, ...]: ...
+
+    @property
+    def units(self) -> Mapping[str, str]: ...
 
 
 #: The 3-D mount closes a 3-D sensor's parameter vector, in this order.

@@ -26,9 +26,11 @@ from nlp_calib.models.base import (
     Symmetry,
     named,
     rows_by_name,
+    sampled_angle,
 )
 from nlp_calib.models.drives import SimulationSettings, counter, cumulative, drive_header, first_order
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
+from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
 
 STEERING_ENCODER = "steering"
@@ -42,6 +44,24 @@ STEERING_PLACES: Mapping[str, str] = MappingProxyType(
         "k_steer": "the steering joint's transmission (SimpleTransmission): mechanical_reduction = 1/k_steer",
         "steer_offset": "the steering joint's transmission (SimpleTransmission): offset = steer_offset",
     }
+)
+
+
+#: The tricycle read from joint positions in radians: the traction wheel's radius (its travel is
+#: radius × Δangle) and the wheelbase, as ``tricycle_controller`` names them.
+RADIANS = RadiansForm(
+    params=MappingProxyType(
+        {
+            "k_traction": Renamed("wheel_radius", "m", 2.0 * np.pi),
+            "axis_length": Renamed("wheelbase", "m"),
+        }
+    ),
+    inputs=MappingProxyType(
+        {
+            "traction_revolutions": Renamed("traction_angle", "rad", 1.0 / (2.0 * np.pi), TRACTION_ENCODER),
+            "steering_angle": Renamed("steering_angle", "rad", 1.0, STEERING_ENCODER),
+        }
+    ),
 )
 
 
@@ -210,13 +230,7 @@ class Tricycle:
         t_max = header.encoder_max[header.encoder_index(TRACTION_ENCODER)]
         revs = log.increments(TRACTION_ENCODER) / float(t_max)
         angle = wrap_angle(2.0 * np.pi * log.encoder(STEERING_ENCODER) / float(s_max))
-        if steering_sample == "start":
-            steer = angle[:-1]
-        elif steering_sample == "end":
-            steer = angle[1:]
-        else:
-            steer = wrap_angle(angle[:-1] + 0.5 * wrap_angle(angle[1:] - angle[:-1]))
-        return np.vstack([revs, steer])
+        return np.vstack([revs, sampled_angle(angle, steering_sample)])
 
     def moving(self, inputs: np.ndarray) -> np.ndarray:
         return np.asarray(inputs[0] != 0.0)
@@ -230,7 +244,7 @@ class Tricycle:
         return {}
 
     def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, int]
+        self, params: Mapping[str, float], ranges: Mapping[str, float]
     ) -> tuple[str, dict[str, float], dict[str, str], str]:
         """``tricycle_controller``: the wheelbase is the axis length, the traction wheel's radius its
         travel per revolution over 2π; the steering gain and offset belong to the steering joint's
@@ -243,6 +257,10 @@ class Tricycle:
             f"model reads it; if your hardware counts N ticks a turn, it is k_traction·N/({t_max}·2π)"
         )
         return "tricycle_controller", parameters, dict(STEERING_PLACES), assumes
+
+    def in_radians(self) -> InRadians:
+        """The tricycle read from joint positions in radians (:data:`RADIANS`)."""
+        return InRadians(self, RADIANS)
 
     def implausible(self, params: Mapping[str, float]) -> str:
         """Never: the canonical form turns every mirror image of the tricycle into the robot itself."""

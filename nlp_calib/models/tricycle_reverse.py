@@ -80,7 +80,7 @@ class TricycleReverse(Tricycle):
         return p["k_steer"] * (1.0 + p["k_steer_reverse"] * reversing) * angle + p["steer_offset"]
 
     def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, int]
+        self, params: Mapping[str, float], ranges: Mapping[str, float]
     ) -> tuple[str, dict[str, float], dict[str, str], str]:
         """The tricycle's, with the reverse gain, which no ros2_control component models."""
         name, parameters, places, assumes = super().controller(params, ranges)

@@ -121,10 +121,15 @@ def _joint(run: CalibrationRun, solver: str) -> ET.Element:
     joint = ET.Element("joint", {"name": f"{PARENT_FRAME}_to_{frame}", "type": "fixed"})
     ET.SubElement(joint, "parent", {"link": PARENT_FRAME})
     ET.SubElement(joint, "child", {"link": frame})
+    # Height, roll and pitch: the nominal mount's (a bag's /tf_static) where known, else 0.
+    z, roll, pitch = run.log.sensor_z_roll_pitch or (0, 0, 0)
     ET.SubElement(
         joint,
         "origin",
-        {"xyz": f"{p['sensor_x']!r} {p['sensor_y']!r} 0", "rpy": f"0 0 {p['sensor_theta']!r}"},
+        {
+            "xyz": f"{p['sensor_x']!r} {p['sensor_y']!r} {z!r}",
+            "rpy": f"{roll!r} {pitch!r} {p['sensor_theta']!r}",
+        },
     )
     return joint
 

@@ -1,12 +1,14 @@
 """Trajectories as TUM files, so that evo (``evo_ape``, ``evo_rpe``) reproduces the reported figures.
 
 Written into ``trajectories/`` with ``--report``: the tracker's poses and each solver's full-run
-dead reckoning over the used records, and, per fault-free segment, the tracker's poses (bad
+dead reckoning over the used records (bad tracker poses left out, as the figures leave them out),
+and, per fault-free segment, the tracker's poses (bad
 tracker poses left out) and each solver's track restarted from the tracker at the segment's
 start. ``README.md`` beside them gives the evo commands and the figures they reproduce. A TUM
-line is ``time x y z qx qy qz qw``: the planar pose with z = 0 and the heading as a quaternion
-about z; times are stamps on the log's own clock (the first record's stamp plus the time since it),
-so ``evo`` matches them with the recording's own topics.
+line is ``time x y z qx qy qz qw``: the planar pose at the tracker's height (its z where the source
+has one, a bag's pose topic; else 0) and the heading as a quaternion about z; times are stamps on
+the log's own clock (the first record's stamp plus the time since it), so ``evo`` compares them with
+the recording's own pose topic directly, with no time offset and no projection onto the plane.
 """
 
 from __future__ import annotations
@@ -29,11 +31,13 @@ def stamps(time_s: np.ndarray, start_ns: int) -> list[str]:
     return [f"{'-' if v < 0 else ''}{abs(v) // 10**9}.{abs(v) % 10**9:09d}" for v in ns.tolist()]
 
 
-def tum_text(time_s: np.ndarray, T: np.ndarray, start_ns: int = 0) -> str:
-    """TUM lines of poses ``T`` (n, 3) at ``time_s`` after the stamp ``start_ns``."""
+def tum_text(time_s: np.ndarray, T: np.ndarray, start_ns: int = 0, z: np.ndarray | None = None) -> str:
+    """TUM lines of poses ``T`` (n, 3) at ``time_s`` after the stamp ``start_ns``, at heights ``z``
+    (default 0)."""
     half = 0.5 * T[:, 2]
     zeros = np.zeros(T.shape[0])
-    cols = np.column_stack([T[:, 0], T[:, 1], zeros, zeros, zeros, np.sin(half), np.cos(half)])
+    height = zeros if z is None else np.asarray(z, dtype=float)
+    cols = np.column_stack([T[:, 0], T[:, 1], height, zeros, zeros, np.sin(half), np.cos(half)])
     return "".join(
         f"{t} " + " ".join(f"{v:.9f}" for v in row) + "\n" for t, row in zip(stamps(time_s, start_ns), cols)
     )
@@ -43,16 +47,20 @@ def write_trajectories(run: CalibrationRun, out_dir: Path, name: str = FOLDER) -
     """Write the TUM files and their README into ``out_dir/name``; returns their paths."""
     folder = out_dir / name
     tracks = run.require_series().tracks
-    t, ref, t0 = tracks.time_s, tracks.tracker, run.log.start_ns
-    written: dict[str, str] = {"tracker.tum": tum_text(t, ref, t0)}
+    t, ref, t0, z = tracks.time_s, tracks.tracker, run.log.start_ns, tracks.tracker_z
+    # Bad tracker poses are left out of every file, as they are of every figure.
+    good = np.flatnonzero(tracks.good)
+    z_good = None if z is None else z[good]
+    written: dict[str, str] = {"tracker.tum": tum_text(t[good], ref[good], t0, z_good)}
     for track in tracks.tracks:
         if track.solver is not None:
-            written[f"{track.solver}.tum"] = tum_text(t, track.T_world_sensor, t0)
+            written[f"{track.solver}.tum"] = tum_text(t[good], track.T_world_sensor[good], t0, z_good)
     for solver, again in tracks.restarted.items():
         for k, (p, q) in enumerate(tracks.parts, start=1):
             idx = p + np.flatnonzero(tracks.good[p:q])
-            written[f"segment{k}_{solver}.tum"] = tum_text(t[idx], again[idx], t0)
-            written.setdefault(f"segment{k}_tracker.tum", tum_text(t[idx], ref[idx], t0))
+            z_k = None if z is None else z[idx]
+            written[f"segment{k}_{solver}.tum"] = tum_text(t[idx], again[idx], t0, z_k)
+            written.setdefault(f"segment{k}_tracker.tum", tum_text(t[idx], ref[idx], t0, z_k))
     written["README.md"] = _readme(run, tracks.segments)
     paths = []
     for file, text in written.items():
@@ -68,7 +76,7 @@ def _readme(run: CalibrationRun, table: tuple[SegmentFigures, ...]) -> str:
     lines = [
         f"# Trajectories of {run.scenario.name} (TUM format)",
         "",
-        "- `tracker.tum`: the tracker's sensor poses over the used records; "
+        "- `tracker.tum`: the tracker's sensor poses over the used records (bad ones left out); "
         + ", ".join(f"`{s}.tum`" for s in solvers)
         + ": each solver's sensor track dead-reckoned from the tracker's first pose (full run).",
         "- `segment<k>_tracker.tum`, `segment<k>_<solver>.tum`: each fault-free segment, the track "

@@ -20,6 +20,7 @@ from nlp_calib.analysis.metrics import integrate, segments, trajectory_metrics
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
+from nlp_calib.logs import Log
 from nlp_calib.models import SENSOR_PARAMS, header_parameters
 from nlp_calib.pipeline import validation
 from nlp_calib.pipeline.fit import Fit
@@ -233,6 +234,7 @@ def track_series(
         faults=tuple((f.record - a, f.kind) for f in view.findings.report.faults if a <= f.record < b),
         holdout_start=windows.fit[1] - a if windows.fit[1] < b - 1 else None,
         segments=tuple(rows),
+        tracker_z=_heights(windows.selected),
     )
 
 
@@ -333,3 +335,8 @@ def analyse_log(
         steering = view.prepared.scenario.objective.residual.steering_sample
         odo = odometry(fit, windows, results[wanted.odometry].params, steering)
     return dataclasses.replace(figures, series=series, odometry=odo)
+
+
+def _heights(log: Log) -> np.ndarray | None:
+    """The tracker's height at each record where it reports 3-D poses (None: a planar tracker)."""
+    return None if log.T_world_sensor_3d is None else np.asarray(log.T_world_sensor_3d[:, 2])

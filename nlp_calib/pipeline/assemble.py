@@ -62,8 +62,9 @@ def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
     """What the outputs say about a log as read."""
     log, model = prepared.log, prepared.model
     kinds = model.encoder_kinds
+    unit = "rad" if log.header.encoder_units == "radians" else "ticks"
     encoders = tuple(
-        Encoder(name, kinds.get(name, "counter"), "ticks", int(vmax))
+        Encoder(name, kinds.get(name, "counter"), unit, int(vmax))
         for name, vmax in zip(log.header.encoder_names, log.header.encoder_max)
     )
     t = log.time_s[windows.used[0] : windows.used[1]]
@@ -75,6 +76,7 @@ def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
         encoders=encoders,
         start_ns=log.start_ns,
         duration_s=float(t[-1] - t[0]) if t.size else 0.0,
+        sensor_z_roll_pitch=log.header.sensor_z_roll_pitch,
     )
 
 

@@ -38,7 +38,7 @@ from nlp_calib.pipeline.analyse import (
 from nlp_calib.pipeline.assemble import assemble_run, fit_notes, scenario_info
 from nlp_calib.pipeline.build import Problem, StartingPoint, build_stage
 from nlp_calib.pipeline.fit import Fit
-from nlp_calib.pipeline.prepare import PreparedLog, prepare
+from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.screen import Screening, exclude_faults, median_interval, screen
 from nlp_calib.pipeline.windows import LogWindows, bind_windows
@@ -91,7 +91,7 @@ def setup_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> LogSetup
     records = (prepared.start, prepared.stop)
     start_from = (read, prepared.start, prepared.split)
     problem = build_stage(
-        sc, prepared.model, tuple(prepared.held), start_from, solvers, records[1] - records[0]
+        prepared.scenario, prepared.model, tuple(prepared.held), start_from, solvers, records[1] - records[0]
     )
     screening = screen(problem.binder, read, records, problem.start.x0)
     alignment = align_stage(problem, prepared, screening)
@@ -263,7 +263,8 @@ class JointCalibration:
             )
         n_records = sum(p.fit[1] - p.fit[0] for p in self.parts)
         start_from = (first.prepared.log, first.used[0], first.fit[1])
-        problem = build_stage(sc, model, tuple(self.held), start_from, self.solvers, n_records)
+        one_horizon = sc.with_options(residual=joint_residual(sc, [p.prepared for p in self.parts]))
+        problem = build_stage(one_horizon, model, tuple(self.held), start_from, self.solvers, n_records)
         self.fitting = Fit(problem, data, self.solvers)
         self.setup_time_s = time.perf_counter() - t0
 

@@ -11,7 +11,7 @@ from nlp_calib.codegen.export import Example, build_for_export, generate
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.pipeline.calibration import Calibration
 from nlp_calib.pipeline.keys import scenario_key
-from nlp_calib.pipeline.prepare import read, select
+from nlp_calib.pipeline.prepare import read, resolved, select
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import build_residual_data
 
@@ -24,6 +24,7 @@ def write_c_export(sc: Scenario, out_dir: Path) -> tuple[list[Path], Example]:
     result with Python's. Returns the files and what the example evaluates.
     """
     model, log = read(sc)
+    sc = resolved(sc, log)
     select(sc, log)  # the horizon must fit the log before anything is built
     with scenario_key(sc, "residual"):
         problems = build_for_export(model, sc.objective.residual.horizon, sc.objective.residual.integration)

@@ -8,14 +8,26 @@ are all checked before the first is solved.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
 
 from nlp_calib.core.errors import DatasetError, ModelError, NlpCalibWarning, ScenarioError
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, get_model, param_names
+from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.problem import ResidualOptions
+
+#: At this rate or above (Hz), a record horizon shorter than :data:`SHORT_WINDOW_S` is warned about:
+#: each window's motion is then little more than the tracker's noise.
+HIGH_RATE_HZ = 50.0
+SHORT_WINDOW_S = 0.05
+#: Logs fitted together whose record horizon spans durations further apart than this factor are
+#: warned about.
+DURATION_RATIO = 2.0
 
 
 @dataclass(frozen=True)
@@ -34,9 +46,16 @@ class PreparedLog:
 
 
 def read(sc: Scenario, log: Log | None = None) -> tuple[KinematicModel, Log]:
-    """The scenario's model and its (first) log read from its source (or ``log`` as given)."""
+    """The scenario's model, in the form the log's encoder units call for, and its (first) log read
+    from its source (or ``log`` as given)."""
     with scenario_key(sc, "model"):
-        model = get_model(sc.model)
+        get_model(sc.model)
+    model, log = _read(sc, log)
+    return in_units(model, log.header.encoder_units), log
+
+
+def _read(sc: Scenario, log: Log | None) -> tuple[KinematicModel, Log]:
+    model = sc.model_form()
     if log is not None:
         if log.header.kinematic_model not in model.log_names:
             raise ModelError(
@@ -99,9 +118,63 @@ def held(sc: Scenario, model: KinematicModel, log: Log, start: int, stop: int) -
     return {n: why for n, why in model.undetermined(inputs).items() if n not in sc.parameters.fixed}
 
 
+def median_dt(sc: Scenario, log: Log) -> float:
+    """The median time between the selected records (s)."""
+    t = log.time_s[sc.log.samples.start : sc.log.samples.stop]
+    return float(np.median(np.diff(t))) if t.size > 1 else 1.0
+
+
+def resolved(sc: Scenario, log: Log) -> Scenario:
+    """``sc`` with its horizon in records for ``log``: ``residual.horizon_s`` over the log's median
+    interval when given; a record horizon that spans a very short time at a high rate is warned
+    about."""
+    residual, dt = sc.objective.residual, median_dt(sc, log)
+    if residual.horizon_s is not None:
+        H = max(1, round(residual.horizon_s / dt)) if dt > 0 else 1
+        return sc.with_options(residual=replace(residual, horizon=int(H)))
+    span = residual.horizon * dt
+    if 0 < dt <= 1.0 / HIGH_RATE_HZ and span < SHORT_WINDOW_S:
+        part = f"{sc.origin} ({sc.dataset.name}): " if sc.origin else ""
+        warnings.warn(
+            f"{part}residual.horizon {residual.horizon} record(s) spans {1e3 * span:.0f} ms at "
+            f"{1.0 / dt:.0f} Hz: each window's motion is little more than the tracker's noise; give the "
+            "windows' duration as residual.horizon_s (e.g. 0.5)",
+            NlpCalibWarning,
+            stacklevel=3,
+        )
+    return sc
+
+
+def joint_residual(sc: Scenario, parts: Sequence[PreparedLog]) -> ResidualOptions:
+    """The residual form of logs fitted together: one record horizon. ``horizon_s`` that means
+    different record horizons on the logs is refused; a record horizon that spans very different
+    durations is warned about."""
+    horizons = [p.scenario.objective.residual.horizon for p in parts]
+    spans = [H * median_dt(p.scenario, p.log) for H, p in zip(horizons, parts)]
+    each = ", ".join(
+        f"{h} records, {s:.3g} s on datasets[{i}]" for i, (h, s) in enumerate(zip(horizons, spans))
+    )
+    given = sc.objective.residual
+    if given.horizon_s is not None and len(set(horizons)) > 1:
+        raise ScenarioError(
+            f"{sc.path or sc.name}: residual.horizon_s {given.horizon_s:g} s is {each}: logs fitted together "
+            "need one record horizon; give residual.horizon (records) instead"
+        )
+    if min(spans) > 0 and max(spans) > DURATION_RATIO * min(spans):
+        warnings.warn(
+            f"residual.horizon {horizons[0]} records spans very different durations ({each}): the logs' "
+            "windows weigh very different stretches of driving",
+            NlpCalibWarning,
+            stacklevel=3,
+        )
+    return replace(given, horizon=horizons[0])
+
+
 def prepare(sc: Scenario, log: Log | None = None) -> PreparedLog:
-    """Read (unless ``log`` is given), select and check the single-log scenario ``sc``'s log."""
+    """Read (unless ``log`` is given), select and check the single-log scenario ``sc``'s log (its
+    horizon in records resolved for the log)."""
     model, log = read(sc, log)
+    sc = resolved(sc, log)
     start, stop = select(sc, log)
     first_split = split(sc, start, stop)
     undetermined = held(sc, model, log, start, first_split)

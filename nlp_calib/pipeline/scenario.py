@@ -23,7 +23,8 @@ from typing import Any
 from nlp_calib.core.config import coerce, fail, from_mapping, key_name, read_yaml
 from nlp_calib.core.errors import ConfigError, FieldError, ScenarioError
 from nlp_calib.core.ranges import Range, check_choice, shown
-from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders, get_model, param_names
+from nlp_calib.models import DEFAULT_MODEL, MODELS, KinematicModel, encoders, get_model, param_names
+from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.options import (
     AlignmentOptions,
     ComputeOptions,
@@ -39,8 +40,9 @@ from nlp_calib.pipeline.options import (
     ValidationOptions,
 )
 from nlp_calib.solvers import SOLVERS
-from nlp_calib.sources import BagSource, TextSource, moved, parse_source
+from nlp_calib.sources import BagSource, JointLogSource, TextSource, moved, parse_source
 from nlp_calib.sources.bag import check_joints
+from nlp_calib.sources.joints import check_encoders
 
 #: Numbers a library may be handed as they are (``ipopt.options``).
 _FINITE = Range(-math.inf, math.inf, lo_open=True, hi_open=True)
@@ -159,6 +161,11 @@ class Scenario:
     def with_solver_options(self, solver: str, options: Any) -> Scenario:
         """The same scenario with ``solver``'s options replaced."""
         return dataclasses.replace(self, solver_options={**self.solver_options, solver: options})
+
+    def model_form(self) -> KinematicModel:
+        """The scenario's model in the form its logs' encoder units call for (joints in radians:
+        parameters in robot units, ``nlp_calib.models.radians``)."""
+        return in_units(get_model(self.model), self.log.source.joint_units)
 
     def where(self) -> str:
         """How messages name this scenario (its file, or its name), with the log of a part."""
@@ -307,16 +314,31 @@ def check_against_model(sc: Scenario, source: str) -> None:
         check_choice("model", sc.model, MODELS)
     except FieldError as exc:
         fail(f"{source}: {exc.field}", exc.reason)
-    model = get_model(sc.model)
+    model = sc.model_form()
     _check_parameter_names(sc.parameters, param_names(model), source)
     for enc in sc.data.encoder_noise:
         _choice(enc, encoders(model), f"{source}: encoder_noise")
     for i, entry in enumerate(sc.data.logs):
+        key = f"datasets[{i}]" if sc.data.joint else "dataset"
         if isinstance(entry.source, BagSource):
-            key = f"datasets[{i}]" if sc.data.joint else "dataset"
             check_joints(entry.source.joints, model, f"{source}: {key}.joints")
+        if isinstance(entry.source, JointLogSource):
+            check_encoders(entry.source.encoders, model, f"{source}: {key}.encoders")
+    _check_units(sc, source)
     _check_solvers(sc, source)
     _check_overlaps(sc, source)
+
+
+def _check_units(sc: Scenario, source: str) -> None:
+    """Logs fitted together read their encoders in one unit: the parameters' names follow it."""
+    units = [e.source.joint_units for e in sc.data.logs]
+    if len(set(units)) > 1:
+        listed = ", ".join(f"datasets[{i}] {u}" for i, u in enumerate(units))
+        fail(
+            f"{source}: datasets",
+            f"logs fitted together need their joints in one unit ({listed}): the parameters differ "
+            "(wheel radius or gain per tick); set joint_units alike",
+        )
 
 
 def _choice(value: str, choices: typing.Iterable[str], where: str) -> None:

@@ -26,21 +26,28 @@ from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES, KinematicModel
 from nlp_calib.problem.functions import HORIZON, ProblemFunctions
 
 STRIDE = Range(1, 1_000_000, integer=True)
+#: ``residual.horizon_s``: a window's duration (s).
+HORIZON_S = Range(0.0, 3600.0, lo_open=True)
 
 
 @dataclass(frozen=True)
 class ResidualOptions:
     """How residuals are formed (scenario key ``residual``): windows of ``horizon`` intervals every
     ``stride`` records, the model integrated ``exact`` or ``euler``, and where in an interval an
-    angle reading is taken (``steering_sample``: at its ``start``, ``end`` or ``mean``)."""
+    angle reading is taken (``steering_sample``: at its ``start``, ``end`` or ``mean``).
+    ``horizon_s`` gives the windows' duration in seconds instead: the horizon in records then
+    follows from each log's median interval (``nlp_calib.pipeline.prepare``)."""
 
     horizon: int = 1
     stride: int = 1
     integration: str = "exact"
     steering_sample: str = "start"
+    horizon_s: float | None = None
 
     def __post_init__(self) -> None:
         check_range("horizon", self.horizon, HORIZON)
+        if self.horizon_s is not None:
+            check_range("horizon_s", self.horizon_s, HORIZON_S)
         check_range("stride", self.stride, STRIDE)
         check_choice("integration", self.integration, INTEGRATIONS)
         check_choice("steering_sample", self.steering_sample, STEERING_SAMPLES)

@@ -80,7 +80,8 @@ class DroppedLine:
 class LogInfo:
     """The log as read: its source, records, what was dropped while reading, the sensor's frame,
     the encoders, the stamp of its first record on its own clock (ns; every time in the result is
-    relative to it) and the duration of the records used (s)."""
+    relative to it), the duration of the records used (s) and the nominal mount's height, roll and
+    pitch where the source gives them (a bag's ``/tf_static``; the planar fit cannot see them)."""
 
     path: str
     records: int
@@ -89,6 +90,7 @@ class LogInfo:
     encoders: tuple[Encoder, ...]
     start_ns: int
     duration_s: float
+    sensor_z_roll_pitch: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)

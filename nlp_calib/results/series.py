@@ -46,7 +46,8 @@ class TrackSeries:
     ``good`` marks the tracker poses not flagged bad; ``parts`` are the fault-free segments
     ``[p, q)`` (indices into the tracks); ``restarted`` holds each solver's track restarted from
     the tracker at the start of every part (what the segment ATE scores); ``faults`` are
-    ``(index, kind)``; ``holdout_start`` the index of the first record kept out of the fit.
+    ``(index, kind)``; ``holdout_start`` the index of the first record kept out of the fit;
+    ``tracker_z`` the tracker's height at each record where the source has one (None: planar).
     """
 
     time_s: np.ndarray
@@ -58,6 +59,7 @@ class TrackSeries:
     faults: tuple[tuple[int, str], ...]
     holdout_start: int | None
     segments: tuple[SegmentFigures, ...]
+    tracker_z: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ from nlp_calib.core import poses3d
 from nlp_calib.core.errors import OptionsError
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.ranges import Range
-from nlp_calib.logs import format_joints_csv, format_tum
+from nlp_calib.logs import format_joint_csv, format_tum
 from nlp_calib.models import MODELS
 from nlp_calib.models.drives import integrate_base
 from nlp_calib.models.joints import JOINT_MAPS, joint_map
@@ -254,10 +254,14 @@ def camera_paths(tum_path: str | Path) -> tuple[Path, Path, Path]:
     return p, p.with_suffix(".joints.csv"), p.with_suffix(".truth.json")
 
 
+def _ns(time_s: np.ndarray) -> np.ndarray:
+    return np.round(np.asarray(time_s) * 1e9).astype(np.int64)
+
+
 def write_camera_simulation(sim: CameraSimulation, tum_path: str | Path) -> tuple[Path, Path, Path]:
     """Write the TUM trajectory, the joint CSV and the truth JSON (atomically); returns the paths."""
     tum, joints, truth = camera_paths(tum_path)
-    atomic_write_text(tum, format_tum(sim.image_time_s, sim.camera_poses))
-    atomic_write_text(joints, format_joints_csv(sim.joint_time_s, sim.joint_names, sim.joint_positions))
+    atomic_write_text(tum, format_tum(_ns(sim.image_time_s), sim.camera_poses))
+    atomic_write_text(joints, format_joint_csv(_ns(sim.joint_time_s), sim.joint_names, sim.joint_positions))
     atomic_write_text(truth, json.dumps(sim.truth_dict(), indent=2) + "\n")
     return tum, joints, truth

@@ -60,6 +60,14 @@ class NormalEquations:
     chi2: float
     inliers: int
 
+    def decrement(self) -> float:
+        """``gᵀH⁻¹g``: the cost decrease the undamped Gauss-Newton step predicts (×½ convention);
+        inf when ``H`` is singular."""
+        try:
+            return float(self.g @ np.linalg.solve(self.H, self.g))
+        except np.linalg.LinAlgError:
+            return float("inf")
+
 
 @dataclass(frozen=True)
 class Priors:

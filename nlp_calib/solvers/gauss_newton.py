@@ -62,14 +62,6 @@ class GaussNewtonOptions:
 _MAX_DAMPING = 1e16
 
 
-def _decrement(ne: NormalEquations) -> float:
-    """``gᵀH⁻¹g``: the cost decrease the undamped Gauss-Newton step predicts (×½ convention)."""
-    try:
-        return float(ne.g @ np.linalg.solve(ne.H, ne.g))
-    except np.linalg.LinAlgError:
-        return float("inf")
-
-
 def _scaled_gradient(ne: NormalEquations) -> float:
     d = np.sqrt(np.maximum(np.diag(ne.H), 1e-300))
     return float(np.max(np.abs(ne.g) / d)) if ne.g.size else 0.0
@@ -134,7 +126,7 @@ class _Iteration:
             part = np.linalg.solve(ne.H + self.lam * np.diag(D), -ne.g)
         except np.linalg.LinAlgError:
             return False, "singular damped normal matrix", True
-        if _decrement(ne) <= opts.function_tolerance * ne.cost:
+        if ne.decrement() <= opts.function_tolerance * ne.cost:
             # Even the undamped step could not lower the cost by more than its rounding.
             return True, "Gauss-Newton decrement below tolerance", False
         predicted = -(2.0 * ne.g @ part + part @ ne.H @ part)

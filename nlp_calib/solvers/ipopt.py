@@ -28,6 +28,11 @@ from nlp_calib.solvers.nlp import NlpOracle
 HUBER_FORMULATIONS = ("direct", "lifted")
 HESSIANS = ("exact", "gauss_newton", "limited_memory")
 _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+#: IPOPT also stops on a step below machine precision, which it takes at an optimum that rounding
+#: keeps it from certifying to its own tolerance (a fit exact to rounding). That point is
+#: converged when no Gauss-Newton step there could lower the cost by more than this fraction.
+_TINY_STEP = "Search_Direction_Becomes_Too_Small"
+_TINY_STEP_DECREMENT = 1e-12
 #: Lower bound of the lifted weights: keeps δ²/w finite; far below any weight at the optimum.
 _W_MIN = 1e-8
 #: IPOPT options that make it read or write files, or load a library, by name of its own: the
@@ -176,6 +181,8 @@ class Ipopt:
         ne = ev.normal_equations(x)
         status = str(stats.get("return_status", "unknown"))
         converged = bool(stats.get("success", False)) or status in _SUCCESS
+        if status == _TINY_STEP:
+            converged = ne.decrement() <= _TINY_STEP_DECREMENT * ne.cost
         reason = status if converged else f"IPOPT stopped: {status}"
         if converged and is_singular(ne.H):
             converged, reason = False, SINGULAR_REASON

@@ -13,10 +13,11 @@ from typing import Any
 from nlp_calib.core.config import fail
 from nlp_calib.sources.bag import BagSource
 from nlp_calib.sources.base import DatasetSource
+from nlp_calib.sources.joints import JointLogSource
 from nlp_calib.sources.text import TextSource, load_log
 
 #: The dataset sources, in the order they are asked whether they read a scenario's entry.
-SOURCES: dict[str, type[DatasetSource]] = {s.kind: s for s in (BagSource, TextSource)}
+SOURCES: dict[str, type[DatasetSource]] = {s.kind: s for s in (BagSource, JointLogSource, TextSource)}
 
 
 def parse_source(raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> DatasetSource:
@@ -34,4 +35,13 @@ def moved(source: DatasetSource, path: Path) -> DatasetSource:
     return source.moved(path) if type(source).accepts(path) else TextSource(path)
 
 
-__all__ = ["SOURCES", "BagSource", "DatasetSource", "TextSource", "load_log", "moved", "parse_source"]
+__all__ = [
+    "SOURCES",
+    "BagSource",
+    "DatasetSource",
+    "JointLogSource",
+    "TextSource",
+    "load_log",
+    "moved",
+    "parse_source",
+]

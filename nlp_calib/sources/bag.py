@@ -1,7 +1,10 @@
 """A ROS 1 or ROS 2 bag as a dataset: the ``dataset:`` block that names its topics, read as a log.
 
-The bag is read and paired on every run exactly as ``nlp-calib import-bag`` would write it
-(:mod:`nlp_calib.logs.bag_records`), with a header from ``ROBOT.yaml`` or the model's defaults.
+Joints in radians (the default, REP 103) are read as a log timed by the tracker, each stream on
+its own clock (:mod:`nlp_calib.logs.bag_joints`); raw counts (``joint_units: counts``) are read and
+paired on every run exactly as ``nlp-calib import-bag`` writes them
+(:mod:`nlp_calib.logs.bag_records`). The header comes from ``ROBOT.yaml``, else from the bag's
+``/tf_static`` for the sensor's mount, else from the model's defaults.
 """
 
 from __future__ import annotations
@@ -16,14 +19,34 @@ from nlp_calib.core.config import coerce, fail, from_mapping, key_name
 from nlp_calib.core.errors import ConfigError, DatasetError
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.logs.bag_files import bag_root
+from nlp_calib.logs.bag_joints import read_joint_bag
 from nlp_calib.logs.bag_reader import DEFAULT_MAX_GAP_S, BagTopics, is_bag
 from nlp_calib.logs.bag_records import BagRecords, read_bag, read_bag_records
+from nlp_calib.logs.bag_tf import static_mount
 from nlp_calib.models import KinematicModel, encoders
+from nlp_calib.models.radians import in_units
 from nlp_calib.sources.base import file_identity
 from nlp_calib.sources.robot import load_robot, robot_header
 
 #: The keys a ``dataset:`` bag block must have.
 REQUIRED = ("bag", "joint_states", "joints", "tracker")
+#: How a topic's messages are timed: their header stamps, or the bag's record (receive) times.
+STAMPS = ("header", "receive")
+
+
+def receive_topics(stamps: str | Mapping[str, str], topics: tuple[str, ...], where: str) -> tuple[str, ...]:
+    """The topics to time by their record times: ``stamps`` is ``header`` or ``receive`` for every
+    topic, or one of them per topic (``{/joint_states: receive}``)."""
+    per_topic = dict.fromkeys(topics, stamps) if isinstance(stamps, str) else dict(stamps)
+    for topic, how in per_topic.items():
+        if how not in STAMPS:
+            raise ConfigError(f"{where}.stamps: {topic}: {how!r} is not one of {', '.join(STAMPS)}")
+        if topic not in topics:
+            raise ConfigError(
+                f"{where}.stamps: {topic!r} is neither the joint_states nor the tracker topic "
+                f"({', '.join(topics)})"
+            )
+    return tuple(t for t, how in per_topic.items() if how == "receive")
 
 
 def _resolved(path: Path, base_dir: Path) -> Path:
@@ -33,7 +56,9 @@ def _resolved(path: Path, base_dir: Path) -> Path:
 @dataclass(frozen=True)
 class BagSource:
     """A bag (``bag``) and how to read it: the topics, the joints in the model's encoder order, the
-    tracked frame, ``ROBOT.yaml`` and the pairing's ``max_gap`` (s)."""
+    tracked frame, ``ROBOT.yaml``, the pairing's ``max_gap`` (s), what the joints' positions hold
+    (``joint_units``), how each topic is timed (``stamps``) and the joints' ``clock_offset`` (s, or
+    ``auto``); ``sensor_frame`` and ``base_frame`` name the frames ``/tf_static`` joins."""
 
     kind: ClassVar[str] = "bag"
     record_word: ClassVar[str] = "record"
@@ -44,6 +69,11 @@ class BagSource:
     tracker_frame: str | None = None
     robot: Path | None = None
     max_gap: float = DEFAULT_MAX_GAP_S
+    joint_units: str = "radians"
+    stamps: str | Mapping[str, str] = "header"
+    clock_offset: float | str = 0.0
+    sensor_frame: str | None = None
+    base_frame: str = "base_link"
 
     def __post_init__(self) -> None:
         self.topics()  # validates the topic fields
@@ -53,13 +83,27 @@ class BagSource:
         return self.bag
 
     def topics(self) -> BagTopics:
-        return BagTopics(self.joint_states, self.joints, self.tracker, self.tracker_frame, self.max_gap)
+        receive = receive_topics(self.stamps, (self.joint_states, self.tracker), "dataset")
+        return BagTopics(
+            self.joint_states,
+            self.joints,
+            self.tracker,
+            self.tracker_frame,
+            self.max_gap,
+            self.joint_units,
+            receive,
+            self.clock_offset,
+        )
 
     def files(self) -> tuple[Path, ...]:
         return (self.bag,) if self.robot is None else (self.bag, self.robot)
 
-    def stamps(self) -> str:
-        return f"the header stamps of {self.joint_states} and {self.tracker}"
+    def clock(self) -> str:
+        receive = self.topics().receive
+        return " and ".join(
+            f"the {'record times' if t in receive else 'header stamps'} of {t}"
+            for t in (self.joint_states, self.tracker)
+        )
 
     def identity(self) -> Hashable:
         """A ROS 2 bag's folder also when its .db3 or .mcap file is named: one bag, one log."""
@@ -69,12 +113,21 @@ class BagSource:
             return file_identity(self.bag)
 
     def header(self, model: KinematicModel) -> LogHeader:
-        """The header the bag's records get: ``ROBOT.yaml``'s values over the model's defaults."""
+        """The header the bag's records get (for ``model`` in the joints' units): ``ROBOT.yaml``'s
+        values, else (joints in radians) the sensor's mount on ``/tf_static``, over the model's
+        defaults. Raw counts keep the header they always had."""
+        model = in_units(model, self.joint_units)
         robot = load_robot(self.robot, model) if self.robot is not None else None
-        return robot_header(model, robot, self.tracker_frame)
+        frame = (robot.sensor_frame if robot else None) or self.sensor_frame or self.tracker_frame
+        mount = None
+        if self.joint_units == "radians" and (robot is None or robot.sensor_pose is None) and frame:
+            mount = static_mount(bag_root(self.bag), self.base_frame, frame)
+        return robot_header(model, robot, frame, mount)
 
     def read(self, model: KinematicModel, *, strict: bool) -> Log:
         check_joints(self.joints, model, "dataset.joints")
+        if self.joint_units == "radians":
+            return read_joint_bag(self.bag, self.topics(), self.header(model))
         return read_bag(self.bag, self.topics(), self.header(model), model.encoder_kinds, strict=strict)
 
     def records(self, model: KinematicModel) -> tuple[LogHeader, BagRecords]:

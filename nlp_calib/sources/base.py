@@ -29,11 +29,16 @@ class DatasetSource(Protocol):
         """The file or folder that names the log (in messages and output folder names)."""
         ...
 
+    @property
+    def joint_units(self) -> str:
+        """What its encoder readings are: ``counts`` or ``radians`` (the model's form follows)."""
+        ...
+
     def files(self) -> tuple[Path, ...]:
         """Every file or folder the source reads (to tell logs apart and to never overwrite one)."""
         ...
 
-    def stamps(self) -> str:
+    def clock(self) -> str:
         """Which clock the records' times come from, in words."""
         ...
 
@@ -73,4 +78,8 @@ def file_identity(path: Path) -> Hashable:
     try:
         return files.identity(path)
     except (OSError, ValueError):
+        pass
+    try:
         return path.resolve()
+    except (OSError, ValueError):  # a NUL in the path: no file has it; the read says so
+        return str(path)

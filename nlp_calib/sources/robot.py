@@ -18,7 +18,9 @@ from nlp_calib.core.config import fail, from_mapping, read_yaml
 from nlp_calib.core.errors import ConfigError
 from nlp_calib.core.ranges import MAGNITUDE, Range
 from nlp_calib.logs import LogHeader
+from nlp_calib.logs.bag_tf import Mount
 from nlp_calib.models import KinematicModel, encoders
+from nlp_calib.models.radians import default_guess, units_of
 
 #: ``#joints_max_enc_values``: the text header's range of an encoder range.
 ENCODER_RANGE = Range(1, 2**32, integer=True)
@@ -71,15 +73,22 @@ def _check(limit: Range, value: float, where: str) -> None:
 
 
 def robot_header(
-    model: KinematicModel, robot: RobotDescription | None = None, sensor_frame: str | None = None
+    model: KinematicModel,
+    robot: RobotDescription | None = None,
+    sensor_frame: str | None = None,
+    mount: Mount | None = None,
 ) -> LogHeader:
     """The header a text log of ``model`` would carry: ``robot``'s values over the model's defaults;
-    the sensor frame from ``robot``, else ``sensor_frame`` (the tracked frame), else ``sensor``."""
+    the sensor's pose from ``robot``, else from ``mount`` (``/tf_static``), else the default; the
+    sensor frame from ``robot``, else ``sensor_frame`` (the tracked frame), else ``sensor``. For a
+    model reading joints in radians the encoder ranges are 0 (no ticks to count)."""
     robot = robot or RobotDescription()
-    drive = model.drive
-    guess = {**drive.default_guess, **robot.initial_guess}
-    ranges = {**drive.default_ranges, **robot.encoder_ranges}
+    guess = {**default_guess(model), **robot.initial_guess}
+    ranges = {**model.drive.default_ranges, **robot.encoder_ranges}
     pose = robot.sensor_pose or tuple(float(guess[n]) for n in ("sensor_x", "sensor_y", "sensor_theta"))
+    if robot.sensor_pose is None and mount is not None:
+        pose = (mount[0], mount[1], mount[5])
+    radians = units_of(model) == "radians"
     frame = robot.sensor_frame or (sensor_frame or "").strip("/") or "sensor"
     if not _FRAME.fullmatch(frame):
         raise ConfigError(
@@ -90,7 +99,9 @@ def robot_header(
         kinematic_model=model.log_names[0],
         parameters={model.header_names[n]: float(guess[n]) for n in model.kinematic_params},
         encoder_names=names,
-        encoder_max=tuple(int(ranges[n]) for n in names),
+        encoder_max=tuple(0 if radians else int(ranges[n]) for n in names),
         sensor_frame=frame,
         T_base_sensor=(float(pose[0]), float(pose[1]), float(pose[2])),
+        encoder_units="radians" if radians else "counts",
+        sensor_z_roll_pitch=None if robot.sensor_pose is not None or mount is None else mount[2:5],
     )

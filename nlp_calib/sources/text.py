@@ -38,6 +38,7 @@ class TextSource:
 
     kind: ClassVar[str] = "text"
     record_word: ClassVar[str] = "line"
+    joint_units: ClassVar[str] = "counts"
     file: Path
 
     @property
@@ -47,7 +48,7 @@ class TextSource:
     def files(self) -> tuple[Path, ...]:
         return (self.file,)
 
-    def stamps(self) -> str:
+    def clock(self) -> str:
         return "the log's own time column"
 
     def identity(self) -> Hashable:

@@ -1,0 +1,235 @@
+"""A bag's joints in radians and its tracker, each on its own clock, as a log timed by the tracker.
+
+Joint positions (REP 103: radians, a wheel's angle growing without wrapping) come fast and smooth;
+tracker poses do not. So a record is made at each tracker pose, at its own stamp, with every
+joint's position interpolated there from the joints' own messages; no pose is ever made up
+between two tracker poses. A tracker pose before the first joint message, after the last, or
+inside a gap of the joints over ``max_gap`` is left out. The joints' messages are kept as they
+are (:class:`~nlp_calib.logs.log.JointStream`), so a tracker lag re-samples them at their own
+stamps. A joint that publishes only its velocity is integrated over the stamps (trapezoids), said
+in a warning.
+
+Each topic is timed by its header stamps unless told otherwise (:class:`BagTopics`): the bag's
+record times, or a constant offset added to the joints' stamps, given or estimated from the record
+times (the tracker lag then refines what remains). Streams that do not overlap in time are one
+error saying which clock to change.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from nlp_calib.core.errors import NlpCalibWarning
+from nlp_calib.core.numeric import wrap_angle
+from nlp_calib.logs.bag_reader import BagError, BagTopics, Drops, Stamped, read_topics
+from nlp_calib.logs.joint_log import format_joint_csv
+from nlp_calib.logs.log import JointStream, Log, LogHeader, frozen
+from nlp_calib.logs.tum import format_tum
+
+#: A joint's positions are quantised when at least this share of its steps are whole multiples
+#: of its smallest step (to 1 %).
+QUANTISED_SHARE = 0.9
+
+
+@dataclass(frozen=True)
+class Timing:
+    """How the tracker's poses were timed against the joints: poses kept, before the first joint
+    message, after the last, inside a gap of the joints over ``max_gap_s``; the joints integrated
+    from velocities; the messages not used as they were."""
+
+    tracker_poses: int
+    kept: int
+    before: int
+    after: int
+    in_gaps: int
+    max_gap_s: float
+    integrated: tuple[str, ...] = ()
+    drops: Drops = field(default_factory=Drops)
+
+    def describe(self) -> str:
+        left = (
+            f"{self.before} before the first joint message, {self.after} after the last, {self.in_gaps} "
+            f"in joint gaps over {self.max_gap_s:g} s"
+        )
+        velocity = (
+            f"; joints integrated from their velocities: {', '.join(self.integrated)}"
+            if self.integrated
+            else ""
+        )
+        dropped = f"; not used as they were: {self.drops.describe()}" if self.drops.counts else ""
+        return (
+            f"{self.kept} of {self.tracker_poses} tracker poses timed inside the joints' stream "
+            f"({left}){velocity}{dropped}"
+        )
+
+
+def clock_shift_ns(path: Path, joints: Stamped, tracker: Stamped, offset: float | str) -> int:
+    """What to add to the joints' stamps to put them on the tracker's clock (ns): ``offset`` (s),
+    or, for ``auto``, the difference of the two topics' median delay from stamp to record time."""
+    if offset != "auto":
+        return round(float(offset) * 1e9)
+    assert joints.recorded_ns is not None and tracker.recorded_ns is not None
+    delay_joints = float(np.median(joints.recorded_ns - joints.stamp_ns))
+    delay_tracker = float(np.median(tracker.recorded_ns - tracker.stamp_ns))
+    shift = round(delay_joints - delay_tracker)
+    warnings.warn(
+        f"{path}: clock_offset auto: the stamps of {joints.topic!r} lie {shift * 1e-9:+.6f} s off those of "
+        f"{tracker.topic!r} (from the bag's record times); they are shifted by it, and the tracker lag "
+        "refines what remains",
+        NlpCalibWarning,
+        stacklevel=3,
+    )
+    return shift
+
+
+def check_overlap(path: Path, joints: Stamped, tracker: Stamped) -> None:
+    """Refuse streams that do not overlap in time, saying which clock to change."""
+    j, t = joints.stamp_ns, tracker.stamp_ns
+    if j.max() >= t.min() and t.max() >= j.min():
+        return
+    raise BagError(
+        path,
+        f"the stamps of {joints.topic!r} ({_span(j)}) and of {tracker.topic!r} ({_span(t)}) do not overlap: "
+        "the topics' header clocks differ (time since boot?); set stamps: {TOPIC: receive} for the "
+        "topic whose clock is unusable, or clock_offset: auto (docs/bags.md)",
+    )
+
+
+def _span(ns: np.ndarray) -> str:
+    return f"{ns.min() * 1e-9:.3f}-{ns.max() * 1e-9:.3f} s"
+
+
+def resolution(positions: np.ndarray) -> float:
+    """A joint's smallest step when its positions are quantised (most steps are whole multiples
+    of it), else 0."""
+    steps = np.abs(np.diff(positions))
+    steps = steps[steps > 0]
+    if steps.size == 0:
+        return 0.0
+    q = float(steps.min())
+    ratio = steps / q
+    return q if np.mean(np.abs(ratio - np.round(ratio)) < 0.01) >= QUANTISED_SHARE else 0.0
+
+
+def joint_positions(
+    path: Path, joints: Stamped, names: tuple[str, ...]
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """The joints' messages in stamp order (one per stamp), their positions (rad; a joint with
+    only velocities integrated over the stamps from 0), and the joints so integrated."""
+    order = np.argsort(joints.stamp_ns, kind="stable")
+    ns = joints.stamp_ns[order]
+    first = np.concatenate([[True], np.diff(ns) > 0])
+    ns, values = ns[first], joints.values[order][first]
+    n = len(names)
+    columns, integrated = [], []
+    for j, name in enumerate(names):
+        position, velocity = values[:, j], values[:, n + j]
+        if np.all(np.isfinite(position)):
+            columns.append(position)
+            continue
+        if not np.all(np.isfinite(velocity)):
+            bad = int(np.sum(~np.isfinite(position) & ~np.isfinite(velocity)))
+            raise BagError(
+                path,
+                f"joint {name!r} on {joints.topic!r}: {bad} of {ns.size} messages give it neither a finite "
+                "position nor a finite velocity; a joint needs one or the other in every message",
+            )
+        dt = np.diff(ns).astype(float) * 1e-9
+        columns.append(np.concatenate([[0.0], np.cumsum(0.5 * (velocity[1:] + velocity[:-1]) * dt)]))
+        integrated.append(name)
+    return ns, np.stack(columns, axis=1), integrated
+
+
+def at_tracker(joint_ns: np.ndarray, tracker: Stamped, max_gap_s: float) -> tuple[np.ndarray, Timing]:
+    """The tracker poses (indices into its messages, in stamp order) the joints can be interpolated
+    at, and how the others fell."""
+    order = np.argsort(tracker.stamp_ns, kind="stable")
+    ts = tracker.stamp_ns[order]
+    first = np.concatenate([[True], np.diff(ts) > 0])
+    order, ts = order[first], ts[first]
+    before, after = ts < joint_ns[0], ts > joint_ns[-1]
+    hi = np.clip(np.searchsorted(joint_ns, ts, side="left"), 1, joint_ns.size - 1)
+    exact = joint_ns[np.minimum(np.searchsorted(joint_ns, ts, side="left"), joint_ns.size - 1)] == ts
+    bridged = joint_ns[hi] - joint_ns[hi - 1] <= round(max_gap_s * 1e9)
+    ok = ~before & ~after & (exact | bridged)
+    gaps = int(np.sum(~ok)) - int(before.sum()) - int(after.sum())
+    timing = Timing(ts.size, int(ok.sum()), int(before.sum()), int(after.sum()), gaps, max_gap_s)
+    return order[ok], timing
+
+
+def read_joint_bag(path: str | Path, topics: BagTopics, header: LogHeader) -> Log:
+    """A bag's joints in radians and its tracker as a :class:`Log` timed by the tracker (see the
+    module docstring)."""
+    p = Path(path)
+    joints, tracker = read_topics(p, topics)
+    shift = clock_shift_ns(p, joints, tracker, topics.clock_offset)
+    joints = replace(joints, stamp_ns=joints.stamp_ns + shift)
+    return timed_by_tracker(p, joints, tracker, topics.joints, topics.max_gap, header)
+
+
+def timed_by_tracker(
+    p: Path, joints: Stamped, tracker: Stamped, names: tuple[str, ...], max_gap_s: float, header: LogHeader
+) -> Log:
+    """The log of ``joints`` (each joint's position, then its velocity; NaN where absent) and of
+    ``tracker`` (its planar and its 3-D pose), a record at each tracker pose the joints cover; a
+    warning says when poses fell in joint gaps, joints were integrated or messages were dropped."""
+    check_overlap(p, joints, tracker)
+    joint_ns, positions, integrated = joint_positions(p, joints, names)
+    index, timing = at_tracker(joint_ns, tracker, max_gap_s)
+    drops = Drops({**joints.drops.counts, **tracker.drops.counts})
+    timing = replace(timing, integrated=tuple(integrated), drops=drops)
+    if timing.kept < 2:
+        raise BagError(p, f"{timing.describe()}; at least 2 are needed")
+    if timing.in_gaps or drops.worrying or integrated:
+        warnings.warn(f"{p}: {timing.describe()}", NlpCalibWarning, stacklevel=3)
+    stamps = tracker.stamp_ns[index]
+    start_ns = int(stamps[0])
+    steps = [0.0 if n in integrated else resolution(positions[:, j]) for j, n in enumerate(names)]
+    by_velocity = tuple(e for e, n in zip(header.encoder_names, names) if n in integrated)
+    stream_s = frozen((joint_ns - start_ns).astype(float) * 1e-9)
+    stream = JointStream(stream_s, frozen(positions), tuple(steps), by_velocity)
+    time_s = frozen((stamps - start_ns).astype(float) * 1e-9)
+    poses = np.array(tracker.values[index, :3], dtype=float)
+    poses[:, 2] = wrap_angle(poses[:, 2])
+    n = int(index.size)
+    return Log(
+        path=str(p),
+        header=header,
+        time_s=time_s,
+        ticks=frozen(np.zeros((n, 0), dtype=np.int64)),
+        model_pose=frozen(np.zeros((n, 3))),
+        T_world_sensor=frozen(poses),
+        line_numbers=frozen(index.astype(np.int64) + 1),
+        start_ns=start_ns,
+        joint_positions=stream.at(time_s),
+        joint_stream=stream,
+        T_world_sensor_3d=frozen(np.array(tracker.values[index][:, [0, 1, 3, 4, 5, 6, 7]], dtype=float)),
+    )
+
+
+def joint_files(path: str | Path, topics: BagTopics) -> tuple[str, str, str]:
+    """A bag's joints in radians as a CSV joint log and its tracker's poses as a TUM trajectory, on
+    the tracker's clock (the joints' stamps shifted by the clock offset), and what was written."""
+    p = Path(path)
+    joints, tracker = read_topics(p, topics)
+    joints = replace(
+        joints, stamp_ns=joints.stamp_ns + clock_shift_ns(p, joints, tracker, topics.clock_offset)
+    )
+    joint_ns, positions, integrated = joint_positions(p, joints, topics.joints)
+    order = np.argsort(tracker.stamp_ns, kind="stable")
+    ts = tracker.stamp_ns[order]
+    first = np.concatenate([[True], np.diff(ts) > 0])
+    poses = tracker.values[order][first]
+    velocity = f" ({', '.join(integrated)} integrated from velocities)" if integrated else ""
+    summary = (
+        f"{joint_ns.size} joint messages{velocity} and {int(first.sum())} tracker poses, each on its clock"
+    )
+    return (
+        format_joint_csv(joint_ns, topics.joints, positions),
+        format_tum(ts[first], poses[:, [0, 1, 3, 4, 5, 6, 7]]),
+        summary,
+    )

@@ -1,0 +1,99 @@
+"""A joint log as CSV: a header row ``time,<joint>,<joint>,…`` then one row per sample.
+
+Times in seconds (read to the nanosecond), joint positions in radians as ROS publishes them
+(REP 103: a wheel's angle grows without wrapping as it turns; an absolute joint's is its angle);
+``#`` lines are comments. A row with another number of fields, a value that is not a finite
+number and a time that does not increase are refused with the file and the line.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nlp_calib.core.errors import DatasetError
+from nlp_calib.logs.log import frozen
+from nlp_calib.logs.text_tables import check_increasing, data_lines, numbers, seconds, stamp_ns
+
+TIME_COLUMN = "time"
+
+
+@dataclass(frozen=True)
+class JointTable:
+    """Joint positions ``(n, len(names))`` (rad) at stamps ``time_ns``, with each row's line."""
+
+    path: str
+    time_ns: np.ndarray
+    names: tuple[str, ...]
+    positions: np.ndarray
+    line_numbers: np.ndarray
+
+    @property
+    def time_s(self) -> np.ndarray:
+        """The stamps in seconds (absolute: float64 keeps them to about 0.2 µs)."""
+        return self.time_ns.astype(float) * 1e-9
+
+    def column(self, name: str) -> np.ndarray:
+        """The positions of joint ``name``."""
+        return self.columns((name,), "joint")[:, 0]
+
+    def columns(self, joints: Sequence[str], where: str) -> np.ndarray:
+        """The positions of ``joints``, in that order; a joint the file lacks is an error naming
+        ``where`` (the key that names it) and the joints it has."""
+        missing = [j for j in joints if j not in self.names]
+        if missing:
+            raise DatasetError(
+                self.path,
+                None,
+                f"has no joint {missing[0]!r} ({where}); its joints are {', '.join(self.names)}",
+            )
+        return self.positions[:, [self.names.index(j) for j in joints]]
+
+
+def _names(path: str, line: int, text: str) -> tuple[str, ...]:
+    names = tuple(f.strip() for f in text.split(","))
+    if names[0].lower() != TIME_COLUMN or len(names) < 2:
+        raise DatasetError(
+            path, line, f"the first row is {text[:80]!r}; expected a header row 'time,<joint>,…'"
+        )
+    joints = names[1:]
+    if not all(joints) or len(set(joints)) != len(joints):
+        raise DatasetError(path, line, f"joint names must be non-empty and distinct, got {list(joints)}")
+    return joints
+
+
+def read_joint_csv(path: str | Path) -> JointTable:
+    """Read a CSV joint log (see the module docstring)."""
+    p = str(path)
+    lines = data_lines(path)
+    first = next(lines, None)
+    if first is None:
+        raise DatasetError(p, None, "is empty; expected a header row 'time,<joint>,…' and rows")
+    names = _names(p, *first)
+    layout = f"{len(names) + 1} comma-separated numbers ({TIME_COLUMN},{','.join(names)})"
+    stamps, rows, at = [], [], []
+    for number, text in lines:
+        fields = text.split(",")
+        if len(fields) != len(names) + 1:
+            raise DatasetError(p, number, f"has {len(fields)} fields; expected {layout}")
+        rows.append(numbers(p, number, fields[1:], layout))
+        stamps.append(stamp_ns(fields[0], p, number))
+        at.append(number)
+    if len(rows) < 2:
+        raise DatasetError(p, None, f"holds {len(rows)} row(s); a joint log needs at least 2")
+    time_ns, line_numbers = np.array(stamps, dtype=np.int64), np.array(at, dtype=np.int64)
+    check_increasing(p, time_ns, line_numbers)
+    return JointTable(p, frozen(time_ns), names, frozen(np.array(rows, dtype=float)), frozen(line_numbers))
+
+
+def format_joint_csv(time_ns: np.ndarray, names: Sequence[str], positions: np.ndarray) -> str:
+    """The CSV text of joint positions ``(n, len(names))`` at stamps ``time_ns``, every value exact."""
+    head = ",".join([TIME_COLUMN, *names]) + "\n"
+    rows = (
+        seconds(int(t)) + "," + ",".join(repr(float(v)) for v in row) + "\n"
+        for t, row in zip(time_ns.tolist(), positions)
+    )
+    return head + "".join(rows)

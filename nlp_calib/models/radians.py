@@ -1,0 +1,308 @@
+"""A model read from joint positions in radians: the same base, its parameters in robot units.
+
+ROS publishes joint positions in radians (REP 103): a wheel's angle, which grows without wrapping,
+and a steering joint's angle. Read that way, a wheel's gain in metres per tick becomes its radius
+in metres (its travel is radius × Δangle) and the parameters take the names a robot's stack gives
+them. Each model declares, once, a :class:`RadiansForm`: for every parameter or input whose
+meaning changes, its name, unit and factor in the radians form (the counts form's value is the
+factor times the radians form's); for every input, the encoder that drives it. :class:`InRadians`
+wraps the model with it: the symbolic increment is the model's own on the parameters and inputs
+mapped back, and every fact (units, ranges, reference precision, symmetries, defaults, the
+controller's parameters, the closed-form start) is the model's, renamed and rescaled. Nothing of
+a model is written twice.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import casadi as ca
+import numpy as np
+
+from nlp_calib.core.errors import ModelError
+from nlp_calib.core.numeric import wrap_angle
+from nlp_calib.logs import EncoderKind, Log
+from nlp_calib.models.base import STEERING_SAMPLES, KinematicModel, Reference, Symmetry, sampled_angle
+
+if TYPE_CHECKING:
+    from nlp_calib.models.drives import Drive
+
+#: Below this (rad) a joint's noise is not taken from its resolution: positions published as
+#: unquantised floats (or integrated from velocities) show no step to take it from.
+MIN_RESOLUTION = 1e-6
+#: What the controller's values assume of joints in radians.
+ASSUMES = (
+    "the joints' positions are in radians as the robot publishes them (REP 103): the radii are "
+    "per radian of the wheel joint, whatever gearing lies between the encoder and that joint"
+)
+
+
+@dataclass(frozen=True)
+class Renamed:
+    """A quantity's name and unit in the radians form, and ``factor``: its value in the counts form
+    per unit of the radians form. For an input, ``encoder`` is the encoder that drives it."""
+
+    name: str
+    unit: str
+    factor: float = 1.0
+    encoder: str = ""
+
+
+@dataclass(frozen=True)
+class RadiansForm:
+    """How a model reads joints in radians: its renamed parameters (by counts-form name; the others
+    keep their names and values) and every input (by counts-form name)."""
+
+    params: Mapping[str, Renamed]
+    inputs: Mapping[str, Renamed]
+
+
+class InRadians:
+    """``model`` read from joint positions in radians (see the module docstring)."""
+
+    def __init__(self, model: KinematicModel, form: RadiansForm) -> None:
+        self.model = model
+        self.form = form
+        self.renamed = {n: form.params.get(n, Renamed(n, model.units[n])) for n in model.kinematic_params}
+        self.counts_names = {r.name: n for n, r in self.renamed.items()}
+
+    # --- names and units ---------------------------------------------------------------------
+
+    @property
+    def name(self) -> str:
+        return self.model.name
+
+    @property
+    def log_names(self) -> tuple[str, ...]:
+        return self.model.log_names
+
+    @property
+    def kinematic_params(self) -> tuple[str, ...]:
+        return tuple(r.name for r in self.renamed.values())
+
+    @property
+    def units(self) -> Mapping[str, str]:
+        return {r.name: r.unit for r in self.renamed.values()}
+
+    @property
+    def header_names(self) -> Mapping[str, str]:
+        return {n: n for n in self.kinematic_params}
+
+    @property
+    def header_aliases(self) -> Mapping[str, str]:
+        return {n.lower(): n for n in self.kinematic_params}
+
+    @property
+    def encoder_kinds(self) -> Mapping[str, EncoderKind]:
+        return self.model.encoder_kinds
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(self.form.inputs[n].name for n in self.model.input_names)
+
+    @property
+    def input_units(self) -> Mapping[str, str]:
+        return {self.form.inputs[n].name: self.form.inputs[n].unit for n in self.model.input_names}
+
+    # --- facts, renamed and rescaled ---------------------------------------------------------
+
+    def rename(self, name: str) -> str:
+        """A parameter's name in the radians form (the sensor's and unknown names unchanged)."""
+        return self.renamed[name].name if name in self.renamed else name
+
+    def words(self, text: str) -> str:
+        """``text`` with the counts form's parameter names in the radians form's."""
+        changed = {n: r.name for n, r in self.renamed.items() if r.name != n}
+        if not changed:
+            return text
+        return re.sub(r"\b(" + "|".join(map(re.escape, changed)) + r")\b", lambda m: changed[m[1]], text)
+
+    def _factor(self, name: str) -> float:
+        return self.renamed[name].factor if name in self.renamed else 1.0
+
+    def from_counts(self, params: Mapping[str, float]) -> dict[str, float]:
+        """Values in the counts form's names, in the radians form's."""
+        return {self.rename(n): float(v) / self._factor(n) for n, v in params.items()}
+
+    def to_counts(self, params: Mapping[str, float]) -> dict[str, float]:
+        """Values in the radians form's names, in the counts form's."""
+        out = {}
+        for n, v in params.items():
+            counts = self.counts_names.get(n, n)
+            out[counts] = float(v) * self._factor(counts)
+        return out
+
+    @property
+    def turning_params(self) -> tuple[str, ...]:
+        return tuple(self.rename(n) for n in self.model.turning_params)
+
+    @property
+    def turning_note(self) -> str:
+        return self.words(self.model.turning_note)
+
+    @property
+    def physical_ranges(self) -> Mapping[str, tuple[float, float]]:
+        return {
+            self.rename(n): (lo / self._factor(n), hi / self._factor(n))
+            for n, (lo, hi) in self.model.physical_ranges.items()
+        }
+
+    @property
+    def reference(self) -> Mapping[str, Reference]:
+        return {
+            self.rename(n): (kind, amount / self._factor(n) if kind == "absolute" else amount)
+            for n, (kind, amount) in self.model.reference.items()
+        }
+
+    @property
+    def headline(self) -> tuple[str, ...]:
+        return tuple(self.rename(n) for n in self.model.headline)
+
+    @property
+    def defaults(self) -> Mapping[str, float]:
+        return self.from_counts(self.model.defaults)
+
+    @property
+    def symmetries(self) -> tuple[Symmetry, ...]:
+        return tuple(
+            Symmetry(
+                s.description,
+                self.rename(s.sign),
+                tuple(map(self.rename, s.negate)),
+                tuple(map(self.rename, s.turn)),
+            )
+            for s in self.model.symmetries
+        )
+
+    @property
+    def angle_params(self) -> tuple[str, ...]:
+        return tuple(self.rename(n) for n in self.model.angle_params)
+
+    @property
+    def drive(self) -> Drive:
+        """The simulator's drive, which simulates the counts form (:func:`default_guess` renames)."""
+        return self.model.drive
+
+    # --- the increment and the inputs --------------------------------------------------------
+
+    def increment(self, k: ca.SX, u: ca.SX, integration: str) -> ca.SX:
+        """The model's increment on the parameters and inputs mapped back to the counts form."""
+        kf = [r.factor for r in self.renamed.values()]
+        uf = [self.form.inputs[n].factor for n in self.model.input_names]
+        k_counts = ca.vertcat(*[k[i] * f if f != 1.0 else k[i] for i, f in enumerate(kf)])
+        u_counts = ca.vertcat(*[u[j] * f if f != 1.0 else u[j] for j, f in enumerate(uf)])
+        return self.model.increment(k_counts, u_counts, integration)
+
+    def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
+        """Rows: each wheel's angle increment and each steering angle (sampled as asked), in rad."""
+        if steering_sample not in STEERING_SAMPLES:
+            raise ModelError(f"steering_sample must be one of {STEERING_SAMPLES}, got {steering_sample!r}")
+        missing = [e for e in self.encoder_kinds if e not in log.header.encoder_names]
+        if missing:
+            raise ModelError(
+                f"{log.path}: the {self.name} model needs joints read as {list(self.encoder_kinds)}; "
+                f"the log has {list(log.header.encoder_names)}"
+            )
+        stream = log.joint_stream
+        lost = [e for e in (stream.integrated if stream else ()) if self.encoder_kinds[e] == "absolute"]
+        if lost:
+            raise ModelError(
+                f"{log.path}: the joint read as {lost[0]!r} publishes only its velocity; an angle cannot be "
+                "integrated from velocities (its start is unknown): publish its position"
+            )
+        rows = []
+        for name in self.model.input_names:
+            encoder = self.form.inputs[name].encoder
+            position = log.joint_position(encoder)
+            if self.encoder_kinds[encoder] == "counter":
+                rows.append(np.diff(position))
+            else:
+                rows.append(sampled_angle(wrap_angle(position), steering_sample))
+        return np.vstack(rows)
+
+    def moving(self, inputs: np.ndarray) -> np.ndarray:
+        return self.model.moving(inputs)
+
+    def travel_direction(self, inputs: np.ndarray) -> np.ndarray:
+        return self.model.travel_direction(inputs)
+
+    def undetermined(self, inputs: np.ndarray) -> dict[str, str]:
+        return {self.rename(n): self.words(why) for n, why in self.model.undetermined(inputs).items()}
+
+    def counter_rows(self, log: Log) -> dict[str, tuple[int, float]]:
+        """Each wheel joint drives its own row, in rad."""
+        return {
+            self.form.inputs[n].encoder: (row, 1.0)
+            for row, n in enumerate(self.model.input_names)
+            if self.encoder_kinds[self.form.inputs[n].encoder] == "counter"
+        }
+
+    def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
+        """1σ of each input (rad): the joint's ``encoder_noise`` (rad), else its resolution's
+        rounding (``resolution/√12``, never below :data:`MIN_RESOLUTION`)."""
+        stream = log.joint_stream
+        noise = []
+        for name in self.model.input_names:
+            encoder = self.form.inputs[name].encoder
+            given = (encoder_noise or {}).get(encoder)
+            if given is not None:
+                noise.append(float(given))
+                continue
+            step = stream.resolution[log.header.encoder_index(encoder)] if stream is not None else 0.0
+            noise.append(max(step, MIN_RESOLUTION) / np.sqrt(12.0))
+        return np.array(noise)
+
+    # --- the hand-off and the start ----------------------------------------------------------
+
+    def controller(
+        self, params: Mapping[str, float], ranges: Mapping[str, float]
+    ) -> tuple[str, dict[str, float], dict[str, str], str]:
+        """The model's controller with every wheel turn 2π of its joint; a controller parameter
+        that is one of the model's own (same name: ``wheel_radius``, ``wheelbase``...) is the
+        parameter itself, not its round trip through the counts form."""
+        turns = dict.fromkeys(self.encoder_kinds, 2.0 * np.pi)
+        name, parameters, places, _ = self.model.controller(self.to_counts(params), turns)
+        own = {n: float(params[n]) if n in params else v for n, v in parameters.items()}
+        return name, own, {self.rename(n): self.words(w) for n, w in places.items()}, ASSUMES
+
+    def implausible(self, params: Mapping[str, float]) -> str:
+        return self.words(self.model.implausible(self.to_counts(params)))
+
+    def initial_guess(
+        self,
+        U: np.ndarray,
+        z: np.ndarray,
+        base_motion: Callable[[Mapping[str, float]], np.ndarray],
+    ) -> dict[str, float]:
+        """The model's closed-form start on the inputs mapped back, its values renamed."""
+        factors = np.array([self.form.inputs[n].factor for n in self.model.input_names])
+        U_counts = U * np.tile(factors, U.shape[0] // factors.size)[:, None]
+
+        def counts_motion(params: Mapping[str, float]) -> np.ndarray:
+            return base_motion(self.from_counts(params))
+
+        return self.from_counts(self.model.initial_guess(U_counts, z, counts_motion))
+
+    def in_radians(self) -> KinematicModel:
+        return self
+
+
+def units_of(model: KinematicModel) -> str:
+    """``radians`` for a model read from joint positions in radians, else ``counts``."""
+    return "radians" if isinstance(model, InRadians) else "counts"
+
+
+def in_units(model: KinematicModel, units: str) -> KinematicModel:
+    """``model`` in the form that reads encoders in ``units`` (``counts`` or ``radians``)."""
+    if units == "radians":
+        return model.in_radians()
+    return model.model if isinstance(model, InRadians) else model
+
+
+def default_guess(model: KinematicModel) -> dict[str, float]:
+    """The simulator's guess of every parameter, in ``model``'s own names."""
+    guess = dict(model.drive.default_guess)
+    return model.from_counts(guess) if isinstance(model, InRadians) else guess

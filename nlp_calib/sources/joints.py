@@ -1,0 +1,137 @@
+"""A CSV joint log and a tracker's TUM trajectory as a dataset: each on its own clock.
+
+The scenario's block names both files and which joint is which of the model's encoders::
+
+    dataset: {joints: wheels.csv, poses: tracker.tum, encoders: {left_wheel: left_wheel_joint,
+              right_wheel: right_wheel_joint}}
+
+The joints are in radians (REP 103). A record is made at each tracker pose the joints cover, with
+the joints interpolated there (:func:`nlp_calib.logs.bag_joints.timed_by_tracker`), exactly as a
+bag's joints in radians are read. ``clock_offset`` (s) is added to the joints' times when the two
+files' clocks differ; ``robot`` is a ``ROBOT.yaml`` (initial guess, the sensor's nominal pose).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Hashable, Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from nlp_calib.core.config import coerce, fail, from_mapping, key_name
+from nlp_calib.core.errors import ConfigError
+from nlp_calib.logs import Log
+from nlp_calib.logs.bag_joints import timed_by_tracker
+from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, MAX_GAP, Stamped
+from nlp_calib.logs.joint_log import read_joint_csv
+from nlp_calib.logs.log import frozen
+from nlp_calib.logs.tum import read_tum
+from nlp_calib.models import KinematicModel, encoders
+from nlp_calib.models.radians import in_units
+from nlp_calib.sources.base import file_identity
+from nlp_calib.sources.robot import load_robot, robot_header
+
+#: The keys a joint-log block must have.
+REQUIRED = ("joints", "poses", "encoders")
+
+
+@dataclass(frozen=True)
+class JointLogSource:
+    """A CSV joint log (``joints``), a TUM trajectory of the sensor (``poses``), the joint that is
+    each of the model's encoders (``encoders``), the longest gap between joint rows a pose's time
+    is interpolated across (``max_gap``, s), the joints' ``clock_offset`` (s) and ``ROBOT.yaml``."""
+
+    kind: ClassVar[str] = "joints"
+    record_word: ClassVar[str] = "pose"
+    joint_units: ClassVar[str] = "radians"
+    joints: Path
+    poses: Path
+    encoders: Mapping[str, str]
+    max_gap: float = DEFAULT_MAX_GAP_S
+    clock_offset: float = 0.0
+    robot: Path | None = None
+
+    def __post_init__(self) -> None:
+        for key, limit in (("max_gap", MAX_GAP), ("clock_offset", CLOCK_OFFSET)):
+            if (reason := limit.problem(getattr(self, key))) is not None:
+                raise ConfigError(f"{key} (seconds) {reason}")
+
+    @property
+    def path(self) -> Path:
+        return self.joints
+
+    def files(self) -> tuple[Path, ...]:
+        return tuple(p for p in (self.joints, self.poses, self.robot) if p is not None)
+
+    def clock(self) -> str:
+        return f"the times of {self.joints.name} and of {self.poses.name}, each on its own"
+
+    def identity(self) -> Hashable:
+        return (file_identity(self.joints), file_identity(self.poses))
+
+    def read(self, model: KinematicModel, *, strict: bool) -> Log:
+        model = in_units(model, "radians")
+        check_encoders(self.encoders, model, "dataset.encoders")
+        names = encoders(model)
+        table = read_joint_csv(self.joints)
+        joint_names = tuple(self.encoders[e] for e in names)
+        positions = table.columns(joint_names, "dataset.encoders")
+        shift = round(self.clock_offset * 1e9)
+        velocities = np.full(positions.shape, np.nan)
+        joints = Stamped(table.path, table.time_ns + shift, np.hstack([positions, velocities]))
+        poses = read_tum(self.poses)
+        tracker = Stamped(str(self.poses), poses.time_ns, poses.planar_and_3d())
+        robot = load_robot(self.robot, model) if self.robot is not None else None
+        header = robot_header(model, robot, None)
+        log = timed_by_tracker(self.joints, joints, tracker, names, self.max_gap, header)
+        return replace(log, line_numbers=frozen(poses.line_numbers[log.line_numbers - 1]))
+
+    def moved(self, path: Path) -> JointLogSource:
+        return replace(self, joints=path)
+
+    @classmethod
+    def claims(cls, raw: Any) -> bool:
+        return isinstance(raw, Mapping) and "joints" in raw and "bag" not in raw
+
+    @classmethod
+    def accepts(cls, path: Path) -> bool:
+        return path.suffix.lower() == ".csv"
+
+    @classmethod
+    def parse(cls, raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> JointLogSource:
+        valid = [f.name for f in dataclasses.fields(cls)]
+        for key in raw:
+            if key not in valid:
+                fail(
+                    f"{where}.{key_name(key)}",
+                    f"unknown key; a joint-log block has {', '.join((*valid, *also))}",
+                )
+        missing = [k for k in REQUIRED if k not in raw]
+        if missing:
+            fail(
+                where,
+                f"a joint-log block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} (docs/bags.md)",
+            )
+        source: JointLogSource = from_mapping(cls, raw, where)
+        joints, poses = (
+            _resolved(coerce(raw[k], Path, f"{where}.{k}"), base_dir) for k in ("joints", "poses")
+        )
+        robot = None if source.robot is None else _resolved(source.robot, base_dir)
+        return replace(source, joints=joints, poses=poses, robot=robot)
+
+
+def check_encoders(given: Mapping[str, str], model: KinematicModel, where: str) -> None:
+    """One joint for each of the model's encoders, by the encoder's name."""
+    names = encoders(model)
+    if set(given) != set(names):
+        raise ConfigError(
+            f"{where}: name the joint of each of {model.name}'s encoders, {', '.join(names)} (got "
+            f"{', '.join(given) or 'none'}), as {{{names[0]}: <joint name>, ...}}"
+        )
+
+
+def _resolved(path: Path, base_dir: Path) -> Path:
+    return path if path.is_absolute() else base_dir / path
