@@ -9,7 +9,7 @@ from nlp_calib.logs.bag_records import read_bag
 from nlp_calib.logs.log import ENCODER_KINDS, DroppedRecord, EncoderKind, Log, LogHeader
 from nlp_calib.logs.reader import parse_log, read_log, yaw_from_quaternion
 from nlp_calib.logs.resample import resample_encoders, resample_tracker
-from nlp_calib.logs.writer import format_log
+from nlp_calib.logs.writer import format_header, format_log, format_records
 
 __all__ = [
     "ENCODER_KINDS",
@@ -19,7 +19,9 @@ __all__ = [
     "EncoderKind",
     "Log",
     "LogHeader",
+    "format_header",
     "format_log",
+    "format_records",
     "parse_log",
     "read_bag",
     "read_log",

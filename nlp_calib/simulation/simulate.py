@@ -12,28 +12,29 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from nlp_calib.core.errors import OptionsError
-from nlp_calib.core.files import atomic_write_text
+from nlp_calib.core.files import atomic_write_text, atomic_writer
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.core.ranges import Range
-from nlp_calib.logs import LogHeader, format_log
+from nlp_calib.logs import LogHeader, format_header, format_log, format_records
 from nlp_calib.models import DEFAULT_MODEL, MODELS
-from nlp_calib.models.drives import integrate_base
+from nlp_calib.models.drives import integrate_base, running
 from nlp_calib.simulation.faults import COUNTER_FAULT_KINDS, InjectedFault, inject
 
 TRAJECTORIES = ("s_curves", "straight", "no_reversals")
 
 #: Accepted values of the numeric options (the command line checks its options against the same).
-#: Memory grows with ``records × substeps`` (about 200 bytes each).
+#: Written block by block (:func:`simulate_to_file`), a log of any length takes the memory of one
+#: block; the ceiling on ``records`` only catches a typo (10⁹ records are about 140 GB of text).
 LIMITS: Mapping[str, Range] = {
-    "records": Range(3, 10**7, integer=True),
+    "records": Range(3, 10**9, integer=True),
     "seed": Range(0, 2**32 - 1, integer=True),
     "rate_hz": Range(1.0, 1000.0),
     "jitter_s": Range(0.0, 0.1),
@@ -141,13 +142,17 @@ class SimulatedLog:
         return format_log(self.header, self.time_ns, self.ticks, self.model_pose, self.T_world_sensor)
 
     def truth_dict(self) -> dict[str, Any]:
-        opts = asdict(self.options)
-        return {
-            "params": dict(self.options.truth),
-            "options": opts,
-            "faults": [f.as_dict() for f in self.faults],
-            "records": int(self.time_ns.size),
-        }
+        return truth_document(self.options, self.faults)
+
+
+def truth_document(opts: SimulationOptions, faults: Iterable[InjectedFault]) -> dict[str, Any]:
+    """The truth JSON of a simulated log: the true parameters, every option, the injected faults."""
+    return {
+        "params": dict(opts.truth),
+        "options": asdict(opts),
+        "faults": [f.as_dict() for f in faults],
+        "records": opts.records,
+    }
 
 
 def _profiles(
@@ -177,10 +182,69 @@ def _profiles(
     return t, speed, turn
 
 
-def _sample_times(opts: SimulationOptions, rng: np.random.Generator) -> np.ndarray:
-    dt = 1.0 / opts.rate_hz + rng.normal(0.0, opts.jitter_s, opts.records - 1)
-    dt = np.clip(dt, 0.25 / opts.rate_hz, None)
-    return np.concatenate([[0.0], np.cumsum(dt)])
+@dataclass(frozen=True)
+class _Plan:
+    """What the blocks need to be drawn one at a time as the whole log would be drawn at once: the
+    drive's profiles (knot times, speeds, turns), the number of outliers, and where each of the
+    simulation's random draws starts (the generator's state before it, in drawing order: sample
+    intervals, then, after the profiles, tracker noise in x/y and in θ, which records are
+    outliers, and their errors in x/y and in θ)."""
+
+    knots: tuple[np.ndarray, np.ndarray, np.ndarray]
+    n_outliers: int
+    streams: tuple[Mapping[str, Any], ...]
+
+
+#: Fine sub-steps simulated at once: a block's memory (about 200 bytes a sub-step) is bounded by
+#: this, whatever the log's length.
+BLOCK_SUBSTEPS = 2**16
+
+
+def _state(rng: np.random.Generator) -> Mapping[str, Any]:
+    return rng.bit_generator.state
+
+
+def _generator(state: Mapping[str, Any]) -> np.random.Generator:
+    rng = np.random.Generator(np.random.PCG64())
+    rng.bit_generator.state = dict(state)
+    return rng
+
+
+def _chunks(n: int, size: int) -> Iterator[tuple[int, int]]:
+    """``[a, b)`` ranges of at most ``size`` covering ``[0, n)``."""
+    for a in range(0, n, size):
+        yield a, min(a + size, n)
+
+
+def _intervals(opts: SimulationOptions, rng: np.random.Generator, n: int) -> np.ndarray:
+    """``n`` jittered sample intervals (s)."""
+    dt = 1.0 / opts.rate_hz + rng.normal(0.0, opts.jitter_s, n)
+    return np.clip(dt, 0.25 / opts.rate_hz, None)
+
+
+def _plan(opts: SimulationOptions, block: int) -> _Plan:
+    """Every draw of the simulation made once, in blocks of ``block`` records, to learn where each
+    starts; the records themselves are drawn again, block by block, by :func:`_blocks`."""
+    rng = np.random.default_rng(opts.seed)
+    n = opts.records
+    streams = [_state(rng)]
+    last: float | None = None
+    for a, b in _chunks(n - 1, block):
+        last = float(running(_intervals(opts, rng, b - a), last)[-1])
+    knots = _profiles(opts, rng, (last or 0.0) + opts.latency_s + 1.0)
+    streams.append(_state(rng))
+    for a, b in _chunks(n, block):
+        rng.normal(size=(b - a, 2))
+    streams.append(_state(rng))
+    for a, b in _chunks(n, block):
+        rng.normal(size=b - a)
+    streams.append(_state(rng))
+    n_outliers = sum(int(np.sum(rng.random(b - a) < opts.outlier_fraction)) for a, b in _chunks(n, block))
+    streams.append(_state(rng))
+    for a, b in _chunks(n_outliers, block):
+        rng.normal(size=(b - a, 2))
+    streams.append(_state(rng))
+    return _Plan(knots, n_outliers, tuple(streams))
 
 
 def _pose_at(t_fine: np.ndarray, poses: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -193,54 +257,172 @@ def _sensor_pose(base: np.ndarray, mount: tuple[float, float, float]) -> np.ndar
     return np.stack([base[:, 0] + c * mx - s * my, base[:, 1] + s * mx + c * my, base[:, 2] + mth], axis=1)
 
 
-def simulate(opts: SimulationOptions) -> SimulatedLog:
-    """Simulate a drive and the log it would produce."""
-    rng = np.random.default_rng(opts.seed)
-    truth = opts.truth
-    t_s = _sample_times(opts, rng)
-    knots = _profiles(opts, rng, float(t_s[-1]) + opts.latency_s + 1.0)
-    # Fine grid: sub-steps between samples, starting early enough to cover the latency.
+@dataclass(frozen=True)
+class _Block:
+    """Records of a simulated log, before the vendor's odometry: sample times (s), encoder readings,
+    tracker poses and the true base poses."""
+
+    time_s: np.ndarray
+    ticks: np.ndarray
+    T_world_sensor: np.ndarray
+    T_world_base_true: np.ndarray
+
+
+@dataclass
+class _Carry:
+    """What a block continues from: the last sample time, the drive's channels and base pose at
+    the last fine point, and the fine grid back as far as the tracker's latency reaches."""
+
+    time_s: float | None = None
+    channels: dict[str, float] | None = None
+    pose: tuple[float, float, float] | None = None
+    t_fine: np.ndarray = field(default_factory=lambda: np.empty(0))
+    poses: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
+
+
+def _block_times(
+    opts: SimulationOptions, rng: np.random.Generator, a: int, b: int, carry: _Carry
+) -> np.ndarray:
+    """Sample times of records ``[a, b)``."""
+    if a == 0:
+        return running(_intervals(opts, rng, b - 1))
+    return running(_intervals(opts, rng, b - a), carry.time_s)[1:]
+
+
+def _fine_motion(
+    opts: SimulationOptions, plan: _Plan, t_s: np.ndarray, carry: _Carry
+) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """The fine grid from the record before ``t_s`` (from the latency's start, in the first block)
+    to its last, the base poses and the drive's channels on it; ``carry`` moves on to its end."""
     t0 = -opts.latency_s
-    base_grid = np.concatenate([[t0], t_s]) if opts.latency_s > 0 else t_s
+    if carry.time_s is not None:
+        base_grid = np.concatenate([[carry.time_s], t_s])
+    else:
+        base_grid = np.concatenate([[t0], t_s]) if opts.latency_s > 0 else t_s
     frac = np.arange(opts.substeps) / opts.substeps
     t_fine = np.concatenate(
         [(base_grid[:-1, None] + np.diff(base_grid)[:, None] * frac).ravel(), base_grid[-1:]]
     )
     drive = MODELS[opts.model].drive
-    kt, kv, ks = knots
+    kt, kv, ks = plan.knots
     t_mid = 0.5 * (t_fine[1:] + t_fine[:-1]) - t0
     ds, w, channels = drive.steps(
-        opts, np.interp(t_mid, kt, kv), np.interp(t_mid, kt, ks), np.diff(t_fine), float(ks[0])
+        opts,
+        np.interp(t_mid, kt, kv),
+        np.interp(t_mid, kt, ks),
+        np.diff(t_fine),
+        float(ks[0]),
+        carry.channels,
     )
-    poses = integrate_base(ds, w)
+    poses = integrate_base(ds, w, carry.pose)
+    carry.time_s = float(t_s[-1])
+    carry.channels = {name: float(c[-1]) for name, c in channels.items()}
+    carry.pose = (float(poses[-1, 0]), float(poses[-1, 1]), float(poses[-1, 2]))
+    return t_fine, poses, channels
 
-    base_at_samples = _pose_at(t_fine, poses, t_s)
-    mount = (truth["sensor_x"], truth["sensor_y"], truth["sensor_theta"])
-    tracker = _sensor_pose(_pose_at(t_fine, poses, t_s - opts.latency_s), mount)
-    tracker[:, :2] += rng.normal(0.0, opts.tracker_noise_xy, (opts.records, 2))
-    tracker[:, 2] += rng.normal(0.0, opts.tracker_noise_theta, opts.records)
-    outliers = rng.random(opts.records) < opts.outlier_fraction
-    tracker[outliers, :2] += rng.normal(0.0, opts.outlier_magnitude, (int(outliers.sum()), 2))
-    tracker[outliers, 2] += rng.normal(0.0, opts.outlier_magnitude, int(outliers.sum()))
+
+def _tracker(
+    opts: SimulationOptions, t_s: np.ndarray, t_fine: np.ndarray, poses: np.ndarray, carry: _Carry
+) -> np.ndarray:
+    """The sensor's true pose at the times the tracker saw it (``latency`` earlier), keeping in
+    ``carry`` the fine points the next block's earliest such time may fall between."""
+    t_all = np.concatenate([carry.t_fine, t_fine])
+    poses_all = np.concatenate([carry.poses, poses])
+    t = opts.truth
+    seen = _sensor_pose(
+        _pose_at(t_all, poses_all, t_s - opts.latency_s), (t["sensor_x"], t["sensor_y"], t["sensor_theta"])
+    )
+    # The next block's fine grid starts at this block's last point: it is kept there, not here.
+    keep = max(int(np.searchsorted(t_all, t_s[-1] - opts.latency_s, side="right")) - 1, 0)
+    carry.t_fine, carry.poses = t_all[keep:-1], poses_all[keep:-1]
+    return seen
+
+
+def _noisy(opts: SimulationOptions, rngs: list[np.random.Generator], tracker: np.ndarray) -> np.ndarray:
+    """``tracker`` with its noise and outliers, drawn from the streams of :class:`_Plan`."""
+    n = tracker.shape[0]
+    _, xy, theta, outlier, error_xy, error_theta = rngs
+    tracker[:, :2] += xy.normal(0.0, opts.tracker_noise_xy, (n, 2))
+    tracker[:, 2] += theta.normal(0.0, opts.tracker_noise_theta, n)
+    outliers = outlier.random(n) < opts.outlier_fraction
+    tracker[outliers, :2] += error_xy.normal(0.0, opts.outlier_magnitude, (int(outliers.sum()), 2))
+    tracker[outliers, 2] += error_theta.normal(0.0, opts.outlier_magnitude, int(outliers.sum()))
     tracker[:, 2] = wrap_angle(tracker[:, 2])
+    return tracker
 
-    ticks = drive.ticks(opts, {name: np.interp(t_s, t_fine, c) for name, c in channels.items()})
-    header = drive.header(opts)
-    faults: tuple[InjectedFault, ...] = ()
-    if opts.counter_faults:
-        # Their own random stream: a log without faults stays the same for a seed.
-        counters = [n for n, kind in MODELS[opts.model].encoder_kinds.items() if kind == "counter"]
-        fault_rng = np.random.default_rng([opts.seed, 1])
-        ticks, faults = inject(
-            ticks, header.encoder_names, counters, opts.counter_faults, opts.counter_fault_kinds, fault_rng
-        )
+
+def _blocks(opts: SimulationOptions, block: int) -> Iterator[_Block]:
+    """The log's records in blocks of ``block``, each drawn as the whole log would be drawn at once."""
+    plan = _plan(opts, block)
+    rngs = [_generator(s) for s in plan.streams]
+    drive = MODELS[opts.model].drive
+    carry = _Carry()
+    for a, b in _chunks(opts.records, block):
+        t_s = _block_times(opts, rngs[0], a, b, carry)
+        t_fine, poses, channels = _fine_motion(opts, plan, t_s, carry)
+        base = _pose_at(t_fine, poses, t_s)
+        tracker = _noisy(opts, rngs, _tracker(opts, t_s, t_fine, poses, carry))
+        ticks = drive.ticks(opts, {name: np.interp(t_s, t_fine, c) for name, c in channels.items()})
+        yield _Block(t_s, ticks, tracker, base)
+
+
+def _block_size(opts: SimulationOptions) -> int:
+    return max(BLOCK_SUBSTEPS // opts.substeps, 1)
+
+
+def _faulty(
+    opts: SimulationOptions, header: LogHeader, blocks: Iterable[_Block]
+) -> tuple[Iterable[_Block], tuple[InjectedFault, ...]]:
+    """The blocks with ``opts.counter_faults`` counter faults injected: placing them needs the whole
+    log, so with faults the blocks are joined into one (about 80 bytes a record)."""
+    if not opts.counter_faults:
+        return blocks, ()
+    parts = list(blocks)
+    whole = _Block(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(_Block)))
+    # Their own random stream: a log without faults stays the same for a seed.
+    counters = [n for n, kind in MODELS[opts.model].encoder_kinds.items() if kind == "counter"]
+    fault_rng = np.random.default_rng([opts.seed, 1])
+    ticks, faults = inject(
+        whole.ticks, header.encoder_names, counters, opts.counter_faults, opts.counter_fault_kinds, fault_rng
+    )
+    return [replace(whole, ticks=ticks)], faults
+
+
+def _time_ns(t_s: np.ndarray) -> np.ndarray:
+    return np.round(t_s * 1e9).astype(np.int64) + 1_700_000_000_000_000_000
+
+
+def _with_odometry(
+    opts: SimulationOptions, header: LogHeader, blocks: Iterable[_Block]
+) -> Iterator[tuple[_Block, np.ndarray]]:
+    """Each block with the vendor's odometry over its records, continued from the block before."""
+    drive = MODELS[opts.model].drive
+    last: tuple[np.ndarray, np.ndarray] | None = None
+    for blk in blocks:
+        if last is None:
+            odometry = drive.vendor_odometry(header, blk.ticks)
+        else:
+            ticks, pose = last
+            start = (float(pose[0]), float(pose[1]), float(pose[2]))
+            odometry = drive.vendor_odometry(header, np.concatenate([ticks[None], blk.ticks]), start)[1:]
+        last = (blk.ticks[-1], odometry[-1])
+        yield blk, odometry
+
+
+def simulate(opts: SimulationOptions, block: int | None = None) -> SimulatedLog:
+    """Simulate a drive and the log it would produce, in memory (``block``: records simulated at
+    once; the log is the same whatever it is)."""
+    header = MODELS[opts.model].drive.header(opts)
+    blocks, faults = _faulty(opts, header, _blocks(opts, block or _block_size(opts)))
+    pieces = list(_with_odometry(opts, header, blocks))
+    joined = {f.name: np.concatenate([getattr(b, f.name) for b, _ in pieces]) for f in fields(_Block)}
     return SimulatedLog(
         header=header,
-        time_ns=np.round(t_s * 1e9).astype(np.int64) + 1_700_000_000_000_000_000,
-        ticks=ticks,
-        model_pose=drive.vendor_odometry(header, ticks),
-        T_world_sensor=tracker,
-        T_world_base_true=base_at_samples,
+        time_ns=_time_ns(joined["time_s"]),
+        ticks=joined["ticks"],
+        model_pose=np.concatenate([odometry for _, odometry in pieces]),
+        T_world_sensor=joined["T_world_sensor"],
+        T_world_base_true=joined["T_world_base_true"],
         options=opts,
         faults=faults,
     )
@@ -255,6 +437,25 @@ def write_simulation(sim: SimulatedLog, out: str | Path) -> tuple[Path, Path]:
     """Write the log and its truth JSON (atomically); returns both paths."""
     log_path = Path(out)
     atomic_write_text(log_path, sim.text())
+    return log_path, _write_truth(log_path, sim.options, sim.faults)
+
+
+def _write_truth(log_path: Path, opts: SimulationOptions, faults: Iterable[InjectedFault]) -> Path:
     tp = truth_path(log_path)
-    atomic_write_text(tp, json.dumps(sim.truth_dict(), indent=2) + "\n")
-    return log_path, tp
+    atomic_write_text(tp, json.dumps(truth_document(opts, faults), indent=2) + "\n")
+    return tp
+
+
+def simulate_to_file(opts: SimulationOptions, out: str | Path, block: int | None = None) -> tuple[Path, Path]:
+    """Simulate and write the log block by block, then its truth JSON (each atomically); returns
+    both paths. The file holds the bytes ``simulate(opts).text()`` would; memory stays that of one
+    block (``block`` records; default: :data:`BLOCK_SUBSTEPS` fine sub-steps), whatever the log's
+    length, unless counter faults are injected (placing them needs the whole log)."""
+    log_path = Path(out)
+    header = MODELS[opts.model].drive.header(opts)
+    blocks, faults = _faulty(opts, header, _blocks(opts, block or _block_size(opts)))
+    with atomic_writer(log_path) as fh:
+        fh.write(format_header(header).encode())
+        for blk, odometry in _with_odometry(opts, header, blocks):
+            fh.write(format_records(_time_ns(blk.time_s), blk.ticks, odometry, blk.T_world_sensor).encode())
+    return log_path, _write_truth(log_path, opts, faults)
