@@ -86,8 +86,8 @@ def test_the_command_line_still_writes_the_shipped_demo_logs(name: str, tmp_path
     made in one piece before it wrote in blocks."""
     out = tmp_path / f"{name}.txt"
     proc = subprocess.run(
-        [sys.executable, "-m", "nlp_calib", "simulate", "--config", str(SCENARIOS / "data" / f"{name}.sim.yaml"),
-         "--out", str(out)],
+        [sys.executable, "-m", "nlp_calib", "simulate", "--config",
+         str(SCENARIOS / "data" / f"{name}.sim.yaml"), "--out", str(out)],
         capture_output=True, text=True, cwd=REPO, check=False,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nlp_calib.cli.fleet import cmd_batch, cmd_check
 from nlp_calib.cli.import_bag import cmd_import_bag
 from nlp_calib.cli.parser import ALL_SOLVERS
 from nlp_calib.core import interrupts
@@ -316,4 +317,6 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "codegen": _cmd_codegen,
     "simulate": _cmd_simulate,
     "import-bag": cmd_import_bag,
+    "check": cmd_check,
+    "batch": cmd_batch,
 }

@@ -50,7 +50,8 @@ def format_records(
     ending in a newline."""
     number = "%r" if digits is None else f"%.{digits}g"
     poses = " ".join([number] * 3)
-    line = f"time: %d.%09d ticks: {' '.join(['%d'] * ticks.shape[1])} model_pose: {poses} tracker_pose: {poses}\n"
+    encoders = " ".join(["%d"] * ticks.shape[1])
+    line = f"time: %d.%09d ticks: {encoders} model_pose: {poses} tracker_pose: {poses}\n"
     sec, ns = np.divmod(np.asarray(time_ns, dtype=np.int64), 1_000_000_000)
     columns = zip(
         sec.tolist(),

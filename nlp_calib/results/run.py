@@ -17,6 +17,7 @@ import numpy as np
 
 from nlp_calib.core.errors import UsageError
 from nlp_calib.results import codec
+from nlp_calib.results.check import DriftCheck
 from nlp_calib.results.checks import CrossValidation, DirectionCheck, LagEstimate, Observability, believed_std
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
@@ -98,12 +99,14 @@ class DataInfo:
 @dataclass(frozen=True)
 class Checks:
     """What the run's checks found: observability, blocked cross-validation, the forward/reverse
-    comparison and the faults (any may be absent when it could not run)."""
+    comparison and the faults (any may be absent when it could not run); ``drift``: the
+    comparison with a stored calibration (``nlp-calib check``)."""
 
     observability: Observability | None
     crossval: CrossValidation | None
     direction: DirectionCheck | None
     findings: Findings | None
+    drift: DriftCheck | None = None
 
 
 @dataclass(frozen=True)

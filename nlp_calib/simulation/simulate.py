@@ -344,7 +344,7 @@ def _noisy(opts: SimulationOptions, rngs: list[np.random.Generator], tracker: np
     _, xy, theta, outlier, error_xy, error_theta = rngs
     tracker[:, :2] += xy.normal(0.0, opts.tracker_noise_xy, (n, 2))
     tracker[:, 2] += theta.normal(0.0, opts.tracker_noise_theta, n)
-    outliers = outlier.random(n) < opts.outlier_fraction
+    outliers = np.asarray(outlier.random(n) < opts.outlier_fraction)
     tracker[outliers, :2] += error_xy.normal(0.0, opts.outlier_magnitude, (int(outliers.sum()), 2))
     tracker[outliers, 2] += error_theta.normal(0.0, opts.outlier_magnitude, int(outliers.sum()))
     tracker[:, 2] = wrap_angle(tracker[:, 2])

@@ -1,0 +1,101 @@
+"""A batch's jobs on this machine: in this process (one job at a time) or on worker processes.
+
+Workers are fresh interpreters (the ``spawn`` start method: nothing of this process, no thread or
+lock, is inherited). While a worker runs a log, a signal unwinds it like the command line (its
+log's staged files are discarded) and the log's row says it was interrupted; an idle worker just
+exits. When this process is interrupted it cancels the logs not started and ends its workers;
+the folders of the logs that finished stay. A worker that dies (a crash in native code, the
+out-of-memory killer) breaks its pool: the logs it left unfinished are run again, each in a pool
+of its own, and a log that breaks that pool too is reported as failed.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import signal
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from types import FrameType
+
+from nlp_calib.core import interrupts
+from nlp_calib.fleet.jobs import Job
+from nlp_calib.fleet.task import run_job
+from nlp_calib.results.batch import BatchRow
+
+#: Called with each job's index and row as it finishes.
+Done = Callable[[int, BatchRow], None]
+#: How long an ended worker has to unwind before it is killed.
+STOP_WAIT_S = 5.0
+
+
+def _quit(signum: int, frame: FrameType | None) -> None:
+    raise SystemExit(128 + signum)  # an idle worker holds nothing to clean up
+
+
+def _init_worker() -> None:
+    for s in interrupts.SIGNALS:
+        signal.signal(s, _quit)
+
+
+def _work(job: Job) -> BatchRow:
+    """:func:`run_job` in a worker, signals turned into an interrupted row while it runs."""
+    t0 = time.perf_counter()
+    try:
+        with interrupts.handled():
+            return run_job(job)
+    except interrupts.Interrupted as exc:
+        where = (job.name, str(job.path), str(job.folder))
+        return BatchRow.failure(where, f"interrupted ({exc.name})", time.perf_counter() - t0)
+
+
+def _stop(pool: ProcessPoolExecutor) -> None:
+    """Cancel the jobs not started and end the workers (each unwinds and discards its staged files)."""
+    workers = list((getattr(pool, "_processes", None) or {}).values())  # no public handle on them
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in workers:
+        if p.is_alive():
+            p.terminate()
+    for p in workers:
+        p.join(STOP_WAIT_S)
+        if p.is_alive():
+            p.kill()
+
+
+def _pass(jobs: Sequence[Job], indices: Sequence[int], workers: int, done: Done) -> list[int]:
+    """``jobs[indices]`` on a pool of ``workers``; returns those left unfinished by a worker's death."""
+    pool = ProcessPoolExecutor(
+        min(workers, len(indices)), mp_context=multiprocessing.get_context("spawn"), initializer=_init_worker
+    )
+    broken: list[int] = []
+    finished = False
+    try:
+        futures: dict[Future[BatchRow], int] = {pool.submit(_work, jobs[i]): i for i in indices}
+        for fut in as_completed(futures):
+            try:
+                row = fut.result()
+            except BrokenProcessPool:
+                broken.append(futures[fut])
+                continue
+            done(futures[fut], row)
+        finished = True
+    finally:
+        if finished:
+            pool.shutdown(wait=True)
+        else:
+            _stop(pool)
+    return broken
+
+
+def run_jobs(jobs: Sequence[Job], workers: int, done: Done) -> None:
+    """Every job, ``workers`` at a time (1: in this process), ``done`` called as each finishes."""
+    if workers <= 1 or len(jobs) <= 1:
+        for i, job in enumerate(jobs):
+            done(i, run_job(job))
+        return
+    for i in _pass(jobs, range(len(jobs)), workers, done):
+        if _pass(jobs, [i], 1, done):
+            job = jobs[i]
+            where = (job.name, str(job.path), str(job.folder))
+            done(i, BatchRow.failure(where, "its worker process died (a crash, or out of memory)", 0.0))
