@@ -186,12 +186,16 @@ def changes(
 def decide(found: tuple[ParameterChange, ...], converged: str, hint: str) -> tuple[str, tuple[str, ...], str]:
     """The verdict, its reasons and the hint, from the changes; ``converged`` is "" when the refit
     converged, else why not."""
+    loose = [c.untested for c in found if c.untested]
     if converged:
-        return CANNOT_TELL, (f"the refit on this log did not converge ({converged})",), hint
+        return (
+            CANNOT_TELL,
+            (f"the refit on this log did not converge ({converged})", *dict.fromkeys(loose)),
+            hint,
+        )
     moved = [c for c in found if c.drifted]
     if moved:
         return DRIFTED, tuple(moved_words(c) for c in sorted(moved, key=lambda c: -abs(c.z))), ""
-    loose = [c.untested for c in found if c.untested]
     if loose:
         return CANNOT_TELL, tuple(dict.fromkeys(loose)), hint
     if not found:

@@ -22,8 +22,8 @@ def drift_of(run: CalibrationRun) -> DriftCheck:
     return run.checks.drift
 
 
-def _number(v: float) -> str:
-    return f"{v:.6g}" if math.isfinite(v) else "-"
+def _number(v: float, form: str = ".6g") -> str:
+    return f"{v:{form}}" if math.isfinite(v) else "-"
 
 
 def check_text(run: CalibrationRun) -> str:
@@ -47,8 +47,9 @@ def check_text(run: CalibrationRun) -> str:
         sigma = math.hypot(c.std_stored, c.std_refit)
         mark = " <- moved" if c.drifted else (" (not tested)" if c.untested else "")
         lines.append(
-            f"{c.name:<16}{_number(c.stored):>13}{_number(c.refit):>13}{c.change:>+12.3g}{sigma:>10.2g}"
-            f"{c.z:>+7.1f}{c.threshold:>7.1f}  {c.unit}{mark}"
+            f"{c.name:<16}{_number(c.stored):>13}{_number(c.refit):>13}{_number(c.change, '+.3g'):>12}"
+            f"{_number(sigma, '.2g'):>10}{_number(c.z, '+.1f'):>7}{_number(c.threshold, '.1f'):>7}"
+            f"  {c.unit}{mark}"
         )
     lines += [
         "",
