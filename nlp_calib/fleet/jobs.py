@@ -104,7 +104,11 @@ def _plain(text: str) -> str:
 def job_names(paths: Sequence[Path]) -> list[str]:
     """A unique folder name for each path: its file's stem, with as many parent folders before it
     as it takes to tell it from the others (and its suffix, for files that differ only by it)."""
-    parts = [list(reversed(p.resolve().with_suffix("").parts)) for p in paths]
+    bare = [p.resolve().with_suffix("") for p in paths]
+    # Files that differ only by their suffix keep it: their other parts cannot tell them apart.
+    parts = [
+        list(reversed((b.parent / p.name if bare.count(b) > 1 else b).parts)) for b, p in zip(bare, paths)
+    ]
     depth = [1] * len(paths)
     for _ in range(max((len(p) for p in parts), default=0)):
         names = ["_".join(reversed(p[:d])) for p, d in zip(parts, depth)]
@@ -112,9 +116,7 @@ def job_names(paths: Sequence[Path]) -> list[str]:
         if not clash:
             break
         depth = [d + 1 if n in clash and d < len(p) else d for n, d, p in zip(names, depth, parts)]
-    names = ["_".join(reversed(p[:d])) for p, d in zip(parts, depth)]
-    names = [n + p.suffix if names.count(n) > 1 else n for n, p in zip(names, paths)]
-    return [_plain(n) for n in names]
+    return [_plain("_".join(reversed(p[:d]))) for p, d in zip(parts, depth)]
 
 
 def batch_jobs(inputs: Iterable[str], options: BatchOptions) -> list[Job]:
