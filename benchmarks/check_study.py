@@ -7,9 +7,11 @@ detections when one parameter of the robot has changed.
 One simulated tricycle (the simulator's default truth), calibrated with the demo scenario's
 formulation on drives with seeds 1000 + c; each calibration is then checked, exactly as the
 command does (its calibration.yaml read back, the new log refitted from it), on fresh drives with
-seeds 5000 + 100·c + k, once with the robot unchanged and once with each change below. The check's
+seeds 5000 + 100·c + k, once with the robot unchanged and once with each change below (the cases
+share their drives' seeds: the same drives, another robot). The check's
 thresholds come from its statistics (analysis/drift.py: Student-t at a 1 % family-wise false-alarm
-rate); nothing here tunes them. Writes ``results/check_study.{json,md}``.
+rate); nothing here tunes them. Writes ``results/check_study.{json,md}`` (``--records N``:
+``check_study_N.*``).
 """
 
 from __future__ import annotations
@@ -38,7 +40,8 @@ CASES: dict[str, tuple[str | None, dict[str, float]]] = {
     "sensor_x +2 cm": ("sensor_x", {"sensor_x": TRUTH["sensor_x"] + 0.02}),
     "sensor_y +2 cm": ("sensor_y", {"sensor_y": TRUTH["sensor_y"] + 0.02}),
 }
-RECORDS = 1500
+#: Records of every drive (``--records``): the σ, and so what a check can see, shrink with it.
+RECORDS = int(os.environ.get("CHECK_STUDY_RECORDS", "1500"))
 
 
 def _simulate(seed: int, truth: dict[str, float], path: Path) -> Path:
@@ -112,17 +115,18 @@ def main() -> int:
     ap.add_argument("--calibrations", type=int, default=5)
     ap.add_argument("--drives", type=int, default=12, help="fresh drives per calibration and case")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--records", type=int, default=RECORDS, help="records of every drive (default 1500)")
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results")
     args = ap.parse_args()
+    if args.records != RECORDS:  # the worker processes read it from the environment
+        os.environ["CHECK_STUDY_RECORDS"] = str(args.records)
+        os.execv(sys.executable, [sys.executable, *sys.argv])
     t0 = time.perf_counter()
     load = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(args.jobs) as pool:
         cals = list(pool.map(calibrate, range(args.calibrations), [Path(tmp)] * args.calibrations))
         jobs = [
-            (cal, c, k, case, tmp)
-            for case in CASES
-            for c, cal in enumerate(cals)
-            for k in range(args.drives)
+            (cal, c, k, case, tmp) for case in CASES for c, cal in enumerate(cals) for k in range(args.drives)
         ]
         results = list(pool.map(check_one, jobs))
     text = (
@@ -133,8 +137,9 @@ def main() -> int:
     )
     args.out.mkdir(parents=True, exist_ok=True)
     doc = {"calibrations": args.calibrations, "drives": args.drives, "records": RECORDS, "results": results}
-    (args.out / "check_study.json").write_text(json.dumps(doc, indent=1) + "\n")
-    (args.out / "check_study.md").write_text(text + "\n")
+    stem = "check_study" if RECORDS == 1500 else f"check_study_{RECORDS}"
+    (args.out / f"{stem}.json").write_text(json.dumps(doc, indent=1) + "\n")
+    (args.out / f"{stem}.md").write_text(text + "\n")
     print(text)
     return 0
 
