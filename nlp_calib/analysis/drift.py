@@ -206,7 +206,7 @@ def decide(found: tuple[ParameterChange, ...], converged: str, hint: str) -> tup
 
 
 def moved_words(c: ParameterChange) -> str:
-    """``k_traction moved by +1.0 % (+0.000105 m per t_max ticks, 12.3σ)``."""
+    """``<name> moved by +1.0 % (+0.000105 <unit>, +12.3σ)`` (the percentage for gains and lengths)."""
     rel = f"{100.0 * c.change / c.stored:+.2g} % (" if c.relative and c.stored != 0 else "("
     return f"{c.name} moved by {rel}{c.change:+.3g} {c.unit}, {c.z:+.1f}σ)"
 
