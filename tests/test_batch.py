@@ -97,8 +97,8 @@ def test_the_task_runs_on_a_dask_cluster(logs: Path, tmp_path: Path) -> None:
     cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True)
     with cluster, distributed.Client(cluster) as client:
         rows = client.gather(client.map(run_job, jobs, pure=False))
-    assert [r.name for r in rows] == ["robot1_drive"] and rows[0].ok
-    assert (tmp_path / "out" / "robot1_drive" / "calibration.yaml").is_file()
+    assert [r.name for r in rows] == ["drive"] and rows[0].ok
+    assert (tmp_path / "out" / "drive" / "calibration.yaml").is_file()
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
