@@ -16,7 +16,7 @@ import pytest
 from conftest import REPO, SCENARIOS, write_sim
 
 from nlp_calib.core.errors import UsageError
-from nlp_calib.fleet import BatchOptions, batch_jobs, run_job, write_summary
+from nlp_calib.fleet import BatchOptions, BatchRow, Job, batch_jobs, run_job, run_jobs, write_summary
 from nlp_calib.fleet.jobs import expand, job_names
 
 DEMO_LOG = SCENARIOS / "data" / "demo_tricycle.txt"
@@ -99,6 +99,22 @@ def test_the_task_runs_on_a_dask_cluster(logs: Path, tmp_path: Path) -> None:
         rows = client.gather(client.map(run_job, jobs, pure=False))
     assert [r.name for r in rows] == ["drive"] and rows[0].ok
     assert (tmp_path / "out" / "drive" / "calibration.yaml").is_file()
+
+
+def crash_on_b(job: Job) -> BatchRow:
+    """A task whose worker dies on job ``b`` (as a crash in native code would end it)."""
+    if job.name == "b":
+        os._exit(1)
+    return BatchRow(job.name, str(job.path), str(job.folder), verdict="good")
+
+
+def test_a_worker_that_dies_costs_only_its_log(tmp_path: Path) -> None:
+    jobs = [Job(name, tmp_path / f"{name}.txt", BatchOptions(tmp_path)) for name in "abcd"]
+    rows: dict[int, BatchRow] = {}
+    run_jobs(jobs, 2, rows.__setitem__, task=crash_on_b)
+    assert sorted(rows) == [0, 1, 2, 3]
+    assert [rows[i].verdict for i in range(4)] == ["good", "failed", "good", "good"]
+    assert "worker process died" in rows[1].error
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:

@@ -26,6 +26,9 @@ from nlp_calib.results.batch import BatchRow
 
 #: Called with each job's index and row as it finishes.
 Done = Callable[[int, BatchRow], None]
+#: The per-log task (:func:`~nlp_calib.fleet.task.run_job`, or a wrapper of it: a top-level
+#: function, so that worker processes can import it).
+Task = Callable[[Job], BatchRow]
 #: How long an ended worker has to unwind before it is killed.
 STOP_WAIT_S = 5.0
 
@@ -39,12 +42,12 @@ def _init_worker() -> None:
         signal.signal(s, _quit)
 
 
-def _work(job: Job) -> BatchRow:
-    """:func:`run_job` in a worker, signals turned into an interrupted row while it runs."""
+def _work(task: Task, job: Job) -> BatchRow:
+    """``task`` of ``job`` in a worker, signals turned into an interrupted row while it runs."""
     t0 = time.perf_counter()
     try:
         with interrupts.handled():
-            return run_job(job)
+            return task(job)
     except interrupts.Interrupted as exc:
         where = (job.name, str(job.path), str(job.folder))
         return BatchRow.failure(where, f"interrupted ({exc.name})", time.perf_counter() - t0)
@@ -63,7 +66,7 @@ def _stop(pool: ProcessPoolExecutor) -> None:
             p.kill()
 
 
-def _pass(jobs: Sequence[Job], indices: Sequence[int], workers: int, done: Done) -> list[int]:
+def _pass(jobs: Sequence[Job], indices: Sequence[int], workers: int, done: Done, task: Task) -> list[int]:
     """``jobs[indices]`` on a pool of ``workers``; returns those left unfinished by a worker's death."""
     pool = ProcessPoolExecutor(
         min(workers, len(indices)), mp_context=multiprocessing.get_context("spawn"), initializer=_init_worker
@@ -71,7 +74,7 @@ def _pass(jobs: Sequence[Job], indices: Sequence[int], workers: int, done: Done)
     broken: list[int] = []
     finished = False
     try:
-        futures: dict[Future[BatchRow], int] = {pool.submit(_work, jobs[i]): i for i in indices}
+        futures: dict[Future[BatchRow], int] = {pool.submit(_work, task, jobs[i]): i for i in indices}
         for fut in as_completed(futures):
             try:
                 row = fut.result()
@@ -88,14 +91,14 @@ def _pass(jobs: Sequence[Job], indices: Sequence[int], workers: int, done: Done)
     return broken
 
 
-def run_jobs(jobs: Sequence[Job], workers: int, done: Done) -> None:
+def run_jobs(jobs: Sequence[Job], workers: int, done: Done, task: Task = run_job) -> None:
     """Every job, ``workers`` at a time (1: in this process), ``done`` called as each finishes."""
     if workers <= 1 or len(jobs) <= 1:
         for i, job in enumerate(jobs):
-            done(i, run_job(job))
+            done(i, task(job))
         return
-    for i in _pass(jobs, range(len(jobs)), workers, done):
-        if _pass(jobs, [i], 1, done):
+    for i in _pass(jobs, range(len(jobs)), workers, done, task):
+        if _pass(jobs, [i], 1, done, task):
             job = jobs[i]
             where = (job.name, str(job.path), str(job.folder))
             done(i, BatchRow.failure(where, "its worker process died (a crash, or out of memory)", 0.0))
