@@ -35,6 +35,14 @@ def _recorded(stored: StoredCalibration, log: Path) -> Scenario:
     residual and robust options it recorded."""
     if stored.scenario is not None:
         return load_scenario(stored.scenario).with_dataset(log)
+    if stored.recorded is not None:
+        warnings.warn(
+            f"the scenario {stored.path} was made with ({stored.recorded}) is not there (paths are "
+            "relative to the folder it ran in); the log is read with the model's defaults and the "
+            "residual and kernel the calibration recorded; give the scenario as SCENARIO to use it",
+            NlpCalibWarning,
+            stacklevel=3,
+        )
     sc = Scenario.of(log.stem or "check", log, model=stored.model)
     objective = stored.objective or {}
     where = f"{stored.path}: objective"

@@ -22,7 +22,8 @@ class StoredCalibration:
     """A calibration read from ``path``: ``parameters``, their σ to believe (``std``) and that σ's
     degrees of freedom (``dof``: the jackknife's folds − 1, or infinite for the white-noise σ),
     the ``model`` and ``solver``, the scenario file it was made with (``scenario``, if it still
-    exists), and the residual and robust options it fitted (``objective``, when recorded)."""
+    exists; ``recorded``: as the file names it), and the residual and robust options it fitted
+    (``objective``, when recorded)."""
 
     path: Path
     model: str
@@ -32,6 +33,7 @@ class StoredCalibration:
     dof: Mapping[str, float]
     scenario: Path | None
     objective: Mapping[str, Any] | None
+    recorded: str | None = None
 
     def stats(self) -> tuple[Mapping[str, float], Mapping[str, float], Mapping[str, float]]:
         """Values, σ to believe and degrees of freedom, as the drift check compares them."""
@@ -60,11 +62,14 @@ def _numbers(
     return out
 
 
-def _scenario_path(doc: Mapping[str, Any]) -> Path | None:
-    """The scenario file the calibration was made with, when it is recorded and still exists."""
+def _scenario_path(doc: Mapping[str, Any]) -> tuple[Path | None, str | None]:
+    """The scenario file the calibration was made with, when it still exists, and its path as
+    recorded."""
     recorded = doc.get("scenario")
     path = recorded.get("path") if isinstance(recorded, Mapping) else None
-    return Path(path) if isinstance(path, str) and Path(path).is_file() else None
+    if not isinstance(path, str):
+        return None, None
+    return (Path(path) if Path(path).is_file() else None), path
 
 
 def read_calibration(path: Path) -> StoredCalibration:
@@ -92,4 +97,5 @@ def read_calibration(path: Path) -> StoredCalibration:
         fail(f"{where}: std_blocks_folds", f"expected a whole number of folds, got {folds!r:.40}")
     dof = {n: believed_dof(white[n], blocks.get(n), folds) for n in names}
     objective = doc.get("objective") if isinstance(doc.get("objective"), Mapping) else None
-    return StoredCalibration(path, model, solver, values, std, dof, _scenario_path(doc), objective)
+    scenario, recorded = _scenario_path(doc)
+    return StoredCalibration(path, model, solver, values, std, dof, scenario, objective, recorded)
