@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import os
 import sys
 import tempfile
@@ -123,7 +124,8 @@ def main() -> int:
         os.execv(sys.executable, [sys.executable, *sys.argv])
     t0 = time.perf_counter()
     load = os.getloadavg()
-    with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(args.jobs) as pool:
+    spawn = multiprocessing.get_context("spawn")  # fresh workers: nothing forked from a busy process
+    with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(args.jobs, mp_context=spawn) as pool:
         cals = list(pool.map(calibrate, range(args.calibrations), [Path(tmp)] * args.calibrations))
         jobs = [
             (cal, c, k, case, tmp) for case in CASES for c, cal in enumerate(cals) for k in range(args.drives)

@@ -4,6 +4,7 @@ when it is installed), the summary table, a failing log, exit codes and signals.
 from __future__ import annotations
 
 import csv
+import multiprocessing
 import os
 import signal
 import subprocess
@@ -65,11 +66,12 @@ def test_inputs_are_folders_globs_and_yaml_lists(logs: Path, tmp_path: Path) -> 
 
 def test_the_task_runs_on_other_processes_and_a_failure_is_its_row(logs: Path, tmp_path: Path) -> None:
     """The job and the row cross process boundaries (pickled); a log that fails is a row with its
-    one-line error, and the others are written."""
+    one-line error, and the others are written. The workers are spawned: a process forked from one
+    that has run calibrations (threads, CasADi's state) may hang."""
     options = BatchOptions(tmp_path / "out", scenario=quick_scenario(tmp_path))
     jobs = batch_jobs([str(logs / "**" / "*.txt")], options)
     assert [j.name for j in jobs] == ["robot1_drive", "broken", "robot2_drive"]
-    with ProcessPoolExecutor(2) as pool:
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
         rows = list(pool.map(run_job, jobs))
     ok = {r.name: r for r in rows if r.ok}
     assert set(ok) == {"robot1_drive", "robot2_drive"}
