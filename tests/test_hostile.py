@@ -548,6 +548,16 @@ def test_docs_examples_of_the_command_line_parse() -> None:
         subprocess.run(
             [sys.executable, "-m", "nlp_calib", cmd, "--help"], cwd=REPO, capture_output=True, text=True
         ).stdout
-        for cmd in ("run", "compare", "validate", "odometry", "codegen", "simulate", "import-bag")
+        for cmd in (
+            "run",
+            "compare",
+            "validate",
+            "odometry",
+            "codegen",
+            "simulate",
+            "import-bag",
+            "check",
+            "batch",
+        )
     )
     assert options and all(o in help_text or o == "--debug" for o in options), sorted(options)
