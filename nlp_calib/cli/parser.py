@@ -127,9 +127,9 @@ COMMAND_EXIT_CODES = {
     ),
     "batch": (
         "exit codes: 0 every log succeeded (with --check: and every one is still good); 1 a log failed (its "
-        "row in summary.csv says why; the others ran); 3 with --check, every log ran and some drifted or "
-        "could not tell; 2 bad input (nothing is computed); 130, 143, 129 interrupted by SIGINT, SIGTERM, "
-        "SIGHUP (the folders of the logs that finished stay; no summary is written)"
+        "row in summary.csv says why; the others ran); with --check, every log ran and: 3 a log drifted, 4 "
+        "none drifted but a log could not tell; 2 bad input (nothing is computed); 130, 143, 129 interrupted "
+        "by SIGINT, SIGTERM, SIGHUP (the folders of the logs that finished stay; no summary is written)"
     ),
 }
 
