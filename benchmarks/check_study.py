@@ -140,7 +140,9 @@ def main() -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     doc = {"calibrations": args.calibrations, "drives": args.drives, "records": RECORDS, "results": results}
     stem = "check_study" if RECORDS == 1500 else f"check_study_{RECORDS}"
-    (args.out / f"{stem}.json").write_text(json.dumps(doc, indent=1) + "\n")
+    head = json.dumps({k: v for k, v in doc.items() if k != "results"})[:-1]
+    rows = ",\n".join("  " + json.dumps(r) for r in results)  # one check a line
+    (args.out / f"{stem}.json").write_text(f'{head}, "results": [\n{rows}\n]}}\n')
     (args.out / f"{stem}.md").write_text(text + "\n")
     print(text)
     return 0
