@@ -3,6 +3,7 @@ same objective and data, and runs on 10^4 to 10^6 simulated records.
 
     python benchmarks/performance.py                 # everything; prints a summary table
     python benchmarks/performance.py --quick         # small sizes, 2 repeats (the tests' smoke run)
+    python benchmarks/performance.py --sections batch,simulate   # some sections only
 
 Every figure is a median over ``--repeats`` (default 7) interleaved repeats, with the load average
 recorded at the start and end of each section (the machine is shared: read the figures with it).
@@ -12,7 +13,9 @@ from an empty compile cache, warm ones from a filled one. Solver times are measu
 the same windows: Gauss-Newton and IPOPT against ``scipy.optimize.least_squares`` (vectorised
 numpy residual with its analytic Jacobian, the same Huber objective; ``baselines.py``) and, when
 installed (``pip install .[bench]``), GTSAM and Ceres through their standard Python APIs.
-Writes ``results/performance.{json,md,png}``.
+``simulate`` times ``nlp-calib simulate --records 10^6`` (its peak RSS: the block-wise writer's);
+``batch`` runs ``nlp-calib batch`` over 20 simulated logs with ``--jobs 1`` and ``--jobs 2``,
+interleaved. Writes ``results/performance.{json,md,png}``.
 """
 
 from __future__ import annotations
@@ -65,7 +68,10 @@ TARGETS = {
     "scipy (prefix) / GN, H=25 [x]": 30.0,
     "10^6 records run --solver gauss_newton [s]": 15.0,
     "10^6 records peak RSS [MB]": 1500.0,
+    "batch of 20 logs, --jobs 1 / --jobs 2 [x]": 1.7,
 }
+#: The sections a run measures (``--sections``), in order.
+SECTIONS = ("end_to_end", "solvers", "scaling", "simulate", "batch")
 
 
 def load() -> list[float]:
@@ -210,15 +216,15 @@ def scaling(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
     logs = {}
     for n in sizes:
         logs[n] = tmp / f"sim_{n}.txt"
-        # The library, not the command (which bounds --records); coarse sub-steps keep 10^6 records
-        # in memory (accuracy is not what is measured here).
-        code = (
-            "import sys; from pathlib import Path; from nlp_calib.simulation import SimulationOptions, "
-            "simulate, write_simulation; n = int(sys.argv[1]); write_simulation(simulate("
-            "SimulationOptions(records=n, seed=11, substeps=4 if n > 200000 else 20)), Path(sys.argv[2]))"
-        )
+        # Coarse sub-steps above 2·10^5 records: the logs these figures were first measured on (the
+        # simulator then held a whole log in memory); the command writes the same bytes.
+        config = tmp / f"sim_{n}.yaml"
+        config.write_text(f"records: {n}\nseed: 11\nsubsteps: {4 if n > 200000 else 20}\n")
         subprocess.run(
-            [sys.executable, "-c", code, str(n), str(logs[n])], env=env, check=True, capture_output=True
+            cli("simulate", "--config", str(config), "--out", str(logs[n]), "--force"),
+            env=env,
+            check=True,
+            capture_output=True,
         )
     scenario = str(REPO / "scenarios" / "real_tricycle_seed.yaml")
     launch(
@@ -252,6 +258,68 @@ def scaling(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
     return {"load_start": start, "load_end": load(), "sizes": cases, "wall_slope": slope}
 
 
+def simulate_big(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
+    """``nlp-calib simulate --records N`` (written block by block): wall and peak RSS."""
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
+    start = load()
+    runs = [
+        launch(cli("simulate", "--records", str(records), "--out", str(tmp / "big.txt"), "--force"), env)
+        for _ in range(repeats)
+    ]
+    size = (tmp / "big.txt").stat().st_size
+    (tmp / "big.txt").unlink()
+    return {
+        "load_start": start,
+        "load_end": load(),
+        "records": records,
+        "file_mb": size / 1e6,
+        "wall_s": med([r["wall_s"] for r in runs]),
+        "peak_mb": med([r["peak_mb"] for r in runs]),
+    }
+
+
+def batch(n_logs: int, records: int, repeats: int, tmp: Path) -> dict[str, Any]:
+    """``nlp-calib batch`` of ``n_logs`` simulated logs with ``--jobs 1`` and ``--jobs 2``,
+    interleaved: median walls and their ratio."""
+    env = dict(
+        os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore", NLP_CALIB_CACHE=str(tmp / "cache-batch")
+    )
+    logs = tmp / "fleet"
+    logs.mkdir(exist_ok=True)
+    for seed in range(n_logs):
+        subprocess.run(
+            cli("simulate", "--records", str(records), "--seed", str(100 + seed), "--out",
+                str(logs / f"drive_{seed:02d}.txt"), "--force"),
+            env=env, check=True, capture_output=True,
+        )  # fmt: skip
+    scenario = str(REPO / "scenarios" / "demo.yaml")
+
+    def once(jobs: int) -> float:
+        out = tmp / f"batch-{jobs}"
+        shutil.rmtree(out, ignore_errors=True)
+        args = ("--scenario", scenario, "--solver", "gauss_newton", "--out", str(out), "--jobs", str(jobs))
+        r = launch(cli("batch", str(logs), *args), env)
+        if r["rc"] != 0:
+            raise SystemExit(f"batch --jobs {jobs} failed with exit code {r['rc']}")
+        return float(r["wall_s"])
+
+    once(1)  # fills the compile cache (not timed)
+    start = load()
+    walls: dict[int, list[float]] = {1: [], 2: []}
+    for _ in range(repeats):
+        for jobs in (1, 2):
+            walls[jobs].append(once(jobs))
+    return {
+        "load_start": start,
+        "load_end": load(),
+        "logs": n_logs,
+        "records": records,
+        "jobs_1_s": walls[1],
+        "jobs_2_s": walls[2],
+        "speedup": med(walls[1]) / med(walls[2]),
+    }
+
+
 def environment() -> dict[str, Any]:
     import casadi
 
@@ -283,13 +351,64 @@ def environment() -> dict[str, Any]:
     }
 
 
+def fleet_lines(doc: dict[str, Any], figures: dict[str, float]) -> list[str]:
+    """The simulate and batch sections' lines; their figures into ``figures``."""
+    lines = []
+    sim, fleet = doc.get("simulate"), doc.get("batch")
+    if sim:
+        lines += [
+            "",
+            f"`nlp-calib simulate --records {sim['records']:,}` (written block by block; load average "
+            f"{sim['load_start']} → {sim['load_end']}): {sim['wall_s']:.1f} s, "
+            f"peak RSS {sim['peak_mb']:.0f} MB, "
+            f"{sim['file_mb']:.0f} MB of text.",
+        ]
+        figures[f"simulate {sim['records']} records peak RSS [MB]"] = sim["peak_mb"]
+    if fleet:
+        lines += [
+            "",
+            f"`nlp-calib batch` of {fleet['logs']} simulated logs of {fleet['records']} records "
+            "(demo scenario, "
+            f"Gauss-Newton; load average {fleet['load_start']} → {fleet['load_end']}): --jobs 1 "
+            f"{med(fleet['jobs_1_s']):.1f} s, --jobs 2 {med(fleet['jobs_2_s']):.1f} s, "
+            f"{fleet['speedup']:.2f}× faster.",
+        ]
+        figures[f"batch of {fleet['logs']} logs, --jobs 1 / --jobs 2 [x]"] = fleet["speedup"]
+    return lines
+
+
 def summary(doc: dict[str, Any]) -> tuple[str, dict[str, float]]:
     """The report's tables and the figures each target is judged by."""
-    e2e, sol, scale = doc["end_to_end"], doc["solvers"], doc.get("scaling")
+    e2e, sol, scale = doc.get("end_to_end"), doc.get("solvers"), doc.get("scaling")
     env = doc["environment"]
     lines = [
         f"Machine: {env['cpu']}, {env['cores']} cores; {env['compiler']}; Python {env['python']}, "
         f"CasADi {env['casadi']}, numpy {env['numpy']}. Medians of {doc['repeats']} interleaved repeats.",
+    ]
+    figures: dict[str, float] = {}
+    if e2e:
+        lines += e2e_lines(e2e)
+    if sol:
+        lines += solver_lines(sol, figures)
+    if scale:
+        lines += scale_lines(scale, figures)
+    lines += fleet_lines(doc, figures)
+    r = e2e["scenarios"].get("real_tricycle") if e2e else None
+    if r:
+        figures["compare real_tricycle.yaml, warm [s]"] = r["warm_wall_s"]
+        figures["compare real_tricycle.yaml, cold [s]"] = r["cold_wall_s"]
+    lines += ["", "| target | measured | target | met |", "|---|---|---|---|"]
+    for name, target in TARGETS.items():
+        if name in figures:
+            v = figures[name]
+            met = v >= target if name.endswith("[x]") else v <= target
+            sign = "≥" if name.endswith("[x]") else "≤"
+            lines.append(f"| {name} | {v:.3g} | {sign} {target:g} | {'yes' if met else 'no'} |")
+    return "\n".join(lines), figures
+
+
+def e2e_lines(e2e: dict[str, Any]) -> list[str]:
+    lines = [
         "",
         "End to end, `nlp-calib compare SCENARIO` in a fresh process "
         f"(load average {e2e['load_start']} → {e2e['load_end']}); solver times as the run reports them:",
@@ -302,7 +421,11 @@ def summary(doc: dict[str, Any]) -> tuple[str, dict[str, float]]:
             f"| {name} | {r['cold_wall_s']:.2f} | {r['warm_wall_s']:.2f} | {r['warm_peak_mb']:.0f} | "
             f"{r.get('gauss_newton_ms', float('nan')):.1f} | {r.get('ipopt_ms', float('nan')):.1f} |"
         )
-    lines += [
+    return lines
+
+
+def solver_lines(sol: dict[str, Any], figures: dict[str, float]) -> list[str]:
+    lines = [
         "",
         "Solvers on the same windows and objective, in-process "
         f"(load average {sol['load_start']} → {sol['load_end']}):",
@@ -311,7 +434,6 @@ def summary(doc: dict[str, Any]) -> tuple[str, dict[str, float]]:
         "| parameters vs GN (max rel.) |",
         "|---|---|---|---|---|---|---|",
     ]
-    figures: dict[str, float] = {}
     for label, c in sol["cases"].items():
         gn = c["median_ms"]["gauss_newton"]
         for name, ms in c["median_ms"].items():
@@ -328,33 +450,25 @@ def summary(doc: dict[str, Any]) -> tuple[str, dict[str, float]]:
         if scenario.startswith("real_tricycle"):
             figures[f"{scenario} GN [ms]"] = gn
             figures[f"{scenario} IPOPT [ms]"] = c["median_ms"]["ipopt"]
-    if scale:
-        lines += [
-            "",
-            "`run --solver gauss_newton` on simulated logs "
-            f"(load average {scale['load_start']} → {scale['load_end']}):",
-            "",
-            "| records | wall [s] | peak RSS [MB] | Gauss-Newton [ms] |",
-            "|---|---|---|---|",
-        ]
-        for n, r in scale["sizes"].items():
-            lines.append(f"| {int(n):,} | {r['wall_s']:.2f} | {r['peak_mb']:.0f} | {r['gn_ms']:.0f} |")
-        lines.append(f"\nWall time ∝ N^{scale['wall_slope']:.2f} over these sizes.")
-        if "1000000" in scale["sizes"]:
-            figures["10^6 records run --solver gauss_newton [s]"] = scale["sizes"]["1000000"]["wall_s"]
-            figures["10^6 records peak RSS [MB]"] = scale["sizes"]["1000000"]["peak_mb"]
-    r = e2e["scenarios"].get("real_tricycle")
-    if r:
-        figures["compare real_tricycle.yaml, warm [s]"] = r["warm_wall_s"]
-        figures["compare real_tricycle.yaml, cold [s]"] = r["cold_wall_s"]
-    lines += ["", "| target | measured | target | met |", "|---|---|---|---|"]
-    for name, target in TARGETS.items():
-        if name in figures:
-            v = figures[name]
-            met = v >= target if name.endswith("[x]") else v <= target
-            sign = "≥" if name.endswith("[x]") else "≤"
-            lines.append(f"| {name} | {v:.3g} | {sign} {target:g} | {'yes' if met else 'no'} |")
-    return "\n".join(lines), figures
+    return lines
+
+
+def scale_lines(scale: dict[str, Any], figures: dict[str, float]) -> list[str]:
+    lines = [
+        "",
+        "`run --solver gauss_newton` on simulated logs "
+        f"(load average {scale['load_start']} → {scale['load_end']}):",
+        "",
+        "| records | wall [s] | peak RSS [MB] | Gauss-Newton [ms] |",
+        "|---|---|---|---|",
+    ]
+    for n, r in scale["sizes"].items():
+        lines.append(f"| {int(n):,} | {r['wall_s']:.2f} | {r['peak_mb']:.0f} | {r['gn_ms']:.0f} |")
+    lines.append(f"\nWall time ∝ N^{scale['wall_slope']:.2f} over these sizes.")
+    if "1000000" in scale["sizes"]:
+        figures["10^6 records run --solver gauss_newton [s]"] = scale["sizes"]["1000000"]["wall_s"]
+        figures["10^6 records peak RSS [MB]"] = scale["sizes"]["1000000"]["peak_mb"]
+    return lines
 
 
 def main() -> int:
@@ -369,37 +483,57 @@ def main() -> int:
         default=None,
         help="the real log (default: shared/data/dataset.txt above the checkout)",
     )
+    ap.add_argument(
+        "--sections",
+        default=",".join(SECTIONS),
+        help=f"comma-separated sections to measure (default: all of {', '.join(SECTIONS)})",
+    )
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results")
     args = ap.parse_args()
+    sections = [x.strip() for x in args.sections.split(",")]
+    if not set(sections) <= set(SECTIONS):
+        ap.error(f"--sections takes {', '.join(SECTIONS)}")
     repeats = args.repeats or (2 if args.quick else 7)
     real = args.data or next(
         (p / "shared/data/dataset.txt" for p in REPO.parents if (p / "shared/data/dataset.txt").is_file()),
         None,
     )
+    doc: dict[str, Any] = {"environment": environment(), "repeats": repeats, "quick": args.quick}
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
-        if args.quick or real is None:
-            scenarios: list[tuple[str, list[str]]] = [("demo", [])]
-        else:
-            scenarios = [(n, ["--data", str(real)]) for n in ("real_tricycle", "real_tricycle_seed")]
-            scenarios += [("demo", []), ("diff_drive_demo", [])]
-        print("end to end ...", file=sys.stderr)
-        doc: dict[str, Any] = {"environment": environment(), "repeats": repeats, "quick": args.quick}
-        doc["end_to_end"] = end_to_end(scenarios, repeats, tmp)
-        print("solvers ...", file=sys.stderr)
-        doc["solvers"] = solvers(solver_cases(real, args.quick), repeats, per_factor=not args.quick)
-        print("scaling ...", file=sys.stderr)
-        doc["scaling"] = scaling([2_000, 8_000] if args.quick else [10_000, 100_000, 1_000_000], repeats, tmp)
+        for section in sections:
+            print(f"{section} ...", file=sys.stderr)
+            doc[section] = measure(section, args.quick, real, repeats, tmp)
     text, figures = summary(doc)
     doc["figures"] = figures
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "performance.json").write_text(json.dumps(doc, indent=2) + "\n")
     (args.out / "performance.md").write_text(text + "\n")
-    from nlp_calib.outputs.plots import scaling_png
+    if "scaling" in doc:
+        from nlp_calib.outputs.plots import scaling_png
 
-    (args.out / "performance.png").write_bytes(scaling_png(doc["scaling"]["sizes"]))
+        (args.out / "performance.png").write_bytes(scaling_png(doc["scaling"]["sizes"]))
     print(text)
     return 0
+
+
+def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Path) -> dict[str, Any]:
+    """One section's measurements."""
+    if section == "end_to_end":
+        if quick or real is None:
+            scenarios: list[tuple[str, list[str]]] = [("demo", [])]
+        else:
+            scenarios = [(n, ["--data", str(real)]) for n in ("real_tricycle", "real_tricycle_seed")]
+            scenarios += [("demo", []), ("diff_drive_demo", [])]
+        return end_to_end(scenarios, repeats, tmp)
+    if section == "solvers":
+        return solvers(solver_cases(real, quick), repeats, per_factor=not quick)
+    if section == "scaling":
+        return scaling([2_000, 8_000] if quick else [10_000, 100_000, 1_000_000], repeats, tmp)
+    if section == "simulate":
+        return simulate_big(10_000 if quick else 1_000_000, 1 if quick else 3, tmp)
+    # Logs of 5000 records (3.3 minutes of driving): a robot's daily log is rarely shorter.
+    return batch(4 if quick else 20, 300 if quick else 5000, 1 if quick else repeats, tmp)
 
 
 if __name__ == "__main__":

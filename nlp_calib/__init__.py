@@ -9,7 +9,7 @@ and IPOPT solve it from the same Functions. Typical use::
 
 Layers, from inputs to outputs (each imports only from the ones before it): ``core``,
 ``symbolic`` and ``logs``, ``models``, ``problem`` and ``simulation``, ``codegen``, ``solvers``,
-``analysis``, ``pipeline``, ``outputs``, ``cli``.
+``analysis``, ``pipeline``, ``outputs``, ``fleet``, ``cli``.
 """
 
 from __future__ import annotations
@@ -51,6 +51,7 @@ if TYPE_CHECKING:
         SolverError,
         UsageError,
     )
+    from nlp_calib.fleet import BatchOptions, batch_jobs, run_job, write_summary
     from nlp_calib.logs import Log, LogHeader, read_log
     from nlp_calib.models import MODELS, KinematicModel, get_model
     from nlp_calib.outputs.summary import summary_lines
@@ -71,6 +72,10 @@ if TYPE_CHECKING:
 # The public API is imported when first used, not with the package: ``python -m nlp_calib``
 # installs its signal handlers before numpy and CasADi load, and light tools stay light.
 _EXPORTS: dict[str, str] = {
+    "BatchOptions": "nlp_calib.fleet",
+    "batch_jobs": "nlp_calib.fleet",
+    "run_job": "nlp_calib.fleet",
+    "write_summary": "nlp_calib.fleet",
     "Calibration": "nlp_calib.pipeline",
     "CalibrationRun": "nlp_calib.results",
     "JointCalibration": "nlp_calib.pipeline",
@@ -129,6 +134,7 @@ def __dir__() -> list[str]:
 __all__ = [
     "MODELS",
     "SOLVERS",
+    "BatchOptions",
     "Calibration",
     "CalibrationRun",
     "CodegenError",
@@ -157,14 +163,17 @@ __all__ = [
     "Verdict",
     "Wanted",
     "__version__",
+    "batch_jobs",
     "build",
     "get_model",
     "get_solver",
     "load_log",
     "load_scenario",
     "read_log",
+    "run_job",
     "scenario_from_mapping",
     "simulate",
     "summary_lines",
     "write_simulation",
+    "write_summary",
 ]

@@ -684,3 +684,20 @@ def test_compare_runs_on_a_scenario_that_names_a_bag(bags: dict[str, Path], tmp_
     assert proc.returncode == 0, proc.stderr
     doc = json.loads((tmp_path / "out" / "result.json").read_text())
     assert doc["dataset"]["path"] == str(bags["mcap"]) and set(doc["solvers"]) == {"gauss_newton", "ipopt"}
+
+
+def test_a_calibration_is_checked_on_a_bag(bags: dict[str, Path], tmp_path: Path) -> None:
+    """``nlp-calib check CALIBRATION.yaml BAG``: the bag is read with the topics of the scenario the
+    calibration records; on the very records it was made from, nothing moved (a drive this short
+    leaves most parameters too loose to test: the verdict says so)."""
+    scenario = _scenario(tmp_path, _bag_block(bags["mcap"]), "from_bag")
+    out = tmp_path / "cal"
+    assert cli("run", str(scenario), "--out", str(out)).returncode == 0
+    proc = cli("check", str(out / "calibration.yaml"), str(bags["sqlite3"]), "--out", str(tmp_path / "check"))
+    doc = json.loads((tmp_path / "check" / "check.json").read_text())
+    assert proc.returncode == doc["exit_code"] and doc["verdict"] in ("still good", "cannot tell"), (
+        proc.stderr
+    )
+    assert doc["dataset"] == str(bags["sqlite3"])
+    assert all(abs(p["change"]) <= 1e-9 * abs(p["stored"]) for p in doc["parameters"].values())
+    assert not any(p["drifted"] for p in doc["parameters"].values())

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.cli.explain import no_crossvalidation
+from nlp_calib.cli.fleet import cmd_batch, cmd_check
 from nlp_calib.cli.import_bag import cmd_import_bag
 from nlp_calib.cli.parser import ALL_SOLVERS
 from nlp_calib.core import interrupts
@@ -32,7 +33,7 @@ from nlp_calib.pipeline.export import write_c_export
 from nlp_calib.pipeline.prepare import read_checked
 from nlp_calib.pipeline.simconfig import simulation_options
 from nlp_calib.results import CalibrationRun
-from nlp_calib.simulation import simulate, truth_path, write_simulation
+from nlp_calib.simulation import simulate_to_file, truth_path
 from nlp_calib.solvers import SOLVERS
 
 
@@ -250,9 +251,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     folder = check_output_dir(out.parent)
     # The target may be the user's own log: never replaced without --force.
     refuse_collisions(folder, [out.name, truth_path(out).name], tracked=False, force=args.force)
-    sim = simulate(opts)
     with StagedOutput(folder, None, force=args.force) as stage:
-        log_path, truth = write_simulation(sim, stage.path / out.name)
+        log_path, truth = simulate_to_file(opts, stage.path / out.name)
         interrupts.hold()
         stage.commit()
     print(f"wrote {stage.final(log_path)} ({opts.records} records) and {stage.final(truth)}")
@@ -342,4 +342,6 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "codegen": _cmd_codegen,
     "simulate": _cmd_simulate,
     "import-bag": cmd_import_bag,
+    "check": cmd_check,
+    "batch": cmd_batch,
 }

@@ -23,6 +23,8 @@ ALL_SOLVERS = ("all", "both")
 
 #: ``odometry --sigma``: the size of the drawn covariance ellipses, in standard deviations.
 SIGMA = Range(0.0, 10.0, lo_open=True)
+#: ``batch --jobs``: worker processes.
+JOBS = Range(1, 256, integer=True)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -97,6 +99,14 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "odometry": ("nlp-calib odometry scenarios/demo.yaml --report --sigma 3",),
     "codegen": ("nlp-calib codegen scenarios/demo.yaml --out c_export && make -C c_export example",),
     "simulate": ("nlp-calib simulate --out my_drive.txt --records 2000 --seed 3 --latency 0.05",),
+    "check": (
+        "nlp-calib check out/demo/calibration.yaml todays_drive.txt",
+        "nlp-calib check out/real/calibration.yaml scenarios/real_tricycle.yaml --out out/check_today",
+    ),
+    "batch": (
+        "nlp-calib batch logs/ --scenario scenarios/demo.yaml --out out/fleet --jobs 2",
+        "nlp-calib batch 'logs/**/drive*.txt' --check out/demo/calibration.yaml --out out/nightly",
+    ),
     "import-bag": (
         f"nlp-calib import-bag drive.bag --out drive.txt --model {DEFAULT_MODEL} --joint-states "
         "/joint_states --joints steer_joint,drive_joint --tracker /mocap/robot/pose",
@@ -107,9 +117,27 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
 }
 
 
+#: Commands whose exit codes say more than success or failure.
+COMMAND_EXIT_CODES = {
+    "check": (
+        "exit codes: 0 still good; 3 drifted: recalibrate (the verdict names what moved and by how much); "
+        "4 cannot tell (the log cannot test a parameter: the verdict says what to drive); 1 the run failed; "
+        "2 bad input (calibration, scenario, log, options: nothing is computed); 130, 143, 129 interrupted "
+        "by SIGINT, SIGTERM, SIGHUP (the output folder keeps the previous files)"
+    ),
+    "batch": (
+        "exit codes: 0 every log succeeded (with --check: and every one is still good); 1 a log failed (its "
+        "row in summary.csv says why; the others ran); with --check, every log ran and: 3 a log drifted, 4 "
+        "none drifted but a log could not tell; 2 bad input (nothing is computed); 130, 143, 129 interrupted "
+        "by SIGINT, SIGTERM, SIGHUP (the folders of the logs that finished stay; no summary is written)"
+    ),
+}
+
+
 def _epilog(command: str) -> str:
     lines = "\n".join(f"  {e}" for e in EXAMPLES[command])
-    return f"example{'s' if len(EXAMPLES[command]) > 1 else ''}:\n{lines}\n\n{EXIT_CODES}"
+    codes = COMMAND_EXIT_CODES.get(command, EXIT_CODES)
+    return f"example{'s' if len(EXAMPLES[command]) > 1 else ''}:\n{lines}\n\n{codes}"
 
 
 def _add_common(p: argparse.ArgumentParser, report: str | None) -> None:
@@ -179,6 +207,8 @@ def build_parser() -> argparse.ArgumentParser:
         _add_odometry,
         _add_simulate,
         _add_import_bag,
+        _add_check,
+        _add_batch,
     ):
         add(sub)
     return parser
@@ -366,3 +396,55 @@ def _offset(text: str) -> float | str:
         return text
     value = _in(CLOCK_OFFSET)(text)
     return float(value)
+
+
+def _add_check(sub: Any) -> None:
+    p = sub.add_parser(
+        "check",
+        help="is a calibration still good on a new log? each parameter's change in its σ, and a verdict",
+        **_sub("check"),
+    )
+    p.add_argument(
+        "calibration", type=_path, metavar="CALIBRATION.yaml", help="a calibration.yaml nlp-calib wrote"
+    )
+    p.add_argument(
+        "target",
+        type=_path,
+        metavar="SCENARIO|LOG",
+        help="a scenario (.yaml) of the new log, or the log itself (read with the scenario the calibration "
+        "records, else the model's defaults and the recorded residual)",
+    )
+    p.add_argument("--out", type=_path, default=None, help="output folder (default: out/check_<log name>)")
+    _add_force(p, "files in the output folder")
+
+
+def _add_batch(sub: Any) -> None:
+    p = sub.add_parser(
+        "batch",
+        help="calibrate (or --check) many logs or scenarios: one folder each and a summary table",
+        **_sub("batch"),
+    )
+    p.add_argument(
+        "inputs",
+        nargs="+",
+        metavar="FOLDER|GLOB|LIST.yaml|FILE",
+        help="logs and scenarios: a folder (its logs), a quoted glob, a YAML list of paths, or files",
+    )
+    p.add_argument(
+        "--out", type=_path, default=Path("out") / "batch", help="output folder (default: out/batch)"
+    )
+    p.add_argument("--scenario", type=_path, default=None, help="the scenario each log is calibrated with")
+    p.add_argument(
+        "--model", choices=tuple(MODELS), default=None, help="without --scenario: the model (its defaults)"
+    )
+    p.add_argument(
+        "--check", type=_path, default=None, metavar="CALIBRATION.yaml", help="check each log against it"
+    )
+    p.add_argument(
+        "--solver", choices=tuple(SOLVERS), default=None, help="the solver (default: the scenario's)"
+    )
+    p.add_argument(
+        "--jobs", type=_in(JOBS), default=None, help=f"logs at once, {JOBS.describe()} (default: cores)"
+    )
+    p.add_argument("--report", action="store_true", help=REPORT)
+    _add_force(p, "files in the output folders")

@@ -12,7 +12,7 @@ from nlp_calib.logs.log import ENCODER_KINDS, DroppedRecord, EncoderKind, JointS
 from nlp_calib.logs.reader import parse_log, read_log, yaw_from_quaternion
 from nlp_calib.logs.resample import resample_encoders
 from nlp_calib.logs.tum import Trajectory3D, format_tum, read_tum
-from nlp_calib.logs.writer import format_log
+from nlp_calib.logs.writer import format_header, format_log, format_records
 
 __all__ = [
     "ENCODER_KINDS",
@@ -28,8 +28,10 @@ __all__ = [
     "LogHeader",
     "Trajectory3D",
     "camera_log",
+    "format_header",
     "format_joint_csv",
     "format_log",
+    "format_records",
     "format_tum",
     "pair",
     "parse_log",

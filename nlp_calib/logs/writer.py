@@ -19,9 +19,14 @@ def format_log(
 ) -> str:
     """Render a log; poses with ``digits`` significant digits (None: the shortest text that reads back
     as the same float), header parameters as named there."""
+    return format_header(header) + format_records(time_ns, ticks, model_pose, T_world_sensor, digits)
+
+
+def format_header(header: LogHeader) -> str:
+    """The header lines of a log, each ending in a newline."""
     names = list(header.parameters)
     x, y, th = header.T_base_sensor
-    out = [
+    lines = [
         f"#kinematic_model: {header.kinematic_model}",
         "#parameters: [ " + " ".join(names) + " ]",
         "#parameter_values: " + " ".join(f"{header.parameters[n]:.9g}" for n in names),
@@ -31,12 +36,34 @@ def format_log(
         f"#\ttranslation:\t[ {x:.9g}, {y:.9g}, 0 ],",
         f"#\trotation:\t [ 0, 0, {math.sin(th / 2):.9g}, {math.cos(th / 2):.9g} ]",
     ]
-    for k in range(time_ns.shape[0]):
-        enc = " ".join(str(int(v)) for v in ticks[k])
-        mp = " ".join(_number(v, digits) for v in model_pose[k])
-        tp = " ".join(_number(v, digits) for v in T_world_sensor[k])
-        out.append(f"time: {format_time(int(time_ns[k]))} ticks: {enc} model_pose: {mp} tracker_pose: {tp}")
-    return "\n".join(out) + "\n"
+    return "".join(f"{line}\n" for line in lines)
+
+
+def format_records(
+    time_ns: np.ndarray,
+    ticks: np.ndarray,
+    model_pose: np.ndarray,
+    T_world_sensor: np.ndarray,
+    digits: int | None = 9,
+) -> str:
+    """The record lines of a log (any run of its records: a log may be written in blocks), each
+    ending in a newline."""
+    number = "%r" if digits is None else f"%.{digits}g"
+    poses = " ".join([number] * 3)
+    encoders = " ".join(["%d"] * ticks.shape[1])
+    line = f"time: %s%d.%09d ticks: {encoders} model_pose: {poses} tracker_pose: {poses}\n"
+    t = np.asarray(time_ns, dtype=np.int64)
+    # Sign, then the magnitude: -1.5 s is -1.500000000, as the reader reads it, not -2.500000000.
+    sec, ns = np.divmod(np.abs(t), 1_000_000_000)
+    columns = zip(
+        np.where(t < 0, "-", "").tolist(),
+        sec.tolist(),
+        ns.tolist(),
+        np.asarray(ticks).astype(np.int64).tolist(),
+        np.asarray(model_pose, dtype=float).tolist(),
+        np.asarray(T_world_sensor, dtype=float).tolist(),
+    )
+    return "".join(line % (sg, s, n, *enc, *mp, *tp) for sg, s, n, enc, mp, tp in columns)
 
 
 def format_time(t_ns: int) -> str:
@@ -44,7 +71,3 @@ def format_time(t_ns: int) -> str:
     ``-1.500000000``, as the reader reads it, not ``-2.500000000``)."""
     sec, ns = divmod(abs(t_ns), 1_000_000_000)
     return f"{'-' if t_ns < 0 else ''}{sec}.{ns:09d}"
-
-
-def _number(v: float, digits: int | None) -> str:
-    return repr(float(v)) if digits is None else f"{v:.{digits}g}"

@@ -250,9 +250,15 @@ def header_parameters(model: KinematicModel, header: LogHeader) -> dict[str, flo
     return out
 
 
+def reference(model: KinematicModel, name: str) -> Reference:
+    """The precision a calibration should reach on parameter ``name``: ``relative`` (a fraction of
+    its value: gains and lengths) or ``absolute`` (in its unit)."""
+    return {**model.reference, **MOUNT_REFERENCE, **SENSOR_REFERENCE}.get(name, ("relative", 0.01))
+
+
 def reference_scale(model: KinematicModel, name: str, value: float) -> float:
     """The precision a calibration should reach on parameter ``name`` at ``value``."""
-    kind, amount = {**model.reference, **MOUNT_REFERENCE, **SENSOR_REFERENCE}.get(name, ("relative", 0.01))
+    kind, amount = reference(model, name)
     return amount * max(abs(value), 1e-9) if kind == "relative" else amount
 
 

@@ -17,7 +17,7 @@ from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, Reference, Symmetry, named, rows_by_name
-from nlp_calib.models.drives import SimulationSettings, counter, cumulative, drive_header, first_order
+from nlp_calib.models.drives import Pose, SimulationSettings, counter, drive_header, first_order, running
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
@@ -74,12 +74,19 @@ class DiffDriveDrive:
     default_ranges: Mapping[str, int] = MappingProxyType({LEFT_ENCODER: 4096, RIGHT_ENCODER: 4096})
 
     def steps(
-        self, opts: SimulationSettings, speed: np.ndarray, turn: np.ndarray, dt: np.ndarray, turn_start: float
+        self,
+        opts: SimulationSettings,
+        speed: np.ndarray,
+        turn: np.ndarray,
+        dt: np.ndarray,
+        turn_start: float,
+        carry: Mapping[str, float] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         ds = speed * dt
         w = ds * _SIM_CURVATURE * turn
         half = 0.5 * opts.truth["baseline"] * w
-        return ds, w, {"left": cumulative(ds - half), "right": cumulative(ds + half)}
+        first: Mapping[str, float | None] = carry or {"left": None, "right": None}
+        return ds, w, {"left": running(ds - half, first["left"]), "right": running(ds + half, first["right"])}
 
     def ticks(self, opts: SimulationSettings, channels: Mapping[str, np.ndarray]) -> np.ndarray:
         t = opts.truth
@@ -90,11 +97,11 @@ class DiffDriveDrive:
     def header(self, opts: SimulationSettings) -> LogHeader:
         return drive_header(opts, "differential_drive", DiffDrive.header_names)
 
-    def vendor_odometry(self, header: LogHeader, ticks: np.ndarray) -> np.ndarray:
+    def vendor_odometry(self, header: LogHeader, ticks: np.ndarray, start: Pose | None = None) -> np.ndarray:
         p = {DiffDrive.header_aliases[n.lower()]: v for n, v in header.parameters.items()}
         d_l = p["k_left"] * wrapped_difference(ticks[:, 0])
         d_r = p["k_right"] * wrapped_difference(ticks[:, 1])
-        return first_order(0.5 * (d_l + d_r), (d_r - d_l) / p["baseline"])
+        return first_order(0.5 * (d_l + d_r), (d_r - d_l) / p["baseline"], start)
 
 
 class DiffDrive:

@@ -16,6 +16,9 @@ import numpy as np
 from nlp_calib.core.numeric import COUNTER_MODULUS
 from nlp_calib.logs import LogHeader
 
+#: A pose ``(x, y, theta)`` a running integration continues from.
+Pose = tuple[float, float, float]
+
 
 class SimulationSettings(Protocol):
     """The simulation options a drive reads (see ``nlp_calib.simulation.SimulationOptions``)."""
@@ -39,9 +42,17 @@ class Drive(Protocol):
     default_ranges: Mapping[str, int]
 
     def steps(
-        self, opts: SimulationSettings, speed: np.ndarray, turn: np.ndarray, dt: np.ndarray, turn_start: float
+        self,
+        opts: SimulationSettings,
+        speed: np.ndarray,
+        turn: np.ndarray,
+        dt: np.ndarray,
+        turn_start: float,
+        carry: Mapping[str, float] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-        """Per sub-step arc length and turn of the base, and cumulative encoder channels."""
+        """Per sub-step arc length and turn of the base, and the encoder channels at the sub-step
+        ends, preceded by their values at the start: at rest (``turn_start``) for the log's first
+        sub-step, else ``carry``, the channels' last values of the sub-steps before."""
         ...
 
     def ticks(self, opts: SimulationSettings, channels: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -52,27 +63,36 @@ class Drive(Protocol):
         """The log header: the guess as the initial values, the encoder ranges."""
         ...
 
-    def vendor_odometry(self, header: LogHeader, ticks: np.ndarray) -> np.ndarray:
-        """The robot's own first-order odometry with the header's parameters (``model_pose``)."""
+    def vendor_odometry(self, header: LogHeader, ticks: np.ndarray, start: Pose | None = None) -> np.ndarray:
+        """The robot's own first-order odometry with the header's parameters (``model_pose``), from
+        ``start`` at the first record (None: the log's start, the origin)."""
         ...
 
 
-def integrate_base(ds: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Base poses ``(n + 1, 3)`` from per-sub-step arcs of length ``ds`` turning by ``w``."""
-    theta = np.concatenate([[0.0], np.cumsum(w)])
+def running(step: np.ndarray, start: float | None = None) -> np.ndarray:
+    """Running sum of ``step`` from ``start`` (one more element; None: from 0, the log's start).
+
+    Summed in order, one addition per element, so a log made in blocks, each continuing from the
+    last sum of the block before, holds the very numbers of a log made at once.
+    """
+    if start is None:
+        return np.concatenate([[0.0], np.cumsum(step)])
+    return np.cumsum(np.concatenate([[start], step]))
+
+
+def integrate_base(ds: np.ndarray, w: np.ndarray, start: Pose | None = None) -> np.ndarray:
+    """Base poses ``(n + 1, 3)`` from per-sub-step arcs of length ``ds`` turning by ``w``, from
+    ``start`` (None: the origin)."""
+    x0, y0, th0 = start if start is not None else (None, None, None)
+    theta = running(w, th0)
     small = np.abs(w) < 1e-9
     w_safe = np.where(small, 1.0, w)
     a = np.where(small, ds, ds * np.sin(w_safe) / w_safe)
     b = np.where(small, 0.5 * ds * w, ds * (1.0 - np.cos(w_safe)) / w_safe)
     c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
-    x = np.concatenate([[0.0], np.cumsum(c * a - s * b)])
-    y = np.concatenate([[0.0], np.cumsum(s * a + c * b)])
+    x = running(c * a - s * b, x0)
+    y = running(s * a + c * b, y0)
     return np.stack([x, y, theta], axis=1)
-
-
-def cumulative(step: np.ndarray) -> np.ndarray:
-    """Running sum of ``step`` starting at 0 (one more element)."""
-    return np.concatenate([[0.0], np.cumsum(step)])
 
 
 def counter(distance: np.ndarray, metres_per_tick: float, wrap_after: int) -> np.ndarray:
@@ -81,11 +101,13 @@ def counter(distance: np.ndarray, metres_per_tick: float, wrap_after: int) -> np
     return np.mod(raw + (COUNTER_MODULUS - wrap_after), COUNTER_MODULUS)
 
 
-def first_order(step: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
-    """Poses of first-order (Euler) dead reckoning: move ``step`` along the heading, then turn."""
-    theta = np.concatenate([[0.0], np.cumsum(dtheta)])
-    x = np.concatenate([[0.0], np.cumsum(step * np.cos(theta[:-1]))])
-    y = np.concatenate([[0.0], np.cumsum(step * np.sin(theta[:-1]))])
+def first_order(step: np.ndarray, dtheta: np.ndarray, start: Pose | None = None) -> np.ndarray:
+    """Poses of first-order (Euler) dead reckoning from ``start`` (None: the origin): move
+    ``step`` along the heading, then turn."""
+    x0, y0, th0 = start if start is not None else (None, None, None)
+    theta = running(dtheta, th0)
+    x = running(step * np.cos(theta[:-1]), x0)
+    y = running(step * np.sin(theta[:-1]), y0)
     return np.stack([x, y, theta], axis=1)
 
 

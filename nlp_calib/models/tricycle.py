@@ -28,7 +28,7 @@ from nlp_calib.models.base import (
     rows_by_name,
     sampled_angle,
 )
-from nlp_calib.models.drives import SimulationSettings, counter, cumulative, drive_header, first_order
+from nlp_calib.models.drives import Pose, SimulationSettings, counter, drive_header, first_order, running
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
@@ -96,12 +96,19 @@ class TricycleDrive:
     default_ranges: Mapping[str, int] = MappingProxyType({STEERING_ENCODER: 8192, TRACTION_ENCODER: 5000})
 
     def steps(
-        self, opts: SimulationSettings, speed: np.ndarray, turn: np.ndarray, dt: np.ndarray, turn_start: float
+        self,
+        opts: SimulationSettings,
+        speed: np.ndarray,
+        turn: np.ndarray,
+        dt: np.ndarray,
+        turn_start: float,
+        carry: Mapping[str, float] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         d = speed * dt
         ds, w = d * np.cos(turn), d * np.sin(turn) / opts.truth["axis_length"]
-        channels = {"front": cumulative(d), "phi": np.concatenate([[turn_start], turn])}
-        channels["direction"] = np.concatenate([[0.0], np.sign(d)])
+        first: Mapping[str, float | None] = carry or {"front": None, "phi": turn_start, "direction": 0.0}
+        channels = {"front": running(d, first["front"]), "phi": np.concatenate([[first["phi"]], turn])}
+        channels["direction"] = np.concatenate([[first["direction"]], np.sign(d)])
         return ds, w, channels
 
     def steering_gain(self, truth: Mapping[str, float], direction: np.ndarray) -> np.ndarray:
@@ -119,7 +126,7 @@ class TricycleDrive:
     def header(self, opts: SimulationSettings) -> LogHeader:
         return drive_header(opts, "traction_drive_wheel", Tricycle.header_names)
 
-    def vendor_odometry(self, header: LogHeader, ticks: np.ndarray) -> np.ndarray:
+    def vendor_odometry(self, header: LogHeader, ticks: np.ndarray, start: Pose | None = None) -> np.ndarray:
         # The vendor's odometry knows the plain tricycle only.
         p = {
             Tricycle.header_aliases[n.lower()]: v
@@ -129,7 +136,7 @@ class TricycleDrive:
         s_max, t_max = header.encoder_max
         d = p["k_traction"] * wrapped_difference(ticks[:, 1]) / t_max
         phi = p["k_steer"] * wrap_angle(2 * np.pi * ticks[:-1, 0] / s_max) + p["steer_offset"]
-        return first_order(d * np.cos(phi), d * np.sin(phi) / p["axis_length"])
+        return first_order(d * np.cos(phi), d * np.sin(phi) / p["axis_length"], start)
 
 
 class Tricycle:

@@ -67,6 +67,10 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "std": best["std"],
         "std_white_noise": best["std_white_noise"],
         "std_blocks": (doc["crossvalidation"] or {}).get("std_blocks"),
+        # The jackknife σ's folds (its degrees of freedom + 1) and the formulation fitted: what
+        # `nlp-calib check` needs to judge this calibration on a new log.
+        "std_blocks_folds": len(run.checks.crossval.converged) if run.checks.crossval is not None else 0,
+        "objective": {"residual": doc["residual"], "robust": doc["robust"]},
         "correlation": best["correlation"],
         "units": dict(sc.units),
         # The units "per t_max ticks" and "per tick" refer to these encoders' ranges.

@@ -1,7 +1,7 @@
 """Every file a run can write, in one registry: its name, what it is for, when it is written.
 
 A command picks the groups it writes (``result``, ``handoff``, ``figures``, ``odometry``,
-``validation``); ``--report`` adds the entries marked ``report``. The same entries give the
+``validation``, ``check``); ``--report`` adds the entries marked ``report``. The same entries give the
 names a run checks for collisions before it computes, the writers it calls, and the lines the
 closing summary says of each file. Adding an output is one module with a writer
 ``(run, folder, name, options) -> [paths]`` and one entry in :data:`OUTPUTS`.
@@ -15,7 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from nlp_calib.outputs import handoff, markdown, results, ros2_control, trajectories, urdf
+from nlp_calib.outputs import check, handoff, markdown, results, ros2_control, trajectories, urdf
+from nlp_calib.outputs.outdir import StagedOutput
 from nlp_calib.results import CalibrationRun
 
 
@@ -99,6 +100,8 @@ OUTPUTS: tuple[Output, ...] = (
            next_step="the base link's odometry with its covariance, one row per record"),
     Output("odometry.png", "odometry", _odometry_png, report=True),
     Output("validation.json", "validation", _plain(results.write_validation)),
+    Output("check.json", "check", _plain(check.write_check),
+           next_step="the verdict and each parameter's change in its σ, for a cron job or a fleet table"),
     Output("trajectory.png", "figures", _figure("trajectory"), report=True),
     Output("convergence.png", "figures", _figure("convergence"), report=True),
     Output("residuals.png", "figures", _figure("residuals"), report=True),
@@ -146,3 +149,20 @@ def write(
             folder.mkdir(exist_ok=True)
             written += output.write(run, folder, output.name, options)
     return written
+
+
+def write_staged(
+    out: Path,
+    outputs: Sequence[Output],
+    run: CalibrationRun,
+    options: OutputOptions,
+    group: str,
+    *,
+    force: bool,
+) -> list[Path]:
+    """``outputs`` of one log's ``run`` into ``out`` through a staged folder (all or nothing, the
+    manifest's ``group``); returns the final paths."""
+    with StagedOutput(out, group, force=force) as stage:
+        written = write(outputs, [(run, stage.path)], (run, stage.path), options)
+        stage.commit()
+    return [stage.final(p) for p in written]

@@ -10,10 +10,9 @@ from nlp_calib.core.config import fail, from_mapping, read_yaml
 from nlp_calib.core.ranges import Range
 from nlp_calib.simulation import LIMITS, SimulationOptions
 
-#: What a user may ask of ``nlp-calib simulate``: the simulator's own limits, with the size of one
-#: run bounded (memory grows with records × substeps, about 200 MB at MAX_FINE_STEPS).
-CLI_LIMITS: Mapping[str, Range] = {**LIMITS, "records": Range(3, 50_000, integer=True)}
-MAX_FINE_STEPS = 1_000_000
+#: What a user may ask of ``nlp-calib simulate``: the simulator's own limits (it writes a log block
+#: by block, so its memory does not grow with the log's length).
+CLI_LIMITS: Mapping[str, Range] = LIMITS
 
 
 def simulation_options(config: Path | None, overrides: Mapping[str, Any]) -> SimulationOptions:
@@ -28,12 +27,4 @@ def simulation_options(config: Path | None, overrides: Mapping[str, Any]) -> Sim
         source = str(config)
     raw.update(overrides)
     opts: SimulationOptions = from_mapping(SimulationOptions, raw, source)
-    reason = CLI_LIMITS["records"].problem(opts.records)
-    if reason is not None:
-        fail(f"{source}: records", reason)
-    if opts.records * opts.substeps > MAX_FINE_STEPS:
-        fail(
-            f"{source}: records × substeps",
-            f"must be at most {MAX_FINE_STEPS:,} (memory), got {opts.records} × {opts.substeps}",
-        )
     return opts

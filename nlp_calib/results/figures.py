@@ -15,6 +15,8 @@ import numpy as np
 RPE_DISTANCES = (1.0, 5.0)
 #: Relative tolerance on a pair's distance (evo's default).
 RPE_TOLERANCE = 0.1
+#: The labels of :meth:`TrajectoryMetrics.fair_figures`.
+FAIR_FIGURES = ("segment ATE mean [m]", *(f"RPE over {d:g} m [m]" for d in RPE_DISTANCES))
 
 
 @dataclass(frozen=True)
@@ -92,6 +94,12 @@ class TrajectoryMetrics:
             (f"RPE over {self.rpe_window} records [m]", self.rpe_trans),
             (f"RPE over {self.rpe_window} records [rad]", self.rpe_rot),
         ]
+
+    def fair_figures(self) -> dict[str, float]:
+        """The fault-robust figures a check or a fleet table compares: the segment ATE and the RPE
+        over each of :data:`RPE_DISTANCES`, by label."""
+        every = dict(self.figures())
+        return {label: every[label] for label in FAIR_FIGURES if label in every}
 
     def as_dict(self) -> dict[str, object]:
         return {

@@ -17,6 +17,7 @@ import numpy as np
 
 from nlp_calib.core.errors import UsageError
 from nlp_calib.results import codec
+from nlp_calib.results.check import DriftCheck
 from nlp_calib.results.checks import (
     ConsistencyCheck,
     CrossValidation,
@@ -110,14 +111,16 @@ class DataInfo:
 @dataclass(frozen=True)
 class Checks:
     """What the run's checks found: observability, blocked cross-validation, the forward/reverse
-    comparison, the faults and, for several logs fitted together, whether each log's own fit
-    agrees with theirs (any may be absent when it could not run)."""
+    comparison, the faults, for several logs fitted together whether each log's own fit agrees
+    with theirs, and the comparison with a stored calibration (``nlp-calib check``: ``drift``);
+    any may be absent when it could not run."""
 
     observability: Observability | None
     crossval: CrossValidation | None
     direction: DirectionCheck | None
     findings: Findings | None
     consistency: ConsistencyCheck | None = None
+    drift: DriftCheck | None = None
 
 
 @dataclass(frozen=True)

@@ -6,6 +6,7 @@ from nlp_calib.simulation.simulate import (
     SimulatedLog,
     SimulationOptions,
     simulate,
+    simulate_to_file,
     truth_path,
     write_simulation,
 )
@@ -16,6 +17,7 @@ __all__ = [
     "SimulatedLog",
     "SimulationOptions",
     "simulate",
+    "simulate_to_file",
     "truth_path",
     "write_simulation",
 ]

@@ -1,0 +1,232 @@
+"""Whether a calibration still holds on a new log: each parameter's change judged in its σ.
+
+For a parameter with the stored estimate θ₀ (σ₀ to believe) and the refit θ₁ on a new,
+independent log (σ₁ to believe), the change in units of the combined σ
+
+    z = (θ₁ − θ₀) / √(σ₀² + σ₁²)
+
+is, when nothing changed, approximately Student-t distributed. Each σ to believe is either the
+white-noise σ, estimated from thousands of residuals (taken as known: ν = ∞), or the jackknife σ of
+K blocks, which has its own sampling error (ν = K − 1). The combined σ's degrees of freedom follow
+Welch and Satterthwaite, ``ν = (σ₀² + σ₁²)² / (σ₀⁴/ν₀ + σ₁⁴/ν₁)``. With m parameters tested at once,
+each |z| is held against the two-sided Student-t quantile at level α/m (Bonferroni), so a check of
+an unchanged robot calls a drift with probability at most α (:data:`FALSE_ALARM`) when the σ are
+honest. Nothing here is tuned on data: α is a choice, the rest follows from it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from nlp_calib.models import SENSOR_PARAMS, KinematicModel
+from nlp_calib.models.base import reference, reference_scale
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.check import CANNOT_TELL, DRIFTED, STILL_GOOD, DriftCheck, ParameterChange
+from nlp_calib.results.checks import WEAK
+
+#: The family-wise probability that a check of an unchanged robot calls a drift.
+FALSE_ALARM = 0.01
+#: How a parameter held at its initial value is named in a run's notes.
+HELD = " held at its initial value: "
+
+
+def _continued_fraction(a: float, b: float, x: float) -> float:
+    """The continued fraction of the regularised incomplete beta function (modified Lentz)."""
+    tiny = 1e-300
+    c, d = 1.0, 1.0 - (a + b) * x / (a + 1.0)
+    d = 1.0 / (d if abs(d) > tiny else tiny)
+    h = d
+    for m in range(1, 500):
+        for num in (m * (b - m) * x / ((a + 2 * m - 1) * (a + 2 * m)),
+                    -(a + m) * (a + b + m) * x / ((a + 2 * m) * (a + 2 * m + 1))):  # fmt: skip
+            d = 1.0 + num * d
+            d = 1.0 / (d if abs(d) > tiny else tiny)
+            c = 1.0 + num / c
+            c = c if abs(c) > tiny else tiny
+            h *= d * c
+        if abs(d * c - 1.0) < 1e-15:
+            break
+    return h
+
+
+def incomplete_beta(a: float, b: float, x: float) -> float:
+    """The regularised incomplete beta function I_x(a, b)."""
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    front = math.exp(
+        math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x) + b * math.log1p(-x)
+    )
+    if x < (a + 1.0) / (a + b + 2.0):
+        return front * _continued_fraction(a, b, x) / a
+    return 1.0 - front * _continued_fraction(b, a, 1.0 - x) / b
+
+
+def two_sided_tail(t: float, dof: float) -> float:
+    """P(|T| > t) for Student's t with ``dof`` degrees of freedom (the normal's for ``inf``)."""
+    if math.isinf(dof):
+        return math.erfc(abs(t) / math.sqrt(2.0))
+    return incomplete_beta(dof / 2.0, 0.5, dof / (dof + t * t))
+
+
+def t_quantile(p: float, dof: float) -> float:
+    """The ``t`` with ``P(|T| > t) = p`` (by bisection: the tail falls monotonically)."""
+    lo, hi = 0.0, 1.0
+    while two_sided_tail(hi, dof) > p:
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if two_sided_tail(mid, dof) > p else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def welch_dof(std: Sequence[float], dof: Sequence[float]) -> float:
+    """Welch–Satterthwaite degrees of freedom of ``√(Σ σᵢ²)``, each σᵢ with ``dofᵢ`` (inf: known)."""
+    total = sum(s * s for s in std) ** 2
+    spread = sum(s**4 / d for s, d in zip(std, dof) if math.isfinite(d))
+    return total / spread if spread > 0 else math.inf
+
+
+def believed_dof(white: float, blocks: float | None, folds: int) -> float:
+    """Degrees of freedom of a σ to believe: ``folds − 1`` when the jackknife σ of ``folds`` blocks
+    is the larger (the one believed), infinite when the white-noise σ is."""
+    if blocks is not None and math.isfinite(blocks) and blocks > white and folds >= 2:
+        return float(folds - 1)
+    return math.inf
+
+
+def run_dof(run: CalibrationRun, solver: str) -> dict[str, float]:
+    """The degrees of freedom of each σ to believe of a run's estimate (see :func:`believed_dof`)."""
+    white = run.reports[solver].uncertainty.std_dict()
+    blocks = run.std_blocks() or {}
+    cv = run.checks.crossval
+    folds = len(cv.converged) if cv is not None else 0
+    return {n: believed_dof(w, blocks.get(n), folds) for n, w in white.items()}
+
+
+def untested(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[str, str]:
+    """The free parameters this log cannot test, with why: held at the initial value, not
+    determined, in a weakly observable direction, or known more loosely than the verdict's
+    :data:`~nlp_calib.results.checks.WEAK` × the precision a calibration needs."""
+    out = {w.split(HELD)[0]: w.split(HELD)[1] for w in run.warnings if HELD in w}
+    obs = run.checks.observability
+    for weak in obs.weak if obs is not None else ():
+        for name in weak.components:
+            out.setdefault(name, weak.words())
+    params = run.reports[solver].result.param_dict()
+    for name, sd in run.std(solver).items():
+        if name not in run.reports[solver].uncertainty.free or name in out:
+            continue
+        ref = reference_scale(model, name, params[name])
+        if not np.isfinite(sd):
+            out[name] = f"{name} is not determined by this drive"
+        elif sd > WEAK * ref:
+            out[name] = f"{name} is known only to ±{sd:.2g} {run.scenario.units[name]} from this drive"
+    return out
+
+
+def drive_more(run: CalibrationRun, model: KinematicModel, names: Sequence[str]) -> str:
+    """What to drive so that a log can test ``names``, in the observability analysis' words."""
+    obs = run.checks.observability
+    said = [w for w in (obs.warnings if obs is not None else ()) if "drive" in w]
+    if said:
+        return said[0].split("; ", 1)[-1]
+    lever = (*model.turning_params, *SENSOR_PARAMS[:2])
+    if any(n in lever for n in names):
+        return "drive more turning: S-curves or circles in both directions, over a longer log"
+    return f"drive longer, with more of what moves {', '.join(names)}"
+
+
+def changes(
+    stored: tuple[Mapping[str, float], Mapping[str, float], Mapping[str, float]],
+    refit: tuple[Mapping[str, float], Mapping[str, float], Mapping[str, float]],
+    units: Mapping[str, str],
+    model: KinematicModel,
+    skipped: Mapping[str, str],
+) -> tuple[ParameterChange, ...]:
+    """Each parameter of ``refit`` (values, σ, degrees of freedom) against ``stored`` (the same),
+    with the Bonferroni threshold over the parameters tested; ``skipped``: those that cannot be
+    tested, with why."""
+    values, std, dof = refit
+    tested = [n for n in values if n not in skipped and math.isfinite(std[n]) and math.isfinite(stored[1][n])]
+    level = FALSE_ALARM / max(len(tested), 1)
+    out = []
+    for name in values:
+        delta = values[name] - stored[0][name]
+        if name in model.angle_params:
+            delta = math.remainder(delta, 2.0 * math.pi)
+        sigma = math.hypot(stored[1][name], std[name])
+        nu = welch_dof((stored[1][name], std[name]), (stored[2][name], dof[name]))
+        why = skipped.get(name, "" if name in tested else f"{name} has no σ to judge a change by")
+        z = delta / sigma if sigma > 0 and math.isfinite(sigma) else math.nan
+        threshold = math.nan if math.isnan(nu) else t_quantile(level, nu)
+        relative = reference(model, name)[0] == "relative"
+        out.append(
+            ParameterChange(
+                name,
+                units[name],
+                stored[0][name],
+                stored[0][name] + delta,
+                stored[1][name],
+                std[name],
+                nu,
+                z,
+                threshold,
+                why,
+                relative,
+            )
+        )
+    return tuple(out)
+
+
+def decide(found: tuple[ParameterChange, ...], converged: str, hint: str) -> tuple[str, tuple[str, ...], str]:
+    """The verdict, its reasons and the hint, from the changes; ``converged`` is "" when the refit
+    converged, else why not."""
+    loose = [c.untested for c in found if c.untested]
+    if converged:
+        return (
+            CANNOT_TELL,
+            (f"the refit on this log did not converge ({converged})", *dict.fromkeys(loose)),
+            hint,
+        )
+    moved = [c for c in found if c.drifted]
+    if moved:
+        return DRIFTED, tuple(moved_words(c) for c in sorted(moved, key=lambda c: -abs(c.z))), ""
+    if loose:
+        return CANNOT_TELL, tuple(dict.fromkeys(loose)), hint
+    if not found:
+        return CANNOT_TELL, ("no parameter could be compared",), hint
+    worst = max(found, key=lambda c: abs(c.z) / c.threshold)
+    largest = f"largest: {worst.name} {worst.z:+.1f}σ against ±{worst.threshold:.1f}σ"
+    return STILL_GOOD, (f"no parameter moved beyond its threshold ({largest})",), ""
+
+
+def moved_words(c: ParameterChange) -> str:
+    """``<name> moved by +1.0 % (+0.000105 <unit>, +12.3σ)`` (the percentage for gains and lengths)."""
+    rel = f"{100.0 * c.change / c.stored:+.2g} % (" if c.relative and c.stored != 0 else "("
+    return f"{c.name} moved by {rel}{c.change:+.3g} {c.unit}, {c.z:+.1f}σ)"
+
+
+def check_drift(
+    run: CalibrationRun,
+    model: KinematicModel,
+    stored: tuple[Mapping[str, float], Mapping[str, float], Mapping[str, float]],
+    calibration: str,
+    solver: str,
+) -> DriftCheck:
+    """The check of ``stored`` (values, σ to believe, their degrees of freedom) against ``run``, a
+    fit of a new log started from it."""
+    result = run.reports[solver].result
+    free = run.reports[solver].uncertainty.free
+    skipped = untested(run, solver, model)
+    held = [n for n in result.names if n not in free and n not in skipped]  # fixed by the scenario
+    values = {n: v for n, v in result.param_dict().items() if n not in held}
+    refit = (values, run.std(solver), run_dof(run, solver))
+    found = changes(stored, refit, run.scenario.units, model, skipped)
+    hint = drive_more(run, model, [c.name for c in found if c.untested])
+    verdict, reasons, hint = decide(found, "" if result.converged else result.reason, hint)
+    return DriftCheck(calibration, solver, found, FALSE_ALARM, verdict, reasons, hint)

@@ -1,0 +1,25 @@
+"""Fleet layer: many logs at once, one folder each and a summary table.
+
+A batch is a list of picklable jobs (:func:`batch_jobs`: folders, globs, YAML lists), a per-log
+task (:func:`run_job`: calibrate or check one log, write its folder, return its summary row) and
+a table of the rows (:func:`write_summary`). :func:`run_jobs` runs the jobs on this machine's
+processes; any engine that maps a function over arguments runs them elsewhere (docs/fleet.md).
+"""
+
+from nlp_calib.fleet.jobs import BatchOptions, Job, batch_jobs
+from nlp_calib.fleet.pool import run_jobs
+from nlp_calib.fleet.task import job_outputs, run_job
+from nlp_calib.outputs.batch import SUMMARY_FILES, write_summary
+from nlp_calib.results.batch import BatchRow
+
+__all__ = [
+    "SUMMARY_FILES",
+    "BatchOptions",
+    "BatchRow",
+    "Job",
+    "batch_jobs",
+    "job_outputs",
+    "run_job",
+    "run_jobs",
+    "write_summary",
+]

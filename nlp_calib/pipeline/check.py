@@ -1,0 +1,95 @@
+"""The check stage: a stored calibration scored and refitted on a new log, and each parameter's
+change judged in the combined σ (:mod:`nlp_calib.analysis.drift`).
+
+The new log goes through every stage of a calibration, started from the stored values: its fair
+figures with the stored values are the run's baseline, the refit's beside them, and the run's
+checks carry the comparison (``checks.drift``). The refit uses the formulation the calibration was
+made with: its scenario file when it still exists, else the model's defaults with the residual
+and robust options the calibration recorded.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from pathlib import Path
+from typing import Any
+
+from nlp_calib.analysis.drift import check_drift
+from nlp_calib.core.config import from_mapping
+from nlp_calib.core.errors import NlpCalibWarning, UsageError
+from nlp_calib.logs import Log
+from nlp_calib.pipeline.calibration import Calibration
+from nlp_calib.pipeline.options import RobustOptions
+from nlp_calib.pipeline.scenario import Scenario, load_scenario
+from nlp_calib.pipeline.stored import StoredCalibration
+from nlp_calib.problem import ResidualOptions
+from nlp_calib.results import CalibrationRun
+
+#: File names taken for scenarios (anything else is a log: a text log or a bag).
+SCENARIO_SUFFIXES = (".yaml", ".yml")
+
+
+def _recorded(stored: StoredCalibration, log: Path) -> Scenario:
+    """The log with the scenario the calibration was made with, or the model's defaults with the
+    residual and robust options it recorded."""
+    if stored.scenario is not None:
+        return load_scenario(stored.scenario).with_dataset(log)
+    if stored.recorded is not None:
+        warnings.warn(
+            f"the scenario {stored.path} was made with ({stored.recorded}) is not there (paths are "
+            "relative to the folder it ran in); the log is read with the model's defaults and the "
+            "residual and kernel the calibration recorded; give the scenario as SCENARIO to use it",
+            NlpCalibWarning,
+            stacklevel=3,
+        )
+    sc = Scenario.of(log.stem or "check", log, model=stored.model)
+    objective = stored.objective or {}
+    where = f"{stored.path}: objective"
+    if "residual" in objective:
+        sc = sc.with_options(
+            residual=from_mapping(ResidualOptions, objective["residual"], f"{where}.residual")
+        )
+    if "robust" in objective:
+        sc = sc.with_options(robust=from_mapping(RobustOptions, objective["robust"], f"{where}.robust"))
+    return sc
+
+
+def _same_formulation(stored: StoredCalibration, sc: Scenario) -> None:
+    """Warn when the scenario fits another residual or kernel than the calibration did: the
+    parameters would then differ by the formulation alone."""
+    recorded = stored.objective or {}
+    used: dict[str, Any] = {"residual": sc.objective.residual, "robust": sc.objective.robust}
+    for key, options in used.items():
+        if key in recorded and dict(recorded[key]) != dataclasses.asdict(options):
+            warnings.warn(
+                f"{sc.path or sc.name} fits {key} {dataclasses.asdict(options)}, the calibration "
+                f"{recorded[key]}: the parameters may differ by the formulation alone; check with the "
+                "scenario the calibration was made with",
+                NlpCalibWarning,
+                stacklevel=3,
+            )
+
+
+def check_scenario(stored: StoredCalibration, target: Path) -> Scenario:
+    """The scenario a check runs: ``target`` when it is a scenario file, else the log ``target``
+    with the calibration's own formulation; started from the stored values, with its solver."""
+    sc = load_scenario(target) if target.suffix in SCENARIO_SUFFIXES else _recorded(stored, target)
+    if sc.data.joint:
+        raise UsageError(f"{target}: a check reads one log; give a scenario with 'dataset', not 'datasets'")
+    if sc.model != stored.model:
+        raise UsageError(
+            f"{target}: the scenario's model is {sc.model}, the calibration's ({stored.path}) is "
+            f"{stored.model}; check with a scenario of the same model"
+        )
+    _same_formulation(stored, sc)
+    return sc.with_options(initial_guess=dict(stored.parameters), solvers=(stored.solver,))
+
+
+def check(stored: StoredCalibration, scenario: Scenario, log: Log | None = None) -> CalibrationRun:
+    """The calibration of ``scenario``'s log (read, or ``log``) from the stored values, with the
+    comparison against them in ``checks.drift``."""
+    calib = Calibration.setup(scenario, log=log, solvers=(stored.solver,))
+    run = calib.run((stored.solver,))
+    drift = check_drift(run, calib.model, stored.stats(), str(stored.path), stored.solver)
+    return dataclasses.replace(run, checks=dataclasses.replace(run.checks, drift=drift))

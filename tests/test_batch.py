@@ -1,0 +1,197 @@
+"""``nlp-calib batch``: its jobs and their names, the per-log task on other processes (and on Dask
+when it is installed), the summary table, a failing log, exit codes and signals."""
+
+from __future__ import annotations
+
+import csv
+import multiprocessing
+import os
+import signal
+import subprocess
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import pytest
+from conftest import REPO, SCENARIOS, write_sim
+
+from nlp_calib.core.errors import UsageError
+from nlp_calib.fleet import BatchOptions, BatchRow, Job, batch_jobs, run_job, run_jobs, write_summary
+from nlp_calib.fleet.jobs import expand, job_names
+
+DEMO_LOG = SCENARIOS / "data" / "demo_tricycle.txt"
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Two robots' drives, both called drive.txt, and a file that is no log."""
+    root = tmp_path_factory.mktemp("fleet")
+    for robot, seed in (("robot1", 1), ("robot2", 2)):
+        (root / robot).mkdir()
+        write_sim(root / robot, "drive.txt", records=400, seed=seed)
+    (root / "robot2" / "broken.txt").write_text("not a log\n")
+    return root
+
+
+def quick_scenario(folder: Path) -> Path:
+    path = folder / "quick.yaml"
+    path.write_text(
+        "dataset: none.txt\nresidual: {horizon: 5}\nsolvers: [gauss_newton]\nvalidation: {blocks: 5}\n"
+    )
+    return path
+
+
+def test_logs_of_the_same_name_get_their_folders_names() -> None:
+    paths = [Path("/d/robot1/drive.txt"), Path("/d/robot2/drive.txt"), Path("/d/robot2/other.txt")]
+    assert job_names(paths) == ["robot1_drive", "robot2_drive", "other"]
+    # Same folder names further up: as many parents as it takes.
+    paths = [Path("/a/x/day1/drive.txt"), Path("/b/x/day1/drive.txt")]
+    assert job_names(paths) == ["a_x_day1_drive", "b_x_day1_drive"]
+    # Files that differ only by their suffix, and names that are no plain folder names.
+    assert job_names([Path("/d/run.txt"), Path("/d/run.bag")]) == ["run.txt", "run.bag"]
+    assert job_names([Path("/d/my drive (1).txt")]) == ["my_drive_1_"]
+
+
+def test_inputs_are_folders_globs_and_yaml_lists(logs: Path, tmp_path: Path) -> None:
+    drives = [logs / "robot1" / "drive.txt", logs / "robot2" / "drive.txt"]
+    assert expand([str(logs / "robot2")]) == [logs / "robot2" / "broken.txt", drives[1]]
+    assert expand([str(logs / "**" / "drive.txt")]) == drives
+    listed = tmp_path / "fleet.yaml"
+    listed.write_text(f"- {os.path.relpath(drives[0], tmp_path)}\n- {drives[1]}\n- {drives[0]}\n")
+    assert [p.resolve() for p in expand([str(listed)])] == drives  # each once
+    with pytest.raises(UsageError, match="no file matches it"):
+        expand([str(logs / "nothing*.txt")])
+
+
+def test_the_task_runs_on_other_processes_and_a_failure_is_its_row(logs: Path, tmp_path: Path) -> None:
+    """The job and the row cross process boundaries (pickled); a log that fails is a row with its
+    one-line error, and the others are written. The workers are spawned: a process forked from one
+    that has run calibrations (threads, CasADi's state) may hang."""
+    options = BatchOptions(tmp_path / "out", scenario=quick_scenario(tmp_path))
+    jobs = batch_jobs([str(logs / "**" / "*.txt")], options)
+    assert [j.name for j in jobs] == ["robot1_drive", "broken", "robot2_drive"]
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
+        rows = list(pool.map(run_job, jobs))
+    ok = {r.name: r for r in rows if r.ok}
+    assert set(ok) == {"robot1_drive", "robot2_drive"}
+    (failed,) = (r for r in rows if not r.ok)
+    assert failed.verdict == "failed" and "broken.txt" in failed.error and "\n" not in failed.error
+    for row in ok.values():
+        assert set(row.parameters) == {"k_traction", "axis_length"}
+        assert (Path(row.folder) / "calibration.yaml").is_file() and (
+            Path(row.folder) / "result.json"
+        ).is_file()
+        assert row.figures["segment ATE mean [m]"] > 0
+    paths = write_summary(rows, tmp_path / "out")
+    table = list(csv.DictReader(paths[0].open()))
+    assert [t["log"] for t in table] == ["robot1_drive", "broken", "robot2_drive"]
+    assert table[1]["error"] == failed.error and float(table[0]["k_traction_std"]) > 0
+
+
+def test_the_task_runs_on_a_dask_cluster(logs: Path, tmp_path: Path) -> None:
+    """The recipe of docs/fleet.md, on a local cluster (dask is not a dependency)."""
+    distributed = pytest.importorskip("dask.distributed")
+    jobs = batch_jobs(
+        [str(logs / "robot1" / "drive.txt")],
+        BatchOptions(tmp_path / "out", scenario=quick_scenario(tmp_path)),
+    )
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True)
+    with cluster, distributed.Client(cluster) as client:
+        rows = client.gather(client.map(run_job, jobs, pure=False))
+    assert [r.name for r in rows] == ["drive"] and rows[0].ok
+    assert (tmp_path / "out" / "drive" / "calibration.yaml").is_file()
+
+
+def crash_on_b(job: Job) -> BatchRow:
+    """A task whose worker dies on job ``b`` (as a crash in native code would end it)."""
+    if job.name == "b":
+        os._exit(1)
+    return BatchRow(job.name, str(job.path), str(job.folder), verdict="good")
+
+
+def test_a_worker_that_dies_costs_only_its_log(tmp_path: Path) -> None:
+    jobs = [Job(name, tmp_path / f"{name}.txt", BatchOptions(tmp_path)) for name in "abcd"]
+    rows: dict[int, BatchRow] = {}
+    run_jobs(jobs, 2, rows.__setitem__, task=crash_on_b)
+    assert sorted(rows) == [0, 1, 2, 3]
+    assert [rows[i].verdict for i in range(4)] == ["good", "failed", "good", "good"]
+    assert "worker process died" in rows[1].error
+
+
+def cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "nlp_calib", *args], capture_output=True, text=True, cwd=REPO
+    )
+
+
+def test_batch_writes_a_folder_per_log_and_the_summary(logs: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    scenario = str(quick_scenario(tmp_path))
+    proc = cli("batch", str(logs / "**" / "*.txt"), "--scenario", scenario, "--out", str(out), "--jobs", "2")
+    assert proc.returncode == 1, proc.stderr  # a log failed; the others ran
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ["robot1_drive", "robot2_drive"]
+    assert "| broken | failed |" in (out / "summary.md").read_text()
+    assert "2 of 3 logs ran to the end" in proc.stdout
+    again = cli(
+        "batch", str(logs / "**" / "drive.txt"), "--scenario", scenario, "--out", str(out), "--jobs", "1"
+    )
+    assert again.returncode == 0, again.stderr
+    assert len(list(csv.DictReader((out / "summary.csv").open()))) == 2
+
+
+def test_batch_checks_each_log_against_a_calibration(tmp_path: Path) -> None:
+    cal = tmp_path / "cal"
+    assert (
+        cli("run", str(SCENARIOS / "demo.yaml"), "--solver", "gauss_newton", "--out", str(cal)).returncode
+        == 0
+    )
+    proc = cli("batch", str(DEMO_LOG), "--check", str(cal / "calibration.yaml"), "--out", str(tmp_path / "o"))
+    assert proc.returncode == 0, proc.stdout + proc.stderr  # the log it was made from is still good
+    row = next(csv.DictReader((tmp_path / "o" / "summary.csv").open()))
+    assert row["verdict"] == "still good" and (tmp_path / "o" / row["log"] / "check.json").is_file()
+
+
+def test_bad_batch_inputs_are_refused_before_any_work(logs: Path, tmp_path: Path) -> None:
+    proc = cli("batch", str(logs / "nothing"), "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2 and "no file matches" in proc.stderr
+    proc = cli("batch", str(logs), "--scenario", str(quick_scenario(tmp_path)), "--model", "tricycle")
+    assert proc.returncode == 2 and "not both" in proc.stderr
+    assert not (tmp_path / "o").exists()
+
+
+#: A scenario whose IPOPT runs for minutes (the batch is interrupted while it runs).
+SLOW = (
+    "dataset: {log}\nresidual: {{horizon: 10}}\nsolvers: [ipopt]\n"
+    "ipopt: {{hessian: limited_memory, max_iter: 1000000, tol: 1.0e-30, options: {{acceptable_iter: 0}}}}\n"
+)
+
+
+@pytest.mark.parametrize("group", [True, False], ids=["ctrl-c to the process group", "sigterm to the batch"])
+def test_a_signal_stops_the_workers_and_keeps_the_finished_logs(group: bool, tmp_path: Path) -> None:
+    quick = tmp_path / "a_quick.yaml"
+    quick.write_text(f"dataset: {DEMO_LOG}\nresidual: {{horizon: 5}}\nsolvers: [gauss_newton]\n")
+    for name in ("b_slow", "c_slow", "d_slow"):
+        (tmp_path / f"{name}.yaml").write_text(SLOW.format(log=DEMO_LOG))
+    out = tmp_path / "out"
+    command = ["batch", str(tmp_path / "*.yaml"), "--out", str(out), "--jobs", "2"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "nlp_calib", *command],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 180
+    while not (out / "a_quick" / "result.json").is_file():
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    time.sleep(1.0)  # the next slow log has started
+    if group:
+        os.killpg(proc.pid, signal.SIGINT)
+    else:
+        proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == (130 if group else 143), err
+    assert "Traceback" not in err
+    assert (out / "a_quick" / "calibration.yaml").is_file()
+    leftovers = [p for p in out.rglob("*") if p.name.startswith(".nlp_calib_staging.")]
+    assert leftovers == [] and not (out / "summary.csv").exists()
+    assert not any((out / n).exists() for n in ("b_slow", "c_slow", "d_slow"))

@@ -1,0 +1,145 @@
+"""``nlp-calib check``: the statistics it judges by, each verdict on a simulated robot (one drive
+each), its files, exit codes and errors. How often it is right over many drives is
+``benchmarks/check_study.py``'s to measure."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import REPO, SCENARIOS, write_sim
+
+from nlp_calib.analysis.drift import FALSE_ALARM, t_quantile, two_sided_tail, welch_dof
+from nlp_calib.core.errors import UsageError
+from nlp_calib.models import MODELS
+from nlp_calib.outputs.check import check_document
+from nlp_calib.outputs.handoff import write_calibration
+from nlp_calib.pipeline import Calibration, load_scenario
+from nlp_calib.pipeline.check import check, check_scenario
+from nlp_calib.pipeline.stored import read_calibration
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.check import CANNOT_TELL, DRIFTED, STILL_GOOD
+
+TRUTH = MODELS["tricycle"].drive.default_truth
+
+
+def cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "nlp_calib", *args], capture_output=True, text=True, cwd=cwd, check=False
+    )
+
+
+@pytest.mark.parametrize(
+    ("p", "dof"), [(0.05, 9.0), (0.01 / 7, 9.0), (0.01 / 7, 18.0), (1e-4, 3.0), (0.05, 1.0)]
+)
+def test_the_t_quantile_is_scipys(p: float, dof: float) -> None:
+    stats = pytest.importorskip("scipy.stats")
+    assert t_quantile(p, dof) == pytest.approx(stats.t.ppf(1 - p / 2, dof), rel=1e-9)
+    assert two_sided_tail(2.5, dof) == pytest.approx(2 * stats.t.sf(2.5, dof), rel=1e-9)
+
+
+def test_the_normal_limit_and_welch_satterthwaite() -> None:
+    assert t_quantile(0.05, math.inf) == pytest.approx(1.959963985, rel=1e-8)
+    assert welch_dof((1.0, 1.0), (9.0, 9.0)) == pytest.approx(18.0)  # two equal jackknife σ
+    assert welch_dof((1.0, 1.0), (9.0, math.inf)) == pytest.approx(36.0)
+    assert math.isinf(welch_dof((1.0, 2.0), (math.inf, math.inf)))
+
+
+@pytest.fixture(scope="module")
+def stored(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A calibration of one simulated drive with the demo scenario's formulation, as run writes it."""
+    tmp = tmp_path_factory.mktemp("check")
+    log = write_sim(tmp, "calibration_drive.txt", records=1500, seed=11, outlier_fraction=0.01)
+    sc = dataclasses.replace(load_scenario(SCENARIOS / "demo.yaml").with_dataset(log), path=None)
+    run = Calibration.setup(sc, solvers=("gauss_newton",)).run(("gauss_newton",))
+    (tmp / "cal").mkdir()
+    (path,) = write_calibration(run, tmp / "cal", "calibration.yaml")
+    return path
+
+
+def fresh(tmp_path: Path, seed: int, **options: object) -> Path:
+    return write_sim(tmp_path, f"fresh_{seed}.txt", records=1500, seed=seed, outlier_fraction=0.01, **options)
+
+
+def test_an_unchanged_robot_is_still_good(stored: Path, tmp_path: Path) -> None:
+    log = fresh(tmp_path, 21)
+    proc = cli("check", str(stored), str(log), "--out", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    doc = json.loads((tmp_path / "out" / "check.json").read_text())
+    assert doc["verdict"] == STILL_GOOD and doc["exit_code"] == 0
+    assert "STILL GOOD" in proc.stdout
+    # Every parameter tested, each within its threshold, and the threshold is the statistics':
+    # Bonferroni over the 7 parameters at FALSE_ALARM, Student-t at the Welch degrees of freedom.
+    for name, p in doc["parameters"].items():
+        assert p["untested"] is None and abs(p["z"]) <= p["threshold"], name
+        level = FALSE_ALARM / len(doc["parameters"])
+        expected = t_quantile(level, p["dof"]) if p["dof"] is not None else t_quantile(level, math.inf)
+        assert p["threshold"] == pytest.approx(expected)
+    assert set(doc["figures"]["stored"]) == {"segment ATE mean [m]", "RPE over 1 m [m]", "RPE over 5 m [m]"}
+    assert (tmp_path / "out" / "result.json").is_file()
+
+
+def test_a_worn_tyre_is_a_drift_naming_k_traction(stored: Path, tmp_path: Path) -> None:
+    log = fresh(tmp_path, 22, truth={"k_traction": TRUTH["k_traction"] * 1.01})
+    proc = cli("check", str(stored), str(log), "--out", str(tmp_path / "out"))
+    assert proc.returncode == 3, proc.stdout + proc.stderr
+    doc = json.loads((tmp_path / "out" / "check.json").read_text())
+    assert doc["verdict"] == DRIFTED
+    assert [n for n, p in doc["parameters"].items() if p["drifted"]] == ["k_traction"]
+    k = doc["parameters"]["k_traction"]
+    assert k["change"] / k["stored"] == pytest.approx(0.01, abs=0.002)  # the 1 % it moved
+    assert "k_traction moved by +" in proc.stdout and "DRIFTED: recalibrate" in proc.stdout
+
+
+def test_a_straight_drive_cannot_tell_and_says_to_turn(stored: Path, tmp_path: Path) -> None:
+    log = fresh(tmp_path, 23, trajectory="straight")
+    proc = cli("check", str(stored), str(log), "--out", str(tmp_path / "out"))
+    assert proc.returncode == 4, proc.stdout + proc.stderr
+    doc = json.loads((tmp_path / "out" / "check.json").read_text())
+    assert doc["verdict"] == CANNOT_TELL
+    assert "S-curves or circles" in doc["hint"]
+    assert doc["parameters"]["axis_length"]["untested"]
+
+
+def test_the_check_reads_back_from_the_stored_result(stored: Path, tmp_path: Path) -> None:
+    """The check lives in the run's checks: a run stored and read back writes the same check.json."""
+    cal = read_calibration(stored)
+    run = check(cal, check_scenario(cal, fresh(tmp_path, 24)))
+    again = CalibrationRun.from_data(json.loads(json.dumps(run.to_data())))
+    assert check_document(again) == check_document(run)
+
+
+def test_a_scenario_with_another_formulation_is_warned_about(stored: Path, tmp_path: Path) -> None:
+    sc = tmp_path / "other.yaml"
+    sc.write_text(f"dataset: {fresh(tmp_path, 25)}\nmodel: tricycle\nresidual: {{horizon: 1}}\n")
+    with pytest.warns(UserWarning, match="formulation"):
+        scenario = check_scenario(read_calibration(stored), sc)
+    assert scenario.solvers == ("gauss_newton",)
+    assert dict(scenario.parameters.initial_guess) == dict(read_calibration(stored).parameters)  # type: ignore[arg-type]
+
+
+def test_bad_inputs_are_one_line_errors(stored: Path, tmp_path: Path) -> None:
+    not_ours = tmp_path / "calibration.yaml"
+    not_ours.write_text("parameters: {k_traction: 1}\n")
+    with pytest.raises(UsageError, match=re.escape("not a calibration.yaml that nlp_calib wrote")):
+        read_calibration(not_ours)
+    broken = tmp_path / "broken.yaml"
+    broken.write_text(stored.read_text().replace("  k_traction: ", "  k_traction: .nan #", 1))
+    with pytest.raises(UsageError, match=re.escape("parameters.k_traction: expected a finite number")):
+        read_calibration(broken)
+    proc = cli("check", str(stored), str(tmp_path / "missing.txt"), "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "missing.txt" in proc.stderr
+    proc = cli(
+        "check", str(stored), str(SCENARIOS / "data" / "demo_tricycle.txt"), "--out", str(stored.parent)
+    )
+    assert proc.returncode == 2 and "holds the calibration being checked" in proc.stderr
+    other = tmp_path / "dd.yaml"
+    other.write_text(f"dataset: {SCENARIOS / 'data' / 'diff_drive_demo.txt'}\nmodel: diff_drive\n")
+    proc = cli("check", str(stored), str(other), "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2 and "the calibration's" in proc.stderr and "tricycle" in proc.stderr
