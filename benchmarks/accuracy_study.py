@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
@@ -73,17 +73,21 @@ def prototype(
 class Backlash(Tricycle):
     """The tricycle with a steering offset by the direction the steering turns (study only)."""
 
-    name: str = "backlash"
-    kinematic_params: tuple[str, ...] = (*Tricycle.kinematic_params, "steering_backlash")
-    units: Mapping[str, str] = MappingProxyType({**Tricycle.units, "steering_backlash": "rad"})
-    header_names: Mapping[str, str] = MappingProxyType({**Tricycle.header_names, "steering_backlash": "sb"})
-    physical_ranges: Mapping[str, tuple[float, float]] = MappingProxyType(
+    name: ClassVar[str] = "backlash"
+    kinematic_params: ClassVar[tuple[str, ...]] = (*Tricycle.kinematic_params, "steering_backlash")
+    units: ClassVar[Mapping[str, str]] = MappingProxyType({**Tricycle.units, "steering_backlash": "rad"})
+    header_names: ClassVar[Mapping[str, str]] = MappingProxyType(
+        {**Tricycle.header_names, "steering_backlash": "sb"}
+    )
+    physical_ranges: ClassVar[Mapping[str, tuple[float, float]]] = MappingProxyType(
         {**Tricycle.physical_ranges, "steering_backlash": (-1.0, 1.0)}
     )
-    defaults: Mapping[str, float] = MappingProxyType({"steering_backlash": 0.0})
-    input_names: tuple[str, ...] = (*Tricycle.input_names, "steering_turn")
-    input_units: Mapping[str, str] = MappingProxyType({**Tricycle.input_units, "steering_turn": "1"})
-    symmetries: tuple[Symmetry, ...] = ()
+    defaults: ClassVar[Mapping[str, float]] = MappingProxyType({"steering_backlash": 0.0})
+    input_names: ClassVar[tuple[str, ...]] = (*Tricycle.input_names, "steering_turn")
+    input_units: ClassVar[Mapping[str, str]] = MappingProxyType(
+        {**Tricycle.input_units, "steering_turn": "1"}
+    )
+    symmetries: ClassVar[tuple[Symmetry, ...]] = ()
 
     def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
         u = super().inputs(log, steering_sample)

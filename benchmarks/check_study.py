@@ -48,7 +48,7 @@ RECORDS = int(os.environ.get("CHECK_STUDY_RECORDS", "1500"))
 def _simulate(seed: int, truth: dict[str, float], path: Path) -> Path:
     from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
 
-    opts = SimulationOptions(records=RECORDS, seed=seed, truth=truth, outlier_fraction=0.01)
+    opts = SimulationOptions.of(records=RECORDS, seed=seed, truth=truth, outlier_fraction=0.01)
     log, _ = write_simulation(simulate(opts), path)
     return log
 

@@ -65,7 +65,7 @@ def scenario(model: str, **changes: Any) -> Scenario:
 
 
 def drive(model: str, seed: int, **options: Any) -> tuple[SimulatedLog, Log]:
-    sim = simulate(SimulationOptions(model=model, seed=seed, **{**DRIVE, **options}))
+    sim = simulate(SimulationOptions.of(model=model, seed=seed, **{**DRIVE, **options}))
     return sim, parse_log(sim.text().splitlines(), get_model(model).encoder_kinds, f"sim{seed}.txt")
 
 
@@ -81,7 +81,7 @@ def gross(sim: SimulatedLog) -> set[int]:
     (the truth where the robot was when the tracker saw it, the lag earlier)."""
     tr, t = sim.options.truth, (sim.time_ns - sim.time_ns[0]) * 1e-9
     seen = np.stack(
-        [np.interp(t - sim.options.latency_s, t, sim.T_world_base_true[:, i]) for i in range(3)], 1
+        [np.interp(t - sim.options.tracker.latency_s, t, sim.T_world_base_true[:, i]) for i in range(3)], 1
     )
     off = between(
         compose(seen, np.array([tr["sensor_x"], tr["sensor_y"], tr["sensor_theta"]])), sim.T_world_sensor

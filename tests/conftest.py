@@ -62,7 +62,7 @@ def parse_lines(
 
 def write_sim(tmp_path: Path, name: str = "sim.txt", **kwargs: object) -> Path:
     """Simulate a log with the given options into ``tmp_path``; returns its path."""
-    log, _ = write_simulation(simulate(SimulationOptions(**kwargs)), tmp_path / name)  # type: ignore[arg-type]
+    log, _ = write_simulation(simulate(SimulationOptions.of(**kwargs)), tmp_path / name)  # type: ignore[arg-type]
     return log
 
 

@@ -64,7 +64,7 @@ def record(
 ) -> Recording:
     """Simulate ``seconds`` of driving and record it as a ROS 2 robot would."""
     counts_truth = truth or (tricycle_truth() if model == "tricycle" else {})
-    opts = SimulationOptions(
+    opts = SimulationOptions.of(
         records=int(seconds * GRID_HZ),
         seed=seed,
         model=model,

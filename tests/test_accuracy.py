@@ -68,7 +68,7 @@ def test_horizon_residual_equals_numpy_composition(H: int, exact: bool) -> None:
 
 def test_horizon_one_is_the_single_step_residual() -> None:
     """H = 1 windows are exactly the per-interval residuals of consecutive records."""
-    sim = parse_lines(simulate(SimulationOptions(records=60, seed=2)).text().splitlines())
+    sim = parse_lines(simulate(SimulationOptions.of(records=60, seed=2)).text().splitlines())
     fns = build(MODEL, ProblemSpec(horizon=1))
     rd = build_residual_data(fns, sim, ResidualOptions(horizon=1))
     e = np.asarray(fns.residual.map(rd.n_residuals)(TRUTH, [], rd.columns))
@@ -81,7 +81,7 @@ def test_horizon_one_is_the_single_step_residual() -> None:
 
 def model_consistent_log(tmp_path: Path, records: int = 800) -> Path:
     """A log whose tracker poses are the truth model integrated (numpy) on its own encoder ticks."""
-    sim = simulate(SimulationOptions(records=records, seed=9))
+    sim = simulate(SimulationOptions.of(records=records, seed=9))
     ds = parse_lines(sim.text().splitlines())
     u = MODEL.inputs(ds, "start")
     T = mat(np.array([0.3, -0.2, 0.4]))
@@ -147,7 +147,7 @@ def test_tracker_lag_is_recovered_from_a_simulated_log(tmp_path: Path) -> None:
     from nlp_calib.simulation import write_simulation
 
     log, _ = write_simulation(
-        simulate(SimulationOptions(records=1500, seed=4, latency_s=0.06, tracker_noise_xy=0.001)),
+        simulate(SimulationOptions.of(records=1500, seed=4, latency_s=0.06, tracker_noise_xy=0.001)),
         tmp_path / "lag.txt",
     )
     sc = load_scenario(SCENARIOS / "demo.yaml").with_options(
@@ -278,7 +278,7 @@ def test_lag_search_gives_the_full_grid_estimate_with_fewer_fits() -> None:
 
 
 def test_lag_at_the_edge_of_its_search_range_is_named() -> None:
-    sim = simulate(SimulationOptions(records=600, seed=4, latency_s=0.25, tracker_noise_xy=0.001))
+    sim = simulate(SimulationOptions.of(records=600, seed=4, latency_s=0.25, tracker_noise_xy=0.001))
     sc = load_scenario(SCENARIOS / "demo.yaml").with_options(
         solvers=("gauss_newton",),
         alignment=AlignmentOptions(tracker_lag="auto", search=(-0.1, 0.1), step=0.01),

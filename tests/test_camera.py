@@ -3,6 +3,7 @@ at the level below the pipeline (simulated recordings with known truth)."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import subprocess
@@ -34,10 +35,10 @@ from nlp_calib.problem import (
 from nlp_calib.problem.camera import camera_initial_guess, fit_selection, start_windows
 from nlp_calib.problem.functions import ProblemFunctions
 from nlp_calib.simulation.camera import (
+    CAMERA_DRIVE,
     CameraNoise,
     CameraSimulation,
     CameraSimulationOptions,
-    DriveShape,
     simulate_camera,
     write_camera_simulation,
 )
@@ -254,7 +255,9 @@ def test_windows_equal_the_defining_residual_and_jacobians_match_finite_differen
 
 def test_every_model_with_a_joint_map_recovers_its_truth(tmp_path: Path) -> None:
     """The tricycle's own planar start, levelled by the camera's floor normal, then Gauss-Newton."""
-    sim, rec = record(tmp_path, model="tricycle", duration_s=60.0, drive=DriveShape(max_turn=0.5))
+    sim, rec = record(
+        tmp_path, model="tricycle", duration_s=60.0, drive=dataclasses.replace(CAMERA_DRIVE, max_turn=0.5)
+    )
     out = fit(sim, rec, lag=0.0)
     assert out.result.converged
     params, truth = out.params(), sim.truth
@@ -264,7 +267,9 @@ def test_every_model_with_a_joint_map_recovers_its_truth(tmp_path: Path) -> None
 
 
 def test_too_little_rotation_to_see_the_floor_normal_is_one_line(tmp_path: Path) -> None:
-    _sim, rec = record(tmp_path, drive=DriveShape("straight"), duration_s=20.0)
+    _sim, rec = record(
+        tmp_path, drive=dataclasses.replace(CAMERA_DRIVE, trajectory="straight"), duration_s=20.0
+    )
     fns = build(get_model(DIFF), ProblemSpec(sensor="3d"))
     data = build_residual_data(
         fns, camera_log(rec, "x"), ResidualOptions(), inputs=rec.inputs(joint_map(DIFF).rows)

@@ -112,7 +112,7 @@ def test_the_direction_check_says_when_it_could_not_compare() -> None:
 def test_a_calibration_worse_than_its_initial_guess_is_not_usable(tmp_path: Path) -> None:
     """Started at the truth, with a prior that holds the traction gain 5 % off it: the fit ends
     farther from the tracker than where it started, whatever else holds."""
-    sim = simulate(SimulationOptions(records=1000, seed=3))
+    sim = simulate(SimulationOptions.of(records=1000, seed=3))
     log = parse_lines(sim.text().splitlines(), "sim.txt")
     truth = dict(sim.options.truth)
     raw = {

@@ -27,7 +27,9 @@ def _run(model: str, sim: SimulationOptions, **raw: object) -> tuple[object, np.
 def test_direction_check_flags_a_direction_dependent_steering_gain() -> None:
     """A drive whose steering is 8 % stronger in reverse: the plain tricycle's forward-only and
     reverse-only fits disagree significantly; the model with that feature's agree."""
-    sim = SimulationOptions(model="tricycle_reverse", records=2400, seed=4, truth={"k_steer_reverse": 0.08})
+    sim = SimulationOptions.of(
+        model="tricycle_reverse", records=2400, seed=4, truth={"k_steer_reverse": 0.08}
+    )
     plain, _ = _run("tricycle", sim)
     assert plain.checks.direction is not None and plain.checks.direction.significant  # type: ignore[attr-defined]
     assert any("disagree" in w for w in plain.warnings)  # type: ignore[attr-defined]
@@ -39,7 +41,7 @@ def test_direction_check_flags_a_direction_dependent_steering_gain() -> None:
 
 
 def test_a_drive_without_reversing_holds_the_reverse_gain_with_a_warning() -> None:
-    sim = SimulationOptions(model="tricycle_reverse", records=1200, seed=2, trajectory="no_reversals")
+    sim = SimulationOptions.of(model="tricycle_reverse", records=1200, seed=2, trajectory="no_reversals")
     with pytest.warns(
         NlpCalibWarning, match="k_steer_reverse is held at its initial value: only 0 intervals"
     ):
@@ -51,7 +53,7 @@ def test_a_drive_without_reversing_holds_the_reverse_gain_with_a_warning() -> No
 
 
 def test_folds_leave_their_block_out_and_score_it() -> None:
-    sim = SimulationOptions(records=1200, seed=1)
+    sim = SimulationOptions.of(records=1200, seed=1)
     run, _ = _run("tricycle", sim, validation={"blocks": 6})
     cv = run.checks.crossval
     assert cv is not None and len(cv.folds) == 6 and cv.available

@@ -30,7 +30,7 @@ def scenario(model: str, **raw: object) -> Scenario:
 
 
 def sim(model: str, **options: object) -> tuple[Log, object]:
-    out = simulate(SimulationOptions(model=model, **{"records": 1500, **options}))  # type: ignore[arg-type]
+    out = simulate(SimulationOptions.of(model=model, **{"records": 1500, **options}))  # type: ignore[arg-type]
     return parse_lines(out.text().splitlines(), "sim.txt", model=model), out
 
 
@@ -157,7 +157,7 @@ def test_windows_crossing_bad_intervals_or_records_are_dropped() -> None:
 
 def test_simulated_faults_are_recorded_in_the_truth_file(tmp_path: Path) -> None:
     _, truth = write_simulation(
-        simulate(SimulationOptions(records=800, seed=4, counter_faults=2)), tmp_path / "f.txt"
+        simulate(SimulationOptions.of(records=800, seed=4, counter_faults=2)), tmp_path / "f.txt"
     )
     faults = json.loads(truth.read_text())["faults"]
     assert sorted(f["kind"] for f in faults) == ["reversal", "stall_then_jump"]
@@ -167,9 +167,9 @@ def test_simulated_faults_are_recorded_in_the_truth_file(tmp_path: Path) -> None
 
 def test_a_log_without_faults_is_unchanged_by_the_fault_options() -> None:
     """The simulator's faults use their own random stream: the same seed gives the same log."""
-    a = simulate(SimulationOptions(records=300, seed=9)).text()
+    a = simulate(SimulationOptions.of(records=300, seed=9)).text()
     b = simulate(
-        SimulationOptions(records=300, seed=9, counter_faults=0, counter_fault_kinds=("reversal",))
+        SimulationOptions.of(records=300, seed=9, counter_faults=0, counter_fault_kinds=("reversal",))
     ).text()
     assert a == b
 

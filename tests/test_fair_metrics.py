@@ -97,7 +97,7 @@ def _rpe(est: np.ndarray, ref: np.ndarray, delta: float) -> np.ndarray:
 def test_tum_files_reproduce_the_reported_figures(tmp_path: Path) -> None:
     """Read back every exported file and recompute ATE, segment ATE (raw and aligned) and RPE."""
     log, _ = write_simulation(
-        simulate(SimulationOptions(records=1500, seed=6, counter_faults=2)), tmp_path / "f.txt"
+        simulate(SimulationOptions.of(records=1500, seed=6, counter_faults=2)), tmp_path / "f.txt"
     )
     sc = tmp_path / "s.yaml"
     sc.write_text(

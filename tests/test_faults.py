@@ -54,7 +54,7 @@ def assert_nothing_written(out: Path) -> None:
 @pytest.fixture(scope="module")
 def log_lines() -> list[str]:
     """A short simulated log (300 records, turns and reversals) as lines."""
-    return simulate(SimulationOptions(records=300, seed=5)).text().splitlines()
+    return simulate(SimulationOptions.of(records=300, seed=5)).text().splitlines()
 
 
 def scenario(tmp_path: Path, log: Path | str, extra: str = "", name: str = "case.yaml") -> Path:
@@ -245,7 +245,7 @@ def test_a_counter_reset_keeps_the_longest_part_of_the_log(log_lines: list[str])
     [{}, {"latency_s": 0.06, "outlier_fraction": 0.1}, {"trajectory": "no_reversals"}, {"jitter_s": 0.015}],
 )
 def test_simulated_logs_have_no_counter_jumps(seed: int, options: dict[str, object]) -> None:
-    sim = simulate(SimulationOptions(records=800, seed=seed, **options))  # type: ignore[arg-type]
+    sim = simulate(SimulationOptions.of(records=800, seed=seed, **options))  # type: ignore[arg-type]
     assert counter_jumps(sim.ticks[:, 1], sim.time_ns, COUNTER_MODULUS) == []
     parse_lines(sim.text().splitlines())  # strict: no error
 

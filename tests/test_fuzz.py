@@ -34,7 +34,7 @@ FUZZ = settings(
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
 
-_SIM_LINES = simulate(SimulationOptions(records=40, seed=11)).text().splitlines()
+_SIM_LINES = simulate(SimulationOptions.of(records=40, seed=11)).text().splitlines()
 
 
 def _real_lines() -> list[str]:

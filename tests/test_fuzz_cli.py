@@ -98,7 +98,7 @@ def test_numeric_options_are_in_range_or_refused_naming_the_option(
     assert _in_range(value, limit), (text, value)
     if command == "simulate":
         opts = simulation_options(None, {dest: value})
-        assert getattr(opts, dest) == value
+        assert opts.flat()[dest] == value
 
 
 _sim_flags = st.lists(

@@ -62,7 +62,7 @@ def test_manifold_jacobian_matches_central_differences(integration: str, horizon
 def small_evaluator(horizon: int, kernel: str, **sim: object) -> tuple[ProblemEvaluator, np.ndarray]:
     """An interpreted evaluator on a short simulated log, and a point near its optimum."""
     fns = build(MODEL, ProblemSpec(horizon=horizon, kernel=kernel))
-    log = parse_lines(simulate(SimulationOptions(records=120, seed=9, **sim)).text().splitlines())  # type: ignore[arg-type]
+    log = parse_lines(simulate(SimulationOptions.of(records=120, seed=9, **sim)).text().splitlines())  # type: ignore[arg-type]
     data = build_residual_data(fns, log, ResidualOptions(horizon=horizon))
     ev = ProblemEvaluator(fns, data, x_fixed=np.zeros(0), omega=np.array([1.0, 1.0, 2.0]), delta=0.01)
     x = np.array(list(MODEL.drive.default_truth.values())) * (1.0 + 0.02 * np.arange(7) / 7)

@@ -32,7 +32,7 @@ def drives(folder: Path, seed: int, records: int = 800) -> tuple[list[Path], dic
     truth: dict[str, float] = {}
     for i, trajectory in enumerate(("s_curves", "no_reversals")):
         path = folder / f"drive{i}_{seed}.txt"
-        opts = SimulationOptions(records=records, seed=10 * seed + i, trajectory=trajectory)
+        opts = SimulationOptions.of(records=records, seed=10 * seed + i, trajectory=trajectory)
         _, truth_file = write_simulation(simulate(opts), path)
         truth = json.loads(Path(truth_file).read_text())["params"]
         paths.append(path)

@@ -49,7 +49,9 @@ def truth(model: str) -> np.ndarray:
 
 def sim_log(model: str, **kwargs: object) -> Log:
     opts = {"records": 1000, "seed": 3, **kwargs}
-    return parse_lines(simulate(SimulationOptions(model=model, **opts)).text().splitlines(), f"sim-{model}")  # type: ignore[arg-type]
+    return parse_lines(
+        simulate(SimulationOptions.of(model=model, **opts)).text().splitlines(), f"sim-{model}"
+    )  # type: ignore[arg-type]
 
 
 def scenario(model: str, **changes: object) -> Scenario:

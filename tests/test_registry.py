@@ -55,7 +55,7 @@ def test_a_model_registered_under_a_new_name_works_end_to_end(monkeypatch: pytes
         log_names = ("trike",)
 
     monkeypatch.setitem(MODELS, "trike", Trike())
-    sim = simulate(SimulationOptions(model="trike", records=500, seed=5))
+    sim = simulate(SimulationOptions.of(model="trike", records=500, seed=5))
     lines = (
         sim.text().replace("#kinematic_model: traction_drive_wheel", "#kinematic_model: trike").splitlines()
     )
@@ -99,7 +99,7 @@ def test_a_registered_solver_reaches_the_command_line_scenarios_and_labels(
 
 @pytest.mark.parametrize("model", sorted(MODELS))
 def test_calibration_yaml_gives_the_unit_of_every_parameter(model: str) -> None:
-    sim = simulate(SimulationOptions(model=model, records=400, seed=6))
+    sim = simulate(SimulationOptions.of(model=model, records=400, seed=6))
     log = parse_lines(sim.text().splitlines(), model=model)
     sc = scenario_from_mapping(_scenario(model, "sim.txt", solvers=["gauss_newton"]), "u.yaml", Path("."))
     doc = calibration_dict(Calibration(sc, log=log).run())

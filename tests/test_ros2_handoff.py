@@ -172,7 +172,7 @@ def test_the_odometry_covariance_covers_the_drift_on_simulated_truth() -> None:
     model = get_model("tricycle")
     calibrated, quantisation = [], []
     for seed in range(11, 17):
-        sim = simulate(SimulationOptions(model="tricycle", records=2000, seed=seed))
+        sim = simulate(SimulationOptions.of(model="tricycle", records=2000, seed=seed))
         log = parse_log(sim.text().splitlines(), model.encoder_kinds, "sim")
         sc = Scenario.of("s", "sim.txt", solvers=("gauss_newton",), validation=ValidationOptions(blocks=0))
         calib = Calibration(sc, log=log)

@@ -26,15 +26,15 @@ def test_shipped_demo_log_is_what_the_simulator_makes() -> None:
 
 
 def test_deterministic_for_a_seed() -> None:
-    a = simulate(SimulationOptions(records=300, seed=5)).text()
-    b = simulate(SimulationOptions(records=300, seed=5)).text()
-    c = simulate(SimulationOptions(records=300, seed=6)).text()
+    a = simulate(SimulationOptions.of(records=300, seed=5)).text()
+    b = simulate(SimulationOptions.of(records=300, seed=5)).text()
+    c = simulate(SimulationOptions.of(records=300, seed=6)).text()
     assert a == b
     assert a != c
 
 
 def test_traction_counter_wraps_and_reads_back(tmp_path: Path) -> None:
-    sim = simulate(SimulationOptions(records=600, seed=1))
+    sim = simulate(SimulationOptions.of(records=600, seed=1))
     ds = parse_lines(sim.text().splitlines())
     raw = ds.encoder("traction_wheel")
     assert raw.max() > 2**32 - 30000 and raw.min() < 30000  # it crossed the wrap
@@ -45,7 +45,7 @@ def test_traction_counter_wraps_and_reads_back(tmp_path: Path) -> None:
 
 
 def test_straight_trajectory_has_constant_steering() -> None:
-    sim = simulate(SimulationOptions(records=300, seed=2, trajectory="straight"))
+    sim = simulate(SimulationOptions.of(records=300, seed=2, trajectory="straight"))
     assert np.unique(sim.ticks[:, 0]).size == 1
 
 
@@ -53,7 +53,7 @@ def test_abrupt_reversals_change_sign_at_speed_smooth_ones_through_a_crawl() -> 
     def flips(reversals: str) -> np.ndarray:
         """At each change of direction, the slower of the two increments, in typical increments."""
         ds = parse_lines(
-            simulate(SimulationOptions(records=1500, seed=3, reversals=reversals)).text().splitlines()
+            simulate(SimulationOptions.of(records=1500, seed=3, reversals=reversals)).text().splitlines()
         )
         inc = ds.increments("traction_wheel")
         inc = inc[inc != 0]
@@ -66,7 +66,9 @@ def test_abrupt_reversals_change_sign_at_speed_smooth_ones_through_a_crawl() -> 
 
 
 def test_a_tracker_on_its_own_clock_is_paired_with_the_encoders_as_a_bag_import_pairs_it() -> None:
-    opts = SimulationOptions(records=1000, seed=2, rate_hz=50.0, tracker_rate_hz=30.0, outlier_fraction=0.02)
+    opts = SimulationOptions.of(
+        records=1000, seed=2, rate_hz=50.0, tracker_rate_hz=30.0, outlier_fraction=0.02
+    )
     sim = simulate(opts)
     t = (sim.time_ns - sim.time_ns[0]) * 1e-9
     assert np.median(np.diff(t)) == pytest.approx(0.02, rel=0.1)  # records at the encoders' rate
@@ -84,8 +86,8 @@ def test_a_tracker_on_its_own_clock_is_paired_with_the_encoders_as_a_bag_import_
 
 
 def test_steering_glitches_are_injected_and_recorded(tmp_path: Path) -> None:
-    plain = simulate(SimulationOptions(records=1200, seed=8))
-    sim = simulate(SimulationOptions(records=1200, seed=8, steering_spikes=3, steering_stuck=2))
+    plain = simulate(SimulationOptions.of(records=1200, seed=8))
+    sim = simulate(SimulationOptions.of(records=1200, seed=8, steering_spikes=3, steering_stuck=2))
     kinds = sorted(f.kind for f in sim.faults)
     assert kinds == ["steering_spike"] * 3 + ["steering_stuck"] * 2
     changed = np.flatnonzero(np.any(sim.ticks != plain.ticks, axis=1))
@@ -121,7 +123,7 @@ BLOCKED_CASES = [
 def test_a_log_made_in_blocks_is_the_log_made_at_once(case: dict[str, object], tmp_path: Path) -> None:
     """Each block continues the sums, the random draws and the fine grid of the one before, so the
     block size changes no byte, in memory or written block by block."""
-    opts = SimulationOptions(**case)  # type: ignore[arg-type]
+    opts = SimulationOptions.of(**case)  # type: ignore[arg-type]
     whole = simulate(opts, block=opts.records).text()
     for block in (1, 2, 7, 64):
         assert simulate(opts, block=block).text() == whole, block
@@ -153,7 +155,7 @@ def test_the_command_line_still_writes_the_shipped_demo_logs(name: str, tmp_path
 def test_a_log_beyond_the_old_limit_is_written_in_bounded_memory(tmp_path: Path) -> None:
     """60,000 records (over the 50,000 the command line allowed when it simulated in one piece):
     the blocks' sizes bound what is held, and the log reads back whole."""
-    opts = SimulationOptions(records=60_000, seed=3)
+    opts = SimulationOptions.of(records=60_000, seed=3)
     path, _ = simulate_to_file(opts, tmp_path / "long.txt")
     log = parse_lines(path.read_text().splitlines())
     assert log.n_records == 60_000

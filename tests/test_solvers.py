@@ -42,10 +42,10 @@ def test_real_log_solvers_agree(real_calibration: Calibration) -> None:
     gn = real_calibration.solve("gauss_newton")
     ip = real_calibration.solve("ipopt")
     agree(gn, ip)
-    assert ip.stats["return_status"] == "Solve_Succeeded"
+    assert ip.trace.stats["return_status"] == "Solve_Succeeded"
     # The fit reduces the cost from the header's guess by more than an order of magnitude.
     assert gn.cost < 0.1 * real_calibration.evaluator.cost(real_calibration.x0)
-    assert gn.history[-1].cost == pytest.approx(gn.cost)
+    assert gn.trace.history[-1].cost == pytest.approx(gn.cost)
 
 
 def test_single_step_seed_formulation_converges_from_header_guess(real_log: Path) -> None:
@@ -70,7 +70,7 @@ def test_lifted_huber_reaches_the_direct_optimum(small_demo: Scenario) -> None:
     direct = Calibration.setup(sc).solve("ipopt")
     lifted_sc = sc.with_solver_options("ipopt", IpoptOptions(huber_formulation="lifted"))
     lifted = Calibration.setup(lifted_sc).solve("ipopt")
-    assert lifted.stats["formulation"] == "lifted"
+    assert lifted.trace.stats["formulation"] == "lifted"
     agree(direct, lifted, params_rtol=1e-6, cost_rtol=1e-9)
     assert direct.inliers < direct.n_residuals  # the threshold is active, so the test means something
 

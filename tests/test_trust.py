@@ -27,7 +27,7 @@ TOLERANCE[0] = 0.02 * TRUTH[0]  # k_steer 2 %
 
 
 def sim_calibration(scenario: Scenario, **sim: object) -> Calibration:
-    ds = parse_lines(simulate(SimulationOptions(**sim)).text().splitlines(), "sim")  # type: ignore[arg-type]
+    ds = parse_lines(simulate(SimulationOptions.of(**sim)).text().splitlines(), "sim")  # type: ignore[arg-type]
     return Calibration(scenario, log=ds)
 
 

@@ -24,7 +24,7 @@ from nlp_calib.solvers import ProblemEvaluator
 
 
 def sim_log(model: str, records: int, seed: int, **kwargs: object) -> Log:
-    text = simulate(SimulationOptions(model=model, records=records, seed=seed, **kwargs)).text()  # type: ignore[arg-type]
+    text = simulate(SimulationOptions.of(model=model, records=records, seed=seed, **kwargs)).text()  # type: ignore[arg-type]
     return parse_lines(text.splitlines(), model=model)
 
 

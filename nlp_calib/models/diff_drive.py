@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
+from typing import ClassVar
 
 import casadi as ca
 import numpy as np
@@ -108,16 +109,16 @@ class DiffDrive:
     """Differential-drive base, parameters ``(k_left, k_right, baseline)`` then the sensor pose
     ``(sensor_x, sensor_y, sensor_theta)``; base link midway between the wheels, x forward."""
 
-    name: str = "diff_drive"
-    log_names: tuple[str, ...] = ("differential_drive", "diff_drive")
-    kinematic_params: tuple[str, ...] = ("k_left", "k_right", "baseline")
-    units: Mapping[str, str] = MappingProxyType(
+    name: ClassVar[str] = "diff_drive"
+    log_names: ClassVar[tuple[str, ...]] = ("differential_drive", "diff_drive")
+    kinematic_params: ClassVar[tuple[str, ...]] = ("k_left", "k_right", "baseline")
+    units: ClassVar[Mapping[str, str]] = MappingProxyType(
         {"k_left": "m per tick", "k_right": "m per tick", "baseline": "m"}
     )
-    header_names: Mapping[str, str] = MappingProxyType(
+    header_names: ClassVar[Mapping[str, str]] = MappingProxyType(
         {"k_left": "Kleft", "k_right": "Kright", "baseline": "baseline"}
     )
-    header_aliases: Mapping[str, str] = MappingProxyType(
+    header_aliases: ClassVar[Mapping[str, str]] = MappingProxyType(
         {
             "kleft": "k_left",
             "k_left": "k_left",
@@ -127,17 +128,19 @@ class DiffDrive:
             "base_line": "baseline",
         }
     )
-    input_names: tuple[str, ...] = ("left_ticks", "right_ticks")
-    input_units: Mapping[str, str] = MappingProxyType({"left_ticks": "ticks", "right_ticks": "ticks"})
-    encoder_kinds: Mapping[str, EncoderKind] = MappingProxyType(
+    input_names: ClassVar[tuple[str, ...]] = ("left_ticks", "right_ticks")
+    input_units: ClassVar[Mapping[str, str]] = MappingProxyType(
+        {"left_ticks": "ticks", "right_ticks": "ticks"}
+    )
+    encoder_kinds: ClassVar[Mapping[str, EncoderKind]] = MappingProxyType(
         {LEFT_ENCODER: "counter", RIGHT_ENCODER: "counter"}
     )
-    turning_params: tuple[str, ...] = ("baseline",)
-    turning_note = ""
-    reference: Mapping[str, Reference] = MappingProxyType({})
-    headline: tuple[str, ...] = ("k_left", "baseline")
-    defaults: Mapping[str, float] = MappingProxyType({})
-    symmetries: tuple[Symmetry, ...] = (
+    turning_params: ClassVar[tuple[str, ...]] = ("baseline",)
+    turning_note: ClassVar[str] = ""
+    reference: ClassVar[Mapping[str, Reference]] = MappingProxyType({})
+    headline: ClassVar[tuple[str, ...]] = ("k_left", "baseline")
+    defaults: ClassVar[Mapping[str, float]] = MappingProxyType({})
+    symmetries: ClassVar[tuple[Symmetry, ...]] = (
         Symmetry(
             "the base frame turned round",
             "baseline",
@@ -145,9 +148,9 @@ class DiffDrive:
             SENSOR_TURNED[1],
         ),
     )
-    angle_params: tuple[str, ...] = ("sensor_theta",)
-    drive = DiffDriveDrive()
-    physical_ranges: Mapping[str, tuple[float, float]] = MappingProxyType(
+    angle_params: ClassVar[tuple[str, ...]] = ("sensor_theta",)
+    drive: ClassVar[DiffDriveDrive] = DiffDriveDrive()
+    physical_ranges: ClassVar[Mapping[str, tuple[float, float]]] = MappingProxyType(
         {
             "k_left": (1e-7, 1.0),
             "k_right": (1e-7, 1.0),

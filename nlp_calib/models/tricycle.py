@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
+from typing import ClassVar
 
 import casadi as ca
 import numpy as np
@@ -143,13 +144,13 @@ class Tricycle:
     """Front-wheel-drive bicycle model of a tricycle, parameters ``(k_steer, k_traction,
     axis_length, steer_offset)`` then the sensor pose ``(sensor_x, sensor_y, sensor_theta)``."""
 
-    name: str = "tricycle"
-    log_names: tuple[str, ...] = ("traction_drive_wheel", "tricycle")
-    kinematic_params: tuple[str, ...] = ("k_steer", "k_traction", "axis_length", "steer_offset")
-    units: Mapping[str, str] = MappingProxyType(
+    name: ClassVar[str] = "tricycle"
+    log_names: ClassVar[tuple[str, ...]] = ("traction_drive_wheel", "tricycle")
+    kinematic_params: ClassVar[tuple[str, ...]] = ("k_steer", "k_traction", "axis_length", "steer_offset")
+    units: ClassVar[Mapping[str, str]] = MappingProxyType(
         {"k_steer": "1", "k_traction": "m per t_max ticks", "axis_length": "m", "steer_offset": "rad"}
     )
-    header_names: Mapping[str, str] = MappingProxyType(
+    header_names: ClassVar[Mapping[str, str]] = MappingProxyType(
         {
             "k_steer": "Ksteer",
             "k_traction": "Ktraction",
@@ -157,7 +158,7 @@ class Tricycle:
             "steer_offset": "steer_offset",
         }
     )
-    header_aliases: Mapping[str, str] = MappingProxyType(
+    header_aliases: ClassVar[Mapping[str, str]] = MappingProxyType(
         {
             "ksteer": "k_steer",
             "k_steer": "k_steer",
@@ -168,19 +169,19 @@ class Tricycle:
             "steer_offset": "steer_offset",
         }
     )
-    encoder_kinds: Mapping[str, EncoderKind] = MappingProxyType(
+    encoder_kinds: ClassVar[Mapping[str, EncoderKind]] = MappingProxyType(
         {STEERING_ENCODER: "absolute", TRACTION_ENCODER: "counter"}
     )
-    turning_params: tuple[str, ...] = ("axis_length",)
-    turning_note = "the split between steering gain and offset"
-    input_names: tuple[str, ...] = ("traction_revolutions", "steering_angle")
-    input_units: Mapping[str, str] = MappingProxyType(
+    turning_params: ClassVar[tuple[str, ...]] = ("axis_length",)
+    turning_note: ClassVar[str] = "the split between steering gain and offset"
+    input_names: ClassVar[tuple[str, ...]] = ("traction_revolutions", "steering_angle")
+    input_units: ClassVar[Mapping[str, str]] = MappingProxyType(
         {"traction_revolutions": "rev", "steering_angle": "rad"}
     )
-    reference: Mapping[str, Reference] = MappingProxyType({"steer_offset": ("absolute", 0.005)})
-    headline: tuple[str, ...] = ("k_traction", "axis_length")
-    defaults: Mapping[str, float] = MappingProxyType({})
-    symmetries: tuple[Symmetry, ...] = (
+    reference: ClassVar[Mapping[str, Reference]] = MappingProxyType({"steer_offset": ("absolute", 0.005)})
+    headline: ClassVar[tuple[str, ...]] = ("k_traction", "axis_length")
+    defaults: ClassVar[Mapping[str, float]] = MappingProxyType({})
+    symmetries: ClassVar[tuple[Symmetry, ...]] = (
         Symmetry(
             "the base frame turned round",
             "axis_length",
@@ -191,9 +192,9 @@ class Tricycle:
             "the wheel turned round, counting backwards", "k_traction", ("k_traction",), ("steer_offset",)
         ),
     )
-    angle_params: tuple[str, ...] = ("steer_offset", "sensor_theta")
-    drive = TricycleDrive()
-    physical_ranges: Mapping[str, tuple[float, float]] = MappingProxyType(
+    angle_params: ClassVar[tuple[str, ...]] = ("steer_offset", "sensor_theta")
+    drive: ClassVar[TricycleDrive] = TricycleDrive()
+    physical_ranges: ClassVar[Mapping[str, tuple[float, float]]] = MappingProxyType(
         {
             "k_steer": (0.01, 3.0),
             "k_traction": (1e-4, 10.0),

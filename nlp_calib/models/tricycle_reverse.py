@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
+from typing import ClassVar
 
 import casadi as ca
 import numpy as np
@@ -46,26 +47,26 @@ class TricycleReverse(Tricycle):
     """Tricycle, parameters ``(k_steer, k_traction, axis_length, steer_offset, k_steer_reverse)``
     then the sensor pose ``(sensor_x, sensor_y, sensor_theta)``."""
 
-    name: str = "tricycle_reverse"
-    kinematic_params: tuple[str, ...] = (*Tricycle.kinematic_params, "k_steer_reverse")
-    units: Mapping[str, str] = MappingProxyType({**Tricycle.units, "k_steer_reverse": "1"})
-    header_names: Mapping[str, str] = MappingProxyType(
+    name: ClassVar[str] = "tricycle_reverse"
+    kinematic_params: ClassVar[tuple[str, ...]] = (*Tricycle.kinematic_params, "k_steer_reverse")
+    units: ClassVar[Mapping[str, str]] = MappingProxyType({**Tricycle.units, "k_steer_reverse": "1"})
+    header_names: ClassVar[Mapping[str, str]] = MappingProxyType(
         {**Tricycle.header_names, "k_steer_reverse": "k_steer_reverse"}
     )
-    header_aliases: Mapping[str, str] = MappingProxyType(
+    header_aliases: ClassVar[Mapping[str, str]] = MappingProxyType(
         {**Tricycle.header_aliases, "k_steer_reverse": "k_steer_reverse"}
     )
-    physical_ranges: Mapping[str, tuple[float, float]] = MappingProxyType(
+    physical_ranges: ClassVar[Mapping[str, tuple[float, float]]] = MappingProxyType(
         {**Tricycle.physical_ranges, "k_steer_reverse": (-0.5, 0.5)}
     )
-    reference: Mapping[str, Reference] = MappingProxyType(
+    reference: ClassVar[Mapping[str, Reference]] = MappingProxyType(
         {**Tricycle.reference, "k_steer_reverse": ("absolute", 0.005)}
     )
-    headline: tuple[str, ...] = ("k_traction", "axis_length", "k_steer_reverse")
-    defaults: Mapping[str, float] = MappingProxyType({"k_steer_reverse": 0.0})
+    headline: ClassVar[tuple[str, ...]] = ("k_traction", "axis_length", "k_steer_reverse")
+    defaults: ClassVar[Mapping[str, float]] = MappingProxyType({"k_steer_reverse": 0.0})
     # Turning the base frame round swaps forward and backward driving: no longer a symmetry.
-    symmetries: tuple[Symmetry, ...] = Tricycle.symmetries[1:]
-    drive = TricycleReverseDrive()
+    symmetries: ClassVar[tuple[Symmetry, ...]] = Tricycle.symmetries[1:]
+    drive: ClassVar[TricycleReverseDrive] = TricycleReverseDrive()
 
     def steering_angle(self, k: ca.SX, u: ca.SX) -> ca.SX:
         """``φ = k_steer·(1 + k_steer_reverse·r)·angle + steer_offset``, ``r`` = the base reverses.

@@ -42,7 +42,7 @@ def trajectory(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
 def convergence(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
     """Each solver's iterations."""
     series = ConvergenceSeries(
-        histories={n: rep.result.history for n, rep in run.reports.items()},
+        histories={n: rep.result.trace.history for n, rep in run.reports.items()},
         labels=run.scenario.labels,
         n_residuals=run.data.n_residuals,
         converged={n: rep.result.converged for n, rep in run.reports.items()},

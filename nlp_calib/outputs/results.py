@@ -80,7 +80,7 @@ def _solver_dict(run: CalibrationRun, name: str, report: SolverReport) -> dict[s
         "metrics": _metrics_dict(report.metrics, report.holdout),
         "history": [
             {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in h.__dict__.items()}
-            for h in r.history
+            for h in r.trace.history
         ],
     }
 

@@ -24,7 +24,7 @@ def scenario_key(sc: Scenario, key: str, hint: str = "") -> Iterator[None]:
 
 def refuse_rejected_options(sc: Scenario, result: SolverResult) -> None:
     """A solver that stopped because it rejected its options is an input error, not a result."""
-    status = result.stats.get("return_status")
+    status = result.trace.stats.get("return_status")
     if status not in REJECTED_OPTIONS:
         return
     options = sc.options_for(result.solver)

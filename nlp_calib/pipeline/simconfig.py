@@ -6,9 +6,11 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from nlp_calib.core.config import fail, from_mapping, read_yaml
+from nlp_calib.core.config import coerce, fail, key_name, read_yaml
+from nlp_calib.core.errors import FieldError, NlpCalibError
 from nlp_calib.core.ranges import Range
 from nlp_calib.simulation import LIMITS, SimulationOptions
+from nlp_calib.simulation.options import flat_hints
 
 #: What a user may ask of ``nlp-calib simulate``: the simulator's own limits (it writes a log block
 #: by block, so its memory does not grow with the log's length).
@@ -16,7 +18,7 @@ CLI_LIMITS: Mapping[str, Range] = LIMITS
 
 
 def simulation_options(config: Path | None, overrides: Mapping[str, Any]) -> SimulationOptions:
-    """Options from ``config`` (YAML mapping of :class:`SimulationOptions` fields), then overrides."""
+    """Options from ``config`` (a YAML mapping of options by their flat names), then overrides."""
     raw: dict[str, Any] = {}
     source = "simulate"
     if config is not None:
@@ -26,5 +28,14 @@ def simulation_options(config: Path | None, overrides: Mapping[str, Any]) -> Sim
         raw.update(loaded or {})
         source = str(config)
     raw.update(overrides)
-    opts: SimulationOptions = from_mapping(SimulationOptions, raw, source)
-    return opts
+    hints = flat_hints()
+    for key in raw:
+        if key not in hints:
+            fail(f"{source}.{key_name(key)}", f"unknown key; valid keys are {', '.join(hints)}")
+    typed = {k: coerce(v, hints[k], f"{source}.{k}") for k, v in raw.items()}
+    try:
+        return SimulationOptions.of(**typed)
+    except FieldError as exc:
+        fail(f"{source}.{exc.field}", exc.reason)
+    except (ValueError, TypeError, NlpCalibError) as exc:
+        fail(source, str(exc))

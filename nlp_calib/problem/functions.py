@@ -79,6 +79,20 @@ class ProblemSpec:
         check_choice("kernel", self.kernel, KERNELS)
 
 
+@dataclass(frozen=True)
+class _Symbols:
+    """The problem's symbols: free and fixed parameters, the information weights, the robust
+    kernel's threshold, a window's data, the full parameter vector and ``M`` = ∂(x ⊞ Δ)/∂Δ at 0."""
+
+    x: ca.SX
+    x_fixed: ca.SX
+    omega: ca.SX
+    delta: ca.SX
+    data: ca.SX
+    params: ca.SX
+    M: ca.SX
+
+
 class ProblemFunctions(TrajectoryFunctions):
     """The Functions of one problem (model + :class:`ProblemSpec`), with the layout facts callers need.
 
@@ -115,17 +129,9 @@ class ProblemFunctions(TrajectoryFunctions):
         if not self.free:
             raise ProblemError("every parameter is fixed; nothing to estimate")
         free, fixed = self.free, self.fixed
-        self._x = x = ca.SX.sym("x", len(free))
-        self._x_fixed = x_fixed = ca.SX.sym("x_fixed", len(fixed))
-        self._omega = ca.SX.sym("omega", sensor.error_rows)
-        self._delta = ca.SX.sym("delta")
-        self._data = ca.SX.sym("data", self.data_rows)
-        self._params = ca.vertcat(
-            *[x[free.index(n)] if n in free else x_fixed[fixed.index(n)] for n in names]
-        )
-        #: Places of the free kinematic parameters in ``x`` (the columns of a prefix Jacobian).
-        self.kinematic_columns = [free.index(n) for n in model.kinematic_params if n in free]
-
+        x = ca.SX.sym("x", len(free))
+        x_fixed = ca.SX.sym("x_fixed", len(fixed))
+        params = ca.vertcat(*[x[free.index(n)] if n in free else x_fixed[fixed.index(n)] for n in names])
         # Box-plus: Euclidean for kinematic parameters; the sensor's own for its mount (planar: a
         # left SE(2) perturbation when all of it is free; a partly fixed pose has no group
         # structure left to respect).
@@ -134,11 +140,18 @@ class ProblemFunctions(TrajectoryFunctions):
         sensor.boxplus(free, x, step, x_plus)
         self.boxplus = ca.Function("boxplus", [x, step], [x_plus], ["x", "step"], ["x_next"], _CSE)
         # dx(x ⊞ Δ)/dΔ at Δ = 0 maps plain-coordinate Jacobians onto the manifold perturbation.
-        self._M = ca.substitute(ca.jacobian(x_plus, step), step, ca.DM.zeros(len(free)))
+        tangent = ca.substitute(ca.jacobian(x_plus, step), step, ca.DM.zeros(len(free)))
+        omega, delta = ca.SX.sym("omega", sensor.error_rows), ca.SX.sym("delta")
+        self._sym = _Symbols(x, x_fixed, omega, delta, ca.SX.sym("data", self.data_rows), params, tangent)
         self._windows: dict[int, tuple[motion_sources.MotionSymbols, ca.SX, ca.SX]] = {}
         self._steps: dict[int, ca.Function] = {}
 
     # --- layout facts ---------------------------------------------------------------------------
+
+    @functools.cached_property
+    def kinematic_columns(self) -> list[int]:
+        """Places of the free kinematic parameters in ``x`` (the columns of a prefix Jacobian)."""
+        return [self.free.index(n) for n in self.model.kinematic_params if n in self.free]
 
     @property
     def n_free(self) -> int:
@@ -184,13 +197,13 @@ class ProblemFunctions(TrajectoryFunctions):
 
     @functools.cached_property
     def _source(self) -> motion_sources.MotionSource:
-        k = split_params(self.model, self.sensor, self._params)[0]
-        kinematic = fn("kinematic", [self._x, self._x_fixed], ["x", "x_fixed"], [k], ["k"])
+        k = split_params(self.model, self.sensor, self._sym.params)[0]
+        kinematic = fn("kinematic", [self._sym.x, self._sym.x_fixed], ["x", "x_fixed"], [k], ["k"])
         return motion_sources.MotionSource(
             self.model,
             kinematic,
-            self._x,
-            self._x_fixed,
+            self._sym.x,
+            self._sym.x_fixed,
             self.kinematic_columns,
             self.n_inputs,
             self.spec.integration,
@@ -204,9 +217,11 @@ class ProblemFunctions(TrajectoryFunctions):
         h = ca.SX.sym("h", self.n_free)
         mo = self._source.window(h, order)
         sensor = [self.free.index(n) for n in self.sensor.params if n in self.free]
-        x_moved = motion_sources.perturbed(self._x, h[sensor], sensor)
-        T_moved = split_params(self.model, self.sensor, ca.substitute(self._params, self._x, x_moved))[1]
-        e = self.sensor.residual(self._data[0 : self.sensor.z_rows], T_moved, mo.M)
+        x_moved = motion_sources.perturbed(self._sym.x, h[sensor], sensor)
+        T_moved = split_params(
+            self.model, self.sensor, ca.substitute(self._sym.params, self._sym.x, x_moved)
+        )[1]
+        e = self.sensor.residual(self._sym.data[0 : self.sensor.z_rows], T_moved, mo.M)
         self._windows[order] = (mo, h, e)
         return mo, h, e
 
@@ -221,24 +236,31 @@ class ProblemFunctions(TrajectoryFunctions):
         """Motion data, ``e`` and the manifold Jacobian ``J`` (first order)."""
         mo, h, e_h = self._window(1)
         e, J_plain = self._at_zero(mo, h, [e_h, ca.jacobian(e_h, h)])
-        return mo.data, e, ca.mtimes(J_plain, self._M)
+        return mo.data, e, ca.mtimes(J_plain, self._sym.M)
 
     def _robust(self, e: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
         """``s = eᵀΩe``, the weighted cost ``w·ρ(s)``, ρ'(s) and the inlier flag."""
-        w, omega, delta = self._data[self.sensor.z_rows], self._omega, self._delta
+        w, omega, delta = self._sym.data[self.sensor.z_rows], self._sym.omega, self._sym.delta
         s = ca.dot(e, omega * e)
         rho, weight = kernel_function(self.spec.kernel)(s, delta)
         return s, w * rho, weight, ca.if_else(s <= delta * delta, 1.0, 0.0)
 
     def _ins(self, motion: ca.SX) -> tuple[list[ca.SX], list[str]]:
-        return [self._x, self._x_fixed, self._omega, self._delta, motion, self._data], list(COMMON_INPUTS)
+        return [
+            self._sym.x,
+            self._sym.x_fixed,
+            self._sym.omega,
+            self._sym.delta,
+            motion,
+            self._sym.data,
+        ], list(COMMON_INPUTS)
 
     @functools.cached_property
     def normal_equations(self) -> ca.Function:
         motion, e, J = self._linear()
         s, cost, weight, inlier = self._robust(e)
-        w = self._data[self.sensor.z_rows]
-        Omega = ca.diag(self._omega)
+        w = self._sym.data[self.sensor.z_rows]
+        Omega = ca.diag(self._sym.omega)
         # Only the upper triangle of the symmetric JᵀΩJ: fewer operations per residual and per sum.
         JtOJ = ca.mtimes([J.T, Omega, J])
         H_upper = ca.vertcat(*[JtOJ[i, j] for i, j in motion_sources.pairs(self.n_free)])
@@ -277,7 +299,12 @@ class ProblemFunctions(TrajectoryFunctions):
             "robust_terms",
             ins,
             in_names,
-            [e, s, weight, self._data[self.sensor.z_rows] * ca.mtimes([J.T, ca.diag(self._omega), e])],
+            [
+                e,
+                s,
+                weight,
+                self._sym.data[self.sensor.z_rows] * ca.mtimes([J.T, ca.diag(self._sym.omega), e]),
+            ],
             ["e", "s", "weight", "JtOe"],
         )
 
@@ -289,15 +316,15 @@ class ProblemFunctions(TrajectoryFunctions):
             h,
             [
                 ca.jacobian(e_h, h),
-                ca.jacobian(e_h, self._data[0 : self.sensor.z_rows]),
+                ca.jacobian(e_h, self._sym.data[0 : self.sensor.z_rows]),
                 ca.jacobian(e_h, mo.end),
             ],
         )
         return fn(
             "sensitivities",
-            [self._x, self._x_fixed, mo.data, self._data],
+            [self._sym.x, self._sym.x_fixed, mo.data, self._sym.data],
             ["x", "x_fixed", "motion", "data"],
-            [ca.mtimes(J_plain, self._M), de_dz, de_dend],
+            [ca.mtimes(J_plain, self._sym.M), de_dz, de_dend],
             ["J", "de_dz", "de_dend"],
         )
 
@@ -317,16 +344,16 @@ class ProblemFunctions(TrajectoryFunctions):
 
     @functools.cached_property
     def tangent_map(self) -> ca.Function:
-        return fn("tangent_map", [self._x], ["x"], [self._M], ["M"])
+        return fn("tangent_map", [self._sym.x], ["x"], [self._sym.M], ["M"])
 
     @functools.cached_property
     def prior(self) -> ca.Function:
         """Gaussian priors on free parameters: r = sqrt_info · (x - mean), r = 0 where sqrt_info = 0."""
-        x, n = self._x, self.n_free
+        x, n = self._sym.x, self.n_free
         mean = ca.SX.sym("mean", n)
         sqrt_info = ca.SX.sym("sqrt_info", n)
         r_prior = sqrt_info * (x - mean)
-        J_prior = ca.mtimes(ca.jacobian(r_prior, x), self._M)
+        J_prior = ca.mtimes(ca.jacobian(r_prior, x), self._sym.M)
         cost_prior = ca.dot(r_prior, r_prior)
         return fn(
             "prior",
@@ -344,7 +371,9 @@ class ProblemFunctions(TrajectoryFunctions):
 
     @functools.cached_property
     def assemble(self) -> ca.Function:
-        return fn("assemble", [self._x, self._x_fixed], ["x", "x_fixed"], [self._params], ["params"])
+        return fn(
+            "assemble", [self._sym.x, self._sym.x_fixed], ["x", "x_fixed"], [self._sym.params], ["params"]
+        )
 
     # --- the residual as defined, on one window's inputs -------------------------------------------
 
@@ -359,21 +388,21 @@ class ProblemFunctions(TrajectoryFunctions):
         n_in, H = self.n_inputs, self.spec.horizon
         U = ca.reshape(column[: n_in * H], n_in, H)
         z = column[n_in * H : n_in * H + self.sensor.z_rows]
-        k, mount = split_params(self.model, self.sensor, self._params)
+        k, mount = split_params(self.model, self.sensor, self._sym.params)
         e = self.sensor.residual(z, mount, base_motion(self.model, k, U, self.spec.integration))
-        return column, e, ca.mtimes(ca.jacobian(e, self._x), self._M)
+        return column, e, ca.mtimes(ca.jacobian(e, self._sym.x), self._sym.M)
 
     @functools.cached_property
     def residual(self) -> ca.Function:
         column, e, _ = self._reference
-        return fn("residual", [self._x, self._x_fixed, column], ["x", "x_fixed", "data"], [e], ["e"])
+        return fn("residual", [self._sym.x, self._sym.x_fixed, column], ["x", "x_fixed", "data"], [e], ["e"])
 
     @functools.cached_property
     def residual_jacobian(self) -> ca.Function:
         column, e, J = self._reference
         return fn(
             "residual_jacobian",
-            [self._x, self._x_fixed, column],
+            [self._sym.x, self._sym.x_fixed, column],
             ["x", "x_fixed", "data"],
             [e, J],
             ["e", "J"],

@@ -25,11 +25,22 @@ class IterationRecord:
 
 
 @dataclass(frozen=True)
+class SolverTrace:
+    """How a solve went: its iterations, wall time (s), per-iteration record and the solver's own
+    statistics (e.g. IPOPT's return status)."""
+
+    iterations: int
+    time_s: float
+    history: tuple[IterationRecord, ...] = ()
+    stats: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class SolverResult:
     """What a solve produced; ``converged`` is False with a ``reason`` whenever it failed.
 
     ``params`` is the full parameter vector in ``names`` order (fixed ones included); ``x`` the
-    free part the solver moved.
+    free part the solver moved; ``trace`` how the solve went.
     """
 
     solver: str
@@ -40,12 +51,17 @@ class SolverResult:
     chi2: float
     inliers: int
     n_residuals: int
-    iterations: int
     converged: bool
     reason: str
-    time_s: float
-    history: tuple[IterationRecord, ...] = ()
-    stats: Mapping[str, Any] = field(default_factory=dict)
+    trace: SolverTrace
+
+    @property
+    def iterations(self) -> int:
+        return self.trace.iterations
+
+    @property
+    def time_s(self) -> float:
+        return self.trace.time_s
 
     def param_dict(self) -> dict[str, float]:
         return {n: float(v) for n, v in zip(self.names, self.params)}

@@ -96,8 +96,8 @@ def _plan(opts: SimulationOptions, block: int) -> _Plan:
     streams = [_state(rng)]
     last: float | None = None
     for a, b in _chunks(n - 1, block):
-        last = float(running(_intervals(opts.rate_hz, opts.jitter_s, rng, b - a), last)[-1])
-    knots = drive_profiles(opts, rng, (last or 0.0) + opts.latency_s + 1.0)
+        last = float(running(_intervals(opts.sampling.rate_hz, opts.sampling.jitter_s, rng, b - a), last)[-1])
+    knots = drive_profiles(opts.drive, rng, (last or 0.0) + opts.tracker.latency_s + 1.0)
     streams.append(_state(rng))
     for a, b in _chunks(n, block):
         rng.normal(size=(b - a, 2))
@@ -105,7 +105,9 @@ def _plan(opts: SimulationOptions, block: int) -> _Plan:
     for a, b in _chunks(n, block):
         rng.normal(size=b - a)
     streams.append(_state(rng))
-    n_outliers = sum(int(np.sum(rng.random(b - a) < opts.outlier_fraction)) for a, b in _chunks(n, block))
+    n_outliers = sum(
+        int(np.sum(rng.random(b - a) < opts.tracker.outlier_fraction)) for a, b in _chunks(n, block)
+    )
     streams.append(_state(rng))
     for a, b in _chunks(n_outliers, block):
         rng.normal(size=(b - a, 2))
@@ -128,8 +130,8 @@ def _block_times(
 ) -> np.ndarray:
     """Sample times of records ``[a, b)``."""
     if a == 0:
-        return running(_intervals(opts.rate_hz, opts.jitter_s, rng, b - 1))
-    return running(_intervals(opts.rate_hz, opts.jitter_s, rng, b - a), carry.time_s)[1:]
+        return running(_intervals(opts.sampling.rate_hz, opts.sampling.jitter_s, rng, b - 1))
+    return running(_intervals(opts.sampling.rate_hz, opts.sampling.jitter_s, rng, b - a), carry.time_s)[1:]
 
 
 def _fine_motion(
@@ -137,12 +139,12 @@ def _fine_motion(
 ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """The fine grid from the record before ``t_s`` (from the latency's start, in the first block)
     to its last, the base poses and the drive's channels on it; ``carry`` moves on to its end."""
-    t0 = -opts.latency_s
+    t0 = -opts.tracker.latency_s
     if carry.time_s is not None:
         base_grid = np.concatenate([[carry.time_s], t_s])
     else:
-        base_grid = np.concatenate([[t0], t_s]) if opts.latency_s > 0 else t_s
-    frac = np.arange(opts.substeps) / opts.substeps
+        base_grid = np.concatenate([[t0], t_s]) if opts.tracker.latency_s > 0 else t_s
+    frac = np.arange(opts.sampling.substeps) / opts.sampling.substeps
     t_fine = np.concatenate(
         [(base_grid[:-1, None] + np.diff(base_grid)[:, None] * frac).ravel(), base_grid[-1:]]
     )
@@ -167,9 +169,9 @@ def _seen(
     poses_all = np.concatenate([carry.poses, poses])
     t = opts.truth
     mount = (t["sensor_x"], t["sensor_y"], t["sensor_theta"])
-    seen = _sensor_pose(_pose_at(t_all, poses_all, t_s - opts.latency_s), mount)
+    seen = _sensor_pose(_pose_at(t_all, poses_all, t_s - opts.tracker.latency_s), mount)
     # The next block's fine grid starts at this block's last point: it is kept there, not here.
-    keep = max(int(np.searchsorted(t_all, t_s[-1] - opts.latency_s, side="right")) - 1, 0)
+    keep = max(int(np.searchsorted(t_all, t_s[-1] - opts.tracker.latency_s, side="right")) - 1, 0)
     carry.t_fine, carry.poses = t_all[keep:-1], poses_all[keep:-1]
     return seen
 
@@ -181,11 +183,11 @@ def _noisy(
     and which poses took in an outlier."""
     n = tracker.shape[0]
     xy, theta, outlier, error_xy, error_theta = rngs
-    tracker[:, :2] += xy.normal(0.0, opts.tracker_noise_xy, (n, 2))
-    tracker[:, 2] += theta.normal(0.0, opts.tracker_noise_theta, n)
-    outliers = np.asarray(outlier.random(n) < opts.outlier_fraction)
-    tracker[outliers, :2] += error_xy.normal(0.0, opts.outlier_magnitude, (int(outliers.sum()), 2))
-    tracker[outliers, 2] += error_theta.normal(0.0, opts.outlier_magnitude, int(outliers.sum()))
+    tracker[:, :2] += xy.normal(0.0, opts.tracker.tracker_noise_xy, (n, 2))
+    tracker[:, 2] += theta.normal(0.0, opts.tracker.tracker_noise_theta, n)
+    outliers = np.asarray(outlier.random(n) < opts.tracker.outlier_fraction)
+    tracker[outliers, :2] += error_xy.normal(0.0, opts.tracker.outlier_magnitude, (int(outliers.sum()), 2))
+    tracker[outliers, 2] += error_theta.normal(0.0, opts.tracker.outlier_magnitude, int(outliers.sum()))
     tracker[:, 2] = wrap_angle(tracker[:, 2])
     return tracker, outliers
 
@@ -210,11 +212,17 @@ def _own_clock(opts: SimulationOptions) -> Block:
     its noise from a stream of its own), paired with the encoder samples as a bag import pairs
     them: a record at each encoder sample the tracker brackets."""
     plan = _plan(opts, opts.records)
-    t_enc = running(_intervals(opts.rate_hz, opts.jitter_s, _generator(plan.streams[0]), opts.records - 1))
+    t_enc = running(
+        _intervals(
+            opts.sampling.rate_hz, opts.sampling.jitter_s, _generator(plan.streams[0]), opts.records - 1
+        )
+    )
     clock = np.random.default_rng([opts.seed, 2])
-    n = int(np.ceil(t_enc[-1] * opts.tracker_rate_hz)) + 2
-    phase = clock.uniform(0.0, 1.0 / opts.tracker_rate_hz)
-    t_trk = phase + running(_intervals(opts.tracker_rate_hz, opts.tracker_jitter_s, clock, n - 1))
+    n = int(np.ceil(t_enc[-1] * opts.tracker.tracker_rate_hz)) + 2
+    phase = clock.uniform(0.0, 1.0 / opts.tracker.tracker_rate_hz)
+    t_trk = phase + running(
+        _intervals(opts.tracker.tracker_rate_hz, opts.tracker.tracker_jitter_s, clock, n - 1)
+    )
     t_fine, poses, channels = _fine_motion(opts, plan, np.union1d(t_enc, t_trk[t_trk > t_enc[-1]]), _Carry())
     own = np.random.default_rng([opts.seed, 3])
     tracker, outliers = _noisy(opts, [own] * 5, _seen(opts, t_trk, t_fine, poses, _Carry()))
@@ -230,10 +238,10 @@ def _own_clock(opts: SimulationOptions) -> Block:
 def blocks(opts: SimulationOptions, block: int | None = None) -> Iterator[Block]:
     """The log's records in blocks of ``block`` (default: :data:`BLOCK_SUBSTEPS` fine sub-steps),
     each drawn as the whole log would be drawn at once."""
-    if opts.tracker_rate_hz:
+    if opts.tracker.tracker_rate_hz:
         yield _own_clock(opts)
         return
-    yield from _same_clock(opts, block or max(BLOCK_SUBSTEPS // opts.substeps, 1))
+    yield from _same_clock(opts, block or max(BLOCK_SUBSTEPS // opts.sampling.substeps, 1))
 
 
 def with_faults(
@@ -241,7 +249,7 @@ def with_faults(
 ) -> tuple[Iterable[Block], tuple[InjectedFault, ...]]:
     """The blocks with the options' faults injected: placing them needs the whole log, so with
     faults the blocks are joined into one (about 80 bytes a record)."""
-    if not (opts.counter_faults or opts.steering_spikes or opts.steering_stuck):
+    if not opts.faults.any:
         return parts, ()
     listed = list(parts)
     whole = Block(*(np.concatenate([getattr(p, f.name) for p in listed]) for f in fields(Block)))
@@ -256,16 +264,21 @@ def inject_faults(
     each kind from a random stream of its own (a log without faults stays the same for a seed)."""
     kinds = MODELS[opts.model].encoder_kinds
     faults: tuple[InjectedFault, ...] = ()
-    if opts.counter_faults:
+    if opts.faults.counter_faults:
         counters = [n for n, kind in kinds.items() if kind == "counter"]
         fault_rng = np.random.default_rng([opts.seed, 1])
         ticks, faults = inject(
-            ticks, header.encoder_names, counters, opts.counter_faults, opts.counter_fault_kinds, fault_rng
+            ticks,
+            header.encoder_names,
+            counters,
+            opts.faults.counter_faults,
+            opts.faults.counter_fault_kinds,
+            fault_rng,
         )
     absolute = [n for n, kind in kinds.items() if kind == "absolute"]
-    if absolute and (opts.steering_spikes or opts.steering_stuck):
+    if absolute and (opts.faults.steering_spikes or opts.faults.steering_stuck):
         glitch_rng = np.random.default_rng([opts.seed, 4])
-        counts = (opts.steering_spikes, opts.steering_stuck)
+        counts = (opts.faults.steering_spikes, opts.faults.steering_stuck)
         ticks, glitches = inject_glitches(ticks, header, absolute[0], counts, faults, glitch_rng)
         faults = tuple(sorted(faults + glitches, key=lambda f: f.record))
     return ticks, faults

@@ -31,7 +31,7 @@ from nlp_calib.models import MODELS
 from nlp_calib.models.drives import integrate_base
 from nlp_calib.models.joints import JOINT_MAPS, joint_map
 from nlp_calib.models.mount import MOUNT_PARAMS, SCALE_PARAM
-from nlp_calib.simulation.options import TRAJECTORIES, drive_profiles
+from nlp_calib.simulation.options import DriveShape, drive_profiles
 
 #: A camera looking forward and 30° down (roll −120°), slightly pitched, on the base's left.
 DEFAULT_MOUNT: Mapping[str, float] = {
@@ -42,6 +42,8 @@ DEFAULT_MOUNT: Mapping[str, float] = {
     "sensor_pitch": float(np.radians(3.0)),
     "sensor_yaw": float(np.radians(-90.0)),
 }
+#: How the camera simulator's base drives unless told: slower, with fewer stops, than a log's.
+CAMERA_DRIVE = DriveShape(max_speed=0.5, stop_fraction=0.1)
 #: Time step of the fine grid the base is integrated on (s).
 FINE_STEP_S = 1e-3
 #: Both clocks start here (s, a Unix time), as a recording's stamps do.
@@ -55,11 +57,6 @@ LIMITS: Mapping[str, Range] = {
     "stamp_offset_s": Range(-1.0, 1.0),
     "scale": Range(0.0, 1e6, lo_open=True),
 }
-DRIVE_LIMITS: Mapping[str, Range] = {
-    "max_speed": Range(0.0, 10.0, lo_open=True),
-    "max_turn": Range(0.0, 1.5),
-    "stop_fraction": Range(0.0, 1.0, hi_open=True),
-}
 NOISE_LIMITS: Mapping[str, Range] = {
     "position": Range(0.0, 1.0),
     "rotation": Range(0.0, 1.0),
@@ -72,25 +69,6 @@ def _check(options: object, limits: Mapping[str, Range], prefix: str = "") -> No
         reason = limit.problem(getattr(options, name))
         if reason is not None:
             raise OptionsError(f"{prefix}{name} {reason}")
-
-
-@dataclass(frozen=True)
-class DriveShape:
-    """How the base drives: ``trajectory`` (``s_curves``, ``straight``, ``no_reversals``), speed
-    (m/s), turning amplitude and the fraction of stops (as :mod:`nlp_calib.simulation.simulate`)."""
-
-    trajectory: str = "s_curves"
-    max_speed: float = 0.5
-    max_turn: float = 0.6
-    stop_fraction: float = 0.1
-    reversals: str = "smooth"
-
-    def __post_init__(self) -> None:
-        _check(self, DRIVE_LIMITS, "drive.")
-        if self.trajectory not in TRAJECTORIES:
-            raise OptionsError(
-                f"drive.trajectory must be one of {', '.join(TRAJECTORIES)}, got {self.trajectory!r}"
-            )
 
 
 @dataclass(frozen=True)
@@ -121,7 +99,7 @@ class CameraSimulationOptions:
     stamp_offset_s: float = 0.0
     scale: float = 1.0
     noise: CameraNoise = CameraNoise()
-    drive: DriveShape = DriveShape()
+    drive: DriveShape = field(default_factory=lambda: CAMERA_DRIVE)
 
     def __post_init__(self) -> None:
         _check(self, LIMITS)

@@ -4,9 +4,10 @@ speed and turning profiles they describe."""
 from __future__ import annotations
 
 import math
+import typing
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Protocol
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -46,89 +47,201 @@ LIMITS: Mapping[str, Range] = {
 }
 
 
+def _check(options: object, prefix: str = "") -> None:
+    """Each numeric field of ``options`` against :data:`LIMITS`, by its name."""
+    for f in fields(options):  # type: ignore[arg-type]
+        limit = LIMITS.get(f.name)
+        reason = None if limit is None else limit.problem(getattr(options, f.name))
+        if reason is not None:
+            raise OptionsError(f"{prefix}{f.name} {reason}")
+
+
 @dataclass(frozen=True)
-class SimulationOptions:
-    """What to simulate. Angles in rad, lengths in m, times in s.
+class Sampling:
+    """The encoders' sample clock: ``rate_hz`` with ``jitter_s`` of jitter, and the fine sub-steps
+    the motion is integrated on between two samples."""
 
-    ``model``: a registered model (default: the first). ``trajectory``: ``s_curves`` (turns,
-    stops and reversals), ``straight`` (no turning) or ``no_reversals`` (turns and stops, always
-    forward). ``truth`` and ``guess`` map parameter names to values (``guess`` goes into the log
-    header as the initial guess); empty means the model's defaults. ``max_turn`` is the amplitude
-    of the turning profile, which each model's drive reads in its own way (see its ``steps``).
-    ``encoder_ranges`` maps encoder names to their ``#joints_max_enc_values`` (absolute range,
-    or counts per turn); empty means the model's defaults. ``reversals``: ``smooth`` (the speed
-    passes through zero over seconds) or ``abrupt`` (within 20 ms). ``tracker_rate_hz`` > 0 puts
-    the tracker on a clock of its own (that rate, ``tracker_jitter_s``, a random phase); its poses
-    are then paired with the encoders' records as a bag import pairs them (interpolated at each
-    encoder stamp). ``counter_faults``, ``steering_spikes`` and ``steering_stuck`` inject that many
-    faults of each kind (:mod:`nlp_calib.simulation.faults`).
-    """
-
-    records: int = 1500
-    seed: int = 0
-    model: str = DEFAULT_MODEL
-    trajectory: str = "s_curves"
-    truth: Mapping[str, float] = field(default_factory=dict)
-    guess: Mapping[str, float] = field(default_factory=dict)
-    encoder_ranges: Mapping[str, int] = field(default_factory=dict)
     rate_hz: float = 25.0
     jitter_s: float = 0.004
     substeps: int = 20
+
+    def __post_init__(self) -> None:
+        _check(self)
+
+
+@dataclass(frozen=True)
+class DriveShape:
+    """How the base drives: ``trajectory`` (``s_curves``: turns, stops and reversals; ``straight``:
+    no turning; ``no_reversals``: turns and stops, always forward), the top speed (m/s), the
+    turning profile's amplitude (each model's drive reads it in its own way, see its ``steps``),
+    the fraction of stops, and ``reversals``: ``smooth`` (the speed passes through zero over
+    seconds) or ``abrupt`` (within :data:`ABRUPT_S`)."""
+
+    trajectory: str = "s_curves"
     max_speed: float = 0.6
     max_turn: float = 0.6
     stop_fraction: float = 0.15
+    reversals: str = "smooth"
+
+    def __post_init__(self) -> None:
+        _check(self)
+        if self.trajectory not in TRAJECTORIES:
+            raise OptionsError(
+                f"trajectory must be one of {', '.join(TRAJECTORIES)}, got {self.trajectory!r}"
+            )
+        if self.reversals not in REVERSALS:
+            raise OptionsError(f"reversals must be one of {', '.join(REVERSALS)}, got {self.reversals!r}")
+
+
+@dataclass(frozen=True)
+class TrackerSim:
+    """The tracker: noise (m, rad), gross outliers (the fraction of poses and their size), its
+    latency behind the encoders, and ``tracker_rate_hz`` > 0 for a clock of its own (that rate,
+    ``tracker_jitter_s``, a random phase), its poses then paired with the encoders' records as a
+    bag import pairs them (interpolated at each encoder stamp)."""
+
     tracker_noise_xy: float = 0.002
     tracker_noise_theta: float = 0.002
     outlier_fraction: float = 0.0
     outlier_magnitude: float = 0.3
     latency_s: float = 0.0
-    wrap_after_ticks: int = 20000
-    counter_faults: int = 0
-    counter_fault_kinds: tuple[str, ...] = COUNTER_FAULT_KINDS
-    reversals: str = "smooth"
     tracker_rate_hz: float = 0.0
     tracker_jitter_s: float = 0.004
+
+    def __post_init__(self) -> None:
+        _check(self)
+
+
+@dataclass(frozen=True)
+class InjectedFaults:
+    """How many faults of each kind to inject (:mod:`nlp_calib.simulation.faults`): counter faults
+    (of ``counter_fault_kinds``), one-record spikes and stuck readings of an absolute encoder."""
+
+    counter_faults: int = 0
+    counter_fault_kinds: tuple[str, ...] = COUNTER_FAULT_KINDS
     steering_spikes: int = 0
     steering_stuck: int = 0
 
     def __post_init__(self) -> None:
-        for name, limit in LIMITS.items():
-            reason = limit.problem(getattr(self, name))
-            if reason is not None:
-                raise OptionsError(f"{name} {reason}")
+        _check(self)
+        if not set(self.counter_fault_kinds) <= set(COUNTER_FAULT_KINDS):
+            raise OptionsError(f"counter_fault_kinds must be among {', '.join(COUNTER_FAULT_KINDS)}")
+
+    @property
+    def any(self) -> bool:
+        return bool(self.counter_faults or self.steering_spikes or self.steering_stuck)
+
+
+_GROUPS: Mapping[str, type] = {
+    "sampling": Sampling,
+    "drive": DriveShape,
+    "tracker": TrackerSim,
+    "faults": InjectedFaults,
+}
+#: The options' flat names, in the order a truth file lists them.
+FLAT_ORDER = (
+    "records", "seed", "model", "trajectory", "truth", "guess", "encoder_ranges", "rate_hz", "jitter_s",
+    "substeps", "max_speed", "max_turn", "stop_fraction", "tracker_noise_xy", "tracker_noise_theta",
+    "outlier_fraction", "outlier_magnitude", "latency_s", "wrap_after_ticks", "counter_faults",
+    "counter_fault_kinds", "reversals", "tracker_rate_hz", "tracker_jitter_s", "steering_spikes",
+    "steering_stuck",
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class SimulationOptions:
+    """What to simulate. Angles in rad, lengths in m, times in s.
+
+    ``model``: a registered model (default: the first). ``truth`` and ``guess`` map parameter
+    names to values (``guess`` goes into the log header as the initial guess); empty means the
+    model's defaults. ``encoder_ranges`` maps encoder names to their ``#joints_max_enc_values``
+    (absolute range, or counts per turn); empty means the model's defaults; counters start
+    ``wrap_after_ticks`` before they wrap. The rest is grouped: :class:`Sampling`,
+    :class:`DriveShape`, :class:`TrackerSim`, :class:`InjectedFaults`. Files and the command
+    line name every option flat (``latency_s``, not ``tracker.latency_s``): see :meth:`of` and
+    :meth:`flat`.
+    """
+
+    records: int = 1500
+    seed: int = 0
+    model: str = DEFAULT_MODEL
+    truth: Mapping[str, float] = field(default_factory=dict)
+    guess: Mapping[str, float] = field(default_factory=dict)
+    encoder_ranges: Mapping[str, int] = field(default_factory=dict)
+    wrap_after_ticks: int = 20000
+    sampling: Sampling = Sampling()
+    drive: DriveShape = DriveShape()
+    tracker: TrackerSim = TrackerSim()
+    faults: InjectedFaults = InjectedFaults()
+
+    @classmethod
+    def of(cls, **flat: Any) -> SimulationOptions:
+        """Options from their flat names (``SimulationOptions.of(records=900, latency_s=0.05)``)."""
+        grouped: dict[str, dict[str, Any]] = {g: {} for g in _GROUPS}
+        own: dict[str, Any] = {}
+        for key, value in flat.items():
+            group = _group_of(key)
+            (own if group is None else grouped[group])[key] = value
+        return cls(**own, **{g: _GROUPS[g](**kw) for g, kw in grouped.items() if kw})
+
+    def flat(self) -> dict[str, Any]:
+        """Every option by its flat name, in :data:`FLAT_ORDER` (a truth file's ``options``)."""
+        values = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in _GROUPS}
+        for g in _GROUPS:
+            values.update(asdict(getattr(self, g)))
+        return {k: values[k] for k in FLAT_ORDER}
+
+    def __post_init__(self) -> None:
+        _check(self)
         if self.model not in MODELS:
             raise OptionsError(f"model must be one of {', '.join(MODELS)}, got {self.model!r}")
-        model = MODELS[self.model]
-        drive = model.drive
+        drive = MODELS[self.model].drive
         # Fill in the model's defaults so the truth JSON records every value used.
         object.__setattr__(self, "truth", {**drive.default_truth, **self.truth})
         object.__setattr__(self, "guess", {**drive.default_guess, **self.guess})
         object.__setattr__(self, "encoder_ranges", {**drive.default_ranges, **self.encoder_ranges})
-        if self.trajectory not in TRAJECTORIES:
-            raise OptionsError(
-                f"trajectory must be one of {', '.join(TRAJECTORIES)}, got {self.trajectory!r}"
-            )
-        unknown = sorted((set(self.truth) | set(self.guess)) - set(drive.default_truth))
-        if unknown:
-            raise OptionsError(f"unknown parameter(s) {unknown} for model {self.model!r}")
-        for name, value in self.truth.items():
-            lo, hi = model.physical_ranges[name]
-            reason = Range(lo, hi).problem(value)
-            if reason is not None:
-                raise OptionsError(f"truth.{name} {reason} (the model's plausible range)")
-        for name, value in self.guess.items():
-            if Range(-math.inf, math.inf, lo_open=True, hi_open=True).problem(value) is not None:
-                raise OptionsError(f"guess.{name} must be a finite number, got {value!r}")
-        unknown = sorted(set(self.encoder_ranges) - set(drive.default_ranges))
-        if unknown or not all(isinstance(v, int) and 0 < v <= 2**32 for v in self.encoder_ranges.values()):
-            raise OptionsError(
-                f"encoder_ranges takes whole numbers in [1, 2^32] for {', '.join(drive.default_ranges)}, "
-                f"got {dict(self.encoder_ranges)}"
-            )
-        if self.reversals not in REVERSALS:
-            raise OptionsError(f"reversals must be one of {', '.join(REVERSALS)}, got {self.reversals!r}")
-        if not set(self.counter_fault_kinds) <= set(COUNTER_FAULT_KINDS):
-            raise OptionsError(f"counter_fault_kinds must be among {', '.join(COUNTER_FAULT_KINDS)}")
+        _check_values(self)
+
+
+def flat_hints() -> dict[str, Any]:
+    """The type of every option, by its flat name (for reading a file of options)."""
+    hints = {k: v for k, v in typing.get_type_hints(SimulationOptions).items() if k not in _GROUPS}
+    for cls in _GROUPS.values():
+        hints.update(typing.get_type_hints(cls))
+    return {k: hints[k] for k in FLAT_ORDER}
+
+
+def _group_of(key: str) -> str | None:
+    """The group holding option ``key`` (None: the options' own); an unknown key is an error."""
+    for group, cls in _GROUPS.items():
+        if key in {f.name for f in fields(cls)}:
+            return group
+    if key in {f.name for f in fields(SimulationOptions)} and key not in _GROUPS:
+        return None
+    raise OptionsError(f"unknown simulation option {key!r}; the options are {', '.join(FLAT_ORDER)}")
+
+
+def _check_values(opts: SimulationOptions) -> None:
+    """The parameters and encoder ranges: known to the model, finite, plausible."""
+    model = MODELS[opts.model]
+    drive = model.drive
+    unknown = sorted((set(opts.truth) | set(opts.guess)) - set(drive.default_truth))
+    if unknown:
+        raise OptionsError(f"unknown parameter(s) {unknown} for model {opts.model!r}")
+    for name, value in opts.truth.items():
+        lo, hi = model.physical_ranges[name]
+        reason = Range(lo, hi).problem(value)
+        if reason is not None:
+            raise OptionsError(f"truth.{name} {reason} (the model's plausible range)")
+    for name, value in opts.guess.items():
+        if Range(-math.inf, math.inf, lo_open=True, hi_open=True).problem(value) is not None:
+            raise OptionsError(f"guess.{name} must be a finite number, got {value!r}")
+    unknown = sorted(set(opts.encoder_ranges) - set(drive.default_ranges))
+    if unknown or not all(isinstance(v, int) and 0 < v <= 2**32 for v in opts.encoder_ranges.values()):
+        raise OptionsError(
+            f"encoder_ranges takes whole numbers in [1, 2^32] for {', '.join(drive.default_ranges)}, "
+            f"got {dict(opts.encoder_ranges)}"
+        )
 
 
 class ProfileSettings(Protocol):

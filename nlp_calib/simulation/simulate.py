@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -84,7 +84,7 @@ def truth_document(
     the records whose tracker pose took in an outlier and how many records the log holds."""
     return {
         "params": dict(opts.truth),
-        "options": asdict(opts),
+        "options": opts.flat(),
         "faults": [f.as_dict() for f in faults],
         "tracker_outliers": list(outliers),
         "records": records,

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from nlp_calib.core.errors import OptionsError
-from nlp_calib.results.solver import IterationRecord, SolverResult
+from nlp_calib.results.solver import IterationRecord, SolverResult, SolverTrace
 from nlp_calib.solvers.evaluation import (
     NAN_START_REASON,
     SINGULAR_REASON,
@@ -236,9 +236,7 @@ def solve(
         chi2=ne.chi2,
         inliers=ne.inliers,
         n_residuals=evaluator.n_residuals,
-        iterations=iteration,
         converged=converged,
         reason=reason,
-        time_s=time.perf_counter() - t0,
-        history=tuple(state.history),
+        trace=SolverTrace(iteration, time.perf_counter() - t0, tuple(state.history)),
     )

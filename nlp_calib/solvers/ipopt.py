@@ -21,7 +21,7 @@ import numpy as np
 
 from nlp_calib.core import memory
 from nlp_calib.core.errors import OptionsError
-from nlp_calib.results.solver import IterationRecord, SolverResult
+from nlp_calib.results.solver import IterationRecord, SolverResult, SolverTrace
 from nlp_calib.solvers.evaluation import NAN_START_REASON, SINGULAR_REASON, ProblemEvaluator, is_singular
 from nlp_calib.solvers.nlp import NlpOracle
 
@@ -215,16 +215,18 @@ class Ipopt:
             chi2=ne.chi2,
             inliers=ne.inliers,
             n_residuals=ev.n_residuals,
-            iterations=int(stats.get("iter_count", len(history))),
             converged=converged,
             reason=reason,
-            time_s=elapsed,
-            history=history,
-            stats={
-                "return_status": status,
-                "build_time_s": self.build_time_s,
-                "formulation": "lifted" if self.lifted else "direct",
-            },
+            trace=SolverTrace(
+                iterations=int(stats.get("iter_count", len(history))),
+                time_s=elapsed,
+                history=history,
+                stats={
+                    "return_status": status,
+                    "build_time_s": self.build_time_s,
+                    "formulation": "lifted" if self.lifted else "direct",
+                },
+            ),
         )
 
     def _not_started(self, x0: np.ndarray, elapsed: float, error: str | None = None) -> SolverResult:
@@ -240,12 +242,14 @@ class Ipopt:
             chi2=ne.chi2,
             inliers=ne.inliers,
             n_residuals=self.evaluator.n_residuals,
-            iterations=0,
             converged=False,
             reason=NAN_START_REASON if error is None else f"IPOPT failed: {error}",
-            time_s=elapsed,
-            stats={
-                "return_status": "not run" if error is None else "error",
-                "build_time_s": self.build_time_s,
-            },
+            trace=SolverTrace(
+                iterations=0,
+                time_s=elapsed,
+                stats={
+                    "return_status": "not run" if error is None else "error",
+                    "build_time_s": self.build_time_s,
+                },
+            ),
         )
