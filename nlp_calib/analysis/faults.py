@@ -31,7 +31,8 @@ import numpy as np
 
 from nlp_calib.analysis.counters import screen_counters
 from nlp_calib.analysis.joint_repair import repair_joints
-from nlp_calib.analysis.readings import Readings, in_radians, interpolated_over, readings, turning
+from nlp_calib.analysis.readings import Readings, interpolated_over, readings, turning
+from nlp_calib.analysis.readings import unit as unit_of
 from nlp_calib.analysis.streams import off_neighbours, scatter, stuck_runs
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
@@ -201,13 +202,13 @@ def counter_faults(
     N = inputs.shape[1]
     counters = fns.model.counter_rows(log)
     if N == 0:
-        return FaultReport(faults=(), stale={}, noise_ticks={})
+        return FaultReport(faults=(), stale={}, noise={}, unit=unit_of(log))
     T = log.T_world_sensor
     z = over_columns(fns.between, T[:-1].T, T[1:].T)[0]
     e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
     de_du = de_du.reshape(3, N, inputs.shape[0])
     screens, lag_s = screen_counters(e, de_du, inputs, counters, log.time_s, lag)
-    lines, unit = log.line_numbers, "rad" if in_radians(log) else "ticks"
+    lines, unit = log.line_numbers, unit_of(log)
     faults = []
     for name, sc in screens.items():
         for f in sc.findings:
@@ -217,7 +218,7 @@ def counter_faults(
             faults.append(_fault(log, f.kind, name, (f.first, k), k + 1, (f.logged, f.implied, f.noise), why))
     stale = {n: sc.stale for n, sc in screens.items()}
     noise = {n: sc.noise for n, sc in screens.items()}
-    return FaultReport(tuple(faults), stale, noise, lag_s=lag_s)
+    return FaultReport(tuple(faults), stale, noise, lag_s=lag_s, unit=unit)
 
 
 #: Fits the model leaving out the windows the masks (per interval, per record) spoil; its
@@ -233,7 +234,7 @@ def screen(
     with them interpolated over, at the tracker ``lag`` (s, or a range to estimate it in)."""
     model, n = fns.model, log.n_records
     glitches = tuple(tracker_faults(log) + absolute_faults(log, model.encoder_kinds))
-    report = FaultReport(glitches, {}, {})
+    report = FaultReport(glitches, {}, {}, unit=unit_of(log))
     params = judge(report.bad_intervals(n - 1), report.bad_records(n))
     if params is None:
         # Judged by a wrong model every interval looks faulty; the solvers will say why.
@@ -256,7 +257,7 @@ def repair(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]:
     radians have no counter width: their counters take the tracker-implied amount
     (:mod:`nlp_calib.analysis.joint_repair`).
     """
-    fixed, changes = repair_joints(log, report) if in_radians(log) else _repair_counts(log, report)
+    fixed, changes = repair_joints(log, report) if unit_of(log) == "rad" else _repair_counts(log, report)
     absolute = [f for f in report.faults if f.kind in ABSOLUTE_KINDS]
     for f in absolute:
         what = "spike" if f.kind == "steering_spike" else "stuck readings"

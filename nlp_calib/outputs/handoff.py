@@ -147,9 +147,11 @@ def _xml(element: ET.Element, comment: str) -> str:
 def urdf_joint(run: CalibrationRun, solver: str) -> str:
     """A URDF ``<joint>`` placing the sensor frame on ``base_link`` with ``solver``'s estimate."""
     frame = run.log.sensor_frame
+    nominal = "the nominal mount's (/tf_static)" if run.log.sensor_z_roll_pitch else "0 (not known)"
     comment = (
         f" Sensor mounting pose calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
-        f"solver {solver}. Paste this joint into the robot's <robot> description; the link "
+        f"solver {solver}. Calibrated: x, y and yaw; z, roll and pitch are {nominal}, which planar "
+        f"driving cannot see. Paste this joint into the robot's <robot> description; the link "
         f"'{frame}' must be declared there. "
     )
     return _xml(_joint(run, solver), comment)

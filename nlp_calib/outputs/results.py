@@ -30,11 +30,11 @@ def _faults_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "handling": findings.handling,
         "checked": not rep.unchecked,
         "unchecked_reason": rep.unchecked or None,
-        "found": [f.as_dict() for f in rep.faults],
+        "found": [f.as_dict(rep.unit) for f in rep.faults],
         "windows_left_out": run.data.dropped_faulty,
         "repairs": list(findings.repairs),
         "stale_readings": dict(rep.stale),
-        "noise_ticks": dict(rep.noise_ticks),
+        f"noise_{rep.unit}": dict(rep.noise),
     }
 
 

@@ -40,7 +40,8 @@ class Fault:
     noise: float
     evidence: str
 
-    def as_dict(self) -> dict[str, object]:
+    def as_dict(self, unit: str = "ticks") -> dict[str, object]:
+        """The fault as JSON types; an encoder's sizes in ``unit`` (``ticks``; ``rad`` for joints)."""
         where = {
             "kind": self.kind,
             "encoder": self.encoder,
@@ -52,7 +53,11 @@ class Fault:
         if self.kind in TRACKER_KINDS:
             size = {"offset_m": self.implied, "noise_m": self.noise}
         else:
-            size = {"logged_ticks": self.logged, "implied_ticks": self.implied, "noise_ticks": self.noise}
+            size = {
+                f"logged_{unit}": self.logged,
+                f"implied_{unit}": self.implied,
+                f"noise_{unit}": self.noise,
+            }
         return {**where, **size, "evidence": self.evidence}
 
 
@@ -71,10 +76,13 @@ class FaultReport:
 
     faults: tuple[Fault, ...]
     stale: Mapping[str, int]
-    noise_ticks: Mapping[str, float]
+    noise: Mapping[str, float]
     #: Why the log's counters could not be checked ("" when they were).
     unchecked: str = ""
     lag_s: float | None = None
+    #: What the encoders' sizes and ``noise`` (each counter's 1σ per interval) are in: ``ticks``,
+    #: or ``rad`` for joints in radians.
+    unit: str = "ticks"
 
     def shifted(self, offset: int, line_numbers: np.ndarray) -> FaultReport:
         """The same findings with record and interval indices moved by ``offset``; ``line_numbers``
