@@ -130,8 +130,15 @@ def _uncertainty_section(run: CalibrationRun) -> list[str]:
         cells = [fmt_std(white[n]), fmt_std(blocked[n]), _cell(ratio, ".1f"), fmt_std(spread)]
         out.append(f"| `{n}` | " + " | ".join(cells) + " |")
     labels = ("segment ATE mean [m]", "RPE over 1 m [m]")
-    held = "; ".join(f"{label} {cv.heldout_mean(label):.4f}" for label in labels)
-    out += ["", f"Each block scored by the fit without it (mean over the blocks): {held}."]
+    held = "; ".join(
+        f"{label} {cv.heldout_mean(label):.4f} (the full fit: {cv.insample_mean(label):.4f})"
+        for label in labels
+    )
+    out += [
+        "",
+        f"Each block scored by the fit without it, beside the full fit on the same block (mean over "
+        f"the blocks): {held}.",
+    ]
     d = run.checks.direction
     if d is not None and not d.compared:
         out += ["", f"Fits on forward-only and reverse-only driving {d.words()}."]
@@ -142,8 +149,12 @@ def _uncertainty_section(run: CalibrationRun) -> list[str]:
             "",
             f"Fits on forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]}) driving "
             f"{verdict}: the largest difference is `{name}`, {abs(z):.1f}σ of the difference (each part's "
-            "σ is the whole fit's, scaled by the square root of the whole's windows over the part's).",
+            "σ is the jackknife σ of blocks of that part alone).",
         ]
+    t = run.checks.truth
+    if t is not None:
+        cells = ", ".join(f"`{n}` {z:+.1f}σ" for n, z in zip(t.names, t.z) if np.isfinite(z))
+        out += ["", f"Against the simulator's truth (`{t.path}`, {t.solver}): {t.words()}: {cells}."]
     return [*out, ""]
 
 

@@ -42,19 +42,21 @@ def _crossval_dict(run: CalibrationRun) -> dict[str, Any] | None:
     cv = run.checks.crossval
     if cv is None:
         return None
+    first = cv.folds[0].heldout if cv.folds else None
+    labels = [label for label, _ in first.figures()[:4]] if first is not None else []
     return {
         "blocks": len(cv.folds),
         "std_blocks": run.std_blocks(),
         "spread": dict(zip(cv.names, map(float, cv.spread()))),
-        "heldout": {label: cv.heldout_mean(label) for label, _ in cv.folds[0].heldout.figures()[:4]}
-        if cv.folds and cv.folds[0].heldout is not None
-        else {},
+        "heldout": {label: cv.heldout_mean(label) for label in labels},
+        "insample": {label: cv.insample_mean(label) for label in labels},
         "folds": [
             {
                 "records": [f.first, f.stop],
                 "converged": f.converged,
                 "params": dict(zip(cv.names, map(float, f.params))),
                 "heldout": f.heldout.as_dict() if f.heldout is not None else None,
+                "insample": f.insample.as_dict() if f.insample is not None else None,
             }
             for f in cv.folds
         ],
@@ -113,10 +115,24 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         "solvers": {name: _solver_dict(run, name, rep) for name, rep in run.reports.items()},
         "crossvalidation": _crossval_dict(run),
         "direction": checks.direction.as_dict() if checks.direction is not None else None,
+        "truth": _truth_dict(run),
         "faults": _faults_dict(run),
         "observability": checks.observability.as_dict() if checks.observability is not None else None,
         "warnings": list(run.warnings),
         "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
+    }
+
+
+def _truth_dict(run: CalibrationRun) -> dict[str, Any] | None:
+    t = run.checks.truth
+    if t is None:
+        return None
+    return {
+        "file": t.path,
+        "solver": t.solver,
+        "truth": dict(zip(t.names, map(float, t.truth))),
+        "error": dict(zip(t.names, map(float, t.error))),
+        "error_in_sigma": dict(zip(t.names, map(float, t.z))),
     }
 
 

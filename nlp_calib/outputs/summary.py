@@ -54,7 +54,11 @@ def _accuracy_line(run: CalibrationRun, solver: str) -> str:
         )
     cv = run.checks.crossval
     if cv is not None and cv.available:
-        text += f"; cross-validated segment ATE {cv.heldout_mean('segment ATE mean [m]'):.3g} m"
+        ate = "segment ATE mean [m]"
+        text += (
+            f"; over the same {len(cv.folds)} blocks, segment ATE {cv.heldout_mean(ate):.3g} m held out "
+            f"vs {cv.insample_mean(ate):.3g} m in-sample"
+        )
     return text
 
 

@@ -54,11 +54,11 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
         f"1σ: the larger of the white-noise σ and the σ of {len(cv.converged)} fits each without one block "
         f"of records (jackknife); the block σ is {lo:.1f}–{hi:.1f}× the white-noise σ" + verdict
     ]
-    held = {label: cv.heldout_mean(label) for label in ("segment ATE mean [m]", "RPE over 1 m [m]")}
+    ate, rpe = "segment ATE mean [m]", "RPE over 1 m [m]"
     lines.append(
-        f"cross-validation over {len(cv.folds)} blocks: held-out segment ATE "
-        f"{held['segment ATE mean [m]']:.3f} m, RPE over 1 m {held['RPE over 1 m [m]']:.3f} m "
-        "(each block scored by the fit without it)"
+        f"cross-validation over {len(cv.folds)} blocks: held-out segment ATE {cv.heldout_mean(ate):.3f} m "
+        f"(in-sample {cv.insample_mean(ate):.3f} m), RPE over 1 m {cv.heldout_mean(rpe):.3f} m (in-sample "
+        f"{cv.insample_mean(rpe):.3f} m): each block scored by the fit without it, and by the full fit"
     )
     return lines
 
@@ -70,6 +70,15 @@ def direction_lines(run: CalibrationRun) -> list[str]:
         return []
     counts = f"forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]})"
     return [f"direction: fits on {counts} driving {d.words()}"]
+
+
+def truth_lines(run: CalibrationRun) -> list[str]:
+    """A simulated log's truth against the estimate, each parameter's error in its σ."""
+    t = run.checks.truth
+    if t is None:
+        return []
+    cells = ", ".join(f"{n} {z:+.1f}σ" for n, z in zip(t.names, t.z) if np.isfinite(z))
+    return [f"against the simulator's truth ({t.path}), {t.solver}: {t.words()}", f"  {cells}"]
 
 
 #: Faults listed one per line; the rest are counted.
@@ -218,6 +227,7 @@ def _check_lines(run: CalibrationRun, solvers: list[str]) -> list[str]:
     if faults:
         lines += ["", *faults]
     lines += direction_lines(run)
+    lines += truth_lines(run)
     obs = run.checks.observability
     if obs is not None:
         lines.append("")

@@ -18,6 +18,7 @@ from nlp_calib.pipeline.align import Alignment, lag_at_edge
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis
 from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.pipeline.truth import against_truth
 from nlp_calib.pipeline.windows import LogWindows
 from nlp_calib.results import (
     CalibrationRun,
@@ -160,4 +161,6 @@ def assemble_run(
         if isinstance(source, BagSource)
         else ""
     )
+    checks = dataclasses.replace(run.checks, truth=against_truth(run))
+    run = dataclasses.replace(run, checks=checks)
     return dataclasses.replace(run, verdict=verdict(run, prepared.model, hint))

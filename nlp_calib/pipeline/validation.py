@@ -93,8 +93,10 @@ def cross_validate(
     k: int,
     canonical: Canonical,
     score: Score,
+    full: np.ndarray,
 ) -> CrossValidation:
-    """``k`` folds over the records ``fit``, each scored on its block by ``score(params, a, b)``."""
+    """``k`` folds over the records ``fit``, each scored on its block by ``score(params, a, b)``,
+    beside the full fit's parameters ``full`` scored on the same block."""
 
     def fold(block: tuple[int, int]) -> Fold:
         a, b = block
@@ -104,7 +106,7 @@ def cross_validate(
         if not n:
             return Fold(a, b, params, False, None)
         params = canonical(params)
-        return Fold(a, b, params, converged, score(params, a, b))
+        return Fold(a, b, params, converged, score(params, a, b), score(full, a, b))
 
     return combine(binder.fns.names, on_threads(fold, blocks(*fit, k)))
 

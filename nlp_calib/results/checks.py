@@ -18,13 +18,16 @@ MIN_FOLDS = 5
 
 @dataclass(frozen=True)
 class Fold:
-    """One fold: the held-out records ``[first, stop)``, the estimate without them and its scores."""
+    """One fold: the held-out records ``[first, stop)``, the estimate without them and its scores
+    on them (``heldout``), and the full fit's scores on the same records (``insample``: the same
+    figure, the block's own data in the fit), so that the two read side by side."""
 
     first: int
     stop: int
     params: np.ndarray
     converged: bool
     heldout: TrajectoryMetrics | None
+    insample: TrajectoryMetrics | None = None
 
 
 @dataclass(frozen=True)
@@ -53,11 +56,19 @@ class CrossValidation:
 
     def heldout_mean(self, figure: str) -> float:
         """The mean of one held-out figure over the folds, weighted by the records each scores."""
+        return self._mean(figure, "heldout")
+
+    def insample_mean(self, figure: str) -> float:
+        """The same mean of the full fit's scores on the same blocks (:meth:`heldout_mean`'s pair)."""
+        return self._mean(figure, "insample")
+
+    def _mean(self, figure: str, which: str) -> float:
         values, weights = [], []
         for f in self.converged:
-            if f.heldout is not None:
-                values.append(dict(f.heldout.figures())[figure])
-                weights.append(f.heldout.records)
+            m = getattr(f, which)
+            if m is not None and f.heldout is not None:
+                values.append(dict(m.figures())[figure])
+                weights.append(m.records)
         ok = np.isfinite(values)
         return (
             float(np.average(np.array(values)[ok], weights=np.array(weights)[ok]))
@@ -286,3 +297,32 @@ class ConsistencyCheck:
             },
             "significant": self.significant,
         }
+
+
+#: Beyond this many σ from the simulator's truth, an estimate is called off in the words.
+TRUTH_SIGMAS = 3.0
+
+
+@dataclass(frozen=True)
+class TruthCheck:
+    """The estimate against a simulated log's known truth (the truth file beside the log):
+    ``error`` = estimate − truth and ``z`` = that in the σ to believe, per parameter; held
+    parameters (no σ) have a ``z`` of nan."""
+
+    path: str
+    solver: str
+    names: tuple[str, ...]
+    truth: np.ndarray
+    error: np.ndarray
+    z: np.ndarray
+
+    def words(self) -> str:
+        """``"estimate − truth within 1.3σ (largest: <name> +1.3σ)"``, or which are off."""
+        z = np.where(np.isfinite(self.z), self.z, 0.0)
+        if not np.any(np.isfinite(self.z)):
+            return "estimate − truth could not be put in σ (no parameter has one)"
+        k = int(np.argmax(np.abs(z)))
+        off = [f"{n} {v:+.1f}σ" for n, v in zip(self.names, z) if abs(v) > TRUTH_SIGMAS]
+        if off:
+            return f"estimate − truth beyond {TRUTH_SIGMAS:g}σ for {', '.join(off)}"
+        return f"estimate − truth within {abs(z[k]):.1f}σ (largest: {self.names[k]} {z[k]:+.1f}σ)"

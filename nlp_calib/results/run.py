@@ -24,6 +24,7 @@ from nlp_calib.results.checks import (
     DirectionCheck,
     LagEstimate,
     Observability,
+    TruthCheck,
     believed_std,
 )
 from nlp_calib.results.faults import Findings
@@ -121,6 +122,8 @@ class Checks:
     findings: Findings | None
     consistency: ConsistencyCheck | None = None
     drift: DriftCheck | None = None
+    #: The estimate against the known truth of a simulated log (a truth file beside it).
+    truth: TruthCheck | None = None
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,52 @@
+"""A simulated log's known truth beside it: the estimate against it, in the σ to believe.
+
+``nlp-calib simulate`` writes ``<log>.truth.json`` beside every log it makes; a run on such a log
+says how far its estimate is from the truth, in σ, so that the demo shows what the σ mean.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from nlp_calib.core.errors import NlpCalibWarning
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.checks import TruthCheck
+from nlp_calib.simulation import truth_path
+
+
+def read_truth(log_path: Path) -> dict[str, float] | None:
+    """The true parameters in the truth file beside ``log_path``; None when there is none (a
+    file that is not one the simulator wrote is said in a warning and left alone)."""
+    path = truth_path(log_path)
+    if not path.is_file():
+        return None
+    try:
+        params = json.loads(path.read_text(encoding="utf-8"))["params"]
+        return {str(k): float(v) for k, v in params.items()}
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError):
+        warnings.warn(
+            f"{path}: not a truth file nlp-calib simulate wrote (no 'params' mapping of numbers); "
+            "the estimate is not compared with it",
+            NlpCalibWarning,
+            stacklevel=2,
+        )
+        return None
+
+
+def against_truth(run: CalibrationRun) -> TruthCheck | None:
+    """The chosen solver's estimate against the truth beside the run's log, if there is one."""
+    solver = run.chosen_solver()
+    truth = read_truth(Path(run.log.path)) if solver is not None else None
+    if solver is None or truth is None:
+        return None
+    result = run.reports[solver].result
+    std = run.std(solver)
+    true = np.array([truth.get(n, np.nan) for n in result.names])
+    sigma = np.array([std.get(n, 0.0) for n in result.names])
+    error = result.params - true
+    z = np.where(sigma > 0, error / np.where(sigma > 0, sigma, 1.0), np.nan)
+    return TruthCheck(str(truth_path(Path(run.log.path))), solver, result.names, true, error, z)
