@@ -112,6 +112,20 @@ def _scores(
     m: np.ndarray,
     excursion: np.ndarray | float,
 ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_scored`, where a stream without scatter (a noise-free simulation) has no scale to
+    judge a miss by: its scores are nan, and nan is never off the path."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return _scored(t, y, sc, outside, m, excursion)
+
+
+def _scored(
+    t: np.ndarray,
+    y: np.ndarray,
+    sc: Scatter,
+    outside: tuple[np.ndarray, ...],
+    m: np.ndarray,
+    excursion: np.ndarray | float,
+) -> tuple[np.ndarray, np.ndarray]:
     """Scores of groups of records ``m`` ``(P, g)``, each between the outside records ``(l2, l1,
     r1, r2)`` ``(P,)`` (see the module docstring), and each group's largest chord miss ``(P, d)``."""
     l2, l1, r1, r2 = outside
