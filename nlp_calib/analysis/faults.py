@@ -100,51 +100,80 @@ def tracker_faults(log: Log) -> list[Fault]:
     return found
 
 
-def _stuck(log: Log, r: Readings, moving: np.ndarray | None) -> list[Fault]:
-    """An absolute encoder's readings that held while the robot moved, then caught up at once."""
-    name, lines, t, y = r.name, log.line_numbers, log.time_s, r.values
+def _messages(log: Log, r: Readings, lo: int, hi: int) -> str:
+    """Where a joint stream's glitch lands: the records (and lines) its messages reach."""
+    lines = log.line_numbers
+    span = f"record {lo}" if hi - lo == 1 else f"records {lo}-{hi - 1}"
+    return (
+        f"{span} (line{'' if hi - lo == 1 else 's'} {lines[lo]}{'' if hi - lo == 1 else f'-{lines[hi - 1]}'})"
+    )
+
+
+def _stuck(log: Log, r: Readings, moving: np.ndarray | None) -> tuple[list[Fault], np.ndarray]:
+    """An absolute encoder's readings that held while the robot moved, then caught up at once;
+    and which readings are left to judge for spikes."""
+    name, lines, t, y = r.name, log.line_numbers, r.t, r.values
+    usable = np.ones(y.size, dtype=bool)
     found = []
     for first, last, jump in stuck_runs(t, y, STUCK_FLOOR_STEPS * r.step, moving):
+        usable[first + 1 : last + 1] = False
+        lo, hi = r.records_of(first + 1, last)
+        if hi <= lo:
+            continue  # between two records: no record read it
+        if r.records is None:
+            evidence = (
+                f"{name!r} holds {r.shown(y[first])} over records {first}-{last} (lines "
+                f"{lines[first]}-{lines[last]}) while the robot moves, then jumps by "
+                f"{r.shown(jump, True)} at record {last + 1}: the reading was stuck"
+            )
+        else:
+            evidence = (
+                f"{name!r} holds {r.shown(y[first])} over {last - first + 1} messages from {t[first]:.3f} s "
+                f"while the robot moves, then jumps by {r.shown(jump, True)}: the reading was stuck "
+                f"({_messages(log, r, lo, hi)})"
+            )
         k = first + 1
-        evidence = (
-            f"{name!r} holds {r.shown(y[first])} over records {first}-{last} (lines "
-            f"{lines[first]}-{lines[last]}) while the robot moves, then jumps by {r.shown(jump, True)} "
-            f"at record {last + 1}: the reading was stuck"
-        )
         implied = y[first] + jump * (t[k] - t[first]) / max(t[last + 1] - t[first], 1e-9)
         size = (float(y[k]), float(implied), r.step)
-        found.append(_fault(log, "steering_stuck", name, (first, last), k, size, evidence))
-    return found
+        found.append(_fault(log, "steering_stuck", name, (lo - 1, hi - 1), lo, size, evidence))
+    return found, usable
 
 
 def _spikes(log: Log, r: Readings, usable: np.ndarray) -> list[Fault]:
-    """An absolute encoder's readings that leave the span of their neighbours for one record."""
-    lines, t, y = log.line_numbers, log.time_s, r.values
+    """An absolute encoder's readings that leave the span of their neighbours for one reading."""
+    lines, t, y = log.line_numbers, r.t, r.values
     sc = scatter(t, y, r.step)
     found = []
     for g in off_neighbours(t, y, sc, usable, excursion=SPIKE_MIN_ANGLE * r.per_radian, max_group=1):
         k, off = g.first, float(g.offset[0])
-        evidence = (
-            f"{r.name!r} reads {r.shown(y[k])} at record {k} (line {lines[k]}), {r.shown(off, True)} off "
-            "the line between its neighbours, which agree with each other: a one-record spike"
-        )
+        lo, hi = r.records_of(k, k)
+        if hi <= lo:
+            continue
+        if r.records is None:
+            evidence = (
+                f"{r.name!r} reads {r.shown(y[k])} at record {k} (line {lines[k]}), {r.shown(off, True)} "
+                "off the line between its neighbours, which agree with each other: a one-record spike"
+            )
+        else:
+            evidence = (
+                f"{r.name!r} reads {r.shown(y[k])} in its message at {t[k]:.3f} s, {r.shown(off, True)} "
+                "off the line between its neighbours, which agree with each other: a one-message spike "
+                f"({_messages(log, r, lo, hi)})"
+            )
         size = (float(y[k]), float(y[k] - off), float(sc.floor[0]))
-        found.append(_fault(log, "steering_spike", r.name, (k - 1, k), k, size, evidence))
+        found.append(_fault(log, "steering_spike", r.name, (lo - 1, hi - 1), lo, size, evidence))
     return found
 
 
 def absolute_faults(log: Log, kinds: Mapping[str, EncoderKind]) -> list[Fault]:
-    """Stuck readings (judged while the robot moves: a counter's increment) and one-record spikes
-    of the log's absolute encoders."""
+    """Stuck readings (judged while the robot moves: a counter's increment) and one-reading spikes
+    of the log's absolute encoders (a joint in radians: on its own stream)."""
     names = log.header.encoder_names
     moving = turning(log, [n for n in names if kinds.get(n) == "counter"])
     found = []
     for name in (n for n in names if kinds.get(n) == "absolute"):
         r = readings(log, name)
-        stuck = _stuck(log, r, moving)
-        usable = np.ones(log.n_records, dtype=bool)
-        for f in stuck:
-            usable[f.record : f.last + 1] = False
+        stuck, usable = _stuck(log, r, moving)
         found += stuck + _spikes(log, r, usable)
     return found
 
@@ -159,7 +188,7 @@ def cleaned(log: Log, faults: Sequence[Fault]) -> Log:
             bad_pose[f.record] = True
         elif f.kind in ABSOLUTE_KINDS and f.encoder is not None:
             bad = np.zeros(log.n_records, dtype=bool)
-            bad[f.record : (f.last + 1 if f.kind == "steering_stuck" else f.record + 1)] = True
+            bad[f.first + 1 : f.last + 1] = True
             out = interpolated_over(out, f.encoder, bad)
     if not bad_pose.any() or (~bad_pose).sum() < 2:
         return out

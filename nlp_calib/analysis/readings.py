@@ -4,6 +4,9 @@
 The screens judge a stream by its own history, so they need its readings, their smallest step and
 how many readings make a radian; this module gives those for either kind of log, and writes
 interpolated readings back where a glitch was, without the screens knowing which kind they read.
+A joint in radians is judged on its own stream, as published (interpolated at the tracker's
+stamps, one bad message would be spread over the records around it): a glitch found there is
+placed on the records whose positions it reaches (:meth:`Readings.records_of`).
 """
 
 from __future__ import annotations
@@ -23,15 +26,29 @@ MIN_JOINT_STEP = 1e-4
 
 @dataclass(frozen=True)
 class Readings:
-    """Encoder ``name``'s readings ``values`` (an absolute encoder's unwrapped across its range), in
-    ``unit``; ``per_radian`` readings make one radian of an absolute encoder and ``step`` is the
-    smallest change a reading shows (1 tick; a joint's resolution)."""
+    """Encoder ``name``'s readings ``values`` at times ``t`` (an absolute encoder's unwrapped
+    across its range), in ``unit``; ``per_radian`` readings make one radian of an absolute encoder
+    and ``step`` is the smallest change a reading shows (1 tick; a joint's resolution). ``records``
+    (the log's record times) is None when the readings are the records themselves."""
 
     name: str
     unit: str
+    t: np.ndarray
     values: np.ndarray
     per_radian: float
     step: float
+    records: np.ndarray | None = None
+
+    def records_of(self, a: int, b: int) -> tuple[int, int]:
+        """The records ``[lo, hi)`` whose values readings ``a..b`` reach: themselves, or for a
+        stream the records stamped strictly between the readings around them (may be empty)."""
+        if self.records is None:
+            return a, b + 1
+        t = self.t
+        before = t[a - 1] if a > 0 else -np.inf
+        after = t[b + 1] if b + 1 < t.size else np.inf
+        lo = int(np.searchsorted(self.records, before, side="right"))
+        return lo, max(int(np.searchsorted(self.records, after, side="left")), lo)
 
     def shown(self, value: float, signed: bool = False) -> str:
         """``value`` as the log writes it: whole ticks, or radians to four significant digits."""
@@ -50,20 +67,26 @@ def unit(log: Log) -> str:
 def readings(log: Log, name: str) -> Readings:
     """Encoder ``name``'s readings; an absolute encoder's counts are unwrapped across their range."""
     col = log.header.encoder_index(name)
+    stream = log.joint_stream
+    if stream is not None:
+        step = max(stream.resolution[col], MIN_JOINT_STEP)
+        return Readings(name, "rad", stream.time_s, stream.positions[:, col], 1.0, step, log.time_s)
     if log.joint_positions is not None:
-        stream = log.joint_stream
-        resolution = stream.resolution[col] if stream is not None else 0.0
-        return Readings(name, "rad", log.joint_positions[:, col], 1.0, max(resolution, MIN_JOINT_STEP))
+        return Readings(name, "rad", log.time_s, log.joint_positions[:, col], 1.0, MIN_JOINT_STEP)
     vmax = log.header.encoder_max[col]
     per_radian = vmax / (2.0 * np.pi)
     values = np.unwrap(log.ticks[:, col] / per_radian) * per_radian
-    return Readings(name, "ticks", values, per_radian, 1.0)
+    return Readings(name, "ticks", log.time_s, values, per_radian, 1.0)
 
 
 def turning(log: Log, names: list[str]) -> np.ndarray | None:
-    """Per interval, whether any of the counters ``names`` changed (None: no counter)."""
+    """Per interval of the readings' axis (see :func:`readings`: a joint stream's messages, else
+    the records), whether any of the counters ``names`` changed (None: no counter)."""
     if not names:
         return None
+    if log.joint_stream is not None:
+        cols = [log.header.encoder_index(n) for n in names]
+        return np.any(np.diff(log.joint_stream.positions[:, cols], axis=0) != 0, axis=1)
     if log.joint_positions is not None:
         cols = [log.header.encoder_index(n) for n in names]
         return np.any(np.diff(log.joint_positions[:, cols], axis=0) != 0, axis=1)
@@ -74,7 +97,8 @@ def interpolated_over(log: Log, name: str, bad: np.ndarray) -> Log:
     """``log`` with absolute encoder ``name``'s readings at the records ``bad`` interpolated in time
     from the others (for joints in radians, in the joints' own stream too, so that re-sampling at
     a tracker lag keeps the change)."""
-    t, y, col = log.time_s, readings(log, name).values, log.header.encoder_index(name)
+    t, col = log.time_s, log.header.encoder_index(name)
+    y = log.joint_positions[:, col] if log.joint_positions is not None else readings(log, name).values
     fixed = np.interp(t[bad], t[~bad], y[~bad])
     if log.joint_positions is None:
         vmax = log.header.encoder_max[col]

@@ -153,8 +153,8 @@ def _uncertainty_section(run: CalibrationRun) -> list[str]:
         ]
     t = run.checks.truth
     if t is not None:
-        cells = ", ".join(f"`{n}` {z:+.1f}σ" for n, z in zip(t.names, t.z) if np.isfinite(z))
-        out += ["", f"Against the simulator's truth (`{t.path}`, {t.solver}): {t.words()}: {cells}."]
+        shown = ", ".join(f"`{n}` {z:+.1f}σ" for n, z in zip(t.names, t.z) if np.isfinite(z))
+        out += ["", f"Against the simulator's truth (`{t.path}`, {t.solver}): {t.words()}: {shown}."]
     return [*out, ""]
 
 
