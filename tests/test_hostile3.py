@@ -9,7 +9,7 @@ says what must be refused, dropped with a count, or read exactly, and checks it)
 error": an error is one line that names the file (or the key in it) and says what to do.
 
 The parts that belong to the pipeline (one log is one log, per-log folders, a mirrored fit) are
-the ``xfail`` tests at the end: they fail today and pass once the pipeline does what they ask.
+the tests at the end.
 """
 
 from __future__ import annotations
