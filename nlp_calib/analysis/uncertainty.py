@@ -30,13 +30,14 @@ timing error or slowly varying model error), and the problem is close to linear 
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass
 
 import numpy as np
 
 from nlp_calib.models import reference_scales
-from nlp_calib.problem import ResidualData
+from nlp_calib.problem import ProblemFunctions, ResidualData
 from nlp_calib.results.uncertainty import Uncertainty
-from nlp_calib.solvers import ProblemEvaluator
+from nlp_calib.solvers import ProblemEvaluator, Sensitivities
 
 #: The per-residual Functions the estimate evaluates, per residual (not summed).
 FUNCTIONS = ("robust_terms", "sensitivities")
@@ -128,64 +129,26 @@ def estimate(
     ne = evaluator.normal_equations(x)
     if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
         return not_available(evaluator)
-    n, N, n_in = fns.n_free, evaluator.n_residuals, fns.n_inputs
     e, s, weight = evaluator.robust_terms(x)
     blocks = evaluator.sensitivities(x)
     first = next(blocks)
-    blocks = itertools.chain([first], blocks)
-    m = first[1].de_dend.shape[2]
-    n_int = data.inputs.shape[1]
-    poses = data.T_world_sensor
-    a_idx, b_idx = data.starts, data.stops
-    distinct = bool(np.all(np.diff(a_idx) > 0) and np.all(np.diff(b_idx) > 0))
-    Omega, groups = evaluator.omega, fns.sensor.noise_groups
     # Input noise is known (encoder resolution, or set by the user); the tracker's two variances
     # follow from the squared residuals by the method of moments, on inliers only. Estimating the
     # input noise the same way is ill-posed: its share of the residuals is small, its effect on the
     # parameters is not (it does not telescope), so residual noise would masquerade as it.
     Sigma_in = np.asarray(input_noise_std, dtype=float) ** 2
+    n_int, n_in = data.inputs.shape[1], fns.n_inputs
     D = first[1].D if first[1].D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
-    # Running sums over the intervals of Σ_j D_j Σ_u D_jᵀ: the input noise a window's end collects.
-    running = np.zeros((n_int + 1, m, m))
-    for lo in range(0, n_int, STEP):
-        hi = min(n_int, lo + STEP)
-        Dj = D[lo:hi]
-        part = (Dj * Sigma_in) @ Dj.transpose(0, 2, 1)
-        running[lo + 1 : hi + 1] = np.cumsum(part, axis=0) + running[lo]
-    use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(N, dtype=bool)
-    gram, proj, yy = np.zeros((len(groups), len(groups))), np.zeros(len(groups)), 0.0
-    K = np.zeros((poses.shape[0], n, sum(len(g) for g in groups)))
-    # Σ over the windows containing interval j of L_w ∂e_w/∂end: +at the first interval, −after the last.
-    C = np.zeros((n_int + 1, n, m))
-    outliers = np.zeros((n, n))
-    for w, sens in blocks:
-        a, b = a_idx[w], b_idx[w]
-        Ea, Eb = sens.de_dz @ sens.dz_da, sens.de_dz @ sens.dz_db  # (., error rows, pose noise)
-        known = ((sens.de_dend @ (running[b] - running[a])) * sens.de_dend).sum(axis=2)
-        E2 = Ea**2 + Eb**2  # per residual component c, pose component k
-        coef = np.stack([E2[:, :, list(g)].sum(axis=2) for g in groups], axis=2)  # (., rows, groups)
-        u = use[w]
-        A, y = coef[u].reshape(-1, len(groups)), (e[:, w].T[u] ** 2 - known[u]).ravel()
-        gram, proj, yy = gram + A.T @ A, proj + A.T @ y, yy + float(y @ y)
-        L = weight[w, None, None] * sens.J.transpose(0, 2, 1) * Omega[None, None, :]  # (., n, rows)
-        _add(K, a, L @ Ea, distinct)
-        _add(K, b, L @ Eb, distinct)
-        G = L @ sens.de_dend
-        _add(C, a, G, distinct)
-        _add(C, b, -G, distinct)
-        # Residuals beyond the kernel threshold are not explained by the noise model; their bounded
-        # but non-zero pull is counted as it is, from their own scores.
-        score = np.einsum("wic,cw->wi", L[~u], e[:, w][:, ~u])
-        outliers += score.T @ score
+    use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(s.size, dtype=bool)
+    sums = _Sums.zero(fns, data, first[1].de_dend.shape[2])
+    residuals = _Residuals(e=e, weight=weight, use=use, Omega=evaluator.omega)
+    running = _input_noise_at_ends(D, Sigma_in, sums.C.shape[2])
+    for w, sens in itertools.chain([first], blocks):
+        sums.add(w, sens, residuals, running)
     mm = fns.error_rows * int(use.sum())
-    dof = max(mm - n, 1)
-    var = nnls_gram(gram, proj, yy) * (mm / dof)
-    Sigma_pose = np.concatenate([np.full(len(g), v) for g, v in zip(groups, var)])
-    meat = _weighted_gram(K, Sigma_pose) + outliers
-    np.cumsum(C, axis=0, out=C)
-    for lo in range(0, n_int, STEP):
-        Q = C[lo : min(n_int, lo + STEP)] @ D[lo : lo + STEP]  # (., n, n_in)
-        meat += _weighted_gram(Q, Sigma_in)
+    dof = max(mm - fns.n_free, 1)
+    var = nnls_gram(sums.gram, sums.proj, sums.yy) * (mm / dof)
+    meat = sums.meat(var, D, Sigma_in)
     if evaluator.priors.active:
         meat = meat + evaluator.prior_information(x)
     free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[
@@ -198,6 +161,107 @@ def estimate(
     lost = np.abs(M) @ undetermined > 0
     cov[lost, :] = np.inf
     cov[:, lost] = np.inf
+    noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
+    noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
+    return _packaged(fns, cov, noise, dof)
+
+
+def _input_noise_at_ends(D: np.ndarray, Sigma_in: np.ndarray, m: int) -> np.ndarray:
+    """Running sums over the intervals of ``Σ_j D_j Σ_u D_jᵀ``: the input noise a window's end
+    collects, ``(n_intervals + 1, m, m)``."""
+    n_int = D.shape[0]
+    running = np.zeros((n_int + 1, m, m))
+    for lo in range(0, n_int, STEP):
+        hi = min(n_int, lo + STEP)
+        Dj = D[lo:hi]
+        part = (Dj * Sigma_in) @ Dj.transpose(0, 2, 1)
+        running[lo + 1 : hi + 1] = np.cumsum(part, axis=0) + running[lo]
+    return running
+
+
+@dataclass(frozen=True)
+class _Residuals:
+    """Per residual at the estimate: error ``e`` ``(rows, N)``, IRLS weight, whether it counts as an
+    inlier; and the information weights ``Omega`` of the error rows."""
+
+    e: np.ndarray
+    weight: np.ndarray
+    use: np.ndarray
+    Omega: np.ndarray
+
+
+@dataclass
+class _Sums:
+    """What the pass over the windows collects: the method-of-moments system for the tracker's
+    variances (``gram``, ``proj``, ``yy``), each pose's noise map into the score (``K``), the
+    input noise map as differences over the intervals (``C``) and the outliers' own scores."""
+
+    groups: tuple[tuple[int, ...], ...]
+    gram: np.ndarray
+    proj: np.ndarray
+    yy: float
+    K: np.ndarray
+    C: np.ndarray
+    outliers: np.ndarray
+    starts: np.ndarray
+    stops: np.ndarray
+    distinct: bool
+
+    @classmethod
+    def zero(cls, fns: ProblemFunctions, data: ResidualData, m: int) -> _Sums:
+        groups = tuple(tuple(g) for g in fns.sensor.noise_groups)
+        n, k, a, b = fns.n_free, len(groups), data.starts, data.stops
+        return cls(
+            groups=groups,
+            gram=np.zeros((k, k)),
+            proj=np.zeros(k),
+            yy=0.0,
+            K=np.zeros((data.T_world_sensor.shape[0], n, sum(len(g) for g in groups))),
+            C=np.zeros((data.inputs.shape[1] + 1, n, m)),
+            outliers=np.zeros((n, n)),
+            starts=a,
+            stops=b,
+            distinct=bool(np.all(np.diff(a) > 0) and np.all(np.diff(b) > 0)),
+        )
+
+    def add(self, w: slice, sens: Sensitivities, r: _Residuals, running: np.ndarray) -> None:
+        """Add the windows ``w``."""
+        a, b = self.starts[w], self.stops[w]
+        Ea, Eb = sens.de_dz @ sens.dz_da, sens.de_dz @ sens.dz_db  # (., error rows, pose noise)
+        known = ((sens.de_dend @ (running[b] - running[a])) * sens.de_dend).sum(axis=2)
+        E2 = Ea**2 + Eb**2  # per residual component c, pose component k
+        coef = np.stack([E2[:, :, list(g)].sum(axis=2) for g in self.groups], axis=2)  # (., rows, groups)
+        u, e = r.use[w], r.e[:, w]
+        A, y = coef[u].reshape(-1, len(self.groups)), (e.T[u] ** 2 - known[u]).ravel()
+        self.gram, self.proj, self.yy = self.gram + A.T @ A, self.proj + A.T @ y, self.yy + float(y @ y)
+        L = r.weight[w, None, None] * sens.J.transpose(0, 2, 1) * r.Omega[None, None, :]  # (., n, rows)
+        _add(self.K, a, L @ Ea, self.distinct)
+        _add(self.K, b, L @ Eb, self.distinct)
+        # Σ over the windows containing interval j of L_w ∂e_w/∂end: +at the first interval, −after the last.
+        G = L @ sens.de_dend
+        _add(self.C, a, G, self.distinct)
+        _add(self.C, b, -G, self.distinct)
+        # Residuals beyond the kernel threshold are not explained by the noise model; their bounded
+        # but non-zero pull is counted as it is, from their own scores.
+        score = np.einsum("wic,cw->wi", L[~u], e[:, ~u])
+        self.outliers += score.T @ score
+
+    def meat(self, var: np.ndarray, D: np.ndarray, Sigma_in: np.ndarray) -> np.ndarray:
+        """``S``: the score's covariance from the tracker poses' noise ``var`` (per group) and the
+        inputs' ``Sigma_in``, plus the outliers' own."""
+        Sigma_pose = np.concatenate([np.full(len(g), v) for g, v in zip(self.groups, var)])
+        meat = _weighted_gram(self.K, Sigma_pose) + self.outliers
+        C = np.cumsum(self.C, axis=0)
+        n_int = D.shape[0]
+        for lo in range(0, n_int, STEP):
+            Q = C[lo : min(n_int, lo + STEP)] @ D[lo : lo + STEP]  # (., n, n_in)
+            meat += _weighted_gram(Q, Sigma_in)
+        return meat
+
+
+def _packaged(fns: ProblemFunctions, cov: np.ndarray, noise: dict[str, float], dof: int) -> Uncertainty:
+    """The free parameters' covariance ``cov`` as the result's :class:`Uncertainty` over every
+    parameter (fixed ones: 0)."""
     names = fns.names
     idx = [names.index(f) for f in fns.free]
     full = np.zeros((len(names), len(names)))
@@ -208,8 +272,6 @@ def estimate(
     corr[~np.isfinite(corr)] = 0.0
     for i in idx:
         corr[i, i] = 1.0
-    noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
-    noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
     return Uncertainty(
         names=names, free=fns.free, covariance=cov, std=std, correlation=corr, noise=noise, dof=dof
     )

@@ -9,7 +9,7 @@ from __future__ import annotations
 from nlp_calib.core.errors import OptionsError
 from nlp_calib.results.solver import IterationRecord, SolverResult
 from nlp_calib.solvers.base import Solver
-from nlp_calib.solvers.evaluation import Priors, ProblemEvaluator
+from nlp_calib.solvers.evaluation import Priors, ProblemEvaluator, Sensitivities
 from nlp_calib.solvers.gauss_newton import GaussNewton, GaussNewtonOptions
 from nlp_calib.solvers.ipopt import Ipopt, IpoptOptions
 
@@ -39,6 +39,7 @@ __all__ = [
     "IterationRecord",
     "Priors",
     "ProblemEvaluator",
+    "Sensitivities",
     "Solver",
     "SolverResult",
     "get_solver",

@@ -10,7 +10,7 @@ analysis at the same estimate cost one evaluation.
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -128,6 +128,20 @@ def requests(fns: ProblemFunctions, names: Iterable[str], n_windows: int) -> lis
 _PRIORITY = ("normal_equations", "cost", "cost_derivatives", "robust_terms", "sensitivities")
 
 
+@dataclass
+class _Windows:
+    """What an evaluator holds per set of windows: rebuilt by :meth:`ProblemEvaluator.bind`."""
+
+    data: ResidualData
+    n_padded: int
+    window_data: np.ndarray
+    motion: WindowMotion
+    bound: dict[str, BlockMap] = field(default_factory=dict)
+    # The last point's normal equations and exact derivatives, keyed by the point's bytes.
+    last: tuple[bytes, NormalEquations] | None = None
+    last_derivatives: tuple[bytes, tuple[float, np.ndarray, np.ndarray]] | None = None
+
+
 class ProblemEvaluator:
     """The problem's Functions mapped over the windows of ``data``, ready to call with a free vector."""
 
@@ -156,14 +170,25 @@ class ProblemEvaluator:
 
     def bind(self, data: ResidualData) -> None:
         """Evaluate on the windows of ``data`` from now on."""
-        self.data = data
-        self.n_residuals = data.n_residuals
-        self.n_padded = self.backend.padded(self.n_residuals)
-        self.window_data = pad_columns(data.data(), self.n_padded)
-        self.motion = WindowMotion(self.fns, self.backend, data, self.n_padded)
-        self._bound: dict[str, BlockMap] = {}
-        self._last: tuple[bytes, NormalEquations] | None = None
-        self._last_derivatives: tuple[bytes, tuple[float, np.ndarray, np.ndarray]] | None = None
+        n_padded = self.backend.padded(data.n_residuals)
+        self._on = _Windows(
+            data=data,
+            n_padded=n_padded,
+            window_data=pad_columns(data.data(), n_padded),
+            motion=WindowMotion(self.fns, self.backend, data, n_padded),
+        )
+
+    @property
+    def data(self) -> ResidualData:
+        return self._on.data
+
+    @property
+    def n_residuals(self) -> int:
+        return self._on.data.n_residuals
+
+    @property
+    def motion(self) -> WindowMotion:
+        return self._on.motion
 
     def prepare(self, names: Iterable[str]) -> None:
         """Bind the per-residual Functions ``names`` now rather than at their first evaluation."""
@@ -177,14 +202,15 @@ class ProblemEvaluator:
         return Backend() if name in _ANALYSES and small else self.backend
 
     def _bind(self, name: str) -> BlockMap:
-        if name not in self._bound:
+        bound = self._on.bound
+        if name not in bound:
             static: dict[str, np.ndarray | float] = {"x_fixed": self.x_fixed}
             if name != "sensitivities":
                 static.update(omega=self.omega, delta=self.delta)
-            mapped = {"motion": self.motion.buffer(ORDER[name]), "data": self.window_data}
+            mapped = {"motion": self.motion.buffer(ORDER[name]), "data": self._on.window_data}
             f = self.fns.function(name)
-            self._bound[name] = BlockMap(self._backend(name), f, mapped, static, name in SUMMED)
-        return self._bound[name]
+            bound[name] = BlockMap(self._backend(name), f, mapped, static, name in SUMMED)
+        return bound[name]
 
     def _call(self, name: str, x: np.ndarray) -> Sequence[np.ndarray]:
         """The per-residual Function ``name`` over the windows at ``x`` (bound on first use)."""
@@ -194,21 +220,21 @@ class ProblemEvaluator:
 
     def set_inputs(self, inputs: np.ndarray) -> None:
         """Re-evaluate the same windows on other interval inputs (nothing is rebuilt)."""
-        self.data = self.data.with_inputs(inputs)
+        self._on.data = self._on.data.with_inputs(inputs)
         self.motion.set_inputs(inputs)
-        self._last = self._last_derivatives = None
+        self._on.last = self._on.last_derivatives = None
 
     def normal_equations(self, x: np.ndarray) -> NormalEquations:
         key = np.asarray(x, dtype=float).tobytes()
-        if self._last is not None and self._last[0] == key:
-            return self._last[1]
+        if self._on.last is not None and self._on.last[0] == key:
+            return self._on.last[1]
         h_upper, g, cost, chi2, inliers = self._call("normal_equations", x)
         H, cost_f = unpack_upper(h_upper, self.fns.n_free), float(cost[0])
         if self.priors.active:
             Hp, gp, cp, _, _ = self._prior(x=x)
             H, g, cost_f = H + Hp, g + gp, cost_f + float(cp[0])
         ne = NormalEquations(H=H, g=g, cost=cost_f, chi2=float(chi2[0]), inliers=round(float(inliers[0])))
-        self._last = (key, ne)
+        self._on.last = (key, ne)
         return ne
 
     def cost(self, x: np.ndarray) -> float:
@@ -221,14 +247,14 @@ class ProblemEvaluator:
     def cost_derivatives(self, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """The objective, its gradient and its exact Hessian ``(n, n)`` in plain coordinates."""
         key = np.asarray(x, dtype=float).tobytes()
-        if self._last_derivatives is not None and self._last_derivatives[0] == key:
-            return self._last_derivatives[1]
+        if self._on.last_derivatives is not None and self._on.last_derivatives[0] == key:
+            return self._on.last_derivatives[1]
         cost, grad, h_upper = self._call("cost_derivatives", x)
         out = (float(cost[0]), grad.ravel(), unpack_upper(h_upper, self.fns.n_free))
         if self.priors.active:
             c, g, H = self.prior_terms(x)
             out = (out[0] + c, out[1] + g, out[2] + H)
-        self._last_derivatives = (key, out)
+        self._on.last_derivatives = (key, out)
         return out
 
     def robust_terms(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -270,7 +296,7 @@ class ProblemEvaluator:
         own = stream(
             self._backend("sensitivities"),
             fns.sensitivities,
-            {"motion": motion, "data": self.window_data},
+            {"motion": motion, "data": self._on.window_data},
             {"x": x, "x_fixed": self.x_fixed},
             N,
         )

@@ -151,20 +151,11 @@ class Ipopt:
     ) -> SolverResult:
         """Solve from ``x0`` (free parameters) within optional bounds on them."""
         ev = self.evaluator
-        n = ev.fns.n_free
-        lbx = np.full(n, -np.inf) if lower is None else np.asarray(lower, dtype=float)
-        ubx = np.full(n, np.inf) if upper is None else np.asarray(upper, dtype=float)
-        x_init = np.asarray(x0, dtype=float)
         t0 = time.perf_counter()
         if not np.isfinite(ev.cost(x0)):
             # Reported like Gauss-Newton does, so that the other solver's result is not lost.
             return self._not_started(np.asarray(x0, dtype=float), time.perf_counter() - t0)
-        if self.lifted:
-            _, s, _ = ev.robust_terms(x_init)
-            w0 = np.clip(ev.delta / np.sqrt(np.maximum(s, 1e-300)), _W_MIN, 1.0)
-            x_init = np.concatenate([x_init, w0])
-            lbx = np.concatenate([lbx, np.full(ev.n_residuals, _W_MIN)])
-            ubx = np.concatenate([ubx, np.ones(ev.n_residuals)])
+        x_init, lbx, ubx = self._start(np.asarray(x0, dtype=float), lower, upper)
         if not Ipopt._buffer_held:
             fix = "solve with gauss_newton alone (solvers: [gauss_newton])"
             memory.require_address_space(_ADDRESS_SPACE, "IPOPT's linear algebra", fix)
@@ -176,8 +167,33 @@ class Ipopt:
             return self._not_started(np.asarray(x0, dtype=float), time.perf_counter() - t0, _last_line(exc))
         self._oracle.guard.reraise()
         elapsed = time.perf_counter() - t0
-        stats = self._solver.stats()
-        x = np.asarray(sol["x"]).ravel()[:n]
+        return self._result(np.asarray(sol["x"]).ravel()[: ev.fns.n_free], self._solver.stats(), elapsed)
+
+    def _start(
+        self,
+        x0: np.ndarray,
+        lower: np.ndarray | Sequence[float] | None,
+        upper: np.ndarray | Sequence[float] | None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """IPOPT's start point and bounds: the free parameters' and, lifted, each residual's weight
+        (started at its IRLS value at ``x0``)."""
+        ev = self.evaluator
+        n = ev.fns.n_free
+        lbx = np.full(n, -np.inf) if lower is None else np.asarray(lower, dtype=float)
+        ubx = np.full(n, np.inf) if upper is None else np.asarray(upper, dtype=float)
+        if not self.lifted:
+            return x0, lbx, ubx
+        _, s, _ = ev.robust_terms(x0)
+        w0 = np.clip(ev.delta / np.sqrt(np.maximum(s, 1e-300)), _W_MIN, 1.0)
+        return (
+            np.concatenate([x0, w0]),
+            np.concatenate([lbx, np.full(ev.n_residuals, _W_MIN)]),
+            np.concatenate([ubx, np.ones(ev.n_residuals)]),
+        )
+
+    def _result(self, x: np.ndarray, stats: dict[str, Any], elapsed: float) -> SolverResult:
+        """The result at IPOPT's answer ``x`` (free parameters), judged on the normal equations there."""
+        ev = self.evaluator
         ne = ev.normal_equations(x)
         status = str(stats.get("return_status", "unknown"))
         converged = bool(stats.get("success", False)) or status in _SUCCESS
@@ -186,26 +202,7 @@ class Ipopt:
         reason = status if converged else f"IPOPT stopped: {status}"
         if converged and is_singular(ne.H):
             converged, reason = False, SINGULAR_REASON
-        its = stats.get("iterations", {})
-        history = tuple(
-            IterationRecord(
-                iteration=i,
-                cost=float(obj),
-                constraint_violation=float(pr),
-                dual_infeasibility=float(du),
-                step_norm=float(dn),
-                damping=float(reg),
-            )
-            for i, (obj, pr, du, dn, reg) in enumerate(
-                zip(
-                    its.get("obj", []),
-                    its.get("inf_pr", []),
-                    its.get("inf_du", []),
-                    its.get("d_norm", []),
-                    its.get("regularization_size", []),
-                )
-            )
-        )
+        history = _history(stats.get("iterations", {}))
         return SolverResult(
             solver=Ipopt.name,
             names=ev.fns.names,
@@ -253,3 +250,19 @@ class Ipopt:
                 },
             ),
         )
+
+
+def _history(its: dict[str, list[float]]) -> tuple[IterationRecord, ...]:
+    """IPOPT's per-iteration statistics as records."""
+    columns = ("obj", "inf_pr", "inf_du", "d_norm", "regularization_size")
+    return tuple(
+        IterationRecord(
+            iteration=i,
+            cost=float(obj),
+            constraint_violation=float(pr),
+            dual_infeasibility=float(du),
+            step_norm=float(dn),
+            damping=float(reg),
+        )
+        for i, (obj, pr, du, dn, reg) in enumerate(zip(*(its.get(c, []) for c in columns)))
+    )
