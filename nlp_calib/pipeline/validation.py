@@ -31,6 +31,10 @@ MAX_THREADS = 2
 T = TypeVar("T")
 R = TypeVar("R")
 
+#: A refit stops when the undamped Gauss-Newton step's predicted cost decrease is below this
+#: squared, times the cost per window: a step of about this fraction of the estimate's σ.
+REFIT_SIGMAS = 0.01
+
 #: A fold needs this many windows of its part in the held-out block to count in a part's jackknife.
 MIN_BLOCK_WINDOWS = 20
 
@@ -48,7 +52,13 @@ def _fit(
     if kept.n_residuals < binder.fns.n_free:
         return np.full(len(binder.fns.names), np.nan), False, 0
     ev = binder.evaluate(kept)
-    _, x_k, converged = binder.fit(ev, x)
+    # Refits start next to their optimum: Gauss-Newton steps from ``x`` until the next would move
+    # the estimate by less than REFIT_SIGMAS of its σ (a step or two), not to rounding; that last
+    # step is taken too (the solver's last normal equations: no evaluation).
+    _, x_k, converged = binder.fit(ev, x, REFIT_SIGMAS**2 / kept.n_residuals)
+    if converged:
+        ne = ev.normal_equations(x_k)
+        x_k = ev.boxplus(x_k, np.linalg.solve(ne.H, -ne.g))
     return ev.params(x_k), converged, kept.n_residuals
 
 
