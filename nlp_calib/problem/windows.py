@@ -184,7 +184,7 @@ def over_columns(f: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
             buf, call = fm.buffer()
             ins = [np.empty(fm.nnz_in(i)) for i in range(fm.n_in())]
             for i, arr in enumerate(ins):
-                buf.set_arg(i, memoryview(arr))
+                buf.set_arg(i, arr.data)
             buffers[hi - lo] = (buf, call, ins)
         buf, call, ins = buffers[hi - lo]
         for target, a in zip(ins, args):
@@ -194,7 +194,7 @@ def over_columns(f: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
                 target.reshape(hi - lo, -1)[:] = np.ravel(a)
         for i, (out, (_, c)) in enumerate(zip(outs, shapes)):
             # A block of columns of a column-major array is one contiguous run: written in place.
-            buf.set_res(i, memoryview(out[:, c * lo : c * hi].reshape(-1, order="F")))
+            buf.set_res(i, out[:, c * lo : c * hi].reshape(-1, order="F").data)
         call()
     return outs
 
