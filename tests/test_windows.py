@@ -192,3 +192,12 @@ def test_over_columns_in_bound_buffers_gives_what_a_casadi_map_gives(monkeypatch
     assert len(got) == 2
     for g, w in zip(got, want):
         assert np.array_equal(g, np.asarray(w))
+
+
+def test_the_weighted_gram_by_blocks_is_the_one_product(monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(3)
+    A, w = rng.normal(size=(1001, 5, 3)), rng.uniform(0.1, 2.0, 3)
+    want = np.einsum("pik,k,pjk->ij", A, w, A)
+    monkeypatch.setattr(unc, "STEP", 64)
+    np.testing.assert_allclose(unc._weighted_gram(A, w), want, rtol=1e-12)
+    np.testing.assert_array_equal(unc._weighted_gram(A[:0], w), np.zeros((5, 5)))
