@@ -13,7 +13,9 @@ from an empty compile cache, warm ones from a filled one. Solver times are measu
 the same windows: Gauss-Newton and IPOPT against ``scipy.optimize.least_squares`` (vectorised
 numpy residual with its analytic Jacobian, the same Huber objective; ``baselines.py``) and, when
 installed (``pip install .[bench]``), GTSAM and Ceres through their standard Python APIs.
-``simulate`` times ``nlp-calib simulate --records 10^6`` (its peak RSS: the block-wise writer's);
+``ipopt_lag`` solves the recommended real-log scenario with IPOPT at 14 lags 0.06 ms apart, with
+the project's ``tiny_step_tol`` and with IPOPT's default (the iterations a lag's last digits
+decided). ``simulate`` times ``nlp-calib simulate --records 10^6`` (its peak RSS: the block-wise writer's);
 ``batch`` runs ``nlp-calib batch`` over 20 simulated logs with ``--jobs 1`` and ``--jobs 2``,
 interleaved. Writes ``results/performance.{json,md,png}``.
 """
@@ -72,7 +74,7 @@ TARGETS = {
     "batch of 20 logs, --jobs 1 / --jobs 2 [x]": 1.7,
 }
 #: The sections a run measures (``--sections``), in order.
-SECTIONS = ("end_to_end", "solvers", "scaling", "simulate", "batch")
+SECTIONS = ("end_to_end", "solvers", "ipopt_lag", "scaling", "simulate", "batch")
 
 
 def load() -> list[float]:
@@ -211,6 +213,59 @@ def compare_solvers(sc: Any, repeats: int, per_factor: bool) -> dict[str, Any]:
         "median_ms": {n: med(t) for n, t in times.items()},
         "agreement": agree,
     }
+
+
+def ipopt_lag(real: Path | None, quick: bool, repeats: int) -> dict[str, Any]:
+    """IPOPT's iterations and time on the recommended real-log scenario at lags a few hundredths of
+    a millisecond apart, with the project's ``tiny_step_tol`` (√ε) and with IPOPT's default (10 ε)."""
+    from nlp_calib.pipeline import Calibration
+    from nlp_calib.pipeline.scenario import AlignmentOptions, load_scenario
+    from nlp_calib.solvers.ipopt import Ipopt, IpoptOptions
+
+    if quick or real is None:
+        base, lags = load_scenario(REPO / "scenarios" / "demo.yaml"), [0.0, 0.00006]
+    else:
+        base = load_scenario(REPO / "scenarios" / "real_tricycle.yaml").with_dataset(real)
+        lags = [round(0.049 + 0.00006 * k, 6) for k in range(14)]
+    settings: dict[str, dict[str, float]] = {
+        "sqrt(eps)": {},
+        "ipopt default (10 eps)": {"tiny_step_tol": 10 * float(np.finfo(float).eps)},
+    }
+    start = load()
+    out: dict[str, dict[str, list[float]]] = {name: {"iterations": [], "ms": []} for name in settings}
+    for lag in lags:
+        calib = Calibration(base.with_options(alignment=AlignmentOptions(tracker_lag=lag)))
+        x0, lo, hi = (
+            calib.fitting.problem.start.x0,
+            calib.fitting.problem.start.lower,
+            calib.fitting.problem.start.upper,
+        )
+        for name, options in settings.items():
+            solver = Ipopt(calib.evaluator, IpoptOptions(options=options))
+            times = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                res = solver.solve(x0, lo, hi)
+                times.append(1e3 * (time.perf_counter() - t0))
+            out[name]["iterations"].append(res.trace.iterations)
+            out[name]["ms"].append(med(times))
+    return {"load_start": start, "load_end": load(), "lags_s": lags, "settings": out}
+
+
+def ipopt_lag_lines(sweep: dict[str, Any]) -> list[str]:
+    lags = sweep["lags_s"]
+    lines = [
+        "",
+        f"IPOPT on the same scenario at {len(lags)} lags from {lags[0]} to {lags[-1]} s "
+        f"(load average {sweep['load_start']} → {sweep['load_end']}):",
+        "",
+        "| tiny_step_tol | iterations (min–max) | time [ms] (min–max) |",
+        "|---|---|---|",
+    ]
+    for name, r in sweep["settings"].items():
+        it, ms = r["iterations"], r["ms"]
+        lines.append(f"| {name} | {min(it)}–{max(it)} | {min(ms):.1f}–{max(ms):.1f} |")
+    return lines
 
 
 def scaling(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
@@ -395,6 +450,8 @@ def summary(doc: dict[str, Any]) -> tuple[str, dict[str, float]]:
         lines += e2e_lines(e2e)
     if sol:
         lines += solver_lines(sol, figures)
+    if doc.get("ipopt_lag"):
+        lines += ipopt_lag_lines(doc["ipopt_lag"])
     if scale:
         lines += scale_lines(scale, figures)
     lines += fleet_lines(doc, figures)
@@ -539,6 +596,8 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
         return end_to_end(scenarios, repeats, tmp)
     if section == "solvers":
         return solvers(solver_cases(real, quick), repeats, per_factor=not quick)
+    if section == "ipopt_lag":
+        return ipopt_lag(real, quick, repeats)
     if section == "scaling":
         return scaling([2_000, 8_000] if quick else [10_000, 100_000, 1_000_000], repeats, tmp)
     if section == "simulate":
