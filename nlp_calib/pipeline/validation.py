@@ -62,9 +62,11 @@ def _fit(
         return np.full(len(binder.fns.names), np.nan), False, 0
     ev = binder.evaluate(kept)
     if whole is not None:
-        left_out = data.select(crossing)
-        data_only = dataclasses.replace(binder, priors=no_priors(binder.fns.n_free))
-        ev.remember(x, whole.less(data_only.evaluate(left_out).normal_equations(x)))
+        ne = whole
+        if crossing.any():
+            data_only = dataclasses.replace(binder, priors=no_priors(binder.fns.n_free))
+            ne = whole.less(data_only.evaluate(data.select(crossing)).normal_equations(x))
+        ev.remember(x, ne)
     # Refits start next to their optimum: Gauss-Newton steps from ``x`` until the next would move
     # the estimate by less than REFIT_SIGMAS of its σ (a step or two), not to rounding; that last
     # step is taken too (the solver's last normal equations: no evaluation).
