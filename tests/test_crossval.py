@@ -81,7 +81,7 @@ def test_validate_command_prints_the_folds_and_writes_validation_json(tmp_path: 
     )
 
 
-def test_refits_from_the_estimate_land_where_full_refits_do() -> None:
+def test_refits_from_the_estimate_land_where_full_refits_do(monkeypatch: pytest.MonkeyPatch) -> None:
     """The folds' and the directions' refits stop a step from their optimum (a fraction of σ);
     against full refits to rounding, on a simulated drive, they agree to σ/100 (σ: the fit's)."""
     from nlp_calib.analysis.crossval import blocks
@@ -105,6 +105,7 @@ def test_refits_from_the_estimate_land_where_full_refits_do() -> None:
         drops.append(bad)
     # The first step from the normal equations of every window less those of the windows left out.
     whole = binder.evaluate(data).normal_equations(x)
+    monkeypatch.setattr(validation, "DOWNDATE_FROM", 0)
     for bad in drops:
         kept = data.select(data.interval_counts(bad) == 0)
         ev = binder.evaluate(kept)

@@ -36,6 +36,10 @@ R = TypeVar("R")
 #: squared, times the cost per window: a step of about this fraction of the estimate's σ.
 REFIT_SIGMAS = 0.01
 
+#: Refits of this many windows or more downdate their first step (below, binding an evaluator on the
+#: windows left out costs more than evaluating the windows kept).
+DOWNDATE_FROM = 50_000
+
 #: A fold needs this many windows of its part in the held-out block to count in a part's jackknife.
 MIN_BLOCK_WINDOWS = 20
 
@@ -61,7 +65,7 @@ def _fit(
     if kept.n_residuals < binder.fns.n_free:
         return np.full(len(binder.fns.names), np.nan), False, 0
     ev = binder.evaluate(kept)
-    if whole is not None:
+    if whole is not None and data.n_residuals >= DOWNDATE_FROM:
         ne = whole
         if crossing.any():
             data_only = dataclasses.replace(binder, priors=no_priors(binder.fns.n_free))
@@ -97,7 +101,7 @@ def _part_fold(
     part: ResidualData,
     fit: tuple[int, int],
     x: np.ndarray,
-    whole: NormalEquations,
+    whole: NormalEquations | None,
 ) -> np.ndarray | None:
     """A direction's refit (of its windows ``part``, with normal equations ``whole`` at ``x``)
     without the records ``block`` (None when it does not converge)."""
@@ -178,7 +182,9 @@ def direction_check(
         # A block without this direction's driving says nothing about it.
         driven = [(a, b) for a, b in blocks(first, stop, k) if np.sum(part[a : b - 1]) >= MIN_BLOCK_WINDOWS]
         part_data = data.select(data.interval_counts(other[first : stop - 1]) == 0)
-        whole = part_binder.evaluate(part_data).normal_equations(x_part)
+        whole = None
+        if part_data.n_residuals >= DOWNDATE_FROM:
+            whole = part_binder.evaluate(part_data).normal_equations(x_part)
         fold = functools.partial(
             _part_fold, binder=part_binder, part=part_data, fit=fit, x=x_part, whole=whole
         )
