@@ -30,6 +30,7 @@ def test_performance_benchmark_quick_run(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr[-3000:]
     doc = json.loads((tmp_path / "performance.json").read_text())
     assert doc["repeats"] == 2 and doc["environment"]["cores"] >= 1
+    assert doc["end_to_end"]["import_floor_s"] > 0
     demo = doc["end_to_end"]["scenarios"]["demo"]
     for key in ("cold_wall_s", "warm_wall_s", "warm_peak_mb", "gauss_newton_ms", "ipopt_ms"):
         assert demo[key] > 0, key

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -78,3 +79,49 @@ def test_validate_command_prints_the_folds_and_writes_validation_json(tmp_path: 
     assert (
         cli("validate", str(SCENARIOS / "demo.yaml"), "--blocks", "1", "--out", str(tmp_path)).returncode == 2
     )
+
+
+def test_refits_from_the_estimate_land_where_full_refits_do(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The folds' and the directions' refits stop a step from their optimum (a fraction of σ);
+    against full refits to rounding, on a simulated drive, they agree to σ/100 (σ: the fit's)."""
+    from nlp_calib.analysis.crossval import blocks
+    from nlp_calib.pipeline import validation
+    from nlp_calib.pipeline.build import no_priors
+
+    sim = SimulationOptions.of(model="tricycle", records=2400, seed=7)
+    log = parse_lines(simulate(sim).text().splitlines(), "sim.txt", model="tricycle")
+    raw = {"dataset": "sim.txt", "model": "tricycle", "solvers": ["gauss_newton"]}
+    raw["residual"] = {"horizon": 10}
+    calib = Calibration(scenario_from_mapping(raw, "cv.yaml", Path(".")), log=log)
+    run = calib.run()
+    sigma = np.array(list(run.std("gauss_newton").values()))  # type: ignore[attr-defined]
+    binder, data, x = calib.fitting.problem.binder, calib.data, calib.solve("gauss_newton").x
+    fit = (0, data.n_records)
+    direction = calib.model.travel_direction(data.inputs)
+    drops = [direction == 1, direction == -1]
+    for a, b in blocks(*fit, 6):
+        bad = np.zeros(data.n_records - 1, dtype=bool)
+        bad[a : b - 1] = True
+        drops.append(bad)
+    # The first step from the normal equations of every window less those of the windows left out.
+    whole = binder.evaluate(data).normal_equations(x)
+    monkeypatch.setattr(validation, "DOWNDATE_FROM", 0)
+    for bad in drops:
+        kept = data.select(data.interval_counts(bad) == 0)
+        ev = binder.evaluate(kept)
+        _, x_full, full_converged = binder.fit(ev, x)
+        assert full_converged
+        for start in (None, whole):
+            steps, converged, n = validation._fit(binder, data, fit, bad, x, start)
+            assert converged and n == kept.n_residuals
+            gap = np.abs(steps - ev.params(x_full)) / sigma
+            assert np.max(gap[sigma > 0]) < 0.01, gap
+    # The downdate is the kept windows' own normal equations (to rounding).
+    kept = data.select(data.interval_counts(drops[2]) == 0)
+    left_out = data.select(data.interval_counts(drops[2]) > 0)
+    mine = binder.evaluate(kept).normal_equations(x)
+    data_only = dataclasses.replace(binder, priors=no_priors(binder.fns.n_free))
+    down = whole.less(data_only.evaluate(left_out).normal_equations(x))
+    np.testing.assert_allclose(down.H, mine.H, rtol=1e-9, atol=1e-9 * np.max(np.abs(mine.H)))
+    np.testing.assert_allclose(down.g, mine.g, rtol=1e-7, atol=1e-9 * np.max(np.abs(mine.g)))
+    assert down.cost == pytest.approx(mine.cost, rel=1e-12)

@@ -234,3 +234,41 @@ def test_too_many_header_lines_is_not_a_log(tmp_path: Path) -> None:
     text = HEADER + "#\n" * 20_000 + two_records()
     with pytest.raises(DatasetError, match="'#' lines before any record: not a log"):
         load_log(write(tmp_path, text))
+
+
+def test_block_reader_times_and_counters_are_the_per_line_readers() -> None:
+    """The block reader's times and counters, read as array operations, against the per-line
+    reader's regular expression and Python's ``int`` on every form a token may take."""
+    from nlp_calib.logs import records
+
+    rng = np.random.default_rng(0)
+    times = [
+        b"4000000000.1",
+        b"3999999999.999999999999",
+        b"9999999999.5",
+        b"0",
+        b".5",
+        b"5.",
+        b"-0.000000001",
+    ]
+    times += [b"12345678901", b"0525089.84", b"1700000000.040136771"]
+    for _ in range(3000):
+        whole = "".join(rng.choice(list("0123456789"), rng.integers(0, 12)))
+        frac = "".join(rng.choice(list("0123456789"), rng.integers(0, 14)))
+        token = ("-" if rng.random() < 0.1 else "") + whole + ("." + frac if rng.random() < 0.8 else "")
+        times.append(token.encode() if token.strip("-") else b"7")
+
+    def per_line(token: bytes) -> int:
+        try:
+            return records._parse_time_ns(token.decode(), "log", 1)
+        except DatasetError:
+            return records._NOT_A_TIME
+
+    def located(tokens: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        starts = np.cumsum([0] + [len(t) + 1 for t in tokens[:-1]])
+        return np.frombuffer(b" ".join(tokens), np.uint8), starts, starts + np.array([len(t) for t in tokens])
+
+    np.testing.assert_array_equal(records._times_ns(*located(times)), [per_line(t) for t in times])
+    ints = [str(v).encode() for v in rng.integers(-(10**18) + 1, 10**18, 3000)]
+    ints += [b"0", b"-0", b"7", b"999999999999999999", b"-999999999999999999", b"4294947296"]
+    np.testing.assert_array_equal(records._integers(*located(ints)), [int(t) for t in ints])

@@ -125,3 +125,34 @@ def test_a_tracker_that_jumps_for_good_is_not_blamed_on_the_counter() -> None:
     shifted = c.copy()
     shifted[1500] += 2**16
     assert screen_counter(ticks, shifted, t).findings == ()
+
+
+@pytest.mark.parametrize("excursion", [0.0, 0.01])
+def test_the_blocked_screened_first_pass_finds_what_scoring_every_group_at_once_finds(
+    excursion: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The first pass scores blocks of groups, and only groups that leave their neighbours' span:
+    the same groups as scoring every group in one call (an independent, unblocked computation)."""
+    from nlp_calib.analysis import streams
+
+    t = _times(3000, seed=4)
+    rng = np.random.default_rng(5)
+    y = np.column_stack([_path(t, [(20.0, -0.6), (70.0, 0.3)]), np.sin(0.05 * t)])
+    y += rng.normal(0.0, 0.002, y.shape)
+    # Glitches of every size about the threshold, some next to each other.
+    bad = rng.choice(np.arange(10, t.size - 10), 300, replace=False)
+    y[bad] += rng.normal(0.0, 0.05, (bad.size, 2))
+    sc = scatter(t, y)
+    usable = rng.random(t.size) > 0.02
+    idx = np.flatnonzero(usable)
+    expected = np.zeros(t.size, dtype=bool)
+    for g in range(1, 4):
+        P = idx.size - g - 3
+        m = idx[np.arange(2, 2 + P)[:, None] + np.arange(g)[None, :]]
+        outside = (idx[:P], idx[1 : P + 1], idx[2 + g : 2 + g + P], idx[3 + g : 3 + g + P])
+        s, _ = streams._scores(t, y, sc, outside, m, excursion)
+        expected[m[s > streams.OFF_SIGMAS].ravel()] = True
+    assert expected.any()
+    monkeypatch.setattr(streams, "FIRST_PASS_BLOCK", 97)
+    got = streams._candidates(t, y, sc, usable, (streams.OFF_SIGMAS, excursion, 3))
+    assert np.array_equal(got, expected)

@@ -172,3 +172,32 @@ def test_faulty_intervals_and_records_drop_their_windows() -> None:
     spoiled = [s for s in range(56) if s <= 20 < s + 4 or s in (40, 36)]
     assert data.dropped_faulty == len(spoiled) == 6
     assert sorted(set(range(56)) - set(data.starts.tolist())) == spoiled
+
+
+def test_over_columns_in_bound_buffers_gives_what_a_casadi_map_gives(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Blocks evaluated in buffers bound to numpy memory (a shared column, two outputs, a short
+    last block) against one CasADi map over every column."""
+
+    from nlp_calib.problem import windows
+
+    p, u = ca.SX.sym("p", 2), ca.SX.sym("u", 3)
+    f = ca.Function(
+        "f", [p, u], [ca.vertcat(p[0] * u[0] + u[1], ca.sin(u[2]) * p[1]), ca.cross(u, ca.vertcat(p, 1.0)).T]
+    )
+    rng = np.random.default_rng(0)
+    params, cols = rng.normal(size=2), rng.normal(size=(3, 1000))
+    monkeypatch.setattr(windows, "BLOCK", 96)
+    got = windows.over_columns(f, params, cols)
+    want = f.map(1000)(params, cols)
+    assert len(got) == 2
+    for g, w in zip(got, want):
+        assert np.array_equal(g, np.asarray(w))
+
+
+def test_the_weighted_gram_by_blocks_is_the_one_product(monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(3)
+    A, w = rng.normal(size=(1001, 5, 3)), rng.uniform(0.1, 2.0, 3)
+    want = np.einsum("pik,k,pjk->ij", A, w, A)
+    monkeypatch.setattr(unc, "STEP", 64)
+    np.testing.assert_allclose(unc._weighted_gram(A, w), want, rtol=1e-12)
+    np.testing.assert_array_equal(unc._weighted_gram(A[:0], w), np.zeros((5, 5)))

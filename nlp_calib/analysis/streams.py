@@ -40,6 +40,8 @@ MAX_GROUP = 4
 MIN_STUCK = 3
 #: A catch-up is a jump when it exceeds this many times the motion per record around it.
 CATCH_UP_FACTOR = 2.5
+#: Groups scored at once in the first pass over a stream.
+FIRST_PASS_BLOCK = 8192
 
 
 def robust_sigma(x: np.ndarray) -> float:
@@ -159,15 +161,24 @@ def _scored(
     split = np.maximum(np.hstack([zero, left]), np.hstack([right, zero])).min(axis=1)
     kinked = size(ym - K, np.where(before, fL, fR)).max(axis=1)
     score = np.minimum.reduce([size(ym - C, fC).max(axis=1), kinked, split])
-    # How far the group leaves the span of its near neighbours: a reading that departs and returns.
-    hi, lo = np.maximum(y[l1], y[r1])[:, None], np.minimum(y[l1], y[r1])[:, None]
-    least = np.broadcast_to(np.asarray(excursion, dtype=float), (y.shape[1],))
-    departs = np.ones(m.shape[0], dtype=bool)
-    if np.any(least > 0):
-        beyond = (np.maximum(ym - hi, 0.0) + np.maximum(lo - ym, 0.0)) / np.where(least > 0, least, np.inf)
-        departs = np.sqrt(np.sum(beyond**2, axis=-1)).max(axis=1) > 1.0
+    departs = _departs(y, (l1, r1), m, excursion)
     worst = np.argmax(size(ym - C, fC), axis=1)
     return np.where(departs, score, 0.0), (ym - C)[np.arange(m.shape[0]), worst]
+
+
+def _departs(
+    y: np.ndarray, near: tuple[np.ndarray, np.ndarray], m: np.ndarray, excursion: np.ndarray | float
+) -> np.ndarray:
+    """Whether each group ``m`` ``(P, g)`` leaves the span of its near neighbours ``(l1, r1)`` by
+    more than ``excursion`` (a reading that departs and returns); all True without one."""
+    l1, r1 = near
+    least = np.broadcast_to(np.asarray(excursion, dtype=float), (y.shape[1],))
+    if not np.any(least > 0):
+        return np.ones(m.shape[0], dtype=bool)
+    ym = y[m]
+    hi, lo = np.maximum(y[l1], y[r1])[:, None], np.minimum(y[l1], y[r1])[:, None]
+    beyond = (np.maximum(ym - hi, 0.0) + np.maximum(lo - ym, 0.0)) / np.where(least > 0, least, np.inf)
+    return np.asarray(np.sqrt(np.sum(beyond**2, axis=-1)).max(axis=1) > 1.0)
 
 
 def _outside(usable: np.ndarray, first: int, last: int) -> np.ndarray | None:
@@ -235,6 +246,34 @@ def _resolve(
     return sorted(kept, key=lambda f: f.first)
 
 
+def _candidates(
+    t: np.ndarray,
+    y: np.ndarray,
+    sc: Scatter,
+    usable: np.ndarray,
+    limits: tuple[float, np.ndarray | float, int],
+) -> np.ndarray:
+    """The first pass: the records of every group of up to ``max_group`` usable records that
+    scores above ``threshold`` against its adjacent usable neighbours (a mask over the records)."""
+    threshold, excursion, max_group = limits
+    idx = np.flatnonzero(usable)
+    candidate = np.zeros(len(t), dtype=bool)
+    for g in range(1, max_group + 1):
+        # A block of groups at a time (each group's score is its own: blocks keep the temporaries
+        # in cache), and of those only the groups that leave the span of their near neighbours
+        # (the others score 0).
+        P = idx.size - g - 3
+        for lo in range(0, max(P, 0), FIRST_PASS_BLOCK):
+            p = np.arange(lo, min(lo + FIRST_PASS_BLOCK, P))
+            m = idx[(p + 2)[:, None] + np.arange(g)[None, :]]
+            keep = _departs(y, (idx[p + 1], idx[p + 2 + g]), m, excursion)
+            m, p = m[keep], p[keep]
+            outside = (idx[p], idx[p + 1], idx[p + 2 + g], idx[p + 3 + g])
+            s, _ = _scores(t, y, sc, outside, m, excursion)
+            candidate[m[s > threshold].ravel()] = True
+    return candidate
+
+
 def off_neighbours(
     t: np.ndarray,
     y: np.ndarray,
@@ -249,17 +288,7 @@ def off_neighbours(
     y = np.asarray(y, dtype=float).reshape(len(t), -1)
     n = len(t)
     usable = np.ones(n, dtype=bool) if usable is None else np.asarray(usable, dtype=bool)
-    idx = np.flatnonzero(usable)
-    candidate = np.zeros(n, dtype=bool)
-    for g in range(1, max_group + 1):
-        # First pass: every group of g usable records with its adjacent usable neighbours.
-        P = idx.size - g - 3
-        if P <= 0:
-            continue
-        m = idx[np.arange(2, 2 + P)[:, None] + np.arange(g)[None, :]]
-        outside = (idx[:P], idx[1 : P + 1], idx[2 + g : 2 + g + P], idx[3 + g : 3 + g + P])
-        s, _ = _scores(t, y, sc, outside, m, excursion)
-        candidate[m[s > threshold].ravel()] = True
+    candidate = _candidates(t, y, sc, usable, (threshold, excursion, max_group))
     if not candidate.any():
         return []
     # Clusters of candidates, with the records whose neighbours they are, resolved one by one.

@@ -116,9 +116,14 @@ def _add(out: np.ndarray, index: np.ndarray, values: np.ndarray, distinct: bool)
 
 
 def _weighted_gram(A: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """``Σ_p A_p diag(weights) A_pᵀ`` for ``A`` ``(P, n, k)``, as one matrix product."""
-    Aw = (A * np.sqrt(weights)).transpose(1, 0, 2).reshape(A.shape[1], -1)
-    return Aw @ Aw.T
+    """``Σ_p A_p diag(weights) A_pᵀ`` for ``A`` ``(P, n, k)``, one matrix product per :data:`STEP`
+    of ``p`` (the weighted copy is a block's, not the whole ``A``'s)."""
+    n = A.shape[1]
+    out = np.zeros((n, n))
+    for lo in range(0, max(A.shape[0], 1), STEP):
+        Aw = (A[lo : lo + STEP] * np.sqrt(weights)).transpose(1, 0, 2).reshape(n, -1)
+        out += Aw @ Aw.T
+    return out
 
 
 def estimate(
@@ -251,7 +256,7 @@ class _Sums:
         inputs' ``Sigma_in``, plus the outliers' own."""
         Sigma_pose = np.concatenate([np.full(len(g), v) for g, v in zip(self.groups, var)])
         meat = _weighted_gram(self.K, Sigma_pose) + self.outliers
-        C = np.cumsum(self.C, axis=0)
+        C = np.cumsum(self.C, axis=0, out=self.C)  # in place: the differences are not needed again
         n_int = D.shape[0]
         for lo in range(0, n_int, STEP):
             Q = C[lo : min(n_int, lo + STEP)] @ D[lo : lo + STEP]  # (., n, n_in)

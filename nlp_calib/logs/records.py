@@ -61,18 +61,55 @@ def _integer_form(arr: np.ndarray, digit: np.ndarray, starts: np.ndarray, ends: 
     return (n_digits == ends - starts - neg) & (n_digits >= 1)
 
 
-def _time_ns(token: bytes) -> int:
-    """``-?[0-9]{1,10}(.[0-9]*)?`` as nanoseconds (digits beyond the ninth dropped); -1 marks
-    a token that is not one (a time cannot be negative and that far from 0 at once)."""
-    neg = token[:1] == b"-"
-    whole, _, frac = (token[1:] if neg else token).partition(b".")
-    if not 1 <= len(whole) <= 10 or int(whole) >= MAX_SECONDS:
-        return _NOT_A_TIME
-    ns = int(whole) * 1_000_000_000 + int((frac + b"000000000")[:9])
-    return -ns if neg else ns
-
-
+#: What :func:`_times_ns` gives a token that is not a time (a time cannot be negative and that
+#: far from 0 at once).
 _NOT_A_TIME = -(2**62)
+_POW10 = 10 ** np.arange(19, dtype=np.int64)
+
+
+def _token_bytes(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The bytes of each token, one row each (``(n, longest)``), and which columns it fills."""
+    width = int(np.max(ends - starts, initial=0))
+    at = starts[:, None] + np.arange(width)[None, :]
+    inside = at < ends[:, None]
+    return np.where(inside, arr[np.minimum(at, max(arr.size - 1, 0))], 0), inside
+
+
+def _digit_sum(chars: np.ndarray, use: np.ndarray, power: np.ndarray) -> np.ndarray:
+    """``Σ digit·10^power`` over the characters ``use`` marks, per row (int64, exact)."""
+    terms = (chars.astype(np.int64) - 48) * _POW10[np.clip(power, 0, 18)]
+    return np.where(use, terms, 0).sum(axis=1)
+
+
+def _integers(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """``int`` of tokens of the form ``-?[0-9]{1,18}``, as array operations."""
+    chars, inside = _token_bytes(arr, starts, ends)
+    neg = chars[:, 0] == 45 if chars.shape[1] else np.zeros(starts.size, dtype=bool)
+    k = np.arange(chars.shape[1])[None, :]
+    value = _digit_sum(chars, inside & (k >= neg[:, None]), (ends - starts)[:, None] - 1 - k)
+    return np.where(neg, -value, value)
+
+
+def _times_ns(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Integer nanoseconds of tokens of the form ``-?[0-9.]+`` with at most one dot, as array
+    operations: 1 to 10 digits of whole seconds (below :data:`MAX_SECONDS`), then the first nine
+    of the fraction; :data:`_NOT_A_TIME` for any other token (as :func:`_parse_time_ns` reads
+    them, without the per-line error)."""
+    chars, inside = _token_bytes(arr, starts, ends)
+    n = starts.size
+    if chars.shape[1] == 0:
+        return np.full(n, _NOT_A_TIME, dtype=np.int64)
+    neg = chars[:, 0] == 45
+    is_dot = chars == 46
+    dot = np.where(is_dot.any(axis=1), np.argmax(is_dot, axis=1), ends - starts)[:, None]
+    k = np.arange(chars.shape[1])[None, :]
+    whole_digits = dot[:, 0] - neg
+    fine = (whole_digits >= 1) & (whole_digits <= 10)
+    whole = _digit_sum(chars, inside & (k >= neg[:, None]) & (k < dot) & fine[:, None], dot - 1 - k)
+    fine &= whole < MAX_SECONDS
+    frac = _digit_sum(chars, inside & (k > dot) & (k <= dot + 9), dot + 9 - k)
+    ns = np.where(fine, whole, 0) * 1_000_000_000 + frac
+    return np.where(fine, np.where(neg, -ns, ns), _NOT_A_TIME)
 
 
 def _floats(tokens: list[bytes], index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -135,14 +172,14 @@ def parse_block(blob: bytes, first_line: int, n_encoders: int) -> Block:
     n_digits, n_dots = _counts(digit, ts, te), _counts(arr == 46, ts, te)
     good &= (n_digits + n_dots == te - ts - neg) & (n_dots <= 1) & (n_digits >= 1) & (te - ts <= 32)
     t_ns = np.zeros(cand.size, dtype=np.int64)
-    t_ns[good] = np.fromiter(map(_time_ns, [tokens[i] for i in (t0[good] + 1).tolist()]), np.int64)
+    t_ns[good] = _times_ns(arr, ts[good], te[good])
     good &= t_ns != _NOT_A_TIME
     tick_cols = (t0[:, None] + 3 + np.arange(n_encoders)[None, :]).ravel()
     tick_ok = _integer_form(arr, digit, tok_start[tick_cols], tok_end[tick_cols])
     tick_ok &= tok_end[tick_cols] - tok_start[tick_cols] - (arr[tok_start[tick_cols]] == 45) <= 18
     good &= tick_ok.reshape(-1, n_encoders).all(axis=1)
     tick_cols = tick_cols.reshape(-1, n_encoders)[good].ravel()
-    ticks = np.fromiter(map(int, [tokens[i] for i in tick_cols.tolist()]), np.int64, tick_cols.size)
+    ticks = _integers(arr, tok_start[tick_cols], tok_end[tick_cols])
     pose_offsets = np.array([4, 5, 6, 8, 9, 10]) + n_encoders
     pose_cols = (t0[good][:, None] + pose_offsets[None, :]).ravel()
     poses, readable = _floats(tokens, pose_cols)

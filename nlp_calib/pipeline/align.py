@@ -20,6 +20,11 @@ from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.prepare import split
 from nlp_calib.pipeline.scenario import Scenario
 
+#: A lag's fit (from the previous lag's estimate) stops once the next Gauss-Newton step would lower
+#: the cost by less than this fraction: its cost is then the optimum's to half of that, far below
+#: the cost differences between lags a parabola is fitted through (about 1e-2 on the real log).
+LAG_FIT_TOLERANCE = 1e-8
+
 
 @dataclass(frozen=True)
 class Alignment:
@@ -58,7 +63,7 @@ def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np
             binder.bind(shifted, first, fit_stop, evaluator=ev)
         else:
             ev.set_inputs(binder.inputs(shifted, first, fit_stop))
-        cost, x, converged = binder.fit(ev, x_start)
+        cost, x, converged = binder.fit(ev, x_start, LAG_FIT_TOLERANCE)
         if not converged:
             return float("nan")
         x_start = x

@@ -130,7 +130,8 @@ def analyse_fit(
     # Blocks are numbered as the scorer's records: the fitted records start at its offset.
     span = (blocks.offset, blocks.offset + data.n_records)
     full = fit.canonical_params(converged[0].params)
-    crossval = validation.cross_validate(binder, data, span, x, k, fit.canonical_params, blocks, full)
+    whole = ev.normal_equations(x) if data.n_residuals >= validation.DOWNDATE_FROM else None
+    crossval = validation.cross_validate(binder, data, span, x, k, fit.canonical_params, blocks, full, whole)
     inputs = np.concatenate([np.zeros((data.inputs.shape[0], span[0])), data.inputs], axis=1)
     model = fit.fns.model
     direction = validation.direction_check(

@@ -213,11 +213,17 @@ class Binder:
         steering = self.scenario.objective.residual.steering_sample
         return interval_inputs(self.fns.model, [log.select(start, stop)], steering)
 
-    def fit(self, evaluator: ProblemEvaluator, x0: np.ndarray) -> tuple[float, np.ndarray, bool]:
-        """The internal solver's cost, estimate and convergence from ``x0``."""
+    def fit(
+        self, evaluator: ProblemEvaluator, x0: np.ndarray, tolerance: float | None = None
+    ) -> tuple[float, np.ndarray, bool]:
+        """The internal solver's cost, estimate and convergence from ``x0``; with ``tolerance``,
+        converged once the undamped step would lower the cost by less than that fraction of it."""
         name = INTERNAL_SOLVER
         with scenario_key(self.scenario, name):
-            res = get_solver(name)(evaluator, self.scenario.options_for(name)).solve(x0)
+            options = self.scenario.options_for(name)
+            if tolerance is not None:
+                options = replace(options, function_tolerance=max(options.function_tolerance, tolerance))
+            res = get_solver(name)(evaluator, options).solve(x0)
         return res.cost, res.x, res.converged
 
 

@@ -19,17 +19,26 @@ import numpy as np
 
 from nlp_calib.analysis.crossval import blocks, combine, jackknife_std
 from nlp_calib.analysis.direction import compare
-from nlp_calib.pipeline.build import Binder
+from nlp_calib.pipeline.build import Binder, no_priors
 from nlp_calib.problem import ResidualData
 from nlp_calib.results.checks import CrossValidation, DirectionCheck, Fold
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.solvers import Priors
+from nlp_calib.solvers.evaluation import NormalEquations
 
 #: Refits run at once (each holds its own evaluator's buffers: memory grows with this).
 MAX_THREADS = 2
 
 T = TypeVar("T")
 R = TypeVar("R")
+
+#: A refit stops when the undamped Gauss-Newton step's predicted cost decrease is below this
+#: squared, times the cost per window: a step of about this fraction of the estimate's σ.
+REFIT_SIGMAS = 0.01
+
+#: Refits of this many windows or more downdate their first step (below, binding an evaluator on the
+#: windows left out costs more than evaluating the windows kept).
+DOWNDATE_FROM = 50_000
 
 #: A fold needs this many windows of its part in the held-out block to count in a part's jackknife.
 MIN_BLOCK_WINDOWS = 20
@@ -40,15 +49,35 @@ Score = Callable[[np.ndarray, int, int], TrajectoryMetrics]
 
 
 def _fit(
-    binder: Binder, data: ResidualData, fit: tuple[int, int], bad: np.ndarray, x: np.ndarray
+    binder: Binder,
+    data: ResidualData,
+    fit: tuple[int, int],
+    bad: np.ndarray,
+    x: np.ndarray,
+    whole: NormalEquations | None = None,
 ) -> tuple[np.ndarray, bool, int]:
     """Full parameters, convergence and window count of a refit of ``data`` without the windows
-    that cross a ``bad`` interval (a mask over the whole log's intervals)."""
-    kept = data.select(data.interval_counts(bad[fit[0] : fit[1] - 1]) == 0)
+    that cross a ``bad`` interval (a mask over the whole log's intervals). ``whole``: the normal
+    equations of all of ``data`` at ``x`` (the refit's priors included), downdated for the first
+    step by those of the windows left out instead of evaluating the windows kept."""
+    crossing = data.interval_counts(bad[fit[0] : fit[1] - 1]) > 0
+    kept = data.select(~crossing)
     if kept.n_residuals < binder.fns.n_free:
         return np.full(len(binder.fns.names), np.nan), False, 0
     ev = binder.evaluate(kept)
-    _, x_k, converged = binder.fit(ev, x)
+    if whole is not None and data.n_residuals >= DOWNDATE_FROM:
+        ne = whole
+        if crossing.any():
+            data_only = dataclasses.replace(binder, priors=no_priors(binder.fns.n_free))
+            ne = whole.less(data_only.evaluate(data.select(crossing)).normal_equations(x))
+        ev.remember(x, ne)
+    # Refits start next to their optimum: Gauss-Newton steps from ``x`` until the next would move
+    # the estimate by less than REFIT_SIGMAS of its σ (a step or two), not to rounding; that last
+    # step is taken too (the solver's last normal equations: no evaluation).
+    _, x_k, converged = binder.fit(ev, x, REFIT_SIGMAS**2 / kept.n_residuals)
+    if converged:
+        ne = ev.normal_equations(x_k)
+        x_k = ev.boxplus(x_k, np.linalg.solve(ne.H, -ne.g))
     return ev.params(x_k), converged, kept.n_residuals
 
 
@@ -69,15 +98,16 @@ def on_threads(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
 def _part_fold(
     block: tuple[int, int],
     binder: Binder,
-    data: ResidualData,
+    part: ResidualData,
     fit: tuple[int, int],
-    other: np.ndarray,
     x: np.ndarray,
+    whole: NormalEquations | None,
 ) -> np.ndarray | None:
-    """A direction's refit without the records ``block`` (None when it does not converge)."""
-    bad = other.copy()
+    """A direction's refit (of its windows ``part``, with normal equations ``whole`` at ``x``)
+    without the records ``block`` (None when it does not converge)."""
+    bad = _base(fit)
     bad[block[0] : block[1] - 1] = True
-    params, converged, _ = _fit(binder, data, fit, bad, x)
+    params, converged, _ = _fit(binder, part, fit, bad, x, whole)
     return params if converged else None
 
 
@@ -94,15 +124,17 @@ def cross_validate(
     canonical: Canonical,
     score: Score,
     full: np.ndarray,
+    whole: NormalEquations | None = None,
 ) -> CrossValidation:
     """``k`` folds over the records ``fit``, each scored on its block by ``score(params, a, b)``,
-    beside the full fit's parameters ``full`` scored on the same block."""
+    beside the full fit's parameters ``full`` scored on the same block. ``whole``: the normal
+    equations of ``data`` at ``x``, when known (each fold's first step downdates them)."""
 
     def fold(block: tuple[int, int]) -> Fold:
         a, b = block
         bad = _base(fit)
         bad[a : b - 1] = True
-        params, converged, n = _fit(binder, data, fit, bad, x)
+        params, converged, n = _fit(binder, data, fit, bad, x, whole)
         if not n:
             return Fold(a, b, params, False, None)
         params = canonical(params)
@@ -149,7 +181,13 @@ def direction_check(
 
         # A block without this direction's driving says nothing about it.
         driven = [(a, b) for a, b in blocks(first, stop, k) if np.sum(part[a : b - 1]) >= MIN_BLOCK_WINDOWS]
-        fold = functools.partial(_part_fold, binder=part_binder, data=data, fit=fit, other=other, x=x_part)
+        part_data = data.select(data.interval_counts(other[first : stop - 1]) == 0)
+        whole = None
+        if part_data.n_residuals >= DOWNDATE_FROM:
+            whole = part_binder.evaluate(part_data).normal_equations(x_part)
+        fold = functools.partial(
+            _part_fold, binder=part_binder, part=part_data, fit=fit, x=x_part, whole=whole
+        )
         folds = [canonical(p) for p in on_threads(fold, driven) if p is not None]
         estimates.append(canonical(params))
         sigmas.append(jackknife_std(np.array(folds)) if len(folds) >= 3 else np.full(len(fns.names), np.nan))

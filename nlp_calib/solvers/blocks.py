@@ -9,6 +9,7 @@ them straight into full per-column arrays.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator, Mapping, Sequence
 
 import casadi as ca
@@ -18,6 +19,14 @@ from nlp_calib.solvers.backends import Backend, Buffered
 
 #: Columns per block: a multiple of every backend's chunk.
 BLOCK = 1 << 14
+
+
+@functools.lru_cache(maxsize=64)
+def _mapped(backend: Backend, f: ca.Function, n: int, names: tuple[str, ...], reduce: bool) -> ca.Function:
+    """``backend.map``, built once per Function and size: every evaluator on windows of about the
+    same number (the refits, the lag search's) evaluates the same wrapper instead of building
+    its own (each call has its own buffers: one Function serves several threads)."""
+    return backend.map(f, n, names, reduce)
 
 
 class BlockMap:
@@ -44,7 +53,7 @@ class BlockMap:
         for lo in range(0, n, BLOCK):
             hi = min(n, lo + BLOCK)
             if hi - lo not in maps:
-                maps[hi - lo] = backend.map(f, hi - lo, names, reduce)
+                maps[hi - lo] = _mapped(backend, f, hi - lo, names, reduce)
             bound = {k: v[:, lo:hi] for k, v in mapped.items()}
             if not reduce:
                 bound.update(
@@ -85,7 +94,7 @@ def stream(
         hi = min(total, lo + BLOCK)
         size = hi - lo
         if size not in buffers:
-            buffers[size] = Buffered(backend.map(f, size, tuple(mapped), False), static)
+            buffers[size] = Buffered(_mapped(backend, f, size, tuple(mapped), False), static)
         buf = buffers[size]
         for name, arr in mapped.items():
             buf.rebind(name, arr[:, lo:hi])

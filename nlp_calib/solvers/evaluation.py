@@ -60,6 +60,16 @@ class NormalEquations:
     chi2: float
     inliers: int
 
+    def less(self, other: NormalEquations) -> NormalEquations:
+        """These normal equations without ``other``'s terms (a subset's, without priors)."""
+        return NormalEquations(
+            self.H - other.H,
+            self.g - other.g,
+            self.cost - other.cost,
+            self.chi2 - other.chi2,
+            self.inliers - other.inliers,
+        )
+
     def decrement(self) -> float:
         """``gᵀH⁻¹g``: the cost decrease the undamped Gauss-Newton step predicts (×½ convention);
         inf when ``H`` is singular."""
@@ -236,6 +246,11 @@ class ProblemEvaluator:
         ne = NormalEquations(H=H, g=g, cost=cost_f, chi2=float(chi2[0]), inliers=round(float(inliers[0])))
         self._on.last = (key, ne)
         return ne
+
+    def remember(self, x: np.ndarray, ne: NormalEquations) -> None:
+        """Take ``ne`` as the normal equations at ``x`` without evaluating them (known otherwise:
+        e.g. a larger set of windows' less those of the windows left out)."""
+        self._on.last = (np.asarray(x, dtype=float).tobytes(), ne)
 
     def cost(self, x: np.ndarray) -> float:
         (cost,) = self._call("cost", x)

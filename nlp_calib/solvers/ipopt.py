@@ -33,6 +33,12 @@ _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 #: converged when no Gauss-Newton step there could lower the cost by more than this fraction.
 _TINY_STEP = "Search_Direction_Becomes_Too_Small"
 _TINY_STEP_DECREMENT = 1e-12
+#: IPOPT takes a step without a line search when no parameter moves by more than this (relative):
+#: √ε. At an optimum such a step changes the cost by about ε of itself, so the line search cannot
+#: see its decrease through the cost's rounding and halves a correct Newton step again and again
+#: (on the real log: 18 iterations and 166 cost evaluations instead of 8 and 9, depending on how
+#: the last digits of the cost happened to round; IPOPT's default is 10 ε).
+TINY_STEP_TOL = float(np.sqrt(np.finfo(float).eps))
 #: Lower bound of the lifted weights: keeps δ²/w finite; far below any weight at the optimum.
 _W_MIN = 1e-8
 #: IPOPT options that make it read or write files, or load a library, by name of its own: the
@@ -122,6 +128,7 @@ class Ipopt:
             "ipopt.print_level": o.print_level,
             "ipopt.sb": "yes",
             "ipopt.linear_solver": o.linear_solver,
+            "ipopt.tiny_step_tol": TINY_STEP_TOL,
             "print_time": False,
             # An empty name: IPOPT reads no ipopt.opt from the working folder.
             "ipopt.option_file_name": "",
