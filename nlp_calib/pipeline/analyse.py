@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
-from nlp_calib.analysis.metrics import integrate, segments, trajectory_metrics
+from nlp_calib.analysis.metrics import geometry, integrate, segments, trajectory_metrics
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
@@ -27,6 +27,7 @@ from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.windows import LogWindows
 from nlp_calib.problem import ProblemFunctions, over_columns
+from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results import SolverResult
 from nlp_calib.results.checks import ConsistencyCheck, CrossValidation, DirectionCheck, Observability
 from nlp_calib.results.faults import Findings
@@ -100,7 +101,7 @@ def log_scorer(fns: ProblemFunctions, windows: LogWindows, steering_sample: str,
     """The scorer over one log's used records."""
     bad_i, bad_r = windows.masks()
     inputs = windows.inputs(steering_sample)
-    poses = windows.selected.T_world_sensor
+    poses = tracker_poses(fns, windows.selected)
     return Scorer(fns, inputs, poses, bad_i, bad_r, windows.used[0], rpe_window)
 
 
@@ -210,7 +211,7 @@ def track_series(
     """The tracker's poses and the tracks of the initial guess and of every estimate over one
     log's used records, restarted after each fault as the segment ATE scores them."""
     windows, inputs = view.windows, view.scorer.inputs
-    ref = np.asarray(windows.selected.T_world_sensor)
+    ref = np.asarray(tracker_poses(fit.fns, windows.selected))
     bad_i, bad_r = windows.masks()
     parts = tuple(segments(ref.shape[0], bad_i))
     p0 = np.array([fit.problem.start.initial[n] for n in fit.fns.names])
@@ -223,7 +224,7 @@ def track_series(
         tracks.append(
             Track(labels.get(name, name), name, full, figures.scores[name][0].ate_mean, r.converged)
         )
-        rows += segment_figures(name, again[name], ref, parts, ~bad_r)
+        rows += segment_figures(name, again[name], ref, parts, ~bad_r, geometry(fit.fns))
     a, b = windows.used
     return TrackSeries(
         time_s=np.asarray(windows.selected.time_s),
