@@ -141,6 +141,17 @@ def _report(
     return SolverReport(result, u, *figures.scores[name], controller)
 
 
+def mount_notes(sc: Scenario, start: StartingPoint) -> list[str]:
+    """A 3-D sensor's held height, said once."""
+    if not sc.objective.sensor.is_3d:
+        return []
+    z = start.initial.get("sensor_z", 0.0)
+    return [
+        f"sensor_z is held at {z:g} m: planar driving cannot determine a 3-D sensor's height "
+        "(give the measured one as initial_guess.sensor_z)"
+    ]
+
+
 def _start_dropped(start: StartingPoint) -> dict[str, int] | None:
     """The windows a 3-D sensor's closed-form start left out, by reason (None: no closed form)."""
     if start.camera is None or start.auto is None:
@@ -169,7 +180,7 @@ def assemble_run(
         baseline_holdout=figures.baseline[1],
         reports=reports,
         checks=Checks(fitted.observability, fitted.crossval, fitted.direction, findings, fitted.consistency),
-        warnings=(*notes, *lag_notes(prepared.scenario, alignment)),
+        warnings=(*notes, *lag_notes(prepared.scenario, alignment), *mount_notes(prepared.scenario, start)),
         verdict=Verdict("", ()),
         series=figures.series,
         odometry=figures.odometry,
@@ -180,6 +191,7 @@ def assemble_run(
         if isinstance(source, BagSource)
         else ""
     )
-    checks = dataclasses.replace(run.checks, truth=against_truth(run))
+    rename = getattr(prepared.model, "rename", str)
+    checks = dataclasses.replace(run.checks, truth=against_truth(run, source.files(), rename))
     run = dataclasses.replace(run, checks=checks)
     return dataclasses.replace(run, verdict=verdict(run, prepared.model, hint))

@@ -64,7 +64,8 @@ def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[st
         {n: v for n, v in header_parameters(model, log.header).items() if n in model.kinematic_params}
     )
     if sensor.is_3d:
-        guess.update({**dict.fromkeys(sensor.held(), 0.0), SCALE_PARAM: 1.0})
+        guess.update(dict.fromkeys(sensor.held(), 0.0))
+        guess.update({SCALE_PARAM: 1.0} if SCALE_PARAM in sensor.params() else {})
     else:
         guess.update(zip(SENSOR_PARAMS, log.header.T_base_sensor))
     if isinstance(p.initial_guess, Mapping):

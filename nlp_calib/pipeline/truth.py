@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -37,16 +38,25 @@ def read_truth(log_path: Path) -> dict[str, float] | None:
         return None
 
 
-def against_truth(run: CalibrationRun) -> TruthCheck | None:
-    """The chosen solver's estimate against the truth beside the run's log, if there is one."""
+def against_truth(
+    run: CalibrationRun, files: Sequence[Path] = (), rename: Callable[[str], str] = str
+) -> TruthCheck | None:
+    """The chosen solver's estimate against the truth beside the run's log (or beside the first of
+    its source's ``files`` that has one: a camera's TUM file), its names given by ``rename`` (a
+    camera simulation's truth names the parameters as the model's counts form does)."""
     solver = run.chosen_solver()
-    truth = read_truth(Path(run.log.path)) if solver is not None else None
-    if solver is None or truth is None:
+    if solver is None:
         return None
+    beside = [p for p in (Path(run.log.path), *files) if truth_path(p).is_file()]
+    found = read_truth(beside[0]) if beside else None
+    if found is None:
+        return None
+    truth = {rename(n): v for n, v in found.items()}
+    path = beside[0]
     result = run.reports[solver].result
     std = run.std(solver)
     true = np.array([truth.get(n, np.nan) for n in result.names])
     sigma = np.array([std.get(n, 0.0) for n in result.names])
     error = result.params - true
     z = np.where(sigma > 0, error / np.where(sigma > 0, sigma, 1.0), np.nan)
-    return TruthCheck(str(truth_path(Path(run.log.path))), solver, result.names, true, error, z)
+    return TruthCheck(str(truth_path(path)), solver, result.names, true, error, z)
