@@ -70,6 +70,7 @@ def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[st
         guess.update(zip(SENSOR_PARAMS, log.header.T_base_sensor))
     if isinstance(p.initial_guess, Mapping):
         guess.update(p.initial_guess)
+    guess.update(p.known)
     mount = sensor.params()
     needed = p.fixed if p.initial_guess == "auto" else (*model.kinematic_params, *mount)
     missing = [n for n in needed if n not in guess]
@@ -289,7 +290,7 @@ def weigh_priors(
     _, ev = binder.bind(log, start, stop)
     _, x, _ = binder.fit(ev, x0)
     _, s, weight = ev.robust_terms(x)
-    sigma = float(np.sqrt(float(np.sum(weight * s)) / max(3 * ev.n_residuals - fns.n_free, 1)))
+    sigma = float(np.sqrt(float(np.sum(weight * s)) / max(fns.error_rows * ev.n_residuals - fns.n_free, 1)))
     mean = np.array([priors[n].mean if n in priors else 0.0 for n in fns.free])
     sqrt_info = np.array([sigma / priors[n].std if n in priors else 0.0 for n in fns.free])
     return Priors(mean=mean, sqrt_info=sqrt_info), sigma

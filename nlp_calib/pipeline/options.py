@@ -215,14 +215,22 @@ class ObjectiveOptions:
 
 @dataclass(frozen=True)
 class ParameterOptions:
-    """Where the parameters start (``from_file``, ``auto`` or values), bounds, fixed ones, priors."""
+    """Where the parameters start (``from_file``, ``auto`` or values), bounds, fixed ones, priors,
+    and ``known`` ones: measured values held fixed whatever the start (a camera's height, the one
+    length a free scale needs), added to ``fixed``."""
 
     initial_guess: str | Mapping[str, float] = "from_file"
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     fixed: tuple[str, ...] = ()
     priors: Mapping[str, Prior] = field(default_factory=dict)
+    known: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        for n, value in self.known.items():
+            check_range(f"known.{n}", value, MAGNITUDE)
+            if n in self.bounds:
+                raise FieldError(f"bounds.{n}", "a known parameter is held at its value; drop its bounds")
+        object.__setattr__(self, "fixed", tuple(dict.fromkeys((*self.fixed, *self.known))))
         if isinstance(self.initial_guess, str):
             check_choice("initial_guess", self.initial_guess, INITIAL_GUESSES)
         else:
@@ -240,6 +248,8 @@ class ParameterOptions:
 
     def guess(self, name: str) -> float | None:
         """The scenario's own initial value of ``name``, if it gives one."""
+        if name in self.known:
+            return self.known[name]
         return self.initial_guess.get(name) if isinstance(self.initial_guess, Mapping) else None
 
 

@@ -334,6 +334,12 @@ def check_against_model(sc: Scenario, source: str) -> None:
     _check_overlaps(sc, source)
 
 
+def refuse_3d(sc: Scenario, what: str, why: str) -> None:
+    """A one-line error when ``sc``'s sensor is 3-D and ``what`` is planar only (``why``)."""
+    if sc.objective.sensor.is_3d:
+        raise ScenarioError(f"{sc.where()}: sensor: 3d: {what} is not available for a 3-D sensor: {why}")
+
+
 def scenario_params(sc: Scenario) -> tuple[str, ...]:
     """Every parameter of the scenario's problem: the model's, then its sensor's mount."""
     return (*sc.model_form().kinematic_params, *sc.objective.sensor.params())
@@ -367,7 +373,7 @@ def _check_parameter_names(p: ParameterOptions, names: tuple[str, ...], source: 
     if isinstance(p.initial_guess, Mapping):
         for n in p.initial_guess:
             _choice(n, names, f"{source}: initial_guess")
-    for key, given in (("bounds", p.bounds), ("fixed", p.fixed), ("priors", p.priors)):
+    for key, given in (("bounds", p.bounds), ("fixed", p.fixed), ("priors", p.priors), ("known", p.known)):
         for n in given:
             _choice(n, names, f"{source}: {key}")
     if len(set(p.fixed)) == len(names):
