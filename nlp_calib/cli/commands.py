@@ -30,9 +30,9 @@ from nlp_calib.outputs.progress import Progress
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.outputs.terminal import correlation_table, run_table, summary_table, validation_table
 from nlp_calib.pipeline import Calibration, JointCalibration, Scenario, Wanted, load_scenario
-from nlp_calib.pipeline.scenario import refuse_3d
 from nlp_calib.pipeline.export import write_c_export
 from nlp_calib.pipeline.prepare import read_checked
+from nlp_calib.pipeline.scenario import refuse_3d
 from nlp_calib.pipeline.simconfig import camera_options, simulation_options
 from nlp_calib.results import CalibrationRun
 from nlp_calib.simulation import simulate_to_file, truth_path

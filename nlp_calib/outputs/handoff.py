@@ -167,8 +167,8 @@ def urdf_joint(run: CalibrationRun, solver: str) -> str:
     frame = run.log.sensor_frame
     nominal = "the nominal mount's (/tf_static)" if run.log.sensor_z_roll_pitch else "0 (not known)"
     what = (
-        "x, y, roll, pitch and yaw; z is held at the value given (0 unless set), which planar driving "
-        "cannot see"
+        "x, y, roll, pitch and yaw; z is held at the value given (known.sensor_z, 0 unless set), "
+        "which planar driving cannot see"
         if run.scenario.sensor_3d
         else f"x, y and yaw; z, roll and pitch are {nominal}, which planar driving cannot see"
     )

@@ -11,14 +11,14 @@ import numpy as np
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.version import __version__
 from nlp_calib.results import CalibrationRun, SolverReport
+from nlp_calib.results.figures import TrajectoryMetrics
 
 #: Why a 3-D sensor's height is held.
 HELD_WHY = (
     "planar driving cannot determine a 3-D sensor's height: the base turns about the vertical, so "
-    "sensor_z never changes a predicted motion; it is held at the value given (initial_guess.sensor_z, "
+    "sensor_z never changes a predicted motion; it is held at the value given (known.sensor_z, "
     "0 unless set)"
 )
-from nlp_calib.results.figures import TrajectoryMetrics
 
 
 def _metrics_dict(full: TrajectoryMetrics, holdout: TrajectoryMetrics | None) -> dict[str, Any]:

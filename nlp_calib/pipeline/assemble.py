@@ -148,7 +148,7 @@ def mount_notes(sc: Scenario, start: StartingPoint) -> list[str]:
     z = start.initial.get("sensor_z", 0.0)
     return [
         f"sensor_z is held at {z:g} m: planar driving cannot determine a 3-D sensor's height "
-        "(give the measured one as initial_guess.sensor_z)"
+        "(give the measured one as known.sensor_z)"
     ]
 
 

@@ -187,7 +187,9 @@ class SensorOptions:
         check_choice("mount", self.mount, SENSORS)
         check_choice("scale", self.scale, SCALES)
         if self.scale == "free" and self.mount == "planar":
-            raise FieldError("scale", "a free scale needs a 3-D sensor (mount: 3d); planar tracker poses are metric")
+            raise FieldError(
+                "scale", "a free scale needs a 3-D sensor (mount: 3d); planar tracker poses are metric"
+            )
 
     @property
     def is_3d(self) -> bool:

@@ -13,8 +13,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from nlp_calib.analysis.faults import absolute_faults, repair
-from nlp_calib.analysis.readings import unit as unit_of
 from nlp_calib.analysis.faults import screen as screen_log
+from nlp_calib.analysis.readings import unit as unit_of
 from nlp_calib.logs import Log
 from nlp_calib.pipeline.build import Binder
 from nlp_calib.results.faults import TRACKER_KINDS, FaultReport, Findings

@@ -63,7 +63,10 @@ def simulation_options(config: Path | None, overrides: Mapping[str, Any]) -> Sim
     """Options from ``config`` (a YAML mapping of options by their flat names), then overrides."""
     raw, source = _config(config)
     if "duration_s" in overrides:
-        fail("simulate: duration", "applies to a camera simulation (--out ending in .tum); a log takes --records")
+        fail(
+            "simulate: duration",
+            "applies to a camera simulation (--out ending in .tum); a log takes --records",
+        )
     raw.update(overrides)
     hints = flat_hints()
     for key in raw:
