@@ -191,7 +191,8 @@ def assemble_run(
         if isinstance(source, BagSource)
         else ""
     )
-    rename = getattr(prepared.model, "rename", str)
-    checks = dataclasses.replace(run.checks, truth=against_truth(run, source.files(), rename))
+    # Joints in radians: the simulator's truth is in the counts form's names and units.
+    convert = getattr(prepared.model, "from_counts", dict)
+    checks = dataclasses.replace(run.checks, truth=against_truth(run, source.files(), convert))
     run = dataclasses.replace(run, checks=checks)
     return dataclasses.replace(run, verdict=verdict(run, prepared.model, hint))

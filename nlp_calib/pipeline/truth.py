@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +17,9 @@ from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import TruthCheck
 from nlp_calib.simulation import truth_path
+
+#: Parameter values in one form's names and units into another's.
+Converter = Callable[[Mapping[str, float]], dict[str, float]]
 
 
 def read_truth(log_path: Path) -> dict[str, float] | None:
@@ -39,11 +42,11 @@ def read_truth(log_path: Path) -> dict[str, float] | None:
 
 
 def against_truth(
-    run: CalibrationRun, files: Sequence[Path] = (), rename: Callable[[str], str] = str
+    run: CalibrationRun, files: Sequence[Path] = (), convert: Converter = dict
 ) -> TruthCheck | None:
     """The chosen solver's estimate against the truth beside the run's log (or beside the first of
-    its source's ``files`` that has one: a camera's TUM file), its names given by ``rename`` (a
-    camera simulation's truth names the parameters as the model's counts form does)."""
+    its source's ``files`` that has one: a camera's TUM file), in the run's names and units by
+    ``convert`` (a camera simulation's truth is in the model's counts form's names and units)."""
     solver = run.chosen_solver()
     if solver is None:
         return None
@@ -51,7 +54,7 @@ def against_truth(
     found = read_truth(beside[0]) if beside else None
     if found is None:
         return None
-    truth = {rename(n): v for n, v in found.items()}
+    truth = convert(found)
     path = beside[0]
     result = run.reports[solver].result
     std = run.std(solver)
