@@ -214,3 +214,44 @@ def test_no_overlap_in_time_with_the_joints_is_one_line(tmp_path: Path) -> None:
         Calibration.setup(load_scenario(scenario(tmp_path)))
     print(exc.value)
     assert "\n" not in str(exc.value) and "cam.joints.csv" in str(exc.value)
+
+
+def test_a_tricycle_with_a_camera_calibrates_in_robot_units(tmp_path: Path) -> None:
+    truth = recording(tmp_path, model="tricycle", **{**TARGET, "duration_s": 40.0})
+    path = tmp_path / "tri.yaml"
+    path.write_text(
+        "model: tricycle\nsensor: 3d\ninitial_guess: auto\nknown: {sensor_z: 0.30}\nvalidation: {blocks: 0}\n"
+        "dataset: {poses: cam.tum, joints: cam.joints.csv,\n"
+        "          encoders: {steering: steering_joint, traction_wheel: traction_wheel_joint}}\n"
+        "alignment: {tracker_lag: auto, search: [-0.05, 0.05], step: 0.005}\n"
+    )
+    run = Calibration.setup(load_scenario(path)).run()
+    params = run.reports["gauss_newton"].result.param_dict()
+    assert "wheel_radius" in params and "wheelbase" in params
+    assert rotation_error_deg(params, truth) < 0.05
+    check = run.checks.truth
+    assert check is not None
+    # The simulator's traction gain is metres per revolution: the run's wheel radius per radian.
+    assert check.truth[check.names.index("wheel_radius")] == pytest.approx(truth["k_traction"] / (2 * np.pi))
+    # The lower layer's tolerance for every model (tests/test_camera.py), here with the lag estimated.
+    for name, true, error in zip(check.names, check.truth, check.error):
+        assert abs(error) <= 1e-3 * max(abs(true), 1.0), name
+
+
+@pytest.mark.slow
+def test_realistic_noise_truth_within_three_sigma_on_most_seeds(tmp_path: Path) -> None:
+    """1 mm and 0.1° of pose noise, the shipped demo's scenario on other seeds."""
+    from nlp_calib.simulation.camera import CameraNoise
+
+    demo = (REPO / "scenarios" / "camera_demo.yaml").read_text().replace("data/camera_demo", "cam")
+    worst = []
+    for seed in range(10):
+        folder = tmp_path / f"seed{seed}"
+        folder.mkdir()
+        recording(folder, duration_s=40.0, seed=seed, stamp_offset_s=0.01, noise=CameraNoise(0.001, 0.0017))
+        (folder / "c.yaml").write_text(demo)
+        check = Calibration.setup(load_scenario(folder / "c.yaml")).run().checks.truth
+        assert check is not None
+        worst.append(float(np.nanmax(np.abs(check.z))))
+    print("largest |estimate − truth| / σ per seed:", np.round(worst, 2))
+    assert np.mean(np.array(worst) < 3.0) >= 0.9
