@@ -135,6 +135,12 @@ def test_the_outputs_hold_the_full_mount(target: Case) -> None:
     assert findings is not None and "3-D sensor's poses are not screened" in findings.report.unchecked
 
 
+def test_a_stored_camera_run_writes_the_same_document(target: Case) -> None:
+    back = CalibrationRun.from_data(target.run.to_data())
+    assert back.data.start_dropped == target.run.data.start_dropped
+    assert result_document(back) == result_document(target.run)
+
+
 def test_the_truth_beside_the_tum_file_is_compared_in_sigma(target: Case) -> None:
     truth = target.run.checks.truth
     assert truth is not None and truth.path.endswith("cam.truth.json")
