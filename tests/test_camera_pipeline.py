@@ -119,6 +119,12 @@ def test_monocular_poses_give_the_scale_with_one_known_length(monocular: Case) -
     assert params["sensor_z"] == 0.30 and params["wheel_separation"] == 0.45
 
 
+def test_a_trajectory_up_to_scale_is_scored_in_metres(target: Case, monocular: Case) -> None:
+    # The same drive (seed and options) written in metres and in units of 3.7 m.
+    metres, scaled = target.run.baseline.distance_m, monocular.run.baseline.distance_m
+    assert scaled == pytest.approx(metres, rel=1e-3)
+
+
 def test_the_outputs_hold_the_full_mount(target: Case) -> None:
     doc = result_document(target.run)
     assert doc["sensor"]["mount"] == "3d" and doc["sensor"]["held"] == {"sensor_z": 0.0}
