@@ -267,3 +267,26 @@ def test_realistic_noise_truth_within_three_sigma_on_most_seeds(tmp_path: Path) 
         worst.append(float(np.nanmax(np.abs(check.z))))
     print("largest |estimate − truth| / σ per seed:", np.round(worst, 2))
     assert np.mean(np.array(worst) < 3.0) >= 0.9
+
+
+@pytest.mark.slow
+def test_a_ros2_bags_tracker_read_as_a_3d_sensor(tmp_path: Path) -> None:
+    """A bag's PoseStamped with its full orientation (a level sensor here: roll and pitch 0)."""
+    import ros2_bags as rb
+
+    rec = rb.record()
+    bag = rb.write(rec, tmp_path / "drive", "sqlite3")
+    path = tmp_path / "b.yaml"
+    path.write_text(
+        f"model: tricycle\nsensor: 3d\n{rb.dataset_block(bag, rec)}\ninitial_guess: auto\n"
+        f"residual: {{horizon_s: 0.5}}\nknown: {{sensor_z: {rb.SENSOR_Z}}}\nsolvers: [gauss_newton]\n"
+    )
+    p = Calibration.setup(load_scenario(path)).run().reports["gauss_newton"].result.param_dict()
+    t = rec.truth
+    assert abs(p["sensor_roll"]) < 1e-3 and abs(p["sensor_pitch"]) < 1e-3
+    assert abs(p["sensor_yaw"] - t["sensor_theta"]) < 0.005
+    assert (
+        abs(p["wheel_radius"] / t["wheel_radius"] - 1) < 0.005
+        and abs(p["wheelbase"] / t["wheelbase"] - 1) < 0.01
+    )
+    assert abs(p["sensor_x"] - t["sensor_x"]) < 0.01 and abs(p["sensor_y"] - t["sensor_y"]) < 0.01
