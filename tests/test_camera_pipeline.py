@@ -207,8 +207,12 @@ def test_simulate_writes_a_camera_and_the_planar_only_commands_refuse_it(tmp_pat
 
 @pytest.mark.slow
 def test_the_shipped_camera_demo_runs_end_to_end_and_shows_the_truth(tmp_path: Path) -> None:
-    out = cli("run", "scenarios/camera_demo.yaml", "--out", str(tmp_path / "demo"))
+    out = cli("run", "scenarios/camera_demo.yaml", "--out", str(tmp_path / "demo"), "--report")
     assert out.returncode == 0, out.stderr
+    # The exported tracker track is the camera's own trajectory, orientation included (for evo).
+    exported = np.loadtxt(tmp_path / "demo" / "trajectories" / "tracker.tum")
+    given = np.loadtxt(REPO / "scenarios" / "data" / "camera_demo.tum")
+    assert exported.shape == given.shape and np.allclose(exported[:, 1:], given[:, 1:], atol=1e-9)
     assert "against the simulator's truth" in out.stdout and "closed-form start alone" in out.stdout
     doc = json.loads((tmp_path / "demo" / "result.json").read_text())
     assert max(abs(z) for z in doc["truth"]["error_in_sigma"].values() if z is not None) < 3.0
