@@ -20,8 +20,10 @@ from nlp_calib.analysis.metrics import geometry, integrate, segments, trajectory
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
+from nlp_calib.core import poses3d
 from nlp_calib.logs import Log
 from nlp_calib.models import SENSOR_PARAMS, header_parameters
+from nlp_calib.models.mount import MOUNT_ANGLES
 from nlp_calib.pipeline import validation
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog
@@ -237,7 +239,20 @@ def track_series(
         holdout_start=windows.fit[1] - a if windows.fit[1] < b - 1 else None,
         segments=tuple(rows),
         tracker_z=_heights(windows.selected),
+        level=_level(fit, results, ref),
     )
+
+
+def _level(fit: Fit, results: Mapping[str, SolverResult], ref: np.ndarray) -> np.ndarray | None:
+    """A 3-D sensor's world frame turned onto the base's frame at the first record, by the first
+    converged estimate's mount (the start's when none converged): ``R_X·R(q_0)ᵀ``."""
+    if fit.fns.sensor.pose_rows != 7:
+        return None
+    names = fit.fns.names
+    done = [r.params for r in results.values() if r.converged]
+    params = done[0] if done else np.array([fit.problem.start.initial[n] for n in names])
+    R_X = poses3d.rpy_to_matrix(np.array([params[names.index(n)] for n in MOUNT_ANGLES]))
+    return np.asarray(R_X @ poses3d.quat_to_matrix(ref[0, 3:7]).T)
 
 
 def model_check(fit: Fit, prepared: PreparedLog) -> ModelCheckSeries | None:
