@@ -138,7 +138,8 @@ def test_the_outputs_hold_the_full_mount(target: Case) -> None:
     assert f'rpy="{p["sensor_roll"]!r} {p["sensor_pitch"]!r} {p["sensor_yaw"]!r}"' in joint
     assert any("sensor_z is held" in w for w in target.run.warnings)
     findings = target.run.checks.findings
-    assert findings is not None and "3-D sensor's poses are not screened" in findings.report.unchecked
+    assert findings is not None and findings.report.unchecked == "" and findings.report.faults == ()
+    assert any("not screened for jumps" in w for w in target.run.warnings)
 
 
 def test_a_stored_camera_run_writes_the_same_document(target: Case) -> None:
@@ -295,3 +296,23 @@ def test_a_ros2_bags_tracker_read_as_a_3d_sensor(tmp_path: Path) -> None:
         and abs(p["wheelbase"] / t["wheelbase"] - 1) < 0.01
     )
     assert abs(p["sensor_x"] - t["sensor_x"]) < 0.01 and abs(p["sensor_y"] - t["sensor_y"]) < 0.01
+
+
+def test_a_wheel_joint_jump_is_found_against_the_camera_and_left_out(tmp_path: Path) -> None:
+    data = REPO / "scenarios" / "data"
+    (tmp_path / "cam.tum").write_bytes((data / "camera_demo.tum").read_bytes())
+    lines = (data / "camera_demo.joints.csv").read_text().splitlines()
+    for i in range(2000, len(lines)):  # the left wheel loses 0.8 rad at t ≈ 19.5 s
+        t, left, right = lines[i].split(",")
+        lines[i] = f"{t},{float(left) - 0.8!r},{right}"
+    (tmp_path / "cam.joints.csv").write_text("\n".join(lines) + "\n")
+    demo = (REPO / "scenarios" / "camera_demo.yaml").read_text().replace("data/camera_demo", "cam")
+    (tmp_path / "c.yaml").write_text(demo)
+    run = Calibration.setup(load_scenario(tmp_path / "c.yaml")).run()
+    findings = run.checks.findings
+    assert findings is not None
+    assert [(f.kind, f.encoder) for f in findings.report.faults] == [("counter_jump", "left_wheel")]
+    assert run.data.dropped_faulty > 0
+    truth = json.loads((data / "camera_demo.truth.json").read_text())["params"]
+    params = run.reports["gauss_newton"].result.param_dict()
+    assert abs(params["left_wheel_radius"] / truth["k_left"] - 1) < 1e-3

@@ -12,9 +12,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from nlp_calib.analysis.faults import absolute_faults, repair
+from nlp_calib.analysis.faults import repair
 from nlp_calib.analysis.faults import screen as screen_log
-from nlp_calib.analysis.readings import unit as unit_of
 from nlp_calib.logs import Log
 from nlp_calib.pipeline.build import Binder
 from nlp_calib.results.faults import TRACKER_KINDS, FaultReport, Findings
@@ -34,27 +33,11 @@ def find_faults(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray)
         return ev.params(x) if converged and np.all(np.isfinite(x)) else None
 
     sc = binder.scenario
-    if sc.objective.sensor.is_3d:
-        return skipped_3d(binder, log.select(start, stop)).shifted(start, log.line_numbers)
     al = sc.log.alignment
     lag = al.search if al.tracker_lag == "auto" else float(al.tracker_lag)
     sample = sc.objective.residual.steering_sample
     report = screen_log(binder.fns, log.select(start, stop), sample, lag, judge)
     return report.shifted(start, log.line_numbers)
-
-
-#: Why a 3-D tracker's poses and the counters judged against them are not screened.
-NOT_SCREENED_3D = (
-    "the tracker-jump and counter screens compare planar tracker poses with the model; a 3-D "
-    "sensor's poses are not screened (sensor: 3d), only absolute encoders' own glitches are"
-)
-
-
-def skipped_3d(binder: Binder, log: Log) -> FaultReport:
-    """A 3-D sensor's screen: the absolute encoders' glitches (each stream alone); the tracker and
-    the counters said to be unchecked."""
-    glitches = tuple(absolute_faults(log, binder.fns.model.encoder_kinds))
-    return FaultReport(glitches, {}, {}, unchecked=NOT_SCREENED_3D, unit=unit_of(log))
 
 
 def handle_faults(log: Log, report: FaultReport, handling: str) -> tuple[Log, Findings]:
