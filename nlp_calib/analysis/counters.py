@@ -75,13 +75,14 @@ class CounterScreen:
 
 
 def counter_corrections(e: np.ndarray, de_du: np.ndarray, rows: list[int], scale: np.ndarray) -> np.ndarray:
-    """Per interval, the counter increments (ticks) that best explain each residual ``e`` (3, N).
+    """Per interval, the counter increments (ticks) that best explain each residual ``e`` (rows, N:
+    3 for a planar tracker, 6 for a 3-D one).
 
-    ``de_du`` is (3, N, n_in); the corrections of the counter ``rows`` solve the weighted least
+    ``de_du`` is (rows, N, n_in); the corrections of the counter ``rows`` solve the weighted least
     squares ``min |e + de_du·c|²`` with each residual component weighted by its robust scatter.
     """
-    w = 1.0 / np.maximum([robust_sigma(e[i]) for i in range(3)], 1e-12) ** 2
-    G = de_du[:, :, rows]  # (3, N, m)
+    w = 1.0 / np.maximum([robust_sigma(e[i]) for i in range(e.shape[0])], 1e-12) ** 2
+    G = de_du[:, :, rows]  # (rows, N, m)
     A = np.einsum("inj,i,ink->njk", G, w, G)
     b = -np.einsum("inj,i,in->nj", G, w, e)
     A = A + 1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] * np.eye(len(rows))
@@ -227,7 +228,7 @@ def screen_counters(
     time_s: np.ndarray,
     lag: float | tuple[float, float],
 ) -> tuple[dict[str, CounterScreen], float]:
-    """Each counter's screen from the N intervals' residuals ``e`` (3, N) and ``de_du`` (3, N,
+    """Each counter's screen from the N intervals' residuals ``e`` (rows, N) and ``de_du`` (rows, N,
     n_in) and inputs ``logged`` (n_in, N); ``counters`` maps names to input row and ticks per unit.
     Also the lag used (given, or estimated when ``lag`` is a range)."""
     names = list(counters)

@@ -34,7 +34,9 @@ def jackknife_std(estimates: np.ndarray) -> np.ndarray:
     if K < 2:
         return np.full(estimates.shape[1], np.nan)
     dev = estimates - estimates.mean(axis=0)
-    return np.sqrt((K - 1) / K * np.sum(dev * dev, axis=0))
+    # A held parameter is the same in every fold: exactly 0, not the mean's rounding.
+    same = np.all(estimates == estimates[0], axis=0)
+    return np.where(same, 0.0, np.sqrt((K - 1) / K * np.sum(dev * dev, axis=0)))
 
 
 def combine(names: Sequence[str], folds: Sequence[Fold]) -> CrossValidation:

@@ -38,6 +38,7 @@ from nlp_calib.core.numeric import COUNTER_MODULUS, wrap_angle, wrapped_differen
 from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.logs.log import frozen
 from nlp_calib.problem import ProblemFunctions, over_columns
+from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results.faults import (
     ABSOLUTE_KINDS,
     TRACKER_KINDS,
@@ -232,10 +233,10 @@ def counter_faults(
     counters = fns.model.counter_rows(log)
     if N == 0:
         return FaultReport(faults=(), stale={}, noise={}, unit=unit_of(log))
-    T = log.T_world_sensor
+    T = tracker_poses(fns, log)
     z = over_columns(fns.between, T[:-1].T, T[1:].T)[0]
     e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
-    de_du = de_du.reshape(3, N, inputs.shape[0])
+    de_du = de_du.reshape(fns.error_rows, N, inputs.shape[0])
     screens, lag_s = screen_counters(e, de_du, inputs, counters, log.time_s, lag)
     lines, unit = log.line_numbers, unit_of(log)
     faults = []
@@ -262,7 +263,9 @@ def screen(
     alone, then the counters' against a fit (``judge``) that leaves those glitches out, on readings
     with them interpolated over, at the tracker ``lag`` (s, or a range to estimate it in)."""
     model, n = fns.model, log.n_records
-    glitches = tuple(tracker_faults(log) + absolute_faults(log, model.encoder_kinds))
+    # The jump screen judges planar poses; a 3-D tracker's outliers are left to the robust kernel.
+    jumps = tracker_faults(log) if fns.sensor.pose_rows == 3 else []
+    glitches = tuple(jumps + absolute_faults(log, model.encoder_kinds))
     report = FaultReport(glitches, {}, {}, unit=unit_of(log))
     params = judge(report.bad_intervals(n - 1), report.bad_records(n))
     if params is None:

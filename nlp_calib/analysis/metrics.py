@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlp_calib.core import poses, poses3d
+from nlp_calib.models.mount import SCALE_PARAM
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.results.figures import RPE_DISTANCES, RPE_TOLERANCE, ErrorStats, TrajectoryMetrics
 
@@ -70,6 +71,16 @@ def steps(fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray) -> np.n
     return over_columns(
         fns.predict, np.ravel(np.asarray(params, dtype=float)), np.asarray(inputs, dtype=float)
     )[0].T
+
+
+def in_metres(fns: ProblemFunctions, params: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """``poses`` (or motions) with their translations in metres: times the ``scale`` of
+    ``params`` when the trajectory's scale is free (as they are otherwise)."""
+    if SCALE_PARAM not in fns.names or SCALE_PARAM not in fns.sensor.params:
+        return poses
+    out = np.array(poses, dtype=float)
+    out[:, :3] *= float(np.ravel(params)[fns.names.index(SCALE_PARAM)])
+    return out
 
 
 def integrate(
@@ -173,8 +184,9 @@ def trajectory_metrics(
     if stop - start < 2:
         raise ValueError(f"need at least 2 records to score a trajectory, got {stop - start}")
     g = geometry(fns)
-    ref = np.asarray(T_world_sensor[start:stop], dtype=float)
-    step = steps(fns, params, inputs[:, start : stop - 1])
+    # A trajectory known up to scale is scored in metres, by each parameter set's own scale.
+    ref = in_metres(fns, params, np.asarray(T_world_sensor[start:stop], dtype=float))
+    step = in_metres(fns, params, steps(fns, params, inputs[:, start : stop - 1]))
     track = g.accumulate(ref[0], step)
     bad_i = None if bad_intervals is None else np.asarray(bad_intervals[start : stop - 1], dtype=bool)
     good = np.ones(stop - start, dtype=bool)

@@ -12,6 +12,7 @@ import dataclasses
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -31,9 +32,11 @@ from nlp_calib.outputs.terminal import correlation_table, run_table, summary_tab
 from nlp_calib.pipeline import Calibration, JointCalibration, Scenario, Wanted, load_scenario
 from nlp_calib.pipeline.export import write_c_export
 from nlp_calib.pipeline.prepare import read_checked
-from nlp_calib.pipeline.simconfig import simulation_options
+from nlp_calib.pipeline.scenario import refuse_3d
+from nlp_calib.pipeline.simconfig import camera_options, simulation_options
 from nlp_calib.results import CalibrationRun
 from nlp_calib.simulation import simulate_to_file, truth_path
+from nlp_calib.simulation.camera import camera_paths, simulate_camera, write_camera_simulation
 from nlp_calib.solvers import SOLVERS
 
 
@@ -241,13 +244,16 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
             "tracker_noise_theta",
             "outlier_fraction",
             "latency_s",
+            "duration_s",
         )
         if getattr(args, k) is not None
     }
-    opts = simulation_options(args.config, overrides)
     out: Path = args.out
     if out.is_dir() or out.name in ("", ".", ".."):
         raise UsageError(f"--out {out} is a folder; give the path of the log file to write")
+    if out.suffix.lower() == ".tum":
+        return _simulate_camera(args, overrides)
+    opts = simulation_options(args.config, overrides)
     folder = check_output_dir(out.parent)
     # The target may be the user's own log: never replaced without --force.
     refuse_collisions(folder, [out.name, truth_path(out).name], tracked=False, force=args.force)
@@ -256,6 +262,22 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         interrupts.hold()
         stage.commit()
     print(f"wrote {stage.final(log_path)} ({opts.records} records) and {stage.final(truth)}")
+    return 0
+
+
+def _simulate_camera(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
+    """A tilted camera's TUM trajectory, its joint CSV and the truth, beside each other."""
+    opts = camera_options(args.config, overrides)
+    out: Path = args.out
+    folder = check_output_dir(out.parent)
+    names = [p.name for p in camera_paths(out)]
+    refuse_collisions(folder, names, tracked=False, force=args.force)
+    with StagedOutput(folder, None, force=args.force) as stage:
+        written = write_camera_simulation(simulate_camera(opts), stage.path / out.name)
+        interrupts.hold()
+        stage.commit()
+    tum, joints, truth = (stage.final(p) for p in written)
+    print(f"wrote {tum} ({opts.duration_s:g} s at {opts.image_rate_hz:g} Hz), {joints} and {truth}")
     return 0
 
 
@@ -281,6 +303,12 @@ def _cmd_odometry(args: argparse.Namespace) -> int:
         raise UsageError("odometry takes one scenario")
     _robot_urdf(args)
     (scenario,) = _load_with_data(args.scenario, args.data)
+    refuse_3d(
+        scenario,
+        "odometry",
+        "its covariance is propagated on the planar base pose, and a camera's poses lie in its own "
+        "world frame; 'nlp-calib run' gives the calibration",
+    )
     (out,) = _out_dirs(args, [scenario])
     outputs = registry.selected(("result", "handoff", "odometry"), args.report)
     log = read_checked(scenario)

@@ -285,7 +285,13 @@ def _add_simulate(sub: Any) -> None:
     p = sub.add_parser(
         "simulate", help="write a synthetic log with known truth (truth JSON beside it)", **_sub("simulate")
     )
-    p.add_argument("--out", type=_path, required=True, help="log file to write")
+    p.add_argument(
+        "--out",
+        type=_path,
+        required=True,
+        help="log file to write; a path ending in .tum writes a tilted camera's TUM trajectory with "
+        "<name>.joints.csv (joints in radians) and <name>.truth.json beside it (docs/camera.md)",
+    )
     _add_force(p, "an existing log or truth file")
     p.add_argument("--config", type=_path, default=None, help="YAML file of simulation options")
     p.add_argument("--model", choices=tuple(MODELS), default=None, help=f"default: {next(iter(MODELS))}")
@@ -301,7 +307,8 @@ def _add_simulate(sub: Any) -> None:
         ("--noise-xy", "tracker_noise_xy", "tracker noise, m"),
         ("--noise-theta", "tracker_noise_theta", "tracker noise, rad"),
         ("--outliers", "outlier_fraction", "fraction of outliers"),
-        ("--latency", "latency_s", "tracker latency, s"),
+        ("--latency", "latency_s", "tracker latency, s (a camera's stamp offset)"),
+        ("--duration", "duration_s", "seconds of driving (a camera simulation only)"),
     ):
         limit = CLI_LIMITS[field]
         p.add_argument(flag, type=_in(limit), default=None, dest=field, help=f"{what}: {limit.describe()}")

@@ -55,10 +55,10 @@ class Trajectory3D:
         )
 
     def planar_and_3d(self) -> np.ndarray:
-        """``(n, 8)``: the planar pose ``(x, y, yaw)`` of a tracker whose world is level, then the
-        3-D pose as written (the layout of a bag's tracker poses)."""
+        """``(n, 8)``: the planar pose ``(x, y, yaw)`` of a tracker whose world is level, then
+        ``z, qx, qy, qz, qw`` (the layout of a bag's tracker poses, ``TRACKER_COLUMNS``)."""
         yaw = [yaw_from_quaternion(*q) for q in self.poses[:, 3:].tolist()]
-        return np.column_stack([self.poses[:, :2], yaw, self.poses])
+        return np.column_stack([self.poses[:, :2], yaw, self.poses[:, 2:]])
 
 
 def read_tum(path: str | Path) -> Trajectory3D:

@@ -106,13 +106,24 @@ def calibration_yaml(doc: Mapping[str, Any]) -> str:
         f"# 'parameters' are {doc['solver']}'s estimate ({doc['solver_choice']}); 'std' is the 1 sigma to\n"
         "# believe: the larger of 'std_white_noise' (white tracker and encoder noise only: a floor) and\n"
         "# 'std_blocks' (the spread of fits each without one block of the drive: every error that varies).\n"
-        f"# sensor_x, sensor_y, sensor_theta: pose of the '{doc['frames']['sensor']}' frame in "
+        f"# {_mount_words(doc)}: pose of the '{doc['frames']['sensor']}' frame in "
         f"'{doc['frames']['parent']}'.\n"
     )
     body = yaml.dump(
         dict(doc), Dumper=_Dumper, sort_keys=False, default_flow_style=False, allow_unicode=True, width=1000
     )
     return head + body
+
+
+def _mount_words(doc: Mapping[str, Any]) -> str:
+    """The mount's parameters as the header comment names them."""
+    if "sensor_roll" not in doc["parameters"]:
+        return "sensor_x, sensor_y, sensor_theta"
+    scale = "; scale: metres per trajectory unit" if "scale" in doc["parameters"] else ""
+    return (
+        "sensor_x, sensor_y, sensor_z, sensor_roll, sensor_pitch, sensor_yaw (URDF: fixed axes, "
+        f"R = Rz(yaw)·Ry(pitch)·Rx(roll); sensor_z held: planar driving cannot see it{scale})"
+    )
 
 
 def _comment_text(text: str) -> str:
@@ -125,17 +136,24 @@ def _joint(run: CalibrationRun, solver: str) -> ET.Element:
     joint = ET.Element("joint", {"name": f"{PARENT_FRAME}_to_{frame}", "type": "fixed"})
     ET.SubElement(joint, "parent", {"link": PARENT_FRAME})
     ET.SubElement(joint, "child", {"link": frame})
-    # Height, roll and pitch: the nominal mount's (a bag's /tf_static) where known, else 0.
-    z, roll, pitch = run.log.sensor_z_roll_pitch or (0, 0, 0)
-    ET.SubElement(
-        joint,
-        "origin",
-        {
-            "xyz": f"{p['sensor_x']!r} {p['sensor_y']!r} {z!r}",
-            "rpy": f"{roll!r} {pitch!r} {p['sensor_theta']!r}",
-        },
-    )
+    ET.SubElement(joint, "origin", _origin(run, p))
     return joint
+
+
+def _origin(run: CalibrationRun, p: Mapping[str, float]) -> dict[str, str]:
+    """The joint's ``xyz`` and ``rpy``: a 3-D mount's six numbers (its held height as given); a
+    planar mount's x, y and yaw with the height, roll and pitch of the nominal mount (a bag's
+    /tf_static) where known, else 0."""
+    if run.scenario.sensor_3d:
+        angles = (p["sensor_roll"], p["sensor_pitch"], p["sensor_yaw"])
+        z = p["sensor_z"]
+    else:
+        z, roll, pitch = run.log.sensor_z_roll_pitch or (0, 0, 0)
+        angles = (roll, pitch, p["sensor_theta"])
+    return {
+        "xyz": f"{p['sensor_x']!r} {p['sensor_y']!r} {z!r}",
+        "rpy": " ".join(repr(a) for a in angles),
+    }
 
 
 def _xml(element: ET.Element, comment: str) -> str:
@@ -148,11 +166,16 @@ def urdf_joint(run: CalibrationRun, solver: str) -> str:
     """A URDF ``<joint>`` placing the sensor frame on ``base_link`` with ``solver``'s estimate."""
     frame = run.log.sensor_frame
     nominal = "the nominal mount's (/tf_static)" if run.log.sensor_z_roll_pitch else "0 (not known)"
+    what = (
+        "x, y, roll, pitch and yaw; z is held at the value given (known.sensor_z, 0 unless set), "
+        "which planar driving cannot see"
+        if run.scenario.sensor_3d
+        else f"x, y and yaw; z, roll and pitch are {nominal}, which planar driving cannot see"
+    )
     comment = (
         f" Sensor mounting pose calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
-        f"solver {solver}. Calibrated: x, y and yaw; z, roll and pitch are {nominal}, which planar "
-        f"driving cannot see. Paste this joint into the robot's <robot> description; the link "
-        f"'{frame}' must be declared there. "
+        f"solver {solver}. Calibrated: {what}. Paste this joint into the robot's <robot> description; "
+        f"the link '{frame}' must be declared there. "
     )
     return _xml(_joint(run, solver), comment)
 
@@ -205,9 +228,12 @@ def write_users_robot(
     if solver is None:
         return _none(folder / name)
     p = run.reports[solver].result.param_dict()
-    atomic_write_bytes(
-        folder / name, urdf.reposed(description, link, p["sensor_x"], p["sensor_y"], p["sensor_theta"])
-    )
+    if run.scenario.sensor_3d:
+        pose = (p["sensor_x"], p["sensor_y"], p["sensor_yaw"])
+        text = urdf.reposed(description, link, *pose, (p["sensor_roll"], p["sensor_pitch"]))
+    else:
+        text = urdf.reposed(description, link, p["sensor_x"], p["sensor_y"], p["sensor_theta"])
+    atomic_write_bytes(folder / name, text)
     return [folder / name]
 
 

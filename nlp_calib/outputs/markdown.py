@@ -249,7 +249,7 @@ def _handoff_section(run: CalibrationRun, handoff: Sequence[str]) -> list[str]:
 
 _FIGURES_TEXT = (
     "Segment ATE: the sensor track dead-reckoned from the tracker, restarted after each fault, "
-    "against the tracker (aligned: after the best SE(2) alignment). RPE over 1 m and 5 m: the "
+    "against the tracker (aligned: after the best {group} alignment). RPE over 1 m and 5 m: the "
     "relative pose error between records that far apart along the tracker's path, within one "
     "fault-free segment. Full-run ATE: one track from the first record (a fault's lost counts "
     "stay in it). RPE over {window} records: the same over a fixed count of records."
@@ -265,7 +265,8 @@ def report_markdown(
     out = _header(run)
     out += ["", "## Summary", "", *_summary(run, next_steps), ""]
     out += ["## Parameters", "", *_parameter_table(run, solvers), ""]
-    out += ["## Solvers", "", _FIGURES_TEXT.format(window=run.baseline.rpe_window), ""]
+    group = "SE(3)" if run.scenario.sensor_3d else "SE(2)"
+    out += ["## Solvers", "", _FIGURES_TEXT.format(window=run.baseline.rpe_window, group=group), ""]
     out += [*_solver_table(run, solvers), "", *_faults_section(run), *_uncertainty_section(run)]
     for s in solvers:
         res = run.reports[s].result

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from nlp_calib.results import CalibrationRun
@@ -171,7 +173,28 @@ def _header_lines(run: CalibrationRun) -> list[str]:
         lines.append(_dropped_line(run))
     if data.dropped_stationary:
         lines.append(f"dropped {data.dropped_stationary} windows without motion")
-    return [*lines, ""]
+    return [*lines, *camera_lines(run), ""]
+
+
+def _by_reason(counts: Mapping[str, int]) -> str:
+    given = [f"{n} {reason}" for reason, n in counts.items() if n]
+    return ", ".join(given) if given else "none"
+
+
+def camera_lines(run: CalibrationRun) -> list[str]:
+    """A 3-D sensor's start and selection, in words (nothing for a planar one)."""
+    data = run.data
+    if not run.scenario.sensor_3d:
+        return []
+    lines = []
+    if data.start_dropped is not None:
+        lines.append(
+            "3-D sensor: the 'initial' column is the closed-form start alone (floor normal, then the "
+            f"planar hand-eye); its windows left out: {_by_reason(data.start_dropped)}"
+        )
+    if data.fit_dropped is not None:
+        lines.append(f"3-D sensor: fitted windows left out: {_by_reason(data.fit_dropped)}")
+    return lines
 
 
 def _parameter_lines(run: CalibrationRun, solvers: list[str], w: int) -> list[str]:

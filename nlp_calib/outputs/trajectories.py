@@ -6,7 +6,8 @@ and, per fault-free segment, the tracker's poses (bad
 tracker poses left out) and each solver's track restarted from the tracker at the segment's
 start. ``README.md`` beside them gives the evo commands and the figures they reproduce. A TUM
 line is ``time x y z qx qy qz qw``: the planar pose at the tracker's height (its z where the source
-has one, a bag's pose topic; else 0) and the heading as a quaternion about z; times are stamps on
+has one, a bag's pose topic; else 0) and the heading as a quaternion about z (a 3-D sensor's poses
+as they are, in its own world frame and units); times are stamps on
 the log's own clock (the first record's stamp plus the time since it), so ``evo`` compares them with
 the recording's own pose topic directly, with no time offset and no projection onto the plane.
 """
@@ -33,11 +34,14 @@ def stamps(time_s: np.ndarray, start_ns: int) -> list[str]:
 
 def tum_text(time_s: np.ndarray, T: np.ndarray, start_ns: int = 0, z: np.ndarray | None = None) -> str:
     """TUM lines of poses ``T`` (n, 3) at ``time_s`` after the stamp ``start_ns``, at heights ``z``
-    (default 0)."""
-    half = 0.5 * T[:, 2]
-    zeros = np.zeros(T.shape[0])
-    height = zeros if z is None else np.asarray(z, dtype=float)
-    cols = np.column_stack([T[:, 0], T[:, 1], height, zeros, zeros, np.sin(half), np.cos(half)])
+    (default 0); 3-D poses ``(n, 7)`` (a 3-D sensor's) as they are."""
+    if T.shape[1] == 7:
+        cols = np.asarray(T, dtype=float)
+    else:
+        half = 0.5 * T[:, 2]
+        zeros = np.zeros(T.shape[0])
+        height = zeros if z is None else np.asarray(z, dtype=float)
+        cols = np.column_stack([T[:, 0], T[:, 1], height, zeros, zeros, np.sin(half), np.cos(half)])
     return "".join(
         f"{t} " + " ".join(f"{v:.9f}" for v in row) + "\n" for t, row in zip(stamps(time_s, start_ns), cols)
     )

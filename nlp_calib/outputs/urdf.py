@@ -151,13 +151,16 @@ def _set(tag: bytes, key: str, value: str) -> bytes:
     return tag[:closing] + f' {key}="{value}"'.encode() + tag[closing:]
 
 
-def reposed(d: Description, link: str, x: float, y: float, yaw: float) -> bytes:
+def reposed(
+    d: Description, link: str, x: float, y: float, yaw: float, roll_pitch: tuple[float, float] | None = None
+) -> bytes:
     """``d``'s text with ``link``'s joint at the calibrated ``x``, ``y``, ``yaw`` in ``base_link``
-    (height, roll and pitch kept)."""
+    (and ``roll_pitch`` when calibrated too: a 3-D sensor's); the height, and the roll and pitch
+    unless given, kept."""
     joint = d.joints[link]
     T_bp = T_base_parent(d, link)
     T_bs = T_bp @ _transform(joint, d.path)
-    roll, pitch, _ = _rpy(T_bs[:3, :3])
+    roll, pitch, _ = _rpy(T_bs[:3, :3]) if roll_pitch is None else (*roll_pitch, 0.0)
     T_new = np.eye(4)
     T_new[:3, :3] = _rotation(np.array([roll, pitch, yaw]))
     T_new[:3, 3] = [x, y, T_bs[2, 3]]

@@ -16,17 +16,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
-from nlp_calib.analysis.metrics import integrate, segments, trajectory_metrics
+from nlp_calib.analysis.metrics import geometry, integrate, segments, trajectory_metrics
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
+from nlp_calib.core import poses3d
 from nlp_calib.logs import Log
 from nlp_calib.models import SENSOR_PARAMS, header_parameters
+from nlp_calib.models.mount import MOUNT_ANGLES
 from nlp_calib.pipeline import validation
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.windows import LogWindows
 from nlp_calib.problem import ProblemFunctions, over_columns
+from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results import SolverResult
 from nlp_calib.results.checks import ConsistencyCheck, CrossValidation, DirectionCheck, Observability
 from nlp_calib.results.faults import Findings
@@ -100,7 +103,7 @@ def log_scorer(fns: ProblemFunctions, windows: LogWindows, steering_sample: str,
     """The scorer over one log's used records."""
     bad_i, bad_r = windows.masks()
     inputs = windows.inputs(steering_sample)
-    poses = windows.selected.T_world_sensor
+    poses = tracker_poses(fns, windows.selected)
     return Scorer(fns, inputs, poses, bad_i, bad_r, windows.used[0], rpe_window)
 
 
@@ -211,7 +214,7 @@ def track_series(
     """The tracker's poses and the tracks of the initial guess and of every estimate over one
     log's used records, restarted after each fault as the segment ATE scores them."""
     windows, inputs = view.windows, view.scorer.inputs
-    ref = np.asarray(windows.selected.T_world_sensor)
+    ref = np.asarray(tracker_poses(fit.fns, windows.selected))
     bad_i, bad_r = windows.masks()
     parts = tuple(segments(ref.shape[0], bad_i))
     p0 = np.array([fit.problem.start.initial[n] for n in fit.fns.names])
@@ -224,7 +227,7 @@ def track_series(
         tracks.append(
             Track(labels.get(name, name), name, full, figures.scores[name][0].ate_mean, r.converged)
         )
-        rows += segment_figures(name, again[name], ref, parts, ~bad_r)
+        rows += segment_figures(name, again[name], ref, parts, ~bad_r, geometry(fit.fns))
     a, b = windows.used
     return TrackSeries(
         time_s=np.asarray(windows.selected.time_s),
@@ -237,7 +240,20 @@ def track_series(
         holdout_start=windows.fit[1] - a if windows.fit[1] < b - 1 else None,
         segments=tuple(rows),
         tracker_z=_heights(windows.selected),
+        level=_level(fit, results, ref),
     )
+
+
+def _level(fit: Fit, results: Mapping[str, SolverResult], ref: np.ndarray) -> np.ndarray | None:
+    """A 3-D sensor's world frame turned onto the base's frame at the first record, by the first
+    converged estimate's mount (the start's when none converged): ``R_X·R(q_0)ᵀ``."""
+    if fit.fns.sensor.pose_rows != 7:
+        return None
+    names = fit.fns.names
+    done = [r.params for r in results.values() if r.converged]
+    params = done[0] if done else np.array([fit.problem.start.initial[n] for n in names])
+    R_X = poses3d.rpy_to_matrix(np.array([params[names.index(n)] for n in MOUNT_ANGLES]))
+    return np.asarray(R_X @ poses3d.quat_to_matrix(ref[0, 3:7]).T)
 
 
 def model_check(fit: Fit, prepared: PreparedLog) -> ModelCheckSeries | None:

@@ -14,8 +14,10 @@ import numpy as np
 from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.models import KinematicModel, param_units
+from nlp_calib.models.mount import MOUNT_UNITS
 from nlp_calib.pipeline.align import Alignment, lag_at_edge
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis
+from nlp_calib.pipeline.build import StartingPoint
 from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.truth import against_truth
@@ -45,7 +47,7 @@ def scenario_info(sc: Scenario, model: KinematicModel) -> ScenarioInfo:
         name=sc.name,
         path=None if sc.path is None else str(sc.path),
         model=sc.model,
-        units=param_units(model),
+        units=_units(sc, model),
         headline=tuple(model.headline),
         dataset=str(sc.dataset),
         datasets=tuple(str(e.path) for e in sc.data.logs) if joint else (),
@@ -57,6 +59,14 @@ def scenario_info(sc: Scenario, model: KinematicModel) -> ScenarioInfo:
         if isinstance(sc.parameters.initial_guess, str)
         else "mapping",
     )
+
+
+def _units(sc: Scenario, model: KinematicModel) -> dict[str, str]:
+    """Every parameter's unit: the model's, then its sensor's mount (a 3-D one's and the scale's)."""
+    if not sc.objective.sensor.is_3d:
+        return param_units(model)
+    kinematic = {n: model.units[n] for n in model.kinematic_params}
+    return {**kinematic, **{n: MOUNT_UNITS[n] for n in sc.objective.sensor.params()}}
 
 
 def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
@@ -81,8 +91,8 @@ def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
     )
 
 
-def data_info(windows: LogWindows, alignment: Alignment) -> DataInfo:
-    """What of a log the fit used."""
+def data_info(windows: LogWindows, alignment: Alignment, start_dropped: Mapping[str, int] | None) -> DataInfo:
+    """What of a log the fit used (``start_dropped``: the windows a camera's start left out)."""
     data = windows.data
     return DataInfo(
         used=windows.used,
@@ -92,6 +102,8 @@ def data_info(windows: LogWindows, alignment: Alignment) -> DataInfo:
         dropped_faulty=data.dropped_faulty,
         tracker_lag_s=alignment.lag_s,
         lag_estimate=alignment.estimate,
+        start_dropped=start_dropped,
+        fit_dropped=None if data.dropped_selection is None else dict(data.dropped_selection),
     )
 
 
@@ -129,10 +141,30 @@ def _report(
     return SolverReport(result, u, *figures.scores[name], controller)
 
 
+def mount_notes(sc: Scenario, start: StartingPoint) -> list[str]:
+    """A 3-D sensor's held height, said once."""
+    if not sc.objective.sensor.is_3d:
+        return []
+    z = start.initial.get("sensor_z", 0.0)
+    return [
+        f"sensor_z is held at {z:g} m: planar driving cannot determine a 3-D sensor's height "
+        "(give the measured one as known.sensor_z)",
+        "a 3-D sensor's poses are not screened for jumps (that screen judges planar poses): the "
+        "robust kernel bounds a bad pose's pull; the encoders are screened against them",
+    ]
+
+
+def _start_dropped(start: StartingPoint) -> dict[str, int] | None:
+    """The windows a 3-D sensor's closed-form start left out, by reason (None: no closed form)."""
+    if start.camera is None or start.auto is None:
+        return None
+    return start.camera.selection.counts()
+
+
 def assemble_run(
     scenario: ScenarioInfo,
     log: tuple[PreparedLog, LogWindows, Alignment, Findings],
-    initial: Mapping[str, float],
+    start: StartingPoint,
     results: Mapping[str, SolverResult],
     fitted: FitAnalysis,
     figures: LogAnalysis,
@@ -144,13 +176,13 @@ def assemble_run(
     run = CalibrationRun(
         scenario=scenario,
         log=log_info(prepared, windows),
-        data=data_info(windows, alignment),
-        initial=dict(initial),
+        data=data_info(windows, alignment, _start_dropped(start)),
+        initial=dict(start.initial),
         baseline=figures.baseline[0],
         baseline_holdout=figures.baseline[1],
         reports=reports,
         checks=Checks(fitted.observability, fitted.crossval, fitted.direction, findings, fitted.consistency),
-        warnings=(*notes, *lag_notes(prepared.scenario, alignment)),
+        warnings=(*notes, *lag_notes(prepared.scenario, alignment), *mount_notes(prepared.scenario, start)),
         verdict=Verdict("", ()),
         series=figures.series,
         odometry=figures.odometry,
@@ -161,6 +193,8 @@ def assemble_run(
         if isinstance(source, BagSource)
         else ""
     )
-    checks = dataclasses.replace(run.checks, truth=against_truth(run))
+    # Joints in radians: the simulator's truth is in the counts form's names and units.
+    convert = getattr(prepared.model, "from_counts", dict)
+    checks = dataclasses.replace(run.checks, truth=against_truth(run, source.files(), convert))
     run = dataclasses.replace(run, checks=checks)
     return dataclasses.replace(run, verdict=verdict(run, prepared.model, hint))

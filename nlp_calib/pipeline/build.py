@@ -13,9 +13,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from nlp_calib.analysis import uncertainty
+from nlp_calib.core import poses3d
 from nlp_calib.core.errors import ScenarioError
 from nlp_calib.logs import Log
 from nlp_calib.models import SENSOR_PARAMS, KinematicModel, header_parameters
+from nlp_calib.models.camera_start import FIT_REASONS, CameraStart, Selection
+from nlp_calib.models.mount import MOUNT_ANGLES, SCALE_PARAM
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import (
@@ -27,6 +30,7 @@ from nlp_calib.problem import (
     interval_inputs,
     over_columns,
 )
+from nlp_calib.problem.camera import camera_initial_guess, fit_selection
 from nlp_calib.solvers import Priors, ProblemEvaluator, get_solver
 from nlp_calib.solvers.backends import Backend, BackendOptions, make_backend
 from nlp_calib.solvers.evaluation import requests
@@ -38,28 +42,37 @@ INTERNAL_SOLVER = "gauss_newton"
 
 def build_problem(sc: Scenario, model: KinematicModel, also_fixed: tuple[str, ...] = ()) -> ProblemFunctions:
     """The problem's Functions for the scenario's residual form, kernel and fixed parameters."""
-    residual = sc.objective.residual
+    residual, sensor = sc.objective.residual, sc.objective.sensor
     spec = ProblemSpec(
         horizon=residual.horizon,
         integration=residual.integration,
         kernel=sc.objective.robust.kernel,
         fixed=(*sc.parameters.fixed, *also_fixed),
+        sensor=sensor.mount,
+        scale=sensor.scale,
     )
     with scenario_key(sc, "residual"):
         return build(model, spec)
 
 
 def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[str, float]:
-    """The log header's values, overridden by the scenario's mapping (``auto`` fills in later)."""
-    p = sc.parameters
+    """The log header's values, overridden by the scenario's mapping (``auto`` fills in later). A
+    3-D mount's held ``sensor_z`` is 0 and its scale 1 unless the scenario gives them."""
+    p, sensor = sc.parameters, sc.objective.sensor
     guess = dict(model.defaults)
     guess.update(
         {n: v for n, v in header_parameters(model, log.header).items() if n in model.kinematic_params}
     )
-    guess.update(zip(SENSOR_PARAMS, log.header.T_base_sensor))
+    if sensor.is_3d:
+        guess.update(dict.fromkeys(sensor.held(), 0.0))
+        guess.update({SCALE_PARAM: 1.0} if SCALE_PARAM in sensor.params() else {})
+    else:
+        guess.update(zip(SENSOR_PARAMS, log.header.T_base_sensor))
     if isinstance(p.initial_guess, Mapping):
         guess.update(p.initial_guess)
-    needed = p.fixed if p.initial_guess == "auto" else (*model.kinematic_params, *SENSOR_PARAMS)
+    guess.update(p.known)
+    mount = sensor.params()
+    needed = p.fixed if p.initial_guess == "auto" else (*model.kinematic_params, *mount)
     missing = [n for n in needed if n not in guess]
     if missing:
         raise ScenarioError(
@@ -74,6 +87,9 @@ class StartingPoint:
 
     initial: Mapping[str, float]
     auto: Mapping[str, float] | None
+    #: A 3-D sensor's start (closed-form, or the given mount's floor normal; None: planar): the
+    #: floor normal the fit's windows are selected by, and the windows the closed form left out.
+    camera: CameraStart | None
     x0: np.ndarray
     x_fixed: np.ndarray
     lower: np.ndarray | None
@@ -96,6 +112,16 @@ def auto_guess(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: 
     return fns.model.initial_guess(columns[:rows], columns[rows : rows + 3], base_motion)
 
 
+def camera_guess(
+    sc: Scenario, fns: ProblemFunctions, data: ResidualData, initial: Mapping[str, float]
+) -> CameraStart:
+    """A 3-D sensor's closed-form start (:func:`~nlp_calib.problem.camera.camera_initial_guess`) on
+    ``data``, the held and fixed parameters at their ``initial`` values."""
+    known = {n: initial[n] for n in fns.fixed}
+    with scenario_key(sc, "initial_guess"):
+        return camera_initial_guess(fns, data, known=known)
+
+
 def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     bounds = sc.parameters.bounds
     lower = np.array([bounds[n][0] if n in bounds else -np.inf for n in fns.free])
@@ -115,13 +141,28 @@ def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.nda
 def starting_point(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int) -> StartingPoint:
     """Initial values (header, scenario, or ``auto`` from records ``start:stop``) and bounds."""
     initial = initial_parameters(sc, fns.model, log)
-    auto = None
-    if sc.parameters.initial_guess == "auto":
+    auto, camera = None, None
+    if sc.parameters.initial_guess == "auto" and sc.objective.sensor.is_3d:
+        data = build_residual_data(fns, log.select(start, stop), sc.objective.residual)
+        camera = camera_guess(sc, fns, data, initial)
+        auto = camera.params
+    elif sc.parameters.initial_guess == "auto":
         auto = auto_guess(sc, fns, log, start, stop)
+    if auto is not None:
         initial.update({n: v for n, v in auto.items() if n not in sc.parameters.fixed})
+    if camera is None and sc.objective.sensor.is_3d:
+        camera = given_mount(initial)
     x0 = np.array([initial[n] for n in fns.free])
     lower, upper = _bounds(sc, fns, x0) if sc.parameters.bounds else (None, None)
-    return StartingPoint(initial, auto, x0, np.array([initial[n] for n in fns.fixed]), lower, upper)
+    x_fixed = np.array([initial[n] for n in fns.fixed])
+    return StartingPoint(initial, auto, camera, x0, x_fixed, lower, upper)
+
+
+def given_mount(initial: Mapping[str, float]) -> CameraStart:
+    """A given 3-D mount as a start: its floor normal in the camera frame is the third row of its
+    rotation (no windows were selected)."""
+    R = poses3d.rpy_to_matrix(np.array([initial[n] for n in MOUNT_ANGLES]))
+    return CameraStart(dict(initial), R[2], Selection(np.zeros(0, dtype=np.int64)))
 
 
 def evaluated(sc: Scenario, solvers: Sequence[str]) -> set[str]:
@@ -143,6 +184,14 @@ def prepare_backend(sc: Scenario, fns: ProblemFunctions, solvers: Sequence[str],
     return backend
 
 
+def camera_selected(fns: ProblemFunctions, data: ResidualData, camera: CameraStart) -> ResidualData:
+    """``data`` without the windows :func:`~nlp_calib.problem.camera.fit_selection` leaves out,
+    their number by reason kept with it."""
+    selection = fit_selection(fns, data, camera)
+    counts = {r: n for r, n in selection.counts().items() if r in FIT_REASONS}
+    return replace(data.select(selection.kept(FIT_REASONS)), dropped_selection=counts)
+
+
 def no_priors(n_free: int) -> Priors:
     return Priors(np.zeros(n_free), np.zeros(n_free))
 
@@ -159,6 +208,9 @@ class Binder:
     #: Per interval / record of the whole log: windows must not cross / start or end at them.
     bad_intervals: np.ndarray | None = None
     bad_records: np.ndarray | None = None
+    #: A 3-D sensor's start: windows whose rotation axis is off its floor normal, or that turn
+    #: against the wheels, are left out (``FIT_REASONS``).
+    camera: CameraStart | None = None
 
     def windows(self, log: Log, start: int, stop: int) -> ResidualData:
         """The residual windows of records ``start:stop`` of ``log`` (those the masks allow)."""
@@ -171,6 +223,8 @@ class Binder:
             bad_intervals=None if self.bad_intervals is None else self.bad_intervals[start : stop - 1],
             bad_records=None if self.bad_records is None else self.bad_records[start:stop],
         )
+        if self.camera is not None and data.n_residuals:
+            data = camera_selected(self.fns, data, self.camera)
         if data.n_residuals < self.fns.n_free:
             at_faults = (
                 f" ({data.dropped_faulty} windows crossing faults were left out; "
@@ -202,7 +256,7 @@ class Binder:
             self.fns,
             data,
             x_fixed=self.x_fixed,
-            omega=np.array(sc.objective.information.omega()),
+            omega=np.array(sc.objective.information.omega(self.fns.error_rows)),
             delta=sc.objective.robust.delta,
             priors=self.priors,
             backend=self.backend,
@@ -242,7 +296,7 @@ def weigh_priors(
     _, ev = binder.bind(log, start, stop)
     _, x, _ = binder.fit(ev, x0)
     _, s, weight = ev.robust_terms(x)
-    sigma = float(np.sqrt(float(np.sum(weight * s)) / max(3 * ev.n_residuals - fns.n_free, 1)))
+    sigma = float(np.sqrt(float(np.sum(weight * s)) / max(fns.error_rows * ev.n_residuals - fns.n_free, 1)))
     mean = np.array([priors[n].mean if n in priors else 0.0 for n in fns.free])
     sqrt_info = np.array([sigma / priors[n].std if n in priors else 0.0 for n in fns.free])
     return Priors(mean=mean, sqrt_info=sqrt_info), sigma
@@ -276,6 +330,6 @@ def build_stage(
     log, start, stop = start_from
     point = starting_point(sc, fns, log, start, stop)
     backend = prepare_backend(sc, fns, solvers, n_records)
-    binder = Binder(sc, fns, backend, point.x_fixed, no_priors(fns.n_free))
+    binder = Binder(sc, fns, backend, point.x_fixed, no_priors(fns.n_free), camera=point.camera)
     priors, _ = weigh_priors(binder, log, start, stop, point.x0)
     return Problem(fns, point, replace(binder, priors=priors))

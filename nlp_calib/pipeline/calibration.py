@@ -365,7 +365,7 @@ def _assemble(
         view = LogView(part.prepared, part.windows, scorer, part.screening.findings, i)
         figures = analyse_log(fitting, results, view, wanted, info.labels)
         stage = (part.prepared, part.windows, part.alignment, part.screening.findings)
-        runs.append(assemble_run(info, stage, fitting.problem.start.initial, results, fitted, figures, notes))
+        runs.append(assemble_run(info, stage, fitting.problem.start, results, fitted, figures, notes))
     return runs
 
 

@@ -26,8 +26,9 @@ def write_c_export(sc: Scenario, out_dir: Path) -> tuple[list[Path], Example]:
     model, log = read(sc)
     sc = resolved(sc, log)
     select(sc, log)  # the horizon must fit the log before anything is built
+    residual, sensor = sc.objective.residual, sc.objective.sensor
     with scenario_key(sc, "residual"):
-        problems = build_for_export(model, sc.objective.residual.horizon, sc.objective.residual.integration)
+        problems = build_for_export(model, residual.horizon, residual.integration, sensor.mount, sensor.scale)
     last = problems[-1]
     H = last.spec.horizon
     windows = build_residual_data(last, log, sc.objective.residual)

@@ -11,6 +11,7 @@ from pathlib import Path
 from nlp_calib.core.errors import FieldError
 from nlp_calib.core.ranges import MAGNITUDE, Range, check_choice, check_range
 from nlp_calib.problem import ResidualOptions
+from nlp_calib.problem.sensors import SCALES, SENSORS, sensor_for
 from nlp_calib.solvers.backends import BACKENDS
 from nlp_calib.sources import DatasetSource
 from nlp_calib.symbolic.kernels import KERNELS
@@ -64,8 +65,11 @@ class InformationWeights:
         check_range("translation", self.translation, WEIGHT)
         check_range("rotation", self.rotation, WEIGHT)
 
-    def omega(self) -> tuple[float, float, float]:
-        return (self.translation, self.translation, self.rotation)
+    def omega(self, error_rows: int = 3) -> tuple[float, ...]:
+        """Ω's diagonal for a residual of ``error_rows`` rows: translation first, then rotation
+        (planar: x, y, θ; a 3-D sensor: x, y, z, then three rotation components)."""
+        half = error_rows // 2
+        return (self.translation,) * (error_rows - half) + (self.rotation,) * half
 
 
 @dataclass(frozen=True)
@@ -170,24 +174,65 @@ class DataOptions:
 
 
 @dataclass(frozen=True)
+class SensorOptions:
+    """What the tracker follows (scenario key ``sensor``): a ``planar`` pose, or a ``3d`` one (a
+    camera on the base, its mount ``x, y, z, roll, pitch, yaw``); ``scale: free`` for 3-D poses
+    known only up to scale (monocular visual odometry). ``sensor: 3d`` is short for
+    ``{mount: 3d}``."""
+
+    mount: str = "planar"
+    scale: str = "fixed"
+
+    def __post_init__(self) -> None:
+        check_choice("mount", self.mount, SENSORS)
+        check_choice("scale", self.scale, SCALES)
+        if self.scale == "free" and self.mount == "planar":
+            raise FieldError(
+                "scale", "a free scale needs a 3-D sensor (mount: 3d); planar tracker poses are metric"
+            )
+
+    @property
+    def is_3d(self) -> bool:
+        return self.mount == "3d"
+
+    def params(self) -> tuple[str, ...]:
+        """The parameters of the sensor's mount (and the scale, when free), in state order."""
+        return sensor_for(self.mount, self.scale).params
+
+    def held(self) -> tuple[str, ...]:
+        """The mount's parameters the drive never determines (held at their given values)."""
+        return sensor_for(self.mount, self.scale).held
+
+
+@dataclass(frozen=True)
 class ObjectiveOptions:
-    """What the fit minimises: the residual form, the robust kernel and the information weights."""
+    """What the fit minimises: the residual form, the sensor, the robust kernel and the information
+    weights."""
 
     residual: ResidualOptions = field(default_factory=ResidualOptions)
+    sensor: SensorOptions = field(default_factory=SensorOptions)
     robust: RobustOptions = field(default_factory=RobustOptions)
     information: InformationWeights = field(default_factory=InformationWeights)
 
 
 @dataclass(frozen=True)
 class ParameterOptions:
-    """Where the parameters start (``from_file``, ``auto`` or values), bounds, fixed ones, priors."""
+    """Where the parameters start (``from_file``, ``auto`` or values), bounds, fixed ones, priors,
+    and ``known`` ones: measured values held fixed whatever the start (a camera's height, the one
+    length a free scale needs), added to ``fixed``."""
 
     initial_guess: str | Mapping[str, float] = "from_file"
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     fixed: tuple[str, ...] = ()
     priors: Mapping[str, Prior] = field(default_factory=dict)
+    known: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        for n, value in self.known.items():
+            check_range(f"known.{n}", value, MAGNITUDE)
+            if n in self.bounds:
+                raise FieldError(f"bounds.{n}", "a known parameter is held at its value; drop its bounds")
+        object.__setattr__(self, "fixed", tuple(dict.fromkeys((*self.fixed, *self.known))))
         if isinstance(self.initial_guess, str):
             check_choice("initial_guess", self.initial_guess, INITIAL_GUESSES)
         else:
@@ -205,6 +250,8 @@ class ParameterOptions:
 
     def guess(self, name: str) -> float | None:
         """The scenario's own initial value of ``name``, if it gives one."""
+        if name in self.known:
+            return self.known[name]
         return self.initial_guess.get(name) if isinstance(self.initial_guess, Mapping) else None
 
 

@@ -15,10 +15,10 @@ import numpy as np
 
 from nlp_calib.core.errors import DatasetError, ModelError, NlpCalibWarning, ScenarioError
 from nlp_calib.logs import Log
-from nlp_calib.models import KinematicModel, get_model, param_names
+from nlp_calib.models import KinematicModel, get_model
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.keys import scenario_key
-from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.pipeline.scenario import Scenario, scenario_params
 from nlp_calib.problem import ResidualOptions
 
 #: At this rate or above (Hz), a record horizon shorter than :data:`SHORT_WINDOW_S` is warned about:
@@ -92,7 +92,8 @@ def check_windows(sc: Scenario, start: int, stop: int) -> None:
     fit_stop = split(sc, start, stop)
     intervals = fit_stop - start - 1
     windows = 0 if intervals < H else (intervals - H) // stride + 1
-    n_free = len(param_names(get_model(sc.model))) - len(set(sc.parameters.fixed))
+    always = sc.objective.sensor.held()
+    n_free = len(set(scenario_params(sc)) - set(sc.parameters.fixed) - set(always))
     if windows >= n_free:
         return
     longest = intervals - (n_free - 1) * stride

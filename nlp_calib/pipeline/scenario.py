@@ -23,7 +23,7 @@ from typing import Any
 from nlp_calib.core.config import coerce, fail, from_mapping, key_name, read_yaml
 from nlp_calib.core.errors import ConfigError, FieldError, ScenarioError
 from nlp_calib.core.ranges import Range, check_choice, shown
-from nlp_calib.models import DEFAULT_MODEL, MODELS, KinematicModel, encoders, get_model, param_names
+from nlp_calib.models import DEFAULT_MODEL, MODELS, KinematicModel, encoders, get_model
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.options import (
     AlignmentOptions,
@@ -37,6 +37,7 @@ from nlp_calib.pipeline.options import (
     Prior,
     RobustOptions,
     SampleSelection,
+    SensorOptions,
     ValidationOptions,
 )
 from nlp_calib.solvers import SOLVERS
@@ -60,6 +61,7 @@ __all__ = [
     "RobustOptions",
     "SampleSelection",
     "Scenario",
+    "SensorOptions",
     "ValidationOptions",
     "load_scenario",
     "scenario_from_mapping",
@@ -244,6 +246,9 @@ def _group(cls: type, raw: Mapping[str, Any], source: str, **given: Any) -> Any:
 
 def _scenario(raw: Any, source: str, base_dir: Path, path: Path | None) -> Scenario:
     _check_keys(raw, source)
+    if isinstance(raw.get("sensor"), str):
+        # ``sensor: 3d`` is short for ``sensor: {mount: 3d}``.
+        raw = {**raw, "sensor": {"mount": raw["sensor"]}}
     hints = typing.get_type_hints(Scenario)
     own = {k: coerce(raw[k], hints[k], f"{source}: {k}") for k in _OWN_KEYS if k in raw}
     own.setdefault("name", Path(source).stem)
@@ -315,7 +320,7 @@ def check_against_model(sc: Scenario, source: str) -> None:
     except FieldError as exc:
         fail(f"{source}: {exc.field}", exc.reason)
     model = sc.model_form()
-    _check_parameter_names(sc.parameters, param_names(model), source)
+    _check_parameter_names(sc.parameters, scenario_params(sc), source)
     for enc in sc.data.encoder_noise:
         _choice(enc, encoders(model), f"{source}: encoder_noise")
     for i, entry in enumerate(sc.data.logs):
@@ -327,6 +332,17 @@ def check_against_model(sc: Scenario, source: str) -> None:
     _check_units(sc, source)
     _check_solvers(sc, source)
     _check_overlaps(sc, source)
+
+
+def refuse_3d(sc: Scenario, what: str, why: str) -> None:
+    """A one-line error when ``sc``'s sensor is 3-D and ``what`` is planar only (``why``)."""
+    if sc.objective.sensor.is_3d:
+        raise ScenarioError(f"{sc.where()}: sensor: 3d: {what} is not available for a 3-D sensor: {why}")
+
+
+def scenario_params(sc: Scenario) -> tuple[str, ...]:
+    """Every parameter of the scenario's problem: the model's, then its sensor's mount."""
+    return (*sc.model_form().kinematic_params, *sc.objective.sensor.params())
 
 
 def _check_units(sc: Scenario, source: str) -> None:
@@ -357,7 +373,7 @@ def _check_parameter_names(p: ParameterOptions, names: tuple[str, ...], source: 
     if isinstance(p.initial_guess, Mapping):
         for n in p.initial_guess:
             _choice(n, names, f"{source}: initial_guess")
-    for key, given in (("bounds", p.bounds), ("fixed", p.fixed), ("priors", p.priors)):
+    for key, given in (("bounds", p.bounds), ("fixed", p.fixed), ("priors", p.priors), ("known", p.known)):
         for n in given:
             _choice(n, names, f"{source}: {key}")
     if len(set(p.fixed)) == len(names):

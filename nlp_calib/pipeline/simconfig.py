@@ -6,27 +6,67 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from nlp_calib.core.config import coerce, fail, key_name, read_yaml
+from nlp_calib.core.config import coerce, fail, from_mapping, key_name, read_yaml
 from nlp_calib.core.errors import FieldError, NlpCalibError
 from nlp_calib.core.ranges import Range
 from nlp_calib.simulation import LIMITS, SimulationOptions
+from nlp_calib.simulation.camera import LIMITS as CAMERA_LIMITS
+from nlp_calib.simulation.camera import CameraSimulationOptions
 from nlp_calib.simulation.options import flat_hints
 
 #: What a user may ask of ``nlp-calib simulate``: the simulator's own limits (it writes a log block
 #: by block, so its memory does not grow with the log's length).
-CLI_LIMITS: Mapping[str, Range] = LIMITS
+CLI_LIMITS: Mapping[str, Range] = {**LIMITS, "duration_s": CAMERA_LIMITS["duration_s"]}
+
+
+#: The command-line options a camera simulation reads: each one's place among its options.
+CAMERA_OVERRIDES: Mapping[str, tuple[str, ...]] = {
+    "seed": ("seed",),
+    "model": ("model",),
+    "trajectory": ("drive", "trajectory"),
+    "duration_s": ("duration_s",),
+    "latency_s": ("stamp_offset_s",),
+    "tracker_noise_xy": ("noise", "position"),
+    "tracker_noise_theta": ("noise", "rotation"),
+}
+
+
+def _config(config: Path | None) -> tuple[dict[str, Any], str]:
+    """The mapping in ``config`` (empty without one) and the name messages give its source."""
+    if config is None:
+        return {}, "simulate"
+    loaded = read_yaml(config, "simulation config")
+    if loaded is not None and not isinstance(loaded, Mapping):
+        fail(str(config), "expected a mapping of simulation options")
+    return dict(loaded or {}), str(config)
+
+
+def camera_options(config: Path | None, overrides: Mapping[str, Any]) -> CameraSimulationOptions:
+    """A camera simulation's options from ``config`` (a YAML mapping of
+    :class:`~nlp_calib.simulation.camera.CameraSimulationOptions`' fields, ``noise`` and ``drive``
+    nested), then the command line's ``overrides`` (by their flat names)."""
+    raw, source = _config(config)
+    for key, value in overrides.items():
+        if key not in CAMERA_OVERRIDES:
+            fail(f"simulate: {key}", "does not apply to a camera simulation (--out ending in .tum)")
+        *group, name = CAMERA_OVERRIDES[key]
+        if group:
+            inner = raw.get(group[0]) or {}
+            raw[group[0]] = {**inner, name: value} if isinstance(inner, Mapping) else inner
+        else:
+            raw[name] = value
+    options: CameraSimulationOptions = from_mapping(CameraSimulationOptions, raw, source)
+    return options
 
 
 def simulation_options(config: Path | None, overrides: Mapping[str, Any]) -> SimulationOptions:
     """Options from ``config`` (a YAML mapping of options by their flat names), then overrides."""
-    raw: dict[str, Any] = {}
-    source = "simulate"
-    if config is not None:
-        loaded = read_yaml(config, "simulation config")
-        if loaded is not None and not isinstance(loaded, Mapping):
-            fail(str(config), "expected a mapping of simulation options")
-        raw.update(loaded or {})
-        source = str(config)
+    raw, source = _config(config)
+    if "duration_s" in overrides:
+        fail(
+            "simulate: duration",
+            "applies to a camera simulation (--out ending in .tum); a log takes --records",
+        )
     raw.update(overrides)
     hints = flat_hints()
     for key in raw:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,9 @@ from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import TruthCheck
 from nlp_calib.simulation import truth_path
+
+#: Parameter values in one form's names and units into another's.
+Converter = Callable[[Mapping[str, float]], dict[str, float]]
 
 
 def read_truth(log_path: Path) -> dict[str, float] | None:
@@ -37,16 +41,25 @@ def read_truth(log_path: Path) -> dict[str, float] | None:
         return None
 
 
-def against_truth(run: CalibrationRun) -> TruthCheck | None:
-    """The chosen solver's estimate against the truth beside the run's log, if there is one."""
+def against_truth(
+    run: CalibrationRun, files: Sequence[Path] = (), convert: Converter = dict
+) -> TruthCheck | None:
+    """The chosen solver's estimate against the truth beside the run's log (or beside the first of
+    its source's ``files`` that has one: a camera's TUM file), in the run's names and units by
+    ``convert`` (a camera simulation's truth is in the model's counts form's names and units)."""
     solver = run.chosen_solver()
-    truth = read_truth(Path(run.log.path)) if solver is not None else None
-    if solver is None or truth is None:
+    if solver is None:
         return None
+    beside = [p for p in (Path(run.log.path), *files) if truth_path(p).is_file()]
+    found = read_truth(beside[0]) if beside else None
+    if found is None:
+        return None
+    truth = convert(found)
+    path = beside[0]
     result = run.reports[solver].result
     std = run.std(solver)
     true = np.array([truth.get(n, np.nan) for n in result.names])
     sigma = np.array([std.get(n, 0.0) for n in result.names])
     error = result.params - true
     z = np.where(sigma > 0, error / np.where(sigma > 0, sigma, 1.0), np.nan)
-    return TruthCheck(str(truth_path(Path(run.log.path))), solver, result.names, true, error, z)
+    return TruthCheck(str(truth_path(path)), solver, result.names, true, error, z)

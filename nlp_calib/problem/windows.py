@@ -13,7 +13,7 @@ adding another log's, is a matter of selecting pairs.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import casadi as ca
@@ -74,6 +74,8 @@ class ResidualData:
     horizon: int
     dropped_stationary: int
     dropped_faulty: int = 0
+    #: A 3-D sensor's windows left out by reason (:func:`nlp_calib.problem.camera.fit_selection`).
+    dropped_selection: Mapping[str, int] | None = None
 
     @property
     def log(self) -> Log:
@@ -227,7 +229,16 @@ def joined(parts: Sequence[ResidualData]) -> ResidualData:
         horizon=parts[0].horizon,
         dropped_stationary=sum(p.dropped_stationary for p in parts),
         dropped_faulty=sum(p.dropped_faulty for p in parts),
+        dropped_selection=_summed([p.dropped_selection for p in parts]),
     )
+
+
+def _summed(counts: Sequence[Mapping[str, int] | None]) -> dict[str, int] | None:
+    """Counts by reason added up (None when no part has any)."""
+    given = [c for c in counts if c is not None]
+    if not given:
+        return None
+    return {r: sum(c.get(r, 0) for c in given) for r in given[0]}
 
 
 def tracker_poses(fns: ProblemFunctions, log: Log) -> np.ndarray:

@@ -58,6 +58,11 @@ class ScenarioInfo:
         """The display name of ``solver``."""
         return self.labels.get(solver, solver)
 
+    @property
+    def sensor_3d(self) -> bool:
+        """Whether the sensor's mount is 3-D (a camera's: roll, pitch and yaw among the parameters)."""
+        return "sensor_roll" in self.units
+
 
 @dataclass(frozen=True)
 class Encoder:
@@ -107,6 +112,10 @@ class DataInfo:
     dropped_faulty: int
     tracker_lag_s: float
     lag_estimate: LagEstimate | None
+    #: A 3-D sensor's closed-form start: the windows it left out, by reason (None: not a camera's).
+    start_dropped: Mapping[str, int] | None = None
+    #: ... and the fitted windows left out by the reasons that also concern the refinement.
+    fit_dropped: Mapping[str, int] | None = None
 
 
 @dataclass(frozen=True)

@@ -47,7 +47,9 @@ class TrackSeries:
     ``[p, q)`` (indices into the tracks); ``restarted`` holds each solver's track restarted from
     the tracker at the start of every part (what the segment ATE scores); ``faults`` are
     ``(index, kind)``; ``holdout_start`` the index of the first record kept out of the fit;
-    ``tracker_z`` the tracker's height at each record where the source has one (None: planar).
+    ``tracker_z`` the tracker's height at each record where the source has one (None: planar);
+    ``level``: for a 3-D sensor, the rotation ``(3, 3)`` from the tracker's world frame to the
+    base's frame at the first record (floor plane x-y, x forward), in which figures draw the tracks.
     """
 
     time_s: np.ndarray
@@ -60,6 +62,7 @@ class TrackSeries:
     holdout_start: int | None
     segments: tuple[SegmentFigures, ...]
     tracker_z: np.ndarray | None = None
+    level: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

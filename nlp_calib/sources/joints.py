@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from nlp_calib.core.config import coerce, fail, from_mapping, key_name
-from nlp_calib.core.errors import ConfigError
+from nlp_calib.core.errors import ConfigError, DatasetError
 from nlp_calib.logs import Log
 from nlp_calib.logs.bag_joints import timed_by_tracker
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, MAX_GAP, Stamped
@@ -83,11 +83,25 @@ class JointLogSource:
         velocities = np.full(positions.shape, np.nan)
         joints = Stamped(table.path, table.time_ns + shift, np.hstack([positions, velocities]))
         poses = read_tum(self.poses)
+        self._check_overlap(joints.stamp_ns, poses.time_ns)
         tracker = Stamped(str(self.poses), poses.time_ns, poses.planar_and_3d())
         robot = load_robot(self.robot, model) if self.robot is not None else None
         header = robot_header(model, robot, None)
         log = timed_by_tracker(self.joints, joints, tracker, names, self.max_gap, header)
         return replace(log, line_numbers=frozen(poses.line_numbers[log.line_numbers - 1]))
+
+    def _check_overlap(self, joint_ns: np.ndarray, pose_ns: np.ndarray) -> None:
+        """Refuse files whose times do not overlap, in this block's words (a bag's are the topics')."""
+        if joint_ns.max() >= pose_ns.min() and pose_ns.max() >= joint_ns.min():
+            return
+        spans = [f"{ns.min() * 1e-9:.3f}-{ns.max() * 1e-9:.3f} s" for ns in (joint_ns, pose_ns)]
+        raise DatasetError(
+            str(self.joints),
+            None,
+            f"its times ({spans[0]}) and those of {self.poses} ({spans[1]}) do not overlap: the two "
+            "files' clocks differ; give the seconds to add to the joints' times as clock_offset in the "
+            "dataset block",
+        )
 
     def moved(self, path: Path) -> JointLogSource:
         return replace(self, joints=path)

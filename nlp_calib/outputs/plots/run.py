@@ -7,6 +7,7 @@ that imports this module is left alone (``matplotlib.use`` would switch it).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -118,9 +119,30 @@ def _marks(ax: Axes, ax_err: Axes, series: TrackSeries, restarted: Track | None)
         ax_err.axvline(t[k], color="red", linestyle=":", label="fitted | hold-out records")
 
 
+def _levelled(series: TrackSeries, restarted: Track | None) -> tuple[TrackSeries, Track | None]:
+    """A 3-D sensor's tracks with their positions turned by ``series.level`` (the floor plane as
+    x-y, from the first record); planar tracks as they are."""
+    if series.level is None:
+        return series, restarted
+    level, origin = series.level, series.tracker[0, :3]
+
+    def turned(P: np.ndarray) -> np.ndarray:
+        return (P[:, :3] - origin) @ level.T
+
+    tracks = tuple(dataclasses.replace(t, T_world_sensor=turned(t.T_world_sensor)) for t in series.tracks)
+    again = (
+        None
+        if restarted is None
+        else dataclasses.replace(restarted, T_world_sensor=turned(restarted.T_world_sensor))
+    )
+    return dataclasses.replace(series, tracker=turned(series.tracker), tracks=tracks), again
+
+
 def trajectory_png(series: TrackSeries, restarted: Track | None, title: str) -> bytes:
     """Tracker track and dead-reckoned sensor tracks (equal axes), and their distance over time;
     ``restarted``: a track restarted after each fault, its distance drawn too."""
+    frame = "the base's frame at the start" if series.level is not None else "the tracker's world frame"
+    series, restarted = _levelled(series, restarted)
     fig = Figure(figsize=(14, 6.2), layout="constrained")
     ax, ax_err = fig.subplots(1, 2, width_ratios=(1.35, 1))
     lo, hi = _tracks(ax, ax_err, series)
@@ -131,8 +153,8 @@ def trajectory_png(series: TrackSeries, restarted: Track | None, title: str) -> 
     ax.dataLim.set_points(np.array([lo - pad, hi + pad]))
     ax.set_aspect("equal", adjustable="datalim")
     ax.autoscale_view()
-    ax.set_xlabel("x in the tracker's world frame [m]")
-    ax.set_ylabel("y in the tracker's world frame [m]")
+    ax.set_xlabel(f"x in {frame} [m]")
+    ax.set_ylabel(f"y in {frame} [m]")
     ax.set_title("sensor track: tracker vs dead reckoning from the tracker's first pose")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8, framealpha=0.85)
