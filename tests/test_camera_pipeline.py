@@ -316,3 +316,51 @@ def test_a_wheel_joint_jump_is_found_against_the_camera_and_left_out(tmp_path: P
     truth = json.loads((data / "camera_demo.truth.json").read_text())["params"]
     params = run.reports["gauss_newton"].result.param_dict()
     assert abs(params["left_wheel_radius"] / truth["k_left"] - 1) < 1e-3
+
+
+def test_data_names_either_file_of_a_joint_log_pair_and_both_move(tmp_path: Path) -> None:
+    data = REPO / "scenarios" / "data"
+    for suffix in (".tum", ".joints.csv"):
+        (tmp_path / f"run2{suffix}").write_bytes((data / f"camera_demo{suffix}").read_bytes())
+    sc = load_scenario(REPO / "scenarios" / "camera_demo.yaml")
+    for given in ("run2.tum", "run2.joints.csv"):
+        source = sc.with_dataset(tmp_path / given).log.source
+        assert (source.joints, source.poses) == (tmp_path / "run2.joints.csv", tmp_path / "run2.tum")
+        assert source.encoders == sc.log.source.encoders  # the same block on another recording
+    # As import-bag writes a pair (NAME.csv beside NAME.tum), and the run reads the moved pair.
+    (tmp_path / "run3.csv").write_bytes((data / "camera_demo.joints.csv").read_bytes())
+    lines = (data / "camera_demo.tum").read_text().splitlines(keepends=True)
+    (tmp_path / "run3.tum").write_text("".join(lines[: len(lines) // 2]))
+    out = cli(
+        "run",
+        "scenarios/camera_demo.yaml",
+        "--data",
+        str(tmp_path / "run3.csv"),
+        "--out",
+        str(tmp_path / "out"),
+        "--solver",
+        "gauss_newton",
+    )
+    assert out.returncode == 0, out.stderr
+    dataset = json.loads((tmp_path / "out" / "result.json").read_text())["dataset"]
+    assert dataset["path"] == str(tmp_path / "run3.csv") and dataset["records"] < len(lines) * 0.6
+
+
+@pytest.mark.parametrize(
+    ("files", "given", "words"),
+    [
+        (("run2.joints.csv",), "run2.joints.csv", "run2.joints.csv: no run2.tum beside it"),
+        (("run2.tum", "run2.csv", "run2.joints.csv"), "run2.tum", "two candidate partners run2.csv or"),
+        ((), "run2.tum", "run2.tum: no such file"),
+    ],
+)
+def test_data_without_one_partner_beside_it_is_one_line(
+    tmp_path: Path, files: tuple[str, ...], given: str, words: str
+) -> None:
+    for name in files:
+        (tmp_path / name).write_text("")
+    sc = load_scenario(REPO / "scenarios" / "camera_demo.yaml")
+    with pytest.raises(NlpCalibError) as exc:
+        sc.with_dataset(tmp_path / given)
+    msg = str(exc.value)
+    assert "\n" not in msg and words in msg and "dataset block" in msg
