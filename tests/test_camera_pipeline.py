@@ -4,6 +4,7 @@ outputs, ``nlp-calib simulate`` of a camera and the shipped demo."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -364,3 +365,21 @@ def test_data_without_one_partner_beside_it_is_one_line(
         sc.with_dataset(tmp_path / given)
     msg = str(exc.value)
     assert "\n" not in msg and words in msg and "dataset block" in msg
+
+
+def test_the_c_examples_window_names_the_tum_file_its_lines_count(tmp_path: Path) -> None:
+    """The window's line numbers are the TUM file's: the camera's motion between those two lines is
+    the example's measured motion ``z``."""
+    import re
+
+    from nlp_calib.pipeline.export import write_c_export
+
+    sc = load_scenario(REPO / "scenarios" / "camera_demo.yaml")
+    _, example = write_c_export(dataclasses.replace(sc, solvers=("gauss_newton",)), tmp_path)
+    match = re.search(r"\(lines (\d+)-(\d+)\) of (\S+),", example.window)
+    assert match is not None and match.group(3) == "camera_demo.tum", example.window
+    lines = (REPO / "scenarios" / "data" / "camera_demo.tum").read_text().splitlines()
+    a, b = (np.array(lines[int(match.group(k)) - 1].split()[1:], dtype=float) for k in (1, 2))
+    z = example.column[-8:-1]  # u, then z, then the window's weight
+    z = z if z[6] * poses3d.between(a, b)[6] > 0 else np.r_[z[:3], -z[3:]]
+    assert np.allclose(poses3d.between(a, b), z, atol=1e-9)

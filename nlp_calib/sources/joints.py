@@ -63,6 +63,10 @@ class JointLogSource:
     def path(self) -> Path:
         return self.joints
 
+    @property
+    def numbered(self) -> Path:
+        return self.poses  # a record is made at each pose
+
     def files(self) -> tuple[Path, ...]:
         return tuple(p for p in (self.joints, self.poses, self.robot) if p is not None)
 
