@@ -441,3 +441,20 @@ def test_the_3d_jump_screen_raises_no_alarm_on_noisy_simulations(tmp_path: Path)
     flagged = [len(tracker_faults(log, spatial=True)) for log in logs]
     print("poses flagged per seed:", flagged)
     assert flagged == [0] * 10
+
+
+def test_a_clean_camera_windows_mahalanobis_norm_is_that_of_two_poses_noise_over_six_rows() -> None:
+    """camera.md's advice on δ: with Ω from the pose noise a clean window's eᵀΩe is about 2·χ²(6)
+    (the window's motion carries its two poses' noise), so δ = 3 leaves about half the windows of
+    the demo beyond it and δ = 6 almost none."""
+    from nlp_calib.pipeline.options import RobustOptions, ValidationOptions
+
+    sc = load_scenario(REPO / "scenarios" / "camera_demo.yaml")
+    inside = {}
+    for delta in (3.0, 6.0):
+        options = {"robust": RobustOptions("huber", delta), "validation": ValidationOptions(blocks=0)}
+        result = Calibration.setup(sc.with_options(solvers=("gauss_newton",), **options)).run()
+        gn = result.reports["gauss_newton"].result
+        inside[delta] = gn.inliers / gn.n_residuals
+    print("fraction of windows within δ:", inside)
+    assert 0.3 < inside[3.0] < 0.6 and inside[6.0] > 0.99
