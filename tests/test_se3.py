@@ -246,3 +246,22 @@ def test_accumulate_matches_repeated_products() -> None:
     for k in range(5):
         T = T @ matrix(steps[k])
         same_pose(track[k + 1], np.concatenate([T[:3, 3], poses3d.matrix_to_quat(T[:3, :3])]))
+
+
+def test_turned_is_an_unwrapped_angle_along_a_fixed_axis() -> None:
+    axis = np.array([0.0, -np.sqrt(0.75), 0.5])  # the floor normal as a camera 30° down sees it
+    angle = np.linspace(0.0, 9.0, 400)  # more than a turn and a half
+    q = poses3d.rotvec_to_quat(np.outer(np.mod(angle + np.pi, 2 * np.pi) - np.pi, axis))
+    assert np.allclose(poses3d.turned(q), np.outer(angle, axis), atol=1e-12)
+
+
+def test_between_at_runs_from_one_pose_to_the_other_on_the_shorter_arc() -> None:
+    rng = np.random.default_rng(4)
+    a = np.r_[rng.normal(size=3), poses3d.rotvec_to_quat(rng.normal(size=3))]
+    step = np.r_[rng.normal(size=3), poses3d.rotvec_to_quat(np.array([0.0, 0.0, 0.8]))]
+    b = poses3d.compose(a, step)
+    s = np.array([[0.0], [0.25], [1.0]])
+    out = poses3d.between_at(np.tile(a, (3, 1)), np.tile(b, (3, 1)), s)
+    assert np.allclose(out[0], a) and np.allclose(poses3d.between(b, out[2])[3:6], 0.0, atol=1e-12)
+    assert np.allclose(out[1, :3], a[:3] + 0.25 * (b[:3] - a[:3]))
+    assert np.allclose(poses3d.quat_to_rotvec(poses3d.between(a, out[1])[3:]), [0.0, 0.0, 0.2])

@@ -98,6 +98,10 @@ class MemorySource:
     def path(self) -> Path:
         return Path(self.name)
 
+    @property
+    def numbered(self) -> Path:
+        return Path(self.name)
+
     def files(self) -> tuple[Path, ...]:
         return ()
 

@@ -34,9 +34,12 @@ from nlp_calib.analysis.joint_repair import repair_joints
 from nlp_calib.analysis.readings import Readings, interpolated_over, readings, turning
 from nlp_calib.analysis.readings import unit as unit_of
 from nlp_calib.analysis.streams import off_neighbours, scatter, stuck_runs
+from nlp_calib.core import poses3d
+from nlp_calib.core.errors import ProblemError
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.logs.log import frozen
+from nlp_calib.models.mount import SCALE_PARAM
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results.faults import (
@@ -66,6 +69,24 @@ def _unwrapped_poses(log: Log) -> np.ndarray:
     return T
 
 
+def _tracker_signal(log: Log, spatial: bool) -> tuple[np.ndarray, int]:
+    """The tracker's poses as a signal continuous in time, and how many of its leading columns are
+    the position: planar ``(x, y, θ unwrapped)``, or 3-D ``(x, y, z)`` and the rotation accumulated
+    about the world's axes (:func:`~nlp_calib.core.poses3d.turned`), so that one path judges both."""
+    if not spatial:
+        return _unwrapped_poses(log), 2
+    if log.T_world_sensor_3d is None:
+        raise ProblemError(
+            f"{log.path}: a 3-D sensor's poses are needed to screen them; the log has planar ones"
+        )
+    P = np.asarray(log.T_world_sensor_3d, dtype=float)
+    return np.hstack([P[:, :3], poses3d.turned(P[:, 3:])]), 3
+
+
+def _norm(x: np.ndarray) -> float:
+    return float(np.hypot.reduce(np.abs(x)))
+
+
 def _fault(
     log: Log,
     kind: str,
@@ -80,19 +101,25 @@ def _fault(
     return Fault(kind, encoder, intervals[0], intervals[1], record, t, line, *size, evidence)
 
 
-def tracker_faults(log: Log) -> list[Fault]:
-    """Tracker poses off the path their neighbours agree on (see :mod:`nlp_calib.analysis.streams`)."""
-    T, t, lines = _unwrapped_poses(log), log.time_s, log.line_numbers
+def tracker_faults(log: Log, spatial: bool = False, length: str = "m") -> list[Fault]:
+    """Tracker poses off the path their neighbours agree on (see :mod:`nlp_calib.analysis.streams`):
+    planar ones, or with ``spatial`` the 3-D poses, their positions in ``length`` units."""
+    T, position = _tracker_signal(log, spatial)
+    t, lines = log.time_s, log.line_numbers
     sc = scatter(t, T)
-    noise = float(np.hypot(sc.floor[0], sc.floor[1]))
+    if not np.any(sc.floor > 0):
+        # Poses without scatter at rest (a noise-free simulation) give no scale to judge a miss by:
+        # a smooth path's own curvature would be taken for glitches.
+        return []
+    noise = _norm(sc.floor[:position])
     found = []
     for g in off_neighbours(t, T, sc, excursion=TRACKER_EXCURSION * sc.floor, max_group=TRACKER_GROUP):
-        off = float(np.hypot(g.offset[0], g.offset[1]))
+        off, turn = _norm(g.offset[:position]), _norm(g.offset[position:])
         for q in range(g.first, g.last + 1):
             group = f"records {g.first}-{g.last} " if g.last > g.first else ""
             evidence = (
                 f"the tracker pose at record {q} (line {lines[q]}) is off the path its neighbours agree "
-                f"on ({group}by up to {off:.3f} m and {abs(g.offset[2]):.3f} rad, "
+                f"on ({group}by up to {off:.3f} {length} and {turn:.3f} rad, "
                 f"{g.score:.0f}× the tracker's scatter)"
             )
             found.append(
@@ -197,7 +224,22 @@ def cleaned(log: Log, faults: Sequence[Fault]) -> Log:
     for j in range(3):
         T[bad_pose, j] = np.interp(t[bad_pose], t[~bad_pose], U[~bad_pose, j])
     T[:, 2] = wrap_angle(T[:, 2])
-    return replace(out, T_world_sensor=frozen(T))
+    out = replace(out, T_world_sensor=frozen(T))
+    if log.T_world_sensor_3d is None:
+        return out
+    return replace(out, T_world_sensor_3d=frozen(_spatial_over(log.T_world_sensor_3d, t, bad_pose)))
+
+
+def _spatial_over(P: np.ndarray, t: np.ndarray, bad: np.ndarray) -> np.ndarray:
+    """3-D poses ``P`` with the ``bad`` ones interpolated in time from the nearest good ones around
+    (the nearest good one at either end)."""
+    good, k = np.flatnonzero(~bad), np.flatnonzero(bad)
+    after = np.clip(np.searchsorted(good, k), 1, good.size - 1)
+    a, b = good[after - 1], good[after]
+    s = np.clip((t[k] - t[a]) / np.maximum(t[b] - t[a], 1e-12), 0.0, 1.0)[:, None]
+    out = np.array(P, dtype=float)
+    out[k] = poses3d.between_at(out[a], out[b], s)
+    return out
 
 
 def _evidence(
@@ -263,8 +305,9 @@ def screen(
     alone, then the counters' against a fit (``judge``) that leaves those glitches out, on readings
     with them interpolated over, at the tracker ``lag`` (s, or a range to estimate it in)."""
     model, n = fns.model, log.n_records
-    # The jump screen judges planar poses; a 3-D tracker's outliers are left to the robust kernel.
-    jumps = tracker_faults(log) if fns.sensor.pose_rows == 3 else []
+    spatial = fns.sensor.pose_rows != 3
+    length = "trajectory units" if SCALE_PARAM in fns.names else "m"
+    jumps = tracker_faults(log, spatial, length)
     glitches = tuple(jumps + absolute_faults(log, model.encoder_kinds))
     report = FaultReport(glitches, {}, {}, unit=unit_of(log))
     params = judge(report.bad_intervals(n - 1), report.bad_records(n))

@@ -149,6 +149,22 @@ def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return compose(inverse(a), b)
 
 
+def between_at(a: np.ndarray, b: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Poses a fraction ``s`` ``(..., 1)`` of the way from ``a`` to ``b``: the position on the line,
+    the rotation along the shorter arc (``s`` 0 gives ``a``, 1 gives ``b``)."""
+    turn = quat_to_rotvec(quat_multiply(quat_conjugate(a[..., 3:]), b[..., 3:]))
+    q = quat_multiply(a[..., 3:], rotvec_to_quat(s * turn))
+    return np.concatenate([a[..., :3] + s * (b[..., :3] - a[..., :3]), q], axis=-1)
+
+
+def turned(q: np.ndarray) -> np.ndarray:
+    """The rotation of unit quaternions ``(n, 4)`` accumulated step by step about the fixed axes
+    (``(n, 3)``, 0 at the first): a turn about one axis is its angle unwrapped along that axis, a
+    rotation off its neighbours departs from the path as an unwrapped angle does."""
+    steps = quat_to_rotvec(quat_multiply(q[1:], quat_conjugate(q[:-1])))
+    return np.vstack([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
+
+
 def accumulate(start: np.ndarray, steps: np.ndarray) -> np.ndarray:
     """Poses ``(n + 1, 7)`` of ``start · steps[0] · … · steps[n-1]`` (a sequential pass)."""
     out = np.empty((steps.shape[0] + 1, 7))

@@ -148,9 +148,7 @@ def mount_notes(sc: Scenario, start: StartingPoint) -> list[str]:
     z = start.initial.get("sensor_z", 0.0)
     return [
         f"sensor_z is held at {z:g} m: planar driving cannot determine a 3-D sensor's height "
-        "(give the measured one as known.sensor_z)",
-        "a 3-D sensor's poses are not screened for jumps (that screen judges planar poses): the "
-        "robust kernel bounds a bad pose's pull; the encoders are screened against them",
+        "(give the measured one as known.sensor_z)"
     ]
 
 

@@ -31,7 +31,8 @@ def parse_source(raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = (
 
 def moved(source: DatasetSource, path: Path) -> DatasetSource:
     """``source``'s reading of another file (``--data PATH``): another bag is read with the same
-    topics; any other path is a text log (reading a bag that way says how to name its topics)."""
+    topics, either file of a joint-log pair with its partner beside it; any other path is a text
+    log (reading a bag that way says how to name its topics)."""
     return source.moved(path) if type(source).accepts(path) else TextSource(path)
 
 

@@ -95,6 +95,10 @@ class BagSource:
             self.clock_offset,
         )
 
+    @property
+    def numbered(self) -> Path:
+        return self.bag
+
     def files(self) -> tuple[Path, ...]:
         return (self.bag,) if self.robot is None else (self.bag, self.robot)
 

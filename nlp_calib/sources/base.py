@@ -34,6 +34,11 @@ class DatasetSource(Protocol):
         """What its encoder readings are: ``counts`` or ``radians`` (the model's form follows)."""
         ...
 
+    @property
+    def numbered(self) -> Path:
+        """The file whose line numbers a record's ``line`` counts (a joint log's are its poses')."""
+        ...
+
     def files(self) -> tuple[Path, ...]:
         """Every file or folder the source reads (to tell logs apart and to never overwrite one)."""
         ...

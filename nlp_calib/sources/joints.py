@@ -63,6 +63,10 @@ class JointLogSource:
     def path(self) -> Path:
         return self.joints
 
+    @property
+    def numbered(self) -> Path:
+        return self.poses  # a record is made at each pose
+
     def files(self) -> tuple[Path, ...]:
         return tuple(p for p in (self.joints, self.poses, self.robot) if p is not None)
 
@@ -104,7 +108,10 @@ class JointLogSource:
         )
 
     def moved(self, path: Path) -> JointLogSource:
-        return replace(self, joints=path)
+        """The same block on another recording: ``path`` names either file of a pair lying side by
+        side with one stem, and both files move (the joints and the poses of one recording)."""
+        joints, poses = paired_files(path)
+        return replace(self, joints=joints, poses=poses)
 
     @classmethod
     def claims(cls, raw: Any) -> bool:
@@ -112,7 +119,7 @@ class JointLogSource:
 
     @classmethod
     def accepts(cls, path: Path) -> bool:
-        return path.suffix.lower() == ".csv"
+        return path.suffix.lower() in (".csv", ".tum")
 
     @classmethod
     def parse(cls, raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> JointLogSource:
@@ -135,6 +142,30 @@ class JointLogSource:
         )
         robot = None if source.robot is None else _resolved(source.robot, base_dir)
         return replace(source, joints=joints, poses=poses, robot=robot)
+
+
+def paired_files(path: Path) -> tuple[Path, Path]:
+    """The joint CSV and the TUM file of one recording from either one's path: ``NAME.tum`` beside
+    ``NAME.csv`` (as ``import-bag`` writes them) or ``NAME.joints.csv`` (as ``simulate`` does)."""
+    is_tum = path.suffix.lower() == ".tum"
+    stem = path.name[: -len(path.suffix)]
+    if is_tum:
+        partners = [path.with_name(f"{stem}.csv"), path.with_name(f"{stem}.joints.csv")]
+    else:
+        partners = [path.with_name(f"{stem.removesuffix('.joints')}.tum")]
+    found = [p for p in partners if p.is_file()]
+    fix = (
+        "--data names one file of a joint-log pair and reads its partner beside it; give the pair "
+        "one stem (NAME.tum with NAME.csv or NAME.joints.csv) or edit the scenario's dataset block "
+        "(joints, poses)"
+    )
+    if not path.is_file():
+        raise DatasetError(str(path), None, f"no such file ({fix})")
+    if len(found) != 1:
+        what = "no" if not found else "two candidate partners"
+        listed = " or ".join(p.name for p in (found or partners))
+        raise DatasetError(str(path), None, f"{what} {listed} beside it ({fix})")
+    return (found[0], path) if is_tum else (path, found[0])
 
 
 def check_encoders(given: Mapping[str, str], model: KinematicModel, where: str) -> None:

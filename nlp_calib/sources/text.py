@@ -45,6 +45,10 @@ class TextSource:
     def path(self) -> Path:
         return self.file
 
+    @property
+    def numbered(self) -> Path:
+        return self.file
+
     def files(self) -> tuple[Path, ...]:
         return (self.file,)
 
