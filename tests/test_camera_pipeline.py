@@ -450,11 +450,15 @@ def test_a_clean_camera_windows_mahalanobis_norm_is_that_of_two_poses_noise_over
     from nlp_calib.pipeline.options import RobustOptions, ValidationOptions
 
     sc = load_scenario(REPO / "scenarios" / "camera_demo.yaml")
-    inside = {}
+    inside, said = {}, {}
     for delta in (3.0, 6.0):
         options = {"robust": RobustOptions("huber", delta), "validation": ValidationOptions(blocks=0)}
         result = Calibration.setup(sc.with_options(solvers=("gauss_newton",), **options)).run()
         gn = result.reports["gauss_newton"].result
-        inside[delta] = gn.inliers / gn.n_residuals
+        inside[delta], n = gn.inliers / gn.n_residuals, gn.n_residuals
+        said[delta] = [w for w in result.warnings if "within the robust threshold" in w]
     print("fraction of windows within δ:", inside)
     assert 0.3 < inside[3.0] < 0.6 and inside[6.0] > 0.99
+    # Most windows beyond δ is said, with the count and the key to change.
+    assert len(said[3.0]) == 1 and f"only {round(inside[3.0] * n)} of {n} windows" in said[3.0][0]
+    assert "robust.delta = 3" in said[3.0][0] and said[6.0] == []

@@ -152,6 +152,27 @@ def mount_notes(sc: Scenario, start: StartingPoint) -> list[str]:
     ]
 
 
+#: Below this share of windows within the robust threshold, the threshold is said to be too tight.
+MIN_INLIER_SHARE = 0.5
+
+
+def threshold_notes(sc: Scenario, results: Mapping[str, SolverResult]) -> list[str]:
+    """A robust threshold that treats most windows as outliers, said once: their weight is then
+    set by δ rather than by the noise, and the white-noise σ comes out too large."""
+    converged = [r for r in results.values() if r.converged and r.n_residuals]
+    if not converged or sc.objective.robust.kernel == "none":
+        return []
+    r = converged[0]
+    if r.inliers >= MIN_INLIER_SHARE * r.n_residuals:
+        return []
+    return [
+        f"only {r.inliers} of {r.n_residuals} windows lie within the robust threshold "
+        f"(robust.delta = {sc.objective.robust.delta:g}): the kernel treats most of the log as "
+        "outliers and the white-noise σ is too large; raise robust.delta (a bound on √(eᵀΩe)) or "
+        "check that information: matches the tracker's noise"
+    ]
+
+
 def _start_dropped(start: StartingPoint) -> dict[str, int] | None:
     """The windows a 3-D sensor's closed-form start left out, by reason (None: no closed form)."""
     if start.camera is None or start.auto is None:
@@ -180,7 +201,12 @@ def assemble_run(
         baseline_holdout=figures.baseline[1],
         reports=reports,
         checks=Checks(fitted.observability, fitted.crossval, fitted.direction, findings, fitted.consistency),
-        warnings=(*notes, *lag_notes(prepared.scenario, alignment), *mount_notes(prepared.scenario, start)),
+        warnings=(
+            *notes,
+            *lag_notes(prepared.scenario, alignment),
+            *mount_notes(prepared.scenario, start),
+            *threshold_notes(prepared.scenario, results),
+        ),
         verdict=Verdict("", ()),
         series=figures.series,
         odometry=figures.odometry,
