@@ -129,3 +129,14 @@ def test_a_calibration_worse_than_its_initial_guess_is_not_usable(tmp_path: Path
     v = worse.verdict
     assert v.level == NOT_USABLE and "worse than the initial guess" in v.reasons[0], v
     assert fine.verdict.level != NOT_USABLE
+    # The same fit judged against a start computed from the data (initial_guess: auto): that start
+    # is itself a fit, so doing no better than it is a caveat, not a reason to discard the answer.
+    from dataclasses import replace
+
+    from nlp_calib.analysis.verdict import verdict
+    from nlp_calib.models import get_model
+    from nlp_calib.results.run import CAVEATS
+
+    fitted_start = replace(worse, scenario=replace(worse.scenario, initial_guess="auto"))
+    v = verdict(fitted_start, get_model("tricycle"))
+    assert v.level == CAVEATS and any("no better than the data-driven start" in r for r in v.reasons), v

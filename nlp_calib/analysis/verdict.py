@@ -7,9 +7,11 @@ The rules a reader can check:
 - **not determined**: no solver converged, or the drive leaves a parameter undetermined (its σ
   is infinite, or a direction of the information matrix is beyond
   :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` reference units);
-- **not usable**: converged and determined, but farther from the tracker than the initial guess
-  (segment ATE), or, fitted to several logs, some log's own fit disagrees with theirs beyond their
-  honest σ (they are not one robot): whatever else holds, such a calibration is not to be used;
+- **not usable**: converged and determined, but farther from the tracker than a given initial guess
+  (segment ATE; a start computed from the data itself, ``initial_guess: auto``, is already a fit
+  of it, so doing no better than it is a caveat), or, fitted to several logs, some log's own fit
+  disagrees with theirs beyond their honest σ (they are not one robot): whatever else holds, such
+  a calibration is not to be used;
 - **usable with caveats**: converged and determined, but something needs a look first: a weakly
   observable direction, a parameter whose σ to believe exceeds
   :data:`~nlp_calib.results.checks.WEAK` times the precision a useful calibration needs,
@@ -73,8 +75,14 @@ def caveats(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str
     out += _checks(run)
     ours, base = run.reports[solver].metrics.segment_ate.mean, run.baseline.segment_ate.mean
     if np.isfinite(base) and not ours < base:
-        out.append(f"no better than the initial guess (segment ATE {ours:.3g} m against {base:.3g} m)")
+        start = "the data-driven start" if _fitted_start(run) else "the initial guess"
+        out.append(f"no better than {start} (segment ATE {ours:.3g} m against {base:.3g} m)")
     return out
+
+
+def _fitted_start(run: CalibrationRun) -> bool:
+    """Whether the initial guess was computed from this data (``initial_guess: auto``)."""
+    return run.scenario.initial_guess == "auto"
 
 
 def verdict(run: CalibrationRun, model: KinematicModel, hint: str = "") -> Verdict:
@@ -96,7 +104,7 @@ def verdict(run: CalibrationRun, model: KinematicModel, hint: str = "") -> Verdi
     if check is not None and check.significant:
         return Verdict(NOT_USABLE, (check.words(),))
     ours, base = run.reports[solver].metrics.segment_ate.mean, run.baseline.segment_ate.mean
-    if ours > base:
+    if ours > base and not _fitted_start(run):
         return Verdict(
             NOT_USABLE,
             (f"worse than the initial guess (segment ATE {ours:.3g} m against {base:.3g} m uncalibrated)",),
