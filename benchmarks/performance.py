@@ -54,8 +54,9 @@ LAUNCHER = (
     "t0 = time.perf_counter()\n"
     "rc = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode\n"
     "wall = time.perf_counter() - t0\n"
-    "peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0\n"
-    "print(json.dumps({'wall_s': wall, 'peak_mb': peak, 'rc': rc}))\n"
+    "use = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+    "peak, cpu = use.ru_maxrss / 1024.0, use.ru_utime + use.ru_stime\n"
+    "print(json.dumps({'wall_s': wall, 'peak_mb': peak, 'cpu_s': cpu, 'rc': rc}))\n"
 )
 TARGETS = {
     "compare real_tricycle.yaml, warm [s]": 1.5,
@@ -82,7 +83,8 @@ def load() -> list[float]:
 
 
 def launch(cmd: list[str], env: dict[str, str]) -> dict[str, Any]:
-    """Run ``cmd`` in a fresh launcher process; its wall time, peak RSS and exit code."""
+    """Run ``cmd`` in a fresh launcher process; its wall time, peak RSS, CPU time (its processes'
+    together) and exit code."""
     out = subprocess.run(
         [sys.executable, "-c", LAUNCHER, *cmd], capture_output=True, text=True, env=env, check=True
     )
@@ -354,21 +356,24 @@ def batch(n_logs: int, records: int, repeats: int, tmp: Path) -> dict[str, Any]:
         )  # fmt: skip
     scenario = str(REPO / "scenarios" / "demo.yaml")
 
-    def once(jobs: int) -> float:
+    def once(jobs: int) -> tuple[float, float]:
         out = tmp / f"batch-{jobs}"
         shutil.rmtree(out, ignore_errors=True)
         args = ("--scenario", scenario, "--solver", "gauss_newton", "--out", str(out), "--jobs", str(jobs))
         r = launch(cli("batch", str(logs), *args), env)
         if r["rc"] != 0:
             raise SystemExit(f"batch --jobs {jobs} failed with exit code {r['rc']}")
-        return float(r["wall_s"])
+        return float(r["wall_s"]), float(r["cpu_s"])
 
     once(1)  # fills the compile cache (not timed)
     start = load()
     walls: dict[int, list[float]] = {1: [], 2: []}
+    cpus: dict[int, list[float]] = {1: [], 2: []}
     for _ in range(repeats):
         for jobs in (1, 2):
-            walls[jobs].append(once(jobs))
+            wall, cpu = once(jobs)
+            walls[jobs].append(wall)
+            cpus[jobs].append(cpu)
     return {
         "load_start": start,
         "load_end": load(),
@@ -376,6 +381,8 @@ def batch(n_logs: int, records: int, repeats: int, tmp: Path) -> dict[str, Any]:
         "records": records,
         "jobs_1_s": walls[1],
         "jobs_2_s": walls[2],
+        "jobs_1_cpu_s": cpus[1],
+        "jobs_2_cpu_s": cpus[2],
         "speedup": med(walls[1]) / med(walls[2]),
     }
 
@@ -431,7 +438,13 @@ def fleet_lines(doc: dict[str, Any], figures: dict[str, float]) -> list[str]:
             "(demo scenario, "
             f"Gauss-Newton; load average {fleet['load_start']} → {fleet['load_end']}): --jobs 1 "
             f"{med(fleet['jobs_1_s']):.1f} s, --jobs 2 {med(fleet['jobs_2_s']):.1f} s, "
-            f"{fleet['speedup']:.2f}× faster.",
+            f"{fleet['speedup']:.2f}× faster"
+            + (
+                f"; CPU time {med(fleet['jobs_1_cpu_s']):.1f} s and {med(fleet['jobs_2_cpu_s']):.1f} s "
+                f"(--jobs 1 / wall {med(fleet['jobs_1_cpu_s']) / med(fleet['jobs_1_s']):.2f} cores)."
+                if "jobs_1_cpu_s" in fleet
+                else "."
+            ),
         ]
         figures[f"batch of {fleet['logs']} logs, --jobs 1 / --jobs 2 [x]"] = fleet["speedup"]
     return lines
