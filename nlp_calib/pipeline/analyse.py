@@ -10,13 +10,13 @@ covariance. The outputs only format what this stage computed.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
-from nlp_calib.analysis.metrics import geometry, integrate, segments, trajectory_metrics
+from nlp_calib.analysis.metrics import each_metrics, geometry, integrate, segments
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
@@ -86,9 +86,15 @@ class Scorer:
 
     def __call__(self, params: np.ndarray, a: int | None = None, b: int | None = None) -> TrajectoryMetrics:
         """The figures of ``params`` over records ``[a, b)`` (all of them by default)."""
-        return trajectory_metrics(
+        return self.each([params], a, b)[0]
+
+    def each(
+        self, param_sets: Sequence[np.ndarray], a: int | None = None, b: int | None = None
+    ) -> list[TrajectoryMetrics]:
+        """The figures of each parameter set over records ``[a, b)``, the reference's side once."""
+        return each_metrics(
             self.fns,
-            params,
+            param_sets,
             self.inputs,
             self.T_world_sensor,
             start=0 if a is None else a - self.offset,
@@ -107,12 +113,13 @@ def log_scorer(fns: ProblemFunctions, windows: LogWindows, steering_sample: str,
     return Scorer(fns, inputs, poses, bad_i, bad_r, windows.used[0], rpe_window)
 
 
-def scores(scorer: Scorer, windows: LogWindows, params: np.ndarray) -> Scores:
-    """Full-range and hold-out figures of ``params`` on one log."""
-    holdout = None
+def scores(scorer: Scorer, windows: LogWindows, param_sets: Sequence[np.ndarray]) -> list[Scores]:
+    """Full-range and hold-out figures of each parameter set on one log."""
+    full = scorer.each(param_sets)
+    holdout: list[TrajectoryMetrics | None] = [None] * len(full)
     if windows.fit[1] < windows.used[1] - 1:
-        holdout = scorer(params, windows.fit[1])
-    return scorer(params), holdout
+        holdout = list(scorer.each(param_sets, windows.fit[1]))
+    return list(zip(full, holdout))
 
 
 def analyse_fit(
@@ -341,9 +348,11 @@ def analyse_log(
     """One log's figures with the fit's estimates (and its series and odometry when wanted)."""
     windows, scorer = view.windows, view.scorer
     p0 = np.array([fit.problem.start.initial[n] for n in fit.fns.names])
+    # The initial guess scored last: its figures are the baseline.
+    *solved, baseline = scores(scorer, windows, [*(r.params for r in results.values()), p0])
     figures = LogAnalysis(
-        scores={name: scores(scorer, windows, r.params) for name, r in results.items()},
-        baseline=scores(scorer, windows, p0),
+        scores=dict(zip(results, solved)),
+        baseline=baseline,
         series=None,
         odometry=None,
     )
