@@ -46,6 +46,9 @@ from nlp_calib.results.series import (
 from nlp_calib.results.uncertainty import Uncertainty
 
 #: A figure of one parameter set on one log: full range and hold-out.
+#: Fits of this many windows let go of their evaluator's buffers while the refits run and after.
+RELEASE_FROM = 100_000
+
 Scores = tuple[TrajectoryMetrics, TrajectoryMetrics | None]
 
 
@@ -141,6 +144,8 @@ def analyse_fit(
     span = (blocks.offset, blocks.offset + data.n_records)
     full = fit.canonical_params(converged[0].params)
     whole = ev.normal_equations(x) if data.n_residuals >= validation.DOWNDATE_FROM else None
+    if data.n_residuals >= RELEASE_FROM:
+        ev.release()  # the refits bind evaluators of their own; a later use binds this one again
     crossval = validation.cross_validate(binder, data, span, x, k, fit.canonical_params, blocks, full, whole)
     inputs = np.concatenate([np.zeros((data.inputs.shape[0], span[0])), data.inputs], axis=1)
     model = fit.fns.model
