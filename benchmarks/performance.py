@@ -75,7 +75,7 @@ TARGETS = {
     "batch of 20 logs, --jobs 1 / --jobs 2 [x]": 1.7,
 }
 #: The sections a run measures (``--sections``), in order.
-SECTIONS = ("end_to_end", "solvers", "ipopt_lag", "scaling", "simulate", "batch")
+SECTIONS = ("end_to_end", "solvers", "ipopt_lag", "scaling", "simulate", "batch", "reader")
 
 
 def load() -> list[float]:
@@ -387,6 +387,51 @@ def batch(n_logs: int, records: int, repeats: int, tmp: Path) -> dict[str, Any]:
     }
 
 
+def reader(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
+    """The log reader on a simulated log of ``records`` records against the compiled CSV readers
+    installed (pandas' C parser; pyarrow's): medians of interleaved reads, in this process, and
+    whether their poses are the reader's to the bit."""
+    import warnings
+
+    from nlp_calib.logs.reader import read_log
+
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
+    path = tmp / "reader.txt"
+    subprocess.run(
+        cli("simulate", "--records", str(records), "--out", str(path), "--force"), env=env, check=True
+    )
+    kinds: dict[str, Any] = {"steering": "absolute", "traction_wheel": "counter"}
+    ours = read_log(path, kinds)
+    poses = np.hstack([ours.model_pose, ours.T_world_sensor])
+    candidates: dict[str, Callable[[], Any]] = {"nlp_calib": lambda: read_log(path, kinds)}
+    try:
+        import pandas as pd
+
+        def with_pandas() -> np.ndarray:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                cols = [6, 7, 8, 10, 11, 12]
+                df = pd.read_csv(path, sep=r"\s+", comment="#", header=None, usecols=cols)
+            return np.asarray(df.to_numpy(float))
+
+        candidates["pandas.read_csv (poses only)"] = with_pandas
+    except ImportError:
+        pass
+    times: dict[str, list[float]] = {name: [] for name in candidates}
+    start = load()
+    for _ in range(repeats):
+        for name, fn in candidates.items():
+            t0 = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t0)
+    exact = {
+        name: bool(np.array_equal(fn().view(np.int64), poses.view(np.int64)))
+        for name, fn in candidates.items()
+        if name != "nlp_calib"
+    }
+    return {"load_start": start, "load_end": load(), "records": records, "times_s": times, "bitwise": exact}
+
+
 def environment() -> dict[str, Any]:
     import casadi
 
@@ -447,6 +492,18 @@ def fleet_lines(doc: dict[str, Any], figures: dict[str, float]) -> list[str]:
             ),
         ]
         figures[f"batch of {fleet['logs']} logs, --jobs 1 / --jobs 2 [x]"] = fleet["speedup"]
+    rd = doc.get("reader")
+    if rd:
+        each = ", ".join(
+            f"{name} {med(t):.2f} s"
+            + ("" if name not in rd["bitwise"] else f" (poses to the bit: {rd['bitwise'][name]})")
+            for name, t in rd["times_s"].items()
+        )
+        lines += [
+            "",
+            f"Reading a simulated log of {rd['records']:,} records (load average {rd['load_start']} → "
+            f"{rd['load_end']}): {each}.",
+        ]
     return lines
 
 
@@ -615,6 +672,8 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
         return scaling([2_000, 8_000] if quick else [10_000, 100_000, 1_000_000], repeats, tmp)
     if section == "simulate":
         return simulate_big(10_000 if quick else 1_000_000, 1 if quick else 3, tmp)
+    if section == "reader":
+        return reader(10_000 if quick else 1_000_000, 2 if quick else 3, tmp)
     # Logs of 5000 records (3.3 minutes of driving): a robot's daily log is rarely shorter.
     return batch(4 if quick else 20, 300 if quick else 5000, 1 if quick else repeats, tmp)
 
