@@ -20,7 +20,7 @@ from nlp_calib.analysis.metrics import each_metrics, geometry, integrate, segmen
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
-from nlp_calib.core import poses3d
+from nlp_calib.core import memory, poses3d
 from nlp_calib.logs import Log
 from nlp_calib.models import SENSOR_PARAMS, header_parameters
 from nlp_calib.models.mount import MOUNT_ANGLES
@@ -46,7 +46,8 @@ from nlp_calib.results.series import (
 from nlp_calib.results.uncertainty import Uncertainty
 
 #: A figure of one parameter set on one log: full range and hold-out.
-#: Fits of this many windows let go of their evaluator's buffers while the refits run and after.
+#: Fits of this many windows let go of their evaluator's buffers after the solvers and again before
+#: the refits (each later use binds only what it evaluates).
 RELEASE_FROM = 100_000
 
 Scores = tuple[TrajectoryMetrics, TrajectoryMetrics | None]
@@ -132,6 +133,10 @@ def analyse_fit(
     may not have started); cross-validation and the direction check from the first converged one,
     with each held-out block scored by ``blocks``."""
     ev, data = fit.evaluator, fit.data
+    big = data.n_residuals >= RELEASE_FROM
+    if big:
+        ev.release()  # the solvers' buffers: each analysis binds again only what it evaluates
+        memory.give_back()
     uncertainty = {name: unc.estimate(ev, r.x, data, noise) for name, r in results.items()}
     finite = [r for r in results.values() if np.isfinite(r.cost)] or list(results.values())
     observability = observability_of(ev, finite[0].x, data.T_world_sensor)
@@ -144,7 +149,7 @@ def analyse_fit(
     span = (blocks.offset, blocks.offset + data.n_records)
     full = fit.canonical_params(converged[0].params)
     whole = ev.normal_equations(x) if data.n_residuals >= validation.DOWNDATE_FROM else None
-    if data.n_residuals >= RELEASE_FROM:
+    if big:
         ev.release()  # the refits bind evaluators of their own; a later use binds this one again
     crossval = validation.cross_validate(binder, data, span, x, k, fit.canonical_params, blocks, full, whole)
     inputs = np.concatenate([np.zeros((data.inputs.shape[0], span[0])), data.inputs], axis=1)
