@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -279,33 +280,11 @@ def scored(
 
 
 def trajectory_metrics(
-    fns: ProblemFunctions,
-    params: np.ndarray,
-    inputs: np.ndarray,
-    T_world_sensor: np.ndarray,
-    *,
-    start: int = 0,
-    stop: int | None = None,
-    rpe_window: int = 25,
-    bad_intervals: np.ndarray | None = None,
-    bad_records: np.ndarray | None = None,
+    fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, T_world_sensor: np.ndarray, **where: Any
 ) -> TrajectoryMetrics:
-    """Metrics of the tracks over records ``start:stop`` (interval ``k`` joins records k, k+1).
-
-    ``bad_intervals`` (per interval) and ``bad_records`` (per record) mark faults in the same
-    indexing as ``inputs`` and ``T_world_sensor``; they shape the fair figures only.
-    """
-    return each_metrics(
-        fns,
-        [params],
-        inputs,
-        T_world_sensor,
-        start=start,
-        stop=stop,
-        rpe_window=rpe_window,
-        bad_intervals=bad_intervals,
-        bad_records=bad_records,
-    )[0]
+    """Metrics of the tracks of ``params`` (``where``: the records and faults, as
+    :func:`each_metrics` takes them)."""
+    return each_metrics(fns, [params], inputs, T_world_sensor, **where)[0]
 
 
 def each_metrics(
@@ -320,8 +299,13 @@ def each_metrics(
     bad_intervals: np.ndarray | None = None,
     bad_records: np.ndarray | None = None,
 ) -> list[TrajectoryMetrics]:
-    """:func:`trajectory_metrics` of each parameter set, the reference's side computed once
-    (once for each set when the trajectory's scale is free)."""
+    """Metrics of the tracks of each parameter set over records ``start:stop`` (interval ``k``
+    joins records k, k+1), the reference's side computed once (once per set when the trajectory's
+    scale is free).
+
+    ``bad_intervals`` (per interval) and ``bad_records`` (per record) mark faults in the same
+    indexing as ``inputs`` and ``T_world_sensor``; they shape the fair figures only.
+    """
     stop = T_world_sensor.shape[0] if stop is None else stop
     if stop - start < 2:
         raise ValueError(f"need at least 2 records to score a trajectory, got {stop - start}")
