@@ -398,7 +398,10 @@ def reader(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
     env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
     path = tmp / "reader.txt"
     subprocess.run(
-        cli("simulate", "--records", str(records), "--out", str(path), "--force"), env=env, check=True
+        cli("simulate", "--records", str(records), "--out", str(path), "--force"),
+        env=env,
+        check=True,
+        capture_output=True,
     )
     kinds: dict[str, Any] = {"steering": "absolute", "traction_wheel": "counter"}
     ours = read_log(path, kinds)
@@ -673,7 +676,7 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
     if section == "simulate":
         return simulate_big(10_000 if quick else 1_000_000, 1 if quick else 3, tmp)
     if section == "reader":
-        return reader(10_000 if quick else 1_000_000, 2 if quick else 3, tmp)
+        return reader(10_000 if quick else 1_000_000, repeats, tmp)
     # Logs of 5000 records (3.3 minutes of driving): a robot's daily log is rarely shorter.
     return batch(4 if quick else 20, 300 if quick else 5000, 1 if quick else repeats, tmp)
 
