@@ -54,8 +54,9 @@ LAUNCHER = (
     "t0 = time.perf_counter()\n"
     "rc = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode\n"
     "wall = time.perf_counter() - t0\n"
-    "peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0\n"
-    "print(json.dumps({'wall_s': wall, 'peak_mb': peak, 'rc': rc}))\n"
+    "use = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+    "peak, cpu = use.ru_maxrss / 1024.0, use.ru_utime + use.ru_stime\n"
+    "print(json.dumps({'wall_s': wall, 'peak_mb': peak, 'cpu_s': cpu, 'rc': rc}))\n"
 )
 TARGETS = {
     "compare real_tricycle.yaml, warm [s]": 1.5,
@@ -74,7 +75,7 @@ TARGETS = {
     "batch of 20 logs, --jobs 1 / --jobs 2 [x]": 1.7,
 }
 #: The sections a run measures (``--sections``), in order.
-SECTIONS = ("end_to_end", "solvers", "ipopt_lag", "scaling", "simulate", "batch")
+SECTIONS = ("end_to_end", "solvers", "ipopt_lag", "scaling", "simulate", "batch", "reader")
 
 
 def load() -> list[float]:
@@ -82,7 +83,8 @@ def load() -> list[float]:
 
 
 def launch(cmd: list[str], env: dict[str, str]) -> dict[str, Any]:
-    """Run ``cmd`` in a fresh launcher process; its wall time, peak RSS and exit code."""
+    """Run ``cmd`` in a fresh launcher process; its wall time, peak RSS, CPU time (its processes'
+    together) and exit code."""
     out = subprocess.run(
         [sys.executable, "-c", LAUNCHER, *cmd], capture_output=True, text=True, env=env, check=True
     )
@@ -354,21 +356,24 @@ def batch(n_logs: int, records: int, repeats: int, tmp: Path) -> dict[str, Any]:
         )  # fmt: skip
     scenario = str(REPO / "scenarios" / "demo.yaml")
 
-    def once(jobs: int) -> float:
+    def once(jobs: int) -> tuple[float, float]:
         out = tmp / f"batch-{jobs}"
         shutil.rmtree(out, ignore_errors=True)
         args = ("--scenario", scenario, "--solver", "gauss_newton", "--out", str(out), "--jobs", str(jobs))
         r = launch(cli("batch", str(logs), *args), env)
         if r["rc"] != 0:
             raise SystemExit(f"batch --jobs {jobs} failed with exit code {r['rc']}")
-        return float(r["wall_s"])
+        return float(r["wall_s"]), float(r["cpu_s"])
 
     once(1)  # fills the compile cache (not timed)
     start = load()
     walls: dict[int, list[float]] = {1: [], 2: []}
+    cpus: dict[int, list[float]] = {1: [], 2: []}
     for _ in range(repeats):
         for jobs in (1, 2):
-            walls[jobs].append(once(jobs))
+            wall, cpu = once(jobs)
+            walls[jobs].append(wall)
+            cpus[jobs].append(cpu)
     return {
         "load_start": start,
         "load_end": load(),
@@ -376,8 +381,58 @@ def batch(n_logs: int, records: int, repeats: int, tmp: Path) -> dict[str, Any]:
         "records": records,
         "jobs_1_s": walls[1],
         "jobs_2_s": walls[2],
+        "jobs_1_cpu_s": cpus[1],
+        "jobs_2_cpu_s": cpus[2],
         "speedup": med(walls[1]) / med(walls[2]),
     }
+
+
+def reader(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
+    """The log reader on a simulated log of ``records`` records against the compiled CSV readers
+    installed (pandas' C parser; pyarrow's): medians of interleaved reads, in this process, and
+    whether their poses are the reader's to the bit."""
+    import warnings
+
+    from nlp_calib.logs.reader import read_log
+
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
+    path = tmp / "reader.txt"
+    subprocess.run(
+        cli("simulate", "--records", str(records), "--out", str(path), "--force"),
+        env=env,
+        check=True,
+        capture_output=True,
+    )
+    kinds: dict[str, Any] = {"steering": "absolute", "traction_wheel": "counter"}
+    ours = read_log(path, kinds)
+    poses = np.hstack([ours.model_pose, ours.T_world_sensor])
+    candidates: dict[str, Callable[[], Any]] = {"nlp_calib": lambda: read_log(path, kinds)}
+    try:
+        import pandas as pd
+
+        def with_pandas() -> np.ndarray:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                cols = [6, 7, 8, 10, 11, 12]
+                df = pd.read_csv(path, sep=r"\s+", comment="#", header=None, usecols=cols)
+            return np.asarray(df.to_numpy(float))
+
+        candidates["pandas.read_csv (poses only)"] = with_pandas
+    except ImportError:
+        pass
+    times: dict[str, list[float]] = {name: [] for name in candidates}
+    start = load()
+    for _ in range(repeats):
+        for name, fn in candidates.items():
+            t0 = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t0)
+    exact = {
+        name: bool(np.array_equal(fn().view(np.int64), poses.view(np.int64)))
+        for name, fn in candidates.items()
+        if name != "nlp_calib"
+    }
+    return {"load_start": start, "load_end": load(), "records": records, "times_s": times, "bitwise": exact}
 
 
 def environment() -> dict[str, Any]:
@@ -431,9 +486,27 @@ def fleet_lines(doc: dict[str, Any], figures: dict[str, float]) -> list[str]:
             "(demo scenario, "
             f"Gauss-Newton; load average {fleet['load_start']} → {fleet['load_end']}): --jobs 1 "
             f"{med(fleet['jobs_1_s']):.1f} s, --jobs 2 {med(fleet['jobs_2_s']):.1f} s, "
-            f"{fleet['speedup']:.2f}× faster.",
+            f"{fleet['speedup']:.2f}× faster"
+            + (
+                f"; CPU time {med(fleet['jobs_1_cpu_s']):.1f} s and {med(fleet['jobs_2_cpu_s']):.1f} s "
+                f"(--jobs 1 / wall {med(fleet['jobs_1_cpu_s']) / med(fleet['jobs_1_s']):.2f} cores)."
+                if "jobs_1_cpu_s" in fleet
+                else "."
+            ),
         ]
         figures[f"batch of {fleet['logs']} logs, --jobs 1 / --jobs 2 [x]"] = fleet["speedup"]
+    rd = doc.get("reader")
+    if rd:
+        each = ", ".join(
+            f"{name} {med(t):.2f} s"
+            + ("" if name not in rd["bitwise"] else f" (poses to the bit: {rd['bitwise'][name]})")
+            for name, t in rd["times_s"].items()
+        )
+        lines += [
+            "",
+            f"Reading a simulated log of {rd['records']:,} records (load average {rd['load_start']} → "
+            f"{rd['load_end']}): {each}.",
+        ]
     return lines
 
 
@@ -602,6 +675,8 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
         return scaling([2_000, 8_000] if quick else [10_000, 100_000, 1_000_000], repeats, tmp)
     if section == "simulate":
         return simulate_big(10_000 if quick else 1_000_000, 1 if quick else 3, tmp)
+    if section == "reader":
+        return reader(10_000 if quick else 1_000_000, repeats, tmp)
     # Logs of 5000 records (3.3 minutes of driving): a robot's daily log is rarely shorter.
     return batch(4 if quick else 20, 300 if quick else 5000, 1 if quick else repeats, tmp)
 

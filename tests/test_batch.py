@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 from conftest import REPO, SCENARIOS, write_sim
 
+from nlp_calib.core import threads
 from nlp_calib.core.errors import UsageError
 from nlp_calib.fleet import BatchOptions, BatchRow, Job, batch_jobs, run_job, run_jobs, write_summary
 from nlp_calib.fleet.jobs import expand, job_names
@@ -117,6 +118,23 @@ def test_a_worker_that_dies_costs_only_its_log(tmp_path: Path) -> None:
     assert sorted(rows) == [0, 1, 2, 3]
     assert [rows[i].verdict for i in range(4)] == ["good", "failed", "good", "good"]
     assert "worker process died" in rows[1].error
+
+
+def threads_seen(job: Job) -> BatchRow:
+    """A task that reports the refit threads and the BLAS threads its process allows."""
+    blas = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
+    return BatchRow(job.name, str(job.path), str(job.folder), detail=f"{threads.allowed(2)} {blas}")
+
+
+def test_workers_take_one_core_each(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two workers on two cores: each runs its refits one at a time and its libraries on one thread,
+    and this process's environment is as it was."""
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    jobs = [Job(name, tmp_path / f"{name}.txt", BatchOptions(tmp_path)) for name in "ab"]
+    rows: dict[int, BatchRow] = {}
+    run_jobs(jobs, 2, rows.__setitem__, task=threads_seen)
+    assert [rows[i].detail for i in range(2)] == ["1 1", "1 1"]
+    assert "OPENBLAS_NUM_THREADS" not in os.environ
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:

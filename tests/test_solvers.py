@@ -138,3 +138,16 @@ def test_ipopt_takes_steps_below_rounding_without_a_line_search(small_demo: Scen
     ip, gn = calib.solve("ipopt"), calib.solve("gauss_newton")
     assert ip.converged and gn.converged
     assert np.max(np.abs(ip.x - gn.x) / np.maximum(np.abs(gn.x), 1e-3)) < 1e-6
+
+
+def test_a_released_evaluator_binds_again_with_the_same_results(small_demo: Scenario) -> None:
+    """Letting go of the windows' buffers (a large fit's, while its refits run) changes nothing."""
+    cal = Calibration(small_demo)
+    ev, x = cal.evaluator, cal.x0
+    before = ev.normal_equations(x), ev.cost(x), ev.robust_terms(x)
+    ev.release()
+    assert ev.data.n_residuals == ev.n_residuals > 0
+    after = ev.normal_equations(x), ev.cost(x), ev.robust_terms(x)
+    assert np.array_equal(before[0].H, after[0].H) and before[0].cost == after[0].cost
+    assert before[1] == after[1]
+    assert all(np.array_equal(a, b) for a, b in zip(before[2], after[2]))

@@ -25,8 +25,9 @@ as angles.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -73,10 +74,15 @@ def steps(fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray) -> np.n
     )[0].T
 
 
+def scale_free(fns: ProblemFunctions) -> bool:
+    """Whether the trajectory's scale is a parameter (its poses are then in metres only by it)."""
+    return SCALE_PARAM in fns.names and SCALE_PARAM in fns.sensor.params
+
+
 def in_metres(fns: ProblemFunctions, params: np.ndarray, poses: np.ndarray) -> np.ndarray:
     """``poses`` (or motions) with their translations in metres: times the ``scale`` of
     ``params`` when the trajectory's scale is free (as they are otherwise)."""
-    if SCALE_PARAM not in fns.names or SCALE_PARAM not in fns.sensor.params:
+    if not scale_free(fns):
         return poses
     out = np.array(poses, dtype=float)
     out[:, :3] *= float(np.ravel(params)[fns.names.index(SCALE_PARAM)])
@@ -139,18 +145,40 @@ def distance_pairs(dist: np.ndarray, delta: float, tol: float) -> tuple[np.ndarr
     return i[keep], j[keep]
 
 
+#: Record pairs ``(i, j)`` of one part at a distance along the reference's path, with the
+#: reference's motion ``ref_i⁻¹·ref_j`` between them.
+Pairs = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def rpe_pairs(
+    T_ref: np.ndarray, parts: list[np.ndarray], deltas: Sequence[float], g: Geometry = PLANAR
+) -> dict[float, list[Pairs]]:
+    """For each of ``deltas`` (m), the pairs inside each part (an array of record indices; the path
+    runs through them in order) that the RPE over that distance compares."""
+    out: dict[float, list[Pairs]] = {d: [] for d in deltas}
+    for idx in parts:
+        dist = path_distance(T_ref[idx], g)
+        for delta in deltas:
+            i, j = distance_pairs(dist, delta, RPE_TOLERANCE * delta)
+            out[delta].append((idx[i], idx[j], g.between(T_ref[idx[i]], T_ref[idx[j]])))
+    return out
+
+
+def rpe_of(T_est: np.ndarray, pairs: list[Pairs], g: Geometry = PLANAR) -> ErrorStats:
+    """Translation error of the estimate's motions against the reference's over ``pairs``."""
+    errors = [
+        np.linalg.norm(g.between(ref, g.between(T_est[i], T_est[j]))[:, : g.dims], axis=1)
+        for i, j, ref in pairs
+    ]
+    return ErrorStats.of(np.concatenate(errors) if errors else np.zeros(0))
+
+
 def rpe_by_distance(
     T_est: np.ndarray, T_ref: np.ndarray, parts: list[np.ndarray], delta: float, g: Geometry = PLANAR
 ) -> ErrorStats:
     """Translation error over ``delta`` metres of the reference's path, pairs inside each part
     (an array of record indices; the path runs through them in order)."""
-    errors = []
-    for idx in parts:
-        i, j = distance_pairs(path_distance(T_ref[idx], g), delta, RPE_TOLERANCE * delta)
-        ref = g.between(T_ref[idx[i]], T_ref[idx[j]])
-        est = g.between(T_est[idx[i]], T_est[idx[j]])
-        errors.append(np.linalg.norm(g.between(ref, est)[:, : g.dims], axis=1))
-    return ErrorStats.of(np.concatenate(errors) if errors else np.zeros(0))
+    return rpe_of(T_est, rpe_pairs(T_ref, parts, (delta,), g)[delta], g)
 
 
 def aligned_errors(T_est: np.ndarray, T_ref: np.ndarray, g: Geometry = PLANAR) -> np.ndarray:
@@ -163,9 +191,105 @@ def aligned_errors(T_est: np.ndarray, T_ref: np.ndarray, g: Geometry = PLANAR) -
     return np.linalg.norm(T_est[:, :d] @ R.T + t - T_ref[:, :d], axis=1)
 
 
+@dataclass(frozen=True)
+class Reference:
+    """The reference's side of the figures over a stretch of records, shared by every parameter
+    set scored there (none when the trajectory's scale is free: its poses then depend on it):
+    its poses ``T`` (in metres), the records ``good`` to score, the ``window`` of the windowed RPE
+    with the record ``pair`` mask and the reference's motions ``rel`` over it, the fault-free
+    ``parts``, the records ``scored`` in them, each part's scored records, the RPE ``pairs`` over
+    each distance and the distance travelled."""
+
+    T: np.ndarray
+    good: np.ndarray
+    window: int
+    pair: np.ndarray
+    rel: np.ndarray
+    parts: list[tuple[int, int]]
+    scored: np.ndarray
+    scored_parts: list[np.ndarray]
+    pairs: dict[float, list[Pairs]]
+    distance_m: float
+
+
+def reference(
+    g: Geometry,
+    T_ref: np.ndarray,
+    rpe_window: int,
+    bad_intervals: np.ndarray | None,
+    bad_records: np.ndarray | None,
+) -> Reference:
+    """The reference's side of the figures over all of ``T_ref`` (masks in its indexing)."""
+    n = T_ref.shape[0]
+    bad_i = None if bad_intervals is None else np.asarray(bad_intervals, dtype=bool)
+    good = np.ones(n, dtype=bool)
+    if bad_records is not None:
+        good &= ~np.asarray(bad_records, dtype=bool)
+    W = min(rpe_window, n - 1)
+    pair = good[:-W] & good[W:]
+    parts = segments(n, bad_i)
+    scored = np.zeros(n, dtype=bool)
+    for a, b in parts:
+        scored[a:b] = True
+    scored &= good
+    # A bad tracker pose is left out of the path too, as it is of the exported files.
+    scored_parts = [a + np.flatnonzero(good[a:b]) for a, b in parts]
+    return Reference(
+        T=T_ref,
+        good=good,
+        window=int(W),
+        pair=pair,
+        rel=g.between(T_ref[:-W][pair], T_ref[W:][pair]),
+        parts=parts,
+        scored=scored,
+        scored_parts=scored_parts,
+        pairs=rpe_pairs(T_ref, scored_parts, RPE_DISTANCES, g),
+        distance_m=float(path_distance(T_ref[good], g)[-1]) if good.any() else 0.0,
+    )
+
+
+def scored(
+    fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, ref: Reference
+) -> TrajectoryMetrics:
+    """The figures of ``params`` against ``ref`` (``inputs``: the intervals between its records)."""
+    g = geometry(fns)
+    T = ref.T
+    step = in_metres(fns, params, steps(fns, params, inputs))
+    track = g.accumulate(T[0], step)
+    # A bad tracker pose is the tracker's error, not the calibration's: left out of every figure.
+    err = np.linalg.norm(track[ref.good, : g.dims] - T[ref.good, : g.dims], axis=1)
+    W, pair = ref.window, ref.pair
+    rel = g.between(ref.rel, g.between(track[:-W][pair], track[W:][pair]))
+    seg_track = restarted(step, T, ref.parts, g)
+    seg_err = np.linalg.norm(seg_track[ref.scored, : g.dims] - T[ref.scored, : g.dims], axis=1)
+    aligned = [aligned_errors(seg_track[idx], T[idx], g) for idx in ref.scored_parts]
+    rpe = {d: rpe_of(seg_track, ref.pairs[d], g) for d in RPE_DISTANCES}
+    return TrajectoryMetrics(
+        ate_final=float(err[-1]) if err.size else float("nan"),
+        rpe_trans=ErrorStats.of(np.linalg.norm(rel[:, : g.dims], axis=1)).mean,
+        rpe_rot=ErrorStats.of(g.angle(rel)).mean,
+        rpe_window=W,
+        records=int(T.shape[0]),
+        ate=ErrorStats.of(err),
+        segment_ate=ErrorStats.of(seg_err),
+        segment_ate_aligned=ErrorStats.of(np.concatenate(aligned) if aligned else np.zeros(0)),
+        rpe_distance=rpe,
+        segments=len(ref.parts),
+        distance_m=ref.distance_m,
+    )
+
+
 def trajectory_metrics(
+    fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, T_world_sensor: np.ndarray, **where: Any
+) -> TrajectoryMetrics:
+    """Metrics of the tracks of ``params`` (``where``: the records and faults, as
+    :func:`each_metrics` takes them)."""
+    return each_metrics(fns, [params], inputs, T_world_sensor, **where)[0]
+
+
+def each_metrics(
     fns: ProblemFunctions,
-    params: np.ndarray,
+    param_sets: Sequence[np.ndarray],
     inputs: np.ndarray,
     T_world_sensor: np.ndarray,
     *,
@@ -174,8 +298,10 @@ def trajectory_metrics(
     rpe_window: int = 25,
     bad_intervals: np.ndarray | None = None,
     bad_records: np.ndarray | None = None,
-) -> TrajectoryMetrics:
-    """Metrics of the tracks over records ``start:stop`` (interval ``k`` joins records k, k+1).
+) -> list[TrajectoryMetrics]:
+    """Metrics of the tracks of each parameter set over records ``start:stop`` (interval ``k``
+    joins records k, k+1), the reference's side computed once (once per set when the trajectory's
+    scale is free).
 
     ``bad_intervals`` (per interval) and ``bad_records`` (per record) mark faults in the same
     indexing as ``inputs`` and ``T_world_sensor``; they shape the fair figures only.
@@ -184,41 +310,14 @@ def trajectory_metrics(
     if stop - start < 2:
         raise ValueError(f"need at least 2 records to score a trajectory, got {stop - start}")
     g = geometry(fns)
-    # A trajectory known up to scale is scored in metres, by each parameter set's own scale.
-    ref = in_metres(fns, params, np.asarray(T_world_sensor[start:stop], dtype=float))
-    step = in_metres(fns, params, steps(fns, params, inputs[:, start : stop - 1]))
-    track = g.accumulate(ref[0], step)
-    bad_i = None if bad_intervals is None else np.asarray(bad_intervals[start : stop - 1], dtype=bool)
-    good = np.ones(stop - start, dtype=bool)
-    if bad_records is not None:
-        good &= ~np.asarray(bad_records[start:stop], dtype=bool)
-    # A bad tracker pose is the tracker's error, not the calibration's: left out of every figure.
-    err = np.linalg.norm(track[good, : g.dims] - ref[good, : g.dims], axis=1)
-    W = min(rpe_window, stop - start - 1)
-    pair = good[:-W] & good[W:]
-    rel = g.between(g.between(ref[:-W][pair], ref[W:][pair]), g.between(track[:-W][pair], track[W:][pair]))
-    parts = segments(stop - start, bad_i)
-    seg_track = restarted(step, ref, parts, g)
-    scored = np.zeros(stop - start, dtype=bool)
-    for a, b in parts:
-        scored[a:b] = True
-    scored &= good
-    seg_err = np.linalg.norm(seg_track[scored, : g.dims] - ref[scored, : g.dims], axis=1)
-    # A bad tracker pose is left out of the path too, as it is of the exported files.
-    scored_parts = [a + np.flatnonzero(good[a:b]) for a, b in parts]
-    aligned = [aligned_errors(seg_track[idx], ref[idx], g) for idx in scored_parts]
-    rpe = {d: rpe_by_distance(seg_track, ref, scored_parts, d, g) for d in RPE_DISTANCES}
-    ate = ErrorStats.of(err)
-    return TrajectoryMetrics(
-        ate_final=float(err[-1]) if err.size else float("nan"),
-        rpe_trans=ErrorStats.of(np.linalg.norm(rel[:, : g.dims], axis=1)).mean,
-        rpe_rot=ErrorStats.of(g.angle(rel)).mean,
-        rpe_window=int(W),
-        records=int(stop - start),
-        ate=ate,
-        segment_ate=ErrorStats.of(seg_err),
-        segment_ate_aligned=ErrorStats.of(np.concatenate(aligned) if aligned else np.zeros(0)),
-        rpe_distance=rpe,
-        segments=len(parts),
-        distance_m=float(path_distance(ref[good], g)[-1]) if good.any() else 0.0,
-    )
+    bad_i = None if bad_intervals is None else bad_intervals[start : stop - 1]
+    bad_r = None if bad_records is None else bad_records[start:stop]
+    T = np.asarray(T_world_sensor[start:stop], dtype=float)
+    out: list[TrajectoryMetrics] = []
+    ref: Reference | None = None
+    for params in param_sets:
+        if ref is None or scale_free(fns):
+            # A trajectory known up to scale is scored in metres, by each parameter set's own scale.
+            ref = reference(g, in_metres(fns, params, T), rpe_window, bad_i, bad_r)
+        out.append(scored(fns, params, inputs[:, start : stop - 1], ref))
+    return out

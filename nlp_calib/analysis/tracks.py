@@ -17,7 +17,8 @@ from nlp_calib.analysis.metrics import (
     aligned_errors,
     geometry,
     restarted,
-    rpe_by_distance,
+    rpe_of,
+    rpe_pairs,
     steps,
 )
 from nlp_calib.problem import ProblemFunctions
@@ -53,6 +54,7 @@ def segment_figures(
         idx = p + np.flatnonzero(good[p:q])
         ate = ErrorStats.of(np.linalg.norm(track[idx, : g.dims] - T_ref[idx, : g.dims], axis=1))
         aligned = ErrorStats.of(aligned_errors(track[idx], T_ref[idx], g))
-        rpe = tuple(rpe_by_distance(track, T_ref, [idx], d, g) for d in RPE_DISTANCES)
+        pairs = rpe_pairs(T_ref, [idx], RPE_DISTANCES, g)
+        rpe = tuple(rpe_of(track, pairs[d], g) for d in RPE_DISTANCES)
         out.append(SegmentFigures(solver, k, len(idx), ate, aligned, rpe))
     return out

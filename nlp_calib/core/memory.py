@@ -54,6 +54,18 @@ def fit_to_limit() -> None:
         ctypes.CDLL(None).mallopt(m_arena_max, 1)
 
 
+def give_back() -> None:
+    """Return the heap's free pages to the system (glibc's ``malloc_trim``; elsewhere nothing).
+
+    Buffers freed by other threads (the refits') go back to those threads' malloc arenas, and
+    freed blocks below glibc's grown mmap threshold to the heap: the process would keep their
+    pages resident to its end."""
+    with contextlib.suppress(Exception):  # not glibc, or no ctypes: nothing to give back
+        import ctypes
+
+        ctypes.CDLL(None).malloc_trim(0)
+
+
 def address_space_used() -> int | None:
     """Bytes of address space the process holds (Linux), or None."""
     with contextlib.suppress(OSError, ValueError, IndexError), open("/proc/self/statm", "rb") as fh:

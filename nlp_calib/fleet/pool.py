@@ -11,6 +11,7 @@ of its own, and a log that breaks that pool too is reported as failed.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import signal
 import time
@@ -19,7 +20,7 @@ from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from types import FrameType
 
-from nlp_calib.core import interrupts
+from nlp_calib.core import interrupts, threads
 from nlp_calib.fleet.jobs import Job
 from nlp_calib.fleet.task import run_job
 from nlp_calib.results.batch import BatchRow
@@ -39,9 +40,11 @@ def _quit(signum: int, frame: FrameType | None) -> None:
     raise SystemExit(128 + signum)  # an idle worker holds nothing to clean up
 
 
-def _init_worker() -> None:
+def _init_worker(shared: bool) -> None:
     for s in interrupts.SIGNALS:
         signal.signal(s, _quit)
+    if shared:  # the other workers have the other cores: this one's refits run one at a time
+        threads.one_core()
 
 
 def _work(task: Task, job: Job) -> BatchRow:
@@ -72,10 +75,19 @@ def _stop(pool: ProcessPoolExecutor) -> None:
 
 
 def _pass(jobs: Sequence[Job], indices: Sequence[int], workers: int, done: Done, task: Task) -> list[int]:
-    """``jobs[indices]`` on a pool of ``workers``; returns those left unfinished by a worker's death."""
-    pool = ProcessPoolExecutor(
-        min(workers, len(indices)), mp_context=multiprocessing.get_context("spawn"), initializer=_init_worker
-    )
+    """``jobs[indices]`` on a pool of ``workers``; returns those left unfinished by a worker's death.
+    Several workers each take one core: one thread per native library, one refit at a time."""
+    n = min(workers, len(indices))
+    spawn = multiprocessing.get_context("spawn")
+    with threads.native_one_thread() if n > 1 else contextlib.nullcontext():
+        pool = ProcessPoolExecutor(n, mp_context=spawn, initializer=_init_worker, initargs=(n > 1,))
+        return _drain(pool, jobs, indices, done, task)
+
+
+def _drain(
+    pool: ProcessPoolExecutor, jobs: Sequence[Job], indices: Sequence[int], done: Done, task: Task
+) -> list[int]:
+    """``jobs[indices]`` on ``pool``, which it shuts down; returns those a worker's death left."""
     broken: list[int] = []
     finished = False
     try:

@@ -10,17 +10,17 @@ covariance. The outputs only format what this stage computed.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
-from nlp_calib.analysis.metrics import geometry, integrate, segments, trajectory_metrics
+from nlp_calib.analysis.metrics import each_metrics, geometry, integrate, segments
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
-from nlp_calib.core import poses3d
+from nlp_calib.core import memory, poses3d
 from nlp_calib.logs import Log
 from nlp_calib.models import SENSOR_PARAMS, header_parameters
 from nlp_calib.models.mount import MOUNT_ANGLES
@@ -46,6 +46,10 @@ from nlp_calib.results.series import (
 from nlp_calib.results.uncertainty import Uncertainty
 
 #: A figure of one parameter set on one log: full range and hold-out.
+#: Fits of this many windows let go of their evaluator's buffers after the solvers and again before
+#: the refits (each later use binds only what it evaluates).
+RELEASE_FROM = 100_000
+
 Scores = tuple[TrajectoryMetrics, TrajectoryMetrics | None]
 
 
@@ -86,9 +90,15 @@ class Scorer:
 
     def __call__(self, params: np.ndarray, a: int | None = None, b: int | None = None) -> TrajectoryMetrics:
         """The figures of ``params`` over records ``[a, b)`` (all of them by default)."""
-        return trajectory_metrics(
+        return self.each([params], a, b)[0]
+
+    def each(
+        self, param_sets: Sequence[np.ndarray], a: int | None = None, b: int | None = None
+    ) -> list[TrajectoryMetrics]:
+        """The figures of each parameter set over records ``[a, b)``, the reference's side once."""
+        return each_metrics(
             self.fns,
-            params,
+            param_sets,
             self.inputs,
             self.T_world_sensor,
             start=0 if a is None else a - self.offset,
@@ -107,12 +117,13 @@ def log_scorer(fns: ProblemFunctions, windows: LogWindows, steering_sample: str,
     return Scorer(fns, inputs, poses, bad_i, bad_r, windows.used[0], rpe_window)
 
 
-def scores(scorer: Scorer, windows: LogWindows, params: np.ndarray) -> Scores:
-    """Full-range and hold-out figures of ``params`` on one log."""
-    holdout = None
+def scores(scorer: Scorer, windows: LogWindows, param_sets: Sequence[np.ndarray]) -> list[Scores]:
+    """Full-range and hold-out figures of each parameter set on one log."""
+    full = scorer.each(param_sets)
+    holdout: list[TrajectoryMetrics | None] = [None] * len(full)
     if windows.fit[1] < windows.used[1] - 1:
-        holdout = scorer(params, windows.fit[1])
-    return scorer(params), holdout
+        holdout = list(scorer.each(param_sets, windows.fit[1]))
+    return list(zip(full, holdout))
 
 
 def analyse_fit(
@@ -122,6 +133,10 @@ def analyse_fit(
     may not have started); cross-validation and the direction check from the first converged one,
     with each held-out block scored by ``blocks``."""
     ev, data = fit.evaluator, fit.data
+    big = data.n_residuals >= RELEASE_FROM
+    if big:
+        ev.release()  # the solvers' buffers: each analysis binds again only what it evaluates
+        memory.give_back()
     uncertainty = {name: unc.estimate(ev, r.x, data, noise) for name, r in results.items()}
     finite = [r for r in results.values() if np.isfinite(r.cost)] or list(results.values())
     observability = observability_of(ev, finite[0].x, data.T_world_sensor)
@@ -134,6 +149,8 @@ def analyse_fit(
     span = (blocks.offset, blocks.offset + data.n_records)
     full = fit.canonical_params(converged[0].params)
     whole = ev.normal_equations(x) if data.n_residuals >= validation.DOWNDATE_FROM else None
+    if big:
+        ev.release()  # the refits bind evaluators of their own; a later use binds this one again
     crossval = validation.cross_validate(binder, data, span, x, k, fit.canonical_params, blocks, full, whole)
     inputs = np.concatenate([np.zeros((data.inputs.shape[0], span[0])), data.inputs], axis=1)
     model = fit.fns.model
@@ -341,9 +358,11 @@ def analyse_log(
     """One log's figures with the fit's estimates (and its series and odometry when wanted)."""
     windows, scorer = view.windows, view.scorer
     p0 = np.array([fit.problem.start.initial[n] for n in fit.fns.names])
+    # The initial guess scored last: its figures are the baseline.
+    *solved, baseline = scores(scorer, windows, [*(r.params for r in results.values()), p0])
     figures = LogAnalysis(
-        scores={name: scores(scorer, windows, r.params) for name, r in results.items()},
-        baseline=scores(scorer, windows, p0),
+        scores=dict(zip(results, solved)),
+        baseline=baseline,
         series=None,
         odometry=None,
     )

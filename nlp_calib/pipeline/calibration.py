@@ -226,7 +226,7 @@ class Calibration:
         scorer = log_scorer(
             self.fns, windows, sc.objective.residual.steering_sample, sc.validation.rpe_window
         )
-        return scores(scorer, windows, params)
+        return scores(scorer, windows, [params])[0]
 
     def run(self, solvers: Sequence[str] | None = None, wanted: Wanted | None = None) -> CalibrationRun:
         """Fit with each solver (the scenario's by default), analyse and assemble the result."""

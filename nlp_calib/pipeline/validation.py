@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
@@ -19,6 +18,7 @@ import numpy as np
 
 from nlp_calib.analysis.crossval import blocks, combine, jackknife_std
 from nlp_calib.analysis.direction import compare
+from nlp_calib.core import memory, threads
 from nlp_calib.pipeline.build import Binder, no_priors
 from nlp_calib.problem import ResidualData
 from nlp_calib.results.checks import CrossValidation, DirectionCheck, Fold
@@ -84,15 +84,18 @@ def _fit(
 def on_threads(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
     """``fn`` of each item, in order, on up to :data:`MAX_THREADS` threads: the refits are
     independent and CasADi lets go of the interpreter lock while it evaluates, so they overlap."""
-    workers = min(len(items), os.cpu_count() or 1, MAX_THREADS)
+    workers = threads.allowed(min(len(items), MAX_THREADS))
     if workers <= 1:
-        return [fn(item) for item in items]
-    pool = ThreadPoolExecutor(workers, thread_name_prefix="refit")
-    try:
-        return list(pool.map(fn, items))
-    finally:
-        # Interrupted: refits not yet started are dropped, the running ones end on their own.
-        pool.shutdown(wait=False, cancel_futures=True)
+        out = [fn(item) for item in items]
+    else:
+        pool = ThreadPoolExecutor(workers, thread_name_prefix="refit")
+        try:
+            out = list(pool.map(fn, items))
+        finally:
+            # Interrupted: refits not yet started are dropped, the running ones end on their own.
+            pool.shutdown(wait=False, cancel_futures=True)
+    memory.give_back()  # the refits' evaluators' buffers (hundreds of MB on 10^6 records)
+    return out
 
 
 def _part_fold(

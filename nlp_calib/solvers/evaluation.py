@@ -181,20 +181,36 @@ class ProblemEvaluator:
     def bind(self, data: ResidualData) -> None:
         """Evaluate on the windows of ``data`` from now on."""
         n_padded = self.backend.padded(data.n_residuals)
-        self._on = _Windows(
+        self._data = data
+        self._windows: _Windows | None = _Windows(
             data=data,
             n_padded=n_padded,
             window_data=pad_columns(data.data(), n_padded),
             motion=WindowMotion(self.fns, self.backend, data, n_padded),
         )
 
+    def release(self) -> None:
+        """Let go of what is bound to the windows (their padded data, the prefix scans' and the
+        mapped Functions' buffers: hundreds of MB on 10^6 windows) until the next evaluation, which
+        binds them again (with the same results)."""
+        if self._windows is not None:
+            self._data = self._windows.data
+        self._windows = None
+
+    @property
+    def _on(self) -> _Windows:
+        if self._windows is None:
+            self.bind(self._data)
+        assert self._windows is not None
+        return self._windows
+
     @property
     def data(self) -> ResidualData:
-        return self._on.data
+        return self._data if self._windows is None else self._windows.data
 
     @property
     def n_residuals(self) -> int:
-        return self._on.data.n_residuals
+        return self.data.n_residuals
 
     @property
     def motion(self) -> WindowMotion:

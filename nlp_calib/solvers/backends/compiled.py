@@ -41,7 +41,7 @@ from nlp_calib.codegen.compiler import (
     stop_compilers,
     usable_cache_dir,
 )
-from nlp_calib.core import interrupts
+from nlp_calib.core import interrupts, threads
 from nlp_calib.core.errors import CodegenError, NlpCalibWarning
 from nlp_calib.solvers.backends.base import Backend, BackendOptions, Request, scan_chunk
 
@@ -239,7 +239,7 @@ def _pool() -> _Compilers:
     """The compiler threads every backend of the process shares."""
     global _POOL
     if _POOL is None:
-        _POOL = _Compilers(os.cpu_count() or 1)
+        _POOL = _Compilers(threads.allowed(os.cpu_count() or 1))
     return _POOL
 
 

@@ -1,0 +1,47 @@
+"""How many threads this process's own work may run at once: refits and compilers.
+
+By default what each asks for, up to the machine's cores. A batch's worker process takes one core
+(:func:`one_core`): its log's refits and compiles then run one at a time, so that the workers, not
+one log's threads, share the cores (two workers on two cores, not two and a half). These threads
+only schedule independent work: the results are the same. A scenario's ``compute.threads`` (the
+chunk maps') is left as asked: it shapes how sums are taken.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Iterator
+
+#: Environment variables that fix a native library's threads when it loads (OpenBLAS, MKL, OpenMP):
+#: a worker process gets them before it imports numpy.
+NATIVE_THREADS = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS")
+
+_cores: int | None = None
+
+
+def one_core() -> None:
+    """This process's work runs on one thread at a time from now on."""
+    global _cores
+    _cores = 1
+
+
+def allowed(wanted: int) -> int:
+    """The threads that work asking for ``wanted`` may run: at most the cores, and one on one core."""
+    return max(1, min(wanted, os.cpu_count() or 1, _cores or wanted))
+
+
+@contextlib.contextmanager
+def native_one_thread() -> Iterator[None]:
+    """Processes started inside start with one thread per native library (set in this process's
+    environment, which they inherit, and restored on leaving)."""
+    saved = {k: os.environ.get(k) for k in NATIVE_THREADS}
+    os.environ.update(dict.fromkeys(NATIVE_THREADS, "1"))
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
