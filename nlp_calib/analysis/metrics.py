@@ -173,14 +173,6 @@ def rpe_of(T_est: np.ndarray, pairs: list[Pairs], g: Geometry = PLANAR) -> Error
     return ErrorStats.of(np.concatenate(errors) if errors else np.zeros(0))
 
 
-def rpe_by_distance(
-    T_est: np.ndarray, T_ref: np.ndarray, parts: list[np.ndarray], delta: float, g: Geometry = PLANAR
-) -> ErrorStats:
-    """Translation error over ``delta`` metres of the reference's path, pairs inside each part
-    (an array of record indices; the path runs through them in order)."""
-    return rpe_of(T_est, rpe_pairs(T_ref, parts, (delta,), g)[delta], g)
-
-
 def aligned_errors(T_est: np.ndarray, T_ref: np.ndarray, g: Geometry = PLANAR) -> np.ndarray:
     """Position errors after the best rigid alignment (SE(2), or SE(3)) of the estimate's
     positions to the reference."""

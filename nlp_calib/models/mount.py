@@ -14,6 +14,10 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Literal, Protocol
 
+import numpy as np
+
+from nlp_calib.core import poses3d
+
 
 class _Units(Protocol):
     """What :func:`length_params` reads of a model (no import of the model protocol: base imports us)."""
@@ -69,3 +73,8 @@ def length_params(model: _Units) -> tuple[str, ...]:
     """The model's kinematic parameters that are lengths (their unit starts with ``m``): with the
     trajectory's scale free, all of them scale with it, so one must be known."""
     return tuple(n for n in model.kinematic_params if model.units[n].split()[0] == "m")
+
+
+def mount_rotation(params: Mapping[str, float]) -> np.ndarray:
+    """``R = Rz(yaw)·Ry(pitch)·Rx(roll)`` of a 3-D mount given by its named angles."""
+    return poses3d.rpy_to_matrix(np.array([params[n] for n in MOUNT_ANGLES]))

@@ -23,7 +23,7 @@ from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
 from nlp_calib.core import memory, poses3d
 from nlp_calib.logs import Log
 from nlp_calib.models import SENSOR_PARAMS, header_parameters
-from nlp_calib.models.mount import MOUNT_ANGLES
+from nlp_calib.models.mount import mount_rotation
 from nlp_calib.pipeline import validation
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog
@@ -45,11 +45,11 @@ from nlp_calib.results.series import (
 )
 from nlp_calib.results.uncertainty import Uncertainty
 
-#: A figure of one parameter set on one log: full range and hold-out.
 #: Fits of this many windows let go of their evaluator's buffers after the solvers and again before
 #: the refits (each later use binds only what it evaluates).
 RELEASE_FROM = 100_000
 
+#: A figure of one parameter set on one log: full range and hold-out.
 Scores = tuple[TrajectoryMetrics, TrajectoryMetrics | None]
 
 
@@ -269,7 +269,7 @@ def _level(fit: Fit, results: Mapping[str, SolverResult], ref: np.ndarray) -> np
     names = fit.fns.names
     done = [r.params for r in results.values() if r.converged]
     params = done[0] if done else np.array([fit.problem.start.initial[n] for n in names])
-    R_X = poses3d.rpy_to_matrix(np.array([params[names.index(n)] for n in MOUNT_ANGLES]))
+    R_X = mount_rotation(dict(zip(names, params)))
     return np.asarray(R_X @ poses3d.quat_to_matrix(ref[0, 3:7]).T)
 
 

@@ -13,12 +13,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from nlp_calib.analysis import uncertainty
-from nlp_calib.core import poses3d
 from nlp_calib.core.errors import ScenarioError
 from nlp_calib.logs import Log
 from nlp_calib.models import SENSOR_PARAMS, KinematicModel, header_parameters
 from nlp_calib.models.camera_start import FIT_REASONS, CameraStart, Selection
-from nlp_calib.models.mount import MOUNT_ANGLES, SCALE_PARAM
+from nlp_calib.models.mount import SCALE_PARAM, mount_rotation
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import (
@@ -161,7 +160,7 @@ def starting_point(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, st
 def given_mount(initial: Mapping[str, float]) -> CameraStart:
     """A given 3-D mount as a start: its floor normal in the camera frame is the third row of its
     rotation (no windows were selected)."""
-    R = poses3d.rpy_to_matrix(np.array([initial[n] for n in MOUNT_ANGLES]))
+    R = mount_rotation(initial)
     return CameraStart(dict(initial), R[2], Selection(np.zeros(0, dtype=np.int64)))
 
 

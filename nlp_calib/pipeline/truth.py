@@ -50,12 +50,11 @@ def against_truth(
     solver = run.chosen_solver()
     if solver is None:
         return None
-    beside = [p for p in (Path(run.log.path), *files) if truth_path(p).is_file()]
-    found = read_truth(beside[0]) if beside else None
-    if found is None:
+    path = next((p for p in (Path(run.log.path), *files) if truth_path(p).is_file()), None)
+    found = read_truth(path) if path is not None else None
+    if path is None or found is None:
         return None
     truth = convert(found)
-    path = beside[0]
     result = run.reports[solver].result
     std = run.std(solver)
     true = np.array([truth.get(n, np.nan) for n in result.names])

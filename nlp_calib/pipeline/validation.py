@@ -59,13 +59,14 @@ def _fit(
     """Full parameters, convergence and window count of a refit of ``data`` without the windows
     that cross a ``bad`` interval (a mask over the whole log's intervals). ``whole``: the normal
     equations of all of ``data`` at ``x`` (the refit's priors included), downdated for the first
-    step by those of the windows left out instead of evaluating the windows kept."""
+    step by those of the windows left out instead of evaluating the windows kept (given by the
+    callers from :data:`DOWNDATE_FROM` windows on)."""
     crossing = data.interval_counts(bad[fit[0] : fit[1] - 1]) > 0
     kept = data.select(~crossing)
     if kept.n_residuals < binder.fns.n_free:
         return np.full(len(binder.fns.names), np.nan), False, 0
     ev = binder.evaluate(kept)
-    if whole is not None and data.n_residuals >= DOWNDATE_FROM:
+    if whole is not None:
         ne = whole
         if crossing.any():
             data_only = dataclasses.replace(binder, priors=no_priors(binder.fns.n_free))
@@ -75,9 +76,9 @@ def _fit(
     # the estimate by less than REFIT_SIGMAS of its σ (a step or two), not to rounding; that last
     # step is taken too (the solver's last normal equations: no evaluation).
     _, x_k, converged = binder.fit(ev, x, REFIT_SIGMAS**2 / kept.n_residuals)
-    if converged:
-        ne = ev.normal_equations(x_k)
-        x_k = ev.boxplus(x_k, np.linalg.solve(ne.H, -ne.g))
+    step = ev.normal_equations(x_k).step() if converged else None
+    if step is not None:
+        x_k = ev.boxplus(x_k, step)
     return ev.params(x_k), converged, kept.n_residuals
 
 

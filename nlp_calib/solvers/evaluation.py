@@ -78,6 +78,13 @@ class NormalEquations:
         except np.linalg.LinAlgError:
             return float("inf")
 
+    def step(self) -> np.ndarray | None:
+        """The undamped Gauss-Newton step ``-H⁻¹g`` (manifold); None when ``H`` is singular."""
+        try:
+            return np.linalg.solve(self.H, -self.g)
+        except np.linalg.LinAlgError:
+            return None
+
 
 @dataclass(frozen=True)
 class Priors:
@@ -140,16 +147,22 @@ _PRIORITY = ("normal_equations", "cost", "cost_derivatives", "robust_terms", "se
 
 @dataclass
 class _Windows:
-    """What an evaluator holds per set of windows: rebuilt by :meth:`ProblemEvaluator.bind`."""
+    """The buffers an evaluator binds to its windows: built on first use after
+    :meth:`ProblemEvaluator.bind` or :meth:`ProblemEvaluator.release`."""
 
-    data: ResidualData
     n_padded: int
     window_data: np.ndarray
     motion: WindowMotion
     bound: dict[str, BlockMap] = field(default_factory=dict)
-    # The last point's normal equations and exact derivatives, keyed by the point's bytes.
-    last: tuple[bytes, NormalEquations] | None = None
-    last_derivatives: tuple[bytes, tuple[float, np.ndarray, np.ndarray]] | None = None
+
+
+@dataclass
+class _Last:
+    """The last point's normal equations and exact derivatives, keyed by the point's bytes: kept
+    when the buffers are released, dropped when the windows or their inputs change."""
+
+    normal_equations: tuple[bytes, NormalEquations] | None = None
+    derivatives: tuple[bytes, tuple[float, np.ndarray, np.ndarray]] | None = None
 
 
 class ProblemEvaluator:
@@ -180,33 +193,31 @@ class ProblemEvaluator:
 
     def bind(self, data: ResidualData) -> None:
         """Evaluate on the windows of ``data`` from now on."""
-        n_padded = self.backend.padded(data.n_residuals)
         self._data = data
-        self._windows: _Windows | None = _Windows(
-            data=data,
-            n_padded=n_padded,
-            window_data=pad_columns(data.data(), n_padded),
-            motion=WindowMotion(self.fns, self.backend, data, n_padded),
-        )
+        self._windows: _Windows | None = None
+        self._last = _Last()
 
     def release(self) -> None:
         """Let go of what is bound to the windows (their padded data, the prefix scans' and the
         mapped Functions' buffers: hundreds of MB on 10^6 windows) until the next evaluation, which
         binds them again (with the same results)."""
-        if self._windows is not None:
-            self._data = self._windows.data
         self._windows = None
 
     @property
     def _on(self) -> _Windows:
         if self._windows is None:
-            self.bind(self._data)
-        assert self._windows is not None
+            data = self._data
+            n_padded = self.backend.padded(data.n_residuals)
+            self._windows = _Windows(
+                n_padded=n_padded,
+                window_data=pad_columns(data.data(), n_padded),
+                motion=WindowMotion(self.fns, self.backend, data, n_padded),
+            )
         return self._windows
 
     @property
     def data(self) -> ResidualData:
-        return self._data if self._windows is None else self._windows.data
+        return self._data
 
     @property
     def n_residuals(self) -> int:
@@ -246,27 +257,29 @@ class ProblemEvaluator:
 
     def set_inputs(self, inputs: np.ndarray) -> None:
         """Re-evaluate the same windows on other interval inputs (nothing is rebuilt)."""
-        self._on.data = self._on.data.with_inputs(inputs)
-        self.motion.set_inputs(inputs)
-        self._on.last = self._on.last_derivatives = None
+        self._data = self._data.with_inputs(inputs)
+        if self._windows is not None:
+            self._windows.motion.set_inputs(inputs)
+        self._last = _Last()
 
     def normal_equations(self, x: np.ndarray) -> NormalEquations:
         key = np.asarray(x, dtype=float).tobytes()
-        if self._on.last is not None and self._on.last[0] == key:
-            return self._on.last[1]
+        last = self._last.normal_equations
+        if last is not None and last[0] == key:
+            return last[1]
         h_upper, g, cost, chi2, inliers = self._call("normal_equations", x)
         H, cost_f = unpack_upper(h_upper, self.fns.n_free), float(cost[0])
         if self.priors.active:
             Hp, gp, cp, _, _ = self._prior(x=x)
             H, g, cost_f = H + Hp, g + gp, cost_f + float(cp[0])
         ne = NormalEquations(H=H, g=g, cost=cost_f, chi2=float(chi2[0]), inliers=round(float(inliers[0])))
-        self._on.last = (key, ne)
+        self._last.normal_equations = (key, ne)
         return ne
 
     def remember(self, x: np.ndarray, ne: NormalEquations) -> None:
         """Take ``ne`` as the normal equations at ``x`` without evaluating them (known otherwise:
         e.g. a larger set of windows' less those of the windows left out)."""
-        self._on.last = (np.asarray(x, dtype=float).tobytes(), ne)
+        self._last.normal_equations = (np.asarray(x, dtype=float).tobytes(), ne)
 
     def cost(self, x: np.ndarray) -> float:
         (cost,) = self._call("cost", x)
@@ -278,14 +291,15 @@ class ProblemEvaluator:
     def cost_derivatives(self, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """The objective, its gradient and its exact Hessian ``(n, n)`` in plain coordinates."""
         key = np.asarray(x, dtype=float).tobytes()
-        if self._on.last_derivatives is not None and self._on.last_derivatives[0] == key:
-            return self._on.last_derivatives[1]
+        last = self._last.derivatives
+        if last is not None and last[0] == key:
+            return last[1]
         cost, grad, h_upper = self._call("cost_derivatives", x)
         out = (float(cost[0]), grad.ravel(), unpack_upper(h_upper, self.fns.n_free))
         if self.priors.active:
             c, g, H = self.prior_terms(x)
             out = (out[0] + c, out[1] + g, out[2] + H)
-        self._on.last_derivatives = (key, out)
+        self._last.derivatives = (key, out)
         return out
 
     def robust_terms(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
