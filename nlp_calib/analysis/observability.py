@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from nlp_calib.models import reference_scales
-from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, Observability, WeakDirection
+from nlp_calib.results.checks import DEGENERATE, NOT_OBSERVABLE, WEAK, Observability, WeakDirection
 from nlp_calib.solvers import ProblemEvaluator
 
 #: Range of the sensor's heading (rad) below which the log counts as not turning.
@@ -50,11 +50,12 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
     weak = []
     # Undetermined directions form a subspace whose basis is arbitrary: describe it by the
     # parameters it involves, not vector by vector.
-    null = std_dir > NOT_OBSERVABLE
+    null = (std_dir > NOT_OBSERVABLE) | (lam < DEGENERATE * max(float(lam[-1]), 1e-300))
     if null.any():
         share = (V[:, null] ** 2).sum(axis=1)
         comps = {names[i]: round(float(share[i]), 3) for i in np.flatnonzero(share > 0.1)}
-        weak.append(WeakDirection(float(std_dir[null].max()), comps))
+        degenerate = bool(np.any(lam[null] < DEGENERATE * max(float(lam[-1]), 1e-300)))
+        weak.append(WeakDirection(float("inf") if degenerate else float(std_dir[null].max()), comps))
     for k in np.flatnonzero((std_dir > WEAK) & ~null):
         v = V[:, k]
         comps = {names[i]: round(float(v[i]), 3) for i in np.flatnonzero(np.abs(v) > 0.3)}
@@ -71,7 +72,8 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
             f"{what} are not observable; drive S-curves or circles in both directions"
         )
     for w in sorted(weak, key=lambda w: -w.std_reference):
-        warnings.append(w.words() + f" (1σ = {w.std_reference:.3g} × the reference precision)")
+        size = f"1σ = {w.std_reference:.3g} ×" if np.isfinite(w.std_reference) else "no information at"
+        warnings.append(w.words() + f" ({size} the reference precision)")
     return Observability(
         condition_number=cond,
         std_reference={n: float(np.sqrt(v)) for n, v in zip(names, var_param)},

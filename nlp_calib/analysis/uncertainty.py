@@ -30,12 +30,13 @@ timing error or slowly varying model error), and the problem is close to linear 
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from nlp_calib.models import reference_scales
 from nlp_calib.problem import ProblemFunctions, ResidualData
+from nlp_calib.results.checks import DEGENERATE
 from nlp_calib.results.uncertainty import Uncertainty
 from nlp_calib.solvers import ProblemEvaluator, Sensitivities
 
@@ -68,7 +69,9 @@ def nnls_gram(G: np.ndarray, h: np.ndarray, yy: float) -> np.ndarray:
     return best
 
 
-def _pseudo_inverse(H: np.ndarray, scale: np.ndarray, rcond: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
+def _pseudo_inverse(
+    H: np.ndarray, scale: np.ndarray, rcond: float = DEGENERATE
+) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of ``H`` on the subspace the data determine, and a mask of the parameters in the rest.
 
     The eigen-analysis runs in reference units (``scale``), where an undetermined direction
@@ -126,10 +129,28 @@ def _weighted_gram(A: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return out
 
 
+def range_std(lower: np.ndarray | None, upper: np.ndarray | None, n: int) -> np.ndarray:
+    """The 1σ of a uniform distribution over each free parameter's bounds (inf where unbounded)."""
+    if lower is None or upper is None:
+        return np.full(n, np.inf)
+    width = np.asarray(upper, dtype=float) - np.asarray(lower, dtype=float)
+    return np.where(np.isfinite(width), width / np.sqrt(12.0), np.inf)
+
+
 def estimate(
-    evaluator: ProblemEvaluator, x: np.ndarray, data: ResidualData, input_noise_std: np.ndarray
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    data: ResidualData,
+    input_noise_std: np.ndarray,
+    bounds_std: np.ndarray | None = None,
 ) -> Uncertainty:
-    """Covariance of the estimate ``x`` fitted to ``data``, given the inputs' 1σ noise."""
+    """Covariance of the estimate ``x`` fitted to ``data``, given the inputs' 1σ noise.
+
+    ``bounds_std`` (per free parameter, inf where unbounded; see :func:`range_std`) enters as a
+    prior: a direction the data do not determine is then known as well as the bounds of the
+    parameters in it allow (a lag within its search), and every parameter that moves along it
+    carries that σ (listed in :attr:`Uncertainty.bounded`); a direction with no bounded parameter
+    in it leaves its parameters' σ infinite."""
     fns = evaluator.fns
     ne = evaluator.normal_equations(x)
     if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
@@ -159,16 +180,31 @@ def estimate(
     free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[
         [fns.names.index(f) for f in fns.free]
     ]
-    bread_inv, undetermined = _pseudo_inverse(ne.H, reference_scales(fns.model, fns.free, free_values))
-    M = np.asarray(fns.tangent_map(x))
-    cov = M @ bread_inv @ meat @ bread_inv @ M.T
-    # A parameter the data do not determine has no finite variance; say so instead of a number.
-    lost = np.abs(M) @ undetermined > 0
-    cov[lost, :] = np.inf
-    cov[:, lost] = np.inf
+    scale = reference_scales(fns.model, fns.free, free_values)
+    cov, bounded = _bounded_covariance(ne.H, meat, scale, np.asarray(fns.tangent_map(x)), bounds_std)
     noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
     noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
-    return _packaged(fns, cov, noise, dof)
+    out = _packaged(fns, cov, noise, dof)
+    return replace(out, bounded=tuple(n for n, b in zip(fns.free, bounded) if b))
+
+
+def _bounded_covariance(
+    H: np.ndarray, meat: np.ndarray, scale: np.ndarray, M: np.ndarray, bounds_std: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The sandwich covariance (plain coordinates) with the bounds' prior where the data leave a
+    direction undetermined, and which parameters move along such a direction (their σ is the
+    bounds')."""
+    n = H.shape[0]
+    prior = np.zeros(n) if bounds_std is None else np.where(np.isfinite(bounds_std), bounds_std**-2.0, 0.0)
+    _, undetermined = _pseudo_inverse(H, scale)
+    P = np.diag(prior) if undetermined.any() else np.zeros((n, n))
+    bread_inv, still = _pseudo_inverse(H + P, scale)
+    cov = M @ bread_inv @ (meat + P) @ bread_inv @ M.T
+    # A parameter the data and the bounds leave undetermined has no finite variance: say so.
+    lost = np.abs(M) @ still > 0
+    cov[lost, :] = np.inf
+    cov[:, lost] = np.inf
+    return cov, undetermined & ~still
 
 
 def _input_noise_at_ends(D: np.ndarray, Sigma_in: np.ndarray, m: int) -> np.ndarray:

@@ -81,6 +81,18 @@ class JointStream:
         cols = [np.interp(t, self.time_s, self.positions[:, j]) for j in range(self.positions.shape[1])]
         return frozen(np.stack(cols, axis=1).reshape(np.shape(t)[0], self.positions.shape[1]))
 
+    def slopes(self, t: np.ndarray) -> np.ndarray:
+        """Each joint's rate (rad/s) at times ``t``: the slope of the stream's segment that holds each
+        time (the derivative of :meth:`at`; the first or last segment's outside the stream)."""
+        ts = self.time_s
+        if ts.size < 2:
+            return np.zeros((np.shape(t)[0], self.positions.shape[1]))
+        i = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, ts.size - 2)
+        dt = ts[i + 1] - ts[i]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rate = (self.positions[i + 1] - self.positions[i]) / dt[:, None]
+        return np.where(dt[:, None] > 0, rate, 0.0)
+
     def covers(self, t: np.ndarray) -> np.ndarray:
         """Which of the times ``t`` lie inside the stream."""
         return (t >= self.time_s[0]) & (t <= self.time_s[-1])
@@ -119,6 +131,9 @@ class Log:
     joint_positions: np.ndarray | None = None
     joint_stream: JointStream | None = None
     T_world_sensor_3d: np.ndarray | None = None
+    #: How much earlier than the tracker's stamps the encoders are read (s): 0 as logged, the lag
+    #: they were re-sampled at otherwise.
+    encoder_lag_s: float = 0.0
 
     @property
     def n_records(self) -> int:
@@ -137,6 +152,13 @@ class Log:
         if self.joint_positions is None:
             raise DatasetError(self.path, None, "holds raw encoder counts, not joint positions in radians")
         return self.joint_positions[:, self.header.encoder_index(name)]
+
+    def joint_rates(self) -> np.ndarray | None:
+        """Each joint's rate (rad/s) at each record, where the encoders are read (None without a
+        joint stream)."""
+        if self.joint_stream is None:
+            return None
+        return self.joint_stream.slopes(self.time_s - self.encoder_lag_s)
 
     def select(self, start: int, stop: int) -> Log:
         """The records ``start:stop`` (time stays relative to the file's first record)."""

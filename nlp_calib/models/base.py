@@ -19,6 +19,7 @@ import numpy as np
 
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log, LogHeader
+from nlp_calib.models.clock import LAG_REFERENCE, base_name
 from nlp_calib.models.mount import MOUNT_REFERENCE
 
 if TYPE_CHECKING:
@@ -96,6 +97,10 @@ class KinematicModel(Protocol):
     #: Names of the per-interval inputs :meth:`inputs` returns, in row order, and their units.
     @property
     def input_names(self) -> tuple[str, ...]: ...
+    #: The inputs that are a level read at the interval (an angle) rather than an increment over
+    #: it: a shorter interval keeps their value (the time offset's end corrections need this).
+    @property
+    def level_inputs(self) -> tuple[str, ...]: ...
     @property
     def input_units(self) -> Mapping[str, str]: ...
     #: Kinematic parameters a log without turning cannot determine, and a note on what else.
@@ -133,6 +138,12 @@ class KinematicModel(Protocol):
 
     def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
         """Per-interval inputs, ``(len(input_names), n_records - 1)``, from the raw encoders."""
+        ...
+
+    def input_rates(self, log: Log) -> np.ndarray | None:
+        """Each input's rate per second at each record (a level: its value), ``(len(input_names),
+        n_records)``, where the log says exactly (joints with a stream of their own); None: the
+        problem takes them from the intervals' inputs (:mod:`nlp_calib.problem.clock`)."""
         ...
 
     def moving(self, inputs: np.ndarray) -> np.ndarray:
@@ -253,7 +264,8 @@ def header_parameters(model: KinematicModel, header: LogHeader) -> dict[str, flo
 def reference(model: KinematicModel, name: str) -> Reference:
     """The precision a calibration should reach on parameter ``name``: ``relative`` (a fraction of
     its value: gains and lengths) or ``absolute`` (in its unit)."""
-    return {**model.reference, **MOUNT_REFERENCE, **SENSOR_REFERENCE}.get(name, ("relative", 0.01))
+    known = {**model.reference, **MOUNT_REFERENCE, **SENSOR_REFERENCE, **LAG_REFERENCE}
+    return known.get(base_name(name), ("relative", 0.01))
 
 
 def reference_scale(model: KinematicModel, name: str, value: float) -> float:

@@ -132,6 +132,7 @@ class DiffDrive:
     input_units: ClassVar[Mapping[str, str]] = MappingProxyType(
         {"left_ticks": "ticks", "right_ticks": "ticks"}
     )
+    level_inputs: ClassVar[tuple[str, ...]] = ()
     encoder_kinds: ClassVar[Mapping[str, EncoderKind]] = MappingProxyType(
         {LEFT_ENCODER: "counter", RIGHT_ENCODER: "counter"}
     )
@@ -210,6 +211,10 @@ class DiffDrive:
         turns = f"{ranges[LEFT_ENCODER]}, {ranges[RIGHT_ENCODER]}"
         assumes = f"the wheel radii take the encoder ranges ({turns} ticks) as one wheel turn each"
         return "diff_drive_controller", parameters, {}, assumes
+
+    def input_rates(self, log: Log) -> None:
+        """None: counts are re-sampled on whole ticks, so the intervals give the rates."""
+        return None
 
     def in_radians(self) -> InRadians:
         """The differential drive read from joint positions in radians (:data:`RADIANS`)."""

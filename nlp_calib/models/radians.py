@@ -104,6 +104,10 @@ class InRadians:
         return tuple(self.form.inputs[n].name for n in self.model.input_names)
 
     @property
+    def level_inputs(self) -> tuple[str, ...]:
+        return tuple(self.form.inputs[n].name for n in self.model.level_inputs)
+
+    @property
     def input_units(self) -> Mapping[str, str]:
         return {self.form.inputs[n].name: self.form.inputs[n].unit for n in self.model.input_names}
 
@@ -195,6 +199,20 @@ class InRadians:
         k_counts = ca.vertcat(*[k[i] * f if f != 1.0 else k[i] for i, f in enumerate(kf)])
         u_counts = ca.vertcat(*[u[j] * f if f != 1.0 else u[j] for j, f in enumerate(uf)])
         return self.model.increment(k_counts, u_counts, integration)
+
+    def input_rates(self, log: Log) -> np.ndarray | None:
+        """Each wheel's angular rate (rad/s) and each steering angle (rad) at the records, exact for
+        the joints' linear interpolation (None without a joint stream)."""
+        rates = log.joint_rates()
+        if rates is None:
+            return None
+        rows = []
+        for name in self.model.input_names:
+            encoder = self.form.inputs[name].encoder
+            j = log.header.encoder_index(encoder)
+            counter = self.encoder_kinds[encoder] == "counter"
+            rows.append(rates[:, j] if counter else wrap_angle(log.joint_position(encoder)))
+        return np.vstack(rows)
 
     def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
         """Rows: each wheel's angle increment and each steering angle (sampled as asked), in rad."""

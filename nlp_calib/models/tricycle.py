@@ -178,6 +178,7 @@ class Tricycle:
     input_units: ClassVar[Mapping[str, str]] = MappingProxyType(
         {"traction_revolutions": "rev", "steering_angle": "rad"}
     )
+    level_inputs: ClassVar[tuple[str, ...]] = ("steering_angle",)
     reference: ClassVar[Mapping[str, Reference]] = MappingProxyType({"steer_offset": ("absolute", 0.005)})
     headline: ClassVar[tuple[str, ...]] = ("k_traction", "axis_length")
     defaults: ClassVar[Mapping[str, float]] = MappingProxyType({})
@@ -265,6 +266,10 @@ class Tricycle:
             f"model reads it; if your hardware counts N ticks a turn, it is k_traction·N/({t_max}·2π)"
         )
         return "tricycle_controller", parameters, dict(STEERING_PLACES), assumes
+
+    def input_rates(self, log: Log) -> None:
+        """None: counts are re-sampled on whole ticks, so the intervals give the rates."""
+        return None
 
     def in_radians(self) -> InRadians:
         """The tricycle read from joint positions in radians (:data:`RADIANS`)."""

@@ -137,7 +137,9 @@ def analyse_fit(
     if big:
         ev.release()  # the solvers' buffers: each analysis binds again only what it evaluates
         memory.give_back()
-    uncertainty = {name: unc.estimate(ev, r.x, data, noise) for name, r in results.items()}
+    start = fit.problem.start
+    ranges = unc.range_std(start.lower, start.upper, fit.fns.n_free)
+    uncertainty = {name: unc.estimate(ev, r.x, data, noise, ranges) for name, r in results.items()}
     finite = [r for r in results.values() if np.isfinite(r.cost)] or list(results.values())
     observability = observability_of(ev, finite[0].x, data.T_world_sensor)
     converged = [r for r in results.values() if r.converged]

@@ -14,6 +14,7 @@ import numpy as np
 from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.models import KinematicModel, param_units
+from nlp_calib.models.clock import LAG_UNIT
 from nlp_calib.models.mount import MOUNT_UNITS
 from nlp_calib.pipeline.align import Alignment, lag_at_edge
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis
@@ -40,14 +41,14 @@ from nlp_calib.solvers import solver_label
 from nlp_calib.sources import BagSource
 
 
-def scenario_info(sc: Scenario, model: KinematicModel) -> ScenarioInfo:
-    """What the outputs say about ``sc``."""
+def scenario_info(sc: Scenario, model: KinematicModel, lags: Sequence[str] = ()) -> ScenarioInfo:
+    """What the outputs say about ``sc`` (fitted with the time offsets ``lags``)."""
     joint = sc.data.joint
     return ScenarioInfo(
         name=sc.name,
         path=None if sc.path is None else str(sc.path),
         model=sc.model,
-        units=_units(sc, model),
+        units={**_units(sc, model), **dict.fromkeys(lags, LAG_UNIT)},
         headline=tuple(model.headline),
         dataset=str(sc.dataset),
         datasets=tuple(str(e.path) for e in sc.data.logs) if joint else (),

@@ -17,6 +17,7 @@ from nlp_calib.core.errors import ScenarioError
 from nlp_calib.logs import Log
 from nlp_calib.models import SENSOR_PARAMS, KinematicModel, header_parameters
 from nlp_calib.models.camera_start import FIT_REASONS, CameraStart, Selection
+from nlp_calib.models.clock import LAG_PARAM, base_name, lag_names
 from nlp_calib.models.mount import SCALE_PARAM, mount_rotation
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario
@@ -39,19 +40,46 @@ from nlp_calib.solvers.evaluation import requests
 INTERNAL_SOLVER = "gauss_newton"
 
 
-def build_problem(sc: Scenario, model: KinematicModel, also_fixed: tuple[str, ...] = ()) -> ProblemFunctions:
-    """The problem's Functions for the scenario's residual form, kernel and fixed parameters."""
+def lag_count(sc: Scenario, n_logs: int) -> int:
+    """Time offsets in the problem: one per log when the scenario estimates the lag, else none."""
+    return n_logs if sc.log.alignment.tracker_lag == "auto" else 0
+
+
+def per_log_names(names: Sequence[str], n_logs: int) -> tuple[str, ...]:
+    """Scenario names with ``tracker_lag`` replaced by each log's own (several logs)."""
+    lags = lag_names(n_logs)
+    return tuple(dict.fromkeys(m for n in names for m in (lags if n == LAG_PARAM else (n,))))
+
+
+def build_problem(
+    sc: Scenario, model: KinematicModel, also_fixed: tuple[str, ...] = (), n_logs: int = 1
+) -> ProblemFunctions:
+    """The problem's Functions for the scenario's residual form, kernel and fixed parameters, with a
+    time offset per log (``n_logs``) when the lag is estimated."""
     residual, sensor = sc.objective.residual, sc.objective.sensor
+    lags = lag_count(sc, n_logs)
     spec = ProblemSpec(
         horizon=residual.horizon,
         integration=residual.integration,
         kernel=sc.objective.robust.kernel,
-        fixed=(*sc.parameters.fixed, *also_fixed),
+        fixed=per_log_names((*sc.parameters.fixed, *also_fixed), lags),
         sensor=sensor.mount,
         scale=sensor.scale,
+        lags=lags,
     )
     with scenario_key(sc, "residual"):
         return build(model, spec)
+
+
+def lag_start(sc: Scenario, n_logs: int, given: Sequence[float] = ()) -> dict[str, float]:
+    """The time offsets' starting values: ``given`` (one per log), else the scenario's value for
+    ``tracker_lag`` (known, or under initial_guess), else 0."""
+    p = sc.parameters
+    value = p.known.get(
+        LAG_PARAM, p.initial_guess.get(LAG_PARAM, 0.0) if isinstance(p.initial_guess, Mapping) else 0.0
+    )
+    names = lag_names(lag_count(sc, n_logs))
+    return {n: float(given[i]) if given else float(value) for i, n in enumerate(names)}
 
 
 def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[str, float]:
@@ -106,7 +134,8 @@ def auto_guess(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: 
     columns = data.columns_of(np.arange(0, data.n_residuals, step))
 
     def base_motion(params: Mapping[str, float]) -> np.ndarray:
-        return over_columns(fns.predict_window, np.array([params[n] for n in fns.names]), columns[:rows])[0]
+        full = np.array([params.get(n, 0.0) for n in fns.names])  # the clock does not move a window
+        return over_columns(fns.predict_window, full, columns[:rows])[0]
 
     return fns.model.initial_guess(columns[:rows], columns[rows : rows + 3], base_motion)
 
@@ -122,9 +151,10 @@ def camera_guess(
 
 
 def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    bounds = sc.parameters.bounds
-    lower = np.array([bounds[n][0] if n in bounds else -np.inf for n in fns.free])
-    upper = np.array([bounds[n][1] if n in bounds else np.inf for n in fns.free])
+    """The scenario's bounds; a time offset's, unless given, ``alignment.search``."""
+    bounds = {LAG_PARAM: sc.log.alignment.search, **sc.parameters.bounds}
+    lower = np.array([bounds[base_name(n)][0] if base_name(n) in bounds else -np.inf for n in fns.free])
+    upper = np.array([bounds[base_name(n)][1] if base_name(n) in bounds else np.inf for n in fns.free])
     for name, lo, hi, x in zip(fns.free, lower, upper, x0):
         if not lo <= x <= hi:
             origin = (
@@ -137,9 +167,13 @@ def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.nda
     return lower, upper
 
 
-def starting_point(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int) -> StartingPoint:
-    """Initial values (header, scenario, or ``auto`` from records ``start:stop``) and bounds."""
+def starting_point(
+    sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int, lags: Sequence[float] = ()
+) -> StartingPoint:
+    """Initial values (header, scenario, or ``auto`` from records ``start:stop``; the time offsets
+    ``lags``, one per log, when given) and bounds."""
     initial = initial_parameters(sc, fns.model, log)
+    initial.update(lag_start(sc, fns.spec.lags, lags))
     auto, camera = None, None
     if sc.parameters.initial_guess == "auto" and sc.objective.sensor.is_3d:
         data = build_residual_data(fns, log.select(start, stop), sc.objective.residual)
@@ -152,7 +186,8 @@ def starting_point(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, st
     if camera is None and sc.objective.sensor.is_3d:
         camera = given_mount(initial)
     x0 = np.array([initial[n] for n in fns.free])
-    lower, upper = _bounds(sc, fns, x0) if sc.parameters.bounds else (None, None)
+    bounded = sc.parameters.bounds or any(base_name(n) == LAG_PARAM for n in fns.free)
+    lower, upper = _bounds(sc, fns, x0) if bounded else (None, None)
     x_fixed = np.array([initial[n] for n in fns.fixed])
     return StartingPoint(initial, auto, camera, x0, x_fixed, lower, upper)
 
@@ -210,6 +245,8 @@ class Binder:
     #: A 3-D sensor's start: windows whose rotation axis is off its floor normal, or that turn
     #: against the wheels, are left out (``FIT_REASONS``).
     camera: CameraStart | None = None
+    #: Bounds of the free parameters every internal fit keeps to (None: none).
+    bounds: tuple[np.ndarray, np.ndarray] | None = None
 
     def windows(self, log: Log, start: int, stop: int) -> ResidualData:
         """The residual windows of records ``start:stop`` of ``log`` (those the masks allow)."""
@@ -276,7 +313,8 @@ class Binder:
             options = self.scenario.options_for(name)
             if tolerance is not None:
                 options = replace(options, function_tolerance=max(options.function_tolerance, tolerance))
-            res = get_solver(name)(evaluator, options).solve(x0)
+            lower, upper = self.bounds if self.bounds is not None else (None, None)
+            res = get_solver(name)(evaluator, options).solve(x0, lower, upper)
         return res.cost, res.x, res.converged
 
 
@@ -322,13 +360,30 @@ def build_stage(
     start_from: tuple[Log, int, int],
     solvers: Sequence[str],
     n_records: int,
+    lags: Sequence[float] = (),
 ) -> Problem:
-    """Build the Functions (``held`` parameters fixed), start from the records ``start_from`` (a log
-    and a range), get the backend ready for ``solvers`` over ``n_records`` and weigh the priors."""
-    fns = build_problem(sc, model, tuple(held))
+    """Build the Functions (``held`` parameters fixed; a time offset per log of ``lags``, or one),
+    start from the records ``start_from`` (a log and a range), get the backend ready for
+    ``solvers`` over ``n_records`` and weigh the priors."""
+    fns = build_problem(sc, model, tuple(held), max(len(lags), 1))
     log, start, stop = start_from
-    point = starting_point(sc, fns, log, start, stop)
+    point = starting_point(sc, fns, log, start, stop, lags)
     backend = prepare_backend(sc, fns, solvers, n_records)
-    binder = Binder(sc, fns, backend, point.x_fixed, no_priors(fns.n_free), camera=point.camera)
+    bounds = None if point.lower is None or point.upper is None else (point.lower, point.upper)
+    binder = Binder(
+        sc, fns, backend, point.x_fixed, no_priors(fns.n_free), camera=point.camera, bounds=bounds
+    )
     priors, _ = weigh_priors(binder, log, start, stop, point.x0)
     return Problem(fns, point, replace(binder, priors=priors))
+
+
+def at_lags(problem: Problem, lags: Sequence[float]) -> Problem:
+    """``problem`` starting at the time offsets ``lags`` (one per log; the data's own once they are
+    re-sampled there, so the problem's clock correction starts at zero)."""
+    fns, start = problem.fns, problem.start
+    given = dict(zip(lag_names(fns.spec.lags), lags))
+    if not any(n in given for n in fns.free):
+        return problem
+    initial = {**start.initial, **given}
+    x0 = np.array([initial[n] for n in fns.free])
+    return replace(problem, start=replace(start, initial=initial, x0=x0))

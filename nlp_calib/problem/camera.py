@@ -101,16 +101,15 @@ def fit_selection(
     turning = angle >= options.min_rotation
     cosine = np.abs(phi @ start.normal) / np.maximum(angle, 1e-300)
     sel = sel.drop(turning & (cosine < np.cos(options.max_axis_angle)), "axis_off_normal")
-    params = np.array([start.params[n] for n in fns.names])
-    base_turn = _window_turn(fns, data, params)
+    k = np.array([start.params[n] for n in fns.model.kinematic_params])
+    base_turn = _window_turn(fns, data, k)
     sel = sel.drop(turning & (np.sign(base_turn) != np.sign(phi @ start.normal)), "opposite_turning")
     return sel
 
 
-def _window_turn(fns: ProblemFunctions, data: ResidualData, params: np.ndarray) -> np.ndarray:
-    """The base's turn over each window the model predicts with ``params`` (rad)."""
+def _window_turn(fns: ProblemFunctions, data: ResidualData, k: np.ndarray) -> np.ndarray:
+    """The base's turn over each window the model predicts with kinematic parameters ``k`` (rad)."""
     planar = build(fns.model, ProblemSpec(horizon=1, integration=fns.integration))
-    k = params[: len(fns.model.kinematic_params)]
     steps = over_columns(planar.predict, np.concatenate([k, np.zeros(3)]), data.inputs)[0][2]
     turned = np.concatenate([[0.0], np.cumsum(steps)])
     return turned[data.stops] - turned[data.starts]

@@ -142,20 +142,24 @@ class DirectionCheck:
 
 @dataclass(frozen=True)
 class LagEstimate:
-    """The estimated lag (s), the costs of the lags fitted, and whether the best of them is at an
-    end of the searched range (then the true lag may lie beyond it)."""
+    """How the fitted tracker lag (s) was reached: the lags the encoders were re-sampled at in
+    turn and the internal fit's cost at each, whether the last fit converged, and whether the lag
+    ended on a bound of the searched range (then the true lag may lie beyond it, or the drive does
+    not determine it)."""
 
     lag_s: float
-    grid_s: tuple[float, ...]
+    path_s: tuple[float, ...]
     costs: tuple[float, ...]
     at_edge: bool = False
+    converged: bool = True
 
     def as_dict(self) -> dict[str, object]:
         return {
             "lag_s": self.lag_s,
-            "grid_s": list(self.grid_s),
+            "path_s": list(self.path_s),
             "costs": [c if np.isfinite(c) else None for c in self.costs],
             "at_edge": self.at_edge,
+            "converged": self.converged,
         }
 
 
@@ -163,6 +167,10 @@ class LagEstimate:
 WEAK = 5.0
 #: ...and beyond this many, not observable.
 NOT_OBSERVABLE = 100.0
+#: A direction whose information (in reference units) is below this fraction of the best
+#: direction's is not determined whatever the noise: the drive leaves it to rounding (an exact
+#: trade-off between parameters, e.g. a lag that sinusoidal wheel speeds turn into a mix of them).
+DEGENERATE = 1e-10
 
 
 @dataclass(frozen=True)
