@@ -254,9 +254,10 @@ def test_a_tricycle_with_a_camera_calibrates_in_robot_units(tmp_path: Path) -> N
     assert check is not None
     # The simulator's traction gain is metres per revolution: the run's wheel radius per radian.
     assert check.truth[check.names.index("wheel_radius")] == pytest.approx(truth["k_traction"] / (2 * np.pi))
-    # The lower layer's tolerance for every model (tests/test_camera.py), here with the lag estimated.
+    # The lower layer's tolerance for every model (tests/test_camera.py), here with the lag estimated;
+    # the lag (a parameter of the fit, absorbing the steering read at each interval's start) within 2 ms.
     for name, true, error in zip(check.names, check.truth, check.error):
-        assert abs(error) <= 1e-3 * max(abs(true), 1.0), name
+        assert abs(error) <= (2e-3 if name == "tracker_lag" else 1e-3 * max(abs(true), 1.0)), name
 
 
 def noisy_demos(folder: Path, seeds: int = 10) -> Iterator[Scenario]:

@@ -27,8 +27,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from nlp_calib.models import KinematicModel
-from nlp_calib.models.clock import is_lag
 from nlp_calib.models.base import reference_scale
+from nlp_calib.models.clock import is_lag
 from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
@@ -55,6 +55,9 @@ def _loose(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]
 def _checks(run: CalibrationRun) -> list[str]:
     """What the checks found that needs a look, in words."""
     out = [w for w in run.warnings if " held at its initial value" in w]
+    lag = run.data.lag_estimate
+    if lag is not None and lag.at_edge:
+        out.append(f"the tracker lag ended on the edge of alignment.search ({1e3 * lag.lag_s:.0f} ms)")
     direction, findings = run.checks.direction, run.checks.findings
     if direction is not None and direction.significant:
         name, z = direction.worst
@@ -130,9 +133,13 @@ def verdict(run: CalibrationRun, model: KinematicModel, hint: str = "") -> Verdi
         return Verdict(UNDETERMINED, (mirror + hint,), handoff=False)
     obs = run.checks.observability
     loose = [w.words() for w in obs.weak if w.std_reference > NOT_OBSERVABLE] if obs is not None else []
+    lag = run.data.lag_estimate
+    unfitted = ["the tracker lag could not be fitted"] if lag is not None and not lag.converged else []
     if solver is None:
         failures = dict.fromkeys(run.reports[s].result.reason for s in run.solver_order())
-        return Verdict(UNDETERMINED, (*loose, *(f"no solver converged: {r}" for r in failures)))
+        group = [n for w in (obs.weak if obs is not None else ()) for n in w.components]
+        out = (*unfitted, *loose, *(f"no solver converged: {r}" for r in failures))
+        return Verdict(UNDETERMINED, (*out, way_out(group, model)) if loose else out)
     if bounded := _trade_off(run, solver):
         return Verdict(UNDETERMINED, (bounded, way_out(run.reports[solver].uncertainty.bounded, model)))
     missing = [n for n, sd in run.std(solver).items() if not np.isfinite(sd)]

@@ -99,13 +99,23 @@ class JointStream:
 
 
 @dataclass(frozen=True)
+class LogClock:
+    """Where a log's times stand: ``start_ns``, the stamp of its first record on its own clock (ns;
+    every time of the log is relative to it), and ``encoder_lag_s``, how much earlier than the
+    tracker's stamps its encoders are read (s: 0 as logged, the lag they were re-sampled at)."""
+
+    start_ns: int = 0
+    encoder_lag_s: float = 0.0
+
+
+@dataclass(frozen=True)
 class Log:
     """An immutable robot log: per-record arrays of equal length ``n_records``.
 
     ``ticks`` holds the raw encoder readings (columns in ``header.encoder_names`` order),
     ``T_world_sensor`` the tracker poses and ``model_pose`` the vendor odometry, both
     ``(x, y, theta)`` per row. ``time_s`` is relative to the first record of the file, whose own
-    stamp on the log's clock is ``start_ns`` (ns).
+    stamp on the log's clock is ``clock.start_ns`` (ns).
 
     A log of joints in radians (``header.encoder_units``) has no counts (``ticks`` has no
     columns): ``joint_positions`` holds each joint's position at the records, interpolated from
@@ -127,13 +137,20 @@ class Log:
     T_world_sensor: np.ndarray
     line_numbers: np.ndarray
     dropped: tuple[DroppedRecord, ...] = field(default=())
-    start_ns: int = 0
+    clock: LogClock = field(default_factory=lambda: LogClock())
     joint_positions: np.ndarray | None = None
     joint_stream: JointStream | None = None
     T_world_sensor_3d: np.ndarray | None = None
-    #: How much earlier than the tracker's stamps the encoders are read (s): 0 as logged, the lag
-    #: they were re-sampled at otherwise.
-    encoder_lag_s: float = 0.0
+
+    @property
+    def start_ns(self) -> int:
+        """The stamp of the first record on the log's own clock (ns)."""
+        return self.clock.start_ns
+
+    @property
+    def encoder_lag_s(self) -> float:
+        """How much earlier than the tracker's stamps the encoders are read (s)."""
+        return self.clock.encoder_lag_s
 
     @property
     def n_records(self) -> int:

@@ -53,7 +53,7 @@ def resample_encoders(
             columns.append(np.mod(np.round(np.interp(when, t, count)) + raw[0], COUNTER_MODULUS))
     ticks = np.stack(columns, axis=1).astype(np.int64)
     ticks.flags.writeable = False
-    shifted = replace(log, ticks=ticks, encoder_lag_s=log.encoder_lag_s + lag_s)
+    shifted = replace(log, ticks=ticks, clock=replace(log.clock, encoder_lag_s=log.encoder_lag_s + lag_s))
     return shifted, (int(valid[0]), int(valid[-1]) + 1)
 
 
@@ -71,5 +71,5 @@ def _joints_resampled(log: Log, lag_s: float, late: list[float]) -> tuple[Log, t
             f"{stream.time_s[-1] - stream.time_s[0]:.1f} s stream; use a lag well below the log's duration"
         )
     positions = np.stack([stream.at(tq - d)[:, j] for j, d in enumerate(late)], axis=1)
-    shifted = replace(log, joint_positions=frozen(positions), encoder_lag_s=lag_s)
+    shifted = replace(log, joint_positions=frozen(positions), clock=replace(log.clock, encoder_lag_s=lag_s))
     return shifted, (int(valid[0]), int(valid[-1]) + 1)

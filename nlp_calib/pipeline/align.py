@@ -79,7 +79,8 @@ class _LagFits:
         return cost, x_new, bool(converged and np.all(np.isfinite(x_new)))
 
     def settle(self, x: np.ndarray) -> tuple[np.ndarray, list[float], list[float], bool]:
-        """Fits from ``x``, re-sampled at each new lag until it stays (see the module docstring)."""
+        """Fits from ``x``, re-sampled at each new lag until it stays within the larger of
+        :data:`LAG_TOLERANCE_S` and a quarter of its white-noise σ (see the module docstring)."""
         path: list[float] = []
         costs: list[float] = []
         converged = False
@@ -91,9 +92,20 @@ class _LagFits:
             if not converged:
                 break
             x = x_new
-            if abs(x[self.column] - resampled) < LAG_TOLERANCE_S:
+            if abs(x[self.column] - resampled) < max(LAG_TOLERANCE_S, 0.25 * self.lag_std(x)):
                 break
         return x, path, costs, converged
+
+    def lag_std(self, x: np.ndarray) -> float:
+        """The lag's white-noise σ at ``x`` from the last fit's normal equations (0 when singular)."""
+        assert self.evaluator is not None
+        ne = self.evaluator.normal_equations(x)
+        dof = max(self.binder.fns.error_rows * self.evaluator.n_residuals - self.binder.fns.n_free, 1)
+        try:
+            var = float(np.linalg.inv(ne.H)[self.column, self.column]) * ne.cost / dof
+        except np.linalg.LinAlgError:
+            return 0.0
+        return float(np.sqrt(var)) if np.isfinite(var) and var > 0 else 0.0
 
     def coarse_start(self, x0: np.ndarray) -> np.ndarray | None:
         """The start of the converged fit of least cost from lags spread over the search (None: none
@@ -137,10 +149,14 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
         with scenario_key(sc, "alignment.search"):
             estimate = estimate_tracker_lag(binder, log, start, stop, x0)
         lag = estimate.lag_s
-        if estimate.at_edge:
+        if not estimate.converged:
+            warnings.warn(lag_not_fitted(sc, estimate.lag_s), NlpCalibWarning, stacklevel=2)
+        elif estimate.at_edge:
             warnings.warn(lag_at_edge(sc, estimate.lag_s), NlpCalibWarning, stacklevel=2)
     elif lag == "auto":
-        lag = 0.0
+        # Held (known, or fixed at its initial value): the data are re-sampled there.
+        held = [i for i, n in enumerate(binder.fns.fixed) if is_lag(n)]
+        lag = float(binder.x_fixed[held[0]]) if held else 0.0
     with scenario_key(sc, "alignment.tracker_lag"):
         aligned, valid = resample_encoders(log, float(lag), binder.fns.model.encoder_kinds)
     return Alignment(lag_s=float(lag), estimate=estimate, log=aligned, valid=valid)
@@ -156,4 +172,15 @@ def lag_at_edge(sc: Scenario, lag_s: float) -> str:
         "fit), or this drive does not determine the lag (the observability lines say with what it "
         "trades off; give the lag as alignment.tracker_lag, or drive so that the wheels' speeds change "
         "independently)"
+    )
+
+
+def lag_not_fitted(sc: Scenario, lag_s: float) -> str:
+    """The warning for a tracker lag that no fit converged at, from any start in the search."""
+    lo, hi = sc.log.alignment.search
+    return (
+        f"{sc.path or sc.name}: alignment.search: no fit converged from any lag in [{lo:g}, {hi:g}] s, so "
+        f"the lag is not fitted (the encoders are read at {1e3 * lag_s:.1f} ms): the observability lines "
+        "say what this drive cannot determine; where they name nothing, search around the lag the "
+        "log's clocks allow, or give it as alignment.tracker_lag"
     )

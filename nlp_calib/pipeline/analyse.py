@@ -31,7 +31,13 @@ from nlp_calib.pipeline.windows import LogWindows
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results import SolverResult
-from nlp_calib.results.checks import ConsistencyCheck, CrossValidation, DirectionCheck, Observability
+from nlp_calib.results.checks import (
+    ConsistencyCheck,
+    CrossValidation,
+    DirectionCheck,
+    LagEffect,
+    Observability,
+)
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.series import (
@@ -63,6 +69,8 @@ class FitAnalysis:
     direction: DirectionCheck | None
     #: For several logs: each log's own fit against theirs.
     consistency: ConsistencyCheck | None = None
+    #: How each time offset moves the other parameters (the first solver's uncertainty).
+    lag_effects: tuple[LagEffect, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -143,9 +151,10 @@ def analyse_fit(
     finite = [r for r in results.values() if np.isfinite(r.cost)] or list(results.values())
     observability = observability_of(ev, finite[0].x, data.T_world_sensor)
     converged = [r for r in results.values() if r.converged]
+    effects = unc.lag_effects(uncertainty[next(iter(results))]) if results else ()
     k = fit.problem.binder.scenario.validation.blocks
     if not converged or not k:
-        return FitAnalysis(uncertainty, observability, None, None)
+        return FitAnalysis(uncertainty, observability, None, None, lag_effects=effects)
     binder, x = fit.problem.binder, converged[0].x
     # Blocks are numbered as the scorer's records: the fitted records start at its offset.
     span = (blocks.offset, blocks.offset + data.n_records)
@@ -166,7 +175,7 @@ def analyse_fit(
         k,
         fit.canonical_params,
     )
-    return FitAnalysis(uncertainty, observability, crossval, direction)
+    return FitAnalysis(uncertainty, observability, crossval, direction, lag_effects=effects)
 
 
 def residual_series(fit: Fit, results: Mapping[str, SolverResult], windows: np.ndarray) -> ResidualSeries:

@@ -16,7 +16,7 @@ from nlp_calib.analysis.verdict import verdict
 from nlp_calib.models import KinematicModel, param_units
 from nlp_calib.models.clock import LAG_UNIT
 from nlp_calib.models.mount import MOUNT_UNITS
-from nlp_calib.pipeline.align import Alignment, lag_at_edge
+from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis
 from nlp_calib.pipeline.build import StartingPoint
 from nlp_calib.pipeline.prepare import PreparedLog
@@ -123,8 +123,12 @@ def fit_notes(results: Mapping[str, SolverResult], fitted: FitAnalysis, held: Ma
 
 
 def lag_notes(sc: Scenario, alignment: Alignment) -> list[str]:
-    """What a log's time alignment found worth saying: a lag at the edge of its search."""
-    if alignment.estimate is not None and alignment.estimate.at_edge:
+    """What a log's time alignment found worth saying: a lag at the edge of its search, or a lag
+    no fit converged at."""
+    est = alignment.estimate
+    if est is not None and not est.converged:
+        return [lag_not_fitted(sc, alignment.lag_s)]
+    if est is not None and est.at_edge:
         return [lag_at_edge(sc, alignment.lag_s)]
     return []
 
@@ -201,7 +205,14 @@ def assemble_run(
         baseline=figures.baseline[0],
         baseline_holdout=figures.baseline[1],
         reports=reports,
-        checks=Checks(fitted.observability, fitted.crossval, fitted.direction, findings, fitted.consistency),
+        checks=Checks(
+            fitted.observability,
+            fitted.crossval,
+            fitted.direction,
+            findings,
+            fitted.consistency,
+            lag_effects=fitted.lag_effects,
+        ),
         warnings=(
             *notes,
             *lag_notes(prepared.scenario, alignment),

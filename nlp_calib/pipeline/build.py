@@ -17,7 +17,7 @@ from nlp_calib.core.errors import ScenarioError
 from nlp_calib.logs import Log
 from nlp_calib.models import SENSOR_PARAMS, KinematicModel, header_parameters
 from nlp_calib.models.camera_start import FIT_REASONS, CameraStart, Selection
-from nlp_calib.models.clock import LAG_PARAM, base_name, lag_names
+from nlp_calib.models.clock import LAG_PARAM, base_name, is_lag, lag_names
 from nlp_calib.models.mount import SCALE_PARAM, mount_rotation
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario
@@ -79,7 +79,10 @@ def lag_start(sc: Scenario, n_logs: int, given: Sequence[float] = ()) -> dict[st
         LAG_PARAM, p.initial_guess.get(LAG_PARAM, 0.0) if isinstance(p.initial_guess, Mapping) else 0.0
     )
     names = lag_names(lag_count(sc, n_logs))
-    return {n: float(given[i]) if given else float(value) for i, n in enumerate(names)}
+    lo, hi = sc.log.alignment.search
+    # A start outside the search (0 when the search is all one side of it) starts at its middle.
+    start = float(value) if lo <= value <= hi else 0.5 * (lo + hi)
+    return {n: float(given[i]) if given else start for i, n in enumerate(names)}
 
 
 def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[str, float]:
@@ -302,6 +305,18 @@ class Binder:
         """The interval inputs of records ``start:stop`` of ``log`` (what :meth:`bind` binds)."""
         steering = self.scenario.objective.residual.steering_sample
         return interval_inputs(self.fns.model, [log.select(start, stop)], steering)
+
+    def lag_held(self, x0: np.ndarray) -> Binder:
+        """This binder with the time offsets held at their values in ``x0`` (fits on the records as
+        logged, whose clock correction the screen does not apply)."""
+        lags = [i for i, n in enumerate(self.fns.free) if is_lag(n)]
+        if not lags:
+            return self
+        n = self.fns.n_free
+        lower, upper = self.bounds if self.bounds is not None else (np.full(n, -np.inf), np.full(n, np.inf))
+        lower, upper = lower.copy(), upper.copy()
+        lower[lags] = upper[lags] = np.asarray(x0, dtype=float)[lags]
+        return replace(self, bounds=(lower, upper))
 
     def fit(
         self, evaluator: ProblemEvaluator, x0: np.ndarray, tolerance: float | None = None

@@ -23,7 +23,7 @@ from nlp_calib.analysis.consistency import compare_logs
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel
-from nlp_calib.models.clock import lag_names
+from nlp_calib.models.clock import LAG_PARAM, is_lag, lag_names
 from nlp_calib.pipeline.align import Alignment, align
 from nlp_calib.pipeline.analyse import (
     FitAnalysis,
@@ -303,7 +303,14 @@ class JointCalibration:
             scenario=scenario_info(sc, self.model, lag_names(self.fns.spec.lags)),
             parts=tuple(parts),
             n_residuals=fitting.data.n_residuals,
-            checks=Checks(fitted.observability, fitted.crossval, fitted.direction, None, check),
+            checks=Checks(
+                fitted.observability,
+                fitted.crossval,
+                fitted.direction,
+                None,
+                check,
+                lag_effects=fitted.lag_effects,
+            ),
             warnings=tuple(notes),
         )
 
@@ -313,6 +320,13 @@ def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
     return _run(
         part.prepared.scenario, Fit(part.problem, part.windows.data, solvers), [part], solvers, Wanted()
     )[2][0]
+
+
+def own_name(name: str, log: int, n_logs: int) -> str:
+    """A joint fit's parameter ``name`` as log ``log``'s own fit calls it ("" when it has none)."""
+    if not is_lag(name):
+        return name
+    return LAG_PARAM if name == lag_names(n_logs)[log] else ""
 
 
 def consistency(
@@ -327,11 +341,17 @@ def consistency(
     blocked = fitted.crossval.std if fitted.crossval is not None else np.full(len(u.names), np.nan)
     nan = np.full(len(result.names), np.nan)
     estimates, stds = [], []
-    for run in own:
+    for i, run in enumerate(own):
         mine = run.reports[solver]
-        ok = mine.result.converged
-        estimates.append(mine.result.params if ok else nan)
-        stds.append(np.array([run.std(solver)[n] for n in result.names]) if ok else nan)
+        if not mine.result.converged:
+            estimates.append(nan)
+            stds.append(nan)
+            continue
+        # Each log's own lag is the joint fit's lag of that log; the other logs' lags it has not.
+        names = [own_name(n, i, len(own)) for n in result.names]
+        values, std = mine.result.param_dict(), run.std(solver)
+        estimates.append(np.array([values.get(n, np.nan) for n in names]))
+        stds.append(np.array([std.get(n, np.nan) for n in names]))
     logs = [run.log.path for run in own]
     return compare_logs(
         result.names, logs, result.params, believed_std(u.std, blocked), np.array(estimates), np.array(stds)

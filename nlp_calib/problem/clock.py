@@ -10,8 +10,9 @@ windows); the problem then takes ``τ = τ₀ + δ`` as a parameter. Over a wind
 with ``M`` the model's motion over the window's intervals and ``E_j`` its motion over the ``δ``
 before record ``j``: the model's increment on the inputs of that stretch, ``δ·ṙ_j`` for an
 increment (``ṙ_j`` its rate at record ``j``: its two intervals' travel over their duration) and
-the level itself for a level (a steering angle). A negative ``δ`` moves along the stretch after
-record ``j`` (the increment is then backwards, the exact inverse for the model's arcs). This is
+the level itself for a level (an angle the model reads as it is). A negative ``δ`` moves along
+the stretch after record ``j`` (the increment is then backwards, the exact inverse for the
+model's arcs). This is
 linear interpolation of the encoders at the shifted time, written symbolically: every consumer
 of the problem's Functions (both solvers, the uncertainty, the observability, the refits and the
 C export) sees the offset's Jacobian. It is exact to first order in ``δ`` for any drive; the

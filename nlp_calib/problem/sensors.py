@@ -89,6 +89,10 @@ class PlanarSensor:
         """The sensor's unwrapped heading at each pose (rad)."""
         return np.unwrap(T_world_sensor[:, 2])
 
+    def tangent(self, z: np.ndarray) -> np.ndarray:
+        """Measured motions ``z`` ``(3, n)`` in the residual's rows: they are their own."""
+        return np.asarray(z, dtype=float)
+
 
 class Mount3D:
     """A 3-D pose sensor (a camera) on a planar base; ``scale_free``: poses known up to scale."""
@@ -151,6 +155,10 @@ class Mount3D:
             rpy = se3.rpy_boxplus(x[idx], step[idx])
             for j, i in enumerate(idx):
                 x_plus[i] = rpy[j]
+
+    def tangent(self, z: np.ndarray) -> np.ndarray:
+        """Measured motions ``z`` ``(7, n)`` in the residual's rows: translation, then rotation vector."""
+        return np.vstack([z[:3], poses3d.quat_to_rotvec(np.asarray(z[3:7]).T).T])
 
     def heading(self, T_world_sensor: np.ndarray) -> np.ndarray:
         """The camera's unwrapped rotation about the floor normal (the principal axis of its

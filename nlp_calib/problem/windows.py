@@ -55,6 +55,15 @@ class ResidualOptions:
 
 
 @dataclass(frozen=True)
+class WindowClock:
+    """What a problem's time offsets need of the data: ``lags``, the offset each log's inputs were
+    re-sampled at (s), and ``rates``, each input's rate (a level: its value) at each record."""
+
+    lags: tuple[float, ...]
+    rates: np.ndarray
+
+
+@dataclass(frozen=True)
 class ResidualData:
     """The windows of one fit and the data they are evaluated on (records numbered as above).
 
@@ -77,10 +86,9 @@ class ResidualData:
     dropped_faulty: int = 0
     #: A 3-D sensor's windows left out by reason (:func:`nlp_calib.problem.camera.fit_selection`).
     dropped_selection: Mapping[str, int] | None = None
-    #: Problems with a time offset: the offset each log's inputs were re-sampled at (s), and each
-    #: input's rate at each record (:mod:`nlp_calib.problem.clock`); None: no clock data.
-    lags: tuple[float, ...] | None = None
-    rates: np.ndarray | None = None
+    #: Problems with a time offset: the offset each log's inputs were re-sampled at and each input's
+    #: rate at each record (:mod:`nlp_calib.problem.clock`); None: no clock data.
+    clock: WindowClock | None = None
 
     @property
     def log(self) -> Log:
@@ -100,7 +108,7 @@ class ResidualData:
     def data(self) -> np.ndarray:
         """The per-window ``data = [z, clock, w]`` matrix, column-major (see
         :attr:`ProblemFunctions.clock_rows`)."""
-        clock = self.clock()
+        clock = self.clock_rows()
         rows, extra = self.z.shape[0], clock.shape[0]
         out = np.empty((rows + extra + 1, self.n_residuals), order="F")
         out[0:rows] = self.z
@@ -112,15 +120,15 @@ class ResidualData:
         """The index of the log each of ``records`` belongs to."""
         return np.searchsorted(np.asarray(self.offsets), records, side="right") - 1
 
-    def clock(self) -> np.ndarray:
+    def clock_rows(self) -> np.ndarray:
         """Each window's clock data (``(0, n)`` without a time offset): the rates at its first and
         last record, its log's re-sampled offset and which log it belongs to."""
-        if self.lags is None or self.rates is None:
+        if self.clock is None:
             return np.zeros((0, self.n_residuals))
-        rates, which = self.rates, self.log_of(self.starts)
-        select = np.zeros((len(self.lags), self.n_residuals))
+        rates, which = self.clock.rates, self.log_of(self.starts)
+        select = np.zeros((len(self.clock.lags), self.n_residuals))
         select[which, np.arange(self.n_residuals)] = 1.0
-        resampled = np.asarray(self.lags)[which][None, :]
+        resampled = np.asarray(self.clock.lags)[which][None, :]
         return np.vstack([rates[:, self.starts], rates[:, self.stops], resampled, select])
 
     def interval_counts(self, flagged: np.ndarray) -> np.ndarray:
@@ -140,9 +148,9 @@ class ResidualData:
         has them)."""
         if inputs.shape != self.inputs.shape:
             raise ProblemError(f"inputs of shape {inputs.shape} do not fit {self.inputs.shape}")
-        if lags is None or self.lags is None:
+        if lags is None or rates is None or self.clock is None:
             return replace(self, inputs=inputs)
-        return replace(self, inputs=inputs, lags=tuple(float(v) for v in lags), rates=rates)
+        return replace(self, inputs=inputs, clock=WindowClock(tuple(float(v) for v in lags), rates))
 
     def columns_of(self, windows: np.ndarray | slice) -> np.ndarray:
         """One column ``[u_0 … u_{H-1}, z, w]`` per window, as the defining ``residual`` takes it."""
@@ -259,16 +267,18 @@ def joined(parts: Sequence[ResidualData]) -> ResidualData:
         dropped_stationary=sum(p.dropped_stationary for p in parts),
         dropped_faulty=sum(p.dropped_faulty for p in parts),
         dropped_selection=_summed([p.dropped_selection for p in parts]),
-        lags=None if any(p.lags is None for p in parts) else tuple(v for p in parts for v in p.lags or ()),
-        rates=_joined_rates([p.rates for p in parts]),
+        clock=_joined_clock([p.clock for p in parts]),
     )
 
 
-def _joined_rates(rates: Sequence[np.ndarray | None]) -> np.ndarray | None:
-    """Parts' rates end to end (None when a part has none)."""
-    if any(r is None for r in rates):
+def _joined_clock(clocks: Sequence[WindowClock | None]) -> WindowClock | None:
+    """Parts' clock data end to end (None when a part has none)."""
+    given = [c for c in clocks if c is not None]
+    if len(given) < len(clocks):
         return None
-    return np.concatenate([r for r in rates if r is not None], axis=1)
+    return WindowClock(
+        tuple(v for c in given for v in c.lags), np.concatenate([c.rates for c in given], axis=1)
+    )
 
 
 def log_rates(model: KinematicModel, logs: Sequence[Log], inputs: np.ndarray) -> np.ndarray:
@@ -347,8 +357,9 @@ def build_residual_data(
         z=tracker_motions(fns, poses, starts, stops),
         horizon=H,
         dropped_stationary=0,
-        lags=tuple(lg.encoder_lag_s for lg in logs) if fns.spec.lags else None,
-        rates=log_rates(fns.model, logs, inputs) if fns.spec.lags else None,
+        clock=WindowClock(tuple(lg.encoder_lag_s for lg in logs), log_rates(fns.model, logs, inputs))
+        if fns.spec.lags
+        else None,
     )
     if drop_stationary and starts.size:
         keep = data.interval_counts(fns.model.moving(inputs)) > 0

@@ -163,14 +163,24 @@ class LagEstimate:
         }
 
 
+@dataclass(frozen=True)
+class LagEffect:
+    """How the other parameters move with a time offset ``lag`` on this drive: each one's change per
+    second of it along their joint uncertainty (the covariance's regression), for the parameters
+    correlated with it by :data:`LAG_EFFECT_CORRELATION` or more."""
+
+    lag: str
+    per_second: dict[str, float]
+
+
+#: Parameters correlated with a lag by at least this much are said to move with it.
+LAG_EFFECT_CORRELATION = 0.3
+
+
 #: A direction with 1σ beyond this many reference units is weakly observable...
 WEAK = 5.0
 #: ...and beyond this many, not observable.
 NOT_OBSERVABLE = 100.0
-#: A direction whose information (in reference units) is below this fraction of the best
-#: direction's is not determined whatever the noise: the drive leaves it to rounding (an exact
-#: trade-off between parameters, e.g. a lag that sinusoidal wheel speeds turn into a mix of them).
-DEGENERATE = 1e-10
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,7 @@ from nlp_calib.results.checks import (
     ConsistencyCheck,
     CrossValidation,
     DirectionCheck,
+    LagEffect,
     LagEstimate,
     Observability,
     TruthCheck,
@@ -133,6 +134,8 @@ class Checks:
     drift: DriftCheck | None = None
     #: The estimate against the known truth of a simulated log (a truth file beside it).
     truth: TruthCheck | None = None
+    #: How each time offset moves the other parameters (see :class:`LagEffect`).
+    lag_effects: tuple[LagEffect, ...] = ()
 
 
 @dataclass(frozen=True)
