@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from conftest import SCENARIOS, assert_close, mat, parse_lines, vec
 
-from nlp_calib.analysis.alignment import estimate_lag, lag_grid, refine_minimum
 from nlp_calib.analysis.metrics import trajectory_metrics
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import format_log, resample_encoders
@@ -251,30 +250,6 @@ def test_seed_formulation_and_uncalibrated_robot_are_far_off(
     assert seed.score(res.params)[0].segment_ate.mean > 10 * ours
     p0 = np.array([seed.initial[n] for n in seed.fns.names])
     assert 13.0 < seed.score(p0)[0].ate_mean < 15.0
-
-
-def test_lag_search_gives_the_full_grid_estimate_with_fewer_fits() -> None:
-    """On a rippled cost curve, the bracketing search fits the parabola the full grid would."""
-    grid = lag_grid((-0.2, 0.2), 0.01)
-    rng = np.random.default_rng(3)
-    for _ in range(20):
-        centre = rng.uniform(-0.12, 0.12)
-        ripple = rng.uniform(0.0, 0.05)
-        phase = rng.uniform(0, 2 * np.pi)
-
-        def cost(lag: float, c: float = centre, r: float = ripple, ph: float = phase) -> float:
-            return 4.0 + 40.0 * (lag - c) ** 2 + r * np.sin(2 * np.pi * lag / 0.04 + ph)
-
-        calls: list[float] = []
-
-        def counted(lag: float, calls: list[float] = calls) -> float:
-            calls.append(lag)
-            return cost(lag)
-
-        est = estimate_lag(counted, (-0.2, 0.2), 0.01)
-        full = refine_minimum(grid, np.array([cost(float(g)) for g in grid]))
-        assert est.lag_s == pytest.approx(round(full, 6), abs=1e-9)
-        assert len(calls) < grid.size and not est.at_edge
 
 
 def test_lag_at_the_edge_of_its_search_range_is_named() -> None:

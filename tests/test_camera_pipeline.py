@@ -22,6 +22,7 @@ from nlp_calib.outputs.handoff import calibration_dict, urdf_joint
 from nlp_calib.outputs.results import result_document
 from nlp_calib.pipeline import Calibration, Scenario, load_scenario
 from nlp_calib.results import CalibrationRun
+from nlp_calib.sensors import sensor_for
 from nlp_calib.simulation.camera import CameraSimulationOptions, simulate_camera, write_camera_simulation
 
 #: The target recording of issue 22: roll −120° (30° down), yaw −90°, images stamped 10 ms late,
@@ -430,7 +431,7 @@ def test_the_3d_jump_screen_raises_no_alarm_on_clean_camera_poses() -> None:
     from nlp_calib.analysis.faults import tracker_faults
 
     sc = load_scenario(REPO / "scenarios" / "camera_demo.yaml")
-    assert tracker_faults(sc.log.source.read(get_model(sc.model), strict=True), spatial=True) == []
+    assert tracker_faults(sc.log.source.read(get_model(sc.model), strict=True), sensor_for("3d")) == []
 
 
 @pytest.mark.slow
@@ -439,7 +440,7 @@ def test_the_3d_jump_screen_raises_no_alarm_on_noisy_simulations(tmp_path: Path)
     from nlp_calib.analysis.faults import tracker_faults
 
     logs = (sc.log.source.read(get_model(sc.model), strict=True) for sc in noisy_demos(tmp_path))
-    flagged = [len(tracker_faults(log, spatial=True)) for log in logs]
+    flagged = [len(tracker_faults(log, sensor_for("3d"))) for log in logs]
     print("poses flagged per seed:", flagged)
     assert flagged == [0] * 10
 

@@ -40,7 +40,7 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
     sigma2 = max(float(np.sum(weight * s)) / dof, 1e-300)
     params = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()
     value = dict(zip(fns.names, params))
-    R = reference_scales(fns.model, names, np.array([value[n] for n in names]))
+    R = reference_scales(fns.model, names, np.array([value[n] for n in names]), fns.sensor.reference)
     lam, V = np.linalg.eigh(0.5 * (ne.H + ne.H.T) * np.outer(R, R) / sigma2)
     free = free_directions(
         lam * sigma2, evaluator.n_residuals, motion_scale(fns, evaluator.data.z, evaluator.omega)

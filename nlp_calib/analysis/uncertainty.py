@@ -185,26 +185,37 @@ def estimate(
     sigma2 = float(np.sum(weight[use] * s[use])) / dof
     if evaluator.priors.active:
         meat = meat + sigma2 * evaluator.prior_information(x)
+    cov, bounded = _covariance(evaluator, x, (ne.H, meat), sigma2, bounds_std)
+    noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
+    noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
+    out = _packaged(fns, cov, noise, dof)
+    return replace(out, bounded=tuple(n for n, b in zip(fns.free, bounded) if b))
+
+
+def _covariance(
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    bread_meat: tuple[np.ndarray, np.ndarray],
+    sigma2: float,
+    bounds_std: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_bounded_covariance` at ``x``: reference units from the estimate, the drive's free
+    directions from its windows' motion, the bounds' prior in the data's units."""
+    fns, data = evaluator.fns, evaluator.data
     free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[
         [fns.names.index(f) for f in fns.free]
     ]
-    scale = reference_scales(fns.model, fns.free, free_values)
+    scale = reference_scales(fns.model, fns.free, free_values, fns.sensor.reference)
     motion2 = motion_scale(fns, data.z, evaluator.omega)
 
     def free(lam: np.ndarray) -> np.ndarray:
         return free_directions(lam, data.n_residuals, motion2)
 
+    prior = np.zeros(fns.n_free)
+    if bounds_std is not None:
+        prior = sigma2 * np.where(np.isfinite(bounds_std), bounds_std**-2.0, 0.0)
     M = np.asarray(fns.tangent_map(x))
-    prior = (
-        np.zeros(fns.n_free)
-        if bounds_std is None
-        else sigma2 * np.where(np.isfinite(bounds_std), bounds_std**-2.0, 0.0)
-    )
-    cov, bounded = _bounded_covariance(ne.H, meat, (scale, M), free, (prior, sigma2))
-    noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
-    noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
-    out = _packaged(fns, cov, noise, dof)
-    return replace(out, bounded=tuple(n for n, b in zip(fns.free, bounded) if b))
+    return _bounded_covariance(*bread_meat, (scale, M), free, (prior, sigma2))
 
 
 def _bounded_covariance(

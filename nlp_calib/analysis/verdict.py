@@ -32,6 +32,7 @@ from nlp_calib.models.clock import is_lag
 from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
+from nlp_calib.sensors import sensor_for
 
 #: Relative parameter difference beyond which two converged solvers disagree.
 AGREE = 1e-4
@@ -44,8 +45,9 @@ def _loose(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]
     obs = run.checks.observability
     if obs is not None:
         out += [w.words() for w in obs.weak if w.std_reference <= NOT_OBSERVABLE]
+    sensor = sensor_for(run.scenario.sensor.kind, run.scenario.sensor.scale)
     for name, sd in run.std(solver).items():
-        ref = reference_scale(model, name, params[name])
+        ref = reference_scale(model, name, params[name], sensor.reference)
         if sd > WEAK * ref:
             unit = run.scenario.units[name]
             out.append(f"{name} is known only to ±{sd:.2g} {unit} (over {WEAK:g}× the {ref:.2g} needed)")

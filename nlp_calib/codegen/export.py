@@ -10,7 +10,7 @@ a Makefile.
 A 3-D sensor's problem exports ``(params[n], u[n_in x H], z[7]) -> (e[6], J[6 x m])``: ``z`` the
 camera's motion ``(x, y, z, qx, qy, qz, qw)``, ``e`` its ``Log`` error and ``J`` the columns of the
 parameters the problem estimates (``m = n − 1``: ``sensor_z`` never enters the residual), the
-mount's rotation perturbed on SO(3) from the left (see :mod:`nlp_calib.problem.sensors`).
+mount's rotation perturbed on SO(3) from the left (see :mod:`nlp_calib.sensors`).
 
 When the scenario fits the tracker lag, ``tracker_lag`` closes ``params`` and the functions take a
 fourth input, ``clock[2·n_in + 1]``: the inputs' rates at the window's first and last record (per

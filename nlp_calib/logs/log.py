@@ -8,8 +8,9 @@ from typing import Literal
 
 import numpy as np
 
+from nlp_calib.core import poses3d
 from nlp_calib.core.errors import DatasetError
-from nlp_calib.core.numeric import wrapped_difference
+from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 
 #: How an encoder reports: ``absolute`` readings lie in ``[0, max)`` (a steering angle);
 #: ``counter`` readings are a uint32 count that wraps at 2³² (a wheel).
@@ -176,6 +177,42 @@ class Log:
         if self.joint_stream is None:
             return None
         return self.joint_stream.slopes(self.time_s - self.encoder_lag_s)
+
+    def poses_3d(self) -> np.ndarray:
+        """The tracker's 3-D poses ``(x, y, z, qx, qy, qz, qw)`` (an error when it reports planar ones)."""
+        if self.T_world_sensor_3d is None:
+            raise DatasetError(
+                self.path, None, "a 3-D sensor needs 3-D tracker poses; this log has planar ones"
+            )
+        return self.T_world_sensor_3d
+
+    def heights(self) -> np.ndarray | None:
+        """The tracker's height at each record where it reports 3-D poses (None: planar ones)."""
+        return None if self.T_world_sensor_3d is None else np.asarray(self.T_world_sensor_3d[:, 2])
+
+    def with_poses_interpolated(self, bad: np.ndarray) -> Log:
+        """This log with the tracker poses of the records ``bad`` (a mask) interpolated in time from
+        the nearest good ones around (the nearest at either end): the planar pose along its
+        unwrapped heading, a 3-D pose along the shorter arc."""
+        if not bad.any() or (~bad).sum() < 2:
+            return self
+        t = self.time_s
+        T = np.array(self.T_world_sensor, dtype=float)
+        U = T.copy()
+        U[:, 2] = np.unwrap(U[:, 2])
+        for j in range(3):
+            T[bad, j] = np.interp(t[bad], t[~bad], U[~bad, j])
+        T[:, 2] = wrap_angle(T[:, 2])
+        out = replace(self, T_world_sensor=frozen(T))
+        if self.T_world_sensor_3d is None:
+            return out
+        good, k = np.flatnonzero(~bad), np.flatnonzero(bad)
+        after = np.clip(np.searchsorted(good, k), 1, good.size - 1)
+        a, b = good[after - 1], good[after]
+        s = np.clip((t[k] - t[a]) / np.maximum(t[b] - t[a], 1e-12), 0.0, 1.0)[:, None]
+        P = np.array(self.T_world_sensor_3d, dtype=float)
+        P[k] = poses3d.between_at(P[a], P[b], s)
+        return replace(out, T_world_sensor_3d=frozen(P))
 
     def select(self, start: int, stop: int) -> Log:
         """The records ``start:stop`` (time stays relative to the file's first record)."""

@@ -20,7 +20,6 @@ import numpy as np
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.clock import LAG_REFERENCE, base_name
-from nlp_calib.models.mount import MOUNT_REFERENCE
 
 if TYPE_CHECKING:
     from nlp_calib.models.drives import Drive
@@ -261,19 +260,27 @@ def header_parameters(model: KinematicModel, header: LogHeader) -> dict[str, flo
     return out
 
 
-def reference(model: KinematicModel, name: str) -> Reference:
+def reference(model: KinematicModel, name: str, sensor: Mapping[str, Reference] | None = None) -> Reference:
     """The precision a calibration should reach on parameter ``name``: ``relative`` (a fraction of
-    its value: gains and lengths) or ``absolute`` (in its unit)."""
-    known = {**model.reference, **MOUNT_REFERENCE, **SENSOR_REFERENCE, **LAG_REFERENCE}
+    its value: gains and lengths) or ``absolute`` (in its unit); ``sensor``: the sensor's own
+    (its mount's; a planar mount's by default)."""
+    known = {**model.reference, **(SENSOR_REFERENCE if sensor is None else sensor), **LAG_REFERENCE}
     return known.get(base_name(name), ("relative", 0.01))
 
 
-def reference_scale(model: KinematicModel, name: str, value: float) -> float:
+def reference_scale(
+    model: KinematicModel, name: str, value: float, sensor: Mapping[str, Reference] | None = None
+) -> float:
     """The precision a calibration should reach on parameter ``name`` at ``value``."""
-    kind, amount = reference(model, name)
+    kind, amount = reference(model, name, sensor)
     return amount * max(abs(value), 1e-9) if kind == "relative" else amount
 
 
-def reference_scales(model: KinematicModel, names: tuple[str, ...], values: np.ndarray) -> np.ndarray:
+def reference_scales(
+    model: KinematicModel,
+    names: tuple[str, ...],
+    values: np.ndarray,
+    sensor: Mapping[str, Reference] | None = None,
+) -> np.ndarray:
     """:func:`reference_scale` of each named parameter."""
-    return np.array([reference_scale(model, n, float(v)) for n, v in zip(names, values)])
+    return np.array([reference_scale(model, n, float(v), sensor) for n, v in zip(names, values)])

@@ -15,11 +15,13 @@ from xml.etree import ElementTree as ET
 
 import yaml
 
+from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import atomic_write_bytes, atomic_write_text
 from nlp_calib.core.version import __version__
 from nlp_calib.outputs import urdf
 from nlp_calib.outputs.results import result_document
 from nlp_calib.results import CalibrationRun
+from nlp_calib.results.handoff import MountPose
 
 CALIBRATION_FILE = "calibration.yaml"
 URDF_FILE = "sensor_mount.urdf.xml"
@@ -63,6 +65,7 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "solver": solver,
         "solver_choice": "first converged solver in the order " + ", ".join(run.solver_order()),
         "frames": {"parent": PARENT_FRAME, "sensor": run.log.sensor_frame},
+        "sensor": _sensor_entry(run, solver),
         "parameters": best["params"],
         "std": best["std"],
         "std_white_noise": best["std_white_noise"],
@@ -80,6 +83,20 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         ],
         "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
         "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
+    }
+
+
+def _sensor_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
+    """Which sensor the calibration holds the mount of, and that mount as a URDF joint."""
+    info, mount = run.scenario.sensor, _mount(run, solver)
+    return {
+        "kind": info.kind,
+        "group": info.group,
+        "scale": info.scale,
+        "params": list(info.params),
+        "convention": info.convention,
+        "held": {n: run.initial.get(n, 0.0) for n in info.held},
+        "urdf": {"xyz": list(mount.xyz), "rpy": list(mount.rpy), "calibrated": mount.calibrated},
     }
 
 
@@ -116,14 +133,10 @@ def calibration_yaml(doc: Mapping[str, Any]) -> str:
 
 
 def _mount_words(doc: Mapping[str, Any]) -> str:
-    """The mount's parameters as the header comment names them."""
-    if "sensor_roll" not in doc["parameters"]:
-        return "sensor_x, sensor_y, sensor_theta"
-    scale = "; scale: metres per trajectory unit" if "scale" in doc["parameters"] else ""
-    return (
-        "sensor_x, sensor_y, sensor_z, sensor_roll, sensor_pitch, sensor_yaw (URDF: fixed axes, "
-        f"R = Rz(yaw)·Ry(pitch)·Rx(roll); sensor_z held: planar driving cannot see it{scale})"
-    )
+    """The mount's parameters as the header comment names them (with what the sensor says of them)."""
+    sensor = doc["sensor"]
+    words = ", ".join(sensor["params"])
+    return f"{words} ({sensor['convention']})" if sensor.get("convention") else words
 
 
 def _comment_text(text: str) -> str:
@@ -131,29 +144,25 @@ def _comment_text(text: str) -> str:
 
 
 def _joint(run: CalibrationRun, solver: str) -> ET.Element:
-    p = run.reports[solver].result.param_dict()
     frame = run.log.sensor_frame
     joint = ET.Element("joint", {"name": f"{PARENT_FRAME}_to_{frame}", "type": "fixed"})
     ET.SubElement(joint, "parent", {"link": PARENT_FRAME})
     ET.SubElement(joint, "child", {"link": frame})
-    ET.SubElement(joint, "origin", _origin(run, p))
+    ET.SubElement(joint, "origin", _origin(run, solver))
     return joint
 
 
-def _origin(run: CalibrationRun, p: Mapping[str, float]) -> dict[str, str]:
-    """The joint's ``xyz`` and ``rpy``: a 3-D mount's six numbers (its held height as given); a
-    planar mount's x, y and yaw with the height, roll and pitch of the nominal mount (a bag's
-    /tf_static) where known, else 0."""
-    if run.scenario.sensor_3d:
-        angles = (p["sensor_roll"], p["sensor_pitch"], p["sensor_yaw"])
-        z = p["sensor_z"]
-    else:
-        z, roll, pitch = run.log.sensor_z_roll_pitch or (0, 0, 0)
-        angles = (roll, pitch, p["sensor_theta"])
-    return {
-        "xyz": f"{p['sensor_x']!r} {p['sensor_y']!r} {z!r}",
-        "rpy": " ".join(repr(a) for a in angles),
-    }
+def _origin(run: CalibrationRun, solver: str) -> dict[str, str]:
+    """The joint's ``xyz`` and ``rpy``, as the sensor gives its mount."""
+    mount = _mount(run, solver)
+    return {"xyz": " ".join(repr(v) for v in mount.xyz), "rpy": " ".join(repr(a) for a in mount.rpy)}
+
+
+def _mount(run: CalibrationRun, solver: str) -> MountPose:
+    mount = run.reports[solver].mount
+    if mount is None:
+        raise UsageError(f"the result of {run.scenario.name} holds no mount for {solver}; run it again")
+    return mount
 
 
 def _xml(element: ET.Element, comment: str) -> str:
@@ -165,13 +174,7 @@ def _xml(element: ET.Element, comment: str) -> str:
 def urdf_joint(run: CalibrationRun, solver: str) -> str:
     """A URDF ``<joint>`` placing the sensor frame on ``base_link`` with ``solver``'s estimate."""
     frame = run.log.sensor_frame
-    nominal = "the nominal mount's (/tf_static)" if run.log.sensor_z_roll_pitch else "0 (not known)"
-    what = (
-        "x, y, roll, pitch and yaw; z is held at the value given (known.sensor_z, 0 unless set), "
-        "which planar driving cannot see"
-        if run.scenario.sensor_3d
-        else f"x, y and yaw; z, roll and pitch are {nominal}, which planar driving cannot see"
-    )
+    what = _mount(run, solver).calibrated
     comment = (
         f" Sensor mounting pose calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
         f"solver {solver}. Calibrated: {what}. Paste this joint into the robot's <robot> description; "
@@ -227,12 +230,11 @@ def write_users_robot(
     solver = run.handoff_solver()
     if solver is None:
         return _none(folder / name)
-    p = run.reports[solver].result.param_dict()
-    if run.scenario.sensor_3d:
-        pose = (p["sensor_x"], p["sensor_y"], p["sensor_yaw"])
-        text = urdf.reposed(description, link, *pose, (p["sensor_roll"], p["sensor_pitch"]))
-    else:
-        text = urdf.reposed(description, link, p["sensor_x"], p["sensor_y"], p["sensor_theta"])
+    mount = _mount(run, solver)
+    roll, pitch, yaw = mount.rpy
+    # The user's own height is kept, and their roll and pitch where the sensor calibrated neither.
+    tilt = (roll, pitch) if mount.tilted else None
+    text = urdf.reposed(description, link, mount.xyz[0], mount.xyz[1], yaw, tilt)
     atomic_write_bytes(folder / name, text)
     return [folder / name]
 

@@ -214,18 +214,16 @@ def _by_reason(counts: Mapping[str, int]) -> str:
 
 
 def camera_lines(run: CalibrationRun) -> list[str]:
-    """A 3-D sensor's start and selection, in words (nothing for a planar one)."""
-    data = run.data
-    if not run.scenario.sensor_3d:
-        return []
+    """A sensor's own start and selection of windows, in words (nothing where it has none)."""
+    data, kind = run.data, run.scenario.sensor.kind
     lines = []
     if data.start_dropped is not None:
         lines.append(
-            "3-D sensor: the 'initial' column is the closed-form start alone (floor normal, then the "
-            f"planar hand-eye); its windows left out: {_by_reason(data.start_dropped)}"
+            f"sensor {kind}: the 'initial' column is its closed-form start alone; its windows left out: "
+            f"{_by_reason(data.start_dropped)}"
         )
     if data.fit_dropped is not None:
-        lines.append(f"3-D sensor: fitted windows left out: {_by_reason(data.fit_dropped)}")
+        lines.append(f"sensor {kind}: fitted windows left out: {_by_reason(data.fit_dropped)}")
     return lines
 
 

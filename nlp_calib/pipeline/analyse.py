@@ -20,10 +20,8 @@ from nlp_calib.analysis.metrics import each_metrics, geometry, integrate, segmen
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
-from nlp_calib.core import memory, poses3d
-from nlp_calib.logs import Log
-from nlp_calib.models import SENSOR_PARAMS, header_parameters
-from nlp_calib.models.mount import mount_rotation
+from nlp_calib.core import memory
+from nlp_calib.models import header_parameters
 from nlp_calib.pipeline import validation
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog
@@ -267,21 +265,19 @@ def track_series(
         faults=tuple((f.record - a, f.kind) for f in view.findings.report.faults if a <= f.record < b),
         holdout_start=windows.fit[1] - a if windows.fit[1] < b - 1 else None,
         segments=tuple(rows),
-        tracker_z=_heights(windows.selected),
+        tracker_z=fit.fns.sensor.heights(windows.selected),
         level=_level(fit, results, ref),
     )
 
 
 def _level(fit: Fit, results: Mapping[str, SolverResult], ref: np.ndarray) -> np.ndarray | None:
-    """A 3-D sensor's world frame turned onto the base's frame at the first record, by the first
-    converged estimate's mount (the start's when none converged): ``R_X·R(q_0)ᵀ``."""
-    if fit.fns.sensor.pose_rows != 7:
-        return None
+    """The sensor's world frame turned onto the base's frame at the first record (None where they
+    are one: a planar tracker's), by the first converged estimate's mount (the start's when none
+    converged)."""
     names = fit.fns.names
     done = [r.params for r in results.values() if r.converged]
     params = done[0] if done else np.array([fit.problem.start.initial[n] for n in names])
-    R_X = mount_rotation(dict(zip(names, params)))
-    return np.asarray(R_X @ poses3d.quat_to_matrix(ref[0, 3:7]).T)
+    return fit.fns.sensor.level(dict(zip(names, map(float, params))), ref[0])
 
 
 def model_check(fit: Fit, prepared: PreparedLog) -> ModelCheckSeries | None:
@@ -295,7 +291,7 @@ def model_check(fit: Fit, prepared: PreparedLog) -> ModelCheckSeries | None:
     header = header_parameters(model, log.header)
     initial = fit.problem.start.initial
     params = {n: float(header.get(n, initial[n])) for n in model.kinematic_params}
-    params.update(dict.fromkeys(SENSOR_PARAMS, 0.0))
+    params.update(dict.fromkeys(fit.fns.sensor.params, 0.0))
     p = np.array([params[n] for n in fit.fns.names])
     residual = prepared.scenario.objective.residual
     inputs = model.inputs(log, residual.steering_sample)
@@ -383,8 +379,3 @@ def analyse_log(
         steering = view.prepared.scenario.objective.residual.steering_sample
         odo = odometry(fit, windows, results[wanted.odometry].params, steering)
     return dataclasses.replace(figures, series=series, odometry=odo)
-
-
-def _heights(log: Log) -> np.ndarray | None:
-    """The tracker's height at each record where it reports 3-D poses (None: a planar tracker)."""
-    return None if log.T_world_sensor_3d is None else np.asarray(log.T_world_sensor_3d[:, 2])

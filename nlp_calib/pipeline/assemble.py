@@ -13,9 +13,8 @@ import numpy as np
 
 from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
-from nlp_calib.models import KinematicModel, param_units
+from nlp_calib.models import KinematicModel
 from nlp_calib.models.clock import LAG_UNIT
-from nlp_calib.models.mount import MOUNT_UNITS
 from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis
 from nlp_calib.pipeline.build import StartingPoint
@@ -31,6 +30,7 @@ from nlp_calib.results import (
     Encoder,
     LogInfo,
     ScenarioInfo,
+    SensorInfo,
     SolverReport,
     SolverResult,
     Verdict,
@@ -49,10 +49,10 @@ def scenario_info(sc: Scenario, model: KinematicModel, lags: Sequence[str] = ())
         path=None if sc.path is None else str(sc.path),
         model=sc.model,
         units={**_units(sc, model), **dict.fromkeys(lags, LAG_UNIT)},
+        sensor=sensor_info(sc),
         headline=tuple(model.headline),
         dataset=str(sc.dataset),
         datasets=tuple(str(e.path) for e in sc.data.logs) if joint else (),
-        solvers=sc.solvers,
         labels={name: solver_label(name) for name in sc.solvers},
         residual=dataclasses.asdict(sc.objective.residual),
         robust=dataclasses.asdict(sc.objective.robust),
@@ -63,11 +63,23 @@ def scenario_info(sc: Scenario, model: KinematicModel, lags: Sequence[str] = ())
 
 
 def _units(sc: Scenario, model: KinematicModel) -> dict[str, str]:
-    """Every parameter's unit: the model's, then its sensor's mount (a 3-D one's and the scale's)."""
-    if not sc.objective.sensor.is_3d:
-        return param_units(model)
+    """Every parameter's unit: the model's, then its sensor's mount's."""
     kinematic = {n: model.units[n] for n in model.kinematic_params}
-    return {**kinematic, **{n: MOUNT_UNITS[n] for n in sc.objective.sensor.params()}}
+    return {**kinematic, **sc.objective.sensor.sensor.units}
+
+
+def sensor_info(sc: Scenario) -> SensorInfo:
+    """What the outputs say about the sensor: what its plug-in says of itself."""
+    sensor = sc.objective.sensor.sensor
+    return SensorInfo(
+        kind=sensor.kind,
+        group=sensor.group,
+        scale=sc.objective.sensor.scale,
+        params=sensor.params,
+        held=sensor.held,
+        held_why=sensor.held_why,
+        convention=sensor.convention,
+    )
 
 
 def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
@@ -143,17 +155,17 @@ def _report(
     ranges = dict(zip(header.encoder_names, header.encoder_max))
     std = believed_std(u.std, blocked)
     controller = controller_params(prepared.model, result.names, result.params, std, u.correlation, ranges)
-    return SolverReport(result, u, *figures.scores[name], controller)
+    sensor = prepared.scenario.objective.sensor.sensor
+    mount = sensor.mount_pose(result.param_dict(), header.sensor_z_roll_pitch)
+    return SolverReport(result, u, *figures.scores[name], controller, mount)
 
 
 def mount_notes(sc: Scenario, start: StartingPoint) -> list[str]:
-    """A 3-D sensor's held height, said once."""
-    if not sc.objective.sensor.is_3d:
-        return []
-    z = start.initial.get("sensor_z", 0.0)
+    """The sensor's held parameters, said once, with why they are held."""
+    sensor = sc.objective.sensor.sensor
     return [
-        f"sensor_z is held at {z:g} m: planar driving cannot determine a 3-D sensor's height "
-        "(give the measured one as known.sensor_z)"
+        f"{n} is held at {start.initial.get(n, 0.0):g} {sensor.units[n]}: {sensor.held_why}"
+        for n in sensor.held
     ]
 
 
@@ -179,10 +191,10 @@ def threshold_notes(sc: Scenario, results: Mapping[str, SolverResult]) -> list[s
 
 
 def _start_dropped(start: StartingPoint) -> dict[str, int] | None:
-    """The windows a 3-D sensor's closed-form start left out, by reason (None: no closed form)."""
-    if start.camera is None or start.auto is None:
+    """The windows the sensor's closed-form start left out, by reason (None: it selects none)."""
+    if start.sensor is None or start.auto is None or start.sensor.dropped is None:
         return None
-    return start.camera.selection.counts()
+    return dict(start.sensor.dropped)
 
 
 def assemble_run(

@@ -15,10 +15,8 @@ import numpy as np
 from nlp_calib.analysis import uncertainty
 from nlp_calib.core.errors import ScenarioError
 from nlp_calib.logs import Log
-from nlp_calib.models import SENSOR_PARAMS, KinematicModel, header_parameters
-from nlp_calib.models.camera_start import FIT_REASONS, CameraStart, Selection
+from nlp_calib.models import KinematicModel, header_parameters
 from nlp_calib.models.clock import LAG_PARAM, base_name, is_lag, lag_names
-from nlp_calib.models.mount import SCALE_PARAM, mount_rotation
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import (
@@ -28,9 +26,9 @@ from nlp_calib.problem import (
     build,
     build_residual_data,
     interval_inputs,
-    over_columns,
 )
-from nlp_calib.problem.camera import camera_initial_guess, fit_selection
+from nlp_calib.problem.start import closed_form_start, fit_windows
+from nlp_calib.sensors import SensorStart
 from nlp_calib.solvers import Priors, ProblemEvaluator, get_solver
 from nlp_calib.solvers.backends import Backend, BackendOptions, make_backend
 from nlp_calib.solvers.evaluation import requests
@@ -86,18 +84,15 @@ def lag_start(sc: Scenario, n_logs: int, given: Sequence[float] = ()) -> dict[st
 
 
 def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[str, float]:
-    """The log header's values, overridden by the scenario's mapping (``auto`` fills in later). A
-    3-D mount's held ``sensor_z`` is 0 and its scale 1 unless the scenario gives them."""
+    """The log header's values, overridden by the scenario's mapping (``auto`` fills in later); the
+    mount's from the sensor (a planar one: the header's nominal mount; a 3-D one: its held height
+    0 and its scale 1) unless the scenario gives them."""
     p, sensor = sc.parameters, sc.objective.sensor
     guess = dict(model.defaults)
     guess.update(
         {n: v for n, v in header_parameters(model, log.header).items() if n in model.kinematic_params}
     )
-    if sensor.is_3d:
-        guess.update(dict.fromkeys(sensor.held(), 0.0))
-        guess.update({SCALE_PARAM: 1.0} if SCALE_PARAM in sensor.params() else {})
-    else:
-        guess.update(zip(SENSOR_PARAMS, log.header.T_base_sensor))
+    guess.update(sensor.sensor.initial(log.header))
     if isinstance(p.initial_guess, Mapping):
         guess.update(p.initial_guess)
     guess.update(p.known)
@@ -117,40 +112,25 @@ class StartingPoint:
 
     initial: Mapping[str, float]
     auto: Mapping[str, float] | None
-    #: A 3-D sensor's start (closed-form, or the given mount's floor normal; None: planar): the
-    #: floor normal the fit's windows are selected by, and the windows the closed form left out.
-    camera: CameraStart | None
+    #: The sensor's start (its closed form, or what it makes of a given mount; None: nothing to
+    #: select the fit's windows by): its own record the fit's windows are selected by, and the
+    #: windows the closed form left out.
+    sensor: SensorStart | None
     x0: np.ndarray
     x_fixed: np.ndarray
     lower: np.ndarray | None
     upper: np.ndarray | None
 
 
-def auto_guess(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int) -> dict[str, float]:
-    """The model's closed-form estimate from the windows of records ``start:stop`` (no guess needed)."""
-    residual = sc.objective.residual
-    data = build_residual_data(fns, log.select(start, stop), residual)
-    rows = fns.n_inputs * data.horizon
-    # Windows overlapping by three quarters carry nearly all the information at a fraction
-    # of the cost of every window.
-    step = max(1, data.horizon // (4 * residual.stride))
-    columns = data.columns_of(np.arange(0, data.n_residuals, step))
-
-    def base_motion(params: Mapping[str, float]) -> np.ndarray:
-        full = np.array([params.get(n, 0.0) for n in fns.names])  # the clock does not move a window
-        return over_columns(fns.predict_window, full, columns[:rows])[0]
-
-    return fns.model.initial_guess(columns[:rows], columns[rows : rows + 3], base_motion)
-
-
-def camera_guess(
-    sc: Scenario, fns: ProblemFunctions, data: ResidualData, initial: Mapping[str, float]
-) -> CameraStart:
-    """A 3-D sensor's closed-form start (:func:`~nlp_calib.problem.camera.camera_initial_guess`) on
-    ``data``, the held and fixed parameters at their ``initial`` values."""
+def auto_start(
+    sc: Scenario, fns: ProblemFunctions, log: Log, records: tuple[int, int], initial: Mapping[str, float]
+) -> SensorStart:
+    """The sensor's closed-form start (:func:`~nlp_calib.problem.start.closed_form_start`) on the
+    records ``records`` of ``log``, the fixed parameters at their ``initial`` values."""
+    data = build_residual_data(fns, log.select(*records), sc.objective.residual)
     known = {n: initial[n] for n in fns.fixed}
     with scenario_key(sc, "initial_guess"):
-        return camera_initial_guess(fns, data, known=known)
+        return closed_form_start(fns, data, known, sc.objective.residual.stride)
 
 
 def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -177,29 +157,19 @@ def starting_point(
     ``lags``, one per log, when given) and bounds."""
     initial = initial_parameters(sc, fns.model, log)
     initial.update(lag_start(sc, fns.spec.lags, lags))
-    auto, camera = None, None
-    if sc.parameters.initial_guess == "auto" and sc.objective.sensor.is_3d:
-        data = build_residual_data(fns, log.select(start, stop), sc.objective.residual)
-        camera = camera_guess(sc, fns, data, initial)
-        auto = camera.params
-    elif sc.parameters.initial_guess == "auto":
-        auto = auto_guess(sc, fns, log, start, stop)
+    sensor = (
+        auto_start(sc, fns, log, (start, stop), initial) if sc.parameters.initial_guess == "auto" else None
+    )
+    auto = None if sensor is None else sensor.params
     if auto is not None:
         initial.update({n: v for n, v in auto.items() if n not in sc.parameters.fixed})
-    if camera is None and sc.objective.sensor.is_3d:
-        camera = given_mount(initial)
+    if sensor is None:
+        sensor = fns.sensor.given(initial)
     x0 = np.array([initial[n] for n in fns.free])
     bounded = sc.parameters.bounds or any(base_name(n) == LAG_PARAM for n in fns.free)
     lower, upper = _bounds(sc, fns, x0) if bounded else (None, None)
     x_fixed = np.array([initial[n] for n in fns.fixed])
-    return StartingPoint(initial, auto, camera, x0, x_fixed, lower, upper)
-
-
-def given_mount(initial: Mapping[str, float]) -> CameraStart:
-    """A given 3-D mount as a start: its floor normal in the camera frame is the third row of its
-    rotation (no windows were selected)."""
-    R = mount_rotation(initial)
-    return CameraStart(dict(initial), R[2], Selection(np.zeros(0, dtype=np.int64)))
+    return StartingPoint(initial, auto, sensor, x0, x_fixed, lower, upper)
 
 
 def evaluated(sc: Scenario, solvers: Sequence[str]) -> set[str]:
@@ -221,12 +191,11 @@ def prepare_backend(sc: Scenario, fns: ProblemFunctions, solvers: Sequence[str],
     return backend
 
 
-def camera_selected(fns: ProblemFunctions, data: ResidualData, camera: CameraStart) -> ResidualData:
-    """``data`` without the windows :func:`~nlp_calib.problem.camera.fit_selection` leaves out,
-    their number by reason kept with it."""
-    selection = fit_selection(fns, data, camera)
-    counts = {r: n for r, n in selection.counts().items() if r in FIT_REASONS}
-    return replace(data.select(selection.kept(FIT_REASONS)), dropped_selection=counts)
+def sensor_selected(fns: ProblemFunctions, data: ResidualData, start: SensorStart) -> ResidualData:
+    """``data`` without the windows the sensor's start leaves out (:func:`~nlp_calib.problem.start.
+    fit_windows`), their number by reason kept with it."""
+    keep, counts = fit_windows(fns, data, start)
+    return replace(data.select(keep), dropped_selection=counts)
 
 
 def no_priors(n_free: int) -> Priors:
@@ -245,9 +214,9 @@ class Binder:
     #: Per interval / record of the whole log: windows must not cross / start or end at them.
     bad_intervals: np.ndarray | None = None
     bad_records: np.ndarray | None = None
-    #: A 3-D sensor's start: windows whose rotation axis is off its floor normal, or that turn
-    #: against the wheels, are left out (``FIT_REASONS``).
-    camera: CameraStart | None = None
+    #: The sensor's start, which may leave some windows out (a camera's: those whose rotation axis
+    #: is off its floor normal, or that turn against the wheels).
+    start: SensorStart | None = None
     #: Bounds of the free parameters every internal fit keeps to (None: none).
     bounds: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -262,8 +231,8 @@ class Binder:
             bad_intervals=None if self.bad_intervals is None else self.bad_intervals[start : stop - 1],
             bad_records=None if self.bad_records is None else self.bad_records[start:stop],
         )
-        if self.camera is not None and data.n_residuals:
-            data = camera_selected(self.fns, data, self.camera)
+        if self.start is not None and self.start.selection is not None and data.n_residuals:
+            data = sensor_selected(self.fns, data, self.start)
         if data.n_residuals < self.fns.n_free:
             at_faults = (
                 f" ({data.dropped_faulty} windows crossing faults were left out; "
@@ -385,9 +354,7 @@ def build_stage(
     point = starting_point(sc, fns, log, start, stop, lags)
     backend = prepare_backend(sc, fns, solvers, n_records)
     bounds = None if point.lower is None or point.upper is None else (point.lower, point.upper)
-    binder = Binder(
-        sc, fns, backend, point.x_fixed, no_priors(fns.n_free), camera=point.camera, bounds=bounds
-    )
+    binder = Binder(sc, fns, backend, point.x_fixed, no_priors(fns.n_free), start=point.sensor, bounds=bounds)
     priors, _ = weigh_priors(binder, log, start, stop, point.x0)
     return Problem(fns, point, replace(binder, priors=priors))
 

@@ -335,10 +335,14 @@ def check_against_model(sc: Scenario, source: str) -> None:
     _check_overlaps(sc, source)
 
 
-def refuse_3d(sc: Scenario, what: str, why: str) -> None:
-    """A one-line error when ``sc``'s sensor is 3-D and ``what`` is planar only (``why``)."""
-    if sc.objective.sensor.is_3d:
-        raise ScenarioError(f"{sc.where()}: sensor: 3d: {what} is not available for a 3-D sensor: {why}")
+def refuse_off_the_base(sc: Scenario, what: str, why: str) -> None:
+    """A one-line error when ``what`` needs the base's planar pose and ``sc``'s sensor does not
+    give it (``why``)."""
+    sensor = sc.objective.sensor.sensor
+    if not sensor.planar_base:
+        raise ScenarioError(
+            f"{sc.where()}: sensor: {sensor.kind}: {what} is not available for this sensor: {why}"
+        )
 
 
 def scenario_params(sc: Scenario) -> tuple[str, ...]:

@@ -9,7 +9,7 @@ A residual compares a horizon window's predicted sensor motion with the tracker'
 sensor mounting pose. Where ``M`` and ``∂M/∂x`` come from is :mod:`nlp_calib.problem.motion`'s
 business (directly from one interval's inputs when ``H = 1``, from prefix poses otherwise); what
 the sensor measures (a planar pose, or a 3-D one: ``e = Log((s·Z)⁻¹·T⁻¹·lift(M)·T)``, 6 rows) is
-:mod:`nlp_calib.problem.sensors`'; every per-residual Function here is built once on top of both.
+:mod:`nlp_calib.sensors`'; every per-residual Function here is built once on top of both.
 
 Per-residual Functions take two mapped inputs: ``motion`` (the window's motion data, see
 :class:`~nlp_calib.problem.motion.MotionSymbols`) and ``data = [z, w]`` (the tracker's motion
@@ -34,8 +34,8 @@ from nlp_calib.models.base import INTEGRATIONS, KinematicModel
 from nlp_calib.models.clock import lag_names
 from nlp_calib.problem import clock
 from nlp_calib.problem import motion as motion_sources
-from nlp_calib.problem.sensors import Sensor, sensor_for
 from nlp_calib.problem.trajectory import TrajectoryFunctions, base_motion, fn, split_params
+from nlp_calib.sensors import Sensor, sensor_for
 from nlp_calib.symbolic.kernels import KERNELS, kernel_function
 
 _CSE = {"cse": True}
@@ -71,7 +71,7 @@ class ProblemSpec:
     integration: str = "exact"
     kernel: str = "huber"
     fixed: tuple[str, ...] = ()
-    #: What the tracker measures: ``planar`` poses or ``3d`` ones (see :mod:`~nlp_calib.problem.sensors`).
+    #: What the tracker measures: ``planar`` poses or ``3d`` ones (see :mod:`~nlp_calib.sensors`).
     sensor: str = "planar"
     #: ``free``: 3-D poses known up to scale (monocular visual odometry): ``scale`` is estimated.
     scale: str = "fixed"
@@ -167,12 +167,12 @@ class ProblemFunctions(TrajectoryFunctions):
 
     @property
     def sensor(self) -> Sensor:
-        """What the tracker measures and how the mount enters (see :mod:`~nlp_calib.problem.sensors`)."""
+        """What the tracker measures and how the mount enters (see :mod:`~nlp_calib.sensors`)."""
         return sensor_for(self.spec.sensor, self.spec.scale)
 
     @property
     def manifold_sensor(self) -> bool:
-        """True when the sensor's mount is perturbed on its group (see :mod:`~nlp_calib.problem.sensors`)."""
+        """True when the sensor's mount is perturbed on its group (see :mod:`~nlp_calib.sensors`)."""
         return self.sensor.manifold(self.free)
 
     @property

@@ -3,7 +3,7 @@ covariance, a window's motion, and SE(2) ``between`` with its Jacobians.
 
 They take the full parameter vector (free and fixed, in model order) rather than the free one,
 because trajectories, metrics, reports and the closed-form start evaluate a given calibration.
-Poses and motions are in the sensor's layout (:mod:`nlp_calib.problem.sensors`): ``(x, y, theta)``
+Poses and motions are in the sensor's layout (:mod:`nlp_calib.sensors`): ``(x, y, theta)``
 for a planar sensor, ``(x, y, z, qx, qy, qz, qw)`` in the trajectory's own units for a 3-D one.
 """
 
@@ -14,7 +14,7 @@ import functools
 import casadi as ca
 
 from nlp_calib.models.base import KinematicModel
-from nlp_calib.problem.sensors import Sensor
+from nlp_calib.sensors import Sensor
 from nlp_calib.symbolic import se2
 
 _CSE = {"cse": True}
@@ -70,7 +70,7 @@ class TrajectoryFunctions:
 
     @property
     def sensor(self) -> Sensor:
-        """The host's sensor (see :mod:`~nlp_calib.problem.sensors`)."""
+        """The host's sensor (see :mod:`~nlp_calib.sensors`)."""
         raise NotImplementedError
 
     @property

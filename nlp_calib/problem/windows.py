@@ -84,7 +84,7 @@ class ResidualData:
     horizon: int
     dropped_stationary: int
     dropped_faulty: int = 0
-    #: A 3-D sensor's windows left out by reason (:func:`nlp_calib.problem.camera.fit_selection`).
+    #: The windows the sensor's start left out, by reason (:func:`nlp_calib.problem.start.fit_windows`).
     dropped_selection: Mapping[str, int] | None = None
     #: Problems with a time offset: the offset each log's inputs were re-sampled at and each input's
     #: rate at each record (:mod:`nlp_calib.problem.clock`); None: no clock data.
@@ -303,13 +303,7 @@ def _summed(counts: Sequence[Mapping[str, int] | None]) -> dict[str, int] | None
 
 def tracker_poses(fns: ProblemFunctions, log: Log) -> np.ndarray:
     """The log's tracker poses in the layout of the problem's sensor."""
-    if fns.sensor.pose_rows == 3:
-        return log.T_world_sensor
-    if log.T_world_sensor_3d is None:
-        raise ProblemError(
-            f"{log.path}: a 3-D sensor's problem needs 3-D tracker poses; the log has planar ones"
-        )
-    return log.T_world_sensor_3d
+    return fns.sensor.poses(log)
 
 
 def build_residual_data(

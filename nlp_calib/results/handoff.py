@@ -33,3 +33,16 @@ class ControllerParams:
     elsewhere: tuple[Placement, ...]
     #: What the values assume of the encoders (e.g. a counter's range being one wheel turn).
     assumes: str = ""
+
+
+@dataclass(frozen=True)
+class MountPose:
+    """The sensor's mount in a robot's terms, as its sensor plug-in says it: a URDF joint's ``xyz``
+    (m) and ``rpy`` (rad, fixed axes), and what of it was calibrated and what is nominal, in words
+    (the height is never calibrated: planar driving cannot see it)."""
+
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float]
+    calibrated: str
+    #: Whether the roll and pitch were calibrated (else they are the nominal mount's).
+    tilted: bool = False

@@ -30,10 +30,27 @@ from nlp_calib.results.checks import (
 )
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
-from nlp_calib.results.handoff import ControllerParams
+from nlp_calib.results.handoff import ControllerParams, MountPose
 from nlp_calib.results.series import OdometryTrack, RunSeries
 from nlp_calib.results.solver import SolverResult
 from nlp_calib.results.uncertainty import Uncertainty
+
+
+@dataclass(frozen=True)
+class SensorInfo:
+    """The run's sensor as its plug-in describes itself: ``kind`` (its registry name, as the
+    scenario's ``sensor`` gives it), the pose ``group`` it measures in, its poses' ``scale``
+    (``fixed``, or ``free`` when known up to scale), its mount's parameters and those the drive
+    never determines, held, with why."""
+
+    kind: str = "planar"
+    group: str = "SE(2)"
+    scale: str = "fixed"
+    params: tuple[str, ...] = ("sensor_x", "sensor_y", "sensor_theta")
+    held: tuple[str, ...] = ()
+    held_why: str = ""
+    #: What its parameters mean, in words (an angle convention), where the names do not say it.
+    convention: str = ""
 
 
 @dataclass(frozen=True)
@@ -49,20 +66,21 @@ class ScenarioInfo:
     headline: tuple[str, ...]
     dataset: str
     datasets: tuple[str, ...]
-    solvers: tuple[str, ...]
+    #: Each solver's display name, in the scenario's order of solvers.
     labels: Mapping[str, str]
     residual: Mapping[str, Any]
     robust: Mapping[str, Any]
     initial_guess: str
+    sensor: SensorInfo = field(default_factory=SensorInfo)
 
     def label(self, solver: str) -> str:
         """The display name of ``solver``."""
         return self.labels.get(solver, solver)
 
     @property
-    def sensor_3d(self) -> bool:
-        """Whether the sensor's mount is 3-D (a camera's: roll, pitch and yaw among the parameters)."""
-        return "sensor_roll" in self.units
+    def solvers(self) -> tuple[str, ...]:
+        """The scenario's solvers, in its order."""
+        return tuple(self.labels)
 
 
 @dataclass(frozen=True)
@@ -148,6 +166,8 @@ class SolverReport:
     holdout: TrajectoryMetrics | None
     #: The estimate in the robot stack's terms (its ros2_control controller's parameters).
     controller: ControllerParams | None = None
+    #: The sensor's mount in a robot's terms (a URDF joint), as the sensor says it.
+    mount: MountPose | None = None
 
 
 #: The verdict's levels.
