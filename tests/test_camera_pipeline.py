@@ -390,7 +390,9 @@ def test_the_c_examples_window_names_the_tum_file_its_lines_count(tmp_path: Path
     assert match is not None and match.group(3) == "camera_demo.tum", example.window
     lines = (REPO / "scenarios" / "data" / "camera_demo.tum").read_text().splitlines()
     a, b = (np.array(lines[int(match.group(k)) - 1].split()[1:], dtype=float) for k in (1, 2))
-    z = example.column[-8:-1]  # u, then z, then the window's weight
+    # u, then z, then the clock (two joints' rates at both ends, the lag read at, the log), the weight
+    clock = 2 * 2 + 2
+    z = example.column[-8 - clock : -1 - clock]
     z = z if z[6] * poses3d.between(a, b)[6] > 0 else np.r_[z[:3], -z[3:]]
     assert np.allclose(poses3d.between(a, b), z, atol=1e-9)
 

@@ -33,7 +33,7 @@ from nlp_calib.analysis.counters import screen_counters
 from nlp_calib.analysis.joint_repair import repair_joints
 from nlp_calib.analysis.readings import Readings, interpolated_over, readings, turning
 from nlp_calib.analysis.readings import unit as unit_of
-from nlp_calib.analysis.streams import off_neighbours, scatter, stuck_runs
+from nlp_calib.analysis.streams import off_neighbours, printed_step, scatter, stuck_runs
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.logs.log import frozen
@@ -85,7 +85,9 @@ def tracker_faults(log: Log, sensor: Sensor) -> list[Fault]:
     T, position = sensor.jump_signal(log)
     length = sensor.length_unit
     t, lines = log.time_s, log.line_numbers
-    sc = scatter(t, T)
+    # The printed precision of the poses (and their discretisation, the path's own bend: see
+    # streams.path_bend) is the least scatter a miss is judged by, however clean the data.
+    sc = scatter(t, T, printed_step(T))
     if not np.any(sc.floor > 0):
         # Poses without scatter at rest (a noise-free simulation) give no scale to judge a miss by:
         # a smooth path's own curvature would be taken for glitches.

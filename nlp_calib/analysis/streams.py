@@ -53,6 +53,24 @@ def robust_sigma(x: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
 
+def printed_step(y: np.ndarray) -> np.ndarray:
+    """Each column's printed precision: the step of the decimals its values were written with (0
+    when they carry more than nine, or none could be told): rounding to it is noise the screen
+    must allow for however clean the data are."""
+    y = np.asarray(y, dtype=float).reshape(len(y), -1)
+    out = np.zeros(y.shape[1])
+    for c in range(y.shape[1]):
+        v = y[np.isfinite(y[:, c]), c]
+        for k in range(10):
+            scaled = v * 10.0**k
+            if not v.size or np.max(np.abs(scaled)) > 1e9:
+                break  # beyond what a double tells apart from its decimals
+            if np.max(np.abs(scaled - np.round(scaled))) < 1e-6:
+                out[c] = 10.0**-k
+                break
+    return out
+
+
 @dataclass(frozen=True)
 class Scatter:
     """A stream's scatter about the chord between a reading's neighbours, per component: ``floor``

@@ -341,7 +341,7 @@ def refuse_off_the_base(sc: Scenario, what: str, why: str) -> None:
     sensor = sc.objective.sensor.sensor
     if not sensor.planar_base:
         raise ScenarioError(
-            f"{sc.where()}: sensor: {sensor.kind}: {what} is not available for this sensor: {why}"
+            f"{sc.where()}: sensor: {sensor.kind}: {what} is not available for a {sensor.label}: {why}"
         )
 
 

@@ -63,7 +63,9 @@ def closed_form_start(
         full = np.array([params.get(n, 0.0) for n in planar.names])  # a sensor's own do not move the base
         return over_columns(planar.predict_window, full, U)[0]
 
-    return fns.sensor.closed_form(fns.model, U, z, base_motion, dict(known or {}))
+    # Only what the problem holds is known: a value it fits is not.
+    held = {n: v for n, v in (known or {}).items() if n in fns.fixed}
+    return fns.sensor.closed_form(fns.model, U, z, base_motion, held)
 
 
 def fit_windows(

@@ -54,6 +54,8 @@ class Sensor(Protocol):
     @property
     def kind(self) -> str: ...  # its registry name, as a scenario's ``sensor`` gives it
     @property
+    def label(self) -> str: ...  # what it is, in words
+    @property
     def group(self) -> str: ...  # the pose group it measures in: "SE(2)", "SE(3)"
     @property
     def params(self) -> tuple[str, ...]: ...

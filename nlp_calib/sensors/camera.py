@@ -48,6 +48,7 @@ class CameraPose:
     """A 3-D pose sensor (see the module docstring); ``scale_free``: poses known up to scale."""
 
     kind: ClassVar[str] = "3d"
+    label: ClassVar[str] = "3-D sensor"
     group: ClassVar[str] = "SE(3)"
     held: ClassVar[tuple[str, ...]] = HELD_PARAMS
     angles: ClassVar[tuple[str, ...]] = MOUNT_ANGLES

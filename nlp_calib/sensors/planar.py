@@ -27,6 +27,7 @@ class PlanarPose:
     """A planar pose sensor (see the module docstring)."""
 
     kind: ClassVar[str] = "planar"
+    label: ClassVar[str] = "planar pose sensor"
     group: ClassVar[str] = "SE(2)"
     params: ClassVar[tuple[str, ...]] = SENSOR_PARAMS
     units: ClassVar[Mapping[str, str]] = MappingProxyType(dict(SENSOR_UNITS))
