@@ -149,6 +149,10 @@ def lag_lines(run: CalibrationRun) -> list[str]:
     data, solver = run.data, run.chosen_solver() or run.solver_order()[0]
     est = data.lag_estimate
     assert est is not None
+    if not est.converged:
+        return [
+            f"tracker lag not fitted: no fit converged (the encoders are read {1e3 * data.tracker_lag_s:.1f} ms early)"
+        ]
     std = run.std(solver)
     params = run.reports[solver].result.param_dict()
     out = []
