@@ -150,9 +150,8 @@ def lag_lines(run: CalibrationRun) -> list[str]:
     est = data.lag_estimate
     assert est is not None
     if not est.converged:
-        return [
-            f"tracker lag not fitted: no fit converged (the encoders are read {1e3 * data.tracker_lag_s:.1f} ms early)"
-        ]
+        early = 1e3 * data.tracker_lag_s
+        return [f"tracker lag not fitted: no fit converged (the encoders are read {early:.1f} ms early)"]
     std = run.std(solver)
     params = run.reports[solver].result.param_dict()
     out = []
