@@ -129,10 +129,33 @@ def cross_validate(
     score: Score,
     full: np.ndarray,
     whole: NormalEquations | None = None,
+    against: Sequence[np.ndarray] = (),
 ) -> CrossValidation:
-    """``k`` folds over the records ``fit``, each scored on its block by ``score(params, a, b)``,
-    beside the full fit's parameters ``full`` scored on the same block. ``whole``: the normal
+    """``k`` folds over the records ``fit`` (see :func:`folds_over`)."""
+    folds = folds_over(binder, data, fit, blocks(*fit, k), (x, full), canonical, score, whole, against)
+    return combine(binder.fns.names, folds)
+
+
+def folds_over(
+    binder: Binder,
+    data: ResidualData,
+    fit: tuple[int, int],
+    ranges: Sequence[tuple[int, int]],
+    start: tuple[np.ndarray, np.ndarray],
+    canonical: Canonical,
+    score: Score,
+    whole: NormalEquations | None = None,
+    against: Sequence[np.ndarray] = (),
+) -> list[Fold]:
+    """One refit of ``data`` (records ``fit``) without each record range of ``ranges`` (blocks, or
+    whole logs), from ``start = (x, full)``: the whole fit's free values and full parameters. Each
+    fold is scored on its range by ``score(params, a, b)``, beside the full fit's parameters on the
+    same range, and costed there (the data cost of the windows the fold left out, no priors): its
+    own estimate's, then each free-parameter vector of ``against``'s. ``whole``: the normal
     equations of ``data`` at ``x``, when known (each fold's first step downdates them)."""
+    x, full = start
+    names, free = binder.fns.names, binder.fns.free
+    data_only = dataclasses.replace(binder, priors=no_priors(binder.fns.n_free))
 
     def fold(block: tuple[int, int]) -> Fold:
         a, b = block
@@ -141,10 +164,16 @@ def cross_validate(
         params, converged, n = _fit(binder, data, fit, bad, x, whole)
         if not n:
             return Fold(a, b, params, False, None)
+        held = data.select(data.interval_counts(bad[fit[0] : fit[1] - 1]) > 0)
+        costs: tuple[float, ...] = ()
+        if converged and held.n_residuals:
+            ev = data_only.evaluate(held)
+            mine = params[[names.index(f) for f in free]]
+            costs = tuple(float(ev.cost(v)) for v in (mine, *against))
         params = canonical(params)
-        return Fold(a, b, params, converged, score(params, a, b), score(full, a, b))
+        return Fold(a, b, params, converged, score(params, a, b), score(full, a, b), costs)
 
-    return combine(binder.fns.names, on_threads(fold, blocks(*fit, k)))
+    return on_threads(fold, list(ranges))
 
 
 def direction_check(
