@@ -138,7 +138,7 @@ def main() -> int:
         if r["verdict"] == "not usable":
             print("   " + "; ".join(r["reasons"]))
         sys.stdout.flush()
-    levels = defaultdict(int)
+    levels: dict[str, int] = defaultdict(int)
     for r in results:
         levels[r["verdict"]] += 1
     print("\nverdicts: " + ", ".join(f"{k} {v}" for k, v in levels.items()))
