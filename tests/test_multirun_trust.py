@@ -10,11 +10,13 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest import shared_scenario
 
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.models import get_model
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.pipeline import Calibration, JointCalibration, scenario_from_mapping
+from nlp_calib.results import JointRun
 from nlp_calib.results.checks import CostComparison
 from nlp_calib.results.run import NOT_USABLE
 from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
@@ -96,3 +98,50 @@ def test_a_joint_fit_is_judged_on_every_log_not_on_its_first(tmp_path: Path) -> 
     assert min(figures.values()) <= ate <= max(figures.values())
     assert [p.log.path for p in joint.parts] == [str(line), str(curves)]
     assert joint.std("gauss_newton") == whole.std("gauss_newton") == joint.parts[1].std("gauss_newton")
+
+
+def _shipped(name: str) -> JointRun:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return JointCalibration(shared_scenario(name)).run(("gauss_newton",))
+
+
+def test_optiodom_tricycle_squares_one_robot_whose_mount_moves_with_the_turning() -> None:
+    """Two runs of one tricycle on a square (clockwise, anticlockwise): their own fits put the
+    tracked point 11 mm apart sideways, 16σ of their own, but within what one robot's logs differ
+    by. Usable, the parameter named as a model limit and its σ covering the spread."""
+    joint = _shipped("optiodom_tricycle_square")
+    check = joint.run.checks.consistency
+    assert check is not None and not check.significant and joint.verdict.level != NOT_USABLE
+    moved = [n for n, m in zip(check.names, check.moved) if m]
+    assert moved == ["sensor_y"], check.words()
+    j = check.names.index("sensor_y")
+    spread = abs(check.own[0, j] - check.own[1, j])
+    assert joint.std("gauss_newton")["sensor_y"] >= 0.45 * spread
+    assert any("sensor_y by" in r and "model limit" in r for r in joint.verdict.reasons)
+    assert "closer to the tracker than the nominal robot" in joint.verdict.gain
+
+
+def test_optiodom_tricycle_circles_usable_with_the_gain_over_the_nominal_robot() -> None:
+    joint = _shipped("optiodom_tricycle_circular")
+    assert joint.verdict.level != NOT_USABLE, joint.verdict.line()
+    nominal = joint.run.checks.nominal
+    assert nominal is not None and nominal.source == "ROBOT.yaml"
+    assert set(nominal.values) == {
+        "wheel_radius",
+        "wheelbase",
+        "steer_offset",
+        "sensor_x",
+        "sensor_y",
+        "sensor_theta",
+    }
+    assert nominal.cost is not None and nominal.cost.outcome == "better"
+
+
+@pytest.mark.slow
+def test_optiodom_diff_drive_six_circles_agree() -> None:
+    joint = _shipped("optiodom_diff_circular")
+    assert joint.verdict.level != NOT_USABLE, joint.verdict.line()
+    assert [p.verdict.level != NOT_USABLE for p in joint.parts] == [True] * 6
+    logs = joint.run.checks.logs
+    assert logs is not None and np.all(np.isfinite(logs.std)) and len(logs.folds) == 6
