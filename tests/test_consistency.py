@@ -150,8 +150,9 @@ def test_forward_and_reverse_that_disagree_widen_the_sigma_to_cover_both() -> No
         np.full(2, 0.05),
         set(),
     )
-    assert check.significant
-    np.testing.assert_allclose(check.spread(), [0.2, np.nan])
+    assert check.significant and abs(check.z[0]) > 4 > abs(check.z[1])
+    noise = 0.4 / abs(check.z[0])
+    np.testing.assert_allclose(check.spread(), [0.5 * np.sqrt(0.4**2 - noise**2), np.nan])
 
 
 def test_the_direction_check_says_when_it_could_not_compare() -> None:

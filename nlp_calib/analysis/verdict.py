@@ -69,7 +69,9 @@ def _checks(run: CalibrationRun) -> list[str]:
     direction, findings = run.checks.direction, run.checks.findings
     if direction is not None and direction.significant:
         name, z = direction.worst
-        out.append(f"forward and reverse driving disagree ({name} by {abs(z):.1f}σ; its σ covers both)")
+        widened = np.isfinite(direction.spread()[direction.names.index(name)])
+        also = "; its σ covers both" if widened else ""
+        out.append(f"forward and reverse driving disagree ({name} by {abs(z):.1f}σ{also})")
     check = _consistency(run)
     if check is not None and not check.significant and check.limits():
         out.append(check.words())

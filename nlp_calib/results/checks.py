@@ -92,6 +92,9 @@ def believed_std(white: np.ndarray, *spreads: np.ndarray) -> np.ndarray:
 
 #: A difference beyond this many σ is reported as significant.
 SIGNIFICANT = 3.0
+#: A log's own estimate beyond this many σ (of its difference from the other logs') disagrees; a
+#: forward-reverse difference beyond it widens the σ to believe.
+CONSISTENCY_SIGMAS = 4.0
 
 
 @dataclass(frozen=True)
@@ -123,12 +126,16 @@ class DirectionCheck:
         return bool(np.any(np.isfinite(self.z)))
 
     def spread(self) -> np.ndarray:
-        """Half the forward-reverse difference of each parameter that differs beyond
-        :data:`SIGNIFICANT` σ (NaN elsewhere): new driving with another mix of directions may land
-        anywhere between the two, so the σ to believe covers it."""
-        with np.errstate(invalid="ignore"):
-            moved = np.abs(self.z) > SIGNIFICANT
-        return np.where(moved, 0.5 * np.abs(self.forward - self.reverse), np.nan)
+        """Half the forward-reverse difference beyond its noise, ``√(Δ² − σ_Δ²)/2``, of each
+        parameter that differs beyond :data:`CONSISTENCY_SIGMAS` σ (NaN elsewhere): driving with
+        another mix of directions may land anywhere between the two, so the σ to believe covers it.
+        An effect size, not a variance estimate: taken in only where the difference is clear (a
+        3σ difference on direction-free truth is rare but not unheard of)."""
+        diff = np.abs(self.forward - self.reverse)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            clear = np.abs(self.z) > CONSISTENCY_SIGMAS
+            noise = diff / np.abs(self.z)
+        return np.where(clear, 0.5 * np.sqrt(np.clip(diff**2 - noise**2, 0.0, None)), np.nan)
 
     def words(self) -> str:
         """The verdict in words: agree within, disagree by, or could not compare (and why)."""
@@ -218,10 +225,6 @@ class Observability:
             "heading_range_rad": self.heading_range_rad,
             "warnings": list(self.warnings),
         }
-
-
-#: A log's own estimate beyond this many σ (of its difference from the other logs') disagrees.
-CONSISTENCY_SIGMAS = 4.0
 
 
 @dataclass(frozen=True)
