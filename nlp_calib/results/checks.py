@@ -307,10 +307,11 @@ class ConsistencyCheck:
         )
 
     def of_log(self, log: str) -> ConsistencyCheck:
-        """The same check on one log's row alone (what that log's own run carries)."""
-        i = [self.logs.index(log)]
+        """The same check on one log's rows alone (several where entries select parts of one file)."""
+        i = [k for k, name in enumerate(self.logs) if name == log]
+        logs = tuple(self.logs[k] for k in i)
         return ConsistencyCheck(
-            self.names, (log,), self.joint, self.own[i], self.others[i], self.z[i], self.apart
+            self.names, logs, self.joint, self.own[i], self.others[i], self.z[i], self.apart
         )
 
     def limits(self) -> list[str]:
@@ -439,7 +440,7 @@ class CostComparison:
 
     def words(self) -> str:
         """How the fit compares with the other set, with the figure that decided it."""
-        how = {"better": "better than", "worse": "worse than", "same": "no better than"}[self.outcome]
+        how = {"better": "better than", "worse": "worse than", "same": "within the noise of"}[self.outcome]
         return f"{how} {self.against} {self.detail()}"
 
 

@@ -144,13 +144,20 @@ class Checks:
 
     def spreads(self, n: int) -> list[np.ndarray]:
         """Each σ beyond the white-noise one that the σ to believe takes in (NaN where one has none):
-        the blocks' jackknife; over several logs, the logs' jackknife for each parameter that moves
-        between them beyond their σ; half the forward-reverse difference where it is significant."""
-        out = [self.crossval.std if self.crossval is not None else np.full(n, np.nan)]
+        the blocks' jackknife, then each of :meth:`moving`."""
+        blocks = self.crossval.std if self.crossval is not None else np.full(n, np.nan)
+        return [blocks, *(spread for _, spread in self.moving())]
+
+    def moving(self) -> list[tuple[str, np.ndarray]]:
+        """How much parameters move with the driving, where they do (NaN elsewhere), each with what
+        measured it: over several logs, the logs' jackknife for each parameter that moves between
+        them beyond their σ; half the forward-reverse difference where it is clear."""
+        out = []
         if self.logs is not None and self.consistency is not None:
-            out.append(np.where(self.consistency.moved, self.logs.std, np.nan))
+            label = f"the jackknife over the {len(self.logs.folds)} logs"
+            out.append((label, np.where(self.consistency.moved, self.logs.std, np.nan)))
         if self.direction is not None:
-            out.append(self.direction.spread())
+            out.append(("half the forward-reverse difference", self.direction.spread()))
         return out
 
 
