@@ -19,9 +19,10 @@ import numpy as np
 from nlp_calib.analysis.crossval import blocks, combine, jackknife_std
 from nlp_calib.analysis.direction import compare
 from nlp_calib.core import memory, threads
+from nlp_calib.models import reference_scales
 from nlp_calib.pipeline.build import Binder, no_priors
 from nlp_calib.problem import ResidualData
-from nlp_calib.results.checks import CrossValidation, DirectionCheck, Fold
+from nlp_calib.results.checks import WEAK, CrossValidation, DirectionCheck, Fold
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.solvers import Priors
 from nlp_calib.solvers.evaluation import NormalEquations
@@ -225,6 +226,7 @@ def direction_check(
         estimates.append(canonical(params))
         sigmas.append(jackknife_std(np.array(folds)) if len(folds) >= 3 else np.full(len(fns.names), np.nan))
         windows.append(n)
+    apart = WEAK * reference_scales(fns.model, fns.names, estimates[0])
     return compare(
-        fns.names, estimates[0], estimates[1], (windows[0], windows[1]), sigmas[0], sigmas[1], held
+        fns.names, estimates[0], estimates[1], (windows[0], windows[1]), sigmas[0], sigmas[1], held, apart
     )

@@ -107,6 +107,8 @@ class DirectionCheck:
     reverse: np.ndarray
     windows: tuple[int, int]
     z: np.ndarray
+    #: Per parameter, the difference beyond which the parts cannot both describe one robot.
+    apart: np.ndarray | None = None
 
     @property
     def worst(self) -> tuple[str, float]:
@@ -127,13 +129,15 @@ class DirectionCheck:
 
     def spread(self) -> np.ndarray:
         """Half the forward-reverse difference beyond its noise, ``√(Δ² − σ_Δ²)/2``, of each
-        parameter that differs beyond :data:`CONSISTENCY_SIGMAS` σ (NaN elsewhere): driving with
-        another mix of directions may land anywhere between the two, so the σ to believe covers it.
-        An effect size, not a variance estimate: taken in only where the difference is clear (a
-        3σ difference on direction-free truth is rare but not unheard of)."""
+        parameter that differs beyond :data:`CONSISTENCY_SIGMAS` σ but within :attr:`apart` (NaN
+        elsewhere): driving with another mix of directions may land anywhere between the two, so
+        the σ to believe covers it. An effect size, not a variance estimate: taken in only where
+        the difference is clear (a 3σ difference on direction-free truth is rare but not unheard
+        of) and could be one robot's (beyond, a part's own fit is in question)."""
         diff = np.abs(self.forward - self.reverse)
+        limit = np.inf if self.apart is None else self.apart
         with np.errstate(invalid="ignore", divide="ignore"):
-            clear = np.abs(self.z) > CONSISTENCY_SIGMAS
+            clear = (np.abs(self.z) > CONSISTENCY_SIGMAS) & (diff <= limit)
             noise = diff / np.abs(self.z)
         return np.where(clear, 0.5 * np.sqrt(np.clip(diff**2 - noise**2, 0.0, None)), np.nan)
 
