@@ -59,6 +59,7 @@ def compare_logs(
     others: np.ndarray,
     known: np.ndarray,
     apart: np.ndarray,
+    units: tuple[str, ...] = (),
 ) -> ConsistencyCheck:
     """The check of each log's own estimates and honest σ ``own = (estimates, σ)`` (n_logs, n_params)
     against the other logs' fit ``others`` (same shape), where the log determines a parameter on its
@@ -77,4 +78,5 @@ def compare_logs(
         others,
         z,
         np.asarray(apart, dtype=float),
+        units,
     )

@@ -295,7 +295,8 @@ class JointCalibration:
         scorer = blocks_scorer(fitting.fns, self.parts, fitting.data)
         logs = logs_crossval(fitting, results, scorer, log_ranges(self.parts))
         own = [_own_run(p, names) for p in self.parts]
-        check = consistency(results, own, logs, self.model)
+        units = scenario_info(self.scenario, self.model).units
+        check = consistency(results, own, logs, (self.model, units))
         if check is not None and (check.significant or check.limits()):
             notes.append(check.words())
         fitted = dataclasses.replace(fitted, consistency=check, logs=logs)
@@ -355,11 +356,11 @@ def consistency(
     results: Mapping[str, SolverResult],
     own: Sequence[CalibrationRun],
     logs: CrossValidation | None,
-    model: KinematicModel,
+    model: tuple[KinematicModel, Mapping[str, str]],
 ) -> ConsistencyCheck | None:
     """Each log's own fit (``own``, in the joint fit's order of logs) against the other logs' (the
     folds of ``logs``), for the first solver that converged in the joint fit, on what each log
-    determines on its own."""
+    determines on its own; ``model``: the model and every parameter's unit."""
     solver = next((name for name, r in results.items() if r.converged), None)
     if solver is None or logs is None:
         return None
@@ -374,10 +375,12 @@ def consistency(
         stds.append(np.array([run.std(solver)[n] for n in names]) if ok else nan)
     est, std = np.array(estimates), np.array(stds)
     others = np.array([f.params if f.converged else nan for f in logs.folds])
-    known = np.array([determined(model, names, e, sd) for e, sd in zip(est, std)])
-    apart = WEAK * reference_scales(model, names, result.params)
+    kind, units = model
+    known = np.array([determined(kind, names, e, sd) for e, sd in zip(est, std)])
+    apart = WEAK * reference_scales(kind, names, result.params)
     paths = [run.log.path for run in own]
-    return compare_logs(names, paths, result.params, (est, std), others, known, apart)
+    unit = tuple(units.get(n, "") for n in names)
+    return compare_logs(names, paths, result.params, (est, std), others, known, apart, unit)
 
 
 def _fit(

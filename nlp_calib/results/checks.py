@@ -261,6 +261,8 @@ class ConsistencyCheck:
     others: np.ndarray
     z: np.ndarray
     apart: np.ndarray
+    #: Each parameter's unit (model order; empty: not known).
+    units: tuple[str, ...] = ()
 
     @property
     def compared(self) -> bool:
@@ -315,7 +317,7 @@ class ConsistencyCheck:
         i = [k for k, name in enumerate(self.logs) if name == log]
         logs = tuple(self.logs[k] for k in i)
         return ConsistencyCheck(
-            self.names, logs, self.joint, self.own[i], self.others[i], self.z[i], self.apart
+            self.names, logs, self.joint, self.own[i], self.others[i], self.z[i], self.apart, self.units
         )
 
     def limits(self) -> list[str]:
@@ -327,7 +329,8 @@ class ConsistencyCheck:
             z = np.where(np.isfinite(self.z[:, j]), np.abs(self.z[:, j]), 0.0)
             i = int(np.argmax(z))
             rel = d[i] / max(abs(float(self.joint[j])), 1e-12)
-            size = f"{100 * rel:.2g} %" if rel < 1 else f"{d[i]:.3g}"
+            unit = f" {self.units[j]}" if self.units else ""
+            size = f"{100 * rel:.2g} %" if rel < 1 else f"{d[i]:.3g}{unit}"
             out.append(f"{self.names[j]} by {size} ({z[i]:.0f}σ, {_name(self.logs[i])})")
         return out
 
