@@ -162,7 +162,9 @@ def analyse_fit(
     if not converged:
         return FitAnalysis(uncertainty, observability, None, None)
     x = converged[0].x
-    against = _against(fit, x)
+    # The nominal values go into the canonical form's other values (a symmetric twin would mix).
+    canonical = fit.canonical_params(converged[0].params)
+    against = _against(fit, canonical[[fit.fns.names.index(n) for n in fit.fns.free]])
     k = fit.problem.binder.scenario.validation.blocks
     crossval = direction = None
     if k:
@@ -183,8 +185,9 @@ def analyse_fit(
 
 
 def _against(fit: Fit, x: np.ndarray) -> dict[str, tuple[str, np.ndarray]]:
-    """The free values the fit ``x`` is judged against, by key: its start and, where some are
-    known, the robot's nominal values (the fit's own elsewhere), each with its name in words."""
+    """The free values the fit (``x``: its free values in canonical form) is judged against, by
+    key: its start and, where some are known, the robot's nominal values (the fit's own elsewhere),
+    each with its name in words."""
     start = fit.problem.start
     free = fit.fns.free
     auto = fit.problem.binder.scenario.parameters.initial_guess == "auto"
