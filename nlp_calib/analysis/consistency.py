@@ -3,16 +3,16 @@
 A joint fit of several logs (``datasets:``) assumes one robot: one set of parameters explains
 every log. Each log's own fit is compared with the fit of the other logs together (the joint fit
 with that log left out, as the jackknife over the logs fits it), on the parameters the log
-determines on its own (:func:`determined`: a finite σ within :data:`~nlp_calib.results.checks.WEAK`
-times the precision a calibration needs; a straight run says nothing of a wheelbase). The two fits
-share no data, so the σ of their difference is ``√(σ_own² + σ_others²)``, both honest (the larger
-of the white-noise and the block jackknife σ): the log's own, and the other logs' own combined by
-their information (a lower bound on what they determine together, so the test errs towards
-agreement).
+determines on its own (:func:`determined`: a finite σ within
+:data:`~nlp_calib.results.checks.WEAK` times the precision a calibration needs; a straight run says
+nothing of how the robot turns). The two fits share no data, so the σ of their difference is
+``√(σ_own² + σ_others²)``, both honest (the larger of the white-noise and the block jackknife σ):
+the log's own, and the other logs' own combined by their information (a lower bound on what they
+determine together, so the test errs towards agreement).
 
 Logs of one robot still differ beyond that σ when a parameter moves with the driving (an
-effective track that depends on the path, a steering that acts differently on circles and on
-squares): a model limit, not another robot. So a difference is said to set the logs apart only
+effective length that depends on the path, a mount that seems to shift with the direction of
+turning): a model limit, not another robot. So a difference is said to set the logs apart only
 when it is also beyond ``apart``, the loosest a calibration is said to be known to (``WEAK``
 times the precision it needs: 5 % of a length or gain, 5 cm of the sensor's position, 25 mrad of
 an angle); within it, the parameter is named as moving between the logs, and the joint σ takes in
