@@ -203,20 +203,22 @@ def _calibrate_joint(
     solvers, outputs = what
     joint = JointCalibration(scenario, logs, solvers).run(solvers, Wanted(series=args.report))
     progress.clear()
-    parts = joint.parts
+    parts, whole = joint.parts, joint.run
     for part in parts:
         print(f"log {part.scenario.name} ({part.scenario.dataset}), figures with the joint parameters")
         print(run_table(part))
         print()
-    print(correlation_table(parts[0], next(iter(joint.reports))))
+    print(correlation_table(whole, next(iter(joint.reports))))
     print()
-    print(f"joint fit of {len(parts)} logs, {joint.n_residuals} windows; each log with the joint parameters:")
-    print(summary_table(list(parts)))
-    handoff = dataclasses.replace(parts[0], scenario=joint.scenario)
-    pieces = [(part, part.scenario.name) for part in parts]
-    final = _write_outputs(out, args, outputs, pieces, (handoff, last))
-    _closing(parts[0], final, out)
-    return list(parts)
+    print(
+        f"joint fit of {len(parts)} logs, {joint.n_residuals} windows; each log with the joint parameters, "
+        "then the joint fit on every log:"
+    )
+    print(summary_table([*parts, whole]))
+    pieces = [(part, part.scenario.name) for part in parts] + [(whole, "")]
+    final = _write_outputs(out, args, outputs, pieces, (whole, last))
+    _closing(whole, final, out)
+    return [whole]
 
 
 def _cmd_run(args: argparse.Namespace) -> int:

@@ -146,6 +146,8 @@ def write(
     for output in outputs:
         targets = runs if output.per_log else [top]
         for run, folder in targets:
+            if output.report and run.series is None and run.scenario.datasets:
+                continue  # the joint fit of several logs: each log's folder holds its figures
             folder.mkdir(exist_ok=True)
             written += output.write(run, folder, output.name, options)
     return written

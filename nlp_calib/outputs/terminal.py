@@ -7,6 +7,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from nlp_calib.results import CalibrationRun
+from nlp_calib.results.checks import believed_std
 from nlp_calib.results.faults import count_kinds
 from nlp_calib.results.figures import TrajectoryMetrics
 
@@ -56,6 +57,7 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
         f"1σ: the larger of the white-noise σ and the σ of {len(cv.converged)} fits each without one block "
         f"of records (jackknife); the block σ is {lo:.1f}–{hi:.1f}× the white-noise σ" + verdict
     ]
+    lines += widened_lines(run)
     ate, rpe = "segment ATE mean [m]", "RPE over 1 m [m]"
     lines.append(
         f"cross-validation over {len(cv.folds)} blocks: held-out segment ATE {cv.heldout_mean(ate):.3f} m "
@@ -63,6 +65,23 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
         f"{cv.insample_mean(rpe):.3f} m): each block scored by the fit without it, and by the full fit"
     )
     return lines
+
+
+def widened_lines(run: CalibrationRun) -> list[str]:
+    """The parameters whose σ takes in how they move with the driving, and from which check."""
+    first = next(iter(run.reports), None)
+    checks = run.checks
+    if first is None:
+        return []
+    names = run.reports[first].uncertainty.names
+    blocks = checks.crossval.std if checks.crossval is not None else np.full(len(names), np.nan)
+    base = believed_std(run.reports[first].uncertainty.std, blocks)
+    out = []
+    for label, spread in checks.moving():
+        wider = [n for n, b, v in zip(names, base, spread) if np.isfinite(v) and v > b]
+        if wider:
+            out.append(f"   σ of {', '.join(wider)}: {label} (they move with the driving: a model limit)")
+    return out
 
 
 def direction_lines(run: CalibrationRun) -> list[str]:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
+from nlp_calib.analysis.crossval import combine
 from nlp_calib.analysis.metrics import each_metrics, geometry, integrate, segments
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
@@ -31,8 +32,10 @@ from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results import SolverResult
 from nlp_calib.results.checks import (
     ConsistencyCheck,
+    CostComparison,
     CrossValidation,
     DirectionCheck,
+    Fold,
     LagEffect,
     Observability,
 )
@@ -65,10 +68,17 @@ class FitAnalysis:
     observability: Observability
     crossval: CrossValidation | None
     direction: DirectionCheck | None
-    #: For several logs: each log's own fit against theirs.
+    #: For several logs: each log's own fit against the other logs'.
     consistency: ConsistencyCheck | None = None
     #: How each time offset moves the other parameters (the first solver's uncertainty).
     lag_effects: tuple[LagEffect, ...] = ()
+    #: For several logs: the joint fit without each log in turn.
+    logs: CrossValidation | None = None
+    #: The fit against its start, and against the robot's nominal values where they are known.
+    start: CostComparison | None = None
+    nominal: CostComparison | None = None
+    #: The nominal values scored (nominal where known, the fit's estimate elsewhere; model order).
+    nominal_params: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -79,6 +89,8 @@ class LogAnalysis:
     baseline: Scores
     series: RunSeries | None
     odometry: OdometryTrack | None
+    #: The nominal robot's figures (None: no nominal values known).
+    nominal: Scores | None = None
 
 
 @dataclass(frozen=True)
@@ -136,8 +148,9 @@ def analyse_fit(
     fit: Fit, results: Mapping[str, SolverResult], noise: np.ndarray, blocks: Scorer
 ) -> FitAnalysis:
     """Uncertainty of each result; observability at the first estimate with a finite cost (a solver
-    may not have started); cross-validation and the direction check from the first converged one,
-    with each held-out block scored by ``blocks``."""
+    may not have started); cross-validation, the direction check and the comparisons with the start
+    and the nominal robot from the first converged one, with each held-out block scored by
+    ``blocks``."""
     ev, data = fit.evaluator, fit.data
     big = data.n_residuals >= RELEASE_FROM
     if big:
@@ -150,17 +163,65 @@ def analyse_fit(
     observability = observability_of(ev, finite[0].x, data.T_world_sensor)
     converged = [r for r in results.values() if r.converged]
     effects = unc.lag_effects(uncertainty[next(iter(results))]) if results else ()
-    k = fit.problem.binder.scenario.validation.blocks
-    if not converged or not k:
+    if not converged:
         return FitAnalysis(uncertainty, observability, None, None, lag_effects=effects)
-    binder, x = fit.problem.binder, converged[0].x
+    x = converged[0].x
+    # The nominal values go into the canonical form's other values (a symmetric twin would mix).
+    canonical = fit.canonical_params(converged[0].params)
+    against = _against(fit, canonical[[fit.fns.names.index(n) for n in fit.fns.free]])
+    k = fit.problem.binder.scenario.validation.blocks
+    crossval = direction = None
+    if k:
+        crossval, direction = _refits(fit, converged[0], blocks, k, [v for _, v in against.values()])
+    costs = comparisons(fit, x, against, crossval.converged if crossval is not None else ())
+    nominal = against.get("nominal")
+    return FitAnalysis(
+        uncertainty,
+        observability,
+        crossval,
+        direction,
+        start=costs["start"],
+        nominal=costs.get("nominal"),
+        nominal_params=None
+        if nominal is None
+        else np.asarray(fit.fns.assemble(nominal[1], ev.x_fixed)).ravel(),
+        lag_effects=effects,
+    )
+
+
+def _against(fit: Fit, x: np.ndarray) -> dict[str, tuple[str, np.ndarray]]:
+    """The free values the fit (``x``: its free values in canonical form) is judged against, by
+    key: its start and, where some are known, the robot's nominal values (the fit's own elsewhere),
+    each with its name in words."""
+    start = fit.problem.start
+    free = fit.fns.free
+    auto = fit.problem.binder.scenario.parameters.initial_guess == "auto"
+    out = {"start": ("the data-driven start" if auto else "the initial guess", start.x0)}
+    if start.nominal:
+        x_nominal = np.array(x, dtype=float)
+        for name, value in start.nominal.items():
+            if name in free:
+                x_nominal[free.index(name)] = value
+        out["nominal"] = ("the nominal robot", x_nominal)
+    return out
+
+
+def _refits(
+    fit: Fit, result: SolverResult, blocks: Scorer, k: int, against: Sequence[np.ndarray]
+) -> tuple[CrossValidation, DirectionCheck | None]:
+    """The blocked cross-validation (each fold costed on its block beside ``against``) and the
+    direction check, refitted from ``result``."""
+    ev, data = fit.evaluator, fit.data
+    binder, x = fit.problem.binder, result.x
     # Blocks are numbered as the scorer's records: the fitted records start at its offset.
     span = (blocks.offset, blocks.offset + data.n_records)
-    full = fit.canonical_params(converged[0].params)
+    full = fit.canonical_params(result.params)
     whole = ev.normal_equations(x) if data.n_residuals >= validation.DOWNDATE_FROM else None
-    if big:
+    if data.n_residuals >= RELEASE_FROM:
         ev.release()  # the refits bind evaluators of their own; a later use binds this one again
-    crossval = validation.cross_validate(binder, data, span, x, k, fit.canonical_params, blocks, full, whole)
+    crossval = validation.cross_validate(
+        binder, data, span, x, k, fit.canonical_params, blocks, full, whole, against
+    )
     inputs = np.concatenate([np.zeros((data.inputs.shape[0], span[0])), data.inputs], axis=1)
     model = fit.fns.model
     direction = validation.direction_check(
@@ -173,7 +234,45 @@ def analyse_fit(
         k,
         fit.canonical_params,
     )
-    return FitAnalysis(uncertainty, observability, crossval, direction, lag_effects=effects)
+    return crossval, direction
+
+
+def logs_crossval(
+    fit: Fit, results: Mapping[str, SolverResult], blocks: Scorer, ranges: Sequence[tuple[int, int]]
+) -> CrossValidation | None:
+    """The joint fit without each log in turn (``ranges``: each log's records, numbered as
+    ``blocks``'s), from the first converged estimate, each scored on the log it left out; its σ
+    needs every fold (None: fewer than two logs, or no converged estimate)."""
+    converged = [r for r in results.values() if r.converged]
+    if not converged or len(ranges) < 2:
+        return None
+    result = converged[0]
+    span = (blocks.offset, blocks.offset + fit.data.n_records)
+    start = (result.x, fit.canonical_params(result.params))
+    folds = validation.folds_over(
+        fit.problem.binder, fit.data, span, ranges, start, fit.canonical_params, blocks
+    )
+    return combine(fit.fns.names, folds, min_folds=len(folds))
+
+
+def comparisons(
+    fit: Fit, x: np.ndarray, against: Mapping[str, tuple[str, np.ndarray]], folds: Sequence[Fold]
+) -> dict[str, CostComparison]:
+    """The fit ``x`` against each set of ``against`` (key: (words, free values)) by their data
+    costs: held out over ``folds`` (costed in the order of ``against``) and on every window."""
+    ev = fit.evaluator
+
+    def data_cost(v: np.ndarray) -> float:
+        prior = ev.prior_terms(v)[0] if ev.priors.active else 0.0
+        return float(ev.cost(v)) - float(prior)
+
+    mine = data_cost(x)
+    costed = [f.costs for f in folds if len(f.costs) == len(against) + 1]
+    out = {}
+    for i, (key, (words, v)) in enumerate(against.items()):
+        heldout = np.array([[c[i + 1], c[0]] for c in costed]).reshape(-1, 2)
+        out[key] = CostComparison(words, heldout, (data_cost(v), mine))
+    return out
 
 
 def residual_series(fit: Fit, results: Mapping[str, SolverResult], windows: np.ndarray) -> ResidualSeries:
@@ -361,17 +460,23 @@ def analyse_log(
     view: LogView,
     wanted: Wanted,
     labels: Mapping[str, str],
+    nominal: np.ndarray | None = None,
 ) -> LogAnalysis:
-    """One log's figures with the fit's estimates (and its series and odometry when wanted)."""
+    """One log's figures with the fit's estimates and the nominal robot's (``nominal``: its full
+    parameters, where known), and its series and odometry when wanted."""
     windows, scorer = view.windows, view.scorer
     p0 = np.array([fit.problem.start.initial[n] for n in fit.fns.names])
-    # The initial guess scored last: its figures are the baseline.
-    *solved, baseline = scores(scorer, windows, [*(r.params for r in results.values()), p0])
+    # The initial guess scored after the estimates (its figures are the baseline), then the
+    # nominal robot where it is known.
+    extra = [] if nominal is None else [nominal]
+    scored = scores(scorer, windows, [*(r.params for r in results.values()), p0, *extra])
+    n = len(results)
     figures = LogAnalysis(
-        scores=dict(zip(results, solved)),
-        baseline=baseline,
+        scores=dict(zip(results, scored[:n])),
+        baseline=scored[n],
         series=None,
         odometry=None,
+        nominal=scored[n + 1] if extra else None,
     )
     series = run_series(fit, results, view, figures, labels) if wanted.series else None
     odo = None

@@ -9,14 +9,12 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 
-import numpy as np
-
 from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.clock import LAG_UNIT
 from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
-from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis
+from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis, Scores
 from nlp_calib.pipeline.build import StartingPoint
 from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.scenario import Scenario
@@ -35,8 +33,8 @@ from nlp_calib.results import (
     SolverResult,
     Verdict,
 )
-from nlp_calib.results.checks import believed_std
-from nlp_calib.results.faults import Findings
+from nlp_calib.results.checks import NominalCheck, believed_std
+from nlp_calib.results.faults import FaultReport, Findings
 from nlp_calib.solvers import solver_label
 from nlp_calib.sources import BagSource
 
@@ -146,18 +144,44 @@ def lag_notes(sc: Scenario, alignment: Alignment) -> list[str]:
 
 
 def _report(
-    prepared: PreparedLog, name: str, result: SolverResult, fitted: FitAnalysis, figures: LogAnalysis
+    prepared: PreparedLog,
+    name: str,
+    result: SolverResult,
+    fitted: tuple[FitAnalysis, Checks],
+    figures: LogAnalysis,
 ) -> SolverReport:
     """One solver's report, with its estimate in the controller's terms."""
-    u = fitted.uncertainty[name]
-    blocked = fitted.crossval.std if fitted.crossval is not None else np.full(len(u.names), np.nan)
+    u = fitted[0].uncertainty[name]
     header = prepared.log.header
     ranges = dict(zip(header.encoder_names, header.encoder_max))
-    std = believed_std(u.std, blocked)
+    std = believed_std(u.std, *fitted[1].spreads(len(u.names)))
     controller = controller_params(prepared.model, result.names, result.params, std, u.correlation, ranges)
     sensor = prepared.scenario.objective.sensor.sensor
     mount = sensor.mount_pose(result.param_dict(), header.sensor_z_roll_pitch)
     return SolverReport(result, u, *figures.scores[name], controller, mount)
+
+
+def fit_checks(
+    fitted: FitAnalysis, findings: Findings | None, start: StartingPoint, nominal: Scores | None
+) -> Checks:
+    """The checks of the fit (the same for every log it is read for) with one log's ``findings``
+    and the nominal robot's figures on it (``nominal``; None: no nominal values known)."""
+    check = None
+    if nominal is not None and fitted.nominal_params is not None:
+        check = NominalCheck(
+            dict(start.nominal), start.nominal_source, fitted.nominal_params, nominal[0], fitted.nominal
+        )
+    return Checks(
+        fitted.observability,
+        fitted.crossval,
+        fitted.direction,
+        findings,
+        fitted.consistency,
+        logs=fitted.logs,
+        start=fitted.start,
+        nominal=check,
+        lag_effects=fitted.lag_effects,
+    )
 
 
 def mount_notes(sc: Scenario, start: StartingPoint) -> list[str]:
@@ -208,7 +232,8 @@ def assemble_run(
 ) -> CalibrationRun:
     """One log's run: the fit's estimates and checks beside this log's figures, with its verdict."""
     prepared, windows, alignment, findings = log
-    reports = {name: _report(prepared, name, r, fitted, figures) for name, r in results.items()}
+    checks = fit_checks(fitted, findings, start, figures.nominal)
+    reports = {name: _report(prepared, name, r, (fitted, checks), figures) for name, r in results.items()}
     run = CalibrationRun(
         scenario=scenario,
         log=log_info(prepared, windows),
@@ -217,14 +242,7 @@ def assemble_run(
         baseline=figures.baseline[0],
         baseline_holdout=figures.baseline[1],
         reports=reports,
-        checks=Checks(
-            fitted.observability,
-            fitted.crossval,
-            fitted.direction,
-            findings,
-            fitted.consistency,
-            lag_effects=fitted.lag_effects,
-        ),
+        checks=checks,
         warnings=(
             *notes,
             *lag_notes(prepared.scenario, alignment),
@@ -246,3 +264,77 @@ def assemble_run(
     checks = dataclasses.replace(run.checks, truth=against_truth(run, source.files(), convert))
     run = dataclasses.replace(run, checks=checks)
     return dataclasses.replace(run, verdict=verdict(run, prepared.model, hint))
+
+
+def merged_findings(runs: Sequence[CalibrationRun]) -> Findings | None:
+    """Every log's findings as one (faults numbered within their own log; each log's unchecked
+    reason named with its log), for the joint fit read as one run."""
+    found = [(run.log.path, run.checks.findings) for run in runs if run.checks.findings is not None]
+    if not found:
+        return None
+    reports = [f.report for _, f in found]
+    stale: dict[str, int] = {}
+    for rep in reports:
+        for name, n in rep.stale.items():
+            stale[name] = stale.get(name, 0) + n
+    unchecked = "; ".join(f"{path}: {f.report.unchecked}" for path, f in found if f.report.unchecked)
+    report = FaultReport(
+        faults=tuple(fault for rep in reports for fault in rep.faults),
+        stale=stale,
+        noise=reports[0].noise,
+        unchecked=unchecked,
+        unit=reports[0].unit,
+    )
+    return Findings(report, found[0][1].handling, tuple(r for _, f in found for r in f.repairs))
+
+
+def joint_run(
+    scenario: ScenarioInfo,
+    parts: Sequence[CalibrationRun],
+    fit: tuple[PreparedLog, StartingPoint, int],
+    results: Mapping[str, SolverResult],
+    fitted: FitAnalysis,
+    figures: LogAnalysis,
+    notes: Sequence[str],
+) -> CalibrationRun:
+    """The joint fit as one run: its figures over every log's fitted records (``figures``), the
+    fit's checks, every log's findings, and its own verdict. ``fit``: the first log (its model,
+    encoders and sensor frame), where the solvers started and the fitted windows."""
+    prepared, start, n_residuals = fit
+    first = parts[0]
+    records = sum(run.data.fit[1] - run.data.fit[0] for run in parts)
+    log = LogInfo(
+        path=f"{len(parts)} logs: " + ", ".join(run.log.path for run in parts),
+        records=sum(run.log.records for run in parts),
+        dropped=tuple(d for run in parts for d in run.log.dropped),
+        sensor_frame=first.log.sensor_frame,
+        encoders=first.log.encoders,
+        start_ns=first.log.start_ns,
+        duration_s=sum(run.log.duration_s for run in parts),
+        sensor_z_roll_pitch=first.log.sensor_z_roll_pitch,
+    )
+    data = DataInfo(
+        used=(0, records),
+        fit=(0, records),
+        n_residuals=n_residuals,
+        dropped_stationary=sum(run.data.dropped_stationary for run in parts),
+        dropped_faulty=sum(run.data.dropped_faulty for run in parts),
+        tracker_lag_s=float("nan"),
+        lag_estimate=None,
+    )
+    checks = fit_checks(fitted, merged_findings(parts), start, figures.nominal)
+    reports = {name: _report(prepared, name, r, (fitted, checks), figures) for name, r in results.items()}
+    warned = dict.fromkeys((*notes, *(w for run in parts for w in run.warnings)))
+    run = CalibrationRun(
+        scenario=scenario,
+        log=log,
+        data=data,
+        initial=dict(start.initial),
+        baseline=figures.baseline[0],
+        baseline_holdout=None,
+        reports=reports,
+        checks=checks,
+        warnings=tuple(warned),
+        verdict=Verdict("", ()),
+    )
+    return dataclasses.replace(run, verdict=verdict(run, prepared.model))

@@ -19,9 +19,10 @@ import numpy as np
 from nlp_calib.analysis.crossval import blocks, combine, jackknife_std
 from nlp_calib.analysis.direction import compare
 from nlp_calib.core import memory, threads
+from nlp_calib.models import reference_scales
 from nlp_calib.pipeline.build import Binder, no_priors
 from nlp_calib.problem import ResidualData
-from nlp_calib.results.checks import CrossValidation, DirectionCheck, Fold
+from nlp_calib.results.checks import WEAK, CrossValidation, DirectionCheck, Fold
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.solvers import Priors
 from nlp_calib.solvers.evaluation import NormalEquations
@@ -131,10 +132,33 @@ def cross_validate(
     score: Score,
     full: np.ndarray,
     whole: NormalEquations | None = None,
+    against: Sequence[np.ndarray] = (),
 ) -> CrossValidation:
-    """``k`` folds over the records ``fit``, each scored on its block by ``score(params, a, b)``,
-    beside the full fit's parameters ``full`` scored on the same block. ``whole``: the normal
+    """``k`` folds over the records ``fit`` (see :func:`folds_over`)."""
+    folds = folds_over(binder, data, fit, blocks(*fit, k), (x, full), canonical, score, whole, against)
+    return combine(binder.fns.names, folds)
+
+
+def folds_over(
+    binder: Binder,
+    data: ResidualData,
+    fit: tuple[int, int],
+    ranges: Sequence[tuple[int, int]],
+    start: tuple[np.ndarray, np.ndarray],
+    canonical: Canonical,
+    score: Score,
+    whole: NormalEquations | None = None,
+    against: Sequence[np.ndarray] = (),
+) -> list[Fold]:
+    """One refit of ``data`` (records ``fit``) without each record range of ``ranges`` (blocks, or
+    whole logs), from ``start = (x, full)``: the whole fit's free values and full parameters. Each
+    fold is scored on its range by ``score(params, a, b)``, beside the full fit's parameters on the
+    same range, and costed there (the data cost of the windows the fold left out, no priors): its
+    own estimate's, then each free-parameter vector of ``against``'s. ``whole``: the normal
     equations of ``data`` at ``x``, when known (each fold's first step downdates them)."""
+    x, full = start
+    names, free = binder.fns.names, binder.fns.free
+    data_only = dataclasses.replace(binder, priors=no_priors(binder.fns.n_free))
 
     def fold(block: tuple[int, int]) -> Fold:
         a, b = block
@@ -143,10 +167,16 @@ def cross_validate(
         params, converged, n = _fit(binder, data, fit, bad, x, whole)
         if not n:
             return Fold(a, b, params, False, None)
+        held = data.select(data.interval_counts(bad[fit[0] : fit[1] - 1]) > 0)
+        costs: tuple[float, ...] = ()
+        if converged and held.n_residuals:
+            ev = data_only.evaluate(held)
+            mine = params[[names.index(f) for f in free]]
+            costs = tuple(float(ev.cost(v)) for v in (mine, *against))
         params = canonical(params)
-        return Fold(a, b, params, converged, score(params, a, b), score(full, a, b))
+        return Fold(a, b, params, converged, score(params, a, b), score(full, a, b), costs)
 
-    return combine(binder.fns.names, on_threads(fold, blocks(*fit, k)))
+    return on_threads(fold, list(ranges))
 
 
 def direction_check(
@@ -198,6 +228,7 @@ def direction_check(
         estimates.append(canonical(params))
         sigmas.append(jackknife_std(np.array(folds)) if len(folds) >= 3 else np.full(len(fns.names), np.nan))
         windows.append(n)
+    apart = WEAK * reference_scales(fns.model, fns.names, estimates[0])
     return compare(
-        fns.names, estimates[0], estimates[1], (windows[0], windows[1]), sigmas[0], sigmas[1], held
+        fns.names, estimates[0], estimates[1], (windows[0], windows[1]), sigmas[0], sigmas[1], held, apart
     )

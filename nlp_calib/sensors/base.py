@@ -110,6 +110,7 @@ class Sensor(Protocol):
 
     # --- the start -----------------------------------------------------------------------------
     def initial(self, header: LogHeader) -> dict[str, float]: ...
+    def nominal(self, header: LogHeader) -> dict[str, float]: ...  # the mount a log's header gives
     @property
     def start_span_s(self) -> float | None: ...  # its start's windows (s); None: the residual's
     def closed_form(

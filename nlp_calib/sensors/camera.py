@@ -168,6 +168,10 @@ class CameraPose:
         """The held height at 0 and the scale at 1 unless the scenario gives them."""
         return {**dict.fromkeys(self.held, 0.0), **({SCALE_PARAM: 1.0} if self.scale_free else {})}
 
+    def nominal(self, header: LogHeader) -> dict[str, float]:
+        """None: a log's header gives a planar mount, not this one."""
+        return {}
+
     def closed_form(
         self,
         model: KinematicModel,

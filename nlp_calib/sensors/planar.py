@@ -119,6 +119,10 @@ class PlanarPose:
 
     def initial(self, header: LogHeader) -> dict[str, float]:
         """The header's nominal mount."""
+        return self.nominal(header)
+
+    def nominal(self, header: LogHeader) -> dict[str, float]:
+        """The mount the log's header gives (its ``T_base_sensor``)."""
         return dict(zip(self.params, header.T_base_sensor))
 
     def closed_form(

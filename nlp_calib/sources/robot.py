@@ -95,6 +95,10 @@ def robot_header(
             f"the sensor frame {frame!r} cannot name a header's frame; set sensor_frame in ROBOT.yaml"
         )
     names = encoders(model)
+    nominal = dict.fromkeys(robot.initial_guess, "ROBOT.yaml")
+    if robot.sensor_pose is not None or mount is not None:
+        where = "ROBOT.yaml" if robot.sensor_pose is not None else "/tf_static"
+        nominal.update(dict.fromkeys(("sensor_x", "sensor_y", "sensor_theta"), where))
     return LogHeader(
         kinematic_model=model.log_names[0],
         parameters={model.header_names[n]: float(guess[n]) for n in model.kinematic_params},
@@ -104,4 +108,5 @@ def robot_header(
         T_base_sensor=(float(pose[0]), float(pose[1]), float(pose[2])),
         encoder_units="radians" if radians else "counts",
         sensor_z_roll_pitch=None if robot.sensor_pose is not None or mount is None else mount[2:5],
+        nominal=nominal,
     )
