@@ -54,8 +54,9 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
     else:
         verdict = ": white noise explains the scatter, the two agree"
     lines = [
-        f"1σ: the larger of the white-noise σ and the σ of {len(cv.converged)} fits each without one block "
-        f"of records (jackknife); the block σ is {lo:.1f}–{hi:.1f}× the white-noise σ" + verdict
+        f"1σ: the white-noise σ, or the σ of {len(cv.converged)} fits each without one block of records "
+        f"(jackknife) where it exceeds it beyond its own noise; the block σ is {lo:.1f}–{hi:.1f}× the "
+        "white-noise σ" + verdict
     ]
     lines += widened_lines(run)
     ate, rpe = "segment ATE mean [m]", "RPE over 1 m [m]"
@@ -73,9 +74,9 @@ def widened_lines(run: CalibrationRun) -> list[str]:
     checks = run.checks
     if first is None:
         return []
-    names = run.reports[first].uncertainty.names
-    blocks = checks.crossval.std if checks.crossval is not None else np.full(len(names), np.nan)
-    base = believed_std(run.reports[first].uncertainty.std, blocks)
+    names, white = run.reports[first].uncertainty.names, run.reports[first].uncertainty.std
+    blocks = checks.crossval.beyond(white) if checks.crossval is not None else np.full(len(names), np.nan)
+    base = believed_std(white, blocks)
     out = []
     for label, spread in checks.moving():
         wider = [n for n, b, v in zip(names, base, spread) if np.isfinite(v) and v > b]

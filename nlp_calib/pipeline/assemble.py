@@ -154,7 +154,7 @@ def _report(
     u = fitted[0].uncertainty[name]
     header = prepared.log.header
     ranges = dict(zip(header.encoder_names, header.encoder_max))
-    std = believed_std(u.std, *fitted[1].spreads(len(u.names)))
+    std = believed_std(u.std, *fitted[1].spreads(u.std))
     controller = controller_params(prepared.model, result.names, result.params, std, u.correlation, ranges)
     sensor = prepared.scenario.objective.sensor.sensor
     mount = sensor.mount_pose(result.param_dict(), header.sensor_z_roll_pitch)

@@ -58,6 +58,20 @@ class CrossValidation:
     def std_dict(self) -> dict[str, float]:
         return {n: float(s) for n, s in zip(self.names, self.std)}
 
+    def beyond(self, white: np.ndarray) -> np.ndarray:
+        """The jackknife σ where it exceeds the white-noise σ by more than its own sampling noise
+        explains (NaN elsewhere): a jackknife of ``k`` folds of white noise alone scatters as
+        ``χ²(k − 1)``, so one beyond its 95 % point says errors vary along the drive; below it,
+        taking the larger of the two would only add that noise to the σ."""
+        k = len(self.converged)
+        if k < 2:
+            return np.full(len(self.names), np.nan)
+        nu = k - 1.0
+        # Wilson-Hilferty: χ²(ν)'s 95 % point within 0.2 % from ν = 3 on.
+        factor = np.sqrt((1.0 - 2.0 / (9.0 * nu) + 1.6449 * np.sqrt(2.0 / (9.0 * nu))) ** 3)
+        with np.errstate(invalid="ignore"):
+            return np.where(self.std > factor * np.asarray(white, dtype=float), self.std, np.nan)
+
     def heldout_mean(self, figure: str) -> float:
         """The mean of one held-out figure over the folds, weighted by the records each scores."""
         return self._mean(figure, "heldout")

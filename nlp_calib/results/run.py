@@ -163,10 +163,12 @@ class Checks:
     #: The fit against the robot's nominal values (None: no source knows them).
     nominal: NominalCheck | None = None
 
-    def spreads(self, n: int) -> list[np.ndarray]:
-        """Each σ beyond the white-noise one that the σ to believe takes in (NaN where one has none):
-        the blocks' jackknife, then each of :meth:`moving`."""
-        blocks = self.crossval.std if self.crossval is not None else np.full(n, np.nan)
+    def spreads(self, white: np.ndarray) -> list[np.ndarray]:
+        """Each σ beyond the white-noise one ``white`` that the σ to believe takes in (NaN where one
+        has none): the blocks' jackknife where it exceeds ``white`` beyond its own noise
+        (:meth:`CrossValidation.beyond`), then each of :meth:`moving`."""
+        n = len(white)
+        blocks = self.crossval.beyond(white) if self.crossval is not None else np.full(n, np.nan)
         return [blocks, *(spread for _, spread in self.moving())]
 
     def moving(self) -> list[tuple[str, np.ndarray]]:
@@ -245,7 +247,7 @@ class CalibrationRun:
         """The 1σ to believe for ``solver``'s estimate: the largest of the white-noise σ, the block
         cross-validation's jackknife σ and the spreads the checks found (:meth:`Checks.spreads`)."""
         u = self.reports[solver].uncertainty
-        return dict(zip(u.names, map(float, believed_std(u.std, *self.checks.spreads(len(u.names))))))
+        return dict(zip(u.names, map(float, believed_std(u.std, *self.checks.spreads(u.std)))))
 
     def std_blocks(self) -> dict[str, float] | None:
         """The jackknife σ of the block cross-validation, when it has enough converged folds."""
