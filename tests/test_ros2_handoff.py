@@ -70,10 +70,12 @@ def test_the_tricycle_controller_gets_its_parameters(handed_off: tuple[Path, dic
     p = result["solvers"]["gauss_newton"]["params"]
     doc = yaml.safe_load((out / "ros2_control.yaml").read_text())
     params = doc["tricycle_controller"]["ros__parameters"]
-    assert params == pytest.approx(
-        {"wheelbase": p["axis_length"], "wheel_radius": p["k_traction"] / (2 * np.pi)}
-    )
+    # The traction encoder's range is the unit k_traction is counted in, not a wheel turn: without
+    # the counts per turn no radius is written, and one line says what is needed.
+    assert params["wheelbase"] == pytest.approx(p["axis_length"]) and "wheel_radius" not in params
     text = (out / "ros2_control.yaml").read_text()
+    (why,) = [line for line in text.splitlines() if line.startswith("#   wheel_radius:")]
+    assert "counts per wheel turn of 'traction_wheel'" in why and "counts_per_turn" in why
     assert (
         "k_steer = " in text
         and "mechanical_reduction = 1/k_steer" in text
@@ -140,12 +142,13 @@ def test_urdf_without_sensor_link_is_a_usage_error_before_any_work(tmp_path: Pat
     assert not (tmp_path / "o").exists()
 
 
-def test_the_diff_drive_controller_gets_radii_from_the_ticks_per_turn(tmp_path: Path) -> None:
+def test_the_diff_drive_controller_gets_radii_from_the_counts_per_turn(tmp_path: Path) -> None:
     out = tmp_path / "dd"
     proc = cli("run", str(SCENARIOS / "diff_drive_demo.yaml"), "--out", str(out), "--solver", "gauss_newton")
     assert proc.returncode == 0, proc.stderr
     p = json.loads((out / "result.json").read_text())["solvers"]["gauss_newton"]["params"]
-    ticks = [e["ticks_per_turn"] for e in yaml.safe_load((out / "calibration.yaml").read_text())["encoders"]]
+    ticks = [e["counts_per_turn"] for e in yaml.safe_load((out / "calibration.yaml").read_text())["encoders"]]
+    assert ticks == [4096, 4096]  # the scenario's counts_per_turn
     left, right = (k * n / (2 * np.pi) for k, n in zip((p["k_left"], p["k_right"]), ticks))
     params = yaml.safe_load((out / "ros2_control.yaml").read_text())["diff_drive_controller"][
         "ros__parameters"

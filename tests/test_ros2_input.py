@@ -22,6 +22,7 @@ from nlp_calib.core.errors import ModelError, NlpCalibWarning, ScenarioError
 from nlp_calib.logs import BagError, JointStream, Log, resample_encoders
 from nlp_calib.logs.joint_log import read_joint_csv
 from nlp_calib.models import canonical, get_model
+from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.outputs.handoff import urdf_joint
 from nlp_calib.pipeline import Calibration, load_scenario
 from nlp_calib.pipeline.build import initial_parameters
@@ -184,14 +185,15 @@ def test_a_model_in_radians_moves_by_its_radius_times_the_angle() -> None:
 
 def test_the_controller_of_a_model_in_radians_takes_its_parameters_as_they_are() -> None:
     dd = get_model("diff_drive").in_radians()
-    name, values, places, assumes = dd.controller(
-        {"left_wheel_radius": 0.1, "right_wheel_radius": 0.11, "wheel_separation": 0.5}, {}
+    found = dd.controller(
+        {"left_wheel_radius": 0.1, "right_wheel_radius": 0.11, "wheel_separation": 0.5}, EncoderScales({})
     )
-    assert name == "diff_drive_controller" and values["wheel_separation"] == 0.5
+    values = found.parameters
+    assert found.controller == "diff_drive_controller" and values["wheel_separation"] == 0.5
     assert math.isclose(values["wheel_radius"], 0.105)
     assert math.isclose(values["left_wheel_radius_multiplier"] * values["wheel_radius"], 0.1)
-    assert "radians" in assumes and "ticks" not in assumes
-    _, values, places, _ = (
+    assert "radians" in found.assumes and "ticks" not in found.assumes
+    trike = (
         get_model("tricycle_reverse")
         .in_radians()
         .controller(
@@ -202,11 +204,12 @@ def test_the_controller_of_a_model_in_radians_takes_its_parameters_as_they_are()
                 "steer_offset": 0.0,
                 "k_steer_reverse": 0.0,
             },
-            {},
+            EncoderScales({}),
         )
     )
-    assert values == {"wheelbase": 1.1, "wheel_radius": 0.2}
-    assert set(places) == {"k_steer", "steer_offset", "k_steer_reverse"}
+    assert trike.parameters == {"wheelbase": 1.1, "wheel_radius": 0.2}
+    assert set(trike.places) == {"k_steer", "steer_offset", "k_steer_reverse"}
+    assert not trike.omitted
 
 
 def test_a_scenario_names_the_parameters_of_the_joints_units(

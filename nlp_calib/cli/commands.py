@@ -175,6 +175,7 @@ def _write_outputs(
         sigma=getattr(args, "sigma", 3.0),
         urdf=getattr(args, "robot_urdf", None),
         sensor_link=getattr(args, "sensor_link", None),
+        ros_distro=getattr(args, "ros_distro", registry.OutputOptions.ros_distro),
     )
     with StagedOutput(out, group, force=args.force) as stage:
         runs = [(run, stage.path / sub) for run, sub in pieces]

@@ -19,6 +19,7 @@ import numpy as np
 
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log, LogHeader
+from nlp_calib.models.controllers import ControllerMap, EncoderScales
 from nlp_calib.models.mount import MOUNT_REFERENCE
 
 if TYPE_CHECKING:
@@ -152,12 +153,10 @@ class KinematicModel(Protocol):
         """For each counter encoder: the input row it drives and the ticks per unit of that input."""
         ...
 
-    def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, float]
-    ) -> tuple[str, dict[str, float], dict[str, str], str]:
-        """The ros2_control controller of this base, its parameters from ``params`` (and each
-        encoder's ``ranges``: readings per turn), where each kinematic parameter with no place
-        among them belongs, and what the values assume of the encoders."""
+    def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
+        """The ros2_control controller of this base, its parameters from ``params`` (and what the
+        encoders' ``scales`` make of them), where each kinematic parameter with no place among them
+        belongs and why any of the controller's parameters is left out."""
         ...
 
     def in_radians(self) -> KinematicModel:

@@ -26,6 +26,7 @@ from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.models.base import STEERING_SAMPLES, KinematicModel, Reference, Symmetry, sampled_angle
+from nlp_calib.models.controllers import ControllerMap, EncoderScales
 
 if TYPE_CHECKING:
     from nlp_calib.models.drives import Drive
@@ -257,16 +258,21 @@ class InRadians:
 
     # --- the hand-off and the start ----------------------------------------------------------
 
-    def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, float]
-    ) -> tuple[str, dict[str, float], dict[str, str], str]:
-        """The model's controller with every wheel turn 2π of its joint; a controller parameter
-        that is one of the model's own (same name: ``wheel_radius``, ``wheelbase``...) is the
-        parameter itself, not its round trip through the counts form."""
+    def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
+        """The model's controller with every wheel turn 2π of its joint and the readings joint
+        angles; a controller parameter that is one of the model's own (same name:
+        ``wheel_radius``, ``wheelbase``...) is the parameter itself, not its round trip through
+        the counts form."""
         turns = dict.fromkeys(self.encoder_kinds, 2.0 * np.pi)
-        name, parameters, places, _ = self.model.controller(self.to_counts(params), turns)
-        own = {n: float(params[n]) if n in params else v for n, v in parameters.items()}
-        return name, own, {self.rename(n): self.words(w) for n, w in places.items()}, ASSUMES
+        found = self.model.controller(self.to_counts(params), EncoderScales(turns, turns, joint_angles=True))
+        own = {n: float(params[n]) if n in params else v for n, v in found.parameters.items()}
+        return ControllerMap(
+            found.controller,
+            own,
+            {self.rename(n): self.words(w) for n, w in found.places.items()},
+            {n: self.words(w) for n, w in found.omitted.items()},
+            ASSUMES,
+        )
 
     def implausible(self, params: Mapping[str, float]) -> str:
         return self.words(self.model.implausible(self.to_counts(params)))

@@ -19,7 +19,7 @@ from nlp_calib.core.files import atomic_write_bytes, atomic_write_text
 from nlp_calib.core.version import __version__
 from nlp_calib.outputs import urdf
 from nlp_calib.outputs.results import result_document
-from nlp_calib.results import CalibrationRun
+from nlp_calib.results import CalibrationRun, Encoder
 
 CALIBRATION_FILE = "calibration.yaml"
 URDF_FILE = "sensor_mount.urdf.xml"
@@ -73,14 +73,19 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "objective": {"residual": doc["residual"], "robust": doc["robust"]},
         "correlation": best["correlation"],
         "units": dict(sc.units),
-        # The units "per t_max ticks" and "per tick" refer to these encoders' ranges.
-        "encoders": [
-            {"name": e.name, "kind": e.kind, "unit": e.unit, "ticks_per_turn": e.range}
-            for e in run.log.encoders
-        ],
+        # The units "per t_max ticks" and "per tick" refer to these encoders' ranges; a wheel's
+        # counts per turn (for its radius) only where the user gave them.
+        "encoders": [_encoder(e) for e in run.log.encoders],
         "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
         "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
     }
+
+
+def _encoder(e: Encoder) -> dict[str, Any]:
+    entry: dict[str, Any] = {"name": e.name, "kind": e.kind, "unit": e.unit, "range": e.range}
+    if e.per_turn is not None:
+        entry["counts_per_turn"] = e.per_turn
+    return entry
 
 
 class _Dumper(yaml.SafeDumper):

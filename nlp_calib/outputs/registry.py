@@ -23,11 +23,13 @@ from nlp_calib.results import CalibrationRun
 @dataclass(frozen=True)
 class OutputOptions:
     """What a user says about the outputs on the command line: ``sigma`` of the drawn ellipses,
-    the robot's own URDF and the sensor's link in it (``robot.urdf`` re-poses that joint)."""
+    the robot's own URDF and the sensor's link in it (``robot.urdf`` re-poses that joint) and the
+    ROS 2 release whose ros2_controllers' names ``ros2_control.yaml`` uses."""
 
     sigma: float = 3.0
     urdf: urdf.Description | None = None
     sensor_link: str | None = None
+    ros_distro: str = ros2_control.DEFAULT_ROS_DISTRO
 
 
 Writer = Callable[[CalibrationRun, Path, str, OutputOptions], list[Path]]
@@ -81,6 +83,10 @@ def _robot(run: CalibrationRun, folder: Path, name: str, options: OutputOptions)
     return handoff.write_users_robot(run, folder, name, options.urdf, options.sensor_link)
 
 
+def _controller(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
+    return ros2_control.write_ros2_control(run, folder, name, options.ros_distro)
+
+
 def _report(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
     files = names(("handoff",)) if run.handoff_solver() is not None else []
     return markdown.write_report(run, folder, name, files, next_steps(files))
@@ -93,7 +99,7 @@ OUTPUTS: tuple[Output, ...] = (
            next_step="paste its <joint> into your robot's URDF (its comment says what was calibrated)"),
     Output("robot.urdf", "handoff", _robot, per_log=False,
            next_step="the same joint in a complete robot description (with --urdf: yours), for URDF tools"),
-    Output("ros2_control.yaml", "handoff", _plain(ros2_control.write_ros2_control), per_log=False,
+    Output("ros2_control.yaml", "handoff", _controller, per_log=False,
            next_step="the controller's parameters (wheel radius, separation or wheelbase) for ros2_control"),
     Output("result.json", "result", _plain(results.write_result)),
     Output("odometry.csv", "odometry", _plain(results.write_odometry),

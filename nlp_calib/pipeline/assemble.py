@@ -14,6 +14,7 @@ import numpy as np
 from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.models import KinematicModel, param_units
+from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.models.mount import MOUNT_UNITS
 from nlp_calib.pipeline.align import Alignment, lag_at_edge
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis
@@ -74,8 +75,9 @@ def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
     log, model = prepared.log, prepared.model
     kinds = model.encoder_kinds
     unit = "rad" if log.header.encoder_units == "radians" else "ticks"
+    per_turn = encoder_scales(prepared).per_turn
     encoders = tuple(
-        Encoder(name, kinds.get(name, "counter"), unit, int(vmax))
+        Encoder(name, kinds.get(name, "counter"), unit, int(vmax), per_turn.get(name))
         for name, vmax in zip(log.header.encoder_names, log.header.encoder_max)
     )
     t = log.time_s[windows.used[0] : windows.used[1]]
@@ -134,11 +136,19 @@ def _report(
     """One solver's report, with its estimate in the controller's terms."""
     u = fitted.uncertainty[name]
     blocked = fitted.crossval.std if fitted.crossval is not None else np.full(len(u.names), np.nan)
-    header = prepared.log.header
-    ranges = dict(zip(header.encoder_names, header.encoder_max))
     std = believed_std(u.std, blocked)
-    controller = controller_params(prepared.model, result.names, result.params, std, u.correlation, ranges)
+    scales = encoder_scales(prepared)
+    estimate = (result.params, std, u.correlation)
+    controller = controller_params(prepared.model, result.names, estimate, scales, figures.noise.get(name))
     return SolverReport(result, u, *figures.scores[name], controller)
+
+
+def encoder_scales(prepared: PreparedLog) -> EncoderScales:
+    """The encoders' ranges in the log and their counts per wheel turn where the user gives them
+    (the scenario's ``counts_per_turn`` over ``ROBOT.yaml``'s)."""
+    header = prepared.log.header
+    per_turn = {**header.counts_per_turn, **prepared.scenario.data.counts_per_turn}
+    return EncoderScales(dict(zip(header.encoder_names, header.encoder_max)), per_turn)
 
 
 def mount_notes(sc: Scenario, start: StartingPoint) -> list[str]:

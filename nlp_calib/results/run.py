@@ -66,13 +66,15 @@ class ScenarioInfo:
 
 @dataclass(frozen=True)
 class Encoder:
-    """An encoder as the log describes it: its name, kind (``absolute`` or ``counter``), unit and
-    range (readings per turn; 0 when the readings are angles)."""
+    """An encoder as the log describes it: its name, kind (``absolute`` or ``counter``), unit,
+    range (the header's: an absolute encoder's readings per turn, the unit a counter's gain is
+    counted in; 0 when the readings are angles) and a wheel's counts per turn where given."""
 
     name: str
     kind: str
     unit: str
     range: int
+    per_turn: float | None = None
 
 
 @dataclass(frozen=True)
