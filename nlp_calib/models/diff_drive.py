@@ -121,7 +121,9 @@ class DiffDriveDrive:
         return drive_header(opts, "differential_drive", DiffDrive.header_names)
 
     def vendor_odometry(self, header: LogHeader, ticks: np.ndarray, start: Pose | None = None) -> np.ndarray:
-        p = {DiffDrive.header_aliases[n.lower()]: v for n, v in header.parameters.items()}
+        # The vendor's odometry knows the plain differential drive only (a skid-steer's slip too).
+        aliases = DiffDrive.header_aliases
+        p = {aliases[n.lower()]: v for n, v in header.parameters.items() if n.lower() in aliases}
         d_l = p["k_left"] * wrapped_difference(ticks[:, 0])
         d_r = p["k_right"] * wrapped_difference(ticks[:, 1])
         return first_order(0.5 * (d_l + d_r), (d_r - d_l) / p["baseline"], start)
