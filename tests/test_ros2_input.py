@@ -84,8 +84,10 @@ def test_a_recording_calibrates_in_robot_units_with_only_topics_and_joints(
     assert [f for f in faults if f["kind"] != "tracker_jump"] == []  # no encoder fault
     assert sum(f["kind"] == "tracker_jump" for f in faults) >= 0.8 * 0.01 * recording.tracker_ns.size
     controller = yaml.safe_load((out / "ros2_control.yaml").read_text())
-    held = controller["tricycle_controller"]["ros__parameters"]
+    held = dict(controller["tricycle_controller"]["ros__parameters"])
+    covariances = [held.pop(k) for k in ("pose_covariance_diagonal", "twist_covariance_diagonal")]
     assert held == {"wheelbase": params["wheelbase"], "wheel_radius": params["wheel_radius"]}
+    assert all(len(c) == 6 and all(v > 0 for v in c) for c in covariances)
     calibration = yaml.safe_load((out / "calibration.yaml").read_text())
     assert {e["unit"] for e in calibration["encoders"]} == {"rad"}
     print(f"{fmt}: {(out / 'ros2_control.yaml').read_text()}")

@@ -110,13 +110,17 @@ def odometry_noise(
     params: np.ndarray,
     inputs: np.ndarray,
     time_s: np.ndarray,
-    noise: Mapping[str, float],
+    noise: tuple[Mapping[str, float], np.ndarray],
 ) -> OdometryNoise:
-    """The covariance diagonals a controller publishes with its odometry, from each input's
-    calibrated ``noise`` per interval, over the intervals of ``inputs`` (at ``time_s``)."""
-    sigma = np.array([noise[n] for n in fns.model.input_names])
+    """The covariance diagonals a controller publishes with its odometry, over the intervals of
+    ``inputs`` (at ``time_s``), from each input's calibrated noise per interval and the noise of
+    one reading (its resolution): ``noise``. A drift adds up the increments' noise (a random walk:
+    slip, jitter); an interval's increment has, besides, the rounding of the reading at its start
+    (the drift's floor counts the one at its end)."""
+    calibrated, reading = noise
+    sigma = np.array([calibrated[n] for n in fns.model.input_names])
     dt = np.diff(np.asarray(time_s, dtype=float))
-    vx, _, wz = _twist(fns, params, inputs, dt, sigma)
+    vx, _, wz = _twist(fns, params, inputs, dt, np.hypot(sigma, reading))
     x, y, yaw = _pose(fns, params, inputs, sigma)
     u = UNMEASURED
     return OdometryNoise(
@@ -124,5 +128,5 @@ def odometry_noise(
         twist=(float(vx), u, u, u, u, float(wz)),
         interval_s=float(np.median(dt)) if dt.size else float("nan"),
         distance_m=POSE_DISTANCE_M,
-        input_noise=dict(noise),
+        input_noise=dict(calibrated),
     )

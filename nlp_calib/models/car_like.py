@@ -71,13 +71,11 @@ RADIANS = RadiansForm(
 )
 
 
-def rear_travel(
-    left: float | np.ndarray, right: float | np.ndarray, curvature: object, track: object
-) -> object:
+def rear_travel(left: ca.SX, right: ca.SX, curvature: ca.SX, track: ca.SX) -> ca.SX:
     """The rear-axle midpoint's travel from each rear wheel's, each taken back to the midline by
-    its distance from the turn's centre (numeric or symbolic)."""
-    half = 0.5 * curvature * track  # type: ignore[operator]
-    return 0.5 * (right / (1.0 + half) + left / (1.0 - half))  # type: ignore[operator]
+    its distance from the turn's centre."""
+    half = 0.5 * curvature * track
+    return 0.5 * (right / (1.0 + half) + left / (1.0 - half))
 
 
 class CarLikeDrive:
@@ -304,8 +302,8 @@ class CarLike:
             return {}
         return {
             "rear_track": (
-                f"only {tight} intervals turn tighter than {0.5 / TIGHT_SPLIT:g} rear tracks' radius (at least "
-                f"{MIN_TIGHT} are needed); give the measured track"
+                f"only {tight} intervals turn tighter than {0.5 / TIGHT_SPLIT:g} rear tracks' radius "
+                f"(at least {MIN_TIGHT} are needed); give the measured track"
             )
         }
 

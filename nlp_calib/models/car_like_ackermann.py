@@ -129,7 +129,7 @@ class CarLikeAckermann(CarLike):
             SENSOR_TURNED[1],
         ),
     )
-    drive: ClassVar[CarLikeAckermannDrive] = CarLikeAckermannDrive()  # type: ignore[assignment]
+    drive: ClassVar[CarLikeAckermannDrive] = CarLikeAckermannDrive()
     physical_ranges: ClassVar[Mapping[str, tuple[float, float]]] = MappingProxyType(
         {**CarLike.physical_ranges, "steering_track": (0.0, 5.0)}
     )
@@ -150,7 +150,7 @@ class CarLikeAckermann(CarLike):
             "steering_track": (
                 "the motion tells the steering track only at second order (the two wheels' angles move "
                 "the mean equally and oppositely); give the distance between the steering pivots"
-            )
+            ),
         }
 
     def tracks(self, params: Mapping[str, float]) -> dict[str, float]:

@@ -96,7 +96,7 @@ class CarLikeBicycle(CarLike):
             SENSOR_TURNED[1],
         ),
     )
-    drive: ClassVar[CarLikeBicycleDrive] = CarLikeBicycleDrive()  # type: ignore[assignment]
+    drive: ClassVar[CarLikeBicycleDrive] = CarLikeBicycleDrive()
     physical_ranges: ClassVar[Mapping[str, tuple[float, float]]] = MappingProxyType(
         {n: r for n, r in CarLike.physical_ranges.items() if n != "rear_track"}
     )

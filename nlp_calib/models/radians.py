@@ -5,7 +5,8 @@ and a steering joint's angle. Read that way, a wheel's gain in metres per tick b
 in metres (its travel is radius × Δangle) and the parameters take the names a robot's stack gives
 them. Each model declares, once, a :class:`RadiansForm`: for every parameter or input whose
 meaning changes, its name, unit and factor in the radians form (the counts form's value is the
-factor times the radians form's); for every input, the encoder that drives it. :class:`InRadians`
+factor times the radians form's); for every input, the encoder that drives it (none: the
+interval's duration, from the log's times). :class:`InRadians`
 wraps the model with it: the symbolic increment is the model's own on the parameters and inputs
 mapped back, and every fact (units, ranges, reference precision, symmetries, defaults, the
 controller's parameters, the closed-form start) is the model's, renamed and rescaled. Nothing of
@@ -217,6 +218,9 @@ class InRadians:
         rows = []
         for name in self.model.input_names:
             encoder = self.form.inputs[name].encoder
+            if not encoder:  # an input no joint drives: the interval's duration
+                rows.append(np.diff(log.time_s))
+                continue
             position = log.joint_position(encoder)
             if self.encoder_kinds[encoder] == "counter":
                 rows.append(np.diff(position))
@@ -238,7 +242,7 @@ class InRadians:
         return {
             self.form.inputs[n].encoder: (row, 1.0)
             for row, n in enumerate(self.model.input_names)
-            if self.encoder_kinds[self.form.inputs[n].encoder] == "counter"
+            if self.encoder_kinds.get(self.form.inputs[n].encoder) == "counter"
         }
 
     def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
@@ -248,6 +252,9 @@ class InRadians:
         noise = []
         for name in self.model.input_names:
             encoder = self.form.inputs[name].encoder
+            if not encoder:  # the interval's duration is exact
+                noise.append(0.0)
+                continue
             given = (encoder_noise or {}).get(encoder)
             if given is not None:
                 noise.append(float(given))

@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.logs import EncoderKind, Log, LogHeader
-from nlp_calib.models.base import SENSOR_TURNED, Reference, Symmetry, named, rows_by_name
+from nlp_calib.models.base import SENSOR_TURNED, Reference, Symmetry, named
 from nlp_calib.models.controllers import ControllerMap, EncoderScales
 from nlp_calib.models.diff_drive import LEFT_ENCODER, RIGHT_ENCODER, DiffDrive, DiffDriveDrive, wheel_pair
 from nlp_calib.models.drives import SimulationSettings, drive_header, running
@@ -134,7 +134,7 @@ class SkidSteer(DiffDrive):
             SENSOR_TURNED[1],
         ),
     )
-    drive: ClassVar[SkidSteerDrive] = SkidSteerDrive()  # type: ignore[assignment]
+    drive: ClassVar[SkidSteerDrive] = SkidSteerDrive()
     physical_ranges: ClassVar[Mapping[str, tuple[float, float]]] = MappingProxyType(
         {**DiffDrive.physical_ranges, "baseline": (0.05, 10.0), "turn_slip": (-0.5, 5.0)}
     )
@@ -164,9 +164,9 @@ class SkidSteer(DiffDrive):
         base = wheel_pair(params["k_left"], params["k_right"], params["baseline"], scales)
         wide = params["baseline"] * (1.0 + params["turn_slip"] * _STATED_RATE)
         slip = (
-            "no ros2_control parameter: the effective track grows as baseline·(1 + turn_slip·|ω|) with the turn "
-            f"rate ω (rad/s); at {_STATED_RATE:g} rad/s it is {wide!r} m: a base that mostly turns at one "
-            "rate takes that track as wheel_separation"
+            "no ros2_control parameter: the effective track grows as baseline·(1 + turn_slip·|ω|) with "
+            f"the turn rate ω (rad/s); at {_STATED_RATE:g} rad/s it is {wide!r} m: a base that mostly "
+            "turns at one rate takes that track as wheel_separation"
         )
         return ControllerMap(
             base.controller, base.parameters, {"turn_slip": slip}, base.omitted, base.assumes
@@ -183,10 +183,7 @@ class SkidSteer(DiffDrive):
     ) -> dict[str, float]:
         """The differential drive's closed form with no slip (its track is the effective one at
         the log's turn rates); the fit finds the slip."""
-        rows = rows_by_name(self.input_names, U)
-        wheels = np.empty((2 * rows["left_ticks"].shape[0], U.shape[1]))
-        wheels[0::2], wheels[1::2] = rows["left_ticks"], rows["right_ticks"]
-        start = super().initial_guess(wheels, z, lambda p: base_motion({**p, "turn_slip": 0.0}))
+        start = super().initial_guess(U, z, lambda p: base_motion({**p, "turn_slip": 0.0}))
         return {**{n: start[n] for n in DiffDrive.kinematic_params}, "turn_slip": 0.0, **_sensor(start)}
 
 

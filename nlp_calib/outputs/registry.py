@@ -9,6 +9,7 @@ closing summary says of each file. Adding an output is one module with a writer
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
@@ -83,6 +84,25 @@ def _robot(run: CalibrationRun, folder: Path, name: str, options: OutputOptions)
     return handoff.write_users_robot(run, folder, name, options.urdf, options.sensor_link)
 
 
+def _joint(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
+    return handoff.write_joint(run, folder, name, users=options.urdf is not None)
+
+
+def placed(run: CalibrationRun, options: OutputOptions) -> CalibrationRun:
+    """``run`` with each estimate's mount as the user's own joint of the sensor's link when they
+    give their URDF (``--urdf``, ``--sensor-link``): what every hand-off file then states."""
+    if options.urdf is None or options.sensor_link is None:
+        return run
+    description, link = options.urdf, options.sensor_link
+    reports = {
+        name: rep
+        if rep.mount is None
+        else dataclasses.replace(rep, mount=urdf.placed(description, link, rep.mount))
+        for name, rep in run.reports.items()
+    }
+    return dataclasses.replace(run, reports=reports)
+
+
 def _controller(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
     return ros2_control.write_ros2_control(run, folder, name, options.ros_distro)
 
@@ -95,7 +115,7 @@ def _report(run: CalibrationRun, folder: Path, name: str, options: OutputOptions
 OUTPUTS: tuple[Output, ...] = (
     Output("calibration.yaml", "handoff", _plain(handoff.write_calibration), per_log=False,
            next_step="the parameters with units and 1σ, for your robot's configuration"),
-    Output("sensor_mount.urdf.xml", "handoff", _plain(handoff.write_joint), per_log=False,
+    Output("sensor_mount.urdf.xml", "handoff", _joint, per_log=False,
            next_step="paste its <joint> into your robot's URDF (its comment says what was calibrated)"),
     Output("robot.urdf", "handoff", _robot, per_log=False,
            next_step="the same joint in a complete robot description (with --urdf: yours), for URDF tools"),
@@ -148,6 +168,9 @@ def write(
 ) -> list[Path]:
     """Write ``outputs``: those per log for each ``(run, folder)`` of ``runs``, the others once for
     the calibration ``top`` (its run and folder). Returns the paths written, in that order."""
+    # The mount each hand-off file states is made once, before any of them is written.
+    runs = [(placed(run, options), folder) for run, folder in runs]
+    top = (placed(top[0], options), top[1])
     written: list[Path] = []
     for output in outputs:
         targets = runs if output.per_log else [top]

@@ -385,7 +385,7 @@ def handoff_noise(
     d = calibrated_drift(fit, windows, params, steering_sample, NOISE_RECORDS)
     noise = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
-    return odometry_noise(fit.fns, params, d.inputs, time_s, noise)
+    return odometry_noise(fit.fns, params, d.inputs, time_s, (noise, windows.input_noise_std))
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.models import KinematicModel, param_units
 from nlp_calib.models.controllers import EncoderScales
-from nlp_calib.models.mount import MOUNT_UNITS
+from nlp_calib.models.mount import MOUNT_PARAMS, MOUNT_UNITS
 from nlp_calib.pipeline.align import Alignment, lag_at_edge
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis
 from nlp_calib.pipeline.build import StartingPoint
@@ -37,6 +37,7 @@ from nlp_calib.results import (
 )
 from nlp_calib.results.checks import believed_std
 from nlp_calib.results.faults import Findings
+from nlp_calib.results.mount import COMPONENTS, SensorMount
 from nlp_calib.solvers import solver_label
 from nlp_calib.sources import BagSource
 
@@ -140,7 +141,33 @@ def _report(
     scales = encoder_scales(prepared)
     estimate = (result.params, std, u.correlation)
     controller = controller_params(prepared.model, result.names, estimate, scales, figures.noise.get(name))
-    return SolverReport(result, u, *figures.scores[name], controller)
+    mount = sensor_mount(prepared, result.param_dict(), dict(zip(result.names, map(float, std))))
+    return SolverReport(result, u, *figures.scores[name], controller, mount)
+
+
+#: Where a planar fit's mount takes what planar driving cannot see.
+_NOMINAL = {True: "from the nominal mount (/tf_static)", False: "not known (0)"}
+_HELD_Z = "held at its given value (known.sensor_z, 0 unless set)"
+
+
+def sensor_mount(prepared: PreparedLog, params: Mapping[str, float], std: Mapping[str, float]) -> SensorMount:
+    """The sensor's mount of an estimate, on ``base_link``: a planar sensor's x, y and yaw
+    calibrated, its height, roll and pitch those of the nominal mount where the log gives one; a
+    3-D sensor's all but its held height."""
+    header = prepared.log.header
+    if prepared.scenario.objective.sensor.is_3d:
+        names = dict(zip(COMPONENTS, MOUNT_PARAMS))
+        nominal, given = {"z": _HELD_Z}, {}
+    else:
+        names = {"x": "sensor_x", "y": "sensor_y", "yaw": "sensor_theta"}
+        zrp = header.sensor_z_roll_pitch
+        given = dict(zip(("z", "roll", "pitch"), zrp or (0.0, 0.0, 0.0)))
+        nominal = dict.fromkeys(given, _NOMINAL[zrp is not None])
+    pose = {c: float(params[names[c]]) if c in names else given[c] for c in COMPONENTS}
+    sd = {c: std[names[c]] for c in COMPONENTS if c in names and c not in nominal}
+    return SensorMount.on_base(
+        prepared.scenario.objective.sensor.mount, header.sensor_frame, pose, sd, nominal
+    )
 
 
 def encoder_scales(prepared: PreparedLog) -> EncoderScales:

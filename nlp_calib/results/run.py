@@ -30,6 +30,7 @@ from nlp_calib.results.checks import (
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import ControllerParams
+from nlp_calib.results.mount import SensorMount
 from nlp_calib.results.series import OdometryTrack, RunSeries
 from nlp_calib.results.solver import SolverResult
 from nlp_calib.results.uncertainty import Uncertainty
@@ -147,6 +148,8 @@ class SolverReport:
     holdout: TrajectoryMetrics | None
     #: The estimate in the robot stack's terms (its ros2_control controller's parameters).
     controller: ControllerParams | None = None
+    #: The sensor's mount as every hand-off file states it.
+    mount: SensorMount | None = None
 
 
 #: The verdict's levels.
