@@ -139,6 +139,10 @@ OUTPUTS: tuple[Output, ...] = (
 )  # fmt: skip
 
 
+#: The groups a calibration writes (``nlp-calib run``, ``compare``; ``write_run``).
+RUN_GROUPS = ("result", "handoff", "figures")
+
+
 def selected(groups: Collection[str], report: bool) -> tuple[Output, ...]:
     """The outputs of ``groups``, those needing ``--report`` only with ``report``."""
     return tuple(o for o in OUTPUTS if o.group in groups and (report or not o.report))
