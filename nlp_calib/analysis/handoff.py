@@ -33,40 +33,77 @@ def _values(model: KinematicModel, names: Sequence[str], p: np.ndarray, scales: 
     return np.array(list(found.parameters.values()))
 
 
+#: A controller value whose 1σ exceeds this share of it is not determined by the drive.
+UNDETERMINED_SHARE = 0.25
+
+
+def _jacobian(
+    model: KinematicModel, names: Sequence[str], params: np.ndarray, step: np.ndarray, scales: EncoderScales
+) -> np.ndarray:
+    """The controller values' Jacobian in the parameters, by central differences."""
+    columns = []
+    for j in range(len(names)):
+        h = 1e-6 * max(abs(float(params[j])), float(step[j]), 1e-9)
+        up, down = params.copy(), params.copy()
+        up[j] += h
+        down[j] -= h
+        columns.append((_values(model, names, up, scales) - _values(model, names, down, scales)) / (2.0 * h))
+    return np.stack(columns, axis=1)
+
+
+def _meaningless(
+    values: Mapping[str, float],
+    sd: np.ndarray,
+    jac: np.ndarray,
+    names: Sequence[str],
+    held: Mapping[str, str],
+) -> dict[str, str]:
+    """The controller values no calibration gave: resting on a parameter held at its initial
+    value (the model's guess, or the header's), or too loose to mean anything."""
+    out = {}
+    for i, (name, value) in enumerate(values.items()):
+        resting = [n for j, n in enumerate(names) if n in held and jac[i, j] != 0.0]
+        if resting:
+            out[name] = f"rests on {resting[0]}, held at its initial value ({held[resting[0]]}): keep yours"
+        elif sd[i] > UNDETERMINED_SHARE * abs(value):
+            out[name] = f"not determined by this drive ({value:.4g} ± {sd[i]:.2g})"
+    return out
+
+
 def controller_params(
     model: KinematicModel,
     names: Sequence[str],
     estimate: tuple[np.ndarray, np.ndarray, np.ndarray],
     scales: EncoderScales,
-    noise: OdometryNoise | None = None,
+    extra: tuple[OdometryNoise | None, Mapping[str, str]] = (None, {}),
 ) -> ControllerParams:
     """``model``'s controller parameters at ``estimate`` (the parameters in ``names`` order, their
-    1σ and correlation) with their 1σ, and the odometry's ``noise``."""
+    1σ and correlation) with their 1σ; ``extra``: the odometry's noise, and the parameters held
+    at their initial values (with why), whose controller values are left out, as is a value too
+    loose to mean anything."""
     params, std, correlation = estimate
+    noise, held = extra
     values = dict(zip(names, map(float, params)))
     found = model.controller(values, scales)
     finite = np.where(np.isfinite(std), std, 0.0)
     cov = np.nan_to_num(correlation) * np.outer(finite, finite)
-    jac = np.zeros((len(found.parameters), len(names)))
-    for j in range(len(names)):
-        h = 1e-6 * max(abs(float(params[j])), float(finite[j]), 1e-9)
-        up, down = params.copy(), params.copy()
-        up[j] += h
-        down[j] -= h
-        jac[:, j] = (_values(model, names, up, scales) - _values(model, names, down, scales)) / (2.0 * h)
+    jac = _jacobian(model, names, params, finite, scales)
     sd = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", jac, cov, jac), 0.0, None))
+    left_out = _meaningless(found.parameters, sd, jac, names, held)
     units = dict(model.units)
     elsewhere = tuple(
         Placement(n, values[n], float(std[list(names).index(n)]), units.get(n, ""), where)
         for n, where in found.places.items()
     )
+    kept = [i for i, n in enumerate(found.parameters) if n not in left_out]
+    parameters = list(found.parameters.items())
     return ControllerParams(
         found.controller,
-        dict(found.parameters),
-        dict(zip(found.parameters, map(float, sd))),
+        {parameters[i][0]: parameters[i][1] for i in kept},
+        {parameters[i][0]: float(sd[i]) for i in kept},
         elsewhere,
         found.assumes,
-        dict(found.omitted),
+        {**found.omitted, **left_out},
         noise,
     )
 

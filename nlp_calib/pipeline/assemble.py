@@ -140,7 +140,8 @@ def _report(
     std = believed_std(u.std, blocked)
     scales = encoder_scales(prepared)
     estimate = (result.params, std, u.correlation)
-    controller = controller_params(prepared.model, result.names, estimate, scales, figures.noise.get(name))
+    extra = (figures.noise.get(name), prepared.held)
+    controller = controller_params(prepared.model, result.names, estimate, scales, extra)
     mount = sensor_mount(prepared, result.param_dict(), dict(zip(result.names, map(float, std))))
     return SolverReport(result, u, *figures.scores[name], controller, mount)
 
