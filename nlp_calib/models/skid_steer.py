@@ -23,7 +23,8 @@ import numpy as np
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.base import SENSOR_TURNED, Reference, Symmetry, named
 from nlp_calib.models.controllers import ControllerMap, EncoderScales
-from nlp_calib.models.diff_drive import LEFT_ENCODER, RIGHT_ENCODER, DiffDrive, DiffDriveDrive, wheel_pair
+from nlp_calib.models.diff_drive import RADIANS as DIFF_DRIVE_RADIANS
+from nlp_calib.models.diff_drive import DiffDrive, DiffDriveDrive, wheel_pair
 from nlp_calib.models.drives import SimulationSettings, drive_header, running
 from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
@@ -35,21 +36,11 @@ _SIM_CURVATURE = 3.0
 #: The turn rate (rad/s) the hand-off states the effective track at.
 _STATED_RATE = 0.5
 
+#: The differential drive's radians form, and the interval's duration, which no joint drives.
 RADIANS = RadiansForm(
-    params=MappingProxyType(
-        {
-            "k_left": Renamed("left_wheel_radius", "m"),
-            "k_right": Renamed("right_wheel_radius", "m"),
-            "baseline": Renamed("wheel_separation", "m"),
-        }
-    ),
+    params=DIFF_DRIVE_RADIANS.params,
     inputs=MappingProxyType(
-        {
-            "left_ticks": Renamed("left_angle", "rad", 1.0, LEFT_ENCODER),
-            "right_ticks": Renamed("right_angle", "rad", 1.0, RIGHT_ENCODER),
-            # No encoder: the interval's duration, from the log's times.
-            "interval_duration": Renamed("interval_duration", "s"),
-        }
+        {**DIFF_DRIVE_RADIANS.inputs, "interval_duration": Renamed("interval_duration", "s")}
     ),
 )
 
