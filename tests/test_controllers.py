@@ -5,6 +5,7 @@ Python API writing what the command writes."""
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import json
 import math
@@ -284,3 +285,38 @@ def test_the_steering_advice_holds_for_any_transmission() -> None:
         f"1/k_steer = {1 / k!r}" in raw["k_steer"]
         and f"offset = steer_offset = {offset!r}" in raw["steer_offset"]
     )
+
+
+# --- compare ---------------------------------------------------------------------------------
+
+
+def test_compare_puts_every_parameter_the_lag_and_the_sensor_side_by_side(tmp_path: Path) -> None:
+    from conftest import SCENARIOS
+
+    scenarios = [str(SCENARIOS / "demo.yaml"), str(SCENARIOS / "diff_drive_demo.yaml")]
+    proc = cli("compare", *scenarios, "--out", str(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    rows = list(csv.DictReader((tmp_path / "compare.csv").open()))
+    assert [(r["scenario"], r["solver"]) for r in rows] == [
+        (s, solver) for s in ("demo", "diff_drive_demo") for solver in ("gauss_newton", "ipopt")
+    ]
+    for row in rows:
+        result = json.loads((tmp_path / row["scenario"] / "result.json").read_text())
+        params = result["solvers"][row["solver"]]["params"]
+        for name, value in params.items():
+            assert float(row[name]) == value and float(row[f"{name}_std"]) > 0
+        others = {n for n in row if n.endswith("_std")} - {f"{n}_std" for n in params}
+        assert all(row[n] == "" for n in others)  # the other model's parameters: none
+        assert float(row["tracker_lag_s"]) == result["alignment"]["tracker_lag_s"]
+        assert row["sensor_frame"] == "laser" and row["sensor_mount"] == "planar"
+    table = (tmp_path / "compare.md").read_text()
+    for label in (
+        "k_steer",
+        "steer_offset [rad]",
+        "sensor_theta [rad]",
+        "baseline [m]",
+        "tracker lag [ms]",
+        "sensor",
+    ):
+        assert f"| {label} |" in table
+    assert "side by side" in proc.stdout and "k_steer" in proc.stdout.split("side by side")[1]

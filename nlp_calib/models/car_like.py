@@ -303,7 +303,7 @@ class CarLike:
         return {
             "rear_track": (
                 f"only {tight} intervals turn tighter than {0.5 / TIGHT_SPLIT:g} rear tracks' radius "
-                f"(at least {MIN_TIGHT} are needed); give the measured track"
+                f"(give the measured track; {MIN_TIGHT} are needed)"
             )
         }
 

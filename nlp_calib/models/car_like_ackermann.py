@@ -148,20 +148,9 @@ class CarLikeAckermann(CarLike):
         return {
             **super().undetermined(inputs),
             "steering_track": (
-                "the motion tells the steering track only at second order (the two wheels' angles move "
-                "the mean equally and oppositely); give the distance between the steering pivots"
+                "a wrong one moves the mean steering angle only at second order (give the measured distance "
+                "between the steering pivots): no turn tells it"
             ),
-        }
-
-    def tracks(self, params: Mapping[str, float]) -> dict[str, float]:
-        return {"traction_track_width": params["rear_track"]}
-
-    def track_places(self, params: Mapping[str, float]) -> dict[str, str]:
-        return {
-            "steering_track": (
-                "held, not calibrated (the motion does not tell it): steering_track_width is your measured "
-                "distance between the steering pivots"
-            )
         }
 
     def in_radians(self) -> InRadians:

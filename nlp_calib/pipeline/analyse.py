@@ -76,7 +76,7 @@ class LogAnalysis:
     baseline: Scores
     series: RunSeries | None
     odometry: OdometryTrack | None
-    #: Each converged solver's odometry noise as its controller publishes it.
+    #: The handed-off solver's odometry noise as its controller publishes it.
     noise: Mapping[str, OdometryNoise | None] = dataclasses.field(default_factory=dict)
 
 
@@ -420,7 +420,11 @@ def analyse_log(
     odo = None
     if wanted.odometry is not None and wanted.odometry in results:
         odo = odometry(fit, windows, results[wanted.odometry].params, steering)
-    noise = {n: handoff_noise(fit, windows, r.params, steering) for n, r in results.items() if r.converged}
+    # The hand-off carries the first converged solver's estimate (in the scenario's order): its
+    # odometry noise is the one a controller file states.
+    order = [*view.prepared.scenario.solvers, *results]
+    first = next((n for n in order if n in results and results[n].converged), None)
+    noise = {} if first is None else {first: handoff_noise(fit, windows, results[first].params, steering)}
     return dataclasses.replace(figures, series=series, odometry=odo, noise=noise)
 
 
