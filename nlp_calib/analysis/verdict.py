@@ -22,13 +22,17 @@ The rules a reader can check:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.base import reference_scale
+from nlp_calib.models.clock import is_lag
 from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
+from nlp_calib.sensors import sensor_for
 
 #: Relative parameter difference beyond which two converged solvers disagree.
 AGREE = 1e-4
@@ -41,8 +45,9 @@ def _loose(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]
     obs = run.checks.observability
     if obs is not None:
         out += [w.words() for w in obs.weak if w.std_reference <= NOT_OBSERVABLE]
+    sensor = sensor_for(run.scenario.sensor.kind, run.scenario.sensor.scale)
     for name, sd in run.std(solver).items():
-        ref = reference_scale(model, name, params[name])
+        ref = reference_scale(model, name, params[name], sensor.reference)
         if sd > WEAK * ref:
             unit = run.scenario.units[name]
             out.append(f"{name} is known only to ±{sd:.2g} {unit} (over {WEAK:g}× the {ref:.2g} needed)")
@@ -52,6 +57,9 @@ def _loose(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]
 def _checks(run: CalibrationRun) -> list[str]:
     """What the checks found that needs a look, in words."""
     out = [w for w in run.warnings if " held at its initial value" in w]
+    lag = run.data.lag_estimate
+    if lag is not None and lag.at_edge:
+        out.append(f"the tracker lag ended on the edge of alignment.search ({1e3 * lag.lag_s:.0f} ms)")
     direction, findings = run.checks.direction, run.checks.findings
     if direction is not None and direction.significant:
         name, z = direction.worst
@@ -80,6 +88,40 @@ def caveats(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str
     return out
 
 
+def _trade_off(run: CalibrationRun, solver: str) -> str:
+    """The parameters this drive determines only together, each known only within the bounds of
+    one of them (a lag within its search), in words; "" when there are none."""
+    group = run.reports[solver].uncertainty.bounded
+    if not group:
+        return ""
+    std, units = run.std(solver), run.scenario.units
+    spread = ", ".join(f"{n} ±{std[n]:.2g} {units.get(n, '')}".rstrip() for n in group)
+    return (
+        f"{', '.join(group)} trade off on this drive (changing one is undone by the others), so each is "
+        f"known only within the range the search allows ({spread})"
+    )
+
+
+def way_out(names: Sequence[str], model: KinematicModel) -> str:
+    """What lets a drive determine the parameters ``names`` that trade off on this one, in words."""
+    names = list(dict.fromkeys(names))
+    lags = [n for n in names if is_lag(n)]
+    if lags:
+        return (
+            "next: give the lag (alignment.tracker_lag: <seconds>, from how the clocks are synchronised), "
+            "or record a drive whose wheel speeds change independently of each other (starts and stops, "
+            "turns of several radii both ways), which a time offset cannot imitate"
+        )
+    turning = [n for n in names if n in model.turning_params or n in ("sensor_x", "sensor_y")]
+    if turning:
+        return "next: drive turns in both directions (S-curves, circles each way) and fit again"
+    held = next((n for n in names), "")
+    return (
+        f"next: hold one of them at a measured value (known: {{{held}: <value>}}), or drive so that they act "
+        f"differently ({model.turning_note or 'other speeds and turns'})"
+    )
+
+
 def _fitted_start(run: CalibrationRun) -> bool:
     """Whether the initial guess was computed from this data (``initial_guess: auto``)."""
     return run.scenario.initial_guess == "auto"
@@ -93,13 +135,20 @@ def verdict(run: CalibrationRun, model: KinematicModel, hint: str = "") -> Verdi
         return Verdict(UNDETERMINED, (mirror + hint,), handoff=False)
     obs = run.checks.observability
     loose = [w.words() for w in obs.weak if w.std_reference > NOT_OBSERVABLE] if obs is not None else []
+    lag = run.data.lag_estimate
+    unfitted = ["the tracker lag could not be fitted"] if lag is not None and not lag.converged else []
     if solver is None:
         failures = dict.fromkeys(run.reports[s].result.reason for s in run.solver_order())
-        return Verdict(UNDETERMINED, (*loose, *(f"no solver converged: {r}" for r in failures)))
+        group = [n for w in (obs.weak if obs is not None else ()) for n in w.components]
+        out = (*unfitted, *loose, *(f"no solver converged: {r}" for r in failures))
+        return Verdict(UNDETERMINED, (*out, way_out(group, model)) if loose else out)
+    if bounded := _trade_off(run, solver):
+        return Verdict(UNDETERMINED, (bounded, way_out(run.reports[solver].uncertainty.bounded, model)))
     missing = [n for n, sd in run.std(solver).items() if not np.isfinite(sd)]
     if missing or loose:
         why = loose or [f"{', '.join(missing)} not determined by this drive"]
-        return Verdict(UNDETERMINED, tuple(why))
+        group = [*missing, *(n for w in (obs.weak if obs is not None else ()) for n in w.components)]
+        return Verdict(UNDETERMINED, (*why, way_out(group, model)))
     check = run.checks.consistency
     if check is not None and check.significant:
         return Verdict(NOT_USABLE, (check.words(),))

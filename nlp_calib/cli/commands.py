@@ -33,7 +33,7 @@ from nlp_calib.outputs.write import output_options
 from nlp_calib.pipeline import Calibration, JointCalibration, Scenario, Wanted, load_scenario
 from nlp_calib.pipeline.export import write_c_export
 from nlp_calib.pipeline.prepare import read_checked
-from nlp_calib.pipeline.scenario import refuse_3d
+from nlp_calib.pipeline.scenario import refuse_off_the_base
 from nlp_calib.pipeline.simconfig import camera_options, simulation_options
 from nlp_calib.results import CalibrationRun
 from nlp_calib.simulation import simulate_to_file, truth_path
@@ -328,7 +328,7 @@ def _cmd_odometry(args: argparse.Namespace) -> int:
         raise UsageError("odometry takes one scenario")
     _robot_urdf(args)
     (scenario,) = _load_with_data(args.scenario, args.data)
-    refuse_3d(
+    refuse_off_the_base(
         scenario,
         "odometry",
         "its covariance is propagated on the planar base pose, and a camera's poses lie in its own "

@@ -19,8 +19,8 @@ import numpy as np
 
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log, LogHeader
+from nlp_calib.models.clock import LAG_REFERENCE, base_name
 from nlp_calib.models.controllers import ControllerMap, EncoderScales
-from nlp_calib.models.mount import MOUNT_REFERENCE
 
 if TYPE_CHECKING:
     from nlp_calib.models.drives import Drive
@@ -97,6 +97,10 @@ class KinematicModel(Protocol):
     #: Names of the per-interval inputs :meth:`inputs` returns, in row order, and their units.
     @property
     def input_names(self) -> tuple[str, ...]: ...
+    #: The inputs that are a level read at the interval (an angle) rather than an increment over
+    #: it: a shorter interval keeps their value (the time offset's end corrections need this).
+    @property
+    def level_inputs(self) -> tuple[str, ...]: ...
     @property
     def input_units(self) -> Mapping[str, str]: ...
     #: Kinematic parameters a log without turning cannot determine, and a note on what else.
@@ -134,6 +138,12 @@ class KinematicModel(Protocol):
 
     def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
         """Per-interval inputs, ``(len(input_names), n_records - 1)``, from the raw encoders."""
+        ...
+
+    def input_rates(self, log: Log) -> np.ndarray | None:
+        """Each input's rate per second at each record (a level: its value), ``(len(input_names),
+        n_records)``, where the log says exactly (joints with a stream of their own); None: the
+        problem takes them from the intervals' inputs (:mod:`nlp_calib.problem.clock`)."""
         ...
 
     def moving(self, inputs: np.ndarray) -> np.ndarray:
@@ -198,6 +208,18 @@ def rows_by_name(names: Sequence[str], U: np.ndarray) -> dict[str, np.ndarray]:
     return {name: U[i :: len(names)] for i, name in enumerate(names)}
 
 
+def record_rates(increments: np.ndarray, time_s: np.ndarray) -> np.ndarray:
+    """Each row's rate per second at each record: the increments of the two intervals around it
+    over their duration (one interval at the log's ends)."""
+    n_rows, n = increments.shape[0], time_s.size
+    if n < 2:
+        return np.zeros((n_rows, n))
+    dt = np.diff(time_s)
+    pad = np.zeros((n_rows, 1))
+    span = np.concatenate([[0.0], dt]) + np.concatenate([dt, [0.0]])
+    return (np.hstack([pad, increments]) + np.hstack([increments, pad])) / span
+
+
 def sampled_angle(angle: np.ndarray, steering_sample: str) -> np.ndarray:
     """Per interval, an angle read at each record (rad), taken at the interval's ``start``, its
     ``end`` or the ``mean`` of both (along the shorter arc)."""
@@ -249,18 +271,27 @@ def header_parameters(model: KinematicModel, header: LogHeader) -> dict[str, flo
     return out
 
 
-def reference(model: KinematicModel, name: str) -> Reference:
+def reference(model: KinematicModel, name: str, sensor: Mapping[str, Reference] | None = None) -> Reference:
     """The precision a calibration should reach on parameter ``name``: ``relative`` (a fraction of
-    its value: gains and lengths) or ``absolute`` (in its unit)."""
-    return {**model.reference, **MOUNT_REFERENCE, **SENSOR_REFERENCE}.get(name, ("relative", 0.01))
+    its value: gains and lengths) or ``absolute`` (in its unit); ``sensor``: the sensor's own
+    (its mount's; a planar mount's by default)."""
+    known = {**model.reference, **(SENSOR_REFERENCE if sensor is None else sensor), **LAG_REFERENCE}
+    return known.get(base_name(name), ("relative", 0.01))
 
 
-def reference_scale(model: KinematicModel, name: str, value: float) -> float:
+def reference_scale(
+    model: KinematicModel, name: str, value: float, sensor: Mapping[str, Reference] | None = None
+) -> float:
     """The precision a calibration should reach on parameter ``name`` at ``value``."""
-    kind, amount = reference(model, name)
+    kind, amount = reference(model, name, sensor)
     return amount * max(abs(value), 1e-9) if kind == "relative" else amount
 
 
-def reference_scales(model: KinematicModel, names: tuple[str, ...], values: np.ndarray) -> np.ndarray:
+def reference_scales(
+    model: KinematicModel,
+    names: tuple[str, ...],
+    values: np.ndarray,
+    sensor: Mapping[str, Reference] | None = None,
+) -> np.ndarray:
     """:func:`reference_scale` of each named parameter."""
-    return np.array([reference_scale(model, n, float(v)) for n, v in zip(names, values)])
+    return np.array([reference_scale(model, n, float(v), sensor) for n, v in zip(names, values)])

@@ -194,6 +194,7 @@ class CarLike:
     input_units: ClassVar[Mapping[str, str]] = MappingProxyType(
         {"rear_left_ticks": "ticks", "rear_right_ticks": "ticks", "steering_angle": "rad"}
     )
+    level_inputs: ClassVar[tuple[str, ...]] = ("steering_angle",)
     turning_params: ClassVar[tuple[str, ...]] = ("wheelbase", "rear_track")
     turning_note: ClassVar[str] = "the split between steering gain and offset"
     reference: ClassVar[Mapping[str, Reference]] = MappingProxyType({"steer_offset": ("absolute", 0.005)})
@@ -279,6 +280,10 @@ class CarLike:
             log.increments(e).astype(float) for e, kind in self.encoder_kinds.items() if kind == "counter"
         ]
         return np.vstack([*wheels, *self.steering_rows(log, steering_sample)])
+
+    def input_rates(self, log: Log) -> None:
+        """None: counts are re-sampled on whole ticks, so the intervals give the rates."""
+        return None
 
     def wheel_rows(self) -> int:
         """How many input rows are wheel counters (they come first)."""

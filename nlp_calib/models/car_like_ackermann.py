@@ -121,6 +121,7 @@ class CarLikeAckermann(CarLike):
             "steering_right_angle": "rad",
         }
     )
+    level_inputs: ClassVar[tuple[str, ...]] = ("steering_left_angle", "steering_right_angle")
     symmetries: ClassVar[tuple[Symmetry, ...]] = (
         Symmetry(
             "the base frame turned round",

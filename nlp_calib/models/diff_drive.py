@@ -156,6 +156,7 @@ class DiffDrive:
     input_units: ClassVar[Mapping[str, str]] = MappingProxyType(
         {"left_ticks": "ticks", "right_ticks": "ticks"}
     )
+    level_inputs: ClassVar[tuple[str, ...]] = ()
     encoder_kinds: ClassVar[Mapping[str, EncoderKind]] = MappingProxyType(
         {LEFT_ENCODER: "counter", RIGHT_ENCODER: "counter"}
     )
@@ -223,6 +224,10 @@ class DiffDrive:
         count alike."""
         return wheel_pair(params["k_left"], params["k_right"], params["baseline"], scales)
 
+    def input_rates(self, log: Log) -> np.ndarray | None:
+        """None: counts are re-sampled on whole ticks, so the intervals give the rates."""
+        return None
+
     def in_radians(self) -> InRadians:
         """The differential drive read from joint positions in radians (:data:`RADIANS`)."""
         return InRadians(self, RADIANS)
@@ -232,12 +237,14 @@ class DiffDrive:
         right encoders are swapped exactly (the sensor then faces backwards)."""
         if params["k_left"] >= 0 or params["k_right"] >= 0:
             return ""
-        facing = "backwards" if abs(wrap_angle(params["sensor_theta"])) > np.pi / 2 else "forwards"
+        # A planar mount's heading says where the sensor faces; a 3-D mount's takes all three angles.
+        theta = params.get("sensor_theta")
+        facing = "" if theta is None else "backwards" if abs(wrap_angle(theta)) > np.pi / 2 else "forwards"
         return (
-            f"k_left and k_right came out negative ({params['k_left']:.3g}, {params['k_right']:.3g}) and "
-            f"the sensor faces {facing}: the mirror image of the robot, which is what swapped left and "
-            f"right wheel joints (or encoders counting backwards) give; give the joints in the order "
-            f"{LEFT_ENCODER}, {RIGHT_ENCODER}"
+            f"k_left and k_right came out negative ({params['k_left']:.3g}, {params['k_right']:.3g})"
+            f"{f' and the sensor faces {facing}' if facing else ''}: the mirror image of the robot, "
+            "which is what swapped left and right wheel joints (or encoders counting backwards) give; "
+            f"give the joints in the order {LEFT_ENCODER}, {RIGHT_ENCODER}"
         )
 
     def counter_rows(self, log: Log) -> dict[str, tuple[int, float]]:

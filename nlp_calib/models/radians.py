@@ -5,8 +5,8 @@ and a steering joint's angle. Read that way, a wheel's gain in metres per tick b
 in metres (its travel is radius × Δangle) and the parameters take the names a robot's stack gives
 them. Each model declares, once, a :class:`RadiansForm`: for every parameter or input whose
 meaning changes, its name, unit and factor in the radians form (the counts form's value is the
-factor times the radians form's); for every input, the encoder that drives it (none: the
-interval's duration, from the log's times). :class:`InRadians`
+factor times the radians form's); for every input, the encoder that drives it (and whether it is
+that joint's rate over the interval). :class:`InRadians`
 wraps the model with it: the symbolic increment is the model's own on the parameters and inputs
 mapped back, and every fact (units, ranges, reference precision, symmetries, defaults, the
 controller's parameters, the closed-form start) is the model's, renamed and rescaled. Nothing of
@@ -26,7 +26,14 @@ import numpy as np
 from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log
-from nlp_calib.models.base import STEERING_SAMPLES, KinematicModel, Reference, Symmetry, sampled_angle
+from nlp_calib.models.base import (
+    STEERING_SAMPLES,
+    KinematicModel,
+    Reference,
+    Symmetry,
+    record_rates,
+    sampled_angle,
+)
 from nlp_calib.models.controllers import ControllerMap, EncoderScales
 
 if TYPE_CHECKING:
@@ -45,12 +52,15 @@ ASSUMES = (
 @dataclass(frozen=True)
 class Renamed:
     """A quantity's name and unit in the radians form, and ``factor``: its value in the counts form
-    per unit of the radians form. For an input, ``encoder`` is the encoder that drives it."""
+    per unit of the radians form. For an input, ``encoder`` is the encoder that drives it, and
+    ``rate``: the input is that joint's rate per second over the interval (a level), not its
+    increment or angle."""
 
     name: str
     unit: str
     factor: float = 1.0
     encoder: str = ""
+    rate: bool = False
 
 
 @dataclass(frozen=True)
@@ -104,6 +114,10 @@ class InRadians:
     @property
     def input_names(self) -> tuple[str, ...]:
         return tuple(self.form.inputs[n].name for n in self.model.input_names)
+
+    @property
+    def level_inputs(self) -> tuple[str, ...]:
+        return tuple(self.form.inputs[n].name for n in self.model.level_inputs)
 
     @property
     def input_units(self) -> Mapping[str, str]:
@@ -198,6 +212,23 @@ class InRadians:
         u_counts = ca.vertcat(*[u[j] * f if f != 1.0 else u[j] for j, f in enumerate(uf)])
         return self.model.increment(k_counts, u_counts, integration)
 
+    def input_rates(self, log: Log) -> np.ndarray | None:
+        """Each wheel's angular rate (rad/s) and each steering angle (rad) at the records, exact for
+        the joints' linear interpolation (None without a joint stream)."""
+        rates = log.joint_rates()
+        if rates is None and not any(r.rate for r in self.form.inputs.values()):
+            return None
+        if rates is None:  # a rate is a level: the intervals' own, never wrapped as an angle is
+            positions = np.stack([log.joint_position(e) for e in log.header.encoder_names], 1)
+            rates = record_rates(np.diff(positions, axis=0).T, np.asarray(log.time_s)).T
+        rows = []
+        for name in self.model.input_names:
+            encoder = self.form.inputs[name].encoder
+            j = log.header.encoder_index(encoder)
+            counter = self.encoder_kinds[encoder] == "counter" or self.form.inputs[name].rate
+            rows.append(rates[:, j] if counter else wrap_angle(log.joint_position(encoder)))
+        return np.vstack(rows)
+
     def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
         """Rows: each wheel's angle increment and each steering angle (sampled as asked), in rad."""
         if steering_sample not in STEERING_SAMPLES:
@@ -218,11 +249,10 @@ class InRadians:
         rows = []
         for name in self.model.input_names:
             encoder = self.form.inputs[name].encoder
-            if not encoder:  # an input no joint drives: the interval's duration
-                rows.append(np.diff(log.time_s))
-                continue
             position = log.joint_position(encoder)
-            if self.encoder_kinds[encoder] == "counter":
+            if self.form.inputs[name].rate:
+                rows.append(np.diff(position) / np.diff(log.time_s))
+            elif self.encoder_kinds[encoder] == "counter":
                 rows.append(np.diff(position))
             else:
                 rows.append(sampled_angle(wrap_angle(position), steering_sample))
@@ -242,7 +272,7 @@ class InRadians:
         return {
             self.form.inputs[n].encoder: (row, 1.0)
             for row, n in enumerate(self.model.input_names)
-            if self.encoder_kinds.get(self.form.inputs[n].encoder) == "counter"
+            if self.encoder_kinds[self.form.inputs[n].encoder] == "counter" and not self.form.inputs[n].rate
         }
 
     def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
@@ -252,7 +282,7 @@ class InRadians:
         noise = []
         for name in self.model.input_names:
             encoder = self.form.inputs[name].encoder
-            if not encoder:  # the interval's duration is exact
+            if self.form.inputs[name].rate:  # a rate's noise is its increment's, counted there
                 noise.append(0.0)
                 continue
             given = (encoder_noise or {}).get(encoder)

@@ -3,12 +3,13 @@
 Parameters ``(k_left, k_right, baseline, turn_slip)``: metres per tick of each side, the effective
 track at a slow turn (wider than the wheels' measured track: the wheels skid sideways as the base
 turns, users report 1.5 to 2 times), and how much wider it grows with the turn rate; inputs per
-interval ``(left_ticks, right_ticks, interval_duration)``: the sides' unwrapped increments and the
-interval's duration. The wheels alone would turn the base by ``Δθ_w = (d_r − d_l)/baseline`` at the
-rate ``ω_w = Δθ_w/Δt``; skidding turns it by ``Δθ = Δθ_w / (1 + turn_slip·|ω_w|)``, as if the track
-were ``baseline·(1 + turn_slip·|ω_w|)``. The base travels ``(d_r + d_l)/2`` along an exact arc (or
-Euler). With ``turn_slip = 0`` it is the differential drive of :mod:`.diff_drive`, whose controller
-(``diff_drive_controller``) it hands off to.
+interval ``(left_ticks, right_ticks, left_rate, right_rate)``: the sides' unwrapped increments and
+their rates over the interval (ticks/s: levels, not increments). The wheels alone would turn the
+base by ``Δθ_w = (d_r − d_l)/baseline`` at the rate ``ω_w = (k_right·right_rate −
+k_left·left_rate)/baseline``; skidding turns it by ``Δθ = Δθ_w / (1 + turn_slip·|ω_w|)``, as if the
+track were ``baseline·(1 + turn_slip·|ω_w|)``. The base travels ``(d_r + d_l)/2`` along an exact
+arc (or Euler). With ``turn_slip = 0`` it is the differential drive of :mod:`.diff_drive`, whose
+controller (``diff_drive_controller``) it hands off to.
 """
 
 from __future__ import annotations
@@ -21,10 +22,10 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.logs import EncoderKind, Log, LogHeader
-from nlp_calib.models.base import SENSOR_TURNED, Reference, Symmetry, named
+from nlp_calib.models.base import SENSOR_TURNED, Reference, Symmetry, named, record_rates
 from nlp_calib.models.controllers import ControllerMap, EncoderScales
+from nlp_calib.models.diff_drive import LEFT_ENCODER, RIGHT_ENCODER, DiffDrive, DiffDriveDrive, wheel_pair
 from nlp_calib.models.diff_drive import RADIANS as DIFF_DRIVE_RADIANS
-from nlp_calib.models.diff_drive import DiffDrive, DiffDriveDrive, wheel_pair
 from nlp_calib.models.drives import SimulationSettings, drive_header, running
 from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
@@ -36,11 +37,15 @@ _SIM_CURVATURE = 3.0
 #: The turn rate (rad/s) the hand-off states the effective track at.
 _STATED_RATE = 0.5
 
-#: The differential drive's radians form, and the interval's duration, which no joint drives.
+#: The differential drive's radians form, and each wheel joint's rate over the interval (rad/s).
 RADIANS = RadiansForm(
     params=DIFF_DRIVE_RADIANS.params,
     inputs=MappingProxyType(
-        {**DIFF_DRIVE_RADIANS.inputs, "interval_duration": Renamed("interval_duration", "s")}
+        {
+            **DIFF_DRIVE_RADIANS.inputs,
+            "left_rate": Renamed("left_rate", "rad/s", 1.0, LEFT_ENCODER, rate=True),
+            "right_rate": Renamed("right_rate", "rad/s", 1.0, RIGHT_ENCODER, rate=True),
+        }
     ),
 )
 
@@ -107,10 +112,11 @@ class SkidSteer(DiffDrive):
     header_aliases: ClassVar[Mapping[str, str]] = MappingProxyType(
         {**DiffDrive.header_aliases, "turn_slip": "turn_slip"}
     )
-    input_names: ClassVar[tuple[str, ...]] = ("left_ticks", "right_ticks", "interval_duration")
+    input_names: ClassVar[tuple[str, ...]] = ("left_ticks", "right_ticks", "left_rate", "right_rate")
     input_units: ClassVar[Mapping[str, str]] = MappingProxyType(
-        {**DiffDrive.input_units, "interval_duration": "s"}
+        {**DiffDrive.input_units, "left_rate": "ticks/s", "right_rate": "ticks/s"}
     )
+    level_inputs: ClassVar[tuple[str, ...]] = ("left_rate", "right_rate")
     encoder_kinds: ClassVar[Mapping[str, EncoderKind]] = DiffDrive.encoder_kinds
     turning_params: ClassVar[tuple[str, ...]] = ("baseline", "turn_slip")
     turning_note: ClassVar[str] = "the split between the track and the slip (turns at several rates)"
@@ -131,23 +137,32 @@ class SkidSteer(DiffDrive):
     )
 
     def increment(self, k: ca.SX, u: ca.SX, integration: str) -> ca.SX:
-        """Travel ``(d_r + d_l)/2`` turning by ``Δθ_w/(1 + turn_slip·|Δθ_w/Δt|)``; exact arc or Euler."""
+        """Travel ``(d_r + d_l)/2`` turning by ``Δθ_w/(1 + turn_slip·|ω_w|)``; exact arc or Euler."""
         p, inputs = named(self.kinematic_params, k), named(self.input_names, u)
         d_left, d_right = p["k_left"] * inputs["left_ticks"], p["k_right"] * inputs["right_ticks"]
         wheels = (d_right - d_left) / p["baseline"]
-        dtheta = wheels / (1.0 + p["turn_slip"] * ca.fabs(wheels) / inputs["interval_duration"])
+        rate = (p["k_right"] * inputs["right_rate"] - p["k_left"] * inputs["left_rate"]) / p["baseline"]
+        dtheta = wheels / (1.0 + p["turn_slip"] * ca.fabs(rate))
         travel = 0.5 * (d_left + d_right)
         if integration == "euler":
             return ca.vertcat(travel, 0.0, dtheta)
         return se2.arc(travel, dtheta)
 
     def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
-        """Rows: the sides' tick increments and each interval's duration (s)."""
-        return np.vstack([super().inputs(log, steering_sample), np.diff(log.time_s)])
+        """Rows: the sides' tick increments, then their rates over each interval (ticks/s)."""
+        ticks = super().inputs(log, steering_sample)
+        return np.vstack([ticks, ticks / np.diff(log.time_s)])
+
+    def input_rates(self, log: Log) -> np.ndarray:
+        """Each side's rate (ticks/s) at each record, for its increment and for its rate alike: the
+        ticks of the two intervals around the record over their duration."""
+        rates = record_rates(super().inputs(log, "start"), np.asarray(log.time_s))
+        return np.vstack([rates, rates])
 
     def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
-        """1σ of each increment in ticks (default: quantisation, ``1/√12``); the durations are exact."""
-        return np.append(super().input_noise_std(log, encoder_noise), 0.0)
+        """1σ of each increment in ticks (default: quantisation, ``1/√12``); a rate's noise is its
+        increment's, counted there."""
+        return np.append(super().input_noise_std(log, encoder_noise), [0.0, 0.0])
 
     def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
         """``diff_drive_controller`` with the effective track at a slow turn; the slip has no place

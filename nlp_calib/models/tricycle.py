@@ -169,6 +169,7 @@ class Tricycle:
     input_units: ClassVar[Mapping[str, str]] = MappingProxyType(
         {"traction_revolutions": "rev", "steering_angle": "rad"}
     )
+    level_inputs: ClassVar[tuple[str, ...]] = ("steering_angle",)
     reference: ClassVar[Mapping[str, Reference]] = MappingProxyType({"steer_offset": ("absolute", 0.005)})
     headline: ClassVar[tuple[str, ...]] = ("k_traction", "axis_length")
     defaults: ClassVar[Mapping[str, float]] = MappingProxyType({})
@@ -255,6 +256,10 @@ class Tricycle:
             steering_places(params["k_steer"], params["steer_offset"], scales),
             {"wheel_radius": why} if why else {},
         )
+
+    def input_rates(self, log: Log) -> None:
+        """None: counts are re-sampled on whole ticks, so the intervals give the rates."""
+        return None
 
     def in_radians(self) -> InRadians:
         """The tricycle read from joint positions in radians (:data:`RADIANS`)."""

@@ -15,6 +15,7 @@ from xml.etree import ElementTree as ET
 
 import yaml
 
+from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import atomic_write_bytes, atomic_write_text
 from nlp_calib.core.version import __version__
 from nlp_calib.outputs import urdf
@@ -65,6 +66,7 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "solver": solver,
         "solver_choice": "first converged solver in the order " + ", ".join(run.solver_order()),
         "frames": {"parent": PARENT_FRAME, "sensor": mount.child},
+        "sensor": _sensor_entry(run),
         "mount": _mount_entry(mount),
         "parameters": best["params"],
         "std": best["std"],
@@ -81,6 +83,19 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "encoders": [_encoder(e) for e in run.log.encoders],
         "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
         "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
+    }
+
+
+def _sensor_entry(run: CalibrationRun) -> dict[str, Any]:
+    """Which sensor the calibration holds the mount of (its mount as a URDF joint: ``mount``)."""
+    info = run.scenario.sensor
+    return {
+        "kind": info.kind,
+        "group": info.group,
+        "scale": info.scale,
+        "params": list(info.params),
+        "convention": info.convention,
+        "held": {n: run.initial.get(n, 0.0) for n in info.held},
     }
 
 
@@ -140,14 +155,10 @@ def calibration_yaml(doc: Mapping[str, Any]) -> str:
 
 
 def _mount_words(doc: Mapping[str, Any]) -> str:
-    """The mount's parameters as the header comment names them."""
-    if "sensor_roll" not in doc["parameters"]:
-        return "sensor_x, sensor_y, sensor_theta"
-    scale = "; scale: metres per trajectory unit" if "scale" in doc["parameters"] else ""
-    return (
-        "sensor_x, sensor_y, sensor_z, sensor_roll, sensor_pitch, sensor_yaw (URDF: fixed axes, "
-        f"R = Rz(yaw)·Ry(pitch)·Rx(roll); sensor_z held: planar driving cannot see it{scale})"
-    )
+    """The mount's parameters as the header comment names them (with what the sensor says of them)."""
+    sensor = doc["sensor"]
+    words = ", ".join(sensor["params"])
+    return f"{words} ({sensor['convention']})" if sensor.get("convention") else words
 
 
 def _comment_text(text: str) -> str:
@@ -171,7 +182,7 @@ def _xml(element: ET.Element, comment: str) -> str:
 def _mount_of(run: CalibrationRun, solver: str) -> SensorMount:
     mount = run.reports[solver].mount
     if mount is None:
-        raise ValueError(f"{solver}'s report holds no mount")  # a result stored before mounts were
+        raise UsageError(f"the result of {run.scenario.name} holds no mount for {solver}; run it again")
     return mount
 
 
@@ -197,8 +208,7 @@ def urdf_joint(
     )
     comment = (
         f" Sensor mounting pose calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
-        f"solver {solver}. {mount.words().capitalize()} (planar driving cannot see what it did not "
-        f"calibrate). {where} "
+        f"solver {solver}. {mount.words().capitalize()}. {where} "
     )
     return _xml(_joint(mount), comment)
 

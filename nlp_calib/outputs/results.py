@@ -13,13 +13,6 @@ from nlp_calib.core.version import __version__
 from nlp_calib.results import CalibrationRun, SolverReport
 from nlp_calib.results.figures import TrajectoryMetrics
 
-#: Why a 3-D sensor's height is held.
-HELD_WHY = (
-    "planar driving cannot determine a 3-D sensor's height: the base turns about the vertical, so "
-    "sensor_z never changes a predicted motion; it is held at the value given (known.sensor_z, "
-    "0 unless set)"
-)
-
 
 def _metrics_dict(full: TrajectoryMetrics, holdout: TrajectoryMetrics | None) -> dict[str, Any]:
     out: dict[str, Any] = full.as_dict()
@@ -97,8 +90,6 @@ def _solver_dict(run: CalibrationRun, name: str, report: SolverReport) -> dict[s
 def result_dict(run: CalibrationRun) -> dict[str, Any]:
     """The ``result.json`` document of a run."""
     sc, data, checks = run.scenario, run.data, run.checks
-    # A 3-D sensor's facts (a planar run's document is as it always was).
-    sensor = {"sensor": _sensor_dict(run)} if sc.sensor_3d else {}
     return {
         "scenario": sc.name,
         "tool": {"name": "nlp_calib", "version": __version__},
@@ -114,7 +105,7 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         },
         "residual": dict(sc.residual),
         "robust": dict(sc.robust),
-        **sensor,
+        "sensor": _sensor_dict(run),
         "alignment": {
             "tracker_lag_s": data.tracker_lag_s,
             "estimate": data.lag_estimate.as_dict() if data.lag_estimate is not None else None,
@@ -134,14 +125,17 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
 
 
 def _sensor_dict(run: CalibrationRun) -> dict[str, Any]:
-    """A 3-D sensor's mount: its form, the held height, the closed-form start alone and the windows
-    the start and the fit left out, by reason."""
-    data, units = run.data, run.scenario.units
+    """The sensor as its plug-in describes itself: its kind, pose group and scale, the parameters it
+    holds (and why), its closed-form start alone and the windows the start and the fit left out,
+    by reason."""
+    data, info = run.data, run.scenario.sensor
     return {
-        "mount": "3d",
-        "scale": "free" if "scale" in units else "fixed",
-        "held": {"sensor_z": run.initial.get("sensor_z", 0.0)},
-        "held_why": HELD_WHY,
+        "kind": info.kind,
+        "mount": info.kind,
+        "group": info.group,
+        "scale": info.scale,
+        "held": {n: run.initial.get(n, 0.0) for n in info.held},
+        "held_why": info.held_why,
         "start": dict(run.initial) if data.start_dropped is not None else None,
         "start_dropped": None if data.start_dropped is None else dict(data.start_dropped),
         "fit_dropped": None if data.fit_dropped is None else dict(data.fit_dropped),

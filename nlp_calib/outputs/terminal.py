@@ -144,6 +144,38 @@ def error_stats_lines(run: CalibrationRun, solver: str) -> list[str]:
     return lines
 
 
+def lag_lines(run: CalibrationRun) -> list[str]:
+    """The fitted tracker lag with its σ and what moves with it, in words."""
+    data, solver = run.data, run.chosen_solver() or run.solver_order()[0]
+    est = data.lag_estimate
+    assert est is not None
+    std = run.std(solver)
+    params = run.reports[solver].result.param_dict()
+    out = []
+    for effect in run.checks.lag_effects or ():
+        lag = params.get(effect.lag, data.tracker_lag_s)
+        moves = ", ".join(
+            _per_10ms(n, v, params.get(n, 0.0), run.scenario.units.get(n, ""))
+            for n, v in effect.per_second.items()
+        )
+        sd = 1e3 * std.get(effect.lag, float("nan"))
+        out.append(
+            f"{effect.lag} {1e3 * lag:.1f} ± {sd:.2g} ms, a parameter of the fit "
+            f"(encoders re-sampled at {len(est.path_s)} lags on the way)"
+            + (f"; per 10 ms of it, {moves}" if moves else "; no other parameter moves with it")
+        )
+    return out or [f"tracker lag fitted with the other parameters: {1e3 * data.tracker_lag_s:.1f} ms"]
+
+
+def _per_10ms(name: str, per_second: float, value: float, unit: str) -> str:
+    """``name``'s change over 10 ms of lag: relative for gains and lengths of the model, absolute
+    for the mount's and angles."""
+    change = 0.01 * per_second
+    if name.startswith("sensor_") or unit in ("rad", "s") or value == 0.0:
+        return f"{name} {change:+.2g} {unit}".rstrip()
+    return f"{name} {100.0 * change / abs(value):+.2g} %"
+
+
 def _dropped_line(run: CalibrationRun) -> str:
     """One line on the records a non-strict read dropped: how many, where, and the first reason."""
     dropped = run.log.dropped
@@ -166,7 +198,7 @@ def _header_lines(run: CalibrationRun) -> list[str]:
         f"kernel {robust['kernel']} δ={robust['delta']:g}"
     ]
     if data.lag_estimate is not None:
-        lines.append(f"tracker lag estimated by the fit cost: {1e3 * data.tracker_lag_s:.1f} ms")
+        lines += lag_lines(run)
     elif data.tracker_lag_s:
         lines.append(f"tracker lag (from the scenario): {1e3 * data.tracker_lag_s:.1f} ms")
     if run.log.dropped:
@@ -182,18 +214,16 @@ def _by_reason(counts: Mapping[str, int]) -> str:
 
 
 def camera_lines(run: CalibrationRun) -> list[str]:
-    """A 3-D sensor's start and selection, in words (nothing for a planar one)."""
-    data = run.data
-    if not run.scenario.sensor_3d:
-        return []
+    """A sensor's own start and selection of windows, in words (nothing where it has none)."""
+    data, kind = run.data, run.scenario.sensor.kind
     lines = []
     if data.start_dropped is not None:
         lines.append(
-            "3-D sensor: the 'initial' column is the closed-form start alone (floor normal, then the "
-            f"planar hand-eye); its windows left out: {_by_reason(data.start_dropped)}"
+            f"sensor {kind}: the 'initial' column is its closed-form start alone; its windows left out: "
+            f"{_by_reason(data.start_dropped)}"
         )
     if data.fit_dropped is not None:
-        lines.append(f"3-D sensor: fitted windows left out: {_by_reason(data.fit_dropped)}")
+        lines.append(f"sensor {kind}: fitted windows left out: {_by_reason(data.fit_dropped)}")
     return lines
 
 

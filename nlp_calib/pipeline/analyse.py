@@ -22,10 +22,8 @@ from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import Drift as DriftSegments
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
-from nlp_calib.core import memory, poses3d
-from nlp_calib.logs import Log
-from nlp_calib.models import SENSOR_PARAMS, header_parameters
-from nlp_calib.models.mount import mount_rotation
+from nlp_calib.core import memory
+from nlp_calib.models import header_parameters
 from nlp_calib.pipeline import validation
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog
@@ -33,7 +31,13 @@ from nlp_calib.pipeline.windows import LogWindows
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results import SolverResult
-from nlp_calib.results.checks import ConsistencyCheck, CrossValidation, DirectionCheck, Observability
+from nlp_calib.results.checks import (
+    ConsistencyCheck,
+    CrossValidation,
+    DirectionCheck,
+    LagEffect,
+    Observability,
+)
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import OdometryNoise
@@ -66,6 +70,8 @@ class FitAnalysis:
     direction: DirectionCheck | None
     #: For several logs: each log's own fit against theirs.
     consistency: ConsistencyCheck | None = None
+    #: How each time offset moves the other parameters (the first solver's uncertainty).
+    lag_effects: tuple[LagEffect, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -142,13 +148,16 @@ def analyse_fit(
     if big:
         ev.release()  # the solvers' buffers: each analysis binds again only what it evaluates
         memory.give_back()
-    uncertainty = {name: unc.estimate(ev, r.x, data, noise) for name, r in results.items()}
+    start = fit.problem.start
+    ranges = unc.range_std(start.lower, start.upper, fit.fns.n_free)
+    uncertainty = {name: unc.estimate(ev, r.x, data, noise, ranges) for name, r in results.items()}
     finite = [r for r in results.values() if np.isfinite(r.cost)] or list(results.values())
     observability = observability_of(ev, finite[0].x, data.T_world_sensor)
     converged = [r for r in results.values() if r.converged]
+    effects = unc.lag_effects(uncertainty[next(iter(results))]) if results else ()
     k = fit.problem.binder.scenario.validation.blocks
     if not converged or not k:
-        return FitAnalysis(uncertainty, observability, None, None)
+        return FitAnalysis(uncertainty, observability, None, None, lag_effects=effects)
     binder, x = fit.problem.binder, converged[0].x
     # Blocks are numbered as the scorer's records: the fitted records start at its offset.
     span = (blocks.offset, blocks.offset + data.n_records)
@@ -169,7 +178,7 @@ def analyse_fit(
         k,
         fit.canonical_params,
     )
-    return FitAnalysis(uncertainty, observability, crossval, direction)
+    return FitAnalysis(uncertainty, observability, crossval, direction, lag_effects=effects)
 
 
 def residual_series(fit: Fit, results: Mapping[str, SolverResult], windows: np.ndarray) -> ResidualSeries:
@@ -261,21 +270,19 @@ def track_series(
         faults=tuple((f.record - a, f.kind) for f in view.findings.report.faults if a <= f.record < b),
         holdout_start=windows.fit[1] - a if windows.fit[1] < b - 1 else None,
         segments=tuple(rows),
-        tracker_z=_heights(windows.selected),
+        tracker_z=fit.fns.sensor.heights(windows.selected),
         level=_level(fit, results, ref),
     )
 
 
 def _level(fit: Fit, results: Mapping[str, SolverResult], ref: np.ndarray) -> np.ndarray | None:
-    """A 3-D sensor's world frame turned onto the base's frame at the first record, by the first
-    converged estimate's mount (the start's when none converged): ``R_X·R(q_0)ᵀ``."""
-    if fit.fns.sensor.pose_rows != 7:
-        return None
+    """The sensor's world frame turned onto the base's frame at the first record (None where they
+    are one: a planar tracker's), by the first converged estimate's mount (the start's when none
+    converged)."""
     names = fit.fns.names
     done = [r.params for r in results.values() if r.converged]
     params = done[0] if done else np.array([fit.problem.start.initial[n] for n in names])
-    R_X = mount_rotation(dict(zip(names, params)))
-    return np.asarray(R_X @ poses3d.quat_to_matrix(ref[0, 3:7]).T)
+    return fit.fns.sensor.level(dict(zip(names, map(float, params))), ref[0])
 
 
 def model_check(fit: Fit, prepared: PreparedLog) -> ModelCheckSeries | None:
@@ -289,7 +296,7 @@ def model_check(fit: Fit, prepared: PreparedLog) -> ModelCheckSeries | None:
     header = header_parameters(model, log.header)
     initial = fit.problem.start.initial
     params = {n: float(header.get(n, initial[n])) for n in model.kinematic_params}
-    params.update(dict.fromkeys(SENSOR_PARAMS, 0.0))
+    params.update(dict.fromkeys(fit.fns.sensor.params, 0.0))
     p = np.array([params[n] for n in fit.fns.names])
     residual = prepared.scenario.objective.residual
     inputs = model.inputs(log, residual.steering_sample)
@@ -380,7 +387,7 @@ def handoff_noise(
     """The covariance a controller publishes with its odometry at ``params``, from the noise
     calibrated on the first :data:`NOISE_RECORDS` used records (None for a 3-D sensor, whose
     poses do not give the planar base's)."""
-    if fit.fns.sensor.pose_rows != 3:
+    if not fit.fns.sensor.planar_base:
         return None
     d = calibrated_drift(fit, windows, params, steering_sample, NOISE_RECORDS)
     noise = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
@@ -426,8 +433,3 @@ def analyse_log(
     first = next((n for n in order if n in results and results[n].converged), None)
     noise = {} if first is None else {first: handoff_noise(fit, windows, results[first].params, steering)}
     return dataclasses.replace(figures, series=series, odometry=odo, noise=noise)
-
-
-def _heights(log: Log) -> np.ndarray | None:
-    """The tracker's height at each record where it reports 3-D poses (None: a planar tracker)."""
-    return None if log.T_world_sensor_3d is None else np.asarray(log.T_world_sensor_3d[:, 2])

@@ -13,10 +13,10 @@ import numpy as np
 
 from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
-from nlp_calib.models import KinematicModel, param_units
+from nlp_calib.models import KinematicModel
+from nlp_calib.models.clock import LAG_UNIT
 from nlp_calib.models.controllers import EncoderScales
-from nlp_calib.models.mount import MOUNT_PARAMS, MOUNT_UNITS
-from nlp_calib.pipeline.align import Alignment, lag_at_edge
+from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis
 from nlp_calib.pipeline.build import StartingPoint
 from nlp_calib.pipeline.prepare import PreparedLog
@@ -31,29 +31,29 @@ from nlp_calib.results import (
     Encoder,
     LogInfo,
     ScenarioInfo,
+    SensorInfo,
     SolverReport,
     SolverResult,
     Verdict,
 )
 from nlp_calib.results.checks import believed_std
 from nlp_calib.results.faults import Findings
-from nlp_calib.results.mount import COMPONENTS, SensorMount
 from nlp_calib.solvers import solver_label
 from nlp_calib.sources import BagSource
 
 
-def scenario_info(sc: Scenario, model: KinematicModel) -> ScenarioInfo:
-    """What the outputs say about ``sc``."""
+def scenario_info(sc: Scenario, model: KinematicModel, lags: Sequence[str] = ()) -> ScenarioInfo:
+    """What the outputs say about ``sc`` (fitted with the time offsets ``lags``)."""
     joint = sc.data.joint
     return ScenarioInfo(
         name=sc.name,
         path=None if sc.path is None else str(sc.path),
         model=sc.model,
-        units=_units(sc, model),
+        units={**_units(sc, model), **dict.fromkeys(lags, LAG_UNIT)},
+        sensor=sensor_info(sc),
         headline=tuple(model.headline),
         dataset=str(sc.dataset),
         datasets=tuple(str(e.path) for e in sc.data.logs) if joint else (),
-        solvers=sc.solvers,
         labels={name: solver_label(name) for name in sc.solvers},
         residual=dataclasses.asdict(sc.objective.residual),
         robust=dataclasses.asdict(sc.objective.robust),
@@ -64,11 +64,23 @@ def scenario_info(sc: Scenario, model: KinematicModel) -> ScenarioInfo:
 
 
 def _units(sc: Scenario, model: KinematicModel) -> dict[str, str]:
-    """Every parameter's unit: the model's, then its sensor's mount (a 3-D one's and the scale's)."""
-    if not sc.objective.sensor.is_3d:
-        return param_units(model)
+    """Every parameter's unit: the model's, then its sensor's mount's."""
     kinematic = {n: model.units[n] for n in model.kinematic_params}
-    return {**kinematic, **{n: MOUNT_UNITS[n] for n in sc.objective.sensor.params()}}
+    return {**kinematic, **sc.objective.sensor.sensor.units}
+
+
+def sensor_info(sc: Scenario) -> SensorInfo:
+    """What the outputs say about the sensor: what its plug-in says of itself."""
+    sensor = sc.objective.sensor.sensor
+    return SensorInfo(
+        kind=sensor.kind,
+        group=sensor.group,
+        scale=sc.objective.sensor.scale,
+        params=sensor.params,
+        held=sensor.held,
+        held_why=sensor.held_why,
+        convention=sensor.convention,
+    )
 
 
 def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
@@ -125,8 +137,12 @@ def fit_notes(results: Mapping[str, SolverResult], fitted: FitAnalysis, held: Ma
 
 
 def lag_notes(sc: Scenario, alignment: Alignment) -> list[str]:
-    """What a log's time alignment found worth saying: a lag at the edge of its search."""
-    if alignment.estimate is not None and alignment.estimate.at_edge:
+    """What a log's time alignment found worth saying: a lag at the edge of its search, or a lag
+    no fit converged at."""
+    est = alignment.estimate
+    if est is not None and not est.converged:
+        return [lag_not_fitted(sc, alignment.lag_s)]
+    if est is not None and est.at_edge:
         return [lag_at_edge(sc, alignment.lag_s)]
     return []
 
@@ -142,33 +158,10 @@ def _report(
     estimate = (result.params, std, u.correlation)
     extra = (figures.noise.get(name), prepared.held)
     controller = controller_params(prepared.model, result.names, estimate, scales, extra)
-    mount = sensor_mount(prepared, result.param_dict(), dict(zip(result.names, map(float, std))))
+    sensor, header = prepared.scenario.objective.sensor.sensor, prepared.log.header
+    sd = dict(zip(result.names, map(float, std)))
+    mount = sensor.mount_pose(result.param_dict(), sd, header.sensor_frame, header.sensor_z_roll_pitch)
     return SolverReport(result, u, *figures.scores[name], controller, mount)
-
-
-#: Where a planar fit's mount takes what planar driving cannot see.
-_NOMINAL = {True: "from the nominal mount (/tf_static)", False: "not known (0)"}
-_HELD_Z = "held at its given value (known.sensor_z, 0 unless set)"
-
-
-def sensor_mount(prepared: PreparedLog, params: Mapping[str, float], std: Mapping[str, float]) -> SensorMount:
-    """The sensor's mount of an estimate, on ``base_link``: a planar sensor's x, y and yaw
-    calibrated, its height, roll and pitch those of the nominal mount where the log gives one; a
-    3-D sensor's all but its held height."""
-    header = prepared.log.header
-    if prepared.scenario.objective.sensor.is_3d:
-        names = dict(zip(COMPONENTS, MOUNT_PARAMS))
-        nominal, given = {"z": _HELD_Z}, {}
-    else:
-        names = {"x": "sensor_x", "y": "sensor_y", "yaw": "sensor_theta"}
-        zrp = header.sensor_z_roll_pitch
-        given = dict(zip(("z", "roll", "pitch"), zrp or (0.0, 0.0, 0.0)))
-        nominal = dict.fromkeys(given, _NOMINAL[zrp is not None])
-    pose = {c: float(params[names[c]]) if c in names else given[c] for c in COMPONENTS}
-    sd = {c: std[names[c]] for c in COMPONENTS if c in names and c not in nominal}
-    return SensorMount.on_base(
-        prepared.scenario.objective.sensor.mount, header.sensor_frame, pose, sd, nominal
-    )
 
 
 def encoder_scales(prepared: PreparedLog) -> EncoderScales:
@@ -180,13 +173,11 @@ def encoder_scales(prepared: PreparedLog) -> EncoderScales:
 
 
 def mount_notes(sc: Scenario, start: StartingPoint) -> list[str]:
-    """A 3-D sensor's held height, said once."""
-    if not sc.objective.sensor.is_3d:
-        return []
-    z = start.initial.get("sensor_z", 0.0)
+    """The sensor's held parameters, said once, with why they are held."""
+    sensor = sc.objective.sensor.sensor
     return [
-        f"sensor_z is held at {z:g} m: planar driving cannot determine a 3-D sensor's height "
-        "(give the measured one as known.sensor_z)"
+        f"{n} is held at {start.initial.get(n, 0.0):g} {sensor.units[n]}: {sensor.held_why}"
+        for n in sensor.held
     ]
 
 
@@ -212,10 +203,10 @@ def threshold_notes(sc: Scenario, results: Mapping[str, SolverResult]) -> list[s
 
 
 def _start_dropped(start: StartingPoint) -> dict[str, int] | None:
-    """The windows a 3-D sensor's closed-form start left out, by reason (None: no closed form)."""
-    if start.camera is None or start.auto is None:
+    """The windows the sensor's closed-form start left out, by reason (None: it selects none)."""
+    if start.sensor is None or start.auto is None or start.sensor.dropped is None:
         return None
-    return start.camera.selection.counts()
+    return dict(start.sensor.dropped)
 
 
 def assemble_run(
@@ -238,7 +229,14 @@ def assemble_run(
         baseline=figures.baseline[0],
         baseline_holdout=figures.baseline[1],
         reports=reports,
-        checks=Checks(fitted.observability, fitted.crossval, fitted.direction, findings, fitted.consistency),
+        checks=Checks(
+            fitted.observability,
+            fitted.crossval,
+            fitted.direction,
+            findings,
+            fitted.consistency,
+            lag_effects=fitted.lag_effects,
+        ),
         warnings=(
             *notes,
             *lag_notes(prepared.scenario, alignment),

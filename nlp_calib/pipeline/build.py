@@ -15,9 +15,8 @@ import numpy as np
 from nlp_calib.analysis import uncertainty
 from nlp_calib.core.errors import ScenarioError
 from nlp_calib.logs import Log
-from nlp_calib.models import SENSOR_PARAMS, KinematicModel, header_parameters
-from nlp_calib.models.camera_start import FIT_REASONS, CameraStart, Selection
-from nlp_calib.models.mount import SCALE_PARAM, mount_rotation
+from nlp_calib.models import KinematicModel, header_parameters
+from nlp_calib.models.clock import LAG_PARAM, base_name, is_lag, lag_names
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import (
@@ -27,9 +26,9 @@ from nlp_calib.problem import (
     build,
     build_residual_data,
     interval_inputs,
-    over_columns,
 )
-from nlp_calib.problem.camera import camera_initial_guess, fit_selection
+from nlp_calib.problem.start import closed_form_start, fit_windows
+from nlp_calib.sensors import SensorStart
 from nlp_calib.solvers import Priors, ProblemEvaluator, get_solver
 from nlp_calib.solvers.backends import Backend, BackendOptions, make_backend
 from nlp_calib.solvers.evaluation import requests
@@ -39,34 +38,61 @@ from nlp_calib.solvers.evaluation import requests
 INTERNAL_SOLVER = "gauss_newton"
 
 
-def build_problem(sc: Scenario, model: KinematicModel, also_fixed: tuple[str, ...] = ()) -> ProblemFunctions:
-    """The problem's Functions for the scenario's residual form, kernel and fixed parameters."""
+def lag_count(sc: Scenario, n_logs: int) -> int:
+    """Time offsets in the problem: one per log when the scenario estimates the lag, else none."""
+    return n_logs if sc.log.alignment.tracker_lag == "auto" else 0
+
+
+def per_log_names(names: Sequence[str], n_logs: int) -> tuple[str, ...]:
+    """Scenario names with ``tracker_lag`` replaced by each log's own (several logs)."""
+    lags = lag_names(n_logs)
+    return tuple(dict.fromkeys(m for n in names for m in (lags if n == LAG_PARAM else (n,))))
+
+
+def build_problem(
+    sc: Scenario, model: KinematicModel, also_fixed: tuple[str, ...] = (), n_logs: int = 1
+) -> ProblemFunctions:
+    """The problem's Functions for the scenario's residual form, kernel and fixed parameters, with a
+    time offset per log (``n_logs``) when the lag is estimated."""
     residual, sensor = sc.objective.residual, sc.objective.sensor
+    lags = lag_count(sc, n_logs)
     spec = ProblemSpec(
         horizon=residual.horizon,
         integration=residual.integration,
         kernel=sc.objective.robust.kernel,
-        fixed=(*sc.parameters.fixed, *also_fixed),
+        fixed=per_log_names((*sc.parameters.fixed, *also_fixed), lags),
         sensor=sensor.mount,
         scale=sensor.scale,
+        lags=lags,
     )
     with scenario_key(sc, "residual"):
         return build(model, spec)
 
 
+def lag_start(sc: Scenario, n_logs: int, given: Sequence[float] = ()) -> dict[str, float]:
+    """The time offsets' starting values: ``given`` (one per log), else the scenario's value for
+    ``tracker_lag`` (known, or under initial_guess), else 0."""
+    p = sc.parameters
+    value = p.known.get(
+        LAG_PARAM, p.initial_guess.get(LAG_PARAM, 0.0) if isinstance(p.initial_guess, Mapping) else 0.0
+    )
+    names = lag_names(lag_count(sc, n_logs))
+    lo, hi = sc.log.alignment.search
+    # A start outside the search (0 when the search is all one side of it) starts at its middle.
+    start = float(value) if lo <= value <= hi else 0.5 * (lo + hi)
+    return {n: float(given[i]) if given else start for i, n in enumerate(names)}
+
+
 def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[str, float]:
-    """The log header's values, overridden by the scenario's mapping (``auto`` fills in later). A
-    3-D mount's held ``sensor_z`` is 0 and its scale 1 unless the scenario gives them."""
+    """The log header's values, overridden by the scenario's mapping (``auto`` fills in later); the
+    mount's from the sensor (a planar one: the header's nominal mount; a 3-D one: its held height
+    0 and its scale 1) unless the scenario gives them."""
     p, sensor = sc.parameters, sc.objective.sensor
     guess = dict(model.defaults)
     guess.update(
         {n: v for n, v in header_parameters(model, log.header).items() if n in model.kinematic_params}
     )
-    if sensor.is_3d:
-        guess.update(dict.fromkeys(sensor.held(), 0.0))
-        guess.update({SCALE_PARAM: 1.0} if SCALE_PARAM in sensor.params() else {})
-    else:
-        guess.update(zip(SENSOR_PARAMS, log.header.T_base_sensor))
+    guess.update(sensor.sensor.initial(log.header))
     if isinstance(p.initial_guess, Mapping):
         guess.update(p.initial_guess)
     guess.update(p.known)
@@ -86,45 +112,32 @@ class StartingPoint:
 
     initial: Mapping[str, float]
     auto: Mapping[str, float] | None
-    #: A 3-D sensor's start (closed-form, or the given mount's floor normal; None: planar): the
-    #: floor normal the fit's windows are selected by, and the windows the closed form left out.
-    camera: CameraStart | None
+    #: The sensor's start (its closed form, or what it makes of a given mount; None: nothing to
+    #: select the fit's windows by): its own record the fit's windows are selected by, and the
+    #: windows the closed form left out.
+    sensor: SensorStart | None
     x0: np.ndarray
     x_fixed: np.ndarray
     lower: np.ndarray | None
     upper: np.ndarray | None
 
 
-def auto_guess(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int) -> dict[str, float]:
-    """The model's closed-form estimate from the windows of records ``start:stop`` (no guess needed)."""
-    residual = sc.objective.residual
-    data = build_residual_data(fns, log.select(start, stop), residual)
-    rows = fns.n_inputs * data.horizon
-    # Windows overlapping by three quarters carry nearly all the information at a fraction
-    # of the cost of every window.
-    step = max(1, data.horizon // (4 * residual.stride))
-    columns = data.columns_of(np.arange(0, data.n_residuals, step))
-
-    def base_motion(params: Mapping[str, float]) -> np.ndarray:
-        return over_columns(fns.predict_window, np.array([params[n] for n in fns.names]), columns[:rows])[0]
-
-    return fns.model.initial_guess(columns[:rows], columns[rows : rows + 3], base_motion)
-
-
-def camera_guess(
-    sc: Scenario, fns: ProblemFunctions, data: ResidualData, initial: Mapping[str, float]
-) -> CameraStart:
-    """A 3-D sensor's closed-form start (:func:`~nlp_calib.problem.camera.camera_initial_guess`) on
-    ``data``, the held and fixed parameters at their ``initial`` values."""
+def auto_start(
+    sc: Scenario, fns: ProblemFunctions, log: Log, records: tuple[int, int], initial: Mapping[str, float]
+) -> SensorStart:
+    """The sensor's closed-form start (:func:`~nlp_calib.problem.start.closed_form_start`) on the
+    records ``records`` of ``log``, the fixed parameters at their ``initial`` values."""
+    data = build_residual_data(fns, log.select(*records), sc.objective.residual)
     known = {n: initial[n] for n in fns.fixed}
     with scenario_key(sc, "initial_guess"):
-        return camera_initial_guess(fns, data, known=known)
+        return closed_form_start(fns, data, known, sc.objective.residual.stride)
 
 
 def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    bounds = sc.parameters.bounds
-    lower = np.array([bounds[n][0] if n in bounds else -np.inf for n in fns.free])
-    upper = np.array([bounds[n][1] if n in bounds else np.inf for n in fns.free])
+    """The scenario's bounds; a time offset's, unless given, ``alignment.search``."""
+    bounds = {LAG_PARAM: sc.log.alignment.search, **sc.parameters.bounds}
+    lower = np.array([bounds[base_name(n)][0] if base_name(n) in bounds else -np.inf for n in fns.free])
+    upper = np.array([bounds[base_name(n)][1] if base_name(n) in bounds else np.inf for n in fns.free])
     for name, lo, hi, x in zip(fns.free, lower, upper, x0):
         if not lo <= x <= hi:
             origin = (
@@ -137,31 +150,26 @@ def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.nda
     return lower, upper
 
 
-def starting_point(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int) -> StartingPoint:
-    """Initial values (header, scenario, or ``auto`` from records ``start:stop``) and bounds."""
+def starting_point(
+    sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int, lags: Sequence[float] = ()
+) -> StartingPoint:
+    """Initial values (header, scenario, or ``auto`` from records ``start:stop``; the time offsets
+    ``lags``, one per log, when given) and bounds."""
     initial = initial_parameters(sc, fns.model, log)
-    auto, camera = None, None
-    if sc.parameters.initial_guess == "auto" and sc.objective.sensor.is_3d:
-        data = build_residual_data(fns, log.select(start, stop), sc.objective.residual)
-        camera = camera_guess(sc, fns, data, initial)
-        auto = camera.params
-    elif sc.parameters.initial_guess == "auto":
-        auto = auto_guess(sc, fns, log, start, stop)
+    initial.update(lag_start(sc, fns.spec.lags, lags))
+    sensor = (
+        auto_start(sc, fns, log, (start, stop), initial) if sc.parameters.initial_guess == "auto" else None
+    )
+    auto = None if sensor is None else sensor.params
     if auto is not None:
         initial.update({n: v for n, v in auto.items() if n not in sc.parameters.fixed})
-    if camera is None and sc.objective.sensor.is_3d:
-        camera = given_mount(initial)
+    if sensor is None:
+        sensor = fns.sensor.given(initial)
     x0 = np.array([initial[n] for n in fns.free])
-    lower, upper = _bounds(sc, fns, x0) if sc.parameters.bounds else (None, None)
+    bounded = sc.parameters.bounds or any(base_name(n) == LAG_PARAM for n in fns.free)
+    lower, upper = _bounds(sc, fns, x0) if bounded else (None, None)
     x_fixed = np.array([initial[n] for n in fns.fixed])
-    return StartingPoint(initial, auto, camera, x0, x_fixed, lower, upper)
-
-
-def given_mount(initial: Mapping[str, float]) -> CameraStart:
-    """A given 3-D mount as a start: its floor normal in the camera frame is the third row of its
-    rotation (no windows were selected)."""
-    R = mount_rotation(initial)
-    return CameraStart(dict(initial), R[2], Selection(np.zeros(0, dtype=np.int64)))
+    return StartingPoint(initial, auto, sensor, x0, x_fixed, lower, upper)
 
 
 def evaluated(sc: Scenario, solvers: Sequence[str]) -> set[str]:
@@ -183,12 +191,11 @@ def prepare_backend(sc: Scenario, fns: ProblemFunctions, solvers: Sequence[str],
     return backend
 
 
-def camera_selected(fns: ProblemFunctions, data: ResidualData, camera: CameraStart) -> ResidualData:
-    """``data`` without the windows :func:`~nlp_calib.problem.camera.fit_selection` leaves out,
-    their number by reason kept with it."""
-    selection = fit_selection(fns, data, camera)
-    counts = {r: n for r, n in selection.counts().items() if r in FIT_REASONS}
-    return replace(data.select(selection.kept(FIT_REASONS)), dropped_selection=counts)
+def sensor_selected(fns: ProblemFunctions, data: ResidualData, start: SensorStart) -> ResidualData:
+    """``data`` without the windows the sensor's start leaves out (:func:`~nlp_calib.problem.start.
+    fit_windows`), their number by reason kept with it."""
+    keep, counts = fit_windows(fns, data, start)
+    return replace(data.select(keep), dropped_selection=counts)
 
 
 def no_priors(n_free: int) -> Priors:
@@ -207,9 +214,11 @@ class Binder:
     #: Per interval / record of the whole log: windows must not cross / start or end at them.
     bad_intervals: np.ndarray | None = None
     bad_records: np.ndarray | None = None
-    #: A 3-D sensor's start: windows whose rotation axis is off its floor normal, or that turn
-    #: against the wheels, are left out (``FIT_REASONS``).
-    camera: CameraStart | None = None
+    #: The sensor's start, which may leave some windows out (a camera's: those whose rotation axis
+    #: is off its floor normal, or that turn against the wheels).
+    start: SensorStart | None = None
+    #: Bounds of the free parameters every internal fit keeps to (None: none).
+    bounds: tuple[np.ndarray, np.ndarray] | None = None
 
     def windows(self, log: Log, start: int, stop: int) -> ResidualData:
         """The residual windows of records ``start:stop`` of ``log`` (those the masks allow)."""
@@ -222,8 +231,8 @@ class Binder:
             bad_intervals=None if self.bad_intervals is None else self.bad_intervals[start : stop - 1],
             bad_records=None if self.bad_records is None else self.bad_records[start:stop],
         )
-        if self.camera is not None and data.n_residuals:
-            data = camera_selected(self.fns, data, self.camera)
+        if self.start is not None and self.start.selection is not None and data.n_residuals:
+            data = sensor_selected(self.fns, data, self.start)
         if data.n_residuals < self.fns.n_free:
             at_faults = (
                 f" ({data.dropped_faulty} windows crossing faults were left out; "
@@ -266,6 +275,18 @@ class Binder:
         steering = self.scenario.objective.residual.steering_sample
         return interval_inputs(self.fns.model, [log.select(start, stop)], steering)
 
+    def lag_held(self, x0: np.ndarray) -> Binder:
+        """This binder with the time offsets held at their values in ``x0`` (fits on the records as
+        logged, whose clock correction the screen does not apply)."""
+        lags = [i for i, n in enumerate(self.fns.free) if is_lag(n)]
+        if not lags:
+            return self
+        n = self.fns.n_free
+        lower, upper = self.bounds if self.bounds is not None else (np.full(n, -np.inf), np.full(n, np.inf))
+        lower, upper = lower.copy(), upper.copy()
+        lower[lags] = upper[lags] = np.asarray(x0, dtype=float)[lags]
+        return replace(self, bounds=(lower, upper))
+
     def fit(
         self, evaluator: ProblemEvaluator, x0: np.ndarray, tolerance: float | None = None
     ) -> tuple[float, np.ndarray, bool]:
@@ -276,7 +297,8 @@ class Binder:
             options = self.scenario.options_for(name)
             if tolerance is not None:
                 options = replace(options, function_tolerance=max(options.function_tolerance, tolerance))
-            res = get_solver(name)(evaluator, options).solve(x0)
+            lower, upper = self.bounds if self.bounds is not None else (None, None)
+            res = get_solver(name)(evaluator, options).solve(x0, lower, upper)
         return res.cost, res.x, res.converged
 
 
@@ -322,13 +344,28 @@ def build_stage(
     start_from: tuple[Log, int, int],
     solvers: Sequence[str],
     n_records: int,
+    lags: Sequence[float] = (),
 ) -> Problem:
-    """Build the Functions (``held`` parameters fixed), start from the records ``start_from`` (a log
-    and a range), get the backend ready for ``solvers`` over ``n_records`` and weigh the priors."""
-    fns = build_problem(sc, model, tuple(held))
+    """Build the Functions (``held`` parameters fixed; a time offset per log of ``lags``, or one),
+    start from the records ``start_from`` (a log and a range), get the backend ready for
+    ``solvers`` over ``n_records`` and weigh the priors."""
+    fns = build_problem(sc, model, tuple(held), max(len(lags), 1))
     log, start, stop = start_from
-    point = starting_point(sc, fns, log, start, stop)
+    point = starting_point(sc, fns, log, start, stop, lags)
     backend = prepare_backend(sc, fns, solvers, n_records)
-    binder = Binder(sc, fns, backend, point.x_fixed, no_priors(fns.n_free), camera=point.camera)
+    bounds = None if point.lower is None or point.upper is None else (point.lower, point.upper)
+    binder = Binder(sc, fns, backend, point.x_fixed, no_priors(fns.n_free), start=point.sensor, bounds=bounds)
     priors, _ = weigh_priors(binder, log, start, stop, point.x0)
     return Problem(fns, point, replace(binder, priors=priors))
+
+
+def at_lags(problem: Problem, lags: Sequence[float]) -> Problem:
+    """``problem`` starting at the time offsets ``lags`` (one per log; the data's own once they are
+    re-sampled there, so the problem's clock correction starts at zero)."""
+    fns, start = problem.fns, problem.start
+    given = dict(zip(lag_names(fns.spec.lags), lags))
+    if not any(n in given for n in fns.free):
+        return problem
+    initial = {**start.initial, **given}
+    x0 = np.array([initial[n] for n in fns.free])
+    return replace(problem, start=replace(start, initial=initial, x0=x0))

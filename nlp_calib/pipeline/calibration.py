@@ -23,6 +23,7 @@ from nlp_calib.analysis.consistency import compare_logs
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel
+from nlp_calib.models.clock import LAG_PARAM, is_lag, lag_names
 from nlp_calib.pipeline.align import Alignment, align
 from nlp_calib.pipeline.analyse import (
     FitAnalysis,
@@ -36,7 +37,7 @@ from nlp_calib.pipeline.analyse import (
     scores,
 )
 from nlp_calib.pipeline.assemble import assemble_run, fit_notes, scenario_info
-from nlp_calib.pipeline.build import Problem, StartingPoint, build_stage
+from nlp_calib.pipeline.build import Problem, StartingPoint, at_lags, build_stage
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.scenario import Scenario
@@ -95,6 +96,7 @@ def setup_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> LogSetup
     )
     screening = screen(problem.binder, read, records, problem.start.x0)
     alignment = align_stage(problem, prepared, screening)
+    problem = at_lags(problem, [alignment.lag_s])
     windows = bind_windows(problem, prepared, screening, alignment)
     return LogSetup(prepared, problem, screening, alignment, windows)
 
@@ -264,7 +266,8 @@ class JointCalibration:
         n_records = sum(p.fit[1] - p.fit[0] for p in self.parts)
         start_from = (first.prepared.log, first.used[0], first.fit[1])
         one_horizon = sc.with_options(residual=joint_residual(sc, [p.prepared for p in self.parts]))
-        problem = build_stage(one_horizon, model, tuple(self.held), start_from, self.solvers, n_records)
+        lags = [p.alignment.lag_s for p in self.parts]
+        problem = build_stage(one_horizon, model, tuple(self.held), start_from, self.solvers, n_records, lags)
         self.fitting = Fit(problem, data, self.solvers)
         self.setup_time_s = time.perf_counter() - t0
 
@@ -297,10 +300,17 @@ class JointCalibration:
         fitted = dataclasses.replace(fitted, consistency=check)
         parts = _assemble(fitting, self.parts, results, fitted, notes, wanted or Wanted())
         return JointRun(
-            scenario=scenario_info(sc, self.model),
+            scenario=scenario_info(sc, self.model, lag_names(self.fns.spec.lags)),
             parts=tuple(parts),
             n_residuals=fitting.data.n_residuals,
-            checks=Checks(fitted.observability, fitted.crossval, fitted.direction, None, check),
+            checks=Checks(
+                fitted.observability,
+                fitted.crossval,
+                fitted.direction,
+                None,
+                check,
+                lag_effects=fitted.lag_effects,
+            ),
             warnings=tuple(notes),
         )
 
@@ -310,6 +320,13 @@ def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
     return _run(
         part.prepared.scenario, Fit(part.problem, part.windows.data, solvers), [part], solvers, Wanted()
     )[2][0]
+
+
+def own_name(name: str, log: int, n_logs: int) -> str:
+    """A joint fit's parameter ``name`` as log ``log``'s own fit calls it ("" when it has none)."""
+    if not is_lag(name):
+        return name
+    return LAG_PARAM if name == lag_names(n_logs)[log] else ""
 
 
 def consistency(
@@ -324,11 +341,17 @@ def consistency(
     blocked = fitted.crossval.std if fitted.crossval is not None else np.full(len(u.names), np.nan)
     nan = np.full(len(result.names), np.nan)
     estimates, stds = [], []
-    for run in own:
+    for i, run in enumerate(own):
         mine = run.reports[solver]
-        ok = mine.result.converged
-        estimates.append(mine.result.params if ok else nan)
-        stds.append(np.array([run.std(solver)[n] for n in result.names]) if ok else nan)
+        if not mine.result.converged:
+            estimates.append(nan)
+            stds.append(nan)
+            continue
+        # Each log's own lag is the joint fit's lag of that log; the other logs' lags it has not.
+        names = [own_name(n, i, len(own)) for n in result.names]
+        values, std = mine.result.param_dict(), run.std(solver)
+        estimates.append(np.array([values.get(n, np.nan) for n in names]))
+        stds.append(np.array([std.get(n, np.nan) for n in names]))
     logs = [run.log.path for run in own]
     return compare_logs(
         result.names, logs, result.params, believed_std(u.std, blocked), np.array(estimates), np.array(stds)
@@ -358,7 +381,7 @@ def _assemble(
     runs = []
     for i, part in enumerate(parts):
         sc = part.prepared.scenario
-        info = scenario_info(sc, fitting.fns.model)
+        info = scenario_info(sc, fitting.fns.model, lag_names(fitting.fns.spec.lags))
         scorer = log_scorer(
             fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window
         )

@@ -8,10 +8,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from nlp_calib.core.errors import FieldError
+from nlp_calib.core.errors import FieldError, ProblemError
 from nlp_calib.core.ranges import MAGNITUDE, Range, check_choice, check_range
 from nlp_calib.problem import ResidualOptions
-from nlp_calib.problem.sensors import SCALES, SENSORS, sensor_for
+from nlp_calib.sensors import SCALES, SENSORS, Sensor, sensor_for
 from nlp_calib.solvers.backends import BACKENDS
 from nlp_calib.sources import DatasetSource
 from nlp_calib.symbolic.kernels import KERNELS
@@ -180,33 +180,34 @@ class DataOptions:
 
 @dataclass(frozen=True)
 class SensorOptions:
-    """What the tracker follows (scenario key ``sensor``): a ``planar`` pose, or a ``3d`` one (a
-    camera on the base, its mount ``x, y, z, roll, pitch, yaw``); ``scale: free`` for 3-D poses
-    known only up to scale (monocular visual odometry). ``sensor: 3d`` is short for
-    ``{mount: 3d}``."""
+    """What the reference is (scenario key ``sensor``): one of the sensor plug-ins
+    (:data:`nlp_calib.sensors.SENSORS`: ``planar``, a tracker's planar pose; ``3d``, a camera's
+    pose on the base, its mount ``x, y, z, roll, pitch, yaw``); ``scale: free`` for poses known
+    only up to scale (monocular visual odometry). ``sensor: 3d`` is short for ``{mount: 3d}``."""
 
     mount: str = "planar"
     scale: str = "fixed"
 
     def __post_init__(self) -> None:
-        check_choice("mount", self.mount, SENSORS)
+        check_choice("mount", self.mount, tuple(SENSORS))
         check_choice("scale", self.scale, SCALES)
-        if self.scale == "free" and self.mount == "planar":
-            raise FieldError(
-                "scale", "a free scale needs a 3-D sensor (mount: 3d); planar tracker poses are metric"
-            )
+        try:
+            sensor_for(self.mount, self.scale)
+        except ProblemError as exc:
+            raise FieldError("scale", str(exc)) from None
 
     @property
-    def is_3d(self) -> bool:
-        return self.mount == "3d"
+    def sensor(self) -> Sensor:
+        """The sensor plug-in."""
+        return sensor_for(self.mount, self.scale)
 
     def params(self) -> tuple[str, ...]:
         """The parameters of the sensor's mount (and the scale, when free), in state order."""
-        return sensor_for(self.mount, self.scale).params
+        return self.sensor.params
 
     def held(self) -> tuple[str, ...]:
         """The mount's parameters the drive never determines (held at their given values)."""
-        return sensor_for(self.mount, self.scale).held
+        return self.sensor.held
 
 
 @dataclass(frozen=True)

@@ -79,6 +79,8 @@ def _fit(
     step = ev.normal_equations(x_k).step() if converged else None
     if step is not None:
         x_k = ev.boxplus(x_k, step)
+        if binder.bounds is not None:  # the fit keeps to the bounds, and so does its last step
+            x_k = np.clip(x_k, *binder.bounds)
     return ev.params(x_k), converged, kept.n_residuals
 
 

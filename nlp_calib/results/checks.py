@@ -142,21 +142,39 @@ class DirectionCheck:
 
 @dataclass(frozen=True)
 class LagEstimate:
-    """The estimated lag (s), the costs of the lags fitted, and whether the best of them is at an
-    end of the searched range (then the true lag may lie beyond it)."""
+    """How the fitted tracker lag (s) was reached: the lags the encoders were re-sampled at in
+    turn and the internal fit's cost at each, whether the last fit converged, and whether the lag
+    ended on a bound of the searched range (then the true lag may lie beyond it, or the drive does
+    not determine it)."""
 
     lag_s: float
-    grid_s: tuple[float, ...]
+    path_s: tuple[float, ...]
     costs: tuple[float, ...]
     at_edge: bool = False
+    converged: bool = True
 
     def as_dict(self) -> dict[str, object]:
         return {
             "lag_s": self.lag_s,
-            "grid_s": list(self.grid_s),
+            "path_s": list(self.path_s),
             "costs": [c if np.isfinite(c) else None for c in self.costs],
             "at_edge": self.at_edge,
+            "converged": self.converged,
         }
+
+
+@dataclass(frozen=True)
+class LagEffect:
+    """How the other parameters move with a time offset ``lag`` on this drive: each one's change per
+    second of it along their joint uncertainty (the covariance's regression), for the parameters
+    correlated with it by :data:`LAG_EFFECT_CORRELATION` or more."""
+
+    lag: str
+    per_second: dict[str, float]
+
+
+#: Parameters correlated with a lag by at least this much are said to move with it.
+LAG_EFFECT_CORRELATION = 0.3
 
 
 #: A direction with 1σ beyond this many reference units is weakly observable...

@@ -22,6 +22,7 @@ from nlp_calib.results.checks import (
     ConsistencyCheck,
     CrossValidation,
     DirectionCheck,
+    LagEffect,
     LagEstimate,
     Observability,
     TruthCheck,
@@ -37,6 +38,23 @@ from nlp_calib.results.uncertainty import Uncertainty
 
 
 @dataclass(frozen=True)
+class SensorInfo:
+    """The run's sensor as its plug-in describes itself: ``kind`` (its registry name, as the
+    scenario's ``sensor`` gives it), the pose ``group`` it measures in, its poses' ``scale``
+    (``fixed``, or ``free`` when known up to scale), its mount's parameters and those the drive
+    never determines, held, with why."""
+
+    kind: str = "planar"
+    group: str = "SE(2)"
+    scale: str = "fixed"
+    params: tuple[str, ...] = ("sensor_x", "sensor_y", "sensor_theta")
+    held: tuple[str, ...] = ()
+    held_why: str = ""
+    #: What its parameters mean, in words (an angle convention), where the names do not say it.
+    convention: str = ""
+
+
+@dataclass(frozen=True)
 class ScenarioInfo:
     """What the outputs say about the scenario: its name and file, the model with its units and
     headline parameters, the log(s), the solvers (in order, with display labels) and the residual
@@ -49,20 +67,21 @@ class ScenarioInfo:
     headline: tuple[str, ...]
     dataset: str
     datasets: tuple[str, ...]
-    solvers: tuple[str, ...]
+    #: Each solver's display name, in the scenario's order of solvers.
     labels: Mapping[str, str]
     residual: Mapping[str, Any]
     robust: Mapping[str, Any]
     initial_guess: str
+    sensor: SensorInfo = field(default_factory=SensorInfo)
 
     def label(self, solver: str) -> str:
         """The display name of ``solver``."""
         return self.labels.get(solver, solver)
 
     @property
-    def sensor_3d(self) -> bool:
-        """Whether the sensor's mount is 3-D (a camera's: roll, pitch and yaw among the parameters)."""
-        return "sensor_roll" in self.units
+    def solvers(self) -> tuple[str, ...]:
+        """The scenario's solvers, in its order."""
+        return tuple(self.labels)
 
 
 @dataclass(frozen=True)
@@ -136,6 +155,8 @@ class Checks:
     drift: DriftCheck | None = None
     #: The estimate against the known truth of a simulated log (a truth file beside it).
     truth: TruthCheck | None = None
+    #: How each time offset moves the other parameters (see :class:`LagEffect`).
+    lag_effects: tuple[LagEffect, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -148,7 +169,7 @@ class SolverReport:
     holdout: TrajectoryMetrics | None
     #: The estimate in the robot stack's terms (its ros2_control controller's parameters).
     controller: ControllerParams | None = None
-    #: The sensor's mount as every hand-off file states it.
+    #: The sensor's mount as every hand-off file states it, as the sensor says it.
     mount: SensorMount | None = None
 
 
