@@ -24,11 +24,12 @@ from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
 from nlp_calib.core.files import check_output_dir
 from nlp_calib.logs import Log
-from nlp_calib.outputs import registry, urdf
+from nlp_calib.outputs import compare, registry
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.outputs.progress import Progress
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.outputs.terminal import correlation_table, run_table, summary_table, validation_table
+from nlp_calib.outputs.write import output_options
 from nlp_calib.pipeline import Calibration, JointCalibration, Scenario, Wanted, load_scenario
 from nlp_calib.pipeline.export import write_c_export
 from nlp_calib.pipeline.prepare import read_checked
@@ -107,17 +108,26 @@ def _wrote(paths: Sequence[Path], out: Path) -> list[str]:
 
 
 #: The output groups each calibrating command writes.
-CALIBRATE = ("result", "handoff", "figures")
+CALIBRATE = registry.RUN_GROUPS
 
 
 def _robot_urdf(args: argparse.Namespace) -> None:
     """The user's URDF (``--urdf``), read and checked before any work (``args.robot_urdf``)."""
-    if (args.urdf is None) != (args.sensor_link is None):
-        raise UsageError("give --urdf and --sensor-link together: the URDF and the sensor's link in it")
-    args.robot_urdf = None if args.urdf is None else urdf.load(args.urdf, args.sensor_link)
+    options = output_options(robot_urdf=args.urdf, sensor_link=args.sensor_link, ros_distro=args.ros_distro)
+    args.robot_urdf = options.urdf
 
 
-def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> int:
+def _compare_dir(args: argparse.Namespace, outs: Sequence[Path]) -> Path:
+    """Where ``compare.md`` and ``compare.csv`` go: one scenario's output folder, or the folder
+    holding several."""
+    if len(outs) == 1:
+        return outs[0]
+    return check_output_dir(args.out if args.out is not None else Path("out"))
+
+
+def _cmd_calibrate(
+    args: argparse.Namespace, solvers: Sequence[str] | None, side_by_side: bool = False
+) -> int:
     _robot_urdf(args)
     scenarios = _load_with_data(args.scenario, args.data)
     outs = _out_dirs(args, scenarios)
@@ -127,6 +137,9 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
     logs = [[read_checked(s) for s in sc.per_log()] for sc in scenarios]
     for out in outs:
         refuse_collisions(out, registry.files(outputs), force=args.force)
+    compared = _compare_dir(args, outs) if side_by_side else None
+    if compared is not None:
+        refuse_collisions(compared, compare.FILES, force=args.force)
     runs: list[CalibrationRun] = []
     wanted = Wanted(series=args.report)
     with Progress(len(scenarios), sys.stderr, label="scenarios") as progress:
@@ -146,10 +159,21 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
             final = _write_outputs(out, args, outputs, [(run, "")], (run, last))
             progress.clear()
             _closing(run, final, out)
-    if len(scenarios) > 1:
+    if compared is not None:
+        _side_by_side(runs, compared, args.force)
+    elif len(scenarios) > 1:
         print(summary_table(runs))
     converged = all(r.result.converged for run in runs for r in run.reports.values())
     return 0 if converged and all(run.verdict.handoff for run in runs) else 1
+
+
+def _side_by_side(runs: Sequence[CalibrationRun], folder: Path, force: bool) -> None:
+    """Every run's parameters, lag and sensor side by side, printed and written (staged)."""
+    print(compare.compare_table(runs))
+    with StagedOutput(folder, "compare", force=force) as stage:
+        written = compare.write_compare(runs, stage.path)
+        stage.commit()
+    print("\n" + "\n".join(f"wrote {stage.final(p)}" for p in written))
 
 
 def _closing(run: CalibrationRun, final: Sequence[Path], out: Path) -> None:
@@ -175,6 +199,7 @@ def _write_outputs(
         sigma=getattr(args, "sigma", 3.0),
         urdf=getattr(args, "robot_urdf", None),
         sensor_link=getattr(args, "sensor_link", None),
+        ros_distro=getattr(args, "ros_distro", registry.OutputOptions.ros_distro),
     )
     with StagedOutput(out, group, force=args.force) as stage:
         runs = [(run, stage.path / sub) for run, sub in pieces]
@@ -231,7 +256,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    return _cmd_calibrate(args, tuple(SOLVERS))
+    return _cmd_calibrate(args, tuple(SOLVERS), side_by_side=True)
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:

@@ -12,6 +12,7 @@ from nlp_calib.core.ranges import Range
 from nlp_calib.core.version import __version__
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, JOINT_UNITS, MAX_GAP, TRACKER_TYPES
 from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders
+from nlp_calib.outputs.ros2_control import DEFAULT_ROS_DISTRO, ROS_DISTROS
 from nlp_calib.pipeline.options import BLOCKS
 from nlp_calib.pipeline.simconfig import CLI_LIMITS
 from nlp_calib.simulation import TRAJECTORIES
@@ -164,19 +165,28 @@ def _add_common(p: argparse.ArgumentParser, report: str | None) -> None:
     _add_force(p, "files in the output folder")
 
 
-def _add_urdf(p: argparse.ArgumentParser) -> None:
+def _add_handoff(p: argparse.ArgumentParser) -> None:
+    """The options of the hand-off files: the user's URDF, the sensor's link in it, the ROS release."""
     p.add_argument(
         "--urdf",
         type=_path,
         default=None,
         help="your robot's URDF: robot.urdf is written as that file with the sensor's joint re-posed "
-        "(x, y, yaw calibrated; z, roll, pitch and everything else kept); needs --sensor-link",
+        "(x, y, yaw calibrated; z, roll, pitch and everything else kept), and sensor_mount.urdf.xml "
+        "holds that same joint; needs --sensor-link",
     )
     p.add_argument(
         "--sensor-link",
         default=None,
         metavar="LINK",
         help="the sensor's link in --urdf (the child of the joint to re-pose)",
+    )
+    p.add_argument(
+        "--ros-distro",
+        choices=ROS_DISTROS,
+        default=DEFAULT_ROS_DISTRO,
+        help=f"the ROS 2 release whose ros2_controllers' parameter names ros2_control.yaml uses "
+        f"(default: {DEFAULT_ROS_DISTRO})",
     )
 
 
@@ -217,7 +227,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_run(sub: Any) -> None:
     p = sub.add_parser("run", help="calibrate with the scenario's solvers (or --solver)", **_sub("run"))
     _add_common(p, REPORT)
-    _add_urdf(p)
+    _add_handoff(p)
     p.add_argument(
         "--solver",
         choices=(*SOLVERS, *ALL_SOLVERS),
@@ -229,7 +239,7 @@ def _add_run(sub: Any) -> None:
 def _add_compare(sub: Any) -> None:
     p = sub.add_parser("compare", help="calibrate with every solver, side by side", **_sub("compare"))
     _add_common(p, REPORT)
-    _add_urdf(p)
+    _add_handoff(p)
 
 
 def _add_validate(sub: Any) -> None:
@@ -266,7 +276,7 @@ def _add_odometry(sub: Any) -> None:
         **_sub("odometry"),
     )
     _add_common(p, "also draw odometry.png: the odometry with its σ ellipses against the tracker")
-    _add_urdf(p)
+    _add_handoff(p)
     p.add_argument(
         "--solver",
         choices=tuple(SOLVERS),

@@ -39,7 +39,9 @@ class LogHeader:
     ``T_base_sensor`` is ordered ``(x, y, theta)``. ``encoder_units`` says what the readings are
     (``encoder_max`` is 0 for joints in radians); ``sensor_z_roll_pitch`` is the nominal mount's
     height, roll and pitch where a source knows them (a bag's ``/tf_static``); ``nominal`` says
-    which values are the robot's nominal ones where a source filled in defaults.
+    which values are the robot's nominal ones where a source filled in defaults;
+    ``counts_per_turn`` each wheel encoder's counts per wheel turn where a source states them
+    (``ROBOT.yaml``).
     """
 
     kinematic_model: str
@@ -54,6 +56,7 @@ class LogHeader:
     #: whose values here are the robot's nominal ones, each with where it comes from; None: all of
     #: them, written by the robot's own logger (a text log's header). The rest are defaults.
     nominal: Mapping[str, str] | None = None
+    counts_per_turn: Mapping[str, float] = field(default_factory=dict)
 
     def encoder_index(self, name: str) -> int:
         """Column of the encoder called ``name`` in :attr:`Log.ticks`."""

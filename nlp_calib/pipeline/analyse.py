@@ -17,8 +17,10 @@ import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.crossval import combine
+from nlp_calib.analysis.handoff import odometry_noise
 from nlp_calib.analysis.metrics import each_metrics, geometry, integrate, segments
 from nlp_calib.analysis.observability import analyse as observability_of
+from nlp_calib.analysis.odometry import Drift as DriftSegments
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
 from nlp_calib.core import memory
@@ -41,6 +43,7 @@ from nlp_calib.results.checks import (
 )
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
+from nlp_calib.results.handoff import OdometryNoise
 from nlp_calib.results.series import (
     FaultSpan,
     ModelCheckSeries,
@@ -91,6 +94,8 @@ class LogAnalysis:
     odometry: OdometryTrack | None
     #: The nominal robot's figures (None: no nominal values known).
     nominal: Scores | None = None
+    #: The handed-off solver's odometry noise as its controller publishes it.
+    noise: Mapping[str, OdometryNoise | None] = dataclasses.field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -421,28 +426,72 @@ def run_series(
     return RunSeries(tracks, residuals, spans, holdout, model_check(fit, view.prepared))
 
 
+#: The used records the hand-off's odometry noise is calibrated on at most (from the first): a
+#: few hundred drift segments determine it, and a long log's cost stays that of a short one.
+NOISE_RECORDS = 20_000
+
+
+@dataclass(frozen=True)
+class Drift:
+    """A log's odometry against the base poses the tracker implies over its first ``records``
+    used records: the inputs, those poses, the segments' drift, and each input's noise per
+    interval (with the reference's own variances) that explains it."""
+
+    inputs: np.ndarray
+    reference: np.ndarray
+    drift: DriftSegments
+    noise: np.ndarray
+    reference_var: np.ndarray
+
+
+def calibrated_drift(
+    fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str, records: int | None = None
+) -> Drift:
+    """Each input's noise per interval calibrated on the drift of the used records (the first
+    ``records`` of them) against the tracker, never below the encoders' quantisation."""
+    fns, sel = fit.fns, windows.selected
+    n = sel.n_records if records is None else min(records, sel.n_records)
+    sel = sel.select(0, n)
+    inputs = windows.binder.fns.model.inputs(sel, steering_sample)
+    reference = over_columns(fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
+    bad_intervals, bad_records = windows.masks()
+    parts = segments(n, bad_intervals[: n - 1])
+    drift = segment_drift(fns, params, inputs, reference, parts, ~bad_records[:n])
+    noise, reference_var = drift_noise(drift, windows.input_noise_std)
+    return Drift(inputs, reference, drift, noise, reference_var)
+
+
 def odometry(fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str) -> OdometryTrack:
     """Base-link odometry with ``params`` over the used records, started at the base pose the
     tracker's first pose implies, beside the base poses the tracker implies throughout; its
     covariance propagated from each input's noise calibrated on the drift this log shows against
     the tracker (never below the encoders' quantisation)."""
-    sel, fns = windows.selected, fit.fns
-    inputs = windows.inputs(steering_sample)
-    reference = over_columns(fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
-    bad_i, bad_r = windows.masks()
-    drift = segment_drift(fns, params, inputs, reference, segments(reference.shape[0], bad_i), ~bad_r)
-    noise, reference_var = drift_noise(drift, windows.input_noise_std)
-    track, cov = propagate(fns, params, inputs, reference[0], noise)
-    names = fns.model.input_names
+    d = calibrated_drift(fit, windows, params, steering_sample)
+    track, cov = propagate(fit.fns, params, d.inputs, d.reference[0], d.noise)
+    names = fit.fns.model.input_names
     return OdometryTrack(
-        np.asarray(sel.time_s),
+        np.asarray(windows.selected.time_s),
         track,
         cov,
-        reference,
-        input_noise=dict(zip(names, map(float, noise))),
+        d.reference,
+        input_noise=dict(zip(names, map(float, d.noise))),
         quantisation=dict(zip(names, map(float, windows.input_noise_std))),
-        coverage=drift_coverage(drift, noise, reference_var),
+        coverage=drift_coverage(d.drift, d.noise, d.reference_var),
     )
+
+
+def handoff_noise(
+    fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str
+) -> OdometryNoise | None:
+    """The covariance a controller publishes with its odometry at ``params``, from the noise
+    calibrated on the first :data:`NOISE_RECORDS` used records (None for a 3-D sensor, whose
+    poses do not give the planar base's)."""
+    if not fit.fns.sensor.planar_base:
+        return None
+    d = calibrated_drift(fit, windows, params, steering_sample, NOISE_RECORDS)
+    noise = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
+    time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
+    return odometry_noise(fit.fns, params, d.inputs, time_s, (noise, windows.input_noise_std))
 
 
 @dataclass(frozen=True)
@@ -479,8 +528,13 @@ def analyse_log(
         nominal=scored[n + 1] if extra else None,
     )
     series = run_series(fit, results, view, figures, labels) if wanted.series else None
+    steering = view.prepared.scenario.objective.residual.steering_sample
     odo = None
     if wanted.odometry is not None and wanted.odometry in results:
-        steering = view.prepared.scenario.objective.residual.steering_sample
         odo = odometry(fit, windows, results[wanted.odometry].params, steering)
-    return dataclasses.replace(figures, series=series, odometry=odo)
+    # The hand-off carries the first converged solver's estimate (in the scenario's order): its
+    # odometry noise is the one a controller file states.
+    order = [*view.prepared.scenario.solvers, *results]
+    first = next((n for n in order if n in results and results[n].converged), None)
+    noise = {} if first is None else {first: handoff_noise(fit, windows, results[first].params, steering)}
+    return dataclasses.replace(figures, series=series, odometry=odo, noise=noise)

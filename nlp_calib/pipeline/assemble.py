@@ -13,6 +13,7 @@ from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.clock import LAG_UNIT
+from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis, Scores
 from nlp_calib.pipeline.build import StartingPoint
@@ -85,8 +86,9 @@ def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
     log, model = prepared.log, prepared.model
     kinds = model.encoder_kinds
     unit = "rad" if log.header.encoder_units == "radians" else "ticks"
+    per_turn = encoder_scales(prepared).per_turn
     encoders = tuple(
-        Encoder(name, kinds.get(name, "counter"), unit, int(vmax))
+        Encoder(name, kinds.get(name, "counter"), unit, int(vmax), per_turn.get(name))
         for name, vmax in zip(log.header.encoder_names, log.header.encoder_max)
     )
     t = log.time_s[windows.used[0] : windows.used[1]]
@@ -152,13 +154,23 @@ def _report(
 ) -> SolverReport:
     """One solver's report, with its estimate in the controller's terms."""
     u = fitted[0].uncertainty[name]
-    header = prepared.log.header
-    ranges = dict(zip(header.encoder_names, header.encoder_max))
     std = believed_std(u.std, *fitted[1].spreads(u.std))
-    controller = controller_params(prepared.model, result.names, result.params, std, u.correlation, ranges)
-    sensor = prepared.scenario.objective.sensor.sensor
-    mount = sensor.mount_pose(result.param_dict(), header.sensor_z_roll_pitch)
+    scales = encoder_scales(prepared)
+    estimate = (result.params, std, u.correlation)
+    extra = (figures.noise.get(name), prepared.held)
+    controller = controller_params(prepared.model, result.names, estimate, scales, extra)
+    sensor, header = prepared.scenario.objective.sensor.sensor, prepared.log.header
+    sd = dict(zip(result.names, map(float, std)))
+    mount = sensor.mount_pose(result.param_dict(), sd, header.sensor_frame, header.sensor_z_roll_pitch)
     return SolverReport(result, u, *figures.scores[name], controller, mount)
+
+
+def encoder_scales(prepared: PreparedLog) -> EncoderScales:
+    """The encoders' ranges in the log and their counts per wheel turn where the user gives them
+    (the scenario's ``counts_per_turn`` over ``ROBOT.yaml``'s)."""
+    header = prepared.log.header
+    per_turn = {**header.counts_per_turn, **prepared.scenario.data.counts_per_turn}
+    return EncoderScales(dict(zip(header.encoder_names, header.encoder_max)), per_turn)
 
 
 def fit_checks(

@@ -32,7 +32,8 @@ from nlp_calib.results.checks import (
 )
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
-from nlp_calib.results.handoff import ControllerParams, MountPose
+from nlp_calib.results.handoff import ControllerParams
+from nlp_calib.results.mount import SensorMount
 from nlp_calib.results.series import OdometryTrack, RunSeries
 from nlp_calib.results.solver import SolverResult
 from nlp_calib.results.uncertainty import Uncertainty
@@ -87,13 +88,15 @@ class ScenarioInfo:
 
 @dataclass(frozen=True)
 class Encoder:
-    """An encoder as the log describes it: its name, kind (``absolute`` or ``counter``), unit and
-    range (readings per turn; 0 when the readings are angles)."""
+    """An encoder as the log describes it: its name, kind (``absolute`` or ``counter``), unit,
+    range (the header's: an absolute encoder's readings per turn, the unit a counter's gain is
+    counted in; 0 when the readings are angles) and a wheel's counts per turn where given."""
 
     name: str
     kind: str
     unit: str
     range: int
+    per_turn: float | None = None
 
 
 @dataclass(frozen=True)
@@ -194,8 +197,8 @@ class SolverReport:
     holdout: TrajectoryMetrics | None
     #: The estimate in the robot stack's terms (its ros2_control controller's parameters).
     controller: ControllerParams | None = None
-    #: The sensor's mount in a robot's terms (a URDF joint), as the sensor says it.
-    mount: MountPose | None = None
+    #: The sensor's mount as every hand-off file states it, as the sensor says it.
+    mount: SensorMount | None = None
 
 
 #: The verdict's levels.

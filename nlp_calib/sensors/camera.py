@@ -26,7 +26,7 @@ from nlp_calib.core import poses3d
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.models.base import KinematicModel
-from nlp_calib.results.handoff import MountPose
+from nlp_calib.results.mount import COMPONENTS, SensorMount
 from nlp_calib.sensors.base import BaseMotion, Reference, SensorStart
 from nlp_calib.sensors.camera_start import FIT_REASONS, CameraStart, camera_start, fit_selection
 from nlp_calib.sensors.mount import (
@@ -212,13 +212,18 @@ class CameraPose:
         return out
 
     def mount_pose(
-        self, params: Mapping[str, float], nominal: tuple[float, float, float] | None
-    ) -> MountPose:
+        self,
+        params: Mapping[str, float],
+        std: Mapping[str, float],
+        frame: str,
+        nominal: tuple[float, float, float] | None,
+    ) -> SensorMount:
         """All six numbers; the height as held."""
-        return MountPose(
-            (float(params["sensor_x"]), float(params["sensor_y"]), float(params["sensor_z"])),
-            (float(params["sensor_roll"]), float(params["sensor_pitch"]), float(params["sensor_yaw"])),
-            "x, y, roll, pitch and yaw; z is held at the value given (known.sensor_z, 0 unless set), "
-            "which planar driving cannot see",
-            tilted=True,
+        names = dict(zip(COMPONENTS, MOUNT_PARAMS))
+        return SensorMount.on_base(
+            self.kind,
+            frame,
+            {c: float(params[n]) for c, n in names.items()},
+            {c: std[n] for c, n in names.items()},
+            {"z": "held at the value given (known.sensor_z, 0 unless set), which planar driving cannot see"},
         )

@@ -18,7 +18,7 @@ import numpy as np
 
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.models.base import SENSOR_PARAMS, SENSOR_REFERENCE, SENSOR_UNITS, KinematicModel, canonical
-from nlp_calib.results.handoff import MountPose
+from nlp_calib.results.mount import SensorMount
 from nlp_calib.sensors.base import BaseMotion, Reference, SensorStart
 from nlp_calib.symbolic import se2
 
@@ -153,13 +153,22 @@ class PlanarPose:
         return canonical(model, params, tuple(fixed))
 
     def mount_pose(
-        self, params: Mapping[str, float], nominal: tuple[float, float, float] | None
-    ) -> MountPose:
+        self,
+        params: Mapping[str, float],
+        std: Mapping[str, float],
+        frame: str,
+        nominal: tuple[float, float, float] | None,
+    ) -> SensorMount:
         """x, y and yaw calibrated; z, roll and pitch the nominal mount's (else 0)."""
         z, roll, pitch = nominal or (0.0, 0.0, 0.0)
-        known = "the nominal mount's (/tf_static)" if nominal else "0 (not known)"
-        return MountPose(
-            (float(params["sensor_x"]), float(params["sensor_y"]), float(z)),
-            (float(roll), float(pitch), float(params["sensor_theta"])),
-            f"x, y and yaw; z, roll and pitch are {known}, which planar driving cannot see",
+        known = "from the nominal mount (/tf_static)" if nominal else "not known (0)"
+        names = {"x": "sensor_x", "y": "sensor_y", "yaw": "sensor_theta"}
+        pose = {"z": z, "roll": roll, "pitch": pitch, **{c: float(params[n]) for c, n in names.items()}}
+        source = f"{known}, which planar driving cannot see"
+        return SensorMount.on_base(
+            self.kind,
+            frame,
+            pose,
+            {c: std[n] for c, n in names.items()},
+            dict.fromkeys(("z", "roll", "pitch"), source),
         )
