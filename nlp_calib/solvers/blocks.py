@@ -4,7 +4,8 @@ Mapping a Function over a million columns at once costs seconds to build (CasADi
 its size) and needs every output in one piece. :class:`BlockMap` maps it over blocks of
 :data:`BLOCK` columns instead (at most two map sizes, built once), binds each block's buffers to
 column slices of the caller's arrays (no copies) and either sums the blocks' outputs or writes
-them straight into full per-column arrays.
+them straight into full per-column arrays. :class:`Scan` folds a step over many intervals the same
+way: folds of a few fixed sizes (built once), chained through the caller's array of states.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.solvers.backends import Backend, Buffered
+from nlp_calib.solvers.backends.base import fold_sizes
 
 #: Columns per block: a multiple of every backend's chunk.
 BLOCK = 1 << 14
@@ -104,3 +106,24 @@ def stream(
             slice(lo, min(hi, n)),
             [out.reshape(r, c * size, order="F") for out, (r, c) in zip(buf.outputs(), shapes)],
         )
+
+
+class Scan:
+    """``step`` (state, x, x_fixed, u) → state' folded over the columns of ``inputs`` (a whole number
+    of the backend's chunks) from the state in ``states[:, 0]``, every state written into
+    ``states[:, 1:]`` (``(rows, n + 1)``, column-major). Each fold of the chain reads its first state
+    from the column the previous one wrote last: no copies, and the same arithmetic as one fold."""
+
+    def __init__(self, backend: Backend, step: ca.Function, inputs: np.ndarray, states: np.ndarray) -> None:
+        self.blocks: list[Buffered] = []
+        lo = 0
+        for size in fold_sizes(inputs.shape[1] // backend.chunk):
+            hi = lo + size * backend.chunk
+            bound = {"state": states[:, lo], "u": inputs[:, lo:hi], "states": states[:, lo + 1 : hi + 1]}
+            self.blocks.append(Buffered(backend.fold(step, size), bound=bound))
+            lo = hi
+
+    def evaluate(self, **inputs: np.ndarray | float) -> None:
+        """Fold over every interval with these inputs (``x``, ``x_fixed``)."""
+        for block in self.blocks:
+            block.evaluate(**inputs)

@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from nlp_calib.problem import ProblemFunctions, ResidualData
-from nlp_calib.solvers.backends import Backend, Buffered
+from nlp_calib.solvers.backends import Backend
+from nlp_calib.solvers.blocks import Scan
 
 
 def padded_index(index: np.ndarray, n: int) -> np.ndarray:
@@ -35,18 +36,17 @@ class _Scan:
         self.poses = np.zeros((rows, n_pad + 1), order="F")
         self.motion = np.zeros((2 * rows, ends.size // 2), order="F")
         self._ends = ends
-        self._scan = Buffered(
-            backend.scan(step, n_pad),
-            {"state": np.zeros(rows)},
-            bound={"u": inputs, "states": self.poses[:, 1:]},
-        )
+        self._scan = Scan(backend, step, inputs, self.poses)
         self.at: bytes | None = None
 
     def update(self, key: bytes, x: np.ndarray, x_fixed: np.ndarray) -> np.ndarray:
         if self.at != key:
             self._scan.evaluate(x=x, x_fixed=x_fixed)
             rows = self.poses.shape[0]
-            np.take(self.poses, self._ends, axis=1, out=self.motion.reshape(rows, -1, order="F"), mode="clip")
+            # Row gathers on the transposed (C-contiguous) views: one copy of each jet, no temporaries
+            # (a column gather of column-major arrays goes through a strided copy of everything).
+            gathered = self.motion.reshape(rows, -1, order="F").T
+            np.take(self.poses.T, self._ends, axis=0, out=gathered, mode="clip")
             self.at = key
         return self.motion
 
