@@ -4,14 +4,18 @@ Mapping a Function over a million columns at once costs seconds to build (CasADi
 its size) and needs every output in one piece. :class:`BlockMap` maps it over blocks of
 :data:`BLOCK` columns instead (at most two map sizes, built once), binds each block's buffers to
 column slices of the caller's arrays (no copies) and either sums the blocks' outputs or writes
-them straight into full per-column arrays. :class:`Scan` folds a step over many intervals the same
-way: folds of a few fixed sizes (built once), chained through the caller's array of states.
+them straight into full per-column arrays. A mapped input may also be a :class:`Columns` source
+(columns made on demand, e.g. gathered from a larger array): each block's columns are then made
+into one block-sized buffer just before the block is evaluated, so the full input never exists.
+:class:`Scan` folds a step over many intervals the same way: folds of a few fixed sizes (built
+once), chained through the caller's array of states.
 """
 
 from __future__ import annotations
 
 import functools
 from collections.abc import Iterator, Mapping, Sequence
+from typing import Protocol, Union
 
 import casadi as ca
 import numpy as np
@@ -21,6 +25,23 @@ from nlp_calib.solvers.backends.base import fold_sizes
 
 #: Columns per block: a multiple of every backend's chunk.
 BLOCK = 1 << 14
+
+
+class Columns(Protocol):
+    """Columns of a mapped input made on demand: ``shape`` ``(rows, n)``; :meth:`fill` writes columns
+    ``lo:hi`` into ``out`` ``(rows, hi - lo)``, column-major."""
+
+    @property
+    def shape(self) -> tuple[int, int]: ...
+
+    def fill(self, lo: int, hi: int, out: np.ndarray) -> None: ...
+
+
+Mapped = Union[np.ndarray, Columns]
+
+
+def _made(mapped: Mapping[str, Mapped]) -> dict[str, Columns]:
+    return {k: v for k, v in mapped.items() if not isinstance(v, np.ndarray)}
 
 
 @functools.lru_cache(maxsize=64)
@@ -39,7 +60,7 @@ class BlockMap:
         self,
         backend: Backend,
         f: ca.Function,
-        mapped: Mapping[str, np.ndarray],
+        mapped: Mapping[str, Mapped],
         static: Mapping[str, np.ndarray | float],
         reduce: bool,
     ) -> None:
@@ -52,11 +73,15 @@ class BlockMap:
         self.full = [] if reduce else [np.zeros((r, c * n), order="F") for r, c in self.shapes]
         maps: dict[int, ca.Function] = {}
         self.blocks: list[Buffered] = []
+        self.spans: list[tuple[int, int]] = []
+        self.made = _made(mapped)
+        # One buffer per made input and block size: the blocks are evaluated one after the other.
+        self.scratch: dict[tuple[str, int], np.ndarray] = {}
         for lo in range(0, n, BLOCK):
             hi = min(n, lo + BLOCK)
             if hi - lo not in maps:
                 maps[hi - lo] = _mapped(backend, f, hi - lo, names, reduce)
-            bound = {k: v[:, lo:hi] for k, v in mapped.items()}
+            bound = {k: self._columns(k, v, lo, hi) for k, v in mapped.items()}
             if not reduce:
                 bound.update(
                     {
@@ -65,10 +90,22 @@ class BlockMap:
                     }
                 )
             self.blocks.append(Buffered(maps[hi - lo], static, bound))
+            self.spans.append((lo, hi))
+
+    def _columns(self, name: str, value: Mapped, lo: int, hi: int) -> np.ndarray:
+        """What block ``lo:hi`` binds of a mapped input: a slice, or the made input's scratch buffer."""
+        if isinstance(value, np.ndarray):
+            return value[:, lo:hi]
+        key = (name, hi - lo)
+        if key not in self.scratch:
+            self.scratch[key] = np.zeros((value.shape[0], hi - lo), order="F")
+        return self.scratch[key]
 
     def __call__(self, **inputs: np.ndarray | float) -> Sequence[np.ndarray]:
         """Evaluate every block; the summed outputs (shaped like ``f``'s), or the full arrays."""
-        for block in self.blocks:
+        for block, (lo, hi) in zip(self.blocks, self.spans):
+            for name, source in self.made.items():
+                source.fill(lo, hi, self.scratch[name, hi - lo])
             block.evaluate(**inputs)
         if not self.reduce:
             return self.full
@@ -82,7 +119,7 @@ class BlockMap:
 def stream(
     backend: Backend,
     f: ca.Function,
-    mapped: Mapping[str, np.ndarray],
+    mapped: Mapping[str, Mapped],
     static: Mapping[str, np.ndarray | float],
     n: int | None = None,
 ) -> Iterator[tuple[slice, list[np.ndarray]]]:
@@ -91,15 +128,19 @@ def stream(
     the first ``n`` columns' blocks are evaluated. Memory stays one block's, however many columns."""
     total = next(iter(mapped.values())).shape[1]
     n = total if n is None else n
-    buffers: dict[int, Buffered] = {}
+    buffers: dict[int, tuple[Buffered, dict[str, np.ndarray]]] = {}
     for lo in range(0, n, BLOCK):
         hi = min(total, lo + BLOCK)
         size = hi - lo
         if size not in buffers:
-            buffers[size] = Buffered(_mapped(backend, f, size, tuple(mapped), False), static)
-        buf = buffers[size]
+            scratch = {k: np.zeros((v.shape[0], size), order="F") for k, v in _made(mapped).items()}
+            buffers[size] = (Buffered(_mapped(backend, f, size, tuple(mapped), False), static, scratch), scratch)
+        buf, scratch = buffers[size]
         for name, arr in mapped.items():
-            buf.rebind(name, arr[:, lo:hi])
+            if isinstance(arr, np.ndarray):
+                buf.rebind(name, arr[:, lo:hi])
+            else:
+                arr.fill(lo, hi, scratch[name])
         buf.evaluate()
         shapes = [f.size_out(i) for i in range(f.n_out())]
         yield (
