@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Iterator, Mapping, Sequence
-from typing import Protocol, Union
+from typing import Protocol, TypeAlias
 
 import casadi as ca
 import numpy as np
@@ -37,7 +37,8 @@ class Columns(Protocol):
     def fill(self, lo: int, hi: int, out: np.ndarray) -> None: ...
 
 
-Mapped = Union[np.ndarray, Columns]
+#: A mapped input: an array, or columns made on demand.
+Mapped: TypeAlias = "np.ndarray | Columns"
 
 
 def _made(mapped: Mapping[str, Mapped]) -> dict[str, Columns]:
@@ -134,7 +135,8 @@ def stream(
         size = hi - lo
         if size not in buffers:
             scratch = {k: np.zeros((v.shape[0], size), order="F") for k, v in _made(mapped).items()}
-            buffers[size] = (Buffered(_mapped(backend, f, size, tuple(mapped), False), static, scratch), scratch)
+            mapped_f = _mapped(backend, f, size, tuple(mapped), False)
+            buffers[size] = (Buffered(mapped_f, static, scratch), scratch)
         buf, scratch = buffers[size]
         for name, arr in mapped.items():
             if isinstance(arr, np.ndarray):
@@ -153,18 +155,28 @@ class Scan:
     """``step`` (state, x, x_fixed, u) → state' folded over the columns of ``inputs`` (a whole number
     of the backend's chunks) from the state in ``states[:, 0]``, every state written into
     ``states[:, 1:]`` (``(rows, n + 1)``, column-major). Each fold of the chain reads its first state
-    from the column the previous one wrote last: no copies, and the same arithmetic as one fold."""
+    from the column the previous one wrote last: no copies, and the same arithmetic as one fold.
+    One buffer per fold size, bound to each span in turn (a fold's work memory is as large as its
+    states: one per span would hold the states twice)."""
 
     def __init__(self, backend: Backend, step: ca.Function, inputs: np.ndarray, states: np.ndarray) -> None:
-        self.blocks: list[Buffered] = []
+        self.inputs, self.states = inputs, states
+        self.spans: list[tuple[Buffered, int, int]] = []
+        buffers: dict[int, Buffered] = {}
         lo = 0
         for size in fold_sizes(inputs.shape[1] // backend.chunk):
+            if size not in buffers:
+                buffers[size] = Buffered(backend.fold(step, size))
             hi = lo + size * backend.chunk
-            bound = {"state": states[:, lo], "u": inputs[:, lo:hi], "states": states[:, lo + 1 : hi + 1]}
-            self.blocks.append(Buffered(backend.fold(step, size), bound=bound))
+            self.spans.append((buffers[size], lo, hi))
             lo = hi
 
     def evaluate(self, **inputs: np.ndarray | float) -> None:
         """Fold over every interval with these inputs (``x``, ``x_fixed``)."""
-        for block in self.blocks:
-            block.evaluate(**inputs)
+        for buf in {id(b): b for b, _, _ in self.spans}.values():
+            buf.set(**inputs)
+        for buf, lo, hi in self.spans:
+            buf.rebind("state", self.states[:, lo])
+            buf.rebind("u", self.inputs[:, lo:hi])
+            buf.rebind_output("states", self.states[:, lo + 1 : hi + 1])
+            buf.evaluate()

@@ -182,6 +182,12 @@ class Buffered:
         self._in[name] = _memory(arr, self.function.nnz_in(i))
         self._buf.set_arg(i, self._in[name].data)
 
+    def rebind_output(self, name: str, arr: np.ndarray) -> None:
+        """Write output ``name`` into another caller-owned array of the same size."""
+        i = self.function.index_out(name)
+        self._out[i] = _memory(arr, self.function.nnz_out(i))
+        self._buf.set_res(i, self._out[i].data)
+
     def set(self, **inputs: np.ndarray | float) -> None:
         """Copy values into the bound input arrays (column-major, as CasADi stores them)."""
         for name, value in inputs.items():
