@@ -143,9 +143,7 @@ def test_a_batch_on_a_dask_cluster_equals_one_at_a_time(logs: Path, tmp_path: Pa
 
 
 def test_dask_without_a_scheduler_is_one_line(logs: Path, tmp_path: Path) -> None:
-    proc = cli(
-        "batch", str(logs / "robot1"), "--out", str(tmp_path / "o"), "--dask", "tcp://127.0.0.1:9"
-    )
+    proc = cli("batch", str(logs / "robot1"), "--out", str(tmp_path / "o"), "--dask", "tcp://127.0.0.1:9")
     assert proc.returncode == 2 and "cannot reach a Dask scheduler" in proc.stderr, proc.stderr
     proc = cli("batch", str(logs / "robot1"), "--jobs", "2", "--dask", "tcp://127.0.0.1:9")
     assert proc.returncode == 2 and "not both" in proc.stderr
