@@ -409,7 +409,7 @@ def camera(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
         logs[n] = tmp / f"camera_{n}.tum"  # a fresh folder: nothing to replace
         duration = f"{n / CAMERA_RATE_HZ:g}"
         subprocess.run(
-            cli("simulate", "--config", str(config), "--duration", duration, "--out", str(logs[n]))
+            cli("simulate", "--config", str(config), "--duration", duration, "--out", str(logs[n])),
             env=env,
             check=True,
             capture_output=True,
