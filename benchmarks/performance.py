@@ -83,6 +83,7 @@ TARGETS = {
     "camera_demo settings, 10^6 poses peak RSS [MB]": 1000.0,
     "camera_demo settings, run time 10^6 / 10^5 poses [x]": 11.0,
     "reader / numpy.loadtxt, 10^6 records [x]": 1.5,
+    "Gauss-Newton pass / fused C loop [x]": 1.5,
     "batch of 20 logs, --jobs 1 / --jobs 2 [x]": 1.0,
 }
 #: Targets a figure must reach or exceed (the others are upper bounds).
@@ -100,6 +101,7 @@ SECTIONS = (
     "simulate",
     "batch",
     "reader",
+    "gn_pass",
 )
 #: The camera demo's images per second (scenarios/data/camera_demo.sim.yaml): a drive of ``n``
 #: poses lasts ``n / CAMERA_RATE_HZ`` seconds.
@@ -417,6 +419,134 @@ def camera(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
     return sized_runs("camera_demo", logs, repeats, tmp)
 
 
+#: One Gauss-Newton pass fused into one C loop: the prefix scan interval by interval, then each
+#: window's normal-equation terms from its two prefix jets, summed as they come (no buffer between).
+FUSED_DRIVER = """
+#include <string.h>
+int fused_pass(const double* U, long n_int, const double* x, const double* xf, const double* omega,
+               const double* delta, const long* a, const long* b, const double* data, long n_win,
+               double* P, double* out) {
+  casadi_int iw[IW + 1]; casadi_real w[W + 1]; const casadi_real* arg[ARG]; casadi_real* res[RES];
+  double motion[2 * SR], o[NOUT];
+  memset(P, 0, SR * sizeof(double));
+  for (long j = 0; j < n_int; ++j) {
+    arg[0] = P + j * SR; arg[1] = x; arg[2] = xf; arg[3] = U + j * NU; res[0] = P + (j + 1) * SR;
+    STEP(arg, res, iw, w, 0);
+  }
+  memset(out, 0, NOUT * sizeof(double));
+  for (long k = 0; k < n_win; ++k) {
+    memcpy(motion, P + a[k] * SR, SR * sizeof(double));
+    memcpy(motion + SR, P + b[k] * SR, SR * sizeof(double));
+    ARGS
+    OUTS
+    NE(arg, res, iw, w, 0);
+    for (int i = 0; i < NOUT; ++i) out[i] += o[i];
+  }
+  return 0;
+}
+"""
+
+
+def fused_loop(fns: Any, tmp: Path) -> Any:
+    """The problem's scan step and per-window normal equations generated as C (CasADi's code, as the
+    compiled backend generates it) with :data:`FUSED_DRIVER`, compiled with the solvers' flags."""
+    import ctypes
+
+    import casadi as ca
+
+    from nlp_calib.codegen.compiler import CFLAGS, find_compiler
+
+    step, ne = fns.step(1), fns.function("normal_equations")
+    cg = ca.CodeGenerator("fused.c", {"with_header": False})
+    cg.add(step)
+    cg.add(ne)
+    sources = {"x": "x", "x_fixed": "xf", "omega": "omega", "delta": "delta", "motion": "motion"}
+    sources["data"] = f"data + k * {ne.nnz_in(ne.index_in('data'))}"
+    args = " ".join(f"arg[{i}] = {sources[ne.name_in(i)]};" for i in range(ne.n_in()))
+    offsets = np.cumsum([0] + [ne.nnz_out(i) for i in range(ne.n_out())])
+    outs = " ".join(f"res[{i}] = o + {offsets[i]};" for i in range(ne.n_out()))
+    sizes = {
+        "IW": max(step.sz_iw(), ne.sz_iw()),
+        "W": max(step.sz_w(), ne.sz_w()),
+        "ARG": max(step.sz_arg(), ne.sz_arg()),
+        "RES": max(step.sz_res(), ne.sz_res()),
+        "SR": step.nnz_in(0),
+        "NU": step.nnz_in(3),
+        "NOUT": int(offsets[-1]),
+    }
+    driver = FUSED_DRIVER.replace("ARGS", args).replace("OUTS", outs)
+    driver = driver.replace("STEP(", f"{step.name()}(").replace("NE(", f"{ne.name()}(")
+    for key, value in sizes.items():
+        driver = driver.replace(key, str(value))
+    src, so = tmp / "fused.c", tmp / "fused.so"
+    src.write_text(cg.dump() + driver)
+    subprocess.run([find_compiler() or "cc", *CFLAGS, str(src), "-o", str(so)], check=True)
+    lib = ctypes.CDLL(str(so))
+    lib.fused_pass.restype = ctypes.c_int
+    return lib, sizes
+
+
+def gn_pass(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
+    """One Gauss-Newton pass (prefix scan, each window's residual, Jacobian, Huber weight and normal
+    equations, summed) on the demo's settings over a simulated log: the evaluator the solvers call
+    against the same computation fused into one C loop, at a new point each time, interleaved."""
+    import ctypes
+
+    from nlp_calib.pipeline import Calibration, load_scenario
+
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
+    log = tmp / f"pass_{records}.txt"
+    subprocess.run(
+        cli("simulate", "--records", str(records), "--seed", "11", "--out", str(log), "--force"),
+        env=env,
+        check=True,
+        capture_output=True,
+    )
+    calib = Calibration(load_scenario(REPO / "scenarios" / "demo.yaml").with_dataset(log))
+    ev = calib.evaluator
+    lib, sizes = fused_loop(ev.fns, tmp)
+    data = ev.data
+    U = np.asfortranarray(data.inputs, dtype=float)
+    windows = np.asfortranarray(data.data())
+    a, b = (np.ascontiguousarray(v, dtype=np.int64) for v in (data.starts, data.stops))
+    P = np.zeros((sizes["SR"], U.shape[1] + 1), order="F")
+    out = np.zeros(sizes["NOUT"])
+    fixed, omega, delta = ev.x_fixed.copy(), ev.omega.copy(), np.array([ev.delta])
+
+    def ptr(v: np.ndarray) -> Any:
+        return v.ctypes.data_as(ctypes.c_void_p)
+
+    def fused(x: np.ndarray) -> np.ndarray:
+        lib.fused_pass(ptr(U), ctypes.c_long(U.shape[1]), ptr(x), ptr(fixed), ptr(omega), ptr(delta),
+                       ptr(a), ptr(b), ptr(windows), ctypes.c_long(a.size), ptr(P), ptr(out))  # fmt: skip
+        return out[ev.fns.n_free * (ev.fns.n_free + 1) // 2 :][: ev.fns.n_free].copy()
+
+    times: dict[str, list[float]] = {"evaluator": [], "fused C loop": []}
+    agree = 0.0
+    start = load()
+    for k in range(repeats + 1):  # the first round warms up, untimed
+        x = calib.x0 * (1.0 + 1e-6 * (k + 1))
+        t0 = time.perf_counter()
+        g_ours = ev.normal_equations(x).g
+        t1 = time.perf_counter()
+        g_fused = fused(x)
+        t2 = time.perf_counter()
+        if k:
+            times["evaluator"].append(1e3 * (t1 - t0))
+            times["fused C loop"].append(1e3 * (t2 - t1))
+        agree = max(agree, float(np.max(np.abs(g_ours - g_fused)) / np.max(np.abs(g_ours))))
+    medians = {name: med(t) for name, t in times.items()}
+    return {
+        "load_start": start,
+        "load_end": load(),
+        "records": records,
+        "windows": int(a.size),
+        "median_ms": medians,
+        "ratio": medians["evaluator"] / medians["fused C loop"],
+        "gradient_rel_difference": agree,
+    }
+
+
 def simulate_big(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
     """``nlp-calib simulate --records N`` (written block by block): wall and peak RSS."""
     env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
@@ -596,6 +726,17 @@ def fleet_lines(doc: dict[str, Any], figures: dict[str, float]) -> list[str]:
             ),
         ]
         figures[f"batch of {fleet['logs']} logs, --jobs 1 / --jobs 2 [x]"] = fleet["speedup"]
+    gp = doc.get("gn_pass")
+    if gp:
+        lines += [
+            "",
+            f"One Gauss-Newton pass (prefix scan, residuals, Jacobians, Huber weights, normal equations) "
+            f"on the demo's settings, {gp['windows']:,} windows (load average {gp['load_start']} → "
+            f"{gp['load_end']}): the evaluator {gp['median_ms']['evaluator']:.1f} ms, the same fused into "
+            f"one C loop {gp['median_ms']['fused C loop']:.1f} ms (×{gp['ratio']:.2f}; gradients agree "
+            f"to {gp['gradient_rel_difference']:.1e}).",
+        ]
+        figures["Gauss-Newton pass / fused C loop [x]"] = gp["ratio"]
     rd = doc.get("reader")
     if rd:
         each = ", ".join(
@@ -827,6 +968,8 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
         return simulate_big(10_000 if quick else 1_000_000, 1 if quick else 3, tmp)
     if section == "reader":
         return reader(10_000 if quick else 1_000_000, repeats, tmp)
+    if section == "gn_pass":
+        return gn_pass(5_000 if quick else 100_000, repeats, tmp)
     # Logs of 5000 records (3.3 minutes of driving): a robot's daily log is rarely shorter.
     return batch(4 if quick else 20, 300 if quick else 5000, 1 if quick else repeats, tmp)
 
