@@ -72,48 +72,38 @@ class BlockMap:
         self.shapes = [f.size_out(i) for i in range(f.n_out())]
         # Unreduced outputs: one (rows, cols * n) array each, column-major like CasADi's map.
         self.full = [] if reduce else [np.zeros((r, c * n), order="F") for r, c in self.shapes]
-        maps: dict[int, ca.Function] = {}
-        self.blocks: list[Buffered] = []
-        self.spans: list[tuple[int, int]] = []
+        self.mapped = dict(mapped)
         self.made = _made(mapped)
-        # One buffer per made input and block size: the blocks are evaluated one after the other.
+        self.spans = [(lo, min(n, lo + BLOCK)) for lo in range(0, n, BLOCK)]
+        # One buffer per block size, bound to each block's columns in turn (a mapped Function's
+        # work memory holds a block's inputs: one buffer per block would hold them all again), and
+        # one block-sized array per made input.
         self.scratch: dict[tuple[str, int], np.ndarray] = {}
-        for lo in range(0, n, BLOCK):
-            hi = min(n, lo + BLOCK)
-            if hi - lo not in maps:
-                maps[hi - lo] = _mapped(backend, f, hi - lo, names, reduce)
-            bound = {k: self._columns(k, v, lo, hi) for k, v in mapped.items()}
-            if not reduce:
-                bound.update(
-                    {
-                        name: out[:, c * lo : c * hi]
-                        for name, out, (_, c) in zip(self.out_names, self.full, self.shapes)
-                    }
-                )
-            self.blocks.append(Buffered(maps[hi - lo], static, bound))
-            self.spans.append((lo, hi))
-
-    def _columns(self, name: str, value: Mapped, lo: int, hi: int) -> np.ndarray:
-        """What block ``lo:hi`` binds of a mapped input: a slice, or the made input's scratch buffer."""
-        if isinstance(value, np.ndarray):
-            return value[:, lo:hi]
-        key = (name, hi - lo)
-        if key not in self.scratch:
-            self.scratch[key] = np.zeros((value.shape[0], hi - lo), order="F")
-        return self.scratch[key]
+        self.buffers: dict[int, Buffered] = {}
+        for size in sorted({hi - lo for lo, hi in self.spans}):
+            made = {k: np.zeros((v.shape[0], size), order="F") for k, v in self.made.items()}
+            self.scratch.update({(k, size): v for k, v in made.items()})
+            self.buffers[size] = Buffered(_mapped(backend, f, size, names, reduce), static, made)
 
     def __call__(self, **inputs: np.ndarray | float) -> Sequence[np.ndarray]:
         """Evaluate every block; the summed outputs (shaped like ``f``'s), or the full arrays."""
-        for block, (lo, hi) in zip(self.blocks, self.spans):
-            for name, source in self.made.items():
-                source.fill(lo, hi, self.scratch[name, hi - lo])
-            block.evaluate(**inputs)
+        for buf in self.buffers.values():
+            buf.set(**inputs)
+        sums = [np.zeros(r * c) for r, c in self.shapes] if self.reduce else []
+        for lo, hi in self.spans:
+            buf = self.buffers[hi - lo]
+            for name, value in self.mapped.items():
+                if isinstance(value, np.ndarray):
+                    buf.rebind(name, value[:, lo:hi])
+                else:
+                    value.fill(lo, hi, self.scratch[name, hi - lo])
+            for name, out, (_, c) in zip(self.out_names, self.full, self.shapes):
+                buf.rebind_output(name, out[:, c * lo : c * hi])
+            buf.evaluate()
+            for total, out in zip(sums, buf.outputs()):
+                total += out
         if not self.reduce:
             return self.full
-        sums = [np.zeros(r * c) for r, c in self.shapes]
-        for block in self.blocks:
-            for total, out in zip(sums, block.outputs()):
-                total += out
         return [s.reshape(shape, order="F") if shape[1] > 1 else s for s, shape in zip(sums, self.shapes)]
 
 
