@@ -15,9 +15,13 @@ numpy residual with its analytic Jacobian, the same Huber objective; ``baselines
 installed (``pip install .[bench]``), GTSAM and Ceres through their standard Python APIs.
 ``ipopt_lag`` solves the recommended real-log scenario with IPOPT at 14 lags 0.06 ms apart, with
 the project's ``tiny_step_tol`` and with IPOPT's default (the iterations a lag's last digits
-decided). ``simulate`` times ``nlp-calib simulate --records 10^6`` (its peak RSS: the block-wise writer's);
-``batch`` runs ``nlp-calib batch`` over 20 simulated logs with ``--jobs 1`` and ``--jobs 2``,
-interleaved. Writes ``results/performance.{json,md,png}``.
+decided). ``horizon`` runs the demo's settings (``nlp-calib run scenarios/demo.yaml --data LOG``)
+on simulated logs of 10^5 and 10^6 records, ``camera`` the camera demo's on drives of 10^5 and
+10^6 poses. ``gn_pass`` times one Gauss-Newton pass of the evaluator against the same computation
+fused into one C loop. ``simulate`` times ``nlp-calib simulate --records 10^6`` (its peak RSS: the
+block-wise writer's); ``batch`` runs ``nlp-calib batch`` over 20 simulated logs with ``--jobs 1``
+and ``--jobs 2``, interleaved; ``reader`` reads 10^6 records against ``numpy.loadtxt``. Writes
+``results/performance.{json,md,png}`` (``--out`` elsewhere).
 """
 
 from __future__ import annotations
