@@ -2,11 +2,12 @@
 
 Mapping a Function over a million columns at once costs seconds to build (CasADi's map grows with
 its size) and needs every output in one piece. :class:`BlockMap` maps it over blocks of
-:data:`BLOCK` columns instead (at most two map sizes, built once), binds each block's buffers to
-column slices of the caller's arrays (no copies) and either sums the blocks' outputs or writes
-them straight into full per-column arrays. A mapped input may also be a :class:`Columns` source
-(columns made on demand, e.g. gathered from a larger array): each block's columns are then made
-into one block-sized buffer just before the block is evaluated, so the full input never exists.
+:data:`BLOCK` columns instead (at most two map sizes, built once), binds one buffer per block
+size to each block's column slices of the caller's arrays in turn (no copies) and either sums the
+blocks' outputs or writes them straight into full per-column arrays. A mapped input may also be
+a :class:`Columns` source (columns made on demand, e.g. gathered from a larger array): each
+block's columns are then made into one block-sized buffer just before the block is evaluated, so
+the full input never exists.
 :class:`Scan` folds a step over many intervals the same way: folds of a few fixed sizes (built
 once), chained through the caller's array of states.
 """
@@ -152,18 +153,19 @@ class Scan:
     def __init__(self, backend: Backend, step: ca.Function, inputs: np.ndarray, states: np.ndarray) -> None:
         self.inputs, self.states = inputs, states
         self.spans: list[tuple[Buffered, int, int]] = []
-        buffers: dict[int, Buffered] = {}
+        by_size: dict[int, Buffered] = {}
         lo = 0
         for size in fold_sizes(inputs.shape[1] // backend.chunk):
-            if size not in buffers:
-                buffers[size] = Buffered(backend.fold(step, size))
+            if size not in by_size:
+                by_size[size] = Buffered(backend.fold(step, size))
             hi = lo + size * backend.chunk
-            self.spans.append((buffers[size], lo, hi))
+            self.spans.append((by_size[size], lo, hi))
             lo = hi
+        self.buffers = list(by_size.values())
 
     def evaluate(self, **inputs: np.ndarray | float) -> None:
         """Fold over every interval with these inputs (``x``, ``x_fixed``)."""
-        for buf in {id(b): b for b, _, _ in self.spans}.values():
+        for buf in self.buffers:
             buf.set(**inputs)
         for buf, lo, hi in self.spans:
             buf.rebind("state", self.states[:, lo])
