@@ -73,7 +73,7 @@ def test_a_difference_within_what_one_robot_moves_by_is_a_model_limit() -> None:
     logs = CrossValidation(NAMES, (), np.array([0.3, 0.05]))
     checks = Checks(None, None, None, None, check, logs=logs)
     white = np.array([0.01, 0.01])
-    np.testing.assert_allclose(believed_std(white, *checks.spreads(2)), [0.3, 0.01])
+    np.testing.assert_allclose(believed_std(white, *checks.spreads(white)), [0.3, 0.01])
 
 
 def test_a_parameter_a_log_does_not_determine_on_its_own_is_not_compared() -> None:

@@ -461,7 +461,17 @@ def _add_batch(sub: Any) -> None:
         "--solver", choices=tuple(SOLVERS), default=None, help="the solver (default: the scenario's)"
     )
     p.add_argument(
-        "--jobs", type=_in(JOBS), default=None, help=f"logs at once, {JOBS.describe()} (default: cores)"
+        "--jobs",
+        type=_in(JOBS),
+        default=None,
+        help=f"logs at once at most, {JOBS.describe()} (default: the cores); never more than the cores free",
+    )
+    p.add_argument(
+        "--dask",
+        default=None,
+        metavar="ADDRESS",
+        help="run the logs on the Dask cluster whose scheduler is there (tcp://HOST:8786; "
+        "the fleet extra); every worker must see --out",
     )
     p.add_argument("--report", action="store_true", help=REPORT)
     _add_force(p, "files in the output folders")

@@ -25,6 +25,7 @@ from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, 
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
 from nlp_calib.core import memory
 from nlp_calib.models import header_parameters
+from nlp_calib.models.clock import lag_names
 from nlp_calib.pipeline import validation
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog
@@ -254,8 +255,11 @@ def logs_crossval(
     result = converged[0]
     span = (blocks.offset, blocks.offset + fit.data.n_records)
     start = (result.x, fit.canonical_params(result.params))
+    # A fold without a log knows nothing of that log's time offset: held where the joint fit put it.
+    lags = lag_names(len(ranges))
+    held = [[lags[i]] for i in range(len(ranges))]
     folds = validation.folds_over(
-        fit.problem.binder, fit.data, span, ranges, start, fit.canonical_params, blocks
+        fit.problem.binder, fit.data, span, ranges, start, fit.canonical_params, blocks, held=held
     )
     return combine(fit.fns.names, folds, min_folds=len(folds))
 

@@ -85,6 +85,19 @@ def _fit(
     return ev.params(x_k), converged, kept.n_residuals
 
 
+def holding(binder: Binder, x: np.ndarray, names: Sequence[str]) -> Binder:
+    """``binder`` with the free parameters ``names`` held at ``x``'s values (stiff priors): a
+    refit whose data say nothing of them (a part without their driving, a fold without their log)
+    would otherwise meet a singular system."""
+    free = binder.fns.free
+    idx = [free.index(n) for n in names if n in free]
+    if not idx:
+        return binder
+    mean, sqrt_info = binder.priors.mean.copy(), binder.priors.sqrt_info.copy()
+    mean[idx], sqrt_info[idx] = x[idx], 1e6
+    return dataclasses.replace(binder, priors=Priors(mean, sqrt_info))
+
+
 def on_threads(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
     """``fn`` of each item, in order, on up to :data:`MAX_THREADS` threads: the refits are
     independent and CasADi lets go of the interpreter lock while it evaluates, so they overlap."""
@@ -149,22 +162,28 @@ def folds_over(
     score: Score,
     whole: NormalEquations | None = None,
     against: Sequence[np.ndarray] = (),
+    held: Sequence[Sequence[str]] = (),
 ) -> list[Fold]:
     """One refit of ``data`` (records ``fit``) without each record range of ``ranges`` (blocks, or
     whole logs), from ``start = (x, full)``: the whole fit's free values and full parameters. Each
     fold is scored on its range by ``score(params, a, b)``, beside the full fit's parameters on the
     same range, and costed there (the data cost of the windows the fold left out, no priors): its
     own estimate's, then each free-parameter vector of ``against``'s. ``whole``: the normal
-    equations of ``data`` at ``x``, when known (each fold's first step downdates them)."""
+    equations of ``data`` at ``x``, when known (each fold's first step downdates them). ``held``:
+    per range, the parameters its fold holds at ``x`` (a left-out log's own time offset)."""
     x, full = start
     names, free = binder.fns.names, binder.fns.free
     data_only = dataclasses.replace(binder, priors=no_priors(binder.fns.n_free))
+
+    holds = dict(zip(ranges, held))
 
     def fold(block: tuple[int, int]) -> Fold:
         a, b = block
         bad = _base(fit)
         bad[a : b - 1] = True
-        params, converged, n = _fit(binder, data, fit, bad, x, whole)
+        hold = holds.get(block, ())
+        # ``whole`` carries the fit's own priors, not a held fold's.
+        params, converged, n = _fit(holding(binder, x, hold), data, fit, bad, x, None if hold else whole)
         if not n:
             return Fold(a, b, params, False, None)
         held = data.select(data.interval_counts(bad[fit[0] : fit[1] - 1]) > 0)
@@ -204,12 +223,7 @@ def direction_check(
         part[first : stop - 1] = direction[first : stop - 1] == sign
         hold = [n for n in undetermined(part) if n in fns.free]
         held |= set(hold)
-        part_binder = binder
-        if hold:
-            idx = [fns.free.index(n) for n in hold]
-            mean, sqrt_info = binder.priors.mean.copy(), binder.priors.sqrt_info.copy()
-            mean[idx], sqrt_info[idx] = x[idx], 1e6  # stiff: held where the whole fit put it
-            part_binder = dataclasses.replace(binder, priors=Priors(mean, sqrt_info))
+        part_binder = holding(binder, x, hold)
         params, converged, n = _fit(part_binder, data, fit, other, x)
         if not converged or n < 10 * fns.n_free:
             return None
