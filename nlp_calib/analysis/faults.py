@@ -69,7 +69,7 @@ def _unwrapped_poses(log: Log) -> np.ndarray:
     return T
 
 
-def _tracker_signal(log: Log, spatial: bool) -> tuple[np.ndarray, int]:
+def tracker_signal(log: Log, spatial: bool) -> tuple[np.ndarray, int]:
     """The tracker's poses as a signal continuous in time, and how many of its leading columns are
     the position: planar ``(x, y, θ unwrapped)``, or 3-D ``(x, y, z)`` and the rotation accumulated
     about the world's axes (:func:`~nlp_calib.core.poses3d.turned`), so that one path judges both."""
@@ -104,7 +104,7 @@ def _fault(
 def tracker_faults(log: Log, spatial: bool = False, length: str = "m") -> list[Fault]:
     """Tracker poses off the path their neighbours agree on (see :mod:`nlp_calib.analysis.streams`):
     planar ones, or with ``spatial`` the 3-D poses, their positions in ``length`` units."""
-    T, position = _tracker_signal(log, spatial)
+    T, position = tracker_signal(log, spatial)
     t, lines = log.time_s, log.line_numbers
     sc = scatter(t, T)
     if not np.any(sc.floor > 0):

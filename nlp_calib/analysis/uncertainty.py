@@ -207,6 +207,24 @@ def estimate(
     return replace(out, bounded=tuple(n for n, b in zip(fns.free, bounded) if b))
 
 
+def white_covariance(
+    H: np.ndarray,
+    sigma2: float,
+    scale: np.ndarray,
+    free: Callable[[np.ndarray], np.ndarray],
+    bounds_std: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The white-noise covariance ``σ²·H⁻¹`` of the information ``H = JᵀΩJ`` (manifold coordinates)
+    as :func:`estimate` treats it: the directions the drive leaves free (``free``, on eigenvalues
+    of ``H`` in the reference units ``scale``) held only by the bounds' prior (``bounds_std``, see
+    :func:`range_std`), inf where nothing holds them; and which parameters only the bounds hold.
+    What a drive, or a drive with a manoeuvre appended, would determine before any fit."""
+    n = H.shape[0]
+    std = np.full(n, np.inf) if bounds_std is None else np.asarray(bounds_std, dtype=float)
+    prior = sigma2 * np.where(np.isfinite(std), std**-2.0, 0.0)
+    return _bounded_covariance(H, sigma2 * H, (scale, np.eye(n)), free, (prior, sigma2))
+
+
 def _bounded_covariance(
     H: np.ndarray,
     meat: np.ndarray,

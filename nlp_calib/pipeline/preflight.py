@@ -1,0 +1,248 @@
+"""The pre-flight: what a recording holds and whether the drive determines each parameter, before any fit.
+
+In seconds and without a fit: each log is read and selected as a run reads it (the prepare
+stage), the problem is built as the run builds it, and its Jacobian is evaluated at a start (the
+scenario's initial guess, or the closed-form start on the stretch of at most
+:data:`START_RECORDS` records that turns most; the nominal values where that fails). From it each
+parameter is determined, weakly determined or not, with the reason
+(:mod:`nlp_calib.analysis.determinacy`, the run's own definitions); the drive's excitation and
+what the data imply of units and signs come from the tracker and the encoders; when a parameter
+is not determined well enough, the plan ranks what to drive next (:mod:`nlp_calib.analysis.plan`).
+:func:`refuse` stops a calibration that cannot succeed with the pre-flight's words.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.analysis import determinacy as det
+from nlp_calib.analysis.excitation import combined, excitation, smoothed, taken
+from nlp_calib.analysis.plan import Setting, plan
+from nlp_calib.analysis.uncertainty import range_std
+from nlp_calib.analysis.units import findings
+from nlp_calib.analysis.verdict import way_out
+from nlp_calib.core.errors import NlpCalibError, PreflightError
+from nlp_calib.logs import Log
+from nlp_calib.models import KinematicModel
+from nlp_calib.models.clock import lag_names
+from nlp_calib.pipeline.assemble import scenario_info
+from nlp_calib.pipeline.build import StartingPoint, build_problem, initial_parameters, starting_point
+from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
+from nlp_calib.pipeline.recording import recording
+from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data, over_columns
+from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Excitation, Preflight, UnitFinding
+
+#: The closed-form start is taken on the stretch of at most this many records that turns most.
+START_RECORDS = 5000
+
+
+@dataclass(frozen=True)
+class Drive:
+    """The logs as prepared, the scenario they are fitted with (one horizon), the problem, its
+    windows over every log's fitted records and the start the Jacobian is taken at, in words."""
+
+    parts: tuple[PreparedLog, ...]
+    scenario: Scenario
+    fns: ProblemFunctions
+    data: ResidualData
+    start: StartingPoint
+    start_words: str
+
+
+def _prepared(
+    sc: Scenario, logs: Sequence[Log] | None
+) -> tuple[tuple[PreparedLog, ...], Scenario, dict[str, str]]:
+    """Each log prepared as a run prepares it, the scenario with one record horizon, and the
+    parameters the drive cannot determine at all (the run holds them)."""
+    per_log = sc.per_log()
+    given: Sequence[Log | None] = list(logs) if logs is not None else [None] * len(per_log)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the run says what preparing says; the pre-flight says it otherwise
+        parts = tuple(prepare(s, log) for s, log in zip(per_log, given))
+    if not sc.data.joint:
+        return parts, parts[0].scenario, dict(parts[0].held)
+    one = sc.with_options(residual=joint_residual(sc, parts))
+    model = parts[0].model
+    inputs = np.concatenate(
+        [model.inputs(p.log.select(p.start, p.split), sc.objective.residual.steering_sample) for p in parts],
+        axis=1,
+    )
+    held = {n: why for n, why in model.undetermined(inputs).items() if n not in sc.parameters.fixed}
+    return parts, one, held
+
+
+def _busiest(log: Log, a: int, b: int, size: int) -> tuple[int, int]:
+    """The stretch of ``size`` records of ``[a, b)`` over which the tracker's heading turns most."""
+    if b - a <= size:
+        return a, b
+    heading = smoothed(log.time_s[a:b], np.unwrap(log.T_world_sensor[a:b, 2])[:, None], 1.0)[:, 0]
+    c = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(heading)))])
+    starts = np.arange(0, b - a - size + 1, max(1, size // 4))
+    best = int(starts[np.argmax(c[starts + size - 1] - c[starts])])
+    return a + best, a + best + size
+
+
+def _implausible(model: KinematicModel, point: StartingPoint) -> str:
+    """The start's parameters outside the model's plausible ranges, in words ("" when none is)."""
+    out = [
+        f"{n} {v:.3g}"
+        for n, v in point.initial.items()
+        if n in model.physical_ranges and not model.physical_ranges[n][0] <= v <= model.physical_ranges[n][1]
+    ]
+    return ", ".join(out)
+
+
+def _start(sc: Scenario, fns: ProblemFunctions, first: PreparedLog, n_logs: int) -> tuple[StartingPoint, str]:
+    """Where the Jacobian is taken: the run's starting point (the closed form on the busiest
+    stretch when ``auto``), or the nominal values where the closed form fails or leaves the
+    model's plausible ranges (a drive that barely determines a scale can send it there)."""
+    auto = sc.parameters.initial_guess == "auto"
+    a, b = (
+        _busiest(first.log, first.start, first.split, START_RECORDS) if auto else (first.start, first.split)
+    )
+    lags = [0.0] * n_logs if n_logs > 1 else []
+    why = ""
+    try:
+        point = starting_point(sc, fns, first.log, a, b, lags)
+        outside = _implausible(fns.model, point) if auto else ""
+        if np.all(np.isfinite(point.x0)) and not outside:
+            words = "the closed-form start (initial_guess: auto)" if auto else "the initial guess"
+            return point, words + (f" on records {a} to {b}" if (a, b) != (first.start, first.split) else "")
+        why = f"it lies outside the plausible ranges: {outside}" if outside else "it is not finite"
+    except (NlpCalibError, np.linalg.LinAlgError, ValueError, ZeroDivisionError) as exc:
+        if not auto:
+            raise
+        why = f"it failed: {exc}"
+    nominal = sc.with_options(initial_guess="from_file")
+    point = starting_point(nominal, fns, first.log, a, b, lags)
+    return point, f"the nominal values (not the closed-form start: {why})"
+
+
+def drive(sc: Scenario, logs: Sequence[Log] | None = None) -> tuple[Drive, dict[str, str]]:
+    """The scenario's logs prepared, its problem built and bound to every log's fitted records, and
+    the start (see the module docstring); with the parameters the run would hold."""
+    parts, one, held = _prepared(sc, logs)
+    fns = build_problem(one, parts[0].model, tuple(held), len(parts))
+    point, words = _start(one, fns, parts[0], len(parts))
+    data = build_residual_data(
+        fns,
+        [p.log.select(p.start, p.split) for p in parts],
+        one.objective.residual,
+        drop_stationary=one.log.samples.drop_stationary,
+    )
+    return Drive(parts, one, fns, data, point, words), held
+
+
+def _track(log: Log) -> tuple[np.ndarray, np.ndarray]:
+    return np.asarray(log.T_world_sensor[:, :2]), np.unwrap(log.T_world_sensor[:, 2])
+
+
+def _nominal_ratio(d: Drive, part: PreparedLog, ex: Excitation) -> float | None:
+    """The tracker's travel over the travel the nominal parameters predict (None: not known)."""
+    fns = d.fns
+    try:
+        nominal = initial_parameters(
+            part.scenario.with_options(initial_guess="from_file"), part.model, part.log
+        )
+    except NlpCalibError:
+        return None
+    nominal.update({n: 0.0 for n in fns.names if n not in nominal})
+    params = np.array([nominal[n] for n in fns.names])
+    inputs = part.model.inputs(
+        part.log.select(part.start, part.split), part.scenario.objective.residual.steering_sample
+    )
+    if inputs.shape[1] == 0:
+        return None
+    k = taken(part.log.time_s[part.start : part.split], 0.25)
+    motion = over_columns(fns.predict, params, inputs)[0]
+    rows = 3 if fns.sensor.pose_rows != 3 else 2
+    travel = float(np.sum(np.linalg.norm(motion[:rows], axis=0)))
+    return ex.distance_m / travel if travel > 0 and k.size > 2 else None
+
+
+def _units(d: Drive, exs: Sequence[Excitation]) -> tuple[UnitFinding, ...]:
+    out: list[UnitFinding] = []
+    planar = d.fns.sensor.pose_rows == 3
+    for part, ex in zip(d.parts, exs):
+        log = part.log.select(part.start, part.split)
+        yaw = float(d.start.initial.get("sensor_theta", 0.0)) if planar else None
+        nominal = {"ratio": _nominal_ratio(d, part, ex), "mount_yaw": yaw}
+        out += [f for f in findings(log, part.model, _track(log), nominal) if f not in out]
+    return tuple(out)
+
+
+def _rough(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str]:
+    """The start brought to the data by one Gauss-Newton step (kept only when it fits them
+    better), the windows' information there and where it stands, in words."""
+    fns, start, delta = d.fns, d.start, d.scenario.objective.robust.delta
+    info = det.information(fns, d.data, start.x0, start.x_fixed, omega, delta)
+    box = None if start.lower is None or start.upper is None else (start.lower, start.upper)
+    x1 = det.stepped(fns, info, start.x0, box)
+    if np.all(np.isfinite(x1)):
+        moved = det.information(fns, d.data, x1, start.x_fixed, omega, delta)
+        if np.isfinite(moved.chi2) and moved.chi2 <= info.chi2:
+            return x1, moved, f"{d.start_words}, moved by one Gauss-Newton step toward the data"
+    return start.x0, info, d.start_words
+
+
+def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
+    """The pre-flight check of ``sc`` (its logs read from their sources unless given)."""
+    t0 = time.perf_counter()
+    d, held = drive(sc, logs)
+    fns, one = d.fns, d.scenario
+    omega = np.array(one.objective.information.omega(fns.error_rows))
+    x0, info, start_words = _rough(d, omega)
+    sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info)
+    x_fixed = d.start.x_fixed
+    bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
+    exs = []
+    for p in d.parts:
+        log = p.log.select(p.start, p.split)
+        steering = p.scenario.objective.residual.steering_sample
+        exs.append(excitation(log.time_s, *_track(log), p.model, p.model.inputs(log, steering)))
+    units = scenario_info(one, fns.model, lag_names(fns.spec.lags)).units
+    found = det.standing(fns, info, sigma2, x0, bounds)
+    statuses = det.statuses(fns, found, held, units, combined(exs))
+    loose = [s.name for s in statuses if s.status in (NOT_DETERMINED, WEAKLY) and not s.held]
+    ahead = None
+    if loose:
+        setting = Setting(
+            fns,
+            d.data,
+            info,
+            (x0, x_fixed, omega),
+            sigma2,
+            bounds,
+            one.objective.residual,
+            one.objective.robust.delta,
+            units,
+            start_words,
+        )
+        ahead = plan(setting)
+    return Preflight(
+        scenario=sc.name,
+        model=sc.model,
+        recordings=tuple(recording(p.scenario, p.log) for p in d.parts),
+        excitation=tuple(exs),
+        units=_units(d, exs),
+        parameters=statuses,
+        start=start_words,
+        noise=noise,
+        plan=ahead,
+        way_out=way_out(loose, fns.model) if loose else "",
+        time_s=time.perf_counter() - t0,
+    )
+
+
+def refuse(report: Preflight) -> None:
+    """Stop a calibration that cannot succeed (a unit or sign the data get wrong, a parameter the
+    drive does not determine) with the pre-flight's words."""
+    words = report.stop_words()
+    if words:
+        raise PreflightError(f"pre-flight: {report.scenario}: {words}", report.exit_code)
