@@ -75,7 +75,7 @@ def wrapped(log: Log, model: KinematicModel) -> list[UnitFinding]:
                     name,
                     f"the joint read as {name} wraps its angle ({int(jumps.sum())} jumps of 2π, its "
                     f"positions stay within [{lo:.2f}, {hi:.2f}] rad): a wheel's position must grow without "
-                    "wrapping (REP 103); publish it unwrapped, or unwrap it (numpy.unwrap) before calibrating",
+                    "wrapping (REP 103): publish it unwrapped, or numpy.unwrap it before calibrating",
                 )
             )
     return out

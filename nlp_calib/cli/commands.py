@@ -20,6 +20,7 @@ from nlp_calib.cli.explain import no_crossvalidation
 from nlp_calib.cli.fleet import cmd_batch, cmd_check
 from nlp_calib.cli.import_bag import cmd_import_bag
 from nlp_calib.cli.parser import ALL_SOLVERS
+from nlp_calib.cli.preflight import cmd_init, cmd_preflight, gate
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
 from nlp_calib.core.files import check_output_dir
@@ -127,6 +128,7 @@ def _cmd_calibrate(args: argparse.Namespace, solvers: Sequence[str] | None) -> i
     logs = [[read_checked(s) for s in sc.per_log()] for sc in scenarios]
     for out in outs:
         refuse_collisions(out, registry.files(outputs), force=args.force)
+    gate(scenarios, logs, args.skip_preflight)
     runs: list[CalibrationRun] = []
     wanted = Wanted(series=args.report)
     with Progress(len(scenarios), sys.stderr, label="scenarios") as progress:
@@ -313,6 +315,7 @@ def _cmd_odometry(args: argparse.Namespace) -> int:
     outputs = registry.selected(("result", "handoff", "odometry"), args.report)
     log = read_checked(scenario)
     refuse_collisions(out, registry.files(outputs), force=args.force)
+    gate([scenario], [[log]], args.skip_preflight)
     calib = Calibration.setup(scenario, log=log)
     run = calib.run((args.solver,), Wanted(odometry=args.solver))
     print(run_table(run))
@@ -351,6 +354,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     outputs = registry.selected(("validation",), report=False)
     log = read_checked(scenario)
     refuse_collisions(out, registry.files(outputs), force=args.force)
+    gate([scenario], [[log]], args.skip_preflight)
     run = Calibration.setup(scenario, log=log).run(scenario.solvers[:1])
     print(validation_table(run))
     written = _write_outputs(out, args, outputs, [(run, "")], (run, True), "validate")
@@ -372,4 +376,6 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "import-bag": cmd_import_bag,
     "check": cmd_check,
     "batch": cmd_batch,
+    "preflight": cmd_preflight,
+    "init": cmd_init,
 }

@@ -16,9 +16,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
+from nlp_calib.analysis.degeneracy import motion_scale
+from nlp_calib.analysis.determinacy import Information
 from nlp_calib.analysis.metrics import each_metrics, geometry, integrate, segments
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
+from nlp_calib.analysis.plan import Setting, plan
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
 from nlp_calib.core import memory, poses3d
 from nlp_calib.logs import Log
@@ -40,6 +43,7 @@ from nlp_calib.results.checks import (
 )
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
+from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import (
     FaultSpan,
     ModelCheckSeries,
@@ -71,6 +75,8 @@ class FitAnalysis:
     consistency: ConsistencyCheck | None = None
     #: How each time offset moves the other parameters (the first solver's uncertainty).
     lag_effects: tuple[LagEffect, ...] = ()
+    #: What to drive next, when a parameter is not determined well enough (see :func:`plan_after`).
+    plan: Plan | None = None
 
 
 @dataclass(frozen=True)
@@ -176,6 +182,34 @@ def analyse_fit(
         fit.canonical_params,
     )
     return FitAnalysis(uncertainty, observability, crossval, direction, lag_effects=effects)
+
+
+def plan_after(fit: Fit, results: Mapping[str, SolverResult], units: Mapping[str, str]) -> Plan | None:
+    """What to drive next (:mod:`nlp_calib.analysis.plan`), simulated with the first converged
+    estimate (else the first with a finite cost), the residuals' variance as the observability
+    takes it; None when every parameter is determined well enough."""
+    ev, fns, data = fit.evaluator, fit.fns, fit.data
+    converged = [(n, r) for n, r in results.items() if r.converged]
+    if data.n_residuals == 0:
+        return None
+    start = fit.problem.start
+    # Without a converged fit the model is simulated as it started: a solver's last iterate on a
+    # drive that leaves directions free can lie anywhere along them.
+    x = converged[0][1].x if converged else start.x0
+    ne = ev.normal_equations(x)
+    if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
+        return None
+    _, s, weight = ev.robust_terms(x)
+    sigma2 = max(float(np.sum(weight * s)) / max(fns.error_rows * ev.n_residuals - fns.n_free, 1), 1e-300)
+    info = Information(ne.H, ev.n_residuals, motion_scale(fns, data.z, ev.omega), ne.g, ne.chi2, sigma2)
+    sc = fit.problem.binder.scenario
+    ranges = unc.range_std(start.lower, start.upper, fns.n_free)
+    model_from = f"the fit ({converged[0][0]})" if converged else "the initial guess (no solver converged)"
+    setting = Setting(
+        fns, data, info, (x, ev.x_fixed, ev.omega), sigma2, ranges, sc.objective.residual,
+        sc.objective.robust.delta, units, model_from,
+    )  # fmt: skip
+    return plan(setting)
 
 
 def residual_series(fit: Fit, results: Mapping[str, SolverResult], windows: np.ndarray) -> ResidualSeries:

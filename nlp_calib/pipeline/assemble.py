@@ -212,6 +212,7 @@ def assemble_run(
             findings,
             fitted.consistency,
             lag_effects=fitted.lag_effects,
+            plan=fitted.plan,
         ),
         warnings=(
             *notes,

@@ -34,6 +34,7 @@ from nlp_calib.pipeline.analyse import (
     analyse_fit,
     analyse_log,
     log_scorer,
+    plan_after,
     scores,
 )
 from nlp_calib.pipeline.assemble import assemble_run, fit_notes, scenario_info
@@ -310,6 +311,7 @@ class JointCalibration:
                 None,
                 check,
                 lag_effects=fitted.lag_effects,
+                plan=fitted.plan,
             ),
             warnings=tuple(notes),
         )
@@ -366,6 +368,9 @@ def _fit(
     results = {name: fitting.solve(name) for name in solvers}
     noise = np.max([p.windows.input_noise_std for p in parts], axis=0)
     fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data))
+    sc = parts[0].prepared.scenario
+    units = scenario_info(sc, fitting.fns.model, lag_names(fitting.fns.spec.lags)).units
+    fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, units))
     return results, fitted, fit_notes(results, fitted, held)
 
 

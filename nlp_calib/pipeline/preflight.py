@@ -240,9 +240,9 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
     )
 
 
-def refuse(report: Preflight) -> None:
+def refuse(report: Preflight, hint: str = "") -> None:
     """Stop a calibration that cannot succeed (a unit or sign the data get wrong, a parameter the
-    drive does not determine) with the pre-flight's words."""
+    drive does not determine) with the pre-flight's words (and ``hint``)."""
     words = report.stop_words()
     if words:
-        raise PreflightError(f"pre-flight: {report.scenario}: {words}", report.exit_code)
+        raise PreflightError(f"pre-flight: {report.scenario}: {words}{hint}", report.exit_code)

@@ -163,10 +163,10 @@ class Plan:
         best = self.best
         if best is None:
             return f"no manoeuvre considered lowers the σ of {self.target}"
+        unit = f" {self.target_unit}" if self.target_unit not in ("", "1") else ""
         return (
-            f"drive {best.words}: the σ of {self.target} would fall from {_sigma(self.target_std_before)} "
-            f"to {_sigma(best.target_std_after)} {self.target_unit} (plan.md ranks {len(self.ranked)} "
-            "manoeuvres)"
+            f"drive {best.words}: the σ of {self.target} would fall from {_sigma(self.target_std_before)}"
+            f"{unit} to {_sigma(best.target_std_after)}{unit}"
         )
 
 

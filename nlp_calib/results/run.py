@@ -31,6 +31,7 @@ from nlp_calib.results.checks import (
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import ControllerParams
+from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import OdometryTrack, RunSeries
 from nlp_calib.results.solver import SolverResult
 from nlp_calib.results.uncertainty import Uncertainty
@@ -136,6 +137,8 @@ class Checks:
     truth: TruthCheck | None = None
     #: How each time offset moves the other parameters (see :class:`LagEffect`).
     lag_effects: tuple[LagEffect, ...] = ()
+    #: What to drive next when a parameter is not determined well enough (``plan.md``).
+    plan: Plan | None = None
 
 
 @dataclass(frozen=True)
