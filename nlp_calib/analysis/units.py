@@ -6,12 +6,13 @@ Each is told from the data alone, against the tracker where it takes a scale or 
 - **a wheel's angle that wraps** (joints in radians): its position jumps by about 2π between two
   samples whose neighbours move little, where REP 103 has a wheel's angle grow without end;
 - **degrees**: a steering joint that reads beyond 2π; wheels whose joints turn so far for the
-  tracker's travel that a radian of them would move the robot less than :data:`MIN_RADIUS`, or
-  :data:`DEGREE_FACTOR`-close to 180/π times further than the nominal parameters predict;
-- **a mirrored wheel axis**: two wheels whose joints turn opposite ways while the robot drives
-  straight (:data:`OPPOSITE_SHARE` of those stretches); the one that turns against the robot's
-  forward travel (the tracker's motion along the nominal mount's heading, for a planar tracker)
-  is named.
+  tracker's travel that a radian of them would move the robot less than :data:`MIN_RADIUS` (the
+  smallest wheels a robot carrying a tracker rolls on are several times larger; read in degrees,
+  a wheel of up to 35 cm radius falls below it);
+- **a mirrored wheel axis**: two wheels whose joints turn opposite ways on gentle curves, where
+  both wheels of any robot turn the same way (:data:`OPPOSITE_SHARE` of those stretches); the one
+  that turns against the robot's forward travel (the tracker's motion along the nominal mount's
+  heading, for a planar tracker) is named.
 
 Every finding says what was measured and how to fix it; the run cannot succeed on such data as
 they are (a degree taken for a radian makes a wheel radius 57 times too small, a mirrored wheel a
@@ -19,8 +20,6 @@ negative one).
 """
 
 from __future__ import annotations
-
-from collections.abc import Mapping
 
 import numpy as np
 
@@ -31,14 +30,13 @@ from nlp_calib.results.preflight import UnitFinding
 
 DEGREE = np.pi / 180.0
 #: A wheel whose joint, read in radians, moves the robot less than this per radian (m) is not
-#: turning in radians (the smallest robot wheels have a radius of about 8 mm).
-MIN_RADIUS = 0.003
-#: The nominal parameters predict 180/π times the tracker's travel within this factor: degrees.
-DEGREE_FACTOR = 3.0
-#: Two wheels turning opposite ways on this share of the straight driving: one axis is mirrored.
+#: turning in radians.
+MIN_RADIUS = 0.006
+#: Two wheels turning opposite ways on this share of the gentle curves: one axis is mirrored.
 OPPOSITE_SHARE = 0.8
-#: Driving counts as straight where the heading turns less than this per metre (rad/m).
-STRAIGHT_CURVATURE = 0.05
+#: A curve is gentle where the heading turns less than this per metre (rad/m): both wheels of a
+#: base narrower than 2 m turn the same way there.
+GENTLE_CURVATURE = 1.0
 
 
 def _positions(log: Log, name: str) -> np.ndarray:
@@ -101,42 +99,39 @@ def _steering_degrees(log: Log, model: KinematicModel) -> list[UnitFinding]:
     return out
 
 
-def _straight_steps(time_s: np.ndarray, xy: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _gentle(time_s: np.ndarray, xy: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Indices of records about :data:`STEP_S` apart and, per step between them, whether the robot
-    moves straight (its heading turns less than :data:`STRAIGHT_CURVATURE` per metre)."""
+    moves on a gentle curve (its heading turns less than :data:`GENTLE_CURVATURE` per metre)."""
     k = taken(time_s, STEP_S)
     ds = np.hypot(*np.diff(xy[k], axis=0).T)
     dth = np.abs(np.diff(heading[k]))
-    return k, (ds > 1e-3) & (dth < STRAIGHT_CURVATURE * np.maximum(ds, 1e-9))
+    return k, (ds > 1e-3) & (dth < GENTLE_CURVATURE * np.maximum(ds, 1e-9))
 
 
-def _wheel_degrees(
-    log: Log, model: KinematicModel, xy: np.ndarray, heading: np.ndarray, ratio: float | None
-) -> list[UnitFinding]:
-    counters = [n for n in log.header.encoder_names if model.encoder_kinds.get(n) == "counter"]
+def _counters(log: Log, model: KinematicModel) -> list[str]:
+    return [n for n in log.header.encoder_names if model.encoder_kinds.get(n) == "counter"]
+
+
+def _wheel_degrees(log: Log, model: KinematicModel, xy: np.ndarray, heading: np.ndarray) -> list[UnitFinding]:
+    counters = _counters(log, model)
     if log.joint_positions is None or not counters:
         return []
-    k, straight = _straight_steps(log.time_s, xy, heading)
-    if straight.sum() < 3:
+    k, gentle = _gentle(log.time_s, xy, heading)
+    if gentle.sum() < 3:
         return []
-    travel = float(np.sum(np.hypot(*np.diff(xy[k], axis=0).T)[straight]))
-    turned = float(np.mean([np.sum(np.abs(np.diff(_positions(log, n)[k]))[straight]) for n in counters]))
+    travel = float(np.sum(np.hypot(*np.diff(xy[k], axis=0).T)[gentle]))
+    turned = float(np.mean([np.sum(np.abs(np.diff(_positions(log, n)[k]))[gentle]) for n in counters]))
     radius = travel / turned if turned > 0 else np.inf
-    nominal = ratio is not None and 1.0 / DEGREE_FACTOR < ratio / DEGREE < DEGREE_FACTOR
-    if radius >= MIN_RADIUS and not nominal:
+    if radius >= MIN_RADIUS:
         return []
-    why = (
-        f"a radian of them moves the robot {1e3 * radius:.2g} mm"
-        if radius < MIN_RADIUS
-        else f"the nominal parameters predict {1.0 / ratio:.3g} times the tracker's travel"  # type: ignore[operator]
-    )
     return [
         UnitFinding(
             "degrees",
             ", ".join(counters),
-            f"the wheel joints ({', '.join(counters)}) turn about 57 times too far for the robot's travel "
-            f"({why}; in radians that is a wheel of {1e3 * radius / DEGREE:.3g} mm radius): their angles "
-            "look like degrees; publish them in radians (REP 103)",
+            f"the wheel joints ({', '.join(counters)}) turn too far for the robot's travel: a radian of them "
+            f"moves it {1e3 * radius:.2g} mm, a wheel smaller than any robot's (read as degrees, one of "
+            f"{1e3 * radius / DEGREE:.3g} mm radius): their angles look like degrees; publish them in "
+            "radians (REP 103)",
         )
     ]
 
@@ -144,35 +139,34 @@ def _wheel_degrees(
 def _mirrored(
     log: Log, model: KinematicModel, track: tuple[np.ndarray, np.ndarray], mount_yaw: float | None
 ) -> list[UnitFinding]:
-    counters = [n for n in log.header.encoder_names if model.encoder_kinds.get(n) == "counter"]
+    counters = _counters(log, model)
     xy, heading = track
     if len(counters) < 2:
         return []
-    k, straight = _straight_steps(log.time_s, xy, heading)
-    steps = {n: np.diff(_positions(log, n)[k])[straight] for n in counters}
-    a, b = (steps[n] for n in counters[:2])
+    k, gentle = _gentle(log.time_s, xy, heading)
+    steps = {n: np.diff(_positions(log, n)[k])[gentle] for n in counters[:2]}
+    a, b = steps.values()
     moving = (np.abs(a) > 0) & (np.abs(b) > 0)
-    if moving.sum() < 5 or np.mean(np.sign(a[moving]) != np.sign(b[moving])) < OPPOSITE_SHARE:
+    opposite = float(np.mean(np.sign(a[moving]) != np.sign(b[moving]))) if moving.any() else 0.0
+    if moving.sum() < 5 or opposite < OPPOSITE_SHARE:
         return []
     forward = _forward(xy, heading, k, mount_yaw)
     if forward is not None:
-        agree = {
-            n: float(np.sum(np.sign(steps[n][moving]) == forward[straight][moving])) for n in counters[:2]
-        }
+        agree = {n: float(np.sum(np.sign(v[moving]) == forward[gentle][moving])) for n, v in steps.items()}
         backwards = min(agree, key=lambda n: agree[n])
         which = f"{backwards} turns backwards as the robot drives forwards (by the tracker)"
     else:
-        totals = {n: float(np.sum(steps[n][moving])) for n in counters[:2]}
+        totals = {n: float(np.sum(v[moving])) for n, v in steps.items()}
         backwards = min(totals, key=lambda n: totals[n])
         which = f"{backwards} turns backwards on most of the driving"
     return [
         UnitFinding(
             "mirrored",
             backwards,
-            f"the joints read as {counters[0]} and {counters[1]} turn opposite ways while the robot drives "
-            f"straight ({100 * np.mean(np.sign(a[moving]) != np.sign(b[moving])):.0f} % of it): one wheel's "
-            f"axis is mirrored, and {which}; negate that joint (its URDF axis, or its sign in the driver) "
-            "or its wheel radius comes out negative",
+            f"the joints read as {counters[0]} and {counters[1]} turn opposite ways on gentle curves, where "
+            f"both wheels of a robot turn the same way ({100 * opposite:.0f} % of them): one wheel's axis is "
+            f"mirrored, and {which}; negate that joint (its URDF axis, or its sign in the driver) or its "
+            "wheel radius comes out negative",
         )
     ]
 
@@ -191,17 +185,13 @@ def _forward(
 
 
 def findings(
-    log: Log,
-    model: KinematicModel,
-    track: tuple[np.ndarray, np.ndarray],
-    nominal: Mapping[str, float | None],
+    log: Log, model: KinematicModel, track: tuple[np.ndarray, np.ndarray], mount_yaw: float | None
 ) -> tuple[UnitFinding, ...]:
     """Every unit and sign finding on ``log`` read for ``model``: ``track`` the tracker's positions
-    ``(n, 2)`` and unwrapped heading at the records; ``nominal``: ``ratio``, the tracker's travel
-    over what the nominal parameters predict (None: not known), and ``mount_yaw``, the nominal
-    planar mount's heading (None for a 3-D sensor)."""
+    ``(n, 2)`` and unwrapped heading at the records; ``mount_yaw`` the nominal planar mount's
+    heading (None for a 3-D sensor)."""
     xy, heading = track
     out = wrapped(log, model) + _steering_degrees(log, model)
-    out += _wheel_degrees(log, model, xy, heading, nominal.get("ratio"))
-    out += _mirrored(log, model, track, nominal.get("mount_yaw"))
+    out += _wheel_degrees(log, model, xy, heading)
+    out += _mirrored(log, model, track, mount_yaw)
     return tuple(out)

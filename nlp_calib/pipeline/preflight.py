@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlp_calib.analysis import determinacy as det
-from nlp_calib.analysis.excitation import combined, excitation, smoothed, taken
+from nlp_calib.analysis.excitation import combined, excitation, smoothed
 from nlp_calib.analysis.plan import Setting, plan
 from nlp_calib.analysis.uncertainty import range_std
 from nlp_calib.analysis.units import findings
@@ -31,12 +31,12 @@ from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.clock import lag_names
 from nlp_calib.pipeline.assemble import scenario_info
-from nlp_calib.pipeline.build import StartingPoint, build_problem, initial_parameters, starting_point
+from nlp_calib.pipeline.build import StartingPoint, build_problem, starting_point
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.recording import recording
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data, over_columns
-from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Excitation, Preflight, UnitFinding
+from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
+from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight, UnitFinding
 
 #: The closed-form start is taken on the stretch of at most this many records that turns most.
 START_RECORDS = 5000
@@ -143,37 +143,13 @@ def _track(log: Log) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(log.T_world_sensor[:, :2]), np.unwrap(log.T_world_sensor[:, 2])
 
 
-def _nominal_ratio(d: Drive, part: PreparedLog, ex: Excitation) -> float | None:
-    """The tracker's travel over the travel the nominal parameters predict (None: not known)."""
-    fns = d.fns
-    try:
-        nominal = initial_parameters(
-            part.scenario.with_options(initial_guess="from_file"), part.model, part.log
-        )
-    except NlpCalibError:
-        return None
-    nominal.update({n: 0.0 for n in fns.names if n not in nominal})
-    params = np.array([nominal[n] for n in fns.names])
-    inputs = part.model.inputs(
-        part.log.select(part.start, part.split), part.scenario.objective.residual.steering_sample
-    )
-    if inputs.shape[1] == 0:
-        return None
-    k = taken(part.log.time_s[part.start : part.split], 0.25)
-    motion = over_columns(fns.predict, params, inputs)[0]
-    rows = 3 if fns.sensor.pose_rows != 3 else 2
-    travel = float(np.sum(np.linalg.norm(motion[:rows], axis=0)))
-    return ex.distance_m / travel if travel > 0 and k.size > 2 else None
-
-
-def _units(d: Drive, exs: Sequence[Excitation]) -> tuple[UnitFinding, ...]:
+def _units(d: Drive) -> tuple[UnitFinding, ...]:
     out: list[UnitFinding] = []
     planar = d.fns.sensor.pose_rows == 3
-    for part, ex in zip(d.parts, exs):
+    for part in d.parts:
         log = part.log.select(part.start, part.split)
         yaw = float(d.start.initial.get("sensor_theta", 0.0)) if planar else None
-        nominal = {"ratio": _nominal_ratio(d, part, ex), "mount_yaw": yaw}
-        out += [f for f in findings(log, part.model, _track(log), nominal) if f not in out]
+        out += [f for f in findings(log, part.model, _track(log), yaw) if f not in out]
     return tuple(out)
 
 
@@ -230,7 +206,7 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
         model=sc.model,
         recordings=tuple(recording(p.scenario, p.log) for p in d.parts),
         excitation=tuple(exs),
-        units=_units(d, exs),
+        units=_units(d),
         parameters=statuses,
         start=start_words,
         noise=noise,
