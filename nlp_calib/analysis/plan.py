@@ -43,13 +43,16 @@ DURATION_S = 30.0
 WORK = 5_000
 #: A steady motion the inverse reproduces to less than this (relative) can be driven.
 INVERSE_TOLERANCE = 1e-6
+#: The inverse moves an angle by at most this much a step (rad).
+MAX_TURN_STEP = 0.2
 #: A spot turn's rate (rad/s).
 SPOT_RATE = 0.5
 
 
 @dataclass(frozen=True)
 class Candidate:
-    """A manoeuvre as steady segments: each ``(seconds, speed m/s, turn rate rad/s)``."""
+    """A manoeuvre as steady segments: each ``(seconds, speed m/s, turn rate rad/s)``; ``speed_mps``
+    and ``radius_m`` are those it was made at (:func:`candidates`)."""
 
     kind: str
     radius_m: float
@@ -73,7 +76,7 @@ def candidates(speed: float, radii: Sequence[float]) -> list[Candidate]:
         Candidate(
             "spot_turns",
             0.0,
-            0.0,
+            v,
             f"turns on the spot, {T / 2:.0f} s each way at {SPOT_RATE:g} rad/s",
             ((T / 2, 0.0, SPOT_RATE), (T / 2, 0.0, -SPOT_RATE)),
         ),
@@ -122,19 +125,22 @@ class Inverse:
         self.typical = typical
 
     def __call__(self, v: float, w: float, dt: float) -> np.ndarray | None:
-        """One interval's inputs for the motion at ``v``, ``w`` over ``dt`` (None: none reproduce it)."""
+        """One interval's inputs for the motion at ``v``, ``w`` over ``dt`` (None: none reproduce it
+        with its angles within ±π). Steps in an angle are kept to :data:`MAX_TURN_STEP`: the model's
+        steady motions repeat along an angle, and a full step jumps to a far copy."""
         target = _arc(v, w, dt)
         u = self.typical * (np.sign(v) if v else 0.0)
         u[self.levels] = 0.0
         scale = max(float(np.linalg.norm(target)), 1e-9)
-        for _ in range(30):
+        for _ in range(60):
             e, de_du = self.residual(params=self.params, u=u, z=target)
             e = np.ravel(e)
             if np.linalg.norm(e) < INVERSE_TOLERANCE * scale:
                 # An angle the model reads as it is must be one a joint can take.
                 return u if np.all(np.abs(u[self.levels]) <= np.pi) else None
             step, *_ = np.linalg.lstsq(np.asarray(de_du), -e, rcond=None)
-            u = u + step
+            turn = float(np.max(np.abs(step[self.levels]))) if self.levels else 0.0
+            u = u + step * min(1.0, MAX_TURN_STEP / turn if turn > 0 else 1.0)
         return None
 
 
@@ -181,8 +187,19 @@ class Setting:
     model_from: str
 
 
-def _speed_and_radii(data: ResidualData, fns: ProblemFunctions) -> tuple[float, list[float], float]:
-    """The drive's speed (m/s), the radii to try and its record interval (s)."""
+@dataclass(frozen=True)
+class DriveFacts:
+    """What a manoeuvre takes from the drive it is appended to: its speed (m/s), the turn radii to
+    try (m), its record interval (s) and its typical inputs per interval (where the inverse starts)."""
+
+    speed: float
+    radii: tuple[float, ...]
+    dt: float
+    typical: np.ndarray
+
+
+def drive_facts(data: ResidualData) -> DriveFacts:
+    """The facts of the drive whose windows are ``data`` (its last log's)."""
     log = data.logs[-1]
     t = log.time_s
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.04
@@ -191,48 +208,68 @@ def _speed_and_radii(data: ResidualData, fns: ProblemFunctions) -> tuple[float, 
     v = np.hypot(*np.diff(xy[::step], axis=0).T) / (step * dt)
     speed = float(np.clip(np.median(v[v > 0.01]) if np.any(v > 0.01) else 0.3, 0.05, 2.0))
     R0 = max(speed / 0.5, 0.3)
-    return speed, [R0, 2 * R0, 4 * R0], dt
+    moving = np.abs(data.inputs).max(axis=0) > 0
+    typical = (
+        np.median(np.abs(data.inputs[:, moving]), axis=1) if moving.any() else np.ones(data.inputs.shape[0])
+    )
+    return DriveFacts(speed, (R0, 2 * R0, 4 * R0), dt, np.where(np.isfinite(typical), typical, 1.0))
 
 
-def plan(s: Setting) -> Plan | None:
+def candidate_of(m: Manoeuvre) -> Candidate:
+    """The candidate a ranked manoeuvre was made from."""
+    return next(c for c in candidates(m.speed_mps, [m.radius_m or 1.0]) if c.kind == m.kind)
+
+
+def simulated(
+    fns: ProblemFunctions,
+    data: ResidualData,
+    params: np.ndarray,
+    c: Candidate,
+    facts: DriveFacts,
+    options: ResidualOptions,
+) -> tuple[ResidualData, np.ndarray] | None:
+    """``data`` with the candidate appended as the model with the full parameters ``params`` drives
+    it (see :func:`~nlp_calib.problem.windows.appended`), and the base's path; None when no inputs
+    of the model drive it."""
+    inverse = Inverse(fns.model, params[: len(fns.model.kinematic_params)], facts.typical)
+    made = synthesised(inverse, c, facts.dt)
+    if made is None:
+        return None
+    time_s, U, path = made
+    track = sensor_poses(fns, params, data.T_world_sensor[-1], path)
+    return appended(fns, data, (time_s, U, track), options), path
+
+
+def plan(s: Setting, free_only: bool = False) -> Plan | None:
     """The manoeuvres ranked (see the module docstring); None when every parameter is already
-    determined to :data:`~nlp_calib.results.checks.WEAK` times its reference precision."""
+    determined to :data:`~nlp_calib.results.checks.WEAK` times its reference precision (with
+    ``free_only``, for a model not fitted to the data, whose residuals say nothing of the noise:
+    when the drive leaves no direction free)."""
     fns, (x, x_fixed, omega) = s.fns, s.point
     values = np.asarray(x, dtype=float)
     before = standing(fns, s.info, s.sigma2, values, s.bounds_std)
     ratio = np.where(np.isfinite(before.std_reference), before.std_reference, np.inf)
-    if not np.any(ratio > WEAK):
+    if not np.any(ratio > WEAK) or (free_only and not before.undetermined.any()):
         return None
     target = int(np.argmax(ratio))
     params = np.asarray(fns.assemble(x, x_fixed)).ravel()
-    speed, radii, dt = _speed_and_radii(s.data, fns)
-    moving = np.abs(s.data.inputs).max(axis=0) > 0
-    typical = np.median(np.abs(s.data.inputs[:, moving]), axis=1) if moving.any() else np.ones(fns.n_inputs)
-    typical = np.where(np.isfinite(typical), typical, 1.0)
-    inverse = Inverse(fns.model, params[: len(fns.model.kinematic_params)], typical)
+    facts = drive_facts(s.data)
     ranked = []
-    for c in candidates(speed, radii):
-        made = synthesised(inverse, c, dt)
+    for c in candidates(facts.speed, facts.radii):
+        made = simulated(fns, s.data, params, c, facts, s.options)
         if made is None:
             continue
-        time_s, U, path = made
-        track = sensor_poses(fns, params, s.data.T_world_sensor[-1], path)
-        extra = appended(fns, s.data, (time_s, U, track), s.options)
+        extra, path = made
         new = extra.select(np.arange(s.data.n_residuals, extra.n_residuals))
         if new.n_residuals == 0:
             continue
-        after = standing(
-            fns,
-            s.info.plus(information(fns, new, x, x_fixed, omega, s.delta, WORK)),
-            s.sigma2,
-            values,
-            s.bounds_std,
-        )
-        worst = float(np.max(after.std_reference))
+        info = s.info.plus(information(fns, new, x, x_fixed, omega, s.delta, WORK))
+        after = standing(fns, info, s.sigma2, values, s.bounds_std)
+        duration = float(extra.n_records - s.data.n_records - 1) * facts.dt
         ranked.append(
             Manoeuvre(
-                c.kind, c.radius_m, c.speed_mps, float(time_s[-1]), c.words, _thinned(path), worst,
-                float(after.std[target]),
+                c.kind, c.radius_m, c.speed_mps, duration, c.words, _thinned(path),
+                float(np.max(after.std_reference)), float(after.std[target]),
             )
         )  # fmt: skip
     ranked.sort(key=lambda m: (m.worst_after, m.target_std_after))

@@ -184,18 +184,17 @@ def analyse_fit(
     return FitAnalysis(uncertainty, observability, crossval, direction, lag_effects=effects)
 
 
-def plan_after(fit: Fit, results: Mapping[str, SolverResult], units: Mapping[str, str]) -> Plan | None:
-    """What to drive next (:mod:`nlp_calib.analysis.plan`), simulated with the first converged
-    estimate (else the first with a finite cost), the residuals' variance as the observability
-    takes it; None when every parameter is determined well enough."""
+def plan_setting(fit: Fit, results: Mapping[str, SolverResult], units: Mapping[str, str]) -> Setting | None:
+    """What a plan after this fit starts from: the first converged estimate (else the starting
+    point: a solver's last iterate on a drive that leaves directions free can lie anywhere along
+    them), the fit's information there and the residuals' variance as the observability takes it;
+    None when nothing can be evaluated."""
     ev, fns, data = fit.evaluator, fit.fns, fit.data
     converged = [(n, r) for n, r in results.items() if r.converged]
+    start = fit.problem.start
+    x = converged[0][1].x if converged else start.x0
     if data.n_residuals == 0:
         return None
-    start = fit.problem.start
-    # Without a converged fit the model is simulated as it started: a solver's last iterate on a
-    # drive that leaves directions free can lie anywhere along them.
-    x = converged[0][1].x if converged else start.x0
     ne = ev.normal_equations(x)
     if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
         return None
@@ -205,11 +204,19 @@ def plan_after(fit: Fit, results: Mapping[str, SolverResult], units: Mapping[str
     sc = fit.problem.binder.scenario
     ranges = unc.range_std(start.lower, start.upper, fns.n_free)
     model_from = f"the fit ({converged[0][0]})" if converged else "the initial guess (no solver converged)"
-    setting = Setting(
+    return Setting(
         fns, data, info, (x, ev.x_fixed, ev.omega), sigma2, ranges, sc.objective.residual,
         sc.objective.robust.delta, units, model_from,
     )  # fmt: skip
-    return plan(setting)
+
+
+def plan_after(fit: Fit, results: Mapping[str, SolverResult], units: Mapping[str, str]) -> Plan | None:
+    """What to drive next (:mod:`nlp_calib.analysis.plan`), simulated with the fit (see
+    :func:`plan_setting`); without a converged fit, only when the drive leaves a direction free."""
+    setting = plan_setting(fit, results, units)
+    if setting is None:
+        return None
+    return plan(setting, free_only=not any(r.converged for r in results.values()))
 
 
 def residual_series(fit: Fit, results: Mapping[str, SolverResult], windows: np.ndarray) -> ResidualSeries:

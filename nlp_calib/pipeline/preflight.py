@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +40,10 @@ from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight, UnitF
 
 #: The closed-form start is taken on the stretch of at most this many records that turns most.
 START_RECORDS = 5000
+#: The start is brought to the data by at most this many Gauss-Newton steps (a far nominal start
+#: takes a few), until a step gains less than this share of the misfit.
+ROUGH_STEPS = 4
+ROUGH_GAIN = 0.1
 
 
 @dataclass(frozen=True)
@@ -100,21 +104,22 @@ def _implausible(model: KinematicModel, point: StartingPoint) -> str:
 
 def _start(sc: Scenario, fns: ProblemFunctions, first: PreparedLog, n_logs: int) -> tuple[StartingPoint, str]:
     """Where the Jacobian is taken: the run's starting point (the closed form on the busiest
-    stretch when ``auto``), or the nominal values where the closed form fails or leaves the
-    model's plausible ranges (a drive that barely determines a scale can send it there)."""
+    stretch when ``auto``), or the nominal values where the closed form fails. A closed form
+    outside the model's plausible ranges is kept, and said: it is where a drive that barely
+    determines some combination sends it, and where the run starts too."""
     auto = sc.parameters.initial_guess == "auto"
     a, b = (
         _busiest(first.log, first.start, first.split, START_RECORDS) if auto else (first.start, first.split)
     )
     lags = [0.0] * n_logs if n_logs > 1 else []
-    why = ""
     try:
         point = starting_point(sc, fns, first.log, a, b, lags)
-        outside = _implausible(fns.model, point) if auto else ""
-        if np.all(np.isfinite(point.x0)) and not outside:
+        if np.all(np.isfinite(point.x0)):
             words = "the closed-form start (initial_guess: auto)" if auto else "the initial guess"
-            return point, words + (f" on records {a} to {b}" if (a, b) != (first.start, first.split) else "")
-        why = f"it lies outside the plausible ranges: {outside}" if outside else "it is not finite"
+            words += f" on records {a} to {b}" if (a, b) != (first.start, first.split) else ""
+            outside = _implausible(fns.model, point)
+            return point, words + (f", outside the plausible ranges in {outside}" if outside else "")
+        why = "it is not finite"
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ZeroDivisionError) as exc:
         if not auto:
             raise
@@ -154,53 +159,87 @@ def _units(d: Drive) -> tuple[UnitFinding, ...]:
 
 
 def _rough(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str]:
-    """The start brought to the data by one Gauss-Newton step (kept only when it fits them
-    better), the windows' information there and where it stands, in words."""
+    """The start brought to the data by Gauss-Newton steps on the directions the drive determines
+    (each kept only when it fits the data better; at most :data:`ROUGH_STEPS`, until one gains
+    less than :data:`ROUGH_GAIN` of the misfit), the windows' information there and where it
+    stands, in words."""
     fns, start, delta = d.fns, d.start, d.scenario.objective.robust.delta
-    info = det.information(fns, d.data, start.x0, start.x_fixed, omega, delta)
+    x, info = start.x0, det.information(fns, d.data, start.x0, start.x_fixed, omega, delta)
     box = None if start.lower is None or start.upper is None else (start.lower, start.upper)
-    x1 = det.stepped(fns, info, start.x0, box)
-    if np.all(np.isfinite(x1)):
+    steps = 0
+    for _ in range(ROUGH_STEPS):
+        x1 = det.stepped(fns, info, x, box)
+        if not np.all(np.isfinite(x1)):
+            break
         moved = det.information(fns, d.data, x1, start.x_fixed, omega, delta)
-        if np.isfinite(moved.chi2) and moved.chi2 <= info.chi2:
-            return x1, moved, f"{d.start_words}, moved by one Gauss-Newton step toward the data"
-    return start.x0, info, d.start_words
+        if not (np.isfinite(moved.chi2) and moved.chi2 <= info.chi2):
+            break
+        gain = 1.0 - moved.chi2 / max(info.chi2, 1e-300)
+        x, info, steps = x1, moved, steps + 1
+        if gain < ROUGH_GAIN:
+            break
+    if not steps:
+        return x, info, d.start_words
+    said = "one Gauss-Newton step" if steps == 1 else f"{steps} Gauss-Newton steps"
+    return x, info, f"{d.start_words}, moved by {said} toward the data"
+
+
+@dataclass(frozen=True)
+class Assessment:
+    """What the pre-flight judges the parameters from: the drive (:class:`Drive`) and the
+    parameters the run would hold, the point the Jacobian is taken at (free ``x``, in words
+    ``where``), the windows' information there, the residuals' variance it assumes (``noise`` in
+    words), the information weights, the robust threshold and the bounds' 1σ."""
+
+    drive: Drive
+    held: Mapping[str, str]
+    x: np.ndarray
+    where: str
+    info: det.Information
+    sigma2: float
+    noise: str
+    omega: np.ndarray
+    delta: float
+    bounds_std: np.ndarray
+
+    def standing(self, info: det.Information | None = None) -> det.Standing:
+        """Each free parameter's standing on these windows (or on those whose information is ``info``)."""
+        d = self.drive
+        return det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std)
+
+
+def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
+    """The drive of ``sc`` prepared and its Jacobian evaluated at the start brought to the data."""
+    d, held = drive(sc, logs)
+    fns, one = d.fns, d.scenario
+    omega = np.array(one.objective.information.omega(fns.error_rows))
+    x, info, where = _rough(d, omega)
+    sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info)
+    bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
+    return Assessment(d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds)
 
 
 def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
     """The pre-flight check of ``sc`` (its logs read from their sources unless given)."""
     t0 = time.perf_counter()
-    d, held = drive(sc, logs)
+    a = assess(sc, logs)
+    d = a.drive
     fns, one = d.fns, d.scenario
-    omega = np.array(one.objective.information.omega(fns.error_rows))
-    x0, info, start_words = _rough(d, omega)
-    sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info)
-    x_fixed = d.start.x_fixed
-    bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     exs = []
     for p in d.parts:
         log = p.log.select(p.start, p.split)
         steering = p.scenario.objective.residual.steering_sample
         exs.append(excitation(log.time_s, *_track(log), p.model, p.model.inputs(log, steering)))
     units = scenario_info(one, fns.model, lag_names(fns.spec.lags)).units
-    found = det.standing(fns, info, sigma2, x0, bounds)
-    statuses = det.statuses(fns, found, held, units, combined(exs))
+    statuses = det.statuses(fns, a.standing(), a.held, units, combined(exs))
     loose = [s.name for s in statuses if s.status in (NOT_DETERMINED, WEAKLY) and not s.held]
     ahead = None
     if loose:
-        setting = Setting(
-            fns,
-            d.data,
-            info,
-            (x0, x_fixed, omega),
-            sigma2,
-            bounds,
-            one.objective.residual,
-            one.objective.robust.delta,
-            units,
-            start_words,
+        point = (a.x, d.start.x_fixed, a.omega)
+        residual = one.objective.residual
+        ahead = plan(
+            Setting(fns, d.data, a.info, point, a.sigma2, a.bounds_std, residual, a.delta, units, a.where)
         )
-        ahead = plan(setting)
     return Preflight(
         scenario=sc.name,
         model=sc.model,
@@ -208,8 +247,8 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
         excitation=tuple(exs),
         units=_units(d),
         parameters=statuses,
-        start=start_words,
-        noise=noise,
+        start=a.where,
+        noise=a.noise,
         plan=ahead,
         way_out=way_out(loose, fns.model) if loose else "",
         time_s=time.perf_counter() - t0,
