@@ -195,11 +195,7 @@ def estimate(
         return free_directions(lam, data.n_residuals, motion2)
 
     M = np.asarray(fns.tangent_map(x))
-    prior = (
-        np.zeros(fns.n_free)
-        if bounds_std is None
-        else sigma2 * np.where(np.isfinite(bounds_std), bounds_std**-2.0, 0.0)
-    )
+    prior = bounds_prior(bounds_std, sigma2, fns.n_free)
     cov, bounded = _bounded_covariance(ne.H, meat, (scale, M), free, (prior, sigma2))
     noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
     noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
@@ -220,9 +216,16 @@ def white_covariance(
     :func:`range_std`), inf where nothing holds them; and which parameters only the bounds hold.
     What a drive, or a drive with a manoeuvre appended, would determine before any fit."""
     n = H.shape[0]
-    std = np.full(n, np.inf) if bounds_std is None else np.asarray(bounds_std, dtype=float)
-    prior = sigma2 * np.where(np.isfinite(std), std**-2.0, 0.0)
+    prior = bounds_prior(bounds_std, sigma2, n)
     return _bounded_covariance(H, sigma2 * H, (scale, np.eye(n)), free, (prior, sigma2))
+
+
+def bounds_prior(bounds_std: np.ndarray | None, sigma2: float, n: int) -> np.ndarray:
+    """The bounds' prior weights in the data's units (``σ²/std²``; 0 where unbounded)."""
+    if bounds_std is None:
+        return np.zeros(n)
+    std = np.asarray(bounds_std, dtype=float)
+    return sigma2 * np.where(np.isfinite(std), std**-2.0, 0.0)
 
 
 def _bounded_covariance(
