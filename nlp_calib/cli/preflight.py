@@ -9,8 +9,8 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from nlp_calib.core.errors import NlpCalibError, NlpCalibWarning, UsageError
-from nlp_calib.core.files import atomic_write_text, check_output_dir
+from nlp_calib.core.errors import NlpCalibWarning, UsageError
+from nlp_calib.core.files import atomic_write_text, check_output_dir, note_input, refuse_input_alias
 from nlp_calib.logs import Log
 from nlp_calib.outputs.preflight import preflight_lines
 from nlp_calib.pipeline import Scenario, load_scenario
@@ -39,6 +39,7 @@ def cmd_preflight(args: argparse.Namespace) -> int:
     report = preflight(sc)
     print("\n".join(preflight_lines(report)))
     if args.json is not None:
+        refuse_input_alias(args.json)  # never over the recording or the scenario it read
         data = json.dumps(_document(report), indent=2, allow_nan=False) + "\n"
         atomic_write_text(args.json, data)
         print(f"wrote {args.json}")
@@ -59,6 +60,8 @@ def cmd_init(args: argparse.Namespace) -> int:
     if out.exists() and not args.force:
         raise UsageError(f"{out} exists; give --force to replace it, or another --out")
     drafted = draft(args.recording, out, args.model)
+    note_input(args.recording)
+    refuse_input_alias(out)
     print("found:")
     print("\n".join(f"  {line}" for line in drafted.found))
     atomic_write_text(out, drafted.text)
@@ -74,8 +77,6 @@ def gate(scenarios: Sequence[Scenario], logs: Sequence[Sequence[Log]], skip: boo
     for sc, log_list in zip(scenarios, logs):
         try:
             report = preflight(sc, log_list)
-        except NlpCalibError:
-            raise
         except Exception as exc:  # the pre-flight must never be what stops a run that could succeed
             warnings.warn(
                 f"pre-flight of {sc.name} not done ({type(exc).__name__}: {exc}); the run goes on",

@@ -24,7 +24,7 @@ def _recording(rec: Recording) -> list[str]:
         if s.rate_hz > 0:
             gaps = f"{s.gaps} gap(s), longest {s.longest_gap_s:.3g} s" if s.gaps else "no gap"
             lines.append(
-                f"  {s.name}: {s.kind}, {s.count} at {s.rate_hz:.1f} Hz, {gaps}; {s.note}".rstrip("; ")
+                f"  {s.name}: {s.count} at {s.rate_hz:.1f} Hz ({s.kind}), {gaps}; {s.note}".rstrip("; ")
             )
         else:
             used = f" (read as the {s.note})" if s.note else ""

@@ -57,7 +57,7 @@ def recording(sc: Scenario, log: Log) -> Recording:
     """The recording of ``sc``'s (single) log as it was read (``log``)."""
     source = sc.log.source
     encoders = ", ".join(log.header.encoder_names)
-    streams = [stream("records", f"records ({source.record_word}s read)", log.time_s, f"encoders {encoders}")]
+    streams = [stream("records", f"one per {source.record_word}", log.time_s, f"encoders {encoders}")]
     overlap = None
     joints = log.joint_stream
     if joints is not None:

@@ -217,11 +217,29 @@ class Preflight:
         blocking = [u.words for u in self.units if u.blocking]
         if blocking:
             return "; ".join(blocking)
-        missing = [p for p in self.parameters if p.status == NOT_DETERMINED]
+        missing = [p for p in self.parameters if p.status == NOT_DETERMINED and not p.held]
         if not missing:
             return ""
-        words = "; ".join(p.words() for p in missing)
         plan = f"; plan: {self.plan.line()}" if self.plan is not None and self.plan.best is not None else ""
+        why = "; ".join(_causes(missing))
         return (
-            f"this drive cannot determine {', '.join(p.name for p in missing)}: {words}; {self.way_out}{plan}"
+            f"this drive cannot determine {', '.join(p.name for p in missing)} ({why}); {self.way_out}{plan}"
         )
+
+
+def _causes(loose: list[ParameterStatus]) -> list[str]:
+    """Why the parameters ``loose`` are not determined, each reason once."""
+    out: dict[str, None] = {}
+    pairs: set[frozenset[str]] = set()
+    for p in loose:
+        cause = p.because.split("; ")[0]
+        if cause.startswith("it trades off"):
+            group = frozenset((p.name, *p.trades_with))
+            if group in pairs:
+                continue
+            pairs.add(group)
+            cause = f"{', '.join(sorted(group))} trade off"
+        elif cause.startswith("the drive carries no information"):
+            cause = f"nothing in the drive shows {p.name}"
+        out[cause] = None
+    return list(out)
