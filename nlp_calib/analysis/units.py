@@ -5,10 +5,10 @@ Each is told from the data alone, against the tracker where it takes a scale or 
 
 - **a wheel's angle that wraps** (joints in radians): its position jumps by about 2π between two
   samples whose neighbours move little, where REP 103 has a wheel's angle grow without end;
-- **degrees**: a steering joint that reads beyond 2π; wheels whose joints turn so far for the
-  tracker's travel that a radian of them would move the robot less than :data:`MIN_RADIUS` (the
-  smallest wheels a robot carrying a tracker rolls on are several times larger; read in degrees,
-  a wheel of up to 35 cm radius falls below it);
+- **degrees**: an angle joint (an absolute encoder's) that reads beyond 2π; wheels whose joints
+  turn so far for the tracker's travel that a radian of them would move the robot less than
+  :data:`MIN_RADIUS` (the smallest wheels a robot carrying a tracker rolls on are several times
+  larger; read in degrees, a wheel of up to 35 cm radius falls below it);
 - **a mirrored wheel axis**: two wheels whose joints turn opposite ways on gentle curves, where
   both wheels of any robot turn the same way (:data:`OPPOSITE_SHARE` of those stretches); the one
   that turns against the robot's forward travel (the tracker's motion along the nominal mount's

@@ -80,10 +80,10 @@ def _add_force(p: argparse.ArgumentParser, what: str) -> None:
 
 EXIT_CODES = (
     "exit codes: 0 success; 1 a solver did not converge or the run failed; 2 bad input (scenario, log, "
-    "options: nothing is computed); 4, 5 the pre-flight found that the drive cannot determine a "
-    "parameter (4) or that the data get a unit or sign wrong (5): nothing is fitted (see 'nlp-calib "
-    "preflight'); 130, 143, 129 interrupted by SIGINT, SIGTERM, SIGHUP (the output folder keeps the "
-    "previous run's files)"
+    "options: nothing is computed); 4, 5 (run, compare, odometry) the pre-flight found that the drive "
+    "cannot determine a parameter (4) or that the data get a unit or sign wrong (5): nothing is fitted "
+    "(see 'nlp-calib preflight'); 130, 143, 129 interrupted by SIGINT, SIGTERM, SIGHUP (the output "
+    "folder keeps the previous run's files)"
 )
 
 #: One or two example command lines per subcommand, shown by its --help.
@@ -175,6 +175,11 @@ def _add_common(p: argparse.ArgumentParser, report: str | None) -> None:
     if report is not None:
         p.add_argument("--report", action="store_true", help=report)
     _add_force(p, "files in the output folder")
+    if report is not None:  # the calibrating commands (validate cross-validates whatever it is given)
+        _add_skip_preflight(p)
+
+
+def _add_skip_preflight(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--skip-preflight",
         action="store_true",

@@ -3,8 +3,8 @@
 From a bag's survey (:mod:`nlp_calib.logs.bag_survey`), a joint log's header row or a text log's
 header: the joints topic and its joints in the model's encoder order, the tracker topic (and
 frame), the model the joint names suggest, and the keys a first run needs. Each encoder takes the
-joint whose name carries a word of the encoder's name (``left`` for ``left_wheel``), an angle
-encoder (``absolute``) a joint named ``steer…``, a wheel (``counter``) left over any joint named
+joint whose name carries a word of the encoder's name (``left`` for an encoder named ``left_…``),
+an angle encoder (``absolute``) a joint named ``steer…``, a wheel (``counter``) left over any joint named
 ``…wheel…``, ``…traction…`` or ``…drive…``; a model is a candidate when every one of its encoders
 takes a joint of its own, the first registered candidate is drafted. The tracker is the pose topic
 whose name says most clearly that it is a reference (a motion-capture system's, a ground truth),
