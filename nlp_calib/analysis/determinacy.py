@@ -50,9 +50,10 @@ COUPLED = 0.3
 class Information:
     """``H = Σ JᵀΩJ`` over ``n_windows`` windows (free parameters, manifold coordinates), the
     windows' mean squared motion (:func:`~nlp_calib.analysis.degeneracy.motion_scale`), and where
-    they were evaluated the gradient ``g = Σ JᵀΩe``, ``Σ eᵀΩe`` and the residuals' variance per
-    row as a run estimates it from its fit (``Σ ρ'(s)·s`` over the rows and windows, ``ρ'`` the
-    robust kernel's weight)."""
+    they were evaluated the gradient ``g = Σ JᵀΩe``, the robust cost ``Σ ρ(s)`` (``chi2``) and
+    the residuals' variance per row as a run estimates it from its fit (``Σ ρ'(s)·s`` over the
+    rows and windows). ``H`` and ``g`` are weighted by the robust kernel's ``ρ'(s)``, as a run's
+    normal equations are."""
 
     H: np.ndarray
     n_windows: int
@@ -109,31 +110,33 @@ def information(
     J = J.reshape(fns.error_rows, idx.size, nf)
     ok = np.all(np.isfinite(J), axis=(0, 2)) & np.all(np.isfinite(e), axis=0)
     J, e, w = J[:, ok], e[:, ok], np.asarray(omega, dtype=float)
-    scale = n / idx.size
-    H = np.einsum("rwi,r,rwj->ij", J, w, J, optimize=True) * scale
-    g = np.einsum("rwi,r,rw->i", J, w, e, optimize=True) * scale
     s = np.sum(w[:, None] * e**2, axis=0)
-    rho_weight = (
-        kernel_function(fns.spec.kernel).map(max(s.size, 1))(s[None, :], delta)[1] if s.size else None
-    )
-    weight = np.asarray(rho_weight.full()).ravel() if rho_weight is not None else s
+    rho, weight = _robust(fns.spec.kernel, s, delta)
+    # Weighted as a run's normal equations weigh each window: by the robust kernel's ρ'(s).
+    scale = n / max(idx.size, 1)
+    H = np.einsum("rwi,r,w,rwj->ij", J, w, weight, J, optimize=True) * scale
+    g = np.einsum("rwi,r,w,rw->i", J, w, weight, e, optimize=True) * scale
     spread2 = float(np.sum(weight * s) / max(s.size * fns.error_rows, 1))
-    return Information(H, n, motion_scale(fns, data.z, omega), g, float(np.sum(s)) * scale, spread2)
+    return Information(H, n, motion_scale(fns, data.z, omega), g, float(np.sum(rho)) * scale, spread2)
 
 
-def stepped(
-    fns: ProblemFunctions, info: Information, x: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None
-) -> np.ndarray:
-    """``x`` moved by one Gauss-Newton step on the directions the windows determine (the others,
-    :func:`~nlp_calib.analysis.degeneracy.free_directions`, are left where they are), kept inside
-    ``bounds``: a start brought to the data, where a drive's free directions are what a fit would
+def _robust(kernel: str, s: np.ndarray, delta: float) -> tuple[np.ndarray, np.ndarray]:
+    """The robust kernel's ρ(s) and weight ρ'(s) of each window's ``s = eᵀΩe``."""
+    if s.size == 0:
+        return s, s
+    rho, weight = kernel_function(kernel).map(s.size)(s[None, :], delta)
+    return np.asarray(rho.full()).ravel(), np.asarray(weight.full()).ravel()
+
+
+def step(fns: ProblemFunctions, info: Information, x: np.ndarray) -> np.ndarray:
+    """The Gauss-Newton step from ``x`` (manifold coordinates) on the directions the windows
+    determine; the others (:func:`~nlp_calib.analysis.degeneracy.free_directions`) are left where
+    they are: a start is brought to the data, where a drive's free directions are what a fit would
     find (away from the data, a free direction can lean into parameters the drive determines)."""
     R = reference_scales(fns.model, fns.free, np.asarray(x, dtype=float))
     lam, V = np.linalg.eigh(0.5 * (info.H + info.H.T) * np.outer(R, R))
     keep = ~free_directions(lam, info.n_windows, info.motion2) & (lam > 0)
-    step = -R * ((V[:, keep] / lam[keep]) @ (V[:, keep].T @ (R * info.g)))
-    moved = np.asarray(fns.boxplus(x, step)).ravel()
-    return moved if bounds is None else np.clip(moved, *bounds)
+    return np.asarray(-R * ((V[:, keep] / lam[keep]) @ (V[:, keep].T @ (R * info.g))))
 
 
 def noise(
