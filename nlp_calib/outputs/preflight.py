@@ -80,9 +80,10 @@ def preflight_lines(report: Preflight) -> list[str]:
     if report.way_out:
         lines.append(f"  {report.way_out}")
     plan = report.plan
-    if plan is not None and plan.best is not None:
+    if plan is not None:
         lines.append(f"plan: {plan.line()}")
-        for m in plan.ranked[1:4]:
+        unit = f" {plan.target_unit}" if plan.target_unit not in ("", "1") else ""
+        for m in [m for m in plan.ranked if m is not plan.best][:3] if plan.best is not None else []:
             std = f"{m.target_std_after:.2g}" if math.isfinite(m.target_std_after) else "unbounded"
-            lines.append(f"  then: {m.words}: σ of {plan.target} {std} {plan.target_unit}")
+            lines.append(f"  then: {m.words}: σ of {plan.target} {std}{unit}")
     return lines

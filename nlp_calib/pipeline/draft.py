@@ -14,7 +14,6 @@ comments, and is read back as a scenario before it is written: ``run`` accepts i
 
 from __future__ import annotations
 
-import os
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -138,6 +137,25 @@ def tracker(found: BagSurvey) -> tuple[Topic, str | None, list[Topic]]:
     return best, frame, poses[1:]
 
 
+def sensor_frame(found: BagSurvey, base: str = "base_link") -> str | None:
+    """The frame on ``/tf_static`` the tracker most likely follows: a leaf of the fixed transforms
+    that leads to ``base`` (the only one, or the one whose name says it is a marker or a
+    reference); None when there is none to tell."""
+    parents = set(found.static.values())
+
+    def reaches(frame: str) -> bool:
+        seen: set[str] = set()
+        while frame in found.static and frame not in seen:
+            seen.add(frame)
+            frame = found.static[frame]
+        return frame == base
+
+    leaves = [f for f in found.static if f not in parents and reaches(f)]
+    marked = [f for f in leaves if _words(f) & {*REFERENCE_WORDS, "marker", "body", "rigid"}]
+    chosen = marked or leaves
+    return chosen[0] if len(chosen) == 1 else None
+
+
 def _listing(found: BagSurvey) -> list[str]:
     lines = []
     for t in found.topics:
@@ -153,20 +171,26 @@ def _listing(found: BagSurvey) -> list[str]:
 
 
 def _relative(path: Path, where: Path) -> str:
-    try:
-        return os.path.relpath(path.resolve(), where.parent.resolve())
-    except ValueError:  # another drive (Windows)
-        return str(path.resolve())
+    """``path`` relative to the scenario's folder when it lies inside it (the two move together),
+    else absolute."""
+    target, folder = path.resolve(), where.parent.resolve()
+    return str(target.relative_to(folder)) if target.is_relative_to(folder) else str(target)
 
 
 def _text(header: Sequence[str], raw: Mapping[str, Any], notes: Mapping[str, str]) -> str:
-    """The scenario as YAML with ``header`` comments on top and ``notes`` after its keys' lines."""
+    """The scenario as YAML with ``header`` comments on top and each key's note after it: one line a
+    key, a mapping of several keys (the dataset's) as a block."""
     lines = [f"# {h}" if h else "#" for h in header]
-    body = yaml.safe_dump(dict(raw), sort_keys=False, default_flow_style=None, width=100)
-    for line in body.splitlines():
-        key = line.strip().split(":")[0]
+    for key, value in raw.items():
+        if isinstance(value, Mapping) and len(value) > 2:
+            lines += yaml.safe_dump(
+                {key: dict(value)}, sort_keys=False, default_flow_style=None, width=200
+            ).splitlines()
+            continue
+        shown = yaml.safe_dump(value, sort_keys=False, default_flow_style=True, width=200).strip()
+        shown = shown.removesuffix("...").strip()
         note = notes.get(key)
-        lines.append(f"{line}   # {note}" if note else line)
+        lines.append(f"{key}: {shown}" + (f"   # {note}" if note else ""))
     return "\n".join(lines) + "\n"
 
 
@@ -194,6 +218,9 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
     dataset["tracker"] = best.name
     if frame is not None:
         dataset["tracker_frame"] = frame
+    mount = sensor_frame(found) if frame is None else None
+    if mount is not None:
+        dataset["sensor_frame"] = mount
     raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS}
     header = [
         f"Drafted by nlp-calib init from {path}: {found.duration_s:.1f} s, {len(found.topics)} topics.",
@@ -203,6 +230,14 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         f"tracker: {best.name} ({best.msgtype}){f', frame {frame}' if frame else ''}"
         + (f"; other pose topics: {', '.join(t.name for t in others)}" if others else "")
         + " (the robot's own odometry is never a reference).",
+        *(
+            [
+                f"sensor_frame {mount}: its fixed transforms from base_link on /tf_static give the nominal "
+                "mount (the hand-off's height, roll and pitch)."
+            ]
+            if mount
+            else []
+        ),
         f"Check it before a run: nlp-calib preflight {where}",
     ]
     text = _text(header, raw, NOTES)

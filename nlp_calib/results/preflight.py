@@ -156,13 +156,18 @@ class Plan:
 
     @property
     def best(self) -> Manoeuvre | None:
-        return self.ranked[0] if self.ranked else None
+        """The first manoeuvre that lowers the target's σ (None: none does)."""
+        before = self.target_std_before
+        return next((m for m in self.ranked if m.target_std_after < before), None)
 
     def line(self) -> str:
         """The "next" line: the first manoeuvre and what it would do to the target's σ."""
         best = self.best
         if best is None:
-            return f"no manoeuvre considered lowers the σ of {self.target}"
+            return (
+                f"no manoeuvre considered lowers the σ of {self.target} with the model as {self.model_from} "
+                "has it"
+            )
         unit = f" {self.target_unit}" if self.target_unit not in ("", "1") else ""
         return (
             f"drive {best.words}: the σ of {self.target} would fall from {_sigma(self.target_std_before)}"
