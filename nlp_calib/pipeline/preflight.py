@@ -72,9 +72,9 @@ def _prepared(
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the run says what preparing says; the pre-flight says it otherwise
         parts = tuple(prepare(s, log) for s, log in zip(per_log, given))
-    if not sc.data.joint:
-        return parts, parts[0].scenario, dict(parts[0].held)
-    one = sc.with_options(residual=joint_residual(sc, parts))
+        if not sc.data.joint:
+            return parts, parts[0].scenario, dict(parts[0].held)
+        one = sc.with_options(residual=joint_residual(sc, parts))
     model = parts[0].model
     inputs = np.concatenate(
         [model.inputs(p.log.select(p.start, p.split), sc.objective.residual.steering_sample) for p in parts],
