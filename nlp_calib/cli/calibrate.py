@@ -17,6 +17,7 @@ import numpy as np
 
 from nlp_calib.cli.explain import no_crossvalidation
 from nlp_calib.cli.parser import ALL_SOLVERS
+from nlp_calib.cli.preflight import gate
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
 from nlp_calib.core.files import check_output_dir
@@ -130,6 +131,7 @@ def _cmd_calibrate(
     logs = [[read_checked(s) for s in sc.per_log()] for sc in scenarios]
     for out in outs:
         refuse_collisions(out, registry.files(outputs), force=args.force)
+    gate(scenarios, logs, args.skip_preflight)
     compared = _compare_dir(args, outs) if side_by_side else None
     if compared is not None:
         refuse_collisions(compared, compare.FILES, force=args.force)
@@ -267,6 +269,7 @@ def cmd_odometry(args: argparse.Namespace) -> int:
     outputs = registry.selected(("result", "handoff", "odometry"), args.report)
     log = read_checked(scenario)
     refuse_collisions(out, registry.files(outputs), force=args.force)
+    gate([scenario], [[log]], args.skip_preflight)
     calib = Calibration.setup(scenario, log=log)
     run = calib.run((args.solver,), Wanted(odometry=args.solver))
     print(run_table(run))

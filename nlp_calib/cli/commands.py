@@ -34,4 +34,6 @@ COMMANDS: dict[str, Command] = {
     "import-bag": _on_demand("nlp_calib.cli.import_bag", "cmd_import_bag"),
     "check": _on_demand("nlp_calib.cli.fleet", "cmd_check"),
     "batch": _on_demand("nlp_calib.cli.fleet", "cmd_batch"),
+    "preflight": _on_demand("nlp_calib.cli.preflight", "cmd_preflight"),
+    "init": _on_demand("nlp_calib.cli.preflight", "cmd_init"),
 }

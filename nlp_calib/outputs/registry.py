@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from nlp_calib.outputs import check, handoff, markdown, results, ros2_control, trajectories, urdf
+from nlp_calib.outputs import check, handoff, markdown, plan, results, ros2_control, trajectories, urdf
 from nlp_calib.outputs.outdir import StagedOutput
 from nlp_calib.results import CalibrationRun
 
@@ -78,6 +78,13 @@ def _odometry_png(run: CalibrationRun, folder: Path, name: str, options: OutputO
     return drawn
 
 
+def _plan_png(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
+    """The plan's sketch, matplotlib imported only when there is a plan to sketch."""
+    if run.checks.plan is None or not run.checks.plan.ranked:
+        return []
+    return _figure("plan")(run, folder, name, options)
+
+
 def _robot(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
     if options.urdf is None or options.sensor_link is None:
         return handoff.write_robot(run, folder, name)
@@ -122,6 +129,9 @@ OUTPUTS: tuple[Output, ...] = (
     Output("ros2_control.yaml", "handoff", _controller, per_log=False,
            next_step="the controller's parameters (wheel radius, separation or wheelbase) for ros2_control"),
     Output("result.json", "result", _plain(results.write_result)),
+    Output("plan.md", "result", _plain(plan.write_plan),
+           next_step="what to drive next, the manoeuvres ranked by how much each would help"),
+    Output("plan.png", "result", _plan_png),
     Output("odometry.csv", "odometry", _plain(results.write_odometry),
            next_step="the base link's odometry with its covariance, one row per record"),
     Output("odometry.png", "odometry", _odometry_png, report=True),

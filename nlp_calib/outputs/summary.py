@@ -71,9 +71,14 @@ def _next_steps(run: CalibrationRun, level: str, files: Sequence[str]) -> list[s
         steps.append(
             f"C code of the residual and its Jacobian: nlp-calib codegen {run.scenario.path} --out DIR"
         )
+    plan = run.checks.plan
+    planned = plan is not None and plan.best is not None
     if level in (UNDETERMINED, NOT_USABLE):
         obs = run.checks.observability
         hints = [w for w in obs.warnings if "drive" in w] if obs is not None else []
+        if planned:
+            assert plan is not None
+            steps.insert(0, f"{plan.line()}; plan.md ranks {len(plan.ranked)} manoeuvres")
         steps.append(
             hints[0]
             if hints
@@ -81,6 +86,9 @@ def _next_steps(run: CalibrationRun, level: str, files: Sequence[str]) -> list[s
         )
     elif level == CAVEATS:
         steps.insert(0, "read the caveats above before using the result")
+        if planned:
+            assert plan is not None
+            steps.insert(1, f"to know {plan.target} better, {plan.line()}")
     return steps
 
 

@@ -17,11 +17,14 @@ import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.crossval import combine
+from nlp_calib.analysis.degeneracy import motion_scale
+from nlp_calib.analysis.determinacy import Information
 from nlp_calib.analysis.handoff import odometry_noise
 from nlp_calib.analysis.metrics import each_metrics, geometry, integrate, segments
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import Drift as DriftSegments
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
+from nlp_calib.analysis.plan import Setting, plan
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
 from nlp_calib.core import memory
 from nlp_calib.models import header_parameters
@@ -45,6 +48,7 @@ from nlp_calib.results.checks import (
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import OdometryNoise
+from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import (
     FaultSpan,
     ModelCheckSeries,
@@ -83,6 +87,8 @@ class FitAnalysis:
     nominal: CostComparison | None = None
     #: The nominal values scored (nominal where known, the fit's estimate elsewhere; model order).
     nominal_params: np.ndarray | None = None
+    #: What to drive next, when a parameter is not determined well enough (see :func:`plan_after`).
+    plan: Plan | None = None
 
 
 @dataclass(frozen=True)
@@ -282,6 +288,41 @@ def comparisons(
         heldout = np.array([[c[i + 1], c[0]] for c in costed]).reshape(-1, 2)
         out[key] = CostComparison(words, heldout, (data_cost(v), mine))
     return out
+
+
+def plan_setting(fit: Fit, results: Mapping[str, SolverResult], units: Mapping[str, str]) -> Setting | None:
+    """What a plan after this fit starts from: the first converged estimate (else the starting
+    point: a solver's last iterate on a drive that leaves directions free can lie anywhere along
+    them), the fit's information there and the residuals' variance as the observability takes it;
+    None when nothing can be evaluated."""
+    ev, fns, data = fit.evaluator, fit.fns, fit.data
+    converged = [(n, r) for n, r in results.items() if r.converged]
+    start = fit.problem.start
+    x = converged[0][1].x if converged else start.x0
+    if data.n_residuals == 0:
+        return None
+    ne = ev.normal_equations(x)
+    if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
+        return None
+    _, s, weight = ev.robust_terms(x)
+    sigma2 = max(float(np.sum(weight * s)) / max(fns.error_rows * ev.n_residuals - fns.n_free, 1), 1e-300)
+    info = Information(ne.H, ev.n_residuals, motion_scale(fns, data.z, ev.omega), ne.g, ne.chi2, sigma2)
+    sc = fit.problem.binder.scenario
+    ranges = unc.range_std(start.lower, start.upper, fns.n_free)
+    model_from = f"the fit ({converged[0][0]})" if converged else "the initial guess (no solver converged)"
+    return Setting(
+        fns, data, info, (x, ev.x_fixed, ev.omega), sigma2, ranges, sc.objective.residual,
+        sc.objective.robust.delta, units, model_from,
+    )  # fmt: skip
+
+
+def plan_after(fit: Fit, results: Mapping[str, SolverResult], units: Mapping[str, str]) -> Plan | None:
+    """What to drive next (:mod:`nlp_calib.analysis.plan`), simulated with the fit (see
+    :func:`plan_setting`); without a converged fit, only when the drive leaves a direction free."""
+    setting = plan_setting(fit, results, units)
+    if setting is None:
+        return None
+    return plan(setting, free_only=not any(r.converged for r in results.values()))
 
 
 def residual_series(fit: Fit, results: Mapping[str, SolverResult], windows: np.ndarray) -> ResidualSeries:

@@ -193,6 +193,7 @@ def fit_checks(
         start=fitted.start,
         nominal=check,
         lag_effects=fitted.lag_effects,
+        plan=fitted.plan,
     )
 
 

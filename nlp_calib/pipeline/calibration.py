@@ -37,6 +37,7 @@ from nlp_calib.pipeline.analyse import (
     analyse_log,
     log_scorer,
     logs_crossval,
+    plan_after,
     scores,
 )
 from nlp_calib.pipeline.assemble import assemble_run, fit_notes, joint_run, scenario_info
@@ -410,6 +411,9 @@ def _fit(
     results = {name: fitting.solve(name) for name in solvers}
     noise = np.max([p.windows.input_noise_std for p in parts], axis=0)
     fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data))
+    sc = parts[0].prepared.scenario
+    units = scenario_info(sc, fitting.fns.model, lag_names(fitting.fns.spec.lags)).units
+    fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, units))
     return results, fitted, fit_notes(results, fitted, held)
 
 

@@ -34,6 +34,7 @@ from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import ControllerParams
 from nlp_calib.results.mount import SensorMount
+from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import OdometryTrack, RunSeries
 from nlp_calib.results.solver import SolverResult
 from nlp_calib.results.uncertainty import Uncertainty
@@ -165,6 +166,8 @@ class Checks:
     start: CostComparison | None = None
     #: The fit against the robot's nominal values (None: no source knows them).
     nominal: NominalCheck | None = None
+    #: What to drive next when a parameter is not determined well enough (``plan.md``).
+    plan: Plan | None = None
 
     def spreads(self, white: np.ndarray) -> list[np.ndarray]:
         """Each σ beyond the white-noise one ``white`` that the σ to believe takes in (NaN where one

@@ -125,6 +125,10 @@ class CameraPose:
 
     # --- numeric twins ---------------------------------------------------------------------------
 
+    def planar_yaw(self, params: Mapping[str, float]) -> float | None:
+        """None: a camera's poses lie in its own world frame, not the base's plane."""
+        return None
+
     def heading(self, T_world_sensor: np.ndarray) -> np.ndarray:
         """The camera's unwrapped rotation about the floor normal (the principal axis of its
         rotations relative to the first pose) at each pose (rad)."""

@@ -89,6 +89,11 @@ class PlanarPose:
         """The sensor's unwrapped heading at each pose (rad)."""
         return np.unwrap(T_world_sensor[:, 2])
 
+    def planar_yaw(self, params: Mapping[str, float]) -> float | None:
+        """The mount's yaw in the base plane (rad) in ``params`` (0 where they hold none): the
+        angle that turns the tracker's motion into the base's."""
+        return float(params.get("sensor_theta", 0.0))
+
     def tangent(self, z: np.ndarray) -> np.ndarray:
         """Measured motions ``z`` ``(3, n)`` in the residual's rows: they are their own."""
         return np.asarray(z, dtype=float)
