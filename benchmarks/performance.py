@@ -965,9 +965,9 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
     if section == "scaling":
         return scaling([2_000, 8_000] if quick else [10_000, 100_000, 1_000_000], repeats, tmp)
     if section == "horizon":  # a 10^6 run takes about a minute: 3 repeats
-        return horizon([2_000, 20_000] if quick else [100_000, 1_000_000], min(repeats, 3), tmp)
+        return horizon([2_000, 5_000] if quick else [100_000, 1_000_000], min(repeats, 3), tmp)
     if section == "camera":
-        return camera([2_000, 20_000] if quick else [100_000, 1_000_000], min(repeats, 3), tmp)
+        return camera([2_000, 5_000] if quick else [100_000, 1_000_000], min(repeats, 3), tmp)
     if section == "simulate":
         return simulate_big(10_000 if quick else 1_000_000, 1 if quick else 3, tmp)
     if section == "reader":
