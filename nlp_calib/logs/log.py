@@ -11,6 +11,7 @@ import numpy as np
 from nlp_calib.core import poses3d
 from nlp_calib.core.errors import DatasetError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
+from nlp_calib.logs.increments import Increments
 
 #: How an encoder reports: ``absolute`` readings lie in ``[0, max)`` (a steering angle);
 #: ``counter`` readings are a uint32 count that wraps at 2³² (a wheel).
@@ -123,6 +124,11 @@ class Log:
     ``joint_stream``, the joints as published on their own clock (re-sampled from there when the
     tracker's clock is shifted).
 
+    A reference that measures its own motion between two of its stamps (a scan matcher, visual
+    odometry: :class:`~nlp_calib.logs.increments.Increments`) fills ``increments``: a record is made
+    at each stamp, and ``T_world_sensor`` is then only the chain of those motions (held where none
+    covers an interval), for figures; the residuals compare each increment itself.
+
     A tracker that reports 3-D poses (a bag's motion capture, a camera's own trajectory) fills
     ``T_world_sensor_3d`` too, ``(x, y, z, qx, qy, qz, qw)`` per row in its own world frame and
     units; ``T_world_sensor`` is then its planar track (the pose's yaw for a tracker whose world
@@ -142,6 +148,7 @@ class Log:
     joint_positions: np.ndarray | None = None
     joint_stream: JointStream | None = None
     T_world_sensor_3d: np.ndarray | None = None
+    increments: Increments | None = None
 
     @property
     def start_ns(self) -> int:
@@ -226,6 +233,7 @@ class Log:
             line_numbers=frozen(self.line_numbers[sl]),
             joint_positions=_rows(self.joint_positions, sl),
             T_world_sensor_3d=_rows(self.T_world_sensor_3d, sl),
+            increments=None if self.increments is None else self.increments.select(start, stop),
         )
 
 

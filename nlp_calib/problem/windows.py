@@ -8,6 +8,10 @@ motion the model predicts over intervals ``start … stop - 1`` with the tracker
 ``z = t2v(T(p_start)⁻¹·T(p_stop))``. The evaluator integrates the intervals once per evaluation
 (see :mod:`nlp_calib.problem.motion`), so the windows are only a list of pairs: dropping some, or
 adding another log's, is a matter of selecting pairs.
+
+A log whose reference measures its own motions (``Log.increments``: a scan matcher's, visual
+odometry's) has no other windows than its increments: each joins the records at its two stamps,
+and its ``z`` is the increment as measured, not a motion between two poses.
 """
 
 from __future__ import annotations
@@ -89,6 +93,12 @@ class ResidualData:
     #: Problems with a time offset: the offset each log's inputs were re-sampled at and each input's
     #: rate at each record (:mod:`nlp_calib.problem.clock`); None: no clock data.
     clock: WindowClock | None = None
+    #: Per window, whether its ``z`` is an increment the reference measured itself (its noise its
+    #: own, not two poses'); None: none is.
+    increment: np.ndarray | None = None
+    #: Whether each window's data say which log it belongs to without a clock (a problem with a
+    #: mount per log: :attr:`ProblemFunctions.select_rows`).
+    selector: bool = False
 
     @property
     def log(self) -> Log:
@@ -123,11 +133,12 @@ class ResidualData:
     def clock_rows(self) -> np.ndarray:
         """Each window's clock data (``(0, n)`` without a time offset): the rates at its first and
         last record, its log's re-sampled offset and which log it belongs to."""
-        if self.clock is None:
-            return np.zeros((0, self.n_residuals))
-        rates, which = self.clock.rates, self.log_of(self.starts)
-        select = np.zeros((len(self.clock.lags), self.n_residuals))
+        which = self.log_of(self.starts)
+        select = np.zeros((len(self.logs), self.n_residuals))
         select[which, np.arange(self.n_residuals)] = 1.0
+        if self.clock is None:
+            return select if self.selector else np.zeros((0, self.n_residuals))
+        rates = self.clock.rates
         resampled = np.asarray(self.clock.lags)[which][None, :]
         return np.vstack([rates[:, self.starts], rates[:, self.stops], resampled, select])
 
@@ -138,7 +149,10 @@ class ResidualData:
 
     def select(self, keep: np.ndarray) -> ResidualData:
         """The windows ``keep`` (a mask or indices) marks, in order."""
-        return replace(self, starts=self.starts[keep], stops=self.stops[keep], z=self.z[:, keep])
+        increment = None if self.increment is None else self.increment[keep]
+        return replace(
+            self, starts=self.starts[keep], stops=self.stops[keep], z=self.z[:, keep], increment=increment
+        )
 
     def with_inputs(
         self, inputs: np.ndarray, lags: Sequence[float] | None = None, rates: np.ndarray | None = None
@@ -268,7 +282,15 @@ def joined(parts: Sequence[ResidualData]) -> ResidualData:
         dropped_faulty=sum(p.dropped_faulty for p in parts),
         dropped_selection=_summed([p.dropped_selection for p in parts]),
         clock=_joined_clock([p.clock for p in parts]),
+        increment=None
+        if all(p.increment is None for p in parts)
+        else np.concatenate([_increments(p) for p in parts]),
     )
+
+
+def _increments(data: ResidualData) -> np.ndarray:
+    """Which of ``data``'s windows are measured increments."""
+    return data.increment if data.increment is not None else np.zeros(data.n_residuals, dtype=bool)
 
 
 def _joined_clock(clocks: Sequence[WindowClock | None]) -> WindowClock | None:
@@ -336,11 +358,15 @@ def build_residual_data(
         inputs = interval_inputs(fns.model, logs, options.steering_sample)
     elif inputs.shape != (fns.n_inputs, sum(lg.n_records for lg in logs) - 1):
         raise ProblemError(f"inputs of shape {inputs.shape} do not fit the logs' intervals")
-    starts = np.concatenate(
-        [o + window_starts(lg.n_records - 1, H, options.stride) for o, lg in zip(offsets, logs)]
-    ).astype(np.int64)
+    parts = [_log_windows(fns, lg, o, H, options.stride) for o, lg in zip(offsets, logs)]
+    starts = np.concatenate([p[0] for p in parts]).astype(np.int64)
+    stops = np.concatenate([p[1] for p in parts]).astype(np.int64)
     poses = np.ascontiguousarray(np.concatenate([tracker_poses(fns, lg) for lg in logs]))
-    stops = starts + H
+    z = tracker_motions(fns, poses, starts, stops)
+    increment = None
+    if any(p[2] is not None for p in parts):
+        increment = np.concatenate([np.full(p[0].size, p[2] is not None) for p in parts])
+        z[:, increment] = np.concatenate([p[2] for p in parts if p[2] is not None], axis=1)
     data = ResidualData(
         logs=logs,
         offsets=offsets,
@@ -348,17 +374,42 @@ def build_residual_data(
         T_world_sensor=poses,
         starts=starts,
         stops=stops,
-        z=tracker_motions(fns, poses, starts, stops),
+        z=z,
         horizon=H,
         dropped_stationary=0,
         clock=WindowClock(tuple(lg.encoder_lag_s for lg in logs), log_rates(fns.model, logs, inputs))
         if fns.spec.lags
         else None,
+        increment=increment,
+        selector=fns.select_rows > 0,
     )
     if drop_stationary and starts.size:
         keep = data.interval_counts(fns.model.moving(inputs)) > 0
         data = replace(data.select(keep), dropped_stationary=int((~keep).sum()))
     return _without_faults(data, bad_intervals, bad_records)
+
+
+def _log_windows(
+    fns: ProblemFunctions, log: Log, offset: int, horizon: int, stride: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The first and last records of one log's windows (numbered from ``offset``), and their
+    measured motions when the log's reference gives its own increments (None: from its poses)."""
+    inc = log.increments
+    if inc is None:
+        first = offset + window_starts(log.n_records - 1, horizon, stride)
+        return first, first + horizon, None
+    if fns.sensor.group != "SE(2)":
+        raise ProblemError(
+            f"{log.path}: its reference gives planar motions (increments); they need a planar sensor "
+            f"(sensor: planar), not {fns.sensor.kind}"
+        )
+    k = np.arange(0, inc.n, stride)
+    if not fns.prefix and np.any(inc.last[k] - inc.first[k] != 1):
+        raise ProblemError(
+            f"{log.path}: some increments span several records (they overlap): a problem of horizon 1 "
+            "compares one interval; set residual.horizon to 2 or more"
+        )
+    return offset + inc.first[k], offset + inc.last[k], np.ascontiguousarray(inc.z[k].T)
 
 
 def _without_faults(
