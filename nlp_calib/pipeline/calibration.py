@@ -23,7 +23,7 @@ from nlp_calib.analysis.consistency import compare_logs
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel
-from nlp_calib.models.clock import LAG_PARAM, is_lag, lag_names
+from nlp_calib.models.clock import LAG_PARAM, base_name, is_lag, lag_names, log_of
 from nlp_calib.pipeline.align import Alignment, align
 from nlp_calib.pipeline.analyse import (
     FitAnalysis,
@@ -36,8 +36,8 @@ from nlp_calib.pipeline.analyse import (
     log_scorer,
     scores,
 )
-from nlp_calib.pipeline.assemble import assemble_run, fit_notes, scenario_info
-from nlp_calib.pipeline.build import Problem, StartingPoint, at_lags, build_stage
+from nlp_calib.pipeline.assemble import MountViews, assemble_run, fit_notes, scenario_info
+from nlp_calib.pipeline.build import Problem, StartingPoint, at_lags, build_stage, mount_count
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.scenario import Scenario
@@ -120,8 +120,9 @@ def blocks_scorer(fns: ProblemFunctions, parts: Sequence[LogSetup], data: Residu
         return log_scorer(fns, parts[0].windows, sc.objective.residual.steering_sample, W)
     intervals = [p.windows.bad_intervals[p.fit[0] : p.fit[1] - 1] for p in parts]
     records = [p.windows.bad_records[p.fit[0] : p.fit[1]] for p in parts]
+    logs = data.log_of(np.arange(data.inputs.shape[1]))  # each interval's mount, with one per log
     return Scorer(
-        fns, data.inputs, data.T_world_sensor, _joined(intervals, True), _joined(records, False), 0, W
+        fns, data.inputs, data.T_world_sensor, _joined(intervals, True), _joined(records, False), 0, W, logs
     )
 
 
@@ -267,7 +268,12 @@ class JointCalibration:
         start_from = (first.prepared.log, first.used[0], first.fit[1])
         one_horizon = sc.with_options(residual=joint_residual(sc, [p.prepared for p in self.parts]))
         lags = [p.alignment.lag_s for p in self.parts]
-        problem = build_stage(one_horizon, model, tuple(self.held), start_from, self.solvers, n_records, lags)
+        # A mount per log: each starts where its log's own start put it; windows say their log.
+        mounts = [p.problem.start.initial for p in self.parts] if mount_count(sc, len(self.parts)) > 1 else []
+        data = dataclasses.replace(data, selector=bool(mounts))
+        problem = build_stage(
+            one_horizon, model, tuple(self.held), start_from, self.solvers, n_records, lags, mounts, data
+        )
         self.fitting = Fit(problem, data, self.solvers)
         self.setup_time_s = time.perf_counter() - t0
 
@@ -300,7 +306,7 @@ class JointCalibration:
         fitted = dataclasses.replace(fitted, consistency=check)
         parts = _assemble(fitting, self.parts, results, fitted, notes, wanted or Wanted())
         return JointRun(
-            scenario=scenario_info(sc, self.model, lag_names(self.fns.spec.lags)),
+            scenario=scenario_info(sc, self.model, lag_names(self.fns.spec.lags), self.fns.spec.mounts),
             parts=tuple(parts),
             n_residuals=fitting.data.n_residuals,
             checks=Checks(
@@ -323,10 +329,14 @@ def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
 
 
 def own_name(name: str, log: int, n_logs: int) -> str:
-    """A joint fit's parameter ``name`` as log ``log``'s own fit calls it ("" when it has none)."""
-    if not is_lag(name):
+    """A joint fit's parameter ``name`` as log ``log``'s own fit calls it ("" when it has none): its
+    own lag and its own mount (with a mount per log) under their plain names."""
+    if is_lag(name):
+        return LAG_PARAM if name == lag_names(n_logs)[log] else ""
+    owner = log_of(name)
+    if owner is None:
         return name
-    return LAG_PARAM if name == lag_names(n_logs)[log] else ""
+    return base_name(name) if owner == log else ""
 
 
 def consistency(
@@ -379,16 +389,18 @@ def _assemble(
 ) -> list[CalibrationRun]:
     """Each log's figures (analyse) and its run (assemble) with the fit's estimates and checks."""
     runs = []
+    logs = tuple((p.prepared.scenario.name, p.prepared.log.header) for p in parts)
     for i, part in enumerate(parts):
         sc = part.prepared.scenario
-        info = scenario_info(sc, fitting.fns.model, lag_names(fitting.fns.spec.lags))
+        info = scenario_info(sc, fitting.fns.model, lag_names(fitting.fns.spec.lags), fitting.fns.spec.mounts)
         scorer = log_scorer(
-            fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window
+            fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window, i
         )
         view = LogView(part.prepared, part.windows, scorer, part.screening.findings, i)
         figures = analyse_log(fitting, results, view, wanted, info.labels)
         stage = (part.prepared, part.windows, part.alignment, part.screening.findings)
-        runs.append(assemble_run(info, stage, fitting.problem.start, results, fitted, figures, notes))
+        views = MountViews(fitting.fns, i, logs)
+        runs.append(assemble_run(info, stage, fitting.problem.start, results, fitted, figures, notes, views))
     return runs
 
 

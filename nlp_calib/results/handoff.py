@@ -46,3 +46,13 @@ class MountPose:
     calibrated: str
     #: Whether the roll and pitch were calibrated (else they are the nominal mount's).
     tilted: bool = False
+
+
+@dataclass(frozen=True)
+class LogMount:
+    """One log's own mount, in a fit of several logs with a mount each: the log (its name), the
+    sensor's frame in it and the mount as a URDF joint."""
+
+    log: str
+    frame: str
+    mount: MountPose

@@ -30,7 +30,7 @@ from nlp_calib.results.checks import (
 )
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
-from nlp_calib.results.handoff import ControllerParams, MountPose
+from nlp_calib.results.handoff import ControllerParams, LogMount, MountPose
 from nlp_calib.results.series import OdometryTrack, RunSeries
 from nlp_calib.results.solver import SolverResult
 from nlp_calib.results.uncertainty import Uncertainty
@@ -166,8 +166,11 @@ class SolverReport:
     holdout: TrajectoryMetrics | None
     #: The estimate in the robot stack's terms (its ros2_control controller's parameters).
     controller: ControllerParams | None = None
-    #: The sensor's mount in a robot's terms (a URDF joint), as the sensor says it.
+    #: The sensor's mount in a robot's terms (a URDF joint), as the sensor says it (this log's own,
+    #: in a fit with a mount per log).
     mount: MountPose | None = None
+    #: A fit with a mount per log: every log's own (one URDF joint each).
+    mounts: tuple[LogMount, ...] = ()
 
 
 #: The verdict's levels.
