@@ -16,7 +16,7 @@ to the stream that explains it:
   ``reversal`` (one increment against the motion, not made up afterwards) and ``counter_jump``
   (counts gained or lost in the direction of motion, not made up afterwards).
 
-A reference that measures its own motions (``Log.increments``: a scan matcher's) has no poses to
+A reference that measures its own motions (``Log.motions``: a scan matcher's) has no poses to
 be off a path; each increment is judged on its own (``bad_match``): first by what its matcher said
 of it (not converged, few points matched, a large fit error against the log's own), then, after the
 counters, by its disagreement with the wheels at the fit, far beyond the increments' robust
@@ -126,7 +126,7 @@ def tracker_faults(log: Log, sensor: Sensor) -> list[Fault]:
 
 def _match_fault(log: Log, k: int, size: tuple[float, float, float], why: str) -> Fault:
     """Increment ``k`` of ``log`` as a bad match."""
-    inc = log.increments
+    inc = log.motions
     assert inc is not None
     a, b, line = int(inc.first[k]), int(inc.last[k]), int(inc.line_numbers[k])
     evidence = f"the increment of line {line} (records {a}-{b}) {why}"
@@ -134,10 +134,10 @@ def _match_fault(log: Log, k: int, size: tuple[float, float, float], why: str) -
 
 
 def match_faults(log: Log) -> list[Fault]:
-    """Increments whose matcher said they are poor (see the module docstring), from the quality
+    """RelativeMotions whose matcher said they are poor (see the module docstring), from the quality
     the log keeps of each: ``converged`` (0 or 1), ``inliers`` (the share of points matched) and
     ``rmse`` (the fit's error, m), as far as the log has them."""
-    inc = log.increments
+    inc = log.motions
     if inc is None:
         return []
     q, why = inc.quality, [""] * inc.n
@@ -165,10 +165,10 @@ def match_faults(log: Log) -> list[Fault]:
 def increment_faults(
     fns: ProblemFunctions, params: np.ndarray, log: Log, inputs: np.ndarray, known: Sequence[Fault]
 ) -> list[Fault]:
-    """Increments that disagree with the wheels at ``params`` by more than :data:`MATCH_SCATTER`
+    """RelativeMotions that disagree with the wheels at ``params`` by more than :data:`MATCH_SCATTER`
     robust σ of the others' scatter (``known``: faults already found, whose increments are
     neither judged nor counted in the scatter)."""
-    inc = log.increments
+    inc = log.motions
     if inc is None or inc.n == 0:
         return []
     step = over_columns(fns.predict, np.ravel(np.asarray(params, dtype=float)), inputs)[0].T
@@ -278,14 +278,14 @@ def cleaned(log: Log, faults: Sequence[Fault]) -> Log:
     from the readings around them), and its bad matches dropped, so that they mislead no
     judgement of another stream."""
     out = log
-    inc = log.increments
+    inc = log.motions
     bad = [f for f in faults if f.kind in MATCH_KINDS]
     if inc is not None and bad:
         keep = np.ones(inc.n, dtype=bool)
         for f in bad:
             keep &= ~((inc.first == f.first) & (inc.last == f.last + 1))
         kept = inc.take(keep)
-        out = replace(out, increments=kept, T_world_sensor=frozen(kept.chain(log.n_records)))
+        out = replace(out, motions=kept, T_world_sensor=frozen(kept.chain(log.n_records)))
     bad_pose = np.zeros(log.n_records, dtype=bool)
     for f in faults:
         if f.kind in TRACKER_KINDS:
@@ -332,9 +332,9 @@ def counter_faults(
         return FaultReport(faults=(), stale={}, noise={}, unit=unit_of(log))
     T = tracker_poses(fns, log)
     z = over_columns(fns.between, T[:-1].T, T[1:].T)[0]
-    if log.increments is not None:
+    if log.motions is not None:
         # No increment measures these intervals: the wheels' own motion, which accuses no counter.
-        gap = ~log.increments.covered(log.n_records)
+        gap = ~log.motions.covered(log.n_records)
         if gap.any():
             z[:, gap] = over_columns(fns.predict, np.ravel(np.asarray(params, dtype=float)), inputs[:, gap])[0]
     e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
@@ -365,7 +365,7 @@ def screen(
     alone, then the counters' against a fit (``judge``) that leaves those glitches out, on readings
     with them interpolated over, at the tracker ``lag`` (s, or a range to estimate it in)."""
     model, n = fns.model, log.n_records
-    jumps = tracker_faults(log, fns.sensor) if log.increments is None else match_faults(log)
+    jumps = tracker_faults(log, fns.sensor) if log.motions is None else match_faults(log)
     glitches = tuple(jumps + absolute_faults(log, model.encoder_kinds))
     report = FaultReport(glitches, {}, {}, unit=unit_of(log))
     params = judge(report.bad_intervals(n - 1), report.bad_records(n))

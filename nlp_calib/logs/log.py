@@ -11,7 +11,7 @@ import numpy as np
 from nlp_calib.core import poses3d
 from nlp_calib.core.errors import DatasetError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
-from nlp_calib.logs.increments import Increments
+from nlp_calib.logs.relative import RelativeMotions
 
 #: How an encoder reports: ``absolute`` readings lie in ``[0, max)`` (a steering angle);
 #: ``counter`` readings are a uint32 count that wraps at 2³² (a wheel).
@@ -125,7 +125,7 @@ class Log:
     tracker's clock is shifted).
 
     A reference that measures its own motion between two of its stamps (a scan matcher, visual
-    odometry: :class:`~nlp_calib.logs.increments.Increments`) fills ``increments``: a record is made
+    odometry: :class:`~nlp_calib.logs.relative.RelativeMotions`) fills ``motions``: a record is made
     at each stamp, and ``T_world_sensor`` is then only the chain of those motions (held where none
     covers an interval), for figures; the residuals compare each increment itself.
 
@@ -148,7 +148,7 @@ class Log:
     joint_positions: np.ndarray | None = None
     joint_stream: JointStream | None = None
     T_world_sensor_3d: np.ndarray | None = None
-    increments: Increments | None = None
+    motions: RelativeMotions | None = None
 
     @property
     def start_ns(self) -> int:
@@ -233,7 +233,7 @@ class Log:
             line_numbers=frozen(self.line_numbers[sl]),
             joint_positions=_rows(self.joint_positions, sl),
             T_world_sensor_3d=_rows(self.T_world_sensor_3d, sl),
-            increments=None if self.increments is None else self.increments.select(start, stop),
+            motions=None if self.motions is None else self.motions.select(start, stop),
         )
 
 

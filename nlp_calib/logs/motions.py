@@ -4,7 +4,7 @@ The file is CSV: a header row ``t_start,t_end,x,y,theta`` (more named columns ma
 tool that measured each motion said of it, e.g. ``converged``, ``inliers``, ``rmse``), then one
 row per increment: its two stamps (s, read to the nanosecond) and the sensor's motion from its
 pose at ``t_start`` to its pose at ``t_end`` in its own frame at ``t_start`` (m, m, rad). ``#``
-lines are comments. Increments may leave gaps between them, share stamps (a chain of scan
+lines are comments. RelativeMotions may leave gaps between them, share stamps (a chain of scan
 matches) or overlap (matches against a key frame).
 
 A log timed by the motions has a record at each stamp the wheels' stream covers, the joints
@@ -24,7 +24,7 @@ import numpy as np
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning
 from nlp_calib.logs.bag_joints import at_tracker, check_overlap, joint_positions, resolution
 from nlp_calib.logs.bag_reader import Stamped
-from nlp_calib.logs.increments import Increments
+from nlp_calib.logs.relative import RelativeMotions
 from nlp_calib.logs.log import JointStream, Log, LogClock, LogHeader, frozen
 from nlp_calib.logs.text_tables import data_lines, numbers, seconds, stamp_ns
 
@@ -147,7 +147,7 @@ def timed_by_motions(
     if left:
         warnings.warn(f"{motions.path}: {left}", NlpCalibWarning, stacklevel=3)
     start_ns = int(stamps[0])
-    increments = Increments(
+    increments = RelativeMotions(
         frozen(np.searchsorted(stamps, motions.start_ns[keep]).astype(np.int64)),
         frozen(np.searchsorted(stamps, motions.end_ns[keep]).astype(np.int64)),
         frozen(motions.z[keep]),
@@ -174,5 +174,5 @@ def timed_by_motions(
         clock=LogClock(start_ns=start_ns),
         joint_positions=stream.at(time_s),
         joint_stream=stream,
-        increments=increments,
+        motions=increments,
     )

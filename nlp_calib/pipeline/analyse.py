@@ -100,8 +100,8 @@ class Scorer:
         """``params`` as the full-parameter Functions take them over these records (one log's
         view, or one view per interval)."""
         fns = self.fns
-        if isinstance(self.logs, int):
-            return fns.view(params, self.logs)
+        if fns.spec.mounts == 1 or isinstance(self.logs, int):
+            return fns.view(params, 0 if isinstance(self.logs, np.ndarray) else self.logs)
         views = np.stack([fns.view(params, i) for i in range(fns.spec.mounts)], axis=1)
         return np.ascontiguousarray(views[:, self.logs])
 

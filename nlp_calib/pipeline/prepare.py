@@ -93,13 +93,13 @@ def check_windows(sc: Scenario, start: int, stop: int, log: Log | None = None) -
     fit_stop = split(sc, start, stop)
     intervals = fit_stop - start - 1
     windows = 0 if intervals < H else (intervals - H) // stride + 1
-    if log is not None and log.increments is not None:
-        windows = -(-log.increments.select(start, fit_stop).n // stride)
+    if log is not None and log.motions is not None:
+        windows = -(-log.motions.select(start, fit_stop).n // stride)
     always = sc.objective.sensor.held()
     n_free = len(set(scenario_params(sc)) - set(sc.parameters.fixed) - set(always))
     if windows >= n_free:
         return
-    if log is not None and log.increments is not None:
+    if log is not None and log.motions is not None:
         part = f"{sc.origin} ({sc.dataset.name}): " if sc.origin else ""
         raise ScenarioError(
             f"{sc.path or sc.name}: {part}{windows} increment(s) in the {fit_stop - start} fitted records of "
@@ -140,8 +140,8 @@ def resolved(sc: Scenario, log: Log) -> Scenario:
     about. A log of measured increments has them as its windows: the horizon only says whether an
     increment may span several records (2 or more) or not (1, the fastest form)."""
     residual, dt = sc.objective.residual, median_dt(sc, log)
-    if log.increments is not None:
-        spans = log.increments.last - log.increments.first
+    if log.motions is not None:
+        spans = log.motions.last - log.motions.first
         H = 1 if spans.size and np.all(spans == 1) else max(residual.horizon, 2)
         return sc.with_options(residual=replace(residual, horizon=H, horizon_s=None))
     if residual.horizon_s is not None:

@@ -9,7 +9,7 @@ motion the model predicts over intervals ``start … stop - 1`` with the tracker
 (see :mod:`nlp_calib.problem.motion`), so the windows are only a list of pairs: dropping some, or
 adding another log's, is a matter of selecting pairs.
 
-A log whose reference measures its own motions (``Log.increments``: a scan matcher's, visual
+A log whose reference measures its own motions (``Log.motions``: a scan matcher's, visual
 odometry's) has no other windows than its increments: each joins the records at its two stamps,
 and its ``z`` is the increment as measured, not a motion between two poses.
 """
@@ -394,7 +394,7 @@ def _log_windows(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """The first and last records of one log's windows (numbered from ``offset``), and their
     measured motions when the log's reference gives its own increments (None: from its poses)."""
-    inc = log.increments
+    inc = log.motions
     if inc is None:
         first = offset + window_starts(log.n_records - 1, horizon, stride)
         return first, first + horizon, None

@@ -26,7 +26,7 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Increments:
+class RelativeMotions:
     """Increment ``k`` joins record ``first[k]`` to record ``last[k] > first[k]``; ``z[k]`` is the
     sensor's motion over it ``(x, y, θ)`` (m, rad) in its frame at ``first[k]``; ``quality`` maps
     a measure's name to its value per increment; ``line_numbers`` says where each came from (a
@@ -49,9 +49,9 @@ class Increments:
     def n(self) -> int:
         return int(self.first.shape[0])
 
-    def take(self, keep: np.ndarray) -> Increments:
+    def take(self, keep: np.ndarray) -> RelativeMotions:
         """The increments ``keep`` (a mask or indices) marks, in order."""
-        return Increments(
+        return RelativeMotions(
             _frozen(self.first[keep]),
             _frozen(self.last[keep]),
             _frozen(self.z[keep]),
@@ -59,7 +59,7 @@ class Increments:
             {k: _frozen(v[keep]) for k, v in self.quality.items()},
         )
 
-    def select(self, start: int, stop: int) -> Increments:
+    def select(self, start: int, stop: int) -> RelativeMotions:
         """Those inside records ``start:stop``, their records counted from ``start``."""
         inside = (self.first >= start) & (self.last < stop)
         out = self.take(inside)
