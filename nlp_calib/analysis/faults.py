@@ -136,7 +136,8 @@ def _match_fault(log: Log, k: int, size: tuple[float, float, float], why: str) -
 def match_faults(log: Log) -> list[Fault]:
     """RelativeMotions whose matcher said they are poor (see the module docstring), from the quality
     the log keeps of each: ``converged`` (0 or 1), ``inliers`` (the share of points matched) and
-    ``rmse`` (the fit's error, m), as far as the log has them."""
+    ``fit_error`` (the match's cost per matched point, in the matcher's own units), as far as the log
+    has them."""
     inc = log.motions
     if inc is None:
         return []
@@ -149,10 +150,14 @@ def match_faults(log: Log) -> list[Fault]:
         checks.append(
             (q["inliers"] < floor, lambda k: f"matched {q['inliers'][k]:.2f} of its points (the log's median {floor / MATCH_INLIERS:.2f})")
         )
-    if "rmse" in q and np.median(q["rmse"]) > 0:
-        ceiling = MATCH_ERROR * float(np.median(q["rmse"]))
+    if "fit_error" in q and np.median(q["fit_error"]) > 0:
+        ceiling = MATCH_ERROR * float(np.median(q["fit_error"]))
         checks.append(
-            (q["rmse"] > ceiling, lambda k: f"fits its points to {q['rmse'][k]:.3g} m rms (the log's median {ceiling / MATCH_ERROR:.3g} m)")
+            (
+                q["fit_error"] > ceiling,
+                lambda k: f"fits its points at a cost of {q['fit_error'][k]:.3g} a point (the log's median "
+                f"{ceiling / MATCH_ERROR:.3g})",
+            )
         )
     for bad, words in checks:
         for k in np.flatnonzero(bad):

@@ -14,12 +14,13 @@ from nlp_calib.core.config import fail
 from nlp_calib.sources.bag import BagSource
 from nlp_calib.sources.base import DatasetSource
 from nlp_calib.sources.joints import JointLogSource
+from nlp_calib.sources.lidar import LidarSource
 from nlp_calib.sources.motions import MotionsSource
 from nlp_calib.sources.text import TextSource, load_log
 
 #: The dataset sources, in the order they are asked whether they read a scenario's entry.
 SOURCES: dict[str, type[DatasetSource]] = {
-    s.kind: s for s in (BagSource, MotionsSource, JointLogSource, TextSource)
+    s.kind: s for s in (LidarSource, BagSource, MotionsSource, JointLogSource, TextSource)
 }
 
 
@@ -44,6 +45,7 @@ __all__ = [
     "BagSource",
     "DatasetSource",
     "JointLogSource",
+    "LidarSource",
     "MotionsSource",
     "TextSource",
     "load_log",
