@@ -468,3 +468,18 @@ def bag_inventory(path: str | Path) -> BagInventory:
         {k: tuple(sorted(v)) for k, v in joints.items()},
         {k: tuple(sorted(v)) for k, v in frames.items()},
     )
+
+
+def read_pose_topic(path: str | Path, topic: str, frame: str | None = None, receive: bool = False) -> Stamped:
+    """A pose topic alone (a robot's own ``nav_msgs/Odometry``, a tracker): its planar and 3-D
+    poses, :data:`TRACKER_COLUMNS`, of child frame ``frame`` where the type names one."""
+    p = Path(path)
+    trk = _Collector(topic)
+    with opened(p) as reader:
+        available = {name: info.msgtype or "mixed types" for name, info in reader.topics.items()}
+        msgtype = _check_topic(p, available, topic, "odometry", TRACKER_TYPES)
+        want = None if frame is None else _frame(frame)
+        seen: set[str] = set()
+        for number, (_, recorded, msg) in enumerate(messages(reader, p, (topic,)), start=1):
+            _add_poses(p, msg, msgtype, want, number, recorded, trk, seen)
+    return trk.result(p, "odometry", len(TRACKER_COLUMNS), "", receive)

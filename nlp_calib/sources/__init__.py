@@ -17,10 +17,11 @@ from nlp_calib.sources.joints import JointLogSource
 from nlp_calib.sources.lidar import LidarSource
 from nlp_calib.sources.motions import MotionsSource
 from nlp_calib.sources.text import TextSource, load_log
+from nlp_calib.sources.vendor import VendorSource
 
 #: The dataset sources, in the order they are asked whether they read a scenario's entry.
 SOURCES: dict[str, type[DatasetSource]] = {
-    s.kind: s for s in (LidarSource, BagSource, MotionsSource, JointLogSource, TextSource)
+    s.kind: s for s in (LidarSource, VendorSource, BagSource, MotionsSource, JointLogSource, TextSource)
 }
 
 
@@ -48,6 +49,7 @@ __all__ = [
     "LidarSource",
     "MotionsSource",
     "TextSource",
+    "VendorSource",
     "load_log",
     "moved",
     "parse_source",
