@@ -90,15 +90,19 @@ SCENARIO: dict[str, Any] = {
 def compare(values: dict[str, float], std: dict[str, float], refs: dict[str, Any]) -> None:
     """Each estimate beside the authors' for each set: the difference in their σ and in the combined
     σ (``σc``: ours and theirs in quadrature)."""
-    print(f"{'set':<10}{'parameter':<20}{'nlp_calib':>12}{'1σ':>10}{'authors':>12}{'1σ':>10}{'Δ/σ':>7}{'Δ/σc':>7}")
+    print(
+        f"{'set':<10}{'parameter':<20}{'nlp_calib':>12}{'1σ':>10}{'authors':>12}{'1σ':>10}{'Δ/σ':>7}{'Δ/σc':>7}"
+    )
     for s, ref in refs.items():
         for i, (name, theirs_of) in enumerate(THEIRS):
             key = name if name in values else f"{name}_{SETS.index(s) + 1}"
             mine, sd = values[key], std[key]
             theirs, their_sd = theirs_of(ref), float(np.sqrt(ref["covariance"][i][i]))
             d = mine - theirs
-            print(f"{s:<10}{key:<20}{mine:>12.6g}{sd:>10.2g}{theirs:>12.6g}{their_sd:>10.2g}"
-                  f"{d / their_sd:>+7.1f}{d / np.hypot(sd, their_sd):>+7.1f}")
+            print(
+                f"{s:<10}{key:<20}{mine:>12.6g}{sd:>10.2g}{theirs:>12.6g}{their_sd:>10.2g}"
+                f"{d / their_sd:>+7.1f}{d / np.hypot(sd, their_sd):>+7.1f}"
+            )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -111,7 +115,9 @@ def main(argv: list[str] | None = None) -> int:
     refs = {s: json.loads((args.reference_output / f"{s}_results.json").read_text()) for s in SETS}
     entries = [entry(*write_set(args.out, s, tuples(args.reference_output / f"{s}.tuple"))) for s in SETS]
     sc = scenario_from_mapping(
-        {**SCENARIO, "datasets": entries, "sensor": {"mount": "planar", "mounts": "per_log"}}, "censi", args.out
+        {**SCENARIO, "datasets": entries, "sensor": {"mount": "planar", "mounts": "per_log"}},
+        "censi",
+        args.out,
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

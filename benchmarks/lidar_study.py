@@ -44,7 +44,12 @@ def one(seed: int, duration: float, degraded: float, folder: Path) -> dict[str, 
     """One seed's figures."""
     sim = simulate_lidar(LidarSimulationOptions(duration_s=duration, seed=seed, degraded_fraction=degraded))
     bag, truth_file = write_lidar_simulation(sim, folder / f"drive_{seed}")
-    dataset = {"bag": str(bag), "joint_states": "/joint_states", "joints": list(sim.joint_names), "scan": "/scan"}
+    dataset = {
+        "bag": str(bag),
+        "joint_states": "/joint_states",
+        "joints": list(sim.joint_names),
+        "scan": "/scan",
+    }
     sc = scenario_from_mapping({**SCENARIO, "dataset": dataset}, f"lidar_{seed}", folder)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -56,7 +61,11 @@ def one(seed: int, duration: float, degraded: float, folder: Path) -> dict[str, 
     off = _matched(bag) - sim.true_motions()
     clean = np.setdiff1d(np.arange(off.shape[0]), np.concatenate([sim.degraded - 1, sim.degraded]))
     wrong = set(np.flatnonzero(np.any(np.abs(off) > 5 * off[clean].std(axis=0), axis=1)).tolist())
-    named = {f.first for f in run.checks.findings.report.faults if f.kind == "bad_match"} if run.checks.findings else set()
+    named = (
+        {f.first for f in run.checks.findings.report.faults if f.kind == "bad_match"}
+        if run.checks.findings
+        else set()
+    )
     return {
         "seed": seed,
         "mount_mm": (1e3 * err["sensor_x"], 1e3 * err["sensor_y"]),
@@ -74,15 +83,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--duration", type=float, default=120.0)
     ap.add_argument("--degraded", type=float, default=0.02)
     args = ap.parse_args(argv)
-    print(f"{'seed':>5} {'Δx mm':>7} {'Δy mm':>7} {'Δyaw°':>7} {'Δr_L %':>7} {'Δr_R %':>7} {'Δb %':>7} "
-          f"{'max|z|':>7} {'wrong/named/named but not':>25}  verdict")
+    print(
+        f"{'seed':>5} {'Δx mm':>7} {'Δy mm':>7} {'Δyaw°':>7} {'Δr_L %':>7} {'Δr_R %':>7} {'Δb %':>7} "
+        f"{'max|z|':>7} {'wrong/named/named but not':>25}  verdict"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
             r = one(seed, args.duration, args.degraded, Path(tmp))
             touched, found, other = r["matches"]
-            print(f"{r['seed']:>5} {r['mount_mm'][0]:>+7.2f} {r['mount_mm'][1]:>+7.2f} {r['yaw_deg']:>+7.3f} "
-                  + "".join(f"{v:>+8.3f}" for v in r["wheels_pct"])
-                  + f" {r['max_z']:>7.2f} {f'{touched}/{found}/{other}':>25}  {r['verdict']}")
+            print(
+                f"{r['seed']:>5} {r['mount_mm'][0]:>+7.2f} {r['mount_mm'][1]:>+7.2f} {r['yaw_deg']:>+7.3f} "
+                + "".join(f"{v:>+8.3f}" for v in r["wheels_pct"])
+                + f" {r['max_z']:>7.2f} {f'{touched}/{found}/{other}':>25}  {r['verdict']}"
+            )
     return 0
 
 

@@ -148,15 +148,23 @@ def match_faults(log: Log) -> list[Fault]:
     if "inliers" in q and np.median(q["inliers"]) > 0:
         floor = MATCH_INLIERS * float(np.median(q["inliers"]))
         checks.append(
-            (q["inliers"] < floor, lambda k: f"matched {q['inliers'][k]:.2f} of its points (the log's median {floor / MATCH_INLIERS:.2f})")
+            (
+                q["inliers"] < floor,
+                lambda k: (
+                    f"matched {q['inliers'][k]:.2f} of its points (the log's median "
+                    f"{floor / MATCH_INLIERS:.2f})"
+                ),
+            )
         )
     if "fit_error" in q and np.median(q["fit_error"]) > 0:
         ceiling = MATCH_ERROR * float(np.median(q["fit_error"]))
         checks.append(
             (
                 q["fit_error"] > ceiling,
-                lambda k: f"fits its points at a cost of {q['fit_error'][k]:.3g} a point (the log's median "
-                f"{ceiling / MATCH_ERROR:.3g})",
+                lambda k: (
+                    f"fits its points at a cost of {q['fit_error'][k]:.3g} a point (the log's median "
+                    f"{ceiling / MATCH_ERROR:.3g})"
+                ),
             )
         )
     for bad, words in checks:
@@ -164,7 +172,11 @@ def match_faults(log: Log) -> list[Fault]:
             why[k] = f"{why[k]}; " if why[k] else ""
             why[k] += words(int(k))
     nan = float("nan")
-    return [_match_fault(log, k, (nan, nan, nan), f"is poor by its matcher's word: {w}") for k, w in enumerate(why) if w]
+    return [
+        _match_fault(log, k, (nan, nan, nan), f"is poor by its matcher's word: {w}")
+        for k, w in enumerate(why)
+        if w
+    ]
 
 
 def increment_faults(
@@ -196,7 +208,9 @@ def increment_faults(
             f"disagrees with the wheels by ({e[0]:+.4f} m, {e[1]:+.4f} m, {e[2]:+.4f} rad), "
             f"{score[k]:.0f}× the increments' robust scatter"
         )
-        found.append(_match_fault(log, int(k), (float(np.hypot(e[0], e[1])), float(e[2]), float(score[k])), why))
+        found.append(
+            _match_fault(log, int(k), (float(np.hypot(e[0], e[1])), float(e[2]), float(score[k])), why)
+        )
     return found
 
 
@@ -284,13 +298,17 @@ def cleaned(log: Log, faults: Sequence[Fault]) -> Log:
     judgement of another stream."""
     out = log
     inc = log.motions
-    bad = [f for f in faults if f.kind in MATCH_KINDS]
-    if inc is not None and bad:
+    matches = [f for f in faults if f.kind in MATCH_KINDS]
+    if inc is not None and matches:
         keep = np.ones(inc.n, dtype=bool)
-        for f in bad:
+        for f in matches:
             keep &= ~((inc.first == f.first) & (inc.last == f.last + 1))
         kept = inc.take(keep)
-        out = replace(out, motions=kept, T_world_sensor=frozen(kept.chain(log.n_records)))
+        out = replace(
+            out,
+            reference=replace(out.reference, motions=kept),
+            T_world_sensor=frozen(kept.chain(log.n_records)),
+        )
     bad_pose = np.zeros(log.n_records, dtype=bool)
     for f in faults:
         if f.kind in TRACKER_KINDS:
@@ -341,7 +359,9 @@ def counter_faults(
         # No increment measures these intervals: the wheels' own motion, which accuses no counter.
         gap = ~log.motions.covered(log.n_records)
         if gap.any():
-            z[:, gap] = over_columns(fns.predict, np.ravel(np.asarray(params, dtype=float)), inputs[:, gap])[0]
+            z[:, gap] = over_columns(fns.predict, np.ravel(np.asarray(params, dtype=float)), inputs[:, gap])[
+                0
+            ]
     e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
     de_du = de_du.reshape(fns.error_rows, N, inputs.shape[0])
     screens, lag_s = screen_counters(e, de_du, inputs, counters, log.time_s, lag)

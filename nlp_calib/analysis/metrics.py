@@ -317,5 +317,7 @@ def each_metrics(
             # A trajectory known up to scale is scored in metres, by each parameter set's own scale.
             ref = reference(g, in_metres(fns, params, T), rpe_window, bad_i, bad_r)
         P = np.asarray(params, dtype=float)
-        out.append(scored(fns, P[:, start : stop - 1] if P.ndim == 2 else P, inputs[:, start : stop - 1], ref))
+        out.append(
+            scored(fns, P[:, start : stop - 1] if P.ndim == 2 else P, inputs[:, start : stop - 1], ref)
+        )
     return out

@@ -329,7 +329,9 @@ class _Sums:
             increment=inc,
         )
 
-    def _sources(self, w: slice, sens: Sensitivities) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _sources(
+        self, w: slice, sens: Sensitivities
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Each window's noise sources (rows of ``K``) and its maps from them: its first and last
         pose's, or a measured increment's own (a row of its own; nothing at its end)."""
         a, b = self.starts[w], self.stops[w]

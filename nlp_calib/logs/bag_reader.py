@@ -34,7 +34,17 @@ from nlp_calib.core.ranges import Range
 from nlp_calib.logs.bag_files import DAMAGED, BagError, is_bag, messages, opened, why
 from nlp_calib.logs.reader import yaw_from_quaternion
 
-__all__ = ["BagError", "BagInventory", "BagTopics", "Drops", "Stamped", "bag_inventory", "is_bag", "read_joints", "read_topics"]
+__all__ = [
+    "BagError",
+    "BagInventory",
+    "BagTopics",
+    "Drops",
+    "Stamped",
+    "bag_inventory",
+    "is_bag",
+    "read_joints",
+    "read_topics",
+]
 
 ENCODER_TYPE = "sensor_msgs/msg/JointState"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
@@ -385,7 +395,9 @@ def _add_angles(
     enc.add(_stamp_ns(p, msg.header, topics.joint_states, number), recorded, pos + vel)
 
 
-def read_joints(path: str | Path, joint_states: str, joints: tuple[str, ...], receive: bool = False) -> Stamped:
+def read_joints(
+    path: str | Path, joint_states: str, joints: tuple[str, ...], receive: bool = False
+) -> Stamped:
     """The joints in radians on ``joint_states`` alone (each joint's position, then its velocity;
     NaN where a message has none), timed by their header stamps or, with ``receive``, the bag's
     record times (a reference other than a pose topic: a lidar's scans)."""
@@ -459,7 +471,9 @@ def bag_inventory(path: str | Path) -> BagInventory:
             if conn.msgtype == ENCODER_TYPE:
                 joints.setdefault(conn.topic, set()).update(msg.name)
             elif conn.msgtype in _FRAMED:
-                frames.setdefault(conn.topic, set()).update(_frame(f[0]) for f in _tracker_poses(msg, conn.msgtype))
+                frames.setdefault(conn.topic, set()).update(
+                    _frame(f[0]) for f in _tracker_poses(msg, conn.msgtype)
+                )
             else:
                 frames.setdefault(conn.topic, set()).add(_frame(msg.header.frame_id))
     return BagInventory(

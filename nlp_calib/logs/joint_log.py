@@ -119,7 +119,9 @@ def wheel_positions(
     if form == "speeds":
         dt = np.diff(time_ns).astype(float) * 1e-9
         v = out[:, cols]
-        out[:, cols] = np.vstack([np.zeros((1, cols.size)), np.cumsum(0.5 * (v[1:] + v[:-1]) * dt[:, None], axis=0)])
+        out[:, cols] = np.vstack(
+            [np.zeros((1, cols.size)), np.cumsum(0.5 * (v[1:] + v[:-1]) * dt[:, None], axis=0)]
+        )
         return out
     per_count = 2.0 * np.pi / counts_per_turn if counts_per_turn is not None else 1.0
     steps = out[1:, cols] * per_count  # the first row's increment ends at the log's first stamp

@@ -111,6 +111,15 @@ class LogClock:
 
 
 @dataclass(frozen=True)
+class ReferenceData:
+    """What the reference measured beyond its planar poses: its 3-D poses ``(n, 7)`` (a tracker's,
+    a camera's), or its own motions between records (a scan matcher's)."""
+
+    poses_3d: np.ndarray | None = None
+    motions: RelativeMotions | None = None
+
+
+@dataclass(frozen=True)
 class Log:
     """An immutable robot log: per-record arrays of equal length ``n_records``.
 
@@ -147,8 +156,17 @@ class Log:
     clock: LogClock = field(default_factory=lambda: LogClock())
     joint_positions: np.ndarray | None = None
     joint_stream: JointStream | None = None
-    T_world_sensor_3d: np.ndarray | None = None
-    motions: RelativeMotions | None = None
+    reference: ReferenceData = field(default_factory=ReferenceData)
+
+    @property
+    def T_world_sensor_3d(self) -> np.ndarray | None:
+        """The tracker's 3-D poses, where it reports them (None: planar ones)."""
+        return self.reference.poses_3d
+
+    @property
+    def motions(self) -> RelativeMotions | None:
+        """The reference's own motions between records, where it measures them."""
+        return self.reference.motions
 
     @property
     def start_ns(self) -> int:
@@ -219,7 +237,7 @@ class Log:
         s = np.clip((t[k] - t[a]) / np.maximum(t[b] - t[a], 1e-12), 0.0, 1.0)[:, None]
         P = np.array(self.T_world_sensor_3d, dtype=float)
         P[k] = poses3d.between_at(P[a], P[b], s)
-        return replace(out, T_world_sensor_3d=frozen(P))
+        return replace(out, reference=replace(out.reference, poses_3d=frozen(P)))
 
     def select(self, start: int, stop: int) -> Log:
         """The records ``start:stop`` (time stays relative to the file's first record)."""
@@ -232,8 +250,10 @@ class Log:
             T_world_sensor=frozen(self.T_world_sensor[sl]),
             line_numbers=frozen(self.line_numbers[sl]),
             joint_positions=_rows(self.joint_positions, sl),
-            T_world_sensor_3d=_rows(self.T_world_sensor_3d, sl),
-            motions=None if self.motions is None else self.motions.select(start, stop),
+            reference=ReferenceData(
+                _rows(self.T_world_sensor_3d, sl),
+                None if self.motions is None else self.motions.select(start, stop),
+            ),
         )
 
 

@@ -24,8 +24,8 @@ import numpy as np
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning
 from nlp_calib.logs.bag_joints import at_tracker, check_overlap, joint_positions, resolution
 from nlp_calib.logs.bag_reader import Stamped
+from nlp_calib.logs.log import JointStream, Log, LogClock, LogHeader, ReferenceData, frozen
 from nlp_calib.logs.relative import RelativeMotions
-from nlp_calib.logs.log import JointStream, Log, LogClock, LogHeader, frozen
 from nlp_calib.logs.text_tables import data_lines, numbers, seconds, stamp_ns
 
 #: The columns every motions file starts with.
@@ -120,7 +120,9 @@ def _records(
     """The records' stamps (those of the increments the joints cover), which increments they keep,
     and what was left out, in words."""
     stamps = np.unique(np.concatenate([motions.start_ns, motions.end_ns]))
-    ok_index, timing = at_tracker(joint_ns, Stamped(motions.path, stamps, np.zeros((stamps.size, 0))), max_gap_s)
+    ok_index, timing = at_tracker(
+        joint_ns, Stamped(motions.path, stamps, np.zeros((stamps.size, 0))), max_gap_s
+    )
     records = stamps[np.sort(ok_index)]
     keep = np.isin(motions.start_ns, records) & np.isin(motions.end_ns, records)
     left = motions.n - int(keep.sum())
@@ -156,7 +158,9 @@ def timed_by_motions(
     )
     steps = [0.0 if n in integrated else resolution(positions[:, j]) for j, n in enumerate(names)]
     by_velocity = tuple(e for e, n in zip(header.encoder_names, names) if n in integrated)
-    stream = JointStream(frozen((joint_ns - start_ns).astype(float) * 1e-9), frozen(positions), tuple(steps), by_velocity)
+    stream = JointStream(
+        frozen((joint_ns - start_ns).astype(float) * 1e-9), frozen(positions), tuple(steps), by_velocity
+    )
     time_s = frozen((stamps - start_ns).astype(float) * 1e-9)
     n = int(stamps.size)
     # A record's "line" is that of the first increment that starts or ends there.
@@ -174,5 +178,5 @@ def timed_by_motions(
         clock=LogClock(start_ns=start_ns),
         joint_positions=stream.at(time_s),
         joint_stream=stream,
-        motions=increments,
+        reference=ReferenceData(motions=increments),
     )

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +30,9 @@ from nlp_calib.logs.bag_files import BagError, messages, opened
 from nlp_calib.logs.motions import MotionTable
 
 SCAN_TYPE = "sensor_msgs/msg/LaserScan"
-_INSTALL = "matching a lidar's scans needs small_gicp: install the lidar extra: pip install 'nlp_calib[lidar]'"
+_INSTALL = (
+    "matching a lidar's scans needs small_gicp: install the lidar extra: pip install 'nlp_calib[lidar]'"
+)
 
 
 @dataclass(frozen=True)
@@ -62,30 +65,38 @@ def read_scans(path: str | Path, topic: str, receive: bool = False) -> LaserScan
     p = Path(path)
     stamps: list[int] = []
     rows: list[np.ndarray] = []
-    first = None
+    first: tuple[tuple[float, float, int], float, float, str] | None = None
     with opened(p) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
         if types.get(topic) != SCAN_TYPE:
             held = f"holds {types[topic]}" if topic in types else "is not in the bag"
-            raise BagError(p, f"scan: topic {topic!r} {held}; name a {SCAN_TYPE} topic (nlp-calib import-bag {p} lists them)")
+            raise BagError(
+                p,
+                f"scan: topic {topic!r} {held}; name a {SCAN_TYPE} topic (nlp-calib import-bag {p} lists "
+                "them)",
+            )
         for _, recorded, msg in messages(reader, p, (topic,)):
             beams = (float(msg.angle_min), float(msg.angle_increment), len(msg.ranges))
             if first is None:
                 first = (beams, float(msg.range_min), float(msg.range_max), str(msg.header.frame_id))
             elif beams != first[0]:
-                raise BagError(p, f"scan {len(rows) + 1} on {topic!r} has other beams than the first ({beams} against {first[0]})")
+                raise BagError(
+                    p,
+                    f"scan {len(rows) + 1} on {topic!r} has other beams than the first ({beams} against "
+                    f"{first[0]})",
+                )
             stamp = recorded if receive else int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
             stamps.append(stamp)
             rows.append(np.asarray(msg.ranges, dtype=float))
     if first is None or len(rows) < 2:
         raise BagError(p, f"scan: topic {topic!r} has {len(rows)} scan(s); a lidar needs at least 2")
-    (angle_min, step, beams), range_min, range_max, frame = first
+    (angle_min, step, n_beams), range_min, range_max, frame = first
     order = np.argsort(np.array(stamps, dtype=np.int64), kind="stable")
     return LaserScans(
         topic,
         np.array(stamps, dtype=np.int64)[order],
         np.array(rows)[order],
-        angle_min + step * np.arange(beams),
+        angle_min + step * np.arange(int(n_beams)),
         range_min,
         range_max,
         frame.strip("/") or "laser",
@@ -109,7 +120,11 @@ class ScanMatching:
     heights: tuple[float, ...] = (-0.1, 0.0, 0.1)
 
     def __post_init__(self) -> None:
-        for name, limit in (("resolution", RESOLUTION), ("max_correspondence", CORRESPONDENCE), ("max_iterations", ITERATIONS)):
+        for name, limit in (
+            ("resolution", RESOLUTION),
+            ("max_correspondence", CORRESPONDENCE),
+            ("max_iterations", ITERATIONS),
+        ):
             if (reason := limit.problem(getattr(self, name))) is not None:
                 raise DatasetError("<scan matching>", None, f"{name} {reason}")
 
@@ -137,7 +152,7 @@ def match_scans(scans: LaserScans, options: ScanMatching | None = None) -> Motio
     n = scans.n
     z, quality = np.zeros((n - 1, 3)), {k: np.zeros(n - 1) for k in ("converged", "inliers", "fit_error")}
 
-    def cloud(k: int) -> tuple[object, object]:
+    def cloud(k: int) -> tuple[Any, Any]:
         return small_gicp.preprocess_points(opts.stood_up(scans.points(k)), opts.resolution, 10, 1)
 
     target, tree = cloud(0)
@@ -149,8 +164,14 @@ def match_scans(scans: LaserScans, options: ScanMatching | None = None) -> Motio
             quality["converged"][k - 1] = 0.0
         else:
             result = small_gicp.align(
-                target, source, tree, init_T_target_source=_se2(guess), registration_type="GICP",
-                max_correspondence_distance=opts.max_correspondence, num_threads=1, max_iterations=opts.max_iterations,
+                target,
+                source,
+                tree,
+                init_T_target_source=_se2(guess),
+                registration_type="GICP",
+                max_correspondence_distance=opts.max_correspondence,
+                num_threads=1,
+                max_iterations=opts.max_iterations,
             )
             T = np.asarray(result.T_target_source)
             z[k - 1] = (T[0, 3], T[1, 3], math.atan2(T[1, 0], T[0, 0]))

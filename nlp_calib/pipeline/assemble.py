@@ -53,7 +53,9 @@ def scenario_info(
     mounts: one per log, or one)."""
     joint = sc.data.joint
     sensor = sc.objective.sensor.sensor
-    own = {f"{n}_{i + 1}": sensor.units[n] for i in range(mounts) for n in sensor.params} if mounts > 1 else {}
+    own = (
+        {f"{n}_{i + 1}": sensor.units[n] for i in range(mounts) for n in sensor.params} if mounts > 1 else {}
+    )
     return ScenarioInfo(
         name=sc.name,
         path=None if sc.path is None else str(sc.path),
@@ -199,8 +201,9 @@ def _report(
     std = believed_std(u.std, blocked)
     controller = controller_params(prepared.model, result.names, result.params, std, u.correlation, ranges)
     sensor = prepared.scenario.objective.sensor.sensor
+    every: tuple[LogMount, ...] = ()
     if views is None:
-        mount, every = sensor.mount_pose(result.param_dict(), header.sensor_z_roll_pitch), ()
+        mount = sensor.mount_pose(result.param_dict(), header.sensor_z_roll_pitch)
     else:
         mount, every = views.mounts(sensor, result.param_dict())
     return SolverReport(result, u, *figures.scores[name], controller, mount, every)

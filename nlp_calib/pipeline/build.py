@@ -48,7 +48,9 @@ def mount_count(sc: Scenario, n_logs: int) -> int:
     return n_logs if sc.objective.sensor.mounts == "per_log" and n_logs > 1 else 1
 
 
-def per_log_names(names: Sequence[str], n_logs: int, mounts: Sequence[str] = (), n_mounts: int = 1) -> tuple[str, ...]:
+def per_log_names(
+    names: Sequence[str], n_logs: int, mounts: Sequence[str] = (), n_mounts: int = 1
+) -> tuple[str, ...]:
     """Scenario names with ``tracker_lag`` replaced by each log's own (several logs), and each of
     ``mounts`` (the sensor's parameters) by each log's own when there is a mount per log."""
     lags = lag_names(n_logs)
@@ -185,7 +187,9 @@ def starting_point(
     initial.update(lag_start(sc, fns.spec.lags, lags))
     one = fns.spec.mounts == 1
     sensor = (
-        auto_start(sc, fns, log, (start, stop), initial) if sc.parameters.initial_guess == "auto" and one else None
+        auto_start(sc, fns, log, (start, stop), initial)
+        if sc.parameters.initial_guess == "auto" and one
+        else None
     )
     auto = None if sensor is None else sensor.params
     if auto is not None:

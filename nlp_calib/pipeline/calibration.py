@@ -270,7 +270,7 @@ class JointCalibration:
         lags = [p.alignment.lag_s for p in self.parts]
         # A mount per log: each starts where its log's own start put it; windows say their log.
         mounts = [p.problem.start.initial for p in self.parts] if mount_count(sc, len(self.parts)) > 1 else []
-        data = dataclasses.replace(data, selector=bool(mounts))
+        data = data.with_selector() if mounts else data
         problem = build_stage(
             one_horizon, model, tuple(self.held), start_from, self.solvers, n_records, lags, mounts, data
         )

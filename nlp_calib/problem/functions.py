@@ -216,7 +216,9 @@ class ProblemFunctions(TrajectoryFunctions):
         out = dict(views[0])
         if self.spec.mounts > 1:
             for i, v in enumerate(views):
-                out.update({n: float(v[p]) for n, p in zip(self.mount_names(i), self.sensor.params) if p in v})
+                out.update(
+                    {n: float(v[p]) for n, p in zip(self.mount_names(i), self.sensor.params) if p in v}
+                )
             for p in self.sensor.params:
                 out.pop(p, None)
         return out

@@ -93,12 +93,20 @@ class ResidualData:
     #: Problems with a time offset: the offset each log's inputs were re-sampled at and each input's
     #: rate at each record (:mod:`nlp_calib.problem.clock`); None: no clock data.
     clock: WindowClock | None = None
-    #: Per window, whether its ``z`` is an increment the reference measured itself (its noise its
-    #: own, not two poses'); None: none is.
-    increment: np.ndarray | None = None
-    #: Whether each window's data say which log it belongs to without a clock (a problem with a
-    #: mount per log: :attr:`ProblemFunctions.select_rows`).
-    selector: bool = False
+
+    @property
+    def increment(self) -> np.ndarray | None:
+        """Per window, whether its ``z`` is an increment the reference measured itself (its noise
+        its own, not two poses'; a log with ``motions``); None: none is."""
+        own = np.array([lg.motions is not None for lg in self.logs])
+        return own[self.log_of(self.starts)] if own.any() else None
+
+    def with_selector(self) -> ResidualData:
+        """These windows saying which log each belongs to (a problem with a mount per log and no
+        time offset: a clock of no offsets)."""
+        if self.clock is not None:
+            return self
+        return replace(self, clock=WindowClock((), np.zeros((0, self.n_records))))
 
     @property
     def log(self) -> Log:
@@ -133,11 +141,13 @@ class ResidualData:
     def clock_rows(self) -> np.ndarray:
         """Each window's clock data (``(0, n)`` without a time offset): the rates at its first and
         last record, its log's re-sampled offset and which log it belongs to."""
+        if self.clock is None:
+            return np.zeros((0, self.n_residuals))
         which = self.log_of(self.starts)
         select = np.zeros((len(self.logs), self.n_residuals))
         select[which, np.arange(self.n_residuals)] = 1.0
-        if self.clock is None:
-            return select if self.selector else np.zeros((0, self.n_residuals))
+        if not self.clock.lags:
+            return select  # a mount per log: which log alone
         rates = self.clock.rates
         resampled = np.asarray(self.clock.lags)[which][None, :]
         return np.vstack([rates[:, self.starts], rates[:, self.stops], resampled, select])
@@ -149,10 +159,7 @@ class ResidualData:
 
     def select(self, keep: np.ndarray) -> ResidualData:
         """The windows ``keep`` (a mask or indices) marks, in order."""
-        increment = None if self.increment is None else self.increment[keep]
-        return replace(
-            self, starts=self.starts[keep], stops=self.stops[keep], z=self.z[:, keep], increment=increment
-        )
+        return replace(self, starts=self.starts[keep], stops=self.stops[keep], z=self.z[:, keep])
 
     def with_inputs(
         self, inputs: np.ndarray, lags: Sequence[float] | None = None, rates: np.ndarray | None = None
@@ -282,15 +289,7 @@ def joined(parts: Sequence[ResidualData]) -> ResidualData:
         dropped_faulty=sum(p.dropped_faulty for p in parts),
         dropped_selection=_summed([p.dropped_selection for p in parts]),
         clock=_joined_clock([p.clock for p in parts]),
-        increment=None
-        if all(p.increment is None for p in parts)
-        else np.concatenate([_increments(p) for p in parts]),
     )
-
-
-def _increments(data: ResidualData) -> np.ndarray:
-    """Which of ``data``'s windows are measured increments."""
-    return data.increment if data.increment is not None else np.zeros(data.n_residuals, dtype=bool)
 
 
 def _joined_clock(clocks: Sequence[WindowClock | None]) -> WindowClock | None:
@@ -363,10 +362,9 @@ def build_residual_data(
     stops = np.concatenate([p[1] for p in parts]).astype(np.int64)
     poses = np.ascontiguousarray(np.concatenate([tracker_poses(fns, lg) for lg in logs]))
     z = tracker_motions(fns, poses, starts, stops)
-    increment = None
     if any(p[2] is not None for p in parts):
-        increment = np.concatenate([np.full(p[0].size, p[2] is not None) for p in parts])
-        z[:, increment] = np.concatenate([p[2] for p in parts if p[2] is not None], axis=1)
+        measured = np.concatenate([np.full(p[0].size, p[2] is not None) for p in parts])
+        z[:, measured] = np.concatenate([p[2] for p in parts if p[2] is not None], axis=1)
     data = ResidualData(
         logs=logs,
         offsets=offsets,
@@ -380,9 +378,9 @@ def build_residual_data(
         clock=WindowClock(tuple(lg.encoder_lag_s for lg in logs), log_rates(fns.model, logs, inputs))
         if fns.spec.lags
         else None,
-        increment=increment,
-        selector=fns.select_rows > 0,
     )
+    if fns.select_rows and data.clock is None:
+        data = data.with_selector()
     if drop_stationary and starts.size:
         keep = data.interval_counts(fns.model.moving(inputs)) > 0
         data = replace(data.select(keep), dropped_stationary=int((~keep).sum()))

@@ -121,22 +121,24 @@ class LidarSimulation:
         }
 
 
-def _box(cx: float, cy: float, w: float, h: float, turn: float) -> np.ndarray:
+def _box(centre: np.ndarray, size: np.ndarray, turn: float) -> np.ndarray:
+    """The four walls ``(4, 4)`` of a box of ``size`` at ``centre``, turned by ``turn``."""
     c, s = np.cos(turn), np.sin(turn)
-    corners = np.array([[-w, -h], [w, -h], [w, h], [-w, h]]) / 2 @ np.array([[c, s], [-s, c]]) + [cx, cy]
+    w, h = size
+    corners = np.array([[-w, -h], [w, -h], [w, h], [-w, h]]) / 2 @ np.array([[c, s], [-s, c]]) + centre
     return np.hstack([corners, np.roll(corners, -1, axis=0)])
 
 
 def room(rng: np.random.Generator, path_xy: np.ndarray) -> np.ndarray:
     """Walls ``(m, 4)`` around the ground ``path_xy`` covers, and boxes clear of the path."""
     lo, hi = path_xy.min(axis=0) - MARGIN_M, path_xy.max(axis=0) + MARGIN_M
-    walls = [_box(*(0.5 * (lo + hi)), *(hi - lo), 0.0)]
+    walls = [_box(0.5 * (lo + hi), hi - lo, 0.0)]
     for _ in range(40 * BOXES):
         if len(walls) > BOXES:
             break
         centre, size = rng.uniform(lo + 0.5, hi - 0.5), rng.uniform(0.3, 1.2, 2)
         if np.min(np.linalg.norm(path_xy - centre, axis=1)) > CLEARANCE_M + 0.5 * np.hypot(*size):
-            walls.append(_box(*centre, *size, float(rng.uniform(0, np.pi))))
+            walls.append(_box(centre, size, float(rng.uniform(0, np.pi))))
     return np.vstack(walls)
 
 
@@ -175,7 +177,11 @@ def simulate_lidar(opts: LidarSimulationOptions) -> LidarSimulation:
     walls = room(rng, stamped[:, :2])
     angles = -np.pi + 2.0 * np.pi * np.arange(opts.beams) / opts.beams
     n_bad = round(opts.degraded_fraction * t_scans.size)
-    degraded = np.sort(rng.choice(np.arange(1, t_scans.size - 1), size=n_bad, replace=False)) if n_bad else np.zeros(0, int)
+    degraded = (
+        np.sort(rng.choice(np.arange(1, t_scans.size - 1), size=n_bad, replace=False))
+        if n_bad
+        else np.zeros(0, int)
+    )
     late = degraded[rng.random(degraded.size) < 0.5]
     seen = t_scans.copy()
     seen[late] += LATE_S
@@ -210,12 +216,14 @@ def lidar_paths(bag: str | Path) -> tuple[Path, Path]:
 def write_lidar_simulation(sim: LidarSimulation, bag: str | Path) -> tuple[Path, Path]:
     """Write the bag (``/joint_states``, ``/scan``, ``/tf_static``) and the truth JSON."""
     path, truth = lidar_paths(bag)
-    ns = lambda t: int(round(float(t) * 1e9))  # noqa: E731
+    ns = lambda t: round(float(t) * 1e9)  # noqa: E731
     t = sim.options.truth
     nominal = (round(t["sensor_x"], 1), round(t["sensor_y"], 1), LIDAR_Z)
     period = 1.0 / sim.options.scan_rate_hz
     messages = [tf_static(ns(sim.joint_time_s[0]), "base_link", "laser", nominal, 0.0)]
-    messages += [joint_state(ns(s), sim.joint_names, row) for s, row in zip(sim.joint_time_s, sim.joint_positions)]
+    messages += [
+        joint_state(ns(s), sim.joint_names, row) for s, row in zip(sim.joint_time_s, sim.joint_positions)
+    ]
     messages += [
         laser_scan(ns(s), "laser", sim.angles, r, sim.options.range_max, period)
         for s, r in zip(sim.scan_time_s, sim.ranges)

@@ -39,13 +39,19 @@ def joint_state(ns: int, names: Sequence[str], position: Sequence[float]) -> Mes
     def build(ts: Any) -> Any:
         empty = np.zeros(0)
         return ts.types[JOINT_STATE](
-            header=header(ts, ns, ""), name=list(names), position=np.asarray(position, float), velocity=empty, effort=empty
+            header=header(ts, ns, ""),
+            name=list(names),
+            position=np.asarray(position, float),
+            velocity=empty,
+            effort=empty,
         )
 
     return ("/joint_states", JOINT_STATE, ns, build)
 
 
-def laser_scan(ns: int, frame: str, angles: np.ndarray, ranges: np.ndarray, range_max: float, period_s: float) -> Message:
+def laser_scan(
+    ns: int, frame: str, angles: np.ndarray, ranges: np.ndarray, range_max: float, period_s: float
+) -> Message:
     """A LaserScan stamped ``ns`` (every beam at that instant), no intensities."""
 
     def build(ts: Any) -> Any:
@@ -68,12 +74,19 @@ def laser_scan(ns: int, frame: str, angles: np.ndarray, ranges: np.ndarray, rang
 def _transform(ts: Any, ns: int, parent: str, child: str, xyz: Sequence[float], yaw: float) -> Any:
     v = ts.types["geometry_msgs/msg/Vector3"](x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
     tf = ts.types["geometry_msgs/msg/Transform"](translation=v, rotation=quaternion(ts, yaw))
-    return ts.types["geometry_msgs/msg/TransformStamped"](header=header(ts, ns, parent), child_frame_id=child, transform=tf)
+    return ts.types["geometry_msgs/msg/TransformStamped"](
+        header=header(ts, ns, parent), child_frame_id=child, transform=tf
+    )
 
 
 def tf_static(ns: int, parent: str, child: str, xyz: Sequence[float], yaw: float) -> Message:
     """One fixed transform on ``/tf_static``."""
-    return ("/tf_static", TF, ns, lambda ts: ts.types[TF](transforms=[_transform(ts, ns, parent, child, xyz, yaw)]))
+    return (
+        "/tf_static",
+        TF,
+        ns,
+        lambda ts: ts.types[TF](transforms=[_transform(ts, ns, parent, child, xyz, yaw)]),
+    )
 
 
 def odometry(ns: int, frame: str, child: str, pose: Sequence[float]) -> Message:

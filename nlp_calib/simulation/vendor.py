@@ -98,7 +98,9 @@ def vendor_odometry(angles: np.ndarray, radius: float, separation: float) -> np.
     return poses.accumulate(np.zeros(3), steps)
 
 
-def write_vendor_simulation(opts: VendorSimulationOptions, odometry_path: str | Path) -> tuple[Path, Path, Path]:
+def write_vendor_simulation(
+    opts: VendorSimulationOptions, odometry_path: str | Path
+) -> tuple[Path, Path, Path]:
     """Simulate and write ``<name>`` (the vendor's odometry, ``t x y θ``), ``<name>.tum`` (the
     tracker) and ``<name>.truth.json`` beside it; returns the three paths."""
     rng = np.random.default_rng(opts.seed)
@@ -118,6 +120,10 @@ def write_vendor_simulation(opts: VendorSimulationOptions, odometry_path: str | 
     ns = lambda t: np.round((EPOCH_S + t) * 1e9).astype(np.int64)  # noqa: E731
     atomic_write_text(p, format_odometry(ns(t_odo), base))
     atomic_write_text(tum, format_tum(ns(t_trk), poses3d.from_planar(sensor)))
-    doc: dict[str, Any] = {"params": dict(opts.truth), "corrections": opts.corrections(), "options": asdict(opts)}
+    doc: dict[str, Any] = {
+        "params": dict(opts.truth),
+        "corrections": opts.corrections(),
+        "options": asdict(opts),
+    }
     atomic_write_text(truth, json.dumps(doc, indent=2) + "\n")
     return p, tum, truth

@@ -136,10 +136,15 @@ class LidarSource:
         valid = [f.name for f in dataclasses.fields(cls)]
         for key in raw:
             if key not in valid:
-                fail(f"{where}.{key_name(key)}", f"unknown key; a lidar block has {', '.join((*valid, *also))}")
+                fail(
+                    f"{where}.{key_name(key)}", f"unknown key; a lidar block has {', '.join((*valid, *also))}"
+                )
         missing = [k for k in REQUIRED if k not in raw]
         if missing:
-            fail(where, f"a lidar block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} (docs/lidar.md)")
+            fail(
+                where,
+                f"a lidar block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} (docs/lidar.md)",
+            )
         source: LidarSource = from_mapping(cls, raw, where)
         bag = coerce(raw["bag"], Path, f"{where}.bag")
         robot = source.robot

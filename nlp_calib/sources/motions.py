@@ -122,12 +122,21 @@ class MotionsSource:
         valid = [f.name for f in dataclasses.fields(cls)]
         for key in raw:
             if key not in valid:
-                fail(f"{where}.{key_name(key)}", f"unknown key; a motions block has {', '.join((*valid, *also))}")
+                fail(
+                    f"{where}.{key_name(key)}",
+                    f"unknown key; a motions block has {', '.join((*valid, *also))}",
+                )
         missing = [k for k in REQUIRED if k not in raw]
         if missing:
-            fail(where, f"a motions block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} (docs/motions.md)")
+            fail(
+                where,
+                f"a motions block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} "
+                "(docs/motions.md)",
+            )
         source: MotionsSource = from_mapping(cls, raw, where)
-        joints, motions = (_resolved(coerce(raw[k], Path, f"{where}.{k}"), base_dir) for k in ("joints", "motions"))
+        joints, motions = (
+            _resolved(coerce(raw[k], Path, f"{where}.{k}"), base_dir) for k in ("joints", "motions")
+        )
         robot = None if source.robot is None else _resolved(source.robot, base_dir)
         return replace(source, joints=joints, motions=motions, robot=robot)
 

@@ -29,8 +29,15 @@ from nlp_calib.core.errors import ConfigError, ModelError
 from nlp_calib.core.ranges import Range
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.logs.bag_joints import timed_by_tracker
+from nlp_calib.logs.bag_reader import (
+    CLOCK_OFFSET,
+    DEFAULT_MAX_GAP_S,
+    MAX_GAP,
+    Stamped,
+    is_bag,
+    read_pose_topic,
+)
 from nlp_calib.logs.log import frozen
-from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, MAX_GAP, Stamped, is_bag, read_pose_topic
 from nlp_calib.logs.motions import read_motions, timed_by_motions
 from nlp_calib.logs.tum import read_tum
 from nlp_calib.logs.vendor import read_odometry, wheel_angles
@@ -75,7 +82,9 @@ class VendorSource:
             if (reason := limit.problem(getattr(self, key))) is not None:
                 raise ConfigError(f"{key} (seconds) {reason}")
         if (self.poses is None) == (self.motions is None):
-            raise ConfigError("name the reference: poses (a TUM file) or motions (a motions file), one of them")
+            raise ConfigError(
+                "name the reference: poses (a TUM file) or motions (a motions file), one of them"
+            )
 
     @property
     def path(self) -> Path:
@@ -105,7 +114,9 @@ class VendorSource:
         clock (positions, then no velocities)."""
         if self.odometry_topic is not None or is_bag(self.odometry):
             if self.odometry_topic is None:
-                raise ConfigError(f"odometry_topic: {self.odometry} is a bag; name its nav_msgs/Odometry topic")
+                raise ConfigError(
+                    f"odometry_topic: {self.odometry} is a bag; name its nav_msgs/Odometry topic"
+                )
             topic = read_pose_topic(self.odometry, self.odometry_topic)
             time_ns, base, path = topic.stamp_ns, topic.values[:, :3], str(self.odometry)
         else:
@@ -118,18 +129,31 @@ class VendorSource:
     def header(self, model: KinematicModel, frame: str | None) -> LogHeader:
         """The vendor's model as the initial guess (the mount at the model's default)."""
         guess = {"left_wheel_radius": self.wheel_radius, "right_wheel_radius": self.wheel_radius}
-        return robot_header(model, RobotDescription(initial_guess={**guess, "wheel_separation": self.wheel_separation}), frame)
+        return robot_header(
+            model, RobotDescription(initial_guess={**guess, "wheel_separation": self.wheel_separation}), frame
+        )
 
     def read(self, model: KinematicModel, *, strict: bool) -> Log:
         if model.name != MODEL:
-            raise ModelError(f"vendor odometry is turned back into a differential drive's wheels: set model: {MODEL}")
+            raise ModelError(
+                f"vendor odometry is turned back into a differential drive's wheels: set model: {MODEL}"
+            )
         model = in_units(model, "radians")
         joints, names = self.joints(), encoders(model)
         if self.motions is not None:
-            return timed_by_motions(self.odometry, joints, read_motions(self.motions), names, self.max_gap, self.header(model, self.sensor_frame))
+            return timed_by_motions(
+                self.odometry,
+                joints,
+                read_motions(self.motions),
+                names,
+                self.max_gap,
+                self.header(model, self.sensor_frame),
+            )
         poses = read_tum(self.reference)
         tracker = Stamped(str(self.reference), poses.time_ns, poses.planar_and_3d())
-        log = timed_by_tracker(self.odometry, joints, tracker, names, self.max_gap, self.header(model, self.sensor_frame))
+        log = timed_by_tracker(
+            self.odometry, joints, tracker, names, self.max_gap, self.header(model, self.sensor_frame)
+        )
         return replace(log, line_numbers=frozen(poses.line_numbers[log.line_numbers - 1]))
 
     def moved(self, path: Path) -> VendorSource:
@@ -148,13 +172,24 @@ class VendorSource:
         valid = [f.name for f in dataclasses.fields(cls)]
         for key in raw:
             if key not in valid:
-                fail(f"{where}.{key_name(key)}", f"unknown key; a vendor odometry block has {', '.join((*valid, *also))}")
+                fail(
+                    f"{where}.{key_name(key)}",
+                    f"unknown key; a vendor odometry block has {', '.join((*valid, *also))}",
+                )
         missing = [k for k in REQUIRED if k not in raw]
         if missing:
-            fail(where, f"a vendor odometry block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} (docs/vendor.md)")
+            fail(
+                where,
+                f"a vendor odometry block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} "
+                "(docs/vendor.md)",
+            )
         source: VendorSource = from_mapping(cls, raw, where)
-        paths = {k: _resolved(coerce(raw[k], Path, f"{where}.{k}"), base_dir) for k in ("odometry", "poses", "motions") if raw.get(k) is not None}
-        return replace(source, **paths)
+        odometry, poses, motions = (
+            None if raw.get(k) is None else _resolved(coerce(raw[k], Path, f"{where}.{k}"), base_dir)
+            for k in ("odometry", "poses", "motions")
+        )
+        assert odometry is not None  # required
+        return replace(source, odometry=odometry, poses=poses, motions=motions)
 
 
 def _resolved(path: Path, base_dir: Path) -> Path:
