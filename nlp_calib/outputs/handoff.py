@@ -97,6 +97,17 @@ def _sensor_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
         "convention": info.convention,
         "held": {n: run.initial.get(n, 0.0) for n in info.held},
         "urdf": {"xyz": list(mount.xyz), "rpy": list(mount.rpy), "calibrated": mount.calibrated},
+        # A mount per log: each log's own, one URDF joint each.
+        **(
+            {
+                "mounts": [
+                    {"log": m.log, "frame": m.frame, "xyz": list(m.mount.xyz), "rpy": list(m.mount.rpy)}
+                    for m in run.reports[solver].mounts
+                ]
+            }
+            if run.reports[solver].mounts
+            else {}
+        ),
     }
 
 
@@ -144,17 +155,27 @@ def _comment_text(text: str) -> str:
 
 
 def _joint(run: CalibrationRun, solver: str) -> ET.Element:
-    frame = run.log.sensor_frame
+    return _joint_of(run.log.sensor_frame, _mount(run, solver))
+
+
+def _joint_of(frame: str, mount: MountPose) -> ET.Element:
     joint = ET.Element("joint", {"name": f"{PARENT_FRAME}_to_{frame}", "type": "fixed"})
     ET.SubElement(joint, "parent", {"link": PARENT_FRAME})
     ET.SubElement(joint, "child", {"link": frame})
-    ET.SubElement(joint, "origin", _origin(run, solver))
+    ET.SubElement(joint, "origin", _origin(mount))
     return joint
 
 
-def _origin(run: CalibrationRun, solver: str) -> dict[str, str]:
+def _joints(run: CalibrationRun, solver: str) -> list[tuple[str, ET.Element]]:
+    """Each calibrated mount's frame and joint: the sensor's, or every log's own (a mount per log)."""
+    every = run.reports[solver].mounts
+    if every:
+        return [(m.frame, _joint_of(m.frame, m.mount)) for m in every]
+    return [(run.log.sensor_frame, _joint(run, solver))]
+
+
+def _origin(mount: MountPose) -> dict[str, str]:
     """The joint's ``xyz`` and ``rpy``, as the sensor gives its mount."""
-    mount = _mount(run, solver)
     return {"xyz": " ".join(repr(v) for v in mount.xyz), "rpy": " ".join(repr(a) for a in mount.rpy)}
 
 
@@ -172,9 +193,23 @@ def _xml(element: ET.Element, comment: str) -> str:
 
 
 def urdf_joint(run: CalibrationRun, solver: str) -> str:
-    """A URDF ``<joint>`` placing the sensor frame on ``base_link`` with ``solver``'s estimate."""
-    frame = run.log.sensor_frame
+    """A URDF ``<joint>`` placing the sensor frame on ``base_link`` with ``solver``'s estimate (a
+    mount per log: a ``<robot>`` of one joint per log, each log's sensor its own link)."""
     what = _mount(run, solver).calibrated
+    joints = _joints(run, solver)
+    if len(joints) > 1:
+        robot = ET.Element("robot", {"name": run.scenario.name})
+        for _, joint in joints:
+            robot.append(joint)
+        links = ", ".join(f"'{frame}'" for frame, _ in joints)
+        comment = (
+            f" Sensor mounting poses calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
+            f"solver {solver}, one per log ({', '.join(m.log for m in run.reports[solver].mounts)}). "
+            f"Calibrated: {what}. Paste these joints into the robot's <robot> description; the links "
+            f"{links} must be declared there. "
+        )
+        return _xml(robot, comment)
+    frame = run.log.sensor_frame
     comment = (
         f" Sensor mounting pose calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
         f"solver {solver}. Calibrated: {what}. Paste this joint into the robot's <robot> description; "
@@ -185,11 +220,13 @@ def urdf_joint(run: CalibrationRun, solver: str) -> str:
 
 def urdf_robot(run: CalibrationRun, solver: str) -> str:
     """A complete URDF: a ``<robot>`` with ``base_link``, the sensor's link and the calibrated joint."""
-    frame = run.log.sensor_frame
     robot = ET.Element("robot", {"name": run.scenario.name})
     ET.SubElement(robot, "link", {"name": PARENT_FRAME})
-    ET.SubElement(robot, "link", {"name": frame})
-    robot.append(_joint(run, solver))
+    joints = _joints(run, solver)
+    for frame, _ in joints:
+        ET.SubElement(robot, "link", {"name": frame})
+    for _, joint in joints:
+        robot.append(joint)
     comment = (
         f" The sensor mount calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
         f"solver {solver}. A complete robot description (base and sensor links, the fixed joint) "

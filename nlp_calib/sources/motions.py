@@ -67,7 +67,7 @@ class MotionsSource:
 
     @property
     def path(self) -> Path:
-        return self.motions
+        return self.joints
 
     @property
     def numbered(self) -> Path:

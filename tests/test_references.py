@@ -1,0 +1,239 @@
+"""References that are not a tracker's poses: a file of the sensor's own motions (a scan matcher's),
+wheels read as speeds or counts per cycle, a mount per log in a joint fit, and the vendor's
+odometry turned back into wheel angles; each against a simulator's truth."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from nlp_calib.cli.main import main
+from nlp_calib.core.errors import ConfigError, DatasetError
+from nlp_calib.logs.joint_log import format_joint_csv, wheel_positions
+from nlp_calib.logs.motions import format_motions, read_motions
+from nlp_calib.models import get_model
+from nlp_calib.models.radians import in_units
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.problem import ProblemSpec, build, build_residual_data, joined
+from nlp_calib.problem.windows import ResidualOptions
+from nlp_calib.simulation.lidar import LidarSimulationOptions, simulate_lidar
+from nlp_calib.simulation.vendor import VendorSimulationOptions, write_vendor_simulation
+from nlp_calib.solvers import ProblemEvaluator
+from nlp_calib.sources import MotionsSource
+
+RADIANS = {"k_left": "left_wheel_radius", "k_right": "right_wheel_radius", "baseline": "wheel_separation"}
+#: The scan matcher's noise per increment (m, rad), and the information weights that go with it.
+NOISE = (0.001, 0.0005)
+BASE: dict[str, Any] = {
+    "model": "diff_drive",
+    "initial_guess": "auto",
+    "information": {"translation": 1.0e6, "rotation": 4.0e6},
+    "robust": {"kernel": "huber", "delta": 3.0},
+    "solvers": ["gauss_newton"],
+}
+
+
+def recording(
+    folder: Path,
+    seed: int,
+    mount: dict[str, float] | None = None,
+    wrong: tuple[int, ...] = (),
+    duration: float = 40.0,
+    name: str = "drive",
+) -> tuple[Path, Path, dict[str, float]]:
+    """A drive's joints (CSV, radians) and its lidar's motions between scans (noisy; those of
+    ``wrong`` off by 3 cm and 20 mrad), with the truth in the radians form's names."""
+    sim = simulate_lidar(
+        LidarSimulationOptions(
+            duration_s=duration, seed=seed, beams=16, degraded_fraction=0.0, truth=mount or {}
+        )
+    )
+    rng = np.random.default_rng(seed)
+    z = sim.true_motions()
+    z[:, :2] += rng.normal(0.0, NOISE[0], (z.shape[0], 2))
+    z[:, 2] += rng.normal(0.0, NOISE[1], z.shape[0])
+    for k in wrong:
+        z[k] += (0.03, -0.02, 0.02)
+    ns = np.round(sim.scan_time_s * 1e9).astype(np.int64)
+    joints, motions = folder / f"{name}.csv", folder / f"{name}.motions.csv"
+    joints.write_text(
+        format_joint_csv(
+            np.round(sim.joint_time_s * 1e9).astype(np.int64), sim.joint_names, sim.joint_positions
+        )
+    )
+    motions.write_text(format_motions(ns[:-1], ns[1:], z, {"converged": np.ones(z.shape[0])}))
+    truth = {RADIANS.get(k, k): v for k, v in sim.options.truth.items()}
+    return joints, motions, truth
+
+
+def entry(joints: Path, motions: Path) -> dict[str, Any]:
+    return {
+        "joints": str(joints),
+        "motions": str(motions),
+        "encoders": {"left_wheel": "left_wheel_joint", "right_wheel": "right_wheel_joint"},
+        "sensor_frame": "laser",
+    }
+
+
+def quiet_run(calibration: Any) -> Any:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return calibration.run()
+
+
+def test_the_windows_are_exactly_the_increments(tmp_path: Path) -> None:
+    joints, motions, _ = recording(tmp_path, 3, duration=10.0)
+    model = in_units(get_model("diff_drive"), "radians")
+    log = MotionsSource(
+        joints, motions, {"left_wheel": "left_wheel_joint", "right_wheel": "right_wheel_joint"}
+    ).read(model, strict=True)
+    table = read_motions(motions)
+    assert log.motions is not None and log.motions.n == table.n
+    fns = build(model, ProblemSpec())
+    data = build_residual_data(fns, log, ResidualOptions())
+    # One window per increment, over exactly its two stamps, its z the increment as written.
+    start_ns = log.start_ns + np.round(log.time_s * 1e9).astype(np.int64)
+    np.testing.assert_array_equal(start_ns[data.starts], table.start_ns)
+    np.testing.assert_array_equal(start_ns[data.stops], table.end_ns)
+    np.testing.assert_array_equal(data.z.T, table.z)
+    assert data.increment is not None and data.increment.all()
+
+
+def test_a_motions_file_calibrates_and_names_its_bad_increments(tmp_path: Path) -> None:
+    wrong = (40, 41, 150, 250)
+    joints, motions, truth = recording(tmp_path, 5, wrong=wrong)
+    run = quiet_run(
+        Calibration(scenario_from_mapping({**BASE, "dataset": entry(joints, motions)}, "m", tmp_path))
+    )
+    est, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
+    for name, value in truth.items():
+        assert abs(est[name] - value) < 4 * std[name], (name, est[name], value, std[name])
+    found = run.checks.findings.report.faults
+    named = {f.first for f in found if f.kind == "bad_match"}
+    assert set(wrong) <= named and len(named - set(wrong)) <= 2, named
+    # Left out of the fit, one window each, never a neighbour of theirs.
+    assert run.data.dropped_faulty == len(named)
+    assert all("disagrees with the wheels" in f.evidence for f in found if f.first in wrong)
+
+
+def test_increment_noise_is_each_increments_own(tmp_path: Path) -> None:
+    """Independent increments: the white-noise σ is the classical σ²(JᵀJ)⁻¹ of independent windows
+    (a chain of poses' noise would telescope and give far less)."""
+    joints, motions, _ = recording(tmp_path, 7)
+    sc = scenario_from_mapping(
+        {**BASE, "dataset": entry(joints, motions), "robust": {"kernel": "none"}}, "m", tmp_path
+    )
+    calib = Calibration(sc)
+    run = quiet_run(calib)
+    result = run.reports["gauss_newton"]
+    ev: ProblemEvaluator = calib.evaluator
+    ne = ev.normal_equations(result.result.x)
+    dof = ev.n_residuals * 3 - calib.fns.n_free
+    classical = np.sqrt(np.diag(np.linalg.inv(ne.H)) * ne.chi2 / dof)
+    white = np.array([result.uncertainty.std[result.uncertainty.names.index(n)] for n in calib.fns.free])
+    np.testing.assert_allclose(white, classical, rtol=0.25)
+
+
+def test_wheels_as_speeds_or_counts_per_cycle_are_positions() -> None:
+    t = np.arange(0, 11) * 100_000_000  # 10 Hz
+    angle = 0.3 * np.arange(11.0) + 0.02 * np.arange(11.0) ** 2
+    speeds = np.gradient(angle, t * 1e-9)
+    from_speeds = wheel_positions(t, np.column_stack([speeds, angle]), [True, False], "speeds", None)
+    # Trapezoids integrate a quadratic's sampled derivative exactly (central differences inside).
+    assert np.allclose(from_speeds[1:-1, 0] - from_speeds[1, 0], angle[1:-1] - angle[1], atol=0.011)
+    assert np.array_equal(from_speeds[:, 1], angle)  # an absolute joint's column is its position
+    counts = np.concatenate([[0.0], np.diff(angle)]) * 4096 / (2 * np.pi)
+    from_counts = wheel_positions(t, counts[:, None], [True], "increments", 4096)
+    np.testing.assert_allclose(from_counts[:, 0], angle - angle[0], atol=1e-12)
+
+
+def test_a_wheel_form_is_checked_where_it_is_given(tmp_path: Path) -> None:
+    joints, motions, _ = recording(tmp_path, 3, duration=5.0)
+    bad = {**entry(joints, motions), "form": "positions", "counts_per_turn": 4096}
+    with pytest.raises(Exception, match="counts_per_turn"):
+        scenario_from_mapping({**BASE, "dataset": bad}, "m", tmp_path)
+    (tmp_path / "bad.motions.csv").write_text("t_start,t_end,x,y,theta\n2.0,1.0,0,0,0\n")
+    with pytest.raises(DatasetError, match="not after t_start"):
+        read_motions(tmp_path / "bad.motions.csv")
+    with pytest.raises(ConfigError, match="form"):
+        MotionsSource(joints, motions, {"left_wheel": "a", "right_wheel": "b"}, form="rad")
+
+
+def test_a_mount_per_log_shares_the_wheels(tmp_path: Path) -> None:
+    first = recording(tmp_path, 11, name="front")
+    second = recording(tmp_path, 12, {"sensor_x": -0.2, "sensor_y": 0.05, "sensor_theta": 3.0}, name="rear")
+    sc = {
+        **BASE,
+        "datasets": [entry(*first[:2]), entry(*second[:2])],
+        "sensor": {"mount": "planar", "mounts": "per_log"},
+    }
+    path = tmp_path / "two.yaml"
+    path.write_text(yaml.safe_dump(sc))
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 0
+    doc = json.loads((tmp_path / "out" / "front" / "result.json").read_text())
+    est = doc["solvers"]["gauss_newton"]["params"]
+    std = doc["solvers"]["gauss_newton"]["std"]
+    for i, (_, _, truth) in enumerate((first, second), start=1):
+        for name in ("sensor_x", "sensor_y", "sensor_theta"):
+            assert abs(est[f"{name}_{i}"] - truth[name]) < 4 * std[f"{name}_{i}"], (name, i)
+    for name in RADIANS.values():
+        assert abs(est[name] - first[2][name]) < 4 * std[name], name
+    # One URDF joint per mount, each log's own; the consistency check compared each log's own fit.
+    urdf = (tmp_path / "out" / "sensor_mount.urdf.xml").read_text()
+    assert urdf.count("<joint ") == 2 and "laser_1" in urdf and "laser_2" in urdf
+    assert doc["verdict"]["level"] != "not usable", doc["verdict"]
+
+
+def test_each_log_s_mount_enters_only_its_own_windows(tmp_path: Path) -> None:
+    """A problem with a mount per log: each window's residual is that of a one-mount problem with
+    its own log's mount."""
+    model = in_units(get_model("diff_drive"), "radians")
+    source = {"left_wheel": "left_wheel_joint", "right_wheel": "right_wheel_joint"}
+    logs = [
+        MotionsSource(*recording(tmp_path, s, duration=5.0, name=f"d{s}")[:2], source).read(
+            model, strict=True
+        )
+        for s in (1, 2)
+    ]
+    one, two = build(model, ProblemSpec()), build(model, ProblemSpec(mounts=2))
+    parts = [build_residual_data(one, log, ResidualOptions()) for log in logs]
+    data = joined(parts).with_selector()
+    mounts = [np.array([0.1, -0.02, 0.3]), np.array([-0.2, 0.04, 2.9])]
+    k = np.array([0.1, 0.1005, 0.45])
+    ev2 = ProblemEvaluator(two, data, x_fixed=np.zeros(0), omega=np.ones(3), delta=1.0)
+    e2 = ev2.robust_terms(np.concatenate([k, *mounts]))[0]
+    for i, part in enumerate(parts):
+        ev1 = ProblemEvaluator(one, part, x_fixed=np.zeros(0), omega=np.ones(3), delta=1.0)
+        e1 = ev1.robust_terms(np.concatenate([k, mounts[i]]))[0]
+        mine = data.log_of(data.starts) == i
+        np.testing.assert_allclose(e2[:, mine], e1, rtol=0, atol=1e-12)
+
+
+def test_vendor_odometry_gives_the_corrections_to_its_model(tmp_path: Path) -> None:
+    opts = VendorSimulationOptions(duration_s=90.0, seed=21)
+    odometry, tum, truth_file = write_vendor_simulation(opts, tmp_path / "odom.txt")
+    dataset = {"odometry": str(odometry), "wheel_radius": 0.1, "wheel_separation": 0.45, "poses": str(tum)}
+    sc = {
+        "model": "diff_drive",
+        "dataset": dataset,
+        "residual": {"horizon_s": 0.5},
+        "solvers": ["gauss_newton"],
+    }
+    run = quiet_run(Calibration(scenario_from_mapping(sc, "v", tmp_path)))
+    est = run.reports["gauss_newton"].result.param_dict()
+    corrections = json.loads(truth_file.read_text())["corrections"]
+    mine = {
+        "left_wheel_radius_multiplier": est["left_wheel_radius"] / 0.1,
+        "right_wheel_radius_multiplier": est["right_wheel_radius"] / 0.1,
+        "wheel_separation_multiplier": est["wheel_separation"] / 0.45,
+    }
+    for name, value in corrections.items():
+        assert abs(mine[name] / value - 1.0) < 0.002, (name, mine[name], value)
+    # The run starts from the vendor's own model.
+    assert run.initial["left_wheel_radius"] == 0.1 and run.initial["wheel_separation"] == 0.45
