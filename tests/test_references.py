@@ -237,3 +237,19 @@ def test_vendor_odometry_gives_the_corrections_to_its_model(tmp_path: Path) -> N
         assert abs(mine[name] / value - 1.0) < 0.002, (name, mine[name], value)
     # The run starts from the vendor's own model.
     assert run.initial["left_wheel_radius"] == 0.1 and run.initial["wheel_separation"] == 0.45
+
+
+def test_figures_never_compose_across_a_gap(tmp_path: Path) -> None:
+    joints, motions, truth = recording(tmp_path, 9, duration=30.0)
+    lines = motions.read_text().splitlines()
+    # Every tenth increment missing: a gap the wheels drive across and no increment measures.
+    motions.write_text("\n".join(line for i, line in enumerate(lines) if i == 0 or i % 10) + "\n")
+    run = quiet_run(
+        Calibration(scenario_from_mapping({**BASE, "dataset": entry(joints, motions)}, "g", tmp_path))
+    )
+    metrics = run.reports["gauss_newton"].metrics
+    assert metrics.segments >= 25
+    # Restarted at each gap, the track stays on the increments' chain to the millimetre.
+    assert metrics.segment_ate.rmse < 0.01
+    est = run.reports["gauss_newton"].result.param_dict()
+    assert abs(est["wheel_separation"] / truth["wheel_separation"] - 1) < 0.01

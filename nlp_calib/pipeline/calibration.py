@@ -350,21 +350,24 @@ def consistency(
     result, u = results[solver], fitted.uncertainty[solver]
     blocked = fitted.crossval.std if fitted.crossval is not None else np.full(len(u.names), np.nan)
     nan = np.full(len(result.names), np.nan)
-    estimates, stds = [], []
+    estimates, stds, whites = [], [], []
     for i, run in enumerate(own):
         mine = run.reports[solver]
         if not mine.result.converged:
             estimates.append(nan)
             stds.append(nan)
+            whites.append(nan)
             continue
         # Each log's own lag is the joint fit's lag of that log; the other logs' lags it has not.
         names = [own_name(n, i, len(own)) for n in result.names]
-        values, std = mine.result.param_dict(), run.std(solver)
+        values, std, white = mine.result.param_dict(), run.std(solver), mine.uncertainty.std_dict()
         estimates.append(np.array([values.get(n, np.nan) for n in names]))
         stds.append(np.array([std.get(n, np.nan) for n in names]))
+        whites.append(np.array([white.get(n, np.nan) for n in names]))
     logs = [run.log.path for run in own]
+    joint = (result.params, believed_std(u.std, blocked))
     return compare_logs(
-        result.names, logs, result.params, believed_std(u.std, blocked), np.array(estimates), np.array(stds)
+        result.names, logs, *joint, np.array(estimates), np.array(stds), white_own=np.array(whites)
     )
 
 
