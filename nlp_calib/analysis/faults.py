@@ -18,9 +18,10 @@ to the stream that explains it:
 
 A reference that measures its own motions (``Log.motions``: a scan matcher's) has no poses to
 be off a path; each increment is judged on its own (``bad_match``): first by what its matcher said
-of it (not converged, few points matched, a large fit error against the log's own), then, after the
-counters, by its disagreement with the wheels at the fit, far beyond the increments' robust
-scatter. A bad increment spoils its own window only.
+of it (not converged, few points matched, a large fit error against the log's own), then by its
+disagreement with the wheels at the fit that judges the encoders, far beyond the increments'
+robust scatter; the counters are then judged without them (a counter's fault shows over several
+increments; over one it is not told from a bad match). A bad increment spoils its own window only.
 
 The counters are judged with a fit that leaves out the tracker's and the absolute encoders'
 glitches, against readings with those glitches interpolated over, so that one stream's glitch is
@@ -182,14 +183,16 @@ def match_faults(log: Log) -> list[Fault]:
 def increment_faults(
     fns: ProblemFunctions, params: np.ndarray, log: Log, inputs: np.ndarray, known: Sequence[Fault]
 ) -> list[Fault]:
-    """RelativeMotions that disagree with the wheels at ``params`` by more than :data:`MATCH_SCATTER`
+    """Increments that disagree with the wheels at ``params`` by more than :data:`MATCH_SCATTER`
     robust σ of the others' scatter (``known``: faults already found, whose increments are
-    neither judged nor counted in the scatter)."""
+    neither judged nor counted in the scatter). A wheel's wrong reading over one increment looks the
+    same (its rotation can always be taken up by one wheel): such an increment is named a bad match
+    too, and left out all the same."""
     inc = log.motions
     if inc is None or inc.n == 0:
         return []
-    step = over_columns(fns.predict, np.ravel(np.asarray(params, dtype=float)), inputs)[0].T
-    prefix = poses.accumulate(np.zeros(3), step)
+    p = np.ravel(np.asarray(params, dtype=float))
+    prefix = poses.accumulate(np.zeros(3), over_columns(fns.predict, p, inputs)[0].T)
     error = poses.between(inc.z, poses.between(prefix[inc.first], prefix[inc.last]))
     judged = np.ones(inc.n, dtype=bool)
     for f in known:
@@ -398,12 +401,13 @@ def screen(
         # Judged by a wrong model every interval looks faulty; the solvers will say why.
         why = "the fit that judges the encoders did not converge from the initial guess"
         return replace(report, unchecked=why)
+    if log.motions is not None:
+        # An increment's disagreement is its own unless one wheel's reading explains it.
+        inputs = model.inputs(log, steering_sample)
+        glitches += tuple(increment_faults(fns, params, log, inputs, glitches))
     clean = cleaned(log, glitches)
-    inputs = model.inputs(clean, steering_sample)
-    counters = counter_faults(fns, params, clean, inputs, lag)
-    found = glitches + counters.faults
-    found += tuple(increment_faults(fns, params, log, inputs, found))
-    faults = tuple(sorted(found, key=lambda f: (f.first, f.kind)))
+    counters = counter_faults(fns, params, clean, model.inputs(clean, steering_sample), lag)
+    faults = tuple(sorted(glitches + counters.faults, key=lambda f: (f.first, f.kind)))
     return replace(counters, faults=faults)
 
 
