@@ -26,12 +26,8 @@ def main(argv: list[str] | None = None) -> int:
         for seed in args.seeds:
             opts = VendorSimulationOptions(duration_s=args.duration, seed=seed)
             odometry, tum, truth = write_vendor_simulation(opts, Path(tmp) / f"odom_{seed}.txt")
-            dataset = {
-                "odometry": str(odometry),
-                "wheel_radius": opts.vendor_radius,
-                "wheel_separation": opts.vendor_separation,
-                "poses": str(tum),
-            }
+            doc = json.loads(truth.read_text())
+            dataset = {"odometry": str(odometry), "vendor": doc["vendor"], "poses": str(tum)}
             sc = {
                 "model": "diff_drive",
                 "dataset": dataset,
@@ -42,13 +38,10 @@ def main(argv: list[str] | None = None) -> int:
                 warnings.simplefilter("ignore")
                 run = Calibration(scenario_from_mapping(sc, f"vendor_{seed}", Path(tmp))).run()
             est = run.reports["gauss_newton"].result.param_dict()
-            mine = {
-                "left_wheel_radius_multiplier": est["left_wheel_radius"] / opts.vendor_radius,
-                "right_wheel_radius_multiplier": est["right_wheel_radius"] / opts.vendor_radius,
-                "wheel_separation_multiplier": est["wheel_separation"] / opts.vendor_separation,
-            }
-            true = json.loads(truth.read_text())["corrections"]
-            cells = "  ".join(f"{k} {100 * (mine[k] / v - 1):+.3f} %" for k, v in true.items())
+            cells = "  ".join(
+                f"{k} {100 * (est[k] / doc['vendor'][k] / v - 1):+.3f} %"
+                for k, v in doc["corrections"].items()
+            )
             print(f"{seed:>4}  {cells}  {run.verdict.level}")
     return 0
 

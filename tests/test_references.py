@@ -218,7 +218,9 @@ def test_each_log_s_mount_enters_only_its_own_windows(tmp_path: Path) -> None:
 def test_vendor_odometry_gives_the_corrections_to_its_model(tmp_path: Path) -> None:
     opts = VendorSimulationOptions(duration_s=90.0, seed=21)
     odometry, tum, truth_file = write_vendor_simulation(opts, tmp_path / "odom.txt")
-    dataset = {"odometry": str(odometry), "wheel_radius": 0.1, "wheel_separation": 0.45, "poses": str(tum)}
+    truth = json.loads(truth_file.read_text())
+    vendor = truth["vendor"]
+    dataset = {"odometry": str(odometry), "vendor": vendor, "poses": str(tum)}
     sc = {
         "model": "diff_drive",
         "dataset": dataset,
@@ -227,16 +229,15 @@ def test_vendor_odometry_gives_the_corrections_to_its_model(tmp_path: Path) -> N
     }
     run = quiet_run(Calibration(scenario_from_mapping(sc, "v", tmp_path)))
     est = run.reports["gauss_newton"].result.param_dict()
-    corrections = json.loads(truth_file.read_text())["corrections"]
-    mine = {
-        "left_wheel_radius_multiplier": est["left_wheel_radius"] / 0.1,
-        "right_wheel_radius_multiplier": est["right_wheel_radius"] / 0.1,
-        "wheel_separation_multiplier": est["wheel_separation"] / 0.45,
-    }
-    for name, value in corrections.items():
-        assert abs(mine[name] / value - 1.0) < 0.002, (name, mine[name], value)
-    # The run starts from the vendor's own model.
-    assert run.initial["left_wheel_radius"] == 0.1 and run.initial["wheel_separation"] == 0.45
+    for name, value in truth["corrections"].items():
+        assert abs(est[name] / vendor[name] / value - 1.0) < 0.002, (name, est[name] / vendor[name], value)
+    # The run starts from the vendor's own model; a model that cannot invert its odometry says so.
+    assert all(run.initial[n] == v for n, v in vendor.items())
+    wrong = scenario_from_mapping(
+        {**sc, "dataset": {**dataset, "vendor": {"wheel_radius": 0.1}}}, "v", tmp_path
+    )
+    with pytest.raises(Exception, match="vendor: give the vendor's left_wheel_radius"):
+        Calibration(wrong)
 
 
 def test_figures_never_compose_across_a_gap(tmp_path: Path) -> None:

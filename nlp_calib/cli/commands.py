@@ -323,8 +323,8 @@ def _simulate_vendor(args: argparse.Namespace, overrides: dict[str, Any]) -> int
         stage.commit()
     odometry, tum, truth = (stage.final(p) for p in written)
     print(
-        f"wrote {odometry} (the robot's own odometry, radius {opts.vendor_radius:g} m and separation "
-        f"{opts.vendor_separation:g} m in its model), {tum} and {truth}"
+        f"wrote {odometry} (the robot's own odometry, integrated with the model "
+        f"{', '.join(f'{n} {v:g}' for n, v in opts.vendor_in_radians().items())}), {tum} and {truth}"
     )
     return 0
 

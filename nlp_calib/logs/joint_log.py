@@ -8,7 +8,7 @@ number and a time that does not increase are refused with the file and the line.
 A wheel's column may hold another form (:data:`WHEEL_FORMS`, :func:`wheel_positions`): its speed
 (rad/s), integrated over the stamps by trapezoids, or its increment over each cycle (the cycle
 that ends at the row's stamp; counts, turned into radians by the counts per turn, or radians),
-summed. An absolute joint's column (a steering angle) is always its position.
+summed. An absolute joint's column (an angle it reads as it is) is always its position.
 """
 
 from __future__ import annotations

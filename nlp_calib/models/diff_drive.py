@@ -14,6 +14,7 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
+from nlp_calib.core import poses
 from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
@@ -73,6 +74,23 @@ class DiffDriveDrive:
     )
     #: Counts per wheel turn: written to the header for information, not used by the model.
     default_ranges: Mapping[str, int] = MappingProxyType({LEFT_ENCODER: 4096, RIGHT_ENCODER: 4096})
+    #: A robot whose controller integrates its odometry with a wrong model (joint units: the radii
+    #: in m per rad), and that model: the vendor odometry simulator's defaults.
+    vendor_truth: Mapping[str, float] = MappingProxyType(
+        {"k_left": 0.1012, "k_right": 0.0994, "baseline": 0.462}
+    )
+    vendor_model: Mapping[str, float] = MappingProxyType({"k_left": 0.1, "k_right": 0.1, "baseline": 0.45})
+
+    def odometry(self, readings: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
+        """The base poses ``(n, 3)`` a controller integrates (exact arcs) from the wheels' readings
+        ``(n, 2)`` (left, right) with its own model ``params``."""
+        d = np.diff(readings, axis=0) * np.array([params["k_left"], params["k_right"]])
+        travel, turn = 0.5 * (d[:, 0] + d[:, 1]), (d[:, 1] - d[:, 0]) / params["baseline"]
+        half = 0.5 * turn
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sinc = np.where(np.abs(half) > 1e-9, np.sin(half) / half, 1.0)
+        steps = np.column_stack([travel * sinc * np.cos(half), travel * sinc * np.sin(half), turn])
+        return poses.accumulate(np.zeros(3), steps)
 
     def steps(
         self,
@@ -243,6 +261,19 @@ class DiffDrive:
         """1σ of each increment in ticks (default: quantisation, ``1/√12``)."""
         ticks = {**dict.fromkeys(self.encoder_kinds, QUANTISATION), **(encoder_noise or {})}
         return np.array([ticks[LEFT_ENCODER], ticks[RIGHT_ENCODER]])
+
+    def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
+        """The wheels' readings ``(n, 2)`` (from 0, left and right) a controller of model ``params``
+        turned to drive the base poses ``base`` ``(n, 3)``: each step an arc, its length signed by
+        its direction of travel, the wheels' travel ``s ∓ baseline·Δθ/2``."""
+        step = poses.between(base[:-1], base[1:])
+        turn, half = step[:, 2], 0.5 * step[:, 2]
+        chord = np.hypot(step[:, 0], step[:, 1]) * np.sign(step[:, 0])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            arc = chord * np.where(np.abs(half) > 1e-9, half / np.sin(half), 1.0 + half**2 / 6.0)
+        left = (arc - 0.5 * params["baseline"] * turn) / params["k_left"]
+        right = (arc + 0.5 * params["baseline"] * turn) / params["k_right"]
+        return np.vstack([np.zeros((1, 2)), np.cumsum(np.column_stack([left, right]), axis=0)])
 
     def initial_guess(
         self,

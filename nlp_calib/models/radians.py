@@ -304,6 +304,13 @@ class InRadians:
 
         return self.from_counts(self.model.initial_guess(U_counts, z, counts_motion))
 
+    def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
+        """The model's own, in joint angles (rad): its parameters mapped back, its readings scaled
+        by each input's factor (a model without it has none: AttributeError)."""
+        own = self.model.readings_from_odometry(base, self.to_counts(params))  # type: ignore[attr-defined]
+        factors = np.array([self.form.inputs[n].factor for n in self.model.input_names])
+        return np.asarray(own) / factors
+
     def in_radians(self) -> KinematicModel:
         return self
 

@@ -30,7 +30,7 @@ from nlp_calib.core.errors import OptionsError
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.ranges import Range
 from nlp_calib.models import MODELS
-from nlp_calib.models.joints import joint_map
+from nlp_calib.models.joints import JOINT_MAPS, joint_map
 from nlp_calib.simulation.camera import EPOCH_S, base_motion, fine_grid
 from nlp_calib.simulation.options import DriveShape
 from nlp_calib.simulation.rosbag import joint_state, laser_scan, tf_static, write_bag
@@ -65,7 +65,7 @@ class LidarSimulationOptions:
     kinematic parameters (joint units) and the mount ``sensor_x, sensor_y, sensor_theta``; missing
     entries take the model's joint-map defaults and :data:`DEFAULT_MOUNT`."""
 
-    model: str = "diff_drive"
+    model: str = next(iter(JOINT_MAPS))
     duration_s: float = 120.0
     seed: int = 0
     truth: Mapping[str, float] = field(default_factory=dict)

@@ -3,15 +3,16 @@
 The scenario's block names the odometry, the vendor's model it was integrated with and the
 reference (a TUM trajectory, or a file of the sensor's own motions)::
 
-    dataset: {odometry: odom.txt, wheel_radius: 0.1, wheel_separation: 0.5, poses: tracker.tum}
+    dataset: {odometry: odom.txt, poses: tracker.tum,
+              vendor: {left_wheel_radius: 0.1, right_wheel_radius: 0.1, wheel_separation: 0.5}}
 
 The odometry is a ``t x y θ`` file, or a bag's ``nav_msgs/Odometry`` topic (``odometry: drive/,
 odometry_topic: /odom``). The base's motion between two of its poses is turned back into the
-wheels' angles by the vendor's model (:mod:`nlp_calib.logs.vendor`), which the differential drive
-(``model: diff_drive``) reads as joints in radians: the calibrated radii and separation over the
-vendor's are the corrections its controller takes (the ``*_multiplier`` parameters of
-``diff_drive_controller``), and start from them (``initial_guess: from_file``). The reference is
-read as a joint log's (``poses``) or a motions file's (``motions``).
+wheels' angles by the vendor's model (``vendor``: its values of the scenario's model's parameters,
+in joint units), as the model says (:meth:`readings_from_odometry`; a model that cannot turn its
+odometry back says so): the calibrated parameters over the vendor's are the corrections its
+controller takes, and the run starts from the vendor's (``initial_guess: from_file``). The
+reference is read as a joint log's (``poses``) or a motions file's (``motions``).
 """
 
 from __future__ import annotations
@@ -26,7 +27,6 @@ import numpy as np
 
 from nlp_calib.core.config import coerce, fail, from_mapping, key_name
 from nlp_calib.core.errors import ConfigError, ModelError
-from nlp_calib.core.ranges import Range
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.logs.bag_joints import timed_by_tracker
 from nlp_calib.logs.bag_reader import (
@@ -40,23 +40,20 @@ from nlp_calib.logs.bag_reader import (
 from nlp_calib.logs.log import frozen
 from nlp_calib.logs.motions import read_motions, timed_by_motions
 from nlp_calib.logs.tum import read_tum
-from nlp_calib.logs.vendor import read_odometry, wheel_angles
+from nlp_calib.logs.vendor import read_odometry
 from nlp_calib.models import KinematicModel, encoders
 from nlp_calib.models.radians import in_units
 from nlp_calib.sources.base import file_identity
 from nlp_calib.sources.robot import RobotDescription, robot_header
 
 #: The keys a vendor block must have (and one reference: poses or motions).
-REQUIRED = ("odometry", "wheel_radius", "wheel_separation")
-LENGTH = Range(1e-6, 1e3, lo_open=True)
-#: The model whose controller the corrections are for.
-MODEL = "diff_drive"
+REQUIRED = ("odometry", "vendor")
 
 
 @dataclass(frozen=True)
 class VendorSource:
     """The vendor's odometry (``odometry``: a ``t x y θ`` file, or a bag with ``odometry_topic``)
-    and its model (``wheel_radius``, ``wheel_separation``, m), the reference (``poses``: a TUM file;
+    and its model (``vendor``: the model's parameters), the reference (``poses``: a TUM file;
     or ``motions``: a motions file), the longest gap between odometry poses a reference stamp is
     interpolated across (``max_gap``, s), the seconds added to the odometry's stamps
     (``clock_offset``) and the sensor's frame (its URDF link)."""
@@ -65,8 +62,7 @@ class VendorSource:
     record_word: ClassVar[str] = "pose"
     joint_units: ClassVar[str] = "radians"
     odometry: Path
-    wheel_radius: float
-    wheel_separation: float
+    vendor: Mapping[str, float]
     poses: Path | None = None
     motions: Path | None = None
     odometry_topic: str | None = None
@@ -75,9 +71,11 @@ class VendorSource:
     sensor_frame: str | None = None
 
     def __post_init__(self) -> None:
-        for key in ("wheel_radius", "wheel_separation"):
-            if (reason := LENGTH.problem(getattr(self, key))) is not None:
-                raise ConfigError(f"{key} (m, the vendor's) {reason}")
+        for key, value in self.vendor.items():
+            if not (np.isfinite(value) and value != 0.0):
+                raise ConfigError(
+                    f"vendor.{key}: the vendor's value, a finite non-zero number, got {value!r}"
+                )
         for key, limit in (("max_gap", MAX_GAP), ("clock_offset", CLOCK_OFFSET)):
             if (reason := limit.problem(getattr(self, key))) is not None:
                 raise ConfigError(f"{key} (seconds) {reason}")
@@ -109,9 +107,9 @@ class VendorSource:
     def identity(self) -> Hashable:
         return (file_identity(self.odometry), file_identity(self.reference))
 
-    def joints(self) -> Stamped:
-        """The wheels' angles the vendor's model turns its odometry back into, on the reference's
-        clock (positions, then no velocities)."""
+    def joints(self, model: KinematicModel) -> Stamped:
+        """The joints' angles (``model``'s, in radians) that the vendor's model turns its odometry
+        back into, on the reference's clock (positions, then no velocities)."""
         if self.odometry_topic is not None or is_bag(self.odometry):
             if self.odometry_topic is None:
                 raise ConfigError(
@@ -122,38 +120,37 @@ class VendorSource:
         else:
             odometry = read_odometry(self.odometry)
             time_ns, base, path = odometry.time_ns, odometry.poses, odometry.path
-        angles = wheel_angles(base, self.wheel_radius, self.wheel_separation)
+        missing = [n for n in model.kinematic_params if n not in self.vendor]
+        unknown = [n for n in self.vendor if n not in model.kinematic_params]
+        if missing or unknown:
+            raise ConfigError(
+                f"vendor: give the vendor's {', '.join(model.kinematic_params)} (missing: "
+                f"{', '.join(missing) or 'none'}; unknown: {', '.join(unknown) or 'none'})"
+            )
+        try:
+            angles = model.readings_from_odometry(base, self.vendor)  # type: ignore[attr-defined]
+        except AttributeError:
+            raise ModelError(
+                f"the {model.name} model cannot turn a robot's odometry back into its joints"
+            ) from None
         values = np.hstack([angles, np.full(angles.shape, np.nan)])
         return Stamped(path, time_ns + round(self.clock_offset * 1e9), values)
 
     def header(self, model: KinematicModel, frame: str | None) -> LogHeader:
         """The vendor's model as the initial guess (the mount at the model's default)."""
-        guess = {"left_wheel_radius": self.wheel_radius, "right_wheel_radius": self.wheel_radius}
-        return robot_header(
-            model, RobotDescription(initial_guess={**guess, "wheel_separation": self.wheel_separation}), frame
-        )
+        return robot_header(model, RobotDescription(initial_guess=dict(self.vendor)), frame)
 
     def read(self, model: KinematicModel, *, strict: bool) -> Log:
-        if model.name != MODEL:
-            raise ModelError(
-                f"vendor odometry is turned back into a differential drive's wheels: set model: {MODEL}"
-            )
         model = in_units(model, "radians")
-        joints, names = self.joints(), encoders(model)
+        joints, names = self.joints(model), encoders(model)
+        header = self.header(model, self.sensor_frame)
         if self.motions is not None:
             return timed_by_motions(
-                self.odometry,
-                joints,
-                read_motions(self.motions),
-                names,
-                self.max_gap,
-                self.header(model, self.sensor_frame),
+                self.odometry, joints, read_motions(self.motions), names, self.max_gap, header
             )
         poses = read_tum(self.reference)
         tracker = Stamped(str(self.reference), poses.time_ns, poses.planar_and_3d())
-        log = timed_by_tracker(
-            self.odometry, joints, tracker, names, self.max_gap, self.header(model, self.sensor_frame)
-        )
+        log = timed_by_tracker(self.odometry, joints, tracker, names, self.max_gap, header)
         return replace(log, line_numbers=frozen(poses.line_numbers[log.line_numbers - 1]))
 
     def moved(self, path: Path) -> VendorSource:
