@@ -19,7 +19,7 @@ from nlp_calib.logs.joint_log import format_joint_csv, wheel_positions
 from nlp_calib.logs.motions import format_motions, read_motions
 from nlp_calib.models import get_model
 from nlp_calib.models.radians import in_units
-from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, JointCalibration, scenario_from_mapping
 from nlp_calib.problem import ProblemSpec, build, build_residual_data, joined
 from nlp_calib.problem.windows import ResidualOptions
 from nlp_calib.simulation.lidar import LidarSimulationOptions, simulate_lidar
@@ -254,3 +254,16 @@ def test_figures_never_compose_across_a_gap(tmp_path: Path) -> None:
     assert metrics.segment_ate.rmse < 0.01
     est = run.reports["gauss_newton"].result.param_dict()
     assert abs(est["wheel_separation"] / truth["wheel_separation"] - 1) < 0.01
+
+
+def test_priors_in_a_joint_fit_with_a_lag_per_log(tmp_path: Path) -> None:
+    """The priors' noise scale of a joint fit whose logs have their own lags comes from every log's
+    windows (one log's alone cannot say which lag is whose)."""
+    from test_joint import BASE as JOINT
+    from test_joint import drives
+
+    paths, _ = drives(tmp_path, 3, records=300)
+    raw = {**JOINT, "datasets": [str(p) for p in paths], "alignment": {"tracker_lag": "auto"}}
+    sc = scenario_from_mapping({**raw, "priors": {"axis_length": {"mean": 1.5, "std": 0.1}}}, "j", tmp_path)
+    run = quiet_run(JointCalibration(sc))
+    assert run.parts[0].reports["gauss_newton"].result.converged

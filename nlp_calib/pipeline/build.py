@@ -391,14 +391,17 @@ def build_stage(
     """Build the Functions (``held`` parameters fixed; a time offset per log of ``lags``, or one;
     a mount per log, each starting from ``mounts``' values, when the scenario asks), start from
     the records ``start_from`` (a log and a range), get the backend ready for ``solvers`` over
-    ``n_records`` and weigh the priors (on ``data``, every log's windows, with a mount per log)."""
+    ``n_records`` and weigh the priors (on ``data``, every log's windows, with a lag or a mount
+    per log)."""
     fns = build_problem(sc, model, tuple(held), max(len(lags), len(mounts), 1))
     log, start, stop = start_from
     point = starting_point(sc, fns, log, start, stop, lags, mounts)
     backend = prepare_backend(sc, fns, solvers, n_records)
     bounds = None if point.lower is None or point.upper is None else (point.lower, point.upper)
     binder = Binder(sc, fns, backend, point.x_fixed, no_priors(fns.n_free), start=point.sensor, bounds=bounds)
-    on = data if data is not None and fns.spec.mounts > 1 else None
+    # Several logs' own lags or mounts: weighed on every log's windows (one log's alone would not
+    # say which lag or mount is whose).
+    on = data if data is not None and max(fns.spec.mounts, fns.spec.lags) > 1 else None
     priors, _ = weigh_priors(binder, log, start, stop, point.x0, on)
     return Problem(fns, point, replace(binder, priors=priors))
 
