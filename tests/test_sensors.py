@@ -21,7 +21,7 @@ from conftest import write_sim
 
 from nlp_calib.cli.main import main
 from nlp_calib.models.base import KinematicModel
-from nlp_calib.results.handoff import MountPose
+from nlp_calib.results.mount import SensorMount
 from nlp_calib.sensors import SENSORS, sensor_for
 from nlp_calib.sensors.base import BaseMotion, SensorStart
 from nlp_calib.sensors.planar import PlanarPose
@@ -57,13 +57,19 @@ class UpsideDownLidar(PlanarPose):
         return dict(params)
 
     def mount_pose(
-        self, params: Mapping[str, float], nominal: tuple[float, float, float] | None
-    ) -> MountPose:
-        return MountPose(
-            (params["sensor_x"], params["sensor_y"], 0.0),
-            (np.pi, 0.0, params["sensor_theta"]),
-            "x, y and yaw; mounted upside down (roll π), its height 0",
-            tilted=True,
+        self,
+        params: Mapping[str, float],
+        std: Mapping[str, float],
+        frame: str,
+        nominal: tuple[float, float, float] | None,
+    ) -> SensorMount:
+        pose = {"x": params["sensor_x"], "y": params["sensor_y"], "z": 0.0, "roll": np.pi, "pitch": 0.0}
+        return SensorMount.on_base(
+            self.kind,
+            frame,
+            {**pose, "yaw": params["sensor_theta"]},
+            {"x": std["sensor_x"], "y": std["sensor_y"], "yaw": std["sensor_theta"]},
+            {"z": "0 (not known)", "roll": "π: mounted upside down", "pitch": "0: mounted upside down"},
         )
 
 

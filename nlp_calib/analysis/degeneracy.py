@@ -7,8 +7,8 @@ matrix in reference units (one unit: the precision a useful calibration needs of
 :func:`nlp_calib.models.reference_scales`) changes the predicted motion of the windows by
 ``√(λ/N)`` in the residual's weights; a direction whose unit step changes it by less than
 :data:`FIDELITY` of the motion itself (``√(mean zᵀΩz)``) is not determined by this drive: a
-time offset that a drive's sinusoidal wheel speeds turn into a mix of the wheels, a gain and a
-length that one circle cannot tell apart. Well-posed drives sit two orders of magnitude above it.
+time offset that a drive's sinusoidal wheel speeds turn into a mix of the wheels, a turning gain
+and a length on circles of one radius. Well-posed drives sit two orders of magnitude above it.
 """
 
 from __future__ import annotations

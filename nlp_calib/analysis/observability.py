@@ -9,6 +9,8 @@ checked too: a log that never turns cannot tell an axis length or a lever arm.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from nlp_calib.analysis.degeneracy import free_directions, motion_scale
@@ -19,6 +21,30 @@ from nlp_calib.solvers import ProblemEvaluator
 
 #: Range of the sensor's heading (rad) below which the log counts as not turning.
 MIN_TURNING = 0.3
+
+
+@dataclass(frozen=True)
+class Directions:
+    """The information matrix ``H/σ²`` in reference units, taken apart: its eigenvalues ``lam`` and
+    eigenvectors ``V`` (columns), which of them the drive leaves free whatever the noise
+    (:mod:`~nlp_calib.analysis.degeneracy`), and each parameter's 1σ in reference units."""
+
+    lam: np.ndarray
+    V: np.ndarray
+    free: np.ndarray
+    std_reference: np.ndarray
+
+
+def directions(H: np.ndarray, sigma2: float, R: np.ndarray, n_windows: int, motion2: float) -> Directions:
+    """The directions of the information ``H`` (``JᵀΩJ`` summed over ``n_windows`` windows whose
+    motion is ``motion2``, :func:`~nlp_calib.analysis.degeneracy.motion_scale`) for residuals of
+    variance ``sigma2``, in the reference units ``R`` of the parameters. The one definition of
+    what a drive determines: a run's observability and the pre-flight both read it."""
+    lam, V = np.linalg.eigh(0.5 * (H + H.T) * np.outer(R, R) / sigma2)
+    free = free_directions(lam * sigma2, n_windows, motion2)
+    tiny = 1e-12 * max(float(lam[-1]), 1e-300)
+    var_param = (V**2 / np.maximum(lam, tiny)).sum(axis=1)
+    return Directions(lam, V, free, np.sqrt(var_param))
 
 
 def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarray) -> Observability:
@@ -41,25 +67,21 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
     params = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()
     value = dict(zip(fns.names, params))
     R = reference_scales(fns.model, names, np.array([value[n] for n in names]), fns.sensor.reference)
-    lam, V = np.linalg.eigh(0.5 * (ne.H + ne.H.T) * np.outer(R, R) / sigma2)
-    free = free_directions(
-        lam * sigma2, evaluator.n_residuals, motion_scale(fns, evaluator.data.z, evaluator.omega)
-    )
-    tiny = 1e-12 * max(float(lam[-1]), 1e-300)
-    var_param = (V**2 / np.maximum(lam, tiny)).sum(axis=1)
+    motion2 = motion_scale(fns, evaluator.data.z, evaluator.omega)
+    found = directions(ne.H, sigma2, R, evaluator.n_residuals, motion2)
     d = np.sqrt(np.maximum(np.diag(ne.H), 1e-300))
     jacobi = np.linalg.eigvalsh(ne.H / np.outer(d, d))
     cond = float(jacobi[-1] / jacobi[0]) if jacobi[0] > 1e-14 * jacobi[-1] else float("inf")
-    weak = weak_directions(names, lam, V, free)
+    weak = weak_directions(names, found.lam, found.V, found.free)
     # The heading's range, not its summed steps: tracker noise adds up over thousands of steps.
     turning = float(np.ptp(heading))
-    warnings = [w for w in [_no_turning(fns, names, turning)] if w]
+    warnings = [w for w in [no_turning(fns, names, turning)] if w]
     for w in sorted(weak, key=lambda w: -w.std_reference):
         size = f"1σ = {w.std_reference:.3g} ×" if np.isfinite(w.std_reference) else "no information at"
         warnings.append(w.words() + f" ({size} the reference precision)")
     return Observability(
         condition_number=cond,
-        std_reference={n: float(np.sqrt(v)) for n, v in zip(names, var_param)},
+        std_reference={n: float(v) for n, v in zip(names, found.std_reference)},
         weak=tuple(weak),
         heading_range_rad=turning,
         warnings=tuple(warnings),
@@ -89,7 +111,7 @@ def weak_directions(
     return weak
 
 
-def _no_turning(fns: ProblemFunctions, names: tuple[str, ...], turning: float) -> str:
+def no_turning(fns: ProblemFunctions, names: tuple[str, ...], turning: float) -> str:
     """The warning for a log that does not turn enough to show a lever arm ("" when it does)."""
     if turning >= MIN_TURNING:
         return ""

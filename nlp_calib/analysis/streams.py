@@ -97,6 +97,14 @@ class Scatter:
 
 
 def scatter(t: np.ndarray, y: np.ndarray, resolution: np.ndarray | float = 0.0) -> Scatter:
+    """The scatter of ``y`` ``(n, d)`` about its chords (:func:`chord_scatter`) and where its path
+    bends beyond it (:func:`path_bend`)."""
+    y = np.asarray(y, dtype=float).reshape(len(t), -1)
+    sc = chord_scatter(t, y, resolution)
+    return sc if len(t) < 5 else Scatter(sc.floor, sc.timing, path_bend(t, y, sc))
+
+
+def chord_scatter(t: np.ndarray, y: np.ndarray, resolution: np.ndarray | float = 0.0) -> Scatter:
     """The scatter of ``y`` ``(n, d)`` about its chords: robust over the slowest quarter of the
     records at rest (at least ``resolution``, a reading's step), and relative to the rate over the
     fastest half."""
@@ -116,8 +124,7 @@ def scatter(t: np.ndarray, y: np.ndarray, resolution: np.ndarray | float = 0.0) 
         fast = rate[:, c] >= max(np.median(rate[:, c]), 1e-12)
         if np.sum(fast) >= 10:
             timing[c] = robust_sigma(miss[fast, c] / rate[fast, c])
-    sc = Scatter(floor, timing)
-    return Scatter(floor, timing, path_bend(t, y, sc))
+    return Scatter(floor, timing)
 
 
 #: Second differences around a record a path's bend is taken over (the median: a glitch's own

@@ -215,11 +215,34 @@ def _covariance(
     def free(lam: np.ndarray) -> np.ndarray:
         return free_directions(lam, data.n_residuals, motion2)
 
-    prior = np.zeros(fns.n_free)
-    if bounds_std is not None:
-        prior = sigma2 * np.where(np.isfinite(bounds_std), bounds_std**-2.0, 0.0)
+    prior = bounds_prior(bounds_std, sigma2, fns.n_free)
     M = np.asarray(fns.tangent_map(x))
     return _bounded_covariance(*bread_meat, (scale, M), free, (prior, sigma2))
+
+
+def white_covariance(
+    H: np.ndarray,
+    sigma2: float,
+    scale: np.ndarray,
+    free: Callable[[np.ndarray], np.ndarray],
+    bounds_std: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The white-noise covariance ``σ²·H⁻¹`` of the information ``H = JᵀΩJ`` (manifold coordinates)
+    as :func:`estimate` treats it: the directions the drive leaves free (``free``, on eigenvalues
+    of ``H`` in the reference units ``scale``) held only by the bounds' prior (``bounds_std``, see
+    :func:`range_std`), inf where nothing holds them; and which parameters only the bounds hold.
+    What a drive, or a drive with a manoeuvre appended, would determine before any fit."""
+    n = H.shape[0]
+    prior = bounds_prior(bounds_std, sigma2, n)
+    return _bounded_covariance(H, sigma2 * H, (scale, np.eye(n)), free, (prior, sigma2))
+
+
+def bounds_prior(bounds_std: np.ndarray | None, sigma2: float, n: int) -> np.ndarray:
+    """The bounds' prior weights in the data's units (``σ²/std²``; 0 where unbounded)."""
+    if bounds_std is None:
+        return np.zeros(n)
+    std = np.asarray(bounds_std, dtype=float)
+    return sigma2 * np.where(np.isfinite(std), std**-2.0, 0.0)
 
 
 def _bounded_covariance(
@@ -227,13 +250,13 @@ def _bounded_covariance(
     meat: np.ndarray,
     scale_and_map: tuple[np.ndarray, np.ndarray],
     free: Callable[[np.ndarray], np.ndarray],
-    bounds_prior: tuple[np.ndarray, float],
+    prior_sigma2: tuple[np.ndarray, float],
 ) -> tuple[np.ndarray, np.ndarray]:
     """The sandwich covariance (plain coordinates, ``M`` the tangent map) with the bounds' prior
     (its weights in the data's units and the residuals' variance σ²) where the drive leaves a
     direction free, and which parameters move along such a direction (their σ is the bounds')."""
     scale, M = scale_and_map
-    prior, sigma2 = bounds_prior
+    prior, sigma2 = prior_sigma2
     n = H.shape[0]
     RR = np.outer(scale, scale)
     lam, V = np.linalg.eigh(H * RR)

@@ -39,7 +39,10 @@ class LogHeader:
     ``parameters`` keeps the header's own names (the model maps them onto its parameter names);
     ``T_base_sensor`` is ordered ``(x, y, theta)``. ``encoder_units`` says what the readings are
     (``encoder_max`` is 0 for joints in radians); ``sensor_z_roll_pitch`` is the nominal mount's
-    height, roll and pitch where a source knows them (a bag's ``/tf_static``).
+    height, roll and pitch where a source knows them (a bag's ``/tf_static``); ``nominal`` says
+    which values are the robot's nominal ones where a source filled in defaults;
+    ``counts_per_turn`` each wheel encoder's counts per wheel turn where a source states them
+    (``ROBOT.yaml``).
     """
 
     kinematic_model: str
@@ -50,6 +53,11 @@ class LogHeader:
     T_base_sensor: tuple[float, float, float]
     encoder_units: EncoderUnits = "counts"
     sensor_z_roll_pitch: tuple[float, float, float] | None = None
+    #: The parameters (the model's names; the mount's ``sensor_x``, ``sensor_y``, ``sensor_theta``)
+    #: whose values here are the robot's nominal ones, each with where it comes from; None: all of
+    #: them, written by the robot's own logger (a text log's header). The rest are defaults.
+    nominal: Mapping[str, str] | None = None
+    counts_per_turn: Mapping[str, float] = field(default_factory=dict)
 
     def encoder_index(self, name: str) -> int:
         """Column of the encoder called ``name`` in :attr:`Log.ticks`."""

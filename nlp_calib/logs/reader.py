@@ -87,7 +87,8 @@ def _blocks(chunks: Iterable[bytes]) -> Iterator[tuple[int, bytes, dict[int, int
         data = carry + chunk
         keep_cr = data.endswith(b"\r")  # a "\r\n" split across two chunks
         data = data[:-1] if keep_cr else data
-        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+        if b"\r" in data:
+            data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
         long: dict[int, int] = {}
         if long_len >= 0:
             end = data.find(b"\n")

@@ -20,6 +20,7 @@ import numpy as np
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.clock import LAG_REFERENCE, base_name
+from nlp_calib.models.controllers import ControllerMap, EncoderScales
 
 if TYPE_CHECKING:
     from nlp_calib.models.drives import Drive
@@ -162,12 +163,10 @@ class KinematicModel(Protocol):
         """For each counter encoder: the input row it drives and the ticks per unit of that input."""
         ...
 
-    def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, float]
-    ) -> tuple[str, dict[str, float], dict[str, str], str]:
-        """The ros2_control controller of this base, its parameters from ``params`` (and each
-        encoder's ``ranges``: readings per turn), where each kinematic parameter with no place
-        among them belongs, and what the values assume of the encoders."""
+    def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
+        """The ros2_control controller of this base, its parameters from ``params`` (and what the
+        encoders' ``scales`` make of them), where each kinematic parameter with no place among them
+        belongs and why any of the controller's parameters is left out."""
         ...
 
     def in_radians(self) -> KinematicModel:
@@ -207,6 +206,18 @@ def rows_by_name(names: Sequence[str], U: np.ndarray) -> dict[str, np.ndarray]:
     """The rows of each named input in horizon windows ``U`` (``len(names)·H`` rows, the inputs of
     each interval in turn)."""
     return {name: U[i :: len(names)] for i, name in enumerate(names)}
+
+
+def record_rates(increments: np.ndarray, time_s: np.ndarray) -> np.ndarray:
+    """Each row's rate per second at each record: the increments of the two intervals around it
+    over their duration (one interval at the log's ends)."""
+    n_rows, n = increments.shape[0], time_s.size
+    if n < 2:
+        return np.zeros((n_rows, n))
+    dt = np.diff(time_s)
+    pad = np.zeros((n_rows, 1))
+    span = np.concatenate([[0.0], dt]) + np.concatenate([dt, [0.0]])
+    return (np.hstack([pad, increments]) + np.hstack([increments, pad])) / span
 
 
 def sampled_angle(angle: np.ndarray, steering_sample: str) -> np.ndarray:

@@ -5,7 +5,8 @@ and a steering joint's angle. Read that way, a wheel's gain in metres per tick b
 in metres (its travel is radius × Δangle) and the parameters take the names a robot's stack gives
 them. Each model declares, once, a :class:`RadiansForm`: for every parameter or input whose
 meaning changes, its name, unit and factor in the radians form (the counts form's value is the
-factor times the radians form's); for every input, the encoder that drives it. :class:`InRadians`
+factor times the radians form's); for every input, the encoder that drives it (and whether it is
+that joint's rate over the interval). :class:`InRadians`
 wraps the model with it: the symbolic increment is the model's own on the parameters and inputs
 mapped back, and every fact (units, ranges, reference precision, symmetries, defaults, the
 controller's parameters, the closed-form start) is the model's, renamed and rescaled. Nothing of
@@ -25,7 +26,15 @@ import numpy as np
 from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log
-from nlp_calib.models.base import STEERING_SAMPLES, KinematicModel, Reference, Symmetry, sampled_angle
+from nlp_calib.models.base import (
+    STEERING_SAMPLES,
+    KinematicModel,
+    Reference,
+    Symmetry,
+    record_rates,
+    sampled_angle,
+)
+from nlp_calib.models.controllers import ControllerMap, EncoderScales
 
 if TYPE_CHECKING:
     from nlp_calib.models.drives import Drive
@@ -43,12 +52,15 @@ ASSUMES = (
 @dataclass(frozen=True)
 class Renamed:
     """A quantity's name and unit in the radians form, and ``factor``: its value in the counts form
-    per unit of the radians form. For an input, ``encoder`` is the encoder that drives it."""
+    per unit of the radians form. For an input, ``encoder`` is the encoder that drives it, and
+    ``rate``: the input is that joint's rate per second over the interval (a level), not its
+    increment or angle."""
 
     name: str
     unit: str
     factor: float = 1.0
     encoder: str = ""
+    rate: bool = False
 
 
 @dataclass(frozen=True)
@@ -204,13 +216,16 @@ class InRadians:
         """Each wheel's angular rate (rad/s) and each steering angle (rad) at the records, exact for
         the joints' linear interpolation (None without a joint stream)."""
         rates = log.joint_rates()
-        if rates is None:
+        if rates is None and not any(r.rate for r in self.form.inputs.values()):
             return None
+        if rates is None:  # a rate is a level: the intervals' own, never wrapped as an angle is
+            positions = np.stack([log.joint_position(e) for e in log.header.encoder_names], 1)
+            rates = record_rates(np.diff(positions, axis=0).T, np.asarray(log.time_s)).T
         rows = []
         for name in self.model.input_names:
             encoder = self.form.inputs[name].encoder
             j = log.header.encoder_index(encoder)
-            counter = self.encoder_kinds[encoder] == "counter"
+            counter = self.encoder_kinds[encoder] == "counter" or self.form.inputs[name].rate
             rows.append(rates[:, j] if counter else wrap_angle(log.joint_position(encoder)))
         return np.vstack(rows)
 
@@ -235,7 +250,9 @@ class InRadians:
         for name in self.model.input_names:
             encoder = self.form.inputs[name].encoder
             position = log.joint_position(encoder)
-            if self.encoder_kinds[encoder] == "counter":
+            if self.form.inputs[name].rate:
+                rows.append(np.diff(position) / np.diff(log.time_s))
+            elif self.encoder_kinds[encoder] == "counter":
                 rows.append(np.diff(position))
             else:
                 rows.append(sampled_angle(wrap_angle(position), steering_sample))
@@ -255,7 +272,7 @@ class InRadians:
         return {
             self.form.inputs[n].encoder: (row, 1.0)
             for row, n in enumerate(self.model.input_names)
-            if self.encoder_kinds[self.form.inputs[n].encoder] == "counter"
+            if self.encoder_kinds[self.form.inputs[n].encoder] == "counter" and not self.form.inputs[n].rate
         }
 
     def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
@@ -265,6 +282,9 @@ class InRadians:
         noise = []
         for name in self.model.input_names:
             encoder = self.form.inputs[name].encoder
+            if self.form.inputs[name].rate:  # a rate's noise is its increment's, counted there
+                noise.append(0.0)
+                continue
             given = (encoder_noise or {}).get(encoder)
             if given is not None:
                 noise.append(float(given))
@@ -275,16 +295,21 @@ class InRadians:
 
     # --- the hand-off and the start ----------------------------------------------------------
 
-    def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, float]
-    ) -> tuple[str, dict[str, float], dict[str, str], str]:
-        """The model's controller with every wheel turn 2π of its joint; a controller parameter
-        that is one of the model's own (same name: ``wheel_radius``, ``wheelbase``...) is the
-        parameter itself, not its round trip through the counts form."""
+    def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
+        """The model's controller with every wheel turn 2π of its joint and the readings joint
+        angles; a controller parameter that is one of the model's own (same name:
+        ``wheel_radius``, ``wheelbase``...) is the parameter itself, not its round trip through
+        the counts form."""
         turns = dict.fromkeys(self.encoder_kinds, 2.0 * np.pi)
-        name, parameters, places, _ = self.model.controller(self.to_counts(params), turns)
-        own = {n: float(params[n]) if n in params else v for n, v in parameters.items()}
-        return name, own, {self.rename(n): self.words(w) for n, w in places.items()}, ASSUMES
+        found = self.model.controller(self.to_counts(params), EncoderScales(turns, turns, joint_angles=True))
+        own = {n: float(params[n]) if n in params else v for n, v in found.parameters.items()}
+        return ControllerMap(
+            found.controller,
+            own,
+            {self.rename(n): self.words(w) for n, w in found.places.items()},
+            {n: self.words(w) for n, w in found.omitted.items()},
+            ASSUMES,
+        )
 
     def implausible(self, params: Mapping[str, float]) -> str:
         return self.words(self.model.implausible(self.to_counts(params)))

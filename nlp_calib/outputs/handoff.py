@@ -8,7 +8,7 @@ Nothing time-dependent is written: the same run gives the same bytes.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree as ET
@@ -20,8 +20,8 @@ from nlp_calib.core.files import atomic_write_bytes, atomic_write_text
 from nlp_calib.core.version import __version__
 from nlp_calib.outputs import urdf
 from nlp_calib.outputs.results import result_document
-from nlp_calib.results import CalibrationRun
-from nlp_calib.results.handoff import MountPose
+from nlp_calib.results import CalibrationRun, Encoder
+from nlp_calib.results.mount import LogMount, SensorMount
 
 CALIBRATION_FILE = "calibration.yaml"
 URDF_FILE = "sensor_mount.urdf.xml"
@@ -42,9 +42,10 @@ def _solver_entry(res: Mapping[str, Any]) -> dict[str, Any]:
 
 def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
     """The ``calibration.yaml`` document, or None when no estimate is handed off."""
-    solver = run.handoff_solver()
-    if solver is None:
+    found = handoff_mount(run)
+    if found is None:
         return None
+    solver, mount = found
     doc = result_document(run)
     best = doc["solvers"][solver]
     sc = run.scenario
@@ -64,8 +65,11 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         **({"datasets": list(sc.datasets)} if sc.datasets else {}),
         "solver": solver,
         "solver_choice": "first converged solver in the order " + ", ".join(run.solver_order()),
-        "frames": {"parent": PARENT_FRAME, "sensor": run.log.sensor_frame},
-        "sensor": _sensor_entry(run, solver),
+        "frames": {"parent": PARENT_FRAME, "sensor": mount.child},
+        "sensor": _sensor_entry(run),
+        "mount": _mount_entry(mount),
+        # A mount per log: each log's own, one URDF joint each (the block above is the first's).
+        **_per_log_mounts(run, solver),
         "parameters": best["params"],
         "std": best["std"],
         "std_white_noise": best["std_white_noise"],
@@ -76,19 +80,17 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "objective": {"residual": doc["residual"], "robust": doc["robust"]},
         "correlation": best["correlation"],
         "units": dict(sc.units),
-        # The units "per t_max ticks" and "per tick" refer to these encoders' ranges.
-        "encoders": [
-            {"name": e.name, "kind": e.kind, "unit": e.unit, "ticks_per_turn": e.range}
-            for e in run.log.encoders
-        ],
+        # The units "per t_max ticks" and "per tick" refer to these encoders' ranges; a wheel's
+        # counts per turn (for its radius) only where the user gave them.
+        "encoders": [_encoder(e) for e in run.log.encoders],
         "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
         "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
     }
 
 
-def _sensor_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
-    """Which sensor the calibration holds the mount of, and that mount as a URDF joint."""
-    info, mount = run.scenario.sensor, _mount(run, solver)
+def _sensor_entry(run: CalibrationRun) -> dict[str, Any]:
+    """Which sensor the calibration holds the mount of (its mount as a URDF joint: ``mount``)."""
+    info = run.scenario.sensor
     return {
         "kind": info.kind,
         "group": info.group,
@@ -96,18 +98,34 @@ def _sensor_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
         "params": list(info.params),
         "convention": info.convention,
         "held": {n: run.initial.get(n, 0.0) for n in info.held},
-        "urdf": {"xyz": list(mount.xyz), "rpy": list(mount.rpy), "calibrated": mount.calibrated},
-        # A mount per log: each log's own, one URDF joint each.
-        **(
-            {
-                "mounts": [
-                    {"log": m.log, "frame": m.frame, "xyz": list(m.mount.xyz), "rpy": list(m.mount.rpy)}
-                    for m in run.reports[solver].mounts
-                ]
-            }
-            if run.reports[solver].mounts
-            else {}
-        ),
+    }
+
+
+def _per_log_mounts(run: CalibrationRun, solver: str) -> dict[str, Any]:
+    every = run.reports[solver].mounts
+    return {"mounts": [{"log": m.log, **_mount_entry(m.mount)} for m in every]} if every else {}
+
+
+def _encoder(e: Encoder) -> dict[str, Any]:
+    entry: dict[str, Any] = {"name": e.name, "kind": e.kind, "unit": e.unit, "range": e.range}
+    if e.per_turn is not None:
+        entry["counts_per_turn"] = e.per_turn
+    return entry
+
+
+def _mount_entry(mount: SensorMount) -> dict[str, Any]:
+    """The mount as the URDF files state it: the joint, its origin, the pose in base_link with each
+    calibrated component's 1σ, and where every other component comes from."""
+    return {
+        "joint": mount.joint,
+        "parent": mount.parent,
+        "child": mount.child,
+        "xyz": list(mount.xyz),
+        "rpy": list(mount.rpy),
+        "pose_in_base_link": dict(mount.pose),
+        "std": {c: mount.std[c] for c in mount.calibrated},
+        "calibrated": list(mount.calibrated),
+        "nominal": dict(mount.nominal),
     }
 
 
@@ -154,36 +172,12 @@ def _comment_text(text: str) -> str:
     return text.replace("--", "- -")  # '--' may not appear inside an XML comment
 
 
-def _joint(run: CalibrationRun, solver: str) -> ET.Element:
-    return _joint_of(run.log.sensor_frame, _mount(run, solver))
-
-
-def _joint_of(frame: str, mount: MountPose) -> ET.Element:
-    joint = ET.Element("joint", {"name": f"{PARENT_FRAME}_to_{frame}", "type": "fixed"})
-    ET.SubElement(joint, "parent", {"link": PARENT_FRAME})
-    ET.SubElement(joint, "child", {"link": frame})
-    ET.SubElement(joint, "origin", _origin(mount))
+def _joint(mount: SensorMount) -> ET.Element:
+    joint = ET.Element("joint", {"name": mount.joint, "type": "fixed"})
+    ET.SubElement(joint, "parent", {"link": mount.parent})
+    ET.SubElement(joint, "child", {"link": mount.child})
+    ET.SubElement(joint, "origin", urdf.origin_text(mount))
     return joint
-
-
-def _joints(run: CalibrationRun, solver: str) -> list[tuple[str, ET.Element]]:
-    """Each calibrated mount's frame and joint: the sensor's, or every log's own (a mount per log)."""
-    every = run.reports[solver].mounts
-    if every:
-        return [(m.frame, _joint_of(m.frame, m.mount)) for m in every]
-    return [(run.log.sensor_frame, _joint(run, solver))]
-
-
-def _origin(mount: MountPose) -> dict[str, str]:
-    """The joint's ``xyz`` and ``rpy``, as the sensor gives its mount."""
-    return {"xyz": " ".join(repr(v) for v in mount.xyz), "rpy": " ".join(repr(a) for a in mount.rpy)}
-
-
-def _mount(run: CalibrationRun, solver: str) -> MountPose:
-    mount = run.reports[solver].mount
-    if mount is None:
-        raise UsageError(f"the result of {run.scenario.name} holds no mount for {solver}; run it again")
-    return mount
 
 
 def _xml(element: ET.Element, comment: str) -> str:
@@ -192,41 +186,69 @@ def _xml(element: ET.Element, comment: str) -> str:
     return f'<?xml version="1.0"?>\n<!--{_comment_text(comment)}-->\n{body}\n'
 
 
-def urdf_joint(run: CalibrationRun, solver: str) -> str:
-    """A URDF ``<joint>`` placing the sensor frame on ``base_link`` with ``solver``'s estimate (a
-    mount per log: a ``<robot>`` of one joint per log, each log's sensor its own link)."""
-    what = _mount(run, solver).calibrated
-    joints = _joints(run, solver)
-    if len(joints) > 1:
-        robot = ET.Element("robot", {"name": run.scenario.name})
-        for _, joint in joints:
-            robot.append(joint)
-        links = ", ".join(f"'{frame}'" for frame, _ in joints)
-        comment = (
-            f" Sensor mounting poses calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
-            f"solver {solver}, one per log ({', '.join(m.log for m in run.reports[solver].mounts)}). "
-            f"Calibrated: {what}. Paste these joints into the robot's <robot> description; the links "
-            f"{links} must be declared there. "
-        )
-        return _xml(robot, comment)
-    frame = run.log.sensor_frame
+def _mount_of(run: CalibrationRun, solver: str) -> SensorMount:
+    mount = run.reports[solver].mount
+    if mount is None:
+        raise UsageError(f"the result of {run.scenario.name} holds no mount for {solver}; run it again")
+    return mount
+
+
+def handoff_mount(run: CalibrationRun) -> tuple[str, SensorMount] | None:
+    """The handed-off solver and its estimate's mount (None: nothing is handed off)."""
+    solver = run.handoff_solver()
+    mount = run.reports[solver].mount if solver is not None else None
+    return None if solver is None or mount is None else (solver, mount)
+
+
+def urdf_joint(
+    run: CalibrationRun, solver: str, mount: SensorMount | None = None, users: bool = False
+) -> str:
+    """A URDF ``<joint>`` placing the sensor's link with ``solver``'s estimate (``mount``: its
+    report's unless given): on ``base_link``, or (``users``: ``--urdf``) the user's own joint of
+    that link, to paste over the one there."""
+    every = run.reports[solver].mounts
+    if every and not users:
+        return _log_joints(run, solver, every)
+    mount = mount or _mount_of(run, solver)
+    where = (
+        f"It is your joint '{mount.joint}' re-posed, as in robot.urdf: replace yours with it."
+        if users
+        else f"Paste this joint into the robot's <robot> description; the link '{mount.child}' must be "
+        "declared there."
+    )
     comment = (
         f" Sensor mounting pose calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
-        f"solver {solver}. Calibrated: {what}. Paste this joint into the robot's <robot> description; "
-        f"the link '{frame}' must be declared there. "
+        f"solver {solver}. {mount.words().capitalize()}. {where} "
     )
-    return _xml(_joint(run, solver), comment)
+    return _xml(_joint(mount), comment)
 
 
-def urdf_robot(run: CalibrationRun, solver: str) -> str:
-    """A complete URDF: a ``<robot>`` with ``base_link``, the sensor's link and the calibrated joint."""
+def _log_joints(run: CalibrationRun, solver: str, every: Sequence[LogMount]) -> str:
+    """One joint per log's own mount (a fit with a mount per log), each log's sensor its own link."""
     robot = ET.Element("robot", {"name": run.scenario.name})
-    ET.SubElement(robot, "link", {"name": PARENT_FRAME})
-    joints = _joints(run, solver)
-    for frame, _ in joints:
-        ET.SubElement(robot, "link", {"name": frame})
-    for _, joint in joints:
-        robot.append(joint)
+    for m in every:
+        robot.append(_joint(m.mount))
+    links = ", ".join(f"'{m.mount.child}'" for m in every)
+    comment = (
+        f" Sensor mounting poses calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
+        f"solver {solver}, one per log ({', '.join(m.log for m in every)}). "
+        f"{every[0].mount.words().capitalize()}. Paste these joints into the robot's <robot> "
+        f"description; the links {links} must be declared there. "
+    )
+    return _xml(robot, comment)
+
+
+def urdf_robot(run: CalibrationRun, solver: str, mount: SensorMount | None = None) -> str:
+    """A complete URDF: a ``<robot>`` with ``base_link``, the sensor's link and the calibrated joint
+    (every log's own, with a mount per log)."""
+    mount = mount or _mount_of(run, solver)
+    mounts = [m.mount for m in run.reports[solver].mounts] or [mount]
+    robot = ET.Element("robot", {"name": run.scenario.name})
+    ET.SubElement(robot, "link", {"name": mount.parent})
+    for m in mounts:
+        ET.SubElement(robot, "link", {"name": m.child})
+    for m in mounts:
+        robot.append(_joint(m))
     comment = (
         f" The sensor mount calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
         f"solver {solver}. A complete robot description (base and sensor links, the fixed joint) "
@@ -251,35 +273,31 @@ def write_calibration(run: CalibrationRun, folder: Path, name: str) -> list[Path
     return [folder / name]
 
 
-def write_joint(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
-    """The URDF joint alone, when an estimate is handed off."""
-    solver = run.handoff_solver()
-    if solver is None:
+def write_joint(run: CalibrationRun, folder: Path, name: str, users: bool = False) -> list[Path]:
+    """The URDF joint alone, when an estimate is handed off (``users``: the user's own joint)."""
+    found = handoff_mount(run)
+    if found is None:
         return _none(folder / name)
-    atomic_write_text(folder / name, urdf_joint(run, solver))
+    atomic_write_text(folder / name, urdf_joint(run, *found, users=users))
     return [folder / name]
 
 
 def write_users_robot(
     run: CalibrationRun, folder: Path, name: str, description: urdf.Description, link: str
 ) -> list[Path]:
-    """The user's own robot description with ``link``'s joint re-posed, when an estimate is handed off."""
-    solver = run.handoff_solver()
-    if solver is None:
+    """The user's own robot description with ``link``'s joint re-posed, when an estimate is handed
+    off (``run``'s mount placed in that description: :func:`nlp_calib.outputs.urdf.placed`)."""
+    found = handoff_mount(run)
+    if found is None:
         return _none(folder / name)
-    mount = _mount(run, solver)
-    roll, pitch, yaw = mount.rpy
-    # The user's own height is kept, and their roll and pitch where the sensor calibrated neither.
-    tilt = (roll, pitch) if mount.tilted else None
-    text = urdf.reposed(description, link, mount.xyz[0], mount.xyz[1], yaw, tilt)
-    atomic_write_bytes(folder / name, text)
+    atomic_write_bytes(folder / name, urdf.reposed(description, link, found[1]))
     return [folder / name]
 
 
 def write_robot(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
     """A complete robot description with the calibrated joint, when an estimate is handed off."""
-    solver = run.handoff_solver()
-    if solver is None:
+    found = handoff_mount(run)
+    if found is None:
         return _none(folder / name)
-    atomic_write_text(folder / name, urdf_robot(run, solver))
+    atomic_write_text(folder / name, urdf_robot(run, *found))
     return [folder / name]

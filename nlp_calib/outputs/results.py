@@ -11,6 +11,7 @@ import numpy as np
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.version import __version__
 from nlp_calib.results import CalibrationRun, SolverReport
+from nlp_calib.results.checks import CostComparison
 from nlp_calib.results.figures import TrajectoryMetrics
 
 
@@ -60,6 +61,51 @@ def _crossval_dict(run: CalibrationRun) -> dict[str, Any] | None:
             }
             for f in cv.folds
         ],
+    }
+
+
+def _logs_dict(run: CalibrationRun) -> dict[str, Any] | None:
+    """Several logs: each log's own fit against the other logs', and the jackknife over the logs."""
+    check, logs = run.checks.consistency, run.checks.logs
+    if check is None and logs is None:
+        return None
+    out: dict[str, Any] = {"consistency": check.as_dict() if check is not None else None}
+    if logs is not None:
+        out["std_logs"] = {n: (float(v) if np.isfinite(v) else None) for n, v in zip(logs.names, logs.std)}
+        out["held_out_logs"] = [
+            {"records": [f.first, f.stop], "converged": f.converged, "heldout": _or_none(f.heldout)}
+            for f in logs.folds
+        ]
+    return out
+
+
+def _or_none(metrics: TrajectoryMetrics | None) -> dict[str, Any] | None:
+    return metrics.as_dict() if metrics is not None else None
+
+
+def _cost_dict(cost: CostComparison | None) -> dict[str, Any] | None:
+    if cost is None:
+        return None
+    t = cost.gain_sigmas
+    return {
+        "against": cost.against,
+        "outcome": cost.outcome,
+        "heldout_gain_in_standard_errors": float(t) if np.isfinite(t) else None,
+        "heldout_folds": int(cost.heldout.shape[0]),
+        "insample_data_cost": {"other": cost.insample[0], "fit": cost.insample[1]},
+    }
+
+
+def _nominal_dict(run: CalibrationRun) -> dict[str, Any] | None:
+    nominal = run.checks.nominal
+    if nominal is None:
+        return None
+    return {
+        "values": dict(nominal.values),
+        "source": nominal.source,
+        "scored": dict(zip(next(iter(run.reports.values())).result.names, map(float, nominal.params))),
+        "metrics": nominal.metrics.as_dict(),
+        "cost": _cost_dict(nominal.cost),
     }
 
 
@@ -116,11 +162,18 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         "solvers": {name: _solver_dict(run, name, rep) for name, rep in run.reports.items()},
         "crossvalidation": _crossval_dict(run),
         "direction": checks.direction.as_dict() if checks.direction is not None else None,
+        "logs": _logs_dict(run),
+        "start": _cost_dict(checks.start),
+        "nominal": _nominal_dict(run),
         "truth": _truth_dict(run),
         "faults": _faults_dict(run),
         "observability": checks.observability.as_dict() if checks.observability is not None else None,
         "warnings": list(run.warnings),
-        "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
+        "verdict": {
+            "level": run.verdict.level,
+            "reasons": list(run.verdict.reasons),
+            "gain": run.verdict.gain,
+        },
     }
 
 

@@ -7,6 +7,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from nlp_calib.results import CalibrationRun
+from nlp_calib.results.checks import believed_std
 from nlp_calib.results.faults import count_kinds
 from nlp_calib.results.figures import TrajectoryMetrics
 
@@ -53,9 +54,11 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
     else:
         verdict = ": white noise explains the scatter, the two agree"
     lines = [
-        f"1σ: the larger of the white-noise σ and the σ of {len(cv.converged)} fits each without one block "
-        f"of records (jackknife); the block σ is {lo:.1f}–{hi:.1f}× the white-noise σ" + verdict
+        f"1σ: the white-noise σ, or the σ of {len(cv.converged)} fits each without one block of records "
+        f"(jackknife) where it exceeds it beyond its own noise; the block σ is {lo:.1f}–{hi:.1f}× the "
+        "white-noise σ" + verdict
     ]
+    lines += widened_lines(run)
     ate, rpe = "segment ATE mean [m]", "RPE over 1 m [m]"
     lines.append(
         f"cross-validation over {len(cv.folds)} blocks: held-out segment ATE {cv.heldout_mean(ate):.3f} m "
@@ -63,6 +66,23 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
         f"{cv.insample_mean(rpe):.3f} m): each block scored by the fit without it, and by the full fit"
     )
     return lines
+
+
+def widened_lines(run: CalibrationRun) -> list[str]:
+    """The parameters whose σ takes in how they move with the driving, and from which check."""
+    first = next(iter(run.reports), None)
+    checks = run.checks
+    if first is None:
+        return []
+    names, white = run.reports[first].uncertainty.names, run.reports[first].uncertainty.std
+    blocks = checks.crossval.beyond(white) if checks.crossval is not None else np.full(len(names), np.nan)
+    base = believed_std(white, blocks)
+    out = []
+    for label, spread in checks.moving():
+        wider = [n for n, b, v in zip(names, base, spread) if np.isfinite(v) and v > b]
+        if wider:
+            out.append(f"   σ of {', '.join(wider)}: {label} (they move with the driving: a model limit)")
+    return out
 
 
 def direction_lines(run: CalibrationRun) -> list[str]:
@@ -149,6 +169,9 @@ def lag_lines(run: CalibrationRun) -> list[str]:
     data, solver = run.data, run.chosen_solver() or run.solver_order()[0]
     est = data.lag_estimate
     assert est is not None
+    if not est.converged:
+        early = 1e3 * data.tracker_lag_s
+        return [f"tracker lag not fitted: no fit converged (the encoders are read {early:.1f} ms early)"]
     std = run.std(solver)
     params = run.reports[solver].result.param_dict()
     out = []

@@ -3,8 +3,10 @@
 The joint whose child is ``LINK`` gets the calibrated mount: x, y and yaw of the sensor in
 ``base_link`` calibrated; its height, roll and pitch kept as the description has them. The joint
 may hang below ``base_link`` through other fixed joints: its new origin is the calibrated pose
-seen from its parent. Everything else in the file stays byte for byte the user's: the file is not
-re-serialised, only the ``xyz`` and ``rpy`` of that one ``<origin>`` are rewritten in place.
+seen from its parent. :func:`placed` makes the mount record that joint (every hand-off file then
+states the user's joint, to the last digit); :func:`reposed` writes it into the description.
+Everything else in the file stays byte for byte the user's: the file is not re-serialised, only
+the ``xyz`` and ``rpy`` of that one ``<origin>`` are rewritten in place.
 Rotations follow URDF: fixed axes, ``R = Rz(yaw)·Ry(pitch)·Rx(roll)``.
 """
 
@@ -19,6 +21,7 @@ import numpy as np
 
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import open_regular
+from nlp_calib.results.mount import COMPONENTS, SensorMount
 
 BASE_LINK = "base_link"
 #: The largest description read (a URDF with meshes inlined is still far below this).
@@ -151,26 +154,43 @@ def _set(tag: bytes, key: str, value: str) -> bytes:
     return tag[:closing] + f' {key}="{value}"'.encode() + tag[closing:]
 
 
-def reposed(
-    d: Description, link: str, x: float, y: float, yaw: float, roll_pitch: tuple[float, float] | None = None
-) -> bytes:
-    """``d``'s text with ``link``'s joint at the calibrated ``x``, ``y``, ``yaw`` in ``base_link``
-    (and ``roll_pitch`` when calibrated too: a 3-D sensor's); the height, and the roll and pitch
-    unless given, kept."""
+def origin_text(mount: SensorMount) -> dict[str, str]:
+    """The ``xyz`` and ``rpy`` attributes of ``mount``'s joint, every digit kept: every hand-off
+    file writes these same strings."""
+    return {
+        "xyz": " ".join(repr(float(v)) for v in mount.xyz),
+        "rpy": " ".join(repr(float(v)) for v in mount.rpy),
+    }
+
+
+def placed(d: Description, link: str, mount: SensorMount) -> SensorMount:
+    """``mount`` as ``d``'s own joint of ``link``: the calibrated components in ``base_link``, the
+    others (a planar fit's height, roll and pitch) as ``d`` has them, the origin in the joint's
+    parent."""
     joint = d.joints[link]
     T_bp = T_base_parent(d, link)
     T_bs = T_bp @ _transform(joint, d.path)
-    roll, pitch, _ = _rpy(T_bs[:3, :3]) if roll_pitch is None else (*roll_pitch, 0.0)
+    kept = dict(zip(COMPONENTS, (*map(float, T_bs[:3, 3]), *map(float, _rpy(T_bs[:3, :3])))))
+    pose = {c: mount.pose[c] if c in mount.calibrated else kept[c] for c in COMPONENTS}
     T_new = np.eye(4)
-    T_new[:3, :3] = _rotation(np.array([roll, pitch, yaw]))
-    T_new[:3, 3] = [x, y, T_bs[2, 3]]
+    T_new[:3, :3] = _rotation(np.array([pose["roll"], pose["pitch"], pose["yaw"]]))
+    T_new[:3, 3] = [pose["x"], pose["y"], pose["z"]]
     T_joint = np.linalg.solve(T_bp, T_new)
-    xyz = " ".join(repr(float(v)) for v in T_joint[:3, 3])
-    rpy = " ".join(repr(float(v)) for v in _rpy(T_joint[:3, :3]))
+    xyz = tuple(float(v) for v in T_joint[:3, 3])
+    rpy = tuple(float(v) for v in _rpy(T_joint[:3, :3]))
+    origin = ((xyz[0], xyz[1], xyz[2]), (rpy[0], rpy[1], rpy[2]))
+    kept_from = dict.fromkeys(mount.nominal, f"kept from {d.path.name} (--urdf)")
+    return mount.under(joint.parent, joint.name, origin, pose, kept_from)
+
+
+def reposed(d: Description, link: str, mount: SensorMount) -> bytes:
+    """``d``'s text with ``link``'s joint at ``mount``'s origin (from :func:`placed`)."""
+    joint = d.joints[link]
+    text = origin_text(mount)
     if joint.origin_start is None:  # no <origin>: one goes right after the joint's start tag
         end = _TAG_END.match(d.text, joint.start).end()  # type: ignore[union-attr]
-        return d.text[:end] + f'<origin xyz="{xyz}" rpy="{rpy}"/>'.encode() + d.text[end:]
+        return d.text[:end] + f'<origin xyz="{text["xyz"]}" rpy="{text["rpy"]}"/>'.encode() + d.text[end:]
     start = joint.origin_start
     end = _TAG_END.match(d.text, start).end()  # type: ignore[union-attr]
-    tag = _set(_set(d.text[start:end], "xyz", xyz), "rpy", rpy)
+    tag = _set(_set(d.text[start:end], "xyz", text["xyz"]), "rpy", text["rpy"])
     return d.text[:start] + tag + d.text[end:]

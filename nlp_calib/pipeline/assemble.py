@@ -10,15 +10,14 @@ import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
-import numpy as np
-
 from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.logs import LogHeader
 from nlp_calib.models import KinematicModel
-from nlp_calib.models.clock import LAG_UNIT
+from nlp_calib.models.clock import LAG_UNIT, lag_names
+from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
-from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis
+from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis, Scores
 from nlp_calib.pipeline.build import StartingPoint
 from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.scenario import Scenario
@@ -38,9 +37,9 @@ from nlp_calib.results import (
     SolverResult,
     Verdict,
 )
-from nlp_calib.results.checks import believed_std
-from nlp_calib.results.faults import Findings
-from nlp_calib.results.handoff import LogMount, MountPose
+from nlp_calib.results.checks import NominalCheck, believed_std
+from nlp_calib.results.faults import FaultReport, Findings
+from nlp_calib.results.mount import LogMount, SensorMount
 from nlp_calib.sensors import Sensor
 from nlp_calib.solvers import solver_label
 from nlp_calib.sources import BagSource
@@ -74,6 +73,11 @@ def scenario_info(
     )
 
 
+def fit_info(sc: Scenario, fns: ProblemFunctions) -> ScenarioInfo:
+    """:func:`scenario_info` of ``sc`` as the problem ``fns`` fits it (its time offsets and mounts)."""
+    return scenario_info(sc, fns.model, lag_names(fns.spec.lags), fns.spec.mounts)
+
+
 def _units(sc: Scenario, model: KinematicModel) -> dict[str, str]:
     """Every parameter's unit: the model's, then its sensor's mount's."""
     kinematic = {n: model.units[n] for n in model.kinematic_params}
@@ -99,8 +103,9 @@ def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
     log, model = prepared.log, prepared.model
     kinds = model.encoder_kinds
     unit = "rad" if log.header.encoder_units == "radians" else "ticks"
+    per_turn = encoder_scales(prepared).per_turn
     encoders = tuple(
-        Encoder(name, kinds.get(name, "counter"), unit, int(vmax))
+        Encoder(name, kinds.get(name, "counter"), unit, int(vmax), per_turn.get(name))
         for name, vmax in zip(log.header.encoder_names, log.header.encoder_max)
     )
     t = log.time_s[windows.used[0] : windows.used[1]]
@@ -164,49 +169,87 @@ class MountViews:
 
     fns: ProblemFunctions
     part: int
-    logs: tuple[tuple[str, LogHeader], ...]
+    logs: tuple[tuple[str, LogHeader | LogInfo], ...]
 
-    def mounts(self, sensor: Sensor, params: Mapping[str, float]) -> tuple[MountPose, tuple[LogMount, ...]]:
-        """This log's mount, and every log's own when each has one."""
+    def mounts(
+        self, sensor: Sensor, params: Mapping[str, float], std: Mapping[str, float]
+    ) -> tuple[SensorMount, tuple[LogMount, ...]]:
+        """This log's mount, and every log's own when each has one (each its own sensor link,
+        numbered where logs share a frame's name)."""
         fns = self.fns
-        own = sensor.mount_pose(fns.view_dict(params, self.part), self.logs[self.part][1].sensor_z_roll_pitch)
-        if fns.spec.mounts == 1:
-            return own, ()
         frames = [h.sensor_frame for _, h in self.logs]
         every = tuple(
             LogMount(
                 name,
-                frame if frames.count(frame) == 1 else f"{frame}_{i + 1}",
-                sensor.mount_pose(fns.view_dict(params, i), header.sensor_z_roll_pitch),
+                sensor.mount_pose(
+                    fns.view_dict(params, i),
+                    fns.view_dict(std, i),
+                    frame if frames.count(frame) == 1 or fns.spec.mounts == 1 else f"{frame}_{i + 1}",
+                    header.sensor_z_roll_pitch,
+                ),
             )
             for i, ((name, header), frame) in enumerate(zip(self.logs, frames))
         )
-        return own, every
+        if fns.spec.mounts == 1:
+            return every[self.part].mount, ()
+        return every[self.part].mount, every
 
 
 def _report(
     prepared: PreparedLog,
     name: str,
     result: SolverResult,
-    analyses: tuple[FitAnalysis, LogAnalysis],
-    views: MountViews | None,
+    fitted: tuple[FitAnalysis, Checks],
+    figures: tuple[LogAnalysis, MountViews | None],
 ) -> SolverReport:
     """One solver's report, with its estimate in the controller's terms and its mount (every log's,
     with a mount per log)."""
-    fitted, figures = analyses
-    u = fitted.uncertainty[name]
-    blocked = fitted.crossval.std if fitted.crossval is not None else np.full(len(u.names), np.nan)
-    header = prepared.log.header
-    ranges = dict(zip(header.encoder_names, header.encoder_max))
-    std = believed_std(u.std, blocked)
-    controller = controller_params(prepared.model, result.names, result.params, std, u.correlation, ranges)
-    sensor = prepared.scenario.objective.sensor.sensor
-    every: tuple[LogMount, ...] = ()
+    u = fitted[0].uncertainty[name]
+    scored, views = figures
+    std = believed_std(u.std, *fitted[1].spreads(u.std))
+    scales = encoder_scales(prepared)
+    estimate = (result.params, std, u.correlation)
+    extra = (scored.noise.get(name), prepared.held)
+    controller = controller_params(prepared.model, result.names, estimate, scales, extra)
+    sensor, header = prepared.scenario.objective.sensor.sensor, prepared.log.header
+    sd = dict(zip(result.names, map(float, std)))
     if views is None:
-        mount = sensor.mount_pose(result.param_dict(), header.sensor_z_roll_pitch)
-    else:
-        mount, every = views.mounts(sensor, result.param_dict())
-    return SolverReport(result, u, *figures.scores[name], controller, mount, every)
+        mount = sensor.mount_pose(result.param_dict(), sd, header.sensor_frame, header.sensor_z_roll_pitch)
+        return SolverReport(result, u, *scored.scores[name], controller, mount)
+    mount, every = views.mounts(sensor, result.param_dict(), sd)
+    return SolverReport(result, u, *scored.scores[name], controller, mount, every)
+
+
+def encoder_scales(prepared: PreparedLog) -> EncoderScales:
+    """The encoders' ranges in the log and their counts per wheel turn where the user gives them
+    (the scenario's ``counts_per_turn`` over ``ROBOT.yaml``'s)."""
+    header = prepared.log.header
+    per_turn = {**header.counts_per_turn, **prepared.scenario.data.counts_per_turn}
+    return EncoderScales(dict(zip(header.encoder_names, header.encoder_max)), per_turn)
+
+
+def fit_checks(
+    fitted: FitAnalysis, findings: Findings | None, start: StartingPoint, nominal: Scores | None
+) -> Checks:
+    """The checks of the fit (the same for every log it is read for) with one log's ``findings``
+    and the nominal robot's figures on it (``nominal``; None: no nominal values known)."""
+    check = None
+    if nominal is not None and fitted.nominal_params is not None:
+        check = NominalCheck(
+            dict(start.nominal), start.nominal_source, fitted.nominal_params, nominal[0], fitted.nominal
+        )
+    return Checks(
+        fitted.observability,
+        fitted.crossval,
+        fitted.direction,
+        findings,
+        fitted.consistency,
+        logs=fitted.logs,
+        start=fitted.start,
+        nominal=check,
+        lag_effects=fitted.lag_effects,
+        plan=fitted.plan,
+    )
 
 
 def mount_notes(sc: Scenario, start: StartingPoint) -> list[str]:
@@ -259,7 +302,10 @@ def assemble_run(
     """One log's run: the fit's estimates and checks beside this log's figures, with its verdict
     (``views``: the fit's mounts seen from this log)."""
     prepared, windows, alignment, findings = log
-    reports = {name: _report(prepared, name, r, (fitted, figures), views) for name, r in results.items()}
+    checks = fit_checks(fitted, findings, start, figures.nominal)
+    reports = {
+        name: _report(prepared, name, r, (fitted, checks), (figures, views)) for name, r in results.items()
+    }
     run = CalibrationRun(
         scenario=scenario,
         log=log_info(prepared, windows),
@@ -268,14 +314,7 @@ def assemble_run(
         baseline=figures.baseline[0],
         baseline_holdout=figures.baseline[1],
         reports=reports,
-        checks=Checks(
-            fitted.observability,
-            fitted.crossval,
-            fitted.direction,
-            findings,
-            fitted.consistency,
-            lag_effects=fitted.lag_effects,
-        ),
+        checks=checks,
         warnings=(
             *notes,
             *lag_notes(prepared.scenario, alignment),
@@ -314,3 +353,80 @@ def _own_truth(
         return out
 
     return mine
+
+
+def merged_findings(runs: Sequence[CalibrationRun]) -> Findings | None:
+    """Every log's findings as one (faults numbered within their own log; each log's unchecked
+    reason named with its log), for the joint fit read as one run."""
+    found = [(run.log.path, run.checks.findings) for run in runs if run.checks.findings is not None]
+    if not found:
+        return None
+    reports = [f.report for _, f in found]
+    stale: dict[str, int] = {}
+    for rep in reports:
+        for name, n in rep.stale.items():
+            stale[name] = stale.get(name, 0) + n
+    unchecked = "; ".join(f"{path}: {f.report.unchecked}" for path, f in found if f.report.unchecked)
+    report = FaultReport(
+        faults=tuple(fault for rep in reports for fault in rep.faults),
+        stale=stale,
+        noise=reports[0].noise,
+        unchecked=unchecked,
+        unit=reports[0].unit,
+    )
+    return Findings(report, found[0][1].handling, tuple(r for _, f in found for r in f.repairs))
+
+
+def joint_run(
+    scenario: ScenarioInfo,
+    parts: Sequence[CalibrationRun],
+    fit: tuple[PreparedLog, StartingPoint, int],
+    results: Mapping[str, SolverResult],
+    fitted: FitAnalysis,
+    figures: LogAnalysis,
+    notes: Sequence[str],
+    views: MountViews | None = None,
+) -> CalibrationRun:
+    """The joint fit as one run: its figures over every log's fitted records (``figures``), the
+    fit's checks, every log's findings, and its own verdict. ``fit``: the first log (its model,
+    encoders and sensor frame), where the solvers started and the fitted windows."""
+    prepared, start, n_residuals = fit
+    first = parts[0]
+    records = sum(run.data.fit[1] - run.data.fit[0] for run in parts)
+    log = LogInfo(
+        path=f"{len(parts)} logs: " + ", ".join(run.log.path for run in parts),
+        records=sum(run.log.records for run in parts),
+        dropped=tuple(d for run in parts for d in run.log.dropped),
+        sensor_frame=first.log.sensor_frame,
+        encoders=first.log.encoders,
+        start_ns=first.log.start_ns,
+        duration_s=sum(run.log.duration_s for run in parts),
+        sensor_z_roll_pitch=first.log.sensor_z_roll_pitch,
+    )
+    data = DataInfo(
+        used=(0, records),
+        fit=(0, records),
+        n_residuals=n_residuals,
+        dropped_stationary=sum(run.data.dropped_stationary for run in parts),
+        dropped_faulty=sum(run.data.dropped_faulty for run in parts),
+        tracker_lag_s=float("nan"),
+        lag_estimate=None,
+    )
+    checks = fit_checks(fitted, merged_findings(parts), start, figures.nominal)
+    reports = {
+        name: _report(prepared, name, r, (fitted, checks), (figures, views)) for name, r in results.items()
+    }
+    warned = dict.fromkeys((*notes, *(w for run in parts for w in run.warnings)))
+    run = CalibrationRun(
+        scenario=scenario,
+        log=log,
+        data=data,
+        initial=dict(start.initial),
+        baseline=figures.baseline[0],
+        baseline_holdout=None,
+        reports=reports,
+        checks=checks,
+        warnings=tuple(warned),
+        verdict=Verdict("", ()),
+    )
+    return dataclasses.replace(run, verdict=verdict(run, prepared.model))

@@ -8,7 +8,7 @@ fit use one, so nothing is built twice.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -122,9 +122,32 @@ def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[st
     return guess
 
 
+def nominal_values(
+    sc: Scenario, model: KinematicModel, log: Log, guess: Mapping[str, float], free: Sequence[str]
+) -> tuple[dict[str, float], str]:
+    """The free parameters whose nominal values something knows (the log's header as its logger
+    wrote it, ``ROBOT.yaml``, ``/tf_static``, the scenario's ``initial_guess`` mapping), at their
+    values in ``guess`` (before a data-driven start replaces them), and where they come from in
+    words. Model defaults are no robot's nominal values: a parameter only they give is left out."""
+    header = log.header
+    mount = tuple(sc.objective.sensor.sensor.nominal(header))
+    if header.nominal is None:
+        given = [*header_parameters(model, header), *mount]
+        sources = {n: "the log's header" for n in given if n in model.kinematic_params or n in mount}
+    else:
+        sources = {
+            n: where for n, where in header.nominal.items() if n in model.kinematic_params or n in mount
+        }
+    if isinstance(sc.parameters.initial_guess, Mapping):
+        sources.update(dict.fromkeys(sc.parameters.initial_guess, "initial_guess"))
+    sources = {n: where for n, where in sources.items() if n in free and n in guess}
+    return {n: float(guess[n]) for n in sources}, ", ".join(dict.fromkeys(sources.values()))
+
+
 @dataclass(frozen=True)
 class StartingPoint:
-    """Where the solvers start (free parameters ``x0``), the fixed values and the bounds."""
+    """Where the solvers start (free parameters ``x0``), the fixed values and the bounds; and the
+    robot's nominal values where something knows them (``nominal``, from ``nominal_source``)."""
 
     initial: Mapping[str, float]
     auto: Mapping[str, float] | None
@@ -136,6 +159,8 @@ class StartingPoint:
     x_fixed: np.ndarray
     lower: np.ndarray | None
     upper: np.ndarray | None
+    nominal: Mapping[str, float] = field(default_factory=dict)
+    nominal_source: str = ""
 
 
 def auto_start(
@@ -185,6 +210,7 @@ def starting_point(
     the problem has a mount per log) and bounds."""
     initial = initial_parameters(sc, fns.model, log)
     initial.update(lag_start(sc, fns.spec.lags, lags))
+    nominal, source = nominal_values(sc, fns.model, log, initial, fns.free)
     one = fns.spec.mounts == 1
     sensor = (
         auto_start(sc, fns, log, (start, stop), initial)
@@ -205,7 +231,7 @@ def starting_point(
     bounded = sc.parameters.bounds or any(base_name(n) == LAG_PARAM for n in fns.free)
     lower, upper = _bounds(sc, fns, x0) if bounded else (None, None)
     x_fixed = np.array([initial[n] for n in fns.fixed])
-    return StartingPoint(initial, auto, sensor, x0, x_fixed, lower, upper)
+    return StartingPoint(initial, auto, sensor, x0, x_fixed, lower, upper, nominal, source)
 
 
 def evaluated(sc: Scenario, solvers: Sequence[str]) -> set[str]:

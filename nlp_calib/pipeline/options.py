@@ -21,6 +21,7 @@ BLOCKS = Range(2, 100, integer=True)
 DELTA = Range(0.0, 1e6, lo_open=True)
 WEIGHT = Range(0.0, 1e12, lo_open=True)
 TICKS = Range(0.0, 1e9, lo_open=True)
+COUNTS_PER_TURN = Range(0.0, 2.0**32, lo_open=True)
 PRIOR_STD = Range(1e-9, 1e6)
 THREADS = Range(1, 64, integer=True)
 RPE_WINDOW = Range(1, 1_000_000, integer=True)
@@ -162,17 +163,21 @@ class LogEntry:
 @dataclass(frozen=True)
 class DataOptions:
     """The logs (one, or several fitted together: ``datasets``), how strictly they are read, the
-    encoders' noise (ticks) and what to do with faults."""
+    encoders' noise (ticks), each wheel encoder's counts per wheel turn (for the controller's
+    radii) and what to do with faults."""
 
     logs: tuple[LogEntry, ...]
     joint: bool = False
     strict: bool = True
     encoder_noise: Mapping[str, float] = field(default_factory=dict)
+    counts_per_turn: Mapping[str, float] = field(default_factory=dict)
     faults: FaultOptions = field(default_factory=FaultOptions)
 
     def __post_init__(self) -> None:
         for enc, ticks in self.encoder_noise.items():
             check_range(f"encoder_noise.{enc}", ticks, TICKS)
+        for enc, counts in self.counts_per_turn.items():
+            check_range(f"counts_per_turn.{enc}", counts, COUNTS_PER_TURN)
 
 
 @dataclass(frozen=True)

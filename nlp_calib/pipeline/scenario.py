@@ -332,6 +332,8 @@ def check_against_model(sc: Scenario, source: str) -> None:
     _check_parameter_names(sc.parameters, scenario_params(sc), source)
     for enc in sc.data.encoder_noise:
         _choice(enc, encoders(model), f"{source}: encoder_noise")
+    for enc in sc.data.counts_per_turn:
+        _choice(enc, encoders(model), f"{source}: counts_per_turn")
     for i, entry in enumerate(sc.data.logs):
         key = f"datasets[{i}]" if sc.data.joint else "dataset"
         if isinstance(entry.source, (BagSource, LidarSource)):

@@ -5,17 +5,16 @@ data are re-sampled at ``t − τ₀`` once per log (``τ₀``: the data's own o
 windows); the problem then takes ``τ = τ₀ + δ`` as a parameter. Over a window from record ``a`` to
 ``b`` the robot moved, between the times the reference saw,
 
-    M_τ = E_a(δ) · M · E_b(δ)⁻¹,     E_j(δ) = Δ(k, u_j(δ))
+    M_τ = E_a(δ) · M · E_b(δ)⁻¹,     E_j(δ) = δ·ξ_j  (to first order in δ)
 
 with ``M`` the model's motion over the window's intervals and ``E_j`` its motion over the ``δ``
-before record ``j``: the model's increment on the inputs of that stretch, ``δ·ṙ_j`` for an
-increment (``ṙ_j`` its rate at record ``j``: its two intervals' travel over their duration) and
-the level itself for a level (an angle the model reads as it is). A negative ``δ`` moves along
-the stretch after record ``j`` (the increment is then backwards, the exact inverse for the
-model's arcs). This is
-linear interpolation of the encoders at the shifted time, written symbolically: every consumer
-of the problem's Functions (both solvers, the uncertainty, the observability, the refits and the
-C export) sees the offset's Jacobian. It is exact to first order in ``δ`` for any drive; the
+before record ``j``: ``ξ_j`` is the base's velocity there, the model's increment per second of a
+stretch whose inputs move at their rates at record ``j`` (an increment: its two intervals' travel
+over their duration; a level, an angle the model reads as it is: its value). A negative ``δ``
+moves along the stretch after record ``j``. This is linear interpolation of the encoders at the
+shifted time, written symbolically, to first order (products of the two ends' small motions
+dropped): every consumer of the problem's Functions (both solvers, the uncertainty, the
+observability, the refits and the C export) sees the offset's exact Jacobian at ``δ = 0``. The
 pipeline re-samples the data at each new estimate, so ``δ`` ends near zero.
 """
 
@@ -28,7 +27,6 @@ import numpy as np
 
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.models.base import KinematicModel
-from nlp_calib.symbolic import se2
 
 
 def level_rows(model: KinematicModel) -> tuple[int, ...]:
@@ -49,10 +47,24 @@ def shifted(
     delta: ca.SX,
     integration: str,
 ) -> ca.SX:
-    """``E_a(δ)·M·E_b(δ)⁻¹`` (see the module docstring); ``ends`` the rates at the window's ends."""
-    levels = level_rows(model)
-    E_a, E_b = (model.increment(k, stretch_inputs(r, delta, levels), integration) for r in ends)
-    return se2.compose(E_a, se2.compose(M, se2.inverse(E_b)))
+    """``E_a(δ)·M·E_b(δ)⁻¹`` to first order in ``δ`` (see the module docstring); ``ends`` the rates
+    at the window's ends."""
+    a, b = (delta * velocity(model, k, r, integration) for r in ends)
+    # E_a·M·E_b⁻¹ to first order in the small motions a and b (their products dropped).
+    c, s = ca.cos(M[2]), ca.sin(M[2])
+    return ca.vertcat(
+        M[0] + a[0] - a[2] * M[1] - c * b[0] + s * b[1],
+        M[1] + a[1] + a[2] * M[0] - s * b[0] - c * b[1],
+        M[2] + a[2] - b[2],
+    )
+
+
+def velocity(model: KinematicModel, k: ca.SX, rate: ca.SX, integration: str) -> ca.SX:
+    """The base's velocity ``(v_x, v_y, ω)`` at a record whose inputs' rates (levels) are ``rate``:
+    the model's increment per second of the stretch, its derivative in the stretch's length."""
+    t = ca.SX.sym("t")
+    step = model.increment(k, stretch_inputs(rate, t, level_rows(model)), integration)
+    return ca.substitute(ca.jacobian(step, t), t, ca.DM(0.0))
 
 
 def record_rates(inputs: np.ndarray, time_s: np.ndarray, levels: Sequence[int]) -> np.ndarray:

@@ -126,6 +126,23 @@ class TrajectoryFunctions:
         )
 
     @functools.cached_property
+    def carried(self) -> ca.Function:
+        """(T_world_sensor, params, M) → the sensor's pose after the base moves by the planar motion
+        ``M`` ``(x, y, θ)`` from where the sensor is at ``T_world_sensor``: ``T_world_sensor·T⁻¹MT``
+        (a manoeuvre's tracker poses from its base path)."""
+        params = self._full[0]
+        T_ws = ca.SX.sym("T_world_sensor", self.sensor.pose_rows)
+        M = ca.SX.sym("M", 3)
+        mount = split_params(self.model, self.sensor, params)[1]
+        return fn(
+            "carried",
+            [T_ws, params, M],
+            ["T_world_sensor", "params", "M"],
+            [self.sensor.compose(T_ws, self.sensor.predict(mount, M))],
+            ["T_world_sensor_next"],
+        )
+
+    @functools.cached_property
     def base_from_sensor(self) -> ca.Function:
         params = self._full[0]
         T_ws = ca.SX.sym("T_world_sensor", self.sensor.pose_rows)

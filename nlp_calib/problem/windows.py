@@ -292,6 +292,38 @@ def joined(parts: Sequence[ResidualData]) -> ResidualData:
     )
 
 
+def appended(
+    fns: ProblemFunctions,
+    data: ResidualData,
+    stretch: tuple[np.ndarray, np.ndarray, np.ndarray],
+    options: ResidualOptions,
+) -> ResidualData:
+    """``data`` with a stretch of driving appended to its last log: ``stretch`` is the stretch's
+    record times (s), its interval inputs ``(n_inputs, n - 1)`` and its tracker poses (in the
+    sensor's layout), laid after the last record as another log would be (a zero interval between,
+    no window across) but on the last log's clock (its time offset). The new windows are the last
+    ones; a manoeuvre a plan proposes is judged on them."""
+    time_s, inputs, poses = stretch
+    H, n0 = options.horizon, data.n_records
+    starts = n0 + window_starts(inputs.shape[1], H, options.stride)
+    all_poses = np.ascontiguousarray(np.concatenate([data.T_world_sensor, poses]))
+    clock = data.clock
+    if clock is not None:
+        rates = record_rates(inputs, time_s, level_rows(fns.model))
+        clock = WindowClock(clock.lags, np.concatenate([clock.rates, rates], axis=1))
+    return replace(
+        data,
+        inputs=np.ascontiguousarray(
+            np.concatenate([data.inputs, np.zeros((inputs.shape[0], 1)), inputs], axis=1)
+        ),
+        T_world_sensor=all_poses,
+        starts=np.concatenate([data.starts, starts]),
+        stops=np.concatenate([data.stops, starts + H]),
+        z=np.concatenate([data.z, tracker_motions(fns, all_poses, starts, starts + H)], axis=1),
+        clock=clock,
+    )
+
+
 def _joined_clock(clocks: Sequence[WindowClock | None]) -> WindowClock | None:
     """Parts' clock data end to end (None when a part has none)."""
     given = [c for c in clocks if c is not None]

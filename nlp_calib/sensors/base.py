@@ -13,9 +13,10 @@ by asking which sensor it is:
   of a motion, its poses in a log, the signal its jump screen judges);
 - its **start**: the mount's starting values, its closed-form start (with the physical sign) and
   the selection of the fit's windows that start implies;
-- its **write-back**: the mount in a robot's terms (a URDF joint's ``xyz`` and ``rpy``, what was
-  calibrated and what is nominal), the canonical form of an estimate and what it says of itself
-  in a result (``kind``, ``group``).
+- its **write-back**: the mount in a robot's terms (:class:`~nlp_calib.results.mount.SensorMount`:
+  the joint of its frame on ``base_link``, each component's value and 1σ, what was calibrated and
+  where each nominal component comes from: every hand-off file's one description of it), the
+  canonical form of an estimate and what it says of itself in a result (``kind``, ``group``).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ import numpy as np
 
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.models.base import KinematicModel
-from nlp_calib.results.handoff import MountPose
+from nlp_calib.results.mount import SensorMount
 
 #: A reference precision: a fraction of the parameter's value, or an absolute amount in its unit.
 Reference = tuple[Literal["relative", "absolute"], float]
@@ -100,6 +101,7 @@ class Sensor(Protocol):
 
     # --- numeric twins ---------------------------------------------------------------------------
     def heading(self, T_world_sensor: np.ndarray) -> np.ndarray: ...
+    def planar_yaw(self, params: Mapping[str, float]) -> float | None: ...  # mount yaw in the base plane
     def tangent(self, z: np.ndarray) -> np.ndarray: ...
     def poses(self, log: Log) -> np.ndarray: ...
     def jump_signal(self, log: Log) -> tuple[np.ndarray, int]: ...
@@ -110,6 +112,7 @@ class Sensor(Protocol):
 
     # --- the start -----------------------------------------------------------------------------
     def initial(self, header: LogHeader) -> dict[str, float]: ...
+    def nominal(self, header: LogHeader) -> dict[str, float]: ...  # the mount a log's header gives
     @property
     def start_span_s(self) -> float | None: ...  # its start's windows (s); None: the residual's
     def closed_form(
@@ -130,5 +133,9 @@ class Sensor(Protocol):
         self, model: KinematicModel, params: Mapping[str, float], fixed: Sequence[str]
     ) -> dict[str, float]: ...
     def mount_pose(
-        self, params: Mapping[str, float], nominal: tuple[float, float, float] | None
-    ) -> MountPose: ...
+        self,
+        params: Mapping[str, float],
+        std: Mapping[str, float],
+        frame: str,
+        nominal: tuple[float, float, float] | None,
+    ) -> SensorMount: ...

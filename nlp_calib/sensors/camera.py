@@ -26,7 +26,7 @@ from nlp_calib.core import poses3d
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.models.base import KinematicModel
-from nlp_calib.results.handoff import MountPose
+from nlp_calib.results.mount import COMPONENTS, SensorMount
 from nlp_calib.sensors.base import BaseMotion, Reference, SensorStart
 from nlp_calib.sensors.camera_start import FIT_REASONS, CameraStart, camera_start, fit_selection
 from nlp_calib.sensors.mount import (
@@ -125,6 +125,10 @@ class CameraPose:
 
     # --- numeric twins ---------------------------------------------------------------------------
 
+    def planar_yaw(self, params: Mapping[str, float]) -> float | None:
+        """None: a camera's poses lie in its own world frame, not the base's plane."""
+        return None
+
     def heading(self, T_world_sensor: np.ndarray) -> np.ndarray:
         """The camera's unwrapped rotation about the floor normal (the principal axis of its
         rotations relative to the first pose) at each pose (rad)."""
@@ -168,6 +172,10 @@ class CameraPose:
         """The held height at 0 and the scale at 1 unless the scenario gives them."""
         return {**dict.fromkeys(self.held, 0.0), **({SCALE_PARAM: 1.0} if self.scale_free else {})}
 
+    def nominal(self, header: LogHeader) -> dict[str, float]:
+        """None: a log's header gives a planar mount, not this one."""
+        return {}
+
     def closed_form(
         self,
         model: KinematicModel,
@@ -208,13 +216,18 @@ class CameraPose:
         return out
 
     def mount_pose(
-        self, params: Mapping[str, float], nominal: tuple[float, float, float] | None
-    ) -> MountPose:
+        self,
+        params: Mapping[str, float],
+        std: Mapping[str, float],
+        frame: str,
+        nominal: tuple[float, float, float] | None,
+    ) -> SensorMount:
         """All six numbers; the height as held."""
-        return MountPose(
-            (float(params["sensor_x"]), float(params["sensor_y"]), float(params["sensor_z"])),
-            (float(params["sensor_roll"]), float(params["sensor_pitch"]), float(params["sensor_yaw"])),
-            "x, y, roll, pitch and yaw; z is held at the value given (known.sensor_z, 0 unless set), "
-            "which planar driving cannot see",
-            tilted=True,
+        names = dict(zip(COMPONENTS, MOUNT_PARAMS))
+        return SensorMount.on_base(
+            self.kind,
+            frame,
+            {c: float(params[n]) for c, n in names.items()},
+            {c: std[n] for c, n in names.items()},
+            {"z": "held at the value given (known.sensor_z, 0 unless set), which planar driving cannot see"},
         )

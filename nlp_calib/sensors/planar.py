@@ -18,7 +18,7 @@ import numpy as np
 
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.models.base import SENSOR_PARAMS, SENSOR_REFERENCE, SENSOR_UNITS, KinematicModel, canonical
-from nlp_calib.results.handoff import MountPose
+from nlp_calib.results.mount import SensorMount
 from nlp_calib.sensors.base import BaseMotion, Reference, SensorStart
 from nlp_calib.symbolic import se2
 
@@ -89,6 +89,11 @@ class PlanarPose:
         """The sensor's unwrapped heading at each pose (rad)."""
         return np.unwrap(T_world_sensor[:, 2])
 
+    def planar_yaw(self, params: Mapping[str, float]) -> float | None:
+        """The mount's yaw in the base plane (rad) in ``params`` (0 where they hold none): the
+        angle that turns the tracker's motion into the base's."""
+        return float(params.get("sensor_theta", 0.0))
+
     def tangent(self, z: np.ndarray) -> np.ndarray:
         """Measured motions ``z`` ``(3, n)`` in the residual's rows: they are their own."""
         return np.asarray(z, dtype=float)
@@ -119,6 +124,10 @@ class PlanarPose:
 
     def initial(self, header: LogHeader) -> dict[str, float]:
         """The header's nominal mount."""
+        return self.nominal(header)
+
+    def nominal(self, header: LogHeader) -> dict[str, float]:
+        """The mount the log's header gives (its ``T_base_sensor``)."""
         return dict(zip(self.params, header.T_base_sensor))
 
     def closed_form(
@@ -149,13 +158,22 @@ class PlanarPose:
         return canonical(model, params, tuple(fixed))
 
     def mount_pose(
-        self, params: Mapping[str, float], nominal: tuple[float, float, float] | None
-    ) -> MountPose:
+        self,
+        params: Mapping[str, float],
+        std: Mapping[str, float],
+        frame: str,
+        nominal: tuple[float, float, float] | None,
+    ) -> SensorMount:
         """x, y and yaw calibrated; z, roll and pitch the nominal mount's (else 0)."""
         z, roll, pitch = nominal or (0.0, 0.0, 0.0)
-        known = "the nominal mount's (/tf_static)" if nominal else "0 (not known)"
-        return MountPose(
-            (float(params["sensor_x"]), float(params["sensor_y"]), float(z)),
-            (float(roll), float(pitch), float(params["sensor_theta"])),
-            f"x, y and yaw; z, roll and pitch are {known}, which planar driving cannot see",
+        known = "from the nominal mount (/tf_static)" if nominal else "not known (0)"
+        names = {"x": "sensor_x", "y": "sensor_y", "yaw": "sensor_theta"}
+        pose = {"z": z, "roll": roll, "pitch": pitch, **{c: float(params[n]) for c, n in names.items()}}
+        source = f"{known}, which planar driving cannot see"
+        return SensorMount.on_base(
+            self.kind,
+            frame,
+            pose,
+            {c: std[n] for c, n in names.items()},
+            dict.fromkeys(("z", "roll", "pitch"), source),
         )
