@@ -2,6 +2,10 @@
 corrections to the vendor's model against the truth, on seeds no test uses::
 
     python3 benchmarks/vendor_study.py --seeds 201 202 203 204 205
+    python3 benchmarks/vendor_study.py --model tricycle --seeds 201 202 203 204 205
+
+A gain's or a length's error is its correction's relative error (%), an angle's the difference of
+its correction from the truth's (mrad).
 """
 
 from __future__ import annotations
@@ -12,24 +16,32 @@ import tempfile
 import warnings
 from pathlib import Path
 
+from nlp_calib.models import get_model
+from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
-from nlp_calib.simulation.vendor import VendorSimulationOptions, write_vendor_simulation
+from nlp_calib.simulation.vendor import (
+    VendorSimulationOptions,
+    correction,
+    vendor_models,
+    write_vendor_simulation,
+)
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[201, 202, 203, 204, 205])
     ap.add_argument("--duration", type=float, default=120.0)
+    ap.add_argument("--model", choices=vendor_models(), default=vendor_models()[0])
     args = ap.parse_args(argv)
     print("seed  error of each correction (estimate over the vendor's, against the truth's)  verdict")
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
-            opts = VendorSimulationOptions(duration_s=args.duration, seed=seed)
+            opts = VendorSimulationOptions(model=args.model, duration_s=args.duration, seed=seed)
             odometry, tum, truth = write_vendor_simulation(opts, Path(tmp) / f"odom_{seed}.txt")
             doc = json.loads(truth.read_text())
             dataset = {"odometry": str(odometry), "vendor": doc["vendor"], "poses": str(tum)}
             sc = {
-                "model": "diff_drive",
+                "model": args.model,
                 "dataset": dataset,
                 "residual": {"horizon_s": 0.5},
                 "solvers": ["gauss_newton"],
@@ -39,11 +51,18 @@ def main(argv: list[str] | None = None) -> int:
                 run = Calibration(scenario_from_mapping(sc, f"vendor_{seed}", Path(tmp))).run()
             est = run.reports["gauss_newton"].result.param_dict()
             cells = "  ".join(
-                f"{k} {100 * (est[k] / doc['vendor'][k] / v - 1):+.3f} %"
-                for k, v in doc["corrections"].items()
+                _error(args.model, k, est[k], doc["vendor"][k], v) for k, v in doc["corrections"].items()
             )
             print(f"{seed:>4}  {cells}  {run.verdict.level}")
     return 0
+
+
+def _error(model: str, name: str, estimate: float, vendor: float, truth: float) -> str:
+    """The estimate's correction against the truth's: in % of it (a ratio), in mrad (an angle's)."""
+    got = correction(model, name, estimate, vendor)
+    if name in in_units(get_model(model), "radians").angle_params:
+        return f"{name} {1e3 * (got - truth):+.3f} mrad"
+    return f"{name} {100 * (got / truth - 1):+.3f} %"
 
 
 if __name__ == "__main__":

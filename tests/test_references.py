@@ -14,16 +14,23 @@ import pytest
 import yaml
 
 from nlp_calib.cli.main import main
-from nlp_calib.core.errors import ConfigError, DatasetError
+from nlp_calib.core.errors import ConfigError, DatasetError, ModelError
 from nlp_calib.logs.joint_log import format_joint_csv, wheel_positions
 from nlp_calib.logs.motions import format_motions, read_motions
-from nlp_calib.models import get_model
+from nlp_calib.models import MODELS, get_model
+from nlp_calib.models.joints import joint_map
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline import Calibration, JointCalibration, scenario_from_mapping
 from nlp_calib.problem import ProblemSpec, build, build_residual_data, joined
 from nlp_calib.problem.windows import ResidualOptions
+from nlp_calib.simulation.camera import base_motion
 from nlp_calib.simulation.lidar import LidarSimulationOptions, simulate_lidar
-from nlp_calib.simulation.vendor import VendorSimulationOptions, write_vendor_simulation
+from nlp_calib.simulation.vendor import (
+    VendorSimulationOptions,
+    correction,
+    vendor_models,
+    write_vendor_simulation,
+)
 from nlp_calib.solvers import ProblemEvaluator
 from nlp_calib.sources import MotionsSource
 
@@ -238,6 +245,55 @@ def test_vendor_odometry_gives_the_corrections_to_its_model(tmp_path: Path) -> N
     )
     with pytest.raises(Exception, match="vendor: give the vendor's left_wheel_radius"):
         Calibration(wrong)
+
+
+@pytest.mark.parametrize("name", ["diff_drive", "tricycle"])
+def test_each_model_turns_its_controllers_odometry_back_into_its_joints(name: str) -> None:
+    # The controller's odometry of a drive that stops, reverses and turns, turned back by the
+    # model with the controller's own values: the very joint readings (a steering angle where the
+    # wheel rolls; the traction's and the wheels' running sums from 0).
+    assert name in vendor_models()
+    opts = VendorSimulationOptions(model=name, duration_s=40.0, seed=3)
+    t = np.arange(0.0, 40.0, 0.02)
+    _, channels = base_motion(name, opts.truth, opts.drive, np.random.default_rng(3), t)
+    joints = joint_map(name).angles(opts.truth, channels)
+    base = MODELS[name].drive.odometry(joints, opts.vendor)  # type: ignore[attr-defined]
+    model = in_units(get_model(name), "radians")
+    back = model.readings_from_odometry(base, opts.vendor_in_radians())
+    drives = next(iter(joints.values()))
+    moved = np.concatenate([[False], np.abs(np.diff(drives)) > 1e-9])
+    assert moved.mean() > 0.5 and (np.diff(drives) < 0).any()
+    for row, input_name in zip(joint_map(name).rows, get_model(name).input_names):
+        angle, encoder = joints[row.joint], model.form.inputs[input_name].encoder
+        want = angle if row.use == "angle" else angle - angle[0]
+        np.testing.assert_allclose(back[encoder][moved], want[moved], rtol=0, atol=1e-8, err_msg=row.joint)
+
+
+def test_a_tricycles_vendor_odometry_gives_its_corrections(tmp_path: Path) -> None:
+    opts = VendorSimulationOptions(model="tricycle", duration_s=60.0, seed=23)
+    odometry, tum, truth_file = write_vendor_simulation(opts, tmp_path / "odom.txt")
+    truth = json.loads(truth_file.read_text())
+    vendor = truth["vendor"]
+    sc = {
+        "model": "tricycle",
+        "dataset": {"odometry": str(odometry), "vendor": vendor, "poses": str(tum)},
+        "residual": {"horizon_s": 0.5, "steering_sample": "end"},
+        "solvers": ["gauss_newton"],
+    }
+    run = quiet_run(Calibration(scenario_from_mapping(sc, "v", tmp_path)))
+    est, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
+    assert set(truth["corrections"]) == set(vendor) and vendor["steer_offset"] == 0.0
+    for name, value in truth["corrections"].items():
+        got = correction("tricycle", name, est[name], vendor[name])
+        if name == "steer_offset":  # an angle's correction is a difference
+            assert abs(got - value) < 3 * std[name] < 0.002, (name, got, value)
+        else:
+            assert abs(got / value - 1.0) < 0.002, (name, got, value)
+    # A model that cannot turn its odometry back says so.
+    car_like = in_units(get_model("car_like"), "radians").kinematic_params
+    car = {**sc, "model": "car_like", "dataset": {**sc["dataset"], "vendor": dict.fromkeys(car_like, 1.0)}}
+    with pytest.raises(ModelError, match="car_like model cannot turn a robot's odometry back"):
+        Calibration(scenario_from_mapping(car, "c", tmp_path))
 
 
 def test_figures_never_compose_across_a_gap(tmp_path: Path) -> None:

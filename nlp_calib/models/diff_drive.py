@@ -14,13 +14,21 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
-from nlp_calib.core import poses
 from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, Reference, Symmetry, named, rows_by_name
 from nlp_calib.models.controllers import ControllerMap, EncoderScales, wheel_radius
-from nlp_calib.models.drives import Pose, SimulationSettings, counter, drive_header, first_order, running
+from nlp_calib.models.drives import (
+    Pose,
+    SimulationSettings,
+    arcs,
+    counter,
+    drive_header,
+    first_order,
+    integrate_base,
+    running,
+)
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
@@ -103,16 +111,12 @@ class DiffDriveDrive:
     )
     vendor_model: Mapping[str, float] = MappingProxyType({"k_left": 0.1, "k_right": 0.1, "baseline": 0.45})
 
-    def odometry(self, readings: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
-        """The base poses ``(n, 3)`` a controller integrates (exact arcs) from the wheels' readings
-        ``(n, 2)`` (left, right) with its own model ``params``."""
-        d = np.diff(readings, axis=0) * np.array([params["k_left"], params["k_right"]])
-        travel, turn = 0.5 * (d[:, 0] + d[:, 1]), (d[:, 1] - d[:, 0]) / params["baseline"]
-        half = 0.5 * turn
-        with np.errstate(divide="ignore", invalid="ignore"):
-            sinc = np.where(np.abs(half) > 1e-9, np.sin(half) / half, 1.0)
-        steps = np.column_stack([travel * sinc * np.cos(half), travel * sinc * np.sin(half), turn])
-        return poses.accumulate(np.zeros(3), steps)
+    def odometry(self, joints: Mapping[str, np.ndarray], params: Mapping[str, float]) -> np.ndarray:
+        """The base poses ``(n, 3)`` a controller integrates (exact arcs) from the wheels' angles
+        with its own model ``params`` (m per rad, m)."""
+        d_l = np.diff(joints["left_wheel_joint"]) * params["k_left"]
+        d_r = np.diff(joints["right_wheel_joint"]) * params["k_right"]
+        return integrate_base(0.5 * (d_l + d_r), (d_r - d_l) / params["baseline"])
 
     def steps(
         self,
@@ -274,18 +278,13 @@ class DiffDrive:
         ticks = {**dict.fromkeys(self.encoder_kinds, QUANTISATION), **(encoder_noise or {})}
         return np.array([ticks[LEFT_ENCODER], ticks[RIGHT_ENCODER]])
 
-    def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
-        """The wheels' readings ``(n, 2)`` (from 0, left and right) a controller of model ``params``
-        turned to drive the base poses ``base`` ``(n, 3)``: each step an arc, its length signed by
-        its direction of travel, the wheels' travel ``s ∓ baseline·Δθ/2``."""
-        step = poses.between(base[:-1], base[1:])
-        turn, half = step[:, 2], 0.5 * step[:, 2]
-        chord = np.hypot(step[:, 0], step[:, 1]) * np.sign(step[:, 0])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            arc = chord * np.where(np.abs(half) > 1e-9, half / np.sin(half), 1.0 + half**2 / 6.0)
+    def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> dict[str, np.ndarray]:
+        """The wheels' readings (from 0) a controller of model ``params`` turned to drive the base
+        poses ``base`` ``(n, 3)``: each step an arc, the wheels' travel ``s ∓ baseline·Δθ/2``."""
+        arc, turn = arcs(base)
         left = (arc - 0.5 * params["baseline"] * turn) / params["k_left"]
         right = (arc + 0.5 * params["baseline"] * turn) / params["k_right"]
-        return np.vstack([np.zeros((1, 2)), np.cumsum(np.column_stack([left, right]), axis=0)])
+        return {LEFT_ENCODER: running(left), RIGHT_ENCODER: running(right)}
 
     def initial_guess(
         self,

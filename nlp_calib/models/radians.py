@@ -29,6 +29,7 @@ from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.models.base import (
     STEERING_SAMPLES,
     KinematicModel,
+    OdometryInverse,
     Reference,
     Symmetry,
     record_rates,
@@ -329,12 +330,14 @@ class InRadians:
 
         return self.from_counts(self.model.initial_guess(U_counts, z, counts_motion))
 
-    def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
-        """The model's own, in joint angles (rad): its parameters mapped back, its readings scaled
-        by each input's factor (a model without it has none: AttributeError)."""
-        own = self.model.readings_from_odometry(base, self.to_counts(params))  # type: ignore[attr-defined]
-        factors = np.array([self.form.inputs[n].factor for n in self.model.input_names])
-        return np.asarray(own) / factors
+    def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> dict[str, np.ndarray]:
+        """The model's own, in joint angles (rad): its parameters mapped back, each reading scaled
+        by the factor of the input it drives."""
+        if not isinstance(self.model, OdometryInverse):
+            raise ModelError(f"the {self.name} model cannot turn a robot's odometry back into its joints")
+        own = self.model.readings_from_odometry(base, self.to_counts(params))
+        factor = {r.encoder: r.factor for r in self.form.inputs.values() if r.encoder}
+        return {encoder: np.asarray(v) / factor.get(encoder, 1.0) for encoder, v in own.items()}
 
     def in_radians(self) -> KinematicModel:
         return self

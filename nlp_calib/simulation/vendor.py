@@ -3,7 +3,9 @@ it: the vendor's odometry, the tracker's TUM trajectory and the truth.
 
 The base drives as the camera simulator's does (:mod:`nlp_calib.simulation.camera`). Its
 controller integrates the joints' angles (read at ``odometry_rate_hz``) with its own model
-(``vendor``; the model's drive says how, and its defaults): the odometry is written as ``t x y θ``.
+(``vendor``; the model's drive says how, and its defaults: any model whose drive is a
+:class:`~nlp_calib.models.drives.VendorController` and that turns its odometry back, see
+:func:`vendor_models`): the odometry is written as ``t x y θ``.
 A tracker sees a sensor mounted at ``(sensor_x, sensor_y, sensor_theta)`` at ``tracker_rate_hz``
 with white noise. The truth holds the true parameters (joint units), the mount, the vendor's model
 and the corrections its controller needs: each true parameter over the vendor's, by the names a
@@ -26,8 +28,9 @@ from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.ranges import Range
 from nlp_calib.logs import format_tum
 from nlp_calib.logs.vendor import format_odometry
-from nlp_calib.models import MODELS
-from nlp_calib.models.joints import joint_map
+from nlp_calib.models import MODELS, OdometryInverse
+from nlp_calib.models.drives import VendorController
+from nlp_calib.models.joints import JOINT_MAPS, joint_map
 from nlp_calib.models.radians import in_units
 from nlp_calib.simulation.camera import EPOCH_S, base_motion, fine_grid
 from nlp_calib.simulation.options import DriveShape
@@ -37,8 +40,25 @@ DEFAULT_MOUNT: Mapping[str, float] = {"sensor_x": 0.12, "sensor_y": 0.03, "senso
 
 
 def vendor_models() -> tuple[str, ...]:
-    """The models whose simulated drive has a vendor's controller (its odometry and defaults)."""
-    return tuple(name for name, m in MODELS.items() if hasattr(m.drive, "odometry"))
+    """The models whose simulated drive has a vendor's controller (its odometry and defaults) and
+    a joint map, and that turn that odometry back into their joints (the joint maps' order)."""
+    return tuple(
+        name
+        for name in JOINT_MAPS
+        if isinstance(MODELS[name].drive, VendorController) and isinstance(MODELS[name], OdometryInverse)
+    )
+
+
+def correction(model: str, name: str, value: float, vendor: float) -> float:
+    """What turns the vendor's value ``vendor`` of parameter ``name`` (the model ``model`` read from
+    joints in radians) into ``value``: a gain's or a length's ratio, an angle's difference."""
+    return value - vendor if name in in_units(MODELS[model], "radians").angle_params else value / vendor
+
+
+def _controller(model: str) -> VendorController:
+    drive = MODELS[model].drive
+    assert isinstance(drive, VendorController)  # vendor_models() holds only these
+    return drive
 
 
 LIMITS: Mapping[str, Range] = {
@@ -74,7 +94,7 @@ class VendorSimulationOptions:
                 raise OptionsError(f"{name} {reason}")
         if self.model not in vendor_models():
             raise OptionsError(f"model must be one of {', '.join(vendor_models())}, got {self.model!r}")
-        drive: Any = MODELS[self.model].drive
+        drive = _controller(self.model)
         for key, defaults in (
             ("truth", {**drive.vendor_truth, **DEFAULT_MOUNT}),
             ("vendor", drive.vendor_model),
@@ -86,10 +106,12 @@ class VendorSimulationOptions:
             object.__setattr__(self, key, {**defaults, **given})
 
     def corrections(self) -> dict[str, float]:
-        """What the vendor's controller needs: each true parameter over the vendor's, by the names
-        of the model read from joints in radians."""
+        """What the vendor's controller needs (:func:`correction`), by the names of the model read
+        from joints in radians."""
         rename = getattr(in_units(MODELS[self.model], "radians"), "rename", lambda n: n)
-        return {rename(n): self.truth[n] / v for n, v in self.vendor.items()}
+        return {
+            rename(n): correction(self.model, rename(n), self.truth[n], v) for n, v in self.vendor.items()
+        }
 
     def vendor_in_radians(self) -> dict[str, float]:
         """The vendor's model by the names and units of the model read from joints in radians."""
@@ -108,8 +130,7 @@ def write_vendor_simulation(
     planar, channels = base_motion(opts.model, opts.truth, opts.drive, rng, t_fine)
     at_odo = np.searchsorted(t_fine, t_odo)
     joints = joint_map(opts.model).angles(opts.truth, {k: v[at_odo] for k, v in channels.items()})
-    drive: Any = MODELS[opts.model].drive
-    base = drive.odometry(np.column_stack(list(joints.values())), opts.vendor)
+    base = _controller(opts.model).odometry(joints, opts.vendor)
     mount = np.array([opts.truth[n] for n in DEFAULT_MOUNT])
     sensor = poses.compose(planar[np.searchsorted(t_fine, t_trk)], mount)
     sensor[:, :2] += rng.normal(0.0, opts.tracker_noise_xy, (sensor.shape[0], 2))

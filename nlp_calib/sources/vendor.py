@@ -41,7 +41,7 @@ from nlp_calib.logs.log import frozen
 from nlp_calib.logs.motions import read_motions, timed_by_motions
 from nlp_calib.logs.tum import read_tum
 from nlp_calib.logs.vendor import read_odometry
-from nlp_calib.models import KinematicModel, encoders
+from nlp_calib.models import KinematicModel, OdometryInverse, encoders
 from nlp_calib.models.radians import in_units
 from nlp_calib.sources.base import file_identity
 from nlp_calib.sources.robot import RobotDescription, robot_header
@@ -72,10 +72,8 @@ class VendorSource:
 
     def __post_init__(self) -> None:
         for key, value in self.vendor.items():
-            if not (np.isfinite(value) and value != 0.0):
-                raise ConfigError(
-                    f"vendor.{key}: the vendor's value, a finite non-zero number, got {value!r}"
-                )
+            if not np.isfinite(value):
+                raise ConfigError(f"vendor.{key}: the vendor's value, a finite number, got {value!r}")
         for key, limit in (("max_gap", MAX_GAP), ("clock_offset", CLOCK_OFFSET)):
             if (reason := limit.problem(getattr(self, key))) is not None:
                 raise ConfigError(f"{key} (seconds) {reason}")
@@ -120,20 +118,9 @@ class VendorSource:
         else:
             odometry = read_odometry(self.odometry)
             time_ns, base, path = odometry.time_ns, odometry.poses, odometry.path
-        missing = [n for n in model.kinematic_params if n not in self.vendor]
-        unknown = [n for n in self.vendor if n not in model.kinematic_params]
-        if missing or unknown:
-            raise ConfigError(
-                f"vendor: give the vendor's {', '.join(model.kinematic_params)} (missing: "
-                f"{', '.join(missing) or 'none'}; unknown: {', '.join(unknown) or 'none'})"
-            )
-        try:
-            angles = model.readings_from_odometry(base, self.vendor)  # type: ignore[attr-defined]
-        except AttributeError:
-            raise ModelError(
-                f"the {model.name} model cannot turn a robot's odometry back into its joints"
-            ) from None
-        values = np.hstack([angles, np.full(angles.shape, np.nan)])
+        readings = vendor_readings(model, base, self.vendor)
+        values = np.column_stack([readings[e] for e in encoders(model)])
+        values = np.hstack([values, np.full(values.shape, np.nan)])
         return Stamped(path, time_ns + round(self.clock_offset * 1e9), values)
 
     def header(self, model: KinematicModel, frame: str | None) -> LogHeader:
@@ -187,6 +174,27 @@ class VendorSource:
         )
         assert odometry is not None  # required
         return replace(source, odometry=odometry, poses=poses, motions=motions)
+
+
+def vendor_readings(
+    model: KinematicModel, base: np.ndarray, vendor: Mapping[str, float]
+) -> dict[str, np.ndarray]:
+    """The readings ``model`` with the vendor's values ``vendor`` turns the odometry ``base`` back
+    into (each encoder's, by name), once the values are checked against the model's parameters."""
+    missing = [n for n in model.kinematic_params if n not in vendor]
+    unknown = [n for n in vendor if n not in model.kinematic_params]
+    if missing or unknown:
+        raise ConfigError(
+            f"vendor: give the vendor's {', '.join(model.kinematic_params)} (missing: "
+            f"{', '.join(missing) or 'none'}; unknown: {', '.join(unknown) or 'none'})"
+        )
+    # A gain or a length of zero is no model; an offset of zero is the usual one.
+    zero = [n for n, v in vendor.items() if v == 0.0 and n not in model.angle_params]
+    if zero:
+        raise ConfigError(f"vendor: {', '.join(zero)} of zero is no model to turn odometry back with")
+    if not isinstance(model, OdometryInverse):
+        raise ModelError(f"the {model.name} model cannot turn a robot's odometry back into its joints")
+    return model.readings_from_odometry(base, vendor)
 
 
 def _resolved(path: Path, base_dir: Path) -> Path:
