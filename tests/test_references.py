@@ -197,6 +197,42 @@ def test_a_mount_per_log_shares_the_wheels(tmp_path: Path) -> None:
     assert doc["verdict"]["level"] != "not usable", doc["verdict"]
 
 
+def test_a_mount_and_a_lag_per_log_together(tmp_path: Path) -> None:
+    """Two logs of one tricycle, each with its own tracker mount and its own tracker latency: each
+    log's mount and lag come out its own, the wheels shared (the lag seam and the mount seam
+    select by the same row of a window's data)."""
+    from conftest import write_sim
+
+    mounts = ({"sensor_x": 1.6, "sensor_y": 0.1, "sensor_theta": 0.05}, {"sensor_x": -0.4, "sensor_y": 0.3})
+    logs = [
+        write_sim(tmp_path, f"l{i}.txt", records=900, seed=61 + i, latency_s=lag, truth=mounts[i])
+        for i, lag in enumerate((0.02, 0.06))
+    ]
+    raw = {
+        "model": "tricycle",
+        "datasets": [str(p) for p in logs],
+        "initial_guess": "from_file",
+        "residual": {"horizon": 10},
+        "alignment": {"tracker_lag": "auto", "search": [-0.1, 0.1]},
+        "sensor": {"mounts": "per_log"},
+        "solvers": ["gauss_newton"],
+    }
+    run = JointCalibration(scenario_from_mapping(raw, "j", tmp_path)).run(["gauss_newton"])
+    part = run.parts[1]
+    params, std = part.reports["gauss_newton"].result.param_dict(), part.std("gauss_newton")
+    truth = {
+        "tracker_lag_1": 0.02,
+        "tracker_lag_2": 0.06,
+        **{f"{n}_{i + 1}": v for i, m in enumerate(mounts) for n, v in m.items()},
+    }
+    for name, true in truth.items():
+        assert abs(params[name] - true) < 4 * std[name], (name, params[name], true, std[name])
+    # Each log's report gives its own mount; the second log's link named apart from the first's.
+    mine = part.reports["gauss_newton"]
+    assert mine.mount is not None and mine.mount.pose["x"] == pytest.approx(params["sensor_x_2"])
+    assert [m.mount.child for m in mine.mounts] == ["laser_1", "laser_2"]
+
+
 def test_each_log_s_mount_enters_only_its_own_windows(tmp_path: Path) -> None:
     """A problem with a mount per log: each window's residual is that of a one-mount problem with
     its own log's mount."""
