@@ -172,7 +172,7 @@ def test_a_wheel_form_is_checked_where_it_is_given(tmp_path: Path) -> None:
         MotionsSource(joints, motions, {"left_wheel": "a", "right_wheel": "b"}, form="rad")
 
 
-def test_a_mount_per_log_shares_the_wheels(tmp_path: Path) -> None:
+def test_a_mount_per_log_shares_the_wheels(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     first = recording(tmp_path, 11, name="front")
     second = recording(tmp_path, 12, {"sensor_x": -0.2, "sensor_y": 0.05, "sensor_theta": 3.0}, name="rear")
     sc = {
@@ -195,6 +195,22 @@ def test_a_mount_per_log_shares_the_wheels(tmp_path: Path) -> None:
     urdf = (tmp_path / "out" / "sensor_mount.urdf.xml").read_text()
     assert urdf.count("<joint ") == 2 and "laser_1" in urdf and "laser_2" in urdf
     assert doc["verdict"]["level"] != "not usable", doc["verdict"]
+    # The user's URDF re-poses one link: a mount per log is refused before any work.
+    robot = tmp_path / "robot.urdf"
+    robot.write_text((tmp_path / "out" / "robot.urdf").read_text())
+    args = [
+        "run",
+        str(path),
+        "--out",
+        str(tmp_path / "again"),
+        "--urdf",
+        str(robot),
+        "--sensor-link",
+        "laser_1",
+    ]
+    capsys.readouterr()
+    assert main(args) != 0
+    assert "fits a mount per log" in capsys.readouterr().err and not (tmp_path / "again").exists()
 
 
 def test_a_mount_and_a_lag_per_log_together(tmp_path: Path) -> None:
