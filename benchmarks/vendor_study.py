@@ -4,7 +4,7 @@ corrections to the vendor's model against the truth, on seeds no test uses::
     python3 benchmarks/vendor_study.py --seeds 201 202 203 204 205
     python3 benchmarks/vendor_study.py --model tricycle --seeds 201 202 203 204 205
 
-A gain's or a length's error is its correction's relative error (%), an angle's the difference of
+A gain's or a length's error is its correction's relative error (%), an offset's the difference of
 its correction from the truth's (mrad).
 """
 
@@ -17,6 +17,7 @@ import warnings
 from pathlib import Path
 
 from nlp_calib.models import get_model
+from nlp_calib.models.base import reference
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.simulation.vendor import (
@@ -58,9 +59,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _error(model: str, name: str, estimate: float, vendor: float, truth: float) -> str:
-    """The estimate's correction against the truth's: in % of it (a ratio), in mrad (an angle's)."""
+    """The estimate's correction against the truth's: in % of it (a ratio), in mrad (an offset's)."""
     got = correction(model, name, estimate, vendor)
-    if name in in_units(get_model(model), "radians").angle_params:
+    if reference(in_units(get_model(model), "radians"), name)[0] == "absolute":
         return f"{name} {1e3 * (got - truth):+.3f} mrad"
     return f"{name} {100 * (got / truth - 1):+.3f} %"
 

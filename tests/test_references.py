@@ -18,6 +18,7 @@ from nlp_calib.core.errors import ConfigError, DatasetError, ModelError
 from nlp_calib.logs.joint_log import format_joint_csv, wheel_positions
 from nlp_calib.logs.motions import format_motions, read_motions
 from nlp_calib.models import MODELS, get_model
+from nlp_calib.models.drives import integrate_base
 from nlp_calib.models.joints import joint_map
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline import Calibration, JointCalibration, scenario_from_mapping
@@ -319,6 +320,29 @@ def test_each_model_turns_its_controllers_odometry_back_into_its_joints(name: st
         angle, encoder = joints[row.joint], model.form.inputs[input_name].encoder
         want = angle if row.use == "angle" else angle - angle[0]
         np.testing.assert_allclose(back[encoder][moved], want[moved], rtol=0, atol=1e-8, err_msg=row.joint)
+
+
+def test_a_tricycle_steered_apart_in_reverse_turns_its_odometry_back() -> None:
+    # Forward, a stop, backwards with its own steering gain, forward again: the controller's arcs
+    # turned back give the very readings (the steering held through the stop is not compared).
+    d = np.concatenate([np.full(100, 0.02), np.zeros(20), np.full(100, -0.015), np.full(180, 0.01)])
+    angle = 0.4 * np.sin(np.linspace(0.0, 6.0, d.size + 1))
+    p = {
+        "k_steer": 0.55,
+        "k_traction": 0.5,
+        "axis_length": 1.5,
+        "steer_offset": -0.05,
+        "k_steer_reverse": 0.1,
+    }
+    phi = p["k_steer"] * (1.0 + p["k_steer_reverse"] * (d < 0)) * angle[1:] + p["steer_offset"]
+    base = integrate_base(d * np.cos(phi), d * np.sin(phi) / p["axis_length"])
+    back = MODELS["tricycle_reverse"].readings_from_odometry(base, p)  # type: ignore[attr-defined]
+    moved = np.concatenate([[False], d != 0])
+    np.testing.assert_allclose(back["steering"][moved], angle[moved], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(back["traction_wheel"], np.cumsum(np.r_[0.0, d]) / 0.5, rtol=0, atol=1e-12)
+    # The skid-steer's controller knows no slip: it says which model turns its odometry back.
+    with pytest.raises(ModelError, match="with model: diff_drive"):
+        MODELS["skid_steer"].readings_from_odometry(base, {})  # type: ignore[attr-defined]
 
 
 def test_a_tricycles_vendor_odometry_gives_its_corrections(tmp_path: Path) -> None:

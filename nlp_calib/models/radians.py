@@ -336,7 +336,7 @@ class InRadians:
         if not isinstance(self.model, OdometryInverse):
             raise ModelError(f"the {self.name} model cannot turn a robot's odometry back into its joints")
         own = self.model.readings_from_odometry(base, self.to_counts(params))
-        factor = {r.encoder: r.factor for r in self.form.inputs.values() if r.encoder}
+        factor = {r.encoder: r.factor for r in self.form.inputs.values() if r.encoder and not r.rate}
         return {encoder: np.asarray(v) / factor.get(encoder, 1.0) for encoder, v in own.items()}
 
     def in_radians(self) -> KinematicModel:

@@ -307,6 +307,10 @@ class Tricycle:
         ticks = {**dict.fromkeys((TRACTION_ENCODER, STEERING_ENCODER), QUANTISATION), **(encoder_noise or {})}
         return np.array([ticks[TRACTION_ENCODER] / t_max, 2.0 * np.pi * ticks[STEERING_ENCODER] / s_max])
 
+    def steering_gain(self, params: Mapping[str, float], backwards: np.ndarray) -> np.ndarray:
+        """The steering joint's gain in each interval, given whether the base drives backwards."""
+        return np.full(backwards.shape, params["k_steer"])
+
     def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> dict[str, np.ndarray]:
         """The traction wheel's revolutions (from 0) and the steering angle (rad) a controller of
         model ``params`` read to drive the base poses ``base`` ``(n, 3)`` (each interval steered
@@ -320,7 +324,7 @@ class Tricycle:
         phi = np.where(back, phi - np.pi * np.sign(phi), phi)
         moving = travel > 1e-9
         last = np.maximum.accumulate(np.where(moving, np.arange(phi.size), 0))
-        steer = (phi[last] - params["steer_offset"]) / params["k_steer"]
+        steer = (phi[last] - params["steer_offset"]) / self.steering_gain(params, back[last])
         return {
             STEERING_ENCODER: np.concatenate([steer[:1], steer]),
             TRACTION_ENCODER: running(np.where(back, -travel, travel) / params["k_traction"]),

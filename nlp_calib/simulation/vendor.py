@@ -29,6 +29,7 @@ from nlp_calib.core.ranges import Range
 from nlp_calib.logs import format_tum
 from nlp_calib.logs.vendor import format_odometry
 from nlp_calib.models import MODELS, OdometryInverse
+from nlp_calib.models.base import reference
 from nlp_calib.models.drives import VendorController
 from nlp_calib.models.joints import JOINT_MAPS, joint_map
 from nlp_calib.models.radians import in_units
@@ -51,8 +52,10 @@ def vendor_models() -> tuple[str, ...]:
 
 def correction(model: str, name: str, value: float, vendor: float) -> float:
     """What turns the vendor's value ``vendor`` of parameter ``name`` (the model ``model`` read from
-    joints in radians) into ``value``: a gain's or a length's ratio, an angle's difference."""
-    return value - vendor if name in in_units(MODELS[model], "radians").angle_params else value / vendor
+    joints in radians) into ``value``: the ratio of a parameter known relative to its size (a gain,
+    a length), the difference of one known absolutely (an offset)."""
+    relative = reference(in_units(MODELS[model], "radians"), name)[0] == "relative"
+    return value / vendor if relative else value - vendor
 
 
 def _controller(model: str) -> VendorController:

@@ -42,6 +42,7 @@ from nlp_calib.logs.motions import read_motions, timed_by_motions
 from nlp_calib.logs.tum import read_tum
 from nlp_calib.logs.vendor import read_odometry
 from nlp_calib.models import KinematicModel, OdometryInverse, encoders
+from nlp_calib.models.base import reference
 from nlp_calib.models.radians import in_units
 from nlp_calib.sources.base import file_identity
 from nlp_calib.sources.robot import RobotDescription, robot_header
@@ -189,7 +190,7 @@ def vendor_readings(
             f"{', '.join(missing) or 'none'}; unknown: {', '.join(unknown) or 'none'})"
         )
     # A gain or a length of zero is no model; an offset of zero is the usual one.
-    zero = [n for n, v in vendor.items() if v == 0.0 and n not in model.angle_params]
+    zero = [n for n, v in vendor.items() if v == 0.0 and reference(model, n)[0] == "relative"]
     if zero:
         raise ConfigError(f"vendor: {', '.join(zero)} of zero is no model to turn odometry back with")
     if not isinstance(model, OdometryInverse):
