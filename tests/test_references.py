@@ -183,6 +183,9 @@ def test_a_mount_per_log_shares_the_wheels(tmp_path: Path, capsys: pytest.Captur
     }
     path = tmp_path / "two.yaml"
     path.write_text(yaml.safe_dump(sc))
+    # The pre-flight starts each log's mount where its own start puts it, as the run does.
+    assert main(["preflight", str(path)]) == 0
+    assert "ENOUGH: the drive determines every parameter" in capsys.readouterr().out
     assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 0
     doc = json.loads((tmp_path / "out" / "front" / "result.json").read_text())
     est = doc["solvers"]["gauss_newton"]["params"]

@@ -309,7 +309,10 @@ def appended(
     all_poses = np.ascontiguousarray(np.concatenate([data.T_world_sensor, poses]))
     clock = data.clock
     if clock is not None:
-        rates = record_rates(inputs, time_s, level_rows(fns.model))
+        # A clock of no offsets (a mount per log) says only which log a window belongs to.
+        rates = (
+            record_rates(inputs, time_s, level_rows(fns.model)) if clock.lags else np.zeros((0, time_s.size))
+        )
         clock = WindowClock(clock.lags, np.concatenate([clock.rates, rates], axis=1))
     return replace(
         data,
