@@ -16,6 +16,13 @@ to the stream that explains it:
   ``reversal`` (one increment against the motion, not made up afterwards) and ``counter_jump``
   (counts gained or lost in the direction of motion, not made up afterwards).
 
+A reference that measures its own motions (``Log.motions``: a scan matcher's) has no poses to
+be off a path; each increment is judged on its own (``bad_match``): first by what its matcher said
+of it (not converged, few points matched, a large fit error against the log's own), then by its
+disagreement with the wheels at the fit that judges the encoders, far beyond the increments'
+robust scatter; the counters are then judged without them (a counter's fault shows over several
+increments; over one it is not told from a bad match). A bad increment spoils its own window only.
+
 The counters are judged with a fit that leaves out the tracker's and the absolute encoders'
 glitches, against readings with those glitches interpolated over, so that one stream's glitch is
 never blamed on another. Stale readings that catch up are counted (``stale``) but harmless to
@@ -34,6 +41,7 @@ from nlp_calib.analysis.joint_repair import repair_joints
 from nlp_calib.analysis.readings import Readings, interpolated_over, readings, turning
 from nlp_calib.analysis.readings import unit as unit_of
 from nlp_calib.analysis.streams import off_neighbours, printed_step, scatter, stuck_runs
+from nlp_calib.core import poses
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.logs.log import frozen
@@ -41,6 +49,7 @@ from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results.faults import (
     ABSOLUTE_KINDS,
+    MATCH_KINDS,
     TRACKER_KINDS,
     Fault,
     FaultReport,
@@ -59,6 +68,13 @@ STUCK_FLOOR_STEPS = 3.0
 #: at rest (a corner cut by a slow tracker interpolated onto faster records stays inside it).
 TRACKER_GROUP = 4
 TRACKER_EXCURSION = 3.0
+#: A match whose share of points matched is below this fraction of the log's median share, or
+#: whose fit error exceeds this many times the log's median, is poor by its matcher's own word.
+MATCH_INLIERS = 0.5
+MATCH_ERROR = 3.0
+#: An increment that disagrees with the wheels at the fit by more than this many robust σ of the
+#: increments' scatter (in any of x, y, θ) is a bad match (5σ: a false alarm in 10⁶ Gaussian ones).
+MATCH_SCATTER = 5.0
 
 
 def _norm(x: np.ndarray) -> float:
@@ -106,6 +122,98 @@ def tracker_faults(log: Log, sensor: Sensor) -> list[Fault]:
             found.append(
                 _fault(log, "tracker_jump", None, (g.first - 1, g.last), q, (0.0, off, noise), evidence)
             )
+    return found
+
+
+def _match_fault(log: Log, k: int, size: tuple[float, float, float], why: str) -> Fault:
+    """Increment ``k`` of ``log`` as a bad match."""
+    inc = log.motions
+    assert inc is not None
+    a, b, line = int(inc.first[k]), int(inc.last[k]), int(inc.line_numbers[k])
+    evidence = f"the increment of line {line} (records {a}-{b}) {why}"
+    return Fault("bad_match", None, a, b - 1, a, float(log.time_s[a]), line, *size, evidence)
+
+
+def match_faults(log: Log) -> list[Fault]:
+    """RelativeMotions whose matcher said they are poor (see the module docstring), from the quality
+    the log keeps of each: ``converged`` (0 or 1), ``inliers`` (the share of points matched) and
+    ``fit_error`` (the match's cost per matched point, in the matcher's own units), as far as the log
+    has them."""
+    inc = log.motions
+    if inc is None:
+        return []
+    q, why = inc.quality, [""] * inc.n
+    checks = []
+    if "converged" in q:
+        checks.append((q["converged"] < 0.5, lambda k: "did not converge in its matcher"))
+    if "inliers" in q and np.median(q["inliers"]) > 0:
+        floor = MATCH_INLIERS * float(np.median(q["inliers"]))
+        checks.append(
+            (
+                q["inliers"] < floor,
+                lambda k: (
+                    f"matched {q['inliers'][k]:.2f} of its points (the log's median "
+                    f"{floor / MATCH_INLIERS:.2f})"
+                ),
+            )
+        )
+    if "fit_error" in q and np.median(q["fit_error"]) > 0:
+        ceiling = MATCH_ERROR * float(np.median(q["fit_error"]))
+        checks.append(
+            (
+                q["fit_error"] > ceiling,
+                lambda k: (
+                    f"fits its points at a cost of {q['fit_error'][k]:.3g} a point (the log's median "
+                    f"{ceiling / MATCH_ERROR:.3g})"
+                ),
+            )
+        )
+    for bad, words in checks:
+        for k in np.flatnonzero(bad):
+            why[k] = f"{why[k]}; " if why[k] else ""
+            why[k] += words(int(k))
+    nan = float("nan")
+    return [
+        _match_fault(log, k, (nan, nan, nan), f"is poor by its matcher's word: {w}")
+        for k, w in enumerate(why)
+        if w
+    ]
+
+
+def increment_faults(
+    fns: ProblemFunctions, params: np.ndarray, log: Log, inputs: np.ndarray, known: Sequence[Fault]
+) -> list[Fault]:
+    """Increments that disagree with the wheels at ``params`` by more than :data:`MATCH_SCATTER`
+    robust σ of the others' scatter (``known``: faults already found, whose increments are
+    neither judged nor counted in the scatter). A wheel's wrong reading over one increment looks the
+    same (its rotation can always be taken up by one wheel): such an increment is named a bad match
+    too, and left out all the same."""
+    inc = log.motions
+    if inc is None or inc.n == 0:
+        return []
+    p = np.ravel(np.asarray(params, dtype=float))
+    prefix = poses.accumulate(np.zeros(3), over_columns(fns.predict, p, inputs)[0].T)
+    error = poses.between(inc.z, poses.between(prefix[inc.first], prefix[inc.last]))
+    judged = np.ones(inc.n, dtype=bool)
+    for f in known:
+        judged &= (inc.last - 1 < f.first) | (inc.first > f.last)
+    if judged.sum() < 10:
+        return []
+    centre = np.median(error[judged], axis=0)
+    spread = 1.4826 * np.median(np.abs(error[judged] - centre), axis=0)
+    if not np.all(spread > 0):
+        return []  # no scatter to judge by (a noise-free simulation)
+    score = np.max(np.abs(error - centre) / spread, axis=1)
+    found = []
+    for k in np.flatnonzero(judged & (score > MATCH_SCATTER)):
+        e = error[k]
+        why = (
+            f"disagrees with the wheels by ({e[0]:+.4f} m, {e[1]:+.4f} m, {e[2]:+.4f} rad), "
+            f"{score[k]:.0f}× the increments' robust scatter"
+        )
+        found.append(
+            _match_fault(log, int(k), (float(np.hypot(e[0], e[1])), float(e[2]), float(score[k])), why)
+        )
     return found
 
 
@@ -189,8 +297,21 @@ def absolute_faults(log: Log, kinds: Mapping[str, EncoderKind]) -> list[Fault]:
 
 def cleaned(log: Log, faults: Sequence[Fault]) -> Log:
     """``log`` with the tracker's and the absolute encoders' glitches interpolated over (in time,
-    from the readings around them), so that they mislead no judgement of another stream."""
+    from the readings around them), and its bad matches dropped, so that they mislead no
+    judgement of another stream."""
     out = log
+    inc = log.motions
+    matches = [f for f in faults if f.kind in MATCH_KINDS]
+    if inc is not None and matches:
+        keep = np.ones(inc.n, dtype=bool)
+        for f in matches:
+            keep &= ~((inc.first == f.first) & (inc.last == f.last + 1))
+        kept = inc.take(keep)
+        out = replace(
+            out,
+            reference=replace(out.reference, motions=kept),
+            T_world_sensor=frozen(kept.chain(log.n_records)),
+        )
     bad_pose = np.zeros(log.n_records, dtype=bool)
     for f in faults:
         if f.kind in TRACKER_KINDS:
@@ -237,6 +358,13 @@ def counter_faults(
         return FaultReport(faults=(), stale={}, noise={}, unit=unit_of(log))
     T = tracker_poses(fns, log)
     z = over_columns(fns.between, T[:-1].T, T[1:].T)[0]
+    if log.motions is not None:
+        # No increment measures these intervals: the wheels' own motion, which accuses no counter.
+        gap = ~log.motions.covered(log.n_records)
+        if gap.any():
+            z[:, gap] = over_columns(fns.predict, np.ravel(np.asarray(params, dtype=float)), inputs[:, gap])[
+                0
+            ]
     e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
     de_du = de_du.reshape(fns.error_rows, N, inputs.shape[0])
     screens, lag_s = screen_counters(e, de_du, inputs, counters, log.time_s, lag)
@@ -265,7 +393,7 @@ def screen(
     alone, then the counters' against a fit (``judge``) that leaves those glitches out, on readings
     with them interpolated over, at the tracker ``lag`` (s, or a range to estimate it in)."""
     model, n = fns.model, log.n_records
-    jumps = tracker_faults(log, fns.sensor)
+    jumps = tracker_faults(log, fns.sensor) if log.motions is None else match_faults(log)
     glitches = tuple(jumps + absolute_faults(log, model.encoder_kinds))
     report = FaultReport(glitches, {}, {}, unit=unit_of(log))
     params = judge(report.bad_intervals(n - 1), report.bad_records(n))
@@ -273,6 +401,10 @@ def screen(
         # Judged by a wrong model every interval looks faulty; the solvers will say why.
         why = "the fit that judges the encoders did not converge from the initial guess"
         return replace(report, unchecked=why)
+    if log.motions is not None:
+        # An increment's disagreement is its own unless one wheel's reading explains it.
+        inputs = model.inputs(log, steering_sample)
+        glitches += tuple(increment_faults(fns, params, log, inputs, glitches))
     clean = cleaned(log, glitches)
     counters = counter_faults(fns, params, clean, model.inputs(clean, steering_sample), lag)
     faults = tuple(sorted(glitches + counters.faults, key=lambda f: (f.first, f.kind)))

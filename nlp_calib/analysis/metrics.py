@@ -68,13 +68,13 @@ def geometry(fns: ProblemFunctions) -> Geometry:
 
 
 def steps(fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray) -> np.ndarray:
-    """The predicted sensor motion ``h_k`` of every interval, ``(n_intervals, pose rows)``."""
+    """The predicted sensor motion ``h_k`` of every interval, ``(n_intervals, pose rows)``;
+    ``params`` is one log's view (:meth:`ProblemFunctions.view`), or one per interval (a column each)."""
     n = inputs.shape[1]
     if n == 0:
         return np.zeros((0, fns.sensor.pose_rows))
-    return over_columns(
-        fns.predict, np.ravel(np.asarray(params, dtype=float)), np.asarray(inputs, dtype=float)
-    )[0].T
+    P = np.asarray(params, dtype=float)
+    return over_columns(fns.predict, P if P.ndim == 2 else np.ravel(P), np.asarray(inputs, dtype=float))[0].T
 
 
 def scale_free(fns: ProblemFunctions) -> bool:
@@ -88,7 +88,9 @@ def in_metres(fns: ProblemFunctions, params: np.ndarray, poses: np.ndarray) -> n
     if not scale_free(fns):
         return poses
     out = np.array(poses, dtype=float)
-    out[:, :3] *= fns.sensor.trajectory_scale(dict(zip(fns.names, map(float, np.ravel(params)))))
+    P = np.asarray(params, dtype=float)
+    first = P[:, 0] if P.ndim == 2 else np.ravel(P)  # one view per interval: the first log's scale
+    out[:, :3] *= fns.sensor.trajectory_scale(dict(zip(fns.view_names, map(float, first))))
     return out
 
 
@@ -296,7 +298,7 @@ def each_metrics(
 ) -> list[TrajectoryMetrics]:
     """Metrics of the tracks of each parameter set over records ``start:stop`` (interval ``k``
     joins records k, k+1), the reference's side computed once (once per set when the trajectory's
-    scale is free).
+    scale is free). A parameter set is one log's view, or one view per interval (a column each).
 
     ``bad_intervals`` (per interval) and ``bad_records`` (per record) mark faults in the same
     indexing as ``inputs`` and ``T_world_sensor``; they shape the fair figures only.
@@ -314,5 +316,8 @@ def each_metrics(
         if ref is None or scale_free(fns):
             # A trajectory known up to scale is scored in metres, by each parameter set's own scale.
             ref = reference(g, in_metres(fns, params, T), rpe_window, bad_i, bad_r)
-        out.append(scored(fns, params, inputs[:, start : stop - 1], ref))
+        P = np.asarray(params, dtype=float)
+        out.append(
+            scored(fns, P[:, start : stop - 1] if P.ndim == 2 else P, inputs[:, start : stop - 1], ref)
+        )
     return out

@@ -236,7 +236,9 @@ def simulated(
     if made is None:
         return None
     time_s, U, path = made
-    track = sensor_poses(fns, params, data.T_world_sensor[-1], path)
+    # The manoeuvre continues the last log: its own mount (with a mount per log) carries the sensor.
+    last = int(data.log_of(np.array([data.n_records - 1]))[0])
+    track = sensor_poses(fns, fns.view(params, last), data.T_world_sensor[-1], path)
     return appended(fns, data, (time_s, U, track), options), path
 
 

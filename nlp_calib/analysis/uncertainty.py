@@ -23,6 +23,10 @@ from the squared residuals by non-negative least squares (method of moments, cor
 fitted degrees of freedom); the input noise is given. ``M`` maps the manifold perturbation to
 plain parameter coordinates.
 
+A reference that measures its own motions (increments: a scan matcher's) carries white noise on
+each increment instead, its own and no other's: ``e_w ≈ ∂e/∂z·n_w + …``, one source per window;
+nothing telescopes.
+
 Assumptions: white tracker-pose noise explains the residuals beyond the given input noise (no
 timing error or slowly varying model error), and the problem is close to linear within a few σ.
 """
@@ -324,29 +328,48 @@ class _Sums:
     starts: np.ndarray
     stops: np.ndarray
     distinct: bool
+    #: Per window, whether its ``z`` is a measured increment (its noise its own: a row of ``K``
+    #: after the poses' rows); None: none is.
+    increment: np.ndarray | None = None
 
     @classmethod
     def zero(cls, fns: ProblemFunctions, data: ResidualData, m: int) -> _Sums:
         groups = tuple(tuple(g) for g in fns.sensor.noise_groups)
         n, k, a, b = fns.n_free, len(groups), data.starts, data.stops
+        inc = data.increment if data.increment is not None and data.increment.any() else None
+        rows = data.T_world_sensor.shape[0] + (data.n_residuals if inc is not None else 0)
         return cls(
             groups=groups,
             gram=np.zeros((k, k)),
             proj=np.zeros(k),
             yy=0.0,
-            K=np.zeros((data.T_world_sensor.shape[0], n, sum(len(g) for g in groups))),
+            K=np.zeros((rows, n, sum(len(g) for g in groups))),
             C=np.zeros((data.inputs.shape[1] + 1, n, m)),
             outliers=np.zeros((n, n)),
             starts=a,
             stops=b,
-            distinct=bool(np.all(np.diff(a) > 0) and np.all(np.diff(b) > 0)),
+            distinct=bool(np.all(np.diff(a) > 0) and np.all(np.diff(b) > 0)) and inc is None,
+            increment=inc,
         )
+
+    def _sources(
+        self, w: slice, sens: Sensitivities
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Each window's noise sources (rows of ``K``) and its maps from them: its first and last
+        pose's, or a measured increment's own (a row of its own; nothing at its end)."""
+        a, b = self.starts[w], self.stops[w]
+        Ea, Eb = sens.de_dz @ sens.dz_da, sens.de_dz @ sens.dz_db  # (., error rows, pose noise)
+        if self.increment is not None and self.increment[w].any():
+            inc = self.increment[w]
+            Ea, Eb = Ea.copy(), Eb.copy()
+            Ea[inc], Eb[inc] = sens.de_dz[inc], 0.0  # a planar increment's rows are its noise's
+            a = np.where(inc, self.K.shape[0] - self.increment.size + np.arange(w.start, w.stop), a)
+        return a, b, Ea, Eb
 
     def add(self, w: slice, sens: Sensitivities, r: _Residuals, running: np.ndarray) -> None:
         """Add the windows ``w``."""
-        a, b = self.starts[w], self.stops[w]
-        Ea, Eb = sens.de_dz @ sens.dz_da, sens.de_dz @ sens.dz_db  # (., error rows, pose noise)
-        known = ((sens.de_dend @ (running[b] - running[a])) * sens.de_dend).sum(axis=2)
+        a, b, Ea, Eb = self._sources(w, sens)
+        known = ((sens.de_dend @ (running[b] - running[self.starts[w]])) * sens.de_dend).sum(axis=2)
         E2 = Ea**2 + Eb**2  # per residual component c, pose component k
         coef = np.stack([E2[:, :, list(g)].sum(axis=2) for g in self.groups], axis=2)  # (., rows, groups)
         u, e = r.use[w], r.e[:, w]
@@ -357,7 +380,7 @@ class _Sums:
         _add(self.K, b, L @ Eb, self.distinct)
         # Σ over the windows containing interval j of L_w ∂e_w/∂end: +at the first interval, −after the last.
         G = L @ sens.de_dend
-        _add(self.C, a, G, self.distinct)
+        _add(self.C, self.starts[w], G, self.distinct)
         _add(self.C, b, -G, self.distinct)
         # Residuals beyond the kernel threshold are not explained by the noise model; their bounded
         # but non-zero pull is counted as it is, from their own scores.

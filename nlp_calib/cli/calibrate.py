@@ -111,6 +111,19 @@ def _robot_urdf(args: argparse.Namespace) -> None:
     args.robot_urdf = options.urdf
 
 
+def _one_link(args: argparse.Namespace, scenarios: Sequence[Scenario]) -> None:
+    """``--urdf`` re-poses one sensor link: refused, before any work, for a fit with a mount per log."""
+    if args.robot_urdf is None:
+        return
+    for sc in scenarios:
+        if sc.data.joint and sc.objective.sensor.mounts == "per_log":
+            raise UsageError(
+                f"--urdf re-poses one sensor link, and {sc.name} fits a mount per log (sensor: "
+                "{mounts: per_log}); run it without --urdf: robot.urdf and sensor_mount.urdf.xml "
+                "then hold one joint per log"
+            )
+
+
 def _compare_dir(args: argparse.Namespace, outs: Sequence[Path]) -> Path:
     """Where ``compare.md`` and ``compare.csv`` go: one scenario's output folder, or the folder
     holding several."""
@@ -124,6 +137,7 @@ def _cmd_calibrate(
 ) -> int:
     _robot_urdf(args)
     scenarios = _loadwith_data(args.scenario, args.data)
+    _one_link(args, scenarios)
     outs = _out_dirs(args, scenarios)
     outputs = registry.selected(CALIBRATE, args.report)
     # Every input read and checked before any work; read first, so that an output over an input

@@ -17,8 +17,9 @@ from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import atomic_write_text, check_output_dir, refuse_input_alias
 from nlp_calib.logs.bag_files import bag_root
 from nlp_calib.logs.bag_joints import joint_files
+from nlp_calib.logs.bag_reader import ENCODER_TYPE, TRACKER_TYPES, bag_inventory
 from nlp_calib.logs.reader import parse_log
-from nlp_calib.models import encoders, get_model
+from nlp_calib.models import KinematicModel, encoders, get_model
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.sources import BagSource
 
@@ -49,13 +50,62 @@ def _write(folder: Path, texts: Mapping[str, str], force: bool) -> StagedOutput:
     return stage
 
 
+def _joints_named(names: tuple[str, ...], model: KinematicModel) -> tuple[str, ...] | None:
+    """The joints among ``names`` whose names say which of the model's encoders each is (its
+    encoder's first word in the joint's name, one joint each); None when they do not."""
+    out = []
+    for encoder in encoders(model):
+        word = encoder.split("_")[0]
+        found = [n for n in names if word in n.lower()]
+        if len(found) != 1:
+            return None
+        out.append(found[0])
+    return tuple(out) if len(set(out)) == len(out) else None
+
+
+def chosen_topics(args: argparse.Namespace, model: KinematicModel) -> tuple[str, tuple[str, ...], str]:
+    """The JointState topic, its joints in the model's encoder order and the tracker's topic: as
+    given, else the bag's only candidates; when the bag leaves a choice open, an error listing
+    what it holds (topics, types, joint names and frames)."""
+    if args.joint_states and args.joints and args.tracker:
+        return args.joint_states, args.joints, args.tracker
+    found = bag_inventory(args.bag)
+    states = [args.joint_states] if args.joint_states else found.of_type(ENCODER_TYPE)
+    # Fixed transforms are the robot's description, never a tracker.
+    trackers = (
+        [args.tracker] if args.tracker else [t for t in found.of_type(*TRACKER_TYPES) if t != "/tf_static"]
+    )
+    joints = args.joints or (
+        _joints_named(found.joints.get(states[0], ()), model) if len(states) == 1 else None
+    )
+    if len(states) == 1 and len(trackers) == 1 and joints is not None:
+        return states[0], joints, trackers[0]
+    open_ = [
+        w
+        for w, ok in (
+            ("--joint-states", len(states) == 1),
+            ("--joints", joints is not None),
+            ("--tracker", len(trackers) == 1),
+        )
+        if not ok
+    ]
+    listing = "\n  ".join(found.lines())
+    raise UsageError(
+        f"{args.bag}: cannot choose {', '.join(open_)} from the bag; it holds:\n  {listing}\ngive "
+        f"{' '.join(open_)} (the joints in {model.name}'s encoder order: {', '.join(encoders(model))}); a "
+        "lidar's scans (sensor_msgs/msg/LaserScan) are read by a scenario's dataset block with scan: TOPIC "
+        "(docs/lidar.md)"
+    )
+
+
 def cmd_import_bag(args: argparse.Namespace) -> int:
     model = get_model(args.model)
+    joint_states, joints, tracker = chosen_topics(args, model)
     source = BagSource(
         args.bag,
-        args.joint_states,
-        args.joints,
-        args.tracker,
+        joint_states,
+        joints,
+        tracker,
         args.tracker_frame,
         args.robot,
         args.max_gap,
@@ -98,6 +148,6 @@ def _import_radians(args: argparse.Namespace, source: BagSource, folder: Path, n
     joints, poses = (stage.final(stage.path / n) for n in names)
     print(f"read {args.bag}: {summary}")
     print(f"wrote {joints} (the joints in radians) and {poses} (the tracker's poses)")
-    pairs = ", ".join(f"{e}: {j}" for e, j in zip(encoders(model), args.joints))
+    pairs = ", ".join(f"{e}: {j}" for e, j in zip(encoders(model), source.joints))
     print(f"a scenario reads them as: dataset: {{joints: {joints}, poses: {poses}, encoders: {{{pairs}}}}}")
     return 0

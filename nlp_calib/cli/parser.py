@@ -101,7 +101,10 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "validate": ("nlp-calib validate scenarios/demo.yaml --blocks 10",),
     "odometry": ("nlp-calib odometry scenarios/demo.yaml --report --sigma 3",),
     "codegen": ("nlp-calib codegen scenarios/demo.yaml --out c_export && make -C c_export example",),
-    "simulate": ("nlp-calib simulate --out my_drive.txt --records 2000 --seed 3 --latency 0.05",),
+    "simulate": (
+        "nlp-calib simulate --out my_drive.txt --records 2000 --seed 3 --latency 0.05",
+        "nlp-calib simulate --lidar --out lidar_drive --duration 120",
+    ),
     "check": (
         "nlp-calib check out/demo/calibration.yaml todays_drive.txt",
         "nlp-calib check out/real/calibration.yaml scenarios/real_tricycle.yaml --out out/check_today",
@@ -329,6 +332,19 @@ def _add_simulate(sub: Any) -> None:
         "<name>.joints.csv (joints in radians) and <name>.truth.json beside it (docs/camera.md)",
     )
     _add_force(p, "an existing log or truth file")
+    kind = p.add_mutually_exclusive_group()
+    kind.add_argument(
+        "--lidar",
+        action="store_true",
+        help="a 2-D lidar in a room of walls: a ROS 2 bag (folder --out) of /scan, /joint_states and "
+        "/tf_static, and --out.truth.json (docs/lidar.md); --outliers: the share of degraded scans",
+    )
+    kind.add_argument(
+        "--vendor",
+        action="store_true",
+        help="a robot's own odometry integrated with a wrong model (--out: t x y θ), a tracker's TUM file "
+        "beside it and the corrections in the truth JSON (docs/vendor.md)",
+    )
     p.add_argument("--config", type=_path, default=None, help="YAML file of simulation options")
     p.add_argument("--model", choices=tuple(MODELS), default=None, help=f"default: {next(iter(MODELS))}")
     p.add_argument(
@@ -369,22 +385,24 @@ def _add_import_bag(sub: Any) -> None:
     p.add_argument("--model", choices=tuple(MODELS), required=True, help="the robot's kinematic model")
     p.add_argument(
         "--joint-states",
-        required=True,
+        default=None,
         metavar="TOPIC",
-        help="sensor_msgs/msg/JointState topic with the joints' positions (or velocities)",
+        help="sensor_msgs/msg/JointState topic with the joints' positions (or velocities); default: the "
+        "bag's only one (else the bag's topics are listed)",
     )
     p.add_argument(
         "--joints",
         type=_names,
-        required=True,
+        default=None,
         metavar="NAME,NAME",
-        help=f"the JointState joints in the model's encoder order ({orders})",
+        help=f"the JointState joints in the model's encoder order ({orders}); default: those whose names "
+        "say which encoder they are (else the joints found are listed)",
     )
     p.add_argument(
         "--tracker",
-        required=True,
+        default=None,
         metavar="TOPIC",
-        help=f"the tracked sensor's poses: {', '.join(TRACKER_TYPES)}",
+        help=f"the tracked sensor's poses: {', '.join(TRACKER_TYPES)}; default: the bag's only one",
     )
     p.add_argument(
         "--tracker-frame",

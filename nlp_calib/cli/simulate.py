@@ -1,4 +1,5 @@
-"""``nlp-calib simulate``: a synthetic drive log (or a camera's trajectory and joints) with its truth."""
+"""``nlp-calib simulate``: a synthetic drive log (or a camera's trajectory and joints, a lidar's bag,
+a vendor's odometry) with its truth."""
 
 from __future__ import annotations
 
@@ -10,9 +11,11 @@ from nlp_calib.core import interrupts
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import check_output_dir
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
-from nlp_calib.pipeline.simconfig import camera_options, simulation_options
+from nlp_calib.pipeline.simconfig import camera_options, lidar_options, simulation_options, vendor_options
 from nlp_calib.simulation import simulate_to_file, truth_path
 from nlp_calib.simulation.camera import camera_paths, simulate_camera, write_camera_simulation
+from nlp_calib.simulation.lidar import lidar_paths, simulate_lidar, write_lidar_simulation
+from nlp_calib.simulation.vendor import write_vendor_simulation
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -34,6 +37,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     out: Path = args.out
     if out.is_dir() or out.name in ("", ".", ".."):
         raise UsageError(f"--out {out} is a folder; give the path of the log file to write")
+    if getattr(args, "lidar", False):
+        return _simulate_lidar(args, overrides)
+    if getattr(args, "vendor", False):
+        return _simulate_vendor(args, overrides)
     if out.suffix.lower() == ".tum":
         return _simulate_camera(args, overrides)
     opts = simulation_options(args.config, overrides)
@@ -61,4 +68,46 @@ def _simulate_camera(args: argparse.Namespace, overrides: dict[str, Any]) -> int
         stage.commit()
     tum, joints, truth = (stage.final(p) for p in written)
     print(f"wrote {tum} ({opts.duration_s:g} s at {opts.image_rate_hz:g} Hz), {joints} and {truth}")
+    return 0
+
+
+def _simulate_lidar(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
+    """A lidar's bag and the truth beside it."""
+    opts = lidar_options(args.config, overrides)
+    out: Path = args.out
+    folder = check_output_dir(out.parent)
+    names = [p.name for p in lidar_paths(out)]
+    refuse_collisions(folder, names, tracked=False, force=args.force)
+    with StagedOutput(folder, None, force=args.force) as stage:
+        written = write_lidar_simulation(simulate_lidar(opts), stage.path / out.name)
+        interrupts.hold()
+        stage.commit()
+    bag, truth = (stage.final(p) for p in written)
+    print(
+        f"wrote {bag} ({opts.duration_s:g} s, scans at {opts.scan_rate_hz:g} Hz, "
+        f"{100 * opts.degraded_fraction:g} % degraded) and {truth}"
+    )
+    print(
+        f"a scenario reads it as: dataset: {{bag: {bag}, joint_states: /joint_states, joints: "
+        "[left_wheel_joint, right_wheel_joint], scan: /scan}"
+    )
+    return 0
+
+
+def _simulate_vendor(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
+    """A vendor's odometry, the tracker's TUM file and the truth, beside each other."""
+    opts = vendor_options(args.config, overrides)
+    out: Path = args.out
+    folder = check_output_dir(out.parent)
+    names = [out.name, out.with_suffix(".tum").name, out.with_suffix(".truth.json").name]
+    refuse_collisions(folder, names, tracked=False, force=args.force)
+    with StagedOutput(folder, None, force=args.force) as stage:
+        written = write_vendor_simulation(opts, stage.path / out.name)
+        interrupts.hold()
+        stage.commit()
+    odometry, tum, truth = (stage.final(p) for p in written)
+    print(
+        f"wrote {odometry} (the robot's own odometry, integrated with the model "
+        f"{', '.join(f'{n} {v:g}' for n, v in opts.vendor_in_radians().items())}), {tum} and {truth}"
+    )
     return 0

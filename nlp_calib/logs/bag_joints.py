@@ -27,7 +27,7 @@ from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs.bag_reader import BagError, BagTopics, Drops, Stamped, read_topics
 from nlp_calib.logs.joint_log import format_joint_csv
-from nlp_calib.logs.log import JointStream, Log, LogClock, LogHeader, frozen
+from nlp_calib.logs.log import JointStream, Log, LogClock, LogHeader, ReferenceData, frozen
 from nlp_calib.logs.tum import format_tum
 
 #: A joint's positions are quantised when at least this share of its steps are whole multiples
@@ -207,7 +207,9 @@ def timed_by_tracker(
         clock=LogClock(start_ns=start_ns),
         joint_positions=stream.at(time_s),
         joint_stream=stream,
-        T_world_sensor_3d=frozen(np.array(tracker.values[index][:, [0, 1, 3, 4, 5, 6, 7]], dtype=float)),
+        reference=ReferenceData(
+            frozen(np.array(tracker.values[index][:, [0, 1, 3, 4, 5, 6, 7]], dtype=float))
+        ),
     )
 
 

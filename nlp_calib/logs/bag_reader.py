@@ -34,7 +34,17 @@ from nlp_calib.core.ranges import Range
 from nlp_calib.logs.bag_files import DAMAGED, BagError, is_bag, messages, opened, why
 from nlp_calib.logs.reader import yaw_from_quaternion
 
-__all__ = ["BagError", "BagTopics", "Drops", "Stamped", "is_bag", "read_topics"]
+__all__ = [
+    "BagError",
+    "BagInventory",
+    "BagTopics",
+    "Drops",
+    "Stamped",
+    "bag_inventory",
+    "is_bag",
+    "read_joints",
+    "read_topics",
+]
 
 ENCODER_TYPE = "sensor_msgs/msg/JointState"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
@@ -383,3 +393,107 @@ def _add_angles(
     pos = [float(position[i]) if position.size else math.nan for i in index]
     vel = [float(velocity[i]) if velocity.size else math.nan for i in index]
     enc.add(_stamp_ns(p, msg.header, topics.joint_states, number), recorded, pos + vel)
+
+
+def read_joints(
+    path: str | Path, joint_states: str, joints: tuple[str, ...], receive: bool = False
+) -> Stamped:
+    """The joints in radians on ``joint_states`` alone (each joint's position, then its velocity;
+    NaN where a message has none), timed by their header stamps or, with ``receive``, the bag's
+    record times (a reference other than a pose topic: a lidar's scans)."""
+    p = Path(path)
+    topics = BagTopics(joint_states, joints, joint_states, joint_units="radians")
+    enc, names_seen, number = _Collector(joint_states), set[str](), 0
+    with opened(p) as reader:
+        available = {name: info.msgtype or "mixed types" for name, info in reader.topics.items()}
+        _check_topic(p, available, joint_states, "joint_states", (ENCODER_TYPE,))
+        for _, recorded, msg in messages(reader, p, (joint_states,)):
+            number += 1
+            _add_joints(p, msg, topics, number, recorded, enc, names_seen)
+    if not enc.rows and not set(joints) <= names_seen:
+        raise BagError(
+            p,
+            f"joints: no message on {joint_states!r} holds {', '.join(joints)}; the joint names present: "
+            f"{', '.join(sorted(names_seen)) or 'none'} (give them in the model's encoder order)",
+        )
+    return enc.result(p, "joint_states", 2 * len(joints), f" holding {', '.join(joints)}", receive)
+
+
+#: Messages of a topic looked at for its joint names or frames (the first ones).
+INVENTORY_MESSAGES = 50
+
+
+@dataclass(frozen=True)
+class BagInventory:
+    """What a bag holds, for a user to choose from: each topic's type and message count, the
+    joint names on each JointState topic and the frames each framed topic names (a TF topic's and
+    an odometry's child frames, a scan's own frame), from their first messages."""
+
+    path: str
+    topics: Mapping[str, tuple[str, int]]
+    joints: Mapping[str, tuple[str, ...]]
+    frames: Mapping[str, tuple[str, ...]]
+
+    def lines(self) -> list[str]:
+        """The inventory in words, a topic a line."""
+        out = []
+        for name, (msgtype, count) in sorted(self.topics.items()):
+            more = ""
+            if name in self.joints:
+                more = f": joints {', '.join(self.joints[name]) or 'none'}"
+            elif name in self.frames:
+                more = f": frames {', '.join(self.frames[name]) or 'none'}"
+            out.append(f"{name} ({msgtype}, {count} messages){more}")
+        return out
+
+    def of_type(self, *msgtypes: str) -> list[str]:
+        """The topics holding any of ``msgtypes``."""
+        return sorted(n for n, (t, _) in self.topics.items() if t in msgtypes)
+
+
+def bag_inventory(path: str | Path) -> BagInventory:
+    """What the bag at ``path`` holds (see :class:`BagInventory`)."""
+    p = Path(path)
+    joints: dict[str, set[str]] = {}
+    frames: dict[str, set[str]] = {}
+    with opened(p) as reader:
+        try:
+            topics = {n: (i.msgtype or "mixed types", int(i.msgcount)) for n, i in reader.topics.items()}
+        except Exception as exc:  # a damaged metadata.yaml or index gets this far in rosbags
+            raise BagError(p, f"cannot read the bag's topics ({why(exc)}); {DAMAGED}") from None
+        looked = (ENCODER_TYPE, *_FRAMED, "sensor_msgs/msg/LaserScan")
+        wanted = [n for n, (t, _) in topics.items() if t in looked]
+        seen: Counter[str] = Counter()
+        for conn, _, msg in messages(reader, p, wanted):
+            if seen[conn.topic] >= INVENTORY_MESSAGES:
+                continue
+            seen[conn.topic] += 1
+            if conn.msgtype == ENCODER_TYPE:
+                joints.setdefault(conn.topic, set()).update(msg.name)
+            elif conn.msgtype in _FRAMED:
+                frames.setdefault(conn.topic, set()).update(
+                    _frame(f[0]) for f in _tracker_poses(msg, conn.msgtype)
+                )
+            else:
+                frames.setdefault(conn.topic, set()).add(_frame(msg.header.frame_id))
+    return BagInventory(
+        str(p),
+        topics,
+        {k: tuple(sorted(v)) for k, v in joints.items()},
+        {k: tuple(sorted(v)) for k, v in frames.items()},
+    )
+
+
+def read_pose_topic(path: str | Path, topic: str, frame: str | None = None, receive: bool = False) -> Stamped:
+    """A pose topic alone (a robot's own ``nav_msgs/Odometry``, a tracker): its planar and 3-D
+    poses, :data:`TRACKER_COLUMNS`, of child frame ``frame`` where the type names one."""
+    p = Path(path)
+    trk = _Collector(topic)
+    with opened(p) as reader:
+        available = {name: info.msgtype or "mixed types" for name, info in reader.topics.items()}
+        msgtype = _check_topic(p, available, topic, "odometry", TRACKER_TYPES)
+        want = None if frame is None else _frame(frame)
+        seen: set[str] = set()
+        for number, (_, recorded, msg) in enumerate(messages(reader, p, (topic,)), start=1):
+            _add_poses(p, msg, msgtype, want, number, recorded, trk, seen)
+    return trk.result(p, "odometry", len(TRACKER_COLUMNS), "", receive)

@@ -20,7 +20,7 @@ import numpy as np
 from nlp_calib.core import poses3d
 from nlp_calib.core.errors import DatasetError
 from nlp_calib.logs.joint_log import JointTable
-from nlp_calib.logs.log import Log, LogHeader, frozen
+from nlp_calib.logs.log import Log, LogHeader, ReferenceData, frozen
 from nlp_calib.logs.tum import Trajectory3D
 
 #: How a joint drives an input row: its change over the interval, or its angle at the start.
@@ -146,5 +146,5 @@ def camera_log(recording: CameraRecording, kinematic_model: str, sensor_frame: s
         model_pose=frozen(np.zeros((n, 3))),
         T_world_sensor=frozen(planar_track(images.poses)),
         line_numbers=images.line_numbers,
-        T_world_sensor_3d=images.poses,
+        reference=ReferenceData(poses_3d=images.poses),
     )

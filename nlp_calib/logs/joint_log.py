@@ -4,6 +4,11 @@ Times in seconds (read to the nanosecond), joint positions in radians as ROS pub
 (REP 103: a wheel's angle grows without wrapping as it turns; an absolute joint's is its angle);
 ``#`` lines are comments. A row with another number of fields, a value that is not a finite
 number and a time that does not increase are refused with the file and the line.
+
+A wheel's column may hold another form (:data:`WHEEL_FORMS`, :func:`wheel_positions`): its speed
+(rad/s), integrated over the stamps by trapezoids, or its increment over each cycle (the cycle
+that ends at the row's stamp; counts, turned into radians by the counts per turn, or radians),
+summed. An absolute joint's column (an angle it reads as it is) is always its position.
 """
 
 from __future__ import annotations
@@ -19,6 +24,8 @@ from nlp_calib.logs.log import frozen
 from nlp_calib.logs.text_tables import check_increasing, data_lines, numbers, seconds, stamp_ns
 
 TIME_COLUMN = "time"
+#: What a wheel's column holds: its angle (rad), its speed (rad/s) or its increment per cycle.
+WHEEL_FORMS = ("positions", "speeds", "increments")
 
 
 @dataclass(frozen=True)
@@ -97,3 +104,26 @@ def format_joint_csv(time_ns: np.ndarray, names: Sequence[str], positions: np.nd
         for t, row in zip(time_ns.tolist(), positions)
     )
     return head + "".join(rows)
+
+
+def wheel_positions(
+    time_ns: np.ndarray, values: np.ndarray, wheels: Sequence[bool], form: str, counts_per_turn: float | None
+) -> np.ndarray:
+    """Each joint's position (rad) at the stamps from its column ``values`` in ``form`` (see the
+    module docstring); only the columns ``wheels`` marks take the form, the others are positions.
+    A wheel's position starts at 0 where it is integrated or summed."""
+    out = np.array(values, dtype=float)
+    cols = np.flatnonzero(np.asarray(wheels, dtype=bool))
+    if form == "positions" or cols.size == 0:
+        return out
+    if form == "speeds":
+        dt = np.diff(time_ns).astype(float) * 1e-9
+        v = out[:, cols]
+        out[:, cols] = np.vstack(
+            [np.zeros((1, cols.size)), np.cumsum(0.5 * (v[1:] + v[:-1]) * dt[:, None], axis=0)]
+        )
+        return out
+    per_count = 2.0 * np.pi / counts_per_turn if counts_per_turn is not None else 1.0
+    steps = out[1:, cols] * per_count  # the first row's increment ends at the log's first stamp
+    out[:, cols] = np.vstack([np.zeros((1, cols.size)), np.cumsum(steps, axis=0)])
+    return out

@@ -11,6 +11,7 @@ import numpy as np
 from nlp_calib.core import poses3d
 from nlp_calib.core.errors import DatasetError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
+from nlp_calib.logs.relative import RelativeMotions
 
 #: How an encoder reports: ``absolute`` readings lie in ``[0, max)`` (a steering angle);
 #: ``counter`` readings are a uint32 count that wraps at 2³² (a wheel).
@@ -118,6 +119,15 @@ class LogClock:
 
 
 @dataclass(frozen=True)
+class ReferenceData:
+    """What the reference measured beyond its planar poses: its 3-D poses ``(n, 7)`` (a tracker's,
+    a camera's), or its own motions between records (a scan matcher's)."""
+
+    poses_3d: np.ndarray | None = None
+    motions: RelativeMotions | None = None
+
+
+@dataclass(frozen=True)
 class Log:
     """An immutable robot log: per-record arrays of equal length ``n_records``.
 
@@ -130,6 +140,11 @@ class Log:
     columns): ``joint_positions`` holds each joint's position at the records, interpolated from
     ``joint_stream``, the joints as published on their own clock (re-sampled from there when the
     tracker's clock is shifted).
+
+    A reference that measures its own motion between two of its stamps (a scan matcher, visual
+    odometry: :class:`~nlp_calib.logs.relative.RelativeMotions`) fills ``motions``: a record is made
+    at each stamp, and ``T_world_sensor`` is then only the chain of those motions (held where none
+    covers an interval), for figures; the residuals compare each increment itself.
 
     A tracker that reports 3-D poses (a bag's motion capture, a camera's own trajectory) fills
     ``T_world_sensor_3d`` too, ``(x, y, z, qx, qy, qz, qw)`` per row in its own world frame and
@@ -149,7 +164,17 @@ class Log:
     clock: LogClock = field(default_factory=lambda: LogClock())
     joint_positions: np.ndarray | None = None
     joint_stream: JointStream | None = None
-    T_world_sensor_3d: np.ndarray | None = None
+    reference: ReferenceData = field(default_factory=ReferenceData)
+
+    @property
+    def T_world_sensor_3d(self) -> np.ndarray | None:
+        """The tracker's 3-D poses, where it reports them (None: planar ones)."""
+        return self.reference.poses_3d
+
+    @property
+    def motions(self) -> RelativeMotions | None:
+        """The reference's own motions between records, where it measures them."""
+        return self.reference.motions
 
     @property
     def start_ns(self) -> int:
@@ -220,7 +245,7 @@ class Log:
         s = np.clip((t[k] - t[a]) / np.maximum(t[b] - t[a], 1e-12), 0.0, 1.0)[:, None]
         P = np.array(self.T_world_sensor_3d, dtype=float)
         P[k] = poses3d.between_at(P[a], P[b], s)
-        return replace(out, T_world_sensor_3d=frozen(P))
+        return replace(out, reference=replace(out.reference, poses_3d=frozen(P)))
 
     def select(self, start: int, stop: int) -> Log:
         """The records ``start:stop`` (time stays relative to the file's first record)."""
@@ -233,7 +258,10 @@ class Log:
             T_world_sensor=frozen(self.T_world_sensor[sl]),
             line_numbers=frozen(self.line_numbers[sl]),
             joint_positions=_rows(self.joint_positions, sl),
-            T_world_sensor_3d=_rows(self.T_world_sensor_3d, sl),
+            reference=ReferenceData(
+                _rows(self.T_world_sensor_3d, sl),
+                None if self.motions is None else self.motions.select(start, stop),
+            ),
         )
 
 

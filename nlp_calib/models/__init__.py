@@ -14,6 +14,7 @@ from nlp_calib.logs.reader import read_header
 from nlp_calib.models.base import (
     SENSOR_PARAMS,
     KinematicModel,
+    OdometryInverse,
     canonical,
     encoders,
     header_parameters,
@@ -83,6 +84,7 @@ __all__ = [
     "MODELS",
     "SENSOR_PARAMS",
     "KinematicModel",
+    "OdometryInverse",
     "canonical",
     "encoders",
     "get_model",

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal, Protocol
+from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 
 import casadi as ca
 import numpy as np
@@ -200,6 +200,18 @@ def named(names: Sequence[str], vector: ca.SX) -> dict[str, ca.SX]:
     """The entries of a symbolic ``vector`` by name (``names`` in its order): models write their
     expressions with parameter and input names, never positions."""
     return {name: vector[i] for i, name in enumerate(names)}
+
+
+@runtime_checkable
+class OdometryInverse(Protocol):
+    """A model that turns a controller's odometry back into the readings it integrated (a robot
+    that publishes only its own odometry: :mod:`nlp_calib.sources.vendor`)."""
+
+    def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> dict[str, np.ndarray]:
+        """Each encoder's readings, in the unit of the input it drives (a counter's running sum
+        from 0, an angle's level), that a controller running this model with ``params`` turned
+        into the base poses ``base`` ``(n, 3)``."""
+        ...
 
 
 def rows_by_name(names: Sequence[str], U: np.ndarray) -> dict[str, np.ndarray]:

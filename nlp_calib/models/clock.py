@@ -9,7 +9,7 @@ order of the logs.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from types import MappingProxyType
 from typing import Literal
 
@@ -33,6 +33,25 @@ def is_lag(name: str) -> bool:
     return name == LAG_PARAM or (name.startswith(LAG_PARAM + "_") and name[len(LAG_PARAM) + 1 :].isdigit())
 
 
+def per_log(names: Sequence[str], n_logs: int) -> tuple[str, ...]:
+    """``names`` of parameters each log of a fit of ``n_logs`` has its own of (a mount per log),
+    log after log, each with its log's number (``sensor_x_2``); for one log, the names themselves."""
+    if n_logs <= 1:
+        return tuple(names)
+    return tuple(f"{n}_{i + 1}" for i in range(n_logs) for n in names)
+
+
 def base_name(name: str) -> str:
-    """The name a scenario's keys give a per-log parameter (``tracker_lag_2`` → ``tracker_lag``)."""
-    return LAG_PARAM if is_lag(name) else name
+    """The name a scenario's keys give a per-log parameter (``tracker_lag_2`` → ``tracker_lag``,
+    ``sensor_x_2`` → ``sensor_x``): per-log parameters end in ``_<log number>``, and no other
+    parameter does."""
+    if is_lag(name):
+        return LAG_PARAM
+    stem, sep, number = name.rpartition("_")
+    return stem if sep and stem and number.isdigit() else name
+
+
+def log_of(name: str) -> int | None:
+    """The log (counted from 0) a per-log parameter belongs to (None: one shared by every log)."""
+    stem, sep, number = name.rpartition("_")
+    return int(number) - 1 if sep and stem and number.isdigit() else None

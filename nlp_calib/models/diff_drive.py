@@ -19,7 +19,16 @@ from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, Reference, Symmetry, named, rows_by_name
 from nlp_calib.models.controllers import ControllerMap, EncoderScales, wheel_radius
-from nlp_calib.models.drives import Pose, SimulationSettings, counter, drive_header, first_order, running
+from nlp_calib.models.drives import (
+    Pose,
+    SimulationSettings,
+    arcs,
+    counter,
+    drive_header,
+    first_order,
+    integrate_base,
+    running,
+)
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
@@ -95,6 +104,19 @@ class DiffDriveDrive:
     )
     #: Counts per wheel turn: written to the header for information, not used by the model.
     default_ranges: Mapping[str, int] = MappingProxyType({LEFT_ENCODER: 4096, RIGHT_ENCODER: 4096})
+    #: A robot whose controller integrates its odometry with a wrong model (joint units: the radii
+    #: in m per rad), and that model: the vendor odometry simulator's defaults.
+    vendor_truth: Mapping[str, float] = MappingProxyType(
+        {"k_left": 0.1012, "k_right": 0.0994, "baseline": 0.462}
+    )
+    vendor_model: Mapping[str, float] = MappingProxyType({"k_left": 0.1, "k_right": 0.1, "baseline": 0.45})
+
+    def odometry(self, joints: Mapping[str, np.ndarray], params: Mapping[str, float]) -> np.ndarray:
+        """The base poses ``(n, 3)`` a controller integrates (exact arcs) from the wheels' angles
+        with its own model ``params`` (m per rad, m)."""
+        d_l = np.diff(joints["left_wheel_joint"]) * params["k_left"]
+        d_r = np.diff(joints["right_wheel_joint"]) * params["k_right"]
+        return integrate_base(0.5 * (d_l + d_r), (d_r - d_l) / params["baseline"])
 
     def steps(
         self,
@@ -255,6 +277,14 @@ class DiffDrive:
         """1σ of each increment in ticks (default: quantisation, ``1/√12``)."""
         ticks = {**dict.fromkeys(self.encoder_kinds, QUANTISATION), **(encoder_noise or {})}
         return np.array([ticks[LEFT_ENCODER], ticks[RIGHT_ENCODER]])
+
+    def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> dict[str, np.ndarray]:
+        """The wheels' readings (from 0) a controller of model ``params`` turned to drive the base
+        poses ``base`` ``(n, 3)``: each step an arc, the wheels' travel ``s ∓ baseline·Δθ/2``."""
+        arc, turn = arcs(base)
+        left = (arc - 0.5 * params["baseline"] * turn) / params["k_left"]
+        right = (arc + 0.5 * params["baseline"] * turn) / params["k_right"]
+        return {LEFT_ENCODER: running(left), RIGHT_ENCODER: running(right)}
 
     def initial_guess(
         self,

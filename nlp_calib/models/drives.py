@@ -9,10 +9,11 @@ on purpose: the simulator is the yardstick the models are checked against.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from nlp_calib.core import poses
 from nlp_calib.core.numeric import COUNTER_MODULUS
 from nlp_calib.logs import LogHeader
 
@@ -69,6 +70,21 @@ class Drive(Protocol):
         ...
 
 
+@runtime_checkable
+class VendorController(Protocol):
+    """A drive whose robot's controller integrates its own odometry from its joints (what the
+    vendor odometry simulator writes): ``vendor_truth``, a robot (the model's parameters in joint
+    units) whose controller runs the wrong model ``vendor_model``."""
+
+    vendor_truth: Mapping[str, float]
+    vendor_model: Mapping[str, float]
+
+    def odometry(self, joints: Mapping[str, np.ndarray], params: Mapping[str, float]) -> np.ndarray:
+        """The base poses ``(n, 3)``, from the origin, that the controller integrates with its
+        model ``params`` from the joints' angles (rad, by the model's joint map's names)."""
+        ...
+
+
 def running(step: np.ndarray, start: float | None = None) -> np.ndarray:
     """Running sum of ``step`` from ``start`` (one more element; None: from 0, the log's start).
 
@@ -93,6 +109,17 @@ def integrate_base(ds: np.ndarray, w: np.ndarray, start: Pose | None = None) -> 
     x = running(c * a - s * b, x0)
     y = running(s * a + c * b, y0)
     return np.stack([x, y, theta], axis=1)
+
+
+def arcs(base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each step between consecutive base poses ``(n, 3)`` as the exact arc that drives it (the
+    inverse of :func:`integrate_base`): its length, signed by its direction of travel, and its turn."""
+    step = poses.between(base[:-1], base[1:])
+    turn, half = step[:, 2], 0.5 * step[:, 2]
+    chord = np.hypot(step[:, 0], step[:, 1]) * np.sign(step[:, 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        arc = chord * np.where(np.abs(half) > 1e-9, half / np.sin(half), 1.0 + half**2 / 6.0)
+    return arc, turn
 
 
 def counter(distance: np.ndarray, metres_per_tick: float, wrap_after: int) -> np.ndarray:

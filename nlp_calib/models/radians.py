@@ -29,6 +29,7 @@ from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.models.base import (
     STEERING_SAMPLES,
     KinematicModel,
+    OdometryInverse,
     Reference,
     Symmetry,
     record_rates,
@@ -328,6 +329,15 @@ class InRadians:
             return base_motion(self.from_counts(params))
 
         return self.from_counts(self.model.initial_guess(U_counts, z, counts_motion))
+
+    def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> dict[str, np.ndarray]:
+        """The model's own, in joint angles (rad): its parameters mapped back, each reading scaled
+        by the factor of the input it drives."""
+        if not isinstance(self.model, OdometryInverse):
+            raise ModelError(f"the {self.name} model cannot turn a robot's odometry back into its joints")
+        own = self.model.readings_from_odometry(base, self.to_counts(params))
+        factor = {r.encoder: r.factor for r in self.form.inputs.values() if r.encoder and not r.rate}
+        return {encoder: np.asarray(v) / factor.get(encoder, 1.0) for encoder, v in own.items()}
 
     def in_radians(self) -> KinematicModel:
         return self

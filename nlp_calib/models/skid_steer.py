@@ -21,6 +21,7 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
+from nlp_calib.core.errors import ModelError
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.base import SENSOR_TURNED, Reference, Symmetry, named, record_rates
 from nlp_calib.models.controllers import ControllerMap, EncoderScales
@@ -176,6 +177,16 @@ class SkidSteer(DiffDrive):
         )
         return ControllerMap(
             base.controller, base.parameters, {"turn_slip": slip}, base.omitted, base.assumes
+        )
+
+    def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> dict[str, np.ndarray]:
+        """Refused: the slip needs the turn rate, which poses alone do not give, and the skid-steer's
+        controller (``diff_drive_controller``) integrates as a differential drive whose separation
+        is the effective track: that model turns its odometry back."""
+        raise ModelError(
+            "the skid_steer model cannot turn a robot's odometry back into its joints: its "
+            "controller integrates as a differential drive with the effective track; calibrate "
+            "the vendor's odometry with model: diff_drive"
         )
 
     def in_radians(self) -> InRadians:

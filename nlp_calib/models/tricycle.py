@@ -30,7 +30,16 @@ from nlp_calib.models.base import (
     sampled_angle,
 )
 from nlp_calib.models.controllers import ControllerMap, EncoderScales, steering_places, wheel_radius
-from nlp_calib.models.drives import Pose, SimulationSettings, counter, drive_header, first_order, running
+from nlp_calib.models.drives import (
+    Pose,
+    SimulationSettings,
+    arcs,
+    counter,
+    drive_header,
+    first_order,
+    integrate_base,
+    running,
+)
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
@@ -86,6 +95,23 @@ class TricycleDrive:
         }
     )
     default_ranges: Mapping[str, int] = MappingProxyType({STEERING_ENCODER: 8192, TRACTION_ENCODER: 5000})
+    #: A robot whose controller integrates its odometry with a wrong model (joint units: the
+    #: traction wheel's travel in m per revolution), and that model: the vendor odometry
+    #: simulator's defaults.
+    vendor_truth: Mapping[str, float] = MappingProxyType(
+        {"k_steer": 0.55, "k_traction": 0.5, "axis_length": 1.5, "steer_offset": -0.05}
+    )
+    vendor_model: Mapping[str, float] = MappingProxyType(
+        {"k_steer": 0.5, "k_traction": 0.49, "axis_length": 1.45, "steer_offset": 0.0}
+    )
+
+    def odometry(self, joints: Mapping[str, np.ndarray], params: Mapping[str, float]) -> np.ndarray:
+        """The base poses ``(n, 3)`` a controller integrates (exact arcs) from the traction and
+        steering joints' angles with its own model ``params``, each interval steered by the
+        angle read at its end (the controller's latest reading)."""
+        d = params["k_traction"] * np.diff(joints["traction_wheel_joint"]) / (2.0 * np.pi)
+        phi = params["k_steer"] * joints["steering_joint"][1:] + params["steer_offset"]
+        return integrate_base(d * np.cos(phi), d * np.sin(phi) / params["axis_length"])
 
     def steps(
         self,
@@ -280,6 +306,29 @@ class Tricycle:
         t_max = header.encoder_max[header.encoder_index(TRACTION_ENCODER)]
         ticks = {**dict.fromkeys((TRACTION_ENCODER, STEERING_ENCODER), QUANTISATION), **(encoder_noise or {})}
         return np.array([ticks[TRACTION_ENCODER] / t_max, 2.0 * np.pi * ticks[STEERING_ENCODER] / s_max])
+
+    def steering_gain(self, params: Mapping[str, float], backwards: np.ndarray) -> np.ndarray:
+        """The steering joint's gain in each interval, given whether the base drives backwards."""
+        return np.full(backwards.shape, params["k_steer"])
+
+    def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> dict[str, np.ndarray]:
+        """The traction wheel's revolutions (from 0) and the steering angle (rad) a controller of
+        model ``params`` read to drive the base poses ``base`` ``(n, 3)`` (each interval steered
+        by the angle at its end): each step an arc ``s`` turning ``Δθ``, the front wheel's travel
+        ``±√(s² + (axis_length·Δθ)²)`` at ``φ = atan(axis_length·Δθ / s)``; at a stop the
+        steering holds its last angle."""
+        arc, turn = arcs(base)
+        lever = params["axis_length"] * turn
+        travel, phi = np.hypot(arc, lever), np.arctan2(lever, arc)
+        back = np.abs(phi) > 0.5 * np.pi  # reversing: the wheel rolls backwards, steered ahead
+        phi = np.where(back, phi - np.pi * np.sign(phi), phi)
+        moving = travel > 1e-9
+        last = np.maximum.accumulate(np.where(moving, np.arange(phi.size), 0))
+        steer = (phi[last] - params["steer_offset"]) / self.steering_gain(params, back[last])
+        return {
+            STEERING_ENCODER: np.concatenate([steer[:1], steer]),
+            TRACTION_ENCODER: running(np.where(back, -travel, travel) / params["k_traction"]),
+        }
 
     def initial_guess(
         self,

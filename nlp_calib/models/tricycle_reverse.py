@@ -82,6 +82,10 @@ class TricycleReverse(Tricycle):
         reversing = ca.if_else(p["k_traction"] * inputs["traction_revolutions"] * ca.cos(phi0) < 0, 1.0, 0.0)
         return p["k_steer"] * (1.0 + p["k_steer_reverse"] * reversing) * angle + p["steer_offset"]
 
+    def steering_gain(self, params: Mapping[str, float], backwards: np.ndarray) -> np.ndarray:
+        """``k_steer·(1 + k_steer_reverse·r)`` in each interval, ``r`` = the base drives backwards."""
+        return params["k_steer"] * (1.0 + params["k_steer_reverse"] * np.asarray(backwards, dtype=float))
+
     def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
         """The tricycle's, with the reverse gain, which no ros2_control component models."""
         base = super().controller(params, scales)

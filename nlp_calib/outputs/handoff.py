@@ -8,7 +8,7 @@ Nothing time-dependent is written: the same run gives the same bytes.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree as ET
@@ -21,7 +21,7 @@ from nlp_calib.core.version import __version__
 from nlp_calib.outputs import urdf
 from nlp_calib.outputs.results import result_document
 from nlp_calib.results import CalibrationRun, Encoder
-from nlp_calib.results.mount import SensorMount
+from nlp_calib.results.mount import LogMount, SensorMount
 
 CALIBRATION_FILE = "calibration.yaml"
 URDF_FILE = "sensor_mount.urdf.xml"
@@ -68,6 +68,8 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "frames": {"parent": PARENT_FRAME, "sensor": mount.child},
         "sensor": _sensor_entry(run),
         "mount": _mount_entry(mount),
+        # A mount per log: each log's own, one URDF joint each (the block above is the first's).
+        **_per_log_mounts(run, solver),
         "parameters": best["params"],
         "std": best["std"],
         "std_white_noise": best["std_white_noise"],
@@ -97,6 +99,11 @@ def _sensor_entry(run: CalibrationRun) -> dict[str, Any]:
         "convention": info.convention,
         "held": {n: run.initial.get(n, 0.0) for n in info.held},
     }
+
+
+def _per_log_mounts(run: CalibrationRun, solver: str) -> dict[str, Any]:
+    every = run.reports[solver].mounts
+    return {"mounts": [{"log": m.log, **_mount_entry(m.mount)} for m in every]} if every else {}
 
 
 def _encoder(e: Encoder) -> dict[str, Any]:
@@ -199,6 +206,9 @@ def urdf_joint(
     """A URDF ``<joint>`` placing the sensor's link with ``solver``'s estimate (``mount``: its
     report's unless given): on ``base_link``, or (``users``: ``--urdf``) the user's own joint of
     that link, to paste over the one there."""
+    every = run.reports[solver].mounts
+    if every and not users:
+        return _log_joints(run, solver, every)
     mount = mount or _mount_of(run, solver)
     where = (
         f"It is your joint '{mount.joint}' re-posed, as in robot.urdf: replace yours with it."
@@ -213,13 +223,32 @@ def urdf_joint(
     return _xml(_joint(mount), comment)
 
 
+def _log_joints(run: CalibrationRun, solver: str, every: Sequence[LogMount]) -> str:
+    """One joint per log's own mount (a fit with a mount per log), each log's sensor its own link."""
+    robot = ET.Element("robot", {"name": run.scenario.name})
+    for m in every:
+        robot.append(_joint(m.mount))
+    links = ", ".join(f"'{m.mount.child}'" for m in every)
+    comment = (
+        f" Sensor mounting poses calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
+        f"solver {solver}, one per log ({', '.join(m.log for m in every)}). "
+        f"{every[0].mount.words().capitalize()}. Paste these joints into the robot's <robot> "
+        f"description; the links {links} must be declared there. "
+    )
+    return _xml(robot, comment)
+
+
 def urdf_robot(run: CalibrationRun, solver: str, mount: SensorMount | None = None) -> str:
-    """A complete URDF: a ``<robot>`` with ``base_link``, the sensor's link and the calibrated joint."""
+    """A complete URDF: a ``<robot>`` with ``base_link``, the sensor's link and the calibrated joint
+    (every log's own, with a mount per log)."""
     mount = mount or _mount_of(run, solver)
+    mounts = [m.mount for m in run.reports[solver].mounts] or [mount]
     robot = ET.Element("robot", {"name": run.scenario.name})
     ET.SubElement(robot, "link", {"name": mount.parent})
-    ET.SubElement(robot, "link", {"name": mount.child})
-    robot.append(_joint(mount))
+    for m in mounts:
+        ET.SubElement(robot, "link", {"name": m.child})
+    for m in mounts:
+        robot.append(_joint(m))
     comment = (
         f" The sensor mount calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
         f"solver {solver}. A complete robot description (base and sensor links, the fixed joint) "

@@ -117,6 +117,17 @@ class Scorer:
     bad_records: np.ndarray
     offset: int
     rpe_window: int
+    #: With a mount per log: the log whose view scores the records, or each interval's log.
+    logs: int | np.ndarray = 0
+
+    def viewed(self, params: np.ndarray) -> np.ndarray:
+        """``params`` as the full-parameter Functions take them over these records (one log's
+        view, or one view per interval)."""
+        fns = self.fns
+        if fns.spec.mounts == 1 or isinstance(self.logs, int):
+            return fns.view(params, 0 if isinstance(self.logs, np.ndarray) else self.logs)
+        views = np.stack([fns.view(params, i) for i in range(fns.spec.mounts)], axis=1)
+        return np.ascontiguousarray(views[:, self.logs])
 
     def __call__(self, params: np.ndarray, a: int | None = None, b: int | None = None) -> TrajectoryMetrics:
         """The figures of ``params`` over records ``[a, b)`` (all of them by default)."""
@@ -128,7 +139,7 @@ class Scorer:
         """The figures of each parameter set over records ``[a, b)``, the reference's side once."""
         return each_metrics(
             self.fns,
-            param_sets,
+            [self.viewed(p) for p in param_sets],
             self.inputs,
             self.T_world_sensor,
             start=0 if a is None else a - self.offset,
@@ -139,12 +150,14 @@ class Scorer:
         )
 
 
-def log_scorer(fns: ProblemFunctions, windows: LogWindows, steering_sample: str, rpe_window: int) -> Scorer:
-    """The scorer over one log's used records."""
+def log_scorer(
+    fns: ProblemFunctions, windows: LogWindows, steering_sample: str, rpe_window: int, log: int = 0
+) -> Scorer:
+    """The scorer over one log's used records (log ``log`` of a fit's)."""
     bad_i, bad_r = windows.masks()
     inputs = windows.inputs(steering_sample)
     poses = tracker_poses(fns, windows.selected)
-    return Scorer(fns, inputs, poses, bad_i, bad_r, windows.used[0], rpe_window)
+    return Scorer(fns, inputs, poses, bad_i, bad_r, windows.used[0], rpe_window, log)
 
 
 def scores(scorer: Scorer, windows: LogWindows, param_sets: Sequence[np.ndarray]) -> list[Scores]:
@@ -261,9 +274,11 @@ def logs_crossval(
     result = converged[0]
     span = (blocks.offset, blocks.offset + fit.data.n_records)
     start = (result.x, fit.canonical_params(result.params))
-    # A fold without a log knows nothing of that log's time offset: held where the joint fit put it.
+    # A fold without a log knows nothing of that log's time offset (nor of its own mount, with a
+    # mount per log): held where the joint fit put them.
     lags = lag_names(len(ranges))
-    held = [[lags[i]] for i in range(len(ranges))]
+    own = [fit.fns.mount_names(i) if fit.fns.spec.mounts > 1 else () for i in range(len(ranges))]
+    held = [[lags[i], *own[i]] for i in range(len(ranges))]
     folds = validation.folds_over(
         fit.problem.binder, fit.data, span, ranges, start, fit.canonical_params, blocks, held=held
     )
@@ -393,12 +408,12 @@ def track_series(
     bad_i, bad_r = windows.masks()
     parts = tuple(segments(ref.shape[0], bad_i))
     p0 = np.array([fit.problem.start.initial[n] for n in fit.fns.names])
-    initial = dead_reckoned(fit.fns, p0, inputs, ref, parts)[0]
+    initial = dead_reckoned(fit.fns, fit.fns.view(p0, view.part), inputs, ref, parts)[0]
     tracks = [Track("uncalibrated (initial guess)", None, initial, figures.baseline[0].ate_mean)]
     again: dict[str, np.ndarray] = {}
     rows = []
     for name, r in results.items():
-        full, again[name] = dead_reckoned(fit.fns, r.params, inputs, ref, parts)
+        full, again[name] = dead_reckoned(fit.fns, fit.fns.view(r.params, view.part), inputs, ref, parts)
         tracks.append(
             Track(labels.get(name, name), name, full, figures.scores[name][0].ate_mean, r.converged)
         )
@@ -415,18 +430,19 @@ def track_series(
         holdout_start=windows.fit[1] - a if windows.fit[1] < b - 1 else None,
         segments=tuple(rows),
         tracker_z=fit.fns.sensor.heights(windows.selected),
-        level=_level(fit, results, ref),
+        level=_level(fit, results, ref, view.part),
     )
 
 
-def _level(fit: Fit, results: Mapping[str, SolverResult], ref: np.ndarray) -> np.ndarray | None:
+def _level(fit: Fit, results: Mapping[str, SolverResult], ref: np.ndarray, part: int) -> np.ndarray | None:
     """The sensor's world frame turned onto the base's frame at the first record (None where they
     are one: a planar tracker's), by the first converged estimate's mount (the start's when none
-    converged)."""
+    converged) on log ``part``."""
     names = fit.fns.names
     done = [r.params for r in results.values() if r.converged]
     params = done[0] if done else np.array([fit.problem.start.initial[n] for n in names])
-    return fit.fns.sensor.level(dict(zip(names, map(float, params))), ref[0])
+    viewed = fit.fns.view(params, part)
+    return fit.fns.sensor.level(dict(zip(fit.fns.view_names, map(float, viewed))), ref[0])
 
 
 def model_check(fit: Fit, prepared: PreparedLog) -> ModelCheckSeries | None:
@@ -441,7 +457,8 @@ def model_check(fit: Fit, prepared: PreparedLog) -> ModelCheckSeries | None:
     initial = fit.problem.start.initial
     params = {n: float(header.get(n, initial[n])) for n in model.kinematic_params}
     params.update(dict.fromkeys(fit.fns.sensor.params, 0.0))
-    p = np.array([params[n] for n in fit.fns.names])
+    params.update({n: 0.0 for n in fit.fns.view_names if n not in params})
+    p = np.array([params[n] for n in fit.fns.view_names])
     residual = prepared.scenario.objective.residual
     inputs = model.inputs(log, residual.steering_sample)
     ours = integrate(fit.fns, p, inputs, vendor[0])
@@ -576,10 +593,12 @@ def analyse_log(
     steering = view.prepared.scenario.objective.residual.steering_sample
     odo = None
     if wanted.odometry is not None and wanted.odometry in results:
-        odo = odometry(fit, windows, results[wanted.odometry].params, steering)
+        odo = odometry(fit, windows, fit.fns.view(results[wanted.odometry].params, view.part), steering)
     # The hand-off carries the first converged solver's estimate (in the scenario's order): its
     # odometry noise is the one a controller file states.
     order = [*view.prepared.scenario.solvers, *results]
     first = next((n for n in order if n in results and results[n].converged), None)
-    noise = {} if first is None else {first: handoff_noise(fit, windows, results[first].params, steering)}
+    noise = {}
+    if first is not None:
+        noise[first] = handoff_noise(fit, windows, fit.fns.view(results[first].params, view.part), steering)
     return dataclasses.replace(figures, series=series, odometry=odo, noise=noise)

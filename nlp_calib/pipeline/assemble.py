@@ -7,12 +7,14 @@ one run per log, each with the joint estimates and checks beside that log's own 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 
 from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
+from nlp_calib.logs import LogHeader
 from nlp_calib.models import KinematicModel
-from nlp_calib.models.clock import LAG_UNIT
+from nlp_calib.models.clock import LAG_UNIT, lag_names
 from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis, Scores
@@ -21,6 +23,7 @@ from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.truth import against_truth
 from nlp_calib.pipeline.windows import LogWindows
+from nlp_calib.problem import ProblemFunctions
 from nlp_calib.results import (
     CalibrationRun,
     Checks,
@@ -36,18 +39,27 @@ from nlp_calib.results import (
 )
 from nlp_calib.results.checks import NominalCheck, believed_std
 from nlp_calib.results.faults import FaultReport, Findings
+from nlp_calib.results.mount import LogMount, SensorMount
+from nlp_calib.sensors import Sensor
 from nlp_calib.solvers import solver_label
 from nlp_calib.sources import BagSource
 
 
-def scenario_info(sc: Scenario, model: KinematicModel, lags: Sequence[str] = ()) -> ScenarioInfo:
-    """What the outputs say about ``sc`` (fitted with the time offsets ``lags``)."""
+def scenario_info(
+    sc: Scenario, model: KinematicModel, lags: Sequence[str] = (), mounts: int = 1
+) -> ScenarioInfo:
+    """What the outputs say about ``sc`` (fitted with the time offsets ``lags``, and ``mounts``
+    mounts: one per log, or one)."""
     joint = sc.data.joint
+    sensor = sc.objective.sensor.sensor
+    own = (
+        {f"{n}_{i + 1}": sensor.units[n] for i in range(mounts) for n in sensor.params} if mounts > 1 else {}
+    )
     return ScenarioInfo(
         name=sc.name,
         path=None if sc.path is None else str(sc.path),
         model=sc.model,
-        units={**_units(sc, model), **dict.fromkeys(lags, LAG_UNIT)},
+        units={**_units(sc, model), **own, **dict.fromkeys(lags, LAG_UNIT)},
         sensor=sensor_info(sc),
         headline=tuple(model.headline),
         dataset=str(sc.dataset),
@@ -59,6 +71,11 @@ def scenario_info(sc: Scenario, model: KinematicModel, lags: Sequence[str] = ())
         if isinstance(sc.parameters.initial_guess, str)
         else "mapping",
     )
+
+
+def fit_info(sc: Scenario, fns: ProblemFunctions) -> ScenarioInfo:
+    """:func:`scenario_info` of ``sc`` as the problem ``fns`` fits it (its time offsets and mounts)."""
+    return scenario_info(sc, fns.model, lag_names(fns.spec.lags), fns.spec.mounts)
 
 
 def _units(sc: Scenario, model: KinematicModel) -> dict[str, str]:
@@ -145,24 +162,62 @@ def lag_notes(sc: Scenario, alignment: Alignment) -> list[str]:
     return []
 
 
+@dataclass(frozen=True)
+class MountViews:
+    """The mounts of a fit, seen from one of its logs: the problem (its mount per log, if any),
+    which log this is, and each log's name and header (its sensor's frame and nominal mount)."""
+
+    fns: ProblemFunctions
+    part: int
+    logs: tuple[tuple[str, LogHeader | LogInfo], ...]
+
+    def mounts(
+        self, sensor: Sensor, params: Mapping[str, float], std: Mapping[str, float]
+    ) -> tuple[SensorMount, tuple[LogMount, ...]]:
+        """This log's mount, and every log's own when each has one (each its own sensor link,
+        numbered where logs share a frame's name)."""
+        fns = self.fns
+        frames = [h.sensor_frame for _, h in self.logs]
+        every = tuple(
+            LogMount(
+                name,
+                sensor.mount_pose(
+                    fns.view_dict(params, i),
+                    fns.view_dict(std, i),
+                    frame if frames.count(frame) == 1 or fns.spec.mounts == 1 else f"{frame}_{i + 1}",
+                    header.sensor_z_roll_pitch,
+                ),
+            )
+            for i, ((name, header), frame) in enumerate(zip(self.logs, frames))
+        )
+        if fns.spec.mounts == 1:
+            return every[self.part].mount, ()
+        return every[self.part].mount, every
+
+
 def _report(
     prepared: PreparedLog,
     name: str,
     result: SolverResult,
     fitted: tuple[FitAnalysis, Checks],
-    figures: LogAnalysis,
+    figures: tuple[LogAnalysis, MountViews | None],
 ) -> SolverReport:
-    """One solver's report, with its estimate in the controller's terms."""
+    """One solver's report, with its estimate in the controller's terms and its mount (every log's,
+    with a mount per log)."""
     u = fitted[0].uncertainty[name]
+    scored, views = figures
     std = believed_std(u.std, *fitted[1].spreads(u.std))
     scales = encoder_scales(prepared)
     estimate = (result.params, std, u.correlation)
-    extra = (figures.noise.get(name), prepared.held)
+    extra = (scored.noise.get(name), prepared.held)
     controller = controller_params(prepared.model, result.names, estimate, scales, extra)
     sensor, header = prepared.scenario.objective.sensor.sensor, prepared.log.header
     sd = dict(zip(result.names, map(float, std)))
-    mount = sensor.mount_pose(result.param_dict(), sd, header.sensor_frame, header.sensor_z_roll_pitch)
-    return SolverReport(result, u, *figures.scores[name], controller, mount)
+    if views is None:
+        mount = sensor.mount_pose(result.param_dict(), sd, header.sensor_frame, header.sensor_z_roll_pitch)
+        return SolverReport(result, u, *scored.scores[name], controller, mount)
+    mount, every = views.mounts(sensor, result.param_dict(), sd)
+    return SolverReport(result, u, *scored.scores[name], controller, mount, every)
 
 
 def encoder_scales(prepared: PreparedLog) -> EncoderScales:
@@ -242,11 +297,15 @@ def assemble_run(
     fitted: FitAnalysis,
     figures: LogAnalysis,
     notes: Sequence[str],
+    views: MountViews | None = None,
 ) -> CalibrationRun:
-    """One log's run: the fit's estimates and checks beside this log's figures, with its verdict."""
+    """One log's run: the fit's estimates and checks beside this log's figures, with its verdict
+    (``views``: the fit's mounts seen from this log)."""
     prepared, windows, alignment, findings = log
     checks = fit_checks(fitted, findings, start, figures.nominal)
-    reports = {name: _report(prepared, name, r, (fitted, checks), figures) for name, r in results.items()}
+    reports = {
+        name: _report(prepared, name, r, (fitted, checks), (figures, views)) for name, r in results.items()
+    }
     run = CalibrationRun(
         scenario=scenario,
         log=log_info(prepared, windows),
@@ -272,11 +331,28 @@ def assemble_run(
         if isinstance(source, BagSource)
         else ""
     )
-    # Joints in radians: the simulator's truth is in the counts form's names and units.
-    convert = getattr(prepared.model, "from_counts", dict)
+    # Joints in radians: the simulator's truth is in the counts form's names and units; a log's
+    # truth is of its own mount.
+    convert = _own_truth(getattr(prepared.model, "from_counts", dict), views)
     checks = dataclasses.replace(run.checks, truth=against_truth(run, source.files(), convert))
     run = dataclasses.replace(run, checks=checks)
     return dataclasses.replace(run, verdict=verdict(run, prepared.model, hint))
+
+
+def _own_truth(
+    convert: Callable[[Mapping[str, float]], dict[str, float]], views: MountViews | None
+) -> Callable[[Mapping[str, float]], dict[str, float]]:
+    """``convert`` of a log's truth, its mount also under its own names in a fit with one per log."""
+    if views is None or views.fns.spec.mounts == 1:
+        return convert
+    fns, part = views.fns, views.part
+
+    def mine(truth: Mapping[str, float]) -> dict[str, float]:
+        out = convert(truth)
+        out.update({n: out[p] for n, p in zip(fns.mount_names(part), fns.sensor.params) if p in out})
+        return out
+
+    return mine
 
 
 def merged_findings(runs: Sequence[CalibrationRun]) -> Findings | None:
@@ -309,6 +385,7 @@ def joint_run(
     fitted: FitAnalysis,
     figures: LogAnalysis,
     notes: Sequence[str],
+    views: MountViews | None = None,
 ) -> CalibrationRun:
     """The joint fit as one run: its figures over every log's fitted records (``figures``), the
     fit's checks, every log's findings, and its own verdict. ``fit``: the first log (its model,
@@ -336,7 +413,9 @@ def joint_run(
         lag_estimate=None,
     )
     checks = fit_checks(fitted, merged_findings(parts), start, figures.nominal)
-    reports = {name: _report(prepared, name, r, (fitted, checks), figures) for name, r in results.items()}
+    reports = {
+        name: _report(prepared, name, r, (fitted, checks), (figures, views)) for name, r in results.items()
+    }
     warned = dict.fromkeys((*notes, *(w for run in parts for w in run.warnings)))
     run = CalibrationRun(
         scenario=scenario,

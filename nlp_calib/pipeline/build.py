@@ -16,7 +16,7 @@ from nlp_calib.analysis import uncertainty
 from nlp_calib.core.errors import ScenarioError
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, header_parameters
-from nlp_calib.models.clock import LAG_PARAM, base_name, is_lag, lag_names
+from nlp_calib.models.clock import LAG_PARAM, base_name, is_lag, lag_names, per_log
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import (
@@ -43,27 +43,43 @@ def lag_count(sc: Scenario, n_logs: int) -> int:
     return n_logs if sc.log.alignment.tracker_lag == "auto" else 0
 
 
-def per_log_names(names: Sequence[str], n_logs: int) -> tuple[str, ...]:
-    """Scenario names with ``tracker_lag`` replaced by each log's own (several logs)."""
+def mount_count(sc: Scenario, n_logs: int) -> int:
+    """Sensor mounts in the problem: one per log when the scenario says so (``mounts: per_log``)."""
+    return n_logs if sc.objective.sensor.mounts == "per_log" and n_logs > 1 else 1
+
+
+def per_log_names(
+    names: Sequence[str], n_logs: int, mounts: Sequence[str] = (), n_mounts: int = 1
+) -> tuple[str, ...]:
+    """Scenario names with ``tracker_lag`` replaced by each log's own (several logs), and each of
+    ``mounts`` (the sensor's parameters) by each log's own when there is a mount per log."""
     lags = lag_names(n_logs)
-    return tuple(dict.fromkeys(m for n in names for m in (lags if n == LAG_PARAM else (n,))))
+
+    def each(n: str) -> tuple[str, ...]:
+        if n == LAG_PARAM:
+            return lags
+        return per_log((n,), n_mounts) if n in mounts else (n,)
+
+    return tuple(dict.fromkeys(m for n in names for m in each(n)))
 
 
 def build_problem(
     sc: Scenario, model: KinematicModel, also_fixed: tuple[str, ...] = (), n_logs: int = 1
 ) -> ProblemFunctions:
     """The problem's Functions for the scenario's residual form, kernel and fixed parameters, with a
-    time offset per log (``n_logs``) when the lag is estimated."""
+    time offset per log (``n_logs``) when the lag is estimated, and a mount per log when asked."""
     residual, sensor = sc.objective.residual, sc.objective.sensor
-    lags = lag_count(sc, n_logs)
+    lags, mounts = lag_count(sc, n_logs), mount_count(sc, n_logs)
+    fixed = per_log_names((*sc.parameters.fixed, *also_fixed), lags, sensor.params(), mounts)
     spec = ProblemSpec(
         horizon=residual.horizon,
         integration=residual.integration,
         kernel=sc.objective.robust.kernel,
-        fixed=per_log_names((*sc.parameters.fixed, *also_fixed), lags),
+        fixed=fixed,
         sensor=sensor.mount,
         scale=sensor.scale,
         lags=lags,
+        mounts=mounts,
     )
     with scenario_key(sc, "residual"):
         return build(model, spec)
@@ -158,11 +174,16 @@ def auto_start(
         return closed_form_start(fns, data, known, sc.objective.residual.stride)
 
 
+def _key(name: str, given: Mapping[str, object]) -> str:
+    """The scenario's key for parameter ``name`` in ``given``: its own, else its per-log stem."""
+    return name if name in given else base_name(name)
+
+
 def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The scenario's bounds; a time offset's, unless given, ``alignment.search``."""
     bounds = {LAG_PARAM: sc.log.alignment.search, **sc.parameters.bounds}
-    lower = np.array([bounds[base_name(n)][0] if base_name(n) in bounds else -np.inf for n in fns.free])
-    upper = np.array([bounds[base_name(n)][1] if base_name(n) in bounds else np.inf for n in fns.free])
+    lower = np.array([bounds[_key(n, bounds)][0] if _key(n, bounds) in bounds else -np.inf for n in fns.free])
+    upper = np.array([bounds[_key(n, bounds)][1] if _key(n, bounds) in bounds else np.inf for n in fns.free])
     for name, lo, hi, x in zip(fns.free, lower, upper, x0):
         if not lo <= x <= hi:
             origin = (
@@ -176,19 +197,34 @@ def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.nda
 
 
 def starting_point(
-    sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int, lags: Sequence[float] = ()
+    sc: Scenario,
+    fns: ProblemFunctions,
+    log: Log,
+    start: int,
+    stop: int,
+    lags: Sequence[float] = (),
+    mounts: Sequence[Mapping[str, float]] = (),
 ) -> StartingPoint:
     """Initial values (header, scenario, or ``auto`` from records ``start:stop``; the time offsets
-    ``lags``, one per log, when given) and bounds."""
+    ``lags``, one per log, when given; each log's own mount from ``mounts``, its own start, when
+    the problem has a mount per log) and bounds."""
     initial = initial_parameters(sc, fns.model, log)
     initial.update(lag_start(sc, fns.spec.lags, lags))
     nominal, source = nominal_values(sc, fns.model, log, initial, fns.free)
+    one = fns.spec.mounts == 1
     sensor = (
-        auto_start(sc, fns, log, (start, stop), initial) if sc.parameters.initial_guess == "auto" else None
+        auto_start(sc, fns, log, (start, stop), initial)
+        if sc.parameters.initial_guess == "auto" and one
+        else None
     )
     auto = None if sensor is None else sensor.params
     if auto is not None:
         initial.update({n: v for n, v in auto.items() if n not in sc.parameters.fixed})
+    if not one:
+        # Each log's mount as its own start found it, the wheels as the first log's did.
+        given = [{**initial, **m} for m in mounts] if mounts else [initial] * fns.spec.mounts
+        initial = fns.full_dict(given)
+        auto = dict(initial) if sc.parameters.initial_guess == "auto" else None
     if sensor is None:
         sensor = fns.sensor.given(initial)
     x0 = np.array([initial[n] for n in fns.free])
@@ -329,23 +365,27 @@ class Binder:
 
 
 def weigh_priors(
-    binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray
+    binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray, data: ResidualData | None = None
 ) -> tuple[Priors, float | None]:
     """The scenario's priors weighed against the data in the data's own noise units.
 
     The data term ``Σ ρ(eᵀΩe)`` is not divided by the residual variance σ², so a prior
     ``((x − μ)/std)²`` enters multiplied by σ², which is estimated from a fit without priors.
     Both solvers then minimise ``σ²·(data/σ² + priors)``: a MAP estimate. Returns the priors and σ.
+    ``data``: the windows to weigh them on (every log's, for a problem with a mount per log), else
+    records ``start:stop`` of ``log``.
     """
     fns, priors = binder.fns, binder.scenario.parameters.priors
     if not priors:
         return no_priors(fns.n_free), None
-    _, ev = binder.bind(log, start, stop)
+    ev = binder.evaluate(data) if data is not None else binder.bind(log, start, stop)[1]
     _, x, _ = binder.fit(ev, x0)
     _, s, weight = ev.robust_terms(x)
     sigma = float(np.sqrt(float(np.sum(weight * s)) / max(fns.error_rows * ev.n_residuals - fns.n_free, 1)))
-    mean = np.array([priors[n].mean if n in priors else 0.0 for n in fns.free])
-    sqrt_info = np.array([sigma / priors[n].std if n in priors else 0.0 for n in fns.free])
+    mean = np.array([priors[_key(n, priors)].mean if _key(n, priors) in priors else 0.0 for n in fns.free])
+    sqrt_info = np.array(
+        [sigma / priors[_key(n, priors)].std if _key(n, priors) in priors else 0.0 for n in fns.free]
+    )
     return Priors(mean=mean, sqrt_info=sqrt_info), sigma
 
 
@@ -371,17 +411,24 @@ def build_stage(
     solvers: Sequence[str],
     n_records: int,
     lags: Sequence[float] = (),
+    mounts: Sequence[Mapping[str, float]] = (),
+    data: ResidualData | None = None,
 ) -> Problem:
-    """Build the Functions (``held`` parameters fixed; a time offset per log of ``lags``, or one),
-    start from the records ``start_from`` (a log and a range), get the backend ready for
-    ``solvers`` over ``n_records`` and weigh the priors."""
-    fns = build_problem(sc, model, tuple(held), max(len(lags), 1))
+    """Build the Functions (``held`` parameters fixed; a time offset per log of ``lags``, or one;
+    a mount per log, each starting from ``mounts``' values, when the scenario asks), start from
+    the records ``start_from`` (a log and a range), get the backend ready for ``solvers`` over
+    ``n_records`` and weigh the priors (on ``data``, every log's windows, with a lag or a mount
+    per log)."""
+    fns = build_problem(sc, model, tuple(held), max(len(lags), len(mounts), 1))
     log, start, stop = start_from
-    point = starting_point(sc, fns, log, start, stop, lags)
+    point = starting_point(sc, fns, log, start, stop, lags, mounts)
     backend = prepare_backend(sc, fns, solvers, n_records)
     bounds = None if point.lower is None or point.upper is None else (point.lower, point.upper)
     binder = Binder(sc, fns, backend, point.x_fixed, no_priors(fns.n_free), start=point.sensor, bounds=bounds)
-    priors, _ = weigh_priors(binder, log, start, stop, point.x0)
+    # Several logs' own lags or mounts: weighed on every log's windows (one log's alone would not
+    # say which lag or mount is whose).
+    on = data if data is not None and max(fns.spec.mounts, fns.spec.lags) > 1 else None
+    priors, _ = weigh_priors(binder, log, start, stop, point.x0, on)
     return Problem(fns, point, replace(binder, priors=priors))
 
 

@@ -24,7 +24,7 @@ from nlp_calib.analysis.consistency import compare_logs, determined
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, reference_scales
-from nlp_calib.models.clock import LAG_PARAM, is_lag, lag_names
+from nlp_calib.models.clock import LAG_PARAM, base_name, is_lag, lag_names, log_of
 from nlp_calib.pipeline.align import Alignment, align
 from nlp_calib.pipeline.analyse import (
     FitAnalysis,
@@ -40,8 +40,8 @@ from nlp_calib.pipeline.analyse import (
     plan_after,
     scores,
 )
-from nlp_calib.pipeline.assemble import assemble_run, fit_notes, joint_run, scenario_info
-from nlp_calib.pipeline.build import Problem, StartingPoint, at_lags, build_stage
+from nlp_calib.pipeline.assemble import MountViews, assemble_run, fit_info, fit_notes, joint_run
+from nlp_calib.pipeline.build import Problem, StartingPoint, at_lags, build_stage, mount_count
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.scenario import Scenario
@@ -125,8 +125,9 @@ def blocks_scorer(fns: ProblemFunctions, parts: Sequence[LogSetup], data: Residu
         return log_scorer(fns, parts[0].windows, sc.objective.residual.steering_sample, W)
     intervals = [p.windows.bad_intervals[p.fit[0] : p.fit[1] - 1] for p in parts]
     records = [p.windows.bad_records[p.fit[0] : p.fit[1]] for p in parts]
+    logs = data.log_of(np.arange(data.inputs.shape[1]))  # each interval's mount, with one per log
     return Scorer(
-        fns, data.inputs, data.T_world_sensor, _joined(intervals, True), _joined(records, False), 0, W
+        fns, data.inputs, data.T_world_sensor, _joined(intervals, True), _joined(records, False), 0, W, logs
     )
 
 
@@ -272,7 +273,12 @@ class JointCalibration:
         start_from = (first.prepared.log, first.used[0], first.fit[1])
         one_horizon = sc.with_options(residual=joint_residual(sc, [p.prepared for p in self.parts]))
         lags = [p.alignment.lag_s for p in self.parts]
-        problem = build_stage(one_horizon, model, tuple(self.held), start_from, self.solvers, n_records, lags)
+        # A mount per log: each starts where its log's own start put it; windows say their log.
+        mounts = [p.problem.start.initial for p in self.parts] if mount_count(sc, len(self.parts)) > 1 else []
+        data = data.with_selector() if mounts else data
+        problem = build_stage(
+            one_horizon, model, tuple(self.held), start_from, self.solvers, n_records, lags, mounts, data
+        )
         self.fitting = Fit(problem, data, self.solvers)
         self.setup_time_s = time.perf_counter() - t0
 
@@ -300,7 +306,7 @@ class JointCalibration:
         scorer = blocks_scorer(fitting.fns, self.parts, fitting.data)
         logs = logs_crossval(fitting, results, scorer, log_ranges(self.parts))
         own = [_own_run(p, names) for p in self.parts]
-        units = scenario_info(self.scenario, self.model, lag_names(self.fns.spec.lags)).units
+        units = fit_info(self.scenario, self.fns).units
         check = consistency(results, own, logs, (self.model, units))
         if check is not None and (check.significant or check.limits()):
             notes.append(check.words())
@@ -345,9 +351,10 @@ def _joint(
         odometry=None,
         nominal=(metrics[n + 1], None) if nominal else None,
     )
-    info = scenario_info(fitting.problem.binder.scenario, fitting.fns.model, lag_names(fitting.fns.spec.lags))
+    info = fit_info(fitting.problem.binder.scenario, fitting.fns)
     fit = (first.prepared, start, fitting.data.n_residuals)
-    return joint_run(info, parts, fit, results, fitted, figures, notes)
+    views = MountViews(fitting.fns, 0, tuple((run.scenario.name, run.log) for run in parts))
+    return joint_run(info, parts, fit, results, fitted, figures, notes, views)
 
 
 def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
@@ -358,10 +365,14 @@ def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
 
 
 def own_name(name: str, log: int, n_logs: int) -> str:
-    """A joint fit's parameter ``name`` as log ``log``'s own fit calls it ("" when it has none)."""
-    if not is_lag(name):
+    """A joint fit's parameter ``name`` as log ``log``'s own fit calls it ("" when it has none): its
+    own lag and its own mount (with a mount per log) under their plain names."""
+    if is_lag(name):
+        return LAG_PARAM if name == lag_names(n_logs)[log] else ""
+    owner = log_of(name)
+    if owner is None:
         return name
-    return LAG_PARAM if name == lag_names(n_logs)[log] else ""
+    return base_name(name) if owner == log else ""
 
 
 def consistency(
@@ -412,7 +423,7 @@ def _fit(
     noise = np.max([p.windows.input_noise_std for p in parts], axis=0)
     fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data))
     sc = parts[0].prepared.scenario
-    units = scenario_info(sc, fitting.fns.model, lag_names(fitting.fns.spec.lags)).units
+    units = fit_info(sc, fitting.fns).units
     fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, units))
     return results, fitted, fit_notes(results, fitted, held)
 
@@ -427,16 +438,18 @@ def _assemble(
 ) -> list[CalibrationRun]:
     """Each log's figures (analyse) and its run (assemble) with the fit's estimates and checks."""
     runs = []
+    logs = tuple((p.prepared.scenario.name, p.prepared.log.header) for p in parts)
     for i, part in enumerate(parts):
         sc = part.prepared.scenario
-        info = scenario_info(sc, fitting.fns.model, lag_names(fitting.fns.spec.lags))
+        info = fit_info(sc, fitting.fns)
         scorer = log_scorer(
-            fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window
+            fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window, i
         )
         view = LogView(part.prepared, part.windows, scorer, part.screening.findings, i)
         figures = analyse_log(fitting, results, view, wanted, info.labels, fitted.nominal_params)
         stage = (part.prepared, part.windows, part.alignment, part.screening.findings)
-        runs.append(assemble_run(info, stage, fitting.problem.start, results, fitted, figures, notes))
+        views = MountViews(fitting.fns, i, logs)
+        runs.append(assemble_run(info, stage, fitting.problem.start, results, fitted, figures, notes, views))
     return runs
 
 

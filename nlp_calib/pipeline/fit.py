@@ -63,5 +63,10 @@ class Fit:
         by the model's symmetries, a 3-D one's angles wrapped)."""
         fns = self.fns
         named = dict(zip(fns.names, map(float, params)))
-        canon = fns.sensor.canonical(fns.model, named, fns.fixed)
+        # A mount per log: each log's view turned round by the same symmetry (the wheels decide it).
+        views = [
+            fns.sensor.canonical(fns.model, fns.view_dict(named, i), fns.mount_view(fns.fixed, i))
+            for i in range(fns.spec.mounts)
+        ]
+        canon = fns.full_dict(views)
         return np.array([canon[n] for n in fns.names])

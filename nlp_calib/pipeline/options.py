@@ -27,6 +27,8 @@ THREADS = Range(1, 64, integer=True)
 RPE_WINDOW = Range(1, 1_000_000, integer=True)
 _FINITE = Range(-math.inf, math.inf, lo_open=True, hi_open=True)
 FAULT_HANDLINGS = ("exclude", "repair", "keep")
+#: Several logs' sensor mounts: one shared, or one per log (the kinematic parameters shared).
+MOUNTS = ("shared", "per_log")
 INITIAL_GUESSES = ("from_file", "auto")
 
 
@@ -183,13 +185,18 @@ class SensorOptions:
     """What the reference is (scenario key ``sensor``): one of the sensor plug-ins
     (:data:`nlp_calib.sensors.SENSORS`: ``planar``, a tracker's planar pose; ``3d``, a camera's
     pose on the base, its mount ``x, y, z, roll, pitch, yaw``); ``scale: free`` for poses known
-    only up to scale (monocular visual odometry). ``sensor: 3d`` is short for ``{mount: 3d}``."""
+    only up to scale (monocular visual odometry). ``sensor: 3d`` is short for ``{mount: 3d}``.
+    ``mounts: per_log``: logs fitted together (``datasets``) each have their own mount (the sensor
+    moved between them, or each log is another sensor's), the wheels shared; ``shared`` (default):
+    one mount for all."""
 
     mount: str = "planar"
     scale: str = "fixed"
+    mounts: str = "shared"
 
     def __post_init__(self) -> None:
         check_choice("mount", self.mount, tuple(SENSORS))
+        check_choice("mounts", self.mounts, MOUNTS)
         check_choice("scale", self.scale, SCALES)
         try:
             sensor_for(self.mount, self.scale)

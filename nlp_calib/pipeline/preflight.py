@@ -29,8 +29,7 @@ from nlp_calib.analysis.verdict import way_out
 from nlp_calib.core.errors import NlpCalibError, PreflightError
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel
-from nlp_calib.models.clock import lag_names
-from nlp_calib.pipeline.assemble import scenario_info
+from nlp_calib.pipeline.assemble import fit_info
 from nlp_calib.pipeline.build import StartingPoint, build_problem, starting_point
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.recording import recording
@@ -102,18 +101,25 @@ def _implausible(model: KinematicModel, point: StartingPoint) -> str:
     return ", ".join(out)
 
 
-def _start(sc: Scenario, fns: ProblemFunctions, first: PreparedLog, n_logs: int) -> tuple[StartingPoint, str]:
+def _start(
+    sc: Scenario,
+    fns: ProblemFunctions,
+    first: PreparedLog,
+    n_logs: int,
+    mounts: Sequence[Mapping[str, float]] = (),
+) -> tuple[StartingPoint, str]:
     """Where the Jacobian is taken: the run's starting point (the closed form on the busiest
     stretch when ``auto``), or the nominal values where the closed form fails. A closed form
     outside the model's plausible ranges is kept, and said: it is where a drive that barely
-    determines some combination sends it, and where the run starts too."""
+    determines some combination sends it, and where the run starts too. ``mounts``: each log's own
+    start, with a mount per log (each log's mount starts there, as the run's does)."""
     auto = sc.parameters.initial_guess == "auto"
     a, b = (
         _busiest(first.log, first.start, first.split, START_RECORDS) if auto else (first.start, first.split)
     )
     lags = [0.0] * n_logs if n_logs > 1 else []
     try:
-        point = starting_point(sc, fns, first.log, a, b, lags)
+        point = starting_point(sc, fns, first.log, a, b, lags, mounts)
         if np.all(np.isfinite(point.x0)):
             words = "the closed-form start (initial_guess: auto)" if auto else "the initial guess"
             words += f" on records {a} to {b}" if (a, b) != (first.start, first.split) else ""
@@ -125,7 +131,7 @@ def _start(sc: Scenario, fns: ProblemFunctions, first: PreparedLog, n_logs: int)
             raise
         why = f"it failed: {exc}"
     nominal = sc.with_options(initial_guess="from_file")
-    point = starting_point(nominal, fns, first.log, a, b, lags)
+    point = starting_point(nominal, fns, first.log, a, b, lags, mounts)
     return point, f"the nominal values (not the closed-form start: {why})"
 
 
@@ -134,7 +140,11 @@ def drive(sc: Scenario, logs: Sequence[Log] | None = None) -> tuple[Drive, dict[
     the start (see the module docstring); with the parameters the run would hold."""
     parts, one, held = _prepared(sc, logs)
     fns = build_problem(one, parts[0].model, tuple(held), len(parts))
-    point, words = _start(one, fns, parts[0], len(parts))
+    mounts = []
+    if fns.spec.mounts > 1:
+        single = build_problem(one, parts[0].model, tuple(held), 1)
+        mounts = [_start(one, single, p, 1)[0].initial for p in parts]
+    point, words = _start(one, fns, parts[0], len(parts), mounts)
     data = build_residual_data(
         fns,
         [p.log.select(p.start, p.split) for p in parts],
@@ -237,7 +247,7 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
         log = p.log.select(p.start, p.split)
         steering = p.scenario.objective.residual.steering_sample
         exs.append(excitation(log.time_s, *_track(log), p.model, p.model.inputs(log, steering)))
-    units = scenario_info(one, fns.model, lag_names(fns.spec.lags)).units
+    units = fit_info(one, fns).units
     statuses = det.statuses(fns, a.standing(), a.held, units, combined(exs))
     loose = [s.name for s in statuses if s.status in (NOT_DETERMINED, WEAKLY) and not s.held]
     ahead = None

@@ -82,20 +82,29 @@ def select(sc: Scenario, log: Log) -> tuple[int, int]:
     stop = n if samples.stop is None else samples.stop
     if stop > n or start >= stop - 1:
         raise ScenarioError(f"{sc.path or sc.name}: samples: [{start}, {stop}) exceeds the log's {n} records")
-    check_windows(sc, start, stop)
+    check_windows(sc, start, stop, log)
     return start, stop
 
 
-def check_windows(sc: Scenario, start: int, stop: int) -> None:
-    """Refuse, before anything is built, a horizon that leaves fewer windows than parameters."""
+def check_windows(sc: Scenario, start: int, stop: int, log: Log | None = None) -> None:
+    """Refuse, before anything is built, a horizon that leaves fewer windows than parameters (a
+    log of measured increments: fewer increments)."""
     H, stride = sc.objective.residual.horizon, sc.objective.residual.stride
     fit_stop = split(sc, start, stop)
     intervals = fit_stop - start - 1
     windows = 0 if intervals < H else (intervals - H) // stride + 1
+    if log is not None and log.motions is not None:
+        windows = -(-log.motions.select(start, fit_stop).n // stride)
     always = sc.objective.sensor.held()
     n_free = len(set(scenario_params(sc)) - set(sc.parameters.fixed) - set(always))
     if windows >= n_free:
         return
+    if log is not None and log.motions is not None:
+        part = f"{sc.origin} ({sc.dataset.name}): " if sc.origin else ""
+        raise ScenarioError(
+            f"{sc.path or sc.name}: {part}{windows} increment(s) in the {fit_stop - start} fitted records of "
+            f"samples [{start}, {stop}) for {n_free} parameters; widen samples"
+        )
     longest = intervals - (n_free - 1) * stride
     fix = f"shorten residual.horizon to at most {longest}" if longest >= 1 else "select more samples"
     part = f"{sc.origin} ({sc.dataset.name}): " if sc.origin else ""
@@ -128,8 +137,13 @@ def median_dt(sc: Scenario, log: Log) -> float:
 def resolved(sc: Scenario, log: Log) -> Scenario:
     """``sc`` with its horizon in records for ``log``: ``residual.horizon_s`` over the log's median
     interval when given; a record horizon that spans a very short time at a high rate is warned
-    about."""
+    about. A log of measured increments has them as its windows: the horizon only says whether an
+    increment may span several records (2 or more) or not (1, the fastest form)."""
     residual, dt = sc.objective.residual, median_dt(sc, log)
+    if log.motions is not None:
+        spans = log.motions.last - log.motions.first
+        H = 1 if spans.size and np.all(spans == 1) else max(residual.horizon, 2)
+        return sc.with_options(residual=replace(residual, horizon=H, horizon_s=None))
     if residual.horizon_s is not None:
         H = max(1, round(residual.horizon_s / dt)) if dt > 0 else 1
         return sc.with_options(residual=replace(residual, horizon=int(H)))

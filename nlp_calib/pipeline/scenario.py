@@ -42,7 +42,15 @@ from nlp_calib.pipeline.options import (
     ValidationOptions,
 )
 from nlp_calib.solvers import SOLVERS
-from nlp_calib.sources import BagSource, JointLogSource, TextSource, moved, parse_source
+from nlp_calib.sources import (
+    BagSource,
+    JointLogSource,
+    LidarSource,
+    MotionsSource,
+    TextSource,
+    moved,
+    parse_source,
+)
 from nlp_calib.sources.bag import check_joints
 from nlp_calib.sources.joints import check_encoders
 
@@ -328,9 +336,9 @@ def check_against_model(sc: Scenario, source: str) -> None:
         _choice(enc, encoders(model), f"{source}: counts_per_turn")
     for i, entry in enumerate(sc.data.logs):
         key = f"datasets[{i}]" if sc.data.joint else "dataset"
-        if isinstance(entry.source, BagSource):
+        if isinstance(entry.source, (BagSource, LidarSource)):
             check_joints(entry.source.joints, model, f"{source}: {key}.joints")
-        if isinstance(entry.source, JointLogSource):
+        if isinstance(entry.source, (JointLogSource, MotionsSource)):
             check_encoders(entry.source.encoders, model, f"{source}: {key}.encoders")
     _check_units(sc, source)
     _check_solvers(sc, source)

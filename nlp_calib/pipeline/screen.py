@@ -16,7 +16,7 @@ from nlp_calib.analysis.faults import repair
 from nlp_calib.analysis.faults import screen as screen_log
 from nlp_calib.logs import Log
 from nlp_calib.pipeline.build import Binder
-from nlp_calib.results.faults import TRACKER_KINDS, FaultReport, Findings
+from nlp_calib.results.faults import MATCH_KINDS, FaultReport, Findings
 
 
 def find_faults(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> FaultReport:
@@ -65,7 +65,11 @@ def fault_masks(
     """The intervals (widened by the records a lag re-samples across) and the tracker records the
     findings mark as bad, per interval and per record of the whole log."""
     reach = int(np.ceil(abs(lag_s) / dt_s)) + 1 if lag_s else 0
-    return dilate(report.bad_intervals(n_records - 1), reach), report.bad_records(n_records)
+    encoders = replace(report, faults=report.encoder_faults)
+    # A bad match is the reference's: re-sampling the encoders spreads nothing of it.
+    matches = replace(report, faults=tuple(f for f in report.faults if f.kind in MATCH_KINDS))
+    intervals = dilate(encoders.bad_intervals(n_records - 1), reach) | matches.bad_intervals(n_records - 1)
+    return intervals, report.bad_records(n_records)
 
 
 def exclude_faults(binder: Binder, findings: Findings, n_records: int, lag_s: float, dt_s: float) -> Binder:
@@ -78,7 +82,7 @@ def exclude_faults(binder: Binder, findings: Findings, n_records: int, lag_s: fl
         return binder
     faults = findings.report.faults
     if findings.handling == "repair":
-        faults = tuple(f for f in faults if f.kind in TRACKER_KINDS)
+        faults = findings.report.reference_faults
     bad_intervals, bad_records = fault_masks(replace(findings.report, faults=faults), n_records, lag_s, dt_s)
     return replace(binder, bad_intervals=bad_intervals, bad_records=bad_records)
 

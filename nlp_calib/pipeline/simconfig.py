@@ -12,7 +12,9 @@ from nlp_calib.core.ranges import Range
 from nlp_calib.simulation import LIMITS, SimulationOptions
 from nlp_calib.simulation.camera import LIMITS as CAMERA_LIMITS
 from nlp_calib.simulation.camera import CameraSimulationOptions
+from nlp_calib.simulation.lidar import LidarSimulationOptions
 from nlp_calib.simulation.options import flat_hints
+from nlp_calib.simulation.vendor import VendorSimulationOptions
 
 #: What a user may ask of ``nlp-calib simulate``: the simulator's own limits (it writes a log block
 #: by block, so its memory does not grow with the log's length).
@@ -31,6 +33,55 @@ CAMERA_OVERRIDES: Mapping[str, tuple[str, ...]] = {
 }
 
 
+#: The command-line options a lidar's and a vendor odometry's simulation read, by their names there.
+LIDAR_OVERRIDES: Mapping[str, tuple[str, ...]] = {
+    "seed": ("seed",),
+    "model": ("model",),
+    "trajectory": ("drive", "trajectory"),
+    "duration_s": ("duration_s",),
+    "outlier_fraction": ("degraded_fraction",),
+}
+VENDOR_OVERRIDES: Mapping[str, tuple[str, ...]] = {
+    "seed": ("seed",),
+    "trajectory": ("drive", "trajectory"),
+    "duration_s": ("duration_s",),
+    "tracker_noise_xy": ("tracker_noise_xy",),
+    "tracker_noise_theta": ("tracker_noise_theta",),
+}
+
+
+def _overridden(
+    raw: dict[str, Any], overrides: Mapping[str, Any], places: Mapping[str, tuple[str, ...]], what: str
+) -> None:
+    """``raw`` with the command line's ``overrides`` put at their ``places``."""
+    for key, value in overrides.items():
+        if key not in places:
+            fail(f"simulate: {key}", f"does not apply to {what}")
+        *group, name = places[key]
+        if group:
+            inner = raw.get(group[0]) or {}
+            raw[group[0]] = {**inner, name: value} if isinstance(inner, Mapping) else inner
+        else:
+            raw[name] = value
+
+
+def lidar_options(config: Path | None, overrides: Mapping[str, Any]) -> LidarSimulationOptions:
+    """A lidar simulation's options from ``config`` (a YAML mapping of
+    :class:`~nlp_calib.simulation.lidar.LidarSimulationOptions`' fields), then ``overrides``."""
+    raw, source = _config(config)
+    _overridden(raw, overrides, LIDAR_OVERRIDES, "a lidar simulation (--lidar)")
+    options: LidarSimulationOptions = from_mapping(LidarSimulationOptions, raw, source)
+    return options
+
+
+def vendor_options(config: Path | None, overrides: Mapping[str, Any]) -> VendorSimulationOptions:
+    """A vendor odometry simulation's options from ``config``, then ``overrides``."""
+    raw, source = _config(config)
+    _overridden(raw, overrides, VENDOR_OVERRIDES, "a vendor odometry simulation (--vendor)")
+    options: VendorSimulationOptions = from_mapping(VendorSimulationOptions, raw, source)
+    return options
+
+
 def _config(config: Path | None) -> tuple[dict[str, Any], str]:
     """The mapping in ``config`` (empty without one) and the name messages give its source."""
     if config is None:
@@ -46,15 +97,7 @@ def camera_options(config: Path | None, overrides: Mapping[str, Any]) -> CameraS
     :class:`~nlp_calib.simulation.camera.CameraSimulationOptions`' fields, ``noise`` and ``drive``
     nested), then the command line's ``overrides`` (by their flat names)."""
     raw, source = _config(config)
-    for key, value in overrides.items():
-        if key not in CAMERA_OVERRIDES:
-            fail(f"simulate: {key}", "does not apply to a camera simulation (--out ending in .tum)")
-        *group, name = CAMERA_OVERRIDES[key]
-        if group:
-            inner = raw.get(group[0]) or {}
-            raw[group[0]] = {**inner, name: value} if isinstance(inner, Mapping) else inner
-        else:
-            raw[name] = value
+    _overridden(raw, overrides, CAMERA_OVERRIDES, "a camera simulation (--out ending in .tum)")
     options: CameraSimulationOptions = from_mapping(CameraSimulationOptions, raw, source)
     return options
 

@@ -23,6 +23,7 @@ not the solvers.
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import casadi as ca
@@ -31,7 +32,7 @@ import numpy as np
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.core.ranges import Range, check_choice, check_range
 from nlp_calib.models.base import INTEGRATIONS, KinematicModel
-from nlp_calib.models.clock import lag_names
+from nlp_calib.models.clock import base_name, lag_names, per_log
 from nlp_calib.problem import clock
 from nlp_calib.problem import motion as motion_sources
 from nlp_calib.problem.trajectory import TrajectoryFunctions, base_motion, fn, split_params
@@ -61,6 +62,8 @@ STEPS = {0: "prefix_value_step", 1: "prefix_step", 2: "prefix_hessian_step"}
 HORIZON = Range(1, 200, integer=True)
 #: Time offsets in one problem (one per log).
 LAGS = Range(0, 10_000, integer=True)
+#: Sensor mounts in one problem: one shared by every log, or one per log.
+MOUNTS = Range(1, 10_000, integer=True)
 
 
 @dataclass(frozen=True)
@@ -78,10 +81,16 @@ class ProblemSpec:
     #: Time offsets (``tracker_lag``) in the problem, one per log (see :mod:`~nlp_calib.problem.clock`);
     #: 0: the data's clock is taken as it is.
     lags: int = 0
+    #: Sensor mounts: 1, shared by every log; or one per log of a joint fit (``sensor_x_1``, …), each
+    #: window's chosen by which log it belongs to, every log sharing the kinematic parameters.
+    mounts: int = 1
 
     def __post_init__(self) -> None:
         sensor_for(self.sensor, self.scale)
         check_range("lags", self.lags, LAGS)
+        check_range("mounts", self.mounts, MOUNTS)
+        if self.mounts > 1 and self.lags and self.lags != self.mounts:
+            raise ProblemError(f"{self.mounts} mounts (one per log) but {self.lags} time offsets")
         check_range("horizon", self.horizon, HORIZON)
         check_choice("integration", self.integration, INTEGRATIONS)
         check_choice("kernel", self.kernel, KERNELS)
@@ -122,16 +131,19 @@ class ProblemFunctions(TrajectoryFunctions):
 
     def __init__(self, model: KinematicModel, spec: ProblemSpec) -> None:
         sensor = sensor_for(spec.sensor, spec.scale)
-        names = (*model.kinematic_params, *sensor.params, *lag_names(spec.lags))
+        lags = lag_names(spec.lags)
+        names = (*model.kinematic_params, *per_log(sensor.params, spec.mounts), *lags)
         unknown = [n for n in spec.fixed if n not in names]
         if unknown:
             raise ProblemError(f"cannot fix unknown parameter(s) {unknown}; parameters are {list(names)}")
         self.spec = spec
         self.model = model
         self.names = names
+        #: One log's parameters as the full-parameter Functions take them (see :meth:`view`).
+        self.view_names = (*model.kinematic_params, *sensor.params, *lags)
         self.integration = spec.integration
         self.horizon = spec.horizon
-        held = {*spec.fixed, *sensor.held}
+        held = {*spec.fixed, *per_log(sensor.held, spec.mounts)}
         self.free = tuple(n for n in names if n not in held)
         self.fixed = tuple(n for n in names if n in held)
         if not self.free:
@@ -145,7 +157,8 @@ class ProblemFunctions(TrajectoryFunctions):
         # structure left to respect).
         step = ca.SX.sym("step", len(free))
         x_plus = ca.SX(step + x)
-        sensor.boxplus(free, x, step, x_plus)
+        for i in range(spec.mounts):
+            sensor.boxplus(self.mount_view(free, i), x, step, x_plus)
         self.boxplus = ca.Function("boxplus", [x, step], [x_plus], ["x", "step"], ["x_next"], _CSE)
         # dx(x ⊞ Δ)/dΔ at Δ = 0 maps plain-coordinate Jacobians onto the manifold perturbation.
         tangent = ca.substitute(ca.jacobian(x_plus, step), step, ca.DM.zeros(len(free)))
@@ -165,6 +178,51 @@ class ProblemFunctions(TrajectoryFunctions):
     def n_free(self) -> int:
         return len(self.free)
 
+    def mount_names(self, log: int) -> tuple[str, ...]:
+        """The names of log ``log``'s mount among :attr:`names` (the shared mount's, for one)."""
+        params = self.sensor.params
+        if self.spec.mounts == 1:
+            return params
+        return per_log(params, self.spec.mounts)[log * len(params) : (log + 1) * len(params)]
+
+    def mount_view(self, names: tuple[str, ...], log: int) -> tuple[str, ...]:
+        """``names`` with log ``log``'s mount under the sensor's own names and every other mount's
+        out of the sensor's sight (what its box-plus and manifold test read)."""
+        if self.spec.mounts == 1:
+            return names
+        mine = set(self.mount_names(log))
+        others = set(per_log(self.sensor.params, self.spec.mounts)) - mine
+        return tuple(base_name(n) if n in mine else f"\0{n}" if n in others else n for n in names)
+
+    def view(self, params: np.ndarray, log: int) -> np.ndarray:
+        """Log ``log``'s parameters in :attr:`view_names` order from the full vector ``params``
+        (what the full-parameter Functions take): the shared ones and its own mount."""
+        if self.spec.mounts == 1:
+            return np.asarray(params, dtype=float)
+        named = dict(zip(self.names, np.ravel(np.asarray(params, dtype=float))))
+        own = dict(zip(self.sensor.params, (named[n] for n in self.mount_names(log))))
+        return np.array([own[n] if n in own else named[n] for n in self.view_names])
+
+    def view_dict(self, params: Mapping[str, float], log: int) -> dict[str, float]:
+        """:meth:`view` of named values (any names; the other logs' mounts left out)."""
+        if self.spec.mounts == 1:
+            return dict(params)
+        own = dict(zip(self.mount_names(log), self.sensor.params))
+        every = set(per_log(self.sensor.params, self.spec.mounts))
+        return {own.get(n, n): float(v) for n, v in params.items() if n in own or n not in every}
+
+    def full_dict(self, views: Sequence[Mapping[str, float]]) -> dict[str, float]:
+        """Named values over :attr:`names` from one view per mount (the shared ones from the first)."""
+        out = dict(views[0])
+        if self.spec.mounts > 1:
+            for i, v in enumerate(views):
+                out.update(
+                    {n: float(v[p]) for n, p in zip(self.mount_names(i), self.sensor.params) if p in v}
+                )
+            for p in self.sensor.params:
+                out.pop(p, None)
+        return out
+
     @property
     def sensor(self) -> Sensor:
         """What the tracker measures and how the mount enters (see :mod:`~nlp_calib.sensors`)."""
@@ -172,8 +230,9 @@ class ProblemFunctions(TrajectoryFunctions):
 
     @property
     def manifold_sensor(self) -> bool:
-        """True when the sensor's mount is perturbed on its group (see :mod:`~nlp_calib.sensors`)."""
-        return self.sensor.manifold(self.free)
+        """True when the sensor's mount (every log's) is perturbed on its group (see
+        :mod:`~nlp_calib.sensors`)."""
+        return all(self.sensor.manifold(self.mount_view(self.free, i)) for i in range(self.spec.mounts))
 
     @property
     def data_rows(self) -> int:
@@ -182,10 +241,18 @@ class ProblemFunctions(TrajectoryFunctions):
 
     @property
     def clock_rows(self) -> int:
-        """Rows of a window's clock data: the inputs' rates at its first and last record, the
-        offset its log's data were re-sampled at, and which log it belongs to (one row per log);
-        none when the problem has no time offset (see :mod:`~nlp_calib.problem.clock`)."""
-        return 2 * self.n_inputs + 1 + self.spec.lags if self.spec.lags else 0
+        """Rows of a window's clock data: the inputs' rates at its first and last record and the
+        offset its log's data were re-sampled at (when the problem has a time offset, see
+        :mod:`~nlp_calib.problem.clock`), then which log it belongs to (:attr:`select_rows`)."""
+        return (2 * self.n_inputs + 1 if self.spec.lags else 0) + self.select_rows
+
+    @property
+    def select_rows(self) -> int:
+        """Rows saying which log a window belongs to, one per log: with a time offset or a mount
+        per log (none otherwise)."""
+        if self.spec.lags:
+            return self.spec.lags
+        return self.spec.mounts if self.spec.mounts > 1 else 0
 
     @property
     def weight_row(self) -> int:
@@ -245,14 +312,19 @@ class ProblemFunctions(TrajectoryFunctions):
 
     def _residual(self, data: ca.SX, params: ca.SX, M: ca.SX) -> ca.SX:
         """The residual of a window's ``data`` for ``params`` and base motion ``M`` (before the clock)."""
-        k, mount, lags = split_params(self.model, self.sensor, params)
+        nk, ns, n_mounts = len(self.model.kinematic_params), len(self.sensor.params), self.spec.mounts
+        k, lags = params[:nk], params[nk + n_mounts * ns :]
+        mounts = [params[nk + i * ns : nk + (i + 1) * ns] for i in range(n_mounts)]
         z_rows, n_in = self.sensor.z_rows, self.n_inputs
+        first = z_rows + (2 * n_in + 1 if self.spec.lags else 0)
+        select = data[first : first + self.select_rows]
         if self.spec.lags:
             ends = data[z_rows : z_rows + n_in], data[z_rows + n_in : z_rows + 2 * n_in]
             resampled = data[z_rows + 2 * n_in]
-            select = data[z_rows + 2 * n_in + 1 : z_rows + 2 * n_in + 1 + self.spec.lags]
             delta = ca.dot(select, lags) - resampled
             M = clock.shifted(self.model, k, M, ends, delta, self.spec.integration)
+        # A mount per log: the window's own, picked by its log's one-hot row (exact for any mount).
+        mount = mounts[0] if n_mounts == 1 else sum(select[i] * mounts[i] for i in range(n_mounts))
         return self.sensor.residual(data[0:z_rows], mount, M)
 
     def _at_zero(self, mo: motion_sources.MotionSymbols, h: ca.SX, exprs: list[ca.SX]) -> list[ca.SX]:

@@ -33,12 +33,16 @@ def start_windows(data: ResidualData, span_s: float) -> tuple[np.ndarray, np.nda
     return first, first + span
 
 
-def _own_windows(data: ResidualData, stride: int) -> tuple[np.ndarray, np.ndarray]:
+def _own_windows(data: ResidualData, stride: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The data's own windows, three quarters overlapping: nearly all the information at a fraction
-    of the cost of every window."""
+    of the cost of every window (measured increments: those of the commonest length), and their
+    measured motions."""
     step = max(1, data.horizon // (4 * stride))
     keep = np.arange(0, data.n_residuals, step)
-    return data.starts[keep], data.stops[keep]
+    if data.increment is not None and data.increment.any():
+        spans = data.stops - data.starts
+        keep = np.flatnonzero(spans == np.bincount(spans).argmax())
+    return data.starts[keep], data.stops[keep], data.z[:, keep]
 
 
 def closed_form_start(
@@ -48,7 +52,11 @@ def closed_form_start(
     needed; ``known`` holds the fixed values (a camera's held height; with a free scale, one
     length in metres)."""
     span_s = fns.sensor.start_span_s
-    a, b = _own_windows(data, stride) if span_s is None else start_windows(data, span_s)
+    if span_s is None:
+        a, b, z = _own_windows(data, stride)
+    else:
+        a, b = start_windows(data, span_s)
+        z = tracker_motions(fns, data.T_world_sensor, a, b)
     span = int(b[0] - a[0]) if a.size else 1
     if a.size == 0 or np.any(b - a != span) or any(log.n_records <= span for log in data.logs):
         raise ProblemError(f"the log is shorter than one start window of {span} records")
@@ -56,7 +64,6 @@ def closed_form_start(
     U = np.empty((n_in * span, a.size))
     for j in range(span):
         U[j * n_in : (j + 1) * n_in] = data.inputs[:, a + j]
-    z = tracker_motions(fns, data.T_world_sensor, a, b)
     planar = build(fns.model, ProblemSpec(horizon=span, integration=fns.integration))
 
     def base_motion(params: Mapping[str, float]) -> np.ndarray:

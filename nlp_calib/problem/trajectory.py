@@ -2,7 +2,8 @@
 covariance, a window's motion, and SE(2) ``between`` with its Jacobians.
 
 They take the full parameter vector (free and fixed, in model order) rather than the free one,
-because trajectories, metrics, reports and the closed-form start evaluate a given calibration.
+because trajectories, metrics, reports and the closed-form start evaluate a given calibration; a
+problem with a mount per log takes one log's view of it (its own mount among the shared ones).
 Poses and motions are in the sensor's layout (:mod:`nlp_calib.sensors`): ``(x, y, theta)``
 for a planar sensor, ``(x, y, z, qx, qy, qz, qw)`` in the trajectory's own units for a 3-D one.
 """
@@ -65,6 +66,9 @@ class TrajectoryFunctions:
 
     model: KinematicModel
     names: tuple[str, ...]
+    #: The parameters these Functions take: one log's (its mount among them; see
+    #: :meth:`ProblemFunctions.view`).
+    view_names: tuple[str, ...]
     integration: str
     horizon: int
 
@@ -80,7 +84,7 @@ class TrajectoryFunctions:
     @functools.cached_property
     def _full(self) -> tuple[ca.SX, ca.SX, ca.SX]:
         """Full-parameter symbols: params, one interval's inputs and the sensor motion over it."""
-        params = ca.SX.sym("params", len(self.names))
+        params = ca.SX.sym("params", len(self.view_names))
         u1 = ca.SX.sym("u", self.n_inputs)
         h1 = predict_motion(
             self.model, self.sensor, params, ca.reshape(u1, self.n_inputs, 1), self.integration

@@ -8,6 +8,10 @@ motion the model predicts over intervals ``start … stop - 1`` with the tracker
 ``z = t2v(T(p_start)⁻¹·T(p_stop))``. The evaluator integrates the intervals once per evaluation
 (see :mod:`nlp_calib.problem.motion`), so the windows are only a list of pairs: dropping some, or
 adding another log's, is a matter of selecting pairs.
+
+A log whose reference measures its own motions (``Log.motions``: a scan matcher's, visual
+odometry's) has no other windows than its increments: each joins the records at its two stamps,
+and its ``z`` is the increment as measured, not a motion between two poses.
 """
 
 from __future__ import annotations
@@ -91,6 +95,20 @@ class ResidualData:
     clock: WindowClock | None = None
 
     @property
+    def increment(self) -> np.ndarray | None:
+        """Per window, whether its ``z`` is an increment the reference measured itself (its noise
+        its own, not two poses'; a log with ``motions``); None: none is."""
+        own = np.array([lg.motions is not None for lg in self.logs])
+        return own[self.log_of(self.starts)] if own.any() else None
+
+    def with_selector(self) -> ResidualData:
+        """These windows saying which log each belongs to (a problem with a mount per log and no
+        time offset: a clock of no offsets)."""
+        if self.clock is not None:
+            return self
+        return replace(self, clock=WindowClock((), np.zeros((0, self.n_records))))
+
+    @property
     def log(self) -> Log:
         """The log of a single-log fit."""
         if len(self.logs) != 1:
@@ -125,9 +143,12 @@ class ResidualData:
         last record, its log's re-sampled offset and which log it belongs to."""
         if self.clock is None:
             return np.zeros((0, self.n_residuals))
-        rates, which = self.clock.rates, self.log_of(self.starts)
-        select = np.zeros((len(self.clock.lags), self.n_residuals))
+        which = self.log_of(self.starts)
+        select = np.zeros((len(self.logs), self.n_residuals))
         select[which, np.arange(self.n_residuals)] = 1.0
+        if not self.clock.lags:
+            return select  # a mount per log: which log alone
+        rates = self.clock.rates
         resampled = np.asarray(self.clock.lags)[which][None, :]
         return np.vstack([rates[:, self.starts], rates[:, self.stops], resampled, select])
 
@@ -288,7 +309,10 @@ def appended(
     all_poses = np.ascontiguousarray(np.concatenate([data.T_world_sensor, poses]))
     clock = data.clock
     if clock is not None:
-        rates = record_rates(inputs, time_s, level_rows(fns.model))
+        # A clock of no offsets (a mount per log) says only which log a window belongs to.
+        rates = (
+            record_rates(inputs, time_s, level_rows(fns.model)) if clock.lags else np.zeros((0, time_s.size))
+        )
         clock = WindowClock(clock.lags, np.concatenate([clock.rates, rates], axis=1))
     return replace(
         data,
@@ -368,11 +392,14 @@ def build_residual_data(
         inputs = interval_inputs(fns.model, logs, options.steering_sample)
     elif inputs.shape != (fns.n_inputs, sum(lg.n_records for lg in logs) - 1):
         raise ProblemError(f"inputs of shape {inputs.shape} do not fit the logs' intervals")
-    starts = np.concatenate(
-        [o + window_starts(lg.n_records - 1, H, options.stride) for o, lg in zip(offsets, logs)]
-    ).astype(np.int64)
+    parts = [_log_windows(fns, lg, o, H, options.stride) for o, lg in zip(offsets, logs)]
+    starts = np.concatenate([p[0] for p in parts]).astype(np.int64)
+    stops = np.concatenate([p[1] for p in parts]).astype(np.int64)
     poses = np.ascontiguousarray(np.concatenate([tracker_poses(fns, lg) for lg in logs]))
-    stops = starts + H
+    z = tracker_motions(fns, poses, starts, stops)
+    if any(p[2] is not None for p in parts):
+        measured = np.concatenate([np.full(p[0].size, p[2] is not None) for p in parts])
+        z[:, measured] = np.concatenate([p[2] for p in parts if p[2] is not None], axis=1)
     data = ResidualData(
         logs=logs,
         offsets=offsets,
@@ -380,17 +407,42 @@ def build_residual_data(
         T_world_sensor=poses,
         starts=starts,
         stops=stops,
-        z=tracker_motions(fns, poses, starts, stops),
+        z=z,
         horizon=H,
         dropped_stationary=0,
         clock=WindowClock(tuple(lg.encoder_lag_s for lg in logs), log_rates(fns.model, logs, inputs))
         if fns.spec.lags
         else None,
     )
+    if fns.select_rows and data.clock is None:
+        data = data.with_selector()
     if drop_stationary and starts.size:
         keep = data.interval_counts(fns.model.moving(inputs)) > 0
         data = replace(data.select(keep), dropped_stationary=int((~keep).sum()))
     return _without_faults(data, bad_intervals, bad_records)
+
+
+def _log_windows(
+    fns: ProblemFunctions, log: Log, offset: int, horizon: int, stride: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The first and last records of one log's windows (numbered from ``offset``), and their
+    measured motions when the log's reference gives its own increments (None: from its poses)."""
+    inc = log.motions
+    if inc is None:
+        first = offset + window_starts(log.n_records - 1, horizon, stride)
+        return first, first + horizon, None
+    if fns.sensor.group != "SE(2)":
+        raise ProblemError(
+            f"{log.path}: its reference gives planar motions (increments); they need a planar sensor "
+            f"(sensor: planar), not {fns.sensor.kind}"
+        )
+    k = np.arange(0, inc.n, stride)
+    if not fns.prefix and np.any(inc.last[k] - inc.first[k] != 1):
+        raise ProblemError(
+            f"{log.path}: some increments span several records (they overlap): a problem of horizon 1 "
+            "compares one interval; set residual.horizon to 2 or more"
+        )
+    return offset + inc.first[k], offset + inc.last[k], np.ascontiguousarray(inc.z[k].T)
 
 
 def _without_faults(

@@ -15,6 +15,9 @@ import numpy as np
 COUNTER_KINDS = ("stall_then_jump", "reversal", "counter_jump")
 ABSOLUTE_KINDS = ("steering_spike", "steering_stuck")
 TRACKER_KINDS = ("tracker_jump",)
+#: A measured increment (a scan match) that is wrong: its matcher said so, or the wheels disagree
+#: with it far beyond the increments' scatter. Its own window is left out, no other.
+MATCH_KINDS = ("bad_match",)
 
 
 @dataclass(frozen=True)
@@ -25,7 +28,9 @@ class Fault:
     a stuck reading: its first repeat); ``logged`` and ``implied`` are the encoder's total
     increment over the stretch as logged and as the tracker's motion implies (for an absolute
     encoder: its reading and the one its neighbours imply), ``noise`` the 1σ of ``implied``
-    (ticks; for a tracker jump: 0, the pose's position error and the tracker's noise, in m).
+    (ticks; for a tracker jump: 0, the pose's position error and the tracker's noise, in m; for
+    a bad match: its disagreement with the wheels in m and rad, and in the increments' robust
+    scatter, or NaN where its matcher's own word condemned it).
     """
 
     kind: str
@@ -52,6 +57,8 @@ class Fault:
         }
         if self.kind in TRACKER_KINDS:
             size = {"offset_m": self.implied, "noise_m": self.noise}
+        elif self.kind in MATCH_KINDS:
+            size = {"error_m": self.logged, "error_rad": self.implied, "in_scatter": self.noise}
         else:
             size = {
                 f"logged_{unit}": self.logged,
@@ -105,13 +112,20 @@ class FaultReport:
 
     @property
     def encoder_faults(self) -> tuple[Fault, ...]:
-        """The counters' and the absolute encoders' faults (all but the tracker's)."""
-        return tuple(f for f in self.faults if f.kind not in TRACKER_KINDS)
+        """The counters' and the absolute encoders' faults (all but the reference's)."""
+        return tuple(f for f in self.faults if f.kind not in (*TRACKER_KINDS, *MATCH_KINDS))
+
+    @property
+    def reference_faults(self) -> tuple[Fault, ...]:
+        """The reference's own faults: tracker jumps and bad matches."""
+        return tuple(f for f in self.faults if f.kind in (*TRACKER_KINDS, *MATCH_KINDS))
 
     def bad_intervals(self, n_intervals: int) -> np.ndarray:
-        """Mask of intervals a residual window must not cross (encoder faults)."""
+        """Mask of intervals a residual window must not cross (encoder faults, bad matches)."""
         mask = np.zeros(n_intervals, dtype=bool)
-        for f in self.encoder_faults:
+        for f in self.faults:
+            if f.kind in TRACKER_KINDS:
+                continue
             mask[max(f.first, 0) : min(f.last + 1, n_intervals)] = True
         return mask
 

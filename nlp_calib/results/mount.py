@@ -99,3 +99,12 @@ class SensorMount:
             sources.setdefault(source, []).append(component)
         rest = "; ".join(f"{', '.join(names)} {source}" for source, names in sources.items())
         return f"calibrated: {', '.join(self.calibrated)}" + (f"; {rest}" if rest else "")
+
+
+@dataclass(frozen=True)
+class LogMount:
+    """One log's own mount, in a fit of several logs with a mount each: the log (its name) and the
+    mount (its sensor's link named apart where logs share a frame's name)."""
+
+    log: str
+    mount: SensorMount

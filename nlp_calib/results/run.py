@@ -33,7 +33,7 @@ from nlp_calib.results.checks import (
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import ControllerParams
-from nlp_calib.results.mount import SensorMount
+from nlp_calib.results.mount import LogMount, SensorMount
 from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import OdometryTrack, RunSeries
 from nlp_calib.results.solver import SolverResult
@@ -200,8 +200,11 @@ class SolverReport:
     holdout: TrajectoryMetrics | None
     #: The estimate in the robot stack's terms (its ros2_control controller's parameters).
     controller: ControllerParams | None = None
-    #: The sensor's mount as every hand-off file states it, as the sensor says it.
+    #: The sensor's mount as every hand-off file states it, as the sensor says it (this log's own,
+    #: in a fit with a mount per log).
     mount: SensorMount | None = None
+    #: A fit with a mount per log: every log's own (one URDF joint each).
+    mounts: tuple[LogMount, ...] = ()
 
 
 #: The verdict's levels.

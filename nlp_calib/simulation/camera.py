@@ -113,7 +113,7 @@ class CameraSimulationOptions:
 
 
 @dataclass(frozen=True)
-class _DriveSettings:
+class DriveSettings:
     """What a model's drive reads of the simulation options."""
 
     truth: Mapping[str, float]
@@ -161,23 +161,26 @@ def _tilt(rng: np.random.Generator, t: np.ndarray, amplitude: float) -> np.ndarr
     return amplitude * out
 
 
-def _fine_grid(opts: CameraSimulationOptions, images: np.ndarray, joints: np.ndarray) -> np.ndarray:
+def fine_grid(images: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """A grid of :data:`FINE_STEP_S` over the samples' span (a second more each side), holding every
+    sample's instant."""
     start = min(images[0], joints[0]) - 1.0
     stop = max(images[-1], joints[-1]) + 1.0
     regular = np.arange(start, stop + FINE_STEP_S, FINE_STEP_S)
     return np.unique(np.concatenate([regular, images, joints]))
 
 
-def _base_motion(
-    opts: CameraSimulationOptions, rng: np.random.Generator, t_fine: np.ndarray
+def base_motion(
+    model: str, truth: Mapping[str, float], shape: DriveShape, rng: np.random.Generator, t_fine: np.ndarray
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Planar base poses ``(n, 3)`` on the fine grid and the drive's channels there."""
-    knots = drive_profiles(opts.drive, rng, float(t_fine[-1] - t_fine[0]) + 1.0)
+    """Planar base poses ``(n, 3)`` of ``model``'s drive (``truth``, driven as ``shape`` says) on the
+    fine grid, and the drive's channels there."""
+    knots = drive_profiles(shape, rng, float(t_fine[-1] - t_fine[0]) + 1.0)
     kt, kv, ks = knots
     t_mid = 0.5 * (t_fine[1:] + t_fine[:-1]) - t_fine[0]
-    drive = MODELS[opts.model].drive
+    drive = MODELS[model].drive
     ds, w, channels = drive.steps(
-        _DriveSettings(opts.truth),
+        DriveSettings(truth),
         np.interp(t_mid, kt, kv),
         np.interp(t_mid, kt, ks),
         np.diff(t_fine),
@@ -191,8 +194,8 @@ def simulate_camera(opts: CameraSimulationOptions) -> CameraSimulation:
     rng = np.random.default_rng(opts.seed)
     t_images = np.arange(0.0, opts.duration_s, 1.0 / opts.image_rate_hz)
     t_joints = np.arange(-0.5, opts.duration_s + 0.5, 1.0 / opts.joint_rate_hz)
-    t_fine = _fine_grid(opts, t_images, t_joints)
-    planar, channels = _base_motion(opts, rng, t_fine)
+    t_fine = fine_grid(t_images, t_joints)
+    planar, channels = base_motion(opts.model, opts.truth, opts.drive, rng, t_fine)
     at_images = np.searchsorted(t_fine, t_images)
     at_joints = np.searchsorted(t_fine, t_joints)
     base = poses3d.from_planar(planar[at_images])

@@ -14,10 +14,15 @@ from nlp_calib.core.config import fail
 from nlp_calib.sources.bag import BagSource
 from nlp_calib.sources.base import DatasetSource
 from nlp_calib.sources.joints import JointLogSource
+from nlp_calib.sources.lidar import LidarSource
+from nlp_calib.sources.motions import MotionsSource
 from nlp_calib.sources.text import TextSource, load_log
+from nlp_calib.sources.vendor import VendorSource
 
 #: The dataset sources, in the order they are asked whether they read a scenario's entry.
-SOURCES: dict[str, type[DatasetSource]] = {s.kind: s for s in (BagSource, JointLogSource, TextSource)}
+SOURCES: dict[str, type[DatasetSource]] = {
+    s.kind: s for s in (LidarSource, VendorSource, BagSource, MotionsSource, JointLogSource, TextSource)
+}
 
 
 def parse_source(raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> DatasetSource:
@@ -41,7 +46,10 @@ __all__ = [
     "BagSource",
     "DatasetSource",
     "JointLogSource",
+    "LidarSource",
+    "MotionsSource",
     "TextSource",
+    "VendorSource",
     "load_log",
     "moved",
     "parse_source",

@@ -5,10 +5,13 @@ The scenario's block names both files and which joint is which of the model's en
     dataset: {joints: wheels.csv, poses: tracker.tum, encoders: {left_wheel: left_wheel_joint,
               right_wheel: right_wheel_joint}}
 
-The joints are in radians (REP 103). A record is made at each tracker pose the joints cover, with
-the joints interpolated there (:func:`nlp_calib.logs.bag_joints.timed_by_tracker`), exactly as a
-bag's joints in radians are read. ``clock_offset`` (s) is added to the joints' times when the two
-files' clocks differ; ``robot`` is a ``ROBOT.yaml`` (initial guess, the sensor's nominal pose).
+The joints are in radians (REP 103); a wheel's column may instead hold its speed (``form:
+speeds``, rad/s) or its increment per cycle (``form: increments``, with ``counts_per_turn`` when
+they are counts; :func:`~nlp_calib.logs.joint_log.wheel_positions`). A record is made at each
+tracker pose the joints cover, with the joints interpolated there
+(:func:`nlp_calib.logs.bag_joints.timed_by_tracker`), exactly as a bag's joints in radians are
+read. ``clock_offset`` (s) is added to the joints' times when the two files' clocks differ;
+``robot`` is a ``ROBOT.yaml`` (initial guess, the sensor's nominal pose).
 """
 
 from __future__ import annotations
@@ -23,11 +26,12 @@ import numpy as np
 
 from nlp_calib.core.config import coerce, fail, from_mapping, key_name
 from nlp_calib.core.errors import ConfigError, DatasetError
+from nlp_calib.core.ranges import Range
 from nlp_calib.logs import Log
 from nlp_calib.logs.bag_joints import timed_by_tracker
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, MAX_GAP, Stamped
-from nlp_calib.logs.joint_log import read_joint_csv
-from nlp_calib.logs.log import frozen
+from nlp_calib.logs.joint_log import WHEEL_FORMS, read_joint_csv, wheel_positions
+from nlp_calib.logs.log import LogHeader, frozen
 from nlp_calib.logs.tum import read_tum
 from nlp_calib.models import KinematicModel, encoders
 from nlp_calib.models.radians import in_units
@@ -36,13 +40,53 @@ from nlp_calib.sources.robot import load_robot, robot_header
 
 #: The keys a joint-log block must have.
 REQUIRED = ("joints", "poses", "encoders")
+#: Counts per wheel turn a per-cycle increment may be given in.
+COUNTS_PER_TURN = Range(1e-6, 1e12, lo_open=True)
+
+
+@dataclass(frozen=True)
+class Wheels:
+    """How a joint CSV is read: which joint is each of the model's encoders, what a wheel's column
+    holds (``form``, :data:`~nlp_calib.logs.joint_log.WHEEL_FORMS`) and, for increments in counts,
+    the counts per turn; ``clock_offset`` (s) is added to its times."""
+
+    encoders: Mapping[str, str]
+    form: str = "positions"
+    counts_per_turn: float | None = None
+    clock_offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.form not in WHEEL_FORMS:
+            raise ConfigError(f"form: one of {', '.join(WHEEL_FORMS)}, got {self.form!r}")
+        if self.counts_per_turn is not None:
+            if self.form != "increments":
+                raise ConfigError("counts_per_turn: only increments per cycle are counted (form: increments)")
+            if (reason := COUNTS_PER_TURN.problem(self.counts_per_turn)) is not None:
+                raise ConfigError(f"counts_per_turn {reason}")
+        if (reason := CLOCK_OFFSET.problem(self.clock_offset)) is not None:
+            raise ConfigError(f"clock_offset (seconds) {reason}")
+
+    def read(self, path: Path, model: KinematicModel, where: str) -> tuple[Stamped, tuple[str, ...]]:
+        """The joints of ``path`` for ``model`` (in radians) as a stream (each joint's position,
+        then its velocity, NaN) on the other file's clock, and the joints' names in encoder order."""
+        check_encoders(self.encoders, model, where)
+        names = encoders(model)
+        table = read_joint_csv(path)
+        joint_names = tuple(self.encoders[e] for e in names)
+        wheels = [model.encoder_kinds[e] == "counter" for e in names]
+        values = table.columns(joint_names, where)
+        positions = wheel_positions(table.time_ns, values, wheels, self.form, self.counts_per_turn)
+        velocities = np.full(positions.shape, np.nan)
+        shift = round(self.clock_offset * 1e9)
+        return Stamped(table.path, table.time_ns + shift, np.hstack([positions, velocities])), joint_names
 
 
 @dataclass(frozen=True)
 class JointLogSource:
     """A CSV joint log (``joints``), a TUM trajectory of the sensor (``poses``), the joint that is
     each of the model's encoders (``encoders``), the longest gap between joint rows a pose's time
-    is interpolated across (``max_gap``, s), the joints' ``clock_offset`` (s) and ``ROBOT.yaml``."""
+    is interpolated across (``max_gap``, s), the joints' ``clock_offset`` (s), ``ROBOT.yaml``, and
+    what a wheel's column holds (``form``; ``counts_per_turn``: see :class:`Wheels`)."""
 
     kind: ClassVar[str] = "joints"
     record_word: ClassVar[str] = "pose"
@@ -53,11 +97,16 @@ class JointLogSource:
     max_gap: float = DEFAULT_MAX_GAP_S
     clock_offset: float = 0.0
     robot: Path | None = None
+    form: str = "positions"
+    counts_per_turn: float | None = None
 
     def __post_init__(self) -> None:
-        for key, limit in (("max_gap", MAX_GAP), ("clock_offset", CLOCK_OFFSET)):
-            if (reason := limit.problem(getattr(self, key))) is not None:
-                raise ConfigError(f"{key} (seconds) {reason}")
+        if (reason := MAX_GAP.problem(self.max_gap)) is not None:
+            raise ConfigError(f"max_gap (seconds) {reason}")
+        self.wheels()  # validates the wheels' fields
+
+    def wheels(self) -> Wheels:
+        return Wheels(self.encoders, self.form, self.counts_per_turn, self.clock_offset)
 
     @property
     def path(self) -> Path:
@@ -78,21 +127,18 @@ class JointLogSource:
 
     def read(self, model: KinematicModel, *, strict: bool) -> Log:
         model = in_units(model, "radians")
-        check_encoders(self.encoders, model, "dataset.encoders")
-        names = encoders(model)
-        table = read_joint_csv(self.joints)
-        joint_names = tuple(self.encoders[e] for e in names)
-        positions = table.columns(joint_names, "dataset.encoders")
-        shift = round(self.clock_offset * 1e9)
-        velocities = np.full(positions.shape, np.nan)
-        joints = Stamped(table.path, table.time_ns + shift, np.hstack([positions, velocities]))
+        joints, _ = self.wheels().read(self.joints, model, "dataset.encoders")
         poses = read_tum(self.poses)
         self._check_overlap(joints.stamp_ns, poses.time_ns)
         tracker = Stamped(str(self.poses), poses.time_ns, poses.planar_and_3d())
-        robot = load_robot(self.robot, model) if self.robot is not None else None
-        header = robot_header(model, robot, None)
-        log = timed_by_tracker(self.joints, joints, tracker, names, self.max_gap, header)
+        header = self.header(model)
+        log = timed_by_tracker(self.joints, joints, tracker, encoders(model), self.max_gap, header)
         return replace(log, line_numbers=frozen(poses.line_numbers[log.line_numbers - 1]))
+
+    def header(self, model: KinematicModel, frame: str | None = None) -> LogHeader:
+        """``ROBOT.yaml``'s header (the model's defaults without one), for ``model`` in radians."""
+        robot = load_robot(self.robot, model) if self.robot is not None else None
+        return robot_header(model, robot, frame)
 
     def _check_overlap(self, joint_ns: np.ndarray, pose_ns: np.ndarray) -> None:
         """Refuse files whose times do not overlap, in this block's words (a bag's are the topics')."""
@@ -115,7 +161,7 @@ class JointLogSource:
 
     @classmethod
     def claims(cls, raw: Any) -> bool:
-        return isinstance(raw, Mapping) and "joints" in raw and "bag" not in raw
+        return isinstance(raw, Mapping) and "joints" in raw and "bag" not in raw and "motions" not in raw
 
     @classmethod
     def accepts(cls, path: Path) -> bool:

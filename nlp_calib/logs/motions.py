@@ -1,0 +1,182 @@
+"""A file of the sensor's own motions between pairs of stamps, and a log timed by them.
+
+The file is CSV: a header row ``t_start,t_end,x,y,theta`` (more named columns may follow: what the
+tool that measured each motion said of it, e.g. ``converged``, ``inliers``, ``rmse``), then one
+row per increment: its two stamps (s, read to the nanosecond) and the sensor's motion from its
+pose at ``t_start`` to its pose at ``t_end`` in its own frame at ``t_start`` (m, m, rad). ``#``
+lines are comments. RelativeMotions may leave gaps between them, share stamps (a chain of scan
+matches) or overlap (matches against a key frame).
+
+A log timed by the motions has a record at each stamp the wheels' stream covers, the joints
+interpolated there exactly as at a tracker's poses (:mod:`nlp_calib.logs.bag_joints`); an
+increment whose stamps are not both covered is left out and counted.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from nlp_calib.core.errors import DatasetError, NlpCalibWarning
+from nlp_calib.logs.bag_joints import at_tracker, check_overlap, joint_positions, resolution
+from nlp_calib.logs.bag_reader import Stamped
+from nlp_calib.logs.log import JointStream, Log, LogClock, LogHeader, ReferenceData, frozen
+from nlp_calib.logs.relative import RelativeMotions
+from nlp_calib.logs.text_tables import data_lines, numbers, seconds, stamp_ns
+
+#: The columns every motions file starts with.
+COLUMNS = ("t_start", "t_end", "x", "y", "theta")
+
+
+@dataclass(frozen=True)
+class MotionTable:
+    """The increments of a motions file: stamps (ns), motions ``(n, 3)``, the file's line of
+    each and the further columns by name."""
+
+    path: str
+    start_ns: np.ndarray
+    end_ns: np.ndarray
+    z: np.ndarray
+    line_numbers: np.ndarray
+    quality: Mapping[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return int(self.start_ns.size)
+
+
+def _names(path: str, line: int, text: str) -> tuple[str, ...]:
+    names = tuple(f.strip() for f in text.split(","))
+    if names[: len(COLUMNS)] != COLUMNS:
+        raise DatasetError(
+            path,
+            line,
+            f"the first row is {text[:80]!r}; expected a header row '{','.join(COLUMNS)}' (further "
+            "named columns may follow)",
+        )
+    extra = names[len(COLUMNS) :]
+    if not all(extra) or len(set(names)) != len(names):
+        raise DatasetError(path, line, f"column names must be non-empty and distinct, got {list(names)}")
+    return names
+
+
+def read_motions(path: str | Path) -> MotionTable:
+    """Read a motions file (see the module docstring); a malformed row is an error naming its line."""
+    p = str(path)
+    lines = data_lines(path)
+    first = next(lines, None)
+    if first is None:
+        raise DatasetError(p, None, f"is empty; expected a header row '{','.join(COLUMNS)}' and rows")
+    names = _names(p, *first)
+    layout = f"{len(names)} comma-separated numbers ({','.join(names)})"
+    starts, ends, rows, at = [], [], [], []
+    for number, text in lines:
+        fields = text.split(",")
+        if len(fields) != len(names):
+            raise DatasetError(p, number, f"has {len(fields)} fields; expected {layout}")
+        a, b = stamp_ns(fields[0], p, number), stamp_ns(fields[1], p, number)
+        if b <= a:
+            raise DatasetError(
+                p, number, f"t_end {seconds(b)} is not after t_start {seconds(a)}; an increment runs forward"
+            )
+        starts.append(a)
+        ends.append(b)
+        rows.append(numbers(p, number, fields[2:], layout))
+        at.append(number)
+    if not rows:
+        raise DatasetError(p, None, "holds no increment")
+    values = np.array(rows, dtype=float)
+    quality = {n: frozen(values[:, 3 + i]) for i, n in enumerate(names[len(COLUMNS) :])}
+    return MotionTable(
+        p,
+        frozen(np.array(starts, dtype=np.int64)),
+        frozen(np.array(ends, dtype=np.int64)),
+        frozen(values[:, :3]),
+        frozen(np.array(at, dtype=np.int64)),
+        quality,
+    )
+
+
+def format_motions(
+    start_ns: np.ndarray, end_ns: np.ndarray, z: np.ndarray, quality: Mapping[str, np.ndarray] | None = None
+) -> str:
+    """The CSV text of increments (see the module docstring), every value exact."""
+    extra = dict(quality or {})
+    head = ",".join([*COLUMNS, *extra]) + "\n"
+    rows = (
+        ",".join([seconds(int(a)), seconds(int(b)), *(repr(float(v)) for v in (*row, *more))]) + "\n"
+        for a, b, row, *more in zip(start_ns.tolist(), end_ns.tolist(), np.asarray(z, float), *extra.values())
+    )
+    return head + "".join(rows)
+
+
+def _records(
+    p: Path, joint_ns: np.ndarray, motions: MotionTable, max_gap_s: float
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """The records' stamps (those of the increments the joints cover), which increments they keep,
+    and what was left out, in words."""
+    stamps = np.unique(np.concatenate([motions.start_ns, motions.end_ns]))
+    ok_index, timing = at_tracker(
+        joint_ns, Stamped(motions.path, stamps, np.zeros((stamps.size, 0))), max_gap_s
+    )
+    records = stamps[np.sort(ok_index)]
+    keep = np.isin(motions.start_ns, records) & np.isin(motions.end_ns, records)
+    left = motions.n - int(keep.sum())
+    said = (
+        f"{left} of {motions.n} increments left out: their stamps lie outside the joints' stream or in "
+        f"its gaps over {max_gap_s:g} s ({timing.before} stamps before the first joint message, "
+        f"{timing.after} after the last, {timing.in_gaps} in gaps)"
+        if left
+        else ""
+    )
+    return records, keep, said
+
+
+def timed_by_motions(
+    p: Path, joints: Stamped, motions: MotionTable, names: Sequence[str], max_gap_s: float, header: LogHeader
+) -> Log:
+    """The log of ``joints`` (each joint's position, then its velocity; NaN where absent) with a
+    record at each stamp of the ``motions`` the joints cover, and the increments between them."""
+    check_overlap(p, joints, Stamped(motions.path, motions.start_ns, np.zeros((motions.n, 0))))
+    joint_ns, positions, integrated = joint_positions(p, joints, tuple(names))
+    stamps, keep, left = _records(p, joint_ns, motions, max_gap_s)
+    if keep.sum() < 1:
+        raise DatasetError(str(p), None, f"no increment lies inside the joints' stream ({left})")
+    if left:
+        warnings.warn(f"{motions.path}: {left}", NlpCalibWarning, stacklevel=3)
+    start_ns = int(stamps[0])
+    increments = RelativeMotions(
+        frozen(np.searchsorted(stamps, motions.start_ns[keep]).astype(np.int64)),
+        frozen(np.searchsorted(stamps, motions.end_ns[keep]).astype(np.int64)),
+        frozen(motions.z[keep]),
+        frozen(motions.line_numbers[keep]),
+        {k: frozen(v[keep]) for k, v in motions.quality.items()},
+    )
+    steps = [0.0 if n in integrated else resolution(positions[:, j]) for j, n in enumerate(names)]
+    by_velocity = tuple(e for e, n in zip(header.encoder_names, names) if n in integrated)
+    stream = JointStream(
+        frozen((joint_ns - start_ns).astype(float) * 1e-9), frozen(positions), tuple(steps), by_velocity
+    )
+    time_s = frozen((stamps - start_ns).astype(float) * 1e-9)
+    n = int(stamps.size)
+    # A record's "line" is that of the first increment that starts or ends there.
+    line = np.zeros(n, dtype=np.int64)
+    for idx in (increments.last, increments.first):
+        line[idx[::-1]] = increments.line_numbers[::-1]
+    return Log(
+        path=str(p),
+        header=header,
+        time_s=time_s,
+        ticks=frozen(np.zeros((n, 0), dtype=np.int64)),
+        model_pose=frozen(np.zeros((n, 3))),
+        T_world_sensor=frozen(increments.chain(n)),
+        line_numbers=frozen(line),
+        clock=LogClock(start_ns=start_ns),
+        joint_positions=stream.at(time_s),
+        joint_stream=stream,
+        reference=ReferenceData(motions=increments),
+    )
