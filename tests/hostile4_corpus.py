@@ -316,6 +316,157 @@ if os.geteuid() == 0:  # only root can give a file to another user
     ]
 
 
+# ----------------------------------------------------------------------------- --urdf
+
+ROBOT = """<?xml version="1.0"?>
+<robot name="trike">
+  <link name="base_link"/>
+  <link name="chassis"/>
+  <link name="laser"/>
+  <link name="front_wheel"/>
+  <joint name="base_to_chassis" type="fixed">
+    <parent link="base_link"/>
+    <child link="chassis"/>
+    <origin xyz="0.2 0 0.1" rpy="0 0 0.1"/>
+  </joint>
+  <joint name="chassis_to_laser" type="fixed">
+    <parent link="chassis"/><child link="laser"/>
+    ORIGIN
+  </joint>
+  <joint name="steer" type="revolute">
+    <parent link="base_link"/><child link="front_wheel"/>
+    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/>
+  </joint>
+</robot>
+"""
+LASER_ORIGIN = '<origin rpy="0.02 -0.05 0" xyz="1.2 0.05 0.4" />'
+
+
+def urdf_run(w: World, tmp: Path, urdf: Path, link: str = "laser") -> list[str]:
+    sc = text_scenario(tmp, w.tricycle)
+    return ["run", str(sc), "--out", str(tmp / "out"), "--urdf", str(urdf), "--sensor-link", link]
+
+
+def urdf_refused(text: bytes | str, needles: tuple[str, ...], w: World, tmp: Path) -> Expect:
+    path = tmp / "robot.urdf"
+    path.write_bytes(text.encode() if isinstance(text, str) else text)
+    return Expect(urdf_run(w, tmp, path), (2,), ("robot.urdf", *needles), keep=(path,), absent=(tmp / "out",))
+
+
+def _laser_in_base(robot: Path) -> np.ndarray:
+    from urdf_parser_py.urdf import URDF
+
+    model = URDF.from_xml_string(robot.read_bytes())
+    joints = {j.child: j for j in model.joints}
+    T, link = np.eye(4), "laser"
+    while link != "base_link":
+        j = joints[link]
+        xyz, rpy = (j.origin.xyz, j.origin.rpy) if j.origin is not None else ([0, 0, 0], [0, 0, 0])
+        from nlp_calib.outputs.urdf import _rotation
+
+        A = np.eye(4)
+        A[:3, :3], A[:3, 3] = _rotation(np.array(rpy, dtype=float)), xyz
+        T, link = A @ T, j.parent
+    return T
+
+
+def re_posed(before: bytes, marker: bytes, tmp: Path, _: Outcome) -> None:
+    """robot.urdf: the laser at the calibrated x, y, yaw as a URDF parser reads it, its height kept,
+    and every byte outside the laser joint's origin tag the user's."""
+    robot = tmp / "out" / "robot.urdf"
+    after = robot.read_bytes()
+    at = before.index(marker)
+    end = before.index(b">", at + len(marker) - 1) + 1
+    assert after.startswith(before[:at]) and after.endswith(before[end:]), after.decode(errors="replace")
+    p = json.loads((tmp / "out" / "result.json").read_text())["solvers"]["gauss_newton"]["params"]
+    T = _laser_in_base(robot)
+    yaw = float(np.arctan2(T[1, 0], T[0, 0]))
+    assert np.allclose([T[0, 3], T[1, 3], yaw], [p["sensor_x"], p["sensor_y"], p["sensor_theta"]], atol=1e-9)
+    assert abs(T[2, 3] - 0.5) < 1e-9  # 0.1 of the chassis + 0.4 of the laser, kept
+
+
+def urdf_edited(text: bytes, marker: bytes, w: World, tmp: Path) -> Expect:
+    path = tmp / "robot.urdf"
+    path.write_bytes(text)
+    return Expect(urdf_run(w, tmp, path), (0,), keep=(path,), check=partial(re_posed, text, marker, tmp))
+
+
+def robot(origin: str = LASER_ORIGIN, head: str = '<?xml version="1.0"?>\n', **replace: str) -> str:
+    text = ROBOT.replace('<?xml version="1.0"?>\n', head).replace("ORIGIN", origin)
+    for old, new in replace.items():
+        text = text.replace(old.replace("_", " "), new)
+    return text
+
+
+ENTITY_JOINT = robot(
+    head='<?xml version="1.0"?>\n<!DOCTYPE robot [\n<!ENTITY laser_joint \'<joint name="chassis_to_laser" '
+    'type="fixed"><parent link="chassis"/><child link="laser"/><origin xyz="1.2 0.05 0.4" rpy="0 0 0"/>'
+    "</joint>'>\n]>\n"
+).replace('<joint name="chassis_to_laser" type="fixed">\n    <parent link="chassis"/><child link="laser"/>\n    '
+          f"{LASER_ORIGIN}\n  </joint>", "&laser_joint;")
+TWO_ORIGINS = robot(origin=f'{LASER_ORIGIN}\n    <origin xyz="0 0 0" rpy="0 0 0"/>')
+TWO_PARENTS = robot().replace('<parent link="chassis"/>', '<parent link="chassis"/><parent link="base_link"/>')
+TWO_CHILDREN = robot().replace('<child link="laser"/>', '<child link="laser"/><child link="front_wheel"/>')
+SECOND_JOINT = robot().replace(
+    "</robot>", '  <joint name="laser_again" type="fixed"><parent link="base_link"/><child link="laser"/>'
+    '<origin xyz="0 0 0"/></joint>\n</robot>'
+)
+SAME_NAME = robot().replace('name="steer"', 'name="chassis_to_laser"')
+UNDECLARED = robot().replace('  <link name="front_wheel"/>\n', "")
+XACRO = robot().replace('<robot name="trike">', '<robot name="trike" xmlns:xacro="http://www.ros.org/wiki/xacro">')
+XACRO_TAG = robot().replace("</robot>", '<xacro:property name="r" value="0.1"/>\n</robot>')
+NOT_ROBOT = robot().replace("<robot ", "<sdf ").replace("</robot>", "</sdf>")
+VALUE_ENTITY = robot(head='<?xml version="1.0"?>\n<!DOCTYPE robot [<!ENTITY h "0.4">]>\n').replace(
+    'xyz="0.2 0 0.1"', 'xyz="0.2 0 &h;"'
+)
+TRANSMISSION = (
+    '<transmission name="t"><type>transmission_interface/SimpleTransmission</type><joint name="chassis_to_laser">'
+    "<hardwareInterface>hardware_interface/PositionJointInterface</hardwareInterface></joint>"
+    '<actuator name="m"><mechanicalReduction>1</mechanicalReduction></actuator></transmission>\n'
+)
+TRICK = '<origin rpy="0.02 -0.05 0" note=\'a xyz="9 9 9" &amp; b\' xyz="1.2 0.05 0.4" />'
+URDF_REFUSED = [
+    ("a UTF-16 URDF (the issue's case)", robot().replace('"1.0"?>', '"1.0" encoding="UTF-16"?>').encode("utf-16"), ("UTF-16", "UTF-8")),
+    ("a UTF-16 URDF without a byte order mark", robot().replace('"1.0"?>', '"1.0" encoding="UTF-16"?>').encode("utf-16-le"), ("UTF-16",)),
+    ("a UTF-32 URDF", robot().encode("utf-32"), ("UTF-32",)),
+    ("a joint defined through an internal entity (the issue's case)", ENTITY_JOINT.encode(), (":3", "entity 'laser_joint'", "does not expand")),
+    ("an origin's value given by an entity", VALUE_ENTITY.encode(), ("entity 'h'",)),
+    ("a joint with two <origin> elements (the issue's case)", TWO_ORIGINS.encode(), (":15", "2 <origin> elements (lines 14, 15)", "reads the first")),
+    ("a joint with two <parent> elements", TWO_PARENTS.encode(), ("2 <parent> elements",)),
+    ("a joint with two <child> elements", TWO_CHILDREN.encode(), ("2 <child> elements",)),
+    ("two joints with one child link (the issue's case)", SECOND_JOINT.encode(), (":20", "'chassis_to_laser' (line 12) and 'laser_again'", "one parent")),
+    ("two joints of one name", SAME_NAME.encode(), ("a second joint named 'chassis_to_laser'",)),
+    ("a joint whose link is not declared", UNDECLARED.encode(), ("'front_wheel' is not declared",)),
+    ("an unexpanded xacro file", XACRO.encode(), ("xacro",)),
+    ("a xacro element in the URDF", XACRO_TAG.encode(), ("xacro:property", "run xacro")),
+    ("a root that is not <robot>", NOT_ROBOT.encode(), ("<sdf>", "<robot>")),
+]
+URDF_EDITED = [
+    ("an attribute whose value holds ' xyz=\"'", robot(origin=TRICK).encode(), b"<origin rpy=\"0.02 -0.05 0\" note="),
+    ("a UTF-8 byte order mark and CRLF lines", b"\xef\xbb\xbf" + robot().replace("\n", "\r\n").encode(), LASER_ORIGIN.encode()),
+    (
+        "a Latin-1 URDF with an accented comment",
+        robot(head='<?xml version="1.0" encoding="ISO-8859-1"?>\n<!-- caméra -->\n').encode("latin-1"),
+        LASER_ORIGIN.encode(),
+    ),
+    ("an origin written with an end tag", robot(origin='<origin xyz="1.2 0.05 0.4" rpy="0 0 0"></origin>').encode(), b'<origin xyz="1.2 0.05 0.4" rpy="0 0 0">'),
+    (
+        "a commented-out origin before the real one",
+        robot(origin=f'<!-- <origin xyz="7 7 7" rpy="0 0 0"/> -->\n    {LASER_ORIGIN}').encode(),
+        LASER_ORIGIN.encode(),
+    ),
+    (
+        "a transmission naming the sensor joint",
+        robot().replace("</robot>", TRANSMISSION + "</robot>").encode(),
+        LASER_ORIGIN.encode(),
+    ),
+]
+URDF_CASES = [
+    *((name, partial(urdf_refused, text, needles)) for name, text, needles in URDF_REFUSED),
+    *((name, partial(urdf_edited, text, marker)) for name, text, marker in URDF_EDITED),
+]
+
+
 # ----------------------------------------------------------------------------- the world
 
 
@@ -364,6 +515,7 @@ CORPUS: list[Case] = [
     Case(cls, name, build)
     for cls, cases in [
         ("code", _CODE),
+        ("urdf", URDF_CASES),
     ]
     for name, build in cases
 ]
