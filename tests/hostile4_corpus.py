@@ -13,6 +13,7 @@ the rules every case shares.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import re
@@ -29,7 +30,8 @@ from typing import Any
 import numpy as np
 import yaml
 from conftest import REPO
-from hostile3_corpus import DEADLINE_S, Outcome
+from hostile3_corpus import DEADLINE_S, Outcome, run_in_process
+from hostile3_corpus import judge as judge3
 from hostile3_corpus import Expect as Expect3
 
 from nlp_calib.codegen import compiler
@@ -42,9 +44,20 @@ HANDOFF = ("calibration.yaml", "ros2_control.yaml", "robot.urdf", "sensor_mount.
 
 @dataclass
 class Expect(Expect3):
-    """Round three's :class:`~hostile3_corpus.Expect`, and ``env``: variables a child runs with."""
+    """Round three's :class:`~hostile3_corpus.Expect`, and ``env``: variables a child runs with;
+    ``answers``: exit codes that are an answer, not an error (``check``'s DRIFTED and CANNOT TELL)."""
 
     env: dict[str, str] = field(default_factory=dict)
+    answers: tuple[int, ...] = (0,)
+
+
+def judge(expect: Expect, outcome: Outcome) -> None:
+    """Round three's rules, an exit code in ``expect.answers`` read as an answer (its needles in the
+    output), any other as an error (one line holding the needles)."""
+    if outcome.code in expect.answers and outcome.code != 0:
+        outcome = Outcome(0, outcome.out, outcome.err)
+        expect = dataclasses.replace(expect, codes=(0,))
+    judge3(expect, outcome)
 
 
 def run_child(argv: Sequence[str], cwd: Path | None, env: dict[str, str]) -> Outcome:
@@ -467,6 +480,83 @@ URDF_CASES = [
 ]
 
 
+# ----------------------------------------------------------------------------- check
+
+
+def stored_calibration(w: World) -> Path:
+    """``calibration.yaml`` of a run on the tricycle log through an absolute scenario path."""
+    return Path(w.extra["calibration"])
+
+
+def tampered(edit: Callable[[dict[str, Any]], None], w: World, tmp: Path) -> Path:
+    doc = yaml.safe_load(stored_calibration(w).read_text())
+    edit(doc)
+    path = tmp / "calibration.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def _set(key: str, name: str, value: Any) -> Callable[[dict[str, Any]], None]:
+    def edit(doc: dict[str, Any]) -> None:
+        doc[key][name] = value
+
+    return edit
+
+
+def check_refused(edit: Callable[[dict[str, Any]], None], needles: tuple[str, ...], w: World, tmp: Path) -> Expect:
+    cal = tampered(edit, w, tmp)
+    argv = ["check", str(cal), str(w.extra["fresh"]), "--out", str(tmp / "out")]
+    return Expect(argv, (2,), ("calibration.yaml", *needles), absent=(tmp / "out",))
+
+
+def relative_scenario(w: World, tmp: Path) -> Expect:
+    """A calibration recording its scenario as ``case.yaml`` (relative) checked from a folder that
+    holds another ``case.yaml`` (another formulation, a few samples): that file is not used."""
+    cal = tampered(lambda d: d["scenario"].update(path="case.yaml"), w, tmp)
+    (tmp / "case.yaml").write_text(f"dataset: {quoted(w.tricycle)}\nmodel: tricycle\nresidual: {{horizon: 1}}\nsamples: {{start: 0, stop: 40}}\n")
+    out = tmp / "out"
+
+    def whole(_: Outcome) -> None:
+        doc = json.loads((out / "result.json").read_text())
+        assert doc["residual"]["horizon"] == 10 and doc["dataset"]["used"][1] == 300, doc["residual"]
+
+    argv = ["check", str(cal), str(w.extra["fresh"]), "--out", str(out)]
+    needles = ("recorded relative to the folder it ran in",)
+    return Expect(argv, (0, 3, 4), needles, cwd=tmp, check=whole, answers=(0, 3, 4))
+
+
+def samples_on_a_new_log(same: bool, w: World, tmp: Path) -> Expect:
+    """A calibration made on records [50, 250) checked on a new log (whole, said) or the same log
+    (the same records)."""
+    out = tmp / "out"
+    log = w.tricycle if same else w.extra["fresh"]
+
+    def used(_: Outcome) -> None:
+        doc = json.loads((out / "result.json").read_text())
+        assert doc["dataset"]["used"] == ([50, 250] if same else [0, 300]), doc["dataset"]
+
+    needles = () if same else ("selects samples [50, 250)", "checked whole")
+    argv = ["check", str(w.extra["sampled"]), str(log), "--out", str(out)]
+    return Expect(argv, (0, 3, 4), needles, check=used, answers=(0, 3, 4))
+
+
+NOT_OURS = "give the calibration.yaml nlp_calib wrote"
+CHECK_CASES = [
+    ("a σ of 1e300 (the issue's case)", partial(check_refused, _set("std", "sensor_x", 1e300), ("std.sensor_x", "1e+300", NOT_OURS))),
+    ("a σ of ten turns", partial(check_refused, _set("std", "sensor_theta", 62.8), ("std.sensor_theta", "62.8"))),
+    ("a negative σ (the issue's case)", partial(check_refused, _set("std", "k_steer", -0.002), ("std.k_steer", "negative"))),
+    ("a negative white-noise σ", partial(check_refused, _set("std_white_noise", "axis_length", -1.0), ("std_white_noise.axis_length", "negative"))),
+    ("a σ that is not a number", partial(check_refused, _set("std", "k_traction", float("nan")), ("std.k_traction", "finite"))),
+    ("axis_length 1e300 (the issue's case)", partial(check_refused, _set("parameters", "axis_length", 1e300), ("parameters.axis_length", "1e+300"))),
+    ("a negative k_steer", partial(check_refused, _set("parameters", "k_steer", -0.55), ("parameters.k_steer",))),
+    ("a sensor_theta of 100 rad", partial(check_refused, _set("parameters", "sensor_theta", 100.0), ("parameters.sensor_theta",))),
+    ("a parameter given as text", partial(check_refused, _set("parameters", "sensor_x", "1.6 m"), ("parameters.sensor_x", "finite number"))),
+    ("a scenario path relative to another folder (the issue's case)", relative_scenario),
+    ("a recorded sample range on a new log (the issue's case)", partial(samples_on_a_new_log, False)),
+    ("a recorded sample range on the same log", partial(samples_on_a_new_log, True)),
+]
+
+
 # ----------------------------------------------------------------------------- the world
 
 
@@ -504,6 +594,12 @@ def make_world(folder: Path) -> World:
         assert proc.code == 0, proc.err
     w = World(folder, tricycle, diff_drive, load_log(tricycle, get_model("tricycle")), camera, truth, cache)
     w.extra["cache_scenario"] = cache_scenario
+    w.extra["fresh"] = write_sim(folder, "fresh.txt", records=300, seed=8)
+    for name, extra in (("calibration", ""), ("sampled", "samples: {start: 50, stop: 250}\n")):
+        sc = text_scenario(folder, tricycle, extra=extra, name=f"{name}.yaml")
+        outcome = run_in_process(["run", str(sc), "--out", str(folder / name)], folder)
+        assert outcome.code == 0, outcome.err
+        w.extra[name] = folder / name / "calibration.yaml"
     return w
 
 
@@ -516,6 +612,7 @@ CORPUS: list[Case] = [
     for cls, cases in [
         ("code", _CODE),
         ("urdf", URDF_CASES),
+        ("check", CHECK_CASES),
     ]
     for name, build in cases
 ]

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pytest
 from conftest import write_sim
-from hostile3_corpus import judge, run_in_process, snapshot
-from hostile4_corpus import CLASSES, CORPUS, Case, World, make_world, run_child
+from hostile3_corpus import run_in_process, snapshot
+from hostile4_corpus import CLASSES, CORPUS, Case, World, judge, make_world, run_child
 
 #: (class, name) -> seconds, filled as the cases run and reported by the last test.
 TIMINGS: dict[tuple[str, str], float] = {}

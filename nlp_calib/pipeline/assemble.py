@@ -6,6 +6,8 @@ one run per log, each with the joint estimates and checks beside that log's own 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import dataclasses
 from collections.abc import Mapping, Sequence
 
@@ -45,7 +47,7 @@ def scenario_info(sc: Scenario, model: KinematicModel) -> ScenarioInfo:
     joint = sc.data.joint
     return ScenarioInfo(
         name=sc.name,
-        path=None if sc.path is None else str(sc.path),
+        path=None if sc.path is None else str(Path(sc.path).absolute()),
         model=sc.model,
         units=_units(sc, model),
         headline=tuple(model.headline),
