@@ -480,6 +480,136 @@ URDF_CASES = [
 ]
 
 
+# ----------------------------------------------------------------------------- lost without a word
+
+
+def batch_case(names: Sequence[str], w: World, tmp: Path) -> Expect:
+    """``batch`` over logs named ``names`` (folders allowed): one folder each, each result the
+    log's own, one summary row each pointing at its own folder."""
+    logs = []
+    for k, name in enumerate(names):
+        path = tmp / "logs" / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(w.tricycle if k % 2 == 0 else w.extra["fresh"], path)
+        logs.append(path)
+    out = tmp / "out"
+
+    def one_each(_: Outcome) -> None:
+        import csv
+
+        rows = list(csv.DictReader((out / "summary.csv").open()))
+        assert len(rows) == len(logs), rows
+        folders = [r["folder"] for r in rows]
+        assert len({f.lower() for f in folders}) == len(logs), folders
+        for row in rows:
+            doc = json.loads((out / row["folder"] / "result.json").read_text())
+            assert Path(doc["dataset"]["path"]).resolve() == Path(row["source"]).resolve(), (row, doc["dataset"])
+        assert {Path(r["source"]).resolve() for r in rows} == {p.resolve() for p in logs}
+
+    argv = ["batch", str(tmp / "logs"), "--out", str(out), "--model", "tricycle", "--jobs", "1"]
+    if any("/" in n for n in names):
+        argv[1:2] = [str(p) for p in logs]
+    return Expect(argv, (0,), check=one_each)
+
+
+def _js_rows(w: World) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    from nlp_calib.logs.joint_log import read_joint_csv
+
+    table = read_joint_csv(w.camera_joints)
+    return table.names, table.time_ns, table.positions
+
+
+def radians_messages(edit: Callable[[int, int, tuple[str, ...], list[float]], Any], w: World) -> list[Any]:
+    """The camera recording as a bag's JointState (radians) and PoseStamped messages; ``edit(k, ns,
+    names, positions)`` returns JointState message ``k``'s ``(ns, names, positions)`` or None."""
+    from hostile3_corpus import pose_with_quaternion
+    from test_bags import JS, POSE, joint_state
+
+    from nlp_calib.logs.tum import read_tum
+
+    names, stamps, positions = _js_rows(w)
+    out = []
+    for k, (ns, row) in enumerate(zip(stamps.tolist(), positions.tolist())):
+        spec = edit(k, int(stamps[k - 1]) if k else ns, names, row) if edit is _repeated else edit(k, ns, names, row)
+        spec = spec or (ns, names, row)
+        out.append(("/joint_states", JS, ns, joint_state(spec[0], spec[1], spec[2])))
+    tum = read_tum(w.camera)
+    for ns, pose in zip(tum.time_ns.tolist(), tum.poses.tolist()):
+        out.append(("/camera/pose", POSE, ns + 1000, pose_with_quaternion(ns, pose[:2], pose[3:])))
+    return sorted(out, key=lambda m: m[2])
+
+
+def radians_import(edit: Callable[..., Any], codes: tuple[int, ...], needles: tuple[str, ...], rows: int | None, w: World, tmp: Path, *extra: str) -> Expect:
+    from test_bags import write_bag
+
+    bag = write_bag(tmp / "bag", "mcap", radians_messages(edit, w))
+    names = ",".join(CAMERA_ENCODERS.values())
+    argv = ["import-bag", str(bag), "--out", str(tmp / "j.csv"), "--model", "diff_drive", "--joint-states",
+            "/joint_states", "--joints", names, "--tracker", "/camera/pose", *extra]
+
+    def counted(_: Outcome) -> None:
+        if rows is not None:
+            data = [ln for ln in (tmp / "j.csv").read_text().splitlines()[1:] if ln.strip()]
+            assert len(data) == rows, len(data)
+            assert not any(ln.startswith("0.") for ln in data), data[:3]
+
+    return Expect(argv, codes, needles, check=counted)
+
+
+def _short(k: int, ns: int, names: tuple[str, ...], row: list[float]) -> Any:
+    return (ns, names, row[:1]) if k % 10 == 3 else None
+
+
+def _zero(k: int, ns: int, names: tuple[str, ...], row: list[float]) -> Any:
+    return (0, names, row) if k % 100 == 50 else None
+
+
+def _partial(k: int, ns: int, names: tuple[str, ...], row: list[float]) -> Any:
+    return (ns, names[:1], row[:1]) if k % 5 == 2 else None
+
+
+def _equal(k: int, ns: int, names: tuple[str, ...], row: list[float]) -> Any:
+    return (1_700_000_000 * 10**9, names, row)
+
+
+def _repeated(k: int, ns: int, names: tuple[str, ...], row: list[float]) -> Any:
+    return (ns, names, row) if k % 2 else None  # ns: the previous message's stamp
+
+
+def _robot(text: str | None, w: World, tmp: Path) -> Expect:
+    path = tmp / "robot.yaml"
+    if text is not None:
+        path.write_text(text)
+    if text is None:
+        return radians_import(lambda *a: None, (2,), ("robot.yaml",), None, w, tmp, "--robot", str(path))
+    return radians_import(lambda *a: None, (0,), (f"robot: {path}",), None, w, tmp, "--robot", str(path))
+
+
+N_JOINTS = 3100  # the camera recording's joint rows: 31 s at 100 Hz
+LOST_CASES = [
+    ("batch: 'a b.txt' and 'a_b.txt' (the issue's case)", partial(batch_case, ["a b.txt", "a_b.txt"])),
+    ("batch: 'ä.txt' and 'ö.txt' (the issue's case)", partial(batch_case, ["ä.txt", "ö.txt"])),
+    ("batch: '..x.txt' and 'x.txt' (the issue's case)", partial(batch_case, ["..x.txt", "x.txt"])),
+    ("batch: 'A.txt' and 'a.txt'", partial(batch_case, ["A.txt", "a.txt"])),
+    ("batch: d1/x.txt, d2/x.txt and d1_x.txt", partial(batch_case, ["d1/x.txt", "d2/x.txt", "d1_x.txt"])),
+    ("batch: a log named like the summary", partial(batch_case, ["summary.csv.txt", "summary.md.txt"])),
+    ("batch: three names that plain characters merge", partial(batch_case, ["r(1).txt", "r[1].txt", "r 1 .txt"])),
+    (
+        "radians bag: JointState arrays of mismatched length (the issue's case)",
+        partial(radians_import, _short, (0,), ("310 JointState messages whose position and name lists differ",), N_JOINTS - 310),
+    ),
+    ("radians bag: zero stamps among good ones (the issue's case)", partial(radians_import, _zero, (0,), ("31 messages stamped 0",), N_JOINTS - 31)),
+    (
+        "radians bag: a joint absent from some messages (the issue's case)",
+        partial(radians_import, _partial, (0,), ("620 JointState messages holding only some of the joints",), N_JOINTS - 620),
+    ),
+    ("radians bag: every stamp equal (the issue's case)", partial(radians_import, _equal, (2,), ("carry one header stamp", "receive"), None)),
+    ("radians bag: every other stamp repeated", partial(radians_import, _repeated, (0,), ("1550 messages repeating",), N_JOINTS - 1550)),
+    ("import-bag --robot a missing file, joints in radians (the issue's case)", partial(_robot, None)),
+    ("import-bag --robot, joints in radians", partial(_robot, "initial_guess: {left_wheel_radius: 0.1, right_wheel_radius: 0.1, wheel_separation: 0.45}\n")),
+]
+
+
 # ----------------------------------------------------------------------------- check
 
 
@@ -613,6 +743,7 @@ CORPUS: list[Case] = [
         ("code", _CODE),
         ("urdf", URDF_CASES),
         ("check", CHECK_CASES),
+        ("lost", LOST_CASES),
     ]
     for name, build in cases
 ]

@@ -228,6 +228,11 @@ def joint_files(path: str | Path, topics: BagTopics) -> tuple[str, str, str]:
     summary = (
         f"{joint_ns.size} joint messages{velocity} and {int(first.sum())} tracker poses, each on its clock"
     )
+    drops = Drops({**joints.drops.counts, **tracker.drops.counts})
+    if drops.counts:
+        summary += f"; not used as they were: {drops.describe()}"
+    if drops.worrying:
+        warnings.warn(f"{p}: {drops.describe()}", NlpCalibWarning, stacklevel=2)
     return (
         format_joint_csv(joint_ns, topics.joints, positions),
         format_tum(ts[first], poses[:, [0, 1, 3, 4, 5, 6, 7]]),
