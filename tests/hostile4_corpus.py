@@ -329,6 +329,198 @@ if os.geteuid() == 0:  # only root can give a file to another user
     ]
 
 
+# ----------------------------------------------------------------------------- wrong but well-fitting
+
+
+def _tum_rows(path: Path) -> list[list[str]]:
+    return [ln.split() for ln in path.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+
+
+def _csv_rows(path: Path) -> tuple[str, list[list[str]]]:
+    lines = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+    return lines[0], [ln.split(",") for ln in lines[1:]]
+
+
+def _later(stamp: str, seconds: float) -> str:
+    return str(Decimal(stamp) + Decimal(repr(seconds)))
+
+
+def recording(
+    w: World,
+    tmp: Path,
+    tum: Callable[[list[list[str]]], list[list[str]]] = lambda r: r,
+    joints: Callable[[list[list[str]]], list[list[str]]] = lambda r: r,
+) -> tuple[Path, Path]:
+    """The camera recording, its TUM rows and joint rows edited, written into ``tmp``."""
+    head, rows = _csv_rows(w.camera_joints)
+    (tmp / "cam.tum").write_text("".join(" ".join(r) + "\n" for r in tum(_tum_rows(w.camera))))
+    (tmp / "cam.joints.csv").write_text(head + "\n" + "".join(",".join(r) + "\n" for r in joints(rows)))
+    return tmp / "cam.tum", tmp / "cam.joints.csv"
+
+
+def _column(j: int, f: Callable[[float], float]) -> Callable[[list[list[str]]], list[list[str]]]:
+    def edit(rows: list[list[str]]) -> list[list[str]]:
+        return [[*r[:j], repr(f(float(r[j]))), *r[j + 1 :]] for r in rows]
+
+    return edit
+
+
+def _both(f: Callable[[float], float]) -> Callable[[list[list[str]]], list[list[str]]]:
+    return lambda rows: _column(2, f)(_column(1, f)(rows))
+
+
+def _w_first(rows: list[list[str]]) -> list[list[str]]:
+    return [[*r[:4], r[7], *r[4:7]] for r in rows]
+
+
+def _cut(t0: float, t1: float) -> Callable[[list[list[str]]], list[list[str]]]:
+    def edit(rows: list[list[str]]) -> list[list[str]]:
+        first = float(rows[0][0])
+        return [r for r in rows if not t0 <= float(r[0]) - first < t1]
+
+    return edit
+
+
+def _shifted(seconds: float) -> Callable[[list[list[str]]], list[list[str]]]:
+    return lambda rows: [[_later(r[0], seconds), *r[1:]] for r in rows]
+
+
+def not_good(out: Path, outcome: Outcome) -> None:
+    """Refused, or a verdict other than GOOD with no hand-off file."""
+    if outcome.code == 2:
+        return
+    doc = json.loads((out / "result.json").read_text())
+    assert doc["verdict"]["level"] != "good", doc["verdict"]
+    written = [n for n in HANDOFF if (out / n).exists()]
+    assert not written, f"hand-off written for a wrong calibration: {written}"
+
+
+def right_answer(out: Path, truth: dict[str, float], _: Outcome) -> None:
+    """Every parameter within 4σ of the truth (and the σ believable: under 1 cm, 1 %, 0.01 rad)."""
+    doc = json.loads((out / "result.json").read_text())
+    g = doc["solvers"]["gauss_newton"]
+    off = {n: (g["params"][n] - truth[n]) / g["std"][n] for n in g["params"] if g["std"][n]}
+    assert all(abs(z) < 4.0 for z in off.values()), off
+
+
+def camera_case(
+    edit: dict[str, Any], outcome: str, needles: tuple[str, ...], w: World, tmp: Path
+) -> Expect:
+    """The camera recording with ``edit`` (TUM rows, joint rows, encoders), run: ``outcome`` is
+    ``wrong`` (refused or not GOOD, naming ``needles``) or ``right`` (within 4σ, saying ``needles``)."""
+    tum, joints = recording(w, tmp, edit.get("tum", lambda r: r), edit.get("joints", lambda r: r))
+    sc = camera_scenario(tmp, tum, joints, encoders=edit.get("encoders"), extra=edit.get("extra", ""))
+    out = tmp / "out"
+    argv = ["run", str(sc), "--out", str(out)]
+    if outcome == "wrong":
+        return Expect(argv, (0, 1, 2), needles, check=partial(not_good, out), answers=(0, 1))
+    return Expect(argv, (0,), needles, check=partial(right_answer, out, w.camera_truth))
+
+
+def clock_case(edit: dict[str, Any], shift: float, w: World, tmp: Path) -> Expect:
+    """Streams stamped seconds apart: refused, saying the shift to add to clock_offset (to 0.1 s:
+    the tracker lag refines what remains; the recording's images are stamped 10 ms late)."""
+    expect = camera_case(edit, "wrong", ("clock_offset", "late, which pairs poses with the wrong joints"), w, tmp)
+    expect.codes, expect.answers = (2,), (0,)
+
+    def said(outcome: Outcome) -> None:
+        found = re.search(r"add ([+-][0-9.]+) s to clock_offset", outcome.err)
+        assert found is not None and abs(float(found[1]) - shift) <= 0.1, outcome.err
+
+    expect.check = said
+    return expect
+
+
+def text_case(
+    model: str,
+    edit: Callable[[list[str]], list[str]],
+    outcome: str,
+    needles: tuple[str, ...],
+    w: World,
+    tmp: Path,
+    extra: str = "",
+) -> Expect:
+    """A simulated text log (counts) with its record lines edited by ``edit``."""
+    src = w.tricycle if model == "tricycle" else w.diff_drive
+    lines = src.read_text().splitlines()
+    head = [ln for ln in lines if ln.startswith("#")]
+    body = [ln for ln in lines if ln.strip() and not ln.startswith("#")]
+    log = tmp / "drive.txt"
+    log.write_text("\n".join(head + edit(body)) + "\n")
+    sc = text_scenario(tmp, log, model=model, extra=extra)
+    out = tmp / "out"
+    argv = ["run", str(sc), "--out", str(out)]
+    if outcome == "wrong":
+        return Expect(argv, (0, 1, 2), needles, check=partial(not_good, out), answers=(0, 1))
+    truth = json.loads(src.with_suffix(".truth.json").read_text())["params"]
+    return Expect(argv, (0,), needles, check=partial(right_answer, out, truth))
+
+
+def _ticks(j: int, f: Callable[[int], int]) -> Callable[[list[str]], list[str]]:
+    """Record lines with encoder column ``j`` mapped by ``f``."""
+
+    def edit(body: list[str]) -> list[str]:
+        out = []
+        for ln in body:
+            parts = ln.split()
+            at = parts.index("ticks:") + 1 + j
+            parts[at] = str(f(int(parts[at])))
+            out.append(" ".join(parts))
+        return out
+
+    return edit
+
+
+def _drop_seconds(t0: float, t1: float) -> Callable[[list[str]], list[str]]:
+    def edit(body: list[str]) -> list[str]:
+        first = float(body[0].split()[1])
+        return [ln for ln in body if not t0 <= float(ln.split()[1]) - first < t1]
+
+    return edit
+
+
+REVERSED = lambda t: (-t) % (1 << 32)  # noqa: E731 (a counter counting backwards)
+DEG = float(np.degrees(1.0))
+VERDICT_CASES = [
+    ("the camera recording as it is (a control)", partial(camera_case, {}, "right", ())),
+    ("a right wheel joint with the opposite sign (the issue's case)", partial(camera_case, {"joints": _column(2, lambda v: -v)}, "wrong", ("counts backwards",))),
+    ("a left wheel joint with the opposite sign", partial(camera_case, {"joints": _column(1, lambda v: -v)}, "wrong", ("counts backwards",))),
+    ("both wheel joints with the opposite sign (the issue's case)", partial(camera_case, {"joints": _both(lambda v: -v)}, "wrong", ("upside down",))),
+    (
+        "the left and right joints swapped (the issue's case)",
+        partial(camera_case, {"encoders": {"left_wheel": "right_wheel_joint", "right_wheel": "left_wheel_joint"}}, "wrong", ("upside down",)),
+    ),
+    ("joints logged in degrees (the issue's case)", partial(camera_case, {"joints": _both(lambda v: v * DEG)}, "wrong", ("degrees",))),
+    (
+        "joints logged in degrees, the right one reversed",
+        partial(camera_case, {"joints": lambda r: _column(2, lambda v: -v)(_both(lambda v: v * DEG)(r))}, "wrong", ("counts backwards",)),
+    ),
+    ("TUM quaternions written w x y z (the issue's case)", partial(camera_case, {"tum": _w_first}, "wrong", ("cam.tum", "qw qx qy qz", "w to the end"))),
+    ("the camera losing tracking for 5 s (the issue's case)", partial(camera_case, {"tum": _cut(12.0, 17.0)}, "right", ("gap",))),
+    ("the joints missing for 5 s (the issue's case)", partial(camera_case, {"joints": _cut(12.0, 17.0)}, "right", ("gap",))),
+    ("the camera losing tracking twice for 2 s", partial(camera_case, {"tum": lambda r: _cut(20.0, 22.0)(_cut(6.0, 8.0)(r))}, "right", ("2 gap(s)",))),
+    ("camera stamps 15 s late (the issue's case)", partial(clock_case, {"tum": _shifted(15.0)}, 15.01)),
+    ("camera stamps 6 s early", partial(clock_case, {"tum": _shifted(-6.0)}, -5.99)),
+    ("joint stamps 10 s late", partial(clock_case, {"joints": _shifted(10.0)}, -9.99)),
+    ("a diff drive's right counter counting backwards", partial(text_case, "diff_drive", _ticks(1, REVERSED), "wrong", ("counts backwards",))),
+    (
+        "a diff drive's left and right counters swapped, started from the data",
+        partial(text_case, "diff_drive", lambda b: _swap_ticks(b), "wrong", ("negative", "swapped"), extra="initial_guess: auto\n"),
+    ),
+    ("a tricycle log with 2 s of records missing", partial(text_case, "tricycle", _drop_seconds(4.0, 6.0), "right", ("gap",))),
+]
+
+
+def _swap_ticks(body: list[str]) -> list[str]:
+    out = []
+    for ln in body:
+        parts = ln.split()
+        at = parts.index("ticks:") + 1
+        parts[at], parts[at + 1] = parts[at + 1], parts[at]
+        out.append(" ".join(parts))
+    return out
+
+
 # ----------------------------------------------------------------------------- --urdf
 
 ROBOT = """<?xml version="1.0"?>
@@ -741,6 +933,7 @@ CORPUS: list[Case] = [
     Case(cls, name, build)
     for cls, cases in [
         ("code", _CODE),
+        ("verdicts", VERDICT_CASES),
         ("urdf", URDF_CASES),
         ("check", CHECK_CASES),
         ("lost", LOST_CASES),

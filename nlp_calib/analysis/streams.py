@@ -42,6 +42,18 @@ MIN_STUCK = 3
 CATCH_UP_FACTOR = 2.5
 #: Groups scored at once in the first pass over a stream.
 FIRST_PASS_BLOCK = 8192
+#: An interval between records longer than this many times their median interval is a gap in a
+#: stream (the tracker lost, the joints missing): one arc of the model cannot span it.
+GAP_FACTOR = 5.0
+
+
+def time_gaps(time_s: np.ndarray) -> np.ndarray:
+    """The intervals (``k`` joins records ``k`` and ``k + 1``) longer than :data:`GAP_FACTOR` times
+    the median interval: a stream's gap, which no window may cross."""
+    dt = np.diff(np.asarray(time_s, dtype=float))
+    if dt.size == 0:
+        return np.zeros(0, dtype=bool)
+    return dt > GAP_FACTOR * float(np.median(dt))
 
 
 def robust_sigma(x: np.ndarray) -> float:

@@ -3,7 +3,10 @@
 The rules a reader can check:
 
 - **not determined**, and no hand-off file written: the estimate cannot be a real robot of its
-  kind although it fits the data (a mirror image, e.g. swapped wheel encoders; the model says);
+  kind although it fits the data: a mirror image (e.g. swapped wheel encoders, one wheel counting
+  backwards; the model says), a 3-D sensor's mount upside down that no given mount asked for (what
+  reversed or swapped joints give a camera), or a parameter outside what the model can have (a
+  wheel's radius of millimetres: joints logged in degrees);
 - **not determined**: no solver converged, or the drive leaves a parameter undetermined (its σ
   is infinite, or a direction of the information matrix is beyond
   :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` reference units);
@@ -26,6 +29,7 @@ import numpy as np
 
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.base import reference_scale
+from nlp_calib.models.mount import mirrored_mount
 from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
@@ -85,11 +89,34 @@ def _fitted_start(run: CalibrationRun) -> bool:
     return run.scenario.initial_guess == "auto"
 
 
+def implausible(run: CalibrationRun, solver: str, model: KinematicModel) -> str:
+    """Why ``solver``'s estimate cannot be the robot although it fits the data: a mirror image
+    (the model's, or a 3-D mount's upside down) or a parameter outside what the model can have;
+    "" when it can be."""
+    params = run.reports[solver].result.param_dict()
+    if mirror := model.implausible(params):
+        return mirror
+    if run.scenario.sensor_3d:
+        given = None if _fitted_start(run) else run.initial
+        if mirror := mirrored_mount(params, given):
+            return mirror
+    for name in model.kinematic_params:
+        lo, hi = model.physical_ranges.get(name, (-np.inf, np.inf))
+        if name in params and not lo <= params[name] <= hi:
+            unit = run.scenario.units.get(name, "")
+            return (
+                f"{name} came out {params[name]:.4g} {unit}, outside what a {model.name} can have "
+                f"([{lo:g}, {hi:g}]): are the encoders (or joints) the scenario names the right ones, in "
+                "the units it says?"
+            )
+    return ""
+
+
 def verdict(run: CalibrationRun, model: KinematicModel, hint: str = "") -> Verdict:
     """The run's verdict and why (see the module's rules); ``hint``: what the data source says of
     a mirror image's likely cause (e.g. the joints' order it was given)."""
     solver = run.chosen_solver()
-    if solver is not None and (mirror := model.implausible(run.reports[solver].result.param_dict())):
+    if solver is not None and (mirror := implausible(run, solver, model)):
         return Verdict(UNDETERMINED, (mirror + hint,), handoff=False)
     obs = run.checks.observability
     loose = [w.words() for w in obs.weak if w.std_reference > NOT_OBSERVABLE] if obs is not None else []

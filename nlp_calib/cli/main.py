@@ -61,6 +61,8 @@ def _run(argv: list[str]) -> int:
         args = build_parser().parse_args(argv)
         with warnings.catch_warnings():
             warnings.simplefilter("always")
+            # A library's own warnings (numpy's floating point, say) once each, not once per call.
+            warnings.simplefilter("default", RuntimeWarning)
             # A file an interrupted import left open is Python's business, not the user's.
             warnings.simplefilter("ignore", ResourceWarning)
             warnings.showwarning = _show_warning

@@ -20,7 +20,7 @@ from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, Reference, Symmetry, named, rows_by_name
 from nlp_calib.models.drives import Pose, SimulationSettings, counter, drive_header, first_order, running
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
-from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
+from nlp_calib.models.radians import WHEEL_RADIUS, InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
 
 LEFT_ENCODER = "left_wheel"
@@ -34,8 +34,8 @@ _SIM_CURVATURE = 1.5
 RADIANS = RadiansForm(
     params=MappingProxyType(
         {
-            "k_left": Renamed("left_wheel_radius", "m"),
-            "k_right": Renamed("right_wheel_radius", "m"),
+            "k_left": Renamed("left_wheel_radius", "m", plausible=WHEEL_RADIUS),
+            "k_right": Renamed("right_wheel_radius", "m", plausible=WHEEL_RADIUS),
             "baseline": Renamed("wheel_separation", "m"),
         }
     ),
@@ -217,8 +217,18 @@ class DiffDrive:
 
     def implausible(self, params: Mapping[str, float]) -> str:
         """Both wheel gains negative: the mirror image of the robot, which fits a log whose left and
-        right encoders are swapped exactly (the sensor then faces backwards)."""
-        if params["k_left"] >= 0 or params["k_right"] >= 0:
+        right encoders are swapped exactly (the sensor then faces backwards). One negative: that
+        wheel's encoder counts backwards (a joint whose axis is mirrored, as URDFs often have it)."""
+        negative = [n for n in ("k_left", "k_right") if params[n] < 0]
+        if len(negative) == 1:
+            name = negative[0]
+            side = name.removeprefix("k_")
+            return (
+                f"{name} came out negative ({params[name]:.3g}) and the other wheel's positive: the "
+                f"{side} wheel's encoder counts backwards (its joint's axis mirrored, as URDFs often give "
+                f"one side's wheel, or the motor wired the other way); negate its readings ({side} wheel)"
+            )
+        if len(negative) < 2:
             return ""
         facing = "backwards" if abs(wrap_angle(params["sensor_theta"])) > np.pi / 2 else "forwards"
         return (

@@ -95,10 +95,13 @@ class StartingPoint:
     upper: np.ndarray | None
 
 
-def auto_guess(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int) -> dict[str, float]:
-    """The model's closed-form estimate from the windows of records ``start:stop`` (no guess needed)."""
+def auto_guess(
+    sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int, gaps: np.ndarray | None = None
+) -> dict[str, float]:
+    """The model's closed-form estimate from the windows of records ``start:stop`` that cross no
+    gap (no guess needed)."""
     residual = sc.objective.residual
-    data = build_residual_data(fns, log.select(start, stop), residual)
+    data = build_residual_data(fns, log.select(start, stop), residual, bad_intervals=_within(gaps, start, stop))
     rows = fns.n_inputs * data.horizon
     # Windows overlapping by three quarters carry nearly all the information at a fraction
     # of the cost of every window.
@@ -137,16 +140,26 @@ def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.nda
     return lower, upper
 
 
-def starting_point(sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int) -> StartingPoint:
-    """Initial values (header, scenario, or ``auto`` from records ``start:stop``) and bounds."""
+def _within(mask: np.ndarray | None, start: int, stop: int) -> np.ndarray | None:
+    """A per-interval mask of the whole log over the intervals of records ``start:stop``."""
+    return None if mask is None else mask[start : stop - 1]
+
+
+def starting_point(
+    sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int, gaps: np.ndarray | None = None
+) -> StartingPoint:
+    """Initial values (header, scenario, or ``auto`` from the windows of records ``start:stop``
+    that cross no gap) and bounds."""
     initial = initial_parameters(sc, fns.model, log)
     auto, camera = None, None
     if sc.parameters.initial_guess == "auto" and sc.objective.sensor.is_3d:
-        data = build_residual_data(fns, log.select(start, stop), sc.objective.residual)
+        data = build_residual_data(
+            fns, log.select(start, stop), sc.objective.residual, bad_intervals=_within(gaps, start, stop)
+        )
         camera = camera_guess(sc, fns, data, initial)
         auto = camera.params
     elif sc.parameters.initial_guess == "auto":
-        auto = auto_guess(sc, fns, log, start, stop)
+        auto = auto_guess(sc, fns, log, start, stop, gaps)
     if auto is not None:
         initial.update({n: v for n, v in auto.items() if n not in sc.parameters.fixed})
     if camera is None and sc.objective.sensor.is_3d:
@@ -210,6 +223,14 @@ class Binder:
     #: A 3-D sensor's start: windows whose rotation axis is off its floor normal, or that turn
     #: against the wheels, are left out (``FIT_REASONS``).
     camera: CameraStart | None = None
+    #: Per interval of the whole log: gaps in time, which no window crosses whatever the faults.
+    gaps: np.ndarray | None = None
+
+    def crossing(self) -> np.ndarray | None:
+        """The intervals no window may cross: the faults' and the gaps."""
+        if self.gaps is None or self.bad_intervals is None:
+            return self.bad_intervals if self.gaps is None else self.gaps
+        return self.bad_intervals | self.gaps
 
     def windows(self, log: Log, start: int, stop: int) -> ResidualData:
         """The residual windows of records ``start:stop`` of ``log`` (those the masks allow)."""
@@ -219,7 +240,7 @@ class Binder:
             log.select(start, stop),
             sc.objective.residual,
             drop_stationary=sc.log.samples.drop_stationary,
-            bad_intervals=None if self.bad_intervals is None else self.bad_intervals[start : stop - 1],
+            bad_intervals=_within(self.crossing(), start, stop),
             bad_records=None if self.bad_records is None else self.bad_records[start:stop],
         )
         if self.camera is not None and data.n_residuals:
@@ -322,13 +343,15 @@ def build_stage(
     start_from: tuple[Log, int, int],
     solvers: Sequence[str],
     n_records: int,
+    gaps: np.ndarray | None = None,
 ) -> Problem:
     """Build the Functions (``held`` parameters fixed), start from the records ``start_from`` (a log
-    and a range), get the backend ready for ``solvers`` over ``n_records`` and weigh the priors."""
+    and a range), get the backend ready for ``solvers`` over ``n_records`` and weigh the priors;
+    no window crosses ``gaps`` (per interval of the log)."""
     fns = build_problem(sc, model, tuple(held))
     log, start, stop = start_from
-    point = starting_point(sc, fns, log, start, stop)
+    point = starting_point(sc, fns, log, start, stop, gaps)
     backend = prepare_backend(sc, fns, solvers, n_records)
-    binder = Binder(sc, fns, backend, point.x_fixed, no_priors(fns.n_free), camera=point.camera)
+    binder = Binder(sc, fns, backend, point.x_fixed, no_priors(fns.n_free), camera=point.camera, gaps=gaps)
     priors, _ = weigh_priors(binder, log, start, stop, point.x0)
     return Problem(fns, point, replace(binder, priors=priors))

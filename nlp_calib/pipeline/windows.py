@@ -61,6 +61,8 @@ def bind_windows(
     report = screening.findings.report
     # Every detected fault shapes the fair figures, whatever the handling: like with like.
     bad_intervals, bad_records = fault_masks(report, log.n_records, alignment.lag_s, dt)
+    if prepared.gaps is not None:  # dead reckoning restarts after a gap, as after a fault
+        bad_intervals = bad_intervals | prepared.gaps
     if report.unchecked:
         warnings.warn(f"encoder faults not checked: {report.unchecked}", NlpCalibWarning, stacklevel=3)
     start, stop = max(prepared.start, alignment.valid[0]), min(prepared.stop, alignment.valid[1])

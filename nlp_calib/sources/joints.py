@@ -28,7 +28,8 @@ from nlp_calib.logs.bag_joints import timed_by_tracker
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, MAX_GAP, Stamped
 from nlp_calib.logs.joint_log import read_joint_csv
 from nlp_calib.logs.log import frozen
-from nlp_calib.logs.tum import read_tum
+from nlp_calib.logs.screens import quaternion_order
+from nlp_calib.logs.tum import Trajectory3D, read_tum
 from nlp_calib.models import KinematicModel, encoders
 from nlp_calib.models.radians import in_units
 from nlp_calib.sources.base import file_identity
@@ -87,12 +88,27 @@ class JointLogSource:
         velocities = np.full(positions.shape, np.nan)
         joints = Stamped(table.path, table.time_ns + shift, np.hstack([positions, velocities]))
         poses = read_tum(self.poses)
+        self._check_order(poses)
         self._check_overlap(joints.stamp_ns, poses.time_ns)
         tracker = Stamped(str(self.poses), poses.time_ns, poses.planar_and_3d())
         robot = load_robot(self.robot, model) if self.robot is not None else None
         header = robot_header(model, robot, None)
         log = timed_by_tracker(self.joints, joints, tracker, names, self.max_gap, header)
         return replace(log, line_numbers=frozen(poses.line_numbers[log.line_numbers - 1]))
+
+    def _check_order(self, poses: Trajectory3D) -> None:
+        """Refuse quaternions written ``w`` first (:func:`~nlp_calib.logs.screens.quaternion_order`)."""
+        found = quaternion_order(poses.time_s, poses.poses)
+        if found is not None:
+            read, w_first = found
+            raise DatasetError(
+                str(self.poses),
+                None,
+                f"its quaternions look written 'qw qx qy qz': read as TUM's 'qx qy qz qw', {100 * read:.0f} % of "
+                f"the sensor's rotation is about the normal of the plane its positions lie in, read w first "
+                f"{100 * w_first:.0f} %; "
+                "a TUM line is 'timestamp tx ty tz qx qy qz qw': move each line's w to the end",
+            )
 
     def _check_overlap(self, joint_ns: np.ndarray, pose_ns: np.ndarray) -> None:
         """Refuse files whose times do not overlap, in this block's words (a bag's are the topics')."""
