@@ -511,6 +511,59 @@ VERDICT_CASES = [
 ]
 
 
+def other_camera(
+    which: str, edit: dict[str, Any], outcome: str, needles: tuple[str, ...], w: World, tmp: Path
+) -> Expect:
+    """Another simulated camera of the world (``tricycle``: on a tricycle; ``upside_down``: a
+    camera whose image is upside down), edited and run as :func:`camera_case` runs the first."""
+    tum_src, truth, extra = w.extra[which]
+    joints_src = tum_src.with_suffix(".joints.csv")
+    head, rows = _csv_rows(joints_src)
+    (tmp / "cam.tum").write_text("".join(" ".join(r) + "\n" for r in edit.get("tum", lambda r: r)(_tum_rows(tum_src))))
+    (tmp / "cam.joints.csv").write_text(head + "\n" + "".join(",".join(r) + "\n" for r in edit.get("joints", lambda r: r)(rows)))
+    model = "tricycle" if which == "tricycle" else "diff_drive"
+    encoders = {"steering": "steering_joint", "traction_wheel": "traction_wheel_joint"} if model == "tricycle" else None
+    sc = camera_scenario(tmp, tmp / "cam.tum", tmp / "cam.joints.csv", extra=extra + edit.get("extra", ""), encoders=encoders)
+    text = sc.read_text().replace("model: diff_drive", f"model: {model}")
+    sc.write_text(text.replace("initial_guess: auto\n", "", 1) if "initial_guess" in edit.get("extra", "") else text)
+    out = tmp / "out"
+    argv = ["run", str(sc), "--out", str(out)]
+    if outcome == "wrong":
+        return Expect(argv, (0, 1, 2), needles, check=partial(not_good, out), answers=(0, 1))
+    return Expect(argv, (0,), needles, check=partial(right_answer, out, truth))
+
+
+def optitrack_w_first(w: World, tmp: Path) -> Expect:
+    """A real run (OptiOdom's differential drive under OptiTrack) with its TUM written w first."""
+    run = REAL_RUN.with_suffix(".tum")
+    rows = _tum_rows(run)
+    (tmp / "run.tum").write_text("".join(" ".join(r) + "\n" for r in _w_first(rows)))
+    shutil.copy(REAL_RUN.with_suffix(".csv"), tmp / "run.csv")
+    sc = camera_scenario(tmp, tmp / "run.tum", tmp / "run.csv").read_text()
+    sc = sc.replace("sensor: 3d\n", "").replace("known: {sensor_z: 0.30}\n", "")
+    (tmp / "cam.yaml").write_text(sc)
+    needles = ("run.tum", "qw qx qy qz", "w to the end")
+    return Expect(["run", str(tmp / "cam.yaml"), "--out", str(tmp / "out")], (2,), needles)
+
+
+REAL_RUN = Path("/work/shared/data/real4/optiodom/diff/circular/231220200134/231220200134_run-01.csv")
+OTHER_CAMERAS = [
+    (
+        "a tricycle's steering joint logged in degrees",
+        partial(other_camera, "tricycle", {"joints": _column(2, lambda v: v * DEG)}, "wrong", ("steering", "degrees")),
+    ),
+    ("a tricycle's joints logged in degrees", partial(other_camera, "tricycle", {"joints": _both(lambda v: v * DEG)}, "wrong", ("degrees",))),
+    ("a tricycle camera as it is (a control)", partial(other_camera, "tricycle", {}, "right", ())),
+    (
+        "a camera mounted upside down, its mount given (a control)",
+        partial(other_camera, "upside_down", {"extra": "initial_guess: {sensor_roll: 1.05, sensor_pitch: -0.05, sensor_yaw: -1.57, sensor_x: 0.25, sensor_y: 0.06, sensor_z: 0.3, left_wheel_radius: 0.1, right_wheel_radius: 0.1, wheel_separation: 0.45}\n"}, "right", ()),
+    ),
+    ("a camera mounted upside down, nothing said of it", partial(other_camera, "upside_down", {}, "wrong", ("upside down", "initial guess"))),
+]
+if REAL_RUN.is_file():
+    OTHER_CAMERAS.append(("a real OptiTrack TUM written w x y z", optitrack_w_first))
+
+
 def _swap_ticks(body: list[str]) -> list[str]:
     out = []
     for ln in body:
@@ -905,10 +958,21 @@ def make_world(folder: Path) -> World:
         stamp_offset_s=0.01,
         noise=CameraNoise(position=0.001, rotation=0.0017),
     )
-    sim = simulate_camera(options)
-    camera, _, _ = write_camera_simulation(sim, folder / "cam.tum")
-    names = {"k_left": "left_wheel_radius", "k_right": "right_wheel_radius", "baseline": "wheel_separation"}
-    truth = {names.get(n, n): float(v) for n, v in sim.truth.items()}
+    names = {
+        "k_left": "left_wheel_radius",
+        "k_right": "right_wheel_radius",
+        "baseline": "wheel_separation",
+        "axis_length": "wheelbase",
+    }
+    cameras = {}
+    for name, model, mount in (("cam", "diff_drive", {}), ("tricycle", "tricycle", {}), ("upside_down", "diff_drive", {"sensor_roll": float(np.radians(60.0))})):
+        sim = simulate_camera(dataclasses.replace(options, model=model, truth=mount))
+        tum, _, _ = write_camera_simulation(sim, folder / f"{name}.tum")
+        truth = {names.get(n, n): float(v) for n, v in sim.truth.items()}
+        if model == "tricycle":
+            truth["wheel_radius"] = truth.pop("k_traction") / (2 * np.pi)
+        cameras[name] = (tum, truth, "")
+    camera, truth = cameras["cam"][0], cameras["cam"][1]
     cache = folder / "cache"
     cache_scenario = text_scenario(folder, tricycle, name="cached.yaml")
     if has_compiler():
@@ -916,6 +980,7 @@ def make_world(folder: Path) -> World:
         assert proc.code == 0, proc.err
     w = World(folder, tricycle, diff_drive, load_log(tricycle, get_model("tricycle")), camera, truth, cache)
     w.extra["cache_scenario"] = cache_scenario
+    w.extra.update(cameras)
     w.extra["fresh"] = write_sim(folder, "fresh.txt", records=300, seed=8)
     for name, extra in (("calibration", ""), ("sampled", "samples: {start: 50, stop: 250}\n")):
         sc = text_scenario(folder, tricycle, extra=extra, name=f"{name}.yaml")
@@ -933,7 +998,7 @@ CORPUS: list[Case] = [
     Case(cls, name, build)
     for cls, cases in [
         ("code", _CODE),
-        ("verdicts", VERDICT_CASES),
+        ("verdicts", [*VERDICT_CASES, *OTHER_CAMERAS]),
         ("urdf", URDF_CASES),
         ("check", CHECK_CASES),
         ("lost", LOST_CASES),

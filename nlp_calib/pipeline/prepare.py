@@ -91,13 +91,32 @@ def select(sc: Scenario, log: Log, model: KinematicModel | None = None) -> tuple
         raise ScenarioError(f"{sc.path or sc.name}: samples: [{start}, {stop}) exceeds the log's {n} records")
     check_windows(sc, start, stop)
     if model is not None:
-        check_moving(sc, model, log.select(start, stop))
+        check_readings(sc, model, log.select(start, stop))
     return start, stop
 
 
-def check_moving(sc: Scenario, model: KinematicModel, log: Log) -> None:
-    """Refuse a wheel's counter (or joint) that never changes while the tracker travels: the wrong
-    encoder or joint named, or a driver that did not publish it; no fit can say more."""
+def check_readings(sc: Scenario, model: KinematicModel, log: Log) -> None:
+    """Refuse readings no fit can use: a steering joint (an angle) that spans more than a turn
+    (logged in degrees), and a wheel's counter (or joint) that never changes while the tracker
+    travels (the wrong encoder or joint named, or a driver that did not publish it)."""
+    if log.joint_positions is not None:
+        for name, kind in model.encoder_kinds.items():
+            if kind == "absolute" and name in log.header.encoder_names:
+                angle = log.joint_position(name)
+                span = float(np.max(angle) - np.min(angle))
+                if span > 2.0 * np.pi:
+                    raise DatasetError(
+                        str(sc.log.source.path),
+                        None,
+                        f"the joint read as {name} (an angle) spans {span:.3g} rad, more than a turn: it "
+                        f"looks logged in degrees ({span:.3g}° would be {np.radians(span):.3g} rad); ROS "
+                        "publishes radians (REP 103): convert the joints (× π/180)",
+                    )
+    check_moving(model, log, str(sc.log.source.path))
+
+
+def check_moving(model: KinematicModel, log: Log, path: str) -> None:
+    """Refuse a wheel's counter (or joint) that never changes while the tracker travels."""
     track = np.asarray(log.T_world_sensor, dtype=float)
     travel = float(np.sum(np.linalg.norm(np.diff(track[:, :2], axis=0), axis=1)))
     turn = float(np.sum(np.abs(np.diff(np.unwrap(track[:, 2])))))
@@ -112,7 +131,7 @@ def check_moving(sc: Scenario, model: KinematicModel, log: Log) -> None:
             what = f"the joint read as {name}" if radians else f"encoder {name}"
             key = "dataset.encoders" if radians else "the log's header and columns"
             raise DatasetError(
-                str(sc.log.source.path),
+                path,
                 None,
                 f"{what} reads {float(values[0]):g} in all {log.n_records} records while the tracker travels "
                 f"{travel:.2f} m and turns {turn:.2f} rad: a wheel that never turns; is it the right one "
