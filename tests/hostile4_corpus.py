@@ -855,6 +855,133 @@ LOST_CASES = [
 ]
 
 
+# ----------------------------------------------------------------------------- messages
+
+
+def short_lines(limit: int, outcome: Outcome) -> None:
+    assert all(len(ln) <= limit for ln in outcome.err.splitlines()), [len(ln) for ln in outcome.err.splitlines()]
+
+
+def batch_list(entries: Callable[[Path], dict[str, list[str]]], needles: tuple[str, ...], w: World, tmp: Path) -> Expect:
+    lists = entries(tmp)
+    for name, items in lists.items():
+        (tmp / name).write_text("".join(f"- {e}\n" for e in items))
+    shutil.copy(w.tricycle, tmp / "drive.txt")
+    argv = ["batch", str(tmp / next(iter(lists))), "--out", str(tmp / "out"), "--model", "tricycle"]
+    return Expect(argv, (2,), needles, absent=(tmp / "out",))
+
+
+def batch_glob(make: Callable[[World, Path], None], needles: tuple[str, ...], w: World, tmp: Path) -> Expect:
+    """``batch 'data/*'`` over a folder holding one log and what ``make`` adds: one job only."""
+    data = tmp / "data"
+    data.mkdir()
+    shutil.copy(w.tricycle, data / "drive.txt")
+    make(w, tmp)
+    out = tmp / "out"
+
+    def one_job(_: Outcome) -> None:
+        rows = (out / "summary.csv").read_text().splitlines()
+        assert len(rows) == 2, rows
+
+    argv = ["batch", str(data / "*"), "--out", str(out), "--model", "tricycle", "--jobs", "1"]
+    return Expect(argv, (0,), needles, check=one_job)
+
+
+def _old_outputs(w: World, tmp: Path) -> None:
+    outcome = run_in_process(["batch", str(tmp / "data"), "--out", str(tmp / "data" / "previous"), "--model", "tricycle", "--jobs", "1"])
+    assert outcome.code == 0, outcome.err
+
+
+def _other_files(w: World, tmp: Path) -> None:
+    (tmp / "data" / "README.md").write_text("my notes\n")
+    (tmp / "data" / "plot.png").write_bytes(b"\x89PNG")
+
+
+def _run_output(w: World, tmp: Path) -> None:
+    sc = text_scenario(tmp, tmp / "data" / "drive.txt")
+    assert run_in_process(["run", str(sc), "--out", str(tmp / "data" / "run1")], tmp).code == 0
+
+
+def partner(data: str, other: str, make: Callable[[Path], None], needles: tuple[str, ...], w: World, tmp: Path) -> Expect:
+    """``--data`` naming one file of a joint-log pair whose partner beside it is not a regular file."""
+    shutil.copy(w.camera if data.endswith(".tum") else w.camera_joints, tmp / data)
+    make(tmp / other)
+    sc = camera_scenario(tmp, w.camera, w.camera_joints)
+    argv = ["run", str(sc), "--out", str(tmp / "out"), "--data", str(tmp / data)]
+    return Expect(argv, (2,), (data, other, *needles), child=True, absent=(tmp / "out",))
+
+
+def non_ascii(utf8_mode: str, w: World, tmp: Path) -> Expect:
+    """A log and folder named in non-ASCII, given in the scenario, under ``LC_ALL=C``."""
+    folder = tmp / "dätä"
+    folder.mkdir()
+    shutil.copy(w.tricycle, folder / "fährt.txt")
+    sc = text_scenario(tmp, Path("dätä") / "fährt.txt")
+    env = {"LC_ALL": "C", "PYTHONUTF8": utf8_mode, "PYTHONIOENCODING": ""}
+    argv = ["run", str(sc), "--out", str(tmp / "out")]
+    if utf8_mode == "1":
+        return Expect(argv, (0,), cwd=tmp, env=env)
+    return Expect(argv, (2,), ("f\\xe4hrt.txt", "file system encoding", "LC_ALL=C.UTF-8"), cwd=tmp, env=env)
+
+
+def long_cache(w: World, tmp: Path) -> Expect:
+    env = {"NLP_CALIB_CACHE": str(tmp / ("c" * 5000))}
+    argv = ["run", str(w.extra["cache_scenario"]), "--out", str(tmp / "out")]
+    return Expect(argv, (2,), ("compile cache", "NLP_CALIB_CACHE", "5"), env=env, check=partial(short_lines, 600))
+
+
+def long_name(where: str, w: World, tmp: Path) -> Expect:
+    name = "x" * 300
+    sc = text_scenario(tmp, w.tricycle)
+    argv = ["run", str(sc), "--out", str(tmp / name)] if where == "out" else ["run", str(sc), "--out", str(tmp / "out"), "--data", str(tmp / f"{name}.txt")]
+    return Expect(argv, (1, 2), ("File name too long",), check=partial(short_lines, 600))
+
+
+def frozen(which: str, w: World, tmp: Path) -> Expect:
+    """Joints (or a counter) that never change while the robot drives: one line naming it, and no
+    library's warnings."""
+    if which == "camera":
+        head, rows = _csv_rows(w.camera_joints)
+        tum, joints = recording(w, tmp, joints=lambda r: [[x[0], "1.0", "2.0"] for x in r])
+        sc = camera_scenario(tmp, tum, joints)
+        needles: tuple[str, ...] = ("cam.joints.csv", "left_wheel", "never turns", "dataset.encoders")
+    else:
+        lines = w.diff_drive.read_text().splitlines()
+        body = [ln for ln in lines if ln.strip() and not ln.startswith("#")]
+        log = tmp / "dd.txt"
+        log.write_text("\n".join([ln for ln in lines if ln.startswith("#")] + _ticks(1, lambda t: 7)(body)) + "\n")
+        sc = text_scenario(tmp, log, model="diff_drive")
+        needles = ("dd.txt", "right_wheel", "never turns")
+
+    def quiet(outcome: Outcome) -> None:
+        assert "warning" not in outcome.err, outcome.err
+
+    return Expect(["run", str(sc), "--out", str(tmp / "out")], (2,), needles, check=quiet)
+
+
+def _fifo(path: Path) -> None:
+    os.mkfifo(path)
+
+
+MESSAGE_CASES = [
+    ("a batch list naming itself (the issue's case)", partial(batch_list, lambda t: {"list.yaml": ["drive.txt", "list.yaml"]}, ("list.yaml", "entry 2", "names itself"))),
+    ("two batch lists naming each other", partial(batch_list, lambda t: {"a.yaml": ["b.yaml"], "b.yaml": ["drive.txt", "a.yaml"]}, ("b.yaml", "leads back"))),
+    ("batch outputs globbed as logs (the issue's case)", partial(batch_glob, _old_outputs, ("left out", "written by nlp_calib"))),
+    ("a run's outputs globbed as logs", partial(batch_glob, _run_output, ("left out", "written by nlp_calib"))),
+    ("a pattern matching notes and pictures", partial(batch_glob, _other_files, ("left out 2", "neither logs nor scenarios", "README.md"))),
+    ("--data x.tum with x.joints.csv a folder (the issue's case)", partial(partner, "x.tum", "x.joints.csv", lambda p: p.mkdir(), ("a folder",))),
+    ("--data x.tum with x.csv a FIFO (the issue's case)", partial(partner, "x.tum", "x.csv", _fifo, ("a FIFO",))),
+    ("--data x.csv with x.tum a folder", partial(partner, "x.csv", "x.tum", lambda p: p.mkdir(), ("a folder",))),
+    ("a non-ASCII path under LC_ALL=C (the issue's case)", partial(non_ascii, "0")),
+    ("a non-ASCII path under LC_ALL=C, UTF-8 mode", partial(non_ascii, "1")),
+    ("a 5,000-character compile cache path (the issue's case)", long_cache),
+    ("an output folder name of 300 characters", partial(long_name, "out")),
+    ("a log name of 300 characters", partial(long_name, "data")),
+    ("joints that never move (the issue's case)", partial(frozen, "camera")),
+    ("a wheel counter that never moves", partial(frozen, "text")),
+]
+
+
 # ----------------------------------------------------------------------------- check
 
 
@@ -1002,6 +1129,7 @@ CORPUS: list[Case] = [
         ("urdf", URDF_CASES),
         ("check", CHECK_CASES),
         ("lost", LOST_CASES),
+        ("messages", MESSAGE_CASES),
     ]
     for name, build in cases
 ]

@@ -44,7 +44,7 @@ from pathlib import Path
 
 import casadi as ca
 
-from nlp_calib.core.errors import CodegenError, NlpCalibWarning, OptionsError
+from nlp_calib.core.errors import CodegenError, NlpCalibWarning, OptionsError, shown_path
 
 #: Optimisation flags for the generated code; -fno-math-errno lets sin/cos/sqrt inline.
 CFLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fPIC", "-shared", "-Wno-int-conversion")
@@ -116,7 +116,7 @@ def usable_cache_dir() -> Path:
         in_the_way = isinstance(exc, FileExistsError | NotADirectoryError)
         reason = "a file is in the way" if in_the_way else getattr(exc, "strerror", None) or str(exc)
         raise OptionsError(
-            f"the compile cache {_shown(folder)} is not a writable folder ({reason}); set "
+            f"the compile cache {shown_path(folder)} is not a writable folder ({reason}); set "
             "NLP_CALIB_CACHE to a writable folder, or use the interpreted backend ('backend: interpreted')"
         ) from None
     used = folder if unsafe is None else _private_folder(folder, unsafe)
@@ -125,12 +125,6 @@ def usable_cache_dir() -> Path:
     if used == folder:
         _remove_leftovers(folder)
     return used
-
-
-def _shown(folder: Path) -> str:
-    """A folder's path for a message: a very long one cut in its middle."""
-    text = str(folder)
-    return text if len(text) <= 200 else f"{text[:100]}…{text[-60:]} ({len(text)} characters)"
 
 
 def writable_by_others(st: os.stat_result) -> str | None:
@@ -147,7 +141,7 @@ def _private_folder(folder: Path, reason: str) -> Path:
     private = Path(tempfile.mkdtemp(prefix="nlp_calib-cache-"))
     atexit.register(shutil.rmtree, private, ignore_errors=True)
     warnings.warn(
-        f"the compile cache {_shown(folder)} is {reason}: a compiled file another user put there would "
+        f"the compile cache {shown_path(folder)} is {reason}: a compiled file another user put there would "
         "run as you, so it is not used (compiling into a private temporary folder, slower). Give "
         "NLP_CALIB_CACHE a folder only you can write (chmod go-w FOLDER; docs/fleet.md, a shared cache)",
         NlpCalibWarning,
@@ -233,7 +227,7 @@ def compile_shared(
 
 def _unwritable(folder: Path, exc: OSError) -> CodegenError:
     return CodegenError(
-        f"writing into the compile cache {_shown(folder)} failed ({exc.strerror or exc}; NLP_CALIB_CACHE "
+        f"writing into the compile cache {shown_path(folder)} failed ({exc.strerror or exc}; NLP_CALIB_CACHE "
         "names the folder)"
     )
 

@@ -26,7 +26,7 @@ def data_lines(path: str | Path) -> Iterator[tuple[int, str]]:
     except FileNotFoundError:
         raise DatasetError(str(p), None, "no such file") from None
     except (OSError, ValueError) as exc:
-        raise DatasetError(str(p), None, f"cannot read the file ({exc})") from None
+        raise DatasetError(str(p), None, f"cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -14,6 +14,8 @@ files' clocks differ; ``robot`` is a ``ROBOT.yaml`` (initial guess, the sensor's
 from __future__ import annotations
 
 import dataclasses
+import os
+import stat
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -23,6 +25,7 @@ import numpy as np
 
 from nlp_calib.core.config import coerce, fail, from_mapping, key_name
 from nlp_calib.core.errors import ConfigError, DatasetError
+from nlp_calib.core.files import kind_of
 from nlp_calib.logs import Log
 from nlp_calib.logs.bag_joints import timed_by_tracker
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, MAX_GAP, Stamped
@@ -177,11 +180,26 @@ def paired_files(path: Path) -> tuple[Path, Path]:
     )
     if not path.is_file():
         raise DatasetError(str(path), None, f"no such file ({fix})")
+    special = [(p, kind) for p in partners if (kind := _not_regular(p)) is not None]
+    if not found and special:
+        partner, kind = special[0]
+        raise DatasetError(
+            str(path), None, f"its partner {partner.name} beside it is {kind}, not a regular file ({fix})"
+        )
     if len(found) != 1:
         what = "no" if not found else "two candidate partners"
         listed = " or ".join(p.name for p in (found or partners))
         raise DatasetError(str(path), None, f"{what} {listed} beside it ({fix})")
     return (found[0], path) if is_tum else (path, found[0])
+
+
+def _not_regular(path: Path) -> str | None:
+    """What ``path`` is when it exists but is not a regular file (a folder, a FIFO...), else None."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    return None if stat.S_ISREG(mode) else kind_of(mode)
 
 
 def check_encoders(given: Mapping[str, str], model: KinematicModel, where: str) -> None:
