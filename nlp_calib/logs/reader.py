@@ -68,8 +68,8 @@ def open_log(p: Path) -> BinaryIO:
         raise DatasetError(str(p), None, f"cannot read the log ({getattr(exc, 'strerror', None) or exc})") from None
 
 
-def _chunks(fh: BinaryIO) -> Iterator[bytes]:
-    while chunk := fh.read(BLOCK_BYTES):
+def _chunks(fh: BinaryIO, size: int = BLOCK_BYTES) -> Iterator[bytes]:
+    while chunk := fh.read(size):
         yield chunk
 
 

@@ -54,7 +54,8 @@ class Renamed:
     factor: float = 1.0
     encoder: str = ""
     #: What a real robot's value can be, in this form's unit (a wheel's radius: millimetres to
-    #: metres), when narrower than the counts form's range says.
+    #: metres), narrower than the counts form's range: outside it the estimate is not the robot's
+    #: (:meth:`InRadians.implausible`).
     plausible: tuple[float, float] | None = None
 
 
@@ -152,12 +153,10 @@ class InRadians:
 
     @property
     def physical_ranges(self) -> Mapping[str, tuple[float, float]]:
-        out = {
+        return {
             self.rename(n): (lo / self._factor(n), hi / self._factor(n))
             for n, (lo, hi) in self.model.physical_ranges.items()
         }
-        out.update({r.name: r.plausible for r in self.renamed.values() if r.plausible is not None})
-        return out
 
     @property
     def reference(self) -> Mapping[str, Reference]:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from nlp_calib.analysis.streams import GAP_FACTOR, time_gaps
+from nlp_calib.analysis.streams import GAP_FACTOR, MIN_GAP_S, gap_threshold, time_gaps
 from nlp_calib.core.errors import DatasetError, ModelError, NlpCalibWarning, ScenarioError
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, get_model
@@ -248,8 +248,8 @@ def gaps_said(sc: Scenario, log: Log, start: int, stop: int) -> np.ndarray:
         k = int(inside[np.argmax(dt[inside])])
         part = f"{sc.origin} ({sc.dataset.name}): " if sc.origin else ""
         warnings.warn(
-            f"{part}{sc.log.source.numbered}: {inside.size} gap(s) in time over {GAP_FACTOR:g}× the median interval "
-            f"({float(np.median(dt)):.3g} s) between records (the longest {dt[k]:.3g} s, after line "
+            f"{part}{sc.log.source.numbered}: {inside.size} gap(s) in time over {gap_threshold(log.time_s):.3g} s "
+            f"({GAP_FACTOR:g}× the median interval, at least {MIN_GAP_S:g} s) between records (the longest {dt[k]:.3g} s, after line "
             f"{int(log.line_numbers[k])}, t = {log.time_s[k]:.3f} s: the tracker or the joints missing); no "
             "residual window crosses them",
             NlpCalibWarning,

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import stat
+import warnings
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -24,20 +25,23 @@ from typing import Any, ClassVar
 import numpy as np
 
 from nlp_calib.core.config import coerce, fail, from_mapping, key_name
-from nlp_calib.core.errors import ConfigError, DatasetError
+from nlp_calib.core.errors import ConfigError, DatasetError, NlpCalibWarning
 from nlp_calib.core.files import kind_of
 from nlp_calib.logs import Log
 from nlp_calib.logs.bag_joints import timed_by_tracker
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, MAX_GAP, Stamped
-from nlp_calib.logs.joint_log import read_joint_csv
+from nlp_calib.logs.joint_log import JointTable, read_joint_csv
 from nlp_calib.logs.log import frozen
-from nlp_calib.logs.screens import quaternion_order
+from nlp_calib.logs.screens import MAX_SHIFT_S, quaternion_order
 from nlp_calib.logs.tum import Trajectory3D, read_tum
 from nlp_calib.models import KinematicModel, encoders
 from nlp_calib.models.radians import in_units
 from nlp_calib.sources.base import file_identity
 from nlp_calib.sources.robot import load_robot, robot_header
 
+#: Joint rows further than this from the poses' span (s, on the poses' clock) cannot pair with them
+#: (the clock check looks this far: :data:`~nlp_calib.logs.screens.MAX_SHIFT_S`).
+PAIRING_MARGIN_S = MAX_SHIFT_S
 #: The keys a joint-log block must have.
 REQUIRED = ("joints", "poses", "encoders")
 
@@ -84,15 +88,14 @@ class JointLogSource:
         model = in_units(model, "radians")
         check_encoders(self.encoders, model, "dataset.encoders")
         names = encoders(model)
-        table = read_joint_csv(self.joints)
-        joint_names = tuple(self.encoders[e] for e in names)
-        positions = table.columns(joint_names, "dataset.encoders")
-        shift = round(self.clock_offset * 1e9)
-        velocities = np.full(positions.shape, np.nan)
-        joints = Stamped(table.path, table.time_ns + shift, np.hstack([positions, velocities]))
         poses = read_tum(self.poses)
         self._check_order(poses)
-        self._check_overlap(joints.stamp_ns, poses.time_ns)
+        shift = round(self.clock_offset * 1e9)
+        table = self._paired(poses, shift)
+        joint_names = tuple(self.encoders[e] for e in names)
+        positions = table.columns(joint_names, "dataset.encoders")
+        velocities = np.full(positions.shape, np.nan)
+        joints = Stamped(table.path, table.time_ns + shift, np.hstack([positions, velocities]))
         tracker = Stamped(str(self.poses), poses.time_ns, poses.planar_and_3d())
         robot = load_robot(self.robot, model) if self.robot is not None else None
         header = robot_header(model, robot, None)
@@ -112,6 +115,28 @@ class JointLogSource:
                 f"{100 * w_first:.0f} %; "
                 "a TUM line is 'timestamp tx ty tz qx qy qz qw': move each line's w to the end",
             )
+
+    def _paired(self, poses: Trajectory3D, shift: int) -> JointTable:
+        """The joint rows within :data:`PAIRING_MARGIN_S` of the poses (on the poses' clock): what
+        can pair with them, the lag search and the clock check included; the rest of a long joint
+        log is skipped as it is read (said in a warning when it is most of it)."""
+        margin = round(PAIRING_MARGIN_S * 1e9)
+        lo, hi = int(poses.time_ns[0]) - shift - margin, int(poses.time_ns[-1]) - shift + margin
+        table = read_joint_csv(self.joints, keep=lambda t: (t >= lo) & (t <= hi))
+        self._check_overlap(np.array(table.span_ns) + shift, poses.time_ns)
+        kept = int(table.time_ns.size)
+        if kept < 2:
+            raise DatasetError(str(self.joints), None, f"holds {kept} row(s) within {PAIRING_MARGIN_S:g} s of the poses; at least 2 are needed")
+        if kept < table.rows / 2:
+            span = (table.span_ns[1] - table.span_ns[0]) * 1e-9
+            warnings.warn(
+                f"{self.joints}: {table.rows} rows over {span:.0f} s, of which the {kept} within "
+                f"{PAIRING_MARGIN_S:g} s of the poses' {poses.time_s[-1] - poses.time_s[0]:.0f} s ({self.poses.name}) "
+                "were kept; the rest cannot pair with them",
+                NlpCalibWarning,
+                stacklevel=4,
+            )
+        return table
 
     def _check_overlap(self, joint_ns: np.ndarray, pose_ns: np.ndarray) -> None:
         """Refuse files whose times do not overlap, in this block's words (a bag's are the topics')."""
