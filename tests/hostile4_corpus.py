@@ -60,10 +60,23 @@ def judge(expect: Expect, outcome: Outcome) -> None:
     judge3(expect, outcome)
 
 
+#: A child that runs the command and writes its peak resident memory (kB) to ``$RSS_FILE``.
+#: (VmHWM: ru_maxrss would carry over the forking parent's peak across exec on Linux.)
+MEASURED = (
+    "import os, re, sys\n"
+    "from nlp_calib.cli import main\n"
+    "code = main(sys.argv[1:])\n"
+    "peak = re.search(r'VmHWM:\\s+(\\d+)', open('/proc/self/status').read())[1]\n"
+    "open(os.environ['RSS_FILE'], 'w').write(peak)\n"
+    "sys.exit(code)\n"
+)
+
+
 def run_child(argv: Sequence[str], cwd: Path | None, env: dict[str, str]) -> Outcome:
-    """The command in a child with a deadline and ``env`` added to this process's environment."""
+    """The command in a child with a deadline and ``env`` added to this process's environment
+    (with ``RSS_FILE`` in it: the child writes its peak resident memory there)."""
     full = dict(os.environ, PYTHONWARNINGS="ignore", PYTHONPATH=str(REPO), **env)
-    command = [sys.executable, "-m", "nlp_calib", *argv]
+    command = [sys.executable, *(("-c", MEASURED) if "RSS_FILE" in env else ("-m", "nlp_calib")), *argv]
     try:
         proc = subprocess.run(
             command, cwd=cwd or REPO, env=full, capture_output=True, text=True, timeout=DEADLINE_S
@@ -1059,6 +1072,99 @@ CHECK_CASES = [
 ]
 
 
+# ----------------------------------------------------------------------------- memory
+
+#: What reading a file may hold beyond a run of a small file like it, per byte of the file.
+MEMORY_FACTOR = 3.0
+
+
+def peak_kb(argv: Sequence[str], cwd: Path) -> int:
+    """The peak resident memory (kB) of the command in a child."""
+    rss = cwd / f"rss-{len(list(cwd.glob('rss-*')))}.txt"
+    outcome = run_child(argv, cwd, {"RSS_FILE": str(rss)})
+    assert "Traceback" not in outcome.err, outcome.err
+    return int(rss.read_text())
+
+
+def within_memory(big: Path, small_argv: Sequence[str], tmp: Path, _: Outcome) -> None:
+    """The command's peak (its ``RSS_FILE``) exceeds the same command's on ``small_argv`` by at
+    most :data:`MEMORY_FACTOR` times the size of ``big``."""
+    peak = int((tmp / "rss.txt").read_text())
+    base = peak_kb(small_argv, tmp)
+    extra, size = (peak - base) * 1024, big.stat().st_size
+    print(f"\n{big.name}: {size / 1e6:.0f} MB, peak {peak / 1024:.0f} MB, base {base / 1024:.0f} MB: {extra / size:.2f}× the file")
+    assert extra <= MEMORY_FACTOR * size, (extra / size, peak, base)
+
+
+def long_joints(where: str, w: World, tmp: Path) -> Expect:
+    """Ten minutes of a joint log at 1 kHz (a scaled-down two hours) of which the camera's 30 s pair
+    with ``where`` (the middle, the start, the end, or a clock offset given): only what pairs is
+    kept, said, and the calibration is the right one."""
+    from nlp_calib.logs.joint_log import format_joint_csv, read_joint_csv
+
+    table = read_joint_csv(w.camera_joints)
+    t = table.time_ns
+    before = {"middle": 300, "start": 0, "end": 600, "offset": 300}[where] * 10**9
+    after = 600 * 10**9 - before
+    step = 10**6
+    pad_a = np.arange(t[0] - before, t[0], step)
+    pad_b = np.arange(t[-1] + step, t[-1] + after, step)
+    fine = np.arange(t[0], t[-1], step)
+    columns = [np.interp(fine, t, table.positions[:, j]) for j in range(table.positions.shape[1])]
+    q = np.column_stack(columns)
+    times = np.concatenate([pad_a, fine, pad_b])
+    values = np.vstack([np.repeat(q[:1], pad_a.size, 0), q, np.repeat(q[-1:], pad_b.size, 0)])
+    shift = 500 * 10**9 if where == "offset" else 0
+    big = tmp / "long.csv"
+    with big.open("w") as fh:
+        fh.write(format_joint_csv(times[:1] - shift, table.names, values[:1]))
+        for k in range(1, times.size, 100_000):
+            fh.write(format_joint_csv(times[k : k + 100_000] - shift, table.names, values[k : k + 100_000]).split("\n", 1)[1])
+    extra = "" if where != "offset" else ", clock_offset: 500.0"
+    sc = camera_scenario(tmp, w.camera, big, block=extra)
+    small = camera_scenario(tmp, w.camera, w.camera_joints, name="small.yaml")
+    out = tmp / "out"
+
+    def check(outcome: Outcome) -> None:
+        within_memory(big, ["run", str(small), "--out", str(tmp / "small")], tmp, outcome)
+        right_answer(out, w.camera_truth, outcome)
+
+    argv = ["run", str(sc), "--out", str(out)]
+    return Expect(argv, (0,), ("long.csv", "were kept"), cwd=tmp, env={"RSS_FILE": str(tmp / "rss.txt")}, check=check)
+
+
+def read_then_refused(kind: str, w: World, tmp: Path) -> Expect:
+    """A large file read whole, then the scenario's samples refused (beyond its records): the
+    reading alone, measured."""
+    from conftest import write_sim
+
+    if kind == "text":
+        big = write_sim(tmp, "big.txt", records=300_000, rate_hz=1000.0, seed=4)
+        sc = text_scenario(tmp, big, extra="samples: {start: 0, stop: 999999999}\n")
+        small = text_scenario(tmp, w.tricycle, extra="samples: {start: 0, stop: 999999999}\n", name="small.yaml")
+    else:  # a camera at 1 kHz: a long TUM file with its joints
+        from nlp_calib.simulation.camera import CameraNoise, CameraSimulationOptions, simulate_camera, write_camera_simulation
+
+        sim = simulate_camera(CameraSimulationOptions(model="diff_drive", duration_s=240.0, seed=9, image_rate_hz=1000.0, noise=CameraNoise(0.001, 0.0017)))
+        big, joints, _ = write_camera_simulation(sim, tmp / "fast.tum")
+        extra = "samples: {start: 0, stop: 999999999}\n"
+        sc = camera_scenario(tmp, big, joints, extra=extra)
+        small = camera_scenario(tmp, w.camera, w.camera_joints, extra=extra, name="small.yaml")
+    argv = ["run", str(sc), "--out", str(tmp / "out")]
+    small_argv = ["run", str(small), "--out", str(tmp / "small")]
+    return Expect(argv, (2,), ("samples",), cwd=tmp, env={"RSS_FILE": str(tmp / "rss.txt")}, check=partial(within_memory, big, small_argv, tmp))
+
+
+MEMORY_CASES = [
+    ("a long joint log, the camera's 30 s in its middle (the issue's case, scaled)", partial(long_joints, "middle")),
+    ("a long joint log, the camera's 30 s at its start", partial(long_joints, "start")),
+    ("a long joint log, the camera's 30 s at its end", partial(long_joints, "end")),
+    ("a long joint log on another clock, clock_offset given", partial(long_joints, "offset")),
+    ("a text log of 300,000 records at 1 kHz, read (the issue's case, scaled)", partial(read_then_refused, "text")),
+    ("a TUM file of 240,000 poses at 1 kHz, read", partial(read_then_refused, "tum")),
+]
+
+
 # ----------------------------------------------------------------------------- the world
 
 
@@ -1130,6 +1236,7 @@ CORPUS: list[Case] = [
         ("check", CHECK_CASES),
         ("lost", LOST_CASES),
         ("messages", MESSAGE_CASES),
+        ("memory", MEMORY_CASES),
     ]
     for name, build in cases
 ]
