@@ -31,8 +31,8 @@ import numpy as np
 import yaml
 from conftest import REPO
 from hostile3_corpus import DEADLINE_S, Outcome, run_in_process
-from hostile3_corpus import judge as judge3
 from hostile3_corpus import Expect as Expect3
+from hostile3_corpus import judge as judge3
 
 from nlp_calib.codegen import compiler
 from nlp_calib.logs import Log
@@ -127,7 +127,9 @@ def quoted(path: Path | str) -> str:
     return json.dumps(str(path))
 
 
-def text_scenario(folder: Path, log: Path, model: str = "tricycle", extra: str = "", name: str = "case.yaml") -> Path:
+def text_scenario(
+    folder: Path, log: Path, model: str = "tricycle", extra: str = "", name: str = "case.yaml"
+) -> Path:
     path = folder / name
     path.write_text(
         f"dataset: {quoted(log)}\nmodel: {model}\nresidual: {{horizon: 10}}\nsolvers: [gauss_newton]\n"
@@ -224,22 +226,45 @@ def undecodable_name(w: World, tmp: Path) -> Expect:
 
 
 CODEGEN_CASES = [
-    ("codegen: a log named to run a command (the issue's case)", partial(codegen_named, PWN + ".txt", PWN, ())),
-    ("codegen: a log named with printf formats", partial(codegen_named, "%s%n%s%n%p.txt", "%s%n%s%n%p.txt", ())),
+    (
+        "codegen: a log named to run a command (the issue's case)",
+        partial(codegen_named, PWN + ".txt", PWN, ()),
+    ),
+    (
+        "codegen: a log named with printf formats",
+        partial(codegen_named, "%s%n%s%n%p.txt", "%s%n%s%n%p.txt", ()),
+    ),
     ("codegen: a log name ending in a backslash", partial(codegen_named, "drive\\", "drive\\", ())),
-    ("codegen: trigraphs in the log name, built with -trigraphs", partial(codegen_named, "x??=??-??!.txt", "x??=??-??!.txt", ("-trigraphs",))),
-    ("codegen: a log name with a tab, quotes and non-ASCII", partial(codegen_named, "a\t'b\"ä€.txt", "a\t'b\"ä€.txt", ())),
+    (
+        "codegen: trigraphs in the log name, built with -trigraphs",
+        partial(codegen_named, "x??=??-??!.txt", "x??=??-??!.txt", ("-trigraphs",)),
+    ),
+    (
+        "codegen: a log name with a tab, quotes and non-ASCII",
+        partial(codegen_named, "a\t'b\"ä€.txt", "a\t'b\"ä€.txt", ()),
+    ),
     ("codegen: a log name that is not UTF-8", undecodable_name),
-    ("codegen: a scenario name with lines of C", partial(codegen_scenario_named, "x *\n#error injected\n* x")),
-    ("codegen: a scenario name with trigraphs and a tab", partial(codegen_scenario_named, "x ??)\t??= #error")),
-    ("codegen: a camera's TUM file named to run a command", partial(codegen_camera_named, 'cam");system("touch PWNED");printf("')),
+    (
+        "codegen: a scenario name with lines of C",
+        partial(codegen_scenario_named, "x *\n#error injected\n* x"),
+    ),
+    (
+        "codegen: a scenario name with trigraphs and a tab",
+        partial(codegen_scenario_named, "x ??)\t??= #error"),
+    ),
+    (
+        "codegen: a camera's TUM file named to run a command",
+        partial(codegen_camera_named, 'cam");system("touch PWNED");printf("'),
+    ),
     ("codegen: a camera's TUM file named with printf formats", partial(codegen_camera_named, "cam%n%s")),
 ]
 
 
 # ----------------------------------------------------------------------------- the compile cache
 
-_EVIL_C = '#include <fcntl.h>\n__attribute__((constructor)) static void evil(void) { creat("PWNED", 0644); }\n'
+_EVIL_C = (
+    '#include <fcntl.h>\n__attribute__((constructor)) static void evil(void) { creat("PWNED", 0644); }\n'
+)
 
 
 def _plant(cache: Path, tmp: Path) -> list[Path]:
@@ -262,9 +287,7 @@ def not_run(tmp: Path, _: Outcome) -> None:
     assert not (tmp / "PWNED").exists(), "a planted shared object ran"
 
 
-def cache_case(
-    arrange: Callable[[Path, Path], Path], warns: tuple[str, ...], w: World, tmp: Path
-) -> Expect:
+def cache_case(arrange: Callable[[Path, Path], Path], warns: tuple[str, ...], w: World, tmp: Path) -> Expect:
     """A run of the warm cache's scenario with a copy of that cache, planted, then ``arrange``d:
     nothing planted runs; the run succeeds and warns naming the folder."""
     cache = tmp / "cache"
@@ -327,18 +350,39 @@ def _sticky(cache: Path, tmp: Path) -> Path:
 FOLDER_WARNS = ("compile cache", "not used", "NLP_CALIB_CACHE")
 ENTRY_WARNS = ("compile cache", "never loaded")
 CACHE_CASES = [
-    ("cache: a planted entry in a folder writable by all", partial(cache_case, partial(_chmod, 0o777), ("writable by", *FOLDER_WARNS))),
-    ("cache: a planted entry in a group-writable folder", partial(cache_case, partial(_chmod, 0o775), ("its group", *FOLDER_WARNS))),
+    (
+        "cache: a planted entry in a folder writable by all",
+        partial(cache_case, partial(_chmod, 0o777), ("writable by", *FOLDER_WARNS)),
+    ),
+    (
+        "cache: a planted entry in a group-writable folder",
+        partial(cache_case, partial(_chmod, 0o775), ("its group", *FOLDER_WARNS)),
+    ),
     ("cache: a planted entry in a sticky folder like /tmp", partial(cache_case, _sticky, FOLDER_WARNS)),
     ("cache: a planted entry through a link to an open folder", partial(cache_case, _linked, FOLDER_WARNS)),
-    ("cache: planted entries writable by others", partial(cache_case, partial(_entries_chmod, 0o666), ENTRY_WARNS)),
-    ("cache: planted entries writable by the group", partial(cache_case, partial(_entries_chmod, 0o775), ENTRY_WARNS)),
-    ("cache: planted entries that are links", partial(cache_case, _entry_links, ("compile cache", "not a regular file"))),
+    (
+        "cache: planted entries writable by others",
+        partial(cache_case, partial(_entries_chmod, 0o666), ENTRY_WARNS),
+    ),
+    (
+        "cache: planted entries writable by the group",
+        partial(cache_case, partial(_entries_chmod, 0o775), ENTRY_WARNS),
+    ),
+    (
+        "cache: planted entries that are links",
+        partial(cache_case, _entry_links, ("compile cache", "not a regular file")),
+    ),
 ]
 if os.geteuid() == 0:  # only root can give a file to another user
     CACHE_CASES += [
-        ("cache: planted entries owned by another user", partial(cache_case, _entries_chown, ("owned by user id 65534", *ENTRY_WARNS))),
-        ("cache: a planted folder owned by another user", partial(cache_case, _folder_chown, ("owned by user id 65534", *FOLDER_WARNS))),
+        (
+            "cache: planted entries owned by another user",
+            partial(cache_case, _entries_chown, ("owned by user id 65534", *ENTRY_WARNS)),
+        ),
+        (
+            "cache: a planted folder owned by another user",
+            partial(cache_case, _folder_chown, ("owned by user id 65534", *FOLDER_WARNS)),
+        ),
     ]
 
 
@@ -416,9 +460,7 @@ def right_answer(out: Path, truth: dict[str, float], _: Outcome) -> None:
     assert all(abs(z) < 4.0 for z in off.values()), off
 
 
-def camera_case(
-    edit: dict[str, Any], outcome: str, needles: tuple[str, ...], w: World, tmp: Path
-) -> Expect:
+def camera_case(edit: dict[str, Any], outcome: str, needles: tuple[str, ...], w: World, tmp: Path) -> Expect:
     """The camera recording with ``edit`` (TUM rows, joint rows, encoders), run: ``outcome`` is
     ``wrong`` (refused or not GOOD, naming ``needles``) or ``right`` (within 4σ, saying ``needles``)."""
     tum, joints = recording(w, tmp, edit.get("tum", lambda r: r), edit.get("joints", lambda r: r))
@@ -433,7 +475,9 @@ def camera_case(
 def clock_case(edit: dict[str, Any], shift: float, w: World, tmp: Path) -> Expect:
     """Streams stamped seconds apart: refused, saying the shift to add to clock_offset (to 0.1 s:
     the tracker lag refines what remains; the recording's images are stamped 10 ms late)."""
-    expect = camera_case(edit, "wrong", ("clock_offset", "late, which pairs poses with the wrong joints"), w, tmp)
+    expect = camera_case(
+        edit, "wrong", ("clock_offset", "late, which pairs poses with the wrong joints"), w, tmp
+    )
     expect.codes, expect.answers = (2,), (0,)
 
     def said(outcome: Outcome) -> None:
@@ -496,31 +540,78 @@ REVERSED = lambda t: (-t) % (1 << 32)  # noqa: E731 (a counter counting backward
 DEG = float(np.degrees(1.0))
 VERDICT_CASES = [
     ("the camera recording as it is (a control)", partial(camera_case, {}, "right", ())),
-    ("a right wheel joint with the opposite sign (the issue's case)", partial(camera_case, {"joints": _column(2, lambda v: -v)}, "wrong", ("counts backwards",))),
-    ("a left wheel joint with the opposite sign", partial(camera_case, {"joints": _column(1, lambda v: -v)}, "wrong", ("counts backwards",))),
-    ("both wheel joints with the opposite sign (the issue's case)", partial(camera_case, {"joints": _both(lambda v: -v)}, "wrong", ("upside down",))),
+    (
+        "a right wheel joint with the opposite sign (the issue's case)",
+        partial(camera_case, {"joints": _column(2, lambda v: -v)}, "wrong", ("counts backwards",)),
+    ),
+    (
+        "a left wheel joint with the opposite sign",
+        partial(camera_case, {"joints": _column(1, lambda v: -v)}, "wrong", ("counts backwards",)),
+    ),
+    (
+        "both wheel joints with the opposite sign (the issue's case)",
+        partial(camera_case, {"joints": _both(lambda v: -v)}, "wrong", ("upside down",)),
+    ),
     (
         "the left and right joints swapped (the issue's case)",
-        partial(camera_case, {"encoders": {"left_wheel": "right_wheel_joint", "right_wheel": "left_wheel_joint"}}, "wrong", ("upside down",)),
+        partial(
+            camera_case,
+            {"encoders": {"left_wheel": "right_wheel_joint", "right_wheel": "left_wheel_joint"}},
+            "wrong",
+            ("upside down",),
+        ),
     ),
-    ("joints logged in degrees (the issue's case)", partial(camera_case, {"joints": _both(lambda v: v * DEG)}, "wrong", ("degrees",))),
+    (
+        "joints logged in degrees (the issue's case)",
+        partial(camera_case, {"joints": _both(lambda v: v * DEG)}, "wrong", ("degrees",)),
+    ),
     (
         "joints logged in degrees, the right one reversed",
-        partial(camera_case, {"joints": lambda r: _column(2, lambda v: -v)(_both(lambda v: v * DEG)(r))}, "wrong", ("counts backwards",)),
+        partial(
+            camera_case,
+            {"joints": lambda r: _column(2, lambda v: -v)(_both(lambda v: v * DEG)(r))},
+            "wrong",
+            ("counts backwards",),
+        ),
     ),
-    ("TUM quaternions written w x y z (the issue's case)", partial(camera_case, {"tum": _w_first}, "wrong", ("cam.tum", "qw qx qy qz", "w to the end"))),
-    ("the camera losing tracking for 5 s (the issue's case)", partial(camera_case, {"tum": _cut(12.0, 17.0)}, "right", ("gap",))),
-    ("the joints missing for 5 s (the issue's case)", partial(camera_case, {"joints": _cut(12.0, 17.0)}, "right", ("gap",))),
-    ("the camera losing tracking twice for 2 s", partial(camera_case, {"tum": lambda r: _cut(20.0, 22.0)(_cut(6.0, 8.0)(r))}, "right", ("2 gap(s)",))),
+    (
+        "TUM quaternions written w x y z (the issue's case)",
+        partial(camera_case, {"tum": _w_first}, "wrong", ("cam.tum", "qw qx qy qz", "w to the end")),
+    ),
+    (
+        "the camera losing tracking for 5 s (the issue's case)",
+        partial(camera_case, {"tum": _cut(12.0, 17.0)}, "right", ("gap",)),
+    ),
+    (
+        "the joints missing for 5 s (the issue's case)",
+        partial(camera_case, {"joints": _cut(12.0, 17.0)}, "right", ("gap",)),
+    ),
+    (
+        "the camera losing tracking twice for 2 s",
+        partial(camera_case, {"tum": lambda r: _cut(20.0, 22.0)(_cut(6.0, 8.0)(r))}, "right", ("2 gap(s)",)),
+    ),
     ("camera stamps 15 s late (the issue's case)", partial(clock_case, {"tum": _shifted(15.0)}, 15.01)),
     ("camera stamps 6 s early", partial(clock_case, {"tum": _shifted(-6.0)}, -5.99)),
     ("joint stamps 10 s late", partial(clock_case, {"joints": _shifted(10.0)}, -9.99)),
-    ("a diff drive's right counter counting backwards", partial(text_case, "diff_drive", _ticks(1, REVERSED), "wrong", ("counts backwards",))),
+    (
+        "a diff drive's right counter counting backwards",
+        partial(text_case, "diff_drive", _ticks(1, REVERSED), "wrong", ("counts backwards",)),
+    ),
     (
         "a diff drive's left and right counters swapped, started from the data",
-        partial(text_case, "diff_drive", lambda b: _swap_ticks(b), "wrong", ("negative", "swapped"), extra="initial_guess: auto\n"),
+        partial(
+            text_case,
+            "diff_drive",
+            lambda b: _swap_ticks(b),
+            "wrong",
+            ("negative", "swapped"),
+            extra="initial_guess: auto\n",
+        ),
     ),
-    ("a tricycle log with 2 s of records missing", partial(text_case, "tricycle", _drop_seconds(4.0, 6.0), "right", ("gap",))),
+    (
+        "a tricycle log with 2 s of records missing",
+        partial(text_case, "tricycle", _drop_seconds(4.0, 6.0), "right", ("gap",)),
+    ),
 ]
 
 
@@ -532,13 +623,25 @@ def other_camera(
     tum_src, truth, extra = w.extra[which]
     joints_src = tum_src.with_suffix(".joints.csv")
     head, rows = _csv_rows(joints_src)
-    (tmp / "cam.tum").write_text("".join(" ".join(r) + "\n" for r in edit.get("tum", lambda r: r)(_tum_rows(tum_src))))
-    (tmp / "cam.joints.csv").write_text(head + "\n" + "".join(",".join(r) + "\n" for r in edit.get("joints", lambda r: r)(rows)))
+    (tmp / "cam.tum").write_text(
+        "".join(" ".join(r) + "\n" for r in edit.get("tum", lambda r: r)(_tum_rows(tum_src)))
+    )
+    (tmp / "cam.joints.csv").write_text(
+        head + "\n" + "".join(",".join(r) + "\n" for r in edit.get("joints", lambda r: r)(rows))
+    )
     model = "tricycle" if which == "tricycle" else "diff_drive"
-    encoders = {"steering": "steering_joint", "traction_wheel": "traction_wheel_joint"} if model == "tricycle" else None
-    sc = camera_scenario(tmp, tmp / "cam.tum", tmp / "cam.joints.csv", extra=extra + edit.get("extra", ""), encoders=encoders)
+    encoders = (
+        {"steering": "steering_joint", "traction_wheel": "traction_wheel_joint"}
+        if model == "tricycle"
+        else None
+    )
+    sc = camera_scenario(
+        tmp, tmp / "cam.tum", tmp / "cam.joints.csv", extra=extra + edit.get("extra", ""), encoders=encoders
+    )
     text = sc.read_text().replace("model: diff_drive", f"model: {model}")
-    sc.write_text(text.replace("initial_guess: auto\n", "", 1) if "initial_guess" in edit.get("extra", "") else text)
+    sc.write_text(
+        text.replace("initial_guess: auto\n", "", 1) if "initial_guess" in edit.get("extra", "") else text
+    )
     out = tmp / "out"
     argv = ["run", str(sc), "--out", str(out)]
     if outcome == "wrong":
@@ -563,15 +666,37 @@ REAL_RUN = Path("/work/shared/data/real4/optiodom/diff/circular/231220200134/231
 OTHER_CAMERAS = [
     (
         "a tricycle's steering joint logged in degrees",
-        partial(other_camera, "tricycle", {"joints": _column(2, lambda v: v * DEG)}, "wrong", ("steering", "degrees")),
+        partial(
+            other_camera,
+            "tricycle",
+            {"joints": _column(2, lambda v: v * DEG)},
+            "wrong",
+            ("steering", "degrees"),
+        ),
     ),
-    ("a tricycle's joints logged in degrees", partial(other_camera, "tricycle", {"joints": _both(lambda v: v * DEG)}, "wrong", ("degrees",))),
+    (
+        "a tricycle's joints logged in degrees",
+        partial(other_camera, "tricycle", {"joints": _both(lambda v: v * DEG)}, "wrong", ("degrees",)),
+    ),
     ("a tricycle camera as it is (a control)", partial(other_camera, "tricycle", {}, "right", ())),
     (
         "a camera mounted upside down, its mount given (a control)",
-        partial(other_camera, "upside_down", {"extra": "initial_guess: {sensor_roll: 1.05, sensor_pitch: -0.05, sensor_yaw: -1.57, sensor_x: 0.25, sensor_y: 0.06, sensor_z: 0.3, left_wheel_radius: 0.1, right_wheel_radius: 0.1, wheel_separation: 0.45}\n"}, "right", ()),
+        partial(
+            other_camera,
+            "upside_down",
+            {
+                "extra": "initial_guess: {sensor_roll: 1.05, sensor_pitch: -0.05, sensor_yaw: -1.57, "
+                "sensor_x: 0.25, sensor_y: 0.06, sensor_z: 0.3, left_wheel_radius: 0.1, "
+                "right_wheel_radius: 0.1, wheel_separation: 0.45}\n"
+            },
+            "right",
+            (),
+        ),
     ),
-    ("a camera mounted upside down, nothing said of it", partial(other_camera, "upside_down", {}, "wrong", ("upside down", "initial guess"))),
+    (
+        "a camera mounted upside down, nothing said of it",
+        partial(other_camera, "upside_down", {}, "wrong", ("upside down", "initial guess")),
+    ),
 ]
 if REAL_RUN.is_file():
     OTHER_CAMERAS.append(("a real OptiTrack TUM written w x y z", optitrack_w_first))
@@ -673,39 +798,68 @@ ENTITY_JOINT = robot(
     head='<?xml version="1.0"?>\n<!DOCTYPE robot [\n<!ENTITY laser_joint \'<joint name="chassis_to_laser" '
     'type="fixed"><parent link="chassis"/><child link="laser"/><origin xyz="1.2 0.05 0.4" rpy="0 0 0"/>'
     "</joint>'>\n]>\n"
-).replace('<joint name="chassis_to_laser" type="fixed">\n    <parent link="chassis"/><child link="laser"/>\n    '
-          f"{LASER_ORIGIN}\n  </joint>", "&laser_joint;")
+).replace(
+    '<joint name="chassis_to_laser" type="fixed">\n    <parent link="chassis"/><child link="laser"/>\n    '
+    f"{LASER_ORIGIN}\n  </joint>",
+    "&laser_joint;",
+)
 TWO_ORIGINS = robot(origin=f'{LASER_ORIGIN}\n    <origin xyz="0 0 0" rpy="0 0 0"/>')
-TWO_PARENTS = robot().replace('<parent link="chassis"/>', '<parent link="chassis"/><parent link="base_link"/>')
+TWO_PARENTS = robot().replace(
+    '<parent link="chassis"/>', '<parent link="chassis"/><parent link="base_link"/>'
+)
 TWO_CHILDREN = robot().replace('<child link="laser"/>', '<child link="laser"/><child link="front_wheel"/>')
 SECOND_JOINT = robot().replace(
-    "</robot>", '  <joint name="laser_again" type="fixed"><parent link="base_link"/><child link="laser"/>'
-    '<origin xyz="0 0 0"/></joint>\n</robot>'
+    "</robot>",
+    '  <joint name="laser_again" type="fixed"><parent link="base_link"/><child link="laser"/>'
+    '<origin xyz="0 0 0"/></joint>\n</robot>',
 )
 SAME_NAME = robot().replace('name="steer"', 'name="chassis_to_laser"')
 UNDECLARED = robot().replace('  <link name="front_wheel"/>\n', "")
-XACRO = robot().replace('<robot name="trike">', '<robot name="trike" xmlns:xacro="http://www.ros.org/wiki/xacro">')
+XACRO = robot().replace(
+    '<robot name="trike">', '<robot name="trike" xmlns:xacro="http://www.ros.org/wiki/xacro">'
+)
 XACRO_TAG = robot().replace("</robot>", '<xacro:property name="r" value="0.1"/>\n</robot>')
 NOT_ROBOT = robot().replace("<robot ", "<sdf ").replace("</robot>", "</sdf>")
 VALUE_ENTITY = robot(head='<?xml version="1.0"?>\n<!DOCTYPE robot [<!ENTITY h "0.4">]>\n').replace(
     'xyz="0.2 0 0.1"', 'xyz="0.2 0 &h;"'
 )
 TRANSMISSION = (
-    '<transmission name="t"><type>transmission_interface/SimpleTransmission</type><joint name="chassis_to_laser">'
+    '<transmission name="t"><type>transmission_interface/SimpleTransmission</type>'
+    '<joint name="chassis_to_laser">'
     "<hardwareInterface>hardware_interface/PositionJointInterface</hardwareInterface></joint>"
     '<actuator name="m"><mechanicalReduction>1</mechanicalReduction></actuator></transmission>\n'
 )
 TRICK = '<origin rpy="0.02 -0.05 0" note=\'a xyz="9 9 9" &amp; b\' xyz="1.2 0.05 0.4" />'
 URDF_REFUSED = [
-    ("a UTF-16 URDF (the issue's case)", robot().replace('"1.0"?>', '"1.0" encoding="UTF-16"?>').encode("utf-16"), ("UTF-16", "UTF-8")),
-    ("a UTF-16 URDF without a byte order mark", robot().replace('"1.0"?>', '"1.0" encoding="UTF-16"?>').encode("utf-16-le"), ("UTF-16",)),
+    (
+        "a UTF-16 URDF (the issue's case)",
+        robot().replace('"1.0"?>', '"1.0" encoding="UTF-16"?>').encode("utf-16"),
+        ("UTF-16", "UTF-8"),
+    ),
+    (
+        "a UTF-16 URDF without a byte order mark",
+        robot().replace('"1.0"?>', '"1.0" encoding="UTF-16"?>').encode("utf-16-le"),
+        ("UTF-16",),
+    ),
     ("a UTF-32 URDF", robot().encode("utf-32"), ("UTF-32",)),
-    ("a joint defined through an internal entity (the issue's case)", ENTITY_JOINT.encode(), (":3", "entity 'laser_joint'", "does not expand")),
+    (
+        "a joint defined through an internal entity (the issue's case)",
+        ENTITY_JOINT.encode(),
+        (":3", "entity 'laser_joint'", "does not expand"),
+    ),
     ("an origin's value given by an entity", VALUE_ENTITY.encode(), ("entity 'h'",)),
-    ("a joint with two <origin> elements (the issue's case)", TWO_ORIGINS.encode(), (":15", "2 <origin> elements (lines 14, 15)", "reads the first")),
+    (
+        "a joint with two <origin> elements (the issue's case)",
+        TWO_ORIGINS.encode(),
+        (":15", "2 <origin> elements (lines 14, 15)", "reads the first"),
+    ),
     ("a joint with two <parent> elements", TWO_PARENTS.encode(), ("2 <parent> elements",)),
     ("a joint with two <child> elements", TWO_CHILDREN.encode(), ("2 <child> elements",)),
-    ("two joints with one child link (the issue's case)", SECOND_JOINT.encode(), (":20", "'chassis_to_laser' (line 12) and 'laser_again'", "one parent")),
+    (
+        "two joints with one child link (the issue's case)",
+        SECOND_JOINT.encode(),
+        (":20", "'chassis_to_laser' (line 12) and 'laser_again'", "one parent"),
+    ),
     ("two joints of one name", SAME_NAME.encode(), ("a second joint named 'chassis_to_laser'",)),
     ("a joint whose link is not declared", UNDECLARED.encode(), ("'front_wheel' is not declared",)),
     ("an unexpanded xacro file", XACRO.encode(), ("xacro",)),
@@ -713,14 +867,26 @@ URDF_REFUSED = [
     ("a root that is not <robot>", NOT_ROBOT.encode(), ("<sdf>", "<robot>")),
 ]
 URDF_EDITED = [
-    ("an attribute whose value holds ' xyz=\"'", robot(origin=TRICK).encode(), b"<origin rpy=\"0.02 -0.05 0\" note="),
-    ("a UTF-8 byte order mark and CRLF lines", b"\xef\xbb\xbf" + robot().replace("\n", "\r\n").encode(), LASER_ORIGIN.encode()),
+    (
+        "an attribute whose value holds ' xyz=\"'",
+        robot(origin=TRICK).encode(),
+        b'<origin rpy="0.02 -0.05 0" note=',
+    ),
+    (
+        "a UTF-8 byte order mark and CRLF lines",
+        b"\xef\xbb\xbf" + robot().replace("\n", "\r\n").encode(),
+        LASER_ORIGIN.encode(),
+    ),
     (
         "a Latin-1 URDF with an accented comment",
         robot(head='<?xml version="1.0" encoding="ISO-8859-1"?>\n<!-- caméra -->\n').encode("latin-1"),
         LASER_ORIGIN.encode(),
     ),
-    ("an origin written with an end tag", robot(origin='<origin xyz="1.2 0.05 0.4" rpy="0 0 0"></origin>').encode(), b'<origin xyz="1.2 0.05 0.4" rpy="0 0 0">'),
+    (
+        "an origin written with an end tag",
+        robot(origin='<origin xyz="1.2 0.05 0.4" rpy="0 0 0"></origin>').encode(),
+        b'<origin xyz="1.2 0.05 0.4" rpy="0 0 0">',
+    ),
     (
         "a commented-out origin before the real one",
         robot(origin=f'<!-- <origin xyz="7 7 7" rpy="0 0 0"/> -->\n    {LASER_ORIGIN}').encode(),
@@ -761,7 +927,10 @@ def batch_case(names: Sequence[str], w: World, tmp: Path) -> Expect:
         assert len({f.lower() for f in folders}) == len(logs), folders
         for row in rows:
             doc = json.loads((out / row["folder"] / "result.json").read_text())
-            assert Path(doc["dataset"]["path"]).resolve() == Path(row["source"]).resolve(), (row, doc["dataset"])
+            assert Path(doc["dataset"]["path"]).resolve() == Path(row["source"]).resolve(), (
+                row,
+                doc["dataset"],
+            )
         assert {Path(r["source"]).resolve() for r in rows} == {p.resolve() for p in logs}
 
     argv = ["batch", str(tmp / "logs"), "--out", str(out), "--model", "tricycle", "--jobs", "1"]
@@ -788,7 +957,11 @@ def radians_messages(edit: Callable[[int, int, tuple[str, ...], list[float]], An
     names, stamps, positions = _js_rows(w)
     out = []
     for k, (ns, row) in enumerate(zip(stamps.tolist(), positions.tolist())):
-        spec = edit(k, int(stamps[k - 1]) if k else ns, names, row) if edit is _repeated else edit(k, ns, names, row)
+        spec = (
+            edit(k, int(stamps[k - 1]) if k else ns, names, row)
+            if edit is _repeated
+            else edit(k, ns, names, row)
+        )
         spec = spec or (ns, names, row)
         out.append(("/joint_states", JS, ns, joint_state(spec[0], spec[1], spec[2])))
     tum = read_tum(w.camera)
@@ -797,13 +970,34 @@ def radians_messages(edit: Callable[[int, int, tuple[str, ...], list[float]], An
     return sorted(out, key=lambda m: m[2])
 
 
-def radians_import(edit: Callable[..., Any], codes: tuple[int, ...], needles: tuple[str, ...], rows: int | None, w: World, tmp: Path, *extra: str) -> Expect:
+def radians_import(
+    edit: Callable[..., Any],
+    codes: tuple[int, ...],
+    needles: tuple[str, ...],
+    rows: int | None,
+    w: World,
+    tmp: Path,
+    *extra: str,
+) -> Expect:
     from test_bags import write_bag
 
     bag = write_bag(tmp / "bag", "mcap", radians_messages(edit, w))
     names = ",".join(CAMERA_ENCODERS.values())
-    argv = ["import-bag", str(bag), "--out", str(tmp / "j.csv"), "--model", "diff_drive", "--joint-states",
-            "/joint_states", "--joints", names, "--tracker", "/camera/pose", *extra]
+    argv = [
+        "import-bag",
+        str(bag),
+        "--out",
+        str(tmp / "j.csv"),
+        "--model",
+        "diff_drive",
+        "--joint-states",
+        "/joint_states",
+        "--joints",
+        names,
+        "--tracker",
+        "/camera/pose",
+        *extra,
+    ]
 
     def counted(_: Outcome) -> None:
         if rows is not None:
@@ -851,20 +1045,50 @@ LOST_CASES = [
     ("batch: 'A.txt' and 'a.txt'", partial(batch_case, ["A.txt", "a.txt"])),
     ("batch: d1/x.txt, d2/x.txt and d1_x.txt", partial(batch_case, ["d1/x.txt", "d2/x.txt", "d1_x.txt"])),
     ("batch: a log named like the summary", partial(batch_case, ["summary.csv.txt", "summary.md.txt"])),
-    ("batch: three names that plain characters merge", partial(batch_case, ["r(1).txt", "r[1].txt", "r 1 .txt"])),
+    (
+        "batch: three names that plain characters merge",
+        partial(batch_case, ["r(1).txt", "r[1].txt", "r 1 .txt"]),
+    ),
     (
         "radians bag: JointState arrays of mismatched length (the issue's case)",
-        partial(radians_import, _short, (0,), ("310 JointState messages whose position and name lists differ",), N_JOINTS - 310),
+        partial(
+            radians_import,
+            _short,
+            (0,),
+            ("310 JointState messages whose position and name lists differ",),
+            N_JOINTS - 310,
+        ),
     ),
-    ("radians bag: zero stamps among good ones (the issue's case)", partial(radians_import, _zero, (0,), ("31 messages stamped 0",), N_JOINTS - 31)),
+    (
+        "radians bag: zero stamps among good ones (the issue's case)",
+        partial(radians_import, _zero, (0,), ("31 messages stamped 0",), N_JOINTS - 31),
+    ),
     (
         "radians bag: a joint absent from some messages (the issue's case)",
-        partial(radians_import, _partial, (0,), ("620 JointState messages holding only some of the joints",), N_JOINTS - 620),
+        partial(
+            radians_import,
+            _partial,
+            (0,),
+            ("620 JointState messages holding only some of the joints",),
+            N_JOINTS - 620,
+        ),
     ),
-    ("radians bag: every stamp equal (the issue's case)", partial(radians_import, _equal, (2,), ("carry one header stamp", "receive"), None)),
-    ("radians bag: every other stamp repeated", partial(radians_import, _repeated, (0,), ("1550 messages repeating",), N_JOINTS - 1550)),
+    (
+        "radians bag: every stamp equal (the issue's case)",
+        partial(radians_import, _equal, (2,), ("carry one header stamp", "receive"), None),
+    ),
+    (
+        "radians bag: every other stamp repeated",
+        partial(radians_import, _repeated, (0,), ("1550 messages repeating",), N_JOINTS - 1550),
+    ),
     ("import-bag --robot a missing file, joints in radians (the issue's case)", partial(_robot, None)),
-    ("import-bag --robot, joints in radians", partial(_robot, "initial_guess: {left_wheel_radius: 0.1, right_wheel_radius: 0.1, wheel_separation: 0.45}\n")),
+    (
+        "import-bag --robot, joints in radians",
+        partial(
+            _robot,
+            "initial_guess: {left_wheel_radius: 0.1, right_wheel_radius: 0.1, wheel_separation: 0.45}\n",
+        ),
+    ),
 ]
 
 
@@ -872,10 +1096,14 @@ LOST_CASES = [
 
 
 def short_lines(limit: int, outcome: Outcome) -> None:
-    assert all(len(ln) <= limit for ln in outcome.err.splitlines()), [len(ln) for ln in outcome.err.splitlines()]
+    assert all(len(ln) <= limit for ln in outcome.err.splitlines()), [
+        len(ln) for ln in outcome.err.splitlines()
+    ]
 
 
-def batch_list(entries: Callable[[Path], dict[str, list[str]]], needles: tuple[str, ...], w: World, tmp: Path) -> Expect:
+def batch_list(
+    entries: Callable[[Path], dict[str, list[str]]], needles: tuple[str, ...], w: World, tmp: Path
+) -> Expect:
     lists = entries(tmp)
     for name, items in lists.items():
         (tmp / name).write_text("".join(f"- {e}\n" for e in items))
@@ -901,7 +1129,18 @@ def batch_glob(make: Callable[[World, Path], None], needles: tuple[str, ...], w:
 
 
 def _old_outputs(w: World, tmp: Path) -> None:
-    outcome = run_in_process(["batch", str(tmp / "data"), "--out", str(tmp / "data" / "previous"), "--model", "tricycle", "--jobs", "1"])
+    outcome = run_in_process(
+        [
+            "batch",
+            str(tmp / "data"),
+            "--out",
+            str(tmp / "data" / "previous"),
+            "--model",
+            "tricycle",
+            "--jobs",
+            "1",
+        ]
+    )
     assert outcome.code == 0, outcome.err
 
 
@@ -915,7 +1154,9 @@ def _run_output(w: World, tmp: Path) -> None:
     assert run_in_process(["run", str(sc), "--out", str(tmp / "data" / "run1")], tmp).code == 0
 
 
-def partner(data: str, other: str, make: Callable[[Path], None], needles: tuple[str, ...], w: World, tmp: Path) -> Expect:
+def partner(
+    data: str, other: str, make: Callable[[Path], None], needles: tuple[str, ...], w: World, tmp: Path
+) -> Expect:
     """``--data`` naming one file of a joint-log pair whose partner beside it is not a regular file."""
     shutil.copy(w.camera if data.endswith(".tum") else w.camera_joints, tmp / data)
     make(tmp / other)
@@ -940,13 +1181,19 @@ def non_ascii(utf8_mode: str, w: World, tmp: Path) -> Expect:
 def long_cache(w: World, tmp: Path) -> Expect:
     env = {"NLP_CALIB_CACHE": str(tmp / ("c" * 5000))}
     argv = ["run", str(w.extra["cache_scenario"]), "--out", str(tmp / "out")]
-    return Expect(argv, (2,), ("compile cache", "NLP_CALIB_CACHE", "5"), env=env, check=partial(short_lines, 600))
+    return Expect(
+        argv, (2,), ("compile cache", "NLP_CALIB_CACHE", "5"), env=env, check=partial(short_lines, 600)
+    )
 
 
 def long_name(where: str, w: World, tmp: Path) -> Expect:
     name = "x" * 300
     sc = text_scenario(tmp, w.tricycle)
-    argv = ["run", str(sc), "--out", str(tmp / name)] if where == "out" else ["run", str(sc), "--out", str(tmp / "out"), "--data", str(tmp / f"{name}.txt")]
+    argv = (
+        ["run", str(sc), "--out", str(tmp / name)]
+        if where == "out"
+        else ["run", str(sc), "--out", str(tmp / "out"), "--data", str(tmp / f"{name}.txt")]
+    )
     return Expect(argv, (1, 2), ("File name too long",), check=partial(short_lines, 600))
 
 
@@ -954,7 +1201,6 @@ def frozen(which: str, w: World, tmp: Path) -> Expect:
     """Joints (or a counter) that never change while the robot drives: one line naming it, and no
     library's warnings."""
     if which == "camera":
-        head, rows = _csv_rows(w.camera_joints)
         tum, joints = recording(w, tmp, joints=lambda r: [[x[0], "1.0", "2.0"] for x in r])
         sc = camera_scenario(tmp, tum, joints)
         needles: tuple[str, ...] = ("cam.joints.csv", "left_wheel", "never turns", "dataset.encoders")
@@ -962,7 +1208,9 @@ def frozen(which: str, w: World, tmp: Path) -> Expect:
         lines = w.diff_drive.read_text().splitlines()
         body = [ln for ln in lines if ln.strip() and not ln.startswith("#")]
         log = tmp / "dd.txt"
-        log.write_text("\n".join([ln for ln in lines if ln.startswith("#")] + _ticks(1, lambda t: 7)(body)) + "\n")
+        log.write_text(
+            "\n".join([ln for ln in lines if ln.startswith("#")] + _ticks(1, lambda t: 7)(body)) + "\n"
+        )
         sc = text_scenario(tmp, log, model="diff_drive")
         needles = ("dd.txt", "right_wheel", "never turns")
 
@@ -977,14 +1225,46 @@ def _fifo(path: Path) -> None:
 
 
 MESSAGE_CASES = [
-    ("a batch list naming itself (the issue's case)", partial(batch_list, lambda t: {"list.yaml": ["drive.txt", "list.yaml"]}, ("list.yaml", "entry 2", "names itself"))),
-    ("two batch lists naming each other", partial(batch_list, lambda t: {"a.yaml": ["b.yaml"], "b.yaml": ["drive.txt", "a.yaml"]}, ("b.yaml", "leads back"))),
-    ("batch outputs globbed as logs (the issue's case)", partial(batch_glob, _old_outputs, ("left out", "written by nlp_calib"))),
-    ("a run's outputs globbed as logs", partial(batch_glob, _run_output, ("left out", "written by nlp_calib"))),
-    ("a pattern matching notes and pictures", partial(batch_glob, _other_files, ("left out 2", "neither logs nor scenarios", "README.md"))),
-    ("--data x.tum with x.joints.csv a folder (the issue's case)", partial(partner, "x.tum", "x.joints.csv", lambda p: p.mkdir(), ("a folder",))),
-    ("--data x.tum with x.csv a FIFO (the issue's case)", partial(partner, "x.tum", "x.csv", _fifo, ("a FIFO",))),
-    ("--data x.csv with x.tum a folder", partial(partner, "x.csv", "x.tum", lambda p: p.mkdir(), ("a folder",))),
+    (
+        "a batch list naming itself (the issue's case)",
+        partial(
+            batch_list,
+            lambda t: {"list.yaml": ["drive.txt", "list.yaml"]},
+            ("list.yaml", "entry 2", "names itself"),
+        ),
+    ),
+    (
+        "two batch lists naming each other",
+        partial(
+            batch_list,
+            lambda t: {"a.yaml": ["b.yaml"], "b.yaml": ["drive.txt", "a.yaml"]},
+            ("b.yaml", "leads back"),
+        ),
+    ),
+    (
+        "batch outputs globbed as logs (the issue's case)",
+        partial(batch_glob, _old_outputs, ("left out", "written by nlp_calib")),
+    ),
+    (
+        "a run's outputs globbed as logs",
+        partial(batch_glob, _run_output, ("left out", "written by nlp_calib")),
+    ),
+    (
+        "a pattern matching notes and pictures",
+        partial(batch_glob, _other_files, ("left out 2", "neither logs nor scenarios", "README.md")),
+    ),
+    (
+        "--data x.tum with x.joints.csv a folder (the issue's case)",
+        partial(partner, "x.tum", "x.joints.csv", lambda p: p.mkdir(), ("a folder",)),
+    ),
+    (
+        "--data x.tum with x.csv a FIFO (the issue's case)",
+        partial(partner, "x.tum", "x.csv", _fifo, ("a FIFO",)),
+    ),
+    (
+        "--data x.csv with x.tum a folder",
+        partial(partner, "x.csv", "x.tum", lambda p: p.mkdir(), ("a folder",)),
+    ),
     ("a non-ASCII path under LC_ALL=C (the issue's case)", partial(non_ascii, "0")),
     ("a non-ASCII path under LC_ALL=C, UTF-8 mode", partial(non_ascii, "1")),
     ("a 5,000-character compile cache path (the issue's case)", long_cache),
@@ -1018,7 +1298,9 @@ def _set(key: str, name: str, value: Any) -> Callable[[dict[str, Any]], None]:
     return edit
 
 
-def check_refused(edit: Callable[[dict[str, Any]], None], needles: tuple[str, ...], w: World, tmp: Path) -> Expect:
+def check_refused(
+    edit: Callable[[dict[str, Any]], None], needles: tuple[str, ...], w: World, tmp: Path
+) -> Expect:
     cal = tampered(edit, w, tmp)
     argv = ["check", str(cal), str(w.extra["fresh"]), "--out", str(tmp / "out")]
     return Expect(argv, (2,), ("calibration.yaml", *needles), absent=(tmp / "out",))
@@ -1028,7 +1310,10 @@ def relative_scenario(w: World, tmp: Path) -> Expect:
     """A calibration recording its scenario as ``case.yaml`` (relative) checked from a folder that
     holds another ``case.yaml`` (another formulation, a few samples): that file is not used."""
     cal = tampered(lambda d: d["scenario"].update(path="case.yaml"), w, tmp)
-    (tmp / "case.yaml").write_text(f"dataset: {quoted(w.tricycle)}\nmodel: tricycle\nresidual: {{horizon: 1}}\nsamples: {{start: 0, stop: 40}}\n")
+    (tmp / "case.yaml").write_text(
+        f"dataset: {quoted(w.tricycle)}\nmodel: tricycle\nresidual: {{horizon: 1}}\n"
+        "samples: {start: 0, stop: 40}\n"
+    )
     out = tmp / "out"
 
     def whole(_: Outcome) -> None:
@@ -1057,15 +1342,50 @@ def samples_on_a_new_log(same: bool, w: World, tmp: Path) -> Expect:
 
 NOT_OURS = "give the calibration.yaml nlp_calib wrote"
 CHECK_CASES = [
-    ("a σ of 1e300 (the issue's case)", partial(check_refused, _set("std", "sensor_x", 1e300), ("std.sensor_x", "1e+300", NOT_OURS))),
-    ("a σ of ten turns", partial(check_refused, _set("std", "sensor_theta", 62.8), ("std.sensor_theta", "62.8"))),
-    ("a negative σ (the issue's case)", partial(check_refused, _set("std", "k_steer", -0.002), ("std.k_steer", "negative"))),
-    ("a negative white-noise σ", partial(check_refused, _set("std_white_noise", "axis_length", -1.0), ("std_white_noise.axis_length", "negative"))),
-    ("a σ that is not a number", partial(check_refused, _set("std", "k_traction", float("nan")), ("std.k_traction", "finite"))),
-    ("axis_length 1e300 (the issue's case)", partial(check_refused, _set("parameters", "axis_length", 1e300), ("parameters.axis_length", "1e+300"))),
-    ("a negative k_steer", partial(check_refused, _set("parameters", "k_steer", -0.55), ("parameters.k_steer",))),
-    ("a sensor_theta of 100 rad", partial(check_refused, _set("parameters", "sensor_theta", 100.0), ("parameters.sensor_theta",))),
-    ("a parameter given as text", partial(check_refused, _set("parameters", "sensor_x", "1.6 m"), ("parameters.sensor_x", "finite number"))),
+    (
+        "a σ of 1e300 (the issue's case)",
+        partial(check_refused, _set("std", "sensor_x", 1e300), ("std.sensor_x", "1e+300", NOT_OURS)),
+    ),
+    (
+        "a σ of ten turns",
+        partial(check_refused, _set("std", "sensor_theta", 62.8), ("std.sensor_theta", "62.8")),
+    ),
+    (
+        "a negative σ (the issue's case)",
+        partial(check_refused, _set("std", "k_steer", -0.002), ("std.k_steer", "negative")),
+    ),
+    (
+        "a negative white-noise σ",
+        partial(
+            check_refused,
+            _set("std_white_noise", "axis_length", -1.0),
+            ("std_white_noise.axis_length", "negative"),
+        ),
+    ),
+    (
+        "a σ that is not a number",
+        partial(check_refused, _set("std", "k_traction", float("nan")), ("std.k_traction", "finite")),
+    ),
+    (
+        "axis_length 1e300 (the issue's case)",
+        partial(
+            check_refused, _set("parameters", "axis_length", 1e300), ("parameters.axis_length", "1e+300")
+        ),
+    ),
+    (
+        "a negative k_steer",
+        partial(check_refused, _set("parameters", "k_steer", -0.55), ("parameters.k_steer",)),
+    ),
+    (
+        "a sensor_theta of 100 rad",
+        partial(check_refused, _set("parameters", "sensor_theta", 100.0), ("parameters.sensor_theta",)),
+    ),
+    (
+        "a parameter given as text",
+        partial(
+            check_refused, _set("parameters", "sensor_x", "1.6 m"), ("parameters.sensor_x", "finite number")
+        ),
+    ),
     ("a scenario path relative to another folder (the issue's case)", relative_scenario),
     ("a recorded sample range on a new log (the issue's case)", partial(samples_on_a_new_log, False)),
     ("a recorded sample range on the same log", partial(samples_on_a_new_log, True)),
@@ -1092,7 +1412,8 @@ def within_memory(big: Path, small_argv: Sequence[str], tmp: Path, _: Outcome) -
     peak = int((tmp / "rss.txt").read_text())
     base = peak_kb(small_argv, tmp)
     extra, size = (peak - base) * 1024, big.stat().st_size
-    print(f"\n{big.name}: {size / 1e6:.0f} MB, peak {peak / 1024:.0f} MB, base {base / 1024:.0f} MB: {extra / size:.2f}× the file")
+    mb = f"{size / 1e6:.0f} MB, peak {peak / 1024:.0f} MB, base {base / 1024:.0f} MB"
+    print(f"\n{big.name}: {mb}: {extra / size:.2f}× the file")
     assert extra <= MEMORY_FACTOR * size, (extra / size, peak, base)
 
 
@@ -1119,7 +1440,11 @@ def long_joints(where: str, w: World, tmp: Path) -> Expect:
     with big.open("w") as fh:
         fh.write(format_joint_csv(times[:1] - shift, table.names, values[:1]))
         for k in range(1, times.size, 100_000):
-            fh.write(format_joint_csv(times[k : k + 100_000] - shift, table.names, values[k : k + 100_000]).split("\n", 1)[1])
+            fh.write(
+                format_joint_csv(times[k : k + 100_000] - shift, table.names, values[k : k + 100_000]).split(
+                    "\n", 1
+                )[1]
+            )
     extra = "" if where != "offset" else ", clock_offset: 500.0"
     sc = camera_scenario(tmp, w.camera, big, block=extra)
     small = camera_scenario(tmp, w.camera, w.camera_joints, name="small.yaml")
@@ -1130,7 +1455,9 @@ def long_joints(where: str, w: World, tmp: Path) -> Expect:
         right_answer(out, w.camera_truth, outcome)
 
     argv = ["run", str(sc), "--out", str(out)]
-    return Expect(argv, (0,), ("long.csv", "were kept"), cwd=tmp, env={"RSS_FILE": str(tmp / "rss.txt")}, check=check)
+    return Expect(
+        argv, (0,), ("long.csv", "were kept"), cwd=tmp, env={"RSS_FILE": str(tmp / "rss.txt")}, check=check
+    )
 
 
 def read_then_refused(kind: str, w: World, tmp: Path) -> Expect:
@@ -1141,26 +1468,54 @@ def read_then_refused(kind: str, w: World, tmp: Path) -> Expect:
     if kind == "text":
         big = write_sim(tmp, "big.txt", records=300_000, rate_hz=1000.0, seed=4)
         sc = text_scenario(tmp, big, extra="samples: {start: 0, stop: 999999999}\n")
-        small = text_scenario(tmp, w.tricycle, extra="samples: {start: 0, stop: 999999999}\n", name="small.yaml")
+        small = text_scenario(
+            tmp, w.tricycle, extra="samples: {start: 0, stop: 999999999}\n", name="small.yaml"
+        )
     else:  # a camera at 1 kHz: a long TUM file with its joints
-        from nlp_calib.simulation.camera import CameraNoise, CameraSimulationOptions, simulate_camera, write_camera_simulation
+        from nlp_calib.simulation.camera import (
+            CameraNoise,
+            CameraSimulationOptions,
+            simulate_camera,
+            write_camera_simulation,
+        )
 
-        sim = simulate_camera(CameraSimulationOptions(model="diff_drive", duration_s=240.0, seed=9, image_rate_hz=1000.0, noise=CameraNoise(0.001, 0.0017)))
+        sim = simulate_camera(
+            CameraSimulationOptions(
+                model="diff_drive",
+                duration_s=240.0,
+                seed=9,
+                image_rate_hz=1000.0,
+                noise=CameraNoise(0.001, 0.0017),
+            )
+        )
         big, joints, _ = write_camera_simulation(sim, tmp / "fast.tum")
         extra = "samples: {start: 0, stop: 999999999}\n"
         sc = camera_scenario(tmp, big, joints, extra=extra)
         small = camera_scenario(tmp, w.camera, w.camera_joints, extra=extra, name="small.yaml")
     argv = ["run", str(sc), "--out", str(tmp / "out")]
     small_argv = ["run", str(small), "--out", str(tmp / "small")]
-    return Expect(argv, (2,), ("samples",), cwd=tmp, env={"RSS_FILE": str(tmp / "rss.txt")}, check=partial(within_memory, big, small_argv, tmp))
+    return Expect(
+        argv,
+        (2,),
+        ("samples",),
+        cwd=tmp,
+        env={"RSS_FILE": str(tmp / "rss.txt")},
+        check=partial(within_memory, big, small_argv, tmp),
+    )
 
 
 MEMORY_CASES = [
-    ("a long joint log, the camera's 30 s in its middle (the issue's case, scaled)", partial(long_joints, "middle")),
+    (
+        "a long joint log, the camera's 30 s in its middle (the issue's case, scaled)",
+        partial(long_joints, "middle"),
+    ),
     ("a long joint log, the camera's 30 s at its start", partial(long_joints, "start")),
     ("a long joint log, the camera's 30 s at its end", partial(long_joints, "end")),
     ("a long joint log on another clock, clock_offset given", partial(long_joints, "offset")),
-    ("a text log of 300,000 records at 1 kHz, read (the issue's case, scaled)", partial(read_then_refused, "text")),
+    (
+        "a text log of 300,000 records at 1 kHz, read (the issue's case, scaled)",
+        partial(read_then_refused, "text"),
+    ),
     ("a TUM file of 240,000 poses at 1 kHz, read", partial(read_then_refused, "tum")),
 ]
 
@@ -1198,7 +1553,11 @@ def make_world(folder: Path) -> World:
         "axis_length": "wheelbase",
     }
     cameras = {}
-    for name, model, mount in (("cam", "diff_drive", {}), ("tricycle", "tricycle", {}), ("upside_down", "diff_drive", {"sensor_roll": float(np.radians(60.0))})):
+    for name, model, mount in (
+        ("cam", "diff_drive", {}),
+        ("tricycle", "tricycle", {}),
+        ("upside_down", "diff_drive", {"sensor_roll": float(np.radians(60.0))}),
+    ):
         sim = simulate_camera(dataclasses.replace(options, model=model, truth=mount))
         tum, _, _ = write_camera_simulation(sim, folder / f"{name}.tum")
         truth = {names.get(n, n): float(v) for n, v in sim.truth.items()}
@@ -1209,7 +1568,11 @@ def make_world(folder: Path) -> World:
     cache = folder / "cache"
     cache_scenario = text_scenario(folder, tricycle, name="cached.yaml")
     if has_compiler():
-        proc = run_child(["run", str(cache_scenario), "--out", str(folder / "cached")], folder, {"NLP_CALIB_CACHE": str(cache)})
+        proc = run_child(
+            ["run", str(cache_scenario), "--out", str(folder / "cached")],
+            folder,
+            {"NLP_CALIB_CACHE": str(cache)},
+        )
         assert proc.code == 0, proc.err
     w = World(folder, tricycle, diff_drive, load_log(tricycle, get_model("tricycle")), camera, truth, cache)
     w.extra["cache_scenario"] = cache_scenario

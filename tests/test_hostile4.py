@@ -17,7 +17,6 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
-from conftest import write_sim
 from hostile3_corpus import run_in_process, snapshot
 from hostile4_corpus import CLASSES, CORPUS, Case, World, judge, make_world, run_child
 

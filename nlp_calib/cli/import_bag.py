@@ -104,5 +104,6 @@ def _import_radians(args: argparse.Namespace, source: BagSource, folder: Path, n
     print(f"wrote {joints} (the joints in radians) and {poses} (the tracker's poses)")
     pairs = ", ".join(f"{e}: {j}" for e, j in zip(encoders(model), args.joints))
     robot = "" if args.robot is None else f", robot: {args.robot}"
-    print(f"a scenario reads them as: dataset: {{joints: {joints}, poses: {poses}, encoders: {{{pairs}}}{robot}}}")
+    block = f"{{joints: {joints}, poses: {poses}, encoders: {{{pairs}}}{robot}}}"
+    print(f"a scenario reads them as: dataset: {block}")
     return 0

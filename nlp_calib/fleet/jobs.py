@@ -143,9 +143,7 @@ def _warn_left_out(left_out: dict[str, list[str]]) -> None:
     for why, paths in left_out.items():
         if paths:
             shown = ", ".join(paths[:5]) + (f" and {len(paths) - 5} more" if len(paths) > 5 else "")
-            warnings.warn(
-                f"left out {len(paths)} input(s) {why}: {shown}", NlpCalibWarning, stacklevel=3
-            )
+            warnings.warn(f"left out {len(paths)} input(s) {why}: {shown}", NlpCalibWarning, stacklevel=3)
 
 
 def _plain(text: str) -> str:

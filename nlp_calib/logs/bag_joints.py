@@ -115,10 +115,10 @@ def check_clocks(path: Path, joint_ns: np.ndarray, positions: np.ndarray, tracke
     raise BagError(
         path,
         f"the joints' speed and the tracker's motion agree when the joints' times are shifted by "
-        f"{shift:+.2f} s (correlation {best:.2f}, against {stamped:.2f} as stamped): {late} {abs(shift):.2f} s "
-        f"late, which pairs poses with the wrong joints; add {shift:+.2f} s to clock_offset in the dataset "
-        "block (the seconds added to the joints' times; the tracker lag refines what remains), or fix "
-        "the recording's stamps",
+        f"{shift:+.2f} s (correlation {best:.2f}, against {stamped:.2f} as stamped): {late} "
+        f"{abs(shift):.2f} s late, which pairs poses with the wrong joints; add {shift:+.2f} s to "
+        "clock_offset in the dataset block (the seconds added to the joints' times; the tracker lag "
+        "refines what remains), or fix the recording's stamps",
     )
 
 

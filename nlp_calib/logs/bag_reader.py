@@ -248,7 +248,9 @@ class _Collector:
         recorded = np.array(self.recorded, dtype=np.int64)
         ns = np.array(stamps, dtype=np.int64)
         keep = self._usable(path, key, ns)
-        return Stamped(self.topic, ns[keep], values[keep], Drops({**drops.counts, **self.stamp_drops}), recorded[keep])
+        return Stamped(
+            self.topic, ns[keep], values[keep], Drops({**drops.counts, **self.stamp_drops}), recorded[keep]
+        )
 
     def _usable(self, path: Path, key: str, ns: np.ndarray) -> np.ndarray:
         """The messages whose stamps are times: a stamp of 0 among others and a stamp an earlier
@@ -265,10 +267,18 @@ class _Collector:
         _, first = np.unique(ns, return_index=True)
         repeated = np.ones(ns.size, dtype=bool)
         repeated[first] = False
-        self.stamp_drops = {why: int(n) for why, n in ((ZERO_STAMPS, zero.sum()), (REPEATED_STAMPS, (repeated & ~zero).sum())) if n}
+        self.stamp_drops = {
+            why: int(n)
+            for why, n in ((ZERO_STAMPS, zero.sum()), (REPEATED_STAMPS, (repeated & ~zero).sum()))
+            if n
+        }
         keep = ~zero & ~repeated
         if int(keep.sum()) < 2:
-            raise BagError(path, f"{key}: topic {self.topic!r} has {int(keep.sum())} message(s) with a usable stamp; at least 2 are needed")
+            raise BagError(
+                path,
+                f"{key}: topic {self.topic!r} has {int(keep.sum())} message(s) with a usable stamp; at least "
+                "2 are needed",
+            )
         return keep
 
 

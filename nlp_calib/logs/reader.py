@@ -65,7 +65,9 @@ def open_log(p: Path) -> BinaryIO:
             str(p), None, "is a folder, not a regular file; pass the log file itself"
         ) from None
     except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
-        raise DatasetError(str(p), None, f"cannot read the log ({getattr(exc, 'strerror', None) or exc})") from None
+        raise DatasetError(
+            str(p), None, f"cannot read the log ({getattr(exc, 'strerror', None) or exc})"
+        ) from None
 
 
 def _chunks(fh: BinaryIO, size: int = BLOCK_BYTES) -> Iterator[bytes]:

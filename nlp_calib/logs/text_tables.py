@@ -81,7 +81,9 @@ def _open(p: Path) -> Iterator[tuple[int, bytes, dict[int, int]]]:
     except IsADirectoryError:
         raise DatasetError(str(p), None, "is a folder, not a regular file; pass the file itself") from None
     except (OSError, ValueError) as exc:
-        raise DatasetError(str(p), None, f"cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
+        raise DatasetError(
+            str(p), None, f"cannot read the file ({getattr(exc, 'strerror', None) or exc})"
+        ) from None
     with fh:
         yield from _blocks(_chunks(fh, TABLE_BLOCK_BYTES))
 
@@ -138,7 +140,10 @@ def _plain_block(blob: bytes, layout: Layout) -> tuple[np.ndarray, np.ndarray, n
         return None
     try:
         values = np.stack(
-            [np.fromiter(map(float, tokens[k::fields]), dtype=float, count=n_lines) for k in range(1, fields)],
+            [
+                np.fromiter(map(float, tokens[k::fields]), dtype=float, count=n_lines)
+                for k in range(1, fields)
+            ],
             axis=1,
         )
     except ValueError:
@@ -220,12 +225,16 @@ class _Rows:
         lines = np.concatenate([[0], np.flatnonzero(np.frombuffer(blob, dtype=np.uint8) == 10) + 1])
         fast = np.zeros(lines.size - 1, dtype=bool)
         fast[rows] = True
-        extra = [self._slow(first + k, blob[lines[k] : lines[k + 1] - 1]) for k in np.flatnonzero(~fast).tolist()]
+        extra = [
+            self._slow(first + k, blob[lines[k] : lines[k + 1] - 1]) for k in np.flatnonzero(~fast).tolist()
+        ]
         found = [(k, r) for k, r in zip(np.flatnonzero(~fast).tolist(), extra) if r is not None]
         if found:
             order = np.argsort(np.concatenate([rows, [k for k, _ in found]]), kind="stable")
             t_ns = np.concatenate([t_ns, np.array([r[0] for _, r in found], dtype=np.int64)])[order]
-            values = np.concatenate([values, np.array([r[1] for _, r in found]).reshape(-1, self.layout.width)])[order]
+            values = np.concatenate(
+                [values, np.array([r[1] for _, r in found]).reshape(-1, self.layout.width)]
+            )[order]
             rows = np.concatenate([rows, [k for k, _ in found]])[order]
         self._gather(first + rows.astype(np.int64), t_ns, values)
 
@@ -250,7 +259,10 @@ class _Rows:
         if not t_ns.size:
             return
         if self.last is not None:
-            t_ns_all, lines_all = np.concatenate([[self.last[0]], t_ns]), np.concatenate([[self.last[1]], lines])
+            t_ns_all, lines_all = (
+                np.concatenate([[self.last[0]], t_ns]),
+                np.concatenate([[self.last[1]], lines]),
+            )
         else:
             t_ns_all, lines_all = t_ns, lines
         check_increasing(self.path, t_ns_all, lines_all)

@@ -289,7 +289,10 @@ class InRadians:
             value = abs(params[r.name])
             if lo <= value <= hi:
                 continue
-            said = f"{r.name} came out {params[r.name]:.3g} {r.unit}, not what a real robot has ([{lo:g}, {hi:g}] {r.unit})"
+            said = (
+                f"{r.name} came out {params[r.name]:.3g} {r.unit}, not what a real robot has "
+                f"([{lo:g}, {hi:g}] {r.unit})"
+            )
             if lo <= value * DEGREE <= hi:
                 return (
                     f"{said}; times 180/π it is {value * DEGREE:.3g} {r.unit}: the joints look logged in "

@@ -34,7 +34,12 @@ BASE_LINK = "base_link"
 MAX_BYTES = 16 * 1024 * 1024
 _TAG_END = re.compile(rb"""(?:[^>"']|"[^"]*"|'[^']*')*>""")
 #: Byte order marks of the encodings ROS's parser cannot read (UTF-32's first: it starts as UTF-16's).
-_BOMS = {b"\xff\xfe\x00\x00": "UTF-32", b"\x00\x00\xfe\xff": "UTF-32", b"\xff\xfe": "UTF-16", b"\xfe\xff": "UTF-16"}
+_BOMS = {
+    b"\xff\xfe\x00\x00": "UTF-32",
+    b"\x00\x00\xfe\xff": "UTF-32",
+    b"\xff\xfe": "UTF-16",
+    b"\xfe\xff": "UTF-16",
+}
 _UTF8_BOM = b"\xef\xbb\xbf"
 #: The elements of a joint ROS reads once (the first of each).
 _ONCE = ("parent", "child", "origin")
@@ -179,7 +184,10 @@ def _parse(path: Path, text: bytes) -> tuple[dict[str, _Joint], str]:
     for joint in reader.joints:
         _check_joint(reader, joint)
         if joint.name in names:
-            raise reader.fail(joint.line, f"a second joint named {joint.name!r} (the first on line {names[joint.name].line})")
+            raise reader.fail(
+                joint.line,
+                f"a second joint named {joint.name!r} (the first on line {names[joint.name].line})",
+            )
         names[joint.name] = joint
         if joint.child in joints:
             first = joints[joint.child]

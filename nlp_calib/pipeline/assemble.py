@@ -6,10 +6,9 @@ one run per log, each with the joint estimates and checks beside that log's own 
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import dataclasses
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 
 import numpy as np
 

@@ -101,7 +101,9 @@ def auto_guess(
     """The model's closed-form estimate from the windows of records ``start:stop`` that cross no
     gap (no guess needed)."""
     residual = sc.objective.residual
-    data = build_residual_data(fns, log.select(start, stop), residual, bad_intervals=_within(gaps, start, stop))
+    data = build_residual_data(
+        fns, log.select(start, stop), residual, bad_intervals=_within(gaps, start, stop)
+    )
     rows = fns.n_inputs * data.horizon
     # Windows overlapping by three quarters carry nearly all the information at a fraction
     # of the cost of every window.

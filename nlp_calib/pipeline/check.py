@@ -37,7 +37,11 @@ def _recorded(stored: StoredCalibration, log: Path) -> Scenario:
     if stored.scenario is not None:
         return _whole(load_scenario(stored.scenario).with_dataset(log), stored)
     if stored.recorded is not None:
-        why = "is not there" if Path(stored.recorded).is_absolute() else "is recorded relative to the folder it ran in"
+        why = (
+            "is not there"
+            if Path(stored.recorded).is_absolute()
+            else "is recorded relative to the folder it ran in"
+        )
         warnings.warn(
             f"the scenario {stored.path} was made with ({stored.recorded}) {why}; the log is read with the "
             "model's defaults and the residual and kernel the calibration recorded; give the scenario as "

@@ -236,7 +236,9 @@ def prepare(sc: Scenario, log: Log | None = None) -> PreparedLog:
         warnings.warn(
             f"{name} is held at its initial value: {why} in the fitted records", NlpCalibWarning, stacklevel=2
         )
-    return PreparedLog(sc, model, log, start, stop, first_split, undetermined, gaps_said(sc, log, start, stop))
+    return PreparedLog(
+        sc, model, log, start, stop, first_split, undetermined, gaps_said(sc, log, start, stop)
+    )
 
 
 def gaps_said(sc: Scenario, log: Log, start: int, stop: int) -> np.ndarray:
@@ -248,8 +250,9 @@ def gaps_said(sc: Scenario, log: Log, start: int, stop: int) -> np.ndarray:
         k = int(inside[np.argmax(dt[inside])])
         part = f"{sc.origin} ({sc.dataset.name}): " if sc.origin else ""
         warnings.warn(
-            f"{part}{sc.log.source.numbered}: {inside.size} gap(s) in time over {gap_threshold(log.time_s):.3g} s "
-            f"({GAP_FACTOR:g}× the median interval, at least {MIN_GAP_S:g} s) between records (the longest {dt[k]:.3g} s, after line "
+            f"{part}{sc.log.source.numbered}: {inside.size} gap(s) in time over "
+            f"{gap_threshold(log.time_s):.3g} s ({GAP_FACTOR:g}× the median interval, at least "
+            f"{MIN_GAP_S:g} s) between records (the longest {dt[k]:.3g} s, after line "
             f"{int(log.line_numbers[k])}, t = {log.time_s[k]:.3f} s: the tracker or the joints missing); no "
             "residual window crosses them",
             NlpCalibWarning,

@@ -94,10 +94,10 @@ def _check_values(
             lo, hi = model.physical_ranges.get(name, (-math.inf, math.inf))
             widest = 2.0 * math.pi if name in model.angle_params else hi - lo
             if sd < 0 or sd > widest:
+                what = "negative" if sd < 0 else f"wider than any {name} can be ({widest:.6g})"
                 fail(
                     f"{where}: {key}.{key_name(name)}",
-                    f"a 1σ of {sd:.6g} is {'negative' if sd < 0 else f'wider than any {name} can be ({widest:.6g})'}; "
-                    "give the calibration.yaml nlp_calib wrote",
+                    f"a 1σ of {sd:.6g} is {what}; give the calibration.yaml nlp_calib wrote",
                 )
 
 

@@ -110,10 +110,10 @@ class JointLogSource:
             raise DatasetError(
                 str(self.poses),
                 None,
-                f"its quaternions look written 'qw qx qy qz': read as TUM's 'qx qy qz qw', {100 * read:.0f} % of "
-                f"the sensor's rotation is about the normal of the plane its positions lie in, read w first "
-                f"{100 * w_first:.0f} %; "
-                "a TUM line is 'timestamp tx ty tz qx qy qz qw': move each line's w to the end",
+                "its quaternions look written 'qw qx qy qz': read as TUM's 'qx qy qz qw', "
+                f"{100 * read:.0f} % of the sensor's rotation is about the normal of the plane its positions "
+                f"lie in, read w first {100 * w_first:.0f} %; a TUM line is "
+                "'timestamp tx ty tz qx qy qz qw': move each line's w to the end",
             )
 
     def _paired(self, poses: Trajectory3D, shift: int) -> JointTable:
@@ -126,13 +126,17 @@ class JointLogSource:
         self._check_overlap(np.array(table.span_ns) + shift, poses.time_ns)
         kept = int(table.time_ns.size)
         if kept < 2:
-            raise DatasetError(str(self.joints), None, f"holds {kept} row(s) within {PAIRING_MARGIN_S:g} s of the poses; at least 2 are needed")
+            raise DatasetError(
+                str(self.joints),
+                None,
+                f"holds {kept} row(s) within {PAIRING_MARGIN_S:g} s of the poses; at least 2 are needed",
+            )
         if kept < table.rows / 2:
             span = (table.span_ns[1] - table.span_ns[0]) * 1e-9
             warnings.warn(
                 f"{self.joints}: {table.rows} rows over {span:.0f} s, of which the {kept} within "
-                f"{PAIRING_MARGIN_S:g} s of the poses' {poses.time_s[-1] - poses.time_s[0]:.0f} s ({self.poses.name}) "
-                "were kept; the rest cannot pair with them",
+                f"{PAIRING_MARGIN_S:g} s of the poses' {poses.time_s[-1] - poses.time_s[0]:.0f} s "
+                f"({self.poses.name}) were kept; the rest cannot pair with them",
                 NlpCalibWarning,
                 stacklevel=4,
             )

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-from nlp_calib.core.config import coerce
 from nlp_calib.core import memory
+from nlp_calib.core.config import coerce
 from nlp_calib.core.errors import ModelError, NlpCalibWarning, UsageError
 from nlp_calib.logs import Log, read_log
 from nlp_calib.logs.bag_reader import is_bag
@@ -53,9 +53,9 @@ def _warn_size(path: Path) -> None:
         return
     room = f", more than the {free / 1e9:.1f} GB free" if free is not None and need >= free else ""
     warnings.warn(
-        f"{path}: {size / 1e6:.0f} MB of records: a run of it holds about {need / 1e9:.1f} GB in memory{room} "
-        "and takes minutes; choose the records you need with samples, or thin the log (a tracker "
-        "at 1 kHz gains little over 100 Hz)",
+        f"{path}: {size / 1e6:.0f} MB of records: a run of it holds about {need / 1e9:.1f} GB in "
+        f"memory{room} and takes minutes; choose the records you need with samples, or thin the log "
+        "(a tracker at 1 kHz gains little over 100 Hz)",
         NlpCalibWarning,
         stacklevel=4,
     )
