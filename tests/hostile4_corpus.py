@@ -1425,7 +1425,7 @@ def long_joints(where: str, w: World, tmp: Path) -> Expect:
 
     table = read_joint_csv(w.camera_joints)
     t = table.time_ns
-    before = {"middle": 300, "start": 0, "end": 600, "offset": 300}[where] * 10**9
+    before = {"middle": 300, "start": 0, "end": 600, "offset": 300, "comments": 300}[where] * 10**9
     after = 600 * 10**9 - before
     step = 10**6
     pad_a = np.arange(t[0] - before, t[0], step)
@@ -1439,12 +1439,10 @@ def long_joints(where: str, w: World, tmp: Path) -> Expect:
     big = tmp / "long.csv"
     with big.open("w") as fh:
         fh.write(format_joint_csv(times[:1] - shift, table.names, values[:1]))
-        for k in range(1, times.size, 100_000):
-            fh.write(
-                format_joint_csv(times[k : k + 100_000] - shift, table.names, values[k : k + 100_000]).split(
-                    "\n", 1
-                )[1]
-            )
+        step_rows = 10_000 if where == "comments" else 100_000
+        for k in range(1, times.size, step_rows):
+            rows = format_joint_csv(times[k : k + step_rows] - shift, table.names, values[k : k + step_rows])
+            fh.write(rows.split("\n", 1)[1] + ("# a note from the logger\n" if where == "comments" else ""))
     extra = "" if where != "offset" else ", clock_offset: 500.0"
     sc = camera_scenario(tmp, w.camera, big, block=extra)
     small = camera_scenario(tmp, w.camera, w.camera_joints, name="small.yaml")
@@ -1465,8 +1463,10 @@ def read_then_refused(kind: str, w: World, tmp: Path) -> Expect:
     reading alone, measured."""
     from conftest import write_sim
 
-    if kind == "text":
+    if kind in ("text", "crlf"):
         big = write_sim(tmp, "big.txt", records=300_000, rate_hz=1000.0, seed=4)
+        if kind == "crlf":
+            big.write_bytes(big.read_bytes().replace(b"\n", b"\r\n"))
         sc = text_scenario(tmp, big, extra="samples: {start: 0, stop: 999999999}\n")
         small = text_scenario(
             tmp, w.tricycle, extra="samples: {start: 0, stop: 999999999}\n", name="small.yaml"
@@ -1517,6 +1517,8 @@ MEMORY_CASES = [
         partial(read_then_refused, "text"),
     ),
     ("a TUM file of 240,000 poses at 1 kHz, read", partial(read_then_refused, "tum")),
+    ("a long joint log with a comment every 10,000 rows", partial(long_joints, "comments")),
+    ("a text log of 300,000 records with CRLF line ends, read", partial(read_then_refused, "crlf")),
 ]
 
 

@@ -339,19 +339,22 @@ class _RecordReader:
                 "the file ends after the header: no records (expected lines 'time: ... ticks: ... "
                 "model_pose: ... tracker_pose: ...'; did the logger stop before its first record?)",
             )
+        parts, self.parts = self.parts, []  # each column gathered once, its blocks let go at once
         lines_arr, t_ns, tick_arr, poses = (
-            np.concatenate([p[i] for p in self.parts]) if self.parts else np.zeros((0,)) for i in range(4)
+            np.concatenate([p[i] for p in parts]) if parts else np.zeros((0,)) for i in range(4)
         )
-        tick_arr = tick_arr.reshape(-1, self.n_enc).astype(np.int64)
+        del parts
+        tick_arr = tick_arr.reshape(-1, self.n_enc).astype(np.int64, copy=False)
         poses = poses.reshape(-1, 6)
-        t_ns, lines_arr = t_ns.astype(np.int64), lines_arr.astype(np.int64)
+        t_ns, lines_arr = t_ns.astype(np.int64, copy=False), lines_arr.astype(np.int64, copy=False)
         keep = np.ones(t_ns.size, dtype=bool)
         self.problems.update(
             counter_drops(
                 t_ns, tick_arr, lines_arr, keep, self.counters, self.path, self.strict, COUNTER_MODULUS
             )
         )
-        t_ns, tick_arr, poses, lines_arr = t_ns[keep], tick_arr[keep], poses[keep], lines_arr[keep]
+        if not keep.all():
+            t_ns, tick_arr, poses, lines_arr = t_ns[keep], tick_arr[keep], poses[keep], lines_arr[keep]
         dropped = tuple(DroppedRecord(line, self.problems[line]) for line in sorted(self.problems))
         if t_ns.shape[0] < 2:
             why = f"; the first dropped: {dropped[0].line}: {dropped[0].reason}" if dropped else ""
