@@ -119,7 +119,7 @@ class JointLogSource:
     def _paired(self, poses: Trajectory3D, shift: int) -> JointTable:
         """The joint rows within :data:`PAIRING_MARGIN_S` of the poses (on the poses' clock): what
         can pair with them, the lag search and the clock check included; the rest of a long joint
-        log is skipped as it is read (said in a warning when it is most of it)."""
+        log is skipped as it is read, and said."""
         margin = round(PAIRING_MARGIN_S * 1e9)
         lo, hi = int(poses.time_ns[0]) - shift - margin, int(poses.time_ns[-1]) - shift + margin
         table = read_joint_csv(self.joints, keep=lambda t: (t >= lo) & (t <= hi))
@@ -131,7 +131,7 @@ class JointLogSource:
                 None,
                 f"holds {kept} row(s) within {PAIRING_MARGIN_S:g} s of the poses; at least 2 are needed",
             )
-        if kept < table.rows / 2:
+        if kept < table.rows:
             span = (table.span_ns[1] - table.span_ns[0]) * 1e-9
             warnings.warn(
                 f"{self.joints}: {table.rows} rows over {span:.0f} s, of which the {kept} within "
