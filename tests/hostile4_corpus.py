@@ -1425,7 +1425,7 @@ def long_joints(where: str, w: World, tmp: Path) -> Expect:
 
     table = read_joint_csv(w.camera_joints)
     t = table.time_ns
-    before = {"middle": 180, "start": 0, "end": 360, "offset": 180, "comments": 180}[where] * 10**9
+    before = {"middle": 180, "end": 360, "offset": 180, "comments": 180, "earlier": 180}[where] * 10**9
     after = 360 * 10**9 - before
     step = 10**6
     pad_a = np.arange(t[0] - before, t[0], step)
@@ -1435,7 +1435,7 @@ def long_joints(where: str, w: World, tmp: Path) -> Expect:
     q = np.column_stack(columns)
     times = np.concatenate([pad_a, fine, pad_b])
     values = np.vstack([np.repeat(q[:1], pad_a.size, 0), q, np.repeat(q[-1:], pad_b.size, 0)])
-    shift = 500 * 10**9 if where == "offset" else 0
+    shift = {"offset": 500, "earlier": 900}.get(where, 0) * 10**9
     big = tmp / "long.csv"
     with big.open("w") as fh:
         fh.write(format_joint_csv(times[:1] - shift, table.names, values[:1]))
@@ -1450,12 +1450,16 @@ def long_joints(where: str, w: World, tmp: Path) -> Expect:
 
     def check(outcome: Outcome) -> None:
         within_memory(big, ["run", str(small), "--out", str(tmp / "small")], tmp, outcome)
-        right_answer(out, w.camera_truth, outcome)
+        if where != "earlier":
+            right_answer(out, w.camera_truth, outcome)
 
     argv = ["run", str(sc), "--out", str(out)]
-    return Expect(
-        argv, (0,), ("long.csv", "were kept"), cwd=tmp, env={"RSS_FILE": str(tmp / "rss.txt")}, check=check
-    )
+    env = {"RSS_FILE": str(tmp / "rss.txt")}
+    if where == "earlier":  # the joints end minutes before the poses begin: refused, naming both spans
+        return Expect(
+            argv, (2,), ("long.csv", "do not overlap", "clock_offset"), cwd=tmp, env=env, check=check
+        )
+    return Expect(argv, (0,), ("long.csv", "were kept"), cwd=tmp, env=env, check=check)
 
 
 def read_then_refused(kind: str, w: World, tmp: Path) -> Expect:
@@ -1518,6 +1522,7 @@ MEMORY_CASES = [
     ),
     ("a TUM file of 180,000 poses at 1 kHz, read", partial(read_then_refused, "tum")),
     ("a long joint log with a comment every 10,000 rows", partial(long_joints, "comments")),
+    ("a long joint log that ends before the poses begin", partial(long_joints, "earlier")),
     ("a text log of 200,000 records with CRLF line ends, read", partial(read_then_refused, "crlf")),
 ]
 

@@ -70,8 +70,8 @@ def open_log(p: Path) -> BinaryIO:
         ) from None
 
 
-def _chunks(fh: BinaryIO, size: int = BLOCK_BYTES) -> Iterator[bytes]:
-    while chunk := fh.read(size):
+def _chunks(fh: BinaryIO, size: int | None = None) -> Iterator[bytes]:
+    while chunk := fh.read(size or BLOCK_BYTES):
         yield chunk
 
 

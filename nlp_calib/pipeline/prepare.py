@@ -96,7 +96,7 @@ def select(sc: Scenario, log: Log, model: KinematicModel | None = None) -> tuple
 
 
 def check_readings(sc: Scenario, model: KinematicModel, log: Log) -> None:
-    """Refuse readings no fit can use: a steering joint (an angle) that spans more than a turn
+    """Refuse readings no fit can use: an absolute joint (an angle) that spans more than a turn
     (logged in degrees), and a wheel's counter (or joint) that never changes while the tracker
     travels (the wrong encoder or joint named, or a driver that did not publish it)."""
     if log.joint_positions is not None:
