@@ -1517,7 +1517,7 @@ MEMORY_CASES = [
     ("a long joint log, the camera's 30 s at its end", partial(long_joints, "end")),
     ("a long joint log on another clock, clock_offset given", partial(long_joints, "offset")),
     (
-        "a text log of 300,000 records at 1 kHz, read (the issue's case, scaled)",
+        "a text log of 200,000 records at 1 kHz, read (the issue's case, scaled)",
         partial(read_then_refused, "text"),
     ),
     ("a TUM file of 180,000 poses at 1 kHz, read", partial(read_then_refused, "tum")),
