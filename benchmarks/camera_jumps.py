@@ -23,6 +23,7 @@ from nlp_calib.analysis.faults import tracker_faults
 from nlp_calib.core import poses3d
 from nlp_calib.logs import Log
 from nlp_calib.models import get_model
+from nlp_calib.sensors import sensor_for
 from nlp_calib.simulation.camera import (
     CameraNoise,
     CameraSimulationOptions,
@@ -52,7 +53,7 @@ def read(tum: Path, joints: Path) -> Log:
 
 
 def flagged_lines(tum: Path, joints: Path) -> list[int]:
-    return [f.line for f in tracker_faults(read(tum, joints), spatial=True)]
+    return [f.line for f in tracker_faults(read(tum, joints), sensor_for("3d"))]
 
 
 def glitched(lines: list[str], index: int, shift: np.ndarray, turn: np.ndarray) -> str:

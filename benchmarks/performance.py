@@ -15,9 +15,13 @@ numpy residual with its analytic Jacobian, the same Huber objective; ``baselines
 installed (``pip install .[bench]``), GTSAM and Ceres through their standard Python APIs.
 ``ipopt_lag`` solves the recommended real-log scenario with IPOPT at 14 lags 0.06 ms apart, with
 the project's ``tiny_step_tol`` and with IPOPT's default (the iterations a lag's last digits
-decided). ``simulate`` times ``nlp-calib simulate --records 10^6`` (its peak RSS: the block-wise writer's);
-``batch`` runs ``nlp-calib batch`` over 20 simulated logs with ``--jobs 1`` and ``--jobs 2``,
-interleaved. Writes ``results/performance.{json,md,png}``.
+decided). ``horizon`` runs the demo's settings (``nlp-calib run scenarios/demo.yaml --data LOG``)
+on simulated logs of 10^5 and 10^6 records, ``camera`` the camera demo's on drives of 10^5 and
+10^6 poses. ``gn_pass`` times one Gauss-Newton pass of the evaluator against the same computation
+fused into one C loop. ``simulate`` times ``nlp-calib simulate --records 10^6`` (its peak RSS: the
+block-wise writer's); ``batch`` runs ``nlp-calib batch`` over 20 simulated logs with ``--jobs 1``
+and ``--jobs 2``, interleaved; ``reader`` reads 10^6 records against ``numpy.loadtxt``. Writes
+``results/performance.{json,md,png}`` (``--out`` elsewhere).
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
+import itertools
 import json
 import os
 import platform
@@ -69,13 +74,42 @@ TARGETS = {
     "scipy (per window) / GN, H=25 [x]": 30.0,
     "scipy (prefix) / GN, H=1 [x]": 10.0,
     "scipy (prefix) / GN, H=25 [x]": 30.0,
-    "compare real_tricycle.yaml, warm / import floor [x]": 5.0,
-    "10^6 records run --solver gauss_newton [s]": 10.0,
+    "compare real_tricycle.yaml, warm / import floor [x]": 4.0,
+    "compare real_tricycle.yaml, cold / import floor [x]": 8.0,
+    "compare camera_demo.yaml, warm / import floor [x]": 6.0,
+    "import nlp_calib.cli.commands / import floor [x]": 1.3,
+    "10^6 records run --solver gauss_newton [s]": 12.0,
     "10^6 records peak RSS [MB]": 1000.0,
-    "batch of 20 logs, --jobs 1 / --jobs 2 [x]": 1.7,
+    "demo settings, 10^6 records run [s]": 30.0,
+    "demo settings, 10^6 records peak RSS [MB]": 1000.0,
+    "demo settings, run time 10^6 / 10^5 records [x]": 11.0,
+    "camera_demo settings, 10^6 poses run [s]": 30.0,
+    "camera_demo settings, 10^6 poses peak RSS [MB]": 1000.0,
+    "camera_demo settings, run time 10^6 / 10^5 poses [x]": 11.0,
+    "reader / numpy.loadtxt, 10^6 records [x]": 1.5,
+    "Gauss-Newton pass / fused C loop [x]": 1.5,
+    "batch of 20 logs, --jobs 1 / --jobs 2 [x]": 1.0,
+}
+#: Targets a figure must reach or exceed (the others are upper bounds).
+AT_LEAST = frozenset({"batch of 20 logs, --jobs 1 / --jobs 2 [x]"}) | {
+    name for name in TARGETS if name.startswith("scipy")
 }
 #: The sections a run measures (``--sections``), in order.
-SECTIONS = ("end_to_end", "solvers", "ipopt_lag", "scaling", "simulate", "batch", "reader")
+SECTIONS = (
+    "end_to_end",
+    "solvers",
+    "ipopt_lag",
+    "scaling",
+    "horizon",
+    "camera",
+    "simulate",
+    "batch",
+    "reader",
+    "gn_pass",
+)
+#: The camera demo's images per second (scenarios/data/camera_demo.sim.yaml): a drive of ``n``
+#: poses lasts ``n / CAMERA_RATE_HZ`` seconds.
+CAMERA_RATE_HZ = 50.0
 
 
 def load() -> list[float]:
@@ -110,10 +144,13 @@ def end_to_end(scenarios: list[tuple[str, list[str]]], repeats: int, tmp: Path) 
         )
     runs: dict[str, dict[str, list[float]]] = {name: {} for name, _ in scenarios}
     floor: list[float] = []
+    commands: list[float] = []
     start = load()
     for k in range(repeats):
-        # The floor every run pays: a fresh interpreter importing numpy and CasADi.
+        # The floor every run pays: a fresh interpreter importing numpy and CasADi; beside it, what
+        # the command line loads before it knows the command.
         floor.append(launch([sys.executable, "-c", "import numpy, casadi"], env)["wall_s"])
+        commands.append(launch([sys.executable, "-c", "import nlp_calib.cli.commands"], env)["wall_s"])
         for name, extra in scenarios:
             for mode in ("cold", "warm"):
                 cache = tmp / f"cache-cold-{k}-{name}" if mode == "cold" else warm
@@ -137,6 +174,7 @@ def end_to_end(scenarios: list[tuple[str, list[str]]], repeats: int, tmp: Path) 
         "load_start": start,
         "load_end": load(),
         "import_floor_s": med(floor),
+        "import_commands_s": med(commands),
         "scenarios": {n: {k: med(v) for k, v in r.items()} for n, r in runs.items()},
     }
 
@@ -320,6 +358,199 @@ def scaling(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
     return {"load_start": start, "load_end": load(), "sizes": cases, "wall_slope": slope}
 
 
+def sized_runs(scenario: str, logs: dict[int, Path], repeats: int, tmp: Path) -> dict[str, Any]:
+    """``nlp-calib run SCENARIO --data LOG`` (the scenario's own settings and solvers) on each log,
+    interleaved: wall, CPU (its processes'), peak RSS, each solver's time; and how the wall time
+    grows from each size to the next."""
+    env = dict(
+        os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore", NLP_CALIB_CACHE=str(tmp / "cache-sized")
+    )
+    path = str(REPO / "scenarios" / f"{scenario}.yaml")
+    first = min(logs)
+    launch(cli("run", path, "--data", str(logs[first]), "--out", str(tmp / "warm-up")), env)  # compiles
+    runs: dict[int, dict[str, list[float]]] = {n: {} for n in logs}
+    start = load()
+    for _ in range(repeats):
+        for n, log in logs.items():
+            out = tmp / f"{scenario}-{n}"
+            r = launch(cli("run", path, "--data", str(log), "--out", str(out), "--force"), env)
+            if r["rc"] not in (0, 1):
+                raise SystemExit(f"run {scenario} on {n} failed with exit code {r['rc']}")
+            rec = runs[n]
+            for key in ("wall_s", "cpu_s", "peak_mb"):
+                rec.setdefault(key, []).append(r[key])
+            for solver, res in json.loads((out / "result.json").read_text())["solvers"].items():
+                rec.setdefault(f"{solver}_ms", []).append(1e3 * res["time_s"])
+    sizes = sorted(logs)
+    cases = {str(n): {k: med(v) for k, v in runs[n].items()} for n in sizes}
+    growth = {
+        f"{b}/{a}": cases[str(b)]["wall_s"] / cases[str(a)]["wall_s"] for a, b in itertools.pairwise(sizes)
+    }
+    return {"load_start": start, "load_end": load(), "scenario": scenario, "sizes": cases, "growth": growth}
+
+
+def horizon(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
+    """The demo's settings (windows of several records, both solvers, every check) on simulated
+    tricycle logs of each size."""
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
+    logs = {}
+    for n in sizes:
+        logs[n] = tmp / f"horizon_{n}.txt"
+        subprocess.run(
+            cli("simulate", "--records", str(n), "--seed", "11", "--out", str(logs[n]), "--force"),
+            env=env,
+            check=True,
+            capture_output=True,
+        )
+    return sized_runs("demo", logs, repeats, tmp)
+
+
+def camera(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
+    """The camera demo's settings (3-D mount, lag search, both solvers) on simulated camera drives of
+    each number of poses (the demo's simulation options, longer)."""
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
+    config = REPO / "scenarios" / "data" / "camera_demo.sim.yaml"
+    logs = {}
+    for n in sizes:
+        logs[n] = tmp / f"camera_{n}.tum"  # a fresh folder: nothing to replace
+        duration = f"{n / CAMERA_RATE_HZ:g}"
+        subprocess.run(
+            cli("simulate", "--config", str(config), "--duration", duration, "--out", str(logs[n])),
+            env=env,
+            check=True,
+            capture_output=True,
+        )
+    return sized_runs("camera_demo", logs, repeats, tmp)
+
+
+#: One Gauss-Newton pass fused into one C loop: the prefix scan interval by interval, then each
+#: window's normal-equation terms from its two prefix jets, summed as they come (no buffer between).
+FUSED_DRIVER = """
+#include <string.h>
+int fused_pass(const double* U, long n_int, const double* x, const double* xf, const double* omega,
+               const double* delta, const long* a, const long* b, const double* data, long n_win,
+               double* P, double* out) {
+  casadi_int iw[IW + 1]; casadi_real w[W + 1]; const casadi_real* arg[ARG]; casadi_real* res[RES];
+  double motion[2 * SR], o[NOUT];
+  memset(P, 0, SR * sizeof(double));
+  for (long j = 0; j < n_int; ++j) {
+    arg[0] = P + j * SR; arg[1] = x; arg[2] = xf; arg[3] = U + j * NU; res[0] = P + (j + 1) * SR;
+    STEP(arg, res, iw, w, 0);
+  }
+  memset(out, 0, NOUT * sizeof(double));
+  for (long k = 0; k < n_win; ++k) {
+    memcpy(motion, P + a[k] * SR, SR * sizeof(double));
+    memcpy(motion + SR, P + b[k] * SR, SR * sizeof(double));
+    ARGS
+    OUTS
+    NE(arg, res, iw, w, 0);
+    for (int i = 0; i < NOUT; ++i) out[i] += o[i];
+  }
+  return 0;
+}
+"""
+
+
+def fused_loop(fns: Any, tmp: Path) -> Any:
+    """The problem's scan step and per-window normal equations generated as C (CasADi's code, as the
+    compiled backend generates it) with :data:`FUSED_DRIVER`, compiled with the solvers' flags."""
+    import ctypes
+
+    import casadi as ca
+
+    from nlp_calib.codegen.compiler import CFLAGS, find_compiler
+
+    step, ne = fns.step(1), fns.function("normal_equations")
+    cg = ca.CodeGenerator("fused.c", {"with_header": False})
+    cg.add(step)
+    cg.add(ne)
+    sources = {"x": "x", "x_fixed": "xf", "omega": "omega", "delta": "delta", "motion": "motion"}
+    sources["data"] = f"data + k * {ne.nnz_in(ne.index_in('data'))}"
+    args = " ".join(f"arg[{i}] = {sources[ne.name_in(i)]};" for i in range(ne.n_in()))
+    offsets = np.cumsum([0] + [ne.nnz_out(i) for i in range(ne.n_out())])
+    outs = " ".join(f"res[{i}] = o + {offsets[i]};" for i in range(ne.n_out()))
+    sizes = {
+        "IW": max(step.sz_iw(), ne.sz_iw()),
+        "W": max(step.sz_w(), ne.sz_w()),
+        "ARG": max(step.sz_arg(), ne.sz_arg()),
+        "RES": max(step.sz_res(), ne.sz_res()),
+        "SR": step.nnz_in(0),
+        "NU": step.nnz_in(3),
+        "NOUT": int(offsets[-1]),
+    }
+    driver = FUSED_DRIVER.replace("ARGS", args).replace("OUTS", outs)
+    driver = driver.replace("STEP(", f"{step.name()}(").replace("NE(", f"{ne.name()}(")
+    for key, value in sizes.items():
+        driver = driver.replace(key, str(value))
+    src, so = tmp / "fused.c", tmp / "fused.so"
+    src.write_text(cg.dump() + driver)
+    subprocess.run([find_compiler() or "cc", *CFLAGS, str(src), "-o", str(so)], check=True)
+    lib = ctypes.CDLL(str(so))
+    lib.fused_pass.restype = ctypes.c_int
+    return lib, sizes
+
+
+def gn_pass(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
+    """One Gauss-Newton pass (prefix scan, each window's residual, Jacobian, Huber weight and normal
+    equations, summed) on the demo's settings over a simulated log: the evaluator the solvers call
+    against the same computation fused into one C loop, at a new point each time, interleaved."""
+    import ctypes
+
+    from nlp_calib.pipeline import Calibration, load_scenario
+
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
+    log = tmp / f"pass_{records}.txt"
+    subprocess.run(
+        cli("simulate", "--records", str(records), "--seed", "11", "--out", str(log), "--force"),
+        env=env,
+        check=True,
+        capture_output=True,
+    )
+    calib = Calibration(load_scenario(REPO / "scenarios" / "demo.yaml").with_dataset(log))
+    ev = calib.evaluator
+    lib, sizes = fused_loop(ev.fns, tmp)
+    data = ev.data
+    U = np.asfortranarray(data.inputs, dtype=float)
+    windows = np.asfortranarray(data.data())
+    a, b = (np.ascontiguousarray(v, dtype=np.int64) for v in (data.starts, data.stops))
+    P = np.zeros((sizes["SR"], U.shape[1] + 1), order="F")
+    out = np.zeros(sizes["NOUT"])
+    fixed, omega, delta = ev.x_fixed.copy(), ev.omega.copy(), np.array([ev.delta])
+
+    def ptr(v: np.ndarray) -> Any:
+        return v.ctypes.data_as(ctypes.c_void_p)
+
+    def fused(x: np.ndarray) -> np.ndarray:
+        lib.fused_pass(ptr(U), ctypes.c_long(U.shape[1]), ptr(x), ptr(fixed), ptr(omega), ptr(delta),
+                       ptr(a), ptr(b), ptr(windows), ctypes.c_long(a.size), ptr(P), ptr(out))  # fmt: skip
+        return out[ev.fns.n_free * (ev.fns.n_free + 1) // 2 :][: ev.fns.n_free].copy()
+
+    times: dict[str, list[float]] = {"evaluator": [], "fused C loop": []}
+    agree = 0.0
+    start = load()
+    for k in range(repeats + 1):  # the first round warms up, untimed
+        x = calib.x0 * (1.0 + 1e-6 * (k + 1))
+        t0 = time.perf_counter()
+        g_ours = ev.normal_equations(x).g
+        t1 = time.perf_counter()
+        g_fused = fused(x)
+        t2 = time.perf_counter()
+        if k:
+            times["evaluator"].append(1e3 * (t1 - t0))
+            times["fused C loop"].append(1e3 * (t2 - t1))
+        agree = max(agree, float(np.max(np.abs(g_ours - g_fused)) / np.max(np.abs(g_ours))))
+    medians = {name: med(t) for name, t in times.items()}
+    return {
+        "load_start": start,
+        "load_end": load(),
+        "records": records,
+        "windows": int(a.size),
+        "median_ms": medians,
+        "ratio": medians["evaluator"] / medians["fused C loop"],
+        "gradient_rel_difference": agree,
+    }
+
+
 def simulate_big(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
     """``nlp-calib simulate --records N`` (written block by block): wall and peak RSS."""
     env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
@@ -406,7 +637,11 @@ def reader(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
     kinds: dict[str, Any] = {"steering": "absolute", "traction_wheel": "counter"}
     ours = read_log(path, kinds)
     poses = np.hstack([ours.model_pose, ours.T_world_sensor])
-    candidates: dict[str, Callable[[], Any]] = {"nlp_calib": lambda: read_log(path, kinds)}
+    candidates: dict[str, Callable[[], Any]] = {
+        "nlp_calib": lambda: read_log(path, kinds),
+        # The same numbers of every record (time, counters, poses), as doubles, by numpy's C reader.
+        "numpy.loadtxt": lambda: np.loadtxt(path, usecols=(1, 3, 4, 6, 7, 8, 10, 11, 12), comments="#"),
+    }
     try:
         import pandas as pd
 
@@ -428,7 +663,7 @@ def reader(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
             fn()
             times[name].append(time.perf_counter() - t0)
     exact = {
-        name: bool(np.array_equal(fn().view(np.int64), poses.view(np.int64)))
+        name: bool(np.array_equal(np.asarray(fn())[:, -6:].view(np.int64), poses.view(np.int64)))
         for name, fn in candidates.items()
         if name != "nlp_calib"
     }
@@ -495,6 +730,17 @@ def fleet_lines(doc: dict[str, Any], figures: dict[str, float]) -> list[str]:
             ),
         ]
         figures[f"batch of {fleet['logs']} logs, --jobs 1 / --jobs 2 [x]"] = fleet["speedup"]
+    gp = doc.get("gn_pass")
+    if gp:
+        lines += [
+            "",
+            f"One Gauss-Newton pass (prefix scan, residuals, Jacobians, Huber weights, normal equations) "
+            f"on the demo's settings, {gp['windows']:,} windows (load average {gp['load_start']} → "
+            f"{gp['load_end']}): the evaluator {gp['median_ms']['evaluator']:.1f} ms, the same fused into "
+            f"one C loop {gp['median_ms']['fused C loop']:.1f} ms (×{gp['ratio']:.2f}; gradients agree "
+            f"to {gp['gradient_rel_difference']:.1e}).",
+        ]
+        figures["Gauss-Newton pass / fused C loop [x]"] = gp["ratio"]
     rd = doc.get("reader")
     if rd:
         each = ", ".join(
@@ -507,6 +753,9 @@ def fleet_lines(doc: dict[str, Any], figures: dict[str, float]) -> list[str]:
             f"Reading a simulated log of {rd['records']:,} records (load average {rd['load_start']} → "
             f"{rd['load_end']}): {each}.",
         ]
+        if "numpy.loadtxt" in rd["times_s"]:
+            ratio = med(rd["times_s"]["nlp_calib"]) / med(rd["times_s"]["numpy.loadtxt"])
+            figures[f"reader / numpy.loadtxt, {rd['records']:g} records [x]".replace("1e+06", "10^6")] = ratio
     return lines
 
 
@@ -528,23 +777,64 @@ def summary(doc: dict[str, Any]) -> tuple[str, dict[str, float]]:
     if scale:
         lines += scale_lines(scale, figures)
     lines += fleet_lines(doc, figures)
-    r = e2e["scenarios"].get("real_tricycle") if e2e else None
-    if r:
-        figures["compare real_tricycle.yaml, warm [s]"] = r["warm_wall_s"]
-        figures["compare real_tricycle.yaml, cold [s]"] = r["cold_wall_s"]
-        floor = (e2e or {}).get("import_floor_s")
-        if floor:
-            ratio = r["warm_wall_s"] / floor
-            figures["compare real_tricycle.yaml, warm / import floor [x]"] = ratio
+    for key in ("horizon", "camera"):
+        if doc.get(key):
+            lines += sized_lines(doc[key], figures)
+    if e2e:
+        floor_figures(e2e, figures)
     lines += ["", "| target | measured | target | met |", "|---|---|---|---|"]
     for name, target in TARGETS.items():
         if name in figures:
             v = figures[name]
-            at_least = name.endswith("[x]") and "floor" not in name
+            at_least = name in AT_LEAST
             met = v >= target if at_least else v <= target
             sign = "≥" if at_least else "≤"
             lines.append(f"| {name} | {v:.3g} | {sign} {target:g} | {'yes' if met else 'no'} |")
     return "\n".join(lines), figures
+
+
+def floor_figures(e2e: dict[str, Any], figures: dict[str, float]) -> None:
+    """The end-to-end figures judged by a target: times, and ratios to the import floor."""
+    floor = e2e.get("import_floor_s") or float("nan")
+    r = e2e["scenarios"].get("real_tricycle")
+    if r:
+        figures["compare real_tricycle.yaml, warm [s]"] = r["warm_wall_s"]
+        figures["compare real_tricycle.yaml, cold [s]"] = r["cold_wall_s"]
+        figures["compare real_tricycle.yaml, warm / import floor [x]"] = r["warm_wall_s"] / floor
+        figures["compare real_tricycle.yaml, cold / import floor [x]"] = r["cold_wall_s"] / floor
+    cam = e2e["scenarios"].get("camera_demo")
+    if cam:
+        figures["compare camera_demo.yaml, warm / import floor [x]"] = cam["warm_wall_s"] / floor
+    if e2e.get("import_commands_s"):
+        figures["import nlp_calib.cli.commands / import floor [x]"] = e2e["import_commands_s"] / floor
+
+
+def sized_lines(run: dict[str, Any], figures: dict[str, float]) -> list[str]:
+    """A scenario's settings on growing logs: the table, and its 10^5 and 10^6 figures."""
+    name = run["scenario"]
+    word = "poses" if name == "camera_demo" else "records"
+    solvers = sorted({k[:-3] for r in run["sizes"].values() for k in r if k.endswith("_ms")})
+    lines = [
+        "",
+        f"`nlp-calib run scenarios/{name}.yaml --data LOG` (its settings and solvers) on simulated logs "
+        f"(load average {run['load_start']} → {run['load_end']}):",
+        "",
+        f"| {word} | wall [s] | CPU [s] | peak RSS [MB] | " + " | ".join(f"{s} [ms]" for s in solvers) + " |",
+        "|---|---|---|---|" + "---|" * len(solvers),
+    ]
+    for n, r in run["sizes"].items():
+        each = " | ".join(f"{r.get(f'{s}_ms', float('nan')):.0f}" for s in solvers)
+        lines.append(f"| {int(n):,} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r['peak_mb']:.0f} | {each} |")
+    for k, v in run["growth"].items():
+        big, small = k.split("/")
+        lines.append(f"\nWall time from {int(small):,} to {int(big):,} {word}: ×{v:.2f}.")
+    million = run["sizes"].get("1000000")
+    if million:
+        figures[f"{name} settings, 10^6 {word} run [s]"] = million["wall_s"]
+        figures[f"{name} settings, 10^6 {word} peak RSS [MB]"] = million["peak_mb"]
+    if "1000000/100000" in run["growth"]:
+        figures[f"{name} settings, run time 10^6 / 10^5 {word} [x]"] = run["growth"]["1000000/100000"]
+    return lines
 
 
 def e2e_lines(e2e: dict[str, Any]) -> list[str]:
@@ -552,7 +842,8 @@ def e2e_lines(e2e: dict[str, Any]) -> list[str]:
         "",
         "End to end, `nlp-calib compare SCENARIO` in a fresh process "
         f"(load average {e2e['load_start']} → {e2e['load_end']}); solver times as the run reports them; "
-        f"the floor, `python -c 'import numpy, casadi'`: {e2e.get('import_floor_s', float('nan')):.2f} s:",
+        f"the floor, `python -c 'import numpy, casadi'`: {e2e.get('import_floor_s', float('nan')):.3f} s; "
+        f"`python -c 'import nlp_calib.cli.commands'`: {e2e.get('import_commands_s', float('nan')):.3f} s:",
         "",
         "| scenario | cold cache [s] | warm cache [s] | peak RSS [MB] | Gauss-Newton [ms] | IPOPT [ms] |",
         "|---|---|---|---|---|---|",
@@ -665,7 +956,7 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
             scenarios: list[tuple[str, list[str]]] = [("demo", [])]
         else:
             scenarios = [(n, ["--data", str(real)]) for n in ("real_tricycle", "real_tricycle_seed")]
-            scenarios += [("demo", []), ("diff_drive_demo", [])]
+            scenarios += [("demo", []), ("diff_drive_demo", []), ("camera_demo", [])]
         return end_to_end(scenarios, repeats, tmp)
     if section == "solvers":
         return solvers(solver_cases(real, quick), repeats, per_factor=not quick)
@@ -673,10 +964,16 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
         return ipopt_lag(real, quick, repeats)
     if section == "scaling":
         return scaling([2_000, 8_000] if quick else [10_000, 100_000, 1_000_000], repeats, tmp)
+    if section == "horizon":  # a 10^6 run takes about a minute: 3 repeats
+        return horizon([2_000, 20_000] if quick else [100_000, 1_000_000], min(repeats, 3), tmp)
+    if section == "camera":
+        return camera([2_000, 20_000] if quick else [100_000, 1_000_000], min(repeats, 3), tmp)
     if section == "simulate":
         return simulate_big(10_000 if quick else 1_000_000, 1 if quick else 3, tmp)
     if section == "reader":
         return reader(10_000 if quick else 1_000_000, repeats, tmp)
+    if section == "gn_pass":
+        return gn_pass(5_000 if quick else 100_000, repeats, tmp)
     # Logs of 5000 records (3.3 minutes of driving): a robot's daily log is rarely shorter.
     return batch(4 if quick else 20, 300 if quick else 5000, 1 if quick else repeats, tmp)
 

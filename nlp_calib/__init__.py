@@ -6,6 +6,7 @@ and IPOPT solve it from the same Functions. Typical use::
     from nlp_calib import Calibration, load_scenario
     run = Calibration.setup(load_scenario("scenarios/demo.yaml")).run()
     print(run.reports["gauss_newton"].result.param_dict())
+    write_run(run, "out/demo")  # what ``nlp-calib run`` writes: calibration.yaml, robot.urdf, ...
 
 Layers, from inputs to outputs (each imports only from the ones before it): ``core``,
 ``symbolic`` and ``logs``, ``models``, ``problem`` and ``simulation``, ``codegen``, ``solvers``,
@@ -55,6 +56,7 @@ if TYPE_CHECKING:
     from nlp_calib.logs import Log, LogHeader, read_log
     from nlp_calib.models import MODELS, KinematicModel, get_model
     from nlp_calib.outputs.summary import summary_lines
+    from nlp_calib.outputs.write import output_options, write_run
     from nlp_calib.pipeline import (
         Calibration,
         JointCalibration,
@@ -114,6 +116,8 @@ _EXPORTS: dict[str, str] = {
     "scenario_from_mapping": "nlp_calib.pipeline",
     "simulate": "nlp_calib.simulation",
     "summary_lines": "nlp_calib.outputs.summary",
+    "output_options": "nlp_calib.outputs.write",
+    "write_run": "nlp_calib.outputs.write",
     "write_simulation": "nlp_calib.simulation",
 }
 
@@ -169,11 +173,13 @@ __all__ = [
     "get_solver",
     "load_log",
     "load_scenario",
+    "output_options",
     "read_log",
     "run_job",
     "scenario_from_mapping",
     "simulate",
     "summary_lines",
+    "write_run",
     "write_simulation",
     "write_summary",
 ]

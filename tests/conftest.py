@@ -11,10 +11,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from nlp_calib.logs import Log, parse_log
 from nlp_calib.models import get_model
-from nlp_calib.pipeline import Scenario, load_scenario
+from nlp_calib.pipeline import Scenario, load_scenario, scenario_from_mapping
 from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
 
 REPO = Path(__file__).resolve().parents[1]
@@ -44,6 +45,22 @@ def assert_close(
     assert np.all(np.isfinite(a)), f"{what}: non-finite values in actual: {a}"
     assert np.all(np.isfinite(e)), f"{what}: non-finite values in expected: {e}"
     np.testing.assert_allclose(a, e, rtol=rtol, atol=atol, err_msg=what)
+
+
+#: The shared data folder the real log lies in (OptiOdom's runs lie beside it, under real4/).
+SHARED_DATA = REAL_LOG.parent
+
+
+def shared_scenario(name: str) -> Scenario:
+    """A shipped scenario that reads the shared data folder (``../../shared/data/`` from
+    ``scenarios/``), pointed at wherever that folder was found; skipped when it is absent."""
+    text = (SCENARIOS / f"{name}.yaml").read_text()
+    prefix = "../../shared/data/"
+    first = text.split(prefix, 1)[1].split(",", 1)[0].split("}", 1)[0].strip() if prefix in text else ""
+    if not (SHARED_DATA / first).is_file():
+        pytest.skip(f"{name}'s data are not at {SHARED_DATA / first} (set NLP_CALIB_REAL_LOG beside them)")
+    raw = yaml.safe_load(text.replace(prefix, f"{SHARED_DATA.as_posix()}/"))
+    return scenario_from_mapping(raw, name, SCENARIOS)
 
 
 @pytest.fixture(scope="session")

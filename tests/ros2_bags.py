@@ -7,8 +7,8 @@ between samples 1 ms apart) at 120 Hz from a phase that never meets a joint's st
 1 mrad of noise and 1 % outliers. A wheel's angle is its
 counter unwrapped, times 2π over its counts per turn, from an arbitrary start; the steering joint's
 angle is its encoder's. The parameters in radians follow from the counts form's truth:
-``wheel_radius = k_traction / 2π`` (tricycle), ``*_wheel_radius = k_* · N / 2π`` (differential
-drive, N counts a turn).
+``wheel_radius = k_traction / 2π`` (tricycle), ``radius = k · N / 2π`` for a gain ``k`` in metres
+per tick (every other model, N counts a turn).
 """
 
 from __future__ import annotations
@@ -32,6 +32,28 @@ JOINT_EVERY, TRACKER_HZ, TRACKER_PHASE = 10, 120.0, 0.37
 SENSOR_Z = 0.42
 TRICYCLE_JOINTS = ("front_steer_joint", "front_wheel_joint")
 DIFF_DRIVE_JOINTS = ("left_wheel_joint", "right_wheel_joint")
+#: Each model's joints, in its encoders' order.
+JOINTS = {
+    "tricycle": TRICYCLE_JOINTS,
+    "diff_drive": DIFF_DRIVE_JOINTS,
+    "skid_steer": DIFF_DRIVE_JOINTS,
+    "car_like": ("front_steer_joint", "rear_left_wheel_joint", "rear_right_wheel_joint"),
+    "car_like_ackermann": (
+        "front_left_steer_joint",
+        "front_right_steer_joint",
+        "rear_left_wheel_joint",
+        "rear_right_wheel_joint",
+    ),
+    "car_like_bicycle": ("front_steer_joint", "traction_motor_joint"),
+}
+#: Each model's gains in metres per tick, with the encoder whose counts per turn make them radii.
+PER_TICK = {
+    "diff_drive": {"k_left": "left_wheel", "k_right": "right_wheel"},
+    "skid_steer": {"k_left": "left_wheel", "k_right": "right_wheel"},
+    "car_like": {"k_traction": "rear_left_wheel"},
+    "car_like_ackermann": {"k_traction": "rear_left_wheel"},
+    "car_like_bicycle": {"k_traction": "traction_motor"},
+}
 
 
 @dataclass(frozen=True)
@@ -94,7 +116,7 @@ def record(
     return Recording(
         joint_ns=ns[j_idx] + T0_NS,
         joints=joints[j_idx],
-        joint_names=TRICYCLE_JOINTS if model == "tricycle" else DIFF_DRIVE_JOINTS,
+        joint_names=JOINTS[model],
         tracker_ns=tracker_ns + T0_NS,
         tracker=_seen(sim.T_world_sensor, ns, tracker_ns, np.random.default_rng(seed + 100)),
         tracker_z=SENSOR_Z + np.zeros(tracker_ns.size),
@@ -116,10 +138,9 @@ def _seen(poses: np.ndarray, ns: np.ndarray, at: np.ndarray, rng: np.random.Gene
 
 
 def _per_turn(model: str, truth: dict[str, float], ranges: Any) -> dict[str, float]:
-    """The counts form's truth with the differential drive's gains per tick made per radian."""
-    if model == "diff_drive":
-        truth["k_left"] *= ranges["left_wheel"] / (2 * math.pi)
-        truth["k_right"] *= ranges["right_wheel"] / (2 * math.pi)
+    """The counts form's truth with the gains per tick made per radian."""
+    for name, encoder in PER_TICK.get(model, {}).items():
+        truth[name] *= ranges[encoder] / (2 * math.pi)
     return truth
 
 

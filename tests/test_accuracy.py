@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from conftest import SCENARIOS, assert_close, mat, parse_lines, vec
 
-from nlp_calib.analysis.alignment import estimate_lag, lag_grid, refine_minimum
 from nlp_calib.analysis.metrics import trajectory_metrics
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import format_log, resample_encoders
@@ -161,29 +160,6 @@ def test_tracker_lag_is_recovered_from_a_simulated_log(tmp_path: Path) -> None:
     assert calib.alignment.lag_s == pytest.approx(0.06, abs=0.012)
 
 
-def test_the_lag_search_fits_to_its_tolerance_give_the_full_fits_lag(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """Each lag's fit stops short of rounding (LAG_FIT_TOLERANCE): the grid's costs agree with full
-    fits' to that tolerance, and the lag with theirs to the microsecond it is given in."""
-    from nlp_calib.pipeline import align
-    from nlp_calib.simulation import write_simulation
-
-    log, _ = write_simulation(
-        simulate(SimulationOptions.of(records=1200, seed=5, latency_s=0.04, tracker_noise_xy=0.001)),
-        tmp_path / "lag.txt",
-    )
-    demo = load_scenario(SCENARIOS / "demo.yaml")
-    sc = demo.with_options(dataset=log, alignment=dataclasses.replace(demo.log.alignment, tracker_lag="auto"))
-    short = Calibration(sc).alignment.estimate
-    monkeypatch.setattr(align, "LAG_FIT_TOLERANCE", None)
-    full = Calibration(sc).alignment.estimate
-    assert short is not None and full is not None
-    assert short.grid_s == full.grid_s
-    np.testing.assert_allclose(short.costs, full.costs, rtol=1e-8)
-    assert abs(short.lag_s - full.lag_s) <= 1e-6
-
-
 @pytest.fixture(scope="module")
 def recommended(real_log: Path) -> CalibrationRun:
     """The recommended scenario on the real log, both solvers, as shipped."""
@@ -276,30 +252,6 @@ def test_seed_formulation_and_uncalibrated_robot_are_far_off(
     assert 13.0 < seed.score(p0)[0].ate_mean < 15.0
 
 
-def test_lag_search_gives_the_full_grid_estimate_with_fewer_fits() -> None:
-    """On a rippled cost curve, the bracketing search fits the parabola the full grid would."""
-    grid = lag_grid((-0.2, 0.2), 0.01)
-    rng = np.random.default_rng(3)
-    for _ in range(20):
-        centre = rng.uniform(-0.12, 0.12)
-        ripple = rng.uniform(0.0, 0.05)
-        phase = rng.uniform(0, 2 * np.pi)
-
-        def cost(lag: float, c: float = centre, r: float = ripple, ph: float = phase) -> float:
-            return 4.0 + 40.0 * (lag - c) ** 2 + r * np.sin(2 * np.pi * lag / 0.04 + ph)
-
-        calls: list[float] = []
-
-        def counted(lag: float, calls: list[float] = calls) -> float:
-            calls.append(lag)
-            return cost(lag)
-
-        est = estimate_lag(counted, (-0.2, 0.2), 0.01)
-        full = refine_minimum(grid, np.array([cost(float(g)) for g in grid]))
-        assert est.lag_s == pytest.approx(round(full, 6), abs=1e-9)
-        assert len(calls) < grid.size and not est.at_edge
-
-
 def test_lag_at_the_edge_of_its_search_range_is_named() -> None:
     sim = simulate(SimulationOptions.of(records=600, seed=4, latency_s=0.25, tracker_noise_xy=0.001))
     sc = load_scenario(SCENARIOS / "demo.yaml").with_options(
@@ -307,7 +259,7 @@ def test_lag_at_the_edge_of_its_search_range_is_named() -> None:
         alignment=AlignmentOptions(tracker_lag="auto", search=(-0.1, 0.1), step=0.01),
     )
     with pytest.warns(
-        NlpCalibWarning, match=r"alignment.tracker_lag: the estimated lag 100.0 ms lies at the edge"
+        NlpCalibWarning, match=r"alignment.tracker_lag: the fitted lag 100.0 ms lies at the edge"
     ):
         calib = Calibration(sc, log=parse_lines(sim.text().splitlines()))
     assert calib.alignment.estimate is not None and calib.alignment.estimate.at_edge

@@ -123,7 +123,8 @@ def test_only_the_command_line_prints() -> None:
 
 
 def test_derivatives_are_taken_only_where_the_problem_is_written() -> None:
-    """Jacobians, gradients and Hessians come from the problem and symbolic layers, once."""
+    """Jacobians, gradients and Hessians come from the problem and symbolic layers, once (and from
+    each sensor plug-in, which writes its own error term: the noise map of its measured motion)."""
     derivative = {"jacobian", "gradient", "hessian", "jtimes", "forward", "reverse"}
     takers = set()
     for name, _, tree in _modules():
@@ -132,7 +133,8 @@ def test_derivatives_are_taken_only_where_the_problem_is_written() -> None:
                 continue
             if node.value.id == "ca" and node.attr in derivative:
                 takers.add(name)
-    assert takers and all(t.startswith(("nlp_calib.problem", "nlp_calib.symbolic")) for t in takers), takers
+    where = ("nlp_calib.problem", "nlp_calib.symbolic", "nlp_calib.sensors")
+    assert takers and all(t.startswith(where) for t in takers), takers
 
 
 def test_solvers_build_no_symbolic_expressions() -> None:
@@ -193,3 +195,47 @@ def test_classes_hold_few_attributes() -> None:
         if isinstance(node, ast.ClassDef) and len(attrs := _class_attributes(node)) > MAX_CLASS_ATTRIBUTES
     ]
     assert large == [], large
+
+
+#: What only a 3-D mount speaks of: its parameters, its pose layout, and the choice of it.
+MOUNT_3D_WORDS = {
+    "sensor_roll", "sensor_pitch", "sensor_yaw", "sensor_z", "MOUNT_PARAMS", "MOUNT_ANGLES", "HELD_PARAMS",
+    "SCALE_PARAM", "is_3d", "sensor_3d", "T_world_sensor_3d", "Mount3D", "CameraPose", "3d",
+}  # fmt: skip
+#: Where they may appear: the sensor plug-ins, the readers of 3-D poses and the camera's simulator.
+MOUNT_3D_PLACES = ("nlp_calib.sensors", "nlp_calib.logs", "nlp_calib.simulation.camera")
+
+
+def _words(tree: ast.Module) -> set[str]:
+    """Names, attributes and string constants of a module's code (docstrings left out)."""
+    docstrings = {
+        id(node.body[0].value)
+        for node in ast.walk(tree)
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+        and node.body
+        and isinstance(node.body[0], ast.Expr)
+        and isinstance(node.body[0].value, ast.Constant)
+    }
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name):
+            out.add(node.id)
+        elif isinstance(node, ast.Attribute):
+            out.add(node.attr)
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
+            out |= set(node.value.replace(".", " ").replace(":", " ").split()) | {node.value}
+        elif isinstance(node, ast.Compare) and "pose_rows" in ast.unparse(node):
+            out.add("pose_rows comparison")
+    return out
+
+
+def test_the_words_of_a_3d_mount_appear_only_in_its_sensor_plug_in() -> None:
+    """No module outside the sensor plug-ins (and the readers and the simulator of 3-D poses) decides
+    anything by the sensor being 3-D: it asks the sensor."""
+    found = {
+        name: sorted(words)
+        for name, _, tree in _modules()
+        if not name.startswith(MOUNT_3D_PLACES)
+        and (words := _words(tree) & (MOUNT_3D_WORDS | {"pose_rows comparison"}))
+    }
+    assert found == {}, found

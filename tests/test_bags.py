@@ -570,9 +570,12 @@ def test_a_bad_dataset_block_names_its_key(tmp_path: Path, block: str, pattern: 
             "sensor_frame: 'my laser'",
             r"sensor_frame: a frame name of letters, digits and _\./- , got 'my laser'",
         ),
+        ("counts_per_turn: {traction_wheel: 0}", r"counts_per_turn\.traction_wheel: must be"),
+        ("counts_per_turn: {left_wheel: 4096}", r"counts_per_turn\.left_wheel: not an encoder of tricycle"),
         (
             "wheels: 3",
-            r"wheels: unknown key; valid keys are initial_guess, encoder_ranges, sensor_pose, sensor_frame",
+            r"wheels: unknown key; valid keys are initial_guess, encoder_ranges, counts_per_turn, "
+            r"sensor_pose, sensor_frame",
         ),
     ],
 )

@@ -1,9 +1,10 @@
-"""``nlp-calib batch``: its jobs and their names, the per-log task on other processes (and on Dask
-when it is installed), the summary table, a failing log, exit codes and signals."""
+"""``nlp-calib batch``: its jobs and their names, the per-log task on other processes and on a Dask
+cluster, the workers it chooses, the summary table, a failing log, exit codes and signals."""
 
 from __future__ import annotations
 
 import csv
+import json
 import multiprocessing
 import os
 import signal
@@ -16,9 +17,19 @@ from pathlib import Path
 import pytest
 from conftest import REPO, SCENARIOS, write_sim
 
+from nlp_calib.cli import main
 from nlp_calib.core import threads
 from nlp_calib.core.errors import UsageError
-from nlp_calib.fleet import BatchOptions, BatchRow, Job, batch_jobs, run_job, run_jobs, write_summary
+from nlp_calib.fleet import (
+    BatchOptions,
+    BatchRow,
+    Job,
+    batch_jobs,
+    local_workers,
+    run_job,
+    run_jobs,
+    write_summary,
+)
 from nlp_calib.fleet.jobs import expand, job_names
 
 DEMO_LOG = SCENARIOS / "data" / "demo_tricycle.txt"
@@ -90,18 +101,77 @@ def test_the_task_runs_on_other_processes_and_a_failure_is_its_row(logs: Path, t
     assert table[1]["error"] == failed.error and float(table[0]["k_traction_std"]) > 0
 
 
-def test_the_task_runs_on_a_dask_cluster(logs: Path, tmp_path: Path) -> None:
-    """The recipe of docs/fleet.md, on a local cluster (dask is not a dependency)."""
-    distributed = pytest.importorskip("dask.distributed")
-    jobs = batch_jobs(
-        [str(logs / "robot1" / "drive.txt")],
-        BatchOptions(tmp_path / "out", scenario=quick_scenario(tmp_path)),
-    )
-    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True)
-    with cluster, distributed.Client(cluster) as client:
-        rows = client.gather(client.map(run_job, jobs, pure=False))
-    assert [r.name for r in rows] == ["drive"] and rows[0].ok
-    assert (tmp_path / "out" / "drive" / "calibration.yaml").is_file()
+def _results(out: Path) -> dict[str, dict[str, object]]:
+    """Each log folder's result.json, without what differs from run to run (times)."""
+
+    def timeless(doc: object) -> object:
+        if isinstance(doc, dict):
+            return {k: timeless(v) for k, v in doc.items() if "time" not in k}
+        if isinstance(doc, list):
+            return [timeless(v) for v in doc]
+        return doc
+
+    docs = {p.parent.name: json.loads(p.read_text()) for p in sorted(out.glob("*/result.json"))}
+    return {name: timeless(doc) for name, doc in docs.items()}  # type: ignore[misc]
+
+
+def _summary(out: Path) -> list[dict[str, str]]:
+    """The summary's rows, without their folder (under ``out``) and time."""
+    return [
+        {k: v for k, v in row.items() if k not in ("folder", "seconds")}
+        for row in csv.DictReader((out / "summary.csv").open())
+    ]
+
+
+def test_a_batch_on_a_dask_cluster_equals_one_at_a_time(logs: Path, tmp_path: Path) -> None:
+    """``nlp-calib batch --dask`` on a local cluster of two worker processes: every log's result
+    and summary row are those of ``--jobs 1``, and a failing log is its row there too."""
+    from dask.distributed import LocalCluster
+
+    scenario = str(quick_scenario(tmp_path))
+    inputs = str(logs / "**" / "*.txt")
+    one = main(["batch", inputs, "--scenario", scenario, "--out", str(tmp_path / "one"), "--jobs", "1"])
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    with cluster:
+        args = ["--scenario", scenario, "--out", str(tmp_path / "dask"), "--dask", cluster.scheduler_address]
+        on_dask = main(["batch", inputs, *args])
+    assert one == on_dask == 1  # the broken log failed, the others ran
+    results = _results(tmp_path / "one")
+    assert set(results) == {"robot1_drive", "robot2_drive"}
+    assert _results(tmp_path / "dask") == results
+    assert _summary(tmp_path / "dask") == _summary(tmp_path / "one")
+
+
+def test_dask_without_a_scheduler_is_one_line(logs: Path, tmp_path: Path) -> None:
+    proc = cli("batch", str(logs / "robot1"), "--out", str(tmp_path / "o"), "--dask", "tcp://127.0.0.1:9")
+    assert proc.returncode == 2 and "cannot reach a Dask scheduler" in proc.stderr, proc.stderr
+    proc = cli("batch", str(logs / "robot1"), "--jobs", "2", "--dask", "tcp://127.0.0.1:9")
+    assert proc.returncode == 2 and "not both" in proc.stderr
+
+
+def test_workers_follow_the_free_cores() -> None:
+    """Never more workers than cores free now (at least one), than asked for or than logs."""
+    assert local_workers(None, 20, 2.0) == min(2, threads.cores())
+    assert local_workers(2, 20, 1.2) == 1  # a busy machine: one at a time beats two on one core
+    assert local_workers(4, 20, 0.1) == 1
+    assert local_workers(2, 1, 2.0) == 1
+    assert local_workers(1, 20, 8.0) == 1
+    assert local_workers(3, 20, 2.6) == 3
+
+
+def test_free_cores_read_the_idle_share_of_the_cpu_time(tmp_path: Path) -> None:
+    """Two samples of /proc/stat: the idle and iowait share of what passed between them."""
+    stat = tmp_path / "stat"
+    samples = iter(["cpu  100 0 100 800 0 0 0 0 0 0\n", "cpu  200 0 200 900 100 0 0 0 0 0\n"])
+
+    class Stat(type(stat)):  # type: ignore[misc]
+        def read_text(self, *args: object, **kwargs: object) -> str:
+            return next(samples)
+
+    free = threads.free_cores(0.0, Stat(stat))
+    cpus = os.cpu_count() or 1
+    assert free == pytest.approx(min(threads.cores(), 0.5 * cpus))
+    assert 0.0 <= threads.free_cores(0.05) <= threads.cores()
 
 
 def crash_on_b(job: Job) -> BatchRow:

@@ -22,6 +22,7 @@ from nlp_calib.outputs.handoff import calibration_dict, urdf_joint
 from nlp_calib.outputs.results import result_document
 from nlp_calib.pipeline import Calibration, Scenario, load_scenario
 from nlp_calib.results import CalibrationRun
+from nlp_calib.sensors import sensor_for
 from nlp_calib.simulation.camera import CameraSimulationOptions, simulate_camera, write_camera_simulation
 
 #: The target recording of issue 22: roll −120° (30° down), yaw −90°, images stamped 10 ms late,
@@ -254,9 +255,10 @@ def test_a_tricycle_with_a_camera_calibrates_in_robot_units(tmp_path: Path) -> N
     assert check is not None
     # The simulator's traction gain is metres per revolution: the run's wheel radius per radian.
     assert check.truth[check.names.index("wheel_radius")] == pytest.approx(truth["k_traction"] / (2 * np.pi))
-    # The lower layer's tolerance for every model (tests/test_camera.py), here with the lag estimated.
+    # The lower layer's tolerance for every model (tests/test_camera.py), here with the lag estimated;
+    # the lag (a parameter of the fit, absorbing the steering read at each interval's start) within 2 ms.
     for name, true, error in zip(check.names, check.truth, check.error):
-        assert abs(error) <= 1e-3 * max(abs(true), 1.0), name
+        assert abs(error) <= (2e-3 if name == "tracker_lag" else 1e-3 * max(abs(true), 1.0)), name
 
 
 def noisy_demos(folder: Path, seeds: int = 10) -> Iterator[Scenario]:
@@ -388,7 +390,9 @@ def test_the_c_examples_window_names_the_tum_file_its_lines_count(tmp_path: Path
     assert match is not None and match.group(3) == "camera_demo.tum", example.window
     lines = (REPO / "scenarios" / "data" / "camera_demo.tum").read_text().splitlines()
     a, b = (np.array(lines[int(match.group(k)) - 1].split()[1:], dtype=float) for k in (1, 2))
-    z = example.column[-8:-1]  # u, then z, then the window's weight
+    # u, then z, then the clock (two joints' rates at both ends, the lag read at, the log), the weight
+    clock = 2 * 2 + 2
+    z = example.column[-8 - clock : -1 - clock]
     z = z if z[6] * poses3d.between(a, b)[6] > 0 else np.r_[z[:3], -z[3:]]
     assert np.allclose(poses3d.between(a, b), z, atol=1e-9)
 
@@ -429,7 +433,7 @@ def test_the_3d_jump_screen_raises_no_alarm_on_clean_camera_poses() -> None:
     from nlp_calib.analysis.faults import tracker_faults
 
     sc = load_scenario(REPO / "scenarios" / "camera_demo.yaml")
-    assert tracker_faults(sc.log.source.read(get_model(sc.model), strict=True), spatial=True) == []
+    assert tracker_faults(sc.log.source.read(get_model(sc.model), strict=True), sensor_for("3d")) == []
 
 
 @pytest.mark.slow
@@ -438,7 +442,7 @@ def test_the_3d_jump_screen_raises_no_alarm_on_noisy_simulations(tmp_path: Path)
     from nlp_calib.analysis.faults import tracker_faults
 
     logs = (sc.log.source.read(get_model(sc.model), strict=True) for sc in noisy_demos(tmp_path))
-    flagged = [len(tracker_faults(log, spatial=True)) for log in logs]
+    flagged = [len(tracker_faults(log, sensor_for("3d"))) for log in logs]
     print("poses flagged per seed:", flagged)
     assert flagged == [0] * 10
 

@@ -7,58 +7,98 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-import pytest
 from conftest import parse_lines, write_sim
 
-from nlp_calib.analysis.consistency import compare_logs
+from nlp_calib.analysis.consistency import combined_others, compare_logs, determined
 from nlp_calib.analysis.direction import compare
+from nlp_calib.models import get_model
 from nlp_calib.pipeline import Calibration, JointCalibration, scenario_from_mapping
+from nlp_calib.results import Checks
 from nlp_calib.results.checks import CONSISTENCY_SIGMAS as SIGNIFICANT
-from nlp_calib.results.checks import ConsistencyCheck
+from nlp_calib.results.checks import ConsistencyCheck, CrossValidation, believed_std
 from nlp_calib.results.run import NOT_USABLE
 from nlp_calib.simulation import SimulationOptions, simulate
 
 NAMES = ("a", "b")
 
 
-def test_against_the_joint_fit_two_logs_differ_as_they_differ_from_each_other() -> None:
-    """For estimates combined by their information, each log's difference to the joint fit in σ
-    of that difference is the two logs' difference in σ of theirs (independent computation; logs
-    of equal information, where the floor on that σ does not bind)."""
+def _unit_check(
+    own: np.ndarray, std: np.ndarray, apart: float = 10.0, known: np.ndarray | None = None
+) -> ConsistencyCheck:
+    """Logs whose "other logs" fit is the information-weighted mean of the other logs' own."""
+    w = 1.0 / std**2
+    others = (np.sum(w * own, axis=0) - w * own) / (np.sum(w, axis=0) - w)
+    joint = np.sum(w * own, axis=0) / np.sum(w, axis=0)
+    mask = np.ones(own.shape, dtype=bool) if known is None else known
+    return compare_logs(
+        NAMES[: own.shape[1]],
+        LOGS[: own.shape[0]],
+        joint,
+        (own, std),
+        others,
+        mask,
+        np.full(own.shape[1], apart),
+    )
+
+
+LOGS = ("x.txt", "y.txt", "z.txt")
+
+
+def test_two_logs_differ_in_the_sigma_of_their_difference() -> None:
+    """Two logs: each one's own fit against the other's, in σ of their difference (independent
+    computation); beyond 4σ and beyond what one robot's logs differ by, the logs are named apart."""
     own = np.array([[1.0, 5.0], [1.6, 5.1]])
     std = np.array([[0.1, 0.2], [0.1, 0.2]])
-    w = 1.0 / std**2
-    joint = np.sum(w * own, axis=0) / np.sum(w, axis=0)
-    std_joint = 1.0 / np.sqrt(np.sum(w, axis=0))
-    check = compare_logs(NAMES, ("x.txt", "y.txt"), joint, std_joint, own, std)
+    check = _unit_check(own, std, apart=0.3)
     pair = (own[0] - own[1]) / np.sqrt(np.sum(std**2, axis=0))
     np.testing.assert_allclose(check.z[0], pair, rtol=1e-12)
     np.testing.assert_allclose(check.z[1], -pair, rtol=1e-12)
     assert abs(pair[0]) > SIGNIFICANT > abs(pair[1])
-    assert check.significant and [(d.log, d.parameter) for d in check.disagreements] == [
+    assert check.significant and [(d.log, d.parameter) for d in check.different] == [
         ("x.txt", "a"),
         ("y.txt", "a"),
     ]
     assert "a differ in x.txt, y.txt" in check.words()
+    assert list(check.moved) == [True, False]
 
 
-def test_a_log_holding_most_of_the_information_is_compared_conservatively() -> None:
-    """Where the joint σ comes close to a log's own, the σ of their difference is at least the
-    log's share of its own variance: never a division by a vanishing difference of variances."""
-    own, std = np.array([[1.0], [1.3]]), np.array([[0.1], [1.0]])
-    w = 1.0 / std**2
-    joint = np.sum(w * own, axis=0) / np.sum(w, axis=0)
-    check = compare_logs(("a",), ("x.txt", "y.txt"), joint, 1.0 / np.sqrt(np.sum(w, axis=0)), own, std)
-    assert abs(check.z[0, 0]) == pytest.approx(abs(own[0, 0] - joint[0]) / (0.1 / np.sqrt(2.0)), rel=1e-12)
-    assert abs(check.z[0, 0]) < abs(own[0, 0] - own[1, 0]) / np.sqrt(np.sum(std**2))
+def test_a_difference_within_what_one_robot_moves_by_is_a_model_limit() -> None:
+    """Far beyond σ but within ``apart``: not two robots, the parameter named as moving between the
+    logs; its σ to believe takes in the jackknife over the logs, the others' do not."""
+    own = np.array([[1.0, 5.0], [1.6, 5.1]])
+    check = _unit_check(own, np.array([[0.1, 0.2], [0.1, 0.2]]), apart=1.0)
+    assert not check.significant and check.disagreements and check.moved[0]
+    assert check.limits()[0] == f"a by {100 * 0.6 / 1.3:.2g} % (4σ, x.txt)"
+    assert "model limit" in check.words() and "a by" in check.words()
+    logs = CrossValidation(NAMES, (), np.array([0.3, 0.05]))
+    checks = Checks(None, None, None, None, check, logs=logs)
+    white = np.array([0.01, 0.01])
+    np.testing.assert_allclose(believed_std(white, *checks.spreads(white)), [0.3, 0.01])
 
 
-def test_held_parameters_are_not_compared_and_nothing_to_compare_is_said() -> None:
-    check = compare_logs(
-        NAMES, ("x.txt",), np.zeros(2), np.ones(2), np.ones((1, 2)), np.full((1, 2), 2.0), [{"a", "b"}]
-    )
-    assert not check.compared and not check.significant and check.worst is None
-    assert "could not be compared" in check.words()
+def test_a_parameter_a_log_does_not_determine_on_its_own_is_not_compared() -> None:
+    own = np.array([[1.0, 5.0], [1.6, 9.0]])
+    known = np.array([[True, False], [True, False]])
+    check = _unit_check(own, np.array([[0.1, 0.2], [0.1, 0.2]]), apart=0.1, known=known)
+    assert np.all(np.isnan(check.z[:, 1])) and {d.parameter for d in check.disagreements} == {"a"}
+    none = _unit_check(own, np.ones((2, 2)), known=np.zeros((2, 2), dtype=bool))
+    assert not none.compared and not none.significant and none.worst is None
+    assert "could not be compared" in none.words()
+
+
+def test_the_other_logs_sigma_is_their_information_combined() -> None:
+    std = np.array([[0.1], [0.2], [np.inf]])
+    np.testing.assert_allclose(combined_others(std)[:, 0], [0.2, 0.1, 1 / np.sqrt(1 / 0.01 + 1 / 0.04)])
+    assert np.isnan(combined_others(np.array([[0.1], [np.nan]]))[0, 0])
+
+
+def test_what_a_log_determines_on_its_own() -> None:
+    model = get_model("tricycle")
+    names = ("k_traction", "axis_length", "sensor_x")
+    values = np.array([0.01, 1.5, 1.6])
+    # 5 % of a gain or length, 5 cm of a position: within, beyond, not finite.
+    std = np.array([0.0004, 1.5 * 0.06, np.inf])
+    assert list(determined(model, names, values, std)) == [True, False, False]
 
 
 def _pair(tmp_path: Path, seed: int, other: dict[str, float]) -> tuple[Path, Path]:
@@ -100,6 +140,21 @@ def test_two_logs_of_different_robots_are_told_apart_naming_parameter_and_logs(t
     assert "k_traction" in check.words() and a.name in check.words()
 
 
+def test_forward_and_reverse_that_disagree_widen_the_sigma_to_cover_both() -> None:
+    check = compare(
+        NAMES,
+        np.array([1.0, 2.0]),
+        np.array([1.4, 2.01]),
+        (100, 90),
+        np.full(2, 0.05),
+        np.full(2, 0.05),
+        set(),
+    )
+    assert check.significant and abs(check.z[0]) > 4 > abs(check.z[1])
+    noise = 0.4 / abs(check.z[0])
+    np.testing.assert_allclose(check.spread(), [0.5 * np.sqrt(0.4**2 - noise**2), np.nan])
+
+
 def test_the_direction_check_says_when_it_could_not_compare() -> None:
     nan = np.full(2, np.nan)
     check = compare(NAMES, np.ones(2), np.ones(2), (100, 30), np.ones(2), nan, set())
@@ -137,6 +192,16 @@ def test_a_calibration_worse_than_its_initial_guess_is_not_usable(tmp_path: Path
     from nlp_calib.models import get_model
     from nlp_calib.results.run import CAVEATS
 
-    fitted_start = replace(worse, scenario=replace(worse.scenario, initial_guess="auto"))
+    # A data-driven start and no nominal values known (the guess given here was both).
+    fitted_start = replace(
+        worse,
+        scenario=replace(worse.scenario, initial_guess="auto"),
+        checks=replace(worse.checks, nominal=None),
+    )
     v = verdict(fitted_start, get_model("tricycle"))
     assert v.level == CAVEATS and any("no better than the data-driven start" in r for r in v.reasons), v
+    # The given guess is the robot's nominal values too: worse than them is not usable either way.
+    v = verdict(replace(fitted_start, checks=worse.checks), get_model("tricycle"))
+    assert v.level == NOT_USABLE and v.reasons == (
+        "worse than the nominal robot (data cost 0.02413 against 0.02391)",
+    ), v

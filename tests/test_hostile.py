@@ -558,6 +558,8 @@ def test_docs_examples_of_the_command_line_parse() -> None:
             "import-bag",
             "check",
             "batch",
+            "preflight",
+            "init",
         )
     )
     assert options and all(o in help_text or o == "--debug" for o in options), sorted(options)

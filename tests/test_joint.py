@@ -130,6 +130,10 @@ def test_run_writes_the_joint_hand_off_and_each_logs_result(tmp_path: Path) -> N
     proc = cli("run", str(sc), "--out", str(out))
     assert proc.returncode == 0, proc.stderr
     assert "joint fit of 2 logs" in proc.stdout
+    assert "summary of the joint fit of 2 logs (joint):" in proc.stdout
+    whole = json.loads((out / "result.json").read_text())
+    assert whole["dataset"]["path"].startswith("2 logs: ") and whole["logs"]["consistency"]["logs"]
+    assert whole["verdict"]["level"] in proc.stdout.split("summary of the joint fit")[1].lower()
     results = [json.loads((out / name / "result.json").read_text()) for name in ("drive0_2", "drive1_2")]
     calibration = (out / "calibration.yaml").read_text()
     params = [r["solvers"]["gauss_newton"]["params"] for r in results]

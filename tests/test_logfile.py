@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import parse_lines
+from hypothesis import event, given, settings
+from hypothesis import strategies as st
 
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning
 from nlp_calib.core.numeric import wrapped_difference
@@ -272,3 +274,74 @@ def test_block_reader_times_and_counters_are_the_per_line_readers() -> None:
     ints = [str(v).encode() for v in rng.integers(-(10**18) + 1, 10**18, 3000)]
     ints += [b"0", b"-0", b"7", b"999999999999999999", b"-999999999999999999", b"4294947296"]
     np.testing.assert_array_equal(records._integers(*located(ints)), [int(t) for t in ints])
+
+
+_FLOATS = st.floats(allow_nan=False, allow_infinity=False).map(repr)
+#: Pose tokens: mostly numbers as loggers write them, now and then one no record may hold.
+_TOKENS = st.one_of(
+    _FLOATS,
+    _FLOATS,
+    _FLOATS,
+    st.integers(-(10**6), 10**6).map(str),
+    st.sampled_from(["1e5", "-0", "1_0", "+1", "0x10", ".5", "5.", "1.2.3", "nan", "inf", "--1", "١٢"]),
+)
+#: Counter readings: mostly in range, now and then too long for a record.
+_TICKS = st.one_of(st.integers(-(10**18) + 1, 10**18 - 1), st.integers(-(10**19), 10**19))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    times=st.lists(
+        st.tuples(st.integers(0, 4 * 10**9), st.text("0123456789", max_size=12), st.booleans()),
+        min_size=1,
+        max_size=6,
+    ),
+    ticks=st.lists(_TICKS, min_size=12, max_size=12),
+    poses=st.lists(_TOKENS, min_size=36, max_size=36),
+    blank=st.booleans(),
+)
+def test_a_clean_block_reads_as_the_general_reader_reads_it(
+    times: list[tuple[int, str, bool]], ticks: list[int], poses: list[str], blank: bool
+) -> None:
+    """The compiled reader of plain records gives the general reader's values to the bit, and
+    leaves every block with a line it does not take as plain to it (which names that line)."""
+    from nlp_calib.logs import records
+
+    lines = []
+    for k, (whole, frac, dot) in enumerate(times):
+        t = f"{whole}.{frac}" if dot else str(whole)
+        p = poses[6 * k : 6 * k + 6]
+        lines.append(
+            f"time: {t} ticks: {ticks[2 * k]} {ticks[2 * k + 1]} model_pose: {' '.join(p[:3])} "
+            f"tracker_pose: {' '.join(p[3:])}"
+        )
+    blob = ("\n\n" if blank else "\n").join(lines).encode() + b"\n"
+    clean = records.parse_clean_block(blob, 7, 2)
+    general = records.parse_block(blob, 7, 2) if clean is None else None
+    if clean is None:
+        event("left to the general reader")
+        return  # the general reader reads it (the reader's own tests hold it to its messages)
+    event("read as plain records")
+    saved = records.parse_clean_block
+    try:
+        records.parse_clean_block = lambda *args: None  # type: ignore[assignment]
+        general = records.parse_block(blob, 7, 2)
+    finally:
+        records.parse_clean_block = saved
+    assert general.others.size == 0 and general.comments.size == 0
+    for field in ("lines", "t_ns", "ticks", "poses"):
+        a, b = np.asarray(getattr(clean, field)), np.asarray(getattr(general, field))
+        assert a.shape == b.shape and a.tobytes() == b.tobytes(), field
+
+
+def test_a_bad_line_in_a_clean_looking_log_is_still_named(tmp_path: Path) -> None:
+    demo = Path(__file__).resolve().parents[1] / "scenarios" / "data" / "demo_tricycle.txt"
+    header = [line for line in demo.read_text().splitlines()[:40] if line.startswith("#")]
+    good = "time: 1700000000.{:09d} ticks: 5 7 model_pose: 0 0 0 tracker_pose: 1 2 0.5"
+    records = [good.format(k) for k in range(50)]
+    records[30] = records[30].replace("ticks: 5", "ticks: +5")  # int() reads it; a log may not hold it
+    log = tmp_path / "log.txt"
+    log.write_text("\n".join(header + records) + "\n")
+    line = len(header) + 31
+    with pytest.raises(DatasetError, match=rf"log\.txt:{line}: ticks: expected 2 integers"):
+        load_log(log, get_model("tricycle"))

@@ -32,14 +32,30 @@ RELATIVE = {
     "k_steer": 0.02,
     "axis_length": 0.02,
     "baseline": 0.02,
+    "wheelbase": 0.02,
+    "steering_track": 0.02,
 }
 ABSOLUTE = {
     "steer_offset": 0.01,
     "k_steer_reverse": 0.01,
+    "turn_slip": 0.02,
     "sensor_x": 0.02,
     "sensor_y": 0.02,
     "sensor_theta": 0.01,
 }
+# A car's rear track enters its odometry only through the correction of the wheels' travel in
+# turns (a second-order effect, see models/car_like.py): 3σ on this drive is about 10 cm.
+ABSOLUTE["rear_track"] = 0.1
+# A car steers by tan φ: its steering gain and wheelbase part only through tan's curvature, to about
+# 2 % each on this drive (their ratio to 0.1 %); 3σ of that.
+_CAR = {"k_steer": 0.06, "wheelbase": 0.06}
+PER_MODEL = {"car_like": _CAR, "car_like_ackermann": _CAR, "car_like_bicycle": _CAR}
+
+
+def tolerance(model: str, name: str, true: float) -> float:
+    """The stated tolerance of parameter ``name`` of ``model`` at its true value."""
+    relative = {**RELATIVE, **PER_MODEL.get(model, {})}
+    return relative[name] * abs(true) if name in relative else ABSOLUTE[name]
 
 
 def truth(model: str) -> np.ndarray:
@@ -77,12 +93,15 @@ def test_manifold_jacobian_matches_central_differences(model: str) -> None:
     backwards = (m.travel_direction(intervals).reshape(-1, 4) < 0).any(axis=1)
     # Windows driving forward and windows reversing: a model may treat the two differently.
     picks = [rng.choice(np.flatnonzero(moving & sel), 8, replace=False) for sel in (~backwards, backwards)]
+    # The Ackermann car's steering track moves the residual only at second order (its column is
+    # below the finite differences' rounding): the model always holds it, no fit has its column.
+    fitted = [i for i, n in enumerate(param_names(m)) if n != "steering_track"]
     for k in np.concatenate(picks):
         x = truth(model) * rng.uniform(0.8, 1.2, truth(model).size)
         data = columns[:, k]
         _, J = (np.asarray(v) for v in fns.residual_jacobian(x, [], data))
-        J_fd = np.zeros_like(J)
-        for i in range(x.size):
+        J, J_fd = J[:, fitted], np.zeros_like(J)
+        for i in fitted:
             d = np.zeros(x.size)
             d[i] = 1e-4 * max(abs(x[i]), 1e-3)
 
@@ -91,6 +110,7 @@ def test_manifold_jacobian_matches_central_differences(model: str) -> None:
 
             # Five-point central stencil: truncation O(h⁴), so h can stay clear of round-off.
             J_fd[:, i] = (-e(2 * d) + 8 * e(d) - 8 * e(-d) + e(-2 * d)) / (12 * d[i])
+        J_fd = J_fd[:, fitted]
         # Per column: the parameters' scales differ by orders of magnitude (metres per tick).
         col = np.abs(J).max(axis=0)
         # A column that is exactly zero here (a parameter this window does not touch) is compared
@@ -108,8 +128,7 @@ def test_solvers_agree_and_recover_truth(model: str) -> None:
     assert_close(gn.params, ip.params, rtol=1e-4, atol=1e-10)
     assert gn.cost == pytest.approx(ip.cost, rel=1e-6)
     for name, value, true in zip(gn.names, gn.params, truth(model)):
-        tol = RELATIVE[name] * abs(true) if name in RELATIVE else ABSOLUTE[name]
-        assert abs(value - true) <= tol, f"{model} {name}: {value} vs {true}"
+        assert abs(value - true) <= tolerance(model, name, true), f"{model} {name}: {value} vs {true}"
 
 
 @pytest.mark.parametrize("model", ALL_MODELS)
@@ -118,7 +137,9 @@ def test_auto_start_needs_no_guess(model: str) -> None:
     calib = Calibration(scenario(model, initial_guess="auto"), log=sim_log(model, records=1500, guess=wild))
     res = calib.solve("gauss_newton")
     assert res.converged, res.reason
-    assert_close(res.params, truth(model), rtol=0.02, atol=0.02)
+    rtol = [PER_MODEL.get(model, {}).get(n, 0.02) for n in res.names]
+    for name, value, true, r in zip(res.names, res.params, truth(model), rtol):
+        assert_close(value, true, rtol=r, atol=0.02, what=f"{model} {name}")
 
 
 @pytest.mark.parametrize("model", ALL_MODELS)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from xml.etree import ElementTree as ET
 
 import numpy as np
 import pytest
@@ -70,10 +71,12 @@ def test_the_tricycle_controller_gets_its_parameters(handed_off: tuple[Path, dic
     p = result["solvers"]["gauss_newton"]["params"]
     doc = yaml.safe_load((out / "ros2_control.yaml").read_text())
     params = doc["tricycle_controller"]["ros__parameters"]
-    assert params == pytest.approx(
-        {"wheelbase": p["axis_length"], "wheel_radius": p["k_traction"] / (2 * np.pi)}
-    )
+    # The traction encoder's range is the unit k_traction is counted in, not a wheel turn: without
+    # the counts per turn no radius is written, and one line says what is needed.
+    assert params["wheelbase"] == pytest.approx(p["axis_length"]) and "wheel_radius" not in params
     text = (out / "ros2_control.yaml").read_text()
+    (why,) = [line for line in text.splitlines() if line.startswith("#   wheel_radius:")]
+    assert "counts per wheel turn of 'traction_wheel'" in why and "counts_per_turn" in why
     assert (
         "k_steer = " in text
         and "mechanical_reduction = 1/k_steer" in text
@@ -100,6 +103,51 @@ def test_the_users_urdf_is_re_posed_and_nothing_else_changes(handed_off: tuple[P
     # Roll and pitch of the sensor in base_link are kept: the last row of Rz(yaw)·Ry(pitch)·Rx(roll)
     # does not depend on the yaw.
     assert new[2, :3] == pytest.approx(old[2, :3], abs=1e-12)
+
+
+def test_every_handoff_file_states_the_users_joint_to_the_last_digit(
+    handed_off: tuple[Path, dict, Path],
+) -> None:
+    """With --urdf, sensor_mount.urdf.xml is the user's own joint of the sensor's link, re-posed
+    exactly as in robot.urdf (same link names, same origin strings), and calibration.yaml's mount
+    the same numbers with the user's height, roll and pitch said to be kept."""
+    out, _, robot = handed_off
+    joint = ET.parse(out / "sensor_mount.urdf.xml").getroot()
+    theirs = {j.get("name"): j for j in ET.parse(out / "robot.urdf").getroot().iter("joint")}
+    assert joint.get("name") == "chassis_to_laser"
+    mine = theirs["chassis_to_laser"]
+    for tag in ("parent", "child"):
+        assert joint.find(tag).get("link") == mine.find(tag).get("link")  # type: ignore[union-attr]
+    assert joint.find("child").get("link") == "laser"  # type: ignore[union-attr]
+    assert joint.find("origin").attrib == mine.find("origin").attrib  # type: ignore[union-attr]
+    mount = yaml.safe_load((out / "calibration.yaml").read_text())["mount"]
+    origin = joint.find("origin").attrib  # type: ignore[union-attr]
+    assert " ".join(map(repr, mount["xyz"])) == origin["xyz"]
+    assert " ".join(map(repr, mount["rpy"])) == origin["rpy"]
+    assert (mount["joint"], mount["parent"], mount["child"]) == ("chassis_to_laser", "chassis", "laser")
+    assert mount["calibrated"] == ["x", "y", "yaw"]
+    assert mount["nominal"] == dict.fromkeys(("z", "roll", "pitch"), f"kept from {robot.name} (--urdf)")
+    # The height, roll and pitch in base_link are the user's (their joints composed).
+    import yourdfpy
+
+    old = yourdfpy.URDF.load(str(robot)).get_transform("laser", "base_link")
+    pose = mount["pose_in_base_link"]
+    assert pose["z"] == pytest.approx(old[2, 3], abs=1e-12)
+    assert pose["pitch"] == pytest.approx(float(np.arcsin(-old[2, 0])), abs=1e-12)
+    assert pose["roll"] == pytest.approx(float(np.arctan2(old[2, 1], old[2, 2])), abs=1e-12)
+
+
+def test_without_urdf_the_mount_is_on_base_link_with_its_nominal_sources(tmp_path: Path) -> None:
+    out = tmp_path / "plain"
+    proc = cli("run", str(SCENARIOS / "demo.yaml"), "--out", str(out), "--solver", "gauss_newton")
+    assert proc.returncode == 0, proc.stderr
+    joint = ET.parse(out / "sensor_mount.urdf.xml").getroot()
+    robot = {j.get("name"): j for j in ET.parse(out / "robot.urdf").getroot().iter("joint")}
+    assert joint.find("origin").attrib == robot[joint.get("name")].find("origin").attrib  # type: ignore[union-attr]
+    mount = yaml.safe_load((out / "calibration.yaml").read_text())["mount"]
+    assert mount["parent"] == "base_link" and set(mount["nominal"]) == {"z", "roll", "pitch"}
+    assert all(v.startswith("not known (0)") for v in mount["nominal"].values())
+    assert set(mount["std"]) == {"x", "y", "yaw"} and all(v > 0 for v in mount["std"].values())
 
 
 def test_the_re_posed_urdf_loads_in_urdf_parser_py(handed_off: tuple[Path, dict, Path]) -> None:
@@ -140,12 +188,13 @@ def test_urdf_without_sensor_link_is_a_usage_error_before_any_work(tmp_path: Pat
     assert not (tmp_path / "o").exists()
 
 
-def test_the_diff_drive_controller_gets_radii_from_the_ticks_per_turn(tmp_path: Path) -> None:
+def test_the_diff_drive_controller_gets_radii_from_the_counts_per_turn(tmp_path: Path) -> None:
     out = tmp_path / "dd"
     proc = cli("run", str(SCENARIOS / "diff_drive_demo.yaml"), "--out", str(out), "--solver", "gauss_newton")
     assert proc.returncode == 0, proc.stderr
     p = json.loads((out / "result.json").read_text())["solvers"]["gauss_newton"]["params"]
-    ticks = [e["ticks_per_turn"] for e in yaml.safe_load((out / "calibration.yaml").read_text())["encoders"]]
+    ticks = [e["counts_per_turn"] for e in yaml.safe_load((out / "calibration.yaml").read_text())["encoders"]]
+    assert ticks == [4096, 4096]  # the scenario's counts_per_turn
     left, right = (k * n / (2 * np.pi) for k, n in zip((p["k_left"], p["k_right"]), ticks))
     params = yaml.safe_load((out / "ros2_control.yaml").read_text())["diff_drive_controller"][
         "ros__parameters"

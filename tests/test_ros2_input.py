@@ -22,6 +22,7 @@ from nlp_calib.core.errors import ModelError, NlpCalibWarning, ScenarioError
 from nlp_calib.logs import BagError, JointStream, Log, resample_encoders
 from nlp_calib.logs.joint_log import read_joint_csv
 from nlp_calib.models import canonical, get_model
+from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.outputs.handoff import urdf_joint
 from nlp_calib.pipeline import Calibration, load_scenario
 from nlp_calib.pipeline.build import initial_parameters
@@ -83,8 +84,10 @@ def test_a_recording_calibrates_in_robot_units_with_only_topics_and_joints(
     assert [f for f in faults if f["kind"] != "tracker_jump"] == []  # no encoder fault
     assert sum(f["kind"] == "tracker_jump" for f in faults) >= 0.8 * 0.01 * recording.tracker_ns.size
     controller = yaml.safe_load((out / "ros2_control.yaml").read_text())
-    held = controller["tricycle_controller"]["ros__parameters"]
+    held = dict(controller["tricycle_controller"]["ros__parameters"])
+    covariances = [held.pop(k) for k in ("pose_covariance_diagonal", "twist_covariance_diagonal")]
     assert held == {"wheelbase": params["wheelbase"], "wheel_radius": params["wheel_radius"]}
+    assert all(len(c) == 6 and all(v > 0 for v in c) for c in covariances)
     calibration = yaml.safe_load((out / "calibration.yaml").read_text())
     assert {e["unit"] for e in calibration["encoders"]} == {"rad"}
     print(f"{fmt}: {(out / 'ros2_control.yaml').read_text()}")
@@ -184,14 +187,15 @@ def test_a_model_in_radians_moves_by_its_radius_times_the_angle() -> None:
 
 def test_the_controller_of_a_model_in_radians_takes_its_parameters_as_they_are() -> None:
     dd = get_model("diff_drive").in_radians()
-    name, values, places, assumes = dd.controller(
-        {"left_wheel_radius": 0.1, "right_wheel_radius": 0.11, "wheel_separation": 0.5}, {}
+    found = dd.controller(
+        {"left_wheel_radius": 0.1, "right_wheel_radius": 0.11, "wheel_separation": 0.5}, EncoderScales({})
     )
-    assert name == "diff_drive_controller" and values["wheel_separation"] == 0.5
+    values = found.parameters
+    assert found.controller == "diff_drive_controller" and values["wheel_separation"] == 0.5
     assert math.isclose(values["wheel_radius"], 0.105)
     assert math.isclose(values["left_wheel_radius_multiplier"] * values["wheel_radius"], 0.1)
-    assert "radians" in assumes and "ticks" not in assumes
-    _, values, places, _ = (
+    assert "radians" in found.assumes and "ticks" not in found.assumes
+    trike = (
         get_model("tricycle_reverse")
         .in_radians()
         .controller(
@@ -202,11 +206,12 @@ def test_the_controller_of_a_model_in_radians_takes_its_parameters_as_they_are()
                 "steer_offset": 0.0,
                 "k_steer_reverse": 0.0,
             },
-            {},
+            EncoderScales({}),
         )
     )
-    assert values == {"wheelbase": 1.1, "wheel_radius": 0.2}
-    assert set(places) == {"k_steer", "steer_offset", "k_steer_reverse"}
+    assert trike.parameters == {"wheelbase": 1.1, "wheel_radius": 0.2}
+    assert set(trike.places) == {"k_steer", "steer_offset", "k_steer_reverse"}
+    assert not trike.omitted
 
 
 def test_a_scenario_names_the_parameters_of_the_joints_units(

@@ -248,6 +248,21 @@ def test_accumulate_matches_repeated_products() -> None:
         same_pose(track[k + 1], np.concatenate([T[:3, 3], poses3d.matrix_to_quat(T[:3, :3])]))
 
 
+def test_accumulate_is_compose_step_by_step_to_the_bit() -> None:
+    """The sequential pass written on floats gives the array compose's doubles, step after step."""
+    rng = np.random.default_rng(3)
+    steps = np.r_[
+        "1", 0.1 * rng.normal(size=(500, 3)), poses3d.rotvec_to_quat(0.05 * rng.normal(size=(500, 3)))
+    ]
+    start = np.r_[rng.normal(size=3), poses3d.rotvec_to_quat(rng.normal(size=3))]
+    expected = np.empty((501, 7))
+    expected[0] = start
+    for k in range(500):
+        expected[k + 1] = poses3d.compose(expected[k], steps[k])
+    expected[:, 3:] /= np.linalg.norm(expected[:, 3:], axis=1, keepdims=True)
+    assert poses3d.accumulate(start, steps).tobytes() == expected.tobytes()
+
+
 def test_turned_is_an_unwrapped_angle_along_a_fixed_axis() -> None:
     axis = np.array([0.0, -np.sqrt(0.75), 0.5])  # the floor normal as a camera 30° down sees it
     angle = np.linspace(0.0, 9.0, 400)  # more than a turn and a half

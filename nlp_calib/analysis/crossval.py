@@ -39,8 +39,9 @@ def jackknife_std(estimates: np.ndarray) -> np.ndarray:
     return np.where(same, 0.0, np.sqrt((K - 1) / K * np.sum(dev * dev, axis=0)))
 
 
-def combine(names: Sequence[str], folds: Sequence[Fold]) -> CrossValidation:
-    """The cross-validation of these folds (σ from the converged ones; NaN with too few)."""
+def combine(names: Sequence[str], folds: Sequence[Fold], min_folds: int = MIN_FOLDS) -> CrossValidation:
+    """The cross-validation of these folds (σ from the converged ones; NaN with fewer than
+    ``min_folds``)."""
     good = [f.params for f in folds if f.converged]
-    std = jackknife_std(np.array(good)) if len(good) >= MIN_FOLDS else np.full(len(names), np.nan)
+    std = jackknife_std(np.array(good)) if len(good) >= min_folds else np.full(len(names), np.nan)
     return CrossValidation(names=tuple(names), folds=tuple(folds), std=std)

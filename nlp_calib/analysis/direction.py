@@ -23,10 +23,13 @@ def compare(
     std_forward: np.ndarray,
     std_reverse: np.ndarray,
     held: set[str],
+    apart: np.ndarray | None = None,
 ) -> DirectionCheck:
-    """The check of two part fits and their σ; parameters held in a part are not compared."""
+    """The check of two part fits and their σ; parameters held in a part are not compared.
+    ``apart``: per parameter, the difference beyond which the two parts cannot both describe one
+    robot (then a part's fit, not a model limit, is in question: the σ is not widened by it)."""
     sigma = np.sqrt(std_forward**2 + std_reverse**2)
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.where(sigma > 0, (forward - reverse) / sigma, np.nan)
     z = np.where([n in held for n in names], np.nan, z)
-    return DirectionCheck(names=names, forward=forward, reverse=reverse, windows=windows, z=z)
+    return DirectionCheck(names=names, forward=forward, reverse=reverse, windows=windows, z=z, apart=apart)

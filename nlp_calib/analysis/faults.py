@@ -33,13 +33,10 @@ from nlp_calib.analysis.counters import screen_counters
 from nlp_calib.analysis.joint_repair import repair_joints
 from nlp_calib.analysis.readings import Readings, interpolated_over, readings, turning
 from nlp_calib.analysis.readings import unit as unit_of
-from nlp_calib.analysis.streams import off_neighbours, scatter, stuck_runs
-from nlp_calib.core import poses3d
-from nlp_calib.core.errors import ProblemError
-from nlp_calib.core.numeric import COUNTER_MODULUS, wrap_angle, wrapped_difference
+from nlp_calib.analysis.streams import off_neighbours, printed_step, scatter, stuck_runs
+from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.logs.log import frozen
-from nlp_calib.models.mount import SCALE_PARAM
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results.faults import (
@@ -48,6 +45,7 @@ from nlp_calib.results.faults import (
     Fault,
     FaultReport,
 )
+from nlp_calib.sensors import Sensor
 
 #: A 16-bit counter wraps after this many ticks (named in the evidence when the deficit matches).
 WRAP_16 = 2**16
@@ -61,26 +59,6 @@ STUCK_FLOOR_STEPS = 3.0
 #: at rest (a corner cut by a slow tracker interpolated onto faster records stays inside it).
 TRACKER_GROUP = 4
 TRACKER_EXCURSION = 3.0
-
-
-def _unwrapped_poses(log: Log) -> np.ndarray:
-    T = np.array(log.T_world_sensor, dtype=float)
-    T[:, 2] = np.unwrap(T[:, 2])
-    return T
-
-
-def _tracker_signal(log: Log, spatial: bool) -> tuple[np.ndarray, int]:
-    """The tracker's poses as a signal continuous in time, and how many of its leading columns are
-    the position: planar ``(x, y, θ unwrapped)``, or 3-D ``(x, y, z)`` and the rotation accumulated
-    about the world's axes (:func:`~nlp_calib.core.poses3d.turned`), so that one path judges both."""
-    if not spatial:
-        return _unwrapped_poses(log), 2
-    if log.T_world_sensor_3d is None:
-        raise ProblemError(
-            f"{log.path}: a 3-D sensor's poses are needed to screen them; the log has planar ones"
-        )
-    P = np.asarray(log.T_world_sensor_3d, dtype=float)
-    return np.hstack([P[:, :3], poses3d.turned(P[:, 3:])]), 3
 
 
 def _norm(x: np.ndarray) -> float:
@@ -101,12 +79,15 @@ def _fault(
     return Fault(kind, encoder, intervals[0], intervals[1], record, t, line, *size, evidence)
 
 
-def tracker_faults(log: Log, spatial: bool = False, length: str = "m") -> list[Fault]:
-    """Tracker poses off the path their neighbours agree on (see :mod:`nlp_calib.analysis.streams`):
-    planar ones, or with ``spatial`` the 3-D poses, their positions in ``length`` units."""
-    T, position = _tracker_signal(log, spatial)
+def tracker_faults(log: Log, sensor: Sensor) -> list[Fault]:
+    """Tracker poses off the path their neighbours agree on (see :mod:`nlp_calib.analysis.streams`),
+    on the signal the ``sensor`` judges them by (its jump signal), its positions in its length unit."""
+    T, position = sensor.jump_signal(log)
+    length = sensor.length_unit
     t, lines = log.time_s, log.line_numbers
-    sc = scatter(t, T)
+    # The printed precision of the poses (and their discretisation, the path's own bend: see
+    # streams.path_bend) is the least scatter a miss is judged by, however clean the data.
+    sc = scatter(t, T, printed_step(T))
     if not np.any(sc.floor > 0):
         # Poses without scatter at rest (a noise-free simulation) give no scale to judge a miss by:
         # a smooth path's own curvature would be taken for glitches.
@@ -209,7 +190,7 @@ def absolute_faults(log: Log, kinds: Mapping[str, EncoderKind]) -> list[Fault]:
 def cleaned(log: Log, faults: Sequence[Fault]) -> Log:
     """``log`` with the tracker's and the absolute encoders' glitches interpolated over (in time,
     from the readings around them), so that they mislead no judgement of another stream."""
-    t, out = log.time_s, log
+    out = log
     bad_pose = np.zeros(log.n_records, dtype=bool)
     for f in faults:
         if f.kind in TRACKER_KINDS:
@@ -218,28 +199,7 @@ def cleaned(log: Log, faults: Sequence[Fault]) -> Log:
             bad = np.zeros(log.n_records, dtype=bool)
             bad[f.first + 1 : f.last + 1] = True
             out = interpolated_over(out, f.encoder, bad)
-    if not bad_pose.any() or (~bad_pose).sum() < 2:
-        return out
-    T, U = np.array(log.T_world_sensor, dtype=float), _unwrapped_poses(log)
-    for j in range(3):
-        T[bad_pose, j] = np.interp(t[bad_pose], t[~bad_pose], U[~bad_pose, j])
-    T[:, 2] = wrap_angle(T[:, 2])
-    out = replace(out, T_world_sensor=frozen(T))
-    if log.T_world_sensor_3d is None:
-        return out
-    return replace(out, T_world_sensor_3d=frozen(_spatial_over(log.T_world_sensor_3d, t, bad_pose)))
-
-
-def _spatial_over(P: np.ndarray, t: np.ndarray, bad: np.ndarray) -> np.ndarray:
-    """3-D poses ``P`` with the ``bad`` ones interpolated in time from the nearest good ones around
-    (the nearest good one at either end)."""
-    good, k = np.flatnonzero(~bad), np.flatnonzero(bad)
-    after = np.clip(np.searchsorted(good, k), 1, good.size - 1)
-    a, b = good[after - 1], good[after]
-    s = np.clip((t[k] - t[a]) / np.maximum(t[b] - t[a], 1e-12), 0.0, 1.0)[:, None]
-    out = np.array(P, dtype=float)
-    out[k] = poses3d.between_at(out[a], out[b], s)
-    return out
+    return out.with_poses_interpolated(bad_pose)
 
 
 def _evidence(
@@ -305,9 +265,7 @@ def screen(
     alone, then the counters' against a fit (``judge``) that leaves those glitches out, on readings
     with them interpolated over, at the tracker ``lag`` (s, or a range to estimate it in)."""
     model, n = fns.model, log.n_records
-    spatial = fns.sensor.pose_rows != 3
-    length = "trajectory units" if SCALE_PARAM in fns.names else "m"
-    jumps = tracker_faults(log, spatial, length)
+    jumps = tracker_faults(log, fns.sensor)
     glitches = tuple(jumps + absolute_faults(log, model.encoder_kinds))
     report = FaultReport(glitches, {}, {}, unit=unit_of(log))
     params = judge(report.bad_intervals(n - 1), report.bad_records(n))

@@ -1,9 +1,13 @@
-"""A calibration in the robot stack's terms: the controller's parameters with their 1σ.
+"""A calibration in the robot stack's terms: the controller's parameters with their 1σ, and the
+covariance its odometry publishes.
 
 The model maps its parameters onto its ros2_control controller's; each derived value's 1σ is
 propagated to first order from the parameters' covariance (their σ to believe with the
 white-noise correlation, as ``result.json`` reports them), with the map's Jacobian taken by
-central differences.
+central differences. The odometry's covariance follows from each input's noise per interval
+calibrated on the log's drift (:mod:`nlp_calib.analysis.odometry`): the twist's over one interval,
+``G·diag(σ_u²)·Gᵀ/Δt²`` with ``G`` the increment's Jacobian in the inputs, averaged over the
+moving intervals; the pose's after a metre of driving as the log drives.
 """
 
 from __future__ import annotations
@@ -12,41 +16,154 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from nlp_calib.analysis.odometry import propagate
 from nlp_calib.models import KinematicModel
-from nlp_calib.results.handoff import ControllerParams, Placement
+from nlp_calib.models.controllers import EncoderScales
+from nlp_calib.problem import ProblemFunctions
+from nlp_calib.problem.windows import over_columns
+from nlp_calib.results.handoff import UNMEASURED, ControllerParams, OdometryNoise, Placement
+
+#: The distance (m) after which the pose's covariance is stated: a fixed diagonal cannot follow
+#: the drift's growth, so it says it at one distance.
+POSE_DISTANCE_M = 1.0
 
 
-def _values(
-    model: KinematicModel, names: Sequence[str], p: np.ndarray, ranges: Mapping[str, float]
+def _values(model: KinematicModel, names: Sequence[str], p: np.ndarray, scales: EncoderScales) -> np.ndarray:
+    found = model.controller(dict(zip(names, map(float, p))), scales)
+    return np.array(list(found.parameters.values()))
+
+
+#: A controller value whose 1σ exceeds this share of it is not determined by the drive.
+UNDETERMINED_SHARE = 0.25
+
+
+def _jacobian(
+    model: KinematicModel, names: Sequence[str], params: np.ndarray, step: np.ndarray, scales: EncoderScales
 ) -> np.ndarray:
-    _, parameters, _, _ = model.controller(dict(zip(names, map(float, p))), ranges)
-    return np.array(list(parameters.values()))
+    """The controller values' Jacobian in the parameters, by central differences."""
+    columns = []
+    for j in range(len(names)):
+        h = 1e-6 * max(abs(float(params[j])), float(step[j]), 1e-9)
+        up, down = params.copy(), params.copy()
+        up[j] += h
+        down[j] -= h
+        columns.append((_values(model, names, up, scales) - _values(model, names, down, scales)) / (2.0 * h))
+    return np.stack(columns, axis=1)
+
+
+def _meaningless(
+    values: Mapping[str, float],
+    sd: np.ndarray,
+    jac: np.ndarray,
+    names: Sequence[str],
+    held: Mapping[str, str],
+) -> dict[str, str]:
+    """The controller values no calibration gave: resting on a parameter held at its initial
+    value (the model's guess, or the header's), or too loose to mean anything."""
+    out = {}
+    for i, (name, value) in enumerate(values.items()):
+        resting = [n for j, n in enumerate(names) if n in held and jac[i, j] != 0.0]
+        if resting:
+            out[name] = f"rests on {resting[0]}, held at its initial value ({held[resting[0]]}): keep yours"
+        elif sd[i] > UNDETERMINED_SHARE * abs(value):
+            out[name] = f"not determined by this drive ({value:.4g} ± {sd[i]:.2g})"
+    return out
 
 
 def controller_params(
     model: KinematicModel,
     names: Sequence[str],
-    params: np.ndarray,
-    std: np.ndarray,
-    correlation: np.ndarray,
-    ranges: Mapping[str, float],
+    estimate: tuple[np.ndarray, np.ndarray, np.ndarray],
+    scales: EncoderScales,
+    extra: tuple[OdometryNoise | None, Mapping[str, str]] = (None, {}),
 ) -> ControllerParams:
-    """``model``'s controller parameters at ``params`` (in ``names`` order) with their 1σ."""
+    """``model``'s controller parameters at ``estimate`` (the parameters in ``names`` order, their
+    1σ and correlation) with their 1σ; ``extra``: the odometry's noise, and the parameters held
+    at their initial values (with why), whose controller values are left out, as is a value too
+    loose to mean anything."""
+    params, std, correlation = estimate
+    noise, held = extra
     values = dict(zip(names, map(float, params)))
-    controller, parameters, places, assumes = model.controller(values, ranges)
+    found = model.controller(values, scales)
     finite = np.where(np.isfinite(std), std, 0.0)
     cov = np.nan_to_num(correlation) * np.outer(finite, finite)
-    jac = np.zeros((len(parameters), len(names)))
-    for j in range(len(names)):
-        h = 1e-6 * max(abs(float(params[j])), float(finite[j]), 1e-9)
-        up, down = params.copy(), params.copy()
-        up[j] += h
-        down[j] -= h
-        jac[:, j] = (_values(model, names, up, ranges) - _values(model, names, down, ranges)) / (2.0 * h)
+    jac = _jacobian(model, names, params, finite, scales)
     sd = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", jac, cov, jac), 0.0, None))
+    left_out = _meaningless(found.parameters, sd, jac, names, held)
     units = dict(model.units)
     elsewhere = tuple(
         Placement(n, values[n], float(std[list(names).index(n)]), units.get(n, ""), where)
-        for n, where in places.items()
+        for n, where in found.places.items()
     )
-    return ControllerParams(controller, parameters, dict(zip(parameters, map(float, sd))), elsewhere, assumes)
+    kept = [i for i, n in enumerate(found.parameters) if n not in left_out]
+    parameters = list(found.parameters.items())
+    return ControllerParams(
+        found.controller,
+        {parameters[i][0]: parameters[i][1] for i in kept},
+        {parameters[i][0]: float(sd[i]) for i in kept},
+        elsewhere,
+        found.assumes,
+        {**found.omitted, **left_out},
+        noise,
+    )
+
+
+def _twist(
+    fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, dt: np.ndarray, noise: np.ndarray
+) -> np.ndarray:
+    """The variance of ``(vx, vy, wz)`` over one interval, averaged over the moving intervals:
+    each interval's increment covariance from the origin, over its duration squared."""
+    moving = fns.model.moving(inputs)
+    if not np.any(moving):
+        return np.full(3, np.nan)
+    step = over_columns(fns.odometry_step, np.zeros(12), np.ravel(params), inputs[:, moving], noise)[0]
+    P = step[3:].reshape(3, 3, -1, order="F")
+    return np.mean(np.stack([P[0, 0], P[1, 1], P[2, 2]]) / dt[moving] ** 2, axis=1)
+
+
+def _pose(fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, noise: np.ndarray) -> np.ndarray:
+    """The variance of ``(x, y, yaw)`` after :data:`POSE_DISTANCE_M` of driving, in the base frame
+    at the start: the covariance added between pose ``i`` and the first pose ``j`` that far on,
+    ``P_j − F·P_i·Fᵀ``, turned into the frame at ``i``, averaged over starts ``i``."""
+    track, P = propagate(fns, params, inputs, np.zeros(3), noise)
+    travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(track[:, :2], axis=0).T))])
+    starts = np.flatnonzero(travelled <= travelled[-1] - POSE_DISTANCE_M)
+    if starts.size == 0:
+        return np.full(3, np.nan)
+    starts = starts[:: max(1, starts.size // 200)]
+    ends = np.searchsorted(travelled, travelled[starts] + POSE_DISTANCE_M)
+    out = []
+    for i, j in zip(starts, ends):
+        F = np.eye(3)
+        F[0, 2], F[1, 2] = -(track[j, 1] - track[i, 1]), track[j, 0] - track[i, 0]
+        c, s = np.cos(track[i, 2]), np.sin(track[i, 2])
+        R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        out.append(np.diag(R @ (P[j] - F @ P[i] @ F.T) @ R.T))
+    return np.mean(out, axis=0)
+
+
+def odometry_noise(
+    fns: ProblemFunctions,
+    params: np.ndarray,
+    inputs: np.ndarray,
+    time_s: np.ndarray,
+    noise: tuple[Mapping[str, float], np.ndarray],
+) -> OdometryNoise:
+    """The covariance diagonals a controller publishes with its odometry, over the intervals of
+    ``inputs`` (at ``time_s``), from each input's calibrated noise per interval and the noise of
+    one reading (its resolution): ``noise``. A drift adds up the increments' noise (a random walk:
+    slip, jitter); an interval's increment has, besides, the rounding of the reading at its start
+    (the drift's floor counts the one at its end)."""
+    calibrated, reading = noise
+    sigma = np.array([calibrated[n] for n in fns.model.input_names])
+    dt = np.diff(np.asarray(time_s, dtype=float))
+    vx, _, wz = _twist(fns, params, inputs, dt, np.hypot(sigma, reading))
+    x, y, yaw = _pose(fns, params, inputs, sigma)
+    u = UNMEASURED
+    return OdometryNoise(
+        pose=(float(x), float(y), u, u, u, float(yaw)),
+        twist=(float(vx), u, u, u, u, float(wz)),
+        interval_s=float(np.median(dt)) if dt.size else float("nan"),
+        distance_m=POSE_DISTANCE_M,
+        input_noise=dict(calibrated),
+    )

@@ -32,7 +32,6 @@ from typing import Any
 import numpy as np
 
 from nlp_calib.core import poses, poses3d
-from nlp_calib.models.mount import SCALE_PARAM
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.results.figures import RPE_DISTANCES, RPE_TOLERANCE, ErrorStats, TrajectoryMetrics
 
@@ -59,9 +58,13 @@ SPATIAL = Geometry(
 )
 
 
+#: The geometry of a pose group's poses.
+GEOMETRIES = {"SE(2)": PLANAR, "SE(3)": SPATIAL}
+
+
 def geometry(fns: ProblemFunctions) -> Geometry:
-    """The geometry of the problem's tracker poses."""
-    return SPATIAL if fns.sensor.pose_rows == 7 else PLANAR
+    """The geometry of the problem's tracker poses (its sensor's pose group)."""
+    return GEOMETRIES[fns.sensor.group]
 
 
 def steps(fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray) -> np.ndarray:
@@ -75,17 +78,17 @@ def steps(fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray) -> np.n
 
 
 def scale_free(fns: ProblemFunctions) -> bool:
-    """Whether the trajectory's scale is a parameter (its poses are then in metres only by it)."""
-    return SCALE_PARAM in fns.names and SCALE_PARAM in fns.sensor.params
+    """Whether the trajectory's poses are in metres only by a parameter (its scale)."""
+    return fns.sensor.length_unit != "m"
 
 
 def in_metres(fns: ProblemFunctions, params: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """``poses`` (or motions) with their translations in metres: times the ``scale`` of
-    ``params`` when the trajectory's scale is free (as they are otherwise)."""
+    """``poses`` (or motions) with their translations in metres: times the sensor's scale at
+    ``params`` when its poses are known only up to scale (as they are otherwise)."""
     if not scale_free(fns):
         return poses
     out = np.array(poses, dtype=float)
-    out[:, :3] *= float(np.ravel(params)[fns.names.index(SCALE_PARAM)])
+    out[:, :3] *= fns.sensor.trajectory_scale(dict(zip(fns.names, map(float, np.ravel(params)))))
     return out
 
 

@@ -9,14 +9,42 @@ checked too: a log that never turns cannot tell an axis length or a lever arm.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from nlp_calib.analysis.degeneracy import free_directions, motion_scale
 from nlp_calib.models import reference_scales
+from nlp_calib.problem import ProblemFunctions
 from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, Observability, WeakDirection
 from nlp_calib.solvers import ProblemEvaluator
 
 #: Range of the sensor's heading (rad) below which the log counts as not turning.
 MIN_TURNING = 0.3
+
+
+@dataclass(frozen=True)
+class Directions:
+    """The information matrix ``H/σ²`` in reference units, taken apart: its eigenvalues ``lam`` and
+    eigenvectors ``V`` (columns), which of them the drive leaves free whatever the noise
+    (:mod:`~nlp_calib.analysis.degeneracy`), and each parameter's 1σ in reference units."""
+
+    lam: np.ndarray
+    V: np.ndarray
+    free: np.ndarray
+    std_reference: np.ndarray
+
+
+def directions(H: np.ndarray, sigma2: float, R: np.ndarray, n_windows: int, motion2: float) -> Directions:
+    """The directions of the information ``H`` (``JᵀΩJ`` summed over ``n_windows`` windows whose
+    motion is ``motion2``, :func:`~nlp_calib.analysis.degeneracy.motion_scale`) for residuals of
+    variance ``sigma2``, in the reference units ``R`` of the parameters. The one definition of
+    what a drive determines: a run's observability and the pre-flight both read it."""
+    lam, V = np.linalg.eigh(0.5 * (H + H.T) * np.outer(R, R) / sigma2)
+    free = free_directions(lam * sigma2, n_windows, motion2)
+    tiny = 1e-12 * max(float(lam[-1]), 1e-300)
+    var_param = (V**2 / np.maximum(lam, tiny)).sum(axis=1)
+    return Directions(lam, V, free, np.sqrt(var_param))
 
 
 def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarray) -> Observability:
@@ -38,44 +66,59 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
     sigma2 = max(float(np.sum(weight * s)) / dof, 1e-300)
     params = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()
     value = dict(zip(fns.names, params))
-    R = reference_scales(fns.model, names, np.array([value[n] for n in names]))
-    Hs = ne.H * np.outer(R, R) / sigma2
-    lam, V = np.linalg.eigh(0.5 * (Hs + Hs.T))
-    tiny = 1e-12 * max(float(lam[-1]), 1e-300)
-    std_dir = 1.0 / np.sqrt(np.maximum(lam, tiny))
-    var_param = (V**2 / np.maximum(lam, tiny)).sum(axis=1)
+    R = reference_scales(fns.model, names, np.array([value[n] for n in names]), fns.sensor.reference)
+    motion2 = motion_scale(fns, evaluator.data.z, evaluator.omega)
+    found = directions(ne.H, sigma2, R, evaluator.n_residuals, motion2)
     d = np.sqrt(np.maximum(np.diag(ne.H), 1e-300))
     jacobi = np.linalg.eigvalsh(ne.H / np.outer(d, d))
     cond = float(jacobi[-1] / jacobi[0]) if jacobi[0] > 1e-14 * jacobi[-1] else float("inf")
+    weak = weak_directions(names, found.lam, found.V, found.free)
+    # The heading's range, not its summed steps: tracker noise adds up over thousands of steps.
+    turning = float(np.ptp(heading))
+    warnings = [w for w in [no_turning(fns, names, turning)] if w]
+    for w in sorted(weak, key=lambda w: -w.std_reference):
+        size = f"1σ = {w.std_reference:.3g} ×" if np.isfinite(w.std_reference) else "no information at"
+        warnings.append(w.words() + f" ({size} the reference precision)")
+    return Observability(
+        condition_number=cond,
+        std_reference={n: float(v) for n, v in zip(names, found.std_reference)},
+        weak=tuple(weak),
+        heading_range_rad=turning,
+        warnings=tuple(warnings),
+    )
+
+
+def weak_directions(
+    names: tuple[str, ...], lam: np.ndarray, V: np.ndarray, degenerate: np.ndarray
+) -> list[WeakDirection]:
+    """The weak and undetermined directions of the information matrix whose eigenvalues ``lam``
+    and eigenvectors ``V`` (in reference units) are given; ``degenerate``: those the drive leaves
+    free whatever the noise (:mod:`nlp_calib.analysis.degeneracy`)."""
+    tiny = 1e-12 * max(float(lam[-1]), 1e-300)
+    std_dir = 1.0 / np.sqrt(np.maximum(lam, tiny))
     weak = []
     # Undetermined directions form a subspace whose basis is arbitrary: describe it by the
     # parameters it involves, not vector by vector.
-    null = std_dir > NOT_OBSERVABLE
+    null = (std_dir > NOT_OBSERVABLE) | degenerate
     if null.any():
         share = (V[:, null] ** 2).sum(axis=1)
         comps = {names[i]: round(float(share[i]), 3) for i in np.flatnonzero(share > 0.1)}
-        weak.append(WeakDirection(float(std_dir[null].max()), comps))
+        weak.append(WeakDirection(float("inf") if degenerate.any() else float(std_dir[null].max()), comps))
     for k in np.flatnonzero((std_dir > WEAK) & ~null):
         v = V[:, k]
         comps = {names[i]: round(float(v[i]), 3) for i in np.flatnonzero(np.abs(v) > 0.3)}
         weak.append(WeakDirection(float(std_dir[k]), comps))
-    # The heading's range, not its summed steps: tracker noise adds up over thousands of steps.
-    turning = float(np.ptp(heading))
-    warnings = []
-    if turning < MIN_TURNING:
-        model = fns.model
-        lever = [n for n in (*model.turning_params, *fns.sensor.turning) if n in names]
-        what = ", ".join(lever) + (f" and {model.turning_note}" if model.turning_note else "")
-        warnings.append(
-            f"no turning: the sensor's heading spans only {turning:.2f} rad over the whole log, so "
-            f"{what} are not observable; drive S-curves or circles in both directions"
-        )
-    for w in sorted(weak, key=lambda w: -w.std_reference):
-        warnings.append(w.words() + f" (1σ = {w.std_reference:.3g} × the reference precision)")
-    return Observability(
-        condition_number=cond,
-        std_reference={n: float(np.sqrt(v)) for n, v in zip(names, var_param)},
-        weak=tuple(weak),
-        heading_range_rad=turning,
-        warnings=tuple(warnings),
+    return weak
+
+
+def no_turning(fns: ProblemFunctions, names: tuple[str, ...], turning: float) -> str:
+    """The warning for a log that does not turn enough to show a lever arm ("" when it does)."""
+    if turning >= MIN_TURNING:
+        return ""
+    model = fns.model
+    lever = [n for n in (*model.turning_params, *fns.sensor.turning) if n in names]
+    what = ", ".join(lever) + (f" and {model.turning_note}" if model.turning_note else "")
+    return (
+        f"no turning: the sensor's heading spans only {turning:.2f} rad over the whole log, so "
+        f"{what} are not observable; drive S-curves or circles in both directions"
     )

@@ -133,12 +133,15 @@ def drift_noise(drift: Drift, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray
     """Each input's 1σ noise per interval whose propagated covariance explains the observed drift,
     never below ``floor`` (the encoders' quantisation), and the reference's own position and
     heading variances: the method of moments, the squared errors against the unit covariances'
-    diagonals and the reference's noise terms, by non-negative least squares."""
-    n_in = drift.covs.shape[1]
+    diagonals and the reference's noise terms, by non-negative least squares. An input with no
+    floor is exact (an interval's duration) and keeps no noise."""
+    floor = np.asarray(floor, dtype=float)
+    noisy = floor > 0
+    n_in = int(noisy.sum())
     errors = drift.errors
     if errors.shape[0] < 3 * (n_in + 2):
-        return np.asarray(floor, dtype=float), np.zeros(2)
-    units = np.concatenate([drift.covs, drift.terms], axis=1)  # (S, n_in + 2, 3, 3)
+        return floor, np.zeros(2)
+    units = np.concatenate([drift.covs[:, noisy], drift.terms], axis=1)  # (S, n_in + 2, 3, 3)
     A = np.concatenate([np.diagonal(units, axis1=2, axis2=3)[:, :, c] for c in range(3)])
     y = np.concatenate([errors[:, c] ** 2 for c in range(3)])
     # A squared error's spread grows with its expected value (a χ² with one degree of freedom):
@@ -149,7 +152,9 @@ def drift_noise(drift: Drift, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray
         w = 1.0 / np.maximum(predicted, 1e-6 * float(np.max(predicted)))
         var = nnls_small(A * w[:, None], y * w)
         predicted = A @ var
-    return np.maximum(np.sqrt(var[:n_in]), floor), var[n_in:]
+    noise = floor.copy()
+    noise[noisy] = np.maximum(np.sqrt(var[:n_in]), floor[noisy])
+    return noise, var[n_in:]
 
 
 def drift_coverage(drift: Drift, noise: np.ndarray, reference_var: np.ndarray, k: float = 2.0) -> float:

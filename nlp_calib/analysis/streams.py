@@ -71,19 +71,58 @@ def robust_sigma(x: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
 
+def printed_step(y: np.ndarray) -> np.ndarray:
+    """Each column's printed precision: the step of the decimals its values were written with (0
+    when they carry more than nine, or none could be told): rounding to it is noise the screen
+    must allow for however clean the data are."""
+    y = np.asarray(y, dtype=float).reshape(len(y), -1)
+    out = np.zeros(y.shape[1])
+    for c in range(y.shape[1]):
+        v = y[np.isfinite(y[:, c]), c]
+        for k in range(10):
+            scaled = v * 10.0**k
+            if not v.size or np.max(np.abs(scaled)) > 1e9:
+                break  # beyond what a double tells apart from its decimals
+            if np.max(np.abs(scaled - np.round(scaled))) < 1e-6:
+                out[c] = 10.0**-k
+                break
+    return out
+
+
 @dataclass(frozen=True)
 class Scatter:
     """A stream's scatter about the chord between a reading's neighbours, per component: ``floor``
-    at rest, growing with the rate of change by ``timing`` (s: the readings' timing noise)."""
+    at rest, growing with the rate of change by ``timing`` (s: the readings' timing noise).
+    ``bend`` ``(2, n, d)``, where given: the path's own acceleration around each record, looking
+    back (``bend[0]``) and ahead (``bend[1]``), where it exceeds what the noise explains: a smooth
+    path misses a chord by that much whatever its noise (:func:`path_bend`)."""
 
     floor: np.ndarray
     timing: np.ndarray
+    bend: np.ndarray | None = None
 
     def at(self, rate: np.ndarray) -> np.ndarray:
         return np.sqrt(self.floor**2 + (self.timing * rate) ** 2)
 
+    def bent(self, rate: np.ndarray, outer: tuple[np.ndarray, np.ndarray], span: np.ndarray) -> np.ndarray:
+        """:meth:`at`, with the miss of a path bending as it does beyond the records ``outer``
+        ``(l2, r2)`` from a chord over ``span`` (s): the discretisation of a smooth drive."""
+        sigma = self.at(rate)
+        if self.bend is None:
+            return sigma
+        accel = np.maximum(self.bend[0][outer[0]], self.bend[1][outer[1]])
+        return np.sqrt(sigma**2 + (accel * (span**2 / 8.0)[:, None]) ** 2)
+
 
 def scatter(t: np.ndarray, y: np.ndarray, resolution: np.ndarray | float = 0.0) -> Scatter:
+    """The scatter of ``y`` ``(n, d)`` about its chords (:func:`chord_scatter`) and where its path
+    bends beyond it (:func:`path_bend`)."""
+    y = np.asarray(y, dtype=float).reshape(len(t), -1)
+    sc = chord_scatter(t, y, resolution)
+    return sc if len(t) < 5 else Scatter(sc.floor, sc.timing, path_bend(t, y, sc))
+
+
+def chord_scatter(t: np.ndarray, y: np.ndarray, resolution: np.ndarray | float = 0.0) -> Scatter:
     """The scatter of ``y`` ``(n, d)`` about its chords: robust over the slowest quarter of the
     records at rest (at least ``resolution``, a reading's step), and relative to the rate over the
     fastest half."""
@@ -104,6 +143,47 @@ def scatter(t: np.ndarray, y: np.ndarray, resolution: np.ndarray | float = 0.0) 
         if np.sum(fast) >= 10:
             timing[c] = robust_sigma(miss[fast, c] / rate[fast, c])
     return Scatter(floor, timing)
+
+
+#: Second differences around a record a path's bend is taken over (the median: a glitch's own
+#: do not count).
+BEND_WINDOW = 7
+#: The path bends where its second differences exceed this many times what its noise gives.
+BEND_OVER_NOISE = 3.0
+
+
+def path_bend(t: np.ndarray, y: np.ndarray, sc: Scatter) -> np.ndarray | None:
+    """Each record's acceleration of the path ``(2, n, d)`` over :data:`BEND_WINDOW` second
+    differences behind it and ahead of it, where it exceeds :data:`BEND_OVER_NOISE` times what the
+    stream's scatter explains (0 elsewhere: a noisy stream's chords already allow for it); None
+    when nothing bends beyond its noise."""
+    n, d = y.shape
+    if n < BEND_WINDOW + 2:
+        return None
+    h_left, h_right = np.maximum(t[1:-1] - t[:-2], 1e-12), np.maximum(t[2:] - t[1:-1], 1e-12)
+    slope_left, slope_right = (y[1:-1] - y[:-2]) / h_left[:, None], (y[2:] - y[1:-1]) / h_right[:, None]
+    accel = np.abs(slope_right - slope_left) / (0.5 * (h_left + h_right))[:, None]
+    h2 = (0.5 * (h_left + h_right))[:, None] ** 2
+    rate = np.maximum(np.abs(slope_left), np.abs(slope_right))
+    # White noise of scatter σ gives second differences of median 0.6745·√6·σ.
+    noise = 0.6745 * np.sqrt(6.0) * sc.at(rate) / h2
+    level = np.full((n, d), np.nan)
+    level[1:-1] = accel
+    floor = np.full((n, d), np.inf)
+    floor[1:-1] = BEND_OVER_NOISE * noise
+    windows = np.lib.stride_tricks.sliding_window_view(level, BEND_WINDOW, axis=0)
+    medians = np.full((n, d), np.nan)
+    medians[BEND_WINDOW - 1 :] = np.nanmedian(windows, axis=-1)
+    limits = np.full((n, d), np.inf)
+    limits[BEND_WINDOW - 1 :] = np.nanmedian(
+        np.lib.stride_tricks.sliding_window_view(floor, BEND_WINDOW, axis=0), axis=-1
+    )
+    back = np.where(np.nan_to_num(medians, nan=0.0) > limits, np.nan_to_num(medians, nan=0.0), 0.0)
+    ahead = np.zeros((n, d))
+    ahead[: n - BEND_WINDOW + 1] = back[BEND_WINDOW - 1 :]
+    if not (back.any() or ahead.any()):
+        return None
+    return np.stack([back, ahead])
 
 
 @dataclass(frozen=True)
@@ -156,7 +236,7 @@ def _scored(
     R = y[r1][:, None] + vR[:, None] * (tm - t[r1][:, None])[..., None]
     chord = (y[r1] - y[l1]) / np.maximum(t[r1] - t[l1], 1e-12)[:, None]
     C = y[l1][:, None] + chord[:, None] * (tm - t[l1][:, None])[..., None]
-    sigma = sc.at(np.maximum(np.abs(vL), np.abs(vR)))
+    sigma = sc.bent(np.maximum(np.abs(vL), np.abs(vR)), (l2, r2), t[r1] - t[l1])
     # A kink where the two lines come closest (in units of scatter), between the near neighbours.
     A = (y[l1] - vL * t[l1][:, None] - y[r1] + vR * t[r1][:, None]) / sigma
     B = (vL - vR) / sigma

@@ -30,12 +30,16 @@ timing error or slowly varying model error), and the problem is close to linear 
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from nlp_calib.analysis.degeneracy import free_directions, motion_scale
 from nlp_calib.models import reference_scales
+from nlp_calib.models.clock import is_lag
 from nlp_calib.problem import ProblemFunctions, ResidualData
+from nlp_calib.results.checks import LAG_EFFECT_CORRELATION, LagEffect
 from nlp_calib.results.uncertainty import Uncertainty
 from nlp_calib.solvers import ProblemEvaluator, Sensitivities
 
@@ -68,14 +72,17 @@ def nnls_gram(G: np.ndarray, h: np.ndarray, yy: float) -> np.ndarray:
     return best
 
 
-def _pseudo_inverse(H: np.ndarray, scale: np.ndarray, rcond: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
+def _pseudo_inverse(
+    H: np.ndarray, scale: np.ndarray, free: Callable[[np.ndarray], np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of ``H`` on the subspace the data determine, and a mask of the parameters in the rest.
 
     The eigen-analysis runs in reference units (``scale``), where an undetermined direction
-    stands out cleanly whatever the parameters' units.
+    stands out cleanly whatever the parameters' units; ``free`` says which eigenvalues belong to
+    directions the drive leaves free (:func:`~nlp_calib.analysis.degeneracy.free_directions`).
     """
     lam, V = np.linalg.eigh(H * np.outer(scale, scale))
-    keep = lam > rcond * max(float(lam[-1]), 1e-300)
+    keep = ~free(lam)
     inv = (V[:, keep] / lam[keep]) @ V[:, keep].T * np.outer(scale, scale)
     undetermined = (V[:, ~keep] ** 2).sum(axis=1) > 1e-3
     return inv, undetermined
@@ -126,10 +133,28 @@ def _weighted_gram(A: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return out
 
 
+def range_std(lower: np.ndarray | None, upper: np.ndarray | None, n: int) -> np.ndarray:
+    """The 1σ of a uniform distribution over each free parameter's bounds (inf where unbounded)."""
+    if lower is None or upper is None:
+        return np.full(n, np.inf)
+    width = np.asarray(upper, dtype=float) - np.asarray(lower, dtype=float)
+    return np.where(np.isfinite(width), width / np.sqrt(12.0), np.inf)
+
+
 def estimate(
-    evaluator: ProblemEvaluator, x: np.ndarray, data: ResidualData, input_noise_std: np.ndarray
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    data: ResidualData,
+    input_noise_std: np.ndarray,
+    bounds_std: np.ndarray | None = None,
 ) -> Uncertainty:
-    """Covariance of the estimate ``x`` fitted to ``data``, given the inputs' 1σ noise."""
+    """Covariance of the estimate ``x`` fitted to ``data``, given the inputs' 1σ noise.
+
+    ``bounds_std`` (per free parameter, inf where unbounded; see :func:`range_std`) enters as a
+    prior: a direction the data do not determine is then known as well as the bounds of the
+    parameters in it allow (a lag within its search), and every parameter that moves along it
+    carries that σ (listed in :attr:`Uncertainty.bounded`); a direction with no bounded parameter
+    in it leaves its parameters' σ infinite."""
     fns = evaluator.fns
     ne = evaluator.normal_equations(x)
     if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
@@ -154,21 +179,109 @@ def estimate(
     dof = max(mm - fns.n_free, 1)
     var = nnls_gram(sums.gram, sums.proj, sums.yy) * (mm / dof)
     meat = sums.meat(var, D, Sigma_in)
+    # The data term is not divided by the residuals' variance σ², so a prior of weight σ²/std²
+    # (the scenario's, weighed so; the bounds' below) adds σ² times that weight to the score's
+    # covariance.
+    sigma2 = float(np.sum(weight[use] * s[use])) / dof
     if evaluator.priors.active:
-        meat = meat + evaluator.prior_information(x)
+        meat = meat + sigma2 * evaluator.prior_information(x)
+    cov, bounded = _covariance(evaluator, x, (ne.H, meat), sigma2, bounds_std)
+    noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
+    noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
+    out = _packaged(fns, cov, noise, dof)
+    return replace(out, bounded=tuple(n for n, b in zip(fns.free, bounded) if b))
+
+
+def _covariance(
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    bread_meat: tuple[np.ndarray, np.ndarray],
+    sigma2: float,
+    bounds_std: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_bounded_covariance` at ``x``: reference units from the estimate, the drive's free
+    directions from its windows' motion, the bounds' prior in the data's units."""
+    fns, data = evaluator.fns, evaluator.data
     free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[
         [fns.names.index(f) for f in fns.free]
     ]
-    bread_inv, undetermined = _pseudo_inverse(ne.H, reference_scales(fns.model, fns.free, free_values))
+    scale = reference_scales(fns.model, fns.free, free_values, fns.sensor.reference)
+    motion2 = motion_scale(fns, data.z, evaluator.omega)
+
+    def free(lam: np.ndarray) -> np.ndarray:
+        return free_directions(lam, data.n_residuals, motion2)
+
+    prior = bounds_prior(bounds_std, sigma2, fns.n_free)
     M = np.asarray(fns.tangent_map(x))
-    cov = M @ bread_inv @ meat @ bread_inv @ M.T
-    # A parameter the data do not determine has no finite variance; say so instead of a number.
-    lost = np.abs(M) @ undetermined > 0
+    return _bounded_covariance(*bread_meat, (scale, M), free, (prior, sigma2))
+
+
+def white_covariance(
+    H: np.ndarray,
+    sigma2: float,
+    scale: np.ndarray,
+    free: Callable[[np.ndarray], np.ndarray],
+    bounds_std: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The white-noise covariance ``σ²·H⁻¹`` of the information ``H = JᵀΩJ`` (manifold coordinates)
+    as :func:`estimate` treats it: the directions the drive leaves free (``free``, on eigenvalues
+    of ``H`` in the reference units ``scale``) held only by the bounds' prior (``bounds_std``, see
+    :func:`range_std`), inf where nothing holds them; and which parameters only the bounds hold.
+    What a drive, or a drive with a manoeuvre appended, would determine before any fit."""
+    n = H.shape[0]
+    prior = bounds_prior(bounds_std, sigma2, n)
+    return _bounded_covariance(H, sigma2 * H, (scale, np.eye(n)), free, (prior, sigma2))
+
+
+def bounds_prior(bounds_std: np.ndarray | None, sigma2: float, n: int) -> np.ndarray:
+    """The bounds' prior weights in the data's units (``σ²/std²``; 0 where unbounded)."""
+    if bounds_std is None:
+        return np.zeros(n)
+    std = np.asarray(bounds_std, dtype=float)
+    return sigma2 * np.where(np.isfinite(std), std**-2.0, 0.0)
+
+
+def _bounded_covariance(
+    H: np.ndarray,
+    meat: np.ndarray,
+    scale_and_map: tuple[np.ndarray, np.ndarray],
+    free: Callable[[np.ndarray], np.ndarray],
+    prior_sigma2: tuple[np.ndarray, float],
+) -> tuple[np.ndarray, np.ndarray]:
+    """The sandwich covariance (plain coordinates, ``M`` the tangent map) with the bounds' prior
+    (its weights in the data's units and the residuals' variance σ²) where the drive leaves a
+    direction free, and which parameters move along such a direction (their σ is the bounds')."""
+    scale, M = scale_and_map
+    prior, sigma2 = prior_sigma2
+    n = H.shape[0]
+    RR = np.outer(scale, scale)
+    lam, V = np.linalg.eigh(H * RR)
+    loose = free(lam)
+    undetermined = (V[:, loose] ** 2).sum(axis=1) > 1e-3
+    P = np.diag(prior) if undetermined.any() else np.zeros((n, n))
+    # What the data say along a free direction is rounding and the model's discretisation: it is
+    # not counted, and the bounds' prior alone holds the direction.
+    H_kept = H - (V[:, loose] * lam[loose]) @ V[:, loose].T / RR
+    # ... and nor is the score's noise along it (the score, a gradient, projected onto the other
+    # directions in reference units: g_ref = R·g).
+    keep = (np.eye(n) - V[:, loose] @ V[:, loose].T) * np.outer(1.0 / scale, scale)
+    meat_kept = keep @ meat @ keep.T
+    # With the prior, only a direction no bounded parameter enters is still free.
+    bread_inv, still = _pseudo_inverse(H_kept + P, scale, lambda lam: free(lam) & ~_bounded(lam, P, scale))
+    cov = M @ bread_inv @ (meat_kept + sigma2 * P) @ bread_inv @ M.T
+    # A parameter the drive and the bounds leave undetermined has no finite variance: say so.
+    lost = np.abs(M) @ still > 0
     cov[lost, :] = np.inf
     cov[:, lost] = np.inf
-    noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
-    noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
-    return _packaged(fns, cov, noise, dof)
+    return cov, undetermined & ~still
+
+
+def _bounded(lam: np.ndarray, P: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Which eigenvalues ``lam`` of ``(H + P)`` in reference units reach the bounds' prior ``P``: a
+    direction the prior holds (at least its smallest entry, in reference units)."""
+    held = np.diag(P) * scale**2
+    least = float(np.min(held[held > 0])) if np.any(held > 0) else np.inf
+    return np.asarray(lam >= 0.5 * least)
 
 
 def _input_noise_at_ends(D: np.ndarray, Sigma_in: np.ndarray, m: int) -> np.ndarray:
@@ -280,3 +393,21 @@ def _packaged(fns: ProblemFunctions, cov: np.ndarray, noise: dict[str, float], d
     return Uncertainty(
         names=names, free=fns.free, covariance=cov, std=std, correlation=corr, noise=noise, dof=dof
     )
+
+
+def lag_effects(u: Uncertainty) -> tuple[LagEffect, ...]:
+    """Each free time offset's effect on the parameters correlated with it (see :class:`LagEffect`)."""
+    out = []
+    for lag in (n for n in u.free if is_lag(n)):
+        i = u.free.index(lag)
+        var = float(u.covariance[i, i])
+        if not (np.isfinite(var) and var > 0):
+            continue
+        per = {}
+        for j, name in enumerate(u.free):
+            c = float(u.covariance[i, j])
+            corr = c / np.sqrt(var * float(u.covariance[j, j])) if u.covariance[j, j] > 0 else 0.0
+            if j != i and np.isfinite(c) and abs(corr) >= LAG_EFFECT_CORRELATION:
+                per[name] = c / var
+        out.append(LagEffect(lag, per))
+    return tuple(out)

@@ -10,29 +10,41 @@ The rules a reader can check:
 - **not determined**: no solver converged, or the drive leaves a parameter undetermined (its σ
   is infinite, or a direction of the information matrix is beyond
   :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` reference units);
-- **not usable**: converged and determined, but farther from the tracker than a given initial guess
-  (segment ATE; a start computed from the data itself, ``initial_guess: auto``, is already a fit
-  of it, so doing no better than it is a caveat), or, fitted to several logs, some log's own fit
-  disagrees with theirs beyond their honest σ (they are not one robot): whatever else holds, such
-  a calibration is not to be used;
+- **not usable**: converged and determined, but worse than a given initial guess or than the
+  robot's nominal values by what the reference measures well (the data cost of the windows each
+  cross-validation fold left out, beyond :data:`~nlp_calib.results.checks.BEATS` standard errors;
+  without folds, the data cost on every window), or, fitted to several logs, some log's own fit
+  differs from the other logs' beyond their honest σ and beyond what one robot's logs differ by
+  (they are not one robot): whatever else holds, such a calibration is not to be used;
 - **usable with caveats**: converged and determined, but something needs a look first: a weakly
   observable direction, a parameter whose σ to believe exceeds
   :data:`~nlp_calib.results.checks.WEAK` times the precision a useful calibration needs,
   solvers that disagree, a parameter held at its initial value, forward and reverse driving that
-  disagree, faults kept in the fit or not checked, or no gain over the initial guess;
+  disagree, parameters that move between logs beyond their σ (a model limit), faults kept in the
+  fit or not checked, or a fit that does worse on held-out data than the start computed from the
+  data itself (``initial_guess: auto``: that start is itself a fit, so this is a caveat);
 - **good**: none of these.
+
+A run of one log among several fitted together is judged on that log's own comparison with the
+others; the joint fit as one run on every log's.
+Beside the level, the verdict states the gain over the robot's nominal values (segment ATE), or
+that no source knows them.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
+from nlp_calib.analysis.consistency import determined
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.base import reference_scale
-from nlp_calib.models.mount import mirrored_mount
+from nlp_calib.models.clock import is_lag
 from nlp_calib.results import CalibrationRun, Verdict
-from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
+from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, ConsistencyCheck
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
+from nlp_calib.sensors import Sensor, sensor_for
 
 #: Relative parameter difference beyond which two converged solvers disagree.
 AGREE = 1e-4
@@ -40,33 +52,60 @@ AGREE = 1e-4
 
 def _loose(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]:
     """Parameters known too loosely, in words."""
-    params = run.reports[solver].result.param_dict()
+    rep = run.reports[solver]
     out = []
     obs = run.checks.observability
     if obs is not None:
         out += [w.words() for w in obs.weak if w.std_reference <= NOT_OBSERVABLE]
-    for name, sd in run.std(solver).items():
-        ref = reference_scale(model, name, params[name])
-        if sd > WEAK * ref:
+    std = run.std(solver)
+    names = tuple(std)
+    sd = np.array([std[n] for n in names])
+    values = np.array([rep.result.param_dict()[n] for n in names])
+    sensor = _sensor(run)
+    known = determined(model, names, values, sd, sensor.reference)
+    for name, s, v, ok in zip(names, sd, values, known):
+        if np.isfinite(s) and not ok:
+            ref = reference_scale(model, name, v, sensor.reference)
             unit = run.scenario.units[name]
-            out.append(f"{name} is known only to ±{sd:.2g} {unit} (over {WEAK:g}× the {ref:.2g} needed)")
+            out.append(f"{name} is known only to ±{s:.2g} {unit} (over {WEAK:g}× the {ref:.2g} needed)")
     return out
+
+
+def _sensor(run: CalibrationRun) -> Sensor:
+    return sensor_for(run.scenario.sensor.kind, run.scenario.sensor.scale)
 
 
 def _checks(run: CalibrationRun) -> list[str]:
     """What the checks found that needs a look, in words."""
     out = [w for w in run.warnings if " held at its initial value" in w]
+    lag = run.data.lag_estimate
+    if lag is not None and lag.at_edge:
+        out.append(f"the tracker lag ended on the edge of alignment.search ({1e3 * lag.lag_s:.0f} ms)")
     direction, findings = run.checks.direction, run.checks.findings
     if direction is not None and direction.significant:
         name, z = direction.worst
-        out.append(f"forward and reverse driving disagree ({name} by {abs(z):.1f}σ)")
+        widened = np.isfinite(direction.spread()[direction.names.index(name)])
+        also = "; its σ covers both" if widened else ""
+        out.append(f"forward and reverse driving disagree ({name} by {abs(z):.1f}σ{also})")
+    check = _consistency(run)
+    if check is not None and not check.significant and check.limits():
+        out.append(check.words())
     if findings is not None:
         rep = findings.report
         if rep.unchecked:
-            out.append("encoder faults not checked")
+            out.append(f"encoder faults not checked ({rep.unchecked})")
         elif rep.faults and findings.handling == "keep":
             out.append(f"{len(rep.faults)} faults kept in the fit (faults.handling: keep)")
     return out
+
+
+def _consistency(run: CalibrationRun) -> ConsistencyCheck | None:
+    """The logs' consistency as this run reads it: one log's own row for a run of one of the logs,
+    every row for the joint fit."""
+    check = run.checks.consistency
+    if check is None or run.log.path not in check.logs:
+        return check
+    return check.of_log(run.log.path)
 
 
 def caveats(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]:
@@ -77,10 +116,9 @@ def caveats(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str
         if (d := run.relative_difference(solver, other)) > AGREE:
             out.append(f"{solver} and {other} disagree by {d:.1e} (relative)")
     out += _checks(run)
-    ours, base = run.reports[solver].metrics.segment_ate.mean, run.baseline.segment_ate.mean
-    if np.isfinite(base) and not ours < base:
-        start = "the data-driven start" if _fitted_start(run) else "the initial guess"
-        out.append(f"no better than {start} (segment ATE {ours:.3g} m against {base:.3g} m)")
+    start = run.checks.start
+    if start is not None and _fitted_start(run) and start.outcome == "worse":
+        out.append(f"no better than the data-driven start {start.detail()}")
     return out
 
 
@@ -90,16 +128,14 @@ def _fitted_start(run: CalibrationRun) -> bool:
 
 
 def implausible(run: CalibrationRun, solver: str, model: KinematicModel) -> str:
-    """Why ``solver``'s estimate cannot be the robot although it fits the data: a mirror image
-    (the model's, or a 3-D mount's upside down) or a parameter outside what the model can have;
-    "" when it can be."""
+    """Why ``solver``'s estimate cannot be the robot although it fits the data: a mirror image (the
+    model's, or the sensor's: a camera's mount upside down) or a parameter outside what the model can
+    have; "" when it can be."""
     params = run.reports[solver].result.param_dict()
     if mirror := model.implausible(params):
         return mirror
-    if run.scenario.sensor_3d:
-        given = None if _fitted_start(run) else run.initial
-        if mirror := mirrored_mount(params, given):
-            return mirror
+    if mirror := _sensor(run).implausible(params, None if _fitted_start(run) else run.initial):
+        return mirror
     for name in model.kinematic_params:
         lo, hi = model.physical_ranges.get(name, (-np.inf, np.inf))
         if name in params and not lo <= params[name] <= hi:
@@ -112,37 +148,105 @@ def implausible(run: CalibrationRun, solver: str, model: KinematicModel) -> str:
     return ""
 
 
-def verdict(run: CalibrationRun, model: KinematicModel, hint: str = "") -> Verdict:
-    """The run's verdict and why (see the module's rules); ``hint``: what the data source says of
-    a mirror image's likely cause (e.g. the joints' order it was given)."""
+def _unusable(run: CalibrationRun) -> list[str]:
+    """Why a converged, determined estimate is not to be used: the logs are not one robot's, or the
+    fit does worse than a given initial guess or the robot's nominal values."""
+    out = []
+    check = _consistency(run)
+    if check is not None and check.significant:
+        out.append(check.words())
+    start, nominal = run.checks.start, run.checks.nominal
+    if start is not None and not _fitted_start(run) and start.outcome == "worse":
+        out.append(start.words())
+    if nominal is not None and nominal.cost is not None and nominal.cost.outcome == "worse":
+        out.append(nominal.cost.words())
+    return out
+
+
+def gain(run: CalibrationRun, solver: str) -> str:
+    """The gain over the robot's nominal values in words, or that no source knows them."""
+    nominal = run.checks.nominal
+    if nominal is None:
+        return (
+            "no nominal robot known (no log header, ROBOT.yaml, /tf_static or initial_guess values "
+            "give one): the gain over it cannot be stated"
+        )
+    return nominal.gain(run.reports[solver].metrics)
+
+
+def _undetermined(run: CalibrationRun, model: KinematicModel, hint: str) -> Verdict | None:
+    """The verdict when the estimate is not determined (see the module's rules), else None."""
     solver = run.chosen_solver()
     if solver is not None and (mirror := implausible(run, solver, model)):
         return Verdict(UNDETERMINED, (mirror + hint,), handoff=False)
     obs = run.checks.observability
     loose = [w.words() for w in obs.weak if w.std_reference > NOT_OBSERVABLE] if obs is not None else []
+    group = [n for w in (obs.weak if obs is not None else ()) for n in w.components]
+    lag = run.data.lag_estimate
+    unfitted = ["the tracker lag could not be fitted"] if lag is not None and not lag.converged else []
     if solver is None:
         failures = dict.fromkeys(run.reports[s].result.reason for s in run.solver_order())
-        return Verdict(UNDETERMINED, (*loose, *(f"no solver converged: {r}" for r in failures)))
+        out = (*unfitted, *loose, *(f"no solver converged: {r}" for r in failures))
+        return Verdict(UNDETERMINED, (*out, way_out(group, model)) if loose else out)
+    if bounded := _trade_off(run, solver):
+        return Verdict(UNDETERMINED, (bounded, way_out(run.reports[solver].uncertainty.bounded, model)))
     missing = [n for n, sd in run.std(solver).items() if not np.isfinite(sd)]
     if missing or loose:
         why = loose or [f"{', '.join(missing)} not determined by this drive"]
-        return Verdict(UNDETERMINED, tuple(why))
-    check = run.checks.consistency
-    if check is not None and check.significant:
-        return Verdict(NOT_USABLE, (check.words(),))
-    ours, base = run.reports[solver].metrics.segment_ate.mean, run.baseline.segment_ate.mean
-    if ours > base and not _fitted_start(run):
-        return Verdict(
-            NOT_USABLE,
-            (f"worse than the initial guess (segment ATE {ours:.3g} m against {base:.3g} m uncalibrated)",),
+        return Verdict(UNDETERMINED, (*why, way_out([*missing, *group], model)))
+    return None
+
+
+def _trade_off(run: CalibrationRun, solver: str) -> str:
+    """The parameters this drive determines only together, each known only within the bounds of
+    one of them (a lag within its search), in words; "" when there are none."""
+    group = run.reports[solver].uncertainty.bounded
+    if not group:
+        return ""
+    std, units = run.std(solver), run.scenario.units
+    spread = ", ".join(f"{n} ±{std[n]:.2g} {units.get(n, '')}".rstrip() for n in group)
+    return (
+        f"{', '.join(group)} trade off on this drive (changing one is undone by the others), so each is "
+        f"known only within the range the search allows ({spread})"
+    )
+
+
+def way_out(names: Sequence[str], model: KinematicModel) -> str:
+    """What lets a drive determine the parameters ``names`` that trade off on this one, in words."""
+    names = list(dict.fromkeys(names))
+    if any(is_lag(n) for n in names):
+        return (
+            "next: give the lag (alignment.tracker_lag: <seconds>, from how the clocks are synchronised), "
+            "or record a drive whose wheel speeds change independently of each other (starts and stops, "
+            "turns of several radii both ways), which a time offset cannot imitate"
         )
+    if any(n in model.turning_params or n in ("sensor_x", "sensor_y") for n in names):
+        return "next: drive turns in both directions (S-curves, circles each way) and fit again"
+    held = next((n for n in names), "")
+    return (
+        f"next: hold one of them at a measured value (known: {{{held}: <value>}}), or drive so that they act "
+        f"differently ({model.turning_note or 'other speeds and turns'})"
+    )
+
+
+def verdict(run: CalibrationRun, model: KinematicModel, hint: str = "") -> Verdict:
+    """The run's verdict and why (see the module's rules); ``hint``: what the data source says of
+    a mirror image's likely cause (e.g. the joints' order it was given)."""
+    undetermined = _undetermined(run, model, hint)
+    solver = run.chosen_solver()
+    if undetermined is not None:
+        return undetermined
+    assert solver is not None  # no converged solver is not determined
+    said = gain(run, solver)
+    unusable = _unusable(run)
+    if unusable:
+        return Verdict(NOT_USABLE, tuple(unusable), gain=said)
     found = caveats(run, solver, model)
     if found:
-        return Verdict(CAVEATS, tuple(found))
-    rep = run.reports[solver]
-    gain = run.baseline.segment_ate.mean / max(rep.metrics.segment_ate.mean, 1e-12)
+        return Verdict(CAVEATS, tuple(found), gain=said)
     reasons = [f"{solver} converged", "every parameter determined to the precision a calibration needs"]
     if len([s for s in run.reports if run.reports[s].result.converged]) > 1:
         reasons.append("the solvers agree")
-    reasons.append(f"{gain:.0f}× closer to the tracker than the initial guess")
-    return Verdict(GOOD, tuple(reasons))
+    if run.checks.start is not None:
+        reasons.append(run.checks.start.words())
+    return Verdict(GOOD, tuple(reasons), gain=said)

@@ -4,11 +4,11 @@ logs at once, one folder each and a summary table)."""
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
 
+from nlp_calib.core import threads
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import check_output_dir
 from nlp_calib.fleet import (
@@ -17,6 +17,7 @@ from nlp_calib.fleet import (
     BatchRow,
     batch_jobs,
     job_outputs,
+    local_workers,
     run_jobs,
     write_summary,
 )
@@ -84,11 +85,18 @@ def cmd_batch(args: argparse.Namespace) -> int:
         refuse_collisions(
             check_output_dir(job.folder), [o.name for o in job_outputs(job)], force=options.force
         )
-    workers = min(args.jobs or os.cpu_count() or 1, len(jobs))
+    if args.dask is not None:
+        if args.jobs is not None:
+            raise UsageError("give --jobs or --dask, not both (the cluster's workers run the logs)")
+        workers, where = 0, f"on the Dask cluster at {args.dask}"
+    else:
+        free = threads.free_cores()
+        workers = local_workers(args.jobs, len(jobs), free)
+        where = f"{workers} at a time ({free:.1f} of {threads.cores()} cores free)"
     rows: list[BatchRow | None] = [None] * len(jobs)
     t0 = time.perf_counter()
     with Progress(len(jobs), sys.stderr, label="logs") as progress:
-        progress.update(0, f"{workers} at a time")
+        progress.update(0, where)
 
         def done(i: int, row: BatchRow) -> None:
             rows[i] = row
@@ -97,14 +105,17 @@ def cmd_batch(args: argparse.Namespace) -> int:
             failed = sum(1 for r in rows if r is not None and not r.ok)
             progress.update(n, f"{row.name} {row.verdict}; {failed} failed; about {left:.0f} s left")
 
-        run_jobs(jobs, workers, done)
+        if args.dask is not None:
+            from nlp_calib.fleet.cluster import run_on_dask
+
+            run_on_dask(jobs, args.dask, done)
+        else:
+            run_jobs(jobs, workers, done)
     finished = [r for r in rows if r is not None]
     with StagedOutput(out, "batch", force=options.force) as stage:
         write_summary(finished, stage.path)
         final = stage.commit()
     print(summary_markdown(finished))
     print("\n".join(f"wrote {p}" for p in final))
-    print(
-        f"wrote {len(jobs)} log folders into {out}/ ({time.perf_counter() - t0:.1f} s, {workers} at a time)"
-    )
+    print(f"wrote {len(jobs)} log folders into {out}/ ({time.perf_counter() - t0:.1f} s, {where})")
     return _batch_code(finished)

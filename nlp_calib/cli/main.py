@@ -15,7 +15,6 @@ from typing import TextIO
 
 from nlp_calib.cli import streams
 from nlp_calib.cli.commands import COMMANDS
-from nlp_calib.cli.parser import build_parser
 from nlp_calib.core import interrupts, memory
 from nlp_calib.core.errors import NlpCalibError, shown_path
 from nlp_calib.core.files import forget_inputs
@@ -58,6 +57,9 @@ def _run(argv: list[str]) -> int:
     forget_inputs()  # each command protects its own inputs from its outputs
     try:
         interrupts.check()  # a signal while the program started
+        # The grammar names every model, solver and option range: loaded only to parse.
+        from nlp_calib.cli.parser import build_parser
+
         args = build_parser().parse_args(argv)
         with warnings.catch_warnings():
             warnings.simplefilter("always")

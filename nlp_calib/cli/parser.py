@@ -12,6 +12,7 @@ from nlp_calib.core.ranges import Range
 from nlp_calib.core.version import __version__
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, JOINT_UNITS, MAX_GAP, TRACKER_TYPES
 from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders
+from nlp_calib.outputs.ros2_control import DEFAULT_ROS_DISTRO, ROS_DISTROS
 from nlp_calib.pipeline.options import BLOCKS
 from nlp_calib.pipeline.simconfig import CLI_LIMITS
 from nlp_calib.simulation import TRAJECTORIES
@@ -80,7 +81,9 @@ def _add_force(p: argparse.ArgumentParser, what: str) -> None:
 
 EXIT_CODES = (
     "exit codes: 0 success; 1 a solver did not converge or the run failed; 2 bad input (scenario, log, "
-    "options: nothing is computed); 130, 143, 129 interrupted by SIGINT, SIGTERM, SIGHUP (the output "
+    "options: nothing is computed); 4, 5 (run, compare, odometry) the pre-flight found that the drive "
+    "cannot determine a parameter (4) or that the data get a unit or sign wrong (5): nothing is fitted "
+    "(see 'nlp-calib preflight'); 130, 143, 129 interrupted by SIGINT, SIGTERM, SIGHUP (the output "
     "folder keeps the previous run's files)"
 )
 
@@ -107,6 +110,11 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "nlp-calib batch logs/ --scenario scenarios/demo.yaml --out out/fleet --jobs 2",
         "nlp-calib batch 'logs/**/drive*.txt' --check out/demo/calibration.yaml --out out/nightly",
     ),
+    "preflight": (
+        "nlp-calib preflight scenarios/demo.yaml",
+        "nlp-calib preflight drive_ros2/ --json preflight.json",
+    ),
+    "init": ("nlp-calib init drive_ros2/ --out my_robot.yaml",),
     "import-bag": (
         f"nlp-calib import-bag drive.bag --out drive.txt --model {DEFAULT_MODEL} --joint-states "
         "/joint_states --joints steer_joint,drive_joint --tracker /mocap/robot/pose",
@@ -119,6 +127,12 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
 
 #: Commands whose exit codes say more than success or failure.
 COMMAND_EXIT_CODES = {
+    "preflight": (
+        "exit codes: 0 enough: the drive determines every parameter; 3 weak: a parameter only weakly (a run "
+        "ends usable with caveats); 4 not enough: the drive cannot determine a parameter (the report says "
+        "which, why and what to drive); 5 check the data: units or signs the data get wrong (degrees, a "
+        "wrapped wheel angle, a mirrored wheel); 1 the check failed; 2 bad input; 130, 143, 129 interrupted"
+    ),
     "check": (
         "exit codes: 0 still good; 3 drifted: recalibrate (the verdict names what moved and by how much); "
         "4 cannot tell (the log cannot test a parameter: the verdict says what to drive); 1 the run failed; "
@@ -162,21 +176,41 @@ def _add_common(p: argparse.ArgumentParser, report: str | None) -> None:
     if report is not None:
         p.add_argument("--report", action="store_true", help=report)
     _add_force(p, "files in the output folder")
+    if report is not None:  # the calibrating commands (validate cross-validates whatever it is given)
+        _add_skip_preflight(p)
 
 
-def _add_urdf(p: argparse.ArgumentParser) -> None:
+def _add_skip_preflight(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--skip-preflight",
+        action="store_true",
+        help="calibrate even when the pre-flight finds that the drive cannot determine a parameter or that "
+        "the data get a unit or sign wrong",
+    )
+
+
+def _add_handoff(p: argparse.ArgumentParser) -> None:
+    """The options of the hand-off files: the user's URDF, the sensor's link in it, the ROS release."""
     p.add_argument(
         "--urdf",
         type=_path,
         default=None,
         help="your robot's URDF: robot.urdf is written as that file with the sensor's joint re-posed "
-        "(x, y, yaw calibrated; z, roll, pitch and everything else kept); needs --sensor-link",
+        "(x, y, yaw calibrated; z, roll, pitch and everything else kept), and sensor_mount.urdf.xml "
+        "holds that same joint; needs --sensor-link",
     )
     p.add_argument(
         "--sensor-link",
         default=None,
         metavar="LINK",
         help="the sensor's link in --urdf (the child of the joint to re-pose)",
+    )
+    p.add_argument(
+        "--ros-distro",
+        choices=ROS_DISTROS,
+        default=DEFAULT_ROS_DISTRO,
+        help=f"the ROS 2 release whose ros2_controllers' parameter names ros2_control.yaml uses "
+        f"(default: {DEFAULT_ROS_DISTRO})",
     )
 
 
@@ -209,6 +243,8 @@ def build_parser() -> argparse.ArgumentParser:
         _add_import_bag,
         _add_check,
         _add_batch,
+        _add_preflight,
+        _add_init,
     ):
         add(sub)
     return parser
@@ -217,7 +253,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_run(sub: Any) -> None:
     p = sub.add_parser("run", help="calibrate with the scenario's solvers (or --solver)", **_sub("run"))
     _add_common(p, REPORT)
-    _add_urdf(p)
+    _add_handoff(p)
     p.add_argument(
         "--solver",
         choices=(*SOLVERS, *ALL_SOLVERS),
@@ -229,7 +265,7 @@ def _add_run(sub: Any) -> None:
 def _add_compare(sub: Any) -> None:
     p = sub.add_parser("compare", help="calibrate with every solver, side by side", **_sub("compare"))
     _add_common(p, REPORT)
-    _add_urdf(p)
+    _add_handoff(p)
 
 
 def _add_validate(sub: Any) -> None:
@@ -266,7 +302,7 @@ def _add_odometry(sub: Any) -> None:
         **_sub("odometry"),
     )
     _add_common(p, "also draw odometry.png: the odometry with its σ ellipses against the tracker")
-    _add_urdf(p)
+    _add_handoff(p)
     p.add_argument(
         "--solver",
         choices=tuple(SOLVERS),
@@ -451,7 +487,53 @@ def _add_batch(sub: Any) -> None:
         "--solver", choices=tuple(SOLVERS), default=None, help="the solver (default: the scenario's)"
     )
     p.add_argument(
-        "--jobs", type=_in(JOBS), default=None, help=f"logs at once, {JOBS.describe()} (default: cores)"
+        "--jobs",
+        type=_in(JOBS),
+        default=None,
+        help=f"logs at once at most, {JOBS.describe()} (default: the cores); never more than the cores free",
+    )
+    p.add_argument(
+        "--dask",
+        default=None,
+        metavar="ADDRESS",
+        help="run the logs on the Dask cluster whose scheduler is there (tcp://HOST:8786; "
+        "the fleet extra); every worker must see --out",
     )
     p.add_argument("--report", action="store_true", help=REPORT)
     _add_force(p, "files in the output folders")
+
+
+def _add_preflight(sub: Any) -> None:
+    p = sub.add_parser(
+        "preflight",
+        help="before any fit: what a recording holds, the drive, units and signs, and whether it determines "
+        "each parameter (and what to drive next)",
+        **_sub("preflight"),
+    )
+    p.add_argument(
+        "target",
+        type=_path,
+        metavar="LOG|BAG|SCENARIO",
+        help="a scenario (.yaml), or a recording: a text log, a ROS bag, a joint log's .csv or .tum (its "
+        "scenario drafted as 'nlp-calib init' drafts it)",
+    )
+    p.add_argument(
+        "--model", choices=tuple(MODELS), default=None, help="for a recording: the model (default: guessed)"
+    )
+    p.add_argument("--json", type=_path, default=None, metavar="FILE", help="also write the report as JSON")
+
+
+def _add_init(sub: Any) -> None:
+    p = sub.add_parser(
+        "init",
+        help="draft a commented scenario that run accepts from a recording (ROS bag, joint log, text log)",
+        **_sub("init"),
+    )
+    p.add_argument("recording", type=_path, metavar="BAG|JOINTS.csv|POSES.tum|LOG", help="the recording")
+    p.add_argument(
+        "--out", type=_path, default=None, help="the scenario to write (default: <recording>.yaml)"
+    )
+    p.add_argument(
+        "--model", choices=tuple(MODELS), default=None, help="the model (default: guessed from the joints)"
+    )
+    _add_force(p, "an existing scenario file")

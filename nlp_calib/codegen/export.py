@@ -10,7 +10,13 @@ a Makefile.
 A 3-D sensor's problem exports ``(params[n], u[n_in x H], z[7]) -> (e[6], J[6 x m])``: ``z`` the
 camera's motion ``(x, y, z, qx, qy, qz, qw)``, ``e`` its ``Log`` error and ``J`` the columns of the
 parameters the problem estimates (``m = n − 1``: ``sensor_z`` never enters the residual), the
-mount's rotation perturbed on SO(3) from the left (see :mod:`nlp_calib.problem.sensors`).
+mount's rotation perturbed on SO(3) from the left (see :mod:`nlp_calib.sensors`).
+
+When the scenario fits the tracker lag, ``tracker_lag`` closes ``params`` and the functions take a
+fourth input, ``clock[2·n_in + 1]``: the inputs' rates at the window's first and last record (per
+second; a level input: its value) and the lag the inputs were read at (s; 0 when read as
+logged): the residual moves the window along the encoders' clock by the difference
+(:mod:`nlp_calib.problem.clock`).
 """
 
 from __future__ import annotations
@@ -54,24 +60,26 @@ def export_functions(fns: ProblemFunctions) -> list[ExportedFunction]:
     if fns.fixed:  # held by the problem itself (a 3-D mount's sensor_z): passed, not differentiated
         x = ca.vertcat(*[params[fns.names.index(f)] for f in fns.free])
         x_fixed = ca.vertcat(*[params[fns.names.index(f)] for f in fns.fixed])
+    if fns.spec.lags > 1:
+        raise ProblemError("export a problem of one log (one tracker lag)")
     U = ca.SX.sym("u", n_in, H)
     z = ca.SX.sym("z", fns.sensor.z_rows)
-    data = ca.vertcat(ca.reshape(U, n_in * H, 1), z, 1.0)
+    # With the lag a parameter: the inputs' rates at the window's ends and the lag the inputs were
+    # read at (the one log's selector is 1).
+    clock = ca.SX.sym("clock", 2 * n_in + 1 if fns.spec.lags else 0)
+    data = ca.vertcat(ca.reshape(U, n_in * H, 1), z, clock, *([1.0] if fns.spec.lags else []), 1.0)
     e = fns.residual(x, x_fixed, data)
     e_j, J = fns.residual_jacobian(x, x_fixed, data)
+    ins, in_names = [params, U, z, *([clock] if fns.spec.lags else [])], ["params", "u", "z", "clock"]
     suffix = f"_h{H}"
     sizes = (H, n, n_in, fns.n_free, fns.error_rows, fns.sensor.z_rows)
     return [
         ExportedFunction(
-            ca.Function(f"{PREFIX}residual{suffix}", [params, U, z], [e], ["params", "u", "z"], ["e"]), *sizes
+            ca.Function(f"{PREFIX}residual{suffix}", ins, [e], in_names[: len(ins)], ["e"]), *sizes
         ),
         ExportedFunction(
             ca.Function(
-                f"{PREFIX}residual_jacobian{suffix}",
-                [params, U, z],
-                [e_j, J],
-                ["params", "u", "z"],
-                ["e", "J"],
+                f"{PREFIX}residual_jacobian{suffix}", ins, [e_j, J], in_names[: len(ins)], ["e", "J"]
             ),
             *sizes,
         ),
@@ -136,7 +144,9 @@ def example_source(fns: ProblemFunctions, exported: ExportedFunction, example: E
     r, nj = exported.error_rows, exported.error_rows * exported.n_free
     params, column = example.params, example.column
     U, z = column[: n_in * H], column[n_in * H : n_in * H + zr]
-    e_py, J_py = (np.asarray(v) for v in f(params, U.reshape(n_in, H, order="F"), z))
+    clock = column[n_in * H + zr : n_in * H + zr + 2 * n_in + 1] if fns.spec.lags else np.zeros(0)
+    ins = [params, U.reshape(n_in, H, order="F"), z, *([clock] if fns.spec.lags else [])]
+    e_py, J_py = (np.asarray(v) for v in f(*ins))
     names, inputs = ", ".join(fns.names), ", ".join(fns.model.input_names)
     return (
         _banner(f"Example: calling {name} from C.", origin)
@@ -152,7 +162,7 @@ int main(void) {{
   const casadi_real u[{n_in * H}] = {{{_c_array(U)}}};
   /* Measured sensor motion {_MOTION[zr]}. */
   const casadi_real z[{zr}] = {{{_c_array(z)}}};
-  casadi_real e[{r}], J[{nj}]; /* J is column-major: J[i + {r}*j] = de_i/ddelta_j */
+{_clock_lines(fns, clock)}  casadi_real e[{r}], J[{nj}]; /* J is column-major: J[i + {r}*j] = de_i/ddelta_j */
 
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   {name}_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
@@ -160,7 +170,7 @@ int main(void) {{
   casadi_real** res = malloc(sz_res * sizeof(*res));
   casadi_int* iw = malloc((sz_iw > 0 ? sz_iw : 1) * sizeof(*iw));
   casadi_real* w = malloc((sz_w > 0 ? sz_w : 1) * sizeof(*w));
-  arg[0] = params; arg[1] = u; arg[2] = z;
+  arg[0] = params; arg[1] = u; arg[2] = z;{" arg[3] = clock;" if fns.spec.lags else ""}
   res[0] = e; res[1] = J;
   if ({name}(arg, res, iw, w, 0) != 0) {{ fprintf(stderr, "evaluation failed\\n"); return 1; }}
 
@@ -183,6 +193,18 @@ int main(void) {{
   return 0;
 }}
 """
+    )
+
+
+def _clock_lines(fns: ProblemFunctions, clock: np.ndarray) -> str:
+    """The example's clock array (the lag a parameter), or nothing."""
+    if not fns.spec.lags:
+        return ""
+    inputs = c_comment(", ".join(fns.model.input_names))
+    return (
+        f"  /* The clock: the inputs' rates at the window's first and last record (per second; a level "
+        f"its value; {inputs}), then the lag (s) the inputs were read at. */\n"
+        f"  const casadi_real clock[{clock.size}] = {{{_c_array(clock)}}};\n"
     )
 
 
@@ -227,11 +249,16 @@ def generate(
 
 
 def build_for_export(
-    model: KinematicModel, horizon: int, integration: str, sensor: str = "planar", scale: str = "fixed"
+    model: KinematicModel,
+    horizon: int,
+    integration: str,
+    sensor: str = "planar",
+    scale: str = "fixed",
+    lags: int = 0,
 ) -> list[ProblemFunctions]:
     """The single-step problem and, when different, the ``horizon`` one, without fixed parameters
-    (beyond those the sensor always holds)."""
+    (beyond those the sensor always holds); with ``lags`` (0 or 1) the tracker lag a parameter."""
     return [
-        build(model, ProblemSpec(horizon=H, integration=integration, sensor=sensor, scale=scale))
+        build(model, ProblemSpec(horizon=H, integration=integration, sensor=sensor, scale=scale, lags=lags))
         for H in sorted({1, horizon})
     ]

@@ -87,6 +87,16 @@ class SolverError(NlpCalibError):
     """A solver could not run at all (as opposed to running and not converging)."""
 
 
+class PreflightError(NlpCalibError):
+    """The pre-flight found that a calibration from these data cannot succeed (a unit or sign the
+    data get wrong, a parameter the drive does not determine); the message says why and what to
+    do. ``exit_code`` is the pre-flight's (4: not enough, 5: check the data)."""
+
+    def __init__(self, message: str, exit_code: int) -> None:
+        super().__init__(message)
+        self.exit_code = exit_code
+
+
 class CodegenError(NlpCalibError):
     """C code could not be generated or compiled."""
 

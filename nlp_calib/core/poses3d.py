@@ -166,11 +166,31 @@ def turned(q: np.ndarray) -> np.ndarray:
 
 
 def accumulate(start: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """Poses ``(n + 1, 7)`` of ``start · steps[0] · … · steps[n-1]`` (a sequential pass)."""
+    """Poses ``(n + 1, 7)`` of ``start · steps[0] · … · steps[n-1]`` (a sequential pass).
+
+    Each step is :func:`compose` of one pose, written out on Python floats (the same operations in
+    the same order, so the same doubles) around the same ``einsum`` for the rotation, without the
+    cost of array calls on seven numbers."""
     out = np.empty((steps.shape[0] + 1, 7))
     out[0] = start
-    for k in range(steps.shape[0]):
-        out[k + 1] = compose(out[k], steps[k])
+    x, y, z, ax, ay, az, aw = (float(v) for v in start)
+    for k, (px, py, pz, bx, by, bz, bw) in enumerate(steps.tolist()):
+        R = np.array(
+            [
+                [1 - 2 * (ay * ay + az * az), 2 * (ax * ay - az * aw), 2 * (ax * az + ay * aw)],
+                [2 * (ax * ay + az * aw), 1 - 2 * (ax * ax + az * az), 2 * (ay * az - ax * aw)],
+                [2 * (ax * az - ay * aw), 2 * (ay * az + ax * aw), 1 - 2 * (ax * ax + ay * ay)],
+            ]
+        )
+        dx, dy, dz = np.einsum("...ij,...j->...i", R, np.array([px, py, pz])).tolist()
+        x, y, z = x + dx, y + dy, z + dz
+        ax, ay, az, aw = (
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        )
+        out[k + 1] = (x, y, z, ax, ay, az, aw)
     out[:, 3:] /= np.linalg.norm(out[:, 3:], axis=1, keepdims=True)
     return out
 

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import contextlib
 import os
+import time
 from collections.abc import Iterator
+from pathlib import Path
 
 #: Environment variables that fix a native library's threads when it loads (OpenBLAS, MKL, OpenMP):
 #: a worker process gets them before it imports numpy.
@@ -45,3 +47,41 @@ def native_one_thread() -> Iterator[None]:
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+def cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def _cpu_times(stat: Path) -> tuple[int, int] | None:
+    """Idle and total jiffies of all CPUs from ``/proc/stat``; None where it cannot be read."""
+    try:
+        fields = stat.read_text().split("\n", 1)[0].split()
+        ticks = [int(v) for v in fields[1:]]
+    except (OSError, ValueError, IndexError):
+        return None
+    if fields[0] != "cpu" or len(ticks) < 5:
+        return None
+    return ticks[3] + ticks[4], sum(ticks[:8])  # idle + iowait; guest time is counted in user
+
+
+def free_cores(sample_s: float = 0.25, stat: Path = Path("/proc/stat")) -> float:
+    """How many of :func:`cores` are idle now: the idle share of the machine's CPU time over
+    ``sample_s`` seconds (``/proc/stat``), or, where that cannot be read, the cores less the
+    one-minute load average."""
+    n = cores()
+    before = _cpu_times(stat)
+    if before is not None:
+        time.sleep(sample_s)
+        after = _cpu_times(stat)
+        if after is not None and after[1] > before[1]:
+            idle = (after[0] - before[0]) / (after[1] - before[1])
+            return min(float(n), idle * (os.cpu_count() or n))
+    try:
+        return max(0.0, n - os.getloadavg()[0])
+    except (AttributeError, OSError):
+        return float(n)

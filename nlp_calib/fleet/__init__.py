@@ -3,11 +3,12 @@
 A batch is a list of picklable jobs (:func:`batch_jobs`: folders, globs, YAML lists), a per-log
 task (:func:`run_job`: calibrate or check one log, write its folder, return its summary row) and
 a table of the rows (:func:`write_summary`). :func:`run_jobs` runs the jobs on this machine's
-processes; any engine that maps a function over arguments runs them elsewhere (docs/fleet.md).
+processes (:func:`local_workers` of them at once), :func:`~nlp_calib.fleet.cluster.run_on_dask` on
+a Dask cluster; any engine that maps a function over arguments runs them elsewhere (docs/fleet.md).
 """
 
 from nlp_calib.fleet.jobs import BatchOptions, Job, batch_jobs
-from nlp_calib.fleet.pool import run_jobs
+from nlp_calib.fleet.pool import local_workers, run_jobs
 from nlp_calib.fleet.task import job_outputs, run_job
 from nlp_calib.outputs.batch import SUMMARY_FILES, write_summary
 from nlp_calib.results.batch import BatchRow
@@ -19,6 +20,7 @@ __all__ = [
     "Job",
     "batch_jobs",
     "job_outputs",
+    "local_workers",
     "run_job",
     "run_jobs",
     "write_summary",

@@ -108,6 +108,15 @@ def _drain(
     return broken
 
 
+def local_workers(asked: int | None, n_jobs: int, free: float) -> int:
+    """How many logs to run at once on this machine: as many as asked (default: its cores), at most
+    one per job and one per core free now (``free``: rounded; at least one). A worker on a busy core
+    only slows the others: a log run alone already keeps more than one core busy (its refits run
+    two at a time), so workers past the free cores make a batch slower than one at a time."""
+    limit = asked if asked is not None else threads.cores()
+    return max(1, min(limit, n_jobs, round(free)))
+
+
 def run_jobs(jobs: Sequence[Job], workers: int, done: Done, task: Task = run_job) -> None:
     """Every job, ``workers`` at a time (1: in this process), ``done`` called as each finishes."""
     if workers <= 1 or len(jobs) <= 1:

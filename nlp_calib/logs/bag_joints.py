@@ -27,7 +27,7 @@ from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs.bag_reader import BagError, BagTopics, Drops, Stamped, read_topics
 from nlp_calib.logs.joint_log import format_joint_csv
-from nlp_calib.logs.log import JointStream, Log, LogHeader, frozen
+from nlp_calib.logs.log import JointStream, Log, LogClock, LogHeader, frozen
 from nlp_calib.logs.screens import clock_shift
 from nlp_calib.logs.tum import format_tum
 
@@ -228,7 +228,7 @@ def timed_by_tracker(
         model_pose=frozen(np.zeros((n, 3))),
         T_world_sensor=frozen(poses),
         line_numbers=frozen(index.astype(np.int64) + 1),
-        start_ns=start_ns,
+        clock=LogClock(start_ns=start_ns),
         joint_positions=stream.at(time_s),
         joint_stream=stream,
         T_world_sensor_3d=frozen(np.array(tracker.values[index][:, [0, 1, 3, 4, 5, 6, 7]], dtype=float)),

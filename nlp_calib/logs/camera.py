@@ -136,6 +136,7 @@ def camera_log(recording: CameraRecording, kinematic_model: str, sensor_frame: s
         encoder_max=(),
         sensor_frame=sensor_frame,
         T_base_sensor=(0.0, 0.0, 0.0),
+        nominal={},
     )
     return Log(
         path=images.path,

@@ -8,8 +8,9 @@ from typing import Literal
 
 import numpy as np
 
+from nlp_calib.core import poses3d
 from nlp_calib.core.errors import DatasetError
-from nlp_calib.core.numeric import wrapped_difference
+from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 
 #: How an encoder reports: ``absolute`` readings lie in ``[0, max)`` (a steering angle);
 #: ``counter`` readings are a uint32 count that wraps at 2³² (a wheel).
@@ -37,7 +38,10 @@ class LogHeader:
     ``parameters`` keeps the header's own names (the model maps them onto its parameter names);
     ``T_base_sensor`` is ordered ``(x, y, theta)``. ``encoder_units`` says what the readings are
     (``encoder_max`` is 0 for joints in radians); ``sensor_z_roll_pitch`` is the nominal mount's
-    height, roll and pitch where a source knows them (a bag's ``/tf_static``).
+    height, roll and pitch where a source knows them (a bag's ``/tf_static``); ``nominal`` says
+    which values are the robot's nominal ones where a source filled in defaults;
+    ``counts_per_turn`` each wheel encoder's counts per wheel turn where a source states them
+    (``ROBOT.yaml``).
     """
 
     kinematic_model: str
@@ -48,6 +52,11 @@ class LogHeader:
     T_base_sensor: tuple[float, float, float]
     encoder_units: EncoderUnits = "counts"
     sensor_z_roll_pitch: tuple[float, float, float] | None = None
+    #: The parameters (the model's names; the mount's ``sensor_x``, ``sensor_y``, ``sensor_theta``)
+    #: whose values here are the robot's nominal ones, each with where it comes from; None: all of
+    #: them, written by the robot's own logger (a text log's header). The rest are defaults.
+    nominal: Mapping[str, str] | None = None
+    counts_per_turn: Mapping[str, float] = field(default_factory=dict)
 
     def encoder_index(self, name: str) -> int:
         """Column of the encoder called ``name`` in :attr:`Log.ticks`."""
@@ -81,9 +90,31 @@ class JointStream:
         cols = [np.interp(t, self.time_s, self.positions[:, j]) for j in range(self.positions.shape[1])]
         return frozen(np.stack(cols, axis=1).reshape(np.shape(t)[0], self.positions.shape[1]))
 
+    def slopes(self, t: np.ndarray) -> np.ndarray:
+        """Each joint's rate (rad/s) at times ``t``: the slope of the stream's segment that holds each
+        time (the derivative of :meth:`at`; the first or last segment's outside the stream)."""
+        ts = self.time_s
+        if ts.size < 2:
+            return np.zeros((np.shape(t)[0], self.positions.shape[1]))
+        i = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, ts.size - 2)
+        dt = ts[i + 1] - ts[i]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rate = (self.positions[i + 1] - self.positions[i]) / dt[:, None]
+        return np.where(dt[:, None] > 0, rate, 0.0)
+
     def covers(self, t: np.ndarray) -> np.ndarray:
         """Which of the times ``t`` lie inside the stream."""
         return (t >= self.time_s[0]) & (t <= self.time_s[-1])
+
+
+@dataclass(frozen=True)
+class LogClock:
+    """Where a log's times stand: ``start_ns``, the stamp of its first record on its own clock (ns;
+    every time of the log is relative to it), and ``encoder_lag_s``, how much earlier than the
+    tracker's stamps its encoders are read (s: 0 as logged, the lag they were re-sampled at)."""
+
+    start_ns: int = 0
+    encoder_lag_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -93,7 +124,7 @@ class Log:
     ``ticks`` holds the raw encoder readings (columns in ``header.encoder_names`` order),
     ``T_world_sensor`` the tracker poses and ``model_pose`` the vendor odometry, both
     ``(x, y, theta)`` per row. ``time_s`` is relative to the first record of the file, whose own
-    stamp on the log's clock is ``start_ns`` (ns).
+    stamp on the log's clock is ``clock.start_ns`` (ns).
 
     A log of joints in radians (``header.encoder_units``) has no counts (``ticks`` has no
     columns): ``joint_positions`` holds each joint's position at the records, interpolated from
@@ -115,10 +146,20 @@ class Log:
     T_world_sensor: np.ndarray
     line_numbers: np.ndarray
     dropped: tuple[DroppedRecord, ...] = field(default=())
-    start_ns: int = 0
+    clock: LogClock = field(default_factory=lambda: LogClock())
     joint_positions: np.ndarray | None = None
     joint_stream: JointStream | None = None
     T_world_sensor_3d: np.ndarray | None = None
+
+    @property
+    def start_ns(self) -> int:
+        """The stamp of the first record on the log's own clock (ns)."""
+        return self.clock.start_ns
+
+    @property
+    def encoder_lag_s(self) -> float:
+        """How much earlier than the tracker's stamps the encoders are read (s)."""
+        return self.clock.encoder_lag_s
 
     @property
     def n_records(self) -> int:
@@ -137,6 +178,49 @@ class Log:
         if self.joint_positions is None:
             raise DatasetError(self.path, None, "holds raw encoder counts, not joint positions in radians")
         return self.joint_positions[:, self.header.encoder_index(name)]
+
+    def joint_rates(self) -> np.ndarray | None:
+        """Each joint's rate (rad/s) at each record, where the encoders are read (None without a
+        joint stream)."""
+        if self.joint_stream is None:
+            return None
+        return self.joint_stream.slopes(self.time_s - self.encoder_lag_s)
+
+    def poses_3d(self) -> np.ndarray:
+        """The tracker's 3-D poses ``(x, y, z, qx, qy, qz, qw)`` (an error when it reports planar ones)."""
+        if self.T_world_sensor_3d is None:
+            raise DatasetError(
+                self.path, None, "a 3-D sensor needs 3-D tracker poses; this log has planar ones"
+            )
+        return self.T_world_sensor_3d
+
+    def heights(self) -> np.ndarray | None:
+        """The tracker's height at each record where it reports 3-D poses (None: planar ones)."""
+        return None if self.T_world_sensor_3d is None else np.asarray(self.T_world_sensor_3d[:, 2])
+
+    def with_poses_interpolated(self, bad: np.ndarray) -> Log:
+        """This log with the tracker poses of the records ``bad`` (a mask) interpolated in time from
+        the nearest good ones around (the nearest at either end): the planar pose along its
+        unwrapped heading, a 3-D pose along the shorter arc."""
+        if not bad.any() or (~bad).sum() < 2:
+            return self
+        t = self.time_s
+        T = np.array(self.T_world_sensor, dtype=float)
+        U = T.copy()
+        U[:, 2] = np.unwrap(U[:, 2])
+        for j in range(3):
+            T[bad, j] = np.interp(t[bad], t[~bad], U[~bad, j])
+        T[:, 2] = wrap_angle(T[:, 2])
+        out = replace(self, T_world_sensor=frozen(T))
+        if self.T_world_sensor_3d is None:
+            return out
+        good, k = np.flatnonzero(~bad), np.flatnonzero(bad)
+        after = np.clip(np.searchsorted(good, k), 1, good.size - 1)
+        a, b = good[after - 1], good[after]
+        s = np.clip((t[k] - t[a]) / np.maximum(t[b] - t[a], 1e-12), 0.0, 1.0)[:, None]
+        P = np.array(self.T_world_sensor_3d, dtype=float)
+        P[k] = poses3d.between_at(P[a], P[b], s)
+        return replace(out, T_world_sensor_3d=frozen(P))
 
     def select(self, start: int, stop: int) -> Log:
         """The records ``start:stop`` (time stays relative to the file's first record)."""

@@ -31,7 +31,7 @@ from nlp_calib.core.files import SpecialFileError, open_regular
 from nlp_calib.core.numeric import COUNTER_MODULUS
 from nlp_calib.logs.checks import counter_drops, drop_summary, value_problems
 from nlp_calib.logs.header import parse_header, yaw_from_quaternion
-from nlp_calib.logs.log import DroppedRecord, EncoderKind, Log, LogHeader, frozen
+from nlp_calib.logs.log import DroppedRecord, EncoderKind, Log, LogClock, LogHeader, frozen
 from nlp_calib.logs.records import parse_block, parse_line
 
 __all__ = ["parse_log", "read_header", "read_log", "yaw_from_quaternion"]
@@ -89,7 +89,8 @@ def _blocks(chunks: Iterable[bytes]) -> Iterator[tuple[int, bytes, dict[int, int
         data = carry + chunk
         keep_cr = data.endswith(b"\r")  # a "\r\n" split across two chunks
         data = data[:-1] if keep_cr else data
-        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+        if b"\r" in data:
+            data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
         long: dict[int, int] = {}
         if long_len >= 0:
             end = data.find(b"\n")
@@ -373,5 +374,5 @@ class _RecordReader:
             T_world_sensor=frozen(poses[:, 3:6]),
             line_numbers=frozen(lines_arr),
             dropped=dropped,
-            start_ns=int(t_ns[0]),
+            clock=LogClock(start_ns=int(t_ns[0])),
         )

@@ -26,7 +26,8 @@ def resample_encoders(
     (:attr:`Log.joint_stream`), never from values already interpolated. Returns the log and the
     record range ``[first, stop)`` whose shifted times lie inside the log (outside it the readings
     are clamped and must not be used). ``delays`` reads an encoder that much later still (s, by
-    name): a stream whose effect lags its readings.
+    name): a stream whose effect lags its readings. The lag adds to the log's own
+    (:attr:`Log.encoder_lag_s`).
     """
     late = [(delays or {}).get(name, 0.0) for name in log.header.encoder_names]
     if lag_s == 0.0 and not any(late):
@@ -52,7 +53,8 @@ def resample_encoders(
             columns.append(np.mod(np.round(np.interp(when, t, count)) + raw[0], COUNTER_MODULUS))
     ticks = np.stack(columns, axis=1).astype(np.int64)
     ticks.flags.writeable = False
-    return replace(log, ticks=ticks), (int(valid[0]), int(valid[-1]) + 1)
+    shifted = replace(log, ticks=ticks, clock=replace(log.clock, encoder_lag_s=log.encoder_lag_s + lag_s))
+    return shifted, (int(valid[0]), int(valid[-1]) + 1)
 
 
 def _joints_resampled(log: Log, lag_s: float, late: list[float]) -> tuple[Log, tuple[int, int]]:
@@ -60,6 +62,7 @@ def _joints_resampled(log: Log, lag_s: float, late: list[float]) -> tuple[Log, t
     each joint ``late`` (s) later still."""
     stream = log.joint_stream
     assert stream is not None
+    lag_s += log.encoder_lag_s  # the stream is as published: shift by the log's own lag too
     tq = log.time_s - lag_s
     valid = np.flatnonzero(stream.covers(tq - max(late)) & stream.covers(tq - min(late)))
     if valid.size < 2:
@@ -68,4 +71,5 @@ def _joints_resampled(log: Log, lag_s: float, late: list[float]) -> tuple[Log, t
             f"{stream.time_s[-1] - stream.time_s[0]:.1f} s stream; use a lag well below the log's duration"
         )
     positions = np.stack([stream.at(tq - d)[:, j] for j, d in enumerate(late)], axis=1)
-    return replace(log, joint_positions=frozen(positions)), (int(valid[0]), int(valid[-1]) + 1)
+    shifted = replace(log, joint_positions=frozen(positions), clock=replace(log.clock, encoder_lag_s=lag_s))
+    return shifted, (int(valid[0]), int(valid[-1]) + 1)

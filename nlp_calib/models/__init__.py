@@ -21,11 +21,26 @@ from nlp_calib.models.base import (
     param_units,
     reference_scales,
 )
+from nlp_calib.models.car_like import CarLike
+from nlp_calib.models.car_like_ackermann import CarLikeAckermann
+from nlp_calib.models.car_like_bicycle import CarLikeBicycle
 from nlp_calib.models.diff_drive import DiffDrive
+from nlp_calib.models.skid_steer import SkidSteer
 from nlp_calib.models.tricycle import Tricycle
 from nlp_calib.models.tricycle_reverse import TricycleReverse
 
-MODELS: dict[str, KinematicModel] = {m.name: m for m in (Tricycle(), DiffDrive(), TricycleReverse())}
+MODELS: dict[str, KinematicModel] = {
+    m.name: m
+    for m in (
+        Tricycle(),
+        DiffDrive(),
+        TricycleReverse(),
+        CarLike(),
+        CarLikeAckermann(),
+        CarLikeBicycle(),
+        SkidSteer(),
+    )
+}
 #: The model a scenario or a simulation uses when it names none.
 DEFAULT_MODEL = next(iter(MODELS))
 

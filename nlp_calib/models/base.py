@@ -19,7 +19,8 @@ import numpy as np
 
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log, LogHeader
-from nlp_calib.models.mount import MOUNT_REFERENCE
+from nlp_calib.models.clock import LAG_REFERENCE, base_name
+from nlp_calib.models.controllers import ControllerMap, EncoderScales
 
 if TYPE_CHECKING:
     from nlp_calib.models.drives import Drive
@@ -96,6 +97,10 @@ class KinematicModel(Protocol):
     #: Names of the per-interval inputs :meth:`inputs` returns, in row order, and their units.
     @property
     def input_names(self) -> tuple[str, ...]: ...
+    #: The inputs that are a level read at the interval (an angle) rather than an increment over
+    #: it: a shorter interval keeps their value (the time offset's end corrections need this).
+    @property
+    def level_inputs(self) -> tuple[str, ...]: ...
     @property
     def input_units(self) -> Mapping[str, str]: ...
     #: Kinematic parameters a log without turning cannot determine, and a note on what else.
@@ -135,6 +140,12 @@ class KinematicModel(Protocol):
         """Per-interval inputs, ``(len(input_names), n_records - 1)``, from the raw encoders."""
         ...
 
+    def input_rates(self, log: Log) -> np.ndarray | None:
+        """Each input's rate per second at each record (a level: its value), ``(len(input_names),
+        n_records)``, where the log says exactly (joints with a stream of their own); None: the
+        problem takes them from the intervals' inputs (:mod:`nlp_calib.problem.clock`)."""
+        ...
+
     def moving(self, inputs: np.ndarray) -> np.ndarray:
         """Boolean mask of intervals in which the encoders report motion."""
         ...
@@ -152,12 +163,10 @@ class KinematicModel(Protocol):
         """For each counter encoder: the input row it drives and the ticks per unit of that input."""
         ...
 
-    def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, float]
-    ) -> tuple[str, dict[str, float], dict[str, str], str]:
-        """The ros2_control controller of this base, its parameters from ``params`` (and each
-        encoder's ``ranges``: readings per turn), where each kinematic parameter with no place
-        among them belongs, and what the values assume of the encoders."""
+    def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
+        """The ros2_control controller of this base, its parameters from ``params`` (and what the
+        encoders' ``scales`` make of them), where each kinematic parameter with no place among them
+        belongs and why any of the controller's parameters is left out."""
         ...
 
     def in_radians(self) -> KinematicModel:
@@ -197,6 +206,18 @@ def rows_by_name(names: Sequence[str], U: np.ndarray) -> dict[str, np.ndarray]:
     """The rows of each named input in horizon windows ``U`` (``len(names)·H`` rows, the inputs of
     each interval in turn)."""
     return {name: U[i :: len(names)] for i, name in enumerate(names)}
+
+
+def record_rates(increments: np.ndarray, time_s: np.ndarray) -> np.ndarray:
+    """Each row's rate per second at each record: the increments of the two intervals around it
+    over their duration (one interval at the log's ends)."""
+    n_rows, n = increments.shape[0], time_s.size
+    if n < 2:
+        return np.zeros((n_rows, n))
+    dt = np.diff(time_s)
+    pad = np.zeros((n_rows, 1))
+    span = np.concatenate([[0.0], dt]) + np.concatenate([dt, [0.0]])
+    return (np.hstack([pad, increments]) + np.hstack([increments, pad])) / span
 
 
 def sampled_angle(angle: np.ndarray, steering_sample: str) -> np.ndarray:
@@ -250,18 +271,27 @@ def header_parameters(model: KinematicModel, header: LogHeader) -> dict[str, flo
     return out
 
 
-def reference(model: KinematicModel, name: str) -> Reference:
+def reference(model: KinematicModel, name: str, sensor: Mapping[str, Reference] | None = None) -> Reference:
     """The precision a calibration should reach on parameter ``name``: ``relative`` (a fraction of
-    its value: gains and lengths) or ``absolute`` (in its unit)."""
-    return {**model.reference, **MOUNT_REFERENCE, **SENSOR_REFERENCE}.get(name, ("relative", 0.01))
+    its value: gains and lengths) or ``absolute`` (in its unit); ``sensor``: the sensor's own
+    (its mount's; a planar mount's by default)."""
+    known = {**model.reference, **(SENSOR_REFERENCE if sensor is None else sensor), **LAG_REFERENCE}
+    return known.get(base_name(name), ("relative", 0.01))
 
 
-def reference_scale(model: KinematicModel, name: str, value: float) -> float:
+def reference_scale(
+    model: KinematicModel, name: str, value: float, sensor: Mapping[str, Reference] | None = None
+) -> float:
     """The precision a calibration should reach on parameter ``name`` at ``value``."""
-    kind, amount = reference(model, name)
+    kind, amount = reference(model, name, sensor)
     return amount * max(abs(value), 1e-9) if kind == "relative" else amount
 
 
-def reference_scales(model: KinematicModel, names: tuple[str, ...], values: np.ndarray) -> np.ndarray:
+def reference_scales(
+    model: KinematicModel,
+    names: tuple[str, ...],
+    values: np.ndarray,
+    sensor: Mapping[str, Reference] | None = None,
+) -> np.ndarray:
     """:func:`reference_scale` of each named parameter."""
-    return np.array([reference_scale(model, n, float(v)) for n, v in zip(names, values)])
+    return np.array([reference_scale(model, n, float(v), sensor) for n, v in zip(names, values)])

@@ -18,6 +18,7 @@ from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, Reference, Symmetry, named, rows_by_name
+from nlp_calib.models.controllers import ControllerMap, EncoderScales, wheel_radius
 from nlp_calib.models.drives import Pose, SimulationSettings, counter, drive_header, first_order, running
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.models.radians import WHEEL_RADIUS, InRadians, RadiansForm, Renamed
@@ -46,6 +47,27 @@ RADIANS = RadiansForm(
         }
     ),
 )
+
+
+def wheel_pair(k_left: float, k_right: float, separation: float, scales: EncoderScales) -> ControllerMap:
+    """``diff_drive_controller`` for two wheels travelling ``k_left``, ``k_right`` metres per count
+    ``separation`` apart: the mean radius and each wheel's multiplier of it (only the multipliers
+    when a wheel's counts per turn are not known and both count alike)."""
+    left, why_left = wheel_radius(k_left, LEFT_ENCODER, scales)
+    right, why_right = wheel_radius(k_right, RIGHT_ENCODER, scales)
+    parameters = {"wheel_separation": separation, "wheel_separation_multiplier": 1.0}
+    if left is not None and right is not None:
+        radius = 0.5 * (left + right)
+        parameters["wheel_radius"] = radius
+        ratios = (left / radius, right / radius)
+    else:
+        ratios = (2.0 * k_left / (k_left + k_right), 2.0 * k_right / (k_left + k_right))
+    parameters["left_wheel_radius_multiplier"], parameters["right_wheel_radius_multiplier"] = ratios
+    omitted = {} if "wheel_radius" in parameters else {"wheel_radius": why_left or why_right}
+    assumes = (
+        "" if "wheel_radius" in parameters else "the multipliers assume both wheels count alike per turn"
+    )
+    return ControllerMap("diff_drive_controller", parameters, {}, omitted, assumes)
 
 
 class DiffDriveDrive:
@@ -99,7 +121,9 @@ class DiffDriveDrive:
         return drive_header(opts, "differential_drive", DiffDrive.header_names)
 
     def vendor_odometry(self, header: LogHeader, ticks: np.ndarray, start: Pose | None = None) -> np.ndarray:
-        p = {DiffDrive.header_aliases[n.lower()]: v for n, v in header.parameters.items()}
+        # The vendor's odometry knows the plain differential drive only (a skid-steer's slip too).
+        aliases = DiffDrive.header_aliases
+        p = {aliases[n.lower()]: v for n, v in header.parameters.items() if n.lower() in aliases}
         d_l = p["k_left"] * wrapped_difference(ticks[:, 0])
         d_r = p["k_right"] * wrapped_difference(ticks[:, 1])
         return first_order(0.5 * (d_l + d_r), (d_r - d_l) / p["baseline"], start)
@@ -132,6 +156,7 @@ class DiffDrive:
     input_units: ClassVar[Mapping[str, str]] = MappingProxyType(
         {"left_ticks": "ticks", "right_ticks": "ticks"}
     )
+    level_inputs: ClassVar[tuple[str, ...]] = ()
     encoder_kinds: ClassVar[Mapping[str, EncoderKind]] = MappingProxyType(
         {LEFT_ENCODER: "counter", RIGHT_ENCODER: "counter"}
     )
@@ -192,24 +217,16 @@ class DiffDrive:
         """None: every parameter can be determined (the observability analysis judges how well)."""
         return {}
 
-    def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, float]
-    ) -> tuple[str, dict[str, float], dict[str, str], str]:
-        """``diff_drive_controller``: each wheel's radius is its travel per tick times the ticks per
-        turn over 2π; the controller takes their mean and each wheel's multiplier of it."""
-        left = params["k_left"] * ranges[LEFT_ENCODER] / (2.0 * np.pi)
-        right = params["k_right"] * ranges[RIGHT_ENCODER] / (2.0 * np.pi)
-        radius = 0.5 * (left + right)
-        parameters = {
-            "wheel_separation": params["baseline"],
-            "wheel_radius": radius,
-            "wheel_separation_multiplier": 1.0,
-            "left_wheel_radius_multiplier": left / radius,
-            "right_wheel_radius_multiplier": right / radius,
-        }
-        turns = f"{ranges[LEFT_ENCODER]}, {ranges[RIGHT_ENCODER]}"
-        assumes = f"the wheel radii take the encoder ranges ({turns} ticks) as one wheel turn each"
-        return "diff_drive_controller", parameters, {}, assumes
+    def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
+        """``diff_drive_controller``: the wheel separation, and each wheel's radius (its travel per
+        tick times the ticks per turn over 2π) as their mean and each wheel's multiplier of it when
+        the ticks per turn are known; else only the multipliers, which need none when both wheels
+        count alike."""
+        return wheel_pair(params["k_left"], params["k_right"], params["baseline"], scales)
+
+    def input_rates(self, log: Log) -> np.ndarray | None:
+        """None: counts are re-sampled on whole ticks, so the intervals give the rates."""
+        return None
 
     def in_radians(self) -> InRadians:
         """The differential drive read from joint positions in radians (:data:`RADIANS`)."""
@@ -230,12 +247,14 @@ class DiffDrive:
             )
         if len(negative) < 2:
             return ""
-        facing = "backwards" if abs(wrap_angle(params["sensor_theta"])) > np.pi / 2 else "forwards"
+        # A planar mount's heading says where the sensor faces; a 3-D mount's takes all three angles.
+        theta = params.get("sensor_theta")
+        facing = "" if theta is None else "backwards" if abs(wrap_angle(theta)) > np.pi / 2 else "forwards"
         return (
-            f"k_left and k_right came out negative ({params['k_left']:.3g}, {params['k_right']:.3g}) and "
-            f"the sensor faces {facing}: the mirror image of the robot, which is what swapped left and "
-            f"right wheel joints (or encoders counting backwards) give; give the joints in the order "
-            f"{LEFT_ENCODER}, {RIGHT_ENCODER}"
+            f"k_left and k_right came out negative ({params['k_left']:.3g}, {params['k_right']:.3g})"
+            f"{f' and the sensor faces {facing}' if facing else ''}: the mirror image of the robot, "
+            "which is what swapped left and right wheel joints (or encoders counting backwards) give; "
+            f"give the joints in the order {LEFT_ENCODER}, {RIGHT_ENCODER}"
         )
 
     def counter_rows(self, log: Log) -> dict[str, tuple[int, float]]:

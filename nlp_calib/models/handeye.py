@@ -67,11 +67,12 @@ def hand_eye(psi: np.ndarray, u: np.ndarray, z: np.ndarray, iterations: int = 8)
     for _ in range(iterations):
         sw = np.sqrt(w)[:, None]
         A1, A2 = A[:, :3] * sw, A[:, 3:] * sw
-        proj = A1 @ np.linalg.pinv(A1)
-        B = A2.T @ (A2 - proj @ A2)
+        pinv = np.linalg.pinv(A1)
+        # A2 less its projection on A1's columns, without the (2M x 2M) projection matrix.
+        B = A2.T @ (A2 - A1 @ (pinv @ A2))
         _, vecs = np.linalg.eigh(B)
         g = vecs[:, 0]
-        p = -np.linalg.pinv(A1) @ (A2 @ g)
+        p = -pinv @ (A2 @ g)
         if p[2] < 0:  # the traction scale is positive: pick the sign of the eigenvector
             g, p = -g, -p
         q = np.concatenate([p, g])

@@ -5,7 +5,8 @@ and a steering joint's angle. Read that way, a wheel's gain in metres per tick b
 in metres (its travel is radius × Δangle) and the parameters take the names a robot's stack gives
 them. Each model declares, once, a :class:`RadiansForm`: for every parameter or input whose
 meaning changes, its name, unit and factor in the radians form (the counts form's value is the
-factor times the radians form's); for every input, the encoder that drives it. :class:`InRadians`
+factor times the radians form's); for every input, the encoder that drives it (and whether it is
+that joint's rate over the interval). :class:`InRadians`
 wraps the model with it: the symbolic increment is the model's own on the parameters and inputs
 mapped back, and every fact (units, ranges, reference precision, symmetries, defaults, the
 controller's parameters, the closed-form start) is the model's, renamed and rescaled. Nothing of
@@ -25,7 +26,15 @@ import numpy as np
 from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log
-from nlp_calib.models.base import STEERING_SAMPLES, KinematicModel, Reference, Symmetry, sampled_angle
+from nlp_calib.models.base import (
+    STEERING_SAMPLES,
+    KinematicModel,
+    Reference,
+    Symmetry,
+    record_rates,
+    sampled_angle,
+)
+from nlp_calib.models.controllers import ControllerMap, EncoderScales
 
 if TYPE_CHECKING:
     from nlp_calib.models.drives import Drive
@@ -47,12 +56,15 @@ ASSUMES = (
 @dataclass(frozen=True)
 class Renamed:
     """A quantity's name and unit in the radians form, and ``factor``: its value in the counts form
-    per unit of the radians form. For an input, ``encoder`` is the encoder that drives it."""
+    per unit of the radians form. For an input, ``encoder`` is the encoder that drives it, and
+    ``rate``: the input is that joint's rate per second over the interval (a level), not its
+    increment or angle."""
 
     name: str
     unit: str
     factor: float = 1.0
     encoder: str = ""
+    rate: bool = False
     #: What a real robot's value can be, in this form's unit (a wheel's radius: millimetres to
     #: metres), narrower than the counts form's range: outside it the estimate is not the robot's
     #: (:meth:`InRadians.implausible`).
@@ -110,6 +122,10 @@ class InRadians:
     @property
     def input_names(self) -> tuple[str, ...]:
         return tuple(self.form.inputs[n].name for n in self.model.input_names)
+
+    @property
+    def level_inputs(self) -> tuple[str, ...]:
+        return tuple(self.form.inputs[n].name for n in self.model.level_inputs)
 
     @property
     def input_units(self) -> Mapping[str, str]:
@@ -204,6 +220,23 @@ class InRadians:
         u_counts = ca.vertcat(*[u[j] * f if f != 1.0 else u[j] for j, f in enumerate(uf)])
         return self.model.increment(k_counts, u_counts, integration)
 
+    def input_rates(self, log: Log) -> np.ndarray | None:
+        """Each wheel's angular rate (rad/s) and each steering angle (rad) at the records, exact for
+        the joints' linear interpolation (None without a joint stream)."""
+        rates = log.joint_rates()
+        if rates is None and not any(r.rate for r in self.form.inputs.values()):
+            return None
+        if rates is None:  # a rate is a level: the intervals' own, never wrapped as an angle is
+            positions = np.stack([log.joint_position(e) for e in log.header.encoder_names], 1)
+            rates = record_rates(np.diff(positions, axis=0).T, np.asarray(log.time_s)).T
+        rows = []
+        for name in self.model.input_names:
+            encoder = self.form.inputs[name].encoder
+            j = log.header.encoder_index(encoder)
+            counter = self.encoder_kinds[encoder] == "counter" or self.form.inputs[name].rate
+            rows.append(rates[:, j] if counter else wrap_angle(log.joint_position(encoder)))
+        return np.vstack(rows)
+
     def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
         """Rows: each wheel's angle increment and each steering angle (sampled as asked), in rad."""
         if steering_sample not in STEERING_SAMPLES:
@@ -225,7 +258,9 @@ class InRadians:
         for name in self.model.input_names:
             encoder = self.form.inputs[name].encoder
             position = log.joint_position(encoder)
-            if self.encoder_kinds[encoder] == "counter":
+            if self.form.inputs[name].rate:
+                rows.append(np.diff(position) / np.diff(log.time_s))
+            elif self.encoder_kinds[encoder] == "counter":
                 rows.append(np.diff(position))
             else:
                 rows.append(sampled_angle(wrap_angle(position), steering_sample))
@@ -245,7 +280,7 @@ class InRadians:
         return {
             self.form.inputs[n].encoder: (row, 1.0)
             for row, n in enumerate(self.model.input_names)
-            if self.encoder_kinds[self.form.inputs[n].encoder] == "counter"
+            if self.encoder_kinds[self.form.inputs[n].encoder] == "counter" and not self.form.inputs[n].rate
         }
 
     def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
@@ -255,6 +290,9 @@ class InRadians:
         noise = []
         for name in self.model.input_names:
             encoder = self.form.inputs[name].encoder
+            if self.form.inputs[name].rate:  # a rate's noise is its increment's, counted there
+                noise.append(0.0)
+                continue
             given = (encoder_noise or {}).get(encoder)
             if given is not None:
                 noise.append(float(given))
@@ -265,16 +303,21 @@ class InRadians:
 
     # --- the hand-off and the start ----------------------------------------------------------
 
-    def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, float]
-    ) -> tuple[str, dict[str, float], dict[str, str], str]:
-        """The model's controller with every wheel turn 2π of its joint; a controller parameter
-        that is one of the model's own (same name: ``wheel_radius``, ``wheelbase``...) is the
-        parameter itself, not its round trip through the counts form."""
+    def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
+        """The model's controller with every wheel turn 2π of its joint and the readings joint
+        angles; a controller parameter that is one of the model's own (same name:
+        ``wheel_radius``, ``wheelbase``...) is the parameter itself, not its round trip through
+        the counts form."""
         turns = dict.fromkeys(self.encoder_kinds, 2.0 * np.pi)
-        name, parameters, places, _ = self.model.controller(self.to_counts(params), turns)
-        own = {n: float(params[n]) if n in params else v for n, v in parameters.items()}
-        return name, own, {self.rename(n): self.words(w) for n, w in places.items()}, ASSUMES
+        found = self.model.controller(self.to_counts(params), EncoderScales(turns, turns, joint_angles=True))
+        own = {n: float(params[n]) if n in params else v for n, v in found.parameters.items()}
+        return ControllerMap(
+            found.controller,
+            own,
+            {self.rename(n): self.words(w) for n, w in found.places.items()},
+            {n: self.words(w) for n, w in found.omitted.items()},
+            ASSUMES,
+        )
 
     def implausible(self, params: Mapping[str, float]) -> str:
         """The model's mirror images, in this form's names; else a parameter no robot has, with

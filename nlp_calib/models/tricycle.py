@@ -29,6 +29,7 @@ from nlp_calib.models.base import (
     rows_by_name,
     sampled_angle,
 )
+from nlp_calib.models.controllers import ControllerMap, EncoderScales, steering_places, wheel_radius
 from nlp_calib.models.drives import Pose, SimulationSettings, counter, drive_header, first_order, running
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
 from nlp_calib.models.radians import WHEEL_RADIUS, InRadians, RadiansForm, Renamed
@@ -36,16 +37,6 @@ from nlp_calib.symbolic import se2
 
 STEERING_ENCODER = "steering"
 TRACTION_ENCODER = "traction_wheel"
-
-
-#: Where a tricycle's steering parameters go in a ros2_control robot: the hardware interface's
-#: transmission of the steering joint, ``joint = actuator / mechanical_reduction + offset``.
-STEERING_PLACES: Mapping[str, str] = MappingProxyType(
-    {
-        "k_steer": "the steering joint's transmission (SimpleTransmission): mechanical_reduction = 1/k_steer",
-        "steer_offset": "the steering joint's transmission (SimpleTransmission): offset = steer_offset",
-    }
-)
 
 
 #: The tricycle read from joint positions in radians: the traction wheel's radius (its travel is
@@ -178,6 +169,7 @@ class Tricycle:
     input_units: ClassVar[Mapping[str, str]] = MappingProxyType(
         {"traction_revolutions": "rev", "steering_angle": "rad"}
     )
+    level_inputs: ClassVar[tuple[str, ...]] = ("steering_angle",)
     reference: ClassVar[Mapping[str, Reference]] = MappingProxyType({"steer_offset": ("absolute", 0.005)})
     headline: ClassVar[tuple[str, ...]] = ("k_traction", "axis_length")
     defaults: ClassVar[Mapping[str, float]] = MappingProxyType({})
@@ -251,20 +243,23 @@ class Tricycle:
         """None: every parameter can be determined (the observability analysis judges how well)."""
         return {}
 
-    def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, float]
-    ) -> tuple[str, dict[str, float], dict[str, str], str]:
-        """``tricycle_controller``: the wheelbase is the axis length, the traction wheel's radius its
-        travel per revolution over 2π; the steering gain and offset belong to the steering joint's
-        transmission."""
-        radius = params["k_traction"] / (2.0 * np.pi)
-        parameters = {"wheelbase": params["axis_length"], "wheel_radius": radius}
-        t_max = ranges.get(TRACTION_ENCODER)
-        assumes = (
-            f"wheel_radius takes the traction encoder's range ({t_max} ticks) as one wheel turn, as the "
-            f"model reads it; if your hardware counts N ticks a turn, it is k_traction·N/({t_max}·2π)"
+    def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
+        """``tricycle_controller``: the wheelbase is the axis length; the traction wheel's radius is
+        its travel per ``t_max`` ticks times the ticks per wheel turn over 2π, written only when
+        those are known; the steering gain and offset belong to the steering joint's transmission."""
+        t_max = float(scales.ranges.get(TRACTION_ENCODER, 0.0)) or 1.0
+        radius, why = wheel_radius(params["k_traction"] / t_max, TRACTION_ENCODER, scales)
+        parameters = {"wheelbase": params["axis_length"], **({"wheel_radius": radius} if radius else {})}
+        return ControllerMap(
+            "tricycle_controller",
+            parameters,
+            steering_places(params["k_steer"], params["steer_offset"], scales),
+            {"wheel_radius": why} if why else {},
         )
-        return "tricycle_controller", parameters, dict(STEERING_PLACES), assumes
+
+    def input_rates(self, log: Log) -> None:
+        """None: counts are re-sampled on whole ticks, so the intervals give the rates."""
+        return None
 
     def in_radians(self) -> InRadians:
         """The tricycle read from joint positions in radians (:data:`RADIANS`)."""

@@ -12,6 +12,7 @@ determine ``k_steer_reverse``; it is then held at its initial value (0 unless gi
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
 from typing import ClassVar
@@ -20,6 +21,7 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.models.base import Reference, Symmetry, named
+from nlp_calib.models.controllers import ControllerMap, EncoderScales
 from nlp_calib.models.tricycle import Tricycle, TricycleDrive
 
 #: With fewer reversing intervals than this, ``k_steer_reverse`` is held (about 2 s of driving).
@@ -80,16 +82,14 @@ class TricycleReverse(Tricycle):
         reversing = ca.if_else(p["k_traction"] * inputs["traction_revolutions"] * ca.cos(phi0) < 0, 1.0, 0.0)
         return p["k_steer"] * (1.0 + p["k_steer_reverse"] * reversing) * angle + p["steer_offset"]
 
-    def controller(
-        self, params: Mapping[str, float], ranges: Mapping[str, float]
-    ) -> tuple[str, dict[str, float], dict[str, str], str]:
+    def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
         """The tricycle's, with the reverse gain, which no ros2_control component models."""
-        name, parameters, places, assumes = super().controller(params, ranges)
-        places["k_steer_reverse"] = (
+        base = super().controller(params, scales)
+        reverse = (
             "no ros2_control parameter: the steering gain is k_steer·(1 + k_steer_reverse) while the base "
             "reverses; apply it in the hardware interface where the direction is known"
         )
-        return name, parameters, places, assumes
+        return dataclasses.replace(base, places={**base.places, "k_steer_reverse": reverse})
 
     def undetermined(self, inputs: np.ndarray) -> dict[str, str]:
         """``k_steer_reverse`` without enough driving in either direction (it compares the two)."""

@@ -39,6 +39,15 @@ def trajectory(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
     return _write(folder, name, plots.trajectory_png(tracks, restarted, title))
 
 
+def plan(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
+    """The plan's sketch: the best manoeuvres' paths (nothing when the run needs none)."""
+    ahead = run.checks.plan
+    if ahead is None or not ahead.ranked:
+        return []
+    title = f"{run.scenario.name}: what to drive next to determine {ahead.target} (best first)"
+    return _write(folder, name, plots.plan_png(ahead, title))
+
+
 def convergence(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
     """Each solver's iterations."""
     series = ConvergenceSeries(

@@ -15,11 +15,13 @@ from xml.etree import ElementTree as ET
 
 import yaml
 
+from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import atomic_write_bytes, atomic_write_text
 from nlp_calib.core.version import __version__
 from nlp_calib.outputs import urdf
 from nlp_calib.outputs.results import result_document
-from nlp_calib.results import CalibrationRun
+from nlp_calib.results import CalibrationRun, Encoder
+from nlp_calib.results.mount import SensorMount
 
 CALIBRATION_FILE = "calibration.yaml"
 URDF_FILE = "sensor_mount.urdf.xml"
@@ -40,9 +42,10 @@ def _solver_entry(res: Mapping[str, Any]) -> dict[str, Any]:
 
 def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
     """The ``calibration.yaml`` document, or None when no estimate is handed off."""
-    solver = run.handoff_solver()
-    if solver is None:
+    found = handoff_mount(run)
+    if found is None:
         return None
+    solver, mount = found
     doc = result_document(run)
     best = doc["solvers"][solver]
     sc = run.scenario
@@ -62,7 +65,9 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         **({"datasets": list(sc.datasets)} if sc.datasets else {}),
         "solver": solver,
         "solver_choice": "first converged solver in the order " + ", ".join(run.solver_order()),
-        "frames": {"parent": PARENT_FRAME, "sensor": run.log.sensor_frame},
+        "frames": {"parent": PARENT_FRAME, "sensor": mount.child},
+        "sensor": _sensor_entry(run),
+        "mount": _mount_entry(mount),
         "parameters": best["params"],
         "std": best["std"],
         "std_white_noise": best["std_white_noise"],
@@ -73,13 +78,47 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "objective": {"residual": doc["residual"], "robust": doc["robust"]},
         "correlation": best["correlation"],
         "units": dict(sc.units),
-        # The units "per t_max ticks" and "per tick" refer to these encoders' ranges.
-        "encoders": [
-            {"name": e.name, "kind": e.kind, "unit": e.unit, "ticks_per_turn": e.range}
-            for e in run.log.encoders
-        ],
+        # The units "per t_max ticks" and "per tick" refer to these encoders' ranges; a wheel's
+        # counts per turn (for its radius) only where the user gave them.
+        "encoders": [_encoder(e) for e in run.log.encoders],
         "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
         "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
+    }
+
+
+def _sensor_entry(run: CalibrationRun) -> dict[str, Any]:
+    """Which sensor the calibration holds the mount of (its mount as a URDF joint: ``mount``)."""
+    info = run.scenario.sensor
+    return {
+        "kind": info.kind,
+        "group": info.group,
+        "scale": info.scale,
+        "params": list(info.params),
+        "convention": info.convention,
+        "held": {n: run.initial.get(n, 0.0) for n in info.held},
+    }
+
+
+def _encoder(e: Encoder) -> dict[str, Any]:
+    entry: dict[str, Any] = {"name": e.name, "kind": e.kind, "unit": e.unit, "range": e.range}
+    if e.per_turn is not None:
+        entry["counts_per_turn"] = e.per_turn
+    return entry
+
+
+def _mount_entry(mount: SensorMount) -> dict[str, Any]:
+    """The mount as the URDF files state it: the joint, its origin, the pose in base_link with each
+    calibrated component's 1σ, and where every other component comes from."""
+    return {
+        "joint": mount.joint,
+        "parent": mount.parent,
+        "child": mount.child,
+        "xyz": list(mount.xyz),
+        "rpy": list(mount.rpy),
+        "pose_in_base_link": dict(mount.pose),
+        "std": {c: mount.std[c] for c in mount.calibrated},
+        "calibrated": list(mount.calibrated),
+        "nominal": dict(mount.nominal),
     }
 
 
@@ -116,44 +155,22 @@ def calibration_yaml(doc: Mapping[str, Any]) -> str:
 
 
 def _mount_words(doc: Mapping[str, Any]) -> str:
-    """The mount's parameters as the header comment names them."""
-    if "sensor_roll" not in doc["parameters"]:
-        return "sensor_x, sensor_y, sensor_theta"
-    scale = "; scale: metres per trajectory unit" if "scale" in doc["parameters"] else ""
-    return (
-        "sensor_x, sensor_y, sensor_z, sensor_roll, sensor_pitch, sensor_yaw (URDF: fixed axes, "
-        f"R = Rz(yaw)·Ry(pitch)·Rx(roll); sensor_z held: planar driving cannot see it{scale})"
-    )
+    """The mount's parameters as the header comment names them (with what the sensor says of them)."""
+    sensor = doc["sensor"]
+    words = ", ".join(sensor["params"])
+    return f"{words} ({sensor['convention']})" if sensor.get("convention") else words
 
 
 def _comment_text(text: str) -> str:
     return text.replace("--", "- -")  # '--' may not appear inside an XML comment
 
 
-def _joint(run: CalibrationRun, solver: str) -> ET.Element:
-    p = run.reports[solver].result.param_dict()
-    frame = run.log.sensor_frame
-    joint = ET.Element("joint", {"name": f"{PARENT_FRAME}_to_{frame}", "type": "fixed"})
-    ET.SubElement(joint, "parent", {"link": PARENT_FRAME})
-    ET.SubElement(joint, "child", {"link": frame})
-    ET.SubElement(joint, "origin", _origin(run, p))
+def _joint(mount: SensorMount) -> ET.Element:
+    joint = ET.Element("joint", {"name": mount.joint, "type": "fixed"})
+    ET.SubElement(joint, "parent", {"link": mount.parent})
+    ET.SubElement(joint, "child", {"link": mount.child})
+    ET.SubElement(joint, "origin", urdf.origin_text(mount))
     return joint
-
-
-def _origin(run: CalibrationRun, p: Mapping[str, float]) -> dict[str, str]:
-    """The joint's ``xyz`` and ``rpy``: a 3-D mount's six numbers (its held height as given); a
-    planar mount's x, y and yaw with the height, roll and pitch of the nominal mount (a bag's
-    /tf_static) where known, else 0."""
-    if run.scenario.sensor_3d:
-        angles = (p["sensor_roll"], p["sensor_pitch"], p["sensor_yaw"])
-        z = p["sensor_z"]
-    else:
-        z, roll, pitch = run.log.sensor_z_roll_pitch or (0, 0, 0)
-        angles = (roll, pitch, p["sensor_theta"])
-    return {
-        "xyz": f"{p['sensor_x']!r} {p['sensor_y']!r} {z!r}",
-        "rpy": " ".join(repr(a) for a in angles),
-    }
 
 
 def _xml(element: ET.Element, comment: str) -> str:
@@ -162,31 +179,47 @@ def _xml(element: ET.Element, comment: str) -> str:
     return f'<?xml version="1.0"?>\n<!--{_comment_text(comment)}-->\n{body}\n'
 
 
-def urdf_joint(run: CalibrationRun, solver: str) -> str:
-    """A URDF ``<joint>`` placing the sensor frame on ``base_link`` with ``solver``'s estimate."""
-    frame = run.log.sensor_frame
-    nominal = "the nominal mount's (/tf_static)" if run.log.sensor_z_roll_pitch else "0 (not known)"
-    what = (
-        "x, y, roll, pitch and yaw; z is held at the value given (known.sensor_z, 0 unless set), "
-        "which planar driving cannot see"
-        if run.scenario.sensor_3d
-        else f"x, y and yaw; z, roll and pitch are {nominal}, which planar driving cannot see"
+def _mount_of(run: CalibrationRun, solver: str) -> SensorMount:
+    mount = run.reports[solver].mount
+    if mount is None:
+        raise UsageError(f"the result of {run.scenario.name} holds no mount for {solver}; run it again")
+    return mount
+
+
+def handoff_mount(run: CalibrationRun) -> tuple[str, SensorMount] | None:
+    """The handed-off solver and its estimate's mount (None: nothing is handed off)."""
+    solver = run.handoff_solver()
+    mount = run.reports[solver].mount if solver is not None else None
+    return None if solver is None or mount is None else (solver, mount)
+
+
+def urdf_joint(
+    run: CalibrationRun, solver: str, mount: SensorMount | None = None, users: bool = False
+) -> str:
+    """A URDF ``<joint>`` placing the sensor's link with ``solver``'s estimate (``mount``: its
+    report's unless given): on ``base_link``, or (``users``: ``--urdf``) the user's own joint of
+    that link, to paste over the one there."""
+    mount = mount or _mount_of(run, solver)
+    where = (
+        f"It is your joint '{mount.joint}' re-posed, as in robot.urdf: replace yours with it."
+        if users
+        else f"Paste this joint into the robot's <robot> description; the link '{mount.child}' must be "
+        "declared there."
     )
     comment = (
         f" Sensor mounting pose calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
-        f"solver {solver}. Calibrated: {what}. Paste this joint into the robot's <robot> description; "
-        f"the link '{frame}' must be declared there. "
+        f"solver {solver}. {mount.words().capitalize()}. {where} "
     )
-    return _xml(_joint(run, solver), comment)
+    return _xml(_joint(mount), comment)
 
 
-def urdf_robot(run: CalibrationRun, solver: str) -> str:
+def urdf_robot(run: CalibrationRun, solver: str, mount: SensorMount | None = None) -> str:
     """A complete URDF: a ``<robot>`` with ``base_link``, the sensor's link and the calibrated joint."""
-    frame = run.log.sensor_frame
+    mount = mount or _mount_of(run, solver)
     robot = ET.Element("robot", {"name": run.scenario.name})
-    ET.SubElement(robot, "link", {"name": PARENT_FRAME})
-    ET.SubElement(robot, "link", {"name": frame})
-    robot.append(_joint(run, solver))
+    ET.SubElement(robot, "link", {"name": mount.parent})
+    ET.SubElement(robot, "link", {"name": mount.child})
+    robot.append(_joint(mount))
     comment = (
         f" The sensor mount calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
         f"solver {solver}. A complete robot description (base and sensor links, the fixed joint) "
@@ -211,36 +244,31 @@ def write_calibration(run: CalibrationRun, folder: Path, name: str) -> list[Path
     return [folder / name]
 
 
-def write_joint(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
-    """The URDF joint alone, when an estimate is handed off."""
-    solver = run.handoff_solver()
-    if solver is None:
+def write_joint(run: CalibrationRun, folder: Path, name: str, users: bool = False) -> list[Path]:
+    """The URDF joint alone, when an estimate is handed off (``users``: the user's own joint)."""
+    found = handoff_mount(run)
+    if found is None:
         return _none(folder / name)
-    atomic_write_text(folder / name, urdf_joint(run, solver))
+    atomic_write_text(folder / name, urdf_joint(run, *found, users=users))
     return [folder / name]
 
 
 def write_users_robot(
     run: CalibrationRun, folder: Path, name: str, description: urdf.Description, link: str
 ) -> list[Path]:
-    """The user's own robot description with ``link``'s joint re-posed, when an estimate is handed off."""
-    solver = run.handoff_solver()
-    if solver is None:
+    """The user's own robot description with ``link``'s joint re-posed, when an estimate is handed
+    off (``run``'s mount placed in that description: :func:`nlp_calib.outputs.urdf.placed`)."""
+    found = handoff_mount(run)
+    if found is None:
         return _none(folder / name)
-    p = run.reports[solver].result.param_dict()
-    if run.scenario.sensor_3d:
-        pose = (p["sensor_x"], p["sensor_y"], p["sensor_yaw"])
-        text = urdf.reposed(description, link, *pose, (p["sensor_roll"], p["sensor_pitch"]))
-    else:
-        text = urdf.reposed(description, link, p["sensor_x"], p["sensor_y"], p["sensor_theta"])
-    atomic_write_bytes(folder / name, text)
+    atomic_write_bytes(folder / name, urdf.reposed(description, link, found[1]))
     return [folder / name]
 
 
 def write_robot(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
     """A complete robot description with the calibrated joint, when an estimate is handed off."""
-    solver = run.handoff_solver()
-    if solver is None:
+    found = handoff_mount(run)
+    if found is None:
         return _none(folder / name)
-    atomic_write_text(folder / name, urdf_robot(run, solver))
+    atomic_write_text(folder / name, urdf_robot(run, *found))
     return [folder / name]

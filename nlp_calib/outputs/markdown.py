@@ -265,7 +265,7 @@ def report_markdown(
     out = _header(run)
     out += ["", "## Summary", "", *_summary(run, next_steps), ""]
     out += ["## Parameters", "", *_parameter_table(run, solvers), ""]
-    group = "SE(3)" if run.scenario.sensor_3d else "SE(2)"
+    group = run.scenario.sensor.group
     out += ["## Solvers", "", _FIGURES_TEXT.format(window=run.baseline.rpe_window, group=group), ""]
     out += [*_solver_table(run, solvers), "", *_faults_section(run), *_uncertainty_section(run)]
     for s in solvers:

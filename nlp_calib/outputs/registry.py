@@ -9,13 +9,14 @@ closing summary says of each file. Adding an output is one module with a writer
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from nlp_calib.outputs import check, handoff, markdown, results, ros2_control, trajectories, urdf
+from nlp_calib.outputs import check, handoff, markdown, plan, results, ros2_control, trajectories, urdf
 from nlp_calib.outputs.outdir import StagedOutput
 from nlp_calib.results import CalibrationRun
 
@@ -23,11 +24,13 @@ from nlp_calib.results import CalibrationRun
 @dataclass(frozen=True)
 class OutputOptions:
     """What a user says about the outputs on the command line: ``sigma`` of the drawn ellipses,
-    the robot's own URDF and the sensor's link in it (``robot.urdf`` re-poses that joint)."""
+    the robot's own URDF and the sensor's link in it (``robot.urdf`` re-poses that joint) and the
+    ROS 2 release whose ros2_controllers' names ``ros2_control.yaml`` uses."""
 
     sigma: float = 3.0
     urdf: urdf.Description | None = None
     sensor_link: str | None = None
+    ros_distro: str = ros2_control.DEFAULT_ROS_DISTRO
 
 
 Writer = Callable[[CalibrationRun, Path, str, OutputOptions], list[Path]]
@@ -75,10 +78,40 @@ def _odometry_png(run: CalibrationRun, folder: Path, name: str, options: OutputO
     return drawn
 
 
+def _plan_png(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
+    """The plan's sketch, matplotlib imported only when there is a plan to sketch."""
+    if run.checks.plan is None or not run.checks.plan.ranked:
+        return []
+    return _figure("plan")(run, folder, name, options)
+
+
 def _robot(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
     if options.urdf is None or options.sensor_link is None:
         return handoff.write_robot(run, folder, name)
     return handoff.write_users_robot(run, folder, name, options.urdf, options.sensor_link)
+
+
+def _joint(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
+    return handoff.write_joint(run, folder, name, users=options.urdf is not None)
+
+
+def placed(run: CalibrationRun, options: OutputOptions) -> CalibrationRun:
+    """``run`` with each estimate's mount as the user's own joint of the sensor's link when they
+    give their URDF (``--urdf``, ``--sensor-link``): what every hand-off file then states."""
+    if options.urdf is None or options.sensor_link is None:
+        return run
+    description, link = options.urdf, options.sensor_link
+    reports = {
+        name: rep
+        if rep.mount is None
+        else dataclasses.replace(rep, mount=urdf.placed(description, link, rep.mount))
+        for name, rep in run.reports.items()
+    }
+    return dataclasses.replace(run, reports=reports)
+
+
+def _controller(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
+    return ros2_control.write_ros2_control(run, folder, name, options.ros_distro)
 
 
 def _report(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
@@ -89,13 +122,16 @@ def _report(run: CalibrationRun, folder: Path, name: str, options: OutputOptions
 OUTPUTS: tuple[Output, ...] = (
     Output("calibration.yaml", "handoff", _plain(handoff.write_calibration), per_log=False,
            next_step="the parameters with units and 1σ, for your robot's configuration"),
-    Output("sensor_mount.urdf.xml", "handoff", _plain(handoff.write_joint), per_log=False,
+    Output("sensor_mount.urdf.xml", "handoff", _joint, per_log=False,
            next_step="paste its <joint> into your robot's URDF (its comment says what was calibrated)"),
     Output("robot.urdf", "handoff", _robot, per_log=False,
            next_step="the same joint in a complete robot description (with --urdf: yours), for URDF tools"),
-    Output("ros2_control.yaml", "handoff", _plain(ros2_control.write_ros2_control), per_log=False,
+    Output("ros2_control.yaml", "handoff", _controller, per_log=False,
            next_step="the controller's parameters (wheel radius, separation or wheelbase) for ros2_control"),
     Output("result.json", "result", _plain(results.write_result)),
+    Output("plan.md", "result", _plain(plan.write_plan),
+           next_step="what to drive next, the manoeuvres ranked by how much each would help"),
+    Output("plan.png", "result", _plan_png),
     Output("odometry.csv", "odometry", _plain(results.write_odometry),
            next_step="the base link's odometry with its covariance, one row per record"),
     Output("odometry.png", "odometry", _odometry_png, report=True),
@@ -111,6 +147,10 @@ OUTPUTS: tuple[Output, ...] = (
            next_step="the figures and tables of this run on one page"),
     Output(trajectories.FOLDER, "figures", _plain(trajectories.write_trajectories), report=True, folder=True),
 )  # fmt: skip
+
+
+#: The groups a calibration writes (``nlp-calib run``, ``compare``; ``write_run``).
+RUN_GROUPS = ("result", "handoff", "figures")
 
 
 def selected(groups: Collection[str], report: bool) -> tuple[Output, ...]:
@@ -142,10 +182,15 @@ def write(
 ) -> list[Path]:
     """Write ``outputs``: those per log for each ``(run, folder)`` of ``runs``, the others once for
     the calibration ``top`` (its run and folder). Returns the paths written, in that order."""
+    # The mount each hand-off file states is made once, before any of them is written.
+    runs = [(placed(run, options), folder) for run, folder in runs]
+    top = (placed(top[0], options), top[1])
     written: list[Path] = []
     for output in outputs:
         targets = runs if output.per_log else [top]
         for run, folder in targets:
+            if output.report and run.series is None and run.scenario.datasets:
+                continue  # the joint fit of several logs: each log's folder holds its figures
             folder.mkdir(exist_ok=True)
             written += output.write(run, folder, output.name, options)
     return written

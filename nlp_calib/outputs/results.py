@@ -11,14 +11,8 @@ import numpy as np
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.version import __version__
 from nlp_calib.results import CalibrationRun, SolverReport
+from nlp_calib.results.checks import CostComparison
 from nlp_calib.results.figures import TrajectoryMetrics
-
-#: Why a 3-D sensor's height is held.
-HELD_WHY = (
-    "planar driving cannot determine a 3-D sensor's height: the base turns about the vertical, so "
-    "sensor_z never changes a predicted motion; it is held at the value given (known.sensor_z, "
-    "0 unless set)"
-)
 
 
 def _metrics_dict(full: TrajectoryMetrics, holdout: TrajectoryMetrics | None) -> dict[str, Any]:
@@ -70,6 +64,51 @@ def _crossval_dict(run: CalibrationRun) -> dict[str, Any] | None:
     }
 
 
+def _logs_dict(run: CalibrationRun) -> dict[str, Any] | None:
+    """Several logs: each log's own fit against the other logs', and the jackknife over the logs."""
+    check, logs = run.checks.consistency, run.checks.logs
+    if check is None and logs is None:
+        return None
+    out: dict[str, Any] = {"consistency": check.as_dict() if check is not None else None}
+    if logs is not None:
+        out["std_logs"] = {n: (float(v) if np.isfinite(v) else None) for n, v in zip(logs.names, logs.std)}
+        out["held_out_logs"] = [
+            {"records": [f.first, f.stop], "converged": f.converged, "heldout": _or_none(f.heldout)}
+            for f in logs.folds
+        ]
+    return out
+
+
+def _or_none(metrics: TrajectoryMetrics | None) -> dict[str, Any] | None:
+    return metrics.as_dict() if metrics is not None else None
+
+
+def _cost_dict(cost: CostComparison | None) -> dict[str, Any] | None:
+    if cost is None:
+        return None
+    t = cost.gain_sigmas
+    return {
+        "against": cost.against,
+        "outcome": cost.outcome,
+        "heldout_gain_in_standard_errors": float(t) if np.isfinite(t) else None,
+        "heldout_folds": int(cost.heldout.shape[0]),
+        "insample_data_cost": {"other": cost.insample[0], "fit": cost.insample[1]},
+    }
+
+
+def _nominal_dict(run: CalibrationRun) -> dict[str, Any] | None:
+    nominal = run.checks.nominal
+    if nominal is None:
+        return None
+    return {
+        "values": dict(nominal.values),
+        "source": nominal.source,
+        "scored": dict(zip(next(iter(run.reports.values())).result.names, map(float, nominal.params))),
+        "metrics": nominal.metrics.as_dict(),
+        "cost": _cost_dict(nominal.cost),
+    }
+
+
 def _solver_dict(run: CalibrationRun, name: str, report: SolverReport) -> dict[str, Any]:
     r, u = report.result, report.uncertainty
     return {
@@ -97,8 +136,6 @@ def _solver_dict(run: CalibrationRun, name: str, report: SolverReport) -> dict[s
 def result_dict(run: CalibrationRun) -> dict[str, Any]:
     """The ``result.json`` document of a run."""
     sc, data, checks = run.scenario, run.data, run.checks
-    # A 3-D sensor's facts (a planar run's document is as it always was).
-    sensor = {"sensor": _sensor_dict(run)} if sc.sensor_3d else {}
     return {
         "scenario": sc.name,
         "tool": {"name": "nlp_calib", "version": __version__},
@@ -114,7 +151,7 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         },
         "residual": dict(sc.residual),
         "robust": dict(sc.robust),
-        **sensor,
+        "sensor": _sensor_dict(run),
         "alignment": {
             "tracker_lag_s": data.tracker_lag_s,
             "estimate": data.lag_estimate.as_dict() if data.lag_estimate is not None else None,
@@ -125,23 +162,33 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         "solvers": {name: _solver_dict(run, name, rep) for name, rep in run.reports.items()},
         "crossvalidation": _crossval_dict(run),
         "direction": checks.direction.as_dict() if checks.direction is not None else None,
+        "logs": _logs_dict(run),
+        "start": _cost_dict(checks.start),
+        "nominal": _nominal_dict(run),
         "truth": _truth_dict(run),
         "faults": _faults_dict(run),
         "observability": checks.observability.as_dict() if checks.observability is not None else None,
         "warnings": list(run.warnings),
-        "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
+        "verdict": {
+            "level": run.verdict.level,
+            "reasons": list(run.verdict.reasons),
+            "gain": run.verdict.gain,
+        },
     }
 
 
 def _sensor_dict(run: CalibrationRun) -> dict[str, Any]:
-    """A 3-D sensor's mount: its form, the held height, the closed-form start alone and the windows
-    the start and the fit left out, by reason."""
-    data, units = run.data, run.scenario.units
+    """The sensor as its plug-in describes itself: its kind, pose group and scale, the parameters it
+    holds (and why), its closed-form start alone and the windows the start and the fit left out,
+    by reason."""
+    data, info = run.data, run.scenario.sensor
     return {
-        "mount": "3d",
-        "scale": "free" if "scale" in units else "fixed",
-        "held": {"sensor_z": run.initial.get("sensor_z", 0.0)},
-        "held_why": HELD_WHY,
+        "kind": info.kind,
+        "mount": info.kind,
+        "group": info.group,
+        "scale": info.scale,
+        "held": {n: run.initial.get(n, 0.0) for n in info.held},
+        "held_why": info.held_why,
         "start": dict(run.initial) if data.start_dropped is not None else None,
         "start_dropped": None if data.start_dropped is None else dict(data.start_dropped),
         "fit_dropped": None if data.fit_dropped is None else dict(data.fit_dropped),

@@ -47,11 +47,14 @@ def _observability_line(run: CalibrationRun) -> str:
 def _accuracy_line(run: CalibrationRun, solver: str) -> str:
     m, b = run.reports[solver].metrics, run.baseline
     rpe5, base5 = m.rpe_distance[5.0].mean, b.rpe_distance[5.0].mean
-    text = f"segment ATE {m.segment_ate.mean:.3g} m (uncalibrated {b.segment_ate.mean:.3g} m)"
+    start = "data-driven start" if run.scenario.initial_guess == "auto" else "initial guess"
+    nominal = run.checks.nominal
+    also = f", nominal robot {nominal.metrics.segment_ate.mean:.3g} m" if nominal is not None else ""
+    text = f"segment ATE {m.segment_ate.mean:.3g} m ({start} {b.segment_ate.mean:.3g} m{also})"
     if np.isfinite(rpe5):
         text += (
             f", RPE over 5 m {rpe5:.3g} m = {100 * rpe5 / 5:.2g} % of the distance "
-            f"(uncalibrated {100 * base5 / 5:.2g} %)"
+            f"({start} {100 * base5 / 5:.2g} %)"
         )
     cv = run.checks.crossval
     if cv is not None and cv.available:
@@ -70,9 +73,14 @@ def _next_steps(run: CalibrationRun, level: str, files: Sequence[str]) -> list[s
             "C code of the residual and its Jacobian: nlp-calib codegen "
             f"{shlex.quote(run.scenario.path)} --out DIR"  # a command to paste: the path quoted
         )
+    plan = run.checks.plan
+    planned = plan is not None and plan.best is not None
     if level in (UNDETERMINED, NOT_USABLE):
         obs = run.checks.observability
         hints = [w for w in obs.warnings if "drive" in w] if obs is not None else []
+        if planned:
+            assert plan is not None
+            steps.insert(0, f"{plan.line()}; plan.md ranks {len(plan.ranked)} manoeuvres")
         steps.append(
             hints[0]
             if hints
@@ -80,15 +88,19 @@ def _next_steps(run: CalibrationRun, level: str, files: Sequence[str]) -> list[s
         )
     elif level == CAVEATS:
         steps.insert(0, "read the caveats above before using the result")
+        if planned:
+            assert plan is not None
+            steps.insert(1, f"to know {plan.target} better, {plan.line()}")
     return steps
 
 
 def summary_lines(run: CalibrationRun, files: Sequence[str] = ()) -> list[str]:
     """The closing summary of a run: one line per solver, accuracy, faults, observability, verdict
     and next steps; ``files`` say what each file the run wrote is for (``name: what``)."""
-    used = run.data.used
+    used, sc = run.data.used, run.scenario
+    name = f"the joint fit of {len(sc.datasets)} logs ({sc.name})" if sc.datasets else sc.name
     lines = [
-        f"summary of {run.scenario.name}: model {run.scenario.model}, {used[1] - used[0]} records over "
+        f"summary of {name}: model {sc.model}, {used[1] - used[0]} records over "
         f"{run.log.duration_s:.1f} s; the sensor travelled {run.baseline.distance_m:.1f} m (tracker path)"
     ]
     chosen = run.chosen_solver()

@@ -7,6 +7,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from nlp_calib.results import CalibrationRun
+from nlp_calib.results.checks import believed_std
 from nlp_calib.results.faults import count_kinds
 from nlp_calib.results.figures import TrajectoryMetrics
 
@@ -53,9 +54,11 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
     else:
         verdict = ": white noise explains the scatter, the two agree"
     lines = [
-        f"1σ: the larger of the white-noise σ and the σ of {len(cv.converged)} fits each without one block "
-        f"of records (jackknife); the block σ is {lo:.1f}–{hi:.1f}× the white-noise σ" + verdict
+        f"1σ: the white-noise σ, or the σ of {len(cv.converged)} fits each without one block of records "
+        f"(jackknife) where it exceeds it beyond its own noise; the block σ is {lo:.1f}–{hi:.1f}× the "
+        "white-noise σ" + verdict
     ]
+    lines += widened_lines(run)
     ate, rpe = "segment ATE mean [m]", "RPE over 1 m [m]"
     lines.append(
         f"cross-validation over {len(cv.folds)} blocks: held-out segment ATE {cv.heldout_mean(ate):.3f} m "
@@ -63,6 +66,23 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
         f"{cv.insample_mean(rpe):.3f} m): each block scored by the fit without it, and by the full fit"
     )
     return lines
+
+
+def widened_lines(run: CalibrationRun) -> list[str]:
+    """The parameters whose σ takes in how they move with the driving, and from which check."""
+    first = next(iter(run.reports), None)
+    checks = run.checks
+    if first is None:
+        return []
+    names, white = run.reports[first].uncertainty.names, run.reports[first].uncertainty.std
+    blocks = checks.crossval.beyond(white) if checks.crossval is not None else np.full(len(names), np.nan)
+    base = believed_std(white, blocks)
+    out = []
+    for label, spread in checks.moving():
+        wider = [n for n, b, v in zip(names, base, spread) if np.isfinite(v) and v > b]
+        if wider:
+            out.append(f"   σ of {', '.join(wider)}: {label} (they move with the driving: a model limit)")
+    return out
 
 
 def direction_lines(run: CalibrationRun) -> list[str]:
@@ -144,6 +164,41 @@ def error_stats_lines(run: CalibrationRun, solver: str) -> list[str]:
     return lines
 
 
+def lag_lines(run: CalibrationRun) -> list[str]:
+    """The fitted tracker lag with its σ and what moves with it, in words."""
+    data, solver = run.data, run.chosen_solver() or run.solver_order()[0]
+    est = data.lag_estimate
+    assert est is not None
+    if not est.converged:
+        early = 1e3 * data.tracker_lag_s
+        return [f"tracker lag not fitted: no fit converged (the encoders are read {early:.1f} ms early)"]
+    std = run.std(solver)
+    params = run.reports[solver].result.param_dict()
+    out = []
+    for effect in run.checks.lag_effects or ():
+        lag = params.get(effect.lag, data.tracker_lag_s)
+        moves = ", ".join(
+            _per_10ms(n, v, params.get(n, 0.0), run.scenario.units.get(n, ""))
+            for n, v in effect.per_second.items()
+        )
+        sd = 1e3 * std.get(effect.lag, float("nan"))
+        out.append(
+            f"{effect.lag} {1e3 * lag:.1f} ± {sd:.2g} ms, a parameter of the fit "
+            f"(encoders re-sampled at {len(est.path_s)} lags on the way)"
+            + (f"; per 10 ms of it, {moves}" if moves else "; no other parameter moves with it")
+        )
+    return out or [f"tracker lag fitted with the other parameters: {1e3 * data.tracker_lag_s:.1f} ms"]
+
+
+def _per_10ms(name: str, per_second: float, value: float, unit: str) -> str:
+    """``name``'s change over 10 ms of lag: relative for gains and lengths of the model, absolute
+    for the mount's and angles."""
+    change = 0.01 * per_second
+    if name.startswith("sensor_") or unit in ("rad", "s") or value == 0.0:
+        return f"{name} {change:+.2g} {unit}".rstrip()
+    return f"{name} {100.0 * change / abs(value):+.2g} %"
+
+
 def _dropped_line(run: CalibrationRun) -> str:
     """One line on the records a non-strict read dropped: how many, where, and the first reason."""
     dropped = run.log.dropped
@@ -166,7 +221,7 @@ def _header_lines(run: CalibrationRun) -> list[str]:
         f"kernel {robust['kernel']} δ={robust['delta']:g}"
     ]
     if data.lag_estimate is not None:
-        lines.append(f"tracker lag estimated by the fit cost: {1e3 * data.tracker_lag_s:.1f} ms")
+        lines += lag_lines(run)
     elif data.tracker_lag_s:
         lines.append(f"tracker lag (from the scenario): {1e3 * data.tracker_lag_s:.1f} ms")
     if run.log.dropped:
@@ -182,18 +237,16 @@ def _by_reason(counts: Mapping[str, int]) -> str:
 
 
 def camera_lines(run: CalibrationRun) -> list[str]:
-    """A 3-D sensor's start and selection, in words (nothing for a planar one)."""
-    data = run.data
-    if not run.scenario.sensor_3d:
-        return []
+    """A sensor's own start and selection of windows, in words (nothing where it has none)."""
+    data, kind = run.data, run.scenario.sensor.kind
     lines = []
     if data.start_dropped is not None:
         lines.append(
-            "3-D sensor: the 'initial' column is the closed-form start alone (floor normal, then the "
-            f"planar hand-eye); its windows left out: {_by_reason(data.start_dropped)}"
+            f"sensor {kind}: the 'initial' column is its closed-form start alone; its windows left out: "
+            f"{_by_reason(data.start_dropped)}"
         )
     if data.fit_dropped is not None:
-        lines.append(f"3-D sensor: fitted windows left out: {_by_reason(data.fit_dropped)}")
+        lines.append(f"sensor {kind}: fitted windows left out: {_by_reason(data.fit_dropped)}")
     return lines
 
 

@@ -3,10 +3,12 @@
 The joint whose child is ``LINK`` gets the calibrated mount: x, y and yaw of the sensor in
 ``base_link`` calibrated; its height, roll and pitch kept as the description has them. The joint
 may hang below ``base_link`` through other fixed joints: its new origin is the calibrated pose
-seen from its parent. Everything else in the file stays byte for byte the user's: the file is not
-re-serialised; the parsed document says where that joint's ``<origin>`` element lies, and only
-that element's start tag is written again, from its parsed attributes (``xyz`` and ``rpy`` new,
-the others as they were). Rotations follow URDF: fixed axes, ``R = Rz(yaw)·Ry(pitch)·Rx(roll)``.
+seen from its parent. :func:`placed` makes the mount record that joint (every hand-off file then
+states the user's joint, to the last digit); :func:`reposed` writes it into the description.
+Everything else in the file stays byte for byte the user's: the file is not re-serialised; the
+parsed document says where that joint's ``<origin>`` element lies, and only that element's start
+tag is written again, from its parsed attributes (``xyz`` and ``rpy`` new, the others as they
+were). Rotations follow URDF: fixed axes, ``R = Rz(yaw)·Ry(pitch)·Rx(roll)``.
 
 What ROS's URDF parser (urdfdom, on TinyXML2) would not read as the file means is refused before
 any work, each with the line: UTF-16 or UTF-32 text, entity declarations (which
@@ -28,6 +30,7 @@ import numpy as np
 
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import open_regular
+from nlp_calib.results.mount import COMPONENTS, SensorMount
 
 BASE_LINK = "base_link"
 #: The largest description read (a URDF with meshes inlined is still far below this).
@@ -278,29 +281,46 @@ def _start_tag(name: str, attrs: dict[str, str], closed: bool, encoding: str) ->
     return f"<{name}{written}{'/>' if closed else '>'}".encode(encoding, errors="xmlcharrefreplace")
 
 
-def reposed(
-    d: Description, link: str, x: float, y: float, yaw: float, roll_pitch: tuple[float, float] | None = None
-) -> bytes:
-    """``d``'s text with ``link``'s joint at the calibrated ``x``, ``y``, ``yaw`` in ``base_link``
-    (and ``roll_pitch`` when calibrated too: a 3-D sensor's); the height, and the roll and pitch
-    unless given, kept."""
+def origin_text(mount: SensorMount) -> dict[str, str]:
+    """The ``xyz`` and ``rpy`` attributes of ``mount``'s joint, every digit kept: every hand-off
+    file writes these same strings."""
+    return {
+        "xyz": " ".join(repr(float(v)) for v in mount.xyz),
+        "rpy": " ".join(repr(float(v)) for v in mount.rpy),
+    }
+
+
+def placed(d: Description, link: str, mount: SensorMount) -> SensorMount:
+    """``mount`` as ``d``'s own joint of ``link``: the calibrated components in ``base_link``, the
+    others (a planar fit's height, roll and pitch) as ``d`` has them, the origin in the joint's
+    parent."""
     joint = d.joints[link]
     T_bp = T_base_parent(d, link)
     T_bs = T_bp @ _transform(joint, d.path)
-    roll, pitch, _ = _rpy(T_bs[:3, :3]) if roll_pitch is None else (*roll_pitch, 0.0)
+    kept = dict(zip(COMPONENTS, (*map(float, T_bs[:3, 3]), *map(float, _rpy(T_bs[:3, :3])))))
+    pose = {c: mount.pose[c] if c in mount.calibrated else kept[c] for c in COMPONENTS}
     T_new = np.eye(4)
-    T_new[:3, :3] = _rotation(np.array([roll, pitch, yaw]))
-    T_new[:3, 3] = [x, y, T_bs[2, 3]]
+    T_new[:3, :3] = _rotation(np.array([pose["roll"], pose["pitch"], pose["yaw"]]))
+    T_new[:3, 3] = [pose["x"], pose["y"], pose["z"]]
     T_joint = np.linalg.solve(T_bp, T_new)
-    xyz = " ".join(repr(float(v)) for v in T_joint[:3, 3])
-    rpy = " ".join(repr(float(v)) for v in _rpy(T_joint[:3, :3]))
+    xyz = tuple(float(v) for v in T_joint[:3, 3])
+    rpy = tuple(float(v) for v in _rpy(T_joint[:3, :3]))
+    origin = ((xyz[0], xyz[1], xyz[2]), (rpy[0], rpy[1], rpy[2]))
+    kept_from = dict.fromkeys(mount.nominal, f"kept from {d.path.name} (--urdf)")
+    return mount.under(joint.parent, joint.name, origin, pose, kept_from)
+
+
+def reposed(d: Description, link: str, mount: SensorMount) -> bytes:
+    """``d``'s text with ``link``'s joint at ``mount``'s origin (from :func:`placed`)."""
+    joint = d.joints[link]
+    text = origin_text(mount)
     if joint.origin_start is None:  # no <origin>: one goes right after the joint's start tag
         end = _tag_end(d, joint.start, b"<joint")
-        return d.text[:end] + _start_tag("origin", {"xyz": xyz, "rpy": rpy}, True, d.encoding) + d.text[end:]
+        return d.text[:end] + _start_tag("origin", text, True, d.encoding) + d.text[end:]
     start = joint.origin_start
     end = _tag_end(d, start, b"<origin")
     closed = d.text[:end].endswith(b"/>")
-    tag = _start_tag("origin", {**joint.origin, "xyz": xyz, "rpy": rpy}, closed, d.encoding)
+    tag = _start_tag("origin", {**joint.origin, **text}, closed, d.encoding)
     return d.text[:start] + tag + d.text[end:]
 
 

@@ -1,8 +1,11 @@
-"""Time alignment as pipeline steps: the tracker lag, given or estimated, applied to the encoders.
+"""Time alignment as a pipeline step: the tracker lag, given or estimated, applied to the encoders.
 
-The estimate reuses one evaluator for every lag it tries (the windows and the tracker's motions
-stay; only the encoder inputs are re-sampled): :func:`nlp_calib.analysis.alignment.estimate_lag`
-decides which lags to fit.
+An estimated lag is a parameter of the problem (``tracker_lag``, :mod:`nlp_calib.problem.clock`):
+the internal solver fits it with every other parameter, the encoders re-sampled at its value, and
+again at the new value until it moves by less than :data:`LAG_TOLERANCE_S` (the problem's clock
+correction is exact to first order in the distance from the re-sampled lag, so that distance
+ends near zero). ``alignment.search`` bounds it; its σ, correlations and observability come from
+the same Functions as every other parameter's.
 """
 
 from __future__ import annotations
@@ -12,18 +15,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlp_calib.analysis.alignment import LagEstimate, estimate_lag
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log, resample_encoders
+from nlp_calib.models.clock import is_lag
 from nlp_calib.pipeline.build import Binder
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.prepare import split
 from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.results.checks import LagEstimate
+from nlp_calib.solvers import ProblemEvaluator
 
-#: A lag's fit (from the previous lag's estimate) stops once the next Gauss-Newton step would lower
-#: the cost by less than this fraction: its cost is then the optimum's to half of that, far below
-#: the cost differences between lags a parabola is fitted through (about 1e-2 on the real log).
-LAG_FIT_TOLERANCE = 1e-8
+#: The re-sampling is done again until the fitted lag moves by less than this (s).
+LAG_TOLERANCE_S = 1e-4
+#: ...or this many times.
+MAX_RESAMPLINGS = 8
+#: Lags over the search a fit starts from when the fit from the lag's initial value does not converge.
+COARSE_STARTS = 9
 
 
 @dataclass(frozen=True)
@@ -39,37 +46,98 @@ class Alignment:
     valid: tuple[int, int]
 
 
-def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> LagEstimate:
-    """The tracker lag that minimises the internal solver's fit cost on a common record range.
+def lag_column(binder: Binder) -> int | None:
+    """The place of the (single log's) lag among the free parameters; None when it is not free."""
+    return next((i for i, n in enumerate(binder.fns.free) if is_lag(n)), None)
 
-    One evaluator serves every lag: the windows and the tracker's motions stay, only the encoder
-    inputs are re-sampled (and, when stationary windows are dropped, the windows re-selected).
-    """
-    sc = binder.scenario
-    al = sc.log.alignment
-    kinds = binder.fns.model.encoder_kinds
-    reach = max(abs(al.search[0]), abs(al.search[1]))
+
+def fit_records(sc: Scenario, log: Log, start: int, stop: int) -> tuple[int, int]:
+    """The records the lag is fitted on: those whose shifted times stay inside the log for every
+    lag of the search."""
+    reach = max(abs(v) for v in sc.log.alignment.search)
     t = log.time_s
     first = max(start, int(np.searchsorted(t, t[0] + reach, side="left")))
     last = min(stop, int(np.searchsorted(t, t[-1] - reach, side="right")))
-    fit_stop = split(sc, first, last)
-    _, ev = binder.bind(log, first, fit_stop)
-    x_start = x0
+    return first, split(sc, first, last)
 
-    def fit_cost(lag: float) -> float:
-        nonlocal x_start
-        shifted, _ = resample_encoders(log, lag, kinds)
-        if sc.log.samples.drop_stationary:
-            binder.bind(shifted, first, fit_stop, evaluator=ev)
-        else:
-            ev.set_inputs(binder.inputs(shifted, first, fit_stop))
-        cost, x, converged = binder.fit(ev, x_start, LAG_FIT_TOLERANCE)
-        if not converged:
-            return float("nan")
-        x_start = x
-        return cost
 
-    return estimate_lag(fit_cost, al.search, al.step)
+@dataclass
+class _LagFits:
+    """The lag's fits on one log: the records, the evaluator they share and the path so far."""
+
+    binder: Binder
+    log: Log
+    records: tuple[int, int]
+    column: int
+    evaluator: ProblemEvaluator | None = None
+
+    def fit(self, x: np.ndarray) -> tuple[float, np.ndarray, bool]:
+        """The internal fit from ``x`` on the encoders re-sampled at ``x``'s lag."""
+        shifted, _ = resample_encoders(self.log, float(x[self.column]), self.binder.fns.model.encoder_kinds)
+        _, self.evaluator = self.binder.bind(shifted, *self.records, evaluator=self.evaluator)
+        cost, x_new, converged = self.binder.fit(self.evaluator, x)
+        return cost, x_new, bool(converged and np.all(np.isfinite(x_new)))
+
+    def settle(self, x: np.ndarray) -> tuple[np.ndarray, list[float], list[float], bool]:
+        """Fits from ``x``, re-sampled at each new lag until it stays within the larger of
+        :data:`LAG_TOLERANCE_S` and a quarter of its white-noise σ (see the module docstring)."""
+        path: list[float] = []
+        costs: list[float] = []
+        converged = False
+        for _ in range(MAX_RESAMPLINGS):
+            resampled = float(x[self.column])
+            cost, x_new, converged = self.fit(x)
+            path.append(resampled)
+            costs.append(cost)
+            if not converged:
+                break
+            x = x_new
+            if abs(x[self.column] - resampled) < max(LAG_TOLERANCE_S, 0.25 * self.lag_std(x)):
+                break
+        return x, path, costs, converged
+
+    def lag_std(self, x: np.ndarray) -> float:
+        """The lag's white-noise σ at ``x`` from the last fit's normal equations (0 when singular)."""
+        assert self.evaluator is not None
+        ne = self.evaluator.normal_equations(x)
+        dof = max(self.binder.fns.error_rows * self.evaluator.n_residuals - self.binder.fns.n_free, 1)
+        try:
+            var = float(np.linalg.inv(ne.H)[self.column, self.column]) * ne.cost / dof
+        except np.linalg.LinAlgError:
+            return 0.0
+        return float(np.sqrt(var)) if np.isfinite(var) and var > 0 else 0.0
+
+    def coarse_start(self, x0: np.ndarray) -> np.ndarray | None:
+        """The start of the converged fit of least cost from lags spread over the search (None: none
+        converged): a start only, the lag is then fitted from it."""
+        lo, hi = self.binder.scenario.log.alignment.search
+        best: tuple[float, np.ndarray] | None = None
+        for lag in np.linspace(lo, hi, COARSE_STARTS):
+            x = x0.copy()
+            x[self.column] = lag
+            cost, x_new, converged = self.fit(x)
+            if converged and (best is None or cost < best[0]):
+                best = (cost, x_new)
+        return None if best is None else best[1]
+
+
+def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> LagEstimate:
+    """The tracker lag fitted with every other parameter, re-sampling the encoders at each new value
+    (see the module docstring); from the lag's initial value in ``x0``, or, when that fit does not
+    converge, from the best of :data:`COARSE_STARTS` lags over the search."""
+    column = lag_column(binder)
+    assert column is not None
+    fits = _LagFits(binder, log, fit_records(binder.scenario, log, start, stop), column)
+    lower, upper = binder.bounds if binder.bounds is not None else (None, None)
+    x = np.clip(np.asarray(x0, dtype=float), lower, upper) if lower is not None else np.asarray(x0, float)
+    x, path, costs, converged = fits.settle(x)
+    if not converged and (better := fits.coarse_start(np.asarray(x0, dtype=float))) is not None:
+        x, more_path, more_costs, converged = fits.settle(better)
+        path, costs = path + more_path, costs + more_costs
+    lag = float(x[column])
+    lo, hi = binder.scenario.log.alignment.search
+    at_edge = bool(converged and (abs(lag - lo) < 1e-6 or abs(lag - hi) < 1e-6))
+    return LagEstimate(lag, tuple(path), tuple(costs), at_edge, converged)
 
 
 def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Alignment:
@@ -77,12 +145,18 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
     sc = binder.scenario
     lag = sc.log.alignment.tracker_lag
     estimate = None
-    if lag == "auto":
+    if lag == "auto" and lag_column(binder) is not None:
         with scenario_key(sc, "alignment.search"):
             estimate = estimate_tracker_lag(binder, log, start, stop, x0)
         lag = estimate.lag_s
-        if estimate.at_edge:
+        if not estimate.converged:
+            warnings.warn(lag_not_fitted(sc, estimate.lag_s), NlpCalibWarning, stacklevel=2)
+        elif estimate.at_edge:
             warnings.warn(lag_at_edge(sc, estimate.lag_s), NlpCalibWarning, stacklevel=2)
+    elif lag == "auto":
+        # Held (known, or fixed at its initial value): the data are re-sampled there.
+        held = [i for i, n in enumerate(binder.fns.fixed) if is_lag(n)]
+        lag = float(binder.x_fixed[held[0]]) if held else 0.0
     with scenario_key(sc, "alignment.tracker_lag"):
         aligned, valid = resample_encoders(log, float(lag), binder.fns.model.encoder_kinds)
     return Alignment(lag_s=float(lag), estimate=estimate, log=aligned, valid=valid)
@@ -92,7 +166,21 @@ def lag_at_edge(sc: Scenario, lag_s: float) -> str:
     """The warning for a tracker lag estimated at an end of the searched range."""
     lo, hi = sc.log.alignment.search
     return (
-        f"{sc.path or sc.name}: alignment.tracker_lag: the estimated lag {1e3 * lag_s:.1f} ms lies at the "
-        f"edge of the searched range [{lo:g}, {hi:g}] s, so the best lag may lie beyond it: widen "
-        "alignment.search, or check the log's timestamps (a gap or a jump in time misleads the estimate)"
+        f"{sc.path or sc.name}: alignment.tracker_lag: the fitted lag {1e3 * lag_s:.1f} ms lies at the "
+        f"edge of alignment.search [{lo:g}, {hi:g}] s, which bounds it: either the lag lies beyond it "
+        "(widen alignment.search, or check the log's timestamps: a gap or a jump in time misleads the "
+        "fit), or this drive does not determine the lag (the observability lines say with what it "
+        "trades off; give the lag as alignment.tracker_lag, or drive so that the wheels' speeds change "
+        "independently)"
+    )
+
+
+def lag_not_fitted(sc: Scenario, lag_s: float) -> str:
+    """The warning for a tracker lag that no fit converged at, from any start in the search."""
+    lo, hi = sc.log.alignment.search
+    return (
+        f"{sc.path or sc.name}: alignment.search: no fit converged from any lag in [{lo:g}, {hi:g}] s, so "
+        f"the lag is not fitted (the encoders are read at {1e3 * lag_s:.1f} ms): the observability lines "
+        "say what this drive cannot determine; where they name nothing, search around the lag the "
+        "log's clocks allow, or give it as alignment.tracker_lag"
     )

@@ -16,14 +16,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlp_calib.analysis import uncertainty as unc
+from nlp_calib.analysis.crossval import combine
+from nlp_calib.analysis.degeneracy import motion_scale
+from nlp_calib.analysis.determinacy import Information
+from nlp_calib.analysis.handoff import odometry_noise
 from nlp_calib.analysis.metrics import each_metrics, geometry, integrate, segments
 from nlp_calib.analysis.observability import analyse as observability_of
+from nlp_calib.analysis.odometry import Drift as DriftSegments
 from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
+from nlp_calib.analysis.plan import Setting, plan
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
-from nlp_calib.core import memory, poses3d
-from nlp_calib.logs import Log
-from nlp_calib.models import SENSOR_PARAMS, header_parameters
-from nlp_calib.models.mount import mount_rotation
+from nlp_calib.core import memory
+from nlp_calib.models import header_parameters
+from nlp_calib.models.clock import lag_names
 from nlp_calib.pipeline import validation
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog
@@ -31,9 +36,19 @@ from nlp_calib.pipeline.windows import LogWindows
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results import SolverResult
-from nlp_calib.results.checks import ConsistencyCheck, CrossValidation, DirectionCheck, Observability
+from nlp_calib.results.checks import (
+    ConsistencyCheck,
+    CostComparison,
+    CrossValidation,
+    DirectionCheck,
+    Fold,
+    LagEffect,
+    Observability,
+)
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
+from nlp_calib.results.handoff import OdometryNoise
+from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import (
     FaultSpan,
     ModelCheckSeries,
@@ -61,8 +76,19 @@ class FitAnalysis:
     observability: Observability
     crossval: CrossValidation | None
     direction: DirectionCheck | None
-    #: For several logs: each log's own fit against theirs.
+    #: For several logs: each log's own fit against the other logs'.
     consistency: ConsistencyCheck | None = None
+    #: How each time offset moves the other parameters (the first solver's uncertainty).
+    lag_effects: tuple[LagEffect, ...] = ()
+    #: For several logs: the joint fit without each log in turn.
+    logs: CrossValidation | None = None
+    #: The fit against its start, and against the robot's nominal values where they are known.
+    start: CostComparison | None = None
+    nominal: CostComparison | None = None
+    #: The nominal values scored (nominal where known, the fit's estimate elsewhere; model order).
+    nominal_params: np.ndarray | None = None
+    #: What to drive next, when a parameter is not determined well enough (see :func:`plan_after`).
+    plan: Plan | None = None
 
 
 @dataclass(frozen=True)
@@ -73,6 +99,10 @@ class LogAnalysis:
     baseline: Scores
     series: RunSeries | None
     odometry: OdometryTrack | None
+    #: The nominal robot's figures (None: no nominal values known).
+    nominal: Scores | None = None
+    #: The handed-off solver's odometry noise as its controller publishes it.
+    noise: Mapping[str, OdometryNoise | None] = dataclasses.field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -130,28 +160,80 @@ def analyse_fit(
     fit: Fit, results: Mapping[str, SolverResult], noise: np.ndarray, blocks: Scorer
 ) -> FitAnalysis:
     """Uncertainty of each result; observability at the first estimate with a finite cost (a solver
-    may not have started); cross-validation and the direction check from the first converged one,
-    with each held-out block scored by ``blocks``."""
+    may not have started); cross-validation, the direction check and the comparisons with the start
+    and the nominal robot from the first converged one, with each held-out block scored by
+    ``blocks``."""
     ev, data = fit.evaluator, fit.data
     big = data.n_residuals >= RELEASE_FROM
     if big:
         ev.release()  # the solvers' buffers: each analysis binds again only what it evaluates
         memory.give_back()
-    uncertainty = {name: unc.estimate(ev, r.x, data, noise) for name, r in results.items()}
+    start = fit.problem.start
+    ranges = unc.range_std(start.lower, start.upper, fit.fns.n_free)
+    uncertainty = {name: unc.estimate(ev, r.x, data, noise, ranges) for name, r in results.items()}
     finite = [r for r in results.values() if np.isfinite(r.cost)] or list(results.values())
     observability = observability_of(ev, finite[0].x, data.T_world_sensor)
     converged = [r for r in results.values() if r.converged]
+    effects = unc.lag_effects(uncertainty[next(iter(results))]) if results else ()
+    if not converged:
+        return FitAnalysis(uncertainty, observability, None, None, lag_effects=effects)
+    x = converged[0].x
+    # The nominal values go into the canonical form's other values (a symmetric twin would mix).
+    canonical = fit.canonical_params(converged[0].params)
+    against = _against(fit, canonical[[fit.fns.names.index(n) for n in fit.fns.free]])
     k = fit.problem.binder.scenario.validation.blocks
-    if not converged or not k:
-        return FitAnalysis(uncertainty, observability, None, None)
-    binder, x = fit.problem.binder, converged[0].x
+    crossval = direction = None
+    if k:
+        crossval, direction = _refits(fit, converged[0], blocks, k, [v for _, v in against.values()])
+    costs = comparisons(fit, x, against, crossval.converged if crossval is not None else ())
+    nominal = against.get("nominal")
+    return FitAnalysis(
+        uncertainty,
+        observability,
+        crossval,
+        direction,
+        start=costs["start"],
+        nominal=costs.get("nominal"),
+        nominal_params=None
+        if nominal is None
+        else np.asarray(fit.fns.assemble(nominal[1], ev.x_fixed)).ravel(),
+        lag_effects=effects,
+    )
+
+
+def _against(fit: Fit, x: np.ndarray) -> dict[str, tuple[str, np.ndarray]]:
+    """The free values the fit (``x``: its free values in canonical form) is judged against, by
+    key: its start and, where some are known, the robot's nominal values (the fit's own elsewhere),
+    each with its name in words."""
+    start = fit.problem.start
+    free = fit.fns.free
+    auto = fit.problem.binder.scenario.parameters.initial_guess == "auto"
+    out = {"start": ("the data-driven start" if auto else "the initial guess", start.x0)}
+    if start.nominal:
+        x_nominal = np.array(x, dtype=float)
+        for name, value in start.nominal.items():
+            if name in free:
+                x_nominal[free.index(name)] = value
+        out["nominal"] = ("the nominal robot", x_nominal)
+    return out
+
+
+def _refits(
+    fit: Fit, result: SolverResult, blocks: Scorer, k: int, against: Sequence[np.ndarray]
+) -> tuple[CrossValidation, DirectionCheck | None]:
+    """The blocked cross-validation (each fold costed on its block beside ``against``) and the
+    direction check, refitted from ``result``."""
+    ev, data = fit.evaluator, fit.data
+    binder, x = fit.problem.binder, result.x
     # Blocks are numbered as the scorer's records: the fitted records start at its offset.
     span = (blocks.offset, blocks.offset + data.n_records)
-    full = fit.canonical_params(converged[0].params)
+    full = fit.canonical_params(result.params)
     whole = ev.normal_equations(x) if data.n_residuals >= validation.DOWNDATE_FROM else None
-    if big:
+    if data.n_residuals >= RELEASE_FROM:
         ev.release()  # the refits bind evaluators of their own; a later use binds this one again
-    crossval = validation.cross_validate(binder, data, span, x, k, fit.canonical_params, blocks, full, whole)
+    crossval = validation.cross_validate(
+        binder, data, span, x, k, fit.canonical_params, blocks, full, whole, against
+    )
     inputs = np.concatenate([np.zeros((data.inputs.shape[0], span[0])), data.inputs], axis=1)
     model = fit.fns.model
     direction = validation.direction_check(
@@ -164,7 +246,83 @@ def analyse_fit(
         k,
         fit.canonical_params,
     )
-    return FitAnalysis(uncertainty, observability, crossval, direction)
+    return crossval, direction
+
+
+def logs_crossval(
+    fit: Fit, results: Mapping[str, SolverResult], blocks: Scorer, ranges: Sequence[tuple[int, int]]
+) -> CrossValidation | None:
+    """The joint fit without each log in turn (``ranges``: each log's records, numbered as
+    ``blocks``'s), from the first converged estimate, each scored on the log it left out; its σ
+    needs every fold (None: fewer than two logs, or no converged estimate)."""
+    converged = [r for r in results.values() if r.converged]
+    if not converged or len(ranges) < 2:
+        return None
+    result = converged[0]
+    span = (blocks.offset, blocks.offset + fit.data.n_records)
+    start = (result.x, fit.canonical_params(result.params))
+    # A fold without a log knows nothing of that log's time offset: held where the joint fit put it.
+    lags = lag_names(len(ranges))
+    held = [[lags[i]] for i in range(len(ranges))]
+    folds = validation.folds_over(
+        fit.problem.binder, fit.data, span, ranges, start, fit.canonical_params, blocks, held=held
+    )
+    return combine(fit.fns.names, folds, min_folds=len(folds))
+
+
+def comparisons(
+    fit: Fit, x: np.ndarray, against: Mapping[str, tuple[str, np.ndarray]], folds: Sequence[Fold]
+) -> dict[str, CostComparison]:
+    """The fit ``x`` against each set of ``against`` (key: (words, free values)) by their data
+    costs: held out over ``folds`` (costed in the order of ``against``) and on every window."""
+    ev = fit.evaluator
+
+    def data_cost(v: np.ndarray) -> float:
+        prior = ev.prior_terms(v)[0] if ev.priors.active else 0.0
+        return float(ev.cost(v)) - float(prior)
+
+    mine = data_cost(x)
+    costed = [f.costs for f in folds if len(f.costs) == len(against) + 1]
+    out = {}
+    for i, (key, (words, v)) in enumerate(against.items()):
+        heldout = np.array([[c[i + 1], c[0]] for c in costed]).reshape(-1, 2)
+        out[key] = CostComparison(words, heldout, (data_cost(v), mine))
+    return out
+
+
+def plan_setting(fit: Fit, results: Mapping[str, SolverResult], units: Mapping[str, str]) -> Setting | None:
+    """What a plan after this fit starts from: the first converged estimate (else the starting
+    point: a solver's last iterate on a drive that leaves directions free can lie anywhere along
+    them), the fit's information there and the residuals' variance as the observability takes it;
+    None when nothing can be evaluated."""
+    ev, fns, data = fit.evaluator, fit.fns, fit.data
+    converged = [(n, r) for n, r in results.items() if r.converged]
+    start = fit.problem.start
+    x = converged[0][1].x if converged else start.x0
+    if data.n_residuals == 0:
+        return None
+    ne = ev.normal_equations(x)
+    if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
+        return None
+    _, s, weight = ev.robust_terms(x)
+    sigma2 = max(float(np.sum(weight * s)) / max(fns.error_rows * ev.n_residuals - fns.n_free, 1), 1e-300)
+    info = Information(ne.H, ev.n_residuals, motion_scale(fns, data.z, ev.omega), ne.g, ne.chi2, sigma2)
+    sc = fit.problem.binder.scenario
+    ranges = unc.range_std(start.lower, start.upper, fns.n_free)
+    model_from = f"the fit ({converged[0][0]})" if converged else "the initial guess (no solver converged)"
+    return Setting(
+        fns, data, info, (x, ev.x_fixed, ev.omega), sigma2, ranges, sc.objective.residual,
+        sc.objective.robust.delta, units, model_from,
+    )  # fmt: skip
+
+
+def plan_after(fit: Fit, results: Mapping[str, SolverResult], units: Mapping[str, str]) -> Plan | None:
+    """What to drive next (:mod:`nlp_calib.analysis.plan`), simulated with the fit (see
+    :func:`plan_setting`); without a converged fit, only when the drive leaves a direction free."""
+    setting = plan_setting(fit, results, units)
+    if setting is None:
+        return None
+    return plan(setting, free_only=not any(r.converged for r in results.values()))
 
 
 def residual_series(fit: Fit, results: Mapping[str, SolverResult], windows: np.ndarray) -> ResidualSeries:
@@ -256,21 +414,19 @@ def track_series(
         faults=tuple((f.record - a, f.kind) for f in view.findings.report.faults if a <= f.record < b),
         holdout_start=windows.fit[1] - a if windows.fit[1] < b - 1 else None,
         segments=tuple(rows),
-        tracker_z=_heights(windows.selected),
+        tracker_z=fit.fns.sensor.heights(windows.selected),
         level=_level(fit, results, ref),
     )
 
 
 def _level(fit: Fit, results: Mapping[str, SolverResult], ref: np.ndarray) -> np.ndarray | None:
-    """A 3-D sensor's world frame turned onto the base's frame at the first record, by the first
-    converged estimate's mount (the start's when none converged): ``R_X·R(q_0)ᵀ``."""
-    if fit.fns.sensor.pose_rows != 7:
-        return None
+    """The sensor's world frame turned onto the base's frame at the first record (None where they
+    are one: a planar tracker's), by the first converged estimate's mount (the start's when none
+    converged)."""
     names = fit.fns.names
     done = [r.params for r in results.values() if r.converged]
     params = done[0] if done else np.array([fit.problem.start.initial[n] for n in names])
-    R_X = mount_rotation(dict(zip(names, params)))
-    return np.asarray(R_X @ poses3d.quat_to_matrix(ref[0, 3:7]).T)
+    return fit.fns.sensor.level(dict(zip(names, map(float, params))), ref[0])
 
 
 def model_check(fit: Fit, prepared: PreparedLog) -> ModelCheckSeries | None:
@@ -284,7 +440,7 @@ def model_check(fit: Fit, prepared: PreparedLog) -> ModelCheckSeries | None:
     header = header_parameters(model, log.header)
     initial = fit.problem.start.initial
     params = {n: float(header.get(n, initial[n])) for n in model.kinematic_params}
-    params.update(dict.fromkeys(SENSOR_PARAMS, 0.0))
+    params.update(dict.fromkeys(fit.fns.sensor.params, 0.0))
     p = np.array([params[n] for n in fit.fns.names])
     residual = prepared.scenario.objective.residual
     inputs = model.inputs(log, residual.steering_sample)
@@ -315,28 +471,72 @@ def run_series(
     return RunSeries(tracks, residuals, spans, holdout, model_check(fit, view.prepared))
 
 
+#: The used records the hand-off's odometry noise is calibrated on at most (from the first): a
+#: few hundred drift segments determine it, and a long log's cost stays that of a short one.
+NOISE_RECORDS = 20_000
+
+
+@dataclass(frozen=True)
+class Drift:
+    """A log's odometry against the base poses the tracker implies over its first ``records``
+    used records: the inputs, those poses, the segments' drift, and each input's noise per
+    interval (with the reference's own variances) that explains it."""
+
+    inputs: np.ndarray
+    reference: np.ndarray
+    drift: DriftSegments
+    noise: np.ndarray
+    reference_var: np.ndarray
+
+
+def calibrated_drift(
+    fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str, records: int | None = None
+) -> Drift:
+    """Each input's noise per interval calibrated on the drift of the used records (the first
+    ``records`` of them) against the tracker, never below the encoders' quantisation."""
+    fns, sel = fit.fns, windows.selected
+    n = sel.n_records if records is None else min(records, sel.n_records)
+    sel = sel.select(0, n)
+    inputs = windows.binder.fns.model.inputs(sel, steering_sample)
+    reference = over_columns(fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
+    bad_intervals, bad_records = windows.masks()
+    parts = segments(n, bad_intervals[: n - 1])
+    drift = segment_drift(fns, params, inputs, reference, parts, ~bad_records[:n])
+    noise, reference_var = drift_noise(drift, windows.input_noise_std)
+    return Drift(inputs, reference, drift, noise, reference_var)
+
+
 def odometry(fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str) -> OdometryTrack:
     """Base-link odometry with ``params`` over the used records, started at the base pose the
     tracker's first pose implies, beside the base poses the tracker implies throughout; its
     covariance propagated from each input's noise calibrated on the drift this log shows against
     the tracker (never below the encoders' quantisation)."""
-    sel, fns = windows.selected, fit.fns
-    inputs = windows.inputs(steering_sample)
-    reference = over_columns(fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
-    bad_i, bad_r = windows.masks()
-    drift = segment_drift(fns, params, inputs, reference, segments(reference.shape[0], bad_i), ~bad_r)
-    noise, reference_var = drift_noise(drift, windows.input_noise_std)
-    track, cov = propagate(fns, params, inputs, reference[0], noise)
-    names = fns.model.input_names
+    d = calibrated_drift(fit, windows, params, steering_sample)
+    track, cov = propagate(fit.fns, params, d.inputs, d.reference[0], d.noise)
+    names = fit.fns.model.input_names
     return OdometryTrack(
-        np.asarray(sel.time_s),
+        np.asarray(windows.selected.time_s),
         track,
         cov,
-        reference,
-        input_noise=dict(zip(names, map(float, noise))),
+        d.reference,
+        input_noise=dict(zip(names, map(float, d.noise))),
         quantisation=dict(zip(names, map(float, windows.input_noise_std))),
-        coverage=drift_coverage(drift, noise, reference_var),
+        coverage=drift_coverage(d.drift, d.noise, d.reference_var),
     )
+
+
+def handoff_noise(
+    fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str
+) -> OdometryNoise | None:
+    """The covariance a controller publishes with its odometry at ``params``, from the noise
+    calibrated on the first :data:`NOISE_RECORDS` used records (None for a 3-D sensor, whose
+    poses do not give the planar base's)."""
+    if not fit.fns.sensor.planar_base:
+        return None
+    d = calibrated_drift(fit, windows, params, steering_sample, NOISE_RECORDS)
+    noise = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
+    time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
+    return odometry_noise(fit.fns, params, d.inputs, time_s, (noise, windows.input_noise_std))
 
 
 @dataclass(frozen=True)
@@ -354,26 +554,32 @@ def analyse_log(
     view: LogView,
     wanted: Wanted,
     labels: Mapping[str, str],
+    nominal: np.ndarray | None = None,
 ) -> LogAnalysis:
-    """One log's figures with the fit's estimates (and its series and odometry when wanted)."""
+    """One log's figures with the fit's estimates and the nominal robot's (``nominal``: its full
+    parameters, where known), and its series and odometry when wanted."""
     windows, scorer = view.windows, view.scorer
     p0 = np.array([fit.problem.start.initial[n] for n in fit.fns.names])
-    # The initial guess scored last: its figures are the baseline.
-    *solved, baseline = scores(scorer, windows, [*(r.params for r in results.values()), p0])
+    # The initial guess scored after the estimates (its figures are the baseline), then the
+    # nominal robot where it is known.
+    extra = [] if nominal is None else [nominal]
+    scored = scores(scorer, windows, [*(r.params for r in results.values()), p0, *extra])
+    n = len(results)
     figures = LogAnalysis(
-        scores=dict(zip(results, solved)),
-        baseline=baseline,
+        scores=dict(zip(results, scored[:n])),
+        baseline=scored[n],
         series=None,
         odometry=None,
+        nominal=scored[n + 1] if extra else None,
     )
     series = run_series(fit, results, view, figures, labels) if wanted.series else None
+    steering = view.prepared.scenario.objective.residual.steering_sample
     odo = None
     if wanted.odometry is not None and wanted.odometry in results:
-        steering = view.prepared.scenario.objective.residual.steering_sample
         odo = odometry(fit, windows, results[wanted.odometry].params, steering)
-    return dataclasses.replace(figures, series=series, odometry=odo)
-
-
-def _heights(log: Log) -> np.ndarray | None:
-    """The tracker's height at each record where it reports 3-D poses (None: a planar tracker)."""
-    return None if log.T_world_sensor_3d is None else np.asarray(log.T_world_sensor_3d[:, 2])
+    # The hand-off carries the first converged solver's estimate (in the scenario's order): its
+    # odometry noise is the one a controller file states.
+    order = [*view.prepared.scenario.solvers, *results]
+    first = next((n for n in order if n in results and results[n].converged), None)
+    noise = {} if first is None else {first: handoff_noise(fit, windows, results[first].params, steering)}
+    return dataclasses.replace(figures, series=series, odometry=odo, noise=noise)

@@ -10,14 +10,13 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-import numpy as np
-
 from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
-from nlp_calib.models import KinematicModel, param_units
-from nlp_calib.models.mount import MOUNT_UNITS
-from nlp_calib.pipeline.align import Alignment, lag_at_edge
-from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis
+from nlp_calib.models import KinematicModel
+from nlp_calib.models.clock import LAG_UNIT
+from nlp_calib.models.controllers import EncoderScales
+from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
+from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis, Scores
 from nlp_calib.pipeline.build import StartingPoint
 from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.scenario import Scenario
@@ -31,28 +30,29 @@ from nlp_calib.results import (
     Encoder,
     LogInfo,
     ScenarioInfo,
+    SensorInfo,
     SolverReport,
     SolverResult,
     Verdict,
 )
-from nlp_calib.results.checks import believed_std
-from nlp_calib.results.faults import Findings
+from nlp_calib.results.checks import NominalCheck, believed_std
+from nlp_calib.results.faults import FaultReport, Findings
 from nlp_calib.solvers import solver_label
 from nlp_calib.sources import BagSource
 
 
-def scenario_info(sc: Scenario, model: KinematicModel) -> ScenarioInfo:
-    """What the outputs say about ``sc``."""
+def scenario_info(sc: Scenario, model: KinematicModel, lags: Sequence[str] = ()) -> ScenarioInfo:
+    """What the outputs say about ``sc`` (fitted with the time offsets ``lags``)."""
     joint = sc.data.joint
     return ScenarioInfo(
         name=sc.name,
         path=None if sc.path is None else str(Path(sc.path).absolute()),
         model=sc.model,
-        units=_units(sc, model),
+        units={**_units(sc, model), **dict.fromkeys(lags, LAG_UNIT)},
+        sensor=sensor_info(sc),
         headline=tuple(model.headline),
         dataset=str(sc.dataset),
         datasets=tuple(str(e.path) for e in sc.data.logs) if joint else (),
-        solvers=sc.solvers,
         labels={name: solver_label(name) for name in sc.solvers},
         residual=dataclasses.asdict(sc.objective.residual),
         robust=dataclasses.asdict(sc.objective.robust),
@@ -63,11 +63,23 @@ def scenario_info(sc: Scenario, model: KinematicModel) -> ScenarioInfo:
 
 
 def _units(sc: Scenario, model: KinematicModel) -> dict[str, str]:
-    """Every parameter's unit: the model's, then its sensor's mount (a 3-D one's and the scale's)."""
-    if not sc.objective.sensor.is_3d:
-        return param_units(model)
+    """Every parameter's unit: the model's, then its sensor's mount's."""
     kinematic = {n: model.units[n] for n in model.kinematic_params}
-    return {**kinematic, **{n: MOUNT_UNITS[n] for n in sc.objective.sensor.params()}}
+    return {**kinematic, **sc.objective.sensor.sensor.units}
+
+
+def sensor_info(sc: Scenario) -> SensorInfo:
+    """What the outputs say about the sensor: what its plug-in says of itself."""
+    sensor = sc.objective.sensor.sensor
+    return SensorInfo(
+        kind=sensor.kind,
+        group=sensor.group,
+        scale=sc.objective.sensor.scale,
+        params=sensor.params,
+        held=sensor.held,
+        held_why=sensor.held_why,
+        convention=sensor.convention,
+    )
 
 
 def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
@@ -75,8 +87,9 @@ def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
     log, model = prepared.log, prepared.model
     kinds = model.encoder_kinds
     unit = "rad" if log.header.encoder_units == "radians" else "ticks"
+    per_turn = encoder_scales(prepared).per_turn
     encoders = tuple(
-        Encoder(name, kinds.get(name, "counter"), unit, int(vmax))
+        Encoder(name, kinds.get(name, "counter"), unit, int(vmax), per_turn.get(name))
         for name, vmax in zip(log.header.encoder_names, log.header.encoder_max)
     )
     t = log.time_s[windows.used[0] : windows.used[1]]
@@ -123,33 +136,74 @@ def fit_notes(results: Mapping[str, SolverResult], fitted: FitAnalysis, held: Ma
 
 
 def lag_notes(sc: Scenario, alignment: Alignment) -> list[str]:
-    """What a log's time alignment found worth saying: a lag at the edge of its search."""
-    if alignment.estimate is not None and alignment.estimate.at_edge:
+    """What a log's time alignment found worth saying: a lag at the edge of its search, or a lag
+    no fit converged at."""
+    est = alignment.estimate
+    if est is not None and not est.converged:
+        return [lag_not_fitted(sc, alignment.lag_s)]
+    if est is not None and est.at_edge:
         return [lag_at_edge(sc, alignment.lag_s)]
     return []
 
 
 def _report(
-    prepared: PreparedLog, name: str, result: SolverResult, fitted: FitAnalysis, figures: LogAnalysis
+    prepared: PreparedLog,
+    name: str,
+    result: SolverResult,
+    fitted: tuple[FitAnalysis, Checks],
+    figures: LogAnalysis,
 ) -> SolverReport:
     """One solver's report, with its estimate in the controller's terms."""
-    u = fitted.uncertainty[name]
-    blocked = fitted.crossval.std if fitted.crossval is not None else np.full(len(u.names), np.nan)
+    u = fitted[0].uncertainty[name]
+    std = believed_std(u.std, *fitted[1].spreads(u.std))
+    scales = encoder_scales(prepared)
+    estimate = (result.params, std, u.correlation)
+    extra = (figures.noise.get(name), prepared.held)
+    controller = controller_params(prepared.model, result.names, estimate, scales, extra)
+    sensor, header = prepared.scenario.objective.sensor.sensor, prepared.log.header
+    sd = dict(zip(result.names, map(float, std)))
+    mount = sensor.mount_pose(result.param_dict(), sd, header.sensor_frame, header.sensor_z_roll_pitch)
+    return SolverReport(result, u, *figures.scores[name], controller, mount)
+
+
+def encoder_scales(prepared: PreparedLog) -> EncoderScales:
+    """The encoders' ranges in the log and their counts per wheel turn where the user gives them
+    (the scenario's ``counts_per_turn`` over ``ROBOT.yaml``'s)."""
     header = prepared.log.header
-    ranges = dict(zip(header.encoder_names, header.encoder_max))
-    std = believed_std(u.std, blocked)
-    controller = controller_params(prepared.model, result.names, result.params, std, u.correlation, ranges)
-    return SolverReport(result, u, *figures.scores[name], controller)
+    per_turn = {**header.counts_per_turn, **prepared.scenario.data.counts_per_turn}
+    return EncoderScales(dict(zip(header.encoder_names, header.encoder_max)), per_turn)
+
+
+def fit_checks(
+    fitted: FitAnalysis, findings: Findings | None, start: StartingPoint, nominal: Scores | None
+) -> Checks:
+    """The checks of the fit (the same for every log it is read for) with one log's ``findings``
+    and the nominal robot's figures on it (``nominal``; None: no nominal values known)."""
+    check = None
+    if nominal is not None and fitted.nominal_params is not None:
+        check = NominalCheck(
+            dict(start.nominal), start.nominal_source, fitted.nominal_params, nominal[0], fitted.nominal
+        )
+    return Checks(
+        fitted.observability,
+        fitted.crossval,
+        fitted.direction,
+        findings,
+        fitted.consistency,
+        logs=fitted.logs,
+        start=fitted.start,
+        nominal=check,
+        lag_effects=fitted.lag_effects,
+        plan=fitted.plan,
+    )
 
 
 def mount_notes(sc: Scenario, start: StartingPoint) -> list[str]:
-    """A 3-D sensor's held height, said once."""
-    if not sc.objective.sensor.is_3d:
-        return []
-    z = start.initial.get("sensor_z", 0.0)
+    """The sensor's held parameters, said once, with why they are held."""
+    sensor = sc.objective.sensor.sensor
     return [
-        f"sensor_z is held at {z:g} m: planar driving cannot determine a 3-D sensor's height "
-        "(give the measured one as known.sensor_z)"
+        f"{n} is held at {start.initial.get(n, 0.0):g} {sensor.units[n]}: {sensor.held_why}"
+        for n in sensor.held
     ]
 
 
@@ -175,10 +229,10 @@ def threshold_notes(sc: Scenario, results: Mapping[str, SolverResult]) -> list[s
 
 
 def _start_dropped(start: StartingPoint) -> dict[str, int] | None:
-    """The windows a 3-D sensor's closed-form start left out, by reason (None: no closed form)."""
-    if start.camera is None or start.auto is None:
+    """The windows the sensor's closed-form start left out, by reason (None: it selects none)."""
+    if start.sensor is None or start.auto is None or start.sensor.dropped is None:
         return None
-    return start.camera.selection.counts()
+    return dict(start.sensor.dropped)
 
 
 def assemble_run(
@@ -192,7 +246,8 @@ def assemble_run(
 ) -> CalibrationRun:
     """One log's run: the fit's estimates and checks beside this log's figures, with its verdict."""
     prepared, windows, alignment, findings = log
-    reports = {name: _report(prepared, name, r, fitted, figures) for name, r in results.items()}
+    checks = fit_checks(fitted, findings, start, figures.nominal)
+    reports = {name: _report(prepared, name, r, (fitted, checks), figures) for name, r in results.items()}
     run = CalibrationRun(
         scenario=scenario,
         log=log_info(prepared, windows),
@@ -201,7 +256,7 @@ def assemble_run(
         baseline=figures.baseline[0],
         baseline_holdout=figures.baseline[1],
         reports=reports,
-        checks=Checks(fitted.observability, fitted.crossval, fitted.direction, findings, fitted.consistency),
+        checks=checks,
         warnings=(
             *notes,
             *lag_notes(prepared.scenario, alignment),
@@ -223,3 +278,77 @@ def assemble_run(
     checks = dataclasses.replace(run.checks, truth=against_truth(run, source.files(), convert))
     run = dataclasses.replace(run, checks=checks)
     return dataclasses.replace(run, verdict=verdict(run, prepared.model, hint))
+
+
+def merged_findings(runs: Sequence[CalibrationRun]) -> Findings | None:
+    """Every log's findings as one (faults numbered within their own log; each log's unchecked
+    reason named with its log), for the joint fit read as one run."""
+    found = [(run.log.path, run.checks.findings) for run in runs if run.checks.findings is not None]
+    if not found:
+        return None
+    reports = [f.report for _, f in found]
+    stale: dict[str, int] = {}
+    for rep in reports:
+        for name, n in rep.stale.items():
+            stale[name] = stale.get(name, 0) + n
+    unchecked = "; ".join(f"{path}: {f.report.unchecked}" for path, f in found if f.report.unchecked)
+    report = FaultReport(
+        faults=tuple(fault for rep in reports for fault in rep.faults),
+        stale=stale,
+        noise=reports[0].noise,
+        unchecked=unchecked,
+        unit=reports[0].unit,
+    )
+    return Findings(report, found[0][1].handling, tuple(r for _, f in found for r in f.repairs))
+
+
+def joint_run(
+    scenario: ScenarioInfo,
+    parts: Sequence[CalibrationRun],
+    fit: tuple[PreparedLog, StartingPoint, int],
+    results: Mapping[str, SolverResult],
+    fitted: FitAnalysis,
+    figures: LogAnalysis,
+    notes: Sequence[str],
+) -> CalibrationRun:
+    """The joint fit as one run: its figures over every log's fitted records (``figures``), the
+    fit's checks, every log's findings, and its own verdict. ``fit``: the first log (its model,
+    encoders and sensor frame), where the solvers started and the fitted windows."""
+    prepared, start, n_residuals = fit
+    first = parts[0]
+    records = sum(run.data.fit[1] - run.data.fit[0] for run in parts)
+    log = LogInfo(
+        path=f"{len(parts)} logs: " + ", ".join(run.log.path for run in parts),
+        records=sum(run.log.records for run in parts),
+        dropped=tuple(d for run in parts for d in run.log.dropped),
+        sensor_frame=first.log.sensor_frame,
+        encoders=first.log.encoders,
+        start_ns=first.log.start_ns,
+        duration_s=sum(run.log.duration_s for run in parts),
+        sensor_z_roll_pitch=first.log.sensor_z_roll_pitch,
+    )
+    data = DataInfo(
+        used=(0, records),
+        fit=(0, records),
+        n_residuals=n_residuals,
+        dropped_stationary=sum(run.data.dropped_stationary for run in parts),
+        dropped_faulty=sum(run.data.dropped_faulty for run in parts),
+        tracker_lag_s=float("nan"),
+        lag_estimate=None,
+    )
+    checks = fit_checks(fitted, merged_findings(parts), start, figures.nominal)
+    reports = {name: _report(prepared, name, r, (fitted, checks), figures) for name, r in results.items()}
+    warned = dict.fromkeys((*notes, *(w for run in parts for w in run.warnings)))
+    run = CalibrationRun(
+        scenario=scenario,
+        log=log,
+        data=data,
+        initial=dict(start.initial),
+        baseline=figures.baseline[0],
+        baseline_holdout=None,
+        reports=reports,
+        checks=checks,
+        warnings=tuple(warned),
+        verdict=Verdict("", ()),
+    )
+    return dataclasses.replace(run, verdict=verdict(run, prepared.model))

@@ -8,16 +8,15 @@ fit use one, so nothing is built twice.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from nlp_calib.analysis import uncertainty
 from nlp_calib.core.errors import ScenarioError
 from nlp_calib.logs import Log
-from nlp_calib.models import SENSOR_PARAMS, KinematicModel, header_parameters
-from nlp_calib.models.camera_start import FIT_REASONS, CameraStart, Selection
-from nlp_calib.models.mount import SCALE_PARAM, mount_rotation
+from nlp_calib.models import KinematicModel, header_parameters
+from nlp_calib.models.clock import LAG_PARAM, base_name, is_lag, lag_names
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import (
@@ -27,9 +26,9 @@ from nlp_calib.problem import (
     build,
     build_residual_data,
     interval_inputs,
-    over_columns,
 )
-from nlp_calib.problem.camera import camera_initial_guess, fit_selection
+from nlp_calib.problem.start import closed_form_start, fit_windows
+from nlp_calib.sensors import SensorStart
 from nlp_calib.solvers import Priors, ProblemEvaluator, get_solver
 from nlp_calib.solvers.backends import Backend, BackendOptions, make_backend
 from nlp_calib.solvers.evaluation import requests
@@ -39,34 +38,61 @@ from nlp_calib.solvers.evaluation import requests
 INTERNAL_SOLVER = "gauss_newton"
 
 
-def build_problem(sc: Scenario, model: KinematicModel, also_fixed: tuple[str, ...] = ()) -> ProblemFunctions:
-    """The problem's Functions for the scenario's residual form, kernel and fixed parameters."""
+def lag_count(sc: Scenario, n_logs: int) -> int:
+    """Time offsets in the problem: one per log when the scenario estimates the lag, else none."""
+    return n_logs if sc.log.alignment.tracker_lag == "auto" else 0
+
+
+def per_log_names(names: Sequence[str], n_logs: int) -> tuple[str, ...]:
+    """Scenario names with ``tracker_lag`` replaced by each log's own (several logs)."""
+    lags = lag_names(n_logs)
+    return tuple(dict.fromkeys(m for n in names for m in (lags if n == LAG_PARAM else (n,))))
+
+
+def build_problem(
+    sc: Scenario, model: KinematicModel, also_fixed: tuple[str, ...] = (), n_logs: int = 1
+) -> ProblemFunctions:
+    """The problem's Functions for the scenario's residual form, kernel and fixed parameters, with a
+    time offset per log (``n_logs``) when the lag is estimated."""
     residual, sensor = sc.objective.residual, sc.objective.sensor
+    lags = lag_count(sc, n_logs)
     spec = ProblemSpec(
         horizon=residual.horizon,
         integration=residual.integration,
         kernel=sc.objective.robust.kernel,
-        fixed=(*sc.parameters.fixed, *also_fixed),
+        fixed=per_log_names((*sc.parameters.fixed, *also_fixed), lags),
         sensor=sensor.mount,
         scale=sensor.scale,
+        lags=lags,
     )
     with scenario_key(sc, "residual"):
         return build(model, spec)
 
 
+def lag_start(sc: Scenario, n_logs: int, given: Sequence[float] = ()) -> dict[str, float]:
+    """The time offsets' starting values: ``given`` (one per log), else the scenario's value for
+    ``tracker_lag`` (known, or under initial_guess), else 0."""
+    p = sc.parameters
+    value = p.known.get(
+        LAG_PARAM, p.initial_guess.get(LAG_PARAM, 0.0) if isinstance(p.initial_guess, Mapping) else 0.0
+    )
+    names = lag_names(lag_count(sc, n_logs))
+    lo, hi = sc.log.alignment.search
+    # A start outside the search (0 when the search is all one side of it) starts at its middle.
+    start = float(value) if lo <= value <= hi else 0.5 * (lo + hi)
+    return {n: float(given[i]) if given else start for i, n in enumerate(names)}
+
+
 def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[str, float]:
-    """The log header's values, overridden by the scenario's mapping (``auto`` fills in later). A
-    3-D mount's held ``sensor_z`` is 0 and its scale 1 unless the scenario gives them."""
+    """The log header's values, overridden by the scenario's mapping (``auto`` fills in later); the
+    mount's from the sensor (a planar one: the header's nominal mount; a 3-D one: its held height
+    0 and its scale 1) unless the scenario gives them."""
     p, sensor = sc.parameters, sc.objective.sensor
     guess = dict(model.defaults)
     guess.update(
         {n: v for n, v in header_parameters(model, log.header).items() if n in model.kinematic_params}
     )
-    if sensor.is_3d:
-        guess.update(dict.fromkeys(sensor.held(), 0.0))
-        guess.update({SCALE_PARAM: 1.0} if SCALE_PARAM in sensor.params() else {})
-    else:
-        guess.update(zip(SENSOR_PARAMS, log.header.T_base_sensor))
+    guess.update(sensor.sensor.initial(log.header))
     if isinstance(p.initial_guess, Mapping):
         guess.update(p.initial_guess)
     guess.update(p.known)
@@ -80,56 +106,72 @@ def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[st
     return guess
 
 
+def nominal_values(
+    sc: Scenario, model: KinematicModel, log: Log, guess: Mapping[str, float], free: Sequence[str]
+) -> tuple[dict[str, float], str]:
+    """The free parameters whose nominal values something knows (the log's header as its logger
+    wrote it, ``ROBOT.yaml``, ``/tf_static``, the scenario's ``initial_guess`` mapping), at their
+    values in ``guess`` (before a data-driven start replaces them), and where they come from in
+    words. Model defaults are no robot's nominal values: a parameter only they give is left out."""
+    header = log.header
+    mount = tuple(sc.objective.sensor.sensor.nominal(header))
+    if header.nominal is None:
+        given = [*header_parameters(model, header), *mount]
+        sources = {n: "the log's header" for n in given if n in model.kinematic_params or n in mount}
+    else:
+        sources = {
+            n: where for n, where in header.nominal.items() if n in model.kinematic_params or n in mount
+        }
+    if isinstance(sc.parameters.initial_guess, Mapping):
+        sources.update(dict.fromkeys(sc.parameters.initial_guess, "initial_guess"))
+    sources = {n: where for n, where in sources.items() if n in free and n in guess}
+    return {n: float(guess[n]) for n in sources}, ", ".join(dict.fromkeys(sources.values()))
+
+
 @dataclass(frozen=True)
 class StartingPoint:
-    """Where the solvers start (free parameters ``x0``), the fixed values and the bounds."""
+    """Where the solvers start (free parameters ``x0``), the fixed values and the bounds; and the
+    robot's nominal values where something knows them (``nominal``, from ``nominal_source``)."""
 
     initial: Mapping[str, float]
     auto: Mapping[str, float] | None
-    #: A 3-D sensor's start (closed-form, or the given mount's floor normal; None: planar): the
-    #: floor normal the fit's windows are selected by, and the windows the closed form left out.
-    camera: CameraStart | None
+    #: The sensor's start (its closed form, or what it makes of a given mount; None: nothing to
+    #: select the fit's windows by): its own record the fit's windows are selected by, and the
+    #: windows the closed form left out.
+    sensor: SensorStart | None
     x0: np.ndarray
     x_fixed: np.ndarray
     lower: np.ndarray | None
     upper: np.ndarray | None
+    nominal: Mapping[str, float] = field(default_factory=dict)
+    nominal_source: str = ""
 
 
-def auto_guess(
-    sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int, gaps: np.ndarray | None = None
-) -> dict[str, float]:
-    """The model's closed-form estimate from the windows of records ``start:stop`` that cross no
-    gap (no guess needed)."""
-    residual = sc.objective.residual
+def auto_start(
+    sc: Scenario,
+    fns: ProblemFunctions,
+    log: Log,
+    records: tuple[int, int],
+    initial: Mapping[str, float],
+    gaps: np.ndarray | None = None,
+) -> SensorStart:
+    """The sensor's closed-form start (:func:`~nlp_calib.problem.start.closed_form_start`) on the
+    records ``records`` of ``log`` that cross no gap (``gaps``, per interval of the log), the fixed
+    parameters at their ``initial`` values."""
+    start, stop = records
     data = build_residual_data(
-        fns, log.select(start, stop), residual, bad_intervals=_within(gaps, start, stop)
+        fns, log.select(start, stop), sc.objective.residual, bad_intervals=_within(gaps, start, stop)
     )
-    rows = fns.n_inputs * data.horizon
-    # Windows overlapping by three quarters carry nearly all the information at a fraction
-    # of the cost of every window.
-    step = max(1, data.horizon // (4 * residual.stride))
-    columns = data.columns_of(np.arange(0, data.n_residuals, step))
-
-    def base_motion(params: Mapping[str, float]) -> np.ndarray:
-        return over_columns(fns.predict_window, np.array([params[n] for n in fns.names]), columns[:rows])[0]
-
-    return fns.model.initial_guess(columns[:rows], columns[rows : rows + 3], base_motion)
-
-
-def camera_guess(
-    sc: Scenario, fns: ProblemFunctions, data: ResidualData, initial: Mapping[str, float]
-) -> CameraStart:
-    """A 3-D sensor's closed-form start (:func:`~nlp_calib.problem.camera.camera_initial_guess`) on
-    ``data``, the held and fixed parameters at their ``initial`` values."""
     known = {n: initial[n] for n in fns.fixed}
     with scenario_key(sc, "initial_guess"):
-        return camera_initial_guess(fns, data, known=known)
+        return closed_form_start(fns, data, known, sc.objective.residual.stride)
 
 
 def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    bounds = sc.parameters.bounds
-    lower = np.array([bounds[n][0] if n in bounds else -np.inf for n in fns.free])
-    upper = np.array([bounds[n][1] if n in bounds else np.inf for n in fns.free])
+    """The scenario's bounds; a time offset's, unless given, ``alignment.search``."""
+    bounds = {LAG_PARAM: sc.log.alignment.search, **sc.parameters.bounds}
+    lower = np.array([bounds[base_name(n)][0] if base_name(n) in bounds else -np.inf for n in fns.free])
+    upper = np.array([bounds[base_name(n)][1] if base_name(n) in bounds else np.inf for n in fns.free])
     for name, lo, hi, x in zip(fns.free, lower, upper, x0):
         if not lo <= x <= hi:
             origin = (
@@ -148,35 +190,31 @@ def _within(mask: np.ndarray | None, start: int, stop: int) -> np.ndarray | None
 
 
 def starting_point(
-    sc: Scenario, fns: ProblemFunctions, log: Log, start: int, stop: int, gaps: np.ndarray | None = None
+    sc: Scenario,
+    fns: ProblemFunctions,
+    log: Log,
+    start: int,
+    stop: int,
+    lags: Sequence[float] = (),
+    gaps: np.ndarray | None = None,
 ) -> StartingPoint:
     """Initial values (header, scenario, or ``auto`` from the windows of records ``start:stop``
-    that cross no gap) and bounds."""
+    that cross no gap in ``gaps``; the time offsets ``lags``, one per log, when given) and bounds."""
     initial = initial_parameters(sc, fns.model, log)
-    auto, camera = None, None
-    if sc.parameters.initial_guess == "auto" and sc.objective.sensor.is_3d:
-        data = build_residual_data(
-            fns, log.select(start, stop), sc.objective.residual, bad_intervals=_within(gaps, start, stop)
-        )
-        camera = camera_guess(sc, fns, data, initial)
-        auto = camera.params
-    elif sc.parameters.initial_guess == "auto":
-        auto = auto_guess(sc, fns, log, start, stop, gaps)
+    initial.update(lag_start(sc, fns.spec.lags, lags))
+    nominal, source = nominal_values(sc, fns.model, log, initial, fns.free)
+    auto_wanted = sc.parameters.initial_guess == "auto"
+    sensor = auto_start(sc, fns, log, (start, stop), initial, gaps) if auto_wanted else None
+    auto = None if sensor is None else sensor.params
     if auto is not None:
         initial.update({n: v for n, v in auto.items() if n not in sc.parameters.fixed})
-    if camera is None and sc.objective.sensor.is_3d:
-        camera = given_mount(initial)
+    if sensor is None:
+        sensor = fns.sensor.given(initial)
     x0 = np.array([initial[n] for n in fns.free])
-    lower, upper = _bounds(sc, fns, x0) if sc.parameters.bounds else (None, None)
+    bounded = sc.parameters.bounds or any(base_name(n) == LAG_PARAM for n in fns.free)
+    lower, upper = _bounds(sc, fns, x0) if bounded else (None, None)
     x_fixed = np.array([initial[n] for n in fns.fixed])
-    return StartingPoint(initial, auto, camera, x0, x_fixed, lower, upper)
-
-
-def given_mount(initial: Mapping[str, float]) -> CameraStart:
-    """A given 3-D mount as a start: its floor normal in the camera frame is the third row of its
-    rotation (no windows were selected)."""
-    R = mount_rotation(initial)
-    return CameraStart(dict(initial), R[2], Selection(np.zeros(0, dtype=np.int64)))
+    return StartingPoint(initial, auto, sensor, x0, x_fixed, lower, upper, nominal, source)
 
 
 def evaluated(sc: Scenario, solvers: Sequence[str]) -> set[str]:
@@ -198,12 +236,11 @@ def prepare_backend(sc: Scenario, fns: ProblemFunctions, solvers: Sequence[str],
     return backend
 
 
-def camera_selected(fns: ProblemFunctions, data: ResidualData, camera: CameraStart) -> ResidualData:
-    """``data`` without the windows :func:`~nlp_calib.problem.camera.fit_selection` leaves out,
-    their number by reason kept with it."""
-    selection = fit_selection(fns, data, camera)
-    counts = {r: n for r, n in selection.counts().items() if r in FIT_REASONS}
-    return replace(data.select(selection.kept(FIT_REASONS)), dropped_selection=counts)
+def sensor_selected(fns: ProblemFunctions, data: ResidualData, start: SensorStart) -> ResidualData:
+    """``data`` without the windows the sensor's start leaves out (:func:`~nlp_calib.problem.start.
+    fit_windows`), their number by reason kept with it."""
+    keep, counts = fit_windows(fns, data, start)
+    return replace(data.select(keep), dropped_selection=counts)
 
 
 def no_priors(n_free: int) -> Priors:
@@ -222,9 +259,11 @@ class Binder:
     #: Per interval / record of the whole log: windows must not cross / start or end at them.
     bad_intervals: np.ndarray | None = None
     bad_records: np.ndarray | None = None
-    #: A 3-D sensor's start: windows whose rotation axis is off its floor normal, or that turn
-    #: against the wheels, are left out (``FIT_REASONS``).
-    camera: CameraStart | None = None
+    #: The sensor's start, which may leave some windows out (a camera's: those whose rotation axis
+    #: is off its floor normal, or that turn against the wheels).
+    start: SensorStart | None = None
+    #: Bounds of the free parameters every internal fit keeps to (None: none).
+    bounds: tuple[np.ndarray, np.ndarray] | None = None
     #: Per interval of the whole log: gaps in time, which no window crosses whatever the faults.
     gaps: np.ndarray | None = None
 
@@ -245,8 +284,8 @@ class Binder:
             bad_intervals=_within(self.crossing(), start, stop),
             bad_records=None if self.bad_records is None else self.bad_records[start:stop],
         )
-        if self.camera is not None and data.n_residuals:
-            data = camera_selected(self.fns, data, self.camera)
+        if self.start is not None and self.start.selection is not None and data.n_residuals:
+            data = sensor_selected(self.fns, data, self.start)
         if data.n_residuals < self.fns.n_free:
             at_faults = (
                 f" ({data.dropped_faulty} windows crossing faults were left out; "
@@ -289,6 +328,18 @@ class Binder:
         steering = self.scenario.objective.residual.steering_sample
         return interval_inputs(self.fns.model, [log.select(start, stop)], steering)
 
+    def lag_held(self, x0: np.ndarray) -> Binder:
+        """This binder with the time offsets held at their values in ``x0`` (fits on the records as
+        logged, whose clock correction the screen does not apply)."""
+        lags = [i for i, n in enumerate(self.fns.free) if is_lag(n)]
+        if not lags:
+            return self
+        n = self.fns.n_free
+        lower, upper = self.bounds if self.bounds is not None else (np.full(n, -np.inf), np.full(n, np.inf))
+        lower, upper = lower.copy(), upper.copy()
+        lower[lags] = upper[lags] = np.asarray(x0, dtype=float)[lags]
+        return replace(self, bounds=(lower, upper))
+
     def fit(
         self, evaluator: ProblemEvaluator, x0: np.ndarray, tolerance: float | None = None
     ) -> tuple[float, np.ndarray, bool]:
@@ -299,7 +350,8 @@ class Binder:
             options = self.scenario.options_for(name)
             if tolerance is not None:
                 options = replace(options, function_tolerance=max(options.function_tolerance, tolerance))
-            res = get_solver(name)(evaluator, options).solve(x0)
+            lower, upper = self.bounds if self.bounds is not None else (None, None)
+            res = get_solver(name)(evaluator, options).solve(x0, lower, upper)
         return res.cost, res.x, res.converged
 
 
@@ -345,15 +397,32 @@ def build_stage(
     start_from: tuple[Log, int, int],
     solvers: Sequence[str],
     n_records: int,
+    lags: Sequence[float] = (),
     gaps: np.ndarray | None = None,
 ) -> Problem:
-    """Build the Functions (``held`` parameters fixed), start from the records ``start_from`` (a log
-    and a range), get the backend ready for ``solvers`` over ``n_records`` and weigh the priors;
-    no window crosses ``gaps`` (per interval of the log)."""
-    fns = build_problem(sc, model, tuple(held))
+    """Build the Functions (``held`` parameters fixed; a time offset per log of ``lags``, or one),
+    start from the records ``start_from`` (a log and a range), get the backend ready for
+    ``solvers`` over ``n_records`` and weigh the priors; no window crosses ``gaps`` (per interval
+    of the log)."""
+    fns = build_problem(sc, model, tuple(held), max(len(lags), 1))
     log, start, stop = start_from
-    point = starting_point(sc, fns, log, start, stop, gaps)
+    point = starting_point(sc, fns, log, start, stop, lags, gaps)
     backend = prepare_backend(sc, fns, solvers, n_records)
-    binder = Binder(sc, fns, backend, point.x_fixed, no_priors(fns.n_free), camera=point.camera, gaps=gaps)
+    bounds = None if point.lower is None or point.upper is None else (point.lower, point.upper)
+    binder = Binder(
+        sc, fns, backend, point.x_fixed, no_priors(fns.n_free), start=point.sensor, bounds=bounds, gaps=gaps
+    )
     priors, _ = weigh_priors(binder, log, start, stop, point.x0)
     return Problem(fns, point, replace(binder, priors=priors))
+
+
+def at_lags(problem: Problem, lags: Sequence[float]) -> Problem:
+    """``problem`` starting at the time offsets ``lags`` (one per log; the data's own once they are
+    re-sampled there, so the problem's clock correction starts at zero)."""
+    fns, start = problem.fns, problem.start
+    given = dict(zip(lag_names(fns.spec.lags), lags))
+    if not any(n in given for n in fns.free):
+        return problem
+    initial = {**start.initial, **given}
+    x0 = np.array([initial[n] for n in fns.free])
+    return replace(problem, start=replace(start, initial=initial, x0=x0))

@@ -11,6 +11,7 @@ runs on it, and the same analyse and assemble stages turn the estimates into a s
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import time
 import warnings
 from collections.abc import Mapping, Sequence
@@ -19,13 +20,15 @@ from pathlib import Path
 
 import numpy as np
 
-from nlp_calib.analysis.consistency import compare_logs
+from nlp_calib.analysis.consistency import compare_logs, determined
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
-from nlp_calib.models import KinematicModel
+from nlp_calib.models import KinematicModel, reference_scales
+from nlp_calib.models.clock import LAG_PARAM, is_lag, lag_names
 from nlp_calib.pipeline.align import Alignment, align
 from nlp_calib.pipeline.analyse import (
     FitAnalysis,
+    LogAnalysis,
     LogView,
     Scorer,
     Scores,
@@ -33,19 +36,22 @@ from nlp_calib.pipeline.analyse import (
     analyse_fit,
     analyse_log,
     log_scorer,
+    logs_crossval,
+    plan_after,
     scores,
 )
-from nlp_calib.pipeline.assemble import assemble_run, fit_notes, scenario_info
-from nlp_calib.pipeline.build import Problem, StartingPoint, build_stage
+from nlp_calib.pipeline.assemble import assemble_run, fit_notes, joint_run, scenario_info
+from nlp_calib.pipeline.build import Problem, StartingPoint, at_lags, build_stage
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.screen import Screening, exclude_faults, median_interval, screen
 from nlp_calib.pipeline.windows import LogWindows, bind_windows
 from nlp_calib.problem import ProblemFunctions, ResidualData, joined
-from nlp_calib.results import CalibrationRun, Checks, JointRun, SolverResult
-from nlp_calib.results.checks import ConsistencyCheck, believed_std
+from nlp_calib.results import CalibrationRun, JointRun, SolverResult
+from nlp_calib.results.checks import WEAK, ConsistencyCheck, CrossValidation
 from nlp_calib.results.faults import Findings
+from nlp_calib.sensors import sensor_for
 from nlp_calib.solvers import ProblemEvaluator
 from nlp_calib.solvers.backends import Backend
 
@@ -97,10 +103,11 @@ def setup_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> LogSetup
         start_from,
         solvers,
         records[1] - records[0],
-        prepared.gaps,
+        gaps=prepared.gaps,
     )
     screening = screen(problem.binder, read, records, problem.start.x0)
     alignment = align_stage(problem, prepared, screening)
+    problem = at_lags(problem, [alignment.lag_s])
     windows = bind_windows(problem, prepared, screening, alignment)
     return LogSetup(prepared, problem, screening, alignment, windows)
 
@@ -270,7 +277,8 @@ class JointCalibration:
         n_records = sum(p.fit[1] - p.fit[0] for p in self.parts)
         start_from = (first.prepared.log, first.used[0], first.fit[1])
         one_horizon = sc.with_options(residual=joint_residual(sc, [p.prepared for p in self.parts]))
-        problem = build_stage(one_horizon, model, tuple(self.held), start_from, self.solvers, n_records)
+        lags = [p.alignment.lag_s for p in self.parts]
+        problem = build_stage(one_horizon, model, tuple(self.held), start_from, self.solvers, n_records, lags)
         self.fitting = Fit(problem, data, self.solvers)
         self.setup_time_s = time.perf_counter() - t0
 
@@ -290,25 +298,62 @@ class JointCalibration:
         return self.fitting.solve(solver)
 
     def run(self, solvers: Sequence[str] | None = None, wanted: Wanted | None = None) -> JointRun:
-        """Fit with each solver on every log's windows, and each log on its own to check that they
-        tell one robot's story; score the result on each log."""
-        sc, fitting, names = self.scenario, self.fitting, tuple(solvers or self.scenario.solvers)
+        """Fit with each solver on every log's windows; refit without each log in turn, and each
+        log on its own, to check that they tell one robot's story; score the result on each log and
+        on all of them."""
+        fitting, names = self.fitting, tuple(solvers or self.scenario.solvers)
         results, fitted, notes = _fit(fitting, self.parts, names, self.held)
-        own = [
-            _run(sc, Fit(p.problem, p.windows.data, names), [p], names, Wanted())[2][0] for p in self.parts
-        ]
-        check = consistency(results, fitted, own)
-        if check is not None and check.significant:
+        scorer = blocks_scorer(fitting.fns, self.parts, fitting.data)
+        logs = logs_crossval(fitting, results, scorer, log_ranges(self.parts))
+        own = [_own_run(p, names) for p in self.parts]
+        units = scenario_info(self.scenario, self.model, lag_names(self.fns.spec.lags)).units
+        check = consistency(results, own, logs, (self.model, units))
+        if check is not None and (check.significant or check.limits()):
             notes.append(check.words())
-        fitted = dataclasses.replace(fitted, consistency=check)
+        fitted = dataclasses.replace(fitted, consistency=check, logs=logs)
         parts = _assemble(fitting, self.parts, results, fitted, notes, wanted or Wanted())
+        joint = _joint(fitting, (scorer, self.parts[0]), parts, results, fitted, notes)
         return JointRun(
-            scenario=scenario_info(sc, self.model),
+            scenario=joint.scenario,
             parts=tuple(parts),
             n_residuals=fitting.data.n_residuals,
-            checks=Checks(fitted.observability, fitted.crossval, fitted.direction, None, check),
+            checks=joint.checks,
             warnings=tuple(notes),
+            joint=joint,
         )
+
+
+def log_ranges(parts: Sequence[LogSetup]) -> list[tuple[int, int]]:
+    """Each log's fitted records in the joint fit's numbering (the logs end to end)."""
+    edges = np.cumsum([0, *(p.fit[1] - p.fit[0] for p in parts)])
+    return [(int(a), int(b)) for a, b in itertools.pairwise(edges)]
+
+
+def _joint(
+    fitting: Fit,
+    scoring: tuple[Scorer, LogSetup],
+    parts: Sequence[CalibrationRun],
+    results: Mapping[str, SolverResult],
+    fitted: FitAnalysis,
+    notes: Sequence[str],
+) -> CalibrationRun:
+    """The joint fit as one run, scored over every log's fitted records by ``scoring[0]``."""
+    scorer, first = scoring
+    start = fitting.problem.start
+    p0 = np.array([start.initial[n] for n in fitting.fns.names])
+    nominal = [] if fitted.nominal_params is None else [fitted.nominal_params]
+    metrics = scorer.each([*(r.params for r in results.values()), p0, *nominal])
+    n = len(results)
+    figures = LogAnalysis(
+        scores={name: (m, None) for name, m in zip(results, metrics)},
+        baseline=(metrics[n], None),
+        series=None,
+        odometry=None,
+        nominal=(metrics[n + 1], None) if nominal else None,
+    )
+    info = scenario_info(fitting.problem.binder.scenario, fitting.fns.model, lag_names(fitting.fns.spec.lags))
+    fit = (first.prepared, start, fitting.data.n_residuals)
+    return joint_run(info, parts, fit, results, fitted, figures, notes)
 
 
 def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
@@ -318,27 +363,50 @@ def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
     )[2][0]
 
 
+def own_name(name: str, log: int, n_logs: int) -> str:
+    """A joint fit's parameter ``name`` as log ``log``'s own fit calls it ("" when it has none)."""
+    if not is_lag(name):
+        return name
+    return LAG_PARAM if name == lag_names(n_logs)[log] else ""
+
+
 def consistency(
-    results: Mapping[str, SolverResult], fitted: FitAnalysis, own: Sequence[CalibrationRun]
+    results: Mapping[str, SolverResult],
+    own: Sequence[CalibrationRun],
+    logs: CrossValidation | None,
+    model: tuple[KinematicModel, Mapping[str, str]],
 ) -> ConsistencyCheck | None:
-    """Each log's own fit (``own``, in the joint fit's order of logs) against the joint fit, in
-    their σ to believe, for the first solver that converged in the joint fit."""
+    """Each log's own fit (``own``, in the joint fit's order of logs) against the other logs' (the
+    folds of ``logs``), for the first solver that converged in the joint fit, on what each log
+    determines on its own; ``model``: the model and every parameter's unit."""
     solver = next((name for name, r in results.items() if r.converged), None)
-    if solver is None:
+    if solver is None or logs is None:
         return None
-    result, u = results[solver], fitted.uncertainty[solver]
-    blocked = fitted.crossval.std if fitted.crossval is not None else np.full(len(u.names), np.nan)
-    nan = np.full(len(result.names), np.nan)
+    result = results[solver]
+    names = result.names
+    nan = np.full(len(names), np.nan)
     estimates, stds = [], []
-    for run in own:
-        mine = run.reports[solver]
-        ok = mine.result.converged
-        estimates.append(mine.result.params if ok else nan)
-        stds.append(np.array([run.std(solver)[n] for n in result.names]) if ok else nan)
-    logs = [run.log.path for run in own]
-    return compare_logs(
-        result.names, logs, result.params, believed_std(u.std, blocked), np.array(estimates), np.array(stds)
-    )
+    for i, run in enumerate(own):
+        mine = run.reports.get(solver)
+        if mine is None or not mine.result.converged:
+            estimates.append(nan)
+            stds.append(nan)
+            continue
+        # Each log's own lag is the joint fit's lag of that log; the other logs' lags it has not.
+        own_names = [own_name(n, i, len(own)) for n in names]
+        values, sd = mine.result.param_dict(), run.std(solver)
+        estimates.append(np.array([values.get(n, np.nan) for n in own_names]))
+        stds.append(np.array([sd.get(n, np.nan) for n in own_names]))
+    est, std = np.array(estimates), np.array(stds)
+    others = np.array([f.params if f.converged else nan for f in logs.folds])
+    kind, units = model
+    sensor = own[0].scenario.sensor
+    reference = sensor_for(sensor.kind, sensor.scale).reference
+    known = np.array([determined(kind, names, e, sd, reference) for e, sd in zip(est, std)])
+    apart = WEAK * reference_scales(kind, names, result.params, reference)
+    paths = [run.log.path for run in own]
+    unit = tuple(units.get(n, "") for n in names)
+    return compare_logs(names, paths, result.params, (est, std), others, known, apart, unit)
 
 
 def _fit(
@@ -349,6 +417,9 @@ def _fit(
     results = {name: fitting.solve(name) for name in solvers}
     noise = np.max([p.windows.input_noise_std for p in parts], axis=0)
     fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data))
+    sc = parts[0].prepared.scenario
+    units = scenario_info(sc, fitting.fns.model, lag_names(fitting.fns.spec.lags)).units
+    fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, units))
     return results, fitted, fit_notes(results, fitted, held)
 
 
@@ -364,12 +435,12 @@ def _assemble(
     runs = []
     for i, part in enumerate(parts):
         sc = part.prepared.scenario
-        info = scenario_info(sc, fitting.fns.model)
+        info = scenario_info(sc, fitting.fns.model, lag_names(fitting.fns.spec.lags))
         scorer = log_scorer(
             fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window
         )
         view = LogView(part.prepared, part.windows, scorer, part.screening.findings, i)
-        figures = analyse_log(fitting, results, view, wanted, info.labels)
+        figures = analyse_log(fitting, results, view, wanted, info.labels, fitted.nominal_params)
         stage = (part.prepared, part.windows, part.alignment, part.screening.findings)
         runs.append(assemble_run(info, stage, fitting.problem.start, results, fitted, figures, notes))
     return runs

@@ -9,6 +9,7 @@ import numpy as np
 
 from nlp_calib.codegen.export import Example, build_for_export, generate
 from nlp_calib.core.errors import NlpCalibWarning
+from nlp_calib.pipeline.build import lag_count
 from nlp_calib.pipeline.calibration import Calibration
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.prepare import read, resolved, select
@@ -28,7 +29,9 @@ def write_c_export(sc: Scenario, out_dir: Path) -> tuple[list[Path], Example]:
     select(sc, log)  # the horizon must fit the log before anything is built
     residual, sensor = sc.objective.residual, sc.objective.sensor
     with scenario_key(sc, "residual"):
-        problems = build_for_export(model, residual.horizon, residual.integration, sensor.mount, sensor.scale)
+        problems = build_for_export(
+            model, residual.horizon, residual.integration, sensor.mount, sensor.scale, lag_count(sc, 1)
+        )
     last = problems[-1]
     H = last.spec.horizon
     windows = build_residual_data(last, log, sc.objective.residual)

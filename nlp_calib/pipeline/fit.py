@@ -13,9 +13,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from nlp_calib.core import interrupts
-from nlp_calib.core.numeric import wrap_angle
-from nlp_calib.models import canonical
-from nlp_calib.models.mount import MOUNT_ANGLES
 from nlp_calib.pipeline.build import Problem, evaluated
 from nlp_calib.pipeline.keys import refuse_rejected_options, scenario_key
 from nlp_calib.problem import ProblemFunctions, ResidualData
@@ -62,13 +59,9 @@ class Fit:
         return dataclasses.replace(result, params=params, x=x)
 
     def canonical_params(self, params: np.ndarray) -> np.ndarray:
-        """The full parameter vector ``params`` in the model's canonical form."""
+        """The full parameter vector ``params`` in the canonical form (the sensor's: a planar mount
+        by the model's symmetries, a 3-D one's angles wrapped)."""
         fns = self.fns
         named = dict(zip(fns.names, map(float, params)))
-        if fns.sensor.pose_rows != 3:
-            # The model's symmetries turn a planar mount round; a 3-D start already has the
-            # physical signs, and each mount angle is only wrapped.
-            wrapped = {n: float(wrap_angle(named[n])) for n in MOUNT_ANGLES if n not in fns.fixed}
-            return np.array([wrapped.get(n, named[n]) for n in fns.names])
-        canon = canonical(fns.model, named, fns.fixed)
+        canon = fns.sensor.canonical(fns.model, named, fns.fixed)
         return np.array([canon[n] for n in fns.names])

@@ -8,10 +8,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from nlp_calib.core.errors import FieldError
+from nlp_calib.core.errors import FieldError, ProblemError
 from nlp_calib.core.ranges import MAGNITUDE, Range, check_choice, check_range
 from nlp_calib.problem import ResidualOptions
-from nlp_calib.problem.sensors import SCALES, SENSORS, sensor_for
+from nlp_calib.sensors import SCALES, SENSORS, Sensor, sensor_for
 from nlp_calib.solvers.backends import BACKENDS
 from nlp_calib.sources import DatasetSource
 from nlp_calib.symbolic.kernels import KERNELS
@@ -21,6 +21,7 @@ BLOCKS = Range(2, 100, integer=True)
 DELTA = Range(0.0, 1e6, lo_open=True)
 WEIGHT = Range(0.0, 1e12, lo_open=True)
 TICKS = Range(0.0, 1e9, lo_open=True)
+COUNTS_PER_TURN = Range(0.0, 2.0**32, lo_open=True)
 PRIOR_STD = Range(1e-9, 1e6)
 THREADS = Range(1, 64, integer=True)
 RPE_WINDOW = Range(1, 1_000_000, integer=True)
@@ -160,48 +161,53 @@ class LogEntry:
 @dataclass(frozen=True)
 class DataOptions:
     """The logs (one, or several fitted together: ``datasets``), how strictly they are read, the
-    encoders' noise (ticks) and what to do with faults."""
+    encoders' noise (ticks), each wheel encoder's counts per wheel turn (for the controller's
+    radii) and what to do with faults."""
 
     logs: tuple[LogEntry, ...]
     joint: bool = False
     strict: bool = True
     encoder_noise: Mapping[str, float] = field(default_factory=dict)
+    counts_per_turn: Mapping[str, float] = field(default_factory=dict)
     faults: FaultOptions = field(default_factory=FaultOptions)
 
     def __post_init__(self) -> None:
         for enc, ticks in self.encoder_noise.items():
             check_range(f"encoder_noise.{enc}", ticks, TICKS)
+        for enc, counts in self.counts_per_turn.items():
+            check_range(f"counts_per_turn.{enc}", counts, COUNTS_PER_TURN)
 
 
 @dataclass(frozen=True)
 class SensorOptions:
-    """What the tracker follows (scenario key ``sensor``): a ``planar`` pose, or a ``3d`` one (a
-    camera on the base, its mount ``x, y, z, roll, pitch, yaw``); ``scale: free`` for 3-D poses
-    known only up to scale (monocular visual odometry). ``sensor: 3d`` is short for
-    ``{mount: 3d}``."""
+    """What the reference is (scenario key ``sensor``): one of the sensor plug-ins
+    (:data:`nlp_calib.sensors.SENSORS`: ``planar``, a tracker's planar pose; ``3d``, a camera's
+    pose on the base, its mount ``x, y, z, roll, pitch, yaw``); ``scale: free`` for poses known
+    only up to scale (monocular visual odometry). ``sensor: 3d`` is short for ``{mount: 3d}``."""
 
     mount: str = "planar"
     scale: str = "fixed"
 
     def __post_init__(self) -> None:
-        check_choice("mount", self.mount, SENSORS)
+        check_choice("mount", self.mount, tuple(SENSORS))
         check_choice("scale", self.scale, SCALES)
-        if self.scale == "free" and self.mount == "planar":
-            raise FieldError(
-                "scale", "a free scale needs a 3-D sensor (mount: 3d); planar tracker poses are metric"
-            )
+        try:
+            sensor_for(self.mount, self.scale)
+        except ProblemError as exc:
+            raise FieldError("scale", str(exc)) from None
 
     @property
-    def is_3d(self) -> bool:
-        return self.mount == "3d"
+    def sensor(self) -> Sensor:
+        """The sensor plug-in."""
+        return sensor_for(self.mount, self.scale)
 
     def params(self) -> tuple[str, ...]:
         """The parameters of the sensor's mount (and the scale, when free), in state order."""
-        return sensor_for(self.mount, self.scale).params
+        return self.sensor.params
 
     def held(self) -> tuple[str, ...]:
         """The mount's parameters the drive never determines (held at their given values)."""
-        return sensor_for(self.mount, self.scale).held
+        return self.sensor.held
 
 
 @dataclass(frozen=True)

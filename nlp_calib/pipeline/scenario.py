@@ -24,6 +24,7 @@ from nlp_calib.core.config import coerce, fail, from_mapping, key_name, read_yam
 from nlp_calib.core.errors import ConfigError, FieldError, ScenarioError
 from nlp_calib.core.ranges import Range, check_choice, shown
 from nlp_calib.models import DEFAULT_MODEL, MODELS, KinematicModel, encoders, get_model
+from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.options import (
     AlignmentOptions,
@@ -323,6 +324,8 @@ def check_against_model(sc: Scenario, source: str) -> None:
     _check_parameter_names(sc.parameters, scenario_params(sc), source)
     for enc in sc.data.encoder_noise:
         _choice(enc, encoders(model), f"{source}: encoder_noise")
+    for enc in sc.data.counts_per_turn:
+        _choice(enc, encoders(model), f"{source}: counts_per_turn")
     for i, entry in enumerate(sc.data.logs):
         key = f"datasets[{i}]" if sc.data.joint else "dataset"
         if isinstance(entry.source, BagSource):
@@ -334,15 +337,21 @@ def check_against_model(sc: Scenario, source: str) -> None:
     _check_overlaps(sc, source)
 
 
-def refuse_3d(sc: Scenario, what: str, why: str) -> None:
-    """A one-line error when ``sc``'s sensor is 3-D and ``what`` is planar only (``why``)."""
-    if sc.objective.sensor.is_3d:
-        raise ScenarioError(f"{sc.where()}: sensor: 3d: {what} is not available for a 3-D sensor: {why}")
+def refuse_off_the_base(sc: Scenario, what: str, why: str) -> None:
+    """A one-line error when ``what`` needs the base's planar pose and ``sc``'s sensor does not
+    give it (``why``)."""
+    sensor = sc.objective.sensor.sensor
+    if not sensor.planar_base:
+        raise ScenarioError(
+            f"{sc.where()}: sensor: {sensor.kind}: {what} is not available for a {sensor.label}: {why}"
+        )
 
 
 def scenario_params(sc: Scenario) -> tuple[str, ...]:
-    """Every parameter of the scenario's problem: the model's, then its sensor's mount."""
-    return (*sc.model_form().kinematic_params, *sc.objective.sensor.params())
+    """Every parameter of the scenario's problem: the model's, then its sensor's mount, then the
+    tracker lag when it is estimated (``tracker_lag``: each log's, in a joint fit)."""
+    lag = (LAG_PARAM,) if sc.log.alignment.tracker_lag == "auto" else ()
+    return (*sc.model_form().kinematic_params, *sc.objective.sensor.params(), *lag)
 
 
 def _check_units(sc: Scenario, source: str) -> None:

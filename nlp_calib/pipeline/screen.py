@@ -27,7 +27,7 @@ def find_faults(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray)
     def judge(bad_intervals: np.ndarray, bad_records: np.ndarray) -> np.ndarray | None:
         masks = np.zeros(log.n_records - 1, dtype=bool), np.zeros(log.n_records, dtype=bool)
         masks[0][start : stop - 1], masks[1][start:stop] = bad_intervals, bad_records
-        masked = replace(binder, bad_intervals=masks[0], bad_records=masks[1])
+        masked = replace(binder.lag_held(x0), bad_intervals=masks[0], bad_records=masks[1])
         _, ev = masked.bind(log, start, stop)
         _, x, converged = masked.fit(ev, x0)
         return ev.params(x) if converged and np.all(np.isfinite(x)) else None

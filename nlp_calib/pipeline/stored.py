@@ -14,6 +14,7 @@ from nlp_calib.core.config import fail, key_name, read_yaml
 from nlp_calib.core.errors import ConfigError, UsageError
 from nlp_calib.models import MODELS, KinematicModel, get_model, param_names
 from nlp_calib.results.checks import MIN_FOLDS
+from nlp_calib.sensors import SENSORS, sensor_for
 from nlp_calib.solvers import SOLVERS
 
 
@@ -114,10 +115,11 @@ def read_calibration(path: Path) -> StoredCalibration:
     model = doc.get("model")
     if model not in MODELS:
         fail(f"{where}: model", f"{model!r:.40} is not one of {', '.join(MODELS)}")
-    if isinstance(doc.get("parameters"), Mapping) and "sensor_roll" in doc["parameters"]:
+    kind = _sensor_kind(doc)
+    if kind not in SENSORS or not sensor_for(kind).planar_base:
         fail(
-            f"{where}: parameters",
-            "a 3-D sensor's calibration (sensor: 3d) cannot be checked yet: the drift check compares a "
+            f"{where}: sensor",
+            f"a calibration of a {kind!s:.20} sensor cannot be checked yet: the drift check compares a "
             "planar mount; recalibrate with 'nlp-calib run' on the new log and compare the two",
         )
     kinematic = get_model(model)
@@ -139,3 +141,14 @@ def read_calibration(path: Path) -> StoredCalibration:
     data = doc.get("dataset")
     dataset = data.get("path") if isinstance(data, Mapping) and isinstance(data.get("path"), str) else None
     return StoredCalibration(path, model, solver, values, std, dof, scenario, objective, recorded, dataset)
+
+
+def _sensor_kind(doc: Mapping[str, Any]) -> str:
+    """The sensor a calibration.yaml holds the mount of (its ``sensor.kind``; a file written before
+    it said so holds a planar one, unless its parameters are a camera mount's)."""
+    sensor = doc.get("sensor")
+    if isinstance(sensor, Mapping) and isinstance(sensor.get("kind"), str):
+        return str(sensor["kind"])
+    params = set(doc["parameters"]) if isinstance(doc.get("parameters"), Mapping) else set()
+    kinds = [k for k in SENSORS if set(sensor_for(k).params) <= params]
+    return max(kinds, key=lambda k: len(sensor_for(k).params), default=next(iter(SENSORS)))

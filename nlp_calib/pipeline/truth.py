@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.core.errors import NlpCalibWarning
+from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import TruthCheck
 from nlp_calib.simulation import truth_path
@@ -29,8 +30,13 @@ def read_truth(log_path: Path) -> dict[str, float] | None:
     if not path.is_file():
         return None
     try:
-        params = json.loads(path.read_text(encoding="utf-8"))["params"]
-        return {str(k): float(v) for k, v in params.items()}
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        out = {str(k): float(v) for k, v in doc["params"].items()}
+        options = doc.get("options") if isinstance(doc.get("options"), dict) else {}
+        lag = doc.get("lag_s", options.get("latency_s"))  # the stamps' offset the simulator applied
+        if isinstance(lag, (int, float)) and not isinstance(lag, bool):
+            out[LAG_PARAM] = float(lag)
+        return out
     except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError):
         warnings.warn(
             f"{path}: not a truth file nlp-calib simulate wrote (no 'params' mapping of numbers); "

@@ -19,9 +19,10 @@ import numpy as np
 from nlp_calib.analysis.crossval import blocks, combine, jackknife_std
 from nlp_calib.analysis.direction import compare
 from nlp_calib.core import memory, threads
+from nlp_calib.models import reference_scales
 from nlp_calib.pipeline.build import Binder, no_priors
 from nlp_calib.problem import ResidualData
-from nlp_calib.results.checks import CrossValidation, DirectionCheck, Fold
+from nlp_calib.results.checks import WEAK, CrossValidation, DirectionCheck, Fold
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.solvers import Priors
 from nlp_calib.solvers.evaluation import NormalEquations
@@ -79,7 +80,22 @@ def _fit(
     step = ev.normal_equations(x_k).step() if converged else None
     if step is not None:
         x_k = ev.boxplus(x_k, step)
+        if binder.bounds is not None:  # the fit keeps to the bounds, and so does its last step
+            x_k = np.clip(x_k, *binder.bounds)
     return ev.params(x_k), converged, kept.n_residuals
+
+
+def holding(binder: Binder, x: np.ndarray, names: Sequence[str]) -> Binder:
+    """``binder`` with the free parameters ``names`` held at ``x``'s values (stiff priors): a
+    refit whose data say nothing of them (a part without their driving, a fold without their log)
+    would otherwise meet a singular system."""
+    free = binder.fns.free
+    idx = [free.index(n) for n in names if n in free]
+    if not idx:
+        return binder
+    mean, sqrt_info = binder.priors.mean.copy(), binder.priors.sqrt_info.copy()
+    mean[idx], sqrt_info[idx] = x[idx], 1e6
+    return dataclasses.replace(binder, priors=Priors(mean, sqrt_info))
 
 
 def on_threads(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
@@ -129,22 +145,57 @@ def cross_validate(
     score: Score,
     full: np.ndarray,
     whole: NormalEquations | None = None,
+    against: Sequence[np.ndarray] = (),
 ) -> CrossValidation:
-    """``k`` folds over the records ``fit``, each scored on its block by ``score(params, a, b)``,
-    beside the full fit's parameters ``full`` scored on the same block. ``whole``: the normal
-    equations of ``data`` at ``x``, when known (each fold's first step downdates them)."""
+    """``k`` folds over the records ``fit`` (see :func:`folds_over`)."""
+    folds = folds_over(binder, data, fit, blocks(*fit, k), (x, full), canonical, score, whole, against)
+    return combine(binder.fns.names, folds)
+
+
+def folds_over(
+    binder: Binder,
+    data: ResidualData,
+    fit: tuple[int, int],
+    ranges: Sequence[tuple[int, int]],
+    start: tuple[np.ndarray, np.ndarray],
+    canonical: Canonical,
+    score: Score,
+    whole: NormalEquations | None = None,
+    against: Sequence[np.ndarray] = (),
+    held: Sequence[Sequence[str]] = (),
+) -> list[Fold]:
+    """One refit of ``data`` (records ``fit``) without each record range of ``ranges`` (blocks, or
+    whole logs), from ``start = (x, full)``: the whole fit's free values and full parameters. Each
+    fold is scored on its range by ``score(params, a, b)``, beside the full fit's parameters on the
+    same range, and costed there (the data cost of the windows the fold left out, no priors): its
+    own estimate's, then each free-parameter vector of ``against``'s. ``whole``: the normal
+    equations of ``data`` at ``x``, when known (each fold's first step downdates them). ``held``:
+    per range, the parameters its fold holds at ``x`` (a left-out log's own time offset)."""
+    x, full = start
+    names, free = binder.fns.names, binder.fns.free
+    data_only = dataclasses.replace(binder, priors=no_priors(binder.fns.n_free))
+
+    holds = dict(zip(ranges, held))
 
     def fold(block: tuple[int, int]) -> Fold:
         a, b = block
         bad = _base(fit)
         bad[a : b - 1] = True
-        params, converged, n = _fit(binder, data, fit, bad, x, whole)
+        hold = holds.get(block, ())
+        # ``whole`` carries the fit's own priors, not a held fold's.
+        params, converged, n = _fit(holding(binder, x, hold), data, fit, bad, x, None if hold else whole)
         if not n:
             return Fold(a, b, params, False, None)
+        held = data.select(data.interval_counts(bad[fit[0] : fit[1] - 1]) > 0)
+        costs: tuple[float, ...] = ()
+        if converged and held.n_residuals:
+            ev = data_only.evaluate(held)
+            mine = params[[names.index(f) for f in free]]
+            costs = tuple(float(ev.cost(v)) for v in (mine, *against))
         params = canonical(params)
-        return Fold(a, b, params, converged, score(params, a, b), score(full, a, b))
+        return Fold(a, b, params, converged, score(params, a, b), score(full, a, b), costs)
 
-    return combine(binder.fns.names, on_threads(fold, blocks(*fit, k)))
+    return on_threads(fold, list(ranges))
 
 
 def direction_check(
@@ -172,12 +223,7 @@ def direction_check(
         part[first : stop - 1] = direction[first : stop - 1] == sign
         hold = [n for n in undetermined(part) if n in fns.free]
         held |= set(hold)
-        part_binder = binder
-        if hold:
-            idx = [fns.free.index(n) for n in hold]
-            mean, sqrt_info = binder.priors.mean.copy(), binder.priors.sqrt_info.copy()
-            mean[idx], sqrt_info[idx] = x[idx], 1e6  # stiff: held where the whole fit put it
-            part_binder = dataclasses.replace(binder, priors=Priors(mean, sqrt_info))
+        part_binder = holding(binder, x, hold)
         params, converged, n = _fit(part_binder, data, fit, other, x)
         if not converged or n < 10 * fns.n_free:
             return None
@@ -196,6 +242,7 @@ def direction_check(
         estimates.append(canonical(params))
         sigmas.append(jackknife_std(np.array(folds)) if len(folds) >= 3 else np.full(len(fns.names), np.nan))
         windows.append(n)
+    apart = WEAK * reference_scales(fns.model, fns.names, estimates[0])
     return compare(
-        fns.names, estimates[0], estimates[1], (windows[0], windows[1]), sigmas[0], sigmas[1], held
+        fns.names, estimates[0], estimates[1], (windows[0], windows[1]), sigmas[0], sigmas[1], held, apart
     )

@@ -9,7 +9,7 @@ A residual compares a horizon window's predicted sensor motion with the tracker'
 sensor mounting pose. Where ``M`` and ``∂M/∂x`` come from is :mod:`nlp_calib.problem.motion`'s
 business (directly from one interval's inputs when ``H = 1``, from prefix poses otherwise); what
 the sensor measures (a planar pose, or a 3-D one: ``e = Log((s·Z)⁻¹·T⁻¹·lift(M)·T)``, 6 rows) is
-:mod:`nlp_calib.problem.sensors`'; every per-residual Function here is built once on top of both.
+:mod:`nlp_calib.sensors`'; every per-residual Function here is built once on top of both.
 
 Per-residual Functions take two mapped inputs: ``motion`` (the window's motion data, see
 :class:`~nlp_calib.problem.motion.MotionSymbols`) and ``data = [z, w]`` (the tracker's motion
@@ -31,9 +31,11 @@ import numpy as np
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.core.ranges import Range, check_choice, check_range
 from nlp_calib.models.base import INTEGRATIONS, KinematicModel
+from nlp_calib.models.clock import lag_names
+from nlp_calib.problem import clock
 from nlp_calib.problem import motion as motion_sources
-from nlp_calib.problem.sensors import Sensor, sensor_for
 from nlp_calib.problem.trajectory import TrajectoryFunctions, base_motion, fn, split_params
+from nlp_calib.sensors import Sensor, sensor_for
 from nlp_calib.symbolic.kernels import KERNELS, kernel_function
 
 _CSE = {"cse": True}
@@ -57,6 +59,8 @@ STEPS = {0: "prefix_value_step", 1: "prefix_step", 2: "prefix_hessian_step"}
 #: ``horizon``: each window composes H steps symbolically, so building the problem costs time and
 #: memory in proportion to H; the accuracy study's trajectory error flattens by H = 25.
 HORIZON = Range(1, 200, integer=True)
+#: Time offsets in one problem (one per log).
+LAGS = Range(0, 10_000, integer=True)
 
 
 @dataclass(frozen=True)
@@ -67,13 +71,17 @@ class ProblemSpec:
     integration: str = "exact"
     kernel: str = "huber"
     fixed: tuple[str, ...] = ()
-    #: What the tracker measures: ``planar`` poses or ``3d`` ones (see :mod:`~nlp_calib.problem.sensors`).
+    #: What the tracker measures: ``planar`` poses or ``3d`` ones (see :mod:`~nlp_calib.sensors`).
     sensor: str = "planar"
     #: ``free``: 3-D poses known up to scale (monocular visual odometry): ``scale`` is estimated.
     scale: str = "fixed"
+    #: Time offsets (``tracker_lag``) in the problem, one per log (see :mod:`~nlp_calib.problem.clock`);
+    #: 0: the data's clock is taken as it is.
+    lags: int = 0
 
     def __post_init__(self) -> None:
         sensor_for(self.sensor, self.scale)
+        check_range("lags", self.lags, LAGS)
         check_range("horizon", self.horizon, HORIZON)
         check_choice("integration", self.integration, INTEGRATIONS)
         check_choice("kernel", self.kernel, KERNELS)
@@ -114,7 +122,7 @@ class ProblemFunctions(TrajectoryFunctions):
 
     def __init__(self, model: KinematicModel, spec: ProblemSpec) -> None:
         sensor = sensor_for(spec.sensor, spec.scale)
-        names = (*model.kinematic_params, *sensor.params)
+        names = (*model.kinematic_params, *sensor.params, *lag_names(spec.lags))
         unknown = [n for n in spec.fixed if n not in names]
         if unknown:
             raise ProblemError(f"cannot fix unknown parameter(s) {unknown}; parameters are {list(names)}")
@@ -159,18 +167,30 @@ class ProblemFunctions(TrajectoryFunctions):
 
     @property
     def sensor(self) -> Sensor:
-        """What the tracker measures and how the mount enters (see :mod:`~nlp_calib.problem.sensors`)."""
+        """What the tracker measures and how the mount enters (see :mod:`~nlp_calib.sensors`)."""
         return sensor_for(self.spec.sensor, self.spec.scale)
 
     @property
     def manifold_sensor(self) -> bool:
-        """True when the sensor's mount is perturbed on its group (see :mod:`~nlp_calib.problem.sensors`)."""
+        """True when the sensor's mount is perturbed on its group (see :mod:`~nlp_calib.sensors`)."""
         return self.sensor.manifold(self.free)
 
     @property
     def data_rows(self) -> int:
-        """Rows of a window's ``data = [z, w]``."""
-        return self.sensor.z_rows + 1
+        """Rows of a window's ``data = [z, clock, w]`` (``clock``: :attr:`clock_rows`)."""
+        return self.sensor.z_rows + self.clock_rows + 1
+
+    @property
+    def clock_rows(self) -> int:
+        """Rows of a window's clock data: the inputs' rates at its first and last record, the
+        offset its log's data were re-sampled at, and which log it belongs to (one row per log);
+        none when the problem has no time offset (see :mod:`~nlp_calib.problem.clock`)."""
+        return 2 * self.n_inputs + 1 + self.spec.lags if self.spec.lags else 0
+
+    @property
+    def weight_row(self) -> int:
+        """The row of a window's weight in its ``data``."""
+        return self.data_rows - 1
 
     @property
     def error_rows(self) -> int:
@@ -216,14 +236,24 @@ class ProblemFunctions(TrajectoryFunctions):
             return self._windows[order]
         h = ca.SX.sym("h", self.n_free)
         mo = self._source.window(h, order)
-        sensor = [self.free.index(n) for n in self.sensor.params if n in self.free]
-        x_moved = motion_sources.perturbed(self._sym.x, h[sensor], sensor)
-        T_moved = split_params(
-            self.model, self.sensor, ca.substitute(self._sym.params, self._sym.x, x_moved)
-        )[1]
-        e = self.sensor.residual(self._sym.data[0 : self.sensor.z_rows], T_moved, mo.M)
+        # The motion's kinematic dependence comes with its data (prefix jets); the mount's and the
+        # clock's is direct.
+        params_h = ca.substitute(self._sym.params, self._sym.x, self._sym.x + h)
+        e = self._residual(self._sym.data, params_h, mo.M)
         self._windows[order] = (mo, h, e)
         return mo, h, e
+
+    def _residual(self, data: ca.SX, params: ca.SX, M: ca.SX) -> ca.SX:
+        """The residual of a window's ``data`` for ``params`` and base motion ``M`` (before the clock)."""
+        k, mount, lags = split_params(self.model, self.sensor, params)
+        z_rows, n_in = self.sensor.z_rows, self.n_inputs
+        if self.spec.lags:
+            ends = data[z_rows : z_rows + n_in], data[z_rows + n_in : z_rows + 2 * n_in]
+            resampled = data[z_rows + 2 * n_in]
+            select = data[z_rows + 2 * n_in + 1 : z_rows + 2 * n_in + 1 + self.spec.lags]
+            delta = ca.dot(select, lags) - resampled
+            M = clock.shifted(self.model, k, M, ends, delta, self.spec.integration)
+        return self.sensor.residual(data[0:z_rows], mount, M)
 
     def _at_zero(self, mo: motion_sources.MotionSymbols, h: ca.SX, exprs: list[ca.SX]) -> list[ca.SX]:
         """``exprs`` at ``h = 0`` (and the motion's end unperturbed)."""
@@ -240,7 +270,7 @@ class ProblemFunctions(TrajectoryFunctions):
 
     def _robust(self, e: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
         """``s = eᵀΩe``, the weighted cost ``w·ρ(s)``, ρ'(s) and the inlier flag."""
-        w, omega, delta = self._sym.data[self.sensor.z_rows], self._sym.omega, self._sym.delta
+        w, omega, delta = self._sym.data[self.weight_row], self._sym.omega, self._sym.delta
         s = ca.dot(e, omega * e)
         rho, weight = kernel_function(self.spec.kernel)(s, delta)
         return s, w * rho, weight, ca.if_else(s <= delta * delta, 1.0, 0.0)
@@ -259,7 +289,7 @@ class ProblemFunctions(TrajectoryFunctions):
     def normal_equations(self) -> ca.Function:
         motion, e, J = self._linear()
         s, cost, weight, inlier = self._robust(e)
-        w = self._sym.data[self.sensor.z_rows]
+        w = self._sym.data[self.weight_row]
         Omega = ca.diag(self._sym.omega)
         # Only the upper triangle of the symmetric JᵀΩJ: fewer operations per residual and per sum.
         JtOJ = ca.mtimes([J.T, Omega, J])
@@ -303,7 +333,7 @@ class ProblemFunctions(TrajectoryFunctions):
                 e,
                 s,
                 weight,
-                self._sym.data[self.sensor.z_rows] * ca.mtimes([J.T, ca.diag(self._sym.omega), e]),
+                self._sym.data[self.weight_row] * ca.mtimes([J.T, ca.diag(self._sym.omega), e]),
             ],
             ["e", "s", "weight", "JtOe"],
         )
@@ -379,7 +409,7 @@ class ProblemFunctions(TrajectoryFunctions):
 
     @property
     def column_rows(self) -> int:
-        """Rows of one window's column ``[u_0 … u_{H-1}, z, w]`` (see :meth:`ResidualData.columns`)."""
+        """Rows of one window's column ``[u_0 … u_{H-1}, data]`` (see :meth:`ResidualData.columns`)."""
         return self.n_inputs * self.spec.horizon + self.data_rows
 
     @functools.cached_property
@@ -387,9 +417,9 @@ class ProblemFunctions(TrajectoryFunctions):
         column = ca.SX.sym("data", self.column_rows)
         n_in, H = self.n_inputs, self.spec.horizon
         U = ca.reshape(column[: n_in * H], n_in, H)
-        z = column[n_in * H : n_in * H + self.sensor.z_rows]
-        k, mount = split_params(self.model, self.sensor, self._sym.params)
-        e = self.sensor.residual(z, mount, base_motion(self.model, k, U, self.spec.integration))
+        k = split_params(self.model, self.sensor, self._sym.params)[0]
+        M = base_motion(self.model, k, U, self.spec.integration)
+        e = self._residual(column[n_in * H :], self._sym.params, M)
         return column, e, ca.mtimes(ca.jacobian(e, self._sym.x), self._sym.M)
 
     @functools.cached_property

@@ -3,7 +3,7 @@ covariance, a window's motion, and SE(2) ``between`` with its Jacobians.
 
 They take the full parameter vector (free and fixed, in model order) rather than the free one,
 because trajectories, metrics, reports and the closed-form start evaluate a given calibration.
-Poses and motions are in the sensor's layout (:mod:`nlp_calib.problem.sensors`): ``(x, y, theta)``
+Poses and motions are in the sensor's layout (:mod:`nlp_calib.sensors`): ``(x, y, theta)``
 for a planar sensor, ``(x, y, z, qx, qy, qz, qw)`` in the trajectory's own units for a 3-D one.
 """
 
@@ -14,7 +14,7 @@ import functools
 import casadi as ca
 
 from nlp_calib.models.base import KinematicModel
-from nlp_calib.problem.sensors import Sensor
+from nlp_calib.sensors import Sensor
 from nlp_calib.symbolic import se2
 
 _CSE = {"cse": True}
@@ -28,11 +28,11 @@ def fn(
     return ca.Function(name, ins, [ca.densify(o) for o in outs], in_names, out_names, _CSE)
 
 
-def split_params(model: KinematicModel, sensor: Sensor, params: ca.SX) -> tuple[ca.SX, ca.SX]:
-    """Kinematic parameters and the sensor's mount (``T_base_sensor``, then the scale when
-    free) of a full parameter vector."""
-    nk = len(model.kinematic_params)
-    return params[:nk], params[nk : nk + len(sensor.params)]
+def split_params(model: KinematicModel, sensor: Sensor, params: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """Kinematic parameters, the sensor's mount (``T_base_sensor``, then the scale when free) and
+    the time offsets (one per log, when the problem has them) of a full parameter vector."""
+    nk, ns = len(model.kinematic_params), len(sensor.params)
+    return params[:nk], params[nk : nk + ns], params[nk + ns :]
 
 
 def base_motion(model: KinematicModel, k: ca.SX, U: ca.SX, integration: str) -> ca.SX:
@@ -47,7 +47,7 @@ def base_motion(model: KinematicModel, k: ca.SX, U: ca.SX, integration: str) -> 
 
 def predict_motion(model: KinematicModel, sensor: Sensor, params: ca.SX, U: ca.SX, integration: str) -> ca.SX:
     """Sensor motion over consecutive intervals: ``T⁻¹ · Δr_0 ⋯ Δr_{H-1} · T``."""
-    k, mount = split_params(model, sensor, params)
+    k, mount, _ = split_params(model, sensor, params)
     return sensor.predict(mount, base_motion(model, k, U, integration))
 
 
@@ -70,7 +70,7 @@ class TrajectoryFunctions:
 
     @property
     def sensor(self) -> Sensor:
-        """The host's sensor (see :mod:`~nlp_calib.problem.sensors`)."""
+        """The host's sensor (see :mod:`~nlp_calib.sensors`)."""
         raise NotImplementedError
 
     @property
@@ -93,7 +93,7 @@ class TrajectoryFunctions:
         and its derivative with respect to the interval's inputs (for checking encoder readings)."""
         params, u1, _ = self._full
         z = ca.SX.sym("z", self.sensor.z_rows)
-        k, mount = split_params(self.model, self.sensor, params)
+        k, mount, _ = split_params(self.model, self.sensor, params)
         M1 = base_motion(self.model, k, ca.reshape(u1, self.n_inputs, 1), self.integration)
         e1 = self.sensor.residual(z, mount, M1)
         return fn(
@@ -122,6 +122,23 @@ class TrajectoryFunctions:
         )
 
     @functools.cached_property
+    def carried(self) -> ca.Function:
+        """(T_world_sensor, params, M) → the sensor's pose after the base moves by the planar motion
+        ``M`` ``(x, y, θ)`` from where the sensor is at ``T_world_sensor``: ``T_world_sensor·T⁻¹MT``
+        (a manoeuvre's tracker poses from its base path)."""
+        params = self._full[0]
+        T_ws = ca.SX.sym("T_world_sensor", self.sensor.pose_rows)
+        M = ca.SX.sym("M", 3)
+        mount = split_params(self.model, self.sensor, params)[1]
+        return fn(
+            "carried",
+            [T_ws, params, M],
+            ["T_world_sensor", "params", "M"],
+            [self.sensor.compose(T_ws, self.sensor.predict(mount, M))],
+            ["T_world_sensor_next"],
+        )
+
+    @functools.cached_property
     def base_from_sensor(self) -> ca.Function:
         params = self._full[0]
         T_ws = ca.SX.sym("T_world_sensor", self.sensor.pose_rows)
@@ -141,7 +158,7 @@ class TrajectoryFunctions:
         state = ca.SX.sym("state", 12)
         T_wb, P = state[:3], ca.reshape(state[3:], 3, 3)
         input_std = ca.SX.sym("input_std", self.n_inputs)
-        k_sym, _ = split_params(self.model, self.sensor, params)
+        k_sym = split_params(self.model, self.sensor, params)[0]
         T_wb_next = se2.compose(T_wb, self.model.increment(k_sym, u1, self.integration))
         F, G = ca.jacobian(T_wb_next, T_wb), ca.jacobian(T_wb_next, u1)
         P_next = ca.mtimes([F, P, F.T]) + ca.mtimes([G, ca.diag(input_std**2), G.T])

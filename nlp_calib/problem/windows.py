@@ -23,6 +23,7 @@ from nlp_calib.core.errors import ProblemError
 from nlp_calib.core.ranges import Range, check_choice, check_range
 from nlp_calib.logs import Log
 from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES, KinematicModel
+from nlp_calib.problem.clock import level_rows, record_rates
 from nlp_calib.problem.functions import HORIZON, ProblemFunctions
 
 STRIDE = Range(1, 1_000_000, integer=True)
@@ -54,6 +55,15 @@ class ResidualOptions:
 
 
 @dataclass(frozen=True)
+class WindowClock:
+    """What a problem's time offsets need of the data: ``lags``, the offset each log's inputs were
+    re-sampled at (s), and ``rates``, each input's rate (a level: its value) at each record."""
+
+    lags: tuple[float, ...]
+    rates: np.ndarray
+
+
+@dataclass(frozen=True)
 class ResidualData:
     """The windows of one fit and the data they are evaluated on (records numbered as above).
 
@@ -74,8 +84,11 @@ class ResidualData:
     horizon: int
     dropped_stationary: int
     dropped_faulty: int = 0
-    #: A 3-D sensor's windows left out by reason (:func:`nlp_calib.problem.camera.fit_selection`).
+    #: The windows the sensor's start left out, by reason (:func:`nlp_calib.problem.start.fit_windows`).
     dropped_selection: Mapping[str, int] | None = None
+    #: Problems with a time offset: the offset each log's inputs were re-sampled at and each input's
+    #: rate at each record (:mod:`nlp_calib.problem.clock`); None: no clock data.
+    clock: WindowClock | None = None
 
     @property
     def log(self) -> Log:
@@ -93,12 +106,30 @@ class ResidualData:
         return int(self.T_world_sensor.shape[0])
 
     def data(self) -> np.ndarray:
-        """The per-window ``data = [z, w]`` matrix ``(z rows + 1, n_residuals)``, column-major."""
-        rows = self.z.shape[0]
-        out = np.empty((rows + 1, self.n_residuals), order="F")
+        """The per-window ``data = [z, clock, w]`` matrix, column-major (see
+        :attr:`ProblemFunctions.clock_rows`)."""
+        clock = self.clock_rows()
+        rows, extra = self.z.shape[0], clock.shape[0]
+        out = np.empty((rows + extra + 1, self.n_residuals), order="F")
         out[0:rows] = self.z
-        out[rows] = 1.0
+        out[rows : rows + extra] = clock
+        out[rows + extra] = 1.0
         return out
+
+    def log_of(self, records: np.ndarray) -> np.ndarray:
+        """The index of the log each of ``records`` belongs to."""
+        return np.searchsorted(np.asarray(self.offsets), records, side="right") - 1
+
+    def clock_rows(self) -> np.ndarray:
+        """Each window's clock data (``(0, n)`` without a time offset): the rates at its first and
+        last record, its log's re-sampled offset and which log it belongs to."""
+        if self.clock is None:
+            return np.zeros((0, self.n_residuals))
+        rates, which = self.clock.rates, self.log_of(self.starts)
+        select = np.zeros((len(self.clock.lags), self.n_residuals))
+        select[which, np.arange(self.n_residuals)] = 1.0
+        resampled = np.asarray(self.clock.lags)[which][None, :]
+        return np.vstack([rates[:, self.starts], rates[:, self.stops], resampled, select])
 
     def interval_counts(self, flagged: np.ndarray) -> np.ndarray:
         """How many of each window's intervals ``flagged`` (a mask over the intervals) marks."""
@@ -109,23 +140,29 @@ class ResidualData:
         """The windows ``keep`` (a mask or indices) marks, in order."""
         return replace(self, starts=self.starts[keep], stops=self.stops[keep], z=self.z[:, keep])
 
-    def with_inputs(self, inputs: np.ndarray) -> ResidualData:
-        """The same windows and tracker motions on other interval inputs (e.g. re-sampled encoders)."""
+    def with_inputs(
+        self, inputs: np.ndarray, lags: Sequence[float] | None = None, rates: np.ndarray | None = None
+    ) -> ResidualData:
+        """The same windows and tracker motions on other interval inputs (e.g. encoders re-sampled
+        at the offsets ``lags``, one per log, with their ``rates`` at the records, when the problem
+        has them)."""
         if inputs.shape != self.inputs.shape:
             raise ProblemError(f"inputs of shape {inputs.shape} do not fit {self.inputs.shape}")
-        return replace(self, inputs=inputs)
+        if lags is None or rates is None or self.clock is None:
+            return replace(self, inputs=inputs)
+        return replace(self, inputs=inputs, clock=WindowClock(tuple(float(v) for v in lags), rates))
 
     def columns_of(self, windows: np.ndarray | slice) -> np.ndarray:
         """One column ``[u_0 … u_{H-1}, z, w]`` per window, as the defining ``residual`` takes it."""
         starts, lengths = self.starts[windows], self.stops[windows] - self.starts[windows]
         if np.any(lengths != self.horizon):
             raise ProblemError(f"only windows of {self.horizon} intervals have a column layout")
-        n_in, H, rows = self.inputs.shape[0], self.horizon, self.z.shape[0]
-        out = np.empty((n_in * H + rows + 1, starts.size), order="F")
+        n_in, H = self.inputs.shape[0], self.horizon
+        data = self.data()[:, windows]
+        out = np.empty((n_in * H + data.shape[0], starts.size), order="F")
         for j in range(H):
             out[j * n_in : (j + 1) * n_in] = self.inputs[:, starts + j]
-        out[n_in * H : n_in * H + rows] = self.z[:, windows]
-        out[-1] = 1.0
+        out[n_in * H :] = data
         return out
 
     @functools.cached_property
@@ -230,7 +267,62 @@ def joined(parts: Sequence[ResidualData]) -> ResidualData:
         dropped_stationary=sum(p.dropped_stationary for p in parts),
         dropped_faulty=sum(p.dropped_faulty for p in parts),
         dropped_selection=_summed([p.dropped_selection for p in parts]),
+        clock=_joined_clock([p.clock for p in parts]),
     )
+
+
+def appended(
+    fns: ProblemFunctions,
+    data: ResidualData,
+    stretch: tuple[np.ndarray, np.ndarray, np.ndarray],
+    options: ResidualOptions,
+) -> ResidualData:
+    """``data`` with a stretch of driving appended to its last log: ``stretch`` is the stretch's
+    record times (s), its interval inputs ``(n_inputs, n - 1)`` and its tracker poses (in the
+    sensor's layout), laid after the last record as another log would be (a zero interval between,
+    no window across) but on the last log's clock (its time offset). The new windows are the last
+    ones; a manoeuvre a plan proposes is judged on them."""
+    time_s, inputs, poses = stretch
+    H, n0 = options.horizon, data.n_records
+    starts = n0 + window_starts(inputs.shape[1], H, options.stride)
+    all_poses = np.ascontiguousarray(np.concatenate([data.T_world_sensor, poses]))
+    clock = data.clock
+    if clock is not None:
+        rates = record_rates(inputs, time_s, level_rows(fns.model))
+        clock = WindowClock(clock.lags, np.concatenate([clock.rates, rates], axis=1))
+    return replace(
+        data,
+        inputs=np.ascontiguousarray(
+            np.concatenate([data.inputs, np.zeros((inputs.shape[0], 1)), inputs], axis=1)
+        ),
+        T_world_sensor=all_poses,
+        starts=np.concatenate([data.starts, starts]),
+        stops=np.concatenate([data.stops, starts + H]),
+        z=np.concatenate([data.z, tracker_motions(fns, all_poses, starts, starts + H)], axis=1),
+        clock=clock,
+    )
+
+
+def _joined_clock(clocks: Sequence[WindowClock | None]) -> WindowClock | None:
+    """Parts' clock data end to end (None when a part has none)."""
+    given = [c for c in clocks if c is not None]
+    if len(given) < len(clocks):
+        return None
+    return WindowClock(
+        tuple(v for c in given for v in c.lags), np.concatenate([c.rates for c in given], axis=1)
+    )
+
+
+def log_rates(model: KinematicModel, logs: Sequence[Log], inputs: np.ndarray) -> np.ndarray:
+    """Each input's rate at every record of ``logs`` laid end to end (``inputs`` as
+    :func:`interval_inputs` lays them): the model's own where it has them, else the intervals'."""
+    parts, first = [], 0
+    for log in logs:
+        exact = model.input_rates(log)
+        u = inputs[:, first : first + log.n_records - 1]
+        parts.append(exact if exact is not None else record_rates(u, log.time_s, level_rows(model)))
+        first += log.n_records
+    return np.concatenate(parts, axis=1)
 
 
 def _summed(counts: Sequence[Mapping[str, int] | None]) -> dict[str, int] | None:
@@ -243,13 +335,7 @@ def _summed(counts: Sequence[Mapping[str, int] | None]) -> dict[str, int] | None
 
 def tracker_poses(fns: ProblemFunctions, log: Log) -> np.ndarray:
     """The log's tracker poses in the layout of the problem's sensor."""
-    if fns.sensor.pose_rows == 3:
-        return log.T_world_sensor
-    if log.T_world_sensor_3d is None:
-        raise ProblemError(
-            f"{log.path}: a 3-D sensor's problem needs 3-D tracker poses; the log has planar ones"
-        )
-    return log.T_world_sensor_3d
+    return fns.sensor.poses(log)
 
 
 def build_residual_data(
@@ -297,6 +383,9 @@ def build_residual_data(
         z=tracker_motions(fns, poses, starts, stops),
         horizon=H,
         dropped_stationary=0,
+        clock=WindowClock(tuple(lg.encoder_lag_s for lg in logs), log_rates(fns.model, logs, inputs))
+        if fns.spec.lags
+        else None,
     )
     if drop_stationary and starts.size:
         keep = data.interval_counts(fns.model.moving(inputs)) > 0

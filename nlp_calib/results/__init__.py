@@ -14,6 +14,7 @@ from nlp_calib.results.run import (
     JointRun,
     LogInfo,
     ScenarioInfo,
+    SensorInfo,
     SolverReport,
     Verdict,
 )
@@ -29,6 +30,7 @@ __all__ = [
     "JointRun",
     "LogInfo",
     "ScenarioInfo",
+    "SensorInfo",
     "SolverReport",
     "SolverResult",
     "Verdict",

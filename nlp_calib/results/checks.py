@@ -6,6 +6,7 @@ these records hold what they found, with the thresholds that decide how it reads
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +29,9 @@ class Fold:
     converged: bool
     heldout: TrajectoryMetrics | None
     insample: TrajectoryMetrics | None = None
+    #: The data cost of the windows the fold left out: the fold's estimate's, then each other
+    #: parameter set's it was asked to cost there (empty: not costed).
+    costs: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -54,6 +58,20 @@ class CrossValidation:
     def std_dict(self) -> dict[str, float]:
         return {n: float(s) for n, s in zip(self.names, self.std)}
 
+    def beyond(self, white: np.ndarray) -> np.ndarray:
+        """The jackknife σ where it exceeds the white-noise σ by more than its own sampling noise
+        explains (NaN elsewhere): a jackknife of ``k`` folds of white noise alone scatters as
+        ``χ²(k − 1)``, so one beyond its 95 % point says errors vary along the drive; below it,
+        taking the larger of the two would only add that noise to the σ."""
+        k = len(self.converged)
+        if k < 2:
+            return np.full(len(self.names), np.nan)
+        nu = k - 1.0
+        # Wilson-Hilferty: χ²(ν)'s 95 % point within 0.2 % from ν = 3 on.
+        factor = np.sqrt((1.0 - 2.0 / (9.0 * nu) + 1.6449 * np.sqrt(2.0 / (9.0 * nu))) ** 3)
+        with np.errstate(invalid="ignore"):
+            return np.where(self.std > factor * np.asarray(white, dtype=float), self.std, np.nan)
+
     def heldout_mean(self, figure: str) -> float:
         """The mean of one held-out figure over the folds, weighted by the records each scores."""
         return self._mean(figure, "heldout")
@@ -77,13 +95,20 @@ class CrossValidation:
         )
 
 
-def believed_std(white: np.ndarray, blocked: np.ndarray) -> np.ndarray:
-    """The σ to believe: the larger of the white-noise σ (a floor) and the jackknife σ."""
-    return np.where(np.isfinite(blocked), np.fmax(white, blocked), white)
+def believed_std(white: np.ndarray, *spreads: np.ndarray) -> np.ndarray:
+    """The σ to believe: the largest of the white-noise σ (a floor) and each jackknife σ or spread
+    (NaN where one has none)."""
+    out = np.asarray(white, dtype=float)
+    for spread in spreads:
+        out = np.where(np.isfinite(spread), np.fmax(out, spread), out)
+    return out
 
 
 #: A difference beyond this many σ is reported as significant.
 SIGNIFICANT = 3.0
+#: A log's own estimate beyond this many σ (of its difference from the other logs') disagrees; a
+#: forward-reverse difference beyond it widens the σ to believe.
+CONSISTENCY_SIGMAS = 4.0
 
 
 @dataclass(frozen=True)
@@ -96,6 +121,8 @@ class DirectionCheck:
     reverse: np.ndarray
     windows: tuple[int, int]
     z: np.ndarray
+    #: Per parameter, the difference beyond which the parts cannot both describe one robot.
+    apart: np.ndarray | None = None
 
     @property
     def worst(self) -> tuple[str, float]:
@@ -113,6 +140,20 @@ class DirectionCheck:
     def compared(self) -> bool:
         """Whether any parameter could be compared (a σ in both parts, held in neither)."""
         return bool(np.any(np.isfinite(self.z)))
+
+    def spread(self) -> np.ndarray:
+        """Half the forward-reverse difference beyond its noise, ``√(Δ² − σ_Δ²)/2``, of each
+        parameter that differs beyond :data:`CONSISTENCY_SIGMAS` σ but within :attr:`apart` (NaN
+        elsewhere): driving with another mix of directions may land anywhere between the two, so
+        the σ to believe covers it. An effect size, not a variance estimate: taken in only where
+        the difference is clear (a 3σ difference on direction-free truth is rare but not unheard
+        of) and could be one robot's (beyond, a part's own fit is in question)."""
+        diff = np.abs(self.forward - self.reverse)
+        limit = np.inf if self.apart is None else self.apart
+        with np.errstate(invalid="ignore", divide="ignore"):
+            clear = (np.abs(self.z) > CONSISTENCY_SIGMAS) & (diff <= limit)
+            noise = diff / np.abs(self.z)
+        return np.where(clear, 0.5 * np.sqrt(np.clip(diff**2 - noise**2, 0.0, None)), np.nan)
 
     def words(self) -> str:
         """The verdict in words: agree within, disagree by, or could not compare (and why)."""
@@ -142,21 +183,39 @@ class DirectionCheck:
 
 @dataclass(frozen=True)
 class LagEstimate:
-    """The estimated lag (s), the costs of the lags fitted, and whether the best of them is at an
-    end of the searched range (then the true lag may lie beyond it)."""
+    """How the fitted tracker lag (s) was reached: the lags the encoders were re-sampled at in
+    turn and the internal fit's cost at each, whether the last fit converged, and whether the lag
+    ended on a bound of the searched range (then the true lag may lie beyond it, or the drive does
+    not determine it)."""
 
     lag_s: float
-    grid_s: tuple[float, ...]
+    path_s: tuple[float, ...]
     costs: tuple[float, ...]
     at_edge: bool = False
+    converged: bool = True
 
     def as_dict(self) -> dict[str, object]:
         return {
             "lag_s": self.lag_s,
-            "grid_s": list(self.grid_s),
+            "path_s": list(self.path_s),
             "costs": [c if np.isfinite(c) else None for c in self.costs],
             "at_edge": self.at_edge,
+            "converged": self.converged,
         }
+
+
+@dataclass(frozen=True)
+class LagEffect:
+    """How the other parameters move with a time offset ``lag`` on this drive: each one's change per
+    second of it along their joint uncertainty (the covariance's regression), for the parameters
+    correlated with it by :data:`LAG_EFFECT_CORRELATION` or more."""
+
+    lag: str
+    per_second: dict[str, float]
+
+
+#: Parameters correlated with a lag by at least this much are said to move with it.
+LAG_EFFECT_CORRELATION = 0.3
 
 
 #: A direction with 1σ beyond this many reference units is weakly observable...
@@ -204,36 +263,47 @@ class Observability:
         }
 
 
-#: A difference beyond this many σ (of the difference) is reported as a disagreement.
-CONSISTENCY_SIGMAS = 4.0
-
-
 @dataclass(frozen=True)
 class Disagreement:
-    """One log's own estimate of a parameter off the joint one by ``z`` σ."""
+    """One log's own estimate of a parameter off the other logs' by ``z`` σ of the difference."""
 
     log: str
     parameter: str
     own: float
-    joint: float
+    others: float
     z: float
 
 
 @dataclass(frozen=True)
 class ConsistencyCheck:
-    """Each log's own estimates (rows, model order) against the joint ones, and the differences
-    in σ of the difference (NaN where a parameter is held in either fit or has no σ)."""
+    """Each log's own estimates (rows, model order) against those of the other logs fitted together
+    (each log left out of the joint fit in turn), on the parameters the log determines on its own.
+
+    ``z``: the differences in σ of the difference, both sides' honest σ (NaN where the log does not
+    determine a parameter, or where either side has no σ). ``apart``: per parameter, the difference
+    beyond which two sets of logs cannot be one robot (the loosest a calibration is said to be known
+    to: :data:`WEAK` times the precision it needs). A difference beyond :data:`SIGNIFICANT` σ but
+    within ``apart`` is a model limit (the parameter moves with the driving); beyond
+    :data:`CONSISTENCY_SIGMAS` σ and ``apart``, the logs are not one robot's."""
 
     names: tuple[str, ...]
     logs: tuple[str, ...]
     joint: np.ndarray
     own: np.ndarray
+    others: np.ndarray
     z: np.ndarray
+    apart: np.ndarray
+    #: Each parameter's unit (model order; empty: not known).
+    units: tuple[str, ...] = ()
 
     @property
     def compared(self) -> bool:
         """Whether any parameter of any log could be compared."""
         return bool(np.any(np.isfinite(self.z)))
+
+    def _beyond(self, sigmas: float) -> np.ndarray:
+        with np.errstate(invalid="ignore"):
+            return np.abs(self.z) > sigmas
 
     @property
     def worst(self) -> Disagreement | None:
@@ -246,57 +316,194 @@ class ConsistencyCheck:
     @property
     def disagreements(self) -> tuple[Disagreement, ...]:
         """Every difference beyond :data:`CONSISTENCY_SIGMAS`, the largest first."""
-        with np.errstate(invalid="ignore"):
-            where = np.argwhere(np.abs(self.z) > CONSISTENCY_SIGMAS)
-        found = [self._at(int(i), int(j)) for i, j in where]
-        return tuple(sorted(found, key=lambda d: -abs(d.z)))
+        return self._listed(self._beyond(CONSISTENCY_SIGMAS))
+
+    @property
+    def different(self) -> tuple[Disagreement, ...]:
+        """The disagreements also beyond :attr:`apart`: no one robot gives both."""
+        far = np.abs(self.own - self.others) > self.apart[None, :]
+        return self._listed(self._beyond(CONSISTENCY_SIGMAS) & far)
 
     @property
     def significant(self) -> bool:
-        return bool(self.disagreements)
+        """Whether the logs are not one robot's (see :attr:`different`)."""
+        return bool(self.different)
+
+    @property
+    def moved(self) -> np.ndarray:
+        """Per parameter: whether some log's own estimate differs from the others' beyond
+        :data:`SIGNIFICANT` σ (the parameter moves with the driving: a model limit)."""
+        return np.any(self._beyond(SIGNIFICANT), axis=0)
+
+    def _listed(self, where: np.ndarray) -> tuple[Disagreement, ...]:
+        found = [self._at(int(i), int(j)) for i, j in np.argwhere(where)]
+        return tuple(sorted(found, key=lambda d: -abs(d.z)))
 
     def _at(self, i: int, j: int) -> Disagreement:
         return Disagreement(
-            self.logs[i], self.names[j], float(self.own[i, j]), float(self.joint[j]), float(self.z[i, j])
+            self.logs[i], self.names[j], float(self.own[i, j]), float(self.others[i, j]), float(self.z[i, j])
         )
 
+    def of_log(self, log: str) -> ConsistencyCheck:
+        """The same check on one log's rows alone (several where entries select parts of one file)."""
+        i = [k for k, name in enumerate(self.logs) if name == log]
+        logs = tuple(self.logs[k] for k in i)
+        return ConsistencyCheck(
+            self.names, logs, self.joint, self.own[i], self.others[i], self.z[i], self.apart, self.units
+        )
+
+    def limits(self) -> list[str]:
+        """One phrase per parameter that moves between the logs beyond their σ without setting
+        them apart: by how much at most and in how many σ."""
+        out = []
+        for j in np.flatnonzero(self.moved):
+            d = np.abs(self.own[:, j] - self.others[:, j])
+            z = np.where(np.isfinite(self.z[:, j]), np.abs(self.z[:, j]), 0.0)
+            i = int(np.argmax(z))
+            rel = d[i] / max(abs(float(self.joint[j])), 1e-12)
+            unit = f" {self.units[j]}" if self.units else ""
+            size = f"{100 * rel:.2g} %" if rel < 1 else f"{d[i]:.3g}{unit}"
+            out.append(f"{self.names[j]} by {size} ({z[i]:.0f}σ, {_name(self.logs[i])})")
+        return out
+
     def words(self) -> str:
-        """One line: which logs disagree on which parameters, that they agree, or that nothing
-        could be compared."""
+        """One line: which logs are not one robot's and on which parameters, which parameters move
+        between the logs (a model limit), that the logs agree, or that nothing could be compared."""
         if not self.compared:
             return (
-                "each log's own fit could not be compared with the joint fit (no parameter with a σ in both)"
+                "each log's own fit could not be compared with the other logs' (no parameter that a log "
+                "determines on its own has a σ on both sides)"
             )
-        if not self.significant:
-            w = self.worst
-            assert w is not None
+        if self.significant:
+            return self._apart_words()
+        limits = self.limits()
+        if limits:
             return (
-                f"each log's own fit agrees with the joint fit within {abs(w.z):.1f}σ "
-                f"(largest: {w.parameter} in {w.log})"
+                f"parameters move between the logs beyond their σ: {'; '.join(limits)}; the model misses "
+                "something that changes with the driving (a model limit), so their σ include the spread "
+                "over the logs"
             )
-        worst = self.disagreements
-        logs = sorted({d.log for d in worst}, key=self.logs.index)
-        params = list(dict.fromkeys(d.parameter for d in worst))
+        w = self.worst
+        assert w is not None
+        return (
+            f"each log's own fit agrees with the other logs' within {abs(w.z):.1f}σ "
+            f"(largest: {w.parameter} in {_name(w.log)})"
+        )
+
+    def _apart_words(self) -> str:
+        worst = self.different
+        logs = [_name(log) for log in sorted({d.log for d in worst}, key=self.logs.index)]
+        params = list(dict.fromkeys(d.parameter for d in (*worst, *self.disagreements)))
         detail = "; ".join(
-            f"{d.parameter} in {d.log}: {d.own:.6g} against {d.joint:.6g} jointly ({d.z:+.1f}σ)"
+            f"{d.parameter} in {_name(d.log)}: {d.own:.6g} against {d.others:.6g} from the other logs "
+            f"({d.z:+.1f}σ)"
             for d in worst[:3]
         )
         return (
             f"the logs do not agree on one robot: {', '.join(params)} differ in {', '.join(logs)} beyond "
-            f"{CONSISTENCY_SIGMAS:g}σ ({detail})"
+            f"{CONSISTENCY_SIGMAS:g}σ and beyond {WEAK:g}× the precision a calibration needs ({detail})"
         )
 
     def as_dict(self) -> dict[str, object]:
+        def row(values: np.ndarray) -> dict[str, float | None]:
+            return {n: (None if not np.isfinite(v) else float(v)) for n, v in zip(self.names, values)}
+
         return {
             "logs": list(self.logs),
             "joint": dict(zip(self.names, map(float, self.joint))),
-            "own": {log: dict(zip(self.names, map(float, row))) for log, row in zip(self.logs, self.own)},
-            "difference_in_sigma": {
-                log: {n: (None if not np.isfinite(v) else float(v)) for n, v in zip(self.names, row)}
-                for log, row in zip(self.logs, self.z)
-            },
+            "own": {log: row(r) for log, r in zip(self.logs, self.own)},
+            "others": {log: row(r) for log, r in zip(self.logs, self.others)},
+            "difference_in_sigma": {log: row(r) for log, r in zip(self.logs, self.z)},
+            "apart": row(self.apart),
+            "moved": [n for n, m in zip(self.names, self.moved) if m],
             "significant": self.significant,
         }
+
+
+def _name(log: str) -> str:
+    """A log's file name: what names it in one line (its result holds the path)."""
+    return log.replace("\\", "/").rsplit("/", 1)[-1]
+
+
+#: A fit beats another parameter set, or does worse, when their held-out costs differ by this many
+#: standard errors (over the cross-validation folds).
+BEATS = 2.0
+
+
+@dataclass(frozen=True)
+class CostComparison:
+    """The fit against another parameter set (``against``: its start, or the robot's nominal
+    values) by what the reference measures well: the objective, in the reference's own noise.
+
+    ``heldout``: per converged cross-validation fold, the other set's and the fold's estimate's
+    cost on the windows the fold left out (``(folds, 2)``); ``insample``: the other set's and the
+    fit's data cost on every window (no priors)."""
+
+    against: str
+    heldout: np.ndarray
+    insample: tuple[float, float]
+
+    @property
+    def gain_sigmas(self) -> float:
+        """The mean held-out cost the fit saves over the other set, in standard errors of that mean
+        over the folds (positive: the fit does better; NaN with fewer than 3 folds)."""
+        d = self.heldout[:, 0] - self.heldout[:, 1] if self.heldout.size else np.zeros(0)
+        d = d[np.isfinite(d)]
+        if d.size < 3:
+            return float("nan")
+        se = float(np.std(d, ddof=1)) / np.sqrt(d.size)
+        mean = float(np.mean(d))
+        return mean / se if se > 0 else float(np.sign(mean) * np.inf if mean else 0.0)
+
+    @property
+    def outcome(self) -> str:
+        """``better``, ``worse`` or ``same``: held out when the folds allow (beyond :data:`BEATS`
+        standard errors), else in sample (the fit's data cost above the other set's is worse)."""
+        t = self.gain_sigmas
+        if not np.isnan(t):
+            return "better" if t > BEATS else "worse" if t < -BEATS else "same"
+        other, fit = self.insample
+        return "worse" if fit > other * (1 + 1e-9) + 1e-300 else "better" if fit < other else "same"
+
+    def detail(self) -> str:
+        """The figure that decided :attr:`outcome`, in words."""
+        t = self.gain_sigmas
+        if not np.isnan(t):
+            way = "lower" if t > 0 else "higher"
+            return (
+                f"on held-out data (its residual cost {way} by {abs(t):.1f} standard errors over "
+                f"{self.heldout.shape[0]} folds)"
+            )
+        other, fit = self.insample
+        return f"(data cost {fit:.4g} against {other:.4g})"
+
+    def words(self) -> str:
+        """How the fit compares with the other set, with the figure that decided it."""
+        how = {"better": "better than", "worse": "worse than", "same": "within the noise of"}[self.outcome]
+        return f"{how} {self.against} {self.detail()}"
+
+
+@dataclass(frozen=True)
+class NominalCheck:
+    """The robot's nominal values where a source knows them (``values``, from ``source``), scored
+    like the fit: the set scored (``params``, model order) is nominal where known and the fit's
+    estimate elsewhere, so what it measures is what calibrating the known values gained."""
+
+    values: Mapping[str, float]
+    source: str
+    params: np.ndarray
+    metrics: TrajectoryMetrics
+    cost: CostComparison | None = None
+
+    def gain(self, ours: TrajectoryMetrics) -> str:
+        """The fit's gain over the nominal robot in words (segment ATE on this run's records)."""
+        base, mine = self.metrics.segment_ate.mean, ours.segment_ate.mean
+        if not (np.isfinite(base) and np.isfinite(mine)):
+            return f"the nominal robot ({self.source}) could not be scored"
+        figures = f"segment ATE {mine:.3g} m against {base:.3g} m with the nominal values ({self.source})"
+        if mine >= base:
+            return f"no closer to the tracker than the nominal robot: {figures}"
+        return f"{base / max(mine, 1e-12):.2g}× closer to the tracker than the nominal robot: {figures}"
 
 
 #: Beyond this many σ from the simulator's truth, an estimate is called off in the words.

@@ -1,14 +1,15 @@
 """What the robot stack's own configuration takes from a calibration: the controller's parameters.
 
-The model says how its parameters map onto a ros2_control controller's (``diff_drive_controller``,
-``tricycle_controller``) and where those with no place there belong; the analyse stage adds each
-value's 1σ; ``ros2_control.yaml`` only formats this record.
+The model says how its parameters map onto its ros2_control controller's (under the newest
+release's names) and where those with no place there belong, and why any is left out; the
+analyse stage adds each value's 1σ and the odometry's noise as the controller publishes it;
+``ros2_control.yaml`` only formats this record, for the release it targets.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 
 @dataclass(frozen=True)
@@ -23,6 +24,26 @@ class Placement:
 
 
 @dataclass(frozen=True)
+class OdometryNoise:
+    """The odometry's covariance diagonals as a controller publishes them, from each input's noise
+    per interval calibrated on the log's drift against the tracker (``input_noise``): the twist
+    ``(vx, vy, vz, wx, wy, wz)`` over one interval of the log (``interval_s``: its median), the
+    pose ``(x, y, z, roll, pitch, yaw)`` after driving ``distance_m`` as the log drives, in the
+    base frame at the start. What the wheels never measure (a planar base's height, roll and
+    pitch, their rates and a lateral velocity) is :data:`UNMEASURED`."""
+
+    pose: tuple[float, ...]
+    twist: tuple[float, ...]
+    interval_s: float
+    distance_m: float
+    input_noise: Mapping[str, float]
+
+
+#: The variance given to what planar wheel odometry does not measure: a filter then ignores it.
+UNMEASURED = 1e6
+
+
+@dataclass(frozen=True)
 class ControllerParams:
     """A ros2_control controller's parameters (name → value, and 1σ), and the rest of the
     calibration with where each belongs."""
@@ -31,5 +52,9 @@ class ControllerParams:
     parameters: Mapping[str, float]
     std: Mapping[str, float]
     elsewhere: tuple[Placement, ...]
-    #: What the values assume of the encoders (e.g. a counter's range being one wheel turn).
+    #: What the values assume of the encoders (e.g. joint angles per radian of the wheel).
     assumes: str = ""
+    #: The controller's parameters left out, each with the reason (e.g. no counts per turn).
+    omitted: Mapping[str, str] = field(default_factory=dict)
+    #: The covariance diagonals the controller publishes with its odometry (None: not calibrated).
+    noise: OdometryNoise | None = None

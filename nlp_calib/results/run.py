@@ -20,9 +20,12 @@ from nlp_calib.results import codec
 from nlp_calib.results.check import DriftCheck
 from nlp_calib.results.checks import (
     ConsistencyCheck,
+    CostComparison,
     CrossValidation,
     DirectionCheck,
+    LagEffect,
     LagEstimate,
+    NominalCheck,
     Observability,
     TruthCheck,
     believed_std,
@@ -30,9 +33,28 @@ from nlp_calib.results.checks import (
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import ControllerParams
+from nlp_calib.results.mount import SensorMount
+from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import OdometryTrack, RunSeries
 from nlp_calib.results.solver import SolverResult
 from nlp_calib.results.uncertainty import Uncertainty
+
+
+@dataclass(frozen=True)
+class SensorInfo:
+    """The run's sensor as its plug-in describes itself: ``kind`` (its registry name, as the
+    scenario's ``sensor`` gives it), the pose ``group`` it measures in, its poses' ``scale``
+    (``fixed``, or ``free`` when known up to scale), its mount's parameters and those the drive
+    never determines, held, with why."""
+
+    kind: str = "planar"
+    group: str = "SE(2)"
+    scale: str = "fixed"
+    params: tuple[str, ...] = ("sensor_x", "sensor_y", "sensor_theta")
+    held: tuple[str, ...] = ()
+    held_why: str = ""
+    #: What its parameters mean, in words (an angle convention), where the names do not say it.
+    convention: str = ""
 
 
 @dataclass(frozen=True)
@@ -48,31 +70,34 @@ class ScenarioInfo:
     headline: tuple[str, ...]
     dataset: str
     datasets: tuple[str, ...]
-    solvers: tuple[str, ...]
+    #: Each solver's display name, in the scenario's order of solvers.
     labels: Mapping[str, str]
     residual: Mapping[str, Any]
     robust: Mapping[str, Any]
     initial_guess: str
+    sensor: SensorInfo = field(default_factory=SensorInfo)
 
     def label(self, solver: str) -> str:
         """The display name of ``solver``."""
         return self.labels.get(solver, solver)
 
     @property
-    def sensor_3d(self) -> bool:
-        """Whether the sensor's mount is 3-D (a camera's: roll, pitch and yaw among the parameters)."""
-        return "sensor_roll" in self.units
+    def solvers(self) -> tuple[str, ...]:
+        """The scenario's solvers, in its order."""
+        return tuple(self.labels)
 
 
 @dataclass(frozen=True)
 class Encoder:
-    """An encoder as the log describes it: its name, kind (``absolute`` or ``counter``), unit and
-    range (readings per turn; 0 when the readings are angles)."""
+    """An encoder as the log describes it: its name, kind (``absolute`` or ``counter``), unit,
+    range (the header's: an absolute encoder's readings per turn, the unit a counter's gain is
+    counted in; 0 when the readings are angles) and a wheel's counts per turn where given."""
 
     name: str
     kind: str
     unit: str
     range: int
+    per_turn: float | None = None
 
 
 @dataclass(frozen=True)
@@ -133,6 +158,36 @@ class Checks:
     drift: DriftCheck | None = None
     #: The estimate against the known truth of a simulated log (a truth file beside it).
     truth: TruthCheck | None = None
+    #: How each time offset moves the other parameters (see :class:`LagEffect`).
+    lag_effects: tuple[LagEffect, ...] = ()
+    #: Several logs: the joint fit without each log in turn (its jackknife σ is the logs').
+    logs: CrossValidation | None = None
+    #: The fit against its starting point, in the objective's own noise.
+    start: CostComparison | None = None
+    #: The fit against the robot's nominal values (None: no source knows them).
+    nominal: NominalCheck | None = None
+    #: What to drive next when a parameter is not determined well enough (``plan.md``).
+    plan: Plan | None = None
+
+    def spreads(self, white: np.ndarray) -> list[np.ndarray]:
+        """Each σ beyond the white-noise one ``white`` that the σ to believe takes in (NaN where one
+        has none): the blocks' jackknife where it exceeds ``white`` beyond its own noise
+        (:meth:`CrossValidation.beyond`), then each of :meth:`moving`."""
+        n = len(white)
+        blocks = self.crossval.beyond(white) if self.crossval is not None else np.full(n, np.nan)
+        return [blocks, *(spread for _, spread in self.moving())]
+
+    def moving(self) -> list[tuple[str, np.ndarray]]:
+        """How much parameters move with the driving, where they do (NaN elsewhere), each with what
+        measured it: over several logs, the logs' jackknife for each parameter that moves between
+        them beyond their σ; half the forward-reverse difference where it is clear."""
+        out = []
+        if self.logs is not None and self.consistency is not None:
+            label = f"the jackknife over the {len(self.logs.folds)} logs"
+            out.append((label, np.where(self.consistency.moved, self.logs.std, np.nan)))
+        if self.direction is not None:
+            out.append(("half the forward-reverse difference", self.direction.spread()))
+        return out
 
 
 @dataclass(frozen=True)
@@ -145,6 +200,8 @@ class SolverReport:
     holdout: TrajectoryMetrics | None
     #: The estimate in the robot stack's terms (its ros2_control controller's parameters).
     controller: ControllerParams | None = None
+    #: The sensor's mount as every hand-off file states it, as the sensor says it.
+    mount: SensorMount | None = None
 
 
 #: The verdict's levels.
@@ -164,9 +221,11 @@ class Verdict:
     #: False when the estimate must not reach a robot although a solver converged (it cannot be a
     #: real robot of its kind): no hand-off file is written.
     handoff: bool = True
+    #: What the calibration gained over the robot's nominal values, or that none are known.
+    gain: str = ""
 
     def line(self) -> str:
-        return f"{self.level.upper()}: " + "; ".join(self.reasons)
+        return f"{self.level.upper()}: " + "; ".join((*self.reasons, *((self.gain,) if self.gain else ())))
 
 
 @dataclass(frozen=True)
@@ -191,12 +250,10 @@ class CalibrationRun:
     odometry: OdometryTrack | None = None
 
     def std(self, solver: str) -> dict[str, float]:
-        """The 1σ to believe for ``solver``'s estimate: the larger of the white-noise σ and the
-        block cross-validation's jackknife σ."""
+        """The 1σ to believe for ``solver``'s estimate: the largest of the white-noise σ, the block
+        cross-validation's jackknife σ and the spreads the checks found (:meth:`Checks.spreads`)."""
         u = self.reports[solver].uncertainty
-        cv = self.checks.crossval
-        blocked = cv.std if cv is not None else np.full(len(u.names), np.nan)
-        return dict(zip(u.names, map(float, believed_std(u.std, blocked))))
+        return dict(zip(u.names, map(float, believed_std(u.std, *self.checks.spreads(u.std)))))
 
     def std_blocks(self) -> dict[str, float] | None:
         """The jackknife σ of the block cross-validation, when it has enough converged folds."""
@@ -250,15 +307,28 @@ class JointRun:
     n_residuals: int
     checks: Checks
     warnings: tuple[str, ...] = field(default=())
+    #: The joint fit as one run: its figures over every log's fitted records (dead reckoning
+    #: restarted at each log's start), its checks and its own verdict.
+    joint: CalibrationRun | None = None
+
+    @property
+    def run(self) -> CalibrationRun:
+        """The joint fit as one run (the first log's, in a result stored before it was kept)."""
+        return self.joint if self.joint is not None else self.parts[0]
+
+    @property
+    def verdict(self) -> Verdict:
+        """The joint fit's verdict."""
+        return self.run.verdict
 
     @property
     def reports(self) -> Mapping[str, SolverReport]:
-        """The joint results by solver (the trajectory metrics are the first log's)."""
-        return self.parts[0].reports
+        """The joint results by solver, with the figures over every log."""
+        return self.run.reports
 
     def std(self, solver: str) -> dict[str, float]:
         """The 1σ to believe for ``solver``'s joint estimate (see :meth:`CalibrationRun.std`)."""
-        return self.parts[0].std(solver)
+        return self.run.std(solver)
 
     def to_data(self) -> Any:
         return codec.to_data(self)

@@ -22,6 +22,9 @@ class Uncertainty:
     correlation: np.ndarray
     noise: dict[str, float]
     dof: int
+    #: Free parameters the data leave undetermined, known only as well as the bounds of a
+    #: parameter they move with allow (a tracker lag within its search).
+    bounded: tuple[str, ...] = ()
 
     def std_dict(self) -> dict[str, float]:
         return {n: float(s) for n, s in zip(self.names, self.std)}

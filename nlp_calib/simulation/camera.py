@@ -30,7 +30,7 @@ from nlp_calib.logs import format_joint_csv, format_tum
 from nlp_calib.models import MODELS
 from nlp_calib.models.drives import integrate_base
 from nlp_calib.models.joints import JOINT_MAPS, joint_map
-from nlp_calib.models.mount import MOUNT_PARAMS, SCALE_PARAM
+from nlp_calib.sensors.mount import MOUNT_PARAMS, SCALE_PARAM
 from nlp_calib.simulation.options import DriveShape, drive_profiles
 
 #: A camera looking forward and 30° down (roll −120°), slightly pitched, on the base's left.

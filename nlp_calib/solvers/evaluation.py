@@ -255,11 +255,17 @@ class ProblemEvaluator:
         self.motion.update(ORDER[name], x, self.x_fixed)
         return bound(x=x)
 
-    def set_inputs(self, inputs: np.ndarray) -> None:
-        """Re-evaluate the same windows on other interval inputs (nothing is rebuilt)."""
-        self._data = self._data.with_inputs(inputs)
+    def set_inputs(
+        self, inputs: np.ndarray, lags: Sequence[float] | None = None, rates: np.ndarray | None = None
+    ) -> None:
+        """Re-evaluate the same windows on other interval inputs (re-sampled at the time offsets
+        ``lags``, one per log, with their ``rates``, when the problem has them); nothing is rebuilt."""
+        self._data = self._data.with_inputs(inputs, lags, rates)
         if self._windows is not None:
             self._windows.motion.set_inputs(inputs)
+            if self.fns.clock_rows:
+                # The windows' clock data follow the inputs; written in place (buffers hold it).
+                self._windows.window_data[:] = pad_columns(self._data.data(), self._windows.n_padded)
         self._last = _Last()
 
     def normal_equations(self, x: np.ndarray) -> NormalEquations:

@@ -3,8 +3,9 @@
 Direct problems (``H = 1``) take each window's interval inputs, fixed once the data are bound.
 Prefix problems integrate every interval once per parameter vector with the problem's scan of
 the order asked for (values, first or second derivatives; see :mod:`nlp_calib.problem.motion`)
-and gather each window's prefix jets at its first and last record; each order keeps its result
-for the last ``x`` it was asked for.
+and gather each window's prefix jets at its first and last record, a block of windows at a time
+as the Functions are evaluated; each order keeps its prefix jets for the last ``x`` it was asked
+for.
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from nlp_calib.problem import ProblemFunctions, ResidualData
-from nlp_calib.solvers.backends import Backend, Buffered
+from nlp_calib.solvers.backends import Backend
+from nlp_calib.solvers.blocks import Mapped, Scan
 
 
 def padded_index(index: np.ndarray, n: int) -> np.ndarray:
@@ -23,32 +25,38 @@ def padded_index(index: np.ndarray, n: int) -> np.ndarray:
 
 
 class _Scan:
-    """One order's prefix scan, its prefix jets and the windows' gathered motion data."""
+    """One order's prefix scan and its prefix jets; the windows' motion data are gathered from
+    them a block of windows at a time (:meth:`fill`), never held whole."""
 
     def __init__(
         self, fns: ProblemFunctions, backend: Backend, order: int, inputs: np.ndarray, ends: np.ndarray
     ):
         step = fns.step(order)
-        rows = step.nnz_in(0)
+        self.rows = step.nnz_in(0)
         n_pad = inputs.shape[1]
         # Column r: the jet after r intervals; column 0 the identity (zeros).
-        self.poses = np.zeros((rows, n_pad + 1), order="F")
-        self.motion = np.zeros((2 * rows, ends.size // 2), order="F")
+        self.poses = np.zeros((self.rows, n_pad + 1), order="F")
         self._ends = ends
-        self._scan = Buffered(
-            backend.scan(step, n_pad),
-            {"state": np.zeros(rows)},
-            bound={"u": inputs, "states": self.poses[:, 1:]},
-        )
+        self._scan = Scan(backend, step, inputs, self.poses)
         self.at: bytes | None = None
 
-    def update(self, key: bytes, x: np.ndarray, x_fixed: np.ndarray) -> np.ndarray:
+    @property
+    def shape(self) -> tuple[int, int]:
+        return 2 * self.rows, self._ends.size // 2
+
+    def update(self, key: bytes, x: np.ndarray, x_fixed: np.ndarray) -> _Scan:
         if self.at != key:
             self._scan.evaluate(x=x, x_fixed=x_fixed)
-            rows = self.poses.shape[0]
-            np.take(self.poses, self._ends, axis=1, out=self.motion.reshape(rows, -1, order="F"), mode="clip")
             self.at = key
-        return self.motion
+        return self
+
+    def fill(self, lo: int, hi: int, out: np.ndarray) -> None:
+        """Windows ``lo:hi``'s motion data into ``out`` ``(2 rows, hi - lo)``: their prefix jets at
+        their first and last record, side by side."""
+        # Row gathers on the transposed (C-contiguous) views: one copy of each jet, no temporaries
+        # (a column gather of column-major arrays goes through a strided copy of everything).
+        gathered = out.reshape(self.rows, -1, order="F").T
+        np.take(self.poses.T, self._ends[2 * lo : 2 * hi], axis=0, out=gathered, mode="clip")
 
 
 class WindowMotion:
@@ -72,13 +80,14 @@ class WindowMotion:
         self._scans: dict[int, _Scan] = {}
         self.set_inputs(data.inputs)
 
-    def buffer(self, order: int) -> np.ndarray:
-        """The array the motion data of ``order`` are kept in (what a Function binds)."""
+    def buffer(self, order: int) -> Mapped:
+        """Where the motion data of ``order`` come from (what a Function maps over): an array, or
+        the prefix jets they are gathered from a block at a time."""
         if not self.prefix:
             return self.direct
         if order not in self._scans:
             self._scans[order] = _Scan(self.fns, self.backend, order, self.inputs, self._ends)
-        return self._scans[order].motion
+        return self._scans[order]
 
     def set_inputs(self, inputs: np.ndarray) -> None:
         """New interval inputs for the same windows (e.g. encoders re-sampled on another clock)."""
@@ -89,8 +98,8 @@ class WindowMotion:
         for scan in self._scans.values():
             scan.at = None
 
-    def update(self, order: int, x: np.ndarray, x_fixed: np.ndarray) -> np.ndarray:
-        """The windows' motion data of ``order`` at ``x``."""
+    def update(self, order: int, x: np.ndarray, x_fixed: np.ndarray) -> Mapped:
+        """The windows' motion data of ``order`` at ``x`` (see :meth:`buffer`)."""
         if not self.prefix:
             return self.direct
         self.buffer(order)

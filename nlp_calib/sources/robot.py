@@ -24,17 +24,21 @@ from nlp_calib.models.radians import default_guess, units_of
 
 #: ``#joints_max_enc_values``: the text header's range of an encoder range.
 ENCODER_RANGE = Range(1, 2**32, integer=True)
+COUNTS_PER_TURN = Range(0.0, 2.0**32, lo_open=True)
 _FRAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_./-]*")
 
 
 @dataclass(frozen=True)
 class RobotDescription:
-    """The keys of ``ROBOT.yaml``: ``initial_guess`` (kinematic parameters), ``encoder_ranges`` (ticks
-    per turn, by the model's encoder names), ``sensor_pose`` ``[x, y, theta]`` (m, m, rad) of the
-    sensor in the base frame and ``sensor_frame``, the sensor's frame name in the hand-off files."""
+    """The keys of ``ROBOT.yaml``: ``initial_guess`` (kinematic parameters), ``encoder_ranges`` (the
+    header's range of each encoder, by the model's encoder names), ``counts_per_turn`` (a wheel
+    encoder's counts per wheel turn, for the controller's radii), ``sensor_pose`` ``[x, y, theta]``
+    (m, m, rad) of the sensor in the base frame and ``sensor_frame``, the sensor's frame name in
+    the hand-off files."""
 
     initial_guess: Mapping[str, float] = field(default_factory=dict)
     encoder_ranges: Mapping[str, int] = field(default_factory=dict)
+    counts_per_turn: Mapping[str, float] = field(default_factory=dict)
     sensor_pose: tuple[float, float, float] | None = None
     sensor_frame: str | None = None
 
@@ -54,10 +58,11 @@ def load_robot(path: str | Path, model: KinematicModel) -> RobotDescription:
                 f"not a parameter of {model.name}: {', '.join(params)}{hint}",
             )
         _check(MAGNITUDE, value, f"{source}: initial_guess.{name}")
-    for name, ticks in robot.encoder_ranges.items():
-        if name not in names:
-            fail(f"{source}: encoder_ranges.{name}", f"not an encoder of {model.name}: {', '.join(names)}")
-        _check(ENCODER_RANGE, ticks, f"{source}: encoder_ranges.{name}")
+    for key, limit in (("encoder_ranges", ENCODER_RANGE), ("counts_per_turn", COUNTS_PER_TURN)):
+        for name, ticks in getattr(robot, key).items():
+            if name not in names:
+                fail(f"{source}: {key}.{name}", f"not an encoder of {model.name}: {', '.join(names)}")
+            _check(limit, ticks, f"{source}: {key}.{name}")
     for axis, value in zip(("x", "y", "theta"), robot.sensor_pose or ()):
         _check(MAGNITUDE, value, f"{source}: sensor_pose.{axis}")
     frame = robot.sensor_frame
@@ -95,6 +100,10 @@ def robot_header(
             f"the sensor frame {frame!r} cannot name a header's frame; set sensor_frame in ROBOT.yaml"
         )
     names = encoders(model)
+    nominal = dict.fromkeys(robot.initial_guess, "ROBOT.yaml")
+    if robot.sensor_pose is not None or mount is not None:
+        where = "ROBOT.yaml" if robot.sensor_pose is not None else "/tf_static"
+        nominal.update(dict.fromkeys(("sensor_x", "sensor_y", "sensor_theta"), where))
     return LogHeader(
         kinematic_model=model.log_names[0],
         parameters={model.header_names[n]: float(guess[n]) for n in model.kinematic_params},
@@ -104,4 +113,6 @@ def robot_header(
         T_base_sensor=(float(pose[0]), float(pose[1]), float(pose[2])),
         encoder_units="radians" if radians else "counts",
         sensor_z_roll_pitch=None if robot.sensor_pose is not None or mount is None else mount[2:5],
+        nominal=nominal,
+        counts_per_turn=dict(robot.counts_per_turn),
     )

@@ -6,6 +6,7 @@ this package keeps its own backend.
 
 from nlp_calib.outputs.plots.benchmark import scaling_png
 from nlp_calib.outputs.plots.odometry import odometry_png
+from nlp_calib.outputs.plots.plan import plan_png
 from nlp_calib.outputs.plots.residuals import residuals_png, residuals_time_png
 from nlp_calib.outputs.plots.run import convergence_png, model_check_png, trajectory_png
 
@@ -13,6 +14,7 @@ __all__ = [
     "convergence_png",
     "model_check_png",
     "odometry_png",
+    "plan_png",
     "residuals_png",
     "residuals_time_png",
     "scaling_png",

@@ -9,6 +9,7 @@ which ``Function.buffer()`` removes by binding numpy memory once; and summing in
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -20,6 +21,10 @@ from nlp_calib.core.errors import OptionsError
 BACKENDS = ("interpreted", "compiled")
 #: Intervals one call of a scan's chunk integrates.
 SCAN_CHUNK = 64
+#: Sizes, in chunks, of the folds a scan of any length is evaluated with, one after the other
+#: (largest first): each is built once per process, not once per evaluator and data size (a fold's
+#: build grows with its size and dominated the evaluators' set-up).
+FOLD_SIZES = (256, 16, 1)
 
 
 @dataclass(frozen=True)
@@ -64,8 +69,19 @@ def scan_chunk(step: ca.Function, chunk: int) -> ca.Function:
     )
 
 
+def fold_sizes(chunks: int) -> list[int]:
+    """``chunks`` as a sum of :data:`FOLD_SIZES`, largest first."""
+    out = []
+    for size in FOLD_SIZES:
+        out += [size] * (chunks // size)
+        chunks %= size
+    return out
+
+
+@functools.lru_cache(maxsize=64)
 def fold_chunks(chunk_fn: ca.Function, chunks: int) -> ca.Function:
-    """A scan's chunk folded over ``chunks`` chunks: (state, x, x_fixed, U) → states."""
+    """A scan's chunk folded over ``chunks`` chunks: (state, x, x_fixed, U) → states (built once
+    per chunk Function and size)."""
     acc = chunk_fn.mapaccum(f"{chunk_fn.name()}_x{chunks}", chunks)
     state = ca.MX.sym("state", chunk_fn.sparsity_in(0))
     x = ca.MX.sym("x", chunk_fn.sparsity_in(1))
@@ -107,13 +123,18 @@ class Backend:
         reduce_out = list(range(f.n_out())) if reduce else []
         return f.map(f"{f.name()}_map", "serial", n, reduce_in, reduce_out)
 
-    def scan(self, step: ca.Function, n: int) -> ca.Function:
-        """``step`` folded over ``n`` intervals (a multiple of the chunk): (state, x, x_fixed, U) → states."""
-        return fold_chunks(self.scan_chunk(step), n // self.chunk)
+    def fold(self, step: ca.Function, chunks: int) -> ca.Function:
+        """``step`` folded over ``chunks`` chunks of intervals: (state, x, x_fixed, U) → states."""
+        return fold_chunks(self.scan_chunk(step), chunks)
 
     def scan_chunk(self, step: ca.Function) -> ca.Function:
-        # One SX expression per chunk: the VM then runs it without a call per interval.
-        return scan_chunk(step, self.chunk).expand()
+        return _expanded_chunk(step, self.chunk)
+
+
+@functools.lru_cache(maxsize=16)
+def _expanded_chunk(step: ca.Function, chunk: int) -> ca.Function:
+    # One SX expression per chunk: the VM then runs it without a call per interval.
+    return scan_chunk(step, chunk).expand()
 
 
 class Buffered:
@@ -160,6 +181,12 @@ class Buffered:
         i = self.function.index_in(name)
         self._in[name] = _memory(arr, self.function.nnz_in(i))
         self._buf.set_arg(i, self._in[name].data)
+
+    def rebind_output(self, name: str, arr: np.ndarray) -> None:
+        """Write output ``name`` into another caller-owned array of the same size."""
+        i = self.function.index_out(name)
+        self._out[i] = _memory(arr, self.function.nnz_out(i))
+        self._buf.set_res(i, self._out[i].data)
 
     def set(self, **inputs: np.ndarray | float) -> None:
         """Copy values into the bound input arrays (column-major, as CasADi stores them)."""

@@ -30,7 +30,7 @@ import numpy as np
 from nlp_calib.core import poses, poses3d
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.models.base import SENSOR_PARAMS, KinematicModel
-from nlp_calib.models.mount import HELD_PARAMS, SCALE_PARAM, length_params
+from nlp_calib.sensors.mount import HELD_PARAMS, SCALE_PARAM, length_params
 
 #: Why a window is left out of the start, in the order the reasons are tried.
 REASONS = ("not_finite", "tiny_translation", "small_rotation", "axis_off_normal", "opposite_turning")
@@ -84,11 +84,11 @@ class Selection:
 @dataclass(frozen=True)
 class CameraStart:
     """The start's parameters (kinematic, then the mount, then the scale when free), the floor
-    normal in the camera frame and the selection of the windows."""
+    normal in the camera frame and the selection of the windows (None: a given mount's, none)."""
 
     params: dict[str, float]
     normal: np.ndarray
-    selection: Selection
+    selection: Selection | None
 
 
 def rotation_vectors(z: np.ndarray) -> np.ndarray:
@@ -189,8 +189,8 @@ def _assemble(
     anchors = [n for n in lengths if n in known]
     if not anchors:
         raise ProblemError(
-            f"a free scale needs one known length: give one of {', '.join(lengths)} in metres "
-            "(the trajectory's scale and every length are otherwise one unknown)"
+            f"a free scale needs one known length: fix one of {', '.join(lengths)} at its measured "
+            "value (the trajectory's scale and every length are otherwise one unknown)"
         )
     c = float(known[anchors[0]]) / out[anchors[0]]
     for name in (*lengths, "sensor_x", "sensor_y"):
@@ -235,3 +235,22 @@ def camera_start(
     sel = sel.drop(np.sign(predicted[2]) != np.sign(zl[2]), "opposite_turning")
     guess, _ = _planar(model, U, zl, base_motion, sel.kept())
     return CameraStart(_assemble(model, guess, tilt, known, scale_free), normal, sel)
+
+
+def fit_selection(
+    z: np.ndarray, normal: np.ndarray, base_turn: np.ndarray, options: SelectionOptions | None = None
+) -> Selection:
+    """The fit's windows (camera motions ``z`` ``(7, M)``) that ``FIT_REASONS`` leave out, judged with
+    the start's floor ``normal`` and the base's turn over each window the start's parameters
+    predict (``base_turn``, rad). Axes and turning senses are judged only where the camera turns
+    by ``min_rotation`` or more (below that the axis is noise)."""
+    options = options or SelectionOptions()
+    finite = np.all(np.isfinite(z), axis=0)
+    sel = Selection(np.where(finite, -1, REASONS.index("not_finite")))
+    z = np.where(finite, z, np.array([[0.0]] * 6 + [[1.0]]))
+    phi = rotation_vectors(z)
+    angle = np.linalg.norm(phi, axis=1)
+    turning = angle >= options.min_rotation
+    cosine = np.abs(phi @ normal) / np.maximum(angle, 1e-300)
+    sel = sel.drop(turning & (cosine < np.cos(options.max_axis_angle)), "axis_off_normal")
+    return sel.drop(turning & (np.sign(base_turn) != np.sign(phi @ normal)), "opposite_turning")

@@ -1,0 +1,285 @@
+"""What to drive next: manoeuvres ranked by how much each, appended to the drive, lowers the largest σ.
+
+Each candidate (circles each way at a few radii, figure eights, S-curves, reversals, a straight
+run, spot turns, arcs driven backwards) is about :data:`DURATION_S` of driving at the drive's own
+speed and sample rate. It is simulated with the model as it stands (the fit's parameters, or the
+pre-flight's start): the inputs that drive each of its steady motions are the model's own inverse
+(the one-interval residual and its input Jacobian, solved by Gauss-Newton), the tracker's poses
+follow from them, and its windows are laid after the drive's last record on the drive's clock
+(:func:`nlp_calib.problem.windows.appended`). Its information adds to the drive's, and every
+parameter's σ is read as the pre-flight reads it (:mod:`nlp_calib.analysis.determinacy`). The
+manoeuvres are ranked by the largest σ over its reference precision once appended, the lag
+included; the plan names the parameter that is worst now and what each manoeuvre does to it.
+A candidate the model cannot drive (no inputs reproduce it, e.g. a spot turn of a steered
+wheel that cannot reach 90°) is left out.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.analysis.determinacy import Information, information, standing
+from nlp_calib.core import poses
+from nlp_calib.models import KinematicModel
+from nlp_calib.problem import (
+    ProblemFunctions,
+    ProblemSpec,
+    ResidualData,
+    ResidualOptions,
+    build,
+    over_columns,
+)
+from nlp_calib.problem.windows import appended
+from nlp_calib.results.checks import WEAK
+from nlp_calib.results.preflight import Manoeuvre, Plan
+from nlp_calib.solvers.backends import Buffered
+
+#: Seconds of driving each candidate takes.
+DURATION_S = 30.0
+#: The candidates' windows are evaluated up to this work (windows × horizon) each.
+WORK = 5_000
+#: A steady motion the inverse reproduces to less than this (relative) can be driven.
+INVERSE_TOLERANCE = 1e-6
+#: The inverse moves an angle by at most this much a step (rad).
+MAX_TURN_STEP = 0.2
+#: A spot turn's rate (rad/s).
+SPOT_RATE = 0.5
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A manoeuvre as steady segments: each ``(seconds, speed m/s, turn rate rad/s)``; ``speed_mps``
+    and ``radius_m`` are those it was made at (:func:`candidates`)."""
+
+    kind: str
+    radius_m: float
+    speed_mps: float
+    words: str
+    segments: tuple[tuple[float, float, float], ...]
+
+
+def candidates(speed: float, radii: Sequence[float]) -> list[Candidate]:
+    """The manoeuvres considered, at ``speed`` and the turn ``radii``."""
+    T, v = DURATION_S, speed
+    out = [
+        Candidate("straight", 0.0, v, f"straight ahead at {v:.2g} m/s for {T:.0f} s", ((T, v, 0.0),)),
+        Candidate(
+            "reversals",
+            0.0,
+            v,
+            f"straight forwards and back, twice, at {v:.2g} m/s ({T:.0f} s)",
+            tuple((T / 4, s * v, 0.0) for s in (1, -1, 1, -1)),
+        ),
+        Candidate(
+            "spot_turns",
+            0.0,
+            v,
+            f"turns on the spot, {T / 2:.0f} s each way at {SPOT_RATE:g} rad/s",
+            ((T / 2, 0.0, SPOT_RATE), (T / 2, 0.0, -SPOT_RATE)),
+        ),
+    ]
+    for R in radii:
+        w = v / R
+        laps = T * v / (2 * np.pi * R)
+        at = f"{R:.2g} m radius at {v:.2g} m/s"
+        out += [
+            Candidate("circle_left", R, v, f"a circle to the left ({at}, {laps:.1f} laps)", ((T, v, w),)),
+            Candidate("circle_right", R, v, f"a circle to the right ({at}, {laps:.1f} laps)", ((T, v, -w),)),
+            Candidate(
+                "figure_eight", R, v, f"a figure eight ({at}, {T:.0f} s)", ((T / 2, v, w), (T / 2, v, -w))
+            ),
+            Candidate(
+                "s_curves",
+                R,
+                v,
+                f"S-curves, quarter turns each way ({at}, {T:.0f} s)",
+                tuple((np.pi / 2 / w, v, s * w) for s in (1, -1) * max(1, round(T * w / np.pi))),
+            ),
+            Candidate(
+                "arcs_backwards", R, v, f"backwards round arcs each way ({at}, {T:.0f} s)",
+                ((T / 2, -v, -w), (T / 2, -v, w)),
+            ),
+        ]  # fmt: skip
+    return out
+
+
+def _arc(v: float, w: float, dt: float) -> np.ndarray:
+    """The exact planar motion ``(x, y, θ)`` of a base moving at ``v`` turning at ``w`` for ``dt``."""
+    th = w * dt
+    if abs(th) < 1e-9:
+        return np.array([v * dt, 0.5 * v * dt * th, th])
+    return np.array([v * np.sin(th) / w, v * (1.0 - np.cos(th)) / w, th])
+
+
+class Inverse:
+    """The inputs that drive a steady motion, from the model's one-interval residual."""
+
+    def __init__(self, model: KinematicModel, kinematic: np.ndarray, typical: np.ndarray) -> None:
+        planar = build(model, ProblemSpec(horizon=1))
+        self.residual = Buffered(planar.interval_residual)
+        self.params = np.concatenate([kinematic, np.zeros(len(planar.names) - kinematic.size)])
+        self.levels = [model.input_names.index(n) for n in model.level_inputs]
+        self.typical = typical
+
+    def __call__(self, v: float, w: float, dt: float) -> np.ndarray | None:
+        """One interval's inputs for the motion at ``v``, ``w`` over ``dt`` (None: none reproduce it
+        with its angles within ±π). Steps in an angle are kept to :data:`MAX_TURN_STEP`: the model's
+        steady motions repeat along an angle, and a full step jumps to a far copy."""
+        target = _arc(v, w, dt)
+        u = self.typical * (np.sign(v) if v else 0.0)
+        u[self.levels] = 0.0
+        scale = max(float(np.linalg.norm(target)), 1e-9)
+        for _ in range(60):
+            e, de_du = self.residual(params=self.params, u=u, z=target)
+            e = np.ravel(e)
+            if np.linalg.norm(e) < INVERSE_TOLERANCE * scale:
+                # An angle the model reads as it is must be one a joint can take.
+                return u if np.all(np.abs(u[self.levels]) <= np.pi) else None
+            step, *_ = np.linalg.lstsq(np.asarray(de_du), -e, rcond=None)
+            turn = float(np.max(np.abs(step[self.levels]))) if self.levels else 0.0
+            u = u + step * min(1.0, MAX_TURN_STEP / turn if turn > 0 else 1.0)
+        return None
+
+
+def synthesised(
+    inverse: Inverse, c: Candidate, dt: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The candidate's record times, interval inputs and base path (None: the model cannot drive it)."""
+    inputs, steps = [], []
+    for seconds, v, w in c.segments:
+        u = inverse(v, w, dt)
+        if u is None:
+            return None
+        n = max(1, round(seconds / dt))
+        inputs.append(np.repeat(u[:, None], n, axis=1))
+        steps.append(np.repeat(_arc(v, w, dt)[None, :], n, axis=0))
+    U = np.concatenate(inputs, axis=1)
+    path = poses.accumulate(np.zeros(3), np.concatenate(steps))
+    return dt * np.arange(U.shape[1] + 1), U, path
+
+
+def sensor_poses(
+    fns: ProblemFunctions, params: np.ndarray, start: np.ndarray, path: np.ndarray
+) -> np.ndarray:
+    """The tracker's poses from ``start`` as the base follows ``path`` ``(n, 3)`` (from the origin)."""
+    (poses_,) = over_columns(fns.carried, start, params, np.ascontiguousarray(path.T))
+    return np.ascontiguousarray(poses_.T)
+
+
+@dataclass(frozen=True)
+class Setting:
+    """What a plan starts from: the problem, the drive's windows and information, the point the model
+    is evaluated at (free ``x``, fixed ``x_fixed``, weights ``omega``), the residuals' variance, the
+    free parameters' bounds (1σ) and the residual form; ``model_from`` says where ``x`` comes from."""
+
+    fns: ProblemFunctions
+    data: ResidualData
+    info: Information
+    point: tuple[np.ndarray, np.ndarray, np.ndarray]
+    sigma2: float
+    bounds_std: np.ndarray | None
+    options: ResidualOptions
+    delta: float
+    units: Mapping[str, str]
+    model_from: str
+
+
+@dataclass(frozen=True)
+class DriveFacts:
+    """What a manoeuvre takes from the drive it is appended to: its speed (m/s), the turn radii to
+    try (m), its record interval (s) and its typical inputs per interval (where the inverse starts)."""
+
+    speed: float
+    radii: tuple[float, ...]
+    dt: float
+    typical: np.ndarray
+
+
+def drive_facts(data: ResidualData) -> DriveFacts:
+    """The facts of the drive whose windows are ``data`` (its last log's)."""
+    log = data.logs[-1]
+    t = log.time_s
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.04
+    xy = log.T_world_sensor[:, :2]
+    step = max(1, round(0.25 / max(dt, 1e-9)))
+    v = np.hypot(*np.diff(xy[::step], axis=0).T) / (step * dt)
+    speed = float(np.clip(np.median(v[v > 0.01]) if np.any(v > 0.01) else 0.3, 0.05, 2.0))
+    R0 = max(speed / 0.5, 0.3)
+    moving = np.abs(data.inputs).max(axis=0) > 0
+    typical = (
+        np.median(np.abs(data.inputs[:, moving]), axis=1) if moving.any() else np.ones(data.inputs.shape[0])
+    )
+    return DriveFacts(speed, (R0, 2 * R0, 4 * R0), dt, np.where(np.isfinite(typical), typical, 1.0))
+
+
+def candidate_of(m: Manoeuvre) -> Candidate:
+    """The candidate a ranked manoeuvre was made from."""
+    return next(c for c in candidates(m.speed_mps, [m.radius_m or 1.0]) if c.kind == m.kind)
+
+
+def simulated(
+    fns: ProblemFunctions,
+    data: ResidualData,
+    params: np.ndarray,
+    c: Candidate,
+    facts: DriveFacts,
+    options: ResidualOptions,
+) -> tuple[ResidualData, np.ndarray] | None:
+    """``data`` with the candidate appended as the model with the full parameters ``params`` drives
+    it (see :func:`~nlp_calib.problem.windows.appended`), and the base's path; None when no inputs
+    of the model drive it."""
+    inverse = Inverse(fns.model, params[: len(fns.model.kinematic_params)], facts.typical)
+    made = synthesised(inverse, c, facts.dt)
+    if made is None:
+        return None
+    time_s, U, path = made
+    track = sensor_poses(fns, params, data.T_world_sensor[-1], path)
+    return appended(fns, data, (time_s, U, track), options), path
+
+
+def plan(s: Setting, free_only: bool = False) -> Plan | None:
+    """The manoeuvres ranked (see the module docstring); None when every parameter is already
+    determined to :data:`~nlp_calib.results.checks.WEAK` times its reference precision (with
+    ``free_only``, for a model not fitted to the data, whose residuals say nothing of the noise:
+    when the drive leaves no direction free)."""
+    fns, (x, x_fixed, omega) = s.fns, s.point
+    values = np.asarray(x, dtype=float)
+    before = standing(fns, s.info, s.sigma2, values, s.bounds_std)
+    ratio = np.where(np.isfinite(before.std_reference), before.std_reference, np.inf)
+    if not np.any(ratio > WEAK) or (free_only and not before.undetermined.any()):
+        return None
+    target = int(np.argmax(ratio))
+    params = np.asarray(fns.assemble(x, x_fixed)).ravel()
+    facts = drive_facts(s.data)
+    ranked = []
+    for c in candidates(facts.speed, facts.radii):
+        made = simulated(fns, s.data, params, c, facts, s.options)
+        if made is None:
+            continue
+        extra, path = made
+        new = extra.select(np.arange(s.data.n_residuals, extra.n_residuals))
+        if new.n_residuals == 0:
+            continue
+        info = s.info.plus(information(fns, new, x, x_fixed, omega, s.delta, WORK))
+        after = standing(fns, info, s.sigma2, values, s.bounds_std)
+        duration = float(extra.n_records - s.data.n_records - 1) * facts.dt
+        ranked.append(
+            Manoeuvre(
+                c.kind, c.radius_m, c.speed_mps, duration, c.words, _thinned(path),
+                float(np.max(after.std_reference)), float(after.std[target]),
+            )
+        )  # fmt: skip
+    ranked.sort(key=lambda m: (m.worst_after, m.target_std_after))
+    name = fns.free[target]
+    unit = s.units.get(name, "")
+    return Plan(name, unit, float(ratio[target]), float(before.std[target]), s.model_from, tuple(ranked))
+
+
+def _thinned(path: np.ndarray, most: int = 400) -> np.ndarray:
+    """At most ``most`` poses of a path, its ends kept."""
+    if path.shape[0] <= most:
+        return path
+    return path[np.unique(np.linspace(0, path.shape[0] - 1, most).round().astype(int))]

@@ -1,0 +1,197 @@
+"""What the data imply of units and signs: joints in degrees, wheel angles that wrap, a wheel whose
+joint turns backwards as the robot drives forwards.
+
+Each is told from the data alone, against the tracker where it takes a scale or a direction:
+
+- **a wheel's angle that wraps** (joints in radians): its position jumps by about 2π between two
+  samples whose neighbours move little, where REP 103 has a wheel's angle grow without end;
+- **degrees**: an angle joint (an absolute encoder's) that reads beyond 2π; wheels whose joints
+  turn so far for the tracker's travel that a radian of them would move the robot less than
+  :data:`MIN_RADIUS` (the smallest wheels a robot carrying a tracker rolls on are several times
+  larger; read in degrees, a wheel of up to 35 cm radius falls below it);
+- **a mirrored wheel axis**: two wheels whose joints turn opposite ways on gentle curves, where
+  both wheels of any robot turn the same way (:data:`OPPOSITE_SHARE` of those stretches); the one
+  that turns against the robot's forward travel (the tracker's motion along the nominal mount's
+  heading, for a planar tracker) is named.
+
+Every finding says what was measured and how to fix it; the run cannot succeed on such data as
+they are (a degree taken for a radian makes a wheel radius 57 times too small, a mirrored wheel a
+negative one).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nlp_calib.analysis.excitation import STEP_S, taken
+from nlp_calib.logs import Log
+from nlp_calib.models import KinematicModel
+from nlp_calib.results.preflight import UnitFinding
+
+DEGREE = np.pi / 180.0
+#: A wheel whose joint, read in radians, moves the robot less than this per radian (m) is not
+#: turning in radians.
+MIN_RADIUS = 0.006
+#: Two wheels turning opposite ways on this share of the gentle curves: one axis is mirrored.
+OPPOSITE_SHARE = 0.8
+#: A curve is gentle where the heading turns less than this per metre (rad/m): both wheels of a
+#: base narrower than 2 m turn the same way there.
+GENTLE_CURVATURE = 1.0
+
+
+def _positions(log: Log, name: str) -> np.ndarray:
+    """An encoder's running position at the records: the joint's angle (rad), or a counter's
+    unwrapped count."""
+    if log.joint_positions is not None:
+        return np.asarray(log.joint_position(name), dtype=float)
+    return np.concatenate([[0.0], np.cumsum(log.increments(name))]).astype(float)
+
+
+def wrapped(log: Log, model: KinematicModel) -> list[UnitFinding]:
+    """Wheels in radians whose angle wraps (see the module docstring)."""
+    if log.joint_positions is None:
+        return []
+    out = []
+    names = log.header.encoder_names
+    stream = log.joint_stream
+    for j, name in enumerate(names):
+        if model.encoder_kinds.get(name) != "counter":
+            continue
+        pos = stream.positions[:, j] if stream is not None else log.joint_positions[:, j]
+        d = np.diff(pos[np.isfinite(pos)])
+        if d.size < 3:
+            continue
+        typical = float(np.median(np.abs(d)))
+        jumps = (np.abs(d) > np.pi) & (
+            np.abs(d - 2 * np.pi * np.round(d / (2 * np.pi))) < max(0.5, 4 * typical)
+        )
+        if jumps.any() and typical < 1.0:
+            lo, hi = float(np.min(pos)), float(np.max(pos))
+            out.append(
+                UnitFinding(
+                    "wrapped",
+                    name,
+                    f"the joint read as {name} wraps its angle ({int(jumps.sum())} jumps of 2π, its "
+                    f"positions stay within [{lo:.2f}, {hi:.2f}] rad): a wheel's position must grow without "
+                    "wrapping (REP 103): publish it unwrapped, or numpy.unwrap it before calibrating",
+                )
+            )
+    return out
+
+
+def _steering_degrees(log: Log, model: KinematicModel) -> list[UnitFinding]:
+    if log.joint_positions is None:
+        return []
+    out = []
+    for j, name in enumerate(log.header.encoder_names):
+        if model.encoder_kinds.get(name) != "absolute":
+            continue
+        top = float(np.nanmax(np.abs(log.joint_positions[:, j])))
+        if top > 2 * np.pi + 0.01:
+            out.append(
+                UnitFinding(
+                    "degrees",
+                    name,
+                    f"the joint read as {name} reads up to {top:.4g}, beyond 2π: its angle is not in radians "
+                    f"(degrees? {top:.4g}° is {top * DEGREE:.3g} rad); publish it in radians (REP 103)",
+                )
+            )
+    return out
+
+
+def _gentle(time_s: np.ndarray, xy: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of records about :data:`STEP_S` apart and, per step between them, whether the robot
+    moves on a gentle curve (its heading turns less than :data:`GENTLE_CURVATURE` per metre)."""
+    k = taken(time_s, STEP_S)
+    ds = np.hypot(*np.diff(xy[k], axis=0).T)
+    dth = np.abs(np.diff(heading[k]))
+    return k, (ds > 1e-3) & (dth < GENTLE_CURVATURE * np.maximum(ds, 1e-9))
+
+
+def _counters(log: Log, model: KinematicModel) -> list[str]:
+    return [n for n in log.header.encoder_names if model.encoder_kinds.get(n) == "counter"]
+
+
+def _wheel_degrees(log: Log, model: KinematicModel, xy: np.ndarray, heading: np.ndarray) -> list[UnitFinding]:
+    counters = _counters(log, model)
+    if log.joint_positions is None or not counters:
+        return []
+    k, gentle = _gentle(log.time_s, xy, heading)
+    if gentle.sum() < 3:
+        return []
+    travel = float(np.sum(np.hypot(*np.diff(xy[k], axis=0).T)[gentle]))
+    turned = float(np.mean([np.sum(np.abs(np.diff(_positions(log, n)[k]))[gentle]) for n in counters]))
+    radius = travel / turned if turned > 0 else np.inf
+    if radius >= MIN_RADIUS:
+        return []
+    return [
+        UnitFinding(
+            "degrees",
+            ", ".join(counters),
+            f"the wheel joints ({', '.join(counters)}) turn too far for the robot's travel: a radian of them "
+            f"moves it {1e3 * radius:.2g} mm, a wheel smaller than any robot's (read as degrees, one of "
+            f"{1e3 * radius / DEGREE:.3g} mm radius): their angles look like degrees; publish them in "
+            "radians (REP 103)",
+        )
+    ]
+
+
+def _mirrored(
+    log: Log, model: KinematicModel, track: tuple[np.ndarray, np.ndarray], mount_yaw: float | None
+) -> list[UnitFinding]:
+    counters = _counters(log, model)
+    xy, heading = track
+    if len(counters) < 2:
+        return []
+    k, gentle = _gentle(log.time_s, xy, heading)
+    steps = {n: np.diff(_positions(log, n)[k])[gentle] for n in counters[:2]}
+    a, b = steps.values()
+    moving = (np.abs(a) > 0) & (np.abs(b) > 0)
+    opposite = float(np.mean(np.sign(a[moving]) != np.sign(b[moving]))) if moving.any() else 0.0
+    if moving.sum() < 5 or opposite < OPPOSITE_SHARE:
+        return []
+    forward = _forward(xy, heading, k, mount_yaw)
+    if forward is not None:
+        agree = {n: float(np.sum(np.sign(v[moving]) == forward[gentle][moving])) for n, v in steps.items()}
+        backwards = min(agree, key=lambda n: agree[n])
+        which = f"{backwards} turns backwards as the robot drives forwards (by the tracker)"
+    else:
+        totals = {n: float(np.sum(v[moving])) for n, v in steps.items()}
+        backwards = min(totals, key=lambda n: totals[n])
+        which = f"{backwards} turns backwards on most of the driving"
+    return [
+        UnitFinding(
+            "mirrored",
+            backwards,
+            f"the joints read as {counters[0]} and {counters[1]} turn opposite ways on gentle curves, where "
+            f"both wheels of a robot turn the same way ({100 * opposite:.0f} % of them): one wheel's axis is "
+            f"mirrored, and {which}; negate that joint (its URDF axis, or its sign in the driver) or its "
+            "wheel radius comes out negative",
+        )
+    ]
+
+
+def _forward(
+    xy: np.ndarray, heading: np.ndarray, k: np.ndarray, mount_yaw: float | None
+) -> np.ndarray | None:
+    """Per step, the sign of the base's travel along its own x axis (None without a planar mount)."""
+    if mount_yaw is None:
+        return None
+    d = np.diff(xy[k], axis=0)
+    th = heading[k][:-1]
+    vx = np.cos(th) * d[:, 0] + np.sin(th) * d[:, 1]
+    vy = -np.sin(th) * d[:, 0] + np.cos(th) * d[:, 1]
+    return np.sign(np.cos(mount_yaw) * vx - np.sin(mount_yaw) * vy)
+
+
+def findings(
+    log: Log, model: KinematicModel, track: tuple[np.ndarray, np.ndarray], mount_yaw: float | None
+) -> tuple[UnitFinding, ...]:
+    """Every unit and sign finding on ``log`` read for ``model``: ``track`` the tracker's positions
+    ``(n, 2)`` and unwrapped heading at the records; ``mount_yaw`` the nominal planar mount's
+    heading (None for a 3-D sensor)."""
+    xy, heading = track
+    out = wrapped(log, model) + _steering_degrees(log, model)
+    out += _wheel_degrees(log, model, xy, heading)
+    out += _mirrored(log, model, track, mount_yaw)
+    return tuple(out)

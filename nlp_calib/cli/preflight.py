@@ -1,0 +1,89 @@
+"""``nlp-calib preflight`` and ``nlp-calib init``: a recording checked before any fit, and a first
+scenario drafted from it; and the pre-flight every calibrating command runs first."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+
+from nlp_calib.core.errors import NlpCalibWarning, UsageError
+from nlp_calib.core.files import atomic_write_text, check_output_dir, note_input, refuse_input_alias
+from nlp_calib.logs import Log
+from nlp_calib.outputs.preflight import preflight_lines
+from nlp_calib.pipeline import Scenario, load_scenario
+from nlp_calib.pipeline.draft import draft
+from nlp_calib.pipeline.preflight import preflight, refuse
+from nlp_calib.results import codec
+from nlp_calib.results.preflight import Preflight
+
+#: A scenario file, by its name.
+SCENARIO_SUFFIXES = (".yaml", ".yml")
+
+
+def _scenario_of(target: Path, model: str | None) -> Scenario:
+    """The scenario to check: the file itself, or one drafted from a recording (not written)."""
+    if target.suffix.lower() in SCENARIO_SUFFIXES:
+        if model is not None:
+            raise UsageError("--model drafts a scenario for a recording; a scenario names its own model")
+        return load_scenario(target)
+    where = target.parent / f"{target.stem}.scenario.yaml"
+    return draft(target, where, model).scenario(where)
+
+
+def cmd_preflight(args: argparse.Namespace) -> int:
+    """Check a recording (or a scenario's) before any fit; the exit code says the verdict."""
+    sc = _scenario_of(args.target, args.model)
+    report = preflight(sc)
+    print("\n".join(preflight_lines(report)))
+    if args.json is not None:
+        refuse_input_alias(args.json)  # never over the recording or the scenario it read
+        data = json.dumps(_document(report), indent=2, allow_nan=False) + "\n"
+        atomic_write_text(args.json, data)
+        print(f"wrote {args.json}")
+    return report.exit_code
+
+
+def _document(report: Preflight) -> object:
+    """The report as JSON data, with its verdict and exit code."""
+    return {"verdict": report.verdict, "exit_code": report.exit_code, **codec.to_data(report)}
+
+
+def cmd_init(args: argparse.Namespace) -> int:
+    """Draft a scenario from a recording and write it (never over a file without --force)."""
+    out: Path = args.out if args.out is not None else Path(f"{args.recording.stem or 'recording'}.yaml")
+    if out.suffix.lower() not in SCENARIO_SUFFIXES:
+        raise UsageError(f"--out {out}: a scenario file ends in .yaml")
+    check_output_dir(out.parent if str(out.parent) else Path("."))
+    if out.exists() and not args.force:
+        raise UsageError(f"{out} exists; give --force to replace it, or another --out")
+    drafted = draft(args.recording, out, args.model)
+    note_input(args.recording)
+    refuse_input_alias(out)
+    print("found:")
+    print("\n".join(f"  {line}" for line in drafted.found))
+    atomic_write_text(out, drafted.text)
+    print(f"wrote {out}: check it with 'nlp-calib preflight {out}', then 'nlp-calib run {out}'")
+    return 0
+
+
+def gate(scenarios: Sequence[Scenario], logs: Sequence[Sequence[Log]], skip: bool) -> None:
+    """The pre-flight of each scenario on its logs (read already): a calibration that cannot succeed
+    stops here with the pre-flight's words (``--skip-preflight``: it goes on)."""
+    if skip:
+        return
+    for sc, log_list in zip(scenarios, logs):
+        try:
+            report = preflight(sc, log_list)
+        except Exception as exc:  # the pre-flight must never be what stops a run that could succeed
+            warnings.warn(
+                f"pre-flight of {sc.name} not done ({type(exc).__name__}: {exc}); the run goes on",
+                NlpCalibWarning,
+                stacklevel=2,
+            )
+            continue
+        if report.stop_words():
+            print("\n".join(preflight_lines(report)) + "\n")
+        refuse(report, "; to calibrate anyway, give --skip-preflight")

@@ -1,0 +1,197 @@
+"""Skid-steer (or tracked) base: each side's wheels driven together, turning by skidding.
+
+Parameters ``(k_left, k_right, baseline, turn_slip)``: metres per tick of each side, the effective
+track at a slow turn (wider than the wheels' measured track: the wheels skid sideways as the base
+turns, users report 1.5 to 2 times), and how much wider it grows with the turn rate; inputs per
+interval ``(left_ticks, right_ticks, left_rate, right_rate)``: the sides' unwrapped increments and
+their rates over the interval (ticks/s: levels, not increments). The wheels alone would turn the
+base by ``Δθ_w = (d_r − d_l)/baseline`` at the rate ``ω_w = (k_right·right_rate −
+k_left·left_rate)/baseline``; skidding turns it by ``Δθ = Δθ_w / (1 + turn_slip·|ω_w|)``, as if the
+track were ``baseline·(1 + turn_slip·|ω_w|)``. The base travels ``(d_r + d_l)/2`` along an exact
+arc (or Euler). With ``turn_slip = 0`` it is the differential drive of :mod:`.diff_drive`, whose
+controller (``diff_drive_controller``) it hands off to.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
+from typing import ClassVar
+
+import casadi as ca
+import numpy as np
+
+from nlp_calib.logs import EncoderKind, Log, LogHeader
+from nlp_calib.models.base import SENSOR_TURNED, Reference, Symmetry, named, record_rates
+from nlp_calib.models.controllers import ControllerMap, EncoderScales
+from nlp_calib.models.diff_drive import LEFT_ENCODER, RIGHT_ENCODER, DiffDrive, DiffDriveDrive, wheel_pair
+from nlp_calib.models.diff_drive import RADIANS as DIFF_DRIVE_RADIANS
+from nlp_calib.models.drives import SimulationSettings, drive_header, running
+from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
+from nlp_calib.symbolic import se2
+
+_PARAMS = ("k_left", "k_right", "baseline", "turn_slip")
+#: Curvature (1/m) per unit of the simulator's turning profile: tighter than the differential
+#: drive's, so that the turn rates span what tells the slip from the track.
+_SIM_CURVATURE = 3.0
+#: The turn rate (rad/s) the hand-off states the effective track at.
+_STATED_RATE = 0.5
+
+#: The differential drive's radians form, and each wheel joint's rate over the interval (rad/s).
+RADIANS = RadiansForm(
+    params=DIFF_DRIVE_RADIANS.params,
+    inputs=MappingProxyType(
+        {
+            **DIFF_DRIVE_RADIANS.inputs,
+            "left_rate": Renamed("left_rate", "rad/s", 1.0, LEFT_ENCODER, rate=True),
+            "right_rate": Renamed("right_rate", "rad/s", 1.0, RIGHT_ENCODER, rate=True),
+        }
+    ),
+)
+
+
+class SkidSteerDrive(DiffDriveDrive):
+    """The base turns at ``w`` (curvature ``3·turn`` per metre); the sides' wheels turn it by
+    ``w·(1 + turn_slip·|ω_w|)`` of their own, ``ω_w`` their turn rate."""
+
+    default_truth: Mapping[str, float] = MappingProxyType(
+        {
+            "k_left": 4.9e-4,
+            "k_right": 5.1e-4,
+            "baseline": 0.95,
+            "turn_slip": 0.3,
+            "sensor_x": 0.3,
+            "sensor_y": -0.05,
+            "sensor_theta": 0.08,
+        }
+    )
+    default_guess: Mapping[str, float] = MappingProxyType(
+        {
+            "k_left": 5e-4,
+            "k_right": 5e-4,
+            "baseline": 0.8,
+            "turn_slip": 0.0,
+            "sensor_x": 0.25,
+            "sensor_y": 0.0,
+            "sensor_theta": 0.0,
+        }
+    )
+
+    def steps(
+        self,
+        opts: SimulationSettings,
+        speed: np.ndarray,
+        turn: np.ndarray,
+        dt: np.ndarray,
+        turn_start: float,
+        carry: Mapping[str, float] | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        t = opts.truth
+        ds = speed * dt
+        w = ds * _SIM_CURVATURE * turn
+        # Δθ_w = Δθ·(1 + turn_slip·|Δθ_w|/Δt) solved for Δθ_w: the wheels turn faster than the base.
+        wheels = w / np.maximum(1.0 - t["turn_slip"] * np.abs(w) / dt, 0.05)
+        half = 0.5 * t["baseline"] * wheels
+        first: Mapping[str, float | None] = carry or {"left": None, "right": None}
+        return ds, w, {"left": running(ds - half, first["left"]), "right": running(ds + half, first["right"])}
+
+    def header(self, opts: SimulationSettings) -> LogHeader:
+        return drive_header(opts, "skid_steer", SkidSteer.header_names)
+
+
+class SkidSteer(DiffDrive):
+    """Skid-steer base, parameters ``(k_left, k_right, baseline, turn_slip)`` then the sensor pose."""
+
+    name: ClassVar[str] = "skid_steer"
+    log_names: ClassVar[tuple[str, ...]] = ("skid_steer",)
+    kinematic_params: ClassVar[tuple[str, ...]] = _PARAMS
+    units: ClassVar[Mapping[str, str]] = MappingProxyType({**DiffDrive.units, "turn_slip": "s/rad"})
+    header_names: ClassVar[Mapping[str, str]] = MappingProxyType(
+        {**DiffDrive.header_names, "turn_slip": "turn_slip"}
+    )
+    header_aliases: ClassVar[Mapping[str, str]] = MappingProxyType(
+        {**DiffDrive.header_aliases, "turn_slip": "turn_slip"}
+    )
+    input_names: ClassVar[tuple[str, ...]] = ("left_ticks", "right_ticks", "left_rate", "right_rate")
+    input_units: ClassVar[Mapping[str, str]] = MappingProxyType(
+        {**DiffDrive.input_units, "left_rate": "ticks/s", "right_rate": "ticks/s"}
+    )
+    level_inputs: ClassVar[tuple[str, ...]] = ("left_rate", "right_rate")
+    encoder_kinds: ClassVar[Mapping[str, EncoderKind]] = DiffDrive.encoder_kinds
+    turning_params: ClassVar[tuple[str, ...]] = ("baseline", "turn_slip")
+    turning_note: ClassVar[str] = "the split between the track and the slip (turns at several rates)"
+    reference: ClassVar[Mapping[str, Reference]] = MappingProxyType({"turn_slip": ("absolute", 0.01)})
+    headline: ClassVar[tuple[str, ...]] = ("k_left", "baseline", "turn_slip")
+    defaults: ClassVar[Mapping[str, float]] = MappingProxyType({"turn_slip": 0.0})
+    symmetries: ClassVar[tuple[Symmetry, ...]] = (
+        Symmetry(
+            "the base frame turned round",
+            "baseline",
+            ("k_left", "k_right", "baseline", *SENSOR_TURNED[0]),
+            SENSOR_TURNED[1],
+        ),
+    )
+    drive: ClassVar[SkidSteerDrive] = SkidSteerDrive()
+    physical_ranges: ClassVar[Mapping[str, tuple[float, float]]] = MappingProxyType(
+        {**DiffDrive.physical_ranges, "baseline": (0.05, 10.0), "turn_slip": (-0.5, 5.0)}
+    )
+
+    def increment(self, k: ca.SX, u: ca.SX, integration: str) -> ca.SX:
+        """Travel ``(d_r + d_l)/2`` turning by ``Δθ_w/(1 + turn_slip·|ω_w|)``; exact arc or Euler."""
+        p, inputs = named(self.kinematic_params, k), named(self.input_names, u)
+        d_left, d_right = p["k_left"] * inputs["left_ticks"], p["k_right"] * inputs["right_ticks"]
+        wheels = (d_right - d_left) / p["baseline"]
+        rate = (p["k_right"] * inputs["right_rate"] - p["k_left"] * inputs["left_rate"]) / p["baseline"]
+        dtheta = wheels / (1.0 + p["turn_slip"] * ca.fabs(rate))
+        travel = 0.5 * (d_left + d_right)
+        if integration == "euler":
+            return ca.vertcat(travel, 0.0, dtheta)
+        return se2.arc(travel, dtheta)
+
+    def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
+        """Rows: the sides' tick increments, then their rates over each interval (ticks/s)."""
+        ticks = super().inputs(log, steering_sample)
+        return np.vstack([ticks, ticks / np.diff(log.time_s)])
+
+    def input_rates(self, log: Log) -> np.ndarray:
+        """Each side's rate (ticks/s) at each record, for its increment and for its rate alike: the
+        ticks of the two intervals around the record over their duration."""
+        rates = record_rates(super().inputs(log, "start"), np.asarray(log.time_s))
+        return np.vstack([rates, rates])
+
+    def input_noise_std(self, log: Log, encoder_noise: Mapping[str, float] | None = None) -> np.ndarray:
+        """1σ of each increment in ticks (default: quantisation, ``1/√12``); a rate's noise is its
+        increment's, counted there."""
+        return np.append(super().input_noise_std(log, encoder_noise), [0.0, 0.0])
+
+    def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
+        """``diff_drive_controller`` with the effective track at a slow turn; the slip has no place
+        there, so the track at a stated turn rate is said with it."""
+        base = wheel_pair(params["k_left"], params["k_right"], params["baseline"], scales)
+        wide = params["baseline"] * (1.0 + params["turn_slip"] * _STATED_RATE)
+        slip = (
+            "no ros2_control parameter: the effective track grows as baseline·(1 + turn_slip·|ω|) with "
+            f"the turn rate ω (rad/s); at {_STATED_RATE:g} rad/s it is {wide!r} m: a base that mostly "
+            "turns at one rate takes that track as wheel_separation"
+        )
+        return ControllerMap(
+            base.controller, base.parameters, {"turn_slip": slip}, base.omitted, base.assumes
+        )
+
+    def in_radians(self) -> InRadians:
+        return InRadians(self, RADIANS)
+
+    def initial_guess(
+        self,
+        U: np.ndarray,
+        z: np.ndarray,
+        base_motion: Callable[[Mapping[str, float]], np.ndarray],
+    ) -> dict[str, float]:
+        """The differential drive's closed form with no slip (its track is the effective one at
+        the log's turn rates); the fit finds the slip."""
+        start = super().initial_guess(U, z, lambda p: base_motion({**p, "turn_slip": 0.0}))
+        return {**{n: start[n] for n in DiffDrive.kinematic_params}, "turn_slip": 0.0, **_sensor(start)}
+
+
+def _sensor(params: Mapping[str, float]) -> dict[str, float]:
+    return {n: params[n] for n in ("sensor_x", "sensor_y", "sensor_theta")}

@@ -1,0 +1,50 @@
+"""``plan.md``: what to drive next, when the drive leaves a parameter not determined well enough.
+
+The manoeuvres are ranked by the largest σ over its reference precision once each is appended to
+the drive (simulated with the fitted model); ``plan.png`` sketches the best of them.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from nlp_calib.core.files import atomic_write_text
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.preflight import Plan
+
+
+def _sigma(value: float) -> str:
+    return f"{value:.3g}" if math.isfinite(value) else "unbounded"
+
+
+def plan_text(plan: Plan, name: str) -> str:
+    """The plan as Markdown."""
+    unit = f" {plan.target_unit}" if plan.target_unit not in ("", "1") else ""
+    lines = [
+        f"# What to drive next: {name}",
+        "",
+        f"On this drive, **{plan.target}** is the parameter known least well relative to the precision a "
+        f"useful calibration needs: σ {_sigma(plan.target_std_before)}{unit}, "
+        f"{_sigma(plan.worst_before)} times that precision. Each manoeuvre below, about half a minute at "
+        f"the drive's own speed, was simulated with {plan.model_from} and appended to the drive; they are "
+        "ranked by the largest σ over its needed precision (the tracker lag included) once appended.",
+        "",
+        f"| rank | manoeuvre | largest σ / needed | σ of {plan.target}{unit} |",
+        "|---|---|---|---|",
+    ]
+    for i, m in enumerate(plan.ranked):
+        lines.append(f"| {i + 1} | {m.words} | {_sigma(m.worst_after)} | {_sigma(m.target_std_after)} |")
+    if plan.ranked:
+        lines += ["", "![the best manoeuvres, from a standstill heading along x](plan.png)"]
+    return "\n".join(lines) + "\n"
+
+
+def write_plan(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
+    """``plan.md`` when the run has a plan (nothing otherwise)."""
+    plan = run.checks.plan
+    if plan is None:
+        return []
+    path = folder / name
+    atomic_write_text(path, plan_text(plan, run.scenario.name))
+    return [path]

@@ -1,0 +1,294 @@
+"""A first scenario drafted from a recording: ``nlp-calib init``.
+
+From a bag's survey (:mod:`nlp_calib.logs.bag_survey`), a joint log's header row or a text log's
+header: the joints topic and its joints in the model's encoder order, the tracker topic (and
+frame), the model the joint names suggest, and the keys a first run needs. Each encoder takes the
+joint whose name carries a word of the encoder's name (``left`` for an encoder named ``left_…``),
+an angle encoder (``absolute``) a joint named ``steer…``, a wheel (``counter``) left over any joint named
+``…wheel…``, ``…traction…`` or ``…drive…``; a model is a candidate when every one of its encoders
+takes a joint of its own, the first registered candidate is drafted. The tracker is the pose topic
+whose name says most clearly that it is a reference (a motion-capture system's, a ground truth),
+never the robot's own odometry. The text says what was found and why each choice was made, as
+comments, and is read back as a scenario before it is written: ``run`` accepts it as it is.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from nlp_calib.core.errors import UsageError
+from nlp_calib.logs.bag_reader import ODOMETRY_TYPE, POSE_TYPE, TF_TYPE, TRANSFORM_TYPE, is_bag
+from nlp_calib.logs.bag_survey import BagSurvey, Topic, survey
+from nlp_calib.logs.joint_log import read_joint_csv
+from nlp_calib.logs.reader import read_header
+from nlp_calib.models import MODELS, encoders, model_for_log
+from nlp_calib.pipeline.scenario import Scenario, scenario_from_mapping
+from nlp_calib.sources.joints import paired_files
+
+#: Words in a topic's name that say it carries a reference, and those that say it does not.
+REFERENCE_WORDS = (
+    "mocap",
+    "vicon",
+    "optitrack",
+    "vrpn",
+    "qualisys",
+    "tracker",
+    "ground_truth",
+    "groundtruth",
+    "gt",
+)
+NOT_REFERENCE_WORDS = ("odom", "cmd", "goal", "plan", "amcl", "estimate", "filtered")
+#: Words of a wheel joint's name when the encoder's own words are not in it.
+WHEEL_WORDS = ("wheel", "traction", "drive")
+#: What the draft asks of a first run.
+DEFAULTS: Mapping[str, Any] = {
+    "initial_guess": "auto",
+    "residual": {"horizon_s": 0.5},
+    "alignment": {"tracker_lag": "auto", "search": [-0.1, 0.1]},
+    "solvers": ["gauss_newton"],
+}
+
+
+@dataclass(frozen=True)
+class Draft:
+    """A drafted scenario: its mapping, its commented text, and what was found, line by line."""
+
+    raw: Mapping[str, Any]
+    text: str
+    found: tuple[str, ...]
+
+    def scenario(self, where: Path) -> Scenario:
+        """The drafted scenario as ``run`` reads it from a file at ``where``."""
+        return scenario_from_mapping(yaml.safe_load(self.text), str(where), where.parent, where)
+
+
+def _words(name: str) -> set[str]:
+    return {w for w in re.split(r"[^a-z0-9]+", name.lower()) if w}
+
+
+def assign(model_name: str, joints: Sequence[str]) -> dict[str, str] | None:
+    """Each of the model's encoders' joint by name (see the module docstring); None when some
+    encoder finds none of its own."""
+    model = MODELS[model_name]
+    out: dict[str, str] = {}
+    for encoder in encoders(model):
+        kind = model.encoder_kinds[encoder]
+        own = _words(encoder) - {"wheel"}
+        free = [j for j in joints if j not in out.values()]
+        match = [j for j in free if own & _words(j)]
+        if not match and kind == "absolute":
+            match = [j for j in free if "steer" in j.lower()]
+        if not match and kind == "counter":
+            match = [j for j in free if any(w in j.lower() for w in WHEEL_WORDS) and "steer" not in j.lower()]
+        if not match:
+            return None
+        out[encoder] = match[0]
+    return out
+
+
+def guess_model(joints: Sequence[str], model: str | None) -> tuple[str, dict[str, str], str]:
+    """The model (``model`` when given), its encoders' joints and why, in words."""
+    names = [model] if model is not None else list(MODELS)
+    fits = {m: a for m in names if (a := assign(m, joints)) is not None}
+    if not fits:
+        given = f"model {model}'s encoders ({', '.join(encoders(MODELS[model]))})" if model else "any model"
+        raise UsageError(
+            f"the joints {', '.join(joints) or '(none)'} do not name the joints of {given}; give --model and "
+            "edit the drafted joints, or name the joints in the scenario (docs/bags.md)"
+        )
+    chosen = next(iter(fits))
+    pairs = ", ".join(f"{e}: {j}" for e, j in fits[chosen].items())
+    others = [m for m in fits if m != chosen]
+    why = f"{'given' if model else 'the joint names fit it'} ({pairs})"
+    if others:
+        why += f"; {', '.join(others)} read(s) the same joints"
+    return chosen, fits[chosen], why
+
+
+def _score(topic: Topic) -> int:
+    words = _words(topic.name) | {w for f in topic.frames for w in _words(f)}
+    score = 2 * len(words & set(REFERENCE_WORDS)) - 3 * any(
+        w in topic.name.lower() for w in NOT_REFERENCE_WORDS
+    )
+    return score + (topic.msgtype in (POSE_TYPE, TRANSFORM_TYPE)) - (topic.msgtype == TF_TYPE)
+
+
+def tracker(found: BagSurvey) -> tuple[Topic, str | None, list[Topic]]:
+    """The tracker topic, its frame (where the type names one to pick) and the other candidates."""
+    poses = sorted(
+        found.of_type(POSE_TYPE, TRANSFORM_TYPE, ODOMETRY_TYPE, TF_TYPE), key=lambda t: (-_score(t), -t.count)
+    )
+    poses = [t for t in poses if t.name != "/tf_static"]
+    if not poses:
+        raise UsageError(
+            f"{found.path}: no topic holds poses (PoseStamped, TransformStamped, Odometry or TF)"
+        )
+    best = poses[0]
+    frame = None
+    if best.msgtype == TF_TYPE or len(best.frames) > 1:
+        frames = sorted(best.frames, key=lambda f: -len(_words(f) & set(REFERENCE_WORDS)))
+        frame = frames[0] if frames else None
+    return best, frame, poses[1:]
+
+
+def sensor_frame(found: BagSurvey, base: str = "base_link") -> str | None:
+    """The frame on ``/tf_static`` the tracker most likely follows: a leaf of the fixed transforms
+    that leads to ``base`` (the only one, or the one whose name says it is a marker or a
+    reference); None when there is none to tell."""
+    parents = set(found.static.values())
+
+    def reaches(frame: str) -> bool:
+        seen: set[str] = set()
+        while frame in found.static and frame not in seen:
+            seen.add(frame)
+            frame = found.static[frame]
+        return frame == base
+
+    leaves = [f for f in found.static if f not in parents and reaches(f)]
+    marked = [f for f in leaves if _words(f) & {*REFERENCE_WORDS, "marker", "body", "rigid"}]
+    chosen = marked or leaves
+    return chosen[0] if len(chosen) == 1 else None
+
+
+def _listing(found: BagSurvey) -> list[str]:
+    lines = []
+    for t in found.topics:
+        what = (
+            f"joints: {', '.join(t.joints)}"
+            if t.joints
+            else (f"frames: {', '.join(t.frames)}" if t.frames else "")
+        )
+        lines.append(f"{t.name}  {t.msgtype}  {t.count} messages, {t.rate_hz:.0f} Hz  {what}".rstrip())
+    if found.static:
+        lines.append("static transforms: " + ", ".join(f"{p} -> {c}" for c, p in found.static.items()))
+    return lines
+
+
+def _relative(path: Path, where: Path) -> str:
+    """``path`` relative to the scenario's folder when it lies inside it (the two move together),
+    else absolute."""
+    target, folder = path.resolve(), where.parent.resolve()
+    return str(target.relative_to(folder)) if target.is_relative_to(folder) else str(target)
+
+
+def _text(header: Sequence[str], raw: Mapping[str, Any], notes: Mapping[str, str]) -> str:
+    """The scenario as YAML with ``header`` comments on top and each key's note after it: one line a
+    key, a mapping of several keys (the dataset's) as a block."""
+    lines = [f"# {h}" if h else "#" for h in header]
+    for key, value in raw.items():
+        if isinstance(value, Mapping) and len(value) > 2:
+            lines += yaml.safe_dump(
+                {key: dict(value)}, sort_keys=False, default_flow_style=None, width=200
+            ).splitlines()
+            continue
+        shown = yaml.safe_dump(value, sort_keys=False, default_flow_style=True, width=200).strip()
+        shown = shown.removesuffix("...").strip()
+        note = notes.get(key)
+        lines.append(f"{key}: {shown}" + (f"   # {note}" if note else ""))
+    return "\n".join(lines) + "\n"
+
+
+NOTES: Mapping[str, str] = {
+    "initial_guess": "the closed-form start from the data: no guess needed",
+    "residual": "windows of half a second, whatever the rates",
+    "alignment": "the tracker's lag behind the joints, estimated within ±0.1 s",
+    "solvers": "add ipopt to compare the two",
+}
+
+
+def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
+    found = survey(path)
+    joint_topics = [t for t in found.of_type("sensor_msgs/msg/JointState") if t.joints]
+    if not joint_topics:
+        raise UsageError(f"{path}: no sensor_msgs/msg/JointState topic names any joint")
+    js = max(joint_topics, key=lambda t: (t.positions, len(t.joints), t.count))
+    name, joints, why = guess_model(js.joints, model)
+    best, frame, others = tracker(found)
+    dataset: dict[str, Any] = {
+        "bag": _relative(path, where),
+        "joint_states": js.name,
+        "joints": list(joints.values()),
+    }
+    dataset["tracker"] = best.name
+    if frame is not None:
+        dataset["tracker_frame"] = frame
+    mount = sensor_frame(found) if frame is None else None
+    if mount is not None:
+        dataset["sensor_frame"] = mount
+    raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS}
+    header = [
+        f"Drafted by nlp-calib init from {path}: {found.duration_s:.1f} s, {len(found.topics)} topics.",
+        *(f"  {line}" for line in _listing(found)),
+        f"model: {name}, because {why}.",
+        f"joints {', '.join(joints.values())} are the model's encoders {', '.join(joints)}, in that order.",
+        f"tracker: {best.name} ({best.msgtype}){f', frame {frame}' if frame else ''}"
+        + (f"; other pose topics: {', '.join(t.name for t in others)}" if others else "")
+        + " (the robot's own odometry is never a reference).",
+        *(
+            [
+                f"sensor_frame {mount}: its fixed transforms from base_link on /tf_static give the nominal "
+                "mount (the hand-off's height, roll and pitch)."
+            ]
+            if mount
+            else []
+        ),
+        f"Check it before a run: nlp-calib preflight {where}",
+    ]
+    text = _text(header, raw, NOTES)
+    lines = (
+        *_listing(found),
+        f"model {name}: {why}",
+        f"tracker {best.name}" + (f" (frame {frame})" if frame else ""),
+    )
+    return Draft(raw, text, lines)
+
+
+def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
+    joints_path, poses_path = paired_files(path)
+    table = read_joint_csv(joints_path)
+    name, joints, why = guess_model(list(table.names), model)
+    dataset = {
+        "joints": _relative(joints_path, where),
+        "poses": _relative(poses_path, where),
+        "encoders": dict(joints),
+    }
+    raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS}
+    header = [
+        f"Drafted by nlp-calib init from {joints_path.name} (joints: {', '.join(table.names)}) and "
+        f"{poses_path.name}.",
+        f"model: {name}, because {why}.",
+        f"Check it before a run: nlp-calib preflight {where}",
+    ]
+    return Draft(
+        raw, _text(header, raw, NOTES), (f"joints: {', '.join(table.names)}", f"model {name}: {why}")
+    )
+
+
+def _draft_text_log(path: Path, where: Path, model: str | None) -> Draft:
+    kind = read_header(path).kinematic_model
+    name = model or model_for_log(kind).name
+    raw = {"name": where.stem, "model": name, "dataset": _relative(path, where), "initial_guess": "from_file"}
+    header = [
+        f"Drafted by nlp-calib init from {path} (#kinematic_model: {kind}).",
+        f"Check it: nlp-calib preflight {where}",
+    ]
+    return Draft(raw, _text(header, raw, {}), (f"a text log of kind {kind}: model {name}",))
+
+
+def draft(path: Path, where: Path, model: str | None = None) -> Draft:
+    """The scenario drafted from the recording at ``path``, to be written at ``where`` (paths in it
+    are relative to that file), read back as ``run`` reads it."""
+    if is_bag(path):
+        d = _draft_bag(path, where, model)
+    elif path.suffix.lower() in (".csv", ".tum"):
+        d = _draft_joint_log(path, where, model)
+    else:
+        d = _draft_text_log(path, where, model)
+    d.scenario(where)  # the draft is one run accepts, or this says why not
+    return d

@@ -1,0 +1,273 @@
+"""The pre-flight: what a recording holds and whether the drive determines each parameter, before any fit.
+
+In seconds and without a fit: each log is read and selected as a run reads it (the prepare
+stage), the problem is built as the run builds it, and its Jacobian is evaluated at a start (the
+scenario's initial guess, or the closed-form start on the stretch of at most
+:data:`START_RECORDS` records that turns most; the nominal values where that fails). From it each
+parameter is determined, weakly determined or not, with the reason
+(:mod:`nlp_calib.analysis.determinacy`, the run's own definitions); the drive's excitation and
+what the data imply of units and signs come from the tracker and the encoders; when a parameter
+is not determined well enough, the plan ranks what to drive next (:mod:`nlp_calib.analysis.plan`).
+:func:`refuse` stops a calibration that cannot succeed with the pre-flight's words.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.analysis import determinacy as det
+from nlp_calib.analysis.excitation import combined, excitation, smoothed
+from nlp_calib.analysis.plan import Setting, plan
+from nlp_calib.analysis.uncertainty import range_std
+from nlp_calib.analysis.units import findings
+from nlp_calib.analysis.verdict import way_out
+from nlp_calib.core.errors import NlpCalibError, PreflightError
+from nlp_calib.logs import Log
+from nlp_calib.models import KinematicModel
+from nlp_calib.models.clock import lag_names
+from nlp_calib.pipeline.assemble import scenario_info
+from nlp_calib.pipeline.build import StartingPoint, build_problem, starting_point
+from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
+from nlp_calib.pipeline.recording import recording
+from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
+from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight, UnitFinding
+
+#: The closed-form start is taken on the stretch of at most this many records that turns most.
+START_RECORDS = 5000
+#: The start is brought to the data by at most this many Gauss-Newton steps (a far nominal start
+#: takes a few), until a step gains less than this share of the misfit.
+ROUGH_STEPS = 4
+ROUGH_GAIN = 0.1
+#: The steps are taken on at most this many windows × horizon (the final information on all of
+#: :data:`~nlp_calib.analysis.determinacy.MAX_WORK`).
+STEP_WORK = 20_000
+
+
+@dataclass(frozen=True)
+class Drive:
+    """The logs as prepared, the scenario they are fitted with (one horizon), the problem, its
+    windows over every log's fitted records and the start the Jacobian is taken at, in words."""
+
+    parts: tuple[PreparedLog, ...]
+    scenario: Scenario
+    fns: ProblemFunctions
+    data: ResidualData
+    start: StartingPoint
+    start_words: str
+
+
+def _prepared(
+    sc: Scenario, logs: Sequence[Log] | None
+) -> tuple[tuple[PreparedLog, ...], Scenario, dict[str, str]]:
+    """Each log prepared as a run prepares it, the scenario with one record horizon, and the
+    parameters the drive cannot determine at all (the run holds them)."""
+    per_log = sc.per_log()
+    given: Sequence[Log | None] = list(logs) if logs is not None else [None] * len(per_log)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the run says what preparing says; the pre-flight says it otherwise
+        parts = tuple(prepare(s, log) for s, log in zip(per_log, given))
+        if not sc.data.joint:
+            return parts, parts[0].scenario, dict(parts[0].held)
+        one = sc.with_options(residual=joint_residual(sc, parts))
+    model = parts[0].model
+    inputs = np.concatenate(
+        [model.inputs(p.log.select(p.start, p.split), sc.objective.residual.steering_sample) for p in parts],
+        axis=1,
+    )
+    held = {n: why for n, why in model.undetermined(inputs).items() if n not in sc.parameters.fixed}
+    return parts, one, held
+
+
+def _busiest(log: Log, a: int, b: int, size: int) -> tuple[int, int]:
+    """The stretch of ``size`` records of ``[a, b)`` over which the tracker's heading turns most."""
+    if b - a <= size:
+        return a, b
+    heading = smoothed(log.time_s[a:b], np.unwrap(log.T_world_sensor[a:b, 2])[:, None], 1.0)[:, 0]
+    c = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(heading)))])
+    starts = np.arange(0, b - a - size + 1, max(1, size // 4))
+    best = int(starts[np.argmax(c[starts + size - 1] - c[starts])])
+    return a + best, a + best + size
+
+
+def _implausible(model: KinematicModel, point: StartingPoint) -> str:
+    """The start's parameters outside the model's plausible ranges, in words ("" when none is)."""
+    out = [
+        f"{n} {v:.3g}"
+        for n, v in point.initial.items()
+        if n in model.physical_ranges and not model.physical_ranges[n][0] <= v <= model.physical_ranges[n][1]
+    ]
+    return ", ".join(out)
+
+
+def _start(sc: Scenario, fns: ProblemFunctions, first: PreparedLog, n_logs: int) -> tuple[StartingPoint, str]:
+    """Where the Jacobian is taken: the run's starting point (the closed form on the busiest
+    stretch when ``auto``), or the nominal values where the closed form fails. A closed form
+    outside the model's plausible ranges is kept, and said: it is where a drive that barely
+    determines some combination sends it, and where the run starts too."""
+    auto = sc.parameters.initial_guess == "auto"
+    a, b = (
+        _busiest(first.log, first.start, first.split, START_RECORDS) if auto else (first.start, first.split)
+    )
+    lags = [0.0] * n_logs if n_logs > 1 else []
+    try:
+        point = starting_point(sc, fns, first.log, a, b, lags)
+        if np.all(np.isfinite(point.x0)):
+            words = "the closed-form start (initial_guess: auto)" if auto else "the initial guess"
+            words += f" on records {a} to {b}" if (a, b) != (first.start, first.split) else ""
+            outside = _implausible(fns.model, point)
+            return point, words + (f", outside the plausible ranges in {outside}" if outside else "")
+        why = "it is not finite"
+    except (NlpCalibError, np.linalg.LinAlgError, ValueError, ZeroDivisionError) as exc:
+        if not auto:
+            raise
+        why = f"it failed: {exc}"
+    nominal = sc.with_options(initial_guess="from_file")
+    point = starting_point(nominal, fns, first.log, a, b, lags)
+    return point, f"the nominal values (not the closed-form start: {why})"
+
+
+def drive(sc: Scenario, logs: Sequence[Log] | None = None) -> tuple[Drive, dict[str, str]]:
+    """The scenario's logs prepared, its problem built and bound to every log's fitted records, and
+    the start (see the module docstring); with the parameters the run would hold."""
+    parts, one, held = _prepared(sc, logs)
+    fns = build_problem(one, parts[0].model, tuple(held), len(parts))
+    point, words = _start(one, fns, parts[0], len(parts))
+    data = build_residual_data(
+        fns,
+        [p.log.select(p.start, p.split) for p in parts],
+        one.objective.residual,
+        drop_stationary=one.log.samples.drop_stationary,
+    )
+    return Drive(parts, one, fns, data, point, words), held
+
+
+def _track(log: Log) -> tuple[np.ndarray, np.ndarray]:
+    return np.asarray(log.T_world_sensor[:, :2]), np.unwrap(log.T_world_sensor[:, 2])
+
+
+def _units(d: Drive) -> tuple[UnitFinding, ...]:
+    out: list[UnitFinding] = []
+    yaw = d.fns.sensor.planar_yaw(d.start.initial)
+    for part in d.parts:
+        log = part.log.select(part.start, part.split)
+        out += [f for f in findings(log, part.model, _track(log), yaw) if f not in out]
+    return tuple(out)
+
+
+def _rough(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str]:
+    """The start brought to the data by Gauss-Newton steps on the directions the drive determines
+    (halved up to twice where a full step does not lower the robust cost; at most
+    :data:`ROUGH_STEPS`, until one gains less than :data:`ROUGH_GAIN` of it), on a smaller
+    subsample of the windows (:data:`STEP_WORK`); the windows' information at the point reached
+    and where it stands, in words."""
+    fns, start, delta = d.fns, d.start, d.scenario.objective.robust.delta
+    box = None if start.lower is None or start.upper is None else (start.lower, start.upper)
+
+    def at(x: np.ndarray, work: int = STEP_WORK) -> det.Information:
+        return det.information(fns, d.data, x, start.x_fixed, omega, delta, work)
+
+    x, info, steps = start.x0, at(start.x0), 0
+    while steps < ROUGH_STEPS:
+        dx = det.step(fns, info, x)
+        for alpha in (1.0, 0.5, 0.25):
+            moved = np.asarray(fns.boxplus(x, alpha * dx)).ravel()
+            moved = moved if box is None else np.clip(moved, *box)
+            found = at(moved) if np.all(np.isfinite(moved)) else None
+            if found is not None and np.isfinite(found.chi2) and found.chi2 < info.chi2:
+                break
+        else:
+            break
+        gain = 1.0 - found.chi2 / max(info.chi2, 1e-300)
+        x, info, steps = moved, found, steps + 1
+        if gain < ROUGH_GAIN:
+            break
+    info = at(x, det.MAX_WORK)
+    if not steps:
+        return x, info, d.start_words
+    said = "one Gauss-Newton step" if steps == 1 else f"{steps} Gauss-Newton steps"
+    return x, info, f"{d.start_words}, moved by {said} toward the data"
+
+
+@dataclass(frozen=True)
+class Assessment:
+    """What the pre-flight judges the parameters from: the drive (:class:`Drive`) and the
+    parameters the run would hold, the point the Jacobian is taken at (free ``x``, in words
+    ``where``), the windows' information there, the residuals' variance it assumes (``noise`` in
+    words), the information weights, the robust threshold and the bounds' 1σ."""
+
+    drive: Drive
+    held: Mapping[str, str]
+    x: np.ndarray
+    where: str
+    info: det.Information
+    sigma2: float
+    noise: str
+    omega: np.ndarray
+    delta: float
+    bounds_std: np.ndarray
+
+    def standing(self, info: det.Information | None = None) -> det.Standing:
+        """Each free parameter's standing on these windows (or on those whose information is ``info``)."""
+        d = self.drive
+        return det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std)
+
+
+def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
+    """The drive of ``sc`` prepared and its Jacobian evaluated at the start brought to the data."""
+    d, held = drive(sc, logs)
+    fns, one = d.fns, d.scenario
+    omega = np.array(one.objective.information.omega(fns.error_rows))
+    x, info, where = _rough(d, omega)
+    sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info)
+    bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
+    return Assessment(d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds)
+
+
+def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
+    """The pre-flight check of ``sc`` (its logs read from their sources unless given)."""
+    t0 = time.perf_counter()
+    a = assess(sc, logs)
+    d = a.drive
+    fns, one = d.fns, d.scenario
+    exs = []
+    for p in d.parts:
+        log = p.log.select(p.start, p.split)
+        steering = p.scenario.objective.residual.steering_sample
+        exs.append(excitation(log.time_s, *_track(log), p.model, p.model.inputs(log, steering)))
+    units = scenario_info(one, fns.model, lag_names(fns.spec.lags)).units
+    statuses = det.statuses(fns, a.standing(), a.held, units, combined(exs))
+    loose = [s.name for s in statuses if s.status in (NOT_DETERMINED, WEAKLY) and not s.held]
+    ahead = None
+    if loose:
+        point = (a.x, d.start.x_fixed, a.omega)
+        residual = one.objective.residual
+        ahead = plan(
+            Setting(fns, d.data, a.info, point, a.sigma2, a.bounds_std, residual, a.delta, units, a.where)
+        )
+    return Preflight(
+        scenario=sc.name,
+        model=sc.model,
+        recordings=tuple(recording(p.scenario, p.log) for p in d.parts),
+        excitation=tuple(exs),
+        units=_units(d),
+        parameters=statuses,
+        start=a.where,
+        noise=a.noise,
+        plan=ahead,
+        way_out=way_out(loose, fns.model) if loose else "",
+        time_s=time.perf_counter() - t0,
+    )
+
+
+def refuse(report: Preflight, hint: str = "") -> None:
+    """Stop a calibration that cannot succeed (a unit or sign the data get wrong, a parameter the
+    drive does not determine) with the pre-flight's words (and ``hint``)."""
+    words = report.stop_words()
+    if words:
+        raise PreflightError(f"pre-flight: {report.scenario}: {words}{hint}", report.exit_code)

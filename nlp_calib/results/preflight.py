@@ -1,0 +1,250 @@
+"""What a pre-flight check found before any fit, and the plan of what to drive next.
+
+The pre-flight (``nlp-calib preflight``, and the start of every calibrating command) reads a
+recording and says what it holds, how the drive excites the robot, what the data imply of units
+and signs, and for each parameter whether the drive determines it, from the problem's Jacobian at
+a start (no fit). The plan ranks manoeuvres by how much each, appended to the drive, would lower
+the largest σ relative to the precision a useful calibration needs. These records hold the
+findings in numbers and words; :mod:`nlp_calib.analysis` computes them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: A parameter's standing on a drive.
+DETERMINED = "determined"
+WEAKLY = "weakly"
+NOT_DETERMINED = "not"
+
+#: The pre-flight's verdicts, from best to worst, and the exit code each gives.
+ENOUGH = "enough"
+WEAK_DRIVE = "weak"
+NOT_ENOUGH = "not enough"
+CHECK_DATA = "check the data"
+EXIT_CODES = {ENOUGH: 0, WEAK_DRIVE: 3, NOT_ENOUGH: 4, CHECK_DATA: 5}
+
+
+@dataclass(frozen=True)
+class Stream:
+    """One stream of a recording (a bag's topic, a file, a text log's records): its messages,
+    their median rate, the span of their times (s, on the stream's own clock), the gaps longer
+    than a few median intervals and the longest, and what else it says (joints, frames)."""
+
+    name: str
+    kind: str
+    count: int
+    rate_hz: float
+    span_s: tuple[float, float]
+    gaps: int
+    longest_gap_s: float
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One log as the pre-flight read it: where it comes from, its streams, the records it is
+    read as, their duration, the overlap of the joints' and the tracker's clocks (s; None when
+    they share one) and notes on its stamps and what was left out."""
+
+    path: str
+    source: str
+    streams: tuple[Stream, ...]
+    records: int
+    duration_s: float
+    overlap_s: float | None
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Excitation:
+    """How a drive excites the robot: distance (the tracker's path), time moving, how far the
+    heading ranges and turns each way (rad), the typical turn radii each way (m: the 10th, 50th
+    and 90th percentiles of the turning stretches; empty: no turn that way), direction changes of
+    travel and the share of driving backwards, and the speeds (m/s)."""
+
+    distance_m: float
+    duration_s: float
+    moving_fraction: float
+    heading_span_rad: float
+    turned_left_rad: float
+    turned_right_rad: float
+    radii_left_m: tuple[float, ...]
+    radii_right_m: tuple[float, ...]
+    reversals: int
+    reverse_fraction: float
+    speed_median_mps: float
+    speed_max_mps: float
+
+
+@dataclass(frozen=True)
+class UnitFinding:
+    """Something the data imply of units or signs (an angle in degrees, a wheel's angle that
+    wraps, a wheel that turns backwards as the robot drives forwards), for which encoder, in
+    words with the fix; ``blocking``: a calibration from these data cannot succeed as they are."""
+
+    kind: str
+    subject: str
+    words: str
+    blocking: bool = True
+
+
+@dataclass(frozen=True)
+class ParameterStatus:
+    """One parameter on this drive: ``status`` (:data:`DETERMINED`, :data:`WEAKLY`,
+    :data:`NOT_DETERMINED`), its 1σ (in its unit; inf when nothing holds it), that σ over the
+    precision a useful calibration needs (``reference``), the parameters it trades off with and
+    why, in words."""
+
+    name: str
+    status: str
+    std: float
+    std_reference: float
+    reference: float
+    unit: str
+    trades_with: tuple[str, ...]
+    because: str
+    #: Held at its initial value by the run (the model says the drive cannot determine it at all).
+    held: bool = False
+
+    def words(self) -> str:
+        """``wheelbase: not determined, because …``"""
+        head = {DETERMINED: "determined", WEAKLY: "weakly determined", NOT_DETERMINED: "not determined"}
+        size = ""
+        if np.isfinite(self.std) and self.status != DETERMINED:
+            size = (
+                f" (±{self.std:.2g} {self.unit}, {self.std_reference:.3g}× the {self.reference:.2g} needed)"
+            )
+        elif self.status == DETERMINED and np.isfinite(self.std):
+            size = f" (±{self.std:.2g} {self.unit})"
+        why = f", because {self.because}" if self.because else ""
+        return f"{self.name}: {head[self.status]}{size}{why}"
+
+
+@dataclass(frozen=True)
+class Manoeuvre:
+    """A manoeuvre to drive: its kind, radius (m; 0 for none), speed (m/s) and duration (s), in
+    words, the base's path for a sketch (``(n, 3)``, starting at the origin heading along x), and
+    what appending it to the drive gives: the largest σ over its reference precision and the plan's
+    target parameter's σ (its unit)."""
+
+    kind: str
+    radius_m: float
+    speed_mps: float
+    duration_s: float
+    words: str
+    path: np.ndarray
+    worst_after: float
+    target_std_after: float
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What to drive next: the parameter whose σ is largest relative to its reference precision
+    (``target``) and that ratio and σ on the drive as it is, where the model was evaluated
+    (``model_from``: the fit, or the pre-flight's start), and the manoeuvres ranked by the largest
+    such ratio once each is appended (best first)."""
+
+    target: str
+    target_unit: str
+    worst_before: float
+    target_std_before: float
+    model_from: str
+    ranked: tuple[Manoeuvre, ...]
+
+    @property
+    def best(self) -> Manoeuvre | None:
+        """The first manoeuvre that lowers the target's σ (None: none does)."""
+        before = self.target_std_before
+        return next((m for m in self.ranked if m.target_std_after < before), None)
+
+    def line(self) -> str:
+        """The "next" line: the first manoeuvre and what it would do to the target's σ."""
+        best = self.best
+        if best is None:
+            return (
+                f"no manoeuvre considered lowers the σ of {self.target} with the model as {self.model_from} "
+                "has it"
+            )
+        unit = f" {self.target_unit}" if self.target_unit not in ("", "1") else ""
+        return (
+            f"drive {best.words}: the σ of {self.target} would fall from {_sigma(self.target_std_before)}"
+            f"{unit} to {_sigma(best.target_std_after)}{unit}"
+        )
+
+
+def _sigma(value: float) -> str:
+    return f"{value:.2g}" if np.isfinite(value) else "unbounded"
+
+
+@dataclass(frozen=True)
+class Preflight:
+    """A pre-flight check of one scenario's logs: each log as read, the drive's excitation (each
+    log's, in order), the unit and sign findings, each free parameter's standing, where the
+    Jacobian was taken (``start``) and the tracker noise it assumed (its words), the plan (when a
+    parameter is not determined well enough), the way out in words and the time it took (s)."""
+
+    scenario: str
+    model: str
+    recordings: tuple[Recording, ...]
+    excitation: tuple[Excitation, ...]
+    units: tuple[UnitFinding, ...]
+    parameters: tuple[ParameterStatus, ...]
+    start: str
+    noise: str
+    plan: Plan | None
+    way_out: str
+    time_s: float
+
+    @property
+    def verdict(self) -> str:
+        """:data:`CHECK_DATA` (a blocking unit or sign finding), :data:`NOT_ENOUGH` (a parameter
+        not determined), :data:`WEAK_DRIVE` (one weakly) or :data:`ENOUGH`."""
+        if any(u.blocking for u in self.units):
+            return CHECK_DATA
+        states = {p.status for p in self.parameters}
+        if NOT_DETERMINED in states:
+            return NOT_ENOUGH
+        return WEAK_DRIVE if WEAKLY in states else ENOUGH
+
+    @property
+    def exit_code(self) -> int:
+        return EXIT_CODES[self.verdict]
+
+    def named(self, status: str) -> tuple[str, ...]:
+        """The parameters of ``status``."""
+        return tuple(p.name for p in self.parameters if p.status == status)
+
+    def stop_words(self) -> str:
+        """Why a calibration from these data cannot succeed, in one line ("" when it can)."""
+        blocking = [u.words for u in self.units if u.blocking]
+        if blocking:
+            return "; ".join(blocking)
+        missing = [p for p in self.parameters if p.status == NOT_DETERMINED and not p.held]
+        if not missing:
+            return ""
+        plan = f"; plan: {self.plan.line()}" if self.plan is not None and self.plan.best is not None else ""
+        why = "; ".join(_causes(missing))
+        return (
+            f"this drive cannot determine {', '.join(p.name for p in missing)} ({why}); {self.way_out}{plan}"
+        )
+
+
+def _causes(loose: list[ParameterStatus]) -> list[str]:
+    """Why the parameters ``loose`` are not determined, each reason once."""
+    out: dict[str, None] = {}
+    pairs: set[frozenset[str]] = set()
+    for p in loose:
+        cause = p.because.split("; ")[0]
+        if cause.startswith("it trades off"):
+            group = frozenset((p.name, *p.trades_with))
+            if group in pairs:
+                continue
+            pairs.add(group)
+            cause = f"{', '.join(sorted(group))} trade off"
+        elif cause.startswith("the drive carries no information"):
+            cause = f"nothing in the drive shows {p.name}"
+        out[cause] = None
+    return list(out)

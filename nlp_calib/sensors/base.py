@@ -1,0 +1,142 @@
+"""What a sensor plug-in provides: the reference a robot's wheels are calibrated against.
+
+A sensor is one file and one registry line (:data:`nlp_calib.sensors.SENSORS`). It owns, like a
+kalibr sensor class, everything about itself that the rest of the package would otherwise decide
+by asking which sensor it is:
+
+- its **variables**: the mount's parameters, their units, the precision a calibration needs of
+  each, those the drive never determines (``held``) and those only turning shows (``turning``),
+  its angles (wrapped in the canonical form);
+- its **error term**: the pose layout it measures, the measured motion ``z`` of a window and the
+  residual comparing it with the model's prediction (symbolic, CasADi), the mount's box-plus, the
+  noise model's groups; and the numeric twins the analyses need (headings, the residual's rows
+  of a motion, its poses in a log, the signal its jump screen judges);
+- its **start**: the mount's starting values, its closed-form start (with the physical sign) and
+  the selection of the fit's windows that start implies;
+- its **write-back**: the mount in a robot's terms (:class:`~nlp_calib.results.mount.SensorMount`:
+  the joint of its frame on ``base_link``, each component's value and 1σ, what was calibrated and
+  where each nominal component comes from: every hand-off file's one description of it), the
+  canonical form of an estimate and what it says of itself in a result (``kind``, ``group``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import casadi as ca
+import numpy as np
+
+from nlp_calib.logs import Log, LogHeader
+from nlp_calib.models.base import KinematicModel
+from nlp_calib.results.mount import SensorMount
+
+#: A reference precision: a fraction of the parameter's value, or an absolute amount in its unit.
+Reference = tuple[Literal["relative", "absolute"], float]
+#: The model's planar base motion ``(3, M)`` over windows, for given parameters.
+BaseMotion = Callable[[Mapping[str, float]], np.ndarray]
+
+
+@dataclass(frozen=True)
+class SensorStart:
+    """A sensor's start: every parameter's starting value (kinematic, then the mount's), what the
+    fit's windows are selected by (a sensor's own record, None: no selection) and the windows the
+    closed form left out, by reason (None: it selected none)."""
+
+    params: dict[str, float]
+    selection: object | None = None
+    dropped: Mapping[str, int] | None = None
+
+
+class Sensor(Protocol):
+    """A reference on the robot (see the module docstring)."""
+
+    @property
+    def kind(self) -> str: ...  # its registry name, as a scenario's ``sensor`` gives it
+    @property
+    def label(self) -> str: ...  # what it is, in words
+    @property
+    def group(self) -> str: ...  # the pose group it measures in: "SE(2)", "SE(3)"
+    @property
+    def params(self) -> tuple[str, ...]: ...
+    @property
+    def units(self) -> Mapping[str, str]: ...
+    @property
+    def reference(self) -> Mapping[str, Reference]: ...
+    @property
+    def held(self) -> tuple[str, ...]: ...
+    @property
+    def turning(self) -> tuple[str, ...]: ...
+    @property
+    def angles(self) -> tuple[str, ...]: ...
+    @property
+    def pose_rows(self) -> int: ...
+    @property
+    def z_rows(self) -> int: ...
+    @property
+    def error_rows(self) -> int: ...
+    @property
+    def noise_groups(self) -> tuple[tuple[int, ...], ...]: ...
+    @property
+    def noise_names(self) -> tuple[str, ...]: ...
+    @property
+    def length_unit(self) -> str: ...  # the unit its positions are in ("m", or "trajectory units")
+    @property
+    def planar_base(self) -> bool: ...  # whether the base's planar odometry and drift check apply
+    @property
+    def held_why(self) -> str: ...  # why ``held`` are held, in words
+    @property
+    def convention(self) -> str: ...  # what its parameters mean, where the names do not say it
+
+    # --- the error term (symbolic) -------------------------------------------------------------
+    def residual(self, z: ca.SX, mount: ca.SX, M: ca.SX) -> ca.SX: ...
+    def predict(self, mount: ca.SX, M: ca.SX) -> ca.SX: ...
+    def between(self, a: ca.SX, b: ca.SX) -> ca.SX: ...
+    def between_jacobians(self, a: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX]: ...
+    def compose(self, pose: ca.SX, motion: ca.SX) -> ca.SX: ...
+    def base_from_sensor(self, T_world_sensor: ca.SX, mount: ca.SX) -> ca.SX: ...
+    def manifold(self, free: Sequence[str]) -> bool: ...
+    def boxplus(self, free: Sequence[str], x: ca.SX, step: ca.SX, x_plus: ca.SX) -> None: ...
+
+    # --- numeric twins ---------------------------------------------------------------------------
+    def heading(self, T_world_sensor: np.ndarray) -> np.ndarray: ...
+    def planar_yaw(self, params: Mapping[str, float]) -> float | None: ...  # mount yaw in the base plane
+    def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str: ...
+    def tangent(self, z: np.ndarray) -> np.ndarray: ...
+    def poses(self, log: Log) -> np.ndarray: ...
+    def jump_signal(self, log: Log) -> tuple[np.ndarray, int]: ...
+    def repaired(self, log: Log, bad: np.ndarray) -> Log: ...
+    def heights(self, log: Log) -> np.ndarray | None: ...
+    def level(self, params: Mapping[str, float], first_pose: np.ndarray) -> np.ndarray | None: ...
+    def trajectory_scale(self, params: Mapping[str, float]) -> float: ...
+
+    # --- the start -----------------------------------------------------------------------------
+    def initial(self, header: LogHeader) -> dict[str, float]: ...
+    def nominal(self, header: LogHeader) -> dict[str, float]: ...  # the mount a log's header gives
+    @property
+    def start_span_s(self) -> float | None: ...  # its start's windows (s); None: the residual's
+    def closed_form(
+        self,
+        model: KinematicModel,
+        U: np.ndarray,
+        z: np.ndarray,
+        base_motion: BaseMotion,
+        known: Mapping[str, float],
+    ) -> SensorStart: ...
+    def given(self, initial: Mapping[str, float]) -> SensorStart | None: ...
+    def fit_windows(
+        self, start: SensorStart, z: np.ndarray, base_turn: np.ndarray
+    ) -> tuple[np.ndarray, dict[str, int]]: ...
+
+    # --- the write-back ------------------------------------------------------------------------
+    def canonical(
+        self, model: KinematicModel, params: Mapping[str, float], fixed: Sequence[str]
+    ) -> dict[str, float]: ...
+    def mount_pose(
+        self,
+        params: Mapping[str, float],
+        std: Mapping[str, float],
+        frame: str,
+        nominal: tuple[float, float, float] | None,
+    ) -> SensorMount: ...
