@@ -133,7 +133,7 @@ def test_folder_names_stay_unique_whatever_plain_characters_and_case_make_of_the
 
 
 def test_a_mount_turned_upside_down_is_the_mirror_unless_given() -> None:
-    from nlp_calib.models.mount import image_up, mirrored_mount
+    from nlp_calib.sensors.mount import image_up, mirrored_mount
 
     truth = {"sensor_roll": -2.094, "sensor_pitch": 0.052, "sensor_yaw": -1.571}
     mirror = {"sensor_roll": 1.047, "sensor_pitch": -0.052, "sensor_yaw": -1.572}
