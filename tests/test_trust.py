@@ -52,9 +52,12 @@ def test_recovers_truth_with_noise_outliers_wrap_and_latency(seed: int) -> None:
         res = calib.solve(solver)
         assert res.converged, res.reason
         u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.aligned))
-        err = res.params - TRUTH
-        assert np.all(np.abs(err) <= 3 * u.std), dict(zip(NAMES, err / u.std))
-        assert np.all(np.abs(err) <= TOLERANCE), dict(zip(NAMES, err))
+        # The lag is a parameter of the problem: its fitted value is judged like the others.
+        idx = [res.names.index(n) for n in (*NAMES, "tracker_lag")]
+        err = res.params[idx] - np.append(TRUTH, 0.05)
+        std = u.std[idx]
+        assert np.all(np.abs(err) <= 3 * std), dict(zip((*NAMES, "tracker_lag"), err / std))
+        assert np.all(np.abs(err[:-1]) <= TOLERANCE), dict(zip(NAMES, err))
 
 
 @pytest.mark.slow

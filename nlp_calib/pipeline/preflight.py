@@ -44,9 +44,6 @@ START_RECORDS = 5000
 #: takes a few), until a step gains less than this share of the misfit.
 ROUGH_STEPS = 4
 ROUGH_GAIN = 0.1
-#: The steps are taken on at most this many windows × horizon (the final information on all of
-#: :data:`~nlp_calib.analysis.determinacy.MAX_WORK`).
-STEP_WORK = 20_000
 
 
 @dataclass(frozen=True)
@@ -163,14 +160,15 @@ def _units(d: Drive) -> tuple[UnitFinding, ...]:
 def _rough(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str]:
     """The start brought to the data by Gauss-Newton steps on the directions the drive determines
     (halved up to twice where a full step does not lower the robust cost; at most
-    :data:`ROUGH_STEPS`, until one gains less than :data:`ROUGH_GAIN` of it), on a smaller
-    subsample of the windows (:data:`STEP_WORK`); the windows' information at the point reached
-    and where it stands, in words."""
+    :data:`ROUGH_STEPS`, until one gains less than :data:`ROUGH_GAIN` of it), on the
+    windows whose information is finally judged (a smaller subsample's noise can carry a weakly
+    determined parameter to where its Jacobian vanishes: the rear track of a car-like base halfway
+    to its value); the windows' information at the point reached and where it stands, in words."""
     fns, start, delta = d.fns, d.start, d.scenario.objective.robust.delta
     box = None if start.lower is None or start.upper is None else (start.lower, start.upper)
 
-    def at(x: np.ndarray, work: int = STEP_WORK) -> det.Information:
-        return det.information(fns, d.data, x, start.x_fixed, omega, delta, work)
+    def at(x: np.ndarray) -> det.Information:
+        return det.information(fns, d.data, x, start.x_fixed, omega, delta, det.MAX_WORK)
 
     x, info, steps = start.x0, at(start.x0), 0
     while steps < ROUGH_STEPS:
@@ -187,7 +185,6 @@ def _rough(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, st
         x, info, steps = moved, found, steps + 1
         if gain < ROUGH_GAIN:
             break
-    info = at(x, det.MAX_WORK)
     if not steps:
         return x, info, d.start_words
     said = "one Gauss-Newton step" if steps == 1 else f"{steps} Gauss-Newton steps"
