@@ -4,7 +4,8 @@ joint turns backwards as the robot drives forwards.
 Each is told from the data alone, against the tracker where it takes a scale or a direction:
 
 - **a wheel's angle that wraps** (joints in radians): its position jumps by about 2π between two
-  samples whose neighbours move little (no gap in time between them), where REP 103 has a wheel's angle grow without end;
+  samples whose neighbours move little (no gap in time between them), where REP 103 has a wheel's
+  angle grow without end;
 - **degrees**: an angle joint (an absolute encoder's) that reads beyond 2π; wheels whose joints
   turn so far for the tracker's travel that a radian of them would move the robot less than
   :data:`MIN_RADIUS` (the smallest wheels a robot carrying a tracker rolls on are several times
