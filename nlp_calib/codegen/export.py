@@ -178,8 +178,8 @@ int main(void) {{
   const casadi_real e_python[{r}] = {{{_c_array(e_py)}}};
   const casadi_real J_python[{nj}] = {{{_c_array(J_py)}}};
   double de = 0.0, dJ = 0.0;
-  printf("window: %s\\n", "{c_string(example.window)}");
-  printf("parameters: %s\\n", "{c_string(example.params_from)}");
+  printf("%s\\n", "{c_string("window: " + example.window)}");
+  printf("%s\\n", "{c_string("parameters: " + example.params_from)}");
   for (int i = 0; i < {r}; ++i) {{
     printf("e %d %.17g\\n", i, e[i]);
     de = fmax(de, fabs(e[i] - e_python[i]));

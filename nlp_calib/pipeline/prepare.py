@@ -82,7 +82,7 @@ def _read(sc: Scenario, log: Log | None) -> tuple[KinematicModel, Log]:
 
 def select(sc: Scenario, log: Log, model: KinematicModel | None = None) -> tuple[int, int]:
     """The record range ``[start, stop)`` the scenario's ``samples`` ask for (with ``model``:
-    checked for counters that never move)."""
+    checked for counters that never move; joints in degrees are the pre-flight's to find)."""
     n = log.n_records
     samples = sc.log.samples
     start = samples.start
@@ -91,28 +91,8 @@ def select(sc: Scenario, log: Log, model: KinematicModel | None = None) -> tuple
         raise ScenarioError(f"{sc.path or sc.name}: samples: [{start}, {stop}) exceeds the log's {n} records")
     check_windows(sc, start, stop)
     if model is not None:
-        check_readings(sc, model, log.select(start, stop))
+        check_moving(model, log.select(start, stop), str(sc.log.source.path))
     return start, stop
-
-
-def check_readings(sc: Scenario, model: KinematicModel, log: Log) -> None:
-    """Refuse readings no fit can use: an absolute joint (an angle) that spans more than a turn
-    (logged in degrees), and a wheel's counter (or joint) that never changes while the tracker
-    travels (the wrong encoder or joint named, or a driver that did not publish it)."""
-    if log.joint_positions is not None:
-        for name, kind in model.encoder_kinds.items():
-            if kind == "absolute" and name in log.header.encoder_names:
-                angle = log.joint_position(name)
-                span = float(np.max(angle) - np.min(angle))
-                if span > 2.0 * np.pi:
-                    raise DatasetError(
-                        str(sc.log.source.path),
-                        None,
-                        f"the joint read as {name} (an angle) spans {span:.3g} rad, more than a turn: it "
-                        f"looks logged in degrees ({span:.3g}° would be {np.radians(span):.3g} rad); ROS "
-                        "publishes radians (REP 103): convert the joints (× π/180)",
-                    )
-    check_moving(model, log, str(sc.log.source.path))
 
 
 def check_moving(model: KinematicModel, log: Log, path: str) -> None:
