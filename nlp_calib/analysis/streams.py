@@ -42,6 +42,24 @@ MIN_STUCK = 3
 CATCH_UP_FACTOR = 2.5
 #: Groups scored at once in the first pass over a stream.
 FIRST_PASS_BLOCK = 8192
+#: An interval between records longer than this many times their median interval, and than
+#: :data:`MIN_GAP_S`, is a gap in a stream (the tracker lost, the joints missing): one arc of the
+#: model cannot span it. (A fast log's jitter makes intervals of several times the median, and
+#: the model's arc spans a few hundredths of a second of any drive.)
+GAP_FACTOR = 5.0
+MIN_GAP_S = 0.2
+
+
+def gap_threshold(time_s: np.ndarray) -> float:
+    """The shortest interval between records that is a gap (s)."""
+    dt = np.diff(np.asarray(time_s, dtype=float))
+    return max(GAP_FACTOR * float(np.median(dt)), MIN_GAP_S) if dt.size else np.inf
+
+
+def time_gaps(time_s: np.ndarray) -> np.ndarray:
+    """The intervals (``k`` joins records ``k`` and ``k + 1``) longer than :func:`gap_threshold`:
+    a stream's gap, which no window may cross."""
+    return np.diff(np.asarray(time_s, dtype=float)) > gap_threshold(time_s)
 
 
 def robust_sigma(x: np.ndarray) -> float:

@@ -4,7 +4,8 @@ joint turns backwards as the robot drives forwards.
 Each is told from the data alone, against the tracker where it takes a scale or a direction:
 
 - **a wheel's angle that wraps** (joints in radians): its position jumps by about 2π between two
-  samples whose neighbours move little, where REP 103 has a wheel's angle grow without end;
+  samples whose neighbours move little (no gap in time between them), where REP 103 has a wheel's
+  angle grow without end;
 - **degrees**: an angle joint (an absolute encoder's) that reads beyond 2π; wheels whose joints
   turn so far for the tracker's travel that a radian of them would move the robot less than
   :data:`MIN_RADIUS` (the smallest wheels a robot carrying a tracker rolls on are several times
@@ -24,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from nlp_calib.analysis.excitation import STEP_S, taken
+from nlp_calib.analysis.streams import time_gaps
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel
 from nlp_calib.results.preflight import UnitFinding
@@ -58,7 +60,10 @@ def wrapped(log: Log, model: KinematicModel) -> list[UnitFinding]:
         if model.encoder_kinds.get(name) != "counter":
             continue
         pos = stream.positions[:, j] if stream is not None else log.joint_positions[:, j]
-        d = np.diff(pos[np.isfinite(pos)])
+        time_s = stream.time_s if stream is not None else log.time_s
+        finite = np.isfinite(pos)
+        # A wheel turns any angle across a gap in the stream: only steps between neighbours count.
+        d = np.diff(pos[finite])[~time_gaps(time_s[finite])]
         if d.size < 3:
             continue
         typical = float(np.median(np.abs(d)))

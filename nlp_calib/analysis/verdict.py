@@ -3,7 +3,10 @@
 The rules a reader can check:
 
 - **not determined**, and no hand-off file written: the estimate cannot be a real robot of its
-  kind although it fits the data (a mirror image, e.g. swapped wheel encoders; the model says);
+  kind although it fits the data: a mirror image (e.g. swapped wheel encoders, one wheel counting
+  backwards; the model says), a 3-D sensor's mount upside down that no given mount asked for (what
+  reversed or swapped joints give a camera), or a parameter outside what the model can have by
+  more than :data:`RANGE_SIGMAS` σ (a wheel's radius of millimetres: joints logged in degrees);
 - **not determined**: no solver converged, or the drive leaves a parameter undetermined (its σ
   is infinite, or a direction of the information matrix is beyond
   :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` reference units);
@@ -45,6 +48,8 @@ from nlp_calib.sensors import Sensor, sensor_for
 
 #: Relative parameter difference beyond which two converged solvers disagree.
 AGREE = 1e-4
+#: A parameter outside what the model can have by more than this many σ is not the robot's.
+RANGE_SIGMAS = 3.0
 
 
 def _loose(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]:
@@ -124,6 +129,34 @@ def _fitted_start(run: CalibrationRun) -> bool:
     return run.scenario.initial_guess == "auto"
 
 
+def implausible(run: CalibrationRun, solver: str, model: KinematicModel) -> str:
+    """Why ``solver``'s estimate cannot be the robot although it fits the data: a mirror image (the
+    model's, or the sensor's: a camera's mount upside down) or a parameter outside what the model can
+    have; "" when it can be."""
+    params = run.reports[solver].result.param_dict()
+    if mirror := model.implausible(params):
+        return mirror
+    if mirror := _sensor(run).implausible(params, None if _fitted_start(run) else run.initial):
+        return mirror
+    std = run.std(solver)
+    for name in model.kinematic_params:
+        lo, hi = model.physical_ranges.get(name, (-np.inf, np.inf))
+        if name not in params or lo <= params[name] <= hi:
+            continue
+        # Outside the range but known so loosely that the range is within reach: not determined,
+        # which the rules after this one say (with the hand-off they allow).
+        reach = RANGE_SIGMAS * std.get(name, 0.0)
+        if not np.isfinite(reach) or (params[name] + reach >= lo and params[name] - reach <= hi):
+            continue
+        unit = run.scenario.units.get(name, "")
+        return (
+            f"{name} came out {params[name]:.4g} {unit}, outside what a {model.name} can have "
+            f"([{lo:g}, {hi:g}]) by more than {RANGE_SIGMAS:g}σ: are the encoders (or joints) the "
+            "scenario names the right ones, in the units it says?"
+        )
+    return ""
+
+
 def _unusable(run: CalibrationRun) -> list[str]:
     """Why a converged, determined estimate is not to be used: the logs are not one robot's, or the
     fit does worse than a given initial guess or the robot's nominal values."""
@@ -153,7 +186,7 @@ def gain(run: CalibrationRun, solver: str) -> str:
 def _undetermined(run: CalibrationRun, model: KinematicModel, hint: str) -> Verdict | None:
     """The verdict when the estimate is not determined (see the module's rules), else None."""
     solver = run.chosen_solver()
-    if solver is not None and (mirror := model.implausible(run.reports[solver].result.param_dict())):
+    if solver is not None and (mirror := implausible(run, solver, model)):
         return Verdict(UNDETERMINED, (mirror + hint,), handoff=False)
     obs = run.checks.observability
     loose = [w.words() for w in obs.weak if w.std_reference > NOT_OBSERVABLE] if obs is not None else []

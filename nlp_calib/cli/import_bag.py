@@ -20,8 +20,10 @@ from nlp_calib.logs.bag_joints import joint_files
 from nlp_calib.logs.bag_reader import ENCODER_TYPE, TRACKER_TYPES, bag_inventory
 from nlp_calib.logs.reader import parse_log
 from nlp_calib.models import KinematicModel, encoders, get_model
+from nlp_calib.models.radians import in_units
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.sources import BagSource
+from nlp_calib.sources.robot import load_robot
 
 
 def _stamps(given: list[str] | None) -> str | Mapping[str, str]:
@@ -143,11 +145,15 @@ def cmd_import_bag(args: argparse.Namespace) -> int:
 
 def _import_radians(args: argparse.Namespace, source: BagSource, folder: Path, names: list[str]) -> int:
     model = get_model(args.model)
+    if args.robot is not None:  # read and checked now: the scenario line below names it
+        load_robot(args.robot, in_units(model, "radians"))
     csv_text, tum_text, summary = joint_files(args.bag, source.topics())
     stage = _write(folder, dict(zip(names, (csv_text, tum_text))), args.force)
     joints, poses = (stage.final(stage.path / n) for n in names)
     print(f"read {args.bag}: {summary}")
     print(f"wrote {joints} (the joints in radians) and {poses} (the tracker's poses)")
     pairs = ", ".join(f"{e}: {j}" for e, j in zip(encoders(model), source.joints))
-    print(f"a scenario reads them as: dataset: {{joints: {joints}, poses: {poses}, encoders: {{{pairs}}}}}")
+    robot = "" if args.robot is None else f", robot: {args.robot}"
+    block = f"{{joints: {joints}, poses: {poses}, encoders: {{{pairs}}}{robot}}}"
+    print(f"a scenario reads them as: dataset: {block}")
     return 0

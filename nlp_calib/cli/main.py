@@ -16,7 +16,7 @@ from typing import TextIO
 from nlp_calib.cli import streams
 from nlp_calib.cli.commands import COMMANDS
 from nlp_calib.core import interrupts, memory
-from nlp_calib.core.errors import NlpCalibError
+from nlp_calib.core.errors import NlpCalibError, shown_path
 from nlp_calib.core.files import forget_inputs
 
 
@@ -63,6 +63,8 @@ def _run(argv: list[str]) -> int:
         args = build_parser().parse_args(argv)
         with warnings.catch_warnings():
             warnings.simplefilter("always")
+            # A library's own warnings (numpy's floating point, say) once each, not once per call.
+            warnings.simplefilter("default", RuntimeWarning)
             # A file an interrupted import left open is Python's business, not the user's.
             warnings.simplefilter("ignore", ResourceWarning)
             warnings.showwarning = _show_warning
@@ -93,8 +95,11 @@ def _report(exc: BaseException, debug: bool) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return exc.exit_code
     if isinstance(exc, OSError):  # the system refused: a full disk, a permission, a vanished folder
-        where = f"{exc.filename}: " if exc.filename else ""
-        hint = "; free some space and run again" if exc.errno == errno.ENOSPC else ""
+        where = f"{shown_path(exc.filename)}: " if exc.filename else ""
+        hint = {
+            errno.ENOSPC: "; free some space and run again",
+            errno.ENAMETOOLONG: "; a name in this path is longer than the file system allows: shorten it",
+        }.get(exc.errno or 0, "")
         print(f"error: {where}{exc.strerror or exc}{hint}", file=sys.stderr)
         return 1
     if isinstance(exc, MemoryError) or (isinstance(exc, RuntimeError) and "std::bad_alloc" in str(exc)):

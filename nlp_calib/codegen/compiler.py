@@ -13,16 +13,27 @@ see half of one, and two processes compiling the same entry each leave a complet
 The compiler itself is tried once per process on a tiny file before the first real compile
 (:func:`check_compiler`): a ``$CC`` that hangs, fails or writes something that cannot be loaded
 is found in seconds, and the caller falls back to CasADi's interpreter.
+
+Loading a shared object runs its code, and the checksum is no seal against a person (anyone can
+compute it). So, as ssh treats its keys, a cache folder that another user could write into (not
+owned by this user or root, or writable by group or others) is not used: the process compiles
+into a private temporary folder instead, with one warning saying how to fix the folder; and an
+entry that another user could have written (a link, not owned by this user or root, or writable by
+group or others) is never loaded but compiled again, with the damaged-entry warning. Entries and
+the folders created here are written readable by all, writable by their owner only, whatever the
+umask.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import ctypes
 import hashlib
 import os
 import shutil
 import signal
+import stat
 import subprocess
 import tempfile
 import threading
@@ -33,7 +44,7 @@ from pathlib import Path
 
 import casadi as ca
 
-from nlp_calib.core.errors import CodegenError, NlpCalibWarning, OptionsError
+from nlp_calib.core.errors import CodegenError, NlpCalibWarning, OptionsError, shown_path
 
 #: Optimisation flags for the generated code; -fno-math-errno lets sin/cos/sqrt inline.
 CFLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fPIC", "-shared", "-Wno-int-conversion")
@@ -59,6 +70,9 @@ _lock = threading.Lock()
 _probe_lock = threading.Lock()
 _probed: dict[str, str | None] = {}
 _warned_folders: set[Path] = set()
+#: The folder each configured cache folder is used as (itself, or a private temporary folder when
+#: another user could write into it).
+_in_use: dict[Path, Path] = {}
 _running: set[subprocess.Popen[str]] = set()
 
 
@@ -86,20 +100,54 @@ def cache_dir() -> Path:
 
 
 def usable_cache_dir() -> Path:
-    """:func:`cache_dir`, created if needed; an error naming it when it cannot hold files."""
+    """The folder compiled code is kept in: :func:`cache_dir`, created if needed, or a private
+    temporary folder (with one warning) when another user could write into it; an error naming it
+    when it cannot hold files."""
     folder = cache_dir()
+    with _lock:
+        if folder in _in_use:
+            return _in_use[folder]
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        folder.mkdir(parents=True, exist_ok=True, mode=0o755)
         if not os.access(folder, os.W_OK | os.X_OK):
             raise PermissionError("not writable")
+        unsafe = writable_by_others(folder.stat())
     except (OSError, ValueError) as exc:
-        reason = "a file is in the way" if folder.is_file() else getattr(exc, "strerror", None) or str(exc)
+        in_the_way = isinstance(exc, FileExistsError | NotADirectoryError)
+        reason = "a file is in the way" if in_the_way else getattr(exc, "strerror", None) or str(exc)
         raise OptionsError(
-            f"the compile cache {folder} is not a writable folder ({reason}); set NLP_CALIB_CACHE to "
-            "a writable folder, or use the interpreted backend ('backend: interpreted')"
+            f"the compile cache {shown_path(folder)} is not a writable folder ({reason}); set "
+            "NLP_CALIB_CACHE to a writable folder, or use the interpreted backend ('backend: interpreted')"
         ) from None
-    _remove_leftovers(folder)
-    return folder
+    used = folder if unsafe is None else _private_folder(folder, unsafe)
+    with _lock:
+        used = _in_use.setdefault(folder, used)
+    if used == folder:
+        _remove_leftovers(folder)
+    return used
+
+
+def writable_by_others(st: os.stat_result) -> str | None:
+    """Why another user could change what ``st`` describes (None: only its owner, this user or
+    root, can)."""
+    if st.st_uid not in (os.getuid(), 0):
+        return f"owned by user id {st.st_uid}, not by you"
+    who = [w for w, bit in (("its group", stat.S_IWGRP), ("others", stat.S_IWOTH)) if st.st_mode & bit]
+    return f"writable by {' and '.join(who)} (mode {stat.S_IMODE(st.st_mode):04o})" if who else None
+
+
+def _private_folder(folder: Path, reason: str) -> Path:
+    """A temporary folder only this user can write, removed at exit, in place of ``folder``."""
+    private = Path(tempfile.mkdtemp(prefix="nlp_calib-cache-"))
+    atexit.register(shutil.rmtree, private, ignore_errors=True)
+    warnings.warn(
+        f"the compile cache {shown_path(folder)} is {reason}: a compiled file another user put there would "
+        "run as you, so it is not used (compiling into a private temporary folder, slower). Give "
+        "NLP_CALIB_CACHE a folder only you can write (chmod go-w FOLDER; docs/fleet.md, a shared cache)",
+        NlpCalibWarning,
+        stacklevel=4,
+    )
+    return private
 
 
 def _remove_leftovers(folder: Path) -> None:
@@ -126,6 +174,11 @@ def entry_problem(path: Path, key: str) -> str | None:
     """Why the cache entry at ``path`` cannot be loaded (None: it is whole and is the entry of
     ``key``; a missing file is ``"missing"``). Read, never mapped: nothing here can SIGBUS."""
     try:
+        st = path.lstat()
+        if not stat.S_ISREG(st.st_mode):
+            return "not a regular file"
+        if (unsafe := writable_by_others(st)) is not None:
+            return f"{unsafe}: never loaded"
         data = path.read_bytes()
     except FileNotFoundError:
         return "missing"
@@ -147,7 +200,7 @@ def compile_shared(
     """Compile C ``source`` into a cached shared object; returns its path. A whole entry is reused
     (unless ``rebuild``: it was whole but did not load); a damaged one is compiled again."""
     key = entry_key(source, compiler, flags)
-    folder = cache_dir()
+    folder = usable_cache_dir()
     target = folder / f"{name}-{key}.so"
     problem = "it did not load" if rebuild else entry_problem(target, key)
     if problem is None:
@@ -165,6 +218,7 @@ def compile_shared(
             body = out.read_bytes()
             with out.open("ab") as fh:
                 fh.write(_seal(key, body))
+            out.chmod(0o755)  # whatever the umask: an entry writable by others is never loaded
             os.replace(out, target)  # atomic: concurrent processes never load a half-written file
     except OSError as exc:  # a full disk, a folder gone: the caller can still interpret
         raise _unwritable(folder, exc) from None
@@ -172,7 +226,10 @@ def compile_shared(
 
 
 def _unwritable(folder: Path, exc: OSError) -> CodegenError:
-    return CodegenError(f"writing into the compile cache {folder} failed ({exc.strerror or exc})")
+    return CodegenError(
+        f"writing into the compile cache {shown_path(folder)} failed ({exc.strerror or exc}; NLP_CALIB_CACHE "
+        "names the folder)"
+    )
 
 
 def _warn_damaged(folder: Path, name: str, problem: str) -> None:
@@ -196,7 +253,7 @@ def check_compiler(compiler: str) -> None:
             try:
                 _probed[compiler] = _probe(compiler)
             except OSError as exc:  # not remembered: a full disk may have room again
-                raise _unwritable(cache_dir(), exc) from None
+                raise _unwritable(usable_cache_dir(), exc) from None
         problem = _probed[compiler]
     if problem is not None:
         raise CodegenError(problem)
@@ -205,8 +262,7 @@ def check_compiler(compiler: str) -> None:
 def _probe(compiler: str) -> str | None:
     """What is wrong with ``compiler`` (None: nothing). The test file is loaded from the cache
     folder, where the real ones will be (a folder mounted noexec fails here, not later)."""
-    folder = cache_dir()
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = usable_cache_dir()
     with tempfile.TemporaryDirectory(dir=folder, prefix=".probe-") as tmp:
         src, out = Path(tmp) / "probe.c", Path(tmp) / "probe.so"
         src.write_text(_PROBE)

@@ -21,6 +21,16 @@ class UsageError(NlpCalibError):
     exit_code = 2
 
 
+#: Paths longer than this are shown cut in their middle: a message stays readable.
+SHOWN_PATH = 200
+
+
+def shown_path(path: object) -> str:
+    """``path`` for a message: a very long one cut in its middle, its length said."""
+    text = str(path)
+    return text if len(text) <= SHOWN_PATH else f"{text[:100]}…{text[-60:]} ({len(text)} characters)"
+
+
 class DatasetError(UsageError):
     """A log file is malformed; the message names ``file:line`` and what was expected.
 
@@ -28,7 +38,8 @@ class DatasetError(UsageError):
     """
 
     def __init__(self, path: str, line: int | None, problem: str, *, droppable: bool = False) -> None:
-        where = f"{path}:{line}" if line is not None else str(path)
+        shown = shown_path(path)
+        where = f"{shown}:{line}" if line is not None else shown
         super().__init__(f"{where}: {problem}")
         self.path = path
         self.line = line

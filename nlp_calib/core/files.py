@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
+import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -52,7 +53,10 @@ def open_regular(path: Path) -> BinaryIO:
     raises :class:`SpecialFileError` without blocking (a FIFO is opened non-blocking, then
     checked)."""
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
-    fd = os.open(path, flags)
+    try:
+        fd = os.open(path, flags)
+    except UnicodeEncodeError:
+        raise OSError(unencodable(path)) from None
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
@@ -63,6 +67,16 @@ def open_regular(path: Path) -> BinaryIO:
     except BaseException:
         os.close(fd)
         raise
+
+
+def unencodable(path: Path | str) -> str:
+    """Why a path whose name the file system's encoding cannot write cannot be opened, and the fix."""
+    encoding = sys.getfilesystemencoding()
+    locale = os.environ.get("LC_ALL") or os.environ.get("LC_CTYPE") or os.environ.get("LANG") or "unset"
+    return (
+        f"its name holds characters the file system encoding ({encoding}, from the locale {locale}) cannot "
+        "write; run with a UTF-8 locale (LC_ALL=C.UTF-8) or PYTHONUTF8=1, or rename it in ASCII"
+    )
 
 
 def forget_inputs() -> None:

@@ -66,6 +66,19 @@ def give_back() -> None:
         ctypes.CDLL(None).malloc_trim(0)
 
 
+def available_memory() -> int | None:
+    """Bytes of memory the system can give without swapping (Linux ``MemAvailable``), or the
+    address-space limit when lower; None when neither is known."""
+    free = None
+    with contextlib.suppress(OSError, ValueError, IndexError), open("/proc/meminfo", "rb") as fh:
+        for line in fh:
+            if line.startswith(b"MemAvailable:"):
+                free = int(line.split()[1]) * 1024
+    limit = address_space_limit()
+    known = [v for v in (free, limit) if v is not None]
+    return min(known) if known else None
+
+
 def address_space_used() -> int | None:
     """Bytes of address space the process holds (Linux), or None."""
     with contextlib.suppress(OSError, ValueError, IndexError), open("/proc/self/statm", "rb") as fh:

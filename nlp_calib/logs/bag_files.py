@@ -40,7 +40,10 @@ class BagError(DatasetError):
 
 def is_bag(path: Path) -> bool:
     """Whether ``path`` names a bag rather than a text log (by its name, or a ROS 2 bag folder)."""
-    return path.suffix in (".bag", *_ROS2_FILES) or (path / "metadata.yaml").is_file()
+    try:
+        return path.suffix in (".bag", *_ROS2_FILES) or (path / "metadata.yaml").is_file()
+    except OSError:  # a name too long, say: whatever it is, it cannot be opened as a bag folder
+        return False
 
 
 def _rosbags(path: Path) -> tuple[Any, Any]:

@@ -28,6 +28,7 @@ from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs.bag_reader import BagError, BagTopics, Drops, Stamped, read_topics
 from nlp_calib.logs.joint_log import format_joint_csv
 from nlp_calib.logs.log import JointStream, Log, LogClock, LogHeader, ReferenceData, frozen
+from nlp_calib.logs.screens import clock_shift
 from nlp_calib.logs.tum import format_tum
 
 #: A joint's positions are quantised when at least this share of its steps are whole multiples
@@ -96,6 +97,28 @@ def check_overlap(path: Path, joints: Stamped, tracker: Stamped) -> None:
         f"the stamps of {joints.topic!r} ({_span(j)}) and of {tracker.topic!r} ({_span(t)}) do not overlap: "
         "the topics' header clocks differ (time since boot?); set stamps: {TOPIC: receive} for the "
         "topic whose clock is unusable, or clock_offset: auto (docs/bags.md)",
+    )
+
+
+def check_clocks(path: Path, joint_ns: np.ndarray, positions: np.ndarray, tracker: Stamped) -> None:
+    """Refuse streams whose motion agrees only with one shifted seconds against the other: one
+    clock is off by that much, which pairs poses with the wrong joints (:func:`~nlp_calib.logs.
+    screens.clock_shift`)."""
+    order = np.argsort(tracker.stamp_ns, kind="stable")
+    ts = tracker.stamp_ns[order]
+    first = np.concatenate([[True], np.diff(ts) > 0])
+    found = clock_shift(joint_ns, positions, ts[first], tracker.values[order][first])
+    if found is None:
+        return
+    shift, best, stamped = found
+    late = "the tracker's stamps lie" if shift > 0 else "the joints' stamps lie"
+    raise BagError(
+        path,
+        f"the joints' speed and the tracker's motion agree when the joints' times are shifted by "
+        f"{shift:+.2f} s (correlation {best:.2f}, against {stamped:.2f} as stamped): {late} "
+        f"{abs(shift):.2f} s late, which pairs poses with the wrong joints; add {shift:+.2f} s to "
+        "clock_offset in the dataset block (the seconds added to the joints' times; the tracker lag "
+        "refines what remains), or fix the recording's stamps",
     )
 
 
@@ -179,6 +202,7 @@ def timed_by_tracker(
     warning says when poses fell in joint gaps, joints were integrated or messages were dropped."""
     check_overlap(p, joints, tracker)
     joint_ns, positions, integrated = joint_positions(p, joints, names)
+    check_clocks(p, joint_ns, positions, tracker)
     index, timing = at_tracker(joint_ns, tracker, max_gap_s)
     drops = Drops({**joints.drops.counts, **tracker.drops.counts})
     timing = replace(timing, integrated=tuple(integrated), drops=drops)
@@ -230,6 +254,11 @@ def joint_files(path: str | Path, topics: BagTopics) -> tuple[str, str, str]:
     summary = (
         f"{joint_ns.size} joint messages{velocity} and {int(first.sum())} tracker poses, each on its clock"
     )
+    drops = Drops({**joints.drops.counts, **tracker.drops.counts})
+    if drops.counts:
+        summary += f"; not used as they were: {drops.describe()}"
+    if drops.worrying:
+        warnings.warn(f"{p}: {drops.describe()}", NlpCalibWarning, stacklevel=2)
     return (
         format_joint_csv(joint_ns, topics.joints, positions),
         format_tum(ts[first], poses[:, [0, 1, 3, 4, 5, 6, 7]]),

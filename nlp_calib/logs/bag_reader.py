@@ -121,6 +121,9 @@ class BagTopics:
 #: Why messages were dropped, as :class:`Drops` counts them.
 MALFORMED_JOINTS = "JointState messages whose position and name lists differ in length or name a joint twice"
 OTHER_JOINTS = "JointState messages without the joints (another publisher on the topic?)"
+PARTIAL_JOINTS = "JointState messages holding only some of the joints"
+ZERO_STAMPS = "messages stamped 0 among stamped ones (a header left unset)"
+REPEATED_STAMPS = "messages repeating an earlier message's stamp"
 NOT_A_ROTATION = (
     f"tracker poses whose quaternion is not a rotation (zero, or norm off 1 by over {QUATERNION_TOLERANCE:g})"
 )
@@ -225,6 +228,7 @@ class _Collector:
         self.recorded: list[int] = []
         self.rows: list[Sequence[float]] = []
         self.drops: Counter[str] = Counter()
+        self.stamp_drops: dict[str, int] = {}
 
     def add(self, stamp: int, recorded: int, row: Sequence[float]) -> None:
         self.stamps.append(stamp)
@@ -252,7 +256,40 @@ class _Collector:
             stamps = self.recorded
         values = np.array(self.rows, dtype=float).reshape(len(self.rows), width)
         recorded = np.array(self.recorded, dtype=np.int64)
-        return Stamped(self.topic, np.array(stamps, dtype=np.int64), values, drops, recorded)
+        ns = np.array(stamps, dtype=np.int64)
+        keep = self._usable(path, key, ns)
+        return Stamped(
+            self.topic, ns[keep], values[keep], Drops({**drops.counts, **self.stamp_drops}), recorded[keep]
+        )
+
+    def _usable(self, path: Path, key: str, ns: np.ndarray) -> np.ndarray:
+        """The messages whose stamps are times: a stamp of 0 among others and a stamp an earlier
+        message already had are dropped (counted in :attr:`stamp_drops`); one stamp for every
+        message is no clock at all."""
+        if ns.size > 1 and np.all(ns == ns[0]):
+            raise BagError(
+                path,
+                f"{key}: all {ns.size} messages on {self.topic!r} carry one header stamp "
+                f"({ns[0] * 1e-9:.9f} s): no clock to time them by; time the topic by the bag's record times "
+                f"(stamps: {{{self.topic}: receive}}, or --stamps {self.topic}=receive)",
+            )
+        zero = ns == 0
+        _, first = np.unique(ns, return_index=True)
+        repeated = np.ones(ns.size, dtype=bool)
+        repeated[first] = False
+        self.stamp_drops = {
+            why: int(n)
+            for why, n in ((ZERO_STAMPS, zero.sum()), (REPEATED_STAMPS, (repeated & ~zero).sum()))
+            if n
+        }
+        keep = ~zero & ~repeated
+        if int(keep.sum()) < 2:
+            raise BagError(
+                path,
+                f"{key}: topic {self.topic!r} has {int(keep.sum())} message(s) with a usable stamp; at least "
+                "2 are needed",
+            )
+        return keep
 
 
 def read_topics(path: str | Path, topics: BagTopics) -> tuple[Stamped, Stamped]:
@@ -358,7 +395,7 @@ def _add_joints(
     names_seen.update(names)
     position = np.asarray(msg.position, dtype=float)
     if not set(topics.joints) <= set(names):
-        enc.drops[OTHER_JOINTS] += 1
+        enc.drops[PARTIAL_JOINTS if set(topics.joints) & set(names) else OTHER_JOINTS] += 1
         return
     if topics.joint_units == "radians":
         _add_angles(p, msg, topics, number, recorded, enc, names)

@@ -21,7 +21,7 @@ import numpy as np
 
 from nlp_calib.core.errors import DatasetError
 from nlp_calib.logs.log import frozen
-from nlp_calib.logs.text_tables import check_increasing, data_lines, numbers, seconds, stamp_ns
+from nlp_calib.logs.text_tables import Keep, Layout, first_row, read_table, seconds
 
 TIME_COLUMN = "time"
 #: What a wheel's column holds: its angle (rad), its speed (rad/s) or its increment per cycle.
@@ -30,13 +30,17 @@ WHEEL_FORMS = ("positions", "speeds", "increments")
 
 @dataclass(frozen=True)
 class JointTable:
-    """Joint positions ``(n, len(names))`` (rad) at stamps ``time_ns``, with each row's line."""
+    """Joint positions ``(n, len(names))`` (rad) at stamps ``time_ns``, with each row's line (the
+    rows kept of the file's ``rows``)."""
 
     path: str
     time_ns: np.ndarray
     names: tuple[str, ...]
     positions: np.ndarray
     line_numbers: np.ndarray
+    #: Rows the file holds (those kept are ``time_ns``'s), and the times of its first and last.
+    rows: int = 0
+    span_ns: tuple[int, int] = (0, 0)
 
     @property
     def time_s(self) -> np.ndarray:
@@ -72,28 +76,27 @@ def _names(path: str, line: int, text: str) -> tuple[str, ...]:
     return joints
 
 
-def read_joint_csv(path: str | Path) -> JointTable:
-    """Read a CSV joint log (see the module docstring)."""
+def read_joint_csv(path: str | Path, keep: Keep | None = None) -> JointTable:
+    """Read a CSV joint log (see the module docstring); ``keep``: which rows to keep, by their
+    times (ns): a long log of which a few seconds are wanted costs those seconds."""
     p = str(path)
-    lines = data_lines(path)
-    first = next(lines, None)
-    if first is None:
+    header = first_row(path)
+    if header is None:
         raise DatasetError(p, None, "is empty; expected a header row 'time,<joint>,…' and rows")
-    names = _names(p, *first)
-    layout = f"{len(names) + 1} comma-separated numbers ({TIME_COLUMN},{','.join(names)})"
-    stamps, rows, at = [], [], []
-    for number, text in lines:
-        fields = text.split(",")
-        if len(fields) != len(names) + 1:
-            raise DatasetError(p, number, f"has {len(fields)} fields; expected {layout}")
-        rows.append(numbers(p, number, fields[1:], layout))
-        stamps.append(stamp_ns(fields[0], p, number))
-        at.append(number)
-    if len(rows) < 2:
-        raise DatasetError(p, None, f"holds {len(rows)} row(s); a joint log needs at least 2")
-    time_ns, line_numbers = np.array(stamps, dtype=np.int64), np.array(at, dtype=np.int64)
-    check_increasing(p, time_ns, line_numbers)
-    return JointTable(p, frozen(time_ns), names, frozen(np.array(rows, dtype=float)), frozen(line_numbers))
+    names = _names(p, *header)
+    words = f"{len(names) + 1} comma-separated numbers ({TIME_COLUMN},{','.join(names)})"
+    table = read_table(path, Layout(len(names), b",", words, header=True), keep)
+    if table.rows < 2:
+        raise DatasetError(p, None, f"holds {table.rows} row(s); a joint log needs at least 2")
+    return JointTable(
+        p,
+        frozen(table.time_ns),
+        names,
+        frozen(table.values),
+        frozen(table.line_numbers),
+        table.rows,
+        (table.first_ns, table.last_ns),
+    )
 
 
 def format_joint_csv(time_ns: np.ndarray, names: Sequence[str], positions: np.ndarray) -> str:

@@ -65,11 +65,13 @@ def open_log(p: Path) -> BinaryIO:
             str(p), None, "is a folder, not a regular file; pass the log file itself"
         ) from None
     except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
-        raise DatasetError(str(p), None, f"cannot read the log ({exc})") from None
+        raise DatasetError(
+            str(p), None, f"cannot read the log ({getattr(exc, 'strerror', None) or exc})"
+        ) from None
 
 
-def _chunks(fh: BinaryIO) -> Iterator[bytes]:
-    while chunk := fh.read(BLOCK_BYTES):
+def _chunks(fh: BinaryIO, size: int | None = None) -> Iterator[bytes]:
+    while chunk := fh.read(size or BLOCK_BYTES):
         yield chunk
 
 
@@ -338,19 +340,22 @@ class _RecordReader:
                 "the file ends after the header: no records (expected lines 'time: ... ticks: ... "
                 "model_pose: ... tracker_pose: ...'; did the logger stop before its first record?)",
             )
+        parts, self.parts = self.parts, []  # each column gathered once, its blocks let go at once
         lines_arr, t_ns, tick_arr, poses = (
-            np.concatenate([p[i] for p in self.parts]) if self.parts else np.zeros((0,)) for i in range(4)
+            np.concatenate([p[i] for p in parts]) if parts else np.zeros((0,)) for i in range(4)
         )
-        tick_arr = tick_arr.reshape(-1, self.n_enc).astype(np.int64)
+        del parts
+        tick_arr = tick_arr.reshape(-1, self.n_enc).astype(np.int64, copy=False)
         poses = poses.reshape(-1, 6)
-        t_ns, lines_arr = t_ns.astype(np.int64), lines_arr.astype(np.int64)
+        t_ns, lines_arr = t_ns.astype(np.int64, copy=False), lines_arr.astype(np.int64, copy=False)
         keep = np.ones(t_ns.size, dtype=bool)
         self.problems.update(
             counter_drops(
                 t_ns, tick_arr, lines_arr, keep, self.counters, self.path, self.strict, COUNTER_MODULUS
             )
         )
-        t_ns, tick_arr, poses, lines_arr = t_ns[keep], tick_arr[keep], poses[keep], lines_arr[keep]
+        if not keep.all():
+            t_ns, tick_arr, poses, lines_arr = t_ns[keep], tick_arr[keep], poses[keep], lines_arr[keep]
         dropped = tuple(DroppedRecord(line, self.problems[line]) for line in sorted(self.problems))
         if t_ns.shape[0] < 2:
             why = f"; the first dropped: {dropped[0].line}: {dropped[0].reason}" if dropped else ""

@@ -40,7 +40,7 @@ from nlp_calib.models.base import (
 from nlp_calib.models.controllers import ControllerMap, EncoderScales, steering_places, wheel_radius
 from nlp_calib.models.drives import Pose, SimulationSettings, counter, drive_header, first_order, running
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
-from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
+from nlp_calib.models.radians import WHEEL_RADIUS, InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
 
 STEERING_ENCODER = "steering"
@@ -57,7 +57,7 @@ MIN_TIGHT = 200
 RADIANS = RadiansForm(
     params=MappingProxyType(
         {
-            "k_traction": Renamed("traction_wheels_radius", "m"),
+            "k_traction": Renamed("traction_wheels_radius", "m", plausible=WHEEL_RADIUS),
             "rear_track": Renamed("traction_track_width", "m"),
         }
     ),

@@ -25,7 +25,7 @@ from nlp_calib.logs import EncoderKind
 from nlp_calib.models.base import SENSOR_TURNED, Symmetry, named
 from nlp_calib.models.car_like import LEFT_ENCODER, RIGHT_ENCODER, CarLike, CarLikeDrive
 from nlp_calib.models.drives import SimulationSettings, counter
-from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
+from nlp_calib.models.radians import WHEEL_RADIUS, InRadians, RadiansForm, Renamed
 
 LEFT_STEERING = "steering_left"
 RIGHT_STEERING = "steering_right"
@@ -36,7 +36,7 @@ _MIN_TURN = 0.1
 RADIANS = RadiansForm(
     params=MappingProxyType(
         {
-            "k_traction": Renamed("traction_wheels_radius", "m"),
+            "k_traction": Renamed("traction_wheels_radius", "m", plausible=WHEEL_RADIUS),
             "rear_track": Renamed("traction_track_width", "m"),
             "steering_track": Renamed("steering_track_width", "m"),
         }

@@ -20,13 +20,13 @@ from nlp_calib.logs import EncoderKind
 from nlp_calib.models.base import SENSOR_TURNED, Symmetry, named
 from nlp_calib.models.car_like import STEERING_ENCODER, CarLike, CarLikeDrive
 from nlp_calib.models.drives import SimulationSettings, counter, running
-from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
+from nlp_calib.models.radians import WHEEL_RADIUS, InRadians, RadiansForm, Renamed
 
 TRACTION_ENCODER = "traction_motor"
 _PARAMS = ("k_steer", "steer_offset", "k_traction", "wheelbase")
 
 RADIANS = RadiansForm(
-    params=MappingProxyType({"k_traction": Renamed("traction_wheel_radius", "m")}),
+    params=MappingProxyType({"k_traction": Renamed("traction_wheel_radius", "m", plausible=WHEEL_RADIUS)}),
     inputs=MappingProxyType(
         {
             "traction_ticks": Renamed("traction_angle", "rad", 1.0, TRACTION_ENCODER),

@@ -30,7 +30,7 @@ from nlp_calib.models.drives import (
     running,
 )
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
-from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
+from nlp_calib.models.radians import WHEEL_RADIUS, InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
 
 LEFT_ENCODER = "left_wheel"
@@ -44,8 +44,8 @@ _SIM_CURVATURE = 1.5
 RADIANS = RadiansForm(
     params=MappingProxyType(
         {
-            "k_left": Renamed("left_wheel_radius", "m"),
-            "k_right": Renamed("right_wheel_radius", "m"),
+            "k_left": Renamed("left_wheel_radius", "m", plausible=WHEEL_RADIUS),
+            "k_right": Renamed("right_wheel_radius", "m", plausible=WHEEL_RADIUS),
             "baseline": Renamed("wheel_separation", "m"),
         }
     ),
@@ -256,8 +256,18 @@ class DiffDrive:
 
     def implausible(self, params: Mapping[str, float]) -> str:
         """Both wheel gains negative: the mirror image of the robot, which fits a log whose left and
-        right encoders are swapped exactly (the sensor then faces backwards)."""
-        if params["k_left"] >= 0 or params["k_right"] >= 0:
+        right encoders are swapped exactly (the sensor then faces backwards). One negative: that
+        wheel's encoder counts backwards (a joint whose axis is mirrored, as URDFs often have it)."""
+        negative = [n for n in ("k_left", "k_right") if params[n] < 0]
+        if len(negative) == 1:
+            name = negative[0]
+            side = name.removeprefix("k_")
+            return (
+                f"{name} came out negative ({params[name]:.3g}) and the other wheel's positive: the "
+                f"{side} wheel's encoder counts backwards (its joint's axis mirrored, as URDFs often give "
+                f"one side's wheel, or the motor wired the other way); negate its readings ({side} wheel)"
+            )
+        if len(negative) < 2:
             return ""
         # A planar mount's heading says where the sensor faces; a 3-D mount's takes all three angles.
         theta = params.get("sensor_theta")

@@ -43,6 +43,10 @@ if TYPE_CHECKING:
 #: Below this (rad) a joint's noise is not taken from its resolution: positions published as
 #: unquantised floats (or integrated from velocities) show no step to take it from.
 MIN_RESOLUTION = 1e-6
+#: A joint logged in degrees makes every gain per radian this much too small.
+DEGREE = 180.0 / np.pi
+#: A wheel's radius a real robot has (m): a few millimetres (a desk robot) to a couple of metres.
+WHEEL_RADIUS = (0.004, 2.0)
 #: What the controller's values assume of joints in radians.
 ASSUMES = (
     "the joints' positions are in radians as the robot publishes them (REP 103): the radii are "
@@ -62,6 +66,10 @@ class Renamed:
     factor: float = 1.0
     encoder: str = ""
     rate: bool = False
+    #: What a real robot's value can be, in this form's unit (a wheel's radius: millimetres to
+    #: metres), narrower than the counts form's range: outside it the estimate is not the robot's
+    #: (:meth:`InRadians.implausible`).
+    plausible: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -313,7 +321,29 @@ class InRadians:
         )
 
     def implausible(self, params: Mapping[str, float]) -> str:
-        return self.words(self.model.implausible(self.to_counts(params)))
+        """The model's mirror images, in this form's names; else a parameter no robot has, with
+        joints logged in degrees named when that explains it."""
+        mirror = self.words(self.model.implausible(self.to_counts(params)))
+        if mirror:
+            return mirror
+        for r in self.renamed.values():
+            if r.plausible is None or r.name not in params:
+                continue
+            lo, hi = r.plausible
+            value = abs(params[r.name])
+            if lo <= value <= hi:
+                continue
+            said = (
+                f"{r.name} came out {params[r.name]:.3g} {r.unit}, not what a real robot has "
+                f"([{lo:g}, {hi:g}] {r.unit})"
+            )
+            if lo <= value * DEGREE <= hi:
+                return (
+                    f"{said}; times 180/π it is {value * DEGREE:.3g} {r.unit}: the joints look logged in "
+                    "degrees; ROS publishes radians (REP 103): convert them (× π/180) and run again"
+                )
+            return f"{said}: are the joints named in the scenario the wheels', in radians?"
+        return ""
 
     def initial_guess(
         self,

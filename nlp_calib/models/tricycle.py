@@ -41,7 +41,7 @@ from nlp_calib.models.drives import (
     running,
 )
 from nlp_calib.models.handeye import hand_eye, robust_lstsq
-from nlp_calib.models.radians import InRadians, RadiansForm, Renamed
+from nlp_calib.models.radians import WHEEL_RADIUS, InRadians, RadiansForm, Renamed
 from nlp_calib.symbolic import se2
 
 STEERING_ENCODER = "steering"
@@ -53,7 +53,7 @@ TRACTION_ENCODER = "traction_wheel"
 RADIANS = RadiansForm(
     params=MappingProxyType(
         {
-            "k_traction": Renamed("wheel_radius", "m", 2.0 * np.pi),
+            "k_traction": Renamed("wheel_radius", "m", 2.0 * np.pi, plausible=WHEEL_RADIUS),
             "axis_length": Renamed("wheelbase", "m"),
         }
     ),

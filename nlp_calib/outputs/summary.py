@@ -6,6 +6,7 @@ in the result; this module only phrases it.
 
 from __future__ import annotations
 
+import shlex
 from collections.abc import Sequence
 
 import numpy as np
@@ -69,7 +70,8 @@ def _next_steps(run: CalibrationRun, level: str, files: Sequence[str]) -> list[s
     steps = list(files)
     if level != UNDETERMINED and run.scenario.path is not None:
         steps.append(
-            f"C code of the residual and its Jacobian: nlp-calib codegen {run.scenario.path} --out DIR"
+            "C code of the residual and its Jacobian: nlp-calib codegen "
+            f"{shlex.quote(run.scenario.path)} --out DIR"  # a command to paste: the path quoted
         )
     plan = run.checks.plan
     planned = plan is not None and plan.best is not None

@@ -5,9 +5,17 @@ The joint whose child is ``LINK`` gets the calibrated mount: x, y and yaw of the
 may hang below ``base_link`` through other fixed joints: its new origin is the calibrated pose
 seen from its parent. :func:`placed` makes the mount record that joint (every hand-off file then
 states the user's joint, to the last digit); :func:`reposed` writes it into the description.
-Everything else in the file stays byte for byte the user's: the file is not re-serialised, only
-the ``xyz`` and ``rpy`` of that one ``<origin>`` are rewritten in place.
-Rotations follow URDF: fixed axes, ``R = Rz(yaw)·Ry(pitch)·Rx(roll)``.
+Everything else in the file stays byte for byte the user's: the file is not re-serialised; the
+parsed document says where that joint's ``<origin>`` element lies, and only that element's start
+tag is written again, from its parsed attributes (``xyz`` and ``rpy`` new, the others as they
+were). Rotations follow URDF: fixed axes, ``R = Rz(yaw)·Ry(pitch)·Rx(roll)``.
+
+What ROS's URDF parser (urdfdom, on TinyXML2) would not read as the file means is refused before
+any work, each with the line: UTF-16 or UTF-32 text, entity declarations (which
+it does not expand), a root that is not ``<robot>``, an unexpanded xacro file, two joints or two
+links of one name, a joint with two ``<parent>``, ``<child>`` or ``<origin>`` elements (it reads
+the first and ignores the rest), two joints with one child link (a link has one parent) and a
+joint whose links the file does not declare.
 """
 
 from __future__ import annotations
@@ -16,6 +24,7 @@ import re
 import xml.parsers.expat
 from dataclasses import dataclass, field
 from pathlib import Path
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -27,6 +36,25 @@ BASE_LINK = "base_link"
 #: The largest description read (a URDF with meshes inlined is still far below this).
 MAX_BYTES = 16 * 1024 * 1024
 _TAG_END = re.compile(rb"""(?:[^>"']|"[^"]*"|'[^']*')*>""")
+#: Byte order marks of the encodings ROS's parser cannot read (UTF-32's first: it starts as UTF-16's).
+_BOMS = {
+    b"\xff\xfe\x00\x00": "UTF-32",
+    b"\x00\x00\xfe\xff": "UTF-32",
+    b"\xff\xfe": "UTF-16",
+    b"\xfe\xff": "UTF-16",
+}
+_UTF8_BOM = b"\xef\xbb\xbf"
+#: The elements of a joint ROS reads once (the first of each).
+_ONCE = ("parent", "child", "origin")
+
+
+@dataclass
+class _Element:
+    """Where an element's start tag begins (byte offset and line) and its attributes, in order."""
+
+    start: int
+    line: int
+    attrs: dict[str, str]
 
 
 @dataclass
@@ -34,10 +62,12 @@ class _Joint:
     name: str
     kind: str
     start: int
+    line: int
     parent: str = ""
     child: str = ""
     origin: dict[str, str] = field(default_factory=dict)
     origin_start: int | None = None
+    seen: dict[str, list[_Element]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -47,32 +77,130 @@ class Description:
     path: Path
     text: bytes
     joints: dict[str, _Joint]
+    encoding: str = "utf-8"
 
 
-def _parse(path: Path, text: bytes) -> dict[str, _Joint]:
-    joints: dict[str, _Joint] = {}
-    current: list[_Joint] = []
-    parser = xml.parsers.expat.ParserCreate()
+class _Reader:
+    """The ``<robot>``'s joints and links as expat reports them, with their byte offsets."""
 
-    def start(name: str, attrs: dict[str, str]) -> None:
-        if name == "joint" and "name" in attrs:
-            current.append(_Joint(attrs["name"], attrs.get("type", ""), parser.CurrentByteIndex))
-        elif current and name in ("parent", "child"):
-            setattr(current[-1], name, attrs.get("link", ""))
-        elif current and name == "origin":
-            current[-1].origin, current[-1].origin_start = dict(attrs), parser.CurrentByteIndex
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.parser = xml.parsers.expat.ParserCreate()
+        self.encoding = "utf-8"
+        self.depth = 0
+        self.joints: list[_Joint] = []
+        self.links: dict[str, int] = {}
+        self.current: _Joint | None = None
+        p = self.parser
+        p.StartElementHandler, p.EndElementHandler = self.start, self.end
+        p.EntityDeclHandler = self.entity
+        p.XmlDeclHandler = self.declaration
 
-    def end(name: str) -> None:
-        if name == "joint" and current:
-            joint = current.pop()
-            joints[joint.child] = joint
+    def declaration(self, version: str, encoding: str | None, standalone: int) -> None:
+        if encoding is not None and encoding.lower().replace("_", "-") not in ("utf-8", "utf8"):
+            if "16" in encoding or "32" in encoding:  # a BOM-less multi-byte file: no byte offsets
+                raise self.fail(1, f"declares the encoding {encoding}; ROS's URDF parser reads UTF-8")
+            self.encoding = encoding
 
-    parser.StartElementHandler, parser.EndElementHandler = start, end
+    def fail(self, line: int | None, problem: str) -> UsageError:
+        where = f"{self.path}:{line}" if line is not None else str(self.path)
+        return UsageError(f"{where}: {problem} (--urdf)")
+
+    def entity(self, name: str, *_: object) -> None:
+        raise self.fail(
+            self.parser.CurrentLineNumber,
+            f"declares the entity {name!r}; ROS's URDF parser does not expand entities: write their text "
+            "out (or generate the file with xacro) and give that file",
+        )
+
+    def start(self, name: str, attrs: dict[str, str]) -> None:
+        line, at = self.parser.CurrentLineNumber, self.parser.CurrentByteIndex
+        self.depth += 1
+        if self.depth == 1:
+            self._root(name, attrs, line)
+        elif name.startswith("xacro:"):
+            raise self.fail(line, f"<{name}> is xacro: run xacro on the file and give its output")
+        elif self.depth == 2 and name == "joint":
+            self.current = _Joint(attrs.get("name", ""), attrs.get("type", ""), at, line)
+        elif self.depth == 2 and name == "link":
+            self._link(attrs.get("name", ""), line)
+        elif self.depth == 3 and self.current is not None and name in _ONCE:
+            self.current.seen.setdefault(name, []).append(_Element(at, line, dict(attrs)))
+
+    def _root(self, name: str, attrs: dict[str, str], line: int) -> None:
+        if name != "robot":
+            raise self.fail(line, f"the root element is <{name}>; a URDF's is <robot>")
+        if any(k.startswith("xmlns:xacro") for k in attrs):
+            raise self.fail(line, "is a xacro file: run xacro on it and give its output")
+
+    def _link(self, name: str, line: int) -> None:
+        if name in self.links:
+            raise self.fail(line, f"a second link named {name!r} (the first on line {self.links[name]})")
+        self.links[name] = line
+
+    def end(self, name: str) -> None:
+        if self.depth == 2 and name == "joint" and self.current is not None:
+            self.joints.append(self.current)
+            self.current = None
+        self.depth -= 1
+
+
+def _check_joint(reader: _Reader, joint: _Joint) -> None:
+    """The joint as ROS reads it, or an error where ROS would read something else or nothing."""
+    if not joint.name:
+        raise reader.fail(joint.line, "a <joint> without a name")
+    for what in _ONCE:
+        found = joint.seen.get(what, [])
+        if len(found) > 1:
+            lines = ", ".join(str(e.line) for e in found)
+            raise reader.fail(
+                found[1].line,
+                f"joint {joint.name!r} has {len(found)} <{what}> elements (lines {lines}); ROS reads the "
+                "first and ignores the rest: keep one",
+            )
+    for what in ("parent", "child"):
+        found = joint.seen.get(what, [])
+        link = found[0].attrs.get("link", "") if found else ""
+        if not link:
+            raise reader.fail(joint.line, f"joint {joint.name!r} names no {what} link")
+        if link not in reader.links:
+            raise reader.fail(joint.line, f"joint {joint.name!r}: its {what} link {link!r} is not declared")
+        setattr(joint, what, link)
+    if origin := joint.seen.get("origin"):
+        joint.origin, joint.origin_start = origin[0].attrs, origin[0].start
+
+
+def _parse(path: Path, text: bytes) -> tuple[dict[str, _Joint], str]:
+    for bom, name in _BOMS.items():
+        if text.startswith(bom):
+            raise UsageError(
+                f"{path}: is {name} text; ROS's URDF parser reads UTF-8: convert it (iconv -f {name} -t "
+                "UTF-8) and give that file (--urdf)"
+            )
+    reader = _Reader(path)
     try:
-        parser.Parse(text, True)
+        reader.parser.Parse(text, True)
     except xml.parsers.expat.ExpatError as exc:
         raise UsageError(f"{path}:{exc.lineno}: not a URDF ({exc}); give the robot's .urdf file") from None
-    return joints
+    joints: dict[str, _Joint] = {}
+    names: dict[str, _Joint] = {}
+    for joint in reader.joints:
+        _check_joint(reader, joint)
+        if joint.name in names:
+            raise reader.fail(
+                joint.line,
+                f"a second joint named {joint.name!r} (the first on line {names[joint.name].line})",
+            )
+        names[joint.name] = joint
+        if joint.child in joints:
+            first = joints[joint.child]
+            raise reader.fail(
+                joint.line,
+                f"joints {first.name!r} (line {first.line}) and {joint.name!r} both have the child link "
+                f"{joint.child!r}; a link has one parent joint",
+            )
+        joints[joint.child] = joint
+    return joints, reader.encoding
 
 
 def load(path: Path, link: str) -> Description:
@@ -86,7 +214,7 @@ def load(path: Path, link: str) -> Description:
         raise UsageError(f"{path}: cannot read the URDF (--urdf): {exc}") from None
     if len(text) > MAX_BYTES:
         raise UsageError(f"{path}: larger than {MAX_BYTES >> 20} MiB; is it the robot's URDF?")
-    description = Description(path, text, _parse(path, text))
+    description = Description(path, text, *_parse(path, text))
     T_base_parent(description, link)  # refuses what cannot be re-posed, before any work
     return description
 
@@ -146,12 +274,11 @@ def T_base_parent(d: Description, link: str) -> np.ndarray:
     return T
 
 
-def _set(tag: bytes, key: str, value: str) -> bytes:
-    pattern = re.compile(rb"""(\s%s\s*=\s*)(["'])(.*?)\2""" % key.encode())
-    if pattern.search(tag):
-        return pattern.sub(lambda m: m.group(1) + m.group(2) + value.encode() + m.group(2), tag, count=1)
-    closing = tag.rfind(b"/>") if tag.endswith(b"/>") else len(tag) - 1
-    return tag[:closing] + f' {key}="{value}"'.encode() + tag[closing:]
+def _start_tag(name: str, attrs: dict[str, str], closed: bool, encoding: str) -> bytes:
+    """A start tag written from parsed attributes, in their order, each value escaped, in the
+    file's encoding."""
+    written = "".join(f" {k}={quoteattr(v)}" for k, v in attrs.items())
+    return f"<{name}{written}{'/>' if closed else '>'}".encode(encoding, errors="xmlcharrefreplace")
 
 
 def origin_text(mount: SensorMount) -> dict[str, str]:
@@ -188,9 +315,18 @@ def reposed(d: Description, link: str, mount: SensorMount) -> bytes:
     joint = d.joints[link]
     text = origin_text(mount)
     if joint.origin_start is None:  # no <origin>: one goes right after the joint's start tag
-        end = _TAG_END.match(d.text, joint.start).end()  # type: ignore[union-attr]
-        return d.text[:end] + f'<origin xyz="{text["xyz"]}" rpy="{text["rpy"]}"/>'.encode() + d.text[end:]
+        end = _tag_end(d, joint.start, b"<joint")
+        return d.text[:end] + _start_tag("origin", text, True, d.encoding) + d.text[end:]
     start = joint.origin_start
-    end = _TAG_END.match(d.text, start).end()  # type: ignore[union-attr]
-    tag = _set(_set(d.text[start:end], "xyz", text["xyz"]), "rpy", text["rpy"])
+    end = _tag_end(d, start, b"<origin")
+    closed = d.text[:end].endswith(b"/>")
+    tag = _start_tag("origin", {**joint.origin, **text}, closed, d.encoding)
     return d.text[:start] + tag + d.text[end:]
+
+
+def _tag_end(d: Description, start: int, opening: bytes) -> int:
+    """Where the start tag the parser placed at ``start`` ends (past its ``>``)."""
+    match = _TAG_END.match(d.text, start)
+    if not d.text.startswith(opening, start) or match is None:  # the parser's offsets are bytes of the file
+        raise UsageError(f"{d.path}: cannot find the element the parser read at byte {start} (--urdf)")
+    return match.end()

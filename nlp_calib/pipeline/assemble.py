@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
@@ -57,7 +58,7 @@ def scenario_info(
     )
     return ScenarioInfo(
         name=sc.name,
-        path=None if sc.path is None else str(sc.path),
+        path=None if sc.path is None else str(Path(sc.path).absolute()),
         model=sc.model,
         units={**_units(sc, model), **own, **dict.fromkeys(lags, LAG_UNIT)},
         sensor=sensor_info(sc),

@@ -164,11 +164,20 @@ class StartingPoint:
 
 
 def auto_start(
-    sc: Scenario, fns: ProblemFunctions, log: Log, records: tuple[int, int], initial: Mapping[str, float]
+    sc: Scenario,
+    fns: ProblemFunctions,
+    log: Log,
+    records: tuple[int, int],
+    initial: Mapping[str, float],
+    gaps: np.ndarray | None = None,
 ) -> SensorStart:
     """The sensor's closed-form start (:func:`~nlp_calib.problem.start.closed_form_start`) on the
-    records ``records`` of ``log``, the fixed parameters at their ``initial`` values."""
-    data = build_residual_data(fns, log.select(*records), sc.objective.residual)
+    records ``records`` of ``log`` that cross no gap (``gaps``, per interval of the log), the fixed
+    parameters at their ``initial`` values."""
+    start, stop = records
+    data = build_residual_data(
+        fns, log.select(start, stop), sc.objective.residual, bad_intervals=_within(gaps, start, stop)
+    )
     known = {n: initial[n] for n in fns.fixed}
     with scenario_key(sc, "initial_guess"):
         return closed_form_start(fns, data, known, sc.objective.residual.stride)
@@ -196,6 +205,11 @@ def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.nda
     return lower, upper
 
 
+def _within(mask: np.ndarray | None, start: int, stop: int) -> np.ndarray | None:
+    """A per-interval mask of the whole log over the intervals of records ``start:stop``."""
+    return None if mask is None else mask[start : stop - 1]
+
+
 def starting_point(
     sc: Scenario,
     fns: ProblemFunctions,
@@ -204,16 +218,17 @@ def starting_point(
     stop: int,
     lags: Sequence[float] = (),
     mounts: Sequence[Mapping[str, float]] = (),
+    gaps: np.ndarray | None = None,
 ) -> StartingPoint:
-    """Initial values (header, scenario, or ``auto`` from records ``start:stop``; the time offsets
-    ``lags``, one per log, when given; each log's own mount from ``mounts``, its own start, when
-    the problem has a mount per log) and bounds."""
+    """Initial values (header, scenario, or ``auto`` from the windows of records ``start:stop``
+    that cross no gap in ``gaps``; the time offsets ``lags``, one per log, when given; each log's
+    own mount from ``mounts``, its own start, when the problem has a mount per log) and bounds."""
     initial = initial_parameters(sc, fns.model, log)
     initial.update(lag_start(sc, fns.spec.lags, lags))
     nominal, source = nominal_values(sc, fns.model, log, initial, fns.free)
     one = fns.spec.mounts == 1
     sensor = (
-        auto_start(sc, fns, log, (start, stop), initial)
+        auto_start(sc, fns, log, (start, stop), initial, gaps)
         if sc.parameters.initial_guess == "auto" and one
         else None
     )
@@ -281,6 +296,14 @@ class Binder:
     start: SensorStart | None = None
     #: Bounds of the free parameters every internal fit keeps to (None: none).
     bounds: tuple[np.ndarray, np.ndarray] | None = None
+    #: Per interval of the whole log: gaps in time, which no window crosses whatever the faults.
+    gaps: np.ndarray | None = None
+
+    def crossing(self) -> np.ndarray | None:
+        """The intervals no window may cross: the faults' and the gaps."""
+        if self.gaps is None or self.bad_intervals is None:
+            return self.bad_intervals if self.gaps is None else self.gaps
+        return self.bad_intervals | self.gaps
 
     def windows(self, log: Log, start: int, stop: int) -> ResidualData:
         """The residual windows of records ``start:stop`` of ``log`` (those the masks allow)."""
@@ -290,7 +313,7 @@ class Binder:
             log.select(start, stop),
             sc.objective.residual,
             drop_stationary=sc.log.samples.drop_stationary,
-            bad_intervals=None if self.bad_intervals is None else self.bad_intervals[start : stop - 1],
+            bad_intervals=_within(self.crossing(), start, stop),
             bad_records=None if self.bad_records is None else self.bad_records[start:stop],
         )
         if self.start is not None and self.start.selection is not None and data.n_residuals:
@@ -413,18 +436,21 @@ def build_stage(
     lags: Sequence[float] = (),
     mounts: Sequence[Mapping[str, float]] = (),
     data: ResidualData | None = None,
+    gaps: np.ndarray | None = None,
 ) -> Problem:
     """Build the Functions (``held`` parameters fixed; a time offset per log of ``lags``, or one;
     a mount per log, each starting from ``mounts``' values, when the scenario asks), start from
     the records ``start_from`` (a log and a range), get the backend ready for ``solvers`` over
     ``n_records`` and weigh the priors (on ``data``, every log's windows, with a lag or a mount
-    per log)."""
+    per log); no window crosses ``gaps`` (per interval of the log)."""
     fns = build_problem(sc, model, tuple(held), max(len(lags), len(mounts), 1))
     log, start, stop = start_from
-    point = starting_point(sc, fns, log, start, stop, lags, mounts)
+    point = starting_point(sc, fns, log, start, stop, lags, mounts, gaps)
     backend = prepare_backend(sc, fns, solvers, n_records)
     bounds = None if point.lower is None or point.upper is None else (point.lower, point.upper)
-    binder = Binder(sc, fns, backend, point.x_fixed, no_priors(fns.n_free), start=point.sensor, bounds=bounds)
+    binder = Binder(
+        sc, fns, backend, point.x_fixed, no_priors(fns.n_free), start=point.sensor, bounds=bounds, gaps=gaps
+    )
     # Several logs' own lags or mounts: weighed on every log's windows (one log's alone would not
     # say which lag or mount is whose).
     on = data if data is not None and max(fns.spec.mounts, fns.spec.lags) > 1 else None

@@ -97,7 +97,13 @@ def setup_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> LogSetup
     records = (prepared.start, prepared.stop)
     start_from = (read, prepared.start, prepared.split)
     problem = build_stage(
-        prepared.scenario, prepared.model, tuple(prepared.held), start_from, solvers, records[1] - records[0]
+        prepared.scenario,
+        prepared.model,
+        tuple(prepared.held),
+        start_from,
+        solvers,
+        records[1] - records[0],
+        gaps=prepared.gaps,
     )
     screening = screen(problem.binder, read, records, problem.start.x0)
     alignment = align_stage(problem, prepared, screening)

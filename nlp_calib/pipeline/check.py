@@ -11,6 +11,7 @@ and robust options the calibration recorded.
 from __future__ import annotations
 
 import dataclasses
+import os
 import warnings
 from pathlib import Path
 from typing import Any
@@ -34,12 +35,17 @@ def _recorded(stored: StoredCalibration, log: Path) -> Scenario:
     """The log with the scenario the calibration was made with, or the model's defaults with the
     residual and robust options it recorded."""
     if stored.scenario is not None:
-        return load_scenario(stored.scenario).with_dataset(log)
+        return _whole(load_scenario(stored.scenario).with_dataset(log), stored)
     if stored.recorded is not None:
+        why = (
+            "is not there"
+            if Path(stored.recorded).is_absolute()
+            else "is recorded relative to the folder it ran in"
+        )
         warnings.warn(
-            f"the scenario {stored.path} was made with ({stored.recorded}) is not there (paths are "
-            "relative to the folder it ran in); the log is read with the model's defaults and the "
-            "residual and kernel the calibration recorded; give the scenario as SCENARIO to use it",
+            f"the scenario {stored.path} was made with ({stored.recorded}) {why}; the log is read with the "
+            "model's defaults and the residual and kernel the calibration recorded; give the scenario as "
+            "SCENARIO to use it",
             NlpCalibWarning,
             stacklevel=3,
         )
@@ -53,6 +59,30 @@ def _recorded(stored: StoredCalibration, log: Path) -> Scenario:
     if "robust" in objective:
         sc = sc.with_options(robust=from_mapping(RobustOptions, objective["robust"], f"{where}.robust"))
     return sc
+
+
+def _whole(sc: Scenario, stored: StoredCalibration) -> Scenario:
+    """The recorded scenario on a new log, all of it: its ``samples`` chose records of the log it
+    calibrated, which mean nothing on another (said in a warning when it had a range)."""
+    samples = sc.log.samples
+    if (samples.start == 0 and samples.stop is None) or _same_file(stored.dataset, sc.dataset):
+        return sc
+    warnings.warn(
+        f"the scenario {stored.path} was made with selects samples [{samples.start}, {samples.stop}) of the "
+        "log it calibrated; the new log is checked whole (give a scenario with samples for it as SCENARIO "
+        "to choose)",
+        NlpCalibWarning,
+        stacklevel=4,
+    )
+    return sc.with_options(samples=dataclasses.replace(samples, start=0, stop=None))
+
+
+def _same_file(recorded: str | None, path: Path) -> bool:
+    """Whether ``path`` is the log the calibration recorded (the same file, by any name)."""
+    try:
+        return recorded is not None and Path(recorded).is_absolute() and os.path.samefile(recorded, path)
+    except OSError:
+        return False
 
 
 def _same_formulation(stored: StoredCalibration, sc: Scenario) -> None:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from nlp_calib.analysis.streams import GAP_FACTOR, MIN_GAP_S, gap_threshold, time_gaps
 from nlp_calib.core.errors import DatasetError, ModelError, NlpCalibWarning, ScenarioError
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, get_model
@@ -25,6 +26,9 @@ from nlp_calib.problem import ResidualOptions
 #: each window's motion is then little more than the tracker's noise.
 HIGH_RATE_HZ = 50.0
 SHORT_WINDOW_S = 0.05
+#: A tracker that travels this far (m) or turns this much (rad) has moved: the wheels must have.
+MOVING_M = 0.5
+MOVING_RAD = 1.0
 #: Logs fitted together whose record horizon spans durations further apart than this factor are
 #: warned about.
 DURATION_RATIO = 2.0
@@ -34,7 +38,8 @@ DURATION_RATIO = 2.0
 class PreparedLog:
     """One log ready for the later stages: its single-log ``scenario``, the model, the records as
     read, the selected range ``[start, stop)``, the first hold-out record ``split`` and the free
-    parameters the selection cannot determine at all (``held``, with the reason)."""
+    parameters the selection cannot determine at all (``held``, with the reason), and the intervals
+    of the log that are gaps in time (``gaps``: no window crosses them)."""
 
     scenario: Scenario
     model: KinematicModel
@@ -43,6 +48,7 @@ class PreparedLog:
     stop: int
     split: int
     held: Mapping[str, str]
+    gaps: np.ndarray | None = None
 
 
 def read(sc: Scenario, log: Log | None = None) -> tuple[KinematicModel, Log]:
@@ -74,8 +80,9 @@ def _read(sc: Scenario, log: Log | None) -> tuple[KinematicModel, Log]:
         raise
 
 
-def select(sc: Scenario, log: Log) -> tuple[int, int]:
-    """The record range ``[start, stop)`` the scenario's ``samples`` ask for."""
+def select(sc: Scenario, log: Log, model: KinematicModel | None = None) -> tuple[int, int]:
+    """The record range ``[start, stop)`` the scenario's ``samples`` ask for (with ``model``:
+    checked for counters that never move; joints in degrees are the pre-flight's to find)."""
     n = log.n_records
     samples = sc.log.samples
     start = samples.start
@@ -83,7 +90,33 @@ def select(sc: Scenario, log: Log) -> tuple[int, int]:
     if stop > n or start >= stop - 1:
         raise ScenarioError(f"{sc.path or sc.name}: samples: [{start}, {stop}) exceeds the log's {n} records")
     check_windows(sc, start, stop, log)
+    if model is not None:
+        check_moving(model, log.select(start, stop), str(sc.log.source.path))
     return start, stop
+
+
+def check_moving(model: KinematicModel, log: Log, path: str) -> None:
+    """Refuse a wheel's counter (or joint) that never changes while the tracker travels."""
+    track = np.asarray(log.T_world_sensor, dtype=float)
+    travel = float(np.sum(np.linalg.norm(np.diff(track[:, :2], axis=0), axis=1)))
+    turn = float(np.sum(np.abs(np.diff(np.unwrap(track[:, 2])))))
+    if travel < MOVING_M and turn < MOVING_RAD:
+        return
+    radians = log.joint_positions is not None
+    for name, kind in model.encoder_kinds.items():
+        if kind != "counter" or name not in log.header.encoder_names:
+            continue
+        values = log.joint_position(name) if radians else log.encoder(name)
+        if np.all(values == values[0]):
+            what = f"the joint read as {name}" if radians else f"encoder {name}"
+            key = "dataset.encoders" if radians else "the log's header and columns"
+            raise DatasetError(
+                path,
+                None,
+                f"{what} reads {float(values[0]):g} in all {log.n_records} records while the tracker travels "
+                f"{travel:.2f} m and turns {turn:.2f} rad: a wheel that never turns; is it the right one "
+                f"({key}), and did its driver publish it?",
+            )
 
 
 def check_windows(sc: Scenario, start: int, stop: int, log: Log | None = None) -> None:
@@ -190,14 +223,36 @@ def prepare(sc: Scenario, log: Log | None = None) -> PreparedLog:
     horizon in records resolved for the log)."""
     model, log = read(sc, log)
     sc = resolved(sc, log)
-    start, stop = select(sc, log)
+    start, stop = select(sc, log, model)
     first_split = split(sc, start, stop)
     undetermined = held(sc, model, log, start, first_split)
     for name, why in undetermined.items():
         warnings.warn(
             f"{name} is held at its initial value: {why} in the fitted records", NlpCalibWarning, stacklevel=2
         )
-    return PreparedLog(sc, model, log, start, stop, first_split, undetermined)
+    return PreparedLog(
+        sc, model, log, start, stop, first_split, undetermined, gaps_said(sc, log, start, stop)
+    )
+
+
+def gaps_said(sc: Scenario, log: Log, start: int, stop: int) -> np.ndarray:
+    """The log's gaps in time (per interval), with a warning naming those in the selected records."""
+    gaps = time_gaps(log.time_s)
+    inside = np.flatnonzero(gaps[start : stop - 1]) + start
+    if inside.size:
+        dt = np.diff(log.time_s)
+        k = int(inside[np.argmax(dt[inside])])
+        part = f"{sc.origin} ({sc.dataset.name}): " if sc.origin else ""
+        warnings.warn(
+            f"{part}{sc.log.source.numbered}: {inside.size} gap(s) in time over "
+            f"{gap_threshold(log.time_s):.3g} s ({GAP_FACTOR:g}× the median interval, at least "
+            f"{MIN_GAP_S:g} s) between records (the longest {dt[k]:.3g} s, after line "
+            f"{int(log.line_numbers[k])}, t = {log.time_s[k]:.3f} s: the tracker or the joints missing); no "
+            "residual window crosses them",
+            NlpCalibWarning,
+            stacklevel=3,
+        )
+    return gaps
 
 
 def read_checked(sc: Scenario) -> Log:

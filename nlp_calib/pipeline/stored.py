@@ -12,7 +12,7 @@ from typing import Any
 from nlp_calib.analysis.drift import believed_dof
 from nlp_calib.core.config import fail, key_name, read_yaml
 from nlp_calib.core.errors import ConfigError, UsageError
-from nlp_calib.models import MODELS, get_model, param_names
+from nlp_calib.models import MODELS, KinematicModel, get_model, param_names
 from nlp_calib.results.checks import MIN_FOLDS
 from nlp_calib.sensors import SENSORS, sensor_for
 from nlp_calib.solvers import SOLVERS
@@ -23,8 +23,8 @@ class StoredCalibration:
     """A calibration read from ``path``: ``parameters``, their σ to believe (``std``) and that σ's
     degrees of freedom (``dof``: the jackknife's folds − 1, or infinite for the white-noise σ),
     the ``model`` and ``solver``, the scenario file it was made with (``scenario``, if it still
-    exists; ``recorded``: as the file names it), and the residual and robust options it fitted
-    (``objective``, when recorded)."""
+    exists; ``recorded``: as the file names it), the residual and robust options it fitted
+    (``objective``, when recorded) and the log it was fitted to (``dataset``, as recorded)."""
 
     path: Path
     model: str
@@ -35,6 +35,7 @@ class StoredCalibration:
     scenario: Path | None
     objective: Mapping[str, Any] | None
     recorded: str | None = None
+    dataset: str | None = None
 
     def stats(self) -> tuple[Mapping[str, float], Mapping[str, float], Mapping[str, float]]:
         """Values, σ to believe and degrees of freedom, as the drift check compares them."""
@@ -65,12 +66,40 @@ def _numbers(
 
 def _scenario_path(doc: Mapping[str, Any]) -> tuple[Path | None, str | None]:
     """The scenario file the calibration was made with, when it still exists, and its path as
-    recorded."""
+    recorded. A relative path is not looked up: it was relative to the folder the run was made
+    in, which the file does not say (today's working folder may hold another file of that name)."""
     recorded = doc.get("scenario")
     path = recorded.get("path") if isinstance(recorded, Mapping) else None
     if not isinstance(path, str):
         return None, None
-    return (Path(path) if Path(path).is_file() else None), path
+    return (Path(path) if Path(path).is_absolute() and Path(path).is_file() else None), path
+
+
+def _check_values(
+    model: KinematicModel, values: Mapping[str, float], spreads: Mapping[str, Mapping[str, float]], where: str
+) -> None:
+    """Refuse values no robot of ``model`` has and σ that are negative or wider than everything
+    the parameter could be (a tampered or foreign file), under the file's own keys."""
+    for name, value in values.items():
+        lo, hi = model.physical_ranges.get(name, (-math.inf, math.inf))
+        if name in model.angle_params:
+            lo, hi = -2.0 * math.pi, 2.0 * math.pi
+        if not lo <= value <= hi:
+            fail(
+                f"{where}: parameters.{key_name(name)}",
+                f"{value:.6g} is outside what a {model.name} can have ([{lo:.6g}, {hi:.6g}]); give the "
+                "calibration.yaml nlp_calib wrote for this robot",
+            )
+    for key, std in spreads.items():
+        for name, sd in std.items():
+            lo, hi = model.physical_ranges.get(name, (-math.inf, math.inf))
+            widest = 2.0 * math.pi if name in model.angle_params else hi - lo
+            if sd < 0 or sd > widest:
+                what = "negative" if sd < 0 else f"wider than any {name} can be ({widest:.6g})"
+                fail(
+                    f"{where}: {key}.{key_name(name)}",
+                    f"a 1σ of {sd:.6g} is {what}; give the calibration.yaml nlp_calib wrote",
+                )
 
 
 def read_calibration(path: Path) -> StoredCalibration:
@@ -93,7 +122,8 @@ def read_calibration(path: Path) -> StoredCalibration:
             f"a calibration of a {kind!s:.20} sensor cannot be checked yet: the drift check compares a "
             "planar mount; recalibrate with 'nlp-calib run' on the new log and compare the two",
         )
-    names = param_names(get_model(model))
+    kinematic = get_model(model)
+    names = param_names(kinematic)
     solver = doc.get("solver")
     solver = solver if solver in SOLVERS else next(iter(SOLVERS))
     values = _numbers(doc, "parameters", names, where, null=False)
@@ -103,10 +133,14 @@ def read_calibration(path: Path) -> StoredCalibration:
     folds = doc.get("std_blocks_folds", MIN_FOLDS)
     if isinstance(folds, bool) or not isinstance(folds, int) or folds < 0:
         fail(f"{where}: std_blocks_folds", f"expected a whole number of folds, got {folds!r:.40}")
+    spreads = {"std": std, "std_white_noise": white, **({"std_blocks": blocks} if blocks else {})}
+    _check_values(kinematic, values, spreads, where)
     dof = {n: believed_dof(white[n], blocks.get(n), folds) for n in names}
     objective = doc.get("objective") if isinstance(doc.get("objective"), Mapping) else None
     scenario, recorded = _scenario_path(doc)
-    return StoredCalibration(path, model, solver, values, std, dof, scenario, objective, recorded)
+    data = doc.get("dataset")
+    dataset = data.get("path") if isinstance(data, Mapping) and isinstance(data.get("path"), str) else None
+    return StoredCalibration(path, model, solver, values, std, dof, scenario, objective, recorded, dataset)
 
 
 def _sensor_kind(doc: Mapping[str, Any]) -> str:

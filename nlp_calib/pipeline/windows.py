@@ -64,6 +64,8 @@ def bind_windows(
     if log.motions is not None:
         # A reference of its own motions is composed only where one-interval increments follow on.
         bad_intervals = bad_intervals | ~log.motions.covered(log.n_records)
+    if prepared.gaps is not None:  # dead reckoning restarts after a gap, as after a fault
+        bad_intervals = bad_intervals | prepared.gaps
     if report.unchecked:
         warnings.warn(f"encoder faults not checked: {report.unchecked}", NlpCalibWarning, stacklevel=3)
     start, stop = max(prepared.start, alignment.valid[0]), min(prepared.stop, alignment.valid[1])

@@ -36,6 +36,7 @@ from nlp_calib.sensors.mount import (
     MOUNT_REFERENCE,
     MOUNT_UNITS,
     SCALE_PARAM,
+    mirrored_mount,
     mount_rotation,
 )
 from nlp_calib.symbolic import se3
@@ -128,6 +129,11 @@ class CameraPose:
     def planar_yaw(self, params: Mapping[str, float]) -> float | None:
         """None: a camera's poses lie in its own world frame, not the base's plane."""
         return None
+
+    def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str:
+        """Why the mount is likely the mirror image a camera's motion cannot tell from the robot (its
+        image upside down while no ``given`` mount says so); "" when it is not."""
+        return mirrored_mount(params, given)
 
     def heading(self, T_world_sensor: np.ndarray) -> np.ndarray:
         """The camera's unwrapped rotation about the floor normal (the principal axis of its

@@ -78,3 +78,33 @@ def length_params(model: _Units) -> tuple[str, ...]:
 def mount_rotation(params: Mapping[str, float]) -> np.ndarray:
     """``R = Rz(yaw)·Ry(pitch)·Rx(roll)`` of a 3-D mount given by its named angles."""
     return poses3d.rpy_to_matrix(np.array([params[n] for n in MOUNT_ANGLES]))
+
+
+def image_up(params: Mapping[str, float]) -> str | None:
+    """Which way the mount turns the camera's image, from the base's forward and up axes seen in the
+    sensor's frame: ``"up"``/``"down"`` for a camera looking along the base's forward axis (x right,
+    y down in the image: REP 103's optical frame) or a body frame (x forward, z up), None when the
+    sensor looks neither way (straight down, say): no convention tells."""
+    R = mount_rotation(params)
+    forward, up = R.T @ np.array([1.0, 0.0, 0.0]), R.T @ np.array([0.0, 0.0, 1.0])
+    axis = int(np.argmax(np.abs(forward)))
+    if abs(forward[axis]) < 0.7:
+        return None
+    if axis == 2:  # optical: looking along the base's forward (or backward) axis, y down
+        return "down" if up[1] > 0.5 else "up" if up[1] < -0.5 else None
+    if axis == 0:  # a body frame, x along the base's forward axis, z up
+        return "down" if up[2] < -0.5 else "up" if up[2] > 0.5 else None
+    return None
+
+
+def mirrored_mount(params: Mapping[str, float], given: Mapping[str, float] | None) -> str:
+    """Why a 3-D mount is likely the mirror image a camera's motion cannot tell from the robot (its
+    image upside down), when no mount ``given`` by the user says the camera is so; "" when not."""
+    if image_up(params) != "down" or (given is not None and image_up(given) == "down"):
+        return ""
+    return (
+        "the camera came out mounted upside down (its image's down axis pointing up): the mirror image "
+        "that both wheel joints turning the other way, or the left and right joints swapped, give a "
+        "camera's motion; check the joints' signs and order in the scenario, or, if the camera is "
+        "mounted upside down, give its mount as the initial guess (sensor_roll, sensor_pitch, sensor_yaw)"
+    )

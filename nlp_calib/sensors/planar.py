@@ -94,6 +94,11 @@ class PlanarPose:
         angle that turns the tracker's motion into the base's."""
         return float(params.get("sensor_theta", 0.0))
 
+    def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str:
+        """Nothing: every planar mount is one a robot can have (a mirror shows in the model's own
+        parameters)."""
+        return ""
+
     def tangent(self, z: np.ndarray) -> np.ndarray:
         """Measured motions ``z`` ``(3, n)`` in the residual's rows: they are their own."""
         return np.asarray(z, dtype=float)

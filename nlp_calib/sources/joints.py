@@ -17,6 +17,9 @@ read. ``clock_offset`` (s) is added to the joints' times when the two files' clo
 from __future__ import annotations
 
 import dataclasses
+import os
+import stat
+import warnings
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -25,19 +28,24 @@ from typing import Any, ClassVar
 import numpy as np
 
 from nlp_calib.core.config import coerce, fail, from_mapping, key_name
-from nlp_calib.core.errors import ConfigError, DatasetError
+from nlp_calib.core.errors import ConfigError, DatasetError, NlpCalibWarning
+from nlp_calib.core.files import kind_of
 from nlp_calib.core.ranges import Range
 from nlp_calib.logs import Log
 from nlp_calib.logs.bag_joints import timed_by_tracker
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, MAX_GAP, Stamped
-from nlp_calib.logs.joint_log import WHEEL_FORMS, read_joint_csv, wheel_positions
+from nlp_calib.logs.joint_log import WHEEL_FORMS, JointTable, read_joint_csv, wheel_positions
 from nlp_calib.logs.log import LogHeader, frozen
-from nlp_calib.logs.tum import read_tum
+from nlp_calib.logs.screens import MAX_SHIFT_S, quaternion_order
+from nlp_calib.logs.tum import Trajectory3D, read_tum
 from nlp_calib.models import KinematicModel, encoders
 from nlp_calib.models.radians import in_units
 from nlp_calib.sources.base import file_identity
 from nlp_calib.sources.robot import load_robot, robot_header
 
+#: Joint rows further than this from the poses' span (s, on the poses' clock) cannot pair with them
+#: (the clock check looks this far: :data:`~nlp_calib.logs.screens.MAX_SHIFT_S`).
+PAIRING_MARGIN_S = MAX_SHIFT_S
 #: The keys a joint-log block must have.
 REQUIRED = ("joints", "poses", "encoders")
 #: Counts per wheel turn a per-cycle increment may be given in.
@@ -66,12 +74,15 @@ class Wheels:
         if (reason := CLOCK_OFFSET.problem(self.clock_offset)) is not None:
             raise ConfigError(f"clock_offset (seconds) {reason}")
 
-    def read(self, path: Path, model: KinematicModel, where: str) -> tuple[Stamped, tuple[str, ...]]:
+    def read(
+        self, path: Path, model: KinematicModel, where: str, table: JointTable | None = None
+    ) -> tuple[Stamped, tuple[str, ...]]:
         """The joints of ``path`` for ``model`` (in radians) as a stream (each joint's position,
-        then its velocity, NaN) on the other file's clock, and the joints' names in encoder order."""
+        then its velocity, NaN) on the other file's clock, and the joints' names in encoder order
+        (``table``: its rows, when already read)."""
         check_encoders(self.encoders, model, where)
         names = encoders(model)
-        table = read_joint_csv(path)
+        table = read_joint_csv(path) if table is None else table
         joint_names = tuple(self.encoders[e] for e in names)
         wheels = [model.encoder_kinds[e] == "counter" for e in names]
         values = table.columns(joint_names, where)
@@ -127,9 +138,10 @@ class JointLogSource:
 
     def read(self, model: KinematicModel, *, strict: bool) -> Log:
         model = in_units(model, "radians")
-        joints, _ = self.wheels().read(self.joints, model, "dataset.encoders")
         poses = read_tum(self.poses)
-        self._check_overlap(joints.stamp_ns, poses.time_ns)
+        self._check_order(poses)
+        table = self._paired(poses, round(self.clock_offset * 1e9))
+        joints, _ = self.wheels().read(self.joints, model, "dataset.encoders", table)
         tracker = Stamped(str(self.poses), poses.time_ns, poses.planar_and_3d())
         header = self.header(model)
         log = timed_by_tracker(self.joints, joints, tracker, encoders(model), self.max_gap, header)
@@ -139,6 +151,46 @@ class JointLogSource:
         """``ROBOT.yaml``'s header (the model's defaults without one), for ``model`` in radians."""
         robot = load_robot(self.robot, model) if self.robot is not None else None
         return robot_header(model, robot, frame)
+
+    def _check_order(self, poses: Trajectory3D) -> None:
+        """Refuse quaternions written ``w`` first (:func:`~nlp_calib.logs.screens.quaternion_order`)."""
+        found = quaternion_order(poses.time_s, poses.poses)
+        if found is not None:
+            read, w_first = found
+            raise DatasetError(
+                str(self.poses),
+                None,
+                "its quaternions look written 'qw qx qy qz': read as TUM's 'qx qy qz qw', "
+                f"{100 * read:.0f} % of the sensor's rotation is about the normal of the plane its positions "
+                f"lie in, read w first {100 * w_first:.0f} %; a TUM line is "
+                "'timestamp tx ty tz qx qy qz qw': move each line's w to the end",
+            )
+
+    def _paired(self, poses: Trajectory3D, shift: int) -> JointTable:
+        """The joint rows within :data:`PAIRING_MARGIN_S` of the poses (on the poses' clock): what
+        can pair with them, the lag search and the clock check included; the rest of a long joint
+        log is skipped as it is read, and said."""
+        margin = round(PAIRING_MARGIN_S * 1e9)
+        lo, hi = int(poses.time_ns[0]) - shift - margin, int(poses.time_ns[-1]) - shift + margin
+        table = read_joint_csv(self.joints, keep=lambda t: (t >= lo) & (t <= hi))
+        self._check_overlap(np.array(table.span_ns) + shift, poses.time_ns)
+        kept = int(table.time_ns.size)
+        if kept < 2:
+            raise DatasetError(
+                str(self.joints),
+                None,
+                f"holds {kept} row(s) within {PAIRING_MARGIN_S:g} s of the poses; at least 2 are needed",
+            )
+        if kept < table.rows:
+            span = (table.span_ns[1] - table.span_ns[0]) * 1e-9
+            warnings.warn(
+                f"{self.joints}: {table.rows} rows over {span:.0f} s, of which the {kept} within "
+                f"{PAIRING_MARGIN_S:g} s of the poses' {poses.time_s[-1] - poses.time_s[0]:.0f} s "
+                f"({self.poses.name}) were kept; the rest cannot pair with them",
+                NlpCalibWarning,
+                stacklevel=4,
+            )
+        return table
 
     def _check_overlap(self, joint_ns: np.ndarray, pose_ns: np.ndarray) -> None:
         """Refuse files whose times do not overlap, in this block's words (a bag's are the topics')."""
@@ -207,11 +259,26 @@ def paired_files(path: Path) -> tuple[Path, Path]:
     )
     if not path.is_file():
         raise DatasetError(str(path), None, f"no such file ({fix})")
+    special = [(p, kind) for p in partners if (kind := _not_regular(p)) is not None]
+    if not found and special:
+        partner, kind = special[0]
+        raise DatasetError(
+            str(path), None, f"its partner {partner.name} beside it is {kind}, not a regular file ({fix})"
+        )
     if len(found) != 1:
         what = "no" if not found else "two candidate partners"
         listed = " or ".join(p.name for p in (found or partners))
         raise DatasetError(str(path), None, f"{what} {listed} beside it ({fix})")
     return (found[0], path) if is_tum else (path, found[0])
+
+
+def _not_regular(path: Path) -> str | None:
+    """What ``path`` is when it exists but is not a regular file (a folder, a FIFO...), else None."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    return None if stat.S_ISREG(mode) else kind_of(mode)
 
 
 def check_encoders(given: Mapping[str, str], model: KinematicModel, where: str) -> None:
