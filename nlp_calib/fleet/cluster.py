@@ -9,8 +9,10 @@ its workers again and again is reported as failed, like a crash on this machine.
 
 from __future__ import annotations
 
+import socket
 from collections.abc import Sequence
 from typing import Any
+from urllib.parse import urlsplit
 
 from nlp_calib.core import threads
 from nlp_calib.core.errors import UsageError
@@ -30,6 +32,25 @@ def _distributed() -> Any:
     return dask.distributed
 
 
+def _refused(address: str) -> OSError | None:
+    """A plain TCP scheduler address that refuses connections outright (a typo, a scheduler not
+    started): said at once, not after Dask's retries until its timeout."""
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    try:
+        port = parts.port
+    except ValueError:
+        return None
+    if parts.scheme != "tcp" or parts.hostname is None or port is None:
+        return None
+    try:
+        socket.create_connection((parts.hostname, port), timeout=5.0).close()
+    except (ConnectionRefusedError, socket.gaierror) as exc:
+        return exc
+    except OSError:  # slow or filtered: Dask's own timeout decides
+        return None
+    return None
+
+
 def _worker_takes_one_core() -> None:
     threads.one_core()
 
@@ -38,6 +59,8 @@ def run_on_dask(jobs: Sequence[Job], address: str, done: Done, task: Task = run_
     """Every job on the Dask cluster whose scheduler is at ``address``, ``done`` called as each
     finishes."""
     distributed = _distributed()
+    if (refused := _refused(address)) is not None:
+        raise UsageError(f"--dask {address}: cannot reach a Dask scheduler there ({refused})")
     try:
         client = distributed.Client(address, timeout="20s")
     except (OSError, TimeoutError) as exc:
