@@ -4,6 +4,8 @@ a vendor's odometry) with its truth."""
 from __future__ import annotations
 
 import argparse
+import functools
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -44,29 +46,31 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if out.suffix.lower() == ".tum":
         return _simulate_camera(args, overrides)
     opts = simulation_options(args.config, overrides)
+    log_path, truth = _staged(args, [out, truth_path(out)], lambda path: simulate_to_file(opts, path))
+    print(f"wrote {log_path} ({opts.records} records) and {truth}")
+    return 0
+
+
+def _staged(
+    args: argparse.Namespace, paths: Sequence[Path], write: Callable[[Path], Sequence[Path]]
+) -> list[Path]:
+    """The files ``write`` writes for ``--out`` (``paths``: their names, none of them a user's
+    own file unless ``--force``), written in a staging folder and moved beside ``--out`` whole."""
+    out: Path = args.out
     folder = check_output_dir(out.parent)
-    # The target may be the user's own log: never replaced without --force.
-    refuse_collisions(folder, [out.name, truth_path(out).name], tracked=False, force=args.force)
+    refuse_collisions(folder, [p.name for p in paths], tracked=False, force=args.force)
     with StagedOutput(folder, None, force=args.force) as stage:
-        log_path, truth = simulate_to_file(opts, stage.path / out.name)
+        written = write(stage.path / out.name)
         interrupts.hold()
         stage.commit()
-    print(f"wrote {stage.final(log_path)} ({opts.records} records) and {stage.final(truth)}")
-    return 0
+    return [stage.final(p) for p in written]
 
 
 def _simulate_camera(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
     """A tilted camera's TUM trajectory, its joint CSV and the truth, beside each other."""
     opts = camera_options(args.config, overrides)
-    out: Path = args.out
-    folder = check_output_dir(out.parent)
-    names = [p.name for p in camera_paths(out)]
-    refuse_collisions(folder, names, tracked=False, force=args.force)
-    with StagedOutput(folder, None, force=args.force) as stage:
-        written = write_camera_simulation(simulate_camera(opts), stage.path / out.name)
-        interrupts.hold()
-        stage.commit()
-    tum, joints, truth = (stage.final(p) for p in written)
+    write = functools.partial(write_camera_simulation, simulate_camera(opts))
+    tum, joints, truth = _staged(args, camera_paths(args.out), write)
     print(f"wrote {tum} ({opts.duration_s:g} s at {opts.image_rate_hz:g} Hz), {joints} and {truth}")
     return 0
 
@@ -74,15 +78,9 @@ def _simulate_camera(args: argparse.Namespace, overrides: dict[str, Any]) -> int
 def _simulate_lidar(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
     """A lidar's bag and the truth beside it."""
     opts = lidar_options(args.config, overrides)
-    out: Path = args.out
-    folder = check_output_dir(out.parent)
-    names = [p.name for p in lidar_paths(out)]
-    refuse_collisions(folder, names, tracked=False, force=args.force)
-    with StagedOutput(folder, None, force=args.force) as stage:
-        written = write_lidar_simulation(simulate_lidar(opts), stage.path / out.name)
-        interrupts.hold()
-        stage.commit()
-    bag, truth = (stage.final(p) for p in written)
+    bag, truth = _staged(
+        args, lidar_paths(args.out), functools.partial(write_lidar_simulation, simulate_lidar(opts))
+    )
     print(
         f"wrote {bag} ({opts.duration_s:g} s, scans at {opts.scan_rate_hz:g} Hz, "
         f"{100 * opts.degraded_fraction:g} % degraded) and {truth}"
@@ -98,14 +96,8 @@ def _simulate_vendor(args: argparse.Namespace, overrides: dict[str, Any]) -> int
     """A vendor's odometry, the tracker's TUM file and the truth, beside each other."""
     opts = vendor_options(args.config, overrides)
     out: Path = args.out
-    folder = check_output_dir(out.parent)
-    names = [out.name, out.with_suffix(".tum").name, out.with_suffix(".truth.json").name]
-    refuse_collisions(folder, names, tracked=False, force=args.force)
-    with StagedOutput(folder, None, force=args.force) as stage:
-        written = write_vendor_simulation(opts, stage.path / out.name)
-        interrupts.hold()
-        stage.commit()
-    odometry, tum, truth = (stage.final(p) for p in written)
+    paths = [out, out.with_suffix(".tum"), out.with_suffix(".truth.json")]
+    odometry, tum, truth = _staged(args, paths, functools.partial(write_vendor_simulation, opts))
     print(
         f"wrote {odometry} (the robot's own odometry, integrated with the model "
         f"{', '.join(f'{n} {v:g}' for n, v in opts.vendor_in_radians().items())}), {tum} and {truth}"

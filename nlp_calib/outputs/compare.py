@@ -51,7 +51,13 @@ def _sensor(run: CalibrationRun, solver: str) -> str:
     return mount.child + ("" if mount.parent == "base_link" else f" on {mount.parent}") + f" ({mount.kind})"
 
 
-def _lag(run: CalibrationRun) -> str:
+def _lag(run: CalibrationRun, solver: str) -> str:
+    """The solver's fitted lag where the lag is a parameter of the fit (the encoders were re-sampled
+    near it, not at it), else the one the encoders were read at."""
+    params = run.reports[solver].result.param_dict()
+    fitted = [params[e.lag] for e in run.checks.lag_effects or () if e.lag in params]
+    if len(fitted) == 1:
+        return f"{1e3 * fitted[0]:.1f} (estimated)"
     how = "estimated" if run.data.lag_estimate is not None else "given"
     return f"{1e3 * run.data.tracker_lag_s:.1f} ({how})"
 
@@ -79,7 +85,7 @@ def rows(runs: Sequence[CalibrationRun]) -> list[tuple[str, list[str]]]:
             cells.append("-" if found is None else f"{found[0]:.7g} ± {found[1]:.2g}")
         out.append((label, cells))
     out += [
-        ("tracker lag [ms]", [_lag(run) for run, _ in cols]),
+        ("tracker lag [ms]", [_lag(run, solver) for run, solver in cols]),
         ("sensor", [_sensor(run, s) for run, s in cols]),
         ("segment ATE [m]", [f"{run.reports[s].metrics.segment_ate.mean:.4g}" for run, s in cols]),
         ("RPE over 5 m [m]", [f"{run.reports[s].metrics.rpe_distance[5.0].mean:.4g}" for run, s in cols]),

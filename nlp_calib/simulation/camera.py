@@ -103,13 +103,19 @@ class CameraSimulationOptions:
 
     def __post_init__(self) -> None:
         _check(self, LIMITS)
-        if self.model not in MODELS:
-            raise OptionsError(f"model must be one of {', '.join(MODELS)}, got {self.model!r}")
-        defaults = {**joint_map(self.model).default_truth, **DEFAULT_MOUNT}
-        unknown = sorted(set(self.truth) - set(defaults))
-        if unknown:
-            raise OptionsError(f"unknown parameter(s) {unknown}; known: {', '.join(defaults)}")
-        object.__setattr__(self, "truth", {**defaults, **self.truth})
+        object.__setattr__(self, "truth", full_truth(self.model, self.truth, DEFAULT_MOUNT))
+
+
+def full_truth(model: str, truth: Mapping[str, float], mount: Mapping[str, float]) -> dict[str, float]:
+    """A simulation's truth: ``truth`` over the defaults of ``model``'s joint map and ``mount``;
+    a model or a parameter that is not known refused."""
+    if model not in MODELS:
+        raise OptionsError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    defaults = {**joint_map(model).default_truth, **mount}
+    unknown = sorted(set(truth) - set(defaults))
+    if unknown:
+        raise OptionsError(f"unknown parameter(s) {unknown}; known: {', '.join(defaults)}")
+    return {**defaults, **truth}
 
 
 @dataclass(frozen=True)

@@ -29,9 +29,8 @@ from nlp_calib.core import poses
 from nlp_calib.core.errors import OptionsError
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.ranges import Range
-from nlp_calib.models import MODELS
 from nlp_calib.models.joints import JOINT_MAPS, joint_map
-from nlp_calib.simulation.camera import EPOCH_S, base_motion, fine_grid
+from nlp_calib.simulation.camera import EPOCH_S, base_motion, fine_grid, full_truth
 from nlp_calib.simulation.options import DriveShape
 from nlp_calib.simulation.rosbag import joint_state, laser_scan, tf_static, write_bag
 
@@ -81,13 +80,7 @@ class LidarSimulationOptions:
         for name, limit in LIMITS.items():
             if (reason := limit.problem(getattr(self, name))) is not None:
                 raise OptionsError(f"{name} {reason}")
-        if self.model not in MODELS:
-            raise OptionsError(f"model must be one of {', '.join(MODELS)}, got {self.model!r}")
-        defaults = {**joint_map(self.model).default_truth, **DEFAULT_MOUNT}
-        unknown = sorted(set(self.truth) - set(defaults))
-        if unknown:
-            raise OptionsError(f"unknown parameter(s) {unknown}; known: {', '.join(defaults)}")
-        object.__setattr__(self, "truth", {**defaults, **self.truth})
+        object.__setattr__(self, "truth", full_truth(self.model, self.truth, DEFAULT_MOUNT))
 
 
 @dataclass(frozen=True)

@@ -9,13 +9,12 @@ paired on every run exactly as ``nlp-calib import-bag`` writes them
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
-from nlp_calib.core.config import coerce, fail, from_mapping, key_name
+from nlp_calib.core.config import coerce, from_mapping
 from nlp_calib.core.errors import ConfigError, DatasetError
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.logs.bag_files import bag_root
@@ -25,7 +24,7 @@ from nlp_calib.logs.bag_records import BagRecords, read_bag, read_bag_records
 from nlp_calib.logs.bag_tf import static_mount
 from nlp_calib.models import KinematicModel, encoders
 from nlp_calib.models.radians import in_units
-from nlp_calib.sources.base import file_identity
+from nlp_calib.sources.base import check_block, file_identity
 from nlp_calib.sources.robot import load_robot, robot_header
 
 #: The keys a ``dataset:`` bag block must have.
@@ -152,15 +151,7 @@ class BagSource:
 
     @classmethod
     def parse(cls, raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> BagSource:
-        valid = [f.name for f in dataclasses.fields(cls)]
-        for key in raw:
-            if key not in valid:
-                fail(f"{where}.{key_name(key)}", f"unknown key; a bag block has {', '.join((*valid, *also))}")
-        missing = [k for k in REQUIRED if k not in raw]
-        if missing:
-            fail(
-                where, f"a bag block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} (docs/bags.md)"
-            )
+        check_block(cls, raw, where, "bag", REQUIRED, "docs/bags.md", also)
         source: BagSource = from_mapping(cls, raw, where)
         robot = None if source.robot is None else _resolved(source.robot, base_dir)
         return replace(source, bag=_resolved(coerce(raw["bag"], Path, f"{where}.bag"), base_dir), robot=robot)

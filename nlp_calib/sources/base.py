@@ -7,11 +7,13 @@ one module with such a class and one entry in :data:`nlp_calib.sources.SOURCES`.
 
 from __future__ import annotations
 
-from collections.abc import Hashable
+import dataclasses
+from collections.abc import Hashable, Sequence
 from pathlib import Path
 from typing import Any, ClassVar, Protocol
 
 from nlp_calib.core import files
+from nlp_calib.core.config import fail, key_name
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel
 
@@ -88,3 +90,17 @@ def file_identity(path: Path) -> Hashable:
         return path.resolve()
     except (OSError, ValueError):  # a NUL in the path: no file has it; the read says so
         return str(path)
+
+
+def check_block(
+    cls: type, raw: Any, where: str, what: str, required: Sequence[str], doc: str, also: tuple[str, ...] = ()
+) -> None:
+    """Refuse a dataset block ``raw`` (a ``what`` block, read as the dataclass ``cls``) with a key
+    ``cls`` does not have or without a ``required`` one; ``doc``: the page that describes it."""
+    valid = [f.name for f in dataclasses.fields(cls)]
+    for key in raw:
+        if key not in valid:
+            fail(f"{where}.{key_name(key)}", f"unknown key; a {what} block has {', '.join((*valid, *also))}")
+    missing = [k for k in required if k not in raw]
+    if missing:
+        fail(where, f"a {what} block needs {', '.join(required)}; missing {', '.join(missing)} ({doc})")

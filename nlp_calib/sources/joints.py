@@ -16,7 +16,6 @@ read. ``clock_offset`` (s) is added to the joints' times when the two files' clo
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import stat
 import warnings
@@ -27,7 +26,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from nlp_calib.core.config import coerce, fail, from_mapping, key_name
+from nlp_calib.core.config import coerce, from_mapping
 from nlp_calib.core.errors import ConfigError, DatasetError, NlpCalibWarning
 from nlp_calib.core.files import kind_of
 from nlp_calib.core.ranges import Range
@@ -40,7 +39,7 @@ from nlp_calib.logs.screens import MAX_SHIFT_S, quaternion_order
 from nlp_calib.logs.tum import Trajectory3D, read_tum
 from nlp_calib.models import KinematicModel, encoders
 from nlp_calib.models.radians import in_units
-from nlp_calib.sources.base import file_identity
+from nlp_calib.sources.base import check_block, file_identity
 from nlp_calib.sources.robot import load_robot, robot_header
 
 #: Joint rows further than this from the poses' span (s, on the poses' clock) cannot pair with them
@@ -221,19 +220,7 @@ class JointLogSource:
 
     @classmethod
     def parse(cls, raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> JointLogSource:
-        valid = [f.name for f in dataclasses.fields(cls)]
-        for key in raw:
-            if key not in valid:
-                fail(
-                    f"{where}.{key_name(key)}",
-                    f"unknown key; a joint-log block has {', '.join((*valid, *also))}",
-                )
-        missing = [k for k in REQUIRED if k not in raw]
-        if missing:
-            fail(
-                where,
-                f"a joint-log block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} (docs/bags.md)",
-            )
+        check_block(cls, raw, where, "joint-log", REQUIRED, "docs/bags.md", also)
         source: JointLogSource = from_mapping(cls, raw, where)
         joints, poses = (
             _resolved(coerce(raw[k], Path, f"{where}.{k}"), base_dir) for k in ("joints", "poses")

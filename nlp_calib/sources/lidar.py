@@ -16,13 +16,12 @@ the scans' stamps. The lidar's nominal mount comes from ``ROBOT.yaml``, else ``/
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
-from nlp_calib.core.config import coerce, fail, from_mapping, key_name
+from nlp_calib.core.config import coerce, from_mapping
 from nlp_calib.core.errors import ConfigError, DatasetError
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.logs.bag_files import bag_root
@@ -33,7 +32,7 @@ from nlp_calib.logs.scans import ScanMatching, match_scans, read_scans
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.radians import in_units
 from nlp_calib.sources.bag import STAMPS, check_joints
-from nlp_calib.sources.base import file_identity
+from nlp_calib.sources.base import check_block, file_identity
 from nlp_calib.sources.robot import load_robot, robot_header
 
 #: The keys a lidar block must have.
@@ -133,18 +132,7 @@ class LidarSource:
 
     @classmethod
     def parse(cls, raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> LidarSource:
-        valid = [f.name for f in dataclasses.fields(cls)]
-        for key in raw:
-            if key not in valid:
-                fail(
-                    f"{where}.{key_name(key)}", f"unknown key; a lidar block has {', '.join((*valid, *also))}"
-                )
-        missing = [k for k in REQUIRED if k not in raw]
-        if missing:
-            fail(
-                where,
-                f"a lidar block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} (docs/lidar.md)",
-            )
+        check_block(cls, raw, where, "lidar", REQUIRED, "docs/lidar.md", also)
         source: LidarSource = from_mapping(cls, raw, where)
         bag = coerce(raw["bag"], Path, f"{where}.bag")
         robot = source.robot

@@ -14,20 +14,19 @@ increments themselves, whatever ``residual.horizon`` says.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
-from nlp_calib.core.config import coerce, fail, from_mapping, key_name
+from nlp_calib.core.config import coerce, from_mapping
 from nlp_calib.core.errors import ConfigError, DatasetError
 from nlp_calib.logs import Log
 from nlp_calib.logs.bag_reader import DEFAULT_MAX_GAP_S, MAX_GAP
 from nlp_calib.logs.motions import read_motions, timed_by_motions
 from nlp_calib.models import KinematicModel, encoders
 from nlp_calib.models.radians import in_units
-from nlp_calib.sources.base import file_identity
+from nlp_calib.sources.base import check_block, file_identity
 from nlp_calib.sources.joints import Wheels
 from nlp_calib.sources.robot import load_robot, robot_header
 
@@ -119,20 +118,7 @@ class MotionsSource:
 
     @classmethod
     def parse(cls, raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> MotionsSource:
-        valid = [f.name for f in dataclasses.fields(cls)]
-        for key in raw:
-            if key not in valid:
-                fail(
-                    f"{where}.{key_name(key)}",
-                    f"unknown key; a motions block has {', '.join((*valid, *also))}",
-                )
-        missing = [k for k in REQUIRED if k not in raw]
-        if missing:
-            fail(
-                where,
-                f"a motions block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} "
-                "(docs/motions.md)",
-            )
+        check_block(cls, raw, where, "motions", REQUIRED, "docs/motions.md", also)
         source: MotionsSource = from_mapping(cls, raw, where)
         joints, motions = (
             _resolved(coerce(raw[k], Path, f"{where}.{k}"), base_dir) for k in ("joints", "motions")

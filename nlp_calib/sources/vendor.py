@@ -17,7 +17,6 @@ reference is read as a joint log's (``poses``) or a motions file's (``motions``)
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -25,7 +24,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from nlp_calib.core.config import coerce, fail, from_mapping, key_name
+from nlp_calib.core.config import coerce, from_mapping
 from nlp_calib.core.errors import ConfigError, ModelError
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.logs.bag_joints import timed_by_tracker
@@ -44,7 +43,7 @@ from nlp_calib.logs.vendor import read_odometry
 from nlp_calib.models import KinematicModel, OdometryInverse, encoders
 from nlp_calib.models.base import reference
 from nlp_calib.models.radians import in_units
-from nlp_calib.sources.base import file_identity
+from nlp_calib.sources.base import check_block, file_identity
 from nlp_calib.sources.robot import RobotDescription, robot_header
 
 #: The keys a vendor block must have (and one reference: poses or motions).
@@ -154,20 +153,7 @@ class VendorSource:
 
     @classmethod
     def parse(cls, raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> VendorSource:
-        valid = [f.name for f in dataclasses.fields(cls)]
-        for key in raw:
-            if key not in valid:
-                fail(
-                    f"{where}.{key_name(key)}",
-                    f"unknown key; a vendor odometry block has {', '.join((*valid, *also))}",
-                )
-        missing = [k for k in REQUIRED if k not in raw]
-        if missing:
-            fail(
-                where,
-                f"a vendor odometry block needs {', '.join(REQUIRED)}; missing {', '.join(missing)} "
-                "(docs/vendor.md)",
-            )
+        check_block(cls, raw, where, "vendor odometry", REQUIRED, "docs/vendor.md", also)
         source: VendorSource = from_mapping(cls, raw, where)
         odometry, poses, motions = (
             None if raw.get(k) is None else _resolved(coerce(raw[k], Path, f"{where}.{k}"), base_dir)
