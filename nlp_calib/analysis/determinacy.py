@@ -28,9 +28,9 @@ from nlp_calib.analysis.uncertainty import white_covariance
 from nlp_calib.logs import Log
 from nlp_calib.models import reference_scales
 from nlp_calib.models.base import reference_scale
-from nlp_calib.models.clock import is_lag
 from nlp_calib.problem import ProblemFunctions, ResidualData, over_columns
 from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
+from nlp_calib.results.layout import CLOCK
 from nlp_calib.results.preflight import DETERMINED, NOT_DETERMINED, WEAKLY, Excitation, ParameterStatus
 from nlp_calib.symbolic.kernels import kernel_function
 
@@ -132,7 +132,7 @@ def step(fns: ProblemFunctions, info: Information, x: np.ndarray) -> np.ndarray:
     determine; the others (:func:`~nlp_calib.analysis.degeneracy.free_directions`) are left where
     they are: a start is brought to the data, where a drive's free directions are what a fit would
     find (away from the data, a free direction can lean into parameters the drive determines)."""
-    R = reference_scales(fns.model, fns.free, np.asarray(x, dtype=float))
+    R = reference_scales(fns.model, fns.layout.keys(fns.free), np.asarray(x, dtype=float))
     lam, V = np.linalg.eigh(0.5 * (info.H + info.H.T) * np.outer(R, R))
     keep = ~free_directions(lam, info.n_windows, info.motion2) & (lam > 0)
     return np.asarray(-R * ((V[:, keep] / lam[keep]) @ (V[:, keep].T @ (R * info.g))))
@@ -190,7 +190,7 @@ def standing(
     """Each free parameter's standing on the windows whose information is ``info``, at the free
     parameters' ``values``, for residuals of variance ``sigma2`` (see the module docstring)."""
     names = fns.free
-    R = reference_scales(fns.model, names, values)
+    R = reference_scales(fns.model, fns.layout.keys(names), values)
     found = directions(info.H, sigma2, R, info.n_windows, info.motion2)
 
     def free(lam: np.ndarray) -> np.ndarray:
@@ -225,8 +225,8 @@ def _cause(fns: ProblemFunctions, name: str, partners: Sequence[str], ex: Excita
     """What about the drive leaves ``name`` loose, where the excitation shows it ("" when nothing
     simple does)."""
     model = fns.model
-    if is_lag(name):
-        moved = ", ".join(p for p in partners if not is_lag(p)) or "the other parameters"
+    if fns.layout.in_block(name, CLOCK):
+        moved = ", ".join(p for p in partners if not fns.layout.in_block(p, CLOCK)) or "the other parameters"
         return f"a time shift of the encoders looks like a change of {moved} on this drive"
     turning = (*model.turning_params, *fns.sensor.turning)
     if ex is None or name not in turning:
@@ -254,7 +254,8 @@ def statuses(
     free ones in model order."""
     out = [
         ParameterStatus(
-            name, NOT_DETERMINED, np.inf, np.inf, reference_scale(fns.model, name, 1.0), units.get(name, ""),
+            name, NOT_DETERMINED, np.inf, np.inf, reference_scale(fns.model, fns.layout.key(name), 1.0),
+            units.get(name, ""),
             (), f"it is held at its initial value: {why}", held=True,
         )
         for name, why in held.items()

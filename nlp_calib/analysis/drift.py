@@ -23,7 +23,7 @@ import numpy as np
 
 from nlp_calib.models import SENSOR_PARAMS, KinematicModel
 from nlp_calib.models.base import reference, reference_scale
-from nlp_calib.results import CalibrationRun
+from nlp_calib.results import CalibrationRun, ScenarioInfo
 from nlp_calib.results.check import CANNOT_TELL, DRIFTED, STILL_GOOD, DriftCheck, ParameterChange
 from nlp_calib.results.checks import WEAK
 
@@ -121,7 +121,7 @@ def untested(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[st
     for name, sd in run.std(solver).items():
         if name not in run.reports[solver].uncertainty.free or name in out:
             continue
-        ref = reference_scale(model, name, params[name])
+        ref = reference_scale(model, run.scenario.layout.key(name), params[name])
         if not np.isfinite(sd):
             out[name] = f"{name} is not determined by this drive"
         elif sd > WEAK * ref:
@@ -144,7 +144,7 @@ def drive_more(run: CalibrationRun, model: KinematicModel, names: Sequence[str])
 def changes(
     stored: tuple[Mapping[str, float], Mapping[str, float], Mapping[str, float]],
     refit: tuple[Mapping[str, float], Mapping[str, float], Mapping[str, float]],
-    units: Mapping[str, str],
+    info: ScenarioInfo,
     model: KinematicModel,
     skipped: Mapping[str, str],
 ) -> tuple[ParameterChange, ...]:
@@ -164,11 +164,11 @@ def changes(
         why = skipped.get(name, "" if name in tested else f"{name} has no σ to judge a change by")
         z = delta / sigma if sigma > 0 and math.isfinite(sigma) else math.nan
         threshold = math.nan if math.isnan(nu) else t_quantile(level, nu)
-        relative = reference(model, name)[0] == "relative"
+        relative = reference(model, info.layout.key(name))[0] == "relative"
         out.append(
             ParameterChange(
                 name,
-                units[name],
+                info.units[name],
                 stored[0][name],
                 stored[0][name] + delta,
                 stored[1][name],
@@ -224,9 +224,12 @@ def check_drift(
     free = run.reports[solver].uncertainty.free
     skipped = untested(run, solver, model)
     held = [n for n in result.names if n not in free and n not in skipped]  # fixed by the scenario
-    values = {n: v for n, v in result.param_dict().items() if n not in held}
+    # A recording's own parameters (its clock offset) are refitted, not judged: a new log may
+    # have another. What the stored calibration does not hold cannot have drifted from it.
+    robot = set(run.scenario.layout.robot()) & set(stored[0])
+    values = {n: v for n, v in result.param_dict().items() if n not in held and n in robot}
     refit = (values, run.std(solver), run_dof(run, solver))
-    found = changes(stored, refit, run.scenario.units, model, skipped)
+    found = changes(stored, refit, run.scenario, model, skipped)
     hint = drive_more(run, model, [c.name for c in found if c.untested])
     verdict, reasons, hint = decide(found, "" if result.converged else result.reason, hint)
     return DriftCheck(calibration, solver, found, FALSE_ALARM, verdict, reasons, hint)

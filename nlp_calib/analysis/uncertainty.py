@@ -41,9 +41,9 @@ import numpy as np
 
 from nlp_calib.analysis.degeneracy import free_directions, motion_scale
 from nlp_calib.models import reference_scales
-from nlp_calib.models.clock import is_lag
 from nlp_calib.problem import ProblemFunctions, ResidualData
 from nlp_calib.results.checks import LAG_EFFECT_CORRELATION, LagEffect
+from nlp_calib.results.layout import CLOCK, Layout
 from nlp_calib.results.uncertainty import Uncertainty
 from nlp_calib.solvers import ProblemEvaluator, Sensitivities
 
@@ -209,7 +209,7 @@ def _covariance(
     free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[
         [fns.names.index(f) for f in fns.free]
     ]
-    scale = reference_scales(fns.model, fns.free, free_values, fns.sensor.reference)
+    scale = reference_scales(fns.model, fns.layout.keys(fns.free), free_values, fns.sensor.reference)
     motion2 = motion_scale(fns, data.z, evaluator.omega)
 
     def free(lam: np.ndarray) -> np.ndarray:
@@ -418,10 +418,11 @@ def _packaged(fns: ProblemFunctions, cov: np.ndarray, noise: dict[str, float], d
     )
 
 
-def lag_effects(u: Uncertainty) -> tuple[LagEffect, ...]:
-    """Each free time offset's effect on the parameters correlated with it (see :class:`LagEffect`)."""
+def lag_effects(u: Uncertainty, layout: Layout) -> tuple[LagEffect, ...]:
+    """Each free time offset's (``layout``'s clock block) effect on the parameters correlated with
+    it (see :class:`LagEffect`)."""
     out = []
-    for lag in (n for n in u.free if is_lag(n)):
+    for lag in (n for n in u.free if layout.in_block(n, CLOCK)):
         i = u.free.index(lag)
         var = float(u.covariance[i, i])
         if not (np.isfinite(var) and var > 0):

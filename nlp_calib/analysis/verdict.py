@@ -40,9 +40,9 @@ import numpy as np
 from nlp_calib.analysis.consistency import determined
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.base import reference_scale
-from nlp_calib.models.clock import is_lag
 from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, ConsistencyCheck
+from nlp_calib.results.layout import CLOCK, Layout
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
 from nlp_calib.sensors import Sensor, sensor_for
 
@@ -64,10 +64,11 @@ def _loose(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]
     sd = np.array([std[n] for n in names])
     values = np.array([rep.result.param_dict()[n] for n in names])
     sensor = _sensor(run)
-    known = determined(model, names, values, sd, sensor.reference)
-    for name, s, v, ok in zip(names, sd, values, known):
+    keys = run.scenario.layout.keys(names)
+    known = determined(model, keys, values, sd, sensor.reference)
+    for name, key, s, v, ok in zip(names, keys, sd, values, known):
         if np.isfinite(s) and not ok:
-            ref = reference_scale(model, name, v, sensor.reference)
+            ref = reference_scale(model, key, v, sensor.reference)
             unit = run.scenario.units[name]
             out.append(f"{name} is known only to ±{s:.2g} {unit} (over {WEAK:g}× the {ref:.2g} needed)")
     return out
@@ -196,13 +197,16 @@ def _undetermined(run: CalibrationRun, model: KinematicModel, hint: str) -> Verd
     if solver is None:
         failures = dict.fromkeys(run.reports[s].result.reason for s in run.solver_order())
         out = (*unfitted, *loose, *(f"no solver converged: {r}" for r in failures))
-        return Verdict(UNDETERMINED, (*out, way_out(group, model)) if loose else out)
+        return Verdict(UNDETERMINED, (*out, way_out(group, model, run.scenario.layout)) if loose else out)
     if bounded := _trade_off(run, solver):
-        return Verdict(UNDETERMINED, (bounded, way_out(run.reports[solver].uncertainty.bounded, model)))
+        return Verdict(
+            UNDETERMINED,
+            (bounded, way_out(run.reports[solver].uncertainty.bounded, model, run.scenario.layout)),
+        )
     missing = [n for n, sd in run.std(solver).items() if not np.isfinite(sd)]
     if missing or loose:
         why = loose or [f"{', '.join(missing)} not determined by this drive"]
-        return Verdict(UNDETERMINED, (*why, way_out([*missing, *group], model)))
+        return Verdict(UNDETERMINED, (*why, way_out([*missing, *group], model, run.scenario.layout)))
     return None
 
 
@@ -220,10 +224,11 @@ def _trade_off(run: CalibrationRun, solver: str) -> str:
     )
 
 
-def way_out(names: Sequence[str], model: KinematicModel) -> str:
-    """What lets a drive determine the parameters ``names`` that trade off on this one, in words."""
+def way_out(names: Sequence[str], model: KinematicModel, layout: Layout) -> str:
+    """What lets a drive determine the parameters ``names`` (of ``layout``) that trade off on this
+    one, in words."""
     names = list(dict.fromkeys(names))
-    if any(is_lag(n) for n in names):
+    if any(layout.in_block(n, CLOCK) for n in names):
         return (
             "next: give the lag (alignment.tracker_lag: <seconds>, from how the clocks are synchronised), "
             "or record a drive whose wheel speeds change independently of each other (starts and stops, "

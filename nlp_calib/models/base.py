@@ -19,7 +19,7 @@ import numpy as np
 
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log, LogHeader
-from nlp_calib.models.clock import LAG_REFERENCE, base_name
+from nlp_calib.models.clock import LAG_REFERENCE
 from nlp_calib.models.controllers import ControllerMap, EncoderScales
 
 if TYPE_CHECKING:
@@ -284,11 +284,12 @@ def header_parameters(model: KinematicModel, header: LogHeader) -> dict[str, flo
 
 
 def reference(model: KinematicModel, name: str, sensor: Mapping[str, Reference] | None = None) -> Reference:
-    """The precision a calibration should reach on parameter ``name``: ``relative`` (a fraction of
+    """The precision a calibration should reach on parameter ``name`` (its key: a per-log
+    parameter's is its layout's, :meth:`~nlp_calib.results.layout.Layout.key`): ``relative`` (a fraction of
     its value: gains and lengths) or ``absolute`` (in its unit); ``sensor``: the sensor's own
     (its mount's; a planar mount's by default)."""
     known = {**model.reference, **(SENSOR_REFERENCE if sensor is None else sensor), **LAG_REFERENCE}
-    return known.get(base_name(name), ("relative", 0.01))
+    return known.get(name, ("relative", 0.01))
 
 
 def reference_scale(

@@ -2,14 +2,15 @@
 
 The reference (a tracker, a camera) reports a pose ``tracker_lag`` seconds after the encoders read
 the robot there: the encoders are read at ``t − tracker_lag`` for a reference stamp ``t``. It is a
-parameter of the problem like any other (:mod:`nlp_calib.problem.clock`), one per log; a fit of
-one log calls it ``tracker_lag``, a fit of several ``tracker_lag_1``, ``tracker_lag_2``, … in the
+parameter of the problem like any other (:mod:`nlp_calib.problem.clock`), one per log: the
+``clock`` block of a calibration's layout (:mod:`nlp_calib.results.layout`), whose names a fit of
+one log calls ``tracker_lag`` and a fit of several ``tracker_lag_1``, ``tracker_lag_2``, … in the
 order of the logs.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Literal
 
@@ -19,39 +20,3 @@ LAG_UNIT = "s"
 LAG_REFERENCE: Mapping[str, tuple[Literal["relative", "absolute"], float]] = MappingProxyType(
     {LAG_PARAM: ("absolute", 0.002)}
 )
-
-
-def lag_names(n_logs: int) -> tuple[str, ...]:
-    """The time offsets' parameter names of a fit of ``n_logs`` logs (none when 0)."""
-    if n_logs <= 1:
-        return (LAG_PARAM,) * n_logs
-    return tuple(f"{LAG_PARAM}_{i + 1}" for i in range(n_logs))
-
-
-def is_lag(name: str) -> bool:
-    """Whether ``name`` is a time offset's parameter."""
-    return name == LAG_PARAM or (name.startswith(LAG_PARAM + "_") and name[len(LAG_PARAM) + 1 :].isdigit())
-
-
-def per_log(names: Sequence[str], n_logs: int) -> tuple[str, ...]:
-    """``names`` of parameters each log of a fit of ``n_logs`` has its own of (a mount per log),
-    log after log, each with its log's number (``sensor_x_2``); for one log, the names themselves."""
-    if n_logs <= 1:
-        return tuple(names)
-    return tuple(f"{n}_{i + 1}" for i in range(n_logs) for n in names)
-
-
-def base_name(name: str) -> str:
-    """The name a scenario's keys give a per-log parameter (``tracker_lag_2`` → ``tracker_lag``,
-    ``sensor_x_2`` → ``sensor_x``): per-log parameters end in ``_<log number>``, and no other
-    parameter does."""
-    if is_lag(name):
-        return LAG_PARAM
-    stem, sep, number = name.rpartition("_")
-    return stem if sep and stem and number.isdigit() else name
-
-
-def log_of(name: str) -> int | None:
-    """The log (counted from 0) a per-log parameter belongs to (None: one shared by every log)."""
-    stem, sep, number = name.rpartition("_")
-    return int(number) - 1 if sep and stem and number.isdigit() else None

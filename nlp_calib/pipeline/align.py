@@ -17,12 +17,12 @@ import numpy as np
 
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log, resample_encoders
-from nlp_calib.models.clock import is_lag
 from nlp_calib.pipeline.build import Binder
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.prepare import split
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.results.checks import LagEstimate
+from nlp_calib.results.layout import CLOCK
 from nlp_calib.solvers import ProblemEvaluator
 
 #: The re-sampling is done again until the fitted lag moves by less than this (s).
@@ -48,7 +48,7 @@ class Alignment:
 
 def lag_column(binder: Binder) -> int | None:
     """The place of the (single log's) lag among the free parameters; None when it is not free."""
-    return next((i for i, n in enumerate(binder.fns.free) if is_lag(n)), None)
+    return next((i for i, n in enumerate(binder.fns.free) if binder.fns.layout.in_block(n, CLOCK)), None)
 
 
 def fit_records(sc: Scenario, log: Log, start: int, stop: int) -> tuple[int, int]:
@@ -155,7 +155,7 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
             warnings.warn(lag_at_edge(sc, estimate.lag_s), NlpCalibWarning, stacklevel=2)
     elif lag == "auto":
         # Held (known, or fixed at its initial value): the data are re-sampled there.
-        held = [i for i, n in enumerate(binder.fns.fixed) if is_lag(n)]
+        held = [i for i, n in enumerate(binder.fns.fixed) if binder.fns.layout.in_block(n, CLOCK)]
         lag = float(binder.x_fixed[held[0]]) if held else 0.0
     with scenario_key(sc, "alignment.tracker_lag"):
         aligned, valid = resample_encoders(log, float(lag), binder.fns.model.encoder_kinds)

@@ -28,7 +28,6 @@ from nlp_calib.analysis.plan import Setting, plan
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
 from nlp_calib.core import memory
 from nlp_calib.models import header_parameters
-from nlp_calib.models.clock import lag_names
 from nlp_calib.pipeline import validation
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog
@@ -187,7 +186,7 @@ def analyse_fit(
     finite = [r for r in results.values() if np.isfinite(r.cost)] or list(results.values())
     observability = observability_of(ev, finite[0].x, data.T_world_sensor)
     converged = [r for r in results.values() if r.converged]
-    effects = unc.lag_effects(uncertainty[next(iter(results))]) if results else ()
+    effects = unc.lag_effects(uncertainty[next(iter(results))], fit.fns.layout) if results else ()
     if not converged:
         return FitAnalysis(uncertainty, observability, None, None, lag_effects=effects)
     x = converged[0].x
@@ -276,9 +275,7 @@ def logs_crossval(
     start = (result.x, fit.canonical_params(result.params))
     # A fold without a log knows nothing of that log's time offset (nor of its own mount, with a
     # mount per log): held where the joint fit put them.
-    lags = lag_names(len(ranges))
-    own = [fit.fns.mount_names(i) if fit.fns.spec.mounts > 1 else () for i in range(len(ranges))]
-    held = [[lags[i], *own[i]] for i in range(len(ranges))]
+    held = [list(fit.fns.layout.owned(i)) for i in range(len(ranges))]
     folds = validation.folds_over(
         fit.problem.binder, fit.data, span, ranges, start, fit.canonical_params, blocks, held=held
     )

@@ -14,8 +14,6 @@ from pathlib import Path
 from nlp_calib.analysis.handoff import controller_params
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.logs import LogHeader
-from nlp_calib.models import KinematicModel
-from nlp_calib.models.clock import LAG_UNIT, lag_names
 from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis, Scores
@@ -40,29 +38,26 @@ from nlp_calib.results import (
 )
 from nlp_calib.results.checks import NominalCheck, believed_std
 from nlp_calib.results.faults import FaultReport, Findings
+from nlp_calib.results.layout import MODEL, MOUNT, Layout
 from nlp_calib.results.mount import LogMount, SensorMount
 from nlp_calib.sensors import Sensor
 from nlp_calib.solvers import solver_label
 from nlp_calib.sources import BagSource
 
 
-def scenario_info(
-    sc: Scenario, model: KinematicModel, lags: Sequence[str] = (), mounts: int = 1
-) -> ScenarioInfo:
-    """What the outputs say about ``sc`` (fitted with the time offsets ``lags``, and ``mounts``
-    mounts: one per log, or one)."""
+def scenario_info(sc: Scenario, layout: Layout) -> ScenarioInfo:
+    """What the outputs say about ``sc`` fitted with the parameters ``layout``."""
     joint = sc.data.joint
-    sensor = sc.objective.sensor.sensor
-    own = (
-        {f"{n}_{i + 1}": sensor.units[n] for i in range(mounts) for n in sensor.params} if mounts > 1 else {}
-    )
+    # The sensor's own keys beside each log's own mount's names (what one log's view calls them).
+    keys = {p.key: p.unit for p in layout.parameters if p.block == MOUNT}
+    units = layout.units
     return ScenarioInfo(
         name=sc.name,
         path=None if sc.path is None else str(Path(sc.path).absolute()),
         model=sc.model,
-        units={**_units(sc, model), **own, **dict.fromkeys(lags, LAG_UNIT)},
+        units={**{n: units[n] for n in layout.block(MODEL)}, **keys, **units},
+        layout=layout,
         sensor=sensor_info(sc),
-        headline=tuple(model.headline),
         dataset=str(sc.dataset),
         datasets=tuple(str(e.path) for e in sc.data.logs) if joint else (),
         labels={name: solver_label(name) for name in sc.solvers},
@@ -76,13 +71,7 @@ def scenario_info(
 
 def fit_info(sc: Scenario, fns: ProblemFunctions) -> ScenarioInfo:
     """:func:`scenario_info` of ``sc`` as the problem ``fns`` fits it (its time offsets and mounts)."""
-    return scenario_info(sc, fns.model, lag_names(fns.spec.lags), fns.spec.mounts)
-
-
-def _units(sc: Scenario, model: KinematicModel) -> dict[str, str]:
-    """Every parameter's unit: the model's, then its sensor's mount's."""
-    kinematic = {n: model.units[n] for n in model.kinematic_params}
-    return {**kinematic, **sc.objective.sensor.sensor.units}
+    return scenario_info(sc, fns.layout)
 
 
 def sensor_info(sc: Scenario) -> SensorInfo:

@@ -16,7 +16,7 @@ from nlp_calib.analysis import uncertainty
 from nlp_calib.core.errors import ScenarioError
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, header_parameters
-from nlp_calib.models.clock import LAG_PARAM, base_name, is_lag, lag_names, per_log
+from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import (
@@ -27,8 +27,10 @@ from nlp_calib.problem import (
     build_residual_data,
     interval_inputs,
 )
+from nlp_calib.problem.functions import problem_layout
 from nlp_calib.problem.start import closed_form_start, fit_windows
-from nlp_calib.sensors import SensorStart
+from nlp_calib.results.layout import CLOCK, own_name
+from nlp_calib.sensors import SensorStart, sensor_for
 from nlp_calib.solvers import Priors, ProblemEvaluator, get_solver
 from nlp_calib.solvers.backends import Backend, BackendOptions, make_backend
 from nlp_calib.solvers.evaluation import requests
@@ -48,41 +50,27 @@ def mount_count(sc: Scenario, n_logs: int) -> int:
     return n_logs if sc.objective.sensor.mounts == "per_log" and n_logs > 1 else 1
 
 
-def per_log_names(
-    names: Sequence[str], n_logs: int, mounts: Sequence[str] = (), n_mounts: int = 1
-) -> tuple[str, ...]:
-    """Scenario names with ``tracker_lag`` replaced by each log's own (several logs), and each of
-    ``mounts`` (the sensor's parameters) by each log's own when there is a mount per log."""
-    lags = lag_names(n_logs)
-
-    def each(n: str) -> tuple[str, ...]:
-        if n == LAG_PARAM:
-            return lags
-        return per_log((n,), n_mounts) if n in mounts else (n,)
-
-    return tuple(dict.fromkeys(m for n in names for m in each(n)))
-
-
 def build_problem(
     sc: Scenario, model: KinematicModel, also_fixed: tuple[str, ...] = (), n_logs: int = 1
 ) -> ProblemFunctions:
     """The problem's Functions for the scenario's residual form, kernel and fixed parameters, with a
     time offset per log (``n_logs``) when the lag is estimated, and a mount per log when asked."""
     residual, sensor = sc.objective.residual, sc.objective.sensor
-    lags, mounts = lag_count(sc, n_logs), mount_count(sc, n_logs)
-    fixed = per_log_names((*sc.parameters.fixed, *also_fixed), lags, sensor.params(), mounts)
     spec = ProblemSpec(
         horizon=residual.horizon,
         integration=residual.integration,
         kernel=sc.objective.robust.kernel,
-        fixed=fixed,
         sensor=sensor.mount,
         scale=sensor.scale,
-        lags=lags,
-        mounts=mounts,
+        lags=lag_count(sc, n_logs),
+        mounts=mount_count(sc, n_logs),
     )
+    # A scenario names a parameter by its key: fixing it fixes every log's own.
+    layout = problem_layout(model, sensor_for(spec.sensor, spec.scale), spec)
+    # (A lag held outside the problem, re-sampled at, is no parameter of it.)
+    fixed = layout.named(k for k in (*sc.parameters.fixed, *also_fixed) if k != LAG_PARAM or spec.lags)
     with scenario_key(sc, "residual"):
-        return build(model, spec)
+        return build(model, replace(spec, fixed=fixed))
 
 
 def lag_start(sc: Scenario, n_logs: int, given: Sequence[float] = ()) -> dict[str, float]:
@@ -92,7 +80,7 @@ def lag_start(sc: Scenario, n_logs: int, given: Sequence[float] = ()) -> dict[st
     value = p.known.get(
         LAG_PARAM, p.initial_guess.get(LAG_PARAM, 0.0) if isinstance(p.initial_guess, Mapping) else 0.0
     )
-    names = lag_names(lag_count(sc, n_logs))
+    names = [own_name(LAG_PARAM, i, n_logs) for i in range(lag_count(sc, n_logs))]
     lo, hi = sc.log.alignment.search
     # A start outside the search (0 when the search is all one side of it) starts at its middle.
     start = float(value) if lo <= value <= hi else 0.5 * (lo + hi)
@@ -183,16 +171,17 @@ def auto_start(
         return closed_form_start(fns, data, known, sc.objective.residual.stride)
 
 
-def _key(name: str, given: Mapping[str, object]) -> str:
-    """The scenario's key for parameter ``name`` in ``given``: its own, else its per-log stem."""
-    return name if name in given else base_name(name)
+def _key(fns: ProblemFunctions, name: str, given: Mapping[str, object]) -> str:
+    """The scenario's key for parameter ``name`` in ``given``: its own, else its key in the layout."""
+    return name if name in given else fns.layout.key(name)
 
 
 def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The scenario's bounds; a time offset's, unless given, ``alignment.search``."""
     bounds = {LAG_PARAM: sc.log.alignment.search, **sc.parameters.bounds}
-    lower = np.array([bounds[_key(n, bounds)][0] if _key(n, bounds) in bounds else -np.inf for n in fns.free])
-    upper = np.array([bounds[_key(n, bounds)][1] if _key(n, bounds) in bounds else np.inf for n in fns.free])
+    keys = [_key(fns, n, bounds) for n in fns.free]
+    lower = np.array([bounds[k][0] if k in bounds else -np.inf for k in keys])
+    upper = np.array([bounds[k][1] if k in bounds else np.inf for k in keys])
     for name, lo, hi, x in zip(fns.free, lower, upper, x0):
         if not lo <= x <= hi:
             origin = (
@@ -243,7 +232,7 @@ def starting_point(
     if sensor is None:
         sensor = fns.sensor.given(initial)
     x0 = np.array([initial[n] for n in fns.free])
-    bounded = sc.parameters.bounds or any(base_name(n) == LAG_PARAM for n in fns.free)
+    bounded = sc.parameters.bounds or any(fns.layout.in_block(n, CLOCK) for n in fns.free)
     lower, upper = _bounds(sc, fns, x0) if bounded else (None, None)
     x_fixed = np.array([initial[n] for n in fns.fixed])
     return StartingPoint(initial, auto, sensor, x0, x_fixed, lower, upper, nominal, source)
@@ -363,7 +352,7 @@ class Binder:
     def lag_held(self, x0: np.ndarray) -> Binder:
         """This binder with the time offsets held at their values in ``x0`` (fits on the records as
         logged, whose clock correction the screen does not apply)."""
-        lags = [i for i, n in enumerate(self.fns.free) if is_lag(n)]
+        lags = [i for i, n in enumerate(self.fns.free) if self.fns.layout.in_block(n, CLOCK)]
         if not lags:
             return self
         n = self.fns.n_free
@@ -405,10 +394,9 @@ def weigh_priors(
     _, x, _ = binder.fit(ev, x0)
     _, s, weight = ev.robust_terms(x)
     sigma = float(np.sqrt(float(np.sum(weight * s)) / max(fns.error_rows * ev.n_residuals - fns.n_free, 1)))
-    mean = np.array([priors[_key(n, priors)].mean if _key(n, priors) in priors else 0.0 for n in fns.free])
-    sqrt_info = np.array(
-        [sigma / priors[_key(n, priors)].std if _key(n, priors) in priors else 0.0 for n in fns.free]
-    )
+    keys = [_key(fns, n, priors) for n in fns.free]
+    mean = np.array([priors[k].mean if k in priors else 0.0 for k in keys])
+    sqrt_info = np.array([sigma / priors[k].std if k in priors else 0.0 for k in keys])
     return Priors(mean=mean, sqrt_info=sqrt_info), sigma
 
 
@@ -462,7 +450,7 @@ def at_lags(problem: Problem, lags: Sequence[float]) -> Problem:
     """``problem`` starting at the time offsets ``lags`` (one per log; the data's own once they are
     re-sampled there, so the problem's clock correction starts at zero)."""
     fns, start = problem.fns, problem.start
-    given = dict(zip(lag_names(fns.spec.lags), lags))
+    given = dict(zip(fns.layout.block(CLOCK), lags))
     if not any(n in given for n in fns.free):
         return problem
     initial = {**start.initial, **given}

@@ -24,7 +24,6 @@ from nlp_calib.analysis.consistency import compare_logs, determined
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, reference_scales
-from nlp_calib.models.clock import LAG_PARAM, base_name, is_lag, lag_names, log_of
 from nlp_calib.pipeline.align import Alignment, align
 from nlp_calib.pipeline.analyse import (
     FitAnalysis,
@@ -48,7 +47,7 @@ from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.screen import Screening, exclude_faults, median_interval, screen
 from nlp_calib.pipeline.windows import LogWindows, bind_windows
 from nlp_calib.problem import ProblemFunctions, ResidualData, joined
-from nlp_calib.results import CalibrationRun, JointRun, SolverResult
+from nlp_calib.results import CalibrationRun, JointRun, ScenarioInfo, SolverResult
 from nlp_calib.results.checks import WEAK, ConsistencyCheck, CrossValidation
 from nlp_calib.results.faults import Findings
 from nlp_calib.sensors import sensor_for
@@ -312,8 +311,7 @@ class JointCalibration:
         scorer = blocks_scorer(fitting.fns, self.parts, fitting.data)
         logs = logs_crossval(fitting, results, scorer, log_ranges(self.parts))
         own = [_own_run(p, names) for p in self.parts]
-        units = fit_info(self.scenario, self.fns).units
-        check = consistency(results, own, logs, (self.model, units))
+        check = consistency(results, own, logs, (self.model, fit_info(self.scenario, self.fns)))
         if check is not None and (check.significant or check.limits()):
             notes.append(check.words())
         fitted = dataclasses.replace(fitted, consistency=check, logs=logs)
@@ -370,31 +368,22 @@ def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
     )[2][0]
 
 
-def own_name(name: str, log: int, n_logs: int) -> str:
-    """A joint fit's parameter ``name`` as log ``log``'s own fit calls it ("" when it has none): its
-    own lag and its own mount (with a mount per log) under their plain names."""
-    if is_lag(name):
-        return LAG_PARAM if name == lag_names(n_logs)[log] else ""
-    owner = log_of(name)
-    if owner is None:
-        return name
-    return base_name(name) if owner == log else ""
-
-
 def consistency(
     results: Mapping[str, SolverResult],
     own: Sequence[CalibrationRun],
     logs: CrossValidation | None,
-    model: tuple[KinematicModel, Mapping[str, str]],
+    model: tuple[KinematicModel, ScenarioInfo],
 ) -> ConsistencyCheck | None:
     """Each log's own fit (``own``, in the joint fit's order of logs) against the other logs' (the
     folds of ``logs``), for the first solver that converged in the joint fit, on what each log
-    determines on its own; ``model``: the model and every parameter's unit."""
+    determines on its own; ``model``: the model and what the outputs say of the fit (its units and
+    parameter layout)."""
     solver = next((name for name, r in results.items() if r.converged), None)
     if solver is None or logs is None:
         return None
     result = results[solver]
     names = result.names
+    kind, info = model
     nan = np.full(len(names), np.nan)
     estimates, stds = [], []
     for i, run in enumerate(own):
@@ -404,19 +393,19 @@ def consistency(
             stds.append(nan)
             continue
         # Each log's own lag is the joint fit's lag of that log; the other logs' lags it has not.
-        own_names = [own_name(n, i, len(own)) for n in names]
+        own_names = [info.layout.own(n, i) for n in names]
         values, sd = mine.result.param_dict(), run.std(solver)
         estimates.append(np.array([values.get(n, np.nan) for n in own_names]))
         stds.append(np.array([sd.get(n, np.nan) for n in own_names]))
     est, std = np.array(estimates), np.array(stds)
     others = np.array([f.params if f.converged else nan for f in logs.folds])
-    kind, units = model
     sensor = own[0].scenario.sensor
     reference = sensor_for(sensor.kind, sensor.scale).reference
-    known = np.array([determined(kind, names, e, sd, reference) for e, sd in zip(est, std)])
-    apart = WEAK * reference_scales(kind, names, result.params, reference)
+    keys = info.layout.keys(names)
+    known = np.array([determined(kind, keys, e, sd, reference) for e, sd in zip(est, std)])
+    apart = WEAK * reference_scales(kind, keys, result.params, reference)
     paths = [run.log.path for run in own]
-    unit = tuple(units.get(n, "") for n in names)
+    unit = tuple(info.units.get(n, "") for n in names)
     return compare_logs(names, paths, result.params, (est, std), others, known, apart, unit)
 
 

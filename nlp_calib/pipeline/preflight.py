@@ -267,7 +267,7 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
         start=a.where,
         noise=a.noise,
         plan=ahead,
-        way_out=way_out(loose, fns.model) if loose else "",
+        way_out=way_out(loose, fns.model, fns.layout) if loose else "",
         time_s=time.perf_counter() - t0,
     )
 

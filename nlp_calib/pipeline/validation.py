@@ -242,7 +242,7 @@ def direction_check(
         estimates.append(canonical(params))
         sigmas.append(jackknife_std(np.array(folds)) if len(folds) >= 3 else np.full(len(fns.names), np.nan))
         windows.append(n)
-    apart = WEAK * reference_scales(fns.model, fns.names, estimates[0])
+    apart = WEAK * reference_scales(fns.model, fns.layout.keys(fns.names), estimates[0])
     return compare(
         fns.names, estimates[0], estimates[1], (windows[0], windows[1]), sigmas[0], sigmas[1], held, apart
     )

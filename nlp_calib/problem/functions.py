@@ -32,10 +32,11 @@ import numpy as np
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.core.ranges import Range, check_choice, check_range
 from nlp_calib.models.base import INTEGRATIONS, KinematicModel
-from nlp_calib.models.clock import base_name, lag_names, per_log
+from nlp_calib.models.clock import LAG_PARAM, LAG_UNIT
 from nlp_calib.problem import clock
 from nlp_calib.problem import motion as motion_sources
 from nlp_calib.problem.trajectory import TrajectoryFunctions, base_motion, fn, split_params
+from nlp_calib.results.layout import CLOCK, HELD, KNOWN, MODEL, MOUNT, BlockSpec, Layout
 from nlp_calib.sensors import Sensor, sensor_for
 from nlp_calib.symbolic.kernels import KERNELS, kernel_function
 
@@ -131,19 +132,21 @@ class ProblemFunctions(TrajectoryFunctions):
 
     def __init__(self, model: KinematicModel, spec: ProblemSpec) -> None:
         sensor = sensor_for(spec.sensor, spec.scale)
-        lags = lag_names(spec.lags)
-        names = (*model.kinematic_params, *per_log(sensor.params, spec.mounts), *lags)
+        layout = problem_layout(model, sensor, spec)
+        names = layout.names
         unknown = [n for n in spec.fixed if n not in names]
         if unknown:
             raise ProblemError(f"cannot fix unknown parameter(s) {unknown}; parameters are {list(names)}")
         self.spec = spec
         self.model = model
         self.names = names
+        held = {*spec.fixed, *layout.status(HELD)}
+        #: Every parameter in its block, with its log and status (see :mod:`nlp_calib.results.layout`).
+        self.layout = layout.with_status(dict.fromkeys(spec.fixed, KNOWN))
         #: One log's parameters as the full-parameter Functions take them (see :meth:`view`).
-        self.view_names = (*model.kinematic_params, *sensor.params, *lags)
+        self.view_names = (*model.kinematic_params, *sensor.params, *layout.block(CLOCK))
         self.integration = spec.integration
         self.horizon = spec.horizon
-        held = {*spec.fixed, *per_log(sensor.held, spec.mounts)}
         self.free = tuple(n for n in names if n not in held)
         self.fixed = tuple(n for n in names if n in held)
         if not self.free:
@@ -180,10 +183,7 @@ class ProblemFunctions(TrajectoryFunctions):
 
     def mount_names(self, log: int) -> tuple[str, ...]:
         """The names of log ``log``'s mount among :attr:`names` (the shared mount's, for one)."""
-        params = self.sensor.params
-        if self.spec.mounts == 1:
-            return params
-        return per_log(params, self.spec.mounts)[log * len(params) : (log + 1) * len(params)]
+        return self.layout.block(MOUNT, log)
 
     def mount_view(self, names: tuple[str, ...], log: int) -> tuple[str, ...]:
         """``names`` with log ``log``'s mount under the sensor's own names and every other mount's
@@ -191,8 +191,8 @@ class ProblemFunctions(TrajectoryFunctions):
         if self.spec.mounts == 1:
             return names
         mine = set(self.mount_names(log))
-        others = set(per_log(self.sensor.params, self.spec.mounts)) - mine
-        return tuple(base_name(n) if n in mine else f"\0{n}" if n in others else n for n in names)
+        others = set(self.layout.block(MOUNT)) - mine
+        return tuple(self.layout.key(n) if n in mine else f"\0{n}" if n in others else n for n in names)
 
     def view(self, params: np.ndarray, log: int) -> np.ndarray:
         """Log ``log``'s parameters in :attr:`view_names` order from the full vector ``params``
@@ -208,7 +208,7 @@ class ProblemFunctions(TrajectoryFunctions):
         if self.spec.mounts == 1:
             return dict(params)
         own = dict(zip(self.mount_names(log), self.sensor.params))
-        every = set(per_log(self.sensor.params, self.spec.mounts))
+        every = set(self.layout.block(MOUNT))
         return {own.get(n, n): float(v) for n, v in params.items() if n in own or n not in every}
 
     def full_dict(self, views: Sequence[Mapping[str, float]]) -> dict[str, float]:
@@ -536,3 +536,19 @@ def unpack_upper(h_upper: np.ndarray, n: int) -> np.ndarray:
     H[rows, cols] = np.ravel(h_upper)
     H[cols, rows] = np.ravel(h_upper)
     return H
+
+
+def problem_layout(model: KinematicModel, sensor: Sensor, spec: ProblemSpec) -> Layout:
+    """The parameters of ``model`` measured by ``sensor`` as ``spec`` lays them out: the model's,
+    the mount (one per log with ``spec.mounts`` > 1), then a clock offset per log (``spec.lags``);
+    the mount's parameters the sensor never determines held."""
+    blocks = [
+        BlockSpec(MODEL, tuple(model.kinematic_params), model.units),
+        BlockSpec(MOUNT, tuple(sensor.params), sensor.units, per_log=spec.mounts > 1),
+    ]
+    if spec.lags:
+        blocks.append(BlockSpec(CLOCK, (LAG_PARAM,), {LAG_PARAM: LAG_UNIT}, per_log=True))
+    layout = Layout.of(blocks, max(spec.lags, spec.mounts, 1), tuple(model.headline))
+    return layout.with_status(
+        {p.name: HELD for p in layout.parameters if p.block == MOUNT and p.key in sensor.held}
+    )

@@ -33,6 +33,7 @@ from nlp_calib.results.checks import (
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import ControllerParams
+from nlp_calib.results.layout import Layout
 from nlp_calib.results.mount import LogMount, SensorMount
 from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import OdometryTrack, RunSeries
@@ -67,7 +68,8 @@ class ScenarioInfo:
     path: str | None
     model: str
     units: Mapping[str, str]
-    headline: tuple[str, ...]
+    #: Every parameter in its block, with its log, unit and status (see :mod:`.layout`).
+    layout: Layout
     dataset: str
     datasets: tuple[str, ...]
     #: Each solver's display name, in the scenario's order of solvers.
@@ -76,6 +78,11 @@ class ScenarioInfo:
     robust: Mapping[str, Any]
     initial_guess: str
     sensor: SensorInfo = field(default_factory=SensorInfo)
+
+    @property
+    def headline(self) -> tuple[str, ...]:
+        """The kinematic parameters a one-line summary shows."""
+        return self.layout.headline
 
     def label(self, solver: str) -> str:
         """The display name of ``solver``."""
