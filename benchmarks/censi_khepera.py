@@ -33,7 +33,7 @@ import numpy as np
 
 from nlp_calib.logs.joint_log import format_joint_csv
 from nlp_calib.logs.motions import format_motions
-from nlp_calib.pipeline import Calibration, JointCalibration, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
 
 SETS = ("lstraight", "l90", "lmov")
 #: The authors' parameters, in their covariance's order, as nlp_calib names them.
@@ -121,16 +121,16 @@ def main(argv: list[str] | None = None) -> int:
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        run = JointCalibration(sc).run()
+        run = Calibration(sc).run()
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
-    part = run.parts[0]
+    part = run.logs[0]
     report = part.reports["gauss_newton"]
     values, std = report.result.param_dict(), part.std("gauss_newton")
-    print(f"joint fit of {len(SETS)} sets, {run.n_residuals} increments; verdict: {part.verdict.level}")
+    print(f"joint fit of {len(SETS)} sets, {run.data.n_residuals} increments; verdict: {part.verdict.level}")
     for reason in part.verdict.reasons:
         print(f"  - {reason}")
-    faults = sum(len(p.checks.findings.report.faults) for p in run.parts if p.checks.findings is not None)
+    faults = sum(len(p.checks.findings.report.faults) for p in run.logs if p.checks.findings is not None)
     print(f"increments named and left out: {faults}")
     compare(values, std, refs)
     if args.own:

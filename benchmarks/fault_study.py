@@ -27,7 +27,7 @@ from nlp_calib.core.poses import between, compose
 from nlp_calib.logs import Log, parse_log
 from nlp_calib.models import get_model, param_names
 from nlp_calib.outputs.progress import Progress
-from nlp_calib.pipeline import Calibration, JointCalibration, Scenario, load_scenario
+from nlp_calib.pipeline import Calibration, Scenario, load_scenario
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.faults import ABSOLUTE_KINDS, COUNTER_KINDS, FaultReport
 from nlp_calib.simulation import SimulatedLog, SimulationOptions, simulate
@@ -296,7 +296,7 @@ def pairs(seeds: int, step: Callable[[str], None]) -> list[str]:
             joint = sc.with_datasets([Path(lg.path) for lg in logs])
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                check = JointCalibration(joint, logs=logs).run().checks.consistency
+                check = Calibration(joint, logs).run().checks.consistency
             assert check is not None
             flagged += check.significant
             named.update({d.parameter for d in check.disagreements})

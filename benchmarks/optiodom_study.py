@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from nlp_calib.pipeline import JointCalibration, Scenario, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, Scenario, scenario_from_mapping
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"
@@ -64,16 +64,15 @@ def fit(folder: Path) -> dict[str, Any]:
     sc = session_scenario(folder)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        joint = JointCalibration(sc).run()
-    run = joint.run
+        run = Calibration(sc).run()
     solver = run.chosen_solver()
     out: dict[str, Any] = {
         "session": "/".join(folder.parts[-3:]),
-        "runs": len(joint.parts),
+        "runs": len(run.logs) or 1,
         "verdict": run.verdict.level,
         "reasons": list(run.verdict.reasons),
         "gain": run.verdict.gain,
-        "logs": [p.verdict.level for p in joint.parts],
+        "logs": [p.verdict.level for p in run.logs],
     }
     if solver is None:
         return out

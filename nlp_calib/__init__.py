@@ -59,14 +59,13 @@ if TYPE_CHECKING:
     from nlp_calib.outputs.write import output_options, write_run
     from nlp_calib.pipeline import (
         Calibration,
-        JointCalibration,
         Scenario,
         Wanted,
         load_scenario,
         scenario_from_mapping,
     )
     from nlp_calib.problem import ProblemFunctions, ProblemSpec, build
-    from nlp_calib.results import CalibrationRun, JointRun, SolverReport, Verdict
+    from nlp_calib.results import CalibrationRun, SolverReport, Verdict
     from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
     from nlp_calib.solvers import SOLVERS, Solver, SolverResult, get_solver
     from nlp_calib.sources import load_log
@@ -80,8 +79,6 @@ _EXPORTS: dict[str, str] = {
     "write_summary": "nlp_calib.fleet",
     "Calibration": "nlp_calib.pipeline",
     "CalibrationRun": "nlp_calib.results",
-    "JointCalibration": "nlp_calib.pipeline",
-    "JointRun": "nlp_calib.results",
     "CodegenError": "nlp_calib.core.errors",
     "ConfigError": "nlp_calib.core.errors",
     "DatasetError": "nlp_calib.core.errors",
@@ -144,8 +141,6 @@ __all__ = [
     "CodegenError",
     "ConfigError",
     "DatasetError",
-    "JointCalibration",
-    "JointRun",
     "KinematicModel",
     "Log",
     "LogHeader",

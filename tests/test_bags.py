@@ -24,7 +24,7 @@ from nlp_calib.logs import Log, read_log
 from nlp_calib.logs.bag_reader import BagError, BagTopics
 from nlp_calib.logs.bag_records import read_bag_records
 from nlp_calib.models import get_model
-from nlp_calib.pipeline import Calibration, JointCalibration, load_scenario, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, load_scenario, scenario_from_mapping
 from nlp_calib.simulation import truth_path
 from nlp_calib.sources import BagSource, TextSource, load_log
 
@@ -628,8 +628,8 @@ def test_several_bags_calibrate_together_as_their_text_logs(
     ):
         raw = {"model": "tricycle", "solvers": ["gauss_newton"], "validation": {"blocks": 0}}
         sc = scenario_from_mapping({**raw, "datasets": [first, second]}, "joint", tmp_path)
-        run = JointCalibration(sc).run()
-        assert [p.log.records for p in run.parts] == [400, 300]  # both logs, whole
+        run = Calibration(sc).run()
+        assert [p.log.records for p in run.logs] == [400, 300]  # both logs, whole
         runs.append(run.reports["gauss_newton"].result)
     text, bag = runs
     assert text.converged and bag.converged

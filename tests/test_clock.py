@@ -137,9 +137,9 @@ def test_several_logs_each_have_their_own_lag(tmp_path: Path) -> None:
             }
         )
     )
-    from nlp_calib.pipeline.calibration import JointCalibration
+    from nlp_calib.pipeline.calibration import Calibration
 
-    run = JointCalibration(load_scenario(path)).run(["gauss_newton"])
+    run = Calibration(load_scenario(path)).run(["gauss_newton"])
     params, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
     for name, true in (("tracker_lag_1", 0.02), ("tracker_lag_2", 0.06)):
         assert 0 < std[name] < 0.01

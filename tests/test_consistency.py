@@ -12,7 +12,7 @@ from conftest import parse_lines, write_sim
 from nlp_calib.analysis.consistency import combined_others, compare_logs, determined
 from nlp_calib.analysis.direction import compare
 from nlp_calib.models import get_model
-from nlp_calib.pipeline import Calibration, JointCalibration, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.results import Checks
 from nlp_calib.results.checks import CONSISTENCY_SIGMAS as SIGNIFICANT
 from nlp_calib.results.checks import ConsistencyCheck, CrossValidation, believed_std
@@ -119,7 +119,7 @@ def _check(a: Path, b: Path, folder: Path) -> ConsistencyCheck:
     """The joint run's own check: each log fitted alone against the two fitted together."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        joint = JointCalibration(
+        joint = Calibration(
             scenario_from_mapping({**RAW, "datasets": [str(a), str(b)]}, "j", folder)
         ).run()
     assert joint.checks.consistency is not None

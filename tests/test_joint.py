@@ -13,7 +13,7 @@ import pytest
 from conftest import cli
 
 from nlp_calib.core.errors import DatasetError, ScenarioError
-from nlp_calib.pipeline import Calibration, JointCalibration, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.pipeline.calibration import CalibrationRun
 from nlp_calib.problem import build_residual_data
 from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
@@ -49,13 +49,13 @@ def joint(paths: list[Any], folder: Path, **extra: Any) -> CalibrationRun:
     sc = scenario_from_mapping({**BASE, "datasets": paths, **extra}, "j", folder)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return JointCalibration(sc).run().parts[0]
+        return Calibration(sc).run().logs[0]
 
 
 def test_windows_never_cross_from_one_log_into_the_next(tmp_path: Path) -> None:
     (a, b), _ = drives(tmp_path, 0, records=120)
     sc = scenario_from_mapping({**BASE, "datasets": [str(a), str(b)]}, "j", tmp_path)
-    calib = JointCalibration(sc)
+    calib = Calibration(sc)
     data = calib.data
     assert len(data.logs) == 2
     boundary = data.offsets[1]
@@ -72,7 +72,7 @@ def test_each_log_keeps_its_own_samples_and_lag(tmp_path: Path) -> None:
     (a, b), _ = drives(tmp_path, 1, records=300)
     entries = [str(a), {"path": str(b), "samples": {"start": 100}, "alignment": {"tracker_lag": 0.04}}]
     sc = scenario_from_mapping({**BASE, "datasets": entries}, "j", tmp_path)
-    calib = JointCalibration(sc)
+    calib = Calibration(sc)
     assert [p.used[0] for p in calib.parts] == [0, 100]
     assert [p.alignment.lag_s for p in calib.parts] == [0.0, 0.04]
     assert calib.data.n_records == sum(p.fit[1] - p.fit[0] for p in calib.parts)
@@ -154,7 +154,7 @@ def test_records_fitted_twice_are_refused_and_errors_name_the_entry(tmp_path: Pa
         {**BASE, "datasets": [str(a), {"path": str(b), "samples": {"start": 118}}]}, "j", tmp_path
     )
     with pytest.raises(ScenarioError, match=r"datasets\[1\] \(drive1_3\.txt\): residual\.horizon"):
-        JointCalibration(short)
+        Calibration(short)
     missing = scenario_from_mapping({**BASE, "datasets": [str(a), "nope.txt"]}, "j", tmp_path)
     with pytest.raises(DatasetError, match=r"fix 'datasets\[1\]'"):
-        JointCalibration(missing)
+        Calibration(missing)

@@ -15,8 +15,8 @@ from conftest import shared_scenario
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.models import get_model
 from nlp_calib.outputs.summary import summary_lines
-from nlp_calib.pipeline import Calibration, JointCalibration, scenario_from_mapping
-from nlp_calib.results import JointRun
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CostComparison
 from nlp_calib.results.run import NOT_USABLE
 from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
@@ -87,23 +87,22 @@ def test_a_joint_fit_is_judged_on_every_log_not_on_its_first(tmp_path: Path) -> 
     raw = {**BASE, "datasets": [str(line), str(curves)], "initial_guess": "from_file"}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        joint = JointCalibration(scenario_from_mapping(raw, "j", tmp_path)).run()
-    whole = joint.run
-    assert whole is joint.joint and whole.verdict is joint.verdict
-    assert whole.data.used == (0, sum(p.data.fit[1] - p.data.fit[0] for p in joint.parts))
+        joint = Calibration(scenario_from_mapping(raw, "j", tmp_path)).run()
+    whole = joint
+    assert whole.data.used == (0, sum(p.data.fit[1] - p.data.fit[0] for p in joint.logs))
     assert whole.verdict.level != NOT_USABLE, whole.verdict.line()
     assert summary_lines(whole)[0].startswith("summary of the joint fit of 2 logs (j):")
-    figures = {p.log.path: p.reports["gauss_newton"].metrics.segment_ate.mean for p in joint.parts}
+    figures = {p.log.path: p.reports["gauss_newton"].metrics.segment_ate.mean for p in joint.logs}
     ate = whole.reports["gauss_newton"].metrics.segment_ate.mean
     assert min(figures.values()) <= ate <= max(figures.values())
-    assert [p.log.path for p in joint.parts] == [str(line), str(curves)]
-    assert joint.std("gauss_newton") == whole.std("gauss_newton") == joint.parts[1].std("gauss_newton")
+    assert [p.log.path for p in joint.logs] == [str(line), str(curves)]
+    assert joint.std("gauss_newton") == whole.std("gauss_newton") == joint.logs[1].std("gauss_newton")
 
 
-def _shipped(name: str) -> JointRun:
+def _shipped(name: str) -> CalibrationRun:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return JointCalibration(shared_scenario(name)).run(("gauss_newton",))
+        return Calibration(shared_scenario(name)).run(("gauss_newton",))
 
 
 def test_optiodom_tricycle_squares_one_robot_whose_mount_moves_with_the_turning() -> None:
@@ -111,7 +110,7 @@ def test_optiodom_tricycle_squares_one_robot_whose_mount_moves_with_the_turning(
     tracked point 11 mm apart sideways, 16σ of their own, but within what one robot's logs differ
     by. Usable, the parameter named as a model limit and its σ covering the spread."""
     joint = _shipped("optiodom_tricycle_square")
-    check = joint.run.checks.consistency
+    check = joint.checks.consistency
     assert check is not None and not check.significant and joint.verdict.level != NOT_USABLE
     moved = [n for n, m in zip(check.names, check.moved) if m]
     assert moved == ["sensor_y"], check.words()
@@ -125,7 +124,7 @@ def test_optiodom_tricycle_squares_one_robot_whose_mount_moves_with_the_turning(
 def test_optiodom_tricycle_circles_usable_with_the_gain_over_the_nominal_robot() -> None:
     joint = _shipped("optiodom_tricycle_circular")
     assert joint.verdict.level != NOT_USABLE, joint.verdict.line()
-    nominal = joint.run.checks.nominal
+    nominal = joint.checks.nominal
     assert nominal is not None and nominal.source == "ROBOT.yaml"
     assert set(nominal.values) == {
         "wheel_radius",
@@ -142,6 +141,6 @@ def test_optiodom_tricycle_circles_usable_with_the_gain_over_the_nominal_robot()
 def test_optiodom_diff_drive_six_circles_agree() -> None:
     joint = _shipped("optiodom_diff_circular")
     assert joint.verdict.level != NOT_USABLE, joint.verdict.line()
-    assert [p.verdict.level != NOT_USABLE for p in joint.parts] == [True] * 6
-    logs = joint.run.checks.logs
+    assert [p.verdict.level != NOT_USABLE for p in joint.logs] == [True] * 6
+    logs = joint.checks.logs
     assert logs is not None and np.all(np.isfinite(logs.std)) and len(logs.folds) == 6

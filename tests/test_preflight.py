@@ -24,7 +24,7 @@ from nlp_calib.analysis.plan import candidate_of, drive_facts, simulated
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.outputs import registry
 from nlp_calib.outputs.summary import summary_lines
-from nlp_calib.pipeline import Calibration, JointCalibration, load_scenario
+from nlp_calib.pipeline import Calibration, load_scenario
 from nlp_calib.pipeline.analyse import plan_setting
 from nlp_calib.pipeline.preflight import preflight
 from nlp_calib.results import CalibrationRun
@@ -149,7 +149,7 @@ def test_the_plans_first_manoeuvre_appended_halves_the_named_sigma(name: str, tm
     judges any drive."""
     path, truth = DRIVES[name](tmp_path)
     sc = load_scenario(path)
-    calib = JointCalibration(sc) if sc.data.joint else Calibration(sc)
+    calib = Calibration(sc)
     run = calib.run(["gauss_newton"])
     plan = run.checks.plan
     assert plan is not None and plan.best is not None

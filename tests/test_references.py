@@ -21,7 +21,7 @@ from nlp_calib.models import MODELS, get_model
 from nlp_calib.models.drives import integrate_base
 from nlp_calib.models.joints import joint_map
 from nlp_calib.models.radians import in_units
-from nlp_calib.pipeline import Calibration, JointCalibration, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.problem import ProblemSpec, build, build_residual_data, joined
 from nlp_calib.problem.windows import ResidualOptions
 from nlp_calib.simulation.camera import base_motion
@@ -237,8 +237,8 @@ def test_a_mount_and_a_lag_per_log_together(tmp_path: Path) -> None:
         "sensor": {"mounts": "per_log"},
         "solvers": ["gauss_newton"],
     }
-    run = JointCalibration(scenario_from_mapping(raw, "j", tmp_path)).run(["gauss_newton"])
-    part = run.parts[1]
+    run = Calibration(scenario_from_mapping(raw, "j", tmp_path)).run(["gauss_newton"])
+    part = run.logs[1]
     params, std = part.reports["gauss_newton"].result.param_dict(), part.std("gauss_newton")
     truth = {
         "tracker_lag_1": 0.02,
@@ -400,5 +400,5 @@ def test_priors_in_a_joint_fit_with_a_lag_per_log(tmp_path: Path) -> None:
     paths, _ = drives(tmp_path, 3, records=300)
     raw = {**JOINT, "datasets": [str(p) for p in paths], "alignment": {"tracker_lag": "auto"}}
     sc = scenario_from_mapping({**raw, "priors": {"axis_length": {"mean": 1.5, "std": 0.1}}}, "j", tmp_path)
-    run = quiet_run(JointCalibration(sc))
-    assert run.parts[0].reports["gauss_newton"].result.converged
+    run = quiet_run(Calibration(sc))
+    assert run.logs[0].reports["gauss_newton"].result.converged

@@ -28,7 +28,7 @@ from nlp_calib.outputs.progress import Progress
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.outputs.terminal import correlation_table, run_table, summary_table, validation_table
 from nlp_calib.outputs.write import output_options
-from nlp_calib.pipeline import Calibration, JointCalibration, Scenario, Wanted, load_scenario
+from nlp_calib.pipeline import Calibration, Scenario, Wanted, load_scenario
 from nlp_calib.pipeline.prepare import read_checked
 from nlp_calib.pipeline.scenario import refuse_off_the_base
 from nlp_calib.results import CalibrationRun
@@ -235,22 +235,21 @@ def _calibrate_joint(
     """One calibration from several logs: the hand-off files in ``out``, each log's result (and
     report) in ``out/<log>/``."""
     solvers, outputs = what
-    joint = JointCalibration(scenario, logs, solvers).run(solvers, Wanted(series=args.report))
+    whole = Calibration(scenario, logs, solvers).run(solvers, Wanted(series=args.report))
     progress.clear()
-    parts, whole = joint.parts, joint.run
+    parts = whole.logs
     for part in parts:
         print(f"log {part.scenario.name} ({part.scenario.dataset}), figures with the joint parameters")
         print(run_table(part))
         print()
-    print(correlation_table(whole, next(iter(joint.reports))))
+    print(correlation_table(whole, next(iter(whole.reports))))
     print()
     print(
-        f"joint fit of {len(parts)} logs, {joint.n_residuals} windows; each log with the joint parameters, "
-        "then the joint fit on every log:"
+        f"joint fit of {len(parts)} logs, {whole.data.n_residuals} windows; each log with the joint "
+        "parameters, then the joint fit on every log:"
     )
     print(summary_table([*parts, whole]))
-    pieces = [(part, part.scenario.name) for part in parts] + [(whole, "")]
-    final = _write_outputs(out, args, outputs, pieces, (whole, last))
+    final = _write_outputs(out, args, outputs, whole.parts(), (whole, last))
     _closing(whole, final, out)
     return [whole]
 

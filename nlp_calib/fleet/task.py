@@ -19,7 +19,7 @@ from nlp_calib.fleet.jobs import Job
 from nlp_calib.outputs import registry
 from nlp_calib.pipeline import Calibration, Scenario, Wanted, load_scenario
 from nlp_calib.pipeline.check import check, check_scenario
-from nlp_calib.pipeline.prepare import read_checked
+from nlp_calib.pipeline.prepare import read_all
 from nlp_calib.pipeline.stored import read_calibration
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.batch import BatchRow
@@ -31,10 +31,6 @@ def job_scenario(job: Job) -> Scenario:
     opts = job.options
     if job.is_scenario:
         sc = load_scenario(job.path)
-        if sc.data.joint:
-            raise NlpCalibError(
-                f"{job.path}: a batch fits one log per scenario; run 'datasets' with nlp-calib run"
-            )
     elif opts.scenario is not None:
         sc = load_scenario(opts.scenario).with_dataset(job.path)
     else:
@@ -46,13 +42,13 @@ def _calibrate(job: Job) -> CalibrationRun:
     opts = job.options
     if opts.check is None:
         scenario = job_scenario(job)
-        return Calibration.setup(scenario, log=read_checked(scenario)).run(None, Wanted(series=opts.report))
+        return Calibration(scenario, read_all(scenario)).run(None, Wanted(series=opts.report))
     stored = read_calibration(opts.check)
     if opts.scenario is not None and not job.is_scenario:
         scenario = check_scenario(stored, opts.scenario).with_dataset(job.path)
     else:
         scenario = check_scenario(stored, job.path)
-    return check(stored, scenario, read_checked(scenario))
+    return check(stored, scenario, read_all(scenario))
 
 
 def job_outputs(job: Job) -> tuple[registry.Output, ...]:

@@ -20,7 +20,8 @@ from nlp_calib.core.files import atomic_write_bytes, atomic_write_text
 from nlp_calib.core.version import __version__
 from nlp_calib.outputs import urdf
 from nlp_calib.outputs.results import result_document
-from nlp_calib.results import CalibrationRun, Encoder
+from nlp_calib.results import CalibrationRun, Encoder, codec
+from nlp_calib.results.layout import LAYOUT_VERSION
 from nlp_calib.results.mount import LogMount, SensorMount
 
 CALIBRATION_FILE = "calibration.yaml"
@@ -52,6 +53,9 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
     ds = doc["dataset"]
     return {
         "tool": {"name": "nlp_calib", "version": __version__},
+        # Every parameter below in its block (model, mount, clock), with its log, unit, status,
+        # range and needed precision: what `nlp-calib check` reads the file by.
+        "layout": {"version": LAYOUT_VERSION, **codec.to_data(sc.layout)},
         "scenario": {"name": sc.name, "path": sc.path},
         "model": doc["model"],
         "dataset": {

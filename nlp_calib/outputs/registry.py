@@ -205,9 +205,10 @@ def write_staged(
     *,
     force: bool,
 ) -> list[Path]:
-    """``outputs`` of one log's ``run`` into ``out`` through a staged folder (all or nothing, the
-    manifest's ``group``); returns the final paths."""
+    """``outputs`` of ``run`` into ``out`` through a staged folder (all or nothing, the manifest's
+    ``group``; over several logs, each log's in its subfolder); returns the final paths."""
     with StagedOutput(out, group, force=force) as stage:
-        written = write(outputs, [(run, stage.path)], (run, stage.path), options)
+        runs = [(part, stage.path / sub) for part, sub in run.parts()]
+        written = write(outputs, runs, (run, stage.path), options)
         stage.commit()
     return [stage.final(p) for p in written]

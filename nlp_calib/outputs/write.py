@@ -9,14 +9,13 @@ files: ``calibration.yaml``, ``sensor_mount.urdf.xml``, ``robot.urdf``, ``ros2_c
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import check_output_dir
 from nlp_calib.outputs import registry, ros2_control, urdf
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
-from nlp_calib.results import CalibrationRun, JointRun
+from nlp_calib.results import CalibrationRun
 
 
 def output_options(
@@ -36,36 +35,26 @@ def output_options(
     return registry.OutputOptions(sigma, description, sensor_link, ros_distro)
 
 
-def pieces(run: CalibrationRun | JointRun) -> tuple[list[tuple[CalibrationRun, str]], CalibrationRun]:
-    """Each log's run with its subfolder (``""``: the output folder itself), and the run whose
-    estimate the files of the whole calibration carry."""
-    if isinstance(run, JointRun):
-        top = dataclasses.replace(run.parts[0], scenario=run.scenario)
-        return [(part, part.scenario.name) for part in run.parts], top
-    return [(run, "")], run
-
-
 def write_run(
-    run: CalibrationRun | JointRun,
+    run: CalibrationRun,
     out_dir: str | Path,
     *,
     report: bool = False,
     options: registry.OutputOptions | None = None,
     force: bool = False,
 ) -> list[Path]:
-    """Write into ``out_dir`` what ``nlp-calib run`` writes for ``run`` (a joint run: each log's
-    files in its subfolder, the hand-off files once), staged: all or nothing. ``options`` from
-    :func:`output_options` (default: no URDF of the robot's, ``ros2_control.yaml`` for the
-    default release). Files nlp_calib did not write are not replaced unless ``force``. Returns
-    the paths written."""
+    """Write into ``out_dir`` what ``nlp-calib run`` writes for ``run`` (over several logs: each
+    log's files in its subfolder, the joint fit's and the hand-off files once), staged: all or
+    nothing. ``options`` from :func:`output_options` (default: no URDF of the robot's,
+    ``ros2_control.yaml`` for the default release). Files nlp_calib did not write are not
+    replaced unless ``force``. Returns the paths written."""
     options = options or registry.OutputOptions()
     outputs = registry.selected(registry.RUN_GROUPS, report)
     folder = check_output_dir(Path(out_dir))
     refuse_collisions(folder, registry.files(outputs), force=force)
-    runs, top = pieces(run)
     with StagedOutput(folder, "run", force=force) as stage:
         written = registry.write(
-            outputs, [(r, stage.path / sub) for r, sub in runs], (top, stage.path), options
+            outputs, [(r, stage.path / sub) for r, sub in run.parts()], (run, stage.path), options
         )
         stage.commit()
     return [stage.final(p) for p in written]

@@ -8,12 +8,11 @@ messages that name the scenario key to fix (:mod:`.keys`).
 """
 
 from nlp_calib.pipeline.analyse import Wanted
-from nlp_calib.pipeline.calibration import Calibration, JointCalibration
+from nlp_calib.pipeline.calibration import Calibration
 from nlp_calib.pipeline.scenario import LogEntry, Scenario, load_scenario, scenario_from_mapping
 
 __all__ = [
     "Calibration",
-    "JointCalibration",
     "LogEntry",
     "Scenario",
     "Wanted",

@@ -38,7 +38,7 @@ from nlp_calib.results import (
 )
 from nlp_calib.results.checks import NominalCheck, believed_std
 from nlp_calib.results.faults import FaultReport, Findings
-from nlp_calib.results.layout import MODEL, MOUNT, Layout
+from nlp_calib.results.layout import KNOWN, MODEL, MOUNT, Layout
 from nlp_calib.results.mount import LogMount, SensorMount
 from nlp_calib.sensors import Sensor
 from nlp_calib.solvers import solver_label
@@ -70,8 +70,10 @@ def scenario_info(sc: Scenario, layout: Layout) -> ScenarioInfo:
 
 
 def fit_info(sc: Scenario, fns: ProblemFunctions) -> ScenarioInfo:
-    """:func:`scenario_info` of ``sc`` as the problem ``fns`` fits it (its time offsets and mounts)."""
-    return scenario_info(sc, fns.layout)
+    """:func:`scenario_info` of ``sc`` as the problem ``fns`` fits it (its time offsets and mounts;
+    what the scenario fixes is known, what the drive cannot determine held)."""
+    known = fns.layout.named(sc.parameters.fixed)
+    return scenario_info(sc, fns.layout.with_status(dict.fromkeys(known, KNOWN)))
 
 
 def sensor_info(sc: Scenario) -> SensorInfo:
@@ -297,10 +299,9 @@ def assemble_run(
         name: _report(prepared, name, r, (fitted, checks), (figures, views)) for name, r in results.items()
     }
     run = CalibrationRun(
-        scenario=scenario,
+        scenario=dataclasses.replace(scenario, layout=scenario.layout.with_start(start.initial)),
         log=log_info(prepared, windows),
         data=data_info(windows, alignment, _start_dropped(start)),
-        initial=dict(start.initial),
         baseline=figures.baseline[0],
         baseline_holdout=figures.baseline[1],
         reports=reports,
@@ -408,10 +409,9 @@ def joint_run(
     }
     warned = dict.fromkeys((*notes, *(w for run in parts for w in run.warnings)))
     run = CalibrationRun(
-        scenario=scenario,
+        scenario=dataclasses.replace(scenario, layout=scenario.layout.with_start(start.initial)),
         log=log,
         data=data,
-        initial=dict(start.initial),
         baseline=figures.baseline[0],
         baseline_holdout=None,
         reports=reports,

@@ -2,10 +2,11 @@
 
 Each log goes through the stages before the fit on its own (:func:`setup_log`): its records are
 read and selected once, the problem is built, faults are screened, the tracker lag is estimated,
-and its windows are bound. The fit then binds one evaluator to the windows of one log
-(:class:`Calibration`) or of several laid end to end (:class:`JointCalibration`), every solver
-runs on it, and the same analyse and assemble stages turn the estimates into a self-contained
-:class:`~nlp_calib.results.CalibrationRun` per log.
+and its windows are bound. The fit then binds one evaluator to the windows of one log or of several
+laid end to end (one :class:`Calibration` either way: one log is N = 1), every solver runs on it,
+and the same analyse and assemble stages turn the estimates into one self-contained
+:class:`~nlp_calib.results.CalibrationRun` (over several logs, with each log's run in its
+``logs``).
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.screen import Screening, exclude_faults, median_interval, screen
 from nlp_calib.pipeline.windows import LogWindows, bind_windows
 from nlp_calib.problem import ProblemFunctions, ResidualData, joined
-from nlp_calib.results import CalibrationRun, JointRun, ScenarioInfo, SolverResult
+from nlp_calib.results import CalibrationRun, ScenarioInfo, SolverResult
 from nlp_calib.results.checks import WEAK, ConsistencyCheck, CrossValidation
 from nlp_calib.results.faults import Findings
 from nlp_calib.sensors import sensor_for
@@ -137,19 +138,32 @@ def blocks_scorer(fns: ProblemFunctions, parts: Sequence[LogSetup], data: Residu
 
 
 class Calibration:
-    """A single-log scenario through the stages up to the fit, ready to solve with any solver.
+    """A scenario through the stages up to the fit, ready to solve with any solver: its log, or
+    with ``datasets`` each log set up on its own (its samples, faults and lag), then their windows
+    laid end to end and fitted together (no window crosses from one log into the next).
 
     :meth:`run` fits with each solver, analyses and assembles the result.
     """
 
     def __init__(
-        self, scenario: Scenario, log: Log | None = None, solvers: Sequence[str] | None = None
+        self,
+        scenario: Scenario,
+        log: Log | Sequence[Log] | None = None,
+        solvers: Sequence[str] | None = None,
     ) -> None:
+        """``log``: the log already read (with ``datasets``: one per entry), or None to read."""
         t0 = time.perf_counter()
-        self.scenario = scenario
-        self.solvers = tuple(solvers or scenario.solvers)
-        self.stages = setup_log(scenario, log, self.solvers)
-        self.fitting = Fit(self.stages.problem, self.stages.windows.data, self.solvers)
+        self.scenario = sc = scenario
+        self.solvers = tuple(solvers or sc.solvers)
+        per_log = sc.per_log() if sc.data.joint else (sc,)
+        given = [log] if isinstance(log, Log) else list(log) if log is not None else [None] * len(per_log)
+        self.parts = [setup_log(s, log, self.solvers) for s, log in zip(per_log, given)]
+        self.stages = self.parts[0]
+        if len(self.parts) == 1:
+            self.held: Mapping[str, str] = self.stages.prepared.held
+            self.fitting = Fit(self.stages.problem, self.stages.windows.data, self.solvers)
+        else:
+            self.held, self.fitting = _joint_fit(sc, self.parts, self.solvers)
         self.setup_time_s = time.perf_counter() - t0
 
     @classmethod
@@ -159,23 +173,21 @@ class Calibration:
         data: str | Path | None = None,
         log: Log | None = None,
         solvers: Sequence[str] | None = None,
+        logs: Sequence[Log] | None = None,
     ) -> Calibration:
         """Build everything ``scenario`` needs (``data`` replaces its log path; ``log``, already read,
-        replaces reading it; ``solvers``, the ones to get ready, the scenario's)."""
-        return cls(scenario.with_dataset(data) if data is not None else scenario, log, solvers)
+        replaces reading it, and ``logs`` each of its ``datasets``; ``solvers``, the ones to get
+        ready, the scenario's)."""
+        return cls(scenario.with_dataset(data) if data is not None else scenario, logs or log, solvers)
 
     @property
     def model(self) -> KinematicModel:
-        return self.stages.prepared.model
+        return self.fitting.fns.model
 
     @property
     def log(self) -> Log:
-        """The log as read."""
+        """The (first) log as read."""
         return self.stages.prepared.log
-
-    @property
-    def held(self) -> Mapping[str, str]:
-        return self.stages.prepared.held
 
     @property
     def alignment(self) -> Alignment:
@@ -187,7 +199,7 @@ class Calibration:
 
     @property
     def aligned(self) -> Log:
-        """The log with the encoders re-sampled on the tracker's clock."""
+        """The (first) log with the encoders re-sampled on the tracker's clock."""
         return self.stages.windows.aligned
 
     @property
@@ -213,118 +225,85 @@ class Calibration:
     @property
     def initial(self) -> Mapping[str, float]:
         """The starting values of every parameter."""
-        return self.stages.problem.start.initial
+        return self.fitting.problem.start.initial
 
     @property
     def backend(self) -> Backend:
-        return self.stages.problem.binder.backend
+        return self.fitting.problem.binder.backend
 
     @property
     def start(self) -> StartingPoint:
         """Where the solvers start, the fixed values and the bounds."""
-        return self.stages.problem.start
+        return self.fitting.problem.start
 
     @property
     def x0(self) -> np.ndarray:
         """The starting values of the free parameters."""
-        return self.stages.problem.start.x0
+        return self.fitting.problem.start.x0
 
     def solve(self, solver: str) -> SolverResult:
         """Run one solver from the initial guess; the result is in the model's canonical form."""
         return self.fitting.solve(solver)
 
     def score(self, params: np.ndarray) -> Scores:
-        """Full-range and hold-out trajectory metrics of the full parameter vector ``params``."""
-        sc, windows = self.scenario, self.stages.windows
+        """Full-range and hold-out trajectory metrics of the full parameter vector ``params`` on
+        the (first) log."""
+        sc, windows = self.stages.prepared.scenario, self.stages.windows
         scorer = log_scorer(
             self.fns, windows, sc.objective.residual.steering_sample, sc.validation.rpe_window
         )
         return scores(scorer, windows, [params])[0]
 
     def run(self, solvers: Sequence[str] | None = None, wanted: Wanted | None = None) -> CalibrationRun:
-        """Fit with each solver (the scenario's by default), analyse and assemble the result."""
-        return _run(self.scenario, self.fitting, [self.stages], solvers, wanted or Wanted())[2][0]
+        """Fit with each solver (the scenario's by default), analyse and assemble the result. Over
+        several logs: refit without each log in turn, and each log on its own, to check that they
+        tell one robot's story; the result is the joint fit scored on every log, with each log's
+        run (its figures with the joint estimates) in ``logs``."""
+        names = tuple(solvers or self.scenario.solvers)
+        if len(self.parts) == 1:
+            return _run(self.scenario, self.fitting, self.parts, names, wanted or Wanted())[2][0]
+        return _joint_run(self, names, wanted or Wanted())
 
 
-class JointCalibration:
-    """A scenario with ``datasets``: each log set up on its own (its samples, faults and lag), then
-    their windows laid end to end and fitted together (no window crosses from one log into the
-    next)."""
-
-    def __init__(
-        self, scenario: Scenario, logs: Sequence[Log] | None = None, solvers: Sequence[str] | None = None
-    ) -> None:
-        t0 = time.perf_counter()
-        self.scenario = sc = scenario
-        self.solvers = tuple(solvers or sc.solvers)
-        per_log = sc.per_log()
-        given: Sequence[Log | None] = list(logs) if logs is not None else [None] * len(per_log)
-        self.parts = [setup_log(s, log, self.solvers) for s, log in zip(per_log, given)]
-        first = self.parts[0]
-        data = joined([p.windows.data for p in self.parts])
-        # A parameter is held only when the logs together do not determine it (two logs that each
-        # reverse a little may together reverse enough).
-        model = first.prepared.model
-        self.held = {
-            n: why for n, why in model.undetermined(data.inputs).items() if n not in sc.parameters.fixed
-        }
-        for name, why in self.held.items():
-            warnings.warn(
-                f"{name} is held at its initial value: {why} in the logs' fitted records",
-                NlpCalibWarning,
-                stacklevel=2,
-            )
-        n_records = sum(p.fit[1] - p.fit[0] for p in self.parts)
-        start_from = (first.prepared.log, first.used[0], first.fit[1])
-        one_horizon = sc.with_options(residual=joint_residual(sc, [p.prepared for p in self.parts]))
-        lags = [p.alignment.lag_s for p in self.parts]
-        # A mount per log: each starts where its log's own start put it; windows say their log.
-        mounts = [p.problem.start.initial for p in self.parts] if mount_count(sc, len(self.parts)) > 1 else []
-        data = data.with_selector() if mounts else data
-        problem = build_stage(
-            one_horizon, model, tuple(self.held), start_from, self.solvers, n_records, lags, mounts, data
+def _joint_fit(sc: Scenario, parts: Sequence[LogSetup], solvers: Sequence[str]) -> tuple[dict[str, str], Fit]:
+    """The fit of several set-up logs' windows end to end, and the parameters it holds."""
+    first = parts[0]
+    data = joined([p.windows.data for p in parts])
+    # A parameter is held only when the logs together do not determine it (two logs that each
+    # reverse a little may together reverse enough).
+    model = first.prepared.model
+    held = {n: why for n, why in model.undetermined(data.inputs).items() if n not in sc.parameters.fixed}
+    for name, why in held.items():
+        warnings.warn(
+            f"{name} is held at its initial value: {why} in the logs' fitted records",
+            NlpCalibWarning,
+            stacklevel=3,
         )
-        self.fitting = Fit(problem, data, self.solvers)
-        self.setup_time_s = time.perf_counter() - t0
+    n_records = sum(p.fit[1] - p.fit[0] for p in parts)
+    start_from = (first.prepared.log, first.used[0], first.fit[1])
+    one_horizon = sc.with_options(residual=joint_residual(sc, [p.prepared for p in parts]))
+    lags = [p.alignment.lag_s for p in parts]
+    # A mount per log: each starts where its log's own start put it; windows say their log.
+    mounts = [p.problem.start.initial for p in parts] if mount_count(sc, len(parts)) > 1 else []
+    data = data.with_selector() if mounts else data
+    problem = build_stage(one_horizon, model, tuple(held), start_from, solvers, n_records, lags, mounts, data)
+    return held, Fit(problem, data, solvers)
 
-    @property
-    def model(self) -> KinematicModel:
-        return self.fitting.fns.model
 
-    @property
-    def fns(self) -> ProblemFunctions:
-        return self.fitting.fns
-
-    @property
-    def data(self) -> ResidualData:
-        return self.fitting.data
-
-    def solve(self, solver: str) -> SolverResult:
-        return self.fitting.solve(solver)
-
-    def run(self, solvers: Sequence[str] | None = None, wanted: Wanted | None = None) -> JointRun:
-        """Fit with each solver on every log's windows; refit without each log in turn, and each
-        log on its own, to check that they tell one robot's story; score the result on each log and
-        on all of them."""
-        fitting, names = self.fitting, tuple(solvers or self.scenario.solvers)
-        results, fitted, notes = _fit(fitting, self.parts, names, self.held)
-        scorer = blocks_scorer(fitting.fns, self.parts, fitting.data)
-        logs = logs_crossval(fitting, results, scorer, log_ranges(self.parts))
-        own = [_own_run(p, names) for p in self.parts]
-        check = consistency(results, own, logs, (self.model, fit_info(self.scenario, self.fns)))
-        if check is not None and (check.significant or check.limits()):
-            notes.append(check.words())
-        fitted = dataclasses.replace(fitted, consistency=check, logs=logs)
-        parts = _assemble(fitting, self.parts, results, fitted, notes, wanted or Wanted())
-        joint = _joint(fitting, (scorer, self.parts[0]), parts, results, fitted, notes)
-        return JointRun(
-            scenario=joint.scenario,
-            parts=tuple(parts),
-            n_residuals=fitting.data.n_residuals,
-            checks=joint.checks,
-            warnings=tuple(notes),
-            joint=joint,
-        )
+def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> CalibrationRun:
+    """:meth:`Calibration.run` over several logs."""
+    fitting, parts = calib.fitting, calib.parts
+    results, fitted, notes = _fit(fitting, parts, names, calib.held)
+    scorer = blocks_scorer(fitting.fns, parts, fitting.data)
+    logs = logs_crossval(fitting, results, scorer, log_ranges(parts))
+    own = [_own_run(p, names) for p in parts]
+    check = consistency(results, own, logs, (calib.model, fit_info(calib.scenario, calib.fns)))
+    if check is not None and (check.significant or check.limits()):
+        notes.append(check.words())
+    fitted = dataclasses.replace(fitted, consistency=check, logs=logs)
+    runs = _assemble(fitting, parts, results, fitted, notes, wanted)
+    joint = _joint(fitting, (scorer, parts[0]), runs, results, fitted, notes)
+    return dataclasses.replace(joint, logs=tuple(runs))
 
 
 def log_ranges(parts: Sequence[LogSetup]) -> list[tuple[int, int]]:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -105,21 +106,21 @@ def check_scenario(stored: StoredCalibration, target: Path) -> Scenario:
     """The scenario a check runs: ``target`` when it is a scenario file, else the log ``target``
     with the calibration's own formulation; started from the stored values, with its solver."""
     sc = load_scenario(target) if target.suffix in SCENARIO_SUFFIXES else _recorded(stored, target)
-    if sc.data.joint:
-        raise UsageError(f"{target}: a check reads one log; give a scenario with 'dataset', not 'datasets'")
     if sc.model != stored.model:
         raise UsageError(
             f"{target}: the scenario's model is {sc.model}, the calibration's ({stored.path}) is "
             f"{stored.model}; check with a scenario of the same model"
         )
     _same_formulation(stored, sc)
-    return sc.with_options(initial_guess=dict(stored.parameters), solvers=(stored.solver,))
+    return sc.with_options(initial_guess=stored.start(), solvers=(stored.solver,))
 
 
-def check(stored: StoredCalibration, scenario: Scenario, log: Log | None = None) -> CalibrationRun:
-    """The calibration of ``scenario``'s log (read, or ``log``) from the stored values, with the
-    comparison against them in ``checks.drift``."""
-    calib = Calibration.setup(scenario, log=log, solvers=(stored.solver,))
+def check(
+    stored: StoredCalibration, scenario: Scenario, logs: Log | Sequence[Log] | None = None
+) -> CalibrationRun:
+    """The calibration of ``scenario``'s log or logs (read, or ``logs``) from the stored values,
+    with the comparison against them in ``checks.drift``."""
+    calib = Calibration(scenario, logs, (stored.solver,))
     run = calib.run((stored.solver,))
     drift = check_drift(run, calib.model, stored.stats(), str(stored.path), stored.solver)
     return dataclasses.replace(run, checks=dataclasses.replace(run.checks, drift=drift))

@@ -260,3 +260,8 @@ def read_checked(sc: Scenario) -> Log:
     _, log = read(sc)
     select(sc, log)
     return log
+
+
+def read_all(sc: Scenario) -> list[Log]:
+    """Every log of the scenario (its ``datasets``, or its one log), each read and checked."""
+    return [read_checked(s) for s in (sc.per_log() if sc.data.joint else (sc,))]

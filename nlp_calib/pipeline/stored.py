@@ -5,15 +5,22 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from nlp_calib.analysis.drift import believed_dof
 from nlp_calib.core.config import fail, key_name, read_yaml
 from nlp_calib.core.errors import ConfigError, UsageError
-from nlp_calib.models import MODELS, KinematicModel, get_model, param_names
+from nlp_calib.core.version import __version__
+from nlp_calib.models import MODELS, KinematicModel, get_model
+from nlp_calib.models.clock import LAG_PARAM
+from nlp_calib.models.radians import in_units
+from nlp_calib.problem import ProblemSpec
+from nlp_calib.problem.functions import problem_layout
+from nlp_calib.results import codec
 from nlp_calib.results.checks import MIN_FOLDS
+from nlp_calib.results.layout import LAYOUT_VERSION, Layout
 from nlp_calib.sensors import SENSORS, sensor_for
 from nlp_calib.solvers import SOLVERS
 
@@ -36,6 +43,19 @@ class StoredCalibration:
     objective: Mapping[str, Any] | None
     recorded: str | None = None
     dataset: str | None = None
+    #: Every stored parameter in its block, with its log (see :mod:`nlp_calib.results.layout`).
+    layout: Layout = field(default_factory=lambda: Layout(()))
+
+    def start(self) -> dict[str, float]:
+        """The stored values a fit of a new log starts from, by the keys a scenario gives: the
+        robot's parameters shared by every log (each log's own mount and clock offset belong to the
+        logs it was fitted to)."""
+        robot = set(self.layout.robot())
+        return {
+            p.key: self.parameters[p.name]
+            for p in self.layout.parameters
+            if p.log is None and p.name in robot
+        }
 
     def stats(self) -> tuple[Mapping[str, float], Mapping[str, float], Mapping[str, float]]:
         """Values, σ to believe and degrees of freedom, as the drift check compares them."""
@@ -76,24 +96,26 @@ def _scenario_path(doc: Mapping[str, Any]) -> tuple[Path | None, str | None]:
 
 
 def _check_values(
-    model: KinematicModel, values: Mapping[str, float], spreads: Mapping[str, Mapping[str, float]], where: str
+    layout: tuple[str, Layout],
+    values: Mapping[str, float],
+    spreads: Mapping[str, Mapping[str, float]],
+    where: str,
 ) -> None:
-    """Refuse values no robot of ``model`` has and σ that are negative or wider than everything
-    the parameter could be (a tampered or foreign file), under the file's own keys."""
+    """Refuse values no robot of the model (``layout[0]``) has and σ that are negative or wider
+    than everything the parameter could be (a tampered or foreign file), under the file's own keys."""
+    model, laid = layout
     for name, value in values.items():
-        lo, hi = model.physical_ranges.get(name, (-math.inf, math.inf))
-        if name in model.angle_params:
-            lo, hi = -2.0 * math.pi, 2.0 * math.pi
+        lo, hi = laid.param(name).range
         if not lo <= value <= hi:
             fail(
                 f"{where}: parameters.{key_name(name)}",
-                f"{value:.6g} is outside what a {model.name} can have ([{lo:.6g}, {hi:.6g}]); give the "
+                f"{value:.6g} is outside what a {model} can have ([{lo:.6g}, {hi:.6g}]); give the "
                 "calibration.yaml nlp_calib wrote for this robot",
             )
     for key, std in spreads.items():
         for name, sd in std.items():
-            lo, hi = model.physical_ranges.get(name, (-math.inf, math.inf))
-            widest = 2.0 * math.pi if name in model.angle_params else hi - lo
+            lo, hi = laid.param(name).range
+            widest = hi - lo
             if sd < 0 or sd > widest:
                 what = "negative" if sd < 0 else f"wider than any {name} can be ({widest:.6g})"
                 fail(
@@ -116,14 +138,10 @@ def read_calibration(path: Path) -> StoredCalibration:
     if model not in MODELS:
         fail(f"{where}: model", f"{model!r:.40} is not one of {', '.join(MODELS)}")
     kind = _sensor_kind(doc)
-    if kind not in SENSORS or not sensor_for(kind).planar_base:
-        fail(
-            f"{where}: sensor",
-            f"a calibration of a {kind!s:.20} sensor cannot be checked yet: the drift check compares a "
-            "planar mount; recalibrate with 'nlp-calib run' on the new log and compare the two",
-        )
-    kinematic = get_model(model)
-    names = param_names(kinematic)
+    if kind not in SENSORS:
+        fail(f"{where}: sensor", f"{kind!r:.40} is not one of {', '.join(SENSORS)}")
+    layout = _layout(doc, where, (get_model(model), kind))
+    names = layout.names
     solver = doc.get("solver")
     solver = solver if solver in SOLVERS else next(iter(SOLVERS))
     values = _numbers(doc, "parameters", names, where, null=False)
@@ -134,13 +152,45 @@ def read_calibration(path: Path) -> StoredCalibration:
     if isinstance(folds, bool) or not isinstance(folds, int) or folds < 0:
         fail(f"{where}: std_blocks_folds", f"expected a whole number of folds, got {folds!r:.40}")
     spreads = {"std": std, "std_white_noise": white, **({"std_blocks": blocks} if blocks else {})}
-    _check_values(kinematic, values, spreads, where)
+    _check_values((str(model), layout), values, spreads, where)
     dof = {n: believed_dof(white[n], blocks.get(n), folds) for n in names}
     objective = doc.get("objective") if isinstance(doc.get("objective"), Mapping) else None
     scenario, recorded = _scenario_path(doc)
     data = doc.get("dataset")
     dataset = data.get("path") if isinstance(data, Mapping) and isinstance(data.get("path"), str) else None
-    return StoredCalibration(path, model, solver, values, std, dof, scenario, objective, recorded, dataset)
+    return StoredCalibration(
+        path, model, solver, values, std, dof, scenario, objective, recorded, dataset, layout
+    )
+
+
+def _layout(doc: Mapping[str, Any], where: str, model: tuple[KinematicModel, str]) -> Layout:
+    """The file's parameter layout (``layout``), or, in a file written before it had one, the
+    layout of one log's fit: the model's parameters in its encoders' units, the sensor's mount and
+    the clock offset where the file holds one."""
+    stored = doc.get("layout")
+    if stored is None:
+        kinematic, kind = model
+        encoders: list[Any] = doc["encoders"] if isinstance(doc.get("encoders"), list) else []
+        radians = any(isinstance(e, Mapping) and e.get("unit") == "rad" for e in encoders)
+        params: Mapping[str, Any] = doc["parameters"] if isinstance(doc.get("parameters"), Mapping) else {}
+        spec = ProblemSpec(sensor=kind, lags=int(LAG_PARAM in params))
+        return problem_layout(in_units(kinematic, "radians" if radians else "counts"), sensor_for(kind), spec)
+    version = stored.get("version") if isinstance(stored, Mapping) else None
+    if isinstance(version, bool) or not isinstance(version, int) or not 1 <= version <= LAYOUT_VERSION:
+        fail(
+            f"{where}: layout.version",
+            f"expected a layout version nlp_calib {__version__} reads (1 to {LAYOUT_VERSION}), got "
+            f"{version!r:.20}; check with the nlp_calib that wrote the file, or recalibrate",
+        )
+    try:
+        layout = codec.load(Layout, {k: v for k, v in stored.items() if k != "version"})
+        names = layout.names
+        ok = len(set(names)) == len(names) and all(isinstance(n, str) and n for n in names)
+    except (TypeError, ValueError, KeyError, AttributeError):
+        ok = False
+    if not ok:
+        fail(f"{where}: layout", "not a parameter layout nlp_calib wrote; give the calibration.yaml it wrote")
+    return layout
 
 
 def _sensor_kind(doc: Mapping[str, Any]) -> str:

@@ -31,12 +31,12 @@ import numpy as np
 
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.core.ranges import Range, check_choice, check_range
-from nlp_calib.models.base import INTEGRATIONS, KinematicModel
-from nlp_calib.models.clock import LAG_PARAM, LAG_UNIT
+from nlp_calib.models.base import INTEGRATIONS, KinematicModel, Reference, reference
+from nlp_calib.models.clock import LAG_PARAM, LAG_REFERENCE, LAG_UNIT
 from nlp_calib.problem import clock
 from nlp_calib.problem import motion as motion_sources
 from nlp_calib.problem.trajectory import TrajectoryFunctions, base_motion, fn, split_params
-from nlp_calib.results.layout import CLOCK, HELD, KNOWN, MODEL, MOUNT, BlockSpec, Layout
+from nlp_calib.results.layout import CLOCK, HELD, MODEL, MOUNT, BlockSpec, Layout
 from nlp_calib.sensors import Sensor, sensor_for
 from nlp_calib.symbolic.kernels import KERNELS, kernel_function
 
@@ -142,7 +142,7 @@ class ProblemFunctions(TrajectoryFunctions):
         self.names = names
         held = {*spec.fixed, *layout.status(HELD)}
         #: Every parameter in its block, with its log and status (see :mod:`nlp_calib.results.layout`).
-        self.layout = layout.with_status(dict.fromkeys(spec.fixed, KNOWN))
+        self.layout = layout.with_status(dict.fromkeys(spec.fixed, HELD))
         #: One log's parameters as the full-parameter Functions take them (see :meth:`view`).
         self.view_names = (*model.kinematic_params, *sensor.params, *layout.block(CLOCK))
         self.integration = spec.integration
@@ -542,13 +542,30 @@ def problem_layout(model: KinematicModel, sensor: Sensor, spec: ProblemSpec) -> 
     """The parameters of ``model`` measured by ``sensor`` as ``spec`` lays them out: the model's,
     the mount (one per log with ``spec.mounts`` > 1), then a clock offset per log (``spec.lags``);
     the mount's parameters the sensor never determines held."""
+    kinematic = tuple(model.kinematic_params)
+    turn = (-2.0 * np.pi, 2.0 * np.pi)
+    ranges = {**model.physical_ranges, **dict.fromkeys(model.angle_params, turn)}
     blocks = [
-        BlockSpec(MODEL, tuple(model.kinematic_params), model.units),
-        BlockSpec(MOUNT, tuple(sensor.params), sensor.units, per_log=spec.mounts > 1),
+        BlockSpec(MODEL, kinematic, model.units, ranges=ranges, precision=_precision(model, kinematic)),
+        BlockSpec(
+            MOUNT,
+            tuple(sensor.params),
+            sensor.units,
+            per_log=spec.mounts > 1,
+            precision=_precision(model, sensor.params, sensor.reference),
+        ),
     ]
     if spec.lags:
-        blocks.append(BlockSpec(CLOCK, (LAG_PARAM,), {LAG_PARAM: LAG_UNIT}, per_log=True))
+        clock = BlockSpec(CLOCK, (LAG_PARAM,), {LAG_PARAM: LAG_UNIT}, True, precision=LAG_REFERENCE)
+        blocks.append(clock)
     layout = Layout.of(blocks, max(spec.lags, spec.mounts, 1), tuple(model.headline))
     return layout.with_status(
         {p.name: HELD for p in layout.parameters if p.block == MOUNT and p.key in sensor.held}
     )
+
+
+def _precision(
+    model: KinematicModel, keys: Sequence[str], sensor: Mapping[str, Reference] | None = None
+) -> dict[str, tuple[str, float]]:
+    """What a calibration must resolve of each of ``keys`` (:func:`~nlp_calib.models.base.reference`)."""
+    return {k: reference(model, k, sensor) for k in keys}

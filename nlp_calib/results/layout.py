@@ -11,6 +11,7 @@ spelling.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -40,6 +41,13 @@ class Parameter:
     log: int | None = None
     unit: str = ""
     status: str = FREE
+    #: What a robot of its kind can have (a stored value outside is refused).
+    range: tuple[float, float] = (-math.inf, math.inf)
+    #: The precision a useful calibration must reach: a fraction of its value (``relative``) or an
+    #: amount in its unit (``absolute``).
+    precision: tuple[str, float] = ("relative", 0.01)
+    #: Where the fit started (a held or known parameter: its value).
+    start: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -51,6 +59,15 @@ class BlockSpec:
     keys: tuple[str, ...]
     units: Mapping[str, str] = field(default_factory=dict)
     per_log: bool = False
+    ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    precision: Mapping[str, tuple[str, float]] = field(default_factory=dict)
+
+    def parameter(self, key: str, log: int | None, n_logs: int) -> Parameter:
+        """The parameter ``key`` of log ``log``'s copy (None: the shared one)."""
+        name = key if log is None else own_name(key, log, n_logs)
+        limits = self.ranges.get(key, (-math.inf, math.inf))
+        needed = self.precision.get(key, ("relative", 0.01))
+        return Parameter(name, key, self.kind, log, self.units.get(key, ""), FREE, limits, needed)
 
 
 def own_name(key: str, log: int, n_logs: int) -> str:
@@ -76,12 +93,7 @@ class Layout:
         for b in blocks:
             copies = range(n_logs) if b.per_log and n_logs > 1 else [None]
             for log in copies:
-                out += [
-                    Parameter(
-                        own_name(k, log, n_logs) if log is not None else k, k, b.kind, log, b.units.get(k, "")
-                    )
-                    for k in b.keys
-                ]
+                out += [b.parameter(k, log, n_logs) for k in b.keys]
         return cls(tuple(out), n_logs, tuple(headline))
 
     # --- what a parameter is -------------------------------------------------------------------
@@ -171,6 +183,16 @@ class Layout:
         """The layout with the statuses ``status`` (by name) set."""
         ps = tuple(replace(p, status=status.get(p.name, p.status)) for p in self.parameters)
         return replace(self, parameters=ps)
+
+    def with_start(self, values: Mapping[str, float]) -> Layout:
+        """The layout with each parameter's start from ``values`` (by name)."""
+        ps = tuple(replace(p, start=float(values.get(p.name, p.start))) for p in self.parameters)
+        return replace(self, parameters=ps)
+
+    @property
+    def starts(self) -> dict[str, float]:
+        """Each parameter's start, by name."""
+        return {p.name: p.start for p in self.parameters}
 
     def status(self, kind: str) -> tuple[str, ...]:
         return tuple(p.name for p in self.parameters if p.status == kind)

@@ -249,7 +249,6 @@ class CalibrationRun:
     scenario: ScenarioInfo
     log: LogInfo
     data: DataInfo
-    initial: Mapping[str, float]
     baseline: TrajectoryMetrics
     baseline_holdout: TrajectoryMetrics | None
     reports: Mapping[str, SolverReport]
@@ -258,6 +257,21 @@ class CalibrationRun:
     verdict: Verdict
     series: RunSeries | None = None
     odometry: OdometryTrack | None = None
+    #: A calibration over several logs: each log's run, the joint estimates beside that log's own
+    #: figures (this run is the joint fit over every log; empty for one log).
+    logs: tuple[CalibrationRun, ...] = ()
+
+    @property
+    def initial(self) -> dict[str, float]:
+        """Where the solvers started, every parameter by name."""
+        return self.scenario.layout.starts
+
+    def parts(self) -> list[tuple[CalibrationRun, str]]:
+        """Each log's run with the subfolder its files go to (``""``: this run's own folder): for
+        one log, this run; for several, each log's under its name, then the joint fit's."""
+        if not self.logs:
+            return [(self, "")]
+        return [*((part, part.scenario.name) for part in self.logs), (self, "")]
 
     def std(self, solver: str) -> dict[str, float]:
         """The 1σ to believe for ``solver``'s estimate: the largest of the white-noise σ, the block
@@ -304,45 +318,4 @@ class CalibrationRun:
     @classmethod
     def from_data(cls, data: Any) -> CalibrationRun:
         """The run :meth:`to_data` stored."""
-        return codec.load(cls, data)
-
-
-@dataclass(frozen=True)
-class JointRun:
-    """A calibration from several logs: ``parts`` holds one run per log, each carrying the joint
-    estimates (same parameters, uncertainty and checks) beside that log's own figures."""
-
-    scenario: ScenarioInfo
-    parts: tuple[CalibrationRun, ...]
-    n_residuals: int
-    checks: Checks
-    warnings: tuple[str, ...] = field(default=())
-    #: The joint fit as one run: its figures over every log's fitted records (dead reckoning
-    #: restarted at each log's start), its checks and its own verdict.
-    joint: CalibrationRun | None = None
-
-    @property
-    def run(self) -> CalibrationRun:
-        """The joint fit as one run (the first log's, in a result stored before it was kept)."""
-        return self.joint if self.joint is not None else self.parts[0]
-
-    @property
-    def verdict(self) -> Verdict:
-        """The joint fit's verdict."""
-        return self.run.verdict
-
-    @property
-    def reports(self) -> Mapping[str, SolverReport]:
-        """The joint results by solver, with the figures over every log."""
-        return self.run.reports
-
-    def std(self, solver: str) -> dict[str, float]:
-        """The 1σ to believe for ``solver``'s joint estimate (see :meth:`CalibrationRun.std`)."""
-        return self.run.std(solver)
-
-    def to_data(self) -> Any:
-        return codec.to_data(self)
-
-    @classmethod
-    def from_data(cls, data: Any) -> JointRun:
         return codec.load(cls, data)
