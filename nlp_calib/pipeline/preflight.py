@@ -30,7 +30,15 @@ from nlp_calib.core.errors import NlpCalibError, PreflightError
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel
 from nlp_calib.pipeline.assemble import fit_info
-from nlp_calib.pipeline.build import StartingPoint, build_problem, starting_point
+from nlp_calib.pipeline.build import (
+    INTERNAL_SOLVER,
+    Binder,
+    StartingPoint,
+    build_problem,
+    no_priors,
+    prepare_backend,
+    starting_point,
+)
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.recording import recording
 from nlp_calib.pipeline.scenario import Scenario
@@ -201,6 +209,39 @@ def _rough(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, st
     return x, info, f"{d.start_words}, moved by {said} toward the data"
 
 
+def _judged(d: Drive) -> ResidualData:
+    """The windows whose information is judged: a spread subsample of at most
+    :data:`~nlp_calib.analysis.determinacy.MAX_WORK` windows × horizon."""
+    n = d.data.n_residuals
+    idx = det.spread(n, max(1, det.MAX_WORK // max(d.data.horizon, 1)))
+    return d.data if idx.size == n else d.data.select(idx)
+
+
+def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str] | None:
+    """The start fitted to convergence by the run's internal solver on the windows whose information
+    is judged (robust kernel, bounds), and the information there: the σ a fit will give is read
+    where the fit ends, never at the start, whose misfit is no noise. None where the fit does not
+    converge (a drive that leaves a direction free: its normal equations are singular)."""
+    fns, start, sc = d.fns, d.start, d.scenario
+    windows = _judged(d)
+    if windows.n_residuals < fns.n_free:
+        return None
+    box = None if start.lower is None or start.upper is None else (start.lower, start.upper)
+    stride = sc.objective.residual.stride
+    backend = prepare_backend(sc, fns, [INTERNAL_SOLVER], windows.n_residuals * stride)
+    binder = Binder(sc, fns, backend, start.x_fixed, no_priors(fns.n_free), bounds=box)
+    try:
+        _, x, converged = binder.fit(binder.evaluate(windows), start.x0)
+    except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
+        return None
+    if not converged or not np.all(np.isfinite(x)):
+        return None
+    info = det.information(fns, windows, x, start.x_fixed, omega, sc.objective.robust.delta, det.MAX_WORK)
+    if not np.isfinite(info.chi2):
+        return None
+    return np.asarray(x, dtype=float), info, f"{d.start_words}, fitted to convergence on the windows judged"
+
+
 @dataclass(frozen=True)
 class Assessment:
     """What the pre-flight judges the parameters from: the drive (:class:`Drive`) and the
@@ -230,8 +271,10 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
     d, held = drive(sc, logs)
     fns, one = d.fns, d.scenario
     omega = np.array(one.objective.information.omega(fns.error_rows))
-    x, info, where = _rough(d, omega)
-    sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info)
+    fitted = _fitted(d, omega)
+    x, info, where = fitted if fitted is not None else _rough(d, omega)
+    at = "the fit" if fitted is not None else "the start"
+    sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info, at)
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     return Assessment(d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds)
 
