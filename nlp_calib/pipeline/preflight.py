@@ -169,8 +169,8 @@ def _track(log: Log, fns: ProblemFunctions) -> tuple[np.ndarray, np.ndarray]:
     reference's (a camera's, whose world frame need not be level) levelled from its own 3-D poses,
     a planar one's as it is."""
     T = np.asarray(log.T_world_sensor)
-    if fns.sensor.planar_yaw({}) is None and log.T_world_sensor_3d is not None:
-        T = planar_track(np.asarray(log.poses_3d(), dtype=float))
+    if fns.sensor.planar_yaw({}) is None:
+        T = planar_track(np.asarray(fns.sensor.poses(log), dtype=float))
     return T[:, :2], np.unwrap(T[:, 2])
 
 
