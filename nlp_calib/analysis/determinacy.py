@@ -139,11 +139,12 @@ def step(fns: ProblemFunctions, info: Information, x: np.ndarray) -> np.ndarray:
 
 
 def noise(
-    fns: ProblemFunctions, logs: Sequence[Log], omega: np.ndarray, info: Information
+    fns: ProblemFunctions, logs: Sequence[Log], omega: np.ndarray, info: Information, at: str = "the start"
 ) -> tuple[float, str]:
     """The variance of a window's residual (``eᵀΩe`` per row) the pre-flight assumes: the larger of
     what the tracker's own scatter about its path gives (two poses per window) and the residuals'
-    spread at the start (``info``: what the model misses beyond the tracker's noise), in words."""
+    spread where ``info`` was evaluated (``at``, in words: a converged fit's, what the model misses
+    beyond the tracker's noise), in words."""
     per_row = []
     for log in logs:
         # The tracker's scatter is the same all along: a stretch of the middle tells it.
@@ -163,7 +164,7 @@ def noise(
     if info.spread2 > tracker:
         times = np.sqrt(info.spread2 / max(tracker, 1e-300))
         return info.spread2, (
-            f"the residuals' spread at the start, {times:.2g} times what the tracker's scatter about its "
+            f"the residuals' spread at {at}, {times:.2g} times what the tracker's scatter about its "
             f"path ({said}) gives"
         )
     return max(tracker, 1e-18), f"the tracker's scatter about its path: {said}"

@@ -34,6 +34,7 @@ that no source knows them.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -41,7 +42,7 @@ from nlp_calib.analysis.consistency import determined
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.base import reference_scale
 from nlp_calib.results import CalibrationRun, Verdict
-from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, ConsistencyCheck
+from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, ConsistencyCheck, LagEstimate
 from nlp_calib.results.layout import CLOCK, Layout
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
 from nlp_calib.sensors import Sensor, sensor_for
@@ -74,6 +75,28 @@ def _loose(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]
     return out
 
 
+def lag_caveats(path: str, lag: LagEstimate | None) -> list[str]:
+    """What the time offset of the log at ``path`` leaves open, naming the log: a lag pinned on the
+    edge of its search (its value is the bound's, with no σ), or two valleys of comparable cost."""
+    if lag is None:
+        return []
+    name = Path(path).name or path
+    if lag.at_edge:
+        return [
+            f"{name}: the tracker lag is pinned on the edge of alignment.search at {1e3 * lag.lag_s:.0f} ms "
+            "(not determined within it: widen the search, or give the lag)"
+        ]
+    if lag.ambiguous:
+        other, cost, own = lag.other
+        return [
+            f"{name}: the tracker lag is ambiguous: {1e3 * lag.lag_s:.0f} ms or {1e3 * other:.0f} ms (fit "
+            f"costs {own:.4g} and {cost:.4g}, {100 * abs(cost / own - 1):.1f} % apart; the lowest kept): a "
+            "drive whose wheel speeds change at different rates (starts, stops and turns of different "
+            "lengths) tells them apart, or give the lag as alignment.tracker_lag"
+        ]
+    return []
+
+
 def _sensor(run: CalibrationRun) -> Sensor:
     return sensor_for(run.scenario.sensor.kind, run.scenario.sensor.scale)
 
@@ -81,9 +104,7 @@ def _sensor(run: CalibrationRun) -> Sensor:
 def _checks(run: CalibrationRun) -> list[str]:
     """What the checks found that needs a look, in words."""
     out = [w for w in run.warnings if " held at its initial value" in w]
-    lag = run.data.lag_estimate
-    if lag is not None and lag.at_edge:
-        out.append(f"the tracker lag ended on the edge of alignment.search ({1e3 * lag.lag_s:.0f} ms)")
+    out += lag_caveats(run.log.path, run.data.lag_estimate)
     direction, findings = run.checks.direction, run.checks.findings
     if direction is not None and direction.significant:
         name, z = direction.worst

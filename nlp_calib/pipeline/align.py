@@ -11,11 +11,11 @@ the same Functions as every other parameter's.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from nlp_calib.core.errors import NlpCalibWarning
+from nlp_calib.core.errors import NlpCalibError, NlpCalibWarning
 from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.pipeline.build import Binder
 from nlp_calib.pipeline.keys import scenario_key
@@ -31,6 +31,18 @@ LAG_TOLERANCE_S = 1e-4
 MAX_RESAMPLINGS = 8
 #: Lags over the search a fit starts from when the fit from the lag's initial value does not converge.
 COARSE_STARTS = 9
+#: The profile of the cost over the search: at most this many lags, at least this far apart (s).
+PROFILE_LAGS = 101
+PROFILE_STEP_S = 0.002
+#: ...on at most this many records (the middle of the fitted ones): its cost does not grow with the log.
+PROFILE_RECORDS = 20_000
+#: Valleys of the profile other than the one the fit settled in that are fitted from too.
+OTHER_VALLEYS = 2
+#: Two lags lie in two valleys where the profile between them rises this share above both.
+RIDGE = 0.02
+#: Two valleys whose fitted costs differ by less than this share of the lower are comparable: the
+#: lag is named ambiguous, with both values.
+COMPARABLE = 0.1
 
 
 @dataclass(frozen=True)
@@ -107,6 +119,29 @@ class _LagFits:
             return 0.0
         return float(np.sqrt(var)) if np.isfinite(var) and var > 0 else 0.0
 
+    def profile(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The cost over the search at ``x``'s other parameters: lags at most :data:`PROFILE_LAGS`
+        and at least :data:`PROFILE_STEP_S` apart, the encoders re-sampled at each, on the middle
+        :data:`PROFILE_RECORDS` of the fitted records."""
+        lo, hi = self.binder.scenario.log.alignment.search
+        n = int(min(PROFILE_LAGS, max(3, round((hi - lo) / PROFILE_STEP_S) + 1)))
+        grid = np.linspace(lo, hi, n)
+        a, b = self.records
+        mid, half = (a + b) // 2, PROFILE_RECORDS // 2
+        records = (max(a, mid - half), min(b, mid + half))
+        kinds = self.binder.fns.model.encoder_kinds
+        evaluator, costs = None, np.full(n, np.nan)
+        for i, lag in enumerate(grid):
+            shifted, _ = resample_encoders(self.log, float(lag), kinds)
+            try:
+                _, evaluator = self.binder.bind(shifted, *records, evaluator=evaluator)
+            except NlpCalibError:
+                continue
+            at = np.array(x, dtype=float)
+            at[self.column] = lag
+            costs[i] = float(evaluator.cost(at))
+        return grid, costs
+
     def coarse_start(self, x0: np.ndarray) -> np.ndarray | None:
         """The start of the converged fit of least cost from lags spread over the search (None: none
         converged): a start only, the lag is then fitted from it."""
@@ -121,23 +156,102 @@ class _LagFits:
         return None if best is None else best[1]
 
 
+def valleys(grid: np.ndarray, costs: np.ndarray) -> list[float]:
+    """The lags of the profile's local minima (the ends included), lowest cost first."""
+    c = np.where(np.isfinite(costs), costs, np.inf)
+    if not np.isfinite(c).any():
+        return []
+    left = np.concatenate([[np.inf], c[:-1]])
+    right = np.concatenate([c[1:], [np.inf]])
+    found = np.flatnonzero((c <= left) & (c <= right) & np.isfinite(c))
+    return [float(grid[i]) for i in found[np.argsort(c[found])]]
+
+
+@dataclass(frozen=True)
+class _Settled:
+    """One fit of the lag settled: its free values, cost, convergence and the path there."""
+
+    x: np.ndarray
+    cost: float
+    converged: bool
+    path: tuple[float, ...]
+    costs: tuple[float, ...]
+
+
+def _settled(fits: _LagFits, x: np.ndarray) -> _Settled:
+    x, path, costs, converged = fits.settle(x)
+    return _Settled(x, costs[-1] if costs else np.inf, converged, tuple(path), tuple(costs))
+
+
+def _global(
+    fits: _LagFits, first: _Settled
+) -> tuple[_Settled, _Settled | None, tuple[np.ndarray, np.ndarray]]:
+    """The lowest of the fits from the valley ``first`` settled in and from the profile's other
+    lowest valleys (:data:`OTHER_VALLEYS`), the runner-up where its cost is comparable
+    (:data:`COMPARABLE`) and a ridge of the profile parts the two, and the profile (lags, costs)."""
+    column = fits.column
+    grid, costs = fits.profile(first.x)
+    width = 2.5 * float(np.ptp(grid)) / max(grid.size - 1, 1)
+    tried = [first]
+    for lag in [v for v in valleys(grid, costs) if abs(v - first.x[column]) > width][:OTHER_VALLEYS]:
+        x = first.x.copy()
+        x[column] = lag
+        other = _settled(fits, x)
+        if other.converged:
+            tried.append(other)
+    tried.sort(key=lambda t: (not t.converged, t.cost))
+    best = tried[0]
+    runner = next(
+        (
+            t
+            for t in tried[1:]
+            if t.converged
+            and t.cost <= (1 + COMPARABLE) * best.cost
+            and apart(grid, costs, t.x[column], best.x[column])
+        ),
+        None,
+    )
+    return best, runner, (grid, costs)
+
+
+def apart(grid: np.ndarray, costs: np.ndarray, a: float, b: float) -> bool:
+    """Whether lags ``a`` and ``b`` lie in two valleys of the profile: a ridge between them rises
+    above the higher of the two by :data:`RIDGE` of it."""
+    lo, hi = min(a, b), max(a, b)
+    between = costs[(grid > lo) & (grid < hi) & np.isfinite(costs)]
+    if between.size == 0:
+        return False
+    ends = np.interp([a, b], grid[np.isfinite(costs)], costs[np.isfinite(costs)])
+    return bool(between.max() > (1 + RIDGE) * ends.max())
+
+
 def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> LagEstimate:
     """The tracker lag fitted with every other parameter, re-sampling the encoders at each new value
     (see the module docstring); from the lag's initial value in ``x0``, or, when that fit does not
-    converge, from the best of :data:`COARSE_STARTS` lags over the search."""
+    converge, from the best of :data:`COARSE_STARTS` lags over the search; then from the other
+    valleys of the cost's profile over the search, the lowest kept (a fit stops in the valley
+    it starts in: a lag off by a period of the drive's motion is a valley too)."""
     column = lag_column(binder)
     assert column is not None
     fits = _LagFits(binder, log, fit_records(binder.scenario, log, start, stop), column)
     lower, upper = binder.bounds if binder.bounds is not None else (None, None)
     x = np.clip(np.asarray(x0, dtype=float), lower, upper) if lower is not None else np.asarray(x0, float)
-    x, path, costs, converged = fits.settle(x)
-    if not converged and (better := fits.coarse_start(np.asarray(x0, dtype=float))) is not None:
-        x, more_path, more_costs, converged = fits.settle(better)
-        path, costs = path + more_path, costs + more_costs
-    lag = float(x[column])
+    first = _settled(fits, x)
+    if not first.converged and (better := fits.coarse_start(np.asarray(x0, dtype=float))) is not None:
+        again = _settled(fits, better)
+        first = replace(again, path=first.path + again.path, costs=first.costs + again.costs)
+    if not first.converged:
+        return LagEstimate(float(first.x[column]), first.path, first.costs, False, False)
+    best, runner, (grid, profile) = _global(fits, first)
+    lag = float(best.x[column])
     lo, hi = binder.scenario.log.alignment.search
-    at_edge = bool(converged and (abs(lag - lo) < 1e-6 or abs(lag - hi) < 1e-6))
-    return LagEstimate(lag, tuple(path), tuple(costs), at_edge, converged)
+    at_edge = bool(abs(lag - lo) < 1e-6 or abs(lag - hi) < 1e-6)
+    path = first.path + (best.path if best is not first else ())
+    costs = first.costs + (best.costs if best is not first else ())
+    other = () if runner is None else (float(runner.x[column]), float(runner.cost), float(best.cost))
+    return LagEstimate(
+        lag, path, costs, at_edge, True, tuple(map(float, grid)), tuple(map(float, profile)), other
+    )
 
 
 def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Alignment:

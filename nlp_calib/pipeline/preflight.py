@@ -16,7 +16,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -27,16 +27,26 @@ from nlp_calib.analysis.uncertainty import range_std
 from nlp_calib.analysis.units import findings
 from nlp_calib.analysis.verdict import way_out
 from nlp_calib.core.errors import NlpCalibError, PreflightError
-from nlp_calib.logs import Log
+from nlp_calib.logs import Log, planar_track
 from nlp_calib.models import KinematicModel
 from nlp_calib.pipeline.assemble import fit_info
-from nlp_calib.pipeline.build import StartingPoint, build_problem, starting_point
+from nlp_calib.pipeline.build import (
+    INTERNAL_SOLVER,
+    Binder,
+    StartingPoint,
+    build_problem,
+    no_priors,
+    prepare_backend,
+    starting_point,
+)
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.recording import recording
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight, UnitFinding
 
+#: Unit and sign findings that stop a run only where the converged fit confirms them.
+JUDGED_BY_FIT = ("mirrored",)
 #: The closed-form start is taken on the stretch of at most this many records that turns most.
 START_RECORDS = 5000
 #: The start is brought to the data by at most this many Gauss-Newton steps (a far nominal start
@@ -91,11 +101,11 @@ def _busiest(log: Log, a: int, b: int, size: int) -> tuple[int, int]:
     return a + best, a + best + size
 
 
-def _implausible(model: KinematicModel, point: StartingPoint) -> str:
-    """The start's parameters outside the model's plausible ranges, in words ("" when none is)."""
+def _implausible(model: KinematicModel, values: Mapping[str, float]) -> str:
+    """The parameters of ``values`` outside the model's plausible ranges, in words ("" when none is)."""
     out = [
         f"{n} {v:.3g}"
-        for n, v in point.initial.items()
+        for n, v in values.items()
         if n in model.physical_ranges and not model.physical_ranges[n][0] <= v <= model.physical_ranges[n][1]
     ]
     return ", ".join(out)
@@ -123,7 +133,7 @@ def _start(
         if np.all(np.isfinite(point.x0)):
             words = "the closed-form start (initial_guess: auto)" if auto else "the initial guess"
             words += f" on records {a} to {b}" if (a, b) != (first.start, first.split) else ""
-            outside = _implausible(fns.model, point)
+            outside = _implausible(fns.model, point.initial)
             return point, words + (f", outside the plausible ranges in {outside}" if outside else "")
         why = "it is not finite"
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ZeroDivisionError) as exc:
@@ -154,17 +164,42 @@ def drive(sc: Scenario, logs: Sequence[Log] | None = None) -> tuple[Drive, dict[
     return Drive(parts, one, fns, data, point, words), held
 
 
-def _track(log: Log) -> tuple[np.ndarray, np.ndarray]:
-    return np.asarray(log.T_world_sensor[:, :2]), np.unwrap(log.T_world_sensor[:, 2])
+def _track(log: Log, fns: ProblemFunctions) -> tuple[np.ndarray, np.ndarray]:
+    """The reference's positions on the floor and its heading about the floor's normal: a 3-D
+    reference's (a camera's, whose world frame need not be level) levelled from its own 3-D poses,
+    a planar one's as it is."""
+    T = np.asarray(log.T_world_sensor)
+    if fns.sensor.planar_yaw({}) is None:
+        T = planar_track(np.asarray(fns.sensor.poses(log), dtype=float))
+    return T[:, :2], np.unwrap(T[:, 2])
 
 
-def _units(d: Drive) -> tuple[UnitFinding, ...]:
+def _units(d: Drive, fitted: Mapping[str, float] | None) -> tuple[UnitFinding, ...]:
+    """What the data imply of units and signs; a sign finding (:data:`JUDGED_BY_FIT`) stops a run
+    only where the fit confirms it (see :func:`_judged_by_fit`)."""
     out: list[UnitFinding] = []
     yaw = d.fns.sensor.planar_yaw(d.start.initial)
     for part in d.parts:
         log = part.log.select(part.start, part.split)
-        out += [f for f in findings(log, part.model, _track(log), yaw) if f not in out]
-    return tuple(out)
+        out += [f for f in findings(log, part.model, _track(log, d.fns), yaw) if f not in out]
+    return tuple(_judged_by_fit(f, d.fns.model, fitted) for f in out)
+
+
+def _judged_by_fit(
+    finding: UnitFinding, model: KinematicModel, fitted: Mapping[str, float] | None
+) -> UnitFinding:
+    """``finding`` as the converged fit (``fitted``: its parameters; None: no fit converged) judges
+    it: a mirrored wheel makes a fitted wheel radius negative, so a fit whose every parameter is
+    plausible says the wheels' signs are as the model reads them (a sensor turned 90°, a scan
+    matcher's slips on gentle curves): the finding is said and the run goes on."""
+    if finding.kind not in JUDGED_BY_FIT or fitted is None or _implausible(model, fitted):
+        return finding
+    return replace(
+        finding,
+        blocking=False,
+        words=finding.words + "; but the fit on these data finds every parameter plausible (the wheels' "
+        "signs as read agree with the reference), so the run goes on",
+    )
 
 
 def _rough(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str]:
@@ -201,6 +236,39 @@ def _rough(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, st
     return x, info, f"{d.start_words}, moved by {said} toward the data"
 
 
+def _judged(d: Drive) -> ResidualData:
+    """The windows whose information is judged: a spread subsample of at most
+    :data:`~nlp_calib.analysis.determinacy.MAX_WORK` windows × horizon."""
+    n = d.data.n_residuals
+    idx = det.spread(n, max(1, det.MAX_WORK // max(d.data.horizon, 1)))
+    return d.data if idx.size == n else d.data.select(idx)
+
+
+def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str] | None:
+    """The start fitted to convergence by the run's internal solver on the windows whose information
+    is judged (robust kernel, bounds), and the information there: the σ a fit will give is read
+    where the fit ends, never at the start, whose misfit is no noise. None where the fit does not
+    converge (a drive that leaves a direction free: its normal equations are singular)."""
+    fns, start, sc = d.fns, d.start, d.scenario
+    windows = _judged(d)
+    if windows.n_residuals < fns.n_free:
+        return None
+    box = None if start.lower is None or start.upper is None else (start.lower, start.upper)
+    stride = sc.objective.residual.stride
+    backend = prepare_backend(sc, fns, [INTERNAL_SOLVER], windows.n_residuals * stride)
+    binder = Binder(sc, fns, backend, start.x_fixed, no_priors(fns.n_free), bounds=box)
+    try:
+        _, x, converged = binder.fit(binder.evaluate(windows), start.x0)
+    except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
+        return None
+    if not converged or not np.all(np.isfinite(x)):
+        return None
+    info = det.information(fns, windows, x, start.x_fixed, omega, sc.objective.robust.delta, det.MAX_WORK)
+    if not np.isfinite(info.chi2):
+        return None
+    return np.asarray(x, dtype=float), info, f"{d.start_words}, fitted to convergence on the windows judged"
+
+
 @dataclass(frozen=True)
 class Assessment:
     """What the pre-flight judges the parameters from: the drive (:class:`Drive`) and the
@@ -218,6 +286,15 @@ class Assessment:
     omega: np.ndarray
     delta: float
     bounds_std: np.ndarray
+    #: Whether ``x`` is where the run's internal solver converged on the judged windows.
+    converged: bool = False
+
+    def fitted(self) -> dict[str, float] | None:
+        """Every parameter where the fit converged (None: it did not)."""
+        if not self.converged:
+            return None
+        fns = self.drive.fns
+        return dict(zip(fns.names, np.asarray(fns.assemble(self.x, self.drive.start.x_fixed)).ravel()))
 
     def standing(self, info: det.Information | None = None) -> det.Standing:
         """Each free parameter's standing on these windows (or on those whose information is ``info``)."""
@@ -230,10 +307,14 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
     d, held = drive(sc, logs)
     fns, one = d.fns, d.scenario
     omega = np.array(one.objective.information.omega(fns.error_rows))
-    x, info, where = _rough(d, omega)
-    sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info)
+    fitted = _fitted(d, omega)
+    x, info, where = fitted if fitted is not None else _rough(d, omega)
+    at = "the fit" if fitted is not None else "the start"
+    sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info, at)
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
-    return Assessment(d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds)
+    return Assessment(
+        d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds, fitted is not None
+    )
 
 
 def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
@@ -246,7 +327,7 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
     for p in d.parts:
         log = p.log.select(p.start, p.split)
         steering = p.scenario.objective.residual.steering_sample
-        exs.append(excitation(log.time_s, *_track(log), p.model, p.model.inputs(log, steering)))
+        exs.append(excitation(log.time_s, *_track(log, fns), p.model, p.model.inputs(log, steering)))
     units = fit_info(one, fns).units
     statuses = det.statuses(fns, a.standing(), a.held, units, combined(exs))
     loose = [s.name for s in statuses if s.status in (NOT_DETERMINED, WEAKLY) and not s.held]
@@ -262,7 +343,7 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
         model=sc.model,
         recordings=tuple(recording(p.scenario, p.log) for p in d.parts),
         excitation=tuple(exs),
-        units=_units(d),
+        units=_units(d, a.fitted()),
         parameters=statuses,
         start=a.where,
         noise=a.noise,

@@ -24,6 +24,7 @@ from nlp_calib.pipeline.build import Binder, no_priors
 from nlp_calib.problem import ResidualData
 from nlp_calib.results.checks import WEAK, CrossValidation, DirectionCheck, Fold
 from nlp_calib.results.figures import TrajectoryMetrics
+from nlp_calib.results.layout import CLOCK
 from nlp_calib.solvers import Priors
 from nlp_calib.solvers.evaluation import NormalEquations
 
@@ -176,6 +177,7 @@ def folds_over(
     data_only = dataclasses.replace(binder, priors=no_priors(binder.fns.n_free))
 
     holds = dict(zip(ranges, held))
+    lags = lag_columns(binder)
 
     def fold(block: tuple[int, int]) -> Fold:
         a, b = block
@@ -191,11 +193,29 @@ def folds_over(
         if converged and held.n_residuals:
             ev = data_only.evaluate(held)
             mine = params[[names.index(f) for f in free]]
-            costs = tuple(float(ev.cost(v)) for v in (mine, *against))
+            costs = tuple(float(ev.cost(v)) for v in (mine, *(lag_alike(v, mine, lags) for v in against)))
         params = canonical(params)
         return Fold(a, b, params, converged, score(params, a, b), score(full, a, b), costs)
 
     return on_threads(fold, list(ranges))
+
+
+def lag_columns(binder: Binder) -> list[int]:
+    """The places of the time offsets among the free parameters."""
+    return [i for i, n in enumerate(binder.fns.free) if binder.fns.layout.in_block(n, CLOCK)]
+
+
+def lag_alike(v: np.ndarray, fold: np.ndarray, lags: Sequence[int]) -> np.ndarray:
+    """The free values ``v`` a fold is compared with on its held-out windows, with the fold's own
+    time offsets (``fold``'s): the fold refits the lags of the logs it cuts into, and a compared set
+    that kept the whole fit's lags (fitted on the held-out windows too) would be judged on its
+    clock, not its parameters: each comparison treats the lag alike on both sides (``lags``: the
+    offsets' places among the free values)."""
+    if not lags:
+        return v
+    out = np.array(v, dtype=float)
+    out[lags] = fold[lags]
+    return out
 
 
 def direction_check(

@@ -186,13 +186,24 @@ class LagEstimate:
     """How the fitted tracker lag (s) was reached: the lags the encoders were re-sampled at in
     turn and the internal fit's cost at each, whether the last fit converged, and whether the lag
     ended on a bound of the searched range (then the true lag may lie beyond it, or the drive does
-    not determine it)."""
+    not determine it). ``profile_s`` and ``profile_costs``: the cost over the search at the
+    settled fit's other parameters (the lags and the cost at each), from which the fit started in
+    each valley; ``other``: a second valley of comparable cost, ``(its lag, its fitted cost, the
+    kept lag's fitted cost)`` (empty: none), the lag then ambiguous between the two."""
 
     lag_s: float
     path_s: tuple[float, ...]
     costs: tuple[float, ...]
     at_edge: bool = False
     converged: bool = True
+    profile_s: tuple[float, ...] = ()
+    profile_costs: tuple[float, ...] = ()
+    other: tuple[float, ...] = ()
+
+    @property
+    def ambiguous(self) -> bool:
+        """Whether a second valley of comparable cost leaves the lag between two values."""
+        return len(self.other) == 3
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -201,6 +212,9 @@ class LagEstimate:
             "costs": [c if np.isfinite(c) else None for c in self.costs],
             "at_edge": self.at_edge,
             "converged": self.converged,
+            "profile_s": list(self.profile_s),
+            "profile_costs": [c if np.isfinite(c) else None for c in self.profile_costs],
+            "other": list(self.other),
         }
 
 
