@@ -98,6 +98,7 @@ class Gyro:
     planar_base: ClassVar[bool] = False
     start_span_s: ClassVar[float | None] = None
     held_why: ClassVar[str] = ""
+    lengths_unseen: ClassVar[str] = "a gyro measures turning, no length"
 
     def __init__(self, scale_free: bool) -> None:
         self.scale_free = scale_free
