@@ -21,7 +21,11 @@ from nlp_calib.simulation.imu import ImuSimulationOptions, simulate_imu, write_i
 pytest.importorskip("rosbags")
 
 RADIANS = {"k_left": "left_wheel_radius", "k_right": "right_wheel_radius", "baseline": "wheel_separation"}
-DATASET = {"joint_states": "/joint_states", "joints": ["left_wheel_joint", "right_wheel_joint"], "imu": "/imu"}
+DATASET = {
+    "joint_states": "/joint_states",
+    "joints": ["left_wheel_joint", "right_wheel_joint"],
+    "imu": "/imu",
+}
 SCENARIO = {
     "model": "diff_drive",
     "sensor": "gyro",
@@ -46,7 +50,9 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, flo
 
 
 def _scenario(bag: Path, **more: object) -> object:
-    return scenario_from_mapping({**SCENARIO, **more, "dataset": {"bag": str(bag), **DATASET}}, "gyro", bag.parent)
+    return scenario_from_mapping(
+        {**SCENARIO, **more, "dataset": {"bag": str(bag), **DATASET}}, "gyro", bag.parent
+    )
 
 
 def test_integration_intervals_add_up_the_rates() -> None:
@@ -100,7 +106,9 @@ def test_simulate_writes_a_gyro_bag_with_its_truth(tmp_path: Path) -> None:
     proc = cli("simulate", "--imu", "--out", str(tmp_path / "g"), "--duration", "5", "--latency", "0.02")
     assert proc.returncode == 0, proc.stderr
     truth = json.loads((tmp_path / "g.truth.json").read_text())["params"]
-    assert truth["tracker_lag"] == 0.02 and {"gyro_bias_z", "imu_roll", "imu_pitch", "gyro_scale"} <= set(truth)
+    assert truth["tracker_lag"] == 0.02 and {"gyro_bias_z", "imu_roll", "imu_pitch", "gyro_scale"} <= set(
+        truth
+    )
     assert "imu: /imu" in proc.stdout
 
 
@@ -109,6 +117,9 @@ def test_a_planar_sensor_refuses_a_gyros_increments(drive: tuple[Path, dict[str,
     sc = scenario_from_mapping(
         {**SCENARIO, "sensor": "planar", "dataset": {"bag": str(bag), **DATASET}}, "gyro", bag.parent
     )
-    with pytest.raises(Exception, match="a gyro's integrated rates .* need a gyro"), warnings.catch_warnings():
+    with (
+        pytest.raises(Exception, match=r"a gyro's integrated rates .* need a gyro"),
+        warnings.catch_warnings(),
+    ):
         warnings.simplefilter("ignore")
         Calibration(sc).run()

@@ -203,7 +203,9 @@ def _undetermined(run: CalibrationRun, model: KinematicModel, hint: str) -> Verd
     missing = [n for n, sd in run.std(solver).items() if not np.isfinite(sd)]
     if missing or loose:
         why = loose or [f"{', '.join(missing)} not determined by this drive"]
-        values = dict(zip(run.reports[solver].uncertainty.names, map(float, run.reports[solver].result.params)))
+        values = dict(
+            zip(run.reports[solver].uncertainty.names, map(float, run.reports[solver].result.params))
+        )
         return Verdict(UNDETERMINED, (*why, way_out([*missing, *group], model, _sensor(run), values)))
     return None
 

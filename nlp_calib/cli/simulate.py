@@ -104,7 +104,9 @@ def _simulate_lidar(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
 def _simulate_imu(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
     """A gyro's bag and the truth beside it."""
     opts = imu_options(args.config, overrides)
-    bag, truth = _staged(args, imu_paths(args.out), functools.partial(write_imu_simulation, simulate_imu(opts)))
+    bag, truth = _staged(
+        args, imu_paths(args.out), functools.partial(write_imu_simulation, simulate_imu(opts))
+    )
     print(
         f"wrote {bag} ({opts.duration_s:g} s, the gyro at {opts.imu_rate_hz:g} Hz stamped "
         f"{1000 * opts.stamp_offset_s:g} ms late) and {truth}"

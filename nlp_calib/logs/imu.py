@@ -54,7 +54,9 @@ def _sorted(source: str, ns: list[int], rows: list[list[float]], at: list[int], 
     rates = np.array(rows, dtype=float).reshape(-1, 3)[order][first]
     if stamps[first].size < 2 or not np.all(np.isfinite(rates)):
         bad = int(np.sum(~np.all(np.isfinite(rates), axis=1)))
-        raise DatasetError(source, None, f"a gyro needs at least 2 samples of finite rates ({bad} not finite)")
+        raise DatasetError(
+            source, None, f"a gyro needs at least 2 samples of finite rates ({bad} not finite)"
+        )
     return GyroRates(source, stamps[first], rates, np.array(at, dtype=np.int64)[order][first], frame)
 
 
@@ -70,7 +72,8 @@ def read_imu(path: str | Path, topic: str, receive: bool = False) -> GyroRates:
         if types.get(topic) != IMU_TYPE:
             held = f"holds {types[topic]}" if topic in types else "is not in the bag"
             raise BagError(
-                p, f"imu: topic {topic!r} {held}; name a {IMU_TYPE} topic (nlp-calib import-bag {p} lists them)"
+                p,
+                f"imu: topic {topic!r} {held}; name a {IMU_TYPE} topic (nlp-calib import-bag {p} lists them)",
             )
         for _, recorded, msg in messages(reader, p, (topic,)):
             w = msg.angular_velocity
@@ -90,7 +93,9 @@ def read_gyro_csv(path: str | Path) -> GyroRates:
     lines = data_lines(path)
     first = next(lines, None)
     if first is None or tuple(f.strip() for f in first[1].split(",")) != COLUMNS:
-        raise DatasetError(p, None if first is None else first[0], f"expected a header row '{','.join(COLUMNS)}'")
+        raise DatasetError(
+            p, None if first is None else first[0], f"expected a header row '{','.join(COLUMNS)}'"
+        )
     ns, rows, at = [], [], []
     for number, text in lines:
         fields = text.split(",")
@@ -110,12 +115,16 @@ def integrated(rates: GyroRates, interval_s: float) -> MotionTable:
     period = float(np.median(dt))
     every = max(1, round(interval_s / period))
     ends = np.arange(0, rates.n, every)
-    area = np.vstack([np.zeros((1, 3)), np.cumsum(0.5 * (rates.rates[1:] + rates.rates[:-1]) * dt[:, None], axis=0)])
+    area = np.vstack(
+        [np.zeros((1, 3)), np.cumsum(0.5 * (rates.rates[1:] + rates.rates[:-1]) * dt[:, None], axis=0)]
+    )
     gap = np.concatenate([[0], np.cumsum(dt > GAP_PERIODS * period)])
     a, b = ends[:-1], ends[1:]
     keep = gap[b] == gap[a]
     a, b = a[keep], b[keep]
     if a.size == 0:
-        raise DatasetError(rates.source, None, f"no integration interval of {interval_s:g} s lies inside the rates")
+        raise DatasetError(
+            rates.source, None, f"no integration interval of {interval_s:g} s lies inside the rates"
+        )
     z = np.column_stack([area[b] - area[a], (t[b] - t[a]).astype(float) * 1e-9])
     return MotionTable(rates.source, frozen(t[a]), frozen(t[b]), frozen(z), frozen(rates.numbers[a]), {})

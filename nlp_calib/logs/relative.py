@@ -41,7 +41,12 @@ class RelativeMotions:
 
     def __post_init__(self) -> None:
         n = self.first.shape[0]
-        if self.last.shape != (n,) or self.z.shape[:1] != (n,) or self.z.ndim != 2 or self.line_numbers.shape != (n,):
+        if (
+            self.last.shape != (n,)
+            or self.z.shape[:1] != (n,)
+            or self.z.ndim != 2
+            or self.line_numbers.shape != (n,)
+        ):
             raise ValueError("increments: first, last, z and line_numbers must have one entry per increment")
         if n and np.any(self.last <= self.first):
             raise ValueError("increments: each must end at a later record than it starts")

@@ -37,7 +37,9 @@ def sensor_for(kind: str, scale: str = "fixed") -> Sensor:
         raise ProblemError(f"scale must be one of {', '.join(SCALES)}, got {scale!r}")
     if scale == "free" and kind not in SCALE_FREE:
         which = ", ".join(sorted(SCALE_FREE))
-        raise ProblemError(f"a free scale needs a 3-D sensor or a gyro (mount: {which}): {kind} poses are metric")
+        raise ProblemError(
+            f"a free scale needs a 3-D sensor or a gyro (mount: {which}): {kind} poses are metric"
+        )
     return SENSORS[kind](scale)
 
 

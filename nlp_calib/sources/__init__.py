@@ -23,7 +23,16 @@ from nlp_calib.sources.vendor import VendorSource
 #: The dataset sources, in the order they are asked whether they read a scenario's entry.
 SOURCES: dict[str, type[DatasetSource]] = {
     s.kind: s
-    for s in (LidarSource, ImuSource, VendorSource, BagSource, MotionsSource, GyroCsvSource, JointLogSource, TextSource)
+    for s in (
+        LidarSource,
+        ImuSource,
+        VendorSource,
+        BagSource,
+        MotionsSource,
+        GyroCsvSource,
+        JointLogSource,
+        TextSource,
+    )
 }
 
 

@@ -141,7 +141,9 @@ class ImuSource:
         source: ImuSource = from_mapping(cls, raw, where)
         bag = coerce(raw["bag"], Path, f"{where}.bag")
         return replace(
-            source, bag=_resolved(bag, base_dir) or bag, robot=_resolved(source.robot, base_dir) or source.robot
+            source,
+            bag=_resolved(bag, base_dir) or bag,
+            robot=_resolved(source.robot, base_dir) or source.robot,
         )
 
 
