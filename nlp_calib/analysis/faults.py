@@ -192,8 +192,15 @@ def increment_faults(
     if inc is None or inc.n == 0:
         return []
     p = np.ravel(np.asarray(params, dtype=float))
-    prefix = poses.accumulate(np.zeros(3), over_columns(fns.predict, p, inputs)[0].T)
-    error = poses.between(inc.z, poses.between(prefix[inc.first], prefix[inc.last]))
+    steps = over_columns(fns.predict, p, inputs)[0].T
+    if inc.z.shape[1] == 3:
+        prefix = poses.accumulate(np.zeros(3), steps)
+        error = poses.between(inc.z, poses.between(prefix[inc.first], prefix[inc.last]))
+        unit = ("m", "m", "rad")
+    else:  # a gyro's integrated rates add up (its bias, the same over each interval, is the centre's)
+        prefix = np.vstack([np.zeros((1, steps.shape[1])), np.cumsum(steps, axis=0)])
+        error = (inc.z - (prefix[inc.last] - prefix[inc.first]))[:, :3]
+        unit = ("rad", "rad", "rad")
     judged = np.ones(inc.n, dtype=bool)
     for f in known:
         judged &= (inc.last - 1 < f.first) | (inc.first > f.last)
@@ -208,7 +215,7 @@ def increment_faults(
     for k in np.flatnonzero(judged & (score > MATCH_SCATTER)):
         e = error[k]
         why = (
-            f"disagrees with the wheels by ({e[0]:+.4f} m, {e[1]:+.4f} m, {e[2]:+.4f} rad), "
+            f"disagrees with the wheels by ({e[0]:+.4f} {unit[0]}, {e[1]:+.4f} {unit[1]}, {e[2]:+.4f} rad), "
             f"{score[k]:.0f}× the increments' robust scatter"
         )
         found.append(

@@ -57,9 +57,20 @@ SPATIAL = Geometry(
     poses3d.align,
 )
 
+#: A gyro's "poses": its rates integrated from the first record (and the time), added up; its
+#: "positions" the three integrated rates (rad), aligned by an offset alone. Its predicted steps
+#: carry no bias (a window's motion has no duration), so its track drifts by the bias.
+RATE = Geometry(
+    lambda T0, steps: T0 + np.vstack([np.zeros((1, T0.size)), np.cumsum(steps, axis=0)]),
+    lambda a, b: b - a,
+    3,
+    lambda rel: np.zeros(rel.shape[0]),
+    lambda est, ref: (np.eye(est.shape[1]), ref.mean(axis=0) - est.mean(axis=0)),
+)
+
 
 #: The geometry of a pose group's poses.
-GEOMETRIES = {"SE(2)": PLANAR, "SE(3)": SPATIAL}
+GEOMETRIES = {"SE(2)": PLANAR, "SE(3)": SPATIAL, "rate": RATE}
 
 
 def geometry(fns: ProblemFunctions) -> Geometry:

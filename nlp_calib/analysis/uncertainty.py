@@ -362,7 +362,9 @@ class _Sums:
         if self.increment is not None and self.increment[w].any():
             inc = self.increment[w]
             Ea, Eb = Ea.copy(), Eb.copy()
-            Ea[inc], Eb[inc] = sens.de_dz[inc], 0.0  # a planar increment's rows are its noise's
+            # An increment's noise lies on its first rows (a planar one's are all its noise's; a
+            # gyro's duration is exact).
+            Ea[inc], Eb[inc] = sens.de_dz[inc][:, :, : Ea.shape[2]], 0.0
             a = np.where(inc, self.K.shape[0] - self.increment.size + np.arange(w.start, w.stop), a)
         return a, b, Ea, Eb
 

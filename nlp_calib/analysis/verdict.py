@@ -33,7 +33,7 @@ that no source knows them.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +46,7 @@ from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, ConsistencyCheck, Lag
 from nlp_calib.results.layout import CLOCK, Layout
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
 from nlp_calib.sensors import Sensor, sensor_for
+from nlp_calib.sensors.mount import length_params
 
 #: Relative parameter difference beyond which two converged solvers disagree.
 AGREE = 1e-4
@@ -218,7 +219,9 @@ def _undetermined(run: CalibrationRun, model: KinematicModel, hint: str) -> Verd
     if solver is None:
         failures = dict.fromkeys(run.reports[s].result.reason for s in run.solver_order())
         out = (*unfitted, *loose, *(f"no solver converged: {r}" for r in failures))
-        return Verdict(UNDETERMINED, (*out, way_out(group, model, run.scenario.layout)) if loose else out)
+        return Verdict(
+            UNDETERMINED, (*out, way_out(group, model, run.scenario.layout, _sensor(run))) if loose else out
+        )
     if bounded := _trade_off(run, solver):
         return Verdict(
             UNDETERMINED,
@@ -227,7 +230,13 @@ def _undetermined(run: CalibrationRun, model: KinematicModel, hint: str) -> Verd
     missing = [n for n, sd in run.std(solver).items() if not np.isfinite(sd)]
     if missing or loose:
         why = loose or [f"{', '.join(missing)} not determined by this drive"]
-        return Verdict(UNDETERMINED, (*why, way_out([*missing, *group], model, run.scenario.layout)))
+        values = dict(
+            zip(run.reports[solver].uncertainty.names, map(float, run.reports[solver].result.params))
+        )
+        return Verdict(
+            UNDETERMINED,
+            (*why, way_out([*missing, *group], model, run.scenario.layout, _sensor(run), values)),
+        )
     return None
 
 
@@ -245,10 +254,39 @@ def _trade_off(run: CalibrationRun, solver: str) -> str:
     )
 
 
-def way_out(names: Sequence[str], model: KinematicModel, layout: Layout) -> str:
+def unseen_lengths(names: Sequence[str], model: KinematicModel, sensor: Sensor | None) -> tuple[str, ...]:
+    """The model's lengths among ``names`` when ``sensor`` measures none (a gyro): their common
+    scale is what no drive determines; the last is the one the others' ratios are stated over."""
+    lengths = length_params(model)
+    if sensor is None or not sensor.lengths_unseen or not any(n in lengths for n in names):
+        return ()
+    return lengths
+
+
+def ratios(lengths: Sequence[str], values: Mapping[str, float]) -> str:
+    """Each length over the last of ``lengths`` at ``values``, in words."""
+    last = lengths[-1]
+    return ", ".join(f"{n}/{last} = {values[n] / values[last]:.6g}" for n in lengths[:-1] if values[last])
+
+
+def way_out(
+    names: Sequence[str],
+    model: KinematicModel,
+    layout: Layout,
+    sensor: Sensor | None = None,
+    values: Mapping[str, float] | None = None,
+) -> str:
     """What lets a drive determine the parameters ``names`` (of ``layout``) that trade off on this
-    one, in words."""
+    one, in words (``sensor``: the reference, when it may be what leaves them free; ``values``: an
+    estimate whose ratios it then states)."""
     names = list(dict.fromkeys(names))
+    if lengths := unseen_lengths(names, model, sensor):
+        said = f" ({ratios(lengths, values)})" if values and all(n in values for n in lengths) else ""
+        return (
+            f"{sensor.lengths_unseen if sensor else ''}: only the ratios of {', '.join(lengths)} are "
+            f"determined{said}, not their scale; next: give one as measured (known: {{{lengths[-1]}: "
+            "<metres>}), or fit beside a reference that measures distance"
+        )
     if any(layout.in_block(n, CLOCK) for n in names):
         return (
             "next: give the lag (alignment.tracker_lag: <seconds>, from how the clocks are synchronised), "

@@ -104,6 +104,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "simulate": (
         "nlp-calib simulate --out my_drive.txt --records 2000 --seed 3 --latency 0.05",
         "nlp-calib simulate --lidar --out lidar_drive --duration 120",
+        "nlp-calib simulate --imu --out gyro_drive --duration 120 --latency 0.02",
     ),
     "check": (
         "nlp-calib check out/demo/calibration.yaml todays_drive.txt",
@@ -340,6 +341,12 @@ def _add_simulate(sub: Any) -> None:
         "/tf_static, and --out.truth.json (docs/lidar.md); --outliers: the share of degraded scans",
     )
     kind.add_argument(
+        "--imu",
+        action="store_true",
+        help="a tilted gyro with a bias: a ROS 2 bag (folder --out) of /imu, /joint_states and /tf_static, "
+        "and --out.truth.json (docs/imu.md); --latency: how late its driver stamps the rates",
+    )
+    kind.add_argument(
         "--vendor",
         action="store_true",
         help="a robot's own odometry integrated with a wrong model (--out: t x y θ), a tracker's TUM file "
@@ -360,7 +367,7 @@ def _add_simulate(sub: Any) -> None:
         ("--noise-theta", "tracker_noise_theta", "tracker noise, rad"),
         ("--outliers", "outlier_fraction", "fraction of outliers"),
         ("--latency", "latency_s", "tracker latency, s (a camera's stamp offset)"),
-        ("--duration", "duration_s", "seconds of driving (a camera simulation only)"),
+        ("--duration", "duration_s", "seconds of driving (a camera, lidar or gyro simulation)"),
     ):
         limit = CLI_LIMITS[field]
         p.add_argument(flag, type=_in(limit), default=None, dest=field, help=f"{what}: {limit.describe()}")

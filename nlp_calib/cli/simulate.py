@@ -1,5 +1,5 @@
-"""``nlp-calib simulate``: a synthetic drive log (or a camera's trajectory and joints, a lidar's bag,
-a vendor's odometry) with its truth."""
+"""``nlp-calib simulate``: a synthetic drive log (or a camera's trajectory and joints, a lidar's or a
+gyro's bag, a vendor's odometry) with its truth."""
 
 from __future__ import annotations
 
@@ -13,9 +13,16 @@ from nlp_calib.core import interrupts
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import check_output_dir
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
-from nlp_calib.pipeline.simconfig import camera_options, lidar_options, simulation_options, vendor_options
+from nlp_calib.pipeline.simconfig import (
+    camera_options,
+    imu_options,
+    lidar_options,
+    simulation_options,
+    vendor_options,
+)
 from nlp_calib.simulation import simulate_to_file, truth_path
 from nlp_calib.simulation.camera import camera_paths, simulate_camera, write_camera_simulation
+from nlp_calib.simulation.imu import imu_paths, simulate_imu, write_imu_simulation
 from nlp_calib.simulation.lidar import lidar_paths, simulate_lidar, write_lidar_simulation
 from nlp_calib.simulation.vendor import write_vendor_simulation
 
@@ -43,6 +50,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         return _simulate_lidar(args, overrides)
     if getattr(args, "vendor", False):
         return _simulate_vendor(args, overrides)
+    if getattr(args, "imu", False):
+        return _simulate_imu(args, overrides)
     if out.suffix.lower() == ".tum":
         return _simulate_camera(args, overrides)
     opts = simulation_options(args.config, overrides)
@@ -88,6 +97,23 @@ def _simulate_lidar(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
     print(
         f"a scenario reads it as: dataset: {{bag: {bag}, joint_states: /joint_states, joints: "
         "[left_wheel_joint, right_wheel_joint], scan: /scan}"
+    )
+    return 0
+
+
+def _simulate_imu(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
+    """A gyro's bag and the truth beside it."""
+    opts = imu_options(args.config, overrides)
+    bag, truth = _staged(
+        args, imu_paths(args.out), functools.partial(write_imu_simulation, simulate_imu(opts))
+    )
+    print(
+        f"wrote {bag} ({opts.duration_s:g} s, the gyro at {opts.imu_rate_hz:g} Hz stamped "
+        f"{1000 * opts.stamp_offset_s:g} ms late) and {truth}"
+    )
+    print(
+        f"a scenario reads it as: dataset: {{bag: {bag}, joint_states: /joint_states, joints: "
+        "[left_wheel_joint, right_wheel_joint], imu: /imu}, with sensor: gyro (docs/imu.md)"
     )
     return 0
 

@@ -28,7 +28,8 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class RelativeMotions:
     """Increment ``k`` joins record ``first[k]`` to record ``last[k] > first[k]``; ``z[k]`` is the
-    sensor's motion over it ``(x, y, θ)`` (m, rad) in its frame at ``first[k]``; ``quality`` maps
+    sensor's motion over it ``(x, y, θ)`` (m, rad) in its frame at ``first[k]`` (a gyro's: its
+    rates integrated over it and its duration, ``(∫ω_x, ∫ω_y, ∫ω_z, Δt)``); ``quality`` maps
     a measure's name to its value per increment; ``line_numbers`` says where each came from (a
     file's line, a scan's message number)."""
 
@@ -40,7 +41,12 @@ class RelativeMotions:
 
     def __post_init__(self) -> None:
         n = self.first.shape[0]
-        if self.last.shape != (n,) or self.z.shape != (n, 3) or self.line_numbers.shape != (n,):
+        if (
+            self.last.shape != (n,)
+            or self.z.shape[:1] != (n,)
+            or self.z.ndim != 2
+            or self.line_numbers.shape != (n,)
+        ):
             raise ValueError("increments: first, last, z and line_numbers must have one entry per increment")
         if n and np.any(self.last <= self.first):
             raise ValueError("increments: each must end at a later record than it starts")
@@ -82,7 +88,10 @@ class RelativeMotions:
         each increment itself)."""
         steps = np.zeros((max(n_records - 1, 0), 3))
         one = self.single()
-        steps[self.first[one]] = self.z[one]
+        if self.z.shape[1] == 3:
+            steps[self.first[one]] = self.z[one]
+        else:  # a gyro's integrated rates: the turn about its own z axis, as a heading
+            steps[self.first[one], 2] = self.z[one, 2]
         out = poses.accumulate(np.zeros(3), steps)
         out[:, 2] = wrap_angle(out[:, 2])
         return out

@@ -348,9 +348,16 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
         start=a.where,
         noise=a.noise,
         plan=ahead,
-        way_out=way_out(loose, fns.model, fns.layout) if loose else "",
+        way_out=way_out(loose, fns.model, fns.layout, fns.sensor, _values(fns, a.x, d.start.x_fixed))
+        if loose
+        else "",
         time_s=time.perf_counter() - t0,
     )
+
+
+def _values(fns: ProblemFunctions, x: np.ndarray, x_fixed: np.ndarray) -> dict[str, float]:
+    """Every parameter's value at the free ``x`` and the fixed ``x_fixed``."""
+    return {**dict(zip(fns.free, map(float, x))), **dict(zip(fns.fixed, map(float, x_fixed)))}
 
 
 def refuse(report: Preflight, hint: str = "") -> None:

@@ -12,6 +12,7 @@ from nlp_calib.core.ranges import Range
 from nlp_calib.simulation import LIMITS, SimulationOptions
 from nlp_calib.simulation.camera import LIMITS as CAMERA_LIMITS
 from nlp_calib.simulation.camera import CameraSimulationOptions
+from nlp_calib.simulation.imu import ImuSimulationOptions
 from nlp_calib.simulation.lidar import LidarSimulationOptions
 from nlp_calib.simulation.options import flat_hints
 from nlp_calib.simulation.vendor import VendorSimulationOptions
@@ -40,6 +41,14 @@ LIDAR_OVERRIDES: Mapping[str, tuple[str, ...]] = {
     "trajectory": ("drive", "trajectory"),
     "duration_s": ("duration_s",),
     "outlier_fraction": ("degraded_fraction",),
+}
+#: The command-line options a gyro's simulation reads (its driver's late stamps: --latency).
+IMU_OVERRIDES: Mapping[str, tuple[str, ...]] = {
+    "seed": ("seed",),
+    "model": ("model",),
+    "trajectory": ("drive", "trajectory"),
+    "duration_s": ("duration_s",),
+    "latency_s": ("stamp_offset_s",),
 }
 VENDOR_OVERRIDES: Mapping[str, tuple[str, ...]] = {
     "seed": ("seed",),
@@ -71,6 +80,15 @@ def lidar_options(config: Path | None, overrides: Mapping[str, Any]) -> LidarSim
     raw, source = _config(config)
     _overridden(raw, overrides, LIDAR_OVERRIDES, "a lidar simulation (--lidar)")
     options: LidarSimulationOptions = from_mapping(LidarSimulationOptions, raw, source)
+    return options
+
+
+def imu_options(config: Path | None, overrides: Mapping[str, Any]) -> ImuSimulationOptions:
+    """A gyro simulation's options from ``config`` (a YAML mapping of
+    :class:`~nlp_calib.simulation.imu.ImuSimulationOptions`' fields), then ``overrides``."""
+    raw, source = _config(config)
+    _overridden(raw, overrides, IMU_OVERRIDES, "a gyro simulation (--imu)")
+    options: ImuSimulationOptions = from_mapping(ImuSimulationOptions, raw, source)
     return options
 
 

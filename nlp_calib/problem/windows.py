@@ -431,10 +431,12 @@ def _log_windows(
     if inc is None:
         first = offset + window_starts(log.n_records - 1, horizon, stride)
         return first, first + horizon, None
-    if fns.sensor.group != "SE(2)":
+    if inc.z.shape[1] != fns.sensor.z_rows:
+        what, needs = ("planar motions", "a planar sensor (sensor: planar)")
+        if inc.z.shape[1] != 3:
+            what, needs = ("a gyro's integrated rates", "a gyro (sensor: gyro)")
         raise ProblemError(
-            f"{log.path}: its reference gives planar motions (increments); they need a planar sensor "
-            f"(sensor: planar), not {fns.sensor.kind}"
+            f"{log.path}: its reference gives {what} (increments); they need {needs}, not {fns.sensor.kind}"
         )
     k = np.arange(0, inc.n, stride)
     if not fns.prefix and np.any(inc.last[k] - inc.first[k] != 1):

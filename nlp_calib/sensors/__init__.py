@@ -12,6 +12,7 @@ from collections.abc import Callable
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.sensors.base import BaseMotion, Reference, Sensor, SensorStart
 from nlp_calib.sensors.camera import CameraPose
+from nlp_calib.sensors.gyro import Gyro
 from nlp_calib.sensors.planar import PlanarPose
 
 #: Each sensor by the name a scenario's ``sensor`` gives it, made for a ``scale`` (``fixed``, or
@@ -19,11 +20,12 @@ from nlp_calib.sensors.planar import PlanarPose
 SENSORS: dict[str, Callable[[str], Sensor]] = {
     "planar": lambda scale: PlanarPose(),
     "3d": lambda scale: CameraPose(scale == "free"),
+    "gyro": lambda scale: Gyro(scale == "free"),
 }
 #: Poses are metric (``fixed``) or known up to scale (``free``: the sensor then estimates it).
 SCALES = ("fixed", "free")
-#: Sensors whose poses may be known up to scale.
-SCALE_FREE = frozenset({"3d"})
+#: Sensors whose scale may be fitted (a camera's trajectory known up to scale, a gyro's scale factor).
+SCALE_FREE = frozenset({"3d", "gyro"})
 
 
 @functools.cache
@@ -35,7 +37,9 @@ def sensor_for(kind: str, scale: str = "fixed") -> Sensor:
         raise ProblemError(f"scale must be one of {', '.join(SCALES)}, got {scale!r}")
     if scale == "free" and kind not in SCALE_FREE:
         which = ", ".join(sorted(SCALE_FREE))
-        raise ProblemError(f"a free scale needs a 3-D sensor (mount: {which}): {kind} poses are metric")
+        raise ProblemError(
+            f"a free scale needs a 3-D sensor or a gyro (mount: {which}): {kind} poses are metric"
+        )
     return SENSORS[kind](scale)
 
 

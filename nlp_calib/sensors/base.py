@@ -88,6 +88,8 @@ class Sensor(Protocol):
     def held_why(self) -> str: ...  # why ``held`` are held, in words
     @property
     def convention(self) -> str: ...  # what its parameters mean, where the names do not say it
+    @property
+    def lengths_unseen(self) -> str: ...  # why it determines no length, in words ("": it measures them)
 
     # --- the error term (symbolic) -------------------------------------------------------------
     def residual(self, z: ca.SX, mount: ca.SX, M: ca.SX) -> ca.SX: ...

@@ -66,6 +66,7 @@ class CameraPose:
     start_span_s: ClassVar[float | None] = 1.0
     held_why: ClassVar[str] = HELD_WHY
     reference: ClassVar[Mapping[str, Reference]] = MOUNT_REFERENCE
+    lengths_unseen: ClassVar[str] = ""
 
     def __init__(self, scale_free: bool) -> None:
         self.scale_free = scale_free

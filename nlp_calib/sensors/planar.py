@@ -47,6 +47,7 @@ class PlanarPose:
     start_span_s: ClassVar[float | None] = None
     held_why: ClassVar[str] = ""
     convention: ClassVar[str] = ""
+    lengths_unseen: ClassVar[str] = ""
 
     # --- the error term ------------------------------------------------------------------------
 

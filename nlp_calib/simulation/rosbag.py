@@ -17,6 +17,7 @@ from nlp_calib.core.errors import UsageError
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
+IMU = "sensor_msgs/msg/Imu"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TF = "tf2_msgs/msg/TFMessage"
 #: A message to write: topic, type, record time (ns) and how to make it from the type store.
@@ -69,6 +70,27 @@ def laser_scan(
         )
 
     return ("/scan", LASER_SCAN, ns, build)
+
+
+def imu(ns: int, frame: str, rate: Sequence[float], accel: Sequence[float]) -> Message:
+    """An Imu stamped ``ns``: angular velocity (rad/s) and linear acceleration (m/s²) in its frame,
+    no orientation (its covariance's first element −1, as REP 145 says)."""
+
+    def build(ts: Any) -> Any:
+        vec = ts.types["geometry_msgs/msg/Vector3"]
+        unknown = np.zeros(9)
+        unknown[0] = -1.0
+        return ts.types[IMU](
+            header=header(ts, ns, frame),
+            orientation=ts.types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+            orientation_covariance=unknown,
+            angular_velocity=vec(x=float(rate[0]), y=float(rate[1]), z=float(rate[2])),
+            angular_velocity_covariance=np.zeros(9),
+            linear_acceleration=vec(x=float(accel[0]), y=float(accel[1]), z=float(accel[2])),
+            linear_acceleration_covariance=np.zeros(9),
+        )
+
+    return ("/imu", IMU, ns, build)
 
 
 def _transform(ts: Any, ns: int, parent: str, child: str, xyz: Sequence[float], yaw: float) -> Any:

@@ -13,6 +13,7 @@ from typing import Any
 from nlp_calib.core.config import fail
 from nlp_calib.sources.bag import BagSource
 from nlp_calib.sources.base import DatasetSource
+from nlp_calib.sources.imu import GyroCsvSource, ImuSource
 from nlp_calib.sources.joints import JointLogSource
 from nlp_calib.sources.lidar import LidarSource
 from nlp_calib.sources.motions import MotionsSource
@@ -21,7 +22,17 @@ from nlp_calib.sources.vendor import VendorSource
 
 #: The dataset sources, in the order they are asked whether they read a scenario's entry.
 SOURCES: dict[str, type[DatasetSource]] = {
-    s.kind: s for s in (LidarSource, VendorSource, BagSource, MotionsSource, JointLogSource, TextSource)
+    s.kind: s
+    for s in (
+        LidarSource,
+        ImuSource,
+        VendorSource,
+        BagSource,
+        MotionsSource,
+        GyroCsvSource,
+        JointLogSource,
+        TextSource,
+    )
 }
 
 
@@ -45,6 +56,8 @@ __all__ = [
     "SOURCES",
     "BagSource",
     "DatasetSource",
+    "GyroCsvSource",
+    "ImuSource",
     "JointLogSource",
     "LidarSource",
     "MotionsSource",

@@ -1,0 +1,111 @@
+"""A gyro's closed-form start: its tilt and biases, then the wheels' turning, from the data alone.
+
+Over each increment the gyro integrates ``z_ω ≈ v·Δθ + b·Δt`` (``v = s·Rᵀ·e_z``: the base's
+vertical in the IMU's frame): with the heading changes ``Δθ`` the wheels predict at some
+kinematic parameters, ``v`` and ``b`` are a linear least-squares fit, and ``v``'s direction is
+the tilt whatever the wheels' error (it only scales ``Δθ``). The gyro's heading change,
+``v̂ᵀ(z_ω − b·Δt)``, then fits the model's turning by Levenberg-Marquardt steps (numeric
+Jacobians of the model's own motion). A gyro leaves the lengths' common scale free: a known
+length sets it, else it is put where the longest length of the simulator's guess of the model is
+that guess (the fit's observability then says the lengths are not determined). Two rounds, so the
+biases are fitted against the fitted turning.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from nlp_calib.models.base import KinematicModel
+from nlp_calib.models.radians import default_guess
+from nlp_calib.sensors.base import BaseMotion
+from nlp_calib.sensors.mount import length_params
+
+#: Rounds of (tilt and biases, then turning), and damped Gauss-Newton steps per round.
+ROUNDS = 2
+STEPS = 30
+#: The weak pull towards the defaults (of the data's own curvature), which holds the free scale.
+PULL = 1e-6
+
+
+def tilt_of(v: np.ndarray) -> tuple[float, float]:
+    """Roll and pitch (rad) whose ``Rᵀ·e_z`` is the direction of ``v``."""
+    u = v / max(float(np.linalg.norm(v)), 1e-300)
+    return float(np.arctan2(u[1], u[2])), float(np.arcsin(np.clip(-u[0], -1.0, 1.0)))
+
+
+def axis_and_bias(z: np.ndarray, turn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``v`` and ``b`` of ``z_ω ≈ v·Δθ + b·Δt`` by least squares (``z`` ``(4, n)``)."""
+    A = np.column_stack([turn, z[3]])
+    coef, *_ = np.linalg.lstsq(A, z[:3].T, rcond=None)
+    return coef[0], coef[1]
+
+
+def _turning(
+    names: list[str], k: dict[str, float], heading: np.ndarray, base_motion: BaseMotion
+) -> dict[str, float]:
+    """The parameters ``names`` fitting the model's heading changes to ``heading`` (Levenberg-
+    Marquardt in units of each parameter's size, weakly pulled to its start)."""
+    k0 = dict(k)
+    scale = np.array([max(abs(k0[n]), 1e-3) for n in names])
+    y0 = np.array([k0[n] for n in names]) / scale
+
+    def turns(y: np.ndarray) -> np.ndarray:
+        return np.asarray(base_motion({**k0, **dict(zip(names, y * scale))}))[2]
+
+    def cost(y: np.ndarray, pull: float) -> float:
+        return float(np.sum((turns(y) - heading) ** 2) + pull * np.sum((y - y0) ** 2))
+
+    y, damping, pull = y0.copy(), 1e-3, 0.0
+    for _ in range(STEPS):
+        r = turns(y) - heading
+        J = np.column_stack([(turns(y + 1e-6 * e) - turns(y - 1e-6 * e)) / 2e-6 for e in np.eye(y.size)])
+        H = J.T @ J
+        pull = pull or PULL * max(float(np.trace(H)), 1e-300)
+        g = J.T @ r + pull * (y - y0)
+        before = cost(y, pull)
+        while damping < 1e12:
+            step = -np.linalg.solve(H + (pull + damping * np.trace(H) / y.size) * np.eye(y.size), g)
+            if cost(y + step, pull) < before:
+                y, damping = y + step, damping / 3.0
+                break
+            damping *= 4.0
+        else:
+            break
+    return {**k0, **dict(zip(names, map(float, y * scale)))}
+
+
+def _anchored(
+    model: KinematicModel, k: dict[str, float], guess: Mapping[str, float], known: Mapping[str, float]
+) -> dict[str, float]:
+    """``k`` with its lengths' common scale, which a gyro cannot see, put where the longest of the
+    guess's lengths is its guessed value (unless a length is known: then it is already set)."""
+    lengths = [n for n in length_params(model) if n in k]
+    if not lengths or any(n in known for n in lengths):
+        return k
+    anchor = max(lengths, key=lambda n: abs(guess[n]))
+    if k[anchor] == 0.0:
+        return k
+    c = guess[anchor] / k[anchor]
+    return {n: v * c if n in lengths else v for n, v in k.items()}
+
+
+def gyro_start(
+    model: KinematicModel, z: np.ndarray, base_motion: BaseMotion, known: Mapping[str, float]
+) -> dict[str, float]:
+    """Every kinematic parameter, the biases and the tilt from the increments ``z`` ``(4, n)``."""
+    guess = {**default_guess(model), **model.defaults}
+    k = {n: float(known.get(n, guess[n])) for n in model.kinematic_params}
+    free = [n for n in model.kinematic_params if n not in known]
+    v, b = np.zeros(3), np.zeros(3)
+    for _ in range(ROUNDS):
+        v, b = axis_and_bias(z, np.asarray(base_motion(k))[2])
+        u = v / max(float(np.linalg.norm(v)), 1e-300)
+        heading = u @ (z[:3] - b[:, None] * z[3])
+        if free:
+            k = _turning(free, k, heading, base_motion)
+    k = _anchored(model, k, guess, known)
+    roll, pitch = tilt_of(v)
+    bias = dict(zip(("gyro_bias_x", "gyro_bias_y", "gyro_bias_z"), map(float, b)))
+    return {**k, **bias, "imu_roll": roll, "imu_pitch": pitch}

@@ -1,0 +1,125 @@
+"""A gyro as the reference: simulated Imu bags (bias, noise, a tilt, late stamps), the wheels' turning,
+the gyro's biases and tilt and its clock offset fitted together; the lengths' scale said to be
+what a gyro alone cannot determine."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import cli
+
+from nlp_calib.logs.imu import GyroRates, integrated
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline.preflight import preflight
+from nlp_calib.results.preflight import NOT_DETERMINED
+from nlp_calib.simulation.imu import ImuSimulationOptions, simulate_imu, write_imu_simulation
+
+pytest.importorskip("rosbags")
+
+RADIANS = {"k_left": "left_wheel_radius", "k_right": "right_wheel_radius", "baseline": "wheel_separation"}
+DATASET = {
+    "joint_states": "/joint_states",
+    "joints": ["left_wheel_joint", "right_wheel_joint"],
+    "imu": "/imu",
+}
+SCENARIO = {
+    "model": "diff_drive",
+    "sensor": "gyro",
+    "initial_guess": "auto",
+    "alignment": {"tracker_lag": "auto"},
+    "information": {"translation": 1.0e8, "rotation": 1.0e8},
+    "robust": {"kernel": "huber", "delta": 3.0},
+    "solvers": ["gauss_newton"],
+}
+#: A 5° roll, a gyro stamped 20 ms late.
+ROLL, LATE = float(np.radians(5.0)), 0.02
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, float]]:
+    """40 s of driving, the IMU rolled 5°, its driver stamping 20 ms late."""
+    folder = tmp_path_factory.mktemp("imu")
+    opts = ImuSimulationOptions(duration_s=40.0, seed=11, truth={"imu_roll": ROLL}, stamp_offset_s=LATE)
+    bag, truth_file = write_imu_simulation(simulate_imu(opts), folder / "gyro")
+    truth = {RADIANS.get(k, k): v for k, v in json.loads(truth_file.read_text())["params"].items()}
+    return bag, truth
+
+
+def _scenario(bag: Path, **more: object) -> object:
+    return scenario_from_mapping(
+        {**SCENARIO, **more, "dataset": {"bag": str(bag), **DATASET}}, "gyro", bag.parent
+    )
+
+
+def test_integration_intervals_add_up_the_rates() -> None:
+    """Trapezoids of a known rate: ∫(a + b·t) over each interval, its duration last; a gap left out."""
+    t = np.concatenate([np.arange(0.0, 1.0, 0.01), np.arange(1.5, 2.0, 0.01)])
+    w = np.column_stack([0.1 + 0.0 * t, 2.0 * t, -t])
+    rates = GyroRates("test", np.round(t * 1e9).astype(np.int64), w, np.arange(t.size))
+    table = integrated(rates, 0.1)
+    a, b = table.start_ns * 1e-9, table.end_ns * 1e-9
+    assert np.all(b - a < 0.2)  # no interval across the half-second gap
+    expected = np.column_stack([0.1 * (b - a), b**2 - a**2, -0.5 * (b**2 - a**2), b - a])
+    np.testing.assert_allclose(table.z, expected, atol=1e-12)
+
+
+def test_a_gyro_with_a_known_length_calibrates_everything(drive: tuple[Path, dict[str, float]]) -> None:
+    bag, truth = drive
+    sc = _scenario(bag, known={"wheel_separation": truth["wheel_separation"]})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()  # type: ignore[arg-type]
+    est, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
+    for name in ("left_wheel_radius", "right_wheel_radius", "gyro_bias_x", "gyro_bias_y", "gyro_bias_z"):
+        assert abs(est[name] - truth[name]) < 3 * std[name], name
+    # The 5° tilt recovered, and the 20 ms late stamps found within 2 ms.
+    assert abs(est["imu_roll"] - ROLL) < 3 * std["imu_roll"] and abs(est["imu_roll"] - ROLL) < 0.005
+    assert abs(est["imu_pitch"] - truth["imu_pitch"]) < 3 * std["imu_pitch"]
+    assert abs(est["tracker_lag"] - LATE) < 0.002
+    # The hand-off: the IMU's joint rotated by the tilt, its height from /tf_static.
+    mount = run.reports["gauss_newton"].mount
+    assert mount is not None and mount.child == "imu_link"
+    assert mount.rpy[0] == pytest.approx(est["imu_roll"]) and mount.xyz[2] == pytest.approx(0.15)
+    assert set(mount.calibrated) == {"roll", "pitch"}
+
+
+def test_a_gyro_alone_leaves_the_lengths_scale_not_determined(drive: tuple[Path, dict[str, float]]) -> None:
+    bag, truth = drive
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        report = preflight(_scenario(bag))  # type: ignore[arg-type]
+    loose = {p.name for p in report.parameters if p.status == NOT_DETERMINED}
+    assert {"left_wheel_radius", "right_wheel_radius", "wheel_separation"} <= loose
+    assert not loose & {"gyro_bias_z", "imu_roll", "imu_pitch", "tracker_lag"}
+    assert "known: {wheel_separation: <metres>}" in report.way_out
+    # The ratios it does determine, stated with their values.
+    ratio = truth["left_wheel_radius"] / truth["wheel_separation"]
+    said = report.way_out.split("left_wheel_radius/wheel_separation = ")[1].split(",")[0]
+    assert float(said) == pytest.approx(ratio, rel=2e-3)
+
+
+def test_simulate_writes_a_gyro_bag_with_its_truth(tmp_path: Path) -> None:
+    proc = cli("simulate", "--imu", "--out", str(tmp_path / "g"), "--duration", "5", "--latency", "0.02")
+    assert proc.returncode == 0, proc.stderr
+    truth = json.loads((tmp_path / "g.truth.json").read_text())["params"]
+    assert truth["tracker_lag"] == 0.02 and {"gyro_bias_z", "imu_roll", "imu_pitch", "gyro_scale"} <= set(
+        truth
+    )
+    assert "imu: /imu" in proc.stdout
+
+
+def test_a_planar_sensor_refuses_a_gyros_increments(drive: tuple[Path, dict[str, float]]) -> None:
+    bag, _ = drive
+    sc = scenario_from_mapping(
+        {**SCENARIO, "sensor": "planar", "dataset": {"bag": str(bag), **DATASET}}, "gyro", bag.parent
+    )
+    with (
+        pytest.raises(Exception, match=r"a gyro's integrated rates .* need a gyro"),
+        warnings.catch_warnings(),
+    ):
+        warnings.simplefilter("ignore")
+        Calibration(sc).run()
