@@ -532,7 +532,7 @@ def calibrated_drift(
     drift = segment_drift(fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS))
     floor = windows.input_noise_std
     noise, reference_var = drift_noise(drift, floor)
-    noise = covering_noise(drift, noise, reference_var, floor)
+    noise = covering_noise(drift, noise, floor)
     return Drift(inputs, reference, drift, noise, reference_var)
 
 

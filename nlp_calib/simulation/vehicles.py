@@ -5,7 +5,7 @@ rolling radius in m per rad, the effective track at a slow turn and its growth w
 rate) through straight stretches, arcs and pivot turns at ``spin_rate`` (several radians per
 motion: more than π per increment at the default rate). The wheels are the model's own law, but
 on a pivot the ground lets the base turn a random share up to ``pivot_slip`` less than that law
-says (slip the model does not hold). The joints are logged at ``joint_rate_hz`` while their
+says, or more (slip the model does not hold). The joints are logged at ``joint_rate_hz`` while their
 positions update only at ``encoder_update_hz`` (a slow wheel driver: each message repeats the
 last update); a lidar matcher reports the sensor's motion over each ``motion_span_s`` with white
 noise, its heading wrapped to (−π, π] as a matcher gives it. The simulator integrates the base on
@@ -164,13 +164,14 @@ def simulate_skid_spins(opts: SkidSpinOptions) -> VehicleSimulation:
     n = int(opts.duration_s / FINE_S)
     speed, rate, pivot = _segments(opts, rng, n)
     # The wheels' own turn rate: the model's law ω = ω_w/(1 + turn_slip·|ω_w|) solved for ω_w; on a
-    # pivot the ground turns the base a random share less than that (one share per pivot).
+    # pivot the ground turns the base a random share off that (one share per pivot, either way:
+    # a share of one sign on every pivot would be the law's own slip, and the truth no longer its).
     wheels = rate / (1.0 - t["turn_slip"] * np.abs(rate))
     starts = np.flatnonzero(np.diff(np.concatenate([[0], pivot.astype(int)])) == 1)
     share = np.zeros(n)
     for a in starts:
         b = a + int(np.argmin(pivot[a:])) if not pivot[a:].all() else n
-        share[a:b] = rng.uniform(0.0, opts.pivot_slip)
+        share[a:b] = rng.uniform(-opts.pivot_slip, opts.pivot_slip)
     rate = rate * (1.0 - share)
     base = integrate_base(speed * FINE_S, rate * FINE_S)
     half = 0.5 * t["baseline"] * wheels
@@ -194,7 +195,7 @@ def simulate_skid_spins(opts: SkidSpinOptions) -> VehicleSimulation:
     z = poses.between(sensor[idx[:, 0]], sensor[idx[:, 1]])
     z += rng.normal(0.0, [opts.motion_noise_xy, opts.motion_noise_xy, opts.motion_noise_theta], z.shape)
     z[:, 2] = np.angle(np.exp(1j * z[:, 2]))
-    slipping = np.concatenate([[0], np.cumsum(share > 0)])
+    slipping = np.concatenate([[0], np.cumsum(share != 0)])
     spoiled = slipping[idx[:, 1]] > slipping[idx[:, 0]]
     return VehicleSimulation(
         joint_time_s=joint_t,
