@@ -80,7 +80,7 @@ def test_the_skid_steer_simulator_spins_past_pi_and_checks_its_options() -> None
 def test_a_skid_steer_spinning_past_pi_ends_right_with_covariances_its_windows_show(
     tmp_path: Path, seed: int, pivot_slip: float
 ) -> None:
-    run, opts, sim = _skid_run(tmp_path, seed, pivot_slip)
+    run, opts, _ = _skid_run(tmp_path, seed, pivot_slip)
     # The truth in the joint form's names (the counts form's k_left is a radius in m per rad here).
     truth = {JOINT_NAMES.get(n, n): v for n, v in opts.truth.items()}
     # The start survived the wrapped increments: positive radii near the truth, no mirror image.

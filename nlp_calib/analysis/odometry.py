@@ -179,10 +179,10 @@ COVERED = 0.95
 
 def covering_noise(drift: Drift, noise: np.ndarray, floor: np.ndarray) -> np.ndarray:
     """``noise`` raised, where its propagated 2σ holds fewer than :data:`COVERED` of the segment
-    errors of any component (x, y or heading), by adding to every noisy input's variance one share of their mean variance, the
-    smallest that makes it hold them: the odometry's noise is at least the drift the segments show
-    (errors that do not grow as a random walk, such as a slow encoder's timing, are still covered
-    at the segments' own length), shared by the inputs the moments could not tell apart. The
+    errors (x, y and heading together), by adding to every noisy input's variance one share of
+    their mean variance, the smallest that makes it hold them: the odometry's noise is at least
+    the drift the segments show (errors that do not grow as a random walk, such as a slow
+    encoder's timing, are still covered at the segments' own length), shared by the inputs the moments could not tell apart. The
     errors are held against the odometry's σ alone: over a window of one increment the
     reference's noise and the wheels' cannot be told apart, and a filter must not trust the wheels
     for what the windows show they miss."""
@@ -193,7 +193,7 @@ def covering_noise(drift: Drift, noise: np.ndarray, floor: np.ndarray) -> np.nda
     for _ in range(8):
         sigma = _sigmas(drift, noise, np.zeros(drift.terms.shape[1]))
         ratio = np.abs(drift.errors) / np.maximum(sigma, 1e-300)
-        need = float(np.max(np.quantile(ratio, COVERED, axis=0))) / 2.0  # each component covered
+        need = float(np.quantile(ratio, COVERED)) / 2.0
         if need <= 1.0 + 1e-6:
             break
         noise[noisy] = np.sqrt(noise[noisy] ** 2 + (need**2 - 1.0) * np.mean(noise[noisy] ** 2))

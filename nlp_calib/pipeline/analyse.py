@@ -22,7 +22,6 @@ from nlp_calib.analysis.determinacy import Information
 from nlp_calib.analysis.handoff import odometry_noise
 from nlp_calib.analysis.metrics import each_metrics, geometry, integrate, segments
 from nlp_calib.analysis.observability import analyse as observability_of
-from nlp_calib.analysis.odometry import Drift as DriftSegments
 from nlp_calib.analysis.odometry import (
     DRIFT_LENGTHS,
     covering_noise,
@@ -31,6 +30,7 @@ from nlp_calib.analysis.odometry import (
     propagate,
     segment_drift,
 )
+from nlp_calib.analysis.odometry import Drift as DriftSegments
 from nlp_calib.analysis.plan import Setting, plan
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
 from nlp_calib.core import memory

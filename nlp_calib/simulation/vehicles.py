@@ -86,7 +86,9 @@ class SkidSpinOptions:
                 raise OptionsError(f"{name} {reason}")
         unknown = sorted(set(self.truth) - set(SKID_TRUTH))
         if unknown:
-            raise OptionsError(f"unknown parameter(s) {unknown}; the skid-steer's are {', '.join(SKID_TRUTH)}")
+            raise OptionsError(
+                f"unknown parameter(s) {unknown}; the skid-steer's are {', '.join(SKID_TRUTH)}"
+            )
         truth = {**SKID_TRUTH, **self.truth}
         if truth["turn_slip"] * self.spin_rate >= 0.9 or min(truth["k_left"], truth["k_right"]) <= 0:
             raise OptionsError("turn_slip × spin_rate must stay under 0.9 and the radii positive")
@@ -138,7 +140,9 @@ def _ns(t_s: np.ndarray) -> np.ndarray:
     return np.round(np.asarray(t_s) * 1e9).astype(np.int64) + EPOCH_NS
 
 
-def _segments(opts: SkidSpinOptions, rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _segments(
+    opts: SkidSpinOptions, rng: np.random.Generator, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per fine step: the base's speed (m/s), turn rate (rad/s) and whether it pivots, in segments
     of 2 to 6 s (a pivot's turn rate, a drive's speed and curvature drawn per segment)."""
     speed, rate, pivot = np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool)
