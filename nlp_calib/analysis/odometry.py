@@ -182,10 +182,10 @@ def covering_noise(drift: Drift, noise: np.ndarray, floor: np.ndarray) -> np.nda
     errors (x, y and heading together), by adding to every noisy input's variance one share of
     their mean variance, the smallest that makes it hold them: the odometry's noise is at least
     the drift the segments show (errors that do not grow as a random walk, such as a slow
-    encoder's timing, are still covered at the segments' own length), shared by the inputs the moments could not tell apart. The
-    errors are held against the odometry's σ alone: over a window of one increment the
-    reference's noise and the wheels' cannot be told apart, and a filter must not trust the wheels
-    for what the windows show they miss."""
+    encoder's timing, are still covered at the segments' own length), shared by the inputs the
+    moments could not tell apart. The errors are held against the odometry's σ alone: over a
+    window of one increment the reference's noise and the wheels' cannot be told apart, and a
+    filter must not trust the wheels for what the windows show they miss."""
     noise = np.asarray(noise, dtype=float).copy()
     noisy = np.asarray(floor, dtype=float) > 0
     if drift.errors.shape[0] == 0 or not noisy.any():
