@@ -119,9 +119,7 @@ def _check(a: Path, b: Path, folder: Path) -> ConsistencyCheck:
     """The joint run's own check: each log fitted alone against the two fitted together."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        joint = Calibration(
-            scenario_from_mapping({**RAW, "datasets": [str(a), str(b)]}, "j", folder)
-        ).run()
+        joint = Calibration(scenario_from_mapping({**RAW, "datasets": [str(a), str(b)]}, "j", folder)).run()
     assert joint.checks.consistency is not None
     return joint.checks.consistency
 

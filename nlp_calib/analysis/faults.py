@@ -50,6 +50,7 @@ from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results.faults import (
     ABSOLUTE_KINDS,
     MATCH_KINDS,
+    PIVOT_RADIUS_M,
     TRACKER_KINDS,
     Fault,
     FaultReport,
@@ -125,13 +126,15 @@ def tracker_faults(log: Log, sensor: Sensor) -> list[Fault]:
     return found
 
 
-def _match_fault(log: Log, k: int, size: tuple[float, float, float], why: str) -> Fault:
-    """Increment ``k`` of ``log`` as a bad match."""
+def _match_fault(
+    log: Log, k: int, size: tuple[float, float, float], why: str, kind: str = "bad_match"
+) -> Fault:
+    """Increment ``k`` of ``log`` as a bad match (or ``kind``)."""
     inc = log.motions
     assert inc is not None
     a, b, line = int(inc.first[k]), int(inc.last[k]), int(inc.line_numbers[k])
     evidence = f"the increment of line {line} (records {a}-{b}) {why}"
-    return Fault("bad_match", None, a, b - 1, a, float(log.time_s[a]), line, *size, evidence)
+    return Fault(kind, None, a, b - 1, a, float(log.time_s[a]), line, *size, evidence)
 
 
 def match_faults(log: Log) -> list[Fault]:
@@ -201,6 +204,10 @@ def increment_faults(
         prefix = np.vstack([np.zeros((1, steps.shape[1])), np.cumsum(steps, axis=0)])
         error = (inc.z - (prefix[inc.last] - prefix[inc.first]))[:, :3]
         unit = ("rad", "rad", "rad")
+    # A pivot: the base turns more than it travels (a gyro's steps hold no travel: never one).
+    travel = np.concatenate([[0.0], np.cumsum(np.abs(steps[:, 0]))])
+    turned = np.abs(prefix[inc.last, 2] - prefix[inc.first, 2])
+    pivot = (travel[inc.last] - travel[inc.first] < PIVOT_RADIUS_M * turned) & (unit[0] == "m")
     judged = np.ones(inc.n, dtype=bool)
     for f in known:
         judged &= (inc.last - 1 < f.first) | (inc.first > f.last)
@@ -218,9 +225,13 @@ def increment_faults(
             f"disagrees with the wheels by ({e[0]:+.4f} {unit[0]}, {e[1]:+.4f} {unit[1]}, {e[2]:+.4f} rad), "
             f"{score[k]:.0f}× the increments' robust scatter"
         )
-        found.append(
-            _match_fault(log, int(k), (float(np.hypot(e[0], e[1])), float(e[2]), float(score[k])), why)
-        )
+        if pivot[k]:
+            why += (
+                f", over a pivot turn ({turned[k]:.2f} rad on the spot): slip on the ground the "
+                "calibration leaves out, as it does every pivot the wheels disagree with"
+            )
+        size = (float(np.hypot(e[0], e[1])), float(e[2]), float(score[k]))
+        found.append(_match_fault(log, int(k), size, why, "pivot_slip" if pivot[k] else "bad_match"))
     return found
 
 

@@ -104,17 +104,18 @@ def segment_drift(
     T_world_base: np.ndarray,
     parts: Sequence[tuple[int, int]],
     good: np.ndarray,
+    lengths: Sequence[int] = DRIFT_LENGTHS,
 ) -> Drift:
-    """The odometry against the reference base poses over segments of :data:`DRIFT_LENGTHS`
-    records inside each fault-free part (half-overlapping, ends at good reference poses), each
-    restarted from the reference at its start."""
+    """The odometry against the reference base poses over segments of ``lengths`` records inside
+    each fault-free part (half-overlapping, ends at good reference poses), each restarted from the
+    reference at its start."""
     errors, covs, terms = [], [], []
     for a, b in parts:
         if b - a < 2:
             continue
         ref = T_world_base[a:b]
         est, P = _unit_covariances(fns, params, inputs[:, a : b - 1], ref[0])
-        for L in DRIFT_LENGTHS:
+        for L in dict.fromkeys(lengths):
             for i in range(0, b - a - L, max(L // 2, 1)):
                 j = i + L
                 if not (good[a + i] and good[a + j]):
@@ -157,12 +158,43 @@ def drift_noise(drift: Drift, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return noise, var[n_in:]
 
 
+def _sigmas(drift: Drift, noise: np.ndarray, reference_var: np.ndarray) -> np.ndarray:
+    """Each segment error's 1σ ``(S, 3)`` with ``noise`` and the reference's variances."""
+    weights = np.concatenate([np.asarray(noise, dtype=float) ** 2, reference_var])
+    P = np.einsum("k,skij->sij", weights, np.concatenate([drift.covs, drift.terms], axis=1))
+    return np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
+
+
 def drift_coverage(drift: Drift, noise: np.ndarray, reference_var: np.ndarray, k: float = 2.0) -> float:
     """The share of segment errors (each component) within ``k`` σ of the odometry's propagated
     covariance with ``noise`` (and the reference's own noise, ``reference_var``: zero against truth)."""
     if drift.errors.shape[0] == 0:
         return float("nan")
-    weights = np.concatenate([np.asarray(noise, dtype=float) ** 2, reference_var])
-    P = np.einsum("k,skij->sij", weights, np.concatenate([drift.covs, drift.terms], axis=1))
-    sigma = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
-    return float(np.mean(np.abs(drift.errors) <= k * sigma))
+    return float(np.mean(np.abs(drift.errors) <= k * _sigmas(drift, noise, reference_var)))
+
+
+#: The share of segment errors within 2σ a calibrated noise must reach: a Gaussian's.
+COVERED = 0.95
+
+
+def covering_noise(drift: Drift, noise: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """``noise`` raised, where its propagated 2σ holds fewer than :data:`COVERED` of the segment
+    errors (x, y and heading together), by adding to every noisy input's variance one share of
+    their mean variance, the smallest that makes it hold them: the odometry's noise is at least
+    the drift the segments show (errors that do not grow as a random walk, such as a slow
+    encoder's timing, are still covered at the segments' own length), shared by the inputs the
+    moments could not tell apart. The errors are held against the odometry's σ alone: over a
+    window of one increment the reference's noise and the wheels' cannot be told apart, and a
+    filter must not trust the wheels for what the windows show they miss."""
+    noise = np.asarray(noise, dtype=float).copy()
+    noisy = np.asarray(floor, dtype=float) > 0
+    if drift.errors.shape[0] == 0 or not noisy.any():
+        return noise
+    for _ in range(8):
+        sigma = _sigmas(drift, noise, np.zeros(drift.terms.shape[1]))
+        ratio = np.abs(drift.errors) / np.maximum(sigma, 1e-300)
+        need = float(np.quantile(ratio, COVERED)) / 2.0
+        if need <= 1.0 + 1e-6:
+            break
+        noise[noisy] = np.sqrt(noise[noisy] ** 2 + (need**2 - 1.0) * np.mean(noise[noisy] ** 2))
+    return noise

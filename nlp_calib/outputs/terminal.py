@@ -312,6 +312,10 @@ def _check_lines(run: CalibrationRun, solvers: list[str]) -> list[str]:
             f"information matrix), heading range {obs.heading_range_rad:.2f} rad"
         )
         lines.extend(f"WARNING: {w}" for w in obs.warnings)
+    said = set(obs.warnings) if obs is not None else set()
+    # Every other warning result.json holds (a solver's failure is said below, in its own words).
+    failed = {f"{s}: {run.reports[s].result.reason}" for s in solvers}
+    lines.extend(f"WARNING: {w}" for w in run.warnings if w not in said and w not in failed)
     for s in solvers:
         res = run.reports[s].result
         if not res.converged:

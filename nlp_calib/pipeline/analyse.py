@@ -22,8 +22,15 @@ from nlp_calib.analysis.determinacy import Information
 from nlp_calib.analysis.handoff import odometry_noise
 from nlp_calib.analysis.metrics import each_metrics, geometry, integrate, segments
 from nlp_calib.analysis.observability import analyse as observability_of
+from nlp_calib.analysis.odometry import (
+    DRIFT_LENGTHS,
+    covering_noise,
+    drift_coverage,
+    drift_noise,
+    propagate,
+    segment_drift,
+)
 from nlp_calib.analysis.odometry import Drift as DriftSegments
-from nlp_calib.analysis.odometry import drift_coverage, drift_noise, propagate, segment_drift
 from nlp_calib.analysis.plan import Setting, plan
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
 from nlp_calib.core import memory
@@ -515,8 +522,14 @@ def calibrated_drift(
     reference = over_columns(fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
     bad_intervals, bad_records = windows.masks()
     parts = segments(n, bad_intervals[: n - 1])
-    drift = segment_drift(fns, params, inputs, reference, parts, ~bad_records[:n])
-    noise, reference_var = drift_noise(drift, windows.input_noise_std)
+    # The fit's own windows are segments too: a log of short fault-free parts (a scan matcher's
+    # increments between bad matches) still shows its drift over them.
+    spans = windows.data.stops - windows.data.starts
+    own = int(np.bincount(spans).argmax()) if spans.size else DRIFT_LENGTHS[0]
+    drift = segment_drift(fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS))
+    floor = windows.input_noise_std
+    noise, reference_var = drift_noise(drift, floor)
+    noise = covering_noise(drift, noise, floor)
     return Drift(inputs, reference, drift, noise, reference_var)
 
 

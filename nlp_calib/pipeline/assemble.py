@@ -245,9 +245,11 @@ def fit_checks(
 
 
 def mount_notes(sc: Scenario, start: StartingPoint) -> list[str]:
-    """The sensor's held parameters, said once, with why they are held."""
+    """What the start said (it gave way to the nominal robot), and the sensor's held parameters,
+    said once, with why they are held."""
     sensor = sc.objective.sensor.sensor
-    return [
+    said = [start.sensor.note] if start.sensor is not None and start.sensor.note else []
+    return said + [
         f"{n} is held at {start.initial.get(n, 0.0):g} {sensor.units[n]}: {sensor.held_why}"
         for n in sensor.held
     ]

@@ -158,17 +158,19 @@ def auto_start(
     records: tuple[int, int],
     initial: Mapping[str, float],
     gaps: np.ndarray | None = None,
+    nominal: Mapping[str, float] | None = None,
 ) -> SensorStart:
     """The sensor's closed-form start (:func:`~nlp_calib.problem.start.closed_form_start`) on the
     records ``records`` of ``log`` that cross no gap (``gaps``, per interval of the log), the fixed
-    parameters at their ``initial`` values."""
+    parameters at their ``initial`` values; the ``nominal`` robot in its place where it explains
+    the windows better."""
     start, stop = records
     data = build_residual_data(
         fns, log.select(start, stop), sc.objective.residual, bad_intervals=_within(gaps, start, stop)
     )
     known = {n: initial[n] for n in fns.fixed}
     with scenario_key(sc, "initial_guess"):
-        return closed_form_start(fns, data, known, sc.objective.residual.stride)
+        return closed_form_start(fns, data, known, sc.objective.residual.stride, nominal)
 
 
 def _key(fns: ProblemFunctions, name: str, given: Mapping[str, object]) -> str:
@@ -217,7 +219,7 @@ def starting_point(
     nominal, source = nominal_values(sc, fns.model, log, initial, fns.free)
     one = fns.spec.mounts == 1
     sensor = (
-        auto_start(sc, fns, log, (start, stop), initial, gaps)
+        auto_start(sc, fns, log, (start, stop), initial, gaps, nominal)
         if sc.parameters.initial_guess == "auto" and one
         else None
     )

@@ -11,13 +11,16 @@ says of the fit's own windows.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 
 import numpy as np
 
+from nlp_calib.core import poses
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.problem.functions import ProblemFunctions, ProblemSpec, build
 from nlp_calib.problem.windows import ResidualData, over_columns, tracker_motions
 from nlp_calib.sensors import SensorStart
+from nlp_calib.sensors.base import BaseMotion
 
 
 def start_windows(data: ResidualData, span_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -46,11 +49,16 @@ def _own_windows(data: ResidualData, stride: int) -> tuple[np.ndarray, np.ndarra
 
 
 def closed_form_start(
-    fns: ProblemFunctions, data: ResidualData, known: Mapping[str, float] | None = None, stride: int = 1
+    fns: ProblemFunctions,
+    data: ResidualData,
+    known: Mapping[str, float] | None = None,
+    stride: int = 1,
+    nominal: Mapping[str, float] | None = None,
 ) -> SensorStart:
     """Every parameter of ``fns`` from the records of ``data`` by the sensor's closed form, no guess
     needed; ``known`` holds the fixed values (a camera's held height; with a free scale, one
-    length in metres)."""
+    length in metres). A planar sensor's start survives windows turning more than π and gives
+    way to the ``nominal`` robot where that explains the windows better (:func:`unwrapped_start`)."""
     span_s = fns.sensor.start_span_s
     if span_s is None:
         a, b, z = _own_windows(data, stride)
@@ -72,7 +80,89 @@ def closed_form_start(
 
     # Only what the problem holds is known: a value it fits is not.
     held = {n: v for n, v in (known or {}).items() if n in fns.fixed}
-    return fns.sensor.closed_form(fns.model, U, z, base_motion, held)
+    if not fns.sensor.planar_base or z.shape[0] != 3:
+        return fns.sensor.closed_form(fns.model, U, z, base_motion, held)
+    return unwrapped_start(fns, (U, z), base_motion, held, nominal)
+
+
+#: The subsets of windows a planar start is first drawn from, by how far their measured heading
+#: change lies from ±π (rad): a window that turned more than π reads as wrapped, and only the
+#: wheels' prediction can tell it; one of these subsets holds few enough of those to start from.
+_FIRST_TURNS = (np.inf, 0.5 * np.pi, 0.25 * np.pi)
+#: Rounds of unwrapping the measured heading changes towards a start's prediction.
+_UNWRAP_ROUNDS = 6
+
+
+def unwrapped_start(
+    fns: ProblemFunctions,
+    windows: tuple[np.ndarray, np.ndarray],
+    base_motion: BaseMotion,
+    held: Mapping[str, float],
+    nominal: Mapping[str, float] | None,
+) -> SensorStart:
+    """A planar sensor's closed form that survives windows turning more than π: drawn from each of
+    :data:`_FIRST_TURNS`' subsets, then again on every window with its heading change unwrapped
+    to the start's own prediction until that stops changing; the start that explains the windows
+    best (:func:`explained`) wins, and the ``nominal`` robot (every parameter, when known) in its
+    place if it explains them better."""
+    U, z = windows
+    sensor, model = fns.sensor, fns.model
+    best: tuple[float, SensorStart] | None = None
+    for limit in _FIRST_TURNS:
+        keep = np.abs(z[2]) < limit
+        if keep.sum() < max(8, 2 * len(model.kinematic_params)):
+            continue
+        try:
+            start = sensor.closed_form(model, U[:, keep], z[:, keep], _columns(base_motion, keep), held)
+            zu = z
+            for _ in range(_UNWRAP_ROUNDS):
+                turned = base_motion({**start.params, **held})[2]
+                unwrapped = z[2] + 2.0 * np.pi * np.round((turned - z[2]) / (2.0 * np.pi))
+                if np.array_equal(unwrapped, zu[2]) and zu is not z:
+                    break
+                zu = np.vstack([z[:2], unwrapped])
+                start = sensor.closed_form(model, U, zu, base_motion, held)
+        except (np.linalg.LinAlgError, ValueError, ZeroDivisionError):
+            continue
+        cost = explained({**start.params, **held}, z, base_motion)
+        if best is None or cost < best[0]:
+            best = (cost, start)
+    if best is None:
+        return sensor.closed_form(model, U, z, base_motion, held)
+    full = set(model.kinematic_params) | set(sensor.params)
+    if nominal is not None and full <= set(nominal) | set(held):
+        given = {**nominal, **held}
+        worse = explained(given, z, base_motion)
+        if worse < best[0]:
+            return replace(
+                best[1],
+                params={n: float(given[n]) for n in best[1].params},
+                note=(
+                    f"the closed-form start explains the windows worse than the nominal robot "
+                    f"({best[0]:.3g} against {worse:.3g} of {z.shape[1]}, each window's share at most "
+                    "1): the fit starts from the nominal values"
+                ),
+            )
+    return best[1]
+
+
+def _columns(base_motion: BaseMotion, keep: np.ndarray) -> BaseMotion:
+    return lambda params: base_motion(params)[:, keep]
+
+
+def explained(params: Mapping[str, float], z: np.ndarray, base_motion: BaseMotion) -> float:
+    """How badly ``params`` explain the planar windows ``z`` ``(3, M)``: over the windows, the
+    squared translation error relative to the window's length (at least the median length) plus
+    ``1 − cos`` of the heading error (blind to whole turns), each window's share at most 1."""
+    M = base_motion(params)
+    mount = np.array([params.get(n, 0.0) for n in ("sensor_x", "sensor_y", "sensor_theta")])
+    T = np.broadcast_to(mount, (M.shape[1], 3))
+    predicted = poses.between(T, poses.compose(M.T, T))
+    length = np.hypot(z[0], z[1])
+    scale = np.maximum(length, np.median(length) + 1e-9)
+    e_xy = np.hypot(*(predicted[:, :2] - z[:2].T).T) / scale
+    e_theta = 1.0 - np.cos(predicted[:, 2] - z[2])
+    return float(np.sum(np.minimum(e_xy**2 + e_theta, 1.0)))
 
 
 def fit_windows(

@@ -16,8 +16,13 @@ COUNTER_KINDS = ("stall_then_jump", "reversal", "counter_jump")
 ABSOLUTE_KINDS = ("steering_spike", "steering_stuck")
 TRACKER_KINDS = ("tracker_jump",)
 #: A measured increment (a scan match) that is wrong: its matcher said so, or the wheels disagree
-#: with it far beyond the increments' scatter. Its own window is left out, no other.
-MATCH_KINDS = ("bad_match",)
+#: with it far beyond the increments' scatter; ``pivot_slip``: such an increment over which the
+#: base pivoted (turned more than it travelled, see ``PIVOT_RADIUS_M``), where the ground lets a
+#: skid-steer slip as no calibration holds. Its own window is left out, no other.
+MATCH_KINDS = ("bad_match", "pivot_slip")
+#: An increment whose turn radius (its travel over its turn, as the wheels give them at the fit)
+#: is under this (m) is a pivot turn.
+PIVOT_RADIUS_M = 0.5
 
 
 @dataclass(frozen=True)

@@ -42,11 +42,13 @@ BaseMotion = Callable[[Mapping[str, float]], np.ndarray]
 class SensorStart:
     """A sensor's start: every parameter's starting value (kinematic, then the mount's), what the
     fit's windows are selected by (a sensor's own record, None: no selection) and the windows the
-    closed form left out, by reason (None: it selected none)."""
+    closed form left out, by reason (None: it selected none) and what it found worth saying."""
 
     params: dict[str, float]
     selection: object | None = None
     dropped: Mapping[str, int] | None = None
+    #: What the start found worth saying (empty: nothing), e.g. that it gave way to the nominal robot.
+    note: str = ""
 
 
 class Sensor(Protocol):

@@ -1,0 +1,213 @@
+"""Real vehicles' drives, with known truth: a skid-steer spinning fast on rough ground.
+
+:func:`simulate_skid_spins` drives a skid-steer base (``skid_steer`` in joint units: each side's
+rolling radius in m per rad, the effective track at a slow turn and its growth with the turn
+rate) through straight stretches, arcs and pivot turns at ``spin_rate`` (several radians per
+motion: more than π per increment at the default rate). The wheels are the model's own law, but
+on a pivot the ground lets the base turn a random share up to ``pivot_slip`` less than that law
+says, or more (slip the model does not hold). The joints are logged at ``joint_rate_hz`` while their
+positions update only at ``encoder_update_hz`` (a slow wheel driver: each message repeats the
+last update); a lidar matcher reports the sensor's motion over each ``motion_span_s`` with white
+noise, its heading wrapped to (−π, π] as a matcher gives it. The simulator integrates the base on
+a fine grid, independently of the symbolic model. Deterministic for a given seed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from nlp_calib.core import poses
+from nlp_calib.core.errors import OptionsError
+from nlp_calib.core.files import atomic_write_text
+from nlp_calib.core.ranges import Range
+from nlp_calib.logs.joint_log import format_joint_csv
+from nlp_calib.logs.motions import format_motions
+from nlp_calib.models.drives import integrate_base
+
+#: A 0.55 m skid-steer whose effective track is 1.8 times that, rolling 10 % under its 0.15 m radius.
+SKID_TRUTH: Mapping[str, float] = MappingProxyType(
+    {
+        "k_left": 0.135,
+        "k_right": 0.137,
+        "baseline": 0.99,
+        "turn_slip": 0.05,
+        "sensor_x": 0.2,
+        "sensor_y": 0.03,
+        "sensor_theta": 0.04,
+    }
+)
+JOINTS = ("left_wheel_joint", "right_wheel_joint")
+#: The fine grid the base is integrated on (s).
+FINE_S = 0.002
+EPOCH_NS = 1_700_000_000_000_000_000
+
+LIMITS: Mapping[str, Range] = {
+    "duration_s": Range(10.0, 36_000.0),
+    "seed": Range(0, 2**32 - 1, integer=True),
+    "joint_rate_hz": Range(1.0, 1000.0),
+    "encoder_update_hz": Range(0.5, 1000.0),
+    "motion_span_s": Range(0.05, 10.0),
+    "spin_rate": Range(0.0, 6.0),
+    "max_speed": Range(0.0, 5.0, lo_open=True),
+    "pivot_fraction": Range(0.0, 1.0),
+    "pivot_slip": Range(0.0, 0.9),
+    "motion_noise_xy": Range(0.0, 1.0),
+    "motion_noise_theta": Range(0.0, 1.0),
+}
+
+
+@dataclass(frozen=True)
+class SkidSpinOptions:
+    """What to simulate (angles in rad, lengths in m, times in s); ``truth`` overrides
+    :data:`SKID_TRUTH` by name."""
+
+    duration_s: float = 240.0
+    seed: int = 0
+    joint_rate_hz: float = 20.0
+    encoder_update_hz: float = 4.0
+    motion_span_s: float = 2.0
+    spin_rate: float = 2.5
+    max_speed: float = 0.8
+    pivot_fraction: float = 0.4
+    pivot_slip: float = 0.1
+    motion_noise_xy: float = 0.005
+    motion_noise_theta: float = 0.003
+    truth: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name, limit in LIMITS.items():
+            if (reason := limit.problem(getattr(self, name))) is not None:
+                raise OptionsError(f"{name} {reason}")
+        unknown = sorted(set(self.truth) - set(SKID_TRUTH))
+        if unknown:
+            raise OptionsError(
+                f"unknown parameter(s) {unknown}; the skid-steer's are {', '.join(SKID_TRUTH)}"
+            )
+        truth = {**SKID_TRUTH, **self.truth}
+        if truth["turn_slip"] * self.spin_rate >= 0.9 or min(truth["k_left"], truth["k_right"]) <= 0:
+            raise OptionsError("turn_slip × spin_rate must stay under 0.9 and the radii positive")
+        object.__setattr__(self, "truth", MappingProxyType(truth))
+
+
+@dataclass(frozen=True)
+class VehicleSimulation:
+    """A simulated drive: the joints' stamps, names and positions (rad), the reference's motions
+    (``motion_stamps_s`` ``(m, 2)``, ``motions`` ``(m, 3)``), which motions a pivot's slip spoiled,
+    the true base poses at the joints' stamps and the options."""
+
+    joint_time_s: np.ndarray
+    joint_names: tuple[str, ...]
+    joint_positions: np.ndarray
+    motion_stamps_s: np.ndarray
+    motions: np.ndarray
+    slipped: np.ndarray
+    base_poses: np.ndarray
+    options: Any
+
+    def joints_csv(self) -> str:
+        return format_joint_csv(_ns(self.joint_time_s), self.joint_names, self.joint_positions)
+
+    def motions_csv(self) -> str:
+        ns = _ns(self.motion_stamps_s)
+        return format_motions(ns[:, 0], ns[:, 1], self.motions)
+
+    def truth_dict(self) -> dict[str, Any]:
+        return {
+            "params": dict(self.options.truth),
+            "slipped_motions": np.flatnonzero(self.slipped).tolist(),
+            "distance_m": float(np.sum(np.hypot(*np.diff(self.base_poses[:, :2], axis=0).T))),
+        }
+
+    def write(self, stem: str | Path) -> tuple[Path, Path, Path]:
+        """``<stem>.csv`` (joints), ``<stem>.motions.csv`` and ``<stem>.truth.json``."""
+        import json
+
+        stem = Path(stem)
+        paths = (stem.with_suffix(".csv"), stem.with_suffix(".motions.csv"), stem.with_suffix(".truth.json"))
+        atomic_write_text(paths[0], self.joints_csv())
+        atomic_write_text(paths[1], self.motions_csv())
+        atomic_write_text(paths[2], json.dumps(self.truth_dict(), indent=2) + "\n")
+        return paths
+
+
+def _ns(t_s: np.ndarray) -> np.ndarray:
+    return np.round(np.asarray(t_s) * 1e9).astype(np.int64) + EPOCH_NS
+
+
+def _segments(
+    opts: SkidSpinOptions, rng: np.random.Generator, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per fine step: the base's speed (m/s), turn rate (rad/s) and whether it pivots, in segments
+    of 2 to 6 s (a pivot's turn rate, a drive's speed and curvature drawn per segment)."""
+    speed, rate, pivot = np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool)
+    i = 0
+    while i < n:
+        j = min(n, i + int(rng.uniform(2.0, 6.0) / FINE_S))
+        if rng.random() < opts.pivot_fraction:
+            rate[i:j] = rng.choice([-1.0, 1.0]) * opts.spin_rate * rng.uniform(0.6, 1.0)
+            pivot[i:j] = True
+        else:
+            speed[i:j] = rng.choice([-1.0, 1.0], p=[0.2, 0.8]) * opts.max_speed * rng.uniform(0.3, 1.0)
+            rate[i:j] = speed[i:j] * rng.uniform(-0.8, 0.8)
+        i = j
+    # Smooth the steps over 0.2 s, as a base's inertia does.
+    kernel = np.ones(int(0.2 / FINE_S)) / int(0.2 / FINE_S)
+    return np.convolve(speed, kernel, "same"), np.convolve(rate, kernel, "same"), pivot
+
+
+def simulate_skid_spins(opts: SkidSpinOptions) -> VehicleSimulation:
+    """The drive of the module docstring."""
+    rng = np.random.default_rng(opts.seed)
+    t = opts.truth
+    n = int(opts.duration_s / FINE_S)
+    speed, rate, pivot = _segments(opts, rng, n)
+    # The wheels' own turn rate: the model's law ω = ω_w/(1 + turn_slip·|ω_w|) solved for ω_w; on a
+    # pivot the ground turns the base a random share off that (one share per pivot, either way:
+    # a share of one sign on every pivot would be the law's own slip, and the truth no longer its).
+    wheels = rate / (1.0 - t["turn_slip"] * np.abs(rate))
+    starts = np.flatnonzero(np.diff(np.concatenate([[0], pivot.astype(int)])) == 1)
+    share = np.zeros(n)
+    for a in starts:
+        b = a + int(np.argmin(pivot[a:])) if not pivot[a:].all() else n
+        share[a:b] = rng.uniform(-opts.pivot_slip, opts.pivot_slip)
+    rate = rate * (1.0 - share)
+    base = integrate_base(speed * FINE_S, rate * FINE_S)
+    half = 0.5 * t["baseline"] * wheels
+    angles = np.stack(
+        [
+            np.concatenate([[0.0], np.cumsum((speed - half) * FINE_S)]) / t["k_left"],
+            np.concatenate([[0.0], np.cumsum((speed + half) * FINE_S)]) / t["k_right"],
+        ],
+        axis=1,
+    )
+    time_s = np.arange(n + 1) * FINE_S
+    joint_t = np.arange(0.0, time_s[-1], 1.0 / opts.joint_rate_hz)
+    phase = rng.uniform(0.0, 1.0 / opts.encoder_update_hz)
+    updated = np.floor((joint_t - phase) * opts.encoder_update_hz) / opts.encoder_update_hz + phase
+    held = np.clip(np.round(np.maximum(updated, 0.0) / FINE_S).astype(int), 0, n)
+    mount = np.array([t["sensor_x"], t["sensor_y"], t["sensor_theta"]])
+    stamps = np.arange(0.0, joint_t[-1] - opts.motion_span_s, opts.motion_span_s)
+    ends = np.stack([stamps, stamps + opts.motion_span_s], axis=1)
+    idx = np.round(ends / FINE_S).astype(int)
+    sensor = poses.compose(base, np.broadcast_to(mount, base.shape))
+    z = poses.between(sensor[idx[:, 0]], sensor[idx[:, 1]])
+    z += rng.normal(0.0, [opts.motion_noise_xy, opts.motion_noise_xy, opts.motion_noise_theta], z.shape)
+    z[:, 2] = np.angle(np.exp(1j * z[:, 2]))
+    slipping = np.concatenate([[0], np.cumsum(share != 0)])
+    spoiled = slipping[idx[:, 1]] > slipping[idx[:, 0]]
+    return VehicleSimulation(
+        joint_time_s=joint_t,
+        joint_names=JOINTS,
+        joint_positions=angles[held],
+        motion_stamps_s=ends,
+        motions=z,
+        slipped=spoiled,
+        base_poses=base[np.round(joint_t / FINE_S).astype(int)],
+        options=opts,
+    )
