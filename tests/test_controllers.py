@@ -138,7 +138,14 @@ def test_a_recording_is_recovered_within_three_sigma_and_handed_to_its_controlle
         assert params["wheel_separation"] == estimate["params"]["wheel_separation"]
         assert "turn_slip = " in (out / "ros2_control.yaml").read_text()
     else:
-        assert params["traction_track_width"] == estimate["params"]["traction_track_width"]
+        track = estimate["params"]["traction_track_width"]
+        if "traction_track_width" in doc["verdict"]["concerns"]:
+            # Under a caveat on it the track is written commented out, its reason on the line above.
+            text = (out / "ros2_control.yaml").read_text().splitlines()
+            i = text.index(f"    # traction_track_width: {track!r}  # ± {estimate['std']['traction_track_width']:.2g} (1σ)")
+            assert "not determined well enough" in text[i - 1] and "traction_track_width" not in params
+        else:
+            assert params["traction_track_width"] == track
 
 
 def _short_run(model: str, per_turn: dict[str, float]) -> CalibrationRun:
