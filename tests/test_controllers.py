@@ -142,7 +142,8 @@ def test_a_recording_is_recovered_within_three_sigma_and_handed_to_its_controlle
         if "traction_track_width" in doc["verdict"]["concerns"]:
             # Under a caveat on it the track is written commented out, its reason on the line above.
             text = (out / "ros2_control.yaml").read_text().splitlines()
-            i = text.index(f"    # traction_track_width: {track!r}  # ± {estimate['std']['traction_track_width']:.2g} (1σ)")
+            sd = estimate["std"]["traction_track_width"]
+            i = text.index(f"    # traction_track_width: {track!r}  # ± {sd:.2g} (1σ)")
             assert "not determined well enough" in text[i - 1] and "traction_track_width" not in params
         else:
             assert params["traction_track_width"] == track

@@ -341,7 +341,9 @@ def test_init_names_the_controller_whose_topics_the_recording_holds() -> None:
     from nlp_calib.pipeline.draft import controller_name
 
     def bag(*names: str) -> BagSurvey:
-        return BagSurvey(Path("b"), 1.0, tuple(Topic(n, "nav_msgs/msg/Odometry", 10, 10.0) for n in names), {})
+        return BagSurvey(
+            Path("b"), 1.0, tuple(Topic(n, "nav_msgs/msg/Odometry", 10, 10.0) for n in names), {}
+        )
 
     assert controller_name(bag("/joint_states", "/diffbot_base_controller/odom")) == "diffbot_base_controller"
     assert controller_name(bag("/diffbot_base_controller/cmd_vel", "/diffbot_base_controller/odom")) == (

@@ -205,7 +205,9 @@ def test_a_converged_fit_the_verdict_calls_not_determined_hands_nothing_off(
     carries a value, and stale ones are removed; the same run under caveats writes them all."""
     run = _calibration(small_demo, solvers=("gauss_newton",)).run()
     assert run.reports["gauss_newton"].result.converged
-    loose = dataclasses.replace(run, verdict=Verdict(UNDETERMINED, ("axis_length not determined by this drive",)))
+    loose = dataclasses.replace(
+        run, verdict=Verdict(UNDETERMINED, ("axis_length not determined by this drive",))
+    )
     files = (CALIBRATION_FILE, URDF_FILE, ROBOT_URDF_FILE, "ros2_control.yaml")
     for name in files:
         (tmp_path / name).write_text("stale")

@@ -273,7 +273,14 @@ def test_the_snippet_pasted_into_a_users_urdf_loads_in_both_urdf_tools(tmp_path:
     robot = tmp_path / "cart.urdf"
     robot.write_text(MARKER_ROBOT)
     out = tmp_path / "out"
-    args = ("--urdf", str(robot), "--sensor-link", "mocap_marker_0", "--controller-name", "cart_base_controller")
+    args = (
+        "--urdf",
+        str(robot),
+        "--sensor-link",
+        "mocap_marker_0",
+        "--controller-name",
+        "cart_base_controller",
+    )
     proc = cli("run", str(SCENARIOS / "demo.yaml"), "--out", str(out), "--solver", "gauss_newton", *args)
     assert proc.returncode == 0, proc.stderr
     snippet = (out / "sensor_mount.urdf.xml").read_text()
@@ -282,7 +289,9 @@ def test_the_snippet_pasted_into_a_users_urdf_loads_in_both_urdf_tools(tmp_path:
     pasted = tmp_path / "pasted.urdf"
     pasted.write_text(MARKER_ROBOT[:start] + joint + MARKER_ROBOT[end:])
     T = yourdfpy.URDF.load(str(pasted), load_meshes=False).get_transform("mocap_marker_0", "base_link")
-    T_robot = yourdfpy.URDF.load(str(out / "robot.urdf"), load_meshes=False).get_transform("mocap_marker_0", "base_link")
+    T_robot = yourdfpy.URDF.load(str(out / "robot.urdf"), load_meshes=False).get_transform(
+        "mocap_marker_0", "base_link"
+    )
     assert T == pytest.approx(T_robot, abs=1e-12)
     model = URDF.from_xml_string(pasted.read_bytes())
     (mine,) = [j for j in model.joints if j.name == "rack_to_marker"]

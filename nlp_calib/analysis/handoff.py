@@ -53,7 +53,10 @@ def _jacobian(
 
 
 def _meaningless(
-    values: Mapping[str, float], sd: np.ndarray, rests_on: Mapping[str, tuple[str, ...]], held: Mapping[str, str]
+    values: Mapping[str, float],
+    sd: np.ndarray,
+    rests_on: Mapping[str, tuple[str, ...]],
+    held: Mapping[str, str],
 ) -> dict[str, str]:
     """The controller values no calibration gave: resting on a parameter held at its initial
     value because the drive cannot determine it (the model's guess, or the header's), or too
@@ -98,7 +101,9 @@ def controller_params(
     cov = np.nan_to_num(correlation) * np.outer(finite, finite)
     jac = _jacobian(model, names, params, finite, scales)
     sd = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", jac, cov, jac), 0.0, None))
-    rests_on = {v: tuple(n for j, n in enumerate(names) if jac[i, j] != 0.0) for i, v in enumerate(found.parameters)}
+    rests_on = {
+        v: tuple(n for j, n in enumerate(names) if jac[i, j] != 0.0) for i, v in enumerate(found.parameters)
+    }
     from_user = {v: why for v, why in _given(rests_on, given).items() if v not in found.settings}
     left_out = _meaningless(found.parameters, sd, rests_on, held)
     units = dict(model.units)

@@ -87,14 +87,16 @@ def _comment(text: str) -> str:
     return " ".join(text.splitlines())
 
 
-def _header(run: CalibrationRun, solver: str, params: ControllerParams, distro: str, name: str | None) -> list[str]:
+def _header(
+    run: CalibrationRun, solver: str, params: ControllerParams, distro: str, name: str | None
+) -> list[str]:
     """The file's comment header: the key to rename (when no name was given), what it holds, the verdict."""
     controller = params.controller
     rename = (
         [
-            f"# Rename the top key '{controller}' to your controller's name (its key under controller_manager, "
-            "e.g. diffbot_base_controller), or give --controller-name NAME (scenario: handoff.controller_name): "
-            "under any other name your controller ignores this file."
+            f"# Rename the top key '{controller}' to your controller's name (its key under "
+            "controller_manager, e.g. diffbot_base_controller), or give --controller-name NAME (scenario: "
+            "handoff.controller_name): under any other name your controller ignores this file."
         ]
         if name is None
         else []
@@ -106,8 +108,9 @@ def _header(run: CalibrationRun, solver: str, params: ControllerParams, distro: 
             f"ros2_controllers' names): scenario {run.scenario.name}, {solver}'s estimate."
         ),
         _comment(f"# Verdict: {run.verdict.line()}"),
-        "# Live: what the calibration determines; a value it does not determine well enough is commented out,",
-        "# its reason on the line above; a value you gave is written as given. Load it after your controller's own file.",
+        "# Live: what the calibration determines; a value it does not determine well enough is commented",
+        "# out, its reason on the line above; a value you gave is written as given. Load it after your",
+        "# controller's own file.",
         *([_comment(f"# Note: {params.assumes}.")] if params.assumes else []),
         *(
             [f"# Note: {_AXLE_NOTES[controller]}."]
@@ -131,10 +134,15 @@ def _value_lines(run: CalibrationRun, params: ControllerParams, distro: str) -> 
         if name in params.settings:
             lines.append(f"    {key}: {value!r}  # {_comment(params.settings[name])}")
         elif name in params.given:
-            lines += [_comment(f"    # {key} is yours, not calibrated: {params.given[name]}"), f"    {key}: {value!r}"]
+            lines += [
+                _comment(f"    # {key} is yours, not calibrated: {params.given[name]}"),
+                f"    {key}: {value!r}",
+            ]
         elif doubts := _doubts(run, params, name):
             lines += [
-                _comment(f"    # {key}: not determined well enough to use ({'; '.join(doubts)}); keep yours:"),
+                _comment(
+                    f"    # {key}: not determined well enough to use ({'; '.join(doubts)}); keep yours:"
+                ),
                 f"    # {key}: {value!r}  # ± {params.std[name]:.2g} (1σ)",
             ]
         else:

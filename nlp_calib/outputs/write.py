@@ -13,8 +13,8 @@ import dataclasses
 from pathlib import Path
 
 from nlp_calib.core.errors import FieldError, UsageError
-from nlp_calib.core.ranges import check_ros_name
 from nlp_calib.core.files import check_output_dir
+from nlp_calib.core.ranges import check_ros_name
 from nlp_calib.outputs import registry, ros2_control, urdf
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.results import CalibrationRun, JointRun

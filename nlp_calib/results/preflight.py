@@ -228,7 +228,9 @@ class Preflight:
         plan = f"; plan: {self.plan.line()}" if self.plan is not None and self.plan.best is not None else ""
         why = "; ".join(c for c in _causes(missing) if c)
         because = f" ({why})" if why else ""  # never an empty "()"
-        return f"this drive cannot determine {', '.join(p.name for p in missing)}{because}; {self.way_out}{plan}"
+        return (
+            f"this drive cannot determine {', '.join(p.name for p in missing)}{because}; {self.way_out}{plan}"
+        )
 
 
 def _causes(loose: list[ParameterStatus]) -> list[str]:
