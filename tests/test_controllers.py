@@ -138,15 +138,25 @@ def test_a_recording_is_recovered_within_three_sigma_and_handed_to_its_controlle
         assert params["wheel_separation"] == estimate["params"]["wheel_separation"]
         assert "turn_slip = " in (out / "ros2_control.yaml").read_text()
     else:
-        assert params["traction_track_width"] == estimate["params"]["traction_track_width"]
+        track = estimate["params"]["traction_track_width"]
+        if "traction_track_width" in doc["verdict"]["concerns"]:
+            # Under a caveat on it the track is written commented out, its reason on the line above.
+            text = (out / "ros2_control.yaml").read_text().splitlines()
+            sd = estimate["std"]["traction_track_width"]
+            i = text.index(f"    # traction_track_width: {track!r}  # ± {sd:.2g} (1σ)")
+            assert "not determined well enough" in text[i - 1] and "traction_track_width" not in params
+        else:
+            assert params["traction_track_width"] == track
 
 
-def _short_run(model: str, per_turn: dict[str, float]) -> CalibrationRun:
+def _short_run(model: str, per_turn: dict[str, float], known: tuple[str, ...] = ()) -> CalibrationRun:
+    """A short simulated run; ``known``: parameters given at their truth (what its drive cannot see)."""
     sim = simulate(SimulationOptions.of(model=model, records=1500, seed=8))
     log = parse_lines(sim.text().splitlines(), model=model)
+    truth = {n: float(v) for n, v in sim.options.truth.items() if n in known}
     sc = Scenario.of(
         "s", "sim.txt", model=model, solvers=("gauss_newton",), validation=ValidationOptions(blocks=0)
-    ).with_options(counts_per_turn=per_turn)
+    ).with_options(counts_per_turn=per_turn, known=truth)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NlpCalibWarning)
         return Calibration(sc, log=log).run()
@@ -156,7 +166,9 @@ def _short_run(model: str, per_turn: dict[str, float]) -> CalibrationRun:
 def test_every_controller_file_names_its_parameters_as_each_release_does(model: str, tmp_path: Path) -> None:
     sim = SimulationOptions.of(model=model)
     wheels = {e: float(n) for e, n in sim.encoder_ranges.items() if "steer" not in e}
-    run = _short_run(model, wheels)
+    # This short drive cannot see a car's rear track (a NOT DETERMINED fit hands nothing off): given.
+    run = _short_run(model, wheels, known=("rear_track",) if model.startswith("car_like") else ())
+    assert run.handoff_solver() is not None, run.verdict.line()
     for distro in ("humble", "jazzy", "kilted"):
         write_run(run, tmp_path / distro, options=output_options(ros_distro=distro))
         params = assert_parameter_file(tmp_path / distro / "ros2_control.yaml", CONTROLLER[model], distro)

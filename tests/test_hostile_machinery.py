@@ -233,25 +233,71 @@ def ended(pid: int) -> bool:
 # ------------------------------------------------------------------------ 2. signals at any moment
 
 
+def _held_at_first_output(*args: str, cache: Path) -> tuple[subprocess.Popen[str], int]:
+    """The tool started with its stdout a pipe this test has filled: its first line of output (the
+    fit's table, printed before any file is written) blocks until the pipe is read, a stage marker
+    that no load on the machine can move. Returns the process and the pipe's read end."""
+    read_end, write_end = os.pipe()
+    os.set_blocking(write_end, False)
+    for size in (4096, 1):  # pages, then the last bytes of a page
+        try:
+            while True:
+                os.write(write_end, b"." * size)
+        except BlockingIOError:
+            pass
+    os.set_blocking(write_end, True)  # the tool's writes wait
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "nlp_calib", *args],
+        cwd=REPO,
+        env={**env_for(cache), "PYTHONUNBUFFERED": "1"},
+        stdout=write_end,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=default_signals,
+    )
+    os.close(write_end)
+    return proc, read_end
+
+
+def _blocked_writing(pid: int) -> bool:
+    """Whether the process sleeps in a write to a full pipe (its only thread's kernel wait channel)."""
+    wchan = Path(f"/proc/{pid}/wchan")
+    return wchan.is_file() and "pipe" in wchan.read_text()
+
+
+def _drain(fd: int) -> None:
+    """Read a pipe to its end (the tool's exit flushes what it printed)."""
+    with os.fdopen(fd, "rb") as f:
+        while f.read(65536):
+            pass
+
+
 @needs_proc
 def test_signals_from_the_tools_first_instruction_end_the_run_and_keep_the_previous_files(
     warm: Warm, tmp_path: Path
 ) -> None:
+    """Each signal at two stage markers, never at a fraction of a measured duration: as soon as the
+    tool's handlers are in place, and while it is held at its first line of output (the fit done,
+    no file written)."""
     out = tmp_path / "out"
     args = ("run", str(warm.scenario), "--out", str(out))
-    durations = []  # only spread the delays over the first part of a run; nothing is asserted on them
-    for _ in range(3):
-        t0 = time.monotonic()
-        assert nlp(*args, cache=warm.cache).returncode == 0
-        durations.append(time.monotonic() - t0)
+    assert nlp(*args, cache=warm.cache).returncode == 0
     before = contents(out)
-    sweep = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP] * 8
     seen = []
-    for k, signum in enumerate(sweep):
-        proc = start(*args, cache=warm.cache)
-        wait_for_handlers(proc)
-        time.sleep(0.4 * min(durations[1:]) * k / len(sweep))
+    for k, signum in enumerate([signal.SIGINT, signal.SIGTERM, signal.SIGHUP] * 2):
+        if k < 3:
+            proc, read_end = start(*args, cache=warm.cache), None
+            wait_for_handlers(proc)
+        else:
+            proc, read_end = _held_at_first_output(*args, cache=warm.cache)
+            deadline = time.monotonic() + HANG_S
+            while not _blocked_writing(proc.pid):
+                assert proc.poll() is None, proc.communicate()
+                assert time.monotonic() < deadline, "the tool never printed"
+                time.sleep(0.01)
         proc.send_signal(signum)
+        if read_end is not None:
+            _drain(read_end)
         _, err = proc.communicate(timeout=HANG_S)
         seen.append(proc.returncode)
         lines = err.strip().splitlines()

@@ -332,3 +332,23 @@ def test_a_run_on_wheel_angles_in_degrees_stops_naming_them(
     proc = cli("run", str(path), "--out", str(tmp_path / "out"))
     assert proc.returncode == 5, proc.stderr
     assert "look like degrees" in proc.stderr and "radians" in proc.stderr
+
+
+def test_init_names_the_controller_whose_topics_the_recording_holds() -> None:
+    """``/NAME/odom`` or ``/NAME/cmd_vel`` of one controller: its name is drafted; none, two, or a
+    name no controller_manager could give: none."""
+    from nlp_calib.logs.bag_survey import BagSurvey, Topic
+    from nlp_calib.pipeline.draft import controller_name
+
+    def bag(*names: str) -> BagSurvey:
+        return BagSurvey(
+            Path("b"), 1.0, tuple(Topic(n, "nav_msgs/msg/Odometry", 10, 10.0) for n in names), {}
+        )
+
+    assert controller_name(bag("/joint_states", "/diffbot_base_controller/odom")) == "diffbot_base_controller"
+    assert controller_name(bag("/diffbot_base_controller/cmd_vel", "/diffbot_base_controller/odom")) == (
+        "diffbot_base_controller"
+    )
+    assert controller_name(bag("/mocap/odom", "/joint_states")) is None
+    assert controller_name(bag("/a_controller/odom", "/b_controller/odom")) is None
+    assert controller_name(bag("/9controller/odom")) is None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import os
@@ -24,7 +25,8 @@ from nlp_calib.outputs.markdown import fmt_std, fmt_value
 from nlp_calib.outputs.progress import Progress
 from nlp_calib.pipeline import Calibration, Wanted
 from nlp_calib.pipeline.scenario import Scenario, ValidationOptions
-from nlp_calib.results import CalibrationRun
+from nlp_calib.results import CalibrationRun, Verdict
+from nlp_calib.results.run import CAVEATS, UNDETERMINED
 from nlp_calib.solvers import GaussNewtonOptions
 
 IMAGES = ("trajectory.png", "convergence.png", "residuals.png", "residuals_time.png", "model_check.png")
@@ -194,6 +196,25 @@ def test_no_converged_solver_writes_no_handoff_and_removes_stale_files(
         (tmp_path / name).write_text("stale")
     assert write_handoff(run, tmp_path) == []
     assert not any((tmp_path / n).exists() for n in (CALIBRATION_FILE, URDF_FILE, ROBOT_URDF_FILE))
+
+
+def test_a_converged_fit_the_verdict_calls_not_determined_hands_nothing_off(
+    tmp_path: Path, small_demo: Scenario
+) -> None:
+    """NOT DETERMINED with a converged solver (a parameter the drive leaves loose): no hand-off file
+    carries a value, and stale ones are removed; the same run under caveats writes them all."""
+    run = _calibration(small_demo, solvers=("gauss_newton",)).run()
+    assert run.reports["gauss_newton"].result.converged
+    loose = dataclasses.replace(
+        run, verdict=Verdict(UNDETERMINED, ("axis_length not determined by this drive",))
+    )
+    files = (CALIBRATION_FILE, URDF_FILE, ROBOT_URDF_FILE, "ros2_control.yaml")
+    for name in files:
+        (tmp_path / name).write_text("stale")
+    assert write_handoff(loose, tmp_path) == []
+    assert not any((tmp_path / n).exists() for n in files)
+    usable = dataclasses.replace(run, verdict=Verdict(CAVEATS, ("a caveat",)))
+    assert [p.name for p in write_handoff(usable, tmp_path)] == list(files)
 
 
 def test_single_solver_report_with_holdout(tmp_path: Path, small_demo: Scenario) -> None:

@@ -242,3 +242,82 @@ def test_the_odometry_covariance_covers_the_drift_on_simulated_truth() -> None:
         )
     assert np.mean(calibrated) >= 0.9, calibrated
     assert np.mean(quantisation) < 0.5, quantisation
+
+
+#: A user's description whose sensor link is named like no default (not the log's 'laser', not
+#: 'sensor'), below an intermediate link.
+MARKER_ROBOT = """<?xml version="1.0"?>
+<robot name="cart">
+  <link name="base_link"/>
+  <link name="roof_rack"/>
+  <link name="mocap_marker_0"/>
+  <joint name="base_to_rack" type="fixed">
+    <parent link="base_link"/><child link="roof_rack"/>
+    <origin xyz="0.3 0 0.8" rpy="0 0 0"/>
+  </joint>
+  <joint name="rack_to_marker" type="fixed">
+    <parent link="roof_rack"/><child link="mocap_marker_0"/>
+    <origin xyz="1.0 0.0 0.1" rpy="0 0 0"/>
+  </joint>
+</robot>
+"""
+
+
+def test_the_snippet_pasted_into_a_users_urdf_loads_in_both_urdf_tools(tmp_path: Path) -> None:
+    """Done as the snippet's comment says (the user's joint replaced by it), the robot loads in
+    yourdfpy and in urdf_parser_py, the sensor where robot.urdf has it; every file names the user's
+    link; ros2_control.yaml's top key is the name given."""
+    import yourdfpy
+    from urdf_parser_py.urdf import URDF
+
+    robot = tmp_path / "cart.urdf"
+    robot.write_text(MARKER_ROBOT)
+    out = tmp_path / "out"
+    args = (
+        "--urdf",
+        str(robot),
+        "--sensor-link",
+        "mocap_marker_0",
+        "--controller-name",
+        "cart_base_controller",
+    )
+    proc = cli("run", str(SCENARIOS / "demo.yaml"), "--out", str(out), "--solver", "gauss_newton", *args)
+    assert proc.returncode == 0, proc.stderr
+    snippet = (out / "sensor_mount.urdf.xml").read_text()
+    joint = snippet[snippet.index("<joint") :]
+    start, end = MARKER_ROBOT.index('<joint name="rack_to_marker"'), MARKER_ROBOT.rindex("</joint>") + 8
+    pasted = tmp_path / "pasted.urdf"
+    pasted.write_text(MARKER_ROBOT[:start] + joint + MARKER_ROBOT[end:])
+    T = yourdfpy.URDF.load(str(pasted), load_meshes=False).get_transform("mocap_marker_0", "base_link")
+    T_robot = yourdfpy.URDF.load(str(out / "robot.urdf"), load_meshes=False).get_transform(
+        "mocap_marker_0", "base_link"
+    )
+    assert T == pytest.approx(T_robot, abs=1e-12)
+    model = URDF.from_xml_string(pasted.read_bytes())
+    (mine,) = [j for j in model.joints if j.name == "rack_to_marker"]
+    assert (mine.parent, mine.child) == ("roof_rack", "mocap_marker_0")
+    cal = yaml.safe_load((out / "calibration.yaml").read_text())
+    assert cal["mount"]["child"] == cal["frames"]["sensor"] == "mocap_marker_0"
+    assert list(yaml.safe_load((out / "ros2_control.yaml").read_text())) == ["cart_base_controller"]
+
+
+def test_values_given_under_known_are_handed_off_as_given_never_as_calibrated(tmp_path: Path) -> None:
+    """The wheelbase and the sensor's yaw given under known: the controller file writes the
+    wheelbase as the user's value (no σ), the mount lists yaw with where it comes from, not among
+    the calibrated components, and calibration.yaml lists both as held; without --controller-name
+    the file's first line says to rename its key."""
+    sc = tmp_path / "known.yaml"
+    text = (SCENARIOS / "demo.yaml").read_text().replace("data/", f"{SCENARIOS / 'data'}/")
+    sc.write_text(text + "\nknown: {axis_length: 1.5, sensor_theta: 0.05}\n")
+    out = tmp_path / "out"
+    proc = cli("run", str(sc), "--out", str(out), "--solver", "gauss_newton")
+    assert proc.returncode == 0, proc.stderr
+    lines = (out / "ros2_control.yaml").read_text().splitlines()
+    assert lines[0].startswith("# Rename the top key 'tricycle_controller' to your controller's name")
+    i = lines.index("    wheelbase: 1.5")
+    assert "not calibrated: given under known: (1.5)" in lines[i - 1]
+    cal = yaml.safe_load((out / "calibration.yaml").read_text())
+    assert set(cal["held"]) == {"axis_length", "sensor_theta"}
+    assert cal["mount"]["calibrated"] == ["x", "y"] and set(cal["mount"]["std"]) == {"x", "y"}
+    assert cal["mount"]["nominal"]["yaw"] == "given under known: (0.05)"
+    assert "Calibrated: x, y; " in (out / "sensor_mount.urdf.xml").read_text()

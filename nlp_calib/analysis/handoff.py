@@ -12,6 +12,7 @@ moving intervals; the pose's after a metre of driving as the log drives.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -54,15 +55,15 @@ def _jacobian(
 def _meaningless(
     values: Mapping[str, float],
     sd: np.ndarray,
-    jac: np.ndarray,
-    names: Sequence[str],
+    rests_on: Mapping[str, tuple[str, ...]],
     held: Mapping[str, str],
 ) -> dict[str, str]:
     """The controller values no calibration gave: resting on a parameter held at its initial
-    value (the model's guess, or the header's), or too loose to mean anything."""
+    value because the drive cannot determine it (the model's guess, or the header's), or too
+    loose to mean anything."""
     out = {}
     for i, (name, value) in enumerate(values.items()):
-        resting = [n for j, n in enumerate(names) if n in held and jac[i, j] != 0.0]
+        resting = [n for n in rests_on[name] if n in held]
         if resting:
             out[name] = f"rests on {resting[0]}, held at its initial value ({held[resting[0]]}): keep yours"
         elif sd[i] > UNDETERMINED_SHARE * abs(value):
@@ -70,29 +71,50 @@ def _meaningless(
     return out
 
 
+def _given(rests_on: Mapping[str, tuple[str, ...]], given: Mapping[str, str]) -> dict[str, str]:
+    """The controller values resting on given parameters alone (``known:``, ``fixed:``), with where
+    each comes from: the user's values, not the calibration's."""
+    return {
+        name: "; ".join(given[n] for n in names)
+        for name, names in rests_on.items()
+        if names and all(n in given for n in names)
+    }
+
+
 def controller_params(
     model: KinematicModel,
     names: Sequence[str],
     estimate: tuple[np.ndarray, np.ndarray, np.ndarray],
     scales: EncoderScales,
-    extra: tuple[OdometryNoise | None, Mapping[str, str]] = (None, {}),
+    extra: tuple[OdometryNoise | None, Mapping[str, str], Mapping[str, str]] = (None, {}, {}),
 ) -> ControllerParams:
     """``model``'s controller parameters at ``estimate`` (the parameters in ``names`` order, their
-    1σ and correlation) with their 1σ; ``extra``: the odometry's noise, and the parameters held
-    at their initial values (with why), whose controller values are left out, as is a value too
-    loose to mean anything."""
+    1σ and correlation) with their 1σ; ``extra``: the odometry's noise, the parameters held at
+    their initial values because the drive cannot determine them (with why), whose controller
+    values are left out, as is a value too loose to mean anything, and the parameters the user
+    gave (``known:``, ``fixed:``, with where from), whose values are said to be given."""
     params, std, correlation = estimate
-    noise, held = extra
+    noise, held, given = extra
     values = dict(zip(names, map(float, params)))
     found = model.controller(values, scales)
     finite = np.where(np.isfinite(std), std, 0.0)
     cov = np.nan_to_num(correlation) * np.outer(finite, finite)
     jac = _jacobian(model, names, params, finite, scales)
     sd = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", jac, cov, jac), 0.0, None))
-    left_out = _meaningless(found.parameters, sd, jac, names, held)
+    rests_on = {
+        v: tuple(n for j, n in enumerate(names) if jac[i, j] != 0.0) for i, v in enumerate(found.parameters)
+    }
+    from_user = {v: why for v, why in _given(rests_on, given).items() if v not in found.settings}
+    left_out = _meaningless(found.parameters, sd, rests_on, held)
     units = dict(model.units)
     elsewhere = tuple(
-        Placement(n, values[n], float(std[list(names).index(n)]), units.get(n, ""), where)
+        Placement(
+            n,
+            values[n],
+            math.nan if n in given else float(std[list(names).index(n)]),
+            units.get(n, ""),
+            f"{given[n]}; {where}" if n in given else where,
+        )
         for n, where in found.places.items()
     )
     kept = [i for i, n in enumerate(found.parameters) if n not in left_out]
@@ -105,6 +127,9 @@ def controller_params(
         found.assumes,
         {**found.omitted, **left_out},
         noise,
+        rests_on={v: tuple(n for n in deps if n not in given) for v, deps in rests_on.items()},
+        given={v: why for v, why in from_user.items() if v not in left_out},
+        settings=dict(found.settings),
     )
 
 

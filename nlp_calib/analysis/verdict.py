@@ -42,7 +42,14 @@ from nlp_calib.analysis.consistency import determined
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.base import reference_scale
 from nlp_calib.results import CalibrationRun, Verdict
-from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, ConsistencyCheck, LagEstimate
+from nlp_calib.results.checks import (
+    NOT_OBSERVABLE,
+    SIGNIFICANT,
+    WEAK,
+    ConsistencyCheck,
+    LagEstimate,
+    WeakDirection,
+)
 from nlp_calib.results.layout import CLOCK, Layout
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
 from nlp_calib.sensors import Sensor, sensor_for
@@ -56,11 +63,19 @@ RANGE_SIGMAS = 3.0
 
 def _loose(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]:
     """Parameters known too loosely, in words."""
-    rep = run.reports[solver]
-    out = []
+    return [w.words() for w in _weak(run)] + list(_coarse(run, solver, model).values())
+
+
+def _weak(run: CalibrationRun) -> list[WeakDirection]:
+    """The weakly (not un-) observable directions."""
     obs = run.checks.observability
-    if obs is not None:
-        out += [w.words() for w in obs.weak if w.std_reference <= NOT_OBSERVABLE]
+    return [w for w in obs.weak if w.std_reference <= NOT_OBSERVABLE] if obs is not None else []
+
+
+def _coarse(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[str, str]:
+    """Each parameter whose σ to believe exceeds WEAK times the precision needed, with why."""
+    rep = run.reports[solver]
+    out: dict[str, str] = {}
     std = run.std(solver)
     names = tuple(std)
     sd = np.array([std[n] for n in names])
@@ -72,7 +87,31 @@ def _loose(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]
         if np.isfinite(s) and not ok:
             ref = reference_scale(model, key, v, sensor.reference)
             unit = run.scenario.units[name]
-            out.append(f"{name} is known only to ±{s:.2g} {unit} (over {WEAK:g}× the {ref:.2g} needed)")
+            out[name] = f"{name} is known only to ±{s:.2g} {unit} (over {WEAK:g}× the {ref:.2g} needed)"
+    return out
+
+
+def concerns(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[str, str]:
+    """Each parameter a caveat of ``solver``'s estimate names, with that caveat: known too loosely,
+    different between the converged solvers, between forward and reverse driving or between logs."""
+    out = {c: w.words() for w in _weak(run) for c in w.components}
+    out.update(_coarse(run, solver, model))
+    params = run.reports[solver].result.param_dict()
+    for other in [s for s in run.solver_order() if run.reports[s].result.converged and s != solver]:
+        theirs = run.reports[other].result.param_dict()
+        for n, v in params.items():
+            if abs(v - theirs[n]) > AGREE * max(abs(v), 1e-12):
+                out.setdefault(n, f"{solver} and {other} disagree on it")
+    direction = run.checks.direction
+    if direction is not None and direction.significant:
+        for n, z in zip(direction.names, direction.z):
+            if np.isfinite(z) and abs(z) > SIGNIFICANT:
+                out.setdefault(n, f"forward and reverse driving disagree on it by {abs(z):.1f}σ")
+    check = _consistency(run)
+    if check is not None and not check.significant:
+        for n, moved in zip(check.names, check.moved):
+            if moved:
+                out.setdefault(n, f"it moves between the logs beyond its σ ({check.words()})")
     return out
 
 
@@ -316,7 +355,7 @@ def verdict(run: CalibrationRun, model: KinematicModel, hint: str = "") -> Verdi
         return Verdict(NOT_USABLE, tuple(unusable), gain=said)
     found = caveats(run, solver, model)
     if found:
-        return Verdict(CAVEATS, tuple(found), gain=said)
+        return Verdict(CAVEATS, tuple(found), gain=said, concerns=concerns(run, solver, model))
     reasons = [f"{solver} converged", "every parameter determined to the precision a calibration needs"]
     if len([s for s in run.reports if run.reports[s].result.converged]) > 1:
         reasons.append("the solvers agree")

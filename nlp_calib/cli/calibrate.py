@@ -165,7 +165,7 @@ def _cmd_calibrate(
             print()
             print(correlation_table(run, next(iter(run.reports))))
             progress.update(i, f"{scenario.name}: writing the results")
-            final = _write_outputs(out, args, outputs, [(run, "")], (run, last))
+            final = _write_outputs(out, args, outputs, [(run, "")], (run, last), scenario=scenario)
             progress.clear()
             _closing(run, final, out)
     if compared is not None:
@@ -199,6 +199,7 @@ def _write_outputs(
     pieces: Sequence[tuple[CalibrationRun, str]],
     top: tuple[CalibrationRun, bool],
     group: str = "run",
+    scenario: Scenario | None = None,
 ) -> list[Path]:
     """``outputs`` of each piece's run in its subfolder (``""``: ``out`` itself), those of the whole
     calibration once in ``out`` for ``top``'s run; returns the final paths. Staged: an interrupted
@@ -209,6 +210,8 @@ def _write_outputs(
         urdf=getattr(args, "robot_urdf", None),
         sensor_link=getattr(args, "sensor_link", None),
         ros_distro=getattr(args, "ros_distro", registry.OutputOptions.ros_distro),
+        controller_name=getattr(args, "controller_name", None)
+        or (scenario.handoff.controller_name if scenario is not None else None),
     )
     with StagedOutput(out, group, force=args.force) as stage:
         runs = [(run, stage.path / sub) for run, sub in pieces]
@@ -249,7 +252,7 @@ def _calibrate_joint(
         "parameters, then the joint fit on every log:"
     )
     print(summary_table([*parts, whole]))
-    final = _write_outputs(out, args, outputs, whole.parts(), (whole, last))
+    final = _write_outputs(out, args, outputs, whole.parts(), (whole, last), scenario=scenario)
     _closing(whole, final, out)
     return [whole]
 
@@ -291,7 +294,7 @@ def cmd_odometry(args: argparse.Namespace) -> int:
     result = run.reports[args.solver].result
     if not result.converged or run.odometry is None:
         raise SolverError(f"{args.solver} did not converge ({result.reason}); no odometry from it")
-    final = _write_outputs(out, args, outputs, [(run, "")], (run, True), "odometry")
+    final = _write_outputs(out, args, outputs, [(run, "")], (run, True), "odometry", scenario)
     odo = run.odometry
     cov = odo.covariance
     units = calib.model.input_units

@@ -7,8 +7,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from nlp_calib.core.errors import UsageError
-from nlp_calib.core.ranges import Range
+from nlp_calib.core.errors import FieldError, UsageError
+from nlp_calib.core.ranges import Range, check_ros_name
 from nlp_calib.core.version import __version__
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, JOINT_UNITS, MAX_GAP, TRACKER_TYPES
 from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders
@@ -59,6 +59,15 @@ def _names(text: str) -> tuple[str, ...]:
     if not all(names):
         raise argparse.ArgumentTypeError(f"expected names separated by commas, got {text!r}")
     return names
+
+
+def _ros_name(text: str) -> str:
+    """A ROS 2 node name (it becomes a YAML key)."""
+    try:
+        check_ros_name("", text)
+    except FieldError as exc:
+        raise argparse.ArgumentTypeError(exc.reason) from None
+    return text
 
 
 def _in(limit: Range) -> Callable[[str], int | float]:
@@ -208,6 +217,15 @@ def _add_handoff(p: argparse.ArgumentParser) -> None:
         default=None,
         metavar="LINK",
         help="the sensor's link in --urdf (the child of the joint to re-pose)",
+    )
+    p.add_argument(
+        "--controller-name",
+        type=_ros_name,
+        default=None,
+        metavar="NAME",
+        help="your ros2_control controller's name (its key under controller_manager, e.g. "
+        "diffbot_base_controller): the top key of ros2_control.yaml (default: the scenario's "
+        "handoff.controller_name, else the controller's type, with a first line saying to rename it)",
     )
     p.add_argument(
         "--ros-distro",

@@ -8,6 +8,7 @@ check uses.
 from __future__ import annotations
 
 import math
+import re
 import reprlib
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -95,3 +96,18 @@ def check_choice(field: str, value: object, choices: Iterable[str]) -> None:
     choices = tuple(choices)
     if value not in choices:
         raise FieldError(field, f"{shown(value)} is not one of {', '.join(choices)}")
+
+
+#: A ROS 2 node name (a ros2_control controller's): letters, digits and underscores, not starting
+#: with a digit; it becomes a YAML key, so nothing else is accepted.
+_ROS_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,254}")
+
+
+def check_ros_name(field: str, value: object) -> None:
+    """Raise :class:`FieldError` naming ``field`` when ``value`` is not a ROS 2 node name."""
+    if not isinstance(value, str) or _ROS_NAME.fullmatch(value) is None:
+        raise FieldError(
+            field,
+            f"{shown(value)} is not a ROS 2 node name (letters, digits and underscores, not starting with "
+            "a digit, e.g. diffbot_base_controller)",
+        )

@@ -51,6 +51,13 @@ def _calibrate(job: Job) -> CalibrationRun:
     return check(stored, scenario, read_all(scenario))
 
 
+def _options(job: Job) -> registry.OutputOptions:
+    """The outputs' options: the controller's name in ``ros2_control.yaml`` as the scenario gives it."""
+    if job.options.check is not None:
+        return registry.OutputOptions()
+    return registry.OutputOptions(controller_name=job_scenario(job).handoff.controller_name)
+
+
 def job_outputs(job: Job) -> tuple[registry.Output, ...]:
     """The files each log's folder gets: the check's, or a run's (with ``--report``, its figures)."""
     if job.options.check is not None:
@@ -80,7 +87,7 @@ def run_job(job: Job) -> BatchRow:
         try:
             run = _calibrate(job)
             group = "check" if job.options.check is not None else "run"
-            registry.write_staged(job.folder, job_outputs(job), run, registry.OutputOptions(), group,
+            registry.write_staged(job.folder, job_outputs(job), run, _options(job), group,
                                   force=job.options.force)  # fmt: skip
         except Exception as exc:  # one log's failure is its row, never the batch's
             notes = tuple(str(w.message) for w in caught)

@@ -43,6 +43,8 @@ class ControllerMap:
     places: Mapping[str, str] = field(default_factory=dict)
     omitted: Mapping[str, str] = field(default_factory=dict)
     assumes: str = ""
+    #: Values no calibration gives that the others' meaning needs, with why (a multiplier of 1).
+    settings: Mapping[str, str] = field(default_factory=dict)
 
 
 def wheel_radius(metres_per_count: float, encoder: str, scales: EncoderScales) -> tuple[float | None, str]:

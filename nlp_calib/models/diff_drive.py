@@ -76,7 +76,11 @@ def wheel_pair(k_left: float, k_right: float, separation: float, scales: Encoder
     assumes = (
         "" if "wheel_radius" in parameters else "the multipliers assume both wheels count alike per turn"
     )
-    return ControllerMap("diff_drive_controller", parameters, {}, omitted, assumes)
+    settings = {
+        "wheel_separation_multiplier": "not calibrated: 1, so that the controller drives the calibrated "
+        "wheel_separation itself (a multiplier of yours would scale it)"
+    }
+    return ControllerMap("diff_drive_controller", parameters, {}, omitted, assumes, settings)
 
 
 class DiffDriveDrive:

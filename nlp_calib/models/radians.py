@@ -318,6 +318,7 @@ class InRadians:
             {self.rename(n): self.words(w) for n, w in found.places.items()},
             {n: self.words(w) for n, w in found.omitted.items()},
             ASSUMES,
+            found.settings,
         )
 
     def implausible(self, params: Mapping[str, float]) -> str:

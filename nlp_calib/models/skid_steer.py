@@ -176,7 +176,7 @@ class SkidSteer(DiffDrive):
             "turns at one rate takes that track as wheel_separation"
         )
         return ControllerMap(
-            base.controller, base.parameters, {"turn_slip": slip}, base.omitted, base.assumes
+            base.controller, base.parameters, {"turn_slip": slip}, base.omitted, base.assumes, base.settings
         )
 
     def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> dict[str, np.ndarray]:

@@ -89,10 +89,33 @@ def rows(runs: Sequence[CalibrationRun]) -> list[tuple[str, list[str]]]:
         ("sensor", [_sensor(run, s) for run, s in cols]),
         ("segment ATE [m]", [f"{run.reports[s].metrics.segment_ate.mean:.4g}" for run, s in cols]),
         ("RPE over 5 m [m]", [f"{run.reports[s].metrics.rpe_distance[5.0].mean:.4g}" for run, s in cols]),
-        ("hold-out segment ATE [m]", [_holdout(run, s) for run, s in cols]),
+        *_holdout_rows(runs, cols),
         ("verdict", [run.verdict.level for run, _ in cols]),
     ]
     return out
+
+
+def _holdout_rows(
+    runs: Sequence[CalibrationRun], cols: Sequence[tuple[CalibrationRun, str]]
+) -> list[tuple[str, list[str]]]:
+    """The figures on records no fit saw: the trailing hold-out (``validation.holdout_fraction``)
+    where a run has one, and the blocked cross-validation's (each block scored by the fit without
+    it; the run's, whichever solver)."""
+    out = []
+    if any(run.reports[s].holdout is not None for run, s in cols):
+        out.append(("hold-out segment ATE [m]", [_holdout(run, s) for run, s in cols]))
+    if any(_crossval(run) != "-" for run in runs):
+        out.append(("cross-validated segment ATE [m]", [_crossval(run) for run, _ in cols]))
+    return out
+
+
+def _crossval(run: CalibrationRun) -> str:
+    """The cross-validation's held-out segment ATE (mean over its blocks), or "-"."""
+    cv = run.checks.crossval
+    if cv is None or not cv.converged:
+        return "-"
+    value = cv.heldout_mean("segment ATE mean [m]")
+    return f"{value:.4g}" if value == value else "-"
 
 
 def _holdout(run: CalibrationRun, solver: str) -> str:

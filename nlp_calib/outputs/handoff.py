@@ -75,6 +75,8 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         # A mount per log: each log's own, one URDF joint each (the block above is the first's).
         **_per_log_mounts(run, solver),
         "parameters": best["params"],
+        # What the fit held rather than estimated (a value given, not calibrated: its std is no σ).
+        **_held_entry(run, solver),
         "std": best["std"],
         "std_white_noise": best["std_white_noise"],
         "std_blocks": (doc["crossvalidation"] or {}).get("std_blocks"),
@@ -103,6 +105,13 @@ def _sensor_entry(run: CalibrationRun) -> dict[str, Any]:
         "convention": info.convention,
         "held": {n: run.initial.get(n, 0.0) for n in info.held},
     }
+
+
+def _held_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
+    """``held:``: each parameter the fit held (given under ``known:``, held under ``fixed:``, or
+    held at its guess because the drive cannot determine it), with why; none: no entry."""
+    held = run.reports[solver].held
+    return {"held": dict(held)} if held else {}
 
 
 def _per_log_mounts(run: CalibrationRun, solver: str) -> dict[str, Any]:

@@ -25,12 +25,14 @@ from nlp_calib.results import CalibrationRun
 class OutputOptions:
     """What a user says about the outputs on the command line: ``sigma`` of the drawn ellipses,
     the robot's own URDF and the sensor's link in it (``robot.urdf`` re-poses that joint) and the
-    ROS 2 release whose ros2_controllers' names ``ros2_control.yaml`` uses."""
+    ROS 2 release whose ros2_controllers' names ``ros2_control.yaml`` uses, and the controller's
+    name there (None: its type, with a line saying to rename it)."""
 
     sigma: float = 3.0
     urdf: urdf.Description | None = None
     sensor_link: str | None = None
     ros_distro: str = ros2_control.DEFAULT_ROS_DISTRO
+    controller_name: str | None = None
 
 
 Writer = Callable[[CalibrationRun, Path, str, OutputOptions], list[Path]]
@@ -111,7 +113,7 @@ def placed(run: CalibrationRun, options: OutputOptions) -> CalibrationRun:
 
 
 def _controller(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
-    return ros2_control.write_ros2_control(run, folder, name, options.ros_distro)
+    return ros2_control.write_ros2_control(run, folder, name, options.ros_distro, options.controller_name)
 
 
 def _report(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:

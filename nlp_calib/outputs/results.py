@@ -173,6 +173,8 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
             "level": run.verdict.level,
             "reasons": list(run.verdict.reasons),
             "gain": run.verdict.gain,
+            # Each parameter a caveat concerns, with it: no hand-off file writes it as calibrated.
+            "concerns": dict(run.verdict.concerns),
         },
     }
 

@@ -81,26 +81,95 @@ def _covariance_notes(noise: OdometryNoise | None) -> list[str]:
     ]
 
 
-def ros2_control_yaml(run: CalibrationRun, solver: str, params: ControllerParams, distro: str) -> str:
-    """The parameter file's text, for ros2_controllers of ROS 2 ``distro``."""
+def _comment(text: str) -> str:
+    """``text`` on one comment line: no line break from an input (a YAML reader breaks lines at
+    more characters than newline) ends the comment."""
+    return " ".join(text.splitlines())
+
+
+def _header(
+    run: CalibrationRun, solver: str, params: ControllerParams, distro: str, name: str | None
+) -> list[str]:
+    """The file's comment header: the key to rename (when no name was given), what it holds, the verdict."""
     controller = params.controller
-    lines = [
-        f"# {controller} parameters calibrated by nlp_calib {__version__} for ROS 2 {distro} (its "
-        f"ros2_controllers' names): scenario {run.scenario.name}, {solver}'s estimate.",
-        "# Only what the calibration determines; load it after your controller's own parameter file.",
-        *([f"# Note: {params.assumes}."] if params.assumes else []),
+    rename = (
+        [
+            f"# Rename the top key '{controller}' to your controller's name (its key under "
+            "controller_manager, e.g. diffbot_base_controller), or give --controller-name NAME (scenario: "
+            "handoff.controller_name): under any other name your controller ignores this file."
+        ]
+        if name is None
+        else []
+    )
+    return [
+        *rename,
+        _comment(
+            f"# {controller} parameters calibrated by nlp_calib {__version__} for ROS 2 {distro} (its "
+            f"ros2_controllers' names): scenario {run.scenario.name}, {solver}'s estimate."
+        ),
+        _comment(f"# Verdict: {run.verdict.line()}"),
+        "# Live: what the calibration determines; a value it does not determine well enough is commented",
+        "# out, its reason on the line above; a value you gave is written as given. Load it after your",
+        "# controller's own file.",
+        *([_comment(f"# Note: {params.assumes}.")] if params.assumes else []),
         *(
             [f"# Note: {_AXLE_NOTES[controller]}."]
             if distro in _BY_AXLE and controller in _AXLE_NOTES
             else []
         ),
-        f"{controller}:",
-        "  ros__parameters:",
     ]
+
+
+def _doubts(run: CalibrationRun, params: ControllerParams, name: str) -> list[str]:
+    """The verdict's caveats on the parameters a controller value rests on."""
+    concerns = run.verdict.concerns
+    return list(dict.fromkeys(concerns[n] for n in params.rests_on.get(name, ()) if n in concerns))
+
+
+def _value_lines(run: CalibrationRun, params: ControllerParams, distro: str) -> list[str]:
+    """One line per value (live, or commented out with why on the line above)."""
+    lines = []
     for name, value in params.parameters.items():
-        lines.append(
-            f"    {release_name(distro, controller, name)}: {value!r}  # ± {params.std[name]:.2g} (1σ)"
-        )
+        key = release_name(distro, params.controller, name)
+        if name in params.settings:
+            lines.append(f"    {key}: {value!r}  # {_comment(params.settings[name])}")
+        elif name in params.given:
+            lines += [
+                _comment(f"    # {key} is yours, not calibrated: {params.given[name]}"),
+                f"    {key}: {value!r}",
+            ]
+        elif doubts := _doubts(run, params, name):
+            lines += [
+                _comment(
+                    f"    # {key}: not determined well enough to use ({'; '.join(doubts)}); keep yours:"
+                ),
+                f"    # {key}: {value!r}  # ± {params.std[name]:.2g} (1σ)",
+            ]
+        else:
+            lines.append(f"    {key}: {value!r}  # ± {params.std[name]:.2g} (1σ)")
+    return lines
+
+
+def _elsewhere_lines(run: CalibrationRun, params: ControllerParams) -> list[str]:
+    """The values with no place among the controller's parameters, and where each belongs."""
+    lines = []
+    for p in params.elsewhere:
+        unit = "" if p.unit in ("", "1") else f" {p.unit}"
+        sd = "given, not calibrated" if p.std != p.std else f"± {p.std:.2g}"
+        doubt = run.verdict.concerns.get(p.name)
+        flag = f" [not determined well enough to use: {doubt}]" if doubt else ""
+        lines.append(_comment(f"#   {p.name} = {p.value!r}{unit} {sd}{flag}: {p.where}"))
+    return ["", f"# Calibrated, but not parameters of {params.controller}:", *lines] if lines else []
+
+
+def ros2_control_yaml(
+    run: CalibrationRun, solver: str, params: ControllerParams, distro: str, name: str | None = None
+) -> str:
+    """The parameter file's text, for ros2_controllers of ROS 2 ``distro``, under the controller's
+    ``name`` (None: its type, with a first line saying to rename it)."""
+    controller = params.controller
+    lines = [*_header(run, solver, params, distro, name), f"{name or controller}:", "  ros__parameters:"]
+    lines += _value_lines(run, params, distro)
     noise, omitted = params.noise, dict(params.omitted)
     covariances, left_out = _covariance_lines(noise)
     lines += covariances
@@ -108,22 +177,22 @@ def ros2_control_yaml(run: CalibrationRun, solver: str, params: ControllerParams
     lines += _covariance_notes(noise)
     if omitted:
         lines += ["", "# Left out (your own file's values stay):"]
-        lines += [f"#   {release_name(distro, controller, n)}: {why}" for n, why in omitted.items()]
-    if params.elsewhere:
-        lines += ["", f"# Calibrated, but not parameters of {controller}:"]
-        for p in params.elsewhere:
-            unit = "" if p.unit in ("", "1") else f" {p.unit}"
-            lines.append(f"#   {p.name} = {p.value!r}{unit} ± {p.std:.2g}: {p.where}")
+        lines += [_comment(f"#   {release_name(distro, controller, n)}: {why}") for n, why in omitted.items()]
+    lines += _elsewhere_lines(run, params)
     lines.append("# The sensor's mount: robot.urdf (or sensor_mount.urdf.xml) beside this file.")
     return "\n".join(lines) + "\n"
 
 
-def write_ros2_control(run: CalibrationRun, folder: Path, name: str, distro: str) -> list[Path]:
-    """Write ``ros2_control.yaml`` for the handed-off estimate (none when nothing is handed off)."""
+def write_ros2_control(
+    run: CalibrationRun, folder: Path, name: str, distro: str, controller_name: str | None = None
+) -> list[Path]:
+    """Write ``ros2_control.yaml`` for the handed-off estimate (none when nothing is handed off),
+    keyed by ``controller_name`` (None: the controller's type)."""
     solver = run.handoff_solver()
     params = run.reports[solver].controller if solver is not None else None
     if params is None:
         (folder / name).unlink(missing_ok=True)
         return []
-    atomic_write_text(folder / name, ros2_control_yaml(run, solver, params, distro))  # type: ignore[arg-type]
+    text = ros2_control_yaml(run, solver, params, distro, controller_name)  # type: ignore[arg-type]
+    atomic_write_text(folder / name, text)
     return [folder / name]

@@ -307,7 +307,7 @@ def placed(d: Description, link: str, mount: SensorMount) -> SensorMount:
     rpy = tuple(float(v) for v in _rpy(T_joint[:3, :3]))
     origin = ((xyz[0], xyz[1], xyz[2]), (rpy[0], rpy[1], rpy[2]))
     kept_from = dict.fromkeys(mount.nominal, f"kept from {d.path.name} (--urdf)")
-    return mount.under(joint.parent, joint.name, origin, pose, kept_from)
+    return mount.under(joint.parent, joint.name, joint.child, origin, pose, kept_from)
 
 
 def reposed(d: Description, link: str, mount: SensorMount) -> bytes:

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from nlp_calib.core.errors import UsageError
+from nlp_calib.core.errors import FieldError, UsageError
 from nlp_calib.core.files import check_output_dir
+from nlp_calib.core.ranges import check_ros_name
 from nlp_calib.outputs import registry, ros2_control, urdf
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.results import CalibrationRun
@@ -23,16 +24,23 @@ def output_options(
     robot_urdf: str | Path | None = None,
     sensor_link: str | None = None,
     ros_distro: str = ros2_control.DEFAULT_ROS_DISTRO,
+    controller_name: str | None = None,
 ) -> registry.OutputOptions:
     """The output options, checked as the command line checks them: the URDF read (and the
-    sensor's link found in it) before anything is written."""
+    sensor's link found in it) before anything is written; ``controller_name``: the top key of
+    ``ros2_control.yaml`` (a ROS 2 node name)."""
     if (robot_urdf is None) != (sensor_link is None):
         raise UsageError("give --urdf and --sensor-link together: the URDF and the sensor's link in it")
     if ros_distro not in ros2_control.ROS_DISTROS:
         known = ", ".join(ros2_control.ROS_DISTROS)
         raise UsageError(f"unknown ROS 2 release {ros_distro!r} (--ros-distro); known: {known}")
+    if controller_name is not None:
+        try:
+            check_ros_name("--controller-name", controller_name)
+        except FieldError as exc:
+            raise UsageError(f"{exc.field}: {exc.reason}") from None
     description = None if robot_urdf is None else urdf.load(Path(robot_urdf), str(sensor_link))
-    return registry.OutputOptions(sigma, description, sensor_link, ros_distro)
+    return registry.OutputOptions(sigma, description, sensor_link, ros_distro, controller_name)
 
 
 def write_run(

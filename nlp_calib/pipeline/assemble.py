@@ -201,15 +201,31 @@ def _report(
     std = believed_std(u.std, *fitted[1].spreads(u.std))
     scales = encoder_scales(prepared)
     estimate = (result.params, std, u.correlation)
-    extra = (scored.noise.get(name), prepared.held)
+    given = given_params(prepared)
+    extra = (scored.noise.get(name), prepared.held, given)
     controller = controller_params(prepared.model, result.names, estimate, scales, extra)
     sensor, header = prepared.scenario.objective.sensor.sensor, prepared.log.header
     sd = dict(zip(result.names, map(float, std)))
+    held = {c: given[n] for c, n in sensor.components.items() if n in given}
+    listed = {**{n: f"held at its initial value: {why}" for n, why in prepared.held.items()}, **given}
     if views is None:
         mount = sensor.mount_pose(result.param_dict(), sd, header.sensor_frame, header.sensor_z_roll_pitch)
-        return SolverReport(result, u, *scored.scores[name], controller, mount)
+        return SolverReport(result, u, *scored.scores[name], controller, mount.holding(held), held=listed)
     mount, every = views.mounts(sensor, result.param_dict(), sd)
-    return SolverReport(result, u, *scored.scores[name], controller, mount, every)
+    every = tuple(dataclasses.replace(m, mount=m.mount.holding(held)) for m in every)
+    return SolverReport(result, u, *scored.scores[name], controller, mount.holding(held), every, listed)
+
+
+def given_params(prepared: PreparedLog) -> dict[str, str]:
+    """The parameters the user gave rather than the fit estimated, with where each comes from
+    (``known:``, or held at its initial value under ``fixed:``); not those the drive could not
+    determine (``PreparedLog.held``), whose guesses no hand-off file carries."""
+    params = prepared.scenario.parameters
+    out = {n: f"given under known: ({v:g})" for n, v in params.known.items()}
+    for n in params.fixed:
+        if n not in out and n not in prepared.held:
+            out[n] = "held at its initial value under fixed:"
+    return out
 
 
 def encoder_scales(prepared: PreparedLog) -> EncoderScales:

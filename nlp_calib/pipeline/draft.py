@@ -22,7 +22,8 @@ from typing import Any
 
 import yaml
 
-from nlp_calib.core.errors import UsageError
+from nlp_calib.core.errors import FieldError, UsageError
+from nlp_calib.core.ranges import check_ros_name
 from nlp_calib.logs.bag_reader import ODOMETRY_TYPE, POSE_TYPE, TF_TYPE, TRANSFORM_TYPE, is_bag
 from nlp_calib.logs.bag_survey import BagSurvey, Topic, survey
 from nlp_calib.logs.joint_log import read_joint_csv
@@ -202,6 +203,29 @@ NOTES: Mapping[str, str] = {
 }
 
 
+#: The topics a ros2_control drive controller publishes or takes, under its own name.
+_CONTROLLER_TOPICS = ("odom", "cmd_vel", "cmd_vel_unstamped", "reference", "reference_unstamped")
+
+
+def controller_name(found: BagSurvey) -> str | None:
+    """The drive controller's name where the recording shows it (``/NAME/odom``, ``/NAME/cmd_vel``
+    ...: ros2_control's controllers publish under their own names), if exactly one such name, a ROS 2
+    node name, appears; else None."""
+    names = set()
+    for t in found.topics:
+        parts = t.name.strip("/").split("/")
+        if len(parts) == 2 and parts[1] in _CONTROLLER_TOPICS and "controller" in parts[0]:
+            names.add(parts[0])
+    if len(names) != 1:
+        return None
+    (name,) = names
+    try:
+        check_ros_name("controller_name", name)
+    except FieldError:
+        return None
+    return name
+
+
 def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
     found = survey(path)
     joint_topics = [t for t in found.of_type("sensor_msgs/msg/JointState") if t.joints]
@@ -221,9 +245,16 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
     mount = sensor_frame(found) if frame is None else None
     if mount is not None:
         dataset["sensor_frame"] = mount
-    raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS}
+    controller = controller_name(found)
+    handoff = {"handoff": {"controller_name": controller}} if controller else {}
+    raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS, **handoff}
     header = [
         f"Drafted by nlp-calib init from {path}: {found.duration_s:.1f} s, {len(found.topics)} topics.",
+        *(
+            [f"handoff.controller_name {controller}: the controller whose topics the recording holds."]
+            if controller
+            else []
+        ),
         *(f"  {line}" for line in _listing(found)),
         f"model: {name}, because {why}.",
         f"joints {', '.join(joints.values())} are the model's encoders {', '.join(joints)}, in that order.",

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from nlp_calib.core.errors import FieldError, ProblemError
-from nlp_calib.core.ranges import MAGNITUDE, Range, check_choice, check_range
+from nlp_calib.core.ranges import MAGNITUDE, Range, check_choice, check_range, check_ros_name
 from nlp_calib.problem import ResidualOptions
 from nlp_calib.sensors import SCALES, SENSORS, Sensor, sensor_for
 from nlp_calib.solvers.backends import BACKENDS
@@ -92,6 +92,19 @@ class ValidationOptions:
         if self.blocks != 0 and (why := BLOCKS.problem(self.blocks)):
             raise FieldError("blocks", f"0 (none) or {why}")
         check_range("rpe_window", self.rpe_window, RPE_WINDOW)
+
+
+@dataclass(frozen=True)
+class HandoffOptions:
+    """``controller_name``: the name the robot's controller_manager gives its ros2_control
+    controller, the top key of ``ros2_control.yaml`` (None: the controller's type, with a first
+    line saying to rename it); ``--controller-name`` overrides it."""
+
+    controller_name: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.controller_name is not None:
+            check_ros_name("controller_name", self.controller_name)
 
 
 @dataclass(frozen=True)

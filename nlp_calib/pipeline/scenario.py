@@ -31,6 +31,7 @@ from nlp_calib.pipeline.options import (
     ComputeOptions,
     DataOptions,
     FaultOptions,
+    HandoffOptions,
     InformationWeights,
     LogEntry,
     ObjectiveOptions,
@@ -62,6 +63,7 @@ __all__ = [
     "ComputeOptions",
     "DataOptions",
     "FaultOptions",
+    "HandoffOptions",
     "InformationWeights",
     "LogEntry",
     "ObjectiveOptions",
@@ -97,6 +99,8 @@ class Scenario:
     solver_options: Mapping[str, Any] = field(default_factory=dict)
     validation: ValidationOptions = field(default_factory=ValidationOptions)
     compute: ComputeOptions = field(default_factory=ComputeOptions)
+    #: What the hand-off files name (the ros2_control controller).
+    handoff: HandoffOptions = field(default_factory=HandoffOptions)
 
     @classmethod
     def of(cls, name: str, dataset: str | Path, **flat: Any) -> Scenario:
@@ -209,7 +213,7 @@ _GROUP_OF: Mapping[str, str] = {
     **{f.name: "compute" for f in dataclasses.fields(ComputeOptions)},
 }
 _LOG_KEYS = ("dataset", "datasets", "samples", "alignment")
-_OWN_KEYS = ("name", "model", "solvers", "validation")
+_OWN_KEYS = ("name", "model", "solvers", "validation", "handoff")
 
 
 def top_level_keys() -> tuple[str, ...]:

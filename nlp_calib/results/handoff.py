@@ -58,3 +58,10 @@ class ControllerParams:
     omitted: Mapping[str, str] = field(default_factory=dict)
     #: The covariance diagonals the controller publishes with its odometry (None: not calibrated).
     noise: OdometryNoise | None = None
+    #: The calibrated parameters each value rests on: a caveat on one of them holds the value back.
+    rests_on: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    #: Values resting only on parameters the user gave (``known:``, ``fixed:``), with where from:
+    #: written as given, never as calibrated.
+    given: Mapping[str, str] = field(default_factory=dict)
+    #: Values no calibration gives but that the others' meaning needs (a multiplier of 1), with why.
+    settings: Mapping[str, str] = field(default_factory=dict)

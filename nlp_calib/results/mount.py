@@ -10,6 +10,7 @@ held value). Rotations follow URDF: fixed axes, ``R = Rz(yaw)·Ry(pitch)·Rx(rol
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -72,17 +73,19 @@ class SensorMount:
         self,
         parent: str,
         joint: str,
+        child: str,
         origin: tuple[Triple, Triple],
         pose: Mapping[str, float],
         nominal: Mapping[str, str],
     ) -> SensorMount:
-        """The same sensor as the child of ``joint`` below ``parent`` (a robot description's own
-        joint): its ``origin`` (xyz, rpy) in the parent, the sensor's ``pose`` in ``base_link``
-        with the components the fit did not calibrate taken from that description (``nominal``)."""
+        """The same sensor as the link ``child`` of ``joint`` below ``parent`` (a robot
+        description's own joint and link, which every hand-off file then names): its ``origin``
+        (xyz, rpy) in the parent, the sensor's ``pose`` in ``base_link`` with the components the
+        fit did not calibrate taken from that description (``nominal``)."""
         return SensorMount(
             kind=self.kind,
             parent=parent,
-            child=self.child,
+            child=child,
             joint=joint,
             xyz=origin[0],
             rpy=origin[1],
@@ -90,6 +93,20 @@ class SensorMount:
             std=self.std,
             calibrated=self.calibrated,
             nominal={c: nominal.get(c, self.nominal[c]) for c in self.nominal},
+        )
+
+    def holding(self, given: Mapping[str, str]) -> SensorMount:
+        """The same mount with the components in ``given`` (component → where its value comes
+        from: ``known:``, ``fixed:``) said to be given, not calibrated: no 1σ, and listed with
+        the nominal ones."""
+        held = [c for c in self.calibrated if c in given]
+        if not held:
+            return self
+        return dataclasses.replace(
+            self,
+            std={c: math.nan if c in given else s for c, s in self.std.items()},
+            calibrated=tuple(c for c in self.calibrated if c not in given),
+            nominal={**self.nominal, **{c: given[c] for c in held}},
         )
 
     def words(self) -> str:

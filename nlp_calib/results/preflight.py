@@ -226,9 +226,10 @@ class Preflight:
         if not missing:
             return ""
         plan = f"; plan: {self.plan.line()}" if self.plan is not None and self.plan.best is not None else ""
-        why = "; ".join(_causes(missing))
+        why = "; ".join(c for c in _causes(missing) if c)
+        because = f" ({why})" if why else ""  # never an empty "()"
         return (
-            f"this drive cannot determine {', '.join(p.name for p in missing)} ({why}); {self.way_out}{plan}"
+            f"this drive cannot determine {', '.join(p.name for p in missing)}{because}; {self.way_out}{plan}"
         )
 
 

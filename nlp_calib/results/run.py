@@ -212,6 +212,9 @@ class SolverReport:
     mount: SensorMount | None = None
     #: A fit with a mount per log: every log's own (one URDF joint each).
     mounts: tuple[LogMount, ...] = ()
+    #: The parameters the fit held rather than estimated, with why (given under ``known:``, held
+    #: under ``fixed:``, or held at the guess because the drive cannot determine them).
+    held: Mapping[str, str] = field(default_factory=dict)
 
 
 #: The verdict's levels.
@@ -233,6 +236,9 @@ class Verdict:
     handoff: bool = True
     #: What the calibration gained over the robot's nominal values, or that none are known.
     gain: str = ""
+    #: Each parameter a caveat concerns, with that caveat: a hand-off file writes no value resting
+    #: on it as if it were calibrated.
+    concerns: Mapping[str, str] = field(default_factory=dict)
 
     def line(self) -> str:
         return f"{self.level.upper()}: " + "; ".join((*self.reasons, *((self.gain,) if self.gain else ())))
@@ -308,8 +314,11 @@ class CalibrationRun:
 
     def handoff_solver(self) -> str | None:
         """The solver whose estimate the hand-off files carry: the chosen one, unless the verdict
-        holds the hand-off back."""
-        return self.chosen_solver() if self.verdict.handoff else None
+        holds the hand-off back or is NOT DETERMINED (no file then carries a value the drive did
+        not determine)."""
+        if not self.verdict.handoff or self.verdict.level == UNDETERMINED:
+            return None
+        return self.chosen_solver()
 
     def to_data(self) -> Any:
         """The run as JSON types (see :mod:`nlp_calib.results.codec`)."""

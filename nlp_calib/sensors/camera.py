@@ -52,6 +52,8 @@ class CameraPose:
     label: ClassVar[str] = "3-D sensor"
     group: ClassVar[str] = "SE(3)"
     held: ClassVar[tuple[str, ...]] = HELD_PARAMS
+    #: The mount's pose components (URDF's) and the parameter each is.
+    components: ClassVar[Mapping[str, str]] = MappingProxyType(dict(zip(COMPONENTS, MOUNT_PARAMS)))
     angles: ClassVar[tuple[str, ...]] = MOUNT_ANGLES
     error_rows: ClassVar[int] = 6
     z_rows: ClassVar[int] = 7
@@ -230,7 +232,7 @@ class CameraPose:
         nominal: tuple[float, float, float] | None,
     ) -> SensorMount:
         """All six numbers; the height as held."""
-        names = dict(zip(COMPONENTS, MOUNT_PARAMS))
+        names = self.components
         return SensorMount.on_base(
             self.kind,
             frame,

@@ -83,6 +83,8 @@ class Gyro:
     kind: ClassVar[str] = "gyro"
     label: ClassVar[str] = "gyro"
     group: ClassVar[str] = "rate"
+    #: The mount's pose components (URDF's) the gyro determines and the parameter each is.
+    components: ClassVar[Mapping[str, str]] = MappingProxyType({"roll": "imu_roll", "pitch": "imu_pitch"})
     reference: ClassVar[Mapping[str, Reference]] = REFERENCE
     held: ClassVar[tuple[str, ...]] = ()
     #: The tilt shows only while the base turns (the vertical rate leaking into x and y).

@@ -30,6 +30,10 @@ class PlanarPose:
     label: ClassVar[str] = "planar pose sensor"
     group: ClassVar[str] = "SE(2)"
     params: ClassVar[tuple[str, ...]] = SENSOR_PARAMS
+    #: The mount's pose components (URDF's) and the parameter each is.
+    components: ClassVar[Mapping[str, str]] = MappingProxyType(
+        {"x": "sensor_x", "y": "sensor_y", "yaw": "sensor_theta"}
+    )
     units: ClassVar[Mapping[str, str]] = MappingProxyType(dict(SENSOR_UNITS))
     reference: ClassVar[Mapping[str, Reference]] = MappingProxyType(dict(SENSOR_REFERENCE))
     held: ClassVar[tuple[str, ...]] = ()
@@ -173,7 +177,7 @@ class PlanarPose:
         """x, y and yaw calibrated; z, roll and pitch the nominal mount's (else 0)."""
         z, roll, pitch = nominal or (0.0, 0.0, 0.0)
         known = "from the nominal mount (/tf_static)" if nominal else "not known (0)"
-        names = {"x": "sensor_x", "y": "sensor_y", "yaw": "sensor_theta"}
+        names = self.components
         pose = {"z": z, "roll": roll, "pitch": pitch, **{c: float(params[n]) for c, n in names.items()}}
         source = f"{known}, which planar driving cannot see"
         return SensorMount.on_base(
