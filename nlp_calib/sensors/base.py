@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import ClassVar, Literal, Protocol
 
 import casadi as ca
 import numpy as np
@@ -146,3 +146,61 @@ class Sensor(Protocol):
         frame: str,
         nominal: tuple[float, float, float] | None,
     ) -> SensorMount: ...
+
+
+class SensorDefaults:
+    """What most references share, for a new kind to inherit and override where it differs: no
+    mount parameter held, no angle convention to state, no turning-only or angle parameter, lengths
+    measured in metres, no planar base pose, no group structure for the mount's perturbation, no
+    repair of its poses, no height, no levelling, no scale, no nominal mount in a log's header, no
+    given start, every window fitted, and the estimate as it is (no mirror images to fold)."""
+
+    held: ClassVar[tuple[str, ...]] = ()
+    held_why: ClassVar[str] = ""
+    convention: str = ""
+    turning: ClassVar[tuple[str, ...]] = ()
+    angles: ClassVar[tuple[str, ...]] = ()
+    lengths_unseen: ClassVar[str] = ""
+    length_unit: str = "m"
+    planar_base: ClassVar[bool] = False
+    start_span_s: ClassVar[float | None] = None
+
+    def manifold(self, free: Sequence[str]) -> bool:
+        return False
+
+    def boxplus(self, free: Sequence[str], x: ca.SX, step: ca.SX, x_plus: ca.SX) -> None:
+        return None
+
+    def planar_yaw(self, params: Mapping[str, float]) -> float | None:
+        return None
+
+    def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str:
+        return ""
+
+    def repaired(self, log: Log, bad: np.ndarray) -> Log:
+        return log
+
+    def heights(self, log: Log) -> np.ndarray | None:
+        return None
+
+    def level(self, params: Mapping[str, float], first_pose: np.ndarray) -> np.ndarray | None:
+        return None
+
+    def trajectory_scale(self, params: Mapping[str, float]) -> float:
+        return 1.0
+
+    def nominal(self, header: LogHeader) -> dict[str, float]:
+        return {}
+
+    def given(self, initial: Mapping[str, float]) -> SensorStart | None:
+        return None
+
+    def fit_windows(
+        self, start: SensorStart, z: np.ndarray, base_turn: np.ndarray
+    ) -> tuple[np.ndarray, dict[str, int]]:
+        return np.ones(z.shape[1], dtype=bool), {}
+
+    def canonical(
+        self, model: KinematicModel, params: Mapping[str, float], fixed: Sequence[str]
+    ) -> dict[str, float]:
+        return dict(params)

@@ -27,7 +27,7 @@ from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.models.base import KinematicModel
 from nlp_calib.results.mount import COMPONENTS, SensorMount
-from nlp_calib.sensors.base import BaseMotion, Reference, SensorStart
+from nlp_calib.sensors.base import BaseMotion, Reference, SensorDefaults, SensorStart
 from nlp_calib.sensors.camera_start import FIT_REASONS, CameraStart, camera_start, fit_selection
 from nlp_calib.sensors.mount import (
     HELD_PARAMS,
@@ -45,7 +45,7 @@ from nlp_calib.symbolic import se3
 HELD_WHY = "planar driving cannot determine a 3-D sensor's height (give the measured one as known.sensor_z)"
 
 
-class CameraPose:
+class CameraPose(SensorDefaults):
     """A 3-D pose sensor (see the module docstring); ``scale_free``: poses known up to scale."""
 
     kind: ClassVar[str] = "3d"
@@ -68,7 +68,6 @@ class CameraPose:
     start_span_s: ClassVar[float | None] = 1.0
     held_why: ClassVar[str] = HELD_WHY
     reference: ClassVar[Mapping[str, Reference]] = MOUNT_REFERENCE
-    lengths_unseen: ClassVar[str] = ""
 
     def __init__(self, scale_free: bool) -> None:
         self.scale_free = scale_free

@@ -37,7 +37,7 @@ from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.models.base import KinematicModel
 from nlp_calib.results.mount import SensorMount
-from nlp_calib.sensors.base import BaseMotion, Reference, SensorStart
+from nlp_calib.sensors.base import BaseMotion, Reference, SensorDefaults, SensorStart
 from nlp_calib.sensors.gyro_start import gyro_start
 
 #: The gyro's bias on each of the IMU's axes (rad/s): one set per log (a gyro's bias changes with
@@ -77,7 +77,7 @@ def tilt_rotation(roll: ca.SX, pitch: ca.SX) -> ca.SX:
     return ca.mtimes(Ry, Rx)
 
 
-class Gyro:
+class Gyro(SensorDefaults):
     """A gyro (see the module docstring); ``scale_free``: its scale factor is fitted."""
 
     kind: ClassVar[str] = "gyro"
@@ -86,7 +86,6 @@ class Gyro:
     #: The mount's pose components (URDF's) the gyro determines and the parameter each is.
     components: ClassVar[Mapping[str, str]] = MappingProxyType({"roll": "imu_roll", "pitch": "imu_pitch"})
     reference: ClassVar[Mapping[str, Reference]] = REFERENCE
-    held: ClassVar[tuple[str, ...]] = ()
     #: The tilt shows only while the base turns (the vertical rate leaking into x and y).
     turning: ClassVar[tuple[str, ...]] = TILT_PARAMS
     angles: ClassVar[tuple[str, ...]] = TILT_PARAMS
@@ -96,10 +95,6 @@ class Gyro:
     error_rows: ClassVar[int] = 3
     noise_groups: ClassVar[tuple[tuple[int, ...], ...]] = ((0, 1, 2),)
     noise_names: ClassVar[tuple[str, ...]] = ("gyro_angle",)
-    length_unit: ClassVar[str] = "m"
-    planar_base: ClassVar[bool] = False
-    start_span_s: ClassVar[float | None] = None
-    held_why: ClassVar[str] = ""
     lengths_unseen: ClassVar[str] = "a gyro measures turning, no length"
 
     def __init__(self, scale_free: bool) -> None:
@@ -143,23 +138,11 @@ class Gyro:
         turned = ca.mtimes(R, T_world_sensor[0:3] - bias * T_world_sensor[3])[2] / scale
         return ca.vertcat(0, 0, turned)
 
-    def manifold(self, free: Sequence[str]) -> bool:
-        return False
-
-    def boxplus(self, free: Sequence[str], x: ca.SX, step: ca.SX, x_plus: ca.SX) -> None:
-        return None
-
     # --- numeric twins ---------------------------------------------------------------------------
 
     def heading(self, T_world_sensor: np.ndarray) -> np.ndarray:
         """The rate integrated about the IMU's z axis (rad): its heading when mounted level."""
         return np.asarray(T_world_sensor[:, 2], dtype=float)
-
-    def planar_yaw(self, params: Mapping[str, float]) -> float | None:
-        return None
-
-    def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str:
-        return ""
 
     def tangent(self, z: np.ndarray) -> np.ndarray:
         """The integrated rates (the time row is no motion)."""
@@ -182,26 +165,11 @@ class Gyro:
     def jump_signal(self, log: Log) -> tuple[np.ndarray, int]:
         return self.poses(log)[:, :3], 0
 
-    def repaired(self, log: Log, bad: np.ndarray) -> Log:
-        return log
-
-    def heights(self, log: Log) -> np.ndarray | None:
-        return None
-
-    def level(self, params: Mapping[str, float], first_pose: np.ndarray) -> np.ndarray | None:
-        return None
-
-    def trajectory_scale(self, params: Mapping[str, float]) -> float:
-        return 1.0
-
     # --- the start -----------------------------------------------------------------------------
 
     def initial(self, header: LogHeader) -> dict[str, float]:
         """No bias, a level IMU, a true scale."""
         return {**dict.fromkeys(self.params, 0.0), **({SCALE_PARAM: 1.0} if self.scale_free else {})}
-
-    def nominal(self, header: LogHeader) -> dict[str, float]:
-        return {}
 
     def closed_form(
         self,
@@ -217,14 +185,6 @@ class Gyro:
         if self.scale_free:
             params[SCALE_PARAM] = float(known.get(SCALE_PARAM, 1.0))
         return SensorStart(params)
-
-    def given(self, initial: Mapping[str, float]) -> SensorStart | None:
-        return None
-
-    def fit_windows(
-        self, start: SensorStart, z: np.ndarray, base_turn: np.ndarray
-    ) -> tuple[np.ndarray, dict[str, int]]:
-        return np.ones(z.shape[1], dtype=bool), {}
 
     # --- the write-back ------------------------------------------------------------------------
 

@@ -19,11 +19,11 @@ import numpy as np
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.models.base import SENSOR_PARAMS, SENSOR_REFERENCE, SENSOR_UNITS, KinematicModel, canonical
 from nlp_calib.results.mount import SensorMount
-from nlp_calib.sensors.base import BaseMotion, Reference, SensorStart
+from nlp_calib.sensors.base import BaseMotion, Reference, SensorDefaults, SensorStart
 from nlp_calib.symbolic import se2
 
 
-class PlanarPose:
+class PlanarPose(SensorDefaults):
     """A planar pose sensor (see the module docstring)."""
 
     kind: ClassVar[str] = "planar"
@@ -36,7 +36,6 @@ class PlanarPose:
     )
     units: ClassVar[Mapping[str, str]] = MappingProxyType(dict(SENSOR_UNITS))
     reference: ClassVar[Mapping[str, Reference]] = MappingProxyType(dict(SENSOR_REFERENCE))
-    held: ClassVar[tuple[str, ...]] = ()
     #: The lever arm: a drive without turning cannot determine it.
     turning: ClassVar[tuple[str, ...]] = SENSOR_PARAMS[:2]
     angles: ClassVar[tuple[str, ...]] = ("sensor_theta",)
@@ -46,12 +45,7 @@ class PlanarPose:
     #: Pose noise components sharing one variance, and the variances' names.
     noise_groups: ClassVar[tuple[tuple[int, ...], ...]] = ((0, 1), (2,))
     noise_names: ClassVar[tuple[str, ...]] = ("tracker_xy", "tracker_theta")
-    length_unit: ClassVar[str] = "m"
     planar_base: ClassVar[bool] = True
-    start_span_s: ClassVar[float | None] = None
-    held_why: ClassVar[str] = ""
-    convention: ClassVar[str] = ""
-    lengths_unseen: ClassVar[str] = ""
 
     # --- the error term ------------------------------------------------------------------------
 
@@ -124,12 +118,6 @@ class PlanarPose:
         """The tracker's height where its source reports one (a bag's 3-D pose topic)."""
         return log.heights()
 
-    def level(self, params: Mapping[str, float], first_pose: np.ndarray) -> np.ndarray | None:
-        return None
-
-    def trajectory_scale(self, params: Mapping[str, float]) -> float:
-        return 1.0
-
     # --- the start -----------------------------------------------------------------------------
 
     def initial(self, header: LogHeader) -> dict[str, float]:
@@ -150,9 +138,6 @@ class PlanarPose:
     ) -> SensorStart:
         """The model's planar closed form: the wheels, and the mount by hand-eye."""
         return SensorStart(model.initial_guess(U, z[:3], base_motion))
-
-    def given(self, initial: Mapping[str, float]) -> SensorStart | None:
-        return None
 
     def fit_windows(
         self, start: SensorStart, z: np.ndarray, base_turn: np.ndarray
