@@ -27,7 +27,7 @@ from nlp_calib.analysis.uncertainty import range_std
 from nlp_calib.analysis.units import findings
 from nlp_calib.analysis.verdict import way_out
 from nlp_calib.core.errors import NlpCalibError, PreflightError
-from nlp_calib.logs import Log, planar_track
+from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel
 from nlp_calib.pipeline.assemble import fit_info
 from nlp_calib.pipeline.build import (
@@ -168,10 +168,8 @@ def _track(log: Log, fns: ProblemFunctions) -> tuple[np.ndarray, np.ndarray]:
     """The reference's positions on the floor and its heading about the floor's normal: a 3-D
     reference's (a camera's, whose world frame need not be level) levelled from its own 3-D poses,
     a planar one's as it is."""
-    T = np.asarray(log.T_world_sensor)
-    if fns.sensor.planar_yaw({}) is None:
-        T = planar_track(np.asarray(fns.sensor.poses(log), dtype=float))
-    return T[:, :2], np.unwrap(T[:, 2])
+    T = fns.sensor.floor_track(log)
+    return T[:, :2], T[:, 2]
 
 
 def _units(d: Drive, fitted: Mapping[str, float] | None) -> tuple[UnitFinding, ...]:

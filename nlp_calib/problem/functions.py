@@ -145,8 +145,6 @@ class ProblemFunctions(TrajectoryFunctions):
         self.layout = layout.with_status(dict.fromkeys(spec.fixed, HELD))
         #: One log's parameters as the full-parameter Functions take them (see :meth:`view`).
         self.view_names = (*model.kinematic_params, *sensor.params, *layout.block(CLOCK))
-        self.integration = spec.integration
-        self.horizon = spec.horizon
         self.free = tuple(n for n in names if n not in held)
         self.fixed = tuple(n for n in names if n in held)
         if not self.free:
@@ -171,6 +169,14 @@ class ProblemFunctions(TrajectoryFunctions):
         self._steps: dict[int, ca.Function] = {}
 
     # --- layout facts ---------------------------------------------------------------------------
+
+    @property
+    def horizon(self) -> int:
+        return self.spec.horizon
+
+    @property
+    def integration(self) -> str:
+        return self.spec.integration
 
     @functools.cached_property
     def kinematic_columns(self) -> list[int]:

@@ -69,8 +69,16 @@ class TrajectoryFunctions:
     #: The parameters these Functions take: one log's (its mount among them; see
     #: :meth:`ProblemFunctions.view`).
     view_names: tuple[str, ...]
-    integration: str
-    horizon: int
+
+    @property
+    def integration(self) -> str:
+        """How an interval's motion is integrated (see :data:`~nlp_calib.models.base.INTEGRATIONS`)."""
+        raise NotImplementedError
+
+    @property
+    def horizon(self) -> int:
+        """Intervals per window."""
+        raise NotImplementedError
 
     @property
     def sensor(self) -> Sensor:

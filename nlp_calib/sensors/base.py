@@ -107,6 +107,7 @@ class Sensor(Protocol):
 
     # --- numeric twins ---------------------------------------------------------------------------
     def heading(self, T_world_sensor: np.ndarray) -> np.ndarray: ...
+    def floor_track(self, log: Log) -> np.ndarray: ...  # (x, y, unwrapped heading) on the floor
     def planar_yaw(self, params: Mapping[str, float]) -> float | None: ...  # mount yaw in the base plane
     def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str: ...
     def tangent(self, z: np.ndarray) -> np.ndarray: ...
@@ -167,6 +168,12 @@ class SensorDefaults:
 
     def manifold(self, free: Sequence[str]) -> bool:
         return False
+
+    def floor_track(self, log: Log) -> np.ndarray:
+        """What it measured of the drive on the floor: its unwrapped heading (no position)."""
+        sensor: Sensor = self  # type: ignore[assignment]  # a subclass implements the rest of Sensor
+        heading = np.unwrap(sensor.heading(np.asarray(sensor.poses(log), dtype=float)))
+        return np.column_stack([np.zeros((heading.size, 2)), heading])
 
     def boxplus(self, free: Sequence[str], x: ca.SX, step: ca.SX, x_plus: ca.SX) -> None:
         return None

@@ -24,7 +24,7 @@ import numpy as np
 
 from nlp_calib.core import poses3d
 from nlp_calib.core.numeric import wrap_angle
-from nlp_calib.logs import Log, LogHeader
+from nlp_calib.logs import Log, LogHeader, planar_track
 from nlp_calib.models.base import KinematicModel
 from nlp_calib.results.mount import COMPONENTS, SensorMount
 from nlp_calib.sensors.base import BaseMotion, Reference, SensorDefaults, SensorStart
@@ -136,6 +136,12 @@ class CameraPose(SensorDefaults):
         """Why the mount is likely the mirror image a camera's motion cannot tell from the robot (its
         image upside down while no ``given`` mount says so); "" when it is not."""
         return mirrored_mount(params, given)
+
+    def floor_track(self, log: Log) -> np.ndarray:
+        """Its 3-D poses levelled onto the floor (its world frame need not be level): the position
+        in the floor's plane and the unwrapped heading about its normal."""
+        T = planar_track(np.asarray(self.poses(log), dtype=float))
+        return np.column_stack([T[:, :2], np.unwrap(T[:, 2])])
 
     def heading(self, T_world_sensor: np.ndarray) -> np.ndarray:
         """The camera's unwrapped rotation about the floor normal (the principal axis of its

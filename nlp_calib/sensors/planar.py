@@ -88,6 +88,11 @@ class PlanarPose(SensorDefaults):
         """The sensor's unwrapped heading at each pose (rad)."""
         return np.unwrap(T_world_sensor[:, 2])
 
+    def floor_track(self, log: Log) -> np.ndarray:
+        """Its poses as they are (x, y and the unwrapped heading)."""
+        T = np.asarray(log.T_world_sensor, dtype=float)
+        return np.column_stack([T[:, :2], np.unwrap(T[:, 2])])
+
     def planar_yaw(self, params: Mapping[str, float]) -> float | None:
         """The mount's yaw in the base plane (rad) in ``params`` (0 where they hold none): the
         angle that turns the tracker's motion into the base's."""
