@@ -64,7 +64,9 @@ def test_solvers_agree_for_every_kernel(small_demo: Scenario, kernel: str) -> No
 
 
 @pytest.mark.parametrize("kernel", ["none", "huber", "cauchy", "pseudo_huber"])
-def test_ipopt_gauss_newton_hessian_reaches_the_exact_hessians_optimum(small_demo: Scenario, kernel: str) -> None:
+def test_ipopt_gauss_newton_hessian_reaches_the_exact_hessians_optimum(
+    small_demo: Scenario, kernel: str
+) -> None:
     """IPOPT's default Hessian is Gauss-Newton's (no second-order prefix jets to integrate or
     compile); it meets the optimum of the exact Hessian, which stays an option, to 1e-8 of each
     parameter (measured: 1e-12 free, 1e-10 at a bound) for every kernel."""
@@ -74,13 +76,13 @@ def test_ipopt_gauss_newton_hessian_reaches_the_exact_hessians_optimum(small_dem
     start = calib.fitting.problem.start
     lower = np.full(start.x0.size, -np.inf) if start.lower is None else start.lower.copy()
     upper = np.full(start.x0.size, np.inf) if start.upper is None else start.upper.copy()
+    axis = calib.fns.free.index("axis_length")
     for bounded in (False, True):
         exact = Ipopt(calib.evaluator, IpoptOptions(hessian="exact")).solve(start.x0, lower, upper)
         default = Ipopt(calib.evaluator).solve(start.x0, lower, upper)
         agree(exact, default, params_rtol=1e-8, cost_rtol=1e-10)
         if bounded:
             assert default.x[axis] == pytest.approx(upper[axis], abs=1e-7)
-        axis = calib.fns.free.index("axis_length")
         # The second round with this bound active (and its mirror image out of reach).
         lower[axis], upper[axis] = 1.0, abs(exact.x[axis]) - 0.05
 
