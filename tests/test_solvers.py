@@ -13,6 +13,7 @@ from nlp_calib.pipeline import Calibration
 from nlp_calib.pipeline.scenario import FaultOptions, RobustOptions, Scenario, load_scenario
 from nlp_calib.problem import ResidualOptions
 from nlp_calib.solvers import IpoptOptions
+from nlp_calib.solvers.ipopt import Ipopt
 
 TRUTH_TOL = {  # absolute tolerances on a noiseless log
     "k_steer": 1e-3,
@@ -60,6 +61,30 @@ def test_solvers_agree_for_every_kernel(small_demo: Scenario, kernel: str) -> No
     sc = small_demo.with_options(robust=RobustOptions(kernel=kernel, delta=0.03))
     calib = Calibration.setup(sc)
     agree(calib.solve("gauss_newton"), calib.solve("ipopt"))
+
+
+@pytest.mark.parametrize("kernel", ["none", "huber", "cauchy", "pseudo_huber"])
+def test_ipopt_gauss_newton_hessian_reaches_the_exact_hessians_optimum(
+    small_demo: Scenario, kernel: str
+) -> None:
+    """IPOPT's default Hessian is Gauss-Newton's (no second-order prefix jets to integrate or
+    compile); it meets the optimum of the exact Hessian, which stays an option, to 1e-8 of each
+    parameter (measured: 1e-12 free, 1e-10 at a bound) for every kernel."""
+    assert IpoptOptions().hessian == "gauss_newton"
+    sc = small_demo.with_options(robust=RobustOptions(kernel=kernel, delta=0.03))
+    calib = Calibration.setup(sc)
+    start = calib.fitting.problem.start
+    lower = np.full(start.x0.size, -np.inf) if start.lower is None else start.lower.copy()
+    upper = np.full(start.x0.size, np.inf) if start.upper is None else start.upper.copy()
+    axis = calib.fns.free.index("axis_length")
+    for bounded in (False, True):
+        exact = Ipopt(calib.evaluator, IpoptOptions(hessian="exact")).solve(start.x0, lower, upper)
+        default = Ipopt(calib.evaluator).solve(start.x0, lower, upper)
+        agree(exact, default, params_rtol=1e-8, cost_rtol=1e-10)
+        if bounded:
+            assert default.x[axis] == pytest.approx(upper[axis], abs=1e-7)
+        # The second round with this bound active (and its mirror image out of reach).
+        lower[axis], upper[axis] = 1.0, abs(exact.x[axis]) - 0.05
 
 
 def test_lifted_huber_reaches_the_direct_optimum(small_demo: Scenario) -> None:

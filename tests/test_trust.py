@@ -184,3 +184,22 @@ def test_tight_prior_pulls_the_estimate_to_its_mean(small_demo: Scenario) -> Non
     np.testing.assert_allclose(gn.params, ip.params, rtol=1e-4)
     loose = Calibration(small_demo.with_options(priors={"axis_length": Prior(mean=mean, std=10.0)}))
     assert loose.solve("gauss_newton").param_dict()["axis_length"] == pytest.approx(free, abs=1e-3)
+
+
+def test_one_uncertainty_where_both_solvers_meet_the_same_optimum(small_demo: Scenario) -> None:
+    """Gauss-Newton and IPOPT at one optimum share one uncertainty, within 1e-6 of the one computed
+    at IPOPT's own estimate; a result elsewhere gets its own."""
+    from nlp_calib.pipeline.analyse import uncertainties
+
+    calib = Calibration.setup(small_demo)
+    fit = calib.fitting
+    noise = calib.model.input_noise_std(calib.aligned)
+    results = {name: calib.solve(name) for name in ("gauss_newton", "ipopt")}
+    shared = uncertainties(fit, results, noise, None)
+    assert shared["ipopt"] is shared["gauss_newton"]
+    own = unc.estimate(calib.evaluator, results["ipopt"].x, calib.data, noise)
+    np.testing.assert_allclose(shared["ipopt"].std, own.std, rtol=1e-6)
+    sigma = own.std[[own.names.index(n) for n in own.free]]
+    moved = dataclasses.replace(results["ipopt"], x=results["ipopt"].x + 1e-3 * sigma)
+    apart = uncertainties(fit, {"gauss_newton": results["gauss_newton"], "ipopt": moved}, noise, None)
+    assert apart["ipopt"] is not apart["gauss_newton"]

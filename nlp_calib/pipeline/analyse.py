@@ -189,7 +189,7 @@ def analyse_fit(
         memory.give_back()
     start = fit.problem.start
     ranges = unc.range_std(start.lower, start.upper, fit.fns.n_free)
-    uncertainty = {name: unc.estimate(ev, r.x, data, noise, ranges) for name, r in results.items()}
+    uncertainty = uncertainties(fit, results, noise, ranges)
     finite = [r for r in results.values() if np.isfinite(r.cost)] or list(results.values())
     observability = observability_of(ev, finite[0].x, data.T_world_sensor)
     converged = [r for r in results.values() if r.converged]
@@ -218,6 +218,37 @@ def analyse_fit(
         else np.asarray(fit.fns.assemble(nominal[1], ev.x_fixed)).ravel(),
         lag_effects=effects,
     )
+
+
+#: Two estimates are one optimum when every free parameter agrees to this fraction of its σ: their
+#: uncertainties then differ by about this times σ over the parameter's own scale (below 1e-6 of
+#: themselves), and one is computed for both.
+SAME_OPTIMUM_SIGMAS = 1e-4
+
+
+def uncertainties(
+    fit: Fit, results: Mapping[str, SolverResult], noise: np.ndarray, ranges: np.ndarray | None
+) -> dict[str, Uncertainty]:
+    """Each result's uncertainty at its estimate; a result at the optimum of one computed before
+    (both solvers met it) takes that one's."""
+    out: dict[str, Uncertainty] = {}
+    done: list[tuple[SolverResult, Uncertainty]] = []
+    for name, r in results.items():
+        same = [u for prior, u in done if _same_optimum(prior, r, u)]
+        out[name] = same[0] if same else unc.estimate(fit.evaluator, r.x, fit.data, noise, ranges)
+        done.append((r, out[name]))
+    return out
+
+
+def _same_optimum(a: SolverResult, b: SolverResult, u: Uncertainty) -> bool:
+    """Whether ``b`` converged to ``a``'s optimum, ``u`` its uncertainty (finite σ of every free
+    parameter)."""
+    if not (a.converged and b.converged) or a.x.shape != b.x.shape:
+        return False
+    sigma = np.array([u.std[u.names.index(n)] for n in u.free])
+    if not np.all(np.isfinite(sigma) & (sigma > 0)):
+        return False
+    return bool(np.all(np.abs(a.x - b.x) <= SAME_OPTIMUM_SIGMAS * sigma))
 
 
 def _against(fit: Fit, x: np.ndarray) -> dict[str, tuple[str, np.ndarray]]:

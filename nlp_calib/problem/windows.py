@@ -161,6 +161,26 @@ class ResidualData:
         """The windows ``keep`` (a mask or indices) marks, in order."""
         return replace(self, starts=self.starts[keep], stops=self.stops[keep], z=self.z[:, keep])
 
+    def spanned(self) -> ResidualData:
+        """The same windows on the records they span alone, renumbered from the first: an evaluator
+        bound to them integrates those intervals only, not the whole log's (a window's motion,
+        ``P_a⁻¹·P_b``, does not depend on where the prefix poses start)."""
+        if not self.n_residuals:
+            return self
+        lo, hi = int(self.starts.min()), int(self.stops.max()) + 1
+        clock = self.clock
+        if clock is not None:
+            clock = replace(clock, rates=clock.rates[:, lo:hi])
+        return replace(
+            self,
+            offsets=tuple(o - lo for o in self.offsets),
+            inputs=self.inputs[:, lo : hi - 1],
+            T_world_sensor=self.T_world_sensor[lo:hi],
+            starts=self.starts - lo,
+            stops=self.stops - lo,
+            clock=clock,
+        )
+
     def with_inputs(
         self, inputs: np.ndarray, lags: Sequence[float] | None = None, rates: np.ndarray | None = None
     ) -> ResidualData:
