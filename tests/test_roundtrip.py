@@ -299,3 +299,20 @@ def test_run_then_check_a_lidar_bag(tmp_path: Path) -> None:
     }
     run, checked = _run_and_check(_scenario(tmp_path, body))
     _assert_still_good(run, checked)
+
+
+def test_a_batch_runs_a_scenario_of_several_logs(tmp_path: Path) -> None:
+    from conftest import cli
+
+    logs = [write_sim(tmp_path, f"drive{i}.txt", records=600, seed=50 + i) for i in range(2)]
+    scenario = _scenario(
+        tmp_path,
+        {"datasets": [str(p) for p in logs], "model": "tricycle", "residual": {"horizon": 10}, **LIGHT},
+    )
+    proc = cli("batch", str(scenario), "--out", str(tmp_path / "batch"), "--jobs", "1")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    (folder,) = [p for p in (tmp_path / "batch").iterdir() if p.is_dir()]
+    # The joint fit's files once, each log's in its subfolder, as `run` writes them.
+    assert (folder / "calibration.yaml").is_file() and (folder / "result.json").is_file()
+    assert all((folder / p.stem / "result.json").is_file() for p in logs)
+    assert "1 of 1 logs ran to the end" in proc.stdout
