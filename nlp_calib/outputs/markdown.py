@@ -162,26 +162,14 @@ def _faults_section(run: CalibrationRun) -> list[str]:
     findings = run.checks.findings
     if findings is None:
         return []
-    out = ["## Encoder and tracker faults", ""]
+    said = findings.words(run.data.dropped_faulty)
+    out = ["## Encoder and tracker faults", "", said[0].upper() + said[1:] + ".", ""]
     rep = findings.report
-    stale = sum(rep.stale.values())
-    if rep.unchecked:
-        return [*out, f"Not checked: {rep.unchecked}.", ""]
-    if not rep.faults:
-        out += [
-            f"None found; {stale} stale counter readings that catch up at the next record (harmless).",
-            "",
-        ]
+    if rep.unchecked or not rep.faults:
         return out
-    done = {
-        "exclude": f"{run.data.dropped_faulty} residual windows that cross them were left out of the fit",
-        "repair": "their counts were repaired (below); windows at tracker jumps were left out",
-        "keep": "they were kept in the fit (`faults.handling: keep`)",
-    }[findings.handling]
     out += [
-        f"{len(rep.faults)} found; {done}. The fault-robust figures restart dead reckoning from the "
-        f"tracker after each fault and leave its records out. {stale} stale counter readings that "
-        "catch up at the next record are harmless.",
+        "The fault-robust figures restart dead reckoning from the tracker after each fault and leave "
+        "its records out.",
         "",
         "| record | line | time [s] | kind | evidence |",
         "|---|---|---|---|---|",

@@ -12,7 +12,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from nlp_calib.results import CalibrationRun
-from nlp_calib.results.faults import count_kinds
 from nlp_calib.results.run import CAVEATS, NOT_USABLE, UNDETERMINED
 
 
@@ -20,18 +19,7 @@ def _faults_line(run: CalibrationRun) -> str:
     findings = run.checks.findings
     if findings is None:
         return "not checked (no fault check ran)"
-    rep, handling = findings.report, findings.handling
-    if rep.unchecked:
-        return f"not checked: {rep.unchecked}"
-    if not rep.faults:
-        return "none found"
-    kinds = count_kinds(rep.faults)
-    done = {
-        "exclude": f"left out ({run.data.dropped_faulty} windows)",
-        "repair": "counter faults repaired",
-        "keep": "kept in the fit",
-    }[handling]
-    return f"{len(rep.faults)} found ({kinds}), {done}"
+    return findings.words(run.data.dropped_faulty)
 
 
 def _observability_line(run: CalibrationRun) -> str:

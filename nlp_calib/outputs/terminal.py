@@ -112,19 +112,10 @@ def fault_lines(run: CalibrationRun) -> list[str]:
     findings = run.checks.findings
     if findings is None:
         return []
-    rep, handling = findings.report, findings.handling
-    stale = sum(rep.stale.values())
-    if rep.unchecked:
-        return [f"faults: not checked: {rep.unchecked}"]
-    if not rep.faults:
-        return [f"faults: none found ({stale} stale counter readings that catch up: harmless)"]
-    what = count_kinds(rep.faults)
-    done = {
-        "exclude": f"{run.data.dropped_faulty} residual windows crossing them left out",
-        "repair": "counter faults repaired, windows at tracker jumps left out",
-        "keep": "kept in the fit (faults.handling: keep)",
-    }[handling]
-    lines = [f"faults: {len(rep.faults)} found ({what}); {done}; {stale} stale readings (harmless)"]
+    rep = findings.report
+    lines = [f"faults: {findings.words(run.data.dropped_faulty)}"]
+    if rep.unchecked or not rep.faults:
+        return lines
     # Encoder faults first: they bias a calibration; tracker jumps are many and each one harmless.
     ordered = sorted(rep.faults, key=lambda f: (f.kind == "tracker_jump", f.record))
     for f in ordered[:SHOWN_FAULTS]:
