@@ -43,6 +43,7 @@ from nlp_calib.models import KinematicModel
 from nlp_calib.models.base import reference_scale
 from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.checks import (
+    CAVEAT,
     NOT_OBSERVABLE,
     SIGNIFICANT,
     WEAK,
@@ -145,6 +146,7 @@ def _checks(run: CalibrationRun) -> list[str]:
     """What the checks found that needs a look, in words."""
     out = [w for w in run.warnings if " held at its initial value" in w]
     out += lag_caveats(run.log.path, run.data.lag_estimate)
+    out += [r.words for r in run.checks.more if r.level == CAVEAT]  # the plug-in checks' caveats
     direction, findings = run.checks.direction, run.checks.findings
     if direction is not None and direction.significant:
         name, z = direction.worst

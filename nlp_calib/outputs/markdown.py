@@ -151,10 +151,11 @@ def _uncertainty_section(run: CalibrationRun) -> list[str]:
             f"{verdict}: the largest difference is `{name}`, {abs(z):.1f}σ of the difference (each part's "
             "σ is the jackknife σ of blocks of that part alone).",
         ]
-    t = run.checks.truth
-    if t is not None:
-        shown = ", ".join(f"`{n}` {z:+.1f}σ" for n, z in zip(t.names, t.z) if np.isfinite(z))
-        out += ["", f"Against the simulator's truth (`{t.path}`, {t.solver}): {t.words()}: {shown}."]
+    for r in run.checks.more:
+        out += [
+            "",
+            r.words[0].upper() + r.words[1:] + (": " + "; ".join(r.details) if r.details else "") + ".",
+        ]
     return [*out, ""]
 
 

@@ -198,16 +198,10 @@ def _sensor_dict(run: CalibrationRun) -> dict[str, Any]:
 
 
 def _truth_dict(run: CalibrationRun) -> dict[str, Any] | None:
-    t = run.checks.truth
+    t = run.checks.plugin("truth")
     if t is None:
         return None
-    return {
-        "file": t.path,
-        "solver": t.solver,
-        "truth": dict(zip(t.names, map(float, t.truth))),
-        "error": dict(zip(t.names, map(float, t.error))),
-        "error_in_sigma": dict(zip(t.names, map(float, t.z))),
-    }
+    return {"file": t.about["file"], "solver": t.about["solver"], **{k: dict(v) for k, v in t.table.items()}}
 
 
 def _json_default(obj: Any) -> Any:

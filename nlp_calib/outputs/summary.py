@@ -107,6 +107,7 @@ def summary_lines(run: CalibrationRun, files: Sequence[str] = ()) -> list[str]:
         lines.append(f"  accuracy ({chosen}): {_accuracy_line(run, chosen)}")
     lines.append(f"  faults: {_faults_line(run)}")
     lines.append(f"  observability: {_observability_line(run)}")
+    lines += [f"  {r.name}: {r.words}" for r in run.checks.more]
     v = run.verdict
     lines.append(f"  verdict: {v.line()}")
     for i, step in enumerate(_next_steps(run, v.level, files)):

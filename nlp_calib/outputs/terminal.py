@@ -95,12 +95,9 @@ def direction_lines(run: CalibrationRun) -> list[str]:
 
 
 def truth_lines(run: CalibrationRun) -> list[str]:
-    """A simulated log's truth against the estimate, each parameter's error in its σ."""
-    t = run.checks.truth
-    if t is None:
-        return []
-    cells = ", ".join(f"{n} {z:+.1f}σ" for n, z in zip(t.names, t.z) if np.isfinite(z))
-    return [f"against the simulator's truth ({t.path}), {t.solver}: {t.words()}", f"  {cells}"]
+    """What each plug-in check found (a simulated log's truth against the estimate among them), in
+    its one wording."""
+    return [line for r in run.checks.more for line in r.lines()]
 
 
 #: Faults listed one per line; the rest are counted.

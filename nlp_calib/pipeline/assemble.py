@@ -18,9 +18,9 @@ from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis, Scores
 from nlp_calib.pipeline.build import StartingPoint
+from nlp_calib.pipeline.checks import CheckContext, run_checks
 from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.pipeline.truth import against_truth
 from nlp_calib.pipeline.windows import LogWindows
 from nlp_calib.problem import ProblemFunctions
 from nlp_calib.results import (
@@ -343,7 +343,7 @@ def assemble_run(
     # Joints in radians: the simulator's truth is in the counts form's names and units; a log's
     # truth is of its own mount.
     convert = _own_truth(getattr(prepared.model, "from_counts", dict), views)
-    checks = dataclasses.replace(run.checks, truth=against_truth(run, source.files(), convert))
+    checks = dataclasses.replace(run.checks, more=run_checks(run, CheckContext(source.files(), convert)))
     run = dataclasses.replace(run, checks=checks)
     return dataclasses.replace(run, verdict=verdict(run, prepared.model, hint))
 

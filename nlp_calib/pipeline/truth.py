@@ -16,7 +16,7 @@ import numpy as np
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.results import CalibrationRun
-from nlp_calib.results.checks import TruthCheck
+from nlp_calib.results.checks import FINE, CheckResult, TruthCheck
 from nlp_calib.simulation import truth_path
 
 #: Parameter values in one form's names and units into another's.
@@ -45,6 +45,24 @@ def read_truth(log_path: Path) -> dict[str, float] | None:
             stacklevel=2,
         )
         return None
+
+
+def check(run: CalibrationRun, files: Sequence[Path] = (), convert: Converter = dict) -> CheckResult | None:
+    """:func:`against_truth` as the ``truth`` plug-in check's result (its one wording: how far the
+    estimate is from the truth, in σ, and each parameter's error in its σ)."""
+    t = against_truth(run, files, convert)
+    if t is None:
+        return None
+    cells = ", ".join(f"{n} {z:+.1f}σ" for n, z in zip(t.names, t.z) if np.isfinite(z))
+    columns = {"truth": t.truth, "error": t.error, "error_in_sigma": t.z}
+    return CheckResult(
+        "truth",
+        FINE,
+        f"against the simulator's truth ({t.path}), {t.solver}: {t.words()}",
+        (cells,),
+        {"file": t.path, "solver": t.solver},
+        {key: dict(zip(t.names, map(float, v))) for key, v in columns.items()},
+    )
 
 
 def against_truth(

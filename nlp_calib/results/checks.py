@@ -7,7 +7,7 @@ these records hold what they found, with the thresholds that decide how it reads
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -547,3 +547,41 @@ class TruthCheck:
         if off:
             return f"estimate − truth beyond {TRUTH_SIGMAS:g}σ for {', '.join(off)}"
         return f"estimate − truth within {abs(z[k]):.1f}σ (largest: {self.names[k]} {z[k]:+.1f}σ)"
+
+
+#: A plug-in check's levels: nothing against the calibration, or a caveat the verdict names.
+FINE = "fine"
+CAVEAT = "caveat"
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """What a plug-in check found, as one generic record every check stores as (so a new check
+    needs no record, reader or wording of its own elsewhere): its registry ``name``, its
+    ``level`` (:data:`FINE`, or :data:`CAVEAT`: the verdict names it), its one wording (``words``:
+    what the terminal, the report and the summary say), further lines (``details``), what it
+    refers to (``about``: a file, a solver, by name) and what it measured (``table``: columns of
+    values by parameter or item)."""
+
+    name: str
+    level: str
+    words: str
+    details: tuple[str, ...] = ()
+    about: Mapping[str, str] = field(default_factory=dict)
+    table: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+
+    def lines(self) -> list[str]:
+        """Its words, then its details indented: the terminal's and the report's lines."""
+        return [self.words, *(f"  {d}" for d in self.details)]
+
+
+def truth_view(result: CheckResult | None) -> TruthCheck | None:
+    """The truth check's result as its figures (:class:`TruthCheck`), or None."""
+    if result is None:
+        return None
+    names = tuple(result.table["truth"])
+    column = lambda key: np.array([result.table[key][n] for n in names], dtype=float)  # noqa: E731
+    return TruthCheck(
+        result.about["file"], result.about["solver"], names, column("truth"), column("error"),
+        column("error_in_sigma"),
+    )  # fmt: skip

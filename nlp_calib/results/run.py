@@ -19,6 +19,7 @@ from nlp_calib.core.errors import UsageError
 from nlp_calib.results import codec
 from nlp_calib.results.check import DriftCheck
 from nlp_calib.results.checks import (
+    CheckResult,
     ConsistencyCheck,
     CostComparison,
     CrossValidation,
@@ -29,6 +30,7 @@ from nlp_calib.results.checks import (
     Observability,
     TruthCheck,
     believed_std,
+    truth_view,
 )
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
@@ -163,8 +165,9 @@ class Checks:
     findings: Findings | None
     consistency: ConsistencyCheck | None = None
     drift: DriftCheck | None = None
-    #: The estimate against the known truth of a simulated log (a truth file beside it).
-    truth: TruthCheck | None = None
+    #: What each plug-in check found (its registry name, level, one wording, figures; the
+    #: estimate against a simulated log's known truth is one: ``truth``).
+    more: tuple[CheckResult, ...] = ()
     #: How each time offset moves the other parameters (see :class:`LagEffect`).
     lag_effects: tuple[LagEffect, ...] = ()
     #: Several logs: the joint fit without each log in turn (its jackknife σ is the logs').
@@ -175,6 +178,15 @@ class Checks:
     nominal: NominalCheck | None = None
     #: What to drive next when a parameter is not determined well enough (``plan.md``).
     plan: Plan | None = None
+
+    def plugin(self, name: str) -> CheckResult | None:
+        """The result of the plug-in check ``name``, when it ran and found something to say."""
+        return next((r for r in self.more if r.name == name), None)
+
+    @property
+    def truth(self) -> TruthCheck | None:
+        """The estimate against the known truth of a simulated log (the ``truth`` plug-in)."""
+        return truth_view(self.plugin("truth"))
 
     def spreads(self, white: np.ndarray) -> list[np.ndarray]:
         """Each σ beyond the white-noise one ``white`` that the σ to believe takes in (NaN where one

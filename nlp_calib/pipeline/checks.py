@@ -1,0 +1,42 @@
+"""Plug-in checks: each one function from a run's result (and what its log's source knows) to a
+generic :class:`~nlp_calib.results.checks.CheckResult`, and one registry line.
+
+A check here runs after the run is assembled and before its verdict: what it finds is stored
+with the run (``checks.more``), printed in its one wording by the terminal, the report and the
+summary, and, at the :data:`~nlp_calib.results.checks.CAVEAT` level, named among the verdict's
+caveats. Adding one touches nothing else.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from nlp_calib.pipeline import truth
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.checks import CheckResult
+
+
+@dataclass(frozen=True)
+class CheckContext:
+    """What a check may read besides the run: its log source's files, and the conversion of
+    parameter values from the simulator's names and units into the run's (``convert``)."""
+
+    files: Sequence[Path] = ()
+    convert: Callable[[Mapping[str, float]], dict[str, float]] = field(default=dict)
+
+
+#: A check: the run and its context to a result, or None when it has nothing to say.
+RunCheck = Callable[[CalibrationRun, CheckContext], "CheckResult | None"]
+
+#: The plug-in checks, by name, in the order they run.
+RUN_CHECKS: dict[str, RunCheck] = {
+    "truth": lambda run, ctx: truth.check(run, ctx.files, ctx.convert),
+}
+
+
+def run_checks(run: CalibrationRun, context: CheckContext) -> tuple[CheckResult, ...]:
+    """Every registered check's result on ``run`` (those with something to say)."""
+    found = (check(run, context) for check in RUN_CHECKS.values())
+    return tuple(r for r in found if r is not None)

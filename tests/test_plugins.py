@@ -1,0 +1,79 @@
+"""What the seams take: a check is one function and one registry line; nothing else is edited.
+
+A toy check is registered here (no file of the package changes): it runs on every run, its result
+is stored with the run and read back, its one wording reaches the terminal, the report and the
+summary, and at the caveat level the verdict names it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from pathlib import Path
+
+import pytest
+from conftest import write_sim
+
+from nlp_calib.outputs.markdown import report_markdown
+from nlp_calib.outputs.summary import summary_lines
+from nlp_calib.outputs.terminal import run_table
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline import checks as plugin_checks
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.checks import CAVEAT, CheckResult
+from nlp_calib.results.run import CAVEATS
+
+
+def toy_check(run: CalibrationRun, context: plugin_checks.CheckContext) -> CheckResult | None:
+    """Says how many windows the fit used, and makes it a caveat when they are under 10,000."""
+    n = run.data.n_residuals
+    return CheckResult(
+        "toy",
+        CAVEAT if n < 10_000 else "fine",
+        f"the toy check counted {n} windows",
+        (f"{n} of at least 10000 wanted",),
+        {"solver": str(run.chosen_solver())},
+        {"windows": {"fitted": float(n)}},
+    )
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> CalibrationRun:
+    tmp = tmp_path_factory.mktemp("plugins")
+    log = write_sim(tmp, "drive.txt", records=700, seed=61)
+    sc = scenario_from_mapping(
+        {"dataset": str(log), "model": "tricycle", "residual": {"horizon": 10}, "solvers": ["gauss_newton"]},
+        "toy",
+        tmp,
+    )
+    with pytest.MonkeyPatch.context() as mp, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mp.setitem(plugin_checks.RUN_CHECKS, "toy", toy_check)
+        return Calibration(sc).run()
+
+
+def test_a_registered_check_runs_and_is_stored_with_the_run(run: CalibrationRun) -> None:
+    found = run.checks.plugin("toy")
+    assert found is not None and found.table["windows"]["fitted"] == run.data.n_residuals
+    back = CalibrationRun.from_data(run.to_data())
+    assert back.checks.plugin("toy") == found
+    # The truth beside a simulated log is a plug-in check too, read as its figures.
+    assert run.checks.plugin("truth") is not None and run.checks.truth is not None
+    assert set(run.checks.truth.names) == set(run.reports["gauss_newton"].result.names)
+
+
+def test_its_one_wording_reaches_every_output_and_the_verdict(run: CalibrationRun, tmp_path: Path) -> None:
+    words = run.checks.plugin("toy").words  # type: ignore[union-attr]
+    assert run.verdict.level == CAVEATS and words in run.verdict.reasons
+    assert any(words in line for line in summary_lines(run))
+    assert words in run_table(run)
+    assert words[1:] in report_markdown(run, [])
+
+
+def test_a_fine_result_is_no_caveat(run: CalibrationRun) -> None:
+    fine = dataclasses.replace(run.checks.plugin("toy"), level="fine")  # type: ignore[arg-type]
+    from nlp_calib.analysis.verdict import caveats
+    from nlp_calib.models import get_model
+
+    quiet = dataclasses.replace(run, checks=dataclasses.replace(run.checks, more=(fine,)))
+    assert fine.words not in caveats(quiet, "gauss_newton", get_model("tricycle"))
