@@ -539,6 +539,7 @@ def _add_preflight(sub: Any) -> None:
         "--model", choices=tuple(MODELS), default=None, help="for a recording: the model (default: guessed)"
     )
     p.add_argument("--json", type=_path, default=None, metavar="FILE", help="also write the report as JSON")
+    _add_force(p, "a --json file")
 
 
 def _add_init(sub: Any) -> None:
