@@ -11,6 +11,7 @@ from pathlib import Path
 
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning, UsageError
 from nlp_calib.core.files import check_output_dir, note_input
+from nlp_calib.core.text import escaped
 from nlp_calib.logs import Log
 from nlp_calib.outputs.outdir import refuse_collisions, write_file
 from nlp_calib.outputs.preflight import preflight_lines
@@ -40,7 +41,7 @@ def cmd_preflight(args: argparse.Namespace) -> int:
         refuse_collisions(check_output_dir(args.json.parent), [args.json.name], tracked=False, force=args.force)
     sc = _scenario_of(args.target, args.model)
     report = preflight(sc)
-    print("\n".join(preflight_lines(report)))
+    print("\n".join(escaped(line) for line in preflight_lines(report)))
     if args.json is not None:
         data = json.dumps(_document(report), indent=2, allow_nan=False) + "\n"
         write_file(args.json, data, force=args.force)  # never over an input, a link or a device
@@ -63,7 +64,7 @@ def cmd_init(args: argparse.Namespace) -> int:
     drafted = draft(args.recording, out, args.model)
     note_input(args.recording)
     print("found:")
-    print("\n".join(f"  {line}" for line in drafted.found))
+    print("\n".join(f"  {escaped(line)}" for line in drafted.found))
     write_file(out, drafted.text, force=args.force)
     print(f"wrote {out}: check it with 'nlp-calib preflight {out}', then 'nlp-calib run {out}'")
     return 0
@@ -87,5 +88,5 @@ def gate(scenarios: Sequence[Scenario], logs: Sequence[Sequence[Log]], skip: boo
             )
             continue
         if report.stop_words():
-            print("\n".join(preflight_lines(report)) + "\n")
+            print("\n".join(escaped(line) for line in preflight_lines(report)) + "\n")
         refuse(report, "; to calibrate anyway, give --skip-preflight")

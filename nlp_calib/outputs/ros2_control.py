@@ -15,6 +15,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from nlp_calib.core.files import atomic_write_text
+from nlp_calib.core.text import escaped
 from nlp_calib.core.version import __version__
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.handoff import UNMEASURED, ControllerParams, OdometryNoise
@@ -86,7 +87,7 @@ def ros2_control_yaml(run: CalibrationRun, solver: str, params: ControllerParams
     controller = params.controller
     lines = [
         f"# {controller} parameters calibrated by nlp_calib {__version__} for ROS 2 {distro} (its "
-        f"ros2_controllers' names): scenario {run.scenario.name}, {solver}'s estimate.",
+        f"ros2_controllers' names): scenario {escaped(run.scenario.name)}, {solver}'s estimate.",
         "# Only what the calibration determines; load it after your controller's own parameter file.",
         *([f"# Note: {params.assumes}."] if params.assumes else []),
         *(
