@@ -354,10 +354,10 @@ def parse_yaml(text: str, source: str) -> Any:
         said = problem if problem.startswith("the text") else f"ambiguous YAML ({problem})"
         raise ConfigError(f"{source}{line}: {said}") from None
     except yaml.reader.ReaderError as exc:  # a character YAML does not allow: says where, not which
-        line = text[: exc.position].count("\n") + 1
+        row = text[: exc.position].count("\n") + 1
+        bad = escaped(chr(exc.character)) if isinstance(exc.character, int) else "a character"
         raise ConfigError(
-            f"{source}:{line}: holds {escaped(chr(exc.character)) if isinstance(exc.character, int) else 'a character'}"
-            ", a control character YAML does not allow; remove it"
+            f"{source}:{row}: holds {bad}, a control character YAML does not allow; remove it"
         ) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)

@@ -209,7 +209,7 @@ class _Rows:
 
     def __init__(self, path: str, layout: Layout, keep: Keep | None) -> None:
         self.path, self.layout, self.keep = path, layout, keep
-        self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.parts: list[tuple[np.ndarray, ...]] = []
         self.header: tuple[int, str] | None = None
         self.rows = 0
         self.first_ns: int | None = None
@@ -273,19 +273,34 @@ class _Rows:
         self.parts.append((t_ns[kept], values[kept], lines[kept]))
 
     def table(self) -> Table:
-        time_ns, values, lines = (
-            np.concatenate([p[i] for p in self.parts]) if self.parts else np.zeros(0) for i in range(3)
-        )
+        time_ns, values, lines = joined(self.parts, 3)
         last = self.last[0] if self.last is not None else 0
         return Table(
-            time_ns.astype(np.int64),
-            values.reshape(-1, self.layout.width).astype(float),
-            lines.astype(np.int64),
+            time_ns.astype(np.int64, copy=False),
+            values.reshape(-1, self.layout.width).astype(float, copy=False),
+            lines.astype(np.int64, copy=False),
             self.header,
             self.rows,
             self.first_ns or 0,
             last,
         )
+
+
+def joined(parts: list[tuple[np.ndarray, ...]], width: int) -> list[np.ndarray]:
+    """The ``width`` columns of blocks of rows (``parts``, emptied), each joined in turn and each
+    block's piece of it let go once copied: the peak is the rows' arrays and one column, not the
+    arrays twice."""
+    held = [list(q) for q in parts]
+    parts.clear()
+    out = []
+    for i in range(width):
+        out.append(np.concatenate([q[i] for q in held]) if held else np.zeros(0))
+        for q in held:
+            q[i] = _NOTHING
+    return out
+
+
+_NOTHING = np.zeros(0)
 
 
 def _decode(raw: bytes, path: str, line: int) -> str:
