@@ -113,7 +113,8 @@ def _report(exc: BaseException, debug: bool) -> int:
         raise exc
     # An unexpected failure is still reported in one line.
     print(
-        f"error: internal error: {type(exc).__name__}: {escaped(str(exc))} (run with --debug for the traceback)",
+        f"error: internal error: {type(exc).__name__}: {escaped(str(exc))} "
+        "(run with --debug for the traceback)",
         file=sys.stderr,
     )
     return 1

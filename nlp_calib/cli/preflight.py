@@ -38,7 +38,9 @@ def _scenario_of(target: Path, model: str | None) -> Scenario:
 def cmd_preflight(args: argparse.Namespace) -> int:
     """Check a recording (or a scenario's) before any fit; the exit code says the verdict."""
     if args.json is not None:  # refused before the work, not after it
-        refuse_collisions(check_output_dir(args.json.parent), [args.json.name], tracked=False, force=args.force)
+        refuse_collisions(
+            check_output_dir(args.json.parent), [args.json.name], tracked=False, force=args.force
+        )
     sc = _scenario_of(args.target, args.model)
     report = preflight(sc)
     print("\n".join(escaped(line) for line in preflight_lines(report)))

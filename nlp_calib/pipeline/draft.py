@@ -28,8 +28,8 @@ from nlp_calib.core.text import escaped, unprintable
 from nlp_calib.logs.bag_reader import ODOMETRY_TYPE, POSE_TYPE, TF_TYPE, TRANSFORM_TYPE, is_bag
 from nlp_calib.logs.bag_survey import BagSurvey, Topic, survey
 from nlp_calib.logs.joint_log import read_joint_csv
-from nlp_calib.logs.scans import SCAN_TYPE
 from nlp_calib.logs.reader import read_header
+from nlp_calib.logs.scans import SCAN_TYPE
 from nlp_calib.models import MODELS, encoders, model_for_log
 from nlp_calib.pipeline.scenario import Scenario, scenario_from_mapping
 from nlp_calib.sources.joints import paired_files
@@ -178,7 +178,9 @@ def _one_line_names(path: Path, dataset: Mapping[str, Any]) -> None:
     """Refuse a drafted name (topic, joint, frame) that is not one line of printable text: a run
     reads a scenario's names as such (a frame id holding a line break is no frame a robot has)."""
     for key, value in dataset.items():
-        names = value.values() if isinstance(value, Mapping) else value if isinstance(value, list) else [value]
+        names = (
+            value.values() if isinstance(value, Mapping) else value if isinstance(value, list) else [value]
+        )
         for name in names:
             if isinstance(name, str) and (bad := unprintable(name)) is not None:
                 raise UsageError(
@@ -234,7 +236,9 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         "joints": list(joints.values()),
     }
     scans = sorted(found.of_type(SCAN_TYPE), key=lambda t: -t.count)
-    poses = [t for t in found.of_type(POSE_TYPE, TRANSFORM_TYPE, ODOMETRY_TYPE, TF_TYPE) if t.name != "/tf_static"]
+    poses = [
+        t for t in found.of_type(POSE_TYPE, TRANSFORM_TYPE, ODOMETRY_TYPE, TF_TYPE) if t.name != "/tf_static"
+    ]
     if not poses and scans:
         return _draft_lidar(path, where, (found, js), (name, joints, why), (dataset, scans))
     best, frame, others = tracker(found)
@@ -282,7 +286,7 @@ def _draft_lidar(
     block: tuple[dict[str, Any], list[Topic]],
 ) -> Draft:
     """A bag whose only reference is a lidar's scans: a lidar scenario (docs/lidar.md)."""
-    (found, js), (name, joints, why), (dataset, scans) = bag, chosen, block
+    (found, _), (name, joints, why), (dataset, scans) = bag, chosen, block
     dataset["scan"] = scans[0].name
     _one_line_names(path, dataset)
     raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS}
