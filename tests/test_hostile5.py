@@ -102,8 +102,9 @@ def lidar_bag(
 def lidar_scenario(bag: Path) -> Path:
     sc = bag.parent / "lidar.yaml"
     sc.write_text(
-        f"name: lidar\nmodel: diff_drive\ndataset: {{bag: {json.dumps(str(bag))}, joint_states: /joint_states, "
-        "joints: [left_wheel_joint, right_wheel_joint], scan: /scan}\ninitial_guess: auto\n"
+        f"name: lidar\nmodel: diff_drive\ndataset: {{bag: {json.dumps(str(bag))}, "
+        "joint_states: /joint_states, joints: [left_wheel_joint, right_wheel_joint], scan: /scan}\n"
+        "initial_guess: auto\n"
         "solvers: [gauss_newton]\nvalidation: {blocks: 0}\n"
     )
     return sc
@@ -258,11 +259,10 @@ def test_a_single_output_file_never_replaces_what_is_not_ours(
 def test_a_link_in_an_output_folder_is_refused_even_with_force(
     small_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from conftest import REPO as _  # noqa: F401  (the suite's root on sys.path)
-
     sc = tmp_path / "s.yaml"
     sc.write_text(
-        f"dataset: {json.dumps(str(small_log))}\nmodel: tricycle\nsolvers: [gauss_newton]\nvalidation: {{blocks: 0}}\n"
+        f"dataset: {json.dumps(str(small_log))}\nmodel: tricycle\nsolvers: [gauss_newton]\n"
+        "validation: {blocks: 0}\n"
     )
     out = tmp_path / "out"
     out.mkdir()
@@ -336,7 +336,7 @@ def test_init_refuses_a_joint_name_that_is_not_one_line(
     names = ("left_wheel_joint", f"right_wheel_joint{brk}known")
     (tmp_path / "d.csv").write_text(format_joint_csv(t, names, np.zeros((200, 2))))
     (tmp_path / "d.tum").write_text("".join(f"{k / 100 + 1.7e9:.6f} 0 0 0 0 0 0 1\n" for k in range(200)))
-    code, out, err = run(["init", tmp_path / "d.csv", "--out", tmp_path / "d.yaml"], capsys)
+    code, _, err = run(["init", tmp_path / "d.csv", "--out", tmp_path / "d.yaml"], capsys)
     assert code == 2, err
     line = one_line_error(err, "line break or control character", "right_wheel_joint")
     assert brk not in line
@@ -465,7 +465,10 @@ def test_a_large_file_costs_less_than_two_bytes_per_byte(what: str, tmp_path: Pa
         path = tmp_path / "odom.txt"
         body = np.column_stack([t, np.sin(t), np.cos(t), t % 1])
         np.savetxt(path, body, fmt=["%.3f", "%.6f", "%.6f", "%.6f"])
-        call = f"from nlp_calib.logs.vendor import read_odometry as r; x = r({str(path)!r}); assert x.time_ns.size == {n}"
+        call = (
+            f"from nlp_calib.logs.vendor import read_odometry as r; x = r({str(path)!r}); "
+            f"assert x.time_ns.size == {n}"
+        )
     else:
         path = tmp_path / "m.csv"
         body = np.column_stack([t, t + 0.001, np.sin(t), np.cos(t), t % 1])
