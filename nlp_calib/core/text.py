@@ -18,7 +18,8 @@ _NOT_TEXT = frozenset(("Cc", "Zl", "Zp", "Cs"))
 
 
 def _bad(c: str) -> bool:
-    return c in _BIDI or unicodedata.category(c) in _NOT_TEXT
+    # A tab is white space to YAML, XML, C comments and a terminal alike: text.
+    return c != "\t" and (c in _BIDI or unicodedata.category(c) in _NOT_TEXT)
 
 
 def unprintable(text: str) -> str | None:
