@@ -287,16 +287,28 @@ class _Rows:
 
 
 def joined(parts: list[tuple[np.ndarray, ...]], width: int) -> list[np.ndarray]:
-    """The ``width`` columns of blocks of rows (``parts``, emptied), each joined in turn and each
-    block's piece of it let go once copied: the peak is the rows' arrays and one column, not the
-    arrays twice."""
+    """The ``width`` columns of blocks of rows (``parts``, emptied), each copied block by block into
+    its place and each block's piece let go once copied (the column's pages are touched only as it
+    fills): the peak is the rows' arrays and a block, not the arrays twice."""
     held = [list(q) for q in parts]
     parts.clear()
     out = []
     for i in range(width):
-        out.append(np.concatenate([q[i] for q in held]) if held else np.zeros(0))
+        if not held:
+            out.append(np.zeros(0))
+            continue
+        pieces = [q[i] for q in held]
+        column = np.empty(
+            (sum(x.shape[0] for x in pieces), *pieces[0].shape[1:]), dtype=np.result_type(*pieces)
+        )
+        del pieces
+        at = 0
         for q in held:
+            n = q[i].shape[0]
+            column[at : at + n] = q[i]
+            at += n
             q[i] = _NOTHING
+        out.append(column)
     return out
 
 
