@@ -212,6 +212,14 @@ def codegen_scenario_named(scenario_name: str, w: World, tmp: Path) -> Expect:
     return Expect(["codegen", str(sc), "--out", str(out)], (0,), cwd=tmp, check=check)
 
 
+def codegen_scenario_refused(scenario_name: str, w: World, tmp: Path) -> Expect:
+    """A scenario ``name:`` holding a line break: refused on load, naming the file's line; no C."""
+    sc = text_scenario(tmp, w.tricycle, extra=f"name: {quoted(scenario_name)}\n")
+    out = tmp / "c"
+    needles = (f"{sc}:6:", "line break or control character")
+    return Expect(["codegen", str(sc), "--out", str(out)], (2,), needles, cwd=tmp, absent=(out,))
+
+
 def codegen_camera_named(stem: str, w: World, tmp: Path) -> Expect:
     tum = tmp / f"{stem}.tum"
     shutil.copy(w.camera, tum)
@@ -247,8 +255,9 @@ CODEGEN_CASES = [
     ),
     ("codegen: a log name that is not UTF-8", undecodable_name),
     (
+        # Round five (issue 40): a name holding a line break is refused on load, with its line.
         "codegen: a scenario name with lines of C",
-        partial(codegen_scenario_named, "x *\n#error injected\n* x"),
+        partial(codegen_scenario_refused, "x *\n#error injected\n* x"),
     ),
     (
         "codegen: a scenario name with trigraphs and a tab",

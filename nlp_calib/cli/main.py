@@ -18,6 +18,7 @@ from nlp_calib.cli.commands import COMMANDS
 from nlp_calib.core import interrupts, memory
 from nlp_calib.core.errors import NlpCalibError, shown_path
 from nlp_calib.core.files import forget_inputs
+from nlp_calib.core.text import escaped
 
 
 def _show_warning(
@@ -31,7 +32,7 @@ def _show_warning(
     """Print a warning at once, as one line (clearing a progress line on a terminal first)."""
     stream = sys.stderr
     clear = "\r\x1b[K" if getattr(stream, "isatty", lambda: False)() else ""
-    print(f"{clear}warning: {message}", file=stream)
+    print(f"{clear}warning: {escaped(str(message), lines=True)}", file=stream)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -92,7 +93,7 @@ def _report(exc: BaseException, debug: bool) -> int:
     if debug:
         traceback.print_exception(exc)
     if isinstance(exc, NlpCalibError):
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {escaped(str(exc), lines=True)}", file=sys.stderr)
         return exc.exit_code
     if isinstance(exc, OSError):  # the system refused: a full disk, a permission, a vanished folder
         where = f"{shown_path(exc.filename)}: " if exc.filename else ""
@@ -100,7 +101,7 @@ def _report(exc: BaseException, debug: bool) -> int:
             errno.ENOSPC: "; free some space and run again",
             errno.ENAMETOOLONG: "; a name in this path is longer than the file system allows: shorten it",
         }.get(exc.errno or 0, "")
-        print(f"error: {where}{exc.strerror or exc}{hint}", file=sys.stderr)
+        print(f"error: {escaped(f'{where}{exc.strerror or exc}{hint}')}", file=sys.stderr)
         return 1
     if isinstance(exc, MemoryError) or (isinstance(exc, RuntimeError) and "std::bad_alloc" in str(exc)):
         print(f"error: {memory.OUT_OF_MEMORY}", file=sys.stderr)
@@ -112,7 +113,8 @@ def _report(exc: BaseException, debug: bool) -> int:
         raise exc
     # An unexpected failure is still reported in one line.
     print(
-        f"error: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)",
+        f"error: internal error: {type(exc).__name__}: {escaped(str(exc))} "
+        "(run with --debug for the traceback)",
         file=sys.stderr,
     )
     return 1

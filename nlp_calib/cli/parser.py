@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
 from nlp_calib.core.errors import FieldError, UsageError
 from nlp_calib.core.ranges import Range, check_ros_name
+from nlp_calib.core.text import escaped
 from nlp_calib.core.version import __version__
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, JOINT_UNITS, MAX_GAP, TRACKER_TYPES
 from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders
@@ -51,6 +53,40 @@ def _path(text: str) -> Path:
     if not text or "\0" in text:
         raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
     return Path(text)
+
+
+#: Scheduler address forms Dask reaches over a network; a host name or address, and a port.
+DASK_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+_HOST = re.compile(r"(?:[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?\.?)+|\[[0-9A-Fa-f:.]+\]")
+DASK_FORM = "tcp://HOST:PORT (or tls://, ws://, wss://, ucx://; HOST a name or address, PORT 1-65535)"
+
+
+def dask_address(text: str) -> str:
+    """``--dask``: a scheduler's address, checked before Dask sees it (Dask reads many strings as
+    something else: a path, an in-process scheduler, a port it never reaches). Never echoes
+    credentials."""
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "tcp", text
+    if "@" in rest:  # user:password@host: said without the text, which would show the password
+        raise argparse.ArgumentTypeError(
+            f"the address holds credentials (user:password@), which Dask does not take and this "
+            f"message does not repeat; give {DASK_FORM}"
+        )
+    shown_text = escaped(text if len(text) <= 80 else f"{text[:60]}… ({len(text)} characters)")
+    host, colon, port = rest.rpartition(":")
+    ok = (
+        scheme.lower() in DASK_SCHEMES
+        and colon
+        and len(host) <= 253
+        and _HOST.fullmatch(host) is not None
+        and port.isascii()
+        and port.isdigit()
+        and 1 <= int(port[:6]) <= 65535
+    )
+    if not ok:
+        raise argparse.ArgumentTypeError(f"expected a scheduler address {DASK_FORM}, got '{shown_text}'")
+    return text
 
 
 def _names(text: str) -> tuple[str, ...]:
@@ -537,6 +573,7 @@ def _add_batch(sub: Any) -> None:
     )
     p.add_argument(
         "--dask",
+        type=dask_address,
         default=None,
         metavar="ADDRESS",
         help="run the logs on the Dask cluster whose scheduler is there (tcp://HOST:8786; "
@@ -564,6 +601,7 @@ def _add_preflight(sub: Any) -> None:
         "--model", choices=tuple(MODELS), default=None, help="for a recording: the model (default: guessed)"
     )
     p.add_argument("--json", type=_path, default=None, metavar="FILE", help="also write the report as JSON")
+    _add_force(p, "a --json file")
 
 
 def _add_init(sub: Any) -> None:

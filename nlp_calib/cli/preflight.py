@@ -10,8 +10,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning, UsageError
-from nlp_calib.core.files import atomic_write_text, check_output_dir, note_input, refuse_input_alias
+from nlp_calib.core.files import check_output_dir, note_input
+from nlp_calib.core.text import escaped
 from nlp_calib.logs import Log
+from nlp_calib.outputs.outdir import refuse_collisions, write_file
 from nlp_calib.outputs.preflight import preflight_lines
 from nlp_calib.pipeline import Scenario, load_scenario
 from nlp_calib.pipeline.draft import draft
@@ -35,13 +37,16 @@ def _scenario_of(target: Path, model: str | None) -> Scenario:
 
 def cmd_preflight(args: argparse.Namespace) -> int:
     """Check a recording (or a scenario's) before any fit; the exit code says the verdict."""
+    if args.json is not None:  # refused before the work, not after it
+        refuse_collisions(
+            check_output_dir(args.json.parent), [args.json.name], tracked=False, force=args.force
+        )
     sc = _scenario_of(args.target, args.model)
     report = preflight(sc)
-    print("\n".join(preflight_lines(report)))
+    print("\n".join(escaped(line) for line in preflight_lines(report)))
     if args.json is not None:
-        refuse_input_alias(args.json)  # never over the recording or the scenario it read
         data = json.dumps(_document(report), indent=2, allow_nan=False) + "\n"
-        atomic_write_text(args.json, data)
+        write_file(args.json, data, force=args.force)  # never over an input, a link or a device
         print(f"wrote {args.json}")
     return report.exit_code
 
@@ -56,15 +61,13 @@ def cmd_init(args: argparse.Namespace) -> int:
     out: Path = args.out if args.out is not None else Path(f"{args.recording.stem or 'recording'}.yaml")
     if out.suffix.lower() not in SCENARIO_SUFFIXES:
         raise UsageError(f"--out {out}: a scenario file ends in .yaml")
-    check_output_dir(out.parent if str(out.parent) else Path("."))
-    if out.exists() and not args.force:
-        raise UsageError(f"{out} exists; give --force to replace it, or another --out")
+    check_output_dir(out.parent)
+    refuse_collisions(out.parent, [out.name], tracked=False, force=args.force)
     drafted = draft(args.recording, out, args.model)
     note_input(args.recording)
-    refuse_input_alias(out)
     print("found:")
-    print("\n".join(f"  {line}" for line in drafted.found))
-    atomic_write_text(out, drafted.text)
+    print("\n".join(f"  {escaped(line)}" for line in drafted.found))
+    write_file(out, drafted.text, force=args.force)
     print(f"wrote {out}: check it with 'nlp-calib preflight {out}', then 'nlp-calib run {out}'")
     return 0
 
@@ -87,5 +90,5 @@ def gate(scenarios: Sequence[Scenario], logs: Sequence[Sequence[Log]], skip: boo
             )
             continue
         if report.stop_words():
-            print("\n".join(preflight_lines(report)) + "\n")
+            print("\n".join(escaped(line) for line in preflight_lines(report)) + "\n")
         refuse(report, "; to calibrate anyway, give --skip-preflight")

@@ -21,6 +21,7 @@ import yaml
 from nlp_calib.core.errors import ConfigError, FieldError, NlpCalibError
 from nlp_calib.core.files import SpecialFileError, open_regular
 from nlp_calib.core.ranges import shown
+from nlp_calib.core.text import escaped, unprintable
 
 show = shown
 
@@ -237,6 +238,16 @@ class _Loader(yaml.SafeLoader):
                 problem="a number with thousands of digits", problem_mark=node.start_mark
             ) from None
 
+    def construct_yaml_str(self, node: yaml.ScalarNode) -> str:
+        text = str(super().construct_yaml_str(node))
+        if (bad := unprintable(text)) is not None:
+            raise _AmbiguousScalar(
+                problem=f"the text {escaped(shown(text))} holds {bad}, a line break or control character; "
+                "a name, a path or a topic is one line of printable text",
+                problem_mark=node.start_mark,
+            )
+        return text
+
     def construct_ambiguous(self, node: yaml.ScalarNode) -> Any:
         text = str(node.value)
         tag12 = super().resolve(yaml.ScalarNode, text, (True, False))
@@ -260,6 +271,7 @@ for _tag, _pattern, _first in [
 ]:
     _Loader.add_implicit_resolver(_tag, re.compile(_pattern), list(_first))
 _Loader.add_constructor(_INT_TAG, _Loader.construct_yaml_int)
+_Loader.add_constructor(_STR_TAG, _Loader.construct_yaml_str)
 _Loader.add_constructor(_AMBIGUOUS_TAG, _Loader.construct_ambiguous)
 
 
@@ -338,7 +350,15 @@ def parse_yaml(text: str, source: str) -> Any:
         return loader.construct_document(node)
     except _AmbiguousScalar as exc:
         line = f":{exc.problem_mark.line + 1}" if exc.problem_mark is not None else ""
-        raise ConfigError(f"{source}{line}: ambiguous YAML ({exc.problem})") from None
+        problem = exc.problem or ""
+        said = problem if problem.startswith("the text") else f"ambiguous YAML ({problem})"
+        raise ConfigError(f"{source}{line}: {said}") from None
+    except yaml.reader.ReaderError as exc:  # a character YAML does not allow: says where, not which
+        row = text[: exc.position].count("\n") + 1
+        bad = escaped(chr(exc.character)) if isinstance(exc.character, int) else "a character"
+        raise ConfigError(
+            f"{source}:{row}: holds {bad}, a control character YAML does not allow; remove it"
+        ) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark is not None else source

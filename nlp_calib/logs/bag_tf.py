@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nlp_calib.logs.bag_files import messages, opened
+from nlp_calib.logs.bag_files import BagError, messages, opened
 
 TF_STATIC = "/tf_static"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
@@ -73,12 +73,25 @@ def static_mount(path: Path, base_frame: str, sensor_frame: str) -> Mount | None
     transforms = static_transforms(path)
     T = np.eye(4)
     frame, base = _frame(sensor_frame), _frame(base_frame)
+    if frame == base:
+        raise BagError(
+            path,
+            f"the sensor's frame {frame!r} is the base frame: a sensor's mount is a joint from the base to "
+            "a frame of its own; set the sensor's frame (sensor_frame in ROBOT.yaml, the driver's frame_id) "
+            "or the dataset's base_frame",
+        )
     seen: set[str] = set()
     while frame != base:
         if frame not in transforms or frame in seen:
             return None
         seen.add(frame)
         parent, T_parent_frame = transforms[frame]
+        if not np.isfinite(T_parent_frame).all():
+            raise BagError(
+                path,
+                f"{TF_STATIC}: the transform of {frame!r} in {parent!r} is not finite (NaN or inf); fix the "
+                "robot's description, or give the mount in ROBOT.yaml (sensor_pose)",
+            )
         T = T_parent_frame @ T
         frame = parent
     return mount_of(T)

@@ -15,7 +15,7 @@ increment whose stamps are not both covered is left out and counted.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,7 +26,7 @@ from nlp_calib.logs.bag_joints import at_tracker, check_overlap, joint_positions
 from nlp_calib.logs.bag_reader import Stamped
 from nlp_calib.logs.log import JointStream, Log, LogClock, LogHeader, ReferenceData, frozen
 from nlp_calib.logs.relative import RelativeMotions
-from nlp_calib.logs.text_tables import data_lines, numbers, seconds, stamp_ns
+from nlp_calib.logs.text_tables import data_lines, joined, numbers, seconds, stamp_ns
 
 #: The columns every motions file starts with.
 COLUMNS = ("t_start", "t_end", "x", "y", "theta")
@@ -64,16 +64,32 @@ def _names(path: str, line: int, text: str) -> tuple[str, ...]:
     return names
 
 
-def read_motions(path: str | Path) -> MotionTable:
-    """Read a motions file (see the module docstring); a malformed row is an error naming its line."""
-    p = str(path)
-    lines = data_lines(path)
-    first = next(lines, None)
-    if first is None:
-        raise DatasetError(p, None, f"is empty; expected a header row '{','.join(COLUMNS)}' and rows")
-    names = _names(p, *first)
+#: Rows converted to arrays at a time: a large file costs its arrays, not a Python object per value.
+ROWS_PER_BLOCK = 1 << 16
+
+
+def _block(
+    rows: list[list[float]], starts: list[int], ends: list[int], at: list[int]
+) -> tuple[np.ndarray, ...]:
+    out = (
+        np.array(starts, dtype=np.int64),
+        np.array(ends, dtype=np.int64),
+        np.array(rows, dtype=float),
+        np.array(at, dtype=np.int64),
+    )
+    for part in (rows, starts, ends, at):
+        part.clear()
+    return out
+
+
+def _rows(p: str, lines: Iterator[tuple[int, str]], names: tuple[str, ...]) -> list[tuple[np.ndarray, ...]]:
+    """The rows after the header, as arrays a block at a time: stamps, values, lines."""
     layout = f"{len(names)} comma-separated numbers ({','.join(names)})"
-    starts, ends, rows, at = [], [], [], []
+    starts: list[int] = []
+    ends: list[int] = []
+    rows: list[list[float]] = []
+    at: list[int] = []
+    blocks = []
     for number, text in lines:
         fields = text.split(",")
         if len(fields) != len(names):
@@ -81,24 +97,95 @@ def read_motions(path: str | Path) -> MotionTable:
         a, b = stamp_ns(fields[0], p, number), stamp_ns(fields[1], p, number)
         if b <= a:
             raise DatasetError(
-                p, number, f"t_end {seconds(b)} is not after t_start {seconds(a)}; an increment runs forward"
+                p,
+                number,
+                f"t_end {seconds(b)} is not after t_start {seconds(a)}; an increment runs forward over "
+                "an interval of its own",
             )
         starts.append(a)
         ends.append(b)
         rows.append(numbers(p, number, fields[2:], layout))
         at.append(number)
-    if not rows:
-        raise DatasetError(p, None, "holds no increment")
-    values = np.array(rows, dtype=float)
-    quality = {n: frozen(values[:, 3 + i]) for i, n in enumerate(names[len(COLUMNS) :])}
-    return MotionTable(
-        p,
-        frozen(np.array(starts, dtype=np.int64)),
-        frozen(np.array(ends, dtype=np.int64)),
-        frozen(values[:, :3]),
-        frozen(np.array(at, dtype=np.int64)),
-        quality,
+        if len(at) == ROWS_PER_BLOCK:
+            blocks.append(_block(rows, starts, ends, at))
+    if at:
+        blocks.append(_block(rows, starts, ends, at))
+    return blocks
+
+
+def _once_each(p: str, table: MotionTable) -> MotionTable:
+    """Each interval once: a row whose stamps repeat an earlier row's is dropped (a row written
+    twice would count its motion twice, and the σ come out too small), and said; increments that
+    chain (each starting where one ended) with some missing between them are said too."""
+    order = np.lexsort((table.end_ns, table.start_ns))
+    start, end = table.start_ns[order], table.end_ns[order]
+    again = (start[1:] == start[:-1]) & (end[1:] == end[:-1])
+    del start, end
+    if not again.any():
+        _say_lost(p, table)
+        return table
+    keep = np.ones(table.n, dtype=bool)
+    keep[order[1:][again]] = False
+    del order, again
+    if keep.sum() < table.n:
+        lines = table.line_numbers[~keep]
+        warnings.warn(
+            f"{p}: {table.n - int(keep.sum())} of {table.n} rows repeat the interval of an earlier row "
+            f"(first on line {int(lines[0])}); each interval is kept once, from its first row",
+            NlpCalibWarning,
+            stacklevel=3,
+        )
+    kept = MotionTable(
+        table.path,
+        frozen(table.start_ns[keep]),
+        frozen(table.end_ns[keep]),
+        frozen(table.z[keep]),
+        frozen(table.line_numbers[keep]),
+        {k: frozen(v[keep]) for k, v in table.quality.items()},
     )
+    _say_lost(p, kept)
+    return kept
+
+
+def _say_lost(p: str, table: MotionTable) -> None:
+    """A chain of increments (most starting where the one before ended) with links missing: the rows
+    a logger lost leave a wheel stretch with no reference, said with its count."""
+    if table.n < 3:
+        return
+    in_order = bool(np.all(table.start_ns[1:] >= table.start_ns[:-1]))
+    order = slice(None) if in_order else np.argsort(table.start_ns, kind="stable")
+    start, end = table.start_ns[order], table.end_ns[order]
+    chained = start[1:] == end[:-1]
+    gaps = start[1:] > end[:-1]
+    if chained.mean() >= 0.5 and gaps.any():
+        k = int(np.flatnonzero(gaps)[0]) + 1
+        warnings.warn(
+            f"{p}: the increments chain (each starts where one ends) but {int(gaps.sum())} links are "
+            f"missing (first before line {int(table.line_numbers[order][k])}, {seconds(int(end[k - 1]))} to "
+            f"{seconds(int(start[k]))}): rows lost by the logger? The stretches without a row have no "
+            "reference",
+            NlpCalibWarning,
+            stacklevel=4,
+        )
+
+
+def read_motions(path: str | Path) -> MotionTable:
+    """Read a motions file (see the module docstring); a malformed row is an error naming its line.
+    Rows are read into arrays a block at a time (memory: the arrays)."""
+    p = str(path)
+    lines = data_lines(path)
+    first = next(lines, None)
+    if first is None:
+        raise DatasetError(p, None, f"is empty; expected a header row '{','.join(COLUMNS)}' and rows")
+    names = _names(p, *first)
+    blocks = _rows(p, lines, names)
+    if not blocks:
+        raise DatasetError(p, None, "holds no increment")
+    starts, ends, values, at = joined(blocks, 4)
+    quality = {n: frozen(values[:, 3 + i].copy()) for i, n in enumerate(names[len(COLUMNS) :])}
+    z = values if values.shape[1] == 3 else values[:, :3].copy()
+    del values
+    return _once_each(p, MotionTable(p, frozen(starts), frozen(ends), frozen(z), frozen(at), quality))
 
 
 def format_motions(

@@ -18,13 +18,14 @@ that de-skews them where this matters).
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from nlp_calib.core.errors import DatasetError
+from nlp_calib.core.errors import DatasetError, NlpCalibWarning
 from nlp_calib.core.ranges import Range
 from nlp_calib.logs.bag_files import BagError, messages, opened
 from nlp_calib.logs.motions import MotionTable
@@ -59,13 +60,43 @@ class LaserScans:
         return np.column_stack([r[ok] * np.cos(self.angles[ok]), r[ok] * np.sin(self.angles[ok])])
 
 
-def read_scans(path: str | Path, topic: str, receive: bool = False) -> LaserScans:
-    """The LaserScan messages on ``topic`` (timed by their header stamps, or the bag's record
-    times with ``receive``); every scan must have the first one's beams."""
-    p = Path(path)
+#: Returns a scan needs for a match (fewer: the match is skipped as not converged).
+MIN_RETURNS = 10
+#: Closest two scans' stamps may be (ns) for a lidar (a lidar sweeps at 5-50 Hz; 1 kHz is none).
+MIN_SCAN_INTERVAL_NS = 1_000_000
+
+
+def _geometry(p: Path, topic: str, number: int, msg: Any) -> str | None:
+    """Why scan ``number``'s beam geometry cannot be right (None when it can): angles and limits
+    finite, and as many ranges as ``angle_min``, ``angle_max`` and ``angle_increment`` give."""
+    a0, a1, step = (float(msg.angle_min), float(msg.angle_max), float(msg.angle_increment))
+    r0, r1, n = float(msg.range_min), float(msg.range_max), len(msg.ranges)
+    where = f"scan {number} on {topic!r}"
+    if not all(math.isfinite(v) for v in (a0, a1, step, r0, r1)):
+        return (
+            f"{where}: its beam geometry is not finite (angle_min {a0}, angle_max {a1}, angle_increment "
+            f"{step}, range_min {r0}, range_max {r1}); the driver's message is damaged"
+        )
+    if n == 0:
+        return f"{where} holds no ranges"
+    if not 0.0 <= r0 < r1:
+        return f"{where}: range_min {r0} and range_max {r1} admit no return; the driver's limits are wrong"
+    beams = (a1 - a0) / step + 1 if step != 0 else math.inf
+    if n > 1 and (abs(beams - n) > 1.01 or abs(step) * (n - 1) > 2 * math.pi + abs(step)):
+        return (
+            f"{where}: its beam geometry does not fit its ranges: angle_min {a0:g}, angle_max {a1:g} and "
+            f"angle_increment {step:g} give {beams:.4g} beams, the message holds {n} ranges; the driver's "
+            "angles are wrong (a beam's angle is angle_min + k·angle_increment), and every point would be "
+            "placed at a wrong bearing"
+        )
+    return None
+
+
+def _read(p: Path, topic: str, receive: bool) -> tuple[list[int], list[np.ndarray], tuple[Any, ...]]:
+    """The scans' stamps and ranges, and the first scan's beams, limits and frame."""
     stamps: list[int] = []
     rows: list[np.ndarray] = []
-    first: tuple[tuple[float, float, int], float, float, str] | None = None
+    first: tuple[Any, ...] | None = None
     with opened(p) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
         if types.get(topic) != SCAN_TYPE:
@@ -76,6 +107,8 @@ def read_scans(path: str | Path, topic: str, receive: bool = False) -> LaserScan
                 "them)",
             )
         for _, recorded, msg in messages(reader, p, (topic,)):
+            if (problem := _geometry(p, topic, len(rows) + 1, msg)) is not None:
+                raise BagError(p, problem)
             beams = (float(msg.angle_min), float(msg.angle_increment), len(msg.ranges))
             if first is None:
                 first = (beams, float(msg.range_min), float(msg.range_max), str(msg.header.frame_id))
@@ -90,12 +123,77 @@ def read_scans(path: str | Path, topic: str, receive: bool = False) -> LaserScan
             rows.append(np.asarray(msg.ranges, dtype=float))
     if first is None or len(rows) < 2:
         raise BagError(p, f"scan: topic {topic!r} has {len(rows)} scan(s); a lidar needs at least 2")
+    return stamps, rows, first
+
+
+def _once_each(p: Path, topic: str, stamp_ns: np.ndarray, ranges: np.ndarray) -> np.ndarray:
+    """Which scans (in stamp order) to keep: each stamp once (the first scan of it), the others
+    counted and said; a lidar's scans sweep at a lidar's rate."""
+    keep = np.ones(stamp_ns.size, dtype=bool)
+    keep[1:] = np.diff(stamp_ns) != 0
+    dropped = int((~keep).sum())
+    if keep.sum() < 2:
+        raise BagError(
+            p,
+            f"scan: all {stamp_ns.size} scans on {topic!r} carry one stamp; the driver does not stamp its "
+            "scans: time them by the bag's record times (stamps: receive)",
+        )
+    if dropped:
+        twice = np.flatnonzero(~keep)
+        same = int(sum(np.array_equal(ranges[k], ranges[k - 1], equal_nan=True) for k in twice))
+        warnings.warn(
+            f"{p}: {dropped} of {stamp_ns.size} scans on {topic!r} carry the stamp of the scan before "
+            f"({same} of them the same scan recorded twice); each stamp's first scan is kept, the "
+            f"{dropped} others dropped",
+            NlpCalibWarning,
+            stacklevel=3,
+        )
+    gaps = np.diff(stamp_ns[keep])
+    if float(np.median(gaps)) < MIN_SCAN_INTERVAL_NS:
+        raise BagError(
+            p,
+            f"scan: the scans on {topic!r} are stamped {float(np.median(gaps)) / 1e6:.3g} ms apart (median), "
+            "faster than any lidar sweeps; their stamps are not the scans' times: time them by the bag's "
+            "record times (stamps: receive)",
+        )
+    return keep
+
+
+def _valid_returns(p: Path, topic: str, ranges: np.ndarray, range_min: float, range_max: float) -> None:
+    """Refuse scans that hold no usable returns, naming why (the first cause found)."""
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(ranges) & (ranges >= range_min) & (ranges <= range_max)
+    usable = int((ok.sum(axis=1) >= MIN_RETURNS).sum())
+    if usable >= 2:
+        return
+    finite = np.isfinite(ranges)
+    with np.errstate(invalid="ignore"):
+        negative, beyond = int((ranges < 0).sum()), int((finite & (ranges > range_max)).sum())
+    raise BagError(
+        p,
+        f"scan: no valid lidar returns on {topic!r}: {usable} of {ranges.shape[0]} scans hold {MIN_RETURNS} "
+        f"ranges inside [range_min {range_min:g}, range_max {range_max:g}] ({ranges.size} ranges: "
+        f"{int((~finite).sum())} NaN or inf, {negative} negative, {beyond} beyond range_max); check the "
+        "driver's ranges and limits",
+    )
+
+
+def read_scans(path: str | Path, topic: str, receive: bool = False) -> LaserScans:
+    """The LaserScan messages on ``topic`` (timed by their header stamps, or the bag's record
+    times with ``receive``); every scan must have the first one's beams, a beam geometry that fits
+    its ranges, and a stamp of its own (a scan recorded twice is kept once, and said)."""
+    p = Path(path)
+    stamps, rows, first = _read(p, topic, receive)
     (angle_min, step, n_beams), range_min, range_max, frame = first
     order = np.argsort(np.array(stamps, dtype=np.int64), kind="stable")
+    stamp_ns, ranges = np.array(stamps, dtype=np.int64)[order], np.array(rows)[order]
+    keep = _once_each(p, topic, stamp_ns, ranges)
+    stamp_ns, ranges = stamp_ns[keep], ranges[keep]
+    _valid_returns(p, topic, ranges, range_min, range_max)
     return LaserScans(
         topic,
-        np.array(stamps, dtype=np.int64)[order],
-        np.array(rows)[order],
+        stamp_ns,
+        ranges,
         angle_min + step * np.arange(int(n_beams)),
         range_min,
         range_max,

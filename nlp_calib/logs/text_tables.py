@@ -209,7 +209,7 @@ class _Rows:
 
     def __init__(self, path: str, layout: Layout, keep: Keep | None) -> None:
         self.path, self.layout, self.keep = path, layout, keep
-        self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.parts: list[tuple[np.ndarray, ...]] = []
         self.header: tuple[int, str] | None = None
         self.rows = 0
         self.first_ns: int | None = None
@@ -273,19 +273,46 @@ class _Rows:
         self.parts.append((t_ns[kept], values[kept], lines[kept]))
 
     def table(self) -> Table:
-        time_ns, values, lines = (
-            np.concatenate([p[i] for p in self.parts]) if self.parts else np.zeros(0) for i in range(3)
-        )
+        time_ns, values, lines = joined(self.parts, 3)
         last = self.last[0] if self.last is not None else 0
         return Table(
-            time_ns.astype(np.int64),
-            values.reshape(-1, self.layout.width).astype(float),
-            lines.astype(np.int64),
+            time_ns.astype(np.int64, copy=False),
+            values.reshape(-1, self.layout.width).astype(float, copy=False),
+            lines.astype(np.int64, copy=False),
             self.header,
             self.rows,
             self.first_ns or 0,
             last,
         )
+
+
+def joined(parts: list[tuple[np.ndarray, ...]], width: int) -> list[np.ndarray]:
+    """The ``width`` columns of blocks of rows (``parts``, emptied), each copied block by block into
+    its place and each block's piece let go once copied (the column's pages are touched only as it
+    fills): the peak is the rows' arrays and a block, not the arrays twice."""
+    held = [list(q) for q in parts]
+    parts.clear()
+    out = []
+    for i in range(width):
+        if not held:
+            out.append(np.zeros(0))
+            continue
+        pieces = [q[i] for q in held]
+        column = np.empty(
+            (sum(x.shape[0] for x in pieces), *pieces[0].shape[1:]), dtype=np.result_type(*pieces)
+        )
+        del pieces
+        at = 0
+        for q in held:
+            n = q[i].shape[0]
+            column[at : at + n] = q[i]
+            at += n
+            q[i] = _NOTHING
+        out.append(column)
+    return out
+
+
+_NOTHING = np.zeros(0)
 
 
 def _decode(raw: bytes, path: str, line: int) -> str:

@@ -18,7 +18,7 @@ import numpy as np
 
 from nlp_calib.core.errors import DatasetError
 from nlp_calib.logs.log import frozen
-from nlp_calib.logs.text_tables import check_increasing, data_lines, numbers, seconds, stamp_ns
+from nlp_calib.logs.text_tables import Layout, first_row, read_table, seconds
 
 LAYOUT = "'t x y theta' (4 numbers)"
 
@@ -34,21 +34,18 @@ class Odometry:
 
 
 def read_odometry(path: str | Path) -> Odometry:
-    """Read a ``t x y θ`` file (see the module docstring)."""
+    """Read a ``t x y θ`` file (see the module docstring), spaces or commas between the numbers: a
+    block at a time, into arrays (memory: the arrays, not a Python object per value)."""
     p = str(path)
-    stamps, rows, lines = [], [], []
-    for number, text in data_lines(path):
-        fields = text.replace(",", " ").split()
-        if len(fields) != 4:
-            raise DatasetError(p, number, f"has {len(fields)} columns; an odometry line is {LAYOUT}")
-        rows.append(numbers(p, number, fields[1:], LAYOUT))
-        stamps.append(stamp_ns(fields[0], p, number))
-        lines.append(number)
-    if len(rows) < 2:
-        raise DatasetError(p, None, f"holds {len(rows)} pose(s); odometry needs at least 2 lines of {LAYOUT}")
-    time_ns, line_numbers = np.array(stamps, dtype=np.int64), np.array(lines, dtype=np.int64)
-    check_increasing(p, time_ns, line_numbers)
-    return Odometry(p, frozen(time_ns), frozen(np.array(rows, dtype=float)), frozen(line_numbers))
+    first = first_row(path)
+    sep = b"," if first is not None and "," in first[1] else None
+    layout = Layout(3, sep, LAYOUT, miscount="has {n} columns; an odometry line is {words}")
+    table = read_table(path, layout)
+    if table.rows < 2:
+        raise DatasetError(
+            p, None, f"holds {table.rows} pose(s); odometry needs at least 2 lines of {LAYOUT}"
+        )
+    return Odometry(p, frozen(table.time_ns), frozen(table.values), frozen(table.line_numbers))
 
 
 def format_odometry(time_ns: np.ndarray, base: np.ndarray) -> str:

@@ -17,6 +17,7 @@ import yaml
 
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import atomic_write_bytes, atomic_write_text
+from nlp_calib.core.text import escaped, unprintable
 from nlp_calib.core.version import __version__
 from nlp_calib.outputs import urdf
 from nlp_calib.outputs.results import result_document
@@ -157,16 +158,25 @@ def _represent_list(dumper: yaml.SafeDumper, data: list[Any]) -> yaml.Node:
 _Dumper.add_representer(list, _represent_list)
 
 
+def _represent_str(dumper: yaml.SafeDumper, data: str) -> yaml.Node:
+    # A line break YAML knows and PyYAML writes raw (U+0085), a control: double-quoted, escaped.
+    style = '"' if unprintable(data) is not None else None
+    return dumper.represent_scalar("tag:yaml.org,2002:str", data, style=style)
+
+
+_Dumper.add_representer(str, _represent_str)
+
+
 def calibration_yaml(doc: Mapping[str, Any]) -> str:
     """YAML text of a calibration document (a comment header, then the document)."""
     head = (
         f"# Wheeled-robot calibration by nlp_calib {doc['tool']['version']}, scenario "
-        f"{doc['scenario']['name']}.\n"
+        f"{escaped(doc['scenario']['name'])}.\n"
         f"# 'parameters' are {doc['solver']}'s estimate ({doc['solver_choice']}); 'std' is the 1 sigma to\n"
         "# believe: the larger of 'std_white_noise' (white tracker and encoder noise only: a floor) and\n"
         "# 'std_blocks' (the spread of fits each without one block of the drive: every error that varies).\n"
-        f"# {_mount_words(doc)}: pose of the '{doc['frames']['sensor']}' frame in "
-        f"'{doc['frames']['parent']}'.\n"
+        f"# {_mount_words(doc)}: pose of the '{escaped(doc['frames']['sensor'])}' frame in "
+        f"'{escaped(doc['frames']['parent'])}'.\n"
     )
     body = yaml.dump(
         dict(doc), Dumper=_Dumper, sort_keys=False, default_flow_style=False, allow_unicode=True, width=1000
@@ -182,7 +192,11 @@ def _mount_words(doc: Mapping[str, Any]) -> str:
 
 
 def _comment_text(text: str) -> str:
-    return text.replace("--", "- -")  # '--' may not appear inside an XML comment
+    # '--' may not appear inside an XML comment, nor '-' at its end; a control character nowhere.
+    text = escaped(text)
+    while "--" in text:
+        text = text.replace("--", "- -")
+    return text + " " if text.endswith("-") else text
 
 
 def _joint(mount: SensorMount) -> ET.Element:

@@ -41,6 +41,8 @@ from nlp_calib.core.files import (
     RESERVED_PREFIX,
     aliased_input,
     atomic_write_text,
+    check_output_dir,
+    kind_of,
     refuse_input_alias,
     reserved_part,
 )
@@ -144,8 +146,18 @@ def _check_name(out_dir: Path, name: str) -> Path:
     if target.is_dir() and not target.is_symlink():
         raise UsageError(f"{target} is a folder; move it away or choose another --out")
     if target.exists() and not target.is_file():  # e.g. /dev/null: never replaced, even forced
-        raise UsageError(f"{target} is not a regular file (a device, FIFO or socket); choose another")
+        raise UsageError(
+            f"{target} is {kind_of(target.stat().st_mode)}, not a regular file; nlp_calib replaces only "
+            "regular files, even with --force: choose another path"
+        )
     return target
+
+
+def _link_error(target: Path) -> UsageError:
+    return UsageError(
+        f"{target} is a symbolic link; nlp_calib never replaces one, even with --force (it would "
+        "replace the link, not write where it points): remove it or choose another path"
+    )
 
 
 def refuse_collisions(
@@ -159,6 +171,8 @@ def refuse_collisions(
     digests = manifest_digests(out_dir) if tracked else {}
     for name in names:
         target = _check_name(out_dir, name)
+        if target.is_symlink() and (force or name not in ours):
+            raise _link_error(target)
         if force or not (target.exists() or target.is_symlink()):
             continue
         if name not in ours:
@@ -168,6 +182,17 @@ def refuse_collisions(
             )
         if _edited(out_dir, name, digests):
             raise _edited_error(target)
+
+
+def write_file(path: Path, text: str, *, force: bool = False) -> Path:
+    """Write one file at ``path`` (``--json``, ``init --out``): never over an input of the run, a
+    folder, a link, a device or a FIFO; over an existing regular file only with ``force`` (a lone
+    file has no manifest to say that nlp_calib wrote it)."""
+    path = Path(path)
+    folder = check_output_dir(path.parent)
+    refuse_collisions(folder, [path.name], tracked=False, force=force)
+    atomic_write_text(path, text)
+    return path
 
 
 class _FolderLock:
@@ -307,8 +332,8 @@ class StagedOutput:
             parent = (self.out_dir / name).parent
             if parent != self.out_dir and (parent.is_symlink() or not parent.is_dir()):
                 continue  # the user put a link (or a file) where our subfolder was: not ours to follow
-            if aliased_input(self.out_dir / name) is not None:
-                continue
+            if aliased_input(self.out_dir / name) is not None or (self.out_dir / name).is_symlink():
+                continue  # an input, or a link put where our file was: left, no longer claimed
             if not self.force and _edited(self.out_dir, name, digests):
                 raise _edited_error(self.out_dir / name)
             stale.append(name)

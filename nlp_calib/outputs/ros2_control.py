@@ -15,6 +15,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from nlp_calib.core.files import atomic_write_text
+from nlp_calib.core.text import escaped
 from nlp_calib.core.version import __version__
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.handoff import UNMEASURED, ControllerParams, OdometryNoise
@@ -82,9 +83,9 @@ def _covariance_notes(noise: OdometryNoise | None) -> list[str]:
 
 
 def _comment(text: str) -> str:
-    """``text`` on one comment line: no line break from an input (a YAML reader breaks lines at
-    more characters than newline) ends the comment."""
-    return " ".join(text.splitlines())
+    """``text`` on one comment line: no line break or control character from an input (a YAML
+    reader breaks lines at more characters than newline) ends the comment or reaches a terminal."""
+    return escaped(" ".join(text.split("\n")))
 
 
 def _header(

@@ -22,12 +22,15 @@ from typing import Any
 
 import yaml
 
+from nlp_calib.core.config import parse_yaml
 from nlp_calib.core.errors import FieldError, UsageError
 from nlp_calib.core.ranges import check_ros_name
+from nlp_calib.core.text import escaped, unprintable
 from nlp_calib.logs.bag_reader import ODOMETRY_TYPE, POSE_TYPE, TF_TYPE, TRANSFORM_TYPE, is_bag
 from nlp_calib.logs.bag_survey import BagSurvey, Topic, survey
 from nlp_calib.logs.joint_log import read_joint_csv
 from nlp_calib.logs.reader import read_header
+from nlp_calib.logs.scans import SCAN_TYPE
 from nlp_calib.models import MODELS, encoders, model_for_log
 from nlp_calib.pipeline.scenario import Scenario, scenario_from_mapping
 from nlp_calib.sources.joints import paired_files
@@ -66,7 +69,7 @@ class Draft:
 
     def scenario(self, where: Path) -> Scenario:
         """The drafted scenario as ``run`` reads it from a file at ``where``."""
-        return scenario_from_mapping(yaml.safe_load(self.text), str(where), where.parent, where)
+        return scenario_from_mapping(parse_yaml(self.text, str(where)), str(where), where.parent, where)
 
 
 def _words(name: str) -> set[str]:
@@ -128,7 +131,8 @@ def tracker(found: BagSurvey) -> tuple[Topic, str | None, list[Topic]]:
     poses = [t for t in poses if t.name != "/tf_static"]
     if not poses:
         raise UsageError(
-            f"{found.path}: no topic holds poses (PoseStamped, TransformStamped, Odometry or TF)"
+            f"{found.path}: no topic holds poses (PoseStamped, TransformStamped, Odometry or TF) or a "
+            f"lidar's scans ({SCAN_TYPE}); a calibration needs one of them as its reference"
         )
     best = poses[0]
     frame = None
@@ -171,6 +175,22 @@ def _listing(found: BagSurvey) -> list[str]:
     return lines
 
 
+def _one_line_names(path: Path, dataset: Mapping[str, Any]) -> None:
+    """Refuse a drafted name (topic, joint, frame) that is not one line of printable text: a run
+    reads a scenario's names as such (a frame id holding a line break is no frame a robot has)."""
+    for key, value in dataset.items():
+        names = (
+            value.values() if isinstance(value, Mapping) else value if isinstance(value, list) else [value]
+        )
+        for name in names:
+            if isinstance(name, str) and (bad := unprintable(name)) is not None:
+                raise UsageError(
+                    f"{path}: the {key} {escaped(name)!r} holds {bad}, a line break or control character; "
+                    "a topic, joint or frame name is one line of printable text: re-record it (or remap "
+                    "it) under a plain name"
+                )
+
+
 def _relative(path: Path, where: Path) -> str:
     """``path`` relative to the scenario's folder when it lies inside it (the two move together),
     else absolute."""
@@ -181,7 +201,8 @@ def _relative(path: Path, where: Path) -> str:
 def _text(header: Sequence[str], raw: Mapping[str, Any], notes: Mapping[str, str]) -> str:
     """The scenario as YAML with ``header`` comments on top and each key's note after it: one line a
     key, a mapping of several keys (the dataset's) as a block."""
-    lines = [f"# {h}" if h else "#" for h in header]
+    # A comment holds only text that cannot end it: names from the recording are escaped.
+    lines = [f"# {escaped(h)}" if h else "#" for h in header]
     for key, value in raw.items():
         if isinstance(value, Mapping) and len(value) > 2:
             lines += yaml.safe_dump(
@@ -191,7 +212,7 @@ def _text(header: Sequence[str], raw: Mapping[str, Any], notes: Mapping[str, str
         shown = yaml.safe_dump(value, sort_keys=False, default_flow_style=True, width=200).strip()
         shown = shown.removesuffix("...").strip()
         note = notes.get(key)
-        lines.append(f"{key}: {shown}" + (f"   # {note}" if note else ""))
+        lines.append(f"{key}: {shown}" + (f"   # {escaped(note)}" if note else ""))
     return "\n".join(lines) + "\n"
 
 
@@ -233,18 +254,25 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         raise UsageError(f"{path}: no sensor_msgs/msg/JointState topic names any joint")
     js = max(joint_topics, key=lambda t: (t.positions, len(t.joints), t.count))
     name, joints, why = guess_model(js.joints, model)
-    best, frame, others = tracker(found)
     dataset: dict[str, Any] = {
         "bag": _relative(path, where),
         "joint_states": js.name,
         "joints": list(joints.values()),
     }
+    scans = sorted(found.of_type(SCAN_TYPE), key=lambda t: -t.count)
+    poses = [
+        t for t in found.of_type(POSE_TYPE, TRANSFORM_TYPE, ODOMETRY_TYPE, TF_TYPE) if t.name != "/tf_static"
+    ]
+    if not poses and scans:
+        return _draft_lidar(path, where, (found, js), (name, joints, why), (dataset, scans))
+    best, frame, others = tracker(found)
     dataset["tracker"] = best.name
     if frame is not None:
         dataset["tracker_frame"] = frame
     mount = sensor_frame(found) if frame is None else None
     if mount is not None:
         dataset["sensor_frame"] = mount
+    _one_line_names(path, dataset)
     controller = controller_name(found)
     handoff = {"handoff": {"controller_name": controller}} if controller else {}
     raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS, **handoff}
@@ -260,7 +288,8 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         f"joints {', '.join(joints.values())} are the model's encoders {', '.join(joints)}, in that order.",
         f"tracker: {best.name} ({best.msgtype}){f', frame {frame}' if frame else ''}"
         + (f"; other pose topics: {', '.join(t.name for t in others)}" if others else "")
-        + " (the robot's own odometry is never a reference).",
+        + " (the robot's own odometry is never a reference)"
+        + (f"; a lidar's scans too: {', '.join(t.name for t in scans)} (docs/lidar.md)." if scans else "."),
         *(
             [
                 f"sensor_frame {mount}: its fixed transforms from base_link on /tf_static give the nominal "
@@ -280,6 +309,34 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
     return Draft(raw, text, lines)
 
 
+def _draft_lidar(
+    path: Path,
+    where: Path,
+    bag: tuple[BagSurvey, Topic],
+    chosen: tuple[str, Mapping[str, str], str],
+    block: tuple[dict[str, Any], list[Topic]],
+) -> Draft:
+    """A bag whose only reference is a lidar's scans: a lidar scenario (docs/lidar.md)."""
+    (found, _), (name, joints, why), (dataset, scans) = bag, chosen, block
+    dataset["scan"] = scans[0].name
+    _one_line_names(path, dataset)
+    raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS}
+    frames = f", frame {', '.join(scans[0].frames)}" if scans[0].frames else ""
+    header = [
+        f"Drafted by nlp-calib init from {path}: {found.duration_s:.1f} s, {len(found.topics)} topics.",
+        *(f"  {line}" for line in _listing(found)),
+        f"model: {name}, because {why}.",
+        f"joints {', '.join(joints.values())} are the model's encoders {', '.join(joints)}, in that order.",
+        f"reference: the lidar's scans on {scans[0].name} ({SCAN_TYPE}{frames}), each matched to the one "
+        "before (docs/lidar.md); no topic holds poses"
+        + (f"; other scan topics: {', '.join(t.name for t in scans[1:])}" if scans[1:] else "")
+        + ".",
+        f"Check it before a run: nlp-calib preflight {where}",
+    ]
+    lines = (*_listing(found), f"model {name}: {why}", f"reference: the scans on {scans[0].name}")
+    return Draft(raw, _text(header, raw, NOTES), lines)
+
+
 def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
     joints_path, poses_path = paired_files(path)
     table = read_joint_csv(joints_path)
@@ -289,6 +346,7 @@ def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
         "poses": _relative(poses_path, where),
         "encoders": dict(joints),
     }
+    _one_line_names(joints_path, dataset)
     raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS}
     header = [
         f"Drafted by nlp-calib init from {joints_path.name} (joints: {', '.join(table.names)}) and "

@@ -24,7 +24,7 @@ from typing import Any, ClassVar
 from nlp_calib.core.config import coerce, from_mapping
 from nlp_calib.core.errors import ConfigError, DatasetError
 from nlp_calib.logs import Log, LogHeader
-from nlp_calib.logs.bag_files import bag_root
+from nlp_calib.logs.bag_files import BagError, bag_root
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, MAX_GAP, is_bag, read_joints
 from nlp_calib.logs.bag_tf import static_mount
 from nlp_calib.logs.motions import timed_by_motions
@@ -115,8 +115,15 @@ class LidarSource:
         joints = read_joints(self.bag, self.joint_states, self.joints, receive)
         joints = replace(joints, stamp_ns=joints.stamp_ns + round(self.clock_offset * 1e9))
         scans = read_scans(self.bag, self.scan, receive)
-        motions = match_scans(scans, self.matching())
         header = self.header(model, scans.frame)
+        if header.sensor_frame == self.base_frame.strip("/"):
+            raise BagError(
+                self.bag,
+                f"the scans on {self.scan!r} are in the base frame {header.sensor_frame!r}: a lidar's "
+                "mount is a joint from the base to a frame of its own; set the driver's frame_id, or "
+                "sensor_frame in ROBOT.yaml",
+            )
+        motions = match_scans(scans, self.matching())
         return timed_by_motions(self.bag, joints, motions, self.joints, self.max_gap, header)
 
     def moved(self, path: Path) -> LidarSource:

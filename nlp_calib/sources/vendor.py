@@ -17,6 +17,7 @@ reference is read as a joint log's (``poses``) or a motions file's (``motions``)
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -25,7 +26,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from nlp_calib.core.config import coerce, from_mapping
-from nlp_calib.core.errors import ConfigError, ModelError
+from nlp_calib.core.errors import ConfigError, ModelError, NlpCalibWarning
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.logs.bag_joints import timed_by_tracker
 from nlp_calib.logs.bag_reader import (
@@ -115,6 +116,13 @@ class VendorSource:
                 )
             topic = read_pose_topic(self.odometry, self.odometry_topic)
             time_ns, base, path = topic.stamp_ns, topic.values[:, :3], str(self.odometry)
+            if topic.drops.counts:  # every message not used is counted and said
+                warnings.warn(
+                    f"{path}: {self.odometry_topic}: {topic.n} messages used, dropped: "
+                    f"{topic.drops.describe()}",
+                    NlpCalibWarning,
+                    stacklevel=2,
+                )
         else:
             odometry = read_odometry(self.odometry)
             time_ns, base, path = odometry.time_ns, odometry.poses, odometry.path
