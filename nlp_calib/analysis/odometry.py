@@ -177,21 +177,26 @@ def drift_coverage(drift: Drift, noise: np.ndarray, reference_var: np.ndarray, k
 COVERED = 0.95
 
 
-def covering_noise(drift: Drift, noise: np.ndarray, floor: np.ndarray) -> np.ndarray:
+def covering_noise(
+    drift: Drift, noise: np.ndarray, floor: np.ndarray, reference_var: np.ndarray | None = None
+) -> np.ndarray:
     """``noise`` raised, where its propagated 2σ holds fewer than :data:`COVERED` of the segment
     errors (x, y and heading together), by adding to every noisy input's variance one share of
     their mean variance, the smallest that makes it hold them: the odometry's noise is at least
     the drift the segments show (errors that do not grow as a random walk, such as a slow
     encoder's timing, are still covered at the segments' own length), shared by the inputs the
-    moments could not tell apart. The errors are held against the odometry's σ alone: over a
-    window of one increment the reference's noise and the wheels' cannot be told apart, and a
-    filter must not trust the wheels for what the windows show they miss."""
+    moments could not tell apart. The errors are held against the odometry's σ and the reference's
+    own variances (``reference_var``, where the moments told them apart: a tracker's poses);
+    without them (over a window of one increment the reference's noise and the wheels' cannot be
+    told apart) against the odometry's alone: a filter must not trust the wheels for what the
+    windows show they miss."""
     noise = np.asarray(noise, dtype=float).copy()
     noisy = np.asarray(floor, dtype=float) > 0
     if drift.errors.shape[0] == 0 or not noisy.any():
         return noise
     for _ in range(8):
-        sigma = _sigmas(drift, noise, np.zeros(drift.terms.shape[1]))
+        ref = np.zeros(drift.terms.shape[1]) if reference_var is None else reference_var
+        sigma = _sigmas(drift, noise, ref)
         ratio = np.abs(drift.errors) / np.maximum(sigma, 1e-300)
         need = float(np.quantile(ratio, COVERED)) / 2.0
         if need <= 1.0 + 1e-6:

@@ -560,7 +560,10 @@ def calibrated_drift(
     drift = segment_drift(fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS))
     floor = windows.input_noise_std
     noise, reference_var = drift_noise(drift, floor)
-    noise = covering_noise(drift, noise, floor)
+    # A tracker's poses tell its own noise from the wheels' (by the drift's growth with length); a
+    # reference's own increments, one per window, do not.
+    told = reference_var if windows.data.increment is None else None
+    noise = covering_noise(drift, noise, floor, told)
     return Drift(inputs, reference, drift, noise, reference_var)
 
 

@@ -550,7 +550,7 @@ def problem_layout(model: KinematicModel, sensor: Sensor, spec: ProblemSpec) -> 
     the mount's parameters the sensor never determines held."""
     kinematic = tuple(model.kinematic_params)
     turn = (-2.0 * np.pi, 2.0 * np.pi)
-    ranges = {**model.physical_ranges, **dict.fromkeys(model.angle_params, turn)}
+    ranges = {**model.physical_ranges, **dict.fromkeys((*model.angle_params, *sensor.angles), turn)}
     blocks = [
         BlockSpec(MODEL, kinematic, model.units, ranges=ranges, precision=_precision(model, kinematic)),
         BlockSpec(
@@ -558,6 +558,7 @@ def problem_layout(model: KinematicModel, sensor: Sensor, spec: ProblemSpec) -> 
             tuple(sensor.params),
             sensor.units,
             per_log=spec.mounts > 1,
+            ranges=ranges,
             precision=_precision(model, sensor.params, sensor.reference),
         ),
     ]

@@ -15,7 +15,6 @@ from dataclasses import replace
 
 import numpy as np
 
-from nlp_calib.core import poses
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.problem.functions import ProblemFunctions, ProblemSpec, build
 from nlp_calib.problem.windows import ResidualData, over_columns, tracker_motions
@@ -154,10 +153,9 @@ def explained(params: Mapping[str, float], z: np.ndarray, base_motion: BaseMotio
     """How badly ``params`` explain the planar windows ``z`` ``(3, M)``: over the windows, the
     squared translation error relative to the window's length (at least the median length) plus
     ``1 − cos`` of the heading error (blind to whole turns), each window's share at most 1."""
-    M = base_motion(params)
-    mount = np.array([params.get(n, 0.0) for n in ("sensor_x", "sensor_y", "sensor_theta")])
-    T = np.broadcast_to(mount, (M.shape[1], 3))
-    predicted = poses.between(T, poses.compose(M.T, T))
+    # ``base_motion`` of a full set of parameters is already the sensor's motion over each window
+    # (its mount among them): applying the mount again would judge a start by another robot.
+    predicted = base_motion(params).T
     length = np.hypot(z[0], z[1])
     scale = np.maximum(length, np.median(length) + 1e-9)
     e_xy = np.hypot(*(predicted[:, :2] - z[:2].T).T) / scale
