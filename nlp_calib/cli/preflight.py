@@ -9,7 +9,7 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from nlp_calib.core.errors import DatasetError, NlpCalibWarning, UsageError
+from nlp_calib.core.errors import DatasetError, NlpCalibWarning, ScenarioError, UsageError
 from nlp_calib.core.files import check_output_dir, note_input
 from nlp_calib.core.text import escaped
 from nlp_calib.logs import Log
@@ -80,8 +80,8 @@ def gate(scenarios: Sequence[Scenario], logs: Sequence[Sequence[Log]], skip: boo
     for sc, log_list in zip(scenarios, logs):
         try:
             report = preflight(sc, log_list)
-        except DatasetError:  # the run's own preparation refuses these logs so: said once, now
-            raise
+        except (DatasetError, ScenarioError, UsageError):  # the run refuses these inputs or settings
+            raise  # so (its preparation, its backend): said once, now
         except Exception as exc:  # the pre-flight must never be what stops a run that could succeed
             warnings.warn(
                 f"pre-flight of {sc.name} not done ({type(exc).__name__}: {exc}); the run goes on",

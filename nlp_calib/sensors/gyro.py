@@ -18,10 +18,10 @@ frees it (``sensor: {mount: gyro, scale: free}``): with a gyro alone it trades w
 of the model.
 
 A gyro measures no length: with it alone, what the wheels determine is their turning, so the
-model's lengths are known only as ratios (a differential drive's radii over its separation; a
-tricycle's wheelbase over its radius, its steering gain and offset); one known length (``known:
-{wheel_radius: …}``) or a second reference fixes the rest. The fit's observability says so: the
-scale of the lengths is a direction the residuals do not see.
+model's lengths are known only as ratios (each length over one of them: the model says which are
+lengths); one known length (under the scenario's ``known``) or a second reference fixes the
+rest. The fit's observability says so: the scale of the lengths is a direction the residuals do
+not see.
 """
 
 from __future__ import annotations
