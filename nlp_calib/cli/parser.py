@@ -392,7 +392,8 @@ def _add_simulate(sub: Any) -> None:
         "--lidar",
         action="store_true",
         help="a 2-D lidar in a room of walls: a ROS 2 bag (folder --out) of /scan, /joint_states and "
-        "/tf_static, and --out.truth.json (docs/lidar.md); --outliers: the share of degraded scans",
+        "/tf_static, and --out.truth.json (docs/lidar.md); --outliers: the share of degraded scans; "
+        "--latency: how late its driver stamps the scans",
     )
     kind.add_argument(
         "--imu",

@@ -170,8 +170,10 @@ def lag_lines(run: CalibrationRun) -> list[str]:
             for n, v in effect.per_second.items()
         )
         sd = 1e3 * std.get(effect.lag, float("nan"))
+        pinned = effect.lag in run.pinned()
+        spread = " ms, pinned on the edge of alignment.search (no σ)" if pinned else f" ± {sd:.2g} ms"
         out.append(
-            f"{effect.lag} {1e3 * lag:.1f} ± {sd:.2g} ms, a parameter of the fit "
+            f"{effect.lag} {1e3 * lag:.1f}{spread}, a parameter of the fit "
             f"(encoders re-sampled at {len(est.path_s)} lags on the way)"
             + (f"; per 10 ms of it, {moves}" if moves else "; no other parameter moves with it")
         )
@@ -246,7 +248,8 @@ def _parameter_lines(run: CalibrationRun, solvers: list[str], w: int) -> list[st
         cells = [_fmt(run.initial[n])]
         for s in solvers:
             v = run.reports[s].result.param_dict()[n]
-            cells.append(f"{_fmt(v, 12)} ± {run.std(s)[n]:<9.2g}")
+            sd = "pinned" if n in run.pinned() else f"{run.std(s)[n]:<9.2g}"
+            cells.append(f"{_fmt(v, 12)} ± {sd:<9}")
         lines.append(_row(n, [*cells, f"  {units[n]}"]))
     lines += uncertainty_lines(run)
     if len(solvers) == 2:

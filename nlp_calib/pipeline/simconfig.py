@@ -41,6 +41,7 @@ LIDAR_OVERRIDES: Mapping[str, tuple[str, ...]] = {
     "trajectory": ("drive", "trajectory"),
     "duration_s": ("duration_s",),
     "outlier_fraction": ("degraded_fraction",),
+    "latency_s": ("stamp_offset_s",),
 }
 #: The command-line options a gyro's simulation reads (its driver's late stamps: --latency).
 IMU_OVERRIDES: Mapping[str, tuple[str, ...]] = {

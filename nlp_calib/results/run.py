@@ -35,7 +35,7 @@ from nlp_calib.results.checks import (
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import ControllerParams
-from nlp_calib.results.layout import Layout
+from nlp_calib.results.layout import CLOCK, Layout
 from nlp_calib.results.mount import LogMount, SensorMount
 from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import OdometryTrack, RunSeries
@@ -295,7 +295,23 @@ class CalibrationRun:
         """The 1σ to believe for ``solver``'s estimate: the largest of the white-noise σ, the block
         cross-validation's jackknife σ and the spreads the checks found (:meth:`Checks.spreads`)."""
         u = self.reports[solver].uncertainty
-        return dict(zip(u.names, map(float, believed_std(u.std, *self.checks.spreads(u.std)))))
+        std = dict(zip(u.names, map(float, believed_std(u.std, *self.checks.spreads(u.std)))))
+        return {n: float("nan") if n in self.pinned() else s for n, s in std.items()}
+
+    def pinned(self) -> tuple[str, ...]:
+        """The time offsets pinned on the edge of their search: the bound's value, with no σ (the
+        data put the lag at or beyond it; the verdict names the log)."""
+        layout = self.scenario.layout
+        if not self.logs:
+            est = self.data.lag_estimate
+            return layout.block(CLOCK) if est is not None and est.at_edge else ()
+        return tuple(
+            n
+            for i, part in enumerate(self.logs)
+            if part.data.lag_estimate is not None and part.data.lag_estimate.at_edge
+            for n in layout.block(CLOCK, log=i)
+            if layout.param(n).log in (i, None)
+        )
 
     def std_blocks(self) -> dict[str, float] | None:
         """The jackknife σ of the block cross-validation, when it has enough converged folds."""

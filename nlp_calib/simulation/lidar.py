@@ -9,7 +9,8 @@ base sweeps ``beams`` beams over a full turn at ``scan_rate_hz`` (each scan seen
 every range with white noise ``range_noise`` (m); a share ``degraded_fraction`` of the scans is
 degraded, half of them by a crowd around the lidar (most beams return clutter close by, the rest
 nothing: a match that its matcher finds poor) and half by a late sweep (the scan seen
-:data:`LATE_S` after its stamp: a match that looks sound and is wrong while the robot moves). The bag
+:data:`LATE_S` after its stamp: a match that looks sound and is wrong while the robot moves). The
+lidar's driver stamps every scan ``stamp_offset_s`` late (the ``tracker_lag`` a fit finds). The bag
 holds ``/joint_states``, ``/scan`` and ``/tf_static`` (the lidar's nominal mount: its height,
 and its x, y and yaw rounded as a drawing gives them); the truth file beside it the parameters,
 the options and which scans were degraded. Deterministic for a given seed.
@@ -55,6 +56,7 @@ LIMITS: Mapping[str, Range] = {
     "range_max": Range(1.0, 200.0),
     "range_noise": Range(0.0, 1.0),
     "degraded_fraction": Range(0.0, 0.5),
+    "stamp_offset_s": Range(-1.0, 1.0),
 }
 
 
@@ -74,6 +76,7 @@ class LidarSimulationOptions:
     range_max: float = 15.0
     range_noise: float = 0.01
     degraded_fraction: float = 0.02
+    stamp_offset_s: float = 0.0
     drive: DriveShape = field(default_factory=lambda: LIDAR_DRIVE)
 
     def __post_init__(self) -> None:
@@ -108,6 +111,7 @@ class LidarSimulation:
     def truth_dict(self) -> dict[str, Any]:
         return {
             "params": dict(self.options.truth),
+            "lag_s": self.options.stamp_offset_s,
             "options": asdict(self.options),
             "scans": int(self.scan_time_s.size),
             "degraded_scans": self.degraded.tolist(),
@@ -187,7 +191,7 @@ def simulate_lidar(opts: LidarSimulationOptions) -> LidarSimulation:
     at_joints = np.searchsorted(t_fine, t_joints)
     angles_j = joint_map(opts.model).angles(opts.truth, {k: v[at_joints] for k, v in channels.items()})
     return LidarSimulation(
-        scan_time_s=EPOCH_S + t_scans,
+        scan_time_s=EPOCH_S + t_scans + opts.stamp_offset_s,
         ranges=ranges,
         angles=angles,
         joint_time_s=EPOCH_S + t_joints,
