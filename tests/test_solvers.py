@@ -23,7 +23,6 @@ TRUTH_TOL = {  # absolute tolerances on a noiseless log
     "sensor_x": 5e-4,
     "sensor_y": 5e-4,
     "sensor_theta": 5e-4,
-    "tracker_lag": 2e-4,  # s: fitted by default, the log's stamps on time
 }
 
 
@@ -119,8 +118,7 @@ def test_recovers_truth_from_noiseless_log(noiseless_log: Path, integration: str
         robust=RobustOptions(kernel="none"),
         residual=ResidualOptions(horizon=1, integration=integration, steering_sample="mean"),
     )
-    doc = json.loads(noiseless_log.with_suffix(".truth.json").read_text())
-    truth = {**doc["params"], "tracker_lag": doc["options"]["latency_s"]}
+    truth = json.loads(noiseless_log.with_suffix(".truth.json").read_text())["params"]
     calib = Calibration.setup(sc)
     for solver in ("gauss_newton", "ipopt"):
         res = calib.solve(solver)
