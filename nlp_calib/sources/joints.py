@@ -92,8 +92,15 @@ class Wheels:
         joint_names = tuple(self.encoders[e] for e in names)
         wheels = [model.encoder_kinds[e] == "counter" for e in names]
         values = table.columns(joint_names, where)
-        positions = wheel_positions(table.time_ns, values, wheels, self.form, self.counts_per_turn)
-        velocities = np.full(positions.shape, np.nan)
+        if self.form == "speeds":
+            # Speeds are a stream's velocities, integrated as a bag's are: the log knows which joints
+            # came from speeds (their units are checked against the tracker: rpm, deg/s).
+            speeds = np.zeros(values.shape, dtype=bool)
+            speeds[:, wheels] = True
+            positions, velocities = np.where(speeds, np.nan, values), np.where(speeds, values, np.nan)
+        else:
+            positions = wheel_positions(table.time_ns, values, wheels, self.form, self.counts_per_turn)
+            velocities = np.full(positions.shape, np.nan)
         shift = round(self.clock_offset * 1e9)
         breaks = self._lost(table) if self.form == "increments" and any(wheels) else None
         stamped = Stamped(table.path, table.time_ns + shift, np.hstack([positions, velocities]))
