@@ -190,8 +190,9 @@ def vendor_readings(
         raise ConfigError(f"vendor: {', '.join(zero)} of zero is no model to turn odometry back with")
     if not isinstance(model, OdometryInverse):
         raise ModelError(f"the {model.name} model cannot turn a robot's odometry back into its joints")
+    readings = model.readings_from_odometry(base, vendor)  # a model that cannot turn it back says so first
     _check_lengths(model, vendor)
-    return model.readings_from_odometry(base, vendor)
+    return readings
 
 
 def _check_lengths(model: KinematicModel, vendor: Mapping[str, float]) -> None:
