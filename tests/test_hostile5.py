@@ -9,12 +9,15 @@ internal error, a replaced file or a hand-off of what cannot be right.
 
 from __future__ import annotations
 
+import contextlib
+import itertools
 import json
 import math
 import os
 import re
 import subprocess
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -585,21 +588,11 @@ def test_a_bags_joint_velocities_in_rpm_are_named(
     one_line_error(err, "speeds look like rpm")
 
 
+@contextlib.contextmanager
 def warnings_ignored() -> Any:
-    import warnings
-
-    manager = warnings.catch_warnings()
-    manager.__enter__()
-    warnings.simplefilter("ignore")
-
-    class _Done:
-        def __enter__(self) -> None:
-            return None
-
-        def __exit__(self, *exc: object) -> None:
-            manager.__exit__(*exc)
-
-    return _Done()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        yield
 
 
 def test_the_intervals_a_break_in_the_joints_overlaps() -> None:
@@ -607,7 +600,7 @@ def test_the_intervals_a_break_in_the_joints_overlaps() -> None:
 
     stream = JointStream(np.arange(10.0), np.zeros((10, 1)), (0.0,), (), np.array([[2.0, 3.0], [6.0, 7.0]]))
     t = np.array([0.0, 1.5, 2.5, 2.8, 3.0, 5.0, 6.0, 7.5, 9.0])
-    want = [any(a < b1 and b > a1 for a1, b1 in ((2.0, 3.0), (6.0, 7.0))) for a, b in zip(t[:-1], t[1:])]
+    want = [any(a < b1 and b > a1 for a1, b1 in ((2.0, 3.0), (6.0, 7.0))) for a, b in itertools.pairwise(t)]
     assert stream.broken(t).tolist() == want == [False, True, True, True, False, False, True, False]
 
 
@@ -637,7 +630,9 @@ def test_every_motions_row_twice_gives_the_sigma_of_once(tmp_path: Path) -> None
         sc = _motions_scenario(folder, duration=20.0)
         if twice:
             head, *rows = (folder / "drive.motions.csv").read_text().splitlines()
-            (folder / "drive.motions.csv").write_text("\n".join([head, *(r for r in rows for _ in "ab")]) + "\n")
+            (folder / "drive.motions.csv").write_text(
+                "\n".join([head, *(r for r in rows for _ in "ab")]) + "\n"
+            )
         with warnings_ignored():
             calibration = Calibration(load_scenario(sc))
             stds.append(calibration.run().std("gauss_newton"))
@@ -649,7 +644,10 @@ def test_motions_of_the_opposite_sign_name_the_references_sign_convention(
 ) -> None:
     sc = _motions_scenario(tmp_path, duration=20.0)
     head, *rows = (tmp_path / "drive.motions.csv").read_text().splitlines()
-    mirrored = [",".join([*f[:3], repr(-float(f[3])), repr(-float(f[4])), *f[5:]]) for f in (r.split(",") for r in rows)]
+    mirrored = [
+        ",".join([*f[:3], repr(-float(f[3])), repr(-float(f[4])), *f[5:]])
+        for f in (r.split(",") for r in rows)
+    ]
     (tmp_path / "drive.motions.csv").write_text("\n".join([head, *mirrored]) + "\n")
     _, out, _ = run(["run", sc, "--out", tmp_path / "out"], capsys)
     verdict = next(line for line in out.splitlines() if "verdict:" in line)

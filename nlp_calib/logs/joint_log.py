@@ -121,7 +121,7 @@ def lost_rows(time_ns: np.ndarray) -> np.ndarray:
     dt = np.diff(np.asarray(time_ns, dtype=np.int64))
     if dt.size < 3:
         return np.zeros(0, dtype=np.int64)
-    return np.flatnonzero(dt > LOST_CYCLES * float(np.median(dt))) + 1
+    return np.flatnonzero(dt.astype(float) > LOST_CYCLES * float(np.median(dt))) + 1
 
 
 def wheel_positions(

@@ -116,7 +116,8 @@ class Wheels:
         cycle = float(np.median(np.diff(t))) * 1e-9
         warnings.warn(
             f"{table.path}: {lost.size} of {t.size} rows follow the row before by more than "
-            f"{LOST_CYCLES:g} cycles of {1e3 * cycle:.3g} ms (first on line {int(table.line_numbers[lost[0]])}, "
+            f"{LOST_CYCLES:g} cycles of {1e3 * cycle:.3g} ms (first on line "
+            f"{int(table.line_numbers[lost[0]])}, "
             f"{(t[lost[0]] - t[lost[0] - 1]) * 1e-6:.3g} ms after the row before): rows lost by the "
             "logger, and the wheels' increments over their cycles with them; no residual window crosses them",
             NlpCalibWarning,

@@ -211,7 +211,9 @@ def _check_lengths(model: KinematicModel, vendor: Mapping[str, float]) -> None:
             f"vendor: {listed} lie outside what a robot can have: the vendor's model looks given in "
             f"millimetres; give its lengths in metres ({words})"
         )
-    limits = ", ".join(f"{n} in [{ranges[n][0]:g}, {ranges[n][1]:g}] {units.get(n, '')}".rstrip() for n in outside)
+    limits = ", ".join(
+        f"{n} in [{ranges[n][0]:g}, {ranges[n][1]:g}] {units.get(n, '')}".rstrip() for n in outside
+    )
     raise ConfigError(
         f"vendor: {listed} lie outside what a robot can have ({limits}); give the vendor's own values"
     )
