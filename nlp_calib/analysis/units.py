@@ -34,6 +34,14 @@ DEGREE = np.pi / 180.0
 #: A wheel whose joint, read in radians, moves the robot less than this per radian (m) is not
 #: turning in radians.
 MIN_RADIUS = 0.006
+#: A wheel whose radius is less than this share of the distance between two wheels is no robot's
+#: (wheels in rpm read as rad/s make it 9.5 times smaller: 2 % of the track for most robots).
+MIN_RADIUS_SHARE = 0.06
+#: A robot's wheel radius: a typical share of its track, and a typical size (m).
+TYPICAL_RADIUS_SHARE = 0.25
+TYPICAL_RADIUS = 0.1
+#: Units wheel speeds are given in by mistake, and how many of them make a radian per second.
+SPEED_UNITS = {"rpm": 60.0 / (2.0 * np.pi), "deg/s": 180.0 / np.pi}
 #: Two wheels turning opposite ways on this share of the gentle curves: one axis is mirrored.
 OPPOSITE_SHARE = 0.8
 #: A curve is gentle where the heading turns less than this per metre (rad/m): both wheels of a
@@ -127,6 +135,9 @@ def _wheel_degrees(log: Log, model: KinematicModel, xy: np.ndarray, heading: np.
     travel = float(np.sum(np.hypot(*np.diff(xy[k], axis=0).T)[gentle]))
     turned = float(np.mean([np.sum(np.abs(np.diff(_positions(log, n)[k]))[gentle]) for n in counters]))
     radius = travel / turned if turned > 0 else np.inf
+    stream = log.joint_stream
+    if stream is not None and set(counters) <= set(stream.integrated):
+        return _speed_units(log, counters, radius, k, heading)
     if radius >= MIN_RADIUS:
         return []
     return [
@@ -137,6 +148,46 @@ def _wheel_degrees(log: Log, model: KinematicModel, xy: np.ndarray, heading: np.
             f"moves it {1e3 * radius:.2g} mm, a wheel smaller than any robot's (read as degrees, one of "
             f"{1e3 * radius / DEGREE:.3g} mm radius): their angles look like degrees; publish them in "
             "radians (REP 103)",
+        )
+    ]
+
+
+def _track_width(log: Log, counters: list[str], radius: float, k: np.ndarray, heading: np.ndarray) -> float:
+    """The distance between the first two wheels that the wheels' own turning implies at ``radius``
+    (m per radian of them): the robot's heading change against their difference, by least squares
+    (NaN with fewer than two wheels or no turning)."""
+    if len(counters) < 2:
+        return float("nan")
+    dth = np.diff(heading[k])
+    apart = np.diff(_positions(log, counters[1])[k] - _positions(log, counters[0])[k])
+    scale = float(np.sum(dth * dth))
+    return abs(radius * float(np.sum(apart * dth)) / scale) if scale > 0 else float("nan")
+
+
+def _speed_units(
+    log: Log, counters: list[str], radius: float, k: np.ndarray, heading: np.ndarray
+) -> list[UnitFinding]:
+    """Wheels given as speeds in rpm or deg/s, not rad/s: a radian of them moves the robot less
+    than :data:`MIN_RADIUS`, or (two wheels) less than :data:`MIN_RADIUS_SHARE` of the distance
+    between them their turning implies (the track: a scale no unit changes). The unit named is the
+    one that brings the wheel to :data:`TYPICAL_RADIUS_SHARE` of the track (to
+    :data:`TYPICAL_RADIUS` without one)."""
+    track = _track_width(log, counters, radius, k, heading)
+    share = radius / track if np.isfinite(track) and track > 0 else float("nan")
+    if radius >= MIN_RADIUS and not share < MIN_RADIUS_SHARE:
+        return []
+    size, typical = (share, TYPICAL_RADIUS_SHARE) if np.isfinite(share) else (radius, TYPICAL_RADIUS)
+    unit, factor = min(SPEED_UNITS.items(), key=lambda u: abs(np.log(size * u[1] / typical)))
+    beside = f", {100 * share:.2g} % of the {track:.3g} m between the wheels" if np.isfinite(share) else ""
+    names = ", ".join(counters)
+    return [
+        UnitFinding(
+            "speed units",
+            names,
+            f"the wheel speeds ({names}) turn too far for the robot's travel: a radian of them moves it "
+            f"{1e3 * radius:.2g} mm{beside}, a wheel smaller than any robot's; read as {unit}, one of "
+            f"{1e3 * radius * factor:.3g} mm radius: their speeds look like {unit}; give them in rad/s "
+            f"({unit} × {1 / factor:.4g}; REP 103)",
         )
     ]
 

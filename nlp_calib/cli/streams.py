@@ -24,6 +24,7 @@ from collections.abc import Callable, Iterator
 from typing import Any, TextIO
 
 from nlp_calib.core import interrupts
+from nlp_calib.core.text import escaped
 
 #: Plain spellings of the characters the tool prints, for a stream that cannot encode them.
 SPELLINGS = {
@@ -83,9 +84,14 @@ class _Guarded:
     """A text stream whose writes never raise for an encoding or a closed pipe (see the module);
     a line whose first piece ``drop`` holds for is not written (pieces to its end included)."""
 
-    def __init__(self, stream: TextIO, drop: Callable[[str], bool] | None = None) -> None:
+    def __init__(
+        self, stream: TextIO, drop: Callable[[str], bool] | None = None, *, escape: bool = False
+    ) -> None:
         self._stream = stream
         self._drop = drop
+        #: Spell every character that is not text as an escape (a name from an input in a table
+        #: cannot move the cursor or end a line): the one place stdout's text passes.
+        self._escape = escape
         self._dropping = False
         #: Why output stopped (None: it did not): the reader went away, or the system refused.
         self.lost: OSError | None = None
@@ -100,15 +106,17 @@ class _Guarded:
                 return len(text) - len(rest) + (self.write(rest) if rest else 0)
         if self.lost is not None:
             return len(text)
+        size, text = len(text), escaped(text, lines=True) if self._escape else text
         try:
-            return self._stream.write(text)
+            self._stream.write(text)
+            return size
         except UnicodeEncodeError:
             self.degraded = True
             encoding = getattr(self._stream, "encoding", None) or "ascii"
             plain = text.encode(encoding, _ERRORS).decode(encoding, "replace")
-            return self._attempt(lambda: self._stream.write(plain), len(text))
+            return self._attempt(lambda: self._stream.write(plain), size)
         except OSError as exc:
-            return self._closed(exc, len(text))
+            return self._closed(exc, size)
 
     def flush(self) -> None:
         if self.lost is None:
@@ -140,7 +148,7 @@ def guarded() -> Iterator[None]:
     """Guard ``sys.stdout`` and ``sys.stderr`` inside the block; when it ends, one line on stderr
     for each way the terminal text was degraded (nothing when nothing was lost)."""
     originals = sys.stdout, sys.stderr
-    out = _Guarded(originals[0]) if originals[0] is not None else None
+    out = _Guarded(originals[0], escape=True) if originals[0] is not None else None
     err = _Guarded(originals[1], _echo_of_a_signal) if originals[1] is not None else None
     sys.stdout, sys.stderr = out, err
     try:

@@ -167,6 +167,11 @@ def joint_positions(
     return ns, np.stack(columns, axis=1), integrated
 
 
+def breaks_s(joints: Stamped, start_ns: int) -> np.ndarray | None:
+    """The joints' breaks (:attr:`Stamped.breaks_ns`) on a log's time axis, which starts at ``start_ns``."""
+    return None if joints.breaks_ns is None else frozen((joints.breaks_ns - start_ns).astype(float) * 1e-9)
+
+
 def at_tracker(joint_ns: np.ndarray, tracker: Stamped, max_gap_s: float) -> tuple[np.ndarray, Timing]:
     """The tracker poses (indices into its messages, in stamp order) the joints can be interpolated
     at, and how the others fell."""
@@ -215,7 +220,7 @@ def timed_by_tracker(
     steps = [0.0 if n in integrated else resolution(positions[:, j]) for j, n in enumerate(names)]
     by_velocity = tuple(e for e, n in zip(header.encoder_names, names) if n in integrated)
     stream_s = frozen((joint_ns - start_ns).astype(float) * 1e-9)
-    stream = JointStream(stream_s, frozen(positions), tuple(steps), by_velocity)
+    stream = JointStream(stream_s, frozen(positions), tuple(steps), by_velocity, breaks_s(joints, start_ns))
     time_s = frozen((stamps - start_ns).astype(float) * 1e-9)
     poses = np.array(tracker.values[index, :3], dtype=float)
     poses[:, 2] = wrap_angle(poses[:, 2])

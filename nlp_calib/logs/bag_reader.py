@@ -148,13 +148,15 @@ class Drops:
 @dataclass(frozen=True)
 class Stamped:
     """A topic's messages in bag order: stamps (ns), one row of values per message, and the bag's
-    record time of each (ns)."""
+    record time of each (ns); ``breaks_ns`` ``(m, 2)``: stretches of stamps over which the values'
+    change is unknown (:attr:`~nlp_calib.logs.log.JointStream.breaks`)."""
 
     topic: str
     stamp_ns: np.ndarray
     values: np.ndarray
     drops: Drops = field(default_factory=Drops)
     recorded_ns: np.ndarray | None = None
+    breaks_ns: np.ndarray | None = None
 
     @property
     def n(self) -> int:

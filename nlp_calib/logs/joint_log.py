@@ -109,6 +109,21 @@ def format_joint_csv(time_ns: np.ndarray, names: Sequence[str], positions: np.nd
     return head + "".join(rows)
 
 
+#: A row whose stamp follows the one before by more than this many times the log's median cycle
+#: has rows lost before it (a logger that skips cycles).
+LOST_CYCLES = 1.5
+
+
+def lost_rows(time_ns: np.ndarray) -> np.ndarray:
+    """The rows (indices) that rows were lost before: their stamp follows the one before by more
+    than :data:`LOST_CYCLES` times the median cycle. Only per-cycle increments lose motion there
+    (positions are interpolated across, speeds integrated)."""
+    dt = np.diff(np.asarray(time_ns, dtype=np.int64))
+    if dt.size < 3:
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(dt.astype(float) > LOST_CYCLES * float(np.median(dt))) + 1
+
+
 def wheel_positions(
     time_ns: np.ndarray, values: np.ndarray, wheels: Sequence[bool], form: str, counts_per_turn: float | None
 ) -> np.ndarray:

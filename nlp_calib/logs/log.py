@@ -79,12 +79,26 @@ class JointStream:
     """Joint positions (rad, ``(n, n_joints)`` in the header's encoder order) on the joints' own
     clock: ``time_s`` on the log's time axis. ``resolution`` is each joint's smallest step (rad;
     0 when its positions are not quantised), the floor of its noise; ``integrated`` names the
-    encoders whose positions were integrated from velocities (known only up to their start)."""
+    encoders whose positions were integrated from velocities (known only up to their start);
+    ``breaks`` ``(m, 2)`` the stretches ``(from, to)`` of ``time_s`` over which the joints' motion is
+    unknown (a wheel's increments per cycle with rows lost between two stamps)."""
 
     time_s: np.ndarray
     positions: np.ndarray
     resolution: tuple[float, ...]
     integrated: tuple[str, ...] = ()
+    breaks: np.ndarray | None = None
+
+    def broken(self, t: np.ndarray) -> np.ndarray | None:
+        """Per interval between the times ``t`` (the joints read there), whether the joints' motion
+        over it is unknown: it overlaps a break (None: the stream has none)."""
+        if self.breaks is None or not self.breaks.size:
+            return None
+        t = np.asarray(t, dtype=float)
+        # Breaks before an interval's end, minus those that end before its start: any overlap.
+        began = np.searchsorted(np.sort(self.breaks[:, 0]), t[1:], side="left")
+        ended = np.searchsorted(np.sort(self.breaks[:, 1]), t[:-1], side="right")
+        return np.asarray(began > ended)
 
     def at(self, t: np.ndarray) -> np.ndarray:
         """The positions interpolated at times ``t`` (held at the ends outside the stream)."""
@@ -189,6 +203,12 @@ class Log:
     @property
     def n_records(self) -> int:
         return int(self.time_s.shape[0])
+
+    def joint_breaks(self) -> np.ndarray | None:
+        """Per interval, whether the joints' motion over it is unknown where they are read (the
+        records' times less the encoders' lag; :meth:`JointStream.broken`); None: nowhere."""
+        stream = self.joint_stream
+        return None if stream is None else stream.broken(self.time_s - self.encoder_lag_s)
 
     def encoder(self, name: str) -> np.ndarray:
         """Raw readings of one encoder, ``(n_records,)`` int64."""

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning
-from nlp_calib.logs.bag_joints import at_tracker, check_overlap, joint_positions, resolution
+from nlp_calib.logs.bag_joints import at_tracker, breaks_s, check_overlap, joint_positions, resolution
 from nlp_calib.logs.bag_reader import Stamped
 from nlp_calib.logs.log import JointStream, Log, LogClock, LogHeader, ReferenceData, frozen
 from nlp_calib.logs.relative import RelativeMotions
@@ -246,7 +246,11 @@ def timed_by_motions(
     steps = [0.0 if n in integrated else resolution(positions[:, j]) for j, n in enumerate(names)]
     by_velocity = tuple(e for e, n in zip(header.encoder_names, names) if n in integrated)
     stream = JointStream(
-        frozen((joint_ns - start_ns).astype(float) * 1e-9), frozen(positions), tuple(steps), by_velocity
+        frozen((joint_ns - start_ns).astype(float) * 1e-9),
+        frozen(positions),
+        tuple(steps),
+        by_velocity,
+        breaks_s(joints, start_ns),
     )
     time_s = frozen((stamps - start_ns).astype(float) * 1e-9)
     n = int(stamps.size)

@@ -159,6 +159,31 @@ def _once_each(p: Path, topic: str, stamp_ns: np.ndarray, ranges: np.ndarray) ->
     return keep
 
 
+#: A field of view narrower than this (rad) is said: a matcher's motions from it are weak (a depth
+#: camera's scan looks down a corridor), and the drive may not determine the mount.
+NARROW_FIELD = np.pi / 2
+
+
+def _field_of_view(p: Path, topic: str, n_beams: int, step: float) -> None:
+    """Refuse scans of fewer beams than a match needs, and say a narrow field of view."""
+    degrees = np.degrees(abs(step) * n_beams)
+    if n_beams < MIN_RETURNS:
+        raise BagError(
+            p,
+            f"scan: each scan on {topic!r} holds {n_beams} beams over {degrees:.3g}° (its field of view); a "
+            f"scan match needs at least {MIN_RETURNS} returns: widen the driver's field of view (angle_min, "
+            "angle_max) or give a reference of more beams",
+        )
+    if abs(step) * n_beams < NARROW_FIELD:
+        warnings.warn(
+            f"{p}: {topic}: the scans cover {degrees:.3g}° ({n_beams} beams): a narrow field of view, whose "
+            "matches are weak along what it sees; parameters the drive seems not to determine may be the "
+            "field of view's doing (a lidar sweeping 180° or more fixes it)",
+            NlpCalibWarning,
+            stacklevel=3,
+        )
+
+
 def _valid_returns(p: Path, topic: str, ranges: np.ndarray, range_min: float, range_max: float) -> None:
     """Refuse scans that hold no usable returns, naming why (the first cause found)."""
     with np.errstate(invalid="ignore"):
@@ -189,6 +214,7 @@ def read_scans(path: str | Path, topic: str, receive: bool = False) -> LaserScan
     stamp_ns, ranges = np.array(stamps, dtype=np.int64)[order], np.array(rows)[order]
     keep = _once_each(p, topic, stamp_ns, ranges)
     stamp_ns, ranges = stamp_ns[keep], ranges[keep]
+    _field_of_view(p, topic, int(n_beams), step)
     _valid_returns(p, topic, ranges, range_min, range_max)
     return LaserScans(
         topic,

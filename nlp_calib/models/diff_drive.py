@@ -279,8 +279,13 @@ class DiffDrive:
         return (
             f"k_left and k_right came out negative ({params['k_left']:.3g}, {params['k_right']:.3g})"
             f"{f' and the sensor faces {facing}' if facing else ''}: the mirror image of the robot, "
-            "which is what swapped left and right wheel joints (or encoders counting backwards) give; "
-            f"give the joints in the order {LEFT_ENCODER}, {RIGHT_ENCODER}"
+            "which the wheels and the reference give when they disagree on which way the robot turns: "
+            "either the reference's sign convention is mirrored (REP 103: x forward, y left, angles "
+            "counter-clockwise seen from above; a lidar mounted upside down whose scans are not flipped, "
+            "a motions file or tracker whose y and θ have the opposite sign), or the left and right wheel "
+            "joints are swapped (or both count backwards). Drive a left turn: if the reference's heading "
+            "falls, negate its y and θ (flip the scans); if it grows, give the joints in the order "
+            f"{LEFT_ENCODER}, {RIGHT_ENCODER}"
         )
 
     def counter_rows(self, log: Log) -> dict[str, tuple[int, float]]:

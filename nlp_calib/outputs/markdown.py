@@ -131,7 +131,8 @@ def _uncertainty_section(run: CalibrationRun) -> list[str]:
         out.append(f"| `{n}` | " + " | ".join(cells) + " |")
     labels = ("segment ATE mean [m]", "RPE over 1 m [m]")
     held = "; ".join(
-        f"{label} {cv.heldout_mean(label):.4f} (the full fit: {cv.insample_mean(label):.4f})"
+        f"{label} {_cell(cv.heldout_mean(label), '.4f')} "
+        f"(the full fit: {_cell(cv.insample_mean(label), '.4f')})"
         for label in labels
     )
     out += [

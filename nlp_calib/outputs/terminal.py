@@ -21,6 +21,11 @@ def _fmt(v: float, width: int = 12) -> str:
     return f"{v:>{width}.6f}"
 
 
+def _figure(v: float, width: int = 0) -> str:
+    """A figure in 4 significant digits, "-" where there is none (NaN: nothing to measure it on)."""
+    return f"{v:>{width}.4g}" if np.isfinite(v) else f"{'-':>{width}}"
+
+
 def _row(label: str, cells: list[str], label_width: int = 26) -> str:
     return f"{label:<{label_width}}" + "".join(cells)
 
@@ -60,10 +65,16 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
     ]
     lines += widened_lines(run)
     ate, rpe = "segment ATE mean [m]", "RPE over 1 m [m]"
+    held, inside = cv.heldout_mean(rpe), cv.insample_mean(rpe)
+    rpe_words = (
+        f"RPE over 1 m {held:.3f} m (in-sample {inside:.3f} m)"
+        if np.isfinite(held) and np.isfinite(inside)
+        else "no RPE over 1 m (no block holds a stretch of 1 m between gaps or faults)"
+    )
     lines.append(
         f"cross-validation over {len(cv.folds)} blocks: held-out segment ATE {cv.heldout_mean(ate):.3f} m "
-        f"(in-sample {cv.insample_mean(ate):.3f} m), RPE over 1 m {cv.heldout_mean(rpe):.3f} m (in-sample "
-        f"{cv.insample_mean(rpe):.3f} m): each block scored by the fit without it, and by the full fit"
+        f"(in-sample {cv.insample_mean(ate):.3f} m), {rpe_words}: each block scored by the fit without it, "
+        "and by the full fit"
     )
     return lines
 
@@ -142,10 +153,16 @@ def error_stats_lines(run: CalibrationRun, solver: str) -> list[str]:
     ]
     for label, stats, base in rows:
         cells = "".join(
-            f"{v:>10.4g}" for v in (stats.rmse, stats.mean, stats.median, stats.std, stats.min, stats.max)
+            _figure(v, 10) for v in (stats.rmse, stats.mean, stats.median, stats.std, stats.min, stats.max)
         )
-        lines.append(f"{label:<26}{cells}{stats.n:>10d}   (uncalibrated rmse {base.rmse:.4g})")
-    per_m = [f"RPE over {d:g} m: {100 * s.mean / d:.2g} % of the distance" for d, s in m.rpe_distance.items()]
+        lines.append(f"{label:<26}{cells}{stats.n:>10d}   (uncalibrated rmse {_figure(base.rmse)})")
+    # A distance no stretch between gaps and faults reaches has no figure: said, never "nan %".
+    per_m = [
+        f"RPE over {d:g} m: {100 * s.mean / d:.2g} % of the distance"
+        if s.n and np.isfinite(s.mean)
+        else f"RPE over {d:g} m: none (no stretch of {d:g} m between gaps or faults)"
+        for d, s in m.rpe_distance.items()
+    ]
     if m.distance_m > 0:
         per_m.append(f"full-run final error {100 * m.ate_final / m.distance_m:.2g} % of {m.distance_m:.1f} m")
     lines.append("per metre driven: " + "; ".join(per_m))

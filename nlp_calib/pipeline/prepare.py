@@ -236,8 +236,11 @@ def prepare(sc: Scenario, log: Log | None = None) -> PreparedLog:
 
 
 def gaps_said(sc: Scenario, log: Log, start: int, stop: int) -> np.ndarray:
-    """The log's gaps in time (per interval), with a warning naming those in the selected records."""
+    """The log's gaps in time (per interval), with a warning naming those in the selected records;
+    with the intervals over which the joints' motion is unknown (said where they were read:
+    :meth:`~nlp_calib.logs.log.Log.joint_breaks`)."""
     gaps = time_gaps(log.time_s)
+    broken = log.joint_breaks()
     inside = np.flatnonzero(gaps[start : stop - 1]) + start
     if inside.size:
         dt = np.diff(log.time_s)
@@ -252,7 +255,7 @@ def gaps_said(sc: Scenario, log: Log, start: int, stop: int) -> np.ndarray:
             NlpCalibWarning,
             stacklevel=3,
         )
-    return gaps
+    return gaps if broken is None else gaps | broken
 
 
 def read_checked(sc: Scenario) -> Log:

@@ -8,7 +8,7 @@ log; the fitted ones end where the hold-out starts. Everything a log's figures a
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -66,6 +66,10 @@ def bind_windows(
         bad_intervals = bad_intervals | ~log.motions.covered(log.n_records)
     if prepared.gaps is not None:  # dead reckoning restarts after a gap, as after a fault
         bad_intervals = bad_intervals | prepared.gaps
+    broken = alignment.log.joint_breaks()
+    if broken is not None:  # where the joints are read at the lag found, their breaks too
+        bad_intervals = bad_intervals | broken
+        binder = replace(binder, gaps=broken if binder.gaps is None else binder.gaps | broken)
     if report.unchecked:
         warnings.warn(f"encoder faults not checked: {report.unchecked}", NlpCalibWarning, stacklevel=3)
     start, stop = max(prepared.start, alignment.valid[0]), min(prepared.stop, alignment.valid[1])

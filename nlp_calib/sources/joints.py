@@ -33,7 +33,14 @@ from nlp_calib.core.ranges import Range
 from nlp_calib.logs import Log
 from nlp_calib.logs.bag_joints import timed_by_tracker
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, MAX_GAP, Stamped
-from nlp_calib.logs.joint_log import WHEEL_FORMS, JointTable, read_joint_csv, wheel_positions
+from nlp_calib.logs.joint_log import (
+    LOST_CYCLES,
+    WHEEL_FORMS,
+    JointTable,
+    lost_rows,
+    read_joint_csv,
+    wheel_positions,
+)
 from nlp_calib.logs.log import LogHeader, frozen
 from nlp_calib.logs.screens import MAX_SHIFT_S, quaternion_order
 from nlp_calib.logs.tum import Trajectory3D, read_tum
@@ -85,10 +92,38 @@ class Wheels:
         joint_names = tuple(self.encoders[e] for e in names)
         wheels = [model.encoder_kinds[e] == "counter" for e in names]
         values = table.columns(joint_names, where)
-        positions = wheel_positions(table.time_ns, values, wheels, self.form, self.counts_per_turn)
-        velocities = np.full(positions.shape, np.nan)
+        if self.form == "speeds":
+            # Speeds are a stream's velocities, integrated as a bag's are: the log knows which joints
+            # came from speeds (their units are checked against the tracker: rpm, deg/s).
+            speeds = np.zeros(values.shape, dtype=bool)
+            speeds[:, wheels] = True
+            positions, velocities = np.where(speeds, np.nan, values), np.where(speeds, values, np.nan)
+        else:
+            positions = wheel_positions(table.time_ns, values, wheels, self.form, self.counts_per_turn)
+            velocities = np.full(positions.shape, np.nan)
         shift = round(self.clock_offset * 1e9)
-        return Stamped(table.path, table.time_ns + shift, np.hstack([positions, velocities])), joint_names
+        breaks = self._lost(table) if self.form == "increments" and any(wheels) else None
+        stamped = Stamped(table.path, table.time_ns + shift, np.hstack([positions, velocities]))
+        return replace(stamped, breaks_ns=None if breaks is None else breaks + shift), joint_names
+
+    def _lost(self, table: JointTable) -> np.ndarray | None:
+        """The stretches ``(from, to)`` (ns) over which increments per cycle were lost with their
+        rows (:func:`~nlp_calib.logs.joint_log.lost_rows`), said; None when none was."""
+        lost = lost_rows(table.time_ns)
+        if not lost.size:
+            return None
+        t = table.time_ns
+        cycle = float(np.median(np.diff(t))) * 1e-9
+        warnings.warn(
+            f"{table.path}: {lost.size} of {t.size} rows follow the row before by more than "
+            f"{LOST_CYCLES:g} cycles of {1e3 * cycle:.3g} ms (first on line "
+            f"{int(table.line_numbers[lost[0]])}, "
+            f"{(t[lost[0]] - t[lost[0] - 1]) * 1e-6:.3g} ms after the row before): rows lost by the "
+            "logger, and the wheels' increments over their cycles with them; no residual window crosses them",
+            NlpCalibWarning,
+            stacklevel=4,
+        )
+        return np.stack([t[lost - 1], t[lost]], axis=1)
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from nlp_calib.core.config import coerce, from_mapping
-from nlp_calib.core.errors import ConfigError, ModelError, NlpCalibWarning
+from nlp_calib.core.errors import ConfigError, DatasetError, ModelError, NlpCalibWarning
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.logs.bag_joints import timed_by_tracker
 from nlp_calib.logs.bag_reader import (
@@ -126,6 +126,7 @@ class VendorSource:
         else:
             odometry = read_odometry(self.odometry)
             time_ns, base, path = odometry.time_ns, odometry.poses, odometry.path
+        check_arcs(path, base)
         readings = vendor_readings(model, base, self.vendor)
         values = np.column_stack([readings[e] for e in encoders(model)])
         values = np.hstack([values, np.full(values.shape, np.nan)])
@@ -189,7 +190,84 @@ def vendor_readings(
         raise ConfigError(f"vendor: {', '.join(zero)} of zero is no model to turn odometry back with")
     if not isinstance(model, OdometryInverse):
         raise ModelError(f"the {model.name} model cannot turn a robot's odometry back into its joints")
-    return model.readings_from_odometry(base, vendor)
+    readings = model.readings_from_odometry(base, vendor)  # a model that cannot turn it back says so first
+    _check_lengths(model, vendor)
+    return readings
+
+
+def _check_lengths(model: KinematicModel, vendor: Mapping[str, float]) -> None:
+    """Refuse a vendor's model no robot has (outside the model's plausible ranges), naming
+    millimetres where its lengths over 1000 are a robot's."""
+    ranges, units = model.physical_ranges, model.units
+    outside = {n: v for n, v in vendor.items() if n in ranges and not ranges[n][0] <= v <= ranges[n][1]}
+    if not outside:
+        return
+    listed = ", ".join(f"{n} {v:g}" for n, v in outside.items())
+    lengths = {n: v / 1000.0 for n, v in vendor.items() if units.get(n) == "m"}
+    fixed = {**vendor, **lengths}
+    if set(outside) <= set(lengths) and all(ranges[n][0] <= fixed[n] <= ranges[n][1] for n in outside):
+        words = ", ".join(f"{n}: {v:g}" for n, v in lengths.items())
+        raise ConfigError(
+            f"vendor: {listed} lie outside what a robot can have: the vendor's model looks given in "
+            f"millimetres; give its lengths in metres ({words})"
+        )
+    limits = ", ".join(
+        f"{n} in [{ranges[n][0]:g}, {ranges[n][1]:g}] {units.get(n, '')}".rstrip() for n in outside
+    )
+    raise ConfigError(
+        f"vendor: {listed} lie outside what a robot can have ({limits}); give the vendor's own values"
+    )
+
+
+#: A step of the odometry moves sideways (off the arc its turn draws) by more than this share of
+#: its length where it is not an arc; steps shorter than :data:`ARC_MIN_STEP` (m) are not judged
+#: (the file's printed digits dominate them).
+ARC_SIDEWAYS = 0.05
+ARC_MIN_STEP = 1e-4
+#: The odometry is not arcs where more than this share of its judged steps are not.
+ARC_SHARE = 0.5
+
+
+def _off_arc(base: np.ndarray, theta_scale: float = 1.0) -> tuple[float, int]:
+    """The share of the odometry's steps (longer than :data:`ARC_MIN_STEP`) that are not arcs (they
+    move sideways to the chord their turn draws by more than :data:`ARC_SIDEWAYS` of their length),
+    with its heading read times ``theta_scale``; and how many steps were judged."""
+    theta = np.unwrap(base[:, 2] * theta_scale)
+    d = np.diff(base[:, :2], axis=0)
+    chord = np.hypot(d[:, 0], d[:, 1])
+    judged = chord > ARC_MIN_STEP
+    mid = theta[:-1] + 0.5 * np.diff(theta)
+    sideways = np.abs(-np.sin(mid) * d[:, 0] + np.cos(mid) * d[:, 1])
+    n = int(judged.sum())
+    return (float(np.mean(sideways[judged] > ARC_SIDEWAYS * chord[judged])) if n else 0.0), n
+
+
+def check_arcs(path: str, base: np.ndarray) -> None:
+    """Refuse odometry that a model turning it back cannot reproduce: every such model reads each
+    step as the arc of a wheeled base (:func:`~nlp_calib.models.drives.arcs`), so its joints
+    re-integrated give the odometry back only where the steps are arcs. A heading in degrees is
+    named (read as radians, the steps are arcs)."""
+    share, n = _off_arc(base)
+    if n < 10 or share <= ARC_SHARE:
+        return
+    said = (
+        f"{100 * share:.0f} % of its {n} steps move sideways, off the arc their turn draws (by more than "
+        f"{100 * ARC_SIDEWAYS:g} % of their length), where a wheeled base's odometry moves along its heading"
+    )
+    if _off_arc(base, np.pi / 180.0)[0] <= ARC_SHARE / 5:
+        raise DatasetError(
+            path,
+            None,
+            f"{said}; read in degrees, its θ makes them arcs: its θ is in degrees; give it in radians "
+            "(REP 103)",
+        )
+    raise DatasetError(
+        path,
+        None,
+        f"{said}: the vendor's model turns it back into joints that, integrated again, do not give it back "
+        "(odometry of a base that slides sideways, or poses of another frame than the base's); the "
+        "vendor's odometry cannot be calibrated against as it is",
+    )
 
 
 def _resolved(path: Path, base_dir: Path) -> Path:
