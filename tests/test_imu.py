@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from conftest import cli
 
 from nlp_calib.logs.imu import GyroRates, integrated
@@ -123,3 +124,64 @@ def test_a_planar_sensor_refuses_a_gyros_increments(drive: tuple[Path, dict[str,
     ):
         warnings.simplefilter("ignore")
         Calibration(sc).run()
+
+
+def _simulated(folder: Path, name: str, seconds: float, **truth: float) -> tuple[Path, dict[str, float]]:
+    opts = ImuSimulationOptions(duration_s=seconds, seed=17, truth=truth, stamp_offset_s=LATE)
+    bag, truth_file = write_imu_simulation(simulate_imu(opts), folder / name)
+    return bag, {RADIANS.get(k, k): v for k, v in json.loads(truth_file.read_text())["params"].items()}
+
+
+def test_init_drafts_a_gyro_scenario_that_runs_once_a_length_is_given(tmp_path: Path) -> None:
+    """``init`` on the simulator's own gyro bag: a gyro scenario; its pre-flight (and ``run``) stop
+    on the lengths' scale with the line to complete; completed, ``run`` calibrates and ``check`` on
+    the same data says STILL GOOD."""
+    bag, truth = _simulated(tmp_path, "drive", 30.0)
+    drafted = tmp_path / "drive.yaml"
+    proc = cli("init", str(bag), "--out", str(drafted))
+    assert proc.returncode == 0, proc.stderr
+    assert "reference: the gyro's rates on /imu" in proc.stdout
+    raw = yaml.safe_load(drafted.read_text())
+    assert raw["sensor"] == "gyro" and raw["dataset"]["imu"] == "/imu" and "known" not in raw
+    assert raw["dataset"]["joints"] == ["left_wheel_joint", "right_wheel_joint"]
+    todo = "# known: {wheel_separation: <metres>}"
+    assert todo in drafted.read_text()
+    # NOT ENOUGH (exit 4): the pre-flight says so, and run stops on it before any fit.
+    for command in ("preflight", "run"):
+        proc = cli(command, str(drafted), *(("--out", str(tmp_path / "refused")) if command == "run" else ()))
+        assert proc.returncode == 4, proc.stdout + proc.stderr
+        assert "known: {wheel_separation: <metres>}" in proc.stdout + proc.stderr
+    completed = tmp_path / "known.yaml"
+    completed.write_text(
+        drafted.read_text().replace(todo, f"known: {{wheel_separation: {truth['wheel_separation']}}}")
+    )
+    proc = cli("run", str(completed), "--out", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    cal = yaml.safe_load((tmp_path / "out" / "calibration.yaml").read_text())
+    for name in ("left_wheel_radius", "gyro_bias_z", "imu_roll", "imu_pitch"):
+        assert abs(cal["parameters"][name] - truth[name]) < 3 * cal["std"][name], name
+    proc = cli(
+        "check", str(tmp_path / "out" / "calibration.yaml"), str(completed), "--out", str(tmp_path / "c")
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    doc = json.loads((tmp_path / "c" / "check.json").read_text())
+    assert doc["verdict"] == "still good" and "STILL GOOD" in proc.stdout
+    assert {"gyro_bias_z", "imu_roll", "imu_pitch", "left_wheel_radius"} <= set(doc["parameters"])
+
+
+def test_check_sees_an_imu_remounted_with_another_tilt(tmp_path: Path) -> None:
+    """The gyro's tilt read back from calibration.yaml and judged: the IMU rolled 2° further on a
+    second drive is a drift naming imu_roll."""
+    bag, truth = _simulated(tmp_path, "first", 30.0)
+    sc = {**SCENARIO, "known": {"wheel_separation": truth["wheel_separation"]}, "name": "gyro"}
+    first = tmp_path / "first.yaml"
+    first.write_text(yaml.safe_dump({**sc, "dataset": {"bag": str(bag), **DATASET}}))
+    assert cli("run", str(first), "--out", str(tmp_path / "out")).returncode == 0
+    moved, _ = _simulated(tmp_path, "second", 30.0, imu_roll=0.02 + float(np.radians(2.0)))
+    second = tmp_path / "second.yaml"
+    second.write_text(yaml.safe_dump({**sc, "dataset": {"bag": str(moved), **DATASET}}))
+    proc = cli("check", str(tmp_path / "out" / "calibration.yaml"), str(second), "--out", str(tmp_path / "c"))
+    assert proc.returncode == 3, proc.stdout + proc.stderr
+    doc = json.loads((tmp_path / "c" / "check.json").read_text())
+    assert [n for n, p in doc["parameters"].items() if p["drifted"]] == ["imu_roll"]
+    assert doc["parameters"]["imu_roll"]["change"] == pytest.approx(np.radians(2.0), abs=0.005)
