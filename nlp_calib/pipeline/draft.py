@@ -62,6 +62,15 @@ DEFAULTS: Mapping[str, Any] = {
 }
 
 
+def defaults(model: str) -> dict[str, Any]:
+    """:data:`DEFAULTS` for ``model``: a steering angle taken as the mean of its readings at an
+    interval's two ends (the joints interpolated there on their own clock): held from the start,
+    it would lag by half an interval, and the fitted clock offset with it."""
+    if not MODELS[model].level_inputs:
+        return dict(DEFAULTS)
+    return {**DEFAULTS, "residual": {**DEFAULTS["residual"], "steering_sample": "mean"}}
+
+
 @dataclass(frozen=True)
 class Draft:
     """A drafted scenario: its mapping, its commented text, and what was found, line by line."""
@@ -222,7 +231,7 @@ def _text(header: Sequence[str], raw: Mapping[str, Any], notes: Mapping[str, str
 
 NOTES: Mapping[str, str] = {
     "initial_guess": "the closed-form start from the data: no guess needed",
-    "residual": "windows of half a second, whatever the rates",
+    "residual": "windows of half a second, whatever the rates; a steering angle the mean of an interval's two readings",
     "alignment": "the tracker's lag behind the joints, estimated within ±0.1 s",
     "solvers": "add ipopt to compare the two",
 }
@@ -282,7 +291,7 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
     _one_line_names(path, dataset)
     controller = controller_name(found)
     handoff = {"handoff": {"controller_name": controller}} if controller else {}
-    raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS, **handoff}
+    raw = {"name": where.stem, "model": name, "dataset": dataset, **defaults(name), **handoff}
     header = [
         f"Drafted by nlp-calib init from {path}: {found.duration_s:.1f} s, {len(found.topics)} topics.",
         *(
@@ -375,7 +384,7 @@ def _draft_alone(
     (found, _), (name, joints, why), (dataset, alone) = bag, chosen, block
     dataset[alone.key] = alone.topic.name
     _one_line_names(path, dataset)
-    raw = {"name": where.stem, "model": name, **alone.more, "dataset": dataset, **DEFAULTS}
+    raw = {"name": where.stem, "model": name, **alone.more, "dataset": dataset, **defaults(name)}
     header = [
         f"Drafted by nlp-calib init from {path}: {found.duration_s:.1f} s, {len(found.topics)} topics.",
         *(f"  {line}" for line in _listing(found)),
@@ -398,7 +407,7 @@ def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
         "encoders": dict(joints),
     }
     _one_line_names(joints_path, dataset)
-    raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS}
+    raw = {"name": where.stem, "model": name, "dataset": dataset, **defaults(name)}
     header = [
         f"Drafted by nlp-calib init from {joints_path.name} (joints: {', '.join(table.names)}) and "
         f"{poses_path.name}.",
