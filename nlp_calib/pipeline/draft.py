@@ -231,7 +231,7 @@ def _text(header: Sequence[str], raw: Mapping[str, Any], notes: Mapping[str, str
 
 NOTES: Mapping[str, str] = {
     "initial_guess": "the closed-form start from the data: no guess needed",
-    "residual": "windows of half a second, whatever the rates; a steering angle the mean of an interval's two readings",
+    "residual": "windows of half a second whatever the rates; a steering angle: its two readings' mean",
     "alignment": "the tracker's lag behind the joints, estimated within ±0.1 s",
     "solvers": "add ipopt to compare the two",
 }
