@@ -155,12 +155,19 @@ def test_init_drafts_a_gyro_scenario_that_runs_once_a_length_is_given(tmp_path: 
         proc = cli(command, str(drafted), *(("--out", str(tmp_path / "refused")) if command == "run" else ()))
         assert proc.returncode == 4, proc.stdout + proc.stderr
         assert "known: {wheel_separation: <metres>}" in proc.stdout + proc.stderr
+        if command == "preflight":
+            assert "no distance, speed or turn radius: the reference measures no position" in proc.stdout
+            assert " m/s" not in proc.stdout
     completed = tmp_path / "known.yaml"
     completed.write_text(
         drafted.read_text().replace(todo, f"known: {{wheel_separation: {truth['wheel_separation']}}}")
     )
     proc = cli("run", str(completed), "--out", str(tmp_path / "out"))
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    # No figure in metres of a track that has no position: said once, with why.
+    assert "[m]" not in proc.stdout and " m (tracker path)" not in proc.stdout
+    assert "trajectory errors: none in metres (a gyro measures turning, no length" in proc.stdout
+    assert "the heading spanned" in proc.stdout
     cal = yaml.safe_load((tmp_path / "out" / "calibration.yaml").read_text())
     for name in ("left_wheel_radius", "gyro_bias_z", "imu_roll", "imu_pitch"):
         assert abs(cal["parameters"][name] - truth[name]) < 3 * cal["std"][name], name
@@ -170,7 +177,9 @@ def test_init_drafts_a_gyro_scenario_that_runs_once_a_length_is_given(tmp_path: 
     assert proc.returncode == 0, proc.stdout + proc.stderr
     doc = json.loads((tmp_path / "c" / "check.json").read_text())
     assert doc["verdict"] == "still good" and "STILL GOOD" in proc.stdout
-    assert {"gyro_bias_z", "imu_roll", "imu_pitch", "left_wheel_radius"} <= set(doc["parameters"])
+    assert "fair figures on this log: none in metres" in proc.stdout
+    # The robot judged (the tilt, the wheels); the bias refitted, a recording's own like its clock.
+    assert set(doc["parameters"]) == {"imu_roll", "imu_pitch", "left_wheel_radius", "right_wheel_radius"}
 
 
 def test_check_sees_an_imu_remounted_with_another_tilt(tmp_path: Path) -> None:

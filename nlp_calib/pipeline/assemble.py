@@ -87,6 +87,7 @@ def sensor_info(sc: Scenario) -> SensorInfo:
         held=sensor.held,
         held_why=sensor.held_why,
         convention=sensor.convention,
+        no_position=sensor.lengths_unseen,
     )
 
 
