@@ -260,6 +260,20 @@ def controller_name(found: BagSurvey) -> str | None:
     return name
 
 
+def _tracker_keys(
+    found: BagSurvey, dataset: dict[str, Any]
+) -> tuple[Topic, str | None, list[Topic], str | None]:
+    """The tracker, its frame, the other pose topics and the sensor's frame, put in ``dataset``."""
+    best, frame, others = tracker(found)
+    dataset["tracker"] = best.name
+    if frame is not None:
+        dataset["tracker_frame"] = frame
+    mount = sensor_frame(found) if frame is None else None
+    if mount is not None:
+        dataset["sensor_frame"] = mount
+    return best, frame, others, mount
+
+
 def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
     found = survey(path)
     joint_topics = [t for t in found.of_type("sensor_msgs/msg/JointState") if t.joints]
@@ -281,13 +295,7 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         # A lidar measures distance, a gyro none: the scans are the reference when both are there.
         alone = _lidar(scans, rates) if scans else _gyro(rates, name)
         return _draft_alone(path, where, (found, js), (name, joints, why), (dataset, alone))
-    best, frame, others = tracker(found)
-    dataset["tracker"] = best.name
-    if frame is not None:
-        dataset["tracker_frame"] = frame
-    mount = sensor_frame(found) if frame is None else None
-    if mount is not None:
-        dataset["sensor_frame"] = mount
+    best, frame, others, mount = _tracker_keys(found, dataset)
     _one_line_names(path, dataset)
     controller = controller_name(found)
     handoff = {"handoff": {"controller_name": controller}} if controller else {}
@@ -305,8 +313,7 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         f"tracker: {best.name} ({best.msgtype}){f', frame {frame}' if frame else ''}"
         + (f"; other pose topics: {', '.join(t.name for t in others)}" if others else "")
         + " (the robot's own odometry is never a reference)"
-        + (f"; a lidar's scans too: {', '.join(t.name for t in scans)} (docs/lidar.md)" if scans else "")
-        + (f"; a gyro's rates too: {', '.join(t.name for t in rates)} (docs/imu.md)" if rates else "")
+        + _too(("a lidar's scans", scans, "lidar"), ("a gyro's rates", rates, "imu"))
         + ".",
         *(
             [
@@ -341,6 +348,15 @@ class _Alone:
     todo: tuple[str, ...] = ()
 
 
+def _too(*others: tuple[str, Sequence[Topic], str]) -> str:
+    """The other references a bag holds, each as (what, its topics, its page in docs/), in words."""
+    return "".join(
+        f"; {what} too: {', '.join(t.name for t in topics)} (docs/{page}.md)"
+        for what, topics, page in others
+        if topics
+    )
+
+
 def _also(kind: str, topics: Sequence[Topic]) -> str:
     return f"; other {kind} topics: {', '.join(t.name for t in topics)}" if topics else ""
 
@@ -351,7 +367,7 @@ def _lidar(scans: Sequence[Topic], rates: Sequence[Topic]) -> _Alone:
     words = (
         f"reference: the lidar's scans on {scans[0].name} ({SCAN_TYPE}{frames}), each matched to the one "
         f"before (docs/lidar.md); no topic holds poses{_also('scan', scans[1:])}"
-        + (f"; a gyro's rates too: {', '.join(t.name for t in rates)} (docs/imu.md)" if rates else "")
+        + _too(("a gyro's rates", rates, "imu"))
         + "."
     )
     return _Alone("scan", scans[0], {}, words, f"reference: the scans on {scans[0].name}")
