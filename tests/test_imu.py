@@ -8,13 +8,18 @@ import json
 import warnings
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 import pytest
+import yaml
 from conftest import cli
 
 from nlp_calib.logs.imu import GyroRates, integrated
+from nlp_calib.models import MODELS
+from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.pipeline.preflight import preflight
+from nlp_calib.problem.functions import ProblemFunctions, ProblemSpec, build
 from nlp_calib.results.preflight import NOT_DETERMINED
 from nlp_calib.simulation.imu import ImuSimulationOptions, simulate_imu, write_imu_simulation
 
@@ -123,3 +128,149 @@ def test_a_planar_sensor_refuses_a_gyros_increments(drive: tuple[Path, dict[str,
     ):
         warnings.simplefilter("ignore")
         Calibration(sc).run()
+
+
+def _simulated(folder: Path, name: str, seconds: float, **truth: float) -> tuple[Path, dict[str, float]]:
+    opts = ImuSimulationOptions(duration_s=seconds, seed=17, truth=truth, stamp_offset_s=LATE)
+    bag, truth_file = write_imu_simulation(simulate_imu(opts), folder / name)
+    return bag, {RADIANS.get(k, k): v for k, v in json.loads(truth_file.read_text())["params"].items()}
+
+
+def test_init_drafts_a_gyro_scenario_that_runs_once_a_length_is_given(tmp_path: Path) -> None:
+    """``init`` on the simulator's own gyro bag: a gyro scenario; its pre-flight (and ``run``) stop
+    on the lengths' scale with the line to complete; completed, ``run`` calibrates and ``check`` on
+    the same data says STILL GOOD."""
+    bag, truth = _simulated(tmp_path, "drive", 30.0)
+    drafted = tmp_path / "drive.yaml"
+    proc = cli("init", str(bag), "--out", str(drafted))
+    assert proc.returncode == 0, proc.stderr
+    assert "reference: the gyro's rates on /imu" in proc.stdout
+    raw = yaml.safe_load(drafted.read_text())
+    assert raw["sensor"] == "gyro" and raw["dataset"]["imu"] == "/imu" and "known" not in raw
+    assert raw["dataset"]["joints"] == ["left_wheel_joint", "right_wheel_joint"]
+    todo = "# known: {wheel_separation: <metres>}"
+    assert todo in drafted.read_text()
+    # NOT ENOUGH (exit 4): the pre-flight says so, and run stops on it before any fit.
+    for command in ("preflight", "run"):
+        proc = cli(command, str(drafted), *(("--out", str(tmp_path / "refused")) if command == "run" else ()))
+        assert proc.returncode == 4, proc.stdout + proc.stderr
+        assert "known: {wheel_separation: <metres>}" in proc.stdout + proc.stderr
+        if command == "preflight":
+            assert "no distance, speed or turn radius: the reference measures no position" in proc.stdout
+            assert " m/s" not in proc.stdout
+    completed = tmp_path / "known.yaml"
+    completed.write_text(
+        drafted.read_text().replace(todo, f"known: {{wheel_separation: {truth['wheel_separation']}}}")
+    )
+    proc = cli("run", str(completed), "--out", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    # No figure in metres of a track that has no position: said once, with why.
+    assert "[m]" not in proc.stdout and " m (tracker path)" not in proc.stdout
+    assert "trajectory errors: none in metres (a gyro measures turning, no length" in proc.stdout
+    assert "the heading spanned" in proc.stdout
+    cal = yaml.safe_load((tmp_path / "out" / "calibration.yaml").read_text())
+    for name in ("left_wheel_radius", "gyro_bias_z", "imu_roll", "imu_pitch"):
+        assert abs(cal["parameters"][name] - truth[name]) < 3 * cal["std"][name], name
+    proc = cli(
+        "check", str(tmp_path / "out" / "calibration.yaml"), str(completed), "--out", str(tmp_path / "c")
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    doc = json.loads((tmp_path / "c" / "check.json").read_text())
+    assert doc["verdict"] == "still good" and "STILL GOOD" in proc.stdout
+    assert "fair figures on this log: none in metres" in proc.stdout
+    # The robot judged (the tilt, the wheels); the bias refitted, a recording's own like its clock.
+    assert set(doc["parameters"]) == {"imu_roll", "imu_pitch", "left_wheel_radius", "right_wheel_radius"}
+
+
+def test_check_sees_an_imu_remounted_with_another_tilt(tmp_path: Path) -> None:
+    """The gyro's tilt read back from calibration.yaml and judged: the IMU rolled 2° further on a
+    second drive is a drift naming imu_roll; its bias, another after a power cycle, is refitted
+    (a recording's own, like its clock), not judged."""
+    bag, truth = _simulated(tmp_path, "first", 30.0)
+    sc = {**SCENARIO, "known": {"wheel_separation": truth["wheel_separation"]}, "name": "gyro"}
+    first = tmp_path / "first.yaml"
+    first.write_text(yaml.safe_dump({**sc, "dataset": {"bag": str(bag), **DATASET}}))
+    assert cli("run", str(first), "--out", str(tmp_path / "out")).returncode == 0
+    power_cycled = {"gyro_bias_x": -0.004, "gyro_bias_z": -0.006}
+    for name, roll, code in (("same", 0.02, 0), ("rolled", 0.02 + float(np.radians(2.0)), 3)):
+        moved, _ = _simulated(tmp_path, name, 30.0, imu_roll=roll, **power_cycled)
+        second = tmp_path / f"{name}.yaml"
+        second.write_text(yaml.safe_dump({**sc, "dataset": {"bag": str(moved), **DATASET}}))
+        out = tmp_path / f"c_{name}"
+        proc = cli("check", str(tmp_path / "out" / "calibration.yaml"), str(second), "--out", str(out))
+        assert proc.returncode == code, proc.stdout + proc.stderr
+        doc = json.loads((out / "check.json").read_text())
+        assert not {"gyro_bias_x", "gyro_bias_y", "gyro_bias_z"} & set(doc["parameters"])
+        assert [n for n, p in doc["parameters"].items() if p["drifted"]] == (["imu_roll"] if code else [])
+    assert doc["parameters"]["imu_roll"]["change"] == pytest.approx(np.radians(2.0), abs=0.005)
+
+
+def test_the_layout_gives_each_log_its_own_bias_beside_a_shared_tilt() -> None:
+    """A gyro over three logs: the tilt (and a free scale) once, the biases once per log, the clock
+    once per log; each window's residual takes its own log's bias (checked against the one-log
+    residual at that log's values), and ``mounts: per_log`` still gives each log the whole mount."""
+    model = in_units(MODELS["diff_drive"], "radians")
+    shared = ("imu_roll", "imu_pitch", "gyro_scale")
+    layout = build(model, ProblemSpec(sensor="gyro", scale="free", lags=3, mounts=3, shared=shared)).layout
+    assert [p.name for p in layout.parameters if p.block == "mount" and p.log is None] == list(shared)
+    assert [p.name for p in layout.parameters if p.log == 1] == [
+        "gyro_bias_x_2", "gyro_bias_y_2", "gyro_bias_z_2", "tracker_lag_2",
+    ]  # fmt: skip
+    whole = build(model, ProblemSpec(sensor="gyro", lags=3, mounts=3)).layout
+    assert not [p for p in whole.parameters if p.block == "mount" and p.log is None]
+    # The residual, without a clock: each window's data is [z, its log's one-hot row, w].
+    fns = build(model, ProblemSpec(sensor="gyro", scale="free", mounts=3, shared=shared))
+    one = build(model, ProblemSpec(sensor="gyro", scale="free"))
+    values = dict(zip(fns.names, np.random.default_rng(3).normal(0.0, 0.01, len(fns.names))))
+    values.update({n: 0.1 for n in model.kinematic_params}, gyro_scale=1.02)
+    z, M = [0.01, -0.02, 0.3, 0.1], [0.05, 0.0, 0.29]
+    for log in range(3):
+        mine = fns.view_dict(values, log)
+        assert (
+            mine["gyro_bias_y"] == values[f"gyro_bias_y_{log + 1}"] and mine["imu_roll"] == values["imu_roll"]
+        )
+        expected = _residual(one, mine, [*z, 1.0], M)
+        got = _residual(fns, values, [*z, *np.eye(3)[log], 1.0], M)
+        np.testing.assert_allclose(got, expected, atol=1e-15)
+        assert np.abs(expected).max() > 1e-3  # a residual the biases move
+
+
+def _residual(
+    fns: ProblemFunctions, values: dict[str, float], data: list[float], M: list[float]
+) -> np.ndarray:
+    """``fns``' residual at named ``values`` for one window's ``data`` and base motion ``M``."""
+    params = ca.DM([values[n] for n in fns.names])
+    return np.asarray(ca.evalf(fns._residual(ca.DM(data), params, ca.DM(M)))).ravel()
+
+
+def test_a_fit_of_two_logs_gives_each_its_own_bias(tmp_path: Path) -> None:
+    """Two drives of one robot, its gyro power-cycled between them (another bias), stamped 20 and
+    10 ms late: one tilt, each log's own bias and lag, all within 3σ of the truth."""
+    biases = ({"gyro_bias_x": 0.003, "gyro_bias_z": 0.004}, {"gyro_bias_x": -0.004, "gyro_bias_z": -0.006})
+    bags, truths = [], []
+    for i, (bias, late) in enumerate(zip(biases, (0.02, 0.01))):
+        opts = ImuSimulationOptions(duration_s=30.0, seed=41 + i, truth=bias, stamp_offset_s=late)
+        bag, truth_file = write_imu_simulation(simulate_imu(opts), tmp_path / f"drive{i}")
+        bags.append(bag)
+        truths.append({RADIANS.get(k, k): v for k, v in json.loads(truth_file.read_text())["params"].items()})
+    raw = {
+        **SCENARIO,
+        "known": {"wheel_separation": truths[0]["wheel_separation"]},
+        "datasets": [{"bag": str(b), **DATASET} for b in bags],
+    }
+    sc = scenario_from_mapping(raw, "two", tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()  # type: ignore[arg-type]
+    est, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
+    assert {"imu_roll", "imu_pitch", "gyro_bias_z_1", "gyro_bias_z_2"} <= set(
+        est
+    ) and "gyro_bias_z" not in est
+    for i, truth in enumerate(truths):
+        for key in ("gyro_bias_x", "gyro_bias_y", "gyro_bias_z", "tracker_lag"):
+            name = f"{key}_{i + 1}"
+            assert abs(est[name] - truth[key]) < 3 * std[name], name
+    for name in ("left_wheel_radius", "right_wheel_radius", "imu_roll", "imu_pitch"):
+        assert abs(est[name] - truths[0][name]) < 3 * std[name], name
+    # One IMU joint in the hand-off: the tilt is shared, no mount per log.
+    assert not run.reports["gauss_newton"].mounts

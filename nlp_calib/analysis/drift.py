@@ -26,6 +26,7 @@ from nlp_calib.models.base import reference, reference_scale
 from nlp_calib.results import CalibrationRun, ScenarioInfo
 from nlp_calib.results.check import CANNOT_TELL, DRIFTED, STILL_GOOD, DriftCheck, ParameterChange
 from nlp_calib.results.checks import WEAK
+from nlp_calib.sensors import sensor_for
 
 #: The family-wise probability that a check of an unchanged robot calls a drift.
 FALSE_ALARM = 0.01
@@ -224,9 +225,11 @@ def check_drift(
     free = run.reports[solver].uncertainty.free
     skipped = untested(run, solver, model)
     held = [n for n in result.names if n not in free and n not in skipped]  # fixed by the scenario
-    # A recording's own parameters (its clock offset) are refitted, not judged: a new log may
-    # have another. What the stored calibration does not hold cannot have drifted from it.
-    robot = set(run.scenario.layout.robot()) & set(stored[0])
+    # A recording's own parameters (its clock offset, a gyro's bias: the sensor's own per log) are
+    # refitted, not judged: a new log may have another. What the stored calibration does not hold
+    # cannot have drifted from it.
+    layout, sensor = run.scenario.layout, sensor_for(run.scenario.sensor.kind, run.scenario.sensor.scale)
+    robot = {n for n in layout.robot() if layout.key(n) not in sensor.per_log} & set(stored[0])
     values = {n: v for n, v in result.param_dict().items() if n not in held and n in robot}
     refit = (values, run.std(solver), run_dof(run, solver))
     found = changes(stored, refit, run.scenario, model, skipped)

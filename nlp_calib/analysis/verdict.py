@@ -341,11 +341,20 @@ def way_out(
     estimate whose ratios it then states)."""
     names = list(dict.fromkeys(names))
     if lengths := unseen_lengths(names, model, sensor):
-        said = f" ({ratios(lengths, values)})" if values and all(n in values for n in lengths) else ""
+        # With another parameter loose beside the lengths (a tricycle's steering gain on a drive of
+        # small steering angles), the ratios trade with it too: values at this point would be a guess.
+        others = [n for n in names if n in model.kinematic_params and n not in lengths]
+        stated = values and not others and all(n in values for n in lengths)
+        said = f" ({ratios(lengths, values)})" if stated and values else ""
+        what = (
+            f"no drive determines the scale of {', '.join(lengths)}, and on this one {', '.join(others)} "
+            "trade(s) with their ratios too (no ratio is stated)"
+            if others
+            else f"only the ratios of {', '.join(lengths)} are determined{said}, not their scale"
+        )
         return (
-            f"{sensor.lengths_unseen if sensor else ''}: only the ratios of {', '.join(lengths)} are "
-            f"determined{said}, not their scale; next: give one as measured (known: {{{lengths[-1]}: "
-            "<metres>}), or fit beside a reference that measures distance"
+            f"{sensor.lengths_unseen if sensor else ''}: {what}; next: give one as measured (known: "
+            f"{{{lengths[-1]}: <metres>}}), or fit beside a reference that measures distance"
         )
     if any(layout.in_block(n, CLOCK) for n in names):
         return (

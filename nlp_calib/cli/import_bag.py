@@ -96,7 +96,8 @@ def chosen_topics(args: argparse.Namespace, model: KinematicModel) -> tuple[str,
         f"{args.bag}: cannot choose {', '.join(open_)} from the bag; it holds:\n  {listing}\ngive "
         f"{' '.join(open_)} (the joints in {model.name}'s encoder order: {', '.join(encoders(model))}); a "
         "lidar's scans (sensor_msgs/msg/LaserScan) are read by a scenario's dataset block with scan: TOPIC "
-        "(docs/lidar.md)"
+        "(docs/lidar.md), a gyro's rates (sensor_msgs/msg/Imu) with imu: TOPIC (docs/imu.md); "
+        f"nlp-calib init {args.bag} drafts that scenario"
     )
 
 

@@ -104,16 +104,17 @@ def _simulate_lidar(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
 def _simulate_imu(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
     """A gyro's bag and the truth beside it."""
     opts = imu_options(args.config, overrides)
-    bag, truth = _staged(
-        args, imu_paths(args.out), functools.partial(write_imu_simulation, simulate_imu(opts))
-    )
+    sim = simulate_imu(opts)
+    bag, truth = _staged(args, imu_paths(args.out), functools.partial(write_imu_simulation, sim))
     print(
         f"wrote {bag} ({opts.duration_s:g} s, the gyro at {opts.imu_rate_hz:g} Hz stamped "
         f"{1000 * opts.stamp_offset_s:g} ms late) and {truth}"
     )
+    joints = ", ".join(sim.joint_names)
     print(
         f"a scenario reads it as: dataset: {{bag: {bag}, joint_states: /joint_states, joints: "
-        "[left_wheel_joint, right_wheel_joint], imu: /imu}, with sensor: gyro (docs/imu.md)"
+        f"[{joints}], imu: /imu}}, with model: {opts.model} and sensor: gyro (docs/imu.md; nlp-calib init "
+        f"{bag} drafts it)"
     )
     return 0
 

@@ -466,7 +466,7 @@ INVENTORY_MESSAGES = 50
 class BagInventory:
     """What a bag holds, for a user to choose from: each topic's type and message count, the
     joint names on each JointState topic and the frames each framed topic names (a TF topic's and
-    an odometry's child frames, a scan's own frame), from their first messages."""
+    an odometry's child frames, a scan's or an Imu's own frame), from their first messages."""
 
     path: str
     topics: Mapping[str, tuple[str, int]]
@@ -500,7 +500,8 @@ def bag_inventory(path: str | Path) -> BagInventory:
             topics = {n: (i.msgtype or "mixed types", int(i.msgcount)) for n, i in reader.topics.items()}
         except Exception as exc:  # a damaged metadata.yaml or index gets this far in rosbags
             raise BagError(p, f"cannot read the bag's topics ({why(exc)}); {DAMAGED}") from None
-        looked = (ENCODER_TYPE, *_FRAMED, "sensor_msgs/msg/LaserScan")
+        # A scan and an Imu message name their own frame (a lidar's, an IMU's: a reference's).
+        looked = (ENCODER_TYPE, *_FRAMED, "sensor_msgs/msg/LaserScan", "sensor_msgs/msg/Imu")
         wanted = [n for n, (t, _) in topics.items() if t in looked]
         seen: Counter[str] = Counter()
         for conn, _, msg in messages(reader, p, wanted):

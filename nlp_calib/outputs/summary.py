@@ -33,6 +33,8 @@ def _observability_line(run: CalibrationRun) -> str:
 
 
 def _accuracy_line(run: CalibrationRun, solver: str) -> str:
+    if reason := run.scenario.sensor.no_position:
+        return f"no trajectory figure in metres ({reason}); the checks below judge the fit"
     m, b = run.reports[solver].metrics, run.baseline
     rpe5, base5 = m.rpe_distance[5.0].mean, b.rpe_distance[5.0].mean
     start = "data-driven start" if run.scenario.initial_guess == "auto" else "initial guess"
@@ -82,6 +84,16 @@ def _next_steps(run: CalibrationRun, level: str, files: Sequence[str]) -> list[s
     return steps
 
 
+def _travelled(run: CalibrationRun) -> str:
+    """How far the sensor went: its path in metres, or for a reference without positions (a gyro)
+    the span of the heading it saw."""
+    if run.scenario.sensor.positions:
+        return f"the sensor travelled {run.baseline.distance_m:.1f} m (tracker path)"
+    obs = run.checks.observability
+    spanned = f"the heading spanned {obs.heading_range_rad:.2f} rad; " if obs is not None else ""
+    return f"{spanned}no distance: {run.scenario.sensor.no_position}"
+
+
 def summary_lines(run: CalibrationRun, files: Sequence[str] = ()) -> list[str]:
     """The closing summary of a run: one line per solver, accuracy, faults, observability, verdict
     and next steps; ``files`` say what each file the run wrote is for (``name: what``)."""
@@ -89,7 +101,7 @@ def summary_lines(run: CalibrationRun, files: Sequence[str] = ()) -> list[str]:
     name = f"the joint fit of {len(sc.datasets)} logs ({sc.name})" if sc.datasets else sc.name
     lines = [
         f"summary of {name}: model {sc.model}, {used[1] - used[0]} records over "
-        f"{run.log.duration_s:.1f} s; the sensor travelled {run.baseline.distance_m:.1f} m (tracker path)"
+        f"{run.log.duration_s:.1f} s; {_travelled(run)}"
     ]
     chosen = run.chosen_solver()
     for s in run.solver_order():

@@ -64,6 +64,8 @@ def uncertainty_lines(run: CalibrationRun) -> list[str]:
         "white-noise σ" + verdict
     ]
     lines += widened_lines(run)
+    if not run.scenario.sensor.positions:
+        return lines
     ate, rpe = "segment ATE mean [m]", "RPE over 1 m [m]"
     held, inside = cv.heldout_mean(rpe), cv.insample_mean(rpe)
     rpe_words = (
@@ -138,7 +140,13 @@ def fault_lines(run: CalibrationRun) -> list[str]:
 
 
 def error_stats_lines(run: CalibrationRun, solver: str) -> list[str]:
-    """``solver``'s trajectory errors with the statistics evo prints, beside the uncalibrated ones."""
+    """``solver``'s trajectory errors with the statistics evo prints, beside the uncalibrated ones
+    (none for a reference without positions, with why)."""
+    if reason := run.scenario.sensor.no_position:
+        return [
+            f"trajectory errors: none in metres ({reason}: ATE and RPE would compare positions it does "
+            "not have); the fit is judged by its residuals, the heading changes, and the checks below"
+        ]
     m, b = run.reports[solver].metrics, run.baseline
     rows = [
         ("segment ATE [m]", m.segment_ate, b.segment_ate),
@@ -290,6 +298,8 @@ def _solver_lines(run: CalibrationRun, solvers: list[str], w: int) -> list[str]:
         ("converged", lambda s: f"{'yes' if res[s].converged else 'NO':>{w}}"),
     ]
     lines = [_row(label, [f"{'':>12}"] + [cell(s) for s in solvers]) for label, cell in figures]
+    if not run.scenario.sensor.positions:
+        return lines  # figures in metres of a track without positions: said once, below
     metric_sets: list[tuple[bool, TrajectoryMetrics]] = [(False, run.baseline)]
     if run.baseline_holdout is not None:
         metric_sets.append((True, run.baseline_holdout))

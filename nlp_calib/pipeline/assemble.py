@@ -87,6 +87,7 @@ def sensor_info(sc: Scenario) -> SensorInfo:
         held=sensor.held,
         held_why=sensor.held_why,
         convention=sensor.convention,
+        no_position=sensor.lengths_unseen,
     )
 
 
@@ -176,13 +177,14 @@ class MountViews:
                 sensor.mount_pose(
                     fns.view_dict(params, i),
                     fns.view_dict(std, i),
-                    frame if frames.count(frame) == 1 or fns.spec.mounts == 1 else f"{frame}_{i + 1}",
+                    frame if frames.count(frame) == 1 or not fns.own_poses else f"{frame}_{i + 1}",
                     header.sensor_z_roll_pitch,
                 ),
             )
             for i, ((name, header), frame) in enumerate(zip(self.logs, frames))
         )
-        if fns.spec.mounts == 1:
+        # One pose shared (each log's own parameters beside it, if any: a gyro's bias): one joint.
+        if not fns.own_poses:
             return every[self.part].mount, ()
         return every[self.part].mount, every
 
@@ -358,7 +360,7 @@ def _own_truth(
 
     def mine(truth: Mapping[str, float]) -> dict[str, float]:
         out = convert(truth)
-        out.update({n: out[p] for n, p in zip(fns.mount_names(part), fns.sensor.params) if p in out})
+        out.update({n: out[p] for n, p in fns.mount_keys(part).items() if p in out})
         return out
 
     return mine

@@ -46,8 +46,20 @@ def lag_count(sc: Scenario, n_logs: int) -> int:
 
 
 def mount_count(sc: Scenario, n_logs: int) -> int:
-    """Sensor mounts in the problem: one per log when the scenario says so (``mounts: per_log``)."""
-    return n_logs if sc.objective.sensor.mounts == "per_log" and n_logs > 1 else 1
+    """Sensor mounts in the problem: one per log when the scenario says so (``mounts: per_log``) or
+    the sensor has parameters of each log's own (a gyro's bias)."""
+    sensor = sc.objective.sensor
+    own = sensor.mounts == "per_log" or bool(sensor.sensor.per_log)
+    return n_logs if own and n_logs > 1 else 1
+
+
+def shared_mount(sc: Scenario, n_logs: int) -> tuple[str, ...]:
+    """With a mount per log, the mount's parameters every log shares: none with ``mounts:
+    per_log``, else all but the sensor's own per log."""
+    sensor = sc.objective.sensor
+    if mount_count(sc, n_logs) == 1 or sensor.mounts == "per_log":
+        return ()
+    return tuple(p for p in sensor.sensor.params if p not in sensor.sensor.per_log)
 
 
 def build_problem(
@@ -64,6 +76,7 @@ def build_problem(
         scale=sensor.scale,
         lags=lag_count(sc, n_logs),
         mounts=mount_count(sc, n_logs),
+        shared=shared_mount(sc, n_logs),
     )
     # A scenario names a parameter by its key: fixing it fixes every log's own.
     layout = problem_layout(model, sensor_for(spec.sensor, spec.scale), spec)

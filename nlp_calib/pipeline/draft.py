@@ -28,11 +28,14 @@ from nlp_calib.core.ranges import check_ros_name
 from nlp_calib.core.text import escaped, unprintable
 from nlp_calib.logs.bag_reader import ODOMETRY_TYPE, POSE_TYPE, TF_TYPE, TRANSFORM_TYPE, is_bag
 from nlp_calib.logs.bag_survey import BagSurvey, Topic, survey
+from nlp_calib.logs.imu import IMU_TYPE
 from nlp_calib.logs.joint_log import read_joint_csv
 from nlp_calib.logs.reader import read_header
 from nlp_calib.logs.scans import SCAN_TYPE
 from nlp_calib.models import MODELS, encoders, model_for_log
+from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.scenario import Scenario, scenario_from_mapping
+from nlp_calib.sensors.mount import length_params
 from nlp_calib.sources.joints import paired_files
 
 #: Words in a topic's name that say it carries a reference, and those that say it does not.
@@ -57,6 +60,15 @@ DEFAULTS: Mapping[str, Any] = {
     "alignment": {"tracker_lag": "auto", "search": [-0.1, 0.1]},
     "solvers": ["gauss_newton"],
 }
+
+
+def defaults(model: str) -> dict[str, Any]:
+    """:data:`DEFAULTS` for ``model``: a steering angle taken as the mean of its readings at an
+    interval's two ends (the joints interpolated there on their own clock): held from the start,
+    it would lag by half an interval, and the fitted clock offset with it."""
+    if not MODELS[model].level_inputs:
+        return dict(DEFAULTS)
+    return {**DEFAULTS, "residual": {**DEFAULTS["residual"], "steering_sample": "mean"}}
 
 
 @dataclass(frozen=True)
@@ -131,8 +143,9 @@ def tracker(found: BagSurvey) -> tuple[Topic, str | None, list[Topic]]:
     poses = [t for t in poses if t.name != "/tf_static"]
     if not poses:
         raise UsageError(
-            f"{found.path}: no topic holds poses (PoseStamped, TransformStamped, Odometry or TF) or a "
-            f"lidar's scans ({SCAN_TYPE}); a calibration needs one of them as its reference"
+            f"{found.path}: no topic holds poses (PoseStamped, TransformStamped, Odometry or TF), a "
+            f"lidar's scans ({SCAN_TYPE}) or a gyro's rates ({IMU_TYPE}); a calibration needs one of "
+            "them as its reference"
         )
     best = poses[0]
     frame = None
@@ -218,7 +231,7 @@ def _text(header: Sequence[str], raw: Mapping[str, Any], notes: Mapping[str, str
 
 NOTES: Mapping[str, str] = {
     "initial_guess": "the closed-form start from the data: no guess needed",
-    "residual": "windows of half a second, whatever the rates",
+    "residual": "windows of half a second whatever the rates; a steering angle: its two readings' mean",
     "alignment": "the tracker's lag behind the joints, estimated within ±0.1 s",
     "solvers": "add ipopt to compare the two",
 }
@@ -247,6 +260,20 @@ def controller_name(found: BagSurvey) -> str | None:
     return name
 
 
+def _tracker_keys(
+    found: BagSurvey, dataset: dict[str, Any]
+) -> tuple[Topic, str | None, list[Topic], str | None]:
+    """The tracker, its frame, the other pose topics and the sensor's frame, put in ``dataset``."""
+    best, frame, others = tracker(found)
+    dataset["tracker"] = best.name
+    if frame is not None:
+        dataset["tracker_frame"] = frame
+    mount = sensor_frame(found) if frame is None else None
+    if mount is not None:
+        dataset["sensor_frame"] = mount
+    return best, frame, others, mount
+
+
 def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
     found = survey(path)
     joint_topics = [t for t in found.of_type("sensor_msgs/msg/JointState") if t.joints]
@@ -260,22 +287,19 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         "joints": list(joints.values()),
     }
     scans = sorted(found.of_type(SCAN_TYPE), key=lambda t: -t.count)
+    rates = sorted(found.of_type(IMU_TYPE), key=lambda t: -t.count)
     poses = [
         t for t in found.of_type(POSE_TYPE, TRANSFORM_TYPE, ODOMETRY_TYPE, TF_TYPE) if t.name != "/tf_static"
     ]
-    if not poses and scans:
-        return _draft_lidar(path, where, (found, js), (name, joints, why), (dataset, scans))
-    best, frame, others = tracker(found)
-    dataset["tracker"] = best.name
-    if frame is not None:
-        dataset["tracker_frame"] = frame
-    mount = sensor_frame(found) if frame is None else None
-    if mount is not None:
-        dataset["sensor_frame"] = mount
+    if not poses and (scans or rates):
+        # A lidar measures distance, a gyro none: the scans are the reference when both are there.
+        alone = _lidar(scans, rates) if scans else _gyro(rates, name)
+        return _draft_alone(path, where, (found, js), (name, joints, why), (dataset, alone))
+    best, frame, others, mount = _tracker_keys(found, dataset)
     _one_line_names(path, dataset)
     controller = controller_name(found)
     handoff = {"handoff": {"controller_name": controller}} if controller else {}
-    raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS, **handoff}
+    raw = {"name": where.stem, "model": name, "dataset": dataset, **defaults(name), **handoff}
     header = [
         f"Drafted by nlp-calib init from {path}: {found.duration_s:.1f} s, {len(found.topics)} topics.",
         *(
@@ -289,7 +313,8 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         f"tracker: {best.name} ({best.msgtype}){f', frame {frame}' if frame else ''}"
         + (f"; other pose topics: {', '.join(t.name for t in others)}" if others else "")
         + " (the robot's own odometry is never a reference)"
-        + (f"; a lidar's scans too: {', '.join(t.name for t in scans)} (docs/lidar.md)." if scans else "."),
+        + _too(("a lidar's scans", scans, "lidar"), ("a gyro's rates", rates, "imu"))
+        + ".",
         *(
             [
                 f"sensor_frame {mount}: its fixed transforms from base_link on /tf_static give the nominal "
@@ -309,32 +334,83 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
     return Draft(raw, text, lines)
 
 
-def _draft_lidar(
+@dataclass(frozen=True)
+class _Alone:
+    """A reference other than poses a bag holds: the dataset's key for its topic, the topic, what
+    else the scenario needs (``sensor: gyro``), what the draft says of it, and lines it writes
+    commented out (for the user to complete)."""
+
+    key: str
+    topic: Topic
+    more: Mapping[str, Any]
+    words: str
+    short: str
+    todo: tuple[str, ...] = ()
+
+
+def _too(*others: tuple[str, Sequence[Topic], str]) -> str:
+    """The other references a bag holds, each as (what, its topics, its page in docs/), in words."""
+    return "".join(
+        f"; {what} too: {', '.join(t.name for t in topics)} (docs/{page}.md)"
+        for what, topics, page in others
+        if topics
+    )
+
+
+def _also(kind: str, topics: Sequence[Topic]) -> str:
+    return f"; other {kind} topics: {', '.join(t.name for t in topics)}" if topics else ""
+
+
+def _lidar(scans: Sequence[Topic], rates: Sequence[Topic]) -> _Alone:
+    """A lidar's scans as the reference (docs/lidar.md)."""
+    frames = f", frame {', '.join(scans[0].frames)}" if scans[0].frames else ""
+    words = (
+        f"reference: the lidar's scans on {scans[0].name} ({SCAN_TYPE}{frames}), each matched to the one "
+        f"before (docs/lidar.md); no topic holds poses{_also('scan', scans[1:])}"
+        + _too(("a gyro's rates", rates, "imu"))
+        + "."
+    )
+    return _Alone("scan", scans[0], {}, words, f"reference: the scans on {scans[0].name}")
+
+
+def _gyro(rates: Sequence[Topic], model: str) -> _Alone:
+    """A gyro's rates as the reference (docs/imu.md): it measures no length, so the draft leaves a
+    line for one measured length, commented out (a guessed length would be a wrong scale)."""
+    length = length_params(in_units(MODELS[model], "radians"))[-1]
+    words = (
+        f"reference: the gyro's rates on {rates[0].name} ({IMU_TYPE}), integrated over intervals and "
+        f"compared with the wheels' turning (docs/imu.md); no topic holds poses{_also('Imu', rates[1:])}. "
+        f"A gyro measures no length: the wheels' lengths are NOT DETERMINED until one is known; measure "
+        f"{length} and give it in the commented line below."
+    )
+    todo = (f"known: {{{length}: <metres>}}   # measured; a gyro alone fixes only the ratios of the lengths",)
+    return _Alone(
+        "imu", rates[0], {"sensor": "gyro"}, words, f"reference: the gyro's rates on {rates[0].name}", todo
+    )
+
+
+def _draft_alone(
     path: Path,
     where: Path,
     bag: tuple[BagSurvey, Topic],
     chosen: tuple[str, Mapping[str, str], str],
-    block: tuple[dict[str, Any], list[Topic]],
+    block: tuple[dict[str, Any], _Alone],
 ) -> Draft:
-    """A bag whose only reference is a lidar's scans: a lidar scenario (docs/lidar.md)."""
-    (found, _), (name, joints, why), (dataset, scans) = bag, chosen, block
-    dataset["scan"] = scans[0].name
+    """A bag whose only reference is not a pose topic (a lidar's scans, a gyro's rates)."""
+    (found, _), (name, joints, why), (dataset, alone) = bag, chosen, block
+    dataset[alone.key] = alone.topic.name
     _one_line_names(path, dataset)
-    raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS}
-    frames = f", frame {', '.join(scans[0].frames)}" if scans[0].frames else ""
+    raw = {"name": where.stem, "model": name, **alone.more, "dataset": dataset, **defaults(name)}
     header = [
         f"Drafted by nlp-calib init from {path}: {found.duration_s:.1f} s, {len(found.topics)} topics.",
         *(f"  {line}" for line in _listing(found)),
         f"model: {name}, because {why}.",
         f"joints {', '.join(joints.values())} are the model's encoders {', '.join(joints)}, in that order.",
-        f"reference: the lidar's scans on {scans[0].name} ({SCAN_TYPE}{frames}), each matched to the one "
-        "before (docs/lidar.md); no topic holds poses"
-        + (f"; other scan topics: {', '.join(t.name for t in scans[1:])}" if scans[1:] else "")
-        + ".",
+        alone.words,
         f"Check it before a run: nlp-calib preflight {where}",
     ]
-    lines = (*_listing(found), f"model {name}: {why}", f"reference: the scans on {scans[0].name}")
-    return Draft(raw, _text(header, raw, NOTES), lines)
+    text = _text(header, raw, NOTES) + "".join(f"# {line}\n" for line in alone.todo)
+    return Draft(raw, text, (*_listing(found), f"model {name}: {why}", alone.short))
 
 
 def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
@@ -347,7 +423,7 @@ def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
         "encoders": dict(joints),
     }
     _one_line_names(joints_path, dataset)
-    raw = {"name": where.stem, "model": name, "dataset": dataset, **DEFAULTS}
+    raw = {"name": where.stem, "model": name, "dataset": dataset, **defaults(name)}
     header = [
         f"Drafted by nlp-calib init from {joints_path.name} (joints: {', '.join(table.names)}) and "
         f"{poses_path.name}.",

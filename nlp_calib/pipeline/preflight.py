@@ -13,6 +13,7 @@ is not determined well enough, the plan ranks what to drive next (:mod:`nlp_cali
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from collections.abc import Mapping, Sequence
@@ -325,7 +326,10 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
     for p in d.parts:
         log = p.log.select(p.start, p.split)
         steering = p.scenario.objective.residual.steering_sample
-        exs.append(excitation(log.time_s, *_track(log, fns), p.model, p.model.inputs(log, steering)))
+        ex = excitation(log.time_s, *_track(log, fns), p.model, p.model.inputs(log, steering))
+        if fns.sensor.lengths_unseen:  # a track without positions (a gyro's): no distance, no speed
+            ex = replace(ex, distance_m=math.nan, speed_median_mps=math.nan, speed_max_mps=math.nan)
+        exs.append(ex)
     units = fit_info(one, fns).units
     statuses = det.statuses(fns, a.standing(), a.held, units, combined(exs))
     loose = [s.name for s in statuses if s.status in (NOT_DETERMINED, WEAKLY) and not s.held]

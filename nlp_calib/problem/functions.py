@@ -85,9 +85,17 @@ class ProblemSpec:
     #: Sensor mounts: 1, shared by every log; or one per log of a joint fit (``sensor_x_1``, …), each
     #: window's chosen by which log it belongs to, every log sharing the kinematic parameters.
     mounts: int = 1
+    #: With a mount per log, its parameters every log shares nonetheless (a gyro's tilt beside each
+    #: log's own bias: the sensor's ``per_log`` alone are each log's own); none: the whole mount.
+    shared: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        sensor_for(self.sensor, self.scale)
+        sensor = sensor_for(self.sensor, self.scale)
+        if self.shared and (self.mounts == 1 or not set(self.shared) < set(sensor.params)):
+            raise ProblemError(
+                f"shared {list(self.shared)}: with a mount per log, some of the mount's parameters "
+                f"({', '.join(sensor.params)}), not all"
+            )
         check_range("lags", self.lags, LAGS)
         check_range("mounts", self.mounts, MOUNTS)
         if self.mounts > 1 and self.lags and self.lags != self.mounts:
@@ -200,20 +208,31 @@ class ProblemFunctions(TrajectoryFunctions):
         others = set(self.layout.block(MOUNT)) - mine
         return tuple(self.layout.key(n) if n in mine else f"\0{n}" if n in others else n for n in names)
 
+    @property
+    def own_poses(self) -> bool:
+        """Whether each log has a mount pose of its own (a pose component among a log's own
+        parameters), not only parameters of its own beside a shared pose (a gyro's bias)."""
+        pose = set(self.sensor.components.values())
+        return any(p.log is not None and p.key in pose for p in self.layout.parameters if p.block == MOUNT)
+
+    def mount_keys(self, log: int) -> dict[str, str]:
+        """Log ``log``'s mount: each of its names among :attr:`names` and the sensor's name for it."""
+        return {n: self.layout.key(n) for n in self.mount_names(log)}
+
     def view(self, params: np.ndarray, log: int) -> np.ndarray:
         """Log ``log``'s parameters in :attr:`view_names` order from the full vector ``params``
         (what the full-parameter Functions take): the shared ones and its own mount."""
         if self.spec.mounts == 1:
             return np.asarray(params, dtype=float)
         named = dict(zip(self.names, np.ravel(np.asarray(params, dtype=float))))
-        own = dict(zip(self.sensor.params, (named[n] for n in self.mount_names(log))))
+        own = {key: named[n] for n, key in self.mount_keys(log).items()}
         return np.array([own[n] if n in own else named[n] for n in self.view_names])
 
     def view_dict(self, params: Mapping[str, float], log: int) -> dict[str, float]:
         """:meth:`view` of named values (any names; the other logs' mounts left out)."""
         if self.spec.mounts == 1:
             return dict(params)
-        own = dict(zip(self.mount_names(log), self.sensor.params))
+        own = self.mount_keys(log)
         every = set(self.layout.block(MOUNT))
         return {own.get(n, n): float(v) for n, v in params.items() if n in own or n not in every}
 
@@ -221,12 +240,11 @@ class ProblemFunctions(TrajectoryFunctions):
         """Named values over :attr:`names` from one view per mount (the shared ones from the first)."""
         out = dict(views[0])
         if self.spec.mounts > 1:
-            for i, v in enumerate(views):
-                out.update(
-                    {n: float(v[p]) for n, p in zip(self.mount_names(i), self.sensor.params) if p in v}
-                )
+            for i, v in reversed(list(enumerate(views))):
+                out.update({n: float(v[key]) for n, key in self.mount_keys(i).items() if key in v})
             for p in self.sensor.params:
-                out.pop(p, None)
+                if p not in self.names:
+                    out.pop(p, None)
         return out
 
     @property
@@ -318,9 +336,9 @@ class ProblemFunctions(TrajectoryFunctions):
 
     def _residual(self, data: ca.SX, params: ca.SX, M: ca.SX) -> ca.SX:
         """The residual of a window's ``data`` for ``params`` and base motion ``M`` (before the clock)."""
-        nk, ns, n_mounts = len(self.model.kinematic_params), len(self.sensor.params), self.spec.mounts
-        k, lags = params[:nk], params[nk + n_mounts * ns :]
-        mounts = [params[nk + i * ns : nk + (i + 1) * ns] for i in range(n_mounts)]
+        at = {n: i for i, n in enumerate(self.names)}
+        k = params[: len(self.model.kinematic_params)]
+        lags = ca.vertcat(*[params[at[n]] for n in self.layout.block(CLOCK)])
         z_rows, n_in = self.sensor.z_rows, self.n_inputs
         first = z_rows + (2 * n_in + 1 if self.spec.lags else 0)
         select = data[first : first + self.select_rows]
@@ -329,9 +347,18 @@ class ProblemFunctions(TrajectoryFunctions):
             resampled = data[z_rows + 2 * n_in]
             delta = ca.dot(select, lags) - resampled
             M = clock.shifted(self.model, k, M, ends, delta, self.spec.integration)
-        # A mount per log: the window's own, picked by its log's one-hot row (exact for any mount).
-        mount = mounts[0] if n_mounts == 1 else sum(select[i] * mounts[i] for i in range(n_mounts))
-        return self.sensor.residual(data[0:z_rows], mount, M)
+        return self.sensor.residual(data[0:z_rows], self._mount(params, select, at), M)
+
+    def _mount(self, params: ca.SX, select: ca.SX, at: Mapping[str, int]) -> ca.SX:
+        """The window's mount in the sensor's order: a shared parameter as it is, a log's own picked
+        by the window's one-hot log row (exact for any mount)."""
+        names = [{key: n for n, key in self.mount_keys(i).items()} for i in range(self.spec.mounts)]
+        rows = []
+        for key in self.sensor.params:
+            own = [at[by[key]] for by in names]
+            one = len(set(own)) == 1
+            rows.append(params[own[0]] if one else sum(select[i] * params[j] for i, j in enumerate(own)))
+        return ca.vertcat(*rows)
 
     def _at_zero(self, mo: motion_sources.MotionSymbols, h: ca.SX, exprs: list[ca.SX]) -> list[ca.SX]:
         """``exprs`` at ``h = 0`` (and the motion's end unperturbed)."""
@@ -546,21 +573,30 @@ def unpack_upper(h_upper: np.ndarray, n: int) -> np.ndarray:
 
 def problem_layout(model: KinematicModel, sensor: Sensor, spec: ProblemSpec) -> Layout:
     """The parameters of ``model`` measured by ``sensor`` as ``spec`` lays them out: the model's,
-    the mount (one per log with ``spec.mounts`` > 1), then a clock offset per log (``spec.lags``);
-    the mount's parameters the sensor never determines held."""
+    the mount (one per log with ``spec.mounts`` > 1: its ``spec.shared`` parameters first, once,
+    then each log's own), then a clock offset per log (``spec.lags``); the mount's parameters the
+    sensor never determines held."""
     kinematic = tuple(model.kinematic_params)
     turn = (-2.0 * np.pi, 2.0 * np.pi)
     ranges = {**model.physical_ranges, **dict.fromkeys((*model.angle_params, *sensor.angles), turn)}
-    blocks = [
-        BlockSpec(MODEL, kinematic, model.units, ranges=ranges, precision=_precision(model, kinematic)),
+    mount = [
         BlockSpec(
             MOUNT,
-            tuple(sensor.params),
+            keys,
             sensor.units,
-            per_log=spec.mounts > 1,
+            per_log=own,
             ranges=ranges,
-            precision=_precision(model, sensor.params, sensor.reference),
-        ),
+            precision=_precision(model, keys, sensor.reference),
+        )
+        for keys, own in (
+            (spec.shared, False),
+            (tuple(k for k in sensor.params if k not in spec.shared), spec.mounts > 1),
+        )
+        if keys
+    ]
+    blocks = [
+        BlockSpec(MODEL, kinematic, model.units, ranges=ranges, precision=_precision(model, kinematic)),
+        *mount,
     ]
     if spec.lags:
         clock = BlockSpec(CLOCK, (LAG_PARAM,), {LAG_PARAM: LAG_UNIT}, True, precision=LAG_REFERENCE)

@@ -58,6 +58,14 @@ class SensorInfo:
     held_why: str = ""
     #: What its parameters mean, in words (an angle convention), where the names do not say it.
     convention: str = ""
+    #: Why its track has no position, in words (a gyro measures turning, no length): the figures in
+    #: metres (ATE, RPE, the distance travelled) are then left out; "": it measures positions.
+    no_position: str = ""
+
+    @property
+    def positions(self) -> bool:
+        """Whether its track has positions the trajectory figures can compare."""
+        return not self.no_position
 
 
 @dataclass(frozen=True)

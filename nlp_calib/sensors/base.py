@@ -94,6 +94,8 @@ class Sensor(Protocol):
     def convention(self) -> str: ...  # what its parameters mean, where the names do not say it
     @property
     def lengths_unseen(self) -> str: ...  # why it determines no length, in words ("": it measures them)
+    @property
+    def per_log(self) -> tuple[str, ...]: ...  # its parameters each log has its own of, even when shared
 
     # --- the error term (symbolic) -------------------------------------------------------------
     def residual(self, z: ca.SX, mount: ca.SX, M: ca.SX) -> ca.SX: ...
@@ -151,7 +153,8 @@ class Sensor(Protocol):
 
 class SensorDefaults:
     """What most references share, for a new kind to inherit and override where it differs: no
-    mount parameter held, no angle convention to state, no turning-only or angle parameter, lengths
+    mount parameter held, no angle convention to state, no turning-only or angle parameter, no
+    parameter of a log's own beside a shared mount, lengths
     measured in metres, no planar base pose, no group structure for the mount's perturbation, no
     repair of its poses, no height, no levelling, no scale, no nominal mount in a log's header, no
     given start, every window fitted, and the estimate as it is (no mirror images to fold)."""
@@ -162,6 +165,9 @@ class SensorDefaults:
     turning: ClassVar[tuple[str, ...]] = ()
     angles: ClassVar[tuple[str, ...]] = ()
     lengths_unseen: ClassVar[str] = ""
+    #: The parameters each log of a fit of several has its own of with the mount shared (a gyro's
+    #: bias, which changes with each power cycle); ``mounts: per_log`` gives each log all of them.
+    per_log: ClassVar[tuple[str, ...]] = ()
     length_unit: str = "m"
     planar_base: ClassVar[bool] = False
     start_span_s: ClassVar[float | None] = None

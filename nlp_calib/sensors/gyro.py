@@ -41,7 +41,7 @@ from nlp_calib.sensors.base import BaseMotion, Reference, SensorDefaults, Sensor
 from nlp_calib.sensors.gyro_start import gyro_start
 
 #: The gyro's bias on each of the IMU's axes (rad/s): one set per log (a gyro's bias changes with
-#: each power cycle). What a fit of several logs gives each log its own of: see :func:`per_log`.
+#: each power cycle): in a fit of several logs each has its own, the tilt and scale shared.
 BIAS_PARAMS: tuple[str, str, str] = ("gyro_bias_x", "gyro_bias_y", "gyro_bias_z")
 #: The IMU's tilt on the base (URDF: R = Rz(yaw)·Ry(pitch)·Rx(roll); the yaw is not seen).
 TILT_PARAMS: tuple[str, str] = ("imu_roll", "imu_pitch")
@@ -59,13 +59,6 @@ REFERENCE: Mapping[str, Reference] = MappingProxyType(
         SCALE_PARAM: ("relative", 0.005),
     }
 )
-
-
-def per_log(sensor_params: Sequence[str]) -> tuple[str, ...]:
-    """The gyro's parameters each log of a fit of several has its own of: its biases. (Until the
-    parameter layout can give a sensor's block in part per log, a fit with ``mounts: per_log``
-    gives each log the whole block; a shared one shares the biases too.)"""
-    return tuple(n for n in sensor_params if n in BIAS_PARAMS)
 
 
 def tilt_rotation(roll: ca.SX, pitch: ca.SX) -> ca.SX:
@@ -96,6 +89,7 @@ class Gyro(SensorDefaults):
     noise_groups: ClassVar[tuple[tuple[int, ...], ...]] = ((0, 1, 2),)
     noise_names: ClassVar[tuple[str, ...]] = ("gyro_angle",)
     lengths_unseen: ClassVar[str] = "a gyro measures turning, no length"
+    per_log: ClassVar[tuple[str, ...]] = BIAS_PARAMS
 
     def __init__(self, scale_free: bool) -> None:
         self.scale_free = scale_free
