@@ -139,7 +139,7 @@ def lag_caveats(path: str, lag: LagEstimate | None) -> list[str]:
 
 
 def steering_caveats(run: CalibrationRun) -> list[str]:
-    """A fitted lag beside a steering angle read at one end of each interval: the reading stands
+    """A fitted lag beside a steer angle read at one end of each interval: the reading stands
     half an interval off the interval's middle, which the lag takes up in part (biased: the demo's
     simulated log, on time, gives −5.3 ms with ``start``, 0.5 ± 0.5 ms with ``mean``)."""
     sample = run.scenario.residual.get("steering_sample", "mean")
@@ -149,7 +149,7 @@ def steering_caveats(run: CalibrationRun) -> list[str]:
     half = 500.0 * run.log.duration_s / (run.log.records - 1)
     side = ("early", "little") if sample == "start" else ("late", "much")
     return [
-        f"residual.steering_sample: {sample} reads the steering about {half:.0f} ms {side[0]} (half an "
+        f"residual.steering_sample: {sample} reads the steer angle about {half:.0f} ms {side[0]} (half an "
         f"interval), which the fitted tracker lag takes up in part (too {side[1]} by up to that): "
         "steering_sample: mean reads it at the interval's middle"
     ]

@@ -51,6 +51,40 @@ RADIANS = RadiansForm(
 )
 
 
+#: The fast-spinning simulator's robot (:mod:`nlp_calib.simulation.vehicles`, in joint units): a
+#: 0.55 m skid-steer whose effective track is 1.8 times that, rolling 10 % under its 0.15 m radius.
+SPIN_TRUTH: Mapping[str, float] = MappingProxyType(
+    {
+        "k_left": 0.135,
+        "k_right": 0.137,
+        "baseline": 0.99,
+        "turn_slip": 0.05,
+        "sensor_x": 0.2,
+        "sensor_y": 0.03,
+        "sensor_theta": 0.04,
+    }
+)
+
+
+def spin_problem(truth: Mapping[str, float], spin_rate: float) -> str:
+    """What keeps ``truth`` from being driven at ``spin_rate`` (rad/s) by the wheels' law ("" if
+    nothing): the law's divisor must stay positive, the radii too."""
+    if truth["turn_slip"] * spin_rate >= 0.9 or min(truth["k_left"], truth["k_right"]) <= 0:
+        return "turn_slip × spin_rate must stay under 0.9 and the radii positive"
+    return ""
+
+
+def spin_wheels(truth: Mapping[str, float], speed: np.ndarray, rate: np.ndarray, dt: float) -> np.ndarray:
+    """Each side's wheel angle ``(n + 1, 2)`` (left, right; rad, from 0) driving the base at
+    ``speed`` (m/s) and turn rate ``rate`` (rad/s) over steps of ``dt``: the model's law
+    ``ω = ω_w/(1 + turn_slip·|ω_w|)`` solved for the wheels' own turn rate ``ω_w``."""
+    wheels = rate / (1.0 - truth["turn_slip"] * np.abs(rate))
+    half = 0.5 * truth["baseline"] * wheels
+    left = np.concatenate([[0.0], np.cumsum((speed - half) * dt)]) / truth["k_left"]
+    right = np.concatenate([[0.0], np.cumsum((speed + half) * dt)]) / truth["k_right"]
+    return np.stack([left, right], axis=1)
+
+
 class SkidSteerDrive(DiffDriveDrive):
     """The base turns at ``w`` (curvature ``3·turn`` per metre); the sides' wheels turn it by
     ``w·(1 + turn_slip·|ω_w|)`` of their own, ``ω_w`` their turn rate."""

@@ -63,7 +63,7 @@ DEFAULTS: Mapping[str, Any] = {
 
 
 def defaults(model: str) -> dict[str, Any]:
-    """:data:`DEFAULTS` for ``model``: a steering angle taken as the mean of its readings at an
+    """:data:`DEFAULTS` for ``model``: a steer angle taken as the mean of its readings at an
     interval's two ends (the joints interpolated there on their own clock): held from the start,
     it would lag by half an interval, and the fitted clock offset with it."""
     if not MODELS[model].level_inputs:
@@ -231,7 +231,7 @@ def _text(header: Sequence[str], raw: Mapping[str, Any], notes: Mapping[str, str
 
 NOTES: Mapping[str, str] = {
     "initial_guess": "the closed-form start from the data: no guess needed",
-    "residual": "windows of half a second whatever the rates; a steering angle: its two readings' mean",
+    "residual": "windows of half a second whatever the rates; a steer angle: its two readings' mean",
     "alignment": "the tracker's lag behind the joints, estimated within ±0.1 s",
     "solvers": "add ipopt to compare the two",
 }

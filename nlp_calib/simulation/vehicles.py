@@ -1,6 +1,6 @@
 """Real vehicles' drives, with known truth: a skid-steer spinning fast on rough ground.
 
-:func:`simulate_skid_spins` drives a skid-steer base (``skid_steer`` in joint units: each side's
+:func:`simulate_skid_spins` drives a skid-steer base (the skid-steer model in joint units: each side's
 rolling radius in m per rad, the effective track at a slow turn and its growth with the turn
 rate) through straight stretches, arcs and pivot turns at ``spin_rate`` (several radians per
 motion: more than π per increment at the default rate). The wheels are the model's own law, but
@@ -29,19 +29,9 @@ from nlp_calib.core.ranges import Range
 from nlp_calib.logs.joint_log import format_joint_csv
 from nlp_calib.logs.motions import format_motions
 from nlp_calib.models.drives import integrate_base
+from nlp_calib.models.skid_steer import SPIN_TRUTH as SKID_TRUTH
+from nlp_calib.models.skid_steer import spin_problem, spin_wheels
 
-#: A 0.55 m skid-steer whose effective track is 1.8 times that, rolling 10 % under its 0.15 m radius.
-SKID_TRUTH: Mapping[str, float] = MappingProxyType(
-    {
-        "k_left": 0.135,
-        "k_right": 0.137,
-        "baseline": 0.99,
-        "turn_slip": 0.05,
-        "sensor_x": 0.2,
-        "sensor_y": 0.03,
-        "sensor_theta": 0.04,
-    }
-)
 JOINTS = ("left_wheel_joint", "right_wheel_joint")
 #: The fine grid the base is integrated on (s).
 FINE_S = 0.002
@@ -90,8 +80,8 @@ class SkidSpinOptions:
                 f"unknown parameter(s) {unknown}; the skid-steer's are {', '.join(SKID_TRUTH)}"
             )
         truth = {**SKID_TRUTH, **self.truth}
-        if truth["turn_slip"] * self.spin_rate >= 0.9 or min(truth["k_left"], truth["k_right"]) <= 0:
-            raise OptionsError("turn_slip × spin_rate must stay under 0.9 and the radii positive")
+        if problem := spin_problem(truth, self.spin_rate):
+            raise OptionsError(problem)
         object.__setattr__(self, "truth", MappingProxyType(truth))
 
 
@@ -170,7 +160,7 @@ def simulate_skid_spins(opts: SkidSpinOptions) -> VehicleSimulation:
     # The wheels' own turn rate: the model's law ω = ω_w/(1 + turn_slip·|ω_w|) solved for ω_w; on a
     # pivot the ground turns the base a random share off that (one share per pivot, either way:
     # a share of one sign on every pivot would be the law's own slip, and the truth no longer its).
-    wheels = rate / (1.0 - t["turn_slip"] * np.abs(rate))
+    angles = spin_wheels(t, speed, rate, FINE_S)  # before the pivots' slip: the wheels' own
     starts = np.flatnonzero(np.diff(np.concatenate([[0], pivot.astype(int)])) == 1)
     share = np.zeros(n)
     for a in starts:
@@ -178,14 +168,6 @@ def simulate_skid_spins(opts: SkidSpinOptions) -> VehicleSimulation:
         share[a:b] = rng.uniform(-opts.pivot_slip, opts.pivot_slip)
     rate = rate * (1.0 - share)
     base = integrate_base(speed * FINE_S, rate * FINE_S)
-    half = 0.5 * t["baseline"] * wheels
-    angles = np.stack(
-        [
-            np.concatenate([[0.0], np.cumsum((speed - half) * FINE_S)]) / t["k_left"],
-            np.concatenate([[0.0], np.cumsum((speed + half) * FINE_S)]) / t["k_right"],
-        ],
-        axis=1,
-    )
     time_s = np.arange(n + 1) * FINE_S
     joint_t = np.arange(0.0, time_s[-1], 1.0 / opts.joint_rate_hz)
     phase = rng.uniform(0.0, 1.0 / opts.encoder_update_hz)
