@@ -50,7 +50,10 @@ FIGURES: tuple[tuple[str, str, str], ...] = (
         "model_check.png",
         "Kinematic model check",
         "The log's `model_pose` (the vendor's base-link odometry) against our model integrated with the "
-        "log header's parameters. Close tracks validate the kinematic model; this uses no tracker data.",
+        "log header's parameters, integrated as the fit integrates and first-order (Euler: along the "
+        "heading, then turned), as a robot's own odometry usually is: the curve that agrees shows how the "
+        "vendor integrates, and what is left is the integration's error, not the model's. Close tracks "
+        "validate the kinematic model; this uses no tracker data.",
     ),
     (
         "trust.png",
