@@ -159,7 +159,9 @@ def test_the_simulators_default_drive_with_the_models_defaults_is_still_good(tmp
     doc = json.loads((tmp_path / "out" / "check.json").read_text())
     assert doc["verdict"] == STILL_GOOD
     assert all(p["untested"] is None for p in doc["parameters"].values())
-    worn = write_sim(tmp_path, "worn.txt", records=1500, seed=13, truth={"k_traction": TRUTH["k_traction"] * 1.01})
+    worn = write_sim(
+        tmp_path, "worn.txt", records=1500, seed=13, truth={"k_traction": TRUTH["k_traction"] * 1.01}
+    )
     proc = cli("check", str(stored), str(worn), "--out", str(tmp_path / "worn"))
     assert proc.returncode == 3, proc.stdout + proc.stderr
     assert "k_traction moved by +" in proc.stdout

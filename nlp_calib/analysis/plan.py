@@ -16,8 +16,8 @@ wheel that cannot reach 90°) is left out.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -48,7 +48,7 @@ INVERSE_TOLERANCE = 1e-6
 MAX_TURN_STEP = 0.2
 #: A spot turn's rate (rad/s).
 SPOT_RATE = 0.5
-#: How much beyond the drive's own largest steering input a manoeuvre may ask (a share of it).
+#: How much beyond the drive's own largest held angle input a manoeuvre may ask (a share of it).
 STEER_MARGIN = 0.05
 
 
@@ -132,7 +132,7 @@ class Inverse:
         self.params = np.concatenate([kinematic, np.zeros(len(planar.names) - kinematic.size)])
         self.levels = levels(model)
         self.typical = typical
-        #: The largest steering input the drive used, each (a plan never asks for more).
+        #: The largest held angle input the drive used, each (a plan never asks for more).
         self.limit = np.full(len(self.levels), np.pi) if steered is None or not steered.size else steered
 
     def __call__(self, v: float, w: float, dt: float) -> np.ndarray | None:
@@ -158,7 +158,7 @@ class Inverse:
 
 
 def levels(model: KinematicModel) -> list[int]:
-    """The rows of the model's steering inputs (angles it holds, not increments)."""
+    """The rows of the inputs the model reads as angles it holds (not increments)."""
     return [model.input_names.index(n) for n in model.level_inputs]
 
 
@@ -209,7 +209,7 @@ class Setting:
 class DriveFacts:
     """What a manoeuvre takes from the drive it is appended to: its speed (m/s), the turn radii to
     try (m), its record interval (s), its typical inputs per interval (where the inverse starts)
-    and how far the drive turned each steering input (its largest magnitude, in the input's unit;
+    and how far the drive turned each held angle input (its largest magnitude, in the input's unit;
     empty: the model steers with none): a plan never asks for more."""
 
     speed: float
@@ -242,7 +242,7 @@ def tightest_radius(T_world_sensor: np.ndarray, dt: float) -> float:
 
 def drive_facts(data: ResidualData, levels: Sequence[int] = ()) -> DriveFacts:
     """The facts of the drive whose windows are ``data`` (its last log's); ``levels``: the rows of
-    the model's steering inputs (angles it holds, not increments)."""
+    the inputs the model reads as angles it holds (not increments)."""
     log = data.logs[-1]
     t = log.time_s
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.04

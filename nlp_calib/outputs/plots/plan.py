@@ -18,6 +18,7 @@ from nlp_calib.results.preflight import Plan
 SKETCHED = 4
 #: Arrows of the direction of travel drawn along each path.
 ARROWS = 8
+_ARROW = {"arrowstyle": "-|>", "color": "C0", "lw": 1.2, "mutation_scale": 14}
 
 
 def _arrows(ax: Axes, P: np.ndarray) -> None:
@@ -28,8 +29,7 @@ def _arrows(ax: Axes, P: np.ndarray) -> None:
     for k in np.linspace(1, n - 2, ARROWS).round().astype(int):
         a, b = P[k - 1, :2], P[k + 1, :2]
         if np.hypot(*(b - a)) > 0:
-            ax.annotate("", xy=tuple(b), xytext=tuple(a),
-                        arrowprops={"arrowstyle": "-|>", "color": "C0", "lw": 1.2, "mutation_scale": 14})  # fmt: skip
+            ax.annotate("", xy=tuple(b), xytext=tuple(a), arrowprops=_ARROW)
 
 
 def _robot(ax: Axes, size: Mapping[str, float]) -> str:

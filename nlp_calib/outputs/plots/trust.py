@@ -41,7 +41,9 @@ def _ratio_axes(ax: Axes, rows: Sequence[Standing]) -> None:
         unit = "" if r.unit in ("", "1") else f" {r.unit}"
         if r.status != "free":
             ax.barh(yi, top, left=low, color=_GIVEN, alpha=0.25)
-            ax.text(low * 1.1, yi, f"{r.status}: {r.value:.4g}{unit} (not estimated)", va="center", fontsize=8)
+            ax.text(
+                low * 1.1, yi, f"{r.status}: {r.value:.4g}{unit} (not estimated)", va="center", fontsize=8
+            )
             continue
         if not (math.isfinite(r.std) and r.std > 0):
             ax.barh(yi, top, left=low, color=_BAD, alpha=0.35, hatch="//")
@@ -109,7 +111,9 @@ def lag_png(est: LagEstimate, std: float, title: str) -> bytes:
     ax.axvline(lag, color="tab:green", linewidth=1.6, label=f"kept: {lag:.1f} ms")
     if est.ambiguous:
         other = 1e3 * est.other[0]
-        ax.axvline(other, color="tab:red", linestyle="--", label=f"second valley of comparable cost: {other:.1f} ms")
+        ax.axvline(
+            other, color="tab:red", linestyle="--", label=f"second valley of comparable cost: {other:.1f} ms"
+        )
     words = []
     if est.at_edge:
         words.append("the lag ended on the edge of its search: the true lag may lie beyond")
@@ -117,7 +121,10 @@ def lag_png(est: LagEstimate, std: float, title: str) -> bytes:
         words.append("the last fit did not converge")
     ax.set_xlabel("tracker lag (the scenario's tracker_lag) [ms]")
     ax.set_ylabel("cost of the fit")
-    ax.set_title("; ".join(words) if words else "no second valley of comparable cost: the lag is determined", fontsize=10)
+    ax.set_title(
+        "; ".join(words) if words else "no second valley of comparable cost: the lag is determined",
+        fontsize=10,
+    )
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     fig.suptitle(title)
