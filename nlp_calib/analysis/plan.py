@@ -222,6 +222,9 @@ class DriveFacts:
 #: The share of the drive's moving records that turn tighter than the tightest radius a plan asks
 #: for (the drive's own tightest turns, robust to a few glitches).
 TIGHTEST_SHARE = 0.02
+#: A drive whose heading spans less than this (rad) did not turn: it says nothing of how far the
+#: robot can steer.
+TURNED_RAD = 0.5
 
 
 def tightest_radius(T_world_sensor: np.ndarray, dt: float) -> float:
@@ -231,8 +234,11 @@ def tightest_radius(T_world_sensor: np.ndarray, dt: float) -> float:
     P = T_world_sensor[::step]
     if P.shape[0] < 2:
         return float("inf")
+    heading = np.unwrap(P[:, 2])
+    if np.ptp(heading) < TURNED_RAD:
+        return float("inf")  # a straight drive's "turns" are its tracker's noise
     ds = np.hypot(*np.diff(P[:, :2], axis=0).T)
-    dth = np.abs(np.diff(np.unwrap(P[:, 2])))
+    dth = np.abs(np.diff(heading))
     moving = ds > 0.01 * step * dt
     turning = moving & (dth > 1e-3)
     if not turning.any():
@@ -259,7 +265,10 @@ def drive_facts(data: ResidualData, levels: Sequence[int] = ()) -> DriveFacts:
     typical = (
         np.median(np.abs(data.inputs[:, moving]), axis=1) if moving.any() else np.ones(data.inputs.shape[0])
     )
-    steered = np.abs(data.inputs[list(levels)]).max(axis=1) if levels and data.inputs.size else np.zeros(0)
+    # A drive that never turned says nothing of how far the robot can steer: then only the joint's
+    # own ±π bounds a manoeuvre.
+    turned = levels and data.inputs.size and math.isfinite(tightest)
+    steered = np.abs(data.inputs[list(levels)]).max(axis=1) if turned else np.zeros(0)
     return DriveFacts(speed, (R0, 2 * R0, 4 * R0), dt, np.where(np.isfinite(typical), typical, 1.0), steered)
 
 
