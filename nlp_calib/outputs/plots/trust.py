@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 
 from nlp_calib.outputs.plots.style import figure_png
 from nlp_calib.results.checks import WEAK, LagEstimate
@@ -57,15 +58,19 @@ def _ratio_axes(ax: Axes, rows: Sequence[Standing]) -> None:
         )
     ax.axvline(1.0, color="k", linewidth=1.0, label="σ = the precision needed")
     ax.axvline(WEAK, color=_BAD, linestyle="--", linewidth=1.0, label=f"{WEAK:g}× it: the verdict's limit")
-    for colour, words in ((_GOOD, "within the precision needed"), (_LOOSE, f"within {WEAK:g}× it"),
-                          (_BAD, "beyond: loose")):  # fmt: skip
-        ax.barh([], [], color=colour, label=words)
+    handles, _ = ax.get_legend_handles_labels()
+    kinds = (
+        (_GOOD, "within the precision needed"),
+        (_LOOSE, f"within {WEAK:g}× it"),
+        (_BAD, "beyond: loose"),
+    )
+    handles += [Patch(color=c, label=w) for c, w in kinds]
     ax.set_xscale("log")
     ax.set_xlim(low, top * 6.0)  # room for the words right of each bar
     ax.set_yticks(y, [r.name for r in rows])
     ax.set_xlabel("1σ to believe ÷ the precision a useful calibration needs (log scale)")
     ax.set_title("each parameter: left of the black line is determined well enough", fontsize=10)
-    ax.legend(fontsize=8, loc="upper right")
+    ax.legend(handles=handles, fontsize=8, loc="upper right")
     ax.grid(True, axis="x", which="both", alpha=0.3)
 
 
