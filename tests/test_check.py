@@ -143,3 +143,25 @@ def test_bad_inputs_are_one_line_errors(stored: Path, tmp_path: Path) -> None:
     other.write_text(f"dataset: {SCENARIOS / 'data' / 'diff_drive_demo.txt'}\nmodel: diff_drive\n")
     proc = cli("check", str(stored), str(other), "--out", str(tmp_path / "o"))
     assert proc.returncode == 2 and "the calibration's" in proc.stderr and "tricycle" in proc.stderr
+
+
+def test_the_simulators_default_drive_with_the_models_defaults_is_still_good(tmp_path: Path) -> None:
+    """The default drive determines every parameter to the precision a check needs (each σ within
+    WEAK × the needed precision): a weakly observable combination alone leaves nothing untested, so
+    an unchanged robot is STILL GOOD (it said "cannot tell", exit 4, every night)."""
+    first = write_sim(tmp_path, "drive.txt", records=1500, seed=11)
+    proc = cli("batch", str(first), "--out", str(tmp_path / "cal"), "--jobs", "1")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    stored = tmp_path / "cal" / "drive" / "calibration.yaml"
+    again = write_sim(tmp_path, "again.txt", records=1500, seed=12)
+    proc = cli("check", str(stored), str(again), "--out", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    doc = json.loads((tmp_path / "out" / "check.json").read_text())
+    assert doc["verdict"] == STILL_GOOD
+    assert all(p["untested"] is None for p in doc["parameters"].values())
+    worn = write_sim(
+        tmp_path, "worn.txt", records=1500, seed=13, truth={"k_traction": TRUTH["k_traction"] * 1.01}
+    )
+    proc = cli("check", str(stored), str(worn), "--out", str(tmp_path / "worn"))
+    assert proc.returncode == 3, proc.stdout + proc.stderr
+    assert "k_traction moved by +" in proc.stdout

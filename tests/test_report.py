@@ -29,7 +29,14 @@ from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.run import CAVEATS, UNDETERMINED
 from nlp_calib.solvers import GaussNewtonOptions
 
-IMAGES = ("trajectory.png", "convergence.png", "residuals.png", "residuals_time.png", "model_check.png")
+IMAGES = (
+    "trajectory.png",
+    "convergence.png",
+    "residuals.png",
+    "residuals_time.png",
+    "model_check.png",
+    "trust.png",
+)
 CALIBRATION_FILE, URDF_FILE, ROBOT_URDF_FILE = "calibration.yaml", "sensor_mount.urdf.xml", "robot.urdf"
 
 
@@ -223,8 +230,8 @@ def test_single_solver_report_with_holdout(tmp_path: Path, small_demo: Scenario)
     )
     run = calib.run(wanted=Wanted(series=True))
     paths = _write(run, tmp_path, "figures")
-    assert [p.name for p in paths[:6]] == [*IMAGES, "report.md"]
-    tracks = {p.relative_to(tmp_path).as_posix() for p in paths[6:]}
+    assert [p.name for p in paths[:7]] == [*IMAGES, "report.md"]
+    tracks = {p.relative_to(tmp_path).as_posix() for p in paths[7:]}
     assert {"trajectories/tracker.tum", "trajectories/gauss_newton.tum", "trajectories/README.md"} <= tracks
     for name in IMAGES:
         png_size(tmp_path / name)

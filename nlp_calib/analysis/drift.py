@@ -25,7 +25,7 @@ from nlp_calib.models import SENSOR_PARAMS, KinematicModel
 from nlp_calib.models.base import reference, reference_scale
 from nlp_calib.results import CalibrationRun, ScenarioInfo
 from nlp_calib.results.check import CANNOT_TELL, DRIFTED, STILL_GOOD, DriftCheck, ParameterChange
-from nlp_calib.results.checks import WEAK
+from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
 from nlp_calib.sensors import sensor_for
 
 #: The family-wise probability that a check of an unchanged robot calls a drift.
@@ -110,14 +110,17 @@ def run_dof(run: CalibrationRun, solver: str) -> dict[str, float]:
 
 
 def untested(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[str, str]:
-    """The free parameters this log cannot test, with why: held at the initial value, not
-    determined, in a weakly observable direction, or known more loosely than the verdict's
-    :data:`~nlp_calib.results.checks.WEAK` × the precision a calibration needs."""
+    """The free parameters this log cannot test, with why: held at the initial value, in a direction
+    the log does not observe, or known more loosely than the verdict's
+    :data:`~nlp_calib.results.checks.WEAK` × the precision a calibration needs. A parameter in a
+    weakly (not un-) observable combination is judged by its own σ, which already carries that
+    looseness: the combination alone does not make it untestable."""
     out = {w.split(HELD)[0]: w.split(HELD)[1] for w in run.warnings if HELD in w}
     obs = run.checks.observability
     for weak in obs.weak if obs is not None else ():
-        for name in weak.components:
-            out.setdefault(name, weak.words())
+        if weak.std_reference > NOT_OBSERVABLE:
+            for name in weak.components:
+                out.setdefault(name, weak.words())
     params = run.reports[solver].result.param_dict()
     for name, sd in run.std(solver).items():
         if name not in run.reports[solver].uncertainty.free or name in out:

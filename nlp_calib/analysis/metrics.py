@@ -112,6 +112,21 @@ def integrate(
     return geometry(fns).accumulate(np.asarray(T_world_sensor_0, dtype=float), steps(fns, params, inputs))
 
 
+def first_order(motion: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """Planar poses from ``start`` dead-reckoned first-order (Euler: along the heading by the arc's
+    length, then turned) from exact per-interval motions ``(n, 3)``: how a robot's own odometry
+    usually integrates the same wheel travel, so the two compare like with like."""
+    dx, dy, dth = (np.asarray(motion, dtype=float)[:, i] for i in range(3))
+    half = 0.5 * dth
+    chord = np.hypot(dx, dy) * np.sign(dx)
+    safe = np.where(np.abs(half) > 1e-9, half, 1.0)
+    arc = np.where(np.abs(half) > 1e-9, chord * half / np.sin(safe), chord)
+    theta = float(start[2]) + np.concatenate([[0.0], np.cumsum(dth)])
+    x = float(start[0]) + np.concatenate([[0.0], np.cumsum(arc * np.cos(theta[:-1]))])
+    y = float(start[1]) + np.concatenate([[0.0], np.cumsum(arc * np.sin(theta[:-1]))])
+    return np.stack([x, y, theta], axis=1)
+
+
 def segments(n_records: int, bad_intervals: np.ndarray | None) -> list[tuple[int, int]]:
     """Record ranges ``[a, b)`` with no bad interval inside (at least two records each)."""
     if bad_intervals is None or not np.any(bad_intervals):

@@ -16,8 +16,9 @@ wheel that cannot reach 90°) is left out.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -47,6 +48,8 @@ INVERSE_TOLERANCE = 1e-6
 MAX_TURN_STEP = 0.2
 #: A spot turn's rate (rad/s).
 SPOT_RATE = 0.5
+#: How much beyond the drive's own largest held angle input a manoeuvre may ask (a share of it).
+STEER_MARGIN = 0.05
 
 
 @dataclass(frozen=True)
@@ -117,12 +120,20 @@ def _arc(v: float, w: float, dt: float) -> np.ndarray:
 class Inverse:
     """The inputs that drive a steady motion, from the model's one-interval residual."""
 
-    def __init__(self, model: KinematicModel, kinematic: np.ndarray, typical: np.ndarray) -> None:
+    def __init__(
+        self,
+        model: KinematicModel,
+        kinematic: np.ndarray,
+        typical: np.ndarray,
+        steered: np.ndarray | None = None,
+    ) -> None:
         planar = build(model, ProblemSpec(horizon=1))
         self.residual = Buffered(planar.interval_residual)
         self.params = np.concatenate([kinematic, np.zeros(len(planar.names) - kinematic.size)])
-        self.levels = [model.input_names.index(n) for n in model.level_inputs]
+        self.levels = levels(model)
         self.typical = typical
+        #: The largest held angle input the drive used, each (a plan never asks for more).
+        self.limit = np.full(len(self.levels), np.pi) if steered is None or not steered.size else steered
 
     def __call__(self, v: float, w: float, dt: float) -> np.ndarray | None:
         """One interval's inputs for the motion at ``v``, ``w`` over ``dt`` (None: none reproduce it
@@ -136,12 +147,19 @@ class Inverse:
             e, de_du = self.residual(params=self.params, u=u, z=target)
             e = np.ravel(e)
             if np.linalg.norm(e) < INVERSE_TOLERANCE * scale:
-                # An angle the model reads as it is must be one a joint can take.
-                return u if np.all(np.abs(u[self.levels]) <= np.pi) else None
+                # An angle the model reads as it is must be one a joint can take, and one the drive
+                # steered to (a car's spot turn would need 90°; a tight circle more than it turned).
+                reach = np.minimum(self.limit * (1.0 + STEER_MARGIN), np.pi)
+                return u if np.all(np.abs(u[self.levels]) <= reach) else None
             step, *_ = np.linalg.lstsq(np.asarray(de_du), -e, rcond=None)
             turn = float(np.max(np.abs(step[self.levels]))) if self.levels else 0.0
             u = u + step * min(1.0, MAX_TURN_STEP / turn if turn > 0 else 1.0)
         return None
+
+
+def levels(model: KinematicModel) -> list[int]:
+    """The rows of the inputs the model reads as angles it holds (not increments)."""
+    return [model.input_names.index(n) for n in model.level_inputs]
 
 
 def synthesised(
@@ -190,29 +208,68 @@ class Setting:
 @dataclass(frozen=True)
 class DriveFacts:
     """What a manoeuvre takes from the drive it is appended to: its speed (m/s), the turn radii to
-    try (m), its record interval (s) and its typical inputs per interval (where the inverse starts)."""
+    try (m), its record interval (s), its typical inputs per interval (where the inverse starts)
+    and how far the drive turned each held angle input (its largest magnitude, in the input's unit;
+    empty: the model steers with none): a plan never asks for more."""
 
     speed: float
     radii: tuple[float, ...]
     dt: float
     typical: np.ndarray
+    steered: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
-def drive_facts(data: ResidualData) -> DriveFacts:
-    """The facts of the drive whose windows are ``data`` (its last log's)."""
+#: The share of the drive's moving records that turn tighter than the tightest radius a plan asks
+#: for (the drive's own tightest turns, robust to a few glitches).
+TIGHTEST_SHARE = 0.02
+#: A drive whose heading spans less than this (rad) did not turn: it says nothing of how far the
+#: robot can steer.
+TURNED_RAD = 0.5
+
+
+def tightest_radius(T_world_sensor: np.ndarray, dt: float) -> float:
+    """The tightest turn radius the drive took while moving (m; inf: it never turned), from the
+    reference's path: its speed over its turn rate, over steps of about a quarter second."""
+    step = max(1, round(0.25 / max(dt, 1e-9)))
+    P = T_world_sensor[::step]
+    if P.shape[0] < 2:
+        return float("inf")
+    heading = np.unwrap(P[:, 2])
+    if np.ptp(heading) < TURNED_RAD:
+        return float("inf")  # a straight drive's "turns" are its tracker's noise
+    ds = np.hypot(*np.diff(P[:, :2], axis=0).T)
+    dth = np.abs(np.diff(heading))
+    moving = ds > 0.01 * step * dt
+    turning = moving & (dth > 1e-3)
+    if not turning.any():
+        return float("inf")
+    return float(np.quantile(ds[turning] / dth[turning], TIGHTEST_SHARE))
+
+
+def drive_facts(data: ResidualData, levels: Sequence[int] = ()) -> DriveFacts:
+    """The facts of the drive whose windows are ``data`` (its last log's); ``levels``: the rows of
+    the inputs the model reads as angles it holds (not increments)."""
     log = data.logs[-1]
     t = log.time_s
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.04
     xy = log.T_world_sensor[:, :2]
     step = max(1, round(0.25 / max(dt, 1e-9)))
     v = np.hypot(*np.diff(xy[::step], axis=0).T) / (step * dt)
-    speed = float(np.clip(np.median(v[v > 0.01]) if np.any(v > 0.01) else 0.3, 0.05, 2.0))
+    # The drive's own speed, however fast: a car on a road is driven at its speed, not a robot's.
+    speed = float(max(np.median(v[v > 0.01]) if np.any(v > 0.01) else 0.3, 0.05))
     R0 = max(speed / 0.5, 0.3)
+    tightest = tightest_radius(log.T_world_sensor, dt) if levels else math.inf
+    if math.isfinite(tightest):
+        R0 = max(R0, tightest)  # a steered robot turns no tighter than the drive turned it
     moving = np.abs(data.inputs).max(axis=0) > 0
     typical = (
         np.median(np.abs(data.inputs[:, moving]), axis=1) if moving.any() else np.ones(data.inputs.shape[0])
     )
-    return DriveFacts(speed, (R0, 2 * R0, 4 * R0), dt, np.where(np.isfinite(typical), typical, 1.0))
+    # A drive that never turned says nothing of how far the robot can steer: then only the joint's
+    # own ±π bounds a manoeuvre.
+    turned = levels and data.inputs.size and math.isfinite(tightest)
+    steered = np.abs(data.inputs[list(levels)]).max(axis=1) if turned else np.zeros(0)
+    return DriveFacts(speed, (R0, 2 * R0, 4 * R0), dt, np.where(np.isfinite(typical), typical, 1.0), steered)
 
 
 def candidate_of(m: Manoeuvre) -> Candidate:
@@ -231,7 +288,7 @@ def simulated(
     """``data`` with the candidate appended as the model with the full parameters ``params`` drives
     it (see :func:`~nlp_calib.problem.windows.appended`), and the base's path; None when no inputs
     of the model drive it."""
-    inverse = Inverse(fns.model, params[: len(fns.model.kinematic_params)], facts.typical)
+    inverse = Inverse(fns.model, params[: len(fns.model.kinematic_params)], facts.typical, facts.steered)
     made = synthesised(inverse, c, facts.dt)
     if made is None:
         return None
@@ -255,7 +312,7 @@ def plan(s: Setting, free_only: bool = False) -> Plan | None:
         return None
     target = int(np.argmax(ratio))
     params = np.asarray(fns.assemble(x, x_fixed)).ravel()
-    facts = drive_facts(s.data)
+    facts = drive_facts(s.data, levels(fns.model))
     ranked = []
     for c in candidates(facts.speed, facts.radii):
         made = simulated(fns, s.data, params, c, facts, s.options)
@@ -277,7 +334,11 @@ def plan(s: Setting, free_only: bool = False) -> Plan | None:
     ranked.sort(key=lambda m: (m.worst_after, m.target_std_after))
     name = fns.free[target]
     unit = s.units.get(name, "")
-    return Plan(name, unit, float(ratio[target]), float(before.std[target]), s.model_from, tuple(ranked))
+    kinematic = fns.model.kinematic_params
+    size = {n: abs(float(v)) for n, v in zip(kinematic, params) if s.units.get(n) == "m" and v != 0}
+    return Plan(
+        name, unit, float(ratio[target]), float(before.std[target]), s.model_from, tuple(ranked), size
+    )
 
 
 def _thinned(path: np.ndarray, most: int = 400) -> np.ndarray:
@@ -285,3 +346,22 @@ def _thinned(path: np.ndarray, most: int = 400) -> np.ndarray:
     if path.shape[0] <= most:
         return path
     return path[np.unique(np.linspace(0, path.shape[0] - 1, most).round().astype(int))]
+
+
+def believed(plan: Plan | None, std: Mapping[str, float]) -> Plan | None:
+    """``plan`` with its target's σ the run's σ to believe ``std`` (what the summary and the
+    observability say of it: the plan's own is the white-noise σ, which the jackknife's can exceed
+    several times), each manoeuvre's σ after scaled by the same factor (the plan's information
+    says by how much each lowers it, and the largest σ over its needed precision by the same
+    factor, so the table's columns and its header speak of one σ)."""
+    if plan is None:
+        return None
+    s, before = std.get(plan.target, math.nan), plan.target_std_before
+    if not (math.isfinite(s) and math.isfinite(before) and before > 0):
+        return plan
+    k = s / before
+    ranked = tuple(
+        replace(m, target_std_after=m.target_std_after * k, worst_after=m.worst_after * k)
+        for m in plan.ranked
+    )
+    return replace(plan, target_std_before=s, worst_before=plan.worst_before * k, ranked=ranked)

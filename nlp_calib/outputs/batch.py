@@ -61,17 +61,18 @@ def _cell(text: str) -> str:
 
 
 def summary_markdown(rows: Sequence[BatchRow]) -> str:
-    """The table a person reads: per log the verdict, headline parameters ± σ, fair figures, time,
-    and the error of a log that failed."""
+    """The table a person reads: per log the verdict, then the error of a log that failed, or why
+    (the verdict's reasons; a check's what to drive when it cannot tell), headline parameters ± σ,
+    fair figures and time."""
     names = _parameters(rows)
     units = {n: u for r in rows for n, u in r.units.items()}
     head = [
         "log",
         "verdict",
+        "why",
         *(f"{n} [{units.get(n, '')}]" for n in names),
         *FAIR_FIGURES,
         "time [s]",
-        "error",
     ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
@@ -79,7 +80,7 @@ def summary_markdown(rows: Sequence[BatchRow]) -> str:
             f"{_g(r.parameters[n][0])} ± {r.parameters[n][1]:.2g}" if n in r.parameters else "" for n in names
         ]
         figures = [_g(r.figures[f]) if f in r.figures else "" for f in FAIR_FIGURES]
-        cells = [r.name, r.verdict, *params, *figures, f"{r.seconds:.1f}", r.error]
+        cells = [r.name, r.verdict, r.error or r.detail, *params, *figures, f"{r.seconds:.1f}"]
         lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
     ok = sum(r.ok for r in rows)
     return "\n".join(lines) + f"\n\n{ok} of {len(rows)} logs ran to the end.\n"

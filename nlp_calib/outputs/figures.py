@@ -6,12 +6,17 @@ of outputs imports it only when a figure is written.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+
+import numpy as np
 
 from nlp_calib.core.files import atomic_write_bytes
 from nlp_calib.outputs import plots
 from nlp_calib.outputs.plots.run import ConvergenceSeries
+from nlp_calib.outputs.plots.trust import Standing
 from nlp_calib.results import CalibrationRun
+from nlp_calib.results.layout import CLOCK
 from nlp_calib.results.series import Track
 
 
@@ -104,3 +109,36 @@ def odometry(run: CalibrationRun, folder: Path, name: str, sigma: float = 3.0) -
     solver = run.chosen_solver() or next(iter(run.reports))
     title = f"{run.scenario.name}: calibrated odometry ({solver}), {sigma:g}σ ellipses"
     return _write(folder, name, plots.odometry_png(run.odometry, run.odometry.reference, title, sigma=sigma))
+
+
+def trust(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
+    """Each parameter's σ to believe against the precision its layout says a calibration needs,
+    and the estimates' correlations (the estimate the hand-off carries, else the first converged)."""
+    solver = run.handoff_solver() or run.chosen_solver()
+    if solver is None:
+        return []
+    values, std = run.reports[solver].result.param_dict(), run.std(solver)
+    layout = run.scenario.layout
+    rows = [
+        Standing(p.name, p.unit, values.get(p.name, p.start), std.get(p.name, math.nan),
+                 p.needed(values.get(p.name, p.start)), p.status)
+        for p in layout.parameters
+    ]  # fmt: skip
+    u = run.reports[solver].uncertainty
+    free = [i for i, n in enumerate(u.names) if n in u.free]
+    names = [u.names[i] for i in free]
+    correlation = np.asarray(u.correlation)[np.ix_(free, free)]
+    title = f"{run.scenario.name}: can I trust each parameter? ({run.scenario.label(solver)}'s estimate)"
+    return _write(folder, name, plots.trust_png(rows, names, correlation, title))
+
+
+def lag(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
+    """The tracker lag's cost profile over its search, where the run estimated the lag."""
+    est = run.data.lag_estimate
+    if est is None:
+        return []
+    solver = run.chosen_solver()
+    clock = run.scenario.layout.block(CLOCK)
+    std = run.std(solver).get(clock[0], math.nan) if solver is not None and len(clock) == 1 else math.nan
+    title = f"{run.scenario.name}: the tracker lag's cost profile ({Path(run.log.path).name})"
+    return _write(folder, name, plots.lag_png(est, std, title))

@@ -50,7 +50,24 @@ FIGURES: tuple[tuple[str, str, str], ...] = (
         "model_check.png",
         "Kinematic model check",
         "The log's `model_pose` (the vendor's base-link odometry) against our model integrated with the "
-        "log header's parameters. Close tracks validate the kinematic model; this uses no tracker data.",
+        "log header's parameters, integrated as the fit integrates and first-order (Euler: along the "
+        "heading, then turned), as a robot's own odometry usually is: the curve that agrees shows how the "
+        "vendor integrates, and what is left is the integration's error, not the model's. Close tracks "
+        "validate the kinematic model; this uses no tracker data.",
+    ),
+    (
+        "trust.png",
+        "Can I trust each parameter?",
+        "Left, each parameter's 1σ to believe (the same as the table above) divided by the precision a "
+        "useful calibration needs of it: left of the black line it is determined well enough, beyond "
+        "the dashed line the verdict calls it loose. Right, the estimates' correlations: a pair near ±1 "
+        "is one the drive cannot tell apart (an error in one is made up by the other).",
+    ),
+    (
+        "lag.png",
+        "Tracker lag",
+        "The fit's cost at each tracker lag searched, the other parameters as fitted: the lag kept sits "
+        "in the lowest valley; a second valley of comparable cost leaves the lag ambiguous.",
     ),
 )
 

@@ -145,6 +145,8 @@ OUTPUTS: tuple[Output, ...] = (
     Output("residuals.png", "figures", _figure("residuals"), report=True),
     Output("residuals_time.png", "figures", _figure("residuals_time"), report=True),
     Output("model_check.png", "figures", _figure("model_check"), report=True),
+    Output("trust.png", "figures", _figure("trust"), report=True),
+    Output("lag.png", "figures", _figure("lag"), report=True),
     Output("report.md", "figures", _report, report=True,
            next_step="the figures and tables of this run on one page"),
     Output(trajectories.FOLDER, "figures", _plain(trajectories.write_trajectories), report=True, folder=True),

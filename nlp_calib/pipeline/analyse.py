@@ -20,7 +20,7 @@ from nlp_calib.analysis.crossval import combine
 from nlp_calib.analysis.degeneracy import motion_scale
 from nlp_calib.analysis.determinacy import Information
 from nlp_calib.analysis.handoff import odometry_noise
-from nlp_calib.analysis.metrics import each_metrics, geometry, integrate, segments
+from nlp_calib.analysis.metrics import each_metrics, first_order, geometry, integrate, segments, steps
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import (
     DRIFT_LENGTHS,
@@ -498,7 +498,8 @@ def model_check(fit: Fit, prepared: PreparedLog) -> ModelCheckSeries | None:
     inputs = model.inputs(log, residual.steering_sample)
     ours = integrate(fit.fns, p, inputs, vendor[0])
     kinematic = {n: params[n] for n in model.kinematic_params}
-    return ModelCheckSeries(np.asarray(log.time_s), vendor, ours, residual.integration, kinematic)
+    euler = first_order(steps(fit.fns, p, inputs), vendor[0])
+    return ModelCheckSeries(np.asarray(log.time_s), vendor, ours, residual.integration, kinematic, euler)
 
 
 def run_series(

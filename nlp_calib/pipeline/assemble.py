@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from nlp_calib.analysis.handoff import controller_params
+from nlp_calib.analysis.plan import believed
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.logs import LogHeader
 from nlp_calib.models.controllers import EncoderScales
@@ -346,7 +347,7 @@ def assemble_run(
     # truth is of its own mount.
     convert = _own_truth(getattr(prepared.model, "from_counts", dict), views)
     checks = dataclasses.replace(run.checks, more=run_checks(run, CheckContext(source.files(), convert)))
-    run = dataclasses.replace(run, checks=checks)
+    run = _believed_plan(dataclasses.replace(run, checks=checks))
     return dataclasses.replace(run, verdict=verdict(run, prepared.model, hint))
 
 
@@ -439,4 +440,15 @@ def joint_run(
         warnings=tuple(warned),
         verdict=Verdict("", ()),
     )
+    run = _believed_plan(run)
     return dataclasses.replace(run, verdict=verdict(run, prepared.model))
+
+
+def _believed_plan(run: CalibrationRun) -> CalibrationRun:
+    """``run`` whose plan states its target's σ as the run's σ to believe (one σ per parameter in
+    plan.md, the summary and the observability; :func:`nlp_calib.analysis.plan.believed`)."""
+    solver = run.chosen_solver()
+    if run.checks.plan is None or solver is None:
+        return run
+    plan = believed(run.checks.plan, run.std(solver))
+    return dataclasses.replace(run, checks=dataclasses.replace(run.checks, plan=plan))

@@ -49,6 +49,11 @@ class Parameter:
     #: Where the fit started (a held or known parameter: its value).
     start: float = math.nan
 
+    def needed(self, value: float) -> float:
+        """The precision a useful calibration needs at ``value``, in the parameter's unit."""
+        kind, amount = self.precision
+        return amount * max(abs(value), 1e-9) if kind == "relative" else amount
+
 
 @dataclass(frozen=True)
 class BlockSpec:

@@ -10,7 +10,8 @@ findings in numbers and words; :mod:`nlp_calib.analysis` computes them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -153,6 +154,8 @@ class Plan:
     target_std_before: float
     model_from: str
     ranked: tuple[Manoeuvre, ...]
+    #: The robot's lengths (m) by name (its wheelbase, its track), for a sketch's scale.
+    size_m: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def best(self) -> Manoeuvre | None:

@@ -83,13 +83,16 @@ class ResidualSeries:
 
 @dataclass(frozen=True)
 class ModelCheckSeries:
-    """The log's vendor odometry against our base-link model with the header's parameters."""
+    """The log's vendor odometry against our base-link model with the header's parameters:
+    ``ours`` integrated as the fit integrates (``integration``), ``first_order`` the same motions
+    integrated first-order (Euler), as a robot's own odometry usually is (None: not computed)."""
 
     time_s: np.ndarray
     vendor: np.ndarray
     ours: np.ndarray
     integration: str
     params: Mapping[str, float]
+    first_order: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -9,9 +9,11 @@ from nlp_calib.outputs.plots.odometry import odometry_png
 from nlp_calib.outputs.plots.plan import plan_png
 from nlp_calib.outputs.plots.residuals import residuals_png, residuals_time_png
 from nlp_calib.outputs.plots.run import convergence_png, model_check_png, trajectory_png
+from nlp_calib.outputs.plots.trust import lag_png, trust_png
 
 __all__ = [
     "convergence_png",
+    "lag_png",
     "model_check_png",
     "odometry_png",
     "plan_png",
@@ -19,4 +21,5 @@ __all__ = [
     "residuals_time_png",
     "scaling_png",
     "trajectory_png",
+    "trust_png",
 ]

@@ -8,6 +8,7 @@ that imports this module is left alone (``matplotlib.use`` would switch it).
 from __future__ import annotations
 
 import dataclasses
+import textwrap
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -16,6 +17,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, MaxNLocator, NullLocator
+from matplotlib.transforms import blended_transform_factory
 
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.outputs.plots.style import STYLES, figure_png
@@ -25,6 +27,8 @@ from nlp_calib.results.series import ModelCheckSeries, Track, TrackSeries
 _STYLES = STYLES
 _TRACKER: Mapping[str, Any] = {"color": "0.15", "linestyle": "-", "linewidth": 3.0, "alpha": 0.35}
 _PLAIN = FuncFormatter(lambda v, _: f"{v:g}")
+#: Characters of a title's default font that fit an inch of panel (a conservative count).
+_TITLE_CHARS_PER_INCH = 8.5
 
 
 def _plain_log_ticks(ax: Axes) -> None:
@@ -68,11 +72,12 @@ def _label(track: Track, outside: bool) -> str:
 def _tracks(ax: Axes, ax_err: Axes, series: TrackSeries) -> tuple[np.ndarray, np.ndarray]:
     """Draw every track and its distance to the tracker; returns the box that frames the tracker
     and the converged tracks."""
-    tr, t = series.tracker, series.time_s - series.time_s[0]
-    ax.plot(tr[:, 0], tr[:, 1], label="tracker (measured sensor pose)", **_TRACKER)
+    tr, t, good = series.tracker, series.time_s - series.time_s[0], _good(series)
+    # The poses left out (tracker jumps) are not drawn: a line through each would be a spike.
+    ax.plot(tr[good, 0], tr[good, 1], label="tracker (measured sensor pose)", **_TRACKER)
     # Frame the tracker and the calibrated tracks; a run-away track (the uncalibrated one on a
     # real log drifts by tens of metres) is drawn but not allowed to shrink the others to a dot.
-    kept = [tr] + [tk.T_world_sensor for tk in series.tracks[1:] if tk.converged]
+    kept = [tr[good]] + [tk.T_world_sensor for tk in series.tracks[1:] if tk.converged]
     xy = np.concatenate([P[:, :2] for P in kept])
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     for track, style in zip(series.tracks, _STYLES):
@@ -84,7 +89,7 @@ def _tracks(ax: Axes, ax_err: Axes, series: TrackSeries) -> tuple[np.ndarray, np
         if not outside:
             ax.plot(P[-1, 0], P[-1, 1], marker="s", markersize=7, color=style["color"], linestyle="none")
         err = np.linalg.norm(P[1:, :2] - tr[1:, :2], axis=1)  # record 0 is the shared start: 0
-        ax_err.plot(t[1:], np.where(err > 0, err, np.nan), label=track.label, **style)
+        ax_err.plot(t[1:], np.where((err > 0) & good[1:], err, np.nan), label=track.label, **style)
     ax.plot(tr[-1, 0], tr[-1, 1], marker="s", markersize=7, color="0.15", linestyle="none")
     ax.plot(tr[0, 0], tr[0, 1], marker="o", markersize=9, color="black", linestyle="none", label="start")
     ax.plot([], [], marker="s", color="0.4", linestyle="none", label="end (colour of each track)")
@@ -93,23 +98,22 @@ def _tracks(ax: Axes, ax_err: Axes, series: TrackSeries) -> tuple[np.ndarray, np
 
 def _marks(ax: Axes, ax_err: Axes, series: TrackSeries, restarted: Track | None) -> None:
     """The track restarted after each fault, the faults and the first hold-out record."""
-    tr, t = series.tracker, series.time_s - series.time_s[0]
+    tr, t, good = series.tracker, series.time_s - series.time_s[0], _good(series)
     if restarted is not None:
         P = restarted.T_world_sensor
         err = np.linalg.norm(P[1:, :2] - tr[1:, :2], axis=1)
         fair = f"{restarted.label} (segment ATE {restarted.ate_mean:.3f} m)"
-        ax_err.plot(t[1:], np.where(err > 0, err, np.nan), color="tab:cyan", linewidth=1.0, label=fair)
-    labelled: set[str] = set()
+        shown = np.where((err > 0) & good[1:], err, np.nan)
+        ax_err.plot(t[1:], shown, color="tab:cyan", linewidth=1.0, label=fair)
+    _jumps(ax, ax_err, series, good)
+    labelled = False
     for k, kind in series.faults:
-        tracker = kind == "tracker_jump"
-        what = "tracker jump (pose left out)" if tracker else "encoder fault (the fair track restarts)"
-        label = None if what in labelled else what
-        labelled.add(what)
-        style: dict[str, Any] = (
-            {"marker": "d", "color": "magenta"} if tracker else {"marker": "X", "color": "red"}
-        )
-        ax.plot(tr[k, 0], tr[k, 1], markersize=10, linestyle="none", label=label, **style)
-        ax_err.axvline(t[k], color=style["color"], linewidth=0.8, alpha=0.6, label=label)
+        if kind == "tracker_jump":
+            continue
+        label = None if labelled else "encoder fault (the fair track restarts)"
+        labelled = True
+        ax.plot(tr[k, 0], tr[k, 1], marker="X", color="red", markersize=10, linestyle="none", label=label)
+        ax_err.axvline(t[k], color="red", linewidth=0.8, alpha=0.6, label=label)
     if series.holdout_start is not None:
         k = series.holdout_start
         ax.plot(
@@ -117,6 +121,30 @@ def _marks(ax: Axes, ax_err: Axes, series: TrackSeries, restarted: Track | None)
             label="first hold-out record (not fitted)",
         )  # fmt: skip
         ax_err.axvline(t[k], color="red", linestyle=":", label="fitted | hold-out records")
+
+
+def _good(series: TrackSeries) -> np.ndarray:
+    """The tracker poses kept (not flagged bad), as a boolean mask over the records."""
+    good = np.asarray(series.good, dtype=bool)
+    return good if good.shape == (series.tracker.shape[0],) else np.ones(series.tracker.shape[0], bool)
+
+
+def _jumps(ax: Axes, ax_err: Axes, series: TrackSeries, good: np.ndarray) -> None:
+    """The tracker poses left out, de-emphasised: a small tick on the track where each happened
+    (at the last kept pose before it; the bad pose itself may lie a metre away) and a tick on the
+    error panel's time axis, one legend entry for them all."""
+    jumps = [k for k, kind in series.faults if kind == "tracker_jump"]
+    if not jumps:
+        return
+    kept = np.flatnonzero(good)
+    at = [int(kept[max(np.searchsorted(kept, k) - 1, 0)]) for k in jumps] if kept.size else jumps
+    tr, t = series.tracker, series.time_s - series.time_s[0]
+    label = f"{len(jumps)} tracker poses left out (jumps), where they happened"
+    ax.plot(tr[at, 0], tr[at, 1], marker="|", markersize=6, color="magenta", alpha=0.7, linestyle="none",
+            label=label)  # fmt: skip
+    rug = blended_transform_factory(ax_err.transData, ax_err.transAxes)
+    ax_err.plot(t[jumps], np.full(len(jumps), 0.015), marker="|", markersize=8, color="magenta",
+                alpha=0.7, linestyle="none", transform=rug, label=label)  # fmt: skip
 
 
 def _levelled(series: TrackSeries, restarted: Track | None) -> tuple[TrackSeries, Track | None]:
@@ -306,6 +334,9 @@ def convergence_png(series: ConvergenceSeries, title: str) -> bytes:
         _excess_axes(bottom, series, names)
     else:
         bottom.text(0.5, 0.5, "no iteration history recorded", ha="center", transform=bottom.transAxes)
+    for ax in fig.axes:  # a title wider than its panel is wrapped, never clipped
+        wide = 6.5 * cols if ax is bottom else 6.5
+        ax.set_title(textwrap.fill(ax.get_title(), int(_TITLE_CHARS_PER_INCH * wide)))
     fig.suptitle(title)
     return figure_png(fig)
 
@@ -314,6 +345,17 @@ def convergence_png(series: ConvergenceSeries, title: str) -> bytes:
 
 
 # --- model check -----------------------------------------------------------------------------
+
+
+def _model_check_tracks(series: ModelCheckSeries) -> list[tuple[np.ndarray, str, dict[str, Any]]]:
+    """Our tracks the model check compares with the vendor's: as the fit integrates, and (where
+    computed) first-order, as a robot's own odometry usually integrates."""
+    out: list[tuple[np.ndarray, str, dict[str, Any]]] = [
+        (series.ours, f"ours ({series.integration} integration)", {"color": "tab:blue"})
+    ]
+    if series.first_order is not None and series.integration != "euler":
+        out.append((series.first_order, "ours, first-order like the vendor", {"color": "tab:green"}))
+    return out
 
 
 def model_check_png(series: ModelCheckSeries, title: str) -> bytes:
@@ -346,18 +388,23 @@ def model_check_png(series: ModelCheckSeries, title: str) -> bytes:
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="best")
     t = series.time_s - series.time_s[0]
-    dpos = np.linalg.norm(o[:, :2] - v[:, :2], axis=1)
-    drot = wrap_angle(o[:, 2] - v[:, 2])
     driven = float(np.sum(np.linalg.norm(np.diff(v[:, :2], axis=0), axis=1)))
-    ax_pos.plot(t, dpos, color="tab:blue")
+    said = []
+    for P, words, style in _model_check_tracks(series):
+        dpos = np.linalg.norm(P[:, :2] - v[:, :2], axis=1)
+        drot = wrap_angle(P[:, 2] - v[:, 2])
+        ax_pos.plot(t, dpos, label=f"{words}: max {dpos.max():.3g} m, final {dpos[-1]:.3g} m", **style)
+        ax_rot.plot(t, drot, label=f"{words}: max |Δθ| {np.abs(drot).max():.3g} rad", **style)
+        said.append(float(dpos.max()))
     ax_pos.set_ylabel("position difference [m]")
-    ax_pos.set_title(
-        f"ours − vendor over {driven:.1f} m driven: position max {dpos.max():.3g} m, final {dpos[-1]:.3g} m",
-        fontsize=10,
-    )
-    ax_rot.plot(t, drot, color="tab:blue")
+    why = ""
+    if len(said) == 2 and said[1] < 0.5 * said[0]:
+        why = "\nintegrated first-order as the vendor does, ours agrees: the rest is integration error"
+    ax_pos.set_title(f"ours − vendor over {driven:.1f} m driven{why}", fontsize=10)
+    ax_pos.legend(fontsize=8, loc="upper left")
     ax_rot.set_ylabel("heading difference [rad]")
-    ax_rot.set_title(f"heading max |Δθ| {np.abs(drot).max():.3g} rad", fontsize=10)
+    ax_rot.set_title("heading", fontsize=10)
+    ax_rot.legend(fontsize=8, loc="upper left")
     ax_rot.set_xlabel("time since the log's first record [s]")
     for a in (ax_pos, ax_rot):
         a.yaxis.set_major_formatter(_PLAIN)  # no offset/multiplier text that is easy to miss
