@@ -144,11 +144,6 @@ class PlanarPose(SensorDefaults):
         """The model's planar closed form: the wheels, and the mount by hand-eye."""
         return SensorStart(model.initial_guess(U, z[:3], base_motion))
 
-    def fit_windows(
-        self, start: SensorStart, z: np.ndarray, base_turn: np.ndarray
-    ) -> tuple[np.ndarray, dict[str, int]]:
-        return np.ones(z.shape[1], dtype=bool), {}
-
     # --- the write-back ------------------------------------------------------------------------
 
     def canonical(
