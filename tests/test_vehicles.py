@@ -14,8 +14,11 @@ from nlp_calib.core.errors import OptionsError
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.pipeline.analyse import Wanted
+from nlp_calib.pipeline.preflight import preflight
+from nlp_calib.results.layout import KNOWN
+from nlp_calib.results.preflight import NOT_DETERMINED, NOT_ENOUGH
 from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
-from nlp_calib.simulation.vehicles import SkidSpinOptions, simulate_skid_spins
+from nlp_calib.simulation.vehicles import HighwayOptions, SkidSpinOptions, simulate_highway, simulate_skid_spins
 
 JOINT_NAMES = {"k_left": "left_wheel_radius", "k_right": "right_wheel_radius", "baseline": "wheel_separation"}
 SKID = {
@@ -106,3 +109,77 @@ def test_a_skid_steer_spinning_past_pi_ends_right_with_covariances_its_windows_s
     grown = np.diff(odo.covariance[:, 2, 2])[~bad]
     ratio = np.sqrt(np.mean(error**2) / np.mean(grown))
     assert 0.5 < ratio < 2.0, ratio
+
+
+# --- a car on a highway ------------------------------------------------------------------------
+
+#: The highway car's truth in the joint form's names (k_traction: the wheels' radius in m per rad).
+CAR_NAMES = {"k_traction": "traction_wheels_radius", "rear_track": "traction_track_width"}
+#: What a straight kilometre cannot determine, given as measured.
+CAR_KNOWN = ("k_steer", "wheelbase", "rear_track", "sensor_x", "sensor_y")
+
+
+def _car_scenario(tmp_path: Path, seed: int, known: tuple[str, ...] = ()) -> tuple[Any, HighwayOptions]:
+    opts = HighwayOptions(seed=seed)
+    joints, poses, _ = simulate_highway(opts).write(tmp_path / "car")
+    truth = {CAR_NAMES.get(n, n): v for n, v in opts.truth.items()}
+    wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
+    sc = {
+        "model": "car_like",
+        "initial_guess": "auto",
+        "solvers": ["gauss_newton"],
+        "dataset": {"joints": str(joints), "poses": str(poses), "form": "speeds", "encoders": dict(zip(wheels, wheels))},
+        "known": {CAR_NAMES.get(n, n): truth[CAR_NAMES.get(n, n)] for n in known},
+    }
+    return scenario_from_mapping(sc, "car", tmp_path), opts
+
+
+def test_the_highway_simulator_drives_a_kilometre_barely_steering_and_checks_its_options() -> None:
+    sim = simulate_highway(HighwayOptions(seed=4))
+    truth = sim.truth_dict()
+    assert 700.0 < truth["distance_m"] < 1300.0
+    speed = np.mean(sim.joint_values[:, :2], axis=1) * sim.options.truth["k_traction"]
+    assert 7.5 < np.min(speed) and np.max(speed) < 20.5
+    heading = np.unwrap(sim.base_poses[:, 2])
+    assert abs(np.degrees(heading[-1] - heading[0]) - 1.0) < 0.2
+    assert np.max(np.abs(sim.joint_values[:, -1])) < np.radians(0.35)  # the steering joint (gain 1)
+    assert sim.joint_values.shape[1] == 5 and 1.0 / np.median(np.diff(sim.joint_time_s)) == pytest.approx(90.0)
+    assert 1.0 / np.median(np.diff(sim.pose_time_s)) == pytest.approx(20.0)
+    with pytest.raises(OptionsError, match="min_speed"):
+        HighwayOptions(min_speed=25.0)
+    with pytest.raises(OptionsError, match="unknown parameter"):
+        HighwayOptions(truth={"turn_slip": 0.1})
+    with pytest.raises(OptionsError, match="steer_max"):
+        HighwayOptions(steer_max=1.0)
+
+
+def test_a_highway_car_is_refused_what_a_straight_kilometre_cannot_determine(tmp_path: Path) -> None:
+    sc, _ = _car_scenario(tmp_path, seed=1)
+    report = preflight(sc)
+    assert report.verdict == NOT_ENOUGH
+    refused = set(report.named(NOT_DETERMINED))
+    assert {"k_steer", "wheelbase", "sensor_x", "sensor_y"} <= refused
+    assert "traction_track_width" in refused  # held: no turn is tight enough
+    # Run anyway: NOT DETERMINED, and nothing handed off.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    assert run.verdict.level == UNDETERMINED
+    assert run.handoff_solver() is None
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_highway_car_given_what_it_cannot_determine_finds_its_wheel_scale_and_yaw(tmp_path: Path, seed: int) -> None:
+    sc, opts = _car_scenario(tmp_path, seed, CAR_KNOWN)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    estimate, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
+    truth = {CAR_NAMES.get(n, n): v for n, v in opts.truth.items()}
+    assert run.verdict.level in (GOOD, CAVEATS), run.verdict
+    for name in ("traction_wheels_radius", "sensor_theta", "steer_offset"):
+        assert abs(estimate[name] - truth[name]) < 3.0 * std[name], (name, estimate[name], std[name])
+    # Known under known:, never calibrated.
+    for name in ("k_steer", "wheelbase", "traction_track_width", "sensor_x", "sensor_y"):
+        assert estimate[name] == truth[name]
+        assert run.scenario.layout.param(name).status == KNOWN
