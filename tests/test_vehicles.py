@@ -3,6 +3,7 @@ its encoders updating at 4 Hz and slipping on pivots, against a scan matcher's i
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from pathlib import Path
 from typing import Any
@@ -10,15 +11,24 @@ from typing import Any
 import numpy as np
 import pytest
 
+from nlp_calib.analysis.precision import HEADING_BUDGET
+from nlp_calib.analysis.verdict import verdict
 from nlp_calib.core.errors import OptionsError
+from nlp_calib.models import MODELS
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.pipeline.analyse import Wanted
 from nlp_calib.pipeline.preflight import preflight
+from nlp_calib.results.checks import NominalCheck
 from nlp_calib.results.layout import KNOWN
 from nlp_calib.results.preflight import NOT_DETERMINED, NOT_ENOUGH
 from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
-from nlp_calib.simulation.vehicles import HighwayOptions, SkidSpinOptions, simulate_highway, simulate_skid_spins
+from nlp_calib.simulation.vehicles import (
+    HighwayOptions,
+    SkidSpinOptions,
+    simulate_highway,
+    simulate_skid_spins,
+)
 
 JOINT_NAMES = {"k_left": "left_wheel_radius", "k_right": "right_wheel_radius", "baseline": "wheel_separation"}
 SKID = {
@@ -128,7 +138,12 @@ def _car_scenario(tmp_path: Path, seed: int, known: tuple[str, ...] = ()) -> tup
         "model": "car_like",
         "initial_guess": "auto",
         "solvers": ["gauss_newton"],
-        "dataset": {"joints": str(joints), "poses": str(poses), "form": "speeds", "encoders": dict(zip(wheels, wheels))},
+        "dataset": {
+            "joints": str(joints),
+            "poses": str(poses),
+            "form": "speeds",
+            "encoders": dict(zip(wheels, wheels)),
+        },
         "known": {CAR_NAMES.get(n, n): truth[CAR_NAMES.get(n, n)] for n in known},
     }
     return scenario_from_mapping(sc, "car", tmp_path), opts
@@ -143,7 +158,9 @@ def test_the_highway_simulator_drives_a_kilometre_barely_steering_and_checks_its
     heading = np.unwrap(sim.base_poses[:, 2])
     assert abs(np.degrees(heading[-1] - heading[0]) - 1.0) < 0.2
     assert np.max(np.abs(sim.joint_values[:, -1])) < np.radians(0.35)  # the steering joint (gain 1)
-    assert sim.joint_values.shape[1] == 5 and 1.0 / np.median(np.diff(sim.joint_time_s)) == pytest.approx(90.0)
+    assert sim.joint_values.shape[1] == 5 and 1.0 / np.median(np.diff(sim.joint_time_s)) == pytest.approx(
+        90.0
+    )
     assert 1.0 / np.median(np.diff(sim.pose_time_s)) == pytest.approx(20.0)
     with pytest.raises(OptionsError, match="min_speed"):
         HighwayOptions(min_speed=25.0)
@@ -169,7 +186,9 @@ def test_a_highway_car_is_refused_what_a_straight_kilometre_cannot_determine(tmp
 
 
 @pytest.mark.parametrize("seed", [1, 2])
-def test_a_highway_car_given_what_it_cannot_determine_finds_its_wheel_scale_and_yaw(tmp_path: Path, seed: int) -> None:
+def test_a_highway_car_given_what_it_cannot_determine_finds_its_wheel_scale_and_yaw(
+    tmp_path: Path, seed: int
+) -> None:
     sc, opts = _car_scenario(tmp_path, seed, CAR_KNOWN)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -183,3 +202,33 @@ def test_a_highway_car_given_what_it_cannot_determine_finds_its_wheel_scale_and_
     for name in ("k_steer", "wheelbase", "traction_track_width", "sensor_x", "sensor_y"):
         assert estimate[name] == truth[name]
         assert run.scenario.layout.param(name).status == KNOWN
+
+
+def test_a_cars_steering_offset_must_resolve_what_turns_its_heading_at_its_own_speed(tmp_path: Path) -> None:
+    sc, opts = _car_scenario(tmp_path, 1, CAR_KNOWN)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    layout = run.scenario.layout
+    # An offset δ turns the heading by δ·v/L a second; the budget is the reference robot's 2.5 mrad/s.
+    speed = run.reports["gauss_newton"].metrics.distance_m / run.log.duration_s
+    wheelbase = opts.truth["wheelbase"]
+    assert layout.param("steer_offset").precision == (
+        "absolute",
+        pytest.approx(HEADING_BUDGET * wheelbase / speed, rel=0.1),
+    )
+    # What errs in proportion to the drive (a wheel scale, the known values) and the mount keep theirs.
+    assert layout.param("traction_wheels_radius").precision == ("relative", 0.01)
+    assert layout.param("sensor_theta").precision == ("absolute", 0.005)
+    # A calibration that dead-reckons farther from the tracker than the nominal robot is never GOOD.
+    ours = run.reports["gauss_newton"].metrics
+    better = dataclasses.replace(
+        ours, segment_ate=dataclasses.replace(ours.segment_ate, mean=0.5 * ours.segment_ate.mean)
+    )
+    nominal = NominalCheck({"k_steer": 1.0}, "a test", np.zeros(0), better)
+    behind = dataclasses.replace(run, checks=dataclasses.replace(run.checks, nominal=nominal))
+    level = verdict(behind, MODELS["car_like"]).level
+    assert level != GOOD and any(
+        "no closer to the tracker than the nominal robot" in r
+        for r in verdict(behind, MODELS["car_like"]).reasons
+    )
