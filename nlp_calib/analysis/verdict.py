@@ -50,6 +50,7 @@ from nlp_calib.results.checks import (
     LagEstimate,
     WeakDirection,
 )
+from nlp_calib.results.faults import PIVOT_SLIP
 from nlp_calib.results.layout import CLOCK, Layout
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
 from nlp_calib.sensors import Sensor, sensor_for
@@ -174,6 +175,12 @@ def _checks(run: CalibrationRun) -> list[str]:
             out.append(f"encoder faults not checked ({rep.unchecked})")
         elif rep.faults and findings.handling == "keep":
             out.append(f"{len(rep.faults)} faults kept in the fit (faults.handling: keep)")
+        elif slipped := sum(f.kind == PIVOT_SLIP for f in rep.faults):
+            out.append(
+                f"{slipped} increments over pivots the ground slipped on were left out: slip too small to "
+                "find stays in the fit, and what the pivots determine (how the base skids as it turns) may "
+                "be biased by it beyond its σ; check it on a drive with fewer pivots, or slower ones"
+            )
     return out
 
 
