@@ -20,7 +20,7 @@ from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.pipeline.analyse import Wanted
 from nlp_calib.pipeline.preflight import preflight
 from nlp_calib.results.checks import NominalCheck
-from nlp_calib.results.layout import KNOWN
+from nlp_calib.results.layout import HELD, KNOWN
 from nlp_calib.results.preflight import NOT_DETERMINED, NOT_ENOUGH
 from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
 from nlp_calib.simulation.vehicles import (
@@ -240,3 +240,18 @@ def test_a_cars_steering_offset_must_resolve_what_turns_its_heading_at_its_own_s
         "no closer to the tracker than the nominal robot" in r
         for r in verdict(behind, MODELS["car_like"]).reasons
     )
+
+
+def test_a_track_held_at_its_start_is_never_blamed_on_the_encoders(tmp_path: Path) -> None:
+    """No tight turn holds the track at its start; a start outside what a car can have is the
+    start's, not a sign of wrong encoders (it was NOT DETERMINED, "are the encoders right?", exit 1)."""
+    sc, opts = _car_scenario(tmp_path, 1, ("k_steer", "wheelbase", "sensor_x", "sensor_y"))
+    guess = {CAR_NAMES.get(n, n): v for n, v in opts.truth.items()} | {"traction_track_width": 7.061}
+    sc = dataclasses.replace(sc, parameters=dataclasses.replace(sc.parameters, initial_guess=guess))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    assert run.scenario.layout.param("traction_track_width").status == HELD
+    assert not any("came out" in r for r in run.verdict.reasons), run.verdict
+    assert run.verdict.level in (CAVEATS, UNDETERMINED)
+    assert any("traction_track_width held at its initial value" in r for r in run.verdict.reasons)

@@ -51,7 +51,7 @@ from nlp_calib.results.checks import (
     WeakDirection,
 )
 from nlp_calib.results.faults import PIVOT_SLIP
-from nlp_calib.results.layout import CLOCK, Layout
+from nlp_calib.results.layout import CLOCK, HELD, KNOWN, Layout
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
 from nlp_calib.sensors import Sensor, sensor_for
 from nlp_calib.sensors.mount import length_params
@@ -233,9 +233,12 @@ def implausible(run: CalibrationRun, solver: str, model: KinematicModel) -> str:
     if mirror := _sensor(run).implausible(params, None if _fitted_start(run) else run.initial):
         return mirror
     std = run.std(solver)
+    # A held or given value is no estimate of the data's: the encoders are not what put it there.
+    layout = run.scenario.layout
+    given = {*layout.status(HELD), *layout.status(KNOWN)}
     for name in model.kinematic_params:
         lo, hi = model.physical_ranges.get(name, (-np.inf, np.inf))
-        if name not in params or lo <= params[name] <= hi:
+        if name not in params or name in given or lo <= params[name] <= hi:
             continue
         # Outside the range but known so loosely that the range is within reach: not determined,
         # which the rules after this one say (with the hand-off they allow).

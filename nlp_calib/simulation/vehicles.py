@@ -88,7 +88,9 @@ class SkidSpinOptions:
             raise OptionsError(problem)
 
 
-def _checked(opts: Any, limits: Mapping[str, Range], defaults: Mapping[str, float], robot: str) -> Mapping[str, float]:
+def _checked(
+    opts: Any, limits: Mapping[str, Range], defaults: Mapping[str, float], robot: str
+) -> Mapping[str, float]:
     """Check ``opts``' fields against ``limits`` and its truth's names against ``defaults`` (the
     ``robot``'s); set its truth to ``defaults`` overridden by it, and return that."""
     for name, limit in limits.items():
@@ -329,7 +331,9 @@ def simulate_highway(opts: HighwayOptions) -> HighwaySimulation:
     values += rng.normal(0.0, [*[opts.wheel_noise] * 4, opts.steer_noise], values.shape)
     pose_t = np.arange(0.0, time_s[-1], 1.0 / opts.pose_rate_hz)
     mount = np.array([t["sensor_x"], t["sensor_y"], t["sensor_theta"]])
-    device = poses.compose(base[np.round(pose_t / FINE_S).astype(int)], np.broadcast_to(mount, (pose_t.size, 3)))
+    device = poses.compose(
+        base[np.round(pose_t / FINE_S).astype(int)], np.broadcast_to(mount, (pose_t.size, 3))
+    )
     device += rng.normal(0.0, [opts.pose_noise_xy, opts.pose_noise_xy, opts.pose_noise_theta], device.shape)
     return HighwaySimulation(
         joint_time_s=joint_t,
