@@ -14,8 +14,8 @@ import pytest
 from nlp_calib.analysis.precision import HEADING_BUDGET
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.core.errors import OptionsError
-from nlp_calib.models import MODELS
 from nlp_calib.core.numeric import wrap_angle
+from nlp_calib.models import MODELS
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.pipeline.analyse import Wanted
 from nlp_calib.pipeline.preflight import preflight
@@ -255,3 +255,14 @@ def test_a_track_held_at_its_start_is_never_blamed_on_the_encoders(tmp_path: Pat
     assert not any("came out" in r for r in run.verdict.reasons), run.verdict
     assert run.verdict.level in (CAVEATS, UNDETERMINED)
     assert any("traction_track_width held at its initial value" in r for r in run.verdict.reasons)
+
+
+def test_a_cars_wheel_speeds_read_as_positions_are_found_and_named(tmp_path: Path) -> None:
+    sc, _ = _car_scenario(tmp_path, 3)
+    entry = sc.data.logs[0]
+    entry = dataclasses.replace(entry, source=dataclasses.replace(entry.source, form="positions"))
+    as_positions = dataclasses.replace(sc, data=dataclasses.replace(sc.data, logs=(entry,)))
+    found = [u for u in preflight(as_positions).units if u.blocking]
+    assert [u.kind for u in found] == ["speeds"], found
+    assert "form: speeds" in found[0].words
+    assert not any(u.blocking for u in preflight(sc).units)

@@ -34,8 +34,8 @@ import numpy as np
 from nlp_calib.core import poses
 from nlp_calib.core.errors import OptionsError
 from nlp_calib.core.files import atomic_write_text
-from nlp_calib.core.ranges import Range
 from nlp_calib.core.poses3d import from_planar
+from nlp_calib.core.ranges import Range
 from nlp_calib.logs.joint_log import format_joint_csv
 from nlp_calib.logs.motions import format_motions
 from nlp_calib.logs.tum import format_tum
