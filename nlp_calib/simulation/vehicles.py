@@ -226,14 +226,15 @@ HIGHWAY_LIMITS: Mapping[str, Range] = {
     "pose_rate_hz": Range(0.5, 1000.0),
     "wheel_noise": Range(0.0, 10.0),
     "steer_noise": Range(0.0, 0.1),
-    "pose_noise_xy": Range(0.0, 5.0),
-    "pose_noise_theta": Range(0.0, 1.0),
 }
+#: The device's pose noise: position (m), heading (rad).
+POSE_NOISE = (Range(0.0, 5.0), Range(0.0, 1.0))
 
 
 @dataclass(frozen=True)
 class HighwayOptions:
-    """What to simulate (angles in rad, lengths in m, speeds in m/s, wheel speeds' noise in rad/s);
+    """What to simulate (angles in rad, lengths in m, speeds in m/s, wheel speeds' noise in rad/s,
+    the device's ``pose_noise`` as position and heading);
     ``truth`` overrides :data:`~nlp_calib.models.car_like.HIGHWAY_TRUTH` by name."""
 
     duration_s: float = 60.0
@@ -246,12 +247,14 @@ class HighwayOptions:
     pose_rate_hz: float = 20.0
     wheel_noise: float = 0.02
     steer_noise: float = 2e-4
-    pose_noise_xy: float = 0.02
-    pose_noise_theta: float = 0.002
+    pose_noise: tuple[float, float] = (0.02, 0.002)
     truth: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         _checked(self, HIGHWAY_LIMITS, HIGHWAY_TRUTH, "car")
+        for what, limit, value in zip(("position", "heading"), POSE_NOISE, self.pose_noise):
+            if (reason := limit.problem(value)) is not None:
+                raise OptionsError(f"pose_noise's {what} {reason}")
         if self.min_speed > self.max_speed:
             raise OptionsError(f"min_speed {self.min_speed:g} is above max_speed {self.max_speed:g}")
 
@@ -334,7 +337,7 @@ def simulate_highway(opts: HighwayOptions) -> HighwaySimulation:
     device = poses.compose(
         base[np.round(pose_t / FINE_S).astype(int)], np.broadcast_to(mount, (pose_t.size, 3))
     )
-    device += rng.normal(0.0, [opts.pose_noise_xy, opts.pose_noise_xy, opts.pose_noise_theta], device.shape)
+    device += rng.normal(0.0, [opts.pose_noise[0], *opts.pose_noise], device.shape)
     return HighwaySimulation(
         joint_time_s=joint_t,
         joint_names=HIGHWAY_JOINTS,
