@@ -51,6 +51,7 @@ from nlp_calib.results.faults import (
     ABSOLUTE_KINDS,
     MATCH_KINDS,
     PIVOT_RADIUS_M,
+    PIVOT_SLIP,
     TRACKER_KINDS,
     Fault,
     FaultReport,
@@ -231,7 +232,7 @@ def increment_faults(
                 "calibration leaves out, as it does every pivot the wheels disagree with"
             )
         size = (float(np.hypot(e[0], e[1])), float(e[2]), float(score[k]))
-        found.append(_match_fault(log, int(k), size, why, "pivot_slip" if pivot[k] else "bad_match"))
+        found.append(_match_fault(log, int(k), size, why, PIVOT_SLIP if pivot[k] else "bad_match"))
     return found
 
 

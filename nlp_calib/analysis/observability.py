@@ -118,6 +118,8 @@ def no_turning(fns: ProblemFunctions, names: tuple[str, ...], turning: float) ->
         return ""
     model = fns.model
     lever = [n for n in (*model.turning_params, *fns.sensor.turning) if n in names]
+    if not lever:  # every lever arm given: nothing a turn would determine is left (no empty list)
+        return ""
     what = ", ".join(lever) + (f" and {model.turning_note}" if model.turning_note else "")
     return (
         f"no turning: the sensor's heading spans only {turning:.2f} rad over the whole log, so "

@@ -37,6 +37,9 @@ MIN_RADIUS = 0.006
 #: A wheel whose radius is less than this share of the distance between two wheels is no robot's
 #: (wheels in rpm read as rad/s make it 9.5 times smaller: 2 % of the track for most robots).
 MIN_RADIUS_SHARE = 0.06
+#: A radian of the wheel joints moving the robot farther than this (m) is a wheel larger than any
+#: robot's: columns of wheel speeds read as positions (they barely change as the robot drives).
+MAX_RADIUS = 5.0
 #: A robot's wheel radius: a typical share of its track, and a typical size (m).
 TYPICAL_RADIUS_SHARE = 0.25
 TYPICAL_RADIUS = 0.1
@@ -138,6 +141,16 @@ def _wheel_degrees(log: Log, model: KinematicModel, xy: np.ndarray, heading: np.
     stream = log.joint_stream
     if stream is not None and set(counters) <= set(stream.integrated):
         return _speed_units(log, counters, radius, k, heading)
+    if radius > MAX_RADIUS:
+        return [
+            UnitFinding(
+                "speeds",
+                ", ".join(counters),
+                f"the wheel joints ({', '.join(counters)}) barely turn for the robot's travel: a radian of "
+                f"them moves it {radius:.3g} m, a wheel larger than any robot's: their columns look like "
+                "speeds (rad/s) read as positions; say so (form: speeds)",
+            )
+        ]
     if radius >= MIN_RADIUS:
         return []
     return [

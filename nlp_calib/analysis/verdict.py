@@ -22,7 +22,8 @@ The rules a reader can check:
   solvers that disagree, a parameter held at its initial value, forward and reverse driving that
   disagree, parameters that move between logs beyond their σ (a model limit), faults kept in the
   fit or not checked, or a fit that does worse on held-out data than the start computed from the
-  data itself (``initial_guess: auto``: that start is itself a fit, so this is a caveat);
+  data itself (``initial_guess: auto``: that start is itself a fit, so this is a caveat), or a
+  calibrated model that dead-reckons farther from the tracker than the nominal one (segment ATE);
 - **good**: none of these.
 
 A run of one log among several fitted together is judged on that log's own comparison with the
@@ -38,9 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nlp_calib.analysis.consistency import determined
 from nlp_calib.models import KinematicModel
-from nlp_calib.models.base import reference_scale
 from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.checks import (
     CAVEAT,
@@ -51,7 +50,8 @@ from nlp_calib.results.checks import (
     LagEstimate,
     WeakDirection,
 )
-from nlp_calib.results.layout import CLOCK, Layout
+from nlp_calib.results.faults import PIVOT_SLIP
+from nlp_calib.results.layout import CLOCK, HELD, KNOWN, Layout
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
 from nlp_calib.sensors import Sensor, sensor_for
 from nlp_calib.sensors.mount import length_params
@@ -74,20 +74,15 @@ def _weak(run: CalibrationRun) -> list[WeakDirection]:
 
 
 def _coarse(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[str, str]:
-    """Each parameter whose σ to believe exceeds WEAK times the precision needed, with why."""
-    rep = run.reports[solver]
-    out: dict[str, str] = {}
+    """Each parameter whose σ to believe exceeds WEAK times the precision its layout needs (the
+    vehicle's, :mod:`nlp_calib.analysis.precision`), with why."""
     std = run.std(solver)
-    names = tuple(std)
-    sd = np.array([std[n] for n in names])
-    values = np.array([rep.result.param_dict()[n] for n in names])
-    sensor = _sensor(run)
-    keys = run.scenario.layout.keys(names)
-    known = determined(model, keys, values, sd, sensor.reference)
-    for name, key, s, v, ok in zip(names, keys, sd, values, known):
-        if np.isfinite(s) and not ok:
-            ref = reference_scale(model, key, v, sensor.reference)
-            unit = run.scenario.units[name]
+    params = run.reports[solver].result.param_dict()
+    needed = run.scenario.layout.needed({n: params[n] for n in std})
+    out: dict[str, str] = {}
+    for name, s in std.items():
+        if np.isfinite(s) and not s <= WEAK * needed[name]:
+            unit, ref = run.scenario.units[name], needed[name]
             out[name] = f"{name} is known only to ±{s:.2g} {unit} (over {WEAK:g}× the {ref:.2g} needed)"
     return out
 
@@ -180,6 +175,12 @@ def _checks(run: CalibrationRun) -> list[str]:
             out.append(f"encoder faults not checked ({rep.unchecked})")
         elif rep.faults and findings.handling == "keep":
             out.append(f"{len(rep.faults)} faults kept in the fit (faults.handling: keep)")
+        elif slipped := sum(f.kind == PIVOT_SLIP for f in rep.faults):
+            out.append(
+                f"{slipped} increments over pivots the ground slipped on were left out: slip too small to "
+                "find stays in the fit, and what the pivots determine (how the base skids as it turns) may "
+                "be biased by it beyond its σ; check it on a drive with fewer pivots, or slower ones"
+            )
     return out
 
 
@@ -200,10 +201,21 @@ def caveats(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str
         if (d := run.relative_difference(solver, other)) > AGREE:
             out.append(f"{solver} and {other} disagree by {d:.1e} (relative)")
     out += _checks(run)
+    out += _behind_nominal(run, solver)
     start = run.checks.start
     if start is not None and _fitted_start(run) and start.outcome == "worse":
         out.append(f"no better than the data-driven start {start.detail()}")
     return out
+
+
+def _behind_nominal(run: CalibrationRun, solver: str) -> list[str]:
+    """That the calibrated model dead-reckons farther from the tracker than the nominal one (segment
+    ATE), in words: a calibration that makes the odometry worse is never good, whatever its σ."""
+    nominal, ours = run.checks.nominal, run.reports[solver].metrics
+    if nominal is None:
+        return []
+    base, mine = nominal.metrics.segment_ate.mean, ours.segment_ate.mean
+    return [nominal.gain(ours)] if np.isfinite(base) and np.isfinite(mine) and mine > base else []
 
 
 def _fitted_start(run: CalibrationRun) -> bool:
@@ -221,9 +233,12 @@ def implausible(run: CalibrationRun, solver: str, model: KinematicModel) -> str:
     if mirror := _sensor(run).implausible(params, None if _fitted_start(run) else run.initial):
         return mirror
     std = run.std(solver)
+    # A held or given value is no estimate of the data's: the encoders are not what put it there.
+    layout = run.scenario.layout
+    given = {*layout.status(HELD), *layout.status(KNOWN)}
     for name in model.kinematic_params:
         lo, hi = model.physical_ranges.get(name, (-np.inf, np.inf))
-        if name not in params or lo <= params[name] <= hi:
+        if name not in params or name in given or lo <= params[name] <= hi:
             continue
         # Outside the range but known so loosely that the range is within reach: not determined,
         # which the rules after this one say (with the hand-off they allow).

@@ -78,6 +78,35 @@ def rear_travel(left: ca.SX, right: ca.SX, curvature: ca.SX, track: ca.SX) -> ca
     return 0.5 * (right / (1.0 + half) + left / (1.0 - half))
 
 
+#: The highway simulator's car (:mod:`nlp_calib.simulation.vehicles`, in joint units: the wheels'
+#: rolling radius in m per rad): a 2.8 m wheelbase and 1.6 m track, its steering joint reading the
+#: road wheels' angle, a windshield device 1.9 m ahead of the rear axle turned 0.92°.
+HIGHWAY_TRUTH: Mapping[str, float] = MappingProxyType(
+    {
+        "k_steer": 1.0,
+        "steer_offset": 0.0004,
+        "k_traction": 0.3185,
+        "wheelbase": 2.8,
+        "rear_track": 1.6,
+        "sensor_x": 1.9,
+        "sensor_y": -0.25,
+        "sensor_theta": 0.016,
+    }
+)
+
+
+def highway_wheels(truth: Mapping[str, float], speed: np.ndarray, curvature: np.ndarray) -> np.ndarray:
+    """Each wheel's speed ``(n, 4)`` (rad/s: rear left, rear right, front left, front right) and the
+    steering joint's angle ``(n,)`` as the last column, of the rear-axle midpoint driving at
+    ``speed`` (m/s) on ``curvature`` (1/m): the rear wheels at their distance from the turn's centre,
+    the front ones (the rear's track apart) at theirs, the steering joint at ``(φ − offset)/k_steer``."""
+    half = 0.5 * curvature * truth["rear_track"]
+    ahead = curvature * truth["wheelbase"]
+    wheels = [1.0 - half, 1.0 + half, np.hypot(1.0 - half, ahead), np.hypot(1.0 + half, ahead)]
+    steering = (np.arctan(ahead) - truth["steer_offset"]) / truth["k_steer"]
+    return np.stack([*(speed * w / truth["k_traction"] for w in wheels), steering], axis=1)
+
+
 class CarLikeDrive:
     """The car drives its rear-axle midpoint at ``speed`` and steers to the bicycle angle ``turn``
     (rad); encoders: the steering (absolute over ``s_max`` ticks a turn) and each rear wheel's

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.analysis.consistency import compare_logs, determined
+from nlp_calib.analysis.precision import drive_precision
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, reference_scales
@@ -415,16 +416,28 @@ def _assemble(
     logs = tuple((p.prepared.scenario.name, p.prepared.log.header) for p in parts)
     for i, part in enumerate(parts):
         sc = part.prepared.scenario
-        info = fit_info(sc, fitting.fns)
         scorer = log_scorer(
             fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window, i
         )
+        info = _vehicle_precision(fit_info(sc, fitting.fns), scorer, part, fitting.problem.start.initial)
         view = LogView(part.prepared, part.windows, scorer, part.screening.findings, i)
         figures = analyse_log(fitting, results, view, wanted, info.labels, fitted.nominal_params)
         stage = (part.prepared, part.windows, part.alignment, part.screening.findings)
         views = MountViews(fitting.fns, i, logs)
         runs.append(assemble_run(info, stage, fitting.problem.start, results, fitted, figures, notes, views))
     return runs
+
+
+def _vehicle_precision(
+    info: ScenarioInfo, scorer: Scorer, part: LogSetup, start: Mapping[str, float]
+) -> ScenarioInfo:
+    """``info`` with the precision its layout needs on this log's drive (at the start's values)."""
+    fns = scorer.fns
+    view = scorer.viewed(np.array([start[n] for n in fns.names]))
+    t = part.windows.selected.time_s
+    duration = float(t[-1] - t[0]) if t.size else 0.0
+    layout = drive_precision(info.layout, fns, view, scorer.inputs, duration)
+    return dataclasses.replace(info, layout=layout)
 
 
 def _run(

@@ -19,7 +19,9 @@ TRACKER_KINDS = ("tracker_jump",)
 #: with it far beyond the increments' scatter; ``pivot_slip``: such an increment over which the
 #: base pivoted (turned more than it travelled, see ``PIVOT_RADIUS_M``), where the ground lets a
 #: skid-steer slip as no calibration holds. Its own window is left out, no other.
-MATCH_KINDS = ("bad_match", "pivot_slip")
+#: An increment over a pivot the wheels disagree with (the ground slipped).
+PIVOT_SLIP = "pivot_slip"
+MATCH_KINDS = ("bad_match", PIVOT_SLIP)
 #: An increment whose turn radius (its travel over its turn, as the wheels give them at the fit)
 #: is under this (m) is a pivot turn.
 PIVOT_RADIUS_M = 0.5

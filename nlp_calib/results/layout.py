@@ -184,6 +184,10 @@ class Layout:
 
     # --- status --------------------------------------------------------------------------------
 
+    def needed(self, values: Mapping[str, float]) -> dict[str, float]:
+        """The precision each of ``values``' parameters needs at its value (its unit)."""
+        return {n: self.param(n).needed(v) for n, v in values.items()}
+
     def with_status(self, status: Mapping[str, str]) -> Layout:
         """The layout with the statuses ``status`` (by name) set."""
         ps = tuple(replace(p, status=status.get(p.name, p.status)) for p in self.parameters)

@@ -1,4 +1,5 @@
-"""Real vehicles' drives, with known truth: a skid-steer spinning fast on rough ground.
+"""Real vehicles' drives, with known truth: a skid-steer spinning fast on rough ground, a car on a
+highway.
 
 :func:`simulate_skid_spins` drives a skid-steer base (the skid-steer model in joint units: each side's
 rolling radius in m per rad, the effective track at a slow turn and its growth with the turn
@@ -10,6 +11,14 @@ positions update only at ``encoder_update_hz`` (a slow wheel driver: each messag
 last update); a lidar matcher reports the sensor's motion over each ``motion_span_s`` with white
 noise, its heading wrapped to (−π, π] as a matcher gives it. The simulator integrates the base on
 a fine grid, independently of the symbolic model. Deterministic for a given seed.
+
+:func:`simulate_highway` drives a car (the car-like model in joint units) at 8 to 20 m/s for a
+minute, about a kilometre, its road wheels steered within ±``steer_max`` by a driver's small
+corrections and its heading changing by ``heading_change`` in all; the four wheels' speeds (rad/s)
+and the steering joint's angle are logged at ``wheel_rate_hz`` (a car's CAN bus), the pose of a
+windshield device (GNSS/vision) at ``pose_rate_hz`` with white noise. What such a drive cannot
+determine (the wheelbase, the steering gain, the track, the device's position) is the class it
+stands for.
 """
 
 from __future__ import annotations
@@ -25,9 +34,12 @@ import numpy as np
 from nlp_calib.core import poses
 from nlp_calib.core.errors import OptionsError
 from nlp_calib.core.files import atomic_write_text
+from nlp_calib.core.poses3d import from_planar
 from nlp_calib.core.ranges import Range
 from nlp_calib.logs.joint_log import format_joint_csv
 from nlp_calib.logs.motions import format_motions
+from nlp_calib.logs.tum import format_tum
+from nlp_calib.models.car_like import HIGHWAY_TRUTH, highway_wheels
 from nlp_calib.models.drives import integrate_base
 from nlp_calib.models.skid_steer import SPIN_TRUTH as SKID_TRUTH
 from nlp_calib.models.skid_steer import spin_problem, spin_wheels
@@ -71,18 +83,25 @@ class SkidSpinOptions:
     truth: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for name, limit in LIMITS.items():
-            if (reason := limit.problem(getattr(self, name))) is not None:
-                raise OptionsError(f"{name} {reason}")
-        unknown = sorted(set(self.truth) - set(SKID_TRUTH))
-        if unknown:
-            raise OptionsError(
-                f"unknown parameter(s) {unknown}; the skid-steer's are {', '.join(SKID_TRUTH)}"
-            )
-        truth = {**SKID_TRUTH, **self.truth}
+        truth = _checked(self, LIMITS, SKID_TRUTH, "skid-steer")
         if problem := spin_problem(truth, self.spin_rate):
             raise OptionsError(problem)
-        object.__setattr__(self, "truth", MappingProxyType(truth))
+
+
+def _checked(
+    opts: Any, limits: Mapping[str, Range], defaults: Mapping[str, float], robot: str
+) -> Mapping[str, float]:
+    """Check ``opts``' fields against ``limits`` and its truth's names against ``defaults`` (the
+    ``robot``'s); set its truth to ``defaults`` overridden by it, and return that."""
+    for name, limit in limits.items():
+        if (reason := limit.problem(getattr(opts, name))) is not None:
+            raise OptionsError(f"{name} {reason}")
+    unknown = sorted(set(opts.truth) - set(defaults))
+    if unknown:
+        raise OptionsError(f"unknown parameter(s) {unknown}; the {robot}'s are {', '.join(defaults)}")
+    truth = MappingProxyType({**defaults, **opts.truth})
+    object.__setattr__(opts, "truth", truth)
+    return truth
 
 
 @dataclass(frozen=True)
@@ -191,5 +210,140 @@ def simulate_skid_spins(opts: SkidSpinOptions) -> VehicleSimulation:
         motions=z,
         slipped=spoiled,
         base_poses=base[np.round(joint_t / FINE_S).astype(int)],
+        options=opts,
+    )
+
+
+HIGHWAY_JOINTS = ("rear_left_wheel", "rear_right_wheel", "front_left_wheel", "front_right_wheel", "steering")
+HIGHWAY_LIMITS: Mapping[str, Range] = {
+    "duration_s": Range(10.0, 3600.0),
+    "seed": Range(0, 2**32 - 1, integer=True),
+    "min_speed": Range(0.0, 70.0, lo_open=True),
+    "max_speed": Range(0.0, 70.0, lo_open=True),
+    "steer_max": Range(0.0, 0.5, lo_open=True),
+    "heading_change": Range(-1.0, 1.0),
+    "wheel_rate_hz": Range(1.0, 1000.0),
+    "pose_rate_hz": Range(0.5, 1000.0),
+    "wheel_noise": Range(0.0, 10.0),
+    "steer_noise": Range(0.0, 0.1),
+}
+#: The device's pose noise: position (m), heading (rad).
+POSE_NOISE = (Range(0.0, 5.0), Range(0.0, 1.0))
+
+
+@dataclass(frozen=True)
+class HighwayOptions:
+    """What to simulate (angles in rad, lengths in m, speeds in m/s, wheel speeds' noise in rad/s,
+    the device's ``pose_noise`` as position and heading);
+    ``truth`` overrides :data:`~nlp_calib.models.car_like.HIGHWAY_TRUTH` by name."""
+
+    duration_s: float = 60.0
+    seed: int = 0
+    min_speed: float = 8.0
+    max_speed: float = 20.0
+    steer_max: float = float(np.radians(0.3))
+    heading_change: float = float(np.radians(1.0))
+    wheel_rate_hz: float = 90.0
+    pose_rate_hz: float = 20.0
+    wheel_noise: float = 0.02
+    steer_noise: float = 2e-4
+    pose_noise: tuple[float, float] = (0.02, 0.002)
+    truth: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        _checked(self, HIGHWAY_LIMITS, HIGHWAY_TRUTH, "car")
+        for what, limit, value in zip(("position", "heading"), POSE_NOISE, self.pose_noise):
+            if (reason := limit.problem(value)) is not None:
+                raise OptionsError(f"pose_noise's {what} {reason}")
+        if self.min_speed > self.max_speed:
+            raise OptionsError(f"min_speed {self.min_speed:g} is above max_speed {self.max_speed:g}")
+
+
+@dataclass(frozen=True)
+class HighwaySimulation:
+    """A simulated car's drive: the joints' stamps, names and values (wheel speeds in rad/s, the
+    steering joint's angle in rad), the device's poses ``(m, 3)`` at ``pose_time_s``, the true base
+    poses at the joints' stamps and the options."""
+
+    joint_time_s: np.ndarray
+    joint_names: tuple[str, ...]
+    joint_values: np.ndarray
+    pose_time_s: np.ndarray
+    poses: np.ndarray
+    base_poses: np.ndarray
+    options: HighwayOptions
+
+    def joints_csv(self) -> str:
+        return format_joint_csv(_ns(self.joint_time_s), self.joint_names, self.joint_values)
+
+    def poses_tum(self, height: float = 1.3) -> str:
+        """The device's poses as TUM lines (at ``height`` above the ground)."""
+        planar = from_planar(self.poses)
+        planar[:, 2] = height
+        return format_tum(_ns(self.pose_time_s), planar)
+
+    def truth_dict(self) -> dict[str, Any]:
+        heading = np.unwrap(self.base_poses[:, 2])
+        return {
+            "params": dict(self.options.truth),
+            "distance_m": float(np.sum(np.hypot(*np.diff(self.base_poses[:, :2], axis=0).T))),
+            "heading_span_rad": float(np.ptp(heading)),
+        }
+
+    def write(self, stem: str | Path) -> tuple[Path, Path, Path]:
+        """``<stem>.csv`` (joints), ``<stem>.tum`` (the device's poses) and ``<stem>.truth.json``."""
+        import json
+
+        stem = Path(stem)
+        paths = (stem.with_suffix(".csv"), stem.with_suffix(".tum"), stem.with_suffix(".truth.json"))
+        atomic_write_text(paths[0], self.joints_csv())
+        atomic_write_text(paths[1], self.poses_tum())
+        atomic_write_text(paths[2], json.dumps(self.truth_dict(), indent=2) + "\n")
+        return paths
+
+
+def _smooth(rng: np.random.Generator, t: np.ndarray, periods: tuple[float, float], k: int = 6) -> np.ndarray:
+    """A smooth random signal on ``t`` of ``k`` sinusoids with periods within ``periods`` (s), its
+    largest magnitude 1."""
+    out = np.zeros_like(t)
+    for _ in range(k):
+        period = rng.uniform(*periods)
+        out += rng.uniform(0.3, 1.0) * np.sin(2 * np.pi * t / period + rng.uniform(0, 2 * np.pi))
+    return out / np.max(np.abs(out))
+
+
+def simulate_highway(opts: HighwayOptions) -> HighwaySimulation:
+    """The drive of the module docstring."""
+    rng = np.random.default_rng(opts.seed)
+    t = opts.truth
+    n = int(opts.duration_s / FINE_S)
+    time_s = np.arange(n) * FINE_S
+    mid, half = 0.5 * (opts.max_speed + opts.min_speed), 0.5 * (opts.max_speed - opts.min_speed)
+    speed = mid + half * _smooth(rng, time_s, (20.0, 120.0))
+    # A driver's corrections (periods of 1.5 to 4 s) within 80 % of the limit, and a steady angle
+    # that turns the heading by heading_change in all.
+    wobble = 0.8 * opts.steer_max * _smooth(rng, time_s, (1.5, 4.0))
+    ds = speed * FINE_S
+    steady = (opts.heading_change * t["wheelbase"] - np.sum(ds * np.tan(wobble))) / np.sum(ds)
+    phi = np.clip(wobble + steady, -opts.steer_max, opts.steer_max)
+    curvature = np.tan(phi) / t["wheelbase"]
+    base = integrate_base(ds, ds * curvature)
+    joint_t = np.arange(0.0, time_s[-1], 1.0 / opts.wheel_rate_hz)
+    at = np.round(joint_t / FINE_S).astype(int)
+    values = highway_wheels(t, speed[at], curvature[at])
+    values += rng.normal(0.0, [*[opts.wheel_noise] * 4, opts.steer_noise], values.shape)
+    pose_t = np.arange(0.0, time_s[-1], 1.0 / opts.pose_rate_hz)
+    mount = np.array([t["sensor_x"], t["sensor_y"], t["sensor_theta"]])
+    device = poses.compose(
+        base[np.round(pose_t / FINE_S).astype(int)], np.broadcast_to(mount, (pose_t.size, 3))
+    )
+    device += rng.normal(0.0, [opts.pose_noise[0], *opts.pose_noise], device.shape)
+    return HighwaySimulation(
+        joint_time_s=joint_t,
+        joint_names=HIGHWAY_JOINTS,
+        joint_values=values,
+        pose_time_s=pose_t,
+        poses=device,
+        base_poses=base[at],
         options=opts,
     )
