@@ -2,9 +2,9 @@
 
 A model's reference precision (:func:`~nlp_calib.models.base.reference`) is written for a robot of
 about a metre driving about half a metre a second. A parameter whose reference is an amount in its
-unit (an offset: a steering offset, a gyro's bias) turns the heading by the same amount every
-second the vehicle drives, whatever it drives; on a car at highway speed the tricycle's 5 mrad of
-steering offset turns the heading a hundred degrees a kilometre. So such a parameter must resolve
+unit (an offset: a steer offset, a gyro's bias) turns the heading by the same amount every
+second the vehicle drives, whatever it drives; on a car at highway speed the reference robot's 5 mrad
+of steer offset turns the heading a hundred degrees a kilometre. So such a parameter must resolve
 the change that turns the dead-reckoned heading by no more than :data:`HEADING_BUDGET` a second at
 the drive's own speed while it drives straight: the reference robot's (5 mrad at half a metre a
 second over a metre of wheelbase). The effect is measured on the drive itself (the model's

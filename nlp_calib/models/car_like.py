@@ -95,6 +95,24 @@ HIGHWAY_TRUTH: Mapping[str, float] = MappingProxyType(
 )
 
 
+#: The highway car's joints as its log names them: the four wheels' speeds, then the steering.
+HIGHWAY_JOINTS = ("rear_left_wheel", "rear_right_wheel", "front_left_wheel", "front_right_wheel", "steering")
+
+
+def highway_steer(
+    truth: Mapping[str, float], ds: np.ndarray, wobble: np.ndarray, heading_change: float
+) -> np.ndarray:
+    """The road wheels' angle: a driver's ``wobble`` plus the steady angle that turns the heading
+    by ``heading_change`` over the steps ``ds`` (m) on ``truth``'s wheelbase."""
+    steady = (heading_change * truth["wheelbase"] - np.sum(ds * np.tan(wobble))) / np.sum(ds)
+    return wobble + steady
+
+
+def highway_curvature(truth: Mapping[str, float], phi: np.ndarray) -> np.ndarray:
+    """The rear axle's curvature (1/m) at road-wheel angle ``phi``."""
+    return np.tan(phi) / truth["wheelbase"]
+
+
 def highway_wheels(truth: Mapping[str, float], speed: np.ndarray, curvature: np.ndarray) -> np.ndarray:
     """Each wheel's speed ``(n, 4)`` (rad/s: rear left, rear right, front left, front right) and the
     steering joint's angle ``(n,)`` as the last column, of the rear-axle midpoint driving at

@@ -15,9 +15,9 @@ a fine grid, independently of the symbolic model. Deterministic for a given seed
 :func:`simulate_highway` drives a car (the car-like model in joint units) at 8 to 20 m/s for a
 minute, about a kilometre, its road wheels steered within ±``steer_max`` by a driver's small
 corrections and its heading changing by ``heading_change`` in all; the four wheels' speeds (rad/s)
-and the steering joint's angle are logged at ``wheel_rate_hz`` (a car's CAN bus), the pose of a
+and the steer joint's angle are logged at ``wheel_rate_hz`` (a car's CAN bus), the pose of a
 windshield device (GNSS/vision) at ``pose_rate_hz`` with white noise. What such a drive cannot
-determine (the wheelbase, the steering gain, the track, the device's position) is the class it
+determine (the axle distance, the steer gain, the track, the device's position) is the class it
 stands for.
 """
 
@@ -39,7 +39,13 @@ from nlp_calib.core.ranges import Range
 from nlp_calib.logs.joint_log import format_joint_csv
 from nlp_calib.logs.motions import format_motions
 from nlp_calib.logs.tum import format_tum
-from nlp_calib.models.car_like import HIGHWAY_TRUTH, highway_wheels
+from nlp_calib.models.car_like import (
+    HIGHWAY_JOINTS,
+    HIGHWAY_TRUTH,
+    highway_curvature,
+    highway_steer,
+    highway_wheels,
+)
 from nlp_calib.models.drives import integrate_base
 from nlp_calib.models.skid_steer import SPIN_TRUTH as SKID_TRUTH
 from nlp_calib.models.skid_steer import spin_problem, spin_wheels
@@ -214,7 +220,6 @@ def simulate_skid_spins(opts: SkidSpinOptions) -> VehicleSimulation:
     )
 
 
-HIGHWAY_JOINTS = ("rear_left_wheel", "rear_right_wheel", "front_left_wheel", "front_right_wheel", "steering")
 HIGHWAY_LIMITS: Mapping[str, Range] = {
     "duration_s": Range(10.0, 3600.0),
     "seed": Range(0, 2**32 - 1, integer=True),
@@ -262,7 +267,7 @@ class HighwayOptions:
 @dataclass(frozen=True)
 class HighwaySimulation:
     """A simulated car's drive: the joints' stamps, names and values (wheel speeds in rad/s, the
-    steering joint's angle in rad), the device's poses ``(m, 3)`` at ``pose_time_s``, the true base
+    steer joint's angle in rad), the device's poses ``(m, 3)`` at ``pose_time_s``, the true base
     poses at the joints' stamps and the options."""
 
     joint_time_s: np.ndarray
@@ -324,9 +329,8 @@ def simulate_highway(opts: HighwayOptions) -> HighwaySimulation:
     # that turns the heading by heading_change in all.
     wobble = 0.8 * opts.steer_max * _smooth(rng, time_s, (1.5, 4.0))
     ds = speed * FINE_S
-    steady = (opts.heading_change * t["wheelbase"] - np.sum(ds * np.tan(wobble))) / np.sum(ds)
-    phi = np.clip(wobble + steady, -opts.steer_max, opts.steer_max)
-    curvature = np.tan(phi) / t["wheelbase"]
+    phi = np.clip(highway_steer(t, ds, wobble, opts.heading_change), -opts.steer_max, opts.steer_max)
+    curvature = highway_curvature(t, phi)
     base = integrate_base(ds, ds * curvature)
     joint_t = np.arange(0.0, time_s[-1], 1.0 / opts.wheel_rate_hz)
     at = np.round(joint_t / FINE_S).astype(int)
