@@ -246,8 +246,8 @@ def folds_over(
             mine = params[[names.index(f) for f in free]]
             costs = tuple(float(ev.cost(v)) for v in (mine, *(lag_alike(v, mine, lags) for v in against)))
         params = canonical(params)
-        mine, theirs = score([params, full], a, b)
-        return Fold(a, b, params, converged, mine, theirs, costs)
+        on_block, full_on_block = score([params, full], a, b)
+        return Fold(a, b, params, converged, on_block, full_on_block, costs)
 
     return on_threads(fold, list(ranges))
 
