@@ -201,3 +201,21 @@ def test_the_weighted_gram_by_blocks_is_the_one_product(monkeypatch: pytest.Monk
     monkeypatch.setattr(unc, "STEP", 64)
     np.testing.assert_allclose(unc._weighted_gram(A, w), want, rtol=1e-12)
     np.testing.assert_array_equal(unc._weighted_gram(A[:0], w), np.zeros((5, 5)))
+
+
+def test_uncertainty_summed_block_by_block_is_the_one_sum(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The noise maps summed a few rows at a time, as windows arrive a block at a time (rows let go
+    of once no later window adds to them), give the covariance of one sum over every row."""
+    from nlp_calib.solvers import blocks
+
+    model, H = get_model("tricycle"), 5
+    fns = build(model, ProblemSpec(horizon=H, kernel="huber"))
+    log = sim_log("tricycle", 400, 6, outlier_fraction=0.03)
+    data = build_residual_data(fns, log, ResidualOptions(horizon=H))
+    x, sigma_in = truth("tricycle") * 1.001, np.array([2e-4, 3e-3])
+    want = unc.estimate(evaluator(fns, data, np.zeros(0)), x, data, sigma_in)
+    monkeypatch.setattr(unc, "STEP", 16)
+    monkeypatch.setattr(blocks, "BLOCK", 64)
+    got = unc.estimate(evaluator(fns, data, np.zeros(0)), x, data, sigma_in)
+    assert_close(got.covariance, want.covariance, rtol=1e-10, what="covariance")
+    assert got.noise == pytest.approx(want.noise, rel=1e-10)

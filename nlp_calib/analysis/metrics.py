@@ -197,9 +197,11 @@ def rpe_pairs(
 
 def rpe_of(T_est: np.ndarray, pairs: list[Pairs], g: Geometry = PLANAR) -> ErrorStats:
     """Translation error of the estimate's motions against the reference's over ``pairs``."""
+    # The translation of ``ref⁻¹·est`` is the difference of the two translations turned by the
+    # reference's rotation: its length is the difference's.
+    d = g.dims
     errors = [
-        np.linalg.norm(g.between(ref, g.between(T_est[i], T_est[j]))[:, : g.dims], axis=1)
-        for i, j, ref in pairs
+        np.linalg.norm(g.between(T_est[i], T_est[j])[:, :d] - ref[:, :d], axis=1) for i, j, ref in pairs
     ]
     return ErrorStats.of(np.concatenate(errors) if errors else np.zeros(0))
 
@@ -283,7 +285,8 @@ def scored(
     err = np.linalg.norm(track[ref.good, : g.dims] - T[ref.good, : g.dims], axis=1)
     W, pair = ref.window, ref.pair
     rel = g.between(ref.rel, g.between(track[:-W][pair], track[W:][pair]))
-    seg_track = restarted(step, T, ref.parts, g)
+    # One part over every record restarts where the track starts: the same poses.
+    seg_track = track if ref.parts == [(0, T.shape[0])] else restarted(step, T, ref.parts, g)
     seg_err = np.linalg.norm(seg_track[ref.scored, : g.dims] - T[ref.scored, : g.dims], axis=1)
     aligned = [aligned_errors(seg_track[idx], T[idx], g) for idx in ref.scored_parts]
     rpe = {d: rpe_of(seg_track, ref.pairs[d], g) for d in RPE_DISTANCES}

@@ -174,15 +174,15 @@ def estimate(
     n_int, n_in = data.inputs.shape[1], fns.n_inputs
     D = first[1].D if first[1].D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
     use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(s.size, dtype=bool)
-    sums = _Sums.zero(fns, data, first[1].de_dend.shape[2])
+    sums = _Sums.zero(fns, data, first[1].de_dend.shape[2], D, Sigma_in)
     residuals = _Residuals(e=e, weight=weight, use=use, Omega=evaluator.omega)
-    running = _input_noise_at_ends(D, Sigma_in, sums.C.shape[2])
+    running = _input_noise_at_ends(D, Sigma_in, sums.C.shape[1])
     for w, sens in itertools.chain([first], blocks):
         sums.add(w, sens, residuals, running)
     mm = fns.error_rows * int(use.sum())
     dof = max(mm - fns.n_free, 1)
     var = nnls_gram(sums.gram, sums.proj, sums.yy) * (mm / dof)
-    meat = sums.meat(var, D, Sigma_in)
+    meat = sums.meat(var)
     # The data term is not divided by the residuals' variance σ², so a prior of weight σ²/std²
     # (the scenario's, weighed so; the bounds' below) adds σ² times that weight to the score's
     # covariance.
@@ -312,51 +312,129 @@ class _Residuals:
     Omega: np.ndarray
 
 
+class _Rows:
+    """Per-row matrices ``(n, k)`` summed over the windows in their order, held only for the rows a
+    later window can still add to: rows below a limit are final and are summed (:meth:`take`),
+    :data:`STEP` at a time from row 0 (the last ones at the end), and let go of."""
+
+    def __init__(self, n_rows: int, shape: tuple[int, int], distinct: bool):
+        self.n_rows, self.shape, self.distinct = n_rows, shape, distinct
+        self.base = 0
+        self.buf = np.zeros((0, *shape))
+
+    def add(self, index: np.ndarray, values: np.ndarray) -> None:
+        """``row[index[w]] += values[w]`` (no index below the last limit released)."""
+        need = int(index.max()) + 1 - self.base if index.size else 0
+        if need > self.buf.shape[0]:
+            grown = np.zeros((max(need, 2 * self.buf.shape[0]), *self.shape))
+            grown[: self.buf.shape[0]] = self.buf
+            self.buf = grown
+        _add(self.buf, index - self.base, values, self.distinct)
+
+    def release(self, limit: int | None) -> None:
+        """Sum the final rows below ``limit`` (None: every row)."""
+        stop = self.n_rows if limit is None else min(limit, self.n_rows)
+        while self.base < stop and (limit is None or stop - self.base >= STEP):
+            size = min(STEP, self.n_rows - self.base)
+            rows = np.zeros((size, *self.shape))
+            held = min(size, self.buf.shape[0])
+            rows[:held] = self.buf[:held]
+            self.take(self.base, rows)
+            self.buf = self.buf[held:].copy()
+            self.base += size
+
+    def take(self, first: int, rows: np.ndarray) -> None:
+        raise NotImplementedError
+
+
+class _PoseRows(_Rows):
+    """Each pose's noise map into the score, ``K_p`` ``(n, noise components)``, summed as each
+    component's Gram ``Σ_p K_p[:, c] K_p[:, c]ᵀ`` (``gram``, ``(components, n, n)``)."""
+
+    def __init__(self, n_rows: int, shape: tuple[int, int], distinct: bool):
+        super().__init__(n_rows, shape, distinct)
+        self.gram = np.zeros((shape[1], shape[0], shape[0]))
+
+    def take(self, first: int, rows: np.ndarray) -> None:
+        self.gram += np.einsum("pic,pjc->cij", rows, rows)
+
+
+class _InputRows(_Rows):
+    """The input noise map as differences over the intervals ``C`` (``Q_j`` is its running sum
+    through interval ``j``'s ``D_j``), summed as the score's covariance ``Σ_j Q_j Σ_u Q_jᵀ``
+    (``gram``)."""
+
+    def __init__(
+        self, n_rows: int, shape: tuple[int, int], distinct: bool, noise: tuple[np.ndarray, np.ndarray]
+    ):
+        super().__init__(n_rows, shape, distinct)
+        self.D, self.Sigma_in = noise
+        self.gram = np.zeros((shape[0], shape[0]))
+        self.carry = np.zeros(shape)
+
+    def take(self, first: int, rows: np.ndarray) -> None:
+        rows[0] += self.carry  # the running sum goes on from the previous block's last
+        C = np.cumsum(rows, axis=0, out=rows)
+        self.carry = C[-1].copy()
+        n_int = self.D.shape[0]
+        if first < n_int:
+            Q = C[: n_int - first] @ self.D[first : first + C.shape[0]]  # (., n, n_in)
+            self.gram += _weighted_gram(Q, self.Sigma_in)
+
+
 @dataclass
 class _Sums:
     """What the pass over the windows collects: the method-of-moments system for the tracker's
-    variances (``gram``, ``proj``, ``yy``), each pose's noise map into the score (``K``), the
-    input noise map as differences over the intervals (``C``) and the outliers' own scores."""
+    variances (``gram``, ``proj``, ``yy``), each pose's noise map into the score (``K``, a row per
+    pose: summed as each noise component's Gram ``KK``, row by row once no later window adds to a
+    row), the input noise map as differences over the intervals (``C``: its running sum's map
+    through each interval's ``D`` summed as the score's covariance ``inputs``, the same way) and the
+    outliers' own scores."""
 
     groups: tuple[tuple[int, ...], ...]
     gram: np.ndarray
     proj: np.ndarray
     yy: float
-    K: np.ndarray
-    C: np.ndarray
+    K: _PoseRows
+    C: _InputRows
     outliers: np.ndarray
     starts: np.ndarray
+    #: Per window, the least first record of the windows from it on: rows below it are final.
+    final: np.ndarray
     stops: np.ndarray
-    distinct: bool
-    #: Per window, whether its ``z`` is a measured increment (its noise its own: a row of ``K``
-    #: after the poses' rows); None: none is.
+    #: Per window, whether its ``z`` is a measured increment (its noise its own, not a pose's);
+    #: None: none is.
     increment: np.ndarray | None = None
 
     @classmethod
-    def zero(cls, fns: ProblemFunctions, data: ResidualData, m: int) -> _Sums:
+    def zero(
+        cls, fns: ProblemFunctions, data: ResidualData, m: int, D: np.ndarray, Sigma_in: np.ndarray
+    ) -> _Sums:
         groups = tuple(tuple(g) for g in fns.sensor.noise_groups)
-        n, k, a, b = fns.n_free, len(groups), data.starts, data.stops
+        n, a, b = fns.n_free, data.starts, data.stops
         inc = data.increment if data.increment is not None and data.increment.any() else None
-        rows = data.T_world_sensor.shape[0] + (data.n_residuals if inc is not None else 0)
+        k = sum(len(g) for g in groups)
+        distinct = bool(np.all(np.diff(a) > 0) and np.all(np.diff(b) > 0))
+        n_int = data.inputs.shape[1]
         return cls(
             groups=groups,
-            gram=np.zeros((k, k)),
-            proj=np.zeros(k),
+            gram=np.zeros((len(groups), len(groups))),
+            proj=np.zeros(len(groups)),
             yy=0.0,
-            K=np.zeros((rows, n, sum(len(g) for g in groups))),
-            C=np.zeros((data.inputs.shape[1] + 1, n, m)),
+            K=_PoseRows(data.T_world_sensor.shape[0], (n, k), distinct),
+            C=_InputRows(n_int + 1, (n, m), distinct, (D, Sigma_in)),
             outliers=np.zeros((n, n)),
             starts=a,
+            final=np.minimum.accumulate(a[::-1])[::-1] if a.size else a,
             stops=b,
-            distinct=bool(np.all(np.diff(a) > 0) and np.all(np.diff(b) > 0)) and inc is None,
             increment=inc,
         )
 
     def _sources(
         self, w: slice, sens: Sensitivities
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Each window's noise sources (rows of ``K``) and its maps from them: its first and last
-        pose's, or a measured increment's own (a row of its own; nothing at its end)."""
+        """Each window's noise sources and its maps from them: its first and last pose's (an
+        increment's noise, its own, is summed where it is added; nothing at its poses)."""
         a, b = self.starts[w], self.stops[w]
         Ea, Eb = sens.de_dz @ sens.dz_da, sens.de_dz @ sens.dz_db  # (., error rows, pose noise)
         if self.increment is not None and self.increment[w].any():
@@ -365,7 +443,6 @@ class _Sums:
             # An increment's noise lies on its first rows (a planar one's are all its noise's; a
             # gyro's duration is exact).
             Ea[inc], Eb[inc] = sens.de_dz[inc][:, :, : Ea.shape[2]], 0.0
-            a = np.where(inc, self.K.shape[0] - self.increment.size + np.arange(w.start, w.stop), a)
         return a, b, Ea, Eb
 
     def add(self, w: slice, sens: Sensitivities, r: _Residuals, running: np.ndarray) -> None:
@@ -378,28 +455,31 @@ class _Sums:
         A, y = coef[u].reshape(-1, len(self.groups)), (e.T[u] ** 2 - known[u]).ravel()
         self.gram, self.proj, self.yy = self.gram + A.T @ A, self.proj + A.T @ y, self.yy + float(y @ y)
         L = r.weight[w, None, None] * sens.J.transpose(0, 2, 1) * r.Omega[None, None, :]  # (., n, rows)
-        _add(self.K, a, L @ Ea, self.distinct)
-        _add(self.K, b, L @ Eb, self.distinct)
+        La = L @ Ea
+        if self.increment is not None and self.increment[w].any():
+            inc = self.increment[w]
+            self.K.take(-1, La[inc])  # an increment's noise is its own: no other window adds to it
+            La[inc] = 0.0
+        self.K.add(a, La)
+        self.K.add(b, L @ Eb)
         # Σ over the windows containing interval j of L_w ∂e_w/∂end: +at the first interval, −after the last.
         G = L @ sens.de_dend
-        _add(self.C, self.starts[w], G, self.distinct)
-        _add(self.C, b, -G, self.distinct)
+        self.C.add(self.starts[w], G)
+        self.C.add(b, -G)
         # Residuals beyond the kernel threshold are not explained by the noise model; their bounded
         # but non-zero pull is counted as it is, from their own scores.
         score = np.einsum("wic,cw->wi", L[~u], e[:, ~u])
         self.outliers += score.T @ score
+        # Rows below the first record of every window to come are final.
+        last = w.stop >= self.final.size
+        self.K.release(None if last else int(self.final[w.stop]))
+        self.C.release(None if last else int(self.final[w.stop]))
 
-    def meat(self, var: np.ndarray, D: np.ndarray, Sigma_in: np.ndarray) -> np.ndarray:
+    def meat(self, var: np.ndarray) -> np.ndarray:
         """``S``: the score's covariance from the tracker poses' noise ``var`` (per group) and the
-        inputs' ``Sigma_in``, plus the outliers' own."""
+        inputs', plus the outliers' own."""
         Sigma_pose = np.concatenate([np.full(len(g), v) for g, v in zip(self.groups, var)])
-        meat = _weighted_gram(self.K, Sigma_pose) + self.outliers
-        C = np.cumsum(self.C, axis=0, out=self.C)  # in place: the differences are not needed again
-        n_int = D.shape[0]
-        for lo in range(0, n_int, STEP):
-            Q = C[lo : min(n_int, lo + STEP)] @ D[lo : lo + STEP]  # (., n, n_in)
-            meat += _weighted_gram(Q, Sigma_in)
-        return meat
+        return np.einsum("c,cij->ij", Sigma_pose, self.K.gram) + self.outliers + self.C.gram
 
 
 def _packaged(fns: ProblemFunctions, cov: np.ndarray, noise: dict[str, float], dof: int) -> Uncertainty:

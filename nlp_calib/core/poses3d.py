@@ -168,21 +168,20 @@ def turned(q: np.ndarray) -> np.ndarray:
 def accumulate(start: np.ndarray, steps: np.ndarray) -> np.ndarray:
     """Poses ``(n + 1, 7)`` of ``start · steps[0] · … · steps[n-1]`` (a sequential pass).
 
-    Each step is :func:`compose` of one pose, written out on Python floats (the same operations in
-    the same order, so the same doubles) around the same ``einsum`` for the rotation, without the
-    cost of array calls on seven numbers."""
+    Each step is :func:`compose` of one pose, written out on Python floats: the same operations in
+    the same order (each rotated coordinate summed as numpy's ``einsum`` sums three products, the
+    first and the third, then the second), so the same doubles, without the cost of array calls on
+    seven numbers (a tenth of the time)."""
     out = np.empty((steps.shape[0] + 1, 7))
     out[0] = start
     x, y, z, ax, ay, az, aw = (float(v) for v in start)
     for k, (px, py, pz, bx, by, bz, bw) in enumerate(steps.tolist()):
-        R = np.array(
-            [
-                [1 - 2 * (ay * ay + az * az), 2 * (ax * ay - az * aw), 2 * (ax * az + ay * aw)],
-                [2 * (ax * ay + az * aw), 1 - 2 * (ax * ax + az * az), 2 * (ay * az - ax * aw)],
-                [2 * (ax * az - ay * aw), 2 * (ay * az + ax * aw), 1 - 2 * (ax * ax + ay * ay)],
-            ]
-        )
-        dx, dy, dz = np.einsum("...ij,...j->...i", R, np.array([px, py, pz])).tolist()
+        r00, r01, r02 = 1 - 2 * (ay * ay + az * az), 2 * (ax * ay - az * aw), 2 * (ax * az + ay * aw)
+        r10, r11, r12 = 2 * (ax * ay + az * aw), 1 - 2 * (ax * ax + az * az), 2 * (ay * az - ax * aw)
+        r20, r21, r22 = 2 * (ax * az - ay * aw), 2 * (ay * az + ax * aw), 1 - 2 * (ax * ax + ay * ay)
+        dx = (r00 * px + r02 * pz) + r01 * py
+        dy = (r10 * px + r12 * pz) + r11 * py
+        dz = (r20 * px + r22 * pz) + r21 * py
         x, y, z = x + dx, y + dy, z + dz
         ax, ay, az, aw = (
             aw * bx + ax * bw + ay * bz - az * by,

@@ -282,7 +282,7 @@ def _refits(
     if data.n_residuals >= RELEASE_FROM:
         ev.release()  # the refits bind evaluators of their own; a later use binds this one again
     crossval = validation.cross_validate(
-        binder, data, span, x, k, fit.canonical_params, blocks, full, whole, against
+        binder, data, span, x, k, fit.canonical_params, blocks.each, full, whole, against
     )
     inputs = np.concatenate([np.zeros((data.inputs.shape[0], span[0])), data.inputs], axis=1)
     model = fit.fns.model
@@ -315,7 +315,7 @@ def logs_crossval(
     # mount per log): held where the joint fit put them.
     held = [list(fit.fns.layout.owned(i)) for i in range(len(ranges))]
     folds = validation.folds_over(
-        fit.problem.binder, fit.data, span, ranges, start, fit.canonical_params, blocks, held=held
+        fit.problem.binder, fit.data, span, ranges, start, fit.canonical_params, blocks.each, held=held
     )
     return combine(fit.fns.names, folds, min_folds=len(folds))
 

@@ -48,8 +48,8 @@ DOWNDATE_FROM = 50_000
 MIN_BLOCK_WINDOWS = 20
 
 Canonical = Callable[[np.ndarray], np.ndarray]
-#: Trajectory metrics of parameters on the records ``a:b``.
-Score = Callable[[np.ndarray, int, int], TrajectoryMetrics]
+#: The figures of each parameter set over records ``[a, b)``, the reference's side computed once.
+Score = Callable[[Sequence[np.ndarray], int, int], list[TrajectoryMetrics]]
 
 
 def _fit(
@@ -210,7 +210,7 @@ def folds_over(
 ) -> list[Fold]:
     """One refit of ``data`` (records ``fit``) without each record range of ``ranges`` (blocks, or
     whole logs), from ``start = (x, full)``: the whole fit's free values and full parameters. Each
-    fold is scored on its range by ``score(params, a, b)``, beside the full fit's parameters on the
+    fold is scored on its range by ``score([params, full], a, b)``, beside the full fit's parameters on the
     same range, and costed there (the data cost of the windows the fold left out, no priors): its
     own estimate's, then each free-parameter vector of ``against``'s. ``whole``: the normal
     equations of ``data`` at ``x``, when known (each fold's first step downdates them). ``held``:
@@ -246,7 +246,8 @@ def folds_over(
             mine = params[[names.index(f) for f in free]]
             costs = tuple(float(ev.cost(v)) for v in (mine, *(lag_alike(v, mine, lags) for v in against)))
         params = canonical(params)
-        return Fold(a, b, params, converged, score(params, a, b), score(full, a, b), costs)
+        on_block, full_on_block = score([params, full], a, b)
+        return Fold(a, b, params, converged, on_block, full_on_block, costs)
 
     return on_threads(fold, list(ranges))
 
