@@ -17,7 +17,8 @@ honest. Nothing here is tuned on data: α is a choice, the rest follows from it.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -221,13 +222,16 @@ def check_drift(
     stored: tuple[Mapping[str, float], Mapping[str, float], Mapping[str, float]],
     calibration: str,
     solver: str,
+    uncalibrated: Collection[str] = (),
 ) -> DriftCheck:
     """The check of ``stored`` (values, σ to believe, their degrees of freedom) against ``run``, a
-    fit of a new log started from it."""
+    fit of a new log started from it; ``uncalibrated``: what the stored calibration held or was
+    given, which it does not vouch for and a check does not judge."""
     result = run.reports[solver].result
     free = run.reports[solver].uncertainty.free
     skipped = untested(run, solver, model)
-    held = [n for n in result.names if n not in free and n not in skipped]  # fixed by the scenario
+    # Fixed by the scenario, or never estimated by the stored calibration: nothing to compare.
+    held = [n for n in result.names if (n not in free and n not in skipped) or n in uncalibrated]
     # A recording's own parameters (its clock offset, a gyro's bias: the sensor's own per log) are
     # refitted, not judged: a new log may have another. What the stored calibration does not hold
     # cannot have drifted from it.
@@ -238,4 +242,8 @@ def check_drift(
     found = changes(stored, refit, run.scenario, model, skipped)
     hint = drive_more(run, model, [c.name for c in found if c.untested])
     verdict, reasons, hint = decide(found, "" if result.converged else result.reason, hint)
+    unjudged = [n for n in result.names if n in uncalibrated]
+    if unjudged:
+        by = Path(calibration).name
+        reasons = (*reasons, f"not judged: {', '.join(unjudged)} (not calibrated by {by})")
     return DriftCheck(calibration, solver, found, FALSE_ALARM, verdict, reasons, hint)

@@ -122,5 +122,7 @@ def check(
     with the comparison against them in ``checks.drift``."""
     calib = Calibration(scenario, logs, (stored.solver,))
     run = calib.run((stored.solver,))
-    drift = check_drift(run, calib.model, stored.stats(), str(stored.path), stored.solver)
+    drift = check_drift(
+        run, calib.model, stored.stats(), str(stored.path), stored.solver, stored.uncalibrated()
+    )
     return dataclasses.replace(run, checks=dataclasses.replace(run.checks, drift=drift))

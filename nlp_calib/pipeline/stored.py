@@ -20,7 +20,7 @@ from nlp_calib.problem import ProblemSpec
 from nlp_calib.problem.functions import problem_layout
 from nlp_calib.results import codec
 from nlp_calib.results.checks import MIN_FOLDS
-from nlp_calib.results.layout import LAYOUT_VERSION, Layout
+from nlp_calib.results.layout import FREE, LAYOUT_VERSION, Layout
 from nlp_calib.sensors import SENSORS, sensor_for
 from nlp_calib.solvers import SOLVERS
 
@@ -56,6 +56,11 @@ class StoredCalibration:
             for p in self.layout.parameters
             if p.log is None and p.name in robot
         }
+
+    def uncalibrated(self) -> tuple[str, ...]:
+        """The parameters this calibration did not estimate (held, or given as known): a check has
+        nothing of theirs to judge."""
+        return tuple(p.name for p in self.layout.parameters if p.status != FREE)
 
     def stats(self) -> tuple[Mapping[str, float], Mapping[str, float], Mapping[str, float]]:
         """Values, σ to believe and degrees of freedom, as the drift check compares them."""
