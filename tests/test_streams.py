@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from nlp_calib.analysis import streams
 from nlp_calib.analysis.counters import at_lag, screen_counter, screen_lag
 from nlp_calib.analysis.streams import Scatter, off_neighbours, scatter, stuck_runs
 
@@ -46,6 +47,45 @@ def test_a_reading_off_its_neighbours_is_found_with_its_size(group: int) -> None
     found = off_neighbours(t, y, scatter(t, y))
     assert [(g.first, g.last) for g in found] == [(200, 200 + group - 1)]
     assert found[0].offset[0] == pytest.approx(max(offsets), abs=0.02)
+
+
+def _strongest_one_by_one(t, y, sc, span, usable, limits):  # type: ignore[no-untyped-def]
+    """The strongest group scored a group at a time, as a reading of the rule (the reference)."""
+    threshold, excursion, max_group = limits
+    best = None
+    for g in range(1, max_group + 1):
+        for p in range(span[0], span[1] - g + 2):
+            around = streams._outside(usable, p, p + g - 1)
+            if not usable[p : p + g].all() or around is None:
+                continue
+            m = np.arange(p, p + g)[None, :]
+            s, off = streams._scores(t, y, sc, tuple(around[:, None]), m, excursion)
+            if s[0] > threshold and (best is None or s[0] > best.score):
+                best = streams.OffGroup(p, p + g - 1, float(s[0]), off[0])
+    return best
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_the_strongest_group_is_the_one_scored_a_group_at_a_time(seed: int) -> None:
+    """Groups of each size scored together pick the group a one-by-one search picks, with its
+    score and offset, around records already left out and near the log's ends."""
+    rng = np.random.default_rng(seed)
+    t = _times(160, seed)
+    y = np.column_stack([_path(t, [(2.0, -0.6), (4.5, 0.6)]), _path(t, [(3.0, 0.2)])])
+    y += rng.normal(0.0, 0.002, y.shape)
+    for first in rng.choice(np.arange(1, 150), 8, replace=False):
+        y[first : first + rng.integers(1, 4)] += rng.normal(0.0, 0.2, 2)
+    sc, usable = scatter(t, y), rng.random(t.size) > 0.1
+    limits = (streams.OFF_SIGMAS, 0.0, streams.MAX_GROUP)
+    picked = 0
+    while (ref := _strongest_one_by_one(t, y, sc, (0, t.size - 1), usable, limits)) is not None:
+        got = streams._strongest(t, y, sc, (0, t.size - 1), usable, limits)
+        assert got is not None and (got.first, got.last) == (ref.first, ref.last)
+        assert got.score == pytest.approx(ref.score, rel=1e-12)
+        np.testing.assert_allclose(got.offset, ref.offset, rtol=1e-12)
+        usable[got.first : got.last + 1] = False
+        picked += 1
+    assert picked >= 3 and streams._strongest(t, y, sc, (0, t.size - 1), usable, limits) is None
 
 
 def test_the_scatter_grows_with_the_rate_when_readings_are_late() -> None:

@@ -302,6 +302,37 @@ def _outside(usable: np.ndarray, first: int, last: int) -> np.ndarray | None:
     return np.array([before[0], before[1], after[0], after[1]])
 
 
+def _strongest(
+    t: np.ndarray,
+    y: np.ndarray,
+    sc: Scatter,
+    span: tuple[int, int],
+    usable: np.ndarray,
+    limits: tuple[float, np.ndarray | float, int],
+) -> OffGroup | None:
+    """The group of up to ``max_group`` usable records in ``span`` that scores highest above
+    ``threshold`` against the two nearest usable records on each side (the first such, by size
+    then position, on a tie); every group of a size scored at once."""
+    threshold, excursion, max_group = limits
+    idx = np.flatnonzero(usable)
+    gaps = np.concatenate([[0], np.cumsum(~usable)])
+    best: OffGroup | None = None
+    for g in range(1, int(max_group) + 1):
+        p = np.arange(span[0], span[1] - g + 2)
+        p = p[gaps[p + g] == gaps[p]]  # every record of the group usable
+        k, j = np.searchsorted(idx, p), np.searchsorted(idx, p + g - 1, side="right")
+        inside = (k >= 2) & (j + 1 < idx.size)  # two usable records on each side
+        p, k, j = p[inside], k[inside], j[inside]
+        if not p.size:
+            continue
+        outside = (idx[k - 2], idx[k - 1], idx[j], idx[j + 1])
+        s, off = _scores(t, y, sc, outside, p[:, None] + np.arange(g)[None, :], excursion)
+        top = int(np.argmax(np.where(s > threshold, s, -np.inf)))
+        if s[top] > threshold and (best is None or s[top] > best.score):
+            best = OffGroup(int(p[top]), int(p[top]) + g - 1, float(s[top]), off[top])
+    return best
+
+
 def _resolve(
     t: np.ndarray,
     y: np.ndarray,
@@ -313,27 +344,13 @@ def _resolve(
     """The groups off their neighbours among the records ``span``: the strongest first, each judged
     against the nearest usable records not already found; then each group's ends that are not off
     on their own are given back."""
-    threshold, excursion, max_group = limits
+    threshold = limits[0]
     usable = usable.copy()
     found: list[OffGroup] = []
 
-    def score(first: int, last: int) -> tuple[float, np.ndarray] | None:
-        around = _outside(usable, first, last)
-        if around is None:
-            return None
-        s, off = _scores(t, y, sc, tuple(around[:, None]), np.arange(first, last + 1)[None, :], excursion)
-        return float(s[0]), off[0]
-
-    while True:
-        best: tuple[float, int, int, np.ndarray] | None = None
-        for g in range(1, int(max_group) + 1):
-            for p in range(span[0], span[1] - g + 2):
-                if usable[p : p + g].all() and (s := score(p, p + g - 1)) is not None and s[0] > threshold:
-                    best = (s[0], p, p + g - 1, s[1]) if best is None or s[0] > best[0] else best
-        if best is None:
-            break
-        usable[best[1] : best[2] + 1] = False
-        found.append(OffGroup(best[1], best[2], best[0], best[3]))
+    while (best := _strongest(t, y, sc, span, usable, limits)) is not None:
+        usable[best.first : best.last + 1] = False
+        found.append(best)
 
     def chord(e: int, f: OffGroup) -> float:
         """How far record ``e`` is off the chord between the nearest usable records around its group."""
