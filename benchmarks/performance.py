@@ -2,7 +2,7 @@
 same objective and data, and runs on 10^4 to 10^6 simulated records.
 
     python benchmarks/performance.py                 # everything; prints a summary table
-    python benchmarks/performance.py --quick         # small sizes, 2 repeats (the tests' smoke run)
+    python benchmarks/performance.py --quick         # small sizes, 2 repeats (1 for the sized runs: the tests' smoke run)
     python benchmarks/performance.py --sections batch,simulate   # some sections only
 
 Every figure is a median over ``--repeats`` (default 7) interleaved repeats, with the load average
@@ -978,10 +978,13 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
         return ipopt_lag(real, quick, repeats)
     if section == "scaling":
         return scaling([2_000, 8_000] if quick else [10_000, 100_000, 1_000_000], repeats, tmp)
-    if section == "horizon":  # a 10^6 run takes about a minute: 3 repeats
-        return horizon([2_000, 5_000] if quick else [100_000, 1_000_000], min(repeats, 3), tmp)
+    # A 10^6 run takes about a minute: 3 repeats. The smoke run measures these once (its
+    # interleaving is the end-to-end and scaling sections').
+    sized = 1 if quick else min(repeats, 3)
+    if section == "horizon":
+        return horizon([2_000, 5_000] if quick else [100_000, 1_000_000], sized, tmp)
     if section == "camera":
-        return camera([2_000, 5_000] if quick else [100_000, 1_000_000], min(repeats, 3), tmp)
+        return camera([2_000, 5_000] if quick else [100_000, 1_000_000], sized, tmp)
     if section == "simulate":
         return simulate_big(10_000 if quick else 1_000_000, 1 if quick else 3, tmp)
     if section == "reader":
@@ -989,7 +992,7 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
     if section == "gn_pass":
         return gn_pass(5_000 if quick else 100_000, repeats, tmp)
     # Logs of 5000 records (3.3 minutes of driving): a robot's daily log is rarely shorter.
-    return batch(4 if quick else 20, 300 if quick else 5000, 1 if quick else repeats, tmp)
+    return batch(2 if quick else 20, 300 if quick else 5000, 1 if quick else repeats, tmp)
 
 
 if __name__ == "__main__":
