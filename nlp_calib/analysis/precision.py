@@ -13,17 +13,23 @@ moved by its reference), so nothing is read from a parameter's name; what errs o
 skid-steer's slip with the turn rate) is no offset and keeps its reference.
 A parameter whose reference is a fraction of its value (a gain, a length) errs in proportion to
 what the vehicle drives (a wheel scale's 1 % is 1 % of the drive's distance), and keeps it.
+
+A clock offset misplaces the reference by what the sensor moves in that time: its reference (2 ms)
+is the reference robot's 2 mm at a metre a second and 2 mrad at a radian a second, so it needs
+what keeps the sensor's own speed and turn rate on this drive (their :data:`FAST_QUANTILE`) to that
+(:func:`lag_precision`); a slow robot needs less of it, a car at speed more.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 
 from nlp_calib.analysis.metrics import steps
 from nlp_calib.problem import ProblemFunctions
-from nlp_calib.results.layout import FREE, Layout
+from nlp_calib.results.layout import CLOCK, FREE, Layout
 
 #: The heading an offset's needed precision may turn a second (rad/s): the reference robot's.
 HEADING_BUDGET = 0.0025
@@ -31,6 +37,10 @@ HEADING_BUDGET = 0.0025
 STRAIGHT_RATE = 0.05
 #: The share of a drive's intervals that must drive straight for its offsets' effect to be measured.
 STRAIGHT_SHARE = 0.1
+#: The reference robot's speed (m/s) and turn rate (rad/s) a clock offset's reference is written for.
+REFERENCE_SPEED, REFERENCE_RATE = 1.0, 1.0
+#: The quantile of the drive's speeds and turn rates (over the intervals it moves) judged by.
+FAST_QUANTILE = 0.9
 
 
 def drive_precision(
@@ -64,4 +74,43 @@ def drive_precision(
         rate = abs(float(np.sum(steps(fns, moved, inputs)[:, 2])) - base) / (dt * inputs.shape[1])
         needed = p.precision[1] * min(1.0, HEADING_BUDGET / rate) if rate > 0 else p.precision[1]
         out.append(dataclasses.replace(p, precision=("absolute", float(needed))))
+    return dataclasses.replace(layout, parameters=tuple(out))
+
+
+def lag_precision(layout: Layout, track: np.ndarray, time_s: np.ndarray, log: int, metric: bool) -> Layout:
+    """``layout`` with the precision of log ``log``'s free clock offsets (and a shared one) from
+    the sensor's track on the floor ``(x, y, heading)`` at ``time_s`` (see the module docstring);
+    without ``metric`` positions (a track in its own units) only the turn rate counts."""
+    dt = np.diff(np.asarray(time_s, dtype=float))
+    step = np.diff(np.asarray(track, dtype=float), axis=0)[dt > 0]
+    dt = dt[dt > 0]
+    speed = np.hypot(step[:, 0], step[:, 1]) / dt / REFERENCE_SPEED if metric else np.zeros(dt.size)
+    fast = max(_fast(speed), _fast(np.abs(step[:, 2]) / dt / REFERENCE_RATE))
+    if fast <= 0:
+        return layout
+    out = []
+    for p in layout.parameters:
+        if p.block == CLOCK and p.status == FREE and p.log in (None, log) and p.precision[0] == "absolute":
+            p = dataclasses.replace(p, precision=("absolute", p.precision[1] / fast))
+        out.append(p)
+    return dataclasses.replace(layout, parameters=tuple(out))
+
+
+def _fast(rates: np.ndarray) -> float:
+    """The :data:`FAST_QUANTILE` of the ``rates`` of the intervals that move (0 without any)."""
+    moving = rates[rates > 0]
+    return float(np.quantile(moving, FAST_QUANTILE)) if moving.size else 0.0
+
+
+def tightest(layout: Layout, logs: Sequence[Layout]) -> Layout:
+    """``layout`` (several logs' together) with each parameter's precision the tightest any log's
+    drive needs of it (``logs``: each log's layout of the whole calibration, as its drive sets it);
+    a log's own parameter (its clock offset) as its own log's drive sets it."""
+    out = []
+    for p in layout.parameters:
+        mine = logs if p.log is None else logs[p.log : p.log + 1]
+        needed = [o.param(p.name).precision for o in mine if p.name in o]
+        if needed and all(kind == "absolute" for kind, _ in needed):
+            p = dataclasses.replace(p, precision=("absolute", min(amount for _, amount in needed)))
+        out.append(p)
     return dataclasses.replace(layout, parameters=tuple(out))

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.analysis.consistency import compare_logs, determined
-from nlp_calib.analysis.precision import drive_precision
+from nlp_calib.analysis.precision import drive_precision, lag_precision, tightest
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, reference_scales
@@ -336,6 +336,7 @@ def _joint(
         nominal=(metrics[n + 1], None) if nominal else None,
     )
     info = fit_info(fitting.problem.binder.scenario, fitting.fns)
+    info = dataclasses.replace(info, layout=tightest(info.layout, [run.scenario.layout for run in parts]))
     fit = (first.prepared, start, fitting.data.n_residuals)
     views = MountViews(fitting.fns, 0, tuple((run.scenario.name, run.log) for run in parts))
     return joint_run(info, parts, fit, results, fitted, figures, notes, views)
@@ -419,7 +420,7 @@ def _assemble(
         scorer = log_scorer(
             fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window, i
         )
-        info = _vehicle_precision(fit_info(sc, fitting.fns), scorer, part, fitting.problem.start.initial)
+        info = _vehicle_precision(fit_info(sc, fitting.fns), scorer, part, fitting.problem.start.initial, i)
         view = LogView(part.prepared, part.windows, scorer, part.screening.findings, i)
         figures = analyse_log(fitting, results, view, wanted, info.labels, fitted.nominal_params)
         stage = (part.prepared, part.windows, part.alignment, part.screening.findings)
@@ -429,14 +430,18 @@ def _assemble(
 
 
 def _vehicle_precision(
-    info: ScenarioInfo, scorer: Scorer, part: LogSetup, start: Mapping[str, float]
+    info: ScenarioInfo, scorer: Scorer, part: LogSetup, start: Mapping[str, float], index: int
 ) -> ScenarioInfo:
-    """``info`` with the precision its layout needs on this log's drive (at the start's values)."""
+    """``info`` with the precision its layout needs on this log's drive (at the start's values;
+    the clock offset of log ``index`` from the sensor's own track)."""
     fns = scorer.fns
     view = scorer.viewed(np.array([start[n] for n in fns.names]))
     t = part.windows.selected.time_s
     duration = float(t[-1] - t[0]) if t.size else 0.0
     layout = drive_precision(info.layout, fns, view, scorer.inputs, duration)
+    log = part.prepared.log
+    track = fns.sensor.floor_track(log)
+    layout = lag_precision(layout, track, log.time_s, index, fns.sensor.length_unit == "m")
     return dataclasses.replace(info, layout=layout)
 
 

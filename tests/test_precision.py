@@ -1,0 +1,74 @@
+"""The precision a calibration needs, from the vehicle's own drive: a clock offset's from how fast
+the sensor moves and turns."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nlp_calib.analysis.precision import lag_precision, tightest
+from nlp_calib.models.clock import LAG_REFERENCE
+from nlp_calib.results.layout import CLOCK, HELD, MODEL, BlockSpec, Layout
+
+REFERENCE = LAG_REFERENCE["tracker_lag"][1]
+
+
+def _layout(n_logs: int) -> Layout:
+    model = BlockSpec(MODEL, ("wheelbase",), precision={"wheelbase": ("relative", 0.01)})
+    clock = BlockSpec(CLOCK, ("tracker_lag",), per_log=n_logs > 1, precision=dict(LAG_REFERENCE))
+    return Layout.of((model, clock), n_logs)
+
+
+def _track(
+    speed: float, rate: float, seconds: float = 20.0, hz: float = 50.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """A sensor on a circle at ``speed`` (m/s) turning at ``rate`` (rad/s)."""
+    t = np.arange(0.0, seconds, 1.0 / hz)
+    heading = rate * t
+    r = speed / rate
+    return np.column_stack([r * np.sin(heading), r * (1 - np.cos(heading)), heading]), t
+
+
+@pytest.mark.parametrize(
+    ("speed", "rate", "needed"),
+    [
+        (1.0, 0.5, REFERENCE),
+        (0.25, 0.1, REFERENCE / 0.25),
+        (20.0, 0.05, REFERENCE / 20.0),
+        (0.3, 2.0, REFERENCE / 2.0),
+    ],
+)
+def test_a_clock_offset_needs_what_keeps_the_sensors_motion_to_the_reference_robots(
+    speed: float, rate: float, needed: float
+) -> None:
+    """2 ms at a metre and a radian a second: the faster of the two sets it."""
+    track, t = _track(speed, rate)
+    out = lag_precision(_layout(1), track, t, 0, metric=True)
+    # (The track's steps are chords of the arc: a few parts in a million shorter.)
+    assert out.param("tracker_lag").precision == ("absolute", pytest.approx(needed, rel=1e-5))
+    assert out.param("wheelbase").precision == ("relative", 0.01)
+
+
+def test_a_track_in_its_own_units_counts_its_turn_rate_only_and_other_logs_keep_theirs() -> None:
+    track, t = _track(5.0, 0.5)
+    out = lag_precision(_layout(2), track, t, 1, metric=False)
+    assert out.param("tracker_lag_2").precision == ("absolute", pytest.approx(REFERENCE / 0.5))
+    assert out.param("tracker_lag_1").precision == LAG_REFERENCE["tracker_lag"]
+
+
+def test_a_held_offset_or_a_still_sensor_keeps_the_reference() -> None:
+    track, t = _track(0.2, 0.1)
+    held = _layout(1).with_status({"tracker_lag": HELD})
+    assert lag_precision(held, track, t, 0, metric=True) == held
+    still = np.zeros((100, 3))
+    assert lag_precision(_layout(1), still, np.arange(100) * 0.02, 0, metric=True) == _layout(1)
+
+
+def test_several_logs_need_the_tightest_of_a_shared_parameter_and_each_its_own_offset() -> None:
+    joint = _layout(2)
+    fast, slow = _track(2.0, 0.2), _track(0.25, 0.1)
+    logs = [lag_precision(joint, *fast, 0, metric=True), lag_precision(joint, *slow, 1, metric=True)]
+    out = tightest(joint, logs)
+    assert out.param("tracker_lag_1").precision[1] == pytest.approx(REFERENCE / 2.0, rel=1e-5)
+    assert out.param("tracker_lag_2").precision[1] == pytest.approx(REFERENCE / 0.25, rel=1e-5)
+    assert out.param("wheelbase").precision == ("relative", 0.01)
