@@ -8,6 +8,9 @@ radii and the separation in %), the largest |error|/σ, the wrong matches (off t
 wrong), and the verdict::
 
     python3 benchmarks/lidar_study.py --seeds 101 102 103 104 105
+
+``--late S`` has the driver stamp every scan S seconds late; the scenario then fits the time offset
+as ``docs/lidar.md``'s does (``alignment: {tracker_lag: auto}``), and the truth's lag is S.
 """
 
 from __future__ import annotations
@@ -40,9 +43,12 @@ def _matched(bag: Path) -> np.ndarray:
     return match_scans(read_scans(bag, "/scan")).z
 
 
-def one(seed: int, duration: float, degraded: float, folder: Path) -> dict[str, Any]:
+def one(seed: int, duration: float, degraded: float, folder: Path, late: float = 0.0) -> dict[str, Any]:
     """One seed's figures."""
-    sim = simulate_lidar(LidarSimulationOptions(duration_s=duration, seed=seed, degraded_fraction=degraded))
+    options = LidarSimulationOptions(
+        duration_s=duration, seed=seed, degraded_fraction=degraded, stamp_offset_s=late
+    )
+    sim = simulate_lidar(options)
     bag, truth_file = write_lidar_simulation(sim, folder / f"drive_{seed}")
     dataset = {
         "bag": str(bag),
@@ -50,12 +56,15 @@ def one(seed: int, duration: float, degraded: float, folder: Path) -> dict[str, 
         "joints": list(sim.joint_names),
         "scan": "/scan",
     }
-    sc = scenario_from_mapping({**SCENARIO, "dataset": dataset}, f"lidar_{seed}", folder)
+    lag = {"alignment": {"tracker_lag": "auto"}} if late else {}
+    sc = scenario_from_mapping({**SCENARIO, **lag, "dataset": dataset}, f"lidar_{seed}", folder)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         run = Calibration(sc).run()
     est, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
     truth = {RADIANS.get(k, k): v for k, v in json.loads(truth_file.read_text())["params"].items()}
+    if late:
+        truth["tracker_lag"] = late
     err = {n: est[n] - truth[n] for n in truth}
     # A match is wrong when it is off the truth by more than 5σ of the clean matches' scatter.
     off = _matched(bag) - sim.true_motions()
@@ -73,6 +82,8 @@ def one(seed: int, duration: float, degraded: float, folder: Path) -> dict[str, 
         "wheels_pct": tuple(100 * err[n] / truth[n] for n in RADIANS.values()),
         "max_z": max(abs(err[n]) / std[n] for n in truth),
         "matches": (len(wrong), len(wrong & named), len(named - wrong)),
+        # A degraded scan spoils its two matches (from the scan before, to the scan after).
+        "degraded": (len(sim.degraded), sum(bool({k - 1, k} & named) for k in sim.degraded.tolist())),
         "verdict": run.verdict.level,
     }
 
@@ -82,19 +93,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[101, 102, 103, 104, 105])
     ap.add_argument("--duration", type=float, default=120.0)
     ap.add_argument("--degraded", type=float, default=0.02)
+    ap.add_argument("--late", type=float, default=0.0, help="the scans' stamps this late (s); the lag fitted")
     args = ap.parse_args(argv)
     print(
         f"{'seed':>5} {'Δx mm':>7} {'Δy mm':>7} {'Δyaw°':>7} {'Δr_L %':>7} {'Δr_R %':>7} {'Δb %':>7} "
-        f"{'max|z|':>7} {'wrong/named/named but not':>25}  verdict"
+        f"{'max|z|':>7} {'wrong/named/named but not':>25} {'degraded/named':>14}  verdict"
     )
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
-            r = one(seed, args.duration, args.degraded, Path(tmp))
+            r = one(seed, args.duration, args.degraded, Path(tmp), args.late)
             touched, found, other = r["matches"]
             print(
                 f"{r['seed']:>5} {r['mount_mm'][0]:>+7.2f} {r['mount_mm'][1]:>+7.2f} {r['yaw_deg']:>+7.3f} "
                 + "".join(f"{v:>+8.3f}" for v in r["wheels_pct"])
-                + f" {r['max_z']:>7.2f} {f'{touched}/{found}/{other}':>25}  {r['verdict']}"
+                + f" {r['max_z']:>7.2f} {f'{touched}/{found}/{other}':>25}"
+                + f" {'/'.join(map(str, r['degraded'])):>14}  {r['verdict']}"
             )
     return 0
 
