@@ -7,6 +7,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import grimp
+import numpy as np
 import pytest
 from conftest import REPO
 from importlinter import configuration
@@ -239,3 +240,39 @@ def test_the_words_of_a_3d_mount_appear_only_in_its_sensor_plug_in() -> None:
         and (words := _words(tree) & (MOUNT_3D_WORDS | {"pose_rows comparison"}))
     }
     assert found == {}, found
+
+
+def test_the_stages_ask_the_references_kind_never_whether_a_log_holds_motions() -> None:
+    """Poses or own motions is the reference kind's to say (``nlp_calib/logs/reference.py``): no
+    module outside the logs and the sources that fill them tests ``….motions is (not) None``."""
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE).as_posix()
+        if rel.startswith(("logs/", "sources/")):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if (
+                isinstance(node, ast.Compare)
+                and isinstance(node.left, ast.Attribute)
+                and node.left.attr == "motions"
+                and any(isinstance(op, (ast.Is, ast.IsNot)) for op in node.ops)
+            ):
+                found.append(f"{rel}:{node.lineno}")
+    assert found == [], found
+
+
+def test_each_source_gives_its_reference_kind() -> None:
+    """A tracker's log holds poses; a motions file's, its own increments (one-interval ones set the
+    horizon to 1 and cover their intervals only)."""
+    from nlp_calib.logs.reference import Motions, Poses
+    from nlp_calib.logs.relative import RelativeMotions
+
+    # Two one-interval increments, then one over two intervals.
+    motions = RelativeMotions(np.array([0, 1, 2]), np.array([1, 2, 4]), np.zeros((3, 3)), np.arange(3))
+    kind = Motions(motions)
+    assert (
+        kind.horizon(1) == 2 and kind.window_count((0, 5), 1, 1) == 3 and kind.window_count((0, 4), 1, 2) == 1
+    )
+    assert kind.uncovered(5).tolist() == [False, False, True, True]
+    assert Motions(motions.take(motions.single())).horizon(7) == 1
+    assert Poses().window_count((0, 10), 3, 2) == 4 and Poses().horizon(3) is None

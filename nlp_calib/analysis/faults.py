@@ -45,6 +45,7 @@ from nlp_calib.core import poses
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.logs.log import frozen
+from nlp_calib.logs.reference import Motions, Poses
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results.faults import (
@@ -377,13 +378,10 @@ def counter_faults(
         return FaultReport(faults=(), stale={}, noise={}, unit=unit_of(log))
     T = tracker_poses(fns, log)
     z = over_columns(fns.between, T[:-1].T, T[1:].T)[0]
-    if log.motions is not None:
-        # No increment measures these intervals: the wheels' own motion, which accuses no counter.
-        gap = ~log.motions.covered(log.n_records)
-        if gap.any():
-            z[:, gap] = over_columns(fns.predict, np.ravel(np.asarray(params, dtype=float)), inputs[:, gap])[
-                0
-            ]
+    # Intervals no measurement covers: the wheels' own motion, which accuses no counter.
+    gap = log.reference.kind.uncovered(log.n_records)
+    if gap.any():
+        z[:, gap] = over_columns(fns.predict, np.ravel(np.asarray(params, dtype=float)), inputs[:, gap])[0]
     e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
     de_du = de_du.reshape(fns.error_rows, N, inputs.shape[0])
     screens, lag_s = screen_counters(e, de_du, inputs, counters, log.time_s, lag)
@@ -400,6 +398,14 @@ def counter_faults(
     return FaultReport(tuple(faults), stale, noise, lag_s=lag_s, unit=unit)
 
 
+#: Each reference kind's own glitches (:mod:`nlp_calib.logs.reference`): poses off their
+#: neighbours, or motions its matcher said are poor.
+JUMPS: dict[str, Callable[[Log, Sensor], list[Fault]]] = {
+    Poses.name: tracker_faults,
+    Motions.name: lambda log, sensor: match_faults(log),
+}
+
+
 #: Fits the model leaving out the windows the masks (per interval, per record) spoil; its
 #: parameters, or None when the fit does not converge.
 Judge = Callable[[np.ndarray, np.ndarray], np.ndarray | None]
@@ -412,7 +418,7 @@ def screen(
     alone, then the counters' against a fit (``judge``) that leaves those glitches out, on readings
     with them interpolated over, at the tracker ``lag`` (s, or a range to estimate it in)."""
     model, n = fns.model, log.n_records
-    jumps = tracker_faults(log, fns.sensor) if log.motions is None else match_faults(log)
+    jumps = JUMPS[log.reference.kind.name](log, fns.sensor)
     glitches = tuple(jumps + absolute_faults(log, model.encoder_kinds))
     report = FaultReport(glitches, {}, {}, unit=unit_of(log))
     params = judge(report.bad_intervals(n - 1), report.bad_records(n))
@@ -420,7 +426,7 @@ def screen(
         # Judged by a wrong model every interval looks faulty; the solvers will say why.
         why = "the fit that judges the encoders did not converge from the initial guess"
         return replace(report, unchecked=why)
-    if log.motions is not None:
+    if log.reference.kind.own_increments:
         # An increment's disagreement is its own unless one wheel's reading explains it.
         inputs = model.inputs(log, steering_sample)
         glitches += tuple(increment_faults(fns, params, log, inputs, glitches))

@@ -11,6 +11,7 @@ import numpy as np
 from nlp_calib.core import poses3d
 from nlp_calib.core.errors import DatasetError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
+from nlp_calib.logs.reference import REFERENCES, Motions, Poses, ReferenceKind
 from nlp_calib.logs.relative import RelativeMotions
 
 #: How an encoder reports: ``absolute`` readings lie in ``[0, max)`` (a steering angle);
@@ -139,6 +140,12 @@ class ReferenceData:
 
     poses_3d: np.ndarray | None = None
     motions: RelativeMotions | None = None
+
+    @property
+    def kind(self) -> ReferenceKind:
+        """What the reference measures (:mod:`nlp_calib.logs.reference`): its own motions where it
+        holds them, else poses."""
+        return REFERENCES[Poses.name if self.motions is None else Motions.name](self.motions)
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ import numpy as np
 from nlp_calib.analysis.streams import GAP_FACTOR, MIN_GAP_S, gap_threshold, time_gaps
 from nlp_calib.core.errors import DatasetError, ModelError, NlpCalibWarning, ScenarioError
 from nlp_calib.logs import Log
+from nlp_calib.logs.reference import Poses
 from nlp_calib.models import KinematicModel, get_model
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.keys import scenario_key
@@ -125,18 +126,17 @@ def check_windows(sc: Scenario, start: int, stop: int, log: Log | None = None) -
     H, stride = sc.objective.residual.horizon, sc.objective.residual.stride
     fit_stop = split(sc, start, stop)
     intervals = fit_stop - start - 1
-    windows = 0 if intervals < H else (intervals - H) // stride + 1
-    if log is not None and log.motions is not None:
-        windows = -(-log.motions.select(start, fit_stop).n // stride)
+    kind = Poses() if log is None else log.reference.kind
+    windows = kind.window_count((start, fit_stop), H, stride)
     always = sc.objective.sensor.held()
     n_free = len(set(scenario_params(sc)) - set(sc.parameters.fixed) - set(always))
     if windows >= n_free:
         return
-    if log is not None and log.motions is not None:
+    if kind.horizon(H) is not None:  # windows of its own: no horizon to shorten
         part = f"{sc.origin} ({sc.dataset.name}): " if sc.origin else ""
         raise ScenarioError(
-            f"{sc.path or sc.name}: {part}{windows} increment(s) in the {fit_stop - start} fitted records of "
-            f"samples [{start}, {stop}) for {n_free} parameters; widen samples"
+            f"{sc.path or sc.name}: {part}{windows} {kind.window_words} in the {fit_stop - start} fitted "
+            f"records of samples [{start}, {stop}) for {n_free} parameters; widen samples"
         )
     longest = intervals - (n_free - 1) * stride
     fix = f"shorten residual.horizon to at most {longest}" if longest >= 1 else "select more samples"
@@ -173,10 +173,9 @@ def resolved(sc: Scenario, log: Log) -> Scenario:
     about. A log of measured increments has them as its windows: the horizon only says whether an
     increment may span several records (2 or more) or not (1, the fastest form)."""
     residual, dt = sc.objective.residual, median_dt(sc, log)
-    if log.motions is not None:
-        spans = log.motions.last - log.motions.first
-        H = 1 if spans.size and np.all(spans == 1) else max(residual.horizon, 2)
-        return sc.with_options(residual=replace(residual, horizon=H, horizon_s=None))
+    own = log.reference.kind.horizon(residual.horizon)
+    if own is not None:
+        return sc.with_options(residual=replace(residual, horizon=own, horizon_s=None))
     if residual.horizon_s is not None:
         H = max(1, round(residual.horizon_s / dt)) if dt > 0 else 1
         return sc.with_options(residual=replace(residual, horizon=int(H)))

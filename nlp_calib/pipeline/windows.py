@@ -61,9 +61,8 @@ def bind_windows(
     report = screening.findings.report
     # Every detected fault shapes the fair figures, whatever the handling: like with like.
     bad_intervals, bad_records = fault_masks(report, log.n_records, alignment.lag_s, dt)
-    if log.motions is not None:
-        # A reference of its own motions is composed only where one-interval increments follow on.
-        bad_intervals = bad_intervals | ~log.motions.covered(log.n_records)
+    # A reference of its own motions is composed only where one-interval increments follow on.
+    bad_intervals = bad_intervals | log.reference.kind.uncovered(log.n_records)
     if prepared.gaps is not None:  # dead reckoning restarts after a gap, as after a fault
         bad_intervals = bad_intervals | prepared.gaps
     broken = alignment.log.joint_breaks()

@@ -98,7 +98,7 @@ class ResidualData:
     def increment(self) -> np.ndarray | None:
         """Per window, whether its ``z`` is an increment the reference measured itself (its noise
         its own, not two poses'; a log with ``motions``); None: none is."""
-        own = np.array([lg.motions is not None for lg in self.logs])
+        own = np.array([lg.reference.kind.own_increments for lg in self.logs])
         return own[self.log_of(self.starts)] if own.any() else None
 
     def with_selector(self) -> ResidualData:

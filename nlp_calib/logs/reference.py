@@ -1,0 +1,84 @@
+"""What a log's reference measures, and what that means for its windows.
+
+A reference either gives the sensor's **poses** (a tracker, a camera, a GNSS/vision device: any two
+of them give the motion between them, so a window may span any records) or its own **motions**
+between two of its stamps (a scan matcher, visual odometry, a vendor's increments: each increment
+is compared with the wheels over exactly its two stamps, and intervals no one-interval increment
+measures have no reference). Each kind is one class here and one line of :data:`REFERENCES`; a
+log's reference names its kind (``log.reference.kind``) and the stages ask the kind, never the
+log's fields.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import ClassVar, Protocol
+
+import numpy as np
+
+from nlp_calib.logs.relative import RelativeMotions
+
+
+class ReferenceKind(Protocol):
+    """What the stages ask of a reference's kind."""
+
+    name: ClassVar[str]
+    #: Whether each window's measurement is one the reference made itself (its noise its own,
+    #: not the difference of two poses').
+    own_increments: ClassVar[bool]
+    #: What one of its windows is called in messages.
+    window_words: ClassVar[str]
+
+    def uncovered(self, n_records: int) -> np.ndarray: ...  # the intervals no measurement covers
+    def window_count(self, span: tuple[int, int], horizon: int, stride: int) -> int: ...
+    def horizon(self, horizon: int) -> int | None: ...  # its own, or None: the scenario's
+
+
+@dataclass(frozen=True)
+class Poses:
+    """Poses of the sensor: windows of ``horizon`` records every ``stride``."""
+
+    name: ClassVar[str] = "poses"
+    own_increments: ClassVar[bool] = False
+    window_words: ClassVar[str] = "residual window(s)"
+
+    def uncovered(self, n_records: int) -> np.ndarray:
+        return np.zeros(max(n_records - 1, 0), dtype=bool)
+
+    def window_count(self, span: tuple[int, int], horizon: int, stride: int) -> int:
+        intervals = span[1] - span[0] - 1
+        return 0 if intervals < horizon else (intervals - horizon) // stride + 1
+
+    def horizon(self, horizon: int) -> int | None:
+        return None
+
+
+@dataclass(frozen=True)
+class Motions:
+    """The sensor's own ``motions`` between pairs of its stamps: each increment is a window."""
+
+    name: ClassVar[str] = "motions"
+    own_increments: ClassVar[bool] = True
+    window_words: ClassVar[str] = "increment(s)"
+
+    motions: RelativeMotions
+
+    def uncovered(self, n_records: int) -> np.ndarray:
+        return ~self.motions.covered(n_records)
+
+    def window_count(self, span: tuple[int, int], horizon: int, stride: int) -> int:
+        return -(-self.motions.select(*span).n // stride)
+
+    def horizon(self, horizon: int) -> int:
+        """1 when every increment spans one interval (the fastest form), else at least 2 (an
+        increment may span several records)."""
+        spans = self.motions.last - self.motions.first
+        return 1 if spans.size and np.all(spans == 1) else max(horizon, 2)
+
+
+#: The reference kinds, by name: each from what the reference holds (its own motions, or none).
+REFERENCES: dict[str, Callable[[RelativeMotions | None], ReferenceKind]] = {
+    Poses.name: lambda motions: Poses(),
+    Motions.name: lambda motions: Motions(motions) if motions is not None else Poses(),
+}
