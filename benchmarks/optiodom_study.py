@@ -106,7 +106,8 @@ def spread_rows(results: list[dict[str, Any]]) -> list[str]:
     for key, rs in groups.items():
         if len(rs) < 3:
             continue
-        for name in rs[0]["params"]:
+        # The robot's parameters (each log's own clock offset is no session's to compare).
+        for name in (n for n in rs[0]["params"] if all(n in r["params"] for r in rs)):
             values = np.array([r["params"][name] for r in rs])
             sigma = np.array([r["std"][name] for r in rs])
             if not np.any(sigma > 0):
