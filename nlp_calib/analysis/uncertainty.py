@@ -511,8 +511,9 @@ def lag_effects(u: Uncertainty, layout: Layout) -> tuple[LagEffect, ...]:
             continue
         per = {}
         for j, name in enumerate(u.free):
-            c = float(u.covariance[i, j])
-            corr = c / np.sqrt(var * float(u.covariance[j, j])) if u.covariance[j, j] > 0 else 0.0
+            c, other = float(u.covariance[i, j]), float(u.covariance[j, j])
+            # (A parameter the data leave unbounded, an infinite variance, correlates with nothing.)
+            corr = c / np.sqrt(var * other) if 0 < other < np.inf else 0.0
             if j != i and np.isfinite(c) and abs(corr) >= LAG_EFFECT_CORRELATION:
                 per[name] = c / var
         out.append(LagEffect(lag, per))
