@@ -289,7 +289,7 @@ def over_columns(f: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
         for target, a in zip(ins, args):
             if a.ndim == 2:
                 target[:] = np.ravel(a[:, lo:hi], order="F")
-            else:  # the same column for every column of the block (once, where compiled)
+            elif a.size:  # the same column for every column of the block (once, where compiled)
                 target.reshape(-1, a.size)[:] = np.ravel(a)
         for i, (out, (_, c)) in enumerate(zip(outs, shapes)):
             # A block of columns of a column-major array is one contiguous run: written in place.
