@@ -198,3 +198,37 @@ def test_a_cache_path_that_cannot_hold_files_is_a_usage_error(tmp_path: Path) ->
             str(cache) in lines[0] and "NLP_CALIB_CACHE" in lines[0] and "not a writable folder" in lines[0]
         )
     assert blocker.read_text() == "not a folder\n"
+
+
+@needs_compiler
+def test_long_column_maps_of_a_compiled_run_give_the_interpreted_columns(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Helper Functions over many columns, whole blocks mapped by the compiled backend's chunks (a
+    shared column given once, two outputs) and the short last block interpreted: CasADi's map
+    over every column, to the bit."""
+    from nlp_calib.pipeline.build import _column_map
+    from nlp_calib.problem import windows
+    from nlp_calib.solvers.backends import BackendOptions, make_backend
+
+    monkeypatch.setenv("NLP_CALIB_CACHE", str(tmp_path / "cache"))
+    p, u = ca.SX.sym("p", 2), ca.SX.sym("u", 3)
+    f = ca.Function(
+        "f", [p, u], [ca.vertcat(p[0] * u[0] + u[1], ca.sin(u[2]) * p[1]), ca.cross(u, ca.vertcat(p, 1.0)).T]
+    )
+    column_map = _column_map(make_backend(BackendOptions(kind="compiled")))
+    assert column_map is not None
+    calls: list[int] = []
+    monkeypatch.setattr(windows, "_column_map", [lambda *a: calls.append(a[1]) or column_map(*a)])
+    monkeypatch.setattr(windows, "BLOCK", 128)
+    monkeypatch.setattr(windows, "COMPILED_FROM", 1000)
+    rng = np.random.default_rng(0)
+    params, cols = rng.normal(size=2), rng.normal(size=(3, 1000))
+    for args in ((params, cols), (np.tile(params[:, None], (1, 1000)), cols)):
+        got = windows.over_columns(f, *args)
+        for g, w in zip(got, f.map(1000)(*args), strict=True):
+            assert np.array_equal(g, np.asarray(w))
+    assert calls == [128, 128]  # one compiled map per call's block size
+    calls.clear()
+    windows.over_columns(f, params, cols[:, :999])  # below COMPILED_FROM: interpreted
+    assert calls == []

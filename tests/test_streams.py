@@ -196,3 +196,26 @@ def test_the_blocked_screened_first_pass_finds_what_scoring_every_group_at_once_
     monkeypatch.setattr(streams, "FIRST_PASS_BLOCK", 97)
     got = streams._candidates(t, y, sc, usable, (streams.OFF_SIGMAS, excursion, 3))
     assert np.array_equal(got, expected)
+
+
+@pytest.mark.parametrize("w", [6, 7])
+def test_the_trailing_medians_are_nanmedians_to_the_bit(w: int) -> None:
+    """The min/max network's medians (and nanmedian's where a run has a nan) are numpy's own:
+    every 0/1 run (the network sorts all inputs if it sorts these) and runs with nans, infinities
+    and ties."""
+    import itertools
+
+    from nlp_calib.analysis.streams import _window_medians
+
+    runs = np.array(list(itertools.product([0.0, 1.0], repeat=w)))
+    got = np.concatenate([_window_medians(run[:, None], w) for run in runs])
+    assert np.array_equal(got[:, 0], np.median(runs, axis=1))
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(2000, 3))
+    for value, share in ((np.nan, 0.02), (np.inf, 0.03), (-np.inf, 0.03), (0.5, 0.2)):
+        a[rng.random(a.shape) < share] = value
+    a[:12, 0] = np.nan
+    with pytest.warns(RuntimeWarning, match="All-NaN"):  # both: the first runs are all nan
+        want = np.nanmedian(np.lib.stride_tricks.sliding_window_view(a, w, axis=0), axis=-1)
+        got = _window_medians(a, w)
+    assert np.array_equal(got, want, equal_nan=True)

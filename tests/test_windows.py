@@ -194,6 +194,17 @@ def test_over_columns_in_bound_buffers_gives_what_a_casadi_map_gives(monkeypatch
         assert np.array_equal(g, np.asarray(w))
 
 
+def test_over_columns_with_an_empty_shared_column() -> None:
+    """A shared input with no rows (a model without free parameters of a kind) fills nothing."""
+    from nlp_calib.problem import windows
+
+    p, u = ca.SX.sym("p", 0), ca.SX.sym("u", 2)
+    f = ca.Function("f", [p, u], [u[0] * u[1]])
+    cols = np.random.default_rng(1).normal(size=(2, 300))
+    (got,) = windows.over_columns(f, np.zeros(0), cols)
+    assert np.array_equal(got[0], cols[0] * cols[1])
+
+
 def test_the_weighted_gram_by_blocks_is_the_one_product(monkeypatch: pytest.MonkeyPatch) -> None:
     rng = np.random.default_rng(3)
     A, w = rng.normal(size=(1001, 5, 3)), rng.uniform(0.1, 2.0, 3)

@@ -29,6 +29,7 @@ from nlp_calib.problem import (
 )
 from nlp_calib.problem.functions import problem_layout
 from nlp_calib.problem.start import closed_form_start, fit_windows
+from nlp_calib.problem.windows import BLOCK, COMPILED_FROM, ColumnMap, compile_columns
 from nlp_calib.results.layout import CLOCK, own_name
 from nlp_calib.sensors import SensorStart, sensor_for
 from nlp_calib.solvers import Priors, ProblemEvaluator, get_solver
@@ -269,7 +270,16 @@ def prepare_backend(sc: Scenario, fns: ProblemFunctions, solvers: Sequence[str],
         backend = make_backend(BackendOptions(kind=sc.compute.backend, threads=sc.compute.threads))
     stride = sc.objective.residual.stride
     backend.prepare(requests(fns, evaluated(sc, solvers), n_records // stride))
+    compile_columns(_column_map(backend) if n_records >= COMPILED_FROM else None)
     return backend
+
+
+def _column_map(backend: Backend) -> ColumnMap | None:
+    """The helper Functions' map over blocks of columns: the backend's compiled chunks (None:
+    interpreted, or blocks that are no whole number of its chunks)."""
+    if backend.name != "compiled" or BLOCK % backend.chunk:
+        return None
+    return lambda f, n, mapped: backend.map(f, n, mapped, False)
 
 
 def sensor_selected(fns: ProblemFunctions, data: ResidualData, start: SensorStart) -> ResidualData:

@@ -231,6 +231,21 @@ def interval_inputs(model: KinematicModel, logs: Sequence[Log], steering_sample:
 
 #: Columns a helper Function is mapped over at a time (a map over a million columns is slow to build).
 BLOCK = 1 << 14
+#: Columns from which :func:`over_columns` maps a compiled chunk, when a run gave it a way to
+#: (:func:`compile_columns`): each helper is evaluated a few times per run over every interval,
+#: and the interpreter took a tenth of a run of 10^6 records doing it; below, it is quick enough.
+COMPILED_FROM = 50_000
+
+#: ``(f, n, mapped inputs) -> f`` over ``n`` columns of those inputs (the others the same for
+#: every column): a compiled backend's map.
+ColumnMap = Callable[[ca.Function, int, tuple[str, ...]], ca.Function]
+_column_map: list[ColumnMap] = []
+
+
+def compile_columns(column_map: ColumnMap | None) -> None:
+    """Map long :func:`over_columns` calls with ``column_map`` from now on (None: CasADi's map,
+    interpreted). Set with each run's backend: the process's runs share the helper Functions."""
+    _column_map[:] = [] if column_map is None else [column_map]
 
 
 @functools.lru_cache(maxsize=32)
@@ -257,10 +272,14 @@ def over_columns(f: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
                 out[:, c * lo : c * hi] = np.asarray(r)
         return outs
     buffers: dict[int, tuple[ca.FunctionBuffer, Callable[[], None], list[np.ndarray]]] = {}
+    mapped = tuple(f.name_in(i) for i, a in enumerate(args) if a.ndim == 2)
+    compiled = _column_map[0] if _column_map and n >= COMPILED_FROM else None
     for lo in range(0, n, BLOCK):
         hi = min(n, lo + BLOCK)
         if hi - lo not in buffers:
-            fm = _mapped(f, hi - lo)
+            # Whole blocks compiled; the last one's few columns (any number) interpreted.
+            whole = compiled is not None and hi - lo == BLOCK
+            fm = compiled(f, BLOCK, mapped) if compiled is not None and whole else _mapped(f, hi - lo)
             buf, call = fm.buffer()
             ins = [np.empty(fm.nnz_in(i)) for i in range(fm.n_in())]
             for i, arr in enumerate(ins):
@@ -270,8 +289,8 @@ def over_columns(f: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
         for target, a in zip(ins, args):
             if a.ndim == 2:
                 target[:] = np.ravel(a[:, lo:hi], order="F")
-            else:  # the same column for every column of the block
-                target.reshape(hi - lo, -1)[:] = np.ravel(a)
+            elif a.size:  # the same column for every column of the block (once, where compiled)
+                target.reshape(-1, a.size)[:] = np.ravel(a)
         for i, (out, (_, c)) in enumerate(zip(outs, shapes)):
             # A block of columns of a column-major array is one contiguous run: written in place.
             buf.set_res(i, out[:, c * lo : c * hi].reshape(-1, order="F").data)
