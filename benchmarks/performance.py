@@ -2,7 +2,7 @@
 same objective and data, and runs on 10^4 to 10^6 simulated records.
 
     python benchmarks/performance.py                 # everything; prints a summary table
-    python benchmarks/performance.py --quick         # small sizes, 2 repeats (1 for the sized runs: the tests' smoke run)
+    python benchmarks/performance.py --quick         # small sizes, few repeats: the tests' smoke run
     python benchmarks/performance.py --sections batch,simulate   # some sections only
 
 Every figure is a median over ``--repeats`` (default 7) interleaved repeats, with the load average
