@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import atexit
 import dataclasses
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -20,6 +23,21 @@ from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"
+
+
+def _cache_bytecode_for_children() -> None:
+    """The tool's processes the tests start keep their compiled bytecode in a folder of this test
+    process's own (made private by ``mkdtemp``, removed at exit), never in the checkout: where the
+    environment says not to write bytecode, every child would otherwise compile the package from
+    source (half of a run's import time)."""
+    if os.environ.get("PYTHONDONTWRITEBYTECODE") and "PYTHONPYCACHEPREFIX" not in os.environ:
+        folder = tempfile.mkdtemp(prefix="nlp_calib_test_pyc_")
+        atexit.register(shutil.rmtree, folder, ignore_errors=True)
+        del os.environ["PYTHONDONTWRITEBYTECODE"]
+        os.environ["PYTHONPYCACHEPREFIX"] = folder
+
+
+_cache_bytecode_for_children()
 
 
 def _find_real_log() -> Path:
