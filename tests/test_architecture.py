@@ -276,3 +276,23 @@ def test_each_source_gives_its_reference_kind() -> None:
     assert kind.uncovered(5).tolist() == [False, False, True, True]
     assert Motions(motions.take(motions.single())).horizon(7) == 1
     assert Poses().window_count((0, 10), 3, 2) == 4 and Poses().horizon(3) is None
+
+
+def test_a_references_kind_is_the_one_its_reader_names() -> None:
+    """The reader that fills a reference names its kind (``ReferenceData.measures``); the kind is
+    not inferred from which fields it holds, keeps through a selection of records, and a name the
+    registry does not know, or own motions without any, are refused with the reason."""
+    from nlp_calib.logs.log import ReferenceData
+    from nlp_calib.logs.reference import Motions, Poses
+    from nlp_calib.logs.relative import RelativeMotions
+
+    motions = RelativeMotions(np.array([0, 1, 2]), np.array([1, 2, 4]), np.zeros((3, 3)), np.arange(3))
+    own = ReferenceData(motions=motions, measures=Motions.name)
+    assert isinstance(own.kind, Motions) and own.kind.uncovered(5).tolist() == [False, False, True, True]
+    part = own.select(0, 3)
+    assert isinstance(part.kind, Motions) and part.motions is not None and part.motions.n == 2
+    assert isinstance(ReferenceData(poses_3d=np.zeros((4, 7))).kind, Poses)
+    with pytest.raises(ValueError, match="unknown reference kind 'lidar'"):
+        ReferenceData(measures="lidar")
+    with pytest.raises(ValueError, match="measure its own motions holds none"):
+        _ = ReferenceData(measures=Motions.name).kind

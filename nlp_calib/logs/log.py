@@ -11,7 +11,7 @@ import numpy as np
 from nlp_calib.core import poses3d
 from nlp_calib.core.errors import DatasetError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
-from nlp_calib.logs.reference import REFERENCES, Motions, Poses, ReferenceKind
+from nlp_calib.logs.reference import REFERENCES, Poses, ReferenceKind
 from nlp_calib.logs.relative import RelativeMotions
 
 #: How an encoder reports: ``absolute`` readings lie in ``[0, max)`` (a steering angle);
@@ -140,12 +140,23 @@ class ReferenceData:
 
     poses_3d: np.ndarray | None = None
     motions: RelativeMotions | None = None
+    #: Its kind's name in :data:`~nlp_calib.logs.reference.REFERENCES`, given by the reader that
+    #: filled it (the source knows what its device measures; no stage infers it from a field).
+    measures: str = Poses.name
+
+    def __post_init__(self) -> None:
+        if self.measures not in REFERENCES:
+            raise ValueError(f"unknown reference kind {self.measures!r} (known: {', '.join(REFERENCES)})")
 
     @property
     def kind(self) -> ReferenceKind:
-        """What the reference measures (:mod:`nlp_calib.logs.reference`): its own motions where it
-        holds them, else poses."""
-        return REFERENCES[Poses.name if self.motions is None else Motions.name](self.motions)
+        """What the reference measures (:mod:`nlp_calib.logs.reference`), as its reader named it."""
+        return REFERENCES[self.measures](self)
+
+    def select(self, start: int, stop: int) -> ReferenceData:
+        """Its records ``[start, stop)`` (its own motions within them), of the same kind."""
+        motions = None if self.motions is None else self.motions.select(start, stop)
+        return replace(self, poses_3d=_rows(self.poses_3d, slice(start, stop)), motions=motions)
 
 
 @dataclass(frozen=True)
@@ -285,10 +296,7 @@ class Log:
             T_world_sensor=frozen(self.T_world_sensor[sl]),
             line_numbers=frozen(self.line_numbers[sl]),
             joint_positions=_rows(self.joint_positions, sl),
-            reference=ReferenceData(
-                _rows(self.T_world_sensor_3d, sl),
-                None if self.motions is None else self.motions.select(start, stop),
-            ),
+            reference=self.reference.select(start, stop),
         )
 
 

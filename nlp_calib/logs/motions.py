@@ -25,6 +25,7 @@ from nlp_calib.core.errors import DatasetError, NlpCalibWarning
 from nlp_calib.logs.bag_joints import at_tracker, breaks_s, check_overlap, joint_positions, resolution
 from nlp_calib.logs.bag_reader import Stamped
 from nlp_calib.logs.log import JointStream, Log, LogClock, LogHeader, ReferenceData, frozen
+from nlp_calib.logs.reference import Motions
 from nlp_calib.logs.relative import RelativeMotions
 from nlp_calib.logs.text_tables import data_lines, joined, numbers, seconds, stamp_ns
 
@@ -269,5 +270,5 @@ def timed_by_motions(
         clock=LogClock(start_ns=start_ns),
         joint_positions=stream.at(time_s),
         joint_stream=stream,
-        reference=ReferenceData(motions=increments),
+        reference=ReferenceData(motions=increments, measures=Motions.name),
     )

@@ -77,8 +77,22 @@ class Motions:
         return 1 if spans.size and np.all(spans == 1) else max(horizon, 2)
 
 
-#: The reference kinds, by name: each from what the reference holds (its own motions, or none).
-REFERENCES: dict[str, Callable[[RelativeMotions | None], ReferenceKind]] = {
-    Poses.name: lambda motions: Poses(),
-    Motions.name: lambda motions: Motions(motions) if motions is not None else Poses(),
+class Measured(Protocol):
+    """What a reference holds that its kind may read (``nlp_calib.logs.log.ReferenceData``)."""
+
+    @property
+    def motions(self) -> RelativeMotions | None: ...
+
+
+def _own_motions(reference: Measured) -> Motions:
+    if reference.motions is None:
+        raise ValueError("a reference said to measure its own motions holds none")
+    return Motions(reference.motions)
+
+
+#: The reference kinds, by the name a log's reader gives its reference (``ReferenceData.measures``):
+#: each built from what the reference holds.
+REFERENCES: dict[str, Callable[[Measured], ReferenceKind]] = {
+    Poses.name: lambda reference: Poses(),
+    Motions.name: _own_motions,
 }
