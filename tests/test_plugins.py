@@ -77,3 +77,12 @@ def test_a_fine_result_is_no_caveat(run: CalibrationRun) -> None:
 
     quiet = dataclasses.replace(run, checks=dataclasses.replace(run.checks, more=(fine,)))
     assert fine.words not in caveats(quiet, "gauss_newton", get_model("tricycle"))
+
+
+def test_the_direction_checks_one_wording_is_the_terminals_and_the_reports(run: CalibrationRun) -> None:
+    d = run.checks.direction
+    assert d is not None
+    said = d.sentence()
+    assert f"forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]})" in said
+    assert said.endswith(d.words()) and f"direction: {said}" in run_table(run)
+    assert f"{said[0].upper()}{said[1:]}." in report_markdown(run, [])

@@ -158,17 +158,11 @@ def _uncertainty_section(run: CalibrationRun) -> list[str]:
         f"the blocks): {held}.",
     ]
     d = run.checks.direction
-    if d is not None and not d.compared:
-        out += ["", f"Fits on forward-only and reverse-only driving {d.words()}."]
-    elif d is not None:
-        name, z = d.worst
-        verdict = "**disagree**" if d.significant else "agree"
-        out += [
-            "",
-            f"Fits on forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]}) driving "
-            f"{verdict}: the largest difference is `{name}`, {abs(z):.1f}σ of the difference (each part's "
-            "σ is the jackknife σ of blocks of that part alone).",
-        ]
+    if d is not None:
+        said = d.sentence()
+        # The terminal's wording; the report adds how each part's σ was had.
+        how = " Each part's σ is the jackknife σ of blocks of that part alone." if d.compared else ""
+        out += ["", f"{said[0].upper()}{said[1:]}.{how}"]
     for r in run.checks.more:
         out += [
             "",

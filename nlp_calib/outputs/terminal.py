@@ -103,8 +103,7 @@ def direction_lines(run: CalibrationRun) -> list[str]:
     d = run.checks.direction
     if d is None:
         return []
-    counts = f"forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]})"
-    return [f"direction: fits on {counts} driving {d.words()}"]
+    return [f"direction: {d.sentence()}"]
 
 
 def truth_lines(run: CalibrationRun) -> list[str]:

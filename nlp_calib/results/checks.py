@@ -169,6 +169,13 @@ class DirectionCheck:
             else f"agree within {abs(z):.1f}σ ({name})"
         )
 
+    def sentence(self) -> str:
+        """Its one wording, for the terminal and the report: the parts' windows and :meth:`words`."""
+        return (
+            f"fits on forward-only ({self.windows[0]} windows) and reverse-only ({self.windows[1]}) "
+            f"driving {self.words()}"
+        )
+
     def as_dict(self) -> dict[str, object]:
         return {
             "windows": {"forward": self.windows[0], "reverse": self.windows[1]},
