@@ -310,7 +310,8 @@ class InRadians:
         ``wheel_radius``, ``wheelbase``...) is the parameter itself, not its round trip through
         the counts form."""
         turns = dict.fromkeys(self.encoder_kinds, 2.0 * np.pi)
-        found = self.model.controller(self.to_counts(params), EncoderScales(turns, turns, joint_angles=True))
+        joints = EncoderScales(turns, turns, joint_angles=True, driven_turn_rates=scales.driven_turn_rates)
+        found = self.model.controller(self.to_counts(params), joints)
         own = {n: float(params[n]) if n in params else v for n, v in found.parameters.items()}
         return ControllerMap(
             found.controller,
