@@ -209,7 +209,7 @@ class SkidSteer(DiffDrive):
         rule = (
             "no ros2_control parameter: diff_drive_controller's wheel_separation is a fixed track, but a "
             "skid-steer's effective track grows with the base's turn rate ω (rad/s) as "
-            "baseline/(1 − turn_slip·|ω|)"
+            f"T0/(1 − turn_slip·|ω|), T0 = {baseline!r} m the zero-rate track (calibration.yaml's)"
         )
         if rates:
             low, high = (effective_track(baseline, slip, r) for r in (rates[0], rates[-1]))
@@ -221,7 +221,7 @@ class SkidSteer(DiffDrive):
             )
         else:
             unknown = "the drive's turn rates are unknown: wheel_separation is the zero-rate track"
-            rule += f"; {unknown} {baseline!r} m"
+            rule += f"; {unknown} T0"
         return ControllerMap(
             base.controller, base.parameters, {"turn_slip": rule}, base.omitted, base.assumes, base.settings
         )
