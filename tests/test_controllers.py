@@ -135,8 +135,19 @@ def test_a_recording_is_recovered_within_three_sigma_and_handed_to_its_controlle
     radius = "wheel_radius" if model == "skid_steer" else "traction_wheels_radius"
     assert radius in params
     if model == "skid_steer":
-        assert params["wheel_separation"] == estimate["params"]["wheel_separation"]
-        assert "turn_slip = " in (out / "ros2_control.yaml").read_text()
+        text = (out / "ros2_control.yaml").read_text()
+        assert "turn_slip = " in text
+        # Not the model's zero-rate track (calibration.yaml keeps that) but the truth's effective
+        # track at the median turn rate the tracker saw while turning (its heading's change over 60
+        # poses, about half a second, against the tracker's noise), within its stated 1σ.
+        heading, t = np.unwrap(rec.tracker[:, 2]), rec.tracker_ns * 1e-9
+        rate = np.abs(heading[60:] - heading[:-60]) / (t[60:] - t[:-60])
+        median = float(np.median(rate[rate > 0.05]))
+        track = rec.truth["wheel_separation"] / (1.0 - rec.truth["turn_slip"] * median)
+        written = params["wheel_separation"]
+        sd = float(text.split(f"wheel_separation: {written!r}  # ± ")[1].split()[0])
+        assert abs(written - track) <= 3.0 * sd + 0.005 * track, (written, track, sd)
+        assert abs(estimate["params"]["wheel_separation"] - track) > 0.05
     else:
         track = estimate["params"]["traction_track_width"]
         if "traction_track_width" in doc["verdict"]["concerns"]:
@@ -332,3 +343,47 @@ def test_compare_puts_every_parameter_the_lag_and_the_sensor_side_by_side(tmp_pa
     ):
         assert f"| {label} |" in table
     assert "side by side" in proc.stdout and "k_steer" in proc.stdout.split("side by side")[1]
+
+
+# --- a skid-steer's track for the turn rates it drives (issue 39) -------------------------------
+
+
+def test_a_skid_steers_separation_turns_the_base_as_the_model_at_the_drives_median_rate() -> None:
+    from scipy.optimize import brentq
+
+    from nlp_calib.models.skid_steer import SkidSteer
+
+    params = {"k_left": 5e-4, "k_right": 5e-4, "baseline": 0.95, "turn_slip": 0.3}
+    rates = (0.1, 0.3, 0.6)
+    found = SkidSteer().controller(params, EncoderScales({}, driven_turn_rates=rates))
+
+    def wheels_at(rate: float) -> float:
+        """The wheels' own turn rate that turns the base at ``rate`` by the model's forward law."""
+        return float(brentq(lambda w: w / (1.0 + 0.3 * abs(w)) - rate, 0.0, 50.0))
+
+    # diff_drive_controller turns the base by the wheels' rate times baseline/wheel_separation.
+    separation = found.parameters["wheel_separation"]
+    assert wheels_at(0.3) * 0.95 / separation == pytest.approx(0.3, rel=1e-9)
+    low, high = (0.95 * wheels_at(r) / r for r in (0.1, 0.6))
+    assert f"from {low:.4g} to {high:.4g} m" in found.places["turn_slip"]
+    assert "median |ω| while turning, 0.3 rad/s" in found.places["turn_slip"]
+    # Unknown rates: the zero-rate track, said so.
+    unknown = SkidSteer().controller(params, EncoderScales({}))
+    assert unknown.parameters["wheel_separation"] == 0.95
+    assert "turn rates are unknown" in unknown.places["turn_slip"]
+
+
+def test_the_driven_turn_rates_are_the_turning_records_percentiles_despite_a_tracker_outlier() -> None:
+    from nlp_calib.analysis.handoff import driven_turn_rates
+
+    t = np.arange(0.0, 40.0, 0.01)
+    # Straight for 10 s, then 10 s at 0.2 rad/s, then 20 s at -0.4 rad/s.
+    rate = np.where(t < 10.0, 0.0, np.where(t < 20.0, 0.2, -0.4))
+    heading = np.concatenate([[0.0], np.cumsum(rate[:-1] * 0.01)])
+    wrapped = np.angle(np.exp(1j * heading))
+    wrapped[1500] += 1.0  # one outlier of the tracker
+    low, median, high = driven_turn_rates(t, wrapped)
+    assert low == pytest.approx(0.2, abs=1e-9)
+    assert median == pytest.approx(0.4, abs=1e-9)
+    assert high == pytest.approx(0.4, abs=1e-9)
+    assert driven_turn_rates(t, np.zeros_like(t)) == ()

@@ -34,6 +34,31 @@ def _values(model: KinematicModel, names: Sequence[str], p: np.ndarray, scales: 
     return np.array(list(found.parameters.values()))
 
 
+#: The span (s) a turn rate is measured over: long against a tracker's noise and its single
+#: outliers, short against a manoeuvre.
+TURN_SPAN_S = 0.5
+#: The base turns (rad/s) above this: slower, it drives straight and any track serves.
+TURNING_RATE = 0.05
+
+
+def driven_turn_rates(time_s: np.ndarray, theta: np.ndarray) -> tuple[float, ...]:
+    """The magnitudes of the base's turn rate (rad/s) while turning: the 10th percentile, the
+    median and the 90th percentile of the heading's rate over :data:`TURN_SPAN_S` (empty if the
+    drive never turns). The heading is the tracker's: the base's up to a fixed angle."""
+    t = np.asarray(time_s, dtype=float)
+    heading = np.unwrap(np.asarray(theta, dtype=float))
+    ahead = np.searchsorted(t, t + TURN_SPAN_S)
+    keep = ahead < t.size
+    if not keep.any():
+        return ()
+    i, j = np.flatnonzero(keep), ahead[keep]
+    rate = np.abs(heading[j] - heading[i]) / (t[j] - t[i])
+    turning = rate[np.isfinite(rate) & (rate > TURNING_RATE)]
+    if turning.size == 0:
+        return ()
+    return tuple(float(v) for v in np.percentile(turning, (10.0, 50.0, 90.0)))
+
+
 #: A controller value whose 1σ exceeds this share of it is not determined by the drive.
 UNDETERMINED_SHARE = 0.25
 

@@ -29,6 +29,10 @@ class EncoderScales:
     ranges: Mapping[str, float]
     per_turn: Mapping[str, float] = field(default_factory=dict)
     joint_angles: bool = False
+    #: The base's turn rates (rad/s, magnitude) the drive used while turning: 10th percentile,
+    #: median, 90th percentile; empty where unknown (a model whose geometry depends on the turn
+    #: rate states its values for these).
+    driven_turn_rates: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)

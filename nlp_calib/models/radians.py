@@ -310,8 +310,9 @@ class InRadians:
         ``wheel_radius``, ``wheelbase``...) is the parameter itself, not its round trip through
         the counts form."""
         turns = dict.fromkeys(self.encoder_kinds, 2.0 * np.pi)
-        found = self.model.controller(self.to_counts(params), EncoderScales(turns, turns, joint_angles=True))
-        own = {n: float(params[n]) if n in params else v for n, v in found.parameters.items()}
+        joints = EncoderScales(turns, turns, joint_angles=True, driven_turn_rates=scales.driven_turn_rates)
+        found = self.model.controller(self.to_counts(params), joints)
+        own = {n: float(params[n]) if _round_trip(params, n, v) else v for n, v in found.parameters.items()}
         return ControllerMap(
             found.controller,
             own,
@@ -390,3 +391,9 @@ def default_guess(model: KinematicModel) -> dict[str, float]:
     """The simulator's guess of every parameter, in ``model``'s own names."""
     guess = dict(model.drive.default_guess)
     return model.from_counts(guess) if isinstance(model, InRadians) else guess
+
+
+def _round_trip(params: Mapping[str, float], name: str, value: float) -> bool:
+    """Whether the controller's ``value`` of ``name`` is the model's own parameter of that name
+    through the counts form (not a value derived from it, as a skid-steer's turning track is)."""
+    return name in params and bool(np.isclose(value, params[name], rtol=1e-9, atol=0.0))

@@ -35,8 +35,6 @@ _PARAMS = ("k_left", "k_right", "baseline", "turn_slip")
 #: Curvature (1/m) per unit of the simulator's turning profile: tighter than the differential
 #: drive's, so that the turn rates span what tells the slip from the track.
 _SIM_CURVATURE = 3.0
-#: The turn rate (rad/s) the hand-off states the effective track at.
-_STATED_RATE = 0.5
 
 #: The differential drive's radians form, and each wheel joint's rate over the interval (rad/s).
 RADIANS = RadiansForm(
@@ -200,17 +198,32 @@ class SkidSteer(DiffDrive):
         return np.append(super().input_noise_std(log, encoder_noise), [0.0, 0.0])
 
     def controller(self, params: Mapping[str, float], scales: EncoderScales) -> ControllerMap:
-        """``diff_drive_controller`` with the effective track at a slow turn; the slip has no place
-        there, so the track at a stated turn rate is said with it."""
-        base = wheel_pair(params["k_left"], params["k_right"], params["baseline"], scales)
-        wide = params["baseline"] * (1.0 + params["turn_slip"] * _STATED_RATE)
-        slip = (
-            "no ros2_control parameter: the effective track grows as baseline·(1 + turn_slip·|ω|) with "
-            f"the turn rate ω (rad/s); at {_STATED_RATE:g} rad/s it is {wide!r} m: a base that mostly "
-            "turns at one rate takes that track as wheel_separation"
+        """``diff_drive_controller`` with the effective track at the median turn rate the drive
+        used (the zero-rate track where unknown); the slip has no place there, so the rule and the
+        track over the driven rates are said with it."""
+        baseline, slip = params["baseline"], params["turn_slip"]
+        rates = scales.driven_turn_rates
+        chosen = rates[len(rates) // 2] if rates else 0.0
+        separation = effective_track(baseline, slip, chosen)
+        base = wheel_pair(params["k_left"], params["k_right"], separation, scales)
+        rule = (
+            "no ros2_control parameter: diff_drive_controller's wheel_separation is a fixed track, but a "
+            "skid-steer's effective track grows with the base's turn rate ω (rad/s) as "
+            f"T0/(1 − turn_slip·|ω|), T0 = {baseline!r} m the zero-rate track (calibration.yaml's)"
         )
+        if rates:
+            low, high = (effective_track(baseline, slip, r) for r in (rates[0], rates[-1]))
+            rule += (
+                f"; wheel_separation is it at the drive's median |ω| while turning, {chosen:.3g} rad/s; "
+                f"over the driven rates ({rates[0]:.3g} to {rates[-1]:.3g} rad/s, 10th to 90th "
+                f"percentile) it runs from {low:.4g} to {high:.4g} m, and the controller's yaw rate is "
+                "off by that ratio elsewhere"
+            )
+        else:
+            unknown = "the drive's turn rates are unknown: wheel_separation is the zero-rate track"
+            rule += f"; {unknown} T0"
         return ControllerMap(
-            base.controller, base.parameters, {"turn_slip": slip}, base.omitted, base.assumes, base.settings
+            base.controller, base.parameters, {"turn_slip": rule}, base.omitted, base.assumes, base.settings
         )
 
     def readings_from_odometry(self, base: np.ndarray, params: Mapping[str, float]) -> dict[str, np.ndarray]:
@@ -236,6 +249,14 @@ class SkidSteer(DiffDrive):
         the log's turn rates); the fit finds the slip."""
         start = super().initial_guess(U, z, lambda p: base_motion({**p, "turn_slip": 0.0}))
         return {**{n: start[n] for n in DiffDrive.kinematic_params}, "turn_slip": 0.0, **_sensor(start)}
+
+
+def effective_track(baseline: float, turn_slip: float, rate: float) -> float:
+    """The track (m) a differential drive turning the base at ``rate`` (rad/s) from the same wheel
+    travel has: the wheels' own rate ``ω_w = ω/(1 − turn_slip·|ω|)`` (the law solved for it) over
+    the base's, times ``baseline``. A rate beyond the law's reach keeps the zero-rate track."""
+    divisor = 1.0 - turn_slip * abs(rate)
+    return baseline / divisor if divisor > 0.1 else baseline
 
 
 def _sensor(params: Mapping[str, float]) -> dict[str, float]:

@@ -11,7 +11,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from nlp_calib.analysis.handoff import controller_params
+from nlp_calib.analysis.handoff import controller_params, driven_turn_rates
 from nlp_calib.analysis.plan import believed
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.logs import LogHeader
@@ -233,10 +233,15 @@ def given_params(prepared: PreparedLog) -> dict[str, str]:
 
 def encoder_scales(prepared: PreparedLog) -> EncoderScales:
     """The encoders' ranges in the log and their counts per wheel turn where the user gives them
-    (the scenario's ``counts_per_turn`` over ``ROBOT.yaml``'s)."""
-    header = prepared.log.header
+    (the scenario's ``counts_per_turn`` over ``ROBOT.yaml``'s), and the turn rates the used
+    records drove at."""
+    log = prepared.log
+    header = log.header
     per_turn = {**header.counts_per_turn, **prepared.scenario.data.counts_per_turn}
-    return EncoderScales(dict(zip(header.encoder_names, header.encoder_max)), per_turn)
+    used = slice(prepared.start, prepared.stop)
+    rates = driven_turn_rates(log.time_s[used], log.T_world_sensor[used, 2])
+    ranges = dict(zip(header.encoder_names, header.encoder_max))
+    return EncoderScales(ranges, per_turn, driven_turn_rates=rates)
 
 
 def fit_checks(
