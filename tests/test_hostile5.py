@@ -732,7 +732,8 @@ VENDOR_BLOCKS = {
 
 
 @pytest.mark.parametrize(
-    ("robot", "declared"), [("diff_drive", "tricycle"), ("tricycle", "diff_drive"), ("diff_drive", "diff_drive")]
+    ("robot", "declared"),
+    [("diff_drive", "tricycle"), ("tricycle", "diff_drive"), ("diff_drive", "diff_drive")],
 )
 def test_vendor_odometry_of_another_model_is_said(robot: str, declared: str, tmp_path: Path) -> None:
     """Any model that turns odometry back reproduces any arcs, so the declared model's fit cannot

@@ -15,11 +15,14 @@ from __future__ import annotations
 import dataclasses
 import math
 
+from nlp_calib.core.errors import NlpCalibError
 from nlp_calib.models import MODELS, OdometryInverse
 from nlp_calib.models.drives import VendorController
 from nlp_calib.models.radians import in_units
+from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.options import ParameterOptions
 from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.pipeline.stages import setup_log
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CAVEAT, FINE, CheckResult
 from nlp_calib.sources.vendor import VendorSource
@@ -41,7 +44,9 @@ def rivals(declared: str) -> tuple[str, ...]:
     return tuple(
         name
         for name, model in MODELS.items()
-        if name != declared and isinstance(model, OdometryInverse) and isinstance(model.drive, VendorController)
+        if name != declared
+        and isinstance(model, OdometryInverse)
+        and isinstance(model.drive, VendorController)
     )
 
 
@@ -55,8 +60,6 @@ def _usual(name: str) -> dict[str, float]:
 def _rival_fit(sc: Scenario, name: str) -> tuple[float, int] | None:
     """Model ``name`` fitted to ``sc``'s vendor odometry and reference: its cost per residual and
     its number of free parameters, or None where it cannot be fitted."""
-    from nlp_calib.pipeline.calibration import Calibration  # the check runs inside a calibration
-
     source = sc.log.source
     assert isinstance(source, VendorSource)
     moved = dataclasses.replace(source, vendor=_usual(name))
@@ -65,13 +68,14 @@ def _rival_fit(sc: Scenario, name: str) -> tuple[float, int] | None:
         sc, model=name, data=dataclasses.replace(sc.data, logs=(entry,)), parameters=ParameterOptions()
     )
     try:
-        calib = Calibration(rival, solvers=(SOLVER,))
-        result = calib.solve(SOLVER)
-    except Exception:  # noqa: BLE001 - a rival that cannot be set up or fitted says nothing
+        part = setup_log(rival, None, (SOLVER,))
+        fitting = Fit(part.problem, part.windows.data, (SOLVER,))
+        result = fitting.solve(SOLVER)
+    except NlpCalibError:  # a rival that cannot be set up or fitted says nothing
         return None
     if not result.converged or result.n_residuals == 0:
         return None
-    return result.cost / result.n_residuals, len(calib.x0)
+    return result.cost / result.n_residuals, len(fitting.problem.start.x0)
 
 
 def check(run: CalibrationRun, sc: Scenario | None) -> CheckResult | None:
@@ -92,9 +96,12 @@ def check(run: CalibrationRun, sc: Scenario | None) -> CheckResult | None:
     figures = ", ".join(f"{n} {c:.3g}" for n, c in table["cost_per_residual"].items())
     if not better:
         return CheckResult(
-            "model", FINE, f"the vendor's odometry is fitted best by {sc.model} (cost per residual: {figures})",
-            about={"model": sc.model}, table=table,
-        )  # fmt: skip
+            "model",
+            FINE,
+            f"the vendor's odometry is fitted best by {sc.model} (cost per residual: {figures})",
+            about={"model": sc.model},
+            table=table,
+        )
     best = min(better, key=lambda n: better[n])
     ratio = own / better[best] if better[best] > 0 else math.inf
     return CheckResult(
