@@ -30,7 +30,7 @@ from nlp_calib.sources.vendor import VendorSource
 #: A rival model fits the odometry better where the declared model's cost per residual is this
 #: many times the rival's: the right model's rivals with no more parameters cannot fit better, and
 #: a parameter more buys about one over the number of independent windows (under 1 % on a drive
-#: of a minute; the wrong model of a simulated minute costs 8 % more, tests/test_hostile5.py).
+#: of a minute); the wrong model of a simulated 40 s drive costs 4.5–11 % more (docs/vendor.md).
 BETTER = 1.03
 #: A rival may have this many parameters more than the declared model.
 EXTRA = 1
