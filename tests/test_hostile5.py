@@ -767,3 +767,17 @@ def test_vendor_odometry_of_another_model_is_said(robot: str, declared: str, tmp
     solver = run.chosen_solver()
     assert solver is not None
     assert set(run.verdict.concerns) == set(run.reports[solver].result.names)  # none handed off as calibrated
+
+
+def test_a_table_that_grows_while_read_keeps_every_row(tmp_path: Path) -> None:
+    """The columns are allocated for the lines counted when the file is opened; rows beyond them
+    (a file appended to while read) are kept in order, none lost."""
+    from nlp_calib.logs.text_tables import _Columns
+
+    cols = _Columns(3, 2)
+    blocks = [(np.arange(k, k + 2), np.full((2, 2), float(k)), np.arange(k, k + 2) + 10) for k in (0, 2, 4)]
+    for block in blocks:
+        cols.add(*block)
+    time_ns, values, lines = cols.filled()
+    for got, i in ((time_ns, 0), (values, 1), (lines, 2)):
+        np.testing.assert_array_equal(got, np.concatenate([b[i] for b in blocks]))
