@@ -723,3 +723,61 @@ def test_a_narrow_field_of_view_is_named(beams: int, lidar_sim: Any, tmp_path: P
     else:
         with pytest.warns(NlpCalibWarning, match=r"the scans cover 60° \(30 beams\): a narrow field of view"):
             read_scans(bag, "/scan")
+
+
+VENDOR_BLOCKS = {
+    "diff_drive": "{left_wheel_radius: 0.1, right_wheel_radius: 0.1, wheel_separation: 0.45}",
+    "tricycle": "{k_steer: 0.5, wheel_radius: 0.078, wheelbase: 1.45, steer_offset: 0.0}",
+}
+
+
+@pytest.mark.parametrize(
+    ("robot", "declared"),
+    [("diff_drive", "tricycle"), ("tricycle", "diff_drive"), ("diff_drive", "diff_drive")],
+)
+def test_vendor_odometry_of_another_model_is_said(robot: str, declared: str, tmp_path: Path) -> None:
+    """Any model that turns odometry back reproduces any arcs, so the declared model's fit cannot
+    tell it is the wrong one: the other models fitted to the same odometry and reference name the
+    robot's own (a caveat with each model's cost per residual); the right one declared is fine."""
+    from nlp_calib.pipeline.calibration import Calibration
+    from nlp_calib.pipeline.scenario import load_scenario
+    from nlp_calib.results.checks import CAVEAT, FINE
+    from nlp_calib.results.run import CAVEATS
+    from nlp_calib.simulation.vendor import VendorSimulationOptions, write_vendor_simulation
+
+    odo, tum, _ = write_vendor_simulation(
+        VendorSimulationOptions(model=robot, duration_s=40.0, seed=5), tmp_path / "odom.txt"
+    )
+    sc = tmp_path / "v.yaml"
+    sc.write_text(
+        f"name: v\nmodel: {declared}\ndataset: {{odometry: {odo.name}, poses: {tum.name}, "
+        f"vendor: {VENDOR_BLOCKS[declared]}}}\nresidual: {{horizon_s: 0.5}}\nsolvers: [gauss_newton]\n"
+    )
+    run = Calibration(load_scenario(sc)).run()
+    found = next(c for c in run.checks.more if c.name == "model")
+    costs = found.table["cost_per_residual"]
+    assert set(costs) == {"diff_drive", "tricycle"}
+    if robot == declared:
+        assert found.level == FINE and min(costs, key=lambda n: costs[n]) == robot
+        return
+    assert found.level == CAVEAT and found.about["likely"] == robot, found.words
+    assert costs[declared] > 1.03 * costs[robot]
+    assert f"looks integrated by a {robot} controller, not the declared {declared}" in found.words
+    assert run.verdict.level == CAVEATS and found.words in run.verdict.reasons, run.verdict
+    solver = run.chosen_solver()
+    assert solver is not None
+    assert set(run.verdict.concerns) == set(run.reports[solver].result.names)  # none handed off as calibrated
+
+
+def test_a_table_that_grows_while_read_keeps_every_row(tmp_path: Path) -> None:
+    """The columns are allocated for the lines counted when the file is opened; rows beyond them
+    (a file appended to while read) are kept in order, none lost."""
+    from nlp_calib.logs.text_tables import _Columns
+
+    cols = _Columns(3, 2)
+    blocks = [(np.arange(k, k + 2), np.full((2, 2), float(k)), np.arange(k, k + 2) + 10) for k in (0, 2, 4)]
+    for block in blocks:
+        cols.add(*block)
+    time_ns, values, lines = cols.filled()
+    for got, i in ((time_ns, 0), (values, 1), (lines, 2)):
+        np.testing.assert_array_equal(got, np.concatenate([b[i] for b in blocks]))

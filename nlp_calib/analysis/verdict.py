@@ -93,6 +93,9 @@ def concerns(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[st
     out = {c: w.words() for w in _weak(run) for c in w.components}
     out.update(_coarse(run, solver, model))
     params = run.reports[solver].result.param_dict()
+    for r in run.checks.more:  # a plug-in check's caveat on every parameter (a wrong model's)
+        if r.level == CAVEAT and r.about.get("concerns") == "all":
+            out.update({n: out.get(n, r.words) for n in params})
     for other in [s for s in run.solver_order() if run.reports[s].result.converged and s != solver]:
         theirs = run.reports[other].result.param_dict()
         for n, v in params.items():

@@ -207,9 +207,12 @@ def _slow_row(path: str, line: int, text: str, layout: Layout) -> tuple[int, lis
 class _Rows:
     """A table's rows gathered block by block (see the module docstring)."""
 
-    def __init__(self, path: str, layout: Layout, keep: Keep | None) -> None:
+    def __init__(self, path: str, layout: Layout, keep: Keep | None, capacity: int) -> None:
         self.path, self.layout, self.keep = path, layout, keep
-        self.parts: list[tuple[np.ndarray, ...]] = []
+        # The columns, allocated once for every line of the file and filled block by block: a
+        # large allocation's pages are touched only as they fill, and no block's pieces are held
+        # beside a copy of them (blocks freed into the heap are not given back to the system).
+        self.columns = _Columns(capacity, layout.width)
         self.header: tuple[int, str] | None = None
         self.rows = 0
         self.first_ns: int | None = None
@@ -270,10 +273,10 @@ class _Rows:
         self.first_ns = int(t_ns[0]) if self.first_ns is None else self.first_ns
         self.last = (int(t_ns[-1]), int(lines[-1]))
         kept = self.keep(t_ns) if self.keep is not None else slice(None)
-        self.parts.append((t_ns[kept], values[kept], lines[kept]))
+        self.columns.add(t_ns[kept], values[kept], lines[kept])
 
     def table(self) -> Table:
-        time_ns, values, lines = joined(self.parts, 3)
+        time_ns, values, lines = self.columns.filled()
         last = self.last[0] if self.last is not None else 0
         return Table(
             time_ns.astype(np.int64, copy=False),
@@ -284,6 +287,38 @@ class _Rows:
             self.first_ns or 0,
             last,
         )
+
+
+class _Columns:
+    """A table's three columns (times, values, line numbers) filled in order up to a capacity;
+    rows beyond it (a file that grew while read) are kept in blocks and joined at the end."""
+
+    def __init__(self, capacity: int, width: int) -> None:
+        self.time_ns = np.empty(capacity, dtype=np.int64)
+        self.values = np.empty((capacity, width))
+        self.lines = np.empty(capacity, dtype=np.int64)
+        self.at = 0
+        self.beyond: list[tuple[np.ndarray, ...]] = []
+
+    def add(self, t_ns: np.ndarray, values: np.ndarray, lines: np.ndarray) -> None:
+        n = t_ns.shape[0]
+        if self.beyond or self.at + n > self.time_ns.shape[0]:
+            self.beyond.append((t_ns, values, lines))
+            return
+        self.time_ns[self.at : self.at + n] = t_ns
+        self.values[self.at : self.at + n] = values
+        self.lines[self.at : self.at + n] = lines
+        self.at += n
+
+    def filled(self) -> list[np.ndarray]:
+        head = (self.time_ns[: self.at], self.values[: self.at], self.lines[: self.at])
+        return joined([head, *self.beyond], 3) if self.beyond else list(head)
+
+
+def line_count(path: Path) -> int:
+    """How many lines the file at ``path`` holds (its line feeds, and a last line without one)."""
+    with open_regular(path) as fh:
+        return 1 + sum(chunk.count(b"\n") for chunk in iter(lambda: fh.read(TABLE_BLOCK_BYTES), b""))
 
 
 def joined(parts: list[tuple[np.ndarray, ...]], width: int) -> list[np.ndarray]:
@@ -343,10 +378,11 @@ def read_table(path: str | Path, layout: Layout, keep: Keep | None = None) -> Ta
     """The rows of the table at ``path`` (the module docstring says how); ``keep``: which rows of
     each block to keep, by their times (all when None)."""
     p = Path(path)
-    rows = _Rows(str(p), layout, keep)
-    for first, blob, long in _open(p):
+    rows: _Rows | None = None
+    for first, blob, long in _open(p):  # opened (or refused) before its lines are counted
+        rows = rows or _Rows(str(p), layout, keep, line_count(p))
         rows.add(first, blob, long)
-    return rows.table()
+    return (rows or _Rows(str(p), layout, keep, 0)).table()
 
 
 def stamp_ns(token: str, path: str, line: int) -> int:

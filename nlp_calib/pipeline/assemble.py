@@ -351,7 +351,9 @@ def assemble_run(
     # Joints in radians: the simulator's truth is in the counts form's names and units; a log's
     # truth is of its own mount.
     convert = _own_truth(getattr(prepared.model, "from_counts", dict), views)
-    checks = dataclasses.replace(run.checks, more=run_checks(run, CheckContext(source.files(), convert)))
+    checks = dataclasses.replace(
+        run.checks, more=run_checks(run, CheckContext(source.files(), convert, prepared.scenario))
+    )
     run = _believed_plan(dataclasses.replace(run, checks=checks))
     return dataclasses.replace(run, verdict=verdict(run, prepared.model, hint))
 

@@ -16,7 +16,6 @@ import itertools
 import time
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +25,7 @@ from nlp_calib.analysis.precision import drive_precision, lag_precision, tightes
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, reference_scales
-from nlp_calib.pipeline.align import Alignment, align
+from nlp_calib.pipeline.align import Alignment
 from nlp_calib.pipeline.analyse import (
     FitAnalysis,
     LogAnalysis,
@@ -42,12 +41,11 @@ from nlp_calib.pipeline.analyse import (
     scores,
 )
 from nlp_calib.pipeline.assemble import MountViews, assemble_run, fit_info, fit_notes, joint_run
-from nlp_calib.pipeline.build import Problem, StartingPoint, at_lags, build_stage, mount_count
+from nlp_calib.pipeline.build import StartingPoint, build_stage, mount_count
 from nlp_calib.pipeline.fit import Fit
-from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
+from nlp_calib.pipeline.prepare import joint_residual
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.pipeline.screen import Screening, exclude_faults, median_interval, screen
-from nlp_calib.pipeline.windows import LogWindows, bind_windows
+from nlp_calib.pipeline.stages import LogSetup, setup_log
 from nlp_calib.problem import ProblemFunctions, ResidualData, joined
 from nlp_calib.results import CalibrationRun, ScenarioInfo, SolverResult
 from nlp_calib.results.checks import WEAK, ConsistencyCheck, CrossValidation
@@ -55,62 +53,6 @@ from nlp_calib.results.faults import Findings
 from nlp_calib.sensors import sensor_for
 from nlp_calib.solvers import ProblemEvaluator
 from nlp_calib.solvers.backends import Backend
-
-
-@dataclass(frozen=True)
-class LogSetup:
-    """One log through the stages before the fit."""
-
-    prepared: PreparedLog
-    problem: Problem
-    screening: Screening
-    alignment: Alignment
-    windows: LogWindows
-
-    @property
-    def used(self) -> tuple[int, int]:
-        return self.windows.used
-
-    @property
-    def fit(self) -> tuple[int, int]:
-        return self.windows.fit
-
-    @property
-    def aligned(self) -> Log:
-        return self.windows.aligned
-
-
-def align_stage(problem: Problem, prepared: PreparedLog, screening: Screening) -> Alignment:
-    """The tracker lag, searched with the windows that could cross a fault within the search's
-    reach left out, applied to the encoders of the log to fit."""
-    al = prepared.scenario.log.alignment
-    search = al.search if al.tracker_lag == "auto" else (0.0, 0.0)
-    reach = max(abs(search[0]), abs(search[1]))
-    log = prepared.log
-    binder = exclude_faults(problem.binder, screening.findings, log.n_records, reach, median_interval(log))
-    return align(binder, screening.fitted_log, prepared.start, prepared.stop, problem.start.x0)
-
-
-def setup_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> LogSetup:
-    """Prepare, build, screen, align and bind one log (``log``: already read, or None)."""
-    prepared = prepare(sc, log)
-    read = prepared.log
-    records = (prepared.start, prepared.stop)
-    start_from = (read, prepared.start, prepared.split)
-    problem = build_stage(
-        prepared.scenario,
-        prepared.model,
-        tuple(prepared.held),
-        start_from,
-        solvers,
-        records[1] - records[0],
-        gaps=prepared.gaps,
-    )
-    screening = screen(problem.binder, read, records, problem.start.x0)
-    alignment = align_stage(problem, prepared, screening)
-    problem = at_lags(problem, [alignment.lag_s])
-    windows = bind_windows(problem, prepared, screening, alignment)
-    return LogSetup(prepared, problem, screening, alignment, windows)
 
 
 def _joined(pieces: Sequence[np.ndarray], joint: bool) -> np.ndarray:

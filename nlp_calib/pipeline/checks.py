@@ -13,18 +13,21 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from nlp_calib.pipeline import truth
+from nlp_calib.pipeline import rival, truth
+from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CheckResult
 
 
 @dataclass(frozen=True)
 class CheckContext:
-    """What a check may read besides the run: its log source's files, and the conversion of
+    """What a check may read besides the run: its log source's files, the scenario, and the conversion of
     parameter values from the simulator's names and units into the run's (``convert``)."""
 
     files: Sequence[Path] = ()
     convert: Callable[[Mapping[str, float]], dict[str, float]] = field(default=dict)
+    #: The scenario the run fitted (None: not known).
+    scenario: Scenario | None = None
 
 
 #: A check: the run and its context to a result, or None when it has nothing to say.
@@ -33,6 +36,7 @@ RunCheck = Callable[[CalibrationRun, CheckContext], "CheckResult | None"]
 #: The plug-in checks, by name, in the order they run.
 RUN_CHECKS: dict[str, RunCheck] = {
     "truth": lambda run, ctx: truth.check(run, ctx.files, ctx.convert),
+    "model": lambda run, ctx: rival.check(run, ctx.scenario),
 }
 
 

@@ -1,0 +1,71 @@
+"""One log through the stages before the fit: prepared, its problem built, screened, aligned and
+its windows bound (:func:`setup_log`), for a calibration and for a check that fits another model."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from nlp_calib.logs import Log
+from nlp_calib.pipeline.align import Alignment, align
+from nlp_calib.pipeline.build import Problem, at_lags, build_stage
+from nlp_calib.pipeline.prepare import PreparedLog, prepare
+from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.pipeline.screen import Screening, exclude_faults, median_interval, screen
+from nlp_calib.pipeline.windows import LogWindows, bind_windows
+
+
+@dataclass(frozen=True)
+class LogSetup:
+    """One log through the stages before the fit."""
+
+    prepared: PreparedLog
+    problem: Problem
+    screening: Screening
+    alignment: Alignment
+    windows: LogWindows
+
+    @property
+    def used(self) -> tuple[int, int]:
+        return self.windows.used
+
+    @property
+    def fit(self) -> tuple[int, int]:
+        return self.windows.fit
+
+    @property
+    def aligned(self) -> Log:
+        return self.windows.aligned
+
+
+def align_stage(problem: Problem, prepared: PreparedLog, screening: Screening) -> Alignment:
+    """The tracker lag, searched with the windows that could cross a fault within the search's
+    reach left out, applied to the encoders of the log to fit."""
+    al = prepared.scenario.log.alignment
+    search = al.search if al.tracker_lag == "auto" else (0.0, 0.0)
+    reach = max(abs(search[0]), abs(search[1]))
+    log = prepared.log
+    binder = exclude_faults(problem.binder, screening.findings, log.n_records, reach, median_interval(log))
+    return align(binder, screening.fitted_log, prepared.start, prepared.stop, problem.start.x0)
+
+
+def setup_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> LogSetup:
+    """Prepare, build, screen, align and bind one log (``log``: already read, or None)."""
+    prepared = prepare(sc, log)
+    read = prepared.log
+    records = (prepared.start, prepared.stop)
+    start_from = (read, prepared.start, prepared.split)
+    problem = build_stage(
+        prepared.scenario,
+        prepared.model,
+        tuple(prepared.held),
+        start_from,
+        solvers,
+        records[1] - records[0],
+        gaps=prepared.gaps,
+    )
+    screening = screen(problem.binder, read, records, problem.start.x0)
+    alignment = align_stage(problem, prepared, screening)
+    problem = at_lags(problem, [alignment.lag_s])
+    windows = bind_windows(problem, prepared, screening, alignment)
+    return LogSetup(prepared, problem, screening, alignment, windows)
