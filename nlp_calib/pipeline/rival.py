@@ -3,8 +3,8 @@ declared?
 
 A model that turns odometry back reads every step as an arc (:func:`~nlp_calib.models.drives.arcs`),
 so any of them reproduces the vendor's odometry exactly and the declared model's own fit cannot say
-it is the wrong one: a differential drive's odometry declared as a tricycle's is fitted by a
-steering that tracks the yaw rate, with a mount off by centimetres and a small σ. The other models
+it is the wrong one: one model's odometry declared as another's is fitted by whatever of the
+declared model follows the turn rate, with a mount off by centimetres and a small σ. The other models
 that turn odometry back are fitted to the same odometry and reference (from their controller's
 usual values: the odometry is metric, so the fit finds the robot's own); one whose residual cost
 per residual is :data:`BETTER` times lower, with at most one parameter more, is named as a caveat.
