@@ -166,11 +166,14 @@ def test_a_direction_finding_needs_many_sigma_and_a_difference_beyond_the_precis
     assert check.flagged.tolist() == [False, True, False]
     assert check.significant and check.worst == ("b", pytest.approx(-10.0))
     assert check.words() == "DISAGREE: b by 10.0σ"
-    small = compare(names, forward, forward + [0.004, 0.0, 0.0], (100, 90), std, std, set(), None, needed)
+    one = forward + np.array([0.004, 0.0, 0.0])
+    small = compare(names, forward, one, (100, 90), std, std, set(), None, needed)
     assert not small.significant and not small.flagged.any()
-    assert small.words() == "agree within the precision needed (a differs by 10.0σ, only 0.4× the precision it needs)"
+    assert small.words() == (
+        "agree within the precision needed (a differs by 10.0σ, only 0.4× the precision it needs)"
+    )
     # Without a needed precision, any difference beyond 3σ is a finding (as before).
-    bare = compare(names, forward, forward + [0.004, 0.0, 0.0], (100, 90), std, std, set())
+    bare = compare(names, forward, one, (100, 90), std, std, set())
     assert bare.significant and bare.worst[0] == "a"
 
 
