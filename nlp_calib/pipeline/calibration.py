@@ -339,13 +339,12 @@ def _fit(
     ``held``: the parameters held because the fitted records do not determine them."""
     results = {name: fitting.solve(name) for name in solvers}
     noise = np.max([p.windows.input_noise_std for p in parts], axis=0)
-    sc = parts[0].prepared.scenario
+    info = fit_info(parts[0].prepared.scenario, fitting.fns)
     # The precision each parameter needs: the tightest any log's drive asks (as the joint run's).
     layouts = [_part_info(fitting, part, i)[1].layout for i, part in enumerate(parts)]
-    needed = tightest(fit_info(sc, fitting.fns).layout, layouts)
+    needed = tightest(info.layout, layouts)
     fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data), needed)
-    units = fit_info(sc, fitting.fns).units
-    fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, units))
+    fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, info.units))
     return results, fitted, fit_notes(results, fitted, held)
 
 
