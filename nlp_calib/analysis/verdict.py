@@ -44,7 +44,6 @@ from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.checks import (
     CAVEAT,
     NOT_OBSERVABLE,
-    SIGNIFICANT,
     WEAK,
     ConsistencyCheck,
     LagEstimate,
@@ -103,8 +102,8 @@ def concerns(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[st
                 out.setdefault(n, f"{solver} and {other} disagree on it")
     direction = run.checks.direction
     if direction is not None and direction.significant:
-        for n, z in zip(direction.names, direction.z):
-            if np.isfinite(z) and abs(z) > SIGNIFICANT:
+        for n, z, flagged in zip(direction.names, direction.z, direction.flagged):
+            if flagged:
                 out.setdefault(n, f"forward and reverse driving disagree on it by {abs(z):.1f}σ")
     check = _consistency(run)
     if check is not None and not check.significant:

@@ -339,10 +339,12 @@ def _fit(
     ``held``: the parameters held because the fitted records do not determine them."""
     results = {name: fitting.solve(name) for name in solvers}
     noise = np.max([p.windows.input_noise_std for p in parts], axis=0)
-    fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data))
-    sc = parts[0].prepared.scenario
-    units = fit_info(sc, fitting.fns).units
-    fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, units))
+    info = fit_info(parts[0].prepared.scenario, fitting.fns)
+    # The precision each parameter needs: the tightest any log's drive asks (as the joint run's).
+    layouts = [_part_info(fitting, part, i)[1].layout for i, part in enumerate(parts)]
+    needed = tightest(info.layout, layouts)
+    fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data), needed)
+    fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, info.units))
     return results, fitted, fit_notes(results, fitted, held)
 
 
@@ -358,17 +360,24 @@ def _assemble(
     runs = []
     logs = tuple((p.prepared.scenario.name, p.prepared.log.header) for p in parts)
     for i, part in enumerate(parts):
-        sc = part.prepared.scenario
-        scorer = log_scorer(
-            fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window, i
-        )
-        info = _vehicle_precision(fit_info(sc, fitting.fns), scorer, part, fitting.problem.start.initial, i)
+        scorer, info = _part_info(fitting, part, i)
         view = LogView(part.prepared, part.windows, scorer, part.screening.findings, i)
         figures = analyse_log(fitting, results, view, wanted, info.labels, fitted.nominal_params)
         stage = (part.prepared, part.windows, part.alignment, part.screening.findings)
         views = MountViews(fitting.fns, i, logs)
         runs.append(assemble_run(info, stage, fitting.problem.start, results, fitted, figures, notes, views))
     return runs
+
+
+def _part_info(fitting: Fit, part: LogSetup, index: int) -> tuple[Scorer, ScenarioInfo]:
+    """Log ``index``'s scorer over its used records, and what the outputs say of its fit with the
+    precision its drive needs (see :func:`_vehicle_precision`)."""
+    sc = part.prepared.scenario
+    scorer = log_scorer(
+        fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window, index
+    )
+    info = _vehicle_precision(fit_info(sc, fitting.fns), scorer, part, fitting.problem.start.initial, index)
+    return scorer, info
 
 
 def _vehicle_precision(
