@@ -172,9 +172,10 @@ class Plan:
                 "has it"
             )
         unit = f" {self.target_unit}" if self.target_unit not in ("", "1") else ""
+        before, after = self.target_std_before, best.target_std_after
         return (
-            f"drive {best.words}: the σ of {self.target} would fall from {_sigma(self.target_std_before)}"
-            f"{unit} to {_sigma(best.target_std_after)}{unit}"
+            f"drive {best.words}: the σ of {self.target} would fall from {_sigma(before)}"
+            f"{unit if np.isfinite(before) else ''} to {_sigma(after)}{unit if np.isfinite(after) else ''}"
         )
 
 
