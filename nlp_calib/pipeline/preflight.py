@@ -338,7 +338,19 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
         point = (a.x, d.start.x_fixed, a.omega)
         residual = one.objective.residual
         ahead = plan(
-            Setting(fns, d.data, a.info, point, a.sigma2, a.bounds_std, residual, a.delta, units, a.where)
+            Setting(
+                fns,
+                d.data,
+                a.info,
+                point,
+                a.sigma2,
+                a.bounds_std,
+                residual,
+                a.delta,
+                units,
+                a.where,
+                one.vehicle.steer_max,
+            )  # fmt: skip
         )
     return Preflight(
         scenario=sc.name,

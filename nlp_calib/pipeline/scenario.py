@@ -32,6 +32,7 @@ from nlp_calib.pipeline.options import (
     DataOptions,
     FaultOptions,
     HandoffOptions,
+    VehicleOptions,
     InformationWeights,
     LogEntry,
     ObjectiveOptions,
@@ -64,6 +65,7 @@ __all__ = [
     "DataOptions",
     "FaultOptions",
     "HandoffOptions",
+    "VehicleOptions",
     "InformationWeights",
     "LogEntry",
     "ObjectiveOptions",
@@ -101,6 +103,8 @@ class Scenario:
     compute: ComputeOptions = field(default_factory=ComputeOptions)
     #: What the hand-off files name (the ros2_control controller).
     handoff: HandoffOptions = field(default_factory=HandoffOptions)
+    #: What the robot can drive beyond its model's facts (the plan's steering limit).
+    vehicle: VehicleOptions = field(default_factory=VehicleOptions)
 
     @classmethod
     def of(cls, name: str, dataset: str | Path, **flat: Any) -> Scenario:
@@ -213,7 +217,7 @@ _GROUP_OF: Mapping[str, str] = {
     **{f.name: "compute" for f in dataclasses.fields(ComputeOptions)},
 }
 _LOG_KEYS = ("dataset", "datasets", "samples", "alignment")
-_OWN_KEYS = ("name", "model", "solvers", "validation", "handoff")
+_OWN_KEYS = ("name", "model", "solvers", "validation", "handoff", "vehicle")
 
 
 def top_level_keys() -> tuple[str, ...]:
