@@ -125,7 +125,8 @@ def _turns(R: float, v: float, reverse_speed: float) -> list[Candidate]:
             tuple((np.pi / 2 / w, v, s * w) for s in (1, -1) * max(1, round(T * w / np.pi))),
         ),
         Candidate(
-            "arcs_backwards", R, vb, f"backwards round arcs each way ({R:.2g} m radius at {vb:.2g} m/s, {T:.0f} s)",
+            "arcs_backwards", R, vb,
+            f"backwards round arcs each way ({R:.2g} m radius at {vb:.2g} m/s, {T:.0f} s)",
             ((T / 2, -vb, -vb / R), (T / 2, -vb, vb / R)),
         ),
     ]  # fmt: skip
@@ -274,12 +275,13 @@ def tightest_radius(T_world_sensor: np.ndarray, dt: float) -> float:
 
 
 def drive_facts(
-    data: ResidualData, model: KinematicModel | None = None, reach: Reach = Reach(0.0), asked: bool = False
+    data: ResidualData, model: KinematicModel | None = None, reach: Reach | None = None, asked: bool = False
 ) -> DriveFacts:
     """The facts of the drive whose windows are ``data`` (its last log's), driven by ``model``
-    (None: one with no held angle inputs) that can drive ``reach``; ``asked``: the reach's steering
-    limit is the scenario's, and no turn the drive took bounds the plan's."""
+    (None: one with no held angle inputs) that can drive ``reach`` (None: anything); ``asked``:
+    the reach's steering limit is the scenario's, and no turn the drive took bounds the plan's."""
     log = data.logs[-1]
+    reach = Reach(0.0) if reach is None else reach
     held = levels(model) if model is not None else []
     t = log.time_s
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.04

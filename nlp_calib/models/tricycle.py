@@ -28,9 +28,9 @@ from nlp_calib.models.base import (
     Reference,
     Symmetry,
     named,
-    steered_reach,
     rows_by_name,
     sampled_angle,
+    steered_reach,
 )
 from nlp_calib.models.controllers import ControllerMap, EncoderScales, steering_places, wheel_radius
 from nlp_calib.models.drives import (

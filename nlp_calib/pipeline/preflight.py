@@ -337,21 +337,10 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
     if loose:
         point = (a.x, d.start.x_fixed, a.omega)
         residual = one.objective.residual
-        ahead = plan(
-            Setting(
-                fns,
-                d.data,
-                a.info,
-                point,
-                a.sigma2,
-                a.bounds_std,
-                residual,
-                a.delta,
-                units,
-                a.where,
-                one.vehicle.steer_max,
-            )  # fmt: skip
+        setting = Setting(
+            fns, d.data, a.info, point, a.sigma2, a.bounds_std, residual, a.delta, units, a.where
         )
+        ahead = plan(replace(setting, steer_max=one.vehicle.steer_max))
     return Preflight(
         scenario=sc.name,
         model=sc.model,

@@ -32,7 +32,6 @@ from nlp_calib.pipeline.options import (
     DataOptions,
     FaultOptions,
     HandoffOptions,
-    VehicleOptions,
     InformationWeights,
     LogEntry,
     ObjectiveOptions,
@@ -42,6 +41,7 @@ from nlp_calib.pipeline.options import (
     SampleSelection,
     SensorOptions,
     ValidationOptions,
+    VehicleOptions,
 )
 from nlp_calib.solvers import SOLVERS
 from nlp_calib.sources import (
@@ -65,7 +65,6 @@ __all__ = [
     "DataOptions",
     "FaultOptions",
     "HandoffOptions",
-    "VehicleOptions",
     "InformationWeights",
     "LogEntry",
     "ObjectiveOptions",
@@ -76,6 +75,7 @@ __all__ = [
     "Scenario",
     "SensorOptions",
     "ValidationOptions",
+    "VehicleOptions",
     "load_scenario",
     "scenario_from_mapping",
 ]
