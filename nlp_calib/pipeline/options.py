@@ -265,13 +265,15 @@ class ObjectiveOptions:
 class ParameterOptions:
     """Where the parameters start (``from_file``, ``auto`` or values), bounds, fixed ones, priors,
     and ``known`` ones: measured values held fixed whatever the start (a camera's height, the one
-    length a free scale needs), added to ``fixed``."""
+    length a free scale needs), added to ``fixed``; ``vehicle``: what the robot can drive beyond
+    its model's facts."""
 
     initial_guess: str | Mapping[str, float] = "from_file"
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     fixed: tuple[str, ...] = ()
     priors: Mapping[str, Prior] = field(default_factory=dict)
     known: Mapping[str, float] = field(default_factory=dict)
+    vehicle: VehicleOptions = field(default_factory=VehicleOptions)
 
     def __post_init__(self) -> None:
         for n, value in self.known.items():

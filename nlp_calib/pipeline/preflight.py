@@ -340,7 +340,7 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
         setting = Setting(
             fns, d.data, a.info, point, a.sigma2, a.bounds_std, residual, a.delta, units, a.where
         )
-        ahead = plan(replace(setting, steer_max=one.vehicle.steer_max))
+        ahead = plan(replace(setting, steer_max=one.parameters.vehicle.steer_max))
     return Preflight(
         scenario=sc.name,
         model=sc.model,

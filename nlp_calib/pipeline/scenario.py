@@ -41,7 +41,6 @@ from nlp_calib.pipeline.options import (
     SampleSelection,
     SensorOptions,
     ValidationOptions,
-    VehicleOptions,
 )
 from nlp_calib.solvers import SOLVERS
 from nlp_calib.sources import (
@@ -75,7 +74,6 @@ __all__ = [
     "Scenario",
     "SensorOptions",
     "ValidationOptions",
-    "VehicleOptions",
     "load_scenario",
     "scenario_from_mapping",
 ]
@@ -103,8 +101,6 @@ class Scenario:
     compute: ComputeOptions = field(default_factory=ComputeOptions)
     #: What the hand-off files name (the ros2_control controller).
     handoff: HandoffOptions = field(default_factory=HandoffOptions)
-    #: What the robot can drive beyond its model's facts (the plan's steering limit).
-    vehicle: VehicleOptions = field(default_factory=VehicleOptions)
 
     @classmethod
     def of(cls, name: str, dataset: str | Path, **flat: Any) -> Scenario:
@@ -217,7 +213,7 @@ _GROUP_OF: Mapping[str, str] = {
     **{f.name: "compute" for f in dataclasses.fields(ComputeOptions)},
 }
 _LOG_KEYS = ("dataset", "datasets", "samples", "alignment")
-_OWN_KEYS = ("name", "model", "solvers", "validation", "handoff", "vehicle")
+_OWN_KEYS = ("name", "model", "solvers", "validation", "handoff")
 
 
 def top_level_keys() -> tuple[str, ...]:
