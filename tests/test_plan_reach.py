@@ -102,3 +102,30 @@ def test_a_highway_cars_plan_is_driven_at_a_circles_speed_and_reversed_slowly(tm
             assert m.radius_m >= opts.truth["wheelbase"] / math.tan(math.radians(35))
             assert m.speed_mps**2 / m.radius_m <= LATERAL_ACCEL * (1 + 1e-9)
     assert np.isfinite(plan.best.target_std_after)
+
+
+def test_plan_md_states_the_runs_sigma_of_its_target(tmp_path: Path) -> None:
+    """One σ per parameter: plan.md's σ of its target is the run's 1σ as the summary states it (it
+    gave the white-noise σ of the plan's own information, 0.25 m against the summary's ±0.052 m)."""
+    import warnings
+
+    from nlp_calib.outputs.plan import plan_text
+    from nlp_calib.pipeline import Calibration
+
+    log = write_sim(tmp_path, "car.txt", model="car_like", seed=3)
+    path = tmp_path / "car.yaml"
+    path.write_text(f"name: car\nmodel: car_like\ndataset: {log.name}\nsolvers: [gauss_newton]\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(load_scenario(path)).run(["gauss_newton"])
+    plan = run.checks.plan
+    assert plan is not None and plan.best is not None
+    std = run.std("gauss_newton")[plan.target]
+    print(plan.target, std, plan.target_std_before, plan.best.words)
+    assert plan.target_std_before == pytest.approx(std, rel=1e-12)
+    assert f"σ {std:.3g} {plan.target_unit} (the run's 1σ" in plan_text(plan, "car")
+    # The manoeuvre that lowers it most asks a turn the car can steer, wider than its own lock.
+    assert plan.best.target_std_after < std
+    wheelbase = run.reports["gauss_newton"].result.param_dict()["wheelbase"]
+    assert all(m.radius_m == 0 or m.radius_m >= wheelbase / math.tan(math.radians(35)) for m in plan.ranked)
+    assert "spot_turns" not in {m.kind for m in plan.ranked}
