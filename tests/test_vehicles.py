@@ -212,6 +212,24 @@ def test_a_highway_car_given_what_it_cannot_determine_finds_its_wheel_scale_and_
         assert run.scenario.layout.param(name).status == KNOWN
 
 
+def test_the_run_past_the_preflight_says_not_determined_for_the_preflights_reason(tmp_path: Path) -> None:
+    """Past a pre-flight that refuses (--skip-preflight), a solver that wanders along the direction
+    the drive leaves free ends anywhere (k_steer -1.8e4, steer_offset -1.16 rad): the run said
+    "outside what a car_like can have: are the encoders right?"; it names what the pre-flight names."""
+    sc, _ = _car_scenario(tmp_path, seed=0)
+    sc = dataclasses.replace(sc, solvers=("gauss_newton", "ipopt"))
+    refused = set(preflight(sc).named(NOT_DETERMINED))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    said = " ".join(run.verdict.reasons)
+    print(run.verdict.line())
+    assert run.verdict.level == UNDETERMINED and run.handoff_solver() is None
+    assert "are the encoders" not in said and "not observable" in said
+    held = {n for n in refused if run.scenario.layout.param(n).status == HELD}
+    assert refused - held and all(n in said for n in refused - held), (refused, said)
+
+
 def test_a_cars_steering_offset_must_resolve_what_turns_its_heading_at_its_own_speed(tmp_path: Path) -> None:
     sc, opts = _car_scenario(tmp_path, 1, CAR_KNOWN)
     with warnings.catch_warnings():

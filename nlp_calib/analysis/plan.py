@@ -349,7 +349,11 @@ def plan(s: Setting, free_only: bool = False) -> Plan | None:
     if not np.any(ratio > WEAK) or (free_only and not before.undetermined.any()):
         return None
     params = np.asarray(fns.assemble(x, x_fixed)).ravel()
-    reach = fns.model.reach(dict(zip(fns.names, params)), s.steer_max)
+    # What the robot can drive, from a robot the model can be (a fit that wandered along a free
+    # direction to a wheelbase of kilometres would ask for circles of hundreds).
+    ranges = fns.model.physical_ranges
+    plausible = {n: float(np.clip(v, *ranges.get(n, (-np.inf, np.inf)))) for n, v in zip(fns.names, params)}
+    reach = fns.model.reach(plausible, s.steer_max)
     facts = drive_facts(s.data, fns.model, reach, asked=s.steer_max is not None)
     tried = []
     for c in candidates(facts.speed, facts.radii, facts.reverse_speed, facts.spot_turns):
