@@ -22,8 +22,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from nlp_calib.analysis import determinacy as det
+from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.excitation import combined, excitation, smoothed
-from nlp_calib.analysis.plan import Setting, plan
+from nlp_calib.analysis.plan import Setting, believed, plan
 from nlp_calib.analysis.uncertainty import range_std
 from nlp_calib.analysis.units import findings
 from nlp_calib.analysis.verdict import way_out
@@ -45,6 +46,7 @@ from nlp_calib.pipeline.recording import recording
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight, UnitFinding
+from nlp_calib.solvers import ProblemEvaluator
 
 #: Unit and sign findings that stop a run only where the converged fit confirms them.
 JUDGED_BY_FIT = ("mirrored",)
@@ -243,11 +245,12 @@ def _judged(d: Drive) -> ResidualData:
     return d.data if idx.size == n else d.data.select(idx)
 
 
-def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str] | None:
+def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str, np.ndarray] | None:
     """The start fitted to convergence by the run's internal solver on the windows whose information
     is judged (robust kernel, bounds), and the information there: the σ a fit will give is read
     where the fit ends, never at the start, whose misfit is no noise. None where the fit does not
-    converge (a drive that leaves a direction free: its normal equations are singular)."""
+    converge (a drive that leaves a direction free: its normal equations are singular). Last, each
+    free parameter's σ as the run computes it there (:func:`_propagated`)."""
     fns, start, sc = d.fns, d.start, d.scenario
     windows = _judged(d)
     if windows.n_residuals < fns.n_free:
@@ -256,8 +259,9 @@ def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, s
     stride = sc.objective.residual.stride
     backend = prepare_backend(sc, fns, [INTERNAL_SOLVER], windows.n_residuals * stride)
     binder = Binder(sc, fns, backend, start.x_fixed, no_priors(fns.n_free), bounds=box)
+    evaluator = binder.evaluate(windows)
     try:
-        _, x, converged = binder.fit(binder.evaluate(windows), start.x0)
+        _, x, converged = binder.fit(evaluator, start.x0)
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return None
     if not converged or not np.all(np.isfinite(x)):
@@ -265,7 +269,22 @@ def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, s
     info = det.information(fns, windows, x, start.x_fixed, omega, sc.objective.robust.delta, det.MAX_WORK)
     if not np.isfinite(info.chi2):
         return None
-    return np.asarray(x, dtype=float), info, f"{d.start_words}, fitted to convergence on the windows judged"
+    words = f"{d.start_words}, fitted to convergence on the windows judged"
+    return np.asarray(x, dtype=float), info, words, _propagated(d, evaluator, x, windows)
+
+
+def _propagated(d: Drive, evaluator: ProblemEvaluator, x: np.ndarray, windows: ResidualData) -> np.ndarray:
+    """Each free parameter's σ at the converged ``x`` as the run computes it (the tracker's noise
+    propagated through the windows that share its poses, the encoders' own: a pose tracker's noise
+    telescopes along a chain of windows, which white residuals do not say), NaN where it cannot."""
+    noise = np.max([p.model.input_noise_std(p.log, d.scenario.data.encoder_noise) for p in d.parts], axis=0)
+    bounds = range_std(d.start.lower, d.start.upper, d.fns.n_free)
+    try:
+        u = unc.estimate(evaluator, x, windows, noise, bounds)
+    except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
+        return np.full(d.fns.n_free, np.nan)
+    std = u.std_dict()
+    return np.array([std.get(n, np.nan) for n in d.fns.free], dtype=float)
 
 
 @dataclass(frozen=True)
@@ -287,6 +306,8 @@ class Assessment:
     bounds_std: np.ndarray
     #: Whether ``x`` is where the run's internal solver converged on the judged windows.
     converged: bool = False
+    #: Each free parameter's σ there as the run computes it (None: not converged; NaN: none).
+    propagated: np.ndarray | None = None
 
     def fitted(self) -> dict[str, float] | None:
         """Every parameter where the fit converged (None: it did not)."""
@@ -298,7 +319,13 @@ class Assessment:
     def standing(self, info: det.Information | None = None) -> det.Standing:
         """Each free parameter's standing on these windows (or on those whose information is ``info``)."""
         d = self.drive
-        return det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std)
+        st = det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std)
+        if info is not None or self.propagated is None:
+            return st
+        # One σ with the run's: the white σ says what the drive leaves free, the run's how well
+        # the rest is known.
+        std = np.where(np.isfinite(st.std) & np.isfinite(self.propagated), self.propagated, st.std)
+        return replace(st, std=std, std_reference=std / st.reference)
 
 
 def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
@@ -307,13 +334,16 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
     fns, one = d.fns, d.scenario
     omega = np.array(one.objective.information.omega(fns.error_rows))
     fitted = _fitted(d, omega)
-    x, info, where = fitted if fitted is not None else _rough(d, omega)
+    x, info, where = fitted[:3] if fitted is not None else _rough(d, omega)
     at = "the fit" if fitted is not None else "the start"
     sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info, at)
+    if fitted is not None:
+        noise += "; each σ as the run computes it, the tracker's noise propagated through the windows"
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     return Assessment(
-        d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds, fitted is not None
-    )
+        d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds, fitted is not None,
+        fitted[3] if fitted is not None else None,
+    )  # fmt: skip
 
 
 def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
@@ -331,7 +361,8 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
             ex = replace(ex, distance_m=math.nan, speed_median_mps=math.nan, speed_max_mps=math.nan)
         exs.append(ex)
     units = fit_info(one, fns).units
-    statuses = det.statuses(fns, a.standing(), a.held, units, combined(exs))
+    standing = a.standing()
+    statuses = det.statuses(fns, standing, a.held, units, combined(exs))
     loose = [s.name for s in statuses if s.status in (NOT_DETERMINED, WEAKLY) and not s.held]
     ahead = None
     if loose:
@@ -341,6 +372,8 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
             fns, d.data, a.info, point, a.sigma2, a.bounds_std, residual, a.delta, units, a.where
         )
         ahead = plan(replace(setting, steer_max=one.parameters.vehicle.steer_max))
+        # The plan's σ of its target as the statuses state it (the run's σ where the fit converged).
+        ahead = believed(ahead, dict(zip(standing.names, map(float, standing.std))))
     return Preflight(
         scenario=sc.name,
         model=sc.model,
