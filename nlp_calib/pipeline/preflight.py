@@ -23,6 +23,7 @@ import numpy as np
 
 from nlp_calib.analysis import determinacy as det
 from nlp_calib.analysis import uncertainty as unc
+from nlp_calib.analysis.crossval import combine
 from nlp_calib.analysis.excitation import combined, excitation, smoothed
 from nlp_calib.analysis.plan import Setting, believed, plan
 from nlp_calib.analysis.uncertainty import range_std
@@ -45,8 +46,8 @@ from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.recording import recording
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
+from nlp_calib.results.checks import Fold, believed_std
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight, UnitFinding
-from nlp_calib.solvers import ProblemEvaluator
 
 #: Unit and sign findings that stop a run only where the converged fit confirms them.
 JUDGED_BY_FIT = ("mirrored",)
@@ -259,9 +260,8 @@ def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, s
     stride = sc.objective.residual.stride
     backend = prepare_backend(sc, fns, [INTERNAL_SOLVER], windows.n_residuals * stride)
     binder = Binder(sc, fns, backend, start.x_fixed, no_priors(fns.n_free), bounds=box)
-    evaluator = binder.evaluate(windows)
     try:
-        _, x, converged = binder.fit(evaluator, start.x0)
+        _, x, converged = binder.fit(binder.evaluate(windows), start.x0)
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return None
     if not converged or not np.all(np.isfinite(x)):
@@ -270,21 +270,44 @@ def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, s
     if not np.isfinite(info.chi2):
         return None
     words = f"{d.start_words}, fitted to convergence on the windows judged"
-    return np.asarray(x, dtype=float), info, words, _propagated(d, evaluator, x, windows)
+    return np.asarray(x, dtype=float), info, words, _propagated(d, binder, x, windows)
 
 
-def _propagated(d: Drive, evaluator: ProblemEvaluator, x: np.ndarray, windows: ResidualData) -> np.ndarray:
-    """Each free parameter's σ at the converged ``x`` as the run computes it (the tracker's noise
-    propagated through the windows that share its poses, the encoders' own: a pose tracker's noise
-    telescopes along a chain of windows, which white residuals do not say), NaN where it cannot."""
+def _propagated(d: Drive, binder: Binder, x: np.ndarray, windows: ResidualData) -> np.ndarray:
+    """Each free parameter's σ at the converged ``x`` as the run computes the σ to believe: the
+    tracker's noise propagated through the windows that share its poses and the encoders' own (a
+    pose tracker's noise telescopes along a chain of windows, which white residuals do not say),
+    or the jackknife of ``validation.blocks`` fits each without one block of windows where it
+    exceeds that beyond its own noise (errors that vary along the drive); NaN where it cannot."""
+    fns = d.fns
     noise = np.max([p.model.input_noise_std(p.log, d.scenario.data.encoder_noise) for p in d.parts], axis=0)
-    bounds = range_std(d.start.lower, d.start.upper, d.fns.n_free)
+    bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     try:
-        u = unc.estimate(evaluator, x, windows, noise, bounds)
+        white = unc.estimate(binder.evaluate(windows), x, windows, noise, bounds).std
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
-        return np.full(d.fns.n_free, np.nan)
-    std = u.std_dict()
-    return np.array([std.get(n, np.nan) for n in d.fns.free], dtype=float)
+        return np.full(fns.n_free, np.nan)
+    k = d.scenario.validation.blocks
+    folds = [
+        _fold(binder, x, windows, np.asarray(b)) for b in np.array_split(np.arange(windows.n_residuals), k)
+    ]
+    spread = combine(fns.names, folds).beyond(white) if k else np.full(len(fns.names), np.nan)
+    std = dict(zip(fns.names, believed_std(white, spread)))
+    return np.array([std.get(n, np.nan) for n in fns.free], dtype=float)
+
+
+def _fold(binder: Binder, x: np.ndarray, windows: ResidualData, block: np.ndarray) -> Fold:
+    """The fit from ``x`` without the windows ``block``, as a cross-validation fold (no scores)."""
+    kept = windows.select(np.setdiff1d(np.arange(windows.n_residuals), block))
+    fns = binder.fns
+    try:
+        evaluator = binder.evaluate(kept)
+        _, xk, converged = binder.fit(evaluator, x)
+        evaluator.release()
+    except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
+        xk, converged = x, False
+    params = np.asarray(fns.assemble(xk, binder.x_fixed)).ravel()
+    first, stop = (int(block[0]), int(block[-1]) + 1) if block.size else (0, 0)
+    return Fold(first, stop, params, bool(converged) and bool(np.all(np.isfinite(params))), None)
 
 
 @dataclass(frozen=True)
@@ -338,7 +361,10 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
     at = "the fit" if fitted is not None else "the start"
     sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info, at)
     if fitted is not None:
-        noise += "; each σ as the run computes it, the tracker's noise propagated through the windows"
+        noise += (
+            "; each σ as the run computes the σ to believe (the tracker's noise propagated through the "
+            "windows, or the blocks' jackknife where larger)"
+        )
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     return Assessment(
         d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds, fitted is not None,
