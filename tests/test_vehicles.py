@@ -230,6 +230,21 @@ def test_the_run_past_the_preflight_says_not_determined_for_the_preflights_reaso
     assert refused - held and all(n in said for n in refused - held), (refused, said)
 
 
+def test_the_preflight_states_the_sigma_the_run_will_state(tmp_path: Path) -> None:
+    """One σ per parameter before the fit and after it: the pre-flight's was the white residuals'
+    (steer_offset ±0.0032 rad where the run says ±0.00018: a pose tracker's noise telescopes
+    along the drive); it is the run's computation, within the sampling of its own windows."""
+    sc, _ = _car_scenario(tmp_path, 1, CAR_KNOWN)
+    before = {p.name: p.std for p in preflight(sc).parameters}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run(["gauss_newton"])
+    after = run.std("gauss_newton")
+    for name in ("steer_offset", "traction_wheels_radius", "sensor_theta"):
+        print(name, before[name], after[name])
+        assert 0.5 < before[name] / after[name] < 2.0, (name, before[name], after[name])
+
+
 def test_a_cars_steering_offset_must_resolve_what_turns_its_heading_at_its_own_speed(tmp_path: Path) -> None:
     sc, opts = _car_scenario(tmp_path, 1, CAR_KNOWN)
     with warnings.catch_warnings():
