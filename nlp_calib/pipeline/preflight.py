@@ -286,11 +286,11 @@ def _propagated(d: Drive, binder: Binder, x: np.ndarray, windows: ResidualData) 
         white = unc.estimate(binder.evaluate(windows), x, windows, noise, bounds).std
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return np.full(fns.n_free, np.nan)
-    k = d.scenario.validation.blocks
-    folds = [
-        _fold(binder, x, windows, np.asarray(b)) for b in np.array_split(np.arange(windows.n_residuals), k)
-    ]
-    spread = combine(fns.names, folds).beyond(white) if k else np.full(len(fns.names), np.nan)
+    k = min(d.scenario.validation.blocks, windows.n_residuals)
+    spread = np.full(len(fns.names), np.nan)
+    if k:
+        parts = np.array_split(np.arange(windows.n_residuals), k)
+        spread = combine(fns.names, [_fold(binder, x, windows, b) for b in parts]).beyond(white)
     std = dict(zip(fns.names, believed_std(white, spread)))
     return np.array([std.get(n, np.nan) for n in fns.free], dtype=float)
 
