@@ -289,10 +289,17 @@ def _propagated(d: Drive, binder: Binder, x: np.ndarray, windows: ResidualData) 
     k = min(d.scenario.validation.blocks, windows.n_residuals)
     spread = np.full(len(fns.names), np.nan)
     if k:
-        parts = np.array_split(np.arange(windows.n_residuals), k)
-        spread = combine(fns.names, [_fold(binder, x, windows, b) for b in parts]).beyond(white)
+        spread = combine(fns.names, [_fold(binder, x, windows, b) for b in _blocks(windows, k)]).beyond(white)
     std = dict(zip(fns.names, believed_std(white, spread)))
     return np.array([std.get(n, np.nan) for n in fns.free], dtype=float)
+
+
+def _blocks(windows: ResidualData, k: int) -> list[np.ndarray]:
+    """``k`` blocks of the windows, each the ``j``-th contiguous stretch of every log's (a fold
+    without one log's whole stretch would leave that log's own parameters, its lag, free)."""
+    log = windows.log_of(windows.starts)
+    parts = [np.array_split(np.flatnonzero(log == i), k) for i in np.unique(log)]
+    return [np.concatenate([p[j] for p in parts]) for j in range(k)]
 
 
 def _fold(binder: Binder, x: np.ndarray, windows: ResidualData, block: np.ndarray) -> Fold:
@@ -306,7 +313,7 @@ def _fold(binder: Binder, x: np.ndarray, windows: ResidualData, block: np.ndarra
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         xk, converged = x, False
     params = np.asarray(fns.assemble(xk, binder.x_fixed)).ravel()
-    first, stop = (int(block[0]), int(block[-1]) + 1) if block.size else (0, 0)
+    first, stop = (int(block.min()), int(block.max()) + 1) if block.size else (0, 0)
     return Fold(first, stop, params, bool(converged) and bool(np.all(np.isfinite(params))), None)
 
 
