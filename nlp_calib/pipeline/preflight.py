@@ -26,6 +26,7 @@ from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.crossval import combine
 from nlp_calib.analysis.excitation import combined, excitation, smoothed
 from nlp_calib.analysis.plan import Setting, believed, plan
+from nlp_calib.analysis.precision import drive_precision, lag_precision, tightest
 from nlp_calib.analysis.uncertainty import range_std
 from nlp_calib.analysis.units import findings
 from nlp_calib.analysis.verdict import way_out
@@ -317,6 +318,26 @@ def _fold(binder: Binder, x: np.ndarray, windows: ResidualData, block: np.ndarra
     return Fold(first, stop, params, bool(converged) and bool(np.all(np.isfinite(params))), None)
 
 
+def _needed(d: Drive, x: np.ndarray) -> np.ndarray:
+    """What the run's verdict will need of each free parameter at ``x`` on this drive: the
+    precision of its layout as the run sets it from each log's drive at the start's values (an
+    offset's from the drive's speed, a clock offset's from the sensor's own), the tightest of the
+    logs' (:mod:`nlp_calib.analysis.precision`)."""
+    fns = d.fns
+    layout = fit_info(d.scenario, fns).layout
+    params = np.array([d.start.initial[n] for n in fns.names], dtype=float)
+    logs = []
+    for i, p in enumerate(d.parts):
+        log = p.log.select(p.start, p.split)
+        inputs = p.model.inputs(log, p.scenario.objective.residual.steering_sample)
+        duration = float(log.time_s[-1] - log.time_s[0]) if log.time_s.size else 0.0
+        own = drive_precision(layout, fns, fns.view(params, i), inputs, duration)
+        track = fns.sensor.floor_track(log)
+        logs.append(lag_precision(own, track, log.time_s, i, fns.sensor.length_unit == "m"))
+    layout = tightest(layout, logs) if len(logs) > 1 else logs[0]
+    return np.array([layout.param(n).needed(float(v)) for n, v in zip(fns.free, x)])
+
+
 @dataclass(frozen=True)
 class Assessment:
     """What the pre-flight judges the parameters from: the drive (:class:`Drive`) and the
@@ -338,6 +359,8 @@ class Assessment:
     converged: bool = False
     #: Each free parameter's σ there as the run computes it (None: not converged; NaN: none).
     propagated: np.ndarray | None = None
+    #: What the run's verdict will need of each free parameter (None: the model's references).
+    needed: np.ndarray | None = None
 
     def fitted(self) -> dict[str, float] | None:
         """Every parameter where the fit converged (None: it did not)."""
@@ -350,12 +373,15 @@ class Assessment:
         """Each free parameter's standing on these windows (or on those whose information is ``info``)."""
         d = self.drive
         st = det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std)
-        if info is not None or self.propagated is None:
+        if info is not None:
             return st
-        # One σ with the run's: the white σ says what the drive leaves free, the run's how well
-        # the rest is known.
-        std = np.where(np.isfinite(st.std) & np.isfinite(self.propagated), self.propagated, st.std)
-        return replace(st, std=std, std_reference=std / st.reference)
+        # One σ and one needed precision with the run's: the white σ says what the drive leaves
+        # free, the run's how well the rest is known, against what the run's verdict needs.
+        std = st.std
+        if self.propagated is not None:
+            std = np.where(np.isfinite(st.std) & np.isfinite(self.propagated), self.propagated, st.std)
+        needed = st.reference if self.needed is None else self.needed
+        return replace(st, std=std, std_reference=std / needed, reference=needed)
 
 
 def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
@@ -375,7 +401,7 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     return Assessment(
         d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds, fitted is not None,
-        fitted[3] if fitted is not None else None,
+        fitted[3] if fitted is not None else None, _needed(d, x),
     )  # fmt: skip
 
 
