@@ -355,16 +355,15 @@ class Assessment:
     omega: np.ndarray
     delta: float
     bounds_std: np.ndarray
-    #: Whether ``x`` is where the run's internal solver converged on the judged windows.
-    converged: bool = False
-    #: Each free parameter's σ there as the run computes it (None: not converged; NaN: none).
+    #: Each free parameter's σ at ``x`` as the run computes it, where the run's internal solver
+    #: converged on the judged windows (None: it did not, ``x`` is a rough start; NaN: no σ).
     propagated: np.ndarray | None = None
     #: What the run's verdict will need of each free parameter (None: the model's references).
     needed: np.ndarray | None = None
 
     def fitted(self) -> dict[str, float] | None:
         """Every parameter where the fit converged (None: it did not)."""
-        if not self.converged:
+        if self.propagated is None:
             return None
         fns = self.drive.fns
         return dict(zip(fns.names, np.asarray(fns.assemble(self.x, self.drive.start.x_fixed)).ravel()))
@@ -400,7 +399,7 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
         )
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     return Assessment(
-        d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds, fitted is not None,
+        d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds,
         fitted[3] if fitted is not None else None, _needed(d, x),
     )  # fmt: skip
 
