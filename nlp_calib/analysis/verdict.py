@@ -6,7 +6,8 @@ The rules a reader can check:
   kind although it fits the data: a mirror image (e.g. swapped wheel encoders, one wheel counting
   backwards; the model says), a 3-D sensor's mount upside down that no given mount asked for (what
   reversed or swapped joints give a camera), or a parameter outside what the model can have by
-  more than :data:`RANGE_SIGMAS` σ (a wheel's radius of millimetres: joints logged in degrees);
+  more than :data:`RANGE_SIGMAS` σ (a wheel's radius of millimetres: joints logged in degrees)
+  where the drive leaves no direction free (else a solver stops anywhere along it: the next rule);
 - **not determined**: no solver converged, or the drive leaves a parameter undetermined (its σ
   is infinite, or a direction of the information matrix is beyond
   :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` reference units);
