@@ -370,7 +370,7 @@ def plan_setting(fit: Fit, results: Mapping[str, SolverResult], units: Mapping[s
     model_from = f"the fit ({converged[0][0]})" if converged else "the initial guess (no solver converged)"
     return Setting(
         fns, data, info, (x, ev.x_fixed, ev.omega), sigma2, ranges, sc.objective.residual,
-        sc.objective.robust.delta, units, model_from,
+        sc.objective.robust.delta, units, model_from, sc.parameters.vehicle.steer_max,
     )  # fmt: skip
 
 
