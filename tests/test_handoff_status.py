@@ -55,14 +55,18 @@ def caveated(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
     """A run whose verdict's caveat (the vendor's odometry is another model's) concerns every
     parameter, the mount's included."""
     run = _vendor_run(tmp_path_factory.mktemp("caveat"), *request.param)
-    assert run.verdict.level == CAVEATS and {"sensor_x", "sensor_y", "sensor_theta"} <= set(run.verdict.concerns)
+    assert run.verdict.level == CAVEATS and {"sensor_x", "sensor_y", "sensor_theta"} <= set(
+        run.verdict.concerns
+    )
     return run
 
 
 def _clean(run: CalibrationRun) -> CalibrationRun:
     """``run`` as if no caveat concerned any parameter (its mounts as the fit estimated them)."""
     clean = dataclasses.replace(run, verdict=Verdict(CAVEATS, ("none",)))
-    reports = {s: dataclasses.replace(r, mount=r.mount and _undoubted(r.mount)) for s, r in clean.reports.items()}
+    reports = {
+        s: dataclasses.replace(r, mount=r.mount and _undoubted(r.mount)) for s, r in clean.reports.items()
+    }
     return dataclasses.replace(clean, reports=reports)
 
 
@@ -113,14 +117,18 @@ def test_with_the_users_urdf_a_doubted_component_keeps_the_users_value(
     out = tmp_path / "out"
     nlp_calib.write_run(caveated, out, options=output_options(robot_urdf=robot, sensor_link="sensor"))
     for name in URDF_FILES:
-        joint = next(j for j in ET.parse(out / name).getroot().iter("joint") if j.get("name") == "my_sensor_joint")
+        joint = next(
+            j for j in ET.parse(out / name).getroot().iter("joint") if j.get("name") == "my_sensor_joint"
+        )
         origin = joint.find("origin")
         assert origin is not None
         assert [float(v) for v in origin.get("xyz", "").split()] == pytest.approx([0.3, -0.2, 0.5])
         assert [float(v) for v in origin.get("rpy", "").split()] == pytest.approx([0.0, 0.0, 0.25])
     mount = yaml.safe_load((out / "calibration.yaml").read_text())["mount"]
     assert mount["calibrated"] == [] and "undetermined" not in mount
-    assert mount["nominal"]["x"].startswith("kept from mine.urdf (--urdf) (not determined well enough to use: ")
+    assert mount["nominal"]["x"].startswith(
+        "kept from mine.urdf (--urdf) (not determined well enough to use: "
+    )
     comment = (out / "sensor_mount.urdf.xml").read_text().split("-->")[0]
     assert "Calibrated: none" in comment and "--urdf" not in comment.split("<!--", 1)[1]
 

@@ -22,9 +22,9 @@ from nlp_calib.core.version import __version__
 from nlp_calib.outputs import urdf
 from nlp_calib.outputs.results import result_document
 from nlp_calib.results import CalibrationRun, Encoder, codec
-from nlp_calib.results.run import GIVEN, LIVE
 from nlp_calib.results.layout import LAYOUT_VERSION
 from nlp_calib.results.mount import LogMount, SensorMount
+from nlp_calib.results.run import GIVEN, LIVE
 
 CALIBRATION_FILE = "calibration.yaml"
 URDF_FILE = "sensor_mount.urdf.xml"

@@ -355,7 +355,9 @@ def assemble_run(
         run.checks, more=run_checks(run, CheckContext(source.files(), convert, prepared.scenario))
     )
     run = _believed_plan(dataclasses.replace(run, checks=checks))
-    return judged(run, verdict(run, prepared.model, hint), prepared.scenario.objective.sensor.sensor.components)
+    return judged(
+        run, verdict(run, prepared.model, hint), prepared.scenario.objective.sensor.sensor.components
+    )
 
 
 def _own_truth(

@@ -140,8 +140,14 @@ class SensorMount:
         for component, source in self.nominal.items():
             sources.setdefault(source, []).append(component)
         rest = "; ".join(f"{', '.join(names)} {source}" for source, names in sources.items())
-        doubted = "; ".join(f"{c} not determined well enough to use ({why})" for c, why in self.undetermined.items())
-        said = [f"calibrated: {', '.join(self.calibrated) or 'none'}", *([rest] if rest else []), *([doubted] if doubted else [])]
+        doubted = "; ".join(
+            f"{c} not determined well enough to use ({why})" for c, why in self.undetermined.items()
+        )
+        said = [
+            f"calibrated: {', '.join(self.calibrated) or 'none'}",
+            *([rest] if rest else []),
+            *([doubted] if doubted else []),
+        ]
         return "; ".join(said)
 
 
