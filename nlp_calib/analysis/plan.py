@@ -11,7 +11,7 @@ parameter's σ is read as the pre-flight reads it (:mod:`nlp_calib.analysis.dete
 manoeuvres are ranked by the largest σ over its reference precision once appended, the lag
 included; the plan names the parameter that is worst now and what each manoeuvre does to it.
 A candidate the model cannot drive is never asked for: the model says what its base can drive
-(:meth:`~nlp_calib.models.base.KinematicModel.reach`: its tightest turn at its steering limit, the
+(:meth:`~nlp_calib.models.base.KinematicModel.reach`: its tightest turn at its wheels' largest angle, the
 scenario's ``vehicle.max_steering_deg`` or the model's own; a spot turn only where it turns on the
 spot), the turns are driven at no more lateral acceleration than :data:`LATERAL_ACCEL`, backwards
 no faster than :data:`REVERSE_SPEED` unless the drive itself did, and a candidate no inputs
@@ -279,7 +279,7 @@ def drive_facts(
 ) -> DriveFacts:
     """The facts of the drive whose windows are ``data`` (its last log's), driven by ``model``
     (None: one with no held angle inputs) that can drive ``reach`` (None: anything); ``asked``:
-    the reach's steering limit is the scenario's, and no turn the drive took bounds the plan's."""
+    the reach's largest wheel angle is the scenario's, and no turn the drive took bounds the plan's."""
     log = data.logs[-1]
     reach = Reach(0.0) if reach is None else reach
     held = levels(model) if model is not None else []
