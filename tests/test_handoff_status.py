@@ -16,7 +16,7 @@ from test_hostile5 import VENDOR_BLOCKS
 import nlp_calib
 from nlp_calib.outputs.write import output_options
 from nlp_calib.pipeline.assemble import judged
-from nlp_calib.pipeline.calibration import Calibration
+from nlp_calib.pipeline.calibration import Calibration, Wanted
 from nlp_calib.pipeline.scenario import load_scenario
 from nlp_calib.pipeline.stored import read_calibration
 from nlp_calib.results.run import CAVEATS, DOUBTFUL, GIVEN, LIVE, UNDETERMINED, CalibrationRun, Verdict
@@ -38,7 +38,9 @@ ROBOT = """<?xml version="1.0"?>
 """
 
 
-def _vendor_run(folder: Path, robot: str, declared: str, extra: str = "") -> CalibrationRun:
+def _vendor_run(
+    folder: Path, robot: str, declared: str, extra: str = "", series: bool = False
+) -> CalibrationRun:
     odo, tum, _ = write_vendor_simulation(
         VendorSimulationOptions(model=robot, duration_s=40.0, seed=5), folder / "odom.txt"
     )
@@ -47,7 +49,7 @@ def _vendor_run(folder: Path, robot: str, declared: str, extra: str = "") -> Cal
         f"name: v\nmodel: {declared}\ndataset: {{odometry: {odo.name}, poses: {tum.name}, "
         f"vendor: {VENDOR_BLOCKS[declared]}}}\nresidual: {{horizon_s: 0.5}}\nsolvers: [gauss_newton]\n{extra}"
     )
-    return Calibration(load_scenario(sc)).run()
+    return Calibration(load_scenario(sc)).run(wanted=Wanted(series=series))
 
 
 @pytest.fixture(scope="module", params=[("diff_drive", "tricycle"), ("tricycle", "diff_drive")])
@@ -107,6 +109,17 @@ def test_a_caveated_mount_is_stated_as_not_determined_and_no_urdf_carries_it(
     assert "# The sensor's mount: no URDF file, x, y, yaw not determined well enough to use" in text
     stored = read_calibration(out / "calibration.yaml")  # what `nlp-calib check` reads
     assert stored.parameters == pytest.approx(cal["parameters"])
+
+
+def test_the_report_names_no_urdf_file_the_run_left_out(tmp_path: Path) -> None:
+    run = _vendor_run(tmp_path, "diff_drive", "tricycle", series=True)
+    assert run.verdict.level == CAVEATS and "sensor_x" in run.verdict.concerns
+    out = tmp_path / "out"
+    written = {p.name for p in nlp_calib.write_run(run, out, report=True)}
+    assert "report.md" in written and not written & set(URDF_FILES)
+    text = (out / "report.md").read_text()
+    assert "calibration.yaml" in text
+    assert not any(name in text for name in URDF_FILES), [n for n in URDF_FILES if n in text]
 
 
 def test_with_the_users_urdf_a_doubted_component_keeps_the_users_value(
