@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.analysis.consistency import compare_logs, determined
-from nlp_calib.analysis.precision import drive_precision, lag_precision, tightest
+from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, reference_scales
@@ -387,12 +387,8 @@ def _vehicle_precision(
     the clock offset of log ``index`` from the sensor's own track)."""
     fns = scorer.fns
     view = scorer.viewed(np.array([start[n] for n in fns.names]))
-    t = part.windows.selected.time_s
-    duration = float(t[-1] - t[0]) if t.size else 0.0
-    layout = drive_precision(info.layout, fns, view, scorer.inputs, duration)
-    log = part.prepared.log
-    track = fns.sensor.floor_track(log)
-    layout = lag_precision(layout, track, log.time_s, index, fns.sensor.length_unit == "m")
+    t = np.asarray(part.windows.selected.time_s)
+    layout = log_precision(info.layout, fns, view, scorer.inputs, t, part.prepared.log, index)
     return dataclasses.replace(info, layout=layout)
 
 

@@ -26,7 +26,7 @@ from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.crossval import combine
 from nlp_calib.analysis.excitation import combined, excitation, smoothed
 from nlp_calib.analysis.plan import Setting, believed, plan
-from nlp_calib.analysis.precision import drive_precision, lag_precision, tightest
+from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.analysis.uncertainty import range_std
 from nlp_calib.analysis.units import findings
 from nlp_calib.analysis.verdict import way_out
@@ -330,10 +330,7 @@ def _needed(d: Drive, x: np.ndarray) -> np.ndarray:
     for i, p in enumerate(d.parts):
         log = p.log.select(p.start, p.split)
         inputs = p.model.inputs(log, p.scenario.objective.residual.steering_sample)
-        duration = float(log.time_s[-1] - log.time_s[0]) if log.time_s.size else 0.0
-        own = drive_precision(layout, fns, fns.view(params, i), inputs, duration)
-        track = fns.sensor.floor_track(log)
-        logs.append(lag_precision(own, track, log.time_s, i, fns.sensor.length_unit == "m"))
+        logs.append(log_precision(layout, fns, fns.view(params, i), inputs, np.asarray(log.time_s), log, i))
     layout = tightest(layout, logs) if len(logs) > 1 else logs[0]
     return np.array([layout.param(n).needed(float(v)) for n, v in zip(fns.free, x)])
 
