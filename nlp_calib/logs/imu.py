@@ -68,7 +68,7 @@ def _said(source: str, count: int, total: int, first: str, what: str) -> None:
 
 def _checked(
     source: str, ns: list[int], rows: list[list[float]], at: list[int], word: str
-) -> tuple[np.ndarray, ...]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The samples in stamp order, each stamp once, with finite rates in rad/s: a sample of
     non-finite rates is left out, one stamped before its predecessor sorted into place, one
     repeating an earlier stamp dropped (the first kept), each counted and said; rates no wheeled
@@ -168,7 +168,8 @@ def read_gyro_csv(path: str | Path) -> GyroRates:
     stamps = np.array(ns, dtype=np.int64)
     _one_stamp(p, stamps, "column t holds each sample's time (s)")
     check_increasing(p, stamps, np.array(at, dtype=np.int64))
-    return GyroRates(p, *_checked(p, ns, rows, at, "line"), "imu_link")
+    stamps, rates, numbers_ = _checked(p, ns, rows, at, "line")
+    return GyroRates(p, stamps, rates, numbers_, "imu_link")
 
 
 def integrated(rates: GyroRates, interval_s: float) -> MotionTable:

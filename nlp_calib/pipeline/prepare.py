@@ -263,9 +263,9 @@ def gaps_said(sc: Scenario, log: Log, start: int, stop: int) -> np.ndarray:
         warnings.warn(
             f"{part}{sc.log.source.numbered}: {inside.size} gap(s) in time over "
             f"{gap_threshold(log.time_s):.3g} s ({GAP_FACTOR:g}× the median interval, at least "
-            f"{MIN_GAP_S:g} s) between records (the longest {dt[k]:.3g} s, after line "
-            f"{int(log.line_numbers[k])}, t = {log.time_s[k]:.3f} s: the tracker or the joints missing); no "
-            "residual window crosses them",
+            f"{MIN_GAP_S:g} s) between records (the longest {dt[k]:.3g} s, after "
+            f"{log.where(log.line_numbers[k])}, t = {log.time_s[k]:.3f} s: the tracker or the joints "
+            "missing); no residual window crosses them",
             NlpCalibWarning,
             stacklevel=3,
         )
