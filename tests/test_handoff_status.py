@@ -5,6 +5,7 @@ calibrated: the files are parsed back (YAML, XML, ``nlp-calib check``'s reader) 
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -203,3 +204,20 @@ def test_given_values_are_written_as_given_with_no_sigma(tmp_path: Path) -> None
     joint = ET.parse(out / "robot.urdf").getroot().find("joint")
     assert joint is not None and joint.find("origin") is not None
     assert float(joint.find("origin").get("rpy", "").split()[2]) == 0.05  # type: ignore[union-attr]
+
+
+@pytest.mark.parametrize("extra", ["known: {sensor_theta: 0.05}\n", "fixed: [sensor_theta]\n"])
+def test_result_json_writes_no_sigma_for_a_value_the_fit_held(extra: str, tmp_path: Path) -> None:
+    """result.json and validation.json, like calibration.yaml: null σ (never 0) for a value held
+    (given under known: or fixed:), in every σ block; an estimated value keeps its σ."""
+    run = _vendor_run(tmp_path, "diff_drive", "diff_drive", extra)
+    out = tmp_path / "out"
+    nlp_calib.write_run(run, out)
+    doc = json.loads((out / "result.json").read_text())
+    blocks = [b for s in doc["solvers"].values() for b in (s["std"], s["std_white_noise"])]
+    if doc["crossvalidation"] is not None:
+        blocks.append(doc["crossvalidation"]["std_blocks"])
+    for block in blocks:
+        assert block["sensor_theta"] is None and block["sensor_x"] > 0
+    for solver in run.reports:  # the run itself still holds the σ its fit computed
+        assert run.reports[solver].uncertainty.std_dict()["sensor_theta"] == 0.0

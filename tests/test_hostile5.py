@@ -781,3 +781,21 @@ def test_a_table_that_grows_while_read_keeps_every_row(tmp_path: Path) -> None:
     time_ns, values, lines = cols.filled()
     for got, i in ((time_ns, 0), (values, 1), (lines, 2)):
         np.testing.assert_array_equal(got, np.concatenate([b[i] for b in blocks]))
+
+
+@pytest.mark.parametrize("frame", ["base_link", "/base_link"])
+def test_a_sensor_frame_that_is_the_base_is_refused_for_every_source(frame: str, tmp_path: Path) -> None:
+    """A CSV source's sensor_frame equal to base_link handed off a joint from base_link to itself
+    (a bag's frame_id and a lidar's were refused already): refused where every source is read."""
+    from nlp_calib.core.errors import DatasetError
+    from nlp_calib.pipeline.prepare import read_checked
+    from nlp_calib.pipeline.scenario import load_scenario
+
+    sc = _motions_scenario(tmp_path)
+    sc.write_text(sc.read_text().replace("sensor_frame: laser", f"sensor_frame: {json.dumps(frame)}"))
+    with pytest.raises(
+        DatasetError, match="the sensor's frame is 'base_link', the frame its mount is calibrated in"
+    ):
+        read_checked(load_scenario(sc))
+    sc.write_text(sc.read_text().replace(f"sensor_frame: {json.dumps(frame)}", "sensor_frame: base_laser"))
+    assert read_checked(load_scenario(sc)).header.sensor_frame == "base_laser"

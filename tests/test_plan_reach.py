@@ -4,7 +4,9 @@ model for a tighter turn, a spot turn it cannot make, or a turn at a car's road 
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -129,3 +131,104 @@ def test_plan_md_states_the_runs_sigma_of_its_target(tmp_path: Path) -> None:
     wheelbase = run.reports["gauss_newton"].result.param_dict()["wheelbase"]
     assert all(m.radius_m == 0 or m.radius_m >= wheelbase / math.tan(math.radians(35)) for m in plan.ranked)
     assert "spot_turns" not in {m.kind for m in plan.ranked}
+
+
+def _urdf(folder: Path, steer: str, limit: str = 'lower="-0.15" upper="0.1745"') -> Path:
+    """A user's URDF: the sensor on a fixed joint, the steered wheel on the joint ``steer``."""
+    path = folder / "robot.urdf"
+    path.write_text(
+        '<?xml version="1.0"?>\n<robot name="car">\n  <link name="base_link"/>\n  <link name="my_lidar"/>\n'
+        '  <link name="wheel"/>\n  <joint name="lidar_mount" type="fixed">\n    <parent link="base_link"/>'
+        '<child link="my_lidar"/>\n    <origin xyz="0.5 0 0.3" rpy="0 0 0"/>\n  </joint>\n'
+        f'  <joint name="{steer}" type="revolute">\n    <parent link="base_link"/><child link="wheel"/>\n'
+        f'    <axis xyz="0 0 1"/>\n    <limit {limit} effort="1" velocity="1"/>\n  </joint>\n</robot>\n'
+    )
+    return path
+
+
+@pytest.fixture(scope="module")
+def car_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    import ros2_bags as rb
+
+    pytest.importorskip("rosbags")
+    folder = tmp_path_factory.mktemp("car_bag")
+    rec = rb.record("car_like", seconds=30.0, seed=3)
+    bag = rb.write(rec, folder / "drive", "sqlite3")
+    sc = folder / "car.yaml"
+    sc.write_text(
+        f"name: car\nmodel: car_like\n{rb.dataset_block(bag, rec)}\ninitial_guess: auto\n"
+        "residual: {horizon_s: 0.5}\nsolvers: [gauss_newton]\nvalidation: {blocks: 0}\n"
+    )
+    return sc, rec.joint_names[0]
+
+
+def test_the_urdfs_steering_limit_bounds_the_plan_as_the_scenarios_would(
+    car_bag: tuple[Path, str], tmp_path: Path
+) -> None:
+    """--urdf: the <limit> of the joint the steering encoder reads is the plan's reach, the plan the
+    same as with vehicle.max_steering_deg at that angle (the larger end of the limit, either way)."""
+    from nlp_calib.outputs import urdf
+    from nlp_calib.pipeline.scenario import with_joint_limits
+
+    path, steer = car_bag
+    limits = urdf.joint_limits(urdf.load(_urdf(tmp_path, steer), "my_lidar"))
+    assert limits == {steer: 0.1745}
+    sc, said = with_joint_limits(load_scenario(path), limits)
+    assert sc.parameters.vehicle.max_steering_deg == pytest.approx(math.degrees(0.1745))
+    assert said is not None and f"joint {steer!r}" in said and "±10°" in said
+    asked = load_scenario(path).with_options(vehicle=sc.parameters.vehicle)
+    plans = [preflight(s).plan for s in (sc, asked)]
+    assert plans[0] is not None and plans[1] is not None and plans[0].ranked
+    assert [m.words for m in plans[0].ranked] == [m.words for m in plans[1].ranked]
+    tightest = plans[0].size_m["wheelbase"] / math.tan(0.1745)
+    assert min(m.radius_m for m in plans[0].ranked if m.radius_m > 0) >= tightest * (1 - 1e-9)
+    # The scenario's own angle wins; a joint the scenario does not read, or a continuous one, says nothing.
+    own = load_scenario(path).with_options(
+        vehicle=dataclasses.replace(sc.parameters.vehicle, max_steering_deg=20.0)
+    )
+    assert with_joint_limits(own, limits) == (own, None)
+    assert with_joint_limits(load_scenario(path), {"another_joint": 0.1}) == (load_scenario(path), None)
+
+
+@pytest.mark.parametrize(
+    ("limit", "error"),
+    [
+        ('lower="-0.5" upper="nan"', "<limit upper='nan'> is not a finite number of radians"),
+        ('lower="left" upper="0.5"', "<limit lower='left'> is not a finite number of radians"),
+        ('lower="0" upper="0"', "the steering joint 'front_steer_joint''s <limit> in the URDF is 0"),
+    ],
+)
+def test_a_steering_limit_that_cannot_be_right_is_refused(
+    limit: str, error: str, car_bag: tuple[Path, str], tmp_path: Path
+) -> None:
+    from nlp_calib.core.errors import UsageError
+    from nlp_calib.outputs import urdf
+    from nlp_calib.pipeline.scenario import with_joint_limits
+
+    path, steer = car_bag
+    with pytest.raises(UsageError, match=re.escape(error)):
+        with_joint_limits(
+            load_scenario(path), urdf.joint_limits(urdf.load(_urdf(tmp_path, steer, limit), "my_lidar"))
+        )
+
+
+def test_run_with_a_urdf_says_the_limit_it_plans_within_and_keeps_it(
+    car_bag: tuple[Path, str], tmp_path: Path
+) -> None:
+    """The command line reads the limit from --urdf and says so; robot.urdf keeps the joint's
+    <limit> as the user wrote it, read back by yourdfpy and urdf_parser_py."""
+    from conftest import cli
+
+    path, steer = car_bag
+    robot = _urdf(tmp_path, steer)
+    out = tmp_path / "out"
+    proc = cli("run", str(path), "--out", str(out), "--urdf", str(robot), "--sensor-link", "my_lidar")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert f"car: the plan steers within ±10°, the URDF's <limit> of joint {steer!r}" in proc.stdout
+    written = out / "robot.urdf"
+    yourdfpy = pytest.importorskip("yourdfpy")
+    joint = yourdfpy.URDF.load(str(written)).joint_map[steer]
+    assert (joint.limit.lower, joint.limit.upper) == (-0.15, 0.1745)
+    urdf_parser = pytest.importorskip("urdf_parser_py.urdf")
+    (parsed,) = [j for j in urdf_parser.URDF.from_xml_string(written.read_bytes()).joints if j.name == steer]
+    assert parsed.limit.upper == 0.1745

@@ -497,3 +497,32 @@ def test_a_steering_spike_in_radians_is_found_and_repaired_in_the_joints_stream(
     moved = np.abs(fixed.joint_stream.positions[:, col] - cal.log.joint_stream.positions[:, col])
     assert 0.3 < moved.max() < 0.5 and np.sum(moved > 0.01) == 1  # that message, and only it
     assert len(changes) == 1 and "spike interpolated" in changes[0]
+
+
+def test_a_bags_faults_are_named_by_topic_and_message(recording: rb.Recording, tmp_path: Path) -> None:
+    """A fault in a bag is placed by its tracker topic's message number (the message at the
+    fault's record, found from the recording's own stamps), in the evidence, the terminal and
+    report.md: no 'line' of a file that has none; a text log's faults keep their lines."""
+    from dataclasses import replace
+
+    from nlp_calib.outputs.markdown import report_markdown
+    from nlp_calib.outputs.terminal import fault_lines
+
+    joints = recording.joints.copy()
+    jump = np.searchsorted(recording.joint_ns, recording.joint_ns[0] + 30 * 10**9)
+    joints[jump:, 1] += 3.0
+    bag = rb.write(replace(recording, joints=joints), tmp_path / "jump", "sqlite3")
+    cal = Calibration(load_scenario(_scenario(tmp_path, rb.dataset_block(bag, recording))))
+    (fault,) = cal.findings.report.counter_faults
+    stamp = cal.log.start_ns + round(float(cal.log.time_s[fault.record]) * 1e9)
+    message = int(np.argmin(np.abs(recording.tracker_ns - stamp))) + 1
+    assert fault.line == message
+    topic = "/mocap/robot/pose message"
+    assert f"({topic}s " in fault.evidence and "line" not in fault.evidence
+    run = cal.run()
+    shown = [line for line in fault_lines(run) if f"record {fault.record} " in line]
+    assert shown and f"({topic} {message}, t = " in shown[0]
+    assert f"| record | {topic} | time [s] |" in report_markdown(run, [])
+    assert f"| {fault.record} | {message} |" in report_markdown(run, [])
+    text = replace(cal.log, reference=replace(cal.log.reference, numbered="line"))
+    assert text.where(4) == "line 4" and text.where(4, 9) == "lines 4-9"

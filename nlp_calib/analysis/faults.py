@@ -118,8 +118,8 @@ def tracker_faults(log: Log, sensor: Sensor) -> list[Fault]:
         for q in range(g.first, g.last + 1):
             group = f"records {g.first}-{g.last} " if g.last > g.first else ""
             evidence = (
-                f"the tracker pose at record {q} (line {lines[q]}) is off the path its neighbours agree "
-                f"on ({group}by up to {off:.3f} {length} and {turn:.3f} rad, "
+                f"the tracker pose at record {q} ({log.where(lines[q])}) is off the path its neighbours "
+                f"agree on ({group}by up to {off:.3f} {length} and {turn:.3f} rad, "
                 f"{g.score:.0f}× the tracker's scatter)"
             )
             found.append(
@@ -135,7 +135,7 @@ def _match_fault(
     inc = log.motions
     assert inc is not None
     a, b, line = int(inc.first[k]), int(inc.last[k]), int(inc.line_numbers[k])
-    evidence = f"the increment of line {line} (records {a}-{b}) {why}"
+    evidence = f"the increment of {log.where(line)} (records {a}-{b}) {why}"
     return Fault(kind, None, a, b - 1, a, float(log.time_s[a]), line, *size, evidence)
 
 
@@ -241,9 +241,7 @@ def _messages(log: Log, r: Readings, lo: int, hi: int) -> str:
     """Where a joint stream's glitch lands: the records (and lines) its messages reach."""
     lines = log.line_numbers
     span = f"record {lo}" if hi - lo == 1 else f"records {lo}-{hi - 1}"
-    return (
-        f"{span} (line{'' if hi - lo == 1 else 's'} {lines[lo]}{'' if hi - lo == 1 else f'-{lines[hi - 1]}'})"
-    )
+    return f"{span} ({log.where(lines[lo], lines[hi - 1])})"
 
 
 def _stuck(log: Log, r: Readings, moving: np.ndarray | None) -> tuple[list[Fault], np.ndarray]:
@@ -259,8 +257,8 @@ def _stuck(log: Log, r: Readings, moving: np.ndarray | None) -> tuple[list[Fault
             continue  # between two records: no record read it
         if r.records is None:
             evidence = (
-                f"{name!r} holds {r.shown(y[first])} over records {first}-{last} (lines "
-                f"{lines[first]}-{lines[last]}) while the robot moves, then jumps by "
+                f"{name!r} holds {r.shown(y[first])} over records {first}-{last} "
+                f"({log.where(lines[first], lines[last])}) while the robot moves, then jumps by "
                 f"{r.shown(jump, True)} at record {last + 1}: the reading was stuck"
             )
         else:
@@ -288,8 +286,9 @@ def _spikes(log: Log, r: Readings, usable: np.ndarray) -> list[Fault]:
             continue
         if r.records is None:
             evidence = (
-                f"{r.name!r} reads {r.shown(y[k])} at record {k} (line {lines[k]}), {r.shown(off, True)} "
-                "off the line between its neighbours, which agree with each other: a one-record spike"
+                f"{r.name!r} reads {r.shown(y[k])} at record {k} ({log.where(lines[k])}), "
+                f"{r.shown(off, True)} off the line between its neighbours, which agree with each other: "
+                "a one-record spike"
             )
         else:
             evidence = (
@@ -390,7 +389,7 @@ def counter_faults(
     for name, sc in screens.items():
         for f in sc.findings:
             k = f.last
-            records = f"records {f.first}-{k + 1} (lines {lines[f.first]}-{lines[k + 1]})"
+            records = f"records {f.first}-{k + 1} ({log.where(lines[f.first], lines[k + 1])})"
             why = _evidence(f.kind, f"counter {name!r}", f.logged, f.implied, f.noise, records, unit)
             faults.append(_fault(log, f.kind, name, (f.first, k), k + 1, (f.logged, f.implied, f.noise), why))
     stale = {n: sc.stale for n, sc in screens.items()}
@@ -452,7 +451,8 @@ def repair(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]:
     for f in absolute:
         what = "spike" if f.kind == "steering_spike" else "stuck readings"
         changes += (
-            f"{f.encoder!r} at record {f.record} (line {f.line}): {what} interpolated from its neighbours",
+            f"{f.encoder!r} at record {f.record} ({log.where(f.line)}): {what} interpolated from its "
+            "neighbours",
         )
     return cleaned(fixed, absolute), changes
 
@@ -472,7 +472,7 @@ def _repair_counts(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]
         ticks[f.record :, col] = np.mod(ticks[f.record :, col] + correction, COUNTER_MODULUS)
         how = f"{wraps:+d} × 2^16" if exact else "the tracker-implied amount"
         changes.append(
-            f"counter {f.encoder!r} at record {f.record} (line {f.line}): increment {before:+d} → "
+            f"counter {f.encoder!r} at record {f.record} ({log.where(f.line)}): increment {before:+d} → "
             f"{before + correction:+d} ticks ({how}; the tracker's motion implied "
             f"{f.implied - f.logged:+.0f} ± {f.noise:.0f} more over records {f.first}-{f.record})"
         )

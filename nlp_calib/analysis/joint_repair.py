@@ -30,8 +30,9 @@ def repair_joints(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]:
         positions[f.record :, col] += correction
         stream[log.joint_stream.time_s > log.time_s[f.record - 1], col] += correction
         changes.append(
-            f"joint {f.encoder!r} at record {f.record} (line {f.line}): {correction:+.4g} rad added from "
-            f"there on (the tracker's motion implied it, ± {f.noise:.2g}, over records {f.first}-{f.record})"
+            f"joint {f.encoder!r} at record {f.record} ({log.where(f.line)}): {correction:+.4g} rad added "
+            f"from there on (the tracker's motion implied it, ± {f.noise:.2g}, over records "
+            f"{f.first}-{f.record})"
         )
     repaired = replace(log.joint_stream, positions=frozen(stream))
     return replace(log, joint_positions=frozen(positions), joint_stream=repaired), tuple(changes)

@@ -22,7 +22,7 @@ from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
 from nlp_calib.core.files import check_output_dir
 from nlp_calib.logs import Log
-from nlp_calib.outputs import compare, registry
+from nlp_calib.outputs import compare, registry, urdf
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.outputs.progress import Progress
 from nlp_calib.outputs.summary import summary_lines
@@ -30,7 +30,7 @@ from nlp_calib.outputs.terminal import correlation_table, run_table, summary_tab
 from nlp_calib.outputs.write import output_options
 from nlp_calib.pipeline import Calibration, Scenario, Wanted, load_scenario
 from nlp_calib.pipeline.prepare import read_checked
-from nlp_calib.pipeline.scenario import refuse_off_the_base
+from nlp_calib.pipeline.scenario import refuse_off_the_base, with_joint_limits
 from nlp_calib.results import CalibrationRun
 from nlp_calib.solvers import SOLVERS
 
@@ -111,6 +111,21 @@ def _robot_urdf(args: argparse.Namespace) -> None:
     args.robot_urdf = options.urdf
 
 
+def _urdf_limits(args: argparse.Namespace, scenarios: Sequence[Scenario]) -> list[Scenario]:
+    """Each scenario with its steered wheels' reach from the user's URDF (``--urdf``) where it
+    gives none (the plan steers within it), said."""
+    if args.robot_urdf is None:
+        return list(scenarios)
+    limits = urdf.joint_limits(args.robot_urdf)
+    out = []
+    for sc in scenarios:
+        sc, said = with_joint_limits(sc, limits)
+        if said is not None:
+            print(said)
+        out.append(sc)
+    return out
+
+
 def _one_link(args: argparse.Namespace, scenarios: Sequence[Scenario]) -> None:
     """``--urdf`` re-poses one sensor link: refused, before any work, for a fit with a mount per log."""
     if args.robot_urdf is None:
@@ -136,7 +151,7 @@ def _cmd_calibrate(
     args: argparse.Namespace, solvers: Sequence[str] | None, side_by_side: bool = False
 ) -> int:
     _robot_urdf(args)
-    scenarios = _loadwith_data(args.scenario, args.data)
+    scenarios = _urdf_limits(args, _loadwith_data(args.scenario, args.data))
     _one_link(args, scenarios)
     outs = _out_dirs(args, scenarios)
     outputs = registry.selected(CALIBRATE, args.report)
@@ -274,7 +289,7 @@ def cmd_odometry(args: argparse.Namespace) -> int:
     if len(args.scenario) != 1:
         raise UsageError("odometry takes one scenario")
     _robot_urdf(args)
-    (scenario,) = _loadwith_data(args.scenario, args.data)
+    (scenario,) = _urdf_limits(args, _loadwith_data(args.scenario, args.data))
     refuse_off_the_base(
         scenario,
         "odometry",

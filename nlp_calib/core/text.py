@@ -38,3 +38,11 @@ def escaped(text: str, *, lines: bool = False) -> str:
     if not any(_bad(c) for c in text):
         return text
     return "".join(c if not _bad(c) or (lines and c == "\n") else _spelled(c) for c in text)
+
+
+def numbered(word: str, first: int, last: int | None = None) -> str:
+    """``line 5`` or ``lines 5-9``: where in its source a record came from, ``word`` what the source
+    counts (a file's ``line``, a bag topic's ``/topic message``)."""
+    if last is None or last == first:
+        return f"{word} {first}"
+    return f"{word}s {first}-{last}"

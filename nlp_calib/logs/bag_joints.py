@@ -196,15 +196,24 @@ def read_joint_bag(path: str | Path, topics: BagTopics, header: LogHeader) -> Lo
     joints, tracker = read_topics(p, topics)
     shift = clock_shift_ns(p, joints, tracker, topics.clock_offset)
     joints = replace(joints, stamp_ns=joints.stamp_ns + shift)
-    return timed_by_tracker(p, joints, tracker, topics.joints, topics.max_gap, header)
+    return timed_by_tracker(
+        p, joints, tracker, topics.joints, topics.max_gap, header, f"{tracker.topic} message"
+    )
 
 
 def timed_by_tracker(
-    p: Path, joints: Stamped, tracker: Stamped, names: tuple[str, ...], max_gap_s: float, header: LogHeader
+    p: Path,
+    joints: Stamped,
+    tracker: Stamped,
+    names: tuple[str, ...],
+    max_gap_s: float,
+    header: LogHeader,
+    numbered: str = "line",
 ) -> Log:
     """The log of ``joints`` (each joint's position, then its velocity; NaN where absent) and of
     ``tracker`` (its planar and its 3-D pose), a record at each tracker pose the joints cover; a
-    warning says when poses fell in joint gaps, joints were integrated or messages were dropped."""
+    warning says when poses fell in joint gaps, joints were integrated or messages were dropped;
+    ``numbered``: what the tracker's line numbers count (a bag topic's ``/topic message``)."""
     check_overlap(p, joints, tracker)
     joint_ns, positions, integrated = joint_positions(p, joints, names)
     check_clocks(p, joint_ns, positions, tracker)
@@ -237,7 +246,8 @@ def timed_by_tracker(
         joint_positions=stream.at(time_s),
         joint_stream=stream,
         reference=ReferenceData(
-            frozen(np.array(tracker.values[index][:, [0, 1, 3, 4, 5, 6, 7]], dtype=float))
+            frozen(np.array(tracker.values[index][:, [0, 1, 3, 4, 5, 6, 7]], dtype=float)),
+            numbered=numbered,
         ),
     )
 

@@ -12,22 +12,28 @@ gyro's median period) is left out: a trapezoid across it would guess the turn.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from nlp_calib.core.errors import DatasetError
+from nlp_calib.core.errors import DatasetError, NlpCalibWarning
 from nlp_calib.logs.bag_files import BagError, messages, opened
 from nlp_calib.logs.log import frozen
 from nlp_calib.logs.motions import MotionTable
-from nlp_calib.logs.text_tables import data_lines, numbers, stamp_ns
+from nlp_calib.logs.text_tables import check_increasing, data_lines, numbers, seconds, stamp_ns
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 #: The columns of a gyro's CSV.
 COLUMNS = ("t", "wx", "wy", "wz")
 #: A step between samples longer than this many median periods is a gap.
 GAP_PERIODS = 5.0
+#: A rate no wheeled base turns at (rad/s, two turns a second): rates beyond it on more than
+#: 1 - :data:`RATE_QUANTILE` of the samples are not rad/s (a slow turn's 0.21 rad/s reads 12 in
+#: degrees per second).
+MAX_RATE = 12.0
+RATE_QUANTILE = 0.99
 
 
 @dataclass(frozen=True)
@@ -46,18 +52,68 @@ class GyroRates:
         return int(self.stamp_ns.size)
 
 
-def _sorted(source: str, ns: list[int], rows: list[list[float]], at: list[int], frame: str) -> GyroRates:
-    stamps = np.array(ns, dtype=np.int64)
-    order = np.argsort(stamps, kind="stable")
-    stamps = stamps[order]
-    first = np.concatenate([[True], np.diff(stamps) > 0])
-    rates = np.array(rows, dtype=float).reshape(-1, 3)[order][first]
-    if stamps[first].size < 2 or not np.all(np.isfinite(rates)):
-        bad = int(np.sum(~np.all(np.isfinite(rates), axis=1)))
+def _one_stamp(source: str, stamps: np.ndarray, fix: str) -> None:
+    """Refuse samples that all carry one stamp (a driver that never stamps them): ``fix`` says how."""
+    if stamps.size >= 2 and np.all(stamps == stamps[0]):
         raise DatasetError(
-            source, None, f"a gyro needs at least 2 samples of finite rates ({bad} not finite)"
+            source, None, f"all {stamps.size} samples carry one stamp ({seconds(int(stamps[0]))} s); {fix}"
         )
-    return GyroRates(source, stamps[first], rates, np.array(at, dtype=np.int64)[order][first], frame)
+
+
+def _said(source: str, count: int, total: int, first: str, what: str) -> None:
+    warnings.warn(
+        f"{source}: {count} of {total} samples {what} (first: {first})", NlpCalibWarning, stacklevel=4
+    )
+
+
+def _checked(
+    source: str, ns: list[int], rows: list[list[float]], at: list[int], word: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The samples in stamp order, each stamp once, with finite rates in rad/s: a sample of
+    non-finite rates is left out, one stamped before its predecessor sorted into place, one
+    repeating an earlier stamp dropped (the first kept), each counted and said; rates no wheeled
+    base turns at (degrees per second) refused."""
+    stamps, numbers_ = np.array(ns, dtype=np.int64), np.array(at, dtype=np.int64)
+    rates = np.array(rows, dtype=float).reshape(-1, 3)
+    finite = np.all(np.isfinite(rates), axis=1)
+    if finite.size < 2:
+        raise DatasetError(source, None, f"has {finite.size} sample(s); a gyro needs at least 2")
+    if not finite.any():
+        raise DatasetError(source, None, f"none of its {finite.size} samples has finite rates (NaN or inf)")
+    if not finite.all():
+        what = "have non-finite rates (NaN or inf) and are left out: the rates are integrated across them"
+        _said(source, int((~finite).sum()), finite.size, f"{word} {int(numbers_[~finite][0])}", what)
+        stamps, rates, numbers_ = stamps[finite], rates[finite], numbers_[finite]
+    behind = np.flatnonzero(np.diff(stamps) < 0) + 1
+    if behind.size:
+        what = "are stamped before the sample received before them; sorted by stamp"
+        _said(source, behind.size, stamps.size, f"{word} {int(numbers_[behind[0]])}", what)
+    order = np.argsort(stamps, kind="stable")
+    stamps, rates, numbers_ = stamps[order], rates[order], numbers_[order]
+    again = np.concatenate([[False], np.diff(stamps) == 0])
+    if again.any():
+        what = "repeat an earlier sample's stamp; each stamp is kept once, from its first sample"
+        _said(source, int(again.sum()), stamps.size, f"{word} {int(numbers_[again][0])}", what)
+        stamps, rates, numbers_ = stamps[~again], rates[~again], numbers_[~again]
+    if stamps.size < 2:
+        raise DatasetError(
+            source, None, f"has {stamps.size} sample(s) of finite rates; a gyro needs at least 2"
+        )
+    _check_rad_s(source, rates)
+    return stamps, rates, numbers_
+
+
+def _check_rad_s(source: str, rates: np.ndarray) -> None:
+    """Refuse rates beyond any wheeled base's turning: a gyro's degrees per second taken for rad/s."""
+    top = float(np.quantile(np.linalg.norm(rates, axis=1), RATE_QUANTILE))
+    if top > MAX_RATE:
+        raise DatasetError(
+            source,
+            None,
+            f"its rates reach {top:.4g} rad/s ({RATE_QUANTILE:.0%} of the samples below), beyond any "
+            f"wheeled base's turning ({MAX_RATE:g} rad/s): degrees per second? ({top:.4g}°/s is "
+            f"{np.radians(top):.3g} rad/s); give the angular velocity in rad/s (REP 103), e.g. × π/180",
+        )
 
 
 def read_imu(path: str | Path, topic: str, receive: bool = False) -> GyroRates:
@@ -83,7 +139,12 @@ def read_imu(path: str | Path, topic: str, receive: bool = False) -> GyroRates:
             frame = frame or str(msg.header.frame_id).strip("/")
     if len(rows) < 2:
         raise BagError(p, f"imu: topic {topic!r} has {len(rows)} message(s); a gyro needs at least 2")
-    return _sorted(f"{p} {topic}", ns, rows, list(range(1, len(rows) + 1)), frame or "imu_link")
+    source = f"{p} {topic}"
+    how = "the bag's record times" if receive else "its header stamps"
+    fix = f"{how} are not the samples' times" + ("" if receive else "; give dataset.stamps: receive")
+    _one_stamp(source, np.array(ns, dtype=np.int64), fix)
+    stamps, rates, at = _checked(source, ns, rows, list(range(1, len(rows) + 1)), "message")
+    return GyroRates(source, stamps, rates, at, frame or "imu_link")
 
 
 def read_gyro_csv(path: str | Path) -> GyroRates:
@@ -104,7 +165,11 @@ def read_gyro_csv(path: str | Path) -> GyroRates:
         ns.append(stamp_ns(fields[0], p, number))
         rows.append(numbers(p, number, fields[1:], "3 rates (rad/s)"))
         at.append(number)
-    return _sorted(p, ns, rows, at, "imu_link")
+    stamps = np.array(ns, dtype=np.int64)
+    _one_stamp(p, stamps, "column t holds each sample's time (s)")
+    check_increasing(p, stamps, np.array(at, dtype=np.int64))
+    stamps, rates, numbers_ = _checked(p, ns, rows, at, "line")
+    return GyroRates(p, stamps, rates, numbers_, "imu_link")
 
 
 def integrated(rates: GyroRates, interval_s: float) -> MotionTable:

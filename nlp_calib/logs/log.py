@@ -11,6 +11,7 @@ import numpy as np
 from nlp_calib.core import poses3d
 from nlp_calib.core.errors import DatasetError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
+from nlp_calib.core.text import numbered
 from nlp_calib.logs.reference import REFERENCES, Poses, ReferenceKind
 from nlp_calib.logs.relative import RelativeMotions
 
@@ -143,6 +144,8 @@ class ReferenceData:
     #: Its kind's name in :data:`~nlp_calib.logs.reference.REFERENCES`, given by the reader that
     #: filled it (the source knows what its device measures; no stage infers it from a field).
     measures: str = Poses.name
+    #: What a record's line number counts: a text file's ``line``, a bag topic's ``/topic message``.
+    numbered: str = "line"
 
     def __post_init__(self) -> None:
         if self.measures not in REFERENCES:
@@ -207,6 +210,11 @@ class Log:
     def motions(self) -> RelativeMotions | None:
         """The reference's own motions between records, where it measures them."""
         return self.reference.motions
+
+    def where(self, first: int, last: int | None = None) -> str:
+        """``line 5``, ``lines 5-9`` or ``/topic message 5``: where line numbers ``first..last``
+        lie in the log's source."""
+        return numbered(self.reference.numbered, int(first), None if last is None else int(last))
 
     @property
     def start_ns(self) -> int:

@@ -225,10 +225,17 @@ def _records(
 
 
 def timed_by_motions(
-    p: Path, joints: Stamped, motions: MotionTable, names: Sequence[str], max_gap_s: float, header: LogHeader
+    p: Path,
+    joints: Stamped,
+    motions: MotionTable,
+    names: Sequence[str],
+    max_gap_s: float,
+    header: LogHeader,
+    numbered: str = "line",
 ) -> Log:
     """The log of ``joints`` (each joint's position, then its velocity; NaN where absent) with a
-    record at each stamp of the ``motions`` the joints cover, and the increments between them."""
+    record at each stamp of the ``motions`` the joints cover, and the increments between them;
+    ``numbered``: what the motions' line numbers count (a bag topic's ``/topic message``)."""
     check_overlap(p, joints, Stamped(motions.path, motions.start_ns, np.zeros((motions.n, 0))))
     joint_ns, positions, integrated = joint_positions(p, joints, tuple(names))
     stamps, keep, left = _records(p, joint_ns, motions, max_gap_s)
@@ -270,5 +277,5 @@ def timed_by_motions(
         clock=LogClock(start_ns=start_ns),
         joint_positions=stream.at(time_s),
         joint_stream=stream,
-        reference=ReferenceData(motions=increments, measures=Motions.name),
+        reference=ReferenceData(motions=increments, measures=Motions.name, numbered=numbered),
     )

@@ -20,11 +20,10 @@ from nlp_calib.core.files import atomic_write_bytes, atomic_write_text
 from nlp_calib.core.text import escaped, unprintable
 from nlp_calib.core.version import __version__
 from nlp_calib.outputs import urdf
-from nlp_calib.outputs.results import result_document
+from nlp_calib.outputs.results import result_document, sigmas
 from nlp_calib.results import CalibrationRun, Encoder, codec
 from nlp_calib.results.layout import LAYOUT_VERSION
 from nlp_calib.results.mount import LogMount, SensorMount
-from nlp_calib.results.run import GIVEN, LIVE
 
 CALIBRATION_FILE = "calibration.yaml"
 URDF_FILE = "sensor_mount.urdf.xml"
@@ -32,13 +31,14 @@ ROBOT_URDF_FILE = "robot.urdf"
 PARENT_FRAME = "base_link"
 
 
-def _solver_entry(run: CalibrationRun, solver: str, res: Mapping[str, Any]) -> dict[str, Any]:
+def _solver_entry(res: Mapping[str, Any]) -> dict[str, Any]:
     keys = ("converged", "reason", "cost", "chi2", "inliers", "residuals", "iterations")
     return {
         **{k: res[k] for k in keys},
         "parameters": res["params"],
-        "std": _sigmas(run, solver, res["std"]),
-        "std_white_noise": _sigmas(run, solver, res["std_white_noise"]),
+        # result.json's σ: null for what the fit held rather than estimated.
+        "std": res["std"],
+        "std_white_noise": res["std_white_noise"],
         "correlation": res["correlation"],
     }
 
@@ -81,9 +81,9 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         **_held_entry(run, solver),
         # What it estimated but did not determine well enough to use, with why: not calibrated.
         **({"not_determined": run.doubts(solver)} if run.doubts(solver) else {}),
-        "std": _sigmas(run, solver, best["std"]),
-        "std_white_noise": _sigmas(run, solver, best["std_white_noise"]),
-        "std_blocks": _sigmas(run, solver, (doc["crossvalidation"] or {}).get("std_blocks")),
+        "std": best["std"],
+        "std_white_noise": best["std_white_noise"],
+        "std_blocks": sigmas(run, solver, (doc["crossvalidation"] or {}).get("std_blocks")),
         # The jackknife σ's folds (its degrees of freedom + 1) and the formulation fitted: what
         # `nlp-calib check` needs to judge this calibration on a new log.
         "std_blocks_folds": len(run.checks.crossval.converged) if run.checks.crossval is not None else 0,
@@ -94,18 +94,8 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         # counts per turn (for its radius) only where the user gave them.
         "encoders": [_encoder(e) for e in run.log.encoders],
         "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
-        "solvers": {name: _solver_entry(run, name, res) for name, res in doc["solvers"].items()},
+        "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
     }
-
-
-def _sigmas(run: CalibrationRun, solver: str, std: Mapping[str, Any] | None) -> dict[str, Any] | None:
-    """``std`` with no σ (null) for each parameter the fit held rather than estimated (given,
-    or held at its guess): a 0 there would read as a value known exactly."""
-    if std is None:
-        return None
-    held = run.reports[solver].held
-    status = run.handoff_status(solver)
-    return {n: None if n in held or status.get(n, (LIVE,))[0] == GIVEN else v for n, v in std.items()}
 
 
 def _sensor_entry(run: CalibrationRun) -> dict[str, Any]:

@@ -184,7 +184,7 @@ def _faults_section(run: CalibrationRun) -> list[str]:
         "The fault-robust figures restart dead reckoning from the tracker after each fault and leave "
         "its records out.",
         "",
-        "| record | line | time [s] | kind | evidence |",
+        f"| record | {run.log.numbered} | time [s] | kind | evidence |",
         "|---|---|---|---|---|",
     ]
     out += [f"| {f.record} | {f.line} | {f.time_s:.2f} | {f.kind} | {f.evidence} |" for f in rep.faults]

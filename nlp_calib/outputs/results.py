@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +14,26 @@ from nlp_calib.core.version import __version__
 from nlp_calib.results import CalibrationRun, SolverReport
 from nlp_calib.results.checks import CostComparison
 from nlp_calib.results.figures import TrajectoryMetrics
+from nlp_calib.results.run import GIVEN
+
+
+def not_estimated(run: CalibrationRun, solver: str | None = None) -> set[str]:
+    """The parameters ``solver``'s fit held rather than estimated (given, or held at its guess;
+    without ``solver``, any solver's): they have no σ."""
+    out: set[str] = set()
+    for name in run.reports if solver is None else (solver,):
+        out |= set(run.reports[name].held)
+        out |= {n for n, (level, _) in run.handoff_status(name).items() if level == GIVEN}
+    return out
+
+
+def sigmas(run: CalibrationRun, solver: str | None, std: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    """``std`` with no σ (null) for each parameter the fit held rather than estimated (see
+    :func:`not_estimated`): a 0 there would read as a value known exactly."""
+    if std is None:
+        return None
+    held = not_estimated(run, solver)
+    return {n: None if n in held else v for n, v in std.items()}
 
 
 def _metrics_dict(full: TrajectoryMetrics, holdout: TrajectoryMetrics | None) -> dict[str, Any]:
@@ -47,7 +68,7 @@ def _crossval_dict(run: CalibrationRun) -> dict[str, Any] | None:
     labels = [label for label, _ in first.figures()[:4]] if first is not None else []
     return {
         "blocks": len(cv.folds),
-        "std_blocks": run.std_blocks(),
+        "std_blocks": sigmas(run, None, run.std_blocks()),
         "spread": dict(zip(cv.names, map(float, cv.spread()))),
         "heldout": {label: cv.heldout_mean(label) for label in labels},
         "insample": {label: cv.insample_mean(label) for label in labels},
@@ -113,8 +134,8 @@ def _solver_dict(run: CalibrationRun, name: str, report: SolverReport) -> dict[s
     r, u = report.result, report.uncertainty
     return {
         "params": r.param_dict(),
-        "std": run.std(name),
-        "std_white_noise": u.std_dict(),
+        "std": sigmas(run, name, run.std(name)),
+        "std_white_noise": sigmas(run, name, u.std_dict()),
         "correlation": {"names": list(u.names), "matrix": np.round(u.correlation, 6).tolist()},
         "cost": r.cost,
         "chi2": r.chi2,
@@ -239,8 +260,8 @@ def write_validation(run: CalibrationRun, folder: Path, name: str) -> list[Path]
         "tool": {"name": "nlp_calib", "version": __version__},
         "solver": solver,
         "params": run.reports[solver].result.param_dict(),
-        "std": run.std(solver),
-        "std_white_noise": run.reports[solver].uncertainty.std_dict(),
+        "std": sigmas(run, solver, run.std(solver)),
+        "std_white_noise": sigmas(run, solver, run.reports[solver].uncertainty.std_dict()),
         "crossvalidation": _crossval_dict(run),
         "direction": run.checks.direction.as_dict() if run.checks.direction is not None else None,
     }

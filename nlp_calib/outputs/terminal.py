@@ -6,6 +6,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from nlp_calib.core.text import numbered
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import believed_std
 from nlp_calib.results.faults import count_kinds
@@ -128,7 +129,10 @@ def fault_lines(run: CalibrationRun) -> list[str]:
     # Encoder faults first: they bias a calibration; tracker jumps are many and each one harmless.
     ordered = sorted(rep.faults, key=lambda f: (f.kind == "tracker_jump", f.record))
     for f in ordered[:SHOWN_FAULTS]:
-        lines.append(f"  record {f.record} (line {f.line}, t = {f.time_s:.2f} s) {f.kind}: {f.evidence}")
+        lines.append(
+            f"  record {f.record} ({numbered(run.log.numbered, f.line)}, t = {f.time_s:.2f} s) {f.kind}: "
+            f"{f.evidence}"
+        )
     if len(ordered) > SHOWN_FAULTS:
         rest = ordered[SHOWN_FAULTS:]
         lines.append(

@@ -20,6 +20,7 @@ joint whose links the file does not declare.
 
 from __future__ import annotations
 
+import math
 import re
 import xml.parsers.expat
 from dataclasses import dataclass, field
@@ -46,6 +47,9 @@ _BOMS = {
 _UTF8_BOM = b"\xef\xbb\xbf"
 #: The elements of a joint ROS reads once (the first of each).
 _ONCE = ("parent", "child", "origin")
+#: A joint's elements read: those, and its ``<limit>`` (a revolute joint's angles: a steered
+#: wheel's reach, which the plan keeps within).
+_READ = (*_ONCE, "limit")
 
 
 @dataclass
@@ -124,7 +128,7 @@ class _Reader:
             self.current = _Joint(attrs.get("name", ""), attrs.get("type", ""), at, line)
         elif self.depth == 2 and name == "link":
             self._link(attrs.get("name", ""), line)
-        elif self.depth == 3 and self.current is not None and name in _ONCE:
+        elif self.depth == 3 and self.current is not None and name in _READ:
             self.current.seen.setdefault(name, []).append(_Element(at, line, dict(attrs)))
 
     def _root(self, name: str, attrs: dict[str, str], line: int) -> None:
@@ -217,6 +221,31 @@ def load(path: Path, link: str) -> Description:
     description = Description(path, text, *_parse(path, text))
     T_base_parent(description, link)  # refuses what cannot be re-posed, before any work
     return description
+
+
+def joint_limits(d: Description) -> dict[str, float]:
+    """The largest angle (rad, either way) each revolute joint with a ``<limit>`` takes, by joint
+    name: how far a steered wheel turns (a continuous joint has no limit; a prismatic one no angle)."""
+    out = {}
+    for joint in d.joints.values():
+        found = joint.seen.get("limit")
+        if joint.kind != "revolute" or not found:
+            continue
+        ends = []
+        for key in ("lower", "upper"):
+            text = found[0].attrs.get(key, "0")
+            try:
+                value = float(text)
+            except ValueError:
+                value = math.nan
+            if not math.isfinite(value):
+                raise UsageError(
+                    f"{d.path}:{found[0].line}: joint {joint.name!r}: <limit {key}={text!r}> is not a finite "
+                    "number of radians (--urdf)"
+                )
+            ends.append(abs(value))
+        out[joint.name] = max(ends)
+    return out
 
 
 def _rotation(rpy: np.ndarray) -> np.ndarray:

@@ -112,6 +112,7 @@ def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
         start_ns=log.start_ns,
         duration_s=float(t[-1] - t[0]) if t.size else 0.0,
         sensor_z_roll_pitch=log.header.sensor_z_roll_pitch,
+        numbered=log.reference.numbered,
     )
 
 
@@ -423,6 +424,7 @@ def joint_run(
         start_ns=first.log.start_ns,
         duration_s=sum(run.log.duration_s for run in parts),
         sensor_z_roll_pitch=first.log.sensor_z_roll_pitch,
+        numbered=first.log.numbered,
     )
     data = DataInfo(
         used=(0, records),

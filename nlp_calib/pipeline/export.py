@@ -40,7 +40,7 @@ def write_c_export(sc: Scenario, out_dir: Path) -> tuple[list[Path], Example]:
     first = int(windows.starts[busiest])
     lines = log.line_numbers[[first, first + H]]
     window = (
-        f"records {first}-{first + H} (lines {lines[0]}-{lines[1]}) of {sc.log.source.numbered.name}, "
+        f"records {first}-{first + H} ({log.where(lines[0], lines[1])}) of {sc.log.source.numbered.name}, "
         "the busiest window"
     )
     calib = Calibration(sc, log)

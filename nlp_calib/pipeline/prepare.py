@@ -22,6 +22,7 @@ from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario, scenario_params
 from nlp_calib.problem import ResidualOptions
+from nlp_calib.results.mount import BASE_LINK
 
 #: At this rate or above (Hz), a record horizon shorter than :data:`SHORT_WINDOW_S` is warned about:
 #: each window's motion is then little more than the tracker's noise.
@@ -71,7 +72,7 @@ def _read(sc: Scenario, log: Log | None) -> tuple[KinematicModel, Log]:
             )
         return model, log
     try:
-        return model, sc.log.source.read(model, strict=sc.data.strict)
+        return model, _own_frame(sc.log.source.read(model, strict=sc.data.strict))
     except DatasetError as exc:
         if exc.droppable:
             raise exc.with_hint("set 'strict: false' in the scenario to drop such records") from None
@@ -79,6 +80,20 @@ def _read(sc: Scenario, log: Log | None) -> tuple[KinematicModel, Log]:
             key = sc.origin or "dataset"
             raise exc.with_hint(f"pass the log with --data or fix '{key}' in the scenario") from None
         raise
+
+
+def _own_frame(log: Log) -> Log:
+    """``log``, whose sensor has a frame of its own: every hand-off file mounts it on
+    ``base_link``, and a joint from a link to itself breaks the robot's description."""
+    if log.header.sensor_frame.strip("/") == BASE_LINK:
+        raise DatasetError(
+            log.path,
+            None,
+            f"the sensor's frame is {BASE_LINK!r}, the frame its mount is calibrated in: a sensor's mount "
+            "is a joint from the base to a frame of its own; name the sensor's frame (the dataset's "
+            "sensor_frame, sensor_frame in ROBOT.yaml, the driver's frame_id)",
+        )
+    return log
 
 
 def select(sc: Scenario, log: Log, model: KinematicModel | None = None) -> tuple[int, int]:
@@ -263,9 +278,9 @@ def gaps_said(sc: Scenario, log: Log, start: int, stop: int) -> np.ndarray:
         warnings.warn(
             f"{part}{sc.log.source.numbered}: {inside.size} gap(s) in time over "
             f"{gap_threshold(log.time_s):.3g} s ({GAP_FACTOR:g}× the median interval, at least "
-            f"{MIN_GAP_S:g} s) between records (the longest {dt[k]:.3g} s, after line "
-            f"{int(log.line_numbers[k])}, t = {log.time_s[k]:.3f} s: the tracker or the joints missing); no "
-            "residual window crosses them",
+            f"{MIN_GAP_S:g} s) between records (the longest {dt[k]:.3g} s, after "
+            f"{log.where(log.line_numbers[k])}, t = {log.time_s[k]:.3f} s: the tracker or the joints "
+            "missing); no residual window crosses them",
             NlpCalibWarning,
             stacklevel=3,
         )

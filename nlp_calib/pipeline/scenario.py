@@ -27,6 +27,7 @@ from nlp_calib.models import DEFAULT_MODEL, MODELS, KinematicModel, encoders, ge
 from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.options import (
+    STEERING_DEG,
     AlignmentOptions,
     ComputeOptions,
     DataOptions,
@@ -53,6 +54,7 @@ from nlp_calib.sources import (
     parse_source,
 )
 from nlp_calib.sources.bag import check_joints
+from nlp_calib.sources.base import encoder_joints
 from nlp_calib.sources.joints import check_encoders
 
 #: Numbers a library may be handed as they are (``ipopt.options``).
@@ -458,3 +460,32 @@ def load_scenario(path: str | Path) -> Scenario:
     except ConfigError as exc:
         raise ScenarioError(str(exc)) from None
     return scenario_from_mapping(raw, str(p), p.parent, p)
+
+
+def with_joint_limits(sc: Scenario, limits: Mapping[str, float]) -> tuple[Scenario, str | None]:
+    """``sc`` with its steered wheels' largest angle (``vehicle.max_steering_deg``) from the joint
+    ``limits`` (rad, by joint name: a URDF's ``<limit>``) of the joints its steering encoders read,
+    the tightest of them, and a line saying so; unchanged where the scenario gives the angle itself
+    or names no such joint. A limit beyond a quarter turn is taken as a quarter turn."""
+    if sc.parameters.vehicle.max_steering_deg is not None:
+        return sc, None
+    model = get_model(sc.model)
+    steering = [e for e, kind in model.encoder_kinds.items() if kind == "absolute"]
+    found = {
+        joint: limits[joint]
+        for entry in sc.data.logs
+        for encoder, joint in encoder_joints(entry.source, model).items()
+        if encoder in steering and joint in limits
+    }
+    if not found:
+        return sc, None
+    joint = min(found, key=found.__getitem__)
+    degrees = min(math.degrees(found[joint]), STEERING_DEG.hi)
+    if not degrees > 0:
+        raise ScenarioError(
+            f"{sc.name}: the steering joint {joint!r}'s <limit> in the URDF is 0: the wheel cannot steer; "
+            "give its real limits, or vehicle: {max_steering_deg: <degrees>}"
+        )
+    vehicle = dataclasses.replace(sc.parameters.vehicle, max_steering_deg=degrees)
+    said = f"{sc.name}: the plan steers within ±{degrees:.3g}°, the URDF's <limit> of joint {joint!r}"
+    return sc.with_options(vehicle=vehicle), said

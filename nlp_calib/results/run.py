@@ -140,6 +140,8 @@ class LogInfo:
     start_ns: int
     duration_s: float
     sensor_z_roll_pitch: tuple[float, float, float] | None = None
+    #: What its line numbers count: a text file's ``line``, a bag topic's ``/topic message``.
+    numbered: str = "line"
 
 
 @dataclass(frozen=True)

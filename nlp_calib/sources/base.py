@@ -8,7 +8,7 @@ one module with such a class and one entry in :data:`nlp_calib.sources.SOURCES`.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Hashable, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, ClassVar, Protocol
 
@@ -104,3 +104,16 @@ def check_block(
     missing = [k for k in required if k not in raw]
     if missing:
         fail(where, f"a {what} block needs {', '.join(required)}; missing {', '.join(missing)} ({doc})")
+
+
+def encoder_joints(source: object, model: KinematicModel) -> dict[str, str]:
+    """The joint each of ``model``'s encoders reads where ``source`` names them (a bag's ``joints``
+    in the model's encoder order, a CSV's ``encoders``); empty for a source that names none (a
+    text log's columns are the encoders themselves)."""
+    named = getattr(source, "encoders", None)
+    if isinstance(named, Mapping):
+        return {str(k): str(v) for k, v in named.items()}
+    joints = getattr(source, "joints", None)
+    if isinstance(joints, tuple):
+        return dict(zip(model.encoder_kinds, map(str, joints)))
+    return {}

@@ -122,7 +122,9 @@ class ImuSource:
             mount = static_mount(bag_root(self.bag), self.base_frame, rates.frame)
         header = robot_header(model, robot, rates.frame, mount)
         motions = integrated(rates, self.interval)
-        return timed_by_motions(self.bag, joints, motions, self.joints, self.max_gap, header)
+        return timed_by_motions(
+            self.bag, joints, motions, self.joints, self.max_gap, header, f"{self.imu} message"
+        )
 
     def moved(self, path: Path) -> ImuSource:
         return replace(self, bag=path)

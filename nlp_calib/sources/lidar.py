@@ -124,7 +124,9 @@ class LidarSource:
                 "sensor_frame in ROBOT.yaml",
             )
         motions = match_scans(scans, self.matching())
-        return timed_by_motions(self.bag, joints, motions, self.joints, self.max_gap, header)
+        return timed_by_motions(
+            self.bag, joints, motions, self.joints, self.max_gap, header, f"{self.scan} message"
+        )
 
     def moved(self, path: Path) -> LidarSource:
         return replace(self, bag=path)
