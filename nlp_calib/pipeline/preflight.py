@@ -13,6 +13,7 @@ is not determined well enough, the plan ranks what to drive next (:mod:`nlp_cali
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 import warnings
@@ -46,9 +47,11 @@ from nlp_calib.pipeline.build import (
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.recording import recording
 from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.pipeline.validation import on_threads, refit_without
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
 from nlp_calib.results.checks import Fold, believed_std
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight, UnitFinding
+from nlp_calib.solvers.evaluation import NormalEquations, ProblemEvaluator
 
 #: Unit and sign findings that stop a run only where the converged fit confirms them.
 JUDGED_BY_FIT = ("mirrored",)
@@ -262,7 +265,8 @@ def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, s
     backend = prepare_backend(sc, fns, [INTERNAL_SOLVER], windows.n_residuals * stride)
     binder = Binder(sc, fns, backend, start.x_fixed, no_priors(fns.n_free), bounds=box)
     try:
-        _, x, converged = binder.fit(binder.evaluate(windows), start.x0)
+        evaluator = binder.evaluate(windows)
+        _, x, converged = binder.fit(evaluator, start.x0)
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return None
     if not converged or not np.all(np.isfinite(x)):
@@ -271,10 +275,12 @@ def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, s
     if not np.isfinite(info.chi2):
         return None
     words = f"{d.start_words}, fitted to convergence on the windows judged"
-    return np.asarray(x, dtype=float), info, words, _propagated(d, binder, x, windows)
+    return np.asarray(x, dtype=float), info, words, _propagated(d, binder, x, windows, evaluator)
 
 
-def _propagated(d: Drive, binder: Binder, x: np.ndarray, windows: ResidualData) -> np.ndarray:
+def _propagated(
+    d: Drive, binder: Binder, x: np.ndarray, windows: ResidualData, evaluator: ProblemEvaluator
+) -> np.ndarray:
     """Each free parameter's σ at the converged ``x`` as the run computes the σ to believe: the
     tracker's noise propagated through the windows that share its poses and the encoders' own (a
     pose tracker's noise telescopes along a chain of windows, which white residuals do not say),
@@ -284,13 +290,15 @@ def _propagated(d: Drive, binder: Binder, x: np.ndarray, windows: ResidualData) 
     noise = np.max([p.model.input_noise_std(p.log, d.scenario.data.encoder_noise) for p in d.parts], axis=0)
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     try:
-        white = unc.estimate(binder.evaluate(windows), x, windows, noise, bounds).std
+        white = unc.estimate(evaluator, x, windows, noise, bounds).std
+        whole = evaluator.normal_equations(x)
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return np.full(fns.n_free, np.nan)
     k = min(d.scenario.validation.blocks, windows.n_residuals)
     spread = np.full(len(fns.names), np.nan)
     if k:
-        spread = combine(fns.names, [_fold(binder, x, windows, b) for b in _blocks(windows, k)]).beyond(white)
+        folds = on_threads(functools.partial(_fold, binder, x, windows, whole), _blocks(windows, k))
+        spread = combine(fns.names, folds).beyond(white)
     std = dict(zip(fns.names, believed_std(white, spread)))
     return np.array([std.get(n, np.nan) for n in fns.free], dtype=float)
 
@@ -303,17 +311,20 @@ def _blocks(windows: ResidualData, k: int) -> list[np.ndarray]:
     return [np.concatenate([p[j] for p in parts]) for j in range(k)]
 
 
-def _fold(binder: Binder, x: np.ndarray, windows: ResidualData, block: np.ndarray) -> Fold:
-    """The fit from ``x`` without the windows ``block``, as a cross-validation fold (no scores)."""
-    kept = windows.select(np.setdiff1d(np.arange(windows.n_residuals), block))
-    fns = binder.fns
+def _fold(
+    binder: Binder, x: np.ndarray, windows: ResidualData, whole: NormalEquations, block: np.ndarray
+) -> Fold:
+    """The refit from ``x`` without the windows ``block``, as a cross-validation fold (no scores):
+    the folds' own refit (:func:`~nlp_calib.pipeline.validation.refit_without`), from the whole
+    fit's normal equations ``whole`` at ``x``."""
+    crossing = np.zeros(windows.n_residuals, dtype=bool)
+    crossing[block] = True
     try:
-        evaluator = binder.evaluate(kept)
-        _, xk, converged = binder.fit(evaluator, x)
-        evaluator.release()
+        params, converged, _, evaluator = refit_without(binder, windows, crossing, x, whole)
+        if evaluator is not None:
+            evaluator.release()
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
-        xk, converged = x, False
-    params = np.asarray(fns.assemble(xk, binder.x_fixed)).ravel()
+        params, converged = np.asarray(binder.fns.assemble(x, binder.x_fixed)).ravel(), False
     first, stop = (int(block.min()), int(block.max()) + 1) if block.size else (0, 0)
     return Fold(first, stop, params, bool(converged) and bool(np.all(np.isfinite(params))), None)
 

@@ -77,7 +77,20 @@ def _refit(
     whole: NormalEquations | None = None,
 ) -> tuple[np.ndarray, bool, int, ProblemEvaluator | None]:
     """:func:`_fit`, and the evaluator it fitted with, on the windows it kept (None: too few)."""
-    crossing = data.interval_counts(bad[fit[0] : fit[1] - 1]) > 0
+    return refit_without(binder, data, data.interval_counts(bad[fit[0] : fit[1] - 1]) > 0, x, whole)
+
+
+def refit_without(
+    binder: Binder,
+    data: ResidualData,
+    crossing: np.ndarray,
+    x: np.ndarray,
+    whole: NormalEquations | None = None,
+) -> tuple[np.ndarray, bool, int, ProblemEvaluator | None]:
+    """The refit from ``x`` of ``data`` without the windows ``crossing`` marks (a fold, a jackknife
+    block): full parameters, convergence, the windows kept and the evaluator it fitted with (None:
+    too few windows). ``whole``: the normal equations of all of ``data`` at ``x``, downdated for the
+    first step by the windows left out instead of evaluating the windows kept."""
     kept = data.select(~crossing)
     if kept.n_residuals < binder.fns.n_free:
         return np.full(len(binder.fns.names), np.nan), False, 0, None
