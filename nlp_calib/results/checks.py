@@ -582,9 +582,11 @@ class TruthCheck:
         return f"estimate − truth within {abs(z[k]):.1f}σ (largest: {self.names[k]} {z[k]:+.1f}σ)"
 
 
-#: A plug-in check's levels: nothing against the calibration, or a caveat the verdict names.
+#: A plug-in check's levels: nothing against the calibration, a caveat the verdict names, or a
+#: reason the estimate is not to be used (the verdict is NOT USABLE).
 FINE = "fine"
 CAVEAT = "caveat"
+UNUSABLE = "unusable"
 
 
 @dataclass(frozen=True)
@@ -592,9 +594,12 @@ class CheckResult:
     """What a plug-in check found, as one generic record every check stores as (so a new check
     needs no record, reader or wording of its own elsewhere): its registry ``name``, its
     ``level`` (:data:`FINE`, or :data:`CAVEAT`: the verdict names it), its one wording (``words``:
-    what the terminal, the report and the summary say), further lines (``details``), what it
-    refers to (``about``: a file, a solver, by name) and what it measured (``table``: columns of
-    values by parameter or item)."""
+    what the terminal, the report and the summary say, after its name), further lines
+    (``details``), what it refers to (``about``: a file, a solver, by name) and what it measured
+    (``table``: columns of values by parameter or item). At :data:`CAVEAT` or :data:`UNUSABLE`,
+    the verdict names ``caveat`` (its words when empty) and ``concerns``, each parameter it puts in
+    doubt with why; ``section``: the report's own section for it (its title, then lines), where
+    a table of what it found is too long for one paragraph."""
 
     name: str
     level: str
@@ -602,10 +607,23 @@ class CheckResult:
     details: tuple[str, ...] = ()
     about: Mapping[str, str] = field(default_factory=dict)
     table: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    caveat: str = ""
+    concerns: Mapping[str, str] = field(default_factory=dict)
+    section: tuple[str, ...] = ()
 
     def lines(self) -> list[str]:
-        """Its words, then its details indented: the terminal's and the report's lines."""
-        return [self.words, *(f"  {d}" for d in self.details)]
+        """Its name and words, then its details indented: the terminal's lines."""
+        return [f"{self.name}: {self.words}", *(f"  {d}" for d in self.details)]
+
+    def sentence(self) -> str:
+        """Its words and details as one sentence: the report's paragraph."""
+        said = self.words + (": " + "; ".join(self.details) if self.details else "")
+        return said[0].upper() + said[1:] + "."
+
+    @property
+    def reason(self) -> str:
+        """What the verdict says of it, at :data:`CAVEAT` or :data:`UNUSABLE`."""
+        return self.caveat or self.words
 
 
 def truth_view(result: CheckResult | None) -> TruthCheck | None:
