@@ -22,9 +22,9 @@ The rules a reader can check:
   :data:`~nlp_calib.results.checks.WEAK` times the precision a useful calibration needs,
   solvers that disagree, a parameter held at its initial value, forward and reverse driving that
   disagree, parameters that move between logs beyond their σ (a model limit), faults kept in the
-  fit or not checked (each a plug-in check's caveat: :mod:`nlp_calib.pipeline.checks`), or a fit
-  that does worse on held-out data than the start computed from the data itself (``initial_guess: auto``: that start is itself a fit, so this is a caveat), or a
-  calibrated model that dead-reckons farther from the tracker than the nominal one (segment ATE);
+  fit or not checked (each a plug-in check's caveat, in the order of its registry), or a fit
+  that does worse on held-out data than the start computed from the data itself
+  (``initial_guess: auto``: that start is itself a fit, so this is a caveat), or a calibrated model that dead-reckons farther from the tracker than the nominal one (segment ATE);
 - **good**: none of these.
 
 A run of one log among several fitted together is judged on that log's own comparison with the
