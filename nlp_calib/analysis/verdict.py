@@ -24,7 +24,8 @@ The rules a reader can check:
   disagree, parameters that move between logs beyond their σ (a model limit), faults kept in the
   fit or not checked (each a plug-in check's caveat, in the order of its registry), or a fit
   that does worse on held-out data than the start computed from the data itself
-  (``initial_guess: auto``: that start is itself a fit, so this is a caveat), or a calibrated model that dead-reckons farther from the tracker than the nominal one (segment ATE);
+  (``initial_guess: auto``: that start is itself a fit, so this is a caveat), or a calibrated
+  model that dead-reckons farther from the tracker than the nominal one (segment ATE);
 - **good**: none of these.
 
 A run of one log among several fitted together is judged on that log's own comparison with the
