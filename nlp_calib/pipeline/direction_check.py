@@ -19,8 +19,9 @@ def check(run: CalibrationRun) -> CheckResult | None:
     d = run.checks.direction
     if d is None:
         return None
+    how = "Each part's σ is the jackknife σ of blocks of that part alone." if d.compared else ""
     if not d.significant:
-        return CheckResult("direction", FINE, d.sentence())
+        return CheckResult("direction", FINE, d.sentence(), how=how)
     name, z = d.worst
     widened = np.isfinite(d.spread()[d.names.index(name)])
     also = "; its σ covers both" if widened else ""
@@ -35,4 +36,5 @@ def check(run: CalibrationRun) -> CheckResult | None:
         d.sentence(),
         caveat=f"forward and reverse driving disagree ({name} by {abs(z):.1f}σ{also})",
         concerns=concerns,
+        how=how,
     )

@@ -598,8 +598,9 @@ class CheckResult:
     (``details``), what it refers to (``about``: a file, a solver, by name) and what it measured
     (``table``: columns of values by parameter or item). At :data:`CAVEAT` or :data:`UNUSABLE`,
     the verdict names ``caveat`` (its words when empty) and ``concerns``, each parameter it puts in
-    doubt with why; ``section``: the report's own section for it (its title, then lines), where
-    a table of what it found is too long for one paragraph."""
+    doubt with why; ``how``: how it measured, which the report adds to its sentence;
+    ``section``: the report's own section for it (its title, then lines), where a table of what it
+    found is too long for one paragraph."""
 
     name: str
     level: str
@@ -609,6 +610,7 @@ class CheckResult:
     table: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
     caveat: str = ""
     concerns: Mapping[str, str] = field(default_factory=dict)
+    how: str = ""
     section: tuple[str, ...] = ()
 
     def lines(self) -> list[str]:
@@ -616,9 +618,9 @@ class CheckResult:
         return [f"{self.name}: {self.words}", *(f"  {d}" for d in self.details)]
 
     def sentence(self) -> str:
-        """Its words and details as one sentence: the report's paragraph."""
+        """Its words and details as one sentence, then how it measured: the report's paragraph."""
         said = self.words + (": " + "; ".join(self.details) if self.details else "")
-        return said[0].upper() + said[1:] + "."
+        return said[0].upper() + said[1:] + "." + (f" {self.how}" if self.how else "")
 
     @property
     def reason(self) -> str:
