@@ -12,6 +12,7 @@ import numpy as np
 
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CAVEAT, FINE, CheckResult
+from nlp_calib.results.codec import finite_or_null
 
 
 def check(run: CalibrationRun) -> CheckResult | None:
@@ -21,7 +22,7 @@ def check(run: CalibrationRun) -> CheckResult | None:
         return None
     how = "Each part's σ is the jackknife σ of blocks of that part alone." if d.compared else ""
     if not d.significant:
-        return CheckResult("direction", FINE, d.sentence(), how=how)
+        return CheckResult("direction", FINE, d.sentence(), how=how, record=finite_or_null(d.as_dict()))
     name, z = d.worst
     widened = np.isfinite(d.spread()[d.names.index(name)])
     also = "; its σ covers both" if widened else ""
@@ -37,4 +38,5 @@ def check(run: CalibrationRun) -> CheckResult | None:
         caveat=f"forward and reverse driving disagree ({name} by {abs(z):.1f}σ{also})",
         concerns=concerns,
         how=how,
+        record=finite_or_null(d.as_dict()),
     )

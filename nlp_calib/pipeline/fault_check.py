@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CAVEAT, FINE, CheckResult
+from nlp_calib.results.codec import finite_or_null
 from nlp_calib.results.faults import PIVOT_SLIP, Findings, count_kinds
 
 #: Faults listed one per line; the rest are counted.
@@ -28,7 +29,23 @@ def check(run: CalibrationRun) -> CheckResult | None:
         _details(findings),
         caveat=caveat,
         section=_section(findings, run.data.dropped_faulty),
+        record=finite_or_null(_record(findings, run.data.dropped_faulty)),
     )
+
+
+def _record(findings: Findings, left_out: int) -> dict[str, object]:
+    """What result.json holds of the faults: every one found, with what was done about it."""
+    rep = findings.report
+    return {
+        "handling": findings.handling,
+        "checked": not rep.unchecked,
+        "unchecked_reason": rep.unchecked or None,
+        "found": [f.as_dict(rep.unit) for f in rep.faults],
+        "windows_left_out": left_out,
+        "repairs": list(findings.repairs),
+        "stale_readings": dict(rep.stale),
+        f"noise_{rep.unit}": dict(rep.noise),
+    }
 
 
 def _caveat(findings: Findings) -> str:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -600,7 +601,8 @@ class CheckResult:
     the verdict names ``caveat`` (its words when empty) and ``concerns``, each parameter it puts in
     doubt with why; ``how``: how it measured, which the report adds to its sentence;
     ``section``: the report's own section for it (its title, then lines), where a table of what it
-    found is too long for one paragraph."""
+    found is too long for one paragraph; ``record``: what result.json holds under its name (JSON
+    types, no NaN; None: nothing)."""
 
     name: str
     level: str
@@ -612,6 +614,7 @@ class CheckResult:
     concerns: Mapping[str, str] = field(default_factory=dict)
     how: str = ""
     section: tuple[str, ...] = ()
+    record: Any = None
 
     def lines(self) -> list[str]:
         """Its name and words, then its details indented: the terminal's lines."""
