@@ -17,7 +17,7 @@ from conftest import write_sim
 from nlp_calib.outputs.markdown import report_markdown
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.outputs.terminal import run_table
-from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, direction_check, fault_check, scenario_from_mapping
 from nlp_calib.pipeline import checks as plugin_checks
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CAVEAT, CheckResult
@@ -82,9 +82,9 @@ def test_a_fine_result_is_no_caveat(run: CalibrationRun) -> None:
 def test_the_direction_checks_one_wording_is_the_terminals_and_the_reports(run: CalibrationRun) -> None:
     d = run.checks.direction
     assert d is not None
-    said = d.sentence()
+    said = direction_check.sentence(d)
     assert f"forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]})" in said
-    assert said.endswith(d.words()) and f"direction: {said}" in run_table(run)
+    assert said.endswith(direction_check.words(d)) and f"direction: {said}" in run_table(run)
     assert f"{said[0].upper()}{said[1:]}." in report_markdown(run, [])
 
 
@@ -100,7 +100,9 @@ def test_the_built_in_checks_are_plug_ins_with_one_wording(run: CalibrationRun) 
         assert f"{name}: {found.words}" in table and f"  {name}: {found.words}" in summary
         assert found.words[1:] in report
     assert "## Encoder and tracker faults" in report
-    assert run.checks.plugin("faults").words == run.checks.findings.words(run.data.dropped_faulty)  # type: ignore[union-attr]
+    findings, faults = run.checks.findings, run.checks.plugin("faults")
+    assert findings is not None and faults is not None
+    assert faults.words == fault_check.words(findings, run.data.dropped_faulty)
 
 
 def test_a_plug_ins_level_concerns_and_caveat_decide_the_verdict(run: CalibrationRun) -> None:
@@ -128,8 +130,6 @@ def test_a_plug_ins_level_concerns_and_caveat_decide_the_verdict(run: Calibratio
 
 
 def test_faults_not_checked_are_the_fault_checks_caveat(run: CalibrationRun) -> None:
-    from nlp_calib.pipeline import fault_check
-
     findings = run.checks.findings
     assert findings is not None
     unchecked = dataclasses.replace(

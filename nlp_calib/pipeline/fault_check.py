@@ -25,7 +25,7 @@ def check(run: CalibrationRun) -> CheckResult | None:
     return CheckResult(
         "faults",
         CAVEAT if caveat else FINE,
-        findings.words(run.data.dropped_faulty),
+        words(findings, run.data.dropped_faulty),
         _details(findings),
         caveat=caveat,
         section=_section(findings, run.data.dropped_faulty),
@@ -46,6 +46,24 @@ def _record(findings: Findings, left_out: int) -> dict[str, object]:
         "stale_readings": dict(rep.stale),
         f"noise_{rep.unit}": dict(rep.noise),
     }
+
+
+def words(findings: Findings, left_out: int) -> str:
+    """What the fault check found and what was done about it, in its one wording (``left_out``:
+    the residual windows crossing them that the fit left out)."""
+    rep = findings.report
+    if rep.unchecked:
+        return f"not checked: {rep.unchecked}"
+    stale = sum(rep.stale.values())
+    harmless = f"{stale} stale counter readings that catch up at the next record (harmless)"
+    if not rep.faults:
+        return f"none found; {harmless}"
+    done = {
+        "exclude": f"{left_out} residual windows crossing them left out",
+        "repair": "counter faults repaired, windows at tracker jumps left out",
+        "keep": "kept in the fit (faults.handling: keep)",
+    }[findings.handling]
+    return f"{len(rep.faults)} found ({count_kinds(rep.faults)}); {done}; {harmless}"
 
 
 def _caveat(findings: Findings) -> str:
@@ -84,7 +102,7 @@ def _details(findings: Findings) -> tuple[str, ...]:
 
 def _section(findings: Findings, left_out: int) -> tuple[str, ...]:
     """The report's section: the words, then every fault in a table."""
-    said = findings.words(left_out)
+    said = words(findings, left_out)
     out = ["Encoder and tracker faults", said[0].upper() + said[1:] + ".", ""]
     rep = findings.report
     if rep.unchecked or not rep.faults:
