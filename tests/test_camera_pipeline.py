@@ -20,7 +20,7 @@ from nlp_calib.core.errors import NlpCalibError, ScenarioError
 from nlp_calib.models import get_model
 from nlp_calib.outputs.handoff import calibration_dict, urdf_joint
 from nlp_calib.outputs.results import result_document
-from nlp_calib.pipeline import Calibration, Scenario, load_scenario
+from nlp_calib.pipeline import Calibration, Scenario, direction_check, load_scenario
 from nlp_calib.results import CalibrationRun
 from nlp_calib.sensors import sensor_for
 from nlp_calib.simulation.camera import CameraSimulationOptions, simulate_camera, write_camera_simulation
@@ -300,7 +300,7 @@ def test_forward_and_reverse_agree_on_a_noise_free_camera_with_its_lag_fitted(
     run = Calibration.setup(load_scenario(tmp_path / "c.yaml")).run()
     check = run.checks.direction
     assert check is not None and check.compared and check.needed is not None
-    assert not check.significant, check.sentence()
+    assert not check.significant, direction_check.sentence(check)
     assert not any("forward" in r for r in run.verdict.reasons), run.verdict.reasons
     values = dict(zip(check.names, 0.5 * (check.forward + check.reverse)))
     needed = run.scenario.layout.needed({n: values[n] for n in run.scenario.layout.names})

@@ -13,7 +13,7 @@ from conftest import parse_lines, write_sim
 from nlp_calib.analysis.consistency import combined_others, compare_logs, determined
 from nlp_calib.analysis.direction import compare
 from nlp_calib.models import get_model
-from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, consistency_check, direction_check, scenario_from_mapping
 from nlp_calib.results import Checks
 from nlp_calib.results.checks import CONSISTENCY_SIGMAS as SIGNIFICANT
 from nlp_calib.results.checks import ConsistencyCheck, CrossValidation, believed_std
@@ -59,7 +59,7 @@ def test_two_logs_differ_in_the_sigma_of_their_difference() -> None:
         ("x.txt", "a"),
         ("y.txt", "a"),
     ]
-    assert "a differ in x.txt, y.txt" in check.words()
+    assert "a differ in x.txt, y.txt" in consistency_check.words(check)
     assert list(check.moved) == [True, False]
 
 
@@ -69,8 +69,8 @@ def test_a_difference_within_what_one_robot_moves_by_is_a_model_limit() -> None:
     own = np.array([[1.0, 5.0], [1.6, 5.1]])
     check = _unit_check(own, np.array([[0.1, 0.2], [0.1, 0.2]]), apart=1.0)
     assert not check.significant and check.disagreements and check.moved[0]
-    assert check.limits()[0] == f"a by {100 * 0.6 / 1.3:.2g} % (4σ, x.txt)"
-    assert "model limit" in check.words() and "a by" in check.words()
+    assert consistency_check.limits(check)[0] == f"a by {100 * 0.6 / 1.3:.2g} % (4σ, x.txt)"
+    assert "model limit" in consistency_check.words(check) and "a by" in consistency_check.words(check)
     logs = CrossValidation(NAMES, (), np.array([0.3, 0.05]))
     checks = Checks(None, None, None, None, check, logs=logs)
     white = np.array([0.01, 0.01])
@@ -84,7 +84,7 @@ def test_a_parameter_a_log_does_not_determine_on_its_own_is_not_compared() -> No
     assert np.all(np.isnan(check.z[:, 1])) and {d.parameter for d in check.disagreements} == {"a"}
     none = _unit_check(own, np.ones((2, 2)), known=np.zeros((2, 2), dtype=bool))
     assert not none.compared and not none.significant and none.worst is None
-    assert "could not be compared" in none.words()
+    assert "could not be compared" in consistency_check.words(none)
 
 
 def test_the_other_logs_sigma_is_their_information_combined() -> None:
@@ -127,7 +127,7 @@ def _check(a: Path, b: Path, folder: Path) -> ConsistencyCheck:
 
 def test_two_logs_of_one_robot_agree(tmp_path: Path) -> None:
     check = _check(*_pair(tmp_path, 1, {}), tmp_path)
-    assert check.compared and not check.significant, check.words()
+    assert check.compared and not check.significant, consistency_check.words(check)
 
 
 def test_two_logs_of_different_robots_are_told_apart_naming_parameter_and_logs(tmp_path: Path) -> None:
@@ -136,7 +136,7 @@ def test_two_logs_of_different_robots_are_told_apart_naming_parameter_and_logs(t
     assert check.significant
     named = {d.parameter for d in check.disagreements}
     assert "k_traction" in named and {d.log for d in check.disagreements} == {str(a), str(b)}
-    assert "k_traction" in check.words() and a.name in check.words()
+    assert "k_traction" in consistency_check.words(check) and a.name in consistency_check.words(check)
 
 
 def test_forward_and_reverse_that_disagree_widen_the_sigma_to_cover_both() -> None:
@@ -165,11 +165,11 @@ def test_a_direction_finding_needs_many_sigma_and_a_difference_beyond_the_precis
     np.testing.assert_allclose(np.abs(check.z), [10.0, 10.0, 1.0])
     assert check.flagged.tolist() == [False, True, False]
     assert check.significant and check.worst == ("b", pytest.approx(-10.0))
-    assert check.words() == "DISAGREE: b by 10.0σ"
+    assert direction_check.words(check) == "DISAGREE: b by 10.0σ"
     one = forward + np.array([0.004, 0.0, 0.0])
     small = compare(names, forward, one, (100, 90), std, std, set(), None, needed)
     assert not small.significant and not small.flagged.any()
-    assert small.words() == (
+    assert direction_check.words(small) == (
         "agree within the precision needed (a differs by 10.0σ, only 0.4× the precision it needs)"
     )
     # Without a needed precision, any difference beyond 3σ is a finding (as before).
@@ -181,9 +181,11 @@ def test_the_direction_check_says_when_it_could_not_compare() -> None:
     nan = np.full(2, np.nan)
     check = compare(NAMES, np.ones(2), np.ones(2), (100, 30), np.ones(2), nan, set())
     assert not check.compared and not check.significant
-    assert "could not be compared" in check.words() and "nan" not in check.words()
+    assert "could not be compared" in direction_check.words(check) and "nan" not in direction_check.words(
+        check
+    )
     ok = compare(NAMES, np.ones(2), np.array([1.1, 1.0]), (100, 90), np.ones(2), np.ones(2), set())
-    assert ok.words() == "agree within 0.1σ (a)"
+    assert direction_check.words(ok) == "agree within 0.1σ (a)"
 
 
 def test_a_calibration_worse_than_its_initial_guess_is_not_usable(tmp_path: Path) -> None:

@@ -12,7 +12,7 @@ from conftest import SCENARIOS, cli, parse_lines
 
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.models import get_model, param_names
-from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, direction_check, scenario_from_mapping
 from nlp_calib.simulation import SimulationOptions, simulate
 
 
@@ -59,7 +59,7 @@ def test_the_direction_check_flags_a_fault_that_matters_not_a_clean_drive(seed: 
             run, _ = _run("tricycle", sim)
             check = run.checks.direction  # type: ignore[attr-defined]
             assert check is not None and check.compared and check.needed is not None
-            assert check.significant == (fault > 0), (noise, fault, check.sentence())
+            assert check.significant == (fault > 0), (noise, fault, direction_check.sentence(check))
             if fault:
                 i = check.names.index("k_steer")
                 assert check.flagged[i] and abs(check.forward[i] - check.reverse[i]) > check.needed[i]

@@ -15,7 +15,7 @@ from conftest import shared_scenario
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.models import get_model
 from nlp_calib.outputs.summary import summary_lines
-from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, consistency_check, scenario_from_mapping
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CostComparison
 from nlp_calib.results.run import NOT_USABLE
@@ -113,7 +113,7 @@ def test_optiodom_tricycle_squares_one_robot_whose_mount_moves_with_the_turning(
     check = joint.checks.consistency
     assert check is not None and not check.significant and joint.verdict.level != NOT_USABLE
     moved = [n for n, m in zip(check.names, check.moved) if m]
-    assert moved == ["sensor_y"], check.words()
+    assert moved == ["sensor_y"], consistency_check.words(check)
     j = check.names.index("sensor_y")
     spread = abs(check.own[0, j] - check.own[1, j])
     assert joint.std("gauss_newton")["sensor_y"] >= 0.45 * spread

@@ -17,7 +17,7 @@ from conftest import write_sim
 from nlp_calib.outputs.markdown import report_markdown
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.outputs.terminal import run_table
-from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, direction_check, fault_check, scenario_from_mapping
 from nlp_calib.pipeline import checks as plugin_checks
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CAVEAT, CheckResult
@@ -82,7 +82,64 @@ def test_a_fine_result_is_no_caveat(run: CalibrationRun) -> None:
 def test_the_direction_checks_one_wording_is_the_terminals_and_the_reports(run: CalibrationRun) -> None:
     d = run.checks.direction
     assert d is not None
-    said = d.sentence()
+    said = direction_check.sentence(d)
     assert f"forward-only ({d.windows[0]} windows) and reverse-only ({d.windows[1]})" in said
-    assert said.endswith(d.words()) and f"direction: {said}" in run_table(run)
+    assert said.endswith(direction_check.words(d)) and f"direction: {said}" in run_table(run)
     assert f"{said[0].upper()}{said[1:]}." in report_markdown(run, [])
+
+
+def test_the_built_in_checks_are_plug_ins_with_one_wording(run: CalibrationRun) -> None:
+    """Faults and direction are registered like the toy: their words reach the terminal, the
+    report and the summary alike, the faults with a section of their own in the report."""
+    assert list(plugin_checks.RUN_CHECKS)[:3] == ["faults", "direction", "consistency"]
+    report, table, summary = report_markdown(run, []), run_table(run), summary_lines(run)
+    for name in ("faults", "direction"):
+        found = run.checks.plugin(name)
+        assert found is not None
+        assert (found.reason in run.verdict.reasons) == (found.level == CAVEAT)
+        assert f"{name}: {found.words}" in table and f"  {name}: {found.words}" in summary
+        assert found.words[1:] in report
+    assert "## Encoder and tracker faults" in report
+    findings, faults = run.checks.findings, run.checks.plugin("faults")
+    assert findings is not None and faults is not None
+    assert faults.words == fault_check.words(findings, run.data.dropped_faulty)
+
+
+def test_a_plug_ins_level_concerns_and_caveat_decide_the_verdict(run: CalibrationRun) -> None:
+    """The verdict reads the generic record: an unusable level makes it NOT USABLE in the check's
+    words; a caveat's own words and the parameters it concerns reach the verdict and the hand-off."""
+    from nlp_calib.analysis.verdict import verdict
+    from nlp_calib.models import get_model
+    from nlp_calib.results.checks import UNUSABLE
+    from nlp_calib.results.run import DOUBTFUL, NOT_USABLE
+
+    def judged(*more: CheckResult) -> CalibrationRun:
+        changed = dataclasses.replace(run, checks=dataclasses.replace(run.checks, more=more))
+        return dataclasses.replace(changed, verdict=verdict(changed, get_model("tricycle")))
+
+    bad = judged(CheckResult("toy", UNUSABLE, "the toy says these logs are two robots"))
+    assert bad.verdict.level == NOT_USABLE and "the toy says these logs are two robots" in bad.verdict.reasons
+    loose = judged(
+        CheckResult(
+            "toy", CAVEAT, "long words", caveat="short caveat", concerns={"k_steer": "the toy doubts it"}
+        )
+    )
+    assert loose.verdict.level == CAVEATS and "short caveat" in loose.verdict.reasons
+    assert "long words" not in loose.verdict.reasons
+    assert loose.handoff_status("gauss_newton")["k_steer"] == (DOUBTFUL, "the toy doubts it")
+
+
+def test_faults_not_checked_are_the_fault_checks_caveat(run: CalibrationRun) -> None:
+    findings = run.checks.findings
+    assert findings is not None
+    unchecked = dataclasses.replace(
+        findings, report=dataclasses.replace(findings.report, unchecked="no counters")
+    )
+    found = fault_check.check(
+        dataclasses.replace(run, checks=dataclasses.replace(run.checks, findings=unchecked))
+    )
+    assert found is not None and found.level == CAVEAT
+    assert (
+        found.words == "not checked: no counters"
+        and found.reason == "encoder faults not checked (no counters)"
+    )

@@ -506,7 +506,7 @@ def test_a_bags_faults_are_named_by_topic_and_message(recording: rb.Recording, t
     from dataclasses import replace
 
     from nlp_calib.outputs.markdown import report_markdown
-    from nlp_calib.outputs.terminal import fault_lines
+    from nlp_calib.outputs.terminal import check_lines
 
     joints = recording.joints.copy()
     jump = np.searchsorted(recording.joint_ns, recording.joint_ns[0] + 30 * 10**9)
@@ -520,7 +520,7 @@ def test_a_bags_faults_are_named_by_topic_and_message(recording: rb.Recording, t
     topic = "/mocap/robot/pose message"
     assert f"({topic}s " in fault.evidence and "line" not in fault.evidence
     run = cal.run()
-    shown = [line for line in fault_lines(run) if f"record {fault.record} " in line]
+    shown = [line for line in check_lines(run) if f"record {fault.record} " in line]
     assert shown and f"({topic} {message}, t = " in shown[0]
     assert f"| record | {topic} | time [s] |" in report_markdown(run, [])
     assert f"| {fault.record} | {message} |" in report_markdown(run, [])

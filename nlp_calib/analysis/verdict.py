@@ -22,9 +22,10 @@ The rules a reader can check:
   :data:`~nlp_calib.results.checks.WEAK` times the precision a useful calibration needs,
   solvers that disagree, a parameter held at its initial value, forward and reverse driving that
   disagree, parameters that move between logs beyond their σ (a model limit), faults kept in the
-  fit or not checked, or a fit that does worse on held-out data than the start computed from the
-  data itself (``initial_guess: auto``: that start is itself a fit, so this is a caveat), or a
-  calibrated model that dead-reckons farther from the tracker than the nominal one (segment ATE);
+  fit or not checked (each a plug-in check's caveat, in the order of its registry), or a fit
+  that does worse on held-out data than the start computed from the data itself
+  (``initial_guess: auto``: that start is itself a fit, so this is a caveat), or a calibrated
+  model that dead-reckons farther from the tracker than the nominal one (segment ATE);
 - **good**: none of these.
 
 A run of one log among several fitted together is judged on that log's own comparison with the
@@ -45,12 +46,11 @@ from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.checks import (
     CAVEAT,
     NOT_OBSERVABLE,
+    UNUSABLE,
     WEAK,
-    ConsistencyCheck,
     LagEstimate,
     WeakDirection,
 )
-from nlp_calib.results.faults import PIVOT_SLIP
 from nlp_calib.results.layout import CLOCK, HELD, KNOWN, Layout
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
 from nlp_calib.sensors import Sensor, sensor_for
@@ -101,16 +101,10 @@ def concerns(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[st
         for n, v in params.items():
             if abs(v - theirs[n]) > AGREE * max(abs(v), 1e-12):
                 out.setdefault(n, f"{solver} and {other} disagree on it")
-    direction = run.checks.direction
-    if direction is not None and direction.significant:
-        for n, z, flagged in zip(direction.names, direction.z, direction.flagged):
-            if flagged:
-                out.setdefault(n, f"forward and reverse driving disagree on it by {abs(z):.1f}σ")
-    check = _consistency(run)
-    if check is not None and not check.significant:
-        for n, moved in zip(check.names, check.moved):
-            if moved:
-                out.setdefault(n, f"it moves between the logs beyond its σ ({check.words()})")
+    for r in run.checks.more:  # each parameter a plug-in check puts in doubt
+        if r.level in (CAVEAT, UNUSABLE):
+            for n, why in r.concerns.items():
+                out.setdefault(n, why)
     return out
 
 
@@ -162,38 +156,8 @@ def _checks(run: CalibrationRun) -> list[str]:
     out = [w for w in run.warnings if " held at its initial value" in w]
     out += lag_caveats(run.log.path, run.data.lag_estimate)
     out += steering_caveats(run)
-    out += [r.words for r in run.checks.more if r.level == CAVEAT]  # the plug-in checks' caveats
-    direction, findings = run.checks.direction, run.checks.findings
-    if direction is not None and direction.significant:
-        name, z = direction.worst
-        widened = np.isfinite(direction.spread()[direction.names.index(name)])
-        also = "; its σ covers both" if widened else ""
-        out.append(f"forward and reverse driving disagree ({name} by {abs(z):.1f}σ{also})")
-    check = _consistency(run)
-    if check is not None and not check.significant and check.limits():
-        out.append(check.words())
-    if findings is not None:
-        rep = findings.report
-        if rep.unchecked:
-            out.append(f"encoder faults not checked ({rep.unchecked})")
-        elif rep.faults and findings.handling == "keep":
-            out.append(f"{len(rep.faults)} faults kept in the fit (faults.handling: keep)")
-        elif slipped := sum(f.kind == PIVOT_SLIP for f in rep.faults):
-            out.append(
-                f"{slipped} increments over pivots the ground slipped on were left out: slip too small to "
-                "find stays in the fit, and what the pivots determine (how the base skids as it turns) may "
-                "be biased by it beyond its σ; check it on a drive with fewer pivots, or slower ones"
-            )
+    out += [r.reason for r in run.checks.more if r.level == CAVEAT]  # the plug-in checks' caveats
     return out
-
-
-def _consistency(run: CalibrationRun) -> ConsistencyCheck | None:
-    """The logs' consistency as this run reads it: one log's own row for a run of one of the logs,
-    every row for the joint fit."""
-    check = run.checks.consistency
-    if check is None or run.log.path not in check.logs:
-        return check
-    return check.of_log(run.log.path)
 
 
 def caveats(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]:
@@ -272,10 +236,7 @@ def _unobservable(run: CalibrationRun) -> set[str]:
 def _unusable(run: CalibrationRun) -> list[str]:
     """Why a converged, determined estimate is not to be used: the logs are not one robot's, or the
     fit does worse than a given initial guess or the robot's nominal values."""
-    out = []
-    check = _consistency(run)
-    if check is not None and check.significant:
-        out.append(check.words())
+    out = [r.reason for r in run.checks.more if r.level == UNUSABLE]
     start, nominal = run.checks.start, run.checks.nominal
     if start is not None and not _fitted_start(run) and start.outcome == "worse":
         out.append(start.words())

@@ -157,39 +157,13 @@ def _uncertainty_section(run: CalibrationRun) -> list[str]:
         f"Each block scored by the fit without it, beside the full fit on the same block (mean over "
         f"the blocks): {held}.",
     ]
-    d = run.checks.direction
-    if d is not None:
-        said = d.sentence()
-        # The terminal's wording; the report adds how each part's σ was had.
-        how = " Each part's σ is the jackknife σ of blocks of that part alone." if d.compared else ""
-        out += ["", f"{said[0].upper()}{said[1:]}.{how}"]
-    for r in run.checks.more:
-        out += [
-            "",
-            r.words[0].upper() + r.words[1:] + (": " + "; ".join(r.details) if r.details else "") + ".",
-        ]
+    out += [line for r in run.checks.more if not r.section for line in ("", r.sentence())]
     return [*out, ""]
 
 
-def _faults_section(run: CalibrationRun) -> list[str]:
-    findings = run.checks.findings
-    if findings is None:
-        return []
-    said = findings.words(run.data.dropped_faulty)
-    out = ["## Encoder and tracker faults", "", said[0].upper() + said[1:] + ".", ""]
-    rep = findings.report
-    if rep.unchecked or not rep.faults:
-        return out
-    out += [
-        "The fault-robust figures restart dead reckoning from the tracker after each fault and leave "
-        "its records out.",
-        "",
-        f"| record | {run.log.numbered} | time [s] | kind | evidence |",
-        "|---|---|---|---|---|",
-    ]
-    out += [f"| {f.record} | {f.line} | {f.time_s:.2f} | {f.kind} | {f.evidence} |" for f in rep.faults]
-    out += ["", *(f"- repaired: {r}" for r in findings.repairs), ""]
-    return out
+def _check_sections(run: CalibrationRun) -> list[str]:
+    """The plug-in checks with a section of their own (its title, then its lines)."""
+    return [line for r in run.checks.more if r.section for line in (f"## {r.section[0]}", "", *r.section[1:])]
 
 
 def _solver_table(run: CalibrationRun, solvers: Sequence[str]) -> list[str]:
@@ -268,7 +242,7 @@ def report_markdown(
     out += ["## Parameters", "", *_parameter_table(run, solvers), ""]
     group = run.scenario.sensor.group
     out += ["## Solvers", "", _FIGURES_TEXT.format(window=run.baseline.rpe_window, group=group), ""]
-    out += [*_solver_table(run, solvers), "", *_faults_section(run), *_uncertainty_section(run)]
+    out += [*_solver_table(run, solvers), "", *_check_sections(run), *_uncertainty_section(run)]
     for s in solvers:
         res = run.reports[s].result
         if not res.converged:

@@ -13,6 +13,7 @@ from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.version import __version__
 from nlp_calib.results import CalibrationRun, SolverReport
 from nlp_calib.results.checks import CostComparison
+from nlp_calib.results.codec import finite_or_null
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.run import GIVEN
 
@@ -41,23 +42,6 @@ def _metrics_dict(full: TrajectoryMetrics, holdout: TrajectoryMetrics | None) ->
     if holdout is not None:
         out.update({f"holdout_{k}": v for k, v in holdout.as_dict().items()})
     return out
-
-
-def _faults_dict(run: CalibrationRun) -> dict[str, Any] | None:
-    findings = run.checks.findings
-    if findings is None:
-        return None
-    rep = findings.report
-    return {
-        "handling": findings.handling,
-        "checked": not rep.unchecked,
-        "unchecked_reason": rep.unchecked or None,
-        "found": [f.as_dict(rep.unit) for f in rep.faults],
-        "windows_left_out": run.data.dropped_faulty,
-        "repairs": list(findings.repairs),
-        "stale_readings": dict(rep.stale),
-        f"noise_{rep.unit}": dict(rep.noise),
-    }
 
 
 def _crossval_dict(run: CalibrationRun) -> dict[str, Any] | None:
@@ -182,12 +166,10 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         "baseline": {"metrics": _metrics_dict(run.baseline, run.baseline_holdout)},
         "solvers": {name: _solver_dict(run, name, rep) for name, rep in run.reports.items()},
         "crossvalidation": _crossval_dict(run),
-        "direction": checks.direction.as_dict() if checks.direction is not None else None,
+        **_check_records(run),
         "logs": _logs_dict(run),
         "start": _cost_dict(checks.start),
         "nominal": _nominal_dict(run),
-        "truth": _truth_dict(run),
-        "faults": _faults_dict(run),
         "observability": checks.observability.as_dict() if checks.observability is not None else None,
         "warnings": list(run.warnings),
         "verdict": {
@@ -218,11 +200,15 @@ def _sensor_dict(run: CalibrationRun) -> dict[str, Any]:
     }
 
 
-def _truth_dict(run: CalibrationRun) -> dict[str, Any] | None:
-    t = run.checks.plugin("truth")
-    if t is None:
-        return None
-    return {"file": t.about["file"], "solver": t.about["solver"], **{k: dict(v) for k, v in t.table.items()}}
+#: Keys of the plug-in checks' records that result.json has always held, null when the check did not
+#: run (readers in the wild look them up).
+STORED_CHECKS = ("direction", "truth", "faults")
+
+
+def _check_records(run: CalibrationRun) -> dict[str, Any]:
+    """What each plug-in check stores in result.json, under its name."""
+    found = {r.name: r.record for r in run.checks.more if r.record is not None}
+    return {**dict.fromkeys(STORED_CHECKS), **found}
 
 
 def _json_default(obj: Any) -> Any:
@@ -233,17 +219,6 @@ def _json_default(obj: Any) -> Any:
     if isinstance(obj, Path):
         return str(obj)
     raise TypeError(f"cannot serialise {type(obj).__name__}")
-
-
-def finite_or_null(obj: Any) -> Any:
-    """The same structure with NaN and infinities as ``None`` (JSON has no such numbers)."""
-    if isinstance(obj, float | np.floating):
-        return float(obj) if np.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: finite_or_null(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [finite_or_null(v) for v in obj]
-    return obj
 
 
 def result_document(run: CalibrationRun) -> dict[str, Any]:
@@ -263,7 +238,7 @@ def write_validation(run: CalibrationRun, folder: Path, name: str) -> list[Path]
         "std": sigmas(run, solver, run.std(solver)),
         "std_white_noise": sigmas(run, solver, run.reports[solver].uncertainty.std_dict()),
         "crossvalidation": _crossval_dict(run),
-        "direction": run.checks.direction.as_dict() if run.checks.direction is not None else None,
+        "direction": _check_records(run)["direction"],
     }
     path = folder / name
     text = json.dumps(

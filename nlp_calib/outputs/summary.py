@@ -15,13 +15,6 @@ from nlp_calib.results import CalibrationRun
 from nlp_calib.results.run import CAVEATS, NOT_USABLE, UNDETERMINED
 
 
-def _faults_line(run: CalibrationRun) -> str:
-    findings = run.checks.findings
-    if findings is None:
-        return "not checked (no fault check ran)"
-    return findings.words(run.data.dropped_faulty)
-
-
 def _observability_line(run: CalibrationRun) -> str:
     obs = run.checks.observability
     if obs is None:
@@ -117,9 +110,8 @@ def summary_lines(run: CalibrationRun, files: Sequence[str] = ()) -> list[str]:
         lines.append(f"  {s}: {state}")
     if chosen is not None:
         lines.append(f"  accuracy ({chosen}): {_accuracy_line(run, chosen)}")
-    lines.append(f"  faults: {_faults_line(run)}")
-    lines.append(f"  observability: {_observability_line(run)}")
     lines += [f"  {r.name}: {r.words}" for r in run.checks.more]
+    lines.append(f"  observability: {_observability_line(run)}")
     v = run.verdict
     lines.append(f"  verdict: {v.line()}")
     for i, step in enumerate(_next_steps(run, v.level, files)):

@@ -6,10 +6,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from nlp_calib.core.text import numbered
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import believed_std
-from nlp_calib.results.faults import count_kinds
 from nlp_calib.results.figures import TrajectoryMetrics
 
 
@@ -99,47 +97,10 @@ def widened_lines(run: CalibrationRun) -> list[str]:
     return out
 
 
-def direction_lines(run: CalibrationRun) -> list[str]:
-    """How well fits on forward-only and on reverse-only driving agree."""
-    d = run.checks.direction
-    if d is None:
-        return []
-    return [f"direction: {d.sentence()}"]
-
-
-def truth_lines(run: CalibrationRun) -> list[str]:
-    """What each plug-in check found (a simulated log's truth against the estimate among them), in
-    its one wording."""
-    return [line for r in run.checks.more for line in r.lines()]
-
-
-#: Faults listed one per line; the rest are counted.
-SHOWN_FAULTS = 6
-
-
-def fault_lines(run: CalibrationRun) -> list[str]:
-    """What the fault check found and what was done about it, one line each."""
-    findings = run.checks.findings
-    if findings is None:
-        return []
-    rep = findings.report
-    lines = [f"faults: {findings.words(run.data.dropped_faulty)}"]
-    if rep.unchecked or not rep.faults:
-        return lines
-    # Encoder faults first: they bias a calibration; tracker jumps are many and each one harmless.
-    ordered = sorted(rep.faults, key=lambda f: (f.kind == "tracker_jump", f.record))
-    for f in ordered[:SHOWN_FAULTS]:
-        lines.append(
-            f"  record {f.record} ({numbered(run.log.numbered, f.line)}, t = {f.time_s:.2f} s) {f.kind}: "
-            f"{f.evidence}"
-        )
-    if len(ordered) > SHOWN_FAULTS:
-        rest = ordered[SHOWN_FAULTS:]
-        lines.append(
-            f"  ... {len(rest)} more ({count_kinds(rest)}): every one is in result.json under faults.found"
-        )
-    lines += [f"  repaired: {r}" for r in findings.repairs]
-    return lines
+def check_lines(run: CalibrationRun) -> list[str]:
+    """What each plug-in check found, in its one wording (one with a section of its own in the
+    report set apart by a blank line)."""
+    return [line for r in run.checks.more for line in (["", *r.lines()] if r.section else r.lines())]
 
 
 def error_stats_lines(run: CalibrationRun, solver: str) -> list[str]:
@@ -320,11 +281,7 @@ def _check_lines(run: CalibrationRun, solvers: list[str]) -> list[str]:
     chosen = next((s for s in solvers if run.reports[s].result.converged), None)
     if chosen is not None:
         lines += ["", *error_stats_lines(run, chosen)]
-    faults = fault_lines(run)
-    if faults:
-        lines += ["", *faults]
-    lines += direction_lines(run)
-    lines += truth_lines(run)
+    lines += check_lines(run)
     obs = run.checks.observability
     if obs is not None:
         lines.append("")
@@ -373,7 +330,8 @@ def validation_table(run: CalibrationRun) -> str:
     for n, w, b, sp in zip(names, white, cv.std, cv.spread()):
         ratio = b / w if w > 0 else float("nan")
         lines.append(f"{n:<18}{w:>14.3g}{b:>12.3g}{ratio:>8.1f}{sp:>12.3g}")
-    lines += ["", *uncertainty_lines(run), *direction_lines(run)]
+    direction = run.checks.plugin("direction")
+    lines += ["", *uncertainty_lines(run), *(direction.lines() if direction is not None else ())]
     return "\n".join(lines)
 
 

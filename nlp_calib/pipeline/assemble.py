@@ -451,6 +451,8 @@ def joint_run(
         warnings=tuple(warned),
         verdict=Verdict("", ()),
     )
+    # The plug-in checks on the joint fit: no log source's files (a simulated log's truth is each log's).
+    run = dataclasses.replace(run, checks=dataclasses.replace(checks, more=run_checks(run, CheckContext())))
     run = _believed_plan(run)
     return judged(run, verdict(run, prepared.model), prepared.scenario.objective.sensor.sensor.components)
 

@@ -25,6 +25,7 @@ from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, reference_scales
+from nlp_calib.pipeline import consistency_check
 from nlp_calib.pipeline.align import Alignment
 from nlp_calib.pipeline.analyse import (
     FitAnalysis,
@@ -241,8 +242,8 @@ def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> Cali
     logs = logs_crossval(fitting, results, scorer, log_ranges(parts))
     own = [_own_run(p, names) for p in parts]
     check = consistency(results, own, logs, (calib.model, fit_info(calib.scenario, calib.fns)))
-    if check is not None and (check.significant or check.limits()):
-        notes.append(check.words())
+    if check is not None and (check.significant or consistency_check.limits(check)):
+        notes.append(consistency_check.words(check))
     fitted = dataclasses.replace(fitted, consistency=check, logs=logs)
     runs = _assemble(fitting, parts, results, fitted, notes, wanted)
     joint = _joint(fitting, (scorer, parts[0]), runs, results, fitted, notes)

@@ -13,7 +13,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from nlp_calib.pipeline import rival, truth
+from nlp_calib.pipeline import consistency_check, direction_check, fault_check, rival, truth
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CheckResult
@@ -33,8 +33,12 @@ class CheckContext:
 #: A check: the run and its context to a result, or None when it has nothing to say.
 RunCheck = Callable[[CalibrationRun, CheckContext], "CheckResult | None"]
 
-#: The plug-in checks, by name, in the order they run.
+#: The plug-in checks, by name, in the order they run: the order the terminal, the report, the
+#: summary and the verdict's reasons name them in.
 RUN_CHECKS: dict[str, RunCheck] = {
+    "faults": lambda run, ctx: fault_check.check(run),
+    "direction": lambda run, ctx: direction_check.check(run),
+    "consistency": lambda run, ctx: consistency_check.check(run),
     "truth": lambda run, ctx: truth.check(run, ctx.files, ctx.convert),
     "model": lambda run, ctx: rival.check(run, ctx.scenario),
 }

@@ -17,6 +17,7 @@ from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import FINE, CheckResult, TruthCheck
+from nlp_calib.results.codec import finite_or_null
 from nlp_calib.simulation import truth_path
 
 #: Parameter values in one form's names and units into another's.
@@ -55,13 +56,16 @@ def check(run: CalibrationRun, files: Sequence[Path] = (), convert: Converter = 
         return None
     cells = ", ".join(f"{n} {z:+.1f}σ" for n, z in zip(t.names, t.z) if np.isfinite(z))
     columns = {"truth": t.truth, "error": t.error, "error_in_sigma": t.z}
+    about = {"file": t.path, "solver": t.solver}
+    table = {key: dict(zip(t.names, map(float, v))) for key, v in columns.items()}
     return CheckResult(
         "truth",
         FINE,
         f"against the simulator's truth ({t.path}), {t.solver}: {t.words()}",
         (cells,),
-        {"file": t.path, "solver": t.solver},
-        {key: dict(zip(t.names, map(float, v))) for key, v in columns.items()},
+        about,
+        table,
+        record=finite_or_null({**about, **table}),
     )
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -174,32 +175,6 @@ class DirectionCheck:
             clear = (np.abs(self.z) > CONSISTENCY_SIGMAS) & (diff <= limit)
             noise = diff / np.abs(self.z)
         return np.where(clear, 0.5 * np.sqrt(np.clip(diff**2 - noise**2, 0.0, None)), np.nan)
-
-    def words(self) -> str:
-        """The verdict in words: agree within, disagree by, or could not compare (and why)."""
-        if not self.compared:
-            return (
-                "could not be compared: no parameter has a σ in both parts (each part's σ needs at "
-                "least 3 blocks with 20 or more windows of its driving)"
-            )
-        name, z = self.worst
-        if self.significant:
-            return f"DISAGREE: {name} by {abs(z):.1f}σ"
-        if abs(z) > SIGNIFICANT and self.needed is not None:
-            i = self.names.index(name)
-            share = abs(self.forward[i] - self.reverse[i]) / self.needed[i]
-            return (
-                f"agree within the precision needed ({name} differs by {abs(z):.1f}σ, only "
-                f"{share:.2g}× the precision it needs)"
-            )
-        return f"agree within {abs(z):.1f}σ ({name})"
-
-    def sentence(self) -> str:
-        """Its one wording, for the terminal and the report: the parts' windows and :meth:`words`."""
-        return (
-            f"fits on forward-only ({self.windows[0]} windows) and reverse-only ({self.windows[1]}) "
-            f"driving {self.words()}"
-        )
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -399,58 +374,6 @@ class ConsistencyCheck:
             self.names, logs, self.joint, self.own[i], self.others[i], self.z[i], self.apart, self.units
         )
 
-    def limits(self) -> list[str]:
-        """One phrase per parameter that moves between the logs beyond their σ without setting
-        them apart: by how much at most and in how many σ."""
-        out = []
-        for j in np.flatnonzero(self.moved):
-            d = np.abs(self.own[:, j] - self.others[:, j])
-            z = np.where(np.isfinite(self.z[:, j]), np.abs(self.z[:, j]), 0.0)
-            i = int(np.argmax(z))
-            rel = d[i] / max(abs(float(self.joint[j])), 1e-12)
-            unit = f" {self.units[j]}" if self.units else ""
-            size = f"{100 * rel:.2g} %" if rel < 1 else f"{d[i]:.3g}{unit}"
-            out.append(f"{self.names[j]} by {size} ({z[i]:.0f}σ, {_name(self.logs[i])})")
-        return out
-
-    def words(self) -> str:
-        """One line: which logs are not one robot's and on which parameters, which parameters move
-        between the logs (a model limit), that the logs agree, or that nothing could be compared."""
-        if not self.compared:
-            return (
-                "each log's own fit could not be compared with the other logs' (no parameter that a log "
-                "determines on its own has a σ on both sides)"
-            )
-        if self.significant:
-            return self._apart_words()
-        limits = self.limits()
-        if limits:
-            return (
-                f"parameters move between the logs beyond their σ: {'; '.join(limits)}; the model misses "
-                "something that changes with the driving (a model limit), so their σ include the spread "
-                "over the logs"
-            )
-        w = self.worst
-        assert w is not None
-        return (
-            f"each log's own fit agrees with the other logs' within {abs(w.z):.1f}σ "
-            f"(largest: {w.parameter} in {_name(w.log)})"
-        )
-
-    def _apart_words(self) -> str:
-        worst = self.different
-        logs = [_name(log) for log in sorted({d.log for d in worst}, key=self.logs.index)]
-        params = list(dict.fromkeys(d.parameter for d in (*worst, *self.disagreements)))
-        detail = "; ".join(
-            f"{d.parameter} in {_name(d.log)}: {d.own:.6g} against {d.others:.6g} from the other logs "
-            f"({d.z:+.1f}σ)"
-            for d in worst[:3]
-        )
-        return (
-            f"the logs do not agree on one robot: {', '.join(params)} differ in {', '.join(logs)} beyond "
-            f"{CONSISTENCY_SIGMAS:g}σ and beyond {WEAK:g}× the precision a calibration needs ({detail})"
-        )
-
     def as_dict(self) -> dict[str, object]:
         def row(values: np.ndarray) -> dict[str, float | None]:
             return {n: (None if not np.isfinite(v) else float(v)) for n, v in zip(self.names, values)}
@@ -465,11 +388,6 @@ class ConsistencyCheck:
             "moved": [n for n, m in zip(self.names, self.moved) if m],
             "significant": self.significant,
         }
-
-
-def _name(log: str) -> str:
-    """A log's file name: what names it in one line (its result holds the path)."""
-    return log.replace("\\", "/").rsplit("/", 1)[-1]
 
 
 #: A fit beats another parameter set, or does worse, when their held-out costs differ by this many
@@ -582,9 +500,11 @@ class TruthCheck:
         return f"estimate − truth within {abs(z[k]):.1f}σ (largest: {self.names[k]} {z[k]:+.1f}σ)"
 
 
-#: A plug-in check's levels: nothing against the calibration, or a caveat the verdict names.
+#: A plug-in check's levels: nothing against the calibration, a caveat the verdict names, or a
+#: reason the estimate is not to be used (the verdict is NOT USABLE).
 FINE = "fine"
 CAVEAT = "caveat"
+UNUSABLE = "unusable"
 
 
 @dataclass(frozen=True)
@@ -592,9 +512,14 @@ class CheckResult:
     """What a plug-in check found, as one generic record every check stores as (so a new check
     needs no record, reader or wording of its own elsewhere): its registry ``name``, its
     ``level`` (:data:`FINE`, or :data:`CAVEAT`: the verdict names it), its one wording (``words``:
-    what the terminal, the report and the summary say), further lines (``details``), what it
-    refers to (``about``: a file, a solver, by name) and what it measured (``table``: columns of
-    values by parameter or item)."""
+    what the terminal, the report and the summary say, after its name), further lines
+    (``details``), what it refers to (``about``: a file, a solver, by name) and what it measured
+    (``table``: columns of values by parameter or item). At :data:`CAVEAT` or :data:`UNUSABLE`,
+    the verdict names ``caveat`` (its words when empty) and ``concerns``, each parameter it puts in
+    doubt with why; ``how``: how it measured, which the report adds to its sentence;
+    ``section``: the report's own section for it (its title, then lines), where a table of what it
+    found is too long for one paragraph; ``record``: what result.json holds under its name (JSON
+    types, no NaN; None: nothing)."""
 
     name: str
     level: str
@@ -602,10 +527,25 @@ class CheckResult:
     details: tuple[str, ...] = ()
     about: Mapping[str, str] = field(default_factory=dict)
     table: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    caveat: str = ""
+    concerns: Mapping[str, str] = field(default_factory=dict)
+    how: str = ""
+    section: tuple[str, ...] = ()
+    record: Any = None
 
     def lines(self) -> list[str]:
-        """Its words, then its details indented: the terminal's and the report's lines."""
-        return [self.words, *(f"  {d}" for d in self.details)]
+        """Its name and words, then its details indented: the terminal's lines."""
+        return [f"{self.name}: {self.words}", *(f"  {d}" for d in self.details)]
+
+    def sentence(self) -> str:
+        """Its words and details as one sentence, then how it measured: the report's paragraph."""
+        said = self.words + (": " + "; ".join(self.details) if self.details else "")
+        return said[0].upper() + said[1:] + "." + (f" {self.how}" if self.how else "")
+
+    @property
+    def reason(self) -> str:
+        """What the verdict says of it, at :data:`CAVEAT` or :data:`UNUSABLE`."""
+        return self.caveat or self.words
 
 
 def truth_view(result: CheckResult | None) -> TruthCheck | None:

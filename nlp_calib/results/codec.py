@@ -117,3 +117,14 @@ def load(cls: type[T], data: Any) -> T:
     """A record of type ``cls`` from its :func:`to_data` form."""
     out: T = from_data(cls, data)
     return out
+
+
+def finite_or_null(obj: Any) -> Any:
+    """The same structure with NaN and infinities as ``None`` (JSON has no such numbers)."""
+    if isinstance(obj, float | np.floating):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: finite_or_null(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [finite_or_null(v) for v in obj]
+    return obj

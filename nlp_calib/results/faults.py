@@ -152,21 +152,3 @@ class Findings:
     report: FaultReport
     handling: str
     repairs: tuple[str, ...] = ()
-
-    def words(self, left_out: int) -> str:
-        """What the fault check found and what was done about it, in the one wording the terminal,
-        the report and the summary share (``left_out``: the residual windows crossing them that
-        the fit left out)."""
-        rep = self.report
-        if rep.unchecked:
-            return f"not checked: {rep.unchecked}"
-        stale = sum(rep.stale.values())
-        harmless = f"{stale} stale counter readings that catch up at the next record (harmless)"
-        if not rep.faults:
-            return f"none found; {harmless}"
-        done = {
-            "exclude": f"{left_out} residual windows crossing them left out",
-            "repair": "counter faults repaired, windows at tracker jumps left out",
-            "keep": "kept in the fit (faults.handling: keep)",
-        }[self.handling]
-        return f"{len(rep.faults)} found ({count_kinds(rep.faults)}); {done}; {harmless}"
