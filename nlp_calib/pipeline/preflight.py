@@ -47,7 +47,7 @@ from nlp_calib.pipeline.build import (
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.recording import recording
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.pipeline.validation import on_threads, refit_without
+from nlp_calib.pipeline.validation import leave_out, on_threads
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
 from nlp_calib.results.checks import Fold, believed_std
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight, UnitFinding
@@ -284,7 +284,8 @@ def _propagated(
     """Each free parameter's σ at the converged ``x`` as the run computes the σ to believe: the
     tracker's noise propagated through the windows that share its poses and the encoders' own (a
     pose tracker's noise telescopes along a chain of windows, which white residuals do not say),
-    or the jackknife of ``validation.blocks`` fits each without one block of windows where it
+    or the jackknife of ``validation.blocks`` folds each without one block of windows (the
+    cross-validation's folds, from the normal equations at ``x`` less the block's) where it
     exceeds that beyond its own noise (errors that vary along the drive); NaN where it cannot."""
     fns = d.fns
     noise = np.max([p.model.input_noise_std(p.log, d.scenario.data.encoder_noise) for p in d.parts], axis=0)
@@ -314,15 +315,15 @@ def _blocks(windows: ResidualData, k: int) -> list[np.ndarray]:
 def _fold(
     binder: Binder, x: np.ndarray, windows: ResidualData, whole: NormalEquations, block: np.ndarray
 ) -> Fold:
-    """The refit from ``x`` without the windows ``block``, as a cross-validation fold (no scores):
-    the folds' own refit (:func:`~nlp_calib.pipeline.validation.refit_without`), from the whole
-    fit's normal equations ``whole`` at ``x``."""
+    """The fold without the windows ``block``, as a cross-validation fold (no scores): the folds'
+    own (:func:`~nlp_calib.pipeline.validation.leave_out`), from the fit's normal equations
+    ``whole`` at ``x`` less the block's."""
     crossing = np.zeros(windows.n_residuals, dtype=bool)
     crossing[block] = True
     try:
-        params, converged, _, evaluator = refit_without(binder, windows, crossing, x, whole)
-        if evaluator is not None:
-            evaluator.release()
+        params, converged, _, left = leave_out(binder, windows, crossing, x, whole)
+        if left is not None:
+            left.release()
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         params, converged = np.asarray(binder.fns.assemble(x, binder.x_fixed)).ravel(), False
     first, stop = (int(block.min()), int(block.max()) + 1) if block.size else (0, 0)
