@@ -7,15 +7,22 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SCENARIOS
 
+from nlp_calib.analysis import determinacy as det
 from nlp_calib.analysis.verdict import lag_caveats
 from nlp_calib.models import get_model
+from nlp_calib.pipeline import preflight as pf
 from nlp_calib.pipeline import scenario_from_mapping
 from nlp_calib.pipeline.align import apart, valleys
+from nlp_calib.pipeline.build import Binder
 from nlp_calib.pipeline.preflight import _judged_by_fit, preflight
+from nlp_calib.pipeline.scenario import load_scenario
 from nlp_calib.pipeline.validation import lag_alike
+from nlp_calib.problem import ResidualData
 from nlp_calib.results.checks import LagEstimate
 from nlp_calib.results.preflight import UnitFinding
+from nlp_calib.solvers.evaluation import NormalEquations
 
 REAL = Path("/work/shared/data/dataset.txt")
 
@@ -79,3 +86,44 @@ def test_parts_of_the_real_log_the_fit_determines_pass_the_gate(records: tuple[i
     assert report.stop_words() == "", report.stop_words()
     sensor_y = next(p for p in report.parameters if p.name == "sensor_y")
     assert sensor_y.std < 0.03
+
+
+@pytest.mark.parametrize("name", ["demo", "real_tricycle"])
+def test_the_preflights_information_and_jackknife_are_its_fits_own(
+    name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 41: the pre-flight's information at its fit is the fit's own normal equations there
+    (determinacy.information evaluated again gives it to rounding), and its jackknife's folds
+    (``validation.leave_out``: the first step from the fit's normal equations less the block's)
+    land within σ/100 of full refits to rounding (σ: the pre-flight's own)."""
+    seen: dict[str, object] = {}
+    original = pf._propagated
+
+    def spy(d, binder, x, windows, fitted):  # type: ignore[no-untyped-def]
+        seen.update(binder=binder, windows=windows, whole=fitted[1])
+        return original(d, binder, x, windows, fitted)
+
+    monkeypatch.setattr(pf, "_propagated", spy)
+    if name == "real_tricycle" and not REAL.exists():
+        pytest.skip("the real log is not on this machine")
+    a = pf.assess(load_scenario(SCENARIOS / f"{name}.yaml"))
+    d = a.drive
+    again = det.information(d.fns, pf._judged(d), a.x, d.start.x_fixed, a.omega, a.delta)
+    np.testing.assert_allclose(a.info.H, again.H, rtol=1e-9, atol=1e-12 * np.abs(again.H).max())
+    assert a.info.chi2 == pytest.approx(again.chi2, rel=1e-9)
+    assert a.info.spread2 == pytest.approx(again.spread2, rel=1e-9)
+    assert (a.info.n_windows, a.info.motion2) == (again.n_windows, again.motion2)
+    binder, windows, whole = seen["binder"], seen["windows"], seen["whole"]
+    assert isinstance(binder, Binder) and isinstance(windows, ResidualData)
+    assert isinstance(whole, NormalEquations) and a.propagated is not None
+    free = [d.fns.names.index(n) for n in d.fns.free]
+    moved = []
+    for block in pf._blocks(windows, 5):
+        fold = pf._fold(binder, a.x, windows, whole, block)
+        kept = binder.evaluate(windows.select(np.setdiff1d(np.arange(windows.n_residuals), block)))
+        _, x_full, converged = binder.fit(kept, a.x)
+        assert fold.converged and converged
+        gap = np.abs(fold.params[free] - x_full) / a.propagated
+        assert np.max(gap) < 0.01, gap
+        moved.append(np.max(np.abs(x_full - a.x) / a.propagated))
+    assert max(moved) > 0.1  # the folds do move: the bound above is not met by staying at x

@@ -36,6 +36,7 @@ from nlp_calib.results.preflight import (
     NOT_ENOUGH,
     WEAK_DRIVE,
     WEAKLY,
+    Preflight,
 )
 
 CIRCLES = REPO.parent / "shared" / "data" / "real4" / "optiodom" / "tricyc" / "circular" / "140120211440"
@@ -298,6 +299,15 @@ def recordings() -> dict[str, rb.Recording]:
     return {m: rb.record(m, seconds=30.0, seed=5) for m in ("tricycle", "diff_drive")}
 
 
+@pytest.fixture(scope="module")
+def clean_reports(
+    recordings: dict[str, rb.Recording], tmp_path_factory: pytest.TempPathFactory
+) -> dict[str, Preflight]:
+    """The pre-flight of each model's recording as recorded: what every unit case is set against."""
+    folder = tmp_path_factory.mktemp("clean")
+    return {m: preflight(load_scenario(_joint_pair(r, folder, f"clean_{m}"))) for m, r in recordings.items()}
+
+
 UNIT_CASES = {
     "degrees": (lambda j: np.degrees(j), "degrees"),
     "wrapped": (lambda j: np.column_stack([j[:, 0], wrap_angle(j[:, 1])]), "wrapped"),
@@ -308,7 +318,11 @@ UNIT_CASES = {
 @pytest.mark.parametrize("case", list(UNIT_CASES))
 @pytest.mark.parametrize("model", ["tricycle", "diff_drive"])
 def test_units_and_signs_the_data_get_wrong_are_named(
-    case: str, model: str, recordings: dict[str, rb.Recording], tmp_path: Path
+    case: str,
+    model: str,
+    recordings: dict[str, rb.Recording],
+    clean_reports: dict[str, Preflight],
+    tmp_path: Path,
 ) -> None:
     if case == "mirrored" and model == "tricycle":
         pytest.skip("one wheel: the tricycle's canonical form takes a wheel counting backwards as it is")
@@ -320,7 +334,7 @@ def test_units_and_signs_the_data_get_wrong_are_named(
     print(model, case, [u.words for u in report.units])
     assert kind in {u.kind for u in report.units}, report.units
     assert report.verdict == CHECK_DATA and report.exit_code == 5
-    clean = preflight(load_scenario(_joint_pair(rec, tmp_path, "clean")))
+    clean = clean_reports[model]
     assert clean.units == () and clean.verdict == ENOUGH
 
 

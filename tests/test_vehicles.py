@@ -158,6 +158,17 @@ def _car_scenario(tmp_path: Path, seed: int, known: tuple[str, ...] = ()) -> tup
     return scenario_from_mapping(sc, "car", tmp_path), opts
 
 
+@pytest.fixture(scope="module")
+def car_known(tmp_path_factory: pytest.TempPathFactory) -> tuple[Any, HighwayOptions, Any]:
+    """The highway car of seed 1 given what it cannot determine (``CAR_KNOWN``), and its run: one
+    calibration that several tests read."""
+    sc, opts = _car_scenario(tmp_path_factory.mktemp("car_known"), 1, CAR_KNOWN)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    return sc, opts, run
+
+
 def test_the_highway_simulator_drives_a_kilometre_barely_steering_and_checks_its_options() -> None:
     sim = simulate_highway(HighwayOptions(seed=4))
     truth = sim.truth_dict()
@@ -196,12 +207,15 @@ def test_a_highway_car_is_refused_what_a_straight_kilometre_cannot_determine(tmp
 
 @pytest.mark.parametrize("seed", [1, 2])
 def test_a_highway_car_given_what_it_cannot_determine_finds_its_wheel_scale_and_yaw(
-    tmp_path: Path, seed: int
+    tmp_path: Path, seed: int, request: pytest.FixtureRequest
 ) -> None:
-    sc, opts = _car_scenario(tmp_path, seed, CAR_KNOWN)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        run = Calibration(sc).run()
+    if seed == 1:
+        sc, opts, run = request.getfixturevalue("car_known")
+    else:
+        sc, opts = _car_scenario(tmp_path, seed, CAR_KNOWN)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            run = Calibration(sc).run()
     estimate, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
     truth = {CAR_NAMES.get(n, n): v for n, v in opts.truth.items()}
     assert run.verdict.level in (GOOD, CAVEATS), run.verdict
@@ -231,15 +245,15 @@ def test_the_run_past_the_preflight_says_not_determined_for_the_preflights_reaso
     assert refused - held and all(n in said for n in refused - held), (refused, said)
 
 
-def test_the_preflight_states_the_sigma_the_run_will_state(tmp_path: Path) -> None:
+def test_the_preflight_states_the_sigma_the_run_will_state(
+    car_known: tuple[Any, HighwayOptions, Any],
+) -> None:
     """One σ per parameter before the fit and after it: the pre-flight's was the white residuals'
     (steer_offset ±0.0032 rad where the run says ±0.00018: a pose tracker's noise telescopes
     along the drive); it is the run's computation, within the sampling of its own windows."""
-    sc, _ = _car_scenario(tmp_path, 1, CAR_KNOWN)
+    sc, _, run = car_known
+    assert tuple(sc.solvers) == ("gauss_newton",)
     before = {p.name: p.std for p in preflight(sc).parameters}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        run = Calibration(sc).run(["gauss_newton"])
     after = run.std("gauss_newton")
     for name in ("steer_offset", "traction_wheels_radius", "sensor_theta"):
         print(name, before[name], after[name])
@@ -262,11 +276,10 @@ def test_a_parameter_the_run_holds_is_a_caveat_before_the_fit_as_after(tmp_path:
     assert any("traction_track_width held at its initial value" in r for r in run.verdict.reasons)
 
 
-def test_a_cars_steering_offset_must_resolve_what_turns_its_heading_at_its_own_speed(tmp_path: Path) -> None:
-    sc, opts = _car_scenario(tmp_path, 1, CAR_KNOWN)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        run = Calibration(sc).run()
+def test_a_cars_steering_offset_must_resolve_what_turns_its_heading_at_its_own_speed(
+    car_known: tuple[Any, HighwayOptions, Any],
+) -> None:
+    _, opts, run = car_known
     layout = run.scenario.layout
     # An offset δ turns the heading by δ·v/L a second; the budget is the reference robot's 2.5 mrad/s.
     speed = run.reports["gauss_newton"].metrics.distance_m / run.log.duration_s

@@ -115,8 +115,23 @@ def information(
     scale = n / max(idx.size, 1)
     H = np.einsum("rwi,r,w,rwj->ij", J, w, weight, J, optimize=True) * scale
     g = np.einsum("rwi,r,w,rw->i", J, w, weight, e, optimize=True) * scale
+    return of_terms(fns, data, omega, (H, g, float(np.sum(rho)) * scale), s, weight)
+
+
+def of_terms(
+    fns: ProblemFunctions,
+    data: ResidualData,
+    omega: np.ndarray,
+    equations: tuple[np.ndarray, np.ndarray, float],
+    s: np.ndarray,
+    weight: np.ndarray,
+) -> Information:
+    """The information of the windows of ``data`` from their robust-weighted normal equations
+    ``(H, g, Σρ)`` and the windows' ``s = eᵀΩe`` and weights ρ'(s) (all of them, or a spread
+    sample's), such as a fit's evaluator gives at its optimum (no second evaluation)."""
+    H, g, rho = equations
     spread2 = float(np.sum(weight * s) / max(s.size * fns.error_rows, 1))
-    return Information(H, n, motion_scale(fns, data.z, omega), g, float(np.sum(rho)) * scale, spread2)
+    return Information(H, data.n_residuals, motion_scale(fns, data.z, omega), g, rho, spread2)
 
 
 def _robust(kernel: str, s: np.ndarray, delta: float) -> tuple[np.ndarray, np.ndarray]:

@@ -47,7 +47,7 @@ from nlp_calib.pipeline.build import (
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.recording import recording
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.pipeline.validation import on_threads, refit_without
+from nlp_calib.pipeline.validation import leave_out, on_threads
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
 from nlp_calib.results.checks import Fold, believed_std
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight, UnitFinding
@@ -254,7 +254,8 @@ def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, s
     """The start fitted to convergence by the run's internal solver on the windows whose information
     is judged (robust kernel, bounds), and the information there: the σ a fit will give is read
     where the fit ends, never at the start, whose misfit is no noise. None where the fit does not
-    converge (a drive that leaves a direction free: its normal equations are singular). Last, each
+    converge (a drive that leaves a direction free: its normal equations are singular). The
+    information is the fit's own normal equations at its optimum (not evaluated again). Last, each
     free parameter's σ as the run computes it there (:func:`_propagated`)."""
     fns, start, sc = d.fns, d.start, d.scenario
     windows = _judged(d)
@@ -267,31 +268,40 @@ def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, s
     try:
         evaluator = binder.evaluate(windows)
         _, x, converged = binder.fit(evaluator, start.x0)
+        if not converged or not np.all(np.isfinite(x)):
+            return None
+        # The fit's own normal equations at its optimum are the windows' information there.
+        whole = evaluator.normal_equations(x)
+        _, s, weight = evaluator.robust_terms(x)
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return None
-    if not converged or not np.all(np.isfinite(x)):
-        return None
-    info = det.information(fns, windows, x, start.x_fixed, omega, sc.objective.robust.delta, det.MAX_WORK)
-    if not np.isfinite(info.chi2):
+    info = det.of_terms(fns, windows, omega, (whole.H, whole.g, whole.cost), s, weight)
+    if not np.isfinite(info.chi2) or not np.all(np.isfinite(info.H)):
         return None
     words = f"{d.start_words}, fitted to convergence on the windows judged"
-    return np.asarray(x, dtype=float), info, words, _propagated(d, binder, x, windows, evaluator)
+    return np.asarray(x, dtype=float), info, words, _propagated(d, binder, x, windows, (evaluator, whole))
 
 
 def _propagated(
-    d: Drive, binder: Binder, x: np.ndarray, windows: ResidualData, evaluator: ProblemEvaluator
+    d: Drive,
+    binder: Binder,
+    x: np.ndarray,
+    windows: ResidualData,
+    fitted: tuple[ProblemEvaluator, NormalEquations],
 ) -> np.ndarray:
     """Each free parameter's σ at the converged ``x`` as the run computes the σ to believe: the
     tracker's noise propagated through the windows that share its poses and the encoders' own (a
     pose tracker's noise telescopes along a chain of windows, which white residuals do not say),
-    or the jackknife of ``validation.blocks`` fits each without one block of windows where it
-    exceeds that beyond its own noise (errors that vary along the drive); NaN where it cannot."""
+    or the jackknife of ``validation.blocks`` folds each without one block of windows (the
+    cross-validation's folds, from the normal equations at ``x`` less the block's) where it
+    exceeds that beyond its own noise (errors that vary along the drive); NaN where it cannot.
+    ``fitted``: the fit's evaluator of ``windows`` and its normal equations at ``x``."""
     fns = d.fns
     noise = np.max([p.model.input_noise_std(p.log, d.scenario.data.encoder_noise) for p in d.parts], axis=0)
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
+    evaluator, whole = fitted
     try:
         white = unc.estimate(evaluator, x, windows, noise, bounds).std
-        whole = evaluator.normal_equations(x)
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return np.full(fns.n_free, np.nan)
     k = min(d.scenario.validation.blocks, windows.n_residuals)
@@ -314,15 +324,15 @@ def _blocks(windows: ResidualData, k: int) -> list[np.ndarray]:
 def _fold(
     binder: Binder, x: np.ndarray, windows: ResidualData, whole: NormalEquations, block: np.ndarray
 ) -> Fold:
-    """The refit from ``x`` without the windows ``block``, as a cross-validation fold (no scores):
-    the folds' own refit (:func:`~nlp_calib.pipeline.validation.refit_without`), from the whole
-    fit's normal equations ``whole`` at ``x``."""
+    """The fold without the windows ``block``, as a cross-validation fold (no scores): the folds'
+    own (:func:`~nlp_calib.pipeline.validation.leave_out`), from the fit's normal equations
+    ``whole`` at ``x`` less the block's."""
     crossing = np.zeros(windows.n_residuals, dtype=bool)
     crossing[block] = True
     try:
-        params, converged, _, evaluator = refit_without(binder, windows, crossing, x, whole)
-        if evaluator is not None:
-            evaluator.release()
+        params, converged, _, left = leave_out(binder, windows, crossing, x, whole)
+        if left is not None:
+            left.release()
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         params, converged = np.asarray(binder.fns.assemble(x, binder.x_fixed)).ravel(), False
     first, stop = (int(block.min()), int(block.max()) + 1) if block.size else (0, 0)

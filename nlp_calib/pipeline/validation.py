@@ -136,6 +136,35 @@ def _stepped(
     return left.params(_bounded(binder, left.boxplus(x, step))), True
 
 
+def leave_out(
+    binder: Binder,
+    data: ResidualData,
+    crossing: np.ndarray,
+    x: np.ndarray,
+    whole: NormalEquations | None = None,
+) -> tuple[np.ndarray, bool, int, ProblemEvaluator | None]:
+    """A fold: the refit from the whole fit's ``x`` of ``data`` without the windows ``crossing``
+    marks (a block of records, a log, a jackknife's block of windows). Full parameters,
+    convergence, the windows kept and the evaluator of the windows left out (data terms alone;
+    None where none was built). ``whole``: the normal equations of all of ``data`` at ``x``, less
+    the left-out windows' for the first step, the windows kept not evaluated there. From
+    :data:`DOWNDATE_FROM` windows on that step is the fold (:func:`_stepped`); below, or without
+    ``whole``, the fold is refitted from ``x`` to :data:`REFIT_SIGMAS` (:func:`refit_without`)."""
+    n = data.n_residuals - int(crossing.sum())
+    if n < binder.fns.n_free:
+        return np.full(len(binder.fns.names), np.nan), False, 0, None
+    if not crossing.any():  # nothing left out: the fold is the whole fit
+        return np.asarray(binder.fns.assemble(x, binder.x_fixed), dtype=float).ravel(), True, n, None
+    if whole is None or data.n_residuals < DOWNDATE_FROM:
+        params, converged, n, ev = refit_without(binder, data, crossing, x, whole)
+        if ev is not None:
+            ev.release()
+        return params, converged, n, None
+    left = _left_out(binder, data, crossing)
+    params, converged = _stepped(binder, whole, left, x)
+    return params, converged, n, left
+
+
 def holding(binder: Binder, x: np.ndarray, names: Sequence[str]) -> Binder:
     """``binder`` with the free parameters ``names`` held at ``x``'s values (stiff priors): a
     refit whose data say nothing of them (a part without their driving, a fold without their log)
@@ -174,17 +203,12 @@ def _part_fold(
     x: np.ndarray,
     whole: NormalEquations | None,
 ) -> np.ndarray | None:
-    """A direction's refit (of its windows ``part``, with normal equations ``whole`` at ``x``: one
-    step, see :func:`_stepped`) without the records ``block`` (None when it does not converge)."""
+    """A direction's refit (of its windows ``part``, see :func:`leave_out`) without the records
+    ``block`` (None when it does not converge)."""
     bad = _base(fit)
     bad[block[0] : block[1] - 1] = True
-    if whole is None:
-        params, converged, _ = _fit(binder, part, fit, bad, x)
-    else:
-        crossing = part.interval_counts(bad[fit[0] : fit[1] - 1]) > 0
-        if part.n_residuals - int(crossing.sum()) < binder.fns.n_free:
-            return None
-        params, converged = _stepped(binder, whole, _left_out(binder, part, crossing), x)
+    crossing = part.interval_counts(bad[fit[0] : fit[1] - 1]) > 0
+    params, converged, _, _ = leave_out(binder, part, crossing, x, whole)
     return params if converged else None
 
 
@@ -241,16 +265,9 @@ def folds_over(
         bad[a : b - 1] = True
         hold = holds.get(block, ())
         crossing = data.interval_counts(bad[fit[0] : fit[1] - 1]) > 0
-        left: ProblemEvaluator | None = None
         # ``whole`` carries the fit's own priors, not a held fold's.
-        if whole is not None and not hold:
-            params, converged, n = np.full(len(names), np.nan), False, 0
-            if data.n_residuals - int(crossing.sum()) >= binder.fns.n_free:
-                left = _left_out(binder, data, crossing)
-                params, converged = _stepped(binder, whole, left, x)
-                n = data.n_residuals - int(crossing.sum())
-        else:
-            params, converged, n = _fit(holding(binder, x, hold), data, fit, bad, x)
+        refit = holding(binder, x, hold)
+        params, converged, n, left = leave_out(refit, data, crossing, x, None if hold else whole)
         if not n:
             return Fold(a, b, params, False, None)
         costs: tuple[float, ...] = ()
