@@ -24,6 +24,7 @@ from test_bags import JS, POSE, Message, _header, _quat, write_bag
 
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 from nlp_calib.models import get_model
+from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.simulation import SimulationOptions, simulate
 
 T0_NS = 1_700_000_000 * 10**9
@@ -120,7 +121,11 @@ def record(
         tracker_ns=tracker_ns + T0_NS,
         tracker=_seen(sim.T_world_sensor, ns, tracker_ns, np.random.default_rng(seed + 100)),
         tracker_z=SENSOR_Z + np.zeros(tracker_ns.size),
-        truth=radians.from_counts(_per_turn(model, dict(opts.truth), opts.encoder_ranges)),
+        # The tracker's stamps are the times it saw the poses: its time offset is the simulator's.
+        truth={
+            **radians.from_counts(_per_turn(model, dict(opts.truth), opts.encoder_ranges)),
+            LAG_PARAM: opts.tracker.latency_s,
+        },
     )
 
 

@@ -25,7 +25,7 @@ from nlp_calib.logs.bag_reader import BagError, BagTopics
 from nlp_calib.logs.bag_records import read_bag_records
 from nlp_calib.models import get_model
 from nlp_calib.pipeline import Calibration, load_scenario, scenario_from_mapping
-from nlp_calib.simulation import truth_path
+from nlp_calib.pipeline.truth import read_truth
 from nlp_calib.sources import BagSource, TextSource, load_log
 
 FORMATS = ("ros1", "sqlite3", "mcap")
@@ -194,7 +194,7 @@ def test_each_bag_format_calibrates_as_its_text_log(
     text = Calibration(load_scenario(_scenario(tmp_path, f"dataset: {path}", "text"))).run()
     expected = text.reports["gauss_newton"].result
     assert expected.converged
-    truth, std = json.loads(truth_path(path).read_text())["params"], text.std("gauss_newton")
+    truth, std = read_truth(path), text.std("gauss_newton")
     for name, value in expected.param_dict().items():  # a real calibration, not any answer
         assert abs(value - truth[name]) <= 4 * std[name], name
     for fmt, bag in bags.items():
@@ -689,11 +689,20 @@ def test_compare_runs_on_a_scenario_that_names_a_bag(bags: dict[str, Path], tmp_
     assert doc["dataset"]["path"] == str(bags["mcap"]) and set(doc["solvers"]) == {"gauss_newton", "ipopt"}
 
 
-def test_a_calibration_is_checked_on_a_bag(bags: dict[str, Path], tmp_path: Path) -> None:
+#: How far a refit on the very records a calibration was made from may move, relative to each
+#: value: with the time offset held, not at all; with it fitted, the run's clock correction is
+#: exact to first order only in the lag's distance from where the encoders were last re-sampled
+#: (``nlp_calib.pipeline.align``), the check's refit re-samples at the stored lag itself.
+UNMOVED = {"held": (1e-9, "alignment: {tracker_lag: 0.0}\n"), "fitted": (1e-6, "")}
+
+
+@pytest.mark.parametrize("lag", list(UNMOVED))
+def test_a_calibration_is_checked_on_a_bag(bags: dict[str, Path], tmp_path: Path, lag: str) -> None:
     """``nlp-calib check CALIBRATION.yaml BAG``: the bag is read with the topics of the scenario the
     calibration records; on the very records it was made from, nothing moved (a drive this short
     leaves most parameters too loose to test: the verdict says so)."""
-    scenario = _scenario(tmp_path, _bag_block(bags["mcap"]), "from_bag")
+    rel, alignment = UNMOVED[lag]
+    scenario = _scenario(tmp_path, _bag_block(bags["mcap"]) + "\n" + alignment, "from_bag")
     out = tmp_path / "cal"
     assert cli("run", str(scenario), "--out", str(out)).returncode == 0
     proc = cli("check", str(out / "calibration.yaml"), str(bags["sqlite3"]), "--out", str(tmp_path / "check"))
@@ -702,5 +711,5 @@ def test_a_calibration_is_checked_on_a_bag(bags: dict[str, Path], tmp_path: Path
         proc.stderr
     )
     assert doc["dataset"] == str(bags["sqlite3"])
-    assert all(abs(p["change"]) <= 1e-9 * abs(p["stored"]) for p in doc["parameters"].values())
+    assert all(abs(p["change"]) <= rel * abs(p["stored"]) for p in doc["parameters"].values())
     assert not any(p["drifted"] for p in doc["parameters"].values())

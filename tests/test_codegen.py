@@ -28,11 +28,23 @@ needs_compiler = pytest.mark.skipif(
 )
 
 
-@pytest.fixture(scope="module")
-def generated(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("codegen")
+#: The demo as shipped (its time offset fitted: the functions take the encoders' rates, ``clock``)
+#: and with the offset held (they do not).
+LAGS = {"fitted": 1, "held": 0}
+
+
+@pytest.fixture(scope="module", params=list(LAGS))
+def generated(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> Path:
+    out = tmp_path_factory.mktemp(f"codegen_{request.param}")
+    scenario = SCENARIOS / "demo.yaml"
+    if request.param == "held":
+        scenario = out.parent / f"{out.name}.yaml"
+        scenario.write_text(
+            (SCENARIOS / "demo.yaml").read_text().replace("data/", f"{SCENARIOS}/data/")
+            + "alignment: {tracker_lag: 0.0}\n"
+        )
     proc = subprocess.run(
-        [sys.executable, "-m", "nlp_calib", "codegen", str(SCENARIOS / "demo.yaml"), "--out", str(out)],
+        [sys.executable, "-m", "nlp_calib", "codegen", str(scenario), "--out", str(out)],
         capture_output=True,
         text=True,
         cwd=REPO,
@@ -77,9 +89,11 @@ def test_example_program_prints_what_python_computes(generated: Path) -> None:
     J_c = np.array([float(ln.split()[2]) for ln in out.splitlines() if ln.startswith("J ")])
     src = (generated / "example.c").read_text()
     params, u, z = _c_array(src, "params"), _c_array(src, "u"), _c_array(src, "z")
-    fns = build_for_export(get_model("tricycle"), 10, "exact")[-1]
+    lags = LAGS[generated.name.split("_")[1].rstrip("0123456789")]
+    clock = [_c_array(src, "clock")] if lags else []
+    fns = build_for_export(get_model("tricycle"), 10, "exact", lags=lags)[-1]
     f = next(e.function for e in export_functions(fns) if "jacobian" in e.function.name())
-    e_py, J_py = (np.asarray(v).ravel(order="F") for v in f(params, u.reshape(2, -1, order="F"), z))
+    e_py, J_py = (np.asarray(v).ravel(order="F") for v in f(params, u.reshape(2, -1, order="F"), z, *clock))
     assert np.abs(J_py).max() > 0.1  # the example window moves, so the check is not of zeros
     assert_close(e_c, e_py, rtol=1e-12, atol=1e-15)
     assert_close(J_c, J_py, rtol=1e-12, atol=1e-12 * np.abs(J_py).max())
@@ -96,16 +110,18 @@ def test_shared_library_equals_python_on_random_inputs(generated: Path) -> None:
         timeout=300,
     )
     rng = np.random.default_rng(0)
-    for fns in build_for_export(get_model("tricycle"), 10, "exact"):
+    lags = LAGS[generated.name.split("_")[1].rstrip("0123456789")]
+    nominal = [0.55, 0.0105, 1.5, -0.05, 1.6, 0.1, 0.05] + [0.02] * lags
+    for fns in build_for_export(get_model("tricycle"), 10, "exact", lags=lags):
         for exp in export_functions(fns):
             ext = ca.external(exp.function.name(), str(lib))
             for _ in range(20):
-                params = np.array([0.55, 0.0105, 1.5, -0.05, 1.6, 0.1, 0.05]) + rng.normal(0, 0.05, 7)
+                params = np.array(nominal) + rng.normal(0, 0.05, len(nominal))
                 u = np.vstack([rng.uniform(-2, 2, exp.horizon), rng.uniform(-1.5, 1.5, exp.horizon)])
-                z = rng.normal(0, 0.2, 3)
+                args = [params, u, rng.normal(0, 0.2, 3)] + [rng.normal(0, 1.0, 5)] * lags
                 for a, b in zip(
-                    ext(params, u, z) if exp.function.n_out() > 1 else [ext(params, u, z)],
-                    exp.function(params, u, z) if exp.function.n_out() > 1 else [exp.function(params, u, z)],
+                    ext(*args) if exp.function.n_out() > 1 else [ext(*args)],
+                    exp.function(*args) if exp.function.n_out() > 1 else [exp.function(*args)],
                 ):
                     a, b = np.asarray(a), np.asarray(b)
                     assert_close(a, b, rtol=1e-12, atol=1e-12 * max(np.abs(b).max(), 1.0))
@@ -129,7 +145,13 @@ def test_compiled_backend_gives_the_interpreted_solution(
     for solver in ("gauss_newton", "ipopt"):
         a, b = interpreted.solve(solver), compiled.solve(solver)
         assert a.converged and b.converged
-        assert_close(b.params, a.params, rtol=1e-10, atol=1e-14, what=solver)
+        # The fitted time offset lies near zero: it is held to 1e-10 of its search's width, as
+        # the other parameters are held to 1e-10 of their values.
+        lag = np.array(a.names) == "tracker_lag"
+        assert lag.sum() == 1
+        assert_close(b.params[~lag], a.params[~lag], rtol=1e-10, atol=1e-14, what=solver)
+        width = float(np.ptp(sc.log.alignment.search))
+        assert_close(b.params[lag], a.params[lag], rtol=0.0, atol=1e-10 * width, what=solver)
         assert b.cost == pytest.approx(a.cost, rel=1e-10)
     # The second set-up reuses the cached shared objects: nothing new is compiled.
     compiled.backend.wait()
