@@ -14,7 +14,6 @@ from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import format_log, resample_encoders
 from nlp_calib.models import get_model
 from nlp_calib.pipeline import Calibration
-from nlp_calib.pipeline.options import AlignmentOptions
 from nlp_calib.pipeline.scenario import (
     AlignmentOptions,
     SampleSelection,

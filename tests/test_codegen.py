@@ -19,6 +19,7 @@ from nlp_calib.codegen.compiler import find_compiler
 from nlp_calib.codegen.export import build_for_export, export_functions
 from nlp_calib.models import get_model
 from nlp_calib.pipeline import Calibration
+from nlp_calib.pipeline.options import AlignmentOptions
 from nlp_calib.pipeline.scenario import load_scenario
 
 COMPILER = find_compiler()
@@ -28,7 +29,7 @@ needs_compiler = pytest.mark.skipif(
 )
 
 
-#: The demo as shipped (its time offset fitted: the functions take the encoders' rates, ``clock``)
+#: The demo as shipped, its time offset fitted (the functions take the encoders' rates, ``clock``),
 #: and with the offset held (they do not).
 LAGS = {"fitted": 1, "held": 0}
 
@@ -138,6 +139,7 @@ def test_compiled_backend_gives_the_interpreted_solution(
     sc = sc.with_options(
         samples=dataclasses.replace(sc.log.samples, stop=700),
         robust=dataclasses.replace(sc.objective.robust, kernel=kernel),
+        alignment=AlignmentOptions(tracker_lag="auto"),
     )
     interpreted = Calibration(sc.with_options(backend="interpreted"))
     compiled = Calibration(sc.with_options(backend="compiled"))

@@ -162,7 +162,12 @@ def test_run_then_check_a_text_log_of_every_model(tmp_path: Path, model: str) ->
     # by default; the diff drive's held at the clock as logged.
     lagged = model != "diff_drive"
     log = write_sim(
-        tmp_path, "drive.txt", records=900, seed=17, model=model, latency_s=0.03 if model == "tricycle" else 0.0
+        tmp_path,
+        "drive.txt",
+        records=900,
+        seed=17,
+        model=model,
+        latency_s=0.03 if model == "tricycle" else 0.0,
     )
     body = {"dataset": str(log), "model": model, "residual": {"horizon": 10}, **LIGHT}
     if model == "tricycle":
