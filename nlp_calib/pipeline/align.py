@@ -19,7 +19,7 @@ from nlp_calib.core.errors import NlpCalibError, NlpCalibWarning
 from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.pipeline.build import Binder
 from nlp_calib.pipeline.keys import scenario_key
-from nlp_calib.pipeline.prepare import split
+from nlp_calib.pipeline.prepare import fit_records
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.results.checks import LagEstimate
 from nlp_calib.results.layout import CLOCK
@@ -61,16 +61,6 @@ class Alignment:
 def lag_column(binder: Binder) -> int | None:
     """The place of the (single log's) lag among the free parameters; None when it is not free."""
     return next((i for i, n in enumerate(binder.fns.free) if binder.fns.layout.in_block(n, CLOCK)), None)
-
-
-def fit_records(sc: Scenario, log: Log, start: int, stop: int) -> tuple[int, int]:
-    """The records the lag is fitted on: those whose shifted times stay inside the log for every
-    lag of the search."""
-    reach = max(abs(v) for v in sc.log.alignment.search)
-    t = log.time_s
-    first = max(start, int(np.searchsorted(t, t[0] + reach, side="left")))
-    last = min(stop, int(np.searchsorted(t, t[-1] - reach, side="right")))
-    return first, split(sc, first, last)
 
 
 @dataclass

@@ -124,10 +124,15 @@ def check_windows(sc: Scenario, start: int, stop: int, log: Log | None = None) -
     """Refuse, before anything is built, a horizon that leaves fewer windows than parameters (a
     log of measured increments: fewer increments)."""
     H, stride = sc.objective.residual.horizon, sc.objective.residual.stride
-    fit_stop = split(sc, start, stop)
-    intervals = fit_stop - start - 1
+    first, fit_stop = start, split(sc, start, stop)
+    ends = ""
+    if sc.log.alignment.tracker_lag == "auto" and log is not None:
+        first, fit_stop = fit_records(sc, log, start, stop)
+        lo, hi = sc.log.alignment.search
+        ends = f" (the fitted lag's search [{lo:g}, {hi:g}] s leaves out the records its reach covers)"
+    intervals = fit_stop - first - 1
     kind = Poses() if log is None else log.reference.kind
-    windows = kind.window_count((start, fit_stop), H, stride)
+    windows = kind.window_count((first, fit_stop), H, stride)
     always = sc.objective.sensor.held()
     n_free = len(set(scenario_params(sc)) - set(sc.parameters.fixed) - set(always))
     if windows >= n_free:
@@ -135,17 +140,27 @@ def check_windows(sc: Scenario, start: int, stop: int, log: Log | None = None) -
     if kind.horizon(H) is not None:  # windows of its own: no horizon to shorten
         part = f"{sc.origin} ({sc.dataset.name}): " if sc.origin else ""
         raise ScenarioError(
-            f"{sc.path or sc.name}: {part}{windows} {kind.window_words} in the {fit_stop - start} fitted "
-            f"records of samples [{start}, {stop}) for {n_free} parameters; widen samples"
+            f"{sc.path or sc.name}: {part}{windows} {kind.window_words} in the {fit_stop - first} fitted "
+            f"records of samples [{start}, {stop}){ends} for {n_free} parameters; widen samples"
         )
     longest = intervals - (n_free - 1) * stride
     fix = f"shorten residual.horizon to at most {longest}" if longest >= 1 else "select more samples"
     part = f"{sc.origin} ({sc.dataset.name}): " if sc.origin else ""
     raise ScenarioError(
         f"{sc.path or sc.name}: {part}residual.horizon {H} (stride {stride}) leaves {windows} residual "
-        f"window(s) in the {fit_stop - start} fitted records of samples [{start}, {stop}) for "
+        f"window(s) in the {fit_stop - first} fitted records of samples [{start}, {stop}){ends} for "
         f"{n_free} parameters; {fix}, or widen samples"
     )
+
+
+def fit_records(sc: Scenario, log: Log, start: int, stop: int) -> tuple[int, int]:
+    """The records a fitted lag is found on: those whose shifted times stay inside the log for
+    every lag of the search (up to the hold-out)."""
+    reach = max(abs(v) for v in sc.log.alignment.search)
+    t = log.time_s
+    first = max(start, int(np.searchsorted(t, t[0] + reach, side="left")))
+    last = min(stop, int(np.searchsorted(t, t[-1] - reach, side="right")))
+    return first, split(sc, first, last)
 
 
 def split(sc: Scenario, start: int, stop: int) -> int:
