@@ -162,7 +162,14 @@ def test_fixed_parameter_stays_bit_identical_and_solvers_agree(small_demo: Scena
         fixed=("axis_length", "sensor_y"), initial_guess={"axis_length": 1.55, "sensor_y": 0.07}
     )
     calib = Calibration(sc)
-    assert calib.fns.free == ("k_steer", "k_traction", "steer_offset", "sensor_x", "sensor_theta", "tracker_lag")
+    assert calib.fns.free == (
+        "k_steer",
+        "k_traction",
+        "steer_offset",
+        "sensor_x",
+        "sensor_theta",
+        "tracker_lag",
+    )
     gn, ip = calib.solve("gauss_newton"), calib.solve("ipopt")
     for res in (gn, ip):
         assert res.converged, res.reason
