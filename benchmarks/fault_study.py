@@ -406,7 +406,8 @@ def write_rest(args: argparse.Namespace, step: Callable[[str], None]) -> list[st
     )
     md.append(
         "Drives without faults, both solvers, 10 blocks. Direction alarms: forward-only and reverse-only "
-        "fits differ beyond 3σ in some parameter (its stated level); on truth that does not depend on "
+        "fits differ beyond 3σ and beyond the precision it needs in some parameter (the check's finding); "
+        "on truth that does not depend on "
         "direction every alarm is false. Coverage: the share of free parameters within 1 and 2 honest σ "
         "of the truth (nominal 68 % and 95 %).\n"
     )

@@ -7,6 +7,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import parse_lines, write_sim
 
 from nlp_calib.analysis.consistency import combined_others, compare_logs, determined
@@ -151,6 +152,29 @@ def test_forward_and_reverse_that_disagree_widen_the_sigma_to_cover_both() -> No
     assert check.significant and abs(check.z[0]) > 4 > abs(check.z[1])
     noise = 0.4 / abs(check.z[0])
     np.testing.assert_allclose(check.spread(), [0.5 * np.sqrt(0.4**2 - noise**2), np.nan])
+
+
+def test_a_direction_finding_needs_many_sigma_and_a_difference_beyond_the_precision_needed() -> None:
+    """Three parameters each 10σ apart: one by 0.4 of its needed precision (noise-free data, where
+    σ is nearly nothing), one by 4 times it; a third by 4 times it but within its noise (1σ)."""
+    forward, needed = np.array([1.0, 2.0, 3.0]), np.full(3, 0.01)
+    reverse = forward + np.array([0.004, 0.04, 0.04])
+    std = np.array([0.0004, 0.004, 0.04]) / np.sqrt(2)  # σ of the difference: 1/10, 1/10, 1
+    names = ("a", "b", "c")
+    check = compare(names, forward, reverse, (100, 90), std, std, set(), None, needed)
+    np.testing.assert_allclose(np.abs(check.z), [10.0, 10.0, 1.0])
+    assert check.flagged.tolist() == [False, True, False]
+    assert check.significant and check.worst == ("b", pytest.approx(-10.0))
+    assert check.words() == "DISAGREE: b by 10.0σ"
+    one = forward + np.array([0.004, 0.0, 0.0])
+    small = compare(names, forward, one, (100, 90), std, std, set(), None, needed)
+    assert not small.significant and not small.flagged.any()
+    assert small.words() == (
+        "agree within the precision needed (a differs by 10.0σ, only 0.4× the precision it needs)"
+    )
+    # Without a needed precision, any difference beyond 3σ is a finding (as before).
+    bare = compare(names, forward, one, (100, 90), std, std, set())
+    assert bare.significant and bare.worst[0] == "a"
 
 
 def test_the_direction_check_says_when_it_could_not_compare() -> None:

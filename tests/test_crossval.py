@@ -48,6 +48,33 @@ def test_direction_check_flags_a_direction_dependent_steering_gain() -> None:
     assert np.all(np.abs(res.params - truth) <= 3.0 * sigma)
 
 
+@pytest.mark.parametrize("seed", [8])
+def test_the_direction_check_flags_a_fault_that_matters_not_a_clean_drive(seed: int) -> None:
+    """Noise-free and at the simulator's tracker noise (2 mm, 2 mrad): the plain tricycle on a
+    drive without a direction fault is not flagged, however small the σ of the difference gets;
+    with the steering 8 % stronger in reverse it is, on k_steer, by more than its needed precision."""
+    for noise in (0.0, 0.002):
+        for fault in (0.0, 0.08):
+            sim = SimulationOptions.of(
+                model="tricycle_reverse",
+                records=2400,
+                seed=seed,
+                truth={"k_steer_reverse": fault},
+                tracker_noise_xy=noise,
+                tracker_noise_theta=noise,
+            )
+            run, _ = _run("tricycle", sim)
+            check = run.checks.direction  # type: ignore[attr-defined]
+            assert check is not None and check.compared and check.needed is not None
+            assert check.significant == (fault > 0), (noise, fault, check.sentence())
+            if fault:
+                i = check.names.index("k_steer")
+                assert check.flagged[i] and abs(check.forward[i] - check.reverse[i]) > check.needed[i]
+                # The reverse gain's truth: the two parts' k_steer differ by about its 8 %.
+                ratio = check.reverse[i] / check.forward[i]
+                assert ratio == pytest.approx(1.08, abs=0.03)
+
+
 def test_a_drive_without_reversing_holds_the_reverse_gain_with_a_warning() -> None:
     sim = SimulationOptions.of(model="tricycle_reverse", records=1200, seed=2, trajectory="no_reversals")
     with pytest.warns(

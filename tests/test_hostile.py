@@ -253,6 +253,13 @@ def test_a_live_runs_staging_folder_is_never_removed(tmp_path: Path, monkeypatch
             ("leaves 2 residual window(s)", "at most 129", "search", "samples"),
         ),
         ("{horizon: 10, stride: 1000}", "", ("residual.horizon 10 (stride 1000)", "leaves 1 residual")),
+        # The lag fitted: 8 parameters, and its search of ±0.5 s leaves the first 13 records
+        # (25 Hz) out of its fit, which the check counts (it was refused later, in the lag's fit).
+        (
+            "{horizon: 135}\nalignment: {tracker_lag: auto, search: [-0.5, 0.5]}",
+            "{stop: 150}",
+            ("leaves 2 residual window(s)", "at most 129", "search", "samples"),
+        ),
     ],
 )
 def test_a_horizon_the_samples_cannot_hold_is_refused_before_the_build(
@@ -277,6 +284,21 @@ def test_the_horizon_check_counts_windows_as_the_residual_data_does(sim_log: Pat
     assert setup(129, "").fns.n_free == 8
     with pytest.raises(ScenarioError, match="at most 129"):
         setup(130, "")
+
+
+def test_the_horizon_check_counts_the_records_a_fitted_lag_leaves(sim_log: Path, tmp_path: Path) -> None:
+    # With the lag fitted the longest horizon the check allows builds (the lag's search on the
+    # records its reach leaves, the final fit on more); one more is refused before any fit.
+    def setup(horizon: int) -> Calibration:
+        text = (
+            f"dataset: {sim_log}\nresidual: {{horizon: {horizon}}}\nsamples: {{stop: 150}}\n"
+            "alignment: {tracker_lag: auto, search: [-0.5, 0.5]}\nsolvers: [gauss_newton]\n"
+        )
+        return Calibration.setup(load_scenario(scenario(tmp_path, text)))
+
+    assert setup(129).fns.n_free == 8
+    with pytest.raises(ScenarioError, match="at most 129"):
+        setup(130)
 
 
 def laughs(indent: str, levels: int = 9) -> str:

@@ -16,12 +16,13 @@ from nlp_calib.analysis.verdict import verdict
 from nlp_calib.core.errors import OptionsError
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.models import MODELS
+from nlp_calib.outputs.preflight import preflight_lines
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.pipeline.analyse import Wanted
 from nlp_calib.pipeline.preflight import preflight
 from nlp_calib.results.checks import NominalCheck
 from nlp_calib.results.layout import HELD, KNOWN
-from nlp_calib.results.preflight import NOT_DETERMINED, NOT_ENOUGH
+from nlp_calib.results.preflight import NOT_DETERMINED, NOT_ENOUGH, WEAK_DRIVE
 from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
 from nlp_calib.simulation.vehicles import (
     HighwayOptions,
@@ -210,6 +211,55 @@ def test_a_highway_car_given_what_it_cannot_determine_finds_its_wheel_scale_and_
     for name in ("k_steer", "wheelbase", "traction_track_width", "sensor_x", "sensor_y"):
         assert estimate[name] == truth[name]
         assert run.scenario.layout.param(name).status == KNOWN
+
+
+def test_the_run_past_the_preflight_says_not_determined_for_the_preflights_reason(tmp_path: Path) -> None:
+    """Past a pre-flight that refuses (--skip-preflight), a solver that wanders along the direction
+    the drive leaves free ends anywhere (k_steer -1.8e4, steer_offset -1.16 rad): the run said
+    "outside what a car_like can have: are the encoders right?"; it names what the pre-flight names."""
+    sc, _ = _car_scenario(tmp_path, seed=0)
+    sc = dataclasses.replace(sc, solvers=("gauss_newton", "ipopt"))
+    refused = set(preflight(sc).named(NOT_DETERMINED))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    said = " ".join(run.verdict.reasons)
+    print(run.verdict.line())
+    assert run.verdict.level == UNDETERMINED and run.handoff_solver() is None
+    assert "are the encoders" not in said and "not observable" in said
+    held = {n for n in refused if run.scenario.layout.param(n).status == HELD}
+    assert refused - held and all(n in said for n in refused - held), (refused, said)
+
+
+def test_the_preflight_states_the_sigma_the_run_will_state(tmp_path: Path) -> None:
+    """One σ per parameter before the fit and after it: the pre-flight's was the white residuals'
+    (steer_offset ±0.0032 rad where the run says ±0.00018: a pose tracker's noise telescopes
+    along the drive); it is the run's computation, within the sampling of its own windows."""
+    sc, _ = _car_scenario(tmp_path, 1, CAR_KNOWN)
+    before = {p.name: p.std for p in preflight(sc).parameters}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run(["gauss_newton"])
+    after = run.std("gauss_newton")
+    for name in ("steer_offset", "traction_wheels_radius", "sensor_theta"):
+        print(name, before[name], after[name])
+        assert 0.5 < before[name] / after[name] < 2.0, (name, before[name], after[name])
+
+
+def test_a_parameter_the_run_holds_is_a_caveat_before_the_fit_as_after(tmp_path: Path) -> None:
+    """The track no turn is tight enough to tell is held at its start by the run, a caveat of its
+    verdict (exit 0); the pre-flight called the drive NOT ENOUGH for it (exit 4) while the gate let
+    the run go on: both say it is held, neither refuses."""
+    sc, _ = _car_scenario(tmp_path, 1, ("k_steer", "wheelbase", "sensor_x", "sensor_y"))
+    report = preflight(sc)
+    assert report.named(NOT_DETERMINED) == ("traction_track_width",) and not report.stop_words()
+    assert report.verdict == WEAK_DRIVE and report.exit_code == 3
+    assert "traction_track_width held at its start" in "\n".join(preflight_lines(report))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run(["gauss_newton"])
+    assert run.verdict.level == CAVEATS and run.verdict.handoff
+    assert any("traction_track_width held at its initial value" in r for r in run.verdict.reasons)
 
 
 def test_a_cars_steering_offset_must_resolve_what_turns_its_heading_at_its_own_speed(tmp_path: Path) -> None:

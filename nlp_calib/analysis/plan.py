@@ -10,8 +10,12 @@ follow from them, and its windows are laid after the drive's last record on the 
 parameter's σ is read as the pre-flight reads it (:mod:`nlp_calib.analysis.determinacy`). The
 manoeuvres are ranked by the largest σ over its reference precision once appended, the lag
 included; the plan names the parameter that is worst now and what each manoeuvre does to it.
-A candidate the model cannot drive (no inputs reproduce it, e.g. a spot turn of a steered
-wheel that cannot reach 90°) is left out.
+A candidate the model cannot drive is never asked for: the model says what its base can drive
+(:meth:`~nlp_calib.models.base.KinematicModel.reach`: its tightest turn at its wheels' largest angle, the
+scenario's ``vehicle.max_steering_deg`` or the model's own; a spot turn only where it turns on the
+spot), the turns are driven at no more lateral acceleration than :data:`LATERAL_ACCEL`, backwards
+no faster than :data:`REVERSE_SPEED` unless the drive itself did, and a candidate no inputs
+reproduce is left out.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ import numpy as np
 
 from nlp_calib.analysis.determinacy import Information, information, standing
 from nlp_calib.core import poses
-from nlp_calib.models import KinematicModel
+from nlp_calib.models import KinematicModel, Reach
 from nlp_calib.problem import (
     ProblemFunctions,
     ProblemSpec,
@@ -50,6 +54,13 @@ MAX_TURN_STEP = 0.2
 SPOT_RATE = 0.5
 #: How much beyond the drive's own largest held angle input a manoeuvre may ask (a share of it).
 STEER_MARGIN = 0.05
+#: A turn is asked at no more lateral acceleration than this (m/s²): a car on a road's speed is
+#: not a circle's.
+LATERAL_ACCEL = 2.0
+#: A drive that never went backwards is asked to reverse no faster than this (m/s).
+REVERSE_SPEED = 1.0
+#: The tightest radius asked is this much wider than the model's tightest turn (not at full lock).
+LOCK_MARGIN = 1.2
 
 
 @dataclass(frozen=True)
@@ -64,49 +75,61 @@ class Candidate:
     segments: tuple[tuple[float, float, float], ...]
 
 
-def candidates(speed: float, radii: Sequence[float]) -> list[Candidate]:
-    """The manoeuvres considered, at ``speed`` and the turn ``radii``."""
+def candidates(
+    speed: float, radii: Sequence[float], reverse_speed: float = math.inf, spot_turns: bool = True
+) -> list[Candidate]:
+    """The manoeuvres considered, at ``speed`` (backwards at most ``reverse_speed``; a turn at most
+    :data:`LATERAL_ACCEL`) and the turn ``radii``; spot turns only with ``spot_turns``."""
     T, v = DURATION_S, speed
+    vr = min(v, reverse_speed)
     out = [
         Candidate("straight", 0.0, v, f"straight ahead at {v:.2g} m/s for {T:.0f} s", ((T, v, 0.0),)),
         Candidate(
             "reversals",
             0.0,
-            v,
-            f"straight forwards and back, twice, at {v:.2g} m/s ({T:.0f} s)",
-            tuple((T / 4, s * v, 0.0) for s in (1, -1, 1, -1)),
-        ),
-        Candidate(
-            "spot_turns",
-            0.0,
-            v,
-            f"turns on the spot, {T / 2:.0f} s each way at {SPOT_RATE:g} rad/s",
-            ((T / 2, 0.0, SPOT_RATE), (T / 2, 0.0, -SPOT_RATE)),
+            vr,
+            f"straight forwards and back, twice, at {vr:.2g} m/s ({T:.0f} s)",
+            tuple((T / 4, s * vr, 0.0) for s in (1, -1, 1, -1)),
         ),
     ]
-    for R in radii:
-        w = v / R
-        laps = T * v / (2 * np.pi * R)
-        at = f"{R:.2g} m radius at {v:.2g} m/s"
-        out += [
-            Candidate("circle_left", R, v, f"a circle to the left ({at}, {laps:.1f} laps)", ((T, v, w),)),
-            Candidate("circle_right", R, v, f"a circle to the right ({at}, {laps:.1f} laps)", ((T, v, -w),)),
+    if spot_turns:
+        out.append(
             Candidate(
-                "figure_eight", R, v, f"a figure eight ({at}, {T:.0f} s)", ((T / 2, v, w), (T / 2, v, -w))
-            ),
-            Candidate(
-                "s_curves",
-                R,
+                "spot_turns",
+                0.0,
                 v,
-                f"S-curves, quarter turns each way ({at}, {T:.0f} s)",
-                tuple((np.pi / 2 / w, v, s * w) for s in (1, -1) * max(1, round(T * w / np.pi))),
-            ),
-            Candidate(
-                "arcs_backwards", R, v, f"backwards round arcs each way ({at}, {T:.0f} s)",
-                ((T / 2, -v, -w), (T / 2, -v, w)),
-            ),
-        ]  # fmt: skip
+                f"turns on the spot, {T / 2:.0f} s each way at {SPOT_RATE:g} rad/s",
+                ((T / 2, 0.0, SPOT_RATE), (T / 2, 0.0, -SPOT_RATE)),
+            )
+        )
+    for R in radii:
+        out += _turns(R, min(v, math.sqrt(LATERAL_ACCEL * R)), vr)
     return out
+
+
+def _turns(R: float, v: float, reverse_speed: float) -> list[Candidate]:
+    """The turning candidates at radius ``R``, at ``v`` (backwards at most ``reverse_speed``)."""
+    T, w = DURATION_S, v / R
+    laps = T * v / (2 * np.pi * R)
+    at = f"{R:.2g} m radius at {v:.2g} m/s"
+    vb = min(v, reverse_speed)
+    return [
+        Candidate("circle_left", R, v, f"a circle to the left ({at}, {laps:.1f} laps)", ((T, v, w),)),
+        Candidate("circle_right", R, v, f"a circle to the right ({at}, {laps:.1f} laps)", ((T, v, -w),)),
+        Candidate("figure_eight", R, v, f"a figure eight ({at}, {T:.0f} s)", ((T / 2, v, w), (T / 2, v, -w))),
+        Candidate(
+            "s_curves",
+            R,
+            v,
+            f"S-curves, quarter turns each way ({at}, {T:.0f} s)",
+            tuple((np.pi / 2 / w, v, s * w) for s in (1, -1) * max(1, round(T * w / np.pi))),
+        ),
+        Candidate(
+            "arcs_backwards", R, vb,
+            f"backwards round arcs each way ({R:.2g} m radius at {vb:.2g} m/s, {T:.0f} s)",
+            ((T / 2, -vb, -vb / R), (T / 2, -vb, vb / R)),
+        ),
+    ]  # fmt: skip
 
 
 def _arc(v: float, w: float, dt: float) -> np.ndarray:
@@ -203,20 +226,25 @@ class Setting:
     delta: float
     units: Mapping[str, str]
     model_from: str
+    #: The steered wheel's largest angle the scenario gives (rad; None: the model's own).
+    steer_max: float | None = None
 
 
 @dataclass(frozen=True)
 class DriveFacts:
-    """What a manoeuvre takes from the drive it is appended to: its speed (m/s), the turn radii to
-    try (m), its record interval (s), its typical inputs per interval (where the inverse starts)
-    and how far the drive turned each held angle input (its largest magnitude, in the input's unit;
-    empty: the model steers with none): a plan never asks for more."""
+    """What a manoeuvre takes from the drive it is appended to and the base that drives it: its
+    speed (m/s), the turn radii to try (m), its record interval (s), its typical inputs per
+    interval (where the inverse starts), how far the drive turned each held angle input (its
+    largest magnitude, in the input's unit; empty: no bound but the joint's ±π): a plan never asks
+    for more; the fastest it may reverse (m/s) and whether the base turns on the spot."""
 
     speed: float
     radii: tuple[float, ...]
     dt: float
     typical: np.ndarray
     steered: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    reverse_speed: float = math.inf
+    spot_turns: bool = True
 
 
 #: The share of the drive's moving records that turn tighter than the tightest radius a plan asks
@@ -246,10 +274,15 @@ def tightest_radius(T_world_sensor: np.ndarray, dt: float) -> float:
     return float(np.quantile(ds[turning] / dth[turning], TIGHTEST_SHARE))
 
 
-def drive_facts(data: ResidualData, levels: Sequence[int] = ()) -> DriveFacts:
-    """The facts of the drive whose windows are ``data`` (its last log's); ``levels``: the rows of
-    the inputs the model reads as angles it holds (not increments)."""
+def drive_facts(
+    data: ResidualData, model: KinematicModel | None = None, reach: Reach | None = None, asked: bool = False
+) -> DriveFacts:
+    """The facts of the drive whose windows are ``data`` (its last log's), driven by ``model``
+    (None: one with no held angle inputs) that can drive ``reach`` (None: anything); ``asked``:
+    the reach's largest wheel angle is the scenario's, and no turn the drive took bounds the plan's."""
     log = data.logs[-1]
+    reach = Reach(0.0) if reach is None else reach
+    held = levels(model) if model is not None else []
     t = log.time_s
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.04
     xy = log.T_world_sensor[:, :2]
@@ -257,19 +290,24 @@ def drive_facts(data: ResidualData, levels: Sequence[int] = ()) -> DriveFacts:
     v = np.hypot(*np.diff(xy[::step], axis=0).T) / (step * dt)
     # The drive's own speed, however fast: a car on a road is driven at its speed, not a robot's.
     speed = float(max(np.median(v[v > 0.01]) if np.any(v > 0.01) else 0.3, 0.05))
-    R0 = max(speed / 0.5, 0.3)
-    tightest = tightest_radius(log.T_world_sensor, dt) if levels else math.inf
-    if math.isfinite(tightest):
-        R0 = max(R0, tightest)  # a steered robot turns no tighter than the drive turned it
+    tightest = tightest_radius(log.T_world_sensor, dt) if held and not asked else math.inf
+    # The model's tightest turn, off full lock; a steered robot turns no tighter than the drive
+    # turned it unless the scenario says how far it steers.
+    floor = max(LOCK_MARGIN * reach.min_radius_m, tightest if math.isfinite(tightest) else 0.0)
+    R0 = max(speed / 0.5, 0.3, floor)
     moving = np.abs(data.inputs).max(axis=0) > 0
     typical = (
         np.median(np.abs(data.inputs[:, moving]), axis=1) if moving.any() else np.ones(data.inputs.shape[0])
     )
     # A drive that never turned says nothing of how far the robot can steer: then only the joint's
-    # own ±π bounds a manoeuvre.
-    turned = levels and data.inputs.size and math.isfinite(tightest)
-    steered = np.abs(data.inputs[list(levels)]).max(axis=1) if turned else np.zeros(0)
-    return DriveFacts(speed, (R0, 2 * R0, 4 * R0), dt, np.where(np.isfinite(typical), typical, 1.0), steered)
+    # own ±π bounds a manoeuvre (and the reach the radii).
+    turned = held and data.inputs.size and math.isfinite(tightest)
+    steered = np.abs(data.inputs[held]).max(axis=1) if turned else np.zeros(0)
+    backwards = model is None or bool(np.any(model.travel_direction(data.inputs) < 0))
+    return DriveFacts(
+        speed, (R0, 2 * R0, 4 * R0), dt, np.where(np.isfinite(typical), typical, 1.0), steered,
+        math.inf if backwards else REVERSE_SPEED, reach.spot_turns,
+    )  # fmt: skip
 
 
 def candidate_of(m: Manoeuvre) -> Candidate:
@@ -310,11 +348,15 @@ def plan(s: Setting, free_only: bool = False) -> Plan | None:
     ratio = np.where(np.isfinite(before.std_reference), before.std_reference, np.inf)
     if not np.any(ratio > WEAK) or (free_only and not before.undetermined.any()):
         return None
-    target = int(np.argmax(ratio))
     params = np.asarray(fns.assemble(x, x_fixed)).ravel()
-    facts = drive_facts(s.data, levels(fns.model))
-    ranked = []
-    for c in candidates(facts.speed, facts.radii):
+    # What the robot can drive, from a robot the model can be (a fit that wandered along a free
+    # direction to a wheelbase of kilometres would ask for circles of hundreds).
+    ranges = fns.model.physical_ranges
+    plausible = {n: float(np.clip(v, *ranges.get(n, (-np.inf, np.inf)))) for n, v in zip(fns.names, params)}
+    reach = fns.model.reach(plausible, s.steer_max)
+    facts = drive_facts(s.data, fns.model, reach, asked=s.steer_max is not None)
+    tried = []
+    for c in candidates(facts.speed, facts.radii, facts.reverse_speed, facts.spot_turns):
         made = simulated(fns, s.data, params, c, facts, s.options)
         if made is None:
             continue
@@ -323,14 +365,19 @@ def plan(s: Setting, free_only: bool = False) -> Plan | None:
         if new.n_residuals == 0:
             continue
         info = s.info.plus(information(fns, new, x, x_fixed, omega, s.delta, WORK))
-        after = standing(fns, info, s.sigma2, values, s.bounds_std)
         duration = float(extra.n_records - s.data.n_records - 1) * facts.dt
-        ranked.append(
-            Manoeuvre(
-                c.kind, c.radius_m, c.speed_mps, duration, c.words, _thinned(path),
-                float(np.max(after.std_reference)), float(after.std[target]),
-            )
-        )  # fmt: skip
+        tried.append((c, path, duration, standing(fns, info, s.sigma2, values, s.bounds_std)))
+    # The worst parameter now; of several equally bad (unbounded), the one a manoeuvre helps most.
+    worst = np.flatnonzero(ratio == np.max(ratio))
+    helped = [min((float(t[3].std_reference[j]) for t in tried), default=math.inf) for j in worst]
+    target = int(worst[int(np.argmin(helped))])
+    ranked = [
+        Manoeuvre(
+            c.kind, c.radius_m, c.speed_mps, duration, c.words, _thinned(path),
+            float(np.max(after.std_reference)), float(after.std[target]),
+        )
+        for c, path, duration, after in tried
+    ]  # fmt: skip
     ranked.sort(key=lambda m: (m.worst_after, m.target_std_after))
     name = fns.free[target]
     unit = s.units.get(name, "")

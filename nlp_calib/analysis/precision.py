@@ -28,6 +28,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from nlp_calib.analysis.metrics import steps
+from nlp_calib.logs import Log
 from nlp_calib.problem import ProblemFunctions
 from nlp_calib.results.layout import CLOCK, FREE, Layout
 
@@ -100,6 +101,24 @@ def _fast(rates: np.ndarray) -> float:
     """The :data:`FAST_QUANTILE` of the ``rates`` of the intervals that move (0 without any)."""
     moving = rates[rates > 0]
     return float(np.quantile(moving, FAST_QUANTILE)) if moving.size else 0.0
+
+
+def log_precision(
+    layout: Layout,
+    fns: ProblemFunctions,
+    view: np.ndarray,
+    inputs: np.ndarray,
+    drive_s: np.ndarray,
+    log: Log,
+    index: int,
+) -> Layout:
+    """``layout`` with what log ``index`` needs: its drive's (:func:`drive_precision`, ``inputs`` at
+    the times ``drive_s``) and its clock offset's from the sensor's own track on ``log``
+    (:func:`lag_precision`). One rule for the pre-flight and the run."""
+    duration = float(drive_s[-1] - drive_s[0]) if drive_s.size else 0.0
+    layout = drive_precision(layout, fns, view, inputs, duration)
+    track = fns.sensor.floor_track(log)
+    return lag_precision(layout, track, log.time_s, index, fns.sensor.length_unit == "m")
 
 
 def tightest(layout: Layout, logs: Sequence[Layout]) -> Layout:

@@ -6,7 +6,8 @@ The rules a reader can check:
   kind although it fits the data: a mirror image (e.g. swapped wheel encoders, one wheel counting
   backwards; the model says), a 3-D sensor's mount upside down that no given mount asked for (what
   reversed or swapped joints give a camera), or a parameter outside what the model can have by
-  more than :data:`RANGE_SIGMAS` σ (a wheel's radius of millimetres: joints logged in degrees);
+  more than :data:`RANGE_SIGMAS` σ (a wheel's radius of millimetres: joints logged in degrees)
+  where the drive leaves no direction free (else a solver stops anywhere along it: the next rule);
 - **not determined**: no solver converged, or the drive leaves a parameter undetermined (its σ
   is infinite, or a direction of the information matrix is beyond
   :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` reference units);
@@ -44,7 +45,6 @@ from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.checks import (
     CAVEAT,
     NOT_OBSERVABLE,
-    SIGNIFICANT,
     WEAK,
     ConsistencyCheck,
     LagEstimate,
@@ -103,8 +103,8 @@ def concerns(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[st
                 out.setdefault(n, f"{solver} and {other} disagree on it")
     direction = run.checks.direction
     if direction is not None and direction.significant:
-        for n, z in zip(direction.names, direction.z):
-            if np.isfinite(z) and abs(z) > SIGNIFICANT:
+        for n, z, flagged in zip(direction.names, direction.z, direction.flagged):
+            if flagged:
                 out.setdefault(n, f"forward and reverse driving disagree on it by {abs(z):.1f}σ")
     check = _consistency(run)
     if check is not None and not check.significant:
@@ -239,6 +239,10 @@ def implausible(run: CalibrationRun, solver: str, model: KinematicModel) -> str:
     # A held or given value is no estimate of the data's: the encoders are not what put it there.
     layout = run.scenario.layout
     given = {*layout.status(HELD), *layout.status(KNOWN)}
+    # A drive that leaves a direction free lets a solver stop anywhere along it, and the values that
+    # move with it anywhere too: not determined, as the pre-flight says, not wrong encoders.
+    if _unobservable(run):
+        return ""
     for name in model.kinematic_params:
         lo, hi = model.physical_ranges.get(name, (-np.inf, np.inf))
         if name not in params or name in given or lo <= params[name] <= hi:
@@ -255,6 +259,14 @@ def implausible(run: CalibrationRun, solver: str, model: KinematicModel) -> str:
             "scenario names the right ones, in the units it says?"
         )
     return ""
+
+
+def _unobservable(run: CalibrationRun) -> set[str]:
+    """The parameters in a direction the drive leaves free (beyond
+    :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` reference units, or unbounded)."""
+    obs = run.checks.observability
+    weak = obs.weak if obs is not None else ()
+    return {n for w in weak if not w.std_reference <= NOT_OBSERVABLE for n in w.components}
 
 
 def _unusable(run: CalibrationRun) -> list[str]:

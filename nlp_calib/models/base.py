@@ -10,6 +10,7 @@ one line in :mod:`nlp_calib.models`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
@@ -42,6 +43,37 @@ SENSOR_REFERENCE: Mapping[str, Reference] = {
     "sensor_y": ("absolute", 0.01),
     "sensor_theta": ("absolute", 0.005),
 }
+
+
+#: A car's steered wheels' largest angle when the scenario gives none (rad): road cars and car-like
+#: robots steer their road wheels about 30–40°.
+CAR_STEER_MAX = math.radians(35.0)
+#: A steered wheel that drives the base (a tricycle's): it turns a quarter turn, about the rear axle.
+QUARTER_TURN = 0.5 * math.pi
+
+
+@dataclass(frozen=True)
+class Reach:
+    """What a base can drive, so that a plan asks for nothing else: its base link's tightest turn
+    radius (m; 0: it turns on the spot) and the steered wheel's largest angle that gives it (rad;
+    None: no wheel steers)."""
+
+    min_radius_m: float
+    steer_max_rad: float | None = None
+
+    @property
+    def spot_turns(self) -> bool:
+        return self.min_radius_m == 0.0
+
+
+def steered_reach(length: float, steer_max: float, beside: float = 0.0) -> Reach:
+    """The reach of a base whose steered wheel, ``length`` ahead of the base link, turns at most
+    ``steer_max`` (rad): radius ``length / tan(steer_max)`` (plus ``beside``, an inner wheel's
+    distance from the midline); a wheel that turns a quarter turn turns the base on the spot."""
+    steer = min(abs(steer_max), QUARTER_TURN)
+    if steer >= QUARTER_TURN - 1e-9:
+        return Reach(0.0, steer)
+    return Reach(abs(length) / math.tan(steer) + abs(beside), steer)
 
 
 @dataclass(frozen=True)
@@ -126,6 +158,14 @@ class KinematicModel(Protocol):
     def symmetries(self) -> tuple[Symmetry, ...]: ...
     @property
     def angle_params(self) -> tuple[str, ...]: ...
+    #: The steered wheel's largest angle when the scenario gives none (rad; None: no wheel steers).
+    @property
+    def steer_max(self) -> float | None: ...
+
+    def reach(self, params: Mapping[str, float], steer_max: float | None = None) -> Reach:
+        """What the base with ``params`` can drive (its tightest turn, whether it turns on the spot),
+        its steered wheel turned at most ``steer_max`` (rad; None: :attr:`steer_max`)."""
+        ...
 
     @property
     def drive(self) -> Drive:

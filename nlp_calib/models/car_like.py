@@ -28,14 +28,17 @@ from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.base import (
+    CAR_STEER_MAX,
     QUANTISATION,
     SENSOR_TURNED,
     STEERING_SAMPLES,
+    Reach,
     Reference,
     Symmetry,
     named,
     rows_by_name,
     sampled_angle,
+    steered_reach,
 )
 from nlp_calib.models.controllers import ControllerMap, EncoderScales, steering_places, wheel_radius
 from nlp_calib.models.drives import Pose, SimulationSettings, counter, drive_header, first_order, running
@@ -256,6 +259,7 @@ class CarLike:
         ),
     )
     angle_params: ClassVar[tuple[str, ...]] = ("steer_offset", "sensor_theta")
+    steer_max: ClassVar[float | None] = CAR_STEER_MAX
     drive: ClassVar[CarLikeDrive] = CarLikeDrive()
     physical_ranges: ClassVar[Mapping[str, tuple[float, float]]] = MappingProxyType(
         {
@@ -272,6 +276,11 @@ class CarLike:
     #: The controller this base's joints go to, and the name the newest release gives its radius.
     controller_name: ClassVar[str] = "tricycle_steering_controller"
     radius_name: ClassVar[str] = "traction_wheels_radius"
+
+    def reach(self, params: Mapping[str, float], steer_max: float | None = None) -> Reach:
+        """The rear-axle midpoint's tightest turn, ``wheelbase / tan φ_max``: a car never turns on
+        the spot."""
+        return steered_reach(params["wheelbase"], CAR_STEER_MAX if steer_max is None else steer_max)
 
     # --- the symbolic increment ----------------------------------------------------------------
 

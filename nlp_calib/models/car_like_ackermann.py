@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.logs import EncoderKind
-from nlp_calib.models.base import SENSOR_TURNED, Symmetry, named
+from nlp_calib.models.base import CAR_STEER_MAX, SENSOR_TURNED, Reach, Symmetry, named, steered_reach
 from nlp_calib.models.car_like import LEFT_ENCODER, RIGHT_ENCODER, CarLike, CarLikeDrive
 from nlp_calib.models.drives import SimulationSettings, counter
 from nlp_calib.models.radians import WHEEL_RADIUS, InRadians, RadiansForm, Renamed
@@ -135,6 +135,12 @@ class CarLikeAckermann(CarLike):
         {**CarLike.physical_ranges, "steering_track": (0.0, 5.0)}
     )
     controller_name: ClassVar[str] = "ackermann_steering_controller"
+
+    def reach(self, params: Mapping[str, float], steer_max: float | None = None) -> Reach:
+        """The inner front wheel reaches its limit first: the rear-axle midpoint then turns on
+        ``wheelbase / tan φ_max`` plus half the steering track."""
+        limit = CAR_STEER_MAX if steer_max is None else steer_max
+        return steered_reach(params["wheelbase"], limit, 0.5 * params["steering_track"])
 
     def steering_angle(self, k: ca.SX, u: ca.SX) -> ca.SX:
         """The mean of each front wheel's bicycle-equivalent angle."""

@@ -17,7 +17,7 @@ import numpy as np
 from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
-from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, Reference, Symmetry, named, rows_by_name
+from nlp_calib.models.base import QUANTISATION, SENSOR_TURNED, Reach, Reference, Symmetry, named, rows_by_name
 from nlp_calib.models.controllers import ControllerMap, EncoderScales, wheel_radius
 from nlp_calib.models.drives import (
     Pose,
@@ -200,6 +200,7 @@ class DiffDrive:
         ),
     )
     angle_params: ClassVar[tuple[str, ...]] = ("sensor_theta",)
+    steer_max: ClassVar[float | None] = None
     drive: ClassVar[DiffDriveDrive] = DiffDriveDrive()
     physical_ranges: ClassVar[Mapping[str, tuple[float, float]]] = MappingProxyType(
         {
@@ -211,6 +212,10 @@ class DiffDrive:
             "sensor_theta": (-np.pi, np.pi),
         }
     )
+
+    def reach(self, params: Mapping[str, float], steer_max: float | None = None) -> Reach:
+        """Wheels on a common axis, none steered: the base turns on the spot (a skid-steer too)."""
+        return Reach(0.0)
 
     def increment(self, k: ca.SX, u: ca.SX, integration: str) -> ca.SX:
         """Travel ``(d_r + d_l)/2`` turning by ``(d_r − d_l)/baseline``; exact arc or Euler."""

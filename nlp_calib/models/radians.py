@@ -30,6 +30,7 @@ from nlp_calib.models.base import (
     STEERING_SAMPLES,
     KinematicModel,
     OdometryInverse,
+    Reach,
     Reference,
     Symmetry,
     record_rates,
@@ -205,6 +206,13 @@ class InRadians:
     @property
     def angle_params(self) -> tuple[str, ...]:
         return tuple(self.rename(n) for n in self.model.angle_params)
+
+    @property
+    def steer_max(self) -> float | None:
+        return self.model.steer_max
+
+    def reach(self, params: Mapping[str, float], steer_max: float | None = None) -> Reach:
+        return self.model.reach(self.to_counts(params), steer_max)
 
     @property
     def drive(self) -> Drive:

@@ -21,13 +21,16 @@ from nlp_calib.core.numeric import wrap_angle, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.base import (
     QUANTISATION,
+    QUARTER_TURN,
     SENSOR_TURNED,
     STEERING_SAMPLES,
+    Reach,
     Reference,
     Symmetry,
     named,
     rows_by_name,
     sampled_angle,
+    steered_reach,
 )
 from nlp_calib.models.controllers import ControllerMap, EncoderScales, steering_places, wheel_radius
 from nlp_calib.models.drives import (
@@ -211,6 +214,9 @@ class Tricycle:
         ),
     )
     angle_params: ClassVar[tuple[str, ...]] = ("steer_offset", "sensor_theta")
+    #: The steered wheel drives the base: it turns it on the spot at a quarter turn (industrial
+    #: tricycles steer ±90° and more).
+    steer_max: ClassVar[float | None] = QUARTER_TURN
     drive: ClassVar[TricycleDrive] = TricycleDrive()
     physical_ranges: ClassVar[Mapping[str, tuple[float, float]]] = MappingProxyType(
         {
@@ -223,6 +229,10 @@ class Tricycle:
             "sensor_theta": (-np.pi, np.pi),
         }
     )
+
+    def reach(self, params: Mapping[str, float], steer_max: float | None = None) -> Reach:
+        """The rear-axle midpoint's tightest turn, ``axis_length / tan φ_max`` (0 at a quarter turn)."""
+        return steered_reach(params["axis_length"], QUARTER_TURN if steer_max is None else steer_max)
 
     def steering_angle(self, k: ca.SX, u: ca.SX) -> ca.SX:
         """``φ = k_steer·angle + steer_offset``."""

@@ -24,6 +24,7 @@ from nlp_calib.outputs.results import result_document
 from nlp_calib.results import CalibrationRun, Encoder, codec
 from nlp_calib.results.layout import LAYOUT_VERSION
 from nlp_calib.results.mount import LogMount, SensorMount
+from nlp_calib.results.run import GIVEN, LIVE
 
 CALIBRATION_FILE = "calibration.yaml"
 URDF_FILE = "sensor_mount.urdf.xml"
@@ -31,13 +32,13 @@ ROBOT_URDF_FILE = "robot.urdf"
 PARENT_FRAME = "base_link"
 
 
-def _solver_entry(res: Mapping[str, Any]) -> dict[str, Any]:
+def _solver_entry(run: CalibrationRun, solver: str, res: Mapping[str, Any]) -> dict[str, Any]:
     keys = ("converged", "reason", "cost", "chi2", "inliers", "residuals", "iterations")
     return {
         **{k: res[k] for k in keys},
         "parameters": res["params"],
-        "std": res["std"],
-        "std_white_noise": res["std_white_noise"],
+        "std": _sigmas(run, solver, res["std"]),
+        "std_white_noise": _sigmas(run, solver, res["std_white_noise"]),
         "correlation": res["correlation"],
     }
 
@@ -76,11 +77,13 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         # A mount per log: each log's own, one URDF joint each (the block above is the first's).
         **_per_log_mounts(run, solver),
         "parameters": best["params"],
-        # What the fit held rather than estimated (a value given, not calibrated: its std is no σ).
+        # What the fit held rather than estimated (a value given, not calibrated: no σ, std null).
         **_held_entry(run, solver),
-        "std": best["std"],
-        "std_white_noise": best["std_white_noise"],
-        "std_blocks": (doc["crossvalidation"] or {}).get("std_blocks"),
+        # What it estimated but did not determine well enough to use, with why: not calibrated.
+        **({"not_determined": run.doubts(solver)} if run.doubts(solver) else {}),
+        "std": _sigmas(run, solver, best["std"]),
+        "std_white_noise": _sigmas(run, solver, best["std_white_noise"]),
+        "std_blocks": _sigmas(run, solver, (doc["crossvalidation"] or {}).get("std_blocks")),
         # The jackknife σ's folds (its degrees of freedom + 1) and the formulation fitted: what
         # `nlp-calib check` needs to judge this calibration on a new log.
         "std_blocks_folds": len(run.checks.crossval.converged) if run.checks.crossval is not None else 0,
@@ -91,8 +94,18 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         # counts per turn (for its radius) only where the user gave them.
         "encoders": [_encoder(e) for e in run.log.encoders],
         "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
-        "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
+        "solvers": {name: _solver_entry(run, name, res) for name, res in doc["solvers"].items()},
     }
+
+
+def _sigmas(run: CalibrationRun, solver: str, std: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    """``std`` with no σ (null) for each parameter the fit held rather than estimated (given,
+    or held at its guess): a 0 there would read as a value known exactly."""
+    if std is None:
+        return None
+    held = run.reports[solver].held
+    status = run.handoff_status(solver)
+    return {n: None if n in held or status.get(n, (LIVE,))[0] == GIVEN else v for n, v in std.items()}
 
 
 def _sensor_entry(run: CalibrationRun) -> dict[str, Any]:
@@ -140,6 +153,8 @@ def _mount_entry(mount: SensorMount) -> dict[str, Any]:
         "std": {c: mount.std[c] for c in mount.calibrated},
         "calibrated": list(mount.calibrated),
         "nominal": dict(mount.nominal),
+        # Estimated, not determined well enough to use: no URDF file is written with them.
+        **({"undetermined": dict(mount.undetermined)} if mount.undetermined else {}),
     }
 
 
@@ -227,6 +242,17 @@ def handoff_mount(run: CalibrationRun) -> tuple[str, SensorMount] | None:
     return None if solver is None or mount is None else (solver, mount)
 
 
+def urdf_mount(run: CalibrationRun) -> tuple[str, SensorMount] | None:
+    """:func:`handoff_mount` when a URDF can state it: None also when a component of the mount
+    (any log's) is not determined well enough to use. A robot loads every number of a joint, and
+    a URDF cannot comment one out: the file is left out, ``calibration.yaml`` says why."""
+    found = handoff_mount(run)
+    if found is None:
+        return None
+    every = [found[1], *(m.mount for m in run.reports[found[0]].mounts)]
+    return None if any(m.undetermined for m in every) else found
+
+
 def urdf_joint(
     run: CalibrationRun, solver: str, mount: SensorMount | None = None, users: bool = False
 ) -> str:
@@ -302,7 +328,7 @@ def write_calibration(run: CalibrationRun, folder: Path, name: str) -> list[Path
 
 def write_joint(run: CalibrationRun, folder: Path, name: str, users: bool = False) -> list[Path]:
     """The URDF joint alone, when an estimate is handed off (``users``: the user's own joint)."""
-    found = handoff_mount(run)
+    found = urdf_mount(run)
     if found is None:
         return _none(folder / name)
     atomic_write_text(folder / name, urdf_joint(run, *found, users=users))
@@ -314,7 +340,7 @@ def write_users_robot(
 ) -> list[Path]:
     """The user's own robot description with ``link``'s joint re-posed, when an estimate is handed
     off (``run``'s mount placed in that description: :func:`nlp_calib.outputs.urdf.placed`)."""
-    found = handoff_mount(run)
+    found = urdf_mount(run)
     if found is None:
         return _none(folder / name)
     atomic_write_bytes(folder / name, urdf.reposed(description, link, found[1]))
@@ -323,7 +349,7 @@ def write_users_robot(
 
 def write_robot(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
     """A complete robot description with the calibrated joint, when an estimate is handed off."""
-    found = handoff_mount(run)
+    found = urdf_mount(run)
     if found is None:
         return _none(folder / name)
     atomic_write_text(folder / name, urdf_robot(run, *found))

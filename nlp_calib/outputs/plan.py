@@ -21,14 +21,17 @@ def _sigma(value: float) -> str:
 def plan_text(plan: Plan, name: str) -> str:
     """The plan as Markdown."""
     unit = f" {plan.target_unit}" if plan.target_unit not in ("", "1") else ""
+    before = plan.target_std_before
     lines = [
         f"# What to drive next: {name}",
         "",
         f"On this drive, **{plan.target}** is the parameter known least well relative to the precision a "
-        f"useful calibration needs: σ {_sigma(plan.target_std_before)}{unit}, "
-        f"{_sigma(plan.worst_before)} times that precision. Each manoeuvre below, about half a minute at "
-        f"the drive's own speed, was simulated with {plan.model_from} and appended to the drive; they are "
-        "ranked by the largest σ over its needed precision (the tracker lag included) once appended.",
+        f"useful calibration needs: σ {_sigma(before)}{unit if math.isfinite(before) else ''} (the run's "
+        f"1σ, as its summary states it), {_sigma(plan.worst_before)} times that precision. Each manoeuvre "
+        f"below, about half a minute at the drive's own speed and within what the robot can steer, was "
+        f"simulated with {plan.model_from} and appended to the drive; they are ranked by the largest σ "
+        "over its needed precision (the tracker lag included) once appended, each σ the plan's white-noise "
+        "σ scaled as the run's σ is to it on the drive as it is.",
         "",
         f"| rank | manoeuvre | largest σ / needed | σ of {plan.target}{unit} |",
         "|---|---|---|---|",

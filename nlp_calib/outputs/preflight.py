@@ -59,10 +59,19 @@ def _drive(ex: Excitation) -> list[str]:
 
 VERDICT_WORDS = {
     ENOUGH: "ENOUGH: the drive determines every parameter",
-    WEAK_DRIVE: "WEAK: {names} determined only weakly (see above)",
+    WEAK_DRIVE: "WEAK: {names} (see above)",
     NOT_ENOUGH: "NOT ENOUGH: the drive cannot determine {names}",
     CHECK_DATA: "CHECK THE DATA: {units}",
 }
+
+
+def _weak_words(report: Preflight) -> str:
+    """What leaves the drive weak: parameters determined only weakly, and those the run holds."""
+    weak, held = report.named(WEAKLY), report.named(NOT_DETERMINED)
+    return "; ".join(
+        [*([f"{', '.join(weak)} determined only weakly"] if weak else []),
+         *([f"{', '.join(held)} held at its start, as the run will hold it"] if held else [])]
+    )  # fmt: skip
 
 
 def preflight_lines(report: Preflight) -> list[str]:
@@ -82,7 +91,7 @@ def preflight_lines(report: Preflight) -> list[str]:
     lines += [f"  {u.words}" for u in report.units]
     lines.append(f"parameters (the Jacobian at {report.start}; noise: {report.noise}):")
     lines += [f"  {p.words()}" for p in report.parameters]
-    missing = ", ".join(report.named(NOT_DETERMINED)) or ", ".join(report.named(WEAKLY))
+    missing = ", ".join(p.name for p in report.missing()) or _weak_words(report)
     units = "; ".join(u.words for u in report.units if u.blocking)
     lines.append("verdict: " + VERDICT_WORDS[report.verdict].format(names=missing, units=units))
     if report.way_out:

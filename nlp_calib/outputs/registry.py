@@ -118,6 +118,8 @@ def _controller(run: CalibrationRun, folder: Path, name: str, options: OutputOpt
 
 def _report(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
     files = names(("handoff",)) if run.handoff_solver() is not None else []
+    if handoff.urdf_mount(run) is None:  # a mount not determined: no URDF file is written
+        files = [f for f in files if f not in (handoff.URDF_FILE, handoff.ROBOT_URDF_FILE)]
     return markdown.write_report(run, folder, name, files, next_steps(files))
 
 

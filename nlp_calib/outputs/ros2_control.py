@@ -121,15 +121,15 @@ def _header(
     ]
 
 
-def _doubts(run: CalibrationRun, params: ControllerParams, name: str) -> list[str]:
-    """The verdict's caveats on the parameters a controller value rests on."""
-    concerns = run.verdict.concerns
-    return list(dict.fromkeys(concerns[n] for n in params.rests_on.get(name, ()) if n in concerns))
+def _doubts(doubts: Mapping[str, str], params: ControllerParams, name: str) -> list[str]:
+    """Why the parameters a controller value rests on are not determined well enough to use
+    (``doubts``: :meth:`CalibrationRun.doubts`)."""
+    return list(dict.fromkeys(doubts[n] for n in params.rests_on.get(name, ()) if n in doubts))
 
 
-def _value_lines(run: CalibrationRun, params: ControllerParams, distro: str) -> list[str]:
+def _value_lines(run: CalibrationRun, solver: str, params: ControllerParams, distro: str) -> list[str]:
     """One line per value (live, or commented out with why on the line above)."""
-    lines = []
+    lines, doubted = [], run.doubts(solver)
     for name, value in params.parameters.items():
         key = release_name(distro, params.controller, name)
         if name in params.settings:
@@ -139,7 +139,7 @@ def _value_lines(run: CalibrationRun, params: ControllerParams, distro: str) -> 
                 _comment(f"    # {key} is yours, not calibrated: {params.given[name]}"),
                 f"    {key}: {value!r}",
             ]
-        elif doubts := _doubts(run, params, name):
+        elif doubts := _doubts(doubted, params, name):
             lines += [
                 _comment(
                     f"    # {key}: not determined well enough to use ({'; '.join(doubts)}); keep yours:"
@@ -151,16 +151,28 @@ def _value_lines(run: CalibrationRun, params: ControllerParams, distro: str) -> 
     return lines
 
 
-def _elsewhere_lines(run: CalibrationRun, params: ControllerParams) -> list[str]:
+def _elsewhere_lines(run: CalibrationRun, solver: str, params: ControllerParams) -> list[str]:
     """The values with no place among the controller's parameters, and where each belongs."""
-    lines = []
+    lines, doubted = [], run.doubts(solver)
     for p in params.elsewhere:
         unit = "" if p.unit in ("", "1") else f" {p.unit}"
         sd = "given, not calibrated" if p.std != p.std else f"± {p.std:.2g}"
-        doubt = run.verdict.concerns.get(p.name)
+        doubt = doubted.get(p.name)
         flag = f" [not determined well enough to use: {doubt}]" if doubt else ""
         lines.append(_comment(f"#   {p.name} = {p.value!r}{unit} {sd}{flag}: {p.where}"))
     return ["", f"# Calibrated, but not parameters of {params.controller}:", *lines] if lines else []
+
+
+def _mount_line(run: CalibrationRun, solver: str) -> str:
+    """Where the sensor's mount is: the URDF files, unless a component is not determined."""
+    mount = run.reports[solver].mount
+    doubted = mount.undetermined if mount is not None else {}
+    if not doubted:
+        return "# The sensor's mount: robot.urdf (or sensor_mount.urdf.xml) beside this file."
+    return _comment(
+        f"# The sensor's mount: no URDF file, {', '.join(doubted)} not determined well enough to use "
+        "(calibration.yaml's mount: undetermined); keep yours."
+    )
 
 
 def ros2_control_yaml(
@@ -170,7 +182,7 @@ def ros2_control_yaml(
     ``name`` (None: its type, with a first line saying to rename it)."""
     controller = params.controller
     lines = [*_header(run, solver, params, distro, name), f"{name or controller}:", "  ros__parameters:"]
-    lines += _value_lines(run, params, distro)
+    lines += _value_lines(run, solver, params, distro)
     noise, omitted = params.noise, dict(params.omitted)
     covariances, left_out = _covariance_lines(noise)
     lines += covariances
@@ -179,8 +191,8 @@ def ros2_control_yaml(
     if omitted:
         lines += ["", "# Left out (your own file's values stay):"]
         lines += [_comment(f"#   {release_name(distro, controller, n)}: {why}") for n, why in omitted.items()]
-    lines += _elsewhere_lines(run, params)
-    lines.append("# The sensor's mount: robot.urdf (or sensor_mount.urdf.xml) beside this file.")
+    lines += _elsewhere_lines(run, solver, params)
+    lines.append(_mount_line(run, solver))
     return "\n".join(lines) + "\n"
 
 

@@ -306,7 +306,8 @@ def placed(d: Description, link: str, mount: SensorMount) -> SensorMount:
     xyz = tuple(float(v) for v in T_joint[:3, 3])
     rpy = tuple(float(v) for v in _rpy(T_joint[:3, :3]))
     origin = ((xyz[0], xyz[1], xyz[2]), (rpy[0], rpy[1], rpy[2]))
-    kept_from = dict.fromkeys(mount.nominal, f"kept from {d.path.name} (--urdf)")
+    # What the fit did not determine well enough stays the user's too: "keep yours".
+    kept_from = dict.fromkeys((*mount.nominal, *mount.undetermined), f"kept from {d.path.name} (--urdf)")
     return mount.under(joint.parent, joint.name, joint.child, origin, pose, kept_from)
 
 

@@ -54,6 +54,7 @@ from nlp_calib.results.checks import (
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import OdometryNoise
+from nlp_calib.results.layout import Layout
 from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import (
     FaultSpan,
@@ -176,12 +177,13 @@ def scores(scorer: Scorer, windows: LogWindows, param_sets: Sequence[np.ndarray]
 
 
 def analyse_fit(
-    fit: Fit, results: Mapping[str, SolverResult], noise: np.ndarray, blocks: Scorer
+    fit: Fit, results: Mapping[str, SolverResult], noise: np.ndarray, blocks: Scorer, layout: Layout
 ) -> FitAnalysis:
     """Uncertainty of each result; observability at the first estimate with a finite cost (a solver
     may not have started); cross-validation, the direction check and the comparisons with the start
     and the nominal robot from the first converged one, with each held-out block scored by
-    ``blocks``."""
+    ``blocks``; ``layout``: the precision each parameter needs on the drive (the direction check's
+    floor)."""
     ev, data = fit.evaluator, fit.data
     big = data.n_residuals >= RELEASE_FROM
     if big:
@@ -203,7 +205,7 @@ def analyse_fit(
     k = fit.problem.binder.scenario.validation.blocks
     crossval = direction = None
     if k:
-        crossval, direction = _refits(fit, converged[0], blocks, k, [v for _, v in against.values()])
+        crossval, direction = _refits(fit, converged[0], blocks, k, [v for _, v in against.values()], layout)
     costs = comparisons(fit, x, against, crossval.converged if crossval is not None else ())
     nominal = against.get("nominal")
     return FitAnalysis(
@@ -269,10 +271,15 @@ def _against(fit: Fit, x: np.ndarray) -> dict[str, tuple[str, np.ndarray]]:
 
 
 def _refits(
-    fit: Fit, result: SolverResult, blocks: Scorer, k: int, against: Sequence[np.ndarray]
+    fit: Fit,
+    result: SolverResult,
+    blocks: Scorer,
+    k: int,
+    against: Sequence[np.ndarray],
+    layout: Layout,
 ) -> tuple[CrossValidation, DirectionCheck | None]:
     """The blocked cross-validation (each fold costed on its block beside ``against``) and the
-    direction check, refitted from ``result``."""
+    direction check (no finding within ``layout``'s needed precision), refitted from ``result``."""
     ev, data = fit.evaluator, fit.data
     binder, x = fit.problem.binder, result.x
     # Blocks are numbered as the scorer's records: the fitted records start at its offset.
@@ -295,6 +302,7 @@ def _refits(
         lambda part: model.undetermined(inputs[:, part]),
         k,
         fit.canonical_params,
+        layout,
     )
     return crossval, direction
 
@@ -362,7 +370,7 @@ def plan_setting(fit: Fit, results: Mapping[str, SolverResult], units: Mapping[s
     model_from = f"the fit ({converged[0][0]})" if converged else "the initial guess (no solver converged)"
     return Setting(
         fns, data, info, (x, ev.x_fixed, ev.omega), sigma2, ranges, sc.objective.residual,
-        sc.objective.robust.delta, units, model_from,
+        sc.objective.robust.delta, units, model_from, sc.parameters.vehicle.steer_max,
     )  # fmt: skip
 
 

@@ -355,7 +355,9 @@ def assemble_run(
         run.checks, more=run_checks(run, CheckContext(source.files(), convert, prepared.scenario))
     )
     run = _believed_plan(dataclasses.replace(run, checks=checks))
-    return dataclasses.replace(run, verdict=verdict(run, prepared.model, hint))
+    return judged(
+        run, verdict(run, prepared.model, hint), prepared.scenario.objective.sensor.sensor.components
+    )
 
 
 def _own_truth(
@@ -448,7 +450,32 @@ def joint_run(
         verdict=Verdict("", ()),
     )
     run = _believed_plan(run)
-    return dataclasses.replace(run, verdict=verdict(run, prepared.model))
+    return judged(run, verdict(run, prepared.model), prepared.scenario.objective.sensor.sensor.components)
+
+
+def judged(run: CalibrationRun, found: Verdict, components: Mapping[str, str]) -> CalibrationRun:
+    """``run`` with its verdict, each estimate's mount (every log's own too) stating the
+    components (``components``: each one's parameter key) the run leaves not determined well
+    enough to use (:meth:`CalibrationRun.doubts`) as such: no hand-off file writes them as
+    calibrated."""
+    run = dataclasses.replace(run, verdict=found)
+    laid = run.scenario.layout.parameters
+    reports = {}
+    for solver, rep in run.reports.items():
+        doubts = run.doubts(solver)
+
+        def of(log: int | None, doubts: Mapping[str, str] = doubts) -> dict[str, str]:
+            return {
+                c: doubts[p.name]
+                for c, key in components.items()
+                for p in laid
+                if p.key == key and p.name in doubts and (log is None or p.log in (log, None))
+            }
+
+        every = tuple(dataclasses.replace(m, mount=m.mount.doubting(of(i))) for i, m in enumerate(rep.mounts))
+        mount = rep.mount.doubting(of(None)) if rep.mount is not None else None
+        reports[solver] = dataclasses.replace(rep, mount=mount, mounts=every)
+    return dataclasses.replace(run, reports=reports)
 
 
 def _believed_plan(run: CalibrationRun) -> CalibrationRun:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.analysis.consistency import compare_logs, determined
-from nlp_calib.analysis.precision import drive_precision, lag_precision, tightest
+from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, reference_scales
@@ -339,10 +339,12 @@ def _fit(
     ``held``: the parameters held because the fitted records do not determine them."""
     results = {name: fitting.solve(name) for name in solvers}
     noise = np.max([p.windows.input_noise_std for p in parts], axis=0)
-    fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data))
-    sc = parts[0].prepared.scenario
-    units = fit_info(sc, fitting.fns).units
-    fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, units))
+    info = fit_info(parts[0].prepared.scenario, fitting.fns)
+    # The precision each parameter needs: the tightest any log's drive asks (as the joint run's).
+    layouts = [_part_info(fitting, part, i)[1].layout for i, part in enumerate(parts)]
+    needed = tightest(info.layout, layouts)
+    fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data), needed)
+    fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, info.units))
     return results, fitted, fit_notes(results, fitted, held)
 
 
@@ -358,17 +360,24 @@ def _assemble(
     runs = []
     logs = tuple((p.prepared.scenario.name, p.prepared.log.header) for p in parts)
     for i, part in enumerate(parts):
-        sc = part.prepared.scenario
-        scorer = log_scorer(
-            fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window, i
-        )
-        info = _vehicle_precision(fit_info(sc, fitting.fns), scorer, part, fitting.problem.start.initial, i)
+        scorer, info = _part_info(fitting, part, i)
         view = LogView(part.prepared, part.windows, scorer, part.screening.findings, i)
         figures = analyse_log(fitting, results, view, wanted, info.labels, fitted.nominal_params)
         stage = (part.prepared, part.windows, part.alignment, part.screening.findings)
         views = MountViews(fitting.fns, i, logs)
         runs.append(assemble_run(info, stage, fitting.problem.start, results, fitted, figures, notes, views))
     return runs
+
+
+def _part_info(fitting: Fit, part: LogSetup, index: int) -> tuple[Scorer, ScenarioInfo]:
+    """Log ``index``'s scorer over its used records, and what the outputs say of its fit with the
+    precision its drive needs (see :func:`_vehicle_precision`)."""
+    sc = part.prepared.scenario
+    scorer = log_scorer(
+        fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window, index
+    )
+    info = _vehicle_precision(fit_info(sc, fitting.fns), scorer, part, fitting.problem.start.initial, index)
+    return scorer, info
 
 
 def _vehicle_precision(
@@ -378,12 +387,8 @@ def _vehicle_precision(
     the clock offset of log ``index`` from the sensor's own track)."""
     fns = scorer.fns
     view = scorer.viewed(np.array([start[n] for n in fns.names]))
-    t = part.windows.selected.time_s
-    duration = float(t[-1] - t[0]) if t.size else 0.0
-    layout = drive_precision(info.layout, fns, view, scorer.inputs, duration)
-    log = part.prepared.log
-    track = fns.sensor.floor_track(log)
-    layout = lag_precision(layout, track, log.time_s, index, fns.sensor.length_unit == "m")
+    t = np.asarray(part.windows.selected.time_s)
+    layout = log_precision(info.layout, fns, view, scorer.inputs, t, part.prepared.log, index)
     return dataclasses.replace(info, layout=layout)
 
 

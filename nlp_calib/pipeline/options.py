@@ -25,6 +25,8 @@ COUNTS_PER_TURN = Range(0.0, 2.0**32, lo_open=True)
 PRIOR_STD = Range(1e-9, 1e6)
 THREADS = Range(1, 64, integer=True)
 RPE_WINDOW = Range(1, 1_000_000, integer=True)
+#: A steered wheel's largest angle (degrees): more than none, at most a quarter turn.
+STEERING_DEG = Range(0.0, 90.0, lo_open=True)
 _FINITE = Range(-math.inf, math.inf, lo_open=True, hi_open=True)
 FAULT_HANDLINGS = ("exclude", "repair", "keep")
 #: Several logs' sensor mounts: one shared, or one per log (the kinematic parameters shared).
@@ -105,6 +107,24 @@ class HandoffOptions:
     def __post_init__(self) -> None:
         if self.controller_name is not None:
             check_ros_name("controller_name", self.controller_name)
+
+
+@dataclass(frozen=True)
+class VehicleOptions:
+    """What the robot can drive beyond what its model says: ``max_steering_deg``, its steered
+    wheels' largest angle (degrees; None: the model's own, 35° for a car, 90° for a tricycle),
+    which the plan's turns keep within."""
+
+    max_steering_deg: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.max_steering_deg is not None:
+            check_range("max_steering_deg", self.max_steering_deg, STEERING_DEG)
+
+    @property
+    def steer_max(self) -> float | None:
+        """The limit in radians (None: the model's own)."""
+        return None if self.max_steering_deg is None else math.radians(self.max_steering_deg)
 
 
 @dataclass(frozen=True)
@@ -246,13 +266,15 @@ class ObjectiveOptions:
 class ParameterOptions:
     """Where the parameters start (``from_file``, ``auto`` or values), bounds, fixed ones, priors,
     and ``known`` ones: measured values held fixed whatever the start (a camera's height, the one
-    length a free scale needs), added to ``fixed``."""
+    length a free scale needs), added to ``fixed``; ``vehicle``: what the robot can drive beyond
+    its model's facts."""
 
     initial_guess: str | Mapping[str, float] = "from_file"
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     fixed: tuple[str, ...] = ()
     priors: Mapping[str, Prior] = field(default_factory=dict)
     known: Mapping[str, float] = field(default_factory=dict)
+    vehicle: VehicleOptions = field(default_factory=VehicleOptions)
 
     def __post_init__(self) -> None:
         for n, value in self.known.items():

@@ -22,8 +22,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from nlp_calib.analysis import determinacy as det
+from nlp_calib.analysis import uncertainty as unc
+from nlp_calib.analysis.crossval import combine
 from nlp_calib.analysis.excitation import combined, excitation, smoothed
-from nlp_calib.analysis.plan import Setting, plan
+from nlp_calib.analysis.plan import Setting, believed, plan
+from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.analysis.uncertainty import range_std
 from nlp_calib.analysis.units import findings
 from nlp_calib.analysis.verdict import way_out
@@ -44,6 +47,7 @@ from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.recording import recording
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
+from nlp_calib.results.checks import Fold, believed_std
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight, UnitFinding
 
 #: Unit and sign findings that stop a run only where the converged fit confirms them.
@@ -243,11 +247,12 @@ def _judged(d: Drive) -> ResidualData:
     return d.data if idx.size == n else d.data.select(idx)
 
 
-def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str] | None:
+def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str, np.ndarray] | None:
     """The start fitted to convergence by the run's internal solver on the windows whose information
     is judged (robust kernel, bounds), and the information there: the σ a fit will give is read
     where the fit ends, never at the start, whose misfit is no noise. None where the fit does not
-    converge (a drive that leaves a direction free: its normal equations are singular)."""
+    converge (a drive that leaves a direction free: its normal equations are singular). Last, each
+    free parameter's σ as the run computes it there (:func:`_propagated`)."""
     fns, start, sc = d.fns, d.start, d.scenario
     windows = _judged(d)
     if windows.n_residuals < fns.n_free:
@@ -265,7 +270,69 @@ def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, s
     info = det.information(fns, windows, x, start.x_fixed, omega, sc.objective.robust.delta, det.MAX_WORK)
     if not np.isfinite(info.chi2):
         return None
-    return np.asarray(x, dtype=float), info, f"{d.start_words}, fitted to convergence on the windows judged"
+    words = f"{d.start_words}, fitted to convergence on the windows judged"
+    return np.asarray(x, dtype=float), info, words, _propagated(d, binder, x, windows)
+
+
+def _propagated(d: Drive, binder: Binder, x: np.ndarray, windows: ResidualData) -> np.ndarray:
+    """Each free parameter's σ at the converged ``x`` as the run computes the σ to believe: the
+    tracker's noise propagated through the windows that share its poses and the encoders' own (a
+    pose tracker's noise telescopes along a chain of windows, which white residuals do not say),
+    or the jackknife of ``validation.blocks`` fits each without one block of windows where it
+    exceeds that beyond its own noise (errors that vary along the drive); NaN where it cannot."""
+    fns = d.fns
+    noise = np.max([p.model.input_noise_std(p.log, d.scenario.data.encoder_noise) for p in d.parts], axis=0)
+    bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
+    try:
+        white = unc.estimate(binder.evaluate(windows), x, windows, noise, bounds).std
+    except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
+        return np.full(fns.n_free, np.nan)
+    k = min(d.scenario.validation.blocks, windows.n_residuals)
+    spread = np.full(len(fns.names), np.nan)
+    if k:
+        spread = combine(fns.names, [_fold(binder, x, windows, b) for b in _blocks(windows, k)]).beyond(white)
+    std = dict(zip(fns.names, believed_std(white, spread)))
+    return np.array([std.get(n, np.nan) for n in fns.free], dtype=float)
+
+
+def _blocks(windows: ResidualData, k: int) -> list[np.ndarray]:
+    """``k`` blocks of the windows, each the ``j``-th contiguous stretch of every log's (a fold
+    without one log's whole stretch would leave that log's own parameters, its lag, free)."""
+    log = windows.log_of(windows.starts)
+    parts = [np.array_split(np.flatnonzero(log == i), k) for i in np.unique(log)]
+    return [np.concatenate([p[j] for p in parts]) for j in range(k)]
+
+
+def _fold(binder: Binder, x: np.ndarray, windows: ResidualData, block: np.ndarray) -> Fold:
+    """The fit from ``x`` without the windows ``block``, as a cross-validation fold (no scores)."""
+    kept = windows.select(np.setdiff1d(np.arange(windows.n_residuals), block))
+    fns = binder.fns
+    try:
+        evaluator = binder.evaluate(kept)
+        _, xk, converged = binder.fit(evaluator, x)
+        evaluator.release()
+    except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
+        xk, converged = x, False
+    params = np.asarray(fns.assemble(xk, binder.x_fixed)).ravel()
+    first, stop = (int(block.min()), int(block.max()) + 1) if block.size else (0, 0)
+    return Fold(first, stop, params, bool(converged) and bool(np.all(np.isfinite(params))), None)
+
+
+def _needed(d: Drive, x: np.ndarray) -> np.ndarray:
+    """What the run's verdict will need of each free parameter at ``x`` on this drive: the
+    precision of its layout as the run sets it from each log's drive at the start's values (an
+    offset's from the drive's speed, a clock offset's from the sensor's own), the tightest of the
+    logs' (:mod:`nlp_calib.analysis.precision`)."""
+    fns = d.fns
+    layout = fit_info(d.scenario, fns).layout
+    params = np.array([d.start.initial[n] for n in fns.names], dtype=float)
+    logs = []
+    for i, p in enumerate(d.parts):
+        log = p.log.select(p.start, p.split)
+        inputs = p.model.inputs(log, p.scenario.objective.residual.steering_sample)
+        logs.append(log_precision(layout, fns, fns.view(params, i), inputs, np.asarray(log.time_s), log, i))
+    layout = tightest(layout, logs) if len(logs) > 1 else logs[0]
+    return np.array([layout.param(n).needed(float(v)) for n, v in zip(fns.free, x)])
 
 
 @dataclass(frozen=True)
@@ -285,12 +352,15 @@ class Assessment:
     omega: np.ndarray
     delta: float
     bounds_std: np.ndarray
-    #: Whether ``x`` is where the run's internal solver converged on the judged windows.
-    converged: bool = False
+    #: Each free parameter's σ at ``x`` as the run computes it, where the run's internal solver
+    #: converged on the judged windows (None: it did not, ``x`` is a rough start; NaN: no σ).
+    propagated: np.ndarray | None = None
+    #: What the run's verdict will need of each free parameter (None: the model's references).
+    needed: np.ndarray | None = None
 
     def fitted(self) -> dict[str, float] | None:
         """Every parameter where the fit converged (None: it did not)."""
-        if not self.converged:
+        if self.propagated is None:
             return None
         fns = self.drive.fns
         return dict(zip(fns.names, np.asarray(fns.assemble(self.x, self.drive.start.x_fixed)).ravel()))
@@ -298,7 +368,16 @@ class Assessment:
     def standing(self, info: det.Information | None = None) -> det.Standing:
         """Each free parameter's standing on these windows (or on those whose information is ``info``)."""
         d = self.drive
-        return det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std)
+        st = det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std)
+        if info is not None:
+            return st
+        # One σ and one needed precision with the run's: the white σ says what the drive leaves
+        # free, the run's how well the rest is known, against what the run's verdict needs.
+        std = st.std
+        if self.propagated is not None:
+            std = np.where(np.isfinite(st.std) & np.isfinite(self.propagated), self.propagated, st.std)
+        needed = st.reference if self.needed is None else self.needed
+        return replace(st, std=std, std_reference=std / needed, reference=needed)
 
 
 def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
@@ -307,13 +386,19 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
     fns, one = d.fns, d.scenario
     omega = np.array(one.objective.information.omega(fns.error_rows))
     fitted = _fitted(d, omega)
-    x, info, where = fitted if fitted is not None else _rough(d, omega)
+    x, info, where = fitted[:3] if fitted is not None else _rough(d, omega)
     at = "the fit" if fitted is not None else "the start"
     sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info, at)
+    if fitted is not None:
+        noise += (
+            "; each σ as the run computes the σ to believe (the tracker's noise propagated through the "
+            "windows, or the blocks' jackknife where larger)"
+        )
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     return Assessment(
-        d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds, fitted is not None
-    )
+        d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds,
+        fitted[3] if fitted is not None else None, _needed(d, x),
+    )  # fmt: skip
 
 
 def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
@@ -331,15 +416,19 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
             ex = replace(ex, distance_m=math.nan, speed_median_mps=math.nan, speed_max_mps=math.nan)
         exs.append(ex)
     units = fit_info(one, fns).units
-    statuses = det.statuses(fns, a.standing(), a.held, units, combined(exs))
+    standing = a.standing()
+    statuses = det.statuses(fns, standing, a.held, units, combined(exs))
     loose = [s.name for s in statuses if s.status in (NOT_DETERMINED, WEAKLY) and not s.held]
     ahead = None
     if loose:
         point = (a.x, d.start.x_fixed, a.omega)
         residual = one.objective.residual
-        ahead = plan(
-            Setting(fns, d.data, a.info, point, a.sigma2, a.bounds_std, residual, a.delta, units, a.where)
+        setting = Setting(
+            fns, d.data, a.info, point, a.sigma2, a.bounds_std, residual, a.delta, units, a.where
         )
+        ahead = plan(replace(setting, steer_max=one.parameters.vehicle.steer_max))
+        # The plan's σ of its target as the statuses state it (the run's σ where the fit converged).
+        ahead = believed(ahead, dict(zip(standing.names, map(float, standing.std))))
     return Preflight(
         scenario=sc.name,
         model=sc.model,

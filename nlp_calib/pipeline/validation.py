@@ -24,7 +24,7 @@ from nlp_calib.pipeline.build import Binder, no_priors
 from nlp_calib.problem import ResidualData
 from nlp_calib.results.checks import WEAK, CrossValidation, DirectionCheck, Fold
 from nlp_calib.results.figures import TrajectoryMetrics
-from nlp_calib.results.layout import CLOCK
+from nlp_calib.results.layout import CLOCK, Layout
 from nlp_calib.solvers import Priors
 from nlp_calib.solvers.evaluation import NormalEquations, ProblemEvaluator, is_singular
 
@@ -279,12 +279,14 @@ def direction_check(
     undetermined: Callable[[np.ndarray], dict[str, str]],
     k: int,
     canonical: Canonical,
+    layout: Layout,
 ) -> DirectionCheck | None:
     """Forward-only and reverse-only fits from ``x``, each with the jackknife σ of its own blocks.
 
     ``direction`` is the travel direction of every interval of ``log``; ``undetermined(mask)``
     names the parameters a part (intervals ``mask`` of the fit range) cannot determine: they are
-    held at ``x``'s values there. None without enough driving either way.
+    held at ``x``'s values there. ``layout``: the precision each parameter needs on this drive
+    (a smaller difference is no finding). None without enough driving either way.
     """
     fns = binder.fns
     first, stop = fit
@@ -316,6 +318,15 @@ def direction_check(
         sigmas.append(jackknife_std(np.array(folds)) if len(folds) >= 3 else np.full(len(fns.names), np.nan))
         windows.append(n)
     apart = WEAK * reference_scales(fns.model, fns.layout.keys(fns.names), estimates[0])
+    needed = layout.needed(dict(zip(fns.names, 0.5 * (estimates[0] + estimates[1]))))
     return compare(
-        fns.names, estimates[0], estimates[1], (windows[0], windows[1]), sigmas[0], sigmas[1], held, apart
+        fns.names,
+        estimates[0],
+        estimates[1],
+        (windows[0], windows[1]),
+        sigmas[0],
+        sigmas[1],
+        held,
+        apart,
+        np.array([needed[n] for n in fns.names]),
     )

@@ -123,18 +123,38 @@ class DirectionCheck:
     z: np.ndarray
     #: Per parameter, the difference beyond which the parts cannot both describe one robot.
     apart: np.ndarray | None = None
+    #: Per parameter, the precision a useful calibration needs (None: any significant difference).
+    needed: np.ndarray | None = None
+
+    @property
+    def flagged(self) -> np.ndarray:
+        """Per parameter: whether the parts disagree, beyond :data:`SIGNIFICANT` σ of the
+        difference AND beyond the precision the calibration needs. Both, because each alone cries
+        wolf: the σ of the difference goes to nothing on noise-free or very long data, where a
+        re-sampling or clock-correction bias of microseconds is many σ; and a difference within its
+        noise says nothing however large. The whole fit lies between the two parts' (driving with
+        another mix of directions moves it by up to the difference), so a difference within the
+        needed precision changes no use of the calibration. Not a quadrature sum of σ and the
+        needed precision: that would let pass a clear fault up to three times the needed precision."""
+        with np.errstate(invalid="ignore"):
+            out = np.abs(self.z) > SIGNIFICANT
+            if self.needed is not None:
+                out &= np.abs(self.forward - self.reverse) > self.needed
+        return out
 
     @property
     def worst(self) -> tuple[str, float]:
-        """The parameter that disagrees most, and by how many σ."""
+        """The parameter that disagrees most (of those :attr:`flagged`, when any), and by how many σ."""
         if not np.any(np.isfinite(self.z)):
             return "", float("nan")
-        i = int(np.nanargmax(np.abs(self.z)))
+        z = np.where(self.flagged, self.z, np.nan) if self.significant else self.z
+        i = int(np.nanargmax(np.abs(z)))
         return self.names[i], float(self.z[i])
 
     @property
     def significant(self) -> bool:
-        return bool(np.nanmax(np.abs(self.z), initial=0.0) > SIGNIFICANT)
+        """Whether any parameter is :attr:`flagged`."""
+        return bool(np.any(self.flagged))
 
     @property
     def compared(self) -> bool:
@@ -163,11 +183,16 @@ class DirectionCheck:
                 "least 3 blocks with 20 or more windows of its driving)"
             )
         name, z = self.worst
-        return (
-            f"DISAGREE: {name} by {abs(z):.1f}σ"
-            if self.significant
-            else f"agree within {abs(z):.1f}σ ({name})"
-        )
+        if self.significant:
+            return f"DISAGREE: {name} by {abs(z):.1f}σ"
+        if abs(z) > SIGNIFICANT and self.needed is not None:
+            i = self.names.index(name)
+            share = abs(self.forward[i] - self.reverse[i]) / self.needed[i]
+            return (
+                f"agree within the precision needed ({name} differs by {abs(z):.1f}σ, only "
+                f"{share:.2g}× the precision it needs)"
+            )
+        return f"agree within {abs(z):.1f}σ ({name})"
 
     def sentence(self) -> str:
         """Its one wording, for the terminal and the report: the parts' windows and :meth:`words`."""
@@ -184,6 +209,7 @@ class DirectionCheck:
             "difference_in_sigma": {
                 n: (None if not np.isfinite(v) else float(v)) for n, v in zip(self.names, self.z)
             },
+            "needed": None if self.needed is None else dict(zip(self.names, map(float, self.needed))),
             "significant": self.significant,
         }
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 #: The frame the calibrated mount is given in.
 BASE_LINK = "base_link"
@@ -29,7 +29,10 @@ class SensorMount:
     ``xyz``/``rpy`` (the child in the parent); ``pose``: the sensor in ``base_link`` by component
     (:data:`COMPONENTS`), ``std`` the 1σ of each calibrated one (in ``base_link``);
     ``calibrated``: the components the fit estimated; ``nominal``: each other component and where
-    its value comes from; ``kind``: the sensor's mount as fitted (``planar`` or ``3d``)."""
+    its value comes from; ``kind``: the sensor's mount as fitted (``planar`` or ``3d``);
+    ``undetermined``: each component the fit estimated but did not determine well enough to use
+    (a caveat of the verdict, or held at its guess), with why: not calibrated, and no URDF file
+    states it (:meth:`doubting`)."""
 
     kind: str
     parent: str
@@ -41,6 +44,7 @@ class SensorMount:
     std: Mapping[str, float]
     calibrated: tuple[str, ...]
     nominal: Mapping[str, str]
+    undetermined: Mapping[str, str] = field(default_factory=dict)
 
     @classmethod
     def on_base(
@@ -92,7 +96,15 @@ class SensorMount:
             pose={c: float(pose[c]) for c in COMPONENTS},
             std=self.std,
             calibrated=self.calibrated,
-            nominal={c: nominal.get(c, self.nominal[c]) for c in self.nominal},
+            nominal={
+                **{c: nominal.get(c, self.nominal[c]) for c in self.nominal},
+                **{
+                    c: f"{nominal[c]} (not determined well enough to use: {why})"
+                    for c, why in self.undetermined.items()
+                    if c in nominal
+                },
+            },
+            undetermined={c: why for c, why in self.undetermined.items() if c not in nominal},
         )
 
     def holding(self, given: Mapping[str, str]) -> SensorMount:
@@ -109,13 +121,34 @@ class SensorMount:
             nominal={**self.nominal, **{c: given[c] for c in held}},
         )
 
+    def doubting(self, doubts: Mapping[str, str]) -> SensorMount:
+        """The same mount with the calibrated components in ``doubts`` (component → why) not
+        determined well enough to use: no longer calibrated, no 1σ, listed under ``undetermined``."""
+        doubted = {c: why for c, why in doubts.items() if c in self.calibrated}
+        if not doubted:
+            return self
+        return dataclasses.replace(
+            self,
+            std={c: math.nan if c in doubted else s for c, s in self.std.items()},
+            calibrated=tuple(c for c in self.calibrated if c not in doubted),
+            undetermined={**self.undetermined, **doubted},
+        )
+
     def words(self) -> str:
         """What was calibrated and where the rest comes from, in words."""
         sources: dict[str, list[str]] = {}
         for component, source in self.nominal.items():
             sources.setdefault(source, []).append(component)
         rest = "; ".join(f"{', '.join(names)} {source}" for source, names in sources.items())
-        return f"calibrated: {', '.join(self.calibrated)}" + (f"; {rest}" if rest else "")
+        doubted = "; ".join(
+            f"{c} not determined well enough to use ({why})" for c, why in self.undetermined.items()
+        )
+        said = [
+            f"calibrated: {', '.join(self.calibrated) or 'none'}",
+            *([rest] if rest else []),
+            *([doubted] if doubted else []),
+        ]
+        return "; ".join(said)
 
 
 @dataclass(frozen=True)

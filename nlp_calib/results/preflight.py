@@ -172,9 +172,10 @@ class Plan:
                 "has it"
             )
         unit = f" {self.target_unit}" if self.target_unit not in ("", "1") else ""
+        before, after = self.target_std_before, best.target_std_after
         return (
-            f"drive {best.words}: the σ of {self.target} would fall from {_sigma(self.target_std_before)}"
-            f"{unit} to {_sigma(best.target_std_after)}{unit}"
+            f"drive {best.words}: the σ of {self.target} would fall from {_sigma(before)}"
+            f"{unit if np.isfinite(before) else ''} to {_sigma(after)}{unit if np.isfinite(after) else ''}"
         )
 
 
@@ -204,13 +205,18 @@ class Preflight:
     @property
     def verdict(self) -> str:
         """:data:`CHECK_DATA` (a blocking unit or sign finding), :data:`NOT_ENOUGH` (a parameter
-        not determined), :data:`WEAK_DRIVE` (one weakly) or :data:`ENOUGH`."""
+        not determined that the run would fit: its verdict would be NOT DETERMINED),
+        :data:`WEAK_DRIVE` (one weakly, or one the run holds at its start: a caveat of its verdict)
+        or :data:`ENOUGH`."""
         if any(u.blocking for u in self.units):
             return CHECK_DATA
-        states = {p.status for p in self.parameters}
-        if NOT_DETERMINED in states:
+        if self.missing():
             return NOT_ENOUGH
-        return WEAK_DRIVE if WEAKLY in states else ENOUGH
+        return WEAK_DRIVE if self.named(WEAKLY) or self.named(NOT_DETERMINED) else ENOUGH
+
+    def missing(self) -> list[ParameterStatus]:
+        """The parameters not determined that the run would fit (not those it holds)."""
+        return [p for p in self.parameters if p.status == NOT_DETERMINED and not p.held]
 
     @property
     def exit_code(self) -> int:
@@ -225,7 +231,7 @@ class Preflight:
         blocking = [u.words for u in self.units if u.blocking]
         if blocking:
             return "; ".join(blocking)
-        missing = [p for p in self.parameters if p.status == NOT_DETERMINED and not p.held]
+        missing = self.missing()
         if not missing:
             return ""
         plan = f"; plan: {self.plan.line()}" if self.plan is not None and self.plan.best is not None else ""

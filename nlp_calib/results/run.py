@@ -35,7 +35,7 @@ from nlp_calib.results.checks import (
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import ControllerParams
-from nlp_calib.results.layout import CLOCK, Layout
+from nlp_calib.results.layout import CLOCK, KNOWN, Layout
 from nlp_calib.results.mount import LogMount, SensorMount
 from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import OdometryTrack, RunSeries
@@ -237,6 +237,13 @@ class SolverReport:
     held: Mapping[str, str] = field(default_factory=dict)
 
 
+#: A parameter's standing in the hand-off files (:meth:`CalibrationRun.handoff_status`): live
+#: (written as calibrated, with its 1σ), given by the user (written as given, no σ) or not
+#: determined well enough to use (never written as calibrated).
+LIVE = "live"
+GIVEN = "given"
+DOUBTFUL = "not determined"
+
 #: The verdict's levels.
 GOOD = "good"
 CAVEATS = "usable with caveats"
@@ -355,6 +362,30 @@ class CalibrationRun:
         if not self.verdict.handoff or self.verdict.level == UNDETERMINED:
             return None
         return self.chosen_solver()
+
+    def handoff_status(self, solver: str) -> dict[str, tuple[str, str]]:
+        """Each parameter of ``solver``'s estimate with its standing in every hand-off file and
+        why: :data:`GIVEN` (``known:``, ``fixed:``), :data:`DOUBTFUL` (held at its guess because
+        the drive cannot determine it, or a caveat of the verdict concerns it) or :data:`LIVE`.
+        The one decision every hand-off file formats."""
+        layout, held = self.scenario.layout, self.reports[solver].held
+        given = {p.name for p in layout.parameters if p.status == KNOWN}
+        concerns = self.verdict.concerns
+        out: dict[str, tuple[str, str]] = {}
+        for name in self.reports[solver].result.names:
+            if name in given:
+                out[name] = (GIVEN, held.get(name, "given"))
+            elif name in held:
+                out[name] = (DOUBTFUL, held[name])
+            elif name in concerns:
+                out[name] = (DOUBTFUL, concerns[name])
+            else:
+                out[name] = (LIVE, "")
+        return out
+
+    def doubts(self, solver: str) -> dict[str, str]:
+        """The parameters of ``solver``'s estimate not determined well enough to use, with why."""
+        return {n: why for n, (status, why) in self.handoff_status(solver).items() if status == DOUBTFUL}
 
     def to_data(self) -> Any:
         """The run as JSON types (see :mod:`nlp_calib.results.codec`)."""
