@@ -115,11 +115,18 @@ def concerns(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[st
 
 
 def lag_caveats(path: str, lag: LagEstimate | None) -> list[str]:
-    """What the time offset of the log at ``path`` leaves open, naming the log: a lag pinned on the
-    edge of its search (its value is the bound's, with no σ), or two valleys of comparable cost."""
+    """What the time offset of the log at ``path`` leaves open, naming the log: a lag no fit
+    converged at (held), pinned on the edge of its search (its value is the bound's, with no σ), or
+    two valleys of comparable cost."""
     if lag is None:
         return []
     name = Path(path).name or path
+    if not lag.converged:
+        return [
+            f"{name}: the tracker lag could not be fitted (no fit converged from any lag in "
+            f"alignment.search): held at {1e3 * lag.lag_s:.0f} ms, not determined (give the lag as "
+            "alignment.tracker_lag)"
+        ]
     if lag.at_edge:
         return [
             f"{name}: the tracker lag is pinned on the edge of alignment.search at {1e3 * lag.lag_s:.0f} ms "
