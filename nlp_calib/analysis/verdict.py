@@ -340,10 +340,11 @@ def _undetermined(run: CalibrationRun, model: KinematicModel, hint: str) -> Verd
 def _trade_off(run: CalibrationRun, solver: str) -> str:
     """The parameters this drive determines only together, each known only within the bounds of
     one of them (a lag within its search), in words; "" when there are none."""
-    group = run.reports[solver].uncertainty.bounded
+    std, units = run.std(solver), run.scenario.units
+    # Known within the bounds is a finite σ; a direction the bounds did not hold is not determined.
+    group = tuple(n for n in run.reports[solver].uncertainty.bounded if np.isfinite(std[n]))
     if not group:
         return ""
-    std, units = run.std(solver), run.scenario.units
     spread = ", ".join(f"{n} ±{std[n]:.2g} {units.get(n, '')}".rstrip() for n in group)
     return (
         f"{', '.join(group)} trade off on this drive (changing one is undone by the others), so each is "
