@@ -312,6 +312,10 @@ def _undetermined(run: CalibrationRun, model: KinematicModel, hint: str) -> Verd
     group = [n for w in (obs.weak if obs is not None else ()) for n in w.components]
     lag = run.data.lag_estimate
     unfitted = ["the tracker lag could not be fitted"] if lag is not None and not lag.converged else []
+    if unfitted and solver is not None and lag is not None and lag.lag_s != 0.0:
+        # Held where its search starts, away from the stamps as logged: a lag nothing chose.
+        words = f"{unfitted[0]}: the encoders were read {1e3 * lag.lag_s:.0f} ms off, where its search starts"
+        return Verdict(UNDETERMINED, (words + hint,), handoff=False)
     if solver is None:
         failures = dict.fromkeys(run.reports[s].result.reason for s in run.solver_order())
         out = (*unfitted, *loose, *(f"no solver converged: {r}" for r in failures))
