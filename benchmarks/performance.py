@@ -184,7 +184,10 @@ def solver_cases(real: Path | None, quick: bool) -> list[tuple[str, Any]]:
     from nlp_calib.pipeline.scenario import AlignmentOptions, load_scenario
 
     if quick or real is None:
-        demo = load_scenario(REPO / "scenarios" / "demo.yaml")
+        # The baselines model no clock: the demo's lag held at its truth (the log has none).
+        demo = load_scenario(REPO / "scenarios" / "demo.yaml").with_options(
+            alignment=AlignmentOptions(tracker_lag=0.0)
+        )
         seed = demo.with_options(residual=dataclasses.replace(demo.objective.residual, horizon=1))
         return [("demo, H=1", seed), ("demo, H=10", demo)]
     # The baselines are written for the tricycle model: the scenarios' windows on that model, with

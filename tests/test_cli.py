@@ -5,8 +5,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 from conftest import SCENARIOS, cli
 
+DEMO_LOG = SCENARIOS / "data" / "demo_tricycle.txt"
 PARAMS = {
     "k_steer",
     "k_traction",
@@ -24,12 +26,16 @@ def test_run_demo_writes_result_matching_contract(tmp_path: Path) -> None:
     doc = json.loads((tmp_path / "result.json").read_text())
     assert doc["scenario"] == "demo"
     assert doc["dataset"]["records"] == 1500
-    assert doc["dataset"]["used"] == [0, 1500]
+    # The records whose encoders can be read at their time less the fitted lag (t − lag inside the log).
+    t = np.array([float(ln.split()[1]) for ln in DEMO_LOG.read_text().splitlines() if ln.startswith("time:")])
+    lag = doc["alignment"]["tracker_lag_s"]
+    inside = np.flatnonzero((t - lag >= t[0]) & (t - lag <= t[-1]))
+    assert doc["dataset"]["used"] == [int(inside[0]), int(inside[-1]) + 1]
     assert Path(doc["dataset"]["path"]).name == "demo_tricycle.txt"
     assert set(doc["solvers"]) == {"gauss_newton", "ipopt"}
     for res in doc["solvers"].values():
-        assert set(res["params"]) == PARAMS
-        assert set(res["std"]) == PARAMS
+        assert set(res["params"]) == {*PARAMS, "tracker_lag"}  # the time offset fitted by default
+        assert set(res["std"]) == {*PARAMS, "tracker_lag"}
         assert all(v > 0 for v in res["std"].values())
         for key, typ in [
             ("cost", float),
@@ -46,6 +52,7 @@ def test_run_demo_writes_result_matching_contract(tmp_path: Path) -> None:
     gn = doc["solvers"]["gauss_newton"]
     for name in PARAMS:
         assert abs(gn["params"][name] - truth[name]) <= 4 * gn["std"][name] + 1e-6, name
+    assert abs(gn["params"]["tracker_lag"]) <= 4 * gn["std"]["tracker_lag"]  # simulated without latency
     assert "gauss_newton" in proc.stdout and "ATE mean" in proc.stdout
 
 

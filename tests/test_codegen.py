@@ -29,8 +29,8 @@ needs_compiler = pytest.mark.skipif(
 )
 
 
-#: The demo with its time offset fitted (the functions take the encoders' rates, ``clock``) and
-#: as shipped, the offset held (they do not).
+#: The demo as shipped, its time offset fitted (the functions take the encoders' rates, ``clock``),
+#: and with the offset held (they do not).
 LAGS = {"fitted": 1, "held": 0}
 
 
@@ -38,11 +38,11 @@ LAGS = {"fitted": 1, "held": 0}
 def generated(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> Path:
     out = tmp_path_factory.mktemp(f"codegen_{request.param}")
     scenario = SCENARIOS / "demo.yaml"
-    if request.param == "fitted":
+    if request.param == "held":
         scenario = out.parent / f"{out.name}.yaml"
         scenario.write_text(
             (SCENARIOS / "demo.yaml").read_text().replace("data/", f"{SCENARIOS}/data/")
-            + "alignment: {tracker_lag: auto}\n"
+            + "alignment: {tracker_lag: 0.0}\n"
         )
     proc = subprocess.run(
         [sys.executable, "-m", "nlp_calib", "codegen", str(scenario), "--out", str(out)],

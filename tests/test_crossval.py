@@ -20,8 +20,15 @@ def _run(model: str, sim: SimulationOptions, **raw: object) -> tuple[object, np.
     log = parse_lines(simulate(sim).text().splitlines(), "sim.txt", model=sim.model)
     base = {"dataset": "sim.txt", "model": model, "solvers": ["gauss_newton"], "residual": {"horizon": 10}}
     sc = scenario_from_mapping({**base, **raw}, "cv.yaml", Path("."))
-    truth = np.array([sim.truth.get(n, 0.0) for n in param_names(get_model(model))])
-    return Calibration(sc, log=log).run(), truth
+    run = Calibration(sc, log=log).run()
+    # The model's truth and the simulator's latency, the fitted time offset's.
+    values = {
+        **dict.fromkeys(param_names(get_model(model)), 0.0),
+        **sim.truth,
+        "tracker_lag": sim.tracker.latency_s,
+    }
+    truth = np.array([values[n] for n in run.reports["gauss_newton"].result.names])
+    return run, truth
 
 
 @pytest.mark.slow

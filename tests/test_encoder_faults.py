@@ -101,7 +101,10 @@ def test_tracker_outliers_are_tracker_jumps_not_counter_faults() -> None:
 
 def test_repair_restores_the_true_counts() -> None:
     log, out = sim("tricycle", seed=2, counter_faults=2, counter_fault_kinds=("stall_then_jump",))
-    calib = Calibration(scenario("tricycle", faults={"handling": "repair"}), log=log)
+    # The clock held: the repaired counts are read back from the aligned log, which a fitted lag
+    # would re-sample between records.
+    sc = scenario("tricycle", faults={"handling": "repair"}, alignment={"tracker_lag": 0.0})
+    calib = Calibration(sc, log=log)
     assert len(calib.findings.repairs) == 2 and all("2^16" in r for r in calib.findings.repairs)
     col = log.header.encoder_index("traction_wheel")
     for f in out.faults:  # type: ignore[attr-defined]

@@ -245,7 +245,13 @@ def test_a_live_runs_staging_folder_is_never_removed(tmp_path: Path, monkeypatch
     [
         ("{horizon: 5000}", "", ("residual.horizon: must be a whole number in [1, 200], got 5000",)),
         ("{horizon: 150}", "{stop: 150}", ("residual.horizon 150", "leaves 0 residual window(s)", "samples")),
-        ("{horizon: 148}", "{stop: 150}", ("leaves 2 residual window(s)", "at most 143", "samples")),
+        # 8 parameters: the robot's and the mount's 7 and the time offset, fitted by default,
+        # whose search of ±0.5 s leaves the first 13 records (25 Hz) out of the fit.
+        (
+            "{horizon: 135}",
+            "{stop: 150}",
+            ("leaves 2 residual window(s)", "at most 129", "search", "samples"),
+        ),
         ("{horizon: 10, stride: 1000}", "", ("residual.horizon 10 (stride 1000)", "leaves 1 residual")),
         # The lag fitted: 8 parameters, and its search of ±0.5 s leaves the first 13 records
         # (25 Hz) out of its fit, which the check counts (it was refused later, in the lag's fit).
@@ -266,12 +272,18 @@ def test_a_horizon_the_samples_cannot_hold_is_refused_before_the_build(
 
 
 def test_the_horizon_check_counts_windows_as_the_residual_data_does(sim_log: Path, tmp_path: Path) -> None:
-    # The longest horizon the check allows builds exactly as many windows as there are parameters.
-    text = (
-        f"dataset: {sim_log}\nresidual: {{horizon: 143}}\nsamples: {{stop: 150}}\nsolvers: [gauss_newton]\n"
-    )
-    calib = Calibration.setup(load_scenario(scenario(tmp_path, text)))
+    # The longest horizon the check allows builds exactly as many windows as there are parameters
+    # (the lag held); with the lag fitted, the longest builds (the lag's search on the records its
+    # reach leaves, the final fit on more), one more is refused.
+    def setup(horizon: int, alignment: str) -> Calibration:
+        text = f"dataset: {sim_log}\nresidual: {{horizon: {horizon}}}\nsamples: {{stop: 150}}\n{alignment}"
+        return Calibration.setup(load_scenario(scenario(tmp_path, text + "solvers: [gauss_newton]\n")))
+
+    calib = setup(143, "alignment: {tracker_lag: 0.0}\n")
     assert calib.data.n_residuals == calib.fns.n_free == 7
+    assert setup(129, "").fns.n_free == 8
+    with pytest.raises(ScenarioError, match="at most 129"):
+        setup(130, "")
 
 
 def test_the_horizon_check_counts_the_records_a_fitted_lag_leaves(sim_log: Path, tmp_path: Path) -> None:

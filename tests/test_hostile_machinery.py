@@ -533,7 +533,9 @@ def test_validate_on_too_short_a_log_says_so(tmp_path: Path) -> None:
     log = tmp_path / "two.txt"
     log.write_text("\n".join([*(ln for ln in lines if ln.startswith("#")), *records[:2]]) + "\n")
     fixed = "[k_steer, k_traction, axis_length, steer_offset, sensor_x, sensor_y]"
-    sc = scenario(tmp_path, f"dataset: {log}\nresidual: {{horizon: 1}}\nfixed: {fixed}\n")
+    # One parameter free (the time offset held: two records cannot re-sample the encoders).
+    body = f"dataset: {log}\nresidual: {{horizon: 1}}\nfixed: {fixed}\nalignment: {{tracker_lag: 0.0}}\n"
+    sc = scenario(tmp_path, body)
     proc = nlp("validate", str(sc), "--out", str(tmp_path / "out"), cache=tmp_path / "cache")
     assert_one_line_error(proc, 1, "case.yaml: two.txt: the log is too short to cross-validate", "2 fitted")
 

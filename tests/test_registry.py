@@ -13,6 +13,7 @@ from conftest import REPO, assert_close, parse_lines
 
 from nlp_calib.cli.parser import build_parser
 from nlp_calib.models import MODELS, param_names
+from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.models.tricycle import Tricycle
 from nlp_calib.outputs.handoff import calibration_dict
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
@@ -105,7 +106,8 @@ def test_calibration_yaml_gives_the_unit_of_every_parameter(model: str) -> None:
     doc = calibration_dict(Calibration(sc, log=log).run())
     assert doc is not None
     units = doc["units"]
-    assert list(units) == list(param_names(MODELS[model]))
+    assert list(units) == [*param_names(MODELS[model]), LAG_PARAM]  # the time offset fitted by default
+    assert units[LAG_PARAM] == "s"
     assert all(isinstance(u, str) and u for u in units.values())
 
 

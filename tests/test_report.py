@@ -230,10 +230,11 @@ def test_single_solver_report_with_holdout(tmp_path: Path, small_demo: Scenario)
     )
     run = calib.run(wanted=Wanted(series=True))
     paths = _write(run, tmp_path, "figures")
-    assert [p.name for p in paths[:7]] == [*IMAGES, "report.md"]
-    tracks = {p.relative_to(tmp_path).as_posix() for p in paths[7:]}
+    images = [*IMAGES, "lag.png"]  # the time offset fitted by default: its profile drawn
+    assert [p.name for p in paths[:8]] == [*images, "report.md"]
+    tracks = {p.relative_to(tmp_path).as_posix() for p in paths[8:]}
     assert {"trajectories/tracker.tum", "trajectories/gauss_newton.tum", "trajectories/README.md"} <= tracks
-    for name in IMAGES:
+    for name in images:
         png_size(tmp_path / name)
     md = (tmp_path / "report.md").read_text()
     holdout = f"{run.reports['gauss_newton'].holdout.segment_ate.mean:.4f}"  # type: ignore[union-attr]

@@ -78,9 +78,9 @@ def test_a_recording_calibrates_in_robot_units_with_only_topics_and_joints(
         t = recording.truth[name]
         print(f"{fmt} {name}: {value:.6g} (truth {t:.6g}; off by {value - t:+.2e})")
     _assert_recovered(params, recording.truth)
-    if "tracker_lag" in params:  # fitted: found where the stamps put it
-        lag_std = doc["solvers"]["gauss_newton"]["std"]["tracker_lag"]
-        assert abs(params["tracker_lag"] - recording.truth["tracker_lag"]) <= 3 * lag_std
+    # The time offset, fitted by default, is found where the stamps put it.
+    lag_std = doc["solvers"]["gauss_newton"]["std"]["tracker_lag"]
+    assert abs(params["tracker_lag"] - recording.truth["tracker_lag"]) <= 3 * lag_std
     faults = doc["faults"]["found"]
     assert [f for f in faults if f["kind"] != "tracker_jump"] == []  # no encoder fault
     assert sum(f["kind"] == "tracker_jump" for f in faults) >= 0.8 * 0.01 * recording.tracker_ns.size

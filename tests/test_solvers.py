@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +10,7 @@ from conftest import SCENARIOS, assert_close
 
 from nlp_calib.pipeline import Calibration
 from nlp_calib.pipeline.scenario import FaultOptions, RobustOptions, Scenario, load_scenario
+from nlp_calib.pipeline.truth import read_truth
 from nlp_calib.problem import ResidualOptions
 from nlp_calib.solvers import IpoptOptions
 from nlp_calib.solvers.ipopt import Ipopt
@@ -23,6 +23,9 @@ TRUTH_TOL = {  # absolute tolerances on a noiseless log
     "sensor_x": 5e-4,
     "sensor_y": 5e-4,
     "sensor_theta": 5e-4,
+    # The log has no latency; fitted by default, the lag takes up the first-order clock correction
+    # and the steering's interpolation: a quarter of the 2 ms a calibration needs at 1 m/s.
+    "tracker_lag": 5e-4,
 }
 
 
@@ -118,7 +121,8 @@ def test_recovers_truth_from_noiseless_log(noiseless_log: Path, integration: str
         robust=RobustOptions(kernel="none"),
         residual=ResidualOptions(horizon=1, integration=integration, steering_sample="mean"),
     )
-    truth = json.loads(noiseless_log.with_suffix(".truth.json").read_text())["params"]
+    truth = read_truth(noiseless_log)
+    assert truth is not None
     calib = Calibration.setup(sc)
     for solver in ("gauss_newton", "ipopt"):
         res = calib.solve(solver)
@@ -162,7 +166,10 @@ def test_ipopt_takes_steps_below_rounding_without_a_line_search(small_demo: Scen
     assert own._ipopt_options()["ipopt.tiny_step_tol"] == 1e-12
     ip, gn = calib.solve("ipopt"), calib.solve("gauss_newton")
     assert ip.converged and gn.converged
-    assert np.max(np.abs(ip.x - gn.x) / np.maximum(np.abs(gn.x), 1e-3)) < 1e-6
+    # Each relative to its value; the time offset (near 0) to its search's width.
+    scale = np.maximum(np.abs(gn.x), 1e-3)
+    scale[[n == "tracker_lag" for n in gn.names]] = np.ptp(small_demo.log.alignment.search)
+    assert np.max(np.abs(ip.x - gn.x) / scale) < 1e-6
 
 
 def test_a_released_evaluator_binds_again_with_the_same_results(small_demo: Scenario) -> None:

@@ -3,7 +3,6 @@ ones over the same blocks."""
 
 from __future__ import annotations
 
-import json
 import warnings
 from pathlib import Path
 
@@ -13,6 +12,7 @@ from conftest import write_sim
 
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline.truth import read_truth
 from nlp_calib.results import CalibrationRun
 
 
@@ -28,7 +28,8 @@ def test_the_estimate_is_put_against_the_truth_file_beside_the_log(tmp_path: Pat
     run = _run(tmp_path, log)
     t = run.checks.truth
     assert t is not None and t.solver == "gauss_newton"
-    truth = json.loads(log.with_suffix(".truth.json").read_text())["params"]
+    truth = read_truth(log)  # the simulator's values and its latency: the fitted time offset's truth
+    assert truth is not None and "tracker_lag" in truth
     result, std = run.reports["gauss_newton"].result, run.std("gauss_newton")
     for i, name in enumerate(result.names):
         assert t.error[i] == pytest.approx(result.params[i] - truth[name], abs=1e-15)

@@ -198,6 +198,9 @@ class Standing:
     undetermined: np.ndarray
     bounded: np.ndarray
     partners: tuple[tuple[str, ...], ...]
+    #: The σ in the model's reference units, which the run's observability judges a parameter
+    #: not determined by (``std_reference`` may be against what the verdict needs instead).
+    observed: np.ndarray | None = None
 
 
 def standing(
@@ -222,7 +225,7 @@ def standing(
     for i in range(len(names)):
         basis = Vf if undetermined[i] else weak_dirs
         partners.append(_coupled(names, basis, i))
-    return Standing(names, std, std / R, R, undetermined, np.asarray(bounded), tuple(partners))
+    return Standing(names, std, std / R, R, undetermined, np.asarray(bounded), tuple(partners), std / R)
 
 
 def _coupled(names: tuple[str, ...], basis: np.ndarray, i: int) -> tuple[str, ...]:
@@ -278,7 +281,8 @@ def statuses(
     ]  # fmt: skip
     for i, name in enumerate(found.names):
         ratio, partners = float(found.std_reference[i]), found.partners[i]
-        if found.undetermined[i] or ratio > NOT_OBSERVABLE:
+        observed = ratio if found.observed is None else float(found.observed[i])
+        if found.undetermined[i] or observed > NOT_OBSERVABLE:
             status = NOT_DETERMINED
         else:
             status = WEAKLY if ratio > WEAK else DETERMINED

@@ -130,32 +130,91 @@ def segment_drift(
     return Drift(np.array(errors), np.array(covs), np.array(terms))
 
 
-def drift_noise(drift: Drift, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each input's 1σ noise per interval whose propagated covariance explains the observed drift,
-    never below ``floor`` (the encoders' quantisation), and the reference's own position and
-    heading variances: the method of moments, the squared errors against the unit covariances'
-    diagonals and the reference's noise terms, by non-negative least squares. An input with no
-    floor is exact (an interval's duration) and keeps no noise."""
-    floor = np.asarray(floor, dtype=float)
-    noisy = floor > 0
-    n_in = int(noisy.sum())
-    errors = drift.errors
-    if errors.shape[0] < 3 * (n_in + 2):
-        return floor, np.zeros(2)
-    units = np.concatenate([drift.covs[:, noisy], drift.terms], axis=1)  # (S, n_in + 2, 3, 3)
-    A = np.concatenate([np.diagonal(units, axis1=2, axis2=3)[:, :, c] for c in range(3)])
-    y = np.concatenate([errors[:, c] ** 2 for c in range(3)])
-    # A squared error's spread grows with its expected value (a χ² with one degree of freedom):
-    # each equation is weighted by the inverse of its prediction, refined a few times.
-    predicted = np.repeat([max(float(np.mean(errors[:, c] ** 2)), 1e-300) for c in range(3)], len(errors))
+def _moments(A: np.ndarray, y: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """Non-negative variances ``x`` with ``A·x ≈ y`` (squared errors): a squared error's spread
+    grows with its expected value (a χ² with one degree of freedom), so each equation is weighted
+    by the inverse of its prediction, refined a few times."""
     var = np.zeros(A.shape[1])
     for _ in range(4):
         w = 1.0 / np.maximum(predicted, 1e-6 * float(np.max(predicted)))
         var = nnls_small(A * w[:, None], y * w)
         predicted = A @ var
+    return var
+
+
+#: How much the squared errors' misfit (in their own variances) may grow when the odometry's
+#: noise is raised from what fits best: 2σ of a parameter.
+ALLOWED = 4.0
+
+
+class _Profile:
+    """The squared errors' misfit with the inputs' variances ``scale·share`` (each input an equal
+    share of the predicted drift), the reference's refitted, in the variances of the best fit's
+    predictions."""
+
+    def __init__(self, A: np.ndarray, y: np.ndarray, n_in: int, predicted: np.ndarray) -> None:
+        self.A, self.y, self.n_in = A, y, n_in
+        self.w = 1.0 / np.maximum(predicted, 1e-6 * float(np.max(predicted)))
+        self.share = 1.0 / np.maximum(np.mean(A[:, :n_in], axis=0), 1e-300)
+
+    def fit(self, scale: float, least: np.ndarray) -> np.ndarray:
+        inputs = np.maximum(scale * self.share, least)
+        rest = (self.y - self.A[:, : self.n_in] @ inputs) * self.w
+        return np.r_[inputs, nnls_small(self.A[:, self.n_in :] * self.w[:, None], rest)]
+
+    def misfit(self, x: np.ndarray) -> float:
+        return 0.5 * float(np.sum(((self.y - self.A @ x) * self.w) ** 2))
+
+
+def _largest(profile: _Profile, least: np.ndarray) -> np.ndarray:
+    """The variances with the largest input noise (along the equal shares, never below ``least``)
+    whose misfit stays within :data:`ALLOWED` of the best: the most the segments allow the
+    odometry to drift, the reference taking the rest."""
+    top = float(np.mean(profile.y))
+    scales = np.r_[0.0, top * np.logspace(-8, 2, 51)]
+    misfits = np.array([profile.misfit(profile.fit(s, least)) for s in scales])
+    best = float(misfits.min())
+    ok = np.flatnonzero(misfits <= best + ALLOWED)
+    lo = float(scales[ok[-1]])
+    if ok[-1] == scales.size - 1:
+        return profile.fit(lo, least)
+    hi = float(scales[ok[-1] + 1])
+    for _ in range(12):  # between the grid's last allowed scale and its first not
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if profile.misfit(profile.fit(mid, least)) <= best + ALLOWED else (lo, mid)
+    return profile.fit(lo, least)
+
+
+def drift_noise(
+    drift: Drift, floor: np.ndarray, credited: tuple[bool, bool] = (True, True)
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each input's 1σ noise per interval whose propagated covariance explains the observed drift,
+    never below ``floor`` (the encoders' quantisation), and the reference's own position and
+    heading variances (those ``credited``; the others 0): the method of moments, the squared
+    errors against the unit covariances' diagonals and the reference's noise terms. A reference's
+    noise and the wheels' over short segments look alike, so the best fit's split is unstable (a
+    drift under the reference's noise goes either way); the inputs get the largest noise the
+    segments allow (within :data:`ALLOWED` of the best fit's misfit), at least the best fit's: a
+    filter must not trust the wheels beyond what the data show of them. An input with no floor is
+    exact (an interval's duration) and keeps no noise."""
+    floor = np.asarray(floor, dtype=float)
+    noisy = floor > 0
+    n_in = int(noisy.sum())
+    errors = drift.errors
+    if errors.shape[0] < 3 * (n_in + 2) or n_in == 0:
+        return floor, np.zeros(2)
+    terms = np.flatnonzero(credited)
+    units = np.concatenate([drift.covs[:, noisy], drift.terms[:, terms]], axis=1)
+    A = np.concatenate([np.diagonal(units, axis1=2, axis2=3)[:, :, c] for c in range(3)])
+    y = np.concatenate([errors[:, c] ** 2 for c in range(3)])
+    start = np.repeat([max(float(np.mean(errors[:, c] ** 2)), 1e-300) for c in range(3)], len(errors))
+    point = _moments(A, y, start)
+    var = _largest(_Profile(A, y, n_in, np.maximum(A @ point, 1e-300)), point[:n_in])
     noise = floor.copy()
     noise[noisy] = np.maximum(np.sqrt(var[:n_in]), floor[noisy])
-    return noise, var[n_in:]
+    reference = np.zeros(2)
+    reference[terms] = var[n_in:]
+    return noise, reference
 
 
 def _sigmas(drift: Drift, noise: np.ndarray, reference_var: np.ndarray) -> np.ndarray:

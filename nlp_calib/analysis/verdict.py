@@ -109,11 +109,18 @@ def concerns(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[st
 
 
 def lag_caveats(path: str, lag: LagEstimate | None) -> list[str]:
-    """What the time offset of the log at ``path`` leaves open, naming the log: a lag pinned on the
-    edge of its search (its value is the bound's, with no σ), or two valleys of comparable cost."""
+    """What the time offset of the log at ``path`` leaves open, naming the log: a lag no fit
+    converged at (held), pinned on the edge of its search (its value is the bound's, with no σ), or
+    two valleys of comparable cost."""
     if lag is None:
         return []
     name = Path(path).name or path
+    if not lag.converged:
+        return [
+            f"{name}: the tracker lag could not be fitted (no fit converged from any lag in "
+            f"alignment.search): held at {1e3 * lag.lag_s:.0f} ms, not determined (give the lag as "
+            "alignment.tracker_lag)"
+        ]
     if lag.at_edge:
         return [
             f"{name}: the tracker lag is pinned on the edge of alignment.search at {1e3 * lag.lag_s:.0f} ms "
@@ -266,6 +273,10 @@ def _undetermined(run: CalibrationRun, model: KinematicModel, hint: str) -> Verd
     group = [n for w in (obs.weak if obs is not None else ()) for n in w.components]
     lag = run.data.lag_estimate
     unfitted = ["the tracker lag could not be fitted"] if lag is not None and not lag.converged else []
+    if unfitted and solver is not None and lag is not None and lag.lag_s != 0.0:
+        # Held where its search starts, away from the stamps as logged: a lag nothing chose.
+        words = f"{unfitted[0]}: the encoders were read {1e3 * lag.lag_s:.0f} ms off, where its search starts"
+        return Verdict(UNDETERMINED, (words + hint,), handoff=False)
     if solver is None:
         failures = dict.fromkeys(run.reports[s].result.reason for s in run.solver_order())
         out = (*unfitted, *loose, *(f"no solver converged: {r}" for r in failures))
@@ -294,10 +305,11 @@ def _undetermined(run: CalibrationRun, model: KinematicModel, hint: str) -> Verd
 def _trade_off(run: CalibrationRun, solver: str) -> str:
     """The parameters this drive determines only together, each known only within the bounds of
     one of them (a lag within its search), in words; "" when there are none."""
-    group = run.reports[solver].uncertainty.bounded
+    std, units = run.std(solver), run.scenario.units
+    # Known within the bounds is a finite σ; a direction the bounds did not hold is not determined.
+    group = tuple(n for n in run.reports[solver].uncertainty.bounded if np.isfinite(std[n]))
     if not group:
         return ""
-    std, units = run.std(solver), run.scenario.units
     spread = ", ".join(f"{n} ±{std[n]:.2g} {units.get(n, '')}".rstrip() for n in group)
     return (
         f"{', '.join(group)} trade off on this drive (changing one is undone by the others), so each is "

@@ -252,11 +252,16 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
     if lag == "auto" and lag_column(binder) is not None:
         with scenario_key(sc, "alignment.search"):
             estimate = estimate_tracker_lag(binder, log, start, stop, x0)
-        lag = estimate.lag_s
         if not estimate.converged:
+            # No fit converged at any lag: the lag is held where it starts (the stamps as logged,
+            # unless the search lies all on one side), and the rest is fitted there.
+            column = lag_column(binder)
+            assert column is not None
+            estimate = replace(estimate, lag_s=float(np.asarray(x0, dtype=float)[column]))
             warnings.warn(lag_not_fitted(sc, estimate.lag_s), NlpCalibWarning, stacklevel=2)
         elif estimate.at_edge:
             warnings.warn(lag_at_edge(sc, estimate.lag_s), NlpCalibWarning, stacklevel=2)
+        lag = estimate.lag_s
     elif lag == "auto":
         # Held (known, or fixed at its initial value): the data are re-sampled there.
         held = [i for i, n in enumerate(binder.fns.fixed) if binder.fns.layout.in_block(n, CLOCK)]

@@ -568,11 +568,12 @@ def calibrated_drift(
     own = int(np.bincount(spans).argmax()) if spans.size else DRIFT_LENGTHS[0]
     drift = segment_drift(fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS))
     floor = windows.input_noise_std
-    noise, reference_var = drift_noise(drift, floor)
-    # A tracker's poses tell its own noise from the wheels' (by the drift's growth with length); a
-    # reference's own increments, one per window, do not.
-    told = reference_var if windows.data.increment is None else None
-    noise = covering_noise(drift, noise, floor, told)
+    # A tracker's poses tell its own noise from the wheels' (by the drift's growth with length);
+    # a reference's own increments, one per window, do not tell their heading's: the heading's
+    # drift is the odometry's (at least what the windows show).
+    credited = (True, windows.data.increment is None)
+    noise, reference_var = drift_noise(drift, floor, credited)
+    noise = covering_noise(drift, noise, floor, reference_var)
     return Drift(inputs, reference, drift, noise, reference_var)
 
 

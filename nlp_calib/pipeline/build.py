@@ -481,3 +481,13 @@ def at_lags(problem: Problem, lags: Sequence[float]) -> Problem:
     initial = {**start.initial, **given}
     x0 = np.array([initial[n] for n in fns.free])
     return replace(problem, start=replace(start, initial=initial, x0=x0))
+
+
+def lags_held(problem: Problem) -> Problem:
+    """``problem`` with its time offsets held at their starts (their bounds closed on them), in
+    the solvers and in the pipeline's own fits: a lag no fit converged at is no parameter."""
+    binder = problem.binder.lag_held(problem.start.x0)
+    if binder is problem.binder or binder.bounds is None:
+        return problem
+    lower, upper = binder.bounds
+    return replace(problem, binder=binder, start=replace(problem.start, lower=lower, upper=upper))

@@ -129,11 +129,12 @@ class VehicleOptions:
 
 @dataclass(frozen=True)
 class AlignmentOptions:
-    """``tracker_lag``: seconds the tracker reports after the encoders, or ``auto`` to estimate
-    it by the fit cost over ``search`` at ``step``."""
+    """``tracker_lag``: seconds the tracker reports after the encoders, or ``auto`` (the default)
+    to fit it with the other parameters, found over ``search`` (wide enough for a driver's or a
+    network's late stamps: a profile of the cost over it gives the fit its start)."""
 
-    tracker_lag: float | str = 0.0
-    search: tuple[float, float] = (-0.2, 0.2)
+    tracker_lag: float | str = "auto"
+    search: tuple[float, float] = (-0.5, 0.5)
     step: float = 0.01
 
     def __post_init__(self) -> None:

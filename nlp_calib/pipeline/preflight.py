@@ -398,7 +398,9 @@ class Assessment:
         if self.propagated is not None:
             std = np.where(np.isfinite(st.std) & np.isfinite(self.propagated), self.propagated, st.std)
         needed = st.reference if self.needed is None else self.needed
-        return replace(st, std=std, std_reference=std / needed, reference=needed)
+        # Not determined as the run's observability says it (the model's reference units); weak
+        # against what the verdict needs.
+        return replace(st, std=std, std_reference=std / needed, reference=needed, observed=std / st.reference)
 
 
 def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:

@@ -36,6 +36,12 @@ BETTER = 1.03
 EXTRA = 1
 #: The solver the rivals are fitted with (fast, and every model's).
 SOLVER = "gauss_newton"
+#: How every model's steering is read in the comparison, the declared model's too (fitted again
+#: where the scenario reads it otherwise): held over each interval from its start. A controller's
+#: own steering moves smoothly and is matched so within its noise; a steering made up to reproduce
+#: another model's arcs jumps from step to step and is not (read as the turning back wrote it, at
+#: each interval's end, any model reproduces any arcs and only the parameters' corrections differ).
+COMPARED = "start"
 
 
 def rivals(declared: str) -> tuple[str, ...]:
@@ -57,25 +63,53 @@ def _usual(name: str) -> dict[str, float]:
     return dict(getattr(in_units(MODELS[name], "radians"), "from_counts", dict)(drive.vendor_model))
 
 
-def _rival_fit(sc: Scenario, name: str) -> tuple[float, int] | None:
-    """Model ``name`` fitted to ``sc``'s vendor odometry and reference: its cost per residual and
-    its number of free parameters, or None where it cannot be fitted."""
+def _alike(sc: Scenario, name: str, vendor: dict[str, float], parameters: ParameterOptions) -> Scenario:
+    """``sc`` with model ``name`` turning the odometry back with ``vendor``'s values, its steering
+    read as :data:`COMPARED`."""
     source = sc.log.source
     assert isinstance(source, VendorSource)
-    moved = dataclasses.replace(source, vendor=_usual(name))
-    entry = dataclasses.replace(sc.log, source=moved)
-    rival = dataclasses.replace(
-        sc, model=name, data=dataclasses.replace(sc.data, logs=(entry,)), parameters=ParameterOptions()
+    entry = dataclasses.replace(sc.log, source=dataclasses.replace(source, vendor=vendor))
+    residual = dataclasses.replace(sc.objective.residual, steering_sample=COMPARED)
+    return dataclasses.replace(
+        sc,
+        model=name,
+        data=dataclasses.replace(sc.data, logs=(entry,)),
+        parameters=parameters,
+        objective=dataclasses.replace(sc.objective, residual=residual),
     )
+
+
+def _fitted(sc: Scenario) -> tuple[float, int] | None:
+    """``sc`` fitted: its cost per residual and its number of free parameters, or None where it
+    cannot be fitted."""
     try:
-        part = setup_log(rival, None, (SOLVER,))
+        part = setup_log(sc, None, (SOLVER,))
         fitting = Fit(part.problem, part.windows.data, (SOLVER,))
         result = fitting.solve(SOLVER)
-    except NlpCalibError:  # a rival that cannot be set up or fitted says nothing
+    except NlpCalibError:  # a model that cannot be set up or fitted says nothing
         return None
     if not result.converged or result.n_residuals == 0:
         return None
     return result.cost / result.n_residuals, len(fitting.problem.start.x0)
+
+
+def _rival_fit(sc: Scenario, name: str) -> tuple[float, int] | None:
+    """Model ``name`` fitted to ``sc``'s vendor odometry and reference from its controller's usual
+    values: its cost per residual and its number of free parameters, or None."""
+    return _fitted(_alike(sc, name, _usual(name), ParameterOptions()))
+
+
+def _declared_fit(run: CalibrationRun, sc: Scenario, solver: str) -> tuple[float, int] | None:
+    """The declared model's cost per residual and free parameters with its steering read as the
+    rivals' is: the run's own fit where it reads it so, else fitted again so."""
+    ours = run.reports[solver].result
+    if ours.n_residuals == 0:
+        return None
+    if sc.objective.residual.steering_sample == COMPARED or MODELS[sc.model].steer_max is None:
+        return ours.cost / ours.n_residuals, int(ours.x.size)
+    source = sc.log.source
+    assert isinstance(source, VendorSource)
+    return _fitted(_alike(sc, sc.model, dict(source.vendor), sc.parameters))
 
 
 def check(run: CalibrationRun, sc: Scenario | None) -> CheckResult | None:
@@ -84,10 +118,10 @@ def check(run: CalibrationRun, sc: Scenario | None) -> CheckResult | None:
     solver = run.chosen_solver()
     if sc is None or sc.data.joint or solver is None or not isinstance(sc.log.source, VendorSource):
         return None
-    ours = run.reports[solver].result
-    if ours.n_residuals == 0:
+    declared = _declared_fit(run, sc, solver)
+    if declared is None:
         return None
-    own, n_own = ours.cost / ours.n_residuals, int(ours.x.size)
+    own, n_own = declared
     fitted = {name: f for name in rivals(sc.model) if (f := _rival_fit(sc, name)) is not None}
     if not fitted:
         return None

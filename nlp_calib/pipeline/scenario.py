@@ -399,8 +399,14 @@ def _check_parameter_names(p: ParameterOptions, names: tuple[str, ...], source: 
     for key, given in (("bounds", p.bounds), ("fixed", p.fixed), ("priors", p.priors), ("known", p.known)):
         for n in given:
             _choice(n, names, f"{source}: {key}")
-    if len(set(p.fixed)) == len(names):
-        fail(f"{source}: fixed", "every parameter is fixed; nothing is left to estimate")
+    # The time offset is the recording's, not the robot's: fitted by default alongside the
+    # robot's and the mount's parameters, it is no calibration alone.
+    if set(names) - {LAG_PARAM} <= set(p.fixed):
+        fail(
+            f"{source}: fixed",
+            "every parameter of the robot and its sensor's mount is fixed; nothing is left to estimate "
+            "(the time offset is fitted only with them)",
+        )
 
 
 def _check_solvers(sc: Scenario, source: str) -> None:

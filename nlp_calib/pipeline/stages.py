@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from nlp_calib.logs import Log
 from nlp_calib.pipeline.align import Alignment, align
-from nlp_calib.pipeline.build import Problem, at_lags, build_stage
+from nlp_calib.pipeline.build import Problem, at_lags, build_stage, lags_held
 from nlp_calib.pipeline.prepare import PreparedLog, prepare
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.screen import Screening, exclude_faults, median_interval, screen
@@ -67,5 +67,8 @@ def setup_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> LogSetup
     screening = screen(problem.binder, read, records, problem.start.x0)
     alignment = align_stage(problem, prepared, screening)
     problem = at_lags(problem, [alignment.lag_s])
+    if alignment.estimate is not None and not alignment.estimate.converged:
+        # A lag no fit converged at is held where the encoders are read (a caveat, not a value).
+        problem = lags_held(problem)
     windows = bind_windows(problem, prepared, screening, alignment)
     return LogSetup(prepared, problem, screening, alignment, windows)

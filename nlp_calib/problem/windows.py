@@ -39,14 +39,16 @@ HORIZON_S = Range(0.0, 3600.0, lo_open=True)
 class ResidualOptions:
     """How residuals are formed (scenario key ``residual``): windows of ``horizon`` intervals every
     ``stride`` records, the model integrated ``exact`` or ``euler``, and where in an interval an
-    angle reading is taken (``steering_sample``: at its ``start``, ``end`` or ``mean``).
+    angle reading is taken (``steering_sample``: at its ``start``, ``end`` or ``mean``; ``mean`` the
+    default, since a reading held from the start lags half an interval and biases a fitted clock
+    offset by as much).
     ``horizon_s`` gives the windows' duration in seconds instead: the horizon in records then
     follows from each log's median interval (``nlp_calib.pipeline.prepare``)."""
 
     horizon: int = 1
     stride: int = 1
     integration: str = "exact"
-    steering_sample: str = "start"
+    steering_sample: str = "mean"
     horizon_s: float | None = None
 
     def __post_init__(self) -> None:

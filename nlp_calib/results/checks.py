@@ -213,6 +213,12 @@ class LagEstimate:
         """Whether a second valley of comparable cost leaves the lag between two values."""
         return len(self.other) == 3
 
+    @property
+    def pinned(self) -> bool:
+        """Whether the lag is a held value, not a fitted one: on the search's edge, or where no
+        fit converged (held where the encoders were read)."""
+        return self.at_edge or not self.converged
+
     def as_dict(self) -> dict[str, object]:
         return {
             "lag_s": self.lag_s,

@@ -316,16 +316,17 @@ class CalibrationRun:
         return {n: float("nan") if n in self.pinned() else s for n, s in std.items()}
 
     def pinned(self) -> tuple[str, ...]:
-        """The time offsets pinned on the edge of their search: the bound's value, with no σ (the
-        data put the lag at or beyond it; the verdict names the log)."""
+        """The time offsets pinned on the edge of their search (the bound's value: the data put
+        the lag at or beyond it) or held where no fit at any lag converged: with no σ, the verdict
+        naming the log."""
         layout = self.scenario.layout
         if not self.logs:
             est = self.data.lag_estimate
-            return layout.block(CLOCK) if est is not None and est.at_edge else ()
+            return layout.block(CLOCK) if est is not None and est.pinned else ()
         return tuple(
             n
             for i, part in enumerate(self.logs)
-            if part.data.lag_estimate is not None and part.data.lag_estimate.at_edge
+            if part.data.lag_estimate is not None and part.data.lag_estimate.pinned
             for n in layout.block(CLOCK, log=i)
             if layout.param(n).log in (i, None)
         )
