@@ -85,6 +85,8 @@ class Sensor(Protocol):
     @property
     def noise_names(self) -> tuple[str, ...]: ...
     @property
+    def weights(self) -> tuple[str, ...]: ...  # each error row's information weight by name (): by halves
+    @property
     def length_unit(self) -> str: ...  # the unit its positions are in ("m", or "trajectory units")
     @property
     def planar_base(self) -> bool: ...  # whether the base's planar odometry and drift check apply
@@ -168,6 +170,8 @@ class SensorDefaults:
     #: The parameters each log of a fit of several has its own of with the mount shared (a gyro's
     #: bias, which changes with each power cycle); ``mounts: per_log`` gives each log all of them.
     per_log: ClassVar[tuple[str, ...]] = ()
+    #: Each error row's information weight by name; (): translation rows, then rotation rows.
+    weights: ClassVar[tuple[str, ...]] = ()
     length_unit: str = "m"
     planar_base: ClassVar[bool] = False
     start_span_s: ClassVar[float | None] = None
