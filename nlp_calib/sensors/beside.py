@@ -87,20 +87,27 @@ class Beside(SensorDefaults):
         return ca.vertcat((1 - g) * e_ref, g * e_gyro)
 
     def predict(self, mount: ca.SX, M: ca.SX) -> ca.SX:
-        """The reference's motion (the poses, figures and odometry are the reference's)."""
-        return self.reference_sensor.predict(self._mounts(mount)[0], M)
+        """Both sensors' motions in the layout of ``z`` (the poses, figures and odometry are the
+        reference's: its rows)."""
+        ref, gyro = self._mounts(mount)
+        return ca.vertcat(self.reference_sensor.predict(ref, M), self.gyro.predict(gyro, M), 0)
 
     def between(self, a: ca.SX, b: ca.SX) -> ca.SX:
-        return self.reference_sensor.between(a, b)
+        """The reference's motion from pose ``a`` to ``b``, in the layout of ``z``."""
+        return ca.vertcat(self.reference_sensor.between(a, b), ca.DM.zeros(GYRO_ROWS + 1, 1))
 
     def between_jacobians(self, a: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """The reference's, in the layout of ``z`` (the gyro's rows and its flag: no pose noise)."""
+        """The reference's, in the layout of ``z`` over both sensors' noise (the reference's pose
+        noise, then the gyro's integrated angle: none at a pose)."""
         da, db = self.reference_sensor.between_jacobians(a, b)
-        pad = ca.DM.zeros(GYRO_ROWS + 1, 3)
-        return ca.vertcat(da, pad), ca.vertcat(db, pad)
+
+        def padded(d: ca.SX) -> ca.SX:
+            return ca.diagcat(d, ca.DM.zeros(GYRO_ROWS + 1, 3))
+
+        return padded(da), padded(db)
 
     def compose(self, pose: ca.SX, motion: ca.SX) -> ca.SX:
-        return self.reference_sensor.compose(pose, motion)
+        return self.reference_sensor.compose(pose, motion[:REFERENCE_ROWS])
 
     def base_from_sensor(self, T_world_sensor: ca.SX, mount: ca.SX) -> ca.SX:
         return self.reference_sensor.base_from_sensor(T_world_sensor, self._mounts(mount)[0])
@@ -127,6 +134,10 @@ class Beside(SensorDefaults):
         out[:3, ~g] = z[:REFERENCE_ROWS, ~g]
         out[3:, g] = z[REFERENCE_ROWS : REFERENCE_ROWS + 3, g]
         return out
+
+    def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The reference's increments, judged against its predicted motion (the gyro's are not)."""
+        return ~is_gyro(np.asarray(z).T), np.asarray(z)[:, :REFERENCE_ROWS]
 
     def poses(self, log: Log) -> np.ndarray:
         """The reference's poses composed from its one-interval increments (the log's own)."""
