@@ -118,11 +118,6 @@ class Sensor(Protocol):
     def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...  # increments judged, as predicted
     def poses(self, log: Log) -> np.ndarray: ...
     def jump_signal(self, log: Log) -> tuple[np.ndarray, int]: ...
-    def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Which increments ``z`` ``(n, z_rows)`` the screen judges against the sensor's predicted
-        motion, and their motions in its layout: all, as they are."""
-        return np.ones(z.shape[0], dtype=bool), z
-
     def repaired(self, log: Log, bad: np.ndarray) -> Log: ...
     def heights(self, log: Log) -> np.ndarray | None: ...
     def level(self, params: Mapping[str, float], first_pose: np.ndarray) -> np.ndarray | None: ...
@@ -202,6 +197,11 @@ class SensorDefaults:
 
     def repaired(self, log: Log, bad: np.ndarray) -> Log:
         return log
+
+    def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Which increments ``z`` ``(n, z_rows)`` the screen judges against the sensor's predicted
+        motion, and their motions in its layout: all, as they are."""
+        return np.ones(z.shape[0], dtype=bool), z
 
     def heights(self, log: Log) -> np.ndarray | None:
         return None

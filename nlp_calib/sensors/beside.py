@@ -144,7 +144,14 @@ class Beside(SensorDefaults):
         return log.T_world_sensor
 
     def jump_signal(self, log: Log) -> tuple[np.ndarray, int]:
-        return self.reference_sensor.jump_signal(log)
+        """The reference's poses as its signal, then the gyro's rates integrated to each record."""
+        signal, positions = self.reference_sensor.jump_signal(log)
+        turned = np.zeros((log.n_records, 3))
+        inc = log.motions
+        if inc is not None and inc.n:
+            g = is_gyro(inc.z.T)
+            np.add.at(turned, inc.last[g], inc.z[g, REFERENCE_ROWS : REFERENCE_ROWS + 3])
+        return np.column_stack([signal, np.cumsum(turned, axis=0)]), positions
 
     # --- the start -----------------------------------------------------------------------------
 
