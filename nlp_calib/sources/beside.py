@@ -89,7 +89,7 @@ class BesideSource:
 
     @classmethod
     def accepts(cls, path: Path) -> bool:
-        return False
+        return any(ref.accepts(path) for ref, *_ in PAIRS)
 
     @classmethod
     def parse(cls, raw: Any, where: str, base_dir: Path, also: tuple[str, ...] = ()) -> BesideSource:
