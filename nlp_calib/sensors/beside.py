@@ -36,6 +36,8 @@ from nlp_calib.sensors.planar import PlanarPose
 
 #: The rows of a reference's increment and of a gyro's in a window's ``z``; then the gyro row.
 REFERENCE_ROWS, GYRO_ROWS = 3, 4
+#: The IMU's link in the hand-off files.
+IMU_FRAME = "imu_link"
 #: Ω's rows, by the information weight each takes (``information: {translation, rotation, gyro}``).
 WEIGHTS: tuple[str, ...] = ("translation", "translation", "rotation", "gyro", "gyro", "gyro")
 
@@ -201,6 +203,6 @@ class Beside(SensorDefaults):
         """The reference's joint (x, y and yaw calibrated)."""
         return self.reference_sensor.mount_pose(params, std, frame, nominal)
 
-    def gyro_pose(self, params: Mapping[str, float], std: Mapping[str, float], frame: str) -> SensorMount:
-        """The IMU's joint (roll and pitch calibrated)."""
-        return self.gyro.mount_pose(params, std, frame, None)
+    def beside_mount(self, params: Mapping[str, float], std: Mapping[str, float]) -> SensorMount | None:
+        """The IMU's joint on ``imu_link`` (roll and pitch calibrated)."""
+        return self.gyro.mount_pose(params, std, IMU_FRAME, None)
