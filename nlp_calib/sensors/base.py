@@ -115,11 +115,7 @@ class Sensor(Protocol):
     def planar_yaw(self, params: Mapping[str, float]) -> float | None: ...  # mount yaw in the base plane
     def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str: ...
     def tangent(self, z: np.ndarray) -> np.ndarray: ...
-    def beside_mount(self, params: Mapping[str, float], std: Mapping[str, float]) -> SensorMount | None: ...
-    def beside_mount(self, params: Mapping[str, float], std: Mapping[str, float]) -> SensorMount | None:
-        """The mount of a second sensor fitted beside the reference (its own joint): none."""
-        return None
-
+    def beside_mount(self, params: Mapping[str, float], std: Mapping[str, float]) -> SensorMount | None: ...  # a 2nd joint
     def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...  # increments judged, as predicted
     def poses(self, log: Log) -> np.ndarray: ...
     def jump_signal(self, log: Log) -> tuple[np.ndarray, int]: ...
@@ -202,6 +198,10 @@ class SensorDefaults:
 
     def repaired(self, log: Log, bad: np.ndarray) -> Log:
         return log
+
+    def beside_mount(self, params: Mapping[str, float], std: Mapping[str, float]) -> SensorMount | None:
+        """The mount of a second sensor fitted beside the reference (its own joint): none."""
+        return None
 
     def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Which increments ``z`` ``(n, z_rows)`` the screen judges against the sensor's predicted
