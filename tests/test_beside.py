@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import warnings
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -37,8 +38,8 @@ BESIDE = {
     "robust": {"kernel": "huber", "delta": 3.0},
     "solvers": ["gauss_newton"],
 }
-#: A 5° roll; both drivers stamp 20 ms late.
-ROLL, LATE = float(np.radians(5.0)), 0.02
+#: A 5° roll; the lidar's driver stamps 20 ms late, the IMU's 45 ms (two clocks).
+ROLL, LATE, GYRO_LATE = float(np.radians(5.0)), 0.02, 0.045
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +47,8 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, flo
     """30 s in a room, a lidar and a rolled IMU on the base (seed never tuned on)."""
     folder = tmp_path_factory.mktemp("beside")
     lidar = LidarSimulationOptions(duration_s=30.0, seed=29, stamp_offset_s=LATE)
-    sim = simulate_beside(lidar, ImuSimulationOptions(seed=29, truth={"imu_roll": ROLL}))
+    gyro = ImuSimulationOptions(seed=29, truth={"imu_roll": ROLL}, stamp_offset_s=GYRO_LATE)
+    sim = simulate_beside(lidar, gyro)
     bag, truth_file = write_beside_simulation(sim, folder / "drive")
     truth = {RADIANS.get(k, k): v for k, v in json.loads(truth_file.read_text())["params"].items()}
     return bag, truth
@@ -81,15 +83,24 @@ def test_a_gyro_and_a_lidar_fit_within_3_sigma_and_check_reads_it_back(
     assert proc.returncode == 0, proc.stderr
     stored = yaml.safe_load((tmp_path / "out" / "calibration.yaml").read_text())
     est, std = stored["parameters"], stored["std"]
-    fitted = LENGTHS | {"sensor_x", "sensor_y", "sensor_theta", "imu_roll", "imu_pitch", "tracker_lag"}
-    fitted |= {"gyro_bias_x", "gyro_bias_y", "gyro_bias_z"}
+    fitted = LENGTHS | {"sensor_x", "sensor_y", "sensor_theta", "imu_roll", "imu_pitch"}
+    fitted |= {"gyro_bias_x", "gyro_bias_y", "gyro_bias_z", "tracker_lag", "gyro_lag"}
     assert fitted <= set(est)
     for name in sorted(fitted):
         assert abs(est[name] - truth[name]) < 3 * std[name], (name, est[name], truth[name], std[name])
-    assert abs(est["imu_roll"] - ROLL) < 0.005 and abs(est["tracker_lag"] - LATE) < 0.002
-    # Both blocks in the layout, each parameter in its own.
+    # Each clock its own offset: the gyro's found within 2 ms, 25 ms from the lidar's.
+    assert truth["tracker_lag"] == LATE and truth["gyro_lag"] == GYRO_LATE
+    assert abs(est["gyro_lag"] - GYRO_LATE) < 0.002 and abs(est["imu_roll"] - ROLL) < 0.005
+    # Each sensor's parameters in the layout's blocks: its mount, each clock's offset.
     blocks = {p["name"]: p["block"] for p in stored["layout"]["parameters"]}
-    assert blocks["sensor_x"] == "mount" and blocks["gyro_bias_z"] == "mount" and blocks["tracker_lag"] != "mount"
+    assert blocks["sensor_x"] == blocks["gyro_bias_z"] == "mount"
+    assert blocks["tracker_lag"] == blocks["gyro_lag"] == "clock"
+    # One URDF joint per sensor: the lidar's and the IMU's (its roll the fit's).
+    joints = {j.get("name"): j for j in ET.parse(tmp_path / "out" / "sensor_mount.urdf.xml").getroot()}
+    assert set(joints) == {"base_link_to_laser", "base_link_to_imu_link"}, set(joints)
+    rpy = joints["base_link_to_imu_link"].find("origin").get("rpy").split()  # type: ignore[union-attr]
+    assert float(rpy[0]) == pytest.approx(est["imu_roll"])
+    assert stored["beside"]["child"] == "imu_link"
     check = cli("check", str(tmp_path / "out" / "calibration.yaml"), str(scenario))
     assert check.returncode == 0, check.stdout + check.stderr
     assert "STILL GOOD" in check.stdout

@@ -125,9 +125,9 @@ def _simulate_imu(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
 
 def _simulate_beside(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
     """A lidar's and a gyro's bag of one drive, and the truth beside it (the options and --config:
-    the lidar's; the gyro takes its defaults, its seed and clock the lidar's)."""
+    the lidar's; the gyro takes its defaults, its seed and its driver's late stamps the lidar's)."""
     lidar = lidar_options(args.config, overrides)
-    sim = simulate_beside(lidar, imu_options(None, {"seed": lidar.seed}))
+    sim = simulate_beside(lidar, imu_options(None, {"seed": lidar.seed, "latency_s": lidar.stamp_offset_s}))
     bag, truth = _staged(args, lidar_paths(args.out), functools.partial(write_beside_simulation, sim))
     print(
         f"wrote {bag} ({lidar.duration_s:g} s, scans at {lidar.scan_rate_hz:g} Hz, the gyro at "

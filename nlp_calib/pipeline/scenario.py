@@ -24,7 +24,6 @@ from nlp_calib.core.config import coerce, fail, from_mapping, key_name, read_yam
 from nlp_calib.core.errors import ConfigError, FieldError, ScenarioError
 from nlp_calib.core.ranges import Range, check_choice, shown
 from nlp_calib.models import DEFAULT_MODEL, MODELS, KinematicModel, encoders, get_model
-from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.options import (
     AlignmentOptions,
@@ -362,7 +361,7 @@ def refuse_off_the_base(sc: Scenario, what: str, why: str) -> None:
 def scenario_params(sc: Scenario) -> tuple[str, ...]:
     """Every parameter of the scenario's problem: the model's, then its sensor's mount, then the
     tracker lag when it is estimated (``tracker_lag``: each log's, in a joint fit)."""
-    lag = (LAG_PARAM,) if sc.log.alignment.tracker_lag == "auto" else ()
+    lag = sc.objective.sensor.sensor.clocks if sc.log.alignment.tracker_lag == "auto" else ()
     return (*sc.model_form().kinematic_params, *sc.objective.sensor.params(), *lag)
 
 

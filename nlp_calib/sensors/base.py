@@ -30,6 +30,7 @@ import numpy as np
 
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.models.base import KinematicModel
+from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.results.mount import SensorMount
 
 #: A reference precision: a fraction of the parameter's value, or an absolute amount in its unit.
@@ -98,9 +99,12 @@ class Sensor(Protocol):
     def lengths_unseen(self) -> str: ...  # why it determines no length, in words ("": it measures them)
     @property
     def per_log(self) -> tuple[str, ...]: ...  # its parameters each log has its own of, even when shared
+    @property
+    def clocks(self) -> tuple[str, ...]: ...  # its clocks' offsets (the clock block's keys)
 
     # --- the error term (symbolic) -------------------------------------------------------------
     def residual(self, z: ca.SX, mount: ca.SX, M: ca.SX) -> ca.SX: ...
+    def clock_weights(self, z: ca.SX) -> ca.SX: ...  # which of its clocks a window's z is on
     def predict(self, mount: ca.SX, M: ca.SX) -> ca.SX: ...
     def between(self, a: ca.SX, b: ca.SX) -> ca.SX: ...
     def between_jacobians(self, a: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX]: ...
@@ -174,6 +178,8 @@ class SensorDefaults:
     per_log: ClassVar[tuple[str, ...]] = ()
     #: Each error row's information weight by name; (): translation rows, then rotation rows.
     weights: ClassVar[tuple[str, ...]] = ()
+    #: Its clocks' offsets, each a parameter of the clock block (one per log): the reference's.
+    clocks: ClassVar[tuple[str, ...]] = (LAG_PARAM,)
     length_unit: str = "m"
     planar_base: ClassVar[bool] = False
     start_span_s: ClassVar[float | None] = None
@@ -198,6 +204,11 @@ class SensorDefaults:
 
     def repaired(self, log: Log, bad: np.ndarray) -> Log:
         return log
+
+    def clock_weights(self, z: ca.SX) -> ca.SX:
+        """How much of each of :attr:`clocks`' offsets a window of measurement ``z`` is late by: its
+        one clock's, whole."""
+        return ca.DM.ones(len(self.clocks), 1)
 
     def beside_mount(self, params: Mapping[str, float], std: Mapping[str, float]) -> SensorMount | None:
         """The mount of a second sensor fitted beside the reference (its own joint): none."""

@@ -29,6 +29,7 @@ import numpy as np
 
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.models.base import KinematicModel
+from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.results.mount import SensorMount
 from nlp_calib.sensors.base import BaseMotion, SensorDefaults, SensorStart
 from nlp_calib.sensors.gyro import Gyro
@@ -36,6 +37,8 @@ from nlp_calib.sensors.planar import PlanarPose
 
 #: The rows of a reference's increment and of a gyro's in a window's ``z``; then the gyro row.
 REFERENCE_ROWS, GYRO_ROWS = 3, 4
+#: The gyro's clock offset: how late its driver stamps the rates (s; the reference's: ``tracker_lag``).
+GYRO_LAG = "gyro_lag"
 #: The IMU's link in the hand-off files.
 IMU_FRAME = "imu_link"
 #: Ω's rows, by the information weight each takes (``information: {translation, rotation, gyro}``).
@@ -61,6 +64,7 @@ class Beside(SensorDefaults):
     noise_groups = ((0, 1), (2,), (3, 4, 5))
     noise_names = ("tracker_xy", "tracker_theta", "gyro_angle")
     weights = WEIGHTS
+    clocks = (LAG_PARAM, GYRO_LAG)
     per_log = Gyro.per_log
 
     def __init__(self, scale_free: bool) -> None:
@@ -87,6 +91,11 @@ class Beside(SensorDefaults):
         e_ref = self.reference_sensor.residual(z[:REFERENCE_ROWS], ref, M)
         e_gyro = self.gyro.residual(z[REFERENCE_ROWS : REFERENCE_ROWS + GYRO_ROWS], gyro, M)
         return ca.vertcat((1 - g) * e_ref, g * e_gyro)
+
+    def clock_weights(self, z: ca.SX) -> ca.SX:
+        """A reference's window is on its clock (``tracker_lag``), a gyro's on the gyro's (``gyro_lag``)."""
+        g = z[REFERENCE_ROWS + GYRO_ROWS]
+        return ca.vertcat(1 - g, g)
 
     def predict(self, mount: ca.SX, M: ca.SX) -> ca.SX:
         """Both sensors' motions in the layout of ``z`` (the poses, figures and odometry are the

@@ -2,9 +2,9 @@
 
 The base drives in a room as the lidar simulator's does (:mod:`nlp_calib.simulation.lidar`; its
 fine grid also holds the IMU's samples); the IMU on it reads as the IMU simulator's does
-(:mod:`nlp_calib.simulation.imu`: tilt, biases, noise). Both drivers stamp the lidar's
-``stamp_offset_s`` late (one clock offset). The truth file holds the lidar's mount, the gyro's
-parameters and the wheels in their names. Deterministic for a given seed.
+(:mod:`nlp_calib.simulation.imu`: tilt, biases, noise). Each driver stamps its own
+``stamp_offset_s`` late (two clocks). The truth file holds the lidar's mount, the gyro's
+parameters, the wheels and both clocks' offsets (``tracker_lag``, ``gyro_lag``) in their names. Deterministic for a given seed.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import numpy as np
 
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.models.clock import LAG_PARAM
+from nlp_calib.sensors.beside import GYRO_LAG
 from nlp_calib.simulation.camera import EPOCH_S
 from nlp_calib.simulation.imu import DEFAULT_GYRO, ImuSimulation, ImuSimulationOptions, gyro_readings, imu_messages, imu_times
 from nlp_calib.simulation.lidar import (
@@ -41,18 +42,18 @@ class BesideSimulation:
     def truth_dict(self) -> dict[str, Any]:
         gyro = self.imu.truth_dict()["params"]
         params = {**self.lidar.options.truth, **gyro, LAG_PARAM: self.lidar.options.stamp_offset_s}
+        params[GYRO_LAG] = self.imu.options.stamp_offset_s
         return {**self.lidar.truth_dict(), "params": params, "imu_options": self.imu.truth_dict()["options"]}
 
 
 def simulate_beside(lidar: LidarSimulationOptions, imu: ImuSimulationOptions) -> BesideSimulation:
-    """The lidar's drive with the IMU's readings on it (the IMU's model, duration and clock offset
-    the lidar's; its truth's wheels the lidar's)."""
+    """The lidar's drive with the IMU's readings on it (the IMU's model and duration the lidar's;
+    its truth's wheels the lidar's; each driver stamps its own ``stamp_offset_s`` late)."""
     kinematic = {k: v for k, v in lidar.truth.items() if k not in DEFAULT_MOUNT}
     imu = replace(
         imu,
         model=lidar.model,
         duration_s=lidar.duration_s,
-        stamp_offset_s=lidar.stamp_offset_s,
         truth={**{k: imu.truth[k] for k in DEFAULT_GYRO}, **kinematic},
     )
     scans = simulate_lidar(lidar, also_s=imu_times(imu))
