@@ -113,10 +113,14 @@ def test_a_sensor_beside_is_refused_where_none_fits(drive: tuple[Path, dict[str,
         scenario_from_mapping(bad, "bad", bag.parent)
     # On load, not at the fit: a gyro beside a dataset that names no reference beside it ...
     gyro_only = {**BESIDE, "dataset": {"bag": str(bag), **JOINTS, "imu": "/imu"}}
-    with pytest.raises(ConfigError, match=r"dataset: sensor: \{mount: planar, beside: gyro\} reads .*scan: …, imu: …"):
+    with pytest.raises(
+        ConfigError, match=r"dataset: sensor: \{mount: planar, beside: gyro\} reads .*scan: …, imu: …"
+    ):
         scenario_from_mapping(gyro_only, "bad", bag.parent)
     # ... and a dataset naming both read by one sensor.
-    with pytest.raises(ConfigError, match=r"dataset: it names .* fit both with sensor: \{mount: planar, beside: gyro\}"):
+    with pytest.raises(
+        ConfigError, match=r"dataset: it names .* fit both with sensor: \{mount: planar, beside: gyro\}"
+    ):
         scenario_from_mapping({**_mapping(bag), "sensor": "planar"}, "bad", bag.parent)
     # The beside source's joints are the model's (each of its two sources reads them).
     wrong = _mapping(bag, joints=["left_wheel_joint", "right_wheel_joint", "caster_joint"])

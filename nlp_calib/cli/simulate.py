@@ -131,7 +131,8 @@ def _simulate_beside(args: argparse.Namespace, overrides: dict[str, Any]) -> int
     bag, truth = _staged(args, lidar_paths(args.out), functools.partial(write_beside_simulation, sim))
     print(
         f"wrote {bag} ({lidar.duration_s:g} s, scans at {lidar.scan_rate_hz:g} Hz, the gyro at "
-        f"{sim.imu.options.imu_rate_hz:g} Hz, both stamped {1000 * lidar.stamp_offset_s:g} ms late) and {truth}"
+        f"{sim.imu.options.imu_rate_hz:g} Hz, both stamped {1000 * lidar.stamp_offset_s:g} ms late) "
+        f"and {truth}"
     )
     print(
         f"a scenario reads it as: dataset: {{bag: {bag}, joint_states: /joint_states, joints: "

@@ -33,7 +33,9 @@ def _poses_at(log: Log, stamps_ns: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(at, t, T[:, 0]), np.interp(at, t, T[:, 1]), np.interp(at, t, heading)])
 
 
-def _placed(inc: RelativeMotions, own_ns: np.ndarray, stamps_ns: np.ndarray, z: np.ndarray) -> RelativeMotions:
+def _placed(
+    inc: RelativeMotions, own_ns: np.ndarray, stamps_ns: np.ndarray, z: np.ndarray
+) -> RelativeMotions:
     return RelativeMotions(
         np.searchsorted(stamps_ns, own_ns[inc.first]).astype(np.int64),
         np.searchsorted(stamps_ns, own_ns[inc.last]).astype(np.int64),

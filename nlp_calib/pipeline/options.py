@@ -245,7 +245,9 @@ class SensorOptions:
         check_choice("scale", self.scale, SCALES)
         if self.beside and (self.mount, self.beside) not in BESIDE:
             pairs = ", ".join(f"{{mount: {m}, beside: {b}}}" for m, b in BESIDE)
-            raise FieldError("beside", f"a second sensor fits beside: {pairs}; got {self.beside!r} beside {self.mount}")
+            raise FieldError(
+                "beside", f"a second sensor fits beside: {pairs}; got {self.beside!r} beside {self.mount}"
+            )
         try:
             sensor_for(self.kind, self.scale)
         except ProblemError as exc:

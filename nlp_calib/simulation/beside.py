@@ -4,7 +4,8 @@ The base drives in a room as the lidar simulator's does (:mod:`nlp_calib.simulat
 fine grid also holds the IMU's samples); the IMU on it reads as the IMU simulator's does
 (:mod:`nlp_calib.simulation.imu`: tilt, biases, noise). Each driver stamps its own
 ``stamp_offset_s`` late (two clocks). The truth file holds the lidar's mount, the gyro's
-parameters, the wheels and both clocks' offsets (``tracker_lag``, ``gyro_lag``) in their names. Deterministic for a given seed.
+parameters, the wheels and both clocks' offsets (``tracker_lag``, ``gyro_lag``) in their names.
+Deterministic for a given seed.
 """
 
 from __future__ import annotations
@@ -20,7 +21,14 @@ from nlp_calib.core.files import atomic_write_text
 from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.sensors.beside import GYRO_LAG
 from nlp_calib.simulation.camera import EPOCH_S
-from nlp_calib.simulation.imu import DEFAULT_GYRO, ImuSimulation, ImuSimulationOptions, gyro_readings, imu_messages, imu_times
+from nlp_calib.simulation.imu import (
+    DEFAULT_GYRO,
+    ImuSimulation,
+    ImuSimulationOptions,
+    gyro_readings,
+    imu_messages,
+    imu_times,
+)
 from nlp_calib.simulation.lidar import (
     DEFAULT_MOUNT,
     LidarSimulation,

@@ -103,4 +103,6 @@ class BesideSource:
                 fail(f"{where}.{key_name(key)}", f"unknown key; a reference beside a gyro has {valid}")
         ref_raw = {k: v for k, v in raw.items() if k in ref_keys}
         gyro_raw = {k: v for k, v in raw.items() if k in gyro_keys}
-        return cls(ref_cls.parse(ref_raw, where, base_dir, also), gyro_cls.parse(gyro_raw, where, base_dir, also))
+        return cls(
+            ref_cls.parse(ref_raw, where, base_dir, also), gyro_cls.parse(gyro_raw, where, base_dir, also)
+        )
