@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from types import MappingProxyType
+from typing import ClassVar
 
 import casadi as ca
 import numpy as np
@@ -66,6 +67,8 @@ class Beside(SensorDefaults):
     weights = WEIGHTS
     clocks = (LAG_PARAM, GYRO_LAG)
     per_log = Gyro.per_log
+    turning: ClassVar[tuple[str, ...]] = (*PlanarPose.turning, *Gyro.turning)
+    angles: ClassVar[tuple[str, ...]] = (*PlanarPose.angles, *Gyro.angles)
 
     def __init__(self, scale_free: bool) -> None:
         self.reference_sensor = PlanarPose()
@@ -75,8 +78,6 @@ class Beside(SensorDefaults):
         self.units: Mapping[str, str] = MappingProxyType({**ref.units, **gyro.units})
         self.components: Mapping[str, str] = MappingProxyType(dict(ref.components))
         self.reference = MappingProxyType({**ref.reference, **gyro.reference})
-        self.turning: tuple[str, ...] = (*ref.turning, *gyro.turning)
-        self.angles: tuple[str, ...] = (*ref.angles, *gyro.angles)
         self.convention = f"{ref.label}: its pose on the base; {gyro.convention}"
 
     def _mounts(self, mount: ca.SX) -> tuple[ca.SX, ca.SX]:
