@@ -56,17 +56,17 @@ class Beside(SensorDefaults):
     module docstring); ``scale_free``: the gyro's scale factor is fitted (a reference that
     measures lengths determines it)."""
 
-    kind = "planar_gyro"
-    label = "planar motions beside a gyro"
-    group = "SE(2)"
-    pose_rows = 3
-    z_rows = REFERENCE_ROWS + GYRO_ROWS + 1
-    error_rows = 6
-    noise_groups = ((0, 1), (2,), (3, 4, 5))
-    noise_names = ("tracker_xy", "tracker_theta", "gyro_angle")
-    weights = WEIGHTS
-    clocks = (LAG_PARAM, GYRO_LAG)
-    per_log = Gyro.per_log
+    kind: ClassVar[str] = "planar_gyro"
+    label: ClassVar[str] = "planar motions beside a gyro"
+    group: ClassVar[str] = "SE(2)"
+    pose_rows: ClassVar[int] = 3
+    z_rows: ClassVar[int] = REFERENCE_ROWS + GYRO_ROWS + 1
+    error_rows: ClassVar[int] = 6
+    noise_groups: ClassVar[tuple[tuple[int, ...], ...]] = ((0, 1), (2,), (3, 4, 5))
+    noise_names: ClassVar[tuple[str, ...]] = ("tracker_xy", "tracker_theta", "gyro_angle")
+    weights: ClassVar[tuple[str, ...]] = WEIGHTS
+    clocks: ClassVar[tuple[str, ...]] = (LAG_PARAM, GYRO_LAG)
+    per_log: ClassVar[tuple[str, ...]] = Gyro.per_log
     turning: ClassVar[tuple[str, ...]] = (*PlanarPose.turning, *Gyro.turning)
     angles: ClassVar[tuple[str, ...]] = (*PlanarPose.angles, *Gyro.angles)
 
