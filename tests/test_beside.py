@@ -68,6 +68,10 @@ def test_the_lengths_a_gyro_alone_cannot_see_are_determined_beside_a_lidar(
         gyro = preflight(scenario_from_mapping(alone, "gyro", bag.parent))
         both = preflight(scenario_from_mapping(_mapping(bag), "beside", bag.parent))
     assert LENGTHS <= {p.name for p in gyro.parameters if p.status == NOT_DETERMINED}
+    # The way out names the key that fits a reference beside the gyro.
+    assert "or fit it beside a reference that measures distance (sensor: {mount: planar, beside: gyro}" in (
+        gyro.way_out
+    )
     status = {p.name: p.status for p in both.parameters}
     assert LENGTHS | {"sensor_x", "gyro_bias_z", "imu_roll", "tracker_lag"} <= set(status)
     assert NOT_DETERMINED not in status.values(), status

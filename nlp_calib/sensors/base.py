@@ -98,6 +98,8 @@ class Sensor(Protocol):
     @property
     def lengths_unseen(self) -> str: ...  # why it determines no length, in words ("": it measures them)
     @property
+    def lengths_from(self) -> str: ...  # what determines the lengths it does not, in words
+    @property
     def per_log(self) -> tuple[str, ...]: ...  # its parameters each log has its own of, even when shared
     @property
     def clocks(self) -> tuple[str, ...]: ...  # its clocks' offsets (the clock block's keys)
@@ -175,6 +177,7 @@ class SensorDefaults:
     turning: ClassVar[tuple[str, ...]] = ()
     angles: ClassVar[tuple[str, ...]] = ()
     lengths_unseen: ClassVar[str] = ""
+    lengths_from: ClassVar[str] = "fit beside a reference that measures distance"
     #: The parameters each log of a fit of several has its own of with the mount shared (a gyro's
     #: bias, which changes with each power cycle); ``mounts: per_log`` gives each log all of them.
     per_log: ClassVar[tuple[str, ...]] = ()
