@@ -138,3 +138,15 @@ def test_simulate_writes_a_lidar_and_gyro_bag_a_scenario_reads(tmp_path: Path) -
     truth = json.loads((tmp_path / "d.truth.json").read_text())["params"]
     assert {"sensor_x", "gyro_bias_z", "imu_roll", "k_left", "tracker_lag"} <= set(truth)
     assert "scan: /scan, imu: /imu" in proc.stdout and "beside: gyro" in proc.stdout
+
+
+def test_codegen_exports_the_two_sensors_residual(
+    drive: tuple[Path, dict[str, float]], tmp_path: Path
+) -> None:
+    """The C export of a problem whose windows are either sensor's (was: a KeyError on its z's rows)."""
+    bag, _ = drive
+    scenario = tmp_path / "beside.yaml"
+    scenario.write_text(yaml.safe_dump(_mapping(bag)))
+    proc = cli("codegen", str(scenario), "--out", str(tmp_path / "c"))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "in 8 rows, as sensor planar_gyro lays out its z" in (tmp_path / "c" / "example.c").read_text()
