@@ -24,7 +24,6 @@ from nlp_calib.core.config import coerce, fail, from_mapping, key_name, read_yam
 from nlp_calib.core.errors import ConfigError, FieldError, ScenarioError
 from nlp_calib.core.ranges import Range, check_choice, shown
 from nlp_calib.models import DEFAULT_MODEL, MODELS, KinematicModel, encoders, get_model
-from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.options import (
     STEERING_DEG,
@@ -46,6 +45,8 @@ from nlp_calib.pipeline.options import (
 from nlp_calib.solvers import SOLVERS
 from nlp_calib.sources import (
     BagSource,
+    BesideSource,
+    DatasetSource,
     JointLogSource,
     LidarSource,
     MotionsSource,
@@ -55,6 +56,7 @@ from nlp_calib.sources import (
 )
 from nlp_calib.sources.bag import check_joints
 from nlp_calib.sources.base import encoder_joints
+from nlp_calib.sources.beside import PAIRS as BESIDE_PAIRS
 from nlp_calib.sources.joints import check_encoders
 
 #: Numbers a library may be handed as they are (``ipopt.options``).
@@ -342,13 +344,36 @@ def check_against_model(sc: Scenario, source: str) -> None:
         _choice(enc, encoders(model), f"{source}: counts_per_turn")
     for i, entry in enumerate(sc.data.logs):
         key = f"datasets[{i}]" if sc.data.joint else "dataset"
-        if isinstance(entry.source, (BagSource, LidarSource)):
-            check_joints(entry.source.joints, model, f"{source}: {key}.joints")
-        if isinstance(entry.source, (JointLogSource, MotionsSource)):
-            check_encoders(entry.source.encoders, model, f"{source}: {key}.encoders")
+        _check_beside(sc, entry.source, f"{source}: {key}")
+        # A gyro beside a reference: each of its two sources reads the joints.
+        both = (entry.source.reference, entry.source.gyro) if isinstance(entry.source, BesideSource) else ()
+        for one in both or (entry.source,):
+            if isinstance(one, (BagSource, LidarSource)):
+                check_joints(one.joints, model, f"{source}: {key}.joints")
+            if isinstance(one, (JointLogSource, MotionsSource)):
+                check_encoders(one.encoders, model, f"{source}: {key}.encoders")
     _check_units(sc, source)
     _check_solvers(sc, source)
     _check_overlaps(sc, source)
+
+
+def _check_beside(sc: Scenario, source: DatasetSource, where: str) -> None:
+    """A sensor beside the reference (``sensor: {…, beside: gyro}``) reads a dataset naming both
+    sensors' streams, and such a dataset is read by no other sensor."""
+    sensor = sc.objective.sensor
+    pairs = " or ".join(f"{{{ref}: …, {gyro}: …}}" for _, _, ref, gyro in BESIDE_PAIRS)
+    if sensor.beside and not isinstance(source, BesideSource):
+        fail(
+            where,
+            f"sensor: {{mount: {sensor.mount}, beside: {sensor.beside}}} reads the reference's own motions "
+            f"and a gyro's rates from one dataset naming both ({pairs}, beside the joints; docs/imu.md)",
+        )
+    if isinstance(source, BesideSource) and not sensor.beside:
+        fail(
+            where,
+            f"it names a reference's own motions and a gyro's rates ({pairs}): fit both with sensor: "
+            f"{{mount: planar, beside: gyro}}, or leave one of the two keys out (sensor: {sensor.mount})",
+        )
 
 
 def refuse_off_the_base(sc: Scenario, what: str, why: str) -> None:
@@ -364,7 +389,7 @@ def refuse_off_the_base(sc: Scenario, what: str, why: str) -> None:
 def scenario_params(sc: Scenario) -> tuple[str, ...]:
     """Every parameter of the scenario's problem: the model's, then its sensor's mount, then the
     tracker lag when it is estimated (``tracker_lag``: each log's, in a joint fit)."""
-    lag = (LAG_PARAM,) if sc.log.alignment.tracker_lag == "auto" else ()
+    lag = sc.objective.sensor.sensor.clocks if sc.log.alignment.tracker_lag == "auto" else ()
     return (*sc.model_form().kinematic_params, *sc.objective.sensor.params(), *lag)
 
 
