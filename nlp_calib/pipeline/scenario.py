@@ -489,7 +489,7 @@ def load_scenario(path: str | Path) -> Scenario:
 
 def with_joint_limits(sc: Scenario, limits: Mapping[str, float]) -> tuple[Scenario, str | None]:
     """``sc`` with its steered wheels' largest angle (``vehicle.max_steering_deg``) from the joint
-    ``limits`` (rad, by joint name: a URDF's ``<limit>``) of the joints its steering encoders read,
+    ``limits`` (rad, by joint name: a URDF's ``<limit>``) of the joints its angle encoders read,
     the tightest of them, and a line saying so; unchanged where the scenario gives the angle itself
     or names no such joint. A limit beyond a quarter turn is taken as a quarter turn."""
     if sc.parameters.vehicle.max_steering_deg is not None:
@@ -508,8 +508,8 @@ def with_joint_limits(sc: Scenario, limits: Mapping[str, float]) -> tuple[Scenar
     degrees = min(math.degrees(found[joint]), STEERING_DEG.hi)
     if not degrees > 0:
         raise ScenarioError(
-            f"{sc.name}: the steering joint {joint!r}'s <limit> in the URDF is 0: the wheel cannot steer; "
-            "give its real limits, or vehicle: {max_steering_deg: <degrees>}"
+            f"{sc.name}: the steered wheel's joint {joint!r}'s <limit> in the URDF is 0: the wheel cannot "
+            "steer; give its real limits, or vehicle: {max_steering_deg: <degrees>}"
         )
     vehicle = dataclasses.replace(sc.parameters.vehicle, max_steering_deg=degrees)
     said = f"{sc.name}: the plan steers within ±{degrees:.3g}°, the URDF's <limit> of joint {joint!r}"
