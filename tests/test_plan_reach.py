@@ -195,7 +195,7 @@ def test_the_urdfs_steering_limit_bounds_the_plan_as_the_scenarios_would(
     [
         ('lower="-0.5" upper="nan"', "<limit upper='nan'> is not a finite number of radians"),
         ('lower="left" upper="0.5"', "<limit lower='left'> is not a finite number of radians"),
-        ('lower="0" upper="0"', "the steering joint 'front_steer_joint''s <limit> in the URDF is 0"),
+        ('lower="0" upper="0"', "the steered wheel's joint 'front_steer_joint''s <limit> in the URDF is 0"),
     ],
 )
 def test_a_steering_limit_that_cannot_be_right_is_refused(

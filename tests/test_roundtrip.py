@@ -80,12 +80,14 @@ def test_every_layout_is_read_back_as_written(
     stored = read_calibration(path)
     assert stored.layout == layout
     # What each parameter is comes from the layout, never from its name's spelling.
-    assert len(layout.block(CLOCK)) == lags
+    # Each of the sensor's clocks (a gyro beside a reference: two) has an offset per log.
+    clocks = len(sensor_for(sensor).clocks)
+    assert len(layout.block(CLOCK)) == lags * clocks
     assert len(layout.block(MOUNT)) == len(sensor_for(sensor).params) * mounts
     for i in range(max(lags, mounts, 1)):
         own = layout.owned(i)
         assert all(layout.param(n).log == i for n in own)
-        assert len(own) == (lags > 1) + (mounts > 1) * len(sensor_for(sensor).params)
+        assert len(own) == (lags > 1) * clocks + (mounts > 1) * len(sensor_for(sensor).params)
     # A check starts a new log from the robot's shared parameters only, by the keys scenarios use.
     start = stored.start()
     assert not set(start) & {p.key for p in layout.parameters if p.block == CLOCK}

@@ -197,10 +197,12 @@ def increment_faults(
     if inc is None or inc.n == 0:
         return []
     p = np.ravel(np.asarray(params, dtype=float))
-    steps = over_columns(fns.predict, p, inputs)[0].T
-    if inc.z.shape[1] == 3:
+    # The increments its prediction is of, in its layout (beside a gyro: the reference's alone).
+    screened, z = fns.sensor.screened(inc.z)
+    steps = over_columns(fns.predict, p, inputs)[0].T[:, : z.shape[1]]
+    if z.shape[1] == 3:
         prefix = poses.accumulate(np.zeros(3), steps)
-        error = poses.between(inc.z, poses.between(prefix[inc.first], prefix[inc.last]))
+        error = poses.between(z, poses.between(prefix[inc.first], prefix[inc.last]))
         unit = ("m", "m", "rad")
     else:  # a gyro's integrated rates add up (its bias, the same over each interval, is the centre's)
         prefix = np.vstack([np.zeros((1, steps.shape[1])), np.cumsum(steps, axis=0)])
@@ -210,7 +212,7 @@ def increment_faults(
     travel = np.concatenate([[0.0], np.cumsum(np.abs(steps[:, 0]))])
     turned = np.abs(prefix[inc.last, 2] - prefix[inc.first, 2])
     pivot = (travel[inc.last] - travel[inc.first] < PIVOT_RADIUS_M * turned) & (unit[0] == "m")
-    judged = np.ones(inc.n, dtype=bool)
+    judged = np.array(screened, dtype=bool)
     for f in known:
         judged &= (inc.last - 1 < f.first) | (inc.first > f.last)
     if judged.sum() < 10:

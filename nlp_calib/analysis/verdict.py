@@ -357,7 +357,7 @@ def way_out(
         )
         return (
             f"{sensor.lengths_unseen if sensor else ''}: {what}; next: give one as measured (known: "
-            f"{{{lengths[-1]}: <metres>}}), or fit beside a reference that measures distance"
+            f"{{{lengths[-1]}: <metres>}}), or {sensor.lengths_from if sensor else 'measure a distance'}"
         )
     if any(layout.in_block(n, CLOCK) for n in names):
         return (

@@ -150,6 +150,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "nlp-calib simulate --out my_drive.txt --records 2000 --seed 3 --latency 0.05",
         "nlp-calib simulate --lidar --out lidar_drive --duration 120",
         "nlp-calib simulate --imu --out gyro_drive --duration 120 --latency 0.02",
+        "nlp-calib simulate --lidar --imu --out lidar_gyro_drive --duration 60",
     ),
     "check": (
         "nlp-calib check out/demo/calibration.yaml todays_drive.txt",
@@ -395,11 +396,12 @@ def _add_simulate(sub: Any) -> None:
         "/tf_static, and --out.truth.json (docs/lidar.md); --outliers: the share of degraded scans; "
         "--latency: how late its driver stamps the scans",
     )
-    kind.add_argument(
+    p.add_argument(
         "--imu",
         action="store_true",
         help="a tilted gyro with a bias: a ROS 2 bag (folder --out) of /imu, /joint_states and /tf_static, "
-        "and --out.truth.json (docs/imu.md); --latency: how late its driver stamps the rates",
+        "and --out.truth.json (docs/imu.md); --latency: how late its driver stamps the rates; with "
+        "--lidar: both on one drive in one bag, both drivers stamping --latency late",
     )
     kind.add_argument(
         "--vendor",

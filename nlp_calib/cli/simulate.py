@@ -21,6 +21,7 @@ from nlp_calib.pipeline.simconfig import (
     vendor_options,
 )
 from nlp_calib.simulation import simulate_to_file, truth_path
+from nlp_calib.simulation.beside import simulate_beside, write_beside_simulation
 from nlp_calib.simulation.camera import camera_paths, simulate_camera, write_camera_simulation
 from nlp_calib.simulation.imu import imu_paths, simulate_imu, write_imu_simulation
 from nlp_calib.simulation.lidar import lidar_paths, simulate_lidar, write_lidar_simulation
@@ -46,11 +47,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     out: Path = args.out
     if out.is_dir() or out.name in ("", ".", ".."):
         raise UsageError(f"--out {out} is a folder; give the path of the log file to write")
+    imu = getattr(args, "imu", False)
     if getattr(args, "lidar", False):
-        return _simulate_lidar(args, overrides)
+        return _simulate_beside(args, overrides) if imu else _simulate_lidar(args, overrides)
+    if imu and (getattr(args, "vendor", False) or out.suffix.lower() == ".tum"):
+        raise UsageError("--imu goes alone or beside --lidar (one bag of both)")
     if getattr(args, "vendor", False):
         return _simulate_vendor(args, overrides)
-    if getattr(args, "imu", False):
+    if imu:
         return _simulate_imu(args, overrides)
     if out.suffix.lower() == ".tum":
         return _simulate_camera(args, overrides)
@@ -115,6 +119,25 @@ def _simulate_imu(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
         f"a scenario reads it as: dataset: {{bag: {bag}, joint_states: /joint_states, joints: "
         f"[{joints}], imu: /imu}}, with model: {opts.model} and sensor: gyro (docs/imu.md; nlp-calib init "
         f"{bag} drafts it)"
+    )
+    return 0
+
+
+def _simulate_beside(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
+    """A lidar's and a gyro's bag of one drive, and the truth beside it (the options and --config:
+    the lidar's; the gyro takes its defaults, its seed and its driver's late stamps the lidar's)."""
+    lidar = lidar_options(args.config, overrides)
+    sim = simulate_beside(lidar, imu_options(None, {"seed": lidar.seed, "latency_s": lidar.stamp_offset_s}))
+    bag, truth = _staged(args, lidar_paths(args.out), functools.partial(write_beside_simulation, sim))
+    print(
+        f"wrote {bag} ({lidar.duration_s:g} s, scans at {lidar.scan_rate_hz:g} Hz, the gyro at "
+        f"{sim.imu.options.imu_rate_hz:g} Hz, both stamped {1000 * lidar.stamp_offset_s:g} ms late) "
+        f"and {truth}"
+    )
+    print(
+        f"a scenario reads it as: dataset: {{bag: {bag}, joint_states: /joint_states, joints: "
+        f"[{', '.join(sim.lidar.joint_names)}], scan: /scan, imu: /imu}}, with sensor: "
+        "{mount: planar, beside: gyro} (docs/imu.md)"
     )
     return 0
 

@@ -160,7 +160,7 @@ int main(void) {{
   const casadi_real params[{n}] = {{{_c_array(params)}}};
   /* Model inputs of the {H} interval(s), interval after interval: {c_comment(inputs)}. */
   const casadi_real u[{n_in * H}] = {{{_c_array(U)}}};
-  /* Measured sensor motion {_MOTION[zr]}. */
+  /* Measured sensor motion {_MOTION.get(zr, f"in {zr} rows, as sensor {fns.sensor.kind} lays out its z")}. */
   const casadi_real z[{zr}] = {{{_c_array(z)}}};
 {_clock_lines(fns, clock)}  casadi_real e[{r}], J[{nj}]; /* J is column-major: J[i + {r}*j] = de_i/ddelta_j */
 

@@ -76,6 +76,8 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "mount": _mount_entry(mount),
         # A mount per log: each log's own, one URDF joint each (the block above is the first's).
         **_per_log_mounts(run, solver),
+        # A sensor fitted beside the reference (a gyro's IMU): its own URDF joint.
+        **_beside_mount(run, solver),
         "parameters": best["params"],
         # What the fit held rather than estimated (a value given, not calibrated: no σ, std null).
         **_held_entry(run, solver),
@@ -121,6 +123,11 @@ def _held_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
 def _per_log_mounts(run: CalibrationRun, solver: str) -> dict[str, Any]:
     every = run.reports[solver].mounts
     return {"mounts": [{"log": m.log, **_mount_entry(m.mount)} for m in every]} if every else {}
+
+
+def _beside_mount(run: CalibrationRun, solver: str) -> dict[str, Any]:
+    beside = run.reports[solver].beside
+    return {"beside": _mount_entry(beside)} if beside is not None else {}
 
 
 def _encoder(e: Encoder) -> dict[str, Any]:
@@ -239,7 +246,8 @@ def urdf_mount(run: CalibrationRun) -> tuple[str, SensorMount] | None:
     found = handoff_mount(run)
     if found is None:
         return None
-    every = [found[1], *(m.mount for m in run.reports[found[0]].mounts)]
+    report = run.reports[found[0]]
+    every = [found[1], *(m.mount for m in report.mounts), *([report.beside] if report.beside else [])]
     return None if any(m.undetermined for m in every) else found
 
 
@@ -253,6 +261,9 @@ def urdf_joint(
     if every and not users:
         return _log_joints(run, solver, every)
     mount = mount or _mount_of(run, solver)
+    beside = run.reports[solver].beside
+    if beside is not None and not users:
+        return _beside_joints(run, solver, mount, beside)
     where = (
         f"It is your joint '{mount.joint}' re-posed, as in robot.urdf: replace yours with it."
         if users
@@ -281,11 +292,27 @@ def _log_joints(run: CalibrationRun, solver: str, every: Sequence[LogMount]) -> 
     return _xml(robot, comment)
 
 
+def _beside_joints(run: CalibrationRun, solver: str, mount: SensorMount, beside: SensorMount) -> str:
+    """The reference's joint and the joint of the sensor fitted beside it (a gyro's IMU)."""
+    robot = ET.Element("robot", {"name": run.scenario.name})
+    robot.append(_joint(mount))
+    robot.append(_joint(beside))
+    comment = (
+        f" Sensor mounting poses calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
+        f"solver {solver}, one joint per sensor. '{mount.child}': {mount.words()}. '{beside.child}': "
+        f"{beside.words()}. Paste these joints into the robot's <robot> description; the links "
+        f"'{mount.child}' and '{beside.child}' must be declared there. "
+    )
+    return _xml(robot, comment)
+
+
 def urdf_robot(run: CalibrationRun, solver: str, mount: SensorMount | None = None) -> str:
     """A complete URDF: a ``<robot>`` with ``base_link``, the sensor's link and the calibrated joint
     (every log's own, with a mount per log)."""
     mount = mount or _mount_of(run, solver)
     mounts = [m.mount for m in run.reports[solver].mounts] or [mount]
+    beside = run.reports[solver].beside
+    mounts += [beside] if beside is not None else []
     robot = ET.Element("robot", {"name": run.scenario.name})
     ET.SubElement(robot, "link", {"name": mount.parent})
     for m in mounts:

@@ -212,12 +212,17 @@ def _report(
     sd = dict(zip(result.names, map(float, std)))
     held = {c: given[n] for c, n in sensor.components.items() if n in given}
     listed = {**{n: f"held at its initial value: {why}" for n, why in prepared.held.items()}, **given}
+    beside = sensor.beside_mount(result.param_dict(), sd)
     if views is None:
         mount = sensor.mount_pose(result.param_dict(), sd, header.sensor_frame, header.sensor_z_roll_pitch)
-        return SolverReport(result, u, *scored.scores[name], controller, mount.holding(held), held=listed)
+        return SolverReport(
+            result, u, *scored.scores[name], controller, mount.holding(held), held=listed, beside=beside
+        )
     mount, every = views.mounts(sensor, result.param_dict(), sd)
     every = tuple(dataclasses.replace(m, mount=m.mount.holding(held)) for m in every)
-    return SolverReport(result, u, *scored.scores[name], controller, mount.holding(held), every, listed)
+    return SolverReport(
+        result, u, *scored.scores[name], controller, mount.holding(held), every, held=listed, beside=beside
+    )
 
 
 def given_params(prepared: PreparedLog) -> dict[str, str]:

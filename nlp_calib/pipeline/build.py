@@ -16,7 +16,6 @@ from nlp_calib.analysis import uncertainty
 from nlp_calib.core.errors import ScenarioError
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, header_parameters
-from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.problem import (
@@ -73,7 +72,7 @@ def build_problem(
         horizon=residual.horizon,
         integration=residual.integration,
         kernel=sc.objective.robust.kernel,
-        sensor=sensor.mount,
+        sensor=sensor.kind,
         scale=sensor.scale,
         lags=lag_count(sc, n_logs),
         mounts=mount_count(sc, n_logs),
@@ -82,23 +81,26 @@ def build_problem(
     # A scenario names a parameter by its key: fixing it fixes every log's own.
     layout = problem_layout(model, sensor_for(spec.sensor, spec.scale), spec)
     # (A lag held outside the problem, re-sampled at, is no parameter of it.)
-    fixed = layout.named(k for k in (*sc.parameters.fixed, *also_fixed) if k != LAG_PARAM or spec.lags)
+    clocks = sc.objective.sensor.sensor.clocks
+    fixed = layout.named(k for k in (*sc.parameters.fixed, *also_fixed) if k not in clocks or spec.lags)
     with scenario_key(sc, "residual"):
         return build(model, replace(spec, fixed=fixed))
 
 
 def lag_start(sc: Scenario, n_logs: int, given: Sequence[float] = ()) -> dict[str, float]:
-    """The time offsets' starting values: ``given`` (one per log), else the scenario's value for
-    ``tracker_lag`` (known, or under initial_guess), else 0."""
+    """The time offsets' starting values, each of the sensor's clocks of each log: ``given`` (one
+    per log), else the scenario's value for it (known, or under initial_guess), else 0."""
     p = sc.parameters
-    value = p.known.get(
-        LAG_PARAM, p.initial_guess.get(LAG_PARAM, 0.0) if isinstance(p.initial_guess, Mapping) else 0.0
-    )
-    names = [own_name(LAG_PARAM, i, n_logs) for i in range(lag_count(sc, n_logs))]
+    guess = p.initial_guess if isinstance(p.initial_guess, Mapping) else {}
     lo, hi = sc.log.alignment.search
-    # A start outside the search (0 when the search is all one side of it) starts at its middle.
-    start = float(value) if lo <= value <= hi else 0.5 * (lo + hi)
-    return {n: float(given[i]) if given else start for i, n in enumerate(names)}
+    out = {}
+    for key in sc.objective.sensor.sensor.clocks:
+        value = p.known.get(key, guess.get(key, 0.0))
+        # A start outside the search (0 when the search is all one side of it) starts at its middle.
+        start = float(value) if lo <= value <= hi else 0.5 * (lo + hi)
+        for i in range(lag_count(sc, n_logs)):
+            out[own_name(key, i, n_logs)] = float(given[i]) if given else start
+    return out
 
 
 def initial_parameters(sc: Scenario, model: KinematicModel, log: Log) -> dict[str, float]:
@@ -194,7 +196,7 @@ def _key(fns: ProblemFunctions, name: str, given: Mapping[str, object]) -> str:
 
 def _bounds(sc: Scenario, fns: ProblemFunctions, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The scenario's bounds; a time offset's, unless given, ``alignment.search``."""
-    bounds = {LAG_PARAM: sc.log.alignment.search, **sc.parameters.bounds}
+    bounds = {**dict.fromkeys(fns.sensor.clocks, sc.log.alignment.search), **sc.parameters.bounds}
     keys = [_key(fns, n, bounds) for n in fns.free]
     lower = np.array([bounds[k][0] if k in bounds else -np.inf for k in keys])
     upper = np.array([bounds[k][1] if k in bounds else np.inf for k in keys])
@@ -363,7 +365,7 @@ class Binder:
             self.fns,
             data,
             x_fixed=self.x_fixed,
-            omega=np.array(sc.objective.information.omega(self.fns.error_rows)),
+            omega=np.array(sc.objective.information.omega(self.fns.error_rows, self.fns.sensor.weights)),
             delta=sc.objective.robust.delta,
             priors=self.priors,
             backend=self.backend,
@@ -475,7 +477,7 @@ def at_lags(problem: Problem, lags: Sequence[float]) -> Problem:
     """``problem`` starting at the time offsets ``lags`` (one per log; the data's own once they are
     re-sampled there, so the problem's clock correction starts at zero)."""
     fns, start = problem.fns, problem.start
-    given = dict(zip(fns.layout.block(CLOCK), lags))
+    given = {n: lags[fns.layout.param(n).log or 0] for n in fns.layout.block(CLOCK)}
     if not any(n in given for n in fns.free):
         return problem
     initial = {**start.initial, **given}

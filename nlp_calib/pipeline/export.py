@@ -30,7 +30,7 @@ def write_c_export(sc: Scenario, out_dir: Path) -> tuple[list[Path], Example]:
     residual, sensor = sc.objective.residual, sc.objective.sensor
     with scenario_key(sc, "residual"):
         problems = build_for_export(
-            model, residual.horizon, residual.integration, sensor.mount, sensor.scale, lag_count(sc, 1)
+            model, residual.horizon, residual.integration, sensor.kind, sensor.scale, lag_count(sc, 1)
         )
     last = problems[-1]
     H = last.spec.horizon

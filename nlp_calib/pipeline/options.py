@@ -11,7 +11,7 @@ from pathlib import Path
 from nlp_calib.core.errors import FieldError, ProblemError
 from nlp_calib.core.ranges import MAGNITUDE, Range, check_choice, check_range, check_ros_name
 from nlp_calib.problem import ResidualOptions
-from nlp_calib.sensors import SCALES, SENSORS, Sensor, sensor_for
+from nlp_calib.sensors import BESIDE, SCALES, SENSORS, Sensor, sensor_for
 from nlp_calib.solvers.backends import BACKENDS
 from nlp_calib.sources import DatasetSource
 from nlp_calib.symbolic.kernels import KERNELS
@@ -61,18 +61,28 @@ class RobustOptions:
 
 @dataclass(frozen=True)
 class InformationWeights:
-    """Diagonal of Ω: weight of the x/y error (1/m²) and of the angle error (1/rad²)."""
+    """Diagonal of Ω: weight of the x/y error (1/m²) and of the angle error (1/rad²); ``gyro``: of a
+    gyro's integrated angle beside another reference (1/rad²; its own noise, not the reference's;
+    default: ``rotation``)."""
 
     translation: float = 1.0
     rotation: float = 1.0
+    gyro: float | None = None
 
     def __post_init__(self) -> None:
         check_range("translation", self.translation, WEIGHT)
         check_range("rotation", self.rotation, WEIGHT)
+        if self.gyro is not None:
+            check_range("gyro", self.gyro, WEIGHT)
 
-    def omega(self, error_rows: int = 3) -> tuple[float, ...]:
+    def omega(self, error_rows: int = 3, weights: tuple[str, ...] = ()) -> tuple[float, ...]:
         """Ω's diagonal for a residual of ``error_rows`` rows: translation first, then rotation
-        (planar: x, y, θ; a 3-D sensor: x, y, z, then three rotation components)."""
+        (planar: x, y, θ; a 3-D sensor: x, y, z, then three rotation components); or each row's
+        weight by name where the sensor names them (``weights``: a reference beside a gyro)."""
+        if weights:
+            named = {"translation": self.translation, "rotation": self.rotation}
+            named["gyro"] = self.rotation if self.gyro is None else self.gyro
+            return tuple(named[w] for w in weights)
         half = error_rows // 2
         return (self.translation,) * (error_rows - half) + (self.rotation,) * half
 
@@ -222,25 +232,37 @@ class SensorOptions:
     only up to scale (monocular visual odometry). ``sensor: 3d`` is short for ``{mount: 3d}``.
     ``mounts: per_log``: logs fitted together (``datasets``) each have their own mount (the sensor
     moved between them, or each log is another sensor's), the wheels shared; ``shared`` (default):
-    one mount for all."""
+    one mount for all. ``beside: gyro``: a gyro beside the reference, both fitted in one objective
+    (:data:`nlp_calib.sensors.BESIDE`; docs/imu.md)."""
 
     mount: str = "planar"
     scale: str = "fixed"
     mounts: str = "shared"
+    beside: str = ""
 
     def __post_init__(self) -> None:
         check_choice("mount", self.mount, tuple(SENSORS))
         check_choice("mounts", self.mounts, MOUNTS)
         check_choice("scale", self.scale, SCALES)
+        if self.beside and (self.mount, self.beside) not in BESIDE:
+            pairs = ", ".join(f"{{mount: {m}, beside: {b}}}" for m, b in BESIDE)
+            raise FieldError(
+                "beside", f"a second sensor fits beside: {pairs}; got {self.beside!r} beside {self.mount}"
+            )
         try:
-            sensor_for(self.mount, self.scale)
+            sensor_for(self.kind, self.scale)
         except ProblemError as exc:
             raise FieldError("scale", str(exc)) from None
 
     @property
+    def kind(self) -> str:
+        """The registered sensor that fits the reference (and the sensor beside it)."""
+        return BESIDE[(self.mount, self.beside)] if self.beside else self.mount
+
+    @property
     def sensor(self) -> Sensor:
         """The sensor plug-in."""
-        return sensor_for(self.mount, self.scale)
+        return sensor_for(self.kind, self.scale)
 
     def params(self) -> tuple[str, ...]:
         """The parameters of the sensor's mount (and the scale, when free), in state order."""

@@ -407,7 +407,7 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
     """The drive of ``sc`` prepared and its Jacobian evaluated at the start brought to the data."""
     d, held = drive(sc, logs)
     fns, one = d.fns, d.scenario
-    omega = np.array(one.objective.information.omega(fns.error_rows))
+    omega = np.array(one.objective.information.omega(fns.error_rows, fns.sensor.weights))
     fitted = _fitted(d, omega)
     x, info, where = fitted[:3] if fitted is not None else _rough(d, omega)
     at = "the fit" if fitted is not None else "the start"

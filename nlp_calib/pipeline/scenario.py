@@ -24,7 +24,6 @@ from nlp_calib.core.config import coerce, fail, from_mapping, key_name, read_yam
 from nlp_calib.core.errors import ConfigError, FieldError, ScenarioError
 from nlp_calib.core.ranges import Range, check_choice, shown
 from nlp_calib.models import DEFAULT_MODEL, MODELS, KinematicModel, encoders, get_model
-from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.options import (
     STEERING_DEG,
@@ -46,6 +45,8 @@ from nlp_calib.pipeline.options import (
 from nlp_calib.solvers import SOLVERS
 from nlp_calib.sources import (
     BagSource,
+    BesideSource,
+    DatasetSource,
     JointLogSource,
     LidarSource,
     MotionsSource,
@@ -55,6 +56,7 @@ from nlp_calib.sources import (
 )
 from nlp_calib.sources.bag import check_joints
 from nlp_calib.sources.base import encoder_joints
+from nlp_calib.sources.beside import PAIRS as BESIDE_PAIRS
 from nlp_calib.sources.joints import check_encoders
 
 #: Numbers a library may be handed as they are (``ipopt.options``).
@@ -335,20 +337,43 @@ def check_against_model(sc: Scenario, source: str) -> None:
     except FieldError as exc:
         fail(f"{source}: {exc.field}", exc.reason)
     model = sc.model_form()
-    _check_parameter_names(sc.parameters, scenario_params(sc), source)
+    _check_parameter_names(sc.parameters, scenario_params(sc), sc.objective.sensor.sensor.clocks, source)
     for enc in sc.data.encoder_noise:
         _choice(enc, encoders(model), f"{source}: encoder_noise")
     for enc in sc.data.counts_per_turn:
         _choice(enc, encoders(model), f"{source}: counts_per_turn")
     for i, entry in enumerate(sc.data.logs):
         key = f"datasets[{i}]" if sc.data.joint else "dataset"
-        if isinstance(entry.source, (BagSource, LidarSource)):
-            check_joints(entry.source.joints, model, f"{source}: {key}.joints")
-        if isinstance(entry.source, (JointLogSource, MotionsSource)):
-            check_encoders(entry.source.encoders, model, f"{source}: {key}.encoders")
+        _check_beside(sc, entry.source, f"{source}: {key}")
+        # A gyro beside a reference: each of its two sources reads the joints.
+        both = (entry.source.reference, entry.source.gyro) if isinstance(entry.source, BesideSource) else ()
+        for one in both or (entry.source,):
+            if isinstance(one, (BagSource, LidarSource)):
+                check_joints(one.joints, model, f"{source}: {key}.joints")
+            if isinstance(one, (JointLogSource, MotionsSource)):
+                check_encoders(one.encoders, model, f"{source}: {key}.encoders")
     _check_units(sc, source)
     _check_solvers(sc, source)
     _check_overlaps(sc, source)
+
+
+def _check_beside(sc: Scenario, source: DatasetSource, where: str) -> None:
+    """A sensor beside the reference (``sensor: {…, beside: gyro}``) reads a dataset naming both
+    sensors' streams, and such a dataset is read by no other sensor."""
+    sensor = sc.objective.sensor
+    pairs = " or ".join(f"{{{ref}: …, {gyro}: …}}" for _, _, ref, gyro in BESIDE_PAIRS)
+    if sensor.beside and not isinstance(source, BesideSource):
+        fail(
+            where,
+            f"sensor: {{mount: {sensor.mount}, beside: {sensor.beside}}} reads the reference's own motions "
+            f"and a gyro's rates from one dataset naming both ({pairs}, beside the joints; docs/imu.md)",
+        )
+    if isinstance(source, BesideSource) and not sensor.beside:
+        fail(
+            where,
+            f"it names a reference's own motions and a gyro's rates ({pairs}): fit both with sensor: "
+            f"{{mount: planar, beside: gyro}}, or leave one of the two keys out (sensor: {sensor.mount})",
+        )
 
 
 def refuse_off_the_base(sc: Scenario, what: str, why: str) -> None:
@@ -364,7 +389,7 @@ def refuse_off_the_base(sc: Scenario, what: str, why: str) -> None:
 def scenario_params(sc: Scenario) -> tuple[str, ...]:
     """Every parameter of the scenario's problem: the model's, then its sensor's mount, then the
     tracker lag when it is estimated (``tracker_lag``: each log's, in a joint fit)."""
-    lag = (LAG_PARAM,) if sc.log.alignment.tracker_lag == "auto" else ()
+    lag = sc.objective.sensor.sensor.clocks if sc.log.alignment.tracker_lag == "auto" else ()
     return (*sc.model_form().kinematic_params, *sc.objective.sensor.params(), *lag)
 
 
@@ -392,7 +417,9 @@ def _check_name(sc: Scenario, source: str) -> None:
         fail(f"{source}: name", f"must be a plain folder name (no '/', '\\' or NUL), got {sc.name!r}")
 
 
-def _check_parameter_names(p: ParameterOptions, names: tuple[str, ...], source: str) -> None:
+def _check_parameter_names(
+    p: ParameterOptions, names: tuple[str, ...], clocks: tuple[str, ...], source: str
+) -> None:
     if isinstance(p.initial_guess, Mapping):
         for n in p.initial_guess:
             _choice(n, names, f"{source}: initial_guess")
@@ -401,7 +428,7 @@ def _check_parameter_names(p: ParameterOptions, names: tuple[str, ...], source: 
             _choice(n, names, f"{source}: {key}")
     # The time offset is the recording's, not the robot's: fitted by default alongside the
     # robot's and the mount's parameters, it is no calibration alone.
-    if set(names) - {LAG_PARAM} <= set(p.fixed):
+    if set(names) - set(clocks) <= set(p.fixed):
         fail(
             f"{source}: fixed",
             "every parameter of the robot and its sensor's mount is fixed; nothing is left to estimate "
@@ -470,7 +497,7 @@ def load_scenario(path: str | Path) -> Scenario:
 
 def with_joint_limits(sc: Scenario, limits: Mapping[str, float]) -> tuple[Scenario, str | None]:
     """``sc`` with its steered wheels' largest angle (``vehicle.max_steering_deg``) from the joint
-    ``limits`` (rad, by joint name: a URDF's ``<limit>``) of the joints its steering encoders read,
+    ``limits`` (rad, by joint name: a URDF's ``<limit>``) of the joints its angle encoders read,
     the tightest of them, and a line saying so; unchanged where the scenario gives the angle itself
     or names no such joint. A limit beyond a quarter turn is taken as a quarter turn."""
     if sc.parameters.vehicle.max_steering_deg is not None:
@@ -489,8 +516,8 @@ def with_joint_limits(sc: Scenario, limits: Mapping[str, float]) -> tuple[Scenar
     degrees = min(math.degrees(found[joint]), STEERING_DEG.hi)
     if not degrees > 0:
         raise ScenarioError(
-            f"{sc.name}: the steering joint {joint!r}'s <limit> in the URDF is 0: the wheel cannot steer; "
-            "give its real limits, or vehicle: {max_steering_deg: <degrees>}"
+            f"{sc.name}: the steered wheel's joint {joint!r}'s <limit> in the URDF is 0: the wheel cannot "
+            "steer; give its real limits, or vehicle: {max_steering_deg: <degrees>}"
         )
     vehicle = dataclasses.replace(sc.parameters.vehicle, max_steering_deg=degrees)
     said = f"{sc.name}: the plan steers within ±{degrees:.3g}°, the URDF's <limit> of joint {joint!r}"

@@ -338,16 +338,27 @@ class ProblemFunctions(TrajectoryFunctions):
         """The residual of a window's ``data`` for ``params`` and base motion ``M`` (before the clock)."""
         at = {n: i for i, n in enumerate(self.names)}
         k = params[: len(self.model.kinematic_params)]
-        lags = ca.vertcat(*[params[at[n]] for n in self.layout.block(CLOCK)])
         z_rows, n_in = self.sensor.z_rows, self.n_inputs
         first = z_rows + (2 * n_in + 1 if self.spec.lags else 0)
         select = data[first : first + self.select_rows]
         if self.spec.lags:
             ends = data[z_rows : z_rows + n_in], data[z_rows + n_in : z_rows + 2 * n_in]
             resampled = data[z_rows + 2 * n_in]
-            delta = ca.dot(select, lags) - resampled
+            delta = ca.dot(select, self._lags(params, data[0:z_rows], at)) - resampled
             M = clock.shifted(self.model, k, M, ends, delta, self.spec.integration)
         return self.sensor.residual(data[0:z_rows], self._mount(params, select, at), M)
+
+    def _lags(self, params: ca.SX, z: ca.SX, at: Mapping[str, int]) -> ca.SX:
+        """Each log's time offset for a window of measurement ``z``: its sensor's clocks' offsets
+        (the clock block's, that log's own) weighted by which clock the window is on."""
+        weights = self.sensor.clock_weights(z)
+        of = {(p.log or 0, p.key): at[p.name] for p in self.layout.parameters if p.block == CLOCK}
+        return ca.vertcat(
+            *[
+                sum(weights[c] * params[of[(i, key)]] for c, key in enumerate(self.sensor.clocks))
+                for i in range(self.spec.lags)
+            ]
+        )
 
     def _mount(self, params: ca.SX, select: ca.SX, at: Mapping[str, int]) -> ca.SX:
         """The window's mount in the sensor's order: a shared parameter as it is, a log's own picked
@@ -599,7 +610,9 @@ def problem_layout(model: KinematicModel, sensor: Sensor, spec: ProblemSpec) -> 
         *mount,
     ]
     if spec.lags:
-        clock = BlockSpec(CLOCK, (LAG_PARAM,), {LAG_PARAM: LAG_UNIT}, True, precision=LAG_REFERENCE)
+        clocks = sensor.clocks
+        needed = dict.fromkeys(clocks, LAG_REFERENCE[LAG_PARAM])
+        clock = BlockSpec(CLOCK, clocks, dict.fromkeys(clocks, LAG_UNIT), True, precision=needed)
         blocks.append(clock)
     layout = Layout.of(blocks, max(spec.lags, spec.mounts, 1), tuple(model.headline))
     return layout.with_status(

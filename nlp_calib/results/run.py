@@ -234,6 +234,8 @@ class SolverReport:
     mount: SensorMount | None = None
     #: A fit with a mount per log: every log's own (one URDF joint each).
     mounts: tuple[LogMount, ...] = ()
+    #: The mount of a sensor fitted beside the reference (a gyro's IMU): its own URDF joint.
+    beside: SensorMount | None = None
     #: The parameters the fit held rather than estimated, with why (given under ``known:``, held
     #: under ``fixed:``, or held at the guess because the drive cannot determine them).
     held: Mapping[str, str] = field(default_factory=dict)

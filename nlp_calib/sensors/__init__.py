@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.sensors.base import BaseMotion, Reference, Sensor, SensorStart
+from nlp_calib.sensors.beside import Beside
 from nlp_calib.sensors.camera import CameraPose
 from nlp_calib.sensors.gyro import Gyro
 from nlp_calib.sensors.planar import PlanarPose
@@ -21,11 +22,15 @@ SENSORS: dict[str, Callable[[str], Sensor]] = {
     "planar": lambda scale: PlanarPose(),
     "3d": lambda scale: CameraPose(scale == "free"),
     "gyro": lambda scale: Gyro(scale == "free"),
+    "planar_gyro": lambda scale: Beside(scale == "free"),
 }
+#: A reference with a second sensor beside it (``sensor: {mount: planar, beside: gyro}``): the
+#: registered sensor that fits both.
+BESIDE: dict[tuple[str, str], str] = {("planar", "gyro"): "planar_gyro"}
 #: Poses are metric (``fixed``) or known up to scale (``free``: the sensor then estimates it).
 SCALES = ("fixed", "free")
 #: Sensors whose scale may be fitted (a camera's trajectory known up to scale, a gyro's scale factor).
-SCALE_FREE = frozenset({"3d", "gyro"})
+SCALE_FREE = frozenset({"3d", "gyro", "planar_gyro"})
 
 
 @functools.cache
@@ -43,4 +48,4 @@ def sensor_for(kind: str, scale: str = "fixed") -> Sensor:
     return SENSORS[kind](scale)
 
 
-__all__ = ["SCALES", "SENSORS", "BaseMotion", "Reference", "Sensor", "SensorStart", "sensor_for"]
+__all__ = ["BESIDE", "SCALES", "SENSORS", "BaseMotion", "Reference", "Sensor", "SensorStart", "sensor_for"]

@@ -30,6 +30,7 @@ import numpy as np
 
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.models.base import KinematicModel
+from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.results.mount import SensorMount
 
 #: A reference precision: a fraction of the parameter's value, or an absolute amount in its unit.
@@ -85,6 +86,8 @@ class Sensor(Protocol):
     @property
     def noise_names(self) -> tuple[str, ...]: ...
     @property
+    def weights(self) -> tuple[str, ...]: ...  # each error row's information weight by name (): by halves
+    @property
     def length_unit(self) -> str: ...  # the unit its positions are in ("m", or "trajectory units")
     @property
     def planar_base(self) -> bool: ...  # whether the base's planar odometry and drift check apply
@@ -95,10 +98,15 @@ class Sensor(Protocol):
     @property
     def lengths_unseen(self) -> str: ...  # why it determines no length, in words ("": it measures them)
     @property
+    def lengths_from(self) -> str: ...  # what determines the lengths it does not, in words
+    @property
     def per_log(self) -> tuple[str, ...]: ...  # its parameters each log has its own of, even when shared
+    @property
+    def clocks(self) -> tuple[str, ...]: ...  # its clocks' offsets (the clock block's keys)
 
     # --- the error term (symbolic) -------------------------------------------------------------
     def residual(self, z: ca.SX, mount: ca.SX, M: ca.SX) -> ca.SX: ...
+    def clock_weights(self, z: ca.SX) -> ca.SX: ...  # which of its clocks a window's z is on
     def predict(self, mount: ca.SX, M: ca.SX) -> ca.SX: ...
     def between(self, a: ca.SX, b: ca.SX) -> ca.SX: ...
     def between_jacobians(self, a: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX]: ...
@@ -113,6 +121,10 @@ class Sensor(Protocol):
     def planar_yaw(self, params: Mapping[str, float]) -> float | None: ...  # mount yaw in the base plane
     def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str: ...
     def tangent(self, z: np.ndarray) -> np.ndarray: ...
+    def beside_mount(
+        self, params: Mapping[str, float], std: Mapping[str, float]
+    ) -> SensorMount | None: ...  # a 2nd joint
+    def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...  # increments judged, as predicted
     def poses(self, log: Log) -> np.ndarray: ...
     def jump_signal(self, log: Log) -> tuple[np.ndarray, int]: ...
     def repaired(self, log: Log, bad: np.ndarray) -> Log: ...
@@ -165,9 +177,14 @@ class SensorDefaults:
     turning: ClassVar[tuple[str, ...]] = ()
     angles: ClassVar[tuple[str, ...]] = ()
     lengths_unseen: ClassVar[str] = ""
+    lengths_from: ClassVar[str] = "fit beside a reference that measures distance"
     #: The parameters each log of a fit of several has its own of with the mount shared (a gyro's
     #: bias, which changes with each power cycle); ``mounts: per_log`` gives each log all of them.
     per_log: ClassVar[tuple[str, ...]] = ()
+    #: Each error row's information weight by name; (): translation rows, then rotation rows.
+    weights: ClassVar[tuple[str, ...]] = ()
+    #: Its clocks' offsets, each a parameter of the clock block (one per log): the reference's.
+    clocks: ClassVar[tuple[str, ...]] = (LAG_PARAM,)
     length_unit: str = "m"
     planar_base: ClassVar[bool] = False
     start_span_s: ClassVar[float | None] = None
@@ -192,6 +209,20 @@ class SensorDefaults:
 
     def repaired(self, log: Log, bad: np.ndarray) -> Log:
         return log
+
+    def clock_weights(self, z: ca.SX) -> ca.SX:
+        """How much of each of :attr:`clocks`' offsets a window of measurement ``z`` is late by: its
+        one clock's, whole."""
+        return ca.DM.ones(len(self.clocks), 1)
+
+    def beside_mount(self, params: Mapping[str, float], std: Mapping[str, float]) -> SensorMount | None:
+        """The mount of a second sensor fitted beside the reference (its own joint): none."""
+        return None
+
+    def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Which increments ``z`` ``(n, z_rows)`` the screen judges against the sensor's predicted
+        motion, and their motions in its layout: all, as they are."""
+        return np.ones(z.shape[0], dtype=bool), z
 
     def heights(self, log: Log) -> np.ndarray | None:
         return None

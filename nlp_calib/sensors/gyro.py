@@ -89,6 +89,10 @@ class Gyro(SensorDefaults):
     noise_groups: ClassVar[tuple[tuple[int, ...], ...]] = ((0, 1, 2),)
     noise_names: ClassVar[tuple[str, ...]] = ("gyro_angle",)
     lengths_unseen: ClassVar[str] = "a gyro measures turning, no length"
+    lengths_from: ClassVar[str] = (
+        "fit it beside a reference that measures distance (sensor: {mount: planar, beside: gyro}, "
+        "with a lidar's scan: or a motions: file in the dataset; docs/imu.md)"
+    )
     per_log: ClassVar[tuple[str, ...]] = BIAS_PARAMS
 
     def __init__(self, scale_free: bool) -> None:

@@ -106,13 +106,17 @@ def imu_rotation(truth: Mapping[str, float]) -> np.ndarray:
     return np.asarray(poses3d.rpy_to_matrix(np.array([truth["imu_roll"], truth["imu_pitch"], 0.0])))
 
 
-def simulate_imu(opts: ImuSimulationOptions) -> ImuSimulation:
-    """Simulate a drive, the gyro's rates and the joints."""
-    rng = np.random.default_rng(opts.seed)
-    t_imu = np.arange(0.0, opts.duration_s, 1.0 / opts.imu_rate_hz)
-    t_joints = np.arange(-0.5, opts.duration_s + 0.5, 1.0 / opts.joint_rate_hz)
-    t_fine = fine_grid(t_imu, t_joints)
-    planar, channels = base_motion(opts.model, opts.truth, opts.drive, rng, t_fine)
+def imu_times(opts: ImuSimulationOptions) -> np.ndarray:
+    """The IMU's sample times (s from the start, as sampled)."""
+    return np.arange(0.0, opts.duration_s, 1.0 / opts.imu_rate_hz)
+
+
+def gyro_readings(
+    opts: ImuSimulationOptions, rng: np.random.Generator, t_fine: np.ndarray, planar: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The gyro's rates and the accelerometer's readings at :func:`imu_times` over the base's
+    drive ``planar`` on the fine grid ``t_fine`` (which holds those times)."""
+    t_imu = imu_times(opts)
     # The base's turn rate at each sample: the fine grid's steps (1 ms) are exact arcs.
     turn_rate = np.diff(np.unwrap(planar[:, 2])) / np.diff(t_fine)
     yaw_rate = np.interp(t_imu, 0.5 * (t_fine[1:] + t_fine[:-1]), turn_rate)
@@ -120,13 +124,23 @@ def simulate_imu(opts: ImuSimulationOptions) -> ImuSimulation:
     bias = np.array([opts.truth[n] for n in ("gyro_bias_x", "gyro_bias_y", "gyro_bias_z")])
     rates = opts.scale * yaw_rate[:, None] * R[2][None, :] + bias
     rates += rng.normal(0.0, opts.rate_noise, rates.shape)
-    accel = np.broadcast_to(GRAVITY * R[2], rates.shape)
+    return rates, np.array(np.broadcast_to(GRAVITY * R[2], rates.shape))
+
+
+def simulate_imu(opts: ImuSimulationOptions) -> ImuSimulation:
+    """Simulate a drive, the gyro's rates and the joints."""
+    rng = np.random.default_rng(opts.seed)
+    t_imu = imu_times(opts)
+    t_joints = np.arange(-0.5, opts.duration_s + 0.5, 1.0 / opts.joint_rate_hz)
+    t_fine = fine_grid(t_imu, t_joints)
+    planar, channels = base_motion(opts.model, opts.truth, opts.drive, rng, t_fine)
+    rates, accel = gyro_readings(opts, rng, t_fine, planar)
     at_joints = np.searchsorted(t_fine, t_joints)
     angles = joint_map(opts.model).angles(opts.truth, {k: v[at_joints] for k, v in channels.items()})
     return ImuSimulation(
         imu_time_s=EPOCH_S + t_imu + opts.stamp_offset_s,
         rates=rates,
-        accel=np.array(accel),
+        accel=accel,
         joint_time_s=EPOCH_S + t_joints,
         joint_names=tuple(angles),
         joint_positions=np.column_stack(list(angles.values())),
@@ -143,11 +157,16 @@ def write_imu_simulation(sim: ImuSimulation, bag: str | Path) -> tuple[Path, Pat
     """Write the bag (``/joint_states``, ``/imu``, ``/tf_static``) and the truth JSON."""
     path, truth = imu_paths(bag)
     ns = lambda t: round(float(t) * 1e9)  # noqa: E731
-    messages = [tf_static(ns(sim.joint_time_s[0]), "base_link", "imu_link", IMU_XYZ, 0.0)]
-    messages += [
+    messages = [
         joint_state(ns(s), sim.joint_names, row) for s, row in zip(sim.joint_time_s, sim.joint_positions)
     ]
-    messages += [imu(ns(s), "imu_link", w, a) for s, w, a in zip(sim.imu_time_s, sim.rates, sim.accel)]
-    write_bag(path, messages)
+    write_bag(path, imu_messages(sim) + messages)
     atomic_write_text(truth, json.dumps(sim.truth_dict(), indent=2) + "\n")
     return path, truth
+
+
+def imu_messages(sim: ImuSimulation) -> list[Any]:
+    """The IMU's messages: its ``/tf_static`` and ``/imu``."""
+    ns = lambda t: round(float(t) * 1e9)  # noqa: E731
+    messages = [tf_static(ns(sim.joint_time_s[0]), "base_link", "imu_link", IMU_XYZ, 0.0)]
+    return messages + [imu(ns(s), "imu_link", w, a) for s, w, a in zip(sim.imu_time_s, sim.rates, sim.accel)]

@@ -103,6 +103,9 @@ class LidarSimulation:
     options: LidarSimulationOptions
     #: The lidar's true pose ``(x, y, θ)`` at each scan's stamp (where a late sweep is not seen).
     lidar_poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    #: The base's drive on the fine grid: its times (s, from the start) and planar poses ``(n, 3)``.
+    fine_time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    base_poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     def true_motions(self) -> np.ndarray:
         """The lidar's true motion ``(n - 1, 3)`` between consecutive scans' stamps."""
@@ -162,12 +165,14 @@ def _crowd(rng: np.random.Generator, ranges: np.ndarray, range_max: float) -> np
     return out
 
 
-def simulate_lidar(opts: LidarSimulationOptions) -> LidarSimulation:
-    """Simulate a drive in a room, the lidar's scans and the joints."""
+def simulate_lidar(opts: LidarSimulationOptions, also_s: np.ndarray | None = None) -> LidarSimulation:
+    """Simulate a drive in a room, the lidar's scans and the joints; ``also_s``: further times (s)
+    the drive's fine grid holds (another sensor's samples)."""
     rng = np.random.default_rng(opts.seed)
     t_scans = np.arange(0.0, opts.duration_s, 1.0 / opts.scan_rate_hz)
     t_joints = np.arange(-0.5, opts.duration_s + 0.5, 1.0 / opts.joint_rate_hz)
-    t_fine = fine_grid(np.concatenate([t_scans, t_scans + LATE_S]), t_joints)
+    more = np.zeros(0) if also_s is None else np.asarray(also_s, dtype=float)
+    t_fine = fine_grid(np.concatenate([t_scans, t_scans + LATE_S, more]), t_joints)
     planar, channels = base_motion(opts.model, opts.truth, opts.drive, rng, t_fine)
     mount = np.array([opts.truth[n] for n in ("sensor_x", "sensor_y", "sensor_theta")])
     stamped = poses.compose(planar[np.searchsorted(t_fine, t_scans)], mount)
@@ -201,6 +206,8 @@ def simulate_lidar(opts: LidarSimulationOptions) -> LidarSimulation:
         degraded=degraded.astype(np.int64),
         options=opts,
         lidar_poses=stamped,
+        fine_time_s=t_fine,
+        base_poses=planar,
     )
 
 
@@ -213,6 +220,13 @@ def lidar_paths(bag: str | Path) -> tuple[Path, Path]:
 def write_lidar_simulation(sim: LidarSimulation, bag: str | Path) -> tuple[Path, Path]:
     """Write the bag (``/joint_states``, ``/scan``, ``/tf_static``) and the truth JSON."""
     path, truth = lidar_paths(bag)
+    write_bag(path, lidar_messages(sim))
+    atomic_write_text(truth, json.dumps(sim.truth_dict(), indent=2) + "\n")
+    return path, truth
+
+
+def lidar_messages(sim: LidarSimulation) -> list[Any]:
+    """The bag's messages: ``/tf_static``, ``/joint_states`` and ``/scan``."""
     ns = lambda t: round(float(t) * 1e9)  # noqa: E731
     t = sim.options.truth
     nominal = (round(t["sensor_x"], 1), round(t["sensor_y"], 1), LIDAR_Z)
@@ -225,6 +239,4 @@ def write_lidar_simulation(sim: LidarSimulation, bag: str | Path) -> tuple[Path,
         laser_scan(ns(s), "laser", sim.angles, r, sim.options.range_max, period)
         for s, r in zip(sim.scan_time_s, sim.ranges)
     ]
-    write_bag(path, messages)
-    atomic_write_text(truth, json.dumps(sim.truth_dict(), indent=2) + "\n")
-    return path, truth
+    return messages

@@ -13,6 +13,7 @@ from typing import Any
 from nlp_calib.core.config import fail
 from nlp_calib.sources.bag import BagSource
 from nlp_calib.sources.base import DatasetSource
+from nlp_calib.sources.beside import BesideSource
 from nlp_calib.sources.imu import GyroCsvSource, ImuSource
 from nlp_calib.sources.joints import JointLogSource
 from nlp_calib.sources.lidar import LidarSource
@@ -24,6 +25,7 @@ from nlp_calib.sources.vendor import VendorSource
 SOURCES: dict[str, type[DatasetSource]] = {
     s.kind: s
     for s in (
+        BesideSource,
         LidarSource,
         ImuSource,
         VendorSource,
@@ -55,6 +57,7 @@ def moved(source: DatasetSource, path: Path) -> DatasetSource:
 __all__ = [
     "SOURCES",
     "BagSource",
+    "BesideSource",
     "DatasetSource",
     "GyroCsvSource",
     "ImuSource",

@@ -1,0 +1,102 @@
+"""One log of a reference's own motions and a gyro's increments, read from the same joints.
+
+Each source reads its own log (records at its own stamps); the two are laid on one time axis: a
+record at every stamp of either, the joints read there from the reference's joint stream, and
+each increment in the layout of :mod:`nlp_calib.sensors.beside` (the reference's motion, the
+gyro's integrated rates and duration, and a last row: 1 for the gyro's).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from nlp_calib.logs.log import Log, LogClock, ReferenceData
+from nlp_calib.logs.reference import Motions
+from nlp_calib.logs.relative import RelativeMotions, _frozen
+
+#: Rows of a reference's increment and of a gyro's.
+REFERENCE_ROWS, GYRO_ROWS = 3, 4
+
+
+def _stamps_ns(log: Log) -> np.ndarray:
+    return log.clock.start_ns + np.round(np.asarray(log.time_s) * 1e9).astype(np.int64)
+
+
+def _poses_at(log: Log, stamps_ns: np.ndarray) -> np.ndarray:
+    """The reference's poses at ``stamps_ns``, interpolated between its own (for figures only)."""
+    t = _stamps_ns(log).astype(float)
+    T = np.array(log.T_world_sensor, dtype=float)
+    heading = np.unwrap(T[:, 2])
+    at = stamps_ns.astype(float)
+    return np.column_stack([np.interp(at, t, T[:, 0]), np.interp(at, t, T[:, 1]), np.interp(at, t, heading)])
+
+
+def _placed(
+    inc: RelativeMotions, own_ns: np.ndarray, stamps_ns: np.ndarray, z: np.ndarray
+) -> RelativeMotions:
+    return RelativeMotions(
+        np.searchsorted(stamps_ns, own_ns[inc.first]).astype(np.int64),
+        np.searchsorted(stamps_ns, own_ns[inc.last]).astype(np.int64),
+        z,
+        inc.line_numbers,
+        {},
+    )
+
+
+def _joined(a: RelativeMotions, b: RelativeMotions, quality: dict[str, np.ndarray]) -> RelativeMotions:
+    order = np.lexsort((np.arange(a.n + b.n), np.concatenate([a.first, b.first])))
+    return RelativeMotions(
+        _frozen(np.concatenate([a.first, b.first])[order]),
+        _frozen(np.concatenate([a.last, b.last])[order]),
+        _frozen(np.vstack([a.z, b.z])[order]),
+        _frozen(np.concatenate([a.line_numbers, b.line_numbers])[order]),
+        {k: _frozen(v[order]) for k, v in quality.items()},
+    )
+
+
+def beside_gyro(reference: Log, gyro: Log) -> Log:
+    """The log of ``reference``'s motions and ``gyro``'s increments on one time axis (each
+    increment's ``z``: reference rows, gyro rows, the gyro flag)."""
+    ref_inc, gyro_inc = reference.reference.motions, gyro.reference.motions
+    if ref_inc is None or gyro_inc is None or ref_inc.z.shape[1] != REFERENCE_ROWS:
+        raise ValueError("a gyro beside a reference needs the reference's own planar motions and the gyro's")
+    stream = reference.joint_stream
+    if stream is None:
+        raise ValueError(f"{reference.path}: a gyro beside it needs the joints' own stream")
+    ref_ns, gyro_ns = _stamps_ns(reference), _stamps_ns(gyro)
+    first_ns, last_ns = ref_ns[0], ref_ns[-1]
+    # Only the gyro's increments within the reference's span: the wheels are read on its stream.
+    inside = (gyro_ns[gyro_inc.first] >= first_ns) & (gyro_ns[gyro_inc.last] <= last_ns)
+    gyro_inc = gyro_inc.take(inside)
+    used = np.unique(np.concatenate([gyro_inc.first, gyro_inc.last]))
+    stamps = np.unique(np.concatenate([ref_ns, gyro_ns[used]]))
+    n_ref, n_gyro = ref_inc.n, gyro_inc.n
+    z_ref = np.hstack([ref_inc.z, np.zeros((n_ref, GYRO_ROWS + 1))])
+    z_gyro = np.hstack([np.zeros((n_gyro, REFERENCE_ROWS)), gyro_inc.z, np.ones((n_gyro, 1))])
+    quality = {k: np.concatenate([v, np.full(n_gyro, np.nan)]) for k, v in ref_inc.quality.items()}
+    motions = _joined(
+        _placed(ref_inc, ref_ns, stamps, z_ref), _placed(gyro_inc, gyro_ns, stamps, z_gyro), quality
+    )
+    start_ns = int(stamps[0])
+    time_s = _frozen((stamps - start_ns).astype(float) * 1e-9)
+    shift = (reference.clock.start_ns - start_ns) * 1e-9
+    breaks = None if stream.breaks is None else _frozen(np.asarray(stream.breaks) + shift)
+    stream = replace(stream, time_s=_frozen(np.asarray(stream.time_s) + shift), breaks=breaks)
+    n = int(stamps.size)
+    line = np.zeros(n, dtype=np.int64)
+    for idx in (motions.last, motions.first):
+        line[idx[::-1]] = motions.line_numbers[::-1]
+    return replace(
+        reference,
+        time_s=time_s,
+        ticks=_frozen(np.zeros((n, 0), dtype=np.int64)),
+        model_pose=_frozen(np.zeros((n, 3))),
+        T_world_sensor=_frozen(_poses_at(reference, stamps)),
+        line_numbers=_frozen(line),
+        clock=LogClock(start_ns=start_ns),
+        joint_positions=stream.at(time_s),
+        joint_stream=stream,
+        reference=ReferenceData(motions=motions, measures=Motions.name),
+    )

@@ -1,0 +1,218 @@
+"""A gyro beside a reference that measures its own planar motion (a lidar's scan matches, visual
+odometry, a motions file): both sensors' residuals in one objective.
+
+Each of the log's increments is one sensor's: the reference's motion ``(x, y, θ)`` between two of
+its stamps, or the gyro's rates integrated over one of its intervals ``(∫ω, Δt)``. A window's
+``z`` holds both layouts and a last row saying whose it is (0: the reference's, 1: the gyro's)::
+
+    z = (z_reference (3), z_gyro (4), gyro?)
+
+and its residual has both sensors' rows, the other sensor's zero::
+
+    e = ((1 − g)·e_reference (3 rows), g·e_gyro (3 rows))
+
+so each is weighted by its own noise (Ω's diagonal: the reference's translation and rotation,
+then the gyro's angle, ``information: {gyro: …}``). The mount is both mounts in one block: the
+reference's pose (``sensor_x, sensor_y, sensor_theta``) and the gyro's bias, tilt and scale.
+The reference measures lengths, so the wheels' scale a gyro alone cannot see is determined; the
+gyro adds its turning. The base's poses, figures and hand-off pose are the reference's; the
+gyro's tilt is stated beside them (:meth:`Beside.mount_pose`, :meth:`Beside.gyro_pose`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from types import MappingProxyType
+from typing import ClassVar
+
+import casadi as ca
+import numpy as np
+
+from nlp_calib.logs import Log, LogHeader
+from nlp_calib.models.base import KinematicModel
+from nlp_calib.models.clock import LAG_PARAM
+from nlp_calib.results.mount import SensorMount
+from nlp_calib.sensors.base import BaseMotion, SensorDefaults, SensorStart
+from nlp_calib.sensors.gyro import Gyro
+from nlp_calib.sensors.planar import PlanarPose
+
+#: The rows of a reference's increment and of a gyro's in a window's ``z``; then the gyro row.
+REFERENCE_ROWS, GYRO_ROWS = 3, 4
+#: The gyro's clock offset: how late its driver stamps the rates (s; the reference's: ``tracker_lag``).
+GYRO_LAG = "gyro_lag"
+#: The IMU's link in the hand-off files.
+IMU_FRAME = "imu_link"
+#: Ω's rows, by the information weight each takes (``information: {translation, rotation, gyro}``).
+WEIGHTS: tuple[str, ...] = ("translation", "translation", "rotation", "gyro", "gyro", "gyro")
+
+
+def is_gyro(z: np.ndarray) -> np.ndarray:
+    """Which windows of ``z`` ``(8, n)`` are the gyro's."""
+    return np.asarray(z[REFERENCE_ROWS + GYRO_ROWS] > 0.5)
+
+
+class Beside(SensorDefaults):
+    """A planar reference's own motions and a gyro's integrated rates in one problem (see the
+    module docstring); ``scale_free``: the gyro's scale factor is fitted (a reference that
+    measures lengths determines it)."""
+
+    kind: ClassVar[str] = "planar_gyro"
+    label: ClassVar[str] = "planar motions beside a gyro"
+    group: ClassVar[str] = "SE(2)"
+    pose_rows: ClassVar[int] = 3
+    z_rows: ClassVar[int] = REFERENCE_ROWS + GYRO_ROWS + 1
+    error_rows: ClassVar[int] = 6
+    noise_groups: ClassVar[tuple[tuple[int, ...], ...]] = ((0, 1), (2,), (3, 4, 5))
+    noise_names: ClassVar[tuple[str, ...]] = ("tracker_xy", "tracker_theta", "gyro_angle")
+    weights: ClassVar[tuple[str, ...]] = WEIGHTS
+    clocks: ClassVar[tuple[str, ...]] = (LAG_PARAM, GYRO_LAG)
+    per_log: ClassVar[tuple[str, ...]] = Gyro.per_log
+    turning: ClassVar[tuple[str, ...]] = (*PlanarPose.turning, *Gyro.turning)
+    angles: ClassVar[tuple[str, ...]] = (*PlanarPose.angles, *Gyro.angles)
+
+    def __init__(self, scale_free: bool) -> None:
+        self.reference_sensor = PlanarPose()
+        self.gyro = Gyro(scale_free)
+        ref, gyro = self.reference_sensor, self.gyro
+        self.params: tuple[str, ...] = (*ref.params, *gyro.params)
+        self.units: Mapping[str, str] = MappingProxyType({**ref.units, **gyro.units})
+        self.components: Mapping[str, str] = MappingProxyType(dict(ref.components))
+        self.reference = MappingProxyType({**ref.reference, **gyro.reference})
+        self.convention = f"{ref.label}: its pose on the base; {gyro.convention}"
+
+    def _mounts(self, mount: ca.SX) -> tuple[ca.SX, ca.SX]:
+        n = len(self.reference_sensor.params)
+        return mount[:n], mount[n:]
+
+    # --- the error term ------------------------------------------------------------------------
+
+    def residual(self, z: ca.SX, mount: ca.SX, M: ca.SX) -> ca.SX:
+        ref, gyro = self._mounts(mount)
+        g = z[REFERENCE_ROWS + GYRO_ROWS]
+        e_ref = self.reference_sensor.residual(z[:REFERENCE_ROWS], ref, M)
+        e_gyro = self.gyro.residual(z[REFERENCE_ROWS : REFERENCE_ROWS + GYRO_ROWS], gyro, M)
+        return ca.vertcat((1 - g) * e_ref, g * e_gyro)
+
+    def clock_weights(self, z: ca.SX) -> ca.SX:
+        """A reference's window is on its clock (``tracker_lag``), a gyro's on the gyro's (``gyro_lag``)."""
+        g = z[REFERENCE_ROWS + GYRO_ROWS]
+        return ca.vertcat(1 - g, g)
+
+    def predict(self, mount: ca.SX, M: ca.SX) -> ca.SX:
+        """Both sensors' motions in the layout of ``z`` (the poses, figures and odometry are the
+        reference's: its rows)."""
+        ref, gyro = self._mounts(mount)
+        return ca.vertcat(self.reference_sensor.predict(ref, M), self.gyro.predict(gyro, M), 0)
+
+    def between(self, a: ca.SX, b: ca.SX) -> ca.SX:
+        """The reference's motion from pose ``a`` to ``b``, in the layout of ``z``."""
+        return ca.vertcat(self.reference_sensor.between(a, b), ca.DM.zeros(GYRO_ROWS + 1, 1))
+
+    def between_jacobians(self, a: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """The reference's, in the layout of ``z`` over both sensors' noise (the reference's pose
+        noise, then the gyro's integrated angle: none at a pose)."""
+        da, db = self.reference_sensor.between_jacobians(a, b)
+
+        def padded(d: ca.SX) -> ca.SX:
+            return ca.diagcat(d, ca.DM.zeros(GYRO_ROWS + 1, 3))
+
+        return padded(da), padded(db)
+
+    def compose(self, pose: ca.SX, motion: ca.SX) -> ca.SX:
+        return self.reference_sensor.compose(pose, motion[:REFERENCE_ROWS])
+
+    def base_from_sensor(self, T_world_sensor: ca.SX, mount: ca.SX) -> ca.SX:
+        return self.reference_sensor.base_from_sensor(T_world_sensor, self._mounts(mount)[0])
+
+    def manifold(self, free: Sequence[str]) -> bool:
+        return self.reference_sensor.manifold(free)
+
+    def boxplus(self, free: Sequence[str], x: ca.SX, step: ca.SX, x_plus: ca.SX) -> None:
+        self.reference_sensor.boxplus(free, x, step, x_plus)
+
+    # --- numeric twins ---------------------------------------------------------------------------
+
+    def heading(self, T_world_sensor: np.ndarray) -> np.ndarray:
+        return self.reference_sensor.heading(T_world_sensor)
+
+    def planar_yaw(self, params: Mapping[str, float]) -> float | None:
+        return self.reference_sensor.planar_yaw(params)
+
+    def tangent(self, z: np.ndarray) -> np.ndarray:
+        """Each window's measured motion in the residual's rows (the other sensor's rows zero)."""
+        z = np.asarray(z, dtype=float)
+        g = is_gyro(z)
+        out = np.zeros((6, z.shape[1]))
+        out[:3, ~g] = z[:REFERENCE_ROWS, ~g]
+        out[3:, g] = z[REFERENCE_ROWS : REFERENCE_ROWS + 3, g]
+        return out
+
+    def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The reference's increments, judged against its predicted motion (the gyro's are not)."""
+        return ~is_gyro(np.asarray(z).T), np.asarray(z)[:, :REFERENCE_ROWS]
+
+    def poses(self, log: Log) -> np.ndarray:
+        """The reference's poses composed from its one-interval increments (the log's own)."""
+        return log.T_world_sensor
+
+    def jump_signal(self, log: Log) -> tuple[np.ndarray, int]:
+        """The reference's poses as its signal, then the gyro's rates integrated to each record."""
+        signal, positions = self.reference_sensor.jump_signal(log)
+        turned = np.zeros((log.n_records, 3))
+        inc = log.motions
+        if inc is not None and inc.n:
+            g = is_gyro(inc.z.T)
+            np.add.at(turned, inc.last[g], inc.z[g, REFERENCE_ROWS : REFERENCE_ROWS + 3])
+        return np.column_stack([signal, np.cumsum(turned, axis=0)]), positions
+
+    # --- the start -----------------------------------------------------------------------------
+
+    def initial(self, header: LogHeader) -> dict[str, float]:
+        return {**self.reference_sensor.initial(header), **self.gyro.initial(header)}
+
+    def nominal(self, header: LogHeader) -> dict[str, float]:
+        return self.reference_sensor.nominal(header)
+
+    def closed_form(
+        self,
+        model: KinematicModel,
+        U: np.ndarray,
+        z: np.ndarray,
+        base_motion: BaseMotion,
+        known: Mapping[str, float],
+    ) -> SensorStart:
+        """The reference's closed form on its windows (the wheels and its mount), then the gyro's
+        tilt and biases on the gyro's windows with those wheels."""
+        g = is_gyro(z)
+
+        def on(keep: np.ndarray) -> BaseMotion:
+            return lambda params: np.asarray(base_motion(params))[:, keep]
+
+        ref = self.reference_sensor.closed_form(model, U[:, ~g], z[:REFERENCE_ROWS, ~g], on(~g), known)
+        wheels = {n: ref.params[n] for n in model.kinematic_params}
+        z_gyro = z[REFERENCE_ROWS : REFERENCE_ROWS + GYRO_ROWS, g]
+        gyro = self.gyro.closed_form(model, U[:, g], z_gyro, on(g), {**wheels, **known})
+        own = {n: v for n, v in gyro.params.items() if n in self.gyro.params}
+        return SensorStart({**ref.params, **own}, note=ref.note)
+
+    # --- the write-back ------------------------------------------------------------------------
+
+    def canonical(
+        self, model: KinematicModel, params: Mapping[str, float], fixed: Sequence[str]
+    ) -> dict[str, float]:
+        out = self.reference_sensor.canonical(model, params, fixed)
+        return self.gyro.canonical(model, out, fixed)
+
+    def mount_pose(
+        self,
+        params: Mapping[str, float],
+        std: Mapping[str, float],
+        frame: str,
+        nominal: tuple[float, float, float] | None,
+    ) -> SensorMount:
+        """The reference's joint (x, y and yaw calibrated)."""
+        return self.reference_sensor.mount_pose(params, std, frame, nominal)
+
+    def beside_mount(self, params: Mapping[str, float], std: Mapping[str, float]) -> SensorMount | None:
+        """The IMU's joint on ``imu_link`` (roll and pitch calibrated)."""
+        return self.gyro.mount_pose(params, std, IMU_FRAME, None)

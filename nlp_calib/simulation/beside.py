@@ -1,0 +1,87 @@
+"""A lidar and an IMU on one drive: one ROS 2 bag of ``/joint_states``, ``/scan`` and ``/imu``.
+
+The base drives in a room as the lidar simulator's does (:mod:`nlp_calib.simulation.lidar`; its
+fine grid also holds the IMU's samples); the IMU on it reads as the IMU simulator's does
+(:mod:`nlp_calib.simulation.imu`: tilt, biases, noise). Each driver stamps its own
+``stamp_offset_s`` late (two clocks). The truth file holds the lidar's mount, the gyro's
+parameters, the wheels and both clocks' offsets (``tracker_lag``, ``gyro_lag``) in their names.
+Deterministic for a given seed.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nlp_calib.core.files import atomic_write_text
+from nlp_calib.models.clock import LAG_PARAM
+from nlp_calib.sensors.beside import GYRO_LAG
+from nlp_calib.simulation.camera import EPOCH_S
+from nlp_calib.simulation.imu import (
+    DEFAULT_GYRO,
+    ImuSimulation,
+    ImuSimulationOptions,
+    gyro_readings,
+    imu_messages,
+    imu_times,
+)
+from nlp_calib.simulation.lidar import (
+    DEFAULT_MOUNT,
+    LidarSimulation,
+    LidarSimulationOptions,
+    lidar_messages,
+    lidar_paths,
+    simulate_lidar,
+)
+from nlp_calib.simulation.rosbag import write_bag
+
+
+@dataclass(frozen=True)
+class BesideSimulation:
+    """The lidar's simulation and the IMU's on the same drive."""
+
+    lidar: LidarSimulation
+    imu: ImuSimulation
+
+    def truth_dict(self) -> dict[str, Any]:
+        gyro = self.imu.truth_dict()["params"]
+        params = {**self.lidar.options.truth, **gyro, LAG_PARAM: self.lidar.options.stamp_offset_s}
+        params[GYRO_LAG] = self.imu.options.stamp_offset_s
+        return {**self.lidar.truth_dict(), "params": params, "imu_options": self.imu.truth_dict()["options"]}
+
+
+def simulate_beside(lidar: LidarSimulationOptions, imu: ImuSimulationOptions) -> BesideSimulation:
+    """The lidar's drive with the IMU's readings on it (the IMU's model and duration the lidar's;
+    its truth's wheels the lidar's; each driver stamps its own ``stamp_offset_s`` late)."""
+    kinematic = {k: v for k, v in lidar.truth.items() if k not in DEFAULT_MOUNT}
+    imu = replace(
+        imu,
+        model=lidar.model,
+        duration_s=lidar.duration_s,
+        truth={**{k: imu.truth[k] for k in DEFAULT_GYRO}, **kinematic},
+    )
+    scans = simulate_lidar(lidar, also_s=imu_times(imu))
+    rng = np.random.default_rng([imu.seed, 1])
+    rates, accel = gyro_readings(imu, rng, scans.fine_time_s, scans.base_poses)
+    gyro = ImuSimulation(
+        imu_time_s=EPOCH_S + imu_times(imu) + imu.stamp_offset_s,
+        rates=rates,
+        accel=accel,
+        joint_time_s=scans.joint_time_s,
+        joint_names=scans.joint_names,
+        joint_positions=scans.joint_positions,
+        options=imu,
+    )
+    return BesideSimulation(scans, gyro)
+
+
+def write_beside_simulation(sim: BesideSimulation, bag: str | Path) -> tuple[Path, Path]:
+    """Write the bag (``/joint_states``, ``/scan``, ``/imu``, ``/tf_static``) and the truth JSON."""
+    path, truth = lidar_paths(bag)
+    write_bag(path, lidar_messages(sim.lidar) + imu_messages(sim.imu))
+    atomic_write_text(truth, json.dumps(sim.truth_dict(), indent=2) + "\n")
+    return path, truth
