@@ -456,7 +456,9 @@ def test_second_run_into_the_same_folder_does_not_mix_files(sim_log: Path, tmp_p
     out = tmp_path / "out"
     out.mkdir()
     (out / "notes.txt").write_text("mine\n")  # the user's own file: never touched
-    sc = scenario(tmp_path, sim_log, "solvers: [gauss_newton]\n")
+    # The lag held: on this 12 s log a fitted one leaves sensor_y to ±8 cm, and the URDF files whose
+    # replacement this test follows would be left out (the subject here is the folder, not the lag).
+    sc = scenario(tmp_path, sim_log, "solvers: [gauss_newton]\nalignment: {tracker_lag: 0.0}\n")
     assert run_cli("run", str(sc), "--out", str(out), "--report").returncode == 0
     first = listing(out)
     assert {"trajectory.png", "report.md", "calibration.yaml", MANIFEST_FILE} <= first

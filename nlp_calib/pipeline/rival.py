@@ -64,7 +64,7 @@ def _usual(name: str) -> dict[str, float]:
 
 
 def _alike(sc: Scenario, name: str, vendor: dict[str, float], parameters: ParameterOptions) -> Scenario:
-    """``sc`` with model ``name`` turning the odometry back with ``vendor``'s values, its steering
+    """``sc`` with model ``name`` turning the odometry back with ``vendor``'s values, its angle joints
     read as :data:`COMPARED`."""
     source = sc.log.source
     assert isinstance(source, VendorSource)
@@ -100,7 +100,7 @@ def _rival_fit(sc: Scenario, name: str) -> tuple[float, int] | None:
 
 
 def _declared_fit(run: CalibrationRun, sc: Scenario, solver: str) -> tuple[float, int] | None:
-    """The declared model's cost per residual and free parameters with its steering read as the
+    """The declared model's cost per residual and free parameters with its angle joints read as the
     rivals' is: the run's own fit where it reads it so, else fitted again so."""
     ours = run.reports[solver].result
     if ours.n_residuals == 0:
