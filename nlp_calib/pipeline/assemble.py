@@ -462,6 +462,16 @@ def joint_run(
     return judged(run, verdict(run, prepared.model), prepared.scenario.objective.sensor.sensor.components)
 
 
+def pinned_alike(run: CalibrationRun) -> CalibrationRun:
+    """``run`` whose per-log views leave out the σ of every clock offset the joint fit holds without
+    one (a log's pinned lag is no log's to state a σ of: each view's σ is the joint fit's)."""
+    pinned = run.pinned()
+    if not pinned:
+        return run
+    views = tuple(dataclasses.replace(p, data=dataclasses.replace(p.data, pinned=pinned)) for p in run.logs)
+    return dataclasses.replace(run, logs=views)
+
+
 def judged(run: CalibrationRun, found: Verdict, components: Mapping[str, str]) -> CalibrationRun:
     """``run`` with its verdict, each estimate's mount (every log's own too) stating the
     components (``components``: each one's parameter key) the run leaves not determined well

@@ -41,7 +41,7 @@ from nlp_calib.pipeline.analyse import (
     plan_after,
     scores,
 )
-from nlp_calib.pipeline.assemble import MountViews, assemble_run, fit_info, fit_notes, joint_run
+from nlp_calib.pipeline.assemble import MountViews, assemble_run, fit_info, fit_notes, joint_run, pinned_alike
 from nlp_calib.pipeline.build import StartingPoint, build_stage, mount_count
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import joint_residual
@@ -247,7 +247,7 @@ def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> Cali
     fitted = dataclasses.replace(fitted, consistency=check, logs=logs)
     runs = _assemble(fitting, parts, results, fitted, notes, wanted)
     joint = _joint(fitting, (scorer, parts[0]), runs, results, fitted, notes)
-    return dataclasses.replace(joint, logs=tuple(runs))
+    return pinned_alike(dataclasses.replace(joint, logs=tuple(runs)))
 
 
 def log_ranges(parts: Sequence[LogSetup]) -> list[tuple[int, int]]:

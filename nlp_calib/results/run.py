@@ -160,6 +160,9 @@ class DataInfo:
     start_dropped: Mapping[str, int] | None = None
     #: ... and the fitted windows left out by the reasons that also concern the refinement.
     fit_dropped: Mapping[str, int] | None = None
+    #: On a joint fit's per-log view: the joint fit's clock offsets held without a σ (any log's,
+    #: :meth:`CalibrationRun.pinned`), which the view's σ, the joint's, leaves out as the joint does.
+    pinned: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -322,6 +325,8 @@ class CalibrationRun:
         the lag at or beyond it) or held where no fit at any lag converged: with no σ, the verdict
         naming the log."""
         layout = self.scenario.layout
+        if self.data.pinned:
+            return self.data.pinned
         if not self.logs:
             est = self.data.lag_estimate
             return layout.block(CLOCK) if est is not None and est.pinned else ()
