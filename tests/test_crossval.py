@@ -146,7 +146,7 @@ def test_refits_from_the_estimate_land_where_full_refits_do(monkeypatch: pytest.
         _, x_full, full_converged = binder.fit(ev, x)
         assert full_converged
         for start in (None, whole):
-            steps, converged, n = validation._fit(binder, data, fit, bad, x, start)
+            steps, converged, n, _ = validation._refit(binder, data, fit, bad, x, start)
             assert converged and n == kept.n_residuals
             gap = np.abs(steps - ev.params(x_full)) / sigma
             assert np.max(gap[sigma > 0]) < 0.01, gap

@@ -52,22 +52,6 @@ Canonical = Callable[[np.ndarray], np.ndarray]
 Score = Callable[[Sequence[np.ndarray], int, int], list[TrajectoryMetrics]]
 
 
-def _fit(
-    binder: Binder,
-    data: ResidualData,
-    fit: tuple[int, int],
-    bad: np.ndarray,
-    x: np.ndarray,
-    whole: NormalEquations | None = None,
-) -> tuple[np.ndarray, bool, int]:
-    """Full parameters, convergence and window count of a refit of ``data`` without the windows
-    that cross a ``bad`` interval (a mask over the whole log's intervals). ``whole``: the normal
-    equations of all of ``data`` at ``x`` (the refit's priors included), downdated for the first
-    step by those of the windows left out instead of evaluating the windows kept."""
-    params, converged, n, _ = _refit(binder, data, fit, bad, x, whole)
-    return params, converged, n
-
-
 def _refit(
     binder: Binder,
     data: ResidualData,
@@ -76,7 +60,8 @@ def _refit(
     x: np.ndarray,
     whole: NormalEquations | None = None,
 ) -> tuple[np.ndarray, bool, int, ProblemEvaluator | None]:
-    """:func:`_fit`, and the evaluator it fitted with, on the windows it kept (None: too few)."""
+    """The refit of ``data`` without the windows that cross a ``bad`` interval (a mask over the whole
+    log's intervals): :func:`refit_without`."""
     return refit_without(binder, data, data.interval_counts(bad[fit[0] : fit[1] - 1]) > 0, x, whole)
 
 
