@@ -15,7 +15,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pytest
-from conftest import REPO, SCENARIOS, write_sim
+from conftest import REPO, SCENARIOS, cli, write_sim
 
 from nlp_calib.cli import main
 from nlp_calib.core import threads
@@ -205,12 +205,6 @@ def test_workers_take_one_core_each(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     run_jobs(jobs, 2, rows.__setitem__, task=threads_seen)
     assert [rows[i].detail for i in range(2)] == ["1 1", "1 1"]
     assert "OPENBLAS_NUM_THREADS" not in os.environ
-
-
-def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "nlp_calib", *args], capture_output=True, text=True, cwd=REPO
-    )
 
 
 def test_batch_writes_a_folder_per_log_and_the_summary(logs: Path, tmp_path: Path) -> None:

@@ -8,13 +8,11 @@ import dataclasses
 import json
 import math
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REAL_LOG, REPO, SCENARIOS, write_sim
+from conftest import REAL_LOG, SCENARIOS, cli, write_sim
 
 from nlp_calib.analysis.drift import FALSE_ALARM, t_quantile, two_sided_tail, welch_dof
 from nlp_calib.core.errors import UsageError
@@ -28,12 +26,6 @@ from nlp_calib.results import CalibrationRun
 from nlp_calib.results.check import CANNOT_TELL, DRIFTED, STILL_GOOD
 
 TRUTH = MODELS["tricycle"].drive.default_truth
-
-
-def cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "nlp_calib", *args], capture_output=True, text=True, cwd=cwd, check=False
-    )
 
 
 @pytest.mark.parametrize(
