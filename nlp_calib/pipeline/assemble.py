@@ -360,9 +360,10 @@ def assemble_run(
     # truth is of its own mount.
     convert = _own_truth(getattr(prepared.model, "from_counts", dict), views)
     checks = dataclasses.replace(
-        run.checks, more=run_checks(
+        run.checks,
+        more=run_checks(
             run, CheckContext(source.files(), convert, prepared.scenario, prepared.model, against)
-        )
+        ),
     )
     run = _believed_plan(dataclasses.replace(run, checks=checks))
     return judged(

@@ -49,6 +49,7 @@ from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.stages import LogSetup, setup_log
 from nlp_calib.pipeline.stored import StoredCalibration
 from nlp_calib.problem import ProblemFunctions, ResidualData, joined
+from nlp_calib.problem.blocks import per_log_kinds
 from nlp_calib.results import CalibrationRun, ScenarioInfo, SolverResult
 from nlp_calib.results.checks import WEAK, ConsistencyCheck, CrossValidation
 from nlp_calib.results.faults import Findings
@@ -230,7 +231,7 @@ def _joint_fit(sc: Scenario, parts: Sequence[LogSetup], solvers: Sequence[str]) 
     lags = [p.alignment.lag_s for p in parts]
     # A mount per log: each starts where its log's own start put it; windows say their log.
     mounts = [p.problem.start.initial for p in parts] if mount_count(sc, len(parts)) > 1 else []
-    data = data.with_selector() if mounts else data
+    data = data.with_selector() if mounts or per_log_kinds(model, len(parts)) else data
     problem = build_stage(one_horizon, model, tuple(held), start_from, solvers, n_records, lags, mounts, data)
     return held, Fit(problem, data, solvers)
 
