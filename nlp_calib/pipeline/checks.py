@@ -14,7 +14,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from nlp_calib.models import KinematicModel
-from nlp_calib.pipeline import consistency_check, direction_check, drift_check, fault_check, rival, truth
+from nlp_calib.pipeline import (
+    consistency_check,
+    determinacy_check,
+    direction_check,
+    drift_check,
+    fault_check,
+    rival,
+    truth,
+)
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.stored import StoredCalibration
 from nlp_calib.results import CalibrationRun
@@ -42,6 +50,7 @@ RunCheck = Callable[[CalibrationRun, CheckContext], "CheckResult | None"]
 #: The plug-in checks, by name, in the order they run: the order the terminal, the report, the
 #: summary and the verdict's reasons name them in.
 RUN_CHECKS: dict[str, RunCheck] = {
+    determinacy_check.NAME: lambda run, ctx: determinacy_check.check(run),
     "faults": lambda run, ctx: fault_check.check(run),
     "direction": lambda run, ctx: direction_check.check(run),
     "consistency": lambda run, ctx: consistency_check.check(run),
