@@ -12,7 +12,6 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from nlp_calib.models import KinematicModel
 from nlp_calib.pipeline import (
@@ -23,13 +22,9 @@ from nlp_calib.pipeline import (
     fault_check,
     rival,
     truth,
-    units_check,
 )
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.stored import StoredCalibration
-
-if TYPE_CHECKING:
-    from nlp_calib.pipeline.preflight import Assessment
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CheckResult
 
@@ -68,21 +63,4 @@ RUN_CHECKS: dict[str, RunCheck] = {
 def run_checks(run: CalibrationRun, context: CheckContext) -> tuple[CheckResult, ...]:
     """Every registered check's result on ``run`` (those with something to say)."""
     found = (check(run, context) for check in RUN_CHECKS.values())
-    return tuple(r for r in found if r is not None)
-
-
-#: A pre-flight check: what the pre-flight assessed (the drive, the fit where one converged) to a
-#: result, or None when it has nothing to say. One at :data:`~nlp_calib.results.checks.UNUSABLE`
-#: stops a run before any fit, in its reasons.
-PreflightCheck = Callable[["Assessment"], "CheckResult | None"]
-
-#: The pre-flight's plug-in checks, by name, in the order its report names them.
-PREFLIGHT_CHECKS: dict[str, PreflightCheck] = {
-    units_check.NAME: lambda a: units_check.check(a.drive, a.fitted()),
-}
-
-
-def preflight_checks(assessed: Assessment) -> tuple[CheckResult, ...]:
-    """Every registered pre-flight check's result (those with something to say)."""
-    found = (check(assessed) for check in PREFLIGHT_CHECKS.values())
     return tuple(r for r in found if r is not None)

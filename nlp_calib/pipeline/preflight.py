@@ -17,7 +17,7 @@ import functools
 import math
 import time
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -32,6 +32,7 @@ from nlp_calib.analysis.uncertainty import range_std
 from nlp_calib.analysis.verdict import way_out
 from nlp_calib.core.errors import NlpCalibError, PreflightError
 from nlp_calib.logs import Log
+from nlp_calib.pipeline import units_check
 from nlp_calib.pipeline.assemble import fit_info
 from nlp_calib.pipeline.build import (
     INTERNAL_SOLVER,
@@ -42,14 +43,13 @@ from nlp_calib.pipeline.build import (
     prepare_backend,
     starting_point,
 )
-from nlp_calib.pipeline.checks import preflight_checks
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.recording import recording
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.units_check import implausible
 from nlp_calib.pipeline.validation import leave_out, on_threads
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
-from nlp_calib.results.checks import Fold, believed_std
+from nlp_calib.results.checks import CheckResult, Fold, believed_std
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight
 from nlp_calib.solvers.evaluation import NormalEquations, ProblemEvaluator
 
@@ -382,6 +382,25 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
         d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds,
         fitted[3] if fitted is not None else None, _needed(d, x),
     )  # fmt: skip
+
+
+#: A pre-flight check: what the pre-flight assessed (the drive, the fit where one converged) to a
+#: result, or None when it has nothing to say; one at :data:`~nlp_calib.results.checks.UNUSABLE`
+#: stops a run before any fit, in its reasons.
+PreflightCheck = Callable[[Assessment], "CheckResult | None"]
+
+#: The pre-flight's plug-in checks, by name, in the order its report names them.
+PREFLIGHT_CHECKS: dict[str, PreflightCheck] = {
+    units_check.NAME: lambda a: units_check.check(
+        a.drive.parts, a.drive.fns, a.drive.start.initial, a.fitted()
+    ),
+}
+
+
+def preflight_checks(assessed: Assessment) -> tuple[CheckResult, ...]:
+    """Every registered pre-flight check's result (those with something to say)."""
+    found = (check(assessed) for check in PREFLIGHT_CHECKS.values())
+    return tuple(r for r in found if r is not None)
 
 
 def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:

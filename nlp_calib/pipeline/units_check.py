@@ -8,18 +8,16 @@ Unusable (the run stops before any fit) on a blocking finding; fine otherwise. A
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 from nlp_calib.analysis.units import findings
 from nlp_calib.models import KinematicModel
+from nlp_calib.pipeline.prepare import PreparedLog
+from nlp_calib.problem import ProblemFunctions
 from nlp_calib.results import codec
 from nlp_calib.results.checks import FINE, UNUSABLE, CheckResult
 from nlp_calib.results.preflight import UnitFinding
-
-if TYPE_CHECKING:
-    from nlp_calib.pipeline.preflight import Drive
 
 #: Its name: the pre-flight's record and ``preflight.json`` hold its findings under it.
 NAME = "units"
@@ -27,10 +25,15 @@ NAME = "units"
 JUDGED_BY_FIT = ("mirrored",)
 
 
-def check(d: Drive, fitted: Mapping[str, float] | None) -> CheckResult:
-    """The units and signs of the drive's logs (``fitted``: the converged fit's parameters; None:
-    no fit converged)."""
-    found = unit_findings(d, fitted)
+def check(
+    parts: Sequence[PreparedLog],
+    fns: ProblemFunctions,
+    start: Mapping[str, float],
+    fitted: Mapping[str, float] | None,
+) -> CheckResult:
+    """The units and signs of the logs ``parts`` fitted with ``fns`` from ``start`` (``fitted``: the
+    converged fit's parameters; None: no fit converged)."""
+    found = unit_findings(parts, fns, start, fitted)
     blocking = [f.words for f in found if f.blocking]
     return CheckResult(
         NAME,
@@ -43,20 +46,20 @@ def check(d: Drive, fitted: Mapping[str, float] | None) -> CheckResult:
     )
 
 
-def view(result: CheckResult | None) -> tuple[UnitFinding, ...]:
-    """The findings of the check's result (none when it did not run)."""
-    return () if result is None else tuple(codec.load(UnitFinding, f) for f in result.record)
-
-
-def unit_findings(d: Drive, fitted: Mapping[str, float] | None) -> tuple[UnitFinding, ...]:
+def unit_findings(
+    parts: Sequence[PreparedLog],
+    fns: ProblemFunctions,
+    start: Mapping[str, float],
+    fitted: Mapping[str, float] | None,
+) -> tuple[UnitFinding, ...]:
     """What the data of each log imply of units and signs, each finding once, judged by the fit."""
     out: list[UnitFinding] = []
-    yaw = d.fns.sensor.planar_yaw(d.start.initial)
-    for part in d.parts:
+    yaw = fns.sensor.planar_yaw(start)
+    for part in parts:
         log = part.log.select(part.start, part.split)
-        T = d.fns.sensor.floor_track(log)
+        T = fns.sensor.floor_track(log)
         out += [f for f in findings(log, part.model, (T[:, :2], T[:, 2]), yaw) if f not in out]
-    return tuple(_judged_by_fit(f, d.fns.model, fitted) for f in out)
+    return tuple(_judged_by_fit(f, fns.model, fitted) for f in out)
 
 
 def _judged_by_fit(
