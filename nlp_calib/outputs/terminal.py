@@ -283,10 +283,12 @@ def _check_lines(run: CalibrationRun, solvers: list[str]) -> list[str]:
         lines += ["", *error_stats_lines(run, chosen)]
     lines += check_lines(run)
     # What a check said in its lines is not said again.
-    said = {d for r in run.checks.more for d in r.details}
+    said = [line for r in run.checks.more for line in (r.words, *r.details)]
     # Every other warning result.json holds (a solver's failure is said below, in its own words).
     failed = {f"{s}: {run.reports[s].result.reason}" for s in solvers}
-    lines.extend(f"WARNING: {w}" for w in run.warnings if w not in said and w not in failed)
+    lines.extend(
+        f"WARNING: {w}" for w in run.warnings if w not in failed and not any(w in line for line in said)
+    )
     for s in solvers:
         res = run.reports[s].result
         if not res.converged:

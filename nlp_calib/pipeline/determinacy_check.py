@@ -30,10 +30,11 @@ def check(run: CalibrationRun) -> CheckResult | None:
     coarse = loose(run, solver) if solver is not None else {}
     concerns.update(coarse)
     reasons = [*(w.words() for w in weak), *coarse.values()]
+    # Its words say the first warning; the details, the figures and the others.
     details = (
         f"condition number {obs.condition_number:.3g} (Jacobi-scaled information matrix), heading range "
         f"{obs.heading_range_rad:.2f} rad",
-        *obs.warnings,
+        *obs.warnings[1:],
     )
     return CheckResult(
         NAME,
