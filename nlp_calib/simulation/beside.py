@@ -85,16 +85,21 @@ def simulate_beside(lidar: LidarSimulationOptions, imu: ImuSimulationOptions) ->
     return BesideSimulation(scans, gyro)
 
 
-def tracker_messages(sim: LidarSimulation) -> list[Any]:
-    """The lidar's frame tracked: ``/tf_static`` and ``/joint_states`` as the lidar's bag has them,
-    then its true pose at each scan's stamp with :data:`TRACKER_NOISE` on ``/tracker``."""
+def tracker_poses(sim: LidarSimulation) -> np.ndarray:
+    """The lidar's frame as a tracker sees it: its true pose at each scan's stamp with
+    :data:`TRACKER_NOISE` (deterministic for the seed)."""
     rng = np.random.default_rng([sim.options.seed, 2])
     xy, theta = TRACKER_NOISE
-    noise = rng.normal(0.0, 1.0, sim.lidar_poses.shape) * np.array([xy, xy, theta])
+    return np.asarray(sim.lidar_poses + rng.normal(0.0, 1.0, sim.lidar_poses.shape) * np.array([xy, xy, theta]))
+
+
+def tracker_messages(sim: LidarSimulation) -> list[Any]:
+    """``/tf_static`` and ``/joint_states`` as the lidar's bag has them, then
+    :func:`tracker_poses` on ``/tracker`` at the scans' stamps."""
     ns = lambda t: round(float(t) * 1e9)  # noqa: E731
     messages = [m for m in lidar_messages(sim) if m[0] != "/scan"]
     return messages + [
-        pose_stamped(ns(s), TRACKER_TOPIC, "map", p) for s, p in zip(sim.scan_time_s, sim.lidar_poses + noise)
+        pose_stamped(ns(s), TRACKER_TOPIC, "map", p) for s, p in zip(sim.scan_time_s, tracker_poses(sim))
     ]
 
 
