@@ -98,3 +98,23 @@ def test_a_gyro_beside_a_tum_file_fits_within_3_sigma(
     scenario.write_text(yaml.safe_dump({**BESIDE, "dataset": {**dataset, "gyro": str(folder / "gyro.csv")}}))
     # The truth file sits beside the bag; the CSVs' run is judged by this test alone.
     _run(scenario, tmp_path / "out", truth)
+
+
+def test_init_drafts_a_gyro_beside_the_trackers_poses_and_preflight_finds_it_enough(
+    drive: tuple[Path, dict[str, float]], tmp_path: Path
+) -> None:
+    """A bag with a pose topic and an Imu topic: ``init`` drafts both in one objective (was: the
+    tracker alone, the gyro named 'too'); the draft's pre-flight determines every parameter."""
+    bag, _ = drive
+    drafted = tmp_path / "drive.yaml"
+    proc = cli("init", str(bag), "--out", str(drafted))
+    assert proc.returncode == 0, proc.stderr
+    assert "gyro beside it /imu" in proc.stdout
+    raw = yaml.safe_load(drafted.read_text())
+    assert raw["sensor"] == {"mount": "planar", "beside": "gyro"}
+    assert raw["dataset"]["tracker"] == "/tracker" and raw["dataset"]["imu"] == "/imu"
+    proc = cli("preflight", str(drafted))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    for name in ("wheel_separation", "gyro_bias_z", "imu_roll", "gyro_lag", "tracker_lag"):
+        assert f"  {name}: determined" in proc.stdout, name
+    assert "verdict: ENOUGH" in proc.stdout
