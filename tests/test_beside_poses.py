@@ -5,6 +5,8 @@ truth on a seed never tuned on, and ``check`` reads the run's calibration.yaml b
 from __future__ import annotations
 
 import json
+import re
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -34,8 +36,9 @@ BESIDE = {
 }
 FITTED = {"left_wheel_radius", "right_wheel_radius", "wheel_separation", "sensor_x", "sensor_y", "sensor_theta"}
 FITTED |= {"gyro_bias_x", "gyro_bias_y", "gyro_bias_z", "imu_roll", "imu_pitch", "tracker_lag", "gyro_lag"}
-#: A 5° roll; the tracker stamps 20 ms late, the IMU's driver 45 ms (two clocks).
-ROLL, LATE, GYRO_LATE = float(np.radians(5.0)), 0.02, 0.045
+#: A 5° roll; the tracker stamps 20 ms late, the IMU's driver 45 ms (two clocks); the Imu messages'
+#: frame.
+ROLL, LATE, GYRO_LATE, IMU = float(np.radians(5.0)), 0.02, 0.045, "gyro_frame"
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +48,7 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, flo
     folder = tmp_path_factory.mktemp("tracked")
     # The room's scans are not written: a few beams keep the simulation cheap.
     lidar = LidarSimulationOptions(duration_s=30.0, seed=37, stamp_offset_s=LATE, beams=16)
-    gyro = ImuSimulationOptions(seed=37, truth={"imu_roll": ROLL}, stamp_offset_s=GYRO_LATE)
+    gyro = ImuSimulationOptions(seed=37, truth={"imu_roll": ROLL}, stamp_offset_s=GYRO_LATE, frame=IMU)
     sim = simulate_beside(lidar, gyro)
     bag, truth_file = write_beside_simulation(sim, folder / "drive", tracker=True)
     ns = lambda t: np.round(np.asarray(t) * 1e9).astype(np.int64)  # noqa: E731
@@ -81,7 +84,11 @@ def test_a_gyro_beside_a_trackers_bag_fits_within_3_sigma_and_check_reads_it_bac
     dataset = {"bag": str(bag), "joint_states": "/joint_states", "joints": JOINTS, "tracker": "/tracker"}
     scenario.write_text(yaml.safe_dump({**BESIDE, "dataset": {**dataset, "imu": "/imu"}}))
     stored = _run(scenario, tmp_path / "out", truth)
-    assert stored["beside"]["child"] == "imu_link"  # type: ignore[index]
+    # The IMU's joint on its messages' frame, its height from /tf_static (0.15 m), roll and pitch fitted.
+    beside = stored["beside"]
+    assert beside["child"] == IMU and beside["xyz"] == [0.0, 0.0, 0.15]  # type: ignore[index]
+    urdf = ET.parse(tmp_path / "out" / "sensor_mount.urdf.xml").getroot()
+    assert {j.get("name") for j in urdf} == {"base_link_to_sensor", f"base_link_to_{IMU}"}
     check = cli("check", str(tmp_path / "out" / "calibration.yaml"), str(scenario))
     assert check.returncode == 0, check.stdout + check.stderr
     assert "STILL GOOD" in check.stdout
@@ -118,3 +125,36 @@ def test_init_drafts_a_gyro_beside_the_trackers_poses_and_preflight_finds_it_eno
     for name in ("wheel_separation", "gyro_bias_z", "imu_roll", "gyro_lag", "tracker_lag"):
         assert f"  {name}: determined" in proc.stdout, name
     assert "verdict: ENOUGH" in proc.stdout
+
+
+@pytest.mark.parametrize(
+    ("frame", "refusal"),
+    [
+        ('imu"/><joint', r"the sensor frame 'imu\"/><joint' cannot name a header's frame"),
+        ("base_link", r"the sensor's frame 'base_link' is the base frame"),
+    ],
+)
+def test_an_imu_frame_no_urdf_can_hold_is_refused(frame: str, refusal: str, tmp_path: Path) -> None:
+    """The Imu messages' frame becomes a URDF link and a YAML value: one that is not a frame name,
+    or is the base's, is refused as the reference's would be (exit 2), before any fit."""
+    lidar = LidarSimulationOptions(duration_s=4.0, seed=5, beams=16)
+    sim = simulate_beside(lidar, ImuSimulationOptions(seed=5, frame=frame))
+    bag, _ = write_beside_simulation(sim, tmp_path / "bad", tracker=True)
+    dataset = {"bag": str(bag), "joint_states": "/joint_states", "joints": JOINTS, "tracker": "/tracker"}
+    scenario = tmp_path / "bad.yaml"
+    scenario.write_text(yaml.safe_dump({**BESIDE, "dataset": {**dataset, "imu": "/imu"}}))
+    proc = cli("run", str(scenario), "--out", str(tmp_path / "out"))
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert re.search(refusal, proc.stderr), proc.stderr
+    assert not (tmp_path / "out" / "sensor_mount.urdf.xml").exists()
+
+
+def test_one_frame_for_both_sensors_is_refused(drive: tuple[Path, dict[str, float]], tmp_path: Path) -> None:
+    """Two joints cannot share a child: the reference's frame given as the IMU's is refused."""
+    bag, _ = drive
+    dataset = {"bag": str(bag), "joint_states": "/joint_states", "joints": JOINTS, "tracker": "/tracker"}
+    scenario = tmp_path / "same.yaml"
+    scenario.write_text(yaml.safe_dump({**BESIDE, "dataset": {**dataset, "imu": "/imu", "sensor_frame": IMU}}))
+    proc = cli("preflight", str(scenario))
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert f"the gyro's frame '{IMU}' is also the reference's" in proc.stderr

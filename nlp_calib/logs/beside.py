@@ -15,7 +15,8 @@ from dataclasses import replace
 import numpy as np
 
 from nlp_calib.core import poses
-from nlp_calib.logs.log import Log, LogClock, ReferenceData
+from nlp_calib.core.errors import DatasetError
+from nlp_calib.logs.log import Log, LogClock, LogHeader, ReferenceData
 from nlp_calib.logs.reference import Motions
 from nlp_calib.logs.relative import RelativeMotions, _frozen
 
@@ -72,6 +73,21 @@ def own_motions(log: Log) -> RelativeMotions | None:
     return RelativeMotions(_frozen(first), _frozen(first + 1), _frozen(z), _frozen(log.line_numbers[1:]))
 
 
+def _both(reference: Log, gyro: Log) -> LogHeader:
+    """The reference's header with the gyro's beside it; one frame cannot be both sensors' (each is
+    a joint of its own from the base)."""
+    frame = gyro.header.sensor_frame
+    if frame == reference.header.sensor_frame:
+        raise DatasetError(
+            str(gyro.path),
+            None,
+            f"the gyro's frame {frame!r} is also the reference's: each sensor's mount is a joint from the "
+            "base to a frame of its own; leave sensor_frame out of ROBOT.yaml (each sensor's frame is then "
+            "its messages' frame_id) or give the dataset's sensor_frame",
+        )
+    return replace(reference.header, beside=gyro.header)
+
+
 def beside_gyro(reference: Log, gyro: Log) -> Log:
     """The log of ``reference``'s motions and ``gyro``'s increments on one time axis (each
     increment's ``z``: reference rows, gyro rows, the gyro flag)."""
@@ -81,6 +97,7 @@ def beside_gyro(reference: Log, gyro: Log) -> Log:
     stream = reference.joint_stream
     if stream is None:
         raise ValueError(f"{reference.path}: a gyro beside it needs the joints' own stream")
+    header = _both(reference, gyro)
     ref_ns, gyro_ns = _stamps_ns(reference), _stamps_ns(gyro)
     first_ns, last_ns = ref_ns[0], ref_ns[-1]
     # Only the gyro's increments within the reference's span: the wheels are read on its stream.
@@ -106,6 +123,7 @@ def beside_gyro(reference: Log, gyro: Log) -> Log:
         line[idx[::-1]] = motions.line_numbers[::-1]
     return replace(
         reference,
+        header=header,
         time_s=time_s,
         ticks=_frozen(np.zeros((n, 0), dtype=np.int64)),
         model_pose=_frozen(np.zeros((n, 3))),
