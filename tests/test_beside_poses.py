@@ -34,7 +34,14 @@ BESIDE = {
     "robust": {"kernel": "huber", "delta": 3.0},
     "solvers": ["gauss_newton"],
 }
-FITTED = {"left_wheel_radius", "right_wheel_radius", "wheel_separation", "sensor_x", "sensor_y", "sensor_theta"}
+FITTED = {
+    "left_wheel_radius",
+    "right_wheel_radius",
+    "wheel_separation",
+    "sensor_x",
+    "sensor_y",
+    "sensor_theta",
+}
 FITTED |= {"gyro_bias_x", "gyro_bias_y", "gyro_bias_z", "imu_roll", "imu_pitch", "tracker_lag", "gyro_lag"}
 #: A 5° roll; the tracker stamps 20 ms late, the IMU's driver 45 ms (two clocks); the Imu messages'
 #: frame.
@@ -58,7 +65,9 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, flo
     (folder / "drive.tum").write_text(format_tum(ns(sim.lidar.scan_time_s), tum))
     joints = format_joint_csv(ns(sim.lidar.joint_time_s), sim.lidar.joint_names, sim.lidar.joint_positions)
     (folder / "drive.csv").write_text(joints)
-    rows = (f"{t:.9f},{w[0]:.17g},{w[1]:.17g},{w[2]:.17g}\n" for t, w in zip(sim.imu.imu_time_s, sim.imu.rates))
+    rows = (
+        f"{t:.9f},{w[0]:.17g},{w[1]:.17g},{w[2]:.17g}\n" for t, w in zip(sim.imu.imu_time_s, sim.imu.rates)
+    )
     (folder / "gyro.csv").write_text("t,wx,wy,wz\n" + "".join(rows))
     truth = {RADIANS.get(k, k): v for k, v in json.loads(truth_file.read_text())["params"].items()}
     return bag, truth
@@ -154,7 +163,9 @@ def test_one_frame_for_both_sensors_is_refused(drive: tuple[Path, dict[str, floa
     bag, _ = drive
     dataset = {"bag": str(bag), "joint_states": "/joint_states", "joints": JOINTS, "tracker": "/tracker"}
     scenario = tmp_path / "same.yaml"
-    scenario.write_text(yaml.safe_dump({**BESIDE, "dataset": {**dataset, "imu": "/imu", "sensor_frame": IMU}}))
+    scenario.write_text(
+        yaml.safe_dump({**BESIDE, "dataset": {**dataset, "imu": "/imu", "sensor_frame": IMU}})
+    )
     proc = cli("preflight", str(scenario))
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert f"the gyro's frame '{IMU}' is also the reference's" in proc.stderr

@@ -133,7 +133,11 @@ def _simulate_beside(args: argparse.Namespace, overrides: dict[str, Any], tracke
     sim = simulate_beside(lidar, imu_options(None, {"seed": lidar.seed, "latency_s": lidar.stamp_offset_s}))
     write = functools.partial(write_beside_simulation, sim, tracker=tracker)
     bag, truth = _staged(args, lidar_paths(args.out), write)
-    what = f"a tracker's poses at {lidar.scan_rate_hz:g} Hz" if tracker else f"scans at {lidar.scan_rate_hz:g} Hz"
+    what = (
+        f"a tracker's poses at {lidar.scan_rate_hz:g} Hz"
+        if tracker
+        else f"scans at {lidar.scan_rate_hz:g} Hz"
+    )
     print(
         f"wrote {bag} ({lidar.duration_s:g} s, {what}, the gyro at "
         f"{sim.imu.options.imu_rate_hz:g} Hz, both stamped {1000 * lidar.stamp_offset_s:g} ms late) "

@@ -93,7 +93,9 @@ def beside_gyro(reference: Log, gyro: Log) -> Log:
     increment's ``z``: reference rows, gyro rows, the gyro flag)."""
     ref_inc, gyro_inc = own_motions(reference), gyro.reference.motions
     if ref_inc is None or gyro_inc is None or ref_inc.z.shape[1] != REFERENCE_ROWS:
-        raise ValueError("a gyro beside a reference needs the reference's planar poses or motions and the gyro's")
+        raise ValueError(
+            "a gyro beside a reference needs the reference's planar poses or motions and the gyro's"
+        )
     stream = reference.joint_stream
     if stream is None:
         raise ValueError(f"{reference.path}: a gyro beside it needs the joints' own stream")

@@ -390,7 +390,9 @@ def _lidar(scans: Sequence[Topic], rates: Sequence[Topic], dataset: dict[str, An
     )
     more = _beside(rates, dataset)
     words += f" {_beside_words(rates)}" if rates else ""
-    short = f"reference: the scans on {scans[0].name}" + (f"; gyro beside it {rates[0].name}" if rates else "")
+    short = f"reference: the scans on {scans[0].name}" + (
+        f"; gyro beside it {rates[0].name}" if rates else ""
+    )
     return _Alone("scan", scans[0], more, words, short)
 
 

@@ -90,7 +90,9 @@ def tracker_poses(sim: LidarSimulation) -> np.ndarray:
     :data:`TRACKER_NOISE` (deterministic for the seed)."""
     rng = np.random.default_rng([sim.options.seed, 2])
     xy, theta = TRACKER_NOISE
-    return np.asarray(sim.lidar_poses + rng.normal(0.0, 1.0, sim.lidar_poses.shape) * np.array([xy, xy, theta]))
+    return np.asarray(
+        sim.lidar_poses + rng.normal(0.0, 1.0, sim.lidar_poses.shape) * np.array([xy, xy, theta])
+    )
 
 
 def tracker_messages(sim: LidarSimulation) -> list[Any]:
@@ -103,7 +105,9 @@ def tracker_messages(sim: LidarSimulation) -> list[Any]:
     ]
 
 
-def write_beside_simulation(sim: BesideSimulation, bag: str | Path, tracker: bool = False) -> tuple[Path, Path]:
+def write_beside_simulation(
+    sim: BesideSimulation, bag: str | Path, tracker: bool = False
+) -> tuple[Path, Path]:
     """Write the bag (``/joint_states``, ``/scan`` or with ``tracker`` ``/tracker``, ``/imu``,
     ``/tf_static``) and the truth JSON."""
     path, truth = lidar_paths(bag)
