@@ -17,7 +17,7 @@ import numpy as np
 from nlp_calib.core import poses
 from nlp_calib.core.errors import DatasetError
 from nlp_calib.logs.log import Log, LogClock, LogHeader, ReferenceData
-from nlp_calib.logs.reference import Motions
+from nlp_calib.logs.reference import Motions, PoseMotions
 from nlp_calib.logs.relative import RelativeMotions, _frozen
 
 #: Rows of a reference's increment and of a gyro's.
@@ -100,6 +100,7 @@ def beside_gyro(reference: Log, gyro: Log) -> Log:
     if stream is None:
         raise ValueError(f"{reference.path}: a gyro beside it needs the joints' own stream")
     header = _both(reference, gyro)
+    measures = Motions.name if reference.reference.motions is not None else PoseMotions.name
     ref_ns, gyro_ns = _stamps_ns(reference), _stamps_ns(gyro)
     first_ns, last_ns = ref_ns[0], ref_ns[-1]
     # Only the gyro's increments within the reference's span: the wheels are read on its stream.
@@ -134,5 +135,6 @@ def beside_gyro(reference: Log, gyro: Log) -> Log:
         clock=LogClock(start_ns=start_ns),
         joint_positions=stream.at(time_s),
         joint_stream=stream,
-        reference=ReferenceData(motions=motions, measures=Motions.name),
+        # A tracker's increments are differences of its poses: their noise is the poses'.
+        reference=ReferenceData(motions=motions, measures=measures),
     )
