@@ -274,6 +274,13 @@ def _tracker_keys(
     return best, frame, others, mount
 
 
+#: What a draft's sensor_frame gives.
+MOUNT_WORDS = (
+    "its fixed transforms from base_link on /tf_static give the nominal mount (the hand-off's height, "
+    "roll and pitch)."
+)
+
+
 def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
     found = survey(path)
     joint_topics = [t for t in found.of_type("sensor_msgs/msg/JointState") if t.joints]
@@ -317,14 +324,7 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         + _too(("a lidar's scans", scans, "lidar"))
         + ".",
         *([_beside_words(rates)] if rates else []),
-        *(
-            [
-                f"sensor_frame {mount}: its fixed transforms from base_link on /tf_static give the nominal "
-                "mount (the hand-off's height, roll and pitch)."
-            ]
-            if mount
-            else []
-        ),
+        *([f"sensor_frame {mount}: {MOUNT_WORDS}"] if mount else []),
         f"Check it before a run: nlp-calib preflight {where}",
     ]
     text = _text(header, raw, NOTES)
