@@ -8,6 +8,7 @@ import json
 import re
 import warnings
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,7 @@ from nlp_calib.pipeline.preflight import preflight
 from nlp_calib.simulation.beside import simulate_beside, tracker_poses, write_beside_simulation
 from nlp_calib.simulation.imu import ImuSimulationOptions
 from nlp_calib.simulation.lidar import LidarSimulationOptions
+from nlp_calib.simulation.options import DriveShape
 
 pytest.importorskip("rosbags")
 
@@ -193,3 +195,23 @@ def test_the_trackers_parameters_are_as_precise_beside_the_gyro_as_alone(
         ]
     for name in ("left_wheel_radius", "right_wheel_radius", "sensor_x", "sensor_y", "sensor_theta"):
         assert std[1][name] < 1.5 * std[0][name], (name, std[1][name], std[0][name])
+
+
+def test_a_slow_robots_gyro_in_degrees_beside_a_tracker_is_refused(tmp_path: Path) -> None:
+    """Beside a reference the gyro's turning is judged against the reference's wheels: degrees per
+    second (180/π times as far) refused with the fix, on a drive too slow for the reader's 12 rad/s."""
+    drive = DriveShape(max_speed=0.3, max_turn=0.15)
+    sim = simulate_beside(
+        LidarSimulationOptions(duration_s=40.0, seed=14, beams=16, drive=drive), ImuSimulationOptions(seed=14)
+    )
+    assert np.quantile(np.abs(sim.imu.rates[:, 2]), 0.99) < 0.21
+    sim = replace(sim, imu=replace(sim.imu, rates=np.degrees(sim.imu.rates)))
+    bag, _ = write_beside_simulation(sim, tmp_path / "deg", tracker=True)
+    dataset = {"bag": str(bag), "joint_states": "/joint_states", "joints": JOINTS, "tracker": "/tracker"}
+    scenario = tmp_path / "deg.yaml"
+    scenario.write_text(yaml.safe_dump({**BESIDE, "dataset": {**dataset, "imu": "/imu"}}))
+    proc = cli("preflight", str(scenario))
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "times as far as the wheels did" in proc.stderr and "degrees per second" in proc.stderr, (
+        proc.stderr
+    )

@@ -7,14 +7,18 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from conftest import cli
 
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning, UsageError
 from nlp_calib.logs.imu import GyroRates, read_gyro_csv, read_imu
+from nlp_calib.simulation.imu import ImuSimulationOptions, simulate_imu, write_imu_simulation
+from nlp_calib.simulation.options import DriveShape
 
 pytest.importorskip("rosbags")
 
@@ -189,13 +193,6 @@ def test_a_slow_robots_gyro_in_degrees_is_refused_against_the_wheels_turning(
     """A robot turning below 0.21 rad/s: its gyro's degrees per second stay under the reader's 12 rad/s
     refusal; the gyro's turning against the wheels' (typical wheels: the lengths are not all known)
     is 180/π and the pre-flight refuses it with the fix (exit 2). The same drive in rad/s is not."""
-    from dataclasses import replace
-
-    from conftest import cli
-
-    from nlp_calib.simulation.imu import ImuSimulationOptions, simulate_imu, write_imu_simulation
-    from nlp_calib.simulation.options import DriveShape
-
     drive = DriveShape(max_speed=0.3, max_turn=0.15)
     sim = simulate_imu(ImuSimulationOptions(duration_s=40.0, seed=13, drive=drive))
     assert np.quantile(np.abs(sim.rates[:, 2]), 0.99) < 0.21
