@@ -215,3 +215,15 @@ def test_a_slow_robots_gyro_in_degrees_beside_a_tracker_is_refused(tmp_path: Pat
     assert "times as far as the wheels did" in proc.stderr and "degrees per second" in proc.stderr, (
         proc.stderr
     )
+
+
+def test_simulate_writes_a_tracker_and_gyro_bag_a_scenario_reads(tmp_path: Path) -> None:
+    proc = cli(
+        "simulate", "--imu", "--tracker", "--out", str(tmp_path / "d"), "--duration", "3", "--seed", "4"
+    )
+    assert proc.returncode == 0, proc.stderr
+    truth = json.loads((tmp_path / "d.truth.json").read_text())["params"]
+    assert {"sensor_x", "gyro_bias_z", "imu_roll", "tracker_lag", "gyro_lag"} <= set(truth)
+    assert "tracker: /tracker, imu: /imu" in proc.stdout and "beside: gyro" in proc.stdout
+    alone = cli("simulate", "--tracker", "--out", str(tmp_path / "e"), "--duration", "3")
+    assert alone.returncode == 2 and "--tracker goes with --imu alone" in alone.stderr, alone.stderr
