@@ -139,6 +139,9 @@ def test_init_drafts_a_gyro_beside_the_trackers_poses_and_preflight_finds_it_eno
     for name in ("wheel_separation", "gyro_bias_z", "imu_roll", "gyro_lag", "tracker_lag"):
         assert f"  {name}: determined" in proc.stdout, name
     assert "verdict: ENOUGH" in proc.stdout
+    # The drive as the tracker saw it (was: 0.0 m, the gyro's heading alone).
+    travelled = re.search(r"\n  (\d+\.\d) m in ", proc.stdout)
+    assert travelled is not None and float(travelled.group(1)) > 3.0, proc.stdout
 
 
 @pytest.mark.parametrize(

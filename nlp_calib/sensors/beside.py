@@ -135,6 +135,10 @@ class Beside(SensorDefaults):
     def heading(self, T_world_sensor: np.ndarray) -> np.ndarray:
         return self.reference_sensor.heading(T_world_sensor)
 
+    def floor_track(self, log: Log) -> np.ndarray:
+        """The reference's positions and heading (was the gyro's heading alone: a drive of 0 m)."""
+        return self.reference_sensor.floor_track(log)
+
     def planar_yaw(self, params: Mapping[str, float]) -> float | None:
         return self.reference_sensor.planar_yaw(params)
 
