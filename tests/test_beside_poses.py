@@ -230,3 +230,29 @@ def test_simulate_writes_a_tracker_and_gyro_bag_a_scenario_reads(tmp_path: Path)
     assert "tracker: /tracker, imu: /imu" in proc.stdout and "beside: gyro" in proc.stdout
     alone = cli("simulate", "--tracker", "--out", str(tmp_path / "e"), "--duration", "3")
     assert alone.returncode == 2 and "--tracker goes with --imu alone" in alone.stderr, alone.stderr
+
+
+def test_two_tracker_and_gyro_logs_fit_together_within_3_sigma(
+    drive: tuple[Path, dict[str, float]], tmp_path: Path
+) -> None:
+    """``datasets:`` of two such bags: each log its own biases and clock offsets, one tilt, one mount
+    and one robot, every one within 3σ of the truth (seed 41 beside the fixture's 37)."""
+    bag, truth = drive
+    lidar = LidarSimulationOptions(duration_s=30.0, seed=41, stamp_offset_s=LATE, beams=16)
+    gyro = ImuSimulationOptions(seed=41, truth={"imu_roll": ROLL}, stamp_offset_s=GYRO_LATE, frame=IMU)
+    other, _ = write_beside_simulation(simulate_beside(lidar, gyro), tmp_path / "other", tracker=True)
+    block = {"joint_states": "/joint_states", "joints": JOINTS, "tracker": "/tracker", "imu": "/imu"}
+    scenario = tmp_path / "two.yaml"
+    scenario.write_text(
+        yaml.safe_dump({**BESIDE, "datasets": [{"bag": str(b), **block} for b in (bag, other)]})
+    )
+    proc = cli("run", str(scenario), "--out", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    stored = yaml.safe_load((tmp_path / "out" / "calibration.yaml").read_text())
+    est, std = stored["parameters"], stored["std"]
+    per_log = {"gyro_bias_x", "gyro_bias_y", "gyro_bias_z", "tracker_lag", "gyro_lag"}
+    expected = {f"{n}_{i}": truth[n] for n in per_log for i in (1, 2)}
+    expected |= {n: truth[n] for n in FITTED - per_log}
+    assert set(expected) <= set(est), sorted(est)
+    for name, value in sorted(expected.items()):
+        assert abs(est[name] - value) < 3 * std[name], (name, est[name], value, std[name])
