@@ -30,7 +30,7 @@ from nlp_calib.analysis.plan import Setting, believed, plan
 from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.analysis.uncertainty import range_std
 from nlp_calib.analysis.verdict import way_out
-from nlp_calib.core.errors import NlpCalibError, PreflightError
+from nlp_calib.core.errors import DatasetError, NlpCalibError, PreflightError
 from nlp_calib.logs import Log
 from nlp_calib.pipeline import units_check
 from nlp_calib.pipeline.assemble import fit_info
@@ -132,6 +132,8 @@ def _start(
             outside = implausible(fns.model, point.initial)
             return point, words + (f", outside the plausible ranges in {outside}" if outside else "")
         why = "it is not finite"
+    except DatasetError:
+        raise  # the data at fault (a gyro in degrees), not the start
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ZeroDivisionError) as exc:
         if not auto:
             raise
