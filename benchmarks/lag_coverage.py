@@ -84,7 +84,7 @@ def tracker(folder: Path, seed: int, models: list[str]) -> list[Row]:
             tracker=TrackerSim(latency_s=lag),
         )
         log, _ = simulate_to_file(opts, folder / f"{model}_{seed}.txt")
-        doc = {"dataset": str(log), "model": model, "initial_guess": "from_file"}
+        doc: dict[str, Any] = {"dataset": str(log), "model": model, "initial_guess": "from_file"}
         doc |= {"solvers": ["gauss_newton"], "alignment": {"tracker_lag": "auto"}}
         run = _run(doc, f"{model}_{seed}", folder)
         out += _rows(run, f"{model} {seed}", {"tracker_lag": lag})
@@ -199,10 +199,10 @@ def main() -> int:
         for kind in args.kinds:
             for seed in range(args.first, args.first + args.seeds):
                 for row in KINDS[kind](Path(tmp), seed, args.models):
-                    label, name, err, white, blocks, told = row
+                    label, name, e, white, blocks, told = row
                     print(
-                        f"{label:22s} {name:11s} error {1e3 * err:+7.2f} ms  σ white {1e3 * white:5.2f} "
-                        f"blocks {1e3 * blocks:5.2f} told {1e3 * told:5.2f} ms  z {err / told:+6.2f}",
+                        f"{label:22s} {name:11s} error {1e3 * e:+7.2f} ms  σ white {1e3 * white:5.2f} "
+                        f"blocks {1e3 * blocks:5.2f} told {1e3 * told:5.2f} ms  z {e / told:+6.2f}",
                         flush=True,
                     )
                     rows.append(row)
