@@ -203,11 +203,11 @@ def test_one_uncertainty_where_both_solvers_meet_the_same_optimum(small_demo: Sc
 
     calib = Calibration.setup(small_demo)
     fit = calib.fitting
-    noise = calib.model.input_noise_std(calib.aligned)
+    noise = calib.stages.windows.input_noise
     results = {name: calib.solve(name) for name in ("gauss_newton", "ipopt")}
     shared = uncertainties(fit, results, noise, None)
     assert shared["ipopt"] is shared["gauss_newton"]
-    own = unc.estimate(calib.evaluator, results["ipopt"].x, calib.data, noise)
+    own = unc.estimate(calib.evaluator, results["ipopt"].x, calib.data, noise[0], counted=noise[1])
     np.testing.assert_allclose(shared["ipopt"].std, own.std, rtol=1e-6)
     sigma = own.std[[own.names.index(n) for n in own.free]]
     moved = dataclasses.replace(results["ipopt"], x=results["ipopt"].x + 1e-3 * sigma)
