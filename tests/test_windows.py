@@ -14,6 +14,7 @@ from nlp_calib.models import get_model
 from nlp_calib.problem import (
     ProblemFunctions,
     ProblemSpec,
+    ResidualData,
     ResidualOptions,
     build,
     build_residual_data,
@@ -113,6 +114,31 @@ def _by_reading(F: np.ndarray, counted: np.ndarray) -> np.ndarray:
     return np.where(counted, read, own)
 
 
+def _column_jacobian(fns: ProblemFunctions, data: ResidualData, x: np.ndarray) -> np.ndarray:
+    """Each window's error's derivatives with respect to its own data column, ``(3, N, rows)``."""
+    N = data.n_residuals
+    col = ca.SX.sym("col", fns.column_rows)
+    d_col = ca.Function("d", [col], [ca.jacobian(fns.residual(x, [], col), col)]).map(N)
+    return np.asarray(d_col(data.columns)).reshape(3, N, -1)
+
+
+@pytest.mark.parametrize("H", [1, 5])
+def test_the_inputs_share_of_the_cost_is_the_sum_over_every_window_and_reading(H: int) -> None:
+    """``T(x)``, the counts' expected share of the robust cost, against the direct sum over each
+    window's readings: ``Σ_w ρ'_w Σ_c Ω_c Σ_r (F_w^{r−1} − F_w^r)² σ²``."""
+    from nlp_calib.analysis.inputs_bias import noise_share
+
+    fns = build(get_model("diff_drive"), ProblemSpec(horizon=H, kernel="huber"))
+    data = build_residual_data(fns, sim_log("diff_drive", 300, 7), ResidualOptions(horizon=H))
+    ev = evaluator(fns, data, np.zeros(0), delta=0.05)
+    x, sigma_in, counted = truth("diff_drive") * 1.001, np.array([0.3, 0.5]), np.array([True, True])
+    _, _, weight = ev.robust_terms(x)
+    D = _column_jacobian(fns, data, x)
+    F = D[:, :, : fns.n_inputs * H].reshape(3, data.n_residuals, H, fns.n_inputs).transpose(1, 2, 0, 3)
+    direct = np.einsum("w,c,whci,i->", weight, ev.omega, _by_reading(F, counted) ** 2, sigma_in**2)
+    assert noise_share(ev, x, weight, (sigma_in, counted)) == pytest.approx(direct, rel=1e-9)
+
+
 @pytest.mark.parametrize("counted", [None, np.array([True, False])], ids=["per interval", "traction counted"])
 def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval(counted: np.ndarray | None) -> None:
     """The running-sum propagation against the direct O(N·H) sum over each window's intervals (a
@@ -128,10 +154,7 @@ def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval(counte
 
     # Reference: derivatives of the defining residual with respect to each window's own data.
     N, n_in, n = data.n_residuals, fns.n_inputs, fns.n_free
-    col = ca.SX.sym("col", fns.column_rows)
-    e_col = fns.residual(x, [], col)
-    d_col = ca.Function("d", [col], [ca.jacobian(e_col, col)]).map(N)
-    D = np.asarray(d_col(data.columns)).reshape(3, N, -1)
+    D = _column_jacobian(fns, data, x)
     e, J = (np.asarray(v) for v in fns.residual_jacobian.map(N)(x, [], data.columns))
     J = J.reshape(3, N, n)
     s = np.einsum("cw,c,cw->w", e, ev.omega, e)
