@@ -329,7 +329,9 @@ class EndNoise:
         """The noise at the end of the windows of intervals ``a`` to ``b − 1``, ``(N, m, m)``."""
         if not self.ends.shape[0]:
             return self.own[b] - self.own[a]
-        return self.own[b] - self.own[a] + self.ends[a] + self.ends[b - 1] + self.inside[b] - self.inside[a + 1]
+        return (
+            self.own[b] - self.own[a] + self.ends[a] + self.ends[b - 1] + self.inside[b] - self.inside[a + 1]
+        )
 
 
 def _sandwich(D: np.ndarray, Sigma: np.ndarray) -> np.ndarray:

@@ -244,7 +244,9 @@ def uncertainties(
     done: list[tuple[SolverResult, Uncertainty]] = []
     for name, r in results.items():
         same = [u for prior, u in done if _same_optimum(prior, r, u)]
-        out[name] = same[0] if same else unc.estimate(fit.evaluator, r.x, fit.data, noise[0], ranges, noise[1])
+        out[name] = (
+            same[0] if same else unc.estimate(fit.evaluator, r.x, fit.data, noise[0], ranges, noise[1])
+        )
         done.append((r, out[name]))
     return out
 

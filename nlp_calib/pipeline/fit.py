@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from nlp_calib.analysis.inputs_bias import bias_step
+from nlp_calib.analysis.inputs_bias import BiasStep, bias_step
 from nlp_calib.core import interrupts
 from nlp_calib.pipeline.build import Problem, evaluated
 from nlp_calib.pipeline.keys import refuse_rejected_options, scenario_key
@@ -36,6 +36,7 @@ class Fit:
         self.problem = problem
         self.data = data
         self.noise = noise
+        self._bias: list[BiasStep] = []
         self.evaluator = problem.binder.evaluate(data)
         self.evaluator.prepare(evaluated(problem.binder.scenario, solvers))
         self._solvers: dict[str, Solver] = {}
@@ -66,10 +67,14 @@ class Fit:
         if self.noise is None or not result.converged:
             return result
         ev, start = self.evaluator, self.problem.start
-        step = bias_step(ev, result.x, self.noise)
-        if not np.any(step):
+        # Both solvers at one optimum: one step (it costs a pass over the windows per parameter).
+        known = [b for b in self._bias if b.holds_at(result.x)]
+        if not known:
+            known = [bias_step(ev, result.x, self.noise)]
+            self._bias.append(known[0])
+        if not np.any(known[0].step):
             return result
-        x = ev.boxplus(result.x, step)
+        x = ev.boxplus(result.x, known[0].step)
         if start.lower is not None and start.upper is not None:
             x = np.clip(x, start.lower, start.upper)
         ne = ev.normal_equations(x)
