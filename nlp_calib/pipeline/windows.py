@@ -14,6 +14,7 @@ import numpy as np
 
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
+from nlp_calib.models import counted_inputs
 from nlp_calib.pipeline.align import Alignment
 from nlp_calib.pipeline.build import Binder, Problem
 from nlp_calib.pipeline.prepare import PreparedLog, split
@@ -82,7 +83,6 @@ def bind_windows(
     fit = (start, split(sc, start, stop))
     data = binder.windows(alignment.log, *fit)
     noise = problem.model.input_noise_std(alignment.log, sc.data.encoder_noise)
-    counted = np.zeros(noise.shape, dtype=bool)
-    counted[[row for row, _ in problem.model.counter_rows(alignment.log).values()]] = True
+    counted = counted_inputs(problem.model, alignment.log)
     masks = (bad_intervals, bad_records)
     return LogWindows(alignment.log, (start, stop), fit, data, binder, *masks, noise, counted)
