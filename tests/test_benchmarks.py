@@ -21,7 +21,15 @@ from nlp_calib.codegen.compiler import find_compiler
 def test_performance_benchmark_quick_run(tmp_path: Path) -> None:
     env = dict(os.environ, NLP_CALIB_CACHE=str(tmp_path / "cache"))
     proc = subprocess.run(
-        [sys.executable, str(REPO / "benchmarks" / "performance.py"), "--quick", "--out", str(tmp_path)],
+        [
+            sys.executable,
+            str(REPO / "benchmarks" / "performance.py"),
+            "--quick",
+            "--repeats",
+            "1",
+            "--out",
+            str(tmp_path),
+        ],
         capture_output=True,
         text=True,
         env=env,
@@ -29,7 +37,8 @@ def test_performance_benchmark_quick_run(tmp_path: Path) -> None:
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     doc = json.loads((tmp_path / "performance.json").read_text())
-    assert doc["repeats"] == 2 and doc["environment"]["cores"] >= 1
+    # One repeat: the smoke run proves every section runs and agrees; the medians are the benchmark's.
+    assert doc["repeats"] == 1 and doc["environment"]["cores"] >= 1
     assert doc["end_to_end"]["import_floor_s"] > 0
     demo = doc["end_to_end"]["scenarios"]["demo"]
     for key in ("cold_wall_s", "warm_wall_s", "warm_peak_mb", "gauss_newton_ms", "ipopt_ms"):

@@ -19,6 +19,8 @@ from nlp_calib.core.errors import UsageError
 from nlp_calib.models import MODELS
 from nlp_calib.outputs.check import check_document
 from nlp_calib.outputs.handoff import write_calibration
+from nlp_calib.outputs.results import result_dict
+from nlp_calib.outputs.terminal import run_table
 from nlp_calib.pipeline import Calibration, load_scenario
 from nlp_calib.pipeline.check import check, check_scenario
 from nlp_calib.pipeline.stored import read_calibration
@@ -106,6 +108,13 @@ def test_the_check_reads_back_from_the_stored_result(stored: Path, tmp_path: Pat
     run = check(cal, check_scenario(cal, fresh(tmp_path, 24)))
     again = CalibrationRun.from_data(json.loads(json.dumps(run.to_data())))
     assert check_document(again) == check_document(run)
+    # The drift is a plug-in check: its one wording is the check's verdict line, its record
+    # result.json's ``drift``, and it judges the stored calibration, not the refit's verdict.
+    drift, found = run.checks.drift, run.checks.plugin("drift")
+    assert drift is not None and found is not None and found.level == "fine"
+    assert found.words == drift.line() and f"drift: {drift.line()}" in run_table(run)
+    assert result_dict(run)["drift"]["verdict"] == drift.verdict == check_document(run)["verdict"]
+    assert [c["name"] for c in result_dict(run)["drift"]["changes"]] == [c.name for c in drift.changes]
 
 
 def test_a_scenario_with_another_formulation_is_warned_about(stored: Path, tmp_path: Path) -> None:

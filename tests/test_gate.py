@@ -16,8 +16,9 @@ from nlp_calib.pipeline import preflight as pf
 from nlp_calib.pipeline import scenario_from_mapping
 from nlp_calib.pipeline.align import apart, valleys
 from nlp_calib.pipeline.build import Binder
-from nlp_calib.pipeline.preflight import _judged_by_fit, preflight
+from nlp_calib.pipeline.preflight import preflight
 from nlp_calib.pipeline.scenario import load_scenario
+from nlp_calib.pipeline.units_check import _judged_by_fit
 from nlp_calib.pipeline.validation import lag_alike
 from nlp_calib.problem import ResidualData
 from nlp_calib.results.checks import LagEstimate

@@ -15,6 +15,7 @@ import pytest
 from conftest import write_sim
 
 from nlp_calib.outputs.markdown import report_markdown
+from nlp_calib.outputs.results import result_dict
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.outputs.terminal import run_table
 from nlp_calib.pipeline import Calibration, direction_check, fault_check, scenario_from_mapping
@@ -34,6 +35,7 @@ def toy_check(run: CalibrationRun, context: plugin_checks.CheckContext) -> Check
         (f"{n} of at least 10000 wanted",),
         {"solver": str(run.chosen_solver())},
         {"windows": {"fitted": float(n)}},
+        record={"windows": n},
     )
 
 
@@ -68,6 +70,8 @@ def test_its_one_wording_reaches_every_output_and_the_verdict(run: CalibrationRu
     assert any(words in line for line in summary_lines(run))
     assert words in run_table(run)
     assert words[1:] in report_markdown(run, [])
+    # Its record is what result.json holds under its name.
+    assert result_dict(run)["toy"] == {"windows": run.data.n_residuals}
 
 
 def test_a_fine_result_is_no_caveat(run: CalibrationRun) -> None:
@@ -91,7 +95,7 @@ def test_the_direction_checks_one_wording_is_the_terminals_and_the_reports(run: 
 def test_the_built_in_checks_are_plug_ins_with_one_wording(run: CalibrationRun) -> None:
     """Faults and direction are registered like the toy: their words reach the terminal, the
     report and the summary alike, the faults with a section of their own in the report."""
-    assert list(plugin_checks.RUN_CHECKS)[:3] == ["faults", "direction", "consistency"]
+    assert list(plugin_checks.RUN_CHECKS)[:4] == ["observability", "faults", "direction", "consistency"]
     report, table, summary = report_markdown(run, []), run_table(run), summary_lines(run)
     for name in ("faults", "direction"):
         found = run.checks.plugin(name)
@@ -143,3 +147,73 @@ def test_faults_not_checked_are_the_fault_checks_caveat(run: CalibrationRun) -> 
         found.words == "not checked: no counters"
         and found.reason == "encoder faults not checked (no counters)"
     )
+
+
+def test_determinacy_is_a_plug_in_whose_caveats_and_concerns_the_verdict_reads(run: CalibrationRun) -> None:
+    """What the drive determines is the first plug-in: its record is result.json's observability,
+    its words the summary's; a weak direction is its caveat on each parameter in it, and a
+    parameter known beyond WEAK× the precision it needs is another, in its own words."""
+    from nlp_calib.pipeline import determinacy_check
+    from nlp_calib.results.checks import WEAK, WeakDirection
+
+    obs, found = run.checks.observability, run.checks.plugin("observability")
+    assert obs is not None and found is not None and found.level == "fine"
+    assert result_dict(run)["observability"] == obs.as_dict()
+    assert f"  observability: {found.words}" in summary_lines(run)
+    weak = WeakDirection(7.0, {"k_steer": 0.8, "steer_offset": -0.6})
+    # A σ to believe beyond WEAK× the needed precision: the white-noise σ of axis_length widened.
+    report = run.reports["gauss_newton"]
+    needed = run.scenario.layout.needed(report.result.param_dict())
+    wide = report.uncertainty.std.copy()
+    wide[list(report.uncertainty.names).index("axis_length")] = 1.5 * WEAK * needed["axis_length"]
+    widened = dataclasses.replace(report, uncertainty=dataclasses.replace(report.uncertainty, std=wide))
+    loose = dataclasses.replace(
+        run,
+        reports={**run.reports, "gauss_newton": widened},
+        checks=dataclasses.replace(run.checks, observability=dataclasses.replace(obs, weak=(weak,))),
+    )
+    said = determinacy_check.check(loose)
+    assert said is not None and said.level == CAVEAT
+    assert (
+        said.reasons[0]
+        == "k_steer, steer_offset are only weakly observable apart (one combination of them is loose)"
+    )
+    assert said.reasons[1].startswith("axis_length is known only to ±")
+    assert said.concerns["k_steer"] == said.concerns["steer_offset"] == said.reasons[0]
+    assert said.concerns["axis_length"] == said.reasons[1] and len(said.reasons) == 2
+    # The verdict names both, the plug-in's caveats first.
+    from nlp_calib.analysis.verdict import caveats
+    from nlp_calib.models import get_model
+
+    judged = dataclasses.replace(loose, checks=dataclasses.replace(loose.checks, more=(said,)))
+    assert caveats(judged, "gauss_newton", get_model("tricycle"))[:2] == list(said.reasons)
+
+
+def test_a_pre_flight_check_is_one_registry_line_and_an_unusable_one_stops_the_run(tmp_path: Path) -> None:
+    """A toy pre-flight check registered here alone: its words reach the pre-flight's report, and at
+    the unusable level the verdict is CHECK THE DATA in its reasons; the units check beside it is
+    one too, its findings read back from its record."""
+    from nlp_calib.outputs.preflight import preflight_lines
+    from nlp_calib.pipeline import preflight as pf
+    from nlp_calib.results.checks import UNUSABLE
+    from nlp_calib.results.preflight import CHECK_DATA, EXIT_CODES
+
+    log = write_sim(tmp_path, "drive.txt", records=400, seed=62)
+    sc = scenario_from_mapping(
+        {"dataset": str(log), "model": "tricycle", "solvers": ["gauss_newton"]}, "pre", tmp_path
+    )
+
+    def toy(assessed: pf.Assessment) -> CheckResult:
+        n = len(assessed.drive.parts)
+        return CheckResult("toy", UNUSABLE, f"the toy saw {n} log", caveat=f"the toy refuses {n} log")
+
+    with pytest.MonkeyPatch.context() as mp, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mp.setitem(pf.PREFLIGHT_CHECKS, "toy", toy)
+        report = pf.preflight(sc)
+    assert "units" in pf.PREFLIGHT_CHECKS and report.check("units") is not None
+    assert report.units == () and report.check("units").words == "nothing suspicious in units and signs"  # type: ignore[union-attr]
+    assert report.verdict == CHECK_DATA and report.exit_code == EXIT_CODES[CHECK_DATA]
+    assert report.stop_words() == "the toy refuses 1 log"
+    lines = preflight_lines(report)
+    assert "toy: the toy saw 1 log" in lines and "verdict: CHECK THE DATA: the toy refuses 1 log" in lines

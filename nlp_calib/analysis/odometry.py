@@ -60,30 +60,36 @@ def _unit_covariances(
 
 
 def _start_jacobian(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``∂(T_a ⊕ M)/∂T_a`` in world axes, for ``T_a ⊕ M`` at ``b``: the start's error carried along."""
-    F = np.eye(3)
-    F[0, 2], F[1, 2] = -(b[1] - a[1]), b[0] - a[0]
+    """``∂(T_a ⊕ M)/∂T_a`` in world axes, for ``T_a ⊕ M`` at ``b`` (rows of poses: one per row):
+    the start's error carried along."""
+    F = np.broadcast_to(np.eye(3), (*a.shape[:-1], 3, 3)).copy()
+    F[..., 0, 2], F[..., 1, 2] = -(b[..., 1] - a[..., 1]), b[..., 0] - a[..., 0]
     return F
 
 
-def _segment(P: np.ndarray, est: np.ndarray, i: int, j: int, turn: float) -> np.ndarray:
-    """The covariance of pose ``j`` dead-reckoned from pose ``i`` (its covariance taken away), in
-    world axes turned by ``turn``: ``P_j − F·P_i·Fᵀ`` with ``F = ∂T_j/∂T_i``."""
+def _segment(P: np.ndarray, est: np.ndarray, i: np.ndarray, j: np.ndarray, turn: np.ndarray) -> np.ndarray:
+    """The covariance of poses ``j`` dead-reckoned from poses ``i`` (their covariance taken away),
+    in world axes turned by ``turn``: ``P_j − F·P_i·Fᵀ`` with ``F = ∂T_j/∂T_i``; ``(len(i), …, 3, 3)``
+    for ``P`` ``(…, poses, 3, 3)``."""
     F = _start_jacobian(est[i], est[j])
-    Pij = P[..., j, :, :] - F @ P[..., i, :, :] @ F.T
+    Pi, Pj = np.moveaxis(P[..., i, :, :], -3, 0), np.moveaxis(P[..., j, :, :], -3, 0)
+    extra = (slice(None),) + (None,) * (Pi.ndim - 3)
+    Pij = Pj - F[extra] @ Pi @ np.swapaxes(F, -1, -2)[extra]
     c, s = np.cos(turn), np.sin(turn)
-    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return R @ Pij @ R.T
+    R = np.zeros((turn.size, 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
+    return R[extra] @ Pij @ np.swapaxes(R, -1, -2)[extra]
+
+
+#: Unit variances of the tracker's position and of its heading.
+_UNITS = np.array([np.diag([1.0, 1.0, 0.0]), np.diag([0.0, 0.0, 1.0])])
 
 
 def _tracker_terms(start: np.ndarray, end: np.ndarray) -> np.ndarray:
     """The error's covariance per unit variance of the tracker's position and of its heading, at
-    both ends of a segment restarted from the tracker: ``(2, 3, 3)``."""
-    F = _start_jacobian(start, end)
-    out = []
-    for unit in (np.diag([1.0, 1.0, 0.0]), np.diag([0.0, 0.0, 1.0])):
-        out.append(F @ unit @ F.T + unit)
-    return np.array(out)
+    both ends of segments restarted from the tracker (rows of poses): ``(rows, 2, 3, 3)``."""
+    F = _start_jacobian(start, end)[:, None]
+    return F @ _UNITS @ np.swapaxes(F, -1, -2) + _UNITS
 
 
 @dataclass(frozen=True)
@@ -116,18 +122,17 @@ def segment_drift(
         ref = T_world_base[a:b]
         est, P = _unit_covariances(fns, params, inputs[:, a : b - 1], ref[0])
         for L in dict.fromkeys(lengths):
-            for i in range(0, b - a - L, max(L // 2, 1)):
-                j = i + L
-                if not (good[a + i] and good[a + j]):
-                    continue
-                again = poses.compose(ref[i], poses.between(est[i], est[j]))
-                errors.append(np.r_[again[:2] - ref[j, :2], wrap_angle(again[2] - ref[j, 2])])
-                covs.append(_segment(P, est, i, j, ref[i, 2] - est[i, 2]))
-                terms.append(_tracker_terms(ref[i], again))
+            i = np.arange(0, b - a - L, max(L // 2, 1))
+            i = i[good[a + i] & good[a + i + L]]
+            j = i + L
+            again = poses.compose(ref[i], poses.between(est[i], est[j]))
+            errors.append(np.c_[again[:, :2] - ref[j, :2], wrap_angle(again[:, 2] - ref[j, 2])])
+            covs.append(_segment(P, est, i, j, ref[i, 2] - est[i, 2]))
+            terms.append(_tracker_terms(ref[i], again))
     n_in = inputs.shape[0]
     if not errors:
         return Drift(np.zeros((0, 3)), np.zeros((0, n_in, 3, 3)), np.zeros((0, 2, 3, 3)))
-    return Drift(np.array(errors), np.array(covs), np.array(terms))
+    return Drift(np.concatenate(errors), np.concatenate(covs), np.concatenate(terms))
 
 
 def _moments(A: np.ndarray, y: np.ndarray, predicted: np.ndarray) -> np.ndarray:

@@ -47,9 +47,7 @@ from nlp_calib.results.checks import (
     CAVEAT,
     NOT_OBSERVABLE,
     UNUSABLE,
-    WEAK,
     LagEstimate,
-    WeakDirection,
 )
 from nlp_calib.results.layout import CLOCK, HELD, KNOWN, Layout
 from nlp_calib.results.run import CAVEATS, GOOD, NOT_USABLE, UNDETERMINED
@@ -62,36 +60,16 @@ AGREE = 1e-4
 RANGE_SIGMAS = 3.0
 
 
-def _loose(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]:
-    """Parameters known too loosely, in words."""
-    return [w.words() for w in _weak(run)] + list(_coarse(run, solver, model).values())
-
-
-def _weak(run: CalibrationRun) -> list[WeakDirection]:
-    """The weakly (not un-) observable directions."""
-    obs = run.checks.observability
-    return [w for w in obs.weak if w.std_reference <= NOT_OBSERVABLE] if obs is not None else []
-
-
-def _coarse(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[str, str]:
-    """Each parameter whose σ to believe exceeds WEAK times the precision its layout needs (the
-    vehicle's, :mod:`nlp_calib.analysis.precision`), with why."""
-    std = run.std(solver)
-    params = run.reports[solver].result.param_dict()
-    needed = run.scenario.layout.needed({n: params[n] for n in std})
-    out: dict[str, str] = {}
-    for name, s in std.items():
-        if np.isfinite(s) and not s <= WEAK * needed[name]:
-            unit, ref = run.scenario.units[name], needed[name]
-            out[name] = f"{name} is known only to ±{s:.2g} {unit} (over {WEAK:g}× the {ref:.2g} needed)"
-    return out
-
-
 def concerns(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[str, str]:
-    """Each parameter a caveat of ``solver``'s estimate names, with that caveat: known too loosely,
-    different between the converged solvers, between forward and reverse driving or between logs."""
-    out = {c: w.words() for w in _weak(run) for c in w.components}
-    out.update(_coarse(run, solver, model))
+    """Each parameter a caveat of ``solver``'s estimate names, with that caveat: each parameter a
+    plug-in check puts in doubt (known too loosely, different between forward and reverse driving
+    or between logs; the first check's word, in registry order), every parameter under a check's
+    caveat on all of them (a wrong model's), or different between the converged solvers."""
+    out: dict[str, str] = {}
+    for r in run.checks.more:
+        if r.level in (CAVEAT, UNUSABLE):
+            for n, why in r.concerns.items():
+                out.setdefault(n, why)
     params = run.reports[solver].result.param_dict()
     for r in run.checks.more:  # a plug-in check's caveat on every parameter (a wrong model's)
         if r.level == CAVEAT and r.about.get("concerns") == "all":
@@ -101,10 +79,6 @@ def concerns(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[st
         for n, v in params.items():
             if abs(v - theirs[n]) > AGREE * max(abs(v), 1e-12):
                 out.setdefault(n, f"{solver} and {other} disagree on it")
-    for r in run.checks.more:  # each parameter a plug-in check puts in doubt
-        if r.level in (CAVEAT, UNUSABLE):
-            for n, why in r.concerns.items():
-                out.setdefault(n, why)
     return out
 
 
@@ -159,17 +133,17 @@ def _sensor(run: CalibrationRun) -> Sensor:
 
 
 def _checks(run: CalibrationRun) -> list[str]:
-    """What the checks found that needs a look, in words."""
+    """What the clock and the held parameters leave open, in words."""
     out = [w for w in run.warnings if " held at its initial value" in w]
     out += lag_caveats(run.log.path, run.data.lag_estimate)
     out += steering_caveats(run)
-    out += [r.reason for r in run.checks.more if r.level == CAVEAT]  # the plug-in checks' caveats
     return out
 
 
 def caveats(run: CalibrationRun, solver: str, model: KinematicModel) -> list[str]:
-    """Why ``solver``'s converged, determined estimate needs a look before it is used."""
-    out = _loose(run, solver, model)
+    """Why ``solver``'s converged, determined estimate needs a look before it is used: the plug-in
+    checks' caveats first (in registry order: what the drive determines first), then the rest."""
+    out = [reason for r in run.checks.more if r.level == CAVEAT for reason in r.reasons]
     converged = [s for s in run.solver_order() if run.reports[s].result.converged]
     for other in converged[1:]:
         if (d := run.relative_difference(solver, other)) > AGREE:
@@ -243,7 +217,7 @@ def _unobservable(run: CalibrationRun) -> set[str]:
 def _unusable(run: CalibrationRun) -> list[str]:
     """Why a converged, determined estimate is not to be used: the logs are not one robot's, or the
     fit does worse than a given initial guess or the robot's nominal values."""
-    out = [r.reason for r in run.checks.more if r.level == UNUSABLE]
+    out = [reason for r in run.checks.more if r.level == UNUSABLE for reason in r.reasons]
     start, nominal = run.checks.start, run.checks.nominal
     if start is not None and not _fitted_start(run) and start.outcome == "worse":
         out.append(start.words())

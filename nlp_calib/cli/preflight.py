@@ -52,8 +52,10 @@ def cmd_preflight(args: argparse.Namespace) -> int:
 
 
 def _document(report: Preflight) -> object:
-    """The report as JSON data, with its verdict and exit code."""
-    return {"verdict": report.verdict, "exit_code": report.exit_code, **codec.to_data(report)}
+    """The report as JSON data, with its verdict and exit code; the unit and sign findings also
+    under ``units``, the key readers have always found them under."""
+    doc = {"verdict": report.verdict, "exit_code": report.exit_code, **codec.to_data(report)}
+    return {**doc, "units": codec.to_data(report.units)}
 
 
 def cmd_init(args: argparse.Namespace) -> int:

@@ -84,15 +84,11 @@ def preflight_lines(report: Preflight) -> list[str]:
             "drive" + (f" ({report.recordings[i].path})" if len(report.excitation) > 1 else "") + ":"
         )
         lines += _drive(ex)
-    lines.append(
-        "units and signs: "
-        + ("nothing suspicious" if not report.units else f"{len(report.units)} finding(s)")
-    )
-    lines += [f"  {u.words}" for u in report.units]
+    lines += [line for r in report.checks for line in r.lines()]
     lines.append(f"parameters (the Jacobian at {report.start}; noise: {report.noise}):")
     lines += [f"  {p.words()}" for p in report.parameters]
     missing = ", ".join(p.name for p in report.missing()) or _weak_words(report)
-    units = "; ".join(u.words for u in report.units if u.blocking)
+    units = "; ".join(report.blocking())
     lines.append("verdict: " + VERDICT_WORDS[report.verdict].format(names=missing, units=units))
     if report.way_out:
         lines.append(f"  {report.way_out}")

@@ -170,7 +170,6 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         "logs": _logs_dict(run),
         "start": _cost_dict(checks.start),
         "nominal": _nominal_dict(run),
-        "observability": checks.observability.as_dict() if checks.observability is not None else None,
         "warnings": list(run.warnings),
         "verdict": {
             "level": run.verdict.level,
@@ -202,7 +201,7 @@ def _sensor_dict(run: CalibrationRun) -> dict[str, Any]:
 
 #: Keys of the plug-in checks' records that result.json has always held, null when the check did not
 #: run (readers in the wild look them up).
-STORED_CHECKS = ("direction", "truth", "faults")
+STORED_CHECKS = ("direction", "truth", "faults", "observability")
 
 
 def _check_records(run: CalibrationRun) -> dict[str, Any]:

@@ -15,16 +15,6 @@ from nlp_calib.results import CalibrationRun
 from nlp_calib.results.run import CAVEATS, NOT_USABLE, UNDETERMINED
 
 
-def _observability_line(run: CalibrationRun) -> str:
-    obs = run.checks.observability
-    if obs is None:
-        return "not analysed"
-    if not obs.warnings:
-        return f"every parameter determined (condition number {obs.condition_number:.3g})"
-    more = len(obs.warnings) - 1
-    return obs.warnings[0] + (f" (and {more} more, above)" if more else "")
-
-
 def _accuracy_line(run: CalibrationRun, solver: str) -> str:
     if reason := run.scenario.sensor.no_position:
         return f"no trajectory figure in metres ({reason}); the checks below judge the fit"
@@ -111,7 +101,6 @@ def summary_lines(run: CalibrationRun, files: Sequence[str] = ()) -> list[str]:
     if chosen is not None:
         lines.append(f"  accuracy ({chosen}): {_accuracy_line(run, chosen)}")
     lines += [f"  {r.name}: {r.words}" for r in run.checks.more]
-    lines.append(f"  observability: {_observability_line(run)}")
     v = run.verdict
     lines.append(f"  verdict: {v.line()}")
     for i, step in enumerate(_next_steps(run, v.level, files)):

@@ -282,18 +282,13 @@ def _check_lines(run: CalibrationRun, solvers: list[str]) -> list[str]:
     if chosen is not None:
         lines += ["", *error_stats_lines(run, chosen)]
     lines += check_lines(run)
-    obs = run.checks.observability
-    if obs is not None:
-        lines.append("")
-        lines.append(
-            f"observability: condition number {obs.condition_number:.3g} (Jacobi-scaled "
-            f"information matrix), heading range {obs.heading_range_rad:.2f} rad"
-        )
-        lines.extend(f"WARNING: {w}" for w in obs.warnings)
-    said = set(obs.warnings) if obs is not None else set()
+    # What a check said in its lines is not said again.
+    said = [line for r in run.checks.more for line in (r.words, *r.details)]
     # Every other warning result.json holds (a solver's failure is said below, in its own words).
     failed = {f"{s}: {run.reports[s].result.reason}" for s in solvers}
-    lines.extend(f"WARNING: {w}" for w in run.warnings if w not in said and w not in failed)
+    lines.extend(
+        f"WARNING: {w}" for w in run.warnings if w not in failed and not any(w in line for line in said)
+    )
     for s in solvers:
         res = run.reports[s].result
         if not res.converged:

@@ -38,6 +38,7 @@ from nlp_calib.models import header_parameters
 from nlp_calib.pipeline import validation
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog
+from nlp_calib.pipeline.stored import StoredCalibration
 from nlp_calib.pipeline.windows import LogWindows
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
@@ -622,10 +623,12 @@ def handoff_noise(
 @dataclass(frozen=True)
 class Wanted:
     """What the analyse stage computes beyond the figures: the series behind a report, and the
-    odometry of one solver's estimate."""
+    odometry of one solver's estimate; and the stored calibration the run checks (``against``:
+    the ``drift`` plug-in's, None: none)."""
 
     series: bool = False
     odometry: str | None = None
+    against: StoredCalibration | None = None
 
 
 def analyse_log(

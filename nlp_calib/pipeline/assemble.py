@@ -22,6 +22,7 @@ from nlp_calib.pipeline.build import StartingPoint
 from nlp_calib.pipeline.checks import CheckContext, run_checks
 from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.pipeline.stored import StoredCalibration
 from nlp_calib.pipeline.windows import LogWindows
 from nlp_calib.problem import ProblemFunctions
 from nlp_calib.results import (
@@ -322,9 +323,10 @@ def assemble_run(
     figures: LogAnalysis,
     notes: Sequence[str],
     views: MountViews | None = None,
+    against: StoredCalibration | None = None,
 ) -> CalibrationRun:
     """One log's run: the fit's estimates and checks beside this log's figures, with its verdict
-    (``views``: the fit's mounts seen from this log)."""
+    (``views``: the fit's mounts seen from this log; ``against``: a stored calibration it checks)."""
     prepared, windows, alignment, findings = log
     checks = fit_checks(fitted, findings, start, figures.nominal)
     reports = {
@@ -358,7 +360,10 @@ def assemble_run(
     # truth is of its own mount.
     convert = _own_truth(getattr(prepared.model, "from_counts", dict), views)
     checks = dataclasses.replace(
-        run.checks, more=run_checks(run, CheckContext(source.files(), convert, prepared.scenario))
+        run.checks,
+        more=run_checks(
+            run, CheckContext(source.files(), convert, prepared.scenario, prepared.model, against)
+        ),
     )
     run = _believed_plan(dataclasses.replace(run, checks=checks))
     return judged(
@@ -413,6 +418,7 @@ def joint_run(
     figures: LogAnalysis,
     notes: Sequence[str],
     views: MountViews | None = None,
+    against: StoredCalibration | None = None,
 ) -> CalibrationRun:
     """The joint fit as one run: its figures over every log's fitted records (``figures``), the
     fit's checks, every log's findings, and its own verdict. ``fit``: the first log (its model,
@@ -457,7 +463,8 @@ def joint_run(
         verdict=Verdict("", ()),
     )
     # The plug-in checks on the joint fit: no log source's files (a simulated log's truth is each log's).
-    run = dataclasses.replace(run, checks=dataclasses.replace(checks, more=run_checks(run, CheckContext())))
+    context = CheckContext(model=prepared.model, against=against)
+    run = dataclasses.replace(run, checks=dataclasses.replace(checks, more=run_checks(run, context)))
     run = _believed_plan(run)
     return judged(run, verdict(run, prepared.model), prepared.scenario.objective.sensor.sensor.components)
 

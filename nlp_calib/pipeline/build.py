@@ -26,6 +26,7 @@ from nlp_calib.problem import (
     build_residual_data,
     interval_inputs,
 )
+from nlp_calib.problem.blocks import kinds_for
 from nlp_calib.problem.functions import problem_layout
 from nlp_calib.problem.start import closed_form_start, fit_windows
 from nlp_calib.problem.windows import BLOCK, COMPILED_FROM, ColumnMap, compile_columns
@@ -77,6 +78,8 @@ def build_problem(
         lags=lag_count(sc, n_logs),
         mounts=mount_count(sc, n_logs),
         shared=shared_mount(sc, n_logs),
+        logs=n_logs,
+        blocks=kinds_for(model, n_logs),
     )
     # A scenario names a parameter by its key: fixing it fixes every log's own.
     layout = problem_layout(model, sensor_for(spec.sensor, spec.scale), spec)
@@ -232,6 +235,8 @@ def starting_point(
     own mount from ``mounts``, its own start, when the problem has a mount per log) and bounds."""
     initial = initial_parameters(sc, fns.model, log)
     initial.update(lag_start(sc, fns.spec.lags, lags))
+    # A registered block's parameters start at their defaults.
+    initial.update({p.name: p.start for p in fns.layout.parameters if p.block in fns.spec.blocks})
     nominal, source = nominal_values(sc, fns.model, log, initial, fns.free)
     one = fns.spec.mounts == 1
     sensor = (

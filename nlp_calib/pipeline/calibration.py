@@ -47,7 +47,9 @@ from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import joint_residual
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.stages import LogSetup, setup_log
+from nlp_calib.pipeline.stored import StoredCalibration
 from nlp_calib.problem import ProblemFunctions, ResidualData, joined
+from nlp_calib.problem.blocks import per_log_kinds
 from nlp_calib.results import CalibrationRun, ScenarioInfo, SolverResult
 from nlp_calib.results.checks import WEAK, ConsistencyCheck, CrossValidation
 from nlp_calib.results.faults import Findings
@@ -230,7 +232,7 @@ def _joint_fit(sc: Scenario, parts: Sequence[LogSetup], solvers: Sequence[str]) 
     lags = [p.alignment.lag_s for p in parts]
     # A mount per log: each starts where its log's own start put it; windows say their log.
     mounts = [p.problem.start.initial for p in parts] if mount_count(sc, len(parts)) > 1 else []
-    data = data.with_selector() if mounts else data
+    data = data.with_selector() if mounts or per_log_kinds(model, len(parts)) else data
     problem = build_stage(one_horizon, model, tuple(held), start_from, solvers, n_records, lags, mounts, data)
     return held, Fit(problem, data, solvers, joint_noise(parts))
 
@@ -246,8 +248,9 @@ def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> Cali
     if check is not None and (check.significant or consistency_check.limits(check)):
         notes.append(consistency_check.words(check))
     fitted = dataclasses.replace(fitted, consistency=check, logs=logs)
-    runs = _assemble(fitting, parts, results, fitted, notes, wanted)
-    joint = _joint(fitting, (scorer, parts[0]), runs, results, fitted, notes)
+    # A stored calibration is checked against the joint fit, not each log's view of it.
+    runs = _assemble(fitting, parts, results, fitted, notes, dataclasses.replace(wanted, against=None))
+    joint = _joint(fitting, (scorer, parts[0]), runs, results, fitted, (notes, wanted.against))
     return pinned_alike(dataclasses.replace(joint, logs=tuple(runs)))
 
 
@@ -263,10 +266,12 @@ def _joint(
     parts: Sequence[CalibrationRun],
     results: Mapping[str, SolverResult],
     fitted: FitAnalysis,
-    notes: Sequence[str],
+    said: tuple[Sequence[str], StoredCalibration | None],
 ) -> CalibrationRun:
-    """The joint fit as one run, scored over every log's fitted records by ``scoring[0]``."""
+    """The joint fit as one run, scored over every log's fitted records by ``scoring[0]``, with the
+    notes and the stored calibration it checks (``said``)."""
     scorer, first = scoring
+    notes, against = said
     start = fitting.problem.start
     p0 = np.array([start.initial[n] for n in fitting.fns.names])
     nominal = [] if fitted.nominal_params is None else [fitted.nominal_params]
@@ -283,7 +288,7 @@ def _joint(
     info = dataclasses.replace(info, layout=tightest(info.layout, [run.scenario.layout for run in parts]))
     fit = (first.prepared, start, fitting.data.n_residuals)
     views = MountViews(fitting.fns, 0, tuple((run.scenario.name, run.log) for run in parts))
-    return joint_run(info, parts, fit, results, fitted, figures, notes, views)
+    return joint_run(info, parts, fit, results, fitted, figures, notes, views, against)
 
 
 def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
@@ -376,7 +381,11 @@ def _assemble(
         figures = analyse_log(fitting, results, view, wanted, info.labels, fitted.nominal_params)
         stage = (part.prepared, part.windows, part.alignment, part.screening.findings)
         views = MountViews(fitting.fns, i, logs)
-        runs.append(assemble_run(info, stage, fitting.problem.start, results, fitted, figures, notes, views))
+        runs.append(
+            assemble_run(
+                info, stage, fitting.problem.start, results, fitted, figures, notes, views, wanted.against
+            )
+        )
     return runs
 
 

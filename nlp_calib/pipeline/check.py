@@ -3,9 +3,10 @@ change judged in the combined σ (:mod:`nlp_calib.analysis.drift`).
 
 The new log goes through every stage of a calibration, started from the stored values: its fair
 figures with the stored values are the run's baseline, the refit's beside them, and the run's
-checks carry the comparison (``checks.drift``). The refit uses the formulation the calibration was
-made with: its scenario file when it still exists, else the model's defaults with the residual
-and robust options the calibration recorded.
+``drift`` plug-in check (:mod:`nlp_calib.pipeline.drift_check`) carries the comparison
+(``checks.drift``). The refit uses the formulation the calibration was made with: its scenario
+file when it still exists, else the model's defaults with the residual and robust options the
+calibration recorded.
 """
 
 from __future__ import annotations
@@ -17,10 +18,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from nlp_calib.analysis.drift import check_drift
 from nlp_calib.core.config import from_mapping
 from nlp_calib.core.errors import NlpCalibWarning, UsageError
 from nlp_calib.logs import Log
+from nlp_calib.pipeline.analyse import Wanted
 from nlp_calib.pipeline.calibration import Calibration
 from nlp_calib.pipeline.options import RobustOptions
 from nlp_calib.pipeline.scenario import Scenario, load_scenario
@@ -119,10 +120,5 @@ def check(
     stored: StoredCalibration, scenario: Scenario, logs: Log | Sequence[Log] | None = None
 ) -> CalibrationRun:
     """The calibration of ``scenario``'s log or logs (read, or ``logs``) from the stored values,
-    with the comparison against them in ``checks.drift``."""
-    calib = Calibration(scenario, logs, (stored.solver,))
-    run = calib.run((stored.solver,))
-    drift = check_drift(
-        run, calib.model, stored.stats(), str(stored.path), stored.solver, stored.uncalibrated()
-    )
-    return dataclasses.replace(run, checks=dataclasses.replace(run.checks, drift=drift))
+    with the comparison against them (the ``drift`` plug-in: ``checks.drift``)."""
+    return Calibration(scenario, logs, (stored.solver,)).run((stored.solver,), Wanted(against=stored))

@@ -13,8 +13,18 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from nlp_calib.pipeline import consistency_check, direction_check, fault_check, rival, truth
+from nlp_calib.models import KinematicModel
+from nlp_calib.pipeline import (
+    consistency_check,
+    determinacy_check,
+    direction_check,
+    drift_check,
+    fault_check,
+    rival,
+    truth,
+)
 from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.pipeline.stored import StoredCalibration
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CheckResult
 
@@ -28,6 +38,10 @@ class CheckContext:
     convert: Callable[[Mapping[str, float]], dict[str, float]] = field(default=dict)
     #: The scenario the run fitted (None: not known).
     scenario: Scenario | None = None
+    #: The model the run fitted (None: the scenario's, by name).
+    model: KinematicModel | None = None
+    #: A stored calibration the run checks (``nlp-calib check``; None: none).
+    against: StoredCalibration | None = None
 
 
 #: A check: the run and its context to a result, or None when it has nothing to say.
@@ -36,11 +50,13 @@ RunCheck = Callable[[CalibrationRun, CheckContext], "CheckResult | None"]
 #: The plug-in checks, by name, in the order they run: the order the terminal, the report, the
 #: summary and the verdict's reasons name them in.
 RUN_CHECKS: dict[str, RunCheck] = {
+    determinacy_check.NAME: lambda run, ctx: determinacy_check.check(run),
     "faults": lambda run, ctx: fault_check.check(run),
     "direction": lambda run, ctx: direction_check.check(run),
     "consistency": lambda run, ctx: consistency_check.check(run),
     "truth": lambda run, ctx: truth.check(run, ctx.files, ctx.convert),
     "model": lambda run, ctx: rival.check(run, ctx.scenario),
+    "drift": lambda run, ctx: drift_check.check(run, ctx.against, ctx.model),
 }
 
 

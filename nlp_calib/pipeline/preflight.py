@@ -17,7 +17,7 @@ import functools
 import math
 import time
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -29,11 +29,11 @@ from nlp_calib.analysis.excitation import combined, excitation, smoothed
 from nlp_calib.analysis.plan import Setting, believed, plan
 from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.analysis.uncertainty import range_std
-from nlp_calib.analysis.units import findings
 from nlp_calib.analysis.verdict import way_out
 from nlp_calib.core.errors import NlpCalibError, PreflightError
 from nlp_calib.logs import Log
-from nlp_calib.models import KinematicModel, counted_inputs
+from nlp_calib.models import counted_inputs
+from nlp_calib.pipeline import units_check
 from nlp_calib.pipeline.assemble import fit_info
 from nlp_calib.pipeline.build import (
     INTERNAL_SOLVER,
@@ -47,14 +47,13 @@ from nlp_calib.pipeline.build import (
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.recording import recording
 from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.pipeline.units_check import implausible
 from nlp_calib.pipeline.validation import leave_out, on_threads
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
-from nlp_calib.results.checks import Fold, believed_std
-from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight, UnitFinding
+from nlp_calib.results.checks import CheckResult, Fold, believed_std
+from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight
 from nlp_calib.solvers.evaluation import NormalEquations, ProblemEvaluator
 
-#: Unit and sign findings that stop a run only where the converged fit confirms them.
-JUDGED_BY_FIT = ("mirrored",)
 #: The closed-form start is taken on the stretch of at most this many records that turns most.
 START_RECORDS = 5000
 #: The start is brought to the data by at most this many Gauss-Newton steps (a far nominal start
@@ -109,16 +108,6 @@ def _busiest(log: Log, a: int, b: int, size: int) -> tuple[int, int]:
     return a + best, a + best + size
 
 
-def _implausible(model: KinematicModel, values: Mapping[str, float]) -> str:
-    """The parameters of ``values`` outside the model's plausible ranges, in words ("" when none is)."""
-    out = [
-        f"{n} {v:.3g}"
-        for n, v in values.items()
-        if n in model.physical_ranges and not model.physical_ranges[n][0] <= v <= model.physical_ranges[n][1]
-    ]
-    return ", ".join(out)
-
-
 def _start(
     sc: Scenario,
     fns: ProblemFunctions,
@@ -141,7 +130,7 @@ def _start(
         if np.all(np.isfinite(point.x0)):
             words = "the closed-form start (initial_guess: auto)" if auto else "the initial guess"
             words += f" on records {a} to {b}" if (a, b) != (first.start, first.split) else ""
-            outside = _implausible(fns.model, point.initial)
+            outside = implausible(fns.model, point.initial)
             return point, words + (f", outside the plausible ranges in {outside}" if outside else "")
         why = "it is not finite"
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ZeroDivisionError) as exc:
@@ -178,34 +167,6 @@ def _track(log: Log, fns: ProblemFunctions) -> tuple[np.ndarray, np.ndarray]:
     a planar one's as it is."""
     T = fns.sensor.floor_track(log)
     return T[:, :2], T[:, 2]
-
-
-def _units(d: Drive, fitted: Mapping[str, float] | None) -> tuple[UnitFinding, ...]:
-    """What the data imply of units and signs; a sign finding (:data:`JUDGED_BY_FIT`) stops a run
-    only where the fit confirms it (see :func:`_judged_by_fit`)."""
-    out: list[UnitFinding] = []
-    yaw = d.fns.sensor.planar_yaw(d.start.initial)
-    for part in d.parts:
-        log = part.log.select(part.start, part.split)
-        out += [f for f in findings(log, part.model, _track(log, d.fns), yaw) if f not in out]
-    return tuple(_judged_by_fit(f, d.fns.model, fitted) for f in out)
-
-
-def _judged_by_fit(
-    finding: UnitFinding, model: KinematicModel, fitted: Mapping[str, float] | None
-) -> UnitFinding:
-    """``finding`` as the converged fit (``fitted``: its parameters; None: no fit converged) judges
-    it: a mirrored wheel makes a fitted wheel radius negative, so a fit whose every parameter is
-    plausible says the wheels' signs are as the model reads them (a sensor turned 90°, a scan
-    matcher's slips on gentle curves): the finding is said and the run goes on."""
-    if finding.kind not in JUDGED_BY_FIT or fitted is None or _implausible(model, fitted):
-        return finding
-    return replace(
-        finding,
-        blocking=False,
-        words=finding.words + "; but the fit on these data finds every parameter plausible (the wheels' "
-        "signs as read agree with the reference), so the run goes on",
-    )
 
 
 def _rough(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str]:
@@ -425,6 +386,25 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
     )  # fmt: skip
 
 
+#: A pre-flight check: what the pre-flight assessed (the drive, the fit where one converged) to a
+#: result, or None when it has nothing to say; one at :data:`~nlp_calib.results.checks.UNUSABLE`
+#: stops a run before any fit, in its reasons.
+PreflightCheck = Callable[[Assessment], "CheckResult | None"]
+
+#: The pre-flight's plug-in checks, by name, in the order its report names them.
+PREFLIGHT_CHECKS: dict[str, PreflightCheck] = {
+    units_check.NAME: lambda a: units_check.check(
+        a.drive.parts, a.drive.fns, a.drive.start.initial, a.fitted()
+    ),
+}
+
+
+def preflight_checks(assessed: Assessment) -> tuple[CheckResult, ...]:
+    """Every registered pre-flight check's result (those with something to say)."""
+    found = (check(assessed) for check in PREFLIGHT_CHECKS.values())
+    return tuple(r for r in found if r is not None)
+
+
 def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
     """The pre-flight check of ``sc`` (its logs read from their sources unless given)."""
     t0 = time.perf_counter()
@@ -458,7 +438,7 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
         model=sc.model,
         recordings=tuple(recording(p.scenario, p.log) for p in d.parts),
         excitation=tuple(exs),
-        units=_units(d, a.fitted()),
+        checks=preflight_checks(a),
         parameters=statuses,
         start=a.where,
         noise=a.noise,

@@ -35,6 +35,7 @@ from nlp_calib.models.base import INTEGRATIONS, KinematicModel, Reference, refer
 from nlp_calib.models.clock import LAG_PARAM, LAG_REFERENCE, LAG_UNIT
 from nlp_calib.problem import clock
 from nlp_calib.problem import motion as motion_sources
+from nlp_calib.problem.blocks import BLOCK_KINDS
 from nlp_calib.problem.trajectory import TrajectoryFunctions, base_motion, fn, split_params
 from nlp_calib.results.layout import CLOCK, HELD, MODEL, MOUNT, BlockSpec, Layout
 from nlp_calib.sensors import Sensor, sensor_for
@@ -88,9 +89,15 @@ class ProblemSpec:
     #: With a mount per log, its parameters every log shares nonetheless (a gyro's tilt beside each
     #: log's own bias: the sensor's ``per_log`` alone are each log's own); none: the whole mount.
     shared: tuple[str, ...] = ()
+    #: Logs in the problem, and the registered block kinds it has beyond the built-in ones (see
+    #: :mod:`~nlp_calib.problem.blocks`; their per-log parameters one per log).
+    logs: int = 1
+    blocks: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         sensor = sensor_for(self.sensor, self.scale)
+        if unknown := [b for b in self.blocks if b not in BLOCK_KINDS]:
+            raise ProblemError(f"blocks {unknown}: not registered ({', '.join(BLOCK_KINDS) or 'none are'})")
         if self.shared and (self.mounts == 1 or not set(self.shared) < set(sensor.params)):
             raise ProblemError(
                 f"shared {list(self.shared)}: with a mount per log, some of the mount's parameters "
@@ -222,7 +229,7 @@ class ProblemFunctions(TrajectoryFunctions):
     def view(self, params: np.ndarray, log: int) -> np.ndarray:
         """Log ``log``'s parameters in :attr:`view_names` order from the full vector ``params``
         (what the full-parameter Functions take): the shared ones and its own mount."""
-        if self.spec.mounts == 1:
+        if self.spec.mounts == 1 and not self.spec.blocks:
             return np.asarray(params, dtype=float)
         named = dict(zip(self.names, np.ravel(np.asarray(params, dtype=float))))
         own = {key: named[n] for n, key in self.mount_keys(log).items()}
@@ -276,7 +283,10 @@ class ProblemFunctions(TrajectoryFunctions):
         per log (none otherwise)."""
         if self.spec.lags:
             return self.spec.lags
-        return self.spec.mounts if self.spec.mounts > 1 else 0
+        if self.spec.mounts > 1:
+            return self.spec.mounts
+        own = any(BLOCK_KINDS[b].per_log for b in self.spec.blocks)
+        return self.spec.logs if own and self.spec.logs > 1 else 0
 
     @property
     def weight_row(self) -> int:
@@ -341,12 +351,25 @@ class ProblemFunctions(TrajectoryFunctions):
         z_rows, n_in = self.sensor.z_rows, self.n_inputs
         first = z_rows + (2 * n_in + 1 if self.spec.lags else 0)
         select = data[first : first + self.select_rows]
+        M = self._blocks(params, select, at, M)
         if self.spec.lags:
             ends = data[z_rows : z_rows + n_in], data[z_rows + n_in : z_rows + 2 * n_in]
             resampled = data[z_rows + 2 * n_in]
             delta = ca.dot(select, self._lags(params, data[0:z_rows], at)) - resampled
             M = clock.shifted(self.model, k, M, ends, delta, self.spec.integration)
         return self.sensor.residual(data[0:z_rows], self._mount(params, select, at), M)
+
+    def _blocks(self, params: ca.SX, select: ca.SX, at: Mapping[str, int], M: ca.SX) -> ca.SX:
+        """The base motion ``M`` through each registered block's transform, with the window's
+        values of its parameters (a per-log one: its log's own, by the window's log rows)."""
+        for kind in self.spec.blocks:
+            values: dict[str, ca.SX] = {}
+            for p in self.layout.parameters:
+                if p.block == kind:
+                    mine = params[at[p.name]] if p.log is None else select[p.log] * params[at[p.name]]
+                    values[p.key] = values.get(p.key, 0) + mine
+            M = BLOCK_KINDS[kind].transform(M, values)
+        return M
 
     def _lags(self, params: ca.SX, z: ca.SX, at: Mapping[str, int]) -> ca.SX:
         """Each log's time offset for a window of measurement ``z``: its sensor's clocks' offsets
@@ -614,10 +637,16 @@ def problem_layout(model: KinematicModel, sensor: Sensor, spec: ProblemSpec) -> 
         needed = dict.fromkeys(clocks, LAG_REFERENCE[LAG_PARAM])
         clock = BlockSpec(CLOCK, clocks, dict.fromkeys(clocks, LAG_UNIT), True, precision=needed)
         blocks.append(clock)
-    layout = Layout.of(blocks, max(spec.lags, spec.mounts, 1), tuple(model.headline))
-    return layout.with_status(
-        {p.name: HELD for p in layout.parameters if p.block == MOUNT and p.key in sensor.held}
-    )
+    kinds = {b: BLOCK_KINDS[b] for b in spec.blocks}
+    blocks += [kind.spec(b) for b, kind in kinds.items()]
+    own = any(kind.per_log for kind in kinds.values())
+    layout = Layout.of(blocks, max(spec.lags, spec.mounts, spec.logs if own else 1), tuple(model.headline))
+    held = {p.name for p in layout.parameters if p.block == MOUNT and p.key in sensor.held}
+    for p in layout.parameters:
+        kind = kinds.get(p.block)
+        if kind is not None and (p.key in kind.held or (p.log == 0 and p.key in kind.held_first)):
+            held.add(p.name)
+    return layout.with_status(dict.fromkeys(held, HELD))
 
 
 def _precision(

@@ -525,7 +525,7 @@ class CheckResult:
     doubt with why; ``how``: how it measured, which the report adds to its sentence;
     ``section``: the report's own section for it (its title, then lines), where a table of what it
     found is too long for one paragraph; ``record``: what result.json holds under its name (JSON
-    types, no NaN; None: nothing)."""
+    types; None: nothing); ``caveats``: further caveats, each a reason of the verdict of its own."""
 
     name: str
     level: str
@@ -538,6 +538,7 @@ class CheckResult:
     how: str = ""
     section: tuple[str, ...] = ()
     record: Any = None
+    caveats: tuple[str, ...] = ()
 
     def lines(self) -> list[str]:
         """Its name and words, then its details indented: the terminal's lines."""
@@ -550,8 +551,13 @@ class CheckResult:
 
     @property
     def reason(self) -> str:
-        """What the verdict says of it, at :data:`CAVEAT` or :data:`UNUSABLE`."""
+        """What the verdict says of it first, at :data:`CAVEAT` or :data:`UNUSABLE`."""
         return self.caveat or self.words
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        """Everything the verdict says of it, at :data:`CAVEAT` or :data:`UNUSABLE`."""
+        return (self.reason, *self.caveats)
 
 
 def truth_view(result: CheckResult | None) -> TruthCheck | None:

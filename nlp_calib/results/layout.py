@@ -66,13 +66,16 @@ class BlockSpec:
     per_log: bool = False
     ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     precision: Mapping[str, tuple[str, float]] = field(default_factory=dict)
+    #: Where its parameters start (none: where the run's start puts them).
+    defaults: Mapping[str, float] = field(default_factory=dict)
 
     def parameter(self, key: str, log: int | None, n_logs: int) -> Parameter:
         """The parameter ``key`` of log ``log``'s copy (None: the shared one)."""
         name = key if log is None else own_name(key, log, n_logs)
         limits = self.ranges.get(key, (-math.inf, math.inf))
         needed = self.precision.get(key, ("relative", 0.01))
-        return Parameter(name, key, self.kind, log, self.units.get(key, ""), FREE, limits, needed)
+        start = self.defaults.get(key, math.nan)
+        return Parameter(name, key, self.kind, log, self.units.get(key, ""), FREE, limits, needed, start)
 
 
 def own_name(key: str, log: int, n_logs: int) -> str:

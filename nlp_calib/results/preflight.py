@@ -15,6 +15,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from nlp_calib.results import codec
+from nlp_calib.results.checks import UNUSABLE, CheckResult
+
 #: A parameter's standing on a drive.
 DETERMINED = "determined"
 WEAKLY = "weakly"
@@ -194,7 +197,8 @@ class Preflight:
     model: str
     recordings: tuple[Recording, ...]
     excitation: tuple[Excitation, ...]
-    units: tuple[UnitFinding, ...]
+    #: What each of the pre-flight's plug-in checks found (``units``: the units and signs).
+    checks: tuple[CheckResult, ...]
     parameters: tuple[ParameterStatus, ...]
     start: str
     noise: str
@@ -208,11 +212,25 @@ class Preflight:
         not determined that the run would fit: its verdict would be NOT DETERMINED),
         :data:`WEAK_DRIVE` (one weakly, or one the run holds at its start: a caveat of its verdict)
         or :data:`ENOUGH`."""
-        if any(u.blocking for u in self.units):
+        if self.blocking():
             return CHECK_DATA
         if self.missing():
             return NOT_ENOUGH
         return WEAK_DRIVE if self.named(WEAKLY) or self.named(NOT_DETERMINED) else ENOUGH
+
+    def check(self, name: str) -> CheckResult | None:
+        """The result of the pre-flight's plug-in check ``name``, when it ran."""
+        return next((r for r in self.checks if r.name == name), None)
+
+    @property
+    def units(self) -> tuple[UnitFinding, ...]:
+        """The unit and sign findings (the ``units`` check's record)."""
+        found = self.check("units")
+        return () if found is None else tuple(codec.load(UnitFinding, f) for f in found.record)
+
+    def blocking(self) -> list[str]:
+        """Why the data stop a calibration before any fit: each unusable check's reasons."""
+        return [reason for r in self.checks if r.level == UNUSABLE for reason in r.reasons]
 
     def missing(self) -> list[ParameterStatus]:
         """The parameters not determined that the run would fit (not those it holds)."""
@@ -228,7 +246,7 @@ class Preflight:
 
     def stop_words(self) -> str:
         """Why a calibration from these data cannot succeed, in one line ("" when it can)."""
-        blocking = [u.words for u in self.units if u.blocking]
+        blocking = self.blocking()
         if blocking:
             return "; ".join(blocking)
         missing = self.missing()

@@ -169,15 +169,14 @@ class DataInfo:
 class Checks:
     """What the run's checks found: observability, blocked cross-validation, the forward/reverse
     comparison, the faults, for several logs fitted together whether each log's own fit agrees
-    with theirs, and the comparison with a stored calibration (``nlp-calib check``: ``drift``);
-    any may be absent when it could not run."""
+    with theirs, and what each plug-in check found (``more``: the comparison with a stored
+    calibration among them, :attr:`drift`); any may be absent when it could not run."""
 
     observability: Observability | None
     crossval: CrossValidation | None
     direction: DirectionCheck | None
     findings: Findings | None
     consistency: ConsistencyCheck | None = None
-    drift: DriftCheck | None = None
     #: What each plug-in check found (its registry name, level, one wording, figures; the
     #: estimate against a simulated log's known truth is one: ``truth``).
     more: tuple[CheckResult, ...] = ()
@@ -195,6 +194,12 @@ class Checks:
     def plugin(self, name: str) -> CheckResult | None:
         """The result of the plug-in check ``name``, when it ran and found something to say."""
         return next((r for r in self.more if r.name == name), None)
+
+    @property
+    def drift(self) -> DriftCheck | None:
+        """A stored calibration against this run's refit (the ``drift`` plug-in; ``nlp-calib check``)."""
+        found = self.plugin("drift")
+        return None if found is None else codec.load(DriftCheck, found.record)
 
     @property
     def truth(self) -> TruthCheck | None:
