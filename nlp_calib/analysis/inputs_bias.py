@@ -12,6 +12,12 @@ biases the baseline by several σ. The expected cost of the noise-free inputs is
 where ``∇F = 0``, is ``Δ = ½ H⁻¹ ∇T`` (``H``, ``g`` are half the Hessian and gradient of ``F``: see
 :class:`~nlp_calib.solvers.evaluation.NormalEquations`). ``∇T`` is taken by differences over one σ
 of each free coordinate: ``T`` is smooth on that scale.
+
+Those differences cost a pass over the windows per parameter. ``T`` is a sum over the windows, so
+a strided subset's sum scaled by ``N/n`` estimates it without bias, and the spread of the subset's
+terms says how far off that estimate can be: where the step it gives stays, with that margin,
+below :data:`MATTERS` of every σ, it is taken as it is (it cannot move an estimate by a share of
+its σ that matters); elsewhere ``∇T`` is taken on every window.
 """
 
 from __future__ import annotations
@@ -23,25 +29,53 @@ import numpy as np
 from nlp_calib.analysis.uncertainty import EndNoise, split_noise
 from nlp_calib.solvers import ProblemEvaluator
 
+#: A step below this share of every σ cannot matter: the subset's estimate of it is taken as it is.
+MATTERS = 0.05
+#: Windows the subset holds: few, as each pass still integrates the whole log (a pass over every
+#: window costs three over these on the shipped scenarios); where the step is thousands of times
+#: below :data:`MATTERS`, as there, their estimate's standard error is too. Problems with fewer
+#: than :data:`SCREEN_FROM` windows take every window at once.
+SUBSET = 64
+SCREEN_FROM = 8 * SUBSET
+#: The subset's estimate's margin, in its own standard errors.
+MARGIN = 3.0
+
 
 def noise_share(
     evaluator: ProblemEvaluator, x: np.ndarray, weight: np.ndarray, noise: tuple[np.ndarray, np.ndarray]
 ) -> float:
     """``T(x) = Σ_w weight_w tr(Ω G_w V_w G_wᵀ)``: the inputs' expected share of the cost at ``x``
     (``noise``: the inputs' 1σ and which of them are counters, noise on their readings)."""
+    return float(np.sum(window_shares(evaluator, x, weight, noise)))
+
+
+def window_shares(
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    weight: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray],
+    windows: np.ndarray | None = None,
+) -> np.ndarray:
+    """Each window's term of :func:`noise_share` (those of the window indices ``windows`` alone
+    when given, in their order)."""
     std, counted = noise
     split = split_noise(np.asarray(std, dtype=float) ** 2, counted)
-    fns, starts, stops = evaluator.fns, evaluator.data.starts, evaluator.data.stops
-    total, ends = 0.0, None
-    for w, sens in evaluator.sensitivities(x):
+    data = evaluator.data
+    picked = np.arange(data.n_residuals) if windows is None else windows
+    starts, stops = data.starts[picked], data.stops[picked]
+    if windows is not None:  # their intervals alone (a window's end noise reads its own), renumbered
+        cols = data.intervals_of(windows)
+        starts, stops = np.searchsorted(cols, starts), np.searchsorted(cols, stops - 1) + 1
+    out, ends = np.zeros(picked.size), None
+    for w, sens in evaluator.sensitivities(x, windows):
         if ends is None:
-            n_int, n_in = evaluator.data.inputs.shape[1], fns.n_inputs
+            n_int, n_in = int(stops.max(initial=0)), evaluator.fns.n_inputs
             D = sens.D if sens.D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
             ends = EndNoise(D, split)
         V = ends.between(starts[w], stops[w])
         rows = ((sens.de_dend @ V) * sens.de_dend).sum(axis=2)  # (windows, error rows)
-        total += float(weight[w] @ (rows @ evaluator.omega))
-    return total
+        out[w] = weight[picked[w]] * (rows @ evaluator.omega)
+    return out
 
 
 @dataclass(frozen=True)
@@ -63,7 +97,8 @@ def bias_step(evaluator: ProblemEvaluator, x: np.ndarray, noise: tuple[np.ndarra
     """The step from the estimate ``x`` that removes the inputs' noise bias (zeros where the inputs
     carry no noise or the normal matrix is singular). ``∇T`` by forward differences over one σ of
     each coordinate (``T`` is smooth on that scale: its curvature changes it by σ over the
-    parameter's own scale)."""
+    parameter's own scale), on a strided subset of the windows first where there are many: the
+    subset's step stands where it cannot matter (see the module's docstring)."""
     n = evaluator.fns.n_free
     none = BiasStep(x, np.zeros(n), np.full(n, np.inf))
     if not np.any(np.asarray(noise[0]) > 0) or n == 0:
@@ -78,14 +113,36 @@ def bias_step(evaluator: ProblemEvaluator, x: np.ndarray, noise: tuple[np.ndarra
     sigma = np.sqrt(np.clip(np.diag(H_inv), 0.0, None) * float(np.sum(weight * s)) / dof)
     if not np.all(np.isfinite(sigma) & (sigma > 0)):
         return none
-    here = noise_share(evaluator, x, weight, noise)
-    grad = np.array(
-        [
-            (noise_share(evaluator, evaluator.boxplus(x, h), weight, noise) - here) / h[i]
-            for i, h in _steps(sigma)
-        ]
-    )
+    N = s.size
+    if N >= SCREEN_FROM:
+        subset = np.linspace(0, N - 1, SUBSET).round().astype(np.intp)
+        terms = 0.5 * _gradient_terms(evaluator, x, weight, noise, sigma, subset) @ H_inv
+        # The subset's sum scaled by N/n, and its standard error (sampling n of N windows).
+        step = N * terms.mean(axis=0)
+        err = N * np.sqrt((1.0 - SUBSET / N) * terms.var(axis=0, ddof=1) / SUBSET)
+        if np.all(np.abs(step) + MARGIN * err <= MATTERS * sigma):
+            return BiasStep(x, step, sigma)
+    grad = _gradient_terms(evaluator, x, weight, noise, sigma, None).sum(axis=0)
     return BiasStep(x, np.asarray(0.5 * H_inv @ grad), sigma)
+
+
+def _gradient_terms(
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    weight: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray],
+    sigma: np.ndarray,
+    windows: np.ndarray | None,
+) -> np.ndarray:
+    """Each window's term of ``∇T`` ``(windows, n_free)``: forward differences over one σ."""
+    here = window_shares(evaluator, x, weight, noise, windows)
+    return np.stack(
+        [
+            (window_shares(evaluator, evaluator.boxplus(x, h), weight, noise, windows) - here) / h[i]
+            for i, h in _steps(sigma)
+        ],
+        axis=1,
+    )
 
 
 def _steps(sigma: np.ndarray) -> list[tuple[int, np.ndarray]]:
