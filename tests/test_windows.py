@@ -139,6 +139,25 @@ def test_the_inputs_share_of_the_cost_is_the_sum_over_every_window_and_reading(H
     assert noise_share(ev, x, weight, (sigma_in, counted)) == pytest.approx(direct, rel=1e-9)
 
 
+@pytest.mark.parametrize("H", [1, 5])
+def test_some_windows_shares_of_the_cost_are_their_terms_of_the_direct_sum(H: int) -> None:
+    """The inputs' share of the cost, window by window, on a subset of the windows (overlapping,
+    apart, the last: their intervals alone are integrated) against each one's direct sum."""
+    from nlp_calib.analysis.inputs_bias import window_shares
+
+    fns = build(get_model("diff_drive"), ProblemSpec(horizon=H, kernel="huber"))
+    data = build_residual_data(fns, sim_log("diff_drive", 300, 7), ResidualOptions(horizon=H))
+    ev = evaluator(fns, data, np.zeros(0), delta=0.05)
+    x, sigma_in, counted = truth("diff_drive") * 1.001, np.array([0.3, 0.5]), np.array([True, False])
+    _, _, weight = ev.robust_terms(x)
+    D = _column_jacobian(fns, data, x)
+    F = D[:, :, : fns.n_inputs * H].reshape(3, data.n_residuals, H, fns.n_inputs).transpose(1, 2, 0, 3)
+    direct = np.einsum("w,c,whci,i->w", weight, ev.omega, _by_reading(F, counted) ** 2, sigma_in**2)
+    picked = np.array([2, 3, 5, 40, 41, 120, data.n_residuals - 1])
+    shares = window_shares(ev, x, weight, (sigma_in, counted), picked)
+    assert_close(shares, direct[picked], rtol=1e-9)
+
+
 @pytest.mark.parametrize("counted", [None, np.array([True, False])], ids=["per interval", "traction counted"])
 def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval(counted: np.ndarray | None) -> None:
     """The running-sum propagation against the direct O(N·H) sum over each window's intervals (a
