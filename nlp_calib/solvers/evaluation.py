@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nlp_calib.problem import ORDER, SUMMED, WINDOW_INPUTS, ProblemFunctions, ResidualData, unpack_upper
-from nlp_calib.solvers.backends import Backend, Buffered, Request, pad_columns
+from nlp_calib.solvers.backends import INTERPRETED, Backend, Buffered, Request, pad_columns
 from nlp_calib.solvers.blocks import BlockMap, stream
 from nlp_calib.solvers.motion import WindowMotion
 
@@ -120,9 +120,6 @@ class Sensitivities:
 #: many windows on; below, the interpreter evaluates them in less time than a compiler takes.
 COMPILE_ANALYSES_FROM = 50_000
 _ANALYSES = ("robust_terms", "sensitivities")
-#: The interpreter: one instance, so that its mapped Functions are built once per size (they are
-#: cached by backend, and a fresh instance is another key: a map rebuilt on every call).
-_INTERPRETED = Backend()
 
 
 def requests(fns: ProblemFunctions, names: Iterable[str], n_windows: int) -> list[Request]:
@@ -183,7 +180,7 @@ class ProblemEvaluator:
         backend: Backend | None = None,
     ) -> None:
         self.fns = fns
-        self.backend = backend or Backend()
+        self.backend = backend or INTERPRETED
         self.x_fixed = np.asarray(x_fixed, dtype=float)
         self.omega = np.asarray(omega, dtype=float)
         self.delta = float(delta)
@@ -239,7 +236,7 @@ class ProblemEvaluator:
     def _backend(self, name: str) -> Backend:
         """Where ``name`` is evaluated: see :data:`COMPILE_ANALYSES_FROM`."""
         small = self.n_residuals < COMPILE_ANALYSES_FROM
-        return _INTERPRETED if name in _ANALYSES and small else self.backend
+        return INTERPRETED if name in _ANALYSES and small else self.backend
 
     def _bind(self, name: str) -> BlockMap:
         bound = self._on.bound
@@ -338,7 +335,7 @@ class ProblemEvaluator:
         fns = self.fns
         N = self.n_residuals if windows is None else int(windows.size)
         # A few windows of many: the interpreter (their compiled map is sized for all of them).
-        backend = self._backend("sensitivities") if windows is None else _INTERPRETED
+        backend = self._backend("sensitivities") if windows is None else INTERPRETED
         D = self._interval_sensitivity(x, windows) if fns.prefix else None
         motion = self.motion.update(ORDER["sensitivities"], x, self.x_fixed, windows)
         data = (
@@ -353,7 +350,7 @@ class ProblemEvaluator:
         )
         ends = {k: np.asfortranarray(poses_wt[i].T) for k, i in (("a", starts), ("b", stops))}
         # Cheap: the interpreter, a block at a time.
-        tracker = stream(_INTERPRETED, fns.between_jacobians, ends, {}, N)
+        tracker = stream(INTERPRETED, fns.between_jacobians, ends, {}, N)
         for (w, (J, de_dz, de_dend)), (_, (dz_da, dz_db)) in zip(own, tracker):
             size = J.shape[1] // fns.n_free
             n = w.stop - w.start
@@ -373,7 +370,7 @@ class ProblemEvaluator:
         else:
             cols = self.data.intervals_of(windows)
             mapped = {"state": np.asfortranarray(poses[:, cols]), "u": np.asfortranarray(m.inputs[:, cols])}
-            backend = _INTERPRETED
+            backend = INTERPRETED
         n = next(iter(mapped.values())).shape[1]
         per = BlockMap(
             backend, self.fns.interval_sensitivity, mapped, {"x_fixed": self.x_fixed}, reduce=False
