@@ -1,0 +1,150 @@
+"""The bias the inputs' noise gives an estimate (errors in variables), and the step that removes it.
+
+The fit minimises ``F = Σ_w ρ(s_w)`` on noisy inputs. Their noise adds to each window's expected
+``s_w`` its share ``T_w(θ) = tr(Ω G_w V_w G_wᵀ)`` (``G_w = ∂e_w/∂end``, ``V_w`` the noise a
+window's end collects, see :class:`~nlp_calib.analysis.uncertainty.EndNoise`), and that share
+depends on the parameters: a differential drive's heading change per interval is the wheels'
+difference over the baseline, so a longer baseline shrinks the noise's share of the cost and the
+fit prefers it (the regression on a noisy regressor attenuates ``1/baseline``). On one-record
+windows the counts' rounding is a few per cent of the wheels' difference per interval, which
+biases the baseline by several σ. The expected cost of the noise-free inputs is ``F − T`` (``T =
+Σ_w ρ'_w T_w``, the weights held at the estimate); one Newton step on it from the estimate ``x̂``,
+where ``∇F = 0``, is ``Δ = ½ H⁻¹ ∇T`` (``H``, ``g`` are half the Hessian and gradient of ``F``: see
+:class:`~nlp_calib.solvers.evaluation.NormalEquations`). ``∇T`` is taken by differences over one σ
+of each free coordinate: ``T`` is smooth on that scale.
+
+Those differences cost a pass over the windows per parameter. ``T`` is a sum over the windows, so
+a strided subset's sum scaled by ``N/n`` estimates it without bias, and the spread of the subset's
+terms says how far off that estimate can be: where the step it gives stays, with that margin,
+below :data:`MATTERS` of every σ, it is taken as it is (it cannot move an estimate by a share of
+its σ that matters); elsewhere ``∇T`` is taken on every window.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.analysis.uncertainty import EndNoise, split_noise
+from nlp_calib.solvers import ProblemEvaluator
+
+#: A step below this share of every σ cannot matter: the subset's estimate of it is taken as it is.
+MATTERS = 0.05
+#: Windows the subset holds: few, as each pass still integrates the whole log (a pass over every
+#: window costs three over these on the shipped scenarios); where the step is thousands of times
+#: below :data:`MATTERS`, as there, their estimate's standard error is too. Problems with fewer
+#: than :data:`SCREEN_FROM` windows take every window at once.
+SUBSET = 64
+SCREEN_FROM = 8 * SUBSET
+#: The subset's estimate's margin, in its own standard errors.
+MARGIN = 3.0
+
+
+def noise_share(
+    evaluator: ProblemEvaluator, x: np.ndarray, weight: np.ndarray, noise: tuple[np.ndarray, np.ndarray]
+) -> float:
+    """``T(x) = Σ_w weight_w tr(Ω G_w V_w G_wᵀ)``: the inputs' expected share of the cost at ``x``
+    (``noise``: the inputs' 1σ and which of them are counters, noise on their readings)."""
+    return float(np.sum(window_shares(evaluator, x, weight, noise)))
+
+
+def window_shares(
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    weight: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray],
+    windows: np.ndarray | None = None,
+) -> np.ndarray:
+    """Each window's term of :func:`noise_share` (those of the window indices ``windows`` alone
+    when given, in their order)."""
+    std, counted = noise
+    split = split_noise(np.asarray(std, dtype=float) ** 2, counted)
+    data = evaluator.data
+    picked = np.arange(data.n_residuals) if windows is None else windows
+    starts, stops = data.starts[picked], data.stops[picked]
+    if windows is not None:  # their intervals alone (a window's end noise reads its own), renumbered
+        cols = data.intervals_of(windows)
+        starts, stops = np.searchsorted(cols, starts), np.searchsorted(cols, stops - 1) + 1
+    out, ends = np.zeros(picked.size), None
+    for w, sens in evaluator.sensitivities(x, windows):
+        if ends is None:
+            n_int, n_in = int(stops.max(initial=0)), evaluator.fns.n_inputs
+            D = sens.D if sens.D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
+            ends = EndNoise(D, split)
+        V = ends.between(starts[w], stops[w])
+        rows = ((sens.de_dend @ V) * sens.de_dend).sum(axis=2)  # (windows, error rows)
+        out[w] = weight[picked[w]] * (rows @ evaluator.omega)
+    return out
+
+
+@dataclass(frozen=True)
+class BiasStep:
+    """The manifold ``step`` from the estimate ``x`` that removes the inputs' noise bias, and the
+    white-noise σ of each free coordinate there (``sigma``: the scale the step was taken on)."""
+
+    x: np.ndarray
+    step: np.ndarray
+    sigma: np.ndarray
+
+    def holds_at(self, x: np.ndarray) -> bool:
+        """Whether ``x`` is this estimate's optimum (another solver's, within 1e-3 of its σ): the
+        step there is this one to well within its own size."""
+        return x.shape == self.x.shape and bool(np.all(np.abs(x - self.x) <= 1e-3 * self.sigma))
+
+
+def bias_step(evaluator: ProblemEvaluator, x: np.ndarray, noise: tuple[np.ndarray, np.ndarray]) -> BiasStep:
+    """The step from the estimate ``x`` that removes the inputs' noise bias (zeros where the inputs
+    carry no noise or the normal matrix is singular). ``∇T`` by forward differences over one σ of
+    each coordinate (``T`` is smooth on that scale: its curvature changes it by σ over the
+    parameter's own scale), on a strided subset of the windows first where there are many: the
+    subset's step stands where it cannot matter (see the module's docstring)."""
+    n = evaluator.fns.n_free
+    none = BiasStep(x, np.zeros(n), np.full(n, np.inf))
+    if not np.any(np.asarray(noise[0]) > 0) or n == 0:
+        return none
+    ne = evaluator.normal_equations(x)
+    _, s, weight = evaluator.robust_terms(x)
+    try:
+        H_inv = np.linalg.inv(ne.H)
+    except np.linalg.LinAlgError:
+        return none
+    dof = max(s.size * evaluator.fns.error_rows - n, 1)
+    sigma = np.sqrt(np.clip(np.diag(H_inv), 0.0, None) * float(np.sum(weight * s)) / dof)
+    if not np.all(np.isfinite(sigma) & (sigma > 0)):
+        return none
+    N = s.size
+    if N >= SCREEN_FROM:
+        subset = np.linspace(0, N - 1, SUBSET).round().astype(np.intp)
+        terms = 0.5 * _gradient_terms(evaluator, x, weight, noise, sigma, subset) @ H_inv
+        # The subset's sum scaled by N/n, and its standard error (sampling n of N windows).
+        step = N * terms.mean(axis=0)
+        err = N * np.sqrt((1.0 - SUBSET / N) * terms.var(axis=0, ddof=1) / SUBSET)
+        if np.all(np.abs(step) + MARGIN * err <= MATTERS * sigma):
+            return BiasStep(x, step, sigma)
+    grad = _gradient_terms(evaluator, x, weight, noise, sigma, None).sum(axis=0)
+    return BiasStep(x, np.asarray(0.5 * H_inv @ grad), sigma)
+
+
+def _gradient_terms(
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    weight: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray],
+    sigma: np.ndarray,
+    windows: np.ndarray | None,
+) -> np.ndarray:
+    """Each window's term of ``∇T`` ``(windows, n_free)``: forward differences over one σ."""
+    here = window_shares(evaluator, x, weight, noise, windows)
+    return np.stack(
+        [
+            (window_shares(evaluator, evaluator.boxplus(x, h), weight, noise, windows) - here) / h[i]
+            for i, h in _steps(sigma)
+        ],
+        axis=1,
+    )
+
+
+def _steps(sigma: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """Each coordinate's step of one σ."""
+    return [(i, np.where(np.arange(sigma.size) == i, sigma, 0.0)) for i in range(sigma.size)]
