@@ -298,14 +298,6 @@ def canonical(
     return p
 
 
-def counted_inputs(model: KinematicModel, log: Log) -> np.ndarray:
-    """Which of ``model``'s inputs are a counter's increments (their noise lies on the readings,
-    two of them per increment), one flag per input row."""
-    counted = np.zeros(len(model.input_names), dtype=bool)
-    counted[[row for row, _ in model.counter_rows(log).values()]] = True
-    return counted
-
-
 def param_names(model: KinematicModel) -> tuple[str, ...]:
     """The full state order: kinematic parameters then the sensor pose."""
     return (*model.kinematic_params, *SENSOR_PARAMS)

@@ -107,8 +107,7 @@ class Calibration:
         self.stages = self.parts[0]
         if len(self.parts) == 1:
             self.held: Mapping[str, str] = self.stages.prepared.held
-            windows = self.stages.windows
-            self.fitting = Fit(self.stages.problem, windows.data, self.solvers, windows.input_noise)
+            self.fitting = Fit(self.stages.problem, self.stages.windows.data, self.solvers)
         else:
             self.held, self.fitting = _joint_fit(sc, self.parts, self.solvers)
         self.setup_time_s = time.perf_counter() - t0
@@ -234,7 +233,7 @@ def _joint_fit(sc: Scenario, parts: Sequence[LogSetup], solvers: Sequence[str]) 
     mounts = [p.problem.start.initial for p in parts] if mount_count(sc, len(parts)) > 1 else []
     data = data.with_selector() if mounts or per_log_kinds(model, len(parts)) else data
     problem = build_stage(one_horizon, model, tuple(held), start_from, solvers, n_records, lags, mounts, data)
-    return held, Fit(problem, data, solvers, joint_noise(parts))
+    return held, Fit(problem, data, solvers)
 
 
 def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> CalibrationRun:
@@ -294,11 +293,7 @@ def _joint(
 def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
     """One log of several fitted on its own (its stages' windows and problem, nothing built again)."""
     return _run(
-        part.prepared.scenario,
-        Fit(part.problem, part.windows.data, solvers, part.windows.input_noise),
-        [part],
-        solvers,
-        Wanted(),
+        part.prepared.scenario, Fit(part.problem, part.windows.data, solvers), [part], solvers, Wanted()
     )[2][0]
 
 
@@ -343,18 +338,13 @@ def consistency(
     return compare_logs(names, paths, result.params, (est, std), others, known, apart, unit)
 
 
-def joint_noise(parts: Sequence[LogSetup]) -> tuple[np.ndarray, np.ndarray]:
-    """The inputs' noise of logs fitted together: the largest any has; the counters the model's."""
-    return np.max([p.windows.input_noise_std for p in parts], axis=0), parts[0].windows.counted
-
-
 def _fit(
     fitting: Fit, parts: Sequence[LogSetup], solvers: Sequence[str], held: Mapping[str, str]
 ) -> tuple[dict[str, SolverResult], FitAnalysis, list[str]]:
     """The fit stage and the fit's analysis over ``parts`` (one log, or several end to end);
     ``held``: the parameters held because the fitted records do not determine them."""
     results = {name: fitting.solve(name) for name in solvers}
-    noise = joint_noise(parts)
+    noise = np.max([p.windows.input_noise_std for p in parts], axis=0)
     info = fit_info(parts[0].prepared.scenario, fitting.fns)
     # The precision each parameter needs: the tightest any log's drive asks (as the joint run's).
     layouts = [_part_info(fitting, part, i)[1].layout for i, part in enumerate(parts)]

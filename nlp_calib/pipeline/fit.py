@@ -12,7 +12,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from nlp_calib.analysis.inputs_bias import BiasStep, bias_step
 from nlp_calib.core import interrupts
 from nlp_calib.pipeline.build import Problem, evaluated
 from nlp_calib.pipeline.keys import refuse_rejected_options, scenario_key
@@ -22,21 +21,11 @@ from nlp_calib.solvers import Solver, get_solver
 
 
 class Fit:
-    """The fitted windows ``data`` of ``problem`` bound to one evaluator, ready for any solver;
-    ``noise``, the inputs' 1σ and which are counters (see :func:`bias_step`), when each estimate
-    is to be freed of the bias the inputs' noise gives it."""
+    """The fitted windows ``data`` of ``problem`` bound to one evaluator, ready for any solver."""
 
-    def __init__(
-        self,
-        problem: Problem,
-        data: ResidualData,
-        solvers: Sequence[str],
-        noise: tuple[np.ndarray, np.ndarray] | None = None,
-    ) -> None:
+    def __init__(self, problem: Problem, data: ResidualData, solvers: Sequence[str]) -> None:
         self.problem = problem
         self.data = data
-        self.noise = noise
-        self._bias: list[BiasStep] = []
         self.evaluator = problem.binder.evaluate(data)
         self.evaluator.prepare(evaluated(problem.binder.scenario, solvers))
         self._solvers: dict[str, Solver] = {}
@@ -59,28 +48,7 @@ class Fit:
         result = self.solver(name).solve(start.x0, start.lower, start.upper)
         interrupts.check()  # IPOPT catches the signal that stops it and returns as if it had failed
         refuse_rejected_options(self.problem.binder.scenario, result)
-        return self.canonical(self.unbiased(dataclasses.replace(result, solver=name)))
-
-    def unbiased(self, result: SolverResult) -> SolverResult:
-        """A converged ``result`` moved by the step that removes the inputs' noise bias, within
-        the bounds (errors in variables: :mod:`nlp_calib.analysis.inputs_bias`)."""
-        if self.noise is None or not result.converged:
-            return result
-        ev, start = self.evaluator, self.problem.start
-        # Both solvers at one optimum: one step (it costs a pass over the windows per parameter).
-        known = [b for b in self._bias if b.holds_at(result.x)]
-        if not known:
-            known = [bias_step(ev, result.x, self.noise)]
-            self._bias.append(known[0])
-        if not np.any(known[0].step):
-            return result
-        x = ev.boxplus(result.x, known[0].step)
-        if start.lower is not None and start.upper is not None:
-            x = np.clip(x, start.lower, start.upper)
-        ne = ev.normal_equations(x)
-        return dataclasses.replace(
-            result, x=x, params=ev.params(x), cost=ne.cost, chi2=ne.chi2, inliers=ne.inliers
-        )
+        return self.canonical(dataclasses.replace(result, solver=name))
 
     def canonical(self, result: SolverResult) -> SolverResult:
         """``result`` mapped onto the model's canonical form (same cost: an exact symmetry)."""

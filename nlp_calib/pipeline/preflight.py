@@ -32,7 +32,6 @@ from nlp_calib.analysis.uncertainty import range_std
 from nlp_calib.analysis.verdict import way_out
 from nlp_calib.core.errors import DatasetError, NlpCalibError, PreflightError
 from nlp_calib.logs import Log
-from nlp_calib.models import counted_inputs
 from nlp_calib.pipeline import units_check
 from nlp_calib.pipeline.assemble import fit_info
 from nlp_calib.pipeline.build import (
@@ -264,8 +263,7 @@ def _propagated(
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     evaluator, whole = fitted
     try:
-        counted = counted_inputs(d.parts[0].model, d.parts[0].log)
-        white = unc.estimate(evaluator, x, windows, noise, bounds, counted).std
+        white = unc.estimate(evaluator, x, windows, noise, bounds).std
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return np.full(fns.n_free, np.nan)
     k = min(d.scenario.validation.blocks, windows.n_residuals)

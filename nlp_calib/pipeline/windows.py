@@ -14,7 +14,6 @@ import numpy as np
 
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
-from nlp_calib.models import counted_inputs
 from nlp_calib.pipeline.align import Alignment
 from nlp_calib.pipeline.build import Binder, Problem
 from nlp_calib.pipeline.prepare import PreparedLog, split
@@ -26,8 +25,7 @@ from nlp_calib.problem import ResidualData
 class LogWindows:
     """A log's fitted windows and what its figures need: the records ``used`` and ``fit`` of the
     aligned log, its fault masks (per interval and per record of the whole log), the binder that
-    keeps its windows clear of faults and each model input's noise (1σ; a counter's, ``counted``,
-    on its readings)."""
+    keeps its windows clear of faults and each model input's noise (1σ)."""
 
     aligned: Log
     used: tuple[int, int]
@@ -37,12 +35,6 @@ class LogWindows:
     bad_intervals: np.ndarray
     bad_records: np.ndarray
     input_noise_std: np.ndarray
-    counted: np.ndarray
-
-    @property
-    def input_noise(self) -> tuple[np.ndarray, np.ndarray]:
-        """Each model input's noise (1σ) and whether it is a counter's (noise on its readings)."""
-        return self.input_noise_std, self.counted
 
     @property
     def selected(self) -> Log:
@@ -83,6 +75,4 @@ def bind_windows(
     fit = (start, split(sc, start, stop))
     data = binder.windows(alignment.log, *fit)
     noise = problem.model.input_noise_std(alignment.log, sc.data.encoder_noise)
-    counted = counted_inputs(problem.model, alignment.log)
-    masks = (bad_intervals, bad_records)
-    return LogWindows(alignment.log, (start, stop), fit, data, binder, *masks, noise, counted)
+    return LogWindows(alignment.log, (start, stop), fit, data, binder, bad_intervals, bad_records, noise)

@@ -2,15 +2,7 @@
 
 from __future__ import annotations
 
-from nlp_calib.solvers.backends.base import (
-    BACKENDS,
-    INTERPRETED,
-    Backend,
-    BackendOptions,
-    Buffered,
-    Request,
-    pad_columns,
-)
+from nlp_calib.solvers.backends.base import BACKENDS, Backend, BackendOptions, Buffered, Request, pad_columns
 from nlp_calib.solvers.backends.compiled import CompiledBackend, make_compiled_backend
 
 
@@ -18,12 +10,11 @@ def make_backend(options: BackendOptions) -> Backend:
     """The backend ``options`` asks for (the compiled one falls back when no compiler exists)."""
     if options.kind == "compiled":
         return make_compiled_backend(options)
-    return INTERPRETED
+    return Backend()
 
 
 __all__ = [
     "BACKENDS",
-    "INTERPRETED",
     "Backend",
     "BackendOptions",
     "Buffered",
