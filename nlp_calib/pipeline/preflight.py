@@ -75,6 +75,12 @@ class Drive:
     start: StartingPoint
     start_words: str
 
+    @property
+    def sizes(self) -> np.ndarray:
+        """The free parameters at the start, whose sizes a relative precision is a fraction of in
+        the pre-flight as in the run (:func:`~nlp_calib.analysis.degeneracy.scales`)."""
+        return np.array([self.start.initial[n] for n in self.fns.free], dtype=float)
+
 
 def _prepared(
     sc: Scenario, logs: Sequence[Log] | None
@@ -223,7 +229,7 @@ def _rough(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, st
 
     x, info, steps = start.x0, at(start.x0), 0
     while steps < ROUGH_STEPS:
-        dx = det.step(fns, info, x)
+        dx = det.step(fns, info, x, d.sizes)
         for alpha in (1.0, 0.5, 0.25):
             moved = np.asarray(fns.boxplus(x, alpha * dx)).ravel()
             moved = moved if box is None else np.clip(moved, *box)
@@ -301,7 +307,7 @@ def _propagated(
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     evaluator, whole = fitted
     try:
-        white = unc.estimate(evaluator, x, windows, noise, bounds).std
+        white = unc.estimate(evaluator, x, windows, noise, bounds, d.sizes).std
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return np.full(fns.n_free, np.nan)
     k = min(d.scenario.validation.blocks, windows.n_residuals)
@@ -389,7 +395,7 @@ class Assessment:
     def standing(self, info: det.Information | None = None) -> det.Standing:
         """Each free parameter's standing on these windows (or on those whose information is ``info``)."""
         d = self.drive
-        st = det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std)
+        st = det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std, d.sizes)
         if info is not None:
             return st
         # One σ and one needed precision with the run's: the white σ says what the drive leaves
@@ -398,9 +404,9 @@ class Assessment:
         if self.propagated is not None:
             std = np.where(np.isfinite(st.std) & np.isfinite(self.propagated), self.propagated, st.std)
         needed = st.reference if self.needed is None else self.needed
-        # Not determined as the run's observability says it (the model's reference units); weak
-        # against what the verdict needs.
-        return replace(st, std=std, std_reference=std / needed, reference=needed, observed=std / st.reference)
+        # Not determined as the run's verdict says it (its observability's directions, in the
+        # reference units at the start both share); weak against what the verdict needs.
+        return replace(st, std=std, std_reference=std / needed, reference=needed)
 
 
 def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
