@@ -17,7 +17,7 @@ hold the model's errors too: the pre-flight's σ is a floor).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -205,6 +205,8 @@ class Standing:
     #: Which the run's verdict would call not determined: along a direction beyond the
     #: not-observable limit (:func:`~nlp_calib.analysis.observability.not_observable`).
     unobservable: np.ndarray
+    #: Which the drive determines only at one end of a direction it barely holds (:func:`rescued`).
+    one_end: np.ndarray | None = None
 
 
 def standing(
@@ -238,6 +240,25 @@ def standing(
         partners.append(_coupled(names, basis, i))
     return Standing(
         names, std, std / R, R, undetermined, np.asarray(bounded), tuple(partners), not_observable(found)
+    )
+
+
+def rescued(here: Standing, there: Standing) -> Standing:
+    """``here`` with each parameter it leaves not determined that ``there`` (the same windows at
+    another point along the loose directions) determines taken as determined at one end only
+    (``one_end``): its σ the finite one of the two, at most weakly determined."""
+    loose = here.undetermined | here.unobservable
+    held = loose & ~(there.undetermined | there.unobservable)
+    if not held.any():
+        return here
+    std = np.where(held & ~np.isfinite(here.std), there.std, here.std)
+    return replace(
+        here,
+        std=std,
+        std_reference=std / here.reference,
+        undetermined=here.undetermined & ~held,
+        unobservable=here.unobservable & ~held,
+        one_end=held,
     )
 
 
@@ -294,13 +315,19 @@ def statuses(
     ]  # fmt: skip
     for i, name in enumerate(found.names):
         ratio, partners = float(found.std_reference[i]), found.partners[i]
+        one_end = found.one_end is not None and bool(found.one_end[i])
         if found.undetermined[i] or found.unobservable[i]:
             status = NOT_DETERMINED
         else:
-            status = WEAKLY if ratio > WEAK else DETERMINED
+            status = WEAKLY if ratio > WEAK or one_end else DETERMINED
         words = [_cause(fns, name, partners, ex)] if status != DETERMINED else []
         if status != DETERMINED:
             words.append(_trade(partners, bool(found.bounded[i]), found.undetermined[i]))
+        if one_end:
+            words.append(
+                "the drive holds it where the run starts, not where the pre-flight's fit stopped along "
+                "a direction it barely holds: the run's verdict says whether it is determined"
+            )
         out.append(
             ParameterStatus(
                 name, status, float(found.std[i]), ratio, float(found.reference[i]), units.get(name, ""),
