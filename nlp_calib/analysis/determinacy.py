@@ -325,8 +325,8 @@ def statuses(
             words.append(_trade(partners, bool(found.bounded[i]), found.undetermined[i]))
         if one_end:
             words.append(
-                "the drive holds it where the run starts, not where the pre-flight's fit stopped along "
-                "a direction it barely holds: the run's verdict says whether it is determined"
+                "the drive holds it 1σ from where the pre-flight's fit stopped along a direction it "
+                "barely holds, not there: the run's verdict says whether it is determined"
             )
         out.append(
             ParameterStatus(

@@ -478,29 +478,24 @@ class Assessment:
         return replace(st, std=std, std_reference=std / needed, reference=needed)
 
     def _either_end(self, st: det.Standing) -> det.Standing:
-        """``st`` (at the fit) with what it leaves not determined judged again where a solver may
-        stop along those directions: 1σ (white, at the fit) either way, within what the model can
-        be, and at their start values (where the run's solver sets out). Along a direction the drive
-        barely holds the cost is flat and a solver stops anywhere there (a car's rear track at 0.50
-        m in the pre-flight, 0.63 m in the run, whose hold on it differs 1.6-fold), so a parameter
-        the drive determines at any of these points is no refusal: it is weak, and the run's
-        verdict says which (:func:`~nlp_calib.analysis.determinacy.rescued`)."""
+        """``st`` (at the fit) with what it leaves beyond the not-observable limit, but held (a finite
+        σ), judged again 1σ (white, at the fit) either way along it, within what the model can be:
+        there the cost has risen by one σ² only, and a solver that sets out elsewhere (the run's, on
+        windows and a lag of its own) may stop there; where the drive's hold on a parameter changes
+        along the way (a car's rear track: at 0.50 m in the pre-flight, 0.63 m in the run, whose
+        hold on it differs 1.6-fold), a parameter determined at either point is no refusal: it is
+        weak, and the run's verdict says which (:func:`~nlp_calib.analysis.determinacy.rescued`).
+        A direction the drive leaves free, or holds only by bounds, is not determined anywhere."""
         d = self.drive
-        loose = np.asarray(st.undetermined | st.unobservable, dtype=bool)
-        if self.propagated is None or not loose.any():
+        sd = np.where(st.unobservable & ~st.undetermined & np.isfinite(st.std), st.std, 0.0)
+        if self.propagated is None or not np.any(sd > 0):
             return st
         fns = d.fns
-        at_start = np.array(self.x, dtype=float)
-        at_start[loose] = np.asarray(d.start.x0, dtype=float)[loose]
-        points = [at_start]
-        sd = np.where(loose & np.isfinite(st.std), st.std, 0.0)
-        if np.any(sd > 0):
-            ranges = [fns.model.physical_ranges.get(fns.layout.key(n), (-np.inf, np.inf)) for n in fns.free]
-            lo, hi = np.array(ranges, dtype=float).T
-            for sign in (-1.0, 1.0):
-                moved = np.asarray(fns.boxplus(self.x, sign * sd)).ravel()
-                points.append(np.where(loose, np.clip(moved, lo, hi), self.x))
-        for x in points:
+        ranges = [fns.model.physical_ranges.get(fns.layout.key(n), (-np.inf, np.inf)) for n in fns.free]
+        lo, hi = np.array(ranges, dtype=float).T
+        for sign in (-1.0, 1.0):
+            moved = np.asarray(fns.boxplus(self.x, sign * sd)).ravel()
+            x = np.where(sd > 0, np.clip(moved, lo, hi), self.x)
             info = det.information(fns, d.data, x, d.start.x_fixed, self.omega, self.delta)
             st = det.rescued(st, det.standing(fns, info, self.sigma2, x, self.bounds_std, d.sizes))
         return st
