@@ -28,7 +28,7 @@ from nlp_calib.analysis.uncertainty import white_covariance
 from nlp_calib.logs import Log
 from nlp_calib.models.base import reference_scale
 from nlp_calib.problem import ProblemFunctions, ResidualData, over_columns
-from nlp_calib.results.checks import WEAK
+from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
 from nlp_calib.results.layout import CLOCK
 from nlp_calib.results.preflight import DETERMINED, NOT_DETERMINED, WEAKLY, Excitation, ParameterStatus
 from nlp_calib.symbolic.kernels import kernel_function
@@ -205,8 +205,8 @@ class Standing:
     #: Which the run's verdict would call not determined: along a direction beyond the
     #: not-observable limit (:func:`~nlp_calib.analysis.observability.not_observable`).
     unobservable: np.ndarray
-    #: Which the drive determines only at one end of a direction it barely holds (:func:`rescued`).
-    one_end: np.ndarray | None = None
+    #: Which the drive holds beyond the not-observable limit where the fit stopped (:func:`held_loosely`).
+    loosely: np.ndarray | None = None
 
 
 def standing(
@@ -243,23 +243,18 @@ def standing(
     )
 
 
-def rescued(here: Standing, there: Standing) -> Standing:
-    """``here`` with each parameter it leaves not determined that ``there`` (the same windows at
-    another point along the loose directions) determines taken as determined at one end only
-    (``one_end``): its σ the finite one of the two, at most weakly determined."""
-    loose = here.undetermined | here.unobservable
-    held = loose & ~(there.undetermined | there.unobservable)
-    if not held.any():
-        return here
-    std = np.where(held & ~np.isfinite(here.std), there.std, here.std)
-    return replace(
-        here,
-        std=std,
-        std_reference=std / here.reference,
-        undetermined=here.undetermined & ~held,
-        unobservable=here.unobservable & ~held,
-        one_end=held,
-    )
+def held_loosely(st: Standing) -> Standing:
+    """``st`` with each parameter the drive holds (a finite σ, no free direction, not by bounds
+    alone) beyond the not-observable limit taken as weakly determined (``loosely``): how well such
+    a parameter is known changes along the direction it barely holds, and a solver stops
+    anywhere there (a car's rear track fits about as well near zero as at its length: the
+    pre-flight's fit stopped at −7 cm, not determined, the run's at 0.60 m, weakly, on encoders
+    re-sampled 1 ms apart), so the run's verdict, where its solver stops, says whether it is
+    determined; what the drive leaves free is not determined wherever a fit stops."""
+    loosely = st.unobservable & ~st.undetermined & np.isfinite(st.std)
+    if not loosely.any():
+        return st
+    return replace(st, unobservable=st.unobservable & ~loosely, loosely=loosely)
 
 
 def _coupled(names: tuple[str, ...], basis: np.ndarray, i: int) -> tuple[str, ...]:
@@ -315,18 +310,19 @@ def statuses(
     ]  # fmt: skip
     for i, name in enumerate(found.names):
         ratio, partners = float(found.std_reference[i]), found.partners[i]
-        one_end = found.one_end is not None and bool(found.one_end[i])
+        loosely = found.loosely is not None and bool(found.loosely[i])
         if found.undetermined[i] or found.unobservable[i]:
             status = NOT_DETERMINED
         else:
-            status = WEAKLY if ratio > WEAK or one_end else DETERMINED
+            status = WEAKLY if ratio > WEAK or loosely else DETERMINED
         words = [_cause(fns, name, partners, ex)] if status != DETERMINED else []
         if status != DETERMINED:
             words.append(_trade(partners, bool(found.bounded[i]), found.undetermined[i]))
-        if one_end:
+        if loosely:
             words.append(
-                "the drive holds it 1σ from where the pre-flight's fit stopped along a direction it "
-                "barely holds, not there: the run's verdict says whether it is determined"
+                f"beyond {NOT_OBSERVABLE:g} times its reference precision where the pre-flight's fit "
+                "stopped, on a direction the drive barely holds: the run's verdict, where its solver "
+                "stops, says whether it is determined"
             )
         out.append(
             ParameterStatus(

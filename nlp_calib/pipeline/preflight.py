@@ -468,7 +468,7 @@ class Assessment:
             return st
         # One σ and one needed precision with the run's: the white σ says what the drive leaves
         # free, the run's how well the rest is known, against what the run's verdict needs.
-        st = self._either_end(st)
+        st = det.held_loosely(st)
         std = st.std
         if self.propagated is not None:
             std = np.where(np.isfinite(st.std) & np.isfinite(self.propagated), self.propagated, st.std)
@@ -476,29 +476,6 @@ class Assessment:
         # Not determined as the run's verdict says it (its observability's directions, in the
         # reference units at the start both share); weak against what the verdict needs.
         return replace(st, std=std, std_reference=std / needed, reference=needed)
-
-    def _either_end(self, st: det.Standing) -> det.Standing:
-        """``st`` (at the fit) with what it leaves beyond the not-observable limit, but held (a finite
-        σ), judged again 1σ (white, at the fit) either way along it, within what the model can be:
-        there the cost has risen by one σ² only, and a solver that sets out elsewhere (the run's, on
-        windows and a lag of its own) may stop there; where the drive's hold on a parameter changes
-        along the way (a car's rear track: at 0.50 m in the pre-flight, 0.63 m in the run, whose
-        hold on it differs 1.6-fold), a parameter determined at either point is no refusal: it is
-        weak, and the run's verdict says which (:func:`~nlp_calib.analysis.determinacy.rescued`).
-        A direction the drive leaves free, or holds only by bounds, is not determined anywhere."""
-        d = self.drive
-        sd = np.where(st.unobservable & ~st.undetermined & np.isfinite(st.std), st.std, 0.0)
-        if self.propagated is None or not np.any(sd > 0):
-            return st
-        fns = d.fns
-        ranges = [fns.model.physical_ranges.get(fns.layout.key(n), (-np.inf, np.inf)) for n in fns.free]
-        lo, hi = np.array(ranges, dtype=float).T
-        for sign in (-1.0, 1.0):
-            moved = np.asarray(fns.boxplus(self.x, sign * sd)).ravel()
-            x = np.where(sd > 0, np.clip(moved, lo, hi), self.x)
-            info = det.information(fns, d.data, x, d.start.x_fixed, self.omega, self.delta)
-            st = det.rescued(st, det.standing(fns, info, self.sigma2, x, self.bounds_std, d.sizes))
-        return st
 
 
 def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
