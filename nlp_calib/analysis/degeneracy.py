@@ -40,20 +40,9 @@ def free_directions(lam: np.ndarray, n_windows: int, motion2: float) -> np.ndarr
     return np.asarray(lam < max(floor, numeric))
 
 
-def scales(fns: ProblemFunctions, values: np.ndarray, start: np.ndarray | None = None) -> np.ndarray:
-    """Each free parameter's reference precision in its unit (:func:`nlp_calib.models.reference_scales`,
-    the sensor's own references) at the free ``values``: the one scale the pre-flight and the run
-    read what a drive determines in. A relative precision (a gain's, a length's 1 %) is that
-    fraction of the parameter's size: the smaller of its size at ``values`` and at the ``start``
-    both share (the scenario's initial guess or the closed-form start; where finite and not zero).
-    A fit that slides along a direction the drive barely holds moves the size with it: toward zero
-    (a car's rear track from 0.6 m to −7 cm, whose sign the drive cannot tell) the precision
-    shrinks with it and the parameter is not determined, as it is not; far out (a steering gain
-    wandered to −1.8e4) the start's size keeps the precision from growing with it (1 % of that
-    gain is 180: its trade with the steering offset would pass for determined).
-    """
-    size = np.abs(np.asarray(values, dtype=float))
-    if start is not None:
-        given = np.abs(np.asarray(start, dtype=float))
-        size = np.where(np.isfinite(given) & (given > 0.0), np.minimum(size, given), size)
-    return reference_scales(fns.model, fns.layout.keys(fns.free), size, fns.sensor.reference)
+def scales(fns: ProblemFunctions, values: np.ndarray) -> np.ndarray:
+    """Each free parameter's reference precision in its unit at the free parameters' ``values``
+    (:func:`nlp_calib.models.reference_scales`, with the sensor's own references: a camera's mount
+    is not a planar one's): the one scale the pre-flight and the run read what a drive determines
+    in (the pre-flight had read every sensor's mount in a planar one's)."""
+    return reference_scales(fns.model, fns.layout.keys(fns.free), values, fns.sensor.reference)

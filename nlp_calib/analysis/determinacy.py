@@ -143,15 +143,12 @@ def _robust(kernel: str, s: np.ndarray, delta: float) -> tuple[np.ndarray, np.nd
     return np.asarray(rho.full()).ravel(), np.asarray(weight.full()).ravel()
 
 
-def step(
-    fns: ProblemFunctions, info: Information, x: np.ndarray, start: np.ndarray | None = None
-) -> np.ndarray:
+def step(fns: ProblemFunctions, info: Information, x: np.ndarray) -> np.ndarray:
     """The Gauss-Newton step from ``x`` (manifold coordinates) on the directions the windows
-    determine; the others (:func:`~nlp_calib.analysis.degeneracy.free_directions`, in reference
-    units at ``start``: :func:`~nlp_calib.analysis.degeneracy.scales`) are left where they are: a
-    start is brought to the data, where a drive's free directions are what a fit would find (away
-    from the data, a free direction can lean into parameters the drive determines)."""
-    R = scales(fns, np.asarray(x, dtype=float), start)
+    determine; the others (:func:`~nlp_calib.analysis.degeneracy.free_directions`) are left where
+    they are: a start is brought to the data, where a drive's free directions are what a fit would
+    find (away from the data, a free direction can lean into parameters the drive determines)."""
+    R = scales(fns, np.asarray(x, dtype=float))
     lam, V = np.linalg.eigh(0.5 * (info.H + info.H.T) * np.outer(R, R))
     keep = ~free_directions(lam, info.n_windows, info.motion2) & (lam > 0)
     return np.asarray(-R * ((V[:, keep] / lam[keep]) @ (V[:, keep].T @ (R * info.g))))
@@ -215,14 +212,12 @@ def standing(
     sigma2: float,
     values: np.ndarray,
     bounds_std: np.ndarray | None,
-    start: np.ndarray | None = None,
 ) -> Standing:
     """Each free parameter's standing on the windows whose information is ``info``, at the free
-    parameters' ``values``, for residuals of variance ``sigma2`` (see the module docstring), in
-    reference units at the fit's ``start`` as a run reads them
-    (:func:`~nlp_calib.analysis.degeneracy.scales`)."""
+    parameters' ``values``, for residuals of variance ``sigma2`` (see the module docstring), in the
+    reference units a run reads them in (:func:`~nlp_calib.analysis.degeneracy.scales`)."""
     names = fns.free
-    R = scales(fns, values, start)
+    R = scales(fns, values)
     found = directions(info.H, sigma2, R, info.n_windows, info.motion2)
 
     def free(lam: np.ndarray) -> np.ndarray:

@@ -48,11 +48,8 @@ def directions(H: np.ndarray, sigma2: float, R: np.ndarray, n_windows: int, moti
     return Directions(lam, V, free, np.sqrt(var_param))
 
 
-def analyse(
-    evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarray, start: np.ndarray | None = None
-) -> Observability:
-    """Observability of the free parameters at ``x`` for the log whose tracker poses are given, in
-    reference units at the fit's ``start`` (free values; :func:`~nlp_calib.analysis.degeneracy.scales`)."""
+def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarray) -> Observability:
+    """Observability of the free parameters at ``x`` for the log whose tracker poses are given."""
     fns = evaluator.fns
     names = fns.free
     ne = evaluator.normal_equations(x)
@@ -71,7 +68,7 @@ def analyse(
     params = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()
     value = dict(zip(fns.names, params))
     values = np.array([value[n] for n in names])
-    R = scales(fns, values, start)
+    R = scales(fns, values)
     motion2 = motion_scale(fns, evaluator.data.z, evaluator.omega)
     found = directions(ne.H, sigma2, R, evaluator.n_residuals, motion2)
     d = np.sqrt(np.maximum(np.diag(ne.H), 1e-300))

@@ -150,7 +150,6 @@ def estimate(
     data: ResidualData,
     input_noise_std: np.ndarray,
     bounds_std: np.ndarray | None = None,
-    start: np.ndarray | None = None,
 ) -> Uncertainty:
     """Covariance of the estimate ``x`` fitted to ``data``, given the inputs' 1σ noise.
 
@@ -158,8 +157,7 @@ def estimate(
     prior: a direction the data do not determine is then known as well as the bounds of the
     parameters in it allow (a lag within its search), and every parameter that moves along it
     carries that σ (listed in :attr:`Uncertainty.bounded`); a direction with no bounded parameter
-    in it leaves its parameters' σ infinite. ``start``: the free parameters at the fit's start,
-    whose sizes the reference units are taken at (:func:`~nlp_calib.analysis.degeneracy.scales`)."""
+    in it leaves its parameters' σ infinite."""
     fns = evaluator.fns
     ne = evaluator.normal_equations(x)
     if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
@@ -190,7 +188,7 @@ def estimate(
     sigma2 = float(np.sum(weight[use] * s[use])) / dof
     if evaluator.priors.active:
         meat = meat + sigma2 * evaluator.prior_information(x)
-    cov, bounded = _covariance(evaluator, x, (ne.H, meat), sigma2, (bounds_std, start))
+    cov, bounded = _covariance(evaluator, x, (ne.H, meat), sigma2, bounds_std)
     noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
     noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
     out = _packaged(fns, cov, noise, dof)
@@ -202,17 +200,15 @@ def _covariance(
     x: np.ndarray,
     bread_meat: tuple[np.ndarray, np.ndarray],
     sigma2: float,
-    bounds_start: tuple[np.ndarray | None, np.ndarray | None],
+    bounds_std: np.ndarray | None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_bounded_covariance` at ``x``: reference units at the start (``bounds_start``: the
-    bounds' 1σ and the start's free values; :func:`~nlp_calib.analysis.degeneracy.scales`), the
-    drive's free directions from its windows' motion, the bounds' prior in the data's units."""
+    """:func:`_bounded_covariance` at ``x``: reference units from the estimate, the drive's free
+    directions from its windows' motion, the bounds' prior in the data's units."""
     fns, data = evaluator.fns, evaluator.data
     free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[
         [fns.names.index(f) for f in fns.free]
     ]
-    bounds_std, start = bounds_start
-    scale = scales(fns, free_values, start)
+    scale = scales(fns, free_values)
     motion2 = motion_scale(fns, data.z, evaluator.omega)
 
     def free(lam: np.ndarray) -> np.ndarray:

@@ -193,7 +193,7 @@ def analyse_fit(
     ranges = unc.range_std(start.lower, start.upper, fit.fns.n_free)
     uncertainty = uncertainties(fit, results, noise, ranges)
     finite = [r for r in results.values() if np.isfinite(r.cost)] or list(results.values())
-    observability = observability_of(ev, finite[0].x, data.T_world_sensor, start.x0)
+    observability = observability_of(ev, finite[0].x, data.T_world_sensor)
     converged = [r for r in results.values() if r.converged]
     effects = unc.lag_effects(uncertainty[next(iter(results))], fit.fns.layout) if results else ()
     if not converged:
@@ -237,11 +237,7 @@ def uncertainties(
     done: list[tuple[SolverResult, Uncertainty]] = []
     for name, r in results.items():
         same = [u for prior, u in done if _same_optimum(prior, r, u)]
-        out[name] = (
-            same[0]
-            if same
-            else unc.estimate(fit.evaluator, r.x, fit.data, noise, ranges, fit.problem.start.x0)
-        )
+        out[name] = same[0] if same else unc.estimate(fit.evaluator, r.x, fit.data, noise, ranges)
         done.append((r, out[name]))
     return out
 

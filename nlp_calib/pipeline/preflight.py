@@ -83,12 +83,6 @@ class Drive:
     #: Each log as read (its encoders are re-sampled from it at a fitted time offset).
     read: tuple[Log, ...] = ()
 
-    @property
-    def sizes(self) -> np.ndarray:
-        """The free parameters at the start, whose sizes a relative precision is a fraction of in
-        the pre-flight as in the run (:func:`~nlp_calib.analysis.degeneracy.scales`)."""
-        return np.array([self.start.initial[n] for n in self.fns.free], dtype=float)
-
 
 def _prepared(
     sc: Scenario, logs: Sequence[Log] | None
@@ -237,7 +231,7 @@ def _rough(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, st
 
     x, info, steps = start.x0, at(start.x0), 0
     while steps < ROUGH_STEPS:
-        dx = det.step(fns, info, x, d.sizes)
+        dx = det.step(fns, info, x)
         for alpha in (1.0, 0.5, 0.25):
             moved = np.asarray(fns.boxplus(x, alpha * dx)).ravel()
             moved = moved if box is None else np.clip(moved, *box)
@@ -375,7 +369,7 @@ def _propagated(
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     evaluator, whole = fitted
     try:
-        white = unc.estimate(evaluator, x, windows, noise, bounds, d.sizes).std
+        white = unc.estimate(evaluator, x, windows, noise, bounds).std
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return np.full(fns.n_free, np.nan)
     k = min(d.scenario.validation.blocks, windows.n_residuals)
@@ -463,7 +457,7 @@ class Assessment:
     def standing(self, info: det.Information | None = None) -> det.Standing:
         """Each free parameter's standing on these windows (or on those whose information is ``info``)."""
         d = self.drive
-        st = det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std, d.sizes)
+        st = det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std)
         if info is not None:
             return st
         # One σ and one needed precision with the run's: the white σ says what the drive leaves
