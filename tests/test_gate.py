@@ -4,12 +4,14 @@ compared alike."""
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from conftest import SCENARIOS
 
 from nlp_calib.analysis import determinacy as det
+from nlp_calib.analysis import observability as obs
 from nlp_calib.analysis.verdict import lag_caveats
 from nlp_calib.models import get_model
 from nlp_calib.pipeline import preflight as pf
@@ -21,7 +23,7 @@ from nlp_calib.pipeline.scenario import load_scenario
 from nlp_calib.pipeline.validation import lag_alike
 from nlp_calib.problem import ResidualData
 from nlp_calib.results.checks import LagEstimate
-from nlp_calib.results.preflight import UnitFinding
+from nlp_calib.results.preflight import DETERMINED, NOT_DETERMINED, WEAKLY, UnitFinding
 from nlp_calib.solvers.evaluation import NormalEquations
 
 REAL = Path("/work/shared/data/dataset.txt")
@@ -127,3 +129,56 @@ def test_the_preflights_information_and_jackknife_are_its_fits_own(
         assert np.max(gap) < 0.01, gap
         moved.append(np.max(np.abs(x_full - a.x) / a.propagated))
     assert max(moved) > 0.1  # the folds do move: the bound above is not met by staying at x
+
+
+def test_the_preflight_judges_every_window_the_budget_holds() -> None:
+    # 1499 windows of one record were rounded down to 1280 (a whole number of buckets): the fit on
+    # them stopped elsewhere along a direction the drive barely holds than the run's on all 1499.
+    assert np.array_equal(det.spread(1499, det.MAX_WORK), np.arange(1499))
+    more = det.spread(10 * det.MAX_WORK, det.MAX_WORK)
+    assert more.size <= det.MAX_WORK and more.size % det.BUCKET == 0 and more[0] == 0
+
+
+def test_the_preflight_calls_not_observable_what_the_runs_verdict_does() -> None:
+    """One rule (observability.not_observable): the parameters of the directions beyond the limit
+    or free, as weak_directions names them for the verdict; not a parameter's own σ."""
+    names = ("a", "b", "c")
+    c, s = np.cos(0.5), np.sin(0.5)  # b's share of the loose direction 0.23
+    V = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    lam = np.array([1.0 / 150.0**2, 1.0 / 2.0**2, 1.0])  # 1σ 150, 2 and 1 reference units
+    found = obs.Directions(lam, V, np.zeros(3, dtype=bool), np.zeros(3))
+    said = {
+        n
+        for w in obs.weak_directions(names, lam, V, found.free)
+        if w.std_reference > 100
+        for n in w.components
+    }
+    flagged = {n for n, f in zip(names, obs.not_observable(found)) if f}
+    assert flagged == said == {"a", "b"}
+    free = obs.Directions(np.array([1e-30, 1.0, 1.0]), np.eye(3), np.array([True, False, False]), np.zeros(3))
+    assert list(obs.not_observable(free)) == [True, False, False]
+
+
+def test_a_parameter_held_beyond_the_limit_is_weak_and_a_free_one_is_refused() -> None:
+    """Where a fit stops along a direction the drive barely holds is chance (a car's rear track fits
+    about as well near zero as at its length); only what the drive leaves free is refused."""
+    inf = np.inf
+    st = det.Standing(
+        names=("rear_track", "wheelbase", "k_steer"),
+        std=np.array([0.4, inf, 0.01]),
+        std_reference=np.array([400.0, inf, 1.0]),
+        reference=np.array([0.001, 0.01, 0.01]),
+        undetermined=np.array([False, True, False]),
+        bounded=np.zeros(3, dtype=bool),
+        partners=((), ("k_steer",), ()),
+        unobservable=np.array([True, True, False]),
+    )
+    held = det.held_loosely(st)
+    # What statuses reads of the problem here: no clock, no turning parameter named.
+    fns = SimpleNamespace(
+        layout=SimpleNamespace(in_block=lambda name, block: False),
+        model=SimpleNamespace(turning_params=()),
+        sensor=SimpleNamespace(turning=()),
+    )
+    statuses = {s.name: s.status for s in det.statuses(fns, held, {}, {}, None)}  # type: ignore[arg-type]
+    assert statuses == {"rear_track": WEAKLY, "wheelbase": NOT_DETERMINED, "k_steer": DETERMINED}
