@@ -306,7 +306,7 @@ def statuses(
     for i, name in enumerate(found.names):
         ratio, partners = float(found.std_reference[i]), found.partners[i]
         loosely = found.loosely is not None and bool(found.loosely[i])
-        if found.undetermined[i] or found.unobservable[i]:
+        if found.undetermined[i] or found.unobservable[i] or _unturned(fns, name, ex):
             status = NOT_DETERMINED
         else:
             status = WEAKLY if ratio > WEAK or loosely else DETERMINED
@@ -326,6 +326,15 @@ def statuses(
             )
         )  # fmt: skip
     return tuple(out)
+
+
+def _unturned(fns: ProblemFunctions, name: str, ex: Excitation | None) -> bool:
+    """Whether ``name`` needs turns the drive never makes (its heading spans less than
+    :data:`~nlp_calib.analysis.observability.MIN_TURNING`): the run's observability calls it not
+    observable then, wherever its fit stops (a straight diff drive's baseline and lever arm,
+    held ±0.3 m where the pre-flight's steps stopped, 1.3e5 m where the run's solver did)."""
+    turning = (*fns.model.turning_params, *fns.sensor.turning)
+    return ex is not None and name in turning and ex.heading_span_rad < MIN_TURNING
 
 
 def _trade(partners: Sequence[str], bounded: bool, free: bool) -> str:

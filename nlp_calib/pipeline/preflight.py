@@ -297,7 +297,7 @@ def _clocks(d: Drive) -> list[tuple[int, list[int]]]:
     shared one: every log)."""
     fns, every = d.fns, list(range(len(d.parts)))
     return [
-        (i, every if fns.layout.param(n).log is None else [int(fns.layout.param(n).log)])
+        (i, every if (log := fns.layout.param(n).log) is None else [log])
         for i, n in enumerate(fns.free)
         if fns.layout.in_block(n, CLOCK)
     ]
