@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -24,7 +23,7 @@ from nlp_calib.pipeline.scenario import load_scenario
 from nlp_calib.pipeline.validation import lag_alike
 from nlp_calib.problem import ResidualData
 from nlp_calib.results.checks import LagEstimate
-from nlp_calib.results.preflight import DETERMINED, NOT_DETERMINED, WEAKLY, UnitFinding
+from nlp_calib.results.preflight import WEAKLY, UnitFinding
 from nlp_calib.results.run import CAVEATS
 from nlp_calib.solvers.evaluation import NormalEquations
 
@@ -161,37 +160,13 @@ def test_the_preflight_calls_not_observable_what_the_runs_verdict_does() -> None
     assert list(obs.not_observable(free)) == [True, False, False]
 
 
-def test_a_parameter_held_beyond_the_limit_is_weak_and_a_free_one_is_refused() -> None:
-    """Where a fit stops along a direction the drive barely holds is chance (a car's rear track fits
-    about as well near zero as at its length); only what the drive leaves free is refused."""
-    inf = np.inf
-    st = det.Standing(
-        names=("rear_track", "wheelbase", "k_steer"),
-        std=np.array([0.4, inf, 0.01]),
-        std_reference=np.array([400.0, inf, 1.0]),
-        reference=np.array([0.001, 0.01, 0.01]),
-        undetermined=np.array([False, True, False]),
-        bounded=np.zeros(3, dtype=bool),
-        partners=((), ("k_steer",), ()),
-        unobservable=np.array([True, True, False]),
-    )
-    held = det.held_loosely(st)
-    # What statuses reads of the problem here: no clock, no turning parameter named.
-    fns = SimpleNamespace(
-        layout=SimpleNamespace(in_block=lambda name, block: False),
-        model=SimpleNamespace(turning_params=()),
-        sensor=SimpleNamespace(turning=()),
-    )
-    statuses = {s.name: s.status for s in det.statuses(fns, held, {}, {}, None)}  # type: ignore[arg-type]
-    assert statuses == {"rear_track": WEAKLY, "wheelbase": NOT_DETERMINED, "k_steer": DETERMINED}
-
-
 def test_a_car_whose_rear_track_the_drive_barely_holds_is_not_refused(tmp_path: Path) -> None:
     """The gate study's car (seed 501 of its defaults: s-curves, 1500 records, stamps 29.9 ms late,
     the lag fitted) was refused (exit 4, "cannot determine rear_track") while the fit, run anyway,
     ended usable with caveats and every parameter within 2.7σ of the truth. The rear track fits
-    about as well near zero as at its length; the pre-flight's fit had stopped near zero, where the
-    drive holds it least. It is weak now, and the run decides."""
+    about as well near zero as at its length, and which a fit stops at turns on the lag the
+    encoders are re-sampled at: the pre-flight's fit now starts where the run's does, at the lag
+    the run's alignment finds, and ends where the run's ends."""
     lag = float(np.random.default_rng(501).uniform(0.0, 0.03))  # as the study draws it
     log = write_sim(tmp_path, "car.txt", seed=501, model="car_like", latency_s=lag)
     sc = scenario_from_mapping(
@@ -213,6 +188,17 @@ def test_a_car_whose_rear_track_the_drive_barely_holds_is_not_refused(tmp_path: 
         warnings.simplefilter("ignore")
         run = Calibration(sc).run()
     assert run.verdict.level == CAVEATS, run.verdict
+    # The pre-flight's fit ends where the run's does (the same lag, the same start, the same windows).
+    fitted = pf.assess(sc).fitted()
+    assert fitted is not None
+    estimate = run.reports["gauss_newton"].result.param_dict()
+    for name, value in fitted.items():
+        assert value == pytest.approx(estimate[name], rel=1e-6, abs=1e-9), name
+    # One σ before the fit and after it, within what the run adds (half the forward-reverse
+    # difference where larger), as test_vehicles' highway car holds it.
+    std = run.std("gauss_newton")
+    ratios = {p.name: p.std / std[p.name] for p in report.parameters}
+    assert all(0.5 < r < 2.0 for r in ratios.values()), ratios
     truth = run.checks.truth
     assert truth is not None
     assert np.nanmax(np.abs(truth.z)) < 3.0, dict(zip(truth.names, truth.z))

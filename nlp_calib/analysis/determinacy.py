@@ -17,7 +17,7 @@ hold the model's errors too: the pre-flight's σ is a floor).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -28,7 +28,7 @@ from nlp_calib.analysis.uncertainty import white_covariance
 from nlp_calib.logs import Log
 from nlp_calib.models.base import reference_scale
 from nlp_calib.problem import ProblemFunctions, ResidualData, over_columns
-from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
+from nlp_calib.results.checks import WEAK
 from nlp_calib.results.layout import CLOCK
 from nlp_calib.results.preflight import DETERMINED, NOT_DETERMINED, WEAKLY, Excitation, ParameterStatus
 from nlp_calib.symbolic.kernels import kernel_function
@@ -202,8 +202,6 @@ class Standing:
     #: Which the run's verdict would call not determined: along a direction beyond the
     #: not-observable limit (:func:`~nlp_calib.analysis.observability.not_observable`).
     unobservable: np.ndarray
-    #: Which the drive holds beyond the not-observable limit where the fit stopped (:func:`held_loosely`).
-    loosely: np.ndarray | None = None
 
 
 def standing(
@@ -236,20 +234,6 @@ def standing(
     return Standing(
         names, std, std / R, R, undetermined, np.asarray(bounded), tuple(partners), not_observable(found)
     )
-
-
-def held_loosely(st: Standing) -> Standing:
-    """``st`` with each parameter the drive holds (a finite σ, no free direction, not by bounds
-    alone) beyond the not-observable limit taken as weakly determined (``loosely``): how well such
-    a parameter is known changes along the direction it barely holds, and a solver stops
-    anywhere there (a car's rear track fits about as well near zero as at its length: the
-    pre-flight's fit stopped at −7 cm, not determined, the run's at 0.60 m, weakly, on encoders
-    re-sampled 1 ms apart), so the run's verdict, where its solver stops, says whether it is
-    determined; what the drive leaves free is not determined wherever a fit stops."""
-    loosely = st.unobservable & ~st.undetermined & np.isfinite(st.std)
-    if not loosely.any():
-        return st
-    return replace(st, unobservable=st.unobservable & ~loosely, loosely=loosely)
 
 
 def _coupled(names: tuple[str, ...], basis: np.ndarray, i: int) -> tuple[str, ...]:
@@ -305,20 +289,13 @@ def statuses(
     ]  # fmt: skip
     for i, name in enumerate(found.names):
         ratio, partners = float(found.std_reference[i]), found.partners[i]
-        loosely = found.loosely is not None and bool(found.loosely[i])
         if found.undetermined[i] or found.unobservable[i] or _unturned(fns, name, ex):
             status = NOT_DETERMINED
         else:
-            status = WEAKLY if ratio > WEAK or loosely else DETERMINED
+            status = WEAKLY if ratio > WEAK else DETERMINED
         words = [_cause(fns, name, partners, ex)] if status != DETERMINED else []
         if status != DETERMINED:
             words.append(_trade(partners, bool(found.bounded[i]), found.undetermined[i]))
-        if loosely:
-            words.append(
-                f"beyond {NOT_OBSERVABLE:g} times its reference precision where the pre-flight's fit "
-                "stopped, on a direction the drive barely holds: the run's verdict, where its solver "
-                "stops, says whether it is determined"
-            )
         out.append(
             ParameterStatus(
                 name, status, float(found.std[i]), ratio, float(found.reference[i]), units.get(name, ""),

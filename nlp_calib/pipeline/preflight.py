@@ -34,7 +34,7 @@ from nlp_calib.analysis.verdict import way_out
 from nlp_calib.core.errors import NlpCalibError, PreflightError
 from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.models import KinematicModel
-from nlp_calib.pipeline.align import MAX_RESAMPLINGS, stays, white_std
+from nlp_calib.pipeline.align import MAX_RESAMPLINGS, estimate_tracker_lag, stays, white_std
 from nlp_calib.pipeline.assemble import fit_info
 from nlp_calib.pipeline.build import (
     INTERNAL_SOLVER,
@@ -266,14 +266,11 @@ def _fitted(d: Drive, omega: np.ndarray, x0: np.ndarray | None = None) -> Fitted
     information is the fit's own normal equations at its optimum (not evaluated again). Last, what
     computes each free parameter's σ as the run does there (:func:`_propagated`). ``x0``: where the
     fit starts (the start's)."""
-    fns, start, sc = d.fns, d.start, d.scenario
+    fns, start = d.fns, d.start
     windows = _judged(d)
     if windows.n_residuals < fns.n_free:
         return None
-    box = None if start.lower is None or start.upper is None else (start.lower, start.upper)
-    stride = sc.objective.residual.stride
-    backend = prepare_backend(sc, fns, [INTERNAL_SOLVER], windows.n_residuals * stride)
-    binder = Binder(sc, fns, backend, start.x_fixed, no_priors(fns.n_free), bounds=box)
+    binder = _binder(d, windows.n_residuals)
     try:
         evaluator = binder.evaluate(windows)
         _, x, converged = binder.fit(evaluator, start.x0 if x0 is None else x0)
@@ -290,6 +287,49 @@ def _fitted(d: Drive, omega: np.ndarray, x0: np.ndarray | None = None) -> Fitted
     words = f"{d.start_words}, fitted to convergence on the windows judged"
     sigma = functools.partial(_propagated, d, binder, x, windows, (evaluator, whole))
     return np.asarray(x, dtype=float), info, words, sigma
+
+
+def _binder(d: Drive, n_windows: int) -> Binder:
+    """The run's internal fit of ``d``'s problem on ``n_windows`` windows (robust kernel, bounds,
+    no priors)."""
+    fns, start, sc = d.fns, d.start, d.scenario
+    box = None if start.lower is None or start.upper is None else (start.lower, start.upper)
+    backend = prepare_backend(sc, fns, [INTERNAL_SOLVER], n_windows * sc.objective.residual.stride)
+    return Binder(sc, fns, backend, start.x_fixed, no_priors(fns.n_free), bounds=box)
+
+
+def _as_the_run_aligns(d: Drive, omega: np.ndarray) -> tuple[Drive, Fitted | None] | None:
+    """One log whose time offset is fitted: the lag found by the run's own alignment
+    (:func:`~nlp_calib.pipeline.align.estimate_tracker_lag`: re-sampled until it stays, then the
+    other valleys of its profile), the encoders re-sampled there and the fit from the start with
+    that lag, as the run's fit stage starts. Along a direction the drive barely holds the fit
+    stops where the lag sends it (a car's rear track near zero or at its length, on encoders
+    re-sampled 1 ms apart): the run's lag is where the run's fit stops. None where the problem
+    has several logs or no free time offset, or no fit converged at any lag."""
+    clocks = _clocks(d)
+    if len(d.parts) != 1 or len(clocks) != 1:
+        return None
+    part, column = d.parts[0], clocks[0][0]
+    try:
+        found = estimate_tracker_lag(
+            _binder(d, d.data.n_residuals), d.read[0], part.start, part.stop, d.start.x0
+        )
+    except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
+        return None
+    if not found.converged:
+        return None
+    x0 = np.array(d.start.x0, dtype=float)
+    x0[column] = found.lag_s
+    moved = _resampled(d, x0)
+    fitted = _fitted(moved, omega, x0)
+    if fitted is None:
+        return moved, None
+    return moved, (
+        fitted[0],
+        fitted[1],
+        f"{fitted[2]}, the encoders re-sampled at the lag the run finds",
+        fitted[3],
+    )
 
 
 def _clocks(d: Drive) -> list[tuple[int, list[int]]]:
@@ -462,7 +502,6 @@ class Assessment:
             return st
         # One σ and one needed precision with the run's: the white σ says what the drive leaves
         # free, the run's how well the rest is known, against what the run's verdict needs.
-        st = det.held_loosely(st)
         std = st.std
         if self.propagated is not None:
             std = np.where(np.isfinite(st.std) & np.isfinite(self.propagated), self.propagated, st.std)
@@ -477,7 +516,8 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
     d, held = drive(sc, logs)
     fns, one = d.fns, d.scenario
     omega = np.array(one.objective.information.omega(fns.error_rows, fns.sensor.weights))
-    d, fitted = _aligned(d, omega, _fitted(d, omega))
+    aligned = _as_the_run_aligns(d, omega)
+    d, fitted = aligned if aligned is not None else _aligned(d, omega, _fitted(d, omega))
     x, info, where = fitted[:3] if fitted is not None else _rough(d, omega)
     at = "the fit" if fitted is not None else "the start"
     sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info, at)
