@@ -363,13 +363,12 @@ def _resampled(d: Drive, x: np.ndarray) -> Drive:
 
 
 def _aligned(d: Drive, omega: np.ndarray, fitted: Fitted | None) -> tuple[Drive, Fitted | None]:
-    """The fit on the encoders re-sampled at its own time offsets, as the run's alignment re-samples
-    them, until each stays (:func:`~nlp_calib.pipeline.align.stays`): the clock correction is exact
-    only to first order in the distance from the lag the encoders were re-sampled at, and a
-    parameter the drive barely holds follows what it leaves (a car's rear track fitted 0.49 m on
-    the encoders as logged 30 ms late, 0.60 m re-sampled, as the run finds it, where the drive
-    holds it four times better). Each fit starts where the run's does: at the start, its time
-    offsets where the encoders were re-sampled. ``fitted``: the fit on the encoders as read."""
+    """The fit on the encoders re-sampled at its own time offsets until each stays
+    (:func:`~nlp_calib.pipeline.align.stays`), as the run's alignment re-samples them (the clock
+    correction is exact only to first order away from the lag the encoders were re-sampled at):
+    for several logs, whose run aligns each log on its own before their joint fit. Each fit starts
+    at the start, its time offsets where the encoders were re-sampled. ``fitted``: the fit on the
+    encoders as read."""
     clocks = _clocks(d)
     for _ in range(MAX_RESAMPLINGS if clocks else 0):
         if fitted is None:
