@@ -43,6 +43,9 @@ from nlp_calib.simulation.camera import (  # noqa: E402
 )
 from nlp_calib.simulation.options import DriveShape, TrackerSim  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from lag_study import camera_doc  # noqa: E402
+
 #: Each row: label, offset's name, error (s), white σ, block σ (NaN: none), σ to believe.
 Row = tuple[str, str, float, float, float, float]
 LAGS = ("tracker_lag", "gyro_lag")
@@ -105,22 +108,7 @@ def camera(folder: Path, seed: int, models: list[str]) -> list[Row]:
         noise=CameraNoise(0.001, 0.0017),
     )
     tum, _, _ = write_camera_simulation(simulate_camera(options), folder / f"cam{seed}.tum")
-    doc = {
-        "model": "diff_drive",
-        "sensor": "3d",
-        "dataset": {
-            "poses": str(tum),
-            "joints": str(tum.with_suffix(".joints.csv")),
-            "encoders": {"left_wheel": "left_wheel_joint", "right_wheel": "right_wheel_joint"},
-        },
-        "initial_guess": "auto",
-        "known": {"sensor_z": 0.30},
-        "alignment": {"tracker_lag": "auto", "search": [-0.05, 0.05]},
-        "residual": {"horizon_s": 0.25},
-        "information": {"translation": 1.0e6, "rotation": 3.0e5},
-        "robust": {"kernel": "huber", "delta": 10.0},
-        "solvers": ["gauss_newton"],
-    }
+    doc = camera_doc(tum)
     return _rows(_run(doc, f"cam{seed}", folder), f"camera {seed}", {"tracker_lag": lag})
 
 
