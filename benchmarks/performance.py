@@ -311,8 +311,9 @@ def ipopt_lag_lines(sweep: dict[str, Any]) -> list[str]:
     return lines
 
 
-def scaling(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
-    """``run --solver gauss_newton`` on simulated logs of each size: wall, peak RSS, GN time."""
+def scaling(sizes: list[int], repeats: int, tmp: Path, warm_up: bool = True) -> dict[str, Any]:
+    """``run --solver gauss_newton`` on simulated logs of each size: wall, peak RSS, GN time
+    (without ``warm_up`` the first run also compiles)."""
     env = dict(
         os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore", NLP_CALIB_CACHE=str(tmp / "cache-scale")
     )
@@ -330,19 +331,11 @@ def scaling(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
             capture_output=True,
         )
     scenario = str(REPO / "scenarios" / "real_tricycle_seed.yaml")
-    launch(
-        cli(
-            "run",
-            scenario,
-            "--data",
-            str(logs[sizes[0]]),
-            "--solver",
-            "gauss_newton",
-            "--out",
-            str(tmp / "s"),
-        ),
-        env,
-    )
+    if warm_up:
+        first = str(logs[sizes[0]])
+        launch(
+            cli("run", scenario, "--data", first, "--solver", "gauss_newton", "--out", str(tmp / "s")), env
+        )
     runs: dict[int, dict[str, list[float]]] = {n: {} for n in sizes}
     start = load()
     for _ in range(repeats):
@@ -361,16 +354,20 @@ def scaling(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
     return {"load_start": start, "load_end": load(), "sizes": cases, "wall_slope": slope}
 
 
-def sized_runs(scenario: str, logs: dict[int, Path], repeats: int, tmp: Path) -> dict[str, Any]:
+def sized_runs(
+    scenario: str, logs: dict[int, Path], repeats: int, tmp: Path, warm_up: bool = True
+) -> dict[str, Any]:
     """``nlp-calib run SCENARIO --data LOG`` (the scenario's own settings and solvers) on each log,
     interleaved: wall, CPU (its processes'), peak RSS, each solver's time; and how the wall time
-    grows from each size to the next."""
+    grows from each size to the next. Without ``warm_up`` the first run also compiles (the smoke
+    run's figures are not the benchmark's)."""
     env = dict(
         os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore", NLP_CALIB_CACHE=str(tmp / "cache-sized")
     )
     path = str(REPO / "scenarios" / f"{scenario}.yaml")
     first = min(logs)
-    launch(cli("run", path, "--data", str(logs[first]), "--out", str(tmp / "warm-up")), env)  # compiles
+    if warm_up:
+        launch(cli("run", path, "--data", str(logs[first]), "--out", str(tmp / "warm-up")), env)  # compiles
     runs: dict[int, dict[str, list[float]]] = {n: {} for n in logs}
     start = load()
     for _ in range(repeats):
@@ -392,7 +389,7 @@ def sized_runs(scenario: str, logs: dict[int, Path], repeats: int, tmp: Path) ->
     return {"load_start": start, "load_end": load(), "scenario": scenario, "sizes": cases, "growth": growth}
 
 
-def horizon(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
+def horizon(sizes: list[int], repeats: int, tmp: Path, warm_up: bool = True) -> dict[str, Any]:
     """The demo's settings (windows of several records, both solvers, every check) on simulated
     tricycle logs of each size."""
     env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
@@ -405,10 +402,10 @@ def horizon(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
             check=True,
             capture_output=True,
         )
-    return sized_runs("demo", logs, repeats, tmp)
+    return sized_runs("demo", logs, repeats, tmp, warm_up)
 
 
-def camera(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
+def camera(sizes: list[int], repeats: int, tmp: Path, warm_up: bool = True) -> dict[str, Any]:
     """The camera demo's settings (3-D mount, lag search, both solvers) on simulated camera drives of
     each number of poses (the demo's simulation options, longer)."""
     env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
@@ -423,7 +420,7 @@ def camera(sizes: list[int], repeats: int, tmp: Path) -> dict[str, Any]:
             check=True,
             capture_output=True,
         )
-    return sized_runs("camera_demo", logs, repeats, tmp)
+    return sized_runs("camera_demo", logs, repeats, tmp, warm_up)
 
 
 #: One Gauss-Newton pass fused into one C loop: the prefix scan interval by interval, then each
@@ -582,9 +579,9 @@ def simulate_big(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
     }
 
 
-def batch(n_logs: int, records: int, repeats: int, tmp: Path) -> dict[str, Any]:
+def batch(n_logs: int, records: int, repeats: int, tmp: Path, warm_up: bool = True) -> dict[str, Any]:
     """``nlp-calib batch`` of ``n_logs`` simulated logs with ``--jobs 1`` and ``--jobs 2``,
-    interleaved: median walls and their ratio."""
+    interleaved: median walls and their ratio (without ``warm_up`` the first also compiles)."""
     env = dict(
         os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore", NLP_CALIB_CACHE=str(tmp / "cache-batch")
     )
@@ -607,7 +604,8 @@ def batch(n_logs: int, records: int, repeats: int, tmp: Path) -> dict[str, Any]:
             raise SystemExit(f"batch --jobs {jobs} failed with exit code {r['rc']}")
         return float(r["wall_s"]), float(r["cpu_s"])
 
-    once(1)  # fills the compile cache (not timed)
+    if warm_up:
+        once(1)  # fills the compile cache (not timed)
     start = load()
     walls: dict[int, list[float]] = {1: [], 2: []}
     cpus: dict[int, list[float]] = {1: [], 2: []}
@@ -980,14 +978,14 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
     if section == "ipopt_lag":
         return ipopt_lag(real, quick, repeats)
     if section == "scaling":
-        return scaling([2_000, 8_000] if quick else [10_000, 100_000, 1_000_000], repeats, tmp)
+        return scaling([2_000, 8_000] if quick else [10_000, 100_000, 1_000_000], repeats, tmp, not quick)
     # A 10^6 run takes about a minute: 3 repeats. The smoke run measures these once (its
     # interleaving is the end-to-end and scaling sections').
     sized = 1 if quick else min(repeats, 3)
     if section == "horizon":
-        return horizon([2_000, 5_000] if quick else [100_000, 1_000_000], sized, tmp)
+        return horizon([1_000, 2_000] if quick else [100_000, 1_000_000], sized, tmp, not quick)
     if section == "camera":
-        return camera([2_000, 5_000] if quick else [100_000, 1_000_000], sized, tmp)
+        return camera([1_000, 2_000] if quick else [100_000, 1_000_000], sized, tmp, not quick)
     if section == "simulate":
         return simulate_big(10_000 if quick else 1_000_000, 1 if quick else 3, tmp)
     if section == "reader":
@@ -995,7 +993,7 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
     if section == "gn_pass":
         return gn_pass(5_000 if quick else 100_000, repeats, tmp)
     # Logs of 5000 records (3.3 minutes of driving): a robot's daily log is rarely shorter.
-    return batch(2 if quick else 20, 300 if quick else 5000, 1 if quick else repeats, tmp)
+    return batch(2 if quick else 20, 300 if quick else 5000, 1 if quick else repeats, tmp, not quick)
 
 
 if __name__ == "__main__":
