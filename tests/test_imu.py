@@ -295,3 +295,29 @@ def test_a_fit_of_two_logs_gives_each_its_own_bias(tmp_path: Path) -> None:
         assert abs(est[name] - truths[0][name]) < 3 * std[name], name
     # One IMU joint in the hand-off: the tilt is shared, no mount per log.
     assert not run.reports["gauss_newton"].mounts
+
+
+def test_a_steering_angle_over_an_interval_is_the_one_its_wheels_travelled() -> None:
+    # Joints at 50 Hz, intervals of 0.1 s (a gyro's): each interval's angle is the mean of the
+    # joints' linear interpolation weighted by the wheels' travel, computed here on a dense grid;
+    # where the wheels stand, by time; an interval whose ends are the stream's own samples and
+    # holds none between (the records at the joints' own samples) reads its two ends' mean.
+    from nlp_calib.logs.log import JointStream
+
+    rng = np.random.default_rng(5)
+    time_s = np.arange(0.0, 2.0, 0.02)
+    wheel = np.cumsum(np.concatenate([[0.0], rng.uniform(0.0, 0.3, time_s.size - 1)]))
+    wheel[60:70] = wheel[60]  # standing still for 0.2 s
+    angle = np.cumsum(rng.normal(0.0, 0.05, time_s.size))
+    stream = JointStream(time_s, np.column_stack([angle, wheel]), (0.0, 0.0))
+    t = np.arange(0.013, 1.9, 0.1)
+    got = stream.travelled_angle(t, 0, [1])
+    for k in range(t.size - 1):
+        dense = np.linspace(t[k], t[k + 1], 20001)
+        a = np.interp(0.5 * (dense[1:] + dense[:-1]), time_s, angle)
+        w = np.abs(np.diff(np.interp(dense, time_s, wheel)))
+        want = np.sum(w * a) / np.sum(w) if np.sum(w) > 1e-12 else np.mean(a)
+        assert got[k] == pytest.approx(want, abs=1e-6), k
+    both = 0.5 * (angle[1:] + angle[:-1])
+    np.testing.assert_allclose(stream.travelled_angle(time_s, 0, [1]), both, rtol=0, atol=1e-12)
+    assert abs(got[6] - 0.5 * (np.interp(t[6], time_s, angle) + np.interp(t[7], time_s, angle))) > 1e-3
