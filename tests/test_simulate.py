@@ -160,3 +160,26 @@ def test_a_log_beyond_the_old_limit_is_written_in_bounded_memory(tmp_path: Path)
     log = parse_lines(path.read_text().splitlines())
     assert log.n_records == 60_000
     assert np.all(np.diff(log.time_s) > 0)
+
+
+def test_a_steering_joint_reads_the_angle_at_its_instant() -> None:
+    # The base's turn over the two fine steps around an instant, over its travel there, is the
+    # curvature tan φ / L of that instant's steering angle (to second order): the channel the
+    # joint is read from must hold it, not the angle half a step before (0.3 mrad off at the
+    # drive's steering rates). The text logs' simulator reads the same channel (profiles_on).
+    from nlp_calib.models.joints import joint_map
+    from nlp_calib.simulation.camera import base_motion
+    from nlp_calib.simulation.lidar import LIDAR_DRIVE
+
+    truth = joint_map("tricycle").default_truth
+    t = np.arange(0.0, 30.0, 1e-3)
+    planar, channels = base_motion("tricycle", truth, LIDAR_DRIVE, np.random.default_rng(3), t)
+    theta = np.unwrap(planar[:, 2])
+    i = np.arange(1, t.size - 1)
+    travel = np.hypot(np.diff(planar[:, 0]), np.diff(planar[:, 1]))
+    arcs = (travel[i - 1] + travel[i]) * np.sign(channels["front"][i + 1] - channels["front"][i - 1])
+    moving = np.abs(arcs) > 1e-4
+    seen = np.arctan(truth["axis_length"] * (theta[i + 1] - theta[i - 1])[moving] / arcs[moving])
+    error = np.abs(channels["phi"][i][moving] - seen)
+    assert moving.mean() > 0.5
+    assert np.quantile(error, 0.99) < 1e-5, np.quantile(error, 0.99)

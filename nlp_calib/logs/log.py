@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -120,6 +120,29 @@ class JointStream:
         with np.errstate(divide="ignore", invalid="ignore"):
             rate = (self.positions[i + 1] - self.positions[i]) / dt[:, None]
         return np.where(dt[:, None] > 0, rate, 0.0)
+
+    def travelled_angle(self, t: np.ndarray, angle: int, wheels: Sequence[int]) -> np.ndarray:
+        """Per interval between the times ``t``, column ``angle``'s mean over it as the wheels
+        (columns ``wheels``) travelled it: the stream's linear interpolation cut at its samples
+        inside the interval, each piece's mid-angle weighted by the wheels' travel on it (by its
+        duration where they stand). A steered wheel turns the base by its travel times the
+        angle's sine, so this is the angle of the interval's turn to the stream's resolution;
+        its two ends' mean alone misses the steering's curve between them and its correlation
+        with the speed (a gyro's 0.1 s interval over 50 Hz joints: the fitted clock offset
+        2-3 ms early)."""
+        t = np.asarray(t, dtype=float)
+        n = t.size - 1
+        cuts = np.union1d(t, self.time_s[(self.time_s > t[0]) & (self.time_s < t[-1])])
+        at = self.at(cuts)
+        piece = np.clip(np.searchsorted(t, cuts[:-1], side="right") - 1, 0, max(n - 1, 0))
+        mid = 0.5 * (at[1:, angle] + at[:-1, angle])
+        travel = np.abs(np.diff(at[:, list(wheels)], axis=0)).sum(axis=1)
+        span = np.diff(cuts)
+        moved, lasted = np.bincount(piece, travel, n), np.bincount(piece, span, n)
+        by_travel = np.bincount(piece, travel * mid, n) / np.where(moved > 0, moved, 1.0)
+        by_time = np.bincount(piece, span * mid, n) / np.where(lasted > 0, lasted, 1.0)
+        ends = 0.5 * (at[np.searchsorted(cuts, t[1:]), angle] + at[np.searchsorted(cuts, t[:-1]), angle])
+        return np.where(moved > 0, by_travel, np.where(lasted > 0, by_time, ends))
 
     def covers(self, t: np.ndarray) -> np.ndarray:
         """Which of the times ``t`` lie inside the stream."""

@@ -168,6 +168,7 @@ class CarLikeDrive:
         opts: SimulationSettings,
         speed: np.ndarray,
         turn: np.ndarray,
+        turn_end: np.ndarray,
         dt: np.ndarray,
         turn_start: float,
         carry: Mapping[str, float] | None = None,
@@ -180,7 +181,7 @@ class CarLikeDrive:
         channels = {
             "left": running(ds * (1.0 - half), first["left"]),
             "right": running(ds * (1.0 + half), first["right"]),
-            "phi": np.concatenate([[first["phi"]], turn]),
+            "phi": np.concatenate([[first["phi"]], turn_end]),
         }
         return ds, ds * curvature, channels
 

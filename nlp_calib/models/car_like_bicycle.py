@@ -53,13 +53,14 @@ class CarLikeBicycleDrive(CarLikeDrive):
         opts: SimulationSettings,
         speed: np.ndarray,
         turn: np.ndarray,
+        turn_end: np.ndarray,
         dt: np.ndarray,
         turn_start: float,
         carry: Mapping[str, float] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         ds = speed * dt
         first: Mapping[str, float | None] = carry or {"travel": None, "phi": turn_start}
-        channels = {"travel": running(ds, first["travel"]), "phi": np.concatenate([[first["phi"]], turn])}
+        channels = {"travel": running(ds, first["travel"]), "phi": np.concatenate([[first["phi"]], turn_end])}
         return ds, ds * np.tan(turn) / opts.truth["wheelbase"], channels
 
     def ticks(self, opts: SimulationSettings, channels: Mapping[str, np.ndarray]) -> np.ndarray:

@@ -127,6 +127,7 @@ class DiffDriveDrive:
         opts: SimulationSettings,
         speed: np.ndarray,
         turn: np.ndarray,
+        turn_end: np.ndarray,
         dt: np.ndarray,
         turn_start: float,
         carry: Mapping[str, float] | None = None,

@@ -47,13 +47,15 @@ class Drive(Protocol):
         opts: SimulationSettings,
         speed: np.ndarray,
         turn: np.ndarray,
+        turn_end: np.ndarray,
         dt: np.ndarray,
         turn_start: float,
         carry: Mapping[str, float] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-        """Per sub-step arc length and turn of the base, and the encoder channels at the sub-step
-        ends, preceded by their values at the start: at rest (``turn_start``) for the log's first
-        sub-step, else ``carry``, the channels' last values of the sub-steps before."""
+        """Per sub-step arc length and turn of the base (``speed`` and ``turn`` at each sub-step's
+        middle), and the encoder channels at the sub-step ends (a steering angle: ``turn_end``, the
+        turn at each end), preceded by their values at the start: at rest (``turn_start``) for the
+        log's first sub-step, else ``carry``, the channels' last values of the sub-steps before."""
         ...
 
     def ticks(self, opts: SimulationSettings, channels: Mapping[str, np.ndarray]) -> np.ndarray:

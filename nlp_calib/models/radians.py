@@ -272,8 +272,19 @@ class InRadians:
             elif self.encoder_kinds[encoder] == "counter":
                 rows.append(np.diff(position))
             else:
-                rows.append(sampled_angle(wrap_angle(position), steering_sample))
+                rows.append(self._steering(log, encoder, steering_sample))
         return np.vstack(rows)
+
+    def _steering(self, log: Log, encoder: str, steering_sample: str) -> np.ndarray:
+        """A steering joint's angle per interval: its ``mean`` over the interval as the wheels
+        travelled it where the joints stream finer than the records
+        (:meth:`~nlp_calib.logs.log.JointStream.travelled_angle`), else read at the records."""
+        stream = log.joint_stream
+        if steering_sample != "mean" or stream is None:
+            return sampled_angle(wrap_angle(log.joint_position(encoder)), steering_sample)
+        wheels = [log.header.encoder_index(e) for e, kind in self.encoder_kinds.items() if kind == "counter"]
+        read = log.time_s - log.encoder_lag_s
+        return wrap_angle(stream.travelled_angle(read, log.header.encoder_index(encoder), wheels))
 
     def moving(self, inputs: np.ndarray) -> np.ndarray:
         return self.model.moving(inputs)

@@ -121,6 +121,7 @@ class TricycleDrive:
         opts: SimulationSettings,
         speed: np.ndarray,
         turn: np.ndarray,
+        turn_end: np.ndarray,
         dt: np.ndarray,
         turn_start: float,
         carry: Mapping[str, float] | None = None,
@@ -128,7 +129,7 @@ class TricycleDrive:
         d = speed * dt
         ds, w = d * np.cos(turn), d * np.sin(turn) / opts.truth["axis_length"]
         first: Mapping[str, float | None] = carry or {"front": None, "phi": turn_start, "direction": 0.0}
-        channels = {"front": running(d, first["front"]), "phi": np.concatenate([[first["phi"]], turn])}
+        channels = {"front": running(d, first["front"]), "phi": np.concatenate([[first["phi"]], turn_end])}
         channels["direction"] = np.concatenate([[first["direction"]], np.sign(d)])
         return ds, w, channels
 

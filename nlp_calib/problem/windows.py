@@ -41,7 +41,8 @@ class ResidualOptions:
     ``stride`` records, the model integrated ``exact`` or ``euler``, and where in an interval an
     angle reading is taken (``steering_sample``: at its ``start``, ``end`` or ``mean``; ``mean`` the
     default, since a reading held from the start lags half an interval and biases a fitted clock
-    offset by as much).
+    offset by as much; over joints streamed finer than the records, the mean as the wheels
+    travelled the interval).
     ``horizon_s`` gives the windows' duration in seconds instead: the horizon in records then
     follows from each log's median interval (``nlp_calib.pipeline.prepare``)."""
 

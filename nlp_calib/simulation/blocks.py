@@ -23,7 +23,7 @@ from nlp_calib.logs.bag_records import pair
 from nlp_calib.models import MODELS
 from nlp_calib.models.drives import integrate_base, running
 from nlp_calib.simulation.faults import InjectedFault, inject, inject_glitches
-from nlp_calib.simulation.options import SimulationOptions, drive_profiles
+from nlp_calib.simulation.options import SimulationOptions, drive_profiles, profiles_on
 
 #: Fine sub-steps simulated at once: a block's memory (about 200 bytes a sub-step) is bounded by
 #: this, whatever the log's length.
@@ -148,11 +148,10 @@ def _fine_motion(
     t_fine = np.concatenate(
         [(base_grid[:-1, None] + np.diff(base_grid)[:, None] * frac).ravel(), base_grid[-1:]]
     )
-    kt, kv, ks = plan.knots
-    t_mid = 0.5 * (t_fine[1:] + t_fine[:-1]) - t0
-    speed, turn = np.interp(t_mid, kt, kv), np.interp(t_mid, kt, ks)
+    speed, turn, turn_end = profiles_on(plan.knots, t_fine, t0)
     drive = MODELS[opts.model].drive
-    ds, w, channels = drive.steps(opts, speed, turn, np.diff(t_fine), float(ks[0]), carry.channels)
+    turn_start = float(plan.knots[2][0])
+    ds, w, channels = drive.steps(opts, speed, turn, turn_end, np.diff(t_fine), turn_start, carry.channels)
     poses = integrate_base(ds, w, carry.pose)
     carry.time_s = float(t_s[-1])
     carry.channels = {name: float(c[-1]) for name, c in channels.items()}

@@ -31,7 +31,7 @@ from nlp_calib.models import MODELS
 from nlp_calib.models.drives import integrate_base
 from nlp_calib.models.joints import JOINT_MAPS, joint_map
 from nlp_calib.sensors.mount import MOUNT_PARAMS, SCALE_PARAM
-from nlp_calib.simulation.options import DriveShape, drive_profiles
+from nlp_calib.simulation.options import DriveShape, drive_profiles, profiles_on
 
 #: A camera looking forward and 30° down (roll −120°), slightly pitched, on the base's left.
 DEFAULT_MOUNT: Mapping[str, float] = {
@@ -188,16 +188,10 @@ def base_motion(
     """Planar base poses ``(n, 3)`` of ``model``'s drive (``truth``, driven as ``shape`` says) on the
     fine grid, and the drive's channels there."""
     knots = drive_profiles(shape, rng, float(t_fine[-1] - t_fine[0]) + 1.0)
-    kt, kv, ks = knots
-    t_mid = 0.5 * (t_fine[1:] + t_fine[:-1]) - t_fine[0]
+    speed, turn, turn_end = profiles_on(knots, t_fine, float(t_fine[0]))
     drive = MODELS[model].drive
-    ds, w, channels = drive.steps(
-        DriveSettings(truth),
-        np.interp(t_mid, kt, kv),
-        np.interp(t_mid, kt, ks),
-        np.diff(t_fine),
-        float(ks[0]),
-    )
+    turn_start = float(knots[2][0])
+    ds, w, channels = drive.steps(DriveSettings(truth), speed, turn, turn_end, np.diff(t_fine), turn_start)
     return integrate_base(ds, w), channels
 
 

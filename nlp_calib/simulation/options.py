@@ -259,6 +259,17 @@ class ProfileSettings(Protocol):
     def reversals(self) -> str: ...
 
 
+def profiles_on(
+    knots: tuple[np.ndarray, np.ndarray, np.ndarray], t_fine: np.ndarray, t0: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The drive's speed and turn at each sub-step's middle of the fine grid ``t_fine`` (its arc)
+    and the turn at each sub-step's end (what a steering encoder reads at that instant; the
+    middle's is half a sub-step early); ``t0``: the profiles' time zero."""
+    kt, kv, ks = knots
+    t_mid = 0.5 * (t_fine[1:] + t_fine[:-1]) - t0
+    return np.interp(t_mid, kt, kv), np.interp(t_mid, kt, ks), np.interp(t_fine[1:] - t0, kt, ks)
+
+
 def drive_profiles(
     opts: ProfileSettings, rng: np.random.Generator, duration: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
