@@ -8,7 +8,7 @@ the intervals with ``mapaccum``. ``σ_u`` is the encoders' noise on the model in
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -96,11 +96,14 @@ def _tracker_terms(start: np.ndarray, end: np.ndarray) -> np.ndarray:
 class Drift:
     """Segments of the odometry against a reference: each error ``(S, 3)``, each input's unit-noise
     covariance of it ``(S, n_inputs, 3, 3)``, and the reference's own noise terms ``(S, 2, 3, 3)``
-    (per unit variance of its position and of its heading, see :func:`_tracker_terms`)."""
+    (per unit variance of its position and of its heading, see :func:`_tracker_terms`); each
+    segment's first and last record ``(S, 2)`` and the reference's heading at its start ``(S,)``."""
 
     errors: np.ndarray
     covs: np.ndarray
     terms: np.ndarray
+    spans: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=int))
+    start_headings: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def segment_drift(
@@ -115,7 +118,7 @@ def segment_drift(
     """The odometry against the reference base poses over segments of ``lengths`` records inside
     each fault-free part (half-overlapping, ends at good reference poses), each restarted from the
     reference at its start."""
-    errors, covs, terms = [], [], []
+    errors, covs, terms, spans, headings = [], [], [], [], []
     for a, b in parts:
         if b - a < 2:
             continue
@@ -129,10 +132,13 @@ def segment_drift(
             errors.append(np.c_[again[:, :2] - ref[j, :2], wrap_angle(again[:, 2] - ref[j, 2])])
             covs.append(_segment(P, est, i, j, ref[i, 2] - est[i, 2]))
             terms.append(_tracker_terms(ref[i], again))
+            spans.append(np.c_[a + i, a + j])
+            headings.append(ref[i, 2])
     n_in = inputs.shape[0]
     if not errors:
         return Drift(np.zeros((0, 3)), np.zeros((0, n_in, 3, 3)), np.zeros((0, 2, 3, 3)))
-    return Drift(np.concatenate(errors), np.concatenate(covs), np.concatenate(terms))
+    stacked = (np.concatenate(errors), np.concatenate(covs), np.concatenate(terms))
+    return Drift(*stacked, np.concatenate(spans).astype(int), np.concatenate(headings))
 
 
 def _moments(A: np.ndarray, y: np.ndarray, predicted: np.ndarray) -> np.ndarray:

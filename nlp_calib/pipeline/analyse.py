@@ -20,6 +20,7 @@ from nlp_calib.analysis.crossval import combine
 from nlp_calib.analysis.degeneracy import motion_scale
 from nlp_calib.analysis.determinacy import Information
 from nlp_calib.analysis.handoff import odometry_noise
+from nlp_calib.analysis.noise_rates import noise_rates
 from nlp_calib.analysis.metrics import each_metrics, first_order, geometry, integrate, segments, steps
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import (
@@ -608,7 +609,9 @@ def handoff_noise(
     d = calibrated_drift(fit, windows, params, steering_sample, NOISE_RECORDS)
     noise = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
-    return odometry_noise(fit.fns, params, d.inputs, time_s, (noise, windows.input_noise_std))
+    found = odometry_noise(fit.fns, params, d.inputs, time_s, (noise, windows.input_noise_std))
+    rates = noise_rates(fit.fns, params, d.inputs, d.noise, (d.drift, d.reference_var))
+    return dataclasses.replace(found, rates=rates)
 
 
 @dataclass(frozen=True)

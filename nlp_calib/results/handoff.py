@@ -24,6 +24,21 @@ class Placement:
 
 
 @dataclass(frozen=True)
+class NoiseRates:
+    """Variances of the base's motion ``(along, across, heading)`` per metre driven (m²/m, m²/m,
+    rad²/m) and per radian turned (m²/rad, m²/rad, rad²/rad); ``coverage``: the share of the drift
+    segments' errors within 2σ of the covariance they grow (None: no segment to judge them by);
+    ``segments``: how many; ``raised``: the factor the variances fitted to the inputs' noise were
+    multiplied by to hold 95 % of them (1: they did)."""
+
+    per_metre: tuple[float, float, float]
+    per_radian: tuple[float, float, float]
+    coverage: float | None
+    segments: int
+    raised: float
+
+
+@dataclass(frozen=True)
 class OdometryNoise:
     """The odometry's covariance diagonals as a controller publishes them, from each input's noise
     per interval calibrated on the log's drift against the tracker (``input_noise``): the twist
@@ -37,6 +52,8 @@ class OdometryNoise:
     interval_s: float
     distance_m: float
     input_noise: Mapping[str, float]
+    #: The same noise per metre driven and per radian turned (None: not computed).
+    rates: NoiseRates | None = None
 
 
 #: The variance given to what planar wheel odometry does not measure: a filter then ignores it.
