@@ -62,7 +62,11 @@ def grown_covariances(increments: np.ndarray, rates: np.ndarray, spans: np.ndarr
     q = A @ rates  # (n, 3): along, across, heading per interval
     th = track[:-1, 2]
     c, s = np.cos(th), np.sin(th)
-    xx, yy, xy = c * c * q[:, 0] + s * s * q[:, 1], s * s * q[:, 0] + c * c * q[:, 1], c * s * (q[:, 0] - q[:, 1])
+    xx, yy, xy = (
+        c * c * q[:, 0] + s * s * q[:, 1],
+        s * s * q[:, 0] + c * c * q[:, 1],
+        c * s * (q[:, 0] - q[:, 1]),
+    )
     e, x, y = q[:, 2], track[1:, 0], track[1:, 1]
     S = _sums(np.stack([xx, yy, xy, e, x * e, y * e, x * x * e, y * y * e, x * y * e], axis=1))
     i, j = spans[:, 0], spans[:, 1]
@@ -81,15 +85,20 @@ def grown_covariances(increments: np.ndarray, rates: np.ndarray, spans: np.ndarr
     return R @ C @ np.swapaxes(R, 1, 2)
 
 
-def _ratios(drift: Drift, increments: np.ndarray, rates: np.ndarray, reference_var: np.ndarray) -> np.ndarray:
+def _ratios(
+    drift: Drift, increments: np.ndarray, rates: np.ndarray, known: tuple[np.ndarray, np.ndarray]
+) -> np.ndarray:
     """Each segment error's size in its σ ``(S, 3)``: the grown covariance turned into the
-    reference's axes at the segment's start, beside the reference's own variances."""
+    reference's axes at the segment's start, beside the reference's own variances and the readings'
+    noise (``known``: those variances and the readings' 1σ per input)."""
+    reference_var, floor = known
     C = grown_covariances(increments, rates, drift.spans)
     turn = drift.start_headings
     c, s = np.cos(turn), np.sin(turn)
     R = np.zeros((turn.size, 3, 3))
     R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
     P = R @ C @ np.swapaxes(R, 1, 2) + np.einsum("k,skij->sij", reference_var, drift.terms)
+    P = P + drift.known(floor)
     sigma = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
     return np.abs(drift.errors) / np.maximum(sigma, 1e-300)
 
@@ -99,24 +108,26 @@ def noise_rates(
     params: np.ndarray,
     inputs: np.ndarray,
     noise: np.ndarray,
-    checked: tuple[Drift, np.ndarray],
+    checked: tuple[Drift, np.ndarray, np.ndarray],
 ) -> NoiseRates:
-    """The rates from each input's 1σ per interval ``noise`` over ``inputs``, checked (and raised
-    where they fall short) on ``checked``: the drift segments over the same records and the
-    reference's own position and heading variances."""
-    drift, reference_var = checked
+    """The rates from each input's 1σ per interval ``noise`` (its random walk) over ``inputs``,
+    checked (and raised where they fall short) on ``checked``: the drift segments over the same
+    records, the reference's own position and heading variances and the readings' 1σ per input
+    (their rounding, which does not add up per metre)."""
+    drift, reference_var, floor = checked
+    known = (reference_var, floor)
     increments, variances = _increments(fns, params, inputs, noise)
     rates = fit_rates(increments, variances)
     if drift.spans.shape[0] == 0:
         return NoiseRates(tuple(rates[0]), tuple(rates[1]), None, 0, 1.0)  # type: ignore[arg-type]
     raised = 1.0
     for _ in range(8):
-        ratio = _ratios(drift, increments, raised * rates, reference_var)
+        ratio = _ratios(drift, increments, raised * rates, known)
         need = float(np.quantile(ratio, COVERED)) / 2.0
         if need <= 1.0 + 1e-6 or not np.any(rates):
             break
         raised *= need * need
-    coverage = float(np.mean(_ratios(drift, increments, raised * rates, reference_var) <= 2.0))
+    coverage = float(np.mean(_ratios(drift, increments, raised * rates, known) <= 2.0))
     return NoiseRates(
         tuple(map(float, raised * rates[0])),  # type: ignore[arg-type]
         tuple(map(float, raised * rates[1])),  # type: ignore[arg-type]

@@ -20,8 +20,8 @@ from nlp_calib.analysis.crossval import combine
 from nlp_calib.analysis.degeneracy import motion_scale
 from nlp_calib.analysis.determinacy import Information
 from nlp_calib.analysis.handoff import odometry_noise
-from nlp_calib.analysis.noise_rates import noise_rates
 from nlp_calib.analysis.metrics import each_metrics, first_order, geometry, integrate, segments, steps
+from nlp_calib.analysis.noise_rates import noise_rates
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import (
     DRIFT_LENGTHS,
@@ -556,7 +556,8 @@ def calibrated_drift(
     fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str, records: int | None = None
 ) -> Drift:
     """Each input's noise per interval calibrated on the drift of the used records (the first
-    ``records`` of them) against the tracker, never below the encoders' quantisation."""
+    ``records`` of them) against the tracker (a random walk beside the readings' rounding, the
+    encoders' quantisation, which does not add up along a drive)."""
     fns, sel = fit.fns, windows.selected
     n = sel.n_records if records is None else min(records, sel.n_records)
     sel = sel.select(0, n)
@@ -583,8 +584,9 @@ def odometry(fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample:
     """Base-link odometry with ``params`` over the used records, started at the base pose the
     tracker's first pose implies, beside the base poses the tracker implies throughout; its
     covariance propagated from each input's noise calibrated on the drift this log shows against
-    the tracker (never below the encoders' quantisation)."""
+    the tracker (a random walk; the readings' rounding, which does not add up, left out)."""
     d = calibrated_drift(fit, windows, params, steering_sample)
+    floor = windows.input_noise_std
     track, cov = propagate(fit.fns, params, d.inputs, d.reference[0], d.noise)
     names = fit.fns.model.input_names
     return OdometryTrack(
@@ -593,8 +595,9 @@ def odometry(fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample:
         cov,
         d.reference,
         input_noise=dict(zip(names, map(float, d.noise))),
-        quantisation=dict(zip(names, map(float, windows.input_noise_std))),
-        coverage=drift_coverage(d.drift, d.noise, d.reference_var),
+        quantisation=dict(zip(names, map(float, floor))),
+        coverage=drift_coverage(d.drift, d.noise, floor, d.reference_var),
+        rates=noise_rates(fit.fns, params, d.inputs, d.noise, (d.drift, d.reference_var, floor)),
     )
 
 
@@ -610,8 +613,8 @@ def handoff_noise(
     noise = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
     found = odometry_noise(fit.fns, params, d.inputs, time_s, (noise, windows.input_noise_std))
-    rates = noise_rates(fit.fns, params, d.inputs, d.noise, (d.drift, d.reference_var))
-    return dataclasses.replace(found, rates=rates)
+    checked = (d.drift, d.reference_var, windows.input_noise_std)
+    return dataclasses.replace(found, rates=noise_rates(fit.fns, params, d.inputs, d.noise, checked))
 
 
 @dataclass(frozen=True)
