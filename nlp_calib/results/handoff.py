@@ -37,6 +37,20 @@ class NoiseRates:
     segments: int
     raised: float
 
+    def words(self) -> str:
+        """The rates and how they held, in one sentence."""
+        per_m = ", ".join(f"{v:.3g}" for v in self.per_metre)
+        per_rad = ", ".join(f"{v:.3g}" for v in self.per_radian)
+        held = (
+            "no drift segment to judge it by"
+            if self.coverage is None
+            else f"{100 * self.coverage:.0f} % of {self.segments} drift segments' errors within its 2σ"
+        )
+        return (
+            f"variance per metre driven {per_m} (along, across, heading: m², m², rad²), per radian "
+            f"turned {per_rad}; {held}"
+        )
+
 
 @dataclass(frozen=True)
 class OdometryNoise:
