@@ -103,6 +103,10 @@ def _ratios(
     return np.abs(drift.errors) / np.maximum(sigma, 1e-300)
 
 
+def _three(v: np.ndarray) -> tuple[float, float, float]:
+    return float(v[0]), float(v[1]), float(v[2])
+
+
 def noise_rates(
     fns: ProblemFunctions,
     params: np.ndarray,
@@ -119,7 +123,7 @@ def noise_rates(
     increments, variances = _increments(fns, params, inputs, noise)
     rates = fit_rates(increments, variances)
     if drift.spans.shape[0] == 0:
-        return NoiseRates(tuple(rates[0]), tuple(rates[1]), None, 0, 1.0)  # type: ignore[arg-type]
+        return NoiseRates(_three(rates[0]), _three(rates[1]), None, 0, 1.0)
     raised = 1.0
     for _ in range(8):
         ratio = _ratios(drift, increments, raised * rates, known)
@@ -129,8 +133,8 @@ def noise_rates(
         raised *= need * need
     coverage = float(np.mean(_ratios(drift, increments, raised * rates, known) <= 2.0))
     return NoiseRates(
-        tuple(map(float, raised * rates[0])),  # type: ignore[arg-type]
-        tuple(map(float, raised * rates[1])),  # type: ignore[arg-type]
+        _three(raised * rates[0]),
+        _three(raised * rates[1]),
         coverage,
         int(drift.spans.shape[0]),
         raised,
