@@ -128,6 +128,8 @@ class Scorer:
     rpe_window: int
     #: With a mount per log: the log whose view scores the records, or each interval's log.
     logs: int | np.ndarray = 0
+    #: Per interval, where the records do not connect (gaps, missing increments, one log's end).
+    breaks: np.ndarray | None = None
 
     def viewed(self, params: np.ndarray) -> np.ndarray:
         """``params`` as the full-parameter Functions take them over these records (one log's
@@ -156,6 +158,7 @@ class Scorer:
             rpe_window=self.rpe_window,
             bad_intervals=self.bad_intervals,
             bad_records=self.bad_records,
+            breaks=self.breaks,
         )
 
 
@@ -166,7 +169,7 @@ def log_scorer(
     bad_i, bad_r = windows.masks()
     inputs = windows.inputs(steering_sample)
     poses = tracker_poses(fns, windows.selected)
-    return Scorer(fns, inputs, poses, bad_i, bad_r, windows.used[0], rpe_window, log)
+    return Scorer(fns, inputs, poses, bad_i, bad_r, windows.used[0], rpe_window, log, windows.used_breaks())
 
 
 def scores(scorer: Scorer, windows: LogWindows, param_sets: Sequence[np.ndarray]) -> list[Scores]:
