@@ -139,7 +139,7 @@ def error_stats_lines(run: CalibrationRun, solver: str) -> list[str]:
         per_m.append(f"full-run final error {100 * m.ate_final / m.distance_m:.2g} % of {m.distance_m:.1f} m")
     elif m.distance_m > 0:
         per_m.append(
-            f"full-run figures: none (the records do not connect: a gap, a reference's missing "
+            f"full-run figures: none (the records do not connect: a gap, a reference's missing or left-out "
             f"increments or a log's end; the segment figures restart at each of the {m.segments} parts)"
         )
     lines.append("per metre driven: " + "; ".join(per_m))

@@ -72,8 +72,13 @@ def bind_windows(
     report = screening.findings.report
     # Every detected fault shapes the fair figures, whatever the handling: like with like.
     bad_intervals, bad_records = fault_masks(report, log.n_records, alignment.lag_s, dt)
-    # A reference of its own motions is composed only where one-interval increments follow on.
-    breaks = log.reference.kind.uncovered(log.n_records)
+    # A reference of its own motions is composed only where one-interval increments follow on, and
+    # not across one left out as its own fault.
+    kind = log.reference.kind
+    breaks = kind.uncovered(log.n_records)
+    if kind.chained:
+        matches = replace(report, faults=report.reference_faults)
+        breaks = breaks | matches.bad_intervals(max(log.n_records - 1, 0))
     if prepared.gaps is not None:  # dead reckoning restarts after a gap, as after a fault
         breaks = breaks | prepared.gaps
     broken = alignment.log.joint_breaks()
