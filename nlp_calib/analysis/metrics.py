@@ -8,8 +8,7 @@ composed in one vectorised pass (linear in the number of records).
   counter fault loses counts for good, so from the first fault on this figure measures the fault,
   not the calibration, and it can rank parameter sets wrongly. Over records that do not connect (a
   gap in time, a reference of its own increments missing some or leaving one out as its fault,
-  several logs end to end) there is
-  none: the track would chain what does not connect.
+  several logs end to end) there is none: the track would chain what does not connect.
 - **Segment ATE**: the track restarted from the tracker after each fault, the fault's records left
   out; ``aligned``: the same after the best SE(2) alignment of each segment to the tracker (what
   ``evo_ape --align`` computes on each exported segment), pooled over the segments.
