@@ -137,7 +137,9 @@ def test_a_skid_steer_whose_pivots_slipped_is_never_called_good(tmp_path: Path) 
     the verdict says so."""
     run, _, _, _ = _skid_run(tmp_path, 2, 0.1)
     assert run.verdict.level != GOOD
-    assert any("pivots the ground slipped on were left out" in r for r in run.verdict.reasons)
+    said = [r for r in run.verdict.reasons if "pivots the ground slipped on were left out" in r]
+    # The rule that keeps or leaves out a pivot, stated with it (the summary prints the verdict).
+    assert said and "under 0.5 m of travel per radian turned" in said[0] and "5× the increments'" in said[0]
 
 
 # --- a car on a highway ------------------------------------------------------------------------
