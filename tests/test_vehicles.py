@@ -358,3 +358,78 @@ def test_a_highway_cars_odometry_noise_is_never_under_the_drift_its_windows_trul
     for way, ratios in found.items():
         print(way, ratios)
         assert np.all(ratios >= 0.5), (way, ratios)
+
+
+# --- a car's joints read as a car's (#43 item 5) --------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("joints", "model", "read"),
+    [
+        # Four wheel speeds and a steering joint (the highway car's CAN): a car, not a tricycle.
+        (
+            ("rear_left_wheel", "rear_right_wheel", "front_left_wheel", "front_right_wheel", "steering"),
+            "car_like",
+            {
+                "steering": "steering",
+                "rear_left_wheel": "rear_left_wheel",
+                "rear_right_wheel": "rear_right_wheel",
+            },
+        ),
+        # Each front wheel's steering joint: the Ackermann pair, each read by its own side.
+        (
+            ("front_left_steering", "front_right_steering", "rear_left_wheel", "rear_right_wheel"),
+            "car_like_ackermann",
+            {
+                "steering_left": "front_left_steering",
+                "steering_right": "front_right_steering",
+                "rear_left_wheel": "rear_left_wheel",
+                "rear_right_wheel": "rear_right_wheel",
+            },
+        ),
+        # A steering joint beside two wheels: never a differential drive's wheels.
+        (
+            ("left_wheel", "right_wheel", "steer_joint"),
+            "car_like",
+            {"steering": "steer_joint", "rear_left_wheel": "left_wheel", "rear_right_wheel": "right_wheel"},
+        ),
+        (("left_wheel_joint", "right_wheel_joint"), "diff_drive", None),
+    ],
+)
+def test_init_reads_a_steering_joint_with_a_steered_model(
+    joints: tuple[str, ...], model: str, read: dict[str, str] | None
+) -> None:
+    from nlp_calib.pipeline.draft import guess_model
+
+    chosen, found, why = guess_model(list(joints), None)
+    assert chosen == model, why
+    assert read is None or found == read
+    if model == "car_like_ackermann":  # the pair's steering track, held whatever the drive, said
+        assert "it holds" in why and "steering_track_width" in why
+
+
+def test_one_steering_joint_for_both_sides_of_an_ackermann_pair_is_refused(tmp_path: Path) -> None:
+    """A single steering column read as both front wheels' (it was accepted silently: no Ackermann
+    split, the steering track started at 0)."""
+    from nlp_calib.core.errors import ConfigError
+
+    joints, poses, _ = simulate_highway(HighwayOptions(seed=2, duration_s=20.0)).write(tmp_path / "car")
+    sc = {
+        "model": "car_like_ackermann",
+        "dataset": {
+            "joints": str(joints),
+            "poses": str(poses),
+            "form": "speeds",
+            "encoders": {
+                "steering_left": "steering",
+                "steering_right": "steering",
+                "rear_left_wheel": "rear_left_wheel",
+                "rear_right_wheel": "rear_right_wheel",
+            },
+        },
+    }
+    with pytest.raises(
+        ConfigError, match="steering_left and steering_right both read the joint 'steering'"
+    ) as e:
+        scenario_from_mapping(sc, "car", tmp_path)
+    assert "Ackermann split" in str(e.value)
