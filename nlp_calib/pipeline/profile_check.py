@@ -6,10 +6,14 @@ its cost can have two near-equal valleys, one near zero and one near its length,
 either (which one turned on 1 ms of re-sampling). The white-noise σ of the valley the fit stopped
 in (±0.11 m on a simulated car whose cost is as low at 0.02 m as at 0.6 m) then says nothing of
 the other. For each free parameter the model says a drive may not determine (its
-``undetermined`` on a drive with no motion), the scenario is fitted again with it held at
-:data:`NEAR_ZERO` of its estimate; where that fit's cost is within :data:`COMPARABLE` (in units of
-χ², the cost over its cost per residual) of the run's, the parameter is not determined: a caveat
-concerning it, so its value is never handed off as calibrated.
+``undetermined`` on a drive with no motion), the scenario is fitted again with it held at its
+estimate, :data:`SIGMAS` σ towards zero from it and at :data:`NEAR_ZERO` of it (all three alike: at
+the run's lag, from its estimate); the rise of the cost near zero over its rise at the yardstick
+gives how many σ away zero lies by the cost (as in a quadratic valley). Within :data:`WITHIN` σ the
+parameter is not determined; :data:`UNDERSTATED` times nearer than its σ says, its σ understates
+the valley (a simulated car's rear track ±0.011 m, ±0.13 m by its cost): either is a caveat
+concerning it, so its value is never handed off as calibrated. The check needs no scale of the
+cost: the run's σ is the yardstick.
 """
 
 from __future__ import annotations
@@ -29,21 +33,33 @@ from nlp_calib.results.checks import CAVEAT, FINE, CheckResult
 NAME = "profile"
 #: Where the other valley is looked for: this share of the estimate.
 NEAR_ZERO = 0.05
-#: Two fits are comparable where the held one's cost exceeds the run's by less than this, in units
-#: of χ² (the residuals' count times the relative increase): a 2σ likelihood-ratio bound. Windows
-#: that overlap make the residuals count more than they are worth, so a difference reads larger
-#: than it is: the bound errs towards calling the two fits different.
-COMPARABLE = 4.0
+#: The yardstick: the fit held this many σ (to believe) towards zero from the estimate.
+SIGMAS = 2.0
+#: Near zero within this many σ by the cost (its rise against the yardstick's, as a quadratic
+#: valley's): not determined.
+WITHIN = 3.0
+#: Zero this many times nearer by the cost than by the σ: the σ understates the valley (it is the
+#: curvature at the bottom of a valley that widens further out).
+UNDERSTATED = 2.0
 #: The solver the profile is fitted with.
 SOLVER = "gauss_newton"
 
 
-def _held_cost(sc: Scenario, name: str, value: float) -> tuple[float, int] | None:
-    """``sc`` fitted with ``name`` held at ``value``: its cost and number of residuals (None: it
-    cannot be fitted, or did not converge)."""
-    held = dataclasses.replace(sc.parameters, known={**sc.parameters.known, name: value})
+def _held_cost(sc: Scenario, run: CalibrationRun, name: str, value: float) -> tuple[float, int] | None:
+    """``sc`` fitted with ``name`` held at ``value``, from the run's estimate at the run's tracker
+    lag (no search again; held there, the cost can only be higher than at its own best lag, which
+    errs towards telling the two apart): its cost and number of residuals (None: it cannot be
+    fitted, or did not converge)."""
+    solver = run.chosen_solver() or SOLVER
+    start = {
+        n: v for n, v in run.reports[solver].result.param_dict().items() if n in run.scenario.layout.robot()
+    }
+    held = dataclasses.replace(
+        sc.parameters, initial_guess={**start, name: value}, known={**sc.parameters.known, name: value}
+    )
+    lag = dataclasses.replace(sc.log.alignment, tracker_lag=run.data.tracker_lag_s)
     try:
-        part = setup_log(dataclasses.replace(sc, parameters=held), None, (SOLVER,))
+        part = setup_log(sc.with_options(parameters=held, alignment=lag), None, (SOLVER,))
         result = Fit(part.problem, part.windows.data, (SOLVER,)).solve(SOLVER)
     except NlpCalibError:
         return None
@@ -63,35 +79,54 @@ def candidates(run: CalibrationRun, model: KinematicModel, solver: str) -> dict[
     }
 
 
+def _profiled(sc: Scenario, run: CalibrationRun, name: str, value: float) -> float | None:
+    """How many σ from ``value`` (its estimate) the cost puts the parameter held near zero, with
+    the run's σ as the yardstick: the fits held at the estimate, :data:`SIGMAS` σ towards zero and
+    near zero, the rise to near zero over the rise to :data:`SIGMAS` σ (None: a fit failed, or the
+    cost does not rise over those σ)."""
+    std = run.std(run.chosen_solver() or SOLVER)[name]
+    costs = [_held_cost(sc, run, name, v) for v in (value, value - SIGMAS * std, NEAR_ZERO * value)]
+    if any(c is None for c in costs):
+        return None
+    at, off, near = (c[0] for c in costs if c is not None)
+    if not off > at:
+        return None
+    return SIGMAS * float(np.sqrt(max(near - at, 0.0) / (off - at)))
+
+
 def check(run: CalibrationRun, sc: Scenario | None, model: KinematicModel | None) -> CheckResult | None:
-    """Each candidate's fit held near zero against the run's (None: nothing to profile)."""
+    """Each candidate's fit held near zero measured in the run's σ (None: nothing to profile)."""
     solver = run.chosen_solver()
     if sc is None or model is None or sc.data.joint or solver != SOLVER:
         return None
     found = candidates(run, model, solver)
-    if not found:
-        return None
-    ours = run.reports[solver].result
-    table: dict[str, dict[str, float]] = {"held_at": {}, "chi2_above": {}}
+    std = run.std(solver)
+    table: dict[str, dict[str, float]] = {"held_at": {}, "sigmas_by_cost": {}, "sigmas_by_std": {}}
     concerns: dict[str, str] = {}
     for name, value in found.items():
-        held = _held_cost(sc, name, NEAR_ZERO * value)
-        if held is None:
+        by_cost = _profiled(sc, run, name, value)
+        if by_cost is None:
             continue
-        cost, n = held
-        rise = n * (cost - ours.cost) / ours.cost
-        table["held_at"][name], table["chi2_above"][name] = NEAR_ZERO * value, rise
-        if rise < COMPARABLE:
-            unit = run.scenario.units[name]
+        by_std = (1.0 - NEAR_ZERO) * value / std[name]
+        table["held_at"][name] = NEAR_ZERO * value
+        table["sigmas_by_cost"][name], table["sigmas_by_std"][name] = by_cost, by_std
+        unit = run.scenario.units[name]
+        if by_cost < WITHIN:
             concerns[name] = (
-                f"{name} is not determined: the drive fits it about as well at {NEAR_ZERO * value:.3g} "
-                f"{unit} as at {value:.3g} {unit} (χ² {rise:+.2g}; two valleys, its σ is the one the fit "
-                "stopped in)"
+                f"{name} is not determined: the drive fits it at {NEAR_ZERO * value:.3g} {unit} within "
+                f"{by_cost:.2g}σ of its {value:.3g} {unit} by the cost, {by_std:.3g}σ by its σ (a second "
+                "valley or a plateau: its σ is the valley's the fit stopped in)"
+            )
+        elif by_cost < by_std / UNDERSTATED:
+            wide = (1.0 - NEAR_ZERO) * value / by_cost
+            concerns[name] = (
+                f"{name}'s σ understates its cost's valley: zero lies {by_cost:.3g}σ away by the cost, "
+                f"{by_std:.3g}σ by its σ; as the cost measures it, {name} is known only to ±{wide:.2g} {unit}"
             )
     if not table["held_at"]:
         return None
     if not concerns:
-        said = ", ".join(f"{n} (χ² +{r:.3g} at {NEAR_ZERO:g}× it)" for n, r in table["chi2_above"].items())
+        said = ", ".join(f"{n} ({table['sigmas_by_cost'][n]:.3g}σ off by the cost)" for n in table["held_at"])
         return CheckResult(NAME, FINE, f"the drive tells from zero: {said}", table=table)
     first, *rest = concerns.values()
     return CheckResult(
