@@ -119,9 +119,9 @@ def assign(model_name: str, joints: Sequence[str]) -> dict[str, str] | None:
 
 def guess_model(joints: Sequence[str], model: str | None) -> tuple[str, dict[str, str], str]:
     """The model (``model`` when given), its encoders' joints and why, in words: of the models
-    whose every encoder finds a joint, the one that reads the most joints (a steering joint beside
-    four wheels is a car's, not a tricycle's nor a differential drive's), the first registered of
-    those."""
+    whose every encoder finds a joint, the one that reads the most joints (a steer joint beside
+    four wheels is a car's, not a three-wheeler's nor a two-wheeled base's), the first registered of
+    those; a steer joint is read by a steered model where one fits."""
     names = [model] if model is not None else list(MODELS)
     fits = {m: a for m in names if (a := assign(m, joints)) is not None}
     if not fits:
@@ -149,7 +149,7 @@ def guess_model(joints: Sequence[str], model: str | None) -> tuple[str, dict[str
 
 def _held(model: str) -> str:
     """What the model holds at its start where a drive does not tell it (an Ackermann pair's
-    steering track whatever the drive), in the joints' names, said before any run."""
+    track between its steer pivots whatever the drive), in the joints' names, said before any run."""
     form = in_units(MODELS[model], "radians")
     held = form.undetermined(np.zeros((len(form.input_names), 0)))
     if not held:

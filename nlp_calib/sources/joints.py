@@ -306,7 +306,7 @@ def _not_regular(path: Path) -> str | None:
 
 def check_encoders(given: Mapping[str, str], model: KinematicModel, where: str) -> None:
     """One joint for each of the model's encoders, by the encoder's name, each its own: one joint
-    read twice (a single steering column for both front wheels of a pair) tells the model nothing
+    read twice (a single steer column for both front wheels of a pair) tells the model nothing
     the second encoder stands for (the pair's split), so it is refused."""
     names = encoders(model)
     if set(given) != set(names):
@@ -322,8 +322,8 @@ def check_encoders(given: Mapping[str, str], model: KinematicModel, where: str) 
             continue
         steered = all(model.encoder_kinds[e] == "absolute" for e in shared)
         hint = (
-            "one steering joint for both front wheels is a model with one steering encoder's, which "
-            "holds no Ackermann split: choose it, or log each wheel's steering joint"
+            "one steer joint for both front wheels is a model's with one steer encoder, which "
+            "holds no Ackermann split: choose it, or log each wheel's own steer joint"
             if steered
             else "give each encoder its own joint"
         )
