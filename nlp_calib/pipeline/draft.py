@@ -6,7 +6,8 @@ frame), the model the joint names suggest, and the keys a first run needs. Each 
 joint whose name carries a word of the encoder's name (``left`` for an encoder named ``left_…``),
 an angle encoder (``absolute``) a joint named ``steer…``, a wheel (``counter``) left over any joint named
 ``…wheel…``, ``…traction…`` or ``…drive…``; a model is a candidate when every one of its encoders
-takes a joint of its own, the first registered candidate is drafted. The tracker is the pose topic
+takes a joint of its own; of those, a steered one where a joint is named steer…, the one reading
+the most joints, the first registered, is drafted. The tracker is the pose topic
 whose name says most clearly that it is a reference (a motion-capture system's, a ground truth),
 never the robot's own odometry. The text says what was found and why each choice was made, as
 comments, and is read back as a scenario before it is written: ``run`` accepts it as it is.
