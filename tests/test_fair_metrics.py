@@ -163,3 +163,43 @@ def test_jackknife_and_blocks() -> None:
     parts = blocks(2, 2434, 10)
     assert parts[0][0] == 2 and parts[-1][1] == 2434 and len(parts) == 10
     assert all(b == c for (_, b), (c, _) in itertools.pairwise(parts))
+
+
+# --- records that do not connect (#43 item 6) ----------------------------------------------------
+
+
+def _drive(n: int = 80) -> tuple[object, np.ndarray, np.ndarray, np.ndarray]:
+    """A tricycle's track (its tracker the model's own poses, with a jump of 3 m at record 40 as a
+    gap leaves: after it the tracker goes on from elsewhere) and the model's inputs."""
+    from nlp_calib.analysis.metrics import integrate
+    from nlp_calib.models import get_model
+    from nlp_calib.problem import ProblemSpec, build
+
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=1))
+    p = np.array([0.5, 0.01, 1.5, 0.0, 1.0, 0.0, 0.0])
+    inputs = np.vstack([np.full(n - 1, 1.0), np.full(n - 1, 0.1)])
+    ref = integrate(fns, p, inputs, np.zeros(3))
+    ref[40:, :2] += 3.0
+    return fns, p, inputs, ref
+
+
+def test_records_that_do_not_connect_have_no_full_run_figure_and_no_rpe_across() -> None:
+    """Across a gap the full-run track chains what does not connect (it was 3 m off from the gap
+    on); the segment figures restart there and the windowed RPE pairs no records across it."""
+    from nlp_calib.analysis.metrics import trajectory_metrics
+
+    fns, p, inputs, ref = _drive()
+    gap = np.zeros(ref.shape[0] - 1, dtype=bool)
+    gap[39] = True
+    chained = trajectory_metrics(fns, p, inputs, ref, rpe_window=5)
+    assert chained.ate.max == pytest.approx(np.hypot(3.0, 3.0), rel=1e-9)
+    apart = trajectory_metrics(fns, p, inputs, ref, rpe_window=5, bad_intervals=gap, breaks=gap)
+    assert apart.ate.n == 0 and np.isnan(apart.ate_final)
+    assert apart.segments == 2 and apart.segment_ate.max == pytest.approx(0.0, abs=1e-9)
+    # The windows of 5 records: 75 pairs, of which the 5 across the gap are left out (their error
+    # is the jump); every other pair is exact.
+    assert apart.rpe_trans == pytest.approx(0.0, abs=1e-9) and chained.rpe_trans > 0.1
+    # A fault (not a break): the records connect, so the full-run figure is kept (it measures the
+    # fault), while the windowed RPE still pairs nothing across it.
+    faulty = trajectory_metrics(fns, p, inputs, ref, rpe_window=5, bad_intervals=gap)
+    assert faulty.ate.n == ref.shape[0] and faulty.rpe_trans == pytest.approx(0.0, abs=1e-9)

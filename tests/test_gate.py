@@ -23,7 +23,7 @@ from nlp_calib.pipeline.scenario import load_scenario
 from nlp_calib.pipeline.units_check import _judged_by_fit
 from nlp_calib.pipeline.validation import lag_alike
 from nlp_calib.problem import ResidualData
-from nlp_calib.results.checks import LagEstimate
+from nlp_calib.results.checks import CAVEAT, LagEstimate
 from nlp_calib.results.preflight import WEAKLY, UnitFinding
 from nlp_calib.results.run import CAVEATS
 from nlp_calib.solvers.evaluation import NormalEquations
@@ -203,3 +203,38 @@ def test_a_car_whose_rear_track_the_drive_barely_holds_is_not_refused(tmp_path: 
     truth = run.checks.truth
     assert truth is not None
     assert np.nanmax(np.abs(truth.z)) < 3.0, dict(zip(truth.names, truth.z))
+    # Its rear track fits about as well near zero (#43 item 5): the profile says so, a caveat
+    # concerning it (its value never handed off as calibrated), whatever σ its valley gives.
+    profile = next(r for r in run.checks.more if r.name == "profile")
+    assert profile.level == CAVEAT and set(profile.concerns) == {"rear_track"}, profile
+    # Zero within 3σ by the cost, while its σ puts it over 5σ away.
+    assert (
+        profile.table["sigmas_by_cost"]["rear_track"]
+        < 3.0
+        < 5.0
+        < profile.table["sigmas_by_std"]["rear_track"]
+    )
+
+
+def test_a_parameter_the_drive_tells_from_zero_is_not_profiled_away(tmp_path: Path) -> None:
+    """The reverse steering gain of a tricycle that reverses: held at a twentieth of it, the cost
+    puts it as many σ away as its σ does (a quadratic valley), so the profile finds it determined
+    (no caveat of its own)."""
+    log = write_sim(tmp_path, "rev.txt", seed=12, model="tricycle_reverse", records=1500)
+    sc = scenario_from_mapping(
+        {
+            "dataset": str(log),
+            "model": "tricycle_reverse",
+            "initial_guess": "from_file",
+            "solvers": ["gauss_newton"],
+        },
+        "rev",
+        tmp_path,
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    profile = next(r for r in run.checks.more if r.name == "profile")
+    assert profile.level != CAVEAT and not profile.concerns, profile
+    by_cost, by_std = (profile.table[k]["k_steer_reverse"] for k in ("sigmas_by_cost", "sigmas_by_std"))
+    assert by_cost > 5.0 and 0.5 < by_cost / by_std < 2.0, profile.table

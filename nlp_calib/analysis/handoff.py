@@ -17,7 +17,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from nlp_calib.analysis.odometry import propagate
+from nlp_calib.analysis.odometry import propagate, readings_covariance, segment_covariance
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.problem import ProblemFunctions
@@ -171,25 +171,23 @@ def _twist(
     return np.mean(np.stack([P[0, 0], P[1, 1], P[2, 2]]) / dt[moving] ** 2, axis=1)
 
 
-def _pose(fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, noise: np.ndarray) -> np.ndarray:
+def _pose(
+    fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, noise: tuple[np.ndarray, np.ndarray]
+) -> np.ndarray:
     """The variance of ``(x, y, yaw)`` after :data:`POSE_DISTANCE_M` of driving, in the base frame
-    at the start: the covariance added between pose ``i`` and the first pose ``j`` that far on,
-    ``P_j − F·P_i·Fᵀ``, turned into the frame at ``i``, averaged over starts ``i``."""
-    track, P = propagate(fns, params, inputs, np.zeros(3), noise)
+    at the start, from each input's random walk and its readings' rounding at both ends
+    (``noise``), averaged over starts ``i``."""
+    walk, reading = noise
+    track, P = propagate(fns, params, inputs, np.zeros(3), walk)
     travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(track[:, :2], axis=0).T))])
     starts = np.flatnonzero(travelled <= travelled[-1] - POSE_DISTANCE_M)
     if starts.size == 0:
         return np.full(3, np.nan)
-    starts = starts[:: max(1, starts.size // 200)]
-    ends = np.searchsorted(travelled, travelled[starts] + POSE_DISTANCE_M)
-    out = []
-    for i, j in zip(starts, ends):
-        F = np.eye(3)
-        F[0, 2], F[1, 2] = -(track[j, 1] - track[i, 1]), track[j, 0] - track[i, 0]
-        c, s = np.cos(track[i, 2]), np.sin(track[i, 2])
-        R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-        out.append(np.diag(R @ (P[j] - F @ P[i] @ F.T) @ R.T))
-    return np.mean(out, axis=0)
+    i = starts[:: max(1, starts.size // 200)]
+    j = np.maximum(np.searchsorted(travelled, travelled[i] + POSE_DISTANCE_M), i + 1)
+    Pr = propagate(fns, params, inputs, np.zeros(3), reading)[1]
+    C = segment_covariance(P, track, i, j, -track[i, 2]) + readings_covariance(Pr, track, i, j, -track[i, 2])
+    return np.mean(np.diagonal(C, axis1=1, axis2=2), axis=0)
 
 
 def odometry_noise(
@@ -202,13 +200,13 @@ def odometry_noise(
     """The covariance diagonals a controller publishes with its odometry, over the intervals of
     ``inputs`` (at ``time_s``), from each input's calibrated noise per interval and the noise of
     one reading (its resolution): ``noise``. A drift adds up the increments' noise (a random walk:
-    slip, jitter); an interval's increment has, besides, the rounding of the reading at its start
-    (the drift's floor counts the one at its end)."""
+    slip, jitter); an interval's increment has, besides, the rounding of the readings at both its
+    ends, as has a drive's (those between cancel)."""
     calibrated, reading = noise
     sigma = np.array([calibrated[n] for n in fns.model.input_names])
     dt = np.diff(np.asarray(time_s, dtype=float))
-    vx, _, wz = _twist(fns, params, inputs, dt, np.hypot(sigma, reading))
-    x, y, yaw = _pose(fns, params, inputs, sigma)
+    vx, _, wz = _twist(fns, params, inputs, dt, np.sqrt(sigma**2 + 2.0 * np.asarray(reading) ** 2))
+    x, y, yaw = _pose(fns, params, inputs, (sigma, np.asarray(reading, dtype=float)))
     u = UNMEASURED
     return OdometryNoise(
         pose=(float(x), float(y), u, u, u, float(yaw)),

@@ -6,7 +6,9 @@ composed in one vectorised pass (linear in the number of records).
 
 - **ATE** (full run): the track started at the first record, against every tracker position. A
   counter fault loses counts for good, so from the first fault on this figure measures the fault,
-  not the calibration, and it can rank parameter sets wrongly.
+  not the calibration, and it can rank parameter sets wrongly. Over records that do not connect (a
+  gap in time, a reference of its own increments missing some or leaving one out as its fault,
+  several logs end to end) there is none: the track would chain what does not connect.
 - **Segment ATE**: the track restarted from the tracker after each fault, the fault's records left
   out; ``aligned``: the same after the best SE(2) alignment of each segment to the tracker (what
   ``evo_ape --align`` computes on each exported segment), pooled over the segments.
@@ -14,7 +16,7 @@ composed in one vectorised pass (linear in the number of records).
   tracker's path is nearest that distance further on (within 10 %, pairs inside one segment, as
   ``evo_rpe --delta D --delta_unit m --all_pairs --pairs_from_reference`` chooses them); the
   error is the translation of ``(ref_i⁻¹·ref_j)⁻¹·(est_i⁻¹·est_j)``. Alignment does not change it.
-- **RPE over a window** of records, as before.
+- **RPE over a window** of records, as before, each pair inside one fault-free part.
 
 Statistics are those evo reports: RMSE, mean, median, standard deviation, minimum and maximum.
 
@@ -235,6 +237,9 @@ class Reference:
     scored_parts: list[np.ndarray]
     pairs: dict[float, list[Pairs]]
     distance_m: float
+    #: Whether the records connect end to end (no gap, missing increment or log's end between
+    #: them): a full-run track over records that do not chains what does not connect.
+    connected: bool = True
 
 
 def reference(
@@ -243,15 +248,21 @@ def reference(
     rpe_window: int,
     bad_intervals: np.ndarray | None,
     bad_records: np.ndarray | None,
+    breaks: np.ndarray | None = None,
 ) -> Reference:
-    """The reference's side of the figures over all of ``T_ref`` (masks in its indexing)."""
+    """The reference's side of the figures over all of ``T_ref`` (masks in its indexing;
+    ``breaks``: the intervals across which the records do not connect)."""
     n = T_ref.shape[0]
     bad_i = None if bad_intervals is None else np.asarray(bad_intervals, dtype=bool)
     good = np.ones(n, dtype=bool)
     if bad_records is not None:
         good &= ~np.asarray(bad_records, dtype=bool)
     W = min(rpe_window, n - 1)
-    pair = good[:-W] & good[W:]
+    # A window's pair of records lies within one fault-free part, as the RPE over a distance's.
+    crossed = np.zeros(n, dtype=np.int64)
+    if bad_i is not None:
+        crossed[1:] = np.cumsum(bad_i)
+    pair = good[:-W] & good[W:] & (crossed[W:] == crossed[:-W])
     parts = segments(n, bad_i)
     scored = np.zeros(n, dtype=bool)
     for a, b in parts:
@@ -270,6 +281,7 @@ def reference(
         scored_parts=scored_parts,
         pairs=rpe_pairs(T_ref, scored_parts, RPE_DISTANCES, g),
         distance_m=float(path_distance(T_ref[good], g)[-1]) if good.any() else 0.0,
+        connected=breaks is None or not np.any(breaks),
     )
 
 
@@ -282,7 +294,9 @@ def scored(
     step = in_metres(fns, params, steps(fns, params, inputs))
     track = g.accumulate(T[0], step)
     # A bad tracker pose is the tracker's error, not the calibration's: left out of every figure.
-    err = np.linalg.norm(track[ref.good, : g.dims] - T[ref.good, : g.dims], axis=1)
+    # Over records that do not connect, a full-run track chains them: no full-run figure.
+    good = ref.good if ref.connected else np.zeros_like(ref.good)
+    err = np.linalg.norm(track[good, : g.dims] - T[good, : g.dims], axis=1)
     W, pair = ref.window, ref.pair
     rel = g.between(ref.rel, g.between(track[:-W][pair], track[W:][pair]))
     # One part over every record restarts where the track starts: the same poses.
@@ -324,13 +338,15 @@ def each_metrics(
     rpe_window: int = 25,
     bad_intervals: np.ndarray | None = None,
     bad_records: np.ndarray | None = None,
+    breaks: np.ndarray | None = None,
 ) -> list[TrajectoryMetrics]:
     """Metrics of the tracks of each parameter set over records ``start:stop`` (interval ``k``
     joins records k, k+1), the reference's side computed once (once per set when the trajectory's
     scale is free). A parameter set is one log's view, or one view per interval (a column each).
 
     ``bad_intervals`` (per interval) and ``bad_records`` (per record) mark faults in the same
-    indexing as ``inputs`` and ``T_world_sensor``; they shape the fair figures only.
+    indexing as ``inputs`` and ``T_world_sensor``; they shape the fair figures only. ``breaks``
+    (per interval) marks where the records do not connect: with any, no full-run figure.
     """
     stop = T_world_sensor.shape[0] if stop is None else stop
     if stop - start < 2:
@@ -338,13 +354,14 @@ def each_metrics(
     g = geometry(fns)
     bad_i = None if bad_intervals is None else bad_intervals[start : stop - 1]
     bad_r = None if bad_records is None else bad_records[start:stop]
+    cut = None if breaks is None else breaks[start : stop - 1]
     T = np.asarray(T_world_sensor[start:stop], dtype=float)
     out: list[TrajectoryMetrics] = []
     ref: Reference | None = None
     for params in param_sets:
         if ref is None or scale_free(fns):
             # A trajectory known up to scale is scored in metres, by each parameter set's own scale.
-            ref = reference(g, in_metres(fns, params, T), rpe_window, bad_i, bad_r)
+            ref = reference(g, in_metres(fns, params, T), rpe_window, bad_i, bad_r, cut)
         P = np.asarray(params, dtype=float)
         out.append(
             scored(fns, P[:, start : stop - 1] if P.ndim == 2 else P, inputs[:, start : stop - 1], ref)

@@ -8,7 +8,7 @@ the intervals with ``mapaccum``. ``σ_u`` is the encoders' noise on the model in
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -67,18 +67,44 @@ def _start_jacobian(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return F
 
 
-def _segment(P: np.ndarray, est: np.ndarray, i: np.ndarray, j: np.ndarray, turn: np.ndarray) -> np.ndarray:
-    """The covariance of poses ``j`` dead-reckoned from poses ``i`` (their covariance taken away),
-    in world axes turned by ``turn``: ``P_j − F·P_i·Fᵀ`` with ``F = ∂T_j/∂T_i``; ``(len(i), …, 3, 3)``
-    for ``P`` ``(…, poses, 3, 3)``."""
-    F = _start_jacobian(est[i], est[j])
-    Pi, Pj = np.moveaxis(P[..., i, :, :], -3, 0), np.moveaxis(P[..., j, :, :], -3, 0)
-    extra = (slice(None),) + (None,) * (Pi.ndim - 3)
-    Pij = Pj - F[extra] @ Pi @ np.swapaxes(F, -1, -2)[extra]
+def _turned(C: np.ndarray, turn: np.ndarray) -> np.ndarray:
+    """Covariances ``C`` ``(len(turn), …, 3, 3)`` in world axes turned by ``turn``."""
     c, s = np.cos(turn), np.sin(turn)
     R = np.zeros((turn.size, 3, 3))
     R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
-    return R[extra] @ Pij @ np.swapaxes(R, -1, -2)[extra]
+    extra = (slice(None),) + (None,) * (C.ndim - 3)
+    return R[extra] @ C @ np.swapaxes(R, -1, -2)[extra]
+
+
+def _grown(P: np.ndarray, est: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """``P_j − F·P_i·Fᵀ`` with ``F = ∂T_j/∂T_i``: what poses ``j`` gained since poses ``i``;
+    ``(len(i), …, 3, 3)`` for ``P`` ``(…, poses, 3, 3)``."""
+    F = _start_jacobian(est[i], est[j])
+    Pi, Pj = np.moveaxis(P[..., i, :, :], -3, 0), np.moveaxis(P[..., j, :, :], -3, 0)
+    extra = (slice(None),) + (None,) * (Pi.ndim - 3)
+    return Pj - F[extra] @ Pi @ np.swapaxes(F, -1, -2)[extra]
+
+
+def segment_covariance(
+    P: np.ndarray, est: np.ndarray, i: np.ndarray, j: np.ndarray, turn: np.ndarray
+) -> np.ndarray:
+    """The covariance of poses ``j`` dead-reckoned from poses ``i`` (their covariance taken away),
+    in world axes turned by ``turn``."""
+    return _turned(_grown(P, est, i, j), turn)
+
+
+def readings_covariance(
+    P: np.ndarray, est: np.ndarray, i: np.ndarray, j: np.ndarray, turn: np.ndarray
+) -> np.ndarray:
+    """The covariance of segments ``i → j`` from one reading's noise at each end, at unit noise
+    (``P`` as :func:`segment_covariance`'s): a position read at ``i`` enters the first interval only, one
+    read at ``j`` the last (those between enter one interval up and the next down, and cancel):
+    the first interval's gain carried to ``j`` and the last's."""
+    first = _grown(P, est, i, i + 1)
+    F = _start_jacobian(est[i + 1], est[j])
+    extra = (slice(None),) + (None,) * (first.ndim - 3)
+    carried = F[extra] @ first @ np.swapaxes(F, -1, -2)[extra]
+    return _turned(carried + _grown(P, est, j - 1, j), turn)
 
 
 #: Unit variances of the tracker's position and of its heading.
@@ -96,11 +122,23 @@ def _tracker_terms(start: np.ndarray, end: np.ndarray) -> np.ndarray:
 class Drift:
     """Segments of the odometry against a reference: each error ``(S, 3)``, each input's unit-noise
     covariance of it ``(S, n_inputs, 3, 3)``, and the reference's own noise terms ``(S, 2, 3, 3)``
-    (per unit variance of its position and of its heading, see :func:`_tracker_terms`)."""
+    (per unit variance of its position and of its heading, see :func:`_tracker_terms`); each
+    segment's first and last record ``(S, 2)``, the reference's heading at its start ``(S,)`` and
+    each input's unit-noise covariance of its two ends' readings ``(S, n_inputs, 3, 3)`` (see
+    :func:`readings_covariance`: a resolution's rounding, which does not add up along a drive)."""
 
     errors: np.ndarray
     covs: np.ndarray
     terms: np.ndarray
+    spans: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=int))
+    start_headings: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    reads: np.ndarray | None = None
+
+    def known(self, floor: np.ndarray) -> np.ndarray:
+        """The errors' covariance ``(S, 3, 3)`` from a reading noise of ``floor`` (1σ per input)."""
+        if self.reads is None:
+            return np.zeros((self.errors.shape[0], 3, 3))
+        return np.einsum("k,skij->sij", np.asarray(floor, dtype=float) ** 2, self.reads)
 
 
 def segment_drift(
@@ -115,7 +153,7 @@ def segment_drift(
     """The odometry against the reference base poses over segments of ``lengths`` records inside
     each fault-free part (half-overlapping, ends at good reference poses), each restarted from the
     reference at its start."""
-    errors, covs, terms = [], [], []
+    errors, covs, terms, spans, headings, reads = [], [], [], [], [], []
     for a, b in parts:
         if b - a < 2:
             continue
@@ -127,23 +165,28 @@ def segment_drift(
             j = i + L
             again = poses.compose(ref[i], poses.between(est[i], est[j]))
             errors.append(np.c_[again[:, :2] - ref[j, :2], wrap_angle(again[:, 2] - ref[j, 2])])
-            covs.append(_segment(P, est, i, j, ref[i, 2] - est[i, 2]))
+            covs.append(segment_covariance(P, est, i, j, ref[i, 2] - est[i, 2]))
+            reads.append(readings_covariance(P, est, i, j, ref[i, 2] - est[i, 2]))
             terms.append(_tracker_terms(ref[i], again))
+            spans.append(np.c_[a + i, a + j])
+            headings.append(ref[i, 2])
     n_in = inputs.shape[0]
     if not errors:
         return Drift(np.zeros((0, 3)), np.zeros((0, n_in, 3, 3)), np.zeros((0, 2, 3, 3)))
-    return Drift(np.concatenate(errors), np.concatenate(covs), np.concatenate(terms))
+    stacked = (np.concatenate(errors), np.concatenate(covs), np.concatenate(terms))
+    where = (np.concatenate(spans).astype(int), np.concatenate(headings))
+    return Drift(*stacked, *where, np.concatenate(reads))
 
 
-def _moments(A: np.ndarray, y: np.ndarray, predicted: np.ndarray) -> np.ndarray:
-    """Non-negative variances ``x`` with ``A·x ≈ y`` (squared errors): a squared error's spread
-    grows with its expected value (a χ² with one degree of freedom), so each equation is weighted
-    by the inverse of its prediction, refined a few times."""
+def _moments(A: np.ndarray, y: np.ndarray, known: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """Non-negative variances ``x`` with ``A·x + known ≈ y`` (squared errors): a squared error's
+    spread grows with its expected value (a χ² with one degree of freedom), so each equation is
+    weighted by the inverse of its prediction, refined a few times."""
     var = np.zeros(A.shape[1])
     for _ in range(4):
         w = 1.0 / np.maximum(predicted, 1e-6 * float(np.max(predicted)))
-        var = nnls_small(A * w[:, None], y * w)
-        predicted = A @ var
+        var = nnls_small(A * w[:, None], (y - known) * w)
+        predicted = A @ var + known
     return var
 
 
@@ -155,10 +198,10 @@ ALLOWED = 4.0
 class _Profile:
     """The squared errors' misfit with the inputs' variances ``scale·share`` (each input an equal
     share of the predicted drift), the reference's refitted, in the variances of the best fit's
-    predictions."""
+    predictions; ``y``: the squared errors less what the readings' known noise explains."""
 
-    def __init__(self, A: np.ndarray, y: np.ndarray, n_in: int, predicted: np.ndarray) -> None:
-        self.A, self.y, self.n_in = A, y, n_in
+    def __init__(self, A: np.ndarray, y: np.ndarray, n_in: int, predicted: np.ndarray, top: float) -> None:
+        self.A, self.y, self.n_in, self.top = A, y, n_in, top
         self.w = 1.0 / np.maximum(predicted, 1e-6 * float(np.max(predicted)))
         self.share = 1.0 / np.maximum(np.mean(A[:, :n_in], axis=0), 1e-300)
 
@@ -175,8 +218,7 @@ def _largest(profile: _Profile, least: np.ndarray) -> np.ndarray:
     """The variances with the largest input noise (along the equal shares, never below ``least``)
     whose misfit stays within :data:`ALLOWED` of the best: the most the segments allow the
     odometry to drift, the reference taking the rest."""
-    top = float(np.mean(profile.y))
-    scales = np.r_[0.0, top * np.logspace(-8, 2, 51)]
+    scales = np.r_[0.0, profile.top * np.logspace(-8, 2, 51)]
     misfits = np.array([profile.misfit(profile.fit(s, least)) for s in scales])
     best = float(misfits.min())
     ok = np.flatnonzero(misfits <= best + ALLOWED)
@@ -190,18 +232,25 @@ def _largest(profile: _Profile, least: np.ndarray) -> np.ndarray:
     return profile.fit(lo, least)
 
 
+def _diagonals(C: np.ndarray) -> np.ndarray:
+    """The diagonals of covariances ``(S, …, 3, 3)`` stacked component by component: ``(3·S, …)``."""
+    d = np.diagonal(C, axis1=-2, axis2=-1)
+    return np.concatenate([d[..., c] for c in range(3)])
+
+
 def drift_noise(
     drift: Drift, floor: np.ndarray, credited: tuple[bool, bool] = (True, True)
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Each input's 1σ noise per interval whose propagated covariance explains the observed drift,
-    never below ``floor`` (the encoders' quantisation), and the reference's own position and
-    heading variances (those ``credited``; the others 0): the method of moments, the squared
-    errors against the unit covariances' diagonals and the reference's noise terms. A reference's
-    noise and the wheels' over short segments look alike, so the best fit's split is unstable (a
-    drift under the reference's noise goes either way); the inputs get the largest noise the
-    segments allow (within :data:`ALLOWED` of the best fit's misfit), at least the best fit's: a
-    filter must not trust the wheels beyond what the data show of them. An input with no floor is
-    exact (an interval's duration) and keeps no noise."""
+    """Each input's 1σ noise per interval whose propagated covariance (a random walk: slip,
+    jitter) explains the observed drift beside the readings' own noise ``floor`` (the encoders'
+    quantisation, counted once at each end of a segment: it does not add up along a drive), and
+    the reference's own position and heading variances (those ``credited``; the others 0): the
+    method of moments, the squared errors against the unit covariances' diagonals and the
+    reference's noise terms. A reference's noise and the wheels' over short segments look alike,
+    so the best fit's split is unstable (a drift under the reference's noise goes either way); the
+    inputs get the largest noise the segments allow (within :data:`ALLOWED` of the best fit's
+    misfit), at least the best fit's: a filter must not trust the wheels beyond what the data show
+    of them. An input with no floor is exact (an interval's duration) and keeps no noise."""
     floor = np.asarray(floor, dtype=float)
     noisy = floor > 0
     n_in = int(noisy.sum())
@@ -209,32 +258,38 @@ def drift_noise(
     if errors.shape[0] < 3 * (n_in + 2) or n_in == 0:
         return floor, np.zeros(2)
     terms = np.flatnonzero(credited)
-    units = np.concatenate([drift.covs[:, noisy], drift.terms[:, terms]], axis=1)
-    A = np.concatenate([np.diagonal(units, axis1=2, axis2=3)[:, :, c] for c in range(3)])
+    A = _diagonals(np.concatenate([drift.covs[:, noisy], drift.terms[:, terms]], axis=1))
     y = np.concatenate([errors[:, c] ** 2 for c in range(3)])
+    known = _diagonals(drift.known(floor))
     start = np.repeat([max(float(np.mean(errors[:, c] ** 2)), 1e-300) for c in range(3)], len(errors))
-    point = _moments(A, y, start)
-    var = _largest(_Profile(A, y, n_in, np.maximum(A @ point, 1e-300)), point[:n_in])
-    noise = floor.copy()
-    noise[noisy] = np.maximum(np.sqrt(var[:n_in]), floor[noisy])
+    point = _moments(A, y, known, start)
+    predicted = np.maximum(A @ point + known, 1e-300)
+    var = _largest(_Profile(A, y - known, n_in, predicted, float(np.mean(y))), point[:n_in])
+    noise = np.zeros_like(floor)
+    noise[noisy] = np.sqrt(var[:n_in])
     reference = np.zeros(2)
     reference[terms] = var[n_in:]
     return noise, reference
 
 
-def _sigmas(drift: Drift, noise: np.ndarray, reference_var: np.ndarray) -> np.ndarray:
-    """Each segment error's 1σ ``(S, 3)`` with ``noise`` and the reference's variances."""
+def _sigmas(drift: Drift, noise: np.ndarray, floor: np.ndarray, reference_var: np.ndarray) -> np.ndarray:
+    """Each segment error's 1σ ``(S, 3)`` with ``noise``, the readings' ``floor`` and the
+    reference's variances."""
     weights = np.concatenate([np.asarray(noise, dtype=float) ** 2, reference_var])
     P = np.einsum("k,skij->sij", weights, np.concatenate([drift.covs, drift.terms], axis=1))
+    P = P + drift.known(floor)
     return np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
 
 
-def drift_coverage(drift: Drift, noise: np.ndarray, reference_var: np.ndarray, k: float = 2.0) -> float:
+def drift_coverage(
+    drift: Drift, noise: np.ndarray, floor: np.ndarray, reference_var: np.ndarray, k: float = 2.0
+) -> float | None:
     """The share of segment errors (each component) within ``k`` σ of the odometry's propagated
-    covariance with ``noise`` (and the reference's own noise, ``reference_var``: zero against truth)."""
+    covariance with ``noise`` and the readings' ``floor`` (and the reference's own noise,
+    ``reference_var``: zero against truth); None without a segment to judge it by."""
     if drift.errors.shape[0] == 0:
-        return float("nan")
-    return float(np.mean(np.abs(drift.errors) <= k * _sigmas(drift, noise, reference_var)))
+        return None
+    return float(np.mean(np.abs(drift.errors) <= k * _sigmas(drift, noise, floor, reference_var)))
 
 
 #: The share of segment errors within 2σ a calibrated noise must reach: a Gaussian's.
@@ -258,12 +313,15 @@ def covering_noise(
     noisy = np.asarray(floor, dtype=float) > 0
     if drift.errors.shape[0] == 0 or not noisy.any():
         return noise
+    floor = np.asarray(floor, dtype=float)
     for _ in range(8):
         ref = np.zeros(drift.terms.shape[1]) if reference_var is None else reference_var
-        sigma = _sigmas(drift, noise, ref)
+        sigma = _sigmas(drift, noise, floor, ref)
         ratio = np.abs(drift.errors) / np.maximum(sigma, 1e-300)
         need = float(np.quantile(ratio, COVERED)) / 2.0
         if need <= 1.0 + 1e-6:
             break
-        noise[noisy] = np.sqrt(noise[noisy] ** 2 + (need**2 - 1.0) * np.mean(noise[noisy] ** 2))
+        # One share of the inputs' mean variance (the readings' where the drift showed none).
+        share = float(np.mean(noise[noisy] ** 2)) or float(np.mean(floor[noisy] ** 2))
+        noise[noisy] = np.sqrt(noise[noisy] ** 2 + (need**2 - 1.0) * share)
     return noise

@@ -27,6 +27,9 @@ class ReferenceKind(Protocol):
     #: Whether each window's measurement is one the reference made itself (its noise its own,
     #: not the difference of two poses').
     own_increments: ClassVar[bool]
+    #: Whether its poses are its increments composed, so that an increment left out as its own
+    #: fault (a bad match) breaks them: no track runs across it.
+    chained: ClassVar[bool]
     #: What one of its windows is called in messages.
     window_words: ClassVar[str]
 
@@ -42,6 +45,7 @@ class Poses:
 
     name: ClassVar[str] = "poses"
     own_increments: ClassVar[bool] = False
+    chained: ClassVar[bool] = False
     window_words: ClassVar[str] = "residual window(s)"
 
     def uncovered(self, n_records: int) -> np.ndarray:
@@ -65,6 +69,7 @@ class Motions:
 
     name: ClassVar[str] = "motions"
     own_increments: ClassVar[bool] = True
+    chained: ClassVar[bool] = True
     window_words: ClassVar[str] = "increment(s)"
 
     motions: RelativeMotions
@@ -95,6 +100,7 @@ class PoseMotions(Motions):
     sensor's)."""
 
     name: ClassVar[str] = "pose_motions"
+    chained: ClassVar[bool] = False  # a tracker's poses: they connect across a left-out increment
 
     def own_windows(self, z: np.ndarray) -> np.ndarray:
         """The second sensor's windows (its noise its own), not the tracker's."""

@@ -95,6 +95,9 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         # The units "per t_max ticks" and "per tick" refer to these encoders' ranges; a wheel's
         # counts per turn (for its radius) only where the user gave them.
         "encoders": [_encoder(e) for e in run.log.encoders],
+        # The odometry's noise as a filter's process noise takes it (ros2_control.yaml's diagonals
+        # are the same noise at one distance and one interval).
+        **_noise_entry(run, solver),
         "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
         "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
     }
@@ -110,6 +113,29 @@ def _sensor_entry(run: CalibrationRun) -> dict[str, Any]:
         "params": list(info.params),
         "convention": info.convention,
         "held": {n: run.initial.get(n, 0.0) for n in info.held},
+    }
+
+
+def _noise_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
+    """``odometry_noise:``: the odometry's variance per metre driven and per radian turned (along,
+    across, heading), each input's noise per interval, and the share of the drift segments' errors
+    within 2σ; none: no entry."""
+    controller = run.reports[solver].controller
+    noise = controller.noise if controller is not None else None
+    rates = noise.rates if noise is not None else None
+    if noise is None or rates is None:
+        return {}
+    axes = ("along", "across", "heading")
+    return {
+        "odometry_noise": {
+            "variance_per_metre": dict(zip(axes, rates.per_metre)),
+            "variance_per_radian": dict(zip(axes, rates.per_radian)),
+            "units": {"along": "m²", "across": "m²", "heading": "rad²"},
+            "inputs_per_interval": dict(noise.input_noise),
+            # None: no drift segment to judge it by.
+            "segments_within_2sigma": rates.coverage,
+            "segments": rates.segments,
+        }
     }
 
 

@@ -18,7 +18,7 @@ from nlp_calib.core.files import atomic_write_text
 from nlp_calib.core.text import escaped
 from nlp_calib.core.version import __version__
 from nlp_calib.results import CalibrationRun
-from nlp_calib.results.handoff import UNMEASURED, ControllerParams, OdometryNoise
+from nlp_calib.results.handoff import UNMEASURED, ControllerParams, NoiseRates, OdometryNoise
 
 #: The ROS 2 releases whose ros2_controllers names the file can use; the default is the first.
 ROS_DISTROS = ("jazzy", "humble", "iron", "kilted", "rolling")
@@ -79,7 +79,15 @@ def _covariance_notes(noise: OdometryNoise | None) -> list[str]:
         f"(the controller's rolling mean) it is about {ms:.3g}/W of it.",
         f"#   {UNMEASURED:g}: what planar wheel odometry does not measure (height, roll, pitch, their rates, "
         "lateral velocity).",
+        *_rates_notes(noise.rates),
     ]
+
+
+def _rates_notes(rates: NoiseRates | None) -> list[str]:
+    """The same noise per metre and per radian (a filter's process noise), with how it held."""
+    if rates is None:
+        return []
+    return [f"#   As a filter's process noise: {rates.words()} (calibration.yaml: odometry_noise)."]
 
 
 def _comment(text: str) -> str:

@@ -135,8 +135,13 @@ def error_stats_lines(run: CalibrationRun, solver: str) -> list[str]:
         else f"RPE over {d:g} m: none (no stretch of {d:g} m between gaps or faults)"
         for d, s in m.rpe_distance.items()
     ]
-    if m.distance_m > 0:
+    if m.distance_m > 0 and np.isfinite(m.ate_final):
         per_m.append(f"full-run final error {100 * m.ate_final / m.distance_m:.2g} % of {m.distance_m:.1f} m")
+    elif m.distance_m > 0:
+        per_m.append(
+            f"full-run figures: none (the records do not connect: a gap, a reference's missing or left-out "
+            f"increments or a log's end; the segment figures restart at each of the {m.segments} parts)"
+        )
     lines.append("per metre driven: " + "; ".join(per_m))
     return lines
 

@@ -21,6 +21,7 @@ from nlp_calib.analysis.degeneracy import motion_scale
 from nlp_calib.analysis.determinacy import Information
 from nlp_calib.analysis.handoff import odometry_noise
 from nlp_calib.analysis.metrics import each_metrics, first_order, geometry, integrate, segments, steps
+from nlp_calib.analysis.noise_rates import noise_rates
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import (
     DRIFT_LENGTHS,
@@ -127,6 +128,8 @@ class Scorer:
     rpe_window: int
     #: With a mount per log: the log whose view scores the records, or each interval's log.
     logs: int | np.ndarray = 0
+    #: Per interval, where the records do not connect (gaps, missing increments, one log's end).
+    breaks: np.ndarray | None = None
 
     def viewed(self, params: np.ndarray) -> np.ndarray:
         """``params`` as the full-parameter Functions take them over these records (one log's
@@ -155,6 +158,7 @@ class Scorer:
             rpe_window=self.rpe_window,
             bad_intervals=self.bad_intervals,
             bad_records=self.bad_records,
+            breaks=self.breaks,
         )
 
 
@@ -165,7 +169,7 @@ def log_scorer(
     bad_i, bad_r = windows.masks()
     inputs = windows.inputs(steering_sample)
     poses = tracker_poses(fns, windows.selected)
-    return Scorer(fns, inputs, poses, bad_i, bad_r, windows.used[0], rpe_window, log)
+    return Scorer(fns, inputs, poses, bad_i, bad_r, windows.used[0], rpe_window, log, windows.used_breaks())
 
 
 def scores(scorer: Scorer, windows: LogWindows, param_sets: Sequence[np.ndarray]) -> list[Scores]:
@@ -555,7 +559,8 @@ def calibrated_drift(
     fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str, records: int | None = None
 ) -> Drift:
     """Each input's noise per interval calibrated on the drift of the used records (the first
-    ``records`` of them) against the tracker, never below the encoders' quantisation."""
+    ``records`` of them) against the tracker (a random walk beside the readings' rounding, the
+    encoders' quantisation, which does not add up along a drive)."""
     fns, sel = fit.fns, windows.selected
     n = sel.n_records if records is None else min(records, sel.n_records)
     sel = sel.select(0, n)
@@ -582,8 +587,9 @@ def odometry(fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample:
     """Base-link odometry with ``params`` over the used records, started at the base pose the
     tracker's first pose implies, beside the base poses the tracker implies throughout; its
     covariance propagated from each input's noise calibrated on the drift this log shows against
-    the tracker (never below the encoders' quantisation)."""
+    the tracker (a random walk; the readings' rounding, which does not add up, left out)."""
     d = calibrated_drift(fit, windows, params, steering_sample)
+    floor = windows.input_noise_std
     track, cov = propagate(fit.fns, params, d.inputs, d.reference[0], d.noise)
     names = fit.fns.model.input_names
     return OdometryTrack(
@@ -592,8 +598,9 @@ def odometry(fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample:
         cov,
         d.reference,
         input_noise=dict(zip(names, map(float, d.noise))),
-        quantisation=dict(zip(names, map(float, windows.input_noise_std))),
-        coverage=drift_coverage(d.drift, d.noise, d.reference_var),
+        quantisation=dict(zip(names, map(float, floor))),
+        coverage=drift_coverage(d.drift, d.noise, floor, d.reference_var),
+        rates=noise_rates(fit.fns, params, d.inputs, d.noise, (d.drift, d.reference_var, floor)),
     )
 
 
@@ -608,7 +615,9 @@ def handoff_noise(
     d = calibrated_drift(fit, windows, params, steering_sample, NOISE_RECORDS)
     noise = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
-    return odometry_noise(fit.fns, params, d.inputs, time_s, (noise, windows.input_noise_std))
+    found = odometry_noise(fit.fns, params, d.inputs, time_s, (noise, windows.input_noise_std))
+    checked = (d.drift, d.reference_var, windows.input_noise_std)
+    return dataclasses.replace(found, rates=noise_rates(fit.fns, params, d.inputs, d.noise, checked))
 
 
 @dataclass(frozen=True)

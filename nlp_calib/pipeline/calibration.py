@@ -77,10 +77,10 @@ def blocks_scorer(fns: ProblemFunctions, parts: Sequence[LogSetup], data: Residu
         return log_scorer(fns, parts[0].windows, sc.objective.residual.steering_sample, W)
     intervals = [p.windows.bad_intervals[p.fit[0] : p.fit[1] - 1] for p in parts]
     records = [p.windows.bad_records[p.fit[0] : p.fit[1]] for p in parts]
+    breaks = [p.windows.breaks_between(*p.fit) for p in parts]
     logs = data.log_of(np.arange(data.inputs.shape[1]))  # each interval's mount, with one per log
-    return Scorer(
-        fns, data.inputs, data.T_world_sensor, _joined(intervals, True), _joined(records, False), 0, W, logs
-    )
+    masks = (_joined(intervals, True), _joined(records, False))
+    return Scorer(fns, data.inputs, data.T_world_sensor, *masks, 0, W, logs, _joined(breaks, True))
 
 
 class Calibration:

@@ -20,6 +20,7 @@ from nlp_calib.pipeline import (
     direction_check,
     drift_check,
     fault_check,
+    profile_check,
     rival,
     truth,
 )
@@ -54,6 +55,7 @@ RUN_CHECKS: dict[str, RunCheck] = {
     "faults": lambda run, ctx: fault_check.check(run),
     "direction": lambda run, ctx: direction_check.check(run),
     "consistency": lambda run, ctx: consistency_check.check(run),
+    profile_check.NAME: lambda run, ctx: profile_check.check(run, ctx.scenario, ctx.model),
     "truth": lambda run, ctx: truth.check(run, ctx.files, ctx.convert),
     "model": lambda run, ctx: rival.check(run, ctx.scenario),
     "drift": lambda run, ctx: drift_check.check(run, ctx.against, ctx.model),

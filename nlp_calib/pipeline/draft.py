@@ -6,7 +6,8 @@ frame), the model the joint names suggest, and the keys a first run needs. Each 
 joint whose name carries a word of the encoder's name (``left`` for an encoder named ``left_…``),
 an angle encoder (``absolute``) a joint named ``steer…``, a wheel (``counter``) left over any joint named
 ``…wheel…``, ``…traction…`` or ``…drive…``; a model is a candidate when every one of its encoders
-takes a joint of its own, the first registered candidate is drafted. The tracker is the pose topic
+takes a joint of its own; of those, a steered one where a joint is named steer…, the one reading
+the most joints, the first registered, is drafted. The tracker is the pose topic
 whose name says most clearly that it is a reference (a motion-capture system's, a ground truth),
 never the robot's own odometry. The text says what was found and why each choice was made, as
 comments, and is read back as a scenario before it is written: ``run`` accepts it as it is.
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from nlp_calib.core.config import parse_yaml
@@ -92,16 +94,24 @@ def assign(model_name: str, joints: Sequence[str]) -> dict[str, str] | None:
     """Each of the model's encoders' joint by name (see the module docstring); None when some
     encoder finds none of its own."""
     model = MODELS[model_name]
+    # A steering encoder reads a steering joint (where any is named so), a wheel one never does.
+    steer = [j for j in joints if "steer" in j.lower()]
     out: dict[str, str] = {}
     for encoder in encoders(model):
         kind = model.encoder_kinds[encoder]
         own = _words(encoder) - {"wheel"}
         free = [j for j in joints if j not in out.values()]
-        match = [j for j in free if own & _words(j)]
+        if kind == "absolute" and steer:
+            free = [j for j in free if j in steer]
+        elif kind == "counter":
+            free = [j for j in free if j not in steer]
+        # The joint sharing most of the encoder's words (rear_left_wheel: rear_left, not front_left).
+        shared = sorted((-len(own & _words(j)), i) for i, j in enumerate(free) if own & _words(j))
+        match = [free[i] for _, i in shared]
         if not match and kind == "absolute":
-            match = [j for j in free if "steer" in j.lower()]
+            match = free if steer else []
         if not match and kind == "counter":
-            match = [j for j in free if any(w in j.lower() for w in WHEEL_WORDS) and "steer" not in j.lower()]
+            match = [j for j in free if any(w in j.lower() for w in WHEEL_WORDS)]
         if not match:
             return None
         out[encoder] = match[0]
@@ -109,7 +119,10 @@ def assign(model_name: str, joints: Sequence[str]) -> dict[str, str] | None:
 
 
 def guess_model(joints: Sequence[str], model: str | None) -> tuple[str, dict[str, str], str]:
-    """The model (``model`` when given), its encoders' joints and why, in words."""
+    """The model (``model`` when given), its encoders' joints and why, in words: of the models
+    whose every encoder finds a joint, the one that reads the most joints (a steer joint beside
+    four wheels is a car's, not a three-wheeler's nor a two-wheeled base's), the first registered of
+    those; a steer joint is read by a steered model where one fits."""
     names = [model] if model is not None else list(MODELS)
     fits = {m: a for m in names if (a := assign(m, joints)) is not None}
     if not fits:
@@ -118,13 +131,34 @@ def guess_model(joints: Sequence[str], model: str | None) -> tuple[str, dict[str
             f"the joints {', '.join(joints) or '(none)'} do not name the joints of {given}; give --model and "
             "edit the drafted joints, or name the joints in the scenario (docs/bags.md)"
         )
-    chosen = next(iter(fits))
+    # A steering joint is read by a steered model where one fits (never a differential drive's).
+    if any("steer" in j.lower() for j in joints) and not model:
+        steered = {m: a for m, a in fits.items() if "absolute" in MODELS[m].encoder_kinds.values()}
+        fits = steered or fits
+    most = max(len(a) for a in fits.values())
+    chosen = next(m for m, a in fits.items() if len(a) == most)
     pairs = ", ".join(f"{e}: {j}" for e, j in fits[chosen].items())
     others = [m for m in fits if m != chosen]
     why = f"{'given' if model else 'the joint names fit it'} ({pairs})"
+    if not model and len(fits[chosen]) < len(joints):
+        unread = [j for j in joints if j not in fits[chosen].values()]
+        why += f"; it reads the most of them ({', '.join(unread)} left unread)"
     if others:
-        why += f"; {', '.join(others)} read(s) the same joints"
-    return chosen, fits[chosen], why
+        why += f"; {', '.join(others)} read(s) {'fewer or ' if not model else ''}the same joints"
+    return chosen, fits[chosen], why + _held(chosen)
+
+
+def _held(model: str) -> str:
+    """What the model holds at its start where a drive does not tell it (an Ackermann pair's
+    track between its steer pivots whatever the drive), in the joints' names, said before any run."""
+    form = in_units(MODELS[model], "radians")
+    held = form.undetermined(np.zeros((len(form.input_names), 0)))
+    if not held:
+        return ""
+    return (
+        f"; it holds {', '.join(held)} at the start where the drive does not tell them (the pre-flight "
+        "says which): give measured values under known:"
+    )
 
 
 def _score(topic: Topic) -> int:

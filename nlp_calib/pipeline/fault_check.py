@@ -7,11 +7,12 @@ ground slipped under pivots (slip too small to find stays in the fit).
 
 from __future__ import annotations
 
+from nlp_calib.analysis.faults import MATCH_SCATTER
 from nlp_calib.core.text import numbered
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CAVEAT, FINE, CheckResult
 from nlp_calib.results.codec import finite_or_null
-from nlp_calib.results.faults import PIVOT_SLIP, Findings, count_kinds
+from nlp_calib.results.faults import PIVOT_RADIUS_M, PIVOT_SLIP, Findings, count_kinds
 
 #: Faults listed one per line; the rest are counted.
 SHOWN = 6
@@ -75,9 +76,12 @@ def _caveat(findings: Findings) -> str:
         return f"{len(rep.faults)} faults kept in the fit (faults.handling: keep)"
     if slipped := sum(f.kind == PIVOT_SLIP for f in rep.faults):
         return (
-            f"{slipped} increments over pivots the ground slipped on were left out: slip too small to "
-            "find stays in the fit, and what the pivots determine (how the base skids as it turns) may "
-            "be biased by it beyond its σ; check it on a drive with fewer pivots, or slower ones"
+            f"{slipped} increments over pivots the ground slipped on were left out (the rule: a pivot, "
+            f"under {PIVOT_RADIUS_M:g} m of travel per radian turned, is kept where the wheels agree with "
+            f"its increment and left out where they disagree beyond {MATCH_SCATTER:g}× the increments' "
+            "robust scatter; the calibration holds for the pivots kept): slip too small to find stays "
+            "in the fit, and what the pivots determine (how the base skids as it turns) may be biased "
+            "by it beyond its σ; check it on a drive with fewer pivots, or slower ones"
         )
     return ""
 

@@ -25,7 +25,9 @@ from nlp_calib.problem import ResidualData
 class LogWindows:
     """A log's fitted windows and what its figures need: the records ``used`` and ``fit`` of the
     aligned log, its fault masks (per interval and per record of the whole log), the binder that
-    keeps its windows clear of faults and each model input's noise (1σ)."""
+    keeps its windows clear of faults, each model input's noise (1σ) and, per interval of the whole
+    log, where its records do not connect (gaps in time, a reference's missing increments, the
+    joints' breaks): no track runs across them."""
 
     aligned: Log
     used: tuple[int, int]
@@ -35,6 +37,7 @@ class LogWindows:
     bad_intervals: np.ndarray
     bad_records: np.ndarray
     input_noise_std: np.ndarray
+    breaks: np.ndarray | None = None
 
     @property
     def selected(self) -> Log:
@@ -50,6 +53,14 @@ class LogWindows:
         a, b = self.used
         return self.bad_intervals[a : b - 1], self.bad_records[a:b]
 
+    def used_breaks(self) -> np.ndarray:
+        """Where the used records do not connect, per used interval."""
+        return self.breaks_between(*self.used)
+
+    def breaks_between(self, a: int, b: int) -> np.ndarray:
+        """Where records ``a`` to ``b`` of the log do not connect, per interval."""
+        return np.zeros(max(b - a - 1, 0), dtype=bool) if self.breaks is None else self.breaks[a : b - 1]
+
 
 def bind_windows(
     problem: Problem, prepared: PreparedLog, screening: Screening, alignment: Alignment
@@ -61,18 +72,25 @@ def bind_windows(
     report = screening.findings.report
     # Every detected fault shapes the fair figures, whatever the handling: like with like.
     bad_intervals, bad_records = fault_masks(report, log.n_records, alignment.lag_s, dt)
-    # A reference of its own motions is composed only where one-interval increments follow on.
-    bad_intervals = bad_intervals | log.reference.kind.uncovered(log.n_records)
+    # A reference of its own motions is composed only where one-interval increments follow on, and
+    # not across one left out as its own fault.
+    kind = log.reference.kind
+    breaks = kind.uncovered(log.n_records)
+    if kind.chained:
+        matches = replace(report, faults=report.reference_faults)
+        breaks = breaks | matches.bad_intervals(max(log.n_records - 1, 0))
     if prepared.gaps is not None:  # dead reckoning restarts after a gap, as after a fault
-        bad_intervals = bad_intervals | prepared.gaps
+        breaks = breaks | prepared.gaps
     broken = alignment.log.joint_breaks()
     if broken is not None:  # where the joints are read at the lag found, their breaks too
-        bad_intervals = bad_intervals | broken
+        breaks = breaks | broken
         binder = replace(binder, gaps=broken if binder.gaps is None else binder.gaps | broken)
+    bad_intervals = bad_intervals | breaks
     if report.unchecked:
         warnings.warn(f"encoder faults not checked: {report.unchecked}", NlpCalibWarning, stacklevel=3)
     start, stop = max(prepared.start, alignment.valid[0]), min(prepared.stop, alignment.valid[1])
     fit = (start, split(sc, start, stop))
     data = binder.windows(alignment.log, *fit)
     noise = problem.model.input_noise_std(alignment.log, sc.data.encoder_noise)
-    return LogWindows(alignment.log, (start, stop), fit, data, binder, bad_intervals, bad_records, noise)
+    masks = (bad_intervals, bad_records, noise, breaks)
+    return LogWindows(alignment.log, (start, stop), fit, data, binder, *masks)

@@ -24,6 +24,35 @@ class Placement:
 
 
 @dataclass(frozen=True)
+class NoiseRates:
+    """Variances of the base's motion ``(along, across, heading)`` per metre driven (m²/m, m²/m,
+    rad²/m) and per radian turned (m²/rad, m²/rad, rad²/rad); ``coverage``: the share of the drift
+    segments' errors within 2σ of the covariance they grow (None: no segment to judge them by);
+    ``segments``: how many; ``raised``: the factor the variances fitted to the inputs' noise were
+    multiplied by to hold 95 % of them (1: they did)."""
+
+    per_metre: tuple[float, float, float]
+    per_radian: tuple[float, float, float]
+    coverage: float | None
+    segments: int
+    raised: float
+
+    def words(self) -> str:
+        """The rates and how they held, in one sentence."""
+        per_m = ", ".join(f"{v:.3g}" for v in self.per_metre)
+        per_rad = ", ".join(f"{v:.3g}" for v in self.per_radian)
+        held = (
+            "no drift segment to judge it by"
+            if self.coverage is None
+            else f"{100 * self.coverage:.0f} % of {self.segments} drift segments' errors within its 2σ"
+        )
+        return (
+            f"variance per metre driven {per_m} (along, across, heading: m², m², rad²), per radian "
+            f"turned {per_rad}; {held}"
+        )
+
+
+@dataclass(frozen=True)
 class OdometryNoise:
     """The odometry's covariance diagonals as a controller publishes them, from each input's noise
     per interval calibrated on the log's drift against the tracker (``input_noise``): the twist
@@ -37,6 +66,8 @@ class OdometryNoise:
     interval_s: float
     distance_m: float
     input_noise: Mapping[str, float]
+    #: The same noise per metre driven and per radian turned (None: not computed).
+    rates: NoiseRates | None = None
 
 
 #: The variance given to what planar wheel odometry does not measure: a filter then ignores it.

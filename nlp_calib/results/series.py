@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nlp_calib.results.figures import ErrorStats
+from nlp_calib.results.handoff import NoiseRates
 
 
 @dataclass(frozen=True)
@@ -101,8 +102,9 @@ class OdometryTrack:
 
     ``reference``: the base poses the tracker implies with the calibrated mount; ``input_noise``:
     each model input's 1σ per interval the covariance is propagated from (calibrated on the drift
-    against the tracker, never below ``quantisation``, the encoders' resolution alone);
-    ``coverage``: the share of that drift, over segments, within the propagated 2σ."""
+    against the tracker: a random walk beside ``quantisation``, the encoders' resolution, which
+    rounds each reading and does not add up); ``coverage``: the share of that drift, over
+    segments, within the propagated 2σ (None: no segment to judge it by)."""
 
     time_s: np.ndarray
     T_world_base: np.ndarray
@@ -110,7 +112,9 @@ class OdometryTrack:
     reference: np.ndarray | None = None
     input_noise: Mapping[str, float] = field(default_factory=dict)
     quantisation: Mapping[str, float] = field(default_factory=dict)
-    coverage: float = float("nan")
+    coverage: float | None = None
+    #: The same noise per metre driven and per radian turned (None: not computed).
+    rates: NoiseRates | None = None
 
     def csv(self) -> str:
         """One row per record: time, pose and the upper triangle of the covariance."""

@@ -30,6 +30,7 @@ from nlp_calib.core.config import coerce, from_mapping
 from nlp_calib.core.errors import ConfigError, DatasetError, NlpCalibWarning
 from nlp_calib.core.files import kind_of
 from nlp_calib.core.ranges import Range
+from nlp_calib.core.text import escaped
 from nlp_calib.logs import Log
 from nlp_calib.logs.bag_joints import timed_by_tracker
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, MAX_GAP, Stamped
@@ -304,13 +305,29 @@ def _not_regular(path: Path) -> str | None:
 
 
 def check_encoders(given: Mapping[str, str], model: KinematicModel, where: str) -> None:
-    """One joint for each of the model's encoders, by the encoder's name."""
+    """One joint for each of the model's encoders, by the encoder's name, each its own: one joint
+    read twice (a single steer column for both front wheels of a pair) tells the model nothing
+    the second encoder stands for (the pair's split), so it is refused."""
     names = encoders(model)
     if set(given) != set(names):
         raise ConfigError(
             f"{where}: name the joint of each of {model.name}'s encoders, {', '.join(names)} (got "
             f"{', '.join(given) or 'none'}), as {{{names[0]}: <joint name>, ...}}"
         )
+    readers: dict[str, list[str]] = {}
+    for encoder, joint in given.items():
+        readers.setdefault(joint, []).append(encoder)
+    for joint, shared in readers.items():
+        if len(shared) < 2:
+            continue
+        steered = all(model.encoder_kinds[e] == "absolute" for e in shared)
+        hint = (
+            "one steer joint for both front wheels is a model's with one steer encoder, which "
+            "holds no Ackermann split: choose it, or log each wheel's own steer joint"
+            if steered
+            else "give each encoder its own joint"
+        )
+        raise ConfigError(f"{where}: {' and '.join(shared)} both read the joint '{escaped(joint)}': {hint}")
 
 
 def _resolved(path: Path, base_dir: Path) -> Path:

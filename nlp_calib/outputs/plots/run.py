@@ -61,7 +61,9 @@ def _far_outside(P: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
 
 
 def _label(track: Track, outside: bool) -> str:
-    parts = [track.label, f"(ATE {track.ate_mean:.3f} m)"]
+    # No full-run ATE over records that do not connect (its track would chain them).
+    ate = f"(ATE {track.ate_mean:.3f} m)" if np.isfinite(track.ate_mean) else "(no full-run ATE: parts apart)"
+    parts = [track.label, ate]
     if not track.converged:
         parts.append("NOT CONVERGED")
     if outside:

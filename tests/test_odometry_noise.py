@@ -1,0 +1,114 @@
+"""The odometry's noise a filter can use (issue #43 item 4): per metre driven and per radian turned,
+grown as a filter grows it; the encoders' quantisation as each reading's rounding (it does not add
+up along a drive), so a quantisation-bound drift is not handed off as a random walk."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from odometry_truth import sigma_over_truth
+
+from nlp_calib.analysis.noise_rates import fit_rates, grown_covariances
+from nlp_calib.analysis.odometry import Drift, drift_noise
+from nlp_calib.core import poses
+from nlp_calib.logs import parse_log
+from nlp_calib.models import get_model
+from nlp_calib.outputs.handoff import calibration_dict
+from nlp_calib.pipeline import Calibration, Scenario, Wanted
+from nlp_calib.pipeline.options import ResidualOptions, ValidationOptions
+from nlp_calib.simulation import SimulationOptions, simulate
+
+
+def test_the_rates_grow_a_segments_covariance_as_a_filter_does() -> None:
+    """One pass of cumulative sums against ``P' = F·P·Fᵀ + R·Q·Rᵀ`` interval by interval."""
+    rng = np.random.default_rng(4)
+    increments = np.c_[rng.uniform(-0.1, 0.3, 60), rng.normal(0.0, 0.01, 60), rng.normal(0.0, 0.3, 60)]
+    rates = np.abs(rng.normal(0.0, 1e-3, (2, 3)))
+    spans = np.array([[0, 60], [3, 17], [10, 11], [20, 20], [41, 59]])
+    track = poses.accumulate(np.zeros(3), increments)
+    for (i, j), found in zip(spans, grown_covariances(increments, rates, spans)):
+        P = np.zeros((3, 3))
+        for k in range(i, j):
+            F = np.eye(3)
+            F[0, 2], F[1, 2] = -(track[k + 1, 1] - track[k, 1]), track[k + 1, 0] - track[k, 0]
+            q = np.array([np.hypot(*increments[k, :2]), abs(increments[k, 2])]) @ rates
+            c, s = np.cos(track[k, 2]), np.sin(track[k, 2])
+            R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+            P = F @ P @ F.T + R @ np.diag(q) @ R.T
+        c, s = np.cos(track[i, 2]), np.sin(track[i, 2])
+        Ri = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        assert np.allclose(found, Ri @ P @ Ri.T, rtol=1e-12, atol=1e-18)
+
+
+def test_the_rates_split_each_intervals_variance_by_distance_and_turn() -> None:
+    rng = np.random.default_rng(5)
+    increments = np.c_[rng.uniform(0.0, 0.2, 200), np.zeros(200), rng.normal(0.0, 0.2, 200)]
+    truth = np.array([[2e-4, 1e-5, 3e-4], [1e-5, 4e-6, 2e-3]])  # per metre, per radian
+    variances = np.c_[np.hypot(increments[:, 0], increments[:, 1]), np.abs(increments[:, 2])] @ truth
+    assert np.allclose(fit_rates(increments, variances), truth, rtol=1e-9)
+
+
+def test_a_drift_of_rounded_readings_alone_is_no_random_walk() -> None:
+    """Segments of 5, 20 and 80 intervals whose errors are one input's random walk and its readings'
+    rounding at both ends (unit terms 2·I): the walk is found beside the rounding, not raised to it
+    (the rounding as a floor per interval made a 80-interval segment's σ 4.5x its error)."""
+    rng = np.random.default_rng(6)
+    lengths = np.repeat([5.0, 20.0, 80.0], 80)
+    walk, rounding = 1e-4, 0.29**2
+    covs = lengths[:, None, None, None] * np.eye(3)[None, None]
+    reads = np.broadcast_to(2.0 * np.eye(3), (lengths.size, 1, 3, 3))
+    sd = np.sqrt(walk * lengths + 2.0 * rounding)
+    errors = rng.normal(0.0, 1.0, (lengths.size, 3)) * sd[:, None]
+    drift = Drift(errors, covs, np.zeros((lengths.size, 2, 3, 3)), reads=reads)
+    noise, _ = drift_noise(drift, np.array([np.sqrt(rounding)]), credited=(False, False))
+    assert noise[0] ** 2 < 0.2 * rounding, noise  # not the rounding's variance per interval
+    assert noise[0] ** 2 >= 0.5 * walk, noise  # the walk the long segments show
+
+
+@pytest.fixture(scope="module")
+def diff_drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, object, object, Path]:
+    sim = simulate(SimulationOptions.of(model="diff_drive", records=1500, seed=7))
+    log = parse_log(sim.text().splitlines(), get_model("diff_drive").encoder_kinds, "sim")
+    sc = Scenario.of(
+        "noise",
+        "sim.txt",
+        model="diff_drive",
+        solvers=("gauss_newton",),
+        residual=ResidualOptions(horizon=10),
+        validation=ValidationOptions(blocks=0),
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        calib = Calibration(sc, log=log)
+        run = calib.run(wanted=Wanted(odometry="gauss_newton"))
+    return sim, calib, run, tmp_path_factory.mktemp("noise")
+
+
+def test_a_diff_drives_odometry_noise_is_the_drift_its_windows_truly_have(diff_drive: tuple) -> None:
+    """Against the true base over the fit's windows: the σ the run gives (the inputs' noise
+    propagated, and the per-metre and per-radian rates) within a factor 2 of the σ whose 2σ holds
+    95 % of the true errors, each component (the quantisation as a random walk made it 2-4x over
+    40 records, 3-9x over 200)."""
+    sim, calib, run, _ = diff_drive
+    found = sigma_over_truth(calib, run, (sim.time_ns * 1e-9, sim.T_world_base_true, 0))
+    for way, ratios in found.items():
+        print(way, ratios)
+        assert np.all((0.5 <= ratios) & (ratios <= 2.0)), (way, ratios)
+
+
+def test_calibration_yaml_holds_the_noise_per_metre_and_per_radian(diff_drive: tuple) -> None:
+    _, _, run, _ = diff_drive
+    doc = yaml.safe_load(yaml.safe_dump(calibration_dict(run)))
+    noise = doc["odometry_noise"]
+    rates = run.reports["gauss_newton"].controller.noise.rates
+    axes = ("along", "across", "heading")
+    assert [noise["variance_per_metre"][a] for a in axes] == list(rates.per_metre)
+    assert [noise["variance_per_radian"][a] for a in axes] == list(rates.per_radian)
+    assert noise["segments_within_2sigma"] >= 0.95 and noise["segments"] == rates.segments > 100
+    # Heading drifts with the distance the wheels roll (both wheels' noise), never nan.
+    assert noise["variance_per_metre"]["heading"] > 0.0
+    assert all(np.isfinite(v) for v in (*rates.per_metre, *rates.per_radian))
