@@ -26,7 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nlp_calib.analysis.degeneracy import motion_scale
+from nlp_calib.analysis.observability import directions
 from nlp_calib.analysis.uncertainty import EndNoise, split_noise
+from nlp_calib.models import reference_scales
+from nlp_calib.results.checks import NOT_OBSERVABLE
 from nlp_calib.solvers import ProblemEvaluator
 
 #: A step below this share of every σ cannot matter: the subset's estimate of it is taken as it is.
@@ -39,6 +43,10 @@ SUBSET = 64
 SCREEN_FROM = 8 * SUBSET
 #: The subset's estimate's margin, in its own standard errors.
 MARGIN = 3.0
+#: A step beyond this many σ of any coordinate is not taken: the counts' rounding biases an
+#: estimate by a few σ (tens on long one-record windows); a step of hundreds is a solver's flat
+#: valley (a drive that does not determine the parameters), where a Newton step extrapolates.
+LARGEST = 100.0
 
 
 def noise_share(
@@ -113,6 +121,7 @@ def bias_step(evaluator: ProblemEvaluator, x: np.ndarray, noise: tuple[np.ndarra
     sigma = np.sqrt(np.clip(np.diag(H_inv), 0.0, None) * float(np.sum(weight * s)) / dof)
     if not np.all(np.isfinite(sigma) & (sigma > 0)):
         return none
+    H_inv = _determined_inverse(evaluator, x, ne.H, float(np.sum(weight * s)) / dof)
     N = s.size
     if N >= SCREEN_FROM:
         subset = np.linspace(0, N - 1, SUBSET).round().astype(np.intp)
@@ -123,7 +132,28 @@ def bias_step(evaluator: ProblemEvaluator, x: np.ndarray, noise: tuple[np.ndarra
         if np.all(np.abs(step) + MARGIN * err <= MATTERS * sigma):
             return BiasStep(x, step, sigma)
     grad = _gradient_terms(evaluator, x, weight, noise, sigma, None).sum(axis=0)
-    return BiasStep(x, np.asarray(0.5 * H_inv @ grad), sigma)
+    step = np.asarray(0.5 * H_inv @ grad)
+    return BiasStep(x, step, sigma) if np.all(np.abs(step) <= LARGEST * sigma) else none
+
+
+def _determined_inverse(
+    evaluator: ProblemEvaluator, x: np.ndarray, H: np.ndarray, sigma2: float
+) -> np.ndarray:
+    """``H⁻¹`` on the directions the drive determines, zero along those the run's observability
+    calls not determined (:func:`~nlp_calib.analysis.observability.directions`, beyond
+    ``NOT_OBSERVABLE`` reference units, or free whatever the noise): along those a Newton step
+    extrapolates the cost's flatness instead of correcting a small bias (a straight highway car's
+    wheelbase: a step of 10^4 of its σ), and nothing is stated of them anyway."""
+    fns, names = evaluator.fns, evaluator.fns.free
+    value = dict(zip(fns.names, np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()))
+    keys = fns.layout.keys(names)
+    R = reference_scales(fns.model, keys, np.array([value[n] for n in names]), fns.sensor.reference)
+    motion2 = motion_scale(fns, evaluator.data.z, evaluator.omega)
+    found = directions(H, sigma2, R, evaluator.n_residuals, motion2)
+    lam = np.maximum(found.lam, 1e-12 * max(float(found.lam[-1]), 1e-300))
+    keep = ~found.free & (1.0 / np.sqrt(lam) <= NOT_OBSERVABLE)
+    V = found.V[:, keep]
+    return (R[:, None] * V / (sigma2 * lam[keep])) @ (V.T * R[None, :])
 
 
 def _gradient_terms(
