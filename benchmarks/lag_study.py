@@ -18,6 +18,7 @@ import argparse
 import tempfile
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -37,10 +38,9 @@ SPLIT: dict[str, list[float]] = {}
 LAG_Z: list[float] = []
 
 
-def scenario(folder: Path, tum: Path) -> Path:
-    """The scenario of docs/camera.md on ``tum`` and its joints."""
-    path = folder / f"{tum.stem}.yaml"
-    doc = {
+def camera_doc(tum: Path) -> dict[str, Any]:
+    """The scenario of docs/camera.md on ``tum`` and its joints, as a mapping."""
+    return {
         "name": tum.stem,
         "model": "diff_drive",
         "sensor": "3d",
@@ -57,7 +57,12 @@ def scenario(folder: Path, tum: Path) -> Path:
         "robust": {"kernel": "huber", "delta": 10.0},
         "solvers": ["gauss_newton"],
     }
-    path.write_text(yaml.safe_dump(doc))
+
+
+def scenario(folder: Path, tum: Path) -> Path:
+    """The scenario of docs/camera.md on ``tum`` and its joints, written to ``folder``."""
+    path = folder / f"{tum.stem}.yaml"
+    path.write_text(yaml.safe_dump(camera_doc(tum)))
     return path
 
 

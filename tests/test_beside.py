@@ -132,6 +132,20 @@ def test_a_sensor_beside_is_refused_where_none_fits(drive: tuple[Path, dict[str,
         scenario_from_mapping(wrong, "bad", bag.parent)
 
 
+def test_init_drafts_a_gyro_beside_the_lidar(drive: tuple[Path, dict[str, float]], tmp_path: Path) -> None:
+    """A bag of scans and an Imu topic: ``init`` drafts both in one objective (was: the scans alone,
+    the gyro named 'too')."""
+    bag, _ = drive
+    drafted = tmp_path / "drive.yaml"
+    proc = cli("init", str(bag), "--out", str(drafted))
+    assert proc.returncode == 0, proc.stderr
+    assert "reference: the scans on /scan; gyro beside it /imu" in proc.stdout
+    raw = yaml.safe_load(drafted.read_text())
+    assert raw["sensor"] == {"mount": "planar", "beside": "gyro"}
+    assert raw["dataset"]["scan"] == "/scan" and raw["dataset"]["imu"] == "/imu"
+    assert "sensor: {mount: planar, beside: gyro}: its bias, tilt and clock offset" in drafted.read_text()
+
+
 def test_simulate_writes_a_lidar_and_gyro_bag_a_scenario_reads(tmp_path: Path) -> None:
     proc = cli("simulate", "--lidar", "--imu", "--out", str(tmp_path / "d"), "--duration", "3", "--seed", "4")
     assert proc.returncode == 0, proc.stderr

@@ -12,7 +12,7 @@ import pytest
 import yaml
 from conftest import SCENARIOS, write_sim
 
-from nlp_calib import Calibration, load_scenario
+from nlp_calib import Calibration, load_scenario, scenario_from_mapping
 from nlp_calib.core import poses3d
 from nlp_calib.logs import resample_encoders
 from nlp_calib.models import get_model, load_log
@@ -209,3 +209,29 @@ def test_a_lag_the_drive_cannot_separate_from_the_wheels_is_not_determined(tmp_p
     params, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
     for name, true in truth.items():
         assert abs(params[name] - true) <= 3 * std[name], (name, params[name], true, std[name])
+
+
+#: χ²(10)'s 0.1 % and 99.9 % points: ten z of a σ that covers its error sum their squares between
+#: them but in one case of 500.
+CHI2_10 = (1.479, 29.59)
+MODELS = ("tricycle", "diff_drive", "car_like", "skid_steer", "car_like_bicycle", "tricycle_reverse")
+
+
+def test_the_lags_sigma_covers_its_error_over_independent_logs(tmp_path: Path) -> None:
+    """Ten short logs, each its own seed (one drive and noise each: logs of one seed share their
+    z), model and lag (0-30 ms late): the lag's z = (estimate − truth)/σ to believe. Their squares
+    sum within χ²(10)'s 0.1-99.9 % range (a σ half the right one gives four times χ²(10): mean 40,
+    beyond it three times in four; one twice the right one a quarter: mean 2.5), and none is beyond
+    3.3σ (0.1 % each)."""
+    z = []
+    for seed in range(61, 71):
+        model = MODELS[seed % len(MODELS)]
+        lag = float(np.random.default_rng(seed).uniform(0.0, 0.03))
+        log = write_sim(tmp_path, f"{seed}.txt", records=400, seed=seed, model=model, latency_s=lag)
+        doc = {"dataset": str(log), "model": model, "initial_guess": "from_file", "solvers": ["gauss_newton"]}
+        sc = scenario_from_mapping({**doc, "alignment": {"tracker_lag": "auto"}}, f"s{seed}", tmp_path)
+        run = Calibration(sc).run(["gauss_newton"])
+        estimate = run.reports["gauss_newton"].result.param_dict()["tracker_lag"]
+        z.append((estimate - lag) / run.std("gauss_newton")["tracker_lag"])
+    assert CHI2_10[0] < float(np.sum(np.square(z))) < CHI2_10[1], z
+    assert float(np.max(np.abs(z))) < 3.3, z

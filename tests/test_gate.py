@@ -3,17 +3,19 @@ compared alike."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import SCENARIOS
+from conftest import SCENARIOS, write_sim
 
 from nlp_calib.analysis import determinacy as det
+from nlp_calib.analysis import observability as obs
 from nlp_calib.analysis.verdict import lag_caveats
 from nlp_calib.models import get_model
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.pipeline import preflight as pf
-from nlp_calib.pipeline import scenario_from_mapping
 from nlp_calib.pipeline.align import apart, valleys
 from nlp_calib.pipeline.build import Binder
 from nlp_calib.pipeline.preflight import preflight
@@ -22,7 +24,8 @@ from nlp_calib.pipeline.units_check import _judged_by_fit
 from nlp_calib.pipeline.validation import lag_alike
 from nlp_calib.problem import ResidualData
 from nlp_calib.results.checks import LagEstimate
-from nlp_calib.results.preflight import UnitFinding
+from nlp_calib.results.preflight import WEAKLY, UnitFinding
+from nlp_calib.results.run import CAVEATS
 from nlp_calib.solvers.evaluation import NormalEquations
 
 REAL = Path("/work/shared/data/dataset.txt")
@@ -128,3 +131,75 @@ def test_the_preflights_information_and_jackknife_are_its_fits_own(
         assert np.max(gap) < 0.01, gap
         moved.append(np.max(np.abs(x_full - a.x) / a.propagated))
     assert max(moved) > 0.1  # the folds do move: the bound above is not met by staying at x
+
+
+def test_the_preflight_judges_every_window_the_budget_holds() -> None:
+    # 1499 windows of one record were rounded down to 1280 (a whole number of buckets): the fit on
+    # them stopped elsewhere along a direction the drive barely holds than the run's on all 1499.
+    assert np.array_equal(det.spread(1499, det.MAX_WORK), np.arange(1499))
+    more = det.spread(10 * det.MAX_WORK, det.MAX_WORK)
+    assert more.size <= det.MAX_WORK and more.size % det.BUCKET == 0 and more[0] == 0
+
+
+def test_the_preflight_calls_not_observable_what_the_runs_verdict_does() -> None:
+    """One rule (observability.not_observable): the parameters of the directions beyond the limit
+    or free, as weak_directions names them for the verdict; not a parameter's own σ."""
+    names = ("a", "b", "c")
+    c, s = np.cos(0.5), np.sin(0.5)  # b's share of the loose direction 0.23
+    V = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    lam = np.array([1.0 / 150.0**2, 1.0 / 2.0**2, 1.0])  # 1σ 150, 2 and 1 reference units
+    found = obs.Directions(lam, V, np.zeros(3, dtype=bool), np.zeros(3))
+    said = {
+        n
+        for w in obs.weak_directions(names, lam, V, found.free)
+        if w.std_reference > 100
+        for n in w.components
+    }
+    flagged = {n for n, f in zip(names, obs.not_observable(found)) if f}
+    assert flagged == said == {"a", "b"}
+    free = obs.Directions(np.array([1e-30, 1.0, 1.0]), np.eye(3), np.array([True, False, False]), np.zeros(3))
+    assert list(obs.not_observable(free)) == [True, False, False]
+
+
+def test_a_car_whose_rear_track_the_drive_barely_holds_is_not_refused(tmp_path: Path) -> None:
+    """The gate study's car (seed 501 of its defaults: s-curves, 1500 records, stamps 29.9 ms late,
+    the lag fitted) was refused (exit 4, "cannot determine rear_track") while the fit, run anyway,
+    ended usable with caveats and every parameter within 2.7σ of the truth. The rear track fits
+    about as well near zero as at its length, and which a fit stops at turns on the lag the
+    encoders are re-sampled at: the pre-flight's fit now starts where the run's does, at the lag
+    the run's alignment finds, and ends where the run's ends."""
+    lag = float(np.random.default_rng(501).uniform(0.0, 0.03))  # as the study draws it
+    log = write_sim(tmp_path, "car.txt", seed=501, model="car_like", latency_s=lag)
+    sc = scenario_from_mapping(
+        {
+            "dataset": str(log),
+            "model": "car_like",
+            "initial_guess": "from_file",
+            "solvers": ["gauss_newton"],
+            "alignment": {"tracker_lag": "auto"},
+        },
+        "car",
+        tmp_path,
+    )
+    report = preflight(sc)
+    assert report.exit_code == 3 and report.stop_words() == "", report.stop_words()
+    rear = next(p for p in report.parameters if p.name == "rear_track")
+    assert rear.status == WEAKLY, rear
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    assert run.verdict.level == CAVEATS, run.verdict
+    # The pre-flight's fit ends where the run's does (the same lag, the same start, the same windows).
+    fitted = pf.assess(sc).fitted()
+    assert fitted is not None
+    estimate = run.reports["gauss_newton"].result.param_dict()
+    for name, value in fitted.items():
+        assert value == pytest.approx(estimate[name], rel=1e-6, abs=1e-9), name
+    # One σ before the fit and after it, within what the run adds (half the forward-reverse
+    # difference where larger), as test_vehicles' highway car holds it.
+    std = run.std("gauss_newton")
+    ratios = {p.name: p.std / std[p.name] for p in report.parameters}
+    assert all(0.5 < r < 2.0 for r in ratios.values()), ratios
+    truth = run.checks.truth
+    assert truth is not None
+    assert np.nanmax(np.abs(truth.z)) < 3.0, dict(zip(truth.names, truth.z))

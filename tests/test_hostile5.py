@@ -245,7 +245,8 @@ def test_a_single_output_file_never_replaces_what_is_not_ours(
     argv = [verb, small_log, flag, target, *(["--force"] if force else [])]
     code, _, err = run(argv, capsys)
     if kind == "user file" and force:
-        assert code in (0, 3), err
+        # Any verdict's exit code (the 400-record drive never turns: NOT ENOUGH, 4): the file is written.
+        assert code in (0, 3, 4), err
         assert target.read_text() != "mine\n"
         return
     assert code == 2, err

@@ -7,13 +7,18 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
+from conftest import cli
 
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning, UsageError
 from nlp_calib.logs.imu import GyroRates, read_gyro_csv, read_imu
+from nlp_calib.simulation.imu import ImuSimulationOptions, simulate_imu, write_imu_simulation
+from nlp_calib.simulation.options import DriveShape
 
 pytest.importorskip("rosbags")
 
@@ -179,3 +184,42 @@ def test_an_empty_imu_topic_is_refused(tmp_path: Path) -> None:
     only = write_bag(tmp_path / "one", [imu(round(T0 * 1e9), "imu_link", (0, 0, 0), (0, 0, 9.8))])
     with pytest.raises(UsageError, match="has 1 message"):
         read_imu(only, "/imu")
+
+
+@pytest.mark.parametrize("degrees", [False, True])
+def test_a_slow_robots_gyro_in_degrees_is_refused_against_the_wheels_turning(
+    degrees: bool, tmp_path: Path
+) -> None:
+    """A robot turning below 0.21 rad/s: its gyro's degrees per second stay under the reader's 12 rad/s
+    refusal; the gyro's turning against the wheels' (typical wheels: the lengths are not all known)
+    is 180/π and the pre-flight refuses it with the fix (exit 2). The same drive in rad/s is not."""
+    drive = DriveShape(max_speed=0.3, max_turn=0.15)
+    sim = simulate_imu(ImuSimulationOptions(duration_s=40.0, seed=13, drive=drive))
+    assert np.quantile(np.abs(sim.rates[:, 2]), 0.99) < 0.21
+    bag, _ = write_imu_simulation(
+        replace(sim, rates=np.degrees(sim.rates)) if degrees else sim, tmp_path / "slow"
+    )
+    dataset = {
+        "bag": str(bag),
+        "joint_states": "/joint_states",
+        "joints": ["left_wheel_joint", "right_wheel_joint"],
+    }
+    scenario = {
+        "model": "diff_drive",
+        "sensor": "gyro",
+        "dataset": {**dataset, "imu": "/imu"},
+        "known": {"wheel_separation": 0.45},
+        "initial_guess": "auto",
+        "information": {"translation": 1.0e8, "rotation": 1.0e8},
+        "solvers": ["gauss_newton"],
+    }
+    path = tmp_path / "slow.yaml"
+    path.write_text(yaml.safe_dump(scenario))
+    proc = cli("preflight", str(path))
+    said = "degrees per second (180/π = 57.3); sensor_msgs/Imu holds rad/s (REP 103)"
+    if degrees:
+        assert proc.returncode == 2, proc.stdout + proc.stderr
+        assert said in proc.stderr and "as far as typical wheels" in proc.stderr, proc.stderr
+    else:
+        assert said not in proc.stdout + proc.stderr
+        assert "  left_wheel_radius: determined" in proc.stdout, proc.stdout

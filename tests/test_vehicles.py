@@ -227,13 +227,6 @@ def test_a_highway_car_given_what_it_cannot_determine_finds_its_wheel_scale_and_
         assert run.scenario.layout.param(name).status == KNOWN
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="#43 item 5 open: with the lag fitted by default, the pre-flight also calls steer_offset not "
-    "determined on this straight drive (it trades with k_steer there), while the run, at the estimate its "
-    "solver wandered to, determines it (its σ under the not-observable limit): the two read the "
-    "information at different estimates; both refuse (NOT DETERMINED, nothing handed off)",
-)
 def test_the_run_past_the_preflight_says_not_determined_for_the_preflights_reason(tmp_path: Path) -> None:
     """Past a pre-flight that refuses (--skip-preflight), a solver that wanders along the direction
     the drive leaves free ends anywhere (k_steer -1.8e4, steer_offset -1.16 rad): the run said

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from nlp_calib.models import reference_scales
 from nlp_calib.problem import ProblemFunctions
 
 #: A direction whose unit step (in reference units) changes the predicted motion by less than this
@@ -37,3 +38,11 @@ def free_directions(lam: np.ndarray, n_windows: int, motion2: float) -> np.ndarr
     floor = FIDELITY**2 * max(n_windows, 1) * motion2
     numeric = 1e-14 * max(float(np.max(lam)) if lam.size else 0.0, 1e-300)
     return np.asarray(lam < max(floor, numeric))
+
+
+def scales(fns: ProblemFunctions, values: np.ndarray) -> np.ndarray:
+    """Each free parameter's reference precision in its unit at the free parameters' ``values``
+    (:func:`nlp_calib.models.reference_scales`, with the sensor's own references: a camera's mount
+    is not a planar one's): the one scale the pre-flight and the run read what a drive determines
+    in (the pre-flight had read every sensor's mount in a planar one's)."""
+    return reference_scales(fns.model, fns.layout.keys(fns.free), values, fns.sensor.reference)

@@ -21,15 +21,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlp_calib.analysis.degeneracy import free_directions, motion_scale
-from nlp_calib.analysis.observability import MIN_TURNING, directions
+from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
+from nlp_calib.analysis.observability import MIN_TURNING, directions, not_observable
 from nlp_calib.analysis.streams import chord_scatter
 from nlp_calib.analysis.uncertainty import white_covariance
 from nlp_calib.logs import Log
-from nlp_calib.models import reference_scales
 from nlp_calib.models.base import reference_scale
 from nlp_calib.problem import ProblemFunctions, ResidualData, over_columns
-from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
+from nlp_calib.results.checks import WEAK
 from nlp_calib.results.layout import CLOCK
 from nlp_calib.results.preflight import DETERMINED, NOT_DETERMINED, WEAKLY, Excitation, ParameterStatus
 from nlp_calib.symbolic.kernels import kernel_function
@@ -79,13 +78,15 @@ class Information:
 
 
 def spread(n: int, most: int) -> np.ndarray:
-    """At most ``most`` indices spread evenly over ``range(n)``, a whole number of :data:`BUCKET`
-    of them when there are more than that."""
-    size = min(n, most)
+    """At most ``most`` indices spread evenly over ``range(n)``: all of them when there are no more
+    than that (the windows a run fits: 1280 of a log's 1499 left a car's barely held rear track
+    to slide elsewhere in its flat valley than the run's fit, with a third of the information);
+    else a whole number of :data:`BUCKET` of them when there are more than that."""
+    if n <= most:
+        return np.arange(n)
+    size = most
     if size > BUCKET:
         size -= size % BUCKET
-    if size == n:
-        return np.arange(n)
     return np.linspace(0, n - 1, size).round().astype(np.int64)
 
 
@@ -147,7 +148,7 @@ def step(fns: ProblemFunctions, info: Information, x: np.ndarray) -> np.ndarray:
     determine; the others (:func:`~nlp_calib.analysis.degeneracy.free_directions`) are left where
     they are: a start is brought to the data, where a drive's free directions are what a fit would
     find (away from the data, a free direction can lean into parameters the drive determines)."""
-    R = reference_scales(fns.model, fns.layout.keys(fns.free), np.asarray(x, dtype=float))
+    R = scales(fns, np.asarray(x, dtype=float))
     lam, V = np.linalg.eigh(0.5 * (info.H + info.H.T) * np.outer(R, R))
     keep = ~free_directions(lam, info.n_windows, info.motion2) & (lam > 0)
     return np.asarray(-R * ((V[:, keep] / lam[keep]) @ (V[:, keep].T @ (R * info.g))))
@@ -198,18 +199,23 @@ class Standing:
     undetermined: np.ndarray
     bounded: np.ndarray
     partners: tuple[tuple[str, ...], ...]
-    #: The σ in the model's reference units, which the run's observability judges a parameter
-    #: not determined by (``std_reference`` may be against what the verdict needs instead).
-    observed: np.ndarray | None = None
+    #: Which the run's verdict would call not determined: along a direction beyond the
+    #: not-observable limit (:func:`~nlp_calib.analysis.observability.not_observable`).
+    unobservable: np.ndarray
 
 
 def standing(
-    fns: ProblemFunctions, info: Information, sigma2: float, values: np.ndarray, bounds_std: np.ndarray | None
+    fns: ProblemFunctions,
+    info: Information,
+    sigma2: float,
+    values: np.ndarray,
+    bounds_std: np.ndarray | None,
 ) -> Standing:
     """Each free parameter's standing on the windows whose information is ``info``, at the free
-    parameters' ``values``, for residuals of variance ``sigma2`` (see the module docstring)."""
+    parameters' ``values``, for residuals of variance ``sigma2`` (see the module docstring), in the
+    reference units a run reads them in (:func:`~nlp_calib.analysis.degeneracy.scales`)."""
     names = fns.free
-    R = reference_scales(fns.model, fns.layout.keys(names), values)
+    R = scales(fns, values)
     found = directions(info.H, sigma2, R, info.n_windows, info.motion2)
 
     def free(lam: np.ndarray) -> np.ndarray:
@@ -225,7 +231,9 @@ def standing(
     for i in range(len(names)):
         basis = Vf if undetermined[i] else weak_dirs
         partners.append(_coupled(names, basis, i))
-    return Standing(names, std, std / R, R, undetermined, np.asarray(bounded), tuple(partners), std / R)
+    return Standing(
+        names, std, std / R, R, undetermined, np.asarray(bounded), tuple(partners), not_observable(found)
+    )
 
 
 def _coupled(names: tuple[str, ...], basis: np.ndarray, i: int) -> tuple[str, ...]:
@@ -281,8 +289,7 @@ def statuses(
     ]  # fmt: skip
     for i, name in enumerate(found.names):
         ratio, partners = float(found.std_reference[i]), found.partners[i]
-        observed = ratio if found.observed is None else float(found.observed[i])
-        if found.undetermined[i] or observed > NOT_OBSERVABLE:
+        if found.undetermined[i] or found.unobservable[i] or _unturned(fns, name, ex):
             status = NOT_DETERMINED
         else:
             status = WEAKLY if ratio > WEAK else DETERMINED
@@ -296,6 +303,15 @@ def statuses(
             )
         )  # fmt: skip
     return tuple(out)
+
+
+def _unturned(fns: ProblemFunctions, name: str, ex: Excitation | None) -> bool:
+    """Whether ``name`` needs turns the drive never makes (its heading spans less than
+    :data:`~nlp_calib.analysis.observability.MIN_TURNING`): the run's observability calls it not
+    observable then, wherever its fit stops (a straight diff drive's baseline and lever arm,
+    held ±0.3 m where the pre-flight's steps stopped, 1.3e5 m where the run's solver did)."""
+    turning = (*fns.model.turning_params, *fns.sensor.turning)
+    return ex is not None and name in turning and ex.heading_span_rad < MIN_TURNING
 
 
 def _trade(partners: Sequence[str], bounded: bool, free: bool) -> str:

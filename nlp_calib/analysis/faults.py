@@ -45,7 +45,7 @@ from nlp_calib.core import poses
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.logs.log import frozen
-from nlp_calib.logs.reference import Motions, Poses
+from nlp_calib.logs.reference import Motions, PoseMotions, Poses
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results.faults import (
@@ -404,6 +404,9 @@ def counter_faults(
 JUMPS: dict[str, Callable[[Log, Sensor], list[Fault]]] = {
     Poses.name: tracker_faults,
     Motions.name: lambda log, sensor: match_faults(log),
+    # A tracker's increments beside a gyro's: judged as increments (increment_faults), as a
+    # scan matcher's are.
+    PoseMotions.name: lambda log, sensor: match_faults(log),
 }
 
 

@@ -13,14 +13,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlp_calib.analysis.degeneracy import free_directions, motion_scale
-from nlp_calib.models import reference_scales
+from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
 from nlp_calib.problem import ProblemFunctions
 from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, Observability, WeakDirection
 from nlp_calib.solvers import ProblemEvaluator
 
 #: Range of the sensor's heading (rad) below which the log counts as not turning.
 MIN_TURNING = 0.3
+#: A parameter moves along a set of directions when more than this share of it lies in them.
+IN_DIRECTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -67,7 +68,7 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
     params = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()
     value = dict(zip(fns.names, params))
     values = np.array([value[n] for n in names])
-    R = reference_scales(fns.model, fns.layout.keys(names), values, fns.sensor.reference)
+    R = scales(fns, values)
     motion2 = motion_scale(fns, evaluator.data.z, evaluator.omega)
     found = directions(ne.H, sigma2, R, evaluator.n_residuals, motion2)
     d = np.sqrt(np.maximum(np.diag(ne.H), 1e-300))
@@ -95,21 +96,35 @@ def weak_directions(
     """The weak and undetermined directions of the information matrix whose eigenvalues ``lam``
     and eigenvectors ``V`` (in reference units) are given; ``degenerate``: those the drive leaves
     free whatever the noise (:mod:`nlp_calib.analysis.degeneracy`)."""
-    tiny = 1e-12 * max(float(lam[-1]), 1e-300)
-    std_dir = 1.0 / np.sqrt(np.maximum(lam, tiny))
+    std_dir = _direction_std(lam)
     weak = []
     # Undetermined directions form a subspace whose basis is arbitrary: describe it by the
     # parameters it involves, not vector by vector.
     null = (std_dir > NOT_OBSERVABLE) | degenerate
     if null.any():
         share = (V[:, null] ** 2).sum(axis=1)
-        comps = {names[i]: round(float(share[i]), 3) for i in np.flatnonzero(share > 0.1)}
+        comps = {names[i]: round(float(share[i]), 3) for i in np.flatnonzero(share > IN_DIRECTION)}
         weak.append(WeakDirection(float("inf") if degenerate.any() else float(std_dir[null].max()), comps))
     for k in np.flatnonzero((std_dir > WEAK) & ~null):
         v = V[:, k]
         comps = {names[i]: round(float(v[i]), 3) for i in np.flatnonzero(np.abs(v) > 0.3)}
         weak.append(WeakDirection(float(std_dir[k]), comps))
     return weak
+
+
+def _direction_std(lam: np.ndarray) -> np.ndarray:
+    """Each direction's 1σ in reference units from its eigenvalue ``lam`` (of ``H/σ²``)."""
+    tiny = 1e-12 * max(float(lam[-1]), 1e-300)
+    return np.asarray(1.0 / np.sqrt(np.maximum(lam, tiny)))
+
+
+def not_observable(found: Directions) -> np.ndarray:
+    """Which parameters a run's verdict calls not determined from ``found``: those that move (more
+    than :data:`IN_DIRECTION` of their share) along a direction the drive leaves free or beyond
+    :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` reference units (:func:`weak_directions`'
+    undetermined subspace). The pre-flight's gate reads the same."""
+    null = (_direction_std(found.lam) > NOT_OBSERVABLE) | found.free
+    return np.asarray((found.V[:, null] ** 2).sum(axis=1) > IN_DIRECTION)
 
 
 def no_turning(fns: ProblemFunctions, names: tuple[str, ...], turning: float) -> str:

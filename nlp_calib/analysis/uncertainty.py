@@ -42,8 +42,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from nlp_calib.analysis.degeneracy import free_directions, motion_scale
-from nlp_calib.models import reference_scales
+from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
 from nlp_calib.problem import ProblemFunctions, ResidualData
 from nlp_calib.results.checks import LAG_EFFECT_CORRELATION, LagEffect
 from nlp_calib.results.layout import CLOCK, Layout
@@ -215,7 +214,7 @@ def _covariance(
     free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[
         [fns.names.index(f) for f in fns.free]
     ]
-    scale = reference_scales(fns.model, fns.layout.keys(fns.free), free_values, fns.sensor.reference)
+    scale = scales(fns, free_values)
     motion2 = motion_scale(fns, data.z, evaluator.omega)
 
     def free(lam: np.ndarray) -> np.ndarray:

@@ -403,6 +403,12 @@ def _add_simulate(sub: Any) -> None:
         "and --out.truth.json (docs/imu.md); --latency: how late its driver stamps the rates; with "
         "--lidar: both on one drive in one bag, both drivers stamping --latency late",
     )
+    p.add_argument(
+        "--tracker",
+        action="store_true",
+        help="with --imu: a tracker's poses (/tracker, PoseStamped, 2 mm and 2 mrad of noise) of the drive "
+        "in the same bag, stamped --latency late as the gyro is (docs/imu.md)",
+    )
     kind.add_argument(
         "--vendor",
         action="store_true",

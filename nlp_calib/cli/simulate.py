@@ -47,9 +47,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     out: Path = args.out
     if out.is_dir() or out.name in ("", ".", ".."):
         raise UsageError(f"--out {out} is a folder; give the path of the log file to write")
-    imu = getattr(args, "imu", False)
-    if getattr(args, "lidar", False):
-        return _simulate_beside(args, overrides) if imu else _simulate_lidar(args, overrides)
+    imu, tracker = getattr(args, "imu", False), getattr(args, "tracker", False)
+    if tracker and (not imu or getattr(args, "lidar", False)):
+        raise UsageError("--tracker goes with --imu alone (a tracker's poses beside the gyro, in one bag)")
+    if getattr(args, "lidar", False) or tracker:
+        return _simulate_beside(args, overrides, tracker) if imu else _simulate_lidar(args, overrides)
     if imu and (getattr(args, "vendor", False) or out.suffix.lower() == ".tum"):
         raise UsageError("--imu goes alone or beside --lidar (one bag of both)")
     if getattr(args, "vendor", False):
@@ -123,21 +125,28 @@ def _simulate_imu(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
     return 0
 
 
-def _simulate_beside(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
-    """A lidar's and a gyro's bag of one drive, and the truth beside it (the options and --config:
-    the lidar's; the gyro takes its defaults, its seed and its driver's late stamps the lidar's)."""
+def _simulate_beside(args: argparse.Namespace, overrides: dict[str, Any], tracker: bool) -> int:
+    """A lidar's (or with ``tracker`` a tracker's) and a gyro's bag of one drive, and the truth beside
+    it (the options and --config: the lidar's; the gyro takes its defaults, its seed and its driver's
+    late stamps the lidar's)."""
     lidar = lidar_options(args.config, overrides)
     sim = simulate_beside(lidar, imu_options(None, {"seed": lidar.seed, "latency_s": lidar.stamp_offset_s}))
-    bag, truth = _staged(args, lidar_paths(args.out), functools.partial(write_beside_simulation, sim))
+    write = functools.partial(write_beside_simulation, sim, tracker=tracker)
+    bag, truth = _staged(args, lidar_paths(args.out), write)
+    what = (
+        f"a tracker's poses at {lidar.scan_rate_hz:g} Hz"
+        if tracker
+        else f"scans at {lidar.scan_rate_hz:g} Hz"
+    )
     print(
-        f"wrote {bag} ({lidar.duration_s:g} s, scans at {lidar.scan_rate_hz:g} Hz, the gyro at "
+        f"wrote {bag} ({lidar.duration_s:g} s, {what}, the gyro at "
         f"{sim.imu.options.imu_rate_hz:g} Hz, both stamped {1000 * lidar.stamp_offset_s:g} ms late) "
         f"and {truth}"
     )
     print(
         f"a scenario reads it as: dataset: {{bag: {bag}, joint_states: /joint_states, joints: "
-        f"[{', '.join(sim.lidar.joint_names)}], scan: /scan, imu: /imu}}, with sensor: "
-        "{mount: planar, beside: gyro} (docs/imu.md)"
+        f"[{', '.join(sim.lidar.joint_names)}], {'tracker: /tracker' if tracker else 'scan: /scan'}, "
+        "imu: /imu}, with sensor: {mount: planar, beside: gyro} (docs/imu.md)"
     )
     return 0
 

@@ -1,5 +1,7 @@
 """One log of a reference's own motions and a gyro's increments, read from the same joints.
 
+A reference that gives poses (a tracker's) gives its motions as each interval's between two
+consecutive poses, the windows its own fit would make by default (``residual: {horizon: 1}``).
 Each source reads its own log (records at its own stamps); the two are laid on one time axis: a
 record at every stamp of either, the joints read there from the reference's joint stream, and
 each increment in the layout of :mod:`nlp_calib.sensors.beside` (the reference's motion, the
@@ -12,8 +14,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from nlp_calib.logs.log import Log, LogClock, ReferenceData
-from nlp_calib.logs.reference import Motions
+from nlp_calib.core import poses
+from nlp_calib.core.errors import DatasetError
+from nlp_calib.logs.log import Log, LogClock, LogHeader, ReferenceData
+from nlp_calib.logs.reference import Motions, PoseMotions
 from nlp_calib.logs.relative import RelativeMotions, _frozen
 
 #: Rows of a reference's increment and of a gyro's.
@@ -56,15 +60,47 @@ def _joined(a: RelativeMotions, b: RelativeMotions, quality: dict[str, np.ndarra
     )
 
 
+def own_motions(log: Log) -> RelativeMotions | None:
+    """The reference's motions: its own increments, or a tracker's each interval's motion between
+    its two poses (in the sensor's frame at the first), each numbered by the line of its last pose."""
+    if log.reference.motions is not None:
+        return log.reference.motions
+    T = np.asarray(log.T_world_sensor, dtype=float)
+    if T.ndim != 2 or T.shape[0] < 2 or T.shape[1] != REFERENCE_ROWS:
+        return None
+    first = np.arange(T.shape[0] - 1, dtype=np.int64)
+    z = poses.between(T[:-1], T[1:])
+    return RelativeMotions(_frozen(first), _frozen(first + 1), _frozen(z), _frozen(log.line_numbers[1:]))
+
+
+def _both(reference: Log, gyro: Log) -> LogHeader:
+    """The reference's header with the gyro's beside it; one frame cannot be both sensors' (each is
+    a joint of its own from the base)."""
+    frame = gyro.header.sensor_frame
+    if frame == reference.header.sensor_frame:
+        raise DatasetError(
+            str(gyro.path),
+            None,
+            f"the gyro's frame {frame!r} is also the reference's: each sensor's mount is a joint from the "
+            "base to a frame of its own; leave sensor_frame out of ROBOT.yaml (each sensor's frame is then "
+            "its messages' frame_id) or give the dataset's sensor_frame",
+        )
+    return replace(reference.header, beside=gyro.header)
+
+
 def beside_gyro(reference: Log, gyro: Log) -> Log:
     """The log of ``reference``'s motions and ``gyro``'s increments on one time axis (each
     increment's ``z``: reference rows, gyro rows, the gyro flag)."""
-    ref_inc, gyro_inc = reference.reference.motions, gyro.reference.motions
+    ref_inc, gyro_inc = own_motions(reference), gyro.reference.motions
     if ref_inc is None or gyro_inc is None or ref_inc.z.shape[1] != REFERENCE_ROWS:
-        raise ValueError("a gyro beside a reference needs the reference's own planar motions and the gyro's")
+        raise ValueError(
+            "a gyro beside a reference needs the reference's planar poses or motions and the gyro's"
+        )
     stream = reference.joint_stream
     if stream is None:
         raise ValueError(f"{reference.path}: a gyro beside it needs the joints' own stream")
+    header = _both(reference, gyro)
+    measures = Motions.name if reference.reference.motions is not None else PoseMotions.name
     ref_ns, gyro_ns = _stamps_ns(reference), _stamps_ns(gyro)
     first_ns, last_ns = ref_ns[0], ref_ns[-1]
     # Only the gyro's increments within the reference's span: the wheels are read on its stream.
@@ -90,6 +126,7 @@ def beside_gyro(reference: Log, gyro: Log) -> Log:
         line[idx[::-1]] = motions.line_numbers[::-1]
     return replace(
         reference,
+        header=header,
         time_s=time_s,
         ticks=_frozen(np.zeros((n, 0), dtype=np.int64)),
         model_pose=_frozen(np.zeros((n, 3))),
@@ -98,5 +135,6 @@ def beside_gyro(reference: Log, gyro: Log) -> Log:
         clock=LogClock(start_ns=start_ns),
         joint_positions=stream.at(time_s),
         joint_stream=stream,
-        reference=ReferenceData(motions=motions, measures=Motions.name),
+        # A tracker's increments are differences of its poses: their noise is the poses'.
+        reference=ReferenceData(motions=motions, measures=measures),
     )

@@ -44,7 +44,7 @@ class LogHeader:
     height, roll and pitch where a source knows them (a bag's ``/tf_static``); ``nominal`` says
     which values are the robot's nominal ones where a source filled in defaults;
     ``counts_per_turn`` each wheel encoder's counts per wheel turn where a source states them
-    (``ROBOT.yaml``).
+    (``ROBOT.yaml``); ``beside`` the header of a second sensor read beside the reference.
     """
 
     kinematic_model: str
@@ -60,6 +60,8 @@ class LogHeader:
     #: them, written by the robot's own logger (a text log's header). The rest are defaults.
     nominal: Mapping[str, str] | None = None
     counts_per_turn: Mapping[str, float] = field(default_factory=dict)
+    #: The header of a sensor read beside the reference (a gyro's: its frame, its nominal mount).
+    beside: LogHeader | None = None
 
     def encoder_index(self, name: str) -> int:
         """Column of the encoder called ``name`` in :attr:`Log.ticks`."""

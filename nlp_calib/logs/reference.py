@@ -31,6 +31,7 @@ class ReferenceKind(Protocol):
     window_words: ClassVar[str]
 
     def uncovered(self, n_records: int) -> np.ndarray: ...  # the intervals no measurement covers
+    def own_windows(self, z: np.ndarray) -> np.ndarray: ...  # per window (z's columns): its own noise?
     def window_count(self, span: tuple[int, int], horizon: int, stride: int) -> int: ...
     def horizon(self, horizon: int) -> int | None: ...  # its own, or None: the scenario's
 
@@ -52,6 +53,10 @@ class Poses:
 
     def horizon(self, horizon: int) -> int | None:
         return None
+
+    def own_windows(self, z: np.ndarray) -> np.ndarray:
+        """None: each window's noise is its two poses'."""
+        return np.zeros(np.shape(z)[1], dtype=bool)
 
 
 @dataclass(frozen=True)
@@ -76,6 +81,25 @@ class Motions:
         spans = self.motions.last - self.motions.first
         return 1 if spans.size and np.all(spans == 1) else max(horizon, 2)
 
+    def own_windows(self, z: np.ndarray) -> np.ndarray:
+        """Every window's noise is its own."""
+        return np.ones(np.shape(z)[1], dtype=bool)
+
+
+@dataclass(frozen=True)
+class PoseMotions(Motions):
+    """A tracker's poses as the motions between each two consecutive ones, beside a second sensor's
+    own increments (a gyro's, :mod:`nlp_calib.logs.beside`): the windows are the increments, as
+    :class:`Motions`' are, but a tracker's window's noise is its two poses' (two consecutive
+    windows share one). Each window's ``z`` ends in a row saying whose it is (1: the second
+    sensor's)."""
+
+    name: ClassVar[str] = "pose_motions"
+
+    def own_windows(self, z: np.ndarray) -> np.ndarray:
+        """The second sensor's windows (its noise its own), not the tracker's."""
+        return np.asarray(np.asarray(z)[-1] > 0.5)
+
 
 class Measured(Protocol):
     """What a reference holds that its kind may read (``nlp_calib.logs.log.ReferenceData``)."""
@@ -95,4 +119,5 @@ def _own_motions(reference: Measured) -> Motions:
 REFERENCES: dict[str, Callable[[Measured], ReferenceKind]] = {
     Poses.name: lambda reference: Poses(),
     Motions.name: _own_motions,
+    PoseMotions.name: lambda reference: PoseMotions(_own_motions(reference).motions),
 }

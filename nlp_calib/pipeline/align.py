@@ -61,6 +61,23 @@ class Alignment:
     valid: tuple[int, int]
 
 
+def stays(moved_s: float, std_s: float) -> bool:
+    """Whether a lag fitted on the encoders re-sampled at another moved from it (``moved_s``) by
+    less than the larger of :data:`LAG_TOLERANCE_S` and a quarter of its white-noise σ ``std_s``:
+    the re-sampling is then done (the run's alignment and the pre-flight's fit alike)."""
+    return abs(moved_s) < max(LAG_TOLERANCE_S, 0.25 * std_s)
+
+
+def white_std(H: np.ndarray, sigma2: float, column: int) -> float:
+    """The white-noise σ of free parameter ``column`` from normal equations ``H`` and residuals of
+    variance ``sigma2`` (0 when singular)."""
+    try:
+        var = float(np.linalg.inv(H)[column, column]) * sigma2
+    except np.linalg.LinAlgError:
+        return 0.0
+    return float(np.sqrt(var)) if np.isfinite(var) and var > 0 else 0.0
+
+
 def lag_column(binder: Binder) -> int | None:
     """The place of the (single log's) lag among the free parameters; None when it is not free."""
     return next((i for i, n in enumerate(binder.fns.free) if binder.fns.layout.in_block(n, CLOCK)), None)
@@ -97,7 +114,7 @@ class _LagFits:
             if not converged:
                 break
             x = x_new
-            if abs(x[self.column] - resampled) < max(LAG_TOLERANCE_S, 0.25 * self.lag_std(x)):
+            if stays(float(x[self.column]) - resampled, self.lag_std(x)):
                 break
         return x, path, costs, converged
 
@@ -106,11 +123,7 @@ class _LagFits:
         assert self.evaluator is not None
         ne = self.evaluator.normal_equations(x)
         dof = max(self.binder.fns.error_rows * self.evaluator.n_residuals - self.binder.fns.n_free, 1)
-        try:
-            var = float(np.linalg.inv(ne.H)[self.column, self.column]) * ne.cost / dof
-        except np.linalg.LinAlgError:
-            return 0.0
-        return float(np.sqrt(var)) if np.isfinite(var) and var > 0 else 0.0
+        return white_std(ne.H, ne.cost / dof, self.column)
 
     def profile(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The cost over the search at ``x``'s other parameters: lags at most :data:`PROFILE_LAGS`

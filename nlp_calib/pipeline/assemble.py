@@ -213,7 +213,7 @@ def _report(
     sd = dict(zip(result.names, map(float, std)))
     held = {c: given[n] for c, n in sensor.components.items() if n in given}
     listed = {**{n: f"held at its initial value: {why}" for n, why in prepared.held.items()}, **given}
-    beside = sensor.beside_mount(result.param_dict(), sd)
+    beside = sensor.beside_mount(result.param_dict(), sd, header)
     if views is None:
         mount = sensor.mount_pose(result.param_dict(), sd, header.sensor_frame, header.sensor_z_roll_pitch)
         return SolverReport(

@@ -274,6 +274,13 @@ def _tracker_keys(
     return best, frame, others, mount
 
 
+#: What a draft's sensor_frame gives.
+MOUNT_WORDS = (
+    "its fixed transforms from base_link on /tf_static give the nominal mount (the hand-off's height, "
+    "roll and pitch)."
+)
+
+
 def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
     found = survey(path)
     joint_topics = [t for t in found.of_type("sensor_msgs/msg/JointState") if t.joints]
@@ -292,14 +299,15 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         t for t in found.of_type(POSE_TYPE, TRANSFORM_TYPE, ODOMETRY_TYPE, TF_TYPE) if t.name != "/tf_static"
     ]
     if not poses and (scans or rates):
-        # A lidar measures distance, a gyro none: the scans are the reference when both are there.
-        alone = _lidar(scans, rates) if scans else _gyro(rates, name)
+        # A lidar measures distance, a gyro none: the scans are the reference, the gyro beside them.
+        alone = _lidar(scans, rates, dataset) if scans else _gyro(rates, name)
         return _draft_alone(path, where, (found, js), (name, joints, why), (dataset, alone))
     best, frame, others, mount = _tracker_keys(found, dataset)
     _one_line_names(path, dataset)
     controller = controller_name(found)
     handoff = {"handoff": {"controller_name": controller}} if controller else {}
-    raw = {"name": where.stem, "model": name, "dataset": dataset, **defaults(name), **handoff}
+    sensor = _beside(rates, dataset)
+    raw = {"name": where.stem, "model": name, **sensor, "dataset": dataset, **defaults(name), **handoff}
     header = [
         f"Drafted by nlp-calib init from {path}: {found.duration_s:.1f} s, {len(found.topics)} topics.",
         *(
@@ -313,16 +321,10 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         f"tracker: {best.name} ({best.msgtype}){f', frame {frame}' if frame else ''}"
         + (f"; other pose topics: {', '.join(t.name for t in others)}" if others else "")
         + " (the robot's own odometry is never a reference)"
-        + _too(("a lidar's scans", scans, "lidar"), ("a gyro's rates", rates, "imu"))
+        + _too(("a lidar's scans", scans, "lidar"))
         + ".",
-        *(
-            [
-                f"sensor_frame {mount}: its fixed transforms from base_link on /tf_static give the nominal "
-                "mount (the hand-off's height, roll and pitch)."
-            ]
-            if mount
-            else []
-        ),
+        *([_beside_words(rates)] if rates else []),
+        *([f"sensor_frame {mount}: {MOUNT_WORDS}"] if mount else []),
         f"Check it before a run: nlp-calib preflight {where}",
     ]
     text = _text(header, raw, NOTES)
@@ -330,6 +332,7 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         *_listing(found),
         f"model {name}: {why}",
         f"tracker {best.name}" + (f" (frame {frame})" if frame else ""),
+        *([f"gyro beside it {rates[0].name}"] if rates else []),
     )
     return Draft(raw, text, lines)
 
@@ -361,16 +364,36 @@ def _also(kind: str, topics: Sequence[Topic]) -> str:
     return f"; other {kind} topics: {', '.join(t.name for t in topics)}" if topics else ""
 
 
-def _lidar(scans: Sequence[Topic], rates: Sequence[Topic]) -> _Alone:
-    """A lidar's scans as the reference (docs/lidar.md)."""
+def _beside(rates: Sequence[Topic], dataset: dict[str, Any]) -> dict[str, Any]:
+    """A gyro beside the reference when the bag holds an Imu topic: its topic in ``dataset``, and
+    the scenario's sensor that fits both (docs/imu.md)."""
+    if not rates:
+        return {}
+    dataset["imu"] = rates[0].name
+    return {"sensor": {"mount": "planar", "beside": "gyro"}}
+
+
+def _beside_words(rates: Sequence[Topic]) -> str:
+    return (
+        f"beside it, the gyro's rates on {rates[0].name} ({IMU_TYPE}), fitted in one objective with "
+        f"sensor: {{mount: planar, beside: gyro}}: its bias, tilt and clock offset (gyro_lag) beside the "
+        f"reference's (docs/imu.md){_also('Imu', rates[1:])}."
+    )
+
+
+def _lidar(scans: Sequence[Topic], rates: Sequence[Topic], dataset: dict[str, Any]) -> _Alone:
+    """A lidar's scans as the reference (docs/lidar.md), a gyro beside them if the bag has one."""
     frames = f", frame {', '.join(scans[0].frames)}" if scans[0].frames else ""
     words = (
         f"reference: the lidar's scans on {scans[0].name} ({SCAN_TYPE}{frames}), each matched to the one "
-        f"before (docs/lidar.md); no topic holds poses{_also('scan', scans[1:])}"
-        + _too(("a gyro's rates", rates, "imu"))
-        + "."
+        f"before (docs/lidar.md); no topic holds poses{_also('scan', scans[1:])}."
     )
-    return _Alone("scan", scans[0], {}, words, f"reference: the scans on {scans[0].name}")
+    more = _beside(rates, dataset)
+    words += f" {_beside_words(rates)}" if rates else ""
+    short = f"reference: the scans on {scans[0].name}" + (
+        f"; gyro beside it {rates[0].name}" if rates else ""
+    )
+    return _Alone("scan", scans[0], more, words, short)
 
 
 def _gyro(rates: Sequence[Topic], model: str) -> _Alone:

@@ -30,10 +30,11 @@ from nlp_calib.analysis.plan import Setting, believed, plan
 from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.analysis.uncertainty import range_std
 from nlp_calib.analysis.verdict import way_out
-from nlp_calib.core.errors import NlpCalibError, PreflightError
-from nlp_calib.logs import Log
+from nlp_calib.core.errors import DatasetError, NlpCalibError, PreflightError
+from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.models import counted_inputs
 from nlp_calib.pipeline import units_check
+from nlp_calib.pipeline.align import MAX_RESAMPLINGS, estimate_tracker_lag, stays, white_std
 from nlp_calib.pipeline.assemble import fit_info
 from nlp_calib.pipeline.build import (
     INTERNAL_SOLVER,
@@ -51,6 +52,7 @@ from nlp_calib.pipeline.units_check import implausible
 from nlp_calib.pipeline.validation import leave_out, on_threads
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
 from nlp_calib.results.checks import CheckResult, Fold, believed_std
+from nlp_calib.results.layout import CLOCK
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight
 from nlp_calib.solvers.evaluation import NormalEquations, ProblemEvaluator
 
@@ -60,6 +62,10 @@ START_RECORDS = 5000
 #: takes a few), until a step gains less than this share of the misfit.
 ROUGH_STEPS = 4
 ROUGH_GAIN = 0.1
+
+#: A converged fit: its free parameters, the windows' information there, where it stands in words
+#: and what computes each free parameter's σ as the run does (once, for the fit finally judged).
+Fitted = tuple[np.ndarray, "det.Information", str, Callable[[], np.ndarray]]
 
 
 @dataclass(frozen=True)
@@ -73,6 +79,8 @@ class Drive:
     data: ResidualData
     start: StartingPoint
     start_words: str
+    #: Each log as read (its encoders are re-sampled from it at a fitted time offset).
+    read: tuple[Log, ...] = ()
 
 
 def _prepared(
@@ -133,6 +141,8 @@ def _start(
             outside = implausible(fns.model, point.initial)
             return point, words + (f", outside the plausible ranges in {outside}" if outside else "")
         why = "it is not finite"
+    except DatasetError:
+        raise  # the data at fault (a gyro in degrees), not the start
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ZeroDivisionError) as exc:
         if not auto:
             raise
@@ -158,7 +168,7 @@ def drive(sc: Scenario, logs: Sequence[Log] | None = None) -> tuple[Drive, dict[
         one.objective.residual,
         drop_stationary=one.log.samples.drop_stationary,
     )
-    return Drive(parts, one, fns, data, point, words), held
+    return Drive(parts, one, fns, data, point, words, tuple(p.log for p in parts)), held
 
 
 def _track(log: Log, fns: ProblemFunctions) -> tuple[np.ndarray, np.ndarray]:
@@ -211,24 +221,22 @@ def _judged(d: Drive) -> ResidualData:
     return d.data if idx.size == n else d.data.select(idx)
 
 
-def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str, np.ndarray] | None:
+def _fitted(d: Drive, omega: np.ndarray, x0: np.ndarray | None = None) -> Fitted | None:
     """The start fitted to convergence by the run's internal solver on the windows whose information
     is judged (robust kernel, bounds), and the information there: the σ a fit will give is read
     where the fit ends, never at the start, whose misfit is no noise. None where the fit does not
     converge (a drive that leaves a direction free: its normal equations are singular). The
-    information is the fit's own normal equations at its optimum (not evaluated again). Last, each
-    free parameter's σ as the run computes it there (:func:`_propagated`)."""
-    fns, start, sc = d.fns, d.start, d.scenario
+    information is the fit's own normal equations at its optimum (not evaluated again). Last, what
+    computes each free parameter's σ as the run does there (:func:`_propagated`). ``x0``: where the
+    fit starts (the start's)."""
+    fns, start = d.fns, d.start
     windows = _judged(d)
     if windows.n_residuals < fns.n_free:
         return None
-    box = None if start.lower is None or start.upper is None else (start.lower, start.upper)
-    stride = sc.objective.residual.stride
-    backend = prepare_backend(sc, fns, [INTERNAL_SOLVER], windows.n_residuals * stride)
-    binder = Binder(sc, fns, backend, start.x_fixed, no_priors(fns.n_free), bounds=box)
+    binder = _binder(d, windows.n_residuals)
     try:
         evaluator = binder.evaluate(windows)
-        _, x, converged = binder.fit(evaluator, start.x0)
+        _, x, converged = binder.fit(evaluator, start.x0 if x0 is None else x0)
         if not converged or not np.all(np.isfinite(x)):
             return None
         # The fit's own normal equations at its optimum are the windows' information there.
@@ -240,7 +248,108 @@ def _fitted(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, s
     if not np.isfinite(info.chi2) or not np.all(np.isfinite(info.H)):
         return None
     words = f"{d.start_words}, fitted to convergence on the windows judged"
-    return np.asarray(x, dtype=float), info, words, _propagated(d, binder, x, windows, (evaluator, whole))
+    sigma = functools.partial(_propagated, d, binder, x, windows, (evaluator, whole))
+    return np.asarray(x, dtype=float), info, words, sigma
+
+
+def _binder(d: Drive, n_windows: int) -> Binder:
+    """The run's internal fit of ``d``'s problem on ``n_windows`` windows (robust kernel, bounds,
+    no priors)."""
+    fns, start, sc = d.fns, d.start, d.scenario
+    box = None if start.lower is None or start.upper is None else (start.lower, start.upper)
+    backend = prepare_backend(sc, fns, [INTERNAL_SOLVER], n_windows * sc.objective.residual.stride)
+    return Binder(sc, fns, backend, start.x_fixed, no_priors(fns.n_free), bounds=box)
+
+
+def _as_the_run_aligns(d: Drive, omega: np.ndarray) -> tuple[Drive, Fitted | None] | None:
+    """One log whose time offset is fitted: the lag found by the run's own alignment
+    (:func:`~nlp_calib.pipeline.align.estimate_tracker_lag`: re-sampled until it stays, then the
+    other valleys of its profile), the encoders re-sampled there and the fit from the start with
+    that lag, as the run's fit stage starts. Along a direction the drive barely holds the fit
+    stops where the lag sends it (a car's rear track near zero or at its length, on encoders
+    re-sampled 1 ms apart): the run's lag is where the run's fit stops. None where the problem
+    has several logs or no free time offset, or no fit converged at any lag."""
+    clocks = _clocks(d)
+    if len(d.parts) != 1 or len(clocks) != 1:
+        return None
+    part, column = d.parts[0], clocks[0][0]
+    try:
+        found = estimate_tracker_lag(
+            _binder(d, d.data.n_residuals), d.read[0], part.start, part.stop, d.start.x0
+        )
+    except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
+        return None
+    if not found.converged:
+        return None
+    x0 = np.array(d.start.x0, dtype=float)
+    x0[column] = found.lag_s
+    moved = _resampled(d, x0)
+    fitted = _fitted(moved, omega, x0)
+    if fitted is None:
+        return moved, None
+    return moved, (
+        fitted[0],
+        fitted[1],
+        f"{fitted[2]}, the encoders re-sampled at the lag the run finds",
+        fitted[3],
+    )
+
+
+def _clocks(d: Drive) -> list[tuple[int, list[int]]]:
+    """Each free time offset's place among the free parameters and the logs it re-samples (a
+    shared one: every log)."""
+    fns, every = d.fns, list(range(len(d.parts)))
+    return [
+        (i, every if (log := fns.layout.param(n).log) is None else [log])
+        for i, n in enumerate(fns.free)
+        if fns.layout.in_block(n, CLOCK)
+    ]
+
+
+def _resampled(d: Drive, x: np.ndarray) -> Drive:
+    """``d`` with each log's encoders re-sampled at its time offset in the free ``x`` (from the log
+    as read: a re-sampling adds to a log's own) and its windows rebuilt on the records they stay
+    valid for."""
+    lags = {log: float(x[i]) for i, logs in _clocks(d) for log in logs}
+    parts = list(d.parts)
+    for log, lag in lags.items():
+        p, read = parts[log], d.read[log]
+        shifted, (a, b) = resample_encoders(read, lag - read.encoder_lag_s, p.model.encoder_kinds)
+        parts[log] = replace(p, log=shifted, start=max(d.parts[log].start, a), split=min(p.split, b))
+    data = build_residual_data(
+        d.fns,
+        [p.log.select(p.start, p.split) for p in parts],
+        d.scenario.objective.residual,
+        drop_stationary=d.scenario.log.samples.drop_stationary,
+    )
+    return replace(d, parts=tuple(parts), data=data)
+
+
+def _aligned(d: Drive, omega: np.ndarray, fitted: Fitted | None) -> tuple[Drive, Fitted | None]:
+    """The fit on the encoders re-sampled at its own time offsets until each stays
+    (:func:`~nlp_calib.pipeline.align.stays`), as the run's alignment re-samples them (the clock
+    correction is exact only to first order away from the lag the encoders were re-sampled at):
+    for several logs, whose run aligns each log on its own before their joint fit. Each fit starts
+    at the start, its time offsets where the encoders were re-sampled. ``fitted``: the fit on the
+    encoders as read."""
+    clocks = _clocks(d)
+    for _ in range(MAX_RESAMPLINGS if clocks else 0):
+        if fitted is None:
+            break
+        x, info = fitted[0], fitted[1]
+        sigma2 = info.chi2 / max(d.fns.error_rows * info.n_windows - d.fns.n_free, 1)
+        at = [d.parts[logs[0]].log.encoder_lag_s for _, logs in clocks]
+        if all(stays(float(x[i]) - a, white_std(info.H, sigma2, i)) for (i, _), a in zip(clocks, at)):
+            break
+        moved = _resampled(d, x)
+        # From the start, its time offsets where the encoders now are, as the run's fit starts.
+        x0 = np.array(d.start.x0, dtype=float)
+        x0[[i for i, _ in clocks]] = x[[i for i, _ in clocks]]
+        again = _fitted(moved, omega, x0)
+        if again is None:
+            break
+        d, fitted = moved, (again[0], again[1], f"{again[2]} re-sampled at its time offset", again[3])
+    return d, fitted
 
 
 def _propagated(
@@ -360,9 +469,9 @@ class Assessment:
         if self.propagated is not None:
             std = np.where(np.isfinite(st.std) & np.isfinite(self.propagated), self.propagated, st.std)
         needed = st.reference if self.needed is None else self.needed
-        # Not determined as the run's observability says it (the model's reference units); weak
-        # against what the verdict needs.
-        return replace(st, std=std, std_reference=std / needed, reference=needed, observed=std / st.reference)
+        # Not determined as the run's verdict says it (its observability's directions, in the
+        # reference units at the start both share); weak against what the verdict needs.
+        return replace(st, std=std, std_reference=std / needed, reference=needed)
 
 
 def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
@@ -370,7 +479,8 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
     d, held = drive(sc, logs)
     fns, one = d.fns, d.scenario
     omega = np.array(one.objective.information.omega(fns.error_rows, fns.sensor.weights))
-    fitted = _fitted(d, omega)
+    aligned = _as_the_run_aligns(d, omega)
+    d, fitted = aligned if aligned is not None else _aligned(d, omega, _fitted(d, omega))
     x, info, where = fitted[:3] if fitted is not None else _rough(d, omega)
     at = "the fit" if fitted is not None else "the start"
     sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info, at)
@@ -382,7 +492,7 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     return Assessment(
         d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds,
-        fitted[3] if fitted is not None else None, _needed(d, x),
+        fitted[3]() if fitted is not None else None, _needed(d, x),
     )  # fmt: skip
 
 

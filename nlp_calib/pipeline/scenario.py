@@ -365,13 +365,14 @@ def _check_beside(sc: Scenario, source: DatasetSource, where: str) -> None:
     if sensor.beside and not isinstance(source, BesideSource):
         fail(
             where,
-            f"sensor: {{mount: {sensor.mount}, beside: {sensor.beside}}} reads the reference's own motions "
-            f"and a gyro's rates from one dataset naming both ({pairs}, beside the joints; docs/imu.md)",
+            f"sensor: {{mount: {sensor.mount}, beside: {sensor.beside}}} reads the reference's poses or "
+            f"motions and a gyro's rates from one dataset naming both ({pairs}, beside the joints; "
+            "docs/imu.md)",
         )
     if isinstance(source, BesideSource) and not sensor.beside:
         fail(
             where,
-            f"it names a reference's own motions and a gyro's rates ({pairs}): fit both with sensor: "
+            f"it names a reference's poses or motions and a gyro's rates ({pairs}): fit both with sensor: "
             f"{{mount: planar, beside: gyro}}, or leave one of the two keys out (sensor: {sensor.mount})",
         )
 

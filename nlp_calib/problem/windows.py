@@ -99,9 +99,15 @@ class ResidualData:
     @property
     def increment(self) -> np.ndarray | None:
         """Per window, whether its ``z`` is an increment the reference measured itself (its noise
-        its own, not two poses'; a log with ``motions``); None: none is."""
-        own = np.array([lg.reference.kind.own_increments for lg in self.logs])
-        return own[self.log_of(self.starts)] if own.any() else None
+        its own, not two poses'; a log with ``motions``, a gyro's beside a tracker's poses); None:
+        no log's reference gives increments."""
+        kinds = [lg.reference.kind for lg in self.logs]
+        if not any(k.own_increments for k in kinds):
+            return None
+        own, of = np.zeros(self.n_residuals, dtype=bool), self.log_of(self.starts)
+        for i, kind in enumerate(kinds):
+            own[of == i] = kind.own_windows(self.z[:, of == i])
+        return own
 
     def with_selector(self) -> ResidualData:
         """These windows saying which log each belongs to (a problem with a mount per log and no

@@ -122,7 +122,7 @@ class Sensor(Protocol):
     def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str: ...
     def tangent(self, z: np.ndarray) -> np.ndarray: ...
     def beside_mount(
-        self, params: Mapping[str, float], std: Mapping[str, float]
+        self, params: Mapping[str, float], std: Mapping[str, float], header: LogHeader
     ) -> SensorMount | None: ...  # a 2nd joint
     def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...  # increments judged, as predicted
     def poses(self, log: Log) -> np.ndarray: ...
@@ -215,8 +215,11 @@ class SensorDefaults:
         one clock's, whole."""
         return ca.DM.ones(len(self.clocks), 1)
 
-    def beside_mount(self, params: Mapping[str, float], std: Mapping[str, float]) -> SensorMount | None:
-        """The mount of a second sensor fitted beside the reference (its own joint): none."""
+    def beside_mount(
+        self, params: Mapping[str, float], std: Mapping[str, float], header: LogHeader
+    ) -> SensorMount | None:
+        """The mount of a second sensor fitted beside the reference (its own joint; ``header``: the
+        log's, :attr:`LogHeader.beside` the second sensor's): none."""
         return None
 
     def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -40,7 +40,7 @@ from nlp_calib.sensors.planar import PlanarPose
 REFERENCE_ROWS, GYRO_ROWS = 3, 4
 #: The gyro's clock offset: how late its driver stamps the rates (s; the reference's: ``tracker_lag``).
 GYRO_LAG = "gyro_lag"
-#: The IMU's link in the hand-off files.
+#: The IMU's link in the hand-off files where its messages name no frame.
 IMU_FRAME = "imu_link"
 #: Ω's rows, by the information weight each takes (``information: {translation, rotation, gyro}``).
 WEIGHTS: tuple[str, ...] = ("translation", "translation", "rotation", "gyro", "gyro", "gyro")
@@ -135,6 +135,10 @@ class Beside(SensorDefaults):
     def heading(self, T_world_sensor: np.ndarray) -> np.ndarray:
         return self.reference_sensor.heading(T_world_sensor)
 
+    def floor_track(self, log: Log) -> np.ndarray:
+        """The reference's positions and heading (was the gyro's heading alone: a drive of 0 m)."""
+        return self.reference_sensor.floor_track(log)
+
     def planar_yaw(self, params: Mapping[str, float]) -> float | None:
         return self.reference_sensor.planar_yaw(params)
 
@@ -213,6 +217,12 @@ class Beside(SensorDefaults):
         """The reference's joint (x, y and yaw calibrated)."""
         return self.reference_sensor.mount_pose(params, std, frame, nominal)
 
-    def beside_mount(self, params: Mapping[str, float], std: Mapping[str, float]) -> SensorMount | None:
-        """The IMU's joint on ``imu_link`` (roll and pitch calibrated)."""
-        return self.gyro.mount_pose(params, std, IMU_FRAME, None)
+    def beside_mount(
+        self, params: Mapping[str, float], std: Mapping[str, float], header: LogHeader
+    ) -> SensorMount | None:
+        """The IMU's joint (roll and pitch calibrated) on its messages' frame (``imu_link`` where
+        they name none), its height the nominal mount's where the source knows it."""
+        gyro = header.beside
+        if gyro is None:
+            return self.gyro.mount_pose(params, std, IMU_FRAME, None)
+        return self.gyro.mount_pose(params, std, gyro.sensor_frame, gyro.sensor_z_roll_pitch)

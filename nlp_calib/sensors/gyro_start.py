@@ -9,6 +9,12 @@ Jacobians of the model's own motion). A gyro leaves the lengths' common scale fr
 length sets it, else it is put where the longest length of the simulator's guess of the model is
 that guess (the fit's observability then says the lengths are not determined). Two rounds, so the
 biases are fitted against the fitted turning.
+
+The same fit against the turning of typical wheels (each radius a quarter of the base's longest
+length; beside a reference, the reference's wheels) is the gyro's turning over the wheels'
+(``|v|``): near 180/π it is a gyro publishing degrees per second, which a slow robot's rates
+(below 0.21 rad/s of turning) keep under the reader's 12 rad/s refusal; it is refused here with
+the fix.
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from nlp_calib.core.errors import DatasetError
 from nlp_calib.models.base import KinematicModel
 from nlp_calib.models.radians import default_guess
 from nlp_calib.sensors.base import BaseMotion
@@ -27,6 +34,57 @@ ROUNDS = 2
 STEPS = 30
 #: The weak pull towards the defaults (of the data's own curvature), which holds the free scale.
 PULL = 1e-6
+#: A typical wheel's radius over the base's longest length (its track, its wheelbase).
+TYPICAL_SHARE = 0.25
+#: The gyro's turning over typical wheels' within this factor of 180/π: degrees per second (wheels
+#: 3 times smaller or larger than typical still land in it; a gyro in rad/s, at ~1, is 19 times below).
+DEGREES_FACTOR = 3.0
+#: The ratio is judged only where it is this many of its standard errors from 0 (a drive that
+#: barely turns says nothing of it).
+MIN_SIGNIFICANCE = 10.0
+
+
+def _typical(
+    model: KinematicModel, k: dict[str, float], known: Mapping[str, float]
+) -> tuple[dict[str, float], str]:
+    """``k`` with its lengths those of typical wheels (:data:`TYPICAL_SHARE`; a gyro sees only their
+    ratios), unless every length is known; and what they are, in words."""
+    lengths = [n for n in length_params(model) if n in k]
+    if not lengths or all(n in known for n in lengths):
+        return k, "the wheels did"
+    longest = max(lengths, key=lambda n: abs(k[n]))
+    typical = {n: (1.0 if n == longest else TYPICAL_SHARE) if n in lengths else v for n, v in k.items()}
+    return typical, f"typical wheels (a radius {TYPICAL_SHARE:g} of {longest}) would have"
+
+
+def _ratio(z: np.ndarray, turn: np.ndarray) -> tuple[float, float]:
+    """``|v|`` of :func:`axis_and_bias` and its standard error."""
+    v, b = axis_and_bias(z, turn)
+    A = np.column_stack([turn, z[3]])
+    r = z[:3].T - A @ np.vstack([v, b])
+    s2 = float(np.sum(r**2)) / max(3 * (turn.size - 2), 1)
+    try:
+        var = s2 * float(np.linalg.inv(A.T @ A)[0, 0])
+    except np.linalg.LinAlgError:
+        return float(np.linalg.norm(v)), np.inf
+    return float(np.linalg.norm(v)), float(np.sqrt(max(var, 0.0)))
+
+
+def check_rad_s(z: np.ndarray, base_motion: BaseMotion, wheels: tuple[dict[str, float], str]) -> None:
+    """Refuse a gyro whose turning is about 180/π times that of the ``wheels`` (their parameters,
+    and what they are in words) over the increments ``z``."""
+    k, what = wheels
+    turn = np.asarray(base_motion(k))[2]
+    (ratio, se), degree = _ratio(z, turn), 180.0 / np.pi
+    if ratio < MIN_SIGNIFICANCE * se or not degree / DEGREES_FACTOR < ratio < degree * DEGREES_FACTOR:
+        return
+    raise DatasetError(
+        "the gyro's rates",
+        None,
+        f"they turned {ratio:.3g} times as far as {what} ({float(np.sum(np.abs(turn))):.3g} rad "
+        f"over {turn.size} increments): degrees per second (180/π = {degree:.1f}); sensor_msgs/Imu holds "
+        "rad/s (REP 103): give the angular velocity in rad/s (× π/180)",
+    )
 
 
 def tilt_of(v: np.ndarray) -> tuple[float, float]:
@@ -99,6 +157,7 @@ def gyro_start(
     k = {n: float(known.get(n, guess[n])) for n in model.kinematic_params}
     free = [n for n in model.kinematic_params if n not in known]
     v, b = np.zeros(3), np.zeros(3)
+    check_rad_s(z, base_motion, _typical(model, k, known))
     for _ in range(ROUNDS):
         v, b = axis_and_bias(z, np.asarray(base_motion(k))[2])
         u = v / max(float(np.linalg.norm(v)), 1e-300)

@@ -1,4 +1,6 @@
-"""A lidar and an IMU on one drive: one ROS 2 bag of ``/joint_states``, ``/scan`` and ``/imu``.
+"""A lidar and an IMU on one drive: one ROS 2 bag of ``/joint_states``, ``/scan`` and ``/imu``
+(or, in place of the scans, a tracker's poses of the lidar's frame on ``/tracker``: a motion
+capture's markers where the lidar sits, each pose with white noise).
 
 The base drives in a room as the lidar simulator's does (:mod:`nlp_calib.simulation.lidar`; its
 fine grid also holds the IMU's samples); the IMU on it reads as the IMU simulator's does
@@ -37,7 +39,11 @@ from nlp_calib.simulation.lidar import (
     lidar_paths,
     simulate_lidar,
 )
-from nlp_calib.simulation.rosbag import write_bag
+from nlp_calib.simulation.rosbag import pose_stamped, write_bag
+
+#: A motion capture's pose noise (m, rad per pose and axis) and its topic.
+TRACKER_NOISE = (0.002, 0.002)
+TRACKER_TOPIC = "/tracker"
 
 
 @dataclass(frozen=True)
@@ -79,9 +85,33 @@ def simulate_beside(lidar: LidarSimulationOptions, imu: ImuSimulationOptions) ->
     return BesideSimulation(scans, gyro)
 
 
-def write_beside_simulation(sim: BesideSimulation, bag: str | Path) -> tuple[Path, Path]:
-    """Write the bag (``/joint_states``, ``/scan``, ``/imu``, ``/tf_static``) and the truth JSON."""
+def tracker_poses(sim: LidarSimulation) -> np.ndarray:
+    """The lidar's frame as a tracker sees it: its true pose at each scan's stamp with
+    :data:`TRACKER_NOISE` (deterministic for the seed)."""
+    rng = np.random.default_rng([sim.options.seed, 2])
+    xy, theta = TRACKER_NOISE
+    return np.asarray(
+        sim.lidar_poses + rng.normal(0.0, 1.0, sim.lidar_poses.shape) * np.array([xy, xy, theta])
+    )
+
+
+def tracker_messages(sim: LidarSimulation) -> list[Any]:
+    """``/tf_static`` and ``/joint_states`` as the lidar's bag has them, then
+    :func:`tracker_poses` on ``/tracker`` at the scans' stamps."""
+    ns = lambda t: round(float(t) * 1e9)  # noqa: E731
+    messages = [m for m in lidar_messages(sim) if m[0] != "/scan"]
+    return messages + [
+        pose_stamped(ns(s), TRACKER_TOPIC, "map", p) for s, p in zip(sim.scan_time_s, tracker_poses(sim))
+    ]
+
+
+def write_beside_simulation(
+    sim: BesideSimulation, bag: str | Path, tracker: bool = False
+) -> tuple[Path, Path]:
+    """Write the bag (``/joint_states``, ``/scan`` or with ``tracker`` ``/tracker``, ``/imu``,
+    ``/tf_static``) and the truth JSON."""
     path, truth = lidar_paths(bag)
-    write_bag(path, lidar_messages(sim.lidar) + imu_messages(sim.imu))
+    reference = tracker_messages(sim.lidar) if tracker else lidar_messages(sim.lidar)
+    write_bag(path, reference + imu_messages(sim.imu))
     atomic_write_text(truth, json.dumps(sim.truth_dict(), indent=2) + "\n")
     return path, truth

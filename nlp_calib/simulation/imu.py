@@ -70,6 +70,8 @@ class ImuSimulationOptions:
     stamp_offset_s: float = 0.0
     scale: float = 1.0
     drive: DriveShape = field(default_factory=lambda: LIDAR_DRIVE)
+    #: The Imu messages' ``frame_id`` (and the child of its ``/tf_static`` transform).
+    frame: str = "imu_link"
 
     def __post_init__(self) -> None:
         for name, limit in LIMITS.items():
@@ -168,5 +170,6 @@ def write_imu_simulation(sim: ImuSimulation, bag: str | Path) -> tuple[Path, Pat
 def imu_messages(sim: ImuSimulation) -> list[Any]:
     """The IMU's messages: its ``/tf_static`` and ``/imu``."""
     ns = lambda t: round(float(t) * 1e9)  # noqa: E731
-    messages = [tf_static(ns(sim.joint_time_s[0]), "base_link", "imu_link", IMU_XYZ, 0.0)]
-    return messages + [imu(ns(s), "imu_link", w, a) for s, w, a in zip(sim.imu_time_s, sim.rates, sim.accel)]
+    frame = sim.options.frame
+    messages = [tf_static(ns(sim.joint_time_s[0]), "base_link", frame, IMU_XYZ, 0.0)]
+    return messages + [imu(ns(s), frame, w, a) for s, w, a in zip(sim.imu_time_s, sim.rates, sim.accel)]

@@ -19,6 +19,7 @@ JOINT_STATE = "sensor_msgs/msg/JointState"
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
 IMU = "sensor_msgs/msg/Imu"
 ODOMETRY = "nav_msgs/msg/Odometry"
+POSE = "geometry_msgs/msg/PoseStamped"
 TF = "tf2_msgs/msg/TFMessage"
 #: A message to write: topic, type, record time (ns) and how to make it from the type store.
 Message = tuple[str, str, int, Callable[[Any], Any]]
@@ -109,6 +110,17 @@ def tf_static(ns: int, parent: str, child: str, xyz: Sequence[float], yaw: float
         ns,
         lambda ts: ts.types[TF](transforms=[_transform(ts, ns, parent, child, xyz, yaw)]),
     )
+
+
+def pose_stamped(ns: int, topic: str, frame: str, pose: Sequence[float]) -> Message:
+    """A planar pose ``(x, y, θ)`` in ``frame`` as geometry_msgs/PoseStamped on ``topic`` (a tracker's)."""
+
+    def build(ts: Any) -> Any:
+        point = ts.types["geometry_msgs/msg/Point"](x=float(pose[0]), y=float(pose[1]), z=0.0)
+        body = ts.types["geometry_msgs/msg/Pose"](position=point, orientation=quaternion(ts, float(pose[2])))
+        return ts.types[POSE](header=header(ts, ns, frame), pose=body)
+
+    return (topic, POSE, ns, build)
 
 
 def odometry(ns: int, frame: str, child: str, pose: Sequence[float]) -> Message:

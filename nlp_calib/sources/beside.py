@@ -1,11 +1,13 @@
-"""A gyro beside a reference that measures its own motion: one dataset block naming both.
+"""A gyro beside a planar reference (its own motions, or a tracker's poses): one dataset block naming both.
 
-From one bag, a lidar's scans and an Imu topic beside the joints::
+From one bag, a lidar's scans (``scan:``) or a tracker's poses (``tracker:``) and an Imu topic
+beside the joints::
 
     dataset: {bag: drive/, joint_states: /joint_states, joints: [left_wheel_joint, right_wheel_joint],
               scan: /scan, imu: /imu}
 
-or, without a bag, a CSV joint log, a motions file and a gyro's CSV::
+or, without a bag, a CSV joint log, a motions file (or a TUM file of poses, ``poses:``) and a
+gyro's CSV::
 
     dataset: {joints: wheels.csv, motions: lidar.csv, gyro: gyro.csv,
               encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}
@@ -27,15 +29,20 @@ from nlp_calib.core.config import fail, key_name
 from nlp_calib.logs import Log
 from nlp_calib.logs.beside import beside_gyro
 from nlp_calib.models import KinematicModel
+from nlp_calib.sources.bag import BagSource
 from nlp_calib.sources.base import DatasetSource
 from nlp_calib.sources.imu import GyroCsvSource, ImuSource
+from nlp_calib.sources.joints import JointLogSource
 from nlp_calib.sources.lidar import LidarSource
 from nlp_calib.sources.motions import MotionsSource
 
-#: Each pair: the reference's source, the gyro's, and the key only the reference's block has.
+#: Each pair: the reference's source, the gyro's, the key only the reference's block has and the
+#: gyro's.
 PAIRS: tuple[tuple[type[DatasetSource], type[DatasetSource], str, str], ...] = (
     (LidarSource, ImuSource, "scan", "imu"),
+    (BagSource, ImuSource, "tracker", "imu"),
     (MotionsSource, GyroCsvSource, "motions", "gyro"),
+    (JointLogSource, GyroCsvSource, "poses", "gyro"),
 )
 
 
