@@ -22,16 +22,18 @@ its σ that matters); elsewhere ``∇T`` is taken on every window.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from nlp_calib.analysis.degeneracy import motion_scale
 from nlp_calib.analysis.observability import directions
-from nlp_calib.analysis.uncertainty import EndNoise, split_noise
-from nlp_calib.models import reference_scales
+from nlp_calib.analysis.uncertainty import EndNoise, per_second, reading_map, split_noise
+from nlp_calib.models import rate_rows, reference_scales
 from nlp_calib.results.checks import NOT_OBSERVABLE
-from nlp_calib.solvers import ProblemEvaluator
+from nlp_calib.problem import ResidualData
+from nlp_calib.solvers import ProblemEvaluator, Sensitivities
 
 #: A step below this share of every σ cannot matter: the subset's estimate of it is taken as it is.
 MATTERS = 0.05
@@ -68,21 +70,109 @@ def window_shares(
     when given, in their order)."""
     std, counted = noise
     split = split_noise(np.asarray(std, dtype=float) ** 2, counted)
-    data = evaluator.data
-    picked = np.arange(data.n_residuals) if windows is None else windows
-    starts, stops = data.starts[picked], data.stops[picked]
-    if windows is not None:  # their intervals alone (a window's end noise reads its own), renumbered
-        cols = data.intervals_of(windows)
-        starts, stops = np.searchsorted(cols, starts), np.searchsorted(cols, stops - 1) + 1
+    picked, starts, stops = _spans(evaluator.data, windows)
+    rates = rate_rows(evaluator.fns.model)
     out, ends = np.zeros(picked.size), None
     for w, sens in evaluator.sensitivities(x, windows):
         if ends is None:
             n_int, n_in = int(stops.max(initial=0)), evaluator.fns.n_inputs
             D = sens.D if sens.D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
-            ends = EndNoise(D, split)
+            ends = EndNoise(reading_map(D, _inputs(evaluator, windows), rates), split)
         V = ends.between(starts[w], stops[w])
         rows = ((sens.de_dend @ V) * sens.de_dend).sum(axis=2)  # (windows, error rows)
         out[w] = weight[picked[w]] * (rows @ evaluator.omega)
+    return out
+
+
+def _spans(data: ResidualData, windows: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The window indices and their first and last interval: of every window, or of ``windows``
+    on their intervals alone, renumbered (the evaluator's ``D`` for them covers those alone)."""
+    picked = np.arange(data.n_residuals) if windows is None else windows
+    starts, stops = data.starts[picked], data.stops[picked]
+    if windows is not None:
+        cols = data.intervals_of(windows)
+        starts, stops = np.searchsorted(cols, starts), np.searchsorted(cols, stops - 1) + 1
+    return picked, starts, stops
+
+
+def _inputs(evaluator: ProblemEvaluator, windows: np.ndarray | None) -> np.ndarray:
+    """The inputs of the intervals the evaluator's ``D`` covers for ``windows`` (every one: all)."""
+    u = evaluator.data.inputs
+    return u if windows is None else u[:, evaluator.data.intervals_of(windows)]
+
+
+def mean_shifts(
+    evaluator: ProblemEvaluator, x: np.ndarray, noise: tuple[np.ndarray, np.ndarray], windows: np.ndarray | None
+) -> Callable[[slice, Sensitivities], np.ndarray]:
+    """Per block of windows, each one's expected residual ``β_w`` ``(windows, error rows)`` that
+    the inputs' noise adds through the model's curvature in them (second order: ``½ E[δᵀ∇²e δ]``
+    over each interval's own noise, along each source at a time; the sources independent).
+    On one-interval windows the residuals' own second differences give it; on longer ones each
+    interval's end shift ``¼ (D(u+v) − D(u−v)) v`` (the prefix poses held: the terms across
+    intervals have no mean), summed over a window's intervals. A rate taken over one interval is
+    what makes it matter: a skid-steer's turn ``Δθ_w/(1 + slip·|ω_w|)`` on a noisy ``ω_w`` turns
+    less by ``slip·σ_ω²`` per second whatever the rate, a track short by its share of the turn rate."""
+    sources = _sources(evaluator, noise)
+    picked, starts, stops = _spans(evaluator.data, windows)
+    if not evaluator.fns.prefix:
+        beta = _second_differences(evaluator, x, sources)[:, picked].T
+        return lambda w, sens: beta[w]
+    cols = None if windows is None else evaluator.data.intervals_of(windows)
+    b = 0.0
+    for v in sources:
+        v = v if cols is None else v[:, cols]
+        ahead, back = (evaluator.interval_sensitivity(x, windows, sign * v) for sign in (1.0, -1.0))
+        b = b + 0.25 * np.einsum("jmi,ij->jm", ahead - back, v)
+    if not sources:
+        return lambda w, sens: np.zeros(sens.de_dend.shape[:2])
+    B = np.concatenate([np.zeros((1, np.shape(b)[1])), np.cumsum(b, axis=0)])
+    return lambda w, sens: np.einsum("nrm,nm->nr", sens.de_dend, B[stops[w]] - B[starts[w]])
+
+
+def _sources(evaluator: ProblemEvaluator, noise: tuple[np.ndarray, np.ndarray]) -> list[np.ndarray]:
+    """Each independent source of an interval's input noise as its 1σ move of every interval's
+    inputs ``(n_inputs, intervals)``: an input with noise of its own, or a counter's increment
+    (two readings' worth, less where the records re-sample a joint stream: :meth:`Log.increment_variance`)
+    with the rate it gives over the interval's duration."""
+    std, counted = (np.asarray(v) for v in noise)
+    u = evaluator.data.inputs
+    rates = rate_rows(evaluator.fns.model)
+    per_s = per_second(u, rates)
+    readings = np.sqrt(_increment_variance(evaluator.data))
+    out = []
+    for row in np.flatnonzero(std > 0):
+        v = np.zeros_like(u, dtype=float)
+        v[row] = std[row] * (readings if counted[row] else 1.0)
+        for rate in (r for r, of in rates.items() if of == row):
+            v[rate] = v[row] * per_s
+        out.append(v)
+    return out
+
+
+def _increment_variance(data: ResidualData) -> np.ndarray:
+    """Every interval column's :meth:`Log.increment_variance` as ``data`` lays its logs' intervals
+    (2 between two logs and wherever a log does not fill its columns)."""
+    out = np.full(data.inputs.shape[1], 2.0)
+    for log, first in zip(data.logs, data.offsets):
+        cols = first + np.arange(log.n_records - 1)
+        keep = (cols >= 0) & (cols < out.size)
+        out[cols[keep]] = log.increment_variance()[keep]
+    return out
+
+
+def _second_differences(evaluator: ProblemEvaluator, x: np.ndarray, sources: list[np.ndarray]) -> np.ndarray:
+    """``½ Σ_v (e(u+v) + e(u−v) − 2e(u))``, every window's ``(error rows, windows)``, on windows of
+    one interval each (no terms across intervals); the evaluator's inputs restored."""
+    data = evaluator.data
+    here = evaluator.robust_terms(x)[0]
+    out = np.zeros_like(here)
+    try:
+        for v in sources:
+            for sign in (1.0, -1.0):
+                evaluator.set_inputs(data.inputs + sign * v)
+                out += 0.5 * (evaluator.robust_terms(x)[0] - here)
+    finally:
+        evaluator.set_inputs(data.inputs)
     return out
 
 
@@ -123,16 +213,21 @@ def bias_step(evaluator: ProblemEvaluator, x: np.ndarray, noise: tuple[np.ndarra
         return none
     H_inv = _determined_inverse(evaluator, x, ne.H, float(np.sum(weight * s)) / dof)
     N = s.size
+    # The noise's mean costs one pass over every window; the gradient of its share, one per
+    # parameter: that is screened on a subset first.
+    mean = H_inv @ _shift_terms(evaluator, x, weight, noise, None).sum(axis=0)
+    share = None
     if N >= SCREEN_FROM:
         subset = np.linspace(0, N - 1, SUBSET).round().astype(np.intp)
         terms = 0.5 * _gradient_terms(evaluator, x, weight, noise, sigma, subset) @ H_inv
         # The subset's sum scaled by N/n, and its standard error (sampling n of N windows).
-        step = N * terms.mean(axis=0)
+        share = N * terms.mean(axis=0)
         err = N * np.sqrt((1.0 - SUBSET / N) * terms.var(axis=0, ddof=1) / SUBSET)
-        if np.all(np.abs(step) + MARGIN * err <= MATTERS * sigma):
-            return BiasStep(x, step, sigma)
-    grad = _gradient_terms(evaluator, x, weight, noise, sigma, None).sum(axis=0)
-    step = np.asarray(0.5 * H_inv @ grad)
+        if not np.all(np.abs(share) + MARGIN * err <= MATTERS * sigma):
+            share = None
+    if share is None:
+        share = 0.5 * H_inv @ _gradient_terms(evaluator, x, weight, noise, sigma, None).sum(axis=0)
+    step = np.asarray(mean + share)
     return BiasStep(x, step, sigma) if np.all(np.abs(step) <= LARGEST * sigma) else none
 
 
@@ -154,6 +249,25 @@ def _determined_inverse(
     keep = ~found.free & (1.0 / np.sqrt(lam) <= NOT_OBSERVABLE)
     V = found.V[:, keep]
     return (R[:, None] * V / (sigma2 * lam[keep])) @ (V.T * R[None, :])
+
+
+def _shift_terms(
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    weight: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray],
+    windows: np.ndarray | None,
+) -> np.ndarray:
+    """Each window's ``ρ'_w J_wᵀ Ω β_w`` ``(windows, n_free)`` (``β_w``, the noise's mean in its
+    residual: :func:`mean_shifts`): the clean residual is the noisy one less ``β``, so the clean
+    fit's gradient at ``x`` is minus their sum."""
+    shift = mean_shifts(evaluator, x, noise, windows)
+    picked = np.arange(evaluator.n_residuals) if windows is None else windows
+    out = np.zeros((picked.size, evaluator.fns.n_free))
+    for w, sens in evaluator.sensitivities(x, windows):
+        beta = shift(w, sens) * evaluator.omega
+        out[w] = weight[picked[w], None] * np.einsum("nrk,nr->nk", sens.J, beta)
+    return out
 
 
 def _gradient_terms(

@@ -37,12 +37,13 @@ timing error or slowly varying model error), and the problem is close to linear 
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
+from nlp_calib.models import rate_rows
 from nlp_calib.problem import ProblemFunctions, ResidualData
 from nlp_calib.results.checks import LAG_EFFECT_CORRELATION, LagEffect
 from nlp_calib.results.layout import CLOCK, Layout
@@ -177,6 +178,7 @@ def estimate(
     Sigma_in = np.asarray(input_noise_std, dtype=float) ** 2
     n_int, n_in = data.inputs.shape[1], fns.n_inputs
     D = first[1].D if first[1].D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
+    D = reading_map(D, data.inputs, rate_rows(fns.model))
     use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(s.size, dtype=bool)
     split = split_noise(Sigma_in, counted)
     sums = _Sums.zero(fns, data, first[1].de_dend.shape[2], D, split)
@@ -291,6 +293,32 @@ def _bounded(lam: np.ndarray, P: np.ndarray, scale: np.ndarray) -> np.ndarray:
     held = np.diag(P) * scale**2
     least = float(np.min(held[held > 0])) if np.any(held > 0) else np.inf
     return np.asarray(lam >= 0.5 * least)
+
+
+def per_second(inputs: np.ndarray, rates: Mapping[int, int]) -> np.ndarray:
+    """Each interval's ``1/Δt`` as its rate rows say (a rate over its increment; where no
+    increment moved, its neighbours'), ``(intervals,)``; zeros without ``rates``."""
+    out = np.full(inputs.shape[1], np.nan)
+    for rate, row in rates.items():
+        moved = inputs[row] != 0
+        out[moved] = np.abs(inputs[rate, moved] / inputs[row, moved])
+    known = np.flatnonzero(np.isfinite(out))
+    if not known.size:
+        return np.zeros(inputs.shape[1])
+    return np.interp(np.arange(out.size), known, out[known])
+
+
+def reading_map(D: np.ndarray, inputs: np.ndarray, rates: Mapping[int, int]) -> np.ndarray:
+    """``D`` ``(intervals, m, n_inputs)`` from the noise of each input that has noise of its own:
+    a rate row's column (see :func:`~nlp_calib.models.rate_rows`) added to its increment's over
+    the interval's duration, as the increment's noise reaches both (a skid-steer's turn rate)."""
+    if not rates:
+        return D
+    out = np.array(D, dtype=float)
+    per_s = per_second(inputs, rates)[: D.shape[0]]
+    for rate, row in rates.items():
+        out[:, :, row] += D[:, :, rate] * per_s[:, None]
+    return out
 
 
 def split_noise(Sigma_in: np.ndarray, counted: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:

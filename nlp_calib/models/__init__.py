@@ -21,6 +21,7 @@ from nlp_calib.models.base import (
     encoders,
     header_parameters,
     param_names,
+    rate_rows,
     param_units,
     reference_scales,
 )
@@ -96,6 +97,7 @@ __all__ = [
     "load_log",
     "model_for_log",
     "param_names",
+    "rate_rows",
     "param_units",
     "reference_scales",
 ]

@@ -336,7 +336,7 @@ class ProblemEvaluator:
         N = self.n_residuals if windows is None else int(windows.size)
         # A few windows of many: the interpreter (their compiled map is sized for all of them).
         backend = self._backend("sensitivities") if windows is None else INTERPRETED
-        D = self._interval_sensitivity(x, windows) if fns.prefix else None
+        D = self.interval_sensitivity(x, windows) if fns.prefix else None
         motion = self.motion.update(ORDER["sensitivities"], x, self.x_fixed, windows)
         data = (
             self._on.window_data if windows is None else np.asfortranarray(self._on.window_data[:, windows])
@@ -359,17 +359,25 @@ class ProblemEvaluator:
             )
             yield w, Sensitivities(J=J_, de_dz=de_dz_, de_dend=de_dend_, dz_da=dz_da_, dz_db=dz_db_, D=D)
 
-    def _interval_sensitivity(self, x: np.ndarray, windows: np.ndarray | None) -> np.ndarray:
+    def interval_sensitivity(
+        self, x: np.ndarray, windows: np.ndarray | None = None, shift: np.ndarray | None = None
+    ) -> np.ndarray:
         """``D`` ``(intervals, m, n_inputs)`` at ``x`` on every interval, or on those the windows of
-        the indices ``windows`` cover alone (:meth:`ResidualData.intervals_of`)."""
+        the indices ``windows`` cover alone (:meth:`ResidualData.intervals_of`); at the inputs
+        moved by ``shift`` ``(n_inputs, those intervals)`` when given (the prefix poses kept)."""
         m = self.motion
         n_pad = m.inputs.shape[1]
         poses = m.poses(x, self.x_fixed)
         if windows is None:
-            mapped, backend = {"state": poses[:, :n_pad], "u": m.inputs}, self._backend("sensitivities")
+            u = m.inputs
+            if shift is not None:
+                u = np.array(u, order="F")
+                u[:, : shift.shape[1]] += shift
+            mapped, backend = {"state": poses[:, :n_pad], "u": u}, self._backend("sensitivities")
         else:
             cols = self.data.intervals_of(windows)
-            mapped = {"state": np.asfortranarray(poses[:, cols]), "u": np.asfortranarray(m.inputs[:, cols])}
+            u = m.inputs[:, cols] if shift is None else m.inputs[:, cols] + shift
+            mapped = {"state": np.asfortranarray(poses[:, cols]), "u": np.asfortranarray(u)}
             backend = INTERPRETED
         n = next(iter(mapped.values())).shape[1]
         per = BlockMap(
