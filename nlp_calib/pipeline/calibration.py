@@ -240,7 +240,7 @@ def _joint_fit(sc: Scenario, parts: Sequence[LogSetup], solvers: Sequence[str]) 
 def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> CalibrationRun:
     """:meth:`Calibration.run` over several logs."""
     fitting, parts = calib.fitting, calib.parts
-    results, fitted, notes = _fit(fitting, parts, names, calib.held)
+    results, fitted, notes = _fit(fitting, parts, names, calib.held, wanted.against is not None)
     scorer = blocks_scorer(fitting.fns, parts, fitting.data)
     logs = logs_crossval(fitting, results, scorer, log_ranges(parts))
     own = [_own_run(p, names) for p in parts]
@@ -349,11 +349,16 @@ def joint_noise(parts: Sequence[LogSetup]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _fit(
-    fitting: Fit, parts: Sequence[LogSetup], solvers: Sequence[str], held: Mapping[str, str]
+    fitting: Fit,
+    parts: Sequence[LogSetup],
+    solvers: Sequence[str],
+    held: Mapping[str, str],
+    from_estimate: bool = False,
 ) -> tuple[dict[str, SolverResult], FitAnalysis, list[str]]:
     """The fit stage and the fit's analysis over ``parts`` (one log, or several end to end);
-    ``held``: the parameters held because the fitted records do not determine them."""
-    results = {name: fitting.solve(name) for name in solvers}
+    ``held``: the parameters held because the fitted records do not determine them;
+    ``from_estimate``: the start is a stored calibration's estimate (:meth:`Fit.solve`)."""
+    results = {name: fitting.solve(name, from_estimate) for name in solvers}
     noise = joint_noise(parts)
     info = fit_info(parts[0].prepared.scenario, fitting.fns)
     # The precision each parameter needs: the tightest any log's drive asks (as the joint run's).
@@ -416,5 +421,6 @@ def _run(
     sc: Scenario, fitting: Fit, parts: Sequence[LogSetup], solvers: Sequence[str] | None, wanted: Wanted
 ) -> tuple[FitAnalysis, list[str], list[CalibrationRun]]:
     """The fit, analyse and assemble stages over ``parts`` (one log, or several end to end)."""
-    results, fitted, notes = _fit(fitting, parts, tuple(solvers or sc.solvers), parts[0].prepared.held)
+    names, held = tuple(solvers or sc.solvers), parts[0].prepared.held
+    results, fitted, notes = _fit(fitting, parts, names, held, wanted.against is not None)
     return fitted, notes, _assemble(fitting, parts, results, fitted, notes, wanted)

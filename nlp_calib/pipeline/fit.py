@@ -53,10 +53,13 @@ class Fit:
                 self._solvers[name] = get_solver(name)(self.evaluator, sc.options_for(name))
         return self._solvers[name]
 
-    def solve(self, name: str) -> SolverResult:
-        """Run one solver from the starting point; the result is in the model's canonical form."""
+    def solve(self, name: str, from_estimate: bool = False) -> SolverResult:
+        """Run one solver from the starting point; the result is in the model's canonical form.
+        ``from_estimate``: the start is an estimate that took the bias step (a stored calibration
+        checked again), so the solver starts where that step began (:meth:`before_step`)."""
         start = self.problem.start
-        result = self.solver(name).solve(start.x0, start.lower, start.upper)
+        x0 = self.before_step(start.x0) if from_estimate else start.x0
+        result = self.solver(name).solve(x0, start.lower, start.upper)
         interrupts.check()  # IPOPT catches the signal that stops it and returns as if it had failed
         refuse_rejected_options(self.problem.binder.scenario, result)
         return self.canonical(self.unbiased(dataclasses.replace(result, solver=name)))
@@ -81,6 +84,22 @@ class Fit:
         return dataclasses.replace(
             result, x=x, params=ev.params(x), cost=ne.cost, chi2=ne.chi2, inliers=ne.inliers
         )
+
+    def before_step(self, x: np.ndarray) -> np.ndarray:
+        """The point whose bias step lands on the estimate ``x``: ``x`` less the step there (the
+        step changes over its own size by a share of itself too small to count), so that a refit
+        from a stored estimate starts at the optimum its run's solver stopped at, and ends, step
+        taken again, where that run did (not wherever a solver's tolerance lets it stop)."""
+        if self.noise is None:
+            return x
+        known = bias_step(self.evaluator, x, self.noise)
+        if not np.any(known.step):
+            return x
+        back = self.evaluator.boxplus(x, -known.step)
+        start = self.problem.start
+        if start.lower is not None and start.upper is not None:
+            back = np.clip(back, start.lower, start.upper)
+        return np.asarray(back)
 
     def canonical(self, result: SolverResult) -> SolverResult:
         """``result`` mapped onto the model's canonical form (same cost: an exact symmetry)."""
