@@ -10,14 +10,17 @@ cost (:mod:`nlp_calib.analysis.inputs_bias`)."""
 
 from __future__ import annotations
 
+import json
 import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from conftest import write_sim
+import ros2_bags as rb
+from conftest import cli, write_sim
 
 from nlp_calib.analysis import inputs_bias
+from nlp_calib.logs.log import JointStream
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
 
 SEEDS = (901, 903, 905)
@@ -111,3 +114,34 @@ def test_the_bias_step_takes_every_window_where_it_matters_and_a_subset_where_it
     assert np.max(np.abs(small)) < 0.01 * inputs_bias.MATTERS
     assert not np.array_equal(screened[1].step, full[1].step)
     np.testing.assert_allclose(screened[1].step / full[1].sigma, small, atol=0.2 * np.max(np.abs(small)))
+
+
+def test_a_skid_steers_turn_rate_over_one_interval_biases_no_track(tmp_path: Path) -> None:
+    """A skid-steer turns by ``Δθ_w/(1 + slip·|ω_w|)`` with ``ω_w`` its wheels' rate over each
+    interval: the counts' rounding in that rate (the tracker's 120 Hz records re-sample 100 Hz
+    joints) makes it turn less, by ``slip·σ_ω²`` per second whatever the rate, and the fit shortens
+    the track by about its share of the turn rate: -6.4σ here with a noise-free tracker
+    and no correction of the noise's mean. The step removes it."""
+    rec = rb.record("skid_steer", seconds=45.0, seed=6, tracker_noise=0.0)
+    bag = rb.write(rec, tmp_path / "bag", "mcap")
+    sc = tmp_path / "robot.yaml"
+    sc.write_text(
+        f"name: robot\nmodel: skid_steer\n{rb.dataset_block(bag, rec)}\ninitial_guess: auto\n"
+        "residual: {horizon_s: 0.5}\nsolvers: [gauss_newton]\n"
+    )
+    proc = cli("run", str(sc), "--out", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stderr
+    estimate = json.loads((tmp_path / "out" / "result.json").read_text())["solvers"]["gauss_newton"]
+    z = {n: (estimate["params"][n] - rec.truth[n]) / estimate["std"][n] for n in ("wheel_separation", "turn_slip")}
+    assert all(abs(v) <= 3.0 for v in z.values()), z
+
+
+def test_a_resampled_joints_increments_carry_their_readings_noise_as_interpolated() -> None:
+    """Records at 120 Hz between joint readings at 100 Hz: each increment's variance, in one
+    reading's, as a simulation of independent readings gives it (2 on the joints' own stamps)."""
+    stream = JointStream(time_s=np.arange(100) * 0.01, positions=np.zeros((100, 1)), resolution=(0.0,))
+    t = 0.0037 + np.arange(100) / 120.0
+    readings = np.random.default_rng(3).normal(size=(4000, 100))
+    drawn = np.var(np.diff([np.interp(t, stream.time_s, r) for r in readings], axis=1), axis=0)
+    np.testing.assert_allclose(stream.increment_variance(t), drawn, rtol=0.15)
+    np.testing.assert_array_equal(stream.increment_variance(stream.time_s[:50]), 2.0)
