@@ -18,6 +18,11 @@ a strided subset's sum scaled by ``N/n`` estimates it without bias, and the spre
 terms says how far off that estimate can be: where the step it gives stays, with that margin,
 below :data:`MATTERS` of every σ, it is taken as it is (it cannot move an estimate by a share of
 its σ that matters); elsewhere ``∇T`` is taken on every window.
+
+The noise also has a mean in the residuals where the model is curved in its inputs (second order,
+``β_w = ½ E[δᵀ∇²e_w δ]``, :func:`mean_shifts`): the clean residual is the noisy one less ``β``, so
+the step adds ``H⁻¹ Σ_w ρ'_w J_wᵀ Ω β_w``. A rate over one interval is what makes it matter (a
+skid-steer's turn on its wheels' noisy rate); it costs one pass over every window.
 """
 
 from __future__ import annotations
