@@ -132,7 +132,10 @@ def test_a_skid_steers_turn_rate_over_one_interval_biases_no_track(tmp_path: Pat
     proc = cli("run", str(sc), "--out", str(tmp_path / "out"))
     assert proc.returncode == 0, proc.stderr
     estimate = json.loads((tmp_path / "out" / "result.json").read_text())["solvers"]["gauss_newton"]
-    z = {n: (estimate["params"][n] - rec.truth[n]) / estimate["std"][n] for n in ("wheel_separation", "turn_slip")}
+    z = {
+        n: (estimate["params"][n] - rec.truth[n]) / estimate["std"][n]
+        for n in ("wheel_separation", "turn_slip")
+    }
     assert all(abs(v) <= 3.0 for v in z.values()), z
 
 

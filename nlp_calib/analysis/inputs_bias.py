@@ -36,8 +36,8 @@ from nlp_calib.analysis.degeneracy import motion_scale
 from nlp_calib.analysis.observability import directions
 from nlp_calib.analysis.uncertainty import EndNoise, per_second, reading_map, split_noise
 from nlp_calib.models import rate_rows, reference_scales
-from nlp_calib.results.checks import NOT_OBSERVABLE
 from nlp_calib.problem import ResidualData
+from nlp_calib.results.checks import NOT_OBSERVABLE
 from nlp_calib.solvers import ProblemEvaluator, Sensitivities
 
 #: A step below this share of every σ cannot matter: the subset's estimate of it is taken as it is.
@@ -107,7 +107,10 @@ def _inputs(evaluator: ProblemEvaluator, windows: np.ndarray | None) -> np.ndarr
 
 
 def mean_shifts(
-    evaluator: ProblemEvaluator, x: np.ndarray, noise: tuple[np.ndarray, np.ndarray], windows: np.ndarray | None
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray],
+    windows: np.ndarray | None,
 ) -> Callable[[slice, Sensitivities], np.ndarray]:
     """Per block of windows, each one's expected residual ``β_w`` ``(windows, error rows)`` that
     the inputs' noise adds through the model's curvature in them (second order: ``½ E[δᵀ∇²e δ]``
@@ -118,20 +121,25 @@ def mean_shifts(
     what makes it matter: a skid-steer's turn ``Δθ_w/(1 + slip·|ω_w|)`` on a noisy ``ω_w`` turns
     less by ``slip·σ_ω²`` per second whatever the rate, a track short by its share of the turn rate."""
     sources = _sources(evaluator, noise)
+    if not sources:
+        return lambda w, sens: np.zeros(sens.de_dend.shape[:2])
     picked, starts, stops = _spans(evaluator.data, windows)
     if not evaluator.fns.prefix:
         beta = _second_differences(evaluator, x, sources)[:, picked].T
         return lambda w, sens: beta[w]
     cols = None if windows is None else evaluator.data.intervals_of(windows)
-    b = 0.0
-    for v in sources:
-        v = v if cols is None else v[:, cols]
-        ahead, back = (evaluator.interval_sensitivity(x, windows, sign * v) for sign in (1.0, -1.0))
-        b = b + 0.25 * np.einsum("jmi,ij->jm", ahead - back, v)
-    if not sources:
-        return lambda w, sens: np.zeros(sens.de_dend.shape[:2])
-    B = np.concatenate([np.zeros((1, np.shape(b)[1])), np.cumsum(b, axis=0)])
+    moved = [v if cols is None else v[:, cols] for v in sources]
+    b = np.sum([_end_shift(evaluator, x, windows, v) for v in moved], axis=0)
+    B = np.concatenate([np.zeros((1, b.shape[1])), np.cumsum(b, axis=0)])
     return lambda w, sens: np.einsum("nrm,nm->nr", sens.de_dend, B[stops[w]] - B[starts[w]])
+
+
+def _end_shift(
+    evaluator: ProblemEvaluator, x: np.ndarray, windows: np.ndarray | None, v: np.ndarray
+) -> np.ndarray:
+    """Each interval's end shift ``¼ (D(u+v) − D(u−v)) v`` ``(intervals, m)`` along the source ``v``."""
+    ahead, back = (evaluator.interval_sensitivity(x, windows, sign * v) for sign in (1.0, -1.0))
+    return np.asarray(0.25 * np.einsum("jmi,ij->jm", ahead - back, v))
 
 
 def _sources(evaluator: ProblemEvaluator, noise: tuple[np.ndarray, np.ndarray]) -> list[np.ndarray]:

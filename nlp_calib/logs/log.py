@@ -136,7 +136,9 @@ class JointStream:
         a0, a1, b0, b1 = -(1.0 - alpha[:-1]), -alpha[:-1], 1.0 - alpha[1:], alpha[1:]
         d = k[1:] - k[:-1]
         apart = a0**2 + a1**2 + b0**2 + b1**2
-        return np.where(d == 0, (a0 + b0) ** 2 + (a1 + b1) ** 2, np.where(d == 1, a0**2 + (a1 + b0) ** 2 + b1**2, apart))
+        return np.where(
+            d == 0, (a0 + b0) ** 2 + (a1 + b1) ** 2, np.where(d == 1, a0**2 + (a1 + b0) ** 2 + b1**2, apart)
+        )
 
     def covers(self, t: np.ndarray) -> np.ndarray:
         """Which of the times ``t`` lie inside the stream."""

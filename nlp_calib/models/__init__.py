@@ -21,8 +21,8 @@ from nlp_calib.models.base import (
     encoders,
     header_parameters,
     param_names,
-    rate_rows,
     param_units,
+    rate_rows,
     reference_scales,
 )
 from nlp_calib.models.car_like import CarLike
@@ -97,7 +97,7 @@ __all__ = [
     "load_log",
     "model_for_log",
     "param_names",
-    "rate_rows",
     "param_units",
+    "rate_rows",
     "reference_scales",
 ]
