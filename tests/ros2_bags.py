@@ -83,9 +83,14 @@ def tricycle_truth(radius: float = 0.125, wheelbase: float = 1.2) -> dict[str, f
 
 
 def record(
-    model: str = "tricycle", seconds: float = 60.0, seed: int = 5, truth: dict[str, float] | None = None
+    model: str = "tricycle",
+    seconds: float = 60.0,
+    seed: int = 5,
+    truth: dict[str, float] | None = None,
+    tracker_noise: float = 0.001,
 ) -> Recording:
-    """Simulate ``seconds`` of driving and record it as a ROS 2 robot would."""
+    """Simulate ``seconds`` of driving and record it as a ROS 2 robot would (the tracker's noise
+    ``tracker_noise`` m and rad)."""
     counts_truth = truth or (tricycle_truth() if model == "tricycle" else {})
     opts = SimulationOptions.of(
         records=int(seconds * GRID_HZ),
@@ -119,7 +124,7 @@ def record(
         joints=joints[j_idx],
         joint_names=JOINTS[model],
         tracker_ns=tracker_ns + T0_NS,
-        tracker=_seen(sim.T_world_sensor, ns, tracker_ns, np.random.default_rng(seed + 100)),
+        tracker=_seen(sim.T_world_sensor, ns, tracker_ns, np.random.default_rng(seed + 100), tracker_noise),
         tracker_z=SENSOR_Z + np.zeros(tracker_ns.size),
         # The tracker's stamps are the times it saw the poses: its time offset is the simulator's.
         truth={
@@ -129,13 +134,15 @@ def record(
     )
 
 
-def _seen(poses: np.ndarray, ns: np.ndarray, at: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """The noise-free poses interpolated at ``at`` (ns), with noise and 1 % outliers."""
+def _seen(
+    poses: np.ndarray, ns: np.ndarray, at: np.ndarray, rng: np.random.Generator, noise: float = 0.001
+) -> np.ndarray:
+    """The noise-free poses interpolated at ``at`` (ns), with ``noise`` and 1 % outliers."""
     heading = np.unwrap(poses[:, 2])
     out = np.stack(
         [np.interp(at, ns, poses[:, 0]), np.interp(at, ns, poses[:, 1]), np.interp(at, ns, heading)], 1
     )
-    out += rng.normal(0.0, 0.001, out.shape)
+    out += rng.normal(0.0, 1.0, out.shape) * noise
     outliers = rng.random(at.size) < 0.01
     out[outliers] += rng.normal(0.0, 0.2, (int(outliers.sum()), 3))
     out[:, 2] = wrap_angle(out[:, 2])

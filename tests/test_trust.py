@@ -44,6 +44,12 @@ def scenario(**changes: object) -> Scenario:
     return base.with_options(**changes)  # type: ignore[arg-type]
 
 
+def _noise(calib: Calibration) -> tuple[np.ndarray, None, np.ndarray]:
+    """The inputs' noise as the pipeline gives it (a counter's on its readings), no bounds."""
+    std, counted = calib.stages.windows.input_noise
+    return std, None, counted
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_recovers_truth_with_noise_outliers_wrap_and_latency(seed: int) -> None:
@@ -54,7 +60,7 @@ def test_recovers_truth_with_noise_outliers_wrap_and_latency(seed: int) -> None:
     for solver in ("gauss_newton", "ipopt"):
         res = calib.solve(solver)
         assert res.converged, res.reason
-        u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.aligned))
+        u = unc.estimate(calib.evaluator, res.x, calib.data, *_noise(calib))
         # The lag is a parameter of the problem: its fitted value is judged like the others.
         idx = [res.names.index(n) for n in (*NAMES, "tracker_lag")]
         err = res.params[idx] - np.append(TRUTH, 0.05)
@@ -78,7 +84,7 @@ def test_uncertainty_is_consistent_over_independent_noise() -> None:
         calib = sim_calibration(sc, records=1000, seed=1000 + k)
         res = calib.solve("gauss_newton")
         assert res.converged, res.reason
-        u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.aligned))
+        u = unc.estimate(calib.evaluator, res.x, calib.data, *_noise(calib))
         err = res.params - TRUTH
         nees[k] = err @ np.linalg.solve(u.covariance, err)
         covered += np.abs(err) <= 2 * u.std
@@ -92,7 +98,7 @@ def test_estimated_noise_matches_the_simulated_tracker_noise() -> None:
         scenario(), records=1500, seed=3, tracker_noise_xy=0.003, tracker_noise_theta=0.001
     )
     res = calib.solve("gauss_newton")
-    u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.aligned))
+    u = unc.estimate(calib.evaluator, res.x, calib.data, *_noise(calib))
     assert u.noise["tracker_xy"] == pytest.approx(0.003, rel=0.1)
     assert u.noise["tracker_theta"] == pytest.approx(0.001, rel=0.1)
 
@@ -106,7 +112,7 @@ def test_straight_line_log_warns_about_turning_and_is_not_converged() -> None:
     assert "no turning" in text
     for name in ("axis_length", "sensor_x", "sensor_y"):
         assert name in text
-    u = unc.estimate(calib.evaluator, res.x, calib.data, calib.model.input_noise_std(calib.aligned))
+    u = unc.estimate(calib.evaluator, res.x, calib.data, *_noise(calib))
     std = u.std_dict()
     assert np.isinf(std["axis_length"]) and np.isinf(std["sensor_x"])
     assert np.isfinite(std["k_traction"]) and np.isfinite(std["sensor_theta"])
@@ -177,7 +183,7 @@ def test_fixed_parameter_stays_bit_identical_and_solvers_agree(small_demo: Scena
         assert res.param_dict()["sensor_y"] == 0.07
     np.testing.assert_allclose(gn.params, ip.params, rtol=1e-6)
     assert gn.cost == pytest.approx(ip.cost, rel=1e-9)
-    u = unc.estimate(calib.evaluator, gn.x, calib.data, calib.model.input_noise_std(calib.aligned))
+    u = unc.estimate(calib.evaluator, gn.x, calib.data, *_noise(calib))
     assert u.std_dict()["axis_length"] == 0.0 and u.std_dict()["k_steer"] > 0.0
 
 
@@ -203,11 +209,11 @@ def test_one_uncertainty_where_both_solvers_meet_the_same_optimum(small_demo: Sc
 
     calib = Calibration.setup(small_demo)
     fit = calib.fitting
-    noise = calib.model.input_noise_std(calib.aligned)
+    noise = calib.stages.windows.input_noise
     results = {name: calib.solve(name) for name in ("gauss_newton", "ipopt")}
     shared = uncertainties(fit, results, noise, None)
     assert shared["ipopt"] is shared["gauss_newton"]
-    own = unc.estimate(calib.evaluator, results["ipopt"].x, calib.data, noise)
+    own = unc.estimate(calib.evaluator, results["ipopt"].x, calib.data, noise[0], counted=noise[1])
     np.testing.assert_allclose(shared["ipopt"].std, own.std, rtol=1e-6)
     sigma = own.std[[own.names.index(n) for n in own.free]]
     moved = dataclasses.replace(results["ipopt"], x=results["ipopt"].x + 1e-3 * sigma)

@@ -14,6 +14,7 @@ from nlp_calib.models import get_model
 from nlp_calib.problem import (
     ProblemFunctions,
     ProblemSpec,
+    ResidualData,
     ResidualOptions,
     build,
     build_residual_data,
@@ -104,8 +105,63 @@ def test_windows_touching_flagged_intervals_can_be_dropped() -> None:
     assert_close(kept.z, data.z[:, counts == 0], rtol=0.0)
 
 
-def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval() -> None:
-    """The running-sum propagation against the direct O(N·H) sum over each window's intervals."""
+def _by_reading(F: np.ndarray, counted: np.ndarray) -> np.ndarray:
+    """Each window's map ``(w, h, c, i)`` from its intervals' inputs to its error, written over the
+    readings ``h = 0..H`` of its intervals' ends: a counted input's interval ``h`` is the reading
+    ``h + 1`` less the reading ``h``; another input's interval is its own (the reading ``h``)."""
+    own = np.concatenate([F, np.zeros_like(F[:, :1])], axis=1)
+    read = np.concatenate([-F[:, :1], F[:, :-1] - F[:, 1:], F[:, -1:]], axis=1)
+    return np.where(counted, read, own)
+
+
+def _column_jacobian(fns: ProblemFunctions, data: ResidualData, x: np.ndarray) -> np.ndarray:
+    """Each window's error's derivatives with respect to its own data column, ``(3, N, rows)``."""
+    N = data.n_residuals
+    col = ca.SX.sym("col", fns.column_rows)
+    d_col = ca.Function("d", [col], [ca.jacobian(fns.residual(x, [], col), col)]).map(N)
+    return np.asarray(d_col(data.columns)).reshape(3, N, -1)
+
+
+@pytest.mark.parametrize("H", [1, 5])
+def test_the_inputs_share_of_the_cost_is_the_sum_over_every_window_and_reading(H: int) -> None:
+    """``T(x)``, the counts' expected share of the robust cost, against the direct sum over each
+    window's readings: ``Σ_w ρ'_w Σ_c Ω_c Σ_r (F_w^{r−1} − F_w^r)² σ²``."""
+    from nlp_calib.analysis.inputs_bias import noise_share
+
+    fns = build(get_model("diff_drive"), ProblemSpec(horizon=H, kernel="huber"))
+    data = build_residual_data(fns, sim_log("diff_drive", 300, 7), ResidualOptions(horizon=H))
+    ev = evaluator(fns, data, np.zeros(0), delta=0.05)
+    x, sigma_in, counted = truth("diff_drive") * 1.001, np.array([0.3, 0.5]), np.array([True, True])
+    _, _, weight = ev.robust_terms(x)
+    D = _column_jacobian(fns, data, x)
+    F = D[:, :, : fns.n_inputs * H].reshape(3, data.n_residuals, H, fns.n_inputs).transpose(1, 2, 0, 3)
+    direct = np.einsum("w,c,whci,i->", weight, ev.omega, _by_reading(F, counted) ** 2, sigma_in**2)
+    assert noise_share(ev, x, weight, (sigma_in, counted)) == pytest.approx(direct, rel=1e-9)
+
+
+@pytest.mark.parametrize("H", [1, 5])
+def test_some_windows_shares_of_the_cost_are_their_terms_of_the_direct_sum(H: int) -> None:
+    """The inputs' share of the cost, window by window, on a subset of the windows (overlapping,
+    apart, the last: their intervals alone are integrated) against each one's direct sum."""
+    from nlp_calib.analysis.inputs_bias import window_shares
+
+    fns = build(get_model("diff_drive"), ProblemSpec(horizon=H, kernel="huber"))
+    data = build_residual_data(fns, sim_log("diff_drive", 300, 7), ResidualOptions(horizon=H))
+    ev = evaluator(fns, data, np.zeros(0), delta=0.05)
+    x, sigma_in, counted = truth("diff_drive") * 1.001, np.array([0.3, 0.5]), np.array([True, False])
+    _, _, weight = ev.robust_terms(x)
+    D = _column_jacobian(fns, data, x)
+    F = D[:, :, : fns.n_inputs * H].reshape(3, data.n_residuals, H, fns.n_inputs).transpose(1, 2, 0, 3)
+    direct = np.einsum("w,c,whci,i->w", weight, ev.omega, _by_reading(F, counted) ** 2, sigma_in**2)
+    picked = np.array([2, 3, 5, 40, 41, 120, data.n_residuals - 1])
+    shares = window_shares(ev, x, weight, (sigma_in, counted), picked)
+    assert_close(shares, direct[picked], rtol=1e-9)
+
+
+@pytest.mark.parametrize("counted", [None, np.array([True, False])], ids=["per interval", "traction counted"])
+def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval(counted: np.ndarray | None) -> None:
+    """The running-sum propagation against the direct O(N·H) sum over each window's intervals (a
+    counter's noise on the readings at their ends: adjacent windows share one)."""
     model, H = get_model("tricycle"), 6
     fns = build(model, ProblemSpec(horizon=H, kernel="huber"))
     log = sim_log("tricycle", 300, 5, outlier_fraction=0.03)
@@ -113,14 +169,11 @@ def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval() -> N
     ev = evaluator(fns, data, np.zeros(0), delta=0.05)
     x = truth("tricycle") * 1.001
     sigma_in = np.array([2e-4, 3e-3])
-    got = unc.estimate(ev, x, data, sigma_in)
+    got = unc.estimate(ev, x, data, sigma_in, counted=counted)
 
     # Reference: derivatives of the defining residual with respect to each window's own data.
     N, n_in, n = data.n_residuals, fns.n_inputs, fns.n_free
-    col = ca.SX.sym("col", fns.column_rows)
-    e_col = fns.residual(x, [], col)
-    d_col = ca.Function("d", [col], [ca.jacobian(e_col, col)]).map(N)
-    D = np.asarray(d_col(data.columns)).reshape(3, N, -1)
+    D = _column_jacobian(fns, data, x)
     e, J = (np.asarray(v) for v in fns.residual_jacobian.map(N)(x, [], data.columns))
     J = J.reshape(3, N, n)
     s = np.einsum("cw,c,cw->w", e, ev.omega, e)
@@ -133,6 +186,7 @@ def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval() -> N
     de_dz = D[:, :, n_in * H : n_in * H + 3]
     Ea, Eb = np.einsum("cwk,kwl->wcl", de_dz, Da), np.einsum("cwk,kwl->wcl", de_dz, Db)
     F = D[:, :, : n_in * H].reshape(3, N, H, n_in).transpose(1, 2, 0, 3)
+    F = _by_reading(F, np.zeros(n_in, dtype=bool) if counted is None else counted)
     use = s <= ev.delta**2
     E2 = Ea**2 + Eb**2
     coef = np.concatenate([E2[:, :, :2].sum(axis=2, keepdims=True), E2[:, :, 2:3]], axis=2)
@@ -143,8 +197,8 @@ def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval() -> N
     K = np.zeros((data.n_records, n, 3))
     np.add.at(K, data.starts, np.einsum("wic,wcl->wil", L, Ea))
     np.add.at(K, data.stops, np.einsum("wic,wcl->wil", L, Eb))
-    Q = np.zeros((data.inputs.shape[1], n, n_in))
-    intervals = data.starts[:, None] + np.arange(H)[None, :]
+    Q = np.zeros((data.inputs.shape[1] + 1, n, n_in))
+    intervals = data.starts[:, None] + np.arange(H + 1)[None, :]
     np.add.at(Q, intervals.ravel(), np.einsum("wic,whcl->whil", L, F).reshape(-1, n, n_in))
     Sigma_pose = np.array([var[0], var[0], var[1]])
     meat = np.einsum("pik,k,pjk->ij", K, Sigma_pose, K) + np.einsum("jik,k,jlk->il", Q, sigma_in**2, Q)
@@ -214,7 +268,10 @@ def test_the_weighted_gram_by_blocks_is_the_one_product(monkeypatch: pytest.Monk
     np.testing.assert_array_equal(unc._weighted_gram(A[:0], w), np.zeros((5, 5)))
 
 
-def test_uncertainty_summed_block_by_block_is_the_one_sum(monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize("counted", [None, np.array([True, False])], ids=["per interval", "traction counted"])
+def test_uncertainty_summed_block_by_block_is_the_one_sum(
+    monkeypatch: pytest.MonkeyPatch, counted: np.ndarray | None
+) -> None:
     """The noise maps summed a few rows at a time, as windows arrive a block at a time (rows let go
     of once no later window adds to them), give the covariance of one sum over every row."""
     from nlp_calib.solvers import blocks
@@ -224,9 +281,9 @@ def test_uncertainty_summed_block_by_block_is_the_one_sum(monkeypatch: pytest.Mo
     log = sim_log("tricycle", 400, 6, outlier_fraction=0.03)
     data = build_residual_data(fns, log, ResidualOptions(horizon=H))
     x, sigma_in = truth("tricycle") * 1.001, np.array([2e-4, 3e-3])
-    want = unc.estimate(evaluator(fns, data, np.zeros(0)), x, data, sigma_in)
+    want = unc.estimate(evaluator(fns, data, np.zeros(0)), x, data, sigma_in, counted=counted)
     monkeypatch.setattr(unc, "STEP", 16)
     monkeypatch.setattr(blocks, "BLOCK", 64)
-    got = unc.estimate(evaluator(fns, data, np.zeros(0)), x, data, sigma_in)
+    got = unc.estimate(evaluator(fns, data, np.zeros(0)), x, data, sigma_in, counted=counted)
     assert_close(got.covariance, want.covariance, rtol=1e-10, what="covariance")
     assert got.noise == pytest.approx(want.noise, rel=1e-10)

@@ -8,7 +8,10 @@ sources instead, to first order:
 
 - each tracker pose carries white noise ``diag(σ_t², σ_t², σ_θ²)`` (a 3-D pose: ``σ_t²`` on each
   coordinate of its position, ``σ_r²`` on each component of a rotation on the right);
-- each interval's model inputs carry white noise ``diag(σ_u²)`` (encoder quantisation by default).
+- each interval's model inputs carry white noise ``diag(σ_u²)`` (encoder quantisation by default),
+  except a counter's (``counted``): its rounding is on the readings, so its increment over an
+  interval is the difference of two readings' noises, ``n_{j+1} − n_j``; a window's count then
+  holds ``2σ_u²`` whatever its length, and adjacent windows' counts share a reading.
 
 A residual is ``e_w ≈ E_w^a n_a + E_w^b n_b + Σ_j F_w^j m_j`` (``E = ∂e/∂z·∂z/∂p`` and
 ``F = ∂e/∂u``, both symbolic), the Gauss-Newton estimate moves by ``−H⁻¹ Σ_w L_w e_w`` with
@@ -34,12 +37,13 @@ timing error or slowly varying model error), and the problem is close to linear 
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
+from nlp_calib.models import rate_rows
 from nlp_calib.problem import ProblemFunctions, ResidualData
 from nlp_calib.results.checks import LAG_EFFECT_CORRELATION, LagEffect
 from nlp_calib.results.layout import CLOCK, Layout
@@ -150,8 +154,10 @@ def estimate(
     data: ResidualData,
     input_noise_std: np.ndarray,
     bounds_std: np.ndarray | None = None,
+    counted: np.ndarray | None = None,
 ) -> Uncertainty:
-    """Covariance of the estimate ``x`` fitted to ``data``, given the inputs' 1σ noise.
+    """Covariance of the estimate ``x`` fitted to ``data``, given the inputs' 1σ noise (on the
+    readings where ``counted``, per input row: a counter's increment differences two of them).
 
     ``bounds_std`` (per free parameter, inf where unbounded; see :func:`range_std`) enters as a
     prior: a direction the data do not determine is then known as well as the bounds of the
@@ -172,10 +178,12 @@ def estimate(
     Sigma_in = np.asarray(input_noise_std, dtype=float) ** 2
     n_int, n_in = data.inputs.shape[1], fns.n_inputs
     D = first[1].D if first[1].D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
+    D = reading_map(D, data.inputs, rate_rows(fns.model))
     use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(s.size, dtype=bool)
-    sums = _Sums.zero(fns, data, first[1].de_dend.shape[2], D, Sigma_in)
+    split = split_noise(Sigma_in, counted)
+    sums = _Sums.zero(fns, data, first[1].de_dend.shape[2], D, split)
     residuals = _Residuals(e=e, weight=weight, use=use, Omega=evaluator.omega)
-    running = _input_noise_at_ends(D, Sigma_in, sums.C.shape[1])
+    running = EndNoise(D, split)
     for w, sens in itertools.chain([first], blocks):
         sums.add(w, sens, residuals, running)
     mm = fns.error_rows * int(use.sum())
@@ -287,17 +295,80 @@ def _bounded(lam: np.ndarray, P: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return np.asarray(lam >= 0.5 * least)
 
 
-def _input_noise_at_ends(D: np.ndarray, Sigma_in: np.ndarray, m: int) -> np.ndarray:
-    """Running sums over the intervals of ``Σ_j D_j Σ_u D_jᵀ``: the input noise a window's end
-    collects, ``(n_intervals + 1, m, m)``."""
-    n_int = D.shape[0]
-    running = np.zeros((n_int + 1, m, m))
-    for lo in range(0, n_int, STEP):
-        hi = min(n_int, lo + STEP)
-        Dj = D[lo:hi]
-        part = (Dj * Sigma_in) @ Dj.transpose(0, 2, 1)
-        running[lo + 1 : hi + 1] = np.cumsum(part, axis=0) + running[lo]
-    return running
+def per_second(inputs: np.ndarray, rates: Mapping[int, int]) -> np.ndarray:
+    """Each interval's ``1/Δt`` as its rate rows say (a rate over its increment; where no
+    increment moved, its neighbours'), ``(intervals,)``; zeros without ``rates``."""
+    out = np.full(inputs.shape[1], np.nan)
+    for rate, row in rates.items():
+        moved = inputs[row] != 0
+        out[moved] = np.abs(inputs[rate, moved] / inputs[row, moved])
+    known = np.flatnonzero(np.isfinite(out))
+    if not known.size:
+        return np.zeros(inputs.shape[1])
+    return np.interp(np.arange(out.size), known, out[known])
+
+
+def reading_map(D: np.ndarray, inputs: np.ndarray, rates: Mapping[int, int]) -> np.ndarray:
+    """``D`` ``(intervals, m, n_inputs)`` from the noise of each input that has noise of its own:
+    a rate row's column (see :func:`~nlp_calib.models.rate_rows`) added to its increment's over
+    the interval's duration, as the increment's noise reaches both (a skid-steer's turn rate)."""
+    if not rates:
+        return D
+    out = np.array(D, dtype=float)
+    per_s = per_second(inputs, rates)[: D.shape[0]]
+    for rate, row in rates.items():
+        out[:, :, row] += D[:, :, rate] * per_s[:, None]
+    return out
+
+
+def split_noise(Sigma_in: np.ndarray, counted: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The inputs' variances ``Sigma_in`` as (each interval's own, the readings' of a counter)."""
+    mask = np.zeros(Sigma_in.shape, dtype=bool) if counted is None else np.asarray(counted, dtype=bool)
+    return np.where(mask, 0.0, Sigma_in), np.where(mask, Sigma_in, 0.0)
+
+
+def _running(parts: Callable[[int, int], np.ndarray], n: int, m: int) -> np.ndarray:
+    """``out[k] = Σ_{j<k} parts(j)``, ``(n + 1, m, m)``, :data:`STEP` items at a time."""
+    out = np.zeros((n + 1, m, m))
+    for lo in range(0, n, STEP):
+        hi = min(n, lo + STEP)
+        out[lo + 1 : hi + 1] = np.cumsum(parts(lo, hi), axis=0) + out[lo]
+    return out
+
+
+class EndNoise:
+    """The input noise a window's end collects, ``(m, m)`` per window: ``Σ_j D_j Σ_u D_jᵀ`` over its
+    intervals ``j`` for the inputs with noise of their own, and for a counter's (noise ``n_r`` on
+    its readings, ``Σ_j D_j (n_{j+1} − n_j)``) ``D_a Σ_c D_aᵀ + D_{b−1} Σ_c D_{b−1}ᵀ`` plus
+    ``Σ_r (D_{r−1} − D_r) Σ_c (D_{r−1} − D_r)ᵀ`` over the readings inside: running sums."""
+
+    def __init__(self, D: np.ndarray, split: tuple[np.ndarray, np.ndarray]):
+        own, reading = split
+        n_int, m = D.shape[0], D.shape[1]
+        self.own = _running(lambda lo, hi: _sandwich(D[lo:hi], own), n_int, m)
+        self.ends = _sandwich(D, reading) if n_int else np.zeros((0, m, m))
+        # inside[k] = Σ_{1 ≤ r < k} of the reading r's term (reading r lies between intervals r−1 and r)
+        steps = lambda lo, hi: _sandwich(D[max(lo, 1) - 1 : hi - 1] - D[max(lo, 1) : hi], reading)  # noqa: E731
+        inside = _running(lambda lo, hi: _pad_first(steps(lo, hi), lo), n_int, m)
+        self.inside = inside
+
+    def between(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """The noise at the end of the windows of intervals ``a`` to ``b − 1``, ``(N, m, m)``."""
+        if not self.ends.shape[0]:
+            return self.own[b] - self.own[a]
+        return (
+            self.own[b] - self.own[a] + self.ends[a] + self.ends[b - 1] + self.inside[b] - self.inside[a + 1]
+        )
+
+
+def _sandwich(D: np.ndarray, Sigma: np.ndarray) -> np.ndarray:
+    """``D Σ Dᵀ`` per item, ``Σ`` diagonal."""
+    return np.asarray((D * Sigma) @ D.transpose(0, 2, 1))
+
+
+def _pad_first(values: np.ndarray, lo: int) -> np.ndarray:
+    """Reading 0 (before interval 0) lies inside no window: nothing at item 0."""
+    return np.concatenate([np.zeros((1, *values.shape[1:])), values]) if lo == 0 else values
 
 
 @dataclass(frozen=True)
@@ -361,24 +432,38 @@ class _PoseRows(_Rows):
 class _InputRows(_Rows):
     """The input noise map as differences over the intervals ``C`` (``Q_j`` is its running sum
     through interval ``j``'s ``D_j``), summed as the score's covariance ``Σ_j Q_j Σ_u Q_jᵀ``
-    (``gram``)."""
+    (``gram``) for the inputs with noise of their own, and ``Σ_r (Q_{r−1} − Q_r) Σ_c (…)ᵀ`` over
+    the readings ``r`` of a counter (``Q_{−1} = Q_n = 0``: the first and last reading)."""
 
     def __init__(
-        self, n_rows: int, shape: tuple[int, int], distinct: bool, noise: tuple[np.ndarray, np.ndarray]
+        self,
+        n_rows: int,
+        shape: tuple[int, int],
+        distinct: bool,
+        noise: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]],
     ):
         super().__init__(n_rows, shape, distinct)
-        self.D, self.Sigma_in = noise
+        self.D, (self.Sigma_own, self.Sigma_reading) = noise
         self.gram = np.zeros((shape[0], shape[0]))
         self.carry = np.zeros(shape)
+        self.last_Q = np.zeros((shape[0], self.D.shape[2]))
 
     def take(self, first: int, rows: np.ndarray) -> None:
         rows[0] += self.carry  # the running sum goes on from the previous block's last
         C = np.cumsum(rows, axis=0, out=rows)
         self.carry = C[-1].copy()
         n_int = self.D.shape[0]
-        if first < n_int:
-            Q = C[: n_int - first] @ self.D[first : first + C.shape[0]]  # (., n, n_in)
-            self.gram += _weighted_gram(Q, self.Sigma_in)
+        if first > n_int:
+            return
+        # Q past the last interval is 0: the last reading's term is −Q_{n−1}.
+        Q = np.zeros((C.shape[0], *self.last_Q.shape))
+        inside = min(C.shape[0], n_int - first)
+        Q[:inside] = C[:inside] @ self.D[first : first + inside]
+        self.gram += _weighted_gram(Q[:inside], self.Sigma_own)
+        if np.any(self.Sigma_reading):
+            steps = np.diff(np.concatenate([self.last_Q[None], Q]), axis=0)
+            self.gram += _weighted_gram(steps, self.Sigma_reading)
+        self.last_Q = Q[-1].copy()
 
 
 @dataclass
@@ -407,7 +492,12 @@ class _Sums:
 
     @classmethod
     def zero(
-        cls, fns: ProblemFunctions, data: ResidualData, m: int, D: np.ndarray, Sigma_in: np.ndarray
+        cls,
+        fns: ProblemFunctions,
+        data: ResidualData,
+        m: int,
+        D: np.ndarray,
+        Sigma_in: tuple[np.ndarray, np.ndarray],
     ) -> _Sums:
         groups = tuple(tuple(g) for g in fns.sensor.noise_groups)
         n, a, b = fns.n_free, data.starts, data.stops
@@ -444,10 +534,10 @@ class _Sums:
             Ea[inc], Eb[inc] = sens.de_dz[inc][:, :, : Ea.shape[2]], 0.0
         return a, b, Ea, Eb
 
-    def add(self, w: slice, sens: Sensitivities, r: _Residuals, running: np.ndarray) -> None:
+    def add(self, w: slice, sens: Sensitivities, r: _Residuals, running: EndNoise) -> None:
         """Add the windows ``w``."""
         a, b, Ea, Eb = self._sources(w, sens)
-        known = ((sens.de_dend @ (running[b] - running[self.starts[w]])) * sens.de_dend).sum(axis=2)
+        known = ((sens.de_dend @ running.between(self.starts[w], b)) * sens.de_dend).sum(axis=2)
         E2 = Ea**2 + Eb**2  # per residual component c, pose component k
         coef = np.stack([E2[:, :, list(g)].sum(axis=2) for g in self.groups], axis=2)  # (., rows, groups)
         u, e = r.use[w], r.e[:, w]

@@ -144,6 +144,25 @@ class JointStream:
         ends = 0.5 * (at[np.searchsorted(cuts, t[1:]), angle] + at[np.searchsorted(cuts, t[:-1]), angle])
         return np.where(moved > 0, by_travel, np.where(lasted > 0, by_time, ends))
 
+    def increment_variance(self, t: np.ndarray) -> np.ndarray:
+        """Per interval between the times ``t``, the variance of the joints' increment read there,
+        in one stream reading's (its readings' noises independent): 2 where ``t`` are the stream's
+        own stamps; less where both ends interpolate one pair of readings (their difference's share
+        of it) or the ends share a reading."""
+        ts = self.time_s
+        if ts.size < 2 or np.size(t) < 2:
+            return np.full(max(np.size(t) - 1, 0), 2.0)
+        k = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, ts.size - 2)
+        alpha = np.clip((t - ts[k]) / (ts[k + 1] - ts[k]), 0.0, 1.0)
+        # Each end reads (1 − α)·n_k + α·n_{k+1}; the increment weighs the readings k_i, k_i + 1
+        # by −(1 − α_i), −α_i and k_{i+1}, k_{i+1} + 1 by 1 − α_{i+1}, α_{i+1}.
+        a0, a1, b0, b1 = -(1.0 - alpha[:-1]), -alpha[:-1], 1.0 - alpha[1:], alpha[1:]
+        d = k[1:] - k[:-1]
+        apart = a0**2 + a1**2 + b0**2 + b1**2
+        return np.where(
+            d == 0, (a0 + b0) ** 2 + (a1 + b1) ** 2, np.where(d == 1, a0**2 + (a1 + b0) ** 2 + b1**2, apart)
+        )
+
     def covers(self, t: np.ndarray) -> np.ndarray:
         """Which of the times ``t`` lie inside the stream."""
         return (t >= self.time_s[0]) & (t <= self.time_s[-1])
@@ -260,6 +279,15 @@ class Log:
         records' times less the encoders' lag; :meth:`JointStream.broken`); None: nowhere."""
         stream = self.joint_stream
         return None if stream is None else stream.broken(self.time_s - self.encoder_lag_s)
+
+    def increment_variance(self) -> np.ndarray:
+        """Per interval, a counter's increment's variance in one reading's where the encoders are
+        read (:meth:`JointStream.increment_variance`): 2 without a joint stream (each record a
+        reading of its own)."""
+        stream = self.joint_stream
+        if stream is None:
+            return np.full(max(self.n_records - 1, 0), 2.0)
+        return stream.increment_variance(self.time_s - self.encoder_lag_s)
 
     def encoder(self, name: str) -> np.ndarray:
         """Raw readings of one encoder, ``(n_records,)`` int64."""

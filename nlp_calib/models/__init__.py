@@ -17,10 +17,12 @@ from nlp_calib.models.base import (
     OdometryInverse,
     Reach,
     canonical,
+    counted_inputs,
     encoders,
     header_parameters,
     param_names,
     param_units,
+    rate_rows,
     reference_scales,
 )
 from nlp_calib.models.car_like import CarLike
@@ -88,6 +90,7 @@ __all__ = [
     "OdometryInverse",
     "Reach",
     "canonical",
+    "counted_inputs",
     "encoders",
     "get_model",
     "header_parameters",
@@ -95,5 +98,6 @@ __all__ = [
     "model_for_log",
     "param_names",
     "param_units",
+    "rate_rows",
     "reference_scales",
 ]

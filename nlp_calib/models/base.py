@@ -298,6 +298,23 @@ def canonical(
     return p
 
 
+def counted_inputs(model: KinematicModel, log: Log) -> np.ndarray:
+    """Which of ``model``'s inputs are a counter's increments (their noise lies on the readings,
+    two of them per increment), one flag per input row."""
+    counted = np.zeros(len(model.input_names), dtype=bool)
+    counted[[row for row, _ in model.counter_rows(log).values()]] = True
+    return counted
+
+
+def rate_rows(model: KinematicModel) -> dict[int, int]:
+    """Each input row that is a joint's rate over its interval (its increment over the interval's
+    duration), with the row of that increment: a counter's noise reaches both."""
+    form = model.in_radians()
+    spec, names = form.form.inputs, form.model.input_names  # type: ignore[attr-defined]
+    increments = {spec[n].encoder: row for row, n in enumerate(names) if not spec[n].rate}
+    return {row: increments[spec[n].encoder] for row, n in enumerate(names) if spec[n].rate}
+
+
 def param_names(model: KinematicModel) -> tuple[str, ...]:
     """The full state order: kinematic parameters then the sensor pose."""
     return (*model.kinematic_params, *SENSOR_PARAMS)

@@ -182,7 +182,11 @@ def scores(scorer: Scorer, windows: LogWindows, param_sets: Sequence[np.ndarray]
 
 
 def analyse_fit(
-    fit: Fit, results: Mapping[str, SolverResult], noise: np.ndarray, blocks: Scorer, layout: Layout
+    fit: Fit,
+    results: Mapping[str, SolverResult],
+    noise: tuple[np.ndarray, np.ndarray],
+    blocks: Scorer,
+    layout: Layout,
 ) -> FitAnalysis:
     """Uncertainty of each result; observability at the first estimate with a finite cost (a solver
     may not have started); cross-validation, the direction check and the comparisons with the start
@@ -234,7 +238,10 @@ SAME_OPTIMUM_SIGMAS = 1e-4
 
 
 def uncertainties(
-    fit: Fit, results: Mapping[str, SolverResult], noise: np.ndarray, ranges: np.ndarray | None
+    fit: Fit,
+    results: Mapping[str, SolverResult],
+    noise: tuple[np.ndarray, np.ndarray],
+    ranges: np.ndarray | None,
 ) -> dict[str, Uncertainty]:
     """Each result's uncertainty at its estimate; a result at the optimum of one computed before
     (both solvers met it) takes that one's."""
@@ -242,7 +249,9 @@ def uncertainties(
     done: list[tuple[SolverResult, Uncertainty]] = []
     for name, r in results.items():
         same = [u for prior, u in done if _same_optimum(prior, r, u)]
-        out[name] = same[0] if same else unc.estimate(fit.evaluator, r.x, fit.data, noise, ranges)
+        out[name] = (
+            same[0] if same else unc.estimate(fit.evaluator, r.x, fit.data, noise[0], ranges, noise[1])
+        )
         done.append((r, out[name]))
     return out
 

@@ -107,7 +107,8 @@ class Calibration:
         self.stages = self.parts[0]
         if len(self.parts) == 1:
             self.held: Mapping[str, str] = self.stages.prepared.held
-            self.fitting = Fit(self.stages.problem, self.stages.windows.data, self.solvers)
+            windows = self.stages.windows
+            self.fitting = Fit(self.stages.problem, windows.data, self.solvers, windows.input_noise)
         else:
             self.held, self.fitting = _joint_fit(sc, self.parts, self.solvers)
         self.setup_time_s = time.perf_counter() - t0
@@ -233,13 +234,13 @@ def _joint_fit(sc: Scenario, parts: Sequence[LogSetup], solvers: Sequence[str]) 
     mounts = [p.problem.start.initial for p in parts] if mount_count(sc, len(parts)) > 1 else []
     data = data.with_selector() if mounts or per_log_kinds(model, len(parts)) else data
     problem = build_stage(one_horizon, model, tuple(held), start_from, solvers, n_records, lags, mounts, data)
-    return held, Fit(problem, data, solvers)
+    return held, Fit(problem, data, solvers, joint_noise(parts))
 
 
 def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> CalibrationRun:
     """:meth:`Calibration.run` over several logs."""
     fitting, parts = calib.fitting, calib.parts
-    results, fitted, notes = _fit(fitting, parts, names, calib.held)
+    results, fitted, notes = _fit(fitting, parts, names, calib.held, wanted.against is not None)
     scorer = blocks_scorer(fitting.fns, parts, fitting.data)
     logs = logs_crossval(fitting, results, scorer, log_ranges(parts))
     own = [_own_run(p, names) for p in parts]
@@ -293,7 +294,11 @@ def _joint(
 def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
     """One log of several fitted on its own (its stages' windows and problem, nothing built again)."""
     return _run(
-        part.prepared.scenario, Fit(part.problem, part.windows.data, solvers), [part], solvers, Wanted()
+        part.prepared.scenario,
+        Fit(part.problem, part.windows.data, solvers, part.windows.input_noise),
+        [part],
+        solvers,
+        Wanted(),
     )[2][0]
 
 
@@ -338,13 +343,23 @@ def consistency(
     return compare_logs(names, paths, result.params, (est, std), others, known, apart, unit)
 
 
+def joint_noise(parts: Sequence[LogSetup]) -> tuple[np.ndarray, np.ndarray]:
+    """The inputs' noise of logs fitted together: the largest any has; the counters the model's."""
+    return np.max([p.windows.input_noise_std for p in parts], axis=0), parts[0].windows.counted
+
+
 def _fit(
-    fitting: Fit, parts: Sequence[LogSetup], solvers: Sequence[str], held: Mapping[str, str]
+    fitting: Fit,
+    parts: Sequence[LogSetup],
+    solvers: Sequence[str],
+    held: Mapping[str, str],
+    from_estimate: bool = False,
 ) -> tuple[dict[str, SolverResult], FitAnalysis, list[str]]:
     """The fit stage and the fit's analysis over ``parts`` (one log, or several end to end);
-    ``held``: the parameters held because the fitted records do not determine them."""
-    results = {name: fitting.solve(name) for name in solvers}
-    noise = np.max([p.windows.input_noise_std for p in parts], axis=0)
+    ``held``: the parameters held because the fitted records do not determine them;
+    ``from_estimate``: the start is a stored calibration's estimate (:meth:`Fit.solve`)."""
+    results = {name: fitting.solve(name, from_estimate) for name in solvers}
+    noise = joint_noise(parts)
     info = fit_info(parts[0].prepared.scenario, fitting.fns)
     # The precision each parameter needs: the tightest any log's drive asks (as the joint run's).
     layouts = [_part_info(fitting, part, i)[1].layout for i, part in enumerate(parts)]
@@ -406,5 +421,6 @@ def _run(
     sc: Scenario, fitting: Fit, parts: Sequence[LogSetup], solvers: Sequence[str] | None, wanted: Wanted
 ) -> tuple[FitAnalysis, list[str], list[CalibrationRun]]:
     """The fit, analyse and assemble stages over ``parts`` (one log, or several end to end)."""
-    results, fitted, notes = _fit(fitting, parts, tuple(solvers or sc.solvers), parts[0].prepared.held)
+    names, held = tuple(solvers or sc.solvers), parts[0].prepared.held
+    results, fitted, notes = _fit(fitting, parts, names, held, wanted.against is not None)
     return fitted, notes, _assemble(fitting, parts, results, fitted, notes, wanted)

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from nlp_calib.analysis.inputs_bias import BiasStep, bias_step
 from nlp_calib.core import interrupts
 from nlp_calib.pipeline.build import Problem, evaluated
 from nlp_calib.pipeline.keys import refuse_rejected_options, scenario_key
@@ -21,11 +22,21 @@ from nlp_calib.solvers import Solver, get_solver
 
 
 class Fit:
-    """The fitted windows ``data`` of ``problem`` bound to one evaluator, ready for any solver."""
+    """The fitted windows ``data`` of ``problem`` bound to one evaluator, ready for any solver;
+    ``noise``, the inputs' 1σ and which are counters (see :func:`bias_step`), when each estimate
+    is to be freed of the bias the inputs' noise gives it."""
 
-    def __init__(self, problem: Problem, data: ResidualData, solvers: Sequence[str]) -> None:
+    def __init__(
+        self,
+        problem: Problem,
+        data: ResidualData,
+        solvers: Sequence[str],
+        noise: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> None:
         self.problem = problem
         self.data = data
+        self.noise = noise
+        self._bias: list[BiasStep] = []
         self.evaluator = problem.binder.evaluate(data)
         self.evaluator.prepare(evaluated(problem.binder.scenario, solvers))
         self._solvers: dict[str, Solver] = {}
@@ -42,13 +53,53 @@ class Fit:
                 self._solvers[name] = get_solver(name)(self.evaluator, sc.options_for(name))
         return self._solvers[name]
 
-    def solve(self, name: str) -> SolverResult:
-        """Run one solver from the starting point; the result is in the model's canonical form."""
+    def solve(self, name: str, from_estimate: bool = False) -> SolverResult:
+        """Run one solver from the starting point; the result is in the model's canonical form.
+        ``from_estimate``: the start is an estimate that took the bias step (a stored calibration
+        checked again), so the solver starts where that step began (:meth:`before_step`)."""
         start = self.problem.start
-        result = self.solver(name).solve(start.x0, start.lower, start.upper)
+        x0 = self.before_step(start.x0) if from_estimate else start.x0
+        result = self.solver(name).solve(x0, start.lower, start.upper)
         interrupts.check()  # IPOPT catches the signal that stops it and returns as if it had failed
         refuse_rejected_options(self.problem.binder.scenario, result)
-        return self.canonical(dataclasses.replace(result, solver=name))
+        return self.canonical(self.unbiased(dataclasses.replace(result, solver=name)))
+
+    def unbiased(self, result: SolverResult) -> SolverResult:
+        """A converged ``result`` moved by the step that removes the inputs' noise bias, within
+        the bounds (errors in variables: :mod:`nlp_calib.analysis.inputs_bias`)."""
+        if self.noise is None or not result.converged:
+            return result
+        ev, start = self.evaluator, self.problem.start
+        # Both solvers at one optimum: one step (it costs a pass over the windows per parameter).
+        known = [b for b in self._bias if b.holds_at(result.x)]
+        if not known:
+            known = [bias_step(ev, result.x, self.noise)]
+            self._bias.append(known[0])
+        if not np.any(known[0].step):
+            return result
+        x = ev.boxplus(result.x, known[0].step)
+        if start.lower is not None and start.upper is not None:
+            x = np.clip(x, start.lower, start.upper)
+        ne = ev.normal_equations(x)
+        return dataclasses.replace(
+            result, x=x, params=ev.params(x), cost=ne.cost, chi2=ne.chi2, inliers=ne.inliers
+        )
+
+    def before_step(self, x: np.ndarray) -> np.ndarray:
+        """The point whose bias step lands on the estimate ``x``: ``x`` less the step there (the
+        step changes over its own size by a share of itself too small to count), so that a refit
+        from a stored estimate starts at the optimum its run's solver stopped at, and ends, step
+        taken again, where that run did (not wherever a solver's tolerance lets it stop)."""
+        if self.noise is None:
+            return x
+        known = bias_step(self.evaluator, x, self.noise)
+        if not np.any(known.step):
+            return x
+        back = self.evaluator.boxplus(x, -known.step)
+        start = self.problem.start
+        if start.lower is not None and start.upper is not None:
+            back = np.clip(back, start.lower, start.upper)
+        return np.asarray(back)
 
     def canonical(self, result: SolverResult) -> SolverResult:
         """``result`` mapped onto the model's canonical form (same cost: an exact symmetry)."""

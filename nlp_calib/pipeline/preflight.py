@@ -32,6 +32,7 @@ from nlp_calib.analysis.uncertainty import range_std
 from nlp_calib.analysis.verdict import way_out
 from nlp_calib.core.errors import DatasetError, NlpCalibError, PreflightError
 from nlp_calib.logs import Log, resample_encoders
+from nlp_calib.models import counted_inputs
 from nlp_calib.pipeline import units_check
 from nlp_calib.pipeline.align import MAX_RESAMPLINGS, estimate_tracker_lag, stays, white_std
 from nlp_calib.pipeline.assemble import fit_info
@@ -370,7 +371,8 @@ def _propagated(
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     evaluator, whole = fitted
     try:
-        white = unc.estimate(evaluator, x, windows, noise, bounds).std
+        counted = counted_inputs(d.parts[0].model, d.parts[0].log)
+        white = unc.estimate(evaluator, x, windows, noise, bounds, counted).std
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return np.full(fns.n_free, np.nan)
     k = min(d.scenario.validation.blocks, windows.n_residuals)

@@ -14,6 +14,7 @@ import numpy as np
 
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
+from nlp_calib.models import counted_inputs
 from nlp_calib.pipeline.align import Alignment
 from nlp_calib.pipeline.build import Binder, Problem
 from nlp_calib.pipeline.prepare import PreparedLog, split
@@ -25,9 +26,9 @@ from nlp_calib.problem import ResidualData
 class LogWindows:
     """A log's fitted windows and what its figures need: the records ``used`` and ``fit`` of the
     aligned log, its fault masks (per interval and per record of the whole log), the binder that
-    keeps its windows clear of faults, each model input's noise (1σ) and, per interval of the whole
-    log, where its records do not connect (gaps in time, a reference's missing increments, the
-    joints' breaks): no track runs across them."""
+    keeps its windows clear of faults, each model input's noise (1σ; a counter's, ``counted``, on
+    its readings) and, per interval of the whole log, where its records do not connect (gaps in
+    time, a reference's missing increments, the joints' breaks): no track runs across them."""
 
     aligned: Log
     used: tuple[int, int]
@@ -37,7 +38,13 @@ class LogWindows:
     bad_intervals: np.ndarray
     bad_records: np.ndarray
     input_noise_std: np.ndarray
+    counted: np.ndarray
     breaks: np.ndarray | None = None
+
+    @property
+    def input_noise(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each model input's noise (1σ) and whether it is a counter's (noise on its readings)."""
+        return self.input_noise_std, self.counted
 
     @property
     def selected(self) -> Log:
@@ -92,5 +99,6 @@ def bind_windows(
     fit = (start, split(sc, start, stop))
     data = binder.windows(alignment.log, *fit)
     noise = problem.model.input_noise_std(alignment.log, sc.data.encoder_noise)
-    masks = (bad_intervals, bad_records, noise, breaks)
+    counted = counted_inputs(problem.model, alignment.log)
+    masks = (bad_intervals, bad_records, noise, counted, breaks)
     return LogWindows(alignment.log, (start, stop), fit, data, binder, *masks)

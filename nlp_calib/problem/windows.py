@@ -170,6 +170,13 @@ class ResidualData:
         """The windows ``keep`` (a mask or indices) marks, in order."""
         return replace(self, starts=self.starts[keep], stops=self.stops[keep], z=self.z[:, keep])
 
+    def intervals_of(self, windows: np.ndarray) -> np.ndarray:
+        """The intervals the windows of the indices ``windows`` cover, in order (each once)."""
+        inside = np.zeros(self.inputs.shape[1] + 1, dtype=np.int64)
+        np.add.at(inside, self.starts[windows], 1)
+        np.add.at(inside, self.stops[windows], -1)
+        return np.flatnonzero(np.cumsum(inside[:-1]) > 0)
+
     def spanned(self) -> ResidualData:
         """The same windows on the records they span alone, renumbered from the first: an evaluator
         bound to them integrates those intervals only, not the whole log's (a window's motion,

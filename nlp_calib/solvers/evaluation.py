@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nlp_calib.problem import ORDER, SUMMED, WINDOW_INPUTS, ProblemFunctions, ResidualData, unpack_upper
-from nlp_calib.solvers.backends import Backend, Buffered, Request, pad_columns
+from nlp_calib.solvers.backends import INTERPRETED, Backend, Buffered, Request, pad_columns
 from nlp_calib.solvers.blocks import BlockMap, stream
 from nlp_calib.solvers.motion import WindowMotion
 
@@ -180,7 +180,7 @@ class ProblemEvaluator:
         backend: Backend | None = None,
     ) -> None:
         self.fns = fns
-        self.backend = backend or Backend()
+        self.backend = backend or INTERPRETED
         self.x_fixed = np.asarray(x_fixed, dtype=float)
         self.omega = np.asarray(omega, dtype=float)
         self.delta = float(delta)
@@ -236,7 +236,7 @@ class ProblemEvaluator:
     def _backend(self, name: str) -> Backend:
         """Where ``name`` is evaluated: see :data:`COMPILE_ANALYSES_FROM`."""
         small = self.n_residuals < COMPILE_ANALYSES_FROM
-        return Backend() if name in _ANALYSES and small else self.backend
+        return INTERPRETED if name in _ANALYSES and small else self.backend
 
     def _bind(self, name: str) -> BlockMap:
         bound = self._on.bound
@@ -325,39 +325,32 @@ class ProblemEvaluator:
             g.reshape(nf, -1, order="F")[:, :n],
         )
 
-    def sensitivities(self, x: np.ndarray) -> Iterator[tuple[slice, Sensitivities]]:
+    def sensitivities(
+        self, x: np.ndarray, windows: np.ndarray | None = None
+    ) -> Iterator[tuple[slice, Sensitivities]]:
         """What the noise propagation needs at ``x``, a block of windows at a time (see
-        :class:`Sensitivities`; ``D`` covers every interval and is the same in each block)."""
-        fns, N = self.fns, self.n_residuals
-        D = None
-        if fns.prefix:
-            m = self.motion
-            n_pad = m.inputs.shape[1]
-            poses = m.poses(x, self.x_fixed)
-            per = BlockMap(
-                self._backend("sensitivities"),
-                fns.interval_sensitivity,
-                {"state": poses[:, :n_pad], "u": m.inputs},
-                {"x_fixed": self.x_fixed},
-                reduce=False,
-            )
-            (D_all,) = per(x=x)
-            D = _per_column(D_all, n_pad, m.n_intervals)
-        motion = self.motion.update(ORDER["sensitivities"], x, self.x_fixed)
+        :class:`Sensitivities`; ``D`` covers every interval and is the same in each block); only
+        the windows of the indices ``windows`` when given (the blocks' slices then index them, and
+        ``D`` covers their intervals alone, in order: :meth:`ResidualData.intervals_of`)."""
+        fns = self.fns
+        N = self.n_residuals if windows is None else int(windows.size)
+        # A few windows of many: the interpreter (their compiled map is sized for all of them).
+        backend = self._backend("sensitivities") if windows is None else INTERPRETED
+        D = self.interval_sensitivity(x, windows) if fns.prefix else None
+        motion = self.motion.update(ORDER["sensitivities"], x, self.x_fixed, windows)
+        data = (
+            self._on.window_data if windows is None else np.asfortranarray(self._on.window_data[:, windows])
+        )
         own = stream(
-            self._backend("sensitivities"),
-            fns.sensitivities,
-            {"motion": motion, "data": self._on.window_data},
-            {"x": x, "x_fixed": self.x_fixed},
-            N,
+            backend, fns.sensitivities, {"motion": motion, "data": data}, {"x": x, "x_fixed": self.x_fixed}, N
         )
         poses_wt = self.data.T_world_sensor
-        ends = {
-            k: np.asfortranarray(poses_wt[i].T)
-            for k, i in (("a", self.motion.starts), ("b", self.motion.stops))
-        }
+        starts, stops = (
+            i if windows is None else i[windows] for i in (self.motion.starts, self.motion.stops)
+        )
+        ends = {k: np.asfortranarray(poses_wt[i].T) for k, i in (("a", starts), ("b", stops))}
         # Cheap: the interpreter, a block at a time.
-        tracker = stream(Backend(), fns.between_jacobians, ends, {}, N)
+        tracker = stream(INTERPRETED, fns.between_jacobians, ends, {}, N)
         for (w, (J, de_dz, de_dend)), (_, (dz_da, dz_db)) in zip(own, tracker):
             size = J.shape[1] // fns.n_free
             n = w.stop - w.start
@@ -365,6 +358,33 @@ class ProblemEvaluator:
                 _per_column(v, size, n) for v in (J, de_dz, de_dend, dz_da, dz_db)
             )
             yield w, Sensitivities(J=J_, de_dz=de_dz_, de_dend=de_dend_, dz_da=dz_da_, dz_db=dz_db_, D=D)
+
+    def interval_sensitivity(
+        self, x: np.ndarray, windows: np.ndarray | None = None, shift: np.ndarray | None = None
+    ) -> np.ndarray:
+        """``D`` ``(intervals, m, n_inputs)`` at ``x`` on every interval, or on those the windows of
+        the indices ``windows`` cover alone (:meth:`ResidualData.intervals_of`); at the inputs
+        moved by ``shift`` ``(n_inputs, those intervals)`` when given (the prefix poses kept)."""
+        m = self.motion
+        n_pad = m.inputs.shape[1]
+        poses = m.poses(x, self.x_fixed)
+        if windows is None:
+            u = m.inputs
+            if shift is not None:
+                u = np.array(u, order="F")
+                u[:, : shift.shape[1]] += shift
+            mapped, backend = {"state": poses[:, :n_pad], "u": u}, self._backend("sensitivities")
+        else:
+            cols = self.data.intervals_of(windows)
+            u = m.inputs[:, cols] if shift is None else m.inputs[:, cols] + shift
+            mapped = {"state": np.asfortranarray(poses[:, cols]), "u": np.asfortranarray(u)}
+            backend = INTERPRETED
+        n = next(iter(mapped.values())).shape[1]
+        per = BlockMap(
+            backend, self.fns.interval_sensitivity, mapped, {"x_fixed": self.x_fixed}, reduce=False
+        )
+        (D_all,) = per(x=x)
+        return _per_column(D_all, n, m.n_intervals if windows is None else n)
 
     def prior_information(self, x: np.ndarray) -> np.ndarray:
         """The priors' contribution ``J_pᵀJ_p`` to the normal matrix."""

@@ -53,10 +53,37 @@ class _Scan:
     def fill(self, lo: int, hi: int, out: np.ndarray) -> None:
         """Windows ``lo:hi``'s motion data into ``out`` ``(2 rows, hi - lo)``: their prefix jets at
         their first and last record, side by side."""
-        # Row gathers on the transposed (C-contiguous) views: one copy of each jet, no temporaries
-        # (a column gather of column-major arrays goes through a strided copy of everything).
-        gathered = out.reshape(self.rows, -1, order="F").T
-        np.take(self.poses.T, self._ends[2 * lo : 2 * hi], axis=0, out=gathered, mode="clip")
+        _gather(self.poses, self.rows, self._ends[2 * lo : 2 * hi], out)
+
+    def picked(self, windows: np.ndarray) -> _Picked:
+        """The motion data of ``windows`` alone (gathered from these prefix jets)."""
+        ends = np.empty(2 * windows.size, dtype=np.intp)
+        ends[0::2], ends[1::2] = self._ends[2 * windows], self._ends[2 * windows + 1]
+        return _Picked(self.poses, self.rows, ends)
+
+
+class _Picked:
+    """Some windows' motion data, gathered from prefix jets ``poses`` at their records ``ends``
+    (first and last of each, interleaved) a block at a time."""
+
+    def __init__(self, poses: np.ndarray, rows: int, ends: np.ndarray) -> None:
+        self.poses, self.rows, self._ends = poses, rows, ends
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return 2 * self.rows, self._ends.size // 2
+
+    def fill(self, lo: int, hi: int, out: np.ndarray) -> None:
+        _gather(self.poses, self.rows, self._ends[2 * lo : 2 * hi], out)
+
+
+def _gather(poses: np.ndarray, rows: int, ends: np.ndarray, out: np.ndarray) -> None:
+    """The prefix jets at the records ``ends`` into ``out`` ``(2 rows, ends / 2)``, a window's two
+    side by side."""
+    # Row gathers on the transposed (C-contiguous) views: one copy of each jet, no temporaries
+    # (a column gather of column-major arrays goes through a strided copy of everything).
+    gathered = out.reshape(rows, -1, order="F").T
+    np.take(poses.T, ends, axis=0, out=gathered, mode="clip")
 
 
 class WindowMotion:
@@ -98,12 +125,16 @@ class WindowMotion:
         for scan in self._scans.values():
             scan.at = None
 
-    def update(self, order: int, x: np.ndarray, x_fixed: np.ndarray) -> Mapped:
-        """The windows' motion data of ``order`` at ``x`` (see :meth:`buffer`)."""
+    def update(
+        self, order: int, x: np.ndarray, x_fixed: np.ndarray, windows: np.ndarray | None = None
+    ) -> Mapped:
+        """The windows' motion data of ``order`` at ``x`` (see :meth:`buffer`); only those of the
+        window indices ``windows`` when given."""
         if not self.prefix:
-            return self.direct
+            return self.direct if windows is None else np.asfortranarray(self.direct[:, windows])
         self.buffer(order)
-        return self._scans[order].update(np.asarray(x, dtype=float).tobytes(), x, x_fixed)
+        scan = self._scans[order].update(np.asarray(x, dtype=float).tobytes(), x, x_fixed)
+        return scan if windows is None else scan.picked(windows)
 
     def poses(self, x: np.ndarray, x_fixed: np.ndarray) -> np.ndarray:
         """Prefix poses at ``x``, ``(3, padded intervals + 1)`` (prefix problems)."""

@@ -2,7 +2,15 @@
 
 from __future__ import annotations
 
-from nlp_calib.solvers.backends.base import BACKENDS, Backend, BackendOptions, Buffered, Request, pad_columns
+from nlp_calib.solvers.backends.base import (
+    BACKENDS,
+    INTERPRETED,
+    Backend,
+    BackendOptions,
+    Buffered,
+    Request,
+    pad_columns,
+)
 from nlp_calib.solvers.backends.compiled import CompiledBackend, make_compiled_backend
 
 
@@ -10,11 +18,12 @@ def make_backend(options: BackendOptions) -> Backend:
     """The backend ``options`` asks for (the compiled one falls back when no compiler exists)."""
     if options.kind == "compiled":
         return make_compiled_backend(options)
-    return Backend()
+    return INTERPRETED
 
 
 __all__ = [
     "BACKENDS",
+    "INTERPRETED",
     "Backend",
     "BackendOptions",
     "Buffered",

@@ -131,6 +131,12 @@ class Backend:
         return _expanded_chunk(step, self.chunk)
 
 
+#: The interpreter: it holds nothing of its own, so one instance serves every caller; mapped and
+#: folded Functions are cached by backend, and a fresh instance is another key (a map rebuilt on
+#: every evaluator, every analysis call).
+INTERPRETED = Backend()
+
+
 @functools.lru_cache(maxsize=16)
 def _expanded_chunk(step: ca.Function, chunk: int) -> ca.Function:
     # One SX expression per chunk: the VM then runs it without a call per interval.

@@ -43,7 +43,7 @@ from nlp_calib.codegen.compiler import (
 )
 from nlp_calib.core import interrupts, threads
 from nlp_calib.core.errors import CodegenError, NlpCalibWarning
-from nlp_calib.solvers.backends.base import Backend, BackendOptions, Request, scan_chunk
+from nlp_calib.solvers.backends.base import INTERPRETED, Backend, BackendOptions, Request, scan_chunk
 
 
 class CompiledBackend(Backend):
@@ -273,6 +273,6 @@ def make_compiled_backend(options: BackendOptions) -> Backend:
                 NlpCalibWarning,
                 stacklevel=2,
             )
-        return Backend()
+        return INTERPRETED
     usable_cache_dir()  # a cache that cannot be written is named now, before any work
     return CompiledBackend(options, compiler)

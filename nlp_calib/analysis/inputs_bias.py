@@ -1,0 +1,324 @@
+"""The bias the inputs' noise gives an estimate (errors in variables), and the step that removes it.
+
+The fit minimises ``F = Σ_w ρ(s_w)`` on noisy inputs. Their noise adds to each window's expected
+``s_w`` its share ``T_w(θ) = tr(Ω G_w V_w G_wᵀ)`` (``G_w = ∂e_w/∂end``, ``V_w`` the noise a
+window's end collects, see :class:`~nlp_calib.analysis.uncertainty.EndNoise`), and that share
+depends on the parameters: a differential drive's heading change per interval is the wheels'
+difference over the baseline, so a longer baseline shrinks the noise's share of the cost and the
+fit prefers it (the regression on a noisy regressor attenuates ``1/baseline``). On one-record
+windows the counts' rounding is a few per cent of the wheels' difference per interval, which
+biases the baseline by several σ. The expected cost of the noise-free inputs is ``F − T`` (``T =
+Σ_w ρ'_w T_w``, the weights held at the estimate); one Newton step on it from the estimate ``x̂``,
+where ``∇F = 0``, is ``Δ = ½ H⁻¹ ∇T`` (``H``, ``g`` are half the Hessian and gradient of ``F``: see
+:class:`~nlp_calib.solvers.evaluation.NormalEquations`). ``∇T`` is taken by differences over one σ
+of each free coordinate: ``T`` is smooth on that scale.
+
+Those differences cost a pass over the windows per parameter. ``T`` is a sum over the windows, so
+a strided subset's sum scaled by ``N/n`` estimates it without bias, and the spread of the subset's
+terms says how far off that estimate can be: where the step it gives stays, with that margin,
+below :data:`MATTERS` of every σ, it is taken as it is (it cannot move an estimate by a share of
+its σ that matters); elsewhere ``∇T`` is taken on every window.
+
+The noise also has a mean in the residuals where the model is curved in its inputs (second order,
+``β_w = ½ E[δᵀ∇²e_w δ]``, :func:`mean_shifts`): the clean residual is the noisy one less ``β``, so
+the step adds ``H⁻¹ Σ_w ρ'_w J_wᵀ Ω β_w``. A rate over one interval is what makes it matter (a
+skid-steer's turn on its wheels' noisy rate); it costs one pass over every window.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.analysis.degeneracy import motion_scale
+from nlp_calib.analysis.observability import directions
+from nlp_calib.analysis.uncertainty import EndNoise, per_second, reading_map, split_noise
+from nlp_calib.models import rate_rows, reference_scales
+from nlp_calib.problem import ResidualData
+from nlp_calib.results.checks import NOT_OBSERVABLE
+from nlp_calib.solvers import ProblemEvaluator, Sensitivities
+
+#: A step below this share of every σ cannot matter: the subset's estimate of it is taken as it is.
+MATTERS = 0.05
+#: Windows the subset holds: few, as each pass still integrates the whole log (a pass over every
+#: window costs three over these on the shipped scenarios); where the step is thousands of times
+#: below :data:`MATTERS`, as there, their estimate's standard error is too. Problems with fewer
+#: than :data:`SCREEN_FROM` windows take every window at once.
+SUBSET = 64
+SCREEN_FROM = 8 * SUBSET
+#: The subset's estimate's margin, in its own standard errors.
+MARGIN = 3.0
+#: A step beyond this many σ of any coordinate is not taken: the counts' rounding biases an
+#: estimate by a few σ (tens on long one-record windows); a step of hundreds is a solver's flat
+#: valley (a drive that does not determine the parameters), where a Newton step extrapolates.
+LARGEST = 100.0
+
+
+def noise_share(
+    evaluator: ProblemEvaluator, x: np.ndarray, weight: np.ndarray, noise: tuple[np.ndarray, np.ndarray]
+) -> float:
+    """``T(x) = Σ_w weight_w tr(Ω G_w V_w G_wᵀ)``: the inputs' expected share of the cost at ``x``
+    (``noise``: the inputs' 1σ and which of them are counters, noise on their readings)."""
+    return float(np.sum(window_shares(evaluator, x, weight, noise)))
+
+
+def window_shares(
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    weight: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray],
+    windows: np.ndarray | None = None,
+) -> np.ndarray:
+    """Each window's term of :func:`noise_share` (those of the window indices ``windows`` alone
+    when given, in their order)."""
+    std, counted = noise
+    split = split_noise(np.asarray(std, dtype=float) ** 2, counted)
+    picked, starts, stops = _spans(evaluator.data, windows)
+    out, ends = np.zeros(picked.size), None
+    for w, sens in evaluator.sensitivities(x, windows):
+        if ends is None:
+            n_int, n_in = int(stops.max(initial=0)), evaluator.fns.n_inputs
+            D = sens.D if sens.D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
+            ends = EndNoise(_noise_map(evaluator, D, counted, windows), split)
+        V = ends.between(starts[w], stops[w])
+        rows = ((sens.de_dend @ V) * sens.de_dend).sum(axis=2)  # (windows, error rows)
+        out[w] = weight[picked[w]] * (rows @ evaluator.omega)
+    return out
+
+
+def _spans(data: ResidualData, windows: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The window indices and their first and last interval: of every window, or of ``windows``
+    on their intervals alone, renumbered (the evaluator's ``D`` for them covers those alone)."""
+    picked = np.arange(data.n_residuals) if windows is None else windows
+    starts, stops = data.starts[picked], data.stops[picked]
+    if windows is not None:
+        cols = data.intervals_of(windows)
+        starts, stops = np.searchsorted(cols, starts), np.searchsorted(cols, stops - 1) + 1
+    return picked, starts, stops
+
+
+def _noise_map(
+    evaluator: ProblemEvaluator, D: np.ndarray, counted: np.ndarray, windows: np.ndarray | None
+) -> np.ndarray:
+    """``D`` over the intervals of ``windows`` (every one: all) from each source of noise: a rate's
+    column folded into its counter's (:func:`~nlp_calib.analysis.uncertainty.reading_map`), and a
+    counter's scaled by ``√(v_j/2)``, ``v_j`` its increment's variance in readings'
+    (:func:`_increment_variance`): a one-interval window's share is then what records re-sampling
+    a joint stream carry (they interpolate its readings, so two records between the same two of
+    them differ by less than two readings' noise: about 0.8 of one for 120 Hz records between
+    100 Hz joints, where two overstated the share 2.5-fold and the step overshot a differential
+    drive's baseline by 6σ to 11σ). Longer windows, where the share barely depends on the
+    parameters, take it as their ends' intervals give it. The σ keeps two readings per increment
+    (:mod:`~nlp_calib.analysis.uncertainty`): an upper bound there."""
+    data = evaluator.data
+    cols = slice(None) if windows is None else data.intervals_of(windows)
+    D = reading_map(D, data.inputs[:, cols], rate_rows(evaluator.fns.model))
+    flags, v = np.asarray(counted, dtype=bool), _increment_variance(data)[cols]
+    if not flags.any() or np.all(v == 2.0):
+        return D
+    out = np.array(D, dtype=float)
+    out[:, :, flags] *= np.sqrt(v[: D.shape[0], None, None] / 2.0)
+    return out
+
+
+def mean_shifts(
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray],
+    windows: np.ndarray | None,
+) -> Callable[[slice, Sensitivities], np.ndarray]:
+    """Per block of windows, each one's expected residual ``β_w`` ``(windows, error rows)`` that
+    the inputs' noise adds through the model's curvature in them (second order: ``½ E[δᵀ∇²e δ]``
+    over each interval's own noise, along each source at a time; the sources independent).
+    On one-interval windows the residuals' own second differences give it; on longer ones each
+    interval's end shift ``¼ (D(u+v) − D(u−v)) v`` (the prefix poses held: the terms across
+    intervals have no mean), summed over a window's intervals. A rate taken over one interval is
+    what makes it matter: a skid-steer's turn ``Δθ_w/(1 + slip·|ω_w|)`` on a noisy ``ω_w`` turns
+    less by ``slip·σ_ω²`` per second whatever the rate, a track short by its share of the turn rate."""
+    sources = _sources(evaluator, noise)
+    if not sources:
+        return lambda w, sens: np.zeros(sens.de_dend.shape[:2])
+    picked, starts, stops = _spans(evaluator.data, windows)
+    if not evaluator.fns.prefix:
+        beta = _second_differences(evaluator, x, sources)[:, picked].T
+        return lambda w, sens: beta[w]
+    cols = None if windows is None else evaluator.data.intervals_of(windows)
+    moved = [v if cols is None else v[:, cols] for v in sources]
+    b = np.sum([_end_shift(evaluator, x, windows, v) for v in moved], axis=0)
+    B = np.concatenate([np.zeros((1, b.shape[1])), np.cumsum(b, axis=0)])
+    return lambda w, sens: np.einsum("nrm,nm->nr", sens.de_dend, B[stops[w]] - B[starts[w]])
+
+
+def _end_shift(
+    evaluator: ProblemEvaluator, x: np.ndarray, windows: np.ndarray | None, v: np.ndarray
+) -> np.ndarray:
+    """Each interval's end shift ``¼ (D(u+v) − D(u−v)) v`` ``(intervals, m)`` along the source ``v``."""
+    ahead, back = (evaluator.interval_sensitivity(x, windows, sign * v) for sign in (1.0, -1.0))
+    return np.asarray(0.25 * np.einsum("jmi,ij->jm", ahead - back, v))
+
+
+def _sources(evaluator: ProblemEvaluator, noise: tuple[np.ndarray, np.ndarray]) -> list[np.ndarray]:
+    """Each independent source of an interval's input noise as its 1σ move of every interval's
+    inputs ``(n_inputs, intervals)``: an input with noise of its own, or a counter's increment
+    (two readings' worth, less where the records re-sample a joint stream: :meth:`Log.increment_variance`)
+    with the rate it gives over the interval's duration."""
+    std, counted = (np.asarray(v) for v in noise)
+    u = evaluator.data.inputs
+    rates = rate_rows(evaluator.fns.model)
+    per_s = per_second(u, rates)
+    readings = np.sqrt(_increment_variance(evaluator.data))
+    out = []
+    for row in np.flatnonzero(std > 0):
+        v = np.zeros_like(u, dtype=float)
+        v[row] = std[row] * (readings if counted[row] else 1.0)
+        for rate in (r for r, of in rates.items() if of == row):
+            v[rate] = v[row] * per_s
+        out.append(v)
+    return out
+
+
+def _increment_variance(data: ResidualData) -> np.ndarray:
+    """Every interval column's :meth:`Log.increment_variance` as ``data`` lays its logs' intervals
+    (2 between two logs and wherever a log does not fill its columns)."""
+    out = np.full(data.inputs.shape[1], 2.0)
+    for log, first in zip(data.logs, data.offsets):
+        cols = first + np.arange(log.n_records - 1)
+        keep = (cols >= 0) & (cols < out.size)
+        out[cols[keep]] = log.increment_variance()[keep]
+    return out
+
+
+def _second_differences(evaluator: ProblemEvaluator, x: np.ndarray, sources: list[np.ndarray]) -> np.ndarray:
+    """``½ Σ_v (e(u+v) + e(u−v) − 2e(u))``, every window's ``(error rows, windows)``, on windows of
+    one interval each (no terms across intervals); the evaluator's inputs restored."""
+    data = evaluator.data
+    here = evaluator.robust_terms(x)[0]
+    out = np.zeros_like(here)
+    try:
+        for v in sources:
+            for sign in (1.0, -1.0):
+                evaluator.set_inputs(data.inputs + sign * v)
+                out += 0.5 * (evaluator.robust_terms(x)[0] - here)
+    finally:
+        evaluator.set_inputs(data.inputs)
+    return out
+
+
+@dataclass(frozen=True)
+class BiasStep:
+    """The manifold ``step`` from the estimate ``x`` that removes the inputs' noise bias, and the
+    white-noise σ of each free coordinate there (``sigma``: the scale the step was taken on)."""
+
+    x: np.ndarray
+    step: np.ndarray
+    sigma: np.ndarray
+
+    def holds_at(self, x: np.ndarray) -> bool:
+        """Whether ``x`` is this estimate's optimum (another solver's, within 1e-3 of its σ): the
+        step there is this one to well within its own size."""
+        return x.shape == self.x.shape and bool(np.all(np.abs(x - self.x) <= 1e-3 * self.sigma))
+
+
+def bias_step(evaluator: ProblemEvaluator, x: np.ndarray, noise: tuple[np.ndarray, np.ndarray]) -> BiasStep:
+    """The step from the estimate ``x`` that removes the inputs' noise bias (zeros where the inputs
+    carry no noise or the normal matrix is singular). ``∇T`` by forward differences over one σ of
+    each coordinate (``T`` is smooth on that scale: its curvature changes it by σ over the
+    parameter's own scale), on a strided subset of the windows first where there are many: the
+    subset's step stands where it cannot matter (see the module's docstring)."""
+    n = evaluator.fns.n_free
+    none = BiasStep(x, np.zeros(n), np.full(n, np.inf))
+    if not np.any(np.asarray(noise[0]) > 0) or n == 0:
+        return none
+    ne = evaluator.normal_equations(x)
+    _, s, weight = evaluator.robust_terms(x)
+    try:
+        H_inv = np.linalg.inv(ne.H)
+    except np.linalg.LinAlgError:
+        return none
+    dof = max(s.size * evaluator.fns.error_rows - n, 1)
+    sigma = np.sqrt(np.clip(np.diag(H_inv), 0.0, None) * float(np.sum(weight * s)) / dof)
+    if not np.all(np.isfinite(sigma) & (sigma > 0)):
+        return none
+    H_inv = _determined_inverse(evaluator, x, ne.H, float(np.sum(weight * s)) / dof)
+    N = s.size
+    # The noise's mean costs one pass over every window; the gradient of its share, one per
+    # parameter: that is screened on a subset first.
+    mean = H_inv @ _shift_terms(evaluator, x, weight, noise, None).sum(axis=0)
+    share = None
+    if N >= SCREEN_FROM:
+        subset = np.linspace(0, N - 1, SUBSET).round().astype(np.intp)
+        terms = 0.5 * _gradient_terms(evaluator, x, weight, noise, sigma, subset) @ H_inv
+        # The subset's sum scaled by N/n, and its standard error (sampling n of N windows).
+        share = N * terms.mean(axis=0)
+        err = N * np.sqrt((1.0 - SUBSET / N) * terms.var(axis=0, ddof=1) / SUBSET)
+        if not np.all(np.abs(share) + MARGIN * err <= MATTERS * sigma):
+            share = None
+    if share is None:
+        share = 0.5 * H_inv @ _gradient_terms(evaluator, x, weight, noise, sigma, None).sum(axis=0)
+    step = np.asarray(mean + share)
+    return BiasStep(x, step, sigma) if np.all(np.abs(step) <= LARGEST * sigma) else none
+
+
+def _determined_inverse(
+    evaluator: ProblemEvaluator, x: np.ndarray, H: np.ndarray, sigma2: float
+) -> np.ndarray:
+    """``H⁻¹`` on the directions the drive determines, zero along those the run's observability
+    calls not determined (:func:`~nlp_calib.analysis.observability.directions`, beyond
+    ``NOT_OBSERVABLE`` reference units, or free whatever the noise): along those a Newton step
+    extrapolates the cost's flatness instead of correcting a small bias (a straight highway car's
+    wheelbase: a step of 10^4 of its σ), and nothing is stated of them anyway."""
+    fns, names = evaluator.fns, evaluator.fns.free
+    value = dict(zip(fns.names, np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()))
+    keys = fns.layout.keys(names)
+    R = reference_scales(fns.model, keys, np.array([value[n] for n in names]), fns.sensor.reference)
+    motion2 = motion_scale(fns, evaluator.data.z, evaluator.omega)
+    found = directions(H, sigma2, R, evaluator.n_residuals, motion2)
+    lam = np.maximum(found.lam, 1e-12 * max(float(found.lam[-1]), 1e-300))
+    keep = ~found.free & (1.0 / np.sqrt(lam) <= NOT_OBSERVABLE)
+    V = found.V[:, keep]
+    return (R[:, None] * V / (sigma2 * lam[keep])) @ (V.T * R[None, :])
+
+
+def _shift_terms(
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    weight: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray],
+    windows: np.ndarray | None,
+) -> np.ndarray:
+    """Each window's ``ρ'_w J_wᵀ Ω β_w`` ``(windows, n_free)`` (``β_w``, the noise's mean in its
+    residual: :func:`mean_shifts`): the clean residual is the noisy one less ``β``, so the clean
+    fit's gradient at ``x`` is minus their sum."""
+    shift = mean_shifts(evaluator, x, noise, windows)
+    picked = np.arange(evaluator.n_residuals) if windows is None else windows
+    out = np.zeros((picked.size, evaluator.fns.n_free))
+    for w, sens in evaluator.sensitivities(x, windows):
+        beta = shift(w, sens) * evaluator.omega
+        out[w] = weight[picked[w], None] * np.einsum("nrk,nr->nk", sens.J, beta)
+    return out
+
+
+def _gradient_terms(
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    weight: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray],
+    sigma: np.ndarray,
+    windows: np.ndarray | None,
+) -> np.ndarray:
+    """Each window's term of ``∇T`` ``(windows, n_free)``: forward differences over one σ."""
+    here = window_shares(evaluator, x, weight, noise, windows)
+    return np.stack(
+        [
+            (window_shares(evaluator, evaluator.boxplus(x, h), weight, noise, windows) - here) / h[i]
+            for i, h in _steps(sigma)
+        ],
+        axis=1,
+    )
+
+
+def _steps(sigma: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """Each coordinate's step of one σ."""
+    return [(i, np.where(np.arange(sigma.size) == i, sigma, 0.0)) for i in range(sigma.size)]
