@@ -37,7 +37,7 @@ from nlp_calib.analysis.observability import directions
 from nlp_calib.analysis.uncertainty import EndNoise, per_second, reading_map, split_noise
 from nlp_calib.models import rate_rows, reference_scales
 from nlp_calib.problem import ResidualData
-from nlp_calib.results.checks import NOT_OBSERVABLE
+from nlp_calib.results.checks import WEAK
 from nlp_calib.solvers import ProblemEvaluator, Sensitivities
 
 #: A step below this share of every σ cannot matter: the subset's estimate of it is taken as it is.
@@ -264,11 +264,13 @@ def bias_step(evaluator: ProblemEvaluator, x: np.ndarray, noise: tuple[np.ndarra
 def _determined_inverse(
     evaluator: ProblemEvaluator, x: np.ndarray, H: np.ndarray, sigma2: float
 ) -> np.ndarray:
-    """``H⁻¹`` on the directions the drive determines, zero along those the run's observability
-    calls not determined (:func:`~nlp_calib.analysis.observability.directions`, beyond
-    ``NOT_OBSERVABLE`` reference units, or free whatever the noise): along those a Newton step
-    extrapolates the cost's flatness instead of correcting a small bias (a straight highway car's
-    wheelbase: a step of 10^4 of its σ), and nothing is stated of them anyway."""
+    """``H⁻¹`` on the directions the drive determines well, zero along those the run's
+    observability calls weak or not determined (:func:`~nlp_calib.analysis.observability.directions`,
+    beyond ``WEAK`` reference units, or free whatever the noise): along those the cost is far from
+    its quadratic valley over a σ, and a Newton step extrapolates instead of correcting a small
+    bias (a straight highway car's wheelbase: a step of 10^4 of its σ; a car whose rear track
+    fits nearly as well near zero: a step of 0.7σ in wheelbase and steering gain that changed by a
+    quarter of itself over its own length). What is stated of them is caveated anyway."""
     fns, names = evaluator.fns, evaluator.fns.free
     value = dict(zip(fns.names, np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()))
     keys = fns.layout.keys(names)
@@ -276,7 +278,7 @@ def _determined_inverse(
     motion2 = motion_scale(fns, evaluator.data.z, evaluator.omega)
     found = directions(H, sigma2, R, evaluator.n_residuals, motion2)
     lam = np.maximum(found.lam, 1e-12 * max(float(found.lam[-1]), 1e-300))
-    keep = ~found.free & (1.0 / np.sqrt(lam) <= NOT_OBSERVABLE)
+    keep = ~found.free & (1.0 / np.sqrt(lam) <= WEAK)
     V = found.V[:, keep]
     return (R[:, None] * V / (sigma2 * lam[keep])) @ (V.T * R[None, :])
 
