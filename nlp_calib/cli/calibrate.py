@@ -17,7 +17,7 @@ import numpy as np
 
 from nlp_calib.cli.explain import no_crossvalidation
 from nlp_calib.cli.parser import ALL_SOLVERS
-from nlp_calib.cli.preflight import gate
+from nlp_calib.cli.preflight import set_up_and_gate
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
 from nlp_calib.core.files import check_output_dir
@@ -160,20 +160,23 @@ def _cmd_calibrate(
     logs = [[read_checked(s) for s in sc.per_log()] for sc in scenarios]
     for out in outs:
         refuse_collisions(out, registry.files(outputs), force=args.force)
-    gate(scenarios, logs, args.skip_preflight)
+    calibrations = set_up_and_gate(scenarios, logs, args.skip_preflight, solvers)
     compared = _compare_dir(args, outs) if side_by_side else None
     if compared is not None:
         refuse_collisions(compared, compare.FILES, force=args.force)
     runs: list[CalibrationRun] = []
     wanted = Wanted(series=args.report)
     with Progress(len(scenarios), sys.stderr, label="scenarios") as progress:
-        for i, (scenario, out, log_list) in enumerate(zip(scenarios, outs, logs)):
+        for i, (scenario, out, log_list, calib) in enumerate(zip(scenarios, outs, logs, calibrations)):
             progress.update(i, f"{scenario.name}: setting up and solving")
             last = i == len(scenarios) - 1
             if scenario.data.joint:
                 runs += _calibrate_joint(scenario, log_list, out, args, (solvers, outputs), progress, last)
                 continue
-            run = Calibration.setup(scenario, log=log_list[0], solvers=solvers).run(solvers, wanted)
+            calibrations[i] = None  # let go of it with its run
+            if calib is None:
+                calib = Calibration.setup(scenario, log=log_list[0], solvers=solvers)
+            run = calib.run(solvers, wanted)
             runs.append(run)
             progress.clear()
             print(run_table(run))
@@ -300,8 +303,8 @@ def cmd_odometry(args: argparse.Namespace) -> int:
     outputs = registry.selected(("result", "handoff", "odometry"), args.report)
     log = read_checked(scenario)
     refuse_collisions(out, registry.files(outputs), force=args.force)
-    gate([scenario], [[log]], args.skip_preflight)
-    calib = Calibration.setup(scenario, log=log)
+    (set_up,) = set_up_and_gate([scenario], [[log]], args.skip_preflight, None)
+    calib = set_up if set_up is not None else Calibration.setup(scenario, log=log)
     run = calib.run((args.solver,), Wanted(odometry=args.solver))
     print(run_table(run))
     print()

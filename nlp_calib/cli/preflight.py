@@ -15,10 +15,11 @@ from nlp_calib.core.text import escaped
 from nlp_calib.logs import Log
 from nlp_calib.outputs.outdir import refuse_collisions, write_file
 from nlp_calib.outputs.preflight import preflight_lines
-from nlp_calib.pipeline import Scenario, load_scenario
+from nlp_calib.pipeline import Calibration, Scenario, load_scenario
 from nlp_calib.pipeline.draft import draft
 from nlp_calib.pipeline.preflight import preflight, refuse
 from nlp_calib.results import codec
+from nlp_calib.results.checks import LagEstimate
 from nlp_calib.results.preflight import Preflight
 
 #: A scenario file, by its name.
@@ -74,14 +75,20 @@ def cmd_init(args: argparse.Namespace) -> int:
     return 0
 
 
-def gate(scenarios: Sequence[Scenario], logs: Sequence[Sequence[Log]], skip: bool) -> None:
+def gate(
+    scenarios: Sequence[Scenario],
+    logs: Sequence[Sequence[Log]],
+    skip: bool,
+    found: Sequence[LagEstimate | None] = (),
+) -> None:
     """The pre-flight of each scenario on its logs (read already): a calibration that cannot succeed
-    stops here with the pre-flight's words (``--skip-preflight``: it goes on)."""
+    stops here with the pre-flight's words (``--skip-preflight``: it goes on). ``found``: each
+    scenario's lag as its run estimated it (None: the pre-flight searches its own)."""
     if skip:
         return
-    for sc, log_list in zip(scenarios, logs):
+    for sc, log_list, lag in zip(scenarios, logs, [*found, *[None] * (len(scenarios) - len(found))]):
         try:
-            report = preflight(sc, log_list)
+            report = preflight(sc, log_list, lag)
         except (DatasetError, ScenarioError, UsageError):  # the run refuses these inputs or settings
             raise  # so (its preparation, its backend): said once, now
         except Exception as exc:  # the pre-flight must never be what stops a run that could succeed
@@ -94,3 +101,34 @@ def gate(scenarios: Sequence[Scenario], logs: Sequence[Sequence[Log]], skip: boo
         if report.stop_words():
             print("\n".join(escaped(line) for line in preflight_lines(report)) + "\n")
         refuse(report, "; to calibrate anyway, give --skip-preflight")
+
+
+def set_up_and_gate(
+    scenarios: Sequence[Scenario],
+    logs: Sequence[Sequence[Log]],
+    skip: bool,
+    solvers: Sequence[str] | None,
+) -> list[Calibration | None]:
+    """Each one-log scenario set up for its fit (prepared, screened, its lag searched, its windows
+    bound), then :func:`gate` with each run's own lag estimate: the lag is searched once, on the
+    screened log the run fits, not again by the pre-flight on the log as read. The warnings of
+    setting up are said after the gate lets the run go on, as they were when the gate came first.
+    None for a scenario of several logs or whose setting up failed (the run sets it up again when
+    its turn comes and says why there, as it did)."""
+    calibrations: list[Calibration | None] = []
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        for sc, log_list in zip(scenarios, logs):
+            calibrations.append(None if sc.data.joint else _set_up(sc, log_list[0], solvers))
+    found = [None if c is None else c.stages.alignment.estimate for c in calibrations]
+    gate(scenarios, logs, skip, found)
+    for w in {(str(w.message), w.category, w.filename, w.lineno): w for w in said}.values():
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+    return calibrations
+
+
+def _set_up(sc: Scenario, log: Log, solvers: Sequence[str] | None) -> Calibration | None:
+    try:
+        return Calibration.setup(sc, log=log, solvers=solvers)
+    except Exception:  # said by the run, in its turn, which sets it up again
+        return None
