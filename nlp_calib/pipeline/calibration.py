@@ -248,7 +248,9 @@ def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> Cali
         notes.append(consistency_check.words(check))
     fitted = dataclasses.replace(fitted, consistency=check, logs=logs)
     # A stored calibration is checked against the joint fit, not each log's view of it.
-    runs = _assemble(fitting, parts, (results, infos), fitted, notes, dataclasses.replace(wanted, against=None))
+    runs = _assemble(
+        fitting, parts, (results, infos), fitted, notes, dataclasses.replace(wanted, against=None)
+    )
     joint = _joint(fitting, (scorer, parts[0]), runs, results, fitted, (notes, wanted.against))
     return pinned_alike(dataclasses.replace(joint, logs=tuple(runs)))
 

@@ -277,8 +277,12 @@ def _as_the_run_aligns(
         return None
     part, column = d.parts[0], clocks[0][0]
     try:
-        found = found if found is not None else estimate_tracker_lag(
-            _binder(d, d.data.n_residuals), d.read[0], part.start, part.stop, d.start.x0
+        found = (
+            found
+            if found is not None
+            else estimate_tracker_lag(
+                _binder(d, d.data.n_residuals), d.read[0], part.start, part.stop, d.start.x0
+            )
         )
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return None
@@ -476,9 +480,7 @@ class Assessment:
         return replace(st, std=std, std_reference=std / needed, reference=needed)
 
 
-def assess(
-    sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None
-) -> Assessment:
+def assess(sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None) -> Assessment:
     """The drive of ``sc`` prepared and its Jacobian evaluated at the start brought to the data
     (``found``: the run's own lag estimate, where it has one)."""
     d, held = drive(sc, logs)
@@ -520,9 +522,7 @@ def preflight_checks(assessed: Assessment) -> tuple[CheckResult, ...]:
     return tuple(r for r in found if r is not None)
 
 
-def preflight(
-    sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None
-) -> Preflight:
+def preflight(sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None) -> Preflight:
     """The pre-flight check of ``sc`` (its logs read from their sources unless given; ``found``: the
     run's own lag estimate, where the run has searched already)."""
     t0 = time.perf_counter()
