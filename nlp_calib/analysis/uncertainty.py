@@ -113,6 +113,9 @@ def not_available(evaluator: ProblemEvaluator) -> Uncertainty:
 
 #: Windows (or intervals) handled at a time: bounds the temporaries, whatever the log's length.
 STEP = 1 << 16
+#: Rows summed stretch by stretch (or only those with something in them) where fewer than one in
+#: this many differ from the row before: windows spread over a log (the pre-flight's judged ones).
+SPARSE = 8
 
 
 def _add(out: np.ndarray, index: np.ndarray, values: np.ndarray, distinct: bool) -> None:
@@ -173,9 +176,9 @@ def estimate(
     n_int, n_in = data.inputs.shape[1], fns.n_inputs
     D = first[1].D if first[1].D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
     use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(s.size, dtype=bool)
-    sums = _Sums.zero(fns, data, first[1].de_dend.shape[2], D, Sigma_in)
+    running = _input_noise_at_ends(D, Sigma_in, first[1].de_dend.shape[2])
+    sums = _Sums.zero(fns, data, first[1].de_dend.shape[2], D, (Sigma_in, running))
     residuals = _Residuals(e=e, weight=weight, use=use, Omega=evaluator.omega)
-    running = _input_noise_at_ends(D, Sigma_in, sums.C.shape[1])
     for w, sens in itertools.chain([first], blocks):
         sums.add(w, sens, residuals, running)
     mm = fns.error_rows * int(use.sum())
@@ -333,14 +336,18 @@ class _Rows:
     def release(self, limit: int | None) -> None:
         """Sum the final rows below ``limit`` (None: every row)."""
         stop = self.n_rows if limit is None else min(limit, self.n_rows)
+        taken = 0  # rows of the buffer summed; what is left is copied once, at the end (not after
+        # each step: windows spread over the log hold a buffer of every row, copied over and over)
         while self.base < stop and (limit is None or stop - self.base >= STEP):
             size = min(STEP, self.n_rows - self.base)
             rows = np.zeros((size, *self.shape))
-            held = min(size, self.buf.shape[0])
-            rows[:held] = self.buf[:held]
+            held = min(size, self.buf.shape[0] - taken)
+            rows[:held] = self.buf[taken : taken + held]
             self.take(self.base, rows)
-            self.buf = self.buf[held:].copy()
+            taken += held
             self.base += size
+        if taken:
+            self.buf = self.buf[taken:].copy()
 
     def take(self, first: int, rows: np.ndarray) -> None:
         raise NotImplementedError
@@ -355,6 +362,9 @@ class _PoseRows(_Rows):
         self.gram = np.zeros((shape[1], shape[0], shape[0]))
 
     def take(self, first: int, rows: np.ndarray) -> None:
+        live = np.flatnonzero(np.any(rows != 0, axis=(1, 2)))
+        if live.size * SPARSE < rows.shape[0]:  # windows spread over the log: most poses in none
+            rows = rows[live]
         self.gram += np.einsum("pic,pjc->cij", rows, rows)
 
 
@@ -364,21 +374,38 @@ class _InputRows(_Rows):
     (``gram``)."""
 
     def __init__(
-        self, n_rows: int, shape: tuple[int, int], distinct: bool, noise: tuple[np.ndarray, np.ndarray]
+        self,
+        n_rows: int,
+        shape: tuple[int, int],
+        distinct: bool,
+        noise: tuple[np.ndarray, np.ndarray, np.ndarray],
     ):
         super().__init__(n_rows, shape, distinct)
-        self.D, self.Sigma_in = noise
+        #: Each interval's ``D_j``, the inputs' variances and the running sums of ``D_j Σ_u D_jᵀ``.
+        self.D, self.Sigma_in, self.running = noise
         self.gram = np.zeros((shape[0], shape[0]))
         self.carry = np.zeros(shape)
 
     def take(self, first: int, rows: np.ndarray) -> None:
+        changes = np.any(rows[1:] != 0, axis=(1, 2))
         rows[0] += self.carry  # the running sum goes on from the previous block's last
         C = np.cumsum(rows, axis=0, out=rows)
         self.carry = C[-1].copy()
         n_int = self.D.shape[0]
-        if first < n_int:
-            Q = C[: n_int - first] @ self.D[first : first + C.shape[0]]  # (., n, n_in)
-            self.gram += _weighted_gram(Q, self.Sigma_in)
+        if first >= n_int:
+            return
+        C = C[: n_int - first]
+        ends = np.append(np.flatnonzero(changes[: C.shape[0] - 1]) + 1, C.shape[0])
+        if ends.size * SPARSE < C.shape[0]:
+            # Windows spread over the log: C is the same over each stretch between two windows'
+            # ends, so the stretch's intervals sum to C (Σ_j D_j Σ_u D_jᵀ) Cᵀ, from the running sums.
+            starts = np.concatenate([[0], ends[:-1]])
+            R = self.running[first + ends] - self.running[first + starts]
+            Cs = C[starts]
+            self.gram += np.einsum("sam,smk,sbk->ab", Cs, R, Cs)
+            return
+        Q = C @ self.D[first : first + C.shape[0]]  # (., n, n_in)
+        self.gram += _weighted_gram(Q, self.Sigma_in)
 
 
 @dataclass
@@ -407,8 +434,15 @@ class _Sums:
 
     @classmethod
     def zero(
-        cls, fns: ProblemFunctions, data: ResidualData, m: int, D: np.ndarray, Sigma_in: np.ndarray
+        cls,
+        fns: ProblemFunctions,
+        data: ResidualData,
+        m: int,
+        D: np.ndarray,
+        noise: tuple[np.ndarray, np.ndarray],
     ) -> _Sums:
+        """Nothing summed yet; ``noise``: the inputs' variances and the running sums of
+        ``D_j Σ_u D_jᵀ`` (:func:`_input_noise_at_ends`)."""
         groups = tuple(tuple(g) for g in fns.sensor.noise_groups)
         n, a, b = fns.n_free, data.starts, data.stops
         inc = data.increment if data.increment is not None and data.increment.any() else None
@@ -421,7 +455,7 @@ class _Sums:
             proj=np.zeros(len(groups)),
             yy=0.0,
             K=_PoseRows(data.T_world_sensor.shape[0], (n, k), distinct),
-            C=_InputRows(n_int + 1, (n, m), distinct, (D, Sigma_in)),
+            C=_InputRows(n_int + 1, (n, m), distinct, (D, *noise)),
             outliers=np.zeros((n, n)),
             starts=a,
             final=np.minimum.accumulate(a[::-1])[::-1] if a.size else a,
