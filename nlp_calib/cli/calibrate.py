@@ -160,23 +160,21 @@ def _cmd_calibrate(
     logs = [[read_checked(s) for s in sc.per_log()] for sc in scenarios]
     for out in outs:
         refuse_collisions(out, registry.files(outputs), force=args.force)
-    calibrations = set_up_and_gate(scenarios, logs, args.skip_preflight, solvers)
+    aligned = set_up_and_gate(scenarios, logs, args.skip_preflight, solvers)
     compared = _compare_dir(args, outs) if side_by_side else None
     if compared is not None:
         refuse_collisions(compared, compare.FILES, force=args.force)
     runs: list[CalibrationRun] = []
     wanted = Wanted(series=args.report)
     with Progress(len(scenarios), sys.stderr, label="scenarios") as progress:
-        for i, (scenario, out, log_list, calib) in enumerate(zip(scenarios, outs, logs, calibrations)):
+        for i, (scenario, out, log_list) in enumerate(zip(scenarios, outs, logs)):
             progress.update(i, f"{scenario.name}: setting up and solving")
             last = i == len(scenarios) - 1
             if scenario.data.joint:
                 runs += _calibrate_joint(scenario, log_list, out, args, (solvers, outputs), progress, last)
                 continue
-            calibrations[i] = None  # let go of it with its run
-            if calib is None:
-                calib = Calibration.setup(scenario, log=log_list[0], solvers=solvers)
-            run = calib.run(solvers, wanted)
+            stages, aligned[i] = aligned[i], None  # let go of them with the run
+            run = Calibration(scenario, log_list[0], solvers, stages).run(solvers, wanted)
             runs.append(run)
             progress.clear()
             print(run_table(run))
@@ -303,8 +301,8 @@ def cmd_odometry(args: argparse.Namespace) -> int:
     outputs = registry.selected(("result", "handoff", "odometry"), args.report)
     log = read_checked(scenario)
     refuse_collisions(out, registry.files(outputs), force=args.force)
-    (set_up,) = set_up_and_gate([scenario], [[log]], args.skip_preflight, None)
-    calib = set_up if set_up is not None else Calibration.setup(scenario, log=log)
+    (stages,) = set_up_and_gate([scenario], [[log]], args.skip_preflight, None)
+    calib = Calibration(scenario, log, None, stages)
     run = calib.run((args.solver,), Wanted(odometry=args.solver))
     print(run_table(run))
     print()

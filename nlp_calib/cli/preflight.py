@@ -15,9 +15,10 @@ from nlp_calib.core.text import escaped
 from nlp_calib.logs import Log
 from nlp_calib.outputs.outdir import refuse_collisions, write_file
 from nlp_calib.outputs.preflight import preflight_lines
-from nlp_calib.pipeline import Calibration, Scenario, load_scenario
+from nlp_calib.pipeline import Scenario, load_scenario
 from nlp_calib.pipeline.draft import draft
 from nlp_calib.pipeline.preflight import preflight, refuse
+from nlp_calib.pipeline.stages import Aligned, align_log
 from nlp_calib.results import codec
 from nlp_calib.results.checks import LagEstimate
 from nlp_calib.results.preflight import Preflight
@@ -108,27 +109,28 @@ def set_up_and_gate(
     logs: Sequence[Sequence[Log]],
     skip: bool,
     solvers: Sequence[str] | None,
-) -> list[Calibration | None]:
-    """Each one-log scenario set up for its fit (prepared, screened, its lag searched, its windows
-    bound), then :func:`gate` with each run's own lag estimate: the lag is searched once, on the
-    screened log the run fits, not again by the pre-flight on the log as read. The warnings of
-    setting up are said after the gate lets the run go on, as they were when the gate came first.
-    None for a scenario of several logs or whose setting up failed (the run sets it up again when
-    its turn comes and says why there, as it did)."""
-    calibrations: list[Calibration | None] = []
+) -> list[Aligned | None]:
+    """Each one-log scenario through the run's stages before its windows are bound (prepared,
+    screened, its lag searched), then :func:`gate` with each run's own lag estimate: the lag is
+    searched once, on the screened log the run fits, not again by the pre-flight on the log as
+    read; the windows are bound after the gate (their memory not held while it judges). The
+    warnings of those stages are said after the gate lets the run go on, as they were when the
+    gate came first. None for a scenario of several logs or whose stages failed (the run goes
+    through them again when its turn comes and says why there, as it did)."""
+    aligned: list[Aligned | None] = []
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
         for sc, log_list in zip(scenarios, logs):
-            calibrations.append(None if sc.data.joint else _set_up(sc, log_list[0], solvers))
-    found = [None if c is None else c.stages.alignment.estimate for c in calibrations]
+            aligned.append(None if sc.data.joint else _aligned(sc, log_list[0], solvers))
+    found = [None if a is None else a.alignment.estimate for a in aligned]
     gate(scenarios, logs, skip, found)
     for w in {(str(w.message), w.category, w.filename, w.lineno): w for w in said}.values():
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
-    return calibrations
+    return aligned
 
 
-def _set_up(sc: Scenario, log: Log, solvers: Sequence[str] | None) -> Calibration | None:
+def _aligned(sc: Scenario, log: Log, solvers: Sequence[str] | None) -> Aligned | None:
     try:
-        return Calibration.setup(sc, log=log, solvers=solvers)
-    except Exception:  # said by the run, in its turn, which sets it up again
+        return align_log(sc, log, tuple(solvers or sc.solvers))
+    except Exception:  # said by the run, in its turn, which goes through these stages again
         return None

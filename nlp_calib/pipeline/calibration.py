@@ -46,7 +46,7 @@ from nlp_calib.pipeline.build import StartingPoint, build_stage, mount_count
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import joint_residual
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.pipeline.stages import LogSetup, setup_log
+from nlp_calib.pipeline.stages import Aligned, LogSetup, setup_log
 from nlp_calib.pipeline.stored import StoredCalibration
 from nlp_calib.problem import ProblemFunctions, ResidualData, joined
 from nlp_calib.problem.blocks import per_log_kinds
@@ -96,14 +96,17 @@ class Calibration:
         scenario: Scenario,
         log: Log | Sequence[Log] | None = None,
         solvers: Sequence[str] | None = None,
+        aligned: Aligned | None = None,
     ) -> None:
-        """``log``: the log already read (with ``datasets``: one per entry), or None to read."""
+        """``log``: the log already read (with ``datasets``: one per entry), or None to read;
+        ``aligned``: one log's stages before its windows are bound, done already."""
         t0 = time.perf_counter()
         self.scenario = sc = scenario
         self.solvers = tuple(solvers or sc.solvers)
         per_log = sc.per_log() if sc.data.joint else (sc,)
         given = [log] if isinstance(log, Log) else list(log) if log is not None else [None] * len(per_log)
-        self.parts = [setup_log(s, log, self.solvers) for s, log in zip(per_log, given)]
+        assert aligned is None or len(per_log) == 1, "stages done already are one log's"
+        self.parts = [setup_log(s, log, self.solvers, aligned) for s, log in zip(per_log, given)]
         self.stages = self.parts[0]
         if len(self.parts) == 1:
             self.held: Mapping[str, str] = self.stages.prepared.held
