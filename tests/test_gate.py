@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import SCENARIOS, write_sim
+from conftest import SCENARIOS, cli, write_sim
 
 from nlp_calib.analysis import determinacy as det
 from nlp_calib.analysis import observability as obs
@@ -243,3 +243,37 @@ def test_a_parameter_the_drive_tells_from_zero_is_not_profiled_away(tmp_path: Pa
     assert profile.level != CAVEAT and not profile.concerns, profile
     by_cost, by_std = (profile.table[k]["k_steer_reverse"] for k in ("sigmas_by_cost", "sigmas_by_std"))
     assert by_cost > 5.0 and 0.5 < by_cost / by_std < 2.0, profile.table
+
+
+def test_a_run_searches_its_lag_once_and_the_gate_judges_at_it(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """Issue 41: inside ``run`` the lag is searched once, by the run on the log it fits, and the
+    gate judges at that lag; on the demo its verdict is the stand-alone pre-flight's."""
+    from nlp_calib.cli import preflight as cli_preflight
+    from nlp_calib.pipeline import align
+
+    searched: list[LagEstimate] = []
+    judged: list[LagEstimate | None] = []
+    search, judge = align.estimate_tracker_lag, cli_preflight.preflight
+
+    def counted(*args: object) -> LagEstimate:
+        searched.append(search(*args))  # type: ignore[arg-type]
+        return searched[-1]
+
+    def spied(sc: object, logs: object, found: LagEstimate | None = None) -> object:
+        judged.append(found)
+        return judge(sc, logs, found)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(align, "estimate_tracker_lag", counted)
+    monkeypatch.setattr(pf, "estimate_tracker_lag", counted)
+    monkeypatch.setattr(cli_preflight, "preflight", spied)
+    demo = SCENARIOS / "demo.yaml"
+    proc = cli("run", str(demo), "--solver", "gauss_newton", "--out", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stderr
+    assert len(searched) == 1 and judged == [searched[0]]
+    own = preflight(load_scenario(demo))
+    assert len(searched) == 2  # the stand-alone pre-flight searches its own
+    at_run = judge(load_scenario(demo), None, searched[0])
+    assert at_run.verdict == own.verdict
+    assert [(p.name, p.status) for p in at_run.parameters] == [(p.name, p.status) for p in own.parameters]

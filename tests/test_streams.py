@@ -219,3 +219,25 @@ def test_the_trailing_medians_are_nanmedians_to_the_bit(w: int) -> None:
         want = np.nanmedian(np.lib.stride_tricks.sliding_window_view(a, w, axis=0), axis=-1)
         got = _window_medians(a, w)
     assert np.array_equal(got, want, equal_nan=True)
+
+
+def test_the_screens_lag_is_the_written_out_huber_profiles_least() -> None:
+    """Issue 41: the screen's lag profile, computed in reused buffers, has its least where Huber's
+    loss written out has it."""
+    from nlp_calib.analysis.counters import HUBER, LAG_STEP, robust_sigma
+
+    rng = np.random.default_rng(7)
+    n = 3000
+    t = np.cumsum(0.02 + 0.002 * rng.random(n + 1))
+    ticks = [rng.integers(-3, 40, n).astype(float), rng.integers(0, 9, n).astype(float)]
+    c = rng.normal(0.0, 1.5, (n, 2))
+    grid = -0.1 + LAG_STEP * np.arange(101)
+    cost = np.zeros(grid.size)
+    for j, x in enumerate(ticks):
+        count = np.concatenate([[0.0], np.cumsum(x)])
+        for i, g in enumerate(grid):
+            r = np.abs(np.diff(np.interp(t - g, t, count)) - x - c[:, j]) / robust_sigma(c[:, j])
+            cost[i] += np.sum(np.where(r < HUBER, 0.5 * r * r, HUBER * r - 0.5 * HUBER**2))
+    assert screen_lag(t, ticks, c, (-0.1, 0.1)) == grid[int(np.argmin(cost))]
+    # One record, no interval: every lag costs nothing, the range's first is kept.
+    assert screen_lag(t[:1], [x[:0] for x in ticks], c[:0], (0.0, 0.0)) == 0.0

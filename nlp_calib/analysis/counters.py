@@ -114,12 +114,28 @@ def screen_lag(
     lo, hi = lag
     grid = lo + LAG_STEP * np.arange(int(np.floor((hi - lo) / LAG_STEP + 1e-9)) + 1)
     cost = np.zeros(grid.size)
+    # Huber's loss of |Δcount(t − g) − x − c| / unit, in buffers reused over the grid: the same
+    # operations in the same order as written out, without a temporary per step of each.
+    n = max(time_s.size - 1, 0)
+    r, at, square = np.empty(n), np.empty(time_s.size), np.empty(n)
     for j, x in enumerate(ticks):
         unit = max(robust_sigma(c[:, j]), 1e-12)
         count = np.concatenate([[0.0], np.cumsum(x)])
+        cj = np.ascontiguousarray(c[:, j])
         for i, g in enumerate(grid):
-            r = np.abs(np.diff(np.interp(time_s - g, time_s, count)) - x - c[:, j]) / unit
-            cost[i] += np.sum(np.where(r < HUBER, 0.5 * r * r, HUBER * r - 0.5 * HUBER**2))
+            shifted = np.interp(np.subtract(time_s, g, out=at), time_s, count)
+            np.subtract(shifted[1:], shifted[:-1], out=r)
+            r -= x
+            r -= cj
+            np.abs(r, out=r)
+            r /= unit
+            inside = r < HUBER
+            np.multiply(r, 0.5, out=square)
+            square *= r
+            r *= HUBER
+            r -= 0.5 * HUBER**2
+            np.copyto(r, square, where=inside)
+            cost[i] += np.sum(r)
     return float(grid[int(np.argmin(cost))])
 
 

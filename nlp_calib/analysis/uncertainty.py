@@ -117,6 +117,9 @@ def not_available(evaluator: ProblemEvaluator) -> Uncertainty:
 
 #: Windows (or intervals) handled at a time: bounds the temporaries, whatever the log's length.
 STEP = 1 << 16
+#: Rows summed stretch by stretch (or only those with something in them) where fewer than one in
+#: this many differ from the row before: windows spread over a log (the pre-flight's judged ones).
+SPARSE = 8
 
 
 def _add(out: np.ndarray, index: np.ndarray, values: np.ndarray, distinct: bool) -> None:
@@ -181,9 +184,9 @@ def estimate(
     D = reading_map(D, data.inputs, rate_rows(fns.model))
     use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(s.size, dtype=bool)
     split = split_noise(Sigma_in, counted)
-    sums = _Sums.zero(fns, data, first[1].de_dend.shape[2], D, split)
-    residuals = _Residuals(e=e, weight=weight, use=use, Omega=evaluator.omega)
     running = EndNoise(D, split)
+    sums = _Sums.zero(fns, data, first[1].de_dend.shape[2], D, (split, running))
+    residuals = _Residuals(e=e, weight=weight, use=use, Omega=evaluator.omega)
     for w, sens in itertools.chain([first], blocks):
         sums.add(w, sens, residuals, running)
     mm = fns.error_rows * int(use.sum())
@@ -404,14 +407,18 @@ class _Rows:
     def release(self, limit: int | None) -> None:
         """Sum the final rows below ``limit`` (None: every row)."""
         stop = self.n_rows if limit is None else min(limit, self.n_rows)
+        taken = 0  # rows of the buffer summed; what is left is copied once, at the end (not after
+        # each step: windows spread over the log hold a buffer of every row, copied over and over)
         while self.base < stop and (limit is None or stop - self.base >= STEP):
             size = min(STEP, self.n_rows - self.base)
             rows = np.zeros((size, *self.shape))
-            held = min(size, self.buf.shape[0])
-            rows[:held] = self.buf[:held]
+            held = min(size, self.buf.shape[0] - taken)
+            rows[:held] = self.buf[taken : taken + held]
             self.take(self.base, rows)
-            self.buf = self.buf[held:].copy()
+            taken += held
             self.base += size
+        if taken:
+            self.buf = self.buf[taken:].copy()
 
     def take(self, first: int, rows: np.ndarray) -> None:
         raise NotImplementedError
@@ -426,6 +433,9 @@ class _PoseRows(_Rows):
         self.gram = np.zeros((shape[1], shape[0], shape[0]))
 
     def take(self, first: int, rows: np.ndarray) -> None:
+        live = np.flatnonzero(np.any(rows != 0, axis=(1, 2)))
+        if live.size * SPARSE < rows.shape[0]:  # windows spread over the log: most poses in none
+            rows = rows[live]
         self.gram += np.einsum("pic,pjc->cij", rows, rows)
 
 
@@ -440,30 +450,55 @@ class _InputRows(_Rows):
         n_rows: int,
         shape: tuple[int, int],
         distinct: bool,
-        noise: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]],
+        noise: tuple[np.ndarray, tuple[np.ndarray, np.ndarray], EndNoise],
     ):
         super().__init__(n_rows, shape, distinct)
-        self.D, (self.Sigma_own, self.Sigma_reading) = noise
+        #: Each interval's ``D_j``, the inputs' own and reading variances and their running sums.
+        self.D, (self.Sigma_own, self.Sigma_reading), self.running = noise
         self.gram = np.zeros((shape[0], shape[0]))
         self.carry = np.zeros(shape)
         self.last_Q = np.zeros((shape[0], self.D.shape[2]))
 
     def take(self, first: int, rows: np.ndarray) -> None:
+        changes = np.any(rows[1:] != 0, axis=(1, 2))
         rows[0] += self.carry  # the running sum goes on from the previous block's last
         C = np.cumsum(rows, axis=0, out=rows)
         self.carry = C[-1].copy()
         n_int = self.D.shape[0]
         if first > n_int:
             return
-        # Q past the last interval is 0: the last reading's term is −Q_{n−1}.
-        Q = np.zeros((C.shape[0], *self.last_Q.shape))
         inside = min(C.shape[0], n_int - first)
-        Q[:inside] = C[:inside] @ self.D[first : first + inside]
-        self.gram += _weighted_gram(Q[:inside], self.Sigma_own)
-        if np.any(self.Sigma_reading):
-            steps = np.diff(np.concatenate([self.last_Q[None], Q]), axis=0)
-            self.gram += _weighted_gram(steps, self.Sigma_reading)
-        self.last_Q = Q[-1].copy()
+        ends = np.append(np.flatnonzero(changes[: max(inside - 1, 0)]) + 1, inside) if inside else None
+        if ends is not None and ends.size * SPARSE < inside:
+            self._stretches(first, C, ends)
+        elif inside:
+            Q = C[:inside] @ self.D[first : first + inside]  # (., n, n_in)
+            self.gram += _weighted_gram(Q, self.Sigma_own)
+            if np.any(self.Sigma_reading):
+                steps = np.diff(np.concatenate([self.last_Q[None], Q]), axis=0)
+                self.gram += _weighted_gram(steps, self.Sigma_reading)
+            self.last_Q = Q[-1].copy()
+        if C.shape[0] > inside and np.any(self.Sigma_reading):
+            # Q past the last interval is 0: the last reading's term is −Q_{n−1}.
+            self.gram += _weighted_gram(-self.last_Q[None], self.Sigma_reading)
+            self.last_Q = np.zeros_like(self.last_Q)
+
+    def _stretches(self, first: int, C: np.ndarray, ends: np.ndarray) -> None:
+        """Windows spread over the log: ``C`` is the same over each stretch between two windows'
+        ends, so a stretch's intervals sum to ``C (Σ_j D_j Σ_u D_jᵀ) Cᵀ`` and its readings inside
+        to ``C (Σ_r (D_{r−1} − D_r) Σ_c (…)ᵀ) Cᵀ``, from the running sums; only each stretch's
+        first reading (where ``C`` changes) is summed on its own."""
+        starts = np.concatenate([[0], ends[:-1]])
+        Cs, at, to = C[starts], first + starts, first + ends
+        self.gram += np.einsum("sam,smk,sbk->ab", Cs, self.running.own[to] - self.running.own[at], Cs)
+        if not np.any(self.Sigma_reading):
+            return
+        inner = self.running.inside[to] - self.running.inside[at + 1]
+        self.gram += np.einsum("sam,smk,sbk->ab", Cs, inner, Cs)
+        Q_first, Q_last = Cs @ self.D[at], Cs @ self.D[to - 1]
+        before = np.concatenate([self.last_Q[None], Q_last[:-1]])
+        self.gram += _weighted_gram(Q_first - before, self.Sigma_reading)
+        self.last_Q = Q_last[-1].copy()
 
 
 @dataclass
@@ -497,8 +532,10 @@ class _Sums:
         data: ResidualData,
         m: int,
         D: np.ndarray,
-        Sigma_in: tuple[np.ndarray, np.ndarray],
+        noise: tuple[tuple[np.ndarray, np.ndarray], EndNoise],
     ) -> _Sums:
+        """Nothing summed yet; ``noise``: the inputs' own and reading variances and their running
+        sums (:class:`EndNoise`)."""
         groups = tuple(tuple(g) for g in fns.sensor.noise_groups)
         n, a, b = fns.n_free, data.starts, data.stops
         inc = data.increment if data.increment is not None and data.increment.any() else None
@@ -511,7 +548,7 @@ class _Sums:
             proj=np.zeros(len(groups)),
             yy=0.0,
             K=_PoseRows(data.T_world_sensor.shape[0], (n, k), distinct),
-            C=_InputRows(n_int + 1, (n, m), distinct, (D, Sigma_in)),
+            C=_InputRows(n_int + 1, (n, m), distinct, (D, *noise)),
             outliers=np.zeros((n, n)),
             starts=a,
             final=np.minimum.accumulate(a[::-1])[::-1] if a.size else a,

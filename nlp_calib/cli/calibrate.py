@@ -17,7 +17,7 @@ import numpy as np
 
 from nlp_calib.cli.explain import no_crossvalidation
 from nlp_calib.cli.parser import ALL_SOLVERS
-from nlp_calib.cli.preflight import gate
+from nlp_calib.cli.preflight import set_up_and_gate
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
 from nlp_calib.core.files import check_output_dir
@@ -160,7 +160,7 @@ def _cmd_calibrate(
     logs = [[read_checked(s) for s in sc.per_log()] for sc in scenarios]
     for out in outs:
         refuse_collisions(out, registry.files(outputs), force=args.force)
-    gate(scenarios, logs, args.skip_preflight)
+    aligned = set_up_and_gate(scenarios, logs, args.skip_preflight, solvers)
     compared = _compare_dir(args, outs) if side_by_side else None
     if compared is not None:
         refuse_collisions(compared, compare.FILES, force=args.force)
@@ -173,7 +173,8 @@ def _cmd_calibrate(
             if scenario.data.joint:
                 runs += _calibrate_joint(scenario, log_list, out, args, (solvers, outputs), progress, last)
                 continue
-            run = Calibration.setup(scenario, log=log_list[0], solvers=solvers).run(solvers, wanted)
+            stages, aligned[i] = aligned[i], None  # let go of them with the run
+            run = Calibration(scenario, log_list[0], solvers, stages).run(solvers, wanted)
             runs.append(run)
             progress.clear()
             print(run_table(run))
@@ -300,8 +301,8 @@ def cmd_odometry(args: argparse.Namespace) -> int:
     outputs = registry.selected(("result", "handoff", "odometry"), args.report)
     log = read_checked(scenario)
     refuse_collisions(out, registry.files(outputs), force=args.force)
-    gate([scenario], [[log]], args.skip_preflight)
-    calib = Calibration.setup(scenario, log=log)
+    (stages,) = set_up_and_gate([scenario], [[log]], args.skip_preflight, None)
+    calib = Calibration(scenario, log, None, stages)
     run = calib.run((args.solver,), Wanted(odometry=args.solver))
     print(run_table(run))
     print()

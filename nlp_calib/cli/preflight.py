@@ -18,7 +18,9 @@ from nlp_calib.outputs.preflight import preflight_lines
 from nlp_calib.pipeline import Scenario, load_scenario
 from nlp_calib.pipeline.draft import draft
 from nlp_calib.pipeline.preflight import preflight, refuse
+from nlp_calib.pipeline.stages import Aligned, align_log
 from nlp_calib.results import codec
+from nlp_calib.results.checks import LagEstimate
 from nlp_calib.results.preflight import Preflight
 
 #: A scenario file, by its name.
@@ -74,14 +76,20 @@ def cmd_init(args: argparse.Namespace) -> int:
     return 0
 
 
-def gate(scenarios: Sequence[Scenario], logs: Sequence[Sequence[Log]], skip: bool) -> None:
+def gate(
+    scenarios: Sequence[Scenario],
+    logs: Sequence[Sequence[Log]],
+    skip: bool,
+    found: Sequence[LagEstimate | None] = (),
+) -> None:
     """The pre-flight of each scenario on its logs (read already): a calibration that cannot succeed
-    stops here with the pre-flight's words (``--skip-preflight``: it goes on)."""
+    stops here with the pre-flight's words (``--skip-preflight``: it goes on). ``found``: each
+    scenario's lag as its run estimated it (None: the pre-flight searches its own)."""
     if skip:
         return
-    for sc, log_list in zip(scenarios, logs):
+    for sc, log_list, lag in zip(scenarios, logs, [*found, *[None] * (len(scenarios) - len(found))]):
         try:
-            report = preflight(sc, log_list)
+            report = preflight(sc, log_list, lag)
         except (DatasetError, ScenarioError, UsageError):  # the run refuses these inputs or settings
             raise  # so (its preparation, its backend): said once, now
         except Exception as exc:  # the pre-flight must never be what stops a run that could succeed
@@ -94,3 +102,35 @@ def gate(scenarios: Sequence[Scenario], logs: Sequence[Sequence[Log]], skip: boo
         if report.stop_words():
             print("\n".join(escaped(line) for line in preflight_lines(report)) + "\n")
         refuse(report, "; to calibrate anyway, give --skip-preflight")
+
+
+def set_up_and_gate(
+    scenarios: Sequence[Scenario],
+    logs: Sequence[Sequence[Log]],
+    skip: bool,
+    solvers: Sequence[str] | None,
+) -> list[Aligned | None]:
+    """Each one-log scenario through the run's stages before its windows are bound (prepared,
+    screened, its lag searched), then :func:`gate` with each run's own lag estimate: the lag is
+    searched once, on the screened log the run fits, not again by the pre-flight on the log as
+    read; the windows are bound after the gate (their memory not held while it judges). The
+    warnings of those stages are said after the gate lets the run go on, as they were when the
+    gate came first. None for a scenario of several logs or whose stages failed (the run goes
+    through them again when its turn comes and says why there, as it did)."""
+    aligned: list[Aligned | None] = []
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        for sc, log_list in zip(scenarios, logs):
+            aligned.append(None if sc.data.joint else _aligned(sc, log_list[0], solvers))
+    found = [None if a is None else a.alignment.estimate for a in aligned]
+    gate(scenarios, logs, skip, found)
+    for w in {(str(w.message), w.category, w.filename, w.lineno): w for w in said}.values():
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+    return aligned
+
+
+def _aligned(sc: Scenario, log: Log, solvers: Sequence[str] | None) -> Aligned | None:
+    try:
+        return align_log(sc, log, tuple(solvers or sc.solvers))
+    except Exception:  # said by the run, in its turn, which goes through these stages again
+        return None

@@ -46,7 +46,7 @@ from nlp_calib.pipeline.build import StartingPoint, build_stage, mount_count
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import joint_residual
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.pipeline.stages import LogSetup, setup_log
+from nlp_calib.pipeline.stages import Aligned, LogSetup, setup_log
 from nlp_calib.pipeline.stored import StoredCalibration
 from nlp_calib.problem import ProblemFunctions, ResidualData, joined
 from nlp_calib.problem.blocks import per_log_kinds
@@ -96,14 +96,17 @@ class Calibration:
         scenario: Scenario,
         log: Log | Sequence[Log] | None = None,
         solvers: Sequence[str] | None = None,
+        aligned: Aligned | None = None,
     ) -> None:
-        """``log``: the log already read (with ``datasets``: one per entry), or None to read."""
+        """``log``: the log already read (with ``datasets``: one per entry), or None to read;
+        ``aligned``: one log's stages before its windows are bound, done already."""
         t0 = time.perf_counter()
         self.scenario = sc = scenario
         self.solvers = tuple(solvers or sc.solvers)
         per_log = sc.per_log() if sc.data.joint else (sc,)
         given = [log] if isinstance(log, Log) else list(log) if log is not None else [None] * len(per_log)
-        self.parts = [setup_log(s, log, self.solvers) for s, log in zip(per_log, given)]
+        assert aligned is None or len(per_log) == 1, "stages done already are one log's"
+        self.parts = [setup_log(s, log, self.solvers, aligned) for s, log in zip(per_log, given)]
         self.stages = self.parts[0]
         if len(self.parts) == 1:
             self.held: Mapping[str, str] = self.stages.prepared.held
@@ -240,7 +243,7 @@ def _joint_fit(sc: Scenario, parts: Sequence[LogSetup], solvers: Sequence[str]) 
 def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> CalibrationRun:
     """:meth:`Calibration.run` over several logs."""
     fitting, parts = calib.fitting, calib.parts
-    results, fitted, notes = _fit(fitting, parts, names, calib.held, wanted.against is not None)
+    results, fitted, notes, infos = _fit(fitting, parts, names, calib.held, wanted.against is not None)
     scorer = blocks_scorer(fitting.fns, parts, fitting.data)
     logs = logs_crossval(fitting, results, scorer, log_ranges(parts))
     own = [_own_run(p, names) for p in parts]
@@ -249,7 +252,9 @@ def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> Cali
         notes.append(consistency_check.words(check))
     fitted = dataclasses.replace(fitted, consistency=check, logs=logs)
     # A stored calibration is checked against the joint fit, not each log's view of it.
-    runs = _assemble(fitting, parts, results, fitted, notes, dataclasses.replace(wanted, against=None))
+    runs = _assemble(
+        fitting, parts, (results, infos), fitted, notes, dataclasses.replace(wanted, against=None)
+    )
     joint = _joint(fitting, (scorer, parts[0]), runs, results, fitted, (notes, wanted.against))
     return pinned_alike(dataclasses.replace(joint, logs=tuple(runs)))
 
@@ -354,34 +359,38 @@ def _fit(
     solvers: Sequence[str],
     held: Mapping[str, str],
     from_estimate: bool = False,
-) -> tuple[dict[str, SolverResult], FitAnalysis, list[str]]:
+) -> tuple[dict[str, SolverResult], FitAnalysis, list[str], list[ScenarioInfo]]:
     """The fit stage and the fit's analysis over ``parts`` (one log, or several end to end);
     ``held``: the parameters held because the fitted records do not determine them;
-    ``from_estimate``: the start is a stored calibration's estimate (:meth:`Fit.solve`)."""
+    ``from_estimate``: the start is a stored calibration's estimate (:meth:`Fit.solve`). Last,
+    what the outputs say of each log's fit (:func:`_part_info`), for its assembly."""
     results = {name: fitting.solve(name, from_estimate) for name in solvers}
     noise = joint_noise(parts)
     info = fit_info(parts[0].prepared.scenario, fitting.fns)
     # The precision each parameter needs: the tightest any log's drive asks (as the joint run's).
-    layouts = [_part_info(fitting, part, i)[1].layout for i, part in enumerate(parts)]
-    needed = tightest(info.layout, layouts)
+    infos = [_part_info(fitting, part, i)[1] for i, part in enumerate(parts)]
+    needed = tightest(info.layout, [i.layout for i in infos])
     fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data), needed)
     fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, info.units))
-    return results, fitted, fit_notes(results, fitted, held)
+    return results, fitted, fit_notes(results, fitted, held), infos
 
 
 def _assemble(
     fitting: Fit,
     parts: Sequence[LogSetup],
-    results: Mapping[str, SolverResult],
+    fits: tuple[Mapping[str, SolverResult], Sequence[ScenarioInfo]],
     fitted: FitAnalysis,
     notes: Sequence[str],
     wanted: Wanted,
 ) -> list[CalibrationRun]:
-    """Each log's figures (analyse) and its run (assemble) with the fit's estimates and checks."""
+    """Each log's figures (analyse) and its run (assemble) with the fit's estimates and checks;
+    ``fits``: the solvers' results and what the outputs say of each log's fit (from the fit stage:
+    its drive's precision is not computed again)."""
     runs = []
+    results, infos = fits
     logs = tuple((p.prepared.scenario.name, p.prepared.log.header) for p in parts)
     for i, part in enumerate(parts):
-        scorer, info = _part_info(fitting, part, i)
+        scorer, info = _scorer(fitting, part, i), infos[i]
         view = LogView(part.prepared, part.windows, scorer, part.screening.findings, i)
         figures = analyse_log(fitting, results, view, wanted, info.labels, fitted.nominal_params)
         stage = (part.prepared, part.windows, part.alignment, part.screening.findings)
@@ -394,13 +403,19 @@ def _assemble(
     return runs
 
 
+def _scorer(fitting: Fit, part: LogSetup, index: int) -> Scorer:
+    """Log ``index``'s scorer over its used records."""
+    sc = part.prepared.scenario
+    return log_scorer(
+        fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window, index
+    )
+
+
 def _part_info(fitting: Fit, part: LogSetup, index: int) -> tuple[Scorer, ScenarioInfo]:
     """Log ``index``'s scorer over its used records, and what the outputs say of its fit with the
     precision its drive needs (see :func:`_vehicle_precision`)."""
     sc = part.prepared.scenario
-    scorer = log_scorer(
-        fitting.fns, part.windows, sc.objective.residual.steering_sample, sc.validation.rpe_window, index
-    )
+    scorer = _scorer(fitting, part, index)
     info = _vehicle_precision(fit_info(sc, fitting.fns), scorer, part, fitting.problem.start.initial, index)
     return scorer, info
 
@@ -422,5 +437,5 @@ def _run(
 ) -> tuple[FitAnalysis, list[str], list[CalibrationRun]]:
     """The fit, analyse and assemble stages over ``parts`` (one log, or several end to end)."""
     names, held = tuple(solvers or sc.solvers), parts[0].prepared.held
-    results, fitted, notes = _fit(fitting, parts, names, held, wanted.against is not None)
-    return fitted, notes, _assemble(fitting, parts, results, fitted, notes, wanted)
+    results, fitted, notes, infos = _fit(fitting, parts, names, held, wanted.against is not None)
+    return fitted, notes, _assemble(fitting, parts, (results, infos), fitted, notes, wanted)

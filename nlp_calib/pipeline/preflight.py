@@ -51,7 +51,7 @@ from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.units_check import implausible
 from nlp_calib.pipeline.validation import leave_out, on_threads
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
-from nlp_calib.results.checks import CheckResult, Fold, believed_std
+from nlp_calib.results.checks import CheckResult, Fold, LagEstimate, believed_std
 from nlp_calib.results.layout import CLOCK
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight
 from nlp_calib.solvers.evaluation import NormalEquations, ProblemEvaluator
@@ -261,21 +261,29 @@ def _binder(d: Drive, n_windows: int) -> Binder:
     return Binder(sc, fns, backend, start.x_fixed, no_priors(fns.n_free), bounds=box)
 
 
-def _as_the_run_aligns(d: Drive, omega: np.ndarray) -> tuple[Drive, Fitted | None] | None:
+def _as_the_run_aligns(
+    d: Drive, omega: np.ndarray, found: LagEstimate | None = None
+) -> tuple[Drive, Fitted | None] | None:
     """One log whose time offset is fitted: the lag found by the run's own alignment
     (:func:`~nlp_calib.pipeline.align.estimate_tracker_lag`: re-sampled until it stays, then the
     other valleys of its profile), the encoders re-sampled there and the fit from the start with
     that lag, as the run's fit stage starts. Along a direction the drive barely holds the fit
     stops where the lag sends it (a car's rear track near zero or at its length, on encoders
-    re-sampled 1 ms apart): the run's lag is where the run's fit stops. None where the problem
-    has several logs or no free time offset, or no fit converged at any lag."""
+    re-sampled 1 ms apart): the run's lag is where the run's fit stops. ``found``: the run's own
+    estimate where the run has searched already (inside ``run``: on the screened log it fits), else
+    searched here on the log as read. None where the problem has several logs or no free time
+    offset, or no fit converged at any lag."""
     clocks = _clocks(d)
     if len(d.parts) != 1 or len(clocks) != 1:
         return None
     part, column = d.parts[0], clocks[0][0]
     try:
-        found = estimate_tracker_lag(
-            _binder(d, d.data.n_residuals), d.read[0], part.start, part.stop, d.start.x0
+        found = (
+            found
+            if found is not None
+            else estimate_tracker_lag(
+                _binder(d, d.data.n_residuals), d.read[0], part.start, part.stop, d.start.x0
+            )
         )
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return None
@@ -474,12 +482,13 @@ class Assessment:
         return replace(st, std=std, std_reference=std / needed, reference=needed)
 
 
-def assess(sc: Scenario, logs: Sequence[Log] | None = None) -> Assessment:
-    """The drive of ``sc`` prepared and its Jacobian evaluated at the start brought to the data."""
+def assess(sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None) -> Assessment:
+    """The drive of ``sc`` prepared and its Jacobian evaluated at the start brought to the data
+    (``found``: the run's own lag estimate, where it has one)."""
     d, held = drive(sc, logs)
     fns, one = d.fns, d.scenario
     omega = np.array(one.objective.information.omega(fns.error_rows, fns.sensor.weights))
-    aligned = _as_the_run_aligns(d, omega)
+    aligned = _as_the_run_aligns(d, omega, found)
     d, fitted = aligned if aligned is not None else _aligned(d, omega, _fitted(d, omega))
     x, info, where = fitted[:3] if fitted is not None else _rough(d, omega)
     at = "the fit" if fitted is not None else "the start"
@@ -515,10 +524,11 @@ def preflight_checks(assessed: Assessment) -> tuple[CheckResult, ...]:
     return tuple(r for r in found if r is not None)
 
 
-def preflight(sc: Scenario, logs: Sequence[Log] | None = None) -> Preflight:
-    """The pre-flight check of ``sc`` (its logs read from their sources unless given)."""
+def preflight(sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None) -> Preflight:
+    """The pre-flight check of ``sc`` (its logs read from their sources unless given; ``found``: the
+    run's own lag estimate, where the run has searched already)."""
     t0 = time.perf_counter()
-    a = assess(sc, logs)
+    a = assess(sc, logs, found)
     d = a.drive
     fns, one = d.fns, d.scenario
     exs = []

@@ -49,8 +49,34 @@ def align_stage(problem: Problem, prepared: PreparedLog, screening: Screening) -
     return align(binder, screening.fitted_log, prepared.start, prepared.stop, problem.start.x0)
 
 
-def setup_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> LogSetup:
-    """Prepare, build, screen, align and bind one log (``log``: already read, or None)."""
+@dataclass(frozen=True)
+class Aligned:
+    """One log prepared, its problem built, screened and its lag found: the stages before its
+    windows are bound (what the pre-flight inside a run judges at: the run's own lag)."""
+
+    prepared: PreparedLog
+    problem: Problem
+    screening: Screening
+    alignment: Alignment
+
+
+def setup_log(
+    sc: Scenario, log: Log | None, solvers: Sequence[str], aligned: Aligned | None = None
+) -> LogSetup:
+    """Prepare, build, screen, align and bind one log (``log``: already read, or None;
+    ``aligned``: the stages before binding, done already)."""
+    a = aligned if aligned is not None else align_log(sc, log, solvers)
+    prepared, problem, screening, alignment = a.prepared, a.problem, a.screening, a.alignment
+    problem = at_lags(problem, [alignment.lag_s])
+    if alignment.estimate is not None and not alignment.estimate.converged:
+        # A lag no fit converged at is held where the encoders are read (a caveat, not a value).
+        problem = lags_held(problem)
+    windows = bind_windows(problem, prepared, screening, alignment)
+    return LogSetup(prepared, problem, screening, alignment, windows)
+
+
+def align_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> Aligned:
+    """Prepare, build, screen and align one log (``log``: already read, or None)."""
     prepared = prepare(sc, log)
     read = prepared.log
     records = (prepared.start, prepared.stop)
@@ -65,10 +91,4 @@ def setup_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> LogSetup
         gaps=prepared.gaps,
     )
     screening = screen(problem.binder, read, records, problem.start.x0)
-    alignment = align_stage(problem, prepared, screening)
-    problem = at_lags(problem, [alignment.lag_s])
-    if alignment.estimate is not None and not alignment.estimate.converged:
-        # A lag no fit converged at is held where the encoders are read (a caveat, not a value).
-        problem = lags_held(problem)
-    windows = bind_windows(problem, prepared, screening, alignment)
-    return LogSetup(prepared, problem, screening, alignment, windows)
+    return Aligned(prepared, problem, screening, align_stage(problem, prepared, screening))
