@@ -289,13 +289,14 @@ def test_uncertainty_summed_block_by_block_is_the_one_sum(
     assert got.noise == pytest.approx(want.noise, rel=1e-10)
 
 
+@pytest.mark.parametrize("counted", [None, np.array([True, False])], ids=["per interval", "traction counted"])
 def test_uncertainty_of_windows_spread_over_the_log_summed_stretch_by_stretch(
-    monkeypatch: pytest.MonkeyPatch,
+    monkeypatch: pytest.MonkeyPatch, counted: np.ndarray | None
 ) -> None:
     """Issue 41: windows spread over a log (the pre-flight judges such a subsample) leave most rows
     of the noise maps empty: summed only where something is, stretch by stretch from the running
     sums, the covariance is the row-by-row sum's (with blocks and steps small enough to release
-    rows many times)."""
+    rows many times), a counter's noise on its readings too."""
     from nlp_calib.solvers import blocks
 
     model, H = get_model("tricycle"), 5
@@ -303,13 +304,16 @@ def test_uncertainty_of_windows_spread_over_the_log_summed_stretch_by_stretch(
     log = sim_log("tricycle", 1200, 6, outlier_fraction=0.03)
     whole = build_residual_data(fns, log, ResidualOptions(horizon=H))
     data = whole.select(np.arange(0, whole.n_residuals, 23))
-    x, sigma_in = truth("tricycle") * 1.001, np.array([2e-4, 3e-3])
+    # A coarse counter (its readings' noise 5e-2): the terms of the readings inside a stretch are
+    # then well above the comparison's 1e-10 (leaving them out changes the covariance by 4e-8).
+    x = truth("tricycle") * 1.001
+    sigma_in = np.array([2e-4 if counted is None else 5e-2, 3e-3])
     monkeypatch.setattr(unc, "STEP", 64)
     monkeypatch.setattr(blocks, "BLOCK", 16)
     monkeypatch.setattr(unc, "SPARSE", 10**9)  # never: every row summed
-    want = unc.estimate(evaluator(fns, data, np.zeros(0)), x, data, sigma_in)
+    want = unc.estimate(evaluator(fns, data, np.zeros(0)), x, data, sigma_in, counted=counted)
     monkeypatch.setattr(unc, "SPARSE", 2)
-    got = unc.estimate(evaluator(fns, data, np.zeros(0)), x, data, sigma_in)
+    got = unc.estimate(evaluator(fns, data, np.zeros(0)), x, data, sigma_in, counted=counted)
     assert np.all(np.isfinite(want.covariance)) and np.any(want.covariance != 0)
     assert_close(got.covariance, want.covariance, rtol=1e-10, what="covariance")
     assert got.noise == pytest.approx(want.noise, rel=1e-10)
