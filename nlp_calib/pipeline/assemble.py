@@ -147,6 +147,23 @@ def fit_notes(results: Mapping[str, SolverResult], fitted: FitAnalysis, held: Ma
     return notes
 
 
+#: A bias step beyond this share of a parameter's σ is said: the estimate moved that much.
+SAID = 1.0
+
+
+def bias_notes(step: Mapping[str, float], std: Mapping[str, float]) -> list[str]:
+    """The inputs' bias step (:meth:`~nlp_calib.pipeline.fit.Fit.bias_taken`) where it moved a
+    parameter by more than :data:`SAID` of its white-noise σ ``std``."""
+    z = {n: abs(v) / std[n] for n, v in step.items() if std.get(n, 0.0) > 0.0}
+    worst = max(z, key=z.__getitem__, default=None)
+    if worst is None or not z[worst] > SAID:
+        return []
+    return [
+        f"the encoders' rounding biased {worst} by {z[worst]:.1f}σ over windows this short; the "
+        "estimate is corrected for it (longer windows, residual.horizon, leave less to correct)"
+    ]
+
+
 def lag_notes(sc: Scenario, alignment: Alignment) -> list[str]:
     """What a log's time alignment found worth saying: a lag at the edge of its search, or a lag
     no fit converged at."""

@@ -41,7 +41,15 @@ from nlp_calib.pipeline.analyse import (
     plan_after,
     scores,
 )
-from nlp_calib.pipeline.assemble import MountViews, assemble_run, fit_info, fit_notes, joint_run, pinned_alike
+from nlp_calib.pipeline.assemble import (
+    MountViews,
+    assemble_run,
+    bias_notes,
+    fit_info,
+    fit_notes,
+    joint_run,
+    pinned_alike,
+)
 from nlp_calib.pipeline.build import StartingPoint, build_stage, mount_count
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import joint_residual
@@ -372,7 +380,11 @@ def _fit(
     needed = tightest(info.layout, [i.layout for i in infos])
     fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data), needed)
     fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, info.units))
-    return results, fitted, fit_notes(results, fitted, held), infos
+    white = fitted.uncertainty[solvers[0]]
+    notes = fit_notes(results, fitted, held) + bias_notes(
+        fitting.bias_taken(), dict(zip(white.names, white.std))
+    )
+    return results, fitted, notes, infos
 
 
 def _assemble(

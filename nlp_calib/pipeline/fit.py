@@ -85,6 +85,11 @@ class Fit:
             result, x=x, params=ev.params(x), cost=ne.cost, chi2=ne.chi2, inliers=ne.inliers
         )
 
+    def bias_taken(self) -> dict[str, float]:
+        """The inputs' bias step this fit took, per free coordinate (empty: none)."""
+        taken = next((b for b in self._bias if np.any(b.step)), None)
+        return {} if taken is None else dict(zip(self.fns.free, map(float, taken.step)))
+
     def before_step(self, x: np.ndarray) -> np.ndarray:
         """The point whose bias step lands on the estimate ``x``: ``x`` less the step there (the
         step changes over its own size by a share of itself too small to count), so that a refit
