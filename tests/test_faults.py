@@ -359,7 +359,7 @@ def test_runtime_failure_exits_1_in_one_line_and_debug_shows_the_traceback(
 ) -> None:
     sc = scenario(tmp_path, sim_log, "solvers: [gauss_newton]\n")
 
-    def broken(self: Fit, solver: str) -> None:
+    def broken(self: Fit, solver: str, from_estimate: bool = False) -> None:
         raise SolverError(f"{solver} could not run")
 
     monkeypatch.setattr(Fit, "solve", broken)
@@ -368,7 +368,7 @@ def test_runtime_failure_exits_1_in_one_line_and_debug_shows_the_traceback(
     assert err == "error: gauss_newton could not run\n"
     assert_nothing_written(tmp_path / "out")
 
-    def crash(self: Fit, solver: str) -> None:
+    def crash(self: Fit, solver: str, from_estimate: bool = False) -> None:
         raise ZeroDivisionError("boom")
 
     monkeypatch.setattr(Fit, "solve", crash)

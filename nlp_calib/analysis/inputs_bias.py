@@ -268,9 +268,10 @@ def _determined_inverse(
     observability calls weak or not determined (:func:`~nlp_calib.analysis.observability.directions`,
     beyond ``WEAK`` reference units, or free whatever the noise): along those the cost is far from
     its quadratic valley over a σ, and a Newton step extrapolates instead of correcting a small
-    bias (a straight highway car's wheelbase: a step of 10^4 of its σ; a car whose rear track
-    fits nearly as well near zero: a step of 0.7σ in wheelbase and steering gain that changed by a
-    quarter of itself over its own length). What is stated of them is caveated anyway."""
+    bias (a car driven straight down a highway: a step of 10^4 σ along what it leaves free; a car
+    with a length that fits nearly as well near zero: a step of 0.7σ along a loose combination,
+    which changed by a quarter of itself over its own length). What is stated of them is caveated
+    anyway."""
     fns, names = evaluator.fns, evaluator.fns.free
     value = dict(zip(fns.names, np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()))
     keys = fns.layout.keys(names)

@@ -127,7 +127,7 @@ class JointStream:
         inside the interval, each piece's mid-angle weighted by the wheels' travel on it (by its
         duration where they stand). A steered wheel turns the base by its travel times the
         angle's sine, so this is the angle of the interval's turn to the stream's resolution;
-        its two ends' mean alone misses the steering's curve between them and its correlation
+        its two ends' mean alone misses the angle's curve between them and its correlation
         with the speed (a gyro's 0.1 s interval over 50 Hz joints: the fitted clock offset
         2-3 ms early)."""
         t = np.asarray(t, dtype=float)

@@ -263,7 +263,7 @@ def profiles_on(
     knots: tuple[np.ndarray, np.ndarray, np.ndarray], t_fine: np.ndarray, t0: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The drive's speed and turn at each sub-step's middle of the fine grid ``t_fine`` (its arc)
-    and the turn at each sub-step's end (what a steering encoder reads at that instant; the
+    and the turn at each sub-step's end (what an angle's encoder reads at that instant; the
     middle's is half a sub-step early); ``t0``: the profiles' time zero."""
     kt, kv, ks = knots
     t_mid = 0.5 * (t_fine[1:] + t_fine[:-1]) - t0
