@@ -139,13 +139,12 @@ def _wheel_degrees(log: Log, model: KinematicModel, xy: np.ndarray, heading: np.
     counters = _counters(log, model)
     if log.joint_positions is None or not counters:
         return []
-    k, gentle = _gentle(log.time_s, xy, heading)
-    if gentle.sum() < 3:
-        return []
-    travel = float(np.sum(np.hypot(*np.diff(xy[k], axis=0).T)[gentle]))
-    turned = float(np.mean([np.sum(np.abs(np.diff(_positions(log, n)[k]))[gentle]) for n in counters]))
-    radius = travel / turned if turned > 0 else np.inf
-    track = _track_width(log, counters, radius, k, heading)
+    scales = _scales(log, counters, xy, heading)
+    if scales is None:
+        # No gentle curve: a heading in degrees turns 57 times too fast for any (their finding).
+        degrees = _scales(log, counters, xy, heading * DEGREE)
+        return _reference_units(degrees[0], degrees[1] * DEGREE) if degrees is not None else []
+    radius, track = scales
     if reference := _reference_units(radius, track):
         return reference
     stream = log.joint_stream
@@ -175,6 +174,18 @@ def _wheel_degrees(log: Log, model: KinematicModel, xy: np.ndarray, heading: np.
     if np.isfinite(track) and track > 0 and radius / track > MAX_RADIUS_SHARE:
         return _wrong_unit("angles", "revolutions", counters, radius, track, 1.0 / (2.0 * np.pi))
     return []
+
+
+def _scales(log: Log, counters: list[str], xy: np.ndarray, heading: np.ndarray) -> tuple[float, float] | None:
+    """The robot's travel per radian of its wheels on gentle curves (m: the wheel's radius as read)
+    and the track their turning implies against ``heading`` (None without three gentle steps)."""
+    k, gentle = _gentle(log.time_s, xy, heading)
+    if gentle.sum() < 3:
+        return None
+    travel = float(np.sum(np.hypot(*np.diff(xy[k], axis=0).T)[gentle]))
+    turned = float(np.mean([np.sum(np.abs(np.diff(_positions(log, n)[k]))[gentle]) for n in counters]))
+    radius = travel / turned if turned > 0 else np.inf
+    return radius, _track_width(log, counters, radius, k, heading)
 
 
 def _reference_units(radius: float, track: float) -> list[UnitFinding]:
