@@ -48,6 +48,10 @@ SPEED_UNITS = {"rpm": 60.0 / (2.0 * np.pi), "deg/s": 180.0 / np.pi, "rev/s": 1.0
 #: A wheel whose radius is more than this share of the distance between two wheels is no robot's
 #: (a wheelchair's drive wheels are about half of it; wheels in revolutions make it 6.3 times larger).
 MAX_RADIUS_SHARE = 0.8
+#: The track is measured well enough to judge a wheel too large for it, or the reference's units,
+#: where the wheels' difference follows the reference's turning this closely (correlation): slips
+#: and a lagging tracker make the track come out half of it, a wheel twice its share.
+TURNING_AGREES = 0.95
 #: The distance between two wheels of a robot (m): the models' plausible wheel separation.
 TRACK_RANGE = (0.05, 5.0)
 #: Length units a reference's positions are given in by mistake, in metres.
@@ -143,13 +147,15 @@ def _wheel_degrees(log: Log, model: KinematicModel, xy: np.ndarray, heading: np.
     if scales is None:
         # No gentle curve: a heading in degrees turns 57 times too fast for any (their finding).
         degrees = _scales(log, counters, xy, heading * DEGREE)
-        return _reference_units(degrees[0], degrees[1] * DEGREE) if degrees is not None else []
-    radius, track = scales
-    if reference := _reference_units(radius, track):
+        if degrees is None or not degrees[2]:
+            return []
+        return _reference_units(degrees[0], degrees[1] * DEGREE)
+    radius, track, agrees = scales
+    if agrees and (reference := _reference_units(radius, track)):
         return reference
     stream = log.joint_stream
     if stream is not None and set(counters) <= set(stream.integrated):
-        return _speed_units(counters, radius, track)
+        return _speed_units(counters, radius, track, agrees)
     if radius > MAX_RADIUS:
         return [
             UnitFinding(
@@ -171,21 +177,30 @@ def _wheel_degrees(log: Log, model: KinematicModel, xy: np.ndarray, heading: np.
                 "them in radians (REP 103)",
             )
         ]
-    if np.isfinite(track) and track > 0 and radius / track > MAX_RADIUS_SHARE:
+    if agrees and np.isfinite(track) and track > 0 and radius / track > MAX_RADIUS_SHARE:
         return _wrong_unit("angles", "revolutions", counters, radius, track, 1.0 / (2.0 * np.pi))
     return []
 
 
-def _scales(log: Log, counters: list[str], xy: np.ndarray, heading: np.ndarray) -> tuple[float, float] | None:
-    """The robot's travel per radian of its wheels on gentle curves (m: the wheel's radius as read)
-    and the track their turning implies against ``heading`` (None without three gentle steps)."""
+def _scales(
+    log: Log, counters: list[str], xy: np.ndarray, heading: np.ndarray
+) -> tuple[float, float, bool] | None:
+    """The robot's travel per radian of its wheels on gentle curves (m: the wheel's radius as read),
+    the track their turning implies against ``heading``, and whether their difference follows the
+    heading's turning closely enough to judge by it (None without three gentle steps)."""
     k, gentle = _gentle(log.time_s, xy, heading)
     if gentle.sum() < 3:
         return None
     travel = float(np.sum(np.hypot(*np.diff(xy[k], axis=0).T)[gentle]))
     turned = float(np.mean([np.sum(np.abs(np.diff(_positions(log, n)[k]))[gentle]) for n in counters]))
     radius = travel / turned if turned > 0 else np.inf
-    return radius, _track_width(log, counters, radius, k, heading)
+    agrees = False
+    if len(counters) >= 2:
+        apart = np.diff(_positions(log, counters[1])[k] - _positions(log, counters[0])[k])
+        dth = np.diff(heading[k])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            agrees = bool(abs(np.corrcoef(apart, dth)[0, 1]) >= TURNING_AGREES)
+    return radius, _track_width(log, counters, radius, k, heading), agrees
 
 
 def _reference_units(radius: float, track: float) -> list[UnitFinding]:
@@ -236,14 +251,15 @@ def _track_width(log: Log, counters: list[str], radius: float, k: np.ndarray, he
     return abs(radius * float(np.sum(apart * dth)) / scale) if scale > 0 else float("nan")
 
 
-def _speed_units(counters: list[str], radius: float, track: float) -> list[UnitFinding]:
+def _speed_units(counters: list[str], radius: float, track: float, agrees: bool) -> list[UnitFinding]:
     """Wheels given as speeds in rpm, deg/s or rev/s, not rad/s: a radian of them moves the robot
     less than :data:`MIN_RADIUS`, or (two wheels) less than :data:`MIN_RADIUS_SHARE` or more than
     :data:`MAX_RADIUS_SHARE` of the distance between them their turning implies (the track: a scale
-    no unit of the wheels changes). The unit named is the one that brings the wheel to
-    :data:`TYPICAL_RADIUS_SHARE` of the track (to :data:`TYPICAL_RADIUS` without one)."""
+    no unit of the wheels changes; ``agrees``: measured well enough to judge a wheel too large).
+    The unit named is the one that brings the wheel to :data:`TYPICAL_RADIUS_SHARE` of the track
+    (to :data:`TYPICAL_RADIUS` without one)."""
     share = radius / track if np.isfinite(track) and track > 0 else float("nan")
-    if radius >= MIN_RADIUS and not share < MIN_RADIUS_SHARE and not share > MAX_RADIUS_SHARE:
+    if radius >= MIN_RADIUS and not share < MIN_RADIUS_SHARE and not (agrees and share > MAX_RADIUS_SHARE):
         return []
     size, typical = (share, TYPICAL_RADIUS_SHARE) if np.isfinite(share) else (radius, TYPICAL_RADIUS)
     unit, factor = min(SPEED_UNITS.items(), key=lambda u: abs(np.log(size * u[1] / typical)))

@@ -105,9 +105,9 @@ def static_mount(path: Path, base_frame: str, sensor_frame: str) -> Mount | None
     if is_base_frame(frame, base):
         raise BagError(
             path,
-            f"the sensor's frame {frame!r} is the base's own (REP 105): a sensor's mount is a joint from "
-            "the base to a frame of its own; set the sensor's frame (sensor_frame in ROBOT.yaml, the "
-            "driver's frame_id) or the dataset's base_frame",
+            f"the sensor's frame {frame!r} is a base frame (the dataset's base_frame or REP 105's): a "
+            "sensor's mount is a joint from the base to a frame of its own; set the sensor's frame "
+            "(sensor_frame in ROBOT.yaml, the driver's frame_id) or the dataset's base_frame",
         )
     seen: set[str] = set()
     while frame != base:
