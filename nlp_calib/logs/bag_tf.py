@@ -105,7 +105,7 @@ def static_mount(path: Path, base_frame: str, sensor_frame: str) -> Mount | None
     if is_base_frame(frame, base):
         raise BagError(
             path,
-            f"the sensor's frame {frame!r} is a base frame (the dataset's base_frame or REP 105's): a "
+            f"the sensor's frame {frame!r} is the base frame{'' if frame == base else ' (REP 105)'}: a "
             "sensor's mount is a joint from the base to a frame of its own; set the sensor's frame "
             "(sensor_frame in ROBOT.yaml, the driver's frame_id) or the dataset's base_frame",
         )
