@@ -96,7 +96,10 @@ TRANSFORMS: dict[str, tuple[dict[str, Any], tuple[str, ...]]] = {
         {"frame": "base_footprint"},
         ("'base_footprint' is the base frame (REP 105)",),
     ),
-    "scans in /base_stabilized": (("'base_stabilized' is the base frame (REP 105)",),),
+    "scans in /base_stabilized": (
+        {"frame": "/base_stabilized"},
+        ("'base_stabilized' is the base frame (REP 105)",),
+    ),
     "rolled 90°": ({"q": _roll(90.0)}, ("tilts the lidar's frame 'laser' 90° from level", "roll 90°")),
     "pitched 45°": ({"q": _pitch(45.0)}, ("45° from level", "pitch 45°")),
 }
