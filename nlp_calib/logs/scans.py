@@ -226,6 +226,13 @@ def read_scans(path: str | Path, topic: str, receive: bool = False) -> LaserScan
     stamp_ns, ranges = stamp_ns[keep], ranges[keep]
     _field_of_view(p, topic, int(n_beams), step)
     _valid_returns(p, topic, ranges, range_min, range_max)
+    if not frame.strip("/"):
+        warnings.warn(
+            f"{p}: the scans on {topic!r} carry no frame_id; the hand-off files name their frame "
+            "'laser' and no /tf_static mount is looked up (set the driver's frame_id)",
+            NlpCalibWarning,
+            stacklevel=2,
+        )
     return LaserScans(
         topic,
         stamp_ns,
