@@ -279,3 +279,18 @@ def test_scans_without_a_frame_id_are_said(sim: Any, tmp_path: Path) -> None:
         NlpCalibWarning, match=r"carry no frame_id; the hand-off files name their frame 'laser'"
     ):
         assert read_scans(bag(sim, tmp_path, frame=""), "/scan").frame == "laser"
+
+
+def test_an_odometry_topic_of_two_child_frames_is_refused_naming_them(tmp_path: Path) -> None:
+    from nlp_calib.logs.bag_files import BagError
+    from nlp_calib.logs.bag_reader import read_pose_topic
+    from nlp_calib.simulation.rosbag import odometry
+
+    msgs = [odometry((k + 1) * 20_000_000, "odom", "base_link", (0.01 * k, 0.0, 0.0)) for k in range(50)]
+    msgs += [
+        odometry((k + 1) * 20_000_000 + 7, "odom", "other_link", (5.0, 0.0, 0.0)) for k in range(0, 50, 10)
+    ]
+    path = write_bag(tmp_path / "bag", msgs)
+    with pytest.raises(BagError, match=r"holds the poses of 2 child frames \(base_link, other_link\)"):
+        read_pose_topic(path, "/odom")
+    assert read_pose_topic(path, "/odom", "base_link").n == 50
