@@ -44,7 +44,18 @@ MAX_RADIUS = 5.0
 TYPICAL_RADIUS_SHARE = 0.25
 TYPICAL_RADIUS = 0.1
 #: Units wheel speeds are given in by mistake, and how many of them make a radian per second.
-SPEED_UNITS = {"rpm": 60.0 / (2.0 * np.pi), "deg/s": 180.0 / np.pi}
+SPEED_UNITS = {"rpm": 60.0 / (2.0 * np.pi), "deg/s": 180.0 / np.pi, "rev/s": 1.0 / (2.0 * np.pi)}
+#: A wheel whose radius is more than this share of the distance between two wheels is no robot's
+#: (a wheelchair's drive wheels are about half of it; wheels in revolutions make it 6.3 times larger).
+MAX_RADIUS_SHARE = 0.8
+#: The track is measured well enough to judge a wheel too large for it, or the reference's units,
+#: where the wheels' difference follows the reference's turning this closely (correlation): slips
+#: and a lagging tracker make the track come out half of it, a wheel twice its share.
+TURNING_AGREES = 0.95
+#: The distance between two wheels of a robot (m): the models' plausible wheel separation.
+TRACK_RANGE = (0.05, 5.0)
+#: Length units a reference's positions are given in by mistake, in metres.
+LENGTH_UNITS = {"millimetres": 1e-3, "centimetres": 1e-2}
 #: Two wheels turning opposite ways on this share of the gentle curves: one axis is mirrored.
 OPPOSITE_SHARE = 0.8
 #: A curve is gentle where the heading turns less than this per metre (rad/m): both wheels of a
@@ -132,15 +143,19 @@ def _wheel_degrees(log: Log, model: KinematicModel, xy: np.ndarray, heading: np.
     counters = _counters(log, model)
     if log.joint_positions is None or not counters:
         return []
-    k, gentle = _gentle(log.time_s, xy, heading)
-    if gentle.sum() < 3:
-        return []
-    travel = float(np.sum(np.hypot(*np.diff(xy[k], axis=0).T)[gentle]))
-    turned = float(np.mean([np.sum(np.abs(np.diff(_positions(log, n)[k]))[gentle]) for n in counters]))
-    radius = travel / turned if turned > 0 else np.inf
+    scales = _scales(log, counters, xy, heading)
+    if scales is None:
+        # No gentle curve: a heading in degrees turns 57 times too fast for any (their finding).
+        degrees = _scales(log, counters, xy, heading * DEGREE)
+        if degrees is None or not degrees[2]:
+            return []
+        return _reference_units(degrees[0], degrees[1] * DEGREE)
+    radius, track, agrees = scales
+    if agrees and (reference := _reference_units(radius, track)):
+        return reference
     stream = log.joint_stream
     if stream is not None and set(counters) <= set(stream.integrated):
-        return _speed_units(log, counters, radius, k, heading)
+        return _speed_units(counters, radius, track, agrees)
     if radius > MAX_RADIUS:
         return [
             UnitFinding(
@@ -151,18 +166,77 @@ def _wheel_degrees(log: Log, model: KinematicModel, xy: np.ndarray, heading: np.
                 "speeds (rad/s) read as positions; say so (form: speeds)",
             )
         ]
-    if radius >= MIN_RADIUS:
+    if radius < MIN_RADIUS:
+        return [
+            UnitFinding(
+                "degrees",
+                ", ".join(counters),
+                f"the wheel joints ({', '.join(counters)}) turn too far for the robot's travel: a radian of "
+                f"them moves it {1e3 * radius:.2g} mm, a wheel smaller than any robot's (read as degrees, "
+                f"one of {1e3 * radius / DEGREE:.3g} mm radius): their angles look like degrees; publish "
+                "them in radians (REP 103)",
+            )
+        ]
+    if agrees and np.isfinite(track) and track > 0 and radius / track > MAX_RADIUS_SHARE:
+        return _wrong_unit("angles", "revolutions", counters, radius, track, 1.0 / (2.0 * np.pi))
+    return []
+
+
+def _scales(
+    log: Log, counters: list[str], xy: np.ndarray, heading: np.ndarray
+) -> tuple[float, float, bool] | None:
+    """The robot's travel per radian of its wheels on gentle curves (m: the wheel's radius as read),
+    the track their turning implies against ``heading``, and whether their difference follows the
+    heading's turning closely enough to judge by it (None without three gentle steps)."""
+    k, gentle = _gentle(log.time_s, xy, heading)
+    if gentle.sum() < 3:
+        return None
+    travel = float(np.sum(np.hypot(*np.diff(xy[k], axis=0).T)[gentle]))
+    turned = float(np.mean([np.sum(np.abs(np.diff(_positions(log, n)[k]))[gentle]) for n in counters]))
+    radius = travel / turned if turned > 0 else np.inf
+    agrees = False
+    if len(counters) >= 2:
+        apart = np.diff(_positions(log, counters[1])[k] - _positions(log, counters[0])[k])
+        dth = np.diff(heading[k])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            agrees = bool(abs(np.corrcoef(apart, dth)[0, 1]) >= TURNING_AGREES)
+    return radius, _track_width(log, counters, radius, k, heading), agrees
+
+
+def _reference_units(radius: float, track: float) -> list[UnitFinding]:
+    """The reference's own units wrong, told by the wheels' two scales: its positions in mm or cm
+    make the wheel and the track both a robot's times a thousand or a hundred (their ratio, which no
+    unit changes, a robot's); its heading in degrees makes the track 57 times too small while the
+    wheel (from the travel alone) is a robot's."""
+    if not np.isfinite(track) or track <= 0:
         return []
-    return [
-        UnitFinding(
-            "degrees",
-            ", ".join(counters),
-            f"the wheel joints ({', '.join(counters)}) turn too far for the robot's travel: a radian of them "
-            f"moves it {1e3 * radius:.2g} mm, a wheel smaller than any robot's (read as degrees, one of "
-            f"{1e3 * radius / DEGREE:.3g} mm radius): their angles look like degrees; publish them in "
-            "radians (REP 103)",
-        )
-    ]
+    share = radius / track
+    plausible_share = MIN_RADIUS_SHARE <= share <= MAX_RADIUS_SHARE
+    if plausible_share and radius > MAX_RADIUS:
+        unit, factor = min(LENGTH_UNITS.items(), key=lambda u: abs(np.log(radius * u[1] / TYPICAL_RADIUS)))
+        return [
+            UnitFinding(
+                "reference units",
+                "reference",
+                f"a radian of the wheels moves the reference {radius:.3g} m and their turning implies "
+                f"{track:.3g} m between them, both {1 / factor:.0f} times a robot's (in {unit}: a wheel "
+                f"of {1e3 * radius * factor:.3g} mm, {track * factor:.3g} m between the wheels): the "
+                f"reference's positions look like {unit}; give them in metres (REP 103)",
+            )
+        ]
+    low, high = TRACK_RANGE
+    if MIN_RADIUS <= radius <= MAX_RADIUS and track < low and low <= track / DEGREE <= high:
+        return [
+            UnitFinding(
+                "reference units",
+                "reference",
+                f"the reference turns {1 / DEGREE:.0f} times more than the wheels: their turning implies "
+                f"{1e3 * track:.3g} mm between them (a wheel of {1e3 * radius:.3g} mm from the travel; "
+                f"read as degrees, {track / DEGREE:.3g} m between them): the reference's heading looks like "
+                "degrees; give it in radians (REP 103)",
+            )
+        ]
+    return []
 
 
 def _track_width(log: Log, counters: list[str], radius: float, k: np.ndarray, heading: np.ndarray) -> float:
@@ -177,30 +251,39 @@ def _track_width(log: Log, counters: list[str], radius: float, k: np.ndarray, he
     return abs(radius * float(np.sum(apart * dth)) / scale) if scale > 0 else float("nan")
 
 
-def _speed_units(
-    log: Log, counters: list[str], radius: float, k: np.ndarray, heading: np.ndarray
-) -> list[UnitFinding]:
-    """Wheels given as speeds in rpm or deg/s, not rad/s: a radian of them moves the robot less
-    than :data:`MIN_RADIUS`, or (two wheels) less than :data:`MIN_RADIUS_SHARE` of the distance
-    between them their turning implies (the track: a scale no unit changes). The unit named is the
-    one that brings the wheel to :data:`TYPICAL_RADIUS_SHARE` of the track (to
-    :data:`TYPICAL_RADIUS` without one)."""
-    track = _track_width(log, counters, radius, k, heading)
+def _speed_units(counters: list[str], radius: float, track: float, agrees: bool) -> list[UnitFinding]:
+    """Wheels given as speeds in rpm, deg/s or rev/s, not rad/s: a radian of them moves the robot
+    less than :data:`MIN_RADIUS`, or (two wheels) less than :data:`MIN_RADIUS_SHARE` or more than
+    :data:`MAX_RADIUS_SHARE` of the distance between them their turning implies (the track: a scale
+    no unit of the wheels changes; ``agrees``: measured well enough to judge a wheel too large).
+    The unit named is the one that brings the wheel to :data:`TYPICAL_RADIUS_SHARE` of the track
+    (to :data:`TYPICAL_RADIUS` without one)."""
     share = radius / track if np.isfinite(track) and track > 0 else float("nan")
-    if radius >= MIN_RADIUS and not share < MIN_RADIUS_SHARE:
+    if radius >= MIN_RADIUS and not share < MIN_RADIUS_SHARE and not (agrees and share > MAX_RADIUS_SHARE):
         return []
     size, typical = (share, TYPICAL_RADIUS_SHARE) if np.isfinite(share) else (radius, TYPICAL_RADIUS)
     unit, factor = min(SPEED_UNITS.items(), key=lambda u: abs(np.log(size * u[1] / typical)))
+    return _wrong_unit("speeds", unit, counters, radius, track, factor)
+
+
+def _wrong_unit(
+    what: str, unit: str, counters: list[str], radius: float, track: float, factor: float
+) -> list[UnitFinding]:
+    """The finding that the wheels' ``what`` (speeds, angles) are in ``unit`` (``factor`` of them a
+    radian, or a radian per second), with the wheel they make at the track ``track``."""
+    share = radius / track if np.isfinite(track) and track > 0 else float("nan")
     beside = f", {100 * share:.2g} % of the {track:.3g} m between the wheels" if np.isfinite(share) else ""
+    size = "smaller" if radius * factor > radius else "larger"
     names = ", ".join(counters)
+    fix = "rad/s" if what == "speeds" else "radians"
     return [
         UnitFinding(
-            "speed units",
+            "speed units" if what == "speeds" else "angle units",
             names,
-            f"the wheel speeds ({names}) turn too far for the robot's travel: a radian of them moves it "
-            f"{1e3 * radius:.2g} mm{beside}, a wheel smaller than any robot's; read as {unit}, one of "
-            f"{1e3 * radius * factor:.3g} mm radius: their speeds look like {unit}; give them in rad/s "
-            f"({unit} × {1 / factor:.4g}; REP 103)",
+            f"the wheel {what} ({names}) turn too {'far' if size == 'smaller' else 'little'} for the "
+            f"robot's travel: a radian of them moves it {1e3 * radius:.2g} mm{beside}, a wheel {size} than "
+            f"any robot's; read as {unit}, one of {1e3 * radius * factor:.3g} mm radius: their {what} look "
+            f"like {unit}; give them in {fix} ({unit} × {1 / factor:.4g}; REP 103)",
         )
     ]
 

@@ -21,6 +21,7 @@ logged): the residual moves the window along the encoders' clock by the differen
 
 from __future__ import annotations
 
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -225,20 +226,19 @@ def generate(
     cg = ca.CodeGenerator(f"{BASENAME}.c", {"with_header": True})
     for e in exported:
         cg.add(e.function)
-    with_tmp = out_dir / ".codegen"
-    with_tmp.mkdir(parents=True, exist_ok=True)
-    cg.generate(str(with_tmp) + "/")
     written = []
-    for suffix, what in (
-        (".c", "Residual and Jacobian of the calibration problem."),
-        (".h", "Declarations."),
-    ):
-        text = (with_tmp / f"{BASENAME}{suffix}").read_text()
-        path = out_dir / f"{BASENAME}{suffix}"
-        atomic_write_text(path, _banner(what, origin) + text)
-        (with_tmp / f"{BASENAME}{suffix}").unlink()
-        written.append(path)
-    with_tmp.rmdir()
+    # CasADi writes into a private folder of its own: the output folder's path may hold the file's
+    # name (CasADi asserts it does not) or a link where a scratch folder would go.
+    with tempfile.TemporaryDirectory(prefix="codegen-") as scratch:
+        cg.generate(str(scratch) + "/")
+        for suffix, what in (
+            (".c", "Residual and Jacobian of the calibration problem."),
+            (".h", "Declarations."),
+        ):
+            text = (Path(scratch) / f"{BASENAME}{suffix}").read_text()
+            path = out_dir / f"{BASENAME}{suffix}"
+            atomic_write_text(path, _banner(what, origin) + text)
+            written.append(path)
     last = fns_by_horizon[-1]
     jac = next(e for e in exported if e.horizon == last.spec.horizon and "jacobian" in e.function.name())
     program = out_dir / "example.c"

@@ -51,6 +51,21 @@ def _refused(address: str) -> OSError | None:
     return None
 
 
+def _transport(address: str) -> None:
+    """Refuse an address whose transport this Dask cannot use (ucx:// without its package): Dask
+    would fail inside its connector instead of naming it."""
+    scheme = address.partition("://")[0].lower() if "://" in address else "tcp"
+    try:
+        from distributed.comm.registry import get_backend
+
+        get_backend(scheme).get_connector()
+    except Exception as exc:  # any failure to build the connector: the transport is not usable here
+        raise UsageError(
+            f"--dask {address}: this Dask cannot connect over {scheme}:// ({type(exc).__name__}); install "
+            "its transport (for ucx://: pip install distributed-ucxx) or give a tcp:// address"
+        ) from None
+
+
 def _worker_takes_one_core() -> None:
     threads.one_core()
 
@@ -59,6 +74,7 @@ def run_on_dask(jobs: Sequence[Job], address: str, done: Done, task: Task = run_
     """Every job on the Dask cluster whose scheduler is at ``address``, ``done`` called as each
     finishes."""
     distributed = _distributed()
+    _transport(address)
     if (refused := _refused(address)) is not None:
         raise UsageError(f"--dask {address}: cannot reach a Dask scheduler there ({refused})")
     try:

@@ -31,6 +31,7 @@ import numpy as np
 
 from nlp_calib.core.errors import NlpCalibWarning, UsageError
 from nlp_calib.core.ranges import Range
+from nlp_calib.core.text import escaped
 from nlp_calib.logs.bag_files import DAMAGED, BagError, is_bag, messages, opened, why
 from nlp_calib.logs.reader import yaw_from_quaternion
 
@@ -348,6 +349,7 @@ def _collect(reader: Any, p: Path, topics: BagTopics, tracker_type: str) -> tupl
             f"names present: {', '.join(sorted(names_seen)) or 'none'} (give them in the model's "
             "encoder order)",
         )
+    _one_frame(p, topics.tracker, want, frames_seen)
     if want is not None and not trk.rows and frames_seen and not trk.drops:
         raise BagError(
             p,
@@ -536,4 +538,19 @@ def read_pose_topic(path: str | Path, topic: str, frame: str | None = None, rece
         seen: set[str] = set()
         for number, (_, recorded, msg) in enumerate(messages(reader, p, (topic,)), start=1):
             _add_poses(p, msg, msgtype, want, number, recorded, trk, seen)
+    _one_frame(p, topic, want, seen)
     return trk.result(p, "odometry", len(TRACKER_COLUMNS), "", receive)
+
+
+def _one_frame(p: Path, topic: str, want: str | None, seen: set[str]) -> None:
+    """Refuse a topic whose poses follow several child frames when none was named: their poses
+    interleaved are no one frame's path."""
+    frames = sorted(f for f in seen if f)
+    if want is None and len(frames) > 1:
+        shown = ", ".join(escaped(f) for f in frames[:5])
+        raise BagError(
+            p,
+            f"topic {topic!r} holds the poses of {len(frames)} child frames ({shown}); they are no one "
+            "frame's path: name the one to read (a tracker's tracker_frame) or record each on a topic "
+            "of its own",
+        )

@@ -104,5 +104,5 @@ def survey(path: Path) -> BagSurvey:
                 topics.append(_pose_topic(reader, path, name, info))
             else:
                 topics.append(Topic(name, *info))
-    static = {child: parent for child, (parent, _) in static_transforms(path).items()}
+    static = {child: parent for child, (parent, *_) in static_transforms(path).items()}
     return BagSurvey(path, duration, tuple(topics), static)

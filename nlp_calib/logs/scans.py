@@ -62,6 +62,8 @@ class LaserScans:
 
 #: Returns a scan needs for a match (fewer: the match is skipped as not converged).
 MIN_RETURNS = 10
+#: Returns whose median lies farther than this (m) are no 2-D lidar's in metres (mm, most likely).
+MAX_TYPICAL_RANGE_M = 200.0
 #: Closest two scans' stamps may be (ns) for a lidar (a lidar sweeps at 5-50 Hz; 1 kHz is none).
 MIN_SCAN_INTERVAL_NS = 1_000_000
 
@@ -190,6 +192,14 @@ def _valid_returns(p: Path, topic: str, ranges: np.ndarray, range_min: float, ra
         ok = np.isfinite(ranges) & (ranges >= range_min) & (ranges <= range_max)
     usable = int((ok.sum(axis=1) >= MIN_RETURNS).sum())
     if usable >= 2:
+        typical = float(np.median(ranges[ok]))
+        if typical > MAX_TYPICAL_RANGE_M:
+            raise BagError(
+                p,
+                f"scan: the returns on {topic!r} lie {typical:.4g} m away (their median; range_max "
+                f"{range_max:g}), farther than a 2-D lidar sees: its ranges look like millimetres; give "
+                "them in metres (REP 103, sensor_msgs/LaserScan)",
+            )
         return
     finite = np.isfinite(ranges)
     with np.errstate(invalid="ignore"):
@@ -216,6 +226,13 @@ def read_scans(path: str | Path, topic: str, receive: bool = False) -> LaserScan
     stamp_ns, ranges = stamp_ns[keep], ranges[keep]
     _field_of_view(p, topic, int(n_beams), step)
     _valid_returns(p, topic, ranges, range_min, range_max)
+    if not frame.strip("/"):
+        warnings.warn(
+            f"{p}: the scans on {topic!r} carry no frame_id; the hand-off files name their frame "
+            "'laser' and no /tf_static mount is looked up (set the driver's frame_id)",
+            NlpCalibWarning,
+            stacklevel=2,
+        )
     return LaserScans(
         topic,
         stamp_ns,

@@ -16,6 +16,7 @@ the scans' stamps. The lidar's nominal mount comes from ``ROBOT.yaml``, else ``/
 
 from __future__ import annotations
 
+import math
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -26,7 +27,7 @@ from nlp_calib.core.errors import ConfigError, DatasetError
 from nlp_calib.logs import Log, LogHeader
 from nlp_calib.logs.bag_files import BagError, bag_root
 from nlp_calib.logs.bag_reader import CLOCK_OFFSET, MAX_GAP, is_bag, read_joints
-from nlp_calib.logs.bag_tf import static_mount
+from nlp_calib.logs.bag_tf import is_base_frame, static_mount
 from nlp_calib.logs.motions import timed_by_motions
 from nlp_calib.logs.scans import ScanMatching, match_scans, read_scans
 from nlp_calib.models import KinematicModel
@@ -37,6 +38,9 @@ from nlp_calib.sources.robot import load_robot, robot_header
 
 #: The keys a lidar block must have.
 REQUIRED = ("bag", "joint_states", "joints", "scan")
+#: A lidar whose scan plane tilts more than this from level (or from upside down) sweeps no plane
+#: parallel to the floor: a planar match of its scans measures nothing of the base's motion.
+MAX_TILT = math.radians(20.0)
 
 
 @dataclass(frozen=True)
@@ -106,6 +110,15 @@ class LidarSource:
         mount = None
         if robot is None or robot.sensor_pose is None:
             mount = static_mount(bag_root(self.bag), self.base_frame, frame)
+        level = abs(math.cos(mount[3]) * math.cos(mount[4])) if mount is not None else 1.0
+        if mount is not None and level < math.cos(MAX_TILT):
+            raise BagError(
+                self.bag,
+                f"/tf_static tilts the lidar's frame {frame!r} {math.degrees(math.acos(level)):.0f}° from "
+                f"level (roll {math.degrees(mount[3]):.0f}°, pitch {math.degrees(mount[4]):.0f}°): its scans "
+                "sweep no floor-parallel plane, which a planar calibration matches; fix the transform (or "
+                "give the mount in ROBOT.yaml, sensor_pose)",
+            )
         return robot_header(model, robot, frame, mount)
 
     def read(self, model: KinematicModel, *, strict: bool) -> Log:
@@ -116,7 +129,7 @@ class LidarSource:
         joints = replace(joints, stamp_ns=joints.stamp_ns + round(self.clock_offset * 1e9))
         scans = read_scans(self.bag, self.scan, receive)
         header = self.header(model, scans.frame)
-        if header.sensor_frame == self.base_frame.strip("/"):
+        if is_base_frame(header.sensor_frame, self.base_frame):
             raise BagError(
                 self.bag,
                 f"the scans on {self.scan!r} are in the base frame {header.sensor_frame!r}: a lidar's "
