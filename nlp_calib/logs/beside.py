@@ -1,7 +1,8 @@
 """One log of a reference's own motions and a gyro's increments, read from the same joints.
 
 A reference that gives poses (a tracker's) gives its motions as each interval's between two
-consecutive poses, the windows its own fit would make by default (``residual: {horizon: 1}``).
+consecutive poses, the windows its own fit would make by default (``residual: {horizon: 1}``):
+planar ``(x, y, θ)``, or with ``in_3d`` a camera's 3-D motions ``(x, y, z, qx, qy, qz, qw)``.
 Each source reads its own log (records at its own stamps); the two are laid on one time axis: a
 record at every stamp of either, the joints read there from the reference's joint stream, and
 each increment in the layout of :mod:`nlp_calib.sensors.beside` (the reference's motion, the
@@ -14,13 +15,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from nlp_calib.core import poses
+from nlp_calib.core import poses, poses3d
 from nlp_calib.core.errors import DatasetError
 from nlp_calib.logs.log import Log, LogClock, LogHeader, ReferenceData
 from nlp_calib.logs.reference import Motions, PoseMotions
 from nlp_calib.logs.relative import RelativeMotions, _frozen
 
-#: Rows of a reference's increment and of a gyro's.
+#: Rows of a planar reference's increment (a 3-D one's: 7) and of a gyro's.
 REFERENCE_ROWS, GYRO_ROWS = 3, 4
 
 
@@ -35,6 +36,23 @@ def _poses_at(log: Log, stamps_ns: np.ndarray) -> np.ndarray:
     heading = np.unwrap(T[:, 2])
     at = stamps_ns.astype(float)
     return np.column_stack([np.interp(at, t, T[:, 0]), np.interp(at, t, T[:, 1]), np.interp(at, t, heading)])
+
+
+def _frozen_or_none(a: np.ndarray | None) -> np.ndarray | None:
+    return None if a is None else _frozen(a)
+
+
+def _poses_3d_at(log: Log, stamps_ns: np.ndarray) -> np.ndarray | None:
+    """The reference's 3-D poses at ``stamps_ns`` (the rotation along the shorter arc), where it
+    has them."""
+    P = log.T_world_sensor_3d
+    if P is None:
+        return None
+    t = _stamps_ns(log)
+    after = np.clip(np.searchsorted(t, stamps_ns), 1, t.size - 1)
+    a, b = after - 1, after
+    s = np.clip((stamps_ns - t[a]) / np.maximum(t[b] - t[a], 1), 0.0, 1.0).astype(float)[:, None]
+    return np.asarray(poses3d.between_at(np.asarray(P)[a], np.asarray(P)[b], s))
 
 
 def _placed(
@@ -60,16 +78,17 @@ def _joined(a: RelativeMotions, b: RelativeMotions, quality: dict[str, np.ndarra
     )
 
 
-def own_motions(log: Log) -> RelativeMotions | None:
+def own_motions(log: Log, in_3d: bool = False) -> RelativeMotions | None:
     """The reference's motions: its own increments, or a tracker's each interval's motion between
-    its two poses (in the sensor's frame at the first), each numbered by the line of its last pose."""
+    its two poses (in the sensor's frame at the first; with ``in_3d`` its 3-D poses'), each
+    numbered by the line of its last pose."""
     if log.reference.motions is not None:
-        return log.reference.motions
-    T = np.asarray(log.T_world_sensor, dtype=float)
-    if T.ndim != 2 or T.shape[0] < 2 or T.shape[1] != REFERENCE_ROWS:
+        return None if in_3d else log.reference.motions
+    T = np.asarray(log.T_world_sensor_3d if in_3d else log.T_world_sensor, dtype=float)
+    if T.ndim != 2 or T.shape[0] < 2 or T.shape[1] != (7 if in_3d else REFERENCE_ROWS):
         return None
     first = np.arange(T.shape[0] - 1, dtype=np.int64)
-    z = poses.between(T[:-1], T[1:])
+    z = poses3d.between(T[:-1], T[1:]) if in_3d else poses.between(T[:-1], T[1:])
     return RelativeMotions(_frozen(first), _frozen(first + 1), _frozen(z), _frozen(log.line_numbers[1:]))
 
 
@@ -88,13 +107,14 @@ def _both(reference: Log, gyro: Log) -> LogHeader:
     return replace(reference.header, beside=gyro.header)
 
 
-def beside_gyro(reference: Log, gyro: Log) -> Log:
-    """The log of ``reference``'s motions and ``gyro``'s increments on one time axis (each
-    increment's ``z``: reference rows, gyro rows, the gyro flag)."""
-    ref_inc, gyro_inc = own_motions(reference), gyro.reference.motions
-    if ref_inc is None or gyro_inc is None or ref_inc.z.shape[1] != REFERENCE_ROWS:
-        raise ValueError(
-            "a gyro beside a reference needs the reference's planar poses or motions and the gyro's"
+def beside_gyro(reference: Log, gyro: Log, in_3d: bool = False) -> Log:
+    """The log of ``reference``'s motions (with ``in_3d``: its 3-D poses') and ``gyro``'s
+    increments on one time axis (each increment's ``z``: reference rows, gyro rows, the gyro flag)."""
+    ref_inc, gyro_inc = own_motions(reference, in_3d), gyro.reference.motions
+    if ref_inc is None or gyro_inc is None:
+        which = "3-D poses" if in_3d else "planar poses or motions"
+        raise DatasetError(
+            str(reference.path), None, f"a gyro beside this reference needs its {which} and the gyro's rates"
         )
     stream = reference.joint_stream
     if stream is None:
@@ -110,7 +130,7 @@ def beside_gyro(reference: Log, gyro: Log) -> Log:
     stamps = np.unique(np.concatenate([ref_ns, gyro_ns[used]]))
     n_ref, n_gyro = ref_inc.n, gyro_inc.n
     z_ref = np.hstack([ref_inc.z, np.zeros((n_ref, GYRO_ROWS + 1))])
-    z_gyro = np.hstack([np.zeros((n_gyro, REFERENCE_ROWS)), gyro_inc.z, np.ones((n_gyro, 1))])
+    z_gyro = np.hstack([np.zeros((n_gyro, ref_inc.z.shape[1])), gyro_inc.z, np.ones((n_gyro, 1))])
     quality = {k: np.concatenate([v, np.full(n_gyro, np.nan)]) for k, v in ref_inc.quality.items()}
     motions = _joined(
         _placed(ref_inc, ref_ns, stamps, z_ref), _placed(gyro_inc, gyro_ns, stamps, z_gyro), quality
@@ -136,5 +156,5 @@ def beside_gyro(reference: Log, gyro: Log) -> Log:
         joint_positions=stream.at(time_s),
         joint_stream=stream,
         # A tracker's increments are differences of its poses: their noise is the poses'.
-        reference=ReferenceData(motions=motions, measures=measures),
+        reference=ReferenceData(poses_3d=_frozen_or_none(_poses_3d_at(reference, stamps)), motions=motions, measures=measures),
     )

@@ -42,6 +42,7 @@ from nlp_calib.pipeline.options import (
     SensorOptions,
     ValidationOptions,
 )
+from nlp_calib.sensors import BESIDE
 from nlp_calib.solvers import SOLVERS
 from nlp_calib.sources import (
     BagSource,
@@ -272,15 +273,27 @@ def _scenario(raw: Any, source: str, base_dir: Path, path: Path | None) -> Scena
     options = {
         k: from_mapping(SOLVERS[k].options_type, v, f"{source}: {k}") for k, v in raw.items() if k in SOLVERS
     }
-    logs = _log_entries(raw, source, base_dir)
+    objective = _group(ObjectiveOptions, raw, source)
+    logs = _in_3d(_log_entries(raw, source, base_dir), objective.sensor.sensor.group == "SE(3)")
     return Scenario(
         path=path,
         data=_group(DataOptions, raw, source, logs=logs, joint="datasets" in raw),
-        objective=_group(ObjectiveOptions, raw, source),
+        objective=objective,
         parameters=_group(ParameterOptions, raw, source),
         compute=_group(ComputeOptions, raw, source),
         solver_options=options,
         **own,
+    )
+
+
+def _in_3d(logs: tuple[LogEntry, ...], in_3d: bool) -> tuple[LogEntry, ...]:
+    """A gyro's dataset beside a 3-D sensor's (``{mount: 3d, beside: gyro}``): the reference's
+    motions between its 3-D poses."""
+    if not in_3d:
+        return logs
+    return tuple(
+        dataclasses.replace(e, source=dataclasses.replace(e.source, in_3d=True)) if isinstance(e.source, BesideSource) else e
+        for e in logs
     )
 
 
@@ -373,8 +386,12 @@ def _check_beside(sc: Scenario, source: DatasetSource, where: str) -> None:
         fail(
             where,
             f"it names a reference's poses or motions and a gyro's rates ({pairs}): fit both with sensor: "
-            f"{{mount: planar, beside: gyro}}, or leave one of the two keys out (sensor: {sensor.mount})",
+            f"{_besides()}, or leave one of the two keys out (sensor: {sensor.mount})",
         )
+
+
+def _besides() -> str:
+    return " or ".join(f"{{mount: {m}, beside: {b}}}" for m, b in BESIDE)
 
 
 def refuse_off_the_base(sc: Scenario, what: str, why: str) -> None:

@@ -13,6 +13,7 @@ from nlp_calib.core.errors import ProblemError
 from nlp_calib.sensors.base import BaseMotion, Reference, Sensor, SensorStart
 from nlp_calib.sensors.beside import Beside
 from nlp_calib.sensors.camera import CameraPose
+from nlp_calib.sensors.camera_beside import CameraBeside
 from nlp_calib.sensors.gyro import Gyro
 from nlp_calib.sensors.planar import PlanarPose
 
@@ -23,14 +24,15 @@ SENSORS: dict[str, Callable[[str], Sensor]] = {
     "3d": lambda scale: CameraPose(scale == "free"),
     "gyro": lambda scale: Gyro(scale == "free"),
     "planar_gyro": lambda scale: Beside(scale == "free"),
+    "3d_gyro": lambda scale: CameraBeside(scale == "free"),
 }
 #: A reference with a second sensor beside it (``sensor: {mount: planar, beside: gyro}``): the
 #: registered sensor that fits both.
-BESIDE: dict[tuple[str, str], str] = {("planar", "gyro"): "planar_gyro"}
+BESIDE: dict[tuple[str, str], str] = {("planar", "gyro"): "planar_gyro", ("3d", "gyro"): "3d_gyro"}
 #: Poses are metric (``fixed``) or known up to scale (``free``: the sensor then estimates it).
 SCALES = ("fixed", "free")
 #: Sensors whose scale may be fitted (a camera's trajectory known up to scale, a gyro's scale factor).
-SCALE_FREE = frozenset({"3d", "gyro", "planar_gyro"})
+SCALE_FREE = frozenset({"3d", "gyro", "planar_gyro", "3d_gyro"})
 
 
 @functools.cache

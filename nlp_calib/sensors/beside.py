@@ -1,15 +1,16 @@
-"""A gyro beside a reference that measures its own planar motion (a lidar's scan matches, visual
-odometry, a motions file): both sensors' residuals in one objective.
+"""A gyro beside a reference that measures its own motion (a lidar's scan matches, a tracker's
+planar poses, a motions file; a camera's 3-D poses, :mod:`.camera_beside`): both sensors'
+residuals in one objective.
 
 Each of the log's increments is one sensor's: the reference's motion ``(x, y, θ)`` between two of
 its stamps, or the gyro's rates integrated over one of its intervals ``(∫ω, Δt)``. A window's
 ``z`` holds both layouts and a last row saying whose it is (0: the reference's, 1: the gyro's)::
 
-    z = (z_reference (3), z_gyro (4), gyro?)
+    z = (z_reference (3; a camera's 7), z_gyro (4), gyro?)
 
 and its residual has both sensors' rows, the other sensor's zero::
 
-    e = ((1 − g)·e_reference (3 rows), g·e_gyro (3 rows))
+    e = ((1 − g)·e_reference (3 rows; a camera's 6), g·e_gyro (3 rows))
 
 so each is weighted by its own noise (Ω's diagonal: the reference's translation and rotation,
 then the gyro's angle, ``information: {gyro: …}``). The mount is both mounts in one block: the
@@ -32,11 +33,11 @@ from nlp_calib.logs import Log, LogHeader
 from nlp_calib.models.base import KinematicModel
 from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.results.mount import SensorMount
-from nlp_calib.sensors.base import BaseMotion, SensorDefaults, SensorStart
+from nlp_calib.sensors.base import BaseMotion, Sensor, SensorDefaults, SensorStart
 from nlp_calib.sensors.gyro import Gyro
 from nlp_calib.sensors.planar import PlanarPose
 
-#: The rows of a reference's increment and of a gyro's in a window's ``z``; then the gyro row.
+#: The rows of a planar reference's increment and of a gyro's in a window's ``z``; then the gyro row.
 REFERENCE_ROWS, GYRO_ROWS = 3, 4
 #: The gyro's clock offset: how late its driver stamps the rates (s; the reference's: ``tracker_lag``).
 GYRO_LAG = "gyro_lag"
@@ -47,8 +48,8 @@ WEIGHTS: tuple[str, ...] = ("translation", "translation", "rotation", "gyro", "g
 
 
 def is_gyro(z: np.ndarray) -> np.ndarray:
-    """Which windows of ``z`` ``(8, n)`` are the gyro's."""
-    return np.asarray(z[REFERENCE_ROWS + GYRO_ROWS] > 0.5)
+    """Which windows of ``z`` ``(rows, n)`` are the gyro's (its last row)."""
+    return np.asarray(z[-1] > 0.5)
 
 
 class Beside(SensorDefaults):
@@ -71,7 +72,7 @@ class Beside(SensorDefaults):
     angles: ClassVar[tuple[str, ...]] = (*PlanarPose.angles, *Gyro.angles)
 
     def __init__(self, scale_free: bool) -> None:
-        self.reference_sensor = PlanarPose()
+        self.reference_sensor: Sensor = self._reference()
         self.gyro = Gyro(scale_free)
         ref, gyro = self.reference_sensor, self.gyro
         self.params: tuple[str, ...] = (*ref.params, *gyro.params)
@@ -79,6 +80,15 @@ class Beside(SensorDefaults):
         self.components: Mapping[str, str] = MappingProxyType(dict(ref.components))
         self.reference = MappingProxyType({**ref.reference, **gyro.reference})
         self.convention = f"{ref.label}: its pose on the base; {gyro.convention}"
+
+    @staticmethod
+    def _reference() -> Sensor:
+        """The reference the gyro is beside."""
+        return PlanarPose()
+
+    @property
+    def _rows(self) -> int:
+        return int(self.reference_sensor.z_rows)
 
     def _mounts(self, mount: ca.SX) -> tuple[ca.SX, ca.SX]:
         n = len(self.reference_sensor.params)
@@ -88,14 +98,15 @@ class Beside(SensorDefaults):
 
     def residual(self, z: ca.SX, mount: ca.SX, M: ca.SX) -> ca.SX:
         ref, gyro = self._mounts(mount)
-        g = z[REFERENCE_ROWS + GYRO_ROWS]
-        e_ref = self.reference_sensor.residual(z[:REFERENCE_ROWS], ref, M)
-        e_gyro = self.gyro.residual(z[REFERENCE_ROWS : REFERENCE_ROWS + GYRO_ROWS], gyro, M)
+        n = self._rows
+        g = z[n + GYRO_ROWS]
+        e_ref = self.reference_sensor.residual(z[:n], ref, M)
+        e_gyro = self.gyro.residual(z[n : n + GYRO_ROWS], gyro, M)
         return ca.vertcat((1 - g) * e_ref, g * e_gyro)
 
     def clock_weights(self, z: ca.SX) -> ca.SX:
         """A reference's window is on its clock (``tracker_lag``), a gyro's on the gyro's (``gyro_lag``)."""
-        g = z[REFERENCE_ROWS + GYRO_ROWS]
+        g = z[self._rows + GYRO_ROWS]
         return ca.vertcat(1 - g, g)
 
     def predict(self, mount: ca.SX, M: ca.SX) -> ca.SX:
@@ -119,7 +130,7 @@ class Beside(SensorDefaults):
         return padded(da), padded(db)
 
     def compose(self, pose: ca.SX, motion: ca.SX) -> ca.SX:
-        return self.reference_sensor.compose(pose, motion[:REFERENCE_ROWS])
+        return self.reference_sensor.compose(pose, motion[: self._rows])
 
     def base_from_sensor(self, T_world_sensor: ca.SX, mount: ca.SX) -> ca.SX:
         return self.reference_sensor.base_from_sensor(T_world_sensor, self._mounts(mount)[0])
@@ -142,18 +153,27 @@ class Beside(SensorDefaults):
     def planar_yaw(self, params: Mapping[str, float]) -> float | None:
         return self.reference_sensor.planar_yaw(params)
 
+    def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str:
+        return self.reference_sensor.implausible(params, given)
+
+    def heights(self, log: Log) -> np.ndarray | None:
+        return self.reference_sensor.heights(log)
+
+    def level(self, params: Mapping[str, float], first_pose: np.ndarray) -> np.ndarray | None:
+        return self.reference_sensor.level(params, first_pose)
+
     def tangent(self, z: np.ndarray) -> np.ndarray:
         """Each window's measured motion in the residual's rows (the other sensor's rows zero)."""
         z = np.asarray(z, dtype=float)
-        g = is_gyro(z)
-        out = np.zeros((6, z.shape[1]))
-        out[:3, ~g] = z[:REFERENCE_ROWS, ~g]
-        out[3:, g] = z[REFERENCE_ROWS : REFERENCE_ROWS + 3, g]
+        g, n, e = is_gyro(z), self._rows, self.reference_sensor.error_rows
+        out = np.zeros((self.error_rows, z.shape[1]))
+        out[:e, ~g] = self.reference_sensor.tangent(z[:n, ~g])
+        out[e:, g] = z[n : n + 3, g]
         return out
 
     def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The reference's increments, judged against its predicted motion (the gyro's are not)."""
-        return ~is_gyro(np.asarray(z).T), np.asarray(z)[:, :REFERENCE_ROWS]
+        return ~is_gyro(np.asarray(z).T), np.asarray(z)[:, : self._rows]
 
     def poses(self, log: Log) -> np.ndarray:
         """The reference's poses composed from its one-interval increments (the log's own)."""
@@ -166,7 +186,7 @@ class Beside(SensorDefaults):
         inc = log.motions
         if inc is not None and inc.n:
             g = is_gyro(inc.z.T)
-            np.add.at(turned, inc.last[g], inc.z[g, REFERENCE_ROWS : REFERENCE_ROWS + 3])
+            np.add.at(turned, inc.last[g], inc.z[g, self._rows : self._rows + 3])
         return np.column_stack([signal, np.cumsum(turned, axis=0)]), positions
 
     # --- the start -----------------------------------------------------------------------------
@@ -187,17 +207,27 @@ class Beside(SensorDefaults):
     ) -> SensorStart:
         """The reference's closed form on its windows (the wheels and its mount), then the gyro's
         tilt and biases on the gyro's windows with those wheels."""
-        g = is_gyro(z)
+        g, n = is_gyro(z), self._rows
 
         def on(keep: np.ndarray) -> BaseMotion:
             return lambda params: np.asarray(base_motion(params))[:, keep]
 
-        ref = self.reference_sensor.closed_form(model, U[:, ~g], z[:REFERENCE_ROWS, ~g], on(~g), known)
-        wheels = {n: ref.params[n] for n in model.kinematic_params}
-        z_gyro = z[REFERENCE_ROWS : REFERENCE_ROWS + GYRO_ROWS, g]
+        ref = self.reference_sensor.closed_form(model, U[:, ~g], z[:n, ~g], on(~g), known)
+        wheels = {k: ref.params[k] for k in model.kinematic_params}
+        z_gyro = z[n : n + GYRO_ROWS, g]
         gyro = self.gyro.closed_form(model, U[:, g], z_gyro, on(g), {**wheels, **known})
-        own = {n: v for n, v in gyro.params.items() if n in self.gyro.params}
-        return SensorStart({**ref.params, **own}, note=ref.note)
+        own = {k: v for k, v in gyro.params.items() if k in self.gyro.params}
+        return SensorStart({**ref.params, **own}, ref.selection, ref.dropped, ref.note)
+
+    def fit_windows(
+        self, start: SensorStart, z: np.ndarray, base_turn: np.ndarray
+    ) -> tuple[np.ndarray, dict[str, int]]:
+        """The reference's selection on its windows; every gyro window fitted."""
+        g = is_gyro(z)
+        keep = np.ones(z.shape[1], dtype=bool)
+        kept, counts = self.reference_sensor.fit_windows(start, z[: self._rows, ~g], np.asarray(base_turn)[~g])
+        keep[~g] = kept
+        return keep, counts
 
     # --- the write-back ------------------------------------------------------------------------
 

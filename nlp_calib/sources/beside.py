@@ -12,7 +12,8 @@ gyro's CSV::
     dataset: {joints: wheels.csv, motions: lidar.csv, gyro: gyro.csv,
               encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}
 
-with ``sensor: {mount: planar, beside: gyro}``. Each key goes to the source that has it (the
+with ``sensor: {mount: planar, beside: gyro}`` (a camera's 3-D poses: ``{mount: 3d, beside: gyro}``,
+which sets ``in_3d`` on load). Each key goes to the source that has it (the
 joints' keys to both); each reads its log, and :func:`~nlp_calib.logs.beside.beside_gyro` lays
 them on one time axis.
 """
@@ -66,6 +67,8 @@ class BesideSource:
     joint_units: ClassVar[str] = "radians"
     reference: DatasetSource
     gyro: DatasetSource
+    #: The reference's motions between its 3-D poses (a camera's), not its planar track.
+    in_3d: bool = False
 
     @property
     def path(self) -> Path:
@@ -82,10 +85,11 @@ class BesideSource:
         return f"{self.reference.clock()}; the gyro's: {self.gyro.clock()}"
 
     def identity(self) -> Hashable:
-        return (self.reference.identity(), self.gyro.identity())
+        return (self.reference.identity(), self.gyro.identity(), self.in_3d)
 
     def read(self, model: KinematicModel, *, strict: bool) -> Log:
-        return beside_gyro(self.reference.read(model, strict=strict), self.gyro.read(model, strict=strict))
+        reference, gyro = self.reference.read(model, strict=strict), self.gyro.read(model, strict=strict)
+        return beside_gyro(reference, gyro, self.in_3d)
 
     def moved(self, path: Path) -> BesideSource:
         return replace(self, reference=self.reference.moved(path), gyro=self.gyro.moved(path))
