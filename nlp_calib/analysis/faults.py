@@ -41,10 +41,11 @@ from nlp_calib.analysis.joint_repair import repair_joints
 from nlp_calib.analysis.readings import Readings, interpolated_over, readings, turning
 from nlp_calib.analysis.readings import unit as unit_of
 from nlp_calib.analysis.streams import off_neighbours, printed_step, scatter, stuck_runs
-from nlp_calib.core import poses
+from nlp_calib.core import poses, poses3d
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.logs.log import frozen
+from nlp_calib.logs.relative import RelativeMotions
 from nlp_calib.logs.reference import Motions, PoseMotions, Poses
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
@@ -200,17 +201,8 @@ def increment_faults(
     # The increments its prediction is of, in its layout (beside a gyro: the reference's alone).
     screened, z = fns.sensor.screened(inc.z)
     steps = over_columns(fns.predict, p, inputs)[0].T[:, : z.shape[1]]
-    if z.shape[1] == 3:
-        prefix = poses.accumulate(np.zeros(3), steps)
-        error = poses.between(z, poses.between(prefix[inc.first], prefix[inc.last]))
-        unit = ("m", "m", "rad")
-    else:  # a gyro's integrated rates add up (its bias, the same over each interval, is the centre's)
-        prefix = np.vstack([np.zeros((1, steps.shape[1])), np.cumsum(steps, axis=0)])
-        error = (inc.z - (prefix[inc.last] - prefix[inc.first]))[:, :3]
-        unit = ("rad", "rad", "rad")
+    error, unit, travel, turned = _disagreement(inc, z, steps)
     # A pivot: the base turns more than it travels (a gyro's steps hold no travel: never one).
-    travel = np.concatenate([[0.0], np.cumsum(np.abs(steps[:, 0]))])
-    turned = np.abs(prefix[inc.last, 2] - prefix[inc.first, 2])
     pivot = (travel[inc.last] - travel[inc.first] < PIVOT_RADIUS_M * turned) & (unit[0] == "m")
     judged = np.array(screened, dtype=bool)
     for f in known:
@@ -225,18 +217,41 @@ def increment_faults(
     found = []
     for k in np.flatnonzero(judged & (score > MATCH_SCATTER)):
         e = error[k]
-        why = (
-            f"disagrees with the wheels by ({e[0]:+.4f} {unit[0]}, {e[1]:+.4f} {unit[1]}, {e[2]:+.4f} rad), "
-            f"{score[k]:.0f}× the increments' robust scatter"
-        )
+        by = ", ".join(f"{v:+.4f} {u}" for v, u in zip(e, unit))
+        why = f"disagrees with the wheels by ({by}), {score[k]:.0f}× the increments' robust scatter"
         if pivot[k]:
             why += (
                 f", over a pivot turn ({turned[k]:.2f} rad on the spot): slip on the ground the "
                 "calibration leaves out, as it does every pivot the wheels disagree with"
             )
-        size = (float(np.hypot(e[0], e[1])), float(e[2]), float(score[k]))
+        size = (float(np.hypot(e[0], e[1])), float(e[-1] if len(e) == 3 else np.linalg.norm(e[3:])), float(score[k]))
         found.append(_match_fault(log, int(k), size, why, PIVOT_SLIP if pivot[k] else "bad_match"))
     return found
+
+
+def _disagreement(
+    inc: RelativeMotions, z: np.ndarray, steps: np.ndarray
+) -> tuple[np.ndarray, tuple[str, ...], np.ndarray, np.ndarray]:
+    """Each increment ``z`` against the wheels' predicted ``steps`` over it: the disagreement (its
+    rows and their units), and the base's travel to each record and its turn over each increment."""
+    if z.shape[1] == 3:
+        prefix = poses.accumulate(np.zeros(3), steps)
+        error = poses.between(z, poses.between(prefix[inc.first], prefix[inc.last]))
+        travel = np.concatenate([[0.0], np.cumsum(np.abs(steps[:, 0]))])
+        return error, ("m", "m", "rad"), travel, np.abs(prefix[inc.last, 2] - prefix[inc.first, 2])
+    if z.shape[1] == 7:  # a camera's 3-D motions: translation, then the rotation vector
+        prefix = poses3d.accumulate(np.array([0.0, 0, 0, 0, 0, 0, 1]), steps)
+        d = poses3d.between(z, poses3d.between(prefix[inc.first], prefix[inc.last]))
+        error = np.hstack([d[:, :3], poses3d.quat_to_rotvec(d[:, 3:])])
+        moved = poses3d.between(prefix[inc.first], prefix[inc.last])
+        travel = np.concatenate([[0.0], np.cumsum(np.linalg.norm(steps[:, :3], axis=1))])
+        turned = np.linalg.norm(poses3d.quat_to_rotvec(moved[:, 3:]), axis=1)
+        return error, ("m", "m", "m", "rad", "rad", "rad"), travel, turned
+    # A gyro's integrated rates add up (its bias, the same over each interval, is the centre's).
+    prefix = np.vstack([np.zeros((1, steps.shape[1])), np.cumsum(steps, axis=0)])
+    error = (z - (prefix[inc.last] - prefix[inc.first]))[:, :3]
+    travel = np.zeros(steps.shape[0] + 1)
+    return error, ("rad", "rad", "rad"), travel, np.abs(prefix[inc.last, 2] - prefix[inc.first, 2])
 
 
 def _messages(log: Log, r: Readings, lo: int, hi: int) -> str:

@@ -87,7 +87,8 @@ def steps(fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray) -> np.n
     if n == 0:
         return np.zeros((0, fns.sensor.pose_rows))
     P = np.asarray(params, dtype=float)
-    return over_columns(fns.predict, P if P.ndim == 2 else np.ravel(P), np.asarray(inputs, dtype=float))[0].T
+    h = over_columns(fns.predict, P if P.ndim == 2 else np.ravel(P), np.asarray(inputs, dtype=float))[0].T
+    return h[:, : fns.sensor.pose_rows]  # a sensor beside the reference predicts rows of its own after them
 
 
 def scale_free(fns: ProblemFunctions) -> bool:

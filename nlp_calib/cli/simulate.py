@@ -21,7 +21,13 @@ from nlp_calib.pipeline.simconfig import (
     vendor_options,
 )
 from nlp_calib.simulation import simulate_to_file, truth_path
-from nlp_calib.simulation.beside import simulate_beside, write_beside_simulation
+from nlp_calib.simulation.beside import (
+    camera_beside_paths,
+    simulate_beside,
+    simulate_camera_beside,
+    write_beside_simulation,
+    write_camera_beside_simulation,
+)
 from nlp_calib.simulation.camera import camera_paths, simulate_camera, write_camera_simulation
 from nlp_calib.simulation.imu import imu_paths, simulate_imu, write_imu_simulation
 from nlp_calib.simulation.lidar import lidar_paths, simulate_lidar, write_lidar_simulation
@@ -52,8 +58,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise UsageError("--tracker goes with --imu alone (a tracker's poses beside the gyro, in one bag)")
     if getattr(args, "lidar", False) or tracker:
         return _simulate_beside(args, overrides, tracker) if imu else _simulate_lidar(args, overrides)
-    if imu and (getattr(args, "vendor", False) or out.suffix.lower() == ".tum"):
-        raise UsageError("--imu goes alone or beside --lidar (one bag of both)")
+    if imu and getattr(args, "vendor", False):
+        raise UsageError("--imu goes alone, beside --lidar or --tracker (one bag) or beside a camera (--out X.tum)")
+    if imu and out.suffix.lower() == ".tum":
+        return _simulate_camera_beside(args, overrides)
     if getattr(args, "vendor", False):
         return _simulate_vendor(args, overrides)
     if imu:
@@ -87,6 +95,25 @@ def _simulate_camera(args: argparse.Namespace, overrides: dict[str, Any]) -> int
     write = functools.partial(write_camera_simulation, simulate_camera(opts))
     tum, joints, truth = _staged(args, camera_paths(args.out), write)
     print(f"wrote {tum} ({opts.duration_s:g} s at {opts.image_rate_hz:g} Hz), {joints} and {truth}")
+    return 0
+
+
+def _simulate_camera_beside(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
+    """A camera's TUM trajectory and joint CSV, a gyro's CSV of the same drive and the truth (the
+    options and --config: the camera's; the gyro takes its defaults, its seed and its driver's late
+    stamps the camera's)."""
+    camera = camera_options(args.config, overrides)
+    gyro = imu_options(None, {"seed": camera.seed, "latency_s": camera.stamp_offset_s})
+    write = functools.partial(write_camera_beside_simulation, simulate_camera_beside(camera, gyro))
+    tum, joints, rates, truth = _staged(args, camera_beside_paths(args.out), write)
+    print(
+        f"wrote {tum} ({camera.duration_s:g} s at {camera.image_rate_hz:g} Hz), {joints}, {rates} (the gyro "
+        f"at {gyro.imu_rate_hz:g} Hz; both stamped {1000 * camera.stamp_offset_s:g} ms late) and {truth}"
+    )
+    print(
+        f"a scenario reads it as: dataset: {{poses: {tum}, joints: {joints}, gyro: {rates}, encoders: …}}, "
+        "with sensor: {mount: 3d, beside: gyro} (docs/imu.md)"
+    )
     return 0
 
 

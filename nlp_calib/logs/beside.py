@@ -38,21 +38,14 @@ def _poses_at(log: Log, stamps_ns: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(at, t, T[:, 0]), np.interp(at, t, T[:, 1]), np.interp(at, t, heading)])
 
 
-def _frozen_or_none(a: np.ndarray | None) -> np.ndarray | None:
-    return None if a is None else _frozen(a)
-
-
-def _poses_3d_at(log: Log, stamps_ns: np.ndarray) -> np.ndarray | None:
-    """The reference's 3-D poses at ``stamps_ns`` (the rotation along the shorter arc), where it
-    has them."""
-    P = log.T_world_sensor_3d
-    if P is None:
-        return None
+def _poses_3d_at(log: Log, stamps_ns: np.ndarray) -> np.ndarray:
+    """The reference's 3-D poses at ``stamps_ns`` (the rotation along the shorter arc)."""
+    P = log.poses_3d()
     t = _stamps_ns(log)
     after = np.clip(np.searchsorted(t, stamps_ns), 1, t.size - 1)
     a, b = after - 1, after
     s = np.clip((stamps_ns - t[a]) / np.maximum(t[b] - t[a], 1), 0.0, 1.0).astype(float)[:, None]
-    return np.asarray(poses3d.between_at(np.asarray(P)[a], np.asarray(P)[b], s))
+    return _frozen(np.asarray(poses3d.between_at(np.asarray(P)[a], np.asarray(P)[b], s)))
 
 
 def _placed(
@@ -130,7 +123,11 @@ def beside_gyro(reference: Log, gyro: Log, in_3d: bool = False) -> Log:
     stamps = np.unique(np.concatenate([ref_ns, gyro_ns[used]]))
     n_ref, n_gyro = ref_inc.n, gyro_inc.n
     z_ref = np.hstack([ref_inc.z, np.zeros((n_ref, GYRO_ROWS + 1))])
-    z_gyro = np.hstack([np.zeros((n_gyro, ref_inc.z.shape[1])), gyro_inc.z, np.ones((n_gyro, 1))])
+    # A gyro's window holds the reference's motion as none at all (a 3-D one's unit quaternion: its
+    # residual, weighed by 0 there, stays finite).
+    still = np.zeros(ref_inc.z.shape[1])
+    still[-1] = 1.0 if in_3d else 0.0
+    z_gyro = np.hstack([np.tile(still, (n_gyro, 1)), gyro_inc.z, np.ones((n_gyro, 1))])
     quality = {k: np.concatenate([v, np.full(n_gyro, np.nan)]) for k, v in ref_inc.quality.items()}
     motions = _joined(
         _placed(ref_inc, ref_ns, stamps, z_ref), _placed(gyro_inc, gyro_ns, stamps, z_gyro), quality
@@ -156,5 +153,7 @@ def beside_gyro(reference: Log, gyro: Log, in_3d: bool = False) -> Log:
         joint_positions=stream.at(time_s),
         joint_stream=stream,
         # A tracker's increments are differences of its poses: their noise is the poses'.
-        reference=ReferenceData(poses_3d=_frozen_or_none(_poses_3d_at(reference, stamps)), motions=motions, measures=measures),
+        reference=ReferenceData(
+            poses_3d=_poses_3d_at(reference, stamps) if in_3d else None, motions=motions, measures=measures
+        ),
     )

@@ -213,6 +213,10 @@ class Beside(SensorDefaults):
             return lambda params: np.asarray(base_motion(params))[:, keep]
 
         ref = self.reference_sensor.closed_form(model, U[:, ~g], z[:n, ~g], on(~g), known)
+        if not g.any():
+            # The start's windows the reference's alone (a camera's second of driving, its
+            # ``start_span_s``): the gyro starts unbiased and level, the fit finds it.
+            return SensorStart({**self.gyro.neutral(), **ref.params}, ref.selection, ref.dropped, ref.note)
         wheels = {k: ref.params[k] for k in model.kinematic_params}
         z_gyro = z[n : n + GYRO_ROWS, g]
         gyro = self.gyro.closed_form(model, U[:, g], z_gyro, on(g), {**wheels, **known})

@@ -45,6 +45,8 @@ class CameraBeside(Beside):
     held: ClassVar[tuple[str, ...]] = HELD_PARAMS
     held_why: ClassVar[str] = HELD_WHY
     planar_base: ClassVar[bool] = False
+    #: The camera's start on seconds of driving (its windows the poses', the gyro starting level).
+    start_span_s: ClassVar[float | None] = CameraPose.start_span_s
 
     @staticmethod
     def _reference() -> Sensor:

@@ -166,6 +166,9 @@ class Gyro(SensorDefaults):
     # --- the start -----------------------------------------------------------------------------
 
     def initial(self, header: LogHeader) -> dict[str, float]:
+        return self.neutral()
+
+    def neutral(self) -> dict[str, float]:
         """No bias, a level IMU, a true scale."""
         return {**dict.fromkeys(self.params, 0.0), **({SCALE_PARAM: 1.0} if self.scale_free else {})}
 

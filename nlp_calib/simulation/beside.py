@@ -1,4 +1,4 @@
-"""A lidar and an IMU on one drive: one ROS 2 bag of ``/joint_states``, ``/scan`` and ``/imu``
+"""A lidar (or a camera) and an IMU on one drive: one ROS 2 bag of ``/joint_states``, ``/scan`` and ``/imu``
 (or, in place of the scans, a tracker's poses of the lidar's frame on ``/tracker``: a motion
 capture's markers where the lidar sits, each pose with white noise).
 
@@ -7,7 +7,8 @@ fine grid also holds the IMU's samples); the IMU on it reads as the IMU simulato
 (:mod:`nlp_calib.simulation.imu`: tilt, biases, noise). Each driver stamps its own
 ``stamp_offset_s`` late (two clocks). The truth file holds the lidar's mount, the gyro's
 parameters, the wheels and both clocks' offsets (``tracker_lag``, ``gyro_lag``) in their names.
-Deterministic for a given seed.
+A camera's drive (:mod:`nlp_calib.simulation.camera`) takes the IMU's readings the same way: its
+TUM file and joint CSV, the gyro's CSV beside them. Deterministic for a given seed.
 """
 
 from __future__ import annotations
@@ -22,7 +23,16 @@ import numpy as np
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.sensors.beside import GYRO_LAG
-from nlp_calib.simulation.camera import EPOCH_S
+from nlp_calib.core.errors import OptionsError
+from nlp_calib.simulation.camera import DEFAULT_MOUNT as CAMERA_MOUNT
+from nlp_calib.simulation.camera import (
+    EPOCH_S,
+    CameraSimulation,
+    CameraSimulationOptions,
+    camera_paths,
+    simulate_camera,
+    write_camera_simulation,
+)
 from nlp_calib.simulation.imu import (
     DEFAULT_GYRO,
     ImuSimulation,
@@ -71,18 +81,72 @@ def simulate_beside(lidar: LidarSimulationOptions, imu: ImuSimulationOptions) ->
         truth={**{k: imu.truth[k] for k in DEFAULT_GYRO}, **kinematic},
     )
     scans = simulate_lidar(lidar, also_s=imu_times(imu))
+    return BesideSimulation(scans, _gyro_on(imu, scans.fine_time_s, scans.base_poses, scans))
+
+
+@dataclass(frozen=True)
+class CameraBesideSimulation:
+    """A camera's simulation and the IMU's on the same drive."""
+
+    camera: CameraSimulation
+    imu: ImuSimulation
+
+    def truth_dict(self) -> dict[str, Any]:
+        gyro = self.imu.truth_dict()["params"]
+        params = {**self.camera.truth, **gyro, LAG_PARAM: self.camera.options.stamp_offset_s}
+        params[GYRO_LAG] = self.imu.options.stamp_offset_s
+        return {**self.camera.truth_dict(), "params": params, "imu_options": self.imu.truth_dict()["options"]}
+
+
+def simulate_camera_beside(camera: CameraSimulationOptions, imu: ImuSimulationOptions) -> CameraBesideSimulation:
+    """The camera's drive with the IMU's readings on it (as :func:`simulate_beside` lays them on
+    the lidar's; the floor level, as a gyro about the base's vertical alone needs)."""
+    if camera.noise.floor_tilt:
+        raise OptionsError("noise.floor_tilt: a gyro beside the camera reads a level base's turning (give 0)")
+    kinematic = {k: v for k, v in camera.truth.items() if k not in CAMERA_MOUNT}
+    imu = replace(
+        imu,
+        model=camera.model,
+        duration_s=camera.duration_s,
+        truth={**{k: imu.truth[k] for k in DEFAULT_GYRO}, **kinematic},
+    )
+    cam = simulate_camera(camera, also_s=imu_times(imu))
+    return CameraBesideSimulation(cam, _gyro_on(imu, cam.fine_time_s, cam.base_poses, cam))
+
+
+def _gyro_on(
+    imu: ImuSimulationOptions, t_fine: np.ndarray, base: np.ndarray, joints: CameraSimulation | LidarSimulation
+) -> ImuSimulation:
+    """The IMU's readings over the base's poses ``base`` on the fine grid, beside ``joints``' joints."""
     rng = np.random.default_rng([imu.seed, 1])
-    rates, accel = gyro_readings(imu, rng, scans.fine_time_s, scans.base_poses)
-    gyro = ImuSimulation(
+    rates, accel = gyro_readings(imu, rng, t_fine, base)
+    return ImuSimulation(
         imu_time_s=EPOCH_S + imu_times(imu) + imu.stamp_offset_s,
         rates=rates,
         accel=accel,
-        joint_time_s=scans.joint_time_s,
-        joint_names=scans.joint_names,
-        joint_positions=scans.joint_positions,
+        joint_time_s=joints.joint_time_s,
+        joint_names=joints.joint_names,
+        joint_positions=joints.joint_positions,
         options=imu,
     )
-    return BesideSimulation(scans, gyro)
+
+
+def camera_beside_paths(tum_path: str | Path) -> tuple[Path, Path, Path, Path]:
+    """The camera's files (:func:`~nlp_calib.simulation.camera.camera_paths`) and ``<name>.gyro.csv``."""
+    tum, joints, truth = camera_paths(tum_path)
+    return tum, joints, tum.with_suffix(".gyro.csv"), truth
+
+
+def write_camera_beside_simulation(
+    sim: CameraBesideSimulation, tum_path: str | Path
+) -> tuple[Path, Path, Path, Path]:
+    """The camera's TUM file and joint CSV, the gyro's CSV (``t,wx,wy,wz``) and the truth JSON."""
+    tum, joints, gyro, truth = camera_beside_paths(tum_path)
+    write_camera_simulation(sim.camera, tum)
+    rows = (f"{t:.9f},{w[0]:.17g},{w[1]:.17g},{w[2]:.17g}\n" for t, w in zip(sim.imu.imu_time_s, sim.imu.rates))
+    atomic_write_text(gyro, "t,wx,wy,wz\n" + "".join(rows))
+    atomic_write_text(truth, json.dumps(sim.truth_dict(), indent=2) + "\n")
+    return tum, joints, gyro, truth
 
 
 def tracker_poses(sim: LidarSimulation) -> np.ndarray:

@@ -142,6 +142,9 @@ class CameraSimulation:
     joint_positions: np.ndarray
     T_world_base_true: np.ndarray
     options: CameraSimulationOptions
+    #: The fine grid (s from the start) and the base's planar poses on it (a gyro's rates beside).
+    fine_time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    base_poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def truth(self) -> dict[str, float]:
@@ -195,12 +198,14 @@ def base_motion(
     return integrate_base(ds, w), channels
 
 
-def simulate_camera(opts: CameraSimulationOptions) -> CameraSimulation:
-    """Simulate a drive, the camera's trajectory and the joint log."""
+def simulate_camera(opts: CameraSimulationOptions, also_s: np.ndarray | None = None) -> CameraSimulation:
+    """Simulate a drive, the camera's trajectory and the joint log; ``also_s``: further times (s
+    from the start) the fine grid holds (a gyro's samples)."""
     rng = np.random.default_rng(opts.seed)
     t_images = np.arange(0.0, opts.duration_s, 1.0 / opts.image_rate_hz)
     t_joints = np.arange(-0.5, opts.duration_s + 0.5, 1.0 / opts.joint_rate_hz)
-    t_fine = fine_grid(t_images, t_joints)
+    more = np.zeros(0) if also_s is None else np.asarray(also_s, dtype=float)
+    t_fine = fine_grid(np.sort(np.concatenate([t_images, more])), t_joints)
     planar, channels = base_motion(opts.model, opts.truth, opts.drive, rng, t_fine)
     at_images = np.searchsorted(t_fine, t_images)
     at_joints = np.searchsorted(t_fine, t_joints)
@@ -222,6 +227,8 @@ def simulate_camera(opts: CameraSimulationOptions) -> CameraSimulation:
         joint_positions=np.column_stack(list(angles.values())),
         T_world_base_true=planar[at_images],
         options=opts,
+        fine_time_s=t_fine,
+        base_poses=planar,
     )
 
 
