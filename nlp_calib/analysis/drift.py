@@ -123,10 +123,12 @@ def untested(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[st
             for name in weak.components:
                 out.setdefault(name, weak.words())
     params = run.reports[solver].result.param_dict()
+    # The sensor's own precisions of its mount (a camera's angles: 0.005 rad, not 1 % of each).
+    own = sensor_for(run.scenario.sensor.kind, run.scenario.sensor.scale).reference
     for name, sd in run.std(solver).items():
         if name not in run.reports[solver].uncertainty.free or name in out:
             continue
-        ref = reference_scale(model, run.scenario.layout.key(name), params[name])
+        ref = reference_scale(model, run.scenario.layout.key(name), params[name], own)
         if not np.isfinite(sd):
             out[name] = f"{name} is not determined by this drive"
         elif sd > WEAK * ref:
