@@ -85,7 +85,9 @@ def test_a_gyro_beside_a_planar_reference_reads_no_3d_motions(drive: tuple[Path,
     scenario, _ = drive
     raw = yaml.safe_load(scenario.read_text())
     flat = {k: v for k, v in raw.items() if k != "known"}  # a planar mount has no height
-    planar = scenario_from_mapping({**flat, "sensor": {"mount": "planar", "beside": "gyro"}}, "s", scenario.parent)
+    planar = scenario_from_mapping(
+        {**flat, "sensor": {"mount": "planar", "beside": "gyro"}}, "s", scenario.parent
+    )
     spatial = scenario_from_mapping(raw, "s", scenario.parent)
     assert not planar.log.source.in_3d  # type: ignore[attr-defined]
     assert spatial.log.source.in_3d  # type: ignore[attr-defined]

@@ -45,8 +45,8 @@ from nlp_calib.core import poses, poses3d
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.logs.log import frozen
-from nlp_calib.logs.relative import RelativeMotions
 from nlp_calib.logs.reference import Motions, PoseMotions, Poses
+from nlp_calib.logs.relative import RelativeMotions
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results.faults import (
@@ -224,7 +224,11 @@ def increment_faults(
                 f", over a pivot turn ({turned[k]:.2f} rad on the spot): slip on the ground the "
                 "calibration leaves out, as it does every pivot the wheels disagree with"
             )
-        size = (float(np.hypot(e[0], e[1])), float(e[-1] if len(e) == 3 else np.linalg.norm(e[3:])), float(score[k]))
+        size = (
+            float(np.hypot(e[0], e[1])),
+            float(e[-1] if len(e) == 3 else np.linalg.norm(e[3:])),
+            float(score[k]),
+        )
         found.append(_match_fault(log, int(k), size, why, PIVOT_SLIP if pivot[k] else "bad_match"))
     return found
 

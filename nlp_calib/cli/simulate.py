@@ -59,7 +59,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if getattr(args, "lidar", False) or tracker:
         return _simulate_beside(args, overrides, tracker) if imu else _simulate_lidar(args, overrides)
     if imu and getattr(args, "vendor", False):
-        raise UsageError("--imu goes alone, beside --lidar or --tracker (one bag) or beside a camera (--out X.tum)")
+        raise UsageError(
+            "--imu goes alone, beside --lidar or --tracker (one bag) or beside a camera (--out X.tum)"
+        )
     if imu and out.suffix.lower() == ".tum":
         return _simulate_camera_beside(args, overrides)
     if getattr(args, "vendor", False):

@@ -292,7 +292,9 @@ def _in_3d(logs: tuple[LogEntry, ...], in_3d: bool) -> tuple[LogEntry, ...]:
     if not in_3d:
         return logs
     return tuple(
-        dataclasses.replace(e, source=dataclasses.replace(e.source, in_3d=True)) if isinstance(e.source, BesideSource) else e
+        dataclasses.replace(e, source=dataclasses.replace(e.source, in_3d=True))
+        if isinstance(e.source, BesideSource)
+        else e
         for e in logs
     )
 

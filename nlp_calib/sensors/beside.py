@@ -229,7 +229,9 @@ class Beside(SensorDefaults):
         """The reference's selection on its windows; every gyro window fitted."""
         g = is_gyro(z)
         keep = np.ones(z.shape[1], dtype=bool)
-        kept, counts = self.reference_sensor.fit_windows(start, z[: self._rows, ~g], np.asarray(base_turn)[~g])
+        kept, counts = self.reference_sensor.fit_windows(
+            start, z[: self._rows, ~g], np.asarray(base_turn)[~g]
+        )
         keep[~g] = kept
         return keep, counts
 

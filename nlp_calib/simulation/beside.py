@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 
+from nlp_calib.core.errors import OptionsError
 from nlp_calib.core.files import atomic_write_text
 from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.sensors.beside import GYRO_LAG
-from nlp_calib.core.errors import OptionsError
 from nlp_calib.simulation.camera import DEFAULT_MOUNT as CAMERA_MOUNT
 from nlp_calib.simulation.camera import (
     EPOCH_S,
@@ -98,7 +98,9 @@ class CameraBesideSimulation:
         return {**self.camera.truth_dict(), "params": params, "imu_options": self.imu.truth_dict()["options"]}
 
 
-def simulate_camera_beside(camera: CameraSimulationOptions, imu: ImuSimulationOptions) -> CameraBesideSimulation:
+def simulate_camera_beside(
+    camera: CameraSimulationOptions, imu: ImuSimulationOptions
+) -> CameraBesideSimulation:
     """The camera's drive with the IMU's readings on it (as :func:`simulate_beside` lays them on
     the lidar's; the floor level, as a gyro about the base's vertical alone needs)."""
     if camera.noise.floor_tilt:
@@ -115,7 +117,10 @@ def simulate_camera_beside(camera: CameraSimulationOptions, imu: ImuSimulationOp
 
 
 def _gyro_on(
-    imu: ImuSimulationOptions, t_fine: np.ndarray, base: np.ndarray, joints: CameraSimulation | LidarSimulation
+    imu: ImuSimulationOptions,
+    t_fine: np.ndarray,
+    base: np.ndarray,
+    joints: CameraSimulation | LidarSimulation,
 ) -> ImuSimulation:
     """The IMU's readings over the base's poses ``base`` on the fine grid, beside ``joints``' joints."""
     rng = np.random.default_rng([imu.seed, 1])
@@ -143,7 +148,9 @@ def write_camera_beside_simulation(
     """The camera's TUM file and joint CSV, the gyro's CSV (``t,wx,wy,wz``) and the truth JSON."""
     tum, joints, gyro, truth = camera_beside_paths(tum_path)
     write_camera_simulation(sim.camera, tum)
-    rows = (f"{t:.9f},{w[0]:.17g},{w[1]:.17g},{w[2]:.17g}\n" for t, w in zip(sim.imu.imu_time_s, sim.imu.rates))
+    rows = (
+        f"{t:.9f},{w[0]:.17g},{w[1]:.17g},{w[2]:.17g}\n" for t, w in zip(sim.imu.imu_time_s, sim.imu.rates)
+    )
     atomic_write_text(gyro, "t,wx,wy,wz\n" + "".join(rows))
     atomic_write_text(truth, json.dumps(sim.truth_dict(), indent=2) + "\n")
     return tum, joints, gyro, truth
