@@ -113,8 +113,13 @@ def test_a_gyro_and_a_lidar_fit_within_3_sigma_and_check_reads_it_back(
 def test_a_sensor_beside_is_refused_where_none_fits(drive: tuple[Path, dict[str, float]]) -> None:
     bag, _ = drive
     bad = {**_mapping(bag), "sensor": {"mount": "3d", "beside": "gyro"}}
-    with pytest.raises(ConfigError, match=r"sensor\.beside.*mount: planar, beside: gyro"):
+    # A camera's 3-D mount beside a gyro reads 3-D poses, not a lidar's planar scan matches.
+    with pytest.raises(
+        ConfigError, match=r"dataset: sensor: \{mount: 3d, beside: gyro\} reads a camera's 3-D poses"
+    ):
         scenario_from_mapping(bad, "bad", bag.parent)
+    with pytest.raises(ConfigError, match=r"sensor\.beside.*mount: planar, beside: gyro"):
+        scenario_from_mapping({**bad, "sensor": {"mount": "gyro", "beside": "gyro"}}, "bad", bag.parent)
     # On load, not at the fit: a gyro beside a dataset that names no reference beside it ...
     gyro_only = {**BESIDE, "dataset": {"bag": str(bag), **JOINTS, "imu": "/imu"}}
     with pytest.raises(

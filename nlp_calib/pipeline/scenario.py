@@ -384,6 +384,17 @@ def _check_beside(sc: Scenario, source: DatasetSource, where: str) -> None:
             f"motions and a gyro's rates from one dataset naming both ({pairs}, beside the joints; "
             "docs/imu.md)",
         )
+    if (
+        isinstance(source, BesideSource)
+        and source.in_3d
+        and isinstance(source.reference, (LidarSource, MotionsSource))
+    ):
+        fail(
+            where,
+            f"sensor: {{mount: {sensor.mount}, beside: {sensor.beside}}} reads a camera's 3-D poses "
+            "(poses: a TUM file, or tracker: a bag's pose topic) beside the gyro's rates; a lidar's scans "
+            "and a motions file are planar motions: fit them with sensor: {mount: planar, beside: gyro}",
+        )
     if isinstance(source, BesideSource) and not sensor.beside:
         fail(
             where,
