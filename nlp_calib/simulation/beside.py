@@ -14,6 +14,7 @@ TUM file and joint CSV, the gyro's CSV beside them. Deterministic for a given se
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -56,6 +57,15 @@ TRACKER_NOISE = (0.002, 0.002)
 TRACKER_TOPIC = "/tracker"
 
 
+def _with_gyro(
+    reference: dict[str, Any], truth: Mapping[str, float], lag_s: float, imu: ImuSimulation
+) -> dict[str, Any]:
+    """A reference's truth record with the gyro's parameters and both clocks' offsets added."""
+    gyro = imu.truth_dict()
+    params = {**truth, **gyro["params"], LAG_PARAM: lag_s, GYRO_LAG: imu.options.stamp_offset_s}
+    return {**reference, "params": params, "imu_options": gyro["options"]}
+
+
 @dataclass(frozen=True)
 class BesideSimulation:
     """The lidar's simulation and the IMU's on the same drive."""
@@ -64,10 +74,8 @@ class BesideSimulation:
     imu: ImuSimulation
 
     def truth_dict(self) -> dict[str, Any]:
-        gyro = self.imu.truth_dict()["params"]
-        params = {**self.lidar.options.truth, **gyro, LAG_PARAM: self.lidar.options.stamp_offset_s}
-        params[GYRO_LAG] = self.imu.options.stamp_offset_s
-        return {**self.lidar.truth_dict(), "params": params, "imu_options": self.imu.truth_dict()["options"]}
+        lidar = self.lidar
+        return _with_gyro(lidar.truth_dict(), lidar.options.truth, lidar.options.stamp_offset_s, self.imu)
 
 
 def simulate_beside(lidar: LidarSimulationOptions, imu: ImuSimulationOptions) -> BesideSimulation:
@@ -92,10 +100,8 @@ class CameraBesideSimulation:
     imu: ImuSimulation
 
     def truth_dict(self) -> dict[str, Any]:
-        gyro = self.imu.truth_dict()["params"]
-        params = {**self.camera.truth, **gyro, LAG_PARAM: self.camera.options.stamp_offset_s}
-        params[GYRO_LAG] = self.imu.options.stamp_offset_s
-        return {**self.camera.truth_dict(), "params": params, "imu_options": self.imu.truth_dict()["options"]}
+        camera = self.camera
+        return _with_gyro(camera.truth_dict(), camera.truth, camera.options.stamp_offset_s, self.imu)
 
 
 def simulate_camera_beside(
