@@ -277,3 +277,17 @@ def test_a_run_searches_its_lag_once_and_the_gate_judges_at_it(
     at_run = judge(load_scenario(demo), None, searched[0])
     assert at_run.verdict == own.verdict
     assert [(p.name, p.status) for p in at_run.parameters] == [(p.name, p.status) for p in own.parameters]
+
+
+def test_two_loose_combinations_of_the_same_parameters_are_one_caveat() -> None:
+    """Two weak directions over the same three parameters read as one caveat (they read twice,
+    their names in another order), the loosest kept; a weak one over other parameters stays."""
+    names = ("a", "b", "c", "d")
+    V = np.zeros((4, 4))
+    V[:3, 0] = [0.8, 0.5, 0.33]  # the loosest
+    V[:3, 1] = [0.4, -0.6, 0.69]  # the same three, another order by size
+    V[3, 2] = 1.0  # d alone
+    lam = np.array([4e-4, 1e-3, 1e-2, 1e4])  # 1σ 50, 31.6, 10 and 0.01 reference units
+    weak = obs.weak_directions(names, lam, V, np.zeros(4, dtype=bool))
+    assert [set(w.components) for w in weak] == [{"a", "b", "c"}, {"d"}]
+    assert weak[0].std_reference == pytest.approx(50.0)

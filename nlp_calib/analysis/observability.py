@@ -105,10 +105,15 @@ def weak_directions(
         share = (V[:, null] ** 2).sum(axis=1)
         comps = {names[i]: round(float(share[i]), 3) for i in np.flatnonzero(share > IN_DIRECTION)}
         weak.append(WeakDirection(float("inf") if degenerate.any() else float(std_dir[null].max()), comps))
-    for k in np.flatnonzero((std_dir > WEAK) & ~null):
+    said: set[frozenset[str]] = set()
+    # Loosest first; another loose combination of the same parameters says nothing new (the
+    # caveat would read twice, its names in another order).
+    for k in sorted(np.flatnonzero((std_dir > WEAK) & ~null), key=lambda k: -std_dir[k]):
         v = V[:, k]
         comps = {names[i]: round(float(v[i]), 3) for i in np.flatnonzero(np.abs(v) > 0.3)}
-        weak.append(WeakDirection(float(std_dir[k]), comps))
+        if frozenset(comps) not in said:
+            said.add(frozenset(comps))
+            weak.append(WeakDirection(float(std_dir[k]), comps))
     return weak
 
 
