@@ -16,7 +16,7 @@ from nlp_calib.analysis.verdict import lag_caveats
 from nlp_calib.models import get_model
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.pipeline import preflight as pf
-from nlp_calib.pipeline.align import apart, valleys
+from nlp_calib.pipeline.align import _global, _settled, apart, valleys
 from nlp_calib.pipeline.build import Binder
 from nlp_calib.pipeline.preflight import preflight
 from nlp_calib.pipeline.scenario import load_scenario
@@ -50,6 +50,30 @@ def test_the_profiles_valleys_lowest_first_and_a_ridge_between_two() -> None:
     assert found[0] == pytest.approx(0.18) and found[1] == pytest.approx(-0.01)
     assert apart(grid, costs, found[0], found[1])
     assert not apart(grid, costs, 0.17, 0.19)  # one valley
+
+
+class _FlatValley:
+    """A lag's fits on a flat cost (a real tricycle's square, 140120211446 run 1): fits settle at
+    293 ms from below 310 ms and at 365 ms, 1.4 % lower, from above; the profile at the first fit's
+    other parameters is one smooth valley, lowest at 325 ms."""
+
+    column = 0
+
+    def profile(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        grid = np.linspace(-0.5, 0.5, 41)
+        return grid, 0.57 + (grid - 0.325) ** 2
+
+    def settle(self, x: np.ndarray) -> tuple[np.ndarray, list[float], list[float], bool]:
+        lag, cost = (0.293, 0.5709) if x[0] < 0.31 else (0.365, 0.5631)
+        return np.array([lag]), [float(x[0])], [cost], True
+
+
+def test_the_lag_search_fits_from_the_profiles_lowest_point_a_step_or_more_away() -> None:
+    fits = _FlatValley()
+    first = _settled(fits, np.array([0.0]))  # type: ignore[arg-type]
+    best, runner, _ = _global(fits, first)  # type: ignore[arg-type]
+    assert best.x[0] == pytest.approx(0.365) and best.cost < first.cost
+    assert runner is None  # no ridge between the two: one valley, its lowest point kept
 
 
 def test_a_fold_and_the_sets_it_is_compared_with_share_its_lags() -> None:

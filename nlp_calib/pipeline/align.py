@@ -197,7 +197,12 @@ def _global(
     (:data:`COMPARABLE`) and a ridge of the profile parts the two, and the profile (lags, costs)."""
     column = fits.column
     grid, costs = fits.profile(first.x)
-    width = 2.5 * float(np.ptp(grid)) / max(grid.size - 1, 1)
+    # A valley more than one of the profile's steps from the settled lag is another place to fit
+    # from: on a flat cost the settled fit (stopped once the lag stays within its tolerance) and
+    # the profile's lowest point can lie steps apart, and the fit from there may settle lower
+    # (a real tricycle's square: 293 ms settled, the profile lowest at 325 ms, the fit from there
+    # 365 ms at 1.4 % less cost).
+    width = 1.01 * float(np.ptp(grid)) / max(grid.size - 1, 1)
     tried = [first]
     for lag in [v for v in valleys(grid, costs) if abs(v - first.x[column]) > width][:OTHER_VALLEYS]:
         x = first.x.copy()
