@@ -516,3 +516,51 @@ def test_atomic_write_that_fails_leaves_the_old_file_and_no_temporary(
         files.atomic_write_text(target, "new\n")
     assert target.read_text() == "old\n"
     assert listing(tmp_path) == {"result.json"}
+
+
+def test_a_sound_increment_where_the_turn_rate_jumps_is_judged_at_the_references_lag() -> None:
+    """Scans stamped 12 ms late over a drive whose turn rate jumps: judged at the stamps as logged,
+    sound increments across a jump disagree with the wheels by the lag's share (many times the
+    matcher's scatter); at the lag the screen fits in its range (12 ms, recovered), only the bad
+    match does."""
+    from types import SimpleNamespace
+
+    from nlp_calib.analysis.faults import MATCH_SCATTER, _disagreement, _robust, _screen_lag
+    from nlp_calib.core import poses
+    from nlp_calib.logs.relative import RelativeMotions
+
+    rng = np.random.default_rng(5)
+    fine = np.arange(0.0, 60.0, 0.001)
+    turn = np.repeat(rng.uniform(-0.6, 0.6, 30), 2000)  # a new turn rate every 2 s
+    speed = 0.3 + 0.1 * np.sin(fine)
+    heading = np.concatenate([[0.0], np.cumsum(turn[:-1] * 0.001)])
+    path = np.column_stack(
+        [np.cumsum(speed * np.cos(heading)) * 0.001, np.cumsum(speed * np.sin(heading)) * 0.001, heading]
+    )
+
+    def pose(t: np.ndarray) -> np.ndarray:
+        return np.column_stack([np.interp(t, fine, path[:, i]) for i in range(3)])
+
+    late, t = 0.012, np.arange(0.5, 59.5, 0.1)
+    seen = pose(t - late)  # each scan taken 12 ms before its stamp
+    z = poses.between(seen[:-1], seen[1:]) + rng.normal(0.0, [3e-4, 3e-4, 1e-4], (t.size - 1, 3))
+    z[200] += [0.02, 0.0, 0.01]  # one bad match
+    k = np.arange(t.size - 1)
+    inc = RelativeMotions(k, k + 1, z, k + 1)
+
+    def at(lag_s: float) -> tuple[np.ndarray, tuple[str, ...], np.ndarray, np.ndarray, tuple[int, int]]:
+        wheels = pose(t - lag_s)  # the encoders read lag_s earlier
+        return (*_disagreement(inc, z, poses.between(wheels[:-1], wheels[1:])), (0, t.size))
+
+    at.log = SimpleNamespace(motions=inc)  # type: ignore[attr-defined]
+
+    def flagged(lag_s: float) -> set[int]:
+        e = at(lag_s)[0]
+        centre, spread = _robust(e)
+        return set(np.flatnonzero(np.max(np.abs(e - centre) / spread, axis=1) > MATCH_SCATTER).tolist())
+
+    assert 200 in flagged(0.0) and len(flagged(0.0)) > 3  # the jumps' sound increments too
+    fitted = _screen_lag(at, np.ones(inc.n, dtype=bool), (-0.5, 0.5))  # type: ignore[arg-type]
+    assert fitted == pytest.approx(late, abs=0.002)
+    assert flagged(fitted) == {200}
+    assert _screen_lag(at, np.ones(inc.n, dtype=bool), 0.03) == 0.03  # type: ignore[arg-type]
