@@ -86,6 +86,8 @@ class Sensor(Protocol):
     @property
     def noise_names(self) -> tuple[str, ...]: ...
     @property
+    def increment_noise_rows(self) -> tuple[int, ...]: ...  # z's row of each noise component, increments
+    @property
     def weights(self) -> tuple[str, ...]: ...  # each error row's information weight by name (): by halves
     @property
     def length_unit(self) -> str: ...  # the unit its positions are in ("m", or "trajectory units")
@@ -191,6 +193,13 @@ class SensorDefaults:
 
     def manifold(self, free: Sequence[str]) -> bool:
         return False
+
+    @property
+    def increment_noise_rows(self) -> tuple[int, ...]:
+        """The row of ``z`` each noise component (``noise_groups``' indices) lies on in a window whose
+        ``z`` is a measured increment (its noise its own): its first rows."""
+        groups: tuple[tuple[int, ...], ...] = self.noise_groups  # type: ignore[attr-defined]
+        return tuple(range(sum(len(g) for g in groups)))
 
     def floor_track(self, log: Log) -> np.ndarray:
         """What it measured of the drive on the floor: its unwrapped heading (no position)."""

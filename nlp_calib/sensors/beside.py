@@ -90,6 +90,13 @@ class Beside(SensorDefaults):
     def _rows(self) -> int:
         return int(self.reference_sensor.z_rows)
 
+    @property
+    def increment_noise_rows(self) -> tuple[int, ...]:
+        """The reference's noise on its rows, the gyro's on its integrated rates (after a camera's
+        seven rows, not its six components: the gyro's third would fall on its time row)."""
+        k = sum(len(g) for g in self.reference_sensor.noise_groups)
+        return (*range(k), *range(self._rows, self._rows + 3))
+
     def _mounts(self, mount: ca.SX) -> tuple[ca.SX, ca.SX]:
         n = len(self.reference_sensor.params)
         return mount[:n], mount[n:]
