@@ -102,6 +102,8 @@ class Sensor(Protocol):
     @property
     def lengths_from(self) -> str: ...  # what determines the lengths it does not, in words
     @property
+    def roles(self) -> str: ...  # what each of its sensors determines, in words ("": one sensor)
+    @property
     def per_log(self) -> tuple[str, ...]: ...  # its parameters each log has its own of, even when shared
     @property
     def clocks(self) -> tuple[str, ...]: ...  # its clocks' offsets (the clock block's keys)
@@ -180,6 +182,7 @@ class SensorDefaults:
     angles: ClassVar[tuple[str, ...]] = ()
     lengths_unseen: ClassVar[str] = ""
     lengths_from: ClassVar[str] = "fit beside a reference that measures distance"
+    roles: ClassVar[str] = ""
     #: The parameters each log of a fit of several has its own of with the mount shared (a gyro's
     #: bias, which changes with each power cycle); ``mounts: per_log`` gives each log all of them.
     per_log: ClassVar[tuple[str, ...]] = ()
