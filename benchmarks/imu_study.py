@@ -27,6 +27,7 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -89,7 +90,7 @@ def one(model: str, seed: int, roll: float, latency: float, folder: Path) -> tup
 
 
 #: docs/imu.md's camera_gyro.yaml, its files in the study's folder.
-CAMERA_SCENARIO = {
+CAMERA_SCENARIO: dict[str, Any] = {
     "name": "camera_gyro",
     "model": "diff_drive",
     "sensor": {"mount": "3d", "beside": "gyro"},
@@ -142,7 +143,8 @@ def main() -> None:
     by_name: dict[str, list[float]] = {}
     for seed in args.seeds if args.camera else []:
         with tempfile.TemporaryDirectory() as tmp:
-            for name, v in camera(seed, *args.camera, Path(tmp)).items():
+            duration, rate = args.camera
+            for name, v in camera(seed, duration, rate, Path(tmp)).items():
                 by_name.setdefault(name, []).append(abs(v))
                 scores.append(abs(v))
     if by_name:

@@ -485,7 +485,7 @@ def turn_axis_tilt(poses_path: Path) -> float | None:
     planar tracker's, about π/2 for a camera's optical frame; None where they turn too little."""
     trajectory = read_tum(poses_path)
     dt = np.diff(trajectory.time_s)
-    step = max(1, int(round(TURN_SPAN_S / max(float(np.median(dt)), 1e-9)))) if dt.size else 1
+    step = max(1, round(TURN_SPAN_S / max(float(np.median(dt)), 1e-9))) if dt.size else 1
     P = trajectory.poses
     if P.shape[0] <= step:
         return None
@@ -505,14 +505,16 @@ def _pose_sensor(poses_path: Path, gyro: bool) -> tuple[dict[str, Any], list[str
     words = []
     if mount == "3d":
         words.append(
-            f"the poses in {poses_path.name} turn about an axis {np.degrees(tilt or 0.0):.0f}° from their z: a "
-            "camera's (sensor: 3d, its mount x, y, z, roll, pitch, yaw on the base; docs/camera.md)."
+            f"the poses in {poses_path.name} turn about an axis {np.degrees(tilt or 0.0):.0f}° from their z: "
+            "a camera's (sensor: 3d, its mount x, y, z, roll, pitch, yaw on the base; docs/camera.md)."
         )
     todo = ("known: {sensor_z: <metres>}   # the camera's height, measured: planar driving cannot see it",)
     if not gyro:
         return ({"sensor": mount} if mount == "3d" else {}), words, todo if mount == "3d" else ()
     sensor = sensor_for(BESIDE[(mount, "gyro")])
-    words.append(f"beside them the gyro's rates in {poses_path.with_suffix(GYRO_SUFFIX).name}: {sensor.roles}.")
+    words.append(
+        f"beside them the gyro's rates in {poses_path.with_suffix(GYRO_SUFFIX).name}: {sensor.roles}."
+    )
     return {"sensor": {"mount": mount, "beside": "gyro"}}, words, todo if mount == "3d" else ()
 
 
