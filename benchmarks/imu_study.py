@@ -15,6 +15,8 @@ With ``--camera DURATION RATE``: a gyro beside a camera's poses instead (docs/im
 its ``camera_gyro.yaml``), each parameter's estimate − truth in its σ::
 
     nice -n 10 python3 benchmarks/imu_study.py --camera 40 30 --seeds 641 642 643
+
+``--noise-seed N`` draws the gyro's noise from a generator of its own (the same drives, other noise).
 """
 
 from __future__ import annotations
@@ -38,6 +40,8 @@ sys.path.insert(0, str(REPO))
 from nlp_calib.models import MODELS  # noqa: E402
 from nlp_calib.models.radians import in_units  # noqa: E402
 
+#: The gyro noise's own seed (``--noise-seed``; None: the drive's generator draws it).
+NOISE_SEED: int | None = None
 #: The commented line ``init`` drafts for the one measured length a gyro needs.
 TODO = re.compile(r"^# known: \{(\w+): <metres>\}.*$", re.MULTILINE)
 
@@ -49,8 +53,14 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
 
 
 def _simulate(model: str, seed: int, roll: float, latency: float, folder: Path) -> None:
-    """The bag at ``folder/gyro`` and its truth beside it."""
-    (folder / "sim.yaml").write_text(yaml.safe_dump({"model": model, "truth": {"imu_roll": roll}}))
+    """The bag at ``folder/gyro`` and its truth beside it (the gyro's noise drawn with
+    :data:`NOISE_SEED` where given)."""
+    sim = {
+        "model": model,
+        "truth": {"imu_roll": roll},
+        **({"noise_seed": NOISE_SEED} if NOISE_SEED is not None else {}),
+    }
+    (folder / "sim.yaml").write_text(yaml.safe_dump(sim))
     sim = _cli(
         "simulate", "--imu", "--out", str(folder / "gyro"), "--seed", str(seed), "--duration", "120",
         "--latency", str(latency), "--config", str(folder / "sim.yaml"),
@@ -138,7 +148,10 @@ def main() -> None:
     ap.add_argument("--roll", type=float, default=0.02)
     ap.add_argument("--latency", type=float, default=0.02)
     ap.add_argument("--camera", type=float, nargs=2, metavar=("DURATION", "RATE"))
+    ap.add_argument("--noise-seed", type=int, help="the gyro noise's own seed: the same drives, other noise")
     args = ap.parse_args()
+    global NOISE_SEED
+    NOISE_SEED = args.noise_seed
     scores: list[float] = []
     by_name: dict[str, list[float]] = {}
     for seed in args.seeds if args.camera else []:
