@@ -55,12 +55,12 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
 def _simulate(model: str, seed: int, roll: float, latency: float, folder: Path) -> None:
     """The bag at ``folder/gyro`` and its truth beside it (the gyro's noise drawn with
     :data:`NOISE_SEED` where given)."""
-    sim = {
+    options = {
         "model": model,
         "truth": {"imu_roll": roll},
         **({"noise_seed": NOISE_SEED} if NOISE_SEED is not None else {}),
     }
-    (folder / "sim.yaml").write_text(yaml.safe_dump(sim))
+    (folder / "sim.yaml").write_text(yaml.safe_dump(options))
     sim = _cli(
         "simulate", "--imu", "--out", str(folder / "gyro"), "--seed", str(seed), "--duration", "120",
         "--latency", str(latency), "--config", str(folder / "sim.yaml"),

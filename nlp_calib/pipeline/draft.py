@@ -501,21 +501,24 @@ def _pose_sensor(poses_path: Path, gyro: bool) -> tuple[dict[str, Any], list[str
     """The scenario's sensor for a TUM file's poses (a camera's where they turn about a tilted axis)
     and a gyro's CSV beside them, what the draft says of it and the lines it leaves for the user."""
     tilt = turn_axis_tilt(poses_path)
-    mount = "3d" if tilt is not None and tilt >= TILTED_RAD else "planar"
+    spatial = tilt is not None and tilt >= TILTED_RAD
+    # The registered mounts a gyro fits beside: the one whose poses are 3-D, or the planar one.
+    mount = next(m for m, _ in BESIDE if sensor_for(m).group == ("SE(3)" if spatial else "SE(2)"))
+    reference = sensor_for(mount)
     words = []
-    if mount == "3d":
+    if spatial:
         words.append(
             f"the poses in {poses_path.name} turn about an axis {np.degrees(tilt or 0.0):.0f}° from their z: "
-            "a camera's (sensor: 3d, its mount x, y, z, roll, pitch, yaw on the base; docs/camera.md)."
+            f"a camera's (sensor: {mount}, its pose on the base in 3-D; docs/camera.md)."
         )
-    todo = ("known: {sensor_z: <metres>}   # the camera's height, measured: planar driving cannot see it",)
+    todo = tuple(f"known: {{{n}: <metres>}}   # measured: {reference.held_why}" for n in reference.held)
     if not gyro:
-        return ({"sensor": mount} if mount == "3d" else {}), words, todo if mount == "3d" else ()
+        return ({"sensor": mount} if spatial else {}), words, todo
     sensor = sensor_for(BESIDE[(mount, "gyro")])
     words.append(
         f"beside them the gyro's rates in {poses_path.with_suffix(GYRO_SUFFIX).name}: {sensor.roles}."
     )
-    return {"sensor": {"mount": mount, "beside": "gyro"}}, words, todo if mount == "3d" else ()
+    return {"sensor": {"mount": mount, "beside": "gyro"}}, words, todo
 
 
 def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
