@@ -14,6 +14,9 @@ import yaml
 from conftest import cli
 
 from nlp_calib.pipeline import scenario_from_mapping
+from nlp_calib.pipeline.draft import TILTED_RAD, draft, turn_axis_tilt
+from nlp_calib.pipeline.recording import recording
+from nlp_calib.sensors import sensor_for
 from nlp_calib.simulation.beside import simulate_camera_beside, write_camera_beside_simulation
 from nlp_calib.simulation.camera import CameraNoise, CameraSimulationOptions
 from nlp_calib.simulation.imu import ImuSimulationOptions
@@ -58,13 +61,21 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, flo
     return scenario, truth
 
 
-def test_a_gyro_beside_a_cameras_poses_fits_within_3_sigma_and_check_reads_it_back(
-    drive: tuple[Path, dict[str, float]], tmp_path: Path
-) -> None:
-    scenario, truth = drive
-    out = tmp_path / "out"
+@pytest.fixture(scope="module")
+def ran(drive: tuple[Path, dict[str, float]]) -> Path:
+    """The run's output folder (beside the drive's files)."""
+    scenario, _ = drive
+    out = scenario.parent / "out"
     proc = cli("run", str(scenario), "--out", str(out))
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    return out
+
+
+def test_a_gyro_beside_a_cameras_poses_fits_within_3_sigma_and_check_reads_it_back(
+    drive: tuple[Path, dict[str, float]], ran: Path, tmp_path: Path
+) -> None:
+    scenario, truth = drive
+    out = ran
     stored = yaml.safe_load((out / "calibration.yaml").read_text())
     est, std = stored["parameters"], stored["std"]
     assert FITTED <= set(est)
@@ -91,3 +102,50 @@ def test_a_gyro_beside_a_planar_reference_reads_no_3d_motions(drive: tuple[Path,
     spatial = scenario_from_mapping(raw, "s", scenario.parent)
     assert not planar.log.source.in_3d  # type: ignore[attr-defined]
     assert spatial.log.source.in_3d  # type: ignore[attr-defined]
+
+
+def test_each_of_the_gyros_axes_carries_its_own_noise_beside_a_camera(ran: Path) -> None:
+    """A gyro's increment beside a camera holds its noise on its three integrated rates (after the
+    camera's seven rows: its third had fallen on its duration, so ∫ω_z's noise was left out and
+    gyro_bias_z's white-noise σ was 600 times gyro_bias_x's too small, gyro_lag's 27 times)."""
+    gn = json.loads((ran / "result.json").read_text())["solvers"]["gauss_newton"]
+    white, angle = gn["std_white_noise"], gn["noise"]["gyro_angle"]
+    # Each bias from its own axis's windows alone: σ_angle / √(Σ Δt²), 0.1 s intervals over 40 s.
+    alone = angle / np.sqrt(400 * 0.1**2)
+    for axis in "xyz":
+        assert white[f"gyro_bias_{axis}"] == pytest.approx(alone, rel=0.15), axis
+    assert sensor_for("3d_gyro").increment_noise_rows == (0, 1, 2, 3, 4, 5, 7, 8, 9)
+    assert sensor_for("planar_gyro").increment_noise_rows == (0, 1, 2, 3, 4, 5)
+
+
+def test_init_drafts_a_cameras_poses_beside_its_gyro_and_the_preflight_says_what_each_determines(
+    drive: tuple[Path, dict[str, float]], tmp_path: Path
+) -> None:
+    """``init`` on the camera's TUM file: its poses turn about an axis 60° from their z (the
+    camera's roll of −120°), so ``sensor: 3d``, with the gyro's CSV beside them; its height left as
+    a commented line; the pre-flight's record of the recording says what each sensor determines."""
+    scenario, _ = drive
+    tum = scenario.parent / "drive.tum"
+    assert turn_axis_tilt(tum) == pytest.approx(np.radians(60.0), abs=0.05)
+    d = draft(tum, tmp_path / "drive.yaml")
+    assert d.raw["sensor"] == {"mount": "3d", "beside": "gyro"}
+    assert Path(d.raw["dataset"]["gyro"]).name == "drive.gyro.csv"
+    assert "# known: {sensor_z: <metres>}" in d.text
+    sc = scenario_from_mapping(yaml.safe_load(scenario.read_text()), "s", scenario.parent)
+    rec = recording(sc, sc.log.source.read(sc.model_form(), strict=True))
+    (said,) = [n for n in rec.notes if n.startswith("sensors: ")]
+    assert "its mount (sensor_x, sensor_y, sensor_roll, sensor_pitch, sensor_yaw)" in said
+    assert "its clock offset (gyro_lag)" in said and "sensor_z is held" in said
+
+
+def test_a_level_trackers_tum_poses_are_drafted_planar(tmp_path: Path) -> None:
+    """A tracker's level poses turn about their own z: no camera (a tilt below TILTED_RAD)."""
+    t = np.arange(0.0, 20.0, 0.05)
+    yaw = 0.6 * np.sin(0.5 * t)
+    rows = [
+        f"{s:.3f} {np.cos(y):.6f} {np.sin(y):.6f} 0.1 0 0 {np.sin(y / 2):.9f} {np.cos(y / 2):.9f}"
+        for s, y in zip(1.7e9 + t, yaw)
+    ]
+    (tmp_path / "level.tum").write_text("\n".join(rows) + "\n")
+    tilt = turn_axis_tilt(tmp_path / "level.tum")
+    assert tilt is not None and tilt < 0.01 < TILTED_RAD

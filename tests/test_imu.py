@@ -14,6 +14,7 @@ import pytest
 import yaml
 from conftest import cli
 
+from nlp_calib.core.errors import OptionsError
 from nlp_calib.logs.imu import GyroRates, integrated
 from nlp_calib.models import MODELS
 from nlp_calib.models.radians import in_units
@@ -361,3 +362,20 @@ def test_a_tricycles_gyro_finds_its_clock_and_check_reads_back_each_calibration(
         check = cli("check", str(out / "calibration.yaml"), str(scenario), "--out", str(checked))
         assert check.returncode == 0, check.stdout + check.stderr
         assert "STILL GOOD" in check.stdout, (name, check.stdout)
+
+
+def test_the_gyros_noise_seed_draws_other_noise_on_the_same_drive() -> None:
+    """``noise_seed``: the gyro's noise from a generator of its own, the drive (the joints and the
+    noise-free rates) the same; without it the drive's generator draws the noise, as before."""
+    base = ImuSimulationOptions(model="tricycle", duration_s=5.0, seed=322)
+    quiet = simulate_imu(ImuSimulationOptions(model="tricycle", duration_s=5.0, seed=322, rate_noise=0.0))
+    own, other = (simulate_imu(ImuSimulationOptions(**{**base.__dict__, "noise_seed": n})) for n in (11, 12))
+    drawn = simulate_imu(base)
+    for sim in (own, other, drawn):
+        np.testing.assert_array_equal(sim.joint_positions, quiet.joint_positions)
+        assert np.std(sim.rates - quiet.rates) == pytest.approx(base.rate_noise, rel=0.05)
+    expected = np.random.default_rng(11).normal(0.0, base.rate_noise, quiet.rates.shape)
+    np.testing.assert_allclose(own.rates - quiet.rates, expected, atol=1e-15)
+    assert not np.allclose(own.rates, other.rates) and not np.allclose(own.rates, drawn.rates)
+    with pytest.raises(OptionsError, match="noise_seed"):
+        ImuSimulationOptions(noise_seed=-1)

@@ -524,6 +524,8 @@ class _Sums:
     #: Per window, whether its ``z`` is a measured increment (its noise its own, not a pose's);
     #: None: none is.
     increment: np.ndarray | None = None
+    #: The row of ``z`` each noise component lies on in a measured increment.
+    increment_rows: tuple[int, ...] = ()
 
     @classmethod
     def zero(
@@ -554,6 +556,7 @@ class _Sums:
             final=np.minimum.accumulate(a[::-1])[::-1] if a.size else a,
             stops=b,
             increment=inc,
+            increment_rows=tuple(fns.sensor.increment_noise_rows),
         )
 
     def _sources(
@@ -566,9 +569,9 @@ class _Sums:
         if self.increment is not None and self.increment[w].any():
             inc = self.increment[w]
             Ea, Eb = Ea.copy(), Eb.copy()
-            # An increment's noise lies on its first rows (a planar one's are all its noise's; a
-            # gyro's duration is exact).
-            Ea[inc], Eb[inc] = sens.de_dz[inc][:, :, : Ea.shape[2]], 0.0
+            # An increment's noise lies on the sensor's rows for it (a planar one's are all its
+            # noise's; a gyro's duration is exact; beside a camera, after its seven rows).
+            Ea[inc], Eb[inc] = sens.de_dz[inc][:, :, self.increment_rows], 0.0
         return a, b, Ea, Eb
 
     def add(self, w: slice, sens: Sensitivities, r: _Residuals, running: EndNoise) -> None:

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from nlp_calib.core import poses3d
 from nlp_calib.core.config import parse_yaml
 from nlp_calib.core.errors import FieldError, UsageError
 from nlp_calib.core.ranges import check_ros_name
@@ -34,9 +35,11 @@ from nlp_calib.logs.imu import IMU_TYPE
 from nlp_calib.logs.joint_log import read_joint_csv
 from nlp_calib.logs.reader import read_header
 from nlp_calib.logs.scans import SCAN_TYPE
+from nlp_calib.logs.tum import read_tum
 from nlp_calib.models import MODELS, encoders, model_for_log
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline.scenario import Scenario, scenario_from_mapping
+from nlp_calib.sensors import BESIDE, sensor_for
 from nlp_calib.sensors.mount import length_params
 from nlp_calib.sources.joints import paired_files
 
@@ -55,6 +58,13 @@ REFERENCE_WORDS = (
 NOT_REFERENCE_WORDS = ("odom", "cmd", "goal", "plan", "amcl", "estimate", "filtered")
 #: Words of a wheel joint's name when the encoder's own words are not in it.
 WHEEL_WORDS = ("wheel", "traction", "drive")
+#: A gyro's CSV beside a recording's poses ``NAME.tum`` (``t, wx, wy, wz``), as ``simulate --imu`` names it.
+GYRO_SUFFIX = ".gyro.csv"
+#: Poses whose motions turn about an axis this far (rad, about 30°) from their frame's z or more are
+#: a camera's (its optical frame: about 90°), not a planar tracker's, whose world is level.
+TILTED_RAD = 0.52
+#: ...judged on motions over about this long (s) that turn by at least this much (rad).
+TURN_SPAN_S, TURN_MIN_RAD = 1.0, 0.05
 #: What the draft asks of a first run.
 DEFAULTS: Mapping[str, Any] = {
     "initial_guess": "auto",
@@ -470,26 +480,72 @@ def _draft_alone(
     return Draft(raw, text, (*_listing(found), f"model {name}: {why}", alone.short))
 
 
+def turn_axis_tilt(poses_path: Path) -> float | None:
+    """How far (rad) the axis a TUM file's poses turn about lies from their frame's z: about 0 for a
+    planar tracker's, about π/2 for a camera's optical frame; None where they turn too little."""
+    trajectory = read_tum(poses_path)
+    dt = np.diff(trajectory.time_s)
+    step = max(1, round(TURN_SPAN_S / max(float(np.median(dt)), 1e-9))) if dt.size else 1
+    P = trajectory.poses
+    if P.shape[0] <= step:
+        return None
+    phi = poses3d.quat_to_rotvec(poses3d.between(P[:-step], P[step:])[:, 3:7])
+    phi = phi[np.linalg.norm(phi, axis=1) >= TURN_MIN_RAD]
+    if phi.shape[0] < 3:
+        return None
+    axis = np.linalg.eigh(phi.T @ phi)[1][:, -1]
+    return float(np.arccos(min(1.0, abs(float(axis[2])))))
+
+
+def _pose_sensor(poses_path: Path, gyro: bool) -> tuple[dict[str, Any], list[str], tuple[str, ...]]:
+    """The scenario's sensor for a TUM file's poses (a camera's where they turn about a tilted axis)
+    and a gyro's CSV beside them, what the draft says of it and the lines it leaves for the user."""
+    tilt = turn_axis_tilt(poses_path)
+    spatial = tilt is not None and tilt >= TILTED_RAD
+    # The registered mounts a gyro fits beside: the one whose poses are 3-D, or the planar one.
+    mount = next(m for m, _ in BESIDE if sensor_for(m).group == ("SE(3)" if spatial else "SE(2)"))
+    reference = sensor_for(mount)
+    words = []
+    if spatial:
+        words.append(
+            f"the poses in {poses_path.name} turn about an axis {np.degrees(tilt or 0.0):.0f}° from their z: "
+            f"a camera's (sensor: {mount}, its pose on the base in 3-D; docs/camera.md)."
+        )
+    todo = tuple(f"known: {{{n}: <metres>}}   # measured: {reference.held_why}" for n in reference.held)
+    if not gyro:
+        return ({"sensor": mount} if spatial else {}), words, todo
+    sensor = sensor_for(BESIDE[(mount, "gyro")])
+    words.append(
+        f"beside them the gyro's rates in {poses_path.with_suffix(GYRO_SUFFIX).name}: {sensor.roles}."
+    )
+    return {"sensor": {"mount": mount, "beside": "gyro"}}, words, todo
+
+
 def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
     joints_path, poses_path = paired_files(path)
     table = read_joint_csv(joints_path)
     name, joints, why = guess_model(list(table.names), model)
+    gyro_path = poses_path.with_suffix(GYRO_SUFFIX)
+    gyro = gyro_path.is_file()
     dataset = {
         "joints": _relative(joints_path, where),
         "poses": _relative(poses_path, where),
+        **({"gyro": _relative(gyro_path, where)} if gyro else {}),
         "encoders": dict(joints),
     }
     _one_line_names(joints_path, dataset)
-    raw = {"name": where.stem, "model": name, "dataset": dataset, **defaults(name)}
+    sensor, words, todo = _pose_sensor(poses_path, gyro)
+    raw = {"name": where.stem, "model": name, **sensor, "dataset": dataset, **defaults(name)}
     header = [
         f"Drafted by nlp-calib init from {joints_path.name} (joints: {', '.join(table.names)}) and "
-        f"{poses_path.name}.",
+        f"{poses_path.name}" + (f" (a gyro's rates beside them: {gyro_path.name})." if gyro else "."),
         f"model: {name}, because {why}.",
+        *words,
         f"Check it before a run: nlp-calib preflight {where}",
     ]
-    return Draft(
-        raw, _text(header, raw, NOTES), (f"joints: {', '.join(table.names)}", f"model {name}: {why}")
-    )
+    found = (f"joints: {', '.join(table.names)}", f"model {name}: {why}")
+    text = _text(header, raw, NOTES) + "".join(f"# {line}\n" for line in todo)
+    return Draft(raw, text, (*found, *((f"gyro beside the poses {gyro_path.name}",) if gyro else ())))
 
 
 def _draft_text_log(path: Path, where: Path, model: str | None) -> Draft:

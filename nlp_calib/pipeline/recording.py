@@ -67,6 +67,9 @@ def recording(sc: Scenario, log: Log) -> Recording:
     if isinstance(source, BagSource):
         streams += _bag_streams(source)
     notes = [f"times: {source.clock()}"]
+    roles = sc.objective.sensor.sensor.roles
+    if roles:
+        notes.append(f"sensors: {roles}")
     if log.dropped:
         notes.append(f"{len(log.dropped)} record(s) left out while reading (first: {log.dropped[0].reason})")
     if joints is not None and joints.integrated:

@@ -86,6 +86,8 @@ class Sensor(Protocol):
     @property
     def noise_names(self) -> tuple[str, ...]: ...
     @property
+    def increment_noise_rows(self) -> tuple[int, ...]: ...  # z's row of each noise component, increments
+    @property
     def weights(self) -> tuple[str, ...]: ...  # each error row's information weight by name (): by halves
     @property
     def length_unit(self) -> str: ...  # the unit its positions are in ("m", or "trajectory units")
@@ -99,6 +101,8 @@ class Sensor(Protocol):
     def lengths_unseen(self) -> str: ...  # why it determines no length, in words ("": it measures them)
     @property
     def lengths_from(self) -> str: ...  # what determines the lengths it does not, in words
+    @property
+    def roles(self) -> str: ...  # what each of its sensors determines, in words ("": one sensor)
     @property
     def per_log(self) -> tuple[str, ...]: ...  # its parameters each log has its own of, even when shared
     @property
@@ -178,6 +182,7 @@ class SensorDefaults:
     angles: ClassVar[tuple[str, ...]] = ()
     lengths_unseen: ClassVar[str] = ""
     lengths_from: ClassVar[str] = "fit beside a reference that measures distance"
+    roles: ClassVar[str] = ""
     #: The parameters each log of a fit of several has its own of with the mount shared (a gyro's
     #: bias, which changes with each power cycle); ``mounts: per_log`` gives each log all of them.
     per_log: ClassVar[tuple[str, ...]] = ()
@@ -191,6 +196,13 @@ class SensorDefaults:
 
     def manifold(self, free: Sequence[str]) -> bool:
         return False
+
+    @property
+    def increment_noise_rows(self) -> tuple[int, ...]:
+        """The row of ``z`` each noise component (``noise_groups``' indices) lies on in a window whose
+        ``z`` is a measured increment (its noise its own): its first rows."""
+        groups: tuple[tuple[int, ...], ...] = self.noise_groups  # type: ignore[attr-defined]
+        return tuple(range(sum(len(g) for g in groups)))
 
     def floor_track(self, log: Log) -> np.ndarray:
         """What it measured of the drive on the floor: its unwrapped heading (no position)."""

@@ -90,6 +90,25 @@ class Beside(SensorDefaults):
     def _rows(self) -> int:
         return int(self.reference_sensor.z_rows)
 
+    @property
+    def roles(self) -> str:  # type: ignore[override]  # a class's words computed from its two sensors
+        """What each sensor determines, as the pre-flight says it."""
+        ref, gyro = self.reference_sensor, self.gyro
+        mount = ", ".join(p for p in ref.params if p not in ref.held)
+        held = f"; {', '.join(ref.held)} is held: {ref.held_why}" if ref.held else ""
+        return (
+            f"the {ref.label} determines the wheels' lengths, its mount ({mount}) and its clock offset "
+            f"({LAG_PARAM}); the gyro beside it its biases and tilt ({', '.join(gyro.params)}) and its "
+            f"clock offset ({GYRO_LAG}), and with the {ref.label} the wheels' turning{held}"
+        )
+
+    @property
+    def increment_noise_rows(self) -> tuple[int, ...]:
+        """The reference's noise on its rows, the gyro's on its integrated rates (after a camera's
+        seven rows, not its six components: the gyro's third would fall on its time row)."""
+        k = sum(len(g) for g in self.reference_sensor.noise_groups)
+        return (*range(k), *range(self._rows, self._rows + 3))
+
     def _mounts(self, mount: ca.SX) -> tuple[ca.SX, ca.SX]:
         n = len(self.reference_sensor.params)
         return mount[:n], mount[n:]

@@ -72,11 +72,16 @@ class ImuSimulationOptions:
     drive: DriveShape = field(default_factory=lambda: LIDAR_DRIVE)
     #: The Imu messages' ``frame_id`` (and the child of its ``/tf_static`` transform).
     frame: str = "imu_link"
+    #: The seed of the gyro noise's own generator (None: the drive's goes on to draw it): the same
+    #: drive with other draws of its noise.
+    noise_seed: int | None = None
 
     def __post_init__(self) -> None:
         for name, limit in LIMITS.items():
             if (reason := limit.problem(getattr(self, name))) is not None:
                 raise OptionsError(f"{name} {reason}")
+        if self.noise_seed is not None and (reason := LIMITS["seed"].problem(self.noise_seed)) is not None:
+            raise OptionsError(f"noise_seed {reason}")
         object.__setattr__(self, "truth", full_truth(self.model, self.truth, DEFAULT_GYRO))
 
 
@@ -136,7 +141,8 @@ def simulate_imu(opts: ImuSimulationOptions) -> ImuSimulation:
     t_joints = np.arange(-0.5, opts.duration_s + 0.5, 1.0 / opts.joint_rate_hz)
     t_fine = fine_grid(t_imu, t_joints)
     planar, channels = base_motion(opts.model, opts.truth, opts.drive, rng, t_fine)
-    rates, accel = gyro_readings(opts, rng, t_fine, planar)
+    noise = rng if opts.noise_seed is None else np.random.default_rng(opts.noise_seed)
+    rates, accel = gyro_readings(opts, noise, t_fine, planar)
     at_joints = np.searchsorted(t_fine, t_joints)
     angles = joint_map(opts.model).angles(opts.truth, {k: v[at_joints] for k, v in channels.items()})
     return ImuSimulation(
