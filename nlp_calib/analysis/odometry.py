@@ -178,7 +178,7 @@ def segment_drift(
     return Drift(*stacked, *where, np.concatenate(reads))
 
 
-def _moments(A: np.ndarray, y: np.ndarray, known: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+def moments(A: np.ndarray, y: np.ndarray, known: np.ndarray, predicted: np.ndarray) -> np.ndarray:
     """Non-negative variances ``x`` with ``A·x + known ≈ y`` (squared errors): a squared error's
     spread grows with its expected value (a χ² with one degree of freedom), so each equation is
     weighted by the inverse of its prediction, refined a few times."""
@@ -262,7 +262,7 @@ def drift_noise(
     y = np.concatenate([errors[:, c] ** 2 for c in range(3)])
     known = _diagonals(drift.known(floor))
     start = np.repeat([max(float(np.mean(errors[:, c] ** 2)), 1e-300) for c in range(3)], len(errors))
-    point = _moments(A, y, known, start)
+    point = moments(A, y, known, start)
     predicted = np.maximum(A @ point + known, 1e-300)
     var = _largest(_Profile(A, y - known, n_in, predicted, float(np.mean(y))), point[:n_in])
     noise = np.zeros_like(floor)
