@@ -114,22 +114,24 @@ def _ratios(units: np.ndarray, rates: np.ndarray, errors: np.ndarray, known: np.
 
 
 #: Which of :func:`systematic_shapes` the odometry's own error makes (a wheel's scale, a heading
-#: error per metre or per radian); one across the motion is a mount's yaw, the reference's.
-ODOMETRY_SHAPES = np.array([1.0, 0.0, 1.0, 1.0])
+#: error per metre or per radian, the clocks' offset); one across the motion is a mount's yaw, the
+#: reference's.
+ODOMETRY_SHAPES = np.array([1.0, 0.0, 1.0, 1.0, 1.0])
 
 
 def systematic_shapes(increments: np.ndarray, spans: np.ndarray) -> np.ndarray:
     """What a constant error of the calibration makes of each span ``(i, j)``'s motion, in the base
-    frame at ``i`` ``(4, S, 3)``: a scale of the distance along the motion, one across it, a heading
+    frame at ``i`` ``(5, S, 3)``: a scale of the distance along the motion, one across it, a heading
     error per metre driven and one per radian turned (each signed as the motion: a wheel's radius,
-    a mount's yaw, a steering offset, a track), at unit size. It is the same on every segment, so
-    the segments' errors regress on it; a random walk's do not."""
+    a mount's yaw, a steering offset, a track), and an offset of the reference's clock by one
+    interval, at unit size. It is the same
+    on every segment, so the segments' errors regress on it; a random walk's do not."""
     track = poses.accumulate(np.zeros(3), increments)
     xy = track[:, :2]
     distance = np.sign(increments[:, 0]) * np.hypot(increments[:, 0], increments[:, 1])
     i, j = spans[:, 0], spans[:, 1]
     moved = xy[j] - xy[i]
-    out = np.zeros((4, spans.shape[0], 3))
+    out = np.zeros((5, spans.shape[0], 3))
     out[0, :, :2] = moved
     out[1, :, :2] = np.c_[-moved[:, 1], moved[:, 0]]
     for k, w in ((2, distance), (3, increments[:, 2])):
@@ -139,6 +141,13 @@ def systematic_shapes(increments: np.ndarray, spans: np.ndarray) -> np.ndarray:
         arm = xy[j] * turned[:, None] - (Wp[j] - Wp[i])  # Σ w·(p_j − p_{k+1})
         out[k, :, :2] = np.c_[-arm[:, 1], arm[:, 0]]
         out[k, :, 2] = turned
+    # The motion per interval at each record: the mean of the intervals either side of it.
+    step = np.diff(track, axis=0)
+    at = 0.5 * (step[np.r_[0, np.arange(step.shape[0])]] + step[np.r_[np.arange(step.shape[0]), -1]])
+    # Read late by one interval: the motion at the end less that at the start, the start's heading
+    # turned by its own turn per interval (the segment restarts from the reference's heading).
+    out[4] = at[j] - at[i]
+    out[4, :, :2] -= at[i, 2, None] * np.c_[-moved[:, 1], moved[:, 0]]
     c, s = np.cos(track[i, 2]), np.sin(track[i, 2])
     x, y = out[:, :, 0].copy(), out[:, :, 1].copy()
     out[:, :, 0], out[:, :, 1] = c * x + s * y, -s * x + c * y
