@@ -3,7 +3,7 @@
     nice -n 10 python3 benchmarks/vehicle_noise.py --car 5 6 7 --skid 5 6 7
 
 For each simulated highway car (given what a straight kilometre cannot determine, as
-``tests/test_vehicles.py`` gives it) and fast-spinning skid-steer (pivot slip 0.1) of the seeds the
+``tests/test_vehicles.py`` gives it) and fast-spinning skid-steer (pivot slip 0.1 unless ``--pivot-slip`` says) of the seeds the
 arguments name: the σ the run hands off (each input's noise propagated, and the rates per metre and
 per radian grown as a filter grows them) over the σ whose 2σ holds 95 % of the true errors over the
 fit's windows, per component (x, y, θ in the base frame at the window's start) and together: 1 where
@@ -49,19 +49,28 @@ SKID = {
 }
 
 
-def _car(folder: Path, seed: int) -> tuple[Any, Any, tuple[np.ndarray, np.ndarray, int]]:
+def _car(folder: Path, seed: int, _: float) -> tuple[Any, Any, tuple[np.ndarray, np.ndarray, int]]:
     opts = HighwayOptions(seed=seed)
     sim = simulate_highway(opts)
     joints, poses, _ = sim.write(folder / "car")
     wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
     known = {CAR_NAMES.get(n, n): opts.truth[n] for n in CAR_KNOWN}
-    dataset = {"joints": str(joints), "poses": str(poses), "form": "speeds", "encoders": dict(zip(wheels, wheels))}
+    dataset = {
+        "joints": str(joints),
+        "poses": str(poses),
+        "form": "speeds",
+        "encoders": dict(zip(wheels, wheels)),
+    }
     sc = {"model": "car_like", "initial_guess": "auto", "solvers": ["gauss_newton"], "dataset": dataset}
-    return scenario_from_mapping({**sc, "known": known}, "car", folder), None, (sim.joint_time_s, sim.base_poses, EPOCH_NS)
+    return (
+        scenario_from_mapping({**sc, "known": known}, "car", folder),
+        None,
+        (sim.joint_time_s, sim.base_poses, EPOCH_NS),
+    )
 
 
-def _skid(folder: Path, seed: int) -> tuple[Any, Any, tuple[np.ndarray, np.ndarray, int]]:
-    sim = simulate_skid_spins(SkidSpinOptions(duration_s=240.0, seed=seed, pivot_slip=0.1))
+def _skid(folder: Path, seed: int, pivot_slip: float) -> tuple[Any, Any, tuple[np.ndarray, np.ndarray, int]]:
+    sim = simulate_skid_spins(SkidSpinOptions(duration_s=240.0, seed=seed, pivot_slip=pivot_slip))
     joints, motions, _ = sim.write(folder / "skid")
     encoders = {"left_wheel": "left_wheel_joint", "right_wheel": "right_wheel_joint"}
     dataset = {"joints": str(joints), "motions": str(motions), "encoders": encoders}
@@ -73,18 +82,21 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--car", type=int, nargs="*", default=[], help="highway car seeds")
     ap.add_argument("--skid", type=int, nargs="*", default=[], help="skid-steer seeds")
+    ap.add_argument("--pivot-slip", type=float, default=0.1, help="the skid-steer's slip on pivots")
     args = ap.parse_args()
     print("case      way     x      y      θ      together   (σ over the σ holding 95 % of true errors)")
     for kind, build, seeds in (("car", _car, args.car), ("skid", _skid, args.skid)):
         for seed in seeds:
             with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                sc, wanted, truth = build(Path(tmp), seed)
+                sc, wanted, truth = build(Path(tmp), seed, args.pivot_slip)
                 calib = Calibration(sc)
                 run = calib.run(wanted=wanted) if wanted else calib.run()
                 found = sigma_over_truth(calib, run, truth)
             for (way, _), r in found.items():
-                print(f"{kind} {seed:<4d} {way:6s} " + " ".join(f"{v:6.2f}" for v in r[:3]) + f"   {r[3]:6.2f}")
+                print(
+                    f"{kind} {seed:<4d} {way:6s} " + " ".join(f"{v:6.2f}" for v in r[:3]) + f"   {r[3]:6.2f}"
+                )
 
 
 if __name__ == "__main__":

@@ -7,8 +7,8 @@ noise alone (a smooth motion's third difference is its jerk times the cycle cube
 third difference has 20 times one reading's variance; a wheel speed integrated by trapezoids
 (:func:`~nlp_calib.logs.joint_log.wheel_positions`, a bag's velocities alike) gives the mean of two
 neighbouring speeds per message, whose third difference has 2.5 times one speed's. The spread is
-read robustly (the median's absolute deviation), so a driver's steps or a slow encoder's held
-readings (most third differences exactly zero) give no noise, never too much.
+read robustly (the median's absolute deviation: a driver's steps do not count), over the readings
+that changed (a message repeating a slow encoder's last update is no reading of its own).
 
 That noise adds up along a drive only where a reading's noise enters one interval and not the
 next: a speed's (integrated) and a steering angle's (each interval's own angle turns the base
@@ -38,6 +38,13 @@ def _robust_std(x: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(x - np.median(x)))) if x.size >= 8 else 0.0
 
 
+def _third_differences(x: np.ndarray) -> np.ndarray:
+    """The third differences of the readings ``x`` that changed (a message repeating the last
+    update of a slow encoder is no reading of its own)."""
+    x = x[np.isfinite(x)]
+    return np.diff(x[np.r_[True, np.diff(x) != 0.0]], 3)
+
+
 def reading_jitter(stream: JointStream, names: tuple[str, ...]) -> np.ndarray:
     """Each joint's white noise of one reading (``names``: the stream's columns' encoders): of its
     speed (rad/s) where it was integrated from speeds, else of its position (rad)."""
@@ -47,18 +54,17 @@ def reading_jitter(stream: JointStream, names: tuple[str, ...]) -> np.ndarray:
         return out
     dt = np.diff(t)
     for j, name in enumerate(names):
-        step = np.diff(stream.positions[:, j])
         if name in stream.integrated:
+            step = np.diff(stream.positions[:, j])
             speed = np.divide(step, dt, out=np.full_like(step, np.nan), where=dt > 0)
-            out[j] = _robust_std(np.diff(speed, 3)) / np.sqrt(THIRD_DIFFERENCE["speed"])
+            out[j] = _robust_std(_third_differences(speed)) / np.sqrt(THIRD_DIFFERENCE["speed"])
         else:
-            out[j] = _robust_std(np.diff(stream.positions[:, j], 3)) / np.sqrt(THIRD_DIFFERENCE["position"])
+            spread = _robust_std(_third_differences(stream.positions[:, j]))
+            out[j] = spread / np.sqrt(THIRD_DIFFERENCE["position"])
     return out
 
 
-def _drawn(
-    stream: JointStream, sigma: np.ndarray, rng: np.random.Generator
-) -> tuple[np.ndarray, np.ndarray]:
+def _drawn(stream: JointStream, sigma: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """One draw of the readings' noise: integrated as a speed's readings are, and as drawn."""
     n, m = stream.positions.shape
     noise = rng.normal(size=(n, m)) * sigma

@@ -1,14 +1,19 @@
 """The odometry's noise per metre driven and per radian turned, as a filter's process noise takes it.
 
-Each interval's increment covariance from the calibrated inputs' noise (``G·diag(σ_u²)·Gᵀ``, in
-the base frame at the interval's start, :mod:`nlp_calib.analysis.odometry`) is split, component
-by component (along, across, heading), into a variance per metre driven and one per radian turned
-(non-negative least squares on the intervals' |distance| and |turn|): what AMCL's ``odom_alpha``
-or a hand-written EKF's process noise ask for. Those rates are then checked on the drift segments
-themselves: each segment's covariance grown from them as a filter grows it (``P' = F·P·Fᵀ + Q``,
-the heading's noise carried by the distance still to drive), with the reference's own variances,
-must hold :data:`~nlp_calib.analysis.odometry.COVERED` of the segments' errors within 2σ, else all
-rates are raised by one factor until it does: at least the drift the windows show.
+A rate per metre and per radian for each component (along, across, heading) is what AMCL's
+``odom_alpha`` or a hand-written EKF's process noise ask for. Each interval adds
+``Q = diag(rates·(|distance|, |turn|))`` in the base frame at its start, grown over a span as a
+filter grows it (``P' = F·P·Fᵀ + Q``, the heading's noise carried by the distance still to drive:
+:func:`grown_covariances`); the rates are fitted on the drift segments themselves, component by
+component (:func:`segment_rates`), beside the reference's own variances (its noise does not grow
+with a segment's length, the wheels' does) and the calibration's constant errors (a wheel's scale,
+a heading error per metre or per radian, the clocks' offset: they grow faster still, the same on
+every segment, so they are regressed on the errors, :func:`systematic_shapes`, and counted over the
+shortest segments). A rate the segments do not show (a car's wheels under its device's 2 cm) is
+the joints' own noise's (:mod:`nlp_calib.analysis.jitter`) where they show one, else the inputs'
+noise's (the most the segments allow along the wheels' noise), said (``bounded``). A component whose 2σ holds fewer than
+:data:`~nlp_calib.analysis.odometry.COVERED` of the segments' errors gets the smallest share of the
+inputs' noise's rates that makes it hold them: at least the drift the windows show.
 """
 
 from __future__ import annotations
@@ -162,7 +167,7 @@ def segment_rates(
     segments' squared ``errors`` less the calibration's constant error (its ``shapes``' sizes,
     returned third, regressed on the errors themselves), each component its own (the method of
     moments: the wheels' noise model ties along, across and heading together, a slipping or
-    slow-read base's drift does not); a rate the segments do not show (:func:`_significant`) is 0."""
+    slow-read base's drift does not); a rate the segments do not show (:func:`_shown`) is NaN."""
     terms, reads = known
     diag = np.diagonal(np.concatenate([units, terms]), axis1=-2, axis2=-1)  # (6 + k, S, 3)
     A = np.concatenate([diag[:, :, c].T for c in range(3)])
@@ -177,27 +182,29 @@ def segment_rates(
         bias = np.linalg.lstsq(B * w[:, None], e * w, rcond=None)[0]
         var = moments(A / scale, (e - B @ bias) ** 2, k, predicted) / scale
         predicted = A @ var + k
-    rates = np.where(_significant(A, var, predicted)[:6], var[:6], 0.0)
+    rates = np.where(_shown(A, var, predicted)[:6], var[:6], np.nan)
     return rates.reshape(2, 3), var[6:], bias
 
+
+#: The rates' components.
+AXES = ("along", "across", "heading")
 
 #: How many σ of its own a rate the segments fit must stand above zero to count as shown by them.
 SHOWN = 2.0
 
 
-def _significant(A: np.ndarray, var: np.ndarray, predicted: np.ndarray) -> np.ndarray:
-    """Which fitted variances ``var`` the squared errors show (:data:`SHOWN`): each squared error's
-    variance is twice its prediction's square (a χ² with one degree of freedom) and half-overlapping
-    segments count about half, so the fit's covariance is twice ``(AᵀWA)⁻¹`` over the variances it
-    fitted; one fitted under the reference's noise (a car's wheels under its device's 2 cm) is
-    noise of that fit, not the odometry's."""
+def _shown(A: np.ndarray, var: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """Which fitted variances ``var`` the squared errors show (:data:`SHOWN` σ above 0): each
+    squared error's variance is twice its prediction's square (a χ² with one degree of freedom)
+    and half-overlapping segments count about half, so the fit's covariance is twice
+    ``(AᵀWA)⁻¹`` over the variances it fitted. One fitted under the reference's noise (a car's
+    wheels under its device's 2 cm) is noise of that fit, not the odometry's."""
     on = var > 0
     if not on.any():
         return on
     w = 1.0 / (2.0 * np.maximum(predicted, 1e-300) ** 2)
-    Aon = A[:, on]
     try:
-        cov = 2.0 * np.linalg.inv(Aon.T @ (Aon * w[:, None]))
+        cov = 2.0 * np.linalg.inv(A[:, on].T @ (A[:, on] * w[:, None]))
     except np.linalg.LinAlgError:
         return np.zeros_like(on)
     shown = np.zeros_like(on)
@@ -258,13 +265,12 @@ def noise_rates(
     checked: tuple[Drift, np.ndarray, np.ndarray],
     jitter: np.ndarray | None = None,
 ) -> NoiseRates:
-    """The rates fitted on ``checked``'s drift segments, each component its own (the inputs' noise
-    ``noise`` propagated where there is none): the segments over the same records, the reference's
-    own position and heading variances and the readings' 1σ per input (their rounding, which does
-    not add up per metre); never under what the joints' own noise gives (``jitter``, each input's
-    1σ per interval: a drift under the reference's noise is not shown by it, but is by them); a
-    component whose 2σ holds fewer than :data:`COVERED` of the segments' errors is raised until it
-    does."""
+    """The rates of the module docstring over ``inputs`` at ``params``: ``checked`` holds the drift
+    segments over the same records, the reference's own position and heading variances (those
+    credited, > 0, are refitted) and the readings' 1σ per input (their rounding, which does not add
+    up per metre); ``noise`` each input's 1σ per interval (its random walk: the rates where there is
+    no segment, and the shape of what a short component gets), ``jitter`` what the joints' own
+    noise gives each input per interval (never under it)."""
     drift, reference_var, floor = checked
     increments, variances = _increments(fns, params, inputs, noise)
     given = fit_rates(increments, variances)
@@ -272,7 +278,7 @@ def noise_rates(
     if jitter is not None and np.any(jitter > 0):
         least = fit_rates(*_increments(fns, params, inputs, jitter))
     if drift.spans.shape[0] == 0:
-        return NoiseRates(_three(given[0]), _three(given[1]), None, 0, 1.0)
+        return NoiseRates(_three(given[0]), _three(given[1]), None, 0, 0.0)
     units = _unit_growth(increments, drift.spans)
     errors, reads, terms = _local(drift, floor)
     shapes = systematic_shapes(increments, drift.spans)
@@ -283,7 +289,14 @@ def noise_rates(
     # A constant error across the motion is the mount's yaw (the reference's, not the odometry's).
     systematic = np.einsum("m,msc->sc", bias * ODOMETRY_SHAPES, shapes)
     errors = errors - np.einsum("m,msc->sc", bias * (1.0 - ODOMETRY_SHAPES), shapes)
-    rates = np.maximum(rates, least) + systematic_rates(increments, drift.spans, systematic)
+    # A rate the segments do not show is the joints' own noise's where they show some in that
+    # component (a car's wheel speeds under its device's noise), else the inputs' noise's (the
+    # most the segments allow along the wheels' noise: bounded, said).
+    jittered = np.broadcast_to(np.any(least > 0, axis=0), rates.shape)
+    unshown = np.isnan(rates)
+    bounded = tuple(a for a, c in zip(AXES, np.any(unshown & ~jittered, axis=0)) if c)
+    rates = np.where(unshown, np.where(jittered, least, given), np.maximum(rates, least))
+    rates = rates + systematic_rates(increments, drift.spans, systematic)
     raised = np.zeros(3)
     for _ in range(4):  # a heading raised carries into the positions: again
         for c in range(3):
@@ -293,5 +306,10 @@ def noise_rates(
             raised[c] += share
     coverage = float(np.mean(_ratios(units, rates, errors, known) <= 2.0))
     return NoiseRates(
-        _three(rates[0]), _three(rates[1]), coverage, int(drift.spans.shape[0]), float(np.max(raised))
+        _three(rates[0]),
+        _three(rates[1]),
+        coverage,
+        int(drift.spans.shape[0]),
+        float(np.max(raised)),
+        bounded,
     )

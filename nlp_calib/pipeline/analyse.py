@@ -630,7 +630,9 @@ def handoff_noise(
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
     found = odometry_noise(fit.fns, params, d.inputs, time_s, (noise, windows.input_noise_std))
     checked = (d.drift, d.reference_var, windows.input_noise_std)
-    return dataclasses.replace(found, rates=noise_rates(fit.fns, params, d.inputs, d.noise, checked, d.jitter))
+    return dataclasses.replace(
+        found, rates=noise_rates(fit.fns, params, d.inputs, d.noise, checked, d.jitter)
+    )
 
 
 @dataclass(frozen=True)
