@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest import cli
 from odometry_truth import sigma_over_truth
 
 from nlp_calib.analysis.precision import HEADING_BUDGET
@@ -151,6 +152,49 @@ def test_a_skid_steer_whose_pivots_slipped_is_never_called_good(tmp_path: Path) 
     said = [r for r in run.verdict.reasons if "pivots the ground slipped on were left out" in r]
     # The rule that keeps or leaves out a pivot, stated with it (the summary prints the verdict).
     assert said and "under 0.5 m of travel per radian turned" in said[0] and "5× the increments'" in said[0]
+
+
+@pytest.mark.parametrize(
+    ("vehicle", "flags", "options", "simulator"),
+    [
+        (
+            "skid_spins",
+            ("--seed", "3", "--duration", "20", "--noise-theta", "0.004"),
+            SkidSpinOptions(duration_s=20.0, seed=3, motion_noise_theta=0.004),
+            simulate_skid_spins,
+        ),
+        (
+            "highway_car",
+            ("--seed", "31", "--duration", "10"),
+            HighwayOptions(duration_s=10.0, seed=31),
+            simulate_highway,
+        ),
+    ],
+)
+def test_the_command_line_writes_a_vehicles_drive_as_the_simulator_does(
+    tmp_path: Path, vehicle: str, flags: tuple[str, ...], options: Any, simulator: Any
+) -> None:
+    """``simulate --vehicle``: the joints, the reference and the truth the tests and the benchmark
+    calibrate, byte for byte, and how a scenario reads them; what does not apply is refused."""
+    config = tmp_path / "vehicle.yaml"
+    config.write_text("pivot_slip: 0.05\n" if vehicle == "skid_spins" else "pose_noise: [0.03, 0.001]\n")
+    proc = cli(
+        "simulate", "--vehicle", vehicle, "--out", str(tmp_path / "drive"), "--config", str(config), *flags
+    )
+    assert proc.returncode == 0, proc.stderr
+    given = {"pivot_slip": 0.05} if vehicle == "skid_spins" else {"pose_noise": (0.03, 0.001)}
+    expected = simulator(dataclasses.replace(options, **given))
+    joints, reference, truth = (
+        tmp_path / f"drive{s}"
+        for s in (".csv", ".motions.csv" if vehicle == "skid_spins" else ".tum", ".truth.json")
+    )
+    assert joints.read_text() == expected.joints_csv()
+    assert reference.read_text() == (
+        expected.motions_csv() if vehicle == "skid_spins" else expected.poses_tum()
+    )
+    assert truth.is_file() and "a scenario reads it as: dataset: {joints:" in proc.stdout
+    refused = cli("simulate", "--vehicle", vehicle, "--out", str(tmp_path / "again"), "--records", "20")
+    assert refused.returncode == 2 and "records: does not apply to a " + vehicle in refused.stderr
 
 
 # --- a car on a highway ------------------------------------------------------------------------

@@ -18,6 +18,7 @@ from nlp_calib.outputs.ros2_control import DEFAULT_ROS_DISTRO, ROS_DISTROS
 from nlp_calib.pipeline.options import BLOCKS
 from nlp_calib.pipeline.simconfig import CLI_LIMITS
 from nlp_calib.simulation import TRAJECTORIES
+from nlp_calib.simulation.vehicles import VEHICLES
 from nlp_calib.solvers import SOLVERS
 
 #: ``--solver`` values that mean every registered solver.
@@ -151,6 +152,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "nlp-calib simulate --lidar --out lidar_drive --duration 120",
         "nlp-calib simulate --imu --out gyro_drive --duration 120 --latency 0.02",
         "nlp-calib simulate --lidar --imu --out lidar_gyro_drive --duration 60",
+        "nlp-calib simulate --vehicle highway_car --out highway --seed 31",
     ),
     "check": (
         "nlp-calib check out/demo/calibration.yaml todays_drive.txt",
@@ -408,6 +410,17 @@ def _add_simulate(sub: Any) -> None:
         action="store_true",
         help="with --imu: a tracker's poses (/tracker, PoseStamped, 2 mm and 2 mrad of noise) of the drive "
         "in the same bag, stamped --latency late as the gyro is (docs/imu.md)",
+    )
+    kind.add_argument(
+        "--vehicle",
+        choices=tuple(VEHICLES),
+        default=None,
+        help="a real vehicle's drive (--out: the stem of its files; docs/models.md): highway_car, a car at 8-20 "
+        "m/s for a minute barely steering, four CAN wheel speeds and its steering at 90 Hz (<out>.csv) "
+        "beside a windshield device's poses at 20 Hz (<out>.tum); skid_spins, a skid-steer spinning over "
+        "pi per 2 s increment, its encoders updating at 4 Hz under 20 Hz messages and slipping on pivots "
+        "(<out>.csv), against a scan matcher's increments (<out>.motions.csv); --seed, --duration and (a "
+        "skid-steer's matcher) --noise-xy, --noise-theta; the rest in --config",
     )
     kind.add_argument(
         "--vendor",
