@@ -3,12 +3,12 @@
     nice -n 10 python3 benchmarks/vehicle_noise.py --car 5 6 7 --skid 5 6 7
 
 For each simulated highway car (given what a straight kilometre cannot determine, as
-``tests/test_vehicles.py`` gives it) and fast-spinning skid-steer (pivot slip 0.1 unless ``--pivot-slip`` says) of the seeds the
-arguments name: the σ the run hands off (each input's noise propagated, and the rates per metre and
-per radian grown as a filter grows them) over the σ whose 2σ holds 95 % of the true errors over the
-fit's windows, per component (x, y, θ in the base frame at the window's start) and together: 1 where
-the σ is the drift the windows truly have. Nothing here tunes anything: the seeds are whatever the
-arguments say.
+``tests/test_vehicles.py`` gives it) and fast-spinning skid-steer (pivot slip 0.1 unless
+``--pivot-slip`` says) of the seeds the arguments name: the σ the run hands off (each input's
+noise propagated, and the rates per metre and per radian grown as a filter grows them) over the σ
+whose 2σ holds 95 % of the true errors over the fit's windows, per component (x, y, θ in the base
+frame at the window's start) and together: 1 where the σ is the drift the windows truly have.
+Nothing here tunes anything: the seeds are whatever the arguments say.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ SKID = {
 def _car(folder: Path, seed: int, _: float) -> tuple[Any, Any, tuple[np.ndarray, np.ndarray, int]]:
     opts = HighwayOptions(seed=seed)
     sim = simulate_highway(opts)
-    joints, poses, _ = sim.write(folder / "car")
+    joints, poses, _truth = sim.write(folder / "car")
     wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
     known = {CAR_NAMES.get(n, n): opts.truth[n] for n in CAR_KNOWN}
     dataset = {

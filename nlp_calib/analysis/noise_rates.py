@@ -11,9 +11,10 @@ a heading error per metre or per radian, the clocks' offset: they grow faster st
 every segment, so they are regressed on the errors, :func:`systematic_shapes`, and counted over the
 shortest segments). A rate the segments do not show (a car's wheels under its device's 2 cm) is
 the joints' own noise's (:mod:`nlp_calib.analysis.jitter`) where they show one, else the inputs'
-noise's (the most the segments allow along the wheels' noise), said (``bounded``). A component whose 2σ holds fewer than
-:data:`~nlp_calib.analysis.odometry.COVERED` of the segments' errors gets the smallest share of the
-inputs' noise's rates that makes it hold them: at least the drift the windows show.
+noise's (the most the segments allow along the wheels' noise), said (``bounded``). A component
+whose 2σ holds fewer than :data:`~nlp_calib.analysis.odometry.COVERED` of the segments' errors gets
+the smallest share of the inputs' noise's rates that makes it hold them: at least the drift the
+windows show.
 """
 
 from __future__ import annotations
