@@ -399,6 +399,33 @@ def test_a_cars_wheel_speeds_read_as_positions_are_found_and_named(tmp_path: Pat
     assert not any(u.blocking for u in preflight(sc).units)
 
 
+@pytest.mark.parametrize("noise", [1.0, 10.0])
+def test_noisy_wheel_speeds_read_as_positions_are_named_speeds_not_wraps(
+    tmp_path: Path, noise: float
+) -> None:
+    """Speed columns with 1 or 10 rad/s of noise (of 25-63) read as positions (no ``form:``): their
+    values follow the tracker's speed, their changes do not. They were a wheel that wraps its angle
+    (1 rad/s) or nothing at all (10 rad/s: a radian of them moved the robot a plausible distance);
+    the same wheels as positions (the speeds integrated) are not speeds."""
+    opts = HighwayOptions(seed=3, duration_s=30.0, wheel_noise=noise)
+    sim = simulate_highway(opts)
+    joints, poses, _ = sim.write(tmp_path / "car")
+    wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
+    sc = {
+        "model": "car_like",
+        "dataset": {"joints": str(joints), "poses": str(poses), "encoders": dict(zip(wheels, wheels))},
+    }
+    found = [u for u in preflight(scenario_from_mapping(sc, "car", tmp_path)).units if u.blocking]
+    assert [u.kind for u in found] == ["speeds"], found
+    assert "form: speeds" in found[0].words and "follow the robot's speed" in found[0].words
+    # The same drive's wheels as positions: their trapezoids summed, as a speeds column is read.
+    values = np.array(sim.joint_values)
+    step = 0.5 * (values[1:, :4] + values[:-1, :4]) * np.diff(sim.joint_time_s)[:, None]
+    values[:, :4] = np.vstack([np.zeros((1, 4)), np.cumsum(step, axis=0)])
+    joints.write_text(dataclasses.replace(sim, joint_values=values).joints_csv())
+    assert not [u for u in preflight(scenario_from_mapping(sc, "car", tmp_path)).units if u.blocking]
+
+
 def test_a_highway_cars_odometry_noise_is_never_under_the_drift_its_windows_truly_have(
     car_known: tuple[Any, HighwayOptions, Any, Any],
 ) -> None:
