@@ -390,6 +390,30 @@ def _add_simulate(sub: Any) -> None:
         "<name>.joints.csv (joints in radians) and <name>.truth.json beside it (docs/camera.md)",
     )
     _add_force(p, "an existing log or truth file")
+    _add_simulated_kinds(p)
+    p.add_argument("--config", type=_path, default=None, help="YAML file of simulation options")
+    p.add_argument("--model", choices=tuple(MODELS), default=None, help=f"default: {next(iter(MODELS))}")
+    p.add_argument(
+        "--trajectory",
+        choices=TRAJECTORIES,
+        default=None,
+        help="s_curves: turns, stops and reversals (default); straight: no turning; no_reversals",
+    )
+    for flag, field, what in (
+        ("--records", "records", "records to write"),
+        ("--seed", "seed", "random seed"),
+        ("--noise-xy", "tracker_noise_xy", "tracker noise, m"),
+        ("--noise-theta", "tracker_noise_theta", "tracker noise, rad"),
+        ("--outliers", "outlier_fraction", "fraction of outliers"),
+        ("--latency", "latency_s", "tracker latency, s (a camera's stamp offset)"),
+        ("--duration", "duration_s", "seconds of driving (a camera, lidar or gyro simulation)"),
+    ):
+        limit = CLI_LIMITS[field]
+        p.add_argument(flag, type=_in(limit), default=None, dest=field, help=f"{what}: {limit.describe()}")
+
+
+def _add_simulated_kinds(p: argparse.ArgumentParser) -> None:
+    """What ``simulate`` writes other than a text log: a lidar's, a gyro's, a vehicle's, a vendor's."""
     kind = p.add_mutually_exclusive_group()
     kind.add_argument(
         "--lidar",
@@ -428,25 +452,6 @@ def _add_simulate(sub: Any) -> None:
         help="a robot's own odometry integrated with a wrong model (--out: t x y θ), a tracker's TUM file "
         "beside it and the corrections in the truth JSON (docs/vendor.md)",
     )
-    p.add_argument("--config", type=_path, default=None, help="YAML file of simulation options")
-    p.add_argument("--model", choices=tuple(MODELS), default=None, help=f"default: {next(iter(MODELS))}")
-    p.add_argument(
-        "--trajectory",
-        choices=TRAJECTORIES,
-        default=None,
-        help="s_curves: turns, stops and reversals (default); straight: no turning; no_reversals",
-    )
-    for flag, field, what in (
-        ("--records", "records", "records to write"),
-        ("--seed", "seed", "random seed"),
-        ("--noise-xy", "tracker_noise_xy", "tracker noise, m"),
-        ("--noise-theta", "tracker_noise_theta", "tracker noise, rad"),
-        ("--outliers", "outlier_fraction", "fraction of outliers"),
-        ("--latency", "latency_s", "tracker latency, s (a camera's stamp offset)"),
-        ("--duration", "duration_s", "seconds of driving (a camera, lidar or gyro simulation)"),
-    ):
-        limit = CLI_LIMITS[field]
-        p.add_argument(flag, type=_in(limit), default=None, dest=field, help=f"{what}: {limit.describe()}")
 
 
 def _add_import_bag(sub: Any) -> None:
