@@ -584,7 +584,10 @@ def calibrated_drift(
     # increments between bad matches) still shows its drift over them.
     spans = windows.data.stops - windows.data.starts
     own = int(np.bincount(spans).argmax()) if spans.size else DRIFT_LENGTHS[0]
-    drift = segment_drift(fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS))
+    lever = reference[:, :2] - np.asarray(sel.T_world_sensor)[:, :2]
+    drift = segment_drift(
+        fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS), lever
+    )
     floor = windows.input_noise_std
     # A tracker's poses tell its own noise from the wheels' (by the drift's growth with length);
     # a reference's own increments, one per window, do not tell their heading's: the heading's
