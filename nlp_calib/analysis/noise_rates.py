@@ -1,21 +1,27 @@
 """The odometry's noise per metre driven and per radian turned, as a filter's process noise takes it.
 
-Each interval's increment covariance from the calibrated inputs' noise (``G·diag(σ_u²)·Gᵀ``, in
-the base frame at the interval's start, :mod:`nlp_calib.analysis.odometry`) is split, component
-by component (along, across, heading), into a variance per metre driven and one per radian turned
-(non-negative least squares on the intervals' |distance| and |turn|): what AMCL's ``odom_alpha``
-or a hand-written EKF's process noise ask for. Those rates are then checked on the drift segments
-themselves: each segment's covariance grown from them as a filter grows it (``P' = F·P·Fᵀ + Q``,
-the heading's noise carried by the distance still to drive), with the reference's own variances,
-must hold :data:`~nlp_calib.analysis.odometry.COVERED` of the segments' errors within 2σ, else all
-rates are raised by one factor until it does: at least the drift the windows show.
+A rate per metre and per radian for each component (along, across, heading) is what AMCL's
+``odom_alpha`` or a hand-written EKF's process noise ask for. Each interval adds
+``Q = diag(rates·(|distance|, |turn|))`` in the base frame at its start, grown over a span as a
+filter grows it (``P' = F·P·Fᵀ + Q``, the heading's noise carried by the distance still to drive:
+:func:`grown_covariances`); the rates are fitted on the drift segments themselves, component by
+component (:func:`segment_rates`), beside the reference's own variances (its noise does not grow
+with a segment's length, the wheels' does) and the calibration's constant errors (a wheel's scale,
+a heading error per metre or per radian, the clocks' offset: they grow faster still, the same on
+every segment, so they are regressed on the errors, :func:`systematic_shapes`, and counted over the
+shortest segments). A rate the segments do not show (a car's wheels under its device's 2 cm) is
+the joints' own noise's (:mod:`nlp_calib.analysis.jitter`) where they show one, else the inputs'
+noise's (the most the segments allow along the wheels' noise), said (``bounded``). A component
+whose 2σ holds fewer than :data:`~nlp_calib.analysis.odometry.COVERED` of the segments' errors gets
+the smallest share of the inputs' noise's rates that makes it hold them: at least the drift the
+windows show.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from nlp_calib.analysis.odometry import COVERED, Drift
+from nlp_calib.analysis.odometry import COVERED, Drift, moments
 from nlp_calib.analysis.uncertainty import nnls_small
 from nlp_calib.core import poses
 from nlp_calib.problem import ProblemFunctions
@@ -85,22 +91,167 @@ def grown_covariances(increments: np.ndarray, rates: np.ndarray, spans: np.ndarr
     return R @ C @ np.swapaxes(R, 1, 2)
 
 
-def _ratios(
-    drift: Drift, increments: np.ndarray, rates: np.ndarray, known: tuple[np.ndarray, np.ndarray]
-) -> np.ndarray:
-    """Each segment error's size in its σ ``(S, 3)``: the grown covariance turned into the
-    reference's axes at the segment's start, beside the reference's own variances and the readings'
-    noise (``known``: those variances and the readings' 1σ per input)."""
-    reference_var, floor = known
-    C = grown_covariances(increments, rates, drift.spans)
-    turn = drift.start_headings
-    c, s = np.cos(turn), np.sin(turn)
-    R = np.zeros((turn.size, 3, 3))
-    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
-    P = R @ C @ np.swapaxes(R, 1, 2) + np.einsum("k,skij->sij", reference_var, drift.terms)
-    P = P + drift.known(floor)
+def _unit_growth(increments: np.ndarray, spans: np.ndarray) -> np.ndarray:
+    """Each rate's covariance of every span at unit rate ``(6, S, 3, 3)`` (per metre along, across,
+    heading, then per radian): a span's covariance is linear in the rates."""
+    units = np.eye(6).reshape(6, 2, 3)
+    return np.stack([grown_covariances(increments, unit, spans) for unit in units])
+
+
+def _local(drift: Drift, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The segments' errors ``(S, 3)``, the readings' rounding's covariance of them ``(S, 3, 3)``
+    and the reference's noise terms ``(2, S, 3, 3)`` (per unit variance of its position and of its
+    heading), in the reference's axes at each segment's start (along, across, heading, as the rates'
+    covariances are)."""
+    c, s = np.cos(drift.start_headings), np.sin(drift.start_headings)
+    R = np.zeros((c.size, 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, s, -s, c, 1.0
+    Rt = np.swapaxes(R, 1, 2)
+    terms = R[None] @ np.moveaxis(drift.terms, 1, 0) @ Rt[None]
+    return np.einsum("sij,sj->si", R, drift.errors), R @ drift.known(floor) @ Rt, terms
+
+
+def _ratios(units: np.ndarray, rates: np.ndarray, errors: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """Each segment error's size in its σ ``(S, 3)``: the rates' grown covariance beside the
+    reference's own variances and the readings' rounding (``known`` ``(S, 3, 3)``)."""
+    P = np.einsum("k,ksij->sij", np.ravel(rates), units) + known
     sigma = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
-    return np.abs(drift.errors) / np.maximum(sigma, 1e-300)
+    return np.abs(errors) / np.maximum(sigma, 1e-300)
+
+
+#: Which of :func:`systematic_shapes` the odometry's own error makes (a wheel's scale, a heading
+#: error per metre or per radian, the clocks' offset); one across the motion is a mount's yaw, the
+#: reference's.
+ODOMETRY_SHAPES = np.array([1.0, 0.0, 1.0, 1.0, 1.0])
+
+
+def systematic_shapes(increments: np.ndarray, spans: np.ndarray) -> np.ndarray:
+    """What a constant error of the calibration makes of each span ``(i, j)``'s motion, in the base
+    frame at ``i`` ``(5, S, 3)``: a scale of the distance along the motion, one across it, a heading
+    error per metre driven and one per radian turned (each signed as the motion: a wheel's radius,
+    a mount's yaw, a steering offset, a track), and an offset of the reference's clock by one
+    interval, at unit size. It is the same
+    on every segment, so the segments' errors regress on it; a random walk's do not."""
+    track = poses.accumulate(np.zeros(3), increments)
+    xy = track[:, :2]
+    distance = np.sign(increments[:, 0]) * np.hypot(increments[:, 0], increments[:, 1])
+    i, j = spans[:, 0], spans[:, 1]
+    moved = xy[j] - xy[i]
+    out = np.zeros((5, spans.shape[0], 3))
+    out[0, :, :2] = moved
+    out[1, :, :2] = np.c_[-moved[:, 1], moved[:, 0]]
+    for k, w in ((2, distance), (3, increments[:, 2])):
+        W = _sums(w)
+        Wp = _sums(w[:, None] * xy[1:])
+        turned = W[j] - W[i]
+        arm = xy[j] * turned[:, None] - (Wp[j] - Wp[i])  # Σ w·(p_j − p_{k+1})
+        out[k, :, :2] = np.c_[-arm[:, 1], arm[:, 0]]
+        out[k, :, 2] = turned
+    # The motion per interval at each record: the mean of the intervals either side of it.
+    step = np.diff(track, axis=0)
+    at = 0.5 * (step[np.r_[0, np.arange(step.shape[0])]] + step[np.r_[np.arange(step.shape[0]), -1]])
+    # Read late by one interval: the motion at the end less that at the start, the start's heading
+    # turned by its own turn per interval (the segment restarts from the reference's heading).
+    out[4] = at[j] - at[i]
+    out[4, :, :2] -= at[i, 2, None] * np.c_[-moved[:, 1], moved[:, 0]]
+    c, s = np.cos(track[i, 2]), np.sin(track[i, 2])
+    x, y = out[:, :, 0].copy(), out[:, :, 1].copy()
+    out[:, :, 0], out[:, :, 1] = c * x + s * y, -s * x + c * y
+    return out
+
+
+def segment_rates(
+    units: np.ndarray, shapes: np.ndarray, errors: np.ndarray, known: tuple[np.ndarray, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rates ``(2, 3)`` and the reference's own variances (those ``known[0]`` holds terms of,
+    ``(k, S, 3, 3)``) whose covariances, beside the readings' rounding (``known[1]``), best give the
+    segments' squared ``errors`` less the calibration's constant error (its ``shapes``' sizes,
+    returned third, regressed on the errors themselves), each component its own (the method of
+    moments: the wheels' noise model ties along, across and heading together, a slipping or
+    slow-read base's drift does not); a rate the segments do not show (:func:`_shown`) is NaN."""
+    terms, reads = known
+    diag = np.diagonal(np.concatenate([units, terms]), axis1=-2, axis2=-1)  # (6 + k, S, 3)
+    A = np.concatenate([diag[:, :, c].T for c in range(3)])
+    k = np.concatenate([reads[:, c, c] for c in range(3)])
+    B = np.concatenate([shapes[:, :, c].T for c in range(3)])
+    e = np.concatenate([errors[:, c] for c in range(3)])
+    scale = np.maximum(np.max(np.abs(A), axis=0), 1e-300)
+    predicted = np.repeat([max(float(np.mean(errors[:, c] ** 2)), 1e-300) for c in range(3)], len(errors))
+    var, bias = np.zeros(A.shape[1]), np.zeros(B.shape[1])
+    for _ in range(3):
+        w = 1.0 / np.sqrt(np.maximum(predicted, 1e-12 * float(np.max(predicted))))
+        bias = np.linalg.lstsq(B * w[:, None], e * w, rcond=None)[0]
+        var = moments(A / scale, (e - B @ bias) ** 2, k, predicted) / scale
+        predicted = A @ var + k
+    rates = np.where(_shown(A, var, predicted)[:6], var[:6], np.nan)
+    return rates.reshape(2, 3), var[6:], bias
+
+
+#: The rates' components.
+AXES = ("along", "across", "heading")
+
+#: How many σ of its own a rate the segments fit must stand above zero to count as shown by them.
+SHOWN = 2.0
+
+
+def _shown(A: np.ndarray, var: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """Which fitted variances ``var`` the squared errors show (:data:`SHOWN` σ above 0): each
+    squared error's variance is twice its prediction's square (a χ² with one degree of freedom)
+    and half-overlapping segments count about half, so the fit's covariance is twice
+    ``(AᵀWA)⁻¹`` over the variances it fitted. One fitted under the reference's noise (a car's
+    wheels under its device's 2 cm) is noise of that fit, not the odometry's."""
+    on = var > 0
+    if not on.any():
+        return on
+    w = 1.0 / (2.0 * np.maximum(predicted, 1e-300) ** 2)
+    try:
+        cov = 2.0 * np.linalg.inv(A[:, on].T @ (A[:, on] * w[:, None]))
+    except np.linalg.LinAlgError:
+        return np.zeros_like(on)
+    shown = np.zeros_like(on)
+    shown[on] = var[on] > SHOWN * np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return shown
+
+
+def systematic_rates(increments: np.ndarray, spans: np.ndarray, systematic: np.ndarray) -> np.ndarray:
+    """``(2, 3)``: the rates that give the shortest segments the variance of the calibration's
+    constant error over them (``systematic`` ``(S, 3)``, each segment's): over the windows the fit
+    judged, that error is the odometry's drift as much as its noise is."""
+    lengths = spans[:, 1] - spans[:, 0]
+    shortest = lengths == lengths.min()
+    travel, turn = _sums(np.hypot(increments[:, 0], increments[:, 1])), _sums(np.abs(increments[:, 2]))
+    i, j = spans[shortest, 0], spans[shortest, 1]
+    along = np.c_[travel[j] - travel[i], np.zeros(i.size), turn[j] - turn[i]]
+    return fit_rates(along, systematic[shortest] ** 2)
+
+
+def _covering_share(
+    units: np.ndarray, added: tuple[np.ndarray, np.ndarray, int], errors: np.ndarray, known: np.ndarray
+) -> float:
+    """The smallest share of ``shape`` added to component ``c``'s rates (``added``: the rates, the
+    shape, c) whose 2σ holds :data:`COVERED` of the segments' errors in that component (0: they
+    do already; the shape: the inputs' noise's rates, what the wheels' noise makes of each
+    component)."""
+    rates, shape, c = added
+    # The share held is itself sampled: within two binomial σ of it over half the segments (they
+    # overlap by half), the reference's own noise, fitted on the same errors, may take the rest.
+    target = COVERED - 2.0 * np.sqrt(COVERED * (1.0 - COVERED) / max(0.5 * errors.shape[0], 1.0))
+
+    def need(share: float) -> float:
+        trial = rates.copy()
+        trial[:, c] += share * shape
+        return float(np.quantile(_ratios(units, trial, errors, known)[:, c], target)) / 2.0
+
+    if need(0.0) <= 1.0 or not np.any(shape > 0):
+        return 0.0
+    hi = 1e-9
+    while need(hi) > 1.0 and hi < 1e12:
+        hi *= 4.0
+    lo = 0.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if need(mid) <= 1.0 else (mid, hi)
+    return hi
 
 
 def _three(v: np.ndarray) -> tuple[float, float, float]:
@@ -113,29 +264,53 @@ def noise_rates(
     inputs: np.ndarray,
     noise: np.ndarray,
     checked: tuple[Drift, np.ndarray, np.ndarray],
+    jitter: np.ndarray | None = None,
 ) -> NoiseRates:
-    """The rates from each input's 1σ per interval ``noise`` (its random walk) over ``inputs``,
-    checked (and raised where they fall short) on ``checked``: the drift segments over the same
-    records, the reference's own position and heading variances and the readings' 1σ per input
-    (their rounding, which does not add up per metre)."""
+    """The rates of the module docstring over ``inputs`` at ``params``: ``checked`` holds the drift
+    segments over the same records, the reference's own position and heading variances (those
+    credited, > 0, are refitted) and the readings' 1σ per input (their rounding, which does not add
+    up per metre); ``noise`` each input's 1σ per interval (its random walk: the rates where there is
+    no segment, and the shape of what a short component gets), ``jitter`` what the joints' own
+    noise gives each input per interval (never under it)."""
     drift, reference_var, floor = checked
-    known = (reference_var, floor)
     increments, variances = _increments(fns, params, inputs, noise)
-    rates = fit_rates(increments, variances)
+    given = fit_rates(increments, variances)
+    least = np.zeros((2, 3))
+    if jitter is not None and np.any(jitter > 0):
+        least = fit_rates(*_increments(fns, params, inputs, jitter))
     if drift.spans.shape[0] == 0:
-        return NoiseRates(_three(rates[0]), _three(rates[1]), None, 0, 1.0)
-    raised = 1.0
-    for _ in range(8):
-        ratio = _ratios(drift, increments, raised * rates, known)
-        need = float(np.quantile(ratio, COVERED)) / 2.0
-        if need <= 1.0 + 1e-6 or not np.any(rates):
-            break
-        raised *= need * need
-    coverage = float(np.mean(_ratios(drift, increments, raised * rates, known) <= 2.0))
+        return NoiseRates(_three(given[0]), _three(given[1]), None, 0, 0.0)
+    units = _unit_growth(increments, drift.spans)
+    errors, reads, terms = _local(drift, floor)
+    shapes = systematic_shapes(increments, drift.spans)
+    # The reference's variances refitted beside the rates (those the wheels' fit credited it with).
+    credited = np.asarray(reference_var) > 0
+    rates, reference, bias = segment_rates(units, shapes, errors, (terms[credited], reads))
+    known = np.einsum("k,ksij->sij", reference, terms[credited]) + reads
+    # A constant error across the motion is the mount's yaw (the reference's, not the odometry's).
+    systematic = np.einsum("m,msc->sc", bias * ODOMETRY_SHAPES, shapes)
+    errors = errors - np.einsum("m,msc->sc", bias * (1.0 - ODOMETRY_SHAPES), shapes)
+    # A rate the segments do not show is the joints' own noise's where they show some in that
+    # component (a car's wheel speeds under its device's noise), else the inputs' noise's (the
+    # most the segments allow along the wheels' noise: bounded, said).
+    jittered = np.broadcast_to(np.any(least > 0, axis=0), rates.shape)
+    unshown = np.isnan(rates)
+    bounded = tuple(a for a, c in zip(AXES, np.any(unshown & ~jittered, axis=0)) if c)
+    rates = np.where(unshown, np.where(jittered, least, given), np.maximum(rates, least))
+    rates = rates + systematic_rates(increments, drift.spans, systematic)
+    raised = np.zeros(3)
+    for _ in range(4):  # a heading raised carries into the positions: again
+        for c in range(3):
+            shape = given[:, c] if np.any(given[:, c] > 0) else rates[:, c]
+            share = _covering_share(units, (rates, shape, c), errors, known)
+            rates[:, c] += share * shape
+            raised[c] += share
+    coverage = float(np.mean(_ratios(units, rates, errors, known) <= 2.0))
     return NoiseRates(
-        _three(raised * rates[0]),
-        _three(raised * rates[1]),
+        _three(rates[0]),
+        _three(rates[1]),
         coverage,
         int(drift.spans.shape[0]),
-        raised,
+        float(np.max(raised)),
+        bounded,
     )

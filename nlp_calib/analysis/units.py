@@ -56,6 +56,12 @@ TURNING_AGREES = 0.95
 TRACK_RANGE = (0.05, 5.0)
 #: Length units a reference's positions are given in by mistake, in metres.
 LENGTH_UNITS = {"millimetres": 1e-3, "centimetres": 1e-2}
+#: Wheel columns whose values follow the reference's speed this closely (their correlation), and
+#: closer by :data:`SPEED_MARGIN` than their changes do: speeds, not positions (a position's change
+#: follows the speed; a speed's own value does, whatever its noise: a noisy speed column read as
+#: positions looked like a wheel that wraps, or like nothing).
+SPEED_CORRELATION = 0.8
+SPEED_MARGIN = 0.3
 #: Two wheels turning opposite ways on this share of the gentle curves: one axis is mirrored.
 OPPOSITE_SHARE = 0.8
 #: A curve is gentle where the heading turns less than this per metre (rad/m): both wheels of a
@@ -336,14 +342,56 @@ def _forward(
     return np.sign(np.cos(mount_yaw) * vx - np.sin(mount_yaw) * vy)
 
 
+def _correlation(a: np.ndarray, b: np.ndarray) -> float:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = float(np.corrcoef(a, b)[0, 1])
+    return c if np.isfinite(c) else 0.0
+
+
+def _speed_columns(log: Log, model: KinematicModel, xy: np.ndarray) -> list[UnitFinding]:
+    """Wheel columns read as positions whose values, not their changes, follow the reference's
+    speed (:data:`SPEED_CORRELATION`): speeds."""
+    counters = _counters(log, model)
+    stream = log.joint_stream
+    if (
+        log.joint_positions is None
+        or not counters
+        or (stream is not None and set(counters) & set(stream.integrated))
+    ):
+        return []
+    k = taken(log.time_s, STEP_S)
+    if k.size < 8:
+        return []
+    speed = np.hypot(*np.diff(xy[k], axis=0).T) / np.diff(log.time_s[k])
+    wheels = np.stack([_positions(log, n)[k] for n in counters])
+    level = np.mean(np.abs(0.5 * (wheels[:, 1:] + wheels[:, :-1])), axis=0)
+    change = np.mean(np.abs(np.diff(wheels, axis=1)), axis=0)
+    as_speed, as_position = _correlation(level, speed), _correlation(change, speed)
+    if as_speed < SPEED_CORRELATION or as_speed < as_position + SPEED_MARGIN:
+        return []
+    names = ", ".join(counters)
+    return [
+        UnitFinding(
+            "speeds",
+            names,
+            f"the wheel joints' values ({names}) follow the robot's speed (correlation {as_speed:.2f}), "
+            f"their changes do not ({as_position:.2f}): their columns look like speeds (rad/s) read as "
+            "positions; say so (form: speeds)",
+        )
+    ]
+
+
 def findings(
     log: Log, model: KinematicModel, track: tuple[np.ndarray, np.ndarray], mount_yaw: float | None
 ) -> tuple[UnitFinding, ...]:
     """Every unit and sign finding on ``log`` read for ``model``: ``track`` the tracker's positions
     ``(n, 2)`` and unwrapped heading at the records; ``mount_yaw`` the nominal planar mount's
-    heading (None for a 3-D sensor)."""
+    heading (None for a 3-D sensor). Wheel columns that look like speeds are said as such alone
+    (their swings looked like wraps, their scale like a wheel of metres)."""
     xy, heading = track
-    out = wrapped(log, model) + _steering_degrees(log, model)
-    out += _wheel_degrees(log, model, xy, heading)
+    speeds = _speed_columns(log, model, xy)
+    out = speeds or wrapped(log, model)
+    out += _steering_degrees(log, model)
+    out += [] if speeds else _wheel_degrees(log, model, xy, heading)
     out += _mirrored(log, model, track, mount_yaw)
     return tuple(out)

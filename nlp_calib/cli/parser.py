@@ -18,6 +18,7 @@ from nlp_calib.outputs.ros2_control import DEFAULT_ROS_DISTRO, ROS_DISTROS
 from nlp_calib.pipeline.options import BLOCKS
 from nlp_calib.pipeline.simconfig import CLI_LIMITS
 from nlp_calib.simulation import TRAJECTORIES
+from nlp_calib.simulation.vehicles import VEHICLES
 from nlp_calib.solvers import SOLVERS
 
 #: ``--solver`` values that mean every registered solver.
@@ -151,6 +152,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "nlp-calib simulate --lidar --out lidar_drive --duration 120",
         "nlp-calib simulate --imu --out gyro_drive --duration 120 --latency 0.02",
         "nlp-calib simulate --lidar --imu --out lidar_gyro_drive --duration 60",
+        "nlp-calib simulate --vehicle highway_car --out highway --seed 31",
     ),
     "check": (
         "nlp-calib check out/demo/calibration.yaml todays_drive.txt",
@@ -388,6 +390,30 @@ def _add_simulate(sub: Any) -> None:
         "<name>.joints.csv (joints in radians) and <name>.truth.json beside it (docs/camera.md)",
     )
     _add_force(p, "an existing log or truth file")
+    _add_simulated_kinds(p)
+    p.add_argument("--config", type=_path, default=None, help="YAML file of simulation options")
+    p.add_argument("--model", choices=tuple(MODELS), default=None, help=f"default: {next(iter(MODELS))}")
+    p.add_argument(
+        "--trajectory",
+        choices=TRAJECTORIES,
+        default=None,
+        help="s_curves: turns, stops and reversals (default); straight: no turning; no_reversals",
+    )
+    for flag, field, what in (
+        ("--records", "records", "records to write"),
+        ("--seed", "seed", "random seed"),
+        ("--noise-xy", "tracker_noise_xy", "tracker noise, m"),
+        ("--noise-theta", "tracker_noise_theta", "tracker noise, rad"),
+        ("--outliers", "outlier_fraction", "fraction of outliers"),
+        ("--latency", "latency_s", "tracker latency, s (a camera's stamp offset)"),
+        ("--duration", "duration_s", "seconds of driving (a camera, lidar or gyro simulation)"),
+    ):
+        limit = CLI_LIMITS[field]
+        p.add_argument(flag, type=_in(limit), default=None, dest=field, help=f"{what}: {limit.describe()}")
+
+
+def _add_simulated_kinds(p: argparse.ArgumentParser) -> None:
+    """What ``simulate`` writes other than a text log: a lidar's, a gyro's, a vehicle's, a vendor's."""
     kind = p.add_mutually_exclusive_group()
     kind.add_argument(
         "--lidar",
@@ -410,30 +436,22 @@ def _add_simulate(sub: Any) -> None:
         "in the same bag, stamped --latency late as the gyro is (docs/imu.md)",
     )
     kind.add_argument(
+        "--vehicle",
+        choices=tuple(VEHICLES),
+        default=None,
+        help="a real vehicle's drive (--out: the stem of its files; docs/models.md): highway_car, a car at "
+        "8-20 m/s for a minute barely steering, four CAN wheel speeds and its steering at 90 Hz (<out>.csv) "
+        "beside a windshield device's poses at 20 Hz (<out>.tum); skid_spins, a skid-steer spinning over "
+        "pi per 2 s increment, its encoders updating at 4 Hz under 20 Hz messages and slipping on pivots "
+        "(<out>.csv), against a scan matcher's increments (<out>.motions.csv); --seed, --duration and (a "
+        "skid-steer's matcher) --noise-xy, --noise-theta; the rest in --config",
+    )
+    kind.add_argument(
         "--vendor",
         action="store_true",
         help="a robot's own odometry integrated with a wrong model (--out: t x y θ), a tracker's TUM file "
         "beside it and the corrections in the truth JSON (docs/vendor.md)",
     )
-    p.add_argument("--config", type=_path, default=None, help="YAML file of simulation options")
-    p.add_argument("--model", choices=tuple(MODELS), default=None, help=f"default: {next(iter(MODELS))}")
-    p.add_argument(
-        "--trajectory",
-        choices=TRAJECTORIES,
-        default=None,
-        help="s_curves: turns, stops and reversals (default); straight: no turning; no_reversals",
-    )
-    for flag, field, what in (
-        ("--records", "records", "records to write"),
-        ("--seed", "seed", "random seed"),
-        ("--noise-xy", "tracker_noise_xy", "tracker noise, m"),
-        ("--noise-theta", "tracker_noise_theta", "tracker noise, rad"),
-        ("--outliers", "outlier_fraction", "fraction of outliers"),
-        ("--latency", "latency_s", "tracker latency, s (a camera's stamp offset)"),
-        ("--duration", "duration_s", "seconds of driving (a camera, lidar or gyro simulation)"),
-    ):
-        limit = CLI_LIMITS[field]
-        p.add_argument(flag, type=_in(limit), default=None, dest=field, help=f"{what}: {limit.describe()}")
 
 
 def _add_import_bag(sub: Any) -> None:

@@ -18,6 +18,7 @@ from nlp_calib.pipeline.simconfig import (
     imu_options,
     lidar_options,
     simulation_options,
+    vehicle_options,
     vendor_options,
 )
 from nlp_calib.simulation import simulate_to_file, truth_path
@@ -31,6 +32,7 @@ from nlp_calib.simulation.beside import (
 from nlp_calib.simulation.camera import camera_paths, simulate_camera, write_camera_simulation
 from nlp_calib.simulation.imu import imu_paths, simulate_imu, write_imu_simulation
 from nlp_calib.simulation.lidar import lidar_paths, simulate_lidar, write_lidar_simulation
+from nlp_calib.simulation.vehicles import simulate_highway, simulate_skid_spins, vehicle_paths
 from nlp_calib.simulation.vendor import write_vendor_simulation
 
 
@@ -54,6 +56,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if out.is_dir() or out.name in ("", ".", ".."):
         raise UsageError(f"--out {out} is a folder; give the path of the log file to write")
     imu, tracker = getattr(args, "imu", False), getattr(args, "tracker", False)
+    if getattr(args, "vehicle", None) is not None:
+        if imu or tracker:
+            raise UsageError("--vehicle goes alone: its drive has its own reference (no --imu, no --tracker)")
+        return _simulate_vehicle(args, overrides)
     if tracker and (not imu or getattr(args, "lidar", False)):
         raise UsageError("--tracker goes with --imu alone (a tracker's poses beside the gyro, in one bag)")
     if getattr(args, "lidar", False) or tracker:
@@ -190,4 +196,32 @@ def _simulate_vendor(args: argparse.Namespace, overrides: dict[str, Any]) -> int
         f"wrote {odometry} (the robot's own odometry, integrated with the model "
         f"{', '.join(f'{n} {v:g}' for n, v in opts.vendor_in_radians().items())}), {tum} and {truth}"
     )
+    return 0
+
+
+#: How a scenario reads each vehicle's files (after its ``joints``/reference paths), and its model.
+VEHICLE_SCENARIOS = {
+    "highway_car": (
+        "poses",
+        "form: speeds, encoders: {steering: steering, rear_left_wheel: rear_left_wheel, rear_right_wheel: "
+        "rear_right_wheel}}, with model: car_like (the axle distance, steer gain, track and the device's "
+        "position given under known:, as a straight kilometre cannot determine them)",
+    ),
+    "skid_spins": (
+        "motions",
+        "encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}, with model: skid_steer "
+        "and initial_guess: auto",
+    ),
+}
+
+
+def _simulate_vehicle(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
+    """A real vehicle's drive (``--vehicle``): its joints, its reference and the truth, beside each other."""
+    vehicle: str = args.vehicle
+    opts = vehicle_options(vehicle, args.config, overrides)
+    sim = simulate_highway(opts) if vehicle == "highway_car" else simulate_skid_spins(opts)
+    joints, reference, truth = _staged(args, vehicle_paths(args.out, vehicle), sim.write)
+    print(f"wrote {joints} ({opts.duration_s:g} s of {vehicle}, seed {opts.seed}), {reference} and {truth}")
+    key, rest = VEHICLE_SCENARIOS[vehicle]
+    print(f"a scenario reads it as: dataset: {{joints: {joints}, {key}: {reference}, {rest}")
     return 0

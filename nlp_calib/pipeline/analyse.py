@@ -20,6 +20,7 @@ from nlp_calib.analysis.crossval import combine
 from nlp_calib.analysis.degeneracy import motion_scale
 from nlp_calib.analysis.determinacy import Information
 from nlp_calib.analysis.handoff import odometry_noise
+from nlp_calib.analysis.jitter import input_jitter
 from nlp_calib.analysis.metrics import each_metrics, first_order, geometry, integrate, segments, steps
 from nlp_calib.analysis.noise_rates import noise_rates
 from nlp_calib.analysis.observability import analyse as observability_of
@@ -554,14 +555,16 @@ NOISE_RECORDS = 20_000
 @dataclass(frozen=True)
 class Drift:
     """A log's odometry against the base poses the tracker implies over its first ``records``
-    used records: the inputs, those poses, the segments' drift, and each input's noise per
-    interval (with the reference's own variances) that explains it."""
+    used records: the inputs, those poses, the segments' drift, each input's noise per interval
+    (with the reference's own variances) that explains it, and what the joints' own noise gives
+    each input per interval (:func:`~nlp_calib.analysis.jitter.input_jitter`)."""
 
     inputs: np.ndarray
     reference: np.ndarray
     drift: DriftSegments
     noise: np.ndarray
     reference_var: np.ndarray
+    jitter: np.ndarray
 
 
 def calibrated_drift(
@@ -581,7 +584,10 @@ def calibrated_drift(
     # increments between bad matches) still shows its drift over them.
     spans = windows.data.stops - windows.data.starts
     own = int(np.bincount(spans).argmax()) if spans.size else DRIFT_LENGTHS[0]
-    drift = segment_drift(fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS))
+    lever = reference[:, :2] - np.asarray(sel.T_world_sensor)[:, :2]
+    drift = segment_drift(
+        fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS), lever
+    )
     floor = windows.input_noise_std
     # A tracker's poses tell its own noise from the wheels' (by the drift's growth with length);
     # a reference's own increments, one per window, do not tell their heading's: the heading's
@@ -589,7 +595,8 @@ def calibrated_drift(
     credited = (True, windows.data.increment is None)
     noise, reference_var = drift_noise(drift, floor, credited)
     noise = covering_noise(drift, noise, floor, reference_var)
-    return Drift(inputs, reference, drift, noise, reference_var)
+    jitter = input_jitter(windows.binder.fns.model, sel, steering_sample)
+    return Drift(inputs, reference, drift, noise, reference_var, jitter)
 
 
 def odometry(fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str) -> OdometryTrack:
@@ -609,7 +616,7 @@ def odometry(fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample:
         input_noise=dict(zip(names, map(float, d.noise))),
         quantisation=dict(zip(names, map(float, floor))),
         coverage=drift_coverage(d.drift, d.noise, floor, d.reference_var),
-        rates=noise_rates(fit.fns, params, d.inputs, d.noise, (d.drift, d.reference_var, floor)),
+        rates=noise_rates(fit.fns, params, d.inputs, d.noise, (d.drift, d.reference_var, floor), d.jitter),
     )
 
 
@@ -626,7 +633,9 @@ def handoff_noise(
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
     found = odometry_noise(fit.fns, params, d.inputs, time_s, (noise, windows.input_noise_std))
     checked = (d.drift, d.reference_var, windows.input_noise_std)
-    return dataclasses.replace(found, rates=noise_rates(fit.fns, params, d.inputs, d.noise, checked))
+    return dataclasses.replace(
+        found, rates=noise_rates(fit.fns, params, d.inputs, d.noise, checked, d.jitter)
+    )
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ from nlp_calib.simulation.camera import CameraSimulationOptions
 from nlp_calib.simulation.imu import ImuSimulationOptions
 from nlp_calib.simulation.lidar import LidarSimulationOptions
 from nlp_calib.simulation.options import flat_hints
+from nlp_calib.simulation.vehicles import HighwayOptions, SkidSpinOptions
 from nlp_calib.simulation.vendor import VendorSimulationOptions
 
 #: What a user may ask of ``nlp-calib simulate``: the simulator's own limits (it writes a log block
@@ -60,6 +61,20 @@ VENDOR_OVERRIDES: Mapping[str, tuple[str, ...]] = {
 }
 
 
+#: The command-line options each vehicle's simulation reads (``--vehicle``), by their names there
+#: (the highway car's device noise, a pair, is its config's ``pose_noise``).
+VEHICLE_OVERRIDES: Mapping[str, Mapping[str, tuple[str, ...]]] = {
+    "highway_car": {"seed": ("seed",), "duration_s": ("duration_s",)},
+    "skid_spins": {
+        "seed": ("seed",),
+        "duration_s": ("duration_s",),
+        "tracker_noise_xy": ("motion_noise_xy",),
+        "tracker_noise_theta": ("motion_noise_theta",),
+    },
+}
+VEHICLE_OPTIONS: Mapping[str, type] = {"highway_car": HighwayOptions, "skid_spins": SkidSpinOptions}
+
+
 def _overridden(
     raw: dict[str, Any], overrides: Mapping[str, Any], places: Mapping[str, tuple[str, ...]], what: str
 ) -> None:
@@ -99,6 +114,15 @@ def vendor_options(config: Path | None, overrides: Mapping[str, Any]) -> VendorS
     _overridden(raw, overrides, VENDOR_OVERRIDES, "a vendor odometry simulation (--vendor)")
     options: VendorSimulationOptions = from_mapping(VendorSimulationOptions, raw, source)
     return options
+
+
+def vehicle_options(vehicle: str, config: Path | None, overrides: Mapping[str, Any]) -> Any:
+    """A ``vehicle``'s simulation options from ``config`` (a YAML mapping of
+    :class:`~nlp_calib.simulation.vehicles.HighwayOptions`' or ``SkidSpinOptions``' fields), then
+    ``overrides``."""
+    raw, source = _config(config)
+    _overridden(raw, overrides, VEHICLE_OVERRIDES[vehicle], f"a {vehicle} simulation (--vehicle)")
+    return from_mapping(VEHICLE_OPTIONS[vehicle], raw, source)
 
 
 def _config(config: Path | None) -> tuple[dict[str, Any], str]:

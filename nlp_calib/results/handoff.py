@@ -28,14 +28,17 @@ class NoiseRates:
     """Variances of the base's motion ``(along, across, heading)`` per metre driven (m²/m, m²/m,
     rad²/m) and per radian turned (m²/rad, m²/rad, rad²/rad); ``coverage``: the share of the drift
     segments' errors within 2σ of the covariance they grow (None: no segment to judge them by);
-    ``segments``: how many; ``raised``: the factor the variances fitted to the inputs' noise were
-    multiplied by to hold 95 % of them (1: they did)."""
+    ``segments``: how many; ``raised``: the largest share of the inputs' noise's rates added to a
+    component to hold 95 % of them (0: they did); ``bounded``: the components whose drift the
+    segments only bound (under the reference's own noise, and no joint's own noise shows it): the
+    most they allow."""
 
     per_metre: tuple[float, float, float]
     per_radian: tuple[float, float, float]
     coverage: float | None
     segments: int
     raised: float
+    bounded: tuple[str, ...] = ()
 
     def words(self) -> str:
         """The rates and how they held, in one sentence."""
@@ -46,6 +49,11 @@ class NoiseRates:
             if self.coverage is None
             else f"{100 * self.coverage:.0f} % of {self.segments} drift segments' errors within its 2σ"
         )
+        if self.bounded:
+            held += (
+                f"; {' and '.join(self.bounded)} only the most the segments allow (the wheels' drift "
+                "there lies under the reference's own noise)"
+            )
         return (
             f"variance per metre driven {per_m} (along, across, heading: m², m², rad²), per radian "
             f"turned {per_rad}; {held}"

@@ -143,12 +143,22 @@ class VehicleSimulation:
         """``<stem>.csv`` (joints), ``<stem>.motions.csv`` and ``<stem>.truth.json``."""
         import json
 
-        stem = Path(stem)
-        paths = (stem.with_suffix(".csv"), stem.with_suffix(".motions.csv"), stem.with_suffix(".truth.json"))
+        paths = vehicle_paths(stem, "skid_spins")
         atomic_write_text(paths[0], self.joints_csv())
         atomic_write_text(paths[1], self.motions_csv())
         atomic_write_text(paths[2], json.dumps(self.truth_dict(), indent=2) + "\n")
         return paths
+
+
+#: The vehicles ``nlp-calib simulate --vehicle`` drives: each one's reference file beside its joints.
+VEHICLES: Mapping[str, str] = MappingProxyType({"highway_car": ".tum", "skid_spins": ".motions.csv"})
+
+
+def vehicle_paths(stem: str | Path, vehicle: str) -> tuple[Path, Path, Path]:
+    """The files a ``vehicle``'s drive is written to beside ``stem``: its joints (``.csv``), its
+    reference (:data:`VEHICLES`) and its truth (``.truth.json``)."""
+    stem = Path(stem)
+    return stem.with_suffix(".csv"), stem.with_suffix(VEHICLES[vehicle]), stem.with_suffix(".truth.json")
 
 
 def _ns(t_s: np.ndarray) -> np.ndarray:
@@ -299,8 +309,7 @@ class HighwaySimulation:
         """``<stem>.csv`` (joints), ``<stem>.tum`` (the device's poses) and ``<stem>.truth.json``."""
         import json
 
-        stem = Path(stem)
-        paths = (stem.with_suffix(".csv"), stem.with_suffix(".tum"), stem.with_suffix(".truth.json"))
+        paths = vehicle_paths(stem, "highway_car")
         atomic_write_text(paths[0], self.joints_csv())
         atomic_write_text(paths[1], self.poses_tum())
         atomic_write_text(paths[2], json.dumps(self.truth_dict(), indent=2) + "\n")

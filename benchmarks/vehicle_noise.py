@@ -1,0 +1,103 @@
+"""Is the odometry's noise the drift its windows truly have, on real vehicles' drives (#43)?
+
+    nice -n 10 python3 benchmarks/vehicle_noise.py --car 5 6 7 --skid 5 6 7
+
+For each simulated highway car (given what a straight kilometre cannot determine, as
+``tests/test_vehicles.py`` gives it) and fast-spinning skid-steer (pivot slip 0.1 unless
+``--pivot-slip`` says) of the seeds the arguments name: the σ the run hands off (each input's
+noise propagated, and the rates per metre and per radian grown as a filter grows them) over the σ
+whose 2σ holds 95 % of the true errors over the fit's windows, per component (x, y, θ in the base
+frame at the window's start) and together: 1 where the σ is the drift the windows truly have.
+Nothing here tunes anything: the seeds are whatever the arguments say.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: This checkout (its code, not an installed one's, is what runs), and the tests' truth helper.
+REPO = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(REPO), str(REPO / "tests")]
+
+from odometry_truth import sigma_over_truth  # noqa: E402
+
+from nlp_calib.pipeline import Calibration, scenario_from_mapping  # noqa: E402
+from nlp_calib.pipeline.analyse import Wanted  # noqa: E402
+from nlp_calib.simulation.vehicles import (  # noqa: E402
+    EPOCH_NS,
+    HighwayOptions,
+    SkidSpinOptions,
+    simulate_highway,
+    simulate_skid_spins,
+)
+
+CAR_NAMES = {"k_traction": "traction_wheels_radius", "rear_track": "traction_track_width"}
+CAR_KNOWN = ("k_steer", "wheelbase", "rear_track", "sensor_x", "sensor_y")
+SKID = {
+    "model": "skid_steer",
+    "initial_guess": "auto",
+    "information": {"translation": 4.0e4, "rotation": 1.0e5},
+    "robust": {"kernel": "huber", "delta": 3.0},
+    "solvers": ["gauss_newton"],
+}
+
+
+def _car(folder: Path, seed: int, _: float) -> tuple[Any, Any, tuple[np.ndarray, np.ndarray, int]]:
+    opts = HighwayOptions(seed=seed)
+    sim = simulate_highway(opts)
+    joints, poses, _truth = sim.write(folder / "car")
+    wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
+    known = {CAR_NAMES.get(n, n): opts.truth[n] for n in CAR_KNOWN}
+    dataset = {
+        "joints": str(joints),
+        "poses": str(poses),
+        "form": "speeds",
+        "encoders": dict(zip(wheels, wheels)),
+    }
+    sc = {"model": "car_like", "initial_guess": "auto", "solvers": ["gauss_newton"], "dataset": dataset}
+    return (
+        scenario_from_mapping({**sc, "known": known}, "car", folder),
+        None,
+        (sim.joint_time_s, sim.base_poses, EPOCH_NS),
+    )
+
+
+def _skid(folder: Path, seed: int, pivot_slip: float) -> tuple[Any, Any, tuple[np.ndarray, np.ndarray, int]]:
+    sim = simulate_skid_spins(SkidSpinOptions(duration_s=240.0, seed=seed, pivot_slip=pivot_slip))
+    joints, motions, _ = sim.write(folder / "skid")
+    encoders = {"left_wheel": "left_wheel_joint", "right_wheel": "right_wheel_joint"}
+    dataset = {"joints": str(joints), "motions": str(motions), "encoders": encoders}
+    sc = scenario_from_mapping({**SKID, "dataset": dataset}, "skid", folder)
+    return sc, Wanted(odometry="gauss_newton"), (sim.joint_time_s, sim.base_poses, EPOCH_NS)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--car", type=int, nargs="*", default=[], help="highway car seeds")
+    ap.add_argument("--skid", type=int, nargs="*", default=[], help="skid-steer seeds")
+    ap.add_argument("--pivot-slip", type=float, default=0.1, help="the skid-steer's slip on pivots")
+    args = ap.parse_args()
+    print("case      way     x      y      θ      together   (σ over the σ holding 95 % of true errors)")
+    for kind, build, seeds in (("car", _car, args.car), ("skid", _skid, args.skid)):
+        for seed in seeds:
+            with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                sc, wanted, truth = build(Path(tmp), seed, args.pivot_slip)
+                calib = Calibration(sc)
+                run = calib.run(wanted=wanted) if wanted else calib.run()
+                found = sigma_over_truth(calib, run, truth)
+            for (way, _), r in found.items():
+                print(
+                    f"{kind} {seed:<4d} {way:6s} " + " ".join(f"{v:6.2f}" for v in r[:3]) + f"   {r[3]:6.2f}"
+                )
+
+
+if __name__ == "__main__":
+    main()
