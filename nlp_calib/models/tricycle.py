@@ -357,10 +357,18 @@ class Tricycle:
         revs, angle = rows["traction_revolutions"], rows["steering_angle"]
         dtheta = z[2]
 
+        # An encoder's angles take few values: the sine and cosine of each value once, then
+        # gathered (the same numbers, a quarter of the search's time).
+        values, where = np.unique(angle, return_inverse=True)
+        few, where = 2 * values.size <= angle.size, where.reshape(angle.shape)
+
         def design(k_steer: float) -> np.ndarray:
-            return np.stack(
-                [(revs * np.sin(k_steer * angle)).sum(0), (revs * np.cos(k_steer * angle)).sum(0)], 1
-            )
+            if few:
+                ka = k_steer * values
+                sin, cos = np.sin(ka)[where], np.cos(ka)[where]
+            else:
+                sin, cos = np.sin(k_steer * angle), np.cos(k_steer * angle)
+            return np.stack([(revs * sin).sum(0), (revs * cos).sum(0)], 1)
 
         def rss(k_steer: float) -> float:
             A = design(k_steer)

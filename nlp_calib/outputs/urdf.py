@@ -25,7 +25,6 @@ import re
 import xml.parsers.expat
 from dataclasses import dataclass, field
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -306,6 +305,10 @@ def T_base_parent(d: Description, link: str) -> np.ndarray:
 def _start_tag(name: str, attrs: dict[str, str], closed: bool, encoding: str) -> bytes:
     """A start tag written from parsed attributes, in their order, each value escaped, in the
     file's encoding."""
+    # Imported here: xml.sax.saxutils pulls in urllib.request, http.client and ssl, a tenth of a
+    # second of every run's start, for the one command that edits a user's URDF.
+    from xml.sax.saxutils import quoteattr
+
     written = "".join(f" {k}={quoteattr(v)}" for k, v in attrs.items())
     return f"<{name}{written}{'/>' if closed else '>'}".encode(encoding, errors="xmlcharrefreplace")
 

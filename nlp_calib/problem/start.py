@@ -107,20 +107,19 @@ def unwrapped_start(
     U, z = windows
     sensor, model = fns.sensor, fns.model
     best: tuple[float, SensorStart] | None = None
+    drawn: list[np.ndarray] = []
     for limit in _FIRST_TURNS:
         keep = np.abs(z[2]) < limit
-        if keep.sum() < max(8, 2 * len(model.kinematic_params)):
+        # A subset drawn before gives the same start: most drives never turn a quarter turn in a
+        # window, and the closed form is most of a run's start.
+        if keep.sum() < max(8, 2 * len(model.kinematic_params)) or any(
+            np.array_equal(keep, k) for k in drawn
+        ):
             continue
+        drawn.append(keep)
         try:
             start = sensor.closed_form(model, U[:, keep], z[:, keep], _columns(base_motion, keep), held)
-            zu = z
-            for _ in range(_UNWRAP_ROUNDS):
-                turned = base_motion({**start.params, **held})[2]
-                unwrapped = z[2] + 2.0 * np.pi * np.round((turned - z[2]) / (2.0 * np.pi))
-                if np.array_equal(unwrapped, zu[2]) and zu is not z:
-                    break
-                zu = np.vstack([z[:2], unwrapped])
-                start = sensor.closed_form(model, U, zu, base_motion, held)
+            start = _unwrapped(start, (U, z), base_motion, held, bool(keep.all()), fns)
         except (np.linalg.LinAlgError, ValueError, ZeroDivisionError):
             continue
         cost = explained({**start.params, **held}, z, base_motion)
@@ -143,6 +142,29 @@ def unwrapped_start(
                 ),
             )
     return best[1]
+
+
+def _unwrapped(
+    start: SensorStart,
+    windows: tuple[np.ndarray, np.ndarray],
+    base_motion: BaseMotion,
+    held: Mapping[str, float],
+    from_every_window: bool,
+    fns: ProblemFunctions,
+) -> SensorStart:
+    """``start`` drawn again on every window, each heading change unwrapped to the start's own
+    prediction, until that stops changing (at most :data:`_UNWRAP_ROUNDS` draws). A start
+    ``from_every_window`` already is the first draw where nothing unwraps."""
+    U, z = windows
+    current = z[2] if from_every_window else None
+    for _ in range(_UNWRAP_ROUNDS):
+        turned = base_motion({**start.params, **held})[2]
+        unwrapped = z[2] + 2.0 * np.pi * np.round((turned - z[2]) / (2.0 * np.pi))
+        if current is not None and np.array_equal(unwrapped, current):
+            break
+        current = unwrapped
+        start = fns.sensor.closed_form(fns.model, U, np.vstack([z[:2], unwrapped]), base_motion, held)
+    return start
 
 
 def _columns(base_motion: BaseMotion, keep: np.ndarray) -> BaseMotion:
