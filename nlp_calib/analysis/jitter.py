@@ -11,7 +11,7 @@ read robustly (the median's absolute deviation: a driver's steps do not count), 
 that changed (a message repeating a slow encoder's last update is no reading of its own).
 
 That noise adds up along a drive only where a reading's noise enters one interval and not the
-next: a speed's (integrated) and a steering angle's (each interval's own angle turns the base
+next: a speed's (integrated) and a steer angle's (each interval's own angle turns the base
 on); a wheel position's noise enters one increment up and the next down and cancels, its
 rounding already counted at a drift's ends (:func:`~nlp_calib.analysis.odometry.drift_noise`).
 """
@@ -76,7 +76,7 @@ def _drawn(stream: JointStream, sigma: np.ndarray, rng: np.random.Generator) -> 
 
 def input_jitter(model: KinematicModel, log: Log, steering_sample: str) -> np.ndarray:
     """Each input's 1σ per interval that the joints' own noise (:func:`reading_jitter`) gives it
-    and that adds up along a drive (a speed's, a steering angle's; 0 for a wheel position's, whose
+    and that adds up along a drive (a speed's, a steer angle's; 0 for a wheel position's, whose
     noise cancels, and without a joint stream): the inputs computed again on the readings with
     :data:`DRAWS` draws of that noise (fixed seed), their mean square difference."""
     n_in = len(model.input_names)

@@ -129,7 +129,7 @@ def systematic_shapes(increments: np.ndarray, spans: np.ndarray) -> np.ndarray:
     """What a constant error of the calibration makes of each span ``(i, j)``'s motion, in the base
     frame at ``i`` ``(5, S, 3)``: a scale of the distance along the motion, one across it, a heading
     error per metre driven and one per radian turned (each signed as the motion: a wheel's radius,
-    a mount's yaw, a steering offset, a track), and an offset of the reference's clock by one
+    a mount's yaw, a steer offset, a track), and an offset of the reference's clock by one
     interval, at unit size. It is the same
     on every segment, so the segments' errors regress on it; a random walk's do not."""
     track = poses.accumulate(np.zeros(3), increments)

@@ -112,7 +112,7 @@ def _tracker_terms(start: np.ndarray, end: np.ndarray, levers: tuple[np.ndarray,
     both ends of segments restarted from the tracker (rows of poses): ``(rows, 2, 3, 3)``. The base
     poses are the tracker's through the mount, so its heading's noise moves the base's position
     too, by the lever from the sensor to the base (``levers``: at the start and the end, world
-    axes): across a forward mount's lever (a tricycle's tracker 1.6 m ahead: 3 mm at 2 mrad)."""
+    axes): across a forward mount's lever (the demo's tracker 1.6 m ahead: 3 mm at 2 mrad)."""
     F = _start_jacobian(start, end)[:, None]
     units = []
     for lever in levers:

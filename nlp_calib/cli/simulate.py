@@ -12,6 +12,8 @@ from typing import Any
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import UsageError
 from nlp_calib.core.files import check_output_dir
+from nlp_calib.models.car_like import HIGHWAY_SCENARIO
+from nlp_calib.models.skid_steer import SPIN_SCENARIO
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.pipeline.simconfig import (
     camera_options,
@@ -200,19 +202,7 @@ def _simulate_vendor(args: argparse.Namespace, overrides: dict[str, Any]) -> int
 
 
 #: How a scenario reads each vehicle's files (after its ``joints``/reference paths), and its model.
-VEHICLE_SCENARIOS = {
-    "highway_car": (
-        "poses",
-        "form: speeds, encoders: {steering: steering, rear_left_wheel: rear_left_wheel, rear_right_wheel: "
-        "rear_right_wheel}}, with model: car_like (the axle distance, steer gain, track and the device's "
-        "position given under known:, as a straight kilometre cannot determine them)",
-    ),
-    "skid_spins": (
-        "motions",
-        "encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}, with model: skid_steer "
-        "and initial_guess: auto",
-    ),
-}
+VEHICLE_SCENARIOS = {"highway_car": ("poses", HIGHWAY_SCENARIO), "skid_spins": ("motions", SPIN_SCENARIO)}
 
 
 def _simulate_vehicle(args: argparse.Namespace, overrides: dict[str, Any]) -> int:

@@ -97,6 +97,13 @@ HIGHWAY_TRUTH: Mapping[str, float] = MappingProxyType(
     }
 )
 
+#: How a scenario reads the highway simulator's files, after its ``joints`` and ``poses`` paths.
+HIGHWAY_SCENARIO = (
+    "form: speeds, encoders: {steering: steering, rear_left_wheel: rear_left_wheel, rear_right_wheel: "
+    "rear_right_wheel}}, with model: car_like (the axle distance, steer gain, track and the device's "
+    "position given under known:, as a straight kilometre cannot determine them)"
+)
+
 
 #: The highway car's joints as its log names them: the four wheels' speeds, then the steering.
 HIGHWAY_JOINTS = ("rear_left_wheel", "rear_right_wheel", "front_left_wheel", "front_right_wheel", "steering")

@@ -63,6 +63,12 @@ SPIN_TRUTH: Mapping[str, float] = MappingProxyType(
     }
 )
 
+#: How a scenario reads the fast-spinning simulator's files, after its ``joints`` and ``motions`` paths.
+SPIN_SCENARIO = (
+    "encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}, with model: skid_steer "
+    "and initial_guess: auto"
+)
+
 
 def spin_problem(truth: Mapping[str, float], spin_rate: float) -> str:
     """What keeps ``truth`` from being driven at ``spin_rate`` (rad/s) by the wheels' law ("" if

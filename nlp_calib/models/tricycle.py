@@ -357,18 +357,7 @@ class Tricycle:
         revs, angle = rows["traction_revolutions"], rows["steering_angle"]
         dtheta = z[2]
 
-        # An encoder's angles take few values: the sine and cosine of each value once, then
-        # gathered (the same numbers, a quarter of the search's time).
-        values, where = np.unique(angle, return_inverse=True)
-        few, where = 2 * values.size <= angle.size, where.reshape(angle.shape)
-
-        def design(k_steer: float) -> np.ndarray:
-            if few:
-                ka = k_steer * values
-                sin, cos = np.sin(ka)[where], np.cos(ka)[where]
-            else:
-                sin, cos = np.sin(k_steer * angle), np.cos(k_steer * angle)
-            return np.stack([(revs * sin).sum(0), (revs * cos).sum(0)], 1)
+        design = _heading_design(revs, angle)
 
         def rss(k_steer: float) -> float:
             A = design(k_steer)
@@ -406,3 +395,21 @@ class Tricycle:
             "sensor_y": y,
             "sensor_theta": theta,
         }
+
+
+def _heading_design(revs: np.ndarray, angle: np.ndarray) -> Callable[[float], np.ndarray]:
+    """``k_steer -> [Σ r·sin(k_steer·a), Σ r·cos(k_steer·a)]`` per window (``(M, 2)``). An encoder's
+    angles take few values: the sine and cosine of each value once, then gathered (the same
+    numbers, a quarter of the search's time)."""
+    values, where = np.unique(angle, return_inverse=True)
+    few, where = 2 * values.size <= angle.size, where.reshape(angle.shape)
+
+    def design(k_steer: float) -> np.ndarray:
+        if few:
+            ka = k_steer * values
+            sin, cos = np.sin(ka)[where], np.cos(ka)[where]
+        else:
+            sin, cos = np.sin(k_steer * angle), np.cos(k_steer * angle)
+        return np.stack([(revs * sin).sum(0), (revs * cos).sum(0)], 1)
+
+    return design
