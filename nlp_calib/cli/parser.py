@@ -439,12 +439,14 @@ def _add_simulated_kinds(p: argparse.ArgumentParser) -> None:
         "--vehicle",
         choices=tuple(VEHICLES),
         default=None,
-        help="a real vehicle's drive (--out: the stem of its files; docs/models.md): highway_car, a car at "
-        "8-20 m/s for a minute barely turning, four CAN wheel speeds and its steer angle at 90 Hz "
-        "(<out>.csv) beside a windshield device's poses at 20 Hz (<out>.tum); skid_spins, a skid-steer spinning over "
-        "pi per 2 s increment, its encoders updating at 4 Hz under 20 Hz messages and slipping on pivots "
-        "(<out>.csv), against a scan matcher's increments (<out>.motions.csv); --seed, --duration and (a "
-        "skid-steer's matcher) --noise-xy, --noise-theta; the rest in --config",
+        help=(
+            "a real vehicle's drive (--out: the stem of its files; docs/models.md): highway_car, a car at "
+            "8-20 m/s for a minute barely turning, four CAN wheel speeds and its steer angle at 90 Hz "
+            "(<out>.csv) beside a windshield device's poses at 20 Hz (<out>.tum); skid_spins, a skid-steer "
+            "spinning over pi per 2 s increment, its encoders updating at 4 Hz under 20 Hz messages and "
+            "slipping on pivots (<out>.csv), against a scan matcher's increments (<out>.motions.csv); "
+            "--seed, --duration and (a skid-steer's matcher) --noise-xy, --noise-theta; the rest in --config"
+        ),
     )
     kind.add_argument(
         "--vendor",
