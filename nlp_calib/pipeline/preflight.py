@@ -553,7 +553,9 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimat
     return _report(sc, assess(sc, logs, found), t0)
 
 
-def stops(sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None) -> Preflight | None:
+def stops(
+    sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None
+) -> Preflight | None:
     """The pre-flight's report (:func:`preflight`'s) where it stops a calibration of ``sc``, else
     None. Whether it stops needs neither the σ to believe (the jackknife's refits, the noise
     propagated over every record) nor the needed precisions nor the plan: a parameter is not
