@@ -138,7 +138,8 @@ class _LagFits:
         kinds = self.binder.fns.model.encoder_kinds
         evaluator, costs = None, np.full(n, np.nan)
         for i, lag in enumerate(grid):
-            shifted, _ = resample_encoders(self.log, float(lag), kinds)
+            # Only the profile's records re-sampled: a long log's others are never read here.
+            shifted, _ = resample_encoders(self.log, float(lag), kinds, records=records)
             try:
                 _, evaluator = self.binder.bind(shifted, *records, evaluator=evaluator)
             except NlpCalibError:
