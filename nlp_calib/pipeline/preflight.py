@@ -435,12 +435,17 @@ def _needed(d: Drive, x: np.ndarray) -> np.ndarray:
     return np.array([layout.param(n).needed(float(v)) for n, v in zip(fns.free, x)])
 
 
+def _omega(d: Drive) -> np.ndarray:
+    """The information weights of an error's rows in ``d``'s problem."""
+    return np.array(d.scenario.objective.information.omega(d.fns.error_rows, d.fns.sensor.weights))
+
+
 @dataclass(frozen=True)
 class Assessment:
     """What the pre-flight judges the parameters from: the drive (:class:`Drive`) and the
     parameters the run would hold, the point the Jacobian is taken at (free ``x``, in words
     ``where``), the windows' information there, the residuals' variance it assumes (``noise`` in
-    words), the information weights, the robust threshold and the bounds' 1σ."""
+    words) and the bounds' 1σ."""
 
     drive: Drive
     held: Mapping[str, str]
@@ -449,8 +454,6 @@ class Assessment:
     info: det.Information
     sigma2: float
     noise: str
-    omega: np.ndarray
-    delta: float
     bounds_std: np.ndarray
     #: Each free parameter's σ at ``x`` as the run computes it, where the run's internal solver
     #: converged on the judged windows (None: it did not, ``x`` is a rough start, or not computed
@@ -463,6 +466,16 @@ class Assessment:
     #: What computes ``propagated`` and ``needed`` where they are not computed yet (None: they
     #: are): whether a run stops needs neither (:func:`stops`).
     pending: Callable[[], tuple[np.ndarray | None, np.ndarray]] | None = None
+
+    @property
+    def omega(self) -> np.ndarray:
+        """The information weights of an error's rows."""
+        return _omega(self.drive)
+
+    @property
+    def delta(self) -> float:
+        """The robust kernel's threshold."""
+        return self.drive.scenario.objective.robust.delta
 
     def completed(self) -> Assessment:
         """This assessment with its σ to believe and the needed precisions computed."""
@@ -502,8 +515,8 @@ def assess(
     (``found``: the run's own lag estimate, where it has one; ``complete``: with the σ to believe
     and the needed precisions, else left :attr:`~Assessment.pending`)."""
     d, held = drive(sc, logs)
-    fns, one = d.fns, d.scenario
-    omega = np.array(one.objective.information.omega(fns.error_rows, fns.sensor.weights))
+    fns = d.fns
+    omega = _omega(d)
     aligned = _as_the_run_aligns(d, omega, found)
     d, fitted = aligned if aligned is not None else _aligned(d, omega, _fitted(d, omega))
     x, info, where = fitted[:3] if fitted is not None else _rough(d, omega)
@@ -521,7 +534,7 @@ def assess(
         return (sigma() if sigma is not None else None), _needed(d, x)
 
     a = Assessment(
-        d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds,
+        d, held, x, where, info, sigma2, noise, bounds,
         converged=fitted is not None, pending=pending,
     )  # fmt: skip
     return a.completed() if complete else a
