@@ -32,35 +32,66 @@ def resample_encoders(
     value the whole log's re-sampling gives it), the others' left as logged, for a caller that
     reads those records alone (a profile over a stretch of a long log).
     """
-    late = [(delays or {}).get(name, 0.0) for name in log.header.encoder_names]
-    if lag_s == 0.0 and not any(late):
-        return log, (0, log.n_records)
-    if log.joint_stream is not None:
-        return _joints_resampled(log, lag_s, late, records)
-    t = log.time_s
-    tq = t - lag_s
-    valid = np.flatnonzero((tq - max(late) >= t[0]) & (tq - min(late) <= t[-1]))
-    if valid.size < 2:
-        raise ProblemError(
-            f"a lag of {lag_s:g} s leaves fewer than 2 records of the {t[-1] - t[0]:.1f} s log; "
-            "use a lag well below the log's duration"
-        )
-    rows = slice(*(records or (0, log.n_records)))
-    columns = []
-    for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
-        raw, when = log.ticks[:, j], tq[rows] - late[j]
-        if kinds.get(name) == "absolute":
-            turns = np.unwrap(2.0 * np.pi * raw / vmax) / (2.0 * np.pi)
-            columns.append(np.mod(np.round(np.interp(when, t, turns) * vmax), vmax))
-        else:
-            count = np.concatenate([[0], np.cumsum(wrapped_difference(raw))]).astype(float)
-            columns.append(np.mod(np.round(np.interp(when, t, count)) + raw[0], COUNTER_MODULUS))
-    ticks = np.stack(columns, axis=1).astype(np.int64)
-    if records is not None:  # the other records as logged
-        ticks = np.concatenate([log.ticks[: rows.start], ticks, log.ticks[rows.stop :]]).astype(np.int64)
-    ticks.flags.writeable = False
-    shifted = replace(log, ticks=ticks, clock=replace(log.clock, encoder_lag_s=log.encoder_lag_s + lag_s))
-    return shifted, (int(valid[0]), int(valid[-1]) + 1)
+    return Resampler(log, kinds, delays).at(lag_s, records)
+
+
+class Resampler:
+    """:func:`resample_encoders` of one log at any number of lags: what does not depend on the
+    lag (each counter's unwrapped cumulative count, each absolute encoder's unwrapped turns) is
+    computed once, at the first lag that needs it."""
+
+    def __init__(
+        self, log: Log, kinds: Mapping[str, EncoderKind], delays: Mapping[str, float] | None = None
+    ) -> None:
+        self.log, self.kinds = log, kinds
+        self.late = [(delays or {}).get(name, 0.0) for name in log.header.encoder_names]
+        self._levels: list[np.ndarray] | None = None
+
+    def levels(self) -> list[np.ndarray]:
+        """Each encoder's readings as a level to interpolate: turns (absolute), counts (counters)."""
+        if self._levels is None:
+            log, out = self.log, []
+            for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
+                raw = log.ticks[:, j]
+                if self.kinds.get(name) == "absolute":
+                    out.append(np.unwrap(2.0 * np.pi * raw / vmax) / (2.0 * np.pi))
+                else:
+                    out.append(np.concatenate([[0], np.cumsum(wrapped_difference(raw))]).astype(float))
+            self._levels = out
+        return self._levels
+
+    def at(self, lag_s: float, records: tuple[int, int] | None = None) -> tuple[Log, tuple[int, int]]:
+        """The log re-sampled at ``lag_s`` (see :func:`resample_encoders`)."""
+        log, late = self.log, self.late
+        if lag_s == 0.0 and not any(late):
+            return log, (0, log.n_records)
+        if log.joint_stream is not None:
+            return _joints_resampled(log, lag_s, late, records)
+        t = log.time_s
+        tq = t - lag_s
+        valid = np.flatnonzero((tq - max(late) >= t[0]) & (tq - min(late) <= t[-1]))
+        if valid.size < 2:
+            raise ProblemError(
+                f"a lag of {lag_s:g} s leaves fewer than 2 records of the {t[-1] - t[0]:.1f} s log; "
+                "use a lag well below the log's duration"
+            )
+        return self._shifted(lag_s, tq, records), (int(valid[0]), int(valid[-1]) + 1)
+
+    def _shifted(self, lag_s: float, tq: np.ndarray, records: tuple[int, int] | None) -> Log:
+        log, t = self.log, self.log.time_s
+        rows = slice(*(records or (0, log.n_records)))
+        columns = []
+        for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
+            level, when = self.levels()[j], tq[rows] - self.late[j]
+            if self.kinds.get(name) == "absolute":
+                columns.append(np.mod(np.round(np.interp(when, t, level) * vmax), vmax))
+            else:
+                columns.append(np.mod(np.round(np.interp(when, t, level)) + log.ticks[0, j], COUNTER_MODULUS))
+        ticks = np.stack(columns, axis=1).astype(np.int64)
+        if records is not None:  # the other records as logged
+            ticks = np.concatenate([log.ticks[: rows.start], ticks, log.ticks[rows.stop :]]).astype(np.int64)
+        ticks.flags.writeable = False
+        return replace(log, ticks=ticks, clock=replace(log.clock, encoder_lag_s=log.encoder_lag_s + lag_s))
 
 
 def _joints_resampled(
