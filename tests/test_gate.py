@@ -326,3 +326,39 @@ def test_the_gate_stops_where_the_preflight_does_and_says_what_it_says(
         return {k: v for k, v in codec.to_data(report).items() if k != "time_s"}
 
     assert stored(gated) == stored(own)
+
+
+def test_the_profiles_held_fit_on_the_runs_evaluator_is_the_held_problem_set_up_anew(tmp_path: Path) -> None:
+    """Issue 41: the profile's fit held at a value, on the run's own evaluator (the held parameter
+    and the time offset, at the run's lag, out of its normal equations), costs what the scenario
+    set up anew with them known costs (prepared, screened, aligned at that lag, bound, fitted)."""
+    import dataclasses
+
+    from nlp_calib.pipeline import profile_check
+    from nlp_calib.pipeline.fit import Fit
+    from nlp_calib.pipeline.stages import setup_log
+
+    log = write_sim(tmp_path, "rev.txt", seed=12, model="tricycle_reverse", records=1500)
+    mapping = {"dataset": str(log), "model": "tricycle_reverse", "initial_guess": "from_file"}
+    sc = scenario_from_mapping({**mapping, "solvers": ["gauss_newton"]}, "rev", tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        calibration = Calibration(sc)
+        run = calibration.run()
+        name = "k_steer_reverse"
+        value = run.reports["gauss_newton"].result.param_dict()[name] - 2.0 * run.std("gauss_newton")[name]
+        ours = profile_check._held_cost(calibration.fitting, run, name, value)
+        start = {
+            n: v
+            for n, v in run.reports["gauss_newton"].result.param_dict().items()
+            if n in run.scenario.layout.robot()
+        }
+        held = dataclasses.replace(
+            sc.parameters, initial_guess={**start, name: value}, known={**sc.parameters.known, name: value}
+        )
+        lag = dataclasses.replace(sc.log.alignment, tracker_lag=run.data.tracker_lag_s)
+        part = setup_log(sc.with_options(parameters=held, alignment=lag), None, ("gauss_newton",))
+        anew = Fit(part.problem, part.windows.data, ("gauss_newton",)).solve("gauss_newton")
+    assert ours is not None and anew.converged
+    assert ours == pytest.approx(anew.cost, rel=1e-9)
+    assert ours > run.reports["gauss_newton"].result.cost  # held 2σ off, the cost rises
