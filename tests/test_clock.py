@@ -25,6 +25,21 @@ from nlp_calib.solvers import ProblemEvaluator
 DEMO_TRUTH = json.loads((SCENARIOS / "data" / "demo_tricycle.truth.json").read_text())["params"]
 
 
+def test_a_stretch_re_sampled_alone_is_the_whole_logs_re_sampling() -> None:
+    """Issue 41: the lag profile re-samples only the records it binds; each is the value the whole
+    log's re-sampling gives it, to the bit (counters and absolute encoders), the others as logged."""
+    model = get_model("tricycle")
+    log = load_log(SCENARIOS / "data" / "demo_tricycle.txt", model)
+    for lag in (0.0137, -0.0421):
+        whole, valid = resample_encoders(log, lag, model.encoder_kinds)
+        part, same = resample_encoders(log, lag, model.encoder_kinds, records=(300, 900))
+        assert same == valid and part.encoder_lag_s == whole.encoder_lag_s
+        assert np.array_equal(part.ticks[300:900], whole.ticks[300:900])
+        assert not np.array_equal(whole.ticks[300:900], log.ticks[300:900])  # it does move them
+        assert np.array_equal(part.ticks[:300], log.ticks[:300])
+        assert np.array_equal(part.ticks[900:], log.ticks[900:])
+
+
 def _residuals(lag_data: float, lag_param: float, horizon: int) -> np.ndarray:
     """The demo log's residuals with its encoders re-sampled at ``lag_data`` and the problem's lag at
     ``lag_param`` (the true parameters otherwise)."""

@@ -23,6 +23,7 @@ from nlp_calib.pipeline.scenario import load_scenario
 from nlp_calib.pipeline.units_check import _judged_by_fit
 from nlp_calib.pipeline.validation import lag_alike
 from nlp_calib.problem import ResidualData
+from nlp_calib.results import codec
 from nlp_calib.results.checks import CAVEAT, LagEstimate
 from nlp_calib.results.preflight import WEAKLY, UnitFinding
 from nlp_calib.results.run import CAVEATS
@@ -279,7 +280,7 @@ def test_a_run_searches_its_lag_once_and_the_gate_judges_at_it(
 
     searched: list[LagEstimate] = []
     judged: list[LagEstimate | None] = []
-    search, judge = align.estimate_tracker_lag, cli_preflight.preflight
+    search, judge, gate = align.estimate_tracker_lag, cli_preflight.preflight, cli_preflight.stops
 
     def counted(*args: object) -> LagEstimate:
         searched.append(search(*args))  # type: ignore[arg-type]
@@ -287,11 +288,11 @@ def test_a_run_searches_its_lag_once_and_the_gate_judges_at_it(
 
     def spied(sc: object, logs: object, found: LagEstimate | None = None) -> object:
         judged.append(found)
-        return judge(sc, logs, found)  # type: ignore[arg-type]
+        return gate(sc, logs, found)  # type: ignore[arg-type]
 
     monkeypatch.setattr(align, "estimate_tracker_lag", counted)
     monkeypatch.setattr(pf, "estimate_tracker_lag", counted)
-    monkeypatch.setattr(cli_preflight, "preflight", spied)
+    monkeypatch.setattr(cli_preflight, "stops", spied)
     demo = SCENARIOS / "demo.yaml"
     proc = cli("run", str(demo), "--solver", "gauss_newton", "--out", str(tmp_path / "out"))
     assert proc.returncode == 0, proc.stderr
@@ -315,3 +316,73 @@ def test_two_loose_combinations_of_the_same_parameters_are_one_caveat() -> None:
     weak = obs.weak_directions(names, lam, V, np.zeros(4, dtype=bool))
     assert [set(w.components) for w in weak] == [{"a", "b", "c"}, {"d"}]
     assert weak[0].std_reference == pytest.approx(50.0)
+
+
+def test_the_gate_stops_where_the_preflight_does_and_says_what_it_says(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 41: inside a run the gate (``stops``) decides without the σ to believe, the needed
+    precisions or the plan, which only its words need: it lets the demo go on without computing
+    them, and where the stand-alone pre-flight stops a drive it stops it with the same report."""
+    computed: list[object] = []
+    sigma = pf._propagated
+
+    def counted(*args: object) -> object:
+        computed.append(args)
+        return sigma(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pf, "_propagated", counted)
+    demo = load_scenario(SCENARIOS / "demo.yaml")
+    assert pf.stops(demo) is None and not computed
+    assert preflight(demo).stop_words() == "" and len(computed) == 1
+    log = write_sim(tmp_path, "straight.txt", seed=5, records=800, trajectory="straight")
+    sc = scenario_from_mapping(
+        {"dataset": str(log), "model": "tricycle", "initial_guess": "from_file", "solvers": ["gauss_newton"]},
+        "straight",
+        tmp_path,
+    )
+    own, gated = preflight(sc), pf.stops(sc)
+    assert own.stop_words() and gated is not None
+    assert gated.stop_words() == own.stop_words() and gated.exit_code == own.exit_code
+    assert gated.plan is not None and gated.plan.best is not None
+
+    def stored(report: object) -> object:
+        return {k: v for k, v in codec.to_data(report).items() if k != "time_s"}
+
+    assert stored(gated) == stored(own)
+
+
+def test_the_profiles_held_fit_on_the_runs_evaluator_is_the_held_problem_set_up_anew(tmp_path: Path) -> None:
+    """Issue 41: the profile's fit held at a value, on the run's own evaluator (the held parameter
+    and the time offset, at the run's lag, out of its normal equations), costs what the scenario
+    set up anew with them known costs (prepared, screened, aligned at that lag, bound, fitted)."""
+    import dataclasses
+
+    from nlp_calib.pipeline import profile_check
+    from nlp_calib.pipeline.fit import Fit
+    from nlp_calib.pipeline.stages import setup_log
+
+    log = write_sim(tmp_path, "rev.txt", seed=12, model="tricycle_reverse", records=1500)
+    mapping = {"dataset": str(log), "model": "tricycle_reverse", "initial_guess": "from_file"}
+    sc = scenario_from_mapping({**mapping, "solvers": ["gauss_newton"]}, "rev", tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        calibration = Calibration(sc)
+        run = calibration.run()
+        name = "k_steer_reverse"
+        value = run.reports["gauss_newton"].result.param_dict()[name] - 2.0 * run.std("gauss_newton")[name]
+        ours = profile_check._held_cost(calibration.fitting, run, name, value)
+        start = {
+            n: v
+            for n, v in run.reports["gauss_newton"].result.param_dict().items()
+            if n in run.scenario.layout.robot()
+        }
+        held = dataclasses.replace(
+            sc.parameters, initial_guess={**start, name: value}, known={**sc.parameters.known, name: value}
+        )
+        lag = dataclasses.replace(sc.log.alignment, tracker_lag=run.data.tracker_lag_s)
+        part = setup_log(sc.with_options(parameters=held, alignment=lag), None, ("gauss_newton",))
+        anew = Fit(part.problem, part.windows.data, ("gauss_newton",)).solve("gauss_newton")
+    assert ours is not None and anew.converged
+    assert ours == pytest.approx(anew.cost, rel=1e-9)
+    assert ours > run.reports["gauss_newton"].result.cost  # held 2σ off, the cost rises

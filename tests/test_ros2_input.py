@@ -149,6 +149,13 @@ def test_a_lag_resamples_the_joints_at_their_own_stamps() -> None:
         )
     assert (a, b) == (0, time_s.size)  # every shifted stamp lies inside the joints' stream
     assert resample_encoders(log, 0.1, TRICYCLE.encoder_kinds)[1][0] > 0
+    # Issue 41: records 40..90 alone re-sampled are the whole re-sampling's, to the bit; the others
+    # as logged.
+    part, _ = resample_encoders(log, 0.0137, TRICYCLE.encoder_kinds, records=(40, 90))
+    assert np.array_equal(part.joint_positions[40:90], shifted.joint_positions[40:90])
+    assert np.array_equal(part.joint_positions[:40], log.joint_positions[:40])
+    assert np.array_equal(part.joint_positions[90:], log.joint_positions[90:])
+    assert part.encoder_lag_s == shifted.encoder_lag_s
 
 
 # --- the models in radians -----------------------------------------------------------------------

@@ -17,7 +17,7 @@ from nlp_calib.outputs.outdir import refuse_collisions, write_file
 from nlp_calib.outputs.preflight import preflight_lines
 from nlp_calib.pipeline import Scenario, load_scenario
 from nlp_calib.pipeline.draft import draft
-from nlp_calib.pipeline.preflight import preflight, refuse
+from nlp_calib.pipeline.preflight import preflight, refuse, stops
 from nlp_calib.pipeline.stages import Aligned, align_log
 from nlp_calib.results import codec
 from nlp_calib.results.checks import LagEstimate
@@ -89,7 +89,7 @@ def gate(
         return
     for sc, log_list, lag in zip(scenarios, logs, [*found, *[None] * (len(scenarios) - len(found))]):
         try:
-            report = preflight(sc, log_list, lag)
+            report = stops(sc, log_list, lag)  # its σ, its plan: only where it stops
         except (DatasetError, ScenarioError, UsageError):  # the run refuses these inputs or settings
             raise  # so (its preparation, its backend): said once, now
         except Exception as exc:  # the pre-flight must never be what stops a run that could succeed
@@ -99,8 +99,9 @@ def gate(
                 stacklevel=2,
             )
             continue
-        if report.stop_words():
-            print("\n".join(escaped(line) for line in preflight_lines(report)) + "\n")
+        if report is None:
+            continue
+        print("\n".join(escaped(line) for line in preflight_lines(report)) + "\n")
         refuse(report, "; to calibrate anyway, give --skip-preflight")
 
 

@@ -17,6 +17,7 @@ def resample_encoders(
     lag_s: float,
     kinds: Mapping[str, EncoderKind],
     delays: Mapping[str, float] | None = None,
+    records: tuple[int, int] | None = None,
 ) -> tuple[Log, tuple[int, int]]:
     """Encoder readings re-sampled at ``t - lag_s``: the tracker reports ``lag_s`` after the encoders.
 
@@ -27,41 +28,80 @@ def resample_encoders(
     record range ``[first, stop)`` whose shifted times lie inside the log (outside it the readings
     are clamped and must not be used). ``delays`` reads an encoder that much later still (s, by
     name): a stream whose effect lags its readings. The lag adds to the log's own
-    (:attr:`Log.encoder_lag_s`).
+    (:attr:`Log.encoder_lag_s`). ``records``: only those records' readings re-sampled (each the
+    value the whole log's re-sampling gives it), the others' left as logged, for a caller that
+    reads those records alone (a profile over a stretch of a long log).
     """
-    late = [(delays or {}).get(name, 0.0) for name in log.header.encoder_names]
-    if lag_s == 0.0 and not any(late):
-        return log, (0, log.n_records)
-    if log.joint_stream is not None:
-        return _joints_resampled(log, lag_s, late)
-    t = log.time_s
-    tq = t - lag_s
-    valid = np.flatnonzero((tq - max(late) >= t[0]) & (tq - min(late) <= t[-1]))
-    if valid.size < 2:
-        raise ProblemError(
-            f"a lag of {lag_s:g} s leaves fewer than 2 records of the {t[-1] - t[0]:.1f} s log; "
-            "use a lag well below the log's duration"
-        )
-    columns = []
-    for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
-        raw, when = log.ticks[:, j], tq - late[j]
-        if kinds.get(name) == "absolute":
-            turns = np.unwrap(2.0 * np.pi * raw / vmax) / (2.0 * np.pi)
-            columns.append(np.mod(np.round(np.interp(when, t, turns) * vmax), vmax))
-        else:
-            count = np.concatenate([[0], np.cumsum(wrapped_difference(raw))]).astype(float)
-            columns.append(np.mod(np.round(np.interp(when, t, count)) + raw[0], COUNTER_MODULUS))
-    ticks = np.stack(columns, axis=1).astype(np.int64)
-    ticks.flags.writeable = False
-    shifted = replace(log, ticks=ticks, clock=replace(log.clock, encoder_lag_s=log.encoder_lag_s + lag_s))
-    return shifted, (int(valid[0]), int(valid[-1]) + 1)
+    return Resampler(log, kinds, delays).at(lag_s, records)
 
 
-def _joints_resampled(log: Log, lag_s: float, late: list[float]) -> tuple[Log, tuple[int, int]]:
+class Resampler:
+    """:func:`resample_encoders` of one log at any number of lags: what does not depend on the
+    lag (each counter's unwrapped cumulative count, each absolute encoder's unwrapped turns) is
+    computed once, at the first lag that needs it."""
+
+    def __init__(
+        self, log: Log, kinds: Mapping[str, EncoderKind], delays: Mapping[str, float] | None = None
+    ) -> None:
+        self.log, self.kinds = log, kinds
+        self.late = [(delays or {}).get(name, 0.0) for name in log.header.encoder_names]
+        self._levels: list[np.ndarray] | None = None
+
+    def levels(self) -> list[np.ndarray]:
+        """Each encoder's readings as a level to interpolate: turns (absolute), counts (counters)."""
+        if self._levels is None:
+            log, out = self.log, []
+            for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
+                raw = log.ticks[:, j]
+                if self.kinds.get(name) == "absolute":
+                    out.append(np.unwrap(2.0 * np.pi * raw / vmax) / (2.0 * np.pi))
+                else:
+                    out.append(np.concatenate([[0], np.cumsum(wrapped_difference(raw))]).astype(float))
+            self._levels = out
+        return self._levels
+
+    def at(self, lag_s: float, records: tuple[int, int] | None = None) -> tuple[Log, tuple[int, int]]:
+        """The log re-sampled at ``lag_s`` (see :func:`resample_encoders`)."""
+        log, late = self.log, self.late
+        if lag_s == 0.0 and not any(late):
+            return log, (0, log.n_records)
+        if log.joint_stream is not None:
+            return _joints_resampled(log, lag_s, late, records)
+        t = log.time_s
+        tq = t - lag_s
+        valid = np.flatnonzero((tq - max(late) >= t[0]) & (tq - min(late) <= t[-1]))
+        if valid.size < 2:
+            raise ProblemError(
+                f"a lag of {lag_s:g} s leaves fewer than 2 records of the {t[-1] - t[0]:.1f} s log; "
+                "use a lag well below the log's duration"
+            )
+        return self._shifted(lag_s, tq, records), (int(valid[0]), int(valid[-1]) + 1)
+
+    def _shifted(self, lag_s: float, tq: np.ndarray, records: tuple[int, int] | None) -> Log:
+        log, t = self.log, self.log.time_s
+        rows = slice(*(records or (0, log.n_records)))
+        columns = []
+        for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
+            level, when = self.levels()[j], tq[rows] - self.late[j]
+            if self.kinds.get(name) == "absolute":
+                columns.append(np.mod(np.round(np.interp(when, t, level) * vmax), vmax))
+            else:
+                columns.append(np.mod(np.round(np.interp(when, t, level)) + log.ticks[0, j], COUNTER_MODULUS))
+        ticks = np.stack(columns, axis=1).astype(np.int64)
+        if records is not None:  # the other records as logged
+            ticks = np.concatenate([log.ticks[: rows.start], ticks, log.ticks[rows.stop :]]).astype(np.int64)
+        ticks.flags.writeable = False
+        return replace(log, ticks=ticks, clock=replace(log.clock, encoder_lag_s=log.encoder_lag_s + lag_s))
+
+
+def _joints_resampled(
+    log: Log, lag_s: float, late: list[float], records: tuple[int, int] | None = None
+) -> tuple[Log, tuple[int, int]]:
     """Joints in radians re-sampled from their own stream (at its own stamps) at ``t - lag_s``,
-    each joint ``late`` (s) later still."""
+    each joint ``late`` (s) later still (``records``: those alone, as :func:`resample_encoders`)."""
     stream = log.joint_stream
     assert stream is not None
+    records = records if log.joint_positions is not None else None
     lag_s += log.encoder_lag_s  # the stream is as published: shift by the log's own lag too
     tq = log.time_s - lag_s
     valid = np.flatnonzero(stream.covers(tq - max(late)) & stream.covers(tq - min(late)))
@@ -70,6 +110,9 @@ def _joints_resampled(log: Log, lag_s: float, late: list[float]) -> tuple[Log, t
             f"a lag of {lag_s:g} s leaves fewer than 2 records inside the joints' "
             f"{stream.time_s[-1] - stream.time_s[0]:.1f} s stream; use a lag well below the log's duration"
         )
-    positions = np.stack([stream.at(tq - d)[:, j] for j, d in enumerate(late)], axis=1)
+    rows = slice(*(records or (0, log.n_records)))
+    positions = np.stack([stream.at(tq[rows] - d)[:, j] for j, d in enumerate(late)], axis=1)
+    if records is not None and (held := log.joint_positions) is not None:  # the others as logged
+        positions = np.concatenate([held[: rows.start], positions, held[rows.stop :]])
     shifted = replace(log, joint_positions=frozen(positions), clock=replace(log.clock, encoder_lag_s=lag_s))
     return shifted, (int(valid[0]), int(valid[-1]) + 1)

@@ -17,6 +17,7 @@ import numpy as np
 
 from nlp_calib.core.errors import NlpCalibError, NlpCalibWarning
 from nlp_calib.logs import Log, resample_encoders
+from nlp_calib.logs.resample import Resampler
 from nlp_calib.pipeline.build import Binder
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.prepare import fit_records
@@ -92,10 +93,18 @@ class _LagFits:
     records: tuple[int, int]
     column: int
     evaluator: ProblemEvaluator | None = None
+    #: The log's re-sampling at any lag (what does not depend on the lag computed once).
+    resampler: Resampler | None = None
+
+    def resampled(self, lag: float, records: tuple[int, int] | None = None) -> Log:
+        """The log's encoders re-sampled at ``lag`` (``records``: those alone)."""
+        if self.resampler is None:
+            self.resampler = Resampler(self.log, self.binder.fns.model.encoder_kinds)
+        return self.resampler.at(lag, records)[0]
 
     def fit(self, x: np.ndarray) -> tuple[float, np.ndarray, bool]:
         """The internal fit from ``x`` on the encoders re-sampled at ``x``'s lag."""
-        shifted, _ = resample_encoders(self.log, float(x[self.column]), self.binder.fns.model.encoder_kinds)
+        shifted = self.resampled(float(x[self.column]))
         _, self.evaluator = self.binder.bind(shifted, *self.records, evaluator=self.evaluator)
         cost, x_new, converged = self.binder.fit(self.evaluator, x)
         return cost, x_new, bool(converged and np.all(np.isfinite(x_new)))
@@ -135,10 +144,10 @@ class _LagFits:
         a, b = self.records
         mid, half = (a + b) // 2, PROFILE_RECORDS // 2
         records = (max(a, mid - half), min(b, mid + half))
-        kinds = self.binder.fns.model.encoder_kinds
         evaluator, costs = None, np.full(n, np.nan)
         for i, lag in enumerate(grid):
-            shifted, _ = resample_encoders(self.log, float(lag), kinds)
+            # Only the profile's records re-sampled: a long log's others are never read here.
+            shifted = self.resampled(float(lag), records)
             try:
                 _, evaluator = self.binder.bind(shifted, *records, evaluator=evaluator)
             except NlpCalibError:

@@ -20,6 +20,7 @@ from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis, Scores
 from nlp_calib.pipeline.build import StartingPoint
 from nlp_calib.pipeline.checks import CheckContext, run_checks
+from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.stored import StoredCalibration
@@ -341,9 +342,11 @@ def assemble_run(
     notes: Sequence[str],
     views: MountViews | None = None,
     against: StoredCalibration | None = None,
+    fit: Fit | None = None,
 ) -> CalibrationRun:
     """One log's run: the fit's estimates and checks beside this log's figures, with its verdict
-    (``views``: the fit's mounts seen from this log; ``against``: a stored calibration it checks)."""
+    (``views``: the fit's mounts seen from this log; ``against``: a stored calibration it checks;
+    ``fit``: the run's fit, which a check may fit again)."""
     prepared, windows, alignment, findings = log
     checks = fit_checks(fitted, findings, start, figures.nominal)
     reports = {
@@ -379,7 +382,7 @@ def assemble_run(
     checks = dataclasses.replace(
         run.checks,
         more=run_checks(
-            run, CheckContext(source.files(), convert, prepared.scenario, prepared.model, against)
+            run, CheckContext(source.files(), convert, prepared.scenario, prepared.model, against, fit)
         ),
     )
     run = _believed_plan(dataclasses.replace(run, checks=checks))

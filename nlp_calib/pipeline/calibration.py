@@ -409,7 +409,16 @@ def _assemble(
         views = MountViews(fitting.fns, i, logs)
         runs.append(
             assemble_run(
-                info, stage, fitting.problem.start, results, fitted, figures, notes, views, wanted.against
+                info,
+                stage,
+                fitting.problem.start,
+                results,
+                fitted,
+                figures,
+                notes,
+                views,
+                wanted.against,
+                fitting,
             )
         )
     return runs

@@ -24,6 +24,7 @@ from nlp_calib.pipeline import (
     rival,
     truth,
 )
+from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.stored import StoredCalibration
 from nlp_calib.results import CalibrationRun
@@ -43,6 +44,8 @@ class CheckContext:
     model: KinematicModel | None = None
     #: A stored calibration the run checks (``nlp-calib check``; None: none).
     against: StoredCalibration | None = None
+    #: The run's fit: its evaluator bound to the windows it fitted (None: not at hand).
+    fit: Fit | None = None
 
 
 #: A check: the run and its context to a result, or None when it has nothing to say.
@@ -55,7 +58,7 @@ RUN_CHECKS: dict[str, RunCheck] = {
     "faults": lambda run, ctx: fault_check.check(run),
     "direction": lambda run, ctx: direction_check.check(run),
     "consistency": lambda run, ctx: consistency_check.check(run),
-    profile_check.NAME: lambda run, ctx: profile_check.check(run, ctx.scenario, ctx.model),
+    profile_check.NAME: lambda run, ctx: profile_check.check(run, ctx.scenario, ctx.model, ctx.fit),
     "truth": lambda run, ctx: truth.check(run, ctx.files, ctx.convert),
     "model": lambda run, ctx: rival.check(run, ctx.scenario),
     "drift": lambda run, ctx: drift_check.check(run, ctx.against, ctx.model),

@@ -435,12 +435,17 @@ def _needed(d: Drive, x: np.ndarray) -> np.ndarray:
     return np.array([layout.param(n).needed(float(v)) for n, v in zip(fns.free, x)])
 
 
+def _omega(d: Drive) -> np.ndarray:
+    """The information weights of an error's rows in ``d``'s problem."""
+    return np.array(d.scenario.objective.information.omega(d.fns.error_rows, d.fns.sensor.weights))
+
+
 @dataclass(frozen=True)
 class Assessment:
     """What the pre-flight judges the parameters from: the drive (:class:`Drive`) and the
     parameters the run would hold, the point the Jacobian is taken at (free ``x``, in words
     ``where``), the windows' information there, the residuals' variance it assumes (``noise`` in
-    words), the information weights, the robust threshold and the bounds' 1σ."""
+    words) and the bounds' 1σ."""
 
     drive: Drive
     held: Mapping[str, str]
@@ -449,18 +454,39 @@ class Assessment:
     info: det.Information
     sigma2: float
     noise: str
-    omega: np.ndarray
-    delta: float
     bounds_std: np.ndarray
     #: Each free parameter's σ at ``x`` as the run computes it, where the run's internal solver
-    #: converged on the judged windows (None: it did not, ``x`` is a rough start; NaN: no σ).
+    #: converged on the judged windows (None: it did not, ``x`` is a rough start, or not computed
+    #: yet: :attr:`pending`; NaN: no σ).
     propagated: np.ndarray | None = None
     #: What the run's verdict will need of each free parameter (None: the model's references).
     needed: np.ndarray | None = None
+    #: Whether the run's internal solver converged on the judged windows (``x``: its fit).
+    converged: bool = False
+    #: What computes ``propagated`` and ``needed`` where they are not computed yet (None: they
+    #: are): whether a run stops needs neither (:func:`stops`).
+    pending: Callable[[], tuple[np.ndarray | None, np.ndarray]] | None = None
+
+    @property
+    def omega(self) -> np.ndarray:
+        """The information weights of an error's rows."""
+        return _omega(self.drive)
+
+    @property
+    def delta(self) -> float:
+        """The robust kernel's threshold."""
+        return self.drive.scenario.objective.robust.delta
+
+    def completed(self) -> Assessment:
+        """This assessment with its σ to believe and the needed precisions computed."""
+        if self.pending is None:
+            return self
+        propagated, needed = self.pending()
+        return replace(self, propagated=propagated, needed=needed, pending=None)
 
     def fitted(self) -> dict[str, float] | None:
         """Every parameter where the fit converged (None: it did not)."""
-        if self.propagated is None:
+        if not self.converged:
             return None
         fns = self.drive.fns
         return dict(zip(fns.names, np.asarray(fns.assemble(self.x, self.drive.start.x_fixed)).ravel()))
@@ -482,12 +508,15 @@ class Assessment:
         return replace(st, std=std, std_reference=std / needed, reference=needed)
 
 
-def assess(sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None) -> Assessment:
+def assess(
+    sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None, complete: bool = True
+) -> Assessment:
     """The drive of ``sc`` prepared and its Jacobian evaluated at the start brought to the data
-    (``found``: the run's own lag estimate, where it has one)."""
+    (``found``: the run's own lag estimate, where it has one; ``complete``: with the σ to believe
+    and the needed precisions, else left :attr:`~Assessment.pending`)."""
     d, held = drive(sc, logs)
-    fns, one = d.fns, d.scenario
-    omega = np.array(one.objective.information.omega(fns.error_rows, fns.sensor.weights))
+    fns = d.fns
+    omega = _omega(d)
     aligned = _as_the_run_aligns(d, omega, found)
     d, fitted = aligned if aligned is not None else _aligned(d, omega, _fitted(d, omega))
     x, info, where = fitted[:3] if fitted is not None else _rough(d, omega)
@@ -499,10 +528,16 @@ def assess(sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate |
             "windows, or the blocks' jackknife where larger)"
         )
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
-    return Assessment(
-        d, held, x, where, info, sigma2, noise, omega, one.objective.robust.delta, bounds,
-        fitted[3]() if fitted is not None else None, _needed(d, x),
+    sigma = fitted[3] if fitted is not None else None
+
+    def pending() -> tuple[np.ndarray | None, np.ndarray]:
+        return (sigma() if sigma is not None else None), _needed(d, x)
+
+    a = Assessment(
+        d, held, x, where, info, sigma2, noise, bounds,
+        converged=fitted is not None, pending=pending,
     )  # fmt: skip
+    return a.completed() if complete else a
 
 
 #: A pre-flight check: what the pre-flight assessed (the drive, the fit where one converged) to a
@@ -528,7 +563,27 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimat
     """The pre-flight check of ``sc`` (its logs read from their sources unless given; ``found``: the
     run's own lag estimate, where the run has searched already)."""
     t0 = time.perf_counter()
-    a = assess(sc, logs, found)
+    return _report(sc, assess(sc, logs, found), t0)
+
+
+def stops(
+    sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None
+) -> Preflight | None:
+    """The pre-flight's report (:func:`preflight`'s) where it stops a calibration of ``sc``, else
+    None. Whether it stops needs neither the σ to believe (the jackknife's refits, the noise
+    propagated over every record) nor the needed precisions nor the plan: a parameter is not
+    determined by the drive's directions and a blocking finding is the units check's, at the fit.
+    So those are computed only where it stops, once: a run that goes on computes its own."""
+    t0 = time.perf_counter()
+    a = assess(sc, logs, found, complete=False)
+    if not _report(sc, a, t0, ahead=False).stop_words():
+        return None
+    return _report(sc, a.completed(), t0)
+
+
+def _report(sc: Scenario, a: Assessment, t0: float, ahead: bool = True) -> Preflight:
+    """The pre-flight's report of ``sc`` from what it assessed (``ahead``: with the plan where a
+    parameter is loose; ``t0``: when it started)."""
     d = a.drive
     fns, one = d.fns, d.scenario
     exs = []
@@ -543,16 +598,16 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimat
     standing = a.standing()
     statuses = det.statuses(fns, standing, a.held, units, combined(exs))
     loose = [s.name for s in statuses if s.status in (NOT_DETERMINED, WEAKLY) and not s.held]
-    ahead = None
-    if loose:
+    plan_ahead = None
+    if loose and ahead:
         point = (a.x, d.start.x_fixed, a.omega)
         residual = one.objective.residual
         setting = Setting(
             fns, d.data, a.info, point, a.sigma2, a.bounds_std, residual, a.delta, units, a.where
         )
-        ahead = plan(replace(setting, steer_max=one.parameters.vehicle.steer_max))
+        plan_ahead = plan(replace(setting, steer_max=one.parameters.vehicle.steer_max))
         # The plan's σ of its target as the statuses state it (the run's σ where the fit converged).
-        ahead = believed(ahead, dict(zip(standing.names, map(float, standing.std))))
+        plan_ahead = believed(plan_ahead, dict(zip(standing.names, map(float, standing.std))))
     return Preflight(
         scenario=sc.name,
         model=sc.model,
@@ -562,7 +617,7 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimat
         parameters=statuses,
         start=a.where,
         noise=a.noise,
-        plan=ahead,
+        plan=plan_ahead,
         way_out=way_out(loose, fns.model, fns.layout, fns.sensor, _values(fns, a.x, d.start.x_fixed))
         if loose
         else "",
