@@ -166,7 +166,7 @@ def _twist(fns: ProblemFunctions, inputs: np.ndarray, dt: np.ndarray, C: np.ndar
     return np.mean(np.diagonal(C[moving], axis1=1, axis2=2).T / dt[moving] ** 2, axis=1)
 
 
-def _metre_spans(track: np.ndarray) -> np.ndarray:
+def metre_spans(track: np.ndarray) -> np.ndarray:
     """Spans ``(i, j)`` of :data:`POSE_DISTANCE_M` of driving along ``track`` (at most about 200,
     spread over it; none when it drives less)."""
     travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(track[:, :2], axis=0).T))])
@@ -195,7 +195,7 @@ def odometry_noise(
     steps = np.c_[np.arange(n), np.arange(1, n + 1)]
     C, track = model_covariances(fns, params, inputs, (rates, reading), steps)
     vx, _, wz = _twist(fns, inputs, dt, C) if n else np.full(3, np.nan)
-    spans = _metre_spans(track)
+    spans = metre_spans(track)
     pose = np.full(3, np.nan)
     if spans.size:
         found = model_covariances(fns, params, inputs, (rates, reading), spans)[0]
