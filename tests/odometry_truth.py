@@ -60,6 +60,8 @@ def _over(error: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     """The σ over the one whose 2σ holds 95 % of ``error``'s rows, per column and together (NaN
     columns left out)."""
     ratio = np.abs(error) / np.maximum(sigma, 1e-300)
+    if ratio.shape[0] == 0:
+        return np.full(4, np.nan)
     keep = ~np.isnan(ratio[0])
     need = np.r_[np.quantile(ratio, 0.95, axis=0), np.quantile(ratio[:, keep], 0.95)] / 2.0
     return 1.0 / need
