@@ -4,10 +4,13 @@
 
 For each simulated highway car (given what a straight kilometre cannot determine, as
 ``tests/test_vehicles.py`` gives it) and fast-spinning skid-steer (pivot slip 0.1 unless
-``--pivot-slip`` says) of the seeds the arguments name: the σ the run hands off (each input's
-noise propagated, and the rates per metre and per radian grown as a filter grows them) over the σ
-whose 2σ holds 95 % of the true errors over the fit's windows, per component (x, y, θ in the base
-frame at the window's start) and together: 1 where the σ is the drift the windows truly have.
+``--pivot-slip`` says) of the seeds the arguments name: every σ the run hands off, from the one
+noise model, over the σ whose 2σ holds 95 % of the true errors, per component (x, y, θ in the base
+frame at the span's start) and together: 1 where the σ is the drift the spans truly have. Rows:
+``pose``, ros2_control.yaml's pose diagonal against every metre driven; ``twist``, its twist
+diagonal (vx, wz; vy is not stated) against every moving interval; ``rates``, calibration.yaml's
+rates per metre and per radian grown as a filter grows them (``nlp-calib odometry``'s covariance)
+over the fit's windows. A case with no hand-off (no converged solver) has no pose or twist row.
 Nothing here tunes anything: the seeds are whatever the arguments say.
 """
 
