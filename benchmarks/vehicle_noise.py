@@ -86,6 +86,13 @@ def main() -> None:
     ap.add_argument("--car", type=int, nargs="*", default=[], help="highway car seeds")
     ap.add_argument("--skid", type=int, nargs="*", default=[], help="skid-steer seeds")
     ap.add_argument("--pivot-slip", type=float, default=0.1, help="the skid-steer's slip on pivots")
+    ap.add_argument(
+        "--multiples",
+        type=int,
+        nargs="*",
+        default=[1],
+        help="the rates also over these multiples of the fit's windows",
+    )
     args = ap.parse_args()
     print("case      way     x      y      θ      together   (σ over the σ holding 95 % of true errors)")
     for kind, build, seeds in (("car", _car, args.car), ("skid", _skid, args.skid)):
@@ -95,10 +102,13 @@ def main() -> None:
                 sc, wanted, truth = build(Path(tmp), seed, args.pivot_slip)
                 calib = Calibration(sc)
                 run = calib.run(wanted=wanted) if wanted else calib.run()
-                found = sigma_over_truth(calib, run, truth)
-            for (way, _), r in found.items():
+                found = sigma_over_truth(calib, run, truth, tuple(args.multiples))
+            for (way, length), r in found.items():
+                label = f"{way} {length}" if way == "rates" and len(args.multiples) > 1 else way
                 print(
-                    f"{kind} {seed:<4d} {way:6s} " + " ".join(f"{v:6.2f}" for v in r[:3]) + f"   {r[3]:6.2f}"
+                    f"{kind} {seed:<4d} {label:6s} "
+                    + " ".join(f"{v:6.2f}" for v in r[:3])
+                    + f"   {r[3]:6.2f}"
                 )
 
 
