@@ -4,10 +4,13 @@
 
 For each simulated highway car (given what a straight kilometre cannot determine, as
 ``tests/test_vehicles.py`` gives it) and fast-spinning skid-steer (pivot slip 0.1 unless
-``--pivot-slip`` says) of the seeds the arguments name: the σ the run hands off (each input's
-noise propagated, and the rates per metre and per radian grown as a filter grows them) over the σ
-whose 2σ holds 95 % of the true errors over the fit's windows, per component (x, y, θ in the base
-frame at the window's start) and together: 1 where the σ is the drift the windows truly have.
+``--pivot-slip`` says) of the seeds the arguments name: every σ the run hands off, from the one
+noise model, over the σ whose 2σ holds 95 % of the true errors, per component (x, y, θ in the base
+frame at the span's start) and together: 1 where the σ is the drift the spans truly have. Rows:
+``pose``, ros2_control.yaml's pose diagonal against every metre driven; ``twist``, its twist
+diagonal (vx, wz; vy is not stated) against every moving interval; ``rates``, calibration.yaml's
+rates per metre and per radian grown as a filter grows them (``nlp-calib odometry``'s covariance)
+over the fit's windows. A case with no hand-off (no converged solver) has no pose or twist row.
 Nothing here tunes anything: the seeds are whatever the arguments say.
 """
 
@@ -83,6 +86,13 @@ def main() -> None:
     ap.add_argument("--car", type=int, nargs="*", default=[], help="highway car seeds")
     ap.add_argument("--skid", type=int, nargs="*", default=[], help="skid-steer seeds")
     ap.add_argument("--pivot-slip", type=float, default=0.1, help="the skid-steer's slip on pivots")
+    ap.add_argument(
+        "--multiples",
+        type=int,
+        nargs="*",
+        default=[1],
+        help="the rates also over these multiples of the fit's windows",
+    )
     args = ap.parse_args()
     print("case      way     x      y      θ      together   (σ over the σ holding 95 % of true errors)")
     for kind, build, seeds in (("car", _car, args.car), ("skid", _skid, args.skid)):
@@ -92,10 +102,13 @@ def main() -> None:
                 sc, wanted, truth = build(Path(tmp), seed, args.pivot_slip)
                 calib = Calibration(sc)
                 run = calib.run(wanted=wanted) if wanted else calib.run()
-                found = sigma_over_truth(calib, run, truth)
-            for (way, _), r in found.items():
+                found = sigma_over_truth(calib, run, truth, tuple(args.multiples))
+            for (way, length), r in found.items():
+                label = f"{way} {length}" if way == "rates" and len(args.multiples) > 1 else way
                 print(
-                    f"{kind} {seed:<4d} {way:6s} " + " ".join(f"{v:6.2f}" for v in r[:3]) + f"   {r[3]:6.2f}"
+                    f"{kind} {seed:<4d} {label:6s} "
+                    + " ".join(f"{v:6.2f}" for v in r[:3])
+                    + f"   {r[3]:6.2f}"
                 )
 
 

@@ -1,7 +1,8 @@
 """The calibrated odometry's σ against the drift it truly has on a simulated drive (issue #43 item 4):
 over windows of the fit's own length and longer, the dead-reckoned motion against the true base's,
-beside the σ the run's noise gives it (the inputs' random walk propagated, or the per-metre and
-per-radian rates grown as a filter grows them, each with the readings' rounding at both ends)."""
+beside the σ the one noise model gives it (the per-metre and per-radian rates grown as a filter
+grows them, with the readings' rounding at both ends), and ros2_control.yaml's diagonals (the
+pose's after a metre, the twist's over one interval) against the true errors over those spans."""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ from typing import Any
 
 import numpy as np
 
+from nlp_calib.analysis.handoff import metre_spans
 from nlp_calib.analysis.noise_rates import grown_covariances
-from nlp_calib.analysis.odometry import propagate, readings_covariance, segment_covariance
+from nlp_calib.analysis.odometry import propagate, readings_covariance
 from nlp_calib.core import poses
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.pipeline.analyse import calibrated_drift
@@ -30,7 +32,7 @@ def sigma_over_truth(
     params = fit.fns.view(run.reports[solver].result.params, 0)
     d = calibrated_drift(fit, part.windows, params, part.prepared.scenario.objective.residual.steering_sample)
     floor = part.windows.input_noise_std
-    track, P = propagate(fit.fns, params, d.inputs, d.reference[0], d.noise)
+    track = propagate(fit.fns, params, d.inputs, d.reference[0], d.noise)[0]
     Pr = propagate(fit.fns, params, d.inputs, d.reference[0], floor)[1]
     t_s, base, epoch = truth
     t = np.asarray(part.windows.selected.time_s) + (run.log.start_ns - epoch) * 1e-9
@@ -41,7 +43,7 @@ def sigma_over_truth(
     rates = run.odometry.rates if run.odometry is not None else run.reports[solver].controller.noise.rates
     increments = poses.between(track[:-1], track[1:])
     per = np.array([rates.per_metre, rates.per_radian])
-    out = {}
+    out = _handed_off(run.reports[solver].controller, track, true, bad, np.diff(t))
     for L in (m * own for m in multiples):
         i = np.arange(0, track.shape[0] - L, max(L // 2, 1))
         i = i[[not bad[a : a + L].any() for a in i]]
@@ -49,13 +51,44 @@ def sigma_over_truth(
         a, b = poses.between(true[i], true[j]), poses.between(track[i], track[j])
         error = np.c_[a[:, :2] - b[:, :2], wrap_angle(a[:, 2] - b[:, 2])]
         read = readings_covariance(Pr, track, i, j, -track[i, 2])
-        ways = {
-            "input": segment_covariance(P, track, i, j, -track[i, 2]),
-            "rates": grown_covariances(increments, per, np.c_[i, j]),
-        }
-        for way, C in ways.items():
-            sigma = np.sqrt(np.clip(np.diagonal(C + read, axis1=1, axis2=2), 0.0, None))
-            ratio = np.abs(error) / np.maximum(sigma, 1e-300)
-            need = np.r_[np.quantile(ratio, 0.95, axis=0), np.quantile(ratio, 0.95)] / 2.0
-            out[(way, L)] = 1.0 / need
+        C = grown_covariances(increments, per, np.c_[i, j]) + read
+        out[("rates", L)] = _over(error, np.sqrt(np.clip(np.diagonal(C, axis1=1, axis2=2), 0.0, None)))
+    return out
+
+
+def _over(error: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """The σ over the one whose 2σ holds 95 % of ``error``'s rows, per column and together (NaN
+    columns left out)."""
+    ratio = np.abs(error) / np.maximum(sigma, 1e-300)
+    if ratio.shape[0] == 0:
+        return np.full(4, np.nan)
+    keep = ~np.isnan(ratio[0])
+    need = np.r_[np.quantile(ratio, 0.95, axis=0), np.quantile(ratio[:, keep], 0.95)] / 2.0
+    return 1.0 / need
+
+
+def _handed_off(
+    controller: Any, track: np.ndarray, true: np.ndarray, bad: np.ndarray, dt: np.ndarray
+) -> dict[tuple[str, int], np.ndarray]:
+    """ros2_control.yaml's diagonals against the true errors: the pose's over every
+    :data:`~nlp_calib.analysis.handoff.POSE_DISTANCE_M` of driving (``("pose", 0)``), the twist's
+    (vx, wz; vy NaN) over every moving interval (``("twist", 1)``), the spans a fault spoiled left out."""
+    noise = controller.noise if controller is not None else None
+    if noise is None:
+        return {}
+    spans = metre_spans(track)
+    spans = spans[[not bad[a:b].any() for a, b in spans]]
+    i, j = spans[:, 0], spans[:, 1]
+    a, b = poses.between(true[i], true[j]), poses.between(track[i], track[j])
+    error = np.c_[a[:, :2] - b[:, :2], wrap_angle(a[:, 2] - b[:, 2])]
+    out = {("pose", 0): _over(error, np.sqrt(np.array(noise.pose)[[0, 1, 5]]))}
+    a, b = poses.between(true[:-1], true[1:]), poses.between(track[:-1], track[1:])
+    moving = ((np.abs(b[:, 0]) + np.abs(b[:, 2])) > 0) & ~bad & (dt > 0)
+    v = (
+        np.c_[a[:, 0] - b[:, 0], np.full(dt.size, np.nan), wrap_angle(a[:, 2] - b[:, 2])][moving]
+        / dt[moving, None]
+    )
+    sigma = np.sqrt(np.array(noise.twist)[[0, 1, 5]])
+    sigma[1] = np.nan
+    out[("twist", 1)] = _over(v, np.broadcast_to(sigma, v.shape))
     return out

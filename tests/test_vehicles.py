@@ -126,22 +126,27 @@ def test_a_skid_steer_spinning_past_pi_ends_right_with_covariances_its_windows_s
     grown = np.diff(odo.covariance[:, 2, 2])[~bad]
     ratio = np.sqrt(np.mean(error**2) / np.mean(grown))
     assert 0.5 < ratio < 2.0, ratio
-    # Against the true base: the σ handed off (the inputs' noise propagated, and the rates per metre
-    # and per radian grown as a filter grows them) within a factor 2 of the σ whose 2σ holds 95 %
-    # of the true errors over the fit's windows (x, y and θ together); the rates each component
-    # (along, across, heading), never under, and over only where they say the segments bound it
-    # (the wheels' drift under the matcher's 5 mm, a 4 Hz encoder showing no noise of its own).
+    # Against the true base: the rates per metre and per radian grown as a filter grows them within
+    # a factor 2 of the σ whose 2σ holds 95 % of the true errors over the fit's windows (x, y and θ
+    # together); every covariance handed off (those rates, ros2_control.yaml's pose diagonal over a
+    # metre and twist diagonal over an interval) each component (along, across, heading) never
+    # under, and over only where the rates say the segments bound it (the wheels' drift under the
+    # matcher's 5 mm, a 4 Hz encoder showing no noise of its own).
     found = sigma_over_truth(calib, run, (sim.joint_time_s, sim.base_poses, EPOCH_NS))
+    assert {way for way, _ in found} == {"rates", "pose", "twist"}
     for way, ratios in found.items():
         print(way, ratios, odo.rates.bounded if odo.rates else None)
-        assert 0.5 <= ratios[-1] <= 2.0, (way, ratios)
-    _within_two_unless_bounded(found[("rates", 1)], odo.rates)
+        assert ratios[-1] >= 0.5, (way, ratios)
+        _within_two_unless_bounded(ratios, odo.rates)
+    assert found[("rates", 1)][-1] <= 2.0, found
 
 
 def _within_two_unless_bounded(ratios: np.ndarray, rates: Any) -> None:
     """Each component's σ over the one whose 2σ holds 95 % of the true errors: at least 0.5, at
     most 2 unless the rates say the segments only bound that component."""
     for c, axis in enumerate(("along", "across", "heading")):
+        if np.isnan(ratios[c]):  # what the file does not state (the twist's lateral velocity)
+            continue
         assert ratios[c] >= 0.5, (axis, ratios)
         assert ratios[c] <= 2.0 or axis in rates.bounded, (axis, ratios, rates)
 
@@ -442,9 +447,11 @@ def test_a_highway_cars_odometry_noise_is_never_under_the_drift_its_windows_trul
     _, opts, run, calib = car_known
     sim = simulate_highway(opts)
     found = sigma_over_truth(calib, run, (sim.joint_time_s, sim.base_poses, EPOCH_NS))
+    assert {way for way, _ in found} == {"rates", "pose", "twist"}
     for way, ratios in found.items():
         print(way, ratios)
-        assert np.all(ratios >= 0.5), (way, ratios)
+        # NaN: what the file does not state (the twist's lateral velocity).
+        assert np.all(ratios[~np.isnan(ratios)] >= 0.5), (way, ratios)
     rates = (
         run.odometry.rates if run.odometry is not None else run.reports["gauss_newton"].controller.noise.rates
     )

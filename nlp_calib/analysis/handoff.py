@@ -4,10 +4,10 @@ covariance its odometry publishes.
 The model maps its parameters onto its ros2_control controller's; each derived value's 1σ is
 propagated to first order from the parameters' covariance (their σ to believe with the
 white-noise correlation, as ``result.json`` reports them), with the map's Jacobian taken by
-central differences. The odometry's covariance follows from each input's noise per interval
-calibrated on the log's drift (:mod:`nlp_calib.analysis.odometry`): the twist's over one interval,
-``G·diag(σ_u²)·Gᵀ/Δt²`` with ``G`` the increment's Jacobian in the inputs, averaged over the
-moving intervals; the pose's after a metre of driving as the log drives.
+central differences. The odometry's covariance is the one noise model's (the rates per metre and per
+radian of :mod:`nlp_calib.analysis.noise_rates`, beside the readings' rounding): the twist's over
+one interval, averaged over the moving intervals; the pose's after a metre of driving as the log
+drives.
 """
 
 from __future__ import annotations
@@ -17,12 +17,11 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from nlp_calib.analysis.odometry import propagate, readings_covariance, segment_covariance
+from nlp_calib.analysis.noise_rates import model_covariances
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.problem import ProblemFunctions
-from nlp_calib.problem.windows import over_columns
-from nlp_calib.results.handoff import UNMEASURED, ControllerParams, OdometryNoise, Placement
+from nlp_calib.results.handoff import UNMEASURED, ControllerParams, NoiseRates, OdometryNoise, Placement
 
 #: The distance (m) after which the pose's covariance is stated: a fixed diagonal cannot follow
 #: the drift's growth, so it says it at one distance.
@@ -158,36 +157,23 @@ def controller_params(
     )
 
 
-def _twist(
-    fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, dt: np.ndarray, noise: np.ndarray
-) -> np.ndarray:
-    """The variance of ``(vx, vy, wz)`` over one interval, averaged over the moving intervals:
-    each interval's increment covariance from the origin, over its duration squared."""
+def _twist(fns: ProblemFunctions, inputs: np.ndarray, dt: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """The variance of ``(vx, vy, wz)`` over one interval, averaged over the moving intervals: each
+    interval's covariance ``C`` ``(n, 3, 3)`` over its duration squared."""
     moving = fns.model.moving(inputs)
     if not np.any(moving):
         return np.full(3, np.nan)
-    step = over_columns(fns.odometry_step, np.zeros(12), np.ravel(params), inputs[:, moving], noise)[0]
-    P = step[3:].reshape(3, 3, -1, order="F")
-    return np.mean(np.stack([P[0, 0], P[1, 1], P[2, 2]]) / dt[moving] ** 2, axis=1)
+    return np.mean(np.diagonal(C[moving], axis1=1, axis2=2).T / dt[moving] ** 2, axis=1)
 
 
-def _pose(
-    fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, noise: tuple[np.ndarray, np.ndarray]
-) -> np.ndarray:
-    """The variance of ``(x, y, yaw)`` after :data:`POSE_DISTANCE_M` of driving, in the base frame
-    at the start, from each input's random walk and its readings' rounding at both ends
-    (``noise``), averaged over starts ``i``."""
-    walk, reading = noise
-    track, P = propagate(fns, params, inputs, np.zeros(3), walk)
+def metre_spans(track: np.ndarray) -> np.ndarray:
+    """Spans ``(i, j)`` of :data:`POSE_DISTANCE_M` of driving along ``track`` (at most about 200,
+    spread over it; none when it drives less)."""
     travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(track[:, :2], axis=0).T))])
     starts = np.flatnonzero(travelled <= travelled[-1] - POSE_DISTANCE_M)
-    if starts.size == 0:
-        return np.full(3, np.nan)
     i = starts[:: max(1, starts.size // 200)]
     j = np.maximum(np.searchsorted(travelled, travelled[i] + POSE_DISTANCE_M), i + 1)
-    Pr = propagate(fns, params, inputs, np.zeros(3), reading)[1]
-    C = segment_covariance(P, track, i, j, -track[i, 2]) + readings_covariance(Pr, track, i, j, -track[i, 2])
-    return np.mean(np.diagonal(C, axis1=1, axis2=2), axis=0)
+    return np.c_[i, j].astype(int)
 
 
 def odometry_noise(
@@ -195,23 +181,32 @@ def odometry_noise(
     params: np.ndarray,
     inputs: np.ndarray,
     time_s: np.ndarray,
-    noise: tuple[Mapping[str, float], np.ndarray],
+    noise: tuple[NoiseRates, np.ndarray, Mapping[str, float]],
 ) -> OdometryNoise:
     """The covariance diagonals a controller publishes with its odometry, over the intervals of
-    ``inputs`` (at ``time_s``), from each input's calibrated noise per interval and the noise of
-    one reading (its resolution): ``noise``. A drift adds up the increments' noise (a random walk:
-    slip, jitter); an interval's increment has, besides, the rounding of the readings at both its
-    ends, as has a drive's (those between cancel)."""
-    calibrated, reading = noise
-    sigma = np.array([calibrated[n] for n in fns.model.input_names])
+    ``inputs`` (at ``time_s``), from the one noise model (``noise``: the rates per metre and per
+    radian, each input's reading 1σ, and each input's random walk per interval they were shaped
+    by, stated beside them): the twist's over one interval, the pose's after
+    :data:`POSE_DISTANCE_M` of driving as the log drives, both
+    :func:`~nlp_calib.analysis.noise_rates.model_covariances`."""
+    rates, reading, walk = noise
     dt = np.diff(np.asarray(time_s, dtype=float))
-    vx, _, wz = _twist(fns, params, inputs, dt, np.sqrt(sigma**2 + 2.0 * np.asarray(reading) ** 2))
-    x, y, yaw = _pose(fns, params, inputs, (sigma, np.asarray(reading, dtype=float)))
+    n = inputs.shape[1]
+    steps = np.c_[np.arange(n), np.arange(1, n + 1)]
+    C, track = model_covariances(fns, params, inputs, (rates, reading), steps)
+    vx, _, wz = _twist(fns, inputs, dt, C) if n else np.full(3, np.nan)
+    spans = metre_spans(track)
+    pose = np.full(3, np.nan)
+    if spans.size:
+        found = model_covariances(fns, params, inputs, (rates, reading), spans)[0]
+        pose = np.mean(np.diagonal(found, axis1=1, axis2=2), axis=0)
+    x, y, yaw = pose
     u = UNMEASURED
     return OdometryNoise(
         pose=(float(x), float(y), u, u, u, float(yaw)),
         twist=(float(vx), u, u, u, u, float(wz)),
         interval_s=float(np.median(dt)) if dt.size else float("nan"),
         distance_m=POSE_DISTANCE_M,
-        input_noise=dict(calibrated),
+        input_noise=dict(walk),
+        rates=rates,
     )

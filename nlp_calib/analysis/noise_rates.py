@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nlp_calib.analysis.odometry import COVERED, Drift, moments
+from nlp_calib.analysis.odometry import COVERED, Drift, moments, propagate, readings_covariance
 from nlp_calib.analysis.uncertainty import nnls_small
 from nlp_calib.core import poses
 from nlp_calib.problem import ProblemFunctions
@@ -89,6 +89,28 @@ def grown_covariances(increments: np.ndarray, rates: np.ndarray, spans: np.ndarr
     R = np.zeros((spans.shape[0], 3, 3))
     R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = ci, si, -si, ci, 1.0
     return R @ C @ np.swapaxes(R, 1, 2)
+
+
+def model_covariances(
+    fns: ProblemFunctions,
+    params: np.ndarray,
+    inputs: np.ndarray,
+    noise: tuple[NoiseRates, np.ndarray],
+    spans: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The one noise model's covariance of each span ``(i, j)``'s motion ``(S, 3, 3)`` (``j > i``),
+    in the base frame at ``i``, and the track dead-reckoned from the origin ``(n + 1, 3)``: the
+    rates per metre and per radian grown as a filter grows them, beside each end's reading's
+    rounding (``noise``: the rates, each input's reading 1σ). Every covariance the tool hands off
+    (the controller's diagonals, ``nlp-calib odometry``'s) is one of these."""
+    rates, floor = noise
+    track, P = propagate(fns, params, inputs, np.zeros(3), np.asarray(floor, dtype=float))
+    increments = poses.between(track[:-1], track[1:])
+    per = np.array([rates.per_metre, rates.per_radian])
+    i, j = spans[:, 0], spans[:, 1]
+    return grown_covariances(increments, per, spans) + readings_covariance(
+        P, track, i, j, -track[i, 2]
+    ), track
 
 
 def _unit_growth(increments: np.ndarray, spans: np.ndarray) -> np.ndarray:

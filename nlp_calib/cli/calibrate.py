@@ -314,22 +314,18 @@ def cmd_odometry(args: argparse.Namespace) -> int:
     odo = run.odometry
     cov = odo.covariance
     units = calib.model.input_units
-    noise = ", ".join(
+    shaped = ", ".join(
         f"{n} {v:.3g} {units[n]} (quantisation {odo.quantisation[n]:.3g})" for n, v in odo.input_noise.items()
     )
-    held = (
-        "no drift segment to judge it by"
-        if odo.coverage is None
-        else f"{100 * odo.coverage:.0f} % of that drift over segments lies within the propagated 2σ"
-    )
+    grown = "the odometry's noise per metre driven and per radian turned"
+    if odo.rates is not None:
+        grown += f" (calibration.yaml's odometry_noise, ros2_control.yaml's diagonals): {odo.rates.words()}"
     print(
         f"\nodometry over {odo.time_s.size} records, final 1σ: "
         f"x {1e3 * np.sqrt(cov[-1, 0, 0]):.3g} mm, y {1e3 * np.sqrt(cov[-1, 1, 1]):.3g} mm, "
-        f"θ {1e3 * np.sqrt(cov[-1, 2, 2]):.3g} mrad from each input's noise per interval, calibrated on this "
-        f"log's drift against the tracker: {noise}; {held}"
+        f"θ {1e3 * np.sqrt(cov[-1, 2, 2]):.3g} mrad, grown as a filter grows {grown}; shaped by each "
+        f"input's noise per interval, calibrated on this log's drift against the tracker: {shaped}"
     )
-    if odo.rates is not None:
-        print(f"the same noise as a filter's process noise: {odo.rates.words()}")
     _closing(run, final, out)
     return 0
 

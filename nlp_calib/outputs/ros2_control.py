@@ -72,7 +72,8 @@ def _covariance_notes(noise: OdometryNoise | None) -> list[str]:
         return []
     ms = 1e3 * noise.interval_s
     return [
-        "# Covariance diagonals: the wheels' noise calibrated on this log's drift against the tracker;",
+        "# Covariance diagonals: the odometry's noise per metre and per radian (below), calibrated on this",
+        "#   log's drift against the tracker, with each reading's rounding;",
         f"#   the pose's after {noise.distance_m:g} m of driving as the log drives (a fixed diagonal "
         "cannot follow the drift's growth),",
         f"#   the twist's over one interval of the log ({ms:.3g} ms); averaged over a window of W ms "

@@ -22,12 +22,11 @@ from nlp_calib.analysis.determinacy import Information
 from nlp_calib.analysis.handoff import odometry_noise
 from nlp_calib.analysis.jitter import input_jitter
 from nlp_calib.analysis.metrics import each_metrics, first_order, geometry, integrate, segments, steps
-from nlp_calib.analysis.noise_rates import noise_rates
+from nlp_calib.analysis.noise_rates import model_covariances, noise_rates
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import (
     DRIFT_LENGTHS,
     covering_noise,
-    drift_coverage,
     drift_noise,
     propagate,
     segment_drift,
@@ -56,7 +55,7 @@ from nlp_calib.results.checks import (
 )
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
-from nlp_calib.results.handoff import OdometryNoise
+from nlp_calib.results.handoff import NoiseRates, OdometryNoise
 from nlp_calib.results.layout import Layout
 from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import (
@@ -599,43 +598,65 @@ def calibrated_drift(
     return Drift(inputs, reference, drift, noise, reference_var, jitter)
 
 
-def odometry(fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str) -> OdometryTrack:
+def noise_model(
+    fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str
+) -> tuple[Drift, NoiseRates]:
+    """The one noise model at ``params``: the odometry's rates per metre and per radian calibrated
+    on the drift of the first :data:`NOISE_RECORDS` used records, with that drift."""
+    d = calibrated_drift(fit, windows, params, steering_sample, NOISE_RECORDS)
+    checked = (d.drift, d.reference_var, windows.input_noise_std)
+    return d, noise_rates(fit.fns, params, d.inputs, d.noise, checked, d.jitter)
+
+
+def odometry(
+    fit: Fit,
+    windows: LogWindows,
+    params: np.ndarray,
+    steering_sample: str,
+    model: tuple[Drift, NoiseRates] | None = None,
+) -> OdometryTrack:
     """Base-link odometry with ``params`` over the used records, started at the base pose the
     tracker's first pose implies, beside the base poses the tracker implies throughout; its
-    covariance propagated from each input's noise calibrated on the drift this log shows against
-    the tracker (a random walk; the readings' rounding, which does not add up, left out)."""
-    d = calibrated_drift(fit, windows, params, steering_sample)
+    covariance the one noise model's (``model``, :func:`noise_model`'s; None: computed), as the
+    hand-off's, from the start (its reading's rounding, and the end's, included)."""
+    d, rates = noise_model(fit, windows, params, steering_sample) if model is None else model
     floor = windows.input_noise_std
-    track, cov = propagate(fit.fns, params, d.inputs, d.reference[0], d.noise)
+    sel = windows.selected
+    inputs = windows.binder.fns.model.inputs(sel, steering_sample)
+    reference = over_columns(fit.fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
+    n = inputs.shape[1]
+    spans = np.c_[np.zeros(n, dtype=int), np.arange(1, n + 1)]
+    C, _ = model_covariances(fit.fns, params, inputs, (rates, floor), spans)
+    c, s = np.cos(reference[0, 2]), np.sin(reference[0, 2])
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    cov = np.concatenate([np.zeros((1, 3, 3)), R @ C @ R.T])
+    track = propagate(fit.fns, params, inputs, reference[0], np.zeros(floor.shape))[0]
     names = fit.fns.model.input_names
     return OdometryTrack(
-        np.asarray(windows.selected.time_s),
+        np.asarray(sel.time_s),
         track,
         cov,
-        d.reference,
+        reference,
         input_noise=dict(zip(names, map(float, d.noise))),
         quantisation=dict(zip(names, map(float, floor))),
-        coverage=drift_coverage(d.drift, d.noise, floor, d.reference_var),
-        rates=noise_rates(fit.fns, params, d.inputs, d.noise, (d.drift, d.reference_var, floor), d.jitter),
+        coverage=rates.coverage,
+        rates=rates,
     )
 
 
 def handoff_noise(
     fit: Fit, windows: LogWindows, params: np.ndarray, steering_sample: str
-) -> OdometryNoise | None:
-    """The covariance a controller publishes with its odometry at ``params``, from the noise
-    calibrated on the first :data:`NOISE_RECORDS` used records (None for a 3-D sensor, whose
-    poses do not give the planar base's)."""
+) -> tuple[OdometryNoise | None, tuple[Drift, NoiseRates] | None]:
+    """The covariance a controller publishes with its odometry at ``params``, from the one noise
+    model (:func:`noise_model`), with that model (None for a 3-D sensor, whose poses do not give
+    the planar base's)."""
     if not fit.fns.sensor.planar_base:
-        return None
-    d = calibrated_drift(fit, windows, params, steering_sample, NOISE_RECORDS)
-    noise = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
+        return None, None
+    d, rates = noise_model(fit, windows, params, steering_sample)
+    walk = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
-    found = odometry_noise(fit.fns, params, d.inputs, time_s, (noise, windows.input_noise_std))
-    checked = (d.drift, d.reference_var, windows.input_noise_std)
-    return dataclasses.replace(
-        found, rates=noise_rates(fit.fns, params, d.inputs, d.noise, checked, d.jitter)
-    )
+    found = odometry_noise(fit.fns, params, d.inputs, time_s, (rates, windows.input_noise_std, walk))
+    return found, (d, rates)
 
 
 @dataclass(frozen=True)
@@ -675,14 +696,17 @@ def analyse_log(
     )
     series = run_series(fit, results, view, figures, labels) if wanted.series else None
     steering = view.prepared.scenario.objective.residual.steering_sample
-    odo = None
-    if wanted.odometry is not None and wanted.odometry in results:
-        odo = odometry(fit, windows, fit.fns.view(results[wanted.odometry].params, view.part), steering)
     # The hand-off carries the first converged solver's estimate (in the scenario's order): its
-    # odometry noise is the one a controller file states.
+    # odometry noise is the one a controller file states, and the odometry's where it is the same.
     order = [*view.prepared.scenario.solvers, *results]
     first = next((n for n in order if n in results and results[n].converged), None)
-    noise = {}
+    noise, model = {}, None
     if first is not None:
-        noise[first] = handoff_noise(fit, windows, fit.fns.view(results[first].params, view.part), steering)
+        noise[first], model = handoff_noise(
+            fit, windows, fit.fns.view(results[first].params, view.part), steering
+        )
+    odo = None
+    if wanted.odometry is not None and wanted.odometry in results:
+        params = fit.fns.view(results[wanted.odometry].params, view.part)
+        odo = odometry(fit, windows, params, steering, model if wanted.odometry == first else None)
     return dataclasses.replace(figures, series=series, odometry=odo, noise=noise)

@@ -62,8 +62,9 @@ class NoiseRates:
 
 @dataclass(frozen=True)
 class OdometryNoise:
-    """The odometry's covariance diagonals as a controller publishes them, from each input's noise
-    per interval calibrated on the log's drift against the tracker (``input_noise``): the twist
+    """The odometry's covariance diagonals as a controller publishes them, from the one noise model
+    (``rates``, calibrated on the log's drift against the tracker; ``input_noise``: each input's
+    noise per interval that shaped them), with each reading's rounding: the twist
     ``(vx, vy, vz, wx, wy, wz)`` over one interval of the log (``interval_s``: its median), the
     pose ``(x, y, z, roll, pitch, yaw)`` after driving ``distance_m`` as the log drives, in the
     base frame at the start. What the wheels never measure (a planar base's height, roll and
@@ -74,7 +75,7 @@ class OdometryNoise:
     interval_s: float
     distance_m: float
     input_noise: Mapping[str, float]
-    #: The same noise per metre driven and per radian turned (None: not computed).
+    #: The noise per metre driven and per radian turned the diagonals come from (None: not computed).
     rates: NoiseRates | None = None
 
 

@@ -100,11 +100,12 @@ class ModelCheckSeries:
 class OdometryTrack:
     """Base-link poses ``(n, 3)`` ordered ``(x, y, theta)`` and covariances ``(n, 3, 3)``.
 
-    ``reference``: the base poses the tracker implies with the calibrated mount; ``input_noise``:
-    each model input's 1σ per interval the covariance is propagated from (calibrated on the drift
-    against the tracker: a random walk beside ``quantisation``, the encoders' resolution, which
-    rounds each reading and does not add up); ``coverage``: the share of that drift, over
-    segments, within the propagated 2σ (None: no segment to judge it by)."""
+    ``reference``: the base poses the tracker implies with the calibrated mount; ``covariance``:
+    the one noise model's (``rates``, grown from the start as a filter grows it, each end's
+    reading's rounding beside it); ``input_noise``: each model input's 1σ per interval that shaped
+    the rates (calibrated on the drift against the tracker: a random walk beside ``quantisation``,
+    the encoders' resolution, which rounds each reading and does not add up); ``coverage``: the
+    share of that drift, over segments, within the rates' 2σ (None: no segment to judge it by)."""
 
     time_s: np.ndarray
     T_world_base: np.ndarray
