@@ -17,6 +17,7 @@ def resample_encoders(
     lag_s: float,
     kinds: Mapping[str, EncoderKind],
     delays: Mapping[str, float] | None = None,
+    beside_lag_s: float | None = None,
 ) -> tuple[Log, tuple[int, int]]:
     """Encoder readings re-sampled at ``t - lag_s``: the tracker reports ``lag_s`` after the encoders.
 
@@ -27,13 +28,16 @@ def resample_encoders(
     record range ``[first, stop)`` whose shifted times lie inside the log (outside it the readings
     are clamped and must not be used). ``delays`` reads an encoder that much later still (s, by
     name): a stream whose effect lags its readings. The lag adds to the log's own
-    (:attr:`Log.encoder_lag_s`).
+    (:attr:`Log.encoder_lag_s`). ``beside_lag_s``: in a log of two sensors, the second's clock's
+    offset over the reference's (s, absolute: its records read that much later still; None: the
+    log's own, :meth:`Log.read_times`).
     """
     late = [(delays or {}).get(name, 0.0) for name in log.header.encoder_names]
-    if lag_s == 0.0 and not any(late):
+    moved = beside_lag_s is not None and beside_lag_s != log.clock.beside_lag_s
+    if lag_s == 0.0 and not any(late) and not moved:
         return log, (0, log.n_records)
     if log.joint_stream is not None:
-        return _joints_resampled(log, lag_s, late)
+        return _joints_resampled(log, lag_s, late, beside_lag_s)
     t = log.time_s
     tq = t - lag_s
     valid = np.flatnonzero((tq - max(late) >= t[0]) & (tq - min(late) <= t[-1]))
@@ -57,13 +61,16 @@ def resample_encoders(
     return shifted, (int(valid[0]), int(valid[-1]) + 1)
 
 
-def _joints_resampled(log: Log, lag_s: float, late: list[float]) -> tuple[Log, tuple[int, int]]:
-    """Joints in radians re-sampled from their own stream (at its own stamps) at ``t - lag_s``,
-    each joint ``late`` (s) later still."""
+def _joints_resampled(
+    log: Log, lag_s: float, late: list[float], beside_lag_s: float | None
+) -> tuple[Log, tuple[int, int]]:
+    """Joints in radians re-sampled from their own stream (at its own stamps) at ``t - lag_s``
+    (a second sensor's records ``beside_lag_s`` later), each joint ``late`` (s) later still."""
     stream = log.joint_stream
     assert stream is not None
     lag_s += log.encoder_lag_s  # the stream is as published: shift by the log's own lag too
-    tq = log.time_s - lag_s
+    beside = log.clock.beside_lag_s if beside_lag_s is None else float(beside_lag_s)
+    tq = log.read_times(lag_s, beside)
     valid = np.flatnonzero(stream.covers(tq - max(late)) & stream.covers(tq - min(late)))
     if valid.size < 2:
         raise ProblemError(
@@ -71,5 +78,6 @@ def _joints_resampled(log: Log, lag_s: float, late: list[float]) -> tuple[Log, t
             f"{stream.time_s[-1] - stream.time_s[0]:.1f} s stream; use a lag well below the log's duration"
         )
     positions = np.stack([stream.at(tq - d)[:, j] for j, d in enumerate(late)], axis=1)
-    shifted = replace(log, joint_positions=frozen(positions), clock=replace(log.clock, encoder_lag_s=lag_s))
+    clock = replace(log.clock, encoder_lag_s=lag_s, beside_lag_s=beside)
+    shifted = replace(log, joint_positions=frozen(positions), clock=clock)
     return shifted, (int(valid[0]), int(valid[-1]) + 1)
