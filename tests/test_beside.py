@@ -18,8 +18,8 @@ from nlp_calib import Calibration
 from nlp_calib.core.errors import ConfigError
 from nlp_calib.logs import resample_encoders
 from nlp_calib.pipeline import scenario_from_mapping
-from nlp_calib.pipeline.prepare import read
 from nlp_calib.pipeline.preflight import preflight
+from nlp_calib.pipeline.prepare import read
 from nlp_calib.results.preflight import NOT_DETERMINED
 from nlp_calib.simulation.beside import simulate_beside, write_beside_simulation
 from nlp_calib.simulation.imu import ImuSimulationOptions

@@ -144,6 +144,7 @@ def beside_gyro(reference: Log, gyro: Log, in_3d: bool = False) -> Log:
     motions = _joined(
         _placed(ref_inc, ref_ns, stamps, z_ref), _placed(gyro_inc, gyro_ns, stamps, z_gyro), quality
     )
+    poses_3d = _poses_3d_at(reference, stamps) if in_3d else None
     start_ns = int(stamps[0])
     time_s = _frozen((stamps - start_ns).astype(float) * 1e-9)
     shift = (reference.clock.start_ns - start_ns) * 1e-9
@@ -165,10 +166,5 @@ def beside_gyro(reference: Log, gyro: Log, in_3d: bool = False) -> Log:
         joint_positions=stream.at(time_s),
         joint_stream=stream,
         # A tracker's increments are differences of its poses: their noise is the poses'.
-        reference=ReferenceData(
-            poses_3d=_poses_3d_at(reference, stamps) if in_3d else None,
-            motions=motions,
-            measures=measures,
-            beside=_frozen(np.isin(stamps, gyro_ns[used])),
-        ),
+        reference=ReferenceData(poses_3d, motions, measures, beside=_frozen(np.isin(stamps, gyro_ns[used]))),
     )

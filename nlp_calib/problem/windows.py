@@ -483,14 +483,7 @@ def build_residual_data(
         z=z,
         horizon=H,
         dropped_stationary=0,
-        clock=WindowClock(
-            tuple(lg.encoder_lag_s for lg in logs),
-            log_rates(fns.model, logs, inputs),
-            tuple(lg.clock.beside_lag_s for lg in logs),
-            fns.sensor.beside_row,
-        )
-        if fns.spec.lags
-        else None,
+        clock=_window_clock(fns, logs, inputs) if fns.spec.lags else None,
     )
     if fns.select_rows and data.clock is None:
         data = data.with_selector()
@@ -498,6 +491,13 @@ def build_residual_data(
         keep = data.interval_counts(fns.model.moving(inputs)) > 0
         data = replace(data.select(keep), dropped_stationary=int((~keep).sum()))
     return _without_faults(data, bad_intervals, bad_records)
+
+
+def _window_clock(fns: ProblemFunctions, logs: Sequence[Log], inputs: np.ndarray) -> WindowClock:
+    """The offsets ``logs``' inputs were re-sampled at (each clock's) and the inputs' rates."""
+    lags = tuple(lg.encoder_lag_s for lg in logs)
+    beside = tuple(lg.clock.beside_lag_s for lg in logs)
+    return WindowClock(lags, log_rates(fns.model, logs, inputs), beside, fns.sensor.beside_row)
 
 
 def _log_windows(
