@@ -7,12 +7,13 @@
 Kinds: ``tracker`` (a simulated text log of each of ``--models``: s-curves, the tracker's stamps
 late by 0–30 ms, the scenario a user writes first with ``tracker_lag: auto``), ``camera`` (a
 camera's TUM file and joints, 40 s, stamps off by ±30 ms, ``docs/camera.md``'s scenario),
-``lidar`` (a bag of scans, 40 s, stamps 0–30 ms late, the lidar scenario of ``docs/lidar.md``)
-and ``beside`` (a gyro beside that lidar, its own clock 0–60 ms late: ``tracker_lag`` and
-``gyro_lag`` both). Each log's every fitted offset: the error, the white-noise σ, the block
-jackknife σ and the σ to believe (``run.std``), its z; at the end the share within 1σ and 2σ and
-the RMS z, overall and by the white σ alone. Nothing here tunes anything: the seeds are whatever
-the arguments say.
+``lidar`` (a bag of scans, 40 s, stamps 0–30 ms late, the lidar scenario of ``docs/lidar.md``),
+``beside`` (a gyro beside that lidar, its own clock 0–60 ms late: ``tracker_lag`` and
+``gyro_lag`` both), ``tracker_gyro`` and ``camera_gyro`` (the gyro beside a tracker's poses or a
+camera's, ``docs/imu.md``'s scenarios). Each log's every fitted offset: the error, the white-noise
+σ, the block jackknife σ and the σ to believe (``run.std``), its z; at the end the share within 1σ
+and 2σ and the RMS z, overall and by the white σ alone. Nothing here tunes anything: the seeds are
+whatever the arguments say.
 """
 
 from __future__ import annotations
@@ -156,11 +157,72 @@ def beside(folder: Path, seed: int, models: list[str]) -> list[Row]:
     return _rows(_run(doc, f"beside_{seed}", folder), f"beside {seed}", lags)
 
 
+def _gyro_lags(seed: int) -> tuple[float, float, Any]:
+    """A reference 0–30 ms late, a gyro 0–60 ms (its own clock), a 5° rolled IMU's options."""
+    from nlp_calib.simulation.imu import ImuSimulationOptions
+
+    rng = np.random.default_rng(seed)
+    late, gyro_late = float(rng.uniform(0.0, 0.03)), float(rng.uniform(0.0, 0.06))
+    return (
+        late,
+        gyro_late,
+        ImuSimulationOptions(seed=seed, truth={"imu_roll": 0.0873}, stamp_offset_s=gyro_late),
+    )
+
+
+def _gyro_rows(doc: dict[str, Any], name: str, folder: Path, truth_file: Path, label: str) -> list[Row]:
+    truth = json.loads(truth_file.read_text())["params"]
+    return _rows(_run(doc, name, folder), label, {n: float(truth[n]) for n in LAGS})
+
+
+def tracker_gyro(folder: Path, seed: int, models: list[str]) -> list[Row]:
+    """A gyro beside a tracker's poses (``docs/imu.md``'s scenario), each on its own clock."""
+    from nlp_calib.simulation.beside import simulate_beside, write_beside_simulation
+    from nlp_calib.simulation.lidar import LidarSimulationOptions
+
+    late, _, gyro = _gyro_lags(seed)
+    lid = LidarSimulationOptions(duration_s=30.0, seed=seed, stamp_offset_s=late)
+    bag, truth = write_beside_simulation(simulate_beside(lid, gyro), folder / f"tg_{seed}", tracker=True)
+    doc = {
+        **LIDAR,
+        "sensor": {"mount": "planar", "beside": "gyro"},
+        "alignment": {"tracker_lag": "auto"},
+        "information": {"translation": 1.25e5, "rotation": 1.25e5, "gyro": 1.0e8},
+        "dataset": {"bag": str(bag), **JOINTS, "tracker": "/tracker", "imu": "/imu"},
+    }
+    return _gyro_rows(doc, f"tg_{seed}", folder, truth, f"tracker+gyro {seed}")
+
+
+def camera_gyro(folder: Path, seed: int, models: list[str]) -> list[Row]:
+    """A gyro beside a camera's TUM poses (``docs/imu.md``'s scenario), each on its own clock."""
+    from nlp_calib.simulation.beside import simulate_camera_beside, write_camera_beside_simulation
+
+    late, _, gyro = _gyro_lags(seed)
+    options = CameraSimulationOptions(
+        duration_s=40.0, seed=seed, image_rate_hz=30.0, stamp_offset_s=late, noise=CameraNoise(0.001, 0.0017)
+    )
+    tum, joints, rates, truth = write_camera_beside_simulation(
+        simulate_camera_beside(options, gyro), folder / f"cg{seed}.tum"
+    )
+    encoders = {"left_wheel": "left_wheel_joint", "right_wheel": "right_wheel_joint"}
+    doc = {
+        **LIDAR,
+        "sensor": {"mount": "3d", "beside": "gyro"},
+        "known": {"sensor_z": 0.30},
+        "alignment": {"tracker_lag": "auto"},
+        "information": {"translation": 5.0e5, "rotation": 1.7e5, "gyro": 1.0e8},
+        "dataset": {"poses": str(tum), "joints": str(joints), "gyro": str(rates), "encoders": encoders},
+    }
+    return _gyro_rows(doc, f"cg{seed}", folder, truth, f"camera+gyro {seed}")
+
+
 KINDS: dict[str, Callable[[Path, int, list[str]], list[Row]]] = {
     "tracker": tracker,
     "camera": camera,
     "lidar": lidar,
     "beside": beside,
+    "tracker_gyro": tracker_gyro,
+    "camera_gyro": camera_gyro,
 }
 
 

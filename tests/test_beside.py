@@ -14,9 +14,12 @@ import pytest
 import yaml
 from conftest import cli
 
+from nlp_calib import Calibration
 from nlp_calib.core.errors import ConfigError
+from nlp_calib.logs import resample_encoders
 from nlp_calib.pipeline import scenario_from_mapping
 from nlp_calib.pipeline.preflight import preflight
+from nlp_calib.pipeline.prepare import read
 from nlp_calib.results.preflight import NOT_DETERMINED
 from nlp_calib.simulation.beside import simulate_beside, write_beside_simulation
 from nlp_calib.simulation.imu import ImuSimulationOptions
@@ -108,6 +111,43 @@ def test_a_gyro_and_a_lidar_fit_within_3_sigma_and_check_reads_it_back(
     check = cli("check", str(tmp_path / "out" / "calibration.yaml"), str(scenario))
     assert check.returncode == 0, check.stdout + check.stderr
     assert "STILL GOOD" in check.stdout
+
+
+def test_each_sensors_records_are_read_on_its_own_clock(drive: tuple[Path, dict[str, float]]) -> None:
+    bag, _ = drive
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model, log = read(scenario_from_mapping(_mapping(bag), "beside", bag.parent))
+    mine, inc = log.reference.beside, log.motions
+    assert mine is not None and inc is not None
+    # Each record is one sensor's: the gyro's increments end at its records, the lidar's at others.
+    g = inc.z[:, -1] > 0.5
+    assert g.any() and (~g).any()
+    assert mine[inc.first[g]].all() and mine[inc.last[g]].all()
+    assert not mine[inc.first[~g]].any() and not mine[inc.last[~g]].any()
+    # Re-sampled at both clocks' offsets: the gyro's records read at its own, the lidar's at its own
+    # (not the gyro's moved there by the problem's first-order clock correction).
+    shifted, _ = resample_encoders(log, LATE, model.encoder_kinds, beside_lag_s=GYRO_LATE - LATE)
+    assert log.joint_stream is not None and shifted.joint_positions is not None
+    expected = log.joint_stream.at(log.time_s - np.where(mine, GYRO_LATE, LATE))
+    np.testing.assert_allclose(shifted.joint_positions, expected, rtol=0, atol=1e-12)
+    # ...and so by the run's alignment: the encoders where each clock's fitted offset reads them.
+    assert shifted.clock.beside_lag_s == pytest.approx(GYRO_LATE - LATE)
+
+
+def test_the_gyros_clock_offset_is_not_biased_where_the_turn_rate_jumps(tmp_path: Path) -> None:
+    """The case found by ``benchmarks/lag_coverage.py --kinds beside --first 2202 --seeds 1``: the
+    encoders were re-sampled at the lidar's offset alone and the gyro's records moved 23 ms on by the
+    first-order clock correction, which a jump of the turn rate breaks: gyro_lag −1.40 ± 0.21 ms."""
+    lidar = LidarSimulationOptions(duration_s=30.0, seed=2202, stamp_offset_s=0.021)
+    gyro = ImuSimulationOptions(seed=2202, truth={"imu_roll": 0.0873}, stamp_offset_s=0.045)
+    bag, _ = write_beside_simulation(simulate_beside(lidar, gyro), tmp_path / "jump")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(scenario_from_mapping(_mapping(bag), "jump", tmp_path)).run(["gauss_newton"])
+    est, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
+    for name, truth in (("tracker_lag", 0.021), ("gyro_lag", 0.045)):
+        assert abs(est[name] - truth) < 2 * std[name], (name, est[name], std[name])
 
 
 def test_a_sensor_beside_is_refused_where_none_fits(drive: tuple[Path, dict[str, float]]) -> None:

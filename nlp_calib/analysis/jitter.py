@@ -92,7 +92,7 @@ def input_jitter(model: KinematicModel, log: Log, steering_sample: str) -> np.nd
     speeds = np.array([n in stream.integrated for n in names])
     rng = np.random.default_rng(0)
     base = model.inputs(log, steering_sample)
-    read = log.time_s - log.encoder_lag_s
+    read = log.read_times()
     total = np.zeros(n_in)
     for _ in range(DRAWS):
         integrated, white = _drawn(stream, sigma, rng)

@@ -6,7 +6,9 @@ planar ``(x, y, θ)``, or with ``in_3d`` a camera's 3-D motions ``(x, y, z, qx, 
 Each source reads its own log (records at its own stamps); the two are laid on one time axis: a
 record at every stamp of either, the joints read there from the reference's joint stream, and
 each increment in the layout of :mod:`nlp_calib.sensors.beside` (the reference's motion, the
-gyro's integrated rates and duration, and a last row: 1 for the gyro's).
+gyro's integrated rates and duration, and a last row: 1 for the gyro's). Each record is one
+sensor's (a gyro stamp that is the reference's too moved 1 ns), so each is read on its own
+sensor's clock (:meth:`~nlp_calib.logs.log.Log.read_times`).
 """
 
 from __future__ import annotations
@@ -85,6 +87,15 @@ def own_motions(log: Log, in_3d: bool = False) -> RelativeMotions | None:
     return RelativeMotions(_frozen(first), _frozen(first + 1), _frozen(z), _frozen(log.line_numbers[1:]))
 
 
+def _apart(own_ns: np.ndarray, other_ns: np.ndarray) -> np.ndarray:
+    """``own_ns`` with each stamp another sensor's too moved 1 ns later: each record is one
+    sensor's, read on its own clock."""
+    own = np.array(own_ns, dtype=np.int64)
+    while (same := np.isin(own, other_ns)).any():
+        own[same] += 1
+    return own
+
+
 def _both(reference: Log, gyro: Log) -> LogHeader:
     """The reference's header with the gyro's beside it; one frame cannot be both sensors' (each is
     a joint of its own from the base)."""
@@ -114,7 +125,8 @@ def beside_gyro(reference: Log, gyro: Log, in_3d: bool = False) -> Log:
         raise ValueError(f"{reference.path}: a gyro beside it needs the joints' own stream")
     header = _both(reference, gyro)
     measures = Motions.name if reference.reference.motions is not None else PoseMotions.name
-    ref_ns, gyro_ns = _stamps_ns(reference), _stamps_ns(gyro)
+    ref_ns = _stamps_ns(reference)
+    gyro_ns = _apart(_stamps_ns(gyro), ref_ns)
     first_ns, last_ns = ref_ns[0], ref_ns[-1]
     # Only the gyro's increments within the reference's span: the wheels are read on its stream.
     inside = (gyro_ns[gyro_inc.first] >= first_ns) & (gyro_ns[gyro_inc.last] <= last_ns)
@@ -132,6 +144,7 @@ def beside_gyro(reference: Log, gyro: Log, in_3d: bool = False) -> Log:
     motions = _joined(
         _placed(ref_inc, ref_ns, stamps, z_ref), _placed(gyro_inc, gyro_ns, stamps, z_gyro), quality
     )
+    poses_3d = _poses_3d_at(reference, stamps) if in_3d else None
     start_ns = int(stamps[0])
     time_s = _frozen((stamps - start_ns).astype(float) * 1e-9)
     shift = (reference.clock.start_ns - start_ns) * 1e-9
@@ -153,7 +166,5 @@ def beside_gyro(reference: Log, gyro: Log, in_3d: bool = False) -> Log:
         joint_positions=stream.at(time_s),
         joint_stream=stream,
         # A tracker's increments are differences of its poses: their noise is the poses'.
-        reference=ReferenceData(
-            poses_3d=_poses_3d_at(reference, stamps) if in_3d else None, motions=motions, measures=measures
-        ),
+        reference=ReferenceData(poses_3d, motions, measures, beside=_frozen(np.isin(stamps, gyro_ns[used]))),
     )

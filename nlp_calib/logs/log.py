@@ -135,17 +135,26 @@ class JointStream:
         with the speed (a gyro's 0.1 s interval over 50 Hz joints: the fitted clock offset
         2-3 ms early)."""
         t = np.asarray(t, dtype=float)
-        n = t.size - 1
-        cuts = np.union1d(t, self.time_s[(self.time_s > t[0]) & (self.time_s < t[-1])])
+        if t.size < 2:
+            return np.zeros(0)
+        # The times need not increase (a gyro's records beside a reference's, each read on its own
+        # clock): each interval covers the stream between its two ends, whichever comes first.
+        cuts = np.union1d(t, self.time_s[(self.time_s > t.min()) & (self.time_s < t.max())])
         at = self.at(cuts)
-        piece = np.clip(np.searchsorted(t, cuts[:-1], side="right") - 1, 0, max(n - 1, 0))
+        k = np.searchsorted(cuts, t)
+        a, b = np.minimum(k[:-1], k[1:]), np.maximum(k[:-1], k[1:])
         mid = 0.5 * (at[1:, angle] + at[:-1, angle])
         travel = np.abs(np.diff(at[:, list(wheels)], axis=0)).sum(axis=1)
         span = np.diff(cuts)
-        moved, lasted = np.bincount(piece, travel, n), np.bincount(piece, span, n)
-        by_travel = np.bincount(piece, travel * mid, n) / np.where(moved > 0, moved, 1.0)
-        by_time = np.bincount(piece, span * mid, n) / np.where(lasted > 0, lasted, 1.0)
-        ends = 0.5 * (at[np.searchsorted(cuts, t[1:]), angle] + at[np.searchsorted(cuts, t[:-1]), angle])
+
+        def over(v: np.ndarray) -> np.ndarray:
+            total = np.concatenate([[0.0], np.cumsum(v)])
+            return np.asarray(total[b] - total[a])
+
+        moved, lasted = over(travel), over(span)
+        by_travel = over(travel * mid) / np.where(moved > 0, moved, 1.0)
+        by_time = over(span * mid) / np.where(lasted > 0, lasted, 1.0)
+        ends = 0.5 * (at[k[1:], angle] + at[k[:-1], angle])
         return np.where(moved > 0, by_travel, np.where(lasted > 0, by_time, ends))
 
     def increment_variance(self, t: np.ndarray) -> np.ndarray:
@@ -176,10 +185,13 @@ class JointStream:
 class LogClock:
     """Where a log's times stand: ``start_ns``, the stamp of its first record on its own clock (ns;
     every time of the log is relative to it), and ``encoder_lag_s``, how much earlier than the
-    tracker's stamps its encoders are read (s: 0 as logged, the lag they were re-sampled at)."""
+    tracker's stamps its encoders are read (s: 0 as logged, the lag they were re-sampled at);
+    ``beside_lag_s``, in a log of two sensors (:attr:`ReferenceData.beside`), how much later still
+    they are read at the second sensor's records (its clock's offset over the reference's)."""
 
     start_ns: int = 0
     encoder_lag_s: float = 0.0
+    beside_lag_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -194,6 +206,9 @@ class ReferenceData:
     measures: str = Poses.name
     #: What a record's line number counts: a text file's ``line``, a bag topic's ``/topic message``.
     numbered: str = "line"
+    #: A log of two sensors on their own clocks (a gyro beside the reference): per record, whether it
+    #: is the second sensor's stamp (the encoders read there on its clock; None: one sensor's log).
+    beside: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.measures not in REFERENCES:
@@ -207,7 +222,10 @@ class ReferenceData:
     def select(self, start: int, stop: int) -> ReferenceData:
         """Its records ``[start, stop)`` (its own motions within them), of the same kind."""
         motions = None if self.motions is None else self.motions.select(start, stop)
-        return replace(self, poses_3d=_rows(self.poses_3d, slice(start, stop)), motions=motions)
+        sl = slice(start, stop)
+        return replace(
+            self, poses_3d=_rows(self.poses_3d, sl), motions=motions, beside=_rows(self.beside, sl)
+        )
 
 
 @dataclass(frozen=True)
@@ -278,11 +296,25 @@ class Log:
     def n_records(self) -> int:
         return int(self.time_s.shape[0])
 
+    def read_times(self, lag_s: float | None = None, beside_lag_s: float | None = None) -> np.ndarray:
+        """Where the encoders are read for each record on the log's time axis: its time less the
+        encoders' lag (``lag_s``, default the log's own), a second sensor's record less its
+        clock's offset over the reference's too (``beside_lag_s``, default the log's own): each
+        sensor's records read on its own clock, not the gyro's by the first-order clock correction
+        over the two clocks' difference (a turn rate's jump inside it took its offset 6σ off)."""
+        lag = self.encoder_lag_s if lag_s is None else lag_s
+        read = np.asarray(self.time_s, dtype=float) - lag
+        mine = self.reference.beside
+        if mine is None:
+            return read
+        beside = self.clock.beside_lag_s if beside_lag_s is None else beside_lag_s
+        return np.asarray(read - beside * mine)
+
     def joint_breaks(self) -> np.ndarray | None:
         """Per interval, whether the joints' motion over it is unknown where they are read (the
         records' times less the encoders' lag; :meth:`JointStream.broken`); None: nowhere."""
         stream = self.joint_stream
-        return None if stream is None else stream.broken(self.time_s - self.encoder_lag_s)
+        return None if stream is None else stream.broken(self.read_times())
 
     def increment_variance(self) -> np.ndarray:
         """Per interval, a counter's increment's variance in one reading's where the encoders are
@@ -291,7 +323,7 @@ class Log:
         stream = self.joint_stream
         if stream is None:
             return np.full(max(self.n_records - 1, 0), 2.0)
-        return stream.increment_variance(self.time_s - self.encoder_lag_s)
+        return stream.increment_variance(self.read_times())
 
     def encoder(self, name: str) -> np.ndarray:
         """Raw readings of one encoder, ``(n_records,)`` int64."""
@@ -312,7 +344,7 @@ class Log:
         joint stream)."""
         if self.joint_stream is None:
             return None
-        return self.joint_stream.slopes(self.time_s - self.encoder_lag_s)
+        return self.joint_stream.slopes(self.read_times())
 
     def poses_3d(self) -> np.ndarray:
         """The tracker's 3-D poses ``(x, y, z, qx, qy, qz, qw)`` (an error when it reports planar ones)."""

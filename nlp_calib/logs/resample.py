@@ -18,6 +18,7 @@ def resample_encoders(
     kinds: Mapping[str, EncoderKind],
     delays: Mapping[str, float] | None = None,
     records: tuple[int, int] | None = None,
+    beside_lag_s: float | None = None,
 ) -> tuple[Log, tuple[int, int]]:
     """Encoder readings re-sampled at ``t - lag_s``: the tracker reports ``lag_s`` after the encoders.
 
@@ -30,9 +31,11 @@ def resample_encoders(
     name): a stream whose effect lags its readings. The lag adds to the log's own
     (:attr:`Log.encoder_lag_s`). ``records``: only those records' readings re-sampled (each the
     value the whole log's re-sampling gives it), the others' left as logged, for a caller that
-    reads those records alone (a profile over a stretch of a long log).
+    reads those records alone (a profile over a stretch of a long log). ``beside_lag_s``: in a log
+    of two sensors, the second's clock's offset over the reference's (s, absolute: its records
+    read that much later still; None: the log's own, :meth:`Log.read_times`).
     """
-    return Resampler(log, kinds, delays).at(lag_s, records)
+    return Resampler(log, kinds, delays).at(lag_s, records, beside_lag_s)
 
 
 class Resampler:
@@ -60,13 +63,16 @@ class Resampler:
             self._levels = out
         return self._levels
 
-    def at(self, lag_s: float, records: tuple[int, int] | None = None) -> tuple[Log, tuple[int, int]]:
+    def at(
+        self, lag_s: float, records: tuple[int, int] | None = None, beside_lag_s: float | None = None
+    ) -> tuple[Log, tuple[int, int]]:
         """The log re-sampled at ``lag_s`` (see :func:`resample_encoders`)."""
         log, late = self.log, self.late
-        if lag_s == 0.0 and not any(late):
+        moved = beside_lag_s is not None and beside_lag_s != log.clock.beside_lag_s
+        if lag_s == 0.0 and not any(late) and not moved:
             return log, (0, log.n_records)
         if log.joint_stream is not None:
-            return _joints_resampled(log, lag_s, late, records)
+            return _joints_resampled(log, lag_s, late, records, beside_lag_s)
         t = log.time_s
         tq = t - lag_s
         valid = np.flatnonzero((tq - max(late) >= t[0]) & (tq - min(late) <= t[-1]))
@@ -95,15 +101,21 @@ class Resampler:
 
 
 def _joints_resampled(
-    log: Log, lag_s: float, late: list[float], records: tuple[int, int] | None = None
+    log: Log,
+    lag_s: float,
+    late: list[float],
+    records: tuple[int, int] | None = None,
+    beside_lag_s: float | None = None,
 ) -> tuple[Log, tuple[int, int]]:
-    """Joints in radians re-sampled from their own stream (at its own stamps) at ``t - lag_s``,
-    each joint ``late`` (s) later still (``records``: those alone, as :func:`resample_encoders`)."""
+    """Joints in radians re-sampled from their own stream (at its own stamps) at ``t - lag_s`` (a
+    second sensor's records ``beside_lag_s`` later), each joint ``late`` (s) later still
+    (``records``: those alone, as :func:`resample_encoders`)."""
     stream = log.joint_stream
     assert stream is not None
     records = records if log.joint_positions is not None else None
     lag_s += log.encoder_lag_s  # the stream is as published: shift by the log's own lag too
-    tq = log.time_s - lag_s
+    beside = log.clock.beside_lag_s if beside_lag_s is None else float(beside_lag_s)
+    tq = log.read_times(lag_s, beside)
     valid = np.flatnonzero(stream.covers(tq - max(late)) & stream.covers(tq - min(late)))
     if valid.size < 2:
         raise ProblemError(
@@ -114,5 +126,6 @@ def _joints_resampled(
     positions = np.stack([stream.at(tq[rows] - d)[:, j] for j, d in enumerate(late)], axis=1)
     if records is not None and (held := log.joint_positions) is not None:  # the others as logged
         positions = np.concatenate([held[: rows.start], positions, held[rows.stop :]])
-    shifted = replace(log, joint_positions=frozen(positions), clock=replace(log.clock, encoder_lag_s=lag_s))
+    clock = replace(log.clock, encoder_lag_s=lag_s, beside_lag_s=beside)
+    shifted = replace(log, joint_positions=frozen(positions), clock=clock)
     return shifted, (int(valid[0]), int(valid[-1]) + 1)

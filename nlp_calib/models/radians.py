@@ -268,7 +268,10 @@ class InRadians:
             encoder = self.form.inputs[name].encoder
             position = log.joint_position(encoder)
             if self.form.inputs[name].rate:
-                rows.append(np.diff(position) / np.diff(log.time_s))
+                # Over the times the joints are read at: a gyro's record beside a reference's is
+                # read on its own clock, the interval between them as long as the reads are apart.
+                dt = np.diff(log.read_times())
+                rows.append(np.diff(position) / np.where(dt != 0, dt, np.inf))
             elif self.encoder_kinds[encoder] == "counter":
                 rows.append(np.diff(position))
             else:
@@ -283,7 +286,7 @@ class InRadians:
         if steering_sample != "mean" or stream is None:
             return sampled_angle(wrap_angle(log.joint_position(encoder)), steering_sample)
         wheels = [log.header.encoder_index(e) for e, kind in self.encoder_kinds.items() if kind == "counter"]
-        read = log.time_s - log.encoder_lag_s
+        read = log.read_times()
         return wrap_angle(stream.travelled_angle(read, log.header.encoder_index(encoder), wheels))
 
     def moving(self, inputs: np.ndarray) -> np.ndarray:

@@ -84,6 +84,16 @@ def lag_column(binder: Binder) -> int | None:
     return next((i for i, n in enumerate(binder.fns.free) if binder.fns.layout.in_block(n, CLOCK)), None)
 
 
+def beside_column(binder: Binder) -> int | None:
+    """The place of a second sensor's clock offset (a gyro's beside the reference) among the free
+    parameters, where the reference's is free too (None: one clock, or either held)."""
+    clocks, layout, free = binder.fns.sensor.clocks, binder.fns.layout, binder.fns.free
+    keys = [layout.param(n).key if layout.in_block(n, CLOCK) else None for n in free]
+    if len(clocks) < 2 or clocks[0] not in keys or clocks[1] not in keys:
+        return None
+    return keys.index(clocks[1])
+
+
 @dataclass
 class _LagFits:
     """The lag's fits on one log: the records, the evaluator they share and the path so far."""
@@ -95,16 +105,26 @@ class _LagFits:
     evaluator: ProblemEvaluator | None = None
     #: The log's re-sampling at any lag (what does not depend on the lag computed once).
     resampler: Resampler | None = None
+    #: The second clock's column (a gyro's offset; None: one clock): its records are re-sampled at
+    #: its own offset, not moved there by the problem's first-order correction.
+    beside: int | None = None
 
-    def resampled(self, lag: float, records: tuple[int, int] | None = None) -> Log:
-        """The log's encoders re-sampled at ``lag`` (``records``: those alone)."""
+    def beside_s(self, x: np.ndarray) -> float | None:
+        """The second clock's offset over the reference's at ``x`` (None: one clock)."""
+        return None if self.beside is None else float(x[self.beside] - x[self.column])
+
+    def resampled(
+        self, lag: float, records: tuple[int, int] | None = None, beside_s: float | None = None
+    ) -> Log:
+        """The log's encoders re-sampled at ``lag`` (``records``: those alone; ``beside_s``: the
+        second clock's offset over the reference's)."""
         if self.resampler is None:
             self.resampler = Resampler(self.log, self.binder.fns.model.encoder_kinds)
-        return self.resampler.at(lag, records)[0]
+        return self.resampler.at(lag, records, beside_s)[0]
 
     def fit(self, x: np.ndarray) -> tuple[float, np.ndarray, bool]:
-        """The internal fit from ``x`` on the encoders re-sampled at ``x``'s lag."""
-        shifted = self.resampled(float(x[self.column]))
+        """The internal fit from ``x`` on the encoders re-sampled at ``x``'s lags."""
+        shifted = self.resampled(float(x[self.column]), beside_s=self.beside_s(x))
         _, self.evaluator = self.binder.bind(shifted, *self.records, evaluator=self.evaluator)
         cost, x_new, converged = self.binder.fit(self.evaluator, x)
         return cost, x_new, bool(converged and np.all(np.isfinite(x_new)))
@@ -116,23 +136,26 @@ class _LagFits:
         costs: list[float] = []
         converged = False
         for _ in range(MAX_RESAMPLINGS):
-            resampled = float(x[self.column])
+            resampled, beside = float(x[self.column]), self.beside_s(x)
             cost, x_new, converged = self.fit(x)
             path.append(resampled)
             costs.append(cost)
             if not converged:
                 break
             x = x_new
-            if stays(float(x[self.column]) - resampled, self.lag_std(x)):
+            now = self.beside_s(x)
+            still = now is None or beside is None or stays(now - beside, self.lag_std(x, self.beside))
+            if still and stays(float(x[self.column]) - resampled, self.lag_std(x)):
                 break
         return x, path, costs, converged
 
-    def lag_std(self, x: np.ndarray) -> float:
-        """The lag's white-noise σ at ``x`` from the last fit's normal equations (0 when singular)."""
+    def lag_std(self, x: np.ndarray, column: int | None = None) -> float:
+        """The lag's (``column``'s) white-noise σ at ``x`` from the last fit's normal equations (0
+        when singular)."""
         assert self.evaluator is not None
         ne = self.evaluator.normal_equations(x)
         dof = max(self.binder.fns.error_rows * self.evaluator.n_residuals - self.binder.fns.n_free, 1)
-        return white_std(ne.H, ne.cost / dof, self.column)
+        return white_std(ne.H, ne.cost / dof, self.column if column is None else column)
 
     def profile(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The cost over the search at ``x``'s other parameters: lags at most :data:`PROFILE_LAGS`
@@ -146,8 +169,10 @@ class _LagFits:
         records = (max(a, mid - half), min(b, mid + half))
         evaluator, costs = None, np.full(n, np.nan)
         for i, lag in enumerate(grid):
-            # Only the profile's records re-sampled: a long log's others are never read here.
-            shifted = self.resampled(float(lag), records)
+            # Only the profile's records re-sampled (a long log's others are never read here); the
+            # second clock's records stay where ``x`` reads them: its offset is ``x``'s.
+            beside = None if self.beside is None else float(x[self.beside] - lag)
+            shifted = self.resampled(float(lag), records, beside)
             try:
                 _, evaluator = self.binder.bind(shifted, *records, evaluator=evaluator)
             except NlpCalibError:
@@ -253,7 +278,8 @@ def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np
     it starts in: a lag off by a period of the drive's motion is a valley too)."""
     column = lag_column(binder)
     assert column is not None
-    fits = _LagFits(binder, log, fit_records(binder.scenario, log, start, stop), column)
+    records = fit_records(binder.scenario, log, start, stop)
+    fits = _LagFits(binder, log, records, column, beside=beside_column(binder))
     lower, upper = binder.bounds if binder.bounds is not None else (None, None)
     x = np.clip(np.asarray(x0, dtype=float), lower, upper) if lower is not None else np.asarray(x0, float)
     first = _settled(fits, x)
@@ -270,7 +296,15 @@ def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np
     costs = first.costs + (best.costs if best is not first else ())
     other = () if runner is None else (float(runner.x[column]), float(runner.cost), float(best.cost))
     return LagEstimate(
-        lag, path, costs, at_edge, True, tuple(map(float, grid)), tuple(map(float, profile)), other
+        lag,
+        path,
+        costs,
+        at_edge,
+        True,
+        tuple(map(float, grid)),
+        tuple(map(float, profile)),
+        other,
+        fits.beside_s(best.x),
     )
 
 
@@ -297,7 +331,10 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
         held = [i for i, n in enumerate(binder.fns.fixed) if binder.fns.layout.in_block(n, CLOCK)]
         lag = float(binder.x_fixed[held[0]]) if held else 0.0
     with scenario_key(sc, "alignment.tracker_lag"):
-        aligned, valid = resample_encoders(log, float(lag), binder.fns.model.encoder_kinds)
+        beside = None if estimate is None or not estimate.converged else estimate.beside_s
+        aligned, valid = resample_encoders(
+            log, float(lag), binder.fns.model.encoder_kinds, beside_lag_s=beside
+        )
     return Alignment(lag_s=float(lag), estimate=estimate, log=aligned, valid=valid)
 
 

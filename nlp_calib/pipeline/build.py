@@ -478,11 +478,19 @@ def build_stage(
     return Problem(fns, point, replace(binder, priors=priors))
 
 
-def at_lags(problem: Problem, lags: Sequence[float]) -> Problem:
+def at_lags(problem: Problem, lags: Sequence[float], beside: Sequence[float] = ()) -> Problem:
     """``problem`` starting at the time offsets ``lags`` (one per log; the data's own once they are
-    re-sampled there, so the problem's clock correction starts at zero)."""
+    re-sampled there, so the problem's clock correction starts at zero), a second sensor's clock
+    (a gyro's beside the reference) ``beside`` later (one per log; none: the reference's)."""
     fns, start = problem.fns, problem.start
-    given = {n: lags[fns.layout.param(n).log or 0] for n in fns.layout.block(CLOCK)}
+    clocks = fns.sensor.clocks
+
+    def at(name: str) -> float:
+        p = fns.layout.param(name)
+        i = p.log or 0
+        return lags[i] + (beside[i] if beside and len(clocks) > 1 and p.key == clocks[1] else 0.0)
+
+    given = {n: at(n) for n in fns.layout.block(CLOCK)}
     if not any(n in given for n in fns.free):
         return problem
     initial = {**start.initial, **given}

@@ -318,11 +318,19 @@ def _resampled(d: Drive, x: np.ndarray) -> Drive:
     """``d`` with each log's encoders re-sampled at its time offset in the free ``x`` (from the log
     as read: a re-sampling adds to a log's own) and its windows rebuilt on the records they stay
     valid for."""
-    lags = {log: float(x[i]) for i, logs in _clocks(d) for log in logs}
+    lags: dict[int, dict[str, float]] = {}
+    for i, logs in _clocks(d):
+        for log in logs:
+            lags.setdefault(log, {})[d.fns.layout.param(d.fns.free[i]).key] = float(x[i])
+    clocks = d.fns.sensor.clocks
     parts = list(d.parts)
-    for log, lag in lags.items():
+    for log, own in lags.items():
         p, read = parts[log], d.read[log]
-        shifted, (a, b) = resample_encoders(read, lag - read.encoder_lag_s, p.model.encoder_kinds)
+        # Each sensor's records at its own clock's offset (a gyro's beside the reference).
+        lag = own.get(clocks[0], next(iter(own.values())))
+        beside = own[clocks[1]] - lag if len(clocks) > 1 and len(own) > 1 else None
+        kinds = p.model.encoder_kinds
+        shifted, (a, b) = resample_encoders(read, lag - read.encoder_lag_s, kinds, beside_lag_s=beside)
         parts[log] = replace(p, log=shifted, start=max(d.parts[log].start, a), split=min(p.split, b))
     data = build_residual_data(
         d.fns,
@@ -331,6 +339,15 @@ def _resampled(d: Drive, x: np.ndarray) -> Drive:
         drop_stationary=d.scenario.log.samples.drop_stationary,
     )
     return replace(d, parts=tuple(parts), data=data)
+
+
+def _read_at(d: Drive, column: int, log: int) -> float:
+    """The offset log ``log``'s encoders are read at for the clock of free parameter ``column`` (a
+    second sensor's: the reference's and its own over it)."""
+    clock = d.parts[log].log.clock
+    clocks = d.fns.sensor.clocks
+    second = len(clocks) > 1 and d.fns.layout.param(d.fns.free[column]).key == clocks[1]
+    return clock.encoder_lag_s + (clock.beside_lag_s if second else 0.0)
 
 
 def _aligned(d: Drive, omega: np.ndarray, fitted: Fitted | None) -> tuple[Drive, Fitted | None]:
@@ -346,7 +363,7 @@ def _aligned(d: Drive, omega: np.ndarray, fitted: Fitted | None) -> tuple[Drive,
             break
         x, info = fitted[0], fitted[1]
         sigma2 = info.chi2 / max(d.fns.error_rows * info.n_windows - d.fns.n_free, 1)
-        at = [d.parts[logs[0]].log.encoder_lag_s for _, logs in clocks]
+        at = [_read_at(d, i, logs[0]) for i, logs in clocks]
         if all(stays(float(x[i]) - a, white_std(info.H, sigma2, i)) for (i, _), a in zip(clocks, at)):
             break
         moved = _resampled(d, x)

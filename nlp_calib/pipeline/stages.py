@@ -67,7 +67,7 @@ def setup_log(
     ``aligned``: the stages before binding, done already)."""
     a = aligned if aligned is not None else align_log(sc, log, solvers)
     prepared, problem, screening, alignment = a.prepared, a.problem, a.screening, a.alignment
-    problem = at_lags(problem, [alignment.lag_s])
+    problem = at_lags(problem, [alignment.lag_s], [alignment.log.clock.beside_lag_s])
     if alignment.estimate is not None and not alignment.estimate.converged:
         # A lag no fit converged at is held where the encoders are read (a caveat, not a value).
         problem = lags_held(problem)

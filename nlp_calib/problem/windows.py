@@ -68,6 +68,19 @@ class WindowClock:
 
     lags: tuple[float, ...]
     rates: np.ndarray
+    #: A log of two sensors' windows (a gyro beside the reference): per log, how much later still
+    #: its second sensor's records were read (its clock's offset over the reference's), and the row
+    #: of ``z`` that is 1 on that sensor's windows (None: one clock).
+    beside: tuple[float, ...] = ()
+    beside_row: int | None = None
+
+    def resampled(self, which: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """The offset each window's inputs were re-sampled at: its log's, on a second sensor's
+        window that log's second clock's (``which``: each window's log; ``z``: their measurements)."""
+        out = np.asarray(self.lags, dtype=float)[which]
+        if self.beside_row is not None and self.beside:
+            out = out + np.asarray(self.beside, dtype=float)[which] * np.asarray(z[self.beside_row])
+        return out
 
 
 @dataclass(frozen=True)
@@ -158,7 +171,7 @@ class ResidualData:
         if not self.clock.lags:
             return select  # a mount per log: which log alone
         rates = self.clock.rates
-        resampled = np.asarray(self.clock.lags)[which][None, :]
+        resampled = self.clock.resampled(which, self.z)[None, :]
         return np.vstack([rates[:, self.starts], rates[:, self.stops], resampled, select])
 
     def interval_counts(self, flagged: np.ndarray) -> np.ndarray:
@@ -207,7 +220,9 @@ class ResidualData:
             raise ProblemError(f"inputs of shape {inputs.shape} do not fit {self.inputs.shape}")
         if lags is None or rates is None or self.clock is None:
             return replace(self, inputs=inputs)
-        return replace(self, inputs=inputs, clock=WindowClock(tuple(float(v) for v in lags), rates))
+        return replace(
+            self, inputs=inputs, clock=replace(self.clock, lags=tuple(float(v) for v in lags), rates=rates)
+        )
 
     def columns_of(self, windows: np.ndarray | slice) -> np.ndarray:
         """One column ``[u_0 … u_{H-1}, z, w]`` per window, as the defining ``residual`` takes it."""
@@ -368,7 +383,7 @@ def appended(
         rates = (
             record_rates(inputs, time_s, level_rows(fns.model)) if clock.lags else np.zeros((0, time_s.size))
         )
-        clock = WindowClock(clock.lags, np.concatenate([clock.rates, rates], axis=1))
+        clock = replace(clock, rates=np.concatenate([clock.rates, rates], axis=1))
     return replace(
         data,
         inputs=np.ascontiguousarray(
@@ -388,7 +403,10 @@ def _joined_clock(clocks: Sequence[WindowClock | None]) -> WindowClock | None:
     if len(given) < len(clocks):
         return None
     return WindowClock(
-        tuple(v for c in given for v in c.lags), np.concatenate([c.rates for c in given], axis=1)
+        tuple(v for c in given for v in c.lags),
+        np.concatenate([c.rates for c in given], axis=1),
+        tuple(v for c in given for v in (c.beside or (0.0,) * len(c.lags))),
+        given[0].beside_row,
     )
 
 
@@ -465,9 +483,7 @@ def build_residual_data(
         z=z,
         horizon=H,
         dropped_stationary=0,
-        clock=WindowClock(tuple(lg.encoder_lag_s for lg in logs), log_rates(fns.model, logs, inputs))
-        if fns.spec.lags
-        else None,
+        clock=_window_clock(fns, logs, inputs) if fns.spec.lags else None,
     )
     if fns.select_rows and data.clock is None:
         data = data.with_selector()
@@ -475,6 +491,13 @@ def build_residual_data(
         keep = data.interval_counts(fns.model.moving(inputs)) > 0
         data = replace(data.select(keep), dropped_stationary=int((~keep).sum()))
     return _without_faults(data, bad_intervals, bad_records)
+
+
+def _window_clock(fns: ProblemFunctions, logs: Sequence[Log], inputs: np.ndarray) -> WindowClock:
+    """The offsets ``logs``' inputs were re-sampled at (each clock's) and the inputs' rates."""
+    lags = tuple(lg.encoder_lag_s for lg in logs)
+    beside = tuple(lg.clock.beside_lag_s for lg in logs)
+    return WindowClock(lags, log_rates(fns.model, logs, inputs), beside, fns.sensor.beside_row)
 
 
 def _log_windows(

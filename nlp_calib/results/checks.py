@@ -197,7 +197,9 @@ class LagEstimate:
     not determine it). ``profile_s`` and ``profile_costs``: the cost over the search at the
     settled fit's other parameters (the lags and the cost at each), from which the fit started in
     each valley; ``other``: a second valley of comparable cost, ``(its lag, its fitted cost, the
-    kept lag's fitted cost)`` (empty: none), the lag then ambiguous between the two."""
+    kept lag's fitted cost)`` (empty: none), the lag then ambiguous between the two. ``beside_s``:
+    a second sensor's clock offset over the reference's the encoders were read at for its records
+    (a gyro's beside the reference; None: one clock)."""
 
     lag_s: float
     path_s: tuple[float, ...]
@@ -207,6 +209,7 @@ class LagEstimate:
     profile_s: tuple[float, ...] = ()
     profile_costs: tuple[float, ...] = ()
     other: tuple[float, ...] = ()
+    beside_s: float | None = None
 
     @property
     def ambiguous(self) -> bool:

@@ -107,6 +107,8 @@ class Sensor(Protocol):
     def per_log(self) -> tuple[str, ...]: ...  # its parameters each log has its own of, even when shared
     @property
     def clocks(self) -> tuple[str, ...]: ...  # its clocks' offsets (the clock block's keys)
+    @property
+    def beside_row(self) -> int | None: ...  # the row of z that is 1 on its second clock's windows
 
     # --- the error term (symbolic) -------------------------------------------------------------
     def residual(self, z: ca.SX, mount: ca.SX, M: ca.SX) -> ca.SX: ...
@@ -190,6 +192,9 @@ class SensorDefaults:
     weights: ClassVar[tuple[str, ...]] = ()
     #: Its clocks' offsets, each a parameter of the clock block (one per log): the reference's.
     clocks: ClassVar[tuple[str, ...]] = (LAG_PARAM,)
+    #: With two clocks, the row of a window's ``z`` that is 1 where the window is on the second
+    #: (:meth:`clock_weights`' second weight; None: one clock).
+    beside_row: ClassVar[int | None] = None
     length_unit: str = "m"
     planar_base: ClassVar[bool] = False
     start_span_s: ClassVar[float | None] = None

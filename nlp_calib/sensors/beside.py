@@ -94,6 +94,11 @@ class Beside(SensorDefaults):
         return int(self.reference_sensor.z_rows)
 
     @property
+    def beside_row(self) -> int:  # type: ignore[override]  # the layout's, from its reference
+        """The row of ``z`` that is 1 on a gyro's window (on the gyro's clock)."""
+        return self._rows + GYRO_ROWS
+
+    @property
     def roles(self) -> str:  # type: ignore[override]  # a class's words computed from its two sensors
         """What each sensor determines, as the pre-flight says it."""
         ref, gyro = self.reference_sensor, self.gyro
@@ -128,7 +133,7 @@ class Beside(SensorDefaults):
 
     def clock_weights(self, z: ca.SX) -> ca.SX:
         """A reference's window is on its clock (``tracker_lag``), a gyro's on the gyro's (``gyro_lag``)."""
-        g = z[self._rows + GYRO_ROWS]
+        g = z[self.beside_row]
         return ca.vertcat(1 - g, g)
 
     def predict(self, mount: ca.SX, M: ca.SX) -> ca.SX:
