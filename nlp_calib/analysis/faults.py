@@ -43,10 +43,11 @@ from nlp_calib.analysis.readings import unit as unit_of
 from nlp_calib.analysis.streams import off_neighbours, printed_step, scatter, stuck_runs
 from nlp_calib.core import poses, poses3d
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
-from nlp_calib.logs import EncoderKind, Log, resample_encoders
+from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.logs.log import frozen
 from nlp_calib.logs.reference import Motions, PoseMotions, Poses
 from nlp_calib.logs.relative import RelativeMotions
+from nlp_calib.logs.resample import Resampler
 from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results.faults import (
@@ -210,7 +211,7 @@ def increment_faults(
         judged &= (inc.last - 1 < f.first) | (inc.first > f.last)
     if judged.sum() < 10:
         return []
-    at = _IncrementsAt(fns, p, log, steering_sample)
+    at = _IncrementsAt(fns, p, log, steering_sample, Resampler(log, fns.model.encoder_kinds))
     error, unit, travel, turned, valid = at(_screen_lag(at, judged, lag))
     judged &= (inc.first >= valid[0]) & (inc.last < valid[1])
     centre, spread = _robust(error[judged])
@@ -254,12 +255,14 @@ SCREEN_LAG_STEP_S = 0.01
 class _IncrementsAt:
     """The reference's increments against the wheels at ``params``, the encoders re-sampled at a
     lag: the disagreement, its units, the base's travel and turn (:func:`_disagreement`) and the
-    records whose re-sampled readings lie inside the log."""
+    records whose re-sampled readings lie inside the log. One ``resampler`` of the log serves every
+    lag the screen's search tries (what does not depend on the lag computed once)."""
 
     fns: ProblemFunctions
     params: np.ndarray
     log: Log
     steering_sample: str
+    resampler: Resampler
 
     def __call__(
         self, lag_s: float
@@ -267,7 +270,7 @@ class _IncrementsAt:
         inc = self.log.motions
         assert inc is not None
         model = self.fns.model
-        shifted, valid = resample_encoders(self.log, lag_s, model.encoder_kinds)
+        shifted, valid = self.resampler.at(lag_s)
         _, z = self.fns.sensor.screened(inc.z)
         steps = over_columns(self.fns.predict, self.params, model.inputs(shifted, self.steering_sample))[0]
         return (*_disagreement(inc, z, steps.T[:, : z.shape[1]]), valid)
