@@ -60,23 +60,45 @@ def nnls_small(A: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def nnls_gram(G: np.ndarray, h: np.ndarray, yy: float) -> np.ndarray:
-    """:func:`nnls_small` from ``G = AᵀA``, ``h = Aᵀy`` and ``yy = yᵀy`` (summed block by block)."""
-    k = G.shape[0]
-    best, best_cost = np.zeros(k), yy
-    for size in range(1, k + 1):
-        for cols in itertools.combinations(range(k), size):
-            c = list(cols)
-            try:
-                sol = np.linalg.solve(G[np.ix_(c, c)], h[c])
-            except np.linalg.LinAlgError:
-                continue
-            if np.all(sol >= 0):
-                full = np.zeros(k)
-                full[c] = sol
-                cost = yy - 2.0 * full @ h + full @ G @ full
-                if cost < best_cost:
-                    best, best_cost = full, cost
-    return best
+    """:func:`nnls_small` from ``G = AᵀA``, ``h = Aᵀy`` and ``yy = yᵀy`` (summed block by block).
+
+    Lawson and Hanson's active set: the problem is convex, so the first point whose free
+    coordinates solve their normal equations and whose held ones could only raise the cost is
+    the optimum (the exhaustive search over every subset found the same one in 2^k solves)."""
+    # In units where every column has length 1 a coordinate's pull is at most the residual's
+    # length, whatever the columns' scales: one tolerance serves them all.
+    d = np.sqrt(np.diag(G))
+    d = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 0.0)
+    Gs, hs = G * np.outer(d, d), h * d
+    x = np.zeros(h.size)
+    free = np.zeros(h.size, dtype=bool)
+    tol = 1e-12 * np.sqrt(max(yy, float(np.abs(hs).max(initial=0.0)) ** 2, 1e-300))
+    for _ in range(3 * h.size + 3):
+        pull = np.where(free | (d == 0), -np.inf, hs - Gs @ x)
+        if pull.max(initial=-np.inf) <= tol:
+            break
+        free[int(np.argmax(pull))] = True
+        x = _free_solution(Gs, hs, x, free)
+    return x * d
+
+
+def _free_solution(G: np.ndarray, h: np.ndarray, x: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """Lawson and Hanson's inner loop: the free coordinates' unconstrained solution, stepping
+    back to the last feasible point (and holding the coordinates that reach 0) while it is not."""
+    for _ in range(free.size + 1):
+        z = np.zeros_like(x)
+        cols = np.flatnonzero(free)
+        z[cols] = np.linalg.lstsq(G[np.ix_(cols, cols)], h[cols], rcond=None)[0]
+        if np.all(z[cols] > 0):
+            return z
+        back = free & (z <= 0)
+        alpha = float(np.min(x[back] / (x[back] - z[back])))
+        x = x + alpha * (z - x)
+        free &= x > 0
+        x[~free] = 0.0
+        if not free.any():
+            return x
+    return x
 
 
 def _pseudo_inverse(
