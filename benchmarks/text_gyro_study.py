@@ -72,9 +72,8 @@ def one(seed: int, latency: float, gyro_late: float, folder: Path) -> dict[str, 
         capture_output=True, text=True, check=False, cwd=REPO,
     )  # fmt: skip
     if run.returncode != 0:
-        print(
-            f"seed {seed}: the run failed (exit {run.returncode}): {(run.stdout + run.stderr).strip().splitlines()[-1]}"
-        )
+        last = (run.stdout + run.stderr).strip().splitlines()[-1]
+        print(f"seed {seed}: the run failed (exit {run.returncode}): {last}")
         return {}
     t, per_rad = sim.options.truth, COUNTS / (2.0 * math.pi)
     truth = {
