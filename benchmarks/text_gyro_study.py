@@ -9,6 +9,9 @@ estimate, σ and estimate − truth in σ::
 
     nice -n 10 python3 benchmarks/text_gyro_study.py --seeds 4 5 6 7 8 9
     nice -n 10 python3 benchmarks/text_gyro_study.py --seeds 10 11 12 13 --latency 0.03 --gyro-late 0.02
+
+``--alone`` fits the same text logs without the gyro (the counts' own model, its lengths read as
+radii over ``COUNTS``), for what the tracker alone gives.
 """
 
 from __future__ import annotations
@@ -57,15 +60,26 @@ SCENARIO = {
     "robust": {"kernel": "huber", "delta": 3.0},
     "solvers": ["gauss_newton"],
 }
+#: ``--alone``: the same text log without the gyro (its counts' own model, k_left in m per count).
+ALONE = {
+    **{k: v for k, v in SCENARIO.items() if k not in ("sensor", "dataset", "information")},
+    "name": "text_alone",
+    "dataset": "run.log",
+    "information": {"translation": 1.25e5, "rotation": 1.25e5},
+}
+#: The counts model's names for the radians model's lengths.
+PER_COUNT = {"k_left": "left_wheel_radius", "k_right": "right_wheel_radius", "baseline": "wheel_separation"}
 
 
-def one(seed: int, latency: float, gyro_late: float, folder: Path) -> dict[str, tuple[float, float, float]]:
+def one(
+    seed: int, latency: float, gyro_late: float, folder: Path, alone: bool = False
+) -> dict[str, tuple[float, float, float]]:
     """Each parameter's estimate, σ and truth on one seed's drive (none where the run failed: its
-    last line printed)."""
+    last line printed); ``alone``: the text log's own fit, without the gyro."""
     sim = simulate(SimulationOptions.of(records=1500, seed=seed, model="diff_drive", latency_s=latency))
     write_simulation(sim, folder / "run.log")
     write_text_log_gyro(sim, folder / "gyro.csv", GYRO, RATE_NOISE, seed, gyro_late)
-    (folder / "text_gyro.yaml").write_text(yaml.safe_dump(SCENARIO))
+    (folder / "text_gyro.yaml").write_text(yaml.safe_dump(ALONE if alone else SCENARIO))
     run = subprocess.run(
         [sys.executable, "-m", "nlp_calib", "run", str(folder / "text_gyro.yaml"),
          "--out", str(folder / "out")],
@@ -87,6 +101,10 @@ def one(seed: int, latency: float, gyro_late: float, folder: Path) -> dict[str, 
     }
     stored = yaml.safe_load((folder / "out" / "calibration.yaml").read_text())
     est, std = stored["parameters"], stored["std"]
+    if alone:
+        unit = {"k_left": per_rad, "k_right": per_rad, "baseline": 1.0}
+        est = {PER_COUNT.get(n, n): v * unit.get(n, 1.0) for n, v in est.items()}
+        std = {PER_COUNT.get(n, n): v * unit.get(n, 1.0) for n, v in std.items() if v is not None}
     return {n: (est[n], std[n], v) for n, v in truth.items() if std.get(n)}
 
 
@@ -97,11 +115,14 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", required=True)
     parser.add_argument("--latency", type=float, default=0.0, help="the text log's tracker latency (s)")
     parser.add_argument("--gyro-late", type=float, default=0.0, help="how late the gyro is stamped (s)")
+    parser.add_argument("--alone", action="store_true", help="the text log's own fit, without the gyro")
     args = parser.parse_args()
     scores: list[float] = []
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
-            for name, (est, std, true) in one(seed, args.latency, args.gyro_late, Path(tmp)).items():
+            for name, (est, std, true) in one(
+                seed, args.latency, args.gyro_late, Path(tmp), args.alone
+            ).items():
                 z = (est - true) / std
                 scores.append(abs(z))
                 unit = 1e3 if name.endswith("_lag") else 1.0
