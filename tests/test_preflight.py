@@ -20,6 +20,7 @@ import ros2_bags as rb
 from conftest import REPO, SCENARIOS, cli, write_sim
 from test_clock import _two_sinusoids
 
+import nlp_calib.pipeline.preflight as stages
 from nlp_calib.analysis.determinacy import information, standing
 from nlp_calib.analysis.plan import candidate_of, drive_facts, simulated
 from nlp_calib.core.numeric import wrap_angle
@@ -439,3 +440,16 @@ def test_codegen_exports_a_problem_whose_windows_have_several_lengths(tmp_path: 
     assert proc.returncode == 0, proc.stdout + proc.stderr
     window = re.search(r"window: records (\d+)-(\d+)", (tmp_path / "c" / "example.c").read_text())
     assert window is not None and int(window[2]) - int(window[1]) == 2, window
+
+
+def test_the_preflight_judges_windows_of_several_lengths_from_its_rough_start(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where no fit converges (a drive whose first fit fails: the text log beside a gyro of seed 5),
+    the pre-flight judges the rough start's information; on windows of several lengths it stopped
+    with "only windows of 2 intervals have a column layout"."""
+    monkeypatch.setattr(stages, "_fitted", lambda *args, **kwargs: None)
+    monkeypatch.setattr(stages, "_as_the_run_aligns", lambda *args, **kwargs: None)
+    found = preflight(load_scenario(_gyro_beside_poses(tmp_path)))
+    assert found.verdict == ENOUGH, found.verdict
+    assert {p.status for p in found.parameters} == {DETERMINED}
