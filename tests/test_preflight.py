@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -19,14 +20,17 @@ import ros2_bags as rb
 from conftest import REPO, SCENARIOS, cli, write_sim
 from test_clock import _two_sinusoids
 
+import nlp_calib.pipeline.preflight as stages
 from nlp_calib.analysis.determinacy import information, standing
 from nlp_calib.analysis.plan import candidate_of, drive_facts, simulated
 from nlp_calib.core.numeric import wrap_angle
+from nlp_calib.logs.joint_log import format_joint_csv
+from nlp_calib.logs.tum import format_tum
 from nlp_calib.outputs import registry
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.pipeline import Calibration, load_scenario
 from nlp_calib.pipeline.analyse import plan_setting
-from nlp_calib.pipeline.preflight import preflight
+from nlp_calib.pipeline.preflight import drive, preflight
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.preflight import (
     CHECK_DATA,
@@ -38,6 +42,10 @@ from nlp_calib.results.preflight import (
     WEAKLY,
     Preflight,
 )
+from nlp_calib.simulation.beside import simulate_beside, tracker_poses
+from nlp_calib.simulation.imu import ImuSimulationOptions
+from nlp_calib.simulation.lidar import LidarSimulationOptions
+from nlp_calib.solvers import ProblemEvaluator
 
 CIRCLES = REPO.parent / "shared" / "data" / "real4" / "optiodom" / "tricyc" / "circular" / "140120211440"
 for _parent in REPO.parents:
@@ -366,3 +374,82 @@ def test_init_names_the_controller_whose_topics_the_recording_holds() -> None:
     assert controller_name(bag("/mocap/odom", "/joint_states")) is None
     assert controller_name(bag("/a_controller/odom", "/b_controller/odom")) is None
     assert controller_name(bag("/9controller/odom")) is None
+
+
+def _gyro_beside_poses(folder: Path) -> Path:
+    """20 s of a tracked base with a gyro beside it, as a joint CSV, a TUM file and a gyro CSV: the
+    gyro's 0.1 s intervals and the tracker's 10 Hz poses make windows of several record lengths."""
+    lidar = LidarSimulationOptions(duration_s=20.0, seed=71, stamp_offset_s=0.02, beams=16)
+    sim = simulate_beside(lidar, ImuSimulationOptions(seed=71, stamp_offset_s=0.03))
+    ns = lambda t: np.round(np.asarray(t) * 1e9).astype(np.int64)  # noqa: E731
+    planar, half = tracker_poses(sim.lidar), tracker_poses(sim.lidar)[:, 2] / 2
+    tum = np.column_stack([planar[:, :2], np.zeros((len(planar), 3)), np.sin(half), np.cos(half)])
+    (folder / "drive.tum").write_text(format_tum(ns(sim.lidar.scan_time_s), tum))
+    joints = format_joint_csv(ns(sim.lidar.joint_time_s), sim.lidar.joint_names, sim.lidar.joint_positions)
+    (folder / "drive.csv").write_text(joints)
+    rows = (
+        f"{t:.9f},{w[0]:.17g},{w[1]:.17g},{w[2]:.17g}\n" for t, w in zip(sim.imu.imu_time_s, sim.imu.rates)
+    )
+    (folder / "gyro.csv").write_text("t,wx,wy,wz\n" + "".join(rows))
+    path = folder / "beside.yaml"
+    path.write_text(
+        "name: beside\nmodel: diff_drive\nsensor: {mount: planar, beside: gyro}\ninitial_guess: auto\n"
+        "dataset: {joints: drive.csv, poses: drive.tum, gyro: gyro.csv, interval: 0.25,\n"
+        "          encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}\n"
+        "alignment: {tracker_lag: auto}\nrobust: {kernel: huber, delta: 3.0}\n"
+        "information: {translation: 1.25e5, rotation: 1.25e5, gyro: 1.0e8}\nsolvers: [gauss_newton]\n"
+    )
+    return path
+
+
+def test_the_rough_start_takes_windows_of_several_lengths(tmp_path: Path) -> None:
+    """The pre-flight's rough path (where the first fit does not converge) sums the information of
+    windows of several lengths (a reference's own increments beside a gyro's intervals): it had
+    stopped with "only windows of 1 intervals have a column layout". Its H and g against central
+    differences of each window's residual (independent of the run's jets)."""
+    d, _ = drive(load_scenario(_gyro_beside_poses(tmp_path)))
+    lengths = d.data.stops - d.data.starts
+    assert np.unique(lengths).size > 1, np.unique(lengths)
+    fns, x, x_fixed = d.fns, np.asarray(d.start.x0, dtype=float), d.start.x_fixed
+    omega = np.array(d.scenario.objective.information.omega(fns.error_rows, fns.sensor.weights))
+    delta = d.scenario.objective.robust.delta
+    info = information(fns, d.data, x, x_fixed, omega, delta)
+    evaluator = ProblemEvaluator(fns, d.data, x_fixed=x_fixed, omega=omega, delta=delta)
+    e, _, weight = (v.copy() for v in evaluator.robust_terms(x))
+    J = np.empty((*e.shape, fns.n_free))
+    for i in range(fns.n_free):
+        h = np.zeros(fns.n_free)
+        h[i] = 1e-6 * max(1.0, abs(x[i]))
+        # Copies: the evaluator's outputs are views of buffers its next call writes.
+        up, down = (
+            evaluator.robust_terms(np.asarray(fns.boxplus(x, s * h)).ravel())[0].copy() for s in (1, -1)
+        )
+        J[:, :, i] = (up - down) / (2 * h[i])
+    H = np.einsum("rwi,r,w,rwj->ij", J, omega, weight, J)
+    g = np.einsum("rwi,r,w,rw->i", J, omega, weight, e)
+    assert info.n_windows == d.data.n_residuals
+    scale = np.sqrt(np.outer(np.diag(H), np.diag(H)))
+    assert np.max(np.abs(info.H - H) / scale) < 1e-4
+    assert np.max(np.abs(info.g - g) / np.sqrt(np.diag(H) * np.sum(weight * (omega[:, None] * e**2)))) < 1e-4
+
+
+def test_codegen_exports_a_problem_whose_windows_have_several_lengths(tmp_path: Path) -> None:
+    """example.c evaluates a window of the C residual's horizon among windows of several lengths (it
+    had stopped: "only windows of 2 intervals have a column layout")."""
+    proc = cli("codegen", str(_gyro_beside_poses(tmp_path)), "--out", str(tmp_path / "c"))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    window = re.search(r"window: records (\d+)-(\d+)", (tmp_path / "c" / "example.c").read_text())
+    assert window is not None and int(window[2]) - int(window[1]) == 2, window
+
+
+def test_the_preflight_judges_windows_of_several_lengths_from_its_rough_start(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where no fit converges (a drive whose first fit fails: the text log beside a gyro of seed 5),
+    the pre-flight judges the rough start's information; on windows of several lengths it stopped
+    with "only windows of 2 intervals have a column layout"."""
+    monkeypatch.setattr(stages, "_fitted", lambda *args, **kwargs: None)
+    monkeypatch.setattr(stages, "_as_the_run_aligns", lambda *args, **kwargs: None)
+    found = preflight(load_scenario(_gyro_beside_poses(tmp_path)))
+    assert found.verdict == ENOUGH, found.verdict
+    assert {p.status for p in found.parameters} == {DETERMINED}

@@ -31,6 +31,7 @@ from nlp_calib.problem import ProblemFunctions, ResidualData, over_columns
 from nlp_calib.results.checks import WEAK
 from nlp_calib.results.layout import CLOCK
 from nlp_calib.results.preflight import DETERMINED, NOT_DETERMINED, WEAKLY, Excitation, ParameterStatus
+from nlp_calib.solvers import ProblemEvaluator
 from nlp_calib.symbolic.kernels import kernel_function
 
 #: Windows times their horizon evaluated at most: a spread subsample of a longer log's windows is
@@ -106,6 +107,9 @@ def information(
         return Information(np.zeros((nf, nf)), 0, 0.0, np.zeros(nf), 0.0, 0.0)
     idx = spread(n, max(1, work // max(data.horizon, 1)))
     at = (np.asarray(x, dtype=float), np.asarray(x_fixed, dtype=float))
+    scale = n / max(idx.size, 1)
+    if np.any(data.stops[idx] - data.starts[idx] != data.horizon):
+        return _evaluated(fns, data, idx, at, (omega, delta))
     e, J = over_columns(fns.residual_jacobian, *at, data.columns_of(idx))
     J = J.reshape(fns.error_rows, idx.size, nf)
     ok = np.all(np.isfinite(J), axis=(0, 2)) & np.all(np.isfinite(e), axis=0)
@@ -113,10 +117,35 @@ def information(
     s = np.sum(w[:, None] * e**2, axis=0)
     rho, weight = _robust(fns.spec.kernel, s, delta)
     # Weighted as a run's normal equations weigh each window: by the robust kernel's ρ'(s).
-    scale = n / max(idx.size, 1)
     H = np.einsum("rwi,r,w,rwj->ij", J, w, weight, J, optimize=True) * scale
     g = np.einsum("rwi,r,w,rw->i", J, w, weight, e, optimize=True) * scale
     return of_terms(fns, data, omega, (H, g, float(np.sum(rho)) * scale), s, weight)
+
+
+def _evaluated(
+    fns: ProblemFunctions,
+    data: ResidualData,
+    idx: np.ndarray,
+    at: tuple[np.ndarray, np.ndarray],
+    weights: tuple[np.ndarray, float],
+) -> Information:
+    """:func:`information` of windows of several lengths (a reference's increments between its own
+    stamps: a lidar's scan matches, a motions file, a gyro's intervals beside a reference), which
+    have no column layout: the windows ``idx`` through the run's own evaluator (the prefix poses'
+    jets take a window of any length), its normal equations scaled to every window. A window whose
+    residual is not finite there is left out, as the columns' path leaves it out."""
+    (omega, delta), n = weights, data.n_residuals
+    part = data.select(idx)
+    evaluator = ProblemEvaluator(fns, part.spanned(), x_fixed=at[1], omega=omega, delta=delta)
+    e, s, weight = (v.copy() for v in evaluator.robust_terms(at[0]))
+    finite = np.all(np.isfinite(e), axis=0)
+    if not finite.all():
+        part = part.select(finite)
+        evaluator = ProblemEvaluator(fns, part.spanned(), x_fixed=at[1], omega=omega, delta=delta)
+        s, weight = s[finite], weight[finite]
+    whole = evaluator.normal_equations(at[0])
+    scale = n / max(part.n_residuals, 1)
+    return of_terms(fns, data, omega, (whole.H * scale, whole.g * scale, whole.cost * scale), s, weight)
 
 
 def of_terms(

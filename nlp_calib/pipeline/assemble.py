@@ -45,7 +45,8 @@ from nlp_calib.results.layout import KNOWN, MODEL, MOUNT, Layout
 from nlp_calib.results.mount import LogMount, SensorMount
 from nlp_calib.sensors import Sensor
 from nlp_calib.solvers import solver_label
-from nlp_calib.sources import BagSource
+from nlp_calib.sources import BagSource, BesideSource
+from nlp_calib.sources.text_gyro import TextPosesSource
 
 
 def scenario_info(sc: Scenario, layout: Layout) -> ScenarioInfo:
@@ -378,7 +379,7 @@ def assemble_run(
     )
     # Joints in radians: the simulator's truth is in the counts form's names and units; a log's
     # truth is of its own mount.
-    convert = _own_truth(getattr(prepared.model, "from_counts", dict), views)
+    convert = _own_truth(_per_count_left_out(getattr(prepared.model, "from_counts", dict), prepared), views)
     checks = dataclasses.replace(
         run.checks,
         more=run_checks(
@@ -389,6 +390,20 @@ def assemble_run(
     return judged(
         run, verdict(run, prepared.model, hint), prepared.scenario.objective.sensor.sensor.components
     )
+
+
+def _per_count_left_out(
+    convert: Callable[[Mapping[str, float]], dict[str, float]], prepared: PreparedLog
+) -> Callable[[Mapping[str, float]], dict[str, float]]:
+    """``convert`` of a text log's truth read in radians beside a gyro: what it states per count
+    (``k_left``, m per tick) is left out, the counts per turn the scenario's, not the simulator's."""
+    source = prepared.scenario.log.source
+    if not (isinstance(source, BesideSource) and isinstance(source.reference, TextPosesSource)):
+        return convert
+    model = prepared.model
+    counts_units = getattr(getattr(model, "model", model), "units", {})
+    per_count = {n for n, r in getattr(model, "renamed", {}).items() if counts_units.get(n) != r.unit}
+    return lambda truth: convert({n: v for n, v in truth.items() if n not in per_count})
 
 
 def _own_truth(

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.codegen.export import Example, build_for_export, generate
-from nlp_calib.core.errors import NlpCalibWarning
+from nlp_calib.core.errors import NlpCalibWarning, ProblemError
 from nlp_calib.pipeline.build import lag_count
 from nlp_calib.pipeline.calibration import Calibration
 from nlp_calib.pipeline.keys import scenario_key
@@ -35,9 +35,14 @@ def write_c_export(sc: Scenario, out_dir: Path) -> tuple[list[Path], Example]:
     last = problems[-1]
     H = last.spec.horizon
     windows = build_residual_data(last, log, sc.objective.residual)
-    # The example evaluates the window with the most motion: a standing robot's Jacobian is 0.
-    busiest = int(np.argmax(np.abs(windows.columns[: last.n_inputs * H]).sum(axis=0)))
-    first = int(windows.starts[busiest])
+    # The example evaluates the window with the most motion: a standing robot's Jacobian is 0. Of
+    # a reference's own increments (windows of several lengths) those of the C residual's H alone.
+    fits = np.flatnonzero(windows.stops - windows.starts == H)
+    if not fits.size:
+        raise ProblemError(f"no window of {H} intervals to evaluate example.c on")
+    columns = windows.columns_of(fits)
+    busiest = int(np.argmax(np.abs(columns[: last.n_inputs * H]).sum(axis=0)))
+    first = int(windows.starts[fits[busiest]])
     lines = log.line_numbers[[first, first + H]]
     window = (
         f"records {first}-{first + H} ({log.where(lines[0], lines[1])}) of {sc.log.source.numbered.name}, "
@@ -57,5 +62,5 @@ def write_c_export(sc: Scenario, out_dir: Path) -> tuple[list[Path], Example]:
         values, params_from = dict(calib.initial), "the initial guess"
     params = np.array([values[n] for n in last.names])
     origin = f"scenario {sc.name} (model {sc.model}, horizon {H}, {sc.objective.residual.integration})"
-    example = Example(params, params_from, windows.columns[:, busiest], window)
+    example = Example(params, params_from, columns[:, busiest], window)
     return generate(problems, out_dir, example, origin), example

@@ -40,6 +40,7 @@ from nlp_calib.simulation.imu import (
     ImuSimulationOptions,
     gyro_readings,
     imu_messages,
+    imu_rotation,
     imu_times,
 )
 from nlp_calib.simulation.lidar import (
@@ -51,6 +52,7 @@ from nlp_calib.simulation.lidar import (
     simulate_lidar,
 )
 from nlp_calib.simulation.rosbag import pose_stamped, write_bag
+from nlp_calib.simulation.simulate import SimulatedLog
 
 #: A motion capture's pose noise (m, rad per pose and axis) and its topic.
 TRACKER_NOISE = (0.002, 0.002)
@@ -192,3 +194,29 @@ def write_beside_simulation(
     write_bag(path, reference + imu_messages(sim.imu))
     atomic_write_text(truth, json.dumps(sim.truth_dict(), indent=2) + "\n")
     return path, truth
+
+
+def write_text_log_gyro(
+    sim: SimulatedLog,
+    path: str | Path,
+    gyro: Mapping[str, float],
+    rate_noise: float,
+    seed: int,
+    late_s: float = 0.0,
+) -> Path:
+    """A gyro's CSV (``t,wx,wy,wz``) beside a simulated text log, sampled at 200 Hz on the log's
+    clock: the base's turn rate over each record interval (its heading change over its duration, as
+    the drive's arcs turn) through the IMU's tilt (``gyro``: ``imu_roll``, ``imu_pitch`` and the
+    biases ``gyro_bias_x``, ``_y``, ``_z``), white noise of ``rate_noise`` (rad/s a sample, its own
+    generator from ``seed``), each sample stamped ``late_s`` late (the truth's ``gyro_lag``)."""
+    time_s = (sim.time_ns - sim.time_ns[0]).astype(float) * 1e-9
+    t = np.arange(0.0, time_s[-1], 0.005)
+    rate = np.diff(np.unwrap(sim.T_world_base_true[:, 2])) / np.diff(time_s)
+    turn = rate[np.clip(np.searchsorted(time_s, t, side="right") - 1, 0, rate.size - 1)]
+    bias = np.array([gyro[f"gyro_bias_{a}"] for a in "xyz"])
+    w = turn[:, None] * imu_rotation(gyro)[2][None, :] + bias
+    w += np.random.default_rng(seed).normal(0.0, rate_noise, w.shape)
+    stamps = float(sim.time_ns[0]) * 1e-9 + t + late_s
+    rows = (f"{s:.9f},{a:.17g},{b:.17g},{c:.17g}\n" for s, (a, b, c) in zip(stamps, w))
+    atomic_write_text(Path(path), "t,wx,wy,wz\n" + "".join(rows))
+    return Path(path)

@@ -36,6 +36,7 @@ from nlp_calib.sources.imu import GyroCsvSource, ImuSource
 from nlp_calib.sources.joints import JointLogSource
 from nlp_calib.sources.lidar import LidarSource
 from nlp_calib.sources.motions import MotionsSource
+from nlp_calib.sources.text_gyro import TextGyroSource, TextPosesSource
 
 #: Each pair: the reference's source, the gyro's, the key only the reference's block has and the
 #: gyro's.
@@ -44,6 +45,7 @@ PAIRS: tuple[tuple[type[DatasetSource], type[DatasetSource], str, str], ...] = (
     (BagSource, ImuSource, "tracker", "imu"),
     (MotionsSource, GyroCsvSource, "motions", "gyro"),
     (JointLogSource, GyroCsvSource, "poses", "gyro"),
+    (TextPosesSource, TextGyroSource, "text", "gyro"),
 )
 
 
