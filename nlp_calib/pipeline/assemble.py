@@ -396,7 +396,7 @@ def _per_count_left_out(
     convert: Callable[[Mapping[str, float]], dict[str, float]], prepared: PreparedLog
 ) -> Callable[[Mapping[str, float]], dict[str, float]]:
     """``convert`` of a text log's truth read in radians beside a gyro: what it states per count
-    (``k_left``, m per tick) is left out, the counts per turn the scenario's, not the simulator's."""
+    (a wheel's metres per tick) is left out, the counts per turn the scenario's, not the simulator's."""
     source = prepared.scenario.log.source
     if not (isinstance(source, BesideSource) and isinstance(source.reference, TextPosesSource)):
         return convert
