@@ -230,8 +230,8 @@ class InRadians:
         return self.model.increment(k_counts, u_counts, integration)
 
     def input_rates(self, log: Log) -> np.ndarray | None:
-        """Each wheel's angular rate (rad/s) and each steering angle (rad) at the records, exact for
-        the joints' linear interpolation (None without a joint stream)."""
+        """Each wheel's angular rate (rad/s) and each steering angle (rad) at the records, the joint
+        stream's (:meth:`~nlp_calib.logs.log.JointStream.slopes`; None without a joint stream)."""
         rates = log.joint_rates()
         if rates is None and not any(r.rate for r in self.form.inputs.values()):
             return None

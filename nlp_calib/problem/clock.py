@@ -11,11 +11,14 @@ with ``M`` the model's motion over the window's intervals and ``E_j`` its motion
 before record ``j``: ``ξ_j`` is the base's velocity there, the model's increment per second of a
 stretch whose inputs move at their rates at record ``j`` (an increment: its two intervals' travel
 over their duration; a level, an angle the model reads as it is: its value). A negative ``δ``
-moves along the stretch after record ``j``. This is linear interpolation of the encoders at the
-shifted time, written symbolically, to first order (products of the two ends' small motions
-dropped): every consumer of the problem's Functions (both solvers, the uncertainty, the
-observability, the refits and the C export) sees the offset's exact Jacobian at ``δ = 0``. The
-pipeline re-samples the data at each new estimate, so ``δ`` ends near zero.
+moves along the stretch after record ``j``. This is the encoders read at the shifted time,
+written symbolically, to first order (products of the two ends' small motions dropped): every
+consumer of the problem's Functions (both solvers, the uncertainty, the observability, the refits
+and the C export) sees the offset's Jacobian at ``δ = 0``. The rates at a record are the samples'
+either side of it (:func:`record_rates`, :meth:`~nlp_calib.logs.log.JointStream.slopes`), not the
+interval's after it: a reading's own noise has then no weight in its rate, which a window that ends
+on it would otherwise meet in the offset's derivative (a biased offset). The pipeline re-samples the
+data at each new estimate, so ``δ`` ends near zero.
 """
 
 from __future__ import annotations
