@@ -15,6 +15,7 @@ from conftest import SCENARIOS, write_sim
 from nlp_calib import Calibration, load_scenario, scenario_from_mapping
 from nlp_calib.core import poses3d
 from nlp_calib.logs import resample_encoders
+from nlp_calib.logs.log import JointStream
 from nlp_calib.models import get_model, load_log
 from nlp_calib.pipeline.options import AlignmentOptions
 from nlp_calib.problem import ProblemSpec, build, build_residual_data
@@ -108,6 +109,28 @@ def test_the_lags_derivative_is_the_resamplings_on_joints_in_radians() -> None:
     numeric = (cost_resampled(x[lag] + h) - cost_resampled(x[lag] - h)) / (2 * h)
     assert abs(grad[lag]) > 100.0
     assert grad[lag] == pytest.approx(numeric, rel=1e-3)
+
+
+def test_a_joints_rate_at_a_sample_gives_its_own_reading_no_weight() -> None:
+    """The clock's rate at a joint sample is the samples' either side over their span (as
+    ``record_rates`` gives a log without a stream), interpolated between samples: a reading's own
+    noise (a count's quantisation) then has no weight in the rate at it, which a window ending there
+    would meet in the offset's derivative (a text log's records are the joints' own samples)."""
+    rng = np.random.default_rng(5)
+    t = np.cumsum(rng.uniform(0.03, 0.05, 12))
+    q = np.column_stack([np.sin(t), 0.3 * t**2])
+    stream = JointStream(t, q, (0.0, 0.0))
+    k = 5
+    central = (q[k + 1] - q[k - 1]) / (t[k + 1] - t[k - 1])
+    np.testing.assert_allclose(stream.slopes(t[[k]])[0], central, rtol=1e-12)
+    noisy = q.copy()
+    noisy[k] += 0.01
+    np.testing.assert_allclose(JointStream(t, noisy, (0.0, 0.0)).slopes(t[[k]])[0], central, rtol=1e-12)
+    # Between two samples: their rates interpolated, the ends' from their one interval.
+    mid = 0.25 * t[k] + 0.75 * t[k + 1]
+    after = (q[k + 2] - q[k]) / (t[k + 2] - t[k])
+    np.testing.assert_allclose(stream.slopes(np.array([mid]))[0], 0.25 * central + 0.75 * after, rtol=1e-12)
+    np.testing.assert_allclose(stream.slopes(t[[0]])[0], (q[1] - q[0]) / (t[1] - t[0]), rtol=1e-12)
 
 
 def test_a_simulated_lag_is_fitted_with_a_sigma_that_covers_it(tmp_path: Path) -> None:
