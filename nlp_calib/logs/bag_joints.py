@@ -141,26 +141,29 @@ def resolution(positions: np.ndarray) -> float:
     return q if np.mean(np.abs(ratio - np.round(ratio)) < 0.01) >= QUANTISED_SHARE else 0.0
 
 
-def fresh_positions(time_s: np.ndarray, positions: np.ndarray) -> np.ndarray:
+def fresh_positions(time_s: np.ndarray, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each joint's positions at its messages, the readings a slow driver held filled in between
-    its updates: a driver that updates at 4 Hz under 20 Hz messages repeats its last reading, which
-    is up to one update period (0.25 s) old, so the stream read between its messages is a staircase
-    whose steps land late (a pivot's start or stop then disagrees with the reference as slip
-    would). A reading is fresh at the message where it changed; the held messages in between are
-    interpolated from the fresh ones, except a hold :data:`STANDSTILL_UPDATES` times the joint's
-    median time between updates, where the joint stood still (its last message is kept). A stream
-    with no repeated readings is returned as it is."""
+    its updates, and which messages are readings of their own (fresh). A driver that updates at
+    4 Hz under 20 Hz messages repeats its last reading, up to one update period (0.25 s) old, so
+    the stream read between its messages is a staircase whose steps land late (a pivot's start or
+    stop then disagrees with the reference as slip would). A reading is fresh at the message where
+    it changed; the held messages in between are interpolated from the fresh ones, except a hold
+    :data:`STANDSTILL_UPDATES` times the joint's median time between updates, where the joint stood
+    still (its last message is kept). A stream with no repeated readings is returned as it is."""
     out = np.array(positions, dtype=float)
+    fresh = np.ones(out.shape, dtype=bool)
     for j in range(out.shape[1]):
         q = out[:, j]
-        fresh = np.flatnonzero(np.r_[True, q[1:] != q[:-1]])
-        if fresh.size < 3 or fresh.size == q.size:
+        changed = np.flatnonzero(np.r_[True, q[1:] != q[:-1]])
+        fresh[:, j] = False
+        fresh[changed, j] = True
+        if changed.size < 3 or changed.size == q.size:
             continue
-        gaps = np.diff(time_s[fresh])
-        still = fresh[1:][gaps > STANDSTILL_UPDATES * np.median(gaps)] - 1
-        keep = np.unique(np.r_[fresh, still, q.size - 1])
+        gaps = np.diff(time_s[changed])
+        still = changed[1:][gaps > STANDSTILL_UPDATES * np.median(gaps)] - 1
+        keep = np.unique(np.r_[changed, still, q.size - 1])
         out[:, j] = np.interp(time_s, time_s[keep], q[keep])
-    return out
+    return out, fresh
 
 
 def joint_stream(
@@ -177,8 +180,8 @@ def joint_stream(
     (:func:`fresh_positions`)."""
     steps = [0.0 if n in integrated else resolution(positions[:, j]) for j, n in enumerate(names)]
     by_velocity = tuple(e for e, n in zip(header.encoder_names, names) if n in integrated)
-    filled = frozen(fresh_positions(time_s, positions))
-    return JointStream(time_s, filled, tuple(steps), by_velocity, breaks)
+    filled, fresh = fresh_positions(time_s, positions)
+    return JointStream(time_s, frozen(filled), tuple(steps), by_velocity, breaks, frozen(fresh))
 
 
 def joint_positions(

@@ -92,6 +92,28 @@ class JointStream:
     resolution: tuple[float, ...]
     integrated: tuple[str, ...] = ()
     breaks: np.ndarray | None = None
+    #: ``(n, n_joints)``: which messages are readings of their own, the others a slow driver's
+    #: held reading filled in between its updates (None: every message is one).
+    fresh: np.ndarray | None = None
+
+    def updates_s(self) -> np.ndarray:
+        """Each joint's median time between its own readings (s): its driver's update period."""
+        ts = np.asarray(self.time_s, dtype=float)
+        if self.fresh is None or ts.size < 2:
+            return np.full(self.positions.shape[1], float(np.median(np.diff(ts))) if ts.size > 1 else 0.0)
+        return np.array(
+            [np.median(np.diff(ts[f])) if f.sum() > 1 else 0.0 for f in np.asarray(self.fresh).T]
+        )
+
+    def reading_spread(self, t: np.ndarray) -> np.ndarray:
+        """Each joint's position read at times ``t`` is known to within this (rad) from its driver's
+        updates alone: between two, the stream runs straight, and a rate that changed by ``Δω``
+        between them bends the true path off that line by up to ``Δω·P/4`` (``P`` the update
+        period: 0.25 s at 4 Hz, where a pivot's start is 0.15 rad of the wheel off)."""
+        period = self.updates_s()
+        ahead = np.stack([self.slopes(t + p)[:, j] for j, p in enumerate(period)], axis=1)
+        behind = np.stack([self.slopes(t - p)[:, j] for j, p in enumerate(period)], axis=1)
+        return np.abs(ahead - behind) * period / 4.0
 
     def broken(self, t: np.ndarray) -> np.ndarray | None:
         """Per interval between the times ``t`` (the joints read there), whether the joints' motion

@@ -577,7 +577,8 @@ def calibrated_drift(
     sel = sel.select(0, n)
     inputs = windows.binder.fns.model.inputs(sel, steering_sample)
     reference = over_columns(fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
-    bad_intervals, bad_records = windows.masks()
+    # The ground's faults (a slipped pivot) are the odometry's own error: its drift holds them.
+    bad_intervals, bad_records = windows.drift_masks()
     parts = segments(n, bad_intervals[: n - 1])
     # The fit's own windows are segments too: a log of short fault-free parts (a scan matcher's
     # increments between bad matches) still shows its drift over them.
