@@ -45,7 +45,7 @@ from nlp_calib.analysis.streams import off_neighbours, printed_step, scatter, st
 from nlp_calib.core import poses, poses3d
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
-from nlp_calib.logs.log import frozen
+from nlp_calib.logs.log import JointStream, frozen
 from nlp_calib.logs.reference import Motions, PoseMotions, Poses
 from nlp_calib.logs.relative import RelativeMotions
 from nlp_calib.logs.resample import Resampler
@@ -223,7 +223,8 @@ def increment_faults(
     # A pivot: the base turns more than it travels (a gyro's steps hold no travel: never one).
     pivot = (travel[inc.last] - travel[inc.first] < PIVOT_RADIUS_M * turned) & (unit[0] == "m")
     # Beyond the scatter by more than the wheels' own readings can move it (a slow driver's).
-    beyond = np.maximum(np.abs(error - centre) - at.reach(lag_s, error), 0.0)
+    reach = at.reach(lag_s, error)
+    beyond = np.maximum(np.abs(error - centre) - reach, 0.0)
     score = np.max(beyond / spread, axis=1)
     missed = np.max(np.abs(arc) / spread, axis=1)
     found = []
@@ -309,7 +310,9 @@ class _IncrementsAt:
     def reach(self, lag_s: float, error: np.ndarray) -> np.ndarray:
         """How far each increment's disagreement ``error`` (at ``lag_s``) moves with the wheels read
         anywhere within their readings' spread at the records (:meth:`JointStream.reading_spread`:
-        a slow driver's updates leave a pivot's start between two of them), each side either way;
+        a slow driver's updates leave a pivot's start between two of them), each joint either way,
+        the records of even and of odd index apart (one end of a chained increment at a time), the
+        path bent as a straight run between two updates misses it (a tent one update period wide);
         zero without a joint stream finer than the records."""
         inc = self.log.motions
         assert inc is not None
@@ -319,11 +322,15 @@ class _IncrementsAt:
         reach = np.zeros_like(error)
         if at is None or stream is None or q is None or z.shape[1] != 3:
             return reach
-        spread = stream.reading_spread(fine.read_times()[at])
-        for signs in itertools.product((-1.0, 1.0), repeat=q.shape[1]):
-            moved = np.array(q)
-            moved[at] += spread * np.array(signs)
-            steps = self._steps(replace(fine, joint_positions=frozen(moved)))
+        read = fine.read_times()
+        # The records and the joints' own readings between them: where a straight run between two
+        # updates starts or ends.
+        own = np.flatnonzero(np.isin(read, np.asarray(stream.time_s)[_fresh_any(stream)]))
+        centres = np.union1d(at, own)
+        spread, period = stream.reading_spread(read[centres]), stream.updates_s()
+        for parity, signs in itertools.product((0, 1), itertools.product((-1.0, 1.0), repeat=q.shape[1])):
+            bent = _tents(read, read[centres[parity::2]], spread[parity::2], period)
+            steps = self._steps(replace(fine, joint_positions=frozen(q + bent * np.array(signs))))
             prefix = poses.accumulate(np.zeros(3), steps[:, :3])
             other = _disagreement(inc, z, poses.between(prefix[at[:-1]], prefix[at[1:]]))[0]
             reach = np.maximum(reach, np.abs(other - error))
@@ -333,6 +340,24 @@ class _IncrementsAt:
         """The model's motion over each interval of ``log`` at the params, one row each."""
         inputs = self.fns.model.inputs(log, self.steering_sample)
         return np.asarray(over_columns(self.fns.predict, self.params, inputs)[0].T)
+
+
+def _fresh_any(stream: JointStream) -> np.ndarray:
+    """Which of the stream's messages hold a reading of their own for some joint."""
+    return np.ones(stream.time_s.size, dtype=bool) if stream.fresh is None else np.any(stream.fresh, axis=1)
+
+
+def _tents(t: np.ndarray, centres: np.ndarray, height: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """At times ``t``, per joint, tents of ``height`` ``(c, joints)`` at ``centres`` (increasing,
+    at least two ``width`` apart, so none overlap), each ``width`` (per joint) either side."""
+    out = np.zeros((t.size, height.shape[1]))
+    if centres.size == 0:
+        return out
+    k = np.clip(np.searchsorted(centres, t), 1, max(centres.size - 1, 1))
+    for side in (k - 1, np.minimum(k, centres.size - 1)):
+        near = np.abs(t - centres[side])[:, None]
+        out = np.maximum(out, np.clip(1.0 - near / np.maximum(width, 1e-9), 0.0, None) * height[side])
+    return out
 
 
 def _finer(log: Log) -> tuple[Log, np.ndarray | None]:
