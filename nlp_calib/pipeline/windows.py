@@ -42,7 +42,7 @@ class LogWindows:
     counted: np.ndarray
     breaks: np.ndarray | None = None
     #: Per interval of the whole log, where only the ground's faults (a slipped pivot) spoil it:
-    #: out of the fit, in the drift the noise model states (the robot's own odometry meets them).
+    #: out of the fit and the drift, stated apart (the robot's own odometry meets them).
     ground: np.ndarray | None = None
 
     @property
@@ -63,14 +63,6 @@ class LogWindows:
         """The fault masks over the used intervals and records."""
         a, b = self.used
         return self.bad_intervals[a : b - 1], self.bad_records[a:b]
-
-    def drift_masks(self) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`masks` less the intervals only the ground's faults spoil (the odometry's own)."""
-        bad, records = self.masks()
-        if self.ground is None:
-            return bad, records
-        a, b = self.used
-        return bad & ~self.ground[a : b - 1], records
 
     def used_breaks(self) -> np.ndarray:
         """Where the used records do not connect, per used interval."""
