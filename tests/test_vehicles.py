@@ -162,7 +162,9 @@ def test_a_slip_free_skid_steer_at_4_hz_is_never_said_to_slip(tmp_path: Path, se
     model's one arc per 2 s interval cannot follow (a pivot's start) are said as such, and their
     windows and drift left out."""
     run, _, _, _ = _skid_run(tmp_path, seed, 0.0)
-    faults = run.checks.findings.report.faults
+    report = run.checks.findings.report
+    assert not report.unchecked, report.unchecked
+    faults = report.faults
     assert not [f.evidence for f in faults if f.kind in ("pivot_slip", "bad_match")]
     arcs = [f for f in faults if f.kind == "coarse_arc"]
     assert arcs and all("one arc per interval" in f.evidence for f in arcs)

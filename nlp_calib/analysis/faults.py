@@ -276,7 +276,7 @@ class _IncrementsAt:
     """The reference's increments against the wheels at ``params``, the encoders re-sampled at a
     lag: the disagreement, its units, the base's travel and turn (:func:`_disagreement`), the
     model's own miss over each increment (its one arc per interval against the wheels composed over
-    their own samples, :func:`_finer`; zero where the joints stream no finer than the records) and
+    their own samples, :meth:`~nlp_calib.logs.log.Log.at_joint_samples`; zero where the joints stream no finer than the records) and
     the records whose re-sampled readings lie inside the log. One ``resampler`` of the log serves
     every lag the screen's search tries (what does not depend on the lag computed once)."""
 
@@ -294,7 +294,7 @@ class _IncrementsAt:
         shifted, valid = self.resampler.at(lag_s)
         _, z = self.fns.sensor.screened(inc.z)
         coarse = self._steps(shifted)
-        fine, at = _finer(shifted)
+        fine, at = shifted.at_joint_samples()
         if at is None or z.shape[1] != 3:
             error, unit, travel, turned = _disagreement(inc, z, coarse[:, : z.shape[1]])
             return error, unit, travel, turned, np.zeros_like(error), valid
@@ -316,7 +316,7 @@ class _IncrementsAt:
         zero without a joint stream finer than the records."""
         inc = self.log.motions
         assert inc is not None
-        fine, at = _finer(self.resampler.at(lag_s)[0])
+        fine, at = self.resampler.at(lag_s)[0].at_joint_samples()
         stream, q = fine.joint_stream, fine.joint_positions
         _, z = self.fns.sensor.screened(inc.z)
         reach = np.zeros_like(error)
@@ -358,35 +358,6 @@ def _tents(t: np.ndarray, centres: np.ndarray, height: np.ndarray, width: np.nda
         near = np.abs(t - centres[side])[:, None]
         out = np.maximum(out, np.clip(1.0 - near / np.maximum(width, 1e-9), 0.0, None) * height[side])
     return out
-
-
-def _finer(log: Log) -> tuple[Log, np.ndarray | None]:
-    """``log`` with a record at each of its joints' own samples between its records too, and where
-    its records fall among those (None: no joint stream finer than the records): a reference's
-    increment over many of the joints' samples is compared with the wheels integrated over those,
-    not with the model's one arc over it, which a drive that changes inside it (a pivot's start)
-    does not follow."""
-    stream = log.joint_stream
-    if stream is None or log.reference.beside is not None:
-        return log, None
-    lag = log.encoder_lag_s
-    inner = stream.time_s + lag
-    inner = inner[(inner > log.time_s[0]) & (inner < log.time_s[-1])]
-    t = np.union1d(log.time_s, inner)
-    if t.size == log.n_records:
-        return log, None
-    n = t.size
-    fine = replace(
-        log,
-        time_s=frozen(t),
-        ticks=frozen(np.zeros((n, 0), dtype=np.int64)),
-        model_pose=frozen(np.zeros((n, 3))),
-        T_world_sensor=frozen(np.zeros((n, 3))),
-        line_numbers=frozen(np.zeros(n, dtype=np.int64)),
-        joint_positions=stream.at(t - lag),
-        reference=replace(log.reference, motions=None),
-    )
-    return fine, np.searchsorted(t, log.time_s)
 
 
 def _screen_lag(at: _IncrementsAt, judged: np.ndarray, lag: float | tuple[float, float]) -> float:

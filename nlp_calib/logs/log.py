@@ -332,6 +332,33 @@ class Log:
         beside = self.clock.beside_lag_s if beside_lag_s is None else beside_lag_s
         return np.asarray(read - beside * mine)
 
+    def at_joint_samples(self) -> tuple[Log, np.ndarray | None]:
+        """The log with a record at each of its joints' own samples between its records too (no
+        reference there), and where its records fall among those (None: no joint stream finer than
+        the records): the wheels integrated over their own samples, as a controller integrates
+        them, not by the model's one arc per interval, which a drive that changes inside it (a
+        pivot's start inside a scan matcher's 2 s) does not follow."""
+        stream = self.joint_stream
+        if stream is None or self.reference.beside is not None:
+            return self, None
+        lag = self.encoder_lag_s
+        inner = stream.time_s + lag
+        t = np.union1d(self.time_s, inner[(inner > self.time_s[0]) & (inner < self.time_s[-1])])
+        if t.size == self.n_records:
+            return self, None
+        n = t.size
+        fine = replace(
+            self,
+            time_s=frozen(t),
+            ticks=frozen(np.zeros((n, 0), dtype=np.int64)),
+            model_pose=frozen(np.zeros((n, 3))),
+            T_world_sensor=frozen(np.zeros((n, 3))),
+            line_numbers=frozen(np.zeros(n, dtype=np.int64)),
+            joint_positions=stream.at(t - lag),
+            reference=replace(self.reference, motions=None),
+        )
+        return fine, np.searchsorted(t, self.time_s)
+
     def joint_breaks(self) -> np.ndarray | None:
         """Per interval, whether the joints' motion over it is unknown where they are read (the
         records' times less the encoders' lag; :meth:`JointStream.broken`); None: nowhere."""
