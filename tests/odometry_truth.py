@@ -33,7 +33,8 @@ def sigma_over_truth(
     poses' times (s, since ``epoch`` ns), the poses, the epoch. ``every_metre``: the pose's diagonal
     also against every metre driven, the faults' included (``("pose_all", 0)``): the diagonal is
     averaged over every metre, and the true base's errors there are the odometry's own (a bad
-    match is the reference's fault; a slipped pivot's error is one a filter meets)."""
+    match is the reference's fault; a slipped pivot's error is one a filter meets), the odometry
+    integrated at the joints' own samples as a controller integrates it."""
     part, fit = calib.parts[0], calib.fitting
     solver = run.handoff_solver() or next(iter(run.reports))
     params = fit.fns.view(run.reports[solver].result.params, 0)
@@ -52,8 +53,16 @@ def sigma_over_truth(
     per = np.array([rates.per_metre, rates.per_radian])
     out = _handed_off(run.reports[solver].controller, track, true, bad, np.diff(t))
     if every_metre and out:
+        # The odometry a controller publishes integrates the wheels at their own samples, not by
+        # the model's one arc per (2 s) interval: over every metre, the slipped pivots' included.
+        sel = part.windows.selected
+        fine, at = sel.at_joint_samples()
+        published = track
+        if at is not None:
+            u = fit.fns.model.inputs(fine, part.prepared.scenario.objective.residual.steering_sample)
+            published = propagate(fit.fns, params, u, d.reference[0], d.noise)[0][at]
         spared = np.zeros_like(bad)
-        out[("pose_all", 0)] = _handed_off(run.reports[solver].controller, track, true, spared, np.diff(t))[
+        out[("pose_all", 0)] = _handed_off(run.reports[solver].controller, published, true, spared, np.diff(t))[
             ("pose", 0)
         ]
     for L in (m * own for m in multiples):
