@@ -62,9 +62,9 @@ def sigma_over_truth(
             u = fit.fns.model.inputs(fine, part.prepared.scenario.objective.residual.steering_sample)
             published = propagate(fit.fns, params, u, d.reference[0], d.noise)[0][at]
         spared = np.zeros_like(bad)
-        out[("pose_all", 0)] = _handed_off(run.reports[solver].controller, published, true, spared, np.diff(t))[
-            ("pose", 0)
-        ]
+        out[("pose_all", 0)] = _handed_off(
+            run.reports[solver].controller, published, true, spared, np.diff(t)
+        )[("pose", 0)]
     for L in (m * own for m in multiples):
         i = np.arange(0, track.shape[0] - L, max(L // 2, 1))
         i = i[[not bad[a : a + L].any() for a in i]]

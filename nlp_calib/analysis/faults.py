@@ -233,7 +233,11 @@ def increment_faults(
             kind, e, by = PIVOT_SLIP if pivot[k] else "bad_match", error[k], score[k]
         else:
             kind, e, by = COARSE_ARC, arc[k], missed[k]
-        size = (float(np.hypot(e[0], e[1])), float(e[-1] if len(e) == 3 else np.linalg.norm(e[3:])), float(by))
+        size = (
+            float(np.hypot(e[0], e[1])),
+            float(e[-1] if len(e) == 3 else np.linalg.norm(e[3:])),
+            float(by),
+        )
         found.append(_match_fault(log, int(k), size, _words(kind, e, unit, by, turned[k]), kind))
     return found
 
@@ -275,10 +279,11 @@ SCREEN_LAG_STEP_S = 0.01
 class _IncrementsAt:
     """The reference's increments against the wheels at ``params``, the encoders re-sampled at a
     lag: the disagreement, its units, the base's travel and turn (:func:`_disagreement`), the
-    model's own miss over each increment (its one arc per interval against the wheels composed over
-    their own samples, :meth:`~nlp_calib.logs.log.Log.at_joint_samples`; zero where the joints stream no finer than the records) and
-    the records whose re-sampled readings lie inside the log. One ``resampler`` of the log serves
-    every lag the screen's search tries (what does not depend on the lag computed once)."""
+    model's own miss over each increment (its one arc per interval against the wheels composed
+    over their own samples, :meth:`~nlp_calib.logs.log.Log.at_joint_samples`; zero where the joints
+    stream no finer than the records) and the records whose re-sampled readings lie inside the log.
+    One ``resampler`` of the log serves every lag the screen's search tries (what does not depend
+    on the lag computed once)."""
 
     fns: ProblemFunctions
     params: np.ndarray

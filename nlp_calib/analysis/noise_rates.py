@@ -19,12 +19,12 @@ windows show.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from nlp_calib.analysis.odometry import COVERED, Drift, moments, propagate, readings_covariance
 from nlp_calib.analysis.uncertainty import nnls_small
-from dataclasses import replace
-
 from nlp_calib.core import poses
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.problem import ProblemFunctions

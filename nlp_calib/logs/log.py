@@ -101,9 +101,7 @@ class JointStream:
         ts = np.asarray(self.time_s, dtype=float)
         if self.fresh is None or ts.size < 2:
             return np.full(self.positions.shape[1], float(np.median(np.diff(ts))) if ts.size > 1 else 0.0)
-        return np.array(
-            [np.median(np.diff(ts[f])) if f.sum() > 1 else 0.0 for f in np.asarray(self.fresh).T]
-        )
+        return np.array([np.median(np.diff(ts[f])) if f.sum() > 1 else 0.0 for f in np.asarray(self.fresh).T])
 
     def reading_spread(self, t: np.ndarray) -> np.ndarray:
         """Each joint's position read at times ``t`` is known to within this (rad) from its driver's

@@ -138,7 +138,12 @@ def _noise_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
             # The pivots the ground slipped on, left out of the rates: the heading's variance they
             # add per radian turned on the spot, for a filter that knows when the robot pivots.
             **(
-                {"slipped_pivots": {"heading_variance_per_radian": rates.slip_per_radian, "pivots": rates.slipped}}
+                {
+                    "slipped_pivots": {
+                        "heading_variance_per_radian": rates.slip_per_radian,
+                        "pivots": rates.slipped,
+                    }
+                }
                 if rates.slipped
                 else {}
             ),

@@ -104,6 +104,8 @@ def bind_windows(
     data = binder.windows(alignment.log, *fit)
     noise = problem.model.input_noise_std(alignment.log, sc.data.encoder_noise)
     counted = counted_inputs(problem.model, alignment.log)
-    ground = bad_intervals & ~(fault_masks(report.apart(GROUND_KINDS), log.n_records, alignment.lag_s, dt)[0] | breaks)
+    ground = bad_intervals & ~(
+        fault_masks(report.apart(GROUND_KINDS), log.n_records, alignment.lag_s, dt)[0] | breaks
+    )
     masks = (bad_intervals, bad_records, noise, counted, breaks, ground)
     return LogWindows(alignment.log, (start, stop), fit, data, binder, *masks)

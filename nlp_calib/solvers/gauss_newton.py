@@ -163,7 +163,9 @@ class _Iteration:
         if np.isfinite(ne_new.cost) and ne_new.cost < self.ne.cost:
             self.x, self.ne, self.last_step = x_new, ne_new, None
             self.history.append(
-                IterationRecord(iteration, ne_new.cost, ne_new.chi2, ne_new.inliers, n1 * r / (1 - r), self.lam)
+                IterationRecord(
+                    iteration, ne_new.cost, ne_new.chi2, ne_new.inliers, n1 * r / (1 - r), self.lam
+                )
             )
 
     def _try(self, iteration: int, step: np.ndarray, predicted: float) -> tuple[bool, str, bool] | None:
