@@ -191,6 +191,9 @@ def test_a_slow_drivers_held_readings_are_filled_in_between_its_updates() -> Non
     assert np.max(np.abs(held[moving, 0] - truth[moving])) > 0.35
     # Standing still from 3 s: flat from its last update on, not a ramp to the log's end.
     assert np.all(filled[t >= 3.0, 0] == 6.0)
+    # A reading of its own in most messages (a fine encoder, resting now and then): as published.
+    fine = np.round(np.sin(t) / 0.01)[:, None] * 0.01
+    assert np.array_equal(fresh_positions(t, fine)[0], fine)
 
 
 def test_a_skid_steer_whose_pivots_slipped_is_never_called_good(tmp_path: Path) -> None:

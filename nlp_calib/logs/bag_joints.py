@@ -34,6 +34,10 @@ from nlp_calib.logs.tum import format_tum
 #: A joint's positions are quantised when at least this share of its steps are whole multiples
 #: of its smallest step (to 1 %).
 QUANTISED_SHARE = 0.9
+#: A joint whose readings change every this many messages or more (the median) has a driver that
+#: updates slower than it publishes; fewer, and a repeated reading is the joint at rest (or within
+#: one step of its resolution), as published.
+SLOW_DRIVER_MESSAGES = 2.0
 #: A reading held this many times longer than the joint's usual time between updates is a joint
 #: that stood still (the last message of the hold is its position then), not a slow driver's.
 STANDSTILL_UPDATES = 2.0
@@ -149,7 +153,8 @@ def fresh_positions(time_s: np.ndarray, positions: np.ndarray) -> tuple[np.ndarr
     stop then disagrees with the reference as slip would). A reading is fresh at the message where
     it changed; the held messages in between are interpolated from the fresh ones, except a hold
     :data:`STANDSTILL_UPDATES` times the joint's median time between updates, where the joint stood
-    still (its last message is kept). A stream with no repeated readings is returned as it is."""
+    still (its last message is kept). A joint with a reading of its own in most messages
+    (:data:`SLOW_DRIVER_MESSAGES`) is returned as published."""
     out = np.array(positions, dtype=float)
     fresh = np.ones(out.shape, dtype=bool)
     for j in range(out.shape[1]):
@@ -160,6 +165,8 @@ def fresh_positions(time_s: np.ndarray, positions: np.ndarray) -> tuple[np.ndarr
         if changed.size < 3 or changed.size == q.size:
             continue
         gaps = np.diff(time_s[changed])
+        if np.median(gaps) < SLOW_DRIVER_MESSAGES * np.median(np.diff(time_s)):
+            continue  # a reading of its own in most messages: a repeat is the joint's own rest
         still = changed[1:][gaps > STANDSTILL_UPDATES * np.median(gaps)] - 1
         keep = np.unique(np.r_[changed, still, q.size - 1])
         out[:, j] = np.interp(time_s, time_s[keep], q[keep])
