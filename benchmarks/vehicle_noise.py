@@ -8,7 +8,9 @@ For each simulated highway car (given what a straight kilometre cannot determine
 noise model, over the σ whose 2σ holds 95 % of the true errors, per component (x, y, θ in the base
 frame at the span's start) and together: 1 where the σ is the drift the spans truly have. Rows:
 ``pose``, ros2_control.yaml's pose diagonal against every metre driven; ``twist``, its twist
-diagonal (vx, wz; vy is not stated) against every moving interval; ``rates``, calibration.yaml's
+diagonal (vx, wz; vy is not stated) against every moving interval; ``pose_all``, the pose
+diagonal against every metre driven, the metres through a fault included (``pose`` leaves them out,
+the diagonal averages over them: the same population as the diagonal's); ``rates``, calibration.yaml's
 rates per metre and per radian grown as a filter grows them (``nlp-calib odometry``'s covariance)
 over the fit's windows. A case with no hand-off (no converged solver) has no pose or twist row.
 Nothing here tunes anything: the seeds are whatever the arguments say.
@@ -102,11 +104,11 @@ def main() -> None:
                 sc, wanted, truth = build(Path(tmp), seed, args.pivot_slip)
                 calib = Calibration(sc)
                 run = calib.run(wanted=wanted) if wanted else calib.run()
-                found = sigma_over_truth(calib, run, truth, tuple(args.multiples))
+                found = sigma_over_truth(calib, run, truth, tuple(args.multiples), every_metre=True)
             for (way, length), r in found.items():
                 label = f"{way} {length}" if way == "rates" and len(args.multiples) > 1 else way
                 print(
-                    f"{kind} {seed:<4d} {label:6s} "
+                    f"{kind} {seed:<4d} {label:8s} "
                     + " ".join(f"{v:6.2f}" for v in r[:3])
                     + f"   {r[3]:6.2f}"
                 )

@@ -19,14 +19,22 @@ from nlp_calib.pipeline.analyse import calibrated_drift
 
 
 def sigma_over_truth(
-    calib: Any, run: Any, truth: tuple[np.ndarray, np.ndarray, int], multiples: tuple[int, ...] = (1,)
+    calib: Any,
+    run: Any,
+    truth: tuple[np.ndarray, np.ndarray, int],
+    multiples: tuple[int, ...] = (1,),
+    every_metre: bool = False,
 ) -> dict[tuple[str, int], np.ndarray]:
     """For each way (``input``, ``rates``) and each window of ``multiples`` of the fit's own length:
     the factor the σ would need to hold 95 % of the true errors within 2σ, ``q₉₅(|error|/σ)/2``,
     per component (x, y, θ in the base frame at the window's start) and over the three together
     (last): 1 where the σ is the drift the windows truly have (the root-mean-square ratio would be
     ruled by a few windows' heavy tail: a 4 Hz encoder's stale pivots). ``truth``: the true base
-    poses' times (s, since ``epoch`` ns), the poses, the epoch."""
+    poses' times (s, since ``epoch`` ns), the poses, the epoch. ``every_metre``: the pose's diagonal
+    also against every metre driven, the faults' included (``("pose_all", 0)``): the diagonal is
+    averaged over every metre, and the true base's errors there are the odometry's own (a bad
+    match is the reference's fault; a slipped pivot's error is one a filter meets), the odometry
+    integrated at the joints' own samples as a controller integrates it."""
     part, fit = calib.parts[0], calib.fitting
     solver = run.handoff_solver() or next(iter(run.reports))
     params = fit.fns.view(run.reports[solver].result.params, 0)
@@ -44,6 +52,19 @@ def sigma_over_truth(
     increments = poses.between(track[:-1], track[1:])
     per = np.array([rates.per_metre, rates.per_radian])
     out = _handed_off(run.reports[solver].controller, track, true, bad, np.diff(t))
+    if every_metre and out:
+        # The odometry a controller publishes integrates the wheels at their own samples, not by
+        # the model's one arc per (2 s) interval: over every metre, the slipped pivots' included.
+        sel = part.windows.selected
+        fine, at = sel.at_joint_samples()
+        published = track
+        if at is not None:
+            u = fit.fns.model.inputs(fine, part.prepared.scenario.objective.residual.steering_sample)
+            published = propagate(fit.fns, params, u, d.reference[0], d.noise)[0][at]
+        spared = np.zeros_like(bad)
+        out[("pose_all", 0)] = _handed_off(
+            run.reports[solver].controller, published, true, spared, np.diff(t)
+        )[("pose", 0)]
     for L in (m * own for m in multiples):
         i = np.arange(0, track.shape[0] - L, max(L // 2, 1))
         i = i[[not bad[a : a + L].any() for a in i]]

@@ -132,6 +132,9 @@ def test_a_skid_steer_spinning_past_pi_ends_right_with_covariances_its_windows_s
     # metre and twist diagonal over an interval) each component (along, across, heading) never
     # under, and over only where the rates say the segments bound it (the wheels' drift under the
     # matcher's 5 mm, a 4 Hz encoder showing no noise of its own).
+    # Over the metres no fault spoils, not every metre: the slipped pivots are stated apart (the
+    # rates' slip_per_radian), and over a coarse arc the track here is the model's one arc per
+    # 2 s interval, not the odometry a controller integrates at the joints' rate.
     found = sigma_over_truth(calib, run, (sim.joint_time_s, sim.base_poses, EPOCH_NS))
     assert {way for way, _ in found} == {"rates", "pose", "twist"}
     for way, ratios in found.items():
@@ -151,10 +154,55 @@ def _within_two_unless_bounded(ratios: np.ndarray, rates: Any) -> None:
         assert ratios[c] <= 2.0 or axis in rates.bounded, (axis, ratios, rates)
 
 
+@pytest.mark.parametrize("seed", [91, 92])
+def test_a_slip_free_skid_steer_at_4_hz_is_never_said_to_slip(tmp_path: Path, seed: int) -> None:
+    """No slip simulated, the encoders updating at 4 Hz under 20 Hz messages: no increment is
+    called slip or a bad match (a held reading is filled in between updates; an increment is judged
+    against the wheels over their own samples, beyond what their readings can move it). Those the
+    model's one arc per 2 s interval cannot follow (a pivot's start) are said as such, and their
+    windows and drift left out."""
+    run, _, _, _ = _skid_run(tmp_path, seed, 0.0)
+    report = run.checks.findings.report
+    assert not report.unchecked, report.unchecked
+    faults = report.faults
+    assert not [f.evidence for f in faults if f.kind in ("pivot_slip", "bad_match")]
+    arcs = [f for f in faults if f.kind == "coarse_arc"]
+    assert arcs and all("one arc per interval" in f.evidence for f in arcs)
+    assert run.odometry is not None and run.odometry.rates is not None
+    assert run.odometry.rates.slipped == 0
+
+
+def test_a_slow_drivers_held_readings_are_filled_in_between_its_updates() -> None:
+    """A 4 Hz driver under 20 Hz messages repeats its last reading: the stream is read between its
+    updates (up to 0.25 s late otherwise), and a hold of a joint that stood still is kept flat."""
+    from nlp_calib.logs.bag_joints import fresh_positions
+
+    t = np.arange(0.0, 6.0, 0.05)
+    updated = np.floor(t * 4.0) / 4.0
+    angle = np.where(updated < 3.0, 2.0 * updated, 6.0)  # drives 3 s at 2 rad/s, then stands still
+    held = angle[:, None]
+    filled, fresh = fresh_positions(t, held)
+    assert fresh[:, 0].sum() == 12 + 1  # the 12 updates while driving, and the first message
+    moving = t < 2.9
+    # Each update's first message carries the angle at its update (here on a message's stamp): the
+    # filled stream is the straight run through them, the drive itself; the staircase 0.4 rad off.
+    truth = 2.0 * t
+    assert np.max(np.abs(filled[moving, 0] - truth[moving])) < 1e-9
+    assert np.max(np.abs(held[moving, 0] - truth[moving])) > 0.35
+    # Standing still from 3 s: flat from its last update on, not a ramp to the log's end.
+    assert np.all(filled[t >= 3.0, 0] == 6.0)
+    # A reading of its own in most messages (a fine encoder, resting now and then): as published.
+    fine = np.round(np.sin(t) / 0.01)[:, None] * 0.01
+    assert np.array_equal(fresh_positions(t, fine)[0], fine)
+
+
 def test_a_skid_steer_whose_pivots_slipped_is_never_called_good(tmp_path: Path) -> None:
     """The slip too small to find biases what the pivots determine beyond its σ (the xfail above):
-    the verdict says so."""
+    the verdict says so; the slipped pivots' heading drift is stated apart from the rates."""
     run, _, _, _ = _skid_run(tmp_path, 2, 0.1)
+    rates = run.odometry.rates if run.odometry is not None else None
+    assert rates is not None and rates.slipped > 0 and rates.slip_per_radian > 0
+    assert "pivots the ground slipped on" in rates.words()
     assert run.verdict.level != GOOD
     said = [r for r in run.verdict.reasons if "pivots the ground slipped on were left out" in r]
     # The rule that keeps or leaves out a pivot, stated with it (the summary prints the verdict).
@@ -446,6 +494,9 @@ def test_a_highway_cars_odometry_noise_is_never_under_the_drift_its_windows_trul
     was 14x along on this seed)."""
     _, opts, run, calib = car_known
     sim = simulate_highway(opts)
+    # Over the metres no fault spoils, not every metre: the slipped pivots are stated apart (the
+    # rates' slip_per_radian), and over a coarse arc the track here is the model's one arc per
+    # 2 s interval, not the odometry a controller integrates at the joints' rate.
     found = sigma_over_truth(calib, run, (sim.joint_time_s, sim.base_poses, EPOCH_NS))
     assert {way for way, _ in found} == {"rates", "pose", "twist"}
     for way, ratios in found.items():

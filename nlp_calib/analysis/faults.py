@@ -31,6 +31,7 @@ horizon windows.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -44,7 +45,7 @@ from nlp_calib.analysis.streams import off_neighbours, printed_step, scatter, st
 from nlp_calib.core import poses, poses3d
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
-from nlp_calib.logs.log import frozen
+from nlp_calib.logs.log import JointStream, frozen
 from nlp_calib.logs.reference import Motions, PoseMotions, Poses
 from nlp_calib.logs.relative import RelativeMotions
 from nlp_calib.logs.resample import Resampler
@@ -52,6 +53,7 @@ from nlp_calib.problem import ProblemFunctions, over_columns
 from nlp_calib.problem.windows import tracker_poses
 from nlp_calib.results.faults import (
     ABSOLUTE_KINDS,
+    COARSE_ARC,
     MATCH_KINDS,
     PIVOT_RADIUS_M,
     PIVOT_SLIP,
@@ -212,31 +214,53 @@ def increment_faults(
     if judged.sum() < 10:
         return []
     at = _IncrementsAt(fns, p, log, steering_sample, Resampler(log, fns.model.encoder_kinds))
-    error, unit, travel, turned, valid = at(_screen_lag(at, judged, lag))
+    lag_s = _screen_lag(at, judged, lag)
+    error, unit, travel, turned, arc, valid = at(lag_s)
     judged &= (inc.first >= valid[0]) & (inc.last < valid[1])
     centre, spread = _robust(error[judged])
     if judged.sum() < 10 or not np.all(spread > 0):
         return []  # no scatter to judge by (a noise-free simulation)
     # A pivot: the base turns more than it travels (a gyro's steps hold no travel: never one).
     pivot = (travel[inc.last] - travel[inc.first] < PIVOT_RADIUS_M * turned) & (unit[0] == "m")
-    score = np.max(np.abs(error - centre) / spread, axis=1)
+    # Beyond the scatter by more than the wheels' own readings can move it (a slow driver's).
+    reach = at.reach(lag_s, error)
+    beyond = np.maximum(np.abs(error - centre) - reach, 0.0)
+    score = np.max(beyond / spread, axis=1)
+    missed = np.max(np.abs(arc) / spread, axis=1)
     found = []
-    for k in np.flatnonzero(judged & (score > MATCH_SCATTER)):
-        e = error[k]
-        by = ", ".join(f"{v:+.4f} {u}" for v, u in zip(e, unit))
-        why = f"disagrees with the wheels by ({by}), {score[k]:.0f}× the increments' robust scatter"
-        if pivot[k]:
-            why += (
-                f", over a pivot turn ({turned[k]:.2f} rad on the spot): slip on the ground the "
-                "calibration leaves out, as it does every pivot the wheels disagree with"
-            )
+    for k in np.flatnonzero(judged & ((score > MATCH_SCATTER) | (missed > MATCH_SCATTER))):
+        if score[k] > MATCH_SCATTER:
+            kind, e, by = PIVOT_SLIP if pivot[k] else "bad_match", error[k], score[k]
+        else:
+            kind, e, by = COARSE_ARC, arc[k], missed[k]
         size = (
             float(np.hypot(e[0], e[1])),
             float(e[-1] if len(e) == 3 else np.linalg.norm(e[3:])),
-            float(score[k]),
+            float(by),
         )
-        found.append(_match_fault(log, int(k), size, why, PIVOT_SLIP if pivot[k] else "bad_match"))
+        found.append(_match_fault(log, int(k), size, _words(kind, e, unit, by, turned[k]), kind))
     return found
+
+
+def _words(kind: str, e: np.ndarray, unit: tuple[str, ...], by: float, turned: float) -> str:
+    """Why increment faults of ``kind`` are one: its disagreement ``e`` (``by`` robust σ)."""
+    amounts = ", ".join(f"{v:+.4f} {u}" for v, u in zip(e, unit))
+    if kind == COARSE_ARC:
+        return (
+            f"agrees with the wheels over their own samples, but the model's one arc per interval misses "
+            f"their motion by ({amounts}), {by:.0f}× the increments' robust scatter: the drive changed "
+            "inside it (a pivot's start or stop), which the fit cannot follow at the records' spacing; "
+            "left out of the fit and of the noise model (odometry integrated at the joints' rate has no "
+            "such error)"
+        )
+    why = f"disagrees with the wheels by ({amounts}), {by:.0f}× the increments' robust scatter"
+    if kind == PIVOT_SLIP:
+        why += (
+            f", over a pivot turn ({turned:.2f} rad on the spot): slip on the ground the calibration "
+            "leaves out, as it does every pivot the wheels disagree with (the noise model keeps it: "
+            "the robot's odometry meets it)"
+        )
+    return why
 
 
 def _robust(error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -254,9 +278,12 @@ SCREEN_LAG_STEP_S = 0.01
 @dataclass(frozen=True)
 class _IncrementsAt:
     """The reference's increments against the wheels at ``params``, the encoders re-sampled at a
-    lag: the disagreement, its units, the base's travel and turn (:func:`_disagreement`) and the
-    records whose re-sampled readings lie inside the log. One ``resampler`` of the log serves every
-    lag the screen's search tries (what does not depend on the lag computed once)."""
+    lag: the disagreement, its units, the base's travel and turn (:func:`_disagreement`), the
+    model's own miss over each increment (its one arc per interval against the wheels composed
+    over their own samples, :meth:`~nlp_calib.logs.log.Log.at_joint_samples`; zero where the joints
+    stream no finer than the records) and the records whose re-sampled readings lie inside the log.
+    One ``resampler`` of the log serves every lag the screen's search tries (what does not depend
+    on the lag computed once)."""
 
     fns: ProblemFunctions
     params: np.ndarray
@@ -266,14 +293,76 @@ class _IncrementsAt:
 
     def __call__(
         self, lag_s: float
-    ) -> tuple[np.ndarray, tuple[str, ...], np.ndarray, np.ndarray, tuple[int, int]]:
+    ) -> tuple[np.ndarray, tuple[str, ...], np.ndarray, np.ndarray, np.ndarray, tuple[int, int]]:
         inc = self.log.motions
         assert inc is not None
-        model = self.fns.model
         shifted, valid = self.resampler.at(lag_s)
         _, z = self.fns.sensor.screened(inc.z)
-        steps = over_columns(self.fns.predict, self.params, model.inputs(shifted, self.steering_sample))[0]
-        return (*_disagreement(inc, z, steps.T[:, : z.shape[1]]), valid)
+        coarse = self._steps(shifted)
+        fine, at = shifted.at_joint_samples()
+        if at is None or z.shape[1] != 3:
+            error, unit, travel, turned = _disagreement(inc, z, coarse[:, : z.shape[1]])
+            return error, unit, travel, turned, np.zeros_like(error), valid
+        steps = self._steps(fine)
+        prefix = poses.accumulate(np.zeros(3), steps[:, :3])
+        travel = np.concatenate([[0.0], np.cumsum(np.abs(steps[:, 0]))])[at]
+        error, unit, _, turned = _disagreement(inc, z, poses.between(prefix[at[:-1]], prefix[at[1:]]))
+        # The fine motion over each increment against the model's one arc per interval.
+        own = poses.between(prefix[at[inc.first]], prefix[at[inc.last]])
+        arc = _disagreement(inc, own, coarse[:, :3])[0]
+        return error, unit, travel, turned, arc, valid
+
+    def reach(self, lag_s: float, error: np.ndarray) -> np.ndarray:
+        """How far each increment's disagreement ``error`` (at ``lag_s``) moves with the wheels read
+        anywhere within their readings' spread at the records (:meth:`JointStream.reading_spread`:
+        a slow driver's updates leave a pivot's start between two of them), each joint either way,
+        the records of even and of odd index apart (one end of a chained increment at a time), the
+        path bent as a straight run between two updates misses it (a tent one update period wide);
+        zero without a joint stream finer than the records."""
+        inc = self.log.motions
+        assert inc is not None
+        fine, at = self.resampler.at(lag_s)[0].at_joint_samples()
+        stream, q = fine.joint_stream, fine.joint_positions
+        _, z = self.fns.sensor.screened(inc.z)
+        reach = np.zeros_like(error)
+        if at is None or stream is None or q is None or z.shape[1] != 3:
+            return reach
+        read = fine.read_times()
+        # The records and the joints' own readings between them: where a straight run between two
+        # updates starts or ends.
+        own = np.flatnonzero(np.isin(read, np.asarray(stream.time_s)[_fresh_any(stream)]))
+        centres = np.union1d(at, own)
+        spread, period = stream.reading_spread(read[centres]), stream.updates_s()
+        for parity, signs in itertools.product((0, 1), itertools.product((-1.0, 1.0), repeat=q.shape[1])):
+            bent = _tents(read, read[centres[parity::2]], spread[parity::2], period)
+            steps = self._steps(replace(fine, joint_positions=frozen(q + bent * np.array(signs))))
+            prefix = poses.accumulate(np.zeros(3), steps[:, :3])
+            other = _disagreement(inc, z, poses.between(prefix[at[:-1]], prefix[at[1:]]))[0]
+            reach = np.maximum(reach, np.abs(other - error))
+        return reach
+
+    def _steps(self, log: Log) -> np.ndarray:
+        """The model's motion over each interval of ``log`` at the params, one row each."""
+        inputs = self.fns.model.inputs(log, self.steering_sample)
+        return np.asarray(over_columns(self.fns.predict, self.params, inputs)[0].T)
+
+
+def _fresh_any(stream: JointStream) -> np.ndarray:
+    """Which of the stream's messages hold a reading of their own for some joint."""
+    return np.ones(stream.time_s.size, dtype=bool) if stream.fresh is None else np.any(stream.fresh, axis=1)
+
+
+def _tents(t: np.ndarray, centres: np.ndarray, height: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """At times ``t``, per joint, tents of ``height`` ``(c, joints)`` at ``centres`` (increasing,
+    at least two ``width`` apart, so none overlap), each ``width`` (per joint) either side."""
+    out = np.zeros((t.size, height.shape[1]))
+    if centres.size == 0:
+        return out
+    k = np.clip(np.searchsorted(centres, t), 1, max(centres.size - 1, 1))
+    for side in (k - 1, np.minimum(k, centres.size - 1)):
+        near = np.abs(t - centres[side])[:, None]
+        out = np.maximum(out, np.clip(1.0 - near / np.maximum(width, 1e-9), 0.0, None) * height[side])
+    return out
 
 
 def _screen_lag(at: _IncrementsAt, judged: np.ndarray, lag: float | tuple[float, float]) -> float:
@@ -527,8 +616,18 @@ def screen(
         why = "the fit that judges the encoders did not converge from the initial guess"
         return replace(report, unchecked=why)
     if log.reference.kind.own_increments:
-        # An increment's disagreement is its own unless one wheel's reading explains it.
-        glitches += tuple(increment_faults(fns, params, log, steering_sample, glitches, lag))
+        # An increment's disagreement is its own unless one wheel's reading explains it. Judged
+        # again by a fit without the increments found (slipped pivots, coarse arcs, bad matches
+        # pull the first fit's turn law off, by as much as a sound pivot's scatter).
+        found = increment_faults(fns, params, log, steering_sample, glitches, lag)
+        if found:
+            n_int = max(n - 1, 0)
+            more = replace(report, faults=glitches + tuple(found))
+            again = judge(more.bad_intervals(n_int), more.bad_records(n))
+            if again is not None:
+                params = again
+                found = increment_faults(fns, params, log, steering_sample, glitches, lag)
+        glitches += tuple(found)
     clean = cleaned(log, glitches)
     counters = counter_faults(fns, params, clean, model.inputs(clean, steering_sample), lag)
     faults = tuple(sorted(glitches + counters.faults, key=lambda f: (f.first, f.kind)))

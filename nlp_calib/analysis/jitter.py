@@ -38,9 +38,12 @@ def _robust_std(x: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(x - np.median(x)))) if x.size >= 8 else 0.0
 
 
-def _third_differences(x: np.ndarray) -> np.ndarray:
+def _third_differences(x: np.ndarray, fresh: np.ndarray | None = None) -> np.ndarray:
     """The third differences of the readings ``x`` that changed (a message repeating the last
-    update of a slow encoder is no reading of its own)."""
+    update of a slow encoder is no reading of its own; ``fresh``: those that are, where the
+    stream filled the held ones in)."""
+    if fresh is not None:
+        x = x[fresh]
     x = x[np.isfinite(x)]
     return np.diff(x[np.r_[True, np.diff(x) != 0.0]], 3)
 
@@ -59,7 +62,8 @@ def reading_jitter(stream: JointStream, names: tuple[str, ...]) -> np.ndarray:
             speed = np.divide(step, dt, out=np.full_like(step, np.nan), where=dt > 0)
             out[j] = _robust_std(_third_differences(speed)) / np.sqrt(THIRD_DIFFERENCE["speed"])
         else:
-            spread = _robust_std(_third_differences(stream.positions[:, j]))
+            fresh = None if stream.fresh is None else np.asarray(stream.fresh)[:, j]
+            spread = _robust_std(_third_differences(stream.positions[:, j], fresh))
             out[j] = spread / np.sqrt(THIRD_DIFFERENCE["position"])
     return out
 

@@ -19,11 +19,14 @@ windows show.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from nlp_calib.analysis.odometry import COVERED, Drift, moments, propagate, readings_covariance
 from nlp_calib.analysis.uncertainty import nnls_small
 from nlp_calib.core import poses
+from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.problem import ProblemFunctions
 from nlp_calib.problem.windows import over_columns
 from nlp_calib.results.handoff import NoiseRates
@@ -336,3 +339,30 @@ def noise_rates(
         float(np.max(raised)),
         bounded,
     )
+
+
+def ground_rate(
+    fns: ProblemFunctions,
+    params: np.ndarray,
+    track: tuple[np.ndarray, np.ndarray],
+    ground: np.ndarray,
+    rates: NoiseRates,
+) -> NoiseRates:
+    """``rates`` with the heading's variance per radian turned over the stretches of intervals
+    ``ground`` marks (pivots the ground slipped on: the odometry meets them, the fit leaves them
+    out) beyond what the rates grow there: the stretches' heading errors against the reference
+    (``track``: the inputs per interval and the reference's base poses at the records), squared
+    and summed, less the rates' variance over them, per radian the wheels turned there."""
+    inputs, reference = track
+    if not np.any(ground):
+        return rates
+    increments = _increments(fns, params, inputs, np.zeros(inputs.shape[0]))[0]
+    edges = np.diff(np.r_[0, ground.astype(int), 0])
+    first, stop = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    turned = np.array([np.abs(increments[a:b, 2]).sum() for a, b in zip(first, stop)])
+    moved = np.array([np.abs(increments[a:b, 0]).sum() for a, b in zip(first, stop)])
+    seen = wrap_angle(reference[stop, 2] - reference[first, 2])
+    error = wrap_angle(seen - np.array([increments[a:b, 2].sum() for a, b in zip(first, stop)]))
+    grown = rates.per_metre[2] * moved + rates.per_radian[2] * turned
+    extra = max(float(np.sum(error**2 - grown)), 0.0) / max(float(turned.sum()), 1e-12)
+    return replace(rates, slip_per_radian=extra, slipped=int(first.size))

@@ -34,6 +34,13 @@ from nlp_calib.logs.tum import format_tum
 #: A joint's positions are quantised when at least this share of its steps are whole multiples
 #: of its smallest step (to 1 %).
 QUANTISED_SHARE = 0.9
+#: A joint whose readings change every this many messages or more (the median) has a driver that
+#: updates slower than it publishes; fewer, and a repeated reading is the joint at rest (or within
+#: one step of its resolution), as published.
+SLOW_DRIVER_MESSAGES = 2.0
+#: A reading held this many times longer than the joint's usual time between updates is a joint
+#: that stood still (the last message of the hold is its position then), not a slow driver's.
+STANDSTILL_UPDATES = 2.0
 
 
 @dataclass(frozen=True)
@@ -138,6 +145,52 @@ def resolution(positions: np.ndarray) -> float:
     return q if np.mean(np.abs(ratio - np.round(ratio)) < 0.01) >= QUANTISED_SHARE else 0.0
 
 
+def fresh_positions(time_s: np.ndarray, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each joint's positions at its messages, the readings a slow driver held filled in between
+    its updates, and which messages are readings of their own (fresh). A driver that updates at
+    4 Hz under 20 Hz messages repeats its last reading, up to one update period (0.25 s) old, so
+    the stream read between its messages is a staircase whose steps land late (a pivot's start or
+    stop then disagrees with the reference as slip would). A reading is fresh at the message where
+    it changed; the held messages in between are interpolated from the fresh ones, except a hold
+    :data:`STANDSTILL_UPDATES` times the joint's median time between updates, where the joint stood
+    still (its last message is kept). A joint with a reading of its own in most messages
+    (:data:`SLOW_DRIVER_MESSAGES`) is returned as published."""
+    out = np.array(positions, dtype=float)
+    fresh = np.ones(out.shape, dtype=bool)
+    for j in range(out.shape[1]):
+        q = out[:, j]
+        changed = np.flatnonzero(np.r_[True, q[1:] != q[:-1]])
+        fresh[:, j] = False
+        fresh[changed, j] = True
+        if changed.size < 3 or changed.size == q.size:
+            continue
+        gaps = np.diff(time_s[changed])
+        if np.median(gaps) < SLOW_DRIVER_MESSAGES * np.median(np.diff(time_s)):
+            continue  # a reading of its own in most messages: a repeat is the joint's own rest
+        still = changed[1:][gaps > STANDSTILL_UPDATES * np.median(gaps)] - 1
+        keep = np.unique(np.r_[changed, still, q.size - 1])
+        out[:, j] = np.interp(time_s, time_s[keep], q[keep])
+    return out, fresh
+
+
+def joint_stream(
+    time_s: np.ndarray,
+    positions: np.ndarray,
+    names: tuple[str, ...],
+    integrated: list[str],
+    header: LogHeader,
+    breaks: np.ndarray | None,
+) -> JointStream:
+    """The joints' own stream (:class:`JointStream`) of ``positions`` at ``time_s`` (``names``: the
+    joints', in the header's encoder order), each joint's resolution read off its readings as
+    published, the readings a slow driver held filled in between its updates
+    (:func:`fresh_positions`)."""
+    steps = [0.0 if n in integrated else resolution(positions[:, j]) for j, n in enumerate(names)]
+    by_velocity = tuple(e for e, n in zip(header.encoder_names, names) if n in integrated)
+    filled, fresh = fresh_positions(time_s, positions)
+    return JointStream(time_s, frozen(filled), tuple(steps), by_velocity, breaks, frozen(fresh))
+
+
 def joint_positions(
     path: Path, joints: Stamped, names: tuple[str, ...]
 ) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -226,10 +279,8 @@ def timed_by_tracker(
         warnings.warn(f"{p}: {timing.describe()}", NlpCalibWarning, stacklevel=3)
     stamps = tracker.stamp_ns[index]
     start_ns = int(stamps[0])
-    steps = [0.0 if n in integrated else resolution(positions[:, j]) for j, n in enumerate(names)]
-    by_velocity = tuple(e for e, n in zip(header.encoder_names, names) if n in integrated)
     stream_s = frozen((joint_ns - start_ns).astype(float) * 1e-9)
-    stream = JointStream(stream_s, frozen(positions), tuple(steps), by_velocity, breaks_s(joints, start_ns))
+    stream = joint_stream(stream_s, positions, names, integrated, header, breaks_s(joints, start_ns))
     time_s = frozen((stamps - start_ns).astype(float) * 1e-9)
     poses = np.array(tracker.values[index, :3], dtype=float)
     poses[:, 2] = wrap_angle(poses[:, 2])

@@ -92,6 +92,26 @@ class JointStream:
     resolution: tuple[float, ...]
     integrated: tuple[str, ...] = ()
     breaks: np.ndarray | None = None
+    #: ``(n, n_joints)``: which messages are readings of their own, the others a slow driver's
+    #: held reading filled in between its updates (None: every message is one).
+    fresh: np.ndarray | None = None
+
+    def updates_s(self) -> np.ndarray:
+        """Each joint's median time between its own readings (s): its driver's update period."""
+        ts = np.asarray(self.time_s, dtype=float)
+        if self.fresh is None or ts.size < 2:
+            return np.full(self.positions.shape[1], float(np.median(np.diff(ts))) if ts.size > 1 else 0.0)
+        return np.array([np.median(np.diff(ts[f])) if f.sum() > 1 else 0.0 for f in np.asarray(self.fresh).T])
+
+    def reading_spread(self, t: np.ndarray) -> np.ndarray:
+        """Each joint's position read at times ``t`` is known to within this (rad) from its driver's
+        updates alone: between two, the stream runs straight, and a rate that changed by ``Δω``
+        between them bends the true path off that line by up to ``Δω·P/4`` (``P`` the update
+        period: 0.25 s at 4 Hz, where a pivot's start is 0.15 rad of the wheel off)."""
+        period = self.updates_s()
+        ahead = np.stack([self.slopes(t + p)[:, j] for j, p in enumerate(period)], axis=1)
+        behind = np.stack([self.slopes(t - p)[:, j] for j, p in enumerate(period)], axis=1)
+        return np.abs(ahead - behind) * period / 4.0
 
     def broken(self, t: np.ndarray) -> np.ndarray | None:
         """Per interval between the times ``t`` (the joints read there), whether the joints' motion
@@ -309,6 +329,33 @@ class Log:
             return read
         beside = self.clock.beside_lag_s if beside_lag_s is None else beside_lag_s
         return np.asarray(read - beside * mine)
+
+    def at_joint_samples(self) -> tuple[Log, np.ndarray | None]:
+        """The log with a record at each of its joints' own samples between its records too (no
+        reference there), and where its records fall among those (None: no joint stream finer than
+        the records): the wheels integrated over their own samples, as a controller integrates
+        them, not by the model's one arc per interval, which a drive that changes inside it (a
+        pivot's start inside a scan matcher's 2 s) does not follow."""
+        stream = self.joint_stream
+        if stream is None or self.reference.beside is not None:
+            return self, None
+        lag = self.encoder_lag_s
+        inner = stream.time_s + lag
+        t = np.union1d(self.time_s, inner[(inner > self.time_s[0]) & (inner < self.time_s[-1])])
+        if t.size == self.n_records:
+            return self, None
+        n = t.size
+        fine = replace(
+            self,
+            time_s=frozen(t),
+            ticks=frozen(np.zeros((n, 0), dtype=np.int64)),
+            model_pose=frozen(np.zeros((n, 3))),
+            T_world_sensor=frozen(np.zeros((n, 3))),
+            line_numbers=frozen(np.zeros(n, dtype=np.int64)),
+            joint_positions=stream.at(t - lag),
+            reference=replace(self.reference, motions=None),
+        )
+        return fine, np.searchsorted(t, self.time_s)
 
     def joint_breaks(self) -> np.ndarray | None:
         """Per interval, whether the joints' motion over it is unknown where they are read (the

@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning
-from nlp_calib.logs.bag_joints import at_tracker, breaks_s, check_overlap, joint_positions, resolution
+from nlp_calib.logs.bag_joints import at_tracker, breaks_s, check_overlap, joint_positions, joint_stream
 from nlp_calib.logs.bag_reader import Stamped
-from nlp_calib.logs.log import JointStream, Log, LogClock, LogHeader, ReferenceData, frozen
+from nlp_calib.logs.log import Log, LogClock, LogHeader, ReferenceData, frozen
 from nlp_calib.logs.reference import Motions
 from nlp_calib.logs.relative import RelativeMotions
 from nlp_calib.logs.text_tables import data_lines, joined, numbers, seconds, stamp_ns
@@ -251,15 +251,8 @@ def timed_by_motions(
         frozen(motions.line_numbers[keep]),
         {k: frozen(v[keep]) for k, v in motions.quality.items()},
     )
-    steps = [0.0 if n in integrated else resolution(positions[:, j]) for j, n in enumerate(names)]
-    by_velocity = tuple(e for e, n in zip(header.encoder_names, names) if n in integrated)
-    stream = JointStream(
-        frozen((joint_ns - start_ns).astype(float) * 1e-9),
-        frozen(positions),
-        tuple(steps),
-        by_velocity,
-        breaks_s(joints, start_ns),
-    )
+    stream_s = frozen((joint_ns - start_ns).astype(float) * 1e-9)
+    stream = joint_stream(stream_s, positions, tuple(names), integrated, header, breaks_s(joints, start_ns))
     time_s = frozen((stamps - start_ns).astype(float) * 1e-9)
     n = int(stamps.size)
     # A record's "line" is that of the first increment that starts or ends there.

@@ -135,6 +135,18 @@ def _noise_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
             # None: no drift segment to judge it by.
             "segments_within_2sigma": rates.coverage,
             "segments": rates.segments,
+            # The pivots the ground slipped on, left out of the rates: the heading's variance they
+            # add per radian turned on the spot, for a filter that knows when the robot pivots.
+            **(
+                {
+                    "slipped_pivots": {
+                        "heading_variance_per_radian": rates.slip_per_radian,
+                        "pivots": rates.slipped,
+                    }
+                }
+                if rates.slipped
+                else {}
+            ),
         }
     }
 

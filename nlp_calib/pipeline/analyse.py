@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -22,7 +22,7 @@ from nlp_calib.analysis.determinacy import Information
 from nlp_calib.analysis.handoff import odometry_noise
 from nlp_calib.analysis.jitter import input_jitter
 from nlp_calib.analysis.metrics import each_metrics, first_order, geometry, integrate, segments, steps
-from nlp_calib.analysis.noise_rates import model_covariances, noise_rates
+from nlp_calib.analysis.noise_rates import ground_rate, model_covariances, noise_rates
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import (
     DRIFT_LENGTHS,
@@ -605,7 +605,16 @@ def noise_model(
     on the drift of the first :data:`NOISE_RECORDS` used records, with that drift."""
     d = calibrated_drift(fit, windows, params, steering_sample, NOISE_RECORDS)
     checked = (d.drift, d.reference_var, windows.input_noise_std)
-    return d, noise_rates(fit.fns, params, d.inputs, d.noise, checked, d.jitter)
+    rates = noise_rates(fit.fns, params, d.inputs, d.noise, checked, d.jitter)
+    if windows.data.increment is not None and "heading" not in rates.bounded:
+        # A reference's own increments do not tell their heading's noise from the wheels' drift
+        # (:func:`calibrated_drift` credits it none): the heading's rate holds both, a bound.
+        rates = replace(rates, bounded=(*rates.bounded, "heading"))
+    if windows.ground is not None:
+        n = d.inputs.shape[1] + 1
+        ground = windows.ground[windows.used[0] : windows.used[0] + n - 1]
+        rates = ground_rate(fit.fns, params, (d.inputs, d.reference), ground, rates)
+    return d, rates
 
 
 def odometry(

@@ -82,7 +82,7 @@ def exclude_faults(binder: Binder, findings: Findings, n_records: int, lag_s: fl
         return binder
     faults = findings.report.faults
     if findings.handling == "repair":
-        faults = findings.report.reference_faults
+        faults = findings.report.unrepaired
     bad_intervals, bad_records = fault_masks(replace(findings.report, faults=faults), n_records, lag_s, dt_s)
     return replace(binder, bad_intervals=bad_intervals, bad_records=bad_records)
 

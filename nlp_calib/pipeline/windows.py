@@ -20,6 +20,7 @@ from nlp_calib.pipeline.build import Binder, Problem
 from nlp_calib.pipeline.prepare import PreparedLog, split
 from nlp_calib.pipeline.screen import Screening, exclude_faults, fault_masks, median_interval
 from nlp_calib.problem import ResidualData
+from nlp_calib.results.faults import GROUND_KINDS
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,9 @@ class LogWindows:
     input_noise_std: np.ndarray
     counted: np.ndarray
     breaks: np.ndarray | None = None
+    #: Per interval of the whole log, where only the ground's faults (a slipped pivot) spoil it:
+    #: out of the fit and the drift, stated apart (the robot's own odometry meets them).
+    ground: np.ndarray | None = None
 
     @property
     def input_noise(self) -> tuple[np.ndarray, np.ndarray]:
@@ -100,5 +104,8 @@ def bind_windows(
     data = binder.windows(alignment.log, *fit)
     noise = problem.model.input_noise_std(alignment.log, sc.data.encoder_noise)
     counted = counted_inputs(problem.model, alignment.log)
-    masks = (bad_intervals, bad_records, noise, counted, breaks)
+    ground = bad_intervals & ~(
+        fault_masks(report.apart(GROUND_KINDS), log.n_records, alignment.lag_s, dt)[0] | breaks
+    )
+    masks = (bad_intervals, bad_records, noise, counted, breaks, ground)
     return LogWindows(alignment.log, (start, stop), fit, data, binder, *masks)

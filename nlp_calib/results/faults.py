@@ -21,7 +21,16 @@ TRACKER_KINDS = ("tracker_jump",)
 #: skid-steer slip as no calibration holds. Its own window is left out, no other.
 #: An increment over a pivot the wheels disagree with (the ground slipped).
 PIVOT_SLIP = "pivot_slip"
-MATCH_KINDS = ("bad_match", PIVOT_SLIP)
+#: An increment the wheels agree with over their own samples, but whose model motion, one arc per
+#: interval between the records, misses theirs: the drive changed inside it (a pivot's start or
+#: stop inside a scan matcher's 2 s), which the fit's model cannot follow at the records' spacing.
+COARSE_ARC = "coarse_arc"
+MATCH_KINDS = ("bad_match", PIVOT_SLIP, COARSE_ARC)
+#: The faults of the ground, not of any stream: the robot's own odometry meets them, so the drift
+#: the noise model states holds them (the fit leaves their windows out all the same).
+GROUND_KINDS = (PIVOT_SLIP,)
+#: The faults of the reference itself: its poses or increments are wrong (a chain breaks there).
+REFERENCE_KINDS = (*TRACKER_KINDS, "bad_match")
 #: An increment whose turn radius (its travel over its turn, as the wheels give them at the fit)
 #: is under this (m) is a pivot turn.
 PIVOT_RADIUS_M = 0.5
@@ -124,8 +133,18 @@ class FaultReport:
 
     @property
     def reference_faults(self) -> tuple[Fault, ...]:
-        """The reference's own faults: tracker jumps and bad matches."""
+        """The reference's own faults: tracker jumps and bad matches (a slipped pivot's or a coarse
+        arc's increment is sound: the wheels or the model miss it)."""
+        return tuple(f for f in self.faults if f.kind in REFERENCE_KINDS)
+
+    @property
+    def unrepaired(self) -> tuple[Fault, ...]:
+        """The faults a repair leaves: all but the encoders' (whose readings it corrects)."""
         return tuple(f for f in self.faults if f.kind in (*TRACKER_KINDS, *MATCH_KINDS))
+
+    def apart(self, kinds: Sequence[str]) -> FaultReport:
+        """The report without the faults of ``kinds``."""
+        return replace(self, faults=tuple(f for f in self.faults if f.kind not in kinds))
 
     def bad_intervals(self, n_intervals: int) -> np.ndarray:
         """Mask of intervals a residual window must not cross (encoder faults, bad matches)."""

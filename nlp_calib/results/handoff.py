@@ -39,6 +39,10 @@ class NoiseRates:
     segments: int
     raised: float
     bounded: tuple[str, ...] = ()
+    #: The heading's variance per radian turned on the spot (rad²/rad) over the pivots the ground
+    #: slipped on, beyond the rates (the fit and the rates leave those out), and how many there were.
+    slip_per_radian: float = 0.0
+    slipped: int = 0
 
     def words(self) -> str:
         """The rates and how they held, in one sentence."""
@@ -52,7 +56,12 @@ class NoiseRates:
         if self.bounded:
             held += (
                 f"; {' and '.join(self.bounded)} only the most the segments allow (the wheels' drift "
-                "there lies under the reference's own noise)"
+                "there lies under the reference's own noise, or is not told from it)"
+            )
+        if self.slipped:
+            held += (
+                f"; on the {self.slipped} pivots the ground slipped on, the heading's variance grows by "
+                f"{self.slip_per_radian:.3g} rad² more per radian turned on the spot"
             )
         return (
             f"variance per metre driven {per_m} (along, across, heading: m², m², rad²), per radian "

@@ -60,6 +60,11 @@ class GaussNewtonOptions:
 
 #: λ beyond this means no step can reduce the cost any more.
 _MAX_DAMPING = 1e16
+#: A leap (:meth:`_Iteration._leap`) follows steps this undamped, this aligned (cosine) with the
+#: last, and shrinking by a share in this range of it (a linear approach, not a quadratic one).
+_LEAP_DAMPING = 1e-6
+_LEAP_ALIGNED = 0.99
+_LEAP_RATIO = (0.5, 0.999)
 
 
 def _scaled_gradient(ne: NormalEquations) -> float:
@@ -108,6 +113,7 @@ class _Iteration:
         self.x = x
         self.ne = evaluator.normal_equations(x)
         self.lam, self.nu = opts.initial_damping, 2.0
+        self.last_step: np.ndarray | None = None
         self.history = [IterationRecord(0, self.ne.cost, self.ne.chi2, self.ne.inliers, 0.0, self.lam)]
 
     def restricted(self) -> tuple[NormalEquations, np.ndarray | None]:
@@ -136,6 +142,32 @@ class _Iteration:
             step[free] = part
         return self._try(iteration, step, predicted)
 
+    def _leap(self, iteration: int, step: np.ndarray) -> None:
+        """After an undamped step along the last one and a steady share of it, the rest of the
+        geometric series at once, kept if it lowers the cost: a robust kernel's reweighting with
+        many windows past its threshold approaches its fixed point linearly (steps shrinking 5 % an
+        iteration: hundreds of them), each step short by the weights' curvature it lacks."""
+        last, self.last_step = self.last_step, step
+        if last is None or self.lam >= _LEAP_DAMPING:
+            return
+        n0, n1 = float(np.linalg.norm(last)), float(np.linalg.norm(step))
+        if n0 == 0.0 or n1 == 0.0 or float(step @ last) < _LEAP_ALIGNED * n0 * n1:
+            return
+        r = n1 / n0
+        if not _LEAP_RATIO[0] <= r <= _LEAP_RATIO[1]:
+            return
+        x_new = self.evaluator.boxplus(self.x, step * (r / (1.0 - r)))
+        if self.box is not None:
+            x_new = self.box.project(x_new)
+        ne_new = self.evaluator.normal_equations(x_new)
+        if np.isfinite(ne_new.cost) and ne_new.cost < self.ne.cost:
+            self.x, self.ne, self.last_step = x_new, ne_new, None
+            self.history.append(
+                IterationRecord(
+                    iteration, ne_new.cost, ne_new.chi2, ne_new.inliers, n1 * r / (1 - r), self.lam
+                )
+            )
+
     def _try(self, iteration: int, step: np.ndarray, predicted: float) -> tuple[bool, str, bool] | None:
         """Move to ``x ⊞ step`` if the true cost falls; adapt λ either way."""
         opts, ne = self.opts, self.ne
@@ -155,6 +187,7 @@ class _Iteration:
             self.history.append(
                 IterationRecord(iteration, ne_new.cost, ne_new.chi2, ne_new.inliers, step_norm, self.lam)
             )
+            self._leap(iteration, step)
             tol = opts.step_tolerance
             small_step = bool(np.all(np.abs(step) <= tol * (np.abs(self.x) + tol)))
             if decrease <= opts.function_tolerance * ne_new.cost and small_step and self.lam < 1.0:
