@@ -194,6 +194,12 @@ def test_a_slow_drivers_held_readings_are_filled_in_between_its_updates() -> Non
     # A reading of its own in most messages (a fine encoder, resting now and then): as published.
     fine = np.round(np.sin(t) / 0.01)[:, None] * 0.01
     assert np.array_equal(fresh_positions(t, fine)[0], fine)
+    # A wheel with a reading of its own in every message beside a steering joint held on a circle,
+    # one step of its resolution now and then (a real tricycle's): the steering's rare changes say
+    # nothing of its driver, and a ramp between them would be a steering that never was.
+    toggled = -0.1571 - 0.00785 * ((t >= 1.0) & (t < 1.5) | (t >= 3.0) & (t < 4.2))
+    both = np.c_[2.0 * t, toggled]
+    assert np.array_equal(fresh_positions(t, both)[0], both)
 
 
 def test_a_skid_steer_whose_pivots_slipped_is_never_called_good(tmp_path: Path) -> None:

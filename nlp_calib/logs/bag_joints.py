@@ -151,25 +151,28 @@ def fresh_positions(time_s: np.ndarray, positions: np.ndarray) -> tuple[np.ndarr
     4 Hz under 20 Hz messages repeats its last reading, up to one update period (0.25 s) old, so
     the stream read between its messages is a staircase whose steps land late (a pivot's start or
     stop then disagrees with the reference as slip would). A reading is fresh at the message where
-    it changed; the held messages in between are interpolated from the fresh ones, except a hold
-    :data:`STANDSTILL_UPDATES` times the joint's median time between updates, where the joint stood
-    still (its last message is kept). A joint with a reading of its own in most messages
-    (:data:`SLOW_DRIVER_MESSAGES`) is returned as published."""
+    it changed. The driver's update period is its busiest joint's median time between changes (a
+    wheel while the robot moves): a joint that rests (a steering joint held on a circle) says
+    nothing of its driver. Where that period spans :data:`SLOW_DRIVER_MESSAGES` messages or more,
+    each joint's held messages are interpolated from its fresh ones, except a hold
+    :data:`STANDSTILL_UPDATES` update periods long or longer, where the joint stood still (its last
+    message is kept); otherwise every joint is returned as published."""
     out = np.array(positions, dtype=float)
-    fresh = np.ones(out.shape, dtype=bool)
-    for j in range(out.shape[1]):
-        q = out[:, j]
-        changed = np.flatnonzero(np.r_[True, q[1:] != q[:-1]])
-        fresh[:, j] = False
+    changes = [np.flatnonzero(np.r_[True, out[1:, j] != out[:-1, j]]) for j in range(out.shape[1])]
+    fresh = np.zeros(out.shape, dtype=bool)
+    for j, changed in enumerate(changes):
         fresh[changed, j] = True
-        if changed.size < 3 or changed.size == q.size:
+    busy = [float(np.median(np.diff(time_s[c]))) for c in changes if c.size >= 3]
+    if not busy or min(busy) < SLOW_DRIVER_MESSAGES * float(np.median(np.diff(time_s))):
+        return out, fresh
+    update = min(busy)
+    for j, changed in enumerate(changes):
+        if changed.size < 2:
             continue
         gaps = np.diff(time_s[changed])
-        if np.median(gaps) < SLOW_DRIVER_MESSAGES * np.median(np.diff(time_s)):
-            continue  # a reading of its own in most messages: a repeat is the joint's own rest
-        still = changed[1:][gaps > STANDSTILL_UPDATES * np.median(gaps)] - 1
-        keep = np.unique(np.r_[changed, still, q.size - 1])
-        out[:, j] = np.interp(time_s, time_s[keep], q[keep])
+        still = changed[1:][gaps >= STANDSTILL_UPDATES * update] - 1
+        keep = np.unique(np.r_[changed, still, out.shape[0] - 1])
+        out[:, j] = np.interp(time_s, time_s[keep], out[keep, j])
     return out, fresh
 
 
