@@ -6,10 +6,15 @@ import io
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from PIL import Image  # matplotlib's own PNG writer (a dependency of matplotlib)
 
 DPI = 110
+#: zlib's level 3 instead of 6: a third less CPU to encode for ~5 % more bytes (the dropped alpha
+#: channel, opaque everywhere, saves more than that).
+_PNG_COMPRESSION = 3
 #: Line styles per track, in drawing order: uncalibrated, first solver, second solver, ...
 STYLES: tuple[Mapping[str, Any], ...] = (
     {"color": "tab:orange", "linestyle": "-.", "linewidth": 1.2},
@@ -24,13 +29,15 @@ def figure_png(fig: Figure) -> bytes:
 
     The layout is computed once and the figure drawn once: ``savefig`` would first draw the whole
     figure without rendering it only to run the layout (a quarter of a figure's CPU), then draw
-    it again; the pixels are the same."""
+    it again; the pixels are the same. Written as RGB (the figures are opaque) without metadata."""
     canvas = FigureCanvasAgg(fig)
     fig.dpi = DPI
     engine = fig.get_layout_engine()
     if engine is not None:
         engine.execute(fig)
         fig.set_layout_engine("none")
+    canvas.draw()
+    rgb = np.ascontiguousarray(np.asarray(canvas.buffer_rgba())[..., :3])
     buf = io.BytesIO()
-    canvas.print_png(buf, metadata={"Software": None})
+    Image.fromarray(rgb).save(buf, format="png", compress_level=_PNG_COMPRESSION, dpi=(DPI, DPI))
     return buf.getvalue()
