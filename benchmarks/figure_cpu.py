@@ -3,6 +3,7 @@
     python benchmarks/figure_cpu.py                       # the four cases below, 3 repeats
     python benchmarks/figure_cpu.py --repeats 5 --out /tmp/figs   # keep the PNGs to look at
     python benchmarks/figure_cpu.py --records 200000      # add a long simulated log's run
+    python benchmarks/figure_cpu.py --repo ../main        # another checkout's figures (before/after)
 
 Cases: a 300-record simulated tricycle log (S-curves, both solvers), scenarios/camera_demo.yaml,
 scenarios/diff_drive_demo.yaml and a 300-record straight drive (a run with a plan). Each figure
@@ -22,6 +23,10 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+# ``--repo PATH`` (first) measures another checkout's figures, e.g. main's, on the same runs.
+if len(sys.argv) > 2 and sys.argv[1] == "--repo":
+    REPO = Path(sys.argv.pop(2)).resolve()
+    sys.argv.pop(1)
 sys.path.insert(0, str(REPO))
 
 from nlp_calib.pipeline import Calibration, Wanted, load_scenario  # noqa: E402

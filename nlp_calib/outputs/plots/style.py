@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import io
+import re
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.ticker import LogFormatterSciNotation
 from PIL import Image  # matplotlib's own PNG writer (a dependency of matplotlib)
 
 DPI = 110
@@ -24,6 +26,36 @@ STYLES: tuple[Mapping[str, Any], ...] = (
 )
 
 
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+_EXPONENT = re.compile(r"\^\{(-?\d+)\}")
+
+
+class PlainLogFormatter(LogFormatterSciNotation):
+    """A log axis's labels (10⁻², 2×10⁻³) as plain text in Unicode superscripts: the same labels
+    as matplotlib's, without parsing and typesetting each through mathtext (a tenth of a figure's
+    CPU in a fresh process)."""
+
+    def __call__(self, x: float, pos: int | None = None) -> str:
+        label = str(super().__call__(x, pos))
+        if not (label.startswith("$\\mathdefault{") and label.endswith("}$")):
+            return label
+        body = label[len("$\\mathdefault{") : -2].replace("\\times", "×")
+        body = _EXPONENT.sub(lambda m: m.group(1).translate(_SUPERSCRIPT), body)
+        return body.replace("-", "\N{MINUS SIGN}") if body.startswith("-") else body
+
+
+def _plain_log_labels(fig: Figure) -> None:
+    """Every log axis still labelled by matplotlib's default formatter gets :class:`PlainLogFormatter`."""
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            if axis.get_scale() != "log":
+                continue
+            if type(axis.get_major_formatter()) is LogFormatterSciNotation:
+                axis.set_major_formatter(PlainLogFormatter(base=10.0))
+            if type(axis.get_minor_formatter()) is LogFormatterSciNotation:
+                axis.set_minor_formatter(PlainLogFormatter(base=10.0))
+
+
 def figure_png(fig: Figure) -> bytes:
     """The figure rendered to PNG bytes (no timestamp, so files are reproducible).
 
@@ -32,6 +64,7 @@ def figure_png(fig: Figure) -> bytes:
     it again; the pixels are the same. Written as RGB (the figures are opaque) without metadata."""
     canvas = FigureCanvasAgg(fig)
     fig.dpi = DPI
+    _plain_log_labels(fig)
     engine = fig.get_layout_engine()
     if engine is not None:
         engine.execute(fig)
