@@ -47,7 +47,8 @@ FIGURES = (
 
 
 def _simulated(folder: Path, name: str, records: int, trajectory: str) -> Path:
-    log, _ = simulate_to_file(SimulationOptions.of(records=records, seed=7, trajectory=trajectory), folder / f"{name}.txt")
+    options = SimulationOptions.of(records=records, seed=7, trajectory=trajectory)
+    log, _ = simulate_to_file(options, folder / f"{name}.txt")
     return log
 
 
@@ -62,16 +63,18 @@ def _runs(folder: Path, records: int) -> dict[str, CalibrationRun]:
     if records:
         cases[f"tricycle{records}"] = demo.with_dataset(_simulated(folder, "long", records, "s_curves"))
     # The odometry figure (``nlp-calib odometry``) on the first case only.
-    wanted = {name: Wanted(series=True, odometry="gauss_newton" if i == 0 else None) for i, name in enumerate(cases)}
-    return {name: Calibration(sc).run(wanted=wanted[name]) for name, sc in cases.items()}
+    return {
+        name: Calibration(sc).run(wanted=Wanted(series=True, odometry="gauss_newton" if i == 0 else None))
+        for i, (name, sc) in enumerate(cases.items())
+    }
 
 
 def _warm_up() -> float:
     """CPU of matplotlib's one-off set-up: importing it and drawing one empty figure."""
     t0 = time.process_time()
-    from nlp_calib.outputs.plots.style import figure_png
-
     from matplotlib.figure import Figure
+
+    from nlp_calib.outputs.plots.style import figure_png
 
     figure_png(Figure(figsize=(2, 2)))
     return time.process_time() - t0
