@@ -1,0 +1,74 @@
+"""figure_png: one layout and one draw give savefig's pixels; log labels in plain text say the same."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation
+from PIL import Image
+
+from nlp_calib.outputs.plots.style import DPI, PlainLogFormatter, figure_png
+
+
+def _figure() -> Figure:
+    fig = Figure(figsize=(7, 3.5), layout="constrained")
+    ax, ax_named = fig.subplots(1, 2)
+    t = np.linspace(0.0, 10.0, 200)
+    ax.plot(t, 1e3 * np.sin(t), label="a sine")
+    ax.set_title("a linear axis with a long title")
+    ax.set_xlabel("time [s]")
+    ax.legend(loc="upper right")
+    ax_named.barh([0, 1, 2], [3.0, 1.0, 2.0])
+    ax_named.set_yticks([0, 1, 2], ["first", "second", "a third name"])
+    ax_named.set_title("named rows (a fixed title)", fontsize=9)
+    fig.suptitle("suptitle")
+    return fig
+
+
+def _savefig_rgb(fig: Figure) -> np.ndarray:
+    FigureCanvasAgg(fig)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI)
+    return np.asarray(Image.open(buf))[..., :3]
+
+
+def test_figure_png_draws_the_pixels_savefig_draws() -> None:
+    ours = np.asarray(Image.open(io.BytesIO(figure_png(_figure()))))
+    assert ours.shape[2] == 3
+    assert np.array_equal(ours, _savefig_rgb(_figure()))
+
+
+def _as_mathtext_reads(label: str) -> str:
+    """What matplotlib's mathtext label reads as, written out independently."""
+    body = label.removeprefix("$\\mathdefault{").removesuffix("}$").replace("\\times", "×")
+    if "^{" not in body:
+        return body
+    head, exponent = body.split("^{")
+    digits = dict(zip("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹"))
+    return head + "".join(digits[c] for c in exponent.rstrip("}"))
+
+
+def test_plain_log_labels_read_as_matplotlibs() -> None:
+    values = [1e-14, 1e-3, 2e-3, 5e-1, 1.0, 10.0, 3e4, 1e6]
+    plain, mathtext = PlainLogFormatter(base=10.0), LogFormatterSciNotation(base=10.0)
+    got = [plain(v) for v in values]
+    assert got == [_as_mathtext_reads(mathtext(v)) for v in values]
+    assert got[:4] == ["10⁻¹⁴", "10⁻³", "2×10⁻³", "5×10⁻¹"]
+
+
+def test_log_axes_of_a_figure_get_plain_labels_and_other_formatters_stay() -> None:
+    fig = Figure(figsize=(6, 3), layout="constrained")
+    ax, ax_kept = fig.subplots(1, 2)
+    for a in (ax, ax_kept):
+        a.plot([1, 2, 3], [1e-4, 1e-2, 1.0])
+        a.set_yscale("log")
+    kept = FuncFormatter(lambda v, _: f"{v:g}")
+    ax_kept.yaxis.set_major_formatter(kept)
+    figure_png(fig)
+    labels = [t.get_text() for t in ax.get_yticklabels() if t.get_text()]
+    assert {"10⁻⁴", "10⁻³", "10⁻²", "10⁻¹", "10⁰"} <= set(labels)
+    assert not any("$" in s for s in labels)
+    assert ax_kept.yaxis.get_major_formatter() is kept
