@@ -10,7 +10,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation
 from PIL import Image
 
-from nlp_calib.outputs.plots.style import DPI, PlainLogFormatter, figure_png
+from nlp_calib.outputs.plots.style import DPI, PlainLogFormatter, envelope, figure_png
 
 
 def _figure() -> Figure:
@@ -72,3 +72,23 @@ def test_log_axes_of_a_figure_get_plain_labels_and_other_formatters_stay() -> No
     assert {"10⁻⁴", "10⁻³", "10⁻²", "10⁻¹", "10⁰"} <= set(labels)
     assert not any("$" in s for s in labels)
     assert ax_kept.yaxis.get_major_formatter() is kept
+
+
+def test_envelope_keeps_each_runs_extremes_ends_and_breaks() -> None:
+    rng = np.random.default_rng(3)
+    n, columns = 100_003, 1000
+    x, y = np.arange(n) * 0.01, rng.standard_normal(n)
+    y[5_000:5_004] = np.nan
+    tx, ty = envelope(x, y, columns)
+    assert columns < tx.size <= 5 * columns and np.all(np.diff(tx) > 0)
+    assert (tx[0], tx[-1]) == (x[0], x[-1])
+    kept = np.round(tx / 0.01).astype(int)
+    assert np.array_equal(ty, y[kept], equal_nan=True)  # points of the series, not new ones
+    assert np.isnan(ty).sum() == 1 and 5_000 <= kept[np.isnan(ty)][0] < 5_004
+    size = -(-n // columns)
+    for start in range(0, n, size):  # every run's lowest and highest point is drawn
+        run = y[start : start + size]
+        inside = (kept >= start) & (kept < start + size)
+        assert np.nanmax(ty[inside]) == np.nanmax(run) and np.nanmin(ty[inside]) == np.nanmin(run)
+    short = np.arange(10.0)
+    assert np.array_equal(envelope(short, short)[1], short)

@@ -6,7 +6,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
 
-from nlp_calib.outputs.plots.run import figure_png
+from nlp_calib.outputs.plots.style import envelope, figure_png
 from nlp_calib.results.series import OdometryTrack
 
 
@@ -57,9 +57,9 @@ def odometry_png(
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="best")
     std = np.sqrt(np.clip(np.diagonal(track.covariance, axis1=1, axis2=2), 0.0, None))
-    ax_s.plot(track.time_s, 1e3 * std[:, 0], label="σ x [mm]")
-    ax_s.plot(track.time_s, 1e3 * std[:, 1], label="σ y [mm]")
-    ax_s.plot(track.time_s, 1e3 * std[:, 2], label="σ θ [mrad]")
+    ax_s.plot(*envelope(track.time_s, 1e3 * std[:, 0]), label="σ x [mm]")
+    ax_s.plot(*envelope(track.time_s, 1e3 * std[:, 1]), label="σ y [mm]")
+    ax_s.plot(*envelope(track.time_s, 1e3 * std[:, 2]), label="σ θ [mrad]")
     ax_s.set_xlabel("time since the first record [s]")
     ax_s.set_ylabel("1σ (mm, mrad)")
     ax_s.set_title("growth of the odometry's uncertainty (input noise calibrated on its drift)")

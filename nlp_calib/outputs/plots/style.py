@@ -26,6 +26,37 @@ STYLES: tuple[Mapping[str, Any], ...] = (
 )
 
 
+#: Columns a time series is thinned to (:func:`envelope`): more than a panel's pixels across.
+COLUMNS = 2500
+
+
+def envelope(x: np.ndarray, y: np.ndarray, columns: int = COLUMNS) -> tuple[np.ndarray, np.ndarray]:
+    """A long series thinned to what a line of ``columns`` pixel columns can show: in each of
+    ``columns`` runs of consecutive points its first, lowest, highest and last point, and its
+    first NaN (where the line breaks), in their order. Drawing a million noisy points costs
+    seconds for the same pixels. Short series are returned as they are."""
+    x, y = np.asarray(x), np.asarray(y, dtype=float)
+    n = y.size
+    if n <= 4 * columns:
+        return x, y
+    size = -(-n // columns)
+    flat = np.full(size * columns, np.nan)
+    flat[:n] = y
+    rows = flat.reshape(columns, size)
+    gaps = np.isnan(rows)
+    start = np.arange(columns) * size
+    picks = [
+        start,
+        start + np.argmin(np.where(gaps, np.inf, rows), axis=1),
+        start + np.argmax(np.where(gaps, -np.inf, rows), axis=1),
+        np.minimum(start + size - 1, n - 1),
+        (start + np.argmax(gaps, axis=1))[gaps.any(axis=1)],
+    ]
+    keep = np.unique(np.concatenate(picks))
+    keep = keep[keep < n]
+    return x[keep], y[keep]
+
+
 _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 _EXPONENT = re.compile(r"\^\{(-?\d+)\}")
 
