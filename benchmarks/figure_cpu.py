@@ -52,7 +52,7 @@ def _simulated(folder: Path, name: str, records: int, trajectory: str) -> Path:
     return log
 
 
-def _runs(folder: Path, records: int) -> dict[str, CalibrationRun]:
+def _runs(folder: Path, records: int, only: str) -> dict[str, CalibrationRun]:
     demo = load_scenario(REPO / "scenarios" / "demo.yaml")
     cases = {
         "tricycle300": demo.with_dataset(_simulated(folder, "s300", 300, "s_curves")),
@@ -63,6 +63,8 @@ def _runs(folder: Path, records: int) -> dict[str, CalibrationRun]:
     if records:
         cases[f"tricycle{records}"] = demo.with_dataset(_simulated(folder, "long", records, "s_curves"))
     # The odometry figure (``nlp-calib odometry``) on the first case only.
+    if only:
+        cases = {name: sc for name, sc in cases.items() if name in only.split(",")}
     return {
         name: Calibration(sc).run(wanted=Wanted(series=True, odometry="gauss_newton" if i == 0 else None))
         for i, (name, sc) in enumerate(cases.items())
@@ -98,11 +100,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--records", type=int, default=0, help="also a simulated log of this many records")
+    parser.add_argument("--cases", default="", help="only these cases (comma-separated names)")
     parser.add_argument("--out", type=Path, default=None, help="folder for the PNGs (default: temporary)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or Path(tmp)
-        runs = _runs(Path(tmp), args.records)
+        runs = _runs(Path(tmp), args.records, args.cases)
         print(f"matplotlib set-up (import, one empty figure): {_warm_up():.3f} s CPU")
         print(f"{'case':<18}{'figure':<16}{'first [s]':>10}{'median [s]':>11}")
         total = 0.0

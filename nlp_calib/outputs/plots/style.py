@@ -87,17 +87,19 @@ def _plain_log_labels(fig: Figure) -> None:
                 axis.set_minor_formatter(PlainLogFormatter(base=10.0))
 
 
-def _fixed_titles(fig: Figure) -> None:
+def _fixed_titles(fig: Figure, offsets_known: bool) -> None:
     """Titles placed at the top of their axes once, where nothing can rise into them: matplotlib
     otherwise re-measures the whole y axis of every titled axes (for a multiplier text such as
     "1e-5" that could overlap the title) in each layout pass and in the draw, a tenth of a figure.
-    Only axes whose x ticks are below and whose y labels carry no multiplier (not a
-    ``ScalarFormatter``: log, fixed and plain labels) are fixed; the pixels are the same."""
+    Fixed: axes whose x ticks are below and whose y labels carry no multiplier: before the layout,
+    those not labelled by a ``ScalarFormatter`` (log, fixed and plain labels); once the layout has
+    set the multipliers (``offsets_known``), the rest without one. The pixels are the same."""
     for ax in fig.axes:
         title = ax.title
         if not title.get_text() or ax.xaxis.get_ticks_position() != "bottom":
             continue
-        if isinstance(ax.yaxis.get_major_formatter(), ScalarFormatter):
+        scalar = isinstance(ax.yaxis.get_major_formatter(), ScalarFormatter)
+        if scalar and not (offsets_known and not ax.yaxis.offsetText.get_text()):
             continue
         ax.set_title(title.get_text(), y=1.0, fontsize=title.get_fontsize())
 
@@ -113,11 +115,12 @@ def figure_png(fig: Figure) -> bytes:
     canvas = FigureCanvasAgg(fig)
     fig.dpi = DPI
     _plain_log_labels(fig)
-    _fixed_titles(fig)
+    _fixed_titles(fig, offsets_known=False)
     engine = fig.get_layout_engine()
     if engine is not None:
         engine.execute(fig)
         fig.set_layout_engine("none")
+        _fixed_titles(fig, offsets_known=True)
     canvas.draw()
     rgb = np.ascontiguousarray(np.asarray(canvas.buffer_rgba())[..., :3])
     buf = io.BytesIO()
