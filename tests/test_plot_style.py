@@ -10,7 +10,14 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation
 from PIL import Image
 
-from nlp_calib.outputs.plots.style import DPI, PlainLogFormatter, envelope, figure_png
+from nlp_calib.outputs.plots.style import (
+    DPI,
+    PlainLogFormatter,
+    envelope,
+    figure_png,
+    path_step,
+    thin_path,
+)
 
 
 def _figure() -> Figure:
@@ -92,3 +99,27 @@ def test_envelope_keeps_each_runs_extremes_ends_and_breaks() -> None:
         assert np.nanmax(ty[inside]) == np.nanmax(run) and np.nanmin(ty[inside]) == np.nanmin(run)
     short = np.arange(10.0)
     assert np.array_equal(envelope(short, short)[1], short)
+
+
+def test_thin_path_stays_within_its_step_of_every_point() -> None:
+    rng = np.random.default_rng(5)
+    n = 50_000
+    s = np.linspace(0.0, 30.0, n)
+    x = 5.0 * np.cos(s / 4) + 1e-3 * rng.standard_normal(n)
+    y = 3.0 * np.sin(s / 3) + 1e-3 * rng.standard_normal(n)
+    step = path_step(np.column_stack([x, y]))
+    assert step == max(np.ptp(x), np.ptp(y)) / 1600.0
+    tx, ty = thin_path(x, y, step)
+    assert tx.size < n // 4 and (tx[0], ty[0], tx[-1], ty[-1]) == (x[0], y[0], x[-1], y[-1])
+    keep = np.flatnonzero(np.isin(x, tx))
+    j = np.clip(np.searchsorted(keep, np.arange(n), side="right") - 1, 0, keep.size - 2)
+    a = np.column_stack([x[keep[j]], y[keep[j]]])
+    b = np.column_stack([x[keep[j + 1]], y[keep[j + 1]]])
+    p = np.column_stack([x, y])
+    u = np.clip(np.sum((p - a) * (b - a), axis=1) / np.maximum(np.sum((b - a) ** 2, axis=1), 1e-300), 0, 1)
+    off = np.linalg.norm(p - (a + u[:, None] * (b - a)), axis=1)
+    assert off.max() <= step  # the drawn line is everywhere within a step of the path
+    assert thin_path(x, y, 1e-6)[0] is x  # no stride keeps the line this close
+    gap = x.copy()
+    gap[100] = np.nan
+    assert thin_path(gap, y, step)[0] is gap  # a path with a gap is drawn as it is
