@@ -6,7 +6,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
 
-from nlp_calib.outputs.plots.run import figure_png
+from nlp_calib.outputs.plots.style import envelope, figure_png, path_step, thin_path
 from nlp_calib.results.series import OdometryTrack
 
 
@@ -18,10 +18,12 @@ def odometry_png(
     fig = Figure(figsize=(14, 6))
     ax, ax_s = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
     P = track.T_world_base
+    step = path_step(P)
     if reference is not None:
         # Dots, not a line: a tracker outlier would otherwise draw a long spike.
-        ax.plot(reference[:, 0], reference[:, 1], ".", color="0.6", ms=2, label="base pose from the tracker")
-    ax.plot(P[:, 0], P[:, 1], color="C0", lw=1.2, label="calibrated odometry (base link)")
+        dots = thin_path(reference[:, 0], reference[:, 1], step)
+        ax.plot(*dots, ".", color="0.6", ms=2, label="base pose from the tracker")
+    ax.plot(*thin_path(P[:, 0], P[:, 1], step), color="C0", lw=1.2, label="calibrated odometry (base link)")
     picks = np.linspace(0, P.shape[0] - 1, ellipses).astype(int)[1:]
     largest = max(float(np.sqrt(np.max(np.linalg.eigvalsh(track.covariance[k, :2, :2])))) for k in picks)
     extent = float(np.max(np.ptp(P[:, :2], axis=0)))
@@ -57,9 +59,9 @@ def odometry_png(
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="best")
     std = np.sqrt(np.clip(np.diagonal(track.covariance, axis1=1, axis2=2), 0.0, None))
-    ax_s.plot(track.time_s, 1e3 * std[:, 0], label="σ x [mm]")
-    ax_s.plot(track.time_s, 1e3 * std[:, 1], label="σ y [mm]")
-    ax_s.plot(track.time_s, 1e3 * std[:, 2], label="σ θ [mrad]")
+    ax_s.plot(*envelope(track.time_s, 1e3 * std[:, 0]), label="σ x [mm]")
+    ax_s.plot(*envelope(track.time_s, 1e3 * std[:, 1]), label="σ y [mm]")
+    ax_s.plot(*envelope(track.time_s, 1e3 * std[:, 2]), label="σ θ [mrad]")
     ax_s.set_xlabel("time since the first record [s]")
     ax_s.set_ylabel("1σ (mm, mrad)")
     ax_s.set_title("growth of the odometry's uncertainty (input noise calibrated on its drift)")

@@ -9,7 +9,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
-from nlp_calib.outputs.plots.style import STYLES, figure_png
+from nlp_calib.outputs.plots.style import STYLES, envelope, figure_png
 from nlp_calib.results.series import ResidualSeries, RunSeries
 
 #: Bins across the calibrated residuals' range: the calibrated peak spans tens of bins.
@@ -115,8 +115,7 @@ def residuals_time_png(series: RunSeries, solver: str, solver_name: str, title: 
         e, thr = errors[i], float(thresholds[i])
         out = np.abs(e) > thr
         ax.plot(
-            t_line,
-            np.insert(e.astype(float), gap, np.nan),
+            *envelope(t_line, np.insert(e.astype(float), gap, np.nan)),
             color="tab:blue",
             linewidth=0.8,
             label=f"{solver_name}'s residual",

@@ -20,7 +20,7 @@ from matplotlib.ticker import FuncFormatter, MaxNLocator, NullLocator
 from matplotlib.transforms import blended_transform_factory
 
 from nlp_calib.core.numeric import wrap_angle
-from nlp_calib.outputs.plots.style import STYLES, figure_png
+from nlp_calib.outputs.plots.style import STYLES, envelope, figure_png, path_step, thin_path
 from nlp_calib.results import IterationRecord
 from nlp_calib.results.series import ModelCheckSeries, Track, TrackSeries
 
@@ -76,22 +76,25 @@ def _tracks(ax: Axes, ax_err: Axes, series: TrackSeries) -> tuple[np.ndarray, np
     and the converged tracks."""
     tr, t, good = series.tracker, series.time_s - series.time_s[0], _good(series)
     # The poses left out (tracker jumps) are not drawn: a line through each would be a spike.
-    ax.plot(tr[good, 0], tr[good, 1], label="tracker (measured sensor pose)", **_TRACKER)
     # Frame the tracker and the calibrated tracks; a run-away track (the uncalibrated one on a
     # real log drifts by tens of metres) is drawn but not allowed to shrink the others to a dot.
     kept = [tr[good]] + [tk.T_world_sensor for tk in series.tracks[1:] if tk.converged]
     xy = np.concatenate([P[:, :2] for P in kept])
     lo, hi = xy.min(axis=0), xy.max(axis=0)
+    step = path_step(xy)
+    ax.plot(*thin_path(tr[good, 0], tr[good, 1], step), label="tracker (measured sensor pose)", **_TRACKER)
     for track, style in zip(series.tracks, _STYLES):
         P = track.T_world_sensor
         outside = _far_outside(P, lo, hi)
         ax.plot(
-            P[:, 0], P[:, 1], label=_label(track, outside), scalex=not outside, scaley=not outside, **style
-        )
+            *thin_path(P[:, 0], P[:, 1], step), label=_label(track, outside), scalex=not outside,
+            scaley=not outside, **style,
+        )  # fmt: skip
         if not outside:
             ax.plot(P[-1, 0], P[-1, 1], marker="s", markersize=7, color=style["color"], linestyle="none")
         err = np.linalg.norm(P[1:, :2] - tr[1:, :2], axis=1)  # record 0 is the shared start: 0
-        ax_err.plot(t[1:], np.where((err > 0) & good[1:], err, np.nan), label=track.label, **style)
+        shown = np.where((err > 0) & good[1:], err, np.nan)
+        ax_err.plot(*envelope(t[1:], shown), label=track.label, **style)
     ax.plot(tr[-1, 0], tr[-1, 1], marker="s", markersize=7, color="0.15", linestyle="none")
     ax.plot(tr[0, 0], tr[0, 1], marker="o", markersize=9, color="black", linestyle="none", label="start")
     ax.plot([], [], marker="s", color="0.4", linestyle="none", label="end (colour of each track)")
@@ -106,7 +109,7 @@ def _marks(ax: Axes, ax_err: Axes, series: TrackSeries, restarted: Track | None)
         err = np.linalg.norm(P[1:, :2] - tr[1:, :2], axis=1)
         fair = f"{restarted.label} (segment ATE {restarted.ate_mean:.3f} m)"
         shown = np.where((err > 0) & good[1:], err, np.nan)
-        ax_err.plot(t[1:], shown, color="tab:cyan", linewidth=1.0, label=fair)
+        ax_err.plot(*envelope(t[1:], shown), color="tab:cyan", linewidth=1.0, label=fair)
     _jumps(ax, ax_err, series, good)
     labelled = False
     for k, kind in series.faults:
@@ -368,10 +371,10 @@ def model_check_png(series: ModelCheckSeries, title: str) -> bytes:
     ax_pos = fig.add_subplot(grid[0, 1])
     ax_rot = fig.add_subplot(grid[1, 1], sharex=ax_pos)
     v, o = series.vendor, series.ours
-    ax.plot(v[:, 0], v[:, 1], label="vendor odometry (log's model_pose)", **_TRACKER)
+    step = path_step(v, o)
+    ax.plot(*thin_path(v[:, 0], v[:, 1], step), label="vendor odometry (log's model_pose)", **_TRACKER)
     ax.plot(
-        o[:, 0],
-        o[:, 1],
+        *thin_path(o[:, 0], o[:, 1], step),
         label=f"our model ({series.integration} integration)",
         **{**_STYLES[2], "color": "tab:blue"},
     )
@@ -395,8 +398,9 @@ def model_check_png(series: ModelCheckSeries, title: str) -> bytes:
     for P, words, style in _model_check_tracks(series):
         dpos = np.linalg.norm(P[:, :2] - v[:, :2], axis=1)
         drot = wrap_angle(P[:, 2] - v[:, 2])
-        ax_pos.plot(t, dpos, label=f"{words}: max {dpos.max():.3g} m, final {dpos[-1]:.3g} m", **style)
-        ax_rot.plot(t, drot, label=f"{words}: max |Δθ| {np.abs(drot).max():.3g} rad", **style)
+        said_pos = f"{words}: max {dpos.max():.3g} m, final {dpos[-1]:.3g} m"
+        ax_pos.plot(*envelope(t, dpos), label=said_pos, **style)
+        ax_rot.plot(*envelope(t, drot), label=f"{words}: max |Δθ| {np.abs(drot).max():.3g} rad", **style)
         said.append(float(dpos.max()))
     ax_pos.set_ylabel("position difference [m]")
     why = ""
