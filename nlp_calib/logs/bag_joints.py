@@ -152,7 +152,7 @@ def fresh_positions(time_s: np.ndarray, positions: np.ndarray) -> tuple[np.ndarr
     the stream read between its messages is a staircase whose steps land late (a pivot's start or
     stop then disagrees with the reference as slip would). A reading is fresh at the message where
     it changed. The driver's update period is its busiest joint's median time between changes (a
-    wheel while the robot moves): a joint that rests (a steering joint held on a circle) says
+    wheel while the robot moves): a joint that rests (a steered wheel's angle held on a circle) says
     nothing of its driver. Where that period spans :data:`SLOW_DRIVER_MESSAGES` messages or more,
     each joint's held messages are interpolated from its fresh ones, except a hold
     :data:`STANDSTILL_UPDATES` update periods long or longer, where the joint stood still (its last
