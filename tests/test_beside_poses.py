@@ -16,11 +16,13 @@ import pytest
 import yaml
 from conftest import cli
 
-from nlp_calib.logs.joint_log import format_joint_csv
-from nlp_calib.logs.tum import format_tum
 from nlp_calib.pipeline import scenario_from_mapping
 from nlp_calib.pipeline.preflight import preflight
-from nlp_calib.simulation.beside import simulate_beside, tracker_poses, write_beside_simulation
+from nlp_calib.simulation.beside import (
+    simulate_beside,
+    write_beside_simulation,
+    write_tracked_files,
+)
 from nlp_calib.simulation.imu import ImuSimulationOptions
 from nlp_calib.simulation.lidar import LidarSimulationOptions
 from nlp_calib.simulation.options import DriveShape
@@ -63,17 +65,7 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, flo
     gyro = ImuSimulationOptions(seed=37, truth={"imu_roll": ROLL}, stamp_offset_s=GYRO_LATE, frame=IMU)
     sim = simulate_beside(lidar, gyro)
     bag, truth_file = write_beside_simulation(sim, folder / "drive", tracker=True)
-    ns = lambda t: np.round(np.asarray(t) * 1e9).astype(np.int64)  # noqa: E731
-    planar = tracker_poses(sim.lidar)
-    half = planar[:, 2] / 2
-    tum = np.column_stack([planar[:, :2], np.zeros((len(planar), 3)), np.sin(half), np.cos(half)])
-    (folder / "drive.tum").write_text(format_tum(ns(sim.lidar.scan_time_s), tum))
-    joints = format_joint_csv(ns(sim.lidar.joint_time_s), sim.lidar.joint_names, sim.lidar.joint_positions)
-    (folder / "drive.csv").write_text(joints)
-    rows = (
-        f"{t:.9f},{w[0]:.17g},{w[1]:.17g},{w[2]:.17g}\n" for t, w in zip(sim.imu.imu_time_s, sim.imu.rates)
-    )
-    (folder / "gyro.csv").write_text("t,wx,wy,wz\n" + "".join(rows))
+    write_tracked_files(sim, folder)
     truth = {RADIANS.get(k, k): v for k, v in json.loads(truth_file.read_text())["params"].items()}
     return bag, truth
 

@@ -24,8 +24,6 @@ import nlp_calib.pipeline.preflight as stages
 from nlp_calib.analysis.determinacy import information, standing
 from nlp_calib.analysis.plan import candidate_of, drive_facts, simulated
 from nlp_calib.core.numeric import wrap_angle
-from nlp_calib.logs.joint_log import format_joint_csv
-from nlp_calib.logs.tum import format_tum
 from nlp_calib.outputs import registry
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.pipeline import Calibration, load_scenario
@@ -42,7 +40,7 @@ from nlp_calib.results.preflight import (
     WEAKLY,
     Preflight,
 )
-from nlp_calib.simulation.beside import simulate_beside, tracker_poses
+from nlp_calib.simulation.beside import simulate_beside, write_tracked_files
 from nlp_calib.simulation.imu import ImuSimulationOptions
 from nlp_calib.simulation.lidar import LidarSimulationOptions
 from nlp_calib.solvers import ProblemEvaluator
@@ -381,16 +379,7 @@ def _gyro_beside_poses(folder: Path) -> Path:
     gyro's 0.1 s intervals and the tracker's 10 Hz poses make windows of several record lengths."""
     lidar = LidarSimulationOptions(duration_s=20.0, seed=71, stamp_offset_s=0.02, beams=16)
     sim = simulate_beside(lidar, ImuSimulationOptions(seed=71, stamp_offset_s=0.03))
-    ns = lambda t: np.round(np.asarray(t) * 1e9).astype(np.int64)  # noqa: E731
-    planar, half = tracker_poses(sim.lidar), tracker_poses(sim.lidar)[:, 2] / 2
-    tum = np.column_stack([planar[:, :2], np.zeros((len(planar), 3)), np.sin(half), np.cos(half)])
-    (folder / "drive.tum").write_text(format_tum(ns(sim.lidar.scan_time_s), tum))
-    joints = format_joint_csv(ns(sim.lidar.joint_time_s), sim.lidar.joint_names, sim.lidar.joint_positions)
-    (folder / "drive.csv").write_text(joints)
-    rows = (
-        f"{t:.9f},{w[0]:.17g},{w[1]:.17g},{w[2]:.17g}\n" for t, w in zip(sim.imu.imu_time_s, sim.imu.rates)
-    )
-    (folder / "gyro.csv").write_text("t,wx,wy,wz\n" + "".join(rows))
+    write_tracked_files(sim, folder)
     path = folder / "beside.yaml"
     path.write_text(
         "name: beside\nmodel: diff_drive\nsensor: {mount: planar, beside: gyro}\ninitial_guess: auto\n"

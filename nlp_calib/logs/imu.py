@@ -147,6 +147,13 @@ def read_imu(path: str | Path, topic: str, receive: bool = False) -> GyroRates:
     return GyroRates(source, stamps, rates, at, frame or "imu_link")
 
 
+def format_gyro_csv(time_s: np.ndarray, rates: np.ndarray) -> str:
+    """A gyro's CSV as :func:`read_gyro_csv` reads it: the header row ``t,wx,wy,wz``, then a row
+    per sample (s; rad/s in the IMU's frame, to the float's last digit)."""
+    rows = (f"{t:.9f},{w[0]:.17g},{w[1]:.17g},{w[2]:.17g}\n" for t, w in zip(time_s, rates))
+    return "t,wx,wy,wz\n" + "".join(rows)
+
+
 def read_gyro_csv(path: str | Path) -> GyroRates:
     """A gyro's CSV: a header row ``t,wx,wy,wz``, then a row per sample (s, read to the
     nanosecond; rad/s in the IMU's frame); ``#`` lines are comments."""

@@ -23,6 +23,9 @@ import numpy as np
 
 from nlp_calib.core.errors import OptionsError
 from nlp_calib.core.files import atomic_write_text
+from nlp_calib.logs.imu import format_gyro_csv
+from nlp_calib.logs.joint_log import format_joint_csv
+from nlp_calib.logs.tum import format_tum
 from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.sensors.beside import GYRO_LAG
 from nlp_calib.simulation.camera import DEFAULT_MOUNT as CAMERA_MOUNT
@@ -156,10 +159,7 @@ def write_camera_beside_simulation(
     """The camera's TUM file and joint CSV, the gyro's CSV (``t,wx,wy,wz``) and the truth JSON."""
     tum, joints, gyro, truth = camera_beside_paths(tum_path)
     write_camera_simulation(sim.camera, tum)
-    rows = (
-        f"{t:.9f},{w[0]:.17g},{w[1]:.17g},{w[2]:.17g}\n" for t, w in zip(sim.imu.imu_time_s, sim.imu.rates)
-    )
-    atomic_write_text(gyro, "t,wx,wy,wz\n" + "".join(rows))
+    atomic_write_text(gyro, format_gyro_csv(sim.imu.imu_time_s, sim.imu.rates))
     atomic_write_text(truth, json.dumps(sim.truth_dict(), indent=2) + "\n")
     return tum, joints, gyro, truth
 
@@ -217,6 +217,23 @@ def write_text_log_gyro(
     w = turn[:, None] * imu_rotation(gyro)[2][None, :] + bias
     w += np.random.default_rng(seed).normal(0.0, rate_noise, w.shape)
     stamps = float(sim.time_ns[0]) * 1e-9 + t + late_s
-    rows = (f"{s:.9f},{a:.17g},{b:.17g},{c:.17g}\n" for s, (a, b, c) in zip(stamps, w))
-    atomic_write_text(Path(path), "t,wx,wy,wz\n" + "".join(rows))
+    atomic_write_text(Path(path), format_gyro_csv(stamps, w))
     return Path(path)
+
+
+def write_tracked_files(sim: BesideSimulation, folder: str | Path) -> tuple[Path, Path, Path]:
+    """The tracked base beside its gyro as files without a bag: ``drive.tum`` (:func:`tracker_poses`
+    at the scans' stamps, level), ``drive.csv`` (the joints) and ``gyro.csv``."""
+    folder = Path(folder)
+    ns = lambda t: np.round(np.asarray(t) * 1e9).astype(np.int64)  # noqa: E731
+    planar = tracker_poses(sim.lidar)
+    half = planar[:, 2] / 2
+    tum = np.column_stack([planar[:, :2], np.zeros((len(planar), 3)), np.sin(half), np.cos(half)])
+    paths = folder / "drive.tum", folder / "drive.csv", folder / "gyro.csv"
+    atomic_write_text(paths[0], format_tum(ns(sim.lidar.scan_time_s), tum))
+    lidar = sim.lidar
+    atomic_write_text(
+        paths[1], format_joint_csv(ns(lidar.joint_time_s), lidar.joint_names, lidar.joint_positions)
+    )
+    atomic_write_text(paths[2], format_gyro_csv(sim.imu.imu_time_s, sim.imu.rates))
+    return paths
