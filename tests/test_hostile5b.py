@@ -209,6 +209,35 @@ def test_the_data_as_they_are_raise_no_unit_finding(tmp_path: Path) -> None:
     assert _preflight_units(_motions_scenario(tmp_path, duration=20.0)) == ()
 
 
+def test_a_pivot_in_place_is_no_heading_in_degrees(tmp_path: Path) -> None:
+    """A differential drive turning half a turn on the spot (a UMBmark-style session's pivot run),
+    its tracker 20 mm off the axle's middle: no curve is gentle in radians, and with the heading
+    read as degrees the tracker's small circle looked like gentle travel of a 8 mm wheel on a 40 mm
+    track (a real OptiOdom session was stopped with exit 5 so). The wheels turn opposite ways
+    there: a pivot, whatever the heading's unit; the radians are right and nothing is found."""
+    from nlp_calib.logs.joint_log import format_joint_csv
+    from nlp_calib.logs.tum import format_tum
+
+    radius, separation, offset = 0.042, 0.2, 0.02
+    t = np.arange(0.0, 11.0, 0.05)
+    heading = 0.5 * np.pi * (1.0 - np.cos(np.pi * t / t[-1]))  # 0 to π, the turn rate smooth
+    wheel = heading * separation / (2.0 * radius)
+    ns = (1_700_000_000.0 + t) * 1e9
+    stamps = np.round(ns).astype(np.int64)
+    poses = np.zeros((t.size, 7))
+    poses[:, 0], poses[:, 1] = offset * np.cos(heading), offset * np.sin(heading)
+    poses[:, 5], poses[:, 6] = np.sin(heading / 2.0), np.cos(heading / 2.0)
+    (tmp_path / "pivot.tum").write_text(format_tum(stamps, poses))
+    (tmp_path / "pivot.csv").write_text(format_joint_csv(stamps, ("left", "right"), np.c_[-wheel, wheel]))
+    sc = tmp_path / "pivot.yaml"
+    sc.write_text(
+        "name: pivot\nmodel: diff_drive\ndataset: {joints: pivot.csv, poses: pivot.tum, encoders: "
+        "{left_wheel: left, right_wheel: right}}\ninitial_guess: auto\nsolvers: [gauss_newton]\n"
+    )
+    words = _preflight_units(sc)
+    assert not any("degrees" in w for w in words), words
+
+
 def test_a_wheel_share_check_names_no_robot_of_large_wheels(tmp_path: Path) -> None:
     """A wheelchair's drive wheels (a radius about half the track) are no unit mistake."""
     from nlp_calib.analysis.units import MAX_RADIUS_SHARE, TRACK_RANGE, _reference_units

@@ -151,9 +151,10 @@ def _wheel_degrees(log: Log, model: KinematicModel, xy: np.ndarray, heading: np.
         return []
     scales = _scales(log, counters, xy, heading)
     if scales is None:
-        # No gentle curve: a heading in degrees turns 57 times too fast for any (their finding).
+        # No gentle curve: a heading in degrees turns 57 times too fast for any (their finding),
+        # unless the wheels turn opposite ways there: a pivot on the spot, in any unit.
         degrees = _scales(log, counters, xy, heading * DEGREE)
-        if degrees is None or not degrees[2]:
+        if degrees is None or not degrees[2] or _pivoting(log, counters, xy, heading * DEGREE):
             return []
         return _reference_units(degrees[0], degrees[1] * DEGREE)
     radius, track, agrees = scales
@@ -207,6 +208,17 @@ def _scales(
         with np.errstate(invalid="ignore", divide="ignore"):
             agrees = bool(abs(np.corrcoef(apart, dth)[0, 1]) >= TURNING_AGREES)
     return radius, _track_width(log, counters, radius, k, heading), agrees
+
+
+def _pivoting(log: Log, counters: list[str], xy: np.ndarray, heading: np.ndarray) -> bool:
+    """Whether the first two wheels turn opposite ways more than together on the steps gentle at
+    ``heading``: the robot pivots there (a tracker off the axle's middle draws a small circle),
+    where on a gentle curve both wheels of a base narrower than 2 m turn the same way."""
+    if len(counters) < 2:
+        return False
+    k, gentle = _gentle(log.time_s, xy, heading)
+    a, b = (np.diff(_positions(log, n)[k])[gentle] for n in counters[:2])
+    return float(np.sum(np.abs(a + b))) < float(np.sum(np.abs(a - b)))
 
 
 def _reference_units(radius: float, track: float) -> list[UnitFinding]:
