@@ -361,7 +361,7 @@ _MOTIONS_LOCK = threading.Lock()
 def _digest(values: np.ndarray) -> tuple[object, ...]:
     """What identifies an array's contents: its type, shape and a hash of its bytes."""
     v = np.ascontiguousarray(values)
-    return (v.dtype.str, v.shape, hashlib.blake2b(memoryview(v).cast("B"), digest_size=16).digest())
+    return (v.dtype.str, v.shape, hashlib.blake2b(v.tobytes(), digest_size=16).digest())
 
 
 def joined(parts: Sequence[ResidualData]) -> ResidualData:

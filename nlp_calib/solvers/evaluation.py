@@ -182,6 +182,8 @@ def _same_windows(a: ResidualData, b: ResidualData) -> bool:
 class ProblemEvaluator:
     """The problem's Functions mapped over the windows of ``data``, ready to call with a free vector."""
 
+    _data: ResidualData
+
     def __init__(
         self,
         fns: ProblemFunctions,
