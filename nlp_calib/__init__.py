@@ -30,8 +30,11 @@ def _started_as_the_command() -> bool:
 # The command's first instruction: a signal from here on ends it quietly (core/interrupts.py).
 if _started_as_the_command():
     from nlp_calib.core import interrupts as _interrupts
+    from nlp_calib.core import threads as _threads
 
     _interrupts.install()
+    # Before numpy loads: its BLAS reads the environment once.
+    _threads.native_one_thread_by_default()
 
 import importlib  # noqa: E402
 from typing import TYPE_CHECKING, Any  # noqa: E402

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import yaml
 
+from nlp_calib.core.threads import native_one_thread_by_default
 from nlp_calib.logs import Log, parse_log
 from nlp_calib.models import get_model
 from nlp_calib.pipeline import Scenario, load_scenario, scenario_from_mapping
@@ -40,6 +41,9 @@ def _cache_bytecode_for_children() -> None:
 
 
 _cache_bytecode_for_children()
+# The test workers (started after this file is read) and the tool's processes the tests start load
+# their native libraries on one thread, as the command does: two workers on two cores, no spinning.
+native_one_thread_by_default()
 
 
 def _find_real_log() -> Path:

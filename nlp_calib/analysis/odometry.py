@@ -7,9 +7,11 @@ the intervals with ``mapaccum``. ``σ_u`` is the encoders' noise on the model in
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import casadi as ca
 import numpy as np
 
 from nlp_calib.analysis.uncertainty import nnls_small
@@ -33,11 +35,18 @@ def propagate(
     states = np.empty((n + 1, 12))
     states[0] = state0
     if n:
-        fold = fns.odometry_step.mapaccum("odometry", n)
+        fold = _fold(fns.odometry_step, n)
         reps = np.repeat(np.asarray(params, dtype=float).reshape(-1, 1), n, axis=1)
         sig = np.repeat(np.asarray(input_std, dtype=float).reshape(-1, 1), n, axis=1)
         states[1:] = np.asarray(fold(state0, reps, inputs, sig)).T
     return states[:, :3], states[:, 3:].reshape(-1, 3, 3, order="F")
+
+
+@functools.lru_cache(maxsize=8)
+def _fold(step: ca.Function, n: int) -> ca.Function:
+    """``step`` folded over ``n`` intervals, built once per length: the covariance per input row
+    and the noise model propagate the same log several times."""
+    return step.mapaccum("odometry", n)
 
 
 #: Segment lengths (records) over which the odometry's drift is compared with the tracker's.

@@ -17,6 +17,8 @@ and its ``z`` is the increment as measured, not a motion between two poses.
 from __future__ import annotations
 
 import functools
+import hashlib
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -335,7 +337,31 @@ def tracker_motions(
     """The tracker's motion ``T(p_a)⁻¹·T(p_b)`` for each pair of records, ``(z rows, len(a))``."""
     if a.size == 0:
         return np.zeros((fns.sensor.z_rows, 0))
-    return over_columns(fns.between, T_world_sensor[a].T, T_world_sensor[b].T)[0]
+    # The lag's fits and profile build the same windows of the same poses once per lag (only the
+    # encoders are re-sampled): their motions are computed once, keyed by the arrays' contents.
+    key = (fns.between, *(_digest(v) for v in (T_world_sensor, a, b)))
+    with _MOTIONS_LOCK:
+        found = _MOTIONS.pop(key, None)
+    if found is None:
+        found = over_columns(fns.between, T_world_sensor[a].T, T_world_sensor[b].T)[0]
+        found.flags.writeable = False
+    with _MOTIONS_LOCK:
+        _MOTIONS[key] = found
+        while len(_MOTIONS) > _MOTIONS_KEPT:
+            del _MOTIONS[next(iter(_MOTIONS))]
+    return found.copy()
+
+
+#: The last few :func:`tracker_motions` (most recent last): a log's, and a fold's or a part's.
+_MOTIONS: dict[tuple[object, ...], np.ndarray] = {}
+_MOTIONS_KEPT = 4
+_MOTIONS_LOCK = threading.Lock()
+
+
+def _digest(values: np.ndarray) -> tuple[object, ...]:
+    """What identifies an array's contents: its type, shape and a hash of its bytes."""
+    v = np.ascontiguousarray(values)
+    return (v.dtype.str, v.shape, hashlib.blake2b(v.tobytes(), digest_size=16).digest())
 
 
 def joined(parts: Sequence[ResidualData]) -> ResidualData:

@@ -165,8 +165,24 @@ class _Last:
     derivatives: tuple[bytes, tuple[float, np.ndarray, np.ndarray]] | None = None
 
 
+def _same_windows(a: ResidualData, b: ResidualData) -> bool:
+    """Whether ``b`` has ``a``'s windows (their records and tracker motions) and layout, its
+    inputs and clock data aside."""
+    return (
+        a.n_residuals == b.n_residuals
+        and a.inputs.shape == b.inputs.shape
+        and len(a.logs) == len(b.logs)
+        and (a.clock is None) == (b.clock is None)
+        and np.array_equal(a.starts, b.starts)
+        and np.array_equal(a.stops, b.stops)
+        and np.array_equal(a.z, b.z)
+    )
+
+
 class ProblemEvaluator:
     """The problem's Functions mapped over the windows of ``data``, ready to call with a free vector."""
+
+    _data: ResidualData
 
     def __init__(
         self,
@@ -193,9 +209,17 @@ class ProblemEvaluator:
 
     def bind(self, data: ResidualData) -> None:
         """Evaluate on the windows of ``data`` from now on."""
+        kept: _Windows | None = getattr(self, "_windows", None)
+        same = kept is not None and _same_windows(self._data, data)
         self._data = data
-        self._windows: _Windows | None = None
         self._last = _Last()
+        if kept is not None and same:
+            # The same windows on other inputs (the lag's re-samplings): the buffers and mapped
+            # Functions bound to them stay, their contents are written in place.
+            kept.motion.set_inputs(data.inputs)
+            kept.window_data[:] = pad_columns(data.data(), kept.n_padded)
+            return
+        self._windows: _Windows | None = None
 
     def release(self) -> None:
         """Let go of what is bound to the windows (their padded data, the prefix scans' and the
