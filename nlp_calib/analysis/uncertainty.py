@@ -23,7 +23,12 @@ interval ``j``. Every interval ``j`` of a window moves its motion through the wi
 noise a window collects, ``Σ_j D_j Σ_u D_jᵀ``, are differences of running sums: the cost is
 linear in the number of windows whatever their length. The tracker's variances are estimated
 from the squared residuals by non-negative least squares (method of moments, corrected for the
-fitted degrees of freedom); the input noise is given. ``M`` maps the manifold perturbation to
+fitted degrees of freedom) over the windows the noise explains; the input noise is given. A robust
+kernel's threshold is on a window's whole residual: a window of six rows of noise alone lies beyond
+δ = 3 (its squared norm over 9) one time in six. Such a window is counted with the noise (its pull,
+weighted by the kernel, propagated from its poses and inputs as every window's is) where its squared
+residual lies within the 99.9 % point of what the noise gives it; only one beyond that adds its own
+score as it is (an error the noise does not explain). ``M`` maps the manifold perturbation to
 plain parameter coordinates.
 
 A reference that measures its own motions (increments: a scan matcher's) carries white noise on
@@ -38,7 +43,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -211,10 +216,11 @@ def estimate(
     residuals = _Residuals(e=e, weight=weight, use=use, Omega=evaluator.omega)
     for w, sens in itertools.chain([first], blocks):
         sums.add(w, sens, residuals, running)
-    mm = fns.error_rows * int(use.sum())
-    dof = max(mm - fns.n_free, 1)
-    var = nnls_gram(sums.gram, sums.proj, sums.yy) * (mm / dof)
-    meat = sums.meat(var)
+    var, explained = sums.variances((fns.error_rows, fns.n_free), int(use.sum()), residuals.Omega)
+    use = use.copy()
+    use[sums.beyond.index[explained]] = True
+    dof = max(fns.error_rows * int(use.sum()) - fns.n_free, 1)
+    meat = sums.meat(var, explained)
     # The data term is not divided by the residuals' variance σ², so a prior of weight σ²/std²
     # (the scenario's, weighed so; the bounds' below) adds σ² times that weight to the score's
     # covariance.
@@ -523,6 +529,75 @@ class _InputRows(_Rows):
         self.last_Q = Q_last[-1].copy()
 
 
+#: The normal deviate of the point of its noise's distribution within which a window's squared
+#: residual is explained by the noise (99.9 %), and the passes that settle which windows are.
+EXPLAINED_Z = 3.0902
+MAX_PASSES = 8
+
+
+def chi2_point(k: np.ndarray, z: float) -> np.ndarray:
+    """χ²(k)'s point at the normal deviate ``z`` (Wilson-Hilferty; ``k`` may be fractional: a sum of
+    unequal squares' effective degrees of freedom)."""
+    k = np.maximum(np.asarray(k, dtype=float), 1e-9)
+    return np.asarray(k * np.clip(1.0 - 2.0 / (9.0 * k) + z * np.sqrt(2.0 / (9.0 * k)), 0.0, None) ** 3)
+
+
+@dataclass(frozen=True)
+class _Window:
+    """Windows beyond the kernel's threshold: their indices, each row's coefficients of the noise
+    groups' variances ``(n, rows, groups)``, known input noise and squared error ``(n, rows)``, and
+    each one's own score ``(n, n_free)``."""
+
+    index: np.ndarray
+    coef: np.ndarray
+    known: np.ndarray
+    e2: np.ndarray
+    score: np.ndarray
+
+    def explained(self, var: np.ndarray, Omega: np.ndarray) -> np.ndarray:
+        """Whether each window's ``s = eᵀΩe`` lies within the 99.9 % point of what the noise
+        (``var`` per group, the inputs' known) gives it: a weighted sum of squares, read as
+        χ² of its effective degrees of freedom ``(Σλ)²/Σλ²`` scaled to its mean ``Σλ``."""
+        lam = Omega[None, :] * np.clip(self.known + self.coef @ var, 0.0, None)
+        total, square = lam.sum(axis=1), (lam**2).sum(axis=1)
+        k = np.where(square > 0, total**2 / np.where(square > 0, square, 1.0), 1.0)
+        s = (Omega[None, :] * self.e2).sum(axis=1)
+        return np.asarray((total > 0) & (s <= total * chi2_point(k, EXPLAINED_Z) / k))
+
+
+@dataclass
+class _Beyond:
+    """The windows beyond the kernel's threshold, collected block by block (see :class:`_Window`)."""
+
+    parts: list[tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]] = field(
+        default_factory=list
+    )
+
+    def add(
+        self, index: np.ndarray, rows: tuple[np.ndarray, np.ndarray, np.ndarray], score: np.ndarray
+    ) -> None:
+        if index.size:
+            self.parts.append((index, rows, score))
+
+    @property
+    def index(self) -> np.ndarray:
+        return np.concatenate([p[0] for p in self.parts]) if self.parts else np.zeros(0, dtype=int)
+
+    def arrays(self, groups: int, rows: int, n_free: int) -> _Window:
+        """Every window collected (empty arrays of these sizes where none is)."""
+        if not self.parts:
+            z = np.zeros
+            return _Window(z(0, dtype=int), z((0, rows, groups)), z((0, rows)), z((0, rows)), z((0, n_free)))
+        cat = np.concatenate
+        return _Window(
+            cat([p[0] for p in self.parts]),
+            cat([p[1][0] for p in self.parts]),
+            cat([p[1][1] for p in self.parts]),
+            cat([p[1][2] for p in self.parts]),
+            cat([p[2] for p in self.parts]),
+        )
+
+
 @dataclass
 class _Sums:
     """What the pass over the windows collects: the method-of-moments system for the tracker's
@@ -530,7 +605,7 @@ class _Sums:
     pose: summed as each noise component's Gram ``KK``, row by row once no later window adds to a
     row), the input noise map as differences over the intervals (``C``: its running sum's map
     through each interval's ``D`` summed as the score's covariance ``inputs``, the same way) and the
-    outliers' own scores."""
+    windows beyond the kernel's threshold (their rows of the method of moments, their own scores)."""
 
     groups: tuple[tuple[int, ...], ...]
     gram: np.ndarray
@@ -538,7 +613,9 @@ class _Sums:
     yy: float
     K: _PoseRows
     C: _InputRows
-    outliers: np.ndarray
+    #: The windows beyond the kernel's threshold (whether the noise explains each is decided once
+    #: the variances are known).
+    beyond: _Beyond
     starts: np.ndarray
     #: Per window, the least first record of the windows from it on: rows below it are final.
     final: np.ndarray
@@ -573,7 +650,7 @@ class _Sums:
             yy=0.0,
             K=_PoseRows(data.T_world_sensor.shape[0], (n, k), distinct),
             C=_InputRows(n_int + 1, (n, m), distinct, (D, *noise)),
-            outliers=np.zeros((n, n)),
+            beyond=_Beyond(),
             starts=a,
             final=np.minimum.accumulate(a[::-1])[::-1] if a.size else a,
             stops=b,
@@ -617,20 +694,46 @@ class _Sums:
         G = L @ sens.de_dend
         self.C.add(self.starts[w], G)
         self.C.add(b, -G)
-        # Residuals beyond the kernel threshold are not explained by the noise model; their bounded
-        # but non-zero pull is counted as it is, from their own scores.
+        # Residuals beyond the kernel threshold: whether the noise explains them is decided with the
+        # variances (:meth:`variances`); their own scores are kept for those it does not.
         score = np.einsum("wic,cw->wi", L[~u], e[:, ~u])
-        self.outliers += score.T @ score
+        rows = (coef[~u], known[~u], e.T[~u] ** 2)
+        self.beyond.add(np.arange(w.start, w.stop)[~u], rows, score)
         # Rows below the first record of every window to come are final.
         last = w.stop >= self.final.size
         self.K.release(None if last else int(self.final[w.stop]))
         self.C.release(None if last else int(self.final[w.stop]))
 
-    def meat(self, var: np.ndarray) -> np.ndarray:
+    def variances(
+        self, rows_free: tuple[int, int], inliers: int, Omega: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The noise groups' variances (method of moments, corrected for the ``rows_free``: error
+        rows per window, fitted parameters) over the windows the noise explains, and which of the
+        windows beyond the kernel's threshold (``beyond``) it explains: the ``inliers``' variances
+        first, then each window beyond whose squared residual lies within the noise's 99.9 % point
+        at the variances found, until the set settles."""
+        rows, n_free = rows_free
+        b = self.beyond.arrays(len(self.groups), rows, n_free)
+        explained = np.zeros(b.index.size, dtype=bool)
+        for _ in range(MAX_PASSES):
+            A = b.coef[explained].reshape(-1, len(self.groups))
+            y = (b.e2 - b.known)[explained].ravel()
+            mm = rows * (inliers + int(explained.sum()))
+            G, h, yy = self.gram + A.T @ A, self.proj + A.T @ y, self.yy + float(y @ y)
+            var = nnls_gram(G, h, yy) * (mm / max(mm - n_free, 1))
+            now = b.explained(var, Omega)
+            if np.array_equal(now, explained):
+                break
+            explained = now
+        return var, explained
+
+    def meat(self, var: np.ndarray, explained: np.ndarray) -> np.ndarray:
         """``S``: the score's covariance from the tracker poses' noise ``var`` (per group) and the
-        inputs', plus the outliers' own."""
+        inputs', plus the own scores of the windows beyond the kernel's threshold that the noise
+        does not explain (``explained``: which of them it does)."""
         Sigma_pose = np.concatenate([np.full(len(g), v) for g, v in zip(self.groups, var)])
-        return np.einsum("c,cij->ij", Sigma_pose, self.K.gram) + self.outliers + self.C.gram
+        score = self.beyond.arrays(len(self.groups), 0, self.K.shape[0]).score[~explained]
+        return np.einsum("c,cij->ij", Sigma_pose, self.K.gram) + score.T @ score + self.C.gram
 
 
 def _packaged(fns: ProblemFunctions, cov: np.ndarray, noise: dict[str, float], dof: int) -> Uncertainty:
