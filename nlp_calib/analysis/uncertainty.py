@@ -25,11 +25,12 @@ linear in the number of windows whatever their length. The tracker's variances a
 from the squared residuals by non-negative least squares (method of moments, corrected for the
 fitted degrees of freedom) over the windows the noise explains; the input noise is given. A robust
 kernel's threshold is on a window's whole residual: a window of six rows of noise alone lies beyond
-δ = 3 (its squared norm over 9) one time in six. Such a window is counted with the noise (its pull,
-weighted by the kernel, propagated from its poses and inputs as every window's is) where its squared
-residual lies within the 99.9 % point of what the noise gives it; only one beyond that adds its own
-score as it is (an error the noise does not explain). ``M`` maps the manifold perturbation to
-plain parameter coordinates.
+δ = 3 (its squared norm over 9) one time in six. Such a window is counted with the noise where its
+squared residual lies within the 99.9 % point of what the noise gives it; only one beyond that adds
+its own score as it is (an error the noise does not explain). The poses' noise reaches the score
+through the kernel's pulls at their mean slope over the windows of that noise, and each window adds
+what its pull holds beyond that slope as its own (:func:`kernel_slopes`); the inputs' noise through
+each window's own weight. ``M`` maps the manifold perturbation to plain parameter coordinates.
 
 A reference that measures its own motions (increments: a scan matcher's) carries white noise on
 each increment instead, its own and no other's: ``e_w ≈ ∂e/∂z·n_w + …``, one source per window;
