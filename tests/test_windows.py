@@ -226,7 +226,7 @@ def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval(
     np.add.at(Q, intervals.ravel(), np.einsum("wic,whcl->whil", L, F).reshape(-1, n, n_in))
     Sigma_pose = np.array([var[0], var[0], var[1]])
     own = np.einsum("wik,k,wjk->ij", La, Sigma_pose, La) + np.einsum("wik,k,wjk->ij", Lb, Sigma_pose, Lb)
-    meat = a**2 * np.einsum("pik,k,pjk->ij", K, Sigma_pose, K) + (b - a**2) * own
+    meat = a**2 * np.einsum("pik,k,pjk->ij", K, Sigma_pose, K) + max(b - a**2, 0.0) * own
     meat += np.einsum("jik,k,jlk->il", Q, sigma_in**2, Q)
     g_out = np.einsum("wic,cw->iw", L[~use], e[:, ~use])
     meat += g_out @ g_out.T
