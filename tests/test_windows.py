@@ -158,15 +158,22 @@ def test_some_windows_shares_of_the_cost_are_their_terms_of_the_direct_sum(H: in
     assert_close(shares, direct[picked], rtol=1e-9)
 
 
-@pytest.mark.parametrize("counted", [None, np.array([True, False])], ids=["per interval", "traction counted"])
-def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval(counted: np.ndarray | None) -> None:
+@pytest.mark.parametrize(
+    ("counted", "delta"),
+    [(None, 0.05), (np.array([True, False]), 0.05), (None, 0.003)],
+    ids=["per interval", "traction counted", "noise beyond delta"],
+)
+def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval(
+    counted: np.ndarray | None, delta: float
+) -> None:
     """The running-sum propagation against the direct O(N·H) sum over each window's intervals (a
-    counter's noise on the readings at their ends: adjacent windows share one)."""
+    counter's noise on the readings at their ends: adjacent windows share one); the log's outliers
+    beyond the kernel's δ, which the noise does not explain, add their own pull."""
     model, H = get_model("tricycle"), 6
     fns = build(model, ProblemSpec(horizon=H, kernel="huber"))
     log = sim_log("tricycle", 300, 5, outlier_fraction=0.03)
     data = build_residual_data(fns, log, ResidualOptions(horizon=H))
-    ev = evaluator(fns, data, np.zeros(0), delta=0.05)
+    ev = evaluator(fns, data, np.zeros(0), delta=delta)
     x = truth("tricycle") * 1.001
     sigma_in = np.array([2e-4, 3e-3])
     got = unc.estimate(ev, x, data, sigma_in, counted=counted)
@@ -187,21 +194,40 @@ def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval(counte
     Ea, Eb = np.einsum("cwk,kwl->wcl", de_dz, Da), np.einsum("cwk,kwl->wcl", de_dz, Db)
     F = D[:, :, : n_in * H].reshape(3, N, H, n_in).transpose(1, 2, 0, 3)
     F = _by_reading(F, np.zeros(n_in, dtype=bool) if counted is None else counted)
-    use = s <= ev.delta**2
+    inside = s <= ev.delta**2
     E2 = Ea**2 + Eb**2
     coef = np.concatenate([E2[:, :, :2].sum(axis=2, keepdims=True), E2[:, :, 2:3]], axis=2)
     known = np.einsum("whci,i->wc", F**2, sigma_in**2)
-    m = 3 * int(use.sum())
-    var = unc.nnls_small(coef[use].reshape(-1, 2), (e.T[use] ** 2 - known[use]).ravel()) * (m / (m - n))
-    L = weight[:, None, None] * np.einsum("cwi,c->wic", J, ev.omega)
+    # The noise's variances over the windows it explains: within δ, or within the 99.9 % point of
+    # what the noise gives a window's three rows (its weighted sum of squares as χ² of
+    # (Σλ)²/Σλ² degrees of freedom), repeated until that set settles.
+    use = inside
+    for _ in range(8):
+        m = 3 * int(use.sum())
+        var = unc.nnls_small(coef[use].reshape(-1, 2), (e.T[use] ** 2 - known[use]).ravel()) * (m / (m - n))
+        lam = ev.omega[None, :] * (known + coef @ var)
+        k = lam.sum(axis=1) ** 2 / (lam**2).sum(axis=1)
+        now = inside | (s <= lam.sum(axis=1) * unc.chi2_point(k, unc.EXPLAINED_Z) / k)
+        if np.array_equal(now, use):
+            break
+        use = now
+    # Huber's pull: slope ρ' within δ, ρ'·(1 − 1/3) beyond (flat along the residual); over the
+    # windows the noise explains, its mean slope a and its square over the residual's, b.
+    slope = np.where(inside, 1.0, weight * (1.0 - 1.0 / 3.0))
+    a, b = slope[use].mean(), float(np.sum(weight[use] ** 2 * s[use]) / np.sum(s[use]))
+    unit = np.einsum("cwi,c->wic", J, ev.omega)
+    L = weight[:, None, None] * unit
+    La, Lb = np.einsum("wic,wcl->wil", unit, Ea), np.einsum("wic,wcl->wil", unit, Eb)
     K = np.zeros((data.n_records, n, 3))
-    np.add.at(K, data.starts, np.einsum("wic,wcl->wil", L, Ea))
-    np.add.at(K, data.stops, np.einsum("wic,wcl->wil", L, Eb))
+    np.add.at(K, data.starts, La)
+    np.add.at(K, data.stops, Lb)
     Q = np.zeros((data.inputs.shape[1] + 1, n, n_in))
     intervals = data.starts[:, None] + np.arange(H + 1)[None, :]
     np.add.at(Q, intervals.ravel(), np.einsum("wic,whcl->whil", L, F).reshape(-1, n, n_in))
     Sigma_pose = np.array([var[0], var[0], var[1]])
-    meat = np.einsum("pik,k,pjk->ij", K, Sigma_pose, K) + np.einsum("jik,k,jlk->il", Q, sigma_in**2, Q)
+    own = np.einsum("wik,k,wjk->ij", La, Sigma_pose, La) + np.einsum("wik,k,wjk->ij", Lb, Sigma_pose, Lb)
+    meat = a**2 * np.einsum("pik,k,pjk->ij", K, Sigma_pose, K) + max(b - a**2, 0.0) * own
+    meat += np.einsum("jik,k,jlk->il", Q, sigma_in**2, Q)
     g_out = np.einsum("wic,cw->iw", L[~use], e[:, ~use])
     meat += g_out @ g_out.T
     bread = np.linalg.inv(ev.normal_equations(x).H)
@@ -209,6 +235,8 @@ def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval(counte
     expected = M @ bread @ meat @ bread @ M.T
 
     assert not use.all()  # the outliers' own pull is exercised
+    # ... and with a small δ, windows beyond it that the noise explains (their pull at the slope).
+    assert delta > 0.01 or not np.array_equal(use, inside)
     assert got.noise["tracker_xy"] == pytest.approx(np.sqrt(var[0]), rel=1e-9)
     assert_close(got.covariance, expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max())
 

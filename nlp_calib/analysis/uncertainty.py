@@ -23,8 +23,14 @@ interval ``j``. Every interval ``j`` of a window moves its motion through the wi
 noise a window collects, ``Σ_j D_j Σ_u D_jᵀ``, are differences of running sums: the cost is
 linear in the number of windows whatever their length. The tracker's variances are estimated
 from the squared residuals by non-negative least squares (method of moments, corrected for the
-fitted degrees of freedom); the input noise is given. ``M`` maps the manifold perturbation to
-plain parameter coordinates.
+fitted degrees of freedom) over the windows the noise explains; the input noise is given. A robust
+kernel's threshold is on a window's whole residual: a window of six rows of noise alone lies beyond
+δ = 3 (its squared norm over 9) one time in six. Such a window is counted with the noise where its
+squared residual lies within the 99.9 % point of what the noise gives it; only one beyond that adds
+its own score as it is (an error the noise does not explain). The poses' noise reaches the score
+through the kernel's pulls at their mean slope over the windows of that noise, and each window adds
+what its pull holds beyond that slope as its own (:func:`kernel_slopes`); the inputs' noise through
+each window's own weight. ``M`` maps the manifold perturbation to plain parameter coordinates.
 
 A reference that measures its own motions (increments: a scan matcher's) carries white noise on
 each increment instead, its own and no other's: ``e_w ≈ ∂e/∂z·n_w + …``, one source per window;
@@ -38,7 +44,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -49,6 +55,7 @@ from nlp_calib.results.checks import LAG_EFFECT_CORRELATION, LagEffect
 from nlp_calib.results.layout import CLOCK, Layout
 from nlp_calib.results.uncertainty import Uncertainty
 from nlp_calib.solvers import ProblemEvaluator, Sensitivities
+from nlp_calib.symbolic.kernels import kernel_function
 
 #: The per-residual Functions the estimate evaluates, per residual (not summed).
 FUNCTIONS = ("robust_terms", "sensitivities")
@@ -208,13 +215,15 @@ def estimate(
     split = split_noise(Sigma_in, counted)
     running = EndNoise(D, split)
     sums = _Sums.zero(fns, data, first[1].de_dend.shape[2], D, (split, running))
-    residuals = _Residuals(e=e, weight=weight, use=use, Omega=evaluator.omega)
+    slope, spread = kernel_slopes(fns.spec.kernel, evaluator.delta, (e, s, weight))
+    residuals = _Residuals(e=e, weight=weight, use=use, Omega=evaluator.omega, slope=slope, spread=spread)
     for w, sens in itertools.chain([first], blocks):
         sums.add(w, sens, residuals, running)
-    mm = fns.error_rows * int(use.sum())
-    dof = max(mm - fns.n_free, 1)
-    var = nnls_gram(sums.gram, sums.proj, sums.yy) * (mm / dof)
-    meat = sums.meat(var)
+    var, explained = sums.variances((fns.error_rows, fns.n_free), int(use.sum()), residuals.Omega)
+    use = use.copy()
+    use[sums.kernel.index[explained]] = True
+    dof = max(fns.error_rows * int(use.sum()) - fns.n_free, 1)
+    meat = sums.meat(var, explained)
     # The data term is not divided by the residuals' variance σ², so a prior of weight σ²/std²
     # (the scenario's, weighed so; the bounds' below) adds σ² times that weight to the score's
     # covariance.
@@ -399,12 +408,38 @@ def _pad_first(values: np.ndarray, lo: int) -> np.ndarray:
 @dataclass(frozen=True)
 class _Residuals:
     """Per residual at the estimate: error ``e`` ``(rows, N)``, IRLS weight, whether it counts as an
-    inlier; and the information weights ``Omega`` of the error rows."""
+    inlier; the information weights ``Omega`` of the error rows; and the kernel's ``slope`` and
+    ``spread`` at each (:func:`kernel_slopes`)."""
 
     e: np.ndarray
     weight: np.ndarray
     use: np.ndarray
     Omega: np.ndarray
+    slope: np.ndarray
+    spread: np.ndarray
+
+
+def kernel_slopes(
+    kernel: str, delta: float, e_s_weight: tuple[np.ndarray, ...]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per window, the mean slope of its pull ``ψ = ρ'(s)·Ω·e`` over its ``k`` rows of noise,
+    ``ρ' + 2ρ''·s/k`` (Huber's beyond δ is flat along the residual: ``ρ'·(1 − 1/k)``), and the pull's
+    square over the residual's, ``ρ'²·s`` (both 1 and ``s`` where the kernel is quadratic).
+
+    Averaged over the windows of one noise, they are ``E[∂ψ/∂e]`` and ``E[ψ²]`` of that noise: by
+    Stein's lemma the pulls of two windows that share a pose are correlated through the mean slope
+    alone, so the pose's noise cancels along a chain of windows as in a plain fit, scaled by the
+    slope, and each window's pull adds what its slope does not carry, ``E[ψ²] − slope²·E[e²]``, as
+    its own (a kernel's weights that follow each window's own noise cost precision along a chain)."""
+    e, s, weight = e_s_weight
+    if kernel == "none" or not s.size:
+        return np.ones_like(s), np.asarray(s, dtype=float)
+    f = kernel_function(kernel).map(s.size)
+    h = 1e-6
+    up, down = (np.asarray(f(s[None, :] * (1.0 + c * h), delta)[1]).ravel() for c in (1.0, -1.0))
+    rho2 = np.where(s > 0, (up - down) / (2.0 * h * np.where(s > 0, s, 1.0)), 0.0)
+    k = np.maximum((np.asarray(e) != 0).sum(axis=0), 1)
+    return weight + 2.0 * rho2 * s / k, weight**2 * s
 
 
 class _Rows:
@@ -453,6 +488,13 @@ class _PoseRows(_Rows):
     def __init__(self, n_rows: int, shape: tuple[int, int], distinct: bool):
         super().__init__(n_rows, shape, distinct)
         self.gram = np.zeros((shape[1], shape[0], shape[0]))
+        #: Each window's own noise maps' Gram, no two windows summed (what does not cancel).
+        self.own = np.zeros((shape[1], shape[0], shape[0]))
+
+    def add_own(self, *maps: np.ndarray) -> None:
+        """Each window's maps ``(., n, components)`` into :attr:`own`, each alone."""
+        for m in maps:
+            self.own += np.einsum("wic,wjc->cij", m, m)
 
     def take(self, first: int, rows: np.ndarray) -> None:
         live = np.flatnonzero(np.any(rows != 0, axis=(1, 2)))
@@ -523,6 +565,92 @@ class _InputRows(_Rows):
         self.last_Q = Q_last[-1].copy()
 
 
+#: The normal deviate of the point of its noise's distribution within which a window's squared
+#: residual is explained by the noise (99.9 %), and the passes that settle which windows are.
+EXPLAINED_Z = 3.0902
+MAX_PASSES = 8
+
+
+def chi2_point(k: np.ndarray, z: float) -> np.ndarray:
+    """χ²(k)'s point at the normal deviate ``z`` (Wilson-Hilferty; ``k`` may be fractional: a sum of
+    unequal squares' effective degrees of freedom)."""
+    k = np.maximum(np.asarray(k, dtype=float), 1e-9)
+    return np.asarray(k * np.clip(1.0 - 2.0 / (9.0 * k) + z * np.sqrt(2.0 / (9.0 * k)), 0.0, None) ** 3)
+
+
+@dataclass(frozen=True)
+class _Window:
+    """Windows beyond the kernel's threshold: their indices, each row's coefficients of the noise
+    groups' variances ``(n, rows, groups)``, known input noise and squared error ``(n, rows)``, each
+    one's own score ``(n, n_free)`` and its kernel's terms (slope, spread, ``s``, 1: ``(n, 4)``)."""
+
+    index: np.ndarray
+    coef: np.ndarray
+    known: np.ndarray
+    e2: np.ndarray
+    score: np.ndarray
+    kernel: np.ndarray
+
+    def terms(self, which: np.ndarray) -> np.ndarray:
+        """The kernel's terms of the windows ``which`` summed per noise group they carry ``(groups, 4)``."""
+        carries = (self.coef[which].sum(axis=1) > 0).astype(float)  # (., groups)
+        return np.asarray(carries.T @ self.kernel[which])
+
+    def explained(self, var: np.ndarray, Omega: np.ndarray) -> np.ndarray:
+        """Whether each window's ``s = eᵀΩe`` lies within the 99.9 % point of what the noise
+        (``var`` per group, the inputs' known) gives it: a weighted sum of squares, read as
+        χ² of its effective degrees of freedom ``(Σλ)²/Σλ²`` scaled to its mean ``Σλ``."""
+        lam = Omega[None, :] * np.clip(self.known + self.coef @ var, 0.0, None)
+        total, square = lam.sum(axis=1), (lam**2).sum(axis=1)
+        k = np.where(square > 0, total**2 / np.where(square > 0, square, 1.0), 1.0)
+        s = (Omega[None, :] * self.e2).sum(axis=1)
+        return np.asarray((total > 0) & (s <= total * chi2_point(k, EXPLAINED_Z) / k))
+
+
+@dataclass
+class _Kernel:
+    """What the robust kernel did: its terms (slope, spread, ``s``, 1) summed over every window per
+    noise group it carries (``sums``, ``(groups, 4)``), and the windows beyond its threshold,
+    collected block by block (see :class:`_Window`)."""
+
+    sums: np.ndarray
+    parts: list[tuple[np.ndarray, tuple[np.ndarray, ...], np.ndarray]] = field(default_factory=list)
+
+    def add(self, index: np.ndarray, rows: tuple[np.ndarray, ...], score: np.ndarray) -> None:
+        if index.size:
+            self.parts.append((index, rows, score))
+
+    def slopes(self, beyond: _Window, explained: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per noise group, the mean slope of the pulls and their mean square over the residuals'
+        (:func:`kernel_slopes`) over the windows the noise explains (those beyond that it does not
+        left out): 1 and 1 where the kernel is quadratic."""
+        sums = self.sums - beyond.terms(~explained)
+        n, s = sums[:, 3], sums[:, 2]
+        a = np.where(n > 0, sums[:, 0] / np.where(n > 0, n, 1.0), 1.0)
+        b = np.where(s > 0, sums[:, 1] / np.where(s > 0, s, 1.0), 1.0)
+        return a, b
+
+    @property
+    def index(self) -> np.ndarray:
+        return np.concatenate([p[0] for p in self.parts]) if self.parts else np.zeros(0, dtype=int)
+
+    def arrays(self, groups: int, rows: int, n_free: int) -> _Window:
+        """Every window collected (empty arrays of these sizes where none is)."""
+        if not self.parts:
+            z = np.zeros
+            empty = (z((0, rows, groups)), z((0, rows)), z((0, rows)), z((0, n_free)), z((0, 4)))
+            return _Window(z(0, dtype=int), *empty)
+        cat = np.concatenate
+        return _Window(
+            cat([p[0] for p in self.parts]),
+            cat([p[1][0] for p in self.parts]),
+            cat([p[1][1] for p in self.parts]),
+            cat([p[1][2] for p in self.parts]),
+            cat([p[2] for p in self.parts]),
+            cat([p[1][3] for p in self.parts]),
+        )
+
+
 @dataclass
 class _Sums:
     """What the pass over the windows collects: the method-of-moments system for the tracker's
@@ -530,7 +658,7 @@ class _Sums:
     pose: summed as each noise component's Gram ``KK``, row by row once no later window adds to a
     row), the input noise map as differences over the intervals (``C``: its running sum's map
     through each interval's ``D`` summed as the score's covariance ``inputs``, the same way) and the
-    outliers' own scores."""
+    windows beyond the kernel's threshold (their rows of the method of moments, their own scores)."""
 
     groups: tuple[tuple[int, ...], ...]
     gram: np.ndarray
@@ -538,7 +666,9 @@ class _Sums:
     yy: float
     K: _PoseRows
     C: _InputRows
-    outliers: np.ndarray
+    #: The kernel's slopes and the windows beyond its threshold (whether the noise explains each is
+    #: decided once the variances are known).
+    kernel: _Kernel
     starts: np.ndarray
     #: Per window, the least first record of the windows from it on: rows below it are final.
     final: np.ndarray
@@ -573,7 +703,7 @@ class _Sums:
             yy=0.0,
             K=_PoseRows(data.T_world_sensor.shape[0], (n, k), distinct),
             C=_InputRows(n_int + 1, (n, m), distinct, (D, *noise)),
-            outliers=np.zeros((n, n)),
+            kernel=_Kernel(np.zeros((len(groups), 4))),
             starts=a,
             final=np.minimum.accumulate(a[::-1])[::-1] if a.size else a,
             stops=b,
@@ -605,32 +735,77 @@ class _Sums:
         u, e = r.use[w], r.e[:, w]
         A, y = coef[u].reshape(-1, len(self.groups)), (e.T[u] ** 2 - known[u]).ravel()
         self.gram, self.proj, self.yy = self.gram + A.T @ A, self.proj + A.T @ y, self.yy + float(y @ y)
-        L = r.weight[w, None, None] * sens.J.transpose(0, 2, 1) * r.Omega[None, None, :]  # (., n, rows)
-        La = L @ Ea
+        # The poses' noise through each window's pull at the kernel's mean slope (applied with the
+        # variances, :meth:`meat`), the inputs' at the window's own weight.
+        unit = sens.J.transpose(0, 2, 1) * r.Omega[None, None, :]  # (., n, rows)
+        L = r.weight[w, None, None] * unit
+        La, Lb = unit @ Ea, unit @ Eb
+        self.K.add_own(La, Lb)
+        terms = np.column_stack(
+            [r.slope[w], r.spread[w], (r.Omega[:, None] * e**2).sum(axis=0), np.ones(e.shape[1])]
+        )
+        self.kernel.sums += (coef.sum(axis=1) > 0).astype(float).T @ terms
         if self.increment is not None and self.increment[w].any():
             inc = self.increment[w]
             self.K.take(-1, La[inc])  # an increment's noise is its own: no other window adds to it
             La[inc] = 0.0
         self.K.add(a, La)
-        self.K.add(b, L @ Eb)
+        self.K.add(b, Lb)
         # Σ over the windows containing interval j of L_w ∂e_w/∂end: +at the first interval, −after the last.
         G = L @ sens.de_dend
         self.C.add(self.starts[w], G)
         self.C.add(b, -G)
-        # Residuals beyond the kernel threshold are not explained by the noise model; their bounded
-        # but non-zero pull is counted as it is, from their own scores.
+        # Residuals beyond the kernel threshold: whether the noise explains them is decided with the
+        # variances (:meth:`variances`); their own scores are kept for those it does not.
         score = np.einsum("wic,cw->wi", L[~u], e[:, ~u])
-        self.outliers += score.T @ score
+        rows = (coef[~u], known[~u], e.T[~u] ** 2, terms[~u])
+        self.kernel.add(np.arange(w.start, w.stop)[~u], rows, score)
         # Rows below the first record of every window to come are final.
         last = w.stop >= self.final.size
         self.K.release(None if last else int(self.final[w.stop]))
         self.C.release(None if last else int(self.final[w.stop]))
 
-    def meat(self, var: np.ndarray) -> np.ndarray:
-        """``S``: the score's covariance from the tracker poses' noise ``var`` (per group) and the
-        inputs', plus the outliers' own."""
-        Sigma_pose = np.concatenate([np.full(len(g), v) for g, v in zip(self.groups, var)])
-        return np.einsum("c,cij->ij", Sigma_pose, self.K.gram) + self.outliers + self.C.gram
+    def variances(
+        self, rows_free: tuple[int, int], inliers: int, Omega: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The noise groups' variances (method of moments, corrected for the ``rows_free``: error
+        rows per window, fitted parameters) over the windows the noise explains, and which of the
+        windows beyond the kernel's threshold (``beyond``) it explains: the ``inliers``' variances
+        first, then each window beyond whose squared residual lies within the noise's 99.9 % point
+        at the variances found, until the set settles."""
+        rows, n_free = rows_free
+        b = self.kernel.arrays(len(self.groups), rows, n_free)
+        explained = np.zeros(b.index.size, dtype=bool)
+        for _ in range(MAX_PASSES):
+            A = b.coef[explained].reshape(-1, len(self.groups))
+            y = (b.e2 - b.known)[explained].ravel()
+            mm = rows * (inliers + int(explained.sum()))
+            G, h, yy = self.gram + A.T @ A, self.proj + A.T @ y, self.yy + float(y @ y)
+            var = nnls_gram(G, h, yy) * (mm / max(mm - n_free, 1))
+            now = b.explained(var, Omega)
+            if np.array_equal(now, explained):
+                break
+            explained = now
+        return var, explained
+
+    def meat(self, var: np.ndarray, explained: np.ndarray) -> np.ndarray:
+        """``S``: the score's covariance from the tracker poses' noise ``var`` (per group) through
+        the kernel's mean slope ``a`` (cancelling along a chain of windows) and what each window's
+        pull holds beyond it (``b − a²`` of its own map, :func:`kernel_slopes`), the inputs', plus
+        the own scores of the windows beyond the kernel's threshold that the noise does not explain
+        (``explained``: which of them it does)."""
+        beyond = self.kernel.arrays(len(self.groups), 0, self.K.shape[0])
+        a, b = self.kernel.slopes(beyond, explained)
+        per = [np.full(len(g), 1.0) for g in self.groups]
+        Sigma_pose = np.concatenate([v * p for v, p in zip(var, per)])
+        chain = Sigma_pose * np.concatenate([a_g**2 * p for a_g, p in zip(a, per)])
+        # E[ψ²] ≥ slope²·E[e²] for any kernel (the pull's variance holds its linear part): a
+        # difference below 0 is the two means' sampling noise (three rows within δ = 3 nearly all:
+        # 0.96 − 0.98²), and would take the chain's variance away.
+        own = Sigma_pose * np.concatenate([max(b_g - a_g**2, 0.0) * p for a_g, b_g, p in zip(a, b, per)])
+        score = beyond.score[~explained]
+        pose = np.einsum("c,cij->ij", chain, self.K.gram) + np.einsum("c,cij->ij", own, self.K.own)
+        return pose + score.T @ score + self.C.gram
 
 
 def _packaged(fns: ProblemFunctions, cov: np.ndarray, noise: dict[str, float], dof: int) -> Uncertainty:

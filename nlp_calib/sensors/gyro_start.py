@@ -134,19 +134,28 @@ def _turning(
     return {**k0, **dict(zip(names, map(float, y * scale)))}
 
 
+def _scale_anchor(model: KinematicModel, known: Mapping[str, float]) -> str | None:
+    """The one known length, which sets the lengths' common scale (None: none is known, or several,
+    whose ratio the user gave)."""
+    given = [n for n in length_params(model) if n in known]
+    return given[0] if len(given) == 1 else None
+
+
 def _anchored(
     model: KinematicModel, k: dict[str, float], guess: Mapping[str, float], known: Mapping[str, float]
 ) -> dict[str, float]:
-    """``k`` with its lengths' common scale, which a gyro cannot see, put where the longest of the
-    guess's lengths is its guessed value (unless a length is known: then it is already set)."""
+    """``k`` with its lengths' common scale, which a gyro cannot see, put where the one known length
+    is its value, else where the longest of the guess's lengths is its guessed value (several
+    known lengths: already set)."""
     lengths = [n for n in length_params(model) if n in k]
-    if not lengths or any(n in known for n in lengths):
+    if not lengths or (any(n in known for n in lengths) and _scale_anchor(model, known) is None):
         return k
-    anchor = max(lengths, key=lambda n: abs(guess[n]))
+    anchor = _scale_anchor(model, known) or max(lengths, key=lambda n: abs(guess[n]))
     if k[anchor] == 0.0:
         return k
-    c = guess[anchor] / k[anchor]
-    return {n: v * c if n in lengths else v for n, v in k.items()}
+    target = float(known.get(anchor, guess[anchor]))
+    c = target / k[anchor]
+    return {n: target if n == anchor else v * c if n in lengths else v for n, v in k.items()}
 
 
 def gyro_start(
@@ -154,8 +163,13 @@ def gyro_start(
 ) -> dict[str, float]:
     """Every kinematic parameter, the biases and the tilt from the increments ``z`` ``(4, n)``."""
     guess = {**default_guess(model), **model.defaults}
-    k = {n: float(known.get(n, guess[n])) for n in model.kinematic_params}
-    free = [n for n in model.kinematic_params if n not in known]
+    # The turning sees the lengths' ratios alone: the one known length is fitted with the others
+    # from the guess, as when none is known, and the scale set by it after (held at its value, the
+    # others' steps from the guess stalled far from their ratios on some drives: a known left radius,
+    # wheel_separation 177 m).
+    held = {n: v for n, v in known.items() if n != _scale_anchor(model, known)}
+    k = {n: float(held.get(n, guess[n])) for n in model.kinematic_params}
+    free = [n for n in model.kinematic_params if n not in held]
     v, b = np.zeros(3), np.zeros(3)
     check_rad_s(z, base_motion, _typical(model, k, known))
     for _ in range(ROUNDS):
