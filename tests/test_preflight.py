@@ -43,10 +43,10 @@ from nlp_calib.results.preflight import (
     Preflight,
 )
 from nlp_calib.simulation.beside import simulate_beside, write_tracked_files
-from nlp_calib.simulation.options import SimulationOptions
-from nlp_calib.simulation.simulate import simulate, write_simulation
 from nlp_calib.simulation.imu import ImuSimulationOptions
 from nlp_calib.simulation.lidar import LidarSimulationOptions
+from nlp_calib.simulation.options import SimulationOptions
+from nlp_calib.simulation.simulate import simulate, write_simulation
 from nlp_calib.solvers import ProblemEvaluator
 
 CIRCLES = REPO.parent / "shared" / "data" / "real4" / "optiodom" / "tricyc" / "circular" / "140120211440"
@@ -447,7 +447,8 @@ def test_a_mirrored_wheel_is_found_on_every_model_whatever_the_mount(
             ticks[:, flip] = np.mod(-ticks[:, flip], COUNTER_MODULUS)
         log, _ = write_simulation(dataclasses.replace(sim, ticks=ticks), tmp_path / f"{flip}.txt")
         (tmp_path / "s.yaml").write_text(
-            f"name: s\nmodel: {model}\ndataset: {log.name}\ninitial_guess: from_file\nsolvers: [gauss_newton]\n"
+            f"name: s\nmodel: {model}\ndataset: {log.name}\n"
+            "initial_guess: from_file\nsolvers: [gauss_newton]\n"
         )
         found = [(u.kind, u.subject) for u in preflight(load_scenario(tmp_path / "s.yaml")).units]
         assert found == ([] if flip is None else [("mirrored", names[flip])]), (flip, found)
