@@ -423,6 +423,22 @@ def test_a_sensor_turned_or_off_the_axle_is_no_mirrored_wheel(mount: str, tmp_pa
         assert mirrored[0].subject == name if not slips else "do not tell which one" in mirrored[0].words
 
 
+def test_the_speed_is_the_median_over_the_time_the_wheels_turn(tmp_path: Path) -> None:
+    """A drive of turns on the spot, its tracker slipping on a tenth of its records: the wheels
+    never drive the base along, so it travels 0 % of the time by them and its median speed while
+    travelling is 0 (it was the median over the tracker's fast steps alone, the slips' speed:
+    Censi's Khepera, 21 m in 44 min "100 % moving" and "0.12 m/s median"); the words say over what
+    each figure is."""
+    rec = _pivoting_drive((0.0, 0.0, math.pi / 2), slips=True)
+    report = preflight(load_scenario(_joint_pair(rec, tmp_path, "spot")))
+    ex = report.excitation[0]
+    assert ex.moving_fraction < 0.05 and ex.speed_median_mps < 0.02, ex
+    from nlp_calib.outputs.preflight import preflight_lines
+
+    said = "\n".join(preflight_lines(report))
+    assert "travelling 0 % of it, by the wheels" in said and "median while travelling" in said, said
+
+
 @pytest.mark.parametrize(
     ("model", "yaw"),
     [

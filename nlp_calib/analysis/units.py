@@ -64,7 +64,7 @@ LENGTH_UNITS = {"millimetres": 1e-3, "centimetres": 1e-2}
 #: positions looked like a wheel that wraps, or like nothing).
 SPEED_CORRELATION = 0.8
 SPEED_MARGIN = 0.3
-#: Two wheels turning opposite ways on this share of the gentle curves: one axis is mirrored.
+#: Two wheels turning against a robot's on this share of the steps judged: one axis is mirrored.
 OPPOSITE_SHARE = 0.8
 #: A curve is gentle where the heading turns less than this per metre (rad/m): both wheels of a
 #: base narrower than 2 m turn the same way there.
