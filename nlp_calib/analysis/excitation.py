@@ -121,9 +121,9 @@ def excitation(
 def words(ex: Excitation) -> list[str]:
     """The excitation in a few lines."""
     lines = [
-        f"{ex.distance_m:.1f} m in {ex.duration_s:.1f} s (travelling {100 * ex.moving_fraction:.0f} % of it, "
-        "by the wheels), speed {ex.speed_median_mps:.2g} m/s median while travelling, {ex.speed_max_mps:.2g} m/s "
-        "at most",
+        f"{ex.distance_m:.1f} m in {ex.duration_s:.1f} s (travelling {100 * ex.moving_fraction:.0f} % of "
+        f"it, by the wheels), speed {ex.speed_median_mps:.2g} m/s median while travelling, "
+        f"{ex.speed_max_mps:.2g} m/s at most",
         f"heading spans {ex.heading_span_rad:.2f} rad; turned {ex.turned_left_rad:.1f} rad left, "
         f"{ex.turned_right_rad:.1f} rad right",
     ]
