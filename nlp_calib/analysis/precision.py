@@ -23,7 +23,7 @@ what keeps the sensor's own speed and turn rate on this drive (their :data:`FAST
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -121,15 +121,33 @@ def log_precision(
     return lag_precision(layout, track, log.time_s, index, fns.sensor.length_unit == "m")
 
 
-def tightest(layout: Layout, logs: Sequence[Layout]) -> Layout:
+def tightest(layout: Layout, logs: Sequence[Layout], shared: bool = True) -> Layout:
     """``layout`` (several logs' together) with each parameter's precision the tightest any log's
     drive needs of it (``logs``: each log's layout of the whole calibration, as its drive sets it);
-    a log's own parameter (its clock offset) as its own log's drive sets it."""
+    a log's own parameter (its clock offset) as its own log's drive sets it. Without ``shared``,
+    only the logs' own parameters: one log's view of a joint fit (its drive's needs of the shared
+    ones, every other log's of its own clock offset, not a constant 2 ms)."""
     out = []
     for p in layout.parameters:
+        if p.log is None and not shared:
+            out.append(p)
+            continue
         mine = logs if p.log is None else logs[p.log : p.log + 1]
         needed = [o.param(p.name).precision for o in mine if p.name in o]
         if needed and all(kind == "absolute" for kind, _ in needed):
             p = dataclasses.replace(p, precision=("absolute", min(amount for _, amount in needed)))
         out.append(p)
     return dataclasses.replace(layout, parameters=tuple(out))
+
+
+def clock_needed(layout: Layout) -> dict[str, float]:
+    """The precision each free clock offset of ``layout`` needs (s): the drive's, where ``layout``
+    is set by :func:`log_precision` (:func:`lag_precision`), so that no check reads a lag by the
+    reference robot's constant 2 ms."""
+    return {p.name: p.needed(0.0) for p in layout.parameters if p.block == CLOCK and p.status == FREE}
+
+
+def with_clocks(scales: np.ndarray, names: Sequence[str], clocks: Mapping[str, float]) -> np.ndarray:
+    """``scales`` (per parameter of ``names``, a precision in its unit) with each clock offset's the
+    drive's (``clocks``: :func:`clock_needed`)."""
+    return np.array([clocks.get(n, s) for n, s in zip(names, np.asarray(scales, dtype=float))])

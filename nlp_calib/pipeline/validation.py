@@ -18,6 +18,7 @@ import numpy as np
 
 from nlp_calib.analysis.crossval import blocks, combine, jackknife_std
 from nlp_calib.analysis.direction import compare
+from nlp_calib.analysis.precision import clock_needed, with_clocks
 from nlp_calib.core import memory, threads
 from nlp_calib.models import reference_scales
 from nlp_calib.pipeline.build import Binder, no_priors
@@ -332,7 +333,8 @@ def direction_check(
         estimates.append(canonical(params))
         sigmas.append(jackknife_std(np.array(folds)) if len(folds) >= 3 else np.full(len(fns.names), np.nan))
         windows.append(n)
-    apart = WEAK * reference_scales(fns.model, fns.layout.keys(fns.names), estimates[0])
+    reference = reference_scales(fns.model, fns.layout.keys(fns.names), estimates[0])
+    apart = WEAK * with_clocks(reference, fns.names, clock_needed(layout))
     needed = layout.needed(dict(zip(fns.names, 0.5 * (estimates[0] + estimates[1]))))
     return compare(
         fns.names,
