@@ -21,17 +21,29 @@ the jackknife over the logs (:meth:`~nlp_calib.results.run.Checks.spreads`).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from nlp_calib.models import KinematicModel, reference_scales
+from nlp_calib.models.base import Reference
 from nlp_calib.results.checks import WEAK, ConsistencyCheck
 
 
-def determined(std: np.ndarray, needed: np.ndarray) -> np.ndarray:
-    """Per parameter: whether an estimate with σ ``std`` determines it to the precision a
-    calibration needs (finite, at most :data:`WEAK` times ``needed``, in its unit)."""
+def determined(
+    model: KinematicModel,
+    names: tuple[str, ...],
+    values: np.ndarray,
+    std: np.ndarray,
+    sensor: Mapping[str, Reference] | None = None,
+    needed: np.ndarray | None = None,
+) -> np.ndarray:
+    """Per parameter: whether an estimate ``values`` with σ ``std`` determines it to the precision a
+    calibration needs (finite, at most :data:`WEAK` times its reference precision; ``sensor``: the
+    sensor's precisions of its mount; ``needed``: the drive's, where known)."""
     std = np.asarray(std, dtype=float)
+    if needed is None:
+        needed = reference_scales(model, names, np.asarray(values, dtype=float), sensor)
     with np.errstate(invalid="ignore"):
         return np.isfinite(std) & (std <= WEAK * np.asarray(needed, dtype=float))
 

@@ -355,7 +355,7 @@ def consistency(
     def needed(values: np.ndarray) -> np.ndarray:
         return with_clocks(reference_scales(kind, keys, values, reference), names, clocks)
 
-    known = np.array([determined(sd, needed(e)) for e, sd in zip(est, std)])
+    known = np.array([determined(kind, keys, e, sd, reference, needed(e)) for e, sd in zip(est, std)])
     apart = WEAK * needed(result.params)
     paths = [run.log.path for run in own]
     unit = tuple(info.units.get(n, "") for n in names)
