@@ -164,3 +164,26 @@ def test_records_fitted_twice_are_refused_and_errors_name_the_entry(tmp_path: Pa
     missing = scenario_from_mapping({**BASE, "datasets": [str(a), "nope.txt"]}, "j", tmp_path)
     with pytest.raises(DatasetError, match=r"fix 'datasets\[1\]'"):
         Calibration(missing)
+
+
+def test_each_log_view_needs_of_every_lag_what_its_own_log_drives(tmp_path: Path) -> None:
+    """A joint fit's view of one log reads every log's clock offset by the precision that log's
+    drive needs (the joint run's, from the drive's speed and turn rate), never by the reference
+    robot's constant 2 ms: a view had said "tracker_lag_2 is known only to ±0.026 s (over 5× the
+    0.002 needed)" where the joint fit needs 0.01 s of it (Censi's Khepera). Two slow drives
+    (0.2 m/s at most) need more than 2 ms of each lag."""
+    paths = []
+    for i, trajectory in enumerate(("s_curves", "no_reversals")):
+        opts = SimulationOptions.of(records=300, seed=40 + i, trajectory=trajectory, max_speed=0.2)
+        paths.append(str(write_simulation(simulate(opts), tmp_path / f"slow{i}.txt")[0]))
+    sc = scenario_from_mapping(
+        {**BASE, "datasets": paths, "alignment": {"tracker_lag": "auto"}}, "j", tmp_path
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    lags = [p for p in run.scenario.layout.parameters if p.name.startswith("tracker_lag")]
+    assert len(lags) == 2 and all(p.needed(0.0) > 0.002 for p in lags), lags
+    for view in run.logs:
+        for p in lags:
+            assert view.scenario.layout.param(p.name).needed(0.0) == pytest.approx(p.needed(0.0)), p

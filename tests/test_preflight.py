@@ -24,6 +24,8 @@ import nlp_calib.pipeline.preflight as stages
 from nlp_calib.analysis.determinacy import information, standing
 from nlp_calib.analysis.plan import candidate_of, drive_facts, simulated
 from nlp_calib.core.numeric import wrap_angle
+from nlp_calib.models import MODELS
+from nlp_calib.models.drives import COUNTER_MODULUS
 from nlp_calib.outputs import registry
 from nlp_calib.outputs.summary import summary_lines
 from nlp_calib.pipeline import Calibration, load_scenario
@@ -43,6 +45,8 @@ from nlp_calib.results.preflight import (
 from nlp_calib.simulation.beside import simulate_beside, write_tracked_files
 from nlp_calib.simulation.imu import ImuSimulationOptions
 from nlp_calib.simulation.lidar import LidarSimulationOptions
+from nlp_calib.simulation.options import SimulationOptions
+from nlp_calib.simulation.simulate import simulate, write_simulation
 from nlp_calib.solvers import ProblemEvaluator
 
 CIRCLES = REPO.parent / "shared" / "data" / "real4" / "optiodom" / "tricyc" / "circular" / "140120211440"
@@ -342,6 +346,128 @@ def test_units_and_signs_the_data_get_wrong_are_named(
     assert report.verdict == CHECK_DATA and report.exit_code == 5
     clean = clean_reports[model]
     assert clean.units == () and clean.verdict == ENOUGH
+
+
+def _pivoting_drive(mount: tuple[float, float, float], slips: bool, seed: int = 3) -> rb.Recording:
+    """A differential drive (wheels of 5 cm, 40 cm apart) at 10 Hz for 80 s, its tracker at
+    ``mount`` (x, y, yaw) in the base: gentle arcs between turns on the spot, or (``slips``) turns on
+    the spot alone, the tracker reporting a bogus move of 25 cm at a tenth of its records (a scan
+    matcher's failures: Censi et al.'s Khepera drives so). Every wheel turns as REP 103 has it."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 80.0, 0.1)
+    # Phases of 3-7 s at a speed of their own (a drive that repeats itself agrees with itself
+    # shifted by its period): straight, on the spot, an arc, on the spot the other way; or on the
+    # spot either way.
+    ends = np.cumsum(rng.uniform(3.0, 7.0, 40))
+    k = np.searchsorted(ends, t, side="right")
+    phase = 1 + 2 * (k % 2) if slips else k % 4
+    scale = rng.uniform(0.5, 1.0, ends.size)[k]
+    v = scale * np.choose(phase, [0.3, 0.0, 0.25, 0.0])
+    w = scale * np.choose(phase, [0.0, 0.4, 0.1, -0.3])
+    radius, track = 0.05, 0.4
+    left = np.concatenate([[0.0], np.cumsum((v - 0.5 * track * w)[:-1] * 0.1 / radius)])
+    right = np.concatenate([[0.0], np.cumsum((v + 0.5 * track * w)[:-1] * 0.1 / radius)])
+    th = np.concatenate([[0.0], np.cumsum(w[:-1] * 0.1)])
+    xy = np.column_stack([np.cos(th) * v, np.sin(th) * v])
+    xy = np.vstack([[0.0, 0.0], np.cumsum(xy[:-1] * 0.1, axis=0)])
+    mx, my, myaw = mount
+    sensor = np.column_stack(
+        [
+            xy[:, 0] + np.cos(th) * mx - np.sin(th) * my,
+            xy[:, 1] + np.sin(th) * mx + np.cos(th) * my,
+            th + myaw,
+        ]
+    )
+    sensor += rng.normal(0.0, 0.001, sensor.shape)
+    if slips:
+        bad = np.flatnonzero((phase != 0) & (rng.random(t.size) < 0.1))
+        sensor[bad, :2] += 0.25 * np.column_stack([np.cos(sensor[bad, 2]), np.sin(sensor[bad, 2])])
+    ns = np.round(1e9 * (100.0 + t)).astype(np.int64)
+    truth = {"wheel_radius": radius, "wheel_separation": track}
+    joints = np.column_stack([left, right])
+    return rb.Recording(ns, joints, ("left_wheel_joint", "right_wheel_joint"), ns, sensor, 0 * t, truth)
+
+
+MOUNTS = {
+    "turned 90° with slips": ((0.0, 0.0, math.pi / 2), True),
+    "turned 90°, 0.5 m off the axle, with slips": ((0.3, 0.4, math.pi / 2), True),
+    "turned 180°, off the axle": ((-0.25, 0.1, math.pi), False),
+    "turned -90° with slips": ((0.1, -0.05, -math.pi / 2), True),
+}
+
+
+@pytest.mark.parametrize("mount", list(MOUNTS))
+def test_a_sensor_turned_or_off_the_axle_is_no_mirrored_wheel(mount: str, tmp_path: Path) -> None:
+    """A correct robot whose tracker is turned 90° or 180° and off the axle, driving gentle curves
+    and turns on the spot (its tracker swinging about the axle, or slipping as a scan matcher
+    does): no sign finding (main had said "one wheel's axis is mirrored" of every slipping one,
+    "100 % of" the gentle curves being the slips). The same robot with one joint negated: the mirror
+    is found, and the negated wheel named where the drive has gentle curves to tell it by."""
+    pose, slips = MOUNTS[mount]
+    rec = _pivoting_drive(pose, slips)
+    folder = tmp_path
+    (folder / "a").mkdir()
+    (folder / "b").mkdir()
+    report = preflight(load_scenario(_joint_pair(rec, folder / "a", "correct")))
+    print(mount, [u.words for u in report.units])
+    assert not [u for u in report.units if u.kind == "mirrored"], report.units
+    for flipped, name in ((np.array([-1.0, 1.0]), "left_wheel"), (np.array([1.0, -1.0]), "right_wheel")):
+        wrong = preflight(
+            load_scenario(
+                _joint_pair(dataclasses.replace(rec, joints=rec.joints * flipped), folder / "b", "m")
+            )
+        )
+        mirrored = [u for u in wrong.units if u.kind == "mirrored"]
+        assert mirrored, wrong.units
+        # Turns on the spot alone cannot tell which wheel drives backwards: the words say so.
+        assert mirrored[0].subject == name if not slips else "do not tell which one" in mirrored[0].words
+
+
+def test_the_speed_is_the_median_over_the_time_the_wheels_turn(tmp_path: Path) -> None:
+    """A drive of turns on the spot, its tracker slipping on a tenth of its records: the wheels
+    never drive the base along, so it travels 0 % of the time by them and its median speed while
+    travelling is 0 (it was the median over the tracker's fast steps alone, the slips' speed:
+    Censi's Khepera, 21 m in 44 min "100 % moving" and "0.12 m/s median"); the words say over what
+    each figure is."""
+    rec = _pivoting_drive((0.0, 0.0, math.pi / 2), slips=True)
+    report = preflight(load_scenario(_joint_pair(rec, tmp_path, "spot")))
+    ex = report.excitation[0]
+    assert ex.moving_fraction < 0.05 and ex.speed_median_mps < 0.02, ex
+    from nlp_calib.outputs.preflight import preflight_lines
+
+    said = "\n".join(preflight_lines(report))
+    assert "travelling 0 % of it, by the wheels" in said and "median while travelling" in said, said
+
+
+@pytest.mark.parametrize(
+    ("model", "yaw"),
+    [
+        ("diff_drive", math.pi / 2),
+        ("skid_steer", math.pi),
+        ("car_like", -math.pi / 2),
+        ("car_like_ackermann", math.pi),
+    ],
+)
+def test_a_mirrored_wheel_is_found_on_every_model_whatever_the_mount(
+    model: str, yaw: float, tmp_path: Path
+) -> None:
+    """Every model with two wheel counters, its tracker turned (90°, 180°) and off the axle: as
+    simulated, no sign finding; with either wheel's counter negated, that wheel named mirrored."""
+    mount = {"sensor_x": 0.2, "sensor_y": -0.15, "sensor_theta": yaw}
+    sim = simulate(SimulationOptions.of(model=model, records=500, seed=4, truth=mount, guess=mount))
+    names = sim.header.encoder_names
+    counters = [j for j, n in enumerate(names) if MODELS[model].encoder_kinds[n] == "counter"]
+    for flip in (None, *counters):
+        ticks = np.array(sim.ticks)
+        if flip is not None:
+            ticks[:, flip] = np.mod(-ticks[:, flip], COUNTER_MODULUS)
+        log, _ = write_simulation(dataclasses.replace(sim, ticks=ticks), tmp_path / f"{flip}.txt")
+        (tmp_path / "s.yaml").write_text(
+            f"name: s\nmodel: {model}\ndataset: {log.name}\n"
+            "initial_guess: from_file\nsolvers: [gauss_newton]\n"
+        )
+        found = [(u.kind, u.subject) for u in preflight(load_scenario(tmp_path / "s.yaml")).units]
+        assert found == ([] if flip is None else [("mirrored", names[flip])]), (flip, found)
 
 
 def test_a_run_on_wheel_angles_in_degrees_stops_naming_them(

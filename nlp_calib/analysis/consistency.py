@@ -36,15 +36,16 @@ def determined(
     values: np.ndarray,
     std: np.ndarray,
     sensor: Mapping[str, Reference] | None = None,
+    needed: np.ndarray | None = None,
 ) -> np.ndarray:
     """Per parameter: whether an estimate ``values`` with σ ``std`` determines it to the precision a
     calibration needs (finite, at most :data:`WEAK` times its reference precision; ``sensor``: the
-    sensor's precisions of its mount)."""
+    sensor's precisions of its mount; ``needed``: the drive's, where known)."""
     std = np.asarray(std, dtype=float)
+    if needed is None:
+        needed = reference_scales(model, names, np.asarray(values, dtype=float), sensor)
     with np.errstate(invalid="ignore"):
-        return np.isfinite(std) & (
-            std <= WEAK * reference_scales(model, names, np.asarray(values, dtype=float), sensor)
-        )
+        return np.isfinite(std) & (std <= WEAK * np.asarray(needed, dtype=float))
 
 
 def combined_others(std_own: np.ndarray) -> np.ndarray:

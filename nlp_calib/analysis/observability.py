@@ -9,6 +9,7 @@ checked too: a log that never turns cannot tell an axis length or a lever arm.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,8 +49,15 @@ def directions(H: np.ndarray, sigma2: float, R: np.ndarray, n_windows: int, moti
     return Directions(lam, V, free, np.sqrt(var_param))
 
 
-def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarray) -> Observability:
-    """Observability of the free parameters at ``x`` for the log whose tracker poses are given."""
+def analyse(
+    evaluator: ProblemEvaluator,
+    x: np.ndarray,
+    T_world_sensor: np.ndarray,
+    clocks: Mapping[str, float] | None = None,
+) -> Observability:
+    """Observability of the free parameters at ``x`` for the log whose tracker poses are given;
+    ``clocks``: the precision the drive needs of each clock offset (a weak direction of offsets
+    alone within :data:`WEAK` times it is none: the reference's 2 ms is a robot's at 1 m/s)."""
     fns = evaluator.fns
     names = fns.free
     ne = evaluator.normal_equations(x)
@@ -75,6 +83,8 @@ def analyse(evaluator: ProblemEvaluator, x: np.ndarray, T_world_sensor: np.ndarr
     jacobi = np.linalg.eigvalsh(ne.H / np.outer(d, d))
     cond = float(jacobi[-1] / jacobi[0]) if jacobi[0] > 1e-14 * jacobi[-1] else float("inf")
     weak = weak_directions(names, found.lam, found.V, found.free)
+    if clocks:
+        weak = [w for w in weak if not _within(w, dict(zip(names, R)), clocks)]
     # The heading's range, not its summed steps: tracker noise adds up over thousands of steps.
     turning = float(np.ptp(heading))
     warnings = [w for w in [no_turning(fns, names, turning)] if w]
@@ -115,6 +125,14 @@ def weak_directions(
             said.add(frozenset(comps))
             weak.append(WeakDirection(float(std_dir[k]), comps))
     return weak
+
+
+def _within(w: WeakDirection, R: Mapping[str, float], clocks: Mapping[str, float]) -> bool:
+    """Whether weak direction ``w`` (in the reference units ``R``) moves only clock offsets, each by
+    at most :data:`WEAK` times what the drive needs of it (``clocks``)."""
+    if w.std_reference > NOT_OBSERVABLE or not set(w.components) <= set(clocks):
+        return False
+    return all(w.std_reference * abs(v) * R[n] <= WEAK * clocks[n] for n, v in w.components.items())
 
 
 def _direction_std(lam: np.ndarray) -> np.ndarray:

@@ -16,17 +16,19 @@ what the vehicle drives (a wheel scale's 1 % is 1 % of the drive's distance), an
 
 A clock offset misplaces the reference by what the sensor moves in that time: its reference (2 ms)
 is the reference robot's 2 mm at a metre a second and 2 mrad at a radian a second, so it needs
-what keeps the sensor's own speed and turn rate on this drive (their :data:`FAST_QUANTILE`) to that
+what keeps the sensor's own speed and turn rate on this drive (their :data:`FAST_QUANTILE`, over
+steps of the path as the drive's description takes them: not the tracker's noise) to that
 (:func:`lag_precision`); a slow robot needs less of it, a car at speed more.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from nlp_calib.analysis.excitation import STEP_S, taken
 from nlp_calib.analysis.metrics import steps
 from nlp_calib.logs import Log
 from nlp_calib.problem import ProblemFunctions
@@ -82,8 +84,14 @@ def lag_precision(layout: Layout, track: np.ndarray, time_s: np.ndarray, log: in
     """``layout`` with the precision of log ``log``'s free clock offsets (and a shared one) from
     the sensor's track on the floor ``(x, y, heading)`` at ``time_s`` (see the module docstring);
     without ``metric`` positions (a track in its own units) only the turn rate counts."""
-    dt = np.diff(np.asarray(time_s, dtype=float))
-    step = np.diff(np.asarray(track, dtype=float), axis=0)[dt > 0]
+    # Steps of a quarter second at least, as the drive's description takes the path: the speed of
+    # each record's noise is not the sensor's (6 mm of noise at 25 Hz moves it 0.2 m/s, over a
+    # quarter second 0.03 m/s); unsmoothed, so that an arc keeps its speed (a chord's shortfall).
+    time_s = np.asarray(time_s, dtype=float)
+    k = taken(time_s, STEP_S)
+    path = np.asarray(track, dtype=float)[k]
+    dt = np.diff(time_s[k])
+    step = np.diff(path, axis=0)[dt > 0]
     dt = dt[dt > 0]
     speed = np.hypot(step[:, 0], step[:, 1]) / dt / REFERENCE_SPEED if metric else np.zeros(dt.size)
     fast = max(_fast(speed), _fast(np.abs(step[:, 2]) / dt / REFERENCE_RATE))
@@ -121,15 +129,33 @@ def log_precision(
     return lag_precision(layout, track, log.time_s, index, fns.sensor.length_unit == "m")
 
 
-def tightest(layout: Layout, logs: Sequence[Layout]) -> Layout:
+def tightest(layout: Layout, logs: Sequence[Layout], shared: bool = True) -> Layout:
     """``layout`` (several logs' together) with each parameter's precision the tightest any log's
     drive needs of it (``logs``: each log's layout of the whole calibration, as its drive sets it);
-    a log's own parameter (its clock offset) as its own log's drive sets it."""
+    a log's own parameter (its clock offset) as its own log's drive sets it. Without ``shared``,
+    only the logs' own parameters: one log's view of a joint fit (its drive's needs of the shared
+    ones, every other log's of its own clock offset, not a constant 2 ms)."""
     out = []
     for p in layout.parameters:
+        if p.log is None and not shared:
+            out.append(p)
+            continue
         mine = logs if p.log is None else logs[p.log : p.log + 1]
         needed = [o.param(p.name).precision for o in mine if p.name in o]
         if needed and all(kind == "absolute" for kind, _ in needed):
             p = dataclasses.replace(p, precision=("absolute", min(amount for _, amount in needed)))
         out.append(p)
     return dataclasses.replace(layout, parameters=tuple(out))
+
+
+def clock_needed(layout: Layout) -> dict[str, float]:
+    """The precision each free clock offset of ``layout`` needs (s): the drive's, where ``layout``
+    is set by :func:`log_precision` (:func:`lag_precision`), so that no check reads a lag by the
+    reference robot's constant 2 ms."""
+    return {p.name: p.needed(0.0) for p in layout.parameters if p.block == CLOCK and p.status == FREE}
+
+
+def with_clocks(scales: np.ndarray, names: Sequence[str], clocks: Mapping[str, float]) -> np.ndarray:
+    """``scales`` (per parameter of ``names``, a precision in its unit) with each clock offset's the
+    drive's (``clocks``: :func:`clock_needed`)."""
+    return np.array([clocks.get(n, s) for n, s in zip(names, np.asarray(scales, dtype=float))])

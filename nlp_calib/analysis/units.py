@@ -10,10 +10,12 @@ Each is told from the data alone, against the tracker where it takes a scale or 
   turn so far for the tracker's travel that a radian of them would move the robot less than
   :data:`MIN_RADIUS` (the smallest wheels a robot carrying a tracker rolls on are several times
   larger; read in degrees, a wheel of up to 35 cm radius falls below it);
-- **a mirrored wheel axis**: two wheels whose joints turn opposite ways on gentle curves, where
-  both wheels of any robot turn the same way (:data:`OPPOSITE_SHARE` of those stretches); the one
-  that turns against the robot's forward travel (the tracker's motion along the nominal mount's
-  heading, for a planar tracker) is named.
+- **a mirrored wheel axis**: two wheels whose joints turn opposite ways where the base drives a
+  gentle curve and the same way where it turns on the spot, where both wheels of any robot do the
+  reverse (:data:`OPPOSITE_SHARE` of those steps); the base's track is the reference's moved by the
+  nominal mount (a sensor turned 90° or off the axle is no mirror), and both kinds of step are
+  judged (a reference's slips, gentle curves where the wheels turn on the spot, are outweighed
+  where it turns with them). The one that turns against the base's forward travel is named.
 
 Every finding says what was measured and how to fix it; the run cannot succeed on such data as
 they are (a degree taken for a radian makes a wheel radius 57 times too small, a mirrored wheel a
@@ -62,11 +64,19 @@ LENGTH_UNITS = {"millimetres": 1e-3, "centimetres": 1e-2}
 #: positions looked like a wheel that wraps, or like nothing).
 SPEED_CORRELATION = 0.8
 SPEED_MARGIN = 0.3
-#: Two wheels turning opposite ways on this share of the gentle curves: one axis is mirrored.
+#: Two wheels turning against a robot's on this share of the steps judged: one axis is mirrored.
 OPPOSITE_SHARE = 0.8
 #: A curve is gentle where the heading turns less than this per metre (rad/m): both wheels of a
 #: base narrower than 2 m turn the same way there.
 GENTLE_CURVATURE = 1.0
+#: The base turns on the spot where it travels less than this per radian turned (m/rad): under
+#: half the narrowest track (:data:`TRACK_RANGE`), so its two wheels turn opposite ways there ...
+PIVOT_RADIUS = 0.025
+#: ... and turns at least this much per step (rad), beyond a tracker's noise.
+PIVOT_TURN = 0.05
+#: The wheels' signs are judged on steps this long (s): a turn on the spot of a few centimetres of
+#: the wheels then moves a tracker by more than its noise.
+SIGN_STEP_S = 1.0
 
 
 def _positions(log: Log, name: str) -> np.ndarray:
@@ -306,52 +316,87 @@ def _wrong_unit(
     ]
 
 
+def base_track(
+    xy: np.ndarray, heading: np.ndarray, mount: tuple[float, float, float] | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The base's positions and heading from a planar sensor's (``xy``, ``heading``) and its
+    nominal mount ``(x, y, yaw)`` in the base (the sensor's own where None): a sensor turned 90°
+    travels sideways and one off the axle swings about it on the spot; the base does neither."""
+    if mount is None:
+        return xy, heading
+    x, y, yaw = mount
+    th = heading - yaw
+    lever = np.column_stack([np.cos(th) * x - np.sin(th) * y, np.sin(th) * x + np.cos(th) * y])
+    return xy - lever, th
+
+
 def _mirrored(
-    log: Log, model: KinematicModel, track: tuple[np.ndarray, np.ndarray], mount_yaw: float | None
+    log: Log,
+    model: KinematicModel,
+    track: tuple[np.ndarray, np.ndarray],
+    mount: tuple[float, float, float] | None,
 ) -> list[UnitFinding]:
+    """Two wheels whose joints turn opposite ways where the base (by the reference and the nominal
+    ``mount``) drives a gentle curve, or the same way where it turns on the spot, on
+    :data:`OPPOSITE_SHARE` of those steps: both say one axis is mirrored, and a reference's fault
+    (a scan matcher's slip, a swing of the sensor about the axle) says only one of them."""
     counters = _counters(log, model)
-    xy, heading = track
     if len(counters) < 2:
         return []
-    k, gentle = _gentle(log.time_s, xy, heading)
-    steps = {n: np.diff(_positions(log, n)[k])[gentle] for n in counters[:2]}
+    xy, heading = base_track(*track, mount)
+    k = taken(log.time_s, SIGN_STEP_S)
+    ds = np.hypot(*np.diff(xy[k], axis=0).T)
+    dth = np.abs(np.diff(heading[k]))
+    gentle = (ds > 1e-3) & (dth < GENTLE_CURVATURE * ds)
+    pivot = (dth > PIVOT_TURN) & (ds < PIVOT_RADIUS * dth)
+    steps = {n: np.diff(_positions(log, n)[k]) for n in counters[:2]}
     a, b = steps.values()
-    moving = (np.abs(a) > 0) & (np.abs(b) > 0)
-    opposite = float(np.mean(np.sign(a[moving]) != np.sign(b[moving]))) if moving.any() else 0.0
-    if moving.sum() < 5 or opposite < OPPOSITE_SHARE:
+    judged = (a != 0) & (b != 0) & np.isfinite(a) & np.isfinite(b) & (gentle | pivot)
+    against = judged & ((np.sign(a) != np.sign(b)) == gentle)
+    share = float(against.sum() / judged.sum()) if judged.any() else 0.0
+    if against.sum() < 5 or share < OPPOSITE_SHARE:
         return []
-    forward = _forward(xy, heading, k, mount_yaw)
-    if forward is not None:
-        agree = {n: float(np.sum(np.sign(v[moving]) == forward[gentle][moving])) for n, v in steps.items()}
-        backwards = min(agree, key=lambda n: agree[n])
-        which = f"{backwards} turns backwards as the robot drives forwards (by the tracker)"
-    else:
-        totals = {n: float(np.sum(v[moving])) for n, v in steps.items()}
-        backwards = min(totals, key=lambda n: totals[n])
-        which = f"{backwards} turns backwards on most of the driving"
+    backwards, which = _backwards(steps, against & gentle, _forward(xy, heading, k) if mount else None)
     return [
         UnitFinding(
             "mirrored",
             backwards,
-            f"the joints read as {counters[0]} and {counters[1]} turn opposite ways on gentle curves, where "
-            f"both wheels of a robot turn the same way ({100 * opposite:.0f} % of them): one wheel's axis is "
-            f"mirrored, and {which}; negate that joint (its URDF axis, or its sign in the driver) or its "
-            "wheel radius comes out negative",
+            f"the joints read as {counters[0]} and {counters[1]} turn opposite ways where the base drives "
+            "a gentle curve, or the same way where it turns on the spot (by the reference and the nominal "
+            f"mount), on {100 * share:.0f} % of {int(judged.sum())} such steps, where a robot's two wheels "
+            f"do the reverse: one wheel's axis is mirrored, and {which}; negate that joint (its URDF axis, "
+            "or its sign in the driver) or its wheel radius comes out negative",
         )
     ]
 
 
-def _forward(
-    xy: np.ndarray, heading: np.ndarray, k: np.ndarray, mount_yaw: float | None
-) -> np.ndarray | None:
-    """Per step, the sign of the base's travel along its own x axis (None without a planar mount)."""
-    if mount_yaw is None:
-        return None
+def _backwards(
+    steps: dict[str, np.ndarray], gentle: np.ndarray, forward: np.ndarray | None
+) -> tuple[str, str]:
+    """Which of two mirrored wheels turns backwards, and how it is told, from the ``gentle`` steps
+    that show the mirror: against the base's travel along its own x axis (``forward``, per step;
+    None without a planar mount), else against most of the driving."""
+    names = list(steps)
+    if not gentle.any():
+        return names[0], (
+            "the steps turning on the spot do not tell which one turns backwards: drive a straight line "
+            f"forwards, and negate the one of {names[0]} and {names[1]} that counts down"
+        )
+    if forward is not None:
+        agree = {n: float(np.sum(np.sign(v[gentle]) == forward[gentle])) for n, v in steps.items()}
+        name = min(agree, key=lambda n: agree[n])
+        return name, f"{name} turns backwards as the robot drives forwards (by the reference and its mount)"
+    totals = {n: float(np.sum(v[gentle])) for n, v in steps.items()}
+    name = min(totals, key=lambda n: totals[n])
+    return name, f"{name} turns backwards on most of the driving"
+
+
+def _forward(xy: np.ndarray, heading: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Per step, the sign of the base's travel along its own x axis (``xy``, ``heading``: the
+    base's track)."""
     d = np.diff(xy[k], axis=0)
     th = heading[k][:-1]
-    vx = np.cos(th) * d[:, 0] + np.sin(th) * d[:, 1]
-    vy = -np.sin(th) * d[:, 0] + np.cos(th) * d[:, 1]
-    return np.sign(np.cos(mount_yaw) * vx - np.sin(mount_yaw) * vy)
+    return np.sign(np.cos(th) * d[:, 0] + np.sin(th) * d[:, 1])
 
 
 def _correlation(a: np.ndarray, b: np.ndarray) -> float:
@@ -394,16 +439,22 @@ def _speed_columns(log: Log, model: KinematicModel, xy: np.ndarray) -> list[Unit
 
 
 def findings(
-    log: Log, model: KinematicModel, track: tuple[np.ndarray, np.ndarray], mount_yaw: float | None
+    log: Log,
+    model: KinematicModel,
+    track: tuple[np.ndarray, np.ndarray],
+    mount: tuple[float, float, float] | None,
 ) -> tuple[UnitFinding, ...]:
     """Every unit and sign finding on ``log`` read for ``model``: ``track`` the tracker's positions
-    ``(n, 2)`` and unwrapped heading at the records; ``mount_yaw`` the nominal planar mount's
-    heading (None for a 3-D sensor). Wheel columns that look like speeds are said as such alone
-    (their swings looked like wraps, their scale like a wheel of metres)."""
+    ``(n, 2)`` and unwrapped heading at the records; ``mount`` the nominal planar mount ``(x, y,
+    yaw)`` (None for a 3-D sensor). Wheel columns that look like speeds are said as such alone
+    (their swings looked like wraps, their scale like a wheel of metres); a reference in the wrong
+    units is no measure of the wheels' signs (its curves and turns on the spot are not what they
+    seem), so no sign is judged against it."""
     xy, heading = track
     speeds = _speed_columns(log, model, xy)
     out = speeds or wrapped(log, model)
     out += _steering_degrees(log, model)
     out += [] if speeds else _wheel_degrees(log, model, xy, heading)
-    out += _mirrored(log, model, track, mount_yaw)
+    if not any(f.kind == "reference units" for f in out):
+        out += _mirrored(log, model, track, mount)
     return tuple(out)

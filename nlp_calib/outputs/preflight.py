@@ -40,7 +40,7 @@ def _drive(ex: Excitation) -> list[str]:
     for side, r in (("left", ex.radii_left_m), ("right", ex.radii_right_m)):
         if r:
             radii.append(f"{side} {r[1]:.2g} m ({r[0]:.2g}-{r[2]:.2g})")
-    moving = f"{ex.duration_s:.1f} s ({100 * ex.moving_fraction:.0f} % moving)"
+    moving = f"{ex.duration_s:.1f} s (travelling {100 * ex.moving_fraction:.0f} % of it, by the wheels)"
     if not math.isfinite(ex.distance_m):  # a reference that measures no position (a gyro)
         return [
             f"  {moving}; no distance, speed or turn radius: the reference measures no position",
@@ -50,7 +50,7 @@ def _drive(ex: Excitation) -> list[str]:
         ]
     return [
         f"  {ex.distance_m:.1f} m in {moving}; speed "
-        f"{ex.speed_median_mps:.2f} m/s median, {ex.speed_max_mps:.2f} m/s at most",
+        f"{ex.speed_median_mps:.2g} m/s median while travelling, {ex.speed_max_mps:.2g} m/s at most",
         f"  heading spans {ex.heading_span_rad:.2f} rad; turned {ex.turned_left_rad:.1f} rad left and "
         f"{ex.turned_right_rad:.1f} rad right; turn radii: {', '.join(radii) or 'none'}",
         f"  {ex.reversals} reversal(s); {100 * ex.reverse_fraction:.0f} % of the driving backwards",

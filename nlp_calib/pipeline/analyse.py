@@ -33,6 +33,7 @@ from nlp_calib.analysis.odometry import (
 )
 from nlp_calib.analysis.odometry import Drift as DriftSegments
 from nlp_calib.analysis.plan import Setting, plan
+from nlp_calib.analysis.precision import clock_needed
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
 from nlp_calib.core import memory
 from nlp_calib.models import header_parameters
@@ -192,7 +193,7 @@ def analyse_fit(
     may not have started); cross-validation, the direction check and the comparisons with the start
     and the nominal robot from the first converged one, with each held-out block scored by
     ``blocks``; ``layout``: the precision each parameter needs on the drive (the direction check's
-    floor)."""
+    floor; the weak directions' of the clock offsets)."""
     ev, data = fit.evaluator, fit.data
     big = data.n_residuals >= RELEASE_FROM
     if big:
@@ -202,7 +203,7 @@ def analyse_fit(
     ranges = unc.range_std(start.lower, start.upper, fit.fns.n_free)
     uncertainty = uncertainties(fit, results, noise, ranges)
     finite = [r for r in results.values() if np.isfinite(r.cost)] or list(results.values())
-    observability = observability_of(ev, finite[0].x, data.T_world_sensor)
+    observability = observability_of(ev, finite[0].x, data.T_world_sensor, clock_needed(layout))
     converged = [r for r in results.values() if r.converged]
     effects = unc.lag_effects(uncertainty[next(iter(results))], fit.fns.layout) if results else ()
     if not converged:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.analysis.consistency import compare_logs, determined
-from nlp_calib.analysis.precision import log_precision, tightest
+from nlp_calib.analysis.precision import clock_needed, log_precision, tightest, with_clocks
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, reference_scales
@@ -255,7 +255,8 @@ def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> Cali
     scorer = blocks_scorer(fitting.fns, parts, fitting.data)
     logs = logs_crossval(fitting, results, scorer, log_ranges(parts))
     own = [_own_run(p, names) for p in parts]
-    check = consistency(results, own, logs, (calib.model, fit_info(calib.scenario, calib.fns)))
+    clocks = clock_needed(infos[0].layout)
+    check = consistency(results, own, logs, (calib.model, fit_info(calib.scenario, calib.fns)), clocks)
     if check is not None and (check.significant or consistency_check.limits(check)):
         notes.append(consistency_check.words(check))
     fitted = dataclasses.replace(fitted, consistency=check, logs=logs)
@@ -320,11 +321,12 @@ def consistency(
     own: Sequence[CalibrationRun],
     logs: CrossValidation | None,
     model: tuple[KinematicModel, ScenarioInfo],
+    clocks: Mapping[str, float],
 ) -> ConsistencyCheck | None:
     """Each log's own fit (``own``, in the joint fit's order of logs) against the other logs' (the
     folds of ``logs``), for the first solver that converged in the joint fit, on what each log
     determines on its own; ``model``: the model and what the outputs say of the fit (its units and
-    parameter layout)."""
+    parameter layout); ``clocks``: the precision each log's drive needs of its clock offset."""
     solver = next((name for name, r in results.items() if r.converged), None)
     if solver is None or logs is None:
         return None
@@ -349,8 +351,12 @@ def consistency(
     sensor = own[0].scenario.sensor
     reference = sensor_for(sensor.kind, sensor.scale).reference
     keys = info.layout.keys(names)
-    known = np.array([determined(kind, keys, e, sd, reference) for e, sd in zip(est, std)])
-    apart = WEAK * reference_scales(kind, keys, result.params, reference)
+
+    def needed(values: np.ndarray) -> np.ndarray:
+        return with_clocks(reference_scales(kind, keys, values, reference), names, clocks)
+
+    known = np.array([determined(kind, keys, e, sd, reference, needed(e)) for e, sd in zip(est, std)])
+    apart = WEAK * needed(result.params)
     paths = [run.log.path for run in own]
     unit = tuple(info.units.get(n, "") for n in names)
     return compare_logs(names, paths, result.params, (est, std), others, known, apart, unit)
@@ -378,6 +384,10 @@ def _fit(
     # The precision each parameter needs: the tightest any log's drive asks (as the joint run's).
     infos = [_part_info(fitting, part, i)[1] for i, part in enumerate(parts)]
     needed = tightest(info.layout, [i.layout for i in infos])
+    # Each log's view: every log's clock offset at what that log's drive needs of it.
+    infos = [
+        dataclasses.replace(i, layout=tightest(i.layout, [o.layout for o in infos], False)) for i in infos
+    ]
     fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data), needed)
     fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, info.units))
     white = fitted.uncertainty[solvers[0]]

@@ -54,11 +54,11 @@ def unit_findings(
 ) -> tuple[UnitFinding, ...]:
     """What the data of each log imply of units and signs, each finding once, judged by the fit."""
     out: list[UnitFinding] = []
-    yaw = fns.sensor.planar_yaw(start)
-    for part in parts:
+    for i, part in enumerate(parts):
         log = part.log.select(part.start, part.split)
         T = fns.sensor.floor_track(log)
-        out += [f for f in findings(log, part.model, (T[:, :2], T[:, 2]), yaw) if f not in out]
+        mount = fns.sensor.planar_mount(fns.view_dict(start, i))
+        out += [f for f in findings(log, part.model, (T[:, :2], T[:, 2]), mount) if f not in out]
     return tuple(_judged_by_fit(f, fns.model, fitted) for f in out)
 
 

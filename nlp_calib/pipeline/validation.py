@@ -18,6 +18,7 @@ import numpy as np
 
 from nlp_calib.analysis.crossval import blocks, combine, jackknife_std
 from nlp_calib.analysis.direction import compare
+from nlp_calib.analysis.precision import clock_needed, with_clocks
 from nlp_calib.core import memory, threads
 from nlp_calib.models import reference_scales
 from nlp_calib.pipeline.build import Binder, no_priors
@@ -332,16 +333,9 @@ def direction_check(
         estimates.append(canonical(params))
         sigmas.append(jackknife_std(np.array(folds)) if len(folds) >= 3 else np.full(len(fns.names), np.nan))
         windows.append(n)
-    apart = WEAK * reference_scales(fns.model, fns.layout.keys(fns.names), estimates[0])
-    needed = layout.needed(dict(zip(fns.names, 0.5 * (estimates[0] + estimates[1]))))
-    return compare(
-        fns.names,
-        estimates[0],
-        estimates[1],
-        (windows[0], windows[1]),
-        sigmas[0],
-        sigmas[1],
-        held,
-        apart,
-        np.array([needed[n] for n in fns.names]),
+    apart = WEAK * with_clocks(
+        reference_scales(fns.model, fns.layout.keys(fns.names), estimates[0]), fns.names, clock_needed(layout)
     )
+    needed = layout.needed(dict(zip(fns.names, 0.5 * (estimates[0] + estimates[1]))))
+    parts = (estimates[0], estimates[1], (windows[0], windows[1]), sigmas[0], sigmas[1])
+    return compare(fns.names, *parts, held, apart, np.array([needed[n] for n in fns.names]))

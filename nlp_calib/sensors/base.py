@@ -124,7 +124,9 @@ class Sensor(Protocol):
     # --- numeric twins ---------------------------------------------------------------------------
     def heading(self, T_world_sensor: np.ndarray) -> np.ndarray: ...
     def floor_track(self, log: Log) -> np.ndarray: ...  # (x, y, unwrapped heading) on the floor
-    def planar_yaw(self, params: Mapping[str, float]) -> float | None: ...  # mount yaw in the base plane
+    def planar_mount(
+        self, params: Mapping[str, float]
+    ) -> tuple[float, float, float] | None: ...  # (x, y, yaw)
     def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str: ...
     def tangent(self, z: np.ndarray) -> np.ndarray: ...
     def beside_mount(
@@ -218,7 +220,7 @@ class SensorDefaults:
     def boxplus(self, free: Sequence[str], x: ca.SX, step: ca.SX, x_plus: ca.SX) -> None:
         return None
 
-    def planar_yaw(self, params: Mapping[str, float]) -> float | None:
+    def planar_mount(self, params: Mapping[str, float]) -> tuple[float, float, float] | None:
         return None
 
     def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str:

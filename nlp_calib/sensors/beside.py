@@ -177,8 +177,8 @@ class Beside(SensorDefaults):
         """The reference's positions and heading (was the gyro's heading alone: a drive of 0 m)."""
         return self.reference_sensor.floor_track(log)
 
-    def planar_yaw(self, params: Mapping[str, float]) -> float | None:
-        return self.reference_sensor.planar_yaw(params)
+    def planar_mount(self, params: Mapping[str, float]) -> tuple[float, float, float] | None:
+        return self.reference_sensor.planar_mount(params)
 
     def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str:
         return self.reference_sensor.implausible(params, given)

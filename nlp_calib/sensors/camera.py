@@ -128,7 +128,7 @@ class CameraPose(SensorDefaults):
 
     # --- numeric twins ---------------------------------------------------------------------------
 
-    def planar_yaw(self, params: Mapping[str, float]) -> float | None:
+    def planar_mount(self, params: Mapping[str, float]) -> tuple[float, float, float] | None:
         """None: a camera's poses lie in its own world frame, not the base's plane."""
         return None
 

@@ -93,10 +93,11 @@ class PlanarPose(SensorDefaults):
         T = np.asarray(log.T_world_sensor, dtype=float)
         return np.column_stack([T[:, :2], np.unwrap(T[:, 2])])
 
-    def planar_yaw(self, params: Mapping[str, float]) -> float | None:
-        """The mount's yaw in the base plane (rad) in ``params`` (0 where they hold none): the
-        angle that turns the tracker's motion into the base's."""
-        return float(params.get("sensor_theta", 0.0))
+    def planar_mount(self, params: Mapping[str, float]) -> tuple[float, float, float] | None:
+        """The mount ``(x, y, yaw)`` in the base plane (m, m, rad) in ``params`` (0 where they hold
+        none): what turns the tracker's track into the base's."""
+        x, y, yaw = (float(params.get(self.components[c], 0.0)) for c in ("x", "y", "yaw"))
+        return x, y, yaw
 
     def implausible(self, params: Mapping[str, float], given: Mapping[str, float] | None) -> str:
         """Nothing: every planar mount is one a robot can have (a mirror shows in the model's own
