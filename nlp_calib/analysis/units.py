@@ -443,18 +443,21 @@ def findings(
     model: KinematicModel,
     track: tuple[np.ndarray, np.ndarray],
     mount: tuple[float, float, float] | None,
+    positions: bool = True,
 ) -> tuple[UnitFinding, ...]:
     """Every unit and sign finding on ``log`` read for ``model``: ``track`` the tracker's positions
     ``(n, 2)`` and unwrapped heading at the records; ``mount`` the nominal planar mount ``(x, y,
-    yaw)`` (None for a 3-D sensor). Wheel columns that look like speeds are said as such alone
-    (their swings looked like wraps, their scale like a wheel of metres); a reference in the wrong
-    units is no measure of the wheels' signs (its curves and turns on the spot are not what they
-    seem), so no sign is judged against it."""
+    yaw)`` (None for a 3-D sensor); ``positions``: whether the reference measures any (a gyro's
+    heading alone does not: every turn of it would look like one on the spot). Wheel columns that
+    look like speeds are said as such alone (their swings looked like wraps, their scale like a
+    wheel of metres); a reference in the wrong units is no measure of the wheels' signs (its curves
+    and turns on the spot are not what they seem), so no sign is judged against it, nor against one
+    without positions."""
     xy, heading = track
     speeds = _speed_columns(log, model, xy)
     out = speeds or wrapped(log, model)
     out += _steering_degrees(log, model)
     out += [] if speeds else _wheel_degrees(log, model, xy, heading)
-    if not any(f.kind == "reference units" for f in out):
+    if positions and not any(f.kind == "reference units" for f in out):
         out += _mirrored(log, model, track, mount)
     return tuple(out)

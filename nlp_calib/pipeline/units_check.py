@@ -58,7 +58,8 @@ def unit_findings(
         log = part.log.select(part.start, part.split)
         T = fns.sensor.floor_track(log)
         mount = fns.sensor.planar_mount(fns.view_dict(start, i))
-        out += [f for f in findings(log, part.model, (T[:, :2], T[:, 2]), mount) if f not in out]
+        found = findings(log, part.model, (T[:, :2], T[:, 2]), mount, not fns.sensor.lengths_unseen)
+        out += [f for f in found if f not in out]
     return tuple(_judged_by_fit(f, fns.model, fitted) for f in out)
 
 
