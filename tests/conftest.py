@@ -46,6 +46,15 @@ _cache_bytecode_for_children()
 native_one_thread_by_default()
 
 
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """One worker more than ``-n auto`` would start (one per core): some tests wait on the tool's
+    own processes, timers and signals (a fifth of the suite's wall time left two workers idle on
+    two cores), and the extra worker runs while they wait."""
+    from xdist.plugin import pytest_xdist_auto_num_workers as per_core
+
+    return int(per_core(config)) + 1
+
+
 def _find_real_log() -> Path:
     """``$NLP_CALIB_REAL_LOG``, else ``shared/data/dataset.txt`` beside the checkout or above it."""
     if "NLP_CALIB_REAL_LOG" in os.environ:
