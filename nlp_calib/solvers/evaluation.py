@@ -216,10 +216,14 @@ class ProblemEvaluator:
         if kept is not None and same:
             # The same windows on other inputs (the lag's re-samplings): the buffers and mapped
             # Functions bound to them stay, their contents are written in place.
-            kept.motion.set_inputs(data.inputs)
-            kept.window_data[:] = pad_columns(data.data(), kept.n_padded)
+            self._write_inputs(kept)
             return
         self._windows: _Windows | None = None
+
+    def _write_inputs(self, windows: _Windows) -> None:
+        """The bound data's inputs and per-window data written into ``windows``' buffers."""
+        windows.motion.set_inputs(self._data.inputs)
+        windows.window_data[:] = pad_columns(self._data.data(), windows.n_padded)
 
     def release(self) -> None:
         """Let go of what is bound to the windows (their padded data, the prefix scans' and the
@@ -286,10 +290,8 @@ class ProblemEvaluator:
         ``lags``, one per log, with their ``rates``, when the problem has them); nothing is rebuilt."""
         self._data = self._data.with_inputs(inputs, lags, rates)
         if self._windows is not None:
-            self._windows.motion.set_inputs(inputs)
-            if self.fns.clock_rows:
-                # The windows' clock data follow the inputs; written in place (buffers hold it).
-                self._windows.window_data[:] = pad_columns(self._data.data(), self._windows.n_padded)
+            # The windows' clock data follow the inputs; written in place (buffers hold it).
+            self._write_inputs(self._windows)
         self._last = _Last()
 
     def normal_equations(self, x: np.ndarray) -> NormalEquations:
