@@ -125,6 +125,15 @@ def launch(cmd: list[str], env: dict[str, str]) -> dict[str, Any]:
     return dict(json.loads(out.stdout))
 
 
+def warm_env() -> dict[str, str]:
+    """The environment of the timed runs: this checkout's code, and the compile cache a user's runs
+    keep (``cache_dir()``), warm after its first run (a smoke run's first run of a scenario may
+    compile there, once, as a user's first run does; a folder of its own would compile again)."""
+    from nlp_calib.codegen.compiler import cache_dir
+
+    return dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore", NLP_CALIB_CACHE=str(cache_dir()))
+
+
 def cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "nlp_calib", *args]
 
@@ -316,9 +325,7 @@ def ipopt_lag_lines(sweep: dict[str, Any]) -> list[str]:
 def scaling(sizes: list[int], repeats: int, tmp: Path, warm_up: bool = True) -> dict[str, Any]:
     """``run --solver gauss_newton`` on simulated logs of each size: wall, peak RSS, GN time
     (without ``warm_up`` the first run also compiles)."""
-    env = dict(
-        os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore", NLP_CALIB_CACHE=str(tmp / "cache-scale")
-    )
+    env = warm_env()
     logs = {}
     for n in sizes:
         logs[n] = tmp / f"sim_{n}.txt"
@@ -363,9 +370,7 @@ def sized_runs(
     interleaved: wall, CPU (its processes'), peak RSS, each solver's time; and how the wall time
     grows from each size to the next. Without ``warm_up`` the first run also compiles (the smoke
     run's figures are not the benchmark's)."""
-    env = dict(
-        os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore", NLP_CALIB_CACHE=str(tmp / "cache-sized")
-    )
+    env = warm_env()
     path = str(REPO / "scenarios" / f"{scenario}.yaml")
     first = min(logs)
     if warm_up:
@@ -584,9 +589,7 @@ def simulate_big(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
 def batch(n_logs: int, records: int, repeats: int, tmp: Path, warm_up: bool = True) -> dict[str, Any]:
     """``nlp-calib batch`` of ``n_logs`` simulated logs with ``--jobs 1`` and ``--jobs 2``,
     interleaved: median walls and their ratio (without ``warm_up`` the first also compiles)."""
-    env = dict(
-        os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore", NLP_CALIB_CACHE=str(tmp / "cache-batch")
-    )
+    env = warm_env()
     logs = tmp / "fleet"
     logs.mkdir(exist_ok=True)
     for seed in range(n_logs):
