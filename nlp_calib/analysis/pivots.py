@@ -4,11 +4,11 @@ A base that pivots turns on the ground as the ground lets it: a skid-steer skids
 holds over a whole pivot and differs from one pivot to the next, either way. Every window of one
 pivot then shares one draw of that slip, a random effect per pivot that neither the white-noise σ
 (independent windows) nor a blocked jackknife (a block holds a pivot or two) counts, and a fit that
-leaves out the pivots the wheels disagree with keeps those of one sign. So each pivot is fitted on
-its own (the drive's windows off every pivot, and its own): the pivots' scatter about the estimate,
-over ``√(G(G − 1))`` for ``G`` pivots, is the σ of the estimate as the law the drive's pivots hold,
-the choice of pivots kept included (the squared distances about the estimate are the pivots'
-scatter about their mean plus ``G`` times the estimate's offset from it).
+leaves out the pivots the wheels disagree with keeps those that agree with it (those of one sign).
+So each pivot is fitted on its own (the drive's windows off every pivot, and its own): the σ of
+their mean over ``G`` pivots, and the estimate's distance from that mean in full (a fit that keeps
+the pivots agreeing with it may sit anywhere among them), give the σ of the estimate as the law
+the drive's pivots hold.
 """
 
 from __future__ import annotations
@@ -53,8 +53,10 @@ def pivot_windows(pivot: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> n
 
 def pivots_std(params: np.ndarray, estimate: np.ndarray) -> np.ndarray:
     """The σ of ``estimate`` as the law ``G`` pivots hold, from each pivot's own fit (``params``,
-    ``(G, n)``): ``√(Σ (θ_g − θ̂)² / (G(G − 1)))``; NaN for fewer than two pivots."""
+    ``(G, n)``): the σ of their mean, ``s/√G`` (``s`` their scatter), and the estimate's distance
+    from that mean in full, ``√(s²/G + (θ̂ − θ̄)²)``; NaN for fewer than two pivots."""
     G = params.shape[0]
     if G < 2:
         return np.full(np.shape(estimate), np.nan)
-    return np.sqrt(np.sum((params - estimate) ** 2, axis=0) / (G * (G - 1.0)))
+    mean = params.mean(axis=0)
+    return np.sqrt(params.var(axis=0, ddof=1) / G + (estimate - mean) ** 2)
