@@ -12,9 +12,9 @@ diagonal (vx, wz; vy is not stated) against every moving interval; ``pose_all``,
 diagonal against every metre driven, the metres through a fault included (``pose`` leaves them out,
 the diagonal averages over them: the same population as the diagonal's); ``pivots_all``, every
 metre too, against the rates grown over each metre as a filter grows them with calibration.yaml's
-slipped pivots' heading variance per radian on every radian the base turns on the spot; ``rates``, calibration.yaml's
-rates per metre and per radian grown as a filter grows them (``nlp-calib odometry``'s covariance)
-over the fit's windows. A case with no hand-off (no converged solver) has no pose or twist row.
+slipped pivots' heading variance per radian on every radian the base turns on the spot;
+``rates``, calibration.yaml's rates per metre and per radian grown as a filter grows them
+(``nlp-calib odometry``'s covariance) over the fit's windows. A case with no hand-off (no converged solver) has no pose or twist row.
 Nothing here tunes anything: the seeds are whatever the arguments say.
 
 With ``--sigmas``, each case's parameters instead: each estimate's error over its σ to believe
