@@ -14,8 +14,9 @@ the diagonal averages over them: the same population as the diagonal's); ``pivot
 metre too, against the rates grown over each metre as a filter grows them with calibration.yaml's
 slipped pivots' heading variance per radian on every radian the base turns on the spot;
 ``rates``, calibration.yaml's rates per metre and per radian grown as a filter grows them
-(``nlp-calib odometry``'s covariance) over the fit's windows. A case with no hand-off (no converged solver) has no pose or twist row.
-Nothing here tunes anything: the seeds are whatever the arguments say.
+(``nlp-calib odometry``'s covariance) over the fit's windows. A case with no hand-off (no
+converged solver) has no pose or twist row. Nothing here tunes anything: the seeds are whatever
+the arguments say.
 
 With ``--sigmas``, each case's parameters instead: each estimate's error over its σ to believe
 (``run.std``; the truth is the simulator's), and over all the cases how many lie within 1σ and 2σ,
