@@ -10,10 +10,17 @@ frame at the span's start) and together: 1 where the σ is the drift the spans t
 ``pose``, ros2_control.yaml's pose diagonal against every metre driven; ``twist``, its twist
 diagonal (vx, wz; vy is not stated) against every moving interval; ``pose_all``, the pose
 diagonal against every metre driven, the metres through a fault included (``pose`` leaves them out,
-the diagonal averages over them: the same population as the diagonal's); ``rates``, calibration.yaml's
-rates per metre and per radian grown as a filter grows them (``nlp-calib odometry``'s covariance)
-over the fit's windows. A case with no hand-off (no converged solver) has no pose or twist row.
-Nothing here tunes anything: the seeds are whatever the arguments say.
+the diagonal averages over them: the same population as the diagonal's); ``pivots_all``, every
+metre too, against the rates grown over each metre as a filter grows them with calibration.yaml's
+slipped pivots' heading variance per radian on every radian the base turns on the spot;
+``rates``, calibration.yaml's rates per metre and per radian grown as a filter grows them
+(``nlp-calib odometry``'s covariance) over the fit's windows. A case with no hand-off (no
+converged solver) has no pose or twist row. Nothing here tunes anything: the seeds are whatever
+the arguments say.
+
+With ``--sigmas``, each case's parameters instead: each estimate's error over its σ to believe
+(``run.std``; the truth is the simulator's), and over all the cases how many lie within 1σ and 2σ,
+per parameter and together (parameters given as known, with no σ, are not counted).
 """
 
 from __future__ import annotations
@@ -44,6 +51,16 @@ from nlp_calib.simulation.vehicles import (  # noqa: E402
 )
 
 CAR_NAMES = {"k_traction": "traction_wheels_radius", "rear_track": "traction_track_width"}
+#: Each vehicle's truth in the joint form's names (the simulators' defaults; no seed changes them).
+TRUTH = {
+    "car": {CAR_NAMES.get(n, n): v for n, v in HighwayOptions().truth.items()},
+    "skid": {
+        {"k_left": "left_wheel_radius", "k_right": "right_wheel_radius", "baseline": "wheel_separation"}.get(
+            n, n
+        ): v
+        for n, v in SkidSpinOptions().truth.items()
+    },
+}
 CAR_KNOWN = ("k_steer", "wheelbase", "rear_track", "sensor_x", "sensor_y")
 SKID = {
     "model": "skid_steer",
@@ -95,8 +112,11 @@ def main() -> None:
         default=[1],
         help="the rates also over these multiples of the fit's windows",
     )
+    ap.add_argument("--sigmas", action="store_true", help="the parameters' errors in their σ instead")
     args = ap.parse_args()
-    print("case      way     x      y      θ      together   (σ over the σ holding 95 % of true errors)")
+    if not args.sigmas:
+        print("case      way     x      y      θ      together   (σ over the σ holding 95 % of true errors)")
+    errors: dict[str, list[float]] = {}
     for kind, build, seeds in (("car", _car, args.car), ("skid", _skid, args.skid)):
         for seed in seeds:
             with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
@@ -104,6 +124,9 @@ def main() -> None:
                 sc, wanted, truth = build(Path(tmp), seed, args.pivot_slip)
                 calib = Calibration(sc)
                 run = calib.run(wanted=wanted) if wanted else calib.run()
+                if args.sigmas:
+                    _sigmas(f"{kind} {seed:<4d}", run, TRUTH[kind], errors)
+                    continue
                 found = sigma_over_truth(calib, run, truth, tuple(args.multiples), every_metre=True)
             for (way, length), r in found.items():
                 label = f"{way} {length}" if way == "rates" and len(args.multiples) > 1 else way
@@ -112,6 +135,34 @@ def main() -> None:
                     + " ".join(f"{v:6.2f}" for v in r[:3])
                     + f"   {r[3]:6.2f}"
                 )
+    if errors:
+        _coverage(errors)
+
+
+def _sigmas(case: str, run: Any, truth: dict[str, float], errors: dict[str, list[float]]) -> None:
+    """One case's errors in their σ to believe, printed and kept in ``errors`` by parameter."""
+    solver = run.chosen_solver()
+    if solver is None:
+        print(f"{case} no converged solver")
+        return
+    estimate, std = run.reports[solver].result.param_dict(), run.std(solver)
+    pivots = run.checks.pivots
+    row = {n: (estimate[n] - v) / std[n] for n, v in truth.items() if np.isfinite(std.get(n, np.nan))}
+    for n, z in row.items():
+        errors.setdefault(n, []).append(z)
+    count = len(pivots.pivots) if pivots is not None else 0
+    print(
+        f"{case} {run.verdict.level:22s} pivots {count:3d}  "
+        + "  ".join(f"{n} {z:+.2f}" for n, z in row.items())
+    )
+
+
+def _coverage(errors: dict[str, list[float]]) -> None:
+    every = np.abs(np.concatenate([np.array(v) for v in errors.values()]))
+    print(f"within 1σ {np.mean(every < 1):.0%}, within 2σ {np.mean(every < 2):.0%} of {every.size} estimates")
+    for n, v in errors.items():
+        z = np.abs(np.array(v))
+        print(f"  {n:24s} within 1σ {np.mean(z < 1):4.0%}  2σ {np.mean(z < 2):4.0%}  largest {z.max():.1f}σ")
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ import numpy as np
 from nlp_calib.analysis.handoff import metre_spans
 from nlp_calib.analysis.noise_rates import grown_covariances
 from nlp_calib.analysis.odometry import propagate, readings_covariance
+from nlp_calib.analysis.pivots import pivot_intervals
 from nlp_calib.core import poses
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.pipeline.analyse import calibrated_drift
@@ -34,7 +35,9 @@ def sigma_over_truth(
     also against every metre driven, the faults' included (``("pose_all", 0)``): the diagonal is
     averaged over every metre, and the true base's errors there are the odometry's own (a bad
     match is the reference's fault; a slipped pivot's error is one a filter meets), the odometry
-    integrated at the joints' own samples as a controller integrates it."""
+    integrated at the joints' own samples as a controller integrates it; and (``("pivots_all", 0)``)
+    the rates with the slipped pivots' heading variance per radian on every pivot, grown over each
+    of those metres as a filter grows them."""
     part, fit = calib.parts[0], calib.fitting
     solver = run.handoff_solver() or next(iter(run.reports))
     params = fit.fns.view(run.reports[solver].result.params, 0)
@@ -65,6 +68,7 @@ def sigma_over_truth(
         out[("pose_all", 0)] = _handed_off(
             run.reports[solver].controller, published, true, spared, np.diff(t)
         )[("pose", 0)]
+        out[("pivots_all", 0)] = _pivots_grown(published, true, per, rates.slip_per_radian)
     for L in (m * own for m in multiples):
         i = np.arange(0, track.shape[0] - L, max(L // 2, 1))
         i = i[[not bad[a : a + L].any() for a in i]]
@@ -75,6 +79,25 @@ def sigma_over_truth(
         C = grown_covariances(increments, per, np.c_[i, j]) + read
         out[("rates", L)] = _over(error, np.sqrt(np.clip(np.diagonal(C, axis1=1, axis2=2), 0.0, None)))
     return out
+
+
+def _pivots_grown(published: np.ndarray, true: np.ndarray, per: np.ndarray, slip: float) -> np.ndarray:
+    """Over every metre of the odometry as published, the σ a filter grows from the rates per metre
+    and per radian with the slipped pivots' heading variance (``slip`` per radian) on every radian
+    it turns on the spot (the pivots by the fit's rule: it knows when it pivots, not when it slips)
+    against the true errors (:func:`_over`)."""
+    spans = metre_spans(published)
+    increments = poses.between(published[:-1], published[1:])
+    on_spot = np.abs(increments[:, 2]) * pivot_intervals(increments)
+    slipping = np.zeros((2, 3))
+    slipping[1, 2] = slip
+    C = grown_covariances(increments, per, spans) + grown_covariances(
+        increments, slipping, spans, np.c_[np.zeros(on_spot.size), on_spot]
+    )
+    i, j = spans[:, 0], spans[:, 1]
+    a, b = poses.between(true[i], true[j]), poses.between(published[i], published[j])
+    error = np.c_[a[:, :2] - b[:, :2], wrap_angle(a[:, 2] - b[:, 2])]
+    return _over(error, np.sqrt(np.clip(np.diagonal(C, axis1=1, axis2=2), 0.0, None)))
 
 
 def _over(error: np.ndarray, sigma: np.ndarray) -> np.ndarray:

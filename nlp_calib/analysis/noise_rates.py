@@ -61,13 +61,19 @@ def _sums(values: np.ndarray) -> np.ndarray:
     return np.concatenate([np.zeros((1, *values.shape[1:])), np.cumsum(values, axis=0)])
 
 
-def grown_covariances(increments: np.ndarray, rates: np.ndarray, spans: np.ndarray) -> np.ndarray:
+def grown_covariances(
+    increments: np.ndarray, rates: np.ndarray, spans: np.ndarray, amounts: np.ndarray | None = None
+) -> np.ndarray:
     """The covariance ``(S, 3, 3)`` of each span ``(i, j)``'s motion, in the base frame at ``i``,
     grown from each interval's ``Q = diag(rates·(|distance|, |turn|))`` added at its end and
     carried to ``j`` (a heading error turns the rest of the span): by cumulative sums of
-    ``Q``'s world-frame terms against the end's position, one pass for every span."""
+    ``Q``'s world-frame terms against the end's position, one pass for every span. ``amounts``
+    ``(n, 2)``: what the rates multiply instead of each interval's |distance| and |turn| (a rate
+    per radian turned on the spot: the pivots' turns, 0 elsewhere)."""
     track = poses.accumulate(np.zeros(3), increments)
     A = np.c_[np.hypot(increments[:, 0], increments[:, 1]), np.abs(increments[:, 2])]
+    if amounts is not None:
+        A = np.asarray(amounts, dtype=float)
     q = A @ rates  # (n, 3): along, across, heading per interval
     th = track[:-1, 2]
     c, s = np.cos(th), np.sin(th)

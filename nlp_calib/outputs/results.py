@@ -69,6 +69,16 @@ def _crossval_dict(run: CalibrationRun) -> dict[str, Any] | None:
     }
 
 
+def _pivots_dict(run: CalibrationRun) -> dict[str, Any]:
+    """Each pivot fitted on its own: how many, the σ their scatter gives (null where held) and
+    each pivot's records."""
+    pivots = run.checks.pivots
+    assert pivots is not None
+    out = pivots.as_dict()
+    out["std_pivots"] = sigmas(run, None, out["std_pivots"])
+    return out
+
+
 def _logs_dict(run: CalibrationRun) -> dict[str, Any] | None:
     """Several logs: each log's own fit against the other logs', and the jackknife over the logs."""
     check, logs = run.checks.consistency, run.checks.logs
@@ -166,6 +176,8 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         "baseline": {"metrics": _metrics_dict(run.baseline, run.baseline_holdout)},
         "solvers": {name: _solver_dict(run, name, rep) for name, rep in run.reports.items()},
         "crossvalidation": _crossval_dict(run),
+        # Only where the drive pivots (each pivot fitted on its own): no field otherwise.
+        **({"pivots": _pivots_dict(run)} if run.checks.pivots is not None else {}),
         **_check_records(run),
         "logs": _logs_dict(run),
         "start": _cost_dict(checks.start),

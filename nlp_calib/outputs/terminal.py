@@ -90,6 +90,14 @@ def widened_lines(run: CalibrationRun) -> list[str]:
     blocks = checks.crossval.beyond(white) if checks.crossval is not None else np.full(len(names), np.nan)
     base = believed_std(white, blocks)
     out = []
+    if checks.pivots is not None:
+        spread = checks.pivots.beyond(white)
+        wider = [n for n, b, v in zip(names, base, spread) if np.isfinite(v) and v > b]
+        if wider:
+            out.append(
+                f"   σ of {', '.join(wider)}: the scatter of the drive's {len(checks.pivots.pivots)} pivots, "
+                "each fitted on its own (a pivot's windows share one slip of the ground)"
+            )
     for label, spread in checks.moving():
         wider = [n for n, b, v in zip(names, base, spread) if np.isfinite(v) and v > b]
         if wider:

@@ -53,6 +53,7 @@ from nlp_calib.results.checks import (
     Fold,
     LagEffect,
     Observability,
+    PivotSpread,
 )
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
@@ -99,6 +100,8 @@ class FitAnalysis:
     nominal_params: np.ndarray | None = None
     #: What to drive next, when a parameter is not determined well enough (see :func:`plan_after`).
     plan: Plan | None = None
+    #: Each pivot of the drive fitted on its own (None: too few pivots, or one log of several).
+    pivots: PivotSpread | None = None
 
 
 @dataclass(frozen=True)

@@ -291,6 +291,7 @@ def fit_checks(
         nominal=check,
         lag_effects=fitted.lag_effects,
         plan=fitted.plan,
+        pivots=fitted.pivots,
     )
 
 

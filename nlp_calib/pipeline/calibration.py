@@ -25,7 +25,7 @@ from nlp_calib.analysis.precision import clock_needed, log_precision, tightest, 
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, reference_scales
-from nlp_calib.pipeline import consistency_check
+from nlp_calib.pipeline import consistency_check, validation
 from nlp_calib.pipeline.align import Alignment
 from nlp_calib.pipeline.analyse import (
     FitAnalysis,
@@ -59,7 +59,7 @@ from nlp_calib.pipeline.stored import StoredCalibration
 from nlp_calib.problem import ProblemFunctions, ResidualData, joined
 from nlp_calib.problem.blocks import per_log_kinds
 from nlp_calib.results import CalibrationRun, ScenarioInfo, SolverResult
-from nlp_calib.results.checks import WEAK, ConsistencyCheck, CrossValidation
+from nlp_calib.results.checks import WEAK, ConsistencyCheck, CrossValidation, PivotSpread
 from nlp_calib.results.faults import Findings
 from nlp_calib.sensors import sensor_for
 from nlp_calib.solvers import ProblemEvaluator
@@ -389,12 +389,35 @@ def _fit(
         dataclasses.replace(i, layout=tightest(i.layout, [o.layout for o in infos], False)) for i in infos
     ]
     fitted = analyse_fit(fitting, results, noise, blocks_scorer(fitting.fns, parts, fitting.data), needed)
-    fitted = dataclasses.replace(fitted, plan=plan_after(fitting, results, info.units))
+    fitted = dataclasses.replace(
+        fitted, plan=plan_after(fitting, results, info.units), pivots=_pivots(fitting, parts, results)
+    )
     white = fitted.uncertainty[solvers[0]]
     notes = fit_notes(results, fitted, held) + bias_notes(
         fitting.bias_taken(), dict(zip(white.names, white.std))
     )
     return results, fitted, notes, infos
+
+
+def _pivots(
+    fitting: Fit, parts: Sequence[LogSetup], results: Mapping[str, SolverResult]
+) -> PivotSpread | None:
+    """One log's pivots, each fitted on its own from the first converged estimate, the slipped
+    pivots the fit left out among them (their windows bound again; see
+    :func:`validation.pivot_spread`). None for several logs, without blocked cross-validation
+    (``validation.blocks: 0``: no refits), or without a converged estimate."""
+    converged = [r for r in results.values() if r.converged]
+    if len(parts) != 1 or not converged or not fitting.problem.binder.scenario.validation.blocks:
+        return None
+    windows = parts[0].windows
+    data = fitting.data
+    if windows.ground is not None and windows.ground.any() and windows.binder.bad_intervals is not None:
+        slipped = dataclasses.replace(
+            windows.binder, bad_intervals=windows.binder.bad_intervals & ~windows.ground
+        )
+        data = slipped.windows(windows.aligned, *windows.fit)
+    binder = fitting.problem.binder
+    return validation.pivot_spread(binder, data, converged[0].x, fitting.canonical_params, windows.fit[0])
 
 
 def _assemble(

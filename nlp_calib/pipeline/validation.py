@@ -18,12 +18,13 @@ import numpy as np
 
 from nlp_calib.analysis.crossval import blocks, combine, jackknife_std
 from nlp_calib.analysis.direction import compare
+from nlp_calib.analysis.pivots import pivot_intervals, pivot_windows, pivots_std
 from nlp_calib.analysis.precision import clock_needed, with_clocks
 from nlp_calib.core import memory, threads
 from nlp_calib.models import reference_scales
 from nlp_calib.pipeline.build import Binder, no_priors
-from nlp_calib.problem import ResidualData
-from nlp_calib.results.checks import WEAK, CrossValidation, DirectionCheck, Fold
+from nlp_calib.problem import ResidualData, over_columns
+from nlp_calib.results.checks import MIN_FOLDS, WEAK, CrossValidation, DirectionCheck, Fold, PivotSpread
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.layout import CLOCK, Layout
 from nlp_calib.solvers import Priors
@@ -339,3 +340,38 @@ def direction_check(
     needed = layout.needed(dict(zip(fns.names, 0.5 * (estimates[0] + estimates[1]))))
     parts = (estimates[0], estimates[1], (windows[0], windows[1]), sigmas[0], sigmas[1])
     return compare(fns.names, *parts, held, apart, np.array([needed[n] for n in fns.names]))
+
+
+def pivot_spread(
+    binder: Binder, data: ResidualData, x: np.ndarray, canonical: Canonical, offset: int = 0
+) -> PivotSpread | None:
+    """Each pivot of ``data`` fitted on its own, from the estimate ``x`` (free values): the windows
+    off every pivot and that pivot's (see :mod:`nlp_calib.analysis.pivots`; ``data`` holds the
+    windows of the slipped pivots the estimate left out); the pivots' records numbered from
+    ``offset``. None with fewer than :data:`MIN_FOLDS` pivots whose own fit converges."""
+    fns = binder.fns
+    full = np.asarray(fns.assemble(x, binder.x_fixed), dtype=float).ravel()
+    steps = np.asarray(over_columns(fns.predict, full, data.inputs)[0]).T
+    label = pivot_windows(pivot_intervals(steps), data.starts, data.stops)
+    if label.max(initial=-1) + 1 < MIN_FOLDS:
+        return None
+    whole = None
+    if data.n_residuals >= DOWNDATE_FROM:
+        ev = binder.evaluate(data)
+        whole = ev.normal_equations(x)
+        ev.release()
+
+    def own(g: int) -> np.ndarray | None:
+        params, converged, _, _ = leave_out(binder, data, (label >= 0) & (label != g), x, whole)
+        return canonical(params) if converged else None
+
+    fits = on_threads(own, list(range(int(label.max()) + 1)))
+    done = [g for g, p in enumerate(fits) if p is not None]
+    if len(done) < MIN_FOLDS:
+        return None
+    params = np.array([fits[g] for g in done])
+    ranges = tuple(
+        (offset + int(data.starts[label == g].min()), offset + int(data.stops[label == g].max()) + 1)
+        for g in done
+    )
+    return PivotSpread(tuple(fns.names), ranges, params, pivots_std(params, canonical(full)))

@@ -35,6 +35,19 @@ class Fold:
     costs: tuple[float, ...] = ()
 
 
+def beyond_noise(std: np.ndarray, white: np.ndarray, k: int) -> np.ndarray:
+    """``std``, a spread of ``k`` draws, where it exceeds the white-noise σ ``white`` by more than
+    its own sampling noise explains (NaN elsewhere): of white noise alone it scatters as
+    ``χ²(k − 1)``, so one beyond its 95 % point says errors the white σ does not count."""
+    if k < 2:
+        return np.full(np.shape(std), np.nan)
+    nu = k - 1.0
+    # Wilson-Hilferty: χ²(ν)'s 95 % point within 0.2 % from ν = 3 on.
+    factor = np.sqrt((1.0 - 2.0 / (9.0 * nu) + 1.6449 * np.sqrt(2.0 / (9.0 * nu))) ** 3)
+    with np.errstate(invalid="ignore"):
+        return np.where(std > factor * np.asarray(white, dtype=float), std, np.nan)
+
+
 @dataclass(frozen=True)
 class CrossValidation:
     """The folds of a blocked cross-validation and the jackknife σ of every parameter (model order)."""
@@ -64,14 +77,7 @@ class CrossValidation:
         explains (NaN elsewhere): a jackknife of ``k`` folds of white noise alone scatters as
         ``χ²(k − 1)``, so one beyond its 95 % point says errors vary along the drive; below it,
         taking the larger of the two would only add that noise to the σ."""
-        k = len(self.converged)
-        if k < 2:
-            return np.full(len(self.names), np.nan)
-        nu = k - 1.0
-        # Wilson-Hilferty: χ²(ν)'s 95 % point within 0.2 % from ν = 3 on.
-        factor = np.sqrt((1.0 - 2.0 / (9.0 * nu) + 1.6449 * np.sqrt(2.0 / (9.0 * nu))) ** 3)
-        with np.errstate(invalid="ignore"):
-            return np.where(self.std > factor * np.asarray(white, dtype=float), self.std, np.nan)
+        return beyond_noise(self.std, white, len(self.converged))
 
     def heldout_mean(self, figure: str) -> float:
         """The mean of one held-out figure over the folds, weighted by the records each scores."""
@@ -94,6 +100,32 @@ class CrossValidation:
             if np.any(ok)
             else float("nan")
         )
+
+
+@dataclass(frozen=True)
+class PivotSpread:
+    """What each pivot of the drive says of the parameters on its own: one fit per pivot of the
+    windows off every pivot and that pivot's (``params``, rows in the order of ``pivots``, each
+    pivot's records ``[first, stop)``; the slipped pivots the fit left out among them), and the σ
+    of the estimate their scatter about it gives (``std``, model order, see
+    :func:`nlp_calib.analysis.pivots.pivots_std`)."""
+
+    names: tuple[str, ...]
+    pivots: tuple[tuple[int, int], ...]
+    params: np.ndarray
+    std: np.ndarray
+
+    def beyond(self, white: np.ndarray) -> np.ndarray:
+        """The pivots' σ where it exceeds the white-noise σ beyond its own noise (NaN elsewhere;
+        :func:`beyond_noise` of its pivots)."""
+        return beyond_noise(self.std, white, len(self.pivots))
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "pivots": len(self.pivots),
+            "std_pivots": {n: (float(v) if np.isfinite(v) else None) for n, v in zip(self.names, self.std)},
+            "records": [list(p) for p in self.pivots],
+        }
 
 
 def believed_std(white: np.ndarray, *spreads: np.ndarray) -> np.ndarray:

@@ -28,6 +28,7 @@ from nlp_calib.results.checks import (
     LagEstimate,
     NominalCheck,
     Observability,
+    PivotSpread,
     TruthCheck,
     believed_std,
     truth_view,
@@ -190,6 +191,8 @@ class Checks:
     nominal: NominalCheck | None = None
     #: What to drive next when a parameter is not determined well enough (``plan.md``).
     plan: Plan | None = None
+    #: Each pivot of the drive fitted on its own: the σ of a random effect per pivot.
+    pivots: PivotSpread | None = None
 
     def plugin(self, name: str) -> CheckResult | None:
         """The result of the plug-in check ``name``, when it ran and found something to say."""
@@ -209,10 +212,12 @@ class Checks:
     def spreads(self, white: np.ndarray) -> list[np.ndarray]:
         """Each σ beyond the white-noise one ``white`` that the σ to believe takes in (NaN where one
         has none): the blocks' jackknife where it exceeds ``white`` beyond its own noise
-        (:meth:`CrossValidation.beyond`), then each of :meth:`moving`."""
+        (:meth:`CrossValidation.beyond`), the pivots' where it does (:meth:`PivotSpread.beyond`),
+        then each of :meth:`moving`."""
         n = len(white)
         blocks = self.crossval.beyond(white) if self.crossval is not None else np.full(n, np.nan)
-        return [blocks, *(spread for _, spread in self.moving())]
+        pivots = self.pivots.beyond(white) if self.pivots is not None else np.full(n, np.nan)
+        return [blocks, pivots, *(spread for _, spread in self.moving())]
 
     def moving(self) -> list[tuple[str, np.ndarray]]:
         """How much parameters move with the driving, where they do (NaN elsewhere), each with what
