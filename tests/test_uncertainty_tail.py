@@ -23,7 +23,7 @@ def test_a_window_is_explained_by_its_rows_noise_not_by_the_kernels_threshold() 
     coef[:, :6, 0] = 1.0  # six rows of the first group's noise, three of the other's (none)
     e2 = np.zeros((3, rows))
     e2[0, :6], e2[1, :6], e2[2, :6] = 2.0, 5.0, 5.0
-    window = _Window(np.arange(3), coef, np.zeros((3, rows)), e2, np.zeros((3, 4)), np.zeros((3, 4)))
+    window = _Window(np.arange(3), coef, np.zeros((3, rows)), e2, np.zeros((3, 4)))
     omega = np.ones(rows)
     assert window.explained(np.array([1.0, 0.0]), omega).tolist() == [True, False, False]
     assert window.explained(np.array([4.0, 0.0]), omega).tolist() == [True, True, True]
@@ -33,5 +33,5 @@ def test_a_window_is_explained_by_its_rows_noise_not_by_the_kernels_threshold() 
     unequal[0] = 100.0
     e2_one = np.zeros((1, rows))
     e2_one[0, 0] = 0.6  # 60 in Ω's units, on the heavily weighted row
-    one = _Window(np.arange(1), coef[:1], np.zeros((1, rows)), e2_one, np.zeros((1, 4)), np.zeros((1, 4)))
+    one = _Window(np.arange(1), coef[:1], np.zeros((1, rows)), e2_one, np.zeros((1, 4)))
     assert one.explained(np.array([0.1, 0.0]), unequal).tolist() == [True]
