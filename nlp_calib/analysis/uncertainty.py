@@ -439,9 +439,8 @@ def expected_kernel_terms(
     slope alone, so the pose's noise cancels along a chain of windows as in a plain fit, scaled by
     the slope, and each window's pull adds what its slope does not carry, ``E[ψ²] − slope²·E[e²]``,
     as its own. Both are means over the noise, not over the windows' own residuals: their
-    difference is a few thousandths (Huber's δ = 3 on six rows: 0.918 − 0.954²), below the sampling
-    noise of a thousand windows' mean squares (about 0.02), which had set how much each window's
-    own pull adds."""
+    difference is a few thousandths (Huber's δ = 3 on six rows: 0.918 − 0.9546²), and the windows'
+    sample means' difference scatters by about half of it over 1,200 windows."""
     mean_s, k = np.asarray(mean_s, dtype=float), np.maximum(np.rint(k), 1.0)
     slope, spread = np.ones_like(mean_s), mean_s.copy()
     if kernel == "none":
