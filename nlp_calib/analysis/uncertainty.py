@@ -418,11 +418,13 @@ class _Residuals:
 
 
 #: Points of χ(k)'s density the kernel's expected terms are summed on, how far beyond √k they reach,
-#: and the step (in the logarithm) of the scales of the noise (a window's mean squared residual)
-#: they are computed at, interpolated between (Huber's on three rows: within 1e-5 of the closed form).
+#: the step (in the logarithm) of the scales of the noise (a window's mean squared residual) they
+#: are computed at, interpolated between, and the points (evenly in log s) the kernel's weight is
+#: evaluated on and interpolated from (Huber's on three rows: within 1e-5 of the closed form).
 CHI_POINTS = 600
 CHI_SPAN = 9.0
 SCALE_STEP = 0.01
+WEIGHT_POINTS = 20_000
 
 
 def expected_kernel_terms(
@@ -457,7 +459,12 @@ def expected_kernel_terms(
         low, high = mean_s[on].min(), mean_s[on].max()
         scales = np.geomspace(low, high, int(np.ceil(np.log(high / low) / SCALE_STEP)) + 2)
         s = scales[:, None] / rows * u[None, :] ** 2
-        weight = np.asarray(f.map(s.size)(s.reshape(1, -1), delta)[1]).reshape(s.shape)
+        # The weight on one grid of log s, read at every (scale, point) pair: a window's scales
+        # over decades would otherwise cost the kernel's evaluation at each of them.
+        log_s = np.linspace(np.log(s[:, 1].min()), np.log(s.max()), WEIGHT_POINTS)
+        table = np.asarray(f.map(WEIGHT_POINTS)(np.exp(log_s)[None, :], delta)[1]).ravel()
+        with np.errstate(divide="ignore"):
+            weight = np.interp(np.log(s), log_s, table)  # s = 0 takes the smallest s's
         at, grid = np.log(mean_s[on]), np.log(scales)
         slope[on] = np.interp(at, grid, (weight * s) @ p / scales)
         spread[on] = np.interp(at, grid, (weight**2 * s) @ p / scales) * mean_s[on]
