@@ -20,6 +20,7 @@ from nlp_calib.sensors import BESIDE, sensor_for
 from nlp_calib.simulation.beside import write_text_log_gyro
 from nlp_calib.simulation.options import SimulationOptions
 from nlp_calib.simulation.simulate import simulate, write_simulation
+from nlp_calib.sources.text_gyro import TextGyroSource, TextPosesSource
 
 #: The wheels' counts per turn (a text log states none): a radius is k·COUNTS/2π.
 COUNTS = 4096.0
@@ -136,3 +137,21 @@ def test_the_gyros_share_of_the_rounding_bias_moves_no_scale(drive: tuple[Path, 
     lengths = [names.index(n) for n in ("left_wheel_radius", "right_wheel_radius", "wheel_separation")]
     along = g[lengths] * np.asarray(x)[lengths]
     assert abs(along.sum()) < 1e-4 * np.abs(along).sum(), along
+
+
+@pytest.mark.parametrize("counts", [0.5, 2.0**32])
+def test_a_wheels_counts_per_turn_out_of_range_is_refused_beside_a_gyro_as_beside_poses(
+    counts: float,
+) -> None:
+    """Both readers of a text log's counts as angles refuse a wheel's counts per turn outside
+    [1, 2^31], naming the wheel, whichever reference the gyro is (the gyro's dataset parsed)."""
+    raw = {
+        "text": "run.log",
+        "gyro": "gyro.csv",
+        "counts_per_turn": {"left_wheel": 4096, "right_wheel": counts},
+    }
+    message = rf"counts_per_turn\.right_wheel must lie in \[1, 2\^31\], got {counts!r}"
+    with pytest.raises(ConfigError, match=message):
+        TextGyroSource.parse(raw, "dataset", Path("."))
+    with pytest.raises(ConfigError, match=message):
+        TextPosesSource(Path("run.log"), raw["counts_per_turn"])

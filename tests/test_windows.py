@@ -211,10 +211,12 @@ def test_linear_uncertainty_equals_the_sum_over_every_window_and_interval(
         if np.array_equal(now, use):
             break
         use = now
-    # Huber's pull: slope ρ' within δ, ρ'·(1 − 1/3) beyond (flat along the residual); over the
-    # windows the noise explains, its mean slope a and its square over the residual's, b.
-    slope = np.where(inside, 1.0, weight * (1.0 - 1.0 / 3.0))
-    a, b = slope[use].mean(), float(np.sum(weight[use] ** 2 * s[use]) / np.sum(s[use]))
+    # The kernel's mean slope a and its pulls' mean square over the residuals' b, as the noise
+    # gives each window explained (its three rows' variances λ; the expectations themselves are
+    # checked against the closed form in test_uncertainty_tail.py).
+    mean_s = lam.sum(axis=1)[use]
+    slope, pull2 = unc.expected_kernel_terms("huber", ev.delta, mean_s, np.full(mean_s.size, 3))
+    a, b = slope.mean(), float(pull2.sum() / mean_s.sum())
     unit = np.einsum("cwi,c->wic", J, ev.omega)
     L = weight[:, None, None] * unit
     La, Lb = np.einsum("wic,wcl->wil", unit, Ea), np.einsum("wic,wcl->wil", unit, Eb)

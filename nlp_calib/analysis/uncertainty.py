@@ -29,7 +29,8 @@ kernel's threshold is on a window's whole residual: a window of six rows of nois
 squared residual lies within the 99.9 % point of what the noise gives it; only one beyond that adds
 its own score as it is (an error the noise does not explain). The poses' noise reaches the score
 through the kernel's pulls at their mean slope over the windows of that noise, and each window adds
-what its pull holds beyond that slope as its own (:func:`kernel_slopes`); the inputs' noise through
+what its pull holds beyond that slope as its own, both as the estimated noise gives them
+(:func:`expected_kernel_terms`); the inputs' noise through
 each window's own weight. ``M`` maps the manifold perturbation to plain parameter coordinates.
 
 A reference that measures its own motions (increments: a scan matcher's) carries white noise on
@@ -214,9 +215,9 @@ def estimate(
     use = s <= evaluator.delta**2 if fns.spec.kernel != "none" else np.ones(s.size, dtype=bool)
     split = split_noise(Sigma_in, counted)
     running = EndNoise(D, split)
-    sums = _Sums.zero(fns, data, first[1].de_dend.shape[2], D, (split, running))
-    slope, spread = kernel_slopes(fns.spec.kernel, evaluator.delta, (e, s, weight))
-    residuals = _Residuals(e=e, weight=weight, use=use, Omega=evaluator.omega, slope=slope, spread=spread)
+    kernel = (fns.spec.kernel, float(evaluator.delta))
+    sums = _Sums.zero(fns, data, first[1].de_dend.shape[2], D, (split, running), kernel)
+    residuals = _Residuals(e=e, weight=weight, use=use, Omega=evaluator.omega)
     for w, sens in itertools.chain([first], blocks):
         sums.add(w, sens, residuals, running)
     var, explained = sums.variances((fns.error_rows, fns.n_free), int(use.sum()), residuals.Omega)
@@ -408,38 +409,66 @@ def _pad_first(values: np.ndarray, lo: int) -> np.ndarray:
 @dataclass(frozen=True)
 class _Residuals:
     """Per residual at the estimate: error ``e`` ``(rows, N)``, IRLS weight, whether it counts as an
-    inlier; the information weights ``Omega`` of the error rows; and the kernel's ``slope`` and
-    ``spread`` at each (:func:`kernel_slopes`)."""
+    inlier; and the information weights ``Omega`` of the error rows."""
 
     e: np.ndarray
     weight: np.ndarray
     use: np.ndarray
     Omega: np.ndarray
-    slope: np.ndarray
-    spread: np.ndarray
 
 
-def kernel_slopes(
-    kernel: str, delta: float, e_s_weight: tuple[np.ndarray, ...]
+#: Points of χ(k)'s density the kernel's expected terms are summed on, how far beyond √k they reach,
+#: the step (in the logarithm) of the scales of the noise (a window's mean squared residual) they
+#: are computed at, interpolated between, and the points (evenly in log s) the kernel's weight is
+#: evaluated on and interpolated from (Huber's on three rows: within 1e-5 of the closed form).
+CHI_POINTS = 600
+CHI_SPAN = 9.0
+SCALE_STEP = 0.01
+WEIGHT_POINTS = 20_000
+
+
+def expected_kernel_terms(
+    kernel: str, delta: float, mean_s: np.ndarray, k: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per window, the mean slope of its pull ``ψ = ρ'(s)·Ω·e`` over its ``k`` rows of noise,
-    ``ρ' + 2ρ''·s/k`` (Huber's beyond δ is flat along the residual: ``ρ'·(1 − 1/k)``), and the pull's
-    square over the residual's, ``ρ'²·s`` (both 1 and ``s`` where the kernel is quadratic).
+    """Per window, the mean slope of its pull ``ψ = ρ'(s)·Ω·e`` along its ``k`` rows of noise,
+    ``E[ρ' + 2ρ''·s/k]``, and the pull's mean square, ``E[ρ'²·s]``, over that noise: ``k`` equal
+    rows whose squares sum to ``mean_s`` on average (``s·k/mean_s ~ χ²(k)``); 1 and ``mean_s``
+    where the kernel is quadratic. The slope is ``E[ρ'·s]/E[s]`` (Stein's lemma: the divergence of
+    ``ψ`` against the noise's density), smooth where Huber's ``ρ''`` jumps. Integrated over χ(k)'s
+    density on :data:`CHI_POINTS` points at scales :data:`SCALE_STEP` apart in the logarithm.
 
-    Averaged over the windows of one noise, they are ``E[∂ψ/∂e]`` and ``E[ψ²]`` of that noise: by
-    Stein's lemma the pulls of two windows that share a pose are correlated through the mean slope
-    alone, so the pose's noise cancels along a chain of windows as in a plain fit, scaled by the
-    slope, and each window's pull adds what its slope does not carry, ``E[ψ²] − slope²·E[e²]``, as
-    its own (a kernel's weights that follow each window's own noise cost precision along a chain)."""
-    e, s, weight = e_s_weight
-    if kernel == "none" or not s.size:
-        return np.ones_like(s), np.asarray(s, dtype=float)
-    f = kernel_function(kernel).map(s.size)
-    h = 1e-6
-    up, down = (np.asarray(f(s[None, :] * (1.0 + c * h), delta)[1]).ravel() for c in (1.0, -1.0))
-    rho2 = np.where(s > 0, (up - down) / (2.0 * h * np.where(s > 0, s, 1.0)), 0.0)
-    k = np.maximum((np.asarray(e) != 0).sum(axis=0), 1)
-    return weight + 2.0 * rho2 * s / k, weight**2 * s
+    By the same lemma the pulls of two windows that share a pose are correlated through the mean
+    slope alone, so the pose's noise cancels along a chain of windows as in a plain fit, scaled by
+    the slope, and each window's pull adds what its slope does not carry, ``E[ψ²] − slope²·E[e²]``,
+    as its own. Both are means over the noise, not over the windows' own residuals: their
+    difference is a few thousandths (Huber's δ = 3 on six rows: 0.918 − 0.9546²), and the windows'
+    sample means' difference scatters by about half of it over 1,200 windows."""
+    mean_s, k = np.asarray(mean_s, dtype=float), np.maximum(np.rint(k), 1.0)
+    slope, spread = np.ones_like(mean_s), mean_s.copy()
+    if kernel == "none":
+        return slope, spread
+    f = kernel_function(kernel)
+    for rows in np.unique(k):
+        on = (k == rows) & (mean_s > 0)
+        if not on.any():
+            continue
+        u = np.linspace(0.0, np.sqrt(rows) + CHI_SPAN, CHI_POINTS)
+        p = u ** (rows - 1.0) * np.exp(-0.5 * u**2)
+        p[0] *= 0.5  # the trapezoid's end (one row's density is largest at 0)
+        p /= p.sum()
+        low, high = mean_s[on].min(), mean_s[on].max()
+        scales = np.geomspace(low, high, int(np.ceil(np.log(high / low) / SCALE_STEP)) + 2)
+        s = scales[:, None] / rows * u[None, :] ** 2
+        # The weight on one grid of log s, read at every (scale, point) pair: a window's scales
+        # over decades would otherwise cost the kernel's evaluation at each of them.
+        log_s = np.linspace(np.log(s[:, 1].min()), np.log(s.max()), WEIGHT_POINTS)
+        table = np.asarray(f.map(WEIGHT_POINTS)(np.exp(log_s)[None, :], delta)[1]).ravel()
+        with np.errstate(divide="ignore"):
+            weight = np.interp(np.log(s), log_s, table)  # s = 0 takes the smallest s's
+        at, grid = np.log(mean_s[on]), np.log(scales)
+        slope[on] = np.interp(at, grid, (weight * s) @ p / scales)
+        spread[on] = np.interp(at, grid, (weight**2 * s) @ p / scales) * mean_s[on]
+    return slope, spread
 
 
 class _Rows:
@@ -581,20 +610,14 @@ def chi2_point(k: np.ndarray, z: float) -> np.ndarray:
 @dataclass(frozen=True)
 class _Window:
     """Windows beyond the kernel's threshold: their indices, each row's coefficients of the noise
-    groups' variances ``(n, rows, groups)``, known input noise and squared error ``(n, rows)``, each
-    one's own score ``(n, n_free)`` and its kernel's terms (slope, spread, ``s``, 1: ``(n, 4)``)."""
+    groups' variances ``(n, rows, groups)``, known input noise and squared error ``(n, rows)`` and
+    each one's own score ``(n, n_free)``."""
 
     index: np.ndarray
     coef: np.ndarray
     known: np.ndarray
     e2: np.ndarray
     score: np.ndarray
-    kernel: np.ndarray
-
-    def terms(self, which: np.ndarray) -> np.ndarray:
-        """The kernel's terms of the windows ``which`` summed per noise group they carry ``(groups, 4)``."""
-        carries = (self.coef[which].sum(axis=1) > 0).astype(float)  # (., groups)
-        return np.asarray(carries.T @ self.kernel[which])
 
     def explained(self, var: np.ndarray, Omega: np.ndarray) -> np.ndarray:
         """Whether each window's ``s = eᵀΩe`` lies within the 99.9 % point of what the noise
@@ -609,25 +632,36 @@ class _Window:
 
 @dataclass
 class _Kernel:
-    """What the robust kernel did: its terms (slope, spread, ``s``, 1) summed over every window per
-    noise group it carries (``sums``, ``(groups, 4)``), and the windows beyond its threshold,
-    collected block by block (see :class:`_Window`)."""
+    """The robust kernel (its name and δ), each window's noise as its squared residual's mean is
+    linear in the groups' variances (``Σ Ω·known``, then ``Σ Ω·coef`` per group, then its rows of
+    noise: ``(n, groups + 2)`` block by block) and the windows beyond its threshold, collected
+    block by block (see :class:`_Window`)."""
 
-    sums: np.ndarray
+    name: str
+    delta: float
+    noise: list[np.ndarray] = field(default_factory=list)
     parts: list[tuple[np.ndarray, tuple[np.ndarray, ...], np.ndarray]] = field(default_factory=list)
 
     def add(self, index: np.ndarray, rows: tuple[np.ndarray, ...], score: np.ndarray) -> None:
         if index.size:
             self.parts.append((index, rows, score))
 
-    def slopes(self, beyond: _Window, explained: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per noise group, the mean slope of the pulls and their mean square over the residuals'
-        (:func:`kernel_slopes`) over the windows the noise explains (those beyond that it does not
-        left out): 1 and 1 where the kernel is quadratic."""
-        sums = self.sums - beyond.terms(~explained)
-        n, s = sums[:, 3], sums[:, 2]
-        a = np.where(n > 0, sums[:, 0] / np.where(n > 0, n, 1.0), 1.0)
-        b = np.where(s > 0, sums[:, 1] / np.where(s > 0, s, 1.0), 1.0)
+    def slopes(self, left_out: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per noise group, the pulls' mean slope and their mean square over the residuals' over the
+        windows that carry it, as the noise ``var`` gives them (:func:`expected_kernel_terms`), but
+        those beyond the threshold that it does not explain (``left_out``): 1 and 1 where the
+        kernel is quadratic."""
+        if self.name == "none" or not self.noise:
+            return np.ones(var.size), np.ones(var.size)
+        noise = np.concatenate(self.noise)
+        noise[left_out] = 0.0
+        known, coef, rows = noise[:, 0], noise[:, 1:-1], noise[:, -1]
+        mean_s = np.clip(known + coef @ var, 0.0, None)
+        slope, spread = expected_kernel_terms(self.name, self.delta, mean_s, rows)
+        carries = ((coef > 0) & (mean_s > 0)[:, None]).astype(float)  # (., groups)
+        n, s = carries.sum(axis=0), carries.T @ mean_s
+        a = np.where(n > 0, (carries.T @ slope) / np.where(n > 0, n, 1.0), 1.0)
+        b = np.where(s > 0, (carries.T @ spread) / np.where(s > 0, s, 1.0), 1.0)
         return a, b
 
     @property
@@ -638,7 +672,7 @@ class _Kernel:
         """Every window collected (empty arrays of these sizes where none is)."""
         if not self.parts:
             z = np.zeros
-            empty = (z((0, rows, groups)), z((0, rows)), z((0, rows)), z((0, n_free)), z((0, 4)))
+            empty = (z((0, rows, groups)), z((0, rows)), z((0, rows)), z((0, n_free)))
             return _Window(z(0, dtype=int), *empty)
         cat = np.concatenate
         return _Window(
@@ -647,7 +681,6 @@ class _Kernel:
             cat([p[1][1] for p in self.parts]),
             cat([p[1][2] for p in self.parts]),
             cat([p[2] for p in self.parts]),
-            cat([p[1][3] for p in self.parts]),
         )
 
 
@@ -687,9 +720,10 @@ class _Sums:
         m: int,
         D: np.ndarray,
         noise: tuple[tuple[np.ndarray, np.ndarray], EndNoise],
+        kernel: tuple[str, float],
     ) -> _Sums:
         """Nothing summed yet; ``noise``: the inputs' own and reading variances and their running
-        sums (:class:`EndNoise`)."""
+        sums (:class:`EndNoise`); ``kernel``: the robust kernel's name and δ."""
         groups = tuple(tuple(g) for g in fns.sensor.noise_groups)
         n, a, b = fns.n_free, data.starts, data.stops
         inc = data.increment if data.increment is not None and data.increment.any() else None
@@ -703,7 +737,7 @@ class _Sums:
             yy=0.0,
             K=_PoseRows(data.T_world_sensor.shape[0], (n, k), distinct),
             C=_InputRows(n_int + 1, (n, m), distinct, (D, *noise)),
-            kernel=_Kernel(np.zeros((len(groups), 4))),
+            kernel=_Kernel(*kernel),
             starts=a,
             final=np.minimum.accumulate(a[::-1])[::-1] if a.size else a,
             stops=b,
@@ -741,10 +775,8 @@ class _Sums:
         L = r.weight[w, None, None] * unit
         La, Lb = unit @ Ea, unit @ Eb
         self.K.add_own(La, Lb)
-        terms = np.column_stack(
-            [r.slope[w], r.spread[w], (r.Omega[:, None] * e**2).sum(axis=0), np.ones(e.shape[1])]
-        )
-        self.kernel.sums += (coef.sum(axis=1) > 0).astype(float).T @ terms
+        rows_of_noise = (e != 0).sum(axis=0)[:, None]
+        self.kernel.noise.append(np.hstack([(known @ r.Omega)[:, None], r.Omega @ coef, rows_of_noise]))
         if self.increment is not None and self.increment[w].any():
             inc = self.increment[w]
             self.K.take(-1, La[inc])  # an increment's noise is its own: no other window adds to it
@@ -758,7 +790,7 @@ class _Sums:
         # Residuals beyond the kernel threshold: whether the noise explains them is decided with the
         # variances (:meth:`variances`); their own scores are kept for those it does not.
         score = np.einsum("wic,cw->wi", L[~u], e[:, ~u])
-        rows = (coef[~u], known[~u], e.T[~u] ** 2, terms[~u])
+        rows = (coef[~u], known[~u], e.T[~u] ** 2)
         self.kernel.add(np.arange(w.start, w.stop)[~u], rows, score)
         # Rows below the first record of every window to come are final.
         last = w.stop >= self.final.size
@@ -791,17 +823,16 @@ class _Sums:
     def meat(self, var: np.ndarray, explained: np.ndarray) -> np.ndarray:
         """``S``: the score's covariance from the tracker poses' noise ``var`` (per group) through
         the kernel's mean slope ``a`` (cancelling along a chain of windows) and what each window's
-        pull holds beyond it (``b − a²`` of its own map, :func:`kernel_slopes`), the inputs', plus
+        pull holds beyond it (``b − a²`` of its own map, :func:`expected_kernel_terms`), the inputs', plus
         the own scores of the windows beyond the kernel's threshold that the noise does not explain
         (``explained``: which of them it does)."""
         beyond = self.kernel.arrays(len(self.groups), 0, self.K.shape[0])
-        a, b = self.kernel.slopes(beyond, explained)
+        a, b = self.kernel.slopes(beyond.index[~explained], var)
         per = [np.full(len(g), 1.0) for g in self.groups]
         Sigma_pose = np.concatenate([v * p for v, p in zip(var, per)])
         chain = Sigma_pose * np.concatenate([a_g**2 * p for a_g, p in zip(a, per)])
         # E[ψ²] ≥ slope²·E[e²] for any kernel (the pull's variance holds its linear part): a
-        # difference below 0 is the two means' sampling noise (three rows within δ = 3 nearly all:
-        # 0.96 − 0.98²), and would take the chain's variance away.
+        # difference below 0 is the quadrature's rounding, and would take the chain's variance away.
         own = Sigma_pose * np.concatenate([max(b_g - a_g**2, 0.0) * p for a_g, b_g, p in zip(a, b, per)])
         score = beyond.score[~explained]
         pose = np.einsum("c,cij->ij", chain, self.K.gram) + np.einsum("c,cij->ij", own, self.K.own)

@@ -42,6 +42,13 @@ REQUIRED = ("text", "gyro", "counts_per_turn")
 COUNTS = (1.0, 2.0**31)
 
 
+def check_counts(counts_per_turn: Mapping[str, float]) -> None:
+    """Each wheel's counts per turn within :data:`COUNTS`, or the error naming it."""
+    for name, counts in counts_per_turn.items():
+        if not COUNTS[0] <= counts <= COUNTS[1]:
+            raise ConfigError(f"counts_per_turn.{name} must lie in [1, 2^31], got {counts!r}")
+
+
 def _joints(log: Log, model: KinematicModel, counts_per_turn: Mapping[str, float]) -> Stamped:
     """The text log's encoders as joint angles (rad) at its records, in ``model``'s encoder order."""
     columns = []
@@ -84,9 +91,7 @@ class TextPosesSource:
     max_gap: float = DEFAULT_MAX_GAP_S
 
     def __post_init__(self) -> None:
-        for name, counts in self.counts_per_turn.items():
-            if not COUNTS[0] <= counts <= COUNTS[1]:
-                raise ConfigError(f"counts_per_turn.{name} must lie in [1, 2^31], got {counts!r}")
+        check_counts(self.counts_per_turn)
 
     @property
     def path(self) -> Path:
@@ -154,6 +159,7 @@ class TextGyroSource:
     sensor_frame: str | None = None
 
     def __post_init__(self) -> None:
+        check_counts(self.counts_per_turn)
         if (reason := INTERVAL.problem(self.interval)) is not None:
             raise ConfigError(f"interval {reason}")
 
