@@ -30,23 +30,27 @@ def pivot_windows(pivot: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> n
     """Per window (records ``starts[w]`` to ``stops[w]``), the pivot it crosses, numbered from 0 in
     the order they are driven (-1: none); a pivot is a run of consecutive ``pivot`` intervals, and
     runs that one window crosses are one pivot (the window shares both draws)."""
-    run = np.cumsum(np.diff(np.concatenate([[0], pivot.astype(int)])) == 1) - 1
-    run = np.where(pivot, run, -1)
-    root = np.arange(int(run.max()) + 1 if run.size else 0)
-
-    def find(r: int) -> int:
-        while root[r] != r:
-            r = int(root[r])
-        return r
-
-    first = np.full(starts.size, -1)
-    for w, (a, b) in enumerate(zip(starts, stops)):
-        crossed = np.unique(run[a:b][run[a:b] >= 0])
-        if crossed.size:
-            first[w] = crossed[0]
-            roots = [find(int(r)) for r in crossed]
-            root[roots] = min(roots)
-    label = np.array([find(int(r)) if r >= 0 else -1 for r in first], dtype=int)
+    pivot = np.asarray(pivot, dtype=bool)
+    starts, stops = np.asarray(starts, dtype=np.intp), np.asarray(stops, dtype=np.intp)
+    n, label = pivot.size, np.full(starts.size, -1)
+    run = np.where(pivot, np.cumsum(np.diff(np.concatenate([[0], pivot.astype(int)])) == 1) - 1, -1)
+    runs = int(run.max(initial=-1)) + 1
+    if not runs or not starts.size:
+        return label
+    # Runs are numbered in driving order, so a window crosses every run from the one of its first
+    # pivot interval to that of its last: a range, and runs joined by one window are a range too.
+    at = np.arange(n)
+    following = np.minimum.accumulate(np.where(pivot, at, n)[::-1])[::-1]
+    preceding = np.maximum.accumulate(np.where(pivot, at, -1))
+    first = np.where(starts < n, following[np.clip(starts, 0, n - 1)], n)
+    last = np.where(stops > 0, preceding[np.clip(stops - 1, 0, n - 1)], -1)
+    crosses = first < np.minimum(stops, n)
+    lo, hi = run[first[crosses]], run[last[crosses]]
+    edges = np.zeros(runs + 1)
+    np.add.at(edges, lo, 1.0)
+    np.add.at(edges, hi, -1.0)
+    joined = np.cumsum(edges)[: runs - 1] > 0  # runs r and r + 1 crossed by one window
+    label[crosses] = np.concatenate([[0], np.cumsum(~joined)])[lo]
     _, dense = np.unique(label, return_inverse=True)
     return np.where(label >= 0, dense - int(np.any(label < 0)), -1)
 

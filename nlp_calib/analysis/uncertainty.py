@@ -43,10 +43,12 @@ timing error or slowly varying model error), and the problem is close to linear 
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
+import casadi as ca
 import numpy as np
 
 from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
@@ -427,6 +429,13 @@ SCALE_STEP = 0.01
 WEIGHT_POINTS = 20_000
 
 
+@functools.lru_cache(maxsize=8)
+def _weight_map(kernel: str) -> ca.Function:
+    """The kernel's Function mapped over :data:`WEIGHT_POINTS` values of ``s``, built once per
+    kernel (each uncertainty reads its weight table through it)."""
+    return kernel_function(kernel).map(WEIGHT_POINTS)
+
+
 def expected_kernel_terms(
     kernel: str, delta: float, mean_s: np.ndarray, k: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -447,7 +456,7 @@ def expected_kernel_terms(
     slope, spread = np.ones_like(mean_s), mean_s.copy()
     if kernel == "none":
         return slope, spread
-    f = kernel_function(kernel)
+    weights = _weight_map(kernel)
     for rows in np.unique(k):
         on = (k == rows) & (mean_s > 0)
         if not on.any():
@@ -462,7 +471,7 @@ def expected_kernel_terms(
         # The weight on one grid of log s, read at every (scale, point) pair: a window's scales
         # over decades would otherwise cost the kernel's evaluation at each of them.
         log_s = np.linspace(np.log(s[:, 1].min()), np.log(s.max()), WEIGHT_POINTS)
-        table = np.asarray(f.map(WEIGHT_POINTS)(np.exp(log_s)[None, :], delta)[1]).ravel()
+        table = np.asarray(weights(np.exp(log_s)[None, :], delta)[1]).ravel()
         with np.errstate(divide="ignore"):
             weight = np.interp(np.log(s), log_s, table)  # s = 0 takes the smallest s's
         at, grid = np.log(mean_s[on]), np.log(scales)
