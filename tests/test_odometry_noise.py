@@ -229,3 +229,30 @@ def test_calibration_yaml_holds_the_noise_per_metre_and_per_radian(diff_drive: t
     # Heading drifts with the distance the wheels roll (both wheels' noise), never nan.
     assert noise["variance_per_metre"]["heading"] > 0.0
     assert all(np.isfinite(v) for v in (*rates.per_metre, *rates.per_radian))
+
+
+def test_the_odometry_folded_block_by_block_in_numpy_memory_is_the_step_applied_interval_by_interval(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The dead-reckoned poses and covariances, folded a few intervals at a time into buffers
+    bound to numpy memory, are the odometry step applied once per interval, digit for digit."""
+    from nlp_calib.analysis import odometry
+    from nlp_calib.problem import ProblemSpec, build
+
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=1))
+    rng = np.random.default_rng(5)
+    n = 53
+    inputs = np.vstack([rng.uniform(0.5, 1.5, n), rng.uniform(-0.3, 0.3, n)])
+    p, std = np.array([0.5, 0.01, 1.5, 0.02, 1.0, 0.1, 0.05]), np.array([1e-3, 2e-3])
+    start = np.array([1.0, -2.0, 0.3])
+    monkeypatch.setattr(odometry, "FOLD_BLOCK", 7)
+    track, P = odometry.propagate(fns, p, inputs, start, std)
+    state = np.concatenate([start, np.zeros(9)])
+    want = [state]
+    for k in range(n):
+        state = np.asarray(fns.odometry_step(state, p, inputs[:, k], std)).ravel()
+        want.append(state)
+    W = np.array(want)
+    assert np.array_equal(track, W[:, :3])
+    assert np.array_equal(P, W[:, 3:].reshape(-1, 3, 3, order="F"))
+    assert np.all(np.diff(P[:, 2, 2]) > 0)  # the heading's variance grows
