@@ -407,13 +407,14 @@ class EndNoise:
     few blocks at a time (:class:`_Prefix`: at 10^6 intervals, whole they were 200 MB)."""
 
     def __init__(self, D: np.ndarray, split: tuple[np.ndarray, np.ndarray]):
-        own, self.reading = split
+        own, reading = split
         n_int, m = D.shape[0], D.shape[1]
-        self.D = D
+        self.D, self.reading = D, reading
+        # The sums' parts close over the arrays, never over self: no cycle keeps D alive after.
         self.own = _Prefix(lambda lo, hi: _sandwich(D[lo:hi], own), n_int, m)
-        self.counted = bool(n_int and np.any(self.reading))
+        self.counted = bool(n_int and np.any(reading))
         # inside[k] = Σ_{1 ≤ r < k} of the reading r's term (reading r lies between intervals r−1 and r)
-        steps = lambda lo, hi: _sandwich(D[max(lo, 1) - 1 : hi - 1] - D[max(lo, 1) : hi], self.reading)  # noqa: E731
+        steps = lambda lo, hi: _sandwich(D[max(lo, 1) - 1 : hi - 1] - D[max(lo, 1) : hi], reading)  # noqa: E731
         inside = _Prefix(lambda lo, hi: _pad_first(steps(lo, hi), lo), n_int if self.counted else 0, m)
         self.inside = inside
 
