@@ -352,6 +352,20 @@ def drift_coverage(
 COVERED = 0.95
 
 
+def beyond_motion(inputs: np.ndarray, noise: np.ndarray) -> tuple[int, ...]:
+    """The inputs (rows of ``inputs``, one column per interval) whose calibrated noise per interval
+    ``noise`` reaches the scale of their own values over the drive (the 95th percentile of the
+    nonzero ones): a random walk that large is not the readings' noise but an error of the model
+    or the clocks that the drift segments show, and a covariance grown from it none a filter can
+    use (on the real log with the seed formulation, 1.8 traction revolutions per 8 ms interval)."""
+    out = []
+    for k, row in enumerate(np.abs(np.asarray(inputs, dtype=float))):
+        moving = row[row > 0]
+        if moving.size and float(noise[k]) >= float(np.quantile(moving, 0.95)):
+            out.append(k)
+    return tuple(out)
+
+
 def covering_noise(
     drift: Drift, noise: np.ndarray, floor: np.ndarray, reference_var: np.ndarray | None = None
 ) -> np.ndarray:
