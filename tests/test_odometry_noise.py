@@ -229,3 +229,62 @@ def test_calibration_yaml_holds_the_noise_per_metre_and_per_radian(diff_drive: t
     # Heading drifts with the distance the wheels roll (both wheels' noise), never nan.
     assert noise["variance_per_metre"]["heading"] > 0.0
     assert all(np.isfinite(v) for v in (*rates.per_metre, *rates.per_radian))
+
+
+def test_the_odometry_folded_block_by_block_in_numpy_memory_is_the_step_applied_interval_by_interval(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The dead-reckoned poses and covariances, folded a few intervals at a time into buffers
+    bound to numpy memory, are the odometry step applied once per interval, digit for digit."""
+    from nlp_calib.analysis import odometry
+    from nlp_calib.problem import ProblemSpec, build
+
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=1))
+    rng = np.random.default_rng(5)
+    n = 53
+    inputs = np.vstack([rng.uniform(0.5, 1.5, n), rng.uniform(-0.3, 0.3, n)])
+    p, std = np.array([0.5, 0.01, 1.5, 0.02, 1.0, 0.1, 0.05]), np.array([1e-3, 2e-3])
+    start = np.array([1.0, -2.0, 0.3])
+    monkeypatch.setattr(odometry, "FOLD_BLOCK", 7)
+    track, P = odometry.propagate(fns, p, inputs, start, std)
+    state = np.concatenate([start, np.zeros(9)])
+    want = [state]
+    for k in range(n):
+        state = np.asarray(fns.odometry_step(state, p, inputs[:, k], std)).ravel()
+        want.append(state)
+    W = np.array(want)
+    assert np.array_equal(track, W[:, :3])
+    assert np.array_equal(P, W[:, 3:].reshape(-1, 3, 3, order="F"))
+    assert np.all(np.diff(P[:, 2, 2]) > 0)  # the heading's variance grows
+
+
+def test_a_noise_as_large_as_the_inputs_own_values_is_named() -> None:
+    """A calibrated random walk per interval as large as the inputs' own values is no noise a
+    filter can use: only such inputs are named."""
+    from nlp_calib.analysis.odometry import beyond_motion
+
+    rng = np.random.default_rng(2)
+    inputs = np.vstack([rng.uniform(0.005, 0.02, 500), rng.uniform(-0.4, 0.4, 500)])
+    inputs[:, :100] = 0.0  # standing still: no scale of its own
+    assert beyond_motion(inputs, np.array([2e-4, 3e-3])) == ()
+    assert beyond_motion(inputs, np.array([1.79, 3e-3])) == (0,)
+    assert beyond_motion(inputs, np.array([1.79, 1.75])) == (0, 1)
+    assert beyond_motion(np.zeros((2, 50)), np.array([1.0, 1.0])) == ()
+
+
+def test_the_seed_formulations_drift_hands_off_no_covariance(real_log: Path, tmp_path: Path) -> None:
+    """On the real log, the seed formulation's odometry drifts as a random walk of 1.8 traction
+    revolutions per 8 ms interval would: no covariance grown from that reaches a controller file
+    (it was 3e40 m²), and calibration.yaml states no odometry noise (the recommended settings'
+    hand-off keeps both: tests/test_ros2_handoff.py)."""
+    from conftest import SCENARIOS, cli
+
+    out = tmp_path / "seed"
+    proc = cli("run", str(SCENARIOS / "real_tricycle_seed.yaml"), "--data", str(real_log), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    ros2 = (out / "ros2_control.yaml").read_text()
+    params = next(iter(yaml.safe_load(ros2).values()))["ros__parameters"] or {}  # every value commented
+    assert "pose_covariance_diagonal" not in params and "twist_covariance_diagonal" not in params
+    assert "pose_covariance_diagonal: the log's drift against the tracker does not determine" in ros2
+    calibration = yaml.safe_load((out / "calibration.yaml").read_text())
+    assert "odometry_noise" not in calibration and calibration["verdict"]["level"] == "usable with caveats"

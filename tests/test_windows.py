@@ -347,3 +347,36 @@ def test_uncertainty_of_windows_spread_over_the_log_summed_stretch_by_stretch(
     assert np.all(np.isfinite(want.covariance)) and np.any(want.covariance != 0)
     assert_close(got.covariance, want.covariance, rtol=1e-10, what="covariance")
     assert got.noise == pytest.approx(want.noise, rel=1e-10)
+
+
+def test_the_end_noise_held_a_few_blocks_at_a_time_is_the_direct_sum(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The input noise at each window's end, from running sums kept a few blocks at a time (asked
+    in any order, blocks let go of and summed again), is the sum written out interval by interval
+    and reading by reading."""
+    rng = np.random.default_rng(7)
+    n, m = 203, 3
+    D = rng.normal(size=(n, m, 2))
+    own, reading = np.array([4e-4, 0.0]), np.array([0.0, 9e-3])
+    a = rng.integers(0, n - 1, 300)
+    b = np.minimum(a + rng.integers(1, 40, a.size), n)
+
+    def direct(lo: int, hi: int) -> np.ndarray:
+        total = sum((D[j] * own) @ D[j].T for j in range(lo, hi))
+        # A counter's readings: the first and last interval's, and each step between two inside.
+        total = total + (D[lo] * reading) @ D[lo].T + (D[hi - 1] * reading) @ D[hi - 1].T
+        for r in range(lo + 1, hi):
+            d = D[r - 1] - D[r]
+            total = total + (d * reading) @ d.T
+        return np.asarray(total)
+
+    monkeypatch.setattr(unc, "STEP", 8)
+    monkeypatch.setattr(unc._Prefix, "KEPT", 2)
+    ends = unc.EndNoise(D, (own, reading))
+    got = ends.between(a, b)
+    want = np.stack([direct(int(lo), int(hi)) for lo, hi in zip(a, b)])
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-14)
+    assert len(ends.own.kept) <= 2
+    # Without a counter's readings: the intervals' own noise alone.
+    alone = unc.EndNoise(D, (own, np.zeros(2))).between(a, b)
+    own_only = np.stack([sum((D[j] * own) @ D[j].T for j in range(lo, hi)) for lo, hi in zip(a, b)])
+    np.testing.assert_allclose(alone, own_only, rtol=1e-9, atol=1e-14)

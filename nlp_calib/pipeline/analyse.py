@@ -26,6 +26,7 @@ from nlp_calib.analysis.noise_rates import ground_rate, model_covariances, noise
 from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import (
     DRIFT_LENGTHS,
+    beyond_motion,
     covering_noise,
     drift_noise,
     propagate,
@@ -666,6 +667,8 @@ def handoff_noise(
     if not fit.fns.sensor.planar_base:
         return None, None
     d, rates = noise_model(fit, windows, params, steering_sample)
+    if beyond_motion(d.inputs, d.noise):
+        return None, None  # the hand-off then says the drift does not determine the noise
     walk = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
     found = odometry_noise(fit.fns, params, d.inputs, time_s, (rates, windows.input_noise_std, walk))

@@ -70,7 +70,8 @@ def _ratio_axes(ax: Axes, rows: Sequence[Standing]) -> None:
     ax.set_yticks(y, [r.name for r in rows])
     ax.set_xlabel("1σ to believe ÷ the precision a useful calibration needs (log scale)")
     ax.set_title("each parameter: left of the black line is determined well enough", fontsize=10)
-    ax.legend(handles=handles, fontsize=8, loc="upper right")
+    # Below the axes: inside them, the box covered the words right of the top bars.
+    ax.legend(handles=handles, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3)
     ax.grid(True, axis="x", which="both", alpha=0.3)
 
 
