@@ -275,13 +275,21 @@ def test_a_noise_as_large_as_the_inputs_own_values_is_named() -> None:
 def test_the_seed_formulations_drift_hands_off_no_covariance(real_log: Path, tmp_path: Path) -> None:
     """On the real log, the seed formulation's odometry drifts as a random walk of 1.8 traction
     revolutions per 8 ms interval would: no covariance grown from that reaches a controller file
-    (it was 3e40 m²), and calibration.yaml states no odometry noise (the recommended settings'
-    hand-off keeps both: tests/test_ros2_handoff.py)."""
+    (it was 3e40 m²), nor to odometry.csv or the terminal (1e24 mm), and calibration.yaml states
+    no odometry noise (the recommended settings' hand-off keeps them: tests/test_ros2_handoff.py)."""
     from conftest import SCENARIOS, cli
 
     out = tmp_path / "seed"
-    proc = cli("run", str(SCENARIOS / "real_tricycle_seed.yaml"), "--data", str(real_log), "--out", str(out))
+    proc = cli(
+        "odometry", str(SCENARIOS / "real_tricycle_seed.yaml"), "--data", str(real_log), "--out", str(out)
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
+    assert (
+        "records, no covariance (nor in odometry.csv, calibration.yaml or ros2_control.yaml)" in proc.stdout
+    )
+    assert "traction_revolutions 3.4" in proc.stdout and "e+" not in proc.stdout.split("odometry over")[1]
+    rows = (out / "odometry.csv").read_text().splitlines()
+    assert len(rows) > 2000 and all(row.endswith(",,,,,,") for row in rows[1:])
     ros2 = (out / "ros2_control.yaml").read_text()
     params = next(iter(yaml.safe_load(ros2).values()))["ros__parameters"] or {}  # every value commented
     assert "pose_covariance_diagonal" not in params and "twist_covariance_diagonal" not in params

@@ -8,7 +8,7 @@ the intervals with ``mapaccum``. ``σ_u`` is the encoders' noise on the model in
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -364,6 +364,17 @@ def beyond_motion(inputs: np.ndarray, noise: np.ndarray) -> tuple[int, ...]:
         if moving.size and float(noise[k]) >= float(np.quantile(moving, 0.95)):
             out.append(k)
     return tuple(out)
+
+
+def beyond_motion_words(
+    names: Sequence[str], units: Mapping[str, str], noise: np.ndarray, beyond: Sequence[int]
+) -> str:
+    """Why no covariance is stated for the inputs ``beyond`` (:func:`beyond_motion`) of ``noise``."""
+    said = ", ".join(f"{names[k]} {float(noise[k]):.3g} {units.get(names[k], '')}".rstrip() for k in beyond)
+    return (
+        "the drift against the reference calibrates a noise per interval as large as the inputs' own "
+        f"values ({said}): the model's or the clocks' error, not noise a filter can use"
+    )
 
 
 def covering_noise(

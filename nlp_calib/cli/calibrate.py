@@ -320,12 +320,14 @@ def cmd_odometry(args: argparse.Namespace) -> int:
     grown = "the odometry's noise per metre driven and per radian turned"
     if odo.rates is not None:
         grown += f" (calibration.yaml's odometry_noise, ros2_control.yaml's diagonals): {odo.rates.words()}"
-    print(
-        f"\nodometry over {odo.time_s.size} records, final 1σ: "
-        f"x {1e3 * np.sqrt(cov[-1, 0, 0]):.3g} mm, y {1e3 * np.sqrt(cov[-1, 1, 1]):.3g} mm, "
+    final_sigma = (
+        f"no covariance (nor in odometry.csv, calibration.yaml or ros2_control.yaml): {odo.undetermined}"
+        if odo.undetermined
+        else f"final 1σ: x {1e3 * np.sqrt(cov[-1, 0, 0]):.3g} mm, y {1e3 * np.sqrt(cov[-1, 1, 1]):.3g} mm, "
         f"θ {1e3 * np.sqrt(cov[-1, 2, 2]):.3g} mrad, grown as a filter grows {grown}; shaped by each "
         f"input's noise per interval, calibrated on this log's drift against the tracker: {shaped}"
     )
+    print(f"\nodometry over {odo.time_s.size} records, {final_sigma}")
     _closing(run, final, out)
     return 0
 

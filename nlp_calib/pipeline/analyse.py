@@ -27,6 +27,7 @@ from nlp_calib.analysis.observability import analyse as observability_of
 from nlp_calib.analysis.odometry import (
     DRIFT_LENGTHS,
     beyond_motion,
+    beyond_motion_words,
     covering_noise,
     drift_noise,
     propagate,
@@ -639,13 +640,17 @@ def odometry(
     inputs = windows.binder.fns.model.inputs(sel, steering_sample)
     reference = over_columns(fit.fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
     n = inputs.shape[1]
-    spans = np.c_[np.zeros(n, dtype=int), np.arange(1, n + 1)]
-    C, _ = model_covariances(fit.fns, params, inputs, (rates, floor), spans)
-    c, s = np.cos(reference[0, 2]), np.sin(reference[0, 2])
-    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    cov = np.concatenate([np.zeros((1, 3, 3)), R @ C @ R.T])
-    track = propagate(fit.fns, params, inputs, reference[0], np.zeros(floor.shape))[0]
     names = fit.fns.model.input_names
+    beyond = beyond_motion(d.inputs, d.noise)
+    why = beyond_motion_words(names, fit.fns.model.input_units, d.noise, beyond) if beyond else ""
+    cov = np.full((n + 1, 3, 3), np.nan)
+    if not why:
+        spans = np.c_[np.zeros(n, dtype=int), np.arange(1, n + 1)]
+        C, _ = model_covariances(fit.fns, params, inputs, (rates, floor), spans)
+        c, s = np.cos(reference[0, 2]), np.sin(reference[0, 2])
+        R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        cov = np.concatenate([np.zeros((1, 3, 3)), R @ C @ R.T])
+    track = propagate(fit.fns, params, inputs, reference[0], np.zeros(floor.shape))[0]
     return OdometryTrack(
         np.asarray(sel.time_s),
         track,
@@ -653,8 +658,9 @@ def odometry(
         reference,
         input_noise=dict(zip(names, map(float, d.noise))),
         quantisation=dict(zip(names, map(float, floor))),
-        coverage=rates.coverage,
-        rates=rates,
+        coverage=None if why else rates.coverage,
+        rates=None if why else rates,
+        undetermined=why,
     )
 
 

@@ -22,12 +22,14 @@ import numpy as np
 
 from nlp_calib.analysis.consistency import compare_logs, determined
 from nlp_calib.analysis.precision import clock_needed, log_precision, tightest, with_clocks
+from nlp_calib.core import memory
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel, reference_scales
 from nlp_calib.pipeline import consistency_check, validation
 from nlp_calib.pipeline.align import Alignment
 from nlp_calib.pipeline.analyse import (
+    RELEASE_FROM,
     FitAnalysis,
     LogAnalysis,
     LogView,
@@ -392,6 +394,11 @@ def _fit(
     fitted = dataclasses.replace(
         fitted, plan=plan_after(fitting, results, info.units), pivots=_pivots(fitting, parts, results)
     )
+    if fitting.data.n_residuals >= RELEASE_FROM:
+        # The plan's terms bound the windows again, their last use before the files (a report's
+        # series binds them anew): held, they stayed resident through the figures and the writing.
+        fitting.evaluator.release()
+        memory.give_back()
     white = fitted.uncertainty[solvers[0]]
     notes = fit_notes(results, fitted, held) + bias_notes(
         fitting.bias_taken(), dict(zip(white.names, white.std))

@@ -116,14 +116,21 @@ class OdometryTrack:
     coverage: float | None = None
     #: The same noise per metre driven and per radian turned (None: not computed).
     rates: NoiseRates | None = None
+    #: Why no covariance is stated ("": one is): the drift is no noise a filter can use.
+    undetermined: str = ""
 
     def csv(self) -> str:
-        """One row per record: time, pose and the upper triangle of the covariance."""
+        """One row per record: time, pose and the upper triangle of the covariance (empty where
+        none is stated)."""
         head = "time_s,x,y,theta,var_x,cov_xy,cov_xtheta,var_y,cov_ytheta,var_theta"
         P = self.covariance
         upper = [P[:, i, j] for i in range(3) for j in range(i, 3)]
         cols = np.column_stack([self.time_s, self.T_world_base, *upper])
-        return head + "\n" + "\n".join(",".join(f"{v:.10g}" for v in row) for row in cols) + "\n"
+        shown = 4 if self.undetermined else cols.shape[1]
+        rows = (
+            ",".join([*(f"{v:.10g}" for v in row[:shown]), *[""] * (cols.shape[1] - shown)]) for row in cols
+        )
+        return head + "\n" + "\n".join(rows) + "\n"
 
 
 @dataclass(frozen=True)
