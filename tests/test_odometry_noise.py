@@ -15,6 +15,7 @@ from odometry_truth import sigma_over_truth
 from nlp_calib.analysis.jitter import reading_jitter
 from nlp_calib.analysis.noise_rates import fit_rates, grown_covariances, systematic_shapes
 from nlp_calib.analysis.odometry import Drift, drift_noise
+from nlp_calib.analysis.pivots import pivot_intervals
 from nlp_calib.core import poses
 from nlp_calib.logs import parse_log
 from nlp_calib.logs.log import JointStream
@@ -198,6 +199,11 @@ def test_every_covariance_handed_off_is_the_one_noise_models(diff_drive: tuple) 
     rounding = step[3:].reshape(3, 3, -1, order="F").transpose(2, 0, 1)
     increments = poses.between(track[:-1], track[1:])
     q = np.c_[np.hypot(increments[:, 0], increments[:, 1]), np.abs(increments[:, 2])] @ rates
+    # Where the base turns on the spot, the heading grows by the pivots' own rate per radian.
+    spot = doc.get("heading_variance_per_radian_on_the_spot")
+    if spot is not None:
+        pivots = pivot_intervals(increments)
+        q[pivots, 2] += np.abs(increments[pivots, 2]) * (spot - rates[1, 2])
     P = np.zeros((3, 3))
     for k in range(increments.shape[0]):
         R = _rotation(track[k, 2])

@@ -7,7 +7,7 @@ white-noise correlation, as ``result.json`` reports them), with the map's Jacobi
 central differences. The odometry's covariance is the one noise model's (the rates per metre and per
 radian of :mod:`nlp_calib.analysis.noise_rates`, beside the readings' rounding): the twist's over
 one interval, averaged over the moving intervals; the pose's after a metre of driving as the log
-drives.
+drives, over the metres no fault touches (the rates' own: a slipped pivot's drift is stated apart).
 """
 
 from __future__ import annotations
@@ -182,13 +182,15 @@ def odometry_noise(
     inputs: np.ndarray,
     time_s: np.ndarray,
     noise: tuple[NoiseRates, np.ndarray, Mapping[str, float]],
+    faults: np.ndarray | None = None,
 ) -> OdometryNoise:
     """The covariance diagonals a controller publishes with its odometry, over the intervals of
     ``inputs`` (at ``time_s``), from the one noise model (``noise``: the rates per metre and per
     radian, each input's reading 1σ, and each input's random walk per interval they were shaped
     by, stated beside them): the twist's over one interval, the pose's after
-    :data:`POSE_DISTANCE_M` of driving as the log drives, both
-    :func:`~nlp_calib.analysis.noise_rates.model_covariances`."""
+    :data:`POSE_DISTANCE_M` of driving as the log drives (over the metres no interval ``faults``
+    marks touches, where there are any: the rates hold those; a slipped pivot's drift is stated
+    apart), both :func:`~nlp_calib.analysis.noise_rates.model_covariances`."""
     rates, reading, walk = noise
     dt = np.diff(np.asarray(time_s, dtype=float))
     n = inputs.shape[1]
@@ -196,6 +198,9 @@ def odometry_noise(
     C, track = model_covariances(fns, params, inputs, (rates, reading), steps)
     vx, _, wz = _twist(fns, inputs, dt, C) if n else np.full(3, np.nan)
     spans = metre_spans(track)
+    if faults is not None and spans.size:
+        clean = np.array([not np.any(faults[a:b]) for a, b in spans], dtype=bool)
+        spans = spans[clean] if clean.any() else spans
     pose = np.full(3, np.nan)
     if spans.size:
         found = model_covariances(fns, params, inputs, (rates, reading), spans)[0]

@@ -668,7 +668,8 @@ def handoff_noise(
     d, rates = noise_model(fit, windows, params, steering_sample)
     walk = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
-    found = odometry_noise(fit.fns, params, d.inputs, time_s, (rates, windows.input_noise_std, walk))
+    faults = windows.masks()[0][: d.inputs.shape[1]]
+    found = odometry_noise(fit.fns, params, d.inputs, time_s, (rates, windows.input_noise_std, walk), faults)
     return found, (d, rates)
 
 
