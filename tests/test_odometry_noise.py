@@ -13,7 +13,7 @@ import yaml
 from odometry_truth import sigma_over_truth
 
 from nlp_calib.analysis.jitter import reading_jitter
-from nlp_calib.analysis.noise_rates import fit_rates, grown_covariances, systematic_shapes
+from nlp_calib.analysis.noise_rates import fit_rates, grown_covariances, segment_rates, systematic_shapes
 from nlp_calib.analysis.odometry import Drift, drift_noise
 from nlp_calib.analysis.pivots import pivot_intervals
 from nlp_calib.core import poses
@@ -64,7 +64,8 @@ def _segments(increments: np.ndarray, spans: np.ndarray) -> np.ndarray:
 
 def test_the_calibrations_constant_errors_are_what_they_make_of_each_segment() -> None:
     """Each shape against the segments dead-reckoned again with that error (first order): a scale
-    of the distance, one across it, a heading error per metre and per radian; and the clocks' offset
+    of the distance, one across it, a heading error per metre, per radian and per radian turned on
+    the spot; and the clocks' offset
     against a smooth drive read one tenth of a millisecond early, its motions at 20 Hz."""
     rng = np.random.default_rng(8)
     increments = np.c_[rng.uniform(-0.05, 0.3, 80), rng.normal(0.0, 0.005, 80), rng.normal(0.0, 0.2, 80)]
@@ -77,8 +78,13 @@ def test_the_calibrations_constant_errors_are_what_they_make_of_each_segment() -
         np.c_[dx - eps * dy, dy + eps * dx, dth],
         np.c_[dx, dy, dth + eps * distance],
         np.c_[dx, dy, dth * (1 + eps)],
+        np.c_[dx, dy, dth + eps * dth],  # the clocks' offset is checked below: same as [3] here
+        np.c_[dx, dy, dth + eps * dth * pivot_intervals(increments)],  # on the spot alone
     ]
+    assert 5 < np.sum(pivot_intervals(increments)) < 75  # both arcs and pivots
     for k, again in enumerate(wrong):
+        if k == 4:
+            continue
         found = (_segments(again, spans) - _segments(increments, spans)) / eps
         assert np.allclose(found, shapes[k], rtol=0.0, atol=1e-5 * np.max(np.abs(shapes[k]))), k
     # A smooth drive (speed and turn rate varying) sampled every 50 ms, read 0.1 ms early.
@@ -96,6 +102,42 @@ def test_the_calibrations_constant_errors_are_what_they_make_of_each_segment() -
         truth[spans[:, 0]], truth[spans[:, 1]]
     )
     assert np.allclose(error, -(early / 0.05) * shape, rtol=0.02, atol=1e-3 * np.max(np.abs(shape)))
+
+
+def test_a_pivots_heading_rate_is_fitted_apart_from_an_arcs() -> None:
+    """Arcs (1 m, up to 0.8 rad an interval) and pivots (6 rad on the spot) whose heading drifts 40x
+    more per radian (a skid-steer's wheels scrub on a pivot): the segments' errors, drawn from
+    the covariance each rate grows (per metre and per radian on an arc, per radian on the spot),
+    give each rate its own (the pivots' within 25 % of the truth, the arcs' heading within 50 %: they
+    share it with the distance); one rate per radian for both gave every arc
+    the pivots' (and the hand-off's pose diagonal 2-20x the fault-free metres' drift)."""
+    rng = np.random.default_rng(11)
+    n = 1200
+    pivot = rng.uniform(size=n) < 0.3
+    turn = np.where(pivot, rng.choice([-6.0, 6.0], n), rng.uniform(-0.8, 0.8, n))
+    increments = np.c_[np.where(pivot, 0.0, rng.uniform(0.8, 1.2, n)), np.zeros(n), turn]
+    assert np.array_equal(pivot_intervals(increments), pivot)
+    per_metre, arc, spot = np.array([1e-4, 4e-5, 2e-5]), 1e-4, 4e-3
+    arcs = np.c_[np.hypot(increments[:, 0], increments[:, 1]), np.abs(turn) * ~pivot]
+    spun = np.c_[np.zeros(n), np.abs(turn) * pivot]
+    spans = np.r_[np.c_[np.arange(n), np.arange(1, n + 1)], np.c_[np.arange(0, n - 3, 3), np.arange(3, n, 3)]]
+    unit = np.eye(3)
+    units = np.stack(
+        [grown_covariances(increments, np.r_[[unit[c]], [np.zeros(3)]], spans) for c in range(3)]
+        + [grown_covariances(increments, np.r_[[np.zeros(3)], [unit[c]]], spans) for c in range(2)]
+        + [grown_covariances(increments, np.r_[[np.zeros(3)], [unit[2]]], spans, a) for a in (arcs, spun)]
+    )
+    truth = np.r_[per_metre, 0.0, 0.0, arc, spot]
+    w, V = np.linalg.eigh(np.einsum("k,ksij->sij", truth, units))
+    root = V * np.sqrt(np.clip(w, 0.0, None))[:, None, :]
+    errors = np.einsum("sij,sj->si", root, rng.normal(size=(spans.shape[0], 3)))
+    shapes = systematic_shapes(increments, spans)
+    # No reference noise; the readings' rounding at a 0.1 mm and 10 µrad floor.
+    reads = np.broadcast_to(np.diag([1e-8, 1e-8, 1e-10]), (spans.shape[0], 3, 3))
+    rates, allowed, _, _ = segment_rates(units, shapes, errors, (np.zeros((0, spans.shape[0], 3, 3)), reads))
+    assert rates[5] == pytest.approx(arc, rel=0.5), (rates, allowed)
+    assert rates[6] == pytest.approx(spot, rel=0.25), (rates, allowed)
+    assert rates[2] == pytest.approx(per_metre[2], rel=0.5), (rates, allowed)
 
 
 def test_a_joints_own_noise_is_read_from_its_third_differences() -> None:
