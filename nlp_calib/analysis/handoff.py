@@ -182,12 +182,23 @@ def metre_spans(track: np.ndarray) -> np.ndarray:
 class Shown:
     """What the drive shows of the odometry: the intervals a fault marks ``(n,)``, the reference's
     base poses ``(n + 1, 3)``, the base's position less the sensor's at each record ``(n + 1, 2)``
-    and the reference's own variances of its position and heading (``(2,)``)."""
+    and the reference's own variances of its position and heading (``(2,)``), fitted on
+    ``segments`` drift segments."""
 
     faults: np.ndarray
     reference: np.ndarray
     lever: np.ndarray
     reference_var: np.ndarray
+    segments: int
+
+
+def most_reference(variances: np.ndarray, segments: int) -> np.ndarray:
+    """The reference's own variances at two σ of their fit over theirs: a variance fitted on ``m``
+    squared errors (a χ² with one degree of freedom each) has a relative σ of ``√(2/m)``, and
+    ``segments`` half-overlapping segments give about half as many. The errors are held against
+    the most of the reference's noise its fit allows: what it cannot take is the odometry's."""
+    m = max(0.5 * segments, 1.0)
+    return np.asarray(variances, dtype=float) * (1.0 + 2.0 * np.sqrt(2.0 / m))
 
 
 def covering_pose(pose: np.ndarray, track: np.ndarray, spans: np.ndarray, shown: Shown) -> np.ndarray:
@@ -202,7 +213,7 @@ def covering_pose(pose: np.ndarray, track: np.ndarray, spans: np.ndarray, shown:
     local = np.c_[c * errors[:, 0] + s * errors[:, 1], -s * errors[:, 0] + c * errors[:, 1], errors[:, 2]]
     R = np.zeros((turn.size, 3, 3))
     R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, s, -s, c, 1.0
-    own = np.einsum("k,skij->sij", np.asarray(shown.reference_var, dtype=float), terms)
+    own = np.einsum("k,skij->sij", most_reference(shown.reference_var, shown.segments), terms)
     own = R @ own @ np.swapaxes(R, 1, 2)
     # |e| ≤ 2·√(σ² + r) holds for the spans whose e²/4 − r is at most σ²: the smallest σ² that
     # holds COVERED of them is that order statistic.

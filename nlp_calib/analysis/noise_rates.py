@@ -338,22 +338,34 @@ def systematic_rates(
     return rates, float(spot[0])
 
 
+def covering_target(segments: int, shared: bool) -> float:
+    """The share of ``segments`` errors a component's 2σ must hold: :data:`COVERED`, less two
+    binomial σ of it over half of them (they overlap by half) where the reference's own noise in
+    that component was fitted on the same errors (``shared``): within that, the share is its
+    sampling and the reference's noise may take the rest. Where no fitted noise of the reference's
+    is beside it (a reference's own increments' heading), nothing else may: never under the drift
+    the segments show."""
+    if not shared:
+        return COVERED
+    return COVERED - 2.0 * float(np.sqrt(COVERED * (1.0 - COVERED) / max(0.5 * segments, 1.0)))
+
+
 def _covering_share(
-    units: np.ndarray, added: tuple[np.ndarray, np.ndarray, int], errors: np.ndarray, known: np.ndarray
+    units: np.ndarray,
+    added: tuple[np.ndarray, np.ndarray, int],
+    errors: np.ndarray,
+    known: np.ndarray,
+    target: float,
 ) -> float:
-    """The smallest share of ``shape`` added to component ``c``'s rates (``added``: the rates, the
-    shape, c) whose 2σ holds :data:`COVERED` of the segments' errors in that component (0: they
-    do already; the shape: the inputs' noise's rates, what the wheels' noise makes of each
-    component)."""
+    """The smallest share of ``shape`` added to the rates (``added``: the rates as ``units`` holds
+    them, the shape, the component ``c`` it raises) whose 2σ holds ``target`` of the segments'
+    errors in that component (:func:`covering_target`; 0: they do already; the shape: the inputs'
+    noise's rates, what the wheels' noise makes of each component)."""
     rates, shape, c = added
-    # The share held is itself sampled: within two binomial σ of it over half the segments (they
-    # overlap by half), the reference's own noise, fitted on the same errors, may take the rest.
-    target = COVERED - 2.0 * np.sqrt(COVERED * (1.0 - COVERED) / max(0.5 * errors.shape[0], 1.0))
 
     def need(share: float) -> float:
-        trial = rates.copy()
-        trial[:, c] += share * shape
-        return float(np.quantile(_ratios(units, trial, errors, known)[:, c], target)) / 2.0
+        ratios = _ratios(units, rates + share * shape, errors, known)[:, c]
+        return float(np.quantile(ratios, target, method="inverted_cdf")) / 2.0
 
     if need(0.0) <= 1.0 or not np.any(shape > 0):
         return 0.0
@@ -388,20 +400,50 @@ def _unshown(
     return np.where(unshown, np.where(jittered, least, most), np.maximum(rates, least)), bounded
 
 
+#: The component (along, across, heading) each rate :func:`_covered` raises is of: per metre, per
+#: radian (an arc's, where a pivot's is apart), then the heading's per radian on the spot.
+COMPONENTS = np.array([0, 1, 2, 0, 1, 2, 2])
+
+
+def _populations(units: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """What :func:`_covered` raises, each with the segments it is judged on: a component's rates
+    (those :data:`COMPONENTS` gives it) on every segment; where the pivots' heading rate is apart
+    (``units``' seventh), the arcs' heading rates on the segments that do not pivot and the
+    pivots' on those that do: each rate never under the drift of the segments it is stated for."""
+    n = units.shape[0]
+    of, every = COMPONENTS[:n], np.ones(units.shape[1], dtype=bool)
+    if n < 7:
+        return [(c, of == c, every) for c in range(3)]
+    pivots = units[6][:, 2, 2] > 0
+    arcs = (of == 2) & (np.arange(n) < 6)
+    return [(0, of == 0, every), (1, of == 1, every), (2, arcs, ~pivots), (2, np.arange(n) == 6, pivots)]
+
+
 def _covered(
-    units: np.ndarray, rates: np.ndarray, given: np.ndarray, against: tuple[np.ndarray, np.ndarray]
+    units: np.ndarray,
+    rates: np.ndarray,
+    given: np.ndarray,
+    against: tuple[np.ndarray, np.ndarray, np.ndarray],
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``rates`` raised, component by component, by the smallest share of the inputs' noise's
-    rates (``given``) whose 2σ holds :data:`COVERED` of the segments' errors (``against``: those
-    and their known covariance), and the shares added."""
-    errors, known = against
-    rates, raised = rates.copy(), np.zeros(3)
+    """``rates`` (as ``units`` holds them: per metre, per radian, and the pivots' heading rate
+    where they have one) raised, rate by rate as :func:`_populations` groups them, by the smallest
+    share of the inputs' noise's rates (``given``, the pivots' as an arc's: one noise per
+    interval) whose 2σ holds :func:`covering_target`'s share of their segments' errors
+    (``against``: those, their known covariance, and in which components the reference's own
+    noise was fitted beside them), and the shares added per component: a pivot that slipped
+    unflagged raises the pivots' rate, not the arcs'."""
+    errors, known, shared = against
+    rates, raised = np.array(rates, dtype=float), np.zeros(3)
+    given = np.r_[np.ravel(given), given[1, 2]][: rates.size]
     for _ in range(4):  # a heading raised carries into the positions: again
-        for c in range(3):
-            shape = given[:, c] if np.any(given[:, c] > 0) else rates[:, c]
-            share = _covering_share(units, (rates, shape, c), errors, known)
-            rates[:, c] += share * shape
-            raised[c] += share
+        for c, which, on in _populations(units):
+            if not np.any(on):
+                continue
+            shape = np.where(which, given if np.any(given[which] > 0) else rates, 0.0)
+            target = covering_target(int(np.count_nonzero(on)), bool(shared[c]))
+            share = _covering_share(units[:, on], (rates, shape, c), errors[on], known[on], target)
+            rates += share * shape
+            raised[c] = max(raised[c], share)
     return rates, raised
 
 
@@ -443,18 +485,21 @@ def noise_rates(
     # rates': one rate for both would give every arc a pivot's drift (none: no pivot to tell it).
     spot = fitted[6] if np.isfinite(fitted[6]) else np.fmin(allowed[6], given[1, 2])
     spot = float(spot) + more_spot if np.any(on_spot(increments)[:, 1] > 0) else None
-    known = np.einsum("k,ksij->sij", reference, terms[credited]) + reads + (spot or 0.0) * units[7]
-    units = units[FITTED[:6]] if spot is not None else units[:6]
-    rates, raised = _covered(units, rates, given, (errors, known))
-    coverage = float(np.mean(_ratios(units, rates, errors, known) <= 2.0))
+    known = np.einsum("k,ksij->sij", reference, terms[credited]) + reads
+    units, held = (
+        (units[FITTED], np.r_[np.ravel(rates), spot]) if spot is not None else (units[:6], np.ravel(rates))
+    )
+    fitted = np.einsum("k,ksii->i", reference, terms[credited]) > 0
+    held, raised = _covered(units, held, given, (errors, known, fitted))
+    coverage = float(np.mean(_ratios(units, held, errors, known) <= 2.0))
     return NoiseRates(
-        _three(rates[0]),
-        _three(rates[1]),
+        _three(held[:3]),
+        _three(held[3:6]),
         coverage,
         int(drift.spans.shape[0]),
         float(np.max(raised)),
         bounded,
-        on_spot=spot,
+        on_spot=float(held[6]) if spot is not None else None,
     )
 
 
