@@ -279,10 +279,11 @@ AXES = ("along", "across", "heading")
 SHOWN = 2.0
 
 #: How many σ of its own above its fit the most the segments allow of a rate lies: a bound the
-#: odometry's σ is never under, so one-sided beyond a test's 2σ (a fit of variances on a few
-#: dozen squared errors is skewed: at 2σ the skid-steers' along rates fell to 0.44-0.51 of the
-#: drift truly had, on seeds 3703, 5108 and 5111).
-BOUND = 3.0
+#: rate is under with :data:`~nlp_calib.analysis.odometry.COVERED` confidence whatever the fit's
+#: distribution (a fit of variances on a few dozen squared errors is skewed, so a Gaussian's
+#: one-sided σ does not hold). Cantelli's inequality, ``P(X − μ ≥ kσ) ≤ 1/(1 + k²)``, gives
+#: ``k = √(COVERED / (1 − COVERED))``: √19 ≈ 4.36 σ.
+BOUND = float(np.sqrt(COVERED / (1.0 - COVERED)))
 
 
 def _spread(A: np.ndarray, w: np.ndarray, on: np.ndarray, k: int) -> float:
