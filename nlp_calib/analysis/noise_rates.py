@@ -17,8 +17,9 @@ not show (a car's wheels under its device's 2 cm) is the joints' own noise's
 (:data:`BOUND` σ above its fit), said (``bounded``): the inputs' noise propagated (one noise per
 interval, which a pivot's drift rules) only where the segments cannot tell it apart. A component
 whose 2σ holds fewer than :data:`~nlp_calib.analysis.odometry.COVERED` of the segments' errors gets
-the smallest share of the inputs' noise's rates that makes it hold them: at least the drift the
-windows show.
+the smallest share of the inputs' noise's rates that makes it hold them, each rate on the segments
+it is stated for (the pivots' heading rate on those that pivot): at least the drift the windows
+show.
 """
 
 from __future__ import annotations
