@@ -14,7 +14,15 @@ from odometry_truth import sigma_over_truth
 
 from nlp_calib.analysis.handoff import Shown, metre_spans, odometry_noise
 from nlp_calib.analysis.jitter import reading_jitter
-from nlp_calib.analysis.noise_rates import fit_rates, grown_covariances, segment_rates, systematic_shapes
+from nlp_calib.analysis.noise_rates import (
+    FITTED,
+    _covered,
+    _unit_growth,
+    fit_rates,
+    grown_covariances,
+    segment_rates,
+    systematic_shapes,
+)
 from nlp_calib.analysis.odometry import COVERED, Drift, drift_noise
 from nlp_calib.analysis.pivots import pivot_intervals
 from nlp_calib.core import poses
@@ -140,6 +148,35 @@ def test_a_pivots_heading_rate_is_fitted_apart_from_an_arcs() -> None:
     assert rates[5] == pytest.approx(arc, rel=0.5), (rates, allowed)
     assert rates[6] == pytest.approx(spot, rel=0.25), (rates, allowed)
     assert rates[2] == pytest.approx(per_metre[2], rel=0.5), (rates, allowed)
+
+
+def test_a_rate_too_small_for_its_own_segments_is_raised_on_them_alone() -> None:
+    """Arcs and pivots as above, the segments' errors drawn from the true rates, the pivots' heading
+    rate held at a tenth of its truth (pivots that slipped too little to be found, in the
+    segments): the pivots' rate is raised until its 2σ holds 95 % of the pivoting segments' heading
+    errors, and the arcs' heading rates stay near their truth (one share for every heading rate,
+    judged on every segment, the pivots' rate held beside them, raised the arcs' 10¹²-fold here)."""
+    rng = np.random.default_rng(4507)
+    n = 900
+    pivot = rng.uniform(size=n) < 0.3
+    turn = np.where(pivot, rng.choice([-6.0, 6.0], n), rng.uniform(-0.8, 0.8, n))
+    increments = np.c_[np.where(pivot, 0.0, rng.uniform(0.8, 1.2, n)), np.zeros(n), turn]
+    spans = np.r_[np.c_[np.arange(n), np.arange(1, n + 1)], np.c_[np.arange(0, n - 3, 3), np.arange(3, n, 3)]]
+    units = _unit_growth(increments, spans)[FITTED]
+    truth = np.array([1e-4, 4e-5, 2e-5, 0.0, 0.0, 1e-4, 4e-3])
+    w, V = np.linalg.eigh(np.einsum("k,ksij->sij", truth, units))
+    root = V * np.sqrt(np.clip(w, 0.0, None))[:, None, :]
+    errors = np.einsum("sij,sj->si", root, rng.normal(size=(spans.shape[0], 3)))
+    held = truth.copy()
+    held[6] *= 0.1
+    given = np.array([[1e-4, 4e-5, 2e-5], [1e-6, 1e-6, 1e-4]])  # the wheels' noise's rates
+    known = np.zeros((spans.shape[0], 3, 3))
+    raised, _ = _covered(units, held, given, (errors, known, np.zeros(3, dtype=bool)))
+    pivots = units[6][:, 2, 2] > 0
+    sigma = np.sqrt(np.einsum("k,ks->s", raised, units[:, :, 2, 2]))
+    assert np.mean(np.abs(errors[pivots, 2]) <= 2.0 * sigma[pivots] * (1.0 + 1e-9)) >= COVERED
+    assert raised[6] > 3.0 * held[6], raised
+    assert raised[2] <= 2.0 * truth[2] and raised[5] <= 2.0 * truth[5], raised
 
 
 def test_a_joints_own_noise_is_read_from_its_third_differences() -> None:
