@@ -183,13 +183,15 @@ class Shown:
     """What the drive shows of the odometry: the intervals a fault marks ``(n,)``, the reference's
     base poses ``(n + 1, 3)``, the base's position less the sensor's at each record ``(n + 1, 2)``
     and the reference's own variances of its position and heading (``(2,)``), fitted on
-    ``segments`` drift segments."""
+    ``segments`` drift segments; ``chained``: the reference is its own increments chained, one an
+    interval (a scan matcher's), its noise over a span each increment's."""
 
     faults: np.ndarray
     reference: np.ndarray
     lever: np.ndarray
     reference_var: np.ndarray
     segments: int
+    chained: bool = False
 
 
 def most_reference(variances: np.ndarray, segments: int) -> np.ndarray:
@@ -214,6 +216,8 @@ def covering_pose(pose: np.ndarray, track: np.ndarray, spans: np.ndarray, shown:
     R = np.zeros((turn.size, 3, 3))
     R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, s, -s, c, 1.0
     own = np.einsum("k,skij->sij", most_reference(shown.reference_var, shown.segments), terms)
+    if shown.chained:  # each increment chained adds its own noise: one's over each
+        own = own * (spans[:, 1] - spans[:, 0])[:, None, None]
     own = R @ own @ np.swapaxes(R, 1, 2)
     # |e| ≤ 2·√(σ² + r) holds for the spans whose e²/4 − r is at most σ²: the smallest σ² that
     # holds COVERED of them is that order statistic.

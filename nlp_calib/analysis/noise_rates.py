@@ -280,11 +280,11 @@ AXES = ("along", "across", "heading")
 SHOWN = 2.0
 
 #: How many σ of its own above its fit the most the segments allow of a rate lies: a bound the
-#: rate is under with :data:`~nlp_calib.analysis.odometry.COVERED` confidence whatever the fit's
-#: distribution (a fit of variances on a few dozen squared errors is skewed, so a Gaussian's
-#: one-sided σ does not hold). Cantelli's inequality, ``P(X − μ ≥ kσ) ≤ 1/(1 + k²)``, gives
-#: ``k = √(COVERED / (1 − COVERED))``: √19 ≈ 4.36 σ.
-BOUND = float(np.sqrt(COVERED / (1.0 - COVERED)))
+#: rate is under with :data:`~nlp_calib.analysis.odometry.COVERED` confidence however skewed the
+#: fit's distribution (variances fitted on a few dozen squared errors: a Gaussian's one-sided σ
+#: does not hold), as long as it has one mode: the one-sided Vysochanskij–Petunin inequality,
+#: ``P(X − μ ≥ kσ) ≤ 4 / (9·(1 + k²))``, gives ``k = √(4 / (9·(1 − COVERED)) − 1)``: 2.81σ.
+BOUND = float(np.sqrt(4.0 / (9.0 * (1.0 - COVERED)) - 1.0))
 
 
 def _spread(A: np.ndarray, w: np.ndarray, on: np.ndarray, k: int) -> float:

@@ -670,7 +670,10 @@ def handoff_noise(
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
     n = d.inputs.shape[1]
     lever = d.reference[:, :2] - np.asarray(windows.selected.T_world_sensor)[: n + 1, :2]
-    shown = Shown(windows.masks()[0][:n], d.reference, lever, d.reference_var, d.drift.errors.shape[0])
+    chained = windows.data.increment is not None
+    shown = Shown(
+        windows.masks()[0][:n], d.reference, lever, d.reference_var, d.drift.errors.shape[0], chained
+    )
     found = odometry_noise(fit.fns, params, d.inputs, time_s, (rates, windows.input_noise_std, walk), shown)
     return found, (d, rates)
 
