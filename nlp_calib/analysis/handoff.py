@@ -184,7 +184,9 @@ class Shown:
     base poses ``(n + 1, 3)``, the base's position less the sensor's at each record ``(n + 1, 2)``
     and the reference's own variances of its position and heading (``(2,)``), fitted on
     ``segments`` drift segments; ``chained``: the reference is its own increments chained, one an
-    interval (a scan matcher's), its noise over a span each increment's."""
+    interval (a scan matcher's), its noise over a span each increment's; ``bad_records``
+    ``(n + 1,)``: the reference's poses a fault spoiled (a tracker's outlier: no end of a span
+    judged)."""
 
     faults: np.ndarray
     reference: np.ndarray
@@ -192,6 +194,7 @@ class Shown:
     reference_var: np.ndarray
     segments: int
     chained: bool = False
+    bad_records: np.ndarray | None = None
 
 
 def most_reference(variances: np.ndarray, segments: int) -> np.ndarray:
@@ -209,6 +212,10 @@ def covering_pose(pose: np.ndarray, track: np.ndarray, spans: np.ndarray, shown:
     :data:`~nlp_calib.analysis.odometry.COVERED` of the errors ``spans`` show against the reference
     (the odometry ``track`` restarted from it at each start): the covariance handed off for those
     metres is never under the drift they show (a pivot that slipped unflagged among them)."""
+    if shown.bad_records is not None:  # a tracker's outlier is the reference's error, not the drift
+        spans = spans[~(shown.bad_records[spans[:, 0]] | shown.bad_records[spans[:, 1]])]
+        if not spans.size:
+            return pose
     errors, terms = restarted(shown.reference, track, spans, shown.lever)
     turn = shown.reference[spans[:, 0], 2]
     c, s = np.cos(turn), np.sin(turn)

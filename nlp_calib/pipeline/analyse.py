@@ -670,9 +670,11 @@ def handoff_noise(
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
     n = d.inputs.shape[1]
     lever = d.reference[:, :2] - np.asarray(windows.selected.T_world_sensor)[: n + 1, :2]
+    bad_intervals, bad_records = windows.masks()
     chained = windows.data.increment is not None
+    segments = d.drift.errors.shape[0]
     shown = Shown(
-        windows.masks()[0][:n], d.reference, lever, d.reference_var, d.drift.errors.shape[0], chained
+        bad_intervals[:n], d.reference, lever, d.reference_var, segments, chained, bad_records[: n + 1]
     )
     found = odometry_noise(fit.fns, params, d.inputs, time_s, (rates, windows.input_noise_std, walk), shown)
     return found, (d, rates)
