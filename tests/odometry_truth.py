@@ -6,14 +6,14 @@ pose's after a metre, the twist's over one interval) against the true errors ove
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from nlp_calib.analysis.handoff import metre_spans
-from nlp_calib.analysis.noise_rates import grown_covariances
+from nlp_calib.analysis.noise_rates import rates_covariances
 from nlp_calib.analysis.odometry import propagate, readings_covariance
-from nlp_calib.analysis.pivots import pivot_intervals
 from nlp_calib.core import poses
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.pipeline.analyse import calibrated_drift
@@ -53,7 +53,6 @@ def sigma_over_truth(
     own = int(np.bincount(spans).argmax())
     rates = run.odometry.rates if run.odometry is not None else run.reports[solver].controller.noise.rates
     increments = poses.between(track[:-1], track[1:])
-    per = np.array([rates.per_metre, rates.per_radian])
     out = _handed_off(run.reports[solver].controller, track, true, bad, np.diff(t))
     if every_metre and out:
         # The odometry a controller publishes integrates the wheels at their own samples, not by
@@ -68,7 +67,7 @@ def sigma_over_truth(
         out[("pose_all", 0)] = _handed_off(
             run.reports[solver].controller, published, true, spared, np.diff(t)
         )[("pose", 0)]
-        out[("pivots_all", 0)] = _pivots_grown(published, true, per, rates.slip_per_radian)
+        out[("pivots_all", 0)] = _pivots_grown(published, true, rates)
     for L in (m * own for m in multiples):
         i = np.arange(0, track.shape[0] - L, max(L // 2, 1))
         i = i[[not bad[a : a + L].any() for a in i]]
@@ -76,24 +75,19 @@ def sigma_over_truth(
         a, b = poses.between(true[i], true[j]), poses.between(track[i], track[j])
         error = np.c_[a[:, :2] - b[:, :2], wrap_angle(a[:, 2] - b[:, 2])]
         read = readings_covariance(Pr, track, i, j, -track[i, 2])
-        C = grown_covariances(increments, per, np.c_[i, j]) + read
+        C = rates_covariances(increments, rates, np.c_[i, j]) + read
         out[("rates", L)] = _over(error, np.sqrt(np.clip(np.diagonal(C, axis1=1, axis2=2), 0.0, None)))
     return out
 
 
-def _pivots_grown(published: np.ndarray, true: np.ndarray, per: np.ndarray, slip: float) -> np.ndarray:
-    """Over every metre of the odometry as published, the σ a filter grows from the rates per metre
-    and per radian with the slipped pivots' heading variance (``slip`` per radian) on every radian
-    it turns on the spot (the pivots by the fit's rule: it knows when it pivots, not when it slips)
-    against the true errors (:func:`_over`)."""
+def _pivots_grown(published: np.ndarray, true: np.ndarray, rates: Any) -> np.ndarray:
+    """Over every metre of the odometry as published, the σ a filter grows from ``rates`` (per
+    metre, per radian and per radian on the spot) with the slipped pivots' heading variance
+    (``rates.slip_per_radian``) on every radian it turns on the spot too (the pivots by the fit's
+    rule: it knows when it pivots, not when it slips) against the true errors (:func:`_over`)."""
     spans = metre_spans(published)
     increments = poses.between(published[:-1], published[1:])
-    on_spot = np.abs(increments[:, 2]) * pivot_intervals(increments)
-    slipping = np.zeros((2, 3))
-    slipping[1, 2] = slip
-    C = grown_covariances(increments, per, spans) + grown_covariances(
-        increments, slipping, spans, np.c_[np.zeros(on_spot.size), on_spot]
-    )
+    C = rates_covariances(increments, replace(rates, on_spot=rates.spot_rate + rates.slip_per_radian), spans)
     i, j = spans[:, 0], spans[:, 1]
     a, b = poses.between(true[i], true[j]), poses.between(published[i], published[j])
     error = np.c_[a[:, :2] - b[:, :2], wrap_angle(a[:, 2] - b[:, 2])]

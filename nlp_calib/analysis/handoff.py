@@ -7,17 +7,19 @@ white-noise correlation, as ``result.json`` reports them), with the map's Jacobi
 central differences. The odometry's covariance is the one noise model's (the rates per metre and per
 radian of :mod:`nlp_calib.analysis.noise_rates`, beside the readings' rounding): the twist's over
 one interval, averaged over the moving intervals; the pose's after a metre of driving as the log
-drives.
+drives, over the metres no fault touches (the rates' own: a slipped pivot's drift is stated apart).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from nlp_calib.analysis.noise_rates import model_covariances
+from nlp_calib.analysis.odometry import COVERED, restarted
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.problem import ProblemFunctions
@@ -176,19 +178,77 @@ def metre_spans(track: np.ndarray) -> np.ndarray:
     return np.c_[i, j].astype(int)
 
 
+@dataclass(frozen=True)
+class Shown:
+    """What the drive shows of the odometry: the intervals a fault marks ``(n,)``, the reference's
+    base poses ``(n + 1, 3)``, the base's position less the sensor's at each record ``(n + 1, 2)``
+    and the reference's own variances of its position and heading (``(2,)``), fitted on
+    ``segments`` drift segments; ``chained``: the reference is its own increments chained, one an
+    interval (a scan matcher's), its noise over a span each increment's; ``bad_records``
+    ``(n + 1,)``: the reference's poses a fault spoiled (a tracker's outlier: no end of a span
+    judged)."""
+
+    faults: np.ndarray
+    reference: np.ndarray
+    lever: np.ndarray
+    reference_var: np.ndarray
+    segments: int
+    chained: bool = False
+    bad_records: np.ndarray | None = None
+
+
+def most_reference(variances: np.ndarray, segments: int) -> np.ndarray:
+    """The reference's own variances at two σ of their fit over theirs: a variance fitted on ``m``
+    squared errors (a χ² with one degree of freedom each) has a relative σ of ``√(2/m)``, and
+    ``segments`` half-overlapping segments give about half as many. The errors are held against
+    the most of the reference's noise its fit allows: what it cannot take is the odometry's."""
+    m = max(0.5 * segments, 1.0)
+    return np.asarray(variances, dtype=float) * (1.0 + 2.0 * np.sqrt(2.0 / m))
+
+
+def covering_pose(pose: np.ndarray, track: np.ndarray, spans: np.ndarray, shown: Shown) -> np.ndarray:
+    """The pose diagonal ``pose`` (x, y, θ in the base frame at a span's start) with each component
+    raised to the smallest variance whose 2σ, beside the reference's own noise, holds
+    :data:`~nlp_calib.analysis.odometry.COVERED` of the errors ``spans`` show against the reference
+    (the odometry ``track`` restarted from it at each start): the covariance handed off for those
+    metres is never under the drift they show (a pivot that slipped unflagged among them)."""
+    if shown.bad_records is not None:  # a tracker's outlier is the reference's error, not the drift
+        spans = spans[~(shown.bad_records[spans[:, 0]] | shown.bad_records[spans[:, 1]])]
+        if not spans.size:
+            return pose
+    errors, terms = restarted(shown.reference, track, spans, shown.lever)
+    turn = shown.reference[spans[:, 0], 2]
+    c, s = np.cos(turn), np.sin(turn)
+    local = np.c_[c * errors[:, 0] + s * errors[:, 1], -s * errors[:, 0] + c * errors[:, 1], errors[:, 2]]
+    R = np.zeros((turn.size, 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, s, -s, c, 1.0
+    own = np.einsum("k,skij->sij", most_reference(shown.reference_var, shown.segments), terms)
+    if shown.chained:  # each increment chained adds its own noise: one's over each
+        own = own * (spans[:, 1] - spans[:, 0])[:, None, None]
+    own = R @ own @ np.swapaxes(R, 1, 2)
+    # |e| ≤ 2·√(σ² + r) holds for the spans whose e²/4 − r is at most σ²: the smallest σ² that
+    # holds COVERED of them is that order statistic.
+    needed = local**2 / 4.0 - np.diagonal(own, axis1=1, axis2=2)
+    least = np.quantile(needed, COVERED, axis=0, method="inverted_cdf")
+    return np.maximum(pose, least)
+
+
 def odometry_noise(
     fns: ProblemFunctions,
     params: np.ndarray,
     inputs: np.ndarray,
     time_s: np.ndarray,
     noise: tuple[NoiseRates, np.ndarray, Mapping[str, float]],
+    shown: Shown | None = None,
 ) -> OdometryNoise:
     """The covariance diagonals a controller publishes with its odometry, over the intervals of
     ``inputs`` (at ``time_s``), from the one noise model (``noise``: the rates per metre and per
     radian, each input's reading 1σ, and each input's random walk per interval they were shaped
     by, stated beside them): the twist's over one interval, the pose's after
-    :data:`POSE_DISTANCE_M` of driving as the log drives, both
-    :func:`~nlp_calib.analysis.noise_rates.model_covariances`."""
+    :data:`POSE_DISTANCE_M` of driving as the log drives (over the metres no interval
+    ``shown.faults`` marks touches, where there are any: the rates hold those; a slipped pivot's
+    drift is stated apart), both :func:`~nlp_calib.analysis.noise_rates.model_covariances`, the
+    pose's never under the drift those metres show (:func:`covering_pose`)."""
     rates, reading, walk = noise
     dt = np.diff(np.asarray(time_s, dtype=float))
     n = inputs.shape[1]
@@ -196,10 +256,15 @@ def odometry_noise(
     C, track = model_covariances(fns, params, inputs, (rates, reading), steps)
     vx, _, wz = _twist(fns, inputs, dt, C) if n else np.full(3, np.nan)
     spans = metre_spans(track)
+    if shown is not None and spans.size:
+        clean = np.array([not np.any(shown.faults[a:b]) for a, b in spans], dtype=bool)
+        spans = spans[clean] if clean.any() else spans
     pose = np.full(3, np.nan)
     if spans.size:
         found = model_covariances(fns, params, inputs, (rates, reading), spans)[0]
         pose = np.mean(np.diagonal(found, axis1=1, axis2=2), axis=0)
+        if shown is not None:
+            pose = covering_pose(pose, track, spans, shown)
     x, y, yaw = pose
     u = UNMEASURED
     return OdometryNoise(

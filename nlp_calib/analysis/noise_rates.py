@@ -9,12 +9,17 @@ component (:func:`segment_rates`), beside the reference's own variances (its noi
 with a segment's length, the wheels' does) and the calibration's constant errors (a wheel's scale,
 a heading error per metre or per radian, the clocks' offset: they grow faster still, the same on
 every segment, so they are regressed on the errors, :func:`systematic_shapes`, and counted over the
-shortest segments). A rate the segments do not show (a car's wheels under its device's 2 cm) is
-the joints' own noise's (:mod:`nlp_calib.analysis.jitter`) where they show one, else the inputs'
-noise's (the most the segments allow along the wheels' noise), said (``bounded``). A component
+shortest segments). A base that pivots turns its heading on the spot by a rate per radian of its
+own (:func:`on_spot`: a skid-steer's wheels scrub there), fitted apart from an arc's, and so is its
+constant error there: one rate for both gives every arc a pivot's drift. A rate the segments do
+not show (a car's wheels under its device's 2 cm) is the joints' own noise's
+(:mod:`nlp_calib.analysis.jitter`) where they show one, else the most the segments allow of it
+(:data:`BOUND` σ above its fit), said (``bounded``): the inputs' noise propagated (one noise per
+interval, which a pivot's drift rules) only where the segments cannot tell it apart. A component
 whose 2σ holds fewer than :data:`~nlp_calib.analysis.odometry.COVERED` of the segments' errors gets
-the smallest share of the inputs' noise's rates that makes it hold them: at least the drift the
-windows show.
+the smallest share of the inputs' noise's rates that makes it hold them, each rate on the segments
+it is stated for (the pivots' heading rate on those that pivot): at least the drift the windows
+show.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from dataclasses import replace
 import numpy as np
 
 from nlp_calib.analysis.odometry import COVERED, Drift, moments, propagate, readings_covariance
+from nlp_calib.analysis.pivots import pivot_intervals
 from nlp_calib.analysis.uncertainty import nnls_small
 from nlp_calib.core import poses
 from nlp_calib.core.numeric import wrap_angle
@@ -100,6 +106,35 @@ def grown_covariances(
     return R @ C @ np.swapaxes(R, 1, 2)
 
 
+def on_spot(increments: np.ndarray) -> np.ndarray:
+    """``(n, 2)``: what a rate per radian turned on the spot multiplies over each interval (0 per
+    metre; the radians turned where the base pivots, :func:`~nlp_calib.analysis.pivots.pivot_intervals`)."""
+    turned = np.abs(increments[:, 2]) * pivot_intervals(increments)
+    return np.c_[np.zeros(turned.size), turned]
+
+
+def _arcs(increments: np.ndarray) -> np.ndarray:
+    """``(n, 2)``: each interval's |distance| and the radians it turns other than on the spot."""
+    spun = on_spot(increments)
+    return np.c_[np.hypot(increments[:, 0], increments[:, 1]), np.abs(increments[:, 2]) - spun[:, 1]]
+
+
+def rates_covariances(increments: np.ndarray, rates: NoiseRates, spans: np.ndarray) -> np.ndarray:
+    """The rates' covariance of each span ``(i, j)``'s motion ``(S, 3, 3)`` (:func:`grown_covariances`),
+    the heading's per radian turned on the spot ``rates.on_spot`` in place of ``per_radian``'s."""
+    per = np.array([rates.per_metre, rates.per_radian])
+    if rates.on_spot is None:
+        return grown_covariances(increments, per, spans)
+    heading = np.zeros((2, 3))
+    heading[1, 2] = 1.0
+    per[1, 2] = 0.0
+    return (
+        grown_covariances(increments, per, spans)
+        + grown_covariances(increments, rates.per_radian[2] * heading, spans, _arcs(increments))
+        + grown_covariances(increments, rates.on_spot * heading, spans, on_spot(increments))
+    )
+
+
 def model_covariances(
     fns: ProblemFunctions,
     params: np.ndarray,
@@ -115,18 +150,29 @@ def model_covariances(
     rates, floor = noise
     track, P = propagate(fns, params, inputs, np.zeros(3), np.asarray(floor, dtype=float))
     increments = poses.between(track[:-1], track[1:])
-    per = np.array([rates.per_metre, rates.per_radian])
     i, j = spans[:, 0], spans[:, 1]
-    return grown_covariances(increments, per, spans) + readings_covariance(
+    return rates_covariances(increments, rates, spans) + readings_covariance(
         P, track, i, j, -track[i, 2]
     ), track
 
 
 def _unit_growth(increments: np.ndarray, spans: np.ndarray) -> np.ndarray:
-    """Each rate's covariance of every span at unit rate ``(6, S, 3, 3)`` (per metre along, across,
-    heading, then per radian): a span's covariance is linear in the rates."""
+    """Each rate's covariance of every span at unit rate ``(8, S, 3, 3)`` (per metre along, across,
+    heading, then per radian; then the heading's per radian turned on an arc, and on the spot): a
+    span's covariance is linear in the rates."""
     units = np.eye(6).reshape(6, 2, 3)
-    return np.stack([grown_covariances(increments, unit, spans) for unit in units])
+    heading = np.zeros((2, 3))
+    heading[1, 2] = 1.0
+    grown = [grown_covariances(increments, unit, spans) for unit in units]
+    split = [
+        grown_covariances(increments, heading, spans, a) for a in (_arcs(increments), on_spot(increments))
+    ]
+    return np.stack([*grown, *split])
+
+
+#: The rates :func:`segment_rates` fits among :func:`_unit_growth`'s: the heading's per radian on
+#: an arc and on the spot apart (a pivot's scrub would otherwise give every arc its drift).
+FITTED = np.array([0, 1, 2, 3, 4, 6, 7])
 
 
 def _local(drift: Drift, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -151,27 +197,33 @@ def _ratios(units: np.ndarray, rates: np.ndarray, errors: np.ndarray, known: np.
 
 
 #: Which of :func:`systematic_shapes` the odometry's own error makes (a wheel's scale, a heading
-#: error per metre or per radian, the clocks' offset); one across the motion is a mount's yaw, the
-#: reference's.
-ODOMETRY_SHAPES = np.array([1.0, 0.0, 1.0, 1.0, 1.0])
+#: error per metre or per radian, the clocks' offset, a pivot's mean slip); one across the motion
+#: is a mount's yaw, the reference's.
+ODOMETRY_SHAPES = np.array([1.0, 0.0, 1.0, 1.0, 1.0, 1.0])
+
+#: Which of :func:`systematic_shapes` grows on the pivots alone (a heading error per radian turned
+#: on the spot): its variance is the pivots' rate, not an arc's.
+SPOT_SHAPE = 5
 
 
 def systematic_shapes(increments: np.ndarray, spans: np.ndarray) -> np.ndarray:
     """What a constant error of the calibration makes of each span ``(i, j)``'s motion, in the base
-    frame at ``i`` ``(5, S, 3)``: a scale of the distance along the motion, one across it, a heading
+    frame at ``i`` ``(6, S, 3)``: a scale of the distance along the motion, one across it, a heading
     error per metre driven and one per radian turned (each signed as the motion: a wheel's radius,
-    a mount's yaw, a steer offset, a track), and an offset of the reference's clock by one
-    interval, at unit size. It is the same
+    a mount's yaw, a steer offset, a track), an offset of the reference's clock by one
+    interval, and a heading error per radian turned on the spot (a skid-steer's pivots slipping
+    one way more than the other), at unit size. It is the same
     on every segment, so the segments' errors regress on it; a random walk's do not."""
     track = poses.accumulate(np.zeros(3), increments)
     xy = track[:, :2]
     distance = np.sign(increments[:, 0]) * np.hypot(increments[:, 0], increments[:, 1])
     i, j = spans[:, 0], spans[:, 1]
     moved = xy[j] - xy[i]
-    out = np.zeros((5, spans.shape[0], 3))
+    out = np.zeros((6, spans.shape[0], 3))
     out[0, :, :2] = moved
     out[1, :, :2] = np.c_[-moved[:, 1], moved[:, 0]]
-    for k, w in ((2, distance), (3, increments[:, 2])):
+    spun = increments[:, 2] * pivot_intervals(increments)
+    for k, w in ((2, distance), (3, increments[:, 2]), (SPOT_SHAPE, spun)):
         W = _sums(w)
         Wp = _sums(w[:, None] * xy[1:])
         turned = W[j] - W[i]
@@ -193,13 +245,15 @@ def systematic_shapes(increments: np.ndarray, spans: np.ndarray) -> np.ndarray:
 
 def segment_rates(
     units: np.ndarray, shapes: np.ndarray, errors: np.ndarray, known: tuple[np.ndarray, np.ndarray]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The rates ``(2, 3)`` and the reference's own variances (those ``known[0]`` holds terms of,
-    ``(k, S, 3, 3)``) whose covariances, beside the readings' rounding (``known[1]``), best give the
-    segments' squared ``errors`` less the calibration's constant error (its ``shapes``' sizes,
-    returned third, regressed on the errors themselves), each component its own (the method of
-    moments: the wheels' noise model ties along, across and heading together, a slipping or
-    slow-read base's drift does not); a rate the segments do not show (:func:`_shown`) is NaN."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The rates (one per unit covariance ``units`` holds) and the reference's own variances
+    (those ``known[0]`` holds terms of, ``(k, S, 3, 3)``, returned third) whose covariances, beside
+    the readings' rounding (``known[1]``), best give the segments' squared ``errors`` less the
+    calibration's constant error (its ``shapes``' sizes, returned last, regressed on the errors
+    themselves), each component its own (the method of moments: the wheels' noise model ties
+    along, across and heading together, a slipping or slow-read base's drift does not); a rate the
+    segments do not show is NaN, and second, the most the segments allow of each rate
+    (:func:`_shown`)."""
     terms, reads = known
     diag = np.diagonal(np.concatenate([units, terms]), axis1=-2, axis2=-1)  # (6 + k, S, 3)
     A = np.concatenate([diag[:, :, c].T for c in range(3)])
@@ -214,8 +268,9 @@ def segment_rates(
         bias = np.linalg.lstsq(B * w[:, None], e * w, rcond=None)[0]
         var = moments(A / scale, (e - B @ bias) ** 2, k, predicted) / scale
         predicted = A @ var + k
-    rates = np.where(_shown(A, var, predicted)[:6], var[:6], np.nan)
-    return rates.reshape(2, 3), var[6:], bias
+    k = units.shape[0]
+    shown, allowed = _shown(A, var, predicted)
+    return np.where(shown[:k], var[:k], np.nan), allowed[:k], var[k:], bias
 
 
 #: The rates' components.
@@ -224,54 +279,95 @@ AXES = ("along", "across", "heading")
 #: How many σ of its own a rate the segments fit must stand above zero to count as shown by them.
 SHOWN = 2.0
 
+#: How many σ of its own above its fit the most the segments allow of a rate lies: a bound the
+#: rate is under with :data:`~nlp_calib.analysis.odometry.COVERED` confidence however skewed the
+#: fit's distribution (variances fitted on a few dozen squared errors: a Gaussian's one-sided σ
+#: does not hold), as long as it has one mode: the one-sided Vysochanskij–Petunin inequality,
+#: ``P(X − μ ≥ kσ) ≤ 4 / (9·(1 + k²))``, gives ``k = √(4 / (9·(1 − COVERED)) − 1)``: 2.81σ.
+BOUND = float(np.sqrt(4.0 / (9.0 * (1.0 - COVERED)) - 1.0))
 
-def _shown(A: np.ndarray, var: np.ndarray, predicted: np.ndarray) -> np.ndarray:
-    """Which fitted variances ``var`` the squared errors show (:data:`SHOWN` σ above 0): each
-    squared error's variance is twice its prediction's square (a χ² with one degree of freedom)
-    and half-overlapping segments count about half, so the fit's covariance is twice
-    ``(AᵀWA)⁻¹`` over the variances it fitted. One fitted under the reference's noise (a car's
-    wheels under its device's 2 cm) is noise of that fit, not the odometry's."""
-    on = var > 0
-    if not on.any():
-        return on
-    w = 1.0 / (2.0 * np.maximum(predicted, 1e-300) ** 2)
+
+def _spread(A: np.ndarray, w: np.ndarray, on: np.ndarray, k: int) -> float:
+    """The fit's σ of variance ``k`` fitted beside those ``on`` (NaN: the segments cannot tell it
+    from them)."""
+    cols = on.copy()
+    cols[k] = True
     try:
-        cov = 2.0 * np.linalg.inv(A[:, on].T @ (A[:, on] * w[:, None]))
+        cov = 2.0 * np.linalg.inv(A[:, cols].T @ (A[:, cols] * w[:, None]))
     except np.linalg.LinAlgError:
-        return np.zeros_like(on)
-    shown = np.zeros_like(on)
-    shown[on] = var[on] > SHOWN * np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    return shown
+        return float("nan")
+    d = float(cov[np.count_nonzero(cols[:k]), np.count_nonzero(cols[:k])])
+    return float(np.sqrt(d)) if d > 0 else float("nan")
 
 
-def systematic_rates(increments: np.ndarray, spans: np.ndarray, systematic: np.ndarray) -> np.ndarray:
-    """``(2, 3)``: the rates that give the shortest segments the variance of the calibration's
-    constant error over them (``systematic`` ``(S, 3)``, each segment's): over the windows the fit
-    judged, that error is the odometry's drift as much as its noise is."""
+def _shown(A: np.ndarray, var: np.ndarray, predicted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which fitted variances ``var`` the squared errors show (:data:`SHOWN` σ above 0), and the
+    most they allow of each (:data:`BOUND` σ above its fit, NaN where the segments cannot tell it
+    from the others): each squared error's variance is twice its prediction's square (a χ² with
+    one degree of freedom) and half-overlapping segments count about half, so the fit's covariance
+    is twice ``(AᵀWA)⁻¹`` over the variances it fitted (one not fitted, held at 0, beside them).
+    One fitted under the reference's noise (a car's wheels under its device's 2 cm) is noise of
+    that fit, not the odometry's."""
+    on = var > 0
+    w = 1.0 / (2.0 * np.maximum(predicted, 1e-300) ** 2)
+    sigma = np.array([_spread(A, w, on, k) for k in range(var.size)])
+    shown = on & (var > SHOWN * np.nan_to_num(sigma, nan=np.inf))
+    return shown, np.maximum(var, 0.0) + BOUND * sigma
+
+
+def systematic_rates(
+    increments: np.ndarray, spans: np.ndarray, systematic: np.ndarray
+) -> tuple[np.ndarray, float]:
+    """``(2, 3)``: the rates that give the shortest segments that do not pivot the variance of the
+    calibration's constant error over them (``systematic`` ``(S, 3)``, each segment's), and the
+    heading's per radian turned on the spot that gives those that pivot the rest of theirs: over
+    the windows the fit judged, that error is the odometry's drift as much as its noise is. It
+    grows as the turn's square, a rate as the turn: a pivot's turns (a few radians) fitted beside
+    an arc's would give every arc a pivot's share."""
     lengths = spans[:, 1] - spans[:, 0]
-    shortest = lengths == lengths.min()
     travel, turn = _sums(np.hypot(increments[:, 0], increments[:, 1])), _sums(np.abs(increments[:, 2]))
-    i, j = spans[shortest, 0], spans[shortest, 1]
-    along = np.c_[travel[j] - travel[i], np.zeros(i.size), turn[j] - turn[i]]
-    return fit_rates(along, systematic[shortest] ** 2)
+    spun = _sums(on_spot(increments)[:, 1])
+    i, j = spans[:, 0], spans[:, 1]
+    along = np.c_[travel[j] - travel[i], np.zeros(i.size), turn[j] - turn[i] - spun[j] + spun[i]]
+    pivots = spun[j] > spun[i]
+    arcs = (lengths == lengths[~pivots].min()) & ~pivots if np.any(~pivots) else lengths == lengths.min()
+    rates = fit_rates(along[arcs], systematic[arcs] ** 2)
+    if not np.any(pivots):
+        return rates, 0.0
+    at = pivots & (lengths == lengths[pivots].min())
+    grown = along[at][:, [0, 2]] @ rates[:, 2]
+    spot = nnls_small((spun[j] - spun[i])[at, None], systematic[at, 2] ** 2 - grown)
+    return rates, float(spot[0])
+
+
+def covering_target(segments: int, shared: bool) -> float:
+    """The share of ``segments`` errors a component's 2σ must hold: :data:`COVERED`, less two
+    binomial σ of it over half of them (they overlap by half) where the reference's own noise in
+    that component was fitted on the same errors (``shared``): within that, the share is its
+    sampling and the reference's noise may take the rest. Where no fitted noise of the reference's
+    is beside it (a reference's own increments' heading), nothing else may: never under the drift
+    the segments show."""
+    if not shared:
+        return COVERED
+    return COVERED - 2.0 * float(np.sqrt(COVERED * (1.0 - COVERED) / max(0.5 * segments, 1.0)))
 
 
 def _covering_share(
-    units: np.ndarray, added: tuple[np.ndarray, np.ndarray, int], errors: np.ndarray, known: np.ndarray
+    units: np.ndarray,
+    added: tuple[np.ndarray, np.ndarray, int],
+    errors: np.ndarray,
+    known: np.ndarray,
+    target: float,
 ) -> float:
-    """The smallest share of ``shape`` added to component ``c``'s rates (``added``: the rates, the
-    shape, c) whose 2σ holds :data:`COVERED` of the segments' errors in that component (0: they
-    do already; the shape: the inputs' noise's rates, what the wheels' noise makes of each
-    component)."""
+    """The smallest share of ``shape`` added to the rates (``added``: the rates as ``units`` holds
+    them, the shape, the component ``c`` it raises) whose 2σ holds ``target`` of the segments'
+    errors in that component (:func:`covering_target`; 0: they do already; the shape: the inputs'
+    noise's rates, what the wheels' noise makes of each component)."""
     rates, shape, c = added
-    # The share held is itself sampled: within two binomial σ of it over half the segments (they
-    # overlap by half), the reference's own noise, fitted on the same errors, may take the rest.
-    target = COVERED - 2.0 * np.sqrt(COVERED * (1.0 - COVERED) / max(0.5 * errors.shape[0], 1.0))
 
     def need(share: float) -> float:
-        trial = rates.copy()
-        trial[:, c] += share * shape
-        return float(np.quantile(_ratios(units, trial, errors, known)[:, c], target)) / 2.0
+        ratios = _ratios(units, rates + share * shape, errors, known)[:, c]
+        return float(np.quantile(ratios, target, method="inverted_cdf")) / 2.0
 
     if need(0.0) <= 1.0 or not np.any(shape > 0):
         return 0.0
@@ -287,6 +383,70 @@ def _covering_share(
 
 def _three(v: np.ndarray) -> tuple[float, float, float]:
     return float(v[0]), float(v[1]), float(v[2])
+
+
+def _unshown(
+    rates: np.ndarray, allowed: np.ndarray, given: np.ndarray, least: np.ndarray
+) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The rates ``(2, 3)`` with those the segments do not show (NaN) filled, and the components
+    so bounded. Such a rate is the joints' own noise's (``least``) where they show some in that
+    component (a car's wheel speeds under its device's noise), else the most the segments allow
+    (bounded, said): the inputs' noise's rates ``given`` (the most along the wheels' noise), but
+    never over the most they allow of that rate alone (``allowed``; NaN: they cannot tell it
+    apart): the wheels' noise is one per interval, an arc's and a pivot's alike, so a pivot's
+    drift would rule an arc's rate)."""
+    jittered = np.broadcast_to(np.any(least > 0, axis=0), rates.shape)
+    unshown = np.isnan(rates)
+    bounded = tuple(a for a, c in zip(AXES, np.any(unshown & ~jittered, axis=0)) if c)
+    most = np.fmin(allowed, given)
+    return np.where(unshown, np.where(jittered, least, most), np.maximum(rates, least)), bounded
+
+
+#: The component (along, across, heading) each rate :func:`_covered` raises is of: per metre, per
+#: radian (an arc's, where a pivot's is apart), then the heading's per radian on the spot.
+COMPONENTS = np.array([0, 1, 2, 0, 1, 2, 2])
+
+
+def _populations(units: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """What :func:`_covered` raises, each with the segments it is judged on: a component's rates
+    (those :data:`COMPONENTS` gives it) on every segment; where the pivots' heading rate is apart
+    (``units``' seventh), the arcs' heading rates on the segments that do not pivot and the
+    pivots' on those that do: each rate never under the drift of the segments it is stated for."""
+    n = units.shape[0]
+    of, every = COMPONENTS[:n], np.ones(units.shape[1], dtype=bool)
+    if n < 7:
+        return [(c, of == c, every) for c in range(3)]
+    pivots = units[6][:, 2, 2] > 0
+    arcs = (of == 2) & (np.arange(n) < 6)
+    return [(0, of == 0, every), (1, of == 1, every), (2, arcs, ~pivots), (2, np.arange(n) == 6, pivots)]
+
+
+def _covered(
+    units: np.ndarray,
+    rates: np.ndarray,
+    given: np.ndarray,
+    against: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> tuple[np.ndarray, np.ndarray]:
+    """``rates`` (as ``units`` holds them: per metre, per radian, and the pivots' heading rate
+    where they have one) raised, rate by rate as :func:`_populations` groups them, by the smallest
+    share of the inputs' noise's rates (``given``, the pivots' as an arc's: one noise per
+    interval) whose 2σ holds :func:`covering_target`'s share of their segments' errors
+    (``against``: those, their known covariance, and in which components the reference's own
+    noise was fitted beside them), and the shares added per component: a pivot that slipped
+    unflagged raises the pivots' rate, not the arcs'."""
+    errors, known, shared = against
+    rates, raised = np.array(rates, dtype=float), np.zeros(3)
+    given = np.r_[np.ravel(given), given[1, 2]][: rates.size]
+    for _ in range(4):  # a heading raised carries into the positions: again
+        for c, which, on in _populations(units):
+            if not np.any(on):
+                continue
+            shape = np.where(which, given if np.any(given[which] > 0) else rates, 0.0)
+            target = covering_target(int(np.count_nonzero(on)), bool(shared[c]))
+            share = _covering_share(units[:, on], (rates, shape, c), errors[on], known[on], target)
+            rates += share * shape
+            raised[c] = max(raised[c], share)
+    return rates, raised
 
 
 def noise_rates(
@@ -316,34 +476,32 @@ def noise_rates(
     shapes = systematic_shapes(increments, drift.spans)
     # The reference's variances refitted beside the rates (those the wheels' fit credited it with).
     credited = np.asarray(reference_var) > 0
-    rates, reference, bias = segment_rates(units, shapes, errors, (terms[credited], reads))
-    known = np.einsum("k,ksij->sij", reference, terms[credited]) + reads
+    fitted, allowed, reference, bias = segment_rates(units[FITTED], shapes, errors, (terms[credited], reads))
     # A constant error across the motion is the mount's yaw (the reference's, not the odometry's).
-    systematic = np.einsum("m,msc->sc", bias * ODOMETRY_SHAPES, shapes)
     errors = errors - np.einsum("m,msc->sc", bias * (1.0 - ODOMETRY_SHAPES), shapes)
-    # A rate the segments do not show is the joints' own noise's where they show some in that
-    # component (a car's wheel speeds under its device's noise), else the inputs' noise's (the
-    # most the segments allow along the wheels' noise: bounded, said).
-    jittered = np.broadcast_to(np.any(least > 0, axis=0), rates.shape)
-    unshown = np.isnan(rates)
-    bounded = tuple(a for a, c in zip(AXES, np.any(unshown & ~jittered, axis=0)) if c)
-    rates = np.where(unshown, np.where(jittered, least, given), np.maximum(rates, least))
-    rates = rates + systematic_rates(increments, drift.spans, systematic)
-    raised = np.zeros(3)
-    for _ in range(4):  # a heading raised carries into the positions: again
-        for c in range(3):
-            shape = given[:, c] if np.any(given[:, c] > 0) else rates[:, c]
-            share = _covering_share(units, (rates, shape, c), errors, known)
-            rates[:, c] += share * shape
-            raised[c] += share
-    coverage = float(np.mean(_ratios(units, rates, errors, known) <= 2.0))
+    systematic = np.einsum("m,msc->sc", bias * ODOMETRY_SHAPES, shapes)
+    more, more_spot = systematic_rates(increments, drift.spans, systematic)
+    rates, bounded = _unshown(fitted[:6].reshape(2, 3), allowed[:6].reshape(2, 3), given, least)
+    rates = rates + more
+    # A pivot's heading drifts by its own rate per radian (the wheels scrub), an arc's by the
+    # rates': one rate for both would give every arc a pivot's drift (none: no pivot to tell it).
+    spot = fitted[6] if np.isfinite(fitted[6]) else np.fmin(allowed[6], given[1, 2])
+    spot = float(spot) + more_spot if np.any(on_spot(increments)[:, 1] > 0) else None
+    known = np.einsum("k,ksij->sij", reference, terms[credited]) + reads
+    units, held = (
+        (units[FITTED], np.r_[np.ravel(rates), spot]) if spot is not None else (units[:6], np.ravel(rates))
+    )
+    fitted = np.einsum("k,ksii->i", reference, terms[credited]) > 0
+    held, raised = _covered(units, held, given, (errors, known, fitted))
+    coverage = float(np.mean(_ratios(units, held, errors, known) <= 2.0))
     return NoiseRates(
-        _three(rates[0]),
-        _three(rates[1]),
+        _three(held[:3]),
+        _three(held[3:6]),
         coverage,
         int(drift.spans.shape[0]),
         float(np.max(raised)),
         bounded,
+        on_spot=float(held[6]) if spot is not None else None,
     )
 
 
@@ -367,8 +525,10 @@ def ground_rate(
     first, stop = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     turned = np.array([np.abs(increments[a:b, 2]).sum() for a, b in zip(first, stop)])
     moved = np.array([np.abs(increments[a:b, 0]).sum() for a, b in zip(first, stop)])
+    spun = on_spot(increments)[:, 1]
+    spun = np.array([spun[a:b].sum() for a, b in zip(first, stop)])
     seen = wrap_angle(reference[stop, 2] - reference[first, 2])
     error = wrap_angle(seen - np.array([increments[a:b, 2].sum() for a, b in zip(first, stop)]))
-    grown = rates.per_metre[2] * moved + rates.per_radian[2] * turned
+    grown = rates.per_metre[2] * moved + rates.per_radian[2] * (turned - spun) + rates.spot_rate * spun
     extra = max(float(np.sum(error**2 - grown)), 0.0) / max(float(turned.sum()), 1e-12)
     return replace(rates, slip_per_radian=extra, slipped=int(first.size))

@@ -170,6 +170,18 @@ def _tracker_terms(start: np.ndarray, end: np.ndarray, levers: tuple[np.ndarray,
     return F @ units[0] @ np.swapaxes(F, -1, -2) + units[1]
 
 
+def restarted(
+    reference: np.ndarray, track: np.ndarray, spans: np.ndarray, lever: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each span ``(i, j)``'s error ``(S, 3)`` (world axes) when the odometry ``track`` is restarted
+    from the ``reference`` base poses at ``i``, and the reference's own noise terms of it
+    ``(S, 2, 3, 3)`` (:func:`_tracker_terms`; ``lever`` ``(n, 2)`` as :func:`segment_drift`'s)."""
+    i, j = spans[:, 0], spans[:, 1]
+    again = poses.compose(reference[i], poses.between(track[i], track[j]))
+    errors = np.c_[again[:, :2] - reference[j, :2], wrap_angle(again[:, 2] - reference[j, 2])]
+    return errors, _tracker_terms(reference[i], again, (lever[i], lever[j]))
+
+
 @dataclass(frozen=True)
 class Drift:
     """Segments of the odometry against a reference: each error ``(S, 3)``, each input's unit-noise
@@ -219,11 +231,11 @@ def segment_drift(
             i = np.arange(0, b - a - L, max(L // 2, 1))
             i = i[good[a + i] & good[a + i + L]]
             j = i + L
-            again = poses.compose(ref[i], poses.between(est[i], est[j]))
-            errors.append(np.c_[again[:, :2] - ref[j, :2], wrap_angle(again[:, 2] - ref[j, 2])])
+            error, term = restarted(ref, est, np.c_[i, j], lever[a:])
+            errors.append(error)
             covs.append(segment_covariance(P, est, i, j, ref[i, 2] - est[i, 2]))
             reads.append(readings_covariance(P, est, i, j, ref[i, 2] - est[i, 2]))
-            terms.append(_tracker_terms(ref[i], again, (lever[a + i], lever[a + j])))
+            terms.append(term)
             spans.append(np.c_[a + i, a + j])
             headings.append(ref[i, 2])
     n_in = inputs.shape[0]

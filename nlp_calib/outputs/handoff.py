@@ -135,6 +135,13 @@ def _noise_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
             # None: no drift segment to judge it by.
             "segments_within_2sigma": rates.coverage,
             "segments": rates.segments,
+            # A base that pivots: the heading's variance per radian turned on the spot, in place
+            # of variance_per_radian's there (a skid-steer's wheels scrub on a pivot, not on an arc).
+            **(
+                {"heading_variance_per_radian_on_the_spot": rates.on_spot}
+                if rates.on_spot is not None
+                else {}
+            ),
             # The pivots the ground slipped on, left out of the rates: the heading's variance they
             # add per radian turned on the spot, for a filter that knows when the robot pivots.
             **(

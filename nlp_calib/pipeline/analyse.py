@@ -19,7 +19,7 @@ from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.crossval import combine
 from nlp_calib.analysis.degeneracy import motion_scale
 from nlp_calib.analysis.determinacy import Information
-from nlp_calib.analysis.handoff import odometry_noise
+from nlp_calib.analysis.handoff import Shown, odometry_noise
 from nlp_calib.analysis.jitter import input_jitter
 from nlp_calib.analysis.metrics import each_metrics, first_order, geometry, integrate, segments, steps
 from nlp_calib.analysis.noise_rates import ground_rate, model_covariances, noise_rates
@@ -677,7 +677,15 @@ def handoff_noise(
         return None, None  # the hand-off then says the drift does not determine the noise
     walk = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
-    found = odometry_noise(fit.fns, params, d.inputs, time_s, (rates, windows.input_noise_std, walk))
+    n = d.inputs.shape[1]
+    lever = d.reference[:, :2] - np.asarray(windows.selected.T_world_sensor)[: n + 1, :2]
+    bad_intervals, bad_records = windows.masks()
+    chained = windows.data.increment is not None
+    segments = d.drift.errors.shape[0]
+    shown = Shown(
+        bad_intervals[:n], d.reference, lever, d.reference_var, segments, chained, bad_records[: n + 1]
+    )
+    found = odometry_noise(fit.fns, params, d.inputs, time_s, (rates, windows.input_noise_std, walk), shown)
     return found, (d, rates)
 
 

@@ -43,6 +43,15 @@ class NoiseRates:
     #: slipped on, beyond the rates (the fit and the rates leave those out), and how many there were.
     slip_per_radian: float = 0.0
     slipped: int = 0
+    #: The heading's variance per radian turned on the spot (rad²/rad), in place of ``per_radian``'s
+    #: there, over the pivots the segments hold (a skid-steer's wheels scrub on a pivot, not on an
+    #: arc); None: no pivot to tell it by, ``per_radian``'s.
+    on_spot: float | None = None
+
+    @property
+    def spot_rate(self) -> float:
+        """The heading's variance per radian turned on the spot (rad²/rad)."""
+        return self.per_radian[2] if self.on_spot is None else self.on_spot
 
     def words(self) -> str:
         """The rates and how they held, in one sentence."""
@@ -58,6 +67,8 @@ class NoiseRates:
                 f"; {' and '.join(self.bounded)} only the most the segments allow (the wheels' drift "
                 "there lies under the reference's own noise, or is not told from it)"
             )
+        if self.on_spot is not None:
+            held += f"; on the spot the heading's grows by {self.on_spot:.3g} rad² per radian turned"
         if self.slipped:
             held += (
                 f"; on the {self.slipped} pivots the ground slipped on, the heading's variance grows by "
