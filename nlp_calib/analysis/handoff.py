@@ -257,7 +257,9 @@ def odometry_noise(
     vx, _, wz = _twist(fns, inputs, dt, C) if n else np.full(3, np.nan)
     spans = metre_spans(track)
     if shown is not None and spans.size:
-        clean = np.array([not np.any(shown.faults[a:b]) for a, b in spans], dtype=bool)
+        # Faults counted up to each interval: a span holds none where the count does not change.
+        counted = np.concatenate([[0], np.cumsum(shown.faults, dtype=np.int64)])
+        clean = counted[spans[:, 1]] == counted[spans[:, 0]]
         spans = spans[clean] if clean.any() else spans
     pose = np.full(3, np.nan)
     if spans.size:
