@@ -225,6 +225,12 @@ class ProblemEvaluator:
         windows.motion.set_inputs(self._data.inputs)
         windows.window_data[:] = pad_columns(self._data.data(), windows.n_padded)
 
+    def unbind(self, name: str) -> None:
+        """Let go of the Function ``name``'s bound buffers (its outputs over every window) until its
+        next evaluation binds them again; what is bound to the windows themselves stays."""
+        if self._windows is not None:
+            self._windows.bound.pop(name, None)
+
     def release(self) -> None:
         """Let go of what is bound to the windows (their padded data, the prefix scans' and the
         mapped Functions' buffers: hundreds of MB on 10^6 windows) until the next evaluation, which
