@@ -146,7 +146,9 @@ def mean_shifts(
         return lambda w, sens: beta[w]
     cols = None if windows is None else evaluator.data.intervals_of(windows)
     moved = [v if cols is None else v[:, cols] for v in sources]
-    b = np.sum([_end_shift(evaluator, x, windows, v) for v in moved], axis=0)
+    b = _end_shift(evaluator, x, windows, moved[0])
+    for v in moved[1:]:  # one source's at a time: a stack of every source's held them all at once
+        b = b + _end_shift(evaluator, x, windows, v)
     B = np.concatenate([np.zeros((1, b.shape[1])), np.cumsum(b, axis=0)])
     return lambda w, sens: np.einsum("nrm,nm->nr", sens.de_dend, B[stops[w]] - B[starts[w]])
 
@@ -245,7 +247,7 @@ def bias_step(evaluator: ProblemEvaluator, x: np.ndarray, noise: tuple[np.ndarra
     N = s.size
     # The noise's mean costs one pass over every window; the gradient of its share, one per
     # parameter: that is screened on a subset first.
-    mean = H_inv @ _shift_terms(evaluator, x, weight, noise, None).sum(axis=0)
+    mean = H_inv @ _shift_sum(evaluator, x, weight, noise)
     share = None
     if N >= SCREEN_FROM:
         subset = np.linspace(0, N - 1, SUBSET).round().astype(np.intp)
@@ -284,23 +286,20 @@ def _determined_inverse(
     return (R[:, None] * V / (sigma2 * lam[keep])) @ (V.T * R[None, :])
 
 
-def _shift_terms(
-    evaluator: ProblemEvaluator,
-    x: np.ndarray,
-    weight: np.ndarray,
-    noise: tuple[np.ndarray, np.ndarray],
-    windows: np.ndarray | None,
+def _shift_sum(
+    evaluator: ProblemEvaluator, x: np.ndarray, weight: np.ndarray, noise: tuple[np.ndarray, np.ndarray]
 ) -> np.ndarray:
-    """Each window's ``ρ'_w J_wᵀ Ω β_w`` ``(windows, n_free)`` (``β_w``, the noise's mean in its
+    """``Σ_w ρ'_w J_wᵀ Ω β_w`` ``(n_free,)`` over every window (``β_w``, the noise's mean in its
     residual: :func:`mean_shifts`): the clean residual is the noisy one less ``β``, so the clean
-    fit's gradient at ``x`` is minus their sum."""
-    shift = mean_shifts(evaluator, x, noise, windows)
-    picked = np.arange(evaluator.n_residuals) if windows is None else windows
-    out = np.zeros((picked.size, evaluator.fns.n_free))
-    for w, sens in evaluator.sensitivities(x, windows):
+    fit's gradient at ``x`` is minus it. Summed block by block in the windows' order, each block
+    onto the running total (the sum of one pass over every window's term, without holding them)."""
+    shift = mean_shifts(evaluator, x, noise, None)
+    total = np.zeros((1, evaluator.fns.n_free))
+    for w, sens in evaluator.sensitivities(x):
         beta = shift(w, sens) * evaluator.omega
-        out[w] = weight[picked[w], None] * np.einsum("nrk,nr->nk", sens.J, beta)
-    return out
+        terms = weight[w, None] * np.einsum("nrk,nr->nk", sens.J, beta)
+        total = np.cumsum(np.concatenate([total, terms]), axis=0)[-1:]
+    return total[0]
 
 
 def _gradient_terms(
