@@ -38,7 +38,7 @@ from nlp_calib.problem.windows import over_columns
 from nlp_calib.results.handoff import NoiseRates
 
 
-def _increments(
+def base_increments(
     fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, noise: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each interval's base increment ``(n, 3)`` and its covariance's diagonal ``(n, 3)`` in the
@@ -464,11 +464,11 @@ def noise_rates(
     no segment, and the shape of what a short component gets), ``jitter`` what the joints' own
     noise gives each input per interval (never under it)."""
     drift, reference_var, floor = checked
-    increments, variances = _increments(fns, params, inputs, noise)
+    increments, variances = base_increments(fns, params, inputs, noise)
     given = fit_rates(increments, variances)
     least = np.zeros((2, 3))
     if jitter is not None and np.any(jitter > 0):
-        least = fit_rates(*_increments(fns, params, inputs, jitter))
+        least = fit_rates(*base_increments(fns, params, inputs, jitter))
     if drift.spans.shape[0] == 0:
         return NoiseRates(_three(given[0]), _three(given[1]), None, 0, 0.0)
     units = _unit_growth(increments, drift.spans)
@@ -520,7 +520,7 @@ def ground_rate(
     inputs, reference = track
     if not np.any(ground):
         return rates
-    increments = _increments(fns, params, inputs, np.zeros(inputs.shape[0]))[0]
+    increments = base_increments(fns, params, inputs, np.zeros(inputs.shape[0]))[0]
     edges = np.diff(np.r_[0, ground.astype(int), 0])
     first, stop = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     turned = np.array([np.abs(increments[a:b, 2]).sum() for a, b in zip(first, stop)])

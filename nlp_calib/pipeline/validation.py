@@ -18,12 +18,13 @@ import numpy as np
 
 from nlp_calib.analysis.crossval import blocks, combine, jackknife_std
 from nlp_calib.analysis.direction import compare
+from nlp_calib.analysis.noise_rates import base_increments
 from nlp_calib.analysis.pivots import pivot_intervals, pivot_windows, pivots_std
 from nlp_calib.analysis.precision import clock_needed, with_clocks
 from nlp_calib.core import memory, threads
 from nlp_calib.models import reference_scales
 from nlp_calib.pipeline.build import Binder, no_priors
-from nlp_calib.problem import ResidualData, over_columns
+from nlp_calib.problem import ResidualData
 from nlp_calib.results.checks import MIN_FOLDS, WEAK, CrossValidation, DirectionCheck, Fold, PivotSpread
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.layout import CLOCK, Layout
@@ -351,7 +352,9 @@ def pivot_spread(
     ``offset``. None with fewer than :data:`MIN_FOLDS` pivots whose own fit converges."""
     fns = binder.fns
     full = np.asarray(fns.assemble(x, binder.x_fixed), dtype=float).ravel()
-    steps = np.asarray(over_columns(fns.predict, full, data.inputs)[0]).T
+    # The base's own motion, as the fault screen judges a pivot: a sensor off the turning centre
+    # travels on a pivot.
+    steps = base_increments(fns, full, data.inputs, np.zeros(data.inputs.shape[0]))[0]
     label = pivot_windows(pivot_intervals(steps), data.starts, data.stops)
     if label.max(initial=-1) + 1 < MIN_FOLDS:
         return None
