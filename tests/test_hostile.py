@@ -26,8 +26,8 @@ from test_faults import assert_nothing_written, assert_one_line_error
 
 from nlp_calib import cli
 from nlp_calib.core import interrupts
-from nlp_calib.core.config import parse_yaml
-from nlp_calib.core.errors import NlpCalibError, NlpCalibWarning, ScenarioError
+from nlp_calib.core.config import MAX_YAML_DEPTH, parse_yaml
+from nlp_calib.core.errors import ConfigError, NlpCalibError, NlpCalibWarning, ScenarioError
 from nlp_calib.outputs import outdir
 from nlp_calib.outputs.outdir import MANIFEST_FILE, StagedOutput
 from nlp_calib.pipeline import Calibration, load_scenario, scenario_from_mapping
@@ -307,6 +307,17 @@ def laughs(indent: str, levels: int = 9) -> str:
     return "\n".join(lines) + "\n"
 
 
+def test_yaml_nesting_is_bounded_at_its_limit_not_before() -> None:
+    # The mapping is a level too: 1 + 63 lists is the limit.
+    deepest = "x: " + "[" * (MAX_YAML_DEPTH - 1) + "]" * (MAX_YAML_DEPTH - 1) + "\n"
+    nested: list[object] = []
+    for _ in range(MAX_YAML_DEPTH - 2):
+        nested = [nested]
+    assert parse_yaml(deepest, "deep.yaml") == {"x": nested}
+    with pytest.raises(ConfigError, match="nested too deeply"):
+        parse_yaml("x: " + "[" * MAX_YAML_DEPTH + "]" * MAX_YAML_DEPTH + "\n", "deeper.yaml")
+
+
 @pytest.mark.parametrize(
     ("text", "needle"),
     [
@@ -318,6 +329,9 @@ def laughs(indent: str, levels: int = 9) -> str:
         ("dataset: x.txt\ninitial_guess:\n" + laughs("  "), "more than 20,000 values"),
         ("dataset: x.txt\nipopt:\n  options: &a {x: *a}\n", "an alias refers to a block that contains it"),
         ("dataset: x.txt\nipopt: {options: {x: " + "[" * 3000 + "]" * 3000 + "}}\n", "nested too deeply"),
+        # Within the size bound: as deep as 64 KiB allows (libyaml's recursion ends the process).
+        ("x: " + "[" * 32_000 + "]" * 32_000 + "\n", "nested too deeply"),
+        ("x:\n" + "".join(" " * i + "a:\n" for i in range(65)), "nested too deeply"),
         ("dataset: x.txt\nfixed: [" + ",".join(["1"] * 25000) + "]\n", "more than 20,000 values"),
         ("dataset: x.txt\n#" + "x" * 70_000 + "\n", "larger than 64 KiB"),
         ("dataset: x.txt\nrobust: {delta: " + "9" * 5000 + "}\n", "a number with thousands of digits"),
