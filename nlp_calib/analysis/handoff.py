@@ -18,8 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlp_calib.analysis.noise_rates import model_covariances
+from nlp_calib.analysis.noise_rates import model_covariances, rates_covariances
 from nlp_calib.analysis.odometry import COVERED, restarted
+from nlp_calib.core import poses
 from nlp_calib.models import KinematicModel
 from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.problem import ProblemFunctions
@@ -206,18 +207,30 @@ def _twist(
     return covering_variance(np.diagonal(C[moving], axis1=1, axis2=2) / dt[moving, None] ** 2)
 
 
+def _rounding(found: np.ndarray, track: np.ndarray, rates: NoiseRates, spans: np.ndarray) -> np.ndarray:
+    """The readings' rounding's share of each span's covariance ``found`` ``(S, 3)`` (diagonal):
+    what is not the rates' (:func:`~nlp_calib.analysis.noise_rates.model_covariances`' sum)."""
+    grown = rates_covariances(poses.between(track[:-1], track[1:]), rates, spans)
+    return np.clip(np.diagonal(found - grown, axis1=1, axis2=2), 0.0, None)
+
+
 def _covering_twist(
-    twist: np.ndarray, track: np.ndarray, intervals: tuple[np.ndarray, np.ndarray], shown: Shown
+    twist: np.ndarray,
+    track: np.ndarray,
+    intervals: tuple[np.ndarray, np.ndarray, np.ndarray],
+    shown: Shown,
 ) -> np.ndarray:
     """``twist`` (vx, vy, wz) held within the drift each moving interval ``intervals`` marks (with
-    the durations) shows against the reference, as :func:`covering_pose` holds the pose's: over the
-    intervals no fault marks (their positions' errors, the base's across velocity, are not stated)."""
-    moving, dt = intervals
+    the durations and the readings' rounding of each, ``(n, 3)``) shows against the reference, as
+    :func:`covering_pose` holds the pose's: over the intervals no fault marks (their positions'
+    errors, the base's across velocity, are not stated)."""
+    moving, dt, rounding = intervals
     keep = moving & ~shown.faults & (dt > 0)
     if not np.any(keep):
         return twist
     at = np.flatnonzero(keep)
-    found = covering_pose(twist, track, np.c_[at, at + 1], shown, dt[at])
+    least = covering_variance(rounding[at] / dt[at, None] ** 2)
+    found = covering_pose(twist, track, np.c_[at, at + 1], shown, (dt[at], least))
     return np.r_[found[0], twist[1], found[2]]
 
 
@@ -278,7 +291,11 @@ def _needed(track: np.ndarray, spans: np.ndarray, shown: Shown, reference_var: n
 
 
 def covering_pose(
-    pose: np.ndarray, track: np.ndarray, spans: np.ndarray, shown: Shown, per: np.ndarray | None = None
+    pose: np.ndarray,
+    track: np.ndarray,
+    spans: np.ndarray,
+    shown: Shown,
+    per: tuple[np.ndarray | None, np.ndarray] | None = None,
 ) -> np.ndarray:
     """The diagonal ``pose`` (x, y, θ in the base frame at a span's start) held, component by
     component, within the drift ``spans`` show against the reference (the odometry ``track``
@@ -291,12 +308,13 @@ def covering_pose(
     long), so they are under the true drift by what the fit absorbed (on a skid-steer's intervals,
     vx to 0.3x). ``per`` ``(S,)``: each span's errors divided by it (an interval's duration: a
     twist's diagonal)."""
+    divided, rounding = (None, np.zeros(3)) if per is None else per
     if shown.bad_records is not None:  # a tracker's outlier is the reference's error, not the drift
         keep = ~(shown.bad_records[spans[:, 0]] | shown.bad_records[spans[:, 1]])
-        spans, per = spans[keep], None if per is None else per[keep]
+        spans, divided = spans[keep], None if divided is None else divided[keep]
         if not spans.size:
             return pose
-    scale = np.ones(spans.shape[0]) if per is None else 1.0 / np.asarray(per, dtype=float) ** 2
+    scale = np.ones(spans.shape[0]) if divided is None else 1.0 / np.asarray(divided, dtype=float) ** 2
     # |e| ≤ 2·√(σ² + r) holds for the spans whose e²/4 − r is at most σ²: the smallest σ² that
     # holds COVERED of them is that order statistic.
     least, most = (
@@ -305,6 +323,7 @@ def covering_pose(
         )
         for ref in (most_reference(shown.reference_var, shown.segments), np.zeros(2))
     )
+    most = np.maximum(most, rounding)
     return np.where(most > 0.0, np.clip(pose, least, np.maximum(most, least)), np.maximum(pose, least))
 
 
@@ -332,7 +351,8 @@ def odometry_noise(
     faults = shown.faults if shown is not None else None
     twist = _twist(fns, inputs, dt, C, faults) if n else np.full(3, np.nan)
     if shown is not None and n:
-        twist = _covering_twist(twist, track, (fns.model.moving(inputs), dt), shown)
+        rounding = _rounding(C, track, rates, steps)
+        twist = _covering_twist(twist, track, (fns.model.moving(inputs), dt, rounding), shown)
     vx, _, wz = twist
     spans = metre_spans(track)
     if shown is not None and spans.size:
@@ -345,7 +365,8 @@ def odometry_noise(
         found = model_covariances(fns, params, inputs, (rates, reading), spans)[0]
         pose = covering_variance(np.diagonal(found, axis1=1, axis2=2))
         if shown is not None:
-            pose = covering_pose(pose, track, spans, shown)
+            rounding = covering_variance(_rounding(found, track, rates, spans))
+            pose = covering_pose(pose, track, spans, shown, (None, rounding))
     x, y, yaw = pose
     u = UNMEASURED
     return OdometryNoise(
