@@ -37,7 +37,8 @@ def sigma_over_truth(
     match is the reference's fault; a slipped pivot's error is one a filter meets), the odometry
     integrated at the joints' own samples as a controller integrates it; and (``("pivots_all", 0)``)
     the rates with the slipped pivots' heading variance per radian on every pivot, grown over each
-    of those metres as a filter grows them."""
+    of those metres as a filter grows them, at the joints' samples it integrates (where the
+    pivots are: a pivot that starts inside a 2 s record is one there)."""
     part, fit = calib.parts[0], calib.fitting
     solver = run.handoff_solver() or next(iter(run.reports))
     params = fit.fns.view(run.reports[solver].result.params, 0)
@@ -59,15 +60,21 @@ def sigma_over_truth(
         # the model's one arc per (2 s) interval: over every metre, the slipped pivots' included.
         sel = part.windows.selected
         fine, at = sel.at_joint_samples()
-        published = track
+        published, grown = track, (track, true)
         if at is not None:
             u = fit.fns.model.inputs(fine, part.prepared.scenario.objective.residual.steering_sample)
-            published = propagate(fit.fns, params, u, d.reference[0], d.noise)[0][at]
+            at_samples = propagate(fit.fns, params, u, d.reference[0], d.noise)[0]
+            published = at_samples[at]
+            # A filter grows its covariance at the samples it integrates, and knows at each whether
+            # the base pivots (a pivot's start inside a 2 s record is a pivot there, not an arc).
+            ts = np.asarray(fine.time_s) + (run.log.start_ns - epoch) * 1e-9
+            unwrapped = (base[:, 0], base[:, 1], np.unwrap(base[:, 2]))
+            grown = (at_samples, np.stack([np.interp(ts, t_s, c) for c in unwrapped], axis=1))
         spared = np.zeros_like(bad)
         out[("pose_all", 0)] = _handed_off(
             run.reports[solver].controller, published, true, spared, np.diff(t)
         )[("pose", 0)]
-        out[("pivots_all", 0)] = _pivots_grown(published, true, rates)
+        out[("pivots_all", 0)] = _pivots_grown(*grown, rates)
     for L in (m * own for m in multiples):
         i = np.arange(0, track.shape[0] - L, max(L // 2, 1))
         i = i[[not bad[a : a + L].any() for a in i]]
