@@ -58,8 +58,7 @@ def sigma_over_truth(
     if every_metre and out:
         # The odometry a controller publishes integrates the wheels at their own samples, not by
         # the model's one arc per (2 s) interval: over every metre, the slipped pivots' included.
-        sel = part.windows.selected
-        fine, at = sel.at_joint_samples()
+        fine, at = part.windows.selected.at_joint_samples()
         published, at_samples = track, track
         if at is not None:
             u = fit.fns.model.inputs(fine, part.prepared.scenario.objective.residual.steering_sample)
