@@ -10,8 +10,9 @@ frame at the span's start) and together: 1 where the σ is the drift the spans t
 ``pose``, ros2_control.yaml's pose diagonal against every metre driven; ``twist``, its twist
 diagonal (vx, wz; vy is not stated) against every moving interval; ``pose_all``, the pose
 diagonal against every metre driven, the metres through a fault included (``pose`` leaves them out,
-the diagonal averages over them: the same population as the diagonal's); ``pivots_all``, every
-metre too, against the rates grown over each metre as a filter grows them with calibration.yaml's
+and so does the diagonal: a population it does not claim, the slipped pivots' drift is stated apart
+as calibration.yaml's ``slipped_pivots``); ``pivots_all``, every metre too, against the rates
+grown over each metre as a filter grows them at the joints' samples it integrates, with that
 slipped pivots' heading variance per radian on every radian the base turns on the spot;
 ``rates``, calibration.yaml's rates per metre and per radian grown as a filter grows them
 (``nlp-calib odometry``'s covariance) over the fit's windows. A case with no hand-off (no

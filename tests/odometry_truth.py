@@ -37,7 +37,8 @@ def sigma_over_truth(
     match is the reference's fault; a slipped pivot's error is one a filter meets), the odometry
     integrated at the joints' own samples as a controller integrates it; and (``("pivots_all", 0)``)
     the rates with the slipped pivots' heading variance per radian on every pivot, grown over each
-    of those metres as a filter grows them."""
+    of those metres as a filter grows them, at the joints' samples it integrates (where the
+    pivots are: a pivot that starts inside a 2 s record is one there)."""
     part, fit = calib.parts[0], calib.fitting
     solver = run.handoff_solver() or next(iter(run.reports))
     params = fit.fns.view(run.reports[solver].result.params, 0)
@@ -57,17 +58,17 @@ def sigma_over_truth(
     if every_metre and out:
         # The odometry a controller publishes integrates the wheels at their own samples, not by
         # the model's one arc per (2 s) interval: over every metre, the slipped pivots' included.
-        sel = part.windows.selected
-        fine, at = sel.at_joint_samples()
-        published = track
+        fine, at = part.windows.selected.at_joint_samples()
+        published, at_samples = track, track
         if at is not None:
             u = fit.fns.model.inputs(fine, part.prepared.scenario.objective.residual.steering_sample)
-            published = propagate(fit.fns, params, u, d.reference[0], d.noise)[0][at]
+            at_samples = propagate(fit.fns, params, u, d.reference[0], d.noise)[0]
+            published = at_samples[at]
         spared = np.zeros_like(bad)
         out[("pose_all", 0)] = _handed_off(
             run.reports[solver].controller, published, true, spared, np.diff(t)
         )[("pose", 0)]
-        out[("pivots_all", 0)] = _pivots_grown(published, true, rates)
+        out[("pivots_all", 0)] = _pivots_grown((published, at_samples, at), true, rates)
     for L in (m * own for m in multiples):
         i = np.arange(0, track.shape[0] - L, max(L // 2, 1))
         i = i[[not bad[a : a + L].any() for a in i]]
@@ -80,16 +81,23 @@ def sigma_over_truth(
     return out
 
 
-def _pivots_grown(published: np.ndarray, true: np.ndarray, rates: Any) -> np.ndarray:
-    """Over every metre of the odometry as published, the σ a filter grows from ``rates`` (per
-    metre, per radian and per radian on the spot) with the slipped pivots' heading variance
-    (``rates.slip_per_radian``) on every radian it turns on the spot too (the pivots by the fit's
-    rule: it knows when it pivots, not when it slips) against the true errors (:func:`_over`)."""
-    spans = metre_spans(published)
-    increments = poses.between(published[:-1], published[1:])
-    C = rates_covariances(increments, replace(rates, on_spot=rates.spot_rate + rates.slip_per_radian), spans)
+def _pivots_grown(
+    published: tuple[np.ndarray, np.ndarray, np.ndarray | None], true: np.ndarray, rates: Any
+) -> np.ndarray:
+    """Over every metre of the odometry as published (``published``: at the records, at the
+    joints' samples it integrates, and where the records fall among those; None: the same), the σ
+    a filter grows from ``rates`` (per metre, per radian and per radian on the spot) with the
+    slipped pivots' heading variance (``rates.slip_per_radian``) on every radian it turns on the
+    spot too (the pivots by the fit's rule at each sample it integrates: it knows when it pivots,
+    not when it slips; a pivot's start inside a 2 s record is a pivot there, not an arc) against
+    the true errors (:func:`_over`)."""
+    track, samples, at = published
+    spans = metre_spans(track)
+    grown = spans if at is None else at[spans]
+    increments = poses.between(samples[:-1], samples[1:])
+    C = rates_covariances(increments, replace(rates, on_spot=rates.spot_rate + rates.slip_per_radian), grown)
     i, j = spans[:, 0], spans[:, 1]
-    a, b = poses.between(true[i], true[j]), poses.between(published[i], published[j])
+    a, b = poses.between(true[i], true[j]), poses.between(track[i], track[j])
     error = np.c_[a[:, :2] - b[:, :2], wrap_angle(a[:, 2] - b[:, 2])]
     return _over(error, np.sqrt(np.clip(np.diagonal(C, axis1=1, axis2=2), 0.0, None)))
 

@@ -80,6 +80,8 @@ def _covariance_notes(noise: OdometryNoise | None) -> list[str]:
         f"(the controller's rolling mean) it is about {ms:.3g}/W of it.",
         f"#   {UNMEASURED:g}: what planar wheel odometry does not measure (height, roll, pitch, their rates, "
         "lateral velocity).",
+        "#   Both over the metres and intervals no fault touched (the variance whose 2σ holds 95 % of them):",
+        "#   not through a fault, nor a pivot the ground slipped on (its drift is stated apart, below).",
         *_rates_notes(noise.rates),
     ]
 
