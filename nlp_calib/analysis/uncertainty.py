@@ -551,6 +551,14 @@ class _Rows:
         raise NotImplementedError
 
 
+def _component_grams(a: np.ndarray) -> np.ndarray:
+    """``Σ_p a[p, :, c] a[p, :, c]ᵀ`` for each component ``c`` of ``a`` ``(p, n, components)``:
+    ``(components, n, n)``, one batched matrix product (BLAS: an order of magnitude under
+    ``einsum``'s loop over ``p``; the same sums to rounding)."""
+    by_component = a.transpose(2, 1, 0)
+    return by_component @ by_component.transpose(0, 2, 1)
+
+
 class _PoseRows(_Rows):
     """Each pose's noise map into the score, ``K_p`` ``(n, noise components)``, summed as each
     component's Gram ``Σ_p K_p[:, c] K_p[:, c]ᵀ`` (``gram``, ``(components, n, n)``)."""
@@ -564,13 +572,13 @@ class _PoseRows(_Rows):
     def add_own(self, *maps: np.ndarray) -> None:
         """Each window's maps ``(., n, components)`` into :attr:`own`, each alone."""
         for m in maps:
-            self.own += np.einsum("wic,wjc->cij", m, m)
+            self.own += _component_grams(m)
 
     def take(self, first: int, rows: np.ndarray) -> None:
         live = np.flatnonzero(np.any(rows != 0, axis=(1, 2)))
         if live.size * SPARSE < rows.shape[0]:  # windows spread over the log: most poses in none
             rows = rows[live]
-        self.gram += np.einsum("pic,pjc->cij", rows, rows)
+        self.gram += _component_grams(rows)
 
 
 class _InputRows(_Rows):
