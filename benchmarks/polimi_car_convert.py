@@ -62,7 +62,7 @@ def read_bag(path: Path) -> dict[str, np.ndarray]:
     with Reader(path) as reader:
         wanted = [c for c in reader.connections if c.topic in rows]
         for conn, _, raw in reader.messages(connections=wanted):
-            msg = store.deserialize_ros1(raw, conn.msgtype)
+            msg: Any = store.deserialize_ros1(raw, conn.msgtype)  # a message class per type
             stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
             if conn.topic == SPEED_STEER:
                 rows[conn.topic].append((stamp, msg.point.x, msg.point.y))
