@@ -439,6 +439,27 @@ def test_the_speed_is_the_median_over_the_time_the_wheels_turn(tmp_path: Path) -
     assert "travelling 0 % of it, by the wheels" in said and "median while travelling" in said, said
 
 
+@pytest.mark.parametrize("rate_hz", [10.0, 50.0])
+def test_a_gap_in_the_reference_is_no_speed(rate_hz: float) -> None:
+    """A car at 16 m/s on a bend, its GNSS reference lost for 20 s twice (tunnels): the path
+    smoothed over a second of time, not of records, never averages positions from either side of a
+    gap; its top speed is the car's (it read 95-110 m/s on a real car's lap of 16 m/s at most, and
+    309 m/s here)."""
+    from nlp_calib.analysis.excitation import excitation
+
+    t = np.arange(0.0, 120.0, 1.0 / rate_hz)
+    t = t[~(((t > 30.0) & (t < 50.0)) | ((t > 80.0) & (t < 100.0)))]
+    speed, radius = 16.0, 400.0
+    heading = speed * t / radius
+    xy = radius * np.column_stack([np.sin(heading), 1.0 - np.cos(heading)])
+    ex = excitation(t, xy, heading, MODELS["car_like"], np.zeros((t.size - 1, 0)))
+    assert abs(ex.speed_max_mps - speed) < 0.01 * speed, ex
+    assert abs(ex.speed_median_mps - speed) < 0.01 * speed, ex
+    # The path the records show: arcs where they run, chords across the gaps.
+    shown = float(np.sum(np.hypot(*np.diff(xy, axis=0).T)))
+    assert abs(ex.distance_m - shown) < 0.01 * shown, ex
+
+
 @pytest.mark.parametrize(
     ("model", "yaw"),
     [
