@@ -335,8 +335,10 @@ CAR_NAMES = {"k_traction": "traction_wheels_radius", "rear_track": "traction_tra
 CAR_KNOWN = ("k_steer", "wheelbase", "rear_track", "sensor_x", "sensor_y")
 
 
-def _car_scenario(tmp_path: Path, seed: int, known: tuple[str, ...] = ()) -> tuple[Any, HighwayOptions]:
-    opts = HighwayOptions(seed=seed)
+def _car_scenario(
+    tmp_path: Path, seed: int, known: tuple[str, ...] = (), truth: dict[str, float] | None = None
+) -> tuple[Any, HighwayOptions]:
+    opts = HighwayOptions(seed=seed, truth=truth or {})
     joints, poses, _ = simulate_highway(opts).write(tmp_path / "car")
     truth = {CAR_NAMES.get(n, n): v for n, v in opts.truth.items()}
     wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
@@ -423,6 +425,27 @@ def test_a_highway_car_given_what_it_cannot_determine_finds_its_wheel_scale_and_
     for name in ("k_steer", "wheelbase", "traction_track_width", "sensor_x", "sensor_y"):
         assert estimate[name] == truth[name]
         assert run.scenario.layout.param(name).status == KNOWN
+
+
+def test_a_wheel_over_a_metre_is_a_robots_wheel(tmp_path: Path) -> None:
+    """Wheels of 1.2 m radius (a tractor's, a haul truck's; or a car's speed in m/s read as the
+    rad/s of a 1 m wheel, 0.6 % fast): within what the joints' form calls a real robot's wheel
+    (up to 2 m), so calibrated, not refused as "outside what a car_like can have ([1e-07, 1])" (the
+    counts form's metre per tick, a 1 m wheel per radian). Seed 4711, never tuned on."""
+    radius = 1.2
+    sc, _ = _car_scenario(tmp_path, 4711, CAR_KNOWN, {"k_traction": radius})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    estimate, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
+    assert run.verdict.level in (GOOD, CAVEATS), run.verdict
+    assert abs(estimate["traction_wheels_radius"] - radius) < 3.0 * std["traction_wheels_radius"], (
+        estimate["traction_wheels_radius"],
+        std["traction_wheels_radius"],
+    )
+    assert run.handoff_solver() == "gauss_newton"
+    lo, hi = MODELS["car_like"].in_radians().physical_ranges["traction_wheels_radius"]
+    assert lo <= 1e-7 and hi == pytest.approx(2.0)  # the counts form's floor, the plausible top
 
 
 def test_the_run_past_the_preflight_says_not_determined_for_the_preflights_reason(tmp_path: Path) -> None:
