@@ -86,10 +86,12 @@ def excitation(
 ) -> Excitation:
     """The excitation of a drive: the tracker's positions ``xy`` ``(n, 2)`` and unwrapped heading
     at the records' ``time_s``, and the model's interval ``inputs`` (see the module docstring)."""
-    path = smoothed(time_s, np.column_stack([xy, heading]), SMOOTH_S)
+    # The times smoothed with the path: a window cut short by a gap or an end averages positions
+    # from before (or after) its record, and their mean time goes with them.
+    path = smoothed(time_s, np.column_stack([xy, heading, time_s - time_s[0]]), SMOOTH_S)
     k = taken(time_s, STEP_S)
-    t, p = time_s[k], path[k]
-    dt = np.maximum(np.diff(t), 1e-9)
+    p = path[k]
+    dt = np.maximum(np.diff(p[:, 3]), 1e-9)
     ds = np.hypot(*np.diff(p[:, :2], axis=0).T)
     dth = np.diff(p[:, 2])
     turning = np.abs(dth) / dt > MIN_TURN_RATE
