@@ -28,7 +28,9 @@ from nlp_calib.results.preflight import NOT_DETERMINED, NOT_ENOUGH, WEAK_DRIVE
 from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
 from nlp_calib.simulation.vehicles import (
     EPOCH_NS,
+    FINE_S,
     HighwayOptions,
+    RoadOptions,
     SkidSpinOptions,
     simulate_highway,
     simulate_skid_spins,
@@ -681,3 +683,36 @@ def test_one_steering_joint_for_both_sides_of_an_ackermann_pair_is_refused(tmp_p
     ) as e:
         scenario_from_mapping(sc, "car", tmp_path)
     assert "Ackermann split" in str(e.value)
+
+
+def test_the_highway_simulator_adds_bends_a_sliding_axle_and_a_wandering_device_error() -> None:
+    """What a real car has at speed that the kinematic model lacks: the axle's course leaves its
+    heading by slip_gain × v²κ (out of the bend), the heading itself unchanged; the device's noise
+    is a Gauss-Markov process of the σ and time constant asked for; bends turn at radii of ~100 m."""
+    base: dict[str, Any] = {"seed": 4801, "duration_s": 60.0}
+    plain = simulate_highway(HighwayOptions(**base, road=RoadOptions(bend_angle=0.03)))
+    slid = simulate_highway(HighwayOptions(**base, road=RoadOptions(bend_angle=0.03, slip_gain=0.004)))
+    np.testing.assert_allclose(slid.base_poses[:, 2], plain.base_poses[:, 2])
+    step = np.diff(slid.base_poses, axis=0)
+    ds = np.hypot(step[:, 0], step[:, 1])
+    # The poses are the fine grid's nearest to each joint stamp: their own times, not the stamps.
+    dt = np.diff(np.round(slid.joint_time_s / FINE_S)) * FINE_S
+    v, kappa = ds / dt, wrap_angle(step[:, 2]) / ds
+    # A chord runs along the mean of its ends' headings, less the slip.
+    slip = wrap_angle(slid.base_poses[:-1, 2] + 0.5 * step[:, 2] - np.arctan2(step[:, 1], step[:, 0]))
+    turning = np.abs(kappa) > 2e-3
+    assert turning.mean() > 0.3 and np.min(1.0 / np.abs(kappa[turning])) < 150.0
+    load = (v**2 * kappa)[turning]  # the lateral acceleration, m/s²
+    gain = np.sum(slip[turning] * load) / np.sum(load**2)
+    assert gain == pytest.approx(0.004, rel=0.05) and np.corrcoef(slip[turning], load)[0, 1] > 0.9
+    quiet = HighwayOptions(seed=4801, duration_s=400.0, pose_noise=(0.0, 0.0))
+    wander = HighwayOptions(
+        seed=4801, duration_s=400.0, pose_noise=(0.3, 0.002), road=RoadOptions(pose_noise_time_s=5.0)
+    )
+    noise = simulate_highway(wander).poses - simulate_highway(quiet).poses
+    a = np.exp(-1.0 / (20.0 * 5.0))  # 20 Hz poses, 5 s
+    for column, sd in zip(noise.T, (0.3, 0.3, 0.002)):
+        assert np.std(column) == pytest.approx(sd, rel=0.3)
+        assert np.corrcoef(column[1:], column[:-1])[0, 1] == pytest.approx(a, abs=0.01)
+    with pytest.raises(OptionsError, match="road's slip_gain"):
+        RoadOptions(slip_gain=1.0)
