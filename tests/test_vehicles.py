@@ -766,3 +766,45 @@ def test_a_laps_wandering_device_error_is_no_confirmed_drift_while_a_turned_devi
     turned = _half_check(tmp_path / "turned", {"sensor_theta": HIGHWAY_TRUTH["sensor_theta"] + 0.0175})
     assert turned is not None and [c.name for c in turned.drifted] == ["sensor_theta"], turned.line()
     assert turned.drifted[0].confirmed and turned.drifted[0].change == pytest.approx(0.0175, abs=0.005)
+
+
+def test_a_refusals_way_out_addresses_its_own_reason_and_its_plan_is_one_sentence() -> None:
+    """A car whose drive already turns both ways is not told to turn both ways: what trades off is
+    named, with one to measure; the plan's no-manoeuvre line says where the model was evaluated in
+    parentheses (it had read "... with the model as the initial guess, fitted ..., has it")."""
+    from nlp_calib.analysis.verdict import way_out
+    from nlp_calib.results.preflight import Plan
+
+    class NoClock:  # the layout's one question here: none of these is a clock offset
+        def in_block(self, name: str, block: str) -> bool:
+            return False
+
+    model, names, layout = MODELS["car_like_bicycle"], ["k_steer", "sensor_x", "sensor_y"], NoClock()
+    unturned = way_out(names, model, layout)  # type: ignore[arg-type]
+    assert unturned == "next: drive turns in both directions (S-curves, circles each way) and fit again"
+    turned = way_out(names, model, layout, turned_both_ways=True)  # type: ignore[arg-type]
+    assert (
+        "drive turns in both directions" not in turned
+        and "leaves k_steer, sensor_x, sensor_y loose" in turned
+    )
+    assert "(known: {" in turned and "tighter ones, at other speeds" in turned
+    # The pre-flight's way out addresses what it refuses for (not determined), not a weak lag beside.
+    from types import SimpleNamespace
+
+    from nlp_calib.pipeline.preflight import _way_out
+    from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, ParameterStatus
+
+    class Clock(NoClock):
+        def in_block(self, name: str, block: str) -> bool:
+            return name == "tracker_lag"
+
+    fns = SimpleNamespace(model=model, layout=Clock(), sensor=None)
+    found = [ParameterStatus("k_steer", NOT_DETERMINED, np.inf, np.inf, 0.01, "1", ("sensor_x",), "")]
+    found.append(ParameterStatus("tracker_lag", WEAKLY, 0.005, 40.0, 1e-4, "s", (), ""))
+    both = SimpleNamespace(turned_left_rad=4.5, turned_right_rad=9.2)
+    said = _way_out(fns, found, ["k_steer", "tracker_lag"], {}, both)  # type: ignore[arg-type]
+    assert "give the lag" not in said and "(known: {k_steer: <value>})" in said, said
+    assert _way_out(fns, found[1:], ["tracker_lag"], {}, both).startswith("next: give the lag")  # type: ignore[arg-type]
+    where = "the initial guess, fitted to convergence on the windows judged"
+    line = Plan("k_steer", "1", 50.0, 0.2, where, ()).line()
+    assert line == f"no manoeuvre considered lowers the σ of k_steer (the model evaluated at {where})"

@@ -26,6 +26,7 @@ from nlp_calib.analysis import determinacy as det
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.crossval import combine
 from nlp_calib.analysis.excitation import combined, excitation, smoothed
+from nlp_calib.analysis.observability import MIN_TURNING
 from nlp_calib.analysis.plan import Setting, believed, plan
 from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.analysis.uncertainty import range_std
@@ -53,7 +54,7 @@ from nlp_calib.pipeline.validation import leave_out, on_threads
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
 from nlp_calib.results.checks import CheckResult, Fold, LagEstimate, believed_std
 from nlp_calib.results.layout import CLOCK
-from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight
+from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Excitation, ParameterStatus, Preflight
 from nlp_calib.solvers.evaluation import NormalEquations, ProblemEvaluator
 
 #: The closed-form start is taken on the stretch of at most this many records that turns most.
@@ -635,11 +636,26 @@ def _report(sc: Scenario, a: Assessment, t0: float, ahead: bool = True) -> Prefl
         start=a.where,
         noise=a.noise,
         plan=plan_ahead,
-        way_out=way_out(loose, fns.model, fns.layout, fns.sensor, _values(fns, a.x, d.start.x_fixed))
+        way_out=_way_out(fns, statuses, loose, _values(fns, a.x, d.start.x_fixed), combined(exs))
         if loose
         else "",
         time_s=time.perf_counter() - t0,
     )
+
+
+def _way_out(
+    fns: ProblemFunctions,
+    statuses: Sequence[ParameterStatus],
+    loose: list[str],
+    values: dict[str, float],
+    ex: Excitation | None,
+) -> str:
+    """The way out for the loose parameters the verdict refuses for: those not determined when any
+    is (a weakly determined lag beside them would turn the advice to the clocks), else the weakly
+    determined ones; on a drive that already turns both ways, not "turn more"."""
+    undetermined = [s.name for s in statuses if s.name in loose and s.status == NOT_DETERMINED]
+    both = ex is not None and min(ex.turned_left_rad, ex.turned_right_rad) >= MIN_TURNING
+    return way_out(undetermined or loose, fns.model, fns.layout, fns.sensor, values, both)
 
 
 def _values(fns: ProblemFunctions, x: np.ndarray, x_fixed: np.ndarray) -> dict[str, float]:
