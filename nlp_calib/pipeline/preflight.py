@@ -168,6 +168,7 @@ def drive(sc: Scenario, logs: Sequence[Log] | None = None) -> tuple[Drive, dict[
         [p.log.select(p.start, p.split) for p in parts],
         one.objective.residual,
         drop_stationary=one.log.samples.drop_stationary,
+        bad_intervals=_gaps(parts),
     )
     return Drive(parts, one, fns, data, point, words, tuple(p.log for p in parts)), held
 
@@ -338,8 +339,27 @@ def _resampled(d: Drive, x: np.ndarray) -> Drive:
         [p.log.select(p.start, p.split) for p in parts],
         d.scenario.objective.residual,
         drop_stationary=d.scenario.log.samples.drop_stationary,
+        bad_intervals=_gaps(parts),
     )
     return replace(d, parts=tuple(parts), data=data)
+
+
+def _gaps(parts: Sequence[PreparedLog]) -> np.ndarray | None:
+    """The intervals of the logs' fitted records end to end that are gaps in time (and the
+    junctions between logs, which no window crosses anyway): as a run's windows, the pre-flight's
+    never cross one (a window over a car's 21 s without GNSS moves 300 m, and the mean motion it
+    inflates is what the fidelity floor of a free direction scales with). None: no gap."""
+    if all(p.gaps is None or not p.gaps[p.start : p.split - 1].any() for p in parts):
+        return None
+    masks = []
+    for i, p in enumerate(parts):
+        n = p.split - p.start - 1
+        masks.append(
+            np.zeros(n, dtype=bool) if p.gaps is None else np.asarray(p.gaps[p.start : p.split - 1], bool)
+        )
+        if i < len(parts) - 1:
+            masks.append(np.zeros(1, dtype=bool))
+    return np.concatenate(masks)
 
 
 def _read_at(d: Drive, column: int, log: int) -> float:
