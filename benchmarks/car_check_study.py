@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -102,7 +103,9 @@ def report(out: Path, seed: int, truth: dict[str, float], stdout: str) -> None:
         t = named.get(name, float("nan"))
         print(
             f"  {name:24s} truth {t: .5f} stored {c['stored']: .5f} ± {c['std_stored']:.2g} "
-            f"refit {c['refit']: .5f} ± {c['std_refit']:.2g} z {c['z']:+.1f} limit {c['threshold']:.1f} "
+            f"refit {c['refit']: .5f} ± {c['std_refit']:.2g} z {c['z']:+.1f} "
+            f"(shared {c['z_shared'] or math.nan:+.1f}) "
+            f"limit {c['threshold']:.1f} "
             f"dof {c['dof']:.1f} {(c['untested'] or '')[:40]}"
         )
 
