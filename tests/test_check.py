@@ -191,3 +191,36 @@ def test_what_the_stored_calibration_held_is_not_judged_and_does_not_stop_the_ch
     assert drift is not None and drift.verdict == STILL_GOOD, drift.reasons
     assert "k_steer_reverse" not in {c.name for c in drift.changes}
     assert any("not judged: k_steer_reverse" in r for r in drift.reasons)
+
+
+def test_a_change_beyond_the_jackknife_alone_is_reported_but_not_confirmed(
+    stored: Path, tmp_path: Path
+) -> None:
+    """The jackknife takes a log's blocks as independent; judged again as if the part of its σ
+    beyond white noise were shared by all of a log's blocks (that part at one block's spread,
+    √folds × the jackknife's), a change within the threshold there is named "not confirmed"."""
+    import yaml
+
+    from nlp_calib.analysis.drift import between_logs_std, moved_words
+    from nlp_calib.results.check import ParameterChange
+    from nlp_calib.results.checks import noise_factor
+
+    # χ²(9)'s 95 % point is 16.919: ten blocks of white noise reach 1.371 × its σ.
+    assert noise_factor(10) == pytest.approx(math.sqrt(16.919 / 9), rel=2e-3)
+    shared = 0.25 - (noise_factor(10) * 0.1) ** 2
+    assert between_logs_std(0.5, 0.1, 10) == pytest.approx(math.sqrt(0.25 + 9 * shared))
+    assert between_logs_std(0.13, 0.1, 10) == 0.13  # within white noise's reach: as believed
+    assert between_logs_std(0.5, 0.1, 0) == 0.5  # no blocks: nothing to widen by
+    doc = yaml.safe_load(stored.read_text())
+    doc["std_white_noise"]["sensor_theta"], doc["std_blocks"]["sensor_theta"] = 0.001, 0.004
+    doc["std"]["sensor_theta"], doc["std_blocks_folds"] = 0.004, 10
+    path = tmp_path / "calibration.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    cal = read_calibration(path)
+    assert cal.std_shared["sensor_theta"] == pytest.approx(between_logs_std(0.004, 0.001, 10))
+    assert cal.std_shared["sensor_theta"] > 2.5 * cal.std["sensor_theta"] == pytest.approx(0.01)
+    args = ("sensor_theta", "rad", 0.01, 0.04, 0.004, 0.004, 18.0, 5.3, 3.6)
+    plain, unconfirmed = ParameterChange(*args, z_shared=4.0), ParameterChange(*args, z_shared=1.7)
+    assert plain.drifted and plain.confirmed and "not confirmed" not in moved_words(plain)
+    assert unconfirmed.drifted and not unconfirmed.confirmed
+    assert "+5.3σ), but only +1.7σ if the errors" in moved_words(unconfirmed)

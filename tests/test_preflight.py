@@ -439,6 +439,30 @@ def test_the_speed_is_the_median_over_the_time_the_wheels_turn(tmp_path: Path) -
     assert "travelling 0 % of it, by the wheels" in said and "median while travelling" in said, said
 
 
+@pytest.mark.parametrize("rate_hz", [10.0, 50.0])
+def test_a_gap_in_the_reference_is_no_speed(rate_hz: float) -> None:
+    """A car at 16 m/s on a bend, its GNSS reference lost for 20 s twice (tunnels) and for under a
+    second thrice: the path smoothed over a second of time, not of records, never averages positions
+    from either side of a gap, and a window a gap cuts short is timed at its records' mean time;
+    its top speed is the car's (a real car's lap of 16 m/s at most read 95-110 m/s, then 18; 309 m/s
+    here, then 25)."""
+    from nlp_calib.analysis.excitation import excitation
+
+    t = np.arange(0.0, 120.0, 1.0 / rate_hz)
+    t = t[~(((t > 30.0) & (t < 50.0)) | ((t > 80.0) & (t < 100.0)))]
+    # And short dropouts, 0.3-0.7 s (a one-sided window's mean lags its record by up to 4 m here).
+    t = t[~np.any([(t > a) & (t < a + w) for a, w in ((10.0, 0.3), (20.0, 0.5), (60.0, 0.7))], axis=0)]
+    speed, radius = 16.0, 400.0
+    heading = speed * t / radius
+    xy = radius * np.column_stack([np.sin(heading), 1.0 - np.cos(heading)])
+    ex = excitation(t, xy, heading, MODELS["car_like"], np.zeros((t.size - 1, 0)))
+    assert abs(ex.speed_max_mps - speed) < 0.01 * speed, ex
+    assert abs(ex.speed_median_mps - speed) < 0.01 * speed, ex
+    # The path the records show: arcs where they run, chords across the gaps.
+    shown = float(np.sum(np.hypot(*np.diff(xy, axis=0).T)))
+    assert abs(ex.distance_m - shown) < 0.01 * shown, ex
+
+
 @pytest.mark.parametrize(
     ("model", "yaw"),
     [

@@ -23,6 +23,7 @@ from nlp_calib.logs import BagError, JointStream, Log, resample_encoders
 from nlp_calib.logs.joint_log import read_joint_csv
 from nlp_calib.models import canonical, get_model
 from nlp_calib.models.controllers import EncoderScales
+from nlp_calib.models.radians import WHEEL_RADIUS
 from nlp_calib.outputs.handoff import urdf_joint
 from nlp_calib.pipeline import Calibration, load_scenario
 from nlp_calib.pipeline.build import initial_parameters
@@ -176,7 +177,9 @@ def test_a_model_in_radians_moves_by_its_radius_times_the_angle() -> None:
     tri = TRICYCLE.in_radians()
     assert tri.kinematic_params == ("k_steer", "wheel_radius", "wheelbase", "steer_offset")
     lo, hi = tri.physical_ranges["wheel_radius"]
-    assert math.isclose(lo, 1e-4 / (2 * math.pi)) and math.isclose(hi, 10 / (2 * math.pi))
+    # The counts form's range per radian (1e-4 to 10 m a wheel turn), its top widened to the 2 m
+    # wheel the form calls a real robot's.
+    assert math.isclose(lo, 1e-4 / (2 * math.pi)) and 10 / (2 * math.pi) < hi == WHEEL_RADIUS[1]
     # The symmetries in the new names: the wheel turned round flips the radius.
     flipped = canonical(
         tri,

@@ -26,7 +26,7 @@ from nlp_calib.models import SENSOR_PARAMS, KinematicModel
 from nlp_calib.models.base import reference, reference_scale
 from nlp_calib.results import CalibrationRun, ScenarioInfo
 from nlp_calib.results.check import CANNOT_TELL, DRIFTED, STILL_GOOD, DriftCheck, ParameterChange
-from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK
+from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, noise_factor
 from nlp_calib.sensors import sensor_for
 
 #: The family-wise probability that a check of an unchanged robot calls a drift.
@@ -101,6 +101,25 @@ def believed_dof(white: float, blocks: float | None, folds: int) -> float:
     return math.inf
 
 
+def between_logs_std(believed: float, white: float, folds: int) -> float:
+    """A σ to believe (``believed``; ``white``: the white-noise σ; ``folds``: the jackknife's) as if
+    what errors that vary along the drive add were shared by all of a log's blocks: the part
+    beyond what white noise gives a jackknife at its 95 % point then counts at a single block's
+    spread, √folds × the jackknife's; the rest averages over the log as before."""
+    if folds < 2 or not (math.isfinite(believed) and math.isfinite(white)):
+        return believed
+    shared = max(0.0, believed * believed - (noise_factor(folds) * white) ** 2)
+    return math.sqrt(believed * believed + (folds - 1) * shared)
+
+
+def run_between_logs(run: CalibrationRun, solver: str) -> dict[str, float]:
+    """Each σ to believe of a run's estimate as :func:`between_logs_std` widens it."""
+    white = run.reports[solver].uncertainty.std_dict()
+    cv = run.checks.crossval
+    folds = len(cv.converged) if cv is not None else 0
+    return {n: between_logs_std(sd, white[n], folds) for n, sd in run.std(solver).items()}
+
+
 def run_dof(run: CalibrationRun, solver: str) -> dict[str, float]:
     """The degrees of freedom of each σ to believe of a run's estimate (see :func:`believed_dof`)."""
     white = run.reports[solver].uncertainty.std_dict()
@@ -154,10 +173,12 @@ def changes(
     info: ScenarioInfo,
     model: KinematicModel,
     skipped: Mapping[str, str],
+    shared: tuple[Mapping[str, float], Mapping[str, float]] | None = None,
 ) -> tuple[ParameterChange, ...]:
     """Each parameter of ``refit`` (values, σ, degrees of freedom) against ``stored`` (the same),
     with the Bonferroni threshold over the parameters tested; ``skipped``: those that cannot be
-    tested, with why."""
+    tested, with why; ``shared``: the stored and refit σ as :func:`between_logs_std` widens them
+    (None: as they are)."""
     values, std, dof = refit
     tested = [n for n in values if n not in skipped and math.isfinite(std[n]) and math.isfinite(stored[1][n])]
     level = FALSE_ALARM / max(len(tested), 1)
@@ -170,6 +191,8 @@ def changes(
         nu = welch_dof((stored[1][name], std[name]), (stored[2][name], dof[name]))
         why = skipped.get(name, "" if name in tested else f"{name} has no σ to judge a change by")
         z = delta / sigma if sigma > 0 and math.isfinite(sigma) else math.nan
+        wide = math.hypot(shared[0][name], shared[1][name]) if shared is not None else sigma
+        z_shared = delta / wide if wide > 0 and math.isfinite(wide) else math.nan
         threshold = math.nan if math.isnan(nu) else t_quantile(level, nu)
         relative = reference(model, info.layout.key(name))[0] == "relative"
         out.append(
@@ -185,6 +208,7 @@ def changes(
                 threshold,
                 why,
                 relative,
+                z_shared,
             )
         )
     return tuple(out)
@@ -213,9 +237,18 @@ def decide(found: tuple[ParameterChange, ...], converged: str, hint: str) -> tup
 
 
 def moved_words(c: ParameterChange) -> str:
-    """``<name> moved by +1.0 % (+0.000105 <unit>, +12.3σ)`` (the percentage for gains and lengths)."""
+    """``<name> moved by +1.0 % (+0.000105 <unit>, +12.3σ)`` (the percentage for gains and lengths),
+    and when the change is not confirmed (:attr:`ParameterChange.confirmed`) how far it is in the
+    σ the blocks would have if errors were shared by all of a log's blocks."""
     rel = f"{100.0 * c.change / c.stored:+.2g} % (" if c.relative and c.stored != 0 else "("
-    return f"{c.name} moved by {rel}{c.change:+.3g} {c.unit}, {c.z:+.1f}σ)"
+    words = f"{c.name} moved by {rel}{c.change:+.3g} {c.unit}, {c.z:+.1f}σ)"
+    if c.confirmed:
+        return words
+    return (
+        f"{words}, but only {c.z_shared:+.1f}σ if the errors that vary along the drive are shared by "
+        "all of a log's blocks (a tracker's bias wandering over minutes, a model error the drive's "
+        "mix sets): not confirmed, check on another log before recalibrating"
+    )
 
 
 def check_drift(
@@ -225,10 +258,12 @@ def check_drift(
     calibration: str,
     solver: str,
     uncalibrated: Collection[str] = (),
+    shared: Mapping[str, float] | None = None,
 ) -> DriftCheck:
     """The check of ``stored`` (values, σ to believe, their degrees of freedom) against ``run``, a
     fit of a new log started from it; ``uncalibrated``: what the stored calibration held or was
-    given, which it does not vouch for and a check does not judge."""
+    given, which it does not vouch for and a check does not judge; ``shared``: the stored σ as
+    :func:`between_logs_std` widens them (None: as they are)."""
     result = run.reports[solver].result
     free = run.reports[solver].uncertainty.free
     skipped = untested(run, solver, model)
@@ -241,7 +276,8 @@ def check_drift(
     robot = {n for n in layout.robot() if layout.key(n) not in sensor.per_log} & set(stored[0])
     values = {n: v for n, v in result.param_dict().items() if n not in held and n in robot}
     refit = (values, run.std(solver), run_dof(run, solver))
-    found = changes(stored, refit, run.scenario, model, skipped)
+    widened = (shared if shared is not None else stored[1], run_between_logs(run, solver))
+    found = changes(stored, refit, run.scenario, model, skipped, widened)
     hint = drive_more(run, model, [c.name for c in found if c.untested])
     verdict, reasons, hint = decide(found, "" if result.converged else result.reason, hint)
     unjudged = [n for n in result.names if n in uncalibrated]

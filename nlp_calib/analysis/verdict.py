@@ -312,10 +312,12 @@ def way_out(
     layout: Layout,
     sensor: Sensor | None = None,
     values: Mapping[str, float] | None = None,
+    turned_both_ways: bool = False,
 ) -> str:
     """What lets a drive determine the parameters ``names`` (of ``layout``) that trade off on this
     one, in words (``sensor``: the reference, when it may be what leaves them free; ``values``: an
-    estimate whose ratios it then states)."""
+    estimate whose ratios it then states; ``turned_both_ways``: the drive already turns both ways,
+    so turning more the same way is no advice)."""
     names = list(dict.fromkeys(names))
     if lengths := unseen_lengths(names, model, sensor):
         # With another parameter loose beside the lengths (a tricycle's steering gain on a drive of
@@ -339,7 +341,14 @@ def way_out(
             "or record a drive whose wheel speeds change independently of each other (starts and stops, "
             "turns of several radii both ways), which a time offset cannot imitate"
         )
-    if any(n in model.turning_params or n in ("sensor_x", "sensor_y") for n in names):
+    turning = [n for n in names if n in model.turning_params or n in ("sensor_x", "sensor_y")]
+    if turning and turned_both_ways:
+        return (
+            f"next: the drive turns both ways, yet it leaves {', '.join(names)} loose: hold one at a "
+            f"measured value (known: {{{turning[0]}: <value>}}), or add turns that tell them apart (tighter "
+            "ones, at other speeds)"
+        )
+    if turning:
         return "next: drive turns in both directions (S-curves, circles each way) and fit again"
     held = next((n for n in names), "")
     return (

@@ -68,8 +68,8 @@ class Renamed:
     encoder: str = ""
     rate: bool = False
     #: What a real robot's value can be, in this form's unit (a wheel's radius: millimetres to
-    #: metres), narrower than the counts form's range: outside it the estimate is not the robot's
-    #: (:meth:`InRadians.implausible`).
+    #: metres): outside it the estimate is not the robot's (:meth:`InRadians.implausible`); the
+    #: form's physical range holds it.
     plausible: tuple[float, float] | None = None
 
 
@@ -171,10 +171,17 @@ class InRadians:
 
     @property
     def physical_ranges(self) -> Mapping[str, tuple[float, float]]:
-        return {
-            self.rename(n): (lo / self._factor(n), hi / self._factor(n))
-            for n, (lo, hi) in self.model.physical_ranges.items()
-        }
+        """The counts form's ranges in this form's units, each widened to what a real robot's value
+        can be (:attr:`Renamed.plausible`): a metre per tick is a 1 m wheel per radian, and a wheel
+        of 1.2 m (a tractor's, or a car's speed in m/s read as a 1 m wheel's rad/s) is a robot's."""
+        out = {}
+        for n, (lo, hi) in self.model.physical_ranges.items():
+            lo, hi = lo / self._factor(n), hi / self._factor(n)
+            plausible = self.renamed[n].plausible if n in self.renamed else None
+            if plausible is not None:
+                lo, hi = min(lo, plausible[0]), max(hi, plausible[1])
+            out[self.rename(n)] = (lo, hi)
+        return out
 
     @property
     def reference(self) -> Mapping[str, Reference]:

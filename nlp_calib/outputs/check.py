@@ -51,7 +51,11 @@ def check_text(run: CalibrationRun) -> str:
     ]
     for c in drift.changes:
         sigma = math.hypot(c.std_stored, c.std_refit)
-        mark = " <- moved" if c.drifted else (" (not tested)" if c.untested else "")
+        mark = (
+            (" <- moved" + ("" if c.confirmed else " (not confirmed)"))
+            if c.drifted
+            else (" (not tested)" if c.untested else "")
+        )
         lines.append(
             f"{c.name:<16}{_number(c.stored):>13}{_number(c.refit):>13}{_number(c.change, '+.3g'):>12}"
             f"{_number(sigma, '.2g'):>10}{_number(c.z, '+.1f'):>7}{_number(c.threshold, '.1f'):>7}"
@@ -79,6 +83,7 @@ def check_document(run: CalibrationRun) -> dict[str, Any]:
             "std_stored": c.std_stored,
             "std_refit": c.std_refit,
             "z": c.z,
+            "z_shared": finite_or_null(c.z_shared),
             "dof": c.dof,
             "threshold": c.threshold,
             "drifted": c.drifted,

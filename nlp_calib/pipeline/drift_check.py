@@ -23,7 +23,15 @@ def check(
     if stored is None:
         return None
     fitted = model if model is not None else get_model(run.scenario.model)
-    found = check_drift(run, fitted, stored.stats(), str(stored.path), stored.solver, stored.uncalibrated())
+    found = check_drift(
+        run,
+        fitted,
+        stored.stats(),
+        str(stored.path),
+        stored.solver,
+        stored.uncalibrated(),
+        stored.std_shared or None,
+    )
     return CheckResult(
         "drift",
         FINE,

@@ -26,6 +26,7 @@ from nlp_calib.analysis import determinacy as det
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.crossval import combine
 from nlp_calib.analysis.excitation import combined, excitation, smoothed
+from nlp_calib.analysis.observability import MIN_TURNING
 from nlp_calib.analysis.plan import Setting, believed, plan
 from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.analysis.uncertainty import range_std
@@ -53,7 +54,7 @@ from nlp_calib.pipeline.validation import leave_out, on_threads
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
 from nlp_calib.results.checks import CheckResult, Fold, LagEstimate, believed_std
 from nlp_calib.results.layout import CLOCK
-from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Preflight
+from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Excitation, ParameterStatus, Preflight
 from nlp_calib.solvers.evaluation import NormalEquations, ProblemEvaluator
 
 #: The closed-form start is taken on the stretch of at most this many records that turns most.
@@ -167,6 +168,7 @@ def drive(sc: Scenario, logs: Sequence[Log] | None = None) -> tuple[Drive, dict[
         [p.log.select(p.start, p.split) for p in parts],
         one.objective.residual,
         drop_stationary=one.log.samples.drop_stationary,
+        bad_intervals=_gaps(parts),
     )
     return Drive(parts, one, fns, data, point, words, tuple(p.log for p in parts)), held
 
@@ -337,8 +339,27 @@ def _resampled(d: Drive, x: np.ndarray) -> Drive:
         [p.log.select(p.start, p.split) for p in parts],
         d.scenario.objective.residual,
         drop_stationary=d.scenario.log.samples.drop_stationary,
+        bad_intervals=_gaps(parts),
     )
     return replace(d, parts=tuple(parts), data=data)
+
+
+def _gaps(parts: Sequence[PreparedLog]) -> np.ndarray | None:
+    """The intervals of the logs' fitted records end to end that are gaps in time (and the
+    junctions between logs, which no window crosses anyway): as a run's windows, the pre-flight's
+    never cross one (a window over a car's 21 s without GNSS moves 300 m, and the mean motion it
+    inflates is what the fidelity floor of a free direction scales with). None: no gap."""
+    if all(p.gaps is None or not p.gaps[p.start : p.split - 1].any() for p in parts):
+        return None
+    masks = []
+    for i, p in enumerate(parts):
+        n = p.split - p.start - 1
+        masks.append(
+            np.zeros(n, dtype=bool) if p.gaps is None else np.asarray(p.gaps[p.start : p.split - 1], bool)
+        )
+        if i < len(parts) - 1:
+            masks.append(np.zeros(1, dtype=bool))
+    return np.concatenate(masks)
 
 
 def _read_at(d: Drive, column: int, log: int) -> float:
@@ -635,11 +656,26 @@ def _report(sc: Scenario, a: Assessment, t0: float, ahead: bool = True) -> Prefl
         start=a.where,
         noise=a.noise,
         plan=plan_ahead,
-        way_out=way_out(loose, fns.model, fns.layout, fns.sensor, _values(fns, a.x, d.start.x_fixed))
+        way_out=_way_out(fns, statuses, loose, _values(fns, a.x, d.start.x_fixed), combined(exs))
         if loose
         else "",
         time_s=time.perf_counter() - t0,
     )
+
+
+def _way_out(
+    fns: ProblemFunctions,
+    statuses: Sequence[ParameterStatus],
+    loose: list[str],
+    values: dict[str, float],
+    ex: Excitation | None,
+) -> str:
+    """The way out for the loose parameters the verdict refuses for: those not determined when any
+    is (a weakly determined lag beside them would turn the advice to the clocks), else the weakly
+    determined ones; on a drive that already turns both ways, not "turn more"."""
+    undetermined = [s.name for s in statuses if s.name in loose and s.status == NOT_DETERMINED]
+    both = ex is not None and min(ex.turned_left_rad, ex.turned_right_rad) >= MIN_TURNING
+    return way_out(undetermined or loose, fns.model, fns.layout, fns.sensor, values, both)
 
 
 def _values(fns: ProblemFunctions, x: np.ndarray, x_fixed: np.ndarray) -> dict[str, float]:

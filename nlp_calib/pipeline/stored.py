@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from nlp_calib.analysis.drift import believed_dof
+from nlp_calib.analysis.drift import believed_dof, between_logs_std
 from nlp_calib.core.config import fail, key_name, read_yaml
 from nlp_calib.core.errors import ConfigError, UsageError
 from nlp_calib.core.version import __version__
@@ -45,6 +45,9 @@ class StoredCalibration:
     dataset: str | None = None
     #: Every stored parameter in its block, with its log (see :mod:`nlp_calib.results.layout`).
     layout: Layout = field(default_factory=lambda: Layout(()))
+    #: Each σ to believe as if errors were shared by all of a log's blocks
+    #: (:func:`~nlp_calib.analysis.drift.between_logs_std`; empty: as ``std``).
+    std_shared: Mapping[str, float] = field(default_factory=dict)
 
     def start(self) -> dict[str, float]:
         """The stored values a fit of a new log starts from, by the keys a scenario gives: the
@@ -163,8 +166,9 @@ def read_calibration(path: Path) -> StoredCalibration:
     scenario, recorded = _scenario_path(doc)
     data = doc.get("dataset")
     dataset = data.get("path") if isinstance(data, Mapping) and isinstance(data.get("path"), str) else None
+    shared = {n: between_logs_std(std[n], white[n], folds) for n in names}
     return StoredCalibration(
-        path, model, solver, values, std, dof, scenario, objective, recorded, dataset, layout
+        path, model, solver, values, std, dof, scenario, objective, recorded, dataset, layout, shared
     )
 
 

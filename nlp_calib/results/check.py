@@ -36,6 +36,9 @@ class ParameterChange:
     untested: str = ""
     #: Whether the parameter is a gain or a length whose change reads as a percentage.
     relative: bool = False
+    #: The change in units of the combined σ widened as if errors that vary along the drive were
+    #: shared by all of a log's blocks (:func:`~nlp_calib.analysis.drift.between_logs_std`).
+    z_shared: float = math.nan
 
     @property
     def change(self) -> float:
@@ -44,6 +47,12 @@ class ParameterChange:
     @property
     def drifted(self) -> bool:
         return not self.untested and math.isfinite(self.z) and abs(self.z) > self.threshold
+
+    @property
+    def confirmed(self) -> bool:
+        """Whether the change passes the threshold also with errors shared by a log's blocks
+        (NaN ``z_shared``: nothing to widen, confirmed as it is)."""
+        return not math.isfinite(self.z_shared) or abs(self.z_shared) > self.threshold
 
 
 @dataclass(frozen=True)

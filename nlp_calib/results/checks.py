@@ -41,11 +41,16 @@ def beyond_noise(std: np.ndarray, white: np.ndarray, k: int) -> np.ndarray:
     ``χ²(k − 1)``, so one beyond its 95 % point says errors the white σ does not count."""
     if k < 2:
         return np.full(np.shape(std), np.nan)
+    with np.errstate(invalid="ignore"):
+        return np.where(std > noise_factor(k) * np.asarray(white, dtype=float), std, np.nan)
+
+
+def noise_factor(k: int) -> float:
+    """How far a spread of ``k ≥ 2`` draws of white noise alone reaches over its σ at its 95 % point:
+    √(χ²₀.₉₅(k − 1)/(k − 1))."""
     nu = k - 1.0
     # Wilson-Hilferty: χ²(ν)'s 95 % point within 0.2 % from ν = 3 on.
-    factor = np.sqrt((1.0 - 2.0 / (9.0 * nu) + 1.6449 * np.sqrt(2.0 / (9.0 * nu))) ** 3)
-    with np.errstate(invalid="ignore"):
-        return np.where(std > factor * np.asarray(white, dtype=float), std, np.nan)
+    return float(np.sqrt((1.0 - 2.0 / (9.0 * nu) + 1.6449 * np.sqrt(2.0 / (9.0 * nu))) ** 3))
 
 
 @dataclass(frozen=True)

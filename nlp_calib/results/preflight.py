@@ -170,10 +170,10 @@ class Plan:
         """The "next" line: the first manoeuvre and what it would do to the target's σ."""
         best = self.best
         if best is None:
-            return (
-                f"no manoeuvre considered lowers the σ of {self.target} with the model as {self.model_from} "
-                "has it"
-            )
+            # model_from is a phrase of its own (the fit, or a start with how it was reached):
+            # in parentheses, a sentence around it stays one.
+            where = f"the model evaluated at {self.model_from}"
+            return f"no manoeuvre considered lowers the σ of {self.target} ({where})"
         unit = f" {self.target_unit}" if self.target_unit not in ("", "1") else ""
         before, after = self.target_std_before, best.target_std_after
         return (

@@ -14,9 +14,11 @@ a fine grid, independently of the symbolic model. Deterministic for a given seed
 
 :func:`simulate_highway` drives a car (the car-like model in joint units) at 8 to 20 m/s for a
 minute, about a kilometre, its road wheels steered within ±``steer_max`` by a driver's small
-corrections and its heading changing by ``heading_change`` in all; the four wheels' speeds (rad/s)
-and the steer joint's angle are logged at ``wheel_rate_hz`` (a car's CAN bus), the pose of a
-windshield device (GNSS/vision) at ``pose_rate_hz`` with white noise. What such a drive cannot
+corrections and its heading changing by ``road.heading_change`` in all; the four wheels' speeds
+(rad/s) and the steer joint's angle are logged at ``wheel_rate_hz`` (a car's CAN bus), the pose of
+a windshield device (GNSS/vision) at ``pose_rate_hz`` with white noise. Its ``road``
+(:class:`RoadOptions`) can add bends, a rear axle sliding out of them and a device error that
+wanders in time: what a real car has at speed that the kinematic model lacks. What such a drive cannot
 determine (the axle distance, the steer gain, the track, the device's position) is the class it
 stands for.
 """
@@ -94,14 +96,19 @@ class SkidSpinOptions:
             raise OptionsError(problem)
 
 
+def _limited(opts: Any, limits: Mapping[str, Range], what: str = "") -> None:
+    """Check ``opts``' fields against ``limits`` (``what``: how the error names their group)."""
+    for name, limit in limits.items():
+        if (reason := limit.problem(getattr(opts, name))) is not None:
+            raise OptionsError(f"{what}{name} {reason}")
+
+
 def _checked(
     opts: Any, limits: Mapping[str, Range], defaults: Mapping[str, float], robot: str
 ) -> Mapping[str, float]:
     """Check ``opts``' fields against ``limits`` and its truth's names against ``defaults`` (the
     ``robot``'s); set its truth to ``defaults`` overridden by it, and return that."""
-    for name, limit in limits.items():
-        if (reason := limit.problem(getattr(opts, name))) is not None:
-            raise OptionsError(f"{name} {reason}")
+    _limited(opts, limits)
     unknown = sorted(set(opts.truth) - set(defaults))
     if unknown:
         raise OptionsError(f"unknown parameter(s) {unknown}; the {robot}'s are {', '.join(defaults)}")
@@ -236,14 +243,35 @@ HIGHWAY_LIMITS: Mapping[str, Range] = {
     "min_speed": Range(0.0, 70.0, lo_open=True),
     "max_speed": Range(0.0, 70.0, lo_open=True),
     "steer_max": Range(0.0, 0.5, lo_open=True),
-    "heading_change": Range(-1.0, 1.0),
     "wheel_rate_hz": Range(1.0, 1000.0),
     "pose_rate_hz": Range(0.5, 1000.0),
     "wheel_noise": Range(0.0, 10.0),
     "steer_noise": Range(0.0, 0.1),
 }
+ROAD_LIMITS: Mapping[str, Range] = {
+    "heading_change": Range(-20.0, 20.0),
+    "bend_angle": Range(0.0, 0.5),
+    "slip_gain": Range(0.0, 0.05),
+    "pose_noise_time_s": Range(0.0, 600.0),
+}
 #: The device's pose noise: position (m), heading (rad).
 POSE_NOISE = (Range(0.0, 5.0), Range(0.0, 1.0))
+
+
+@dataclass(frozen=True)
+class RoadOptions:
+    """The road the highway car drives and what a real car has there that the kinematic model
+    lacks: the heading's net change (rad), bends (the road wheels' largest angle on them, held 10 to
+    40 s), the rear axle sliding out of a bend at ``slip_gain`` rad per m/s² of lateral
+    acceleration, and the device's noise correlated over ``pose_noise_time_s`` (0: white)."""
+
+    heading_change: float = float(np.radians(1.0))
+    bend_angle: float = 0.0
+    slip_gain: float = 0.0
+    pose_noise_time_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        _limited(self, ROAD_LIMITS, "road's ")
 
 
 @dataclass(frozen=True)
@@ -257,7 +285,7 @@ class HighwayOptions:
     min_speed: float = 8.0
     max_speed: float = 20.0
     steer_max: float = float(np.radians(0.3))
-    heading_change: float = float(np.radians(1.0))
+    road: RoadOptions = field(default_factory=RoadOptions)
     wheel_rate_hz: float = 90.0
     pose_rate_hz: float = 20.0
     wheel_noise: float = 0.02
@@ -326,6 +354,31 @@ def _smooth(rng: np.random.Generator, t: np.ndarray, periods: tuple[float, float
     return out / np.max(np.abs(out))
 
 
+def _slide(base: np.ndarray, ds: np.ndarray, slip: np.ndarray) -> np.ndarray:
+    """``base`` (poses at the fine steps' ends, one more than ``ds``) with its axle travelling
+    ``slip`` rad right of its heading: out of a left bend, as tyres slide under lateral load."""
+    course = base[:-1, 2] - slip
+    x = np.concatenate([[base[0, 0]], base[0, 0] + np.cumsum(ds * np.cos(course))])
+    y = np.concatenate([[base[0, 1]], base[0, 1] + np.cumsum(ds * np.sin(course))])
+    return np.stack([x, y, base[:, 2]], axis=1)
+
+
+def _pose_noise(rng: np.random.Generator, opts: HighwayOptions, n: int) -> np.ndarray:
+    """The device's noise ``(n, 3)``: white, or each component a first-order Gauss-Markov process
+    of the same σ with the road's time constant ``pose_noise_time_s`` (a GNSS fix's slowly wandering
+    error)."""
+    std = np.array([opts.pose_noise[0], *opts.pose_noise])
+    white = rng.normal(0.0, std, (n, 3))
+    if opts.road.pose_noise_time_s <= 0:
+        return white
+    a = float(np.exp(-1.0 / (opts.pose_rate_hz * opts.road.pose_noise_time_s)))
+    out = np.empty_like(white)
+    out[0] = white[0]
+    for i in range(1, n):
+        out[i] = a * out[i - 1] + np.sqrt(1.0 - a * a) * white[i]
+    return out
+
+
 def simulate_highway(opts: HighwayOptions) -> HighwaySimulation:
     """The drive of the module docstring."""
     rng = np.random.default_rng(opts.seed)
@@ -335,12 +388,18 @@ def simulate_highway(opts: HighwayOptions) -> HighwaySimulation:
     mid, half = 0.5 * (opts.max_speed + opts.min_speed), 0.5 * (opts.max_speed - opts.min_speed)
     speed = mid + half * _smooth(rng, time_s, (20.0, 120.0))
     # A driver's corrections (periods of 1.5 to 4 s) within 80 % of the limit, and a steady angle
-    # that turns the heading by heading_change in all.
+    # that turns the heading by the road's heading_change in all.
     wobble = 0.8 * opts.steer_max * _smooth(rng, time_s, (1.5, 4.0))
+    road = opts.road
+    if road.bend_angle > 0:
+        wobble = wobble + road.bend_angle * _smooth(rng, time_s, (20.0, 80.0), k=4)
     ds = speed * FINE_S
-    phi = np.clip(highway_steer(t, ds, wobble, opts.heading_change), -opts.steer_max, opts.steer_max)
+    limit = opts.steer_max + road.bend_angle
+    phi = np.clip(highway_steer(t, ds, wobble, road.heading_change), -limit, limit)
     curvature = highway_curvature(t, phi)
     base = integrate_base(ds, ds * curvature)
+    if road.slip_gain > 0:
+        base = _slide(base, ds, road.slip_gain * speed**2 * curvature)
     joint_t = np.arange(0.0, time_s[-1], 1.0 / opts.wheel_rate_hz)
     at = np.round(joint_t / FINE_S).astype(int)
     values = highway_wheels(t, speed[at], curvature[at])
@@ -350,7 +409,7 @@ def simulate_highway(opts: HighwayOptions) -> HighwaySimulation:
     device = poses.compose(
         base[np.round(pose_t / FINE_S).astype(int)], np.broadcast_to(mount, (pose_t.size, 3))
     )
-    device += rng.normal(0.0, [opts.pose_noise[0], *opts.pose_noise], device.shape)
+    device += _pose_noise(rng, opts, pose_t.size)
     return HighwaySimulation(
         joint_time_s=joint_t,
         joint_names=HIGHWAY_JOINTS,
