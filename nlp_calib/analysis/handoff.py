@@ -301,22 +301,22 @@ def most_reference(variances: np.ndarray, segments: int) -> np.ndarray:
     return np.asarray(variances, dtype=float) * (1.0 + 2.0 * np.sqrt(2.0 / m))
 
 
-def _needed(track: np.ndarray, spans: np.ndarray, shown: Shown, reference_var: np.ndarray) -> np.ndarray:
-    """Each span's squared error over 4 less the reference's own variance of it ``(S, 3)`` (x, y, θ
-    in the base frame at its start; the odometry ``track`` restarted from the reference at each
-    start; ``reference_var``: its variances of position and heading): a span's error lies within
-    2σ of a variance at least that."""
+def _needed(track: np.ndarray, spans: np.ndarray, shown: Shown) -> tuple[np.ndarray, np.ndarray]:
+    """Each span's squared error over 4, and the most of the reference's own variance of it its fit
+    allows, ``(S, 3)`` each (x, y, θ in the base frame at its start; the odometry ``track``
+    restarted from the reference at each start): a span's error lies within 2σ of a variance at
+    least their difference."""
     errors, terms = restarted(shown.reference, track, spans, shown.lever)
     turn = shown.reference[spans[:, 0], 2]
     c, s = np.cos(turn), np.sin(turn)
     local = np.c_[c * errors[:, 0] + s * errors[:, 1], -s * errors[:, 0] + c * errors[:, 1], errors[:, 2]]
     R = np.zeros((turn.size, 3, 3))
     R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, s, -s, c, 1.0
-    own = np.einsum("k,skij->sij", reference_var, terms)
+    own = np.einsum("k,skij->sij", most_reference(shown.reference_var, shown.segments), terms)
     if shown.chained:  # each increment chained adds its own noise: one's over each
         own = own * (spans[:, 1] - spans[:, 0])[:, None, None]
     own = R @ own @ np.swapaxes(R, 1, 2)
-    return local**2 / 4.0 - np.diagonal(own, axis1=1, axis2=2)
+    return local**2 / 4.0, np.diagonal(own, axis1=1, axis2=2)
 
 
 def covering_pose(
@@ -346,11 +346,10 @@ def covering_pose(
     scale = np.ones(spans.shape[0]) if divided is None else 1.0 / np.asarray(divided, dtype=float) ** 2
     # |e| ≤ 2·√(σ² + r) holds for the spans whose e²/4 − r is at most σ²: the smallest σ² that
     # holds COVERED of them is that order statistic.
+    half_squared, reference = _needed(track, spans, shown)
     least, most = (
-        np.quantile(
-            _needed(track, spans, shown, ref) * scale[:, None], COVERED, axis=0, method="inverted_cdf"
-        )
-        for ref in (most_reference(shown.reference_var, shown.segments), np.zeros(2))
+        np.quantile(v * scale[:, None], COVERED, axis=0, method="inverted_cdf")
+        for v in (half_squared - reference, half_squared)
     )
     most = np.maximum(most, rounding)
     return np.where(most > 0.0, np.clip(pose, least, np.maximum(most, least)), np.maximum(pose, least))
