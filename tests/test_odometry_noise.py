@@ -117,20 +117,20 @@ def test_the_calibrations_constant_errors_are_what_they_make_of_each_segment() -
     assert np.allclose(error, -(early / 0.05) * shape, rtol=0.02, atol=1e-3 * np.max(np.abs(shape)))
 
 
-def test_a_pivots_heading_rate_is_fitted_apart_from_an_arcs() -> None:
-    """Arcs (1 m, up to 0.8 rad an interval) and pivots (6 rad on the spot) whose heading drifts 40x
-    more per radian (a skid-steer's wheels scrub on a pivot): the segments' errors, drawn from
-    the covariance each rate grows (per metre and per radian on an arc, per radian on the spot),
-    give each rate its own (the pivots' within 25 % of the truth, the arcs' heading within 50 %: they
-    share it with the distance); one rate per radian for both gave every arc
-    the pivots' (and the hand-off's pose diagonal 2-20x the fault-free metres' drift)."""
+#: The arcs-and-pivots drive's rates: per metre (along, across, heading), per radian turned on an
+#: arc and per radian turned on the spot.
+PER_METRE, ARC, SPOT = np.array([1e-4, 4e-5, 2e-5]), 1e-4, 4e-3
+
+
+def _arcs_and_pivots() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Arcs and pivots (see below): the rates' unit covariances, the calibration's constant-error
+    shapes, the segments' errors and the readings' rounding, of a drive whose rates are known."""
     rng = np.random.default_rng(11)
     n = 1200
     pivot = rng.uniform(size=n) < 0.3
     turn = np.where(pivot, rng.choice([-6.0, 6.0], n), rng.uniform(-0.8, 0.8, n))
     increments = np.c_[np.where(pivot, 0.0, rng.uniform(0.8, 1.2, n)), np.zeros(n), turn]
     assert np.array_equal(pivot_intervals(increments), pivot)
-    per_metre, arc, spot = np.array([1e-4, 4e-5, 2e-5]), 1e-4, 4e-3
     arcs = np.c_[np.hypot(increments[:, 0], increments[:, 1]), np.abs(turn) * ~pivot]
     spun = np.c_[np.zeros(n), np.abs(turn) * pivot]
     spans = np.r_[np.c_[np.arange(n), np.arange(1, n + 1)], np.c_[np.arange(0, n - 3, 3), np.arange(3, n, 3)]]
@@ -140,17 +140,42 @@ def test_a_pivots_heading_rate_is_fitted_apart_from_an_arcs() -> None:
         + [grown_covariances(increments, np.r_[[np.zeros(3)], [unit[c]]], spans) for c in range(2)]
         + [grown_covariances(increments, np.r_[[np.zeros(3)], [unit[2]]], spans, a) for a in (arcs, spun)]
     )
-    truth = np.r_[per_metre, 0.0, 0.0, arc, spot]
+    truth = np.r_[PER_METRE, 0.0, 0.0, ARC, SPOT]
     w, V = np.linalg.eigh(np.einsum("k,ksij->sij", truth, units))
     root = V * np.sqrt(np.clip(w, 0.0, None))[:, None, :]
     errors = np.einsum("sij,sj->si", root, rng.normal(size=(spans.shape[0], 3)))
     shapes = systematic_shapes(increments, spans)
     # No reference noise; the readings' rounding at a 0.1 mm and 10 µrad floor.
     reads = np.broadcast_to(np.diag([1e-8, 1e-8, 1e-10]), (spans.shape[0], 3, 3))
-    rates, allowed, _, _ = segment_rates(units, shapes, errors, (np.zeros((0, spans.shape[0], 3, 3)), reads))
-    assert rates[5] == pytest.approx(arc, rel=0.5), (rates, allowed)
-    assert rates[6] == pytest.approx(spot, rel=0.25), (rates, allowed)
-    assert rates[2] == pytest.approx(per_metre[2], rel=0.5), (rates, allowed)
+    return units, shapes, errors, reads
+
+
+def test_a_pivots_heading_rate_is_fitted_apart_from_an_arcs() -> None:
+    """Arcs (1 m, up to 0.8 rad an interval) and pivots (6 rad on the spot) whose heading drifts 40x
+    more per radian (a skid-steer's wheels scrub on a pivot): the segments' errors, drawn from
+    the covariance each rate grows (per metre and per radian on an arc, per radian on the spot),
+    give each rate its own (the pivots' within 25 % of the truth, the arcs' heading within 50 %: they
+    share it with the distance); one rate per radian for both gave every arc
+    the pivots' (and the hand-off's pose diagonal 2-20x the fault-free metres' drift)."""
+    units, shapes, errors, reads = _arcs_and_pivots()
+    rates, allowed, _, _ = segment_rates(units, shapes, errors, (np.zeros((0, errors.shape[0], 3, 3)), reads))
+    assert rates[5] == pytest.approx(ARC, rel=0.5), (rates, allowed)
+    assert rates[6] == pytest.approx(SPOT, rel=0.25), (rates, allowed)
+    assert rates[2] == pytest.approx(PER_METRE[2], rel=0.5), (rates, allowed)
+
+
+def test_a_component_without_error_leaves_the_others_rates_told() -> None:
+    """Exact readings (no rounding) of a drive whose sideways errors are all zero: the segments'
+    predicted variance there is zero, and the others' rates are still told (within the tolerances of
+    the test above; an infinite weight on those squared errors left every rate untold)."""
+    units, shapes, errors, reads = _arcs_and_pivots()
+    errors[:, 1] = 0.0
+    rates, allowed, _, _ = segment_rates(
+        units, shapes, errors, (np.zeros((0, errors.shape[0], 3, 3)), 0.0 * reads)
+    )
+    assert rates[5] == pytest.approx(ARC, rel=0.5), (rates, allowed)
+    assert rates[6] == pytest.approx(SPOT, rel=0.25), (rates, allowed)
+    assert np.all(np.isfinite(allowed[[0, 2, 5, 6]])), allowed
 
 
 def test_a_rate_too_small_for_its_own_segments_is_raised_on_them_alone() -> None:

@@ -309,8 +309,11 @@ def _shown(A: np.ndarray, var: np.ndarray, predicted: np.ndarray) -> tuple[np.nd
     One fitted under the reference's noise (a car's wheels under its device's 2 cm) is noise of
     that fit, not the odometry's."""
     on = var > 0
-    w = 1.0 / (2.0 * np.maximum(predicted, 1e-300) ** 2)
-    sigma = np.array([_spread(A, w, on, k) for k in range(var.size)])
+    # In units of the largest prediction, floored as the fit's weights are: squared errors of a few
+    # micrometres square to under 1e-300, and an infinite weight leaves every rate untold.
+    top = max(float(np.max(predicted, initial=0.0)), 1e-300)
+    w = 1.0 / (2.0 * np.maximum(predicted / top, 1e-12) ** 2)
+    sigma = top * np.array([_spread(A, w, on, k) for k in range(var.size)])
     shown = on & (var > SHOWN * np.nan_to_num(sigma, nan=np.inf))
     return shown, np.maximum(var, 0.0) + BOUND * sigma
 
