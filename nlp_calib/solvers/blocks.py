@@ -4,7 +4,8 @@ Mapping a Function over a million columns at once costs seconds to build (CasADi
 its size) and needs every output in one piece. :class:`BlockMap` maps it over blocks of
 :data:`BLOCK` columns instead (at most two map sizes, built once), binds one buffer per block
 size to each block's column slices of the caller's arrays in turn (no copies) and either sums the
-blocks' outputs or writes them straight into full per-column arrays. A mapped input may also be
+blocks' outputs (and the partial sums a backend's map leaves, in order) or writes them straight
+into full per-column arrays. A mapped input may also be
 a :class:`Columns` source (columns made on demand, e.g. gathered from a larger array): each
 block's columns are then made into one block-sized buffer just before the block is evaluated, so
 the full input never exists.
@@ -81,7 +82,8 @@ class BlockMap:
         # one block-sized array per made input.
         self.scratch: dict[tuple[str, int], np.ndarray] = {}
         self.buffers: dict[int, Buffered] = {}
-        for size in sorted({hi - lo for lo, hi in self.spans}):
+        self.parts = {size: backend.parts(size) for size in {hi - lo for lo, hi in self.spans}}
+        for size in sorted(self.parts):
             made = {k: np.zeros((v.shape[0], size), order="F") for k, v in self.made.items()}
             self.scratch.update({(k, size): v for k, v in made.items()})
             self.buffers[size] = Buffered(_mapped(backend, f, size, names, reduce), static, made)
@@ -102,10 +104,19 @@ class BlockMap:
                 buf.rebind_output(name, out[:, c * lo : c * hi])
             buf.evaluate()
             for total, out in zip(sums, buf.outputs()):
-                total += out
+                total += add_parts(out, self.parts[hi - lo])
         if not self.reduce:
             return self.full
         return [s.reshape(shape, order="F") if shape[1] > 1 else s for s, shape in zip(sums, self.shapes)]
+
+
+def add_parts(out: np.ndarray, parts: int) -> np.ndarray:
+    """The sum of ``parts`` partial sums stored one after the other in ``out``, added in order from
+    the first, as a map's own sum adds them (the same bits)."""
+    if parts == 1:
+        return out
+    # accumulate, unlike sum, never reorders the additions (no pairwise summation).
+    return np.add.accumulate(out.reshape(parts, -1), axis=0)[-1]
 
 
 def stream(

@@ -118,10 +118,16 @@ class Backend:
         """Wait until what :meth:`prepare` started is ready (nothing to wait for here)."""
 
     def map(self, f: ca.Function, n: int, mapped_inputs: Sequence[str], reduce: bool) -> ca.Function:
-        """``f`` over ``n`` columns of ``mapped_inputs``; outputs summed when ``reduce``."""
+        """``f`` over ``n`` columns of ``mapped_inputs``. When ``reduce``, each output is
+        :meth:`parts` partial sums over consecutive columns, side by side ``(rows, cols * parts)``,
+        left for the caller to add in order (here one part: the map sums)."""
         reduce_in = [i for i in range(f.n_in()) if f.name_in(i) not in mapped_inputs]
         reduce_out = list(range(f.n_out())) if reduce else []
         return f.map(f"{f.name()}_map", "serial", n, reduce_in, reduce_out)
+
+    def parts(self, n: int) -> int:
+        """Partial sums a summed :meth:`map` over ``n`` columns leaves side by side."""
+        return 1
 
     def fold(self, step: ca.Function, chunks: int) -> ca.Function:
         """``step`` folded over ``chunks`` chunks of intervals: (state, x, x_fixed, U) → states."""
