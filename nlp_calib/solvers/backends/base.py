@@ -167,16 +167,17 @@ class Buffered:
         self.function = f
         self._buf, self._eval = f.buffer()
         bound = dict(bound or {})
-        out_names = [f.name_out(i) for i in range(f.n_out())]
+        # Index and size by name, asked of CasADi once (each query costs microseconds; a scan
+        # rebinds its buffers dozens of times per evaluation).
+        self._slot_in = {f.name_in(i): (i, f.nnz_in(i)) for i in range(f.n_in())}
+        self._slot_out = {f.name_out(i): (i, f.nnz_out(i)) for i in range(f.n_out())}
         self._in = {
-            f.name_in(i): _memory(bound.pop(f.name_in(i)), f.nnz_in(i))
-            if f.name_in(i) in bound
-            else np.zeros(f.nnz_in(i))
-            for i in range(f.n_in())
+            name: _memory(bound.pop(name), nnz) if name in bound else np.zeros(nnz)
+            for name, (_, nnz) in self._slot_in.items()
         }
         self._out = [
-            _memory(bound.pop(name), f.nnz_out(i)) if name in bound else np.zeros(f.nnz_out(i))
-            for i, name in enumerate(out_names)
+            _memory(bound.pop(name), nnz) if name in bound else np.zeros(nnz)
+            for name, (_, nnz) in self._slot_out.items()
         ]
         if bound:
             raise KeyError(f"{f.name()} has no input or output {sorted(bound)}")
@@ -190,14 +191,14 @@ class Buffered:
 
     def rebind(self, name: str, arr: np.ndarray) -> None:
         """Bind input ``name`` to another caller-owned array of the same size."""
-        i = self.function.index_in(name)
-        self._in[name] = _memory(arr, self.function.nnz_in(i))
+        i, nnz = self._slot_in[name]
+        self._in[name] = _memory(arr, nnz)
         self._buf.set_arg(i, self._in[name].data)
 
     def rebind_output(self, name: str, arr: np.ndarray) -> None:
         """Write output ``name`` into another caller-owned array of the same size."""
-        i = self.function.index_out(name)
-        self._out[i] = _memory(arr, self.function.nnz_out(i))
+        i, nnz = self._slot_out[name]
+        self._out[i] = _memory(arr, nnz)
         self._buf.set_res(i, self._out[i].data)
 
     def set(self, **inputs: np.ndarray | float) -> None:
@@ -231,7 +232,9 @@ class Buffered:
 def _memory(arr: np.ndarray, size: int) -> np.ndarray:
     """The flat view of a caller-owned array that a buffer binds (no copy)."""
     flat = arr.reshape(-1, order="F")
-    if flat.dtype != np.float64 or flat.size != size or not np.shares_memory(flat, arr):
+    # A reshape that had to copy gives new memory, outside the array's bounds: the cheap bounds
+    # check tells it (the exact overlap test costs more than the rest of a rebind).
+    if flat.dtype != np.float64 or flat.size != size or not np.may_share_memory(flat, arr):
         raise ValueError(f"cannot bind an array of {arr.size} {arr.dtype} values to {size} values")
     return flat
 
