@@ -220,6 +220,7 @@ class ProblemEvaluator:
         self._prior = Buffered(fns.prior, {"mean": self.priors.mean, "sqrt_info": self.priors.sqrt_info})
         self._boxplus = Buffered(fns.boxplus)
         self._tangent = Buffered(fns.tangent_map)
+        self._assemble = Buffered(fns.assemble)
         self.bind(data)
 
     def bind(self, data: ResidualData) -> None:
@@ -453,7 +454,7 @@ class ProblemEvaluator:
 
     def params(self, x: np.ndarray) -> np.ndarray:
         """Full parameter vector (free and fixed, in model order)."""
-        return np.asarray(self.fns.assemble(x, self.x_fixed)).ravel()
+        return self._assemble(x=x, x_fixed=self.x_fixed)[0].ravel()
 
 
 def _per_column(value: np.ndarray, n_columns: int, n: int) -> np.ndarray:
