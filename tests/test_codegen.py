@@ -291,7 +291,9 @@ def test_a_summed_compiled_map_leaves_a_sum_per_chunk_added_in_casadis_order(
         got = BlockMap(backend, f, {"u": cols}, {"p": params}, reduce=True)(p=params)
         for g, w in zip(got, want, strict=True):
             assert np.array_equal(np.reshape(g, w.shape), w)
-    # The map leaves one partial sum per chunk: no addition per chunk to build.
+    # A block is evaluated by maps of fixed sizes (built once, whatever the data's size), each
+    # leaving one partial sum per chunk.
+    assert serial.spans(n - BLOCK) == [32 * chunk, 8 * chunk, 4 * chunk]
     for k in (16, 256):
         assert serial.parts(k * chunk) == k
         assert serial.map(f, k * chunk, ("u",), True).size_out(0) == (2, 2 * k)

@@ -25,6 +25,11 @@ SCAN_CHUNK = 64
 #: (largest first): each is built once per process, not once per evaluator and data size (a fold's
 #: build grows with its size and dominated the evaluators' set-up).
 FOLD_SIZES = (256, 16, 1)
+#: Sizes, in chunks, of the compiled maps a block of windows is evaluated with, one after the
+#: other (largest first), for the same reason: a map of a compiled chunk takes a build time growing
+#: with its size (40-80 ms at 256 chunks), and data of every size would otherwise build its own.
+#: Each size at most once in a block: every piece of a block keeps its own buffer's binding.
+MAP_SIZES = (256, 128, 64, 32, 16, 8, 4, 2, 1)
 
 
 @dataclass(frozen=True)
@@ -69,10 +74,10 @@ def scan_chunk(step: ca.Function, chunk: int) -> ca.Function:
     )
 
 
-def fold_sizes(chunks: int) -> list[int]:
-    """``chunks`` as a sum of :data:`FOLD_SIZES`, largest first."""
+def fold_sizes(chunks: int, sizes: Sequence[int] = FOLD_SIZES) -> list[int]:
+    """``chunks`` as a sum of ``sizes`` (ending in 1), largest first."""
     out = []
-    for size in FOLD_SIZES:
+    for size in sizes:
         out += [size] * (chunks // size)
         chunks %= size
     return out
@@ -128,6 +133,11 @@ class Backend:
     def parts(self, n: int) -> int:
         """Partial sums a summed :meth:`map` over ``n`` columns leaves side by side."""
         return 1
+
+    def spans(self, n: int) -> list[int]:
+        """The sizes of the maps ``n`` columns are evaluated with, one after the other (here one
+        map of every size: the map sums its columns itself)."""
+        return [n]
 
     def fold(self, step: ca.Function, chunks: int) -> ca.Function:
         """``step`` folded over ``chunks`` chunks of intervals: (state, x, x_fixed, U) → states."""

@@ -43,7 +43,15 @@ from nlp_calib.codegen.compiler import (
 )
 from nlp_calib.core import interrupts, threads
 from nlp_calib.core.errors import CodegenError, NlpCalibWarning
-from nlp_calib.solvers.backends.base import INTERPRETED, Backend, BackendOptions, Request, scan_chunk
+from nlp_calib.solvers.backends.base import (
+    INTERPRETED,
+    MAP_SIZES,
+    Backend,
+    BackendOptions,
+    Request,
+    fold_sizes,
+    scan_chunk,
+)
 
 
 class CompiledBackend(Backend):
@@ -150,6 +158,9 @@ class CompiledBackend(Backend):
 
     def parts(self, n: int) -> int:
         return n // self.chunk
+
+    def spans(self, n: int) -> list[int]:
+        return [size * self.chunk for size in fold_sizes(n // self.chunk, MAP_SIZES)]
 
     def _threaded(self, fc: ca.Function, chunks: int, reduce_in: list[int]) -> ca.Function:
         """The chunk map on ``threads`` threads, broadcast inputs tiled."""
