@@ -58,10 +58,11 @@ def _mapped(backend: Backend, f: ca.Function, n: int, names: tuple[str, ...], re
 class _Pieces:
     """``f`` over blocks of at most :data:`BLOCK` columns of ``mapped``, each block evaluated as the
     backend's maps of fixed sizes one after the other (:meth:`Backend.spans`: nothing is built per
-    data size). One buffer per map size, bound to each piece's columns in turn (a mapped Function's
-    work memory holds a piece's inputs: one buffer per piece would hold them all again), and one
-    piece-sized array per made input. A piece's outputs go to the columns of the caller's
-    ``targets`` that :attr:`pieces` gives it: its columns, or, summed, its partial sums."""
+    data size). One buffer per map size, bound to a piece's columns until a piece of another block
+    takes it (a mapped Function's work memory holds a piece's inputs: one buffer per piece would
+    hold them all again; a block has each size once), and one piece-sized array per made input. A
+    piece's outputs go to the columns of the caller's ``targets`` that :attr:`pieces` gives it: its
+    columns, or, summed, its partial sums."""
 
     def __init__(
         self,

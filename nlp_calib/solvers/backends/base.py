@@ -3,7 +3,8 @@ prefix scans over the intervals, called without copies.
 
 Two measured facts shape this module: most of a naive call's time is the numpy<->DM conversion,
 which ``Function.buffer()`` removes by binding numpy memory once; and summing inside the map
-(``reduce_out``) beats returning per-sample blocks to numpy. Scans fold a step over chunks of
+(``reduce_out``) beats returning per-sample blocks to numpy (a compiled backend sums inside its
+chunks and leaves the chunks' few sums to the caller). Scans fold a step over chunks of
 :data:`SCAN_CHUNK` intervals, each chunk one expression, and the chunks over the data.
 """
 
