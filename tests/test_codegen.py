@@ -256,3 +256,44 @@ def test_long_column_maps_of_a_compiled_run_give_the_interpreted_columns(
     calls.clear()
     windows.over_columns(f, params, cols[:, :999])  # below COMPILED_FROM: interpreted
     assert calls == []
+
+
+@needs_compiler
+def test_a_summed_compiled_map_leaves_a_sum_per_chunk_added_in_casadis_order(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The chunks' partial sums, left side by side by the compiled backend's map and added by the
+    block map, equal to the bit CasADi's own map summing the same chunks (serial and threaded),
+    over two block sizes."""
+    from nlp_calib.solvers.backends import BackendOptions, make_backend
+    from nlp_calib.solvers.blocks import BLOCK, BlockMap
+
+    monkeypatch.setenv("NLP_CALIB_CACHE", str(tmp_path / "cache"))
+    p, u = ca.SX.sym("p", 2), ca.SX.sym("u", 3)
+    e = ca.vertcat(p[0] * u[0] - u[1], ca.sin(u[2]) * p[1] ** 3)
+    f = ca.Function("f", [p, u], [ca.mtimes(e, e.T), e, ca.dot(e, e)], ["p", "u"], ["H", "g", "c"])
+    serial = make_backend(BackendOptions(kind="compiled"))
+    threaded = make_backend(BackendOptions(kind="compiled", threads=2))
+    assert serial.name == threaded.name == "compiled"
+    chunk = serial.chunk
+    n = BLOCK + 44 * chunk
+    rng = np.random.default_rng(3)
+    cols = np.asfortranarray(rng.normal(size=(3, n)) * 10.0 ** rng.integers(-6, 3, size=(1, n)))
+    cols[:, ::5] = -0.0
+    params = np.array([1.3, -0.7])
+    one_chunk = serial.map(f, chunk, ("u",), True)  # the compiled chunk, summing its own windows
+    want = [np.zeros(f.size_out(i)) for i in range(3)]
+    for lo, hi in ((0, BLOCK), (BLOCK, n)):
+        ref = one_chunk.map("ref", "serial", (hi - lo) // chunk, [0], [0, 1, 2])
+        for total, part in zip(want, ref(params, cols[:, lo:hi]), strict=True):
+            total += np.asarray(part).reshape(total.shape)
+    for backend in (serial, threaded):
+        got = BlockMap(backend, f, {"u": cols}, {"p": params}, reduce=True)(p=params)
+        for g, w in zip(got, want, strict=True):
+            assert np.array_equal(np.reshape(g, w.shape), w)
+    # A block is evaluated by maps of fixed sizes (built once, whatever the data's size), each
+    # leaving one partial sum per chunk.
+    assert serial.spans(n - BLOCK) == [32 * chunk, 8 * chunk, 4 * chunk]
+    for k in (16, 256):
+        assert serial.parts(k * chunk) == k
+        assert serial.map(f, k * chunk, ("u",), True).size_out(0) == (2, 2 * k)

@@ -9,7 +9,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 import pytest
-from conftest import assert_close, boxplus_numpy, parse_lines
+from conftest import SCENARIOS, assert_close, boxplus_numpy, parse_lines
 
 from nlp_calib.analysis.odometry import propagate
 from nlp_calib.codegen.compiler import find_compiler
@@ -221,3 +221,20 @@ def test_c_export_equals_python(model: str, tmp_path: Path) -> None:
                         rtol=1e-12,
                         atol=1e-12 * max(float(np.abs(np.asarray(b)).max()), 1.0),
                     )
+
+
+def test_each_models_radians_form_is_one_object_and_its_problem_is_built_once() -> None:
+    from nlp_calib.models.radians import InRadians, in_units
+    from nlp_calib.pipeline import load_scenario
+
+    for name in MODELS:
+        model = get_model(name)
+        form = in_units(model, "radians")
+        assert isinstance(form, InRadians) and form.model is model
+        assert in_units(model, "radians") is form and in_units(form, "radians") is form
+        assert in_units(form, "counts") is model
+    # Two set-ups of a scenario of joints in radians share its problems' Functions.
+    a, b = (load_scenario(SCENARIOS / "optiodom_tricycle_square.yaml").model_form() for _ in range(2))
+    assert a is b
+    spec = ProblemSpec()
+    assert build(a, spec) is build(b, spec)

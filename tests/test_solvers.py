@@ -227,3 +227,24 @@ def test_gauss_newton_reaches_a_robust_optimum_its_reweighting_approaches_linear
         lo, hi = (mid, hi) if np.sum(np.clip(mid - problem.y, -1.0, 1.0)) < 0 else (lo, mid)
     assert res.converged, res.reason
     assert abs(res.x[0] - lo) < 1e-9, (res.x[0], lo)
+
+
+def test_a_buffer_binds_caller_memory_and_refuses_an_array_it_would_have_to_copy() -> None:
+    import casadi as ca
+
+    from nlp_calib.solvers.backends import Buffered
+
+    u = ca.SX.sym("u", 2, 3)
+    buf = Buffered(ca.Function("f", [u], [2 * u], ["u"], ["y"]))
+    states = np.zeros((2, 10), order="F")
+    inputs = np.asfortranarray(np.arange(20.0).reshape(2, 10))
+    buf.rebind("u", inputs[:, 4:7])
+    buf.rebind_output("y", states[:, 1:4])
+    buf.evaluate()
+    assert np.array_equal(states[:, 1:4], 2 * inputs[:, 4:7])  # written into the caller's array
+    assert not states[:, 4:].any() and not states[:, 0].any()
+    for wrong in (np.ascontiguousarray(inputs)[:, 4:7], inputs[:, 4:6], inputs[:, 4:7].astype(np.float32)):
+        with pytest.raises(ValueError, match="cannot bind"):
+            buf.rebind("u", wrong)
+    with pytest.raises(KeyError):
+        buf.rebind("v", inputs[:, 4:7])

@@ -16,6 +16,7 @@ a model is written twice.
 from __future__ import annotations
 
 import re
+import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -410,10 +411,20 @@ def units_of(model: KinematicModel) -> str:
 
 
 def in_units(model: KinematicModel, units: str) -> KinematicModel:
-    """``model`` in the form that reads encoders in ``units`` (``counts`` or ``radians``)."""
+    """``model`` in the form that reads encoders in ``units`` (``counts`` or ``radians``): one
+    radians form per model object, so that the problems built for it (once per model object and
+    problem) are built once per process, not at every scenario's set-up."""
     if units == "radians":
-        return model.in_radians()
+        with _FORMS_LOCK:
+            if id(model) not in _FORMS:
+                _FORMS[id(model)] = (model, model.in_radians())
+            return _FORMS[id(model)][1]
     return model.model if isinstance(model, InRadians) else model
+
+
+#: Each model's radians form, with the model (which keeps its id its own).
+_FORMS: dict[int, tuple[KinematicModel, KinematicModel]] = {}
+_FORMS_LOCK = threading.Lock()
 
 
 def default_guess(model: KinematicModel) -> dict[str, float]:

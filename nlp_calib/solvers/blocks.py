@@ -2,12 +2,13 @@
 
 Mapping a Function over a million columns at once costs seconds to build (CasADi's map grows with
 its size) and needs every output in one piece. :class:`BlockMap` maps it over blocks of
-:data:`BLOCK` columns instead (at most two map sizes, built once), binds one buffer per block
-size to each block's column slices of the caller's arrays in turn (no copies) and either sums the
-blocks' outputs or writes them straight into full per-column arrays. A mapped input may also be
-a :class:`Columns` source (columns made on demand, e.g. gathered from a larger array): each
-block's columns are then made into one block-sized buffer just before the block is evaluated, so
-the full input never exists.
+:data:`BLOCK` columns instead, each block a few maps of the fixed sizes the backend builds
+(:meth:`~nlp_calib.solvers.backends.Backend.spans`, each built once per process), binds one buffer
+per map size to each piece's column slices of the caller's arrays in turn (no copies) and either
+sums the outputs (and, in order, the partial sums a backend's map leaves) or writes them straight
+into full per-column arrays. A mapped input may also be a :class:`Columns` source (columns made on
+demand, e.g. gathered from a larger array): each piece's columns are then made into one
+piece-sized buffer just before it is evaluated, so the full input never exists.
 :class:`Scan` folds a step over many intervals the same way: folds of a few fixed sizes (built
 once), chained through the caller's array of states.
 """
@@ -48,10 +49,77 @@ def _made(mapped: Mapping[str, Mapped]) -> dict[str, Columns]:
 
 @functools.lru_cache(maxsize=64)
 def _mapped(backend: Backend, f: ca.Function, n: int, names: tuple[str, ...], reduce: bool) -> ca.Function:
-    """``backend.map``, built once per Function and size: every evaluator on windows of about the
-    same number (the refits, the lag search's) evaluates the same wrapper instead of building
-    its own (each call has its own buffers: one Function serves several threads)."""
+    """``backend.map``, built once per Function and size: every evaluator evaluates the same
+    wrappers of the backend's sizes instead of building its own (each call has its own buffers:
+    one Function serves several threads)."""
     return backend.map(f, n, names, reduce)
+
+
+class _Pieces:
+    """``f`` over blocks of at most :data:`BLOCK` columns of ``mapped``, each block evaluated as the
+    backend's maps of fixed sizes one after the other (:meth:`Backend.spans`: nothing is built per
+    data size). One buffer per map size, bound to a piece's columns until a piece of another block
+    takes it (a mapped Function's work memory holds a piece's inputs: one buffer per piece would
+    hold them all again; a block has each size once), and one piece-sized array per made input. A
+    piece's outputs go to the columns of the caller's ``targets`` that :attr:`pieces` gives it: its
+    columns, or, summed, its partial sums."""
+
+    def __init__(
+        self,
+        backend: Backend,
+        f: ca.Function,
+        mapped: Mapping[str, Mapped],
+        static: Mapping[str, np.ndarray | float],
+        reduce: bool,
+        n: int,
+    ) -> None:
+        total = next(iter(mapped.values())).shape[1]
+        self.mapped = dict(mapped)
+        self.out_names = [f.name_out(i) for i in range(f.n_out())]
+        self.shapes = [f.size_out(i) for i in range(f.n_out())]
+        self.blocks = [(lo, min(total, lo + BLOCK)) for lo in range(0, n, BLOCK)]
+        #: Per block size: each piece's columns [a, b) in the block and output columns [o, p).
+        self.pieces: dict[int, list[tuple[int, int, int, int]]] = {}
+        #: Per block size: the output columns of its pieces together (its partial sums, summed).
+        self.width: dict[int, int] = {}
+        self.scratch: dict[tuple[str, int], np.ndarray] = {}
+        self.buffers: dict[int, Buffered] = {}
+        #: The first column of the piece each buffer is bound to (bound again only on a change).
+        self.bound: dict[int, int] = {}
+        for size in sorted({hi - lo for lo, hi in self.blocks}):
+            a = o = 0
+            self.pieces[size] = []
+            for span in backend.spans(size):
+                width = backend.parts(span) if reduce else span
+                self.pieces[size].append((a, a + span, o, o + width))
+                a, o = a + span, o + width
+                if span not in self.buffers:
+                    made = {k: np.zeros((v.shape[0], span), order="F") for k, v in _made(mapped).items()}
+                    self.scratch.update({(k, span): v for k, v in made.items()})
+                    mapped_f = _mapped(backend, f, span, tuple(mapped), reduce)
+                    self.buffers[span] = Buffered(mapped_f, static, made)
+            self.width[size] = o
+
+    def set(self, **inputs: np.ndarray | float) -> None:
+        for buf in self.buffers.values():
+            buf.set(**inputs)
+
+    def evaluate(self, lo: int, hi: int, targets: Sequence[np.ndarray]) -> None:
+        """Evaluate the block of columns ``[lo, hi)`` into ``targets`` (one ``(rows, cols *
+        width)`` array per output, column-major; the same arrays at every call for a block)."""
+        for a, b, o, p in self.pieces[hi - lo]:
+            buf = self.buffers[b - a]
+            bind = self.bound.get(b - a) != lo + a
+            for name, value in self.mapped.items():
+                if not isinstance(value, np.ndarray):
+                    value.fill(lo + a, lo + b, self.scratch[name, b - a])
+                elif bind:
+                    buf.rebind(name, value[:, lo + a : lo + b])
+            if bind:
+                for name, out, (_, c) in zip(self.out_names, targets, self.shapes):
+                    buf.rebind_output(name, out[:, c * o : c * p])
+                self.bound[b - a] = lo + a
+            buf.evaluate()
 
 
 class BlockMap:
@@ -68,44 +136,43 @@ class BlockMap:
     ) -> None:
         self.reduce = reduce
         n = next(iter(mapped.values())).shape[1]
-        names = tuple(mapped)
-        self.out_names = [f.name_out(i) for i in range(f.n_out())]
-        self.shapes = [f.size_out(i) for i in range(f.n_out())]
-        # Unreduced outputs: one (rows, cols * n) array each, column-major like CasADi's map.
+        self.pieces = _Pieces(backend, f, mapped, static, reduce, n)
+        self.shapes = self.pieces.shapes
+        # Unreduced outputs: one (rows, cols * n) array each, column-major like CasADi's map;
+        # summed ones: a block's partial sums, added in order once the block is evaluated.
         self.full = [] if reduce else [np.zeros((r, c * n), order="F") for r, c in self.shapes]
-        self.mapped = dict(mapped)
-        self.made = _made(mapped)
-        self.spans = [(lo, min(n, lo + BLOCK)) for lo in range(0, n, BLOCK)]
-        # One buffer per block size, bound to each block's columns in turn (a mapped Function's
-        # work memory holds a block's inputs: one buffer per block would hold them all again), and
-        # one block-sized array per made input.
-        self.scratch: dict[tuple[str, int], np.ndarray] = {}
-        self.buffers: dict[int, Buffered] = {}
-        for size in sorted({hi - lo for lo, hi in self.spans}):
-            made = {k: np.zeros((v.shape[0], size), order="F") for k, v in self.made.items()}
-            self.scratch.update({(k, size): v for k, v in made.items()})
-            self.buffers[size] = Buffered(_mapped(backend, f, size, names, reduce), static, made)
+        self.sums = {
+            size: [np.zeros((r, c * width), order="F") for r, c in self.shapes]
+            for size, width in self.pieces.width.items()
+            if reduce
+        }
 
     def __call__(self, **inputs: np.ndarray | float) -> Sequence[np.ndarray]:
         """Evaluate every block; the summed outputs (shaped like ``f``'s), or the full arrays."""
-        for buf in self.buffers.values():
-            buf.set(**inputs)
-        sums = [np.zeros(r * c) for r, c in self.shapes] if self.reduce else []
-        for lo, hi in self.spans:
-            buf = self.buffers[hi - lo]
-            for name, value in self.mapped.items():
-                if isinstance(value, np.ndarray):
-                    buf.rebind(name, value[:, lo:hi])
-                else:
-                    value.fill(lo, hi, self.scratch[name, hi - lo])
-            for name, out, (_, c) in zip(self.out_names, self.full, self.shapes):
-                buf.rebind_output(name, out[:, c * lo : c * hi])
-            buf.evaluate()
-            for total, out in zip(sums, buf.outputs()):
-                total += out
+        self.pieces.set(**inputs)
+        totals = [np.zeros(r * c) for r, c in self.shapes] if self.reduce else []
+        for lo, hi in self.pieces.blocks:
+            if not self.reduce:
+                self.pieces.evaluate(
+                    lo, hi, [out[:, c * lo : c * hi] for out, (_, c) in zip(self.full, self.shapes)]
+                )
+                continue
+            parts = self.sums[hi - lo]
+            self.pieces.evaluate(lo, hi, parts)
+            for total, part in zip(totals, parts):
+                total += add_parts(part.reshape(-1, order="F"), self.pieces.width[hi - lo])
         if not self.reduce:
             return self.full
-        return [s.reshape(shape, order="F") if shape[1] > 1 else s for s, shape in zip(sums, self.shapes)]
+        return [s.reshape(shape, order="F") if shape[1] > 1 else s for s, shape in zip(totals, self.shapes)]
+
+
+def add_parts(out: np.ndarray, parts: int) -> np.ndarray:
+    """The sum of ``parts`` partial sums stored one after the other in ``out``, added in order from
+    the first, as a map's own sum adds them (the same bits)."""
+    if parts == 1:
+        return out
+    # accumulate, unlike sum, never reorders the additions (no pairwise summation).
+    return np.add.accumulate(out.reshape(parts, -1), axis=0)[-1]
 
 
 def stream(
@@ -118,28 +185,12 @@ def stream(
     """``f`` over the columns of ``mapped``, one block at a time: each block's columns and its
     outputs ``(rows, cols * block)`` (reused for the next block: copy what must outlive it). Only
     the first ``n`` columns' blocks are evaluated. Memory stays one block's, however many columns."""
-    total = next(iter(mapped.values())).shape[1]
-    n = total if n is None else n
-    buffers: dict[int, tuple[Buffered, dict[str, np.ndarray]]] = {}
-    for lo in range(0, n, BLOCK):
-        hi = min(total, lo + BLOCK)
-        size = hi - lo
-        if size not in buffers:
-            scratch = {k: np.zeros((v.shape[0], size), order="F") for k, v in _made(mapped).items()}
-            mapped_f = _mapped(backend, f, size, tuple(mapped), False)
-            buffers[size] = (Buffered(mapped_f, static, scratch), scratch)
-        buf, scratch = buffers[size]
-        for name, arr in mapped.items():
-            if isinstance(arr, np.ndarray):
-                buf.rebind(name, arr[:, lo:hi])
-            else:
-                arr.fill(lo, hi, scratch[name])
-        buf.evaluate()
-        shapes = [f.size_out(i) for i in range(f.n_out())]
-        yield (
-            slice(lo, min(hi, n)),
-            [out.reshape(r, c * size, order="F") for out, (r, c) in zip(buf.outputs(), shapes)],
-        )
+    n = next(iter(mapped.values())).shape[1] if n is None else n
+    pieces = _Pieces(backend, f, mapped, static, False, n)
+    outs = {size: [np.zeros((r, c * size), order="F") for r, c in pieces.shapes] for size in pieces.width}
+    for lo, hi in pieces.blocks:
+        pieces.evaluate(lo, hi, outs[hi - lo])
+        yield slice(lo, min(hi, n)), outs[hi - lo]
 
 
 class Scan:

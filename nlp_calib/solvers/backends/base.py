@@ -3,7 +3,8 @@ prefix scans over the intervals, called without copies.
 
 Two measured facts shape this module: most of a naive call's time is the numpy<->DM conversion,
 which ``Function.buffer()`` removes by binding numpy memory once; and summing inside the map
-(``reduce_out``) beats returning per-sample blocks to numpy. Scans fold a step over chunks of
+(``reduce_out``) beats returning per-sample blocks to numpy (a compiled backend sums inside its
+chunks and leaves the chunks' few sums to the caller). Scans fold a step over chunks of
 :data:`SCAN_CHUNK` intervals, each chunk one expression, and the chunks over the data.
 """
 
@@ -25,6 +26,11 @@ SCAN_CHUNK = 64
 #: (largest first): each is built once per process, not once per evaluator and data size (a fold's
 #: build grows with its size and dominated the evaluators' set-up).
 FOLD_SIZES = (256, 16, 1)
+#: Sizes, in chunks, of the compiled maps a block of windows is evaluated with, one after the
+#: other (largest first), for the same reason: a map of a compiled chunk takes a build time growing
+#: with its size (40-80 ms at 256 chunks), and data of every size would otherwise build its own.
+#: Each size at most once in a block: every piece of a block keeps its own buffer's binding.
+MAP_SIZES = (256, 128, 64, 32, 16, 8, 4, 2, 1)
 
 
 @dataclass(frozen=True)
@@ -69,10 +75,10 @@ def scan_chunk(step: ca.Function, chunk: int) -> ca.Function:
     )
 
 
-def fold_sizes(chunks: int) -> list[int]:
-    """``chunks`` as a sum of :data:`FOLD_SIZES`, largest first."""
+def fold_sizes(chunks: int, sizes: Sequence[int] = FOLD_SIZES) -> list[int]:
+    """``chunks`` as a sum of ``sizes`` (ending in 1), largest first."""
     out = []
-    for size in FOLD_SIZES:
+    for size in sizes:
         out += [size] * (chunks // size)
         chunks %= size
     return out
@@ -118,10 +124,21 @@ class Backend:
         """Wait until what :meth:`prepare` started is ready (nothing to wait for here)."""
 
     def map(self, f: ca.Function, n: int, mapped_inputs: Sequence[str], reduce: bool) -> ca.Function:
-        """``f`` over ``n`` columns of ``mapped_inputs``; outputs summed when ``reduce``."""
+        """``f`` over ``n`` columns of ``mapped_inputs``. When ``reduce``, each output is
+        :meth:`parts` partial sums over consecutive columns, side by side ``(rows, cols * parts)``,
+        left for the caller to add in order (here one part: the map sums)."""
         reduce_in = [i for i in range(f.n_in()) if f.name_in(i) not in mapped_inputs]
         reduce_out = list(range(f.n_out())) if reduce else []
         return f.map(f"{f.name()}_map", "serial", n, reduce_in, reduce_out)
+
+    def parts(self, n: int) -> int:
+        """Partial sums a summed :meth:`map` over ``n`` columns leaves side by side."""
+        return 1
+
+    def spans(self, n: int) -> list[int]:
+        """The sizes of the maps ``n`` columns are evaluated with, one after the other (here one
+        map of every size: the map sums its columns itself)."""
+        return [n]
 
     def fold(self, step: ca.Function, chunks: int) -> ca.Function:
         """``step`` folded over ``chunks`` chunks of intervals: (state, x, x_fixed, U) → states."""
@@ -161,16 +178,17 @@ class Buffered:
         self.function = f
         self._buf, self._eval = f.buffer()
         bound = dict(bound or {})
-        out_names = [f.name_out(i) for i in range(f.n_out())]
+        # Index and size by name, asked of CasADi once (each query costs microseconds; a scan
+        # rebinds its buffers dozens of times per evaluation).
+        self._slot_in = {f.name_in(i): (i, f.nnz_in(i)) for i in range(f.n_in())}
+        self._slot_out = {f.name_out(i): (i, f.nnz_out(i)) for i in range(f.n_out())}
         self._in = {
-            f.name_in(i): _memory(bound.pop(f.name_in(i)), f.nnz_in(i))
-            if f.name_in(i) in bound
-            else np.zeros(f.nnz_in(i))
-            for i in range(f.n_in())
+            name: _memory(bound.pop(name), nnz) if name in bound else np.zeros(nnz)
+            for name, (_, nnz) in self._slot_in.items()
         }
         self._out = [
-            _memory(bound.pop(name), f.nnz_out(i)) if name in bound else np.zeros(f.nnz_out(i))
-            for i, name in enumerate(out_names)
+            _memory(bound.pop(name), nnz) if name in bound else np.zeros(nnz)
+            for name, (_, nnz) in self._slot_out.items()
         ]
         if bound:
             raise KeyError(f"{f.name()} has no input or output {sorted(bound)}")
@@ -184,14 +202,14 @@ class Buffered:
 
     def rebind(self, name: str, arr: np.ndarray) -> None:
         """Bind input ``name`` to another caller-owned array of the same size."""
-        i = self.function.index_in(name)
-        self._in[name] = _memory(arr, self.function.nnz_in(i))
+        i, nnz = self._slot_in[name]
+        self._in[name] = _memory(arr, nnz)
         self._buf.set_arg(i, self._in[name].data)
 
     def rebind_output(self, name: str, arr: np.ndarray) -> None:
         """Write output ``name`` into another caller-owned array of the same size."""
-        i = self.function.index_out(name)
-        self._out[i] = _memory(arr, self.function.nnz_out(i))
+        i, nnz = self._slot_out[name]
+        self._out[i] = _memory(arr, nnz)
         self._buf.set_res(i, self._out[i].data)
 
     def set(self, **inputs: np.ndarray | float) -> None:
@@ -225,7 +243,9 @@ class Buffered:
 def _memory(arr: np.ndarray, size: int) -> np.ndarray:
     """The flat view of a caller-owned array that a buffer binds (no copy)."""
     flat = arr.reshape(-1, order="F")
-    if flat.dtype != np.float64 or flat.size != size or not np.shares_memory(flat, arr):
+    # A reshape that had to copy gives new memory, outside the array's bounds: the cheap bounds
+    # check tells it (the exact overlap test costs more than the rest of a rebind).
+    if flat.dtype != np.float64 or flat.size != size or not np.may_share_memory(flat, arr):
         raise ValueError(f"cannot bind an array of {arr.size} {arr.dtype} values to {size} values")
     return flat
 

@@ -43,7 +43,15 @@ from nlp_calib.codegen.compiler import (
 )
 from nlp_calib.core import interrupts, threads
 from nlp_calib.core.errors import CodegenError, NlpCalibWarning
-from nlp_calib.solvers.backends.base import INTERPRETED, Backend, BackendOptions, Request, scan_chunk
+from nlp_calib.solvers.backends.base import (
+    INTERPRETED,
+    MAP_SIZES,
+    Backend,
+    BackendOptions,
+    Request,
+    fold_sizes,
+    scan_chunk,
+)
 
 
 class CompiledBackend(Backend):
@@ -139,20 +147,25 @@ class CompiledBackend(Backend):
         return self._compile(Request(step, scan=True))
 
     def map(self, f: ca.Function, n: int, mapped_inputs: Sequence[str], reduce: bool) -> ca.Function:
+        # The chunks' sums are left side by side: a map that adds them itself takes a build time
+        # growing with their number (an addition per chunk), paid again for every window count.
         chunks = n // self.chunk
         fc = self._compile(Request(f, tuple(mapped_inputs), reduce))
         reduce_in = [i for i in range(f.n_in()) if f.name_in(i) not in mapped_inputs]
-        reduce_out = list(range(f.n_out())) if reduce else []
         if self.threads <= 1 or chunks <= 1:
-            return fc.map(f"{f.name()}_x{chunks}", "serial", chunks, reduce_in, reduce_out)
-        return self._threaded(fc, chunks, reduce_in, reduce_out)
+            return fc.map(f"{f.name()}_x{chunks}", "serial", chunks, reduce_in, [])
+        return self._threaded(fc, chunks, reduce_in)
 
-    def _threaded(
-        self, fc: ca.Function, chunks: int, reduce_in: list[int], reduce_out: list[int]
-    ) -> ca.Function:
-        """The chunk map on ``threads`` threads; broadcast inputs tiled, sums taken after."""
-        # map(n, 'thread', t) maps every input: a thin MX wrapper tiles the broadcast ones and
-        # sums the per-chunk partial sums (the 5-argument form would start a thread per chunk).
+    def parts(self, n: int) -> int:
+        return n // self.chunk
+
+    def spans(self, n: int) -> list[int]:
+        return [size * self.chunk for size in fold_sizes(n // self.chunk, MAP_SIZES)]
+
+    def _threaded(self, fc: ca.Function, chunks: int, reduce_in: list[int]) -> ca.Function:
+        """The chunk map on ``threads`` threads, broadcast inputs tiled."""
+        # map(n, 'thread', t) maps every input: a thin MX wrapper tiles the broadcast ones (the
+        # 5-argument form would start a thread per chunk).
         par = fc.map(chunks, "thread", min(self.threads, chunks))
         ins = [
             ca.MX.sym(
@@ -164,17 +177,10 @@ class CompiledBackend(Backend):
         ]
         args = [ca.repmat(s, 1, chunks) if i in reduce_in else s for i, s in enumerate(ins)]
         outs = par(*args)
-        outs = [outs] if isinstance(outs, ca.MX) else list(outs)
-        summed = []
-        for i, o in enumerate(outs):
-            if i in reduce_out:
-                cols = fc.sparsity_out(i).size2()
-                o = ca.mtimes(o, ca.repmat(ca.DM.eye(cols), chunks, 1))
-            summed.append(o)
         return ca.Function(
             f"{fc.name()}_t{chunks}",
             ins,
-            summed,
+            [outs] if isinstance(outs, ca.MX) else list(outs),
             [fc.name_in(i) for i in range(fc.n_in())],
             [fc.name_out(i) for i in range(fc.n_out())],
         )
