@@ -22,6 +22,7 @@ from nlp_calib.pipeline import (
     fault_check,
     profile_check,
     rival,
+    slip_check,
     truth,
 )
 from nlp_calib.pipeline.fit import Fit
@@ -54,6 +55,9 @@ RunCheck = Callable[[CalibrationRun, CheckContext], "CheckResult | None"]
 #: The plug-in checks, by name, in the order they run: the order the terminal, the report, the
 #: summary and the verdict's reasons name them in.
 RUN_CHECKS: dict[str, RunCheck] = {
+    # A value the speed moves is not determined, however closely the drive seems to pin it: the
+    # slip check's word on it comes first.
+    slip_check.NAME: lambda run, ctx: slip_check.check(run, ctx.model, ctx.fit),
     determinacy_check.NAME: lambda run, ctx: determinacy_check.check(run),
     "faults": lambda run, ctx: fault_check.check(run),
     "direction": lambda run, ctx: direction_check.check(run),

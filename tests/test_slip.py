@@ -1,0 +1,115 @@
+"""The slip check: a car whose rear axle slides out of bends never gets a wrong sensor_x with a
+small σ (it is said not determined), and a car that does not slide keeps its sensor_x."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline.slip_check import BINS, MIN_BINS, NAME, slopes, speed_bins
+from nlp_calib.results.run import DOUBTFUL, LIVE
+from nlp_calib.simulation.vehicles import HighwayOptions, RoadOptions, simulate_highway
+
+NAMES = {"k_traction": "traction_wheels_radius", "rear_track": "traction_track_width"}
+WHEELS = ("steering", "rear_left_wheel", "rear_right_wheel")
+
+
+def _run(
+    tmp_path: Path, seed: int, slip: float, model: str = "car_like", lag: Any = "auto"
+) -> tuple[Any, Any]:
+    """The highway car on a road with bends (its rear axle sliding out of them at ``slip`` rad per
+    m/s²) for 160 s, the axle distance and track given; its run and truth."""
+    road = RoadOptions(heading_change=-2.0, bend_angle=0.03, slip_gain=slip, pose_noise_time_s=5.0)
+    sim = simulate_highway(HighwayOptions(duration_s=160.0, seed=seed, road=road))
+    joints, poses, _ = sim.write(tmp_path / "car")
+    truth = {NAMES.get(n, n): v for n, v in sim.options.truth.items()}
+    encoders = dict(zip(WHEELS, WHEELS))
+    sc = {
+        "model": model,
+        "initial_guess": "auto",
+        "solvers": ["gauss_newton"],
+        "dataset": {"joints": str(joints), "poses": str(poses), "form": "speeds", "encoders": encoders},
+        "alignment": {"tracker_lag": lag},
+        "known": {n: truth[n] for n in ("wheelbase", "traction_track_width") if n in truth},
+    }
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(scenario_from_mapping(sc, "car", tmp_path)).run()
+    return run, truth
+
+
+def _slip(run: Any) -> Any:
+    return next(r for r in run.checks.more if r.name == NAME)
+
+
+@pytest.mark.parametrize("lag", ["auto", 0.0])
+def test_a_car_sliding_out_of_bends_never_hands_off_a_wrong_sensor_x(tmp_path: Path, lag: Any) -> None:
+    run, truth = _run(tmp_path, seed=7, slip=0.006, lag=lag)
+    estimate, std = (
+        run.reports["gauss_newton"].result.param_dict()["sensor_x"],
+        run.std("gauss_newton")["sensor_x"],
+    )
+    status, why = run.handoff_status("gauss_newton")["sensor_x"]
+    # Either right within its σ, or said not determined for the slip, never handed off live.
+    assert abs(estimate - truth["sensor_x"]) < std or "NOT DETERMINED" in why, (estimate, std, why)
+    assert abs(estimate - truth["sensor_x"]) > 3.0 * std  # the slip the check is for
+    assert status == DOUBTFUL and "moves with the speed" in why and "known:" in why
+    assert "sensor_x" in _slip(run).record["moved"]
+    assert any("NOT DETERMINED" in r and "sensor_x" in r for r in run.verdict.reasons)
+
+
+def test_a_car_that_does_not_slide_keeps_its_sensor_x(tmp_path: Path) -> None:
+    run, truth = _run(tmp_path, seed=7, slip=0.0)
+    estimate, std = (
+        run.reports["gauss_newton"].result.param_dict()["sensor_x"],
+        run.std("gauss_newton")["sensor_x"],
+    )
+    assert abs(estimate - truth["sensor_x"]) < 3.0 * std
+    found = _slip(run)
+    assert found.level == "fine" and found.record["moved"] == []
+    assert "speed" not in run.handoff_status("gauss_newton")["sensor_x"][1]
+    assert run.handoff_status("gauss_newton")["sensor_theta"][0] == LIVE
+
+
+def test_the_lines_over_the_speed_squared_are_weighted_least_squares() -> None:
+    rng = np.random.default_rng(3)
+    squared = np.linspace(8.0, 20.0, BINS) ** 2
+    variance = rng.uniform(0.01, 0.2, (BINS, 2))
+    fits = np.stack([1.9 - 0.004 * squared, np.full(BINS, 0.3)], axis=1) + rng.normal(0, np.sqrt(variance))
+    fits[4] = np.nan  # a piece whose fit failed is left out
+    lines = slopes(fits, variance, squared)
+    keep = np.arange(BINS) != 4
+    assert lines.dof == BINS - 3
+    for i in range(2):  # numpy's weighted polynomial fit, its covariance scaled by the residuals
+        w = 1.0 / np.sqrt(variance[keep, i])
+        coef, cov = np.polyfit(squared[keep], fits[keep, i], 1, w=w, cov=True)
+        assert lines.slope[i] == pytest.approx(coef[0]) and lines.at_zero[i] == pytest.approx(coef[1])
+        assert lines.std[i] == pytest.approx(np.sqrt(cov[0, 0]))
+        assert lines.std_at_zero[i] == pytest.approx(np.sqrt(cov[1, 1]))
+
+
+def test_the_bins_go_by_speed_and_need_loaded_bends_at_varied_speeds() -> None:
+    n = 4000
+    speed = 14.0 + 6.0 * np.sin(np.linspace(0.0, 6.0, n))
+    rate = 0.15 * np.sin(np.linspace(0.0, 40.0, n))
+    cut = speed_bins(speed, rate)
+    assert cut is not None
+    label, squared = cut
+    assert set(label) == set(range(BINS))
+    for j in range(BINS - 1):  # slowest first
+        assert speed[label == j].max() <= speed[label == j + 1].min()
+    first = label == 0  # weighed by the squared turn rate
+    assert squared[0] == pytest.approx(
+        np.sum(rate[first] ** 2 * speed[first] ** 2) / np.sum(rate[first] ** 2)
+    )
+    standing = speed.copy()
+    standing[:10] = 0.0
+    assert np.all(speed_bins(standing, rate)[0][:10] == -1)  # type: ignore[index]
+    assert speed_bins(speed, 0.02 * rate) is None  # bends that barely load the tyres
+    assert speed_bins(np.full(n, 14.0), rate) is None  # one speed
+    assert MIN_BINS < BINS
