@@ -47,7 +47,8 @@ def report(out: Path, seed: int, truth: float) -> None:
     t = (slip.get("slope_in_sigma") or {}).get("sensor_x")
     zero = (slip.get("at_zero_speed") or {}).get("sensor_x")
     concern = r["verdict"]["concerns"].get("sensor_x", "")
-    said = "NOT DETERMINED (slip)" if "NOT DETERMINED" in concern else ("doubtful" if concern else "calibrated")
+    said = "NOT DETERMINED (slip)" if "NOT DETERMINED" in concern else "doubtful"
+    said = said if concern else "calibrated"
     slope = "no slip check" if t is None else f"slope {t:+.1f}σ, {zero:.3f} m at zero speed"
     print(
         f"seed {seed}: sensor_x truth {truth:.3f} estimate {x:.3f} ± {std:.3f} |error|/σ "

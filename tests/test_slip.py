@@ -84,7 +84,7 @@ def test_the_lines_over_the_speed_squared_are_weighted_least_squares() -> None:
     fits[4] = np.nan  # a piece whose fit failed is left out
     lines = slopes(fits, variance, squared)
     keep = np.arange(BINS) != 4
-    assert lines.dof == BINS - 3
+    assert np.all(lines.dof == BINS - 3)
     for i in range(2):  # numpy's weighted polynomial fit, its covariance scaled by the residuals
         w = 1.0 / np.sqrt(variance[keep, i])
         coef, cov = np.polyfit(squared[keep], fits[keep, i], 1, w=w, cov=True)

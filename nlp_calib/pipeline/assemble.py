@@ -455,10 +455,12 @@ def joint_run(
     notes: Sequence[str],
     views: MountViews | None = None,
     against: StoredCalibration | None = None,
+    fitting: Fit | None = None,
 ) -> CalibrationRun:
     """The joint fit as one run: its figures over every log's fitted records (``figures``), the
     fit's checks, every log's findings, and its own verdict. ``fit``: the first log (its model,
-    encoders and sensor frame), where the solvers started and the fitted windows."""
+    encoders and sensor frame), where the solvers started and the fitted windows; ``fitting``: the
+    joint fit itself, for the checks that refit its windows."""
     prepared, start, n_residuals = fit
     first = parts[0]
     records = sum(run.data.fit[1] - run.data.fit[0] for run in parts)
@@ -499,7 +501,7 @@ def joint_run(
         verdict=Verdict("", ()),
     )
     # The plug-in checks on the joint fit: no log source's files (a simulated log's truth is each log's).
-    context = CheckContext(model=prepared.model, against=against)
+    context = CheckContext(model=prepared.model, against=against, fit=fitting)
     run = dataclasses.replace(run, checks=dataclasses.replace(checks, more=run_checks(run, context)))
     run = _believed_plan(run)
     return judged(run, verdict(run, prepared.model), prepared.scenario.objective.sensor.sensor.components)

@@ -55,14 +55,12 @@ RunCheck = Callable[[CalibrationRun, CheckContext], "CheckResult | None"]
 #: The plug-in checks, by name, in the order they run: the order the terminal, the report, the
 #: summary and the verdict's reasons name them in.
 RUN_CHECKS: dict[str, RunCheck] = {
-    # A value the speed moves is not determined, however closely the drive seems to pin it: the
-    # slip check's word on it comes first.
-    slip_check.NAME: lambda run, ctx: slip_check.check(run, ctx.model, ctx.fit),
     determinacy_check.NAME: lambda run, ctx: determinacy_check.check(run),
     "faults": lambda run, ctx: fault_check.check(run),
     "direction": lambda run, ctx: direction_check.check(run),
     "consistency": lambda run, ctx: consistency_check.check(run),
     profile_check.NAME: lambda run, ctx: profile_check.check(run, ctx.scenario, ctx.model, ctx.fit),
+    slip_check.NAME: lambda run, ctx: slip_check.check(run, ctx.model, ctx.fit),
     "truth": lambda run, ctx: truth.check(run, ctx.files, ctx.convert),
     "model": lambda run, ctx: rival.check(run, ctx.scenario),
     "drift": lambda run, ctx: drift_check.check(run, ctx.against, ctx.model),
