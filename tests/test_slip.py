@@ -19,23 +19,31 @@ NAMES = {"k_traction": "traction_wheels_radius", "rear_track": "traction_track_w
 WHEELS = ("steering", "rear_left_wheel", "rear_right_wheel")
 
 
-def _run(
-    tmp_path: Path, seed: int, slip: float, model: str = "car_like", lag: Any = "auto"
-) -> tuple[Any, Any]:
+def _drive(
+    tmp_path: Path, seed: int, slip: float, duration: float
+) -> tuple[dict[str, Any], dict[str, float]]:
     """The highway car on a road with bends (its rear axle sliding out of them at ``slip`` rad per
-    m/s²) for 160 s, the axle distance and track given; its run and truth."""
+    m/s²) for ``duration`` s: its dataset entry and truth."""
     road = RoadOptions(heading_change=-2.0, bend_angle=0.03, slip_gain=slip, pose_noise_time_s=5.0)
-    sim = simulate_highway(HighwayOptions(duration_s=160.0, seed=seed, road=road))
-    joints, poses, _ = sim.write(tmp_path / "car")
+    sim = simulate_highway(HighwayOptions(duration_s=duration, seed=seed, road=road))
+    joints, poses, _ = sim.write(tmp_path / f"car{seed}")
     truth = {NAMES.get(n, n): v for n, v in sim.options.truth.items()}
     encoders = dict(zip(WHEELS, WHEELS))
+    return {"joints": str(joints), "poses": str(poses), "form": "speeds", "encoders": encoders}, truth
+
+
+def _run(tmp_path: Path, seed: int, slip: float, lag: Any = "auto", logs: int = 1) -> tuple[Any, Any]:
+    """The car of :func:`_drive` (160 s; or ``logs`` drives of 90 s from ``seed`` on, fitted
+    together), the axle distance and track given: its run and truth."""
+    drives = [_drive(tmp_path, seed + i, slip, 160.0 if logs == 1 else 90.0) for i in range(logs)]
+    truth = drives[0][1]
     sc = {
-        "model": model,
+        "model": "car_like",
         "initial_guess": "auto",
         "solvers": ["gauss_newton"],
-        "dataset": {"joints": str(joints), "poses": str(poses), "form": "speeds", "encoders": encoders},
+        **({"dataset": drives[0][0]} if logs == 1 else {"datasets": [d for d, _ in drives]}),
         "alignment": {"tracker_lag": lag},
-        "known": {n: truth[n] for n in ("wheelbase", "traction_track_width") if n in truth},
+        "known": {n: truth[n] for n in ("wheelbase", "traction_track_width")},
     }
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -47,9 +55,12 @@ def _slip(run: Any) -> Any:
     return next(r for r in run.checks.more if r.name == NAME)
 
 
-@pytest.mark.parametrize("lag", ["auto", 0.0])
-def test_a_car_sliding_out_of_bends_never_hands_off_a_wrong_sensor_x(tmp_path: Path, lag: Any) -> None:
-    run, truth = _run(tmp_path, seed=7, slip=0.006, lag=lag)
+@pytest.mark.parametrize(("lag", "logs"), [("auto", 1), (0.0, 1), ("auto", 2)])
+def test_a_car_sliding_out_of_bends_never_hands_off_a_wrong_sensor_x(
+    tmp_path: Path, lag: Any, logs: int
+) -> None:
+    """One log with the lag fitted and held, and two logs fitted together (seeds 7 and 8)."""
+    run, truth = _run(tmp_path, seed=7, slip=0.006, lag=lag, logs=logs)
     estimate, std = (
         run.reports["gauss_newton"].result.param_dict()["sensor_x"],
         run.std("gauss_newton")["sensor_x"],
