@@ -142,14 +142,22 @@ def bin_fits(
 @dataclass(frozen=True)
 class Lines:
     """Each parameter's weighted line over the speed squared: its value at zero speed and that
-    value's σ, its slope (per (m/s)²) and the slope's σ, on ``dof`` degrees of freedom (NaN: too
-    few bins fitted)."""
+    value's σ, its slope (per (m/s)²) and the slope's σ, on ``dof`` degrees of freedom, and the
+    drive's ``lever``: the bins' speed squared weighed as the line weighs them, where the line
+    passes the whole drive's fit (NaN: too few bins fitted)."""
 
     at_zero: np.ndarray
     std_at_zero: np.ndarray
     slope: np.ndarray
     std: np.ndarray
     dof: np.ndarray
+    lever: np.ndarray
+
+    def shift(self) -> np.ndarray:
+        """The σ the slip adds to each parameter's σ to believe, ``lever·√(slope² + σ_slope²)``:
+        the root mean square, over what the line allows, of the distance from the drive's fit to
+        the value at zero speed (see the module's docstring)."""
+        return np.abs(self.lever) * np.hypot(self.slope, self.std)
 
 
 def slopes(fits: np.ndarray, variance: np.ndarray, squared: np.ndarray) -> Lines:
@@ -171,7 +179,7 @@ def slopes(fits: np.ndarray, variance: np.ndarray, squared: np.ndarray) -> Lines
         std_at_zero = np.sqrt(scale * (1.0 / total + u_mean**2 / spread))
         std = np.sqrt(scale / spread)
     few = dof < MIN_BINS - 2
-    return Lines(*(np.where(few, np.nan, v) for v in (at_zero, std_at_zero, slope, std, dof)))
+    return Lines(*(np.where(few, np.nan, v) for v in (at_zero, std_at_zero, slope, std, dof, u_mean)))
 
 
 @dataclass(frozen=True)
@@ -204,6 +212,8 @@ class SpeedLines:
             "slope_in_sigma": by_name(self.t),
             "at_zero_speed": by_name(self.lines.at_zero),
             "std_at_zero_speed": by_name(self.lines.std_at_zero),
+            "lever_speed_squared": by_name(self.lines.lever),
+            "std_slip": by_name(self.lines.shift()),
             "moved": [self.names[i] for i in self.moved],
         }
 
