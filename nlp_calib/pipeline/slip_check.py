@@ -17,7 +17,10 @@ of its σ that moves the parameter over the speeds driven by more than the preci
 calibration needs means the model lacks what moves it: the run's value and its σ are not believed
 and the parameter is said NOT DETERMINED (a caveat concerning it, so no hand-off file writes it as
 calibrated), with its value at zero speed by the line (what a linear tyre model gives) and what to
-do. The check runs on bases that cannot turn on the spot (cars: a turn on the spot has no lateral
+do. A slope under the limit does not rule the slip out: each parameter's σ to believe takes
+in what the line leaves open (:meth:`Lines.shift`; the rule and why in docs/models.md), the
+drive's fit being, by the line, ``lever·slope`` from the value at zero speed. The check runs on
+bases that cannot turn on the spot (cars: a turn on the spot has no lateral
 load) whose drive reaches :data:`MIN_LATERAL` in its bends.
 
 A bin of speeds is whichever stretches of the drive drove at that speed; a drive that changes its
