@@ -113,11 +113,22 @@ def between_logs_std(believed: float, white: float, folds: int) -> float:
 
 
 def run_between_logs(run: CalibrationRun, solver: str) -> dict[str, float]:
-    """Each σ to believe of a run's estimate as :func:`between_logs_std` widens it."""
+    """Each σ to believe of a run's estimate as :func:`between_logs_std` widens it (the slip's σ,
+    a shift the whole drive shares already, added to it unwidened)."""
     white = run.reports[solver].uncertainty.std_dict()
     cv = run.checks.crossval
     folds = len(cv.converged) if cv is not None else 0
-    return {n: between_logs_std(sd, white[n], folds) for n, sd in run.std(solver).items()}
+    full = run.std(solver)
+    return {
+        n: with_slip(between_logs_std(sd, white[n], folds), sd, full[n])
+        for n, sd in run.std(solver, slip=False).items()
+    }
+
+
+def with_slip(widened: float, base: float, full: float) -> float:
+    """``widened`` (a σ to believe without the slip's, ``base``, made wider) with what the slip adds
+    to ``base`` to make ``full`` added in quadrature."""
+    return math.sqrt(widened * widened + max(0.0, full * full - base * base))
 
 
 def run_dof(run: CalibrationRun, solver: str) -> dict[str, float]:

@@ -63,10 +63,13 @@ RANGE_SIGMAS = 3.0
 def concerns(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[str, str]:
     """Each parameter a caveat of ``solver``'s estimate names, with that caveat: each parameter a
     plug-in check puts in doubt (known too loosely, different between forward and reverse driving
-    or between logs; the first check's word, in registry order), every parameter under a check's
-    caveat on all of them (a wrong model's), or different between the converged solvers."""
+    or between logs; the first check's word, in registry order, after those of a check whose word
+    on its parameters comes first: one that finds them not determined at all), every parameter
+    under a check's caveat on all of them (a wrong model's), or different between the converged
+    solvers."""
     out: dict[str, str] = {}
-    for r in run.checks.more:
+    first = [r for r in run.checks.more if r.about.get("concerns") == "first"]
+    for r in [*first, *(r for r in run.checks.more if r not in first)]:
         if r.level in (CAVEAT, UNUSABLE):
             for n, why in r.concerns.items():
                 out.setdefault(n, why)

@@ -8,6 +8,7 @@ Nothing time-dependent is written: the same run gives the same bytes.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -86,6 +87,8 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "std": best["std"],
         "std_white_noise": best["std_white_noise"],
         "std_blocks": sigmas(run, solver, (doc["crossvalidation"] or {}).get("std_blocks")),
+        # What the slip check's lines leave open of a slip the model lacks, in 'std' already.
+        **_slip_entry(run, solver),
         # The jackknife σ's folds (its degrees of freedom + 1) and the formulation fitted: what
         # `nlp-calib check` needs to judge this calibration on a new log.
         "std_blocks_folds": len(run.checks.crossval.converged) if run.checks.crossval is not None else 0,
@@ -229,6 +232,15 @@ def _represent_str(dumper: yaml.SafeDumper, data: str) -> yaml.Node:
 _Dumper.add_representer(str, _represent_str)
 
 
+def _slip_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
+    """``std_slip``: each parameter's σ of the slip (null: none), where the slip check measured it."""
+    names = run.reports[solver].uncertainty.names
+    slip = {n: float(v) if math.isfinite(v) else None for n, v in zip(names, run.checks.slip(names))}
+    if all(v is None for v in slip.values()):
+        return {}
+    return {"std_slip": sigmas(run, solver, slip)}
+
+
 def calibration_yaml(doc: Mapping[str, Any]) -> str:
     """YAML text of a calibration document (a comment header, then the document)."""
     head = (
@@ -236,8 +248,13 @@ def calibration_yaml(doc: Mapping[str, Any]) -> str:
         f"{escaped(doc['scenario']['name'])}.\n"
         f"# 'parameters' are {doc['solver']}'s estimate ({doc['solver_choice']}); 'std' is the 1 sigma to\n"
         "# believe: the larger of 'std_white_noise' (white tracker and encoder noise only: a floor) and\n"
-        "# 'std_blocks' (the spread of fits each without one block of the drive: every error that varies).\n"
-        f"# {_mount_words(doc)}: pose of the '{escaped(doc['frames']['sensor'])}' frame in "
+        "# 'std_blocks' (the spread of fits each without one block of the drive: every error that varies)"
+        + (
+            ",\n# with 'std_slip' (a slip of the tyres the drive's speeds leave open) added in quadrature.\n"
+            if "std_slip" in doc
+            else ".\n"
+        )
+        + f"# {_mount_words(doc)}: pose of the '{escaped(doc['frames']['sensor'])}' frame in "
         f"'{escaped(doc['frames']['parent'])}'.\n"
     )
     body = yaml.dump(

@@ -102,6 +102,13 @@ def widened_lines(run: CalibrationRun) -> list[str]:
         wider = [n for n, b, v in zip(names, base, spread) if np.isfinite(v) and v > b]
         if wider:
             out.append(f"   σ of {', '.join(wider)}: {label} (they move with the driving: a model limit)")
+    slip = checks.slip(names)
+    wider = [n for n, b, v in zip(names, base, slip) if np.isfinite(v) and v > b]
+    if wider:
+        out.append(
+            f"   σ of {', '.join(wider)}: with the tyres' slip the drive's speeds leave open, in "
+            "quadrature (the slip check's lines over the speed squared)"
+        )
     return out
 
 

@@ -7,6 +7,7 @@ one run per log, each with the joint estimates and checks beside that log's own 
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +40,7 @@ from nlp_calib.results import (
     SolverResult,
     Verdict,
 )
-from nlp_calib.results.checks import NominalCheck, believed_std
+from nlp_calib.results.checks import NominalCheck
 from nlp_calib.results.faults import FaultReport, Findings
 from nlp_calib.results.layout import KNOWN, MODEL, MOUNT, Layout
 from nlp_calib.results.mount import LogMount, SensorMount
@@ -222,7 +223,7 @@ def _report(
     with a mount per log)."""
     u = fitted[0].uncertainty[name]
     scored, views = figures
-    std = believed_std(u.std, *fitted[1].spreads(u.std))
+    std = fitted[1].believed(u)
     scales = encoder_scales(prepared)
     estimate = (result.params, std, u.correlation)
     given = given_params(prepared)
@@ -243,6 +244,27 @@ def _report(
     return SolverReport(
         result, u, *scored.scores[name], controller, mount.holding(held), every, held=listed, beside=beside
     )
+
+
+def _checked(
+    run: CalibrationRun,
+    context: CheckContext,
+    prepared: PreparedLog,
+    analysed: tuple[FitAnalysis, LogAnalysis, MountViews | None],
+) -> CalibrationRun:
+    """``run`` with its plug-in checks' results, its reports made again where the checks widened
+    the σ to believe (the slip's σ, which only a check measures): the mount and the controller's
+    figures state the σ every file does. ``analysed``: the fit's analysis, the log's figures and
+    the mounts' views the reports were made from."""
+    checks = dataclasses.replace(run.checks, more=run_checks(run, context))
+    fitted, figures, views = analysed
+    if not any(math.isfinite(v) for r in run.reports.values() for v in checks.slip(r.uncertainty.names)):
+        return dataclasses.replace(run, checks=checks)
+    reports = {
+        name: _report(prepared, name, r.result, (fitted, checks), (figures, views))
+        for name, r in run.reports.items()
+    }
+    return dataclasses.replace(run, checks=checks, reports=reports)
 
 
 def given_params(prepared: PreparedLog) -> dict[str, str]:
@@ -381,13 +403,8 @@ def assemble_run(
     # Joints in radians: the simulator's truth is in the counts form's names and units; a log's
     # truth is of its own mount.
     convert = _own_truth(_per_count_left_out(getattr(prepared.model, "from_counts", dict), prepared), views)
-    checks = dataclasses.replace(
-        run.checks,
-        more=run_checks(
-            run, CheckContext(source.files(), convert, prepared.scenario, prepared.model, against, fit)
-        ),
-    )
-    run = _believed_plan(dataclasses.replace(run, checks=checks))
+    context = CheckContext(source.files(), convert, prepared.scenario, prepared.model, against, fit)
+    run = _believed_plan(_checked(run, context, prepared, (fitted, figures, views)))
     return judged(
         run, verdict(run, prepared.model, hint), prepared.scenario.objective.sensor.sensor.components
     )
@@ -455,10 +472,12 @@ def joint_run(
     notes: Sequence[str],
     views: MountViews | None = None,
     against: StoredCalibration | None = None,
+    fitting: Fit | None = None,
 ) -> CalibrationRun:
     """The joint fit as one run: its figures over every log's fitted records (``figures``), the
     fit's checks, every log's findings, and its own verdict. ``fit``: the first log (its model,
-    encoders and sensor frame), where the solvers started and the fitted windows."""
+    encoders and sensor frame), where the solvers started and the fitted windows; ``fitting``: the
+    joint fit itself, for the checks that refit its windows."""
     prepared, start, n_residuals = fit
     first = parts[0]
     records = sum(run.data.fit[1] - run.data.fit[0] for run in parts)
@@ -499,9 +518,8 @@ def joint_run(
         verdict=Verdict("", ()),
     )
     # The plug-in checks on the joint fit: no log source's files (a simulated log's truth is each log's).
-    context = CheckContext(model=prepared.model, against=against)
-    run = dataclasses.replace(run, checks=dataclasses.replace(checks, more=run_checks(run, context)))
-    run = _believed_plan(run)
+    context = CheckContext(model=prepared.model, against=against, fit=fitting)
+    run = _believed_plan(_checked(run, context, prepared, (fitted, figures, views)))
     return judged(run, verdict(run, prepared.model), prepared.scenario.objective.sensor.sensor.components)
 
 

@@ -304,7 +304,7 @@ def _joint(
     info = dataclasses.replace(info, layout=tightest(info.layout, [run.scenario.layout for run in parts]))
     fit = (first.prepared, start, fitting.data.n_residuals)
     views = MountViews(fitting.fns, 0, tuple((run.scenario.name, run.log) for run in parts))
-    return joint_run(info, parts, fit, results, fitted, figures, notes, views, against)
+    return joint_run(info, parts, fit, results, fitted, figures, notes, views, against, fitting)
 
 
 def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:

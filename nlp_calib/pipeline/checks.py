@@ -9,6 +9,7 @@ caveats. Adding one touches nothing else.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +23,7 @@ from nlp_calib.pipeline import (
     fault_check,
     profile_check,
     rival,
+    slip_check,
     truth,
 )
 from nlp_calib.pipeline.fit import Fit
@@ -54,6 +56,8 @@ RunCheck = Callable[[CalibrationRun, CheckContext], "CheckResult | None"]
 #: The plug-in checks, by name, in the order they run: the order the terminal, the report, the
 #: summary and the verdict's reasons name them in.
 RUN_CHECKS: dict[str, RunCheck] = {
+    # First: its σ of the slip is part of the σ to believe every later check reads.
+    slip_check.NAME: lambda run, ctx: slip_check.check(run, ctx.model, ctx.fit),
     determinacy_check.NAME: lambda run, ctx: determinacy_check.check(run),
     "faults": lambda run, ctx: fault_check.check(run),
     "direction": lambda run, ctx: direction_check.check(run),
@@ -66,6 +70,12 @@ RUN_CHECKS: dict[str, RunCheck] = {
 
 
 def run_checks(run: CalibrationRun, context: CheckContext) -> tuple[CheckResult, ...]:
-    """Every registered check's result on ``run`` (those with something to say)."""
-    found = (check(run, context) for check in RUN_CHECKS.values())
-    return tuple(r for r in found if r is not None)
+    """Every registered check's result on ``run`` (those with something to say), each check
+    reading the run with the results of those before it (the σ to believe they widen)."""
+    found: list[CheckResult] = []
+    for check in RUN_CHECKS.values():
+        seen = dataclasses.replace(run, checks=dataclasses.replace(run.checks, more=tuple(found)))
+        result = check(seen, context)
+        if result is not None:
+            found.append(result)
+    return tuple(found)

@@ -219,6 +219,20 @@ class Checks:
         pivots = self.pivots.beyond(white) if self.pivots is not None else np.full(n, np.nan)
         return [blocks, pivots, *(spread for _, spread in self.moving())]
 
+    def believed(self, u: Uncertainty, slip: bool = True) -> np.ndarray:
+        """The σ to believe of the estimate whose white-noise σ ``u`` gives (see
+        :meth:`CalibrationRun.std`; ``slip``: with the slip's σ)."""
+        base = believed_std(u.std, *self.spreads(u.std))
+        added = self.slip(u.names) if slip else np.full(len(u.names), np.nan)
+        return np.where(np.isfinite(added), np.hypot(base, added), base)
+
+    def slip(self, names: tuple[str, ...]) -> np.ndarray:
+        """Each of ``names``' σ of the slip (the ``slip`` plug-in's ``std_slip``: what the drive
+        leaves open of a lateral slip the model lacks; NaN where it has none)."""
+        found = self.plugin("slip")
+        std = (found.record or {}).get("std_slip") or {} if found is not None else {}
+        return np.array([np.nan if std.get(n) is None else std[n] for n in names], dtype=float)
+
     def moving(self) -> list[tuple[str, np.ndarray]]:
         """How much parameters move with the driving, where they do (NaN elsewhere), each with what
         measured it: over several logs, the logs' jackknife for each parameter that moves between
@@ -323,11 +337,14 @@ class CalibrationRun:
             return [(self, "")]
         return [*((part, part.scenario.name) for part in self.logs), (self, "")]
 
-    def std(self, solver: str) -> dict[str, float]:
+    def std(self, solver: str, slip: bool = True) -> dict[str, float]:
         """The 1σ to believe for ``solver``'s estimate: the largest of the white-noise σ, the block
-        cross-validation's jackknife σ and the spreads the checks found (:meth:`Checks.spreads`)."""
+        cross-validation's jackknife σ and the spreads the checks found (:meth:`Checks.spreads`),
+        with the slip's σ (:meth:`Checks.slip`) added in quadrature (``slip``: False, without it).
+        In quadrature: the slip shifts the whole drive's fit at once, an error none of the others
+        measures (:meth:`Checks.believed`)."""
         u = self.reports[solver].uncertainty
-        std = dict(zip(u.names, map(float, believed_std(u.std, *self.checks.spreads(u.std)))))
+        std = dict(zip(u.names, map(float, self.checks.believed(u, slip))))
         return {n: float("nan") if n in self.pinned() else s for n, s in std.items()}
 
     def pinned(self) -> tuple[str, ...]:

@@ -1,0 +1,296 @@
+"""The ``slip`` plug-in check: does the calibration hold at every speed a car drove its bends at?
+
+A car's tyres carry a bend by slip angles: its rear axle slides out of the bend by an angle about
+proportional to the lateral acceleration (the linear single-track, "understeer", model: a few
+mrad per m/s² on a road car), which the kinematic models lack. At speed ``v`` on curvature ``κ``
+that slip moves the rear axle sideways at ``c·v³·κ``, which a sensor ahead of the axle by ``x``
+explains as ``x·v·κ`` wherever the speed varies little: the fit moves ``sensor_x`` by ``c·v²``
+(0.8 m on a car at 14 m/s with 4 mrad per m/s²), and its σ, the spread of fits along the drive,
+says nothing of a shift that every part of the drive shares.
+
+What tells it is the speed: the drive's moving intervals are put in :data:`BINS` bins of speed,
+each bin's windows fitted on their own from the run's estimate, and each parameter's fits regressed
+on the bins' speed squared (the slip's shift grows with ``v²``; a bin's speed is its intervals'
+weighed by their squared turn rate, as a lever arm's information is), each bin weighed by its own
+information, the slope's σ from the fits' scatter about the line. A slope beyond :data:`T_LIMIT`
+of its σ that moves the parameter over the speeds driven by more than the precision the
+calibration needs means the model lacks what moves it: the run's value and its σ are not believed
+and the parameter is said NOT DETERMINED (a caveat concerning it, so no hand-off file writes it as
+calibrated), with its value at zero speed by the line (what a linear tyre model gives) and what to
+do. A slope under the limit does not rule the slip out: each parameter's σ to believe takes
+in what the line leaves open (:meth:`Lines.shift`; the rule and why in docs/models.md), the
+drive's fit being, by the line, ``lever·slope`` from the value at zero speed. The check runs on
+bases that cannot turn on the spot (cars: a turn on the spot has no lateral
+load) whose drive reaches :data:`MIN_LATERAL` in its bends.
+
+A bin of speeds is whichever stretches of the drive drove at that speed; a drive that changes its
+speed slowly puts few stretches in each, and an error that varies along the drive (a wandering
+tracker, one bend) then moves neighbouring bins together, which the scatter does not see: the
+limit is set above the scatter's own 1-in-250 point for that. Pieces of the drive in time order
+would be independent, but each drives at its own stretch's speed: they span less of the speeds
+and hold fewer bends each, and tell the slip less often.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.analysis.noise_rates import base_increments
+from nlp_calib.models import KinematicModel
+from nlp_calib.pipeline import validation
+from nlp_calib.pipeline.fit import Fit
+from nlp_calib.problem import ResidualData
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.checks import CAVEAT, FINE, CheckResult
+from nlp_calib.solvers.evaluation import is_singular
+
+NAME = "slip"
+#: The lateral acceleration (m/s²) the drive's bends must reach, at the 90th percentile of its moving
+#: intervals, for the check to run: below it a road tyre's slip angle stays within a few mrad.
+MIN_LATERAL = 1.0
+#: The slowest bin's speed must be under this share of the fastest's: the slip's shift grows with
+#: the speed squared, so a drive at nearly one speed cannot tell it.
+SPEED_RATIO = 0.85
+#: Bins of speed fitted on their own, and how many of them must be fitted.
+BINS = 16
+MIN_BINS = 10
+#: A slope beyond this many of its σ is a finding: Student's t with 14 degrees of freedom passes
+#: it by chance one time in 800 (3.4: one in 250), with room for neighbouring bins that share an
+#: error (see the module's docstring).
+T_LIMIT = 4.0
+#: The solver whose estimate the bins are fitted from.
+SOLVER = "gauss_newton"
+
+
+def interval_motion(fit: Fit, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each interval's base speed (m/s) and turn rate (rad/s) with ``params`` (the full vector;
+    NaN across logs and where the records' stamps do not space it)."""
+    data = fit.data
+    steps = base_increments(fit.fns, params, data.inputs, np.zeros(data.inputs.shape[0]))[0]
+    dt = interval_durations(data)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed = np.where(dt > 0, np.hypot(steps[:, 0], steps[:, 1]) / dt, np.nan)
+        rate = np.where(dt > 0, steps[:, 2] / dt, np.nan)
+    return speed, rate
+
+
+def interval_durations(data: ResidualData) -> np.ndarray:
+    """Each interval's duration (s) from its log's stamps; NaN between logs (and everywhere when
+    the logs' records are not the windows')."""
+    parts = [np.append(np.diff(np.asarray(lg.time_s, dtype=float)), np.nan) for lg in data.logs]
+    dt = np.concatenate(parts)[:-1] if parts else np.zeros(0)
+    if dt.size != data.n_records - 1:
+        return np.full(data.n_records - 1, np.nan)
+    return dt
+
+
+def speed_bins(speed: np.ndarray, rate: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per interval its bin of speed (0 to :data:`BINS` − 1, slowest first, split at the moving
+    intervals' quantiles; −1 standing or not timed) and each bin's speed squared, its intervals'
+    weighed by their squared turn rate (a straight bin's: their mean); None when the drive's bends
+    stay under :data:`MIN_LATERAL` or its bins drive at nearly one speed (:data:`SPEED_RATIO`)."""
+    moving = np.isfinite(speed) & np.isfinite(rate) & (speed > 0.0)
+    if moving.sum() < 4 * BINS or np.percentile(np.abs(speed * rate)[moving], 90) < MIN_LATERAL:
+        return None
+    edges = np.quantile(speed[moving], np.linspace(0.0, 1.0, BINS + 1)[1:-1])
+    label = np.where(moving, np.searchsorted(edges, np.where(moving, speed, 0.0)), -1)
+    if np.any(np.bincount(label[moving], minlength=BINS) == 0):  # speeds too alike to split
+        return None
+    squared = np.empty(BINS)
+    for j in range(BINS):
+        v2, w = speed[label == j] ** 2, rate[label == j] ** 2
+        squared[j] = np.sum(w * v2) / np.sum(w) if np.sum(w) > 0 else np.mean(v2)
+    if not np.sqrt(squared.min()) < SPEED_RATIO * np.sqrt(squared.max()):
+        return None
+    return label, squared
+
+
+def bin_fits(
+    run: CalibrationRun, model: KinematicModel, fit: Fit, label: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each bin's own fit ``(BINS, n_params)`` in canonical form, from the run's estimate, what the
+    bin cannot determine held there, and each value's white-noise variance (its bin's information
+    alone: what weighs the bins against each other); NaN for a held parameter and for a bin whose
+    fit did not converge or had too few windows. A bin's intervals are those ``label`` gives its
+    number. Every free parameter is fitted at once, as the run fits them: fitted one at a time, each
+    takes up what the others would (a gain moves with a slipping sensor's lever arm), and
+    a drive whose few stretches of one speed share an error is more often taken for a slip."""
+    x = np.asarray(run.reports[SOLVER].result.x, dtype=float)
+    binder, data, fns = fit.problem.binder, fit.data, fit.fns
+    at = [fns.names.index(f) for f in fns.free]
+    fits, variance = np.full((BINS, len(fns.names)), np.nan), np.full((BINS, len(fns.names)), np.nan)
+
+    def own(j: int) -> None:
+        part = label == j
+        hold = [n for n in model.undetermined(data.inputs[:, part]) if n in fns.free]
+        crossing = data.interval_counts(~part) > 0
+        params, converged, n, ev = validation.refit_without(
+            validation.holding(binder, x, hold), data, crossing, x
+        )
+        if ev is None:
+            return
+        H = ev.normal_equations(params[at]).H
+        ev.release()
+        if converged and n >= 10 * fns.n_free and not is_singular(H):
+            free = [i for i, f in zip(at, fns.free) if f not in hold]
+            fits[j, free] = fit.canonical_params(params)[free]
+            variance[j, at] = np.diag(np.linalg.inv(H))
+
+    validation.on_threads(own, list(range(BINS)))
+    return fits, variance
+
+
+@dataclass(frozen=True)
+class Lines:
+    """Each parameter's weighted line over the speed squared: its value at zero speed and that
+    value's σ, its slope (per (m/s)²) and the slope's σ, on ``dof`` degrees of freedom, and the
+    drive's ``lever``: the bins' speed squared weighed as the line weighs them, where the line
+    passes the whole drive's fit (NaN: too few bins fitted)."""
+
+    at_zero: np.ndarray
+    std_at_zero: np.ndarray
+    slope: np.ndarray
+    std: np.ndarray
+    dof: np.ndarray
+    lever: np.ndarray
+
+    def shift(self) -> np.ndarray:
+        """The σ the slip adds to each parameter's σ to believe, ``lever·√(slope² + σ_slope²)``:
+        the root mean square, over what the line allows, of the distance from the drive's fit to
+        the value at zero speed (see the module's docstring)."""
+        return np.abs(self.lever) * np.hypot(self.slope, self.std)
+
+
+def slopes(fits: np.ndarray, variance: np.ndarray, squared: np.ndarray) -> Lines:
+    """Each parameter's line through its ``fits`` (one row per bin; NaN left out) over the bins'
+    speed ``squared``, each bin weighed by its information, the σ from the fits' weighted scatter
+    about the line (the information sets only the bins' relative weights: what the bins truly
+    differ by sets the scale)."""
+    ok = np.isfinite(fits) & np.isfinite(variance) & (variance > 0) & np.isfinite(squared)[:, None]
+    w = np.where(ok, 1.0 / np.where(ok, variance, 1.0), 0.0)
+    f, u = np.where(ok, fits, 0.0), np.where(ok, squared[:, None], 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        total = np.sum(w, axis=0)
+        u_mean, f_mean = np.sum(w * u, axis=0) / total, np.sum(w * f, axis=0) / total
+        spread = np.sum(w * (u - u_mean) ** 2, axis=0)
+        slope = np.sum(w * (u - u_mean) * (f - f_mean), axis=0) / spread
+        at_zero = f_mean - slope * u_mean
+        dof = np.sum(ok, axis=0) - 2.0
+        scale = np.sum(w * (f - (at_zero + u * slope)) ** 2, axis=0) / dof
+        std_at_zero = np.sqrt(scale * (1.0 / total + u_mean**2 / spread))
+        std = np.sqrt(scale / spread)
+    few = dof < MIN_BINS - 2
+    return Lines(*(np.where(few, np.nan, v) for v in (at_zero, std_at_zero, slope, std, dof, u_mean)))
+
+
+@dataclass(frozen=True)
+class SpeedLines:
+    """Each parameter's fits on the bins of speed (``fits`` ``(BINS, n)``, canonical
+    form) at the bins' ``speeds`` (m/s), their :class:`Lines` over the speed squared, each slope
+    in its σ (``t``) and which parameters move with the speed (indices)."""
+
+    names: tuple[str, ...]
+    speeds: np.ndarray
+    fits: np.ndarray
+    lines: Lines
+    t: np.ndarray
+    moved: tuple[int, ...]
+
+    def at(self, i: int, speed: float) -> float:
+        """Parameter ``i`` at ``speed`` (m/s) by its line."""
+        return float(self.lines.at_zero[i] + self.lines.slope[i] * speed**2)
+
+    def as_dict(self) -> dict[str, object]:
+        def by_name(values: np.ndarray) -> dict[str, float | None]:
+            return {n: (float(v) if np.isfinite(v) else None) for n, v in zip(self.names, values)}
+
+        def listed(values: np.ndarray) -> list[float | None]:
+            return [float(v) if np.isfinite(v) else None for v in values]
+
+        return {
+            "speeds_mps": listed(self.speeds),
+            "fits": {n: listed(self.fits[:, i]) for i, n in enumerate(self.names)},
+            "slope_in_sigma": by_name(self.t),
+            "at_zero_speed": by_name(self.lines.at_zero),
+            "std_at_zero_speed": by_name(self.lines.std_at_zero),
+            "lever_speed_squared": by_name(self.lines.lever),
+            "std_slip": by_name(self.lines.shift()),
+            "moved": [self.names[i] for i in self.moved],
+        }
+
+
+def measure(run: CalibrationRun, model: KinematicModel, fit: Fit) -> SpeedLines | None:
+    """The run's parameters on bins of speed against the speed squared (None: the check does
+    not apply, or too few bins could be fitted)."""
+    report = run.reports.get(SOLVER)
+    if report is None or not report.result.converged:
+        return None
+    params = report.result.param_dict()
+    if model.reach(params).spot_turns:
+        return None
+    cut = speed_bins(*interval_motion(fit, np.asarray(report.result.params, dtype=float)))
+    if cut is None:
+        return None
+    fits, variance = bin_fits(run, model, fit, cut[0])
+    lines = slopes(fits, variance, cut[1])
+    if not np.any(np.isfinite(lines.slope)):
+        return None
+    names = tuple(fit.fns.names)
+    needed = run.scenario.layout.needed({n: params[n] for n in names})
+    span = np.max(cut[1]) - np.min(cut[1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(lines.std > 0, lines.slope / lines.std, np.nan)
+    # Beyond its scatter, and by more than a calibration needs over the speeds driven: a shift
+    # within the needed precision changes no use of the value, however many σ.
+    moved = tuple(
+        i
+        for i, n in enumerate(names)
+        if n in report.uncertainty.free and abs(t[i]) > T_LIMIT and abs(lines.slope[i]) * span > needed[n]
+    )
+    return SpeedLines(names, np.sqrt(cut[1]), fits, lines, t, moved)
+
+
+def check(run: CalibrationRun, model: KinematicModel | None, fit: Fit | None) -> CheckResult | None:
+    """Each parameter's fits on bins of speed against the speed squared (None: the check
+    does not apply or could not be made)."""
+    found = None if model is None or fit is None else measure(run, model, fit)
+    if found is None:
+        return None
+    names = found.names
+    v = np.nanmin(found.speeds), np.nanmax(found.speeds)
+    said = f"fits on {BINS} bins of speed at {v[0]:.3g} to {v[1]:.3g} m/s"
+    if not found.moved:
+        worst = int(np.argmax(np.abs(np.where(np.isfinite(found.t), found.t, 0.0))))
+        most = f"{abs(found.t[worst]):.1f}σ ({names[worst]})"
+        words = f"{said} agree: no parameter moves with the speed beyond {most}"
+        return CheckResult(NAME, FINE, words, record=found.as_dict())
+    concerns = {names[i]: concern(found, i, run.scenario.units.get(names[i], "")) for i in found.moved}
+    first, *rest = concerns.values()
+    return CheckResult(
+        NAME,
+        CAVEAT,
+        f"{said} DISAGREE: {', '.join(names[i] for i in found.moved)} moves with the speed",
+        caveat=first,
+        caveats=tuple(rest),
+        # A value the speed moves is not determined, however closely the drive seems to pin it:
+        # this word on it comes before another check's σ of it.
+        about={"concerns": "first"},
+        concerns=concerns,
+        how="Each parameter's fits are regressed on the speed squared; the slope's σ is their scatter.",
+        record=found.as_dict(),
+    )
+
+
+def concern(found: SpeedLines, i: int, unit: str) -> str:
+    """Why parameter ``i`` is not determined, in ``unit``, with its value at zero speed and what to do."""
+    lo, hi = float(np.nanmin(found.speeds)), float(np.nanmax(found.speeds))
+    zero, std = found.lines.at_zero[i], found.lines.std_at_zero[i]
+    return (
+        f"{found.names[i]} is NOT DETERMINED: it moves with the speed ({found.at(i, lo):.4g} {unit} at "
+        f"{lo:.3g} m/s, {found.at(i, hi):.4g} at {hi:.3g} m/s; {abs(found.t[i]):.1f}σ), as tyres sliding "
+        "out of bends at speed move it (a lateral slip the model lacks; a linear tyre model puts it at "
+        f"{zero:.4g} ± {std:.2g} at zero speed): give it under known: (measured), or calibrate on bends "
+        "driven slowly (a few m/s), where tyres barely slide"
+    )

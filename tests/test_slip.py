@@ -1,0 +1,180 @@
+"""The slip check: a car whose rear axle slides out of bends never gets a wrong sensor_x with a
+small σ (it is said not determined), and a car that does not slide keeps its sensor_x."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from nlp_calib.analysis.drift import between_logs_std
+from nlp_calib.outputs.handoff import calibration_dict, calibration_yaml
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline.slip_check import BINS, MIN_BINS, NAME, T_LIMIT, slopes, speed_bins
+from nlp_calib.pipeline.stored import read_calibration
+from nlp_calib.results.checks import CheckResult
+from nlp_calib.results.run import DOUBTFUL, LIVE, Checks
+from nlp_calib.results.uncertainty import Uncertainty
+from nlp_calib.simulation.vehicles import HighwayOptions, RoadOptions, simulate_highway
+
+NAMES = {"k_traction": "traction_wheels_radius", "rear_track": "traction_track_width"}
+WHEELS = ("steering", "rear_left_wheel", "rear_right_wheel")
+
+
+def _drive(
+    tmp_path: Path, seed: int, slip: float, duration: float
+) -> tuple[dict[str, Any], dict[str, float]]:
+    """The highway car on a road with bends (its rear axle sliding out of them at ``slip`` rad per
+    m/s²) for ``duration`` s: its dataset entry and truth."""
+    road = RoadOptions(heading_change=-2.0, bend_angle=0.03, slip_gain=slip, pose_noise_time_s=5.0)
+    sim = simulate_highway(HighwayOptions(duration_s=duration, seed=seed, road=road))
+    joints, poses, _ = sim.write(tmp_path / f"car{seed}")
+    truth = {NAMES.get(n, n): v for n, v in sim.options.truth.items()}
+    encoders = dict(zip(WHEELS, WHEELS))
+    return {"joints": str(joints), "poses": str(poses), "form": "speeds", "encoders": encoders}, truth
+
+
+def _run(tmp_path: Path, seed: int, slip: float, lag: Any = "auto", logs: int = 1) -> tuple[Any, Any]:
+    """The car of :func:`_drive` (160 s; or ``logs`` drives of 90 s from ``seed`` on, fitted
+    together), the axle distance and track given: its run and truth."""
+    drives = [_drive(tmp_path, seed + i, slip, 160.0 if logs == 1 else 90.0) for i in range(logs)]
+    truth = drives[0][1]
+    sc = {
+        "model": "car_like",
+        "initial_guess": "auto",
+        "solvers": ["gauss_newton"],
+        **({"dataset": drives[0][0]} if logs == 1 else {"datasets": [d for d, _ in drives]}),
+        "alignment": {"tracker_lag": lag},
+        "known": {n: truth[n] for n in ("wheelbase", "traction_track_width")},
+    }
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(scenario_from_mapping(sc, "car", tmp_path)).run()
+    return run, truth
+
+
+def _slip(run: Any) -> Any:
+    return next(r for r in run.checks.more if r.name == NAME)
+
+
+@pytest.mark.parametrize(("lag", "logs"), [("auto", 1), (0.0, 1), ("auto", 2)])
+def test_a_car_sliding_out_of_bends_never_hands_off_a_wrong_sensor_x(
+    tmp_path: Path, lag: Any, logs: int
+) -> None:
+    """One log with the lag fitted and held, and two logs fitted together (seeds 7 and 8)."""
+    run, truth = _run(tmp_path, seed=7, slip=0.006, lag=lag, logs=logs)
+    estimate, std = (
+        run.reports["gauss_newton"].result.param_dict()["sensor_x"],
+        run.std("gauss_newton")["sensor_x"],
+    )
+    status, why = run.handoff_status("gauss_newton")["sensor_x"]
+    # Either right within its σ, or said not determined for the slip, never handed off live.
+    assert abs(estimate - truth["sensor_x"]) < std or "NOT DETERMINED" in why, (estimate, std, why)
+    own = run.std("gauss_newton", slip=False)["sensor_x"]  # the estimate's σ without the slip's
+    assert abs(estimate - truth["sensor_x"]) > 3.0 * own  # the slip the check is for
+    assert status == DOUBTFUL and "moves with the speed" in why and "known:" in why
+    assert "sensor_x" in _slip(run).record["moved"]
+    assert any("NOT DETERMINED" in r and "sensor_x" in r for r in run.verdict.reasons)
+
+
+def test_a_slip_the_check_does_not_tell_is_in_the_sigma_every_file_states(tmp_path: Path) -> None:
+    """A car sliding out of bends too little for the slope to pass the limit (seed 11, 2 mrad per
+    m/s², slope 3.7σ): sensor_x, 3.7σ wrong in the σ without the slip's, lies within 2σ of the
+    truth in the σ to believe, and that σ is what the verdict, calibration.yaml and its reading
+    back by ``nlp-calib check`` state."""
+    run, truth = _run(tmp_path, seed=11, slip=0.002)
+    estimate = run.reports["gauss_newton"].result.param_dict()["sensor_x"]
+    std, own = run.std("gauss_newton")["sensor_x"], run.std("gauss_newton", slip=False)["sensor_x"]
+    error = abs(estimate - truth["sensor_x"])
+    found = _slip(run).record
+    assert "sensor_x" not in found["moved"] and abs(found["slope_in_sigma"]["sensor_x"]) < T_LIMIT
+    assert error > 3.0 * own  # the class the slope misses
+    status, why = run.handoff_status("gauss_newton")["sensor_x"]
+    assert error <= 2.0 * std or "NOT DETERMINED" in why, (estimate, std, why)
+    # The σ to believe is the estimate's with the slip's in quadrature, everywhere it is stated.
+    assert std == pytest.approx(np.hypot(own, found["std_slip"]["sensor_x"]))
+    assert status == DOUBTFUL and f"±{std:.2g} m" in why
+    # The mount's σ (the URDF's, calibration.yaml's mount block) too: its y, calibrated, is sensor_y.
+    assert "sensor_y" in found["std_slip"] and "y" in run.reports["gauss_newton"].mount.calibrated
+    assert run.reports["gauss_newton"].mount.std["y"] == pytest.approx(run.std("gauss_newton")["sensor_y"])
+    doc = calibration_dict(run)
+    assert doc is not None and doc["std"]["sensor_x"] == pytest.approx(std)
+    (tmp_path / "calibration.yaml").write_text(calibration_yaml(doc))
+    stored = read_calibration(tmp_path / "calibration.yaml")
+    assert stored.std["sensor_x"] == pytest.approx(std)
+    # Between logs only the part that varies along the drive is widened; the slip's is not.
+    white, folds = run.reports["gauss_newton"].uncertainty.std_dict()["sensor_x"], doc["std_blocks_folds"]
+    shared = np.hypot(between_logs_std(own, white, folds), found["std_slip"]["sensor_x"])
+    assert stored.std_shared["sensor_x"] == pytest.approx(shared, rel=1e-6)
+
+
+def test_a_car_that_does_not_slide_keeps_its_sensor_x(tmp_path: Path) -> None:
+    run, truth = _run(tmp_path, seed=7, slip=0.0)
+    estimate, std = (
+        run.reports["gauss_newton"].result.param_dict()["sensor_x"],
+        run.std("gauss_newton")["sensor_x"],
+    )
+    assert abs(estimate - truth["sensor_x"]) < 3.0 * std
+    found = _slip(run)
+    assert found.level == "fine" and found.record["moved"] == []
+    assert "speed" not in run.handoff_status("gauss_newton")["sensor_x"][1]
+    assert run.handoff_status("gauss_newton")["sensor_theta"][0] == LIVE
+
+
+def test_the_lines_over_the_speed_squared_are_weighted_least_squares() -> None:
+    rng = np.random.default_rng(3)
+    squared = np.linspace(8.0, 20.0, BINS) ** 2
+    variance = rng.uniform(0.01, 0.2, (BINS, 2))
+    fits = np.stack([1.9 - 0.004 * squared, np.full(BINS, 0.3)], axis=1) + rng.normal(0, np.sqrt(variance))
+    fits[4] = np.nan  # a piece whose fit failed is left out
+    lines = slopes(fits, variance, squared)
+    keep = np.arange(BINS) != 4
+    assert np.all(lines.dof == BINS - 3)
+    for i in range(2):  # numpy's weighted polynomial fit, its covariance scaled by the residuals
+        w = 1.0 / np.sqrt(variance[keep, i])
+        coef, cov = np.polyfit(squared[keep], fits[keep, i], 1, w=w, cov=True)
+        assert lines.slope[i] == pytest.approx(coef[0]) and lines.at_zero[i] == pytest.approx(coef[1])
+        assert lines.std[i] == pytest.approx(np.sqrt(cov[0, 0]))
+        assert lines.std_at_zero[i] == pytest.approx(np.sqrt(cov[1, 1]))
+        # The drive's lever: where the line passes the bins' information-weighed mean fit.
+        lever = np.average(squared[keep], weights=1.0 / variance[keep, i])
+        assert lines.lever[i] == pytest.approx(lever)
+        mean = np.average(fits[keep, i], weights=1.0 / variance[keep, i])
+        assert coef[1] + coef[0] * lever == pytest.approx(mean)
+        assert lines.shift()[i] == pytest.approx(lever * np.sqrt(coef[0] ** 2 + cov[0, 0]))
+
+
+def test_the_slip_s_sigma_joins_the_sigma_to_believe_in_quadrature() -> None:
+    names = ("sensor_x", "k_steer", "sensor_theta")
+    white = np.array([0.3, 0.01, 0.002])
+    u = Uncertainty(names, names, np.diag(white**2), white, np.eye(3), {}, 100)
+    record = {"std_slip": {"sensor_x": 0.4, "k_steer": None, "sensor_theta": 0.0015}}
+    checks = Checks(None, None, None, None, more=(CheckResult(NAME, "fine", "", record=record),))
+    assert checks.believed(u) == pytest.approx([0.5, 0.01, 0.0025])
+    assert checks.believed(u, slip=False) == pytest.approx(white)
+    assert Checks(None, None, None, None).believed(u) == pytest.approx(white)  # no slip check: as before
+
+
+def test_the_bins_go_by_speed_and_need_loaded_bends_at_varied_speeds() -> None:
+    n = 4000
+    speed = 14.0 + 6.0 * np.sin(np.linspace(0.0, 6.0, n))
+    rate = 0.15 * np.sin(np.linspace(0.0, 40.0, n))
+    cut = speed_bins(speed, rate)
+    assert cut is not None
+    label, squared = cut
+    assert set(label) == set(range(BINS))
+    for j in range(BINS - 1):  # slowest first
+        assert speed[label == j].max() <= speed[label == j + 1].min()
+    first = label == 0  # weighed by the squared turn rate
+    assert squared[0] == pytest.approx(
+        np.sum(rate[first] ** 2 * speed[first] ** 2) / np.sum(rate[first] ** 2)
+    )
+    standing = speed.copy()
+    standing[:10] = 0.0
+    assert np.all(speed_bins(standing, rate)[0][:10] == -1)  # type: ignore[index]
+    assert speed_bins(speed, 0.02 * rate) is None  # bends that barely load the tyres
+    assert speed_bins(np.full(n, 14.0), rate) is None  # one speed
+    assert MIN_BINS < BINS
