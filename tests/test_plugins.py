@@ -95,7 +95,14 @@ def test_the_direction_checks_one_wording_is_the_terminals_and_the_reports(run: 
 def test_the_built_in_checks_are_plug_ins_with_one_wording(run: CalibrationRun) -> None:
     """Faults and direction are registered like the toy: their words reach the terminal, the
     report and the summary alike, the faults with a section of their own in the report."""
-    assert list(plugin_checks.RUN_CHECKS)[:4] == ["observability", "faults", "direction", "consistency"]
+    # The slip's first: its σ is part of the σ to believe the others read.
+    assert list(plugin_checks.RUN_CHECKS)[:5] == [
+        "slip",
+        "observability",
+        "faults",
+        "direction",
+        "consistency",
+    ]
     report, table, summary = report_markdown(run, []), run_table(run), summary_lines(run)
     for name in ("faults", "direction"):
         found = run.checks.plugin(name)
