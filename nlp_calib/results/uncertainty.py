@@ -25,6 +25,9 @@ class Uncertainty:
     #: Free parameters the data leave undetermined, known only as well as the bounds of a
     #: parameter they move with allow (a tracker lag within its search).
     bounded: tuple[str, ...] = ()
+    #: Free parameters whose σ the residuals' own scores set, beyond the noise model's (an error of
+    #: each window's own that the poses' noise, cancelling along a chain, does not carry).
+    residual_floor: tuple[str, ...] = ()
 
     def std_dict(self) -> dict[str, float]:
         return {n: float(s) for n, s in zip(self.names, self.std)}
