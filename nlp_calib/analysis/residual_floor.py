@@ -16,7 +16,8 @@ the noise model its expectation is the propagated meat, whatever the noise's siz
 residuals hold more than the model's cancelling noise it is larger. It is noisy (a sum of
 cancelling terms), so each parameter's variance from it is compared with the propagated one in
 units of its own sampling noise, from contiguous batches of windows, and only a variance beyond
-it beyond that noise (Student's t, 95 %) is taken.
+it beyond that noise (Student's t, 95 %) is taken: a spread the σ to believe takes in, as the
+block jackknife's, beside the noise model's σ (which stays the white-noise σ).
 """
 
 from __future__ import annotations
@@ -76,16 +77,15 @@ class ScoreRows:
         return per.sum(axis=0), t * np.sqrt(batches * per.var(axis=0, ddof=1))
 
 
-def floor(cov: np.ndarray, found: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
-    """``cov`` with each parameter's variance raised to the residuals' own (``found``: it and the
-    margin of its noise) where that exceeds it beyond the margin, correlations kept; and which
-    parameters were."""
+def beyond(cov: np.ndarray, found: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """Each parameter's σ from the residuals' own scores (``found``: its variance and the margin of
+    its noise) where it exceeds the σ of ``cov`` (the noise model's) beyond that margin; NaN
+    elsewhere."""
     n = cov.shape[0]
     if found is None:
-        return cov, np.zeros(n, dtype=bool)
+        return np.full(n, np.nan)
     var, margin = found
     base = np.diag(cov)
     with np.errstate(invalid="ignore"):
-        raised = np.isfinite(base) & (base > 0) & (var - base > margin)
-    ratio = np.where(raised, np.sqrt(np.where(raised, var, 1.0) / np.where(raised, base, 1.0)), 1.0)
-    return cov * np.outer(ratio, ratio), raised
+        raised = np.isfinite(base) & (var - base > margin)
+    return np.where(raised, np.sqrt(np.where(raised, var, 0.0)), np.nan)

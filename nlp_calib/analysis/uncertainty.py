@@ -52,7 +52,7 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
-from nlp_calib.analysis.residual_floor import ScoreRows, floor
+from nlp_calib.analysis.residual_floor import ScoreRows, beyond
 from nlp_calib.models import rate_rows
 from nlp_calib.problem import ProblemFunctions, ResidualData
 from nlp_calib.results.checks import LAG_EFFECT_CORRELATION, LagEffect
@@ -240,19 +240,26 @@ def estimate(
     if evaluator.priors.active:
         meat = meat + sigma2 * evaluator.prior_information(x)
     sandwich = _covariance(evaluator, x, ne.H, sigma2, bounds_std)
-    cov, bounded = sandwich(meat)
-    # Never below what the residuals' own scores give (:mod:`residual_floor`): an error of each
-    # window's own read as the poses' noise cancels along the chain with it.
-    zero = sandwich(np.zeros_like(meat))[0]
-    cov, raised = floor(cov, own.variances(lambda m: sandwich(m)[0] - zero))
+    (cov, bounded), residual = _with_residuals(sandwich, meat, own)
     noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
     noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
     out = _packaged(fns, cov, noise, dof)
     return replace(
         out,
         bounded=tuple(n for n, b in zip(fns.free, bounded) if b),
-        residual_floor=tuple(n for n, r in zip(fns.free, raised) if r),
+        std_residuals=np.array([residual[fns.free.index(n)] if n in fns.free else np.nan for n in fns.names]),
     )
+
+
+def _with_residuals(
+    sandwich: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], meat: np.ndarray, own: ScoreRows
+) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """The covariance of ``meat`` and which parameters it leaves bounded; and each parameter's σ
+    from the residuals' own scores where beyond it (:mod:`residual_floor`: an error of each
+    window's own, read as the poses' noise, cancels along the chain with it), NaN elsewhere."""
+    cov, bounded = sandwich(meat)
+    zero = sandwich(np.zeros_like(meat))[0]
+    return (cov, bounded), beyond(cov, own.variances(lambda m: sandwich(m)[0] - zero))
 
 
 def _covariance(

@@ -222,7 +222,7 @@ def _report(
     with a mount per log)."""
     u = fitted[0].uncertainty[name]
     scored, views = figures
-    std = believed_std(u.std, *fitted[1].spreads(u.std))
+    std = believed_std(u.std, u.residual_spread(), *fitted[1].spreads(u.std))
     scales = encoder_scales(prepared)
     estimate = (result.params, std, u.correlation)
     given = given_params(prepared)

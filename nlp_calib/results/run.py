@@ -327,7 +327,9 @@ class CalibrationRun:
         """The 1σ to believe for ``solver``'s estimate: the largest of the white-noise σ, the block
         cross-validation's jackknife σ and the spreads the checks found (:meth:`Checks.spreads`)."""
         u = self.reports[solver].uncertainty
-        std = dict(zip(u.names, map(float, believed_std(u.std, *self.checks.spreads(u.std)))))
+        std = dict(
+            zip(u.names, map(float, believed_std(u.std, u.residual_spread(), *self.checks.spreads(u.std))))
+        )
         return {n: float("nan") if n in self.pinned() else s for n, s in std.items()}
 
     def pinned(self) -> tuple[str, ...]:
