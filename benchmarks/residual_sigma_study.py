@@ -15,6 +15,7 @@ as those σ allow; far above, errors vary along the drive beyond them.
 from __future__ import annotations
 
 import argparse
+import itertools
 import warnings
 
 import numpy as np
@@ -54,7 +55,8 @@ def sigmas(cal: Calibration, x: np.ndarray, g: np.ndarray) -> None:
         return np.sqrt(np.clip(np.diag(M @ Hi @ meat @ Hi @ M.T), 0, None))
 
     shared, alone = sd(shared_meat(g, data.starts, data.stops)), sd(g.T @ g)
-    print(f"{'parameter':24s} {'white':>9s} {'residuals':>9s} {'(beyond)':>9s} {'alone':>9s} {'σ²H⁻¹':>9s} {'believe':>9s}")
+    heads = ("white", "residuals", "(beyond)", "alone", "σ²H⁻¹", "believe")
+    print(f"{'parameter':24s} " + " ".join(f"{h:>9s}" for h in heads))
     for i, n in enumerate(fns.free):
         j = u.names.index(n)
         print(
@@ -68,7 +70,7 @@ def blocks(cal: Calibration, x: np.ndarray, g: np.ndarray, h: np.ndarray, k: int
     a, b = cal.data.starts, cal.data.stops
     edges = np.linspace(a.min(), b.max() + 1, k + 1)
     vals, sds = [], []
-    for lo, up in zip(edges[:-1], edges[1:]):
+    for lo, up in itertools.pairwise(edges):
         m = (a >= lo) & (a < up)
         H = h[m, c].sum()
         if H <= 0:

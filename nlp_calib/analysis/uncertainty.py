@@ -241,14 +241,16 @@ def estimate(
         meat = meat + sigma2 * evaluator.prior_information(x)
     sandwich = _covariance(evaluator, x, ne.H, sigma2, bounds_std)
     (cov, bounded), residual = _with_residuals(sandwich, meat, own)
+    out = _packaged(fns, cov, _noise_levels(fns, var, Sigma_in), dof)
+    std_residuals = np.array([dict(zip(fns.free, residual)).get(n, np.nan) for n in fns.names])
+    return replace(out, bounded=tuple(n for n, b in zip(fns.free, bounded) if b), std_residuals=std_residuals)
+
+
+def _noise_levels(fns: ProblemFunctions, var: np.ndarray, Sigma_in: np.ndarray) -> dict[str, float]:
+    """Each noise source's 1σ by name: the tracker's groups, then the inputs'."""
     noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
     noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
-    out = _packaged(fns, cov, noise, dof)
-    return replace(
-        out,
-        bounded=tuple(n for n, b in zip(fns.free, bounded) if b),
-        std_residuals=np.array([residual[fns.free.index(n)] if n in fns.free else np.nan for n in fns.names]),
-    )
+    return noise
 
 
 def _with_residuals(
