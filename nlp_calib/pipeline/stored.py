@@ -166,7 +166,13 @@ def read_calibration(path: Path) -> StoredCalibration:
     scenario, recorded = _scenario_path(doc)
     data = doc.get("dataset")
     dataset = data.get("path") if isinstance(data, Mapping) and isinstance(data.get("path"), str) else None
-    shared = {n: between_logs_std(std[n], white[n], folds) for n in names}
+    # What averages over a log: the white noise and the residuals' own errors of each window.
+    own = _numbers(doc, "std_residuals", names, where, null=True) if doc.get("std_residuals") else {}
+    averaged = {
+        n: max((v for v in (white[n], own.get(n, math.nan)) if math.isfinite(v)), default=white[n])
+        for n in names
+    }
+    shared = {n: between_logs_std(std[n], averaged[n], folds) for n in names}
     return StoredCalibration(
         path, model, solver, values, std, dof, scenario, objective, recorded, dataset, layout, shared
     )
