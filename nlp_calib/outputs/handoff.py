@@ -85,8 +85,7 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         **({"not_determined": run.doubts(solver)} if run.doubts(solver) else {}),
         "std": best["std"],
         "std_white_noise": best["std_white_noise"],
-        # The residuals' own σ where it exceeds the white-noise σ: errors of each window's own, which
-        # average over a log as white noise does (the drift check's shared σ leaves them out).
+        # Errors of each window's own average over a log as white noise does (the drift check).
         **({"std_residuals": best["std_residuals"]} if best.get("std_residuals") else {}),
         "std_blocks": sigmas(run, solver, (doc["crossvalidation"] or {}).get("std_blocks")),
         # The jackknife σ's folds (its degrees of freedom + 1) and the formulation fitted: what
