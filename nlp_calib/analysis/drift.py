@@ -115,7 +115,9 @@ def between_logs_std(believed: float, white: float, folds: int) -> float:
 def run_between_logs(run: CalibrationRun, solver: str) -> dict[str, float]:
     """Each σ to believe of a run's estimate as :func:`between_logs_std` widens it (the slip's σ,
     a shift the whole drive shares already, added to it unwidened)."""
-    white = run.reports[solver].uncertainty.std_dict()
+    u = run.reports[solver].uncertainty
+    # What averages over a log: the white noise and the residuals' own errors of each window.
+    white = dict(zip(u.names, map(float, np.fmax(u.std, u.residual_spread()))))
     cv = run.checks.crossval
     folds = len(cv.converged) if cv is not None else 0
     full = run.std(solver)

@@ -52,6 +52,7 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
+from nlp_calib.analysis.residual_floor import ScoreRows, beyond
 from nlp_calib.models import rate_rows
 from nlp_calib.problem import ProblemFunctions, ResidualData
 from nlp_calib.results.checks import LAG_EFFECT_CORRELATION, LagEffect
@@ -223,8 +224,10 @@ def estimate(
     kernel = (fns.spec.kernel, float(evaluator.delta))
     sums = _Sums.zero(fns, data, first[1].de_dend.shape[2], D, (split, running), kernel)
     residuals = _Residuals(e=e, weight=weight, use=use, Omega=evaluator.omega)
+    own = ScoreRows(data.starts, data.stops, fns.n_free)
     for w, sens in itertools.chain([first], blocks):
         sums.add(w, sens, residuals, running)
+        own.add(w, sens.J, weight[w] * e[:, w], evaluator.omega)
     var, explained = sums.variances((fns.error_rows, fns.n_free), int(use.sum()), residuals.Omega)
     use = use.copy()
     use[sums.kernel.index[explained]] = True
@@ -236,22 +239,41 @@ def estimate(
     sigma2 = float(np.sum(weight[use] * s[use])) / dof
     if evaluator.priors.active:
         meat = meat + sigma2 * evaluator.prior_information(x)
-    cov, bounded = _covariance(evaluator, x, (ne.H, meat), sigma2, bounds_std)
+    sandwich = _covariance(evaluator, x, ne.H, sigma2, bounds_std)
+    (cov, bounded), residual = _with_residuals(sandwich, meat, own)
+    out = _packaged(fns, cov, _noise_levels(fns, var, Sigma_in), dof)
+    std_residuals = np.array([dict(zip(fns.free, residual)).get(n, np.nan) for n in fns.names])
+    return replace(out, bounded=tuple(n for n, b in zip(fns.free, bounded) if b), std_residuals=std_residuals)
+
+
+def _noise_levels(fns: ProblemFunctions, var: np.ndarray, Sigma_in: np.ndarray) -> dict[str, float]:
+    """Each noise source's 1σ by name: the tracker's groups, then the inputs'."""
     noise = {name: float(np.sqrt(v)) for name, v in zip(fns.sensor.noise_names, var)}
     noise.update({f"input_{name}": float(np.sqrt(v)) for name, v in zip(fns.model.input_names, Sigma_in)})
-    out = _packaged(fns, cov, noise, dof)
-    return replace(out, bounded=tuple(n for n, b in zip(fns.free, bounded) if b))
+    return noise
+
+
+def _with_residuals(
+    sandwich: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], meat: np.ndarray, own: ScoreRows
+) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """The covariance of ``meat`` and which parameters it leaves bounded; and each parameter's σ
+    from the residuals' own scores where beyond it (:mod:`residual_floor`: an error of each
+    window's own, read as the poses' noise, cancels along the chain with it), NaN elsewhere."""
+    cov, bounded = sandwich(meat)
+    zero = sandwich(np.zeros_like(meat))[0]
+    return (cov, bounded), beyond(cov, own.variances(lambda m: sandwich(m)[0] - zero))
 
 
 def _covariance(
     evaluator: ProblemEvaluator,
     x: np.ndarray,
-    bread_meat: tuple[np.ndarray, np.ndarray],
+    H: np.ndarray,
     sigma2: float,
     bounds_std: np.ndarray | None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_bounded_covariance` at ``x``: reference units from the estimate, the drive's free
-    directions from its windows' motion, the bounds' prior in the data's units."""
+) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """:func:`_bounded_covariance` at ``x`` as a function of the meat: reference units from the
+    estimate, the drive's free directions from its windows' motion, the bounds' prior in the
+    data's units."""
     fns, data = evaluator.fns, evaluator.data
     free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[
         [fns.names.index(f) for f in fns.free]
@@ -264,7 +286,17 @@ def _covariance(
 
     prior = bounds_prior(bounds_std, sigma2, fns.n_free)
     M = np.asarray(fns.tangent_map(x))
-    return _bounded_covariance(*bread_meat, (scale, M), free, (prior, sigma2))
+    return functools.partial(_sandwich_of, H, (scale, M), free, (prior, sigma2))
+
+
+def _sandwich_of(
+    H: np.ndarray,
+    scale_and_map: tuple[np.ndarray, np.ndarray],
+    free: Callable[[np.ndarray], np.ndarray],
+    prior_sigma2: tuple[np.ndarray, float],
+    meat: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    return _bounded_covariance(H, meat, scale_and_map, free, prior_sigma2)
 
 
 def white_covariance(

@@ -86,6 +86,8 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         **({"not_determined": run.doubts(solver)} if run.doubts(solver) else {}),
         "std": best["std"],
         "std_white_noise": best["std_white_noise"],
+        # Errors of each window's own average over a log as white noise does (the drift check).
+        **({"std_residuals": best["std_residuals"]} if best.get("std_residuals") else {}),
         "std_blocks": sigmas(run, solver, (doc["crossvalidation"] or {}).get("std_blocks")),
         # What the slip check's lines leave open of a slip the model lacks, in 'std' already.
         **_slip_entry(run, solver),

@@ -130,6 +130,7 @@ def _solver_dict(run: CalibrationRun, name: str, report: SolverReport) -> dict[s
         "params": r.param_dict(),
         "std": sigmas(run, name, run.std(name)),
         "std_white_noise": sigmas(run, name, u.std_dict()),
+        "std_residuals": sigmas(run, name, dict(zip(u.names, map(float, u.residual_spread())))),
         "correlation": {"names": list(u.names), "matrix": np.round(u.correlation, 6).tolist()},
         "cost": r.cost,
         "chi2": r.chi2,

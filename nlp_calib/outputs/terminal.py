@@ -86,9 +86,10 @@ def widened_lines(run: CalibrationRun) -> list[str]:
     checks = run.checks
     if first is None:
         return []
-    names, white = run.reports[first].uncertainty.names, run.reports[first].uncertainty.std
+    u = run.reports[first].uncertainty
+    names, white = u.names, u.std
     blocks = checks.crossval.beyond(white) if checks.crossval is not None else np.full(len(names), np.nan)
-    base = believed_std(white, blocks)
+    base = believed_std(white, u.residual_spread(), blocks)
     out = []
     if checks.pivots is not None:
         spread = checks.pivots.beyond(white)

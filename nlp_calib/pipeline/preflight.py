@@ -418,15 +418,16 @@ def _propagated(
     evaluator, whole = fitted
     try:
         counted = counted_inputs(d.parts[0].model, d.parts[0].log)
-        white = unc.estimate(evaluator, x, windows, noise, bounds, counted).std
+        found = unc.estimate(evaluator, x, windows, noise, bounds, counted)
     except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
         return np.full(fns.n_free, np.nan)
+    white = found.std
     k = min(d.scenario.validation.blocks, windows.n_residuals)
     spread = np.full(len(fns.names), np.nan)
     if k:
         folds = on_threads(functools.partial(_fold, binder, x, windows, whole), _blocks(windows, k))
         spread = combine(fns.names, folds).beyond(white)
-    std = dict(zip(fns.names, believed_std(white, spread)))
+    std = dict(zip(fns.names, believed_std(white, found.residual_spread(), spread)))
     return np.array([std.get(n, np.nan) for n in fns.free], dtype=float)
 
 

@@ -167,7 +167,13 @@ def read_calibration(path: Path) -> StoredCalibration:
     data = doc.get("dataset")
     dataset = data.get("path") if isinstance(data, Mapping) and isinstance(data.get("path"), str) else None
     slip = _numbers(doc, "std_slip", names, where, null=True) if doc.get("std_slip") else {}
-    shared = {n: _shared(std[n], white[n], slip.get(n, math.nan), folds) for n in names}
+    # What averages over a log: the white noise and the residuals' own errors of each window.
+    own = _numbers(doc, "std_residuals", names, where, null=True) if doc.get("std_residuals") else {}
+    averaged = {
+        n: max((v for v in (white[n], own.get(n, math.nan)) if math.isfinite(v)), default=white[n])
+        for n in names
+    }
+    shared = {n: _shared(std[n], averaged[n], slip.get(n, math.nan), folds) for n in names}
     return StoredCalibration(
         path, model, solver, values, std, dof, scenario, objective, recorded, dataset, layout, shared
     )

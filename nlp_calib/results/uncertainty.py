@@ -25,6 +25,15 @@ class Uncertainty:
     #: Free parameters the data leave undetermined, known only as well as the bounds of a
     #: parameter they move with allow (a tracker lag within its search).
     bounded: tuple[str, ...] = ()
+    #: Each parameter's σ from the residuals' own scores where it exceeds ``std`` beyond its noise
+    #: (an error of each window's own that the poses' noise, cancelling along a chain, does not
+    #: carry), NaN elsewhere (None: not estimated).
+    std_residuals: np.ndarray | None = None
+
+    def residual_spread(self) -> np.ndarray:
+        """:attr:`std_residuals`, NaN everywhere when it was not estimated: a spread the σ to
+        believe takes in."""
+        return np.full(len(self.names), np.nan) if self.std_residuals is None else self.std_residuals
 
     def std_dict(self) -> dict[str, float]:
         return {n: float(s) for n, s in zip(self.names, self.std)}
