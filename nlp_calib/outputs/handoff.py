@@ -84,16 +84,8 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         **_held_entry(run, solver),
         # What it estimated but did not determine well enough to use, with why: not calibrated.
         **({"not_determined": run.doubts(solver)} if run.doubts(solver) else {}),
-        "std": best["std"],
-        "std_white_noise": best["std_white_noise"],
-        # Errors of each window's own average over a log as white noise does (the drift check).
-        **({"std_residuals": best["std_residuals"]} if best.get("std_residuals") else {}),
-        "std_blocks": sigmas(run, solver, (doc["crossvalidation"] or {}).get("std_blocks")),
-        # What the slip check's lines leave open of a slip the model lacks, in 'std' already.
-        **_slip_entry(run, solver),
-        # The jackknife σ's folds (its degrees of freedom + 1) and the formulation fitted: what
-        # `nlp-calib check` needs to judge this calibration on a new log.
-        "std_blocks_folds": len(run.checks.crossval.converged) if run.checks.crossval is not None else 0,
+        **_sigma_entries(run, solver, doc),
+        # The formulation fitted: what `nlp-calib check` needs to judge this calibration on a new log.
         "objective": {"residual": doc["residual"], "robust": doc["robust"]},
         "correlation": best["correlation"],
         "units": dict(sc.units),
@@ -105,6 +97,22 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         **_noise_entry(run, solver),
         "verdict": {"level": run.verdict.level, "reasons": list(run.verdict.reasons)},
         "solvers": {name: _solver_entry(res) for name, res in doc["solvers"].items()},
+    }
+
+
+def _sigma_entries(run: CalibrationRun, solver: str, doc: Mapping[str, Any]) -> dict[str, Any]:
+    """The σ to believe of ``solver``'s estimate and what `nlp-calib check` weighs it by."""
+    best = doc["solvers"][solver]
+    return {
+        "std": best["std"],
+        "std_white_noise": best["std_white_noise"],
+        # Errors of each window's own average over a log as white noise does (the drift check).
+        **({"std_residuals": best["std_residuals"]} if best.get("std_residuals") else {}),
+        "std_blocks": sigmas(run, solver, (doc["crossvalidation"] or {}).get("std_blocks")),
+        # What the slip check's lines leave open of a slip the model lacks, in 'std' already.
+        **_slip_entry(run, solver),
+        # The jackknife σ's folds: its degrees of freedom + 1.
+        "std_blocks_folds": len(run.checks.crossval.converged) if run.checks.crossval is not None else 0,
     }
 
 
