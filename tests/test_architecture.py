@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -112,6 +113,46 @@ def test_matplotlib_is_imported_only_by_the_plotting_package() -> None:
             if any(n.split(".")[0] == "matplotlib" for n in names):
                 users.add(name)
     assert users and all(u.startswith("nlp_calib.outputs.plots") for u in users), users
+
+
+#: The run-time dependencies' import names (pyproject.toml's ``dependencies``: pyyaml is ``yaml``).
+RUNTIME = {"casadi", "numpy", "matplotlib", "yaml"}
+#: What the run-time dependencies install themselves (matplotlib writes its PNGs with Pillow).
+WITH_RUNTIME = {"PIL"}
+
+
+def _top_level_imports(tree: ast.Module) -> Iterator[str]:
+    """The modules a file imports when it is imported (not inside a function, nor for type checking
+    alone)."""
+    for node in tree.body:
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            continue
+        for sub in ast.walk(node):
+            if isinstance(sub, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                break
+            if isinstance(sub, ast.Import):
+                yield from (a.name for a in sub.names)
+            elif isinstance(sub, ast.ImportFrom) and sub.module and sub.level == 0:
+                yield sub.module
+
+
+def test_the_package_imports_only_its_run_time_dependencies() -> None:
+    """What a fresh install (the README's first command) has: the standard library, the package and
+    its run-time dependencies; an extra (rosbags, small_gicp, dask) or a test-only library (scipy)
+    only inside the function that needs it."""
+    text = (REPO / "pyproject.toml").read_text()
+    block = text.split("\ndependencies = [", 1)[1].split("]", 1)[0]
+    declared = {
+        line.strip().strip('",').split(">")[0].split("=")[0] for line in block.splitlines() if line.strip()
+    }
+    assert {d.replace("pyyaml", "yaml") for d in declared} == RUNTIME
+    outside = {
+        (name, top)
+        for name, _, tree in _modules()
+        for top in {m.split(".")[0] for m in _top_level_imports(tree)}
+        if top not in sys.stdlib_module_names and top != "nlp_calib" and top not in RUNTIME | WITH_RUNTIME
+    }
+    assert outside == set(), sorted(outside)
 
 
 def test_only_the_command_line_prints() -> None:

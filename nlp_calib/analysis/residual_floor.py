@@ -25,7 +25,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy import stats
+
+from nlp_calib.analysis.drift import t_quantile
 
 #: Contiguous batches of windows the residuals' variance is split into to estimate its noise.
 BATCHES = 20
@@ -73,7 +74,7 @@ class ScoreRows:
                 later = P[hi[lo:up]] - P[lo + 1 : up + 1]
                 meats[k] += g.T @ g + g.T @ later + later.T @ g
         per = np.array([np.diag(to_cov(m)) for m in meats])
-        t = float(stats.t.ppf(LEVEL, batches - 1))
+        t = t_quantile(2.0 * (1.0 - LEVEL), batches - 1)
         return per.sum(axis=0), t * np.sqrt(batches * per.var(axis=0, ddof=1))
 
 
