@@ -9,6 +9,7 @@ residuals' own variance and its noise are checked against these exact values.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from nlp_calib.analysis.residual_floor import ScoreRows, beyond
 
@@ -58,3 +59,23 @@ def test_too_few_windows_to_judge_leave_the_sigma_alone() -> None:
     rows = ScoreRows(np.arange(10), np.arange(10) + 5, 1)
     assert rows.variances(lambda meat: meat) is None
     assert np.isnan(beyond(np.array([[1.0]]), None)).all()
+
+
+def test_windows_added_a_block_at_a_time_give_the_meats_of_all_at_once() -> None:
+    """The uncertainty streams its windows in blocks: windows of three records each (each shares
+    records with the two before and after it) added in uneven blocks give the batches' meats of
+    every window added at once, and a block out of order is refused."""
+    rng = np.random.default_rng(3)
+    starts = np.arange(W)
+    stops, J = starts + 2, rng.normal(size=(W, 1, 2))
+    e = rng.normal(size=(1, W))
+    whole = ScoreRows(starts, stops, 2)
+    whole.add(slice(0, W), J, e, np.ones(1))
+    parts = ScoreRows(starts, stops, 2)
+    for lo, hi in ((0, 7), (7, 700), (700, 701), (701, W)):
+        parts.add(slice(lo, hi), J[lo:hi], e[:, lo:hi], np.ones(1))
+    np.testing.assert_allclose(parts.meats, whole.meats, rtol=1e-12, atol=1e-12 * np.abs(whole.meats).max())
+    assert whole.meats.shape[0] >= 5 and parts.variances(lambda m: m) is not None
+    late = ScoreRows(starts, stops, 2)
+    with pytest.raises(ValueError, match="out of order"):
+        late.add(slice(7, W), J[7:], e[:, 7:], np.ones(1))
