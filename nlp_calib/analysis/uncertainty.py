@@ -261,7 +261,13 @@ def _with_residuals(
     window's own, read as the poses' noise, cancels along the chain with it), NaN elsewhere."""
     cov, bounded = sandwich(meat)
     zero = sandwich(np.zeros_like(meat))[0]
-    return (cov, bounded), beyond(cov, own.variances(lambda m: sandwich(m)[0] - zero))
+
+    def meat_part(m: np.ndarray) -> np.ndarray:
+        # A parameter the drive leaves undetermined is inf in both: NaN, which beyond() leaves out.
+        with np.errstate(invalid="ignore"):
+            return sandwich(m)[0] - zero
+
+    return (cov, bounded), beyond(cov, own.variances(meat_part))
 
 
 def _covariance(
