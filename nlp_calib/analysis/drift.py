@@ -113,24 +113,28 @@ def between_logs_std(believed: float, white: float, folds: int) -> float:
 
 
 def run_between_logs(run: CalibrationRun, solver: str) -> dict[str, float]:
-    """Each σ to believe of a run's estimate as :func:`between_logs_std` widens it (the slip's σ,
-    a shift the whole drive shares already, added to it unwidened)."""
+    """Each σ to believe of a run's estimate as :func:`shared_std` widens it."""
     u = run.reports[solver].uncertainty
-    # What averages over a log: the white noise and the residuals' own errors of each window.
-    white = dict(zip(u.names, map(float, np.fmax(u.std, u.residual_spread()))))
     cv = run.checks.crossval
     folds = len(cv.converged) if cv is not None else 0
-    full = run.std(solver)
+    slip, own = run.checks.slip(u.names), u.residual_spread()
     return {
-        n: with_slip(between_logs_std(sd, white[n], folds), sd, full[n])
-        for n, sd in run.std(solver, slip=False).items()
+        n: shared_std(sd, (float(u.std[i]), float(own[i]), float(slip[i])), folds)
+        for i, (n, sd) in enumerate(run.std(solver).items())
     }
 
 
-def with_slip(widened: float, base: float, full: float) -> float:
-    """``widened`` (a σ to believe without the slip's, ``base``, made wider) with what the slip adds
-    to ``base`` to make ``full`` added in quadrature."""
-    return math.sqrt(widened * widened + max(0.0, full * full - base * base))
+def shared_std(believed: float, parts: tuple[float, float, float], folds: int) -> float:
+    """A σ to believe ``believed`` as :func:`between_logs_std` widens it. ``parts``: its white-noise
+    σ, the residuals' own σ and the slip's σ (NaN: none). What averages over a log is the larger of
+    the first two (an error of each window's own averages as white noise does); the slip's σ is a
+    shift the whole drive shares already, so it is taken out before the widening and added back
+    unwidened, in quadrature."""
+    white, own, slip = parts
+    averaged = float(np.fmax(white, own))
+    base = math.sqrt(max(0.0, believed * believed - slip * slip)) if math.isfinite(slip) else believed
+    widened = between_logs_std(base, averaged, folds)
+    return math.sqrt(widened * widened + max(0.0, believed * believed - base * base))
 
 
 def run_dof(run: CalibrationRun, solver: str) -> dict[str, float]:

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from nlp_calib.analysis.drift import believed_dof, between_logs_std, with_slip
+from nlp_calib.analysis.drift import believed_dof, shared_std
 from nlp_calib.core.config import fail, key_name, read_yaml
 from nlp_calib.core.errors import ConfigError, UsageError
 from nlp_calib.core.version import __version__
@@ -167,23 +167,13 @@ def read_calibration(path: Path) -> StoredCalibration:
     data = doc.get("dataset")
     dataset = data.get("path") if isinstance(data, Mapping) and isinstance(data.get("path"), str) else None
     slip = _numbers(doc, "std_slip", names, where, null=True) if doc.get("std_slip") else {}
-    # What averages over a log: the white noise and the residuals' own errors of each window.
     own = _numbers(doc, "std_residuals", names, where, null=True) if doc.get("std_residuals") else {}
-    averaged = {
-        n: max((v for v in (white[n], own.get(n, math.nan)) if math.isfinite(v)), default=white[n])
-        for n in names
+    shared = {
+        n: shared_std(std[n], (white[n], own.get(n, math.nan), slip.get(n, math.nan)), folds) for n in names
     }
-    shared = {n: _shared(std[n], averaged[n], slip.get(n, math.nan), folds) for n in names}
     return StoredCalibration(
         path, model, solver, values, std, dof, scenario, objective, recorded, dataset, layout, shared
     )
-
-
-def _shared(std: float, white: float, slip: float, folds: int) -> float:
-    """A stored σ to believe ``std`` as :func:`between_logs_std` widens it; the slip's σ in it
-    (``slip``; NaN: none) a shift the whole drive shares already, added unwidened."""
-    base = math.sqrt(max(0.0, std * std - slip * slip)) if math.isfinite(slip) else std
-    return with_slip(between_logs_std(base, white, folds), base, std)
 
 
 def _layout(doc: Mapping[str, Any], where: str, model: tuple[KinematicModel, str]) -> Layout:
