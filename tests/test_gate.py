@@ -286,9 +286,9 @@ def test_a_run_searches_its_lag_once_and_the_gate_judges_at_it(
         searched.append(search(*args))  # type: ignore[arg-type]
         return searched[-1]
 
-    def spied(sc: object, logs: object, found: LagEstimate | None = None) -> object:
+    def spied(sc: object, logs: object, found: LagEstimate | None = None, run: object = None) -> object:
         judged.append(found)
-        return gate(sc, logs, found)  # type: ignore[arg-type]
+        return gate(sc, logs, found, run)  # type: ignore[arg-type]
 
     monkeypatch.setattr(align, "estimate_tracker_lag", counted)
     monkeypatch.setattr(pf, "estimate_tracker_lag", counted)
@@ -302,6 +302,70 @@ def test_a_run_searches_its_lag_once_and_the_gate_judges_at_it(
     at_run = judge(load_scenario(demo), None, searched[0])
     assert at_run.verdict == own.verdict
     assert [(p.name, p.status) for p in at_run.parameters] == [(p.name, p.status) for p in own.parameters]
+
+
+def test_inside_a_run_the_gate_prepares_and_builds_nothing_of_its_own(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """Issue 41: inside ``run`` the pre-flight judges with the run's own prepared log and
+    evaluation backend: it prepares no log and makes no backend of its own (a second one built
+    its maps again and set the helpers' column map anew, over the run's), and its problem is the
+    run's Functions."""
+    from nlp_calib.pipeline import build, stages
+
+    prepared: list[object] = []
+    backends: list[object] = []
+    columns: list[object] = []
+    judged: list[pf.Assessment] = []
+    own = stages.prepare, build.prepare_backend, build.compile_columns, pf.assess
+
+    def counted_prepare(*args: object) -> object:
+        prepared.append(args)
+        return own[0](*args)  # type: ignore[arg-type]
+
+    def counted_backend(*args: object) -> object:
+        backends.append(own[1](*args))  # type: ignore[arg-type]
+        return backends[-1]
+
+    def counted_columns(column_map: object) -> None:
+        columns.append(column_map)
+        own[2](column_map)  # type: ignore[arg-type]
+
+    def spied(*args: object, **kw: object) -> object:
+        judged.append(own[3](*args, **kw))  # type: ignore[arg-type]
+        return judged[-1]
+
+    for module in (stages, pf):
+        monkeypatch.setattr(module, "prepare", counted_prepare)
+    for module in (build, pf):
+        monkeypatch.setattr(module, "prepare_backend", counted_backend)
+    monkeypatch.setattr(build, "compile_columns", counted_columns)
+    monkeypatch.setattr(pf, "assess", spied)
+    demo = SCENARIOS / "demo.yaml"
+    proc = cli("run", str(demo), "--solver", "gauss_newton", "--out", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stderr
+    # The run's own: one log prepared, one backend got ready (its helpers' column map set once).
+    assert len(judged) == 1 and len(prepared) == 1 and len(backends) == 1 and len(columns) == 1
+    assert judged[0].drive.backend is backends[0]
+
+
+def test_the_gate_judges_with_the_runs_stages_as_on_its_own(tmp_path: Path) -> None:
+    """Issue 41: the pre-flight on a run's prepared log and backend judges bit for bit as it does
+    preparing its own (the same start, fit, information and words)."""
+    from nlp_calib.pipeline.stages import align_log
+
+    sc = load_scenario(SCENARIOS / "demo.yaml")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = align_log(sc, None, ("gauss_newton",))
+    found = run.alignment.estimate
+    shared, own = pf.assess(sc, None, found, run=run), pf.assess(sc, None, found)
+    assert shared.drive.backend is run.problem.binder.backend and own.drive.backend is None
+    assert shared.drive.fns is own.drive.fns is run.problem.fns
+    assert shared.converged and own.converged and shared.where == own.where
+    assert np.array_equal(shared.x, own.x) and np.array_equal(shared.info.H, own.info.H)
+    assert shared.info.chi2 == own.info.chi2 and shared.sigma2 == own.sigma2
+    assert np.array_equal(shared.propagated, own.propagated, equal_nan=True)
 
 
 def test_two_loose_combinations_of_the_same_parameters_are_one_caveat() -> None:

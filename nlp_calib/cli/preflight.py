@@ -20,7 +20,6 @@ from nlp_calib.pipeline.draft import draft
 from nlp_calib.pipeline.preflight import preflight, refuse, stops
 from nlp_calib.pipeline.stages import Aligned, align_log
 from nlp_calib.results import codec
-from nlp_calib.results.checks import LagEstimate
 from nlp_calib.results.preflight import Preflight
 
 #: A scenario file, by its name.
@@ -80,16 +79,18 @@ def gate(
     scenarios: Sequence[Scenario],
     logs: Sequence[Sequence[Log]],
     skip: bool,
-    found: Sequence[LagEstimate | None] = (),
+    runs: Sequence[Aligned | None] = (),
 ) -> None:
     """The pre-flight of each scenario on its logs (read already): a calibration that cannot succeed
-    stops here with the pre-flight's words (``--skip-preflight``: it goes on). ``found``: each
-    scenario's lag as its run estimated it (None: the pre-flight searches its own)."""
+    stops here with the pre-flight's words (``--skip-preflight``: it goes on). ``runs``: each
+    scenario's run's stages before its windows are bound (None: none), whose lag estimate, prepared
+    log and backend the pre-flight judges with (else it prepares and searches its own)."""
     if skip:
         return
-    for sc, log_list, lag in zip(scenarios, logs, [*found, *[None] * (len(scenarios) - len(found))]):
+    for sc, log_list, run in zip(scenarios, logs, [*runs, *[None] * (len(scenarios) - len(runs))]):
+        lag = None if run is None else run.alignment.estimate
         try:
-            report = stops(sc, log_list, lag)  # its σ, its plan: only where it stops
+            report = stops(sc, log_list, lag, run)  # its σ, its plan: only where it stops
         except (DatasetError, ScenarioError, UsageError):  # the run refuses these inputs or settings
             raise  # so (its preparation, its backend): said once, now
         except Exception as exc:  # the pre-flight must never be what stops a run that could succeed
@@ -123,8 +124,7 @@ def set_up_and_gate(
         warnings.simplefilter("always")
         for sc, log_list in zip(scenarios, logs):
             aligned.append(None if sc.data.joint else _aligned(sc, log_list[0], solvers))
-    found = [None if a is None else a.alignment.estimate for a in aligned]
-    gate(scenarios, logs, skip, found)
+    gate(scenarios, logs, skip, aligned)
     for w in {(str(w.message), w.category, w.filename, w.lineno): w for w in said}.values():
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
     return aligned

@@ -49,12 +49,14 @@ from nlp_calib.pipeline.build import (
 from nlp_calib.pipeline.prepare import PreparedLog, joint_residual, prepare
 from nlp_calib.pipeline.recording import recording
 from nlp_calib.pipeline.scenario import Scenario
+from nlp_calib.pipeline.stages import Aligned
 from nlp_calib.pipeline.units_check import implausible
 from nlp_calib.pipeline.validation import leave_out, on_threads
 from nlp_calib.problem import ProblemFunctions, ResidualData, build_residual_data
 from nlp_calib.results.checks import CheckResult, Fold, LagEstimate, believed_std
 from nlp_calib.results.layout import CLOCK
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Excitation, ParameterStatus, Preflight
+from nlp_calib.solvers.backends import Backend
 from nlp_calib.solvers.evaluation import NormalEquations, ProblemEvaluator
 
 #: The closed-form start is taken on the stretch of at most this many records that turns most.
@@ -82,13 +84,19 @@ class Drive:
     start_words: str
     #: Each log as read (its encoders are re-sampled from it at a fitted time offset).
     read: tuple[Log, ...] = ()
+    #: The run's own evaluation backend, where the pre-flight judges inside a run (None: one of
+    #: its own): a second would build its maps again and reset what the run set for its helpers.
+    backend: Backend | None = None
 
 
 def _prepared(
-    sc: Scenario, logs: Sequence[Log] | None
+    sc: Scenario, logs: Sequence[Log] | None, run: Aligned | None = None
 ) -> tuple[tuple[PreparedLog, ...], Scenario, dict[str, str]]:
-    """Each log prepared as a run prepares it, the scenario with one record horizon, and the
-    parameters the drive cannot determine at all (the run holds them)."""
+    """Each log prepared as a run prepares it (``run``: a one-log run's stages, its log prepared
+    already), the scenario with one record horizon, and the parameters the drive cannot determine
+    at all (the run holds them)."""
+    if run is not None and not sc.data.joint:
+        return (run.prepared,), run.prepared.scenario, dict(run.prepared.held)
     per_log = sc.per_log()
     given: Sequence[Log | None] = list(logs) if logs is not None else [None] * len(per_log)
     with warnings.catch_warnings():
@@ -153,10 +161,13 @@ def _start(
     return point, f"the nominal values (not the closed-form start: {why})"
 
 
-def drive(sc: Scenario, logs: Sequence[Log] | None = None) -> tuple[Drive, dict[str, str]]:
+def drive(
+    sc: Scenario, logs: Sequence[Log] | None = None, run: Aligned | None = None
+) -> tuple[Drive, dict[str, str]]:
     """The scenario's logs prepared, its problem built and bound to every log's fitted records, and
-    the start (see the module docstring); with the parameters the run would hold."""
-    parts, one, held = _prepared(sc, logs)
+    the start (see the module docstring); with the parameters the run would hold. ``run``: a
+    one-log run's stages before its windows are bound (its prepared log and its backend used)."""
+    parts, one, held = _prepared(sc, logs, run)
     fns = build_problem(one, parts[0].model, tuple(held), len(parts))
     mounts = []
     if fns.spec.mounts > 1:
@@ -170,7 +181,8 @@ def drive(sc: Scenario, logs: Sequence[Log] | None = None) -> tuple[Drive, dict[
         drop_stationary=one.log.samples.drop_stationary,
         bad_intervals=_gaps(parts),
     )
-    return Drive(parts, one, fns, data, point, words, tuple(p.log for p in parts)), held
+    backend = None if run is None else run.problem.binder.backend
+    return Drive(parts, one, fns, data, point, words, tuple(p.log for p in parts), backend), held
 
 
 def _track(log: Log, fns: ProblemFunctions) -> tuple[np.ndarray, np.ndarray]:
@@ -259,7 +271,8 @@ def _binder(d: Drive, n_windows: int) -> Binder:
     no priors)."""
     fns, start, sc = d.fns, d.start, d.scenario
     box = None if start.lower is None or start.upper is None else (start.lower, start.upper)
-    backend = prepare_backend(sc, fns, [INTERNAL_SOLVER], n_windows * sc.objective.residual.stride)
+    records = n_windows * sc.objective.residual.stride
+    backend = d.backend or prepare_backend(sc, fns, [INTERNAL_SOLVER], records)
     return Binder(sc, fns, backend, start.x_fixed, no_priors(fns.n_free), bounds=box)
 
 
@@ -548,12 +561,17 @@ class Assessment:
 
 
 def assess(
-    sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None, complete: bool = True
+    sc: Scenario,
+    logs: Sequence[Log] | None = None,
+    found: LagEstimate | None = None,
+    complete: bool = True,
+    run: Aligned | None = None,
 ) -> Assessment:
     """The drive of ``sc`` prepared and its Jacobian evaluated at the start brought to the data
     (``found``: the run's own lag estimate, where it has one; ``complete``: with the σ to believe
-    and the needed precisions, else left :attr:`~Assessment.pending`)."""
-    d, held = drive(sc, logs)
+    and the needed precisions, else left :attr:`~Assessment.pending`; ``run``: a one-log run's
+    stages before its windows are bound, whose prepared log and backend it judges with)."""
+    d, held = drive(sc, logs, run)
     fns = d.fns
     omega = _omega(d)
     aligned = _as_the_run_aligns(d, omega, found)
@@ -606,15 +624,19 @@ def preflight(sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimat
 
 
 def stops(
-    sc: Scenario, logs: Sequence[Log] | None = None, found: LagEstimate | None = None
+    sc: Scenario,
+    logs: Sequence[Log] | None = None,
+    found: LagEstimate | None = None,
+    run: Aligned | None = None,
 ) -> Preflight | None:
     """The pre-flight's report (:func:`preflight`'s) where it stops a calibration of ``sc``, else
     None. Whether it stops needs neither the σ to believe (the jackknife's refits, the noise
     propagated over every record) nor the needed precisions nor the plan: a parameter is not
     determined by the drive's directions and a blocking finding is the units check's, at the fit.
-    So those are computed only where it stops, once: a run that goes on computes its own."""
+    So those are computed only where it stops, once: a run that goes on computes its own.
+    ``run``: a one-log run's stages before its windows are bound (:func:`assess`)."""
     t0 = time.perf_counter()
-    a = assess(sc, logs, found, complete=False)
+    a = assess(sc, logs, found, complete=False, run=run)
     if not _report(sc, a, t0, ahead=False).stop_words():
         return None
     return _report(sc, a.completed(), t0)
