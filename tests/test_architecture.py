@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import functools
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -22,11 +23,19 @@ def graph() -> grimp.ImportGraph:
     return grimp.build_graph("nlp_calib", cache_dir=None)
 
 
-def _modules() -> Iterator[tuple[str, Path, ast.Module]]:
+@functools.cache
+def _parsed() -> tuple[tuple[str, Path, ast.Module], ...]:
+    """Every module of the package parsed once per test process (the trees are only read)."""
+    out = []
     for path in sorted(PACKAGE.rglob("*.py")):
         rel = path.relative_to(REPO).with_suffix("")
         name = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
-        yield name, path, ast.parse(path.read_text(encoding="utf-8"))
+        out.append((name, path, ast.parse(path.read_text(encoding="utf-8"))))
+    return tuple(out)
+
+
+def _modules() -> Iterator[tuple[str, Path, ast.Module]]:
+    yield from _parsed()
 
 
 def _strongly_connected(nodes: set[str], edges: dict[str, set[str]]) -> list[set[str]]:
@@ -287,11 +296,11 @@ def test_the_stages_ask_the_references_kind_never_whether_a_log_holds_motions() 
     """Poses or own motions is the reference kind's to say (``nlp_calib/logs/reference.py``): no
     module outside the logs and the sources that fill them tests ``….motions is (not) None``."""
     found = []
-    for path in sorted(PACKAGE.rglob("*.py")):
+    for _, path, tree in _modules():
         rel = path.relative_to(PACKAGE).as_posix()
         if rel.startswith(("logs/", "sources/")):
             continue
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in ast.walk(tree):
             if (
                 isinstance(node, ast.Compare)
                 and isinstance(node.left, ast.Attribute)
