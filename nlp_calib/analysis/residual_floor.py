@@ -53,16 +53,24 @@ class ScoreRows:
         # The windows whose every neighbour has arrived once the first ``k`` have.
         self.reach = np.maximum.accumulate(self.hi) if n else self.hi
         self.meats = np.zeros((batches, n_free, n_free))
+        # Each batch's score and its information's diagonal (each parameter alone): a block's own
+        # estimate (:mod:`block_scatter`).
+        self.scores = np.zeros((batches, n_free))
+        self.information = np.zeros((batches, n_free))
         self.kept = np.zeros((0, n_free))
         self.done = 0
 
-    def add(self, w: slice, J: np.ndarray, weighted_e: np.ndarray, Omega: np.ndarray) -> None:
-        """Windows ``w`` (the next after those added): their Jacobians ``J`` (., rows, n) and
-        residuals times ρ' (rows, .)."""
+    def add(
+        self, w: slice, J: np.ndarray, weighted_e: np.ndarray, Omega: np.ndarray, weight: np.ndarray
+    ) -> None:
+        """Windows ``w`` (the next after those added): their Jacobians ``J`` (., rows, n),
+        residuals times ρ' (rows, .) and ρ' (.)."""
         if self.meats.shape[0] < 5:
             return
         if w.start != self.done + self.kept.shape[0]:
             raise ValueError(f"windows {w.start}-{w.stop} added out of order")
+        batch = np.searchsorted(self.edges, np.arange(w.start, w.stop), side="right") - 1
+        np.add.at(self.information, batch, np.einsum("wrn,r,w->wn", J * J, Omega, weight))
         g = np.concatenate([self.kept, np.einsum("wrn,r,rw->wn", J, Omega, weighted_e)])
         base = self.done
         ready = int(np.searchsorted(self.reach[base : w.stop], w.stop, side="right"))
@@ -74,6 +82,7 @@ class ScoreRows:
             own = g[lo - base : up - base]
             later = prefix[self.hi[lo:up] - base] - prefix[lo - base + 1 : up - base + 1]
             self.meats[k] += own.T @ own + own.T @ later + later.T @ own
+            self.scores[k] += own.sum(axis=0)
         self.kept, self.done = g[ready:], base + ready
 
     def variances(self, to_cov: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:

@@ -131,6 +131,7 @@ def _solver_dict(run: CalibrationRun, name: str, report: SolverReport) -> dict[s
         "std": sigmas(run, name, run.std(name)),
         "std_white_noise": sigmas(run, name, u.std_dict()),
         "std_residuals": sigmas(run, name, dict(zip(u.names, map(float, u.residual_spread())))),
+        "std_block_scatter": sigmas(run, name, dict(zip(u.names, map(float, u.block_spread())))),
         "correlation": {"names": list(u.names), "matrix": np.round(u.correlation, 6).tolist()},
         "cost": r.cost,
         "chi2": r.chi2,

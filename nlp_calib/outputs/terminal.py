@@ -89,7 +89,7 @@ def widened_lines(run: CalibrationRun) -> list[str]:
     u = run.reports[first].uncertainty
     names, white = u.names, u.std
     blocks = checks.crossval.beyond(white) if checks.crossval is not None else np.full(len(names), np.nan)
-    base = believed_std(white, u.residual_spread(), blocks)
+    base = believed_std(white, *u.spreads(), blocks)
     out = []
     if checks.pivots is not None:
         spread = checks.pivots.beyond(white)
