@@ -5,16 +5,17 @@ without each block. Where blocks carry very unequal information (a car whose few
 that a mount's lateral offset is known from), leaving one out moves the fit little although the
 blocks, each fitted alone, disagree far beyond their σ: the jackknife cannot see it.
 
-So each parameter is also estimated on each block of windows alone, the others held at the fit:
-one Gauss-Newton step from the fit on the block's own score ``g_k`` and information ``H_k``
-(the parameter's diagonal entry), ``θ_k = θ − g_k / H_k``, with the σ of the block's own
-residuals' meat (:mod:`residual_floor`: each window's score times those sharing a record with it),
-never below the white noise's share of the block (the noise model's meat apportioned by the
-block's information). The χ² of the blocks' estimates about their weighted mean has ``K − 1``
-degrees of freedom when the blocks scatter as their σ allow. Beyond its upper :data:`LEVEL`
-point, the blocks disagree: the parameter's σ (the larger of the white-noise σ and the residuals'
-own) is scaled by the Birge ratio ``√(χ²/(K − 1))``, a spread the σ to believe takes in. Blocks
-where the parameter is not determined (no information, or a negligible share of it) are left out.
+So the blocks of windows the residuals' own σ is estimated from (:mod:`residual_floor`'s
+batches) are each fitted alone: one Gauss-Newton step from the fit on the block's own score and
+information, ``θ_k = θ − H_k⁻¹g_k`` (its own marginal estimate: holding the other parameters at the
+fit would move a parameter with how each block weighs the others' errors, which white noise alone
+makes disagree). Its σ is the larger of the block's own residuals' meat's and the noise model's:
+its share of the whole fit's meat plus what the block keeps at its two borders of a pose's noise
+that cancels along the chain. The χ² of the blocks' estimates about their weighted mean has
+``K − 1`` degrees of freedom when they scatter as their σ allow. Beyond its upper :data:`LEVEL`
+point the blocks disagree: the parameter's σ (the larger of the white-noise σ and the residuals'
+own) is scaled by the Birge ratio ``√(χ²/(K − 1))``, a spread the σ to believe takes in. A block
+that leaves a parameter free, or holds a negligible share of its weight, is left out of its χ².
 """
 
 from __future__ import annotations
@@ -28,6 +29,9 @@ import numpy as np
 LEVEL = 1e-3
 #: A block counts in a parameter's χ² where it holds at least this share of its information.
 MIN_SHARE = 1e-3
+#: A direction of a block's information below this fraction of its largest (in units where every
+#: parameter's diagonal is 1) is one the block leaves free.
+SINGULAR = 1e-9
 #: Fewer blocks that determine a parameter than this judge nothing.
 MIN_BLOCKS = 4
 
@@ -51,28 +55,42 @@ def chi2_tail(x: float, dof: int) -> float:
     return tail
 
 
-def block_estimates(
-    scores: np.ndarray, information: np.ndarray, meats: np.ndarray, white_meat: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Each block's step from the fit for each parameter alone, ``−g_k/H_k`` (blocks, n), and its
-    σ: the block's own residuals' meat or the white noise's share, the larger (NaN where the
-    block holds no information on the parameter). ``white_meat``: the noise model's meat of the
-    whole fit (n, n)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        H = np.where(information > 0, information, np.nan)
-        own = np.clip(np.diagonal(meats, axis1=1, axis2=2), 0.0, None)
-        white = np.clip(np.diag(white_meat), 0.0, None) * H / np.nansum(H, axis=0)
-        return -scores / H, np.sqrt(np.fmax(own, white)) / H
+def block_estimates(rows: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Each block's own estimate as a step from the fit, ``−H_k⁻¹g_k`` (blocks, n), and its σ;
+    NaN for a parameter the block does not determine (in a direction its information leaves
+    free). ``rows``: each block's score, information, meat and border meat (``ScoreRows.blocks``)
+    and the noise model's meat of the whole fit. The σ is the larger of the block's own meat's and
+    the noise's: its share of the noise model's meat (by information) plus its borders'. The own
+    meat of a block is a sum of cancelling terms where a pose's noise cancels along the chain, so
+    it can come out near 0, while the block keeps the noise of the poses at its two ends."""
+    scores, information, meats, border, white = rows
+    step, std = np.full(scores.shape, np.nan), np.full(scores.shape, np.nan)
+    total = np.clip(np.diagonal(information, axis1=1, axis2=2).sum(axis=0), 0.0, None)
+    for k, (g, H) in enumerate(zip(scores, information)):
+        d = np.sqrt(np.clip(np.diag(H), 0.0, None))
+        if not np.all(np.isfinite(H)) or not np.any(d > 0):
+            continue
+        unit = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 0.0)
+        lam, V = np.linalg.eigh(H * np.outer(unit, unit))
+        keep = lam > SINGULAR * lam.max()
+        inv = (V[:, keep] / lam[keep]) @ V[:, keep].T * np.outer(unit, unit)
+        free = ((V[:, ~keep] ** 2).sum(axis=1) > 1e-3) | (d == 0)
+        share = np.sqrt(np.where(total > 0, d * d / np.where(total > 0, total, 1.0), 0.0))
+        noise = white * np.outer(share, share) + border[k]
+        var = np.fmax(np.diag(inv @ meats[k] @ inv), np.diag(inv @ noise @ inv))
+        step[k] = np.where(free, np.nan, -inv @ g)
+        std[k] = np.where(free, np.nan, np.sqrt(np.clip(var, 0.0, None)))
+    return step, std
 
 
-def chi2_about_mean(
-    step: np.ndarray, std: np.ndarray, information: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per parameter, the χ² of the blocks that determine it about their weighted mean and its
-    degrees of freedom (0 where fewer than :data:`MIN_BLOCKS` do)."""
-    share = information / np.where(information.sum(axis=0) > 0, information.sum(axis=0), 1.0)
-    counts = np.isfinite(step) & np.isfinite(std) & (std > 0) & (share >= MIN_SHARE)
-    w = np.where(counts, 1.0 / np.where(counts, std, 1.0) ** 2, 0.0)
+def chi2_about_mean(step: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per parameter, the χ² of the blocks that determine it (each with at least
+    :data:`MIN_SHARE` of the weight) about their weighted mean and its degrees of freedom (0 where
+    fewer than :data:`MIN_BLOCKS` do)."""
+    ok = np.isfinite(step) & np.isfinite(std) & (std > 0)
+    w = np.where(ok, 1.0 / np.where(ok, std, 1.0) ** 2, 0.0)
+    counts = ok & (w >= MIN_SHARE * w.sum(axis=0))
+    w = np.where(counts, w, 0.0)
     v = np.where(counts, step, 0.0)
     total = w.sum(axis=0)
     mean = (w * v).sum(axis=0) / np.where(total > 0, total, 1.0)
@@ -91,16 +109,13 @@ def birge_spread(chi2: np.ndarray, dof: np.ndarray, std: np.ndarray) -> np.ndarr
     return out
 
 
-def block_scatter(
-    rows: tuple[np.ndarray, np.ndarray, np.ndarray], white_meat: np.ndarray, std: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def block_scatter(rows: tuple[np.ndarray, ...], std: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per free parameter: the spread (``std`` times the Birge ratio where the blocks disagree,
-    NaN elsewhere), the blocks' χ² and its degrees of freedom (0: not judged). ``rows``: each
-    block's score, information diagonal and residuals' meat (``ScoreRows``' batches)."""
-    scores, information, meats = rows
-    if scores.shape[0] < MIN_BLOCKS:
+    NaN elsewhere), the blocks' χ² and its degrees of freedom (0: not judged). ``rows``: see
+    :func:`block_estimates`."""
+    if rows[0].shape[0] < MIN_BLOCKS:
         n = std.size
         return np.full(n, np.nan), np.full(n, np.nan), np.zeros(n, dtype=int)
-    step, sd = block_estimates(scores, information, meats, white_meat)
-    chi2, dof = chi2_about_mean(step, sd, information)
+    step, sd = block_estimates(rows)
+    chi2, dof = chi2_about_mean(step, sd)
     return birge_spread(chi2, dof, std), np.where(dof > 0, chi2, np.nan), dof

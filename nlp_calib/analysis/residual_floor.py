@@ -53,10 +53,13 @@ class ScoreRows:
         # The windows whose every neighbour has arrived once the first ``k`` have.
         self.reach = np.maximum.accumulate(self.hi) if n else self.hi
         self.meats = np.zeros((batches, n_free, n_free))
-        # Each batch's score and its information's diagonal (each parameter alone): a block's own
-        # estimate (:mod:`block_scatter`).
+        # Each batch's score and information: a block's own estimate (:mod:`block_scatter`) ...
         self.scores = np.zeros((batches, n_free))
-        self.information = np.zeros((batches, n_free))
+        self.information = np.zeros((batches, n_free, n_free))
+        # ... and the sum of its windows' scores' squares, each alone.
+        self.alone = np.zeros((batches, n_free, n_free))
+        #: How many later windows a window shares a record with, on average.
+        self.span = float(np.mean(self.hi - np.arange(n))) - 1.0 if n and ordered else 0.0
         self.kept = np.zeros((0, n_free))
         self.done = 0
 
@@ -70,7 +73,10 @@ class ScoreRows:
         if w.start != self.done + self.kept.shape[0]:
             raise ValueError(f"windows {w.start}-{w.stop} added out of order")
         batch = np.searchsorted(self.edges, np.arange(w.start, w.stop), side="right") - 1
-        np.add.at(self.information, batch, np.einsum("wrn,r,w->wn", J * J, Omega, weight))
+        root = J * np.sqrt(Omega)[None, :, None] * np.sqrt(weight)[:, None, None]
+        for k in np.unique(batch):
+            rows = root[batch == k].reshape(-1, root.shape[2])
+            self.information[k] += rows.T @ rows
         g = np.concatenate([self.kept, np.einsum("wrn,r,rw->wn", J, Omega, weighted_e)])
         base = self.done
         ready = int(np.searchsorted(self.reach[base : w.stop], w.stop, side="right"))
@@ -83,7 +89,16 @@ class ScoreRows:
             later = prefix[self.hi[lo:up] - base] - prefix[lo - base + 1 : up - base + 1]
             self.meats[k] += own.T @ own + own.T @ later + later.T @ own
             self.scores[k] += own.sum(axis=0)
+            self.alone[k] += own.T @ own
         self.kept, self.done = g[ready:], base + ready
+
+    def blocks(self) -> tuple[np.ndarray, ...]:
+        """Each batch's score, information and residuals' meat, and the meat its borders keep of a
+        noise that cancels along the chain (one window's mean squared score times the windows it
+        shares records with: :mod:`block_scatter`)."""
+        windows = np.diff(self.edges)[:, None, None]
+        border = self.alone / np.where(windows > 0, windows, 1) * max(self.span, 1.0)
+        return self.scores, self.information, self.meats, border
 
     def variances(self, to_cov: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
         """Each parameter's variance from the residuals' own meat and the margin its sampling noise

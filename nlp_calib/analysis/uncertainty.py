@@ -255,7 +255,7 @@ def _with_spreads(
     disagreement (:mod:`block_scatter`, from ``own``'s batches and the noise model's meat)."""
     with np.errstate(invalid="ignore"):
         floor = np.fmax(np.sqrt(np.diag(out.covariance)), residual)
-    scatter, chi2, blocks = block_scatter((own.scores, own.information, own.meats), white_meat, floor)
+    scatter, chi2, blocks = block_scatter((*own.blocks(), white_meat), floor)
 
     def in_names(v: np.ndarray) -> np.ndarray:
         return np.array([dict(zip(out.free, v)).get(n, np.nan) for n in out.names], dtype=float)

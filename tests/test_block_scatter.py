@@ -1,0 +1,87 @@
+"""Blocks of one drive that disagree beyond their σ widen it (nlp_calib.analysis.block_scatter).
+
+A chain of windows each measuring the offset θ between consecutive poses, ``z_{u+1} − z_u = θ``
+(see test_residual_floor): a block's own estimate is its mean increment. An error that shifts
+each block by its own amount must fire and widen the σ until it covers the truth; white noise, of
+each window's own or on the poses (cancelling along the chain), must not.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nlp_calib.analysis.block_scatter import LEVEL, block_scatter, chi2_tail
+from nlp_calib.analysis.residual_floor import ScoreRows
+
+W = 2000
+
+
+def _chain(seed: int, own: float, pose: float, bias: float = 0.0) -> tuple[tuple[np.ndarray, ...], dict]:
+    """The chain's blocks' figures (``ScoreRows.blocks`` and the noise model's meat) and what an
+    independent computation needs: the increments, the blocks' edges, the fit and its σ."""
+    rng = np.random.default_rng(seed)
+    rows = ScoreRows(np.arange(W), np.arange(W) + 1, 1)
+    edges = rows.edges
+    shift = np.repeat(rng.normal(0.0, bias, edges.size - 1), np.diff(edges))
+    inc = np.diff(rng.normal(0.0, pose, W + 1)) + rng.normal(0.0, own, W) + shift
+    fit = inc.mean()
+    rows.add(slice(0, W), -np.ones((W, 1, 1)), (inc - fit)[None, :], np.ones(1), np.ones(W))
+    white = np.array([[2 * pose**2 + W * own**2]])  # the noise model's meat of the whole chain
+    return (*rows.blocks(), white), {"inc": inc, "edges": edges, "fit": fit, "std": math.sqrt(white[0, 0]) / W}
+
+
+def test_chi2_tail_against_the_integrated_density() -> None:
+    for dof in (1, 2, 3, 9, 18, 19):
+        for x in (0.5, dof, 3.0 * dof + 10.0):
+            t = np.linspace(x, x + 400.0, 400_001)
+            pdf = np.exp((dof / 2 - 1) * np.log(t) - t / 2 - math.lgamma(dof / 2) - dof / 2 * math.log(2))
+            assert abs(chi2_tail(x, dof) - np.trapezoid(pdf, t)) < 1e-6, (dof, x)
+
+
+def test_blocks_shifted_each_by_its_own_error_fire_and_the_sigma_covers_the_truth() -> None:
+    missed = 0
+    for seed in (3101, 3102, 3103):
+        rows, c = _chain(seed, own=1.0, pose=0.0, bias=0.3)
+        spread, chi2, dof = block_scatter(rows, np.array([c["std"]]))
+        # Independently: each block's mean increment, its σ the noise's (1/√N), their χ².
+        edges, inc = c["edges"], c["inc"]
+        means = np.array([inc[a:b].mean() for a, b in zip(edges[:-1], edges[1:])])
+        w = np.diff(edges).astype(float)  # 1/σ² of a block's mean with unit noise
+        expect = float((w * (means - (w * means).sum() / w.sum()) ** 2).sum())
+        assert dof[0] == edges.size - 2
+        assert chi2_tail(expect, int(dof[0])) < LEVEL
+        # The blocks' σ come from their residuals about the whole fit, which hold their shifts too: a
+        # lower χ² than with the noise's σ known, never a higher one.
+        assert 0.5 < chi2[0] / expect < 1.1, (chi2[0], expect)
+        assert np.isfinite(spread[0]) and abs(spread[0] / (c["std"] * math.sqrt(chi2[0] / dof[0])) - 1) < 1e-12
+        assert abs(c["fit"]) < 3.0 * spread[0], (c["fit"], spread[0])  # the truth is 0
+        missed += int(abs(c["fit"]) > 3.0 * c["std"])
+    assert missed  # the white-noise σ alone does not cover it
+
+
+def test_white_noise_of_each_window_or_of_the_poses_does_not_fire() -> None:
+    """40 draws each (seeds 3200-3239): of each window's own, of the poses (cancelling along the
+    chain: a block's own meat sums cancelling terms to about 0), both."""
+    for own, pose in ((1.0, 0.0), (0.0, 0.5), (0.1, 0.5)):
+        fired = 0
+        for seed in range(3200, 3240):
+            rows, c = _chain(seed, own, pose)
+            fired += int(np.isfinite(block_scatter(rows, np.array([c["std"]]))[0][0]))
+        assert fired <= 1, (own, pose, fired)
+
+
+def test_a_block_that_leaves_a_parameter_free_is_left_out_of_its_chi2() -> None:
+    """Two parameters, the second seen only by the first half of the windows."""
+    rng = np.random.default_rng(3300)
+    rows = ScoreRows(np.arange(W), np.arange(W) + 1, 2)
+    J = np.ones((W, 1, 2))
+    J[:, 0, 1] = rng.normal(size=W)
+    J[W // 2 :, 0, 1] = 0.0
+    rows.add(slice(0, W), J, rng.normal(size=(1, W)), np.ones(1), np.ones(W))
+    _, chi2, dof = block_scatter((*rows.blocks(), np.eye(2) * W), np.ones(2))
+    blocks = rows.edges.size - 1
+    half = int(np.sum(rows.edges[1:] <= W // 2))
+    assert dof[0] == blocks - 1 and dof[1] == half - 1 and blocks > half
+    assert np.all(np.isfinite(chi2))
