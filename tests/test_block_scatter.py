@@ -8,6 +8,7 @@ each window's own or on the poses (cancelling along the chain), must not.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -29,7 +30,12 @@ def _chain(seed: int, own: float, pose: float, bias: float = 0.0) -> tuple[tuple
     fit = inc.mean()
     rows.add(slice(0, W), -np.ones((W, 1, 1)), (inc - fit)[None, :], np.ones(1), np.ones(W))
     white = np.array([[2 * pose**2 + W * own**2]])  # the noise model's meat of the whole chain
-    return (*rows.blocks(), white), {"inc": inc, "edges": edges, "fit": fit, "std": math.sqrt(white[0, 0]) / W}
+    return (*rows.blocks(), white), {
+        "inc": inc,
+        "edges": edges,
+        "fit": fit,
+        "std": math.sqrt(white[0, 0]) / W,
+    }
 
 
 def test_chi2_tail_against_the_integrated_density() -> None:
@@ -47,7 +53,7 @@ def test_blocks_shifted_each_by_its_own_error_fire_and_the_sigma_covers_the_trut
         spread, chi2, dof = block_scatter(rows, np.array([c["std"]]))
         # Independently: each block's mean increment, its σ the noise's (1/√N), their χ².
         edges, inc = c["edges"], c["inc"]
-        means = np.array([inc[a:b].mean() for a, b in zip(edges[:-1], edges[1:])])
+        means = np.array([inc[a:b].mean() for a, b in itertools.pairwise(edges)])
         w = np.diff(edges).astype(float)  # 1/σ² of a block's mean with unit noise
         expect = float((w * (means - (w * means).sum() / w.sum()) ** 2).sum())
         assert dof[0] == edges.size - 2
@@ -55,7 +61,9 @@ def test_blocks_shifted_each_by_its_own_error_fire_and_the_sigma_covers_the_trut
         # The blocks' σ come from their residuals about the whole fit, which hold their shifts too: a
         # lower χ² than with the noise's σ known, never a higher one.
         assert 0.5 < chi2[0] / expect < 1.1, (chi2[0], expect)
-        assert np.isfinite(spread[0]) and abs(spread[0] / (c["std"] * math.sqrt(chi2[0] / dof[0])) - 1) < 1e-12
+        assert (
+            np.isfinite(spread[0]) and abs(spread[0] / (c["std"] * math.sqrt(chi2[0] / dof[0])) - 1) < 1e-12
+        )
         assert abs(c["fit"]) < 3.0 * spread[0], (c["fit"], spread[0])  # the truth is 0
         missed += int(abs(c["fit"]) > 3.0 * c["std"])
     assert missed  # the white-noise σ alone does not cover it

@@ -80,7 +80,7 @@ def test_windows_added_a_block_at_a_time_give_the_meats_of_all_at_once() -> None
     score = np.array(
         [(J[batch == k, 0] * e[0, batch == k, None]).sum(axis=0) for k in range(batch.max() + 1)]
     )
-    info = np.array([(J[batch == k, 0] ** 2).sum(axis=0) for k in range(batch.max() + 1)])
+    info = np.array([J[batch == k, 0].T @ J[batch == k, 0] for k in range(batch.max() + 1)])
     np.testing.assert_allclose(parts.scores, score, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(parts.information, info, rtol=1e-12)
     assert whole.meats.shape[0] >= 5 and parts.variances(lambda m: m) is not None
