@@ -15,6 +15,8 @@ import numpy as np
 
 from nlp_calib.analysis.block_scatter import LEVEL, block_scatter, chi2_tail
 from nlp_calib.analysis.residual_floor import ScoreRows
+from nlp_calib.results.run import Checks
+from nlp_calib.results.uncertainty import Uncertainty
 
 W = 2000
 
@@ -51,12 +53,16 @@ def test_blocks_shifted_each_by_its_own_error_fire_and_the_sigma_covers_the_trut
     for seed in (3101, 3102, 3103):
         rows, c = _chain(seed, own=1.0, pose=0.0, bias=0.3)
         spread, chi2, dof = block_scatter(rows, np.array([c["std"]]))
-        # Independently: each block's mean increment, its σ the noise's (1/√N), their χ².
+        # Independently: each block's mean increment, its σ the noise's (1/√N), their χ² without
+        # the block that adds most to it.
         edges, inc = c["edges"], c["inc"]
         means = np.array([inc[a:b].mean() for a, b in itertools.pairwise(edges)])
         w = np.diff(edges).astype(float)  # 1/σ² of a block's mean with unit noise
+        terms = w * (means - (w * means).sum() / w.sum()) ** 2
+        keep = np.arange(means.size) != np.argmax(terms)  # the block adding most left out
+        w, means = w[keep], means[keep]
         expect = float((w * (means - (w * means).sum() / w.sum()) ** 2).sum())
-        assert dof[0] == edges.size - 2
+        assert dof[0] == edges.size - 3
         assert chi2_tail(expect, int(dof[0])) < LEVEL
         # The blocks' σ come from their residuals about the whole fit, which hold their shifts too: a
         # lower χ² than with the noise's σ known, never a higher one.
@@ -91,5 +97,22 @@ def test_a_block_that_leaves_a_parameter_free_is_left_out_of_its_chi2() -> None:
     _, chi2, dof = block_scatter((*rows.blocks(), np.eye(2) * W), np.ones(2))
     blocks = rows.edges.size - 1
     half = int(np.sum(rows.edges[1:] <= W // 2))
-    assert dof[0] == blocks - 1 and dof[1] == half - 1 and blocks > half
+    assert dof[0] == blocks - 2 and dof[1] == half - 2 and blocks > half  # the worst block left out
     assert np.all(np.isfinite(chi2))
+
+
+def test_the_sigma_to_believe_takes_the_block_scatter_in_where_it_is_the_largest() -> None:
+    names = ("a", "b", "c")
+    u = Uncertainty(
+        names=names,
+        free=names,
+        covariance=np.diag([1.0, 4.0, 9.0]) * 1e-4,
+        std=np.array([0.01, 0.02, 0.03]),
+        correlation=np.eye(3),
+        noise={},
+        dof=100,
+        std_residuals=np.array([0.015, np.nan, np.nan]),
+        std_block_scatter=np.array([0.012, 0.05, np.nan]),
+    )
+    believed = Checks(observability=None, crossval=None, direction=None, findings=None).believed(u)
+    np.testing.assert_array_equal(believed, [0.015, 0.05, 0.03])

@@ -27,8 +27,9 @@ import numpy as np
 #: Upper-tail probability of χ²(K − 1) beyond which a parameter's blocks disagree: strict, so
 #: white noise almost never widens a σ (measured on simulated white-noise runs, see the tests).
 LEVEL = 1e-3
-#: A block counts in a parameter's χ² where it holds at least this share of its information.
-MIN_SHARE = 1e-3
+#: A block counts in a parameter's χ² where its weight (1/σ²) is at least this fraction of an
+#: equal share: a σ ten times an average block's says the block barely determines it.
+MIN_SHARE = 0.01
 #: A direction of a block's information below this fraction of its largest (in units where every
 #: parameter's diagonal is 1) is one the block leaves free.
 SINGULAR = 1e-9
@@ -84,19 +85,30 @@ def block_estimates(rows: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarra
 
 
 def chi2_about_mean(step: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per parameter, the χ² of the blocks that determine it (each with at least
-    :data:`MIN_SHARE` of the weight) about their weighted mean and its degrees of freedom (0 where
-    fewer than :data:`MIN_BLOCKS` do)."""
+    """Per parameter, the χ² of the blocks that determine it (each with at least :data:`MIN_SHARE`
+    of an equal share of the weight) about their weighted mean, the block that adds most to it
+    left out, and its degrees of freedom (0 where fewer than :data:`MIN_BLOCKS` remain)."""
     ok = np.isfinite(step) & np.isfinite(std) & (std > 0)
     w = np.where(ok, 1.0 / np.where(ok, std, 1.0) ** 2, 0.0)
-    counts = ok & (w >= MIN_SHARE * w.sum(axis=0))
-    w = np.where(counts, w, 0.0)
-    v = np.where(counts, step, 0.0)
-    total = w.sum(axis=0)
-    mean = (w * v).sum(axis=0) / np.where(total > 0, total, 1.0)
-    chi2 = (w * (v - mean) ** 2).sum(axis=0)
+    counts = ok & (w * step.shape[0] >= MIN_SHARE * w.sum(axis=0))
+    chi2, terms = _about_mean(step, np.where(counts, w, 0.0))
+    # One block's σ can come out too small (its own meat is a sum of cancelling terms, its floor
+    # an apportioned share): one block alone never makes the blocks disagree.
+    worst = np.argmax(terms, axis=0)
+    counts[worst, np.arange(step.shape[1])] = False
+    chi2, _ = _about_mean(step, np.where(counts, w, 0.0))
     dof = counts.sum(axis=0) - 1
     return chi2, np.where(dof + 1 >= MIN_BLOCKS, dof, 0)
+
+
+def _about_mean(step: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The χ² of ``step`` (blocks, n) about its mean weighted by ``w`` (0: left out), and each
+    block's term of it."""
+    v = np.where(w > 0, step, 0.0)
+    total = w.sum(axis=0)
+    mean = (w * v).sum(axis=0) / np.where(total > 0, total, 1.0)
+    terms = w * (v - mean) ** 2
+    return terms.sum(axis=0), terms
 
 
 def birge_spread(chi2: np.ndarray, dof: np.ndarray, std: np.ndarray) -> np.ndarray:
