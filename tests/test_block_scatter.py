@@ -10,13 +10,21 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
+from pathlib import Path
+from typing import Any
 
 import numpy as np
+import pytest
 
 from nlp_calib.analysis.block_scatter import LEVEL, block_scatter, chi2_tail
 from nlp_calib.analysis.residual_floor import ScoreRows
+from nlp_calib.outputs.handoff import calibration_dict
+from nlp_calib.outputs.results import result_dict
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.results.run import Checks
 from nlp_calib.results.uncertainty import Uncertainty
+from nlp_calib.simulation.vehicles import HighwayOptions, RoadOptions, simulate_highway
 
 W = 2000
 
@@ -116,3 +124,65 @@ def test_the_sigma_to_believe_takes_the_block_scatter_in_where_it_is_the_largest
     )
     believed = Checks(observability=None, crossval=None, direction=None, findings=None).believed(u)
     np.testing.assert_array_equal(believed, [0.015, 0.05, 0.03])
+
+
+def _highway(tmp_path: Path, seed: int, pose_noise_time_s: float) -> tuple[Any, dict[str, float]]:
+    """A car on a highway with bends (160 s), its device's noise white or correlated over
+    ``pose_noise_time_s``: the run (axle distance and track given) and the truth."""
+    road = RoadOptions(heading_change=-2.0, bend_angle=0.03, pose_noise_time_s=pose_noise_time_s)
+    sim = simulate_highway(HighwayOptions(duration_s=160.0, seed=seed, road=road))
+    joints, poses, _ = sim.write(tmp_path / f"car{seed}")
+    names = {"k_traction": "traction_wheels_radius", "rear_track": "traction_track_width"}
+    truth = {names.get(n, n): v for n, v in sim.options.truth.items()}
+    wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
+    sc = {
+        "model": "car_like",
+        "initial_guess": "auto",
+        "solvers": ["gauss_newton"],
+        "dataset": {
+            "joints": str(joints),
+            "poses": str(poses),
+            "form": "speeds",
+            "encoders": dict(zip(wheels, wheels)),
+        },
+        "known": {n: truth[n] for n in ("wheelbase", "traction_track_width")},
+    }
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return Calibration(scenario_from_mapping(sc, "car", tmp_path)).run(), truth
+
+
+def test_a_device_noise_correlated_along_the_drive_fires_and_reaches_the_handoff(tmp_path: Path) -> None:
+    """Seed 44: noise correlated over 5 s shifts each block its own way (the white-noise σ of
+    sensor_x misses the truth by tens of σ); the blocks disagree, the spread is carried to
+    result.json and calibration.yaml, and the σ to believe covers the truth."""
+    run, truth = _highway(tmp_path, 44, 5.0)
+    u = run.reports["gauss_newton"].uncertainty
+    assert u.block_chi2 is not None
+    i = u.names.index("sensor_x")
+    chi2, dof = u.block_chi2[:, i]
+    assert chi2_tail(float(chi2), int(dof)) < LEVEL
+    base = max(u.std[i], np.nan_to_num(u.residual_spread()[i]))
+    assert u.block_spread()[i] == pytest.approx(base * math.sqrt(chi2 / dof), rel=1e-12)
+    std, err = (
+        run.std("gauss_newton"),
+        run.reports["gauss_newton"].result.param_dict()["sensor_x"] - truth["sensor_x"],
+    )
+    assert (
+        abs(err) > 5.0 * u.std[i]
+        and abs(err) < 3.0 * std["sensor_x"]
+        and std["sensor_x"] >= u.block_spread()[i]
+    )
+    spread = result_dict(run)["solvers"]["gauss_newton"]["std_block_scatter"]["sensor_x"]
+    assert (
+        spread == pytest.approx(u.block_spread()[i])
+        and calibration_dict(run)["std_block_scatter"]["sensor_x"] == spread
+    )
+
+
+def test_white_device_noise_on_a_highway_does_not_fire(tmp_path: Path) -> None:
+    """Seed 44 with white noise: no parameter's blocks disagree."""
+    run, _ = _highway(tmp_path, 44, 0.0)
+    u = run.reports["gauss_newton"].uncertainty
+    assert u.block_chi2 is not None and (u.block_chi2[1] > 0).sum() >= 5
+    assert not np.isfinite(u.block_spread()).any(), u.block_chi2
