@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest import highway_dataset
 
 from nlp_calib.analysis.block_scatter import LEVEL, block_scatter, chi2_tail
 from nlp_calib.analysis.residual_floor import ScoreRows
@@ -134,17 +135,11 @@ def _highway(tmp_path: Path, seed: int, pose_noise_time_s: float) -> tuple[Any, 
     joints, poses, _ = sim.write(tmp_path / f"car{seed}")
     names = {"k_traction": "traction_wheels_radius", "rear_track": "traction_track_width"}
     truth = {names.get(n, n): v for n, v in sim.options.truth.items()}
-    wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
     sc = {
         "model": "car_like",
         "initial_guess": "auto",
         "solvers": ["gauss_newton"],
-        "dataset": {
-            "joints": str(joints),
-            "poses": str(poses),
-            "form": "speeds",
-            "encoders": dict(zip(wheels, wheels)),
-        },
+        "dataset": highway_dataset(joints, poses),
         "known": {n: truth[n] for n in ("wheelbase", "traction_track_width")},
     }
     with warnings.catch_warnings():
