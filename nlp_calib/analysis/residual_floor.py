@@ -72,11 +72,7 @@ class ScoreRows:
             return
         if w.start != self.done + self.kept.shape[0]:
             raise ValueError(f"windows {w.start}-{w.stop} added out of order")
-        batch = np.searchsorted(self.edges, np.arange(w.start, w.stop), side="right") - 1
-        root = J * np.sqrt(Omega)[None, :, None] * np.sqrt(weight)[:, None, None]
-        for k in np.unique(batch):
-            rows = root[batch == k].reshape(-1, root.shape[2])
-            self.information[k] += rows.T @ rows
+        self._add_information(w, J, Omega, weight)
         g = np.concatenate([self.kept, np.einsum("wrn,r,rw->wn", J, Omega, weighted_e)])
         base = self.done
         ready = int(np.searchsorted(self.reach[base : w.stop], w.stop, side="right"))
@@ -91,6 +87,16 @@ class ScoreRows:
             self.scores[k] += own.sum(axis=0)
             self.alone[k] += own.T @ own
         self.kept, self.done = g[ready:], base + ready
+
+    def _add_information(self, w: slice, J: np.ndarray, Omega: np.ndarray, weight: np.ndarray) -> None:
+        """Each batch's ``Σ ρ'·JᵀΩJ`` over the windows ``w``, batch by batch and row by row: the
+        temporaries are (windows, n), never J's whole size."""
+        cut = np.clip(self.edges, w.start, w.stop) - w.start
+        for b in np.flatnonzero(cut[1:] > cut[:-1]):
+            first, last = int(cut[b]), int(cut[b + 1])
+            for r in range(J.shape[1]):
+                A = J[first:last, r, :]
+                self.information[b] += (A * (Omega[r] * weight[first:last])[:, None]).T @ A
 
     def blocks(self) -> tuple[np.ndarray, ...]:
         """Each batch's score, information and residuals' meat, and the meat its borders keep of a
