@@ -9,7 +9,10 @@ the same with every window's score alone (independent windows) and ``σ²·H⁻�
 variance. Then ``--param`` fitted on each of ``--blocks`` contiguous blocks alone (the others held
 at the fit, one Gauss-Newton step), each with its σ from the block's own scores, and the χ² of the
 blocks' values about their weighted mean: a χ² near its degrees of freedom says the blocks scatter
-as those σ allow; far above, errors vary along the drive beyond them.
+as those σ allow; far above, errors vary along the drive beyond them. Holding the others makes
+white noise disagree too (each block weighs the others' errors its own way): the run's own figure,
+``block_chi2`` in result.json, fits every parameter a block determines at once
+(``nlp_calib.analysis.block_scatter``).
 """
 
 from __future__ import annotations

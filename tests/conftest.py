@@ -110,6 +110,17 @@ def parse_lines(
     return parse_log(lines, get_model(model).encoder_kinds, path, strict=strict)
 
 
+def highway_dataset(joints: Path, poses: Path) -> dict[str, object]:
+    """The dataset entry of a simulated highway car's files (wheel speeds, the device's poses)."""
+    wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
+    return {
+        "joints": str(joints),
+        "poses": str(poses),
+        "form": "speeds",
+        "encoders": dict(zip(wheels, wheels)),
+    }
+
+
 def write_sim(tmp_path: Path, name: str = "sim.txt", **kwargs: object) -> Path:
     """Simulate a log with the given options into ``tmp_path``; returns its path."""
     log, _ = write_simulation(simulate(SimulationOptions.of(**kwargs)), tmp_path / name)  # type: ignore[arg-type]

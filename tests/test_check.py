@@ -12,9 +12,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from conftest import REAL_LOG, SCENARIOS, cli, write_sim
 
-from nlp_calib.analysis.drift import FALSE_ALARM, t_quantile, two_sided_tail, welch_dof
+from nlp_calib.analysis.drift import FALSE_ALARM, between_logs_std, t_quantile, two_sided_tail, welch_dof
 from nlp_calib.core.errors import UsageError
 from nlp_calib.models import MODELS
 from nlp_calib.outputs.check import check_document
@@ -115,6 +116,34 @@ def test_the_check_reads_back_from_the_stored_result(stored: Path, tmp_path: Pat
     assert found.words == drift.line() and f"drift: {drift.line()}" in run_table(run)
     assert result_dict(run)["drift"]["verdict"] == drift.verdict == check_document(run)["verdict"]
     assert [c["name"] for c in result_dict(run)["drift"]["changes"]] == [c.name for c in drift.changes]
+
+
+def test_a_stored_block_scatter_averages_over_a_log_as_the_residuals_own_sigma_does(
+    stored: Path, tmp_path: Path
+) -> None:
+    """A calibration.yaml whose blocks disagreed on axis_length: its between-logs σ widens only the
+    part of the σ beyond the blocks' scatter (it averages over a log, like white noise)."""
+    doc = yaml.safe_load(stored.read_text())
+    std, white, folds = (
+        doc["std"]["axis_length"],
+        doc["std_white_noise"]["axis_length"],
+        doc["std_blocks_folds"],
+    )
+    doc["std"]["axis_length"] = scatter = 3.0 * std  # as the σ to believe takes the scatter in
+    doc["std_block_scatter"] = {n: (scatter if n == "axis_length" else None) for n in doc["std"]}
+    doc.pop("std_slip", None)
+    with_scatter = tmp_path / "with.yaml"
+    with_scatter.write_text(yaml.safe_dump(doc))
+    doc.pop("std_block_scatter")
+    without = tmp_path / "without.yaml"
+    without.write_text(yaml.safe_dump(doc))
+    own = (doc.get("std_residuals") or {}).get("axis_length") or math.nan
+    averaged = max(v for v in (scatter, own, white) if math.isfinite(v))
+    assert read_calibration(with_scatter).std_shared["axis_length"] == pytest.approx(
+        between_logs_std(scatter, averaged, folds), rel=1e-12
+    )
+    assert read_calibration(with_scatter).std_shared["axis_length"] == pytest.approx(scatter, rel=1e-12)
+    assert read_calibration(without).std_shared["axis_length"] > 1.5 * scatter  # widened as shared
 
 
 def test_a_scenario_with_another_formulation_is_warned_about(stored: Path, tmp_path: Path) -> None:

@@ -29,7 +29,7 @@ def _residuals_variance(
     e: np.ndarray, starts: np.ndarray, stops: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     rows = ScoreRows(starts, stops, 1)
-    rows.add(slice(0, W), np.ones((W, 1, 1)), e[None, :], np.ones(1))
+    rows.add(slice(0, W), np.ones((W, 1, 1)), e[None, :], np.ones(1), np.ones(W))
     found = rows.variances(lambda meat: meat / W**2)  # H = W: the covariance H⁻¹·S·H⁻¹
     assert found is not None
     return found
@@ -70,12 +70,20 @@ def test_windows_added_a_block_at_a_time_give_the_meats_of_all_at_once() -> None
     stops, J = starts + 2, rng.normal(size=(W, 1, 2))
     e = rng.normal(size=(1, W))
     whole = ScoreRows(starts, stops, 2)
-    whole.add(slice(0, W), J, e, np.ones(1))
+    whole.add(slice(0, W), J, e, np.ones(1), np.ones(W))
     parts = ScoreRows(starts, stops, 2)
     for lo, hi in ((0, 7), (7, 700), (700, 701), (701, W)):
-        parts.add(slice(lo, hi), J[lo:hi], e[:, lo:hi], np.ones(1))
+        parts.add(slice(lo, hi), J[lo:hi], e[:, lo:hi], np.ones(1), np.ones(hi - lo))
     np.testing.assert_allclose(parts.meats, whole.meats, rtol=1e-12, atol=1e-12 * np.abs(whole.meats).max())
+    # Each batch's score and information, from the windows' own (independent sums).
+    batch = np.searchsorted(whole.edges, starts, side="right") - 1
+    score = np.array(
+        [(J[batch == k, 0] * e[0, batch == k, None]).sum(axis=0) for k in range(batch.max() + 1)]
+    )
+    info = np.array([J[batch == k, 0].T @ J[batch == k, 0] for k in range(batch.max() + 1)])
+    np.testing.assert_allclose(parts.scores, score, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(parts.information, info, rtol=1e-12)
     assert whole.meats.shape[0] >= 5 and parts.variances(lambda m: m) is not None
     late = ScoreRows(starts, stops, 2)
     with pytest.raises(ValueError, match="out of order"):
-        late.add(slice(7, W), J[7:], e[:, 7:], np.ones(1))
+        late.add(slice(7, W), J[7:], e[:, 7:], np.ones(1), np.ones(W - 7))

@@ -117,7 +117,7 @@ def run_between_logs(run: CalibrationRun, solver: str) -> dict[str, float]:
     u = run.reports[solver].uncertainty
     cv = run.checks.crossval
     folds = len(cv.converged) if cv is not None else 0
-    slip, own = run.checks.slip(u.names), u.residual_spread()
+    slip, own = run.checks.slip(u.names), np.fmax(*u.spreads())
     return {
         n: shared_std(sd, (float(u.std[i]), float(own[i]), float(slip[i])), folds)
         for i, (n, sd) in enumerate(run.std(solver).items())

@@ -53,16 +53,26 @@ class ScoreRows:
         # The windows whose every neighbour has arrived once the first ``k`` have.
         self.reach = np.maximum.accumulate(self.hi) if n else self.hi
         self.meats = np.zeros((batches, n_free, n_free))
+        # Each batch's score and information: a block's own estimate (:mod:`block_scatter`) ...
+        self.scores = np.zeros((batches, n_free))
+        self.information = np.zeros((batches, n_free, n_free))
+        # ... and the sum of its windows' scores' squares, each alone.
+        self.alone = np.zeros((batches, n_free, n_free))
+        #: How many later windows a window shares a record with, on average.
+        self.span = float(np.mean(self.hi - np.arange(n))) - 1.0 if n and ordered else 0.0
         self.kept = np.zeros((0, n_free))
         self.done = 0
 
-    def add(self, w: slice, J: np.ndarray, weighted_e: np.ndarray, Omega: np.ndarray) -> None:
-        """Windows ``w`` (the next after those added): their Jacobians ``J`` (., rows, n) and
-        residuals times ρ' (rows, .)."""
+    def add(
+        self, w: slice, J: np.ndarray, weighted_e: np.ndarray, Omega: np.ndarray, weight: np.ndarray
+    ) -> None:
+        """Windows ``w`` (the next after those added): their Jacobians ``J`` (., rows, n),
+        residuals times ρ' (rows, .) and ρ' (.)."""
         if self.meats.shape[0] < 5:
             return
         if w.start != self.done + self.kept.shape[0]:
             raise ValueError(f"windows {w.start}-{w.stop} added out of order")
+        self._add_information(w, J, Omega, weight)
         g = np.concatenate([self.kept, np.einsum("wrn,r,rw->wn", J, Omega, weighted_e)])
         base = self.done
         ready = int(np.searchsorted(self.reach[base : w.stop], w.stop, side="right"))
@@ -74,7 +84,27 @@ class ScoreRows:
             own = g[lo - base : up - base]
             later = prefix[self.hi[lo:up] - base] - prefix[lo - base + 1 : up - base + 1]
             self.meats[k] += own.T @ own + own.T @ later + later.T @ own
+            self.scores[k] += own.sum(axis=0)
+            self.alone[k] += own.T @ own
         self.kept, self.done = g[ready:], base + ready
+
+    def _add_information(self, w: slice, J: np.ndarray, Omega: np.ndarray, weight: np.ndarray) -> None:
+        """Each batch's ``Σ ρ'·JᵀΩJ`` over the windows ``w``, batch by batch and row by row: the
+        temporaries are (windows, n), never J's whole size."""
+        cut = np.clip(self.edges, w.start, w.stop) - w.start
+        for b in np.flatnonzero(cut[1:] > cut[:-1]):
+            first, last = int(cut[b]), int(cut[b + 1])
+            for r in range(J.shape[1]):
+                A = J[first:last, r, :]
+                self.information[b] += (A * (Omega[r] * weight[first:last])[:, None]).T @ A
+
+    def blocks(self) -> tuple[np.ndarray, ...]:
+        """Each batch's score, information and residuals' meat, and the meat its borders keep of a
+        noise that cancels along the chain (one window's mean squared score times the windows it
+        shares records with: :mod:`block_scatter`)."""
+        windows = np.diff(self.edges)[:, None, None]
+        border = self.alone / np.where(windows > 0, windows, 1) * max(self.span, 1.0)
+        return self.scores, self.information, self.meats, border
 
     def variances(self, to_cov: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
         """Each parameter's variance from the residuals' own meat and the margin its sampling noise

@@ -51,6 +51,7 @@ from dataclasses import dataclass, field, replace
 import casadi as ca
 import numpy as np
 
+from nlp_calib.analysis.block_scatter import block_scatter
 from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
 from nlp_calib.analysis.residual_floor import ScoreRows, beyond
 from nlp_calib.models import rate_rows
@@ -227,12 +228,12 @@ def estimate(
     own = ScoreRows(data.starts, data.stops, fns.n_free)
     for w, sens in itertools.chain([first], blocks):
         sums.add(w, sens, residuals, running)
-        own.add(w, sens.J, weight[w] * e[:, w], evaluator.omega)
+        own.add(w, sens.J, weight[w] * e[:, w], evaluator.omega, weight[w])
     var, explained = sums.variances((fns.error_rows, fns.n_free), int(use.sum()), residuals.Omega)
     use = use.copy()
     use[sums.kernel.index[explained]] = True
     dof = max(fns.error_rows * int(use.sum()) - fns.n_free, 1)
-    meat = sums.meat(var, explained)
+    meat = white_meat = sums.meat(var, explained)
     # The data term is not divided by the residuals' variance σ², so a prior of weight σ²/std²
     # (the scenario's, weighed so; the bounds' below) adds σ² times that weight to the score's
     # covariance.
@@ -242,8 +243,29 @@ def estimate(
     sandwich = _covariance(evaluator, x, ne.H, sigma2, bounds_std)
     (cov, bounded), residual = _with_residuals(sandwich, meat, own)
     out = _packaged(fns, cov, _noise_levels(fns, var, Sigma_in), dof)
-    std_residuals = np.array([dict(zip(fns.free, residual)).get(n, np.nan) for n in fns.names])
-    return replace(out, bounded=tuple(n for n, b in zip(fns.free, bounded) if b), std_residuals=std_residuals)
+    out = replace(out, bounded=tuple(n for n, b in zip(fns.free, bounded) if b))
+    return _with_spreads(out, residual, own, white_meat)
+
+
+def _with_spreads(
+    out: Uncertainty, residual: np.ndarray, own: ScoreRows, white_meat: np.ndarray
+) -> Uncertainty:
+    """``out`` with the spreads of the fit's own residuals: each free parameter's σ from its
+    residuals' own scores where beyond the noise model's (``residual``), and the blocks'
+    disagreement (:mod:`block_scatter`, from ``own``'s batches and the noise model's meat)."""
+    with np.errstate(invalid="ignore"):
+        floor = np.fmax(np.sqrt(np.diag(out.covariance)), residual)
+    scatter, chi2, blocks = block_scatter((*own.blocks(), white_meat), floor)
+
+    def in_names(v: np.ndarray) -> np.ndarray:
+        return np.array([dict(zip(out.free, v)).get(n, np.nan) for n in out.names], dtype=float)
+
+    return replace(
+        out,
+        std_residuals=in_names(residual),
+        std_block_scatter=in_names(scatter),
+        block_chi2=np.vstack([in_names(chi2), in_names(blocks)]),
+    )
 
 
 def _noise_levels(fns: ProblemFunctions, var: np.ndarray, Sigma_in: np.ndarray) -> dict[str, float]:

@@ -108,6 +108,8 @@ def _sigma_entries(run: CalibrationRun, solver: str, doc: Mapping[str, Any]) -> 
         "std_white_noise": best["std_white_noise"],
         # Errors of each window's own average over a log as white noise does (the drift check).
         **({"std_residuals": best["std_residuals"]} if best.get("std_residuals") else {}),
+        # Blocks of the drive that disagree beyond their σ: a spread that averages over a log too.
+        **({"std_block_scatter": best["std_block_scatter"]} if best.get("std_block_scatter") else {}),
         "std_blocks": sigmas(run, solver, (doc["crossvalidation"] or {}).get("std_blocks")),
         # What the slip check's lines leave open of a slip the model lacks, in 'std' already.
         **_slip_entry(run, solver),

@@ -16,6 +16,7 @@ from nlp_calib.results.checks import CostComparison
 from nlp_calib.results.codec import finite_or_null
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.run import GIVEN
+from nlp_calib.results.uncertainty import Uncertainty
 
 
 def not_estimated(run: CalibrationRun, solver: str | None = None) -> set[str]:
@@ -124,6 +125,16 @@ def _nominal_dict(run: CalibrationRun) -> dict[str, Any] | None:
     }
 
 
+def _block_chi2(u: Uncertainty) -> dict[str, Any] | None:
+    """Each parameter's blocks' χ² about their weighted mean and its degrees of freedom (None: not
+    judged)."""
+    if u.block_chi2 is None:
+        return None
+    return {
+        n: {"chi2": float(c), "dof": int(d)} if d > 0 else None for n, (c, d) in zip(u.names, u.block_chi2.T)
+    }
+
+
 def _solver_dict(run: CalibrationRun, name: str, report: SolverReport) -> dict[str, Any]:
     r, u = report.result, report.uncertainty
     return {
@@ -131,6 +142,8 @@ def _solver_dict(run: CalibrationRun, name: str, report: SolverReport) -> dict[s
         "std": sigmas(run, name, run.std(name)),
         "std_white_noise": sigmas(run, name, u.std_dict()),
         "std_residuals": sigmas(run, name, dict(zip(u.names, map(float, u.residual_spread())))),
+        "std_block_scatter": sigmas(run, name, dict(zip(u.names, map(float, u.block_spread())))),
+        "block_chi2": sigmas(run, name, _block_chi2(u)),
         "correlation": {"names": list(u.names), "matrix": np.round(u.correlation, 6).tolist()},
         "cost": r.cost,
         "chi2": r.chi2,

@@ -91,6 +91,16 @@ def widened_lines(run: CalibrationRun) -> list[str]:
     blocks = checks.crossval.beyond(white) if checks.crossval is not None else np.full(len(names), np.nan)
     base = believed_std(white, u.residual_spread(), blocks)
     out = []
+    scatter, (chi2, dof) = u.block_spread(), u.block_chi2 if u.block_chi2 is not None else ((), ())
+    wider = [
+        f"{n} (χ² {c:.0f} on {d:.0f})" for n, b, v, c, d in zip(names, base, scatter, chi2, dof) if v > b
+    ]
+    if wider:
+        out.append(
+            f"   σ of {', '.join(wider)}: scaled by √(χ²/dof), the blocks of the drive, each fitting "
+            "it alone, disagree beyond their own σ (errors that vary along the drive)"
+        )
+    base = believed_std(base, scatter)
     if checks.pivots is not None:
         spread = checks.pivots.beyond(white)
         wider = [n for n, b, v in zip(names, base, spread) if np.isfinite(v) and v > b]

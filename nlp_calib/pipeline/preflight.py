@@ -440,7 +440,7 @@ def _propagated(
     if k:
         folds = on_threads(functools.partial(_fold, binder, x, windows, whole), _blocks(windows, k))
         spread = combine(fns.names, folds).beyond(white)
-    std = dict(zip(fns.names, believed_std(white, found.residual_spread(), spread)))
+    std = dict(zip(fns.names, believed_std(white, *found.spreads(), spread)))
     return np.array([std.get(n, np.nan) for n in fns.free], dtype=float)
 
 

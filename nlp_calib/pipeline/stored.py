@@ -168,9 +168,17 @@ def read_calibration(path: Path) -> StoredCalibration:
     dataset = data.get("path") if isinstance(data, Mapping) and isinstance(data.get("path"), str) else None
     slip = _numbers(doc, "std_slip", names, where, null=True) if doc.get("std_slip") else {}
     own = _numbers(doc, "std_residuals", names, where, null=True) if doc.get("std_residuals") else {}
-    shared = {
-        n: shared_std(std[n], (white[n], own.get(n, math.nan), slip.get(n, math.nan)), folds) for n in names
+    scatter = (
+        _numbers(doc, "std_block_scatter", names, where, null=True) if doc.get("std_block_scatter") else {}
+    )
+    # The residuals' own σ and the blocks' scatter both average over a log (see shared_std).
+    averaged = {
+        n: max(
+            (v for v in (own.get(n), scatter.get(n)) if v is not None and math.isfinite(v)), default=math.nan
+        )
+        for n in names
     }
+    shared = {n: shared_std(std[n], (white[n], averaged[n], slip.get(n, math.nan)), folds) for n in names}
     return StoredCalibration(
         path, model, solver, values, std, dof, scenario, objective, recorded, dataset, layout, shared
     )

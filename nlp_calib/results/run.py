@@ -222,7 +222,7 @@ class Checks:
     def believed(self, u: Uncertainty, slip: bool = True) -> np.ndarray:
         """The σ to believe of the estimate whose white-noise σ ``u`` gives (see
         :meth:`CalibrationRun.std`; ``slip``: with the slip's σ)."""
-        base = believed_std(u.std, u.residual_spread(), *self.spreads(u.std))
+        base = believed_std(u.std, *u.spreads(), *self.spreads(u.std))
         added = self.slip(u.names) if slip else np.full(len(u.names), np.nan)
         return np.where(np.isfinite(added), np.hypot(base, added), base)
 

@@ -29,11 +29,27 @@ class Uncertainty:
     #: (an error of each window's own that the poses' noise, cancelling along a chain, does not
     #: carry), NaN elsewhere (None: not estimated).
     std_residuals: np.ndarray | None = None
+    #: Each parameter's σ (the larger of ``std`` and ``std_residuals``) scaled by the Birge ratio
+    #: where contiguous blocks of the drive, each estimating it alone, disagree beyond their own
+    #: σ; NaN elsewhere (None: not estimated).
+    std_block_scatter: np.ndarray | None = None
+    #: The blocks' χ² about their weighted mean (row 0) and its degrees of freedom (row 1; 0 and
+    #: NaN: not judged), per parameter.
+    block_chi2: np.ndarray | None = None
 
     def residual_spread(self) -> np.ndarray:
         """:attr:`std_residuals`, NaN everywhere when it was not estimated: a spread the σ to
         believe takes in."""
         return np.full(len(self.names), np.nan) if self.std_residuals is None else self.std_residuals
+
+    def block_spread(self) -> np.ndarray:
+        """:attr:`std_block_scatter`, NaN everywhere when it was not estimated."""
+        return np.full(len(self.names), np.nan) if self.std_block_scatter is None else self.std_block_scatter
+
+    def spreads(self) -> list[np.ndarray]:
+        """The spreads of the estimate's own residuals the σ to believe takes in beside the
+        white-noise σ: the residuals' own σ and the blocks' disagreement."""
+        return [self.residual_spread(), self.block_spread()]
 
     def std_dict(self) -> dict[str, float]:
         return {n: float(s) for n, s in zip(self.names, self.std)}
