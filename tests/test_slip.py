@@ -132,7 +132,8 @@ def test_the_lines_over_the_speed_squared_are_weighted_least_squares() -> None:
     variance = rng.uniform(0.01, 0.2, (BINS, 2))
     fits = np.stack([1.9 - 0.004 * squared, np.full(BINS, 0.3)], axis=1) + rng.normal(0, np.sqrt(variance))
     fits[4] = np.nan  # a piece whose fit failed is left out
-    lines = slopes(fits, variance, squared)
+    drive = np.array([1.2, 0.31])  # the whole drive's fit, off the line at the lever
+    lines = slopes(fits, variance, squared, drive)
     keep = np.arange(BINS) != 4
     assert np.all(lines.dof == BINS - 3)
     for i in range(2):  # numpy's weighted polynomial fit, its covariance scaled by the residuals
@@ -146,7 +147,26 @@ def test_the_lines_over_the_speed_squared_are_weighted_least_squares() -> None:
         assert lines.lever[i] == pytest.approx(lever)
         mean = np.average(fits[keep, i], weights=1.0 / variance[keep, i])
         assert coef[1] + coef[0] * lever == pytest.approx(mean)
-        assert lines.shift()[i] == pytest.approx(lever * np.sqrt(coef[0] ** 2 + cov[0, 0]))
+        # The slip's σ: the larger of the drive's fit's and the line's distance to the value at
+        # zero speed, and that value's own σ.
+        distance = max(abs(drive[i] - coef[1]), abs(coef[0] * lever))
+        assert lines.shift()[i] == pytest.approx(np.hypot(distance, np.sqrt(cov[1, 1])))
+
+
+def test_a_drive_s_fit_off_the_bins_line_is_in_the_slip_s_sigma() -> None:
+    """The steering gain of a car whose axle slides: each bin, at about one speed, finds the truth
+    (the slip there is a lever arm's shift), while the whole drive's fit, mixing its speeds, is off
+    every bin's line. The slip's σ covers that distance; the slope's (``lever·√(b² + σ_b²)``, flat
+    bins) did not."""
+    rng = np.random.default_rng(11)
+    squared = np.linspace(9.0, 19.0, BINS) ** 2
+    variance = np.full((BINS, 1), 0.004**2)
+    fits = 1.0 + rng.normal(0.0, 0.004, (BINS, 1))
+    drive = np.array([0.975])  # 0.025 under the truth, as the study's slipping cars' fits are
+    lines = slopes(fits, variance, squared, drive)
+    assert abs(lines.slope[0]) < 3.0 * lines.std[0]  # flat: the slope tells nothing
+    slope_only = abs(lines.lever[0]) * np.hypot(lines.slope[0], lines.std[0])
+    assert 2.0 * slope_only < abs(drive[0] - 1.0) <= 2.0 * lines.shift()[0]
 
 
 def test_the_slip_s_sigma_joins_the_sigma_to_believe_in_quadrature() -> None:

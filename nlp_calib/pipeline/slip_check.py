@@ -18,8 +18,8 @@ calibration needs means the model lacks what moves it: the run's value and its �
 and the parameter is said NOT DETERMINED (a caveat concerning it, so no hand-off file writes it as
 calibrated), with its value at zero speed by the line (what a linear tyre model gives) and what to
 do. A slope under the limit does not rule the slip out: each parameter's σ to believe takes
-in what the line leaves open (:meth:`Lines.shift`; the rule and why in docs/models.md), the
-drive's fit being, by the line, ``lever·slope`` from the value at zero speed. The check runs on
+in what the line leaves open (:meth:`Lines.shift`; the rule and why in docs/models.md): the
+distance from the drive's fit to the value at zero speed, with that value's σ. The check runs on
 bases that cannot turn on the spot (cars: a turn on the spot has no lateral
 load) whose drive reaches :data:`MIN_LATERAL` in its bends.
 
@@ -145,9 +145,9 @@ def bin_fits(
 @dataclass(frozen=True)
 class Lines:
     """Each parameter's weighted line over the speed squared: its value at zero speed and that
-    value's σ, its slope (per (m/s)²) and the slope's σ, on ``dof`` degrees of freedom, and the
-    drive's ``lever``: the bins' speed squared weighed as the line weighs them, where the line
-    passes the whole drive's fit (NaN: too few bins fitted)."""
+    value's σ, its slope (per (m/s)²) and the slope's σ, on ``dof`` degrees of freedom, the
+    ``lever``: the bins' speed squared weighed as the line weighs them, and the whole drive's
+    fit ``drive`` (NaN: too few bins fitted, or no drive's fit given)."""
 
     at_zero: np.ndarray
     std_at_zero: np.ndarray
@@ -155,19 +155,25 @@ class Lines:
     std: np.ndarray
     dof: np.ndarray
     lever: np.ndarray
+    drive: np.ndarray
 
     def shift(self) -> np.ndarray:
-        """The σ the slip adds to each parameter's σ to believe, ``lever·√(slope² + σ_slope²)``:
-        the root mean square, over what the line allows, of the distance from the drive's fit to
-        the value at zero speed (see the module's docstring)."""
-        return np.abs(self.lever) * np.hypot(self.slope, self.std)
+        """The σ the slip adds to each parameter's σ to believe: the distance from the drive's fit
+        to the value at zero speed, where a slip the line allows puts the truth, with that value's
+        σ, ``√(max((drive − at_zero)², (lever·slope)²) + σ_at_zero²)``. The distance is the larger
+        of the fit's own and the line's (``lever·slope``): the drive mixes its speeds, and what a
+        lever arm fixed over them cannot take of a shift growing with the speed squared another
+        parameter takes (the steering gain), off every bin's line; a fit near the value at zero
+        speed where the line is steep is the noise of one of them."""
+        distance = np.fmax(np.abs(self.drive - self.at_zero), np.abs(self.lever * self.slope))
+        return np.hypot(distance, self.std_at_zero)
 
 
-def slopes(fits: np.ndarray, variance: np.ndarray, squared: np.ndarray) -> Lines:
+def slopes(fits: np.ndarray, variance: np.ndarray, squared: np.ndarray, drive: np.ndarray) -> Lines:
     """Each parameter's line through its ``fits`` (one row per bin; NaN left out) over the bins'
     speed ``squared``, each bin weighed by its information, the σ from the fits' weighted scatter
     about the line (the information sets only the bins' relative weights: what the bins truly
-    differ by sets the scale)."""
+    differ by sets the scale); ``drive``: the whole drive's fit, in the fits' form."""
     ok = np.isfinite(fits) & np.isfinite(variance) & (variance > 0) & np.isfinite(squared)[:, None]
     w = np.where(ok, 1.0 / np.where(ok, variance, 1.0), 0.0)
     f, u = np.where(ok, fits, 0.0), np.where(ok, squared[:, None], 0.0)
@@ -182,7 +188,8 @@ def slopes(fits: np.ndarray, variance: np.ndarray, squared: np.ndarray) -> Lines
         std_at_zero = np.sqrt(scale * (1.0 / total + u_mean**2 / spread))
         std = np.sqrt(scale / spread)
     few = dof < MIN_BINS - 2
-    return Lines(*(np.where(few, np.nan, v) for v in (at_zero, std_at_zero, slope, std, dof, u_mean)))
+    values = (at_zero, std_at_zero, slope, std, dof, u_mean, np.asarray(drive, dtype=float))
+    return Lines(*(np.where(few, np.nan, v) for v in values))
 
 
 @dataclass(frozen=True)
@@ -234,7 +241,8 @@ def measure(run: CalibrationRun, model: KinematicModel, fit: Fit) -> SpeedLines 
     if cut is None:
         return None
     fits, variance = bin_fits(run, model, fit, cut[0])
-    lines = slopes(fits, variance, cut[1])
+    drive = fit.canonical_params(np.asarray(report.result.params, dtype=float))
+    lines = slopes(fits, variance, cut[1], drive)
     if not np.any(np.isfinite(lines.slope)):
         return None
     names = tuple(fit.fns.names)
