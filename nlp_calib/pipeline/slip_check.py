@@ -239,6 +239,7 @@ class SpeedLines:
             "speeds_mps": listed(self.speeds),
             "fits": {n: listed(self.fits[:, i]) for i, n in enumerate(self.names)},
             "slope_in_sigma": by_name(self.t),
+            "slope": by_name(self.lines.slope),
             "at_zero_speed": by_name(self.lines.at_zero),
             "std_at_zero_speed": by_name(self.lines.std_at_zero),
             "lever_speed_squared": by_name(self.lines.lever),
