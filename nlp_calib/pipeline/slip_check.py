@@ -182,7 +182,7 @@ class Lines:
         σ, ``√(max((drive − at_zero)², (lever·slope)²) + σ_at_zero²)``. The distance is the larger
         of the fit's own and the line's (``lever·slope``): the drive mixes its speeds, and what a
         lever arm fixed over them cannot take of a shift growing with the speed squared another
-        parameter takes (the steering gain), off every bin's line; a fit near the value at zero
+        parameter takes (a gain of the turn), off every bin's line; a fit near the value at zero
         speed where the line is steep is the noise of one of them."""
         distance = np.fmax(np.abs(self.drive - self.at_zero), np.abs(self.lever * self.slope))
         return np.hypot(distance, self.std_at_zero)
