@@ -13,9 +13,18 @@ import pytest
 from nlp_calib.analysis.drift import between_logs_std
 from nlp_calib.outputs.handoff import calibration_dict, calibration_yaml
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
-from nlp_calib.pipeline.slip_check import BINS, MIN_BINS, NAME, T_LIMIT, slopes, speed_bins
+from nlp_calib.pipeline.slip_check import (
+    BINS,
+    MIN_BINS,
+    NAME,
+    T_LIMIT,
+    NotMade,
+    not_made,
+    slopes,
+    speed_bins,
+)
 from nlp_calib.pipeline.stored import read_calibration
-from nlp_calib.results.checks import CheckResult
+from nlp_calib.results.checks import CAVEAT, FINE, CheckResult
 from nlp_calib.results.run import DOUBTFUL, LIVE, Checks
 from nlp_calib.results.uncertainty import Uncertainty
 from nlp_calib.simulation.vehicles import HighwayOptions, RoadOptions, simulate_highway
@@ -204,3 +213,13 @@ def test_the_bins_go_by_speed_and_need_loaded_bends_at_varied_speeds() -> None:
     assert "too alike" in str(speed_bins(np.full(n, 14.0), rate))
     assert f"{4 * BINS - 1} timed moving" in str(speed_bins(speed[: 4 * BINS - 1], rate[: 4 * BINS - 1]))
     assert MIN_BINS < BINS
+
+
+def test_a_check_not_made_says_why_and_is_a_caveat_where_the_bends_load_the_tyres() -> None:
+    calm = not_made(NotMade("its bends reach 0.2 m/s²", 0.2))
+    assert calm.level == FINE and calm.words == "not made: its bends reach 0.2 m/s²"
+    assert calm.record == {"made": False, "why": "its bends reach 0.2 m/s²", "lateral_mps2": 0.2}
+    for load, said in ((2.5, "bends reaching 2.5 m/s²"), (float("nan"), "slip in its bends")):
+        loaded = not_made(NotMade("too few windows", load))
+        assert loaded.level == CAVEAT and said in loaded.caveat and "too few windows" in loaded.caveat
+        assert "nan" not in loaded.caveat

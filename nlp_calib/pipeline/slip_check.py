@@ -351,10 +351,12 @@ def not_made(found: NotMade) -> CheckResult:
     }
     if not found.open:
         return CheckResult(NAME, FINE, words, record=record)
+    # Bends not timed (NaN) are not known to stay under the limit: the slip is left open there too.
+    bends = f"bends reaching {found.load:.2g} m/s²" if np.isfinite(found.load) else "its bends"
     caveat = (
-        f"the slip check was not made ({found.why}): the tyres' slip in bends reaching {found.load:.2g} "
-        "m/s², which moves a lever arm such as the sensor's x with the speed, is not ruled out and is "
-        "in no σ; drive bends at several speeds, slow ones too, for it to be told"
+        f"the slip check was not made ({found.why}): the tyres' slip in {bends}, which moves a lever "
+        "arm such as the sensor's x with the speed, is not ruled out and is in no σ; drive bends at "
+        "several speeds, slow ones too, for it to be told"
     )
     return CheckResult(NAME, CAVEAT, words, caveat=caveat, record=record)
 
