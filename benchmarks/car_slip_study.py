@@ -10,7 +10,9 @@ acceleration (0: the control); ``car_like`` with the axle distance and track giv
 calibrated with ``nlp-calib run``. Prints sensor_x's truth, estimate, σ, |error|/σ, the verdict,
 the slip check's slope in σ and its value at zero speed (and the σ of the slip in the σ to
 believe), and whether sensor_x is handed off as calibrated (no verdict concern names it) or said
-not determined; then how many seeds' sensor_x lie within 2σ of the truth.
+not determined; then how many seeds' sensor_x lie within 2σ of the truth, and for every parameter
+with a truth how many lie within 2σ and 3σ, the largest |error|/σ, how much the slip's σ widens
+its σ, and how far the drive's fit lies from the value at zero speed beside the line's distance.
 """
 
 from __future__ import annotations
@@ -61,6 +63,36 @@ def report(out: Path, seed: int, truth: float) -> tuple[float, bool]:
     return abs(x - truth) / std, said.startswith("NOT")
 
 
+def every_parameter(out: Path, seeds: list[int]) -> None:
+    """Per parameter over the seeds (the truth check's errors): how many lie within 2σ and 3σ of
+    the truth, the largest |error|/σ, the σ over the σ without the slip's, and the drive's fit's
+    distance to the value at zero speed beside the line's (``lever·slope``)."""
+    docs = [json.loads((out / str(seed) / "first" / "result.json").read_text()) for seed in seeds]
+    for name, error in docs[0]["truth"]["error"].items():
+        if error is None or docs[0]["solvers"]["gauss_newton"]["std"].get(name) is None:
+            continue  # no truth, or held
+        z, grown, fit, line = [], [], [], []
+        for r in docs:
+            gn, slip = r["solvers"]["gauss_newton"], r.get("slip") or {}
+            std, added = gn["std"][name], (slip.get("std_slip") or {}).get(name) or 0.0
+            z.append(abs(r["truth"]["error"][name]) / std)
+            grown.append(std / max(std**2 - added**2, 1e-300) ** 0.5)
+            if slip.get("made", True) and slip.get("at_zero_speed", {}).get(name) is not None:
+                zero, t = slip["at_zero_speed"][name], slip["slope_in_sigma"][name]
+                fit.append(gn["params"][name] - zero)
+                lever = slip["lever_speed_squared"][name]
+                # Before the record held the slope, the slip's σ was lever·√(slope² + σ_slope²).
+                slope = (slip.get("slope") or {}).get(name)
+                old = abs(t) * added / (1.0 + t * t) ** 0.5
+                line.append(abs(lever * slope) if slope is not None else old)
+        print(
+            f"{name}: within 2σ {sum(v <= 2 for v in z)} of {len(z)}, 3σ {sum(v <= 3 for v in z)}, "
+            f"largest |error|/σ {max(z):.2f}; σ {min(grown):.1f}-{max(grown):.1f}× the σ without the slip's; "
+            f"fit − value at zero speed {min(fit, default=0):+.3g} to {max(fit, default=0):+.3g}, "
+            f"|lever·slope| up to {max(line, default=0):.3g}"
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("out", type=Path)
@@ -71,6 +103,7 @@ def main() -> None:
     within = sum(z <= 2.0 for z, _ in found)
     told = sum(said for _, said in found)
     print(f"sensor_x within 2σ of truth: {within} of {len(found)}; NOT DETERMINED: {told}")
+    every_parameter(args.out, args.seeds)
 
 
 if __name__ == "__main__":

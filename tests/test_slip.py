@@ -13,9 +13,18 @@ import pytest
 from nlp_calib.analysis.drift import between_logs_std
 from nlp_calib.outputs.handoff import calibration_dict, calibration_yaml
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
-from nlp_calib.pipeline.slip_check import BINS, MIN_BINS, NAME, T_LIMIT, slopes, speed_bins
+from nlp_calib.pipeline.slip_check import (
+    BINS,
+    MIN_BINS,
+    NAME,
+    T_LIMIT,
+    NotMade,
+    not_made,
+    slopes,
+    speed_bins,
+)
 from nlp_calib.pipeline.stored import read_calibration
-from nlp_calib.results.checks import CheckResult
+from nlp_calib.results.checks import CAVEAT, FINE, CheckResult
 from nlp_calib.results.run import DOUBTFUL, LIVE, Checks
 from nlp_calib.results.uncertainty import Uncertainty
 from nlp_calib.simulation.vehicles import HighwayOptions, RoadOptions, simulate_highway
@@ -132,7 +141,8 @@ def test_the_lines_over_the_speed_squared_are_weighted_least_squares() -> None:
     variance = rng.uniform(0.01, 0.2, (BINS, 2))
     fits = np.stack([1.9 - 0.004 * squared, np.full(BINS, 0.3)], axis=1) + rng.normal(0, np.sqrt(variance))
     fits[4] = np.nan  # a piece whose fit failed is left out
-    lines = slopes(fits, variance, squared)
+    drive = np.array([1.2, 0.31])  # the whole drive's fit, off the line at the lever
+    lines = slopes(fits, variance, squared, drive)
     keep = np.arange(BINS) != 4
     assert np.all(lines.dof == BINS - 3)
     for i in range(2):  # numpy's weighted polynomial fit, its covariance scaled by the residuals
@@ -146,7 +156,26 @@ def test_the_lines_over_the_speed_squared_are_weighted_least_squares() -> None:
         assert lines.lever[i] == pytest.approx(lever)
         mean = np.average(fits[keep, i], weights=1.0 / variance[keep, i])
         assert coef[1] + coef[0] * lever == pytest.approx(mean)
-        assert lines.shift()[i] == pytest.approx(lever * np.sqrt(coef[0] ** 2 + cov[0, 0]))
+        # The slip's σ: the larger of the drive's fit's and the line's distance to the value at
+        # zero speed, and that value's own σ.
+        distance = max(abs(drive[i] - coef[1]), abs(coef[0] * lever))
+        assert lines.shift()[i] == pytest.approx(np.hypot(distance, np.sqrt(cov[1, 1])))
+
+
+def test_a_drive_s_fit_off_the_bins_line_is_in_the_slip_s_sigma() -> None:
+    """The steering gain of a car whose axle slides: each bin, at about one speed, finds the truth
+    (the slip there is a lever arm's shift), while the whole drive's fit, mixing its speeds, is off
+    every bin's line. The slip's σ covers that distance; the slope's (``lever·√(b² + σ_b²)``, flat
+    bins) did not."""
+    rng = np.random.default_rng(11)
+    squared = np.linspace(9.0, 19.0, BINS) ** 2
+    variance = np.full((BINS, 1), 0.004**2)
+    fits = 1.0 + rng.normal(0.0, 0.004, (BINS, 1))
+    drive = np.array([0.975])  # 0.025 under the truth, as the study's slipping cars' fits are
+    lines = slopes(fits, variance, squared, drive)
+    assert abs(lines.slope[0]) < 3.0 * lines.std[0]  # flat: the slope tells nothing
+    slope_only = abs(lines.lever[0]) * np.hypot(lines.slope[0], lines.std[0])
+    assert 2.0 * slope_only < abs(drive[0] - 1.0) <= 2.0 * lines.shift()[0]
 
 
 def test_the_slip_s_sigma_joins_the_sigma_to_believe_in_quadrature() -> None:
@@ -165,7 +194,7 @@ def test_the_bins_go_by_speed_and_need_loaded_bends_at_varied_speeds() -> None:
     speed = 14.0 + 6.0 * np.sin(np.linspace(0.0, 6.0, n))
     rate = 0.15 * np.sin(np.linspace(0.0, 40.0, n))
     cut = speed_bins(speed, rate)
-    assert cut is not None
+    assert not isinstance(cut, str)
     label, squared = cut
     assert set(label) == set(range(BINS))
     for j in range(BINS - 1):  # slowest first
@@ -176,7 +205,21 @@ def test_the_bins_go_by_speed_and_need_loaded_bends_at_varied_speeds() -> None:
     )
     standing = speed.copy()
     standing[:10] = 0.0
-    assert np.all(speed_bins(standing, rate)[0][:10] == -1)  # type: ignore[index]
-    assert speed_bins(speed, 0.02 * rate) is None  # bends that barely load the tyres
-    assert speed_bins(np.full(n, 14.0), rate) is None  # one speed
+    stood = speed_bins(standing, rate)
+    assert not isinstance(stood, str) and np.all(stood[0][:10] == -1)
+    # Why a drive is not binned, said: bends that barely load the tyres, one speed, too short.
+    load = np.percentile(np.abs(speed * 0.02 * rate), 90)
+    assert f"bends reach {load:.2g} m/s²" in str(speed_bins(speed, 0.02 * rate))
+    assert "too alike" in str(speed_bins(np.full(n, 14.0), rate))
+    assert f"{4 * BINS - 1} timed moving" in str(speed_bins(speed[: 4 * BINS - 1], rate[: 4 * BINS - 1]))
     assert MIN_BINS < BINS
+
+
+def test_a_check_not_made_says_why_and_is_a_caveat_where_the_bends_load_the_tyres() -> None:
+    calm = not_made(NotMade("its bends reach 0.2 m/s²", 0.2))
+    assert calm.level == FINE and calm.words == "not made: its bends reach 0.2 m/s²"
+    assert calm.record == {"made": False, "why": "its bends reach 0.2 m/s²", "lateral_mps2": 0.2}
+    for load, said in ((2.5, "bends reaching 2.5 m/s²"), (float("nan"), "slip in its bends")):
+        loaded = not_made(NotMade("too few windows", load))
+        assert loaded.level == CAVEAT and said in loaded.caveat and "too few windows" in loaded.caveat
+        assert "nan" not in loaded.caveat

@@ -18,8 +18,8 @@ calibration needs means the model lacks what moves it: the run's value and its �
 and the parameter is said NOT DETERMINED (a caveat concerning it, so no hand-off file writes it as
 calibrated), with its value at zero speed by the line (what a linear tyre model gives) and what to
 do. A slope under the limit does not rule the slip out: each parameter's σ to believe takes
-in what the line leaves open (:meth:`Lines.shift`; the rule and why in docs/models.md), the
-drive's fit being, by the line, ``lever·slope`` from the value at zero speed. The check runs on
+in what the line leaves open (:meth:`Lines.shift`; the rule and why in docs/models.md): the
+distance from the drive's fit to the value at zero speed, with that value's σ. The check runs on
 bases that cannot turn on the spot (cars: a turn on the spot has no lateral
 load) whose drive reaches :data:`MIN_LATERAL` in its bends.
 
@@ -60,6 +60,8 @@ MIN_BINS = 10
 #: it by chance one time in 800 (3.4: one in 250), with room for neighbouring bins that share an
 #: error (see the module's docstring).
 T_LIMIT = 4.0
+#: The windows a bin needs per free parameter to be fitted on its own.
+WINDOWS_PER_FREE = 10
 #: The solver whose estimate the bins are fitted from.
 SOLVER = "gauss_newton"
 
@@ -86,24 +88,41 @@ def interval_durations(data: ResidualData) -> np.ndarray:
     return dt
 
 
-def speed_bins(speed: np.ndarray, rate: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+def lateral(speed: np.ndarray, rate: np.ndarray) -> float:
+    """The lateral acceleration (m/s²) the drive's bends reach: the 90th percentile of its moving
+    intervals' (NaN: none moves)."""
+    moving = np.isfinite(speed) & np.isfinite(rate) & (speed > 0.0)
+    return float(np.percentile(np.abs(speed * rate)[moving], 90)) if moving.any() else float("nan")
+
+
+def speed_bins(speed: np.ndarray, rate: np.ndarray) -> tuple[np.ndarray, np.ndarray] | str:
     """Per interval its bin of speed (0 to :data:`BINS` − 1, slowest first, split at the moving
     intervals' quantiles; −1 standing or not timed) and each bin's speed squared, its intervals'
-    weighed by their squared turn rate (a straight bin's: their mean); None when the drive's bends
-    stay under :data:`MIN_LATERAL` or its bins drive at nearly one speed (:data:`SPEED_RATIO`)."""
+    weighed by their squared turn rate (a straight bin's: their mean); or why the drive cannot be
+    binned: too few moving intervals, bends under :data:`MIN_LATERAL`, or speeds too alike to
+    split or to tell a slip by (the slowest bin over :data:`SPEED_RATIO` of the fastest)."""
     moving = np.isfinite(speed) & np.isfinite(rate) & (speed > 0.0)
-    if moving.sum() < 4 * BINS or np.percentile(np.abs(speed * rate)[moving], 90) < MIN_LATERAL:
-        return None
+    if moving.sum() < 4 * BINS:
+        return f"it has {int(moving.sum())} timed moving intervals ({4 * BINS} needed)"
+    if (load := lateral(speed, rate)) < MIN_LATERAL:
+        return (
+            f"its bends reach {load:.2g} m/s² of lateral acceleration (under {MIN_LATERAL:g} m/s², "
+            "tyres barely slide)"
+        )
     edges = np.quantile(speed[moving], np.linspace(0.0, 1.0, BINS + 1)[1:-1])
     label = np.where(moving, np.searchsorted(edges, np.where(moving, speed, 0.0)), -1)
-    if np.any(np.bincount(label[moving], minlength=BINS) == 0):  # speeds too alike to split
-        return None
+    if np.any(np.bincount(label[moving], minlength=BINS) == 0):
+        return f"its speeds are too alike to split into {BINS} bins"
     squared = np.empty(BINS)
     for j in range(BINS):
         v2, w = speed[label == j] ** 2, rate[label == j] ** 2
         squared[j] = np.sum(w * v2) / np.sum(w) if np.sum(w) > 0 else np.mean(v2)
-    if not np.sqrt(squared.min()) < SPEED_RATIO * np.sqrt(squared.max()):
-        return None
+    lo, hi = np.sqrt(squared.min()), np.sqrt(squared.max())
+    if not lo < SPEED_RATIO * hi:
+        return (
+            f"its speeds are too alike to tell a slip from a lever arm (its bends at {lo:.3g} to "
+            f"{hi:.3g} m/s; the slowest must be under {SPEED_RATIO:.0%} of the fastest)"
+        )
     return label, squared
 
 
@@ -133,7 +152,7 @@ def bin_fits(
             return
         H = ev.normal_equations(params[at]).H
         ev.release()
-        if converged and n >= 10 * fns.n_free and not is_singular(H):
+        if converged and n >= WINDOWS_PER_FREE * fns.n_free and not is_singular(H):
             free = [i for i, f in zip(at, fns.free) if f not in hold]
             fits[j, free] = fit.canonical_params(params)[free]
             variance[j, at] = np.diag(np.linalg.inv(H))
@@ -145,9 +164,9 @@ def bin_fits(
 @dataclass(frozen=True)
 class Lines:
     """Each parameter's weighted line over the speed squared: its value at zero speed and that
-    value's σ, its slope (per (m/s)²) and the slope's σ, on ``dof`` degrees of freedom, and the
-    drive's ``lever``: the bins' speed squared weighed as the line weighs them, where the line
-    passes the whole drive's fit (NaN: too few bins fitted)."""
+    value's σ, its slope (per (m/s)²) and the slope's σ, on ``dof`` degrees of freedom, the
+    ``lever``: the bins' speed squared weighed as the line weighs them, and the whole drive's
+    fit ``drive`` (NaN: too few bins fitted, or no drive's fit given)."""
 
     at_zero: np.ndarray
     std_at_zero: np.ndarray
@@ -155,19 +174,25 @@ class Lines:
     std: np.ndarray
     dof: np.ndarray
     lever: np.ndarray
+    drive: np.ndarray
 
     def shift(self) -> np.ndarray:
-        """The σ the slip adds to each parameter's σ to believe, ``lever·√(slope² + σ_slope²)``:
-        the root mean square, over what the line allows, of the distance from the drive's fit to
-        the value at zero speed (see the module's docstring)."""
-        return np.abs(self.lever) * np.hypot(self.slope, self.std)
+        """The σ the slip adds to each parameter's σ to believe: the distance from the drive's fit
+        to the value at zero speed, where a slip the line allows puts the truth, with that value's
+        σ, ``√(max((drive − at_zero)², (lever·slope)²) + σ_at_zero²)``. The distance is the larger
+        of the fit's own and the line's (``lever·slope``): the drive mixes its speeds, and what a
+        lever arm fixed over them cannot take of a shift growing with the speed squared another
+        parameter takes (a gain of the turn), off every bin's line; a fit near the value at zero
+        speed where the line is steep is the noise of one of them."""
+        distance = np.fmax(np.abs(self.drive - self.at_zero), np.abs(self.lever * self.slope))
+        return np.hypot(distance, self.std_at_zero)
 
 
-def slopes(fits: np.ndarray, variance: np.ndarray, squared: np.ndarray) -> Lines:
+def slopes(fits: np.ndarray, variance: np.ndarray, squared: np.ndarray, drive: np.ndarray) -> Lines:
     """Each parameter's line through its ``fits`` (one row per bin; NaN left out) over the bins'
     speed ``squared``, each bin weighed by its information, the σ from the fits' weighted scatter
     about the line (the information sets only the bins' relative weights: what the bins truly
-    differ by sets the scale)."""
+    differ by sets the scale); ``drive``: the whole drive's fit, in the fits' form."""
     ok = np.isfinite(fits) & np.isfinite(variance) & (variance > 0) & np.isfinite(squared)[:, None]
     w = np.where(ok, 1.0 / np.where(ok, variance, 1.0), 0.0)
     f, u = np.where(ok, fits, 0.0), np.where(ok, squared[:, None], 0.0)
@@ -182,7 +207,8 @@ def slopes(fits: np.ndarray, variance: np.ndarray, squared: np.ndarray) -> Lines
         std_at_zero = np.sqrt(scale * (1.0 / total + u_mean**2 / spread))
         std = np.sqrt(scale / spread)
     few = dof < MIN_BINS - 2
-    return Lines(*(np.where(few, np.nan, v) for v in (at_zero, std_at_zero, slope, std, dof, u_mean)))
+    values = (at_zero, std_at_zero, slope, std, dof, u_mean, np.asarray(drive, dtype=float))
+    return Lines(*(np.where(few, np.nan, v) for v in values))
 
 
 @dataclass(frozen=True)
@@ -213,30 +239,59 @@ class SpeedLines:
             "speeds_mps": listed(self.speeds),
             "fits": {n: listed(self.fits[:, i]) for i, n in enumerate(self.names)},
             "slope_in_sigma": by_name(self.t),
+            "slope": by_name(self.lines.slope),
             "at_zero_speed": by_name(self.lines.at_zero),
             "std_at_zero_speed": by_name(self.lines.std_at_zero),
             "lever_speed_squared": by_name(self.lines.lever),
             "std_slip": by_name(self.lines.shift()),
             "moved": [self.names[i] for i in self.moved],
+            "made": True,
         }
 
 
-def measure(run: CalibrationRun, model: KinematicModel, fit: Fit) -> SpeedLines | None:
-    """The run's parameters on bins of speed against the speed squared (None: the check does
-    not apply, or too few bins could be fitted)."""
+@dataclass(frozen=True)
+class NotMade:
+    """Why the check could not be made on a base it is for, and the lateral acceleration (m/s²)
+    the drive's bends reach (NaN: not known): at :data:`MIN_LATERAL` or more a slip is left open."""
+
+    why: str
+    load: float
+
+    @property
+    def open(self) -> bool:
+        return not self.load < MIN_LATERAL
+
+
+def measure(run: CalibrationRun, model: KinematicModel, fit: Fit) -> SpeedLines | NotMade | None:
+    """The run's parameters on bins of speed against the speed squared; why they could not be
+    made (:class:`NotMade`); None: no solver converged, or the base turns on the spot (no check)."""
     report = run.reports.get(SOLVER)
-    if report is None or not report.result.converged:
+    chosen = SOLVER if report is not None and report.result.converged else run.chosen_solver()
+    if chosen is None:
         return None
+    at = np.asarray(run.reports[chosen].result.params, dtype=float)
+    if model.reach(run.reports[chosen].result.param_dict()).spot_turns:
+        return None
+    motion = interval_motion(fit, at)
+    if report is None or chosen != SOLVER:
+        said = "is not among the solvers" if report is None else "did not converge"
+        return NotMade(
+            f"its bins are refitted from {SOLVER}'s estimate, and {SOLVER} {said}", lateral(*motion)
+        )
     params = report.result.param_dict()
-    if model.reach(params).spot_turns:
-        return None
-    cut = speed_bins(*interval_motion(fit, np.asarray(report.result.params, dtype=float)))
-    if cut is None:
-        return None
+    cut = speed_bins(*motion)
+    if isinstance(cut, str):
+        return NotMade(cut, lateral(*motion))
     fits, variance = bin_fits(run, model, fit, cut[0])
-    lines = slopes(fits, variance, cut[1])
+    lines = slopes(fits, variance, cut[1], fit.canonical_params(at))
     if not np.any(np.isfinite(lines.slope)):
-        return None
+        fitted, n = int(np.max(np.sum(np.isfinite(fits), axis=0))), fit.data.n_residuals
+        why = (
+            f"{fitted} of its {BINS} bins of speed could be fitted on their own ({MIN_BINS} needed; a bin "
+            f"needs {WINDOWS_PER_FREE * fit.fns.n_free} windows, {WINDOWS_PER_FREE} a free parameter, "
+            f"and the drive has {n} in all)"
+        )
+        return NotMade(why, lateral(*motion))
     names = tuple(fit.fns.names)
     needed = run.scenario.layout.needed({n: params[n] for n in names})
     span = np.max(cut[1]) - np.min(cut[1])
@@ -253,11 +308,13 @@ def measure(run: CalibrationRun, model: KinematicModel, fit: Fit) -> SpeedLines 
 
 
 def check(run: CalibrationRun, model: KinematicModel | None, fit: Fit | None) -> CheckResult | None:
-    """Each parameter's fits on bins of speed against the speed squared (None: the check
-    does not apply or could not be made)."""
+    """Each parameter's fits on bins of speed against the speed squared, or why they could not be
+    made (None: the check does not apply, or the run is not at hand)."""
     found = None if model is None or fit is None else measure(run, model, fit)
     if found is None:
         return None
+    if isinstance(found, NotMade):
+        return not_made(found)
     names = found.names
     v = np.nanmin(found.speeds), np.nanmax(found.speeds)
     said = f"fits on {BINS} bins of speed at {v[0]:.3g} to {v[1]:.3g} m/s"
@@ -281,6 +338,27 @@ def check(run: CalibrationRun, model: KinematicModel | None, fit: Fit | None) ->
         how="Each parameter's fits are regressed on the speed squared; the slope's σ is their scatter.",
         record=found.as_dict(),
     )
+
+
+def not_made(found: NotMade) -> CheckResult:
+    """What the run says of a check it could not make: a caveat where the drive's bends load the
+    tyres (a slip is left open, and no σ holds it), else a fine word."""
+    words = f"not made: {found.why}"
+    record = {
+        "made": False,
+        "why": found.why,
+        "lateral_mps2": found.load if np.isfinite(found.load) else None,
+    }
+    if not found.open:
+        return CheckResult(NAME, FINE, words, record=record)
+    # Bends not timed (NaN) are not known to stay under the limit: the slip is left open there too.
+    bends = f"bends reaching {found.load:.2g} m/s²" if np.isfinite(found.load) else "its bends"
+    caveat = (
+        f"the slip check was not made ({found.why}): the tyres' slip in {bends}, which moves a lever "
+        "arm such as the sensor's x with the speed, is not ruled out and is in no σ; drive bends at "
+        "several speeds, slow ones too, for it to be told"
+    )
+    return CheckResult(NAME, CAVEAT, words, caveat=caveat, record=record)
 
 
 def concern(found: SpeedLines, i: int, unit: str) -> str:
