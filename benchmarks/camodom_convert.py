@@ -53,7 +53,7 @@ from nlp_calib.logs.joint_log import format_joint_csv
 from nlp_calib.logs.tum import format_tum
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from optiodom_convert import Source  # noqa: E402
+from optiodom_convert import Source
 
 DATA = "simulateData"
 SEQUENCES = ("sinSpeed", "sinSpeed1")
