@@ -22,17 +22,21 @@ same file), 6.3 s of driving ahead at an uneven speed, whose generator is not pu
 camera's track of each agrees with what ``config.yaml``'s mount makes of its own odometry to
 2·10⁻⁵ m and rad (printed), so the one truth serves both:
 
-- ``NAME.joints.csv``: ``time,left_wheel_joint,right_wheel_joint``, each wheel's speed in rad/s
-  (``form: speeds``), the rows' speeds turned back into the wheels' by ``config.yaml``'s radii and
-  separation (the data hold the base's rates, not the wheels: the radii and separation in the
-  converted files are ``config.yaml``'s by construction, as in the simulator before it wrote the
-  rates);
+- ``NAME.joints.csv``: ``time,left_wheel_joint,right_wheel_joint``, each wheel's angle in rad:
+  the rows' rates turned back into the wheels' speeds by ``config.yaml``'s radii and separation
+  (the data hold the base's rates, not the wheels': the radii and separation in the converted
+  files are ``config.yaml``'s by construction, as in the simulator before it wrote the rates),
+  each held over its row as the simulator holds it and summed, so the angle at ``t_i`` is the
+  wheels' after row ``i − 1``: exactly the simulator's, linear between rows. With ``--speeds``,
+  the speeds themselves (``form: speeds``, as a user of the tool would feed them), which the
+  tool integrates by trapezoids: rates held over a row are then read half a row late, and
+  rates that jump from row to row are not followed within a row;
 - ``NAME.tum``: the camera's poses, its motions chained from the identity at the first
   ``start_t``, stamped at their ``end_t``;
 - ``NAME.truth.json``: the simulator's truth in the names ``nlp-calib simulate`` writes, and the
-  offset of the camera's stamps (``lag_s``): the pose after odometry row ``i`` is stamped ``t_i``
-  (one row early) and the trapezoids over the speeds move the wheels half a row late, so the
-  camera is stamped half a row (5 ms) early;
+  offset of the camera's stamps (``lag_s``): the camera's pose after odometry row ``i`` (at
+  ``t_{i+1}``) is stamped ``t_i``, one row (10 ms) early; with ``--speeds``, half a row (5 ms), the
+  trapezoids' own half-row delay taken off;
 - ``NAME.yaml``: a ``diff_drive`` scenario with a ``3d`` sensor over the pair, the start
   closed-form and the camera's height known (planar driving cannot see it), everything else the
   tool's defaults.
@@ -133,12 +137,18 @@ def mismatch(poses: np.ndarray, expected: np.ndarray) -> tuple[float, float]:
     return float(np.abs(d[:, :3]).max()), float(turn.max())
 
 
-def truth(config: dict[str, float], odo_period_s: float) -> dict[str, Any]:
+def wheel_angles(odo: np.ndarray, speeds: np.ndarray) -> np.ndarray:
+    """Each wheel's angle (rad) at each row's stamp: the speeds held over their rows and summed."""
+    dt = np.diff(odo[:, 0])[:, None]
+    return np.vstack([np.zeros((1, speeds.shape[1])), np.cumsum(speeds[:-1] * dt, axis=0)])
+
+
+def truth(config: dict[str, float], lag_s: float) -> dict[str, Any]:
     params = {name: config[key] for key, name in TRUTH_KEYS.items()}
-    return {"params": params, "lag_s": round(-0.5 * odo_period_s, 9), "source": f"{DATA}/config.yaml"}
+    return {"params": params, "lag_s": round(lag_s, 9), "source": f"{DATA}/config.yaml"}
 
 
-def scenario(name: str, sensor_z: float) -> dict[str, Any]:
+def scenario(name: str, sensor_z: float, form: str) -> dict[str, Any]:
     return {
         "name": f"camodom_{name}",
         "model": "diff_drive",
@@ -146,7 +156,7 @@ def scenario(name: str, sensor_z: float) -> dict[str, Any]:
         "dataset": {
             "poses": f"{name}.tum",
             "joints": f"{name}.joints.csv",
-            "form": "speeds",
+            "form": form,
             "encoders": {"left_wheel": JOINTS[0], "right_wheel": JOINTS[1]},
         },
         "initial_guess": "auto",
@@ -158,17 +168,20 @@ def ns(time_s: np.ndarray) -> np.ndarray:
     return np.round(time_s * 1e9).astype(np.int64)
 
 
-def convert(src: Source, name: str, config: dict[str, float], out: Path) -> str:
-    """One sequence's files; a line saying what was written."""
+def convert(src: Source, name: str, config: dict[str, float], out: Path, as_speeds: bool) -> str:
+    """One sequence's files (the wheels as angles, or ``as_speeds``); a line saying what was written."""
     odo = table(src.text(f"{DATA}/output/odo_{name}.txt"))
     cam = table(src.text(f"{DATA}/output/cam_{name}.txt"))
     speeds = wheel_speeds(odo, config)
-    (out / f"{name}.joints.csv").write_text(format_joint_csv(ns(odo[:, 0]), JOINTS, speeds))
+    wheels = speeds if as_speeds else wheel_angles(odo, speeds)
+    (out / f"{name}.joints.csv").write_text(format_joint_csv(ns(odo[:, 0]), JOINTS, wheels))
     stamps, poses = camera_poses(cam)
     (out / f"{name}.tum").write_text(format_tum(ns(stamps), poses))
-    (out / f"{name}.yaml").write_text(yaml.safe_dump(scenario(name, config["t2"]), sort_keys=False))
+    form = "speeds" if as_speeds else "positions"
+    (out / f"{name}.yaml").write_text(yaml.safe_dump(scenario(name, config["t2"], form), sort_keys=False))
     period = float(np.median(np.diff(odo[:, 0])))
-    (out / f"{name}.truth.json").write_text(json.dumps(truth(config, period), indent=2) + "\n")
+    lag = -(0.5 if as_speeds else 1.0) * period
+    (out / f"{name}.truth.json").write_text(json.dumps(truth(config, lag), indent=2) + "\n")
     travel = float(np.sum(np.linalg.norm(np.diff(poses[:, :3], axis=0), axis=1)))
     off_m, off_rad = mismatch(poses, predicted(odo, config, len(poses)))
     return (
@@ -183,12 +196,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("source", type=Path)
     ap.add_argument("out", type=Path)
+    ap.add_argument("--speeds", action="store_true", help="the wheels as speeds (form: speeds), not angles")
     args = ap.parse_args(argv)
     src = Source(args.source)
     config = read_config(src.text(f"{DATA}/config.yaml"))
     args.out.mkdir(parents=True, exist_ok=True)
     for name in SEQUENCES:
-        print(convert(src, name, config, args.out))
+        print(convert(src, name, config, args.out, args.speeds))
     return 0
 
 
