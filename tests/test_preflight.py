@@ -138,6 +138,51 @@ def test_the_reasons_say_what_the_drive_lacks(tmp_path: Path) -> None:
     assert "alignment.tracker_lag" in sinus.way_out
 
 
+def _swinging(folder: Path) -> Path:
+    """A differential drive (radii 0.1 m, separation 0.57 m) driving ahead at 0.2 m/s for 25 s while
+    its heading swings as 0.12·(1 − cos t): it turns about 0.5 rad each way, its heading spanning
+    0.24 rad; joints at 100 Hz, the base's pose at 50 Hz with 1 mm and 1 mrad of noise (seed 5)."""
+    r, b, dt = 0.1, 0.57, 0.01
+    t = np.arange(2501) * dt
+    turn_rate = 0.12 * np.sin(t[:-1])
+    wl, wr = (0.2 - 0.5 * b * turn_rate) / r, (0.2 + 0.5 * b * turn_rate) / r
+    heading = np.concatenate([[0.0], np.cumsum(turn_rate * dt)])
+    mid = heading[:-1] + 0.5 * turn_rate * dt
+    x = np.concatenate([[0.0], np.cumsum(0.2 * dt * np.cos(mid))])
+    y = np.concatenate([[0.0], np.cumsum(0.2 * dt * np.sin(mid))])
+    rng = np.random.default_rng(5)
+    images = np.arange(0, t.size, 2)
+    noisy = np.column_stack([x, y, heading])[images] + rng.normal(0, [0.001, 0.001, 0.001], (images.size, 3))
+    with (folder / "swing.tum").open("w") as f:
+        for s, (px, py, th) in zip(t[images], noisy):
+            f.write(f"{s:.6f} {px:.6f} {py:.6f} 0 0 0 {math.sin(th / 2):.9f} {math.cos(th / 2):.9f}\n")
+    angles = np.column_stack([np.concatenate([[0.0], np.cumsum(w * dt)]) for w in (wl, wr)])
+    with (folder / "swing.csv").open("w") as f:
+        f.write("time,left_wheel_joint,right_wheel_joint\n")
+        f.writelines(f"{s:.6f},{a:.6f},{c:.6f}\n" for s, (a, c) in zip(t, angles))
+    path = folder / "swing.yaml"
+    path.write_text(
+        "name: swing\nmodel: diff_drive\ninitial_guess: auto\nalignment: {tracker_lag: 0.0}\n"
+        "dataset: {poses: swing.tum, joints: swing.csv,\n"
+        "          encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}\n"
+    )
+    return path
+
+
+def test_a_drive_whose_heading_stays_in_a_narrow_band_is_told_to_turn(tmp_path: Path) -> None:
+    """Swinging both ways inside a 0.24 rad band: the separation and the lever arm "never turn";
+    the way out must not say that the drive already turns both ways (it did, beside that cause), but
+    ask for the turns it lacks."""
+    report = preflight(load_scenario(_swinging(tmp_path)))
+    ex = report.excitation[0]
+    assert ex.heading_span_rad < 0.3 <= min(ex.turned_left_rad, ex.turned_right_rad), ex
+    words = {p.name: p.because for p in report.parameters}
+    assert "never turns" in words["wheel_separation"], words
+    assert report.verdict == NOT_ENOUGH, report.way_out
+    assert "turns both ways" not in report.way_out, report.way_out
+    assert "turns in both directions" in report.way_out, report.way_out
+
+
 @pytest.mark.parametrize("demo", ["demo.yaml", "diff_drive_demo.yaml", "camera_demo.yaml"])
 def test_the_shipped_demos_are_enough(demo: str) -> None:
     report = preflight(load_scenario(SCENARIOS / demo))

@@ -695,9 +695,11 @@ def _way_out(
 ) -> str:
     """The way out for the loose parameters the verdict refuses for: those not determined when any
     is (a weakly determined lag beside them would turn the advice to the clocks), else the weakly
-    determined ones; on a drive that already turns both ways, not "turn more"."""
+    determined ones; on a drive that already turns both ways, not "turn more". A drive whose
+    heading never leaves a band under MIN_TURNING has not turned for the turning parameters, however
+    often it swings both ways inside it: their cause says it "never turns", so must the way out."""
     undetermined = [s.name for s in statuses if s.name in loose and s.status == NOT_DETERMINED]
-    both = ex is not None and min(ex.turned_left_rad, ex.turned_right_rad) >= MIN_TURNING
+    both = ex is not None and min(ex.heading_span_rad, ex.turned_left_rad, ex.turned_right_rad) >= MIN_TURNING
     return way_out(undetermined or loose, fns.model, fns.layout, fns.sensor, values, both)
 
 
