@@ -222,7 +222,7 @@ def test_the_trailing_medians_are_nanmedians_to_the_bit(w: int) -> None:
 
 
 def test_the_screens_lag_is_the_written_out_huber_profiles_least() -> None:
-    """Issue 41: the screen's lag profile, computed in reused buffers, has its least where Huber's
+    """Issue 41: the screen's lag profile, taken over blocks of records, has its least where Huber's
     loss written out has it."""
     from nlp_calib.analysis.counters import HUBER, LAG_STEP, robust_sigma
 
