@@ -222,7 +222,7 @@ def test_the_trailing_medians_are_nanmedians_to_the_bit(w: int) -> None:
 
 
 def test_the_screens_lag_is_the_written_out_huber_profiles_least() -> None:
-    """Issue 41: the screen's lag profile, computed in reused buffers, has its least where Huber's
+    """Issue 41: the screen's lag profile, taken over blocks of records, has its least where Huber's
     loss written out has it."""
     from nlp_calib.analysis.counters import HUBER, LAG_STEP, robust_sigma
 
@@ -241,3 +241,47 @@ def test_the_screens_lag_is_the_written_out_huber_profiles_least() -> None:
     assert screen_lag(t, ticks, c, (-0.1, 0.1)) == grid[int(np.argmin(cost))]
     # One record, no interval: every lag costs nothing, the range's first is kept.
     assert screen_lag(t[:1], [x[:0] for x in ticks], c[:0], (0.0, 0.0)) == 0.0
+
+
+def test_the_screens_lag_costs_are_one_pass_per_lag_to_the_last_bit() -> None:
+    """Issue 41: the lag profile taken over blocks of records, every lag at once, is each lag's
+    pass over every record (np.interp on all of them, np.sum of all terms) bit for bit: over
+    several blocks, irregular records, a record stamped twice and lags that read before the first
+    record and after the last."""
+    from nlp_calib.analysis.counters import HUBER, LAG_STEP, LAG_TERMS, lag_costs, robust_sigma
+
+    rng = np.random.default_rng(31)
+    n = 5000
+    t = np.cumsum(0.001 + 0.04 * rng.random(n + 1))
+    t[700] = t[699]
+    x = rng.integers(-5, 60, n).astype(float)
+    c = rng.standard_t(3, n) * 2.0
+    grid = -0.4 + LAG_STEP * np.arange(401)
+    assert n > 3 * (LAG_TERMS // grid.size)  # several blocks, their sums joined
+    count = np.concatenate([[0.0], np.cumsum(x)])
+    want = np.empty(grid.size)
+    for i, g in enumerate(grid):
+        r = np.abs(np.diff(np.interp(t - g, t, count)) - x - c) / max(robust_sigma(c), 1e-12)
+        want[i] = np.sum(np.where(r < HUBER, 0.5 * r * r, HUBER * r - 0.5 * HUBER**2))
+    assert np.array_equal(lag_costs(t, x, c, grid), want)
+
+
+def test_pairwise_sums_of_blocks_are_numpys_sum_of_all() -> None:
+    """Issue 41: block sums joined as numpy's pairwise summation joins halves give np.sum of the
+    whole array to the last bit, whatever the blocks' size (a plain running sum of the blocks does
+    not: the check can fail)."""
+    from nlp_calib.analysis.counters import _pairwise
+
+    rng = np.random.default_rng(5)
+    a = rng.standard_normal((3, 100_003)) * 10.0 ** rng.uniform(-6, 6, (3, 100_003))
+
+    def sums(lo: int, hi: int) -> np.ndarray:
+        return a[:, lo:hi].sum(axis=1)
+
+    want = np.array([np.sum(row) for row in a])
+    for n in (0, 7, 129, 4096, 100_003):
+        for leaf in (128, 1000, 8192, 1 << 17):
+            expected = np.array([np.sum(row[:n]) for row in a])
+            assert np.array_equal(_pairwise(sums, 0, n, leaf), expected), (n, leaf)
+    running = sum(sums(lo, min(lo + 1000, a.shape[1])) for lo in range(0, a.shape[1], 1000))
+    assert not np.array_equal(running, want)
