@@ -817,7 +817,7 @@ def test_a_refusals_way_out_addresses_its_own_reason_and_its_plan_is_one_sentenc
     fns = SimpleNamespace(model=model, layout=Clock(), sensor=None)
     found = [ParameterStatus("k_steer", NOT_DETERMINED, np.inf, np.inf, 0.01, "1", ("sensor_x",), "")]
     found.append(ParameterStatus("tracker_lag", WEAKLY, 0.005, 40.0, 1e-4, "s", (), ""))
-    both = SimpleNamespace(turned_left_rad=4.5, turned_right_rad=9.2)
+    both = SimpleNamespace(turned_left_rad=4.5, turned_right_rad=9.2, heading_span_rad=4.7)
     said = _way_out(fns, found, ["k_steer", "tracker_lag"], {}, both)  # type: ignore[arg-type]
     assert "give the lag" not in said and "(known: {k_steer: <value>})" in said, said
     assert _way_out(fns, found[1:], ["tracker_lag"], {}, both).startswith("next: give the lag")  # type: ignore[arg-type]
