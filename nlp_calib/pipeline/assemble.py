@@ -413,7 +413,7 @@ def assemble_run(
         prepared.model,
         against,
         fit,
-        given_lag(prepared, windows, alignment),
+        given_lag(prepared, windows, alignment) if fit is not None and fit.data is windows.data else None,
     )
     run = _believed_plan(_checked(run, context, prepared, (fitted, figures, views)))
     return judged(
@@ -423,7 +423,8 @@ def assemble_run(
 
 def given_lag(prepared: PreparedLog, windows: LogWindows, alignment: Alignment) -> HeldLag | None:
     """A tracker lag given as a number, with the fitted windows' inputs re-sampled off it (None: the
-    lag is a parameter of the problem)."""
+    lag is a parameter of the problem). Only where the fit is this log's windows alone: a joint
+    fit's are every log's end to end."""
     if prepared.scenario.log.alignment.tracker_lag == "auto":
         return None
     binder = windows.binder
