@@ -16,17 +16,14 @@ from nlp_calib.analysis.handoff import controller_params, driven_turn_rates
 from nlp_calib.analysis.plan import believed
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.logs import LogHeader
-from nlp_calib.logs.resample import Resampler
 from nlp_calib.models.controllers import EncoderScales
 from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis, Scores
 from nlp_calib.pipeline.build import StartingPoint
 from nlp_calib.pipeline.checks import CheckContext, run_checks
 from nlp_calib.pipeline.fit import Fit
-from nlp_calib.pipeline.held_check import HeldLag
 from nlp_calib.pipeline.prepare import PreparedLog
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.pipeline.screen import median_interval
 from nlp_calib.pipeline.stored import StoredCalibration
 from nlp_calib.pipeline.windows import LogWindows
 from nlp_calib.problem import ProblemFunctions
@@ -406,34 +403,10 @@ def assemble_run(
     # Joints in radians: the simulator's truth is in the counts form's names and units; a log's
     # truth is of its own mount.
     convert = _own_truth(_per_count_left_out(getattr(prepared.model, "from_counts", dict), prepared), views)
-    context = CheckContext(
-        source.files(),
-        convert,
-        prepared.scenario,
-        prepared.model,
-        against,
-        fit,
-        given_lag(prepared, windows, alignment) if fit is not None and fit.data is windows.data else None,
-    )
+    context = CheckContext(source.files(), convert, prepared.scenario, prepared.model, against, fit)
     run = _believed_plan(_checked(run, context, prepared, (fitted, figures, views)))
     return judged(
         run, verdict(run, prepared.model, hint), prepared.scenario.objective.sensor.sensor.components
-    )
-
-
-def given_lag(prepared: PreparedLog, windows: LogWindows, alignment: Alignment) -> HeldLag | None:
-    """A tracker lag given as a number, with the fitted windows' inputs re-sampled off it (None: the
-    lag is a parameter of the problem). Only where the fit is this log's windows alone: a joint
-    fit's are every log's end to end."""
-    if prepared.scenario.log.alignment.tracker_lag == "auto":
-        return None
-    binder = windows.binder
-    # The aligned log is re-sampled on from its own lag: what it adds is the offset from it.
-    resampler = Resampler(alignment.log, binder.fns.model.encoder_kinds)
-    return HeldLag(
-        alignment.lag_s,
-        median_interval(alignment.log),
-        lambda d: binder.inputs(resampler.at(d)[0], *windows.fit),
     )
 
 

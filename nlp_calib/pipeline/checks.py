@@ -49,9 +49,6 @@ class CheckContext:
     against: StoredCalibration | None = None
     #: The run's fit: its evaluator bound to the windows it fitted (None: not at hand).
     fit: Fit | None = None
-    #: A tracker lag given as a number, with the fitted windows' inputs at other lags (None: the
-    #: lag is a parameter of the problem, or the run's log is not at hand).
-    held_lag: held_check.HeldLag | None = None
 
 
 #: A check: the run and its context to a result, or None when it has nothing to say.
@@ -68,7 +65,7 @@ RUN_CHECKS: dict[str, RunCheck] = {
     "consistency": lambda run, ctx: consistency_check.check(run),
     profile_check.NAME: lambda run, ctx: profile_check.check(run, ctx.scenario, ctx.model, ctx.fit),
     # After every check that widens a σ to believe: a held value's shift is weighed against it.
-    held_check.NAME: lambda run, ctx: held_check.check(run, ctx.fit, ctx.held_lag),
+    held_check.NAME: lambda run, ctx: held_check.check(run, ctx.fit),
     "truth": lambda run, ctx: truth.check(run, ctx.files, ctx.convert),
     "model": lambda run, ctx: rival.check(run, ctx.scenario),
     "drift": lambda run, ctx: drift_check.check(run, ctx.against, ctx.model),

@@ -3,8 +3,9 @@
 A value held (a parameter under ``known:``, one the layout holds because the drive cannot determine
 it, a tracker lag given as a number) enters the fit as exact: no σ carries its error. Where the
 estimates depend on it strongly, a held value a little off moves them by many of their σ, and the
-run hands off a wrong value with a small σ (a lag given as 0 that is 10 ms: a wheel radius 2400σ
-off). For each held value the check measures the fit's linear response of every free parameter,
+run hands off a wrong value with a small σ (on a drive whose wheels turn at 2·cos t and 2·sin t, a
+lag given as 0 that is 40 ms: a wheel radius 4 % and 10⁵σ off, ``tests/test_held.py``). For each
+held value the check measures the fit's linear response of every free parameter,
 ``∂x̂/∂h = −H⁻¹·∂g/∂h`` (``H``, ``g``: the fit's normal equations at its estimate), by a central
 difference of ``g`` over the held value's plausible error either side:
 
@@ -21,7 +22,7 @@ what to do: free the value, or give it to within the error that moves no paramet
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +30,7 @@ import numpy as np
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CAVEAT, FINE, CheckResult
-from nlp_calib.results.layout import CLOCK
+from nlp_calib.results.layout import CLOCK, KNOWN
 from nlp_calib.solvers import ProblemEvaluator
 
 NAME = "held"
@@ -38,16 +39,6 @@ LAG = "alignment.tracker_lag"
 #: The plausible errors' rules, as the record states them.
 RECORD_INTERVAL = "one record interval"
 NEEDED = "the precision a calibration needs of it"
-
-
-@dataclass(frozen=True)
-class HeldLag:
-    """A tracker lag given as a number: its value (s), the log's record interval (s) and the fitted
-    windows' interval inputs with the encoders read ``d`` s later than at it (``inputs(d)``)."""
-
-    lag_s: float
-    interval_s: float
-    inputs: Callable[[float], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -136,7 +127,7 @@ def _fixed_errors(run: CalibrationRun, fit: Fit) -> list[tuple[float, str]]:
     return out
 
 
-def responses(run: CalibrationRun, fit: Fit, lag: HeldLag | None) -> list[Response]:
+def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
     """Each held value's response (see the module's docstring), at the chosen solver's estimate."""
     solver = run.chosen_solver()
     if solver is None:
@@ -168,46 +159,49 @@ def responses(run: CalibrationRun, fit: Fit, lag: HeldLag | None) -> list[Respon
         up, down = base.copy(), base.copy()
         up[i], down[i] = base[i] + error[0], base[i] - error[0]
         response(name, float(base[i]), error, (_at_fixed(ev, x, up), _at_fixed(ev, x, down)))
-    if lag is not None:
-        d = lag.interval_s
-        grads = (_at_inputs(ev, x, lag.inputs(d)), _at_inputs(ev, x, lag.inputs(-d)))
-        response(LAG, lag.lag_s, (d, RECORD_INTERVAL), grads)
+    if fit.given_lag is not None and np.isfinite(d := record_interval(fit)):
+        grads = (_at_inputs(ev, x, fit.given_lag(d)), _at_inputs(ev, x, fit.given_lag(-d)))
+        response(LAG, run.data.tracker_lag_s, (d, RECORD_INTERVAL), grads)
     return found
 
 
 def _amount(value: float, unit: str) -> str:
-    """``value`` in ``unit``, a time in ms."""
-    return f"{1e3 * value:.3g} ms" if unit == "s" else f"{value:.3g} {unit}".rstrip()
+    """``value`` in ``unit`` (a time in ms; a ratio bare)."""
+    if unit == "s":
+        return f"{1e3 * value:.3g} ms"
+    return f"{value:.4g}" if unit in ("", "1") else f"{value:.4g} {unit}"
 
 
-def _what_to_do(r: Response) -> str:
-    """How to leave the parameters ``r`` moves with a σ that holds."""
-    free = "fit it (alignment.tracker_lag: auto)" if r.name == LAG else "free it (leave it out of known:)"
-    return f"{free}, or give it measured to within {_amount(r.within(), r.unit)}"
+def _what_to_do(r: Response, given: bool) -> str:
+    """How to leave the parameters ``r`` moves with a σ that holds (``given``: under known:)."""
+    within = f"give it measured to within {_amount(r.within(), r.unit)}"
+    if r.name == LAG:
+        return f"fit it (alignment.tracker_lag: auto), or {within}"
+    return f"free it (leave it out of known:), or {within}" if given else within
 
 
-def concern(r: Response, name: str, units: Mapping[str, str]) -> str:
+def concern(r: Response, name: str, run: CalibrationRun) -> str:
     """Why parameter ``name`` is not believed: the held value of ``r`` moves it beyond its σ."""
-    unit = units.get(name, "")
+    unit, layout = run.scenario.units.get(name, ""), run.scenario.layout
+    given = r.name in layout and layout.param(r.name).status == KNOWN
     return (
         f"{name} rests on {r.name} held at {_amount(r.value, r.unit)}: off by {_amount(r.error, r.unit)} "
         f"({r.rule}), it moves {name} by {r.shift[name]:+.3g} {unit} ({r.in_sigma[name]:+.1f}σ), an error "
-        f"in no σ; {_what_to_do(r)}"
+        f"in no σ; {_what_to_do(r, given)}"
     )
 
 
-def check(run: CalibrationRun, fit: Fit | None, lag: HeldLag | None) -> CheckResult | None:
+def check(run: CalibrationRun, fit: Fit | None) -> CheckResult | None:
     """Each held value's error moved into the free parameters, against their σ to believe (None:
     nothing held, no fit at hand or none converged)."""
-    found = [] if fit is None else responses(run, fit, lag)
+    found = [] if fit is None else responses(run, fit)
     if not found:
         return None
     record = {"held": {r.name: r.as_dict() for r in found}}
-    units = run.scenario.units
     concerns: dict[str, str] = {}
     for r in found:
         for name in r.moved():
-            said = concern(r, name, units)
+            said = concern(r, name, run)
             concerns[name] = f"{concerns[name]}; {said}" if name in concerns else said
     if not concerns:
         worst = max(
