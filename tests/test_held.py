@@ -71,7 +71,8 @@ def test_a_lag_held_at_its_truth_on_a_drive_that_determines_everything_moves_not
     """A simulated differential drive (turns, stops, reversals; 100 Hz) whose tracker is 20 ms (two
     records) late, the lag given at its truth: a lag one record interval off would move no
     parameter by its σ: no caveat, and the record says so. (At 25 Hz one interval is 40 ms, which
-    moves sensor_y by 1-2σ on such a drive: the rule's caveat, even at the truth.)"""
+    moves sensor_y by up to 2σ on such a drive, beyond the 1 cm it needs on one seed of five: the
+    rule's caveat, even at the truth.)"""
     log = write_sim(
         tmp_path, "sim.txt", records=1500, seed=216, model="diff_drive", latency_s=0.02, rate_hz=100.0
     )

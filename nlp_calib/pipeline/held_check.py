@@ -15,9 +15,11 @@ difference of ``g`` over the held value's plausible error either side:
   problem (``known:``) moves its clock correction;
 * any other: the precision a calibration needs of it (its layout's, at its value).
 
-A parameter moved by that error by more than its σ to believe is a caveat concerning it (so no
-hand-off file writes it as calibrated), naming the held value, the shift in its unit and in σ, and
-what to do: free the value, or give it to within the error that moves no parameter beyond its σ.
+A parameter moved by that error by more than its σ to believe and the precision a calibration needs
+of it (a shift within the needed precision changes no use of the value, however many σ; the slip
+check's rule) is a caveat concerning it (so no hand-off file writes it as calibrated), naming the
+held value, the shift in its unit and in σ, and what to do: free the value, or give it to within
+the error that moves no parameter beyond both.
 """
 
 from __future__ import annotations
@@ -44,7 +46,8 @@ NEEDED = "the precision a calibration needs of it"
 @dataclass(frozen=True)
 class Response:
     """One held value's ``error`` (by ``rule``, in ``unit``) and what it moves each free parameter
-    by (``shift``, their units) and in their σ to believe (``in_sigma``)."""
+    by (``shift``, their units), in their σ to believe (``in_sigma``), and the precision a
+    calibration needs of each (``needed``, their units)."""
 
     name: str
     value: float
@@ -53,15 +56,25 @@ class Response:
     unit: str
     shift: Mapping[str, float]
     in_sigma: Mapping[str, float]
+    needed: Mapping[str, float]
 
-    def moved(self) -> tuple[str, ...]:
+    def beyond_sigma(self) -> tuple[str, ...]:
         """The parameters the error moves by more than their σ to believe."""
         return tuple(n for n, z in self.in_sigma.items() if abs(z) > 1.0)
 
+    def moved(self) -> tuple[str, ...]:
+        """The parameters the error moves beyond their σ to believe and the precision a calibration
+        needs of them both: a shift within the needed precision changes no use of the value."""
+        return tuple(n for n in self.beyond_sigma() if abs(self.shift[n]) > self.needed[n])
+
     def within(self) -> float:
-        """The error of the held value that moves no parameter beyond its σ (its unit)."""
-        worst = max((abs(z) for z in self.in_sigma.values() if np.isfinite(z)), default=0.0)
-        return self.error / worst if worst > 0 else float("inf")
+        """The error of the held value that moves no parameter beyond both its σ and the precision
+        it needs (the held value's unit)."""
+        ratios = [
+            abs(self.shift[n]) / max(abs(self.shift[n] / self.in_sigma[n]), self.needed[n])
+            for n in self.moved()
+        ]
+        return self.error / max(ratios) if ratios else float("inf")
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -71,6 +84,8 @@ class Response:
             "unit": self.unit,
             "shift": dict(self.shift),
             "shift_in_sigma": {n: (z if np.isfinite(z) else None) for n, z in self.in_sigma.items()},
+            "needed": dict(self.needed),
+            "beyond_sigma": list(self.beyond_sigma()),
             "moved": list(self.moved()),
         }
 
@@ -139,6 +154,8 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
     params = np.asarray(ev.params(x), dtype=float)
     std, units = run.std(solver), run.scenario.units
     free = [n for n in fns.free if n in report.uncertainty.free]
+    estimate = report.result.param_dict()
+    needed = run.scenario.layout.needed({n: estimate[n] for n in free})
     found: list[Response] = []
 
     def response(
@@ -150,7 +167,7 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         moved = dict(zip(fns.names, np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params))
         shift = {n: float(moved[n]) for n in free}
         z = {n: shift[n] / std[n] if std.get(n, 0.0) > 0 else float("nan") for n in free}
-        found.append(Response(name, value, error[0], error[1], units.get(name, "s"), shift, z))
+        found.append(Response(name, value, error[0], error[1], units.get(name, "s"), shift, z, needed))
 
     base = np.asarray(ev.x_fixed, dtype=float)
     for i, (name, error) in enumerate(zip(fns.fixed, _fixed_errors(run, fit))):
@@ -186,14 +203,29 @@ def concern(r: Response, name: str, run: CalibrationRun) -> str:
     given = r.name in layout and layout.param(r.name).status == KNOWN
     return (
         f"{name} rests on {r.name} held at {_amount(r.value, r.unit)}: off by {_amount(r.error, r.unit)} "
-        f"({r.rule}), it moves {name} by {r.shift[name]:+.3g} {unit} ({r.in_sigma[name]:+.1f}σ), an error "
-        f"in no σ; {_what_to_do(r, given)}"
+        f"({r.rule}), it moves {name} by {r.shift[name]:+.3g} {unit} ({r.in_sigma[name]:+.1f}σ; a "
+        f"calibration needs {r.needed[name]:.2g} {unit}), an error in no σ; {_what_to_do(r, given)}"
     )
 
 
+def fine_words(found: list[Response], units: Mapping[str, str]) -> str:
+    """What a check that found no parameter moved says: each held value's error, and the largest
+    shift in σ, with the precision that parameter needs where the shift is beyond its σ."""
+    said = ", ".join(f"{r.name} by {_amount(r.error, r.unit)}" for r in found)
+    shifts = [(abs(z), r, n) for r in found for n, z in r.in_sigma.items() if np.isfinite(z)]
+    if not shifts:
+        return f"held values off ({said}) move no parameter"
+    z, r, n = max(shifts, key=lambda t: t[0])
+    most = f"at most {z:.2g}σ ({n}, by {r.name})"
+    if z > 1.0:
+        unit = units.get(n, "")
+        most += f": {abs(r.shift[n]):.2g} {unit}, within the {r.needed[n]:.2g} {unit} a calibration needs"
+    return f"held values off ({said}) move no parameter beyond its σ and the precision it needs: {most}"
+
+
 def check(run: CalibrationRun, fit: Fit | None) -> CheckResult | None:
-    """Each held value's error moved into the free parameters, against their σ to believe (None:
-    nothing held, no fit at hand or none converged)."""
+    """Each held value's error moved into the free parameters, against their σ to believe and the
+    precision they need (None: nothing held, no fit at hand or none converged)."""
     found = [] if fit is None else responses(run, fit)
     if not found:
         return None
@@ -204,24 +236,14 @@ def check(run: CalibrationRun, fit: Fit | None) -> CheckResult | None:
             said = concern(r, name, run)
             concerns[name] = f"{concerns[name]}; {said}" if name in concerns else said
     if not concerns:
-        worst = max(
-            ((abs(z), r.name, n) for r in found for n, z in r.in_sigma.items() if np.isfinite(z)),
-            default=(0.0, found[0].name, ""),
-        )
-        said = ", ".join(f"{r.name} by {_amount(r.error, r.unit)}" for r in found)
-        most = f"{worst[0]:.2g}σ ({worst[2]}, by {worst[1]})" if worst[2] else "nothing"
-        return CheckResult(
-            NAME,
-            FINE,
-            f"held values off ({said}) move no parameter beyond its σ: at most {most}",
-            record=record,
-        )
+        return CheckResult(NAME, FINE, fine_words(found, run.scenario.units), record=record)
     held = ", ".join(r.name for r in found if r.moved())
     first, *rest = concerns.values()
     return CheckResult(
         NAME,
         CAVEAT,
-        f"{held} held: {', '.join(concerns)} move beyond their σ with its plausible error",
+        f"{held} held: {', '.join(concerns)} move beyond their σ and the precision they need with its "
+        "plausible error",
         caveat=first,
         caveats=tuple(rest),
         concerns=concerns,
