@@ -162,3 +162,34 @@ def test_a_lag_given_to_logs_fitted_together_is_moved_in_every_log(tmp_path: Pat
     at = run.reports["gauss_newton"].result.param_dict()
     for name in MOVED:
         assert later[name] - at[name] == pytest.approx(record["shift"][name], rel=0.15), name
+
+
+def test_a_value_declared_under_known_is_taken_as_exact_and_what_it_moves_said(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A steering gain given under known: whose plausible error would move the wheelbase beyond its
+    σ and the precision it needs: the user's value is taken as exact (fine, no concern), and the
+    words say what it would move; a time offset's same shift stays a caveat concerning it."""
+    from nlp_calib.pipeline import held_check
+
+    log = write_sim(tmp_path, "sim.txt", records=300, seed=218)
+    doc = {"dataset": str(log), "model": "tricycle", "known": {"k_steer": 1.0}, "solvers": ["gauss_newton"]}
+    run = Calibration(scenario_from_mapping(doc, "k", tmp_path)).run(["gauss_newton"])
+    needed, shift = {"axis_length": 0.0015}, {"axis_length": 0.0016}
+    gain = held_check.Response(
+        "k_steer", 1.0, 0.01, held_check.NEEDED, "", shift, {"axis_length": 3.05}, needed
+    )
+    lag = held_check.Response(
+        "tracker_lag", 0.0, 0.02, held_check.RECORD_INTERVAL, "s", shift, {"axis_length": 3.05}, needed
+    )
+    assert held_check.declared(gain, run) and not held_check.declared(lag, run)
+    monkeypatch.setattr(held_check, "responses", lambda run, fit: [gain])
+    said = held_check.check(run, object())  # type: ignore[arg-type]
+    assert said is not None and said.level == FINE and not said.concerns, said
+    assert "axis_length rests on k_steer given as 1 and taken as exact" in said.words, said.words
+    assert "+0.0016" in said.words and "(+3.0σ)" in said.words, said.words
+    monkeypatch.setattr(held_check, "responses", lambda run, fit: [gain, lag])
+    said = held_check.check(run, object())  # type: ignore[arg-type]
+    assert said is not None and said.level == CAVEAT and set(said.concerns) == {"axis_length"}, said
+    assert "tracker_lag" in said.concerns["axis_length"] and "k_steer" not in said.concerns["axis_length"]
+    assert "rests on k_steer" in said.words, said.words

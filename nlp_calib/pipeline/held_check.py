@@ -19,7 +19,8 @@ A parameter moved by that error by more than its σ to believe and the precision
 of it (a shift within the needed precision changes no use of the value, however many σ; the slip
 check's rule) is a caveat concerning it (so no hand-off file writes it as calibrated), naming the
 held value, the shift in its unit and in σ, and what to do: free the value, or give it to within
-the error that moves no parameter beyond both.
+the error that moves no parameter beyond both. A value the user gives under ``known:`` other than a
+time offset is taken as exact (:func:`declared`): what it would move is said, not held against.
 """
 
 from __future__ import annotations
@@ -223,6 +224,30 @@ def fine_words(found: list[Response], units: Mapping[str, str]) -> str:
     return f"held values off ({said}) move no parameter beyond its σ and the precision it needs: {most}"
 
 
+def declared(r: Response, run: CalibrationRun) -> bool:
+    """Whether ``r`` is a value the user gives under ``known:`` other than a time offset: taken as
+    exact (its response is said, not held against the parameters it moves). A time offset given
+    is rarely known to a record interval without a synchronisation, and a value the layout holds
+    because the drive cannot determine it is a start, not a measurement: both are held against."""
+    layout = run.scenario.layout
+    return r.rule != RECORD_INTERVAL and r.name in layout and layout.param(r.name).status == KNOWN
+
+
+def rests_on(found: list[Response], units: Mapping[str, str]) -> str:
+    """What the declared values (:func:`declared`) that would move a parameter beyond both its σ
+    and its needed precision move: said beside the check's words ("" where none)."""
+    said = []
+    for r in found:
+        for n in r.moved():
+            unit = units.get(n, "")
+            said.append(
+                f"{n} rests on {r.name} given as {_amount(r.value, r.unit)} and taken as exact: off by "
+                f"{_amount(r.error, r.unit)} ({r.rule}) it would move {n} by {r.shift[n]:+.3g} {unit} "
+                f"({r.in_sigma[n]:+.1f}σ)"
+            )
+    return "; ".join(said)
+
+
 def check(run: CalibrationRun, fit: Fit | None) -> CheckResult | None:
     """Each held value's error moved into the free parameters, against their σ to believe and the
     precision they need (None: nothing held, no fit at hand or none converged)."""
@@ -230,20 +255,23 @@ def check(run: CalibrationRun, fit: Fit | None) -> CheckResult | None:
     if not found:
         return None
     record = {"held": {r.name: r.as_dict() for r in found}}
+    exact = rests_on([r for r in found if declared(r, run)], run.scenario.units)
     concerns: dict[str, str] = {}
     for r in found:
-        for name in r.moved():
+        for name in [] if declared(r, run) else r.moved():
             said = concern(r, name, run)
             concerns[name] = f"{concerns[name]}; {said}" if name in concerns else said
     if not concerns:
-        return CheckResult(NAME, FINE, fine_words(found, run.scenario.units), record=record)
-    held = ", ".join(r.name for r in found if r.moved())
+        rest = [r for r in found if not (declared(r, run) and r.moved())]
+        words = fine_words(rest, run.scenario.units) if rest else ""
+        return CheckResult(NAME, FINE, "; ".join(w for w in (words, exact) if w), record=record)
+    held = ", ".join(r.name for r in found if r.moved() and not declared(r, run))
     first, *rest = concerns.values()
     return CheckResult(
         NAME,
         CAVEAT,
         f"{held} held: {', '.join(concerns)} move beyond their σ and the precision they need with its "
-        "plausible error",
+        "plausible error" + (f"; {exact}" if exact else ""),
         caveat=first,
         caveats=tuple(rest),
         concerns=concerns,
