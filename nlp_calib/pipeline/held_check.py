@@ -258,12 +258,12 @@ def check(run: CalibrationRun, fit: Fit | None) -> CheckResult | None:
     exact = rests_on([r for r in found if declared(r, run)], run.scenario.units)
     concerns: dict[str, str] = {}
     for r in found:
-        for name in [] if declared(r, run) else r.moved():
+        for name in () if declared(r, run) else r.moved():
             said = concern(r, name, run)
             concerns[name] = f"{concerns[name]}; {said}" if name in concerns else said
     if not concerns:
-        rest = [r for r in found if not (declared(r, run) and r.moved())]
-        words = fine_words(rest, run.scenario.units) if rest else ""
+        others = [r for r in found if not (declared(r, run) and r.moved())]
+        words = fine_words(others, run.scenario.units) if others else ""
         return CheckResult(NAME, FINE, "; ".join(w for w in (words, exact) if w), record=record)
     held = ", ".join(r.name for r in found if r.moved() and not declared(r, run))
     first, *rest = concerns.values()
