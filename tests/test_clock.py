@@ -10,10 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import SCENARIOS, write_sim
+from conftest import SCENARIOS, two_sinusoids, write_sim
 
 from nlp_calib import Calibration, load_scenario, scenario_from_mapping
-from nlp_calib.core import poses3d
 from nlp_calib.logs import resample_encoders
 from nlp_calib.logs.log import JointStream
 from nlp_calib.models import get_model, load_log
@@ -184,52 +183,12 @@ def test_several_logs_each_have_their_own_lag(tmp_path: Path) -> None:
         assert abs(params[name] - true) < 3 * std[name], (name, params[name], std[name])
 
 
-def _two_sinusoids(folder: Path, stamp_offset_s: float = -0.01) -> dict[str, float]:
-    """A differential drive whose wheels turn at 2·cos t and 2·sin t rad/s for 30 s (radii 0.1 m,
-    separation 0.57 m), joints at 100 Hz, a camera at 50 Hz stamped ``stamp_offset_s`` late, its
-    poses and joints printed to six decimals: a drive on which a time shift is a mix of the two
-    wheels."""
-    r, b, dt, mount = 0.1, 0.57, 0.01, (0.36, 0.06, 0.10, -1.58, 0.012, -1.55)
-    t = np.arange(3001) * dt
-    wl, wr = 2.0 * np.cos(t[:-1]), 2.0 * np.sin(t[:-1])
-    travel, turn = 0.5 * r * (wl + wr) * dt, r * (wr - wl) / b * dt
-    planar = np.zeros((t.size, 3))
-    for k in range(t.size - 1):
-        x, y, th = planar[k]
-        c = np.sinc(turn[k] / (2 * np.pi)) * travel[k]
-        planar[k + 1] = (x + c * np.cos(th + turn[k] / 2), y + c * np.sin(th + turn[k] / 2), th + turn[k])
-    poses = poses3d.compose(poses3d.from_planar(planar), poses3d.mount_pose(np.array(mount)))
-    images = np.arange(0, t.size, 2)
-    stamps = t[images] - stamp_offset_s
-    with (folder / "cam.tum").open("w") as f:
-        for s, p in zip(stamps, poses[images]):
-            f.write(f"{1e9 + s:.6f} " + " ".join(f"{v:.6f}" for v in p) + "\n")
-    joints = np.column_stack(
-        [t, np.concatenate([[0], np.cumsum(wl * dt)]), np.concatenate([[0], np.cumsum(wr * dt)])]
-    )
-    with (folder / "cam.joints.csv").open("w") as f:
-        f.write("time,left_wheel_joint,right_wheel_joint\n")
-        for row in joints:
-            f.write(f"{1e9 + row[0]:.6f},{row[1]:.6f},{row[2]:.6f}\n")
-    return dict(
-        left_wheel_radius=r,
-        right_wheel_radius=r,
-        wheel_separation=b,
-        sensor_x=0.36,
-        sensor_y=0.06,
-        sensor_roll=-1.58,
-        sensor_pitch=0.012,
-        sensor_yaw=-1.55,
-        tracker_lag=stamp_offset_s,
-    )
-
-
 @pytest.mark.slow
 def test_a_lag_the_drive_cannot_separate_from_the_wheels_is_not_determined(tmp_path: Path) -> None:
     """Two sinusoidal wheel speeds: a time shift is a mix of the wheels, which the radii and the
     mount take up. The run says NOT DETERMINED naming the lag and the radii, with the way out; every
     parameter it gives a finite σ lies within 3σ of the truth; the clean poses show no fault."""
-    truth = _two_sinusoids(tmp_path)
+    truth = two_sinusoids(tmp_path)
     path = tmp_path / "cam.yaml"
     path.write_text(
         "name: sinusoids\nmodel: diff_drive\nsensor: 3d\ninitial_guess: auto\nknown: {sensor_z: 0.10}\n"

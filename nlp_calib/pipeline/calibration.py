@@ -15,7 +15,7 @@ import dataclasses
 import itertools
 import time
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +25,7 @@ from nlp_calib.analysis.precision import clock_needed, log_precision, tightest, 
 from nlp_calib.core import memory
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
+from nlp_calib.logs.resample import Resampler
 from nlp_calib.models import KinematicModel, reference_scales
 from nlp_calib.pipeline import consistency_check, validation
 from nlp_calib.pipeline.align import Alignment
@@ -121,7 +122,9 @@ class Calibration:
         if len(self.parts) == 1:
             self.held: Mapping[str, str] = self.stages.prepared.held
             windows = self.stages.windows
-            self.fitting = Fit(self.stages.problem, windows.data, self.solvers, windows.input_noise)
+            self.fitting = Fit(
+                self.stages.problem, windows.data, self.solvers, windows.input_noise, given_lag(self.parts)
+            )
         else:
             self.held, self.fitting = _joint_fit(sc, self.parts, self.solvers)
         self.setup_time_s = time.perf_counter() - t0
@@ -247,7 +250,7 @@ def _joint_fit(sc: Scenario, parts: Sequence[LogSetup], solvers: Sequence[str]) 
     mounts = [p.problem.start.initial for p in parts] if mount_count(sc, len(parts)) > 1 else []
     data = data.with_selector() if mounts or per_log_kinds(model, len(parts)) else data
     problem = build_stage(one_horizon, model, tuple(held), start_from, solvers, n_records, lags, mounts, data)
-    return held, Fit(problem, data, solvers, joint_noise(parts))
+    return held, Fit(problem, data, solvers, joint_noise(parts), given_lag(parts))
 
 
 def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> CalibrationRun:
@@ -311,7 +314,7 @@ def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
     """One log of several fitted on its own (its stages' windows and problem, nothing built again)."""
     return _run(
         part.prepared.scenario,
-        Fit(part.problem, part.windows.data, solvers, part.windows.input_noise),
+        Fit(part.problem, part.windows.data, solvers, part.windows.input_noise, given_lag([part])),
         [part],
         solvers,
         Wanted(),
@@ -362,6 +365,22 @@ def consistency(
     paths = [run.log.path for run in own]
     unit = tuple(info.units.get(n, "") for n in names)
     return compare_logs(names, paths, result.params, (est, std), others, known, apart, unit)
+
+
+def given_lag(parts: Sequence[LogSetup]) -> Callable[[float], np.ndarray] | None:
+    """Where every log's tracker lag is given as a number, the fitted windows' interval inputs
+    (the logs end to end) with each log's encoders read ``d`` s later than at its lag (None: a lag
+    is a parameter of the problem)."""
+    if any(p.prepared.scenario.log.alignment.tracker_lag == "auto" for p in parts):
+        return None
+    # Each aligned log is re-sampled on from its own lag: what ``d`` adds is the offset from it.
+    logs = [(p.windows, Resampler(p.alignment.log, p.problem.fns.model.encoder_kinds)) for p in parts]
+
+    def inputs(d: float) -> np.ndarray:
+        data = [w.data.with_inputs(w.binder.inputs(r.at(d)[0], *w.fit)) for w, r in logs]
+        return data[0].inputs if len(data) == 1 else joined(data).inputs
+
+    return inputs
 
 
 def joint_noise(parts: Sequence[LogSetup]) -> tuple[np.ndarray, np.ndarray]:

@@ -21,6 +21,7 @@ from nlp_calib.pipeline import (
     direction_check,
     drift_check,
     fault_check,
+    held_check,
     profile_check,
     rival,
     slip_check,
@@ -63,6 +64,8 @@ RUN_CHECKS: dict[str, RunCheck] = {
     "direction": lambda run, ctx: direction_check.check(run),
     "consistency": lambda run, ctx: consistency_check.check(run),
     profile_check.NAME: lambda run, ctx: profile_check.check(run, ctx.scenario, ctx.model, ctx.fit),
+    # After every check that widens a σ to believe: a held value's shift is weighed against it.
+    held_check.NAME: lambda run, ctx: held_check.check(run, ctx.fit),
     "truth": lambda run, ctx: truth.check(run, ctx.files, ctx.convert),
     "model": lambda run, ctx: rival.check(run, ctx.scenario),
     "drift": lambda run, ctx: drift_check.check(run, ctx.against, ctx.model),

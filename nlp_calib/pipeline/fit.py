@@ -8,7 +8,7 @@ form (the same cost: an exact symmetry of the model).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -24,7 +24,9 @@ from nlp_calib.solvers import Solver, get_solver
 class Fit:
     """The fitted windows ``data`` of ``problem`` bound to one evaluator, ready for any solver;
     ``noise``, the inputs' 1σ and which are counters (see :func:`bias_step`), when each estimate
-    is to be freed of the bias the inputs' noise gives it."""
+    is to be freed of the bias the inputs' noise gives it; ``given_lag``, where every log's tracker
+    lag is given as a number (no parameter of the problem), the windows' interval inputs with each
+    log's encoders read ``d`` s later than at it (``given_lag(d)``)."""
 
     def __init__(
         self,
@@ -32,10 +34,12 @@ class Fit:
         data: ResidualData,
         solvers: Sequence[str],
         noise: tuple[np.ndarray, np.ndarray] | None = None,
+        given_lag: Callable[[float], np.ndarray] | None = None,
     ) -> None:
         self.problem = problem
         self.data = data
         self.noise = noise
+        self.given_lag = given_lag
         self._bias: list[BiasStep] = []
         self.evaluator = problem.binder.evaluate(data)
         self.evaluator.prepare(evaluated(problem.binder.scenario, solvers))

@@ -1,0 +1,284 @@
+"""The ``held`` plug-in check: does a value the fit holds move what it estimates?
+
+A value held (a parameter under ``known:``, one the layout holds because the drive cannot determine
+it, a tracker lag given as a number) enters the fit as exact: no σ carries its error. Where the
+estimates depend on it strongly, a held value a little off moves them by many of their σ, and the
+run hands off a wrong value with a small σ (on a drive whose wheels turn at 2·cos t and 2·sin t, a
+lag given as 0 that is 40 ms: a wheel radius 4 % and 10⁵σ off, ``tests/test_held.py``). For each
+held value the check measures the fit's linear response of every free parameter,
+``∂x̂/∂h = −H⁻¹·∂g/∂h`` (``H``, ``g``: the fit's normal equations at its estimate), by a central
+difference of ``g`` over the held value's plausible error either side:
+
+* a time offset: one record interval of the log (a clock offset is rarely known better without a
+  synchronisation). A lag given as a number is no parameter of the problem: the encoders are
+  re-sampled that interval earlier and later, the same windows evaluated on them; a lag held in the
+  problem (``known:``) moves its clock correction;
+* any other: the precision a calibration needs of it (its layout's, at its value).
+
+A parameter moved by that error by more than its σ to believe and the precision a calibration needs
+of it (a shift within the needed precision changes no use of the value, however many σ; the slip
+check's rule) is a caveat concerning it (so no hand-off file writes it as calibrated), naming the
+held value, the shift in its unit and in σ, and what to do: free the value, or give it to within
+the error that moves no parameter beyond both. A value the user gives under ``known:`` other than a
+time offset is taken as exact (:func:`declared`): what it would move is said, not held against.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlp_calib.pipeline.fit import Fit
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.checks import CAVEAT, FINE, CheckResult
+from nlp_calib.results.layout import CLOCK, KNOWN
+from nlp_calib.solvers import ProblemEvaluator
+
+NAME = "held"
+#: What the lag given as a number is called in the check's words and its record.
+LAG = "alignment.tracker_lag"
+#: The plausible errors' rules, as the record states them.
+RECORD_INTERVAL = "one record interval"
+NEEDED = "the precision a calibration needs of it"
+
+
+@dataclass(frozen=True)
+class Response:
+    """One held value's ``error`` (by ``rule``, in ``unit``) and what it moves each free parameter
+    by (``shift``, their units), in their σ to believe (``in_sigma``), and the precision a
+    calibration needs of each (``needed``, their units)."""
+
+    name: str
+    value: float
+    error: float
+    rule: str
+    unit: str
+    shift: Mapping[str, float]
+    in_sigma: Mapping[str, float]
+    needed: Mapping[str, float]
+
+    def beyond_sigma(self) -> tuple[str, ...]:
+        """The parameters the error moves by more than their σ to believe."""
+        return tuple(n for n, z in self.in_sigma.items() if abs(z) > 1.0)
+
+    def moved(self) -> tuple[str, ...]:
+        """The parameters the error moves beyond their σ to believe and the precision a calibration
+        needs of them both: a shift within the needed precision changes no use of the value."""
+        return tuple(n for n in self.beyond_sigma() if abs(self.shift[n]) > self.needed[n])
+
+    def within(self) -> float:
+        """The error of the held value that moves no parameter beyond both its σ and the precision
+        it needs (the held value's unit)."""
+        ratios = [
+            abs(self.shift[n]) / max(abs(self.shift[n] / self.in_sigma[n]), self.needed[n])
+            for n in self.moved()
+        ]
+        return self.error / max(ratios) if ratios else float("inf")
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "value": self.value,
+            "error": self.error,
+            "rule": self.rule,
+            "unit": self.unit,
+            "shift": dict(self.shift),
+            "shift_in_sigma": {n: (z if np.isfinite(z) else None) for n, z in self.in_sigma.items()},
+            "needed": dict(self.needed),
+            "beyond_sigma": list(self.beyond_sigma()),
+            "moved": list(self.moved()),
+        }
+
+
+def step(H: np.ndarray, plus: np.ndarray, minus: np.ndarray) -> np.ndarray | None:
+    """The fit's move for a held value one error up: ``−H⁻¹·(g₊ − g₋)/2`` from the gradients one
+    error either side (None: ``H`` singular)."""
+    try:
+        return np.linalg.solve(H, -0.5 * (plus - minus))
+    except np.linalg.LinAlgError:
+        return None
+
+
+def _at_fixed(ev: ProblemEvaluator, x: np.ndarray, x_fixed: np.ndarray) -> np.ndarray:
+    """The gradient of the normal equations at ``x`` with the held values ``x_fixed`` (an evaluator
+    of its own on the same windows: the fit's stays as it is)."""
+    other = ProblemEvaluator(
+        ev.fns, ev.data, x_fixed=x_fixed, omega=ev.omega, delta=ev.delta, priors=ev.priors, backend=ev.backend
+    )
+    g = other.normal_equations(x).g
+    other.release()
+    return np.asarray(g, dtype=float)
+
+
+def _at_inputs(ev: ProblemEvaluator, x: np.ndarray, inputs: np.ndarray) -> np.ndarray:
+    """The gradient at ``x`` on the same windows with other interval ``inputs`` (the fit's own put
+    back after)."""
+    kept = ev.data.inputs
+    try:
+        ev.set_inputs(inputs)
+        return np.asarray(ev.normal_equations(x).g, dtype=float)
+    finally:
+        ev.set_inputs(kept)
+
+
+def record_interval(fit: Fit) -> float:
+    """The median time between the fitted logs' records (s; NaN: not known)."""
+    steps = [np.diff(np.asarray(lg.time_s, dtype=float)) for lg in fit.data.logs]
+    steps = [s for s in steps if s.size]
+    return float(np.median(np.concatenate(steps))) if steps else float("nan")
+
+
+def _fixed_errors(run: CalibrationRun, fit: Fit) -> list[tuple[float, str]]:
+    """Each held parameter's plausible error and its rule, in the fit's order of held values: a
+    time offset's, one record interval; any other's, the precision a calibration needs of it."""
+    fns, layout = fit.fns, run.scenario.layout
+    out: list[tuple[float, str]] = []
+    for name, value in zip(fns.fixed, map(float, fit.evaluator.x_fixed)):
+        if fns.layout.in_block(name, CLOCK):
+            out.append((record_interval(fit), RECORD_INTERVAL))
+            continue
+        p = layout.param(name) if name in layout else fns.layout.param(name)
+        out.append((p.needed(value), NEEDED))
+    return out
+
+
+def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
+    """Each held value's response (see the module's docstring), at the chosen solver's estimate."""
+    solver = run.chosen_solver()
+    if solver is None:
+        return []
+    report = run.reports[solver]
+    x = np.asarray(report.result.x, dtype=float)
+    ev, fns = fit.evaluator, fit.fns
+    H = ev.normal_equations(x).H
+    params = np.asarray(ev.params(x), dtype=float)
+    std, units = run.std(solver), run.scenario.units
+    free = [n for n in fns.free if n in report.uncertainty.free]
+    estimate = report.result.param_dict()
+    needed = run.scenario.layout.needed({n: estimate[n] for n in free})
+    found: list[Response] = []
+
+    def response(
+        name: str, value: float, error: tuple[float, str], gradients: tuple[np.ndarray, ...]
+    ) -> None:
+        move = step(H, *gradients)
+        if move is None or not np.all(np.isfinite(move)):
+            return
+        moved = dict(zip(fns.names, np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params))
+        shift = {n: float(moved[n]) for n in free}
+        z = {n: shift[n] / std[n] if std.get(n, 0.0) > 0 else float("nan") for n in free}
+        found.append(Response(name, value, error[0], error[1], units.get(name, "s"), shift, z, needed))
+
+    base = np.asarray(ev.x_fixed, dtype=float)
+    for i, (name, error) in enumerate(zip(fns.fixed, _fixed_errors(run, fit))):
+        if not np.isfinite(error[0]) or error[0] <= 0:
+            continue
+        up, down = base.copy(), base.copy()
+        up[i], down[i] = base[i] + error[0], base[i] - error[0]
+        response(name, float(base[i]), error, (_at_fixed(ev, x, up), _at_fixed(ev, x, down)))
+    if fit.given_lag is not None and np.isfinite(d := record_interval(fit)):
+        grads = (_at_inputs(ev, x, fit.given_lag(d)), _at_inputs(ev, x, fit.given_lag(-d)))
+        response(LAG, run.data.tracker_lag_s, (d, RECORD_INTERVAL), grads)
+    return found
+
+
+def _amount(value: float, unit: str) -> str:
+    """``value`` in ``unit`` (a time in ms; a ratio bare)."""
+    if unit == "s":
+        return f"{1e3 * value:.3g} ms"
+    return f"{value:.4g}" if unit in ("", "1") else f"{value:.4g} {unit}"
+
+
+def _what_to_do(r: Response, given: bool) -> str:
+    """How to leave the parameters ``r`` moves with a σ that holds (``given``: under known:)."""
+    within = f"give it measured to within {_amount(r.within(), r.unit)}"
+    if r.name == LAG:
+        return f"fit it (alignment.tracker_lag: auto), or {within}"
+    return f"free it (leave it out of known:), or {within}" if given else within
+
+
+def concern(r: Response, name: str, run: CalibrationRun) -> str:
+    """Why parameter ``name`` is not believed: the held value of ``r`` moves it beyond its σ."""
+    unit, layout = run.scenario.units.get(name, ""), run.scenario.layout
+    given = r.name in layout and layout.param(r.name).status == KNOWN
+    return (
+        f"{name} rests on {r.name} held at {_amount(r.value, r.unit)}: off by {_amount(r.error, r.unit)} "
+        f"({r.rule}), it moves {name} by {r.shift[name]:+.3g} {unit} ({r.in_sigma[name]:+.1f}σ; a "
+        f"calibration needs {r.needed[name]:.2g} {unit}), an error in no σ; {_what_to_do(r, given)}"
+    )
+
+
+def fine_words(found: list[Response], units: Mapping[str, str]) -> str:
+    """What a check that found no parameter moved says: each held value's error, and the largest
+    shift in σ, with the precision that parameter needs where the shift is beyond its σ."""
+    said = ", ".join(f"{r.name} by {_amount(r.error, r.unit)}" for r in found)
+    shifts = [(abs(z), r, n) for r in found for n, z in r.in_sigma.items() if np.isfinite(z)]
+    if not shifts:
+        return f"held values off ({said}) move no parameter"
+    z, r, n = max(shifts, key=lambda t: t[0])
+    most = f"at most {z:.2g}σ ({n}, by {r.name})"
+    if z > 1.0:
+        unit = units.get(n, "")
+        most += f": {abs(r.shift[n]):.2g} {unit}, within the {r.needed[n]:.2g} {unit} a calibration needs"
+    return f"held values off ({said}) move no parameter beyond its σ and the precision it needs: {most}"
+
+
+def declared(r: Response, run: CalibrationRun) -> bool:
+    """Whether ``r`` is a value the user gives under ``known:`` other than a time offset: taken as
+    exact (its response is said, not held against the parameters it moves). A time offset given
+    is rarely known to a record interval without a synchronisation, and a value the layout holds
+    because the drive cannot determine it is a start, not a measurement: both are held against."""
+    layout = run.scenario.layout
+    return r.rule != RECORD_INTERVAL and r.name in layout and layout.param(r.name).status == KNOWN
+
+
+def rests_on(found: list[Response], units: Mapping[str, str]) -> str:
+    """What the declared values (:func:`declared`) that would move a parameter beyond both its σ
+    and its needed precision move: said beside the check's words ("" where none)."""
+    said = []
+    for r in found:
+        for n in r.moved():
+            unit = units.get(n, "")
+            said.append(
+                f"{n} rests on {r.name} given as {_amount(r.value, r.unit)} and taken as exact: off by "
+                f"{_amount(r.error, r.unit)} ({r.rule}) it would move {n} by {r.shift[n]:+.3g} {unit} "
+                f"({r.in_sigma[n]:+.1f}σ)"
+            )
+    return "; ".join(said)
+
+
+def check(run: CalibrationRun, fit: Fit | None) -> CheckResult | None:
+    """Each held value's error moved into the free parameters, against their σ to believe and the
+    precision they need (None: nothing held, no fit at hand or none converged)."""
+    found = [] if fit is None else responses(run, fit)
+    if not found:
+        return None
+    record = {"held": {r.name: r.as_dict() for r in found}}
+    exact = rests_on([r for r in found if declared(r, run)], run.scenario.units)
+    concerns: dict[str, str] = {}
+    for r in found:
+        for name in () if declared(r, run) else r.moved():
+            said = concern(r, name, run)
+            concerns[name] = f"{concerns[name]}; {said}" if name in concerns else said
+    if not concerns:
+        others = [r for r in found if not (declared(r, run) and r.moved())]
+        words = fine_words(others, run.scenario.units) if others else ""
+        return CheckResult(NAME, FINE, "; ".join(w for w in (words, exact) if w), record=record)
+    held = ", ".join(r.name for r in found if r.moved() and not declared(r, run))
+    first, *rest = concerns.values()
+    return CheckResult(
+        NAME,
+        CAVEAT,
+        f"{held} held: {', '.join(concerns)} move beyond their σ and the precision they need with its "
+        "plausible error" + (f"; {exact}" if exact else ""),
+        caveat=first,
+        caveats=tuple(rest),
+        concerns=concerns,
+        how=(
+            "Each held value is moved by its plausible error (a time offset: one record interval; any "
+            "other: the precision a calibration needs of it) and the fit's linear response taken from "
+            "its normal equations."
+        ),
+        record=record,
+    )
