@@ -17,8 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import ros2_bags as rb
-from conftest import REPO, SCENARIOS, cli, write_sim
-from test_clock import _two_sinusoids
+from conftest import REPO, SCENARIOS, cli, two_sinusoids, write_sim
 
 import nlp_calib.pipeline.preflight as stages
 from nlp_calib.analysis.determinacy import information, standing
@@ -87,7 +86,7 @@ def _circles(folder: Path) -> tuple[Path, dict[str, float]]:
 
 
 def _sinusoids(folder: Path) -> tuple[Path, dict[str, float]]:
-    truth = _two_sinusoids(folder)
+    truth = two_sinusoids(folder)
     path = folder / "cam.yaml"
     path.write_text(
         "name: sinusoids\nmodel: diff_drive\nsensor: 3d\ninitial_guess: auto\nknown: {sensor_z: 0.10}\n"
