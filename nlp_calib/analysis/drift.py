@@ -117,7 +117,7 @@ def run_between_logs(run: CalibrationRun, solver: str) -> dict[str, float]:
     u = run.reports[solver].uncertainty
     cv = run.checks.crossval
     folds = len(cv.converged) if cv is not None else 0
-    slip, own = run.checks.slip(u.names), np.fmax(*u.spreads())
+    slip, own = run.checks.shifts(u.names), np.fmax(*u.spreads())
     return {
         n: shared_std(sd, (float(u.std[i]), float(own[i]), float(slip[i])), folds)
         for i, (n, sd) in enumerate(run.std(solver).items())
@@ -126,10 +126,10 @@ def run_between_logs(run: CalibrationRun, solver: str) -> dict[str, float]:
 
 def shared_std(believed: float, parts: tuple[float, float, float], folds: int) -> float:
     """A σ to believe ``believed`` as :func:`between_logs_std` widens it. ``parts``: its white-noise
-    σ, the residuals' own σ and the slip's σ (NaN: none). What averages over a log is the larger of
-    the first two (an error of each window's own averages as white noise does); the slip's σ is a
-    shift the whole drive shares already, so it is taken out before the widening and added back
-    unwidened, in quadrature."""
+    σ, the residuals' own σ and the σ of the shifts the whole drive shares (the slip's and the held
+    values'; NaN: none). What averages over a log is the larger of the first two (an error of each
+    window's own averages as white noise does); the shifts' σ is shared by the whole drive already,
+    so it is taken out before the widening and added back unwidened, in quadrature."""
     white, own, slip = parts
     averaged = float(np.fmax(white, own))
     base = math.sqrt(max(0.0, believed * believed - slip * slip)) if math.isfinite(slip) else believed

@@ -9,11 +9,12 @@ Nothing time-dependent is written: the same run gives the same bytes.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree as ET
 
+import numpy as np
 import yaml
 
 from nlp_calib.core.errors import UsageError
@@ -112,7 +113,9 @@ def _sigma_entries(run: CalibrationRun, solver: str, doc: Mapping[str, Any]) -> 
         **({"std_block_scatter": best["std_block_scatter"]} if best.get("std_block_scatter") else {}),
         "std_blocks": sigmas(run, solver, (doc["crossvalidation"] or {}).get("std_blocks")),
         # What the slip check's lines leave open of a slip the model lacks, in 'std' already.
-        **_slip_entry(run, solver),
+        **_shift_entry(run, solver, "std_slip", run.checks.slip),
+        # What the held values' plausible errors move each estimate by, in 'std' already.
+        **_shift_entry(run, solver, "std_held", run.checks.held),
         # The jackknife σ's folds: its degrees of freedom + 1.
         "std_blocks_folds": len(run.checks.crossval.converged) if run.checks.crossval is not None else 0,
     }
@@ -244,13 +247,26 @@ def _represent_str(dumper: yaml.SafeDumper, data: str) -> yaml.Node:
 _Dumper.add_representer(str, _represent_str)
 
 
-def _slip_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
-    """``std_slip``: each parameter's σ of the slip (null: none), where the slip check measured it."""
+def _shift_entry(
+    run: CalibrationRun, solver: str, key: str, std: Callable[[tuple[str, ...]], np.ndarray]
+) -> dict[str, Any]:
+    """``key``: each parameter's σ of a shift the whole drive shares (``std``: the slip's, the held
+    values'; null: none), where a check measured it."""
     names = run.reports[solver].uncertainty.names
-    slip = {n: float(v) if math.isfinite(v) else None for n, v in zip(names, run.checks.slip(names))}
-    if all(v is None for v in slip.values()):
+    found = {n: float(v) if math.isfinite(v) else None for n, v in zip(names, std(names))}
+    if all(v is None for v in found.values()):
         return {}
-    return {"std_slip": sigmas(run, solver, slip)}
+    return {key: sigmas(run, solver, found)}
+
+
+def _shift_words(doc: Mapping[str, Any]) -> str:
+    """The header's end: the shifts 'std' adds in quadrature, where it does."""
+    said = {
+        "std_slip": "'std_slip' (a slip of the tyres the drive's speeds leave open)",
+        "std_held": "'std_held' (what the held values' plausible errors move)",
+    }
+    added = [words for key, words in said.items() if key in doc]
+    return f",\n# with {' and '.join(added)} added in quadrature.\n" if added else ".\n"
 
 
 def calibration_yaml(doc: Mapping[str, Any]) -> str:
@@ -262,9 +278,7 @@ def calibration_yaml(doc: Mapping[str, Any]) -> str:
         "# believe: the larger of 'std_white_noise' (white tracker and encoder noise only: a floor) and\n"
         "# 'std_blocks' (the spread of fits each without one block of the drive: every error that varies)"
         + (
-            ",\n# with 'std_slip' (a slip of the tyres the drive's speeds leave open) added in quadrature.\n"
-            if "std_slip" in doc
-            else ".\n"
+            _shift_words(doc)
         )
         + f"# {_mount_words(doc)}: pose of the '{escaped(doc['frames']['sensor'])}' frame in "
         f"'{escaped(doc['frames']['parent'])}'.\n"

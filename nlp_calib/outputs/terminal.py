@@ -120,6 +120,13 @@ def widened_lines(run: CalibrationRun) -> list[str]:
             f"   σ of {', '.join(wider)}: with the tyres' slip the drive's speeds leave open, in "
             "quadrature (the slip check's lines over the speed squared)"
         )
+    held = checks.held(names)
+    wider = [n for n, b, v in zip(names, base, held) if np.isfinite(v) and 3.0 * v > b]
+    if wider:
+        out.append(
+            f"   σ of {', '.join(wider)}: with what the held values' plausible errors move them by, in "
+            "quadrature (the held check)"
+        )
     return out
 
 

@@ -1,9 +1,9 @@
 """The ``held`` plug-in check: does a value the fit holds move what it estimates?
 
 A value held (a parameter under ``known:``, one the layout holds because the drive cannot determine
-it, a tracker lag given as a number) enters the fit as exact: no σ carries its error. Where the
-estimates depend on it strongly, a held value a little off moves them by many of their σ, and the
-run hands off a wrong value with a small σ (on a drive whose wheels turn at 2·cos t and 2·sin t, a
+it, a tracker lag given as a number) enters the fit as exact: no σ the data give carries its error.
+Where the estimates depend on it strongly, a held value a little off moves them by many of those σ,
+and a run would hand off a wrong value with a small σ (on a drive whose wheels turn at 2·cos t and 2·sin t, a
 lag given as 0 that is 40 ms: a wheel radius 4 % and 10⁵σ off, ``tests/test_held.py``). For each
 held value the check measures the fit's linear response of every free parameter,
 ``∂x̂/∂h = −H⁻¹·∂g/∂h`` (``H``, ``g``: the fit's normal equations at its estimate), by a central
@@ -15,9 +15,11 @@ difference of ``g`` over the held value's plausible error either side:
   problem (``known:``) moves its clock correction;
 * any other: the precision a calibration needs of it (its layout's, at its value).
 
-A parameter moved by that error by more than its σ to believe and the precision a calibration needs
-of it (a shift within the needed precision changes no use of the value, however many σ; the slip
-check's rule) is a caveat concerning it (so no hand-off file writes it as calibrated), naming the
+Each free parameter's shifts over the held values enter its σ to believe in quadrature
+(``std_held``, as the slip's σ does): a value moved within the precision it needs is still off by
+that much. A parameter moved by more than its σ (without them) and the precision a calibration needs
+of it (a shift within the needed precision changes no use of the value; the slip check's rule) is
+a caveat concerning it (so no hand-off file writes it as calibrated), naming the
 held value, the shift in its unit and in σ, and what to do: free the value, or give it to within
 the error that moves no parameter beyond both. A value the user gives under ``known:`` other than a
 time offset is taken as exact (:func:`declared`): what it would move is said, not held against.
@@ -204,8 +206,8 @@ def concern(r: Response, name: str, run: CalibrationRun) -> str:
     given = r.name in layout and layout.param(r.name).status == KNOWN
     return (
         f"{name} rests on {r.name} held at {_amount(r.value, r.unit)}: off by {_amount(r.error, r.unit)} "
-        f"({r.rule}), it moves {name} by {r.shift[name]:+.3g} {unit} ({r.in_sigma[name]:+.1f}σ; a "
-        f"calibration needs {r.needed[name]:.2g} {unit}), an error in no σ; {_what_to_do(r, given)}"
+        f"({r.rule}), it moves {name} by {r.shift[name]:+.3g} {unit} ({r.in_sigma[name]:+.1f}× the σ the "
+        f"data give; a calibration needs {r.needed[name]:.2g} {unit}); {_what_to_do(r, given)}"
     )
 
 
@@ -248,13 +250,25 @@ def rests_on(found: list[Response], units: Mapping[str, str]) -> str:
     return "; ".join(said)
 
 
+def std_held(found: list[Response], run: CalibrationRun) -> dict[str, dict[str, float]]:
+    """``std_held``: each free parameter's σ of the held values (their shifts over their plausible
+    errors, in quadrature; values given under ``known:`` other than a time offset count as exact),
+    added to its σ to believe as the slip's is (:meth:`~nlp_calib.results.run.Checks.shifts`):
+    a value moved by a held one within the precision it needs is still off by that shift."""
+    counted = [r for r in found if not declared(r, run)]
+    names = dict.fromkeys(n for r in counted for n in r.shift)
+    std = {n: float(np.sqrt(sum(r.shift[n] ** 2 for r in counted if n in r.shift))) for n in names}
+    std = {n: s for n, s in std.items() if np.isfinite(s) and s > 0}
+    return {"std_held": std} if std else {}
+
+
 def check(run: CalibrationRun, fit: Fit | None) -> CheckResult | None:
     """Each held value's error moved into the free parameters, against their σ to believe and the
     precision they need (None: nothing held, no fit at hand or none converged)."""
     found = [] if fit is None else responses(run, fit)
     if not found:
         return None
-    record = {"held": {r.name: r.as_dict() for r in found}}
+    record = {"held": {r.name: r.as_dict() for r in found}, **std_held(found, run)}
     exact = rests_on([r for r in found if declared(r, run)], run.scenario.units)
     concerns: dict[str, str] = {}
     for r in found:

@@ -166,7 +166,7 @@ def read_calibration(path: Path) -> StoredCalibration:
     scenario, recorded = _scenario_path(doc)
     data = doc.get("dataset")
     dataset = data.get("path") if isinstance(data, Mapping) and isinstance(data.get("path"), str) else None
-    slip = _numbers(doc, "std_slip", names, where, null=True) if doc.get("std_slip") else {}
+    slip = _shifts(doc, names, where)
     own = _numbers(doc, "std_residuals", names, where, null=True) if doc.get("std_residuals") else {}
     scatter = (
         _numbers(doc, "std_block_scatter", names, where, null=True) if doc.get("std_block_scatter") else {}
@@ -182,6 +182,18 @@ def read_calibration(path: Path) -> StoredCalibration:
     return StoredCalibration(
         path, model, solver, values, std, dof, scenario, objective, recorded, dataset, layout, shared
     )
+
+
+def _shifts(doc: Mapping[str, Any], names: tuple[str, ...], where: str) -> dict[str, float]:
+    """Each parameter's σ of the shifts its whole drive shared ('std_slip' and 'std_held', in
+    quadrature; absent: none)."""
+    parts = [_numbers(doc, key, names, where, null=True) for key in ("std_slip", "std_held") if doc.get(key)]
+    out = {}
+    for n in names:
+        found = [p[n] for p in parts if p.get(n) is not None and math.isfinite(p[n])]
+        if found:
+            out[n] = math.hypot(*found)
+    return out
 
 
 def _layout(doc: Mapping[str, Any], where: str, model: tuple[KinematicModel, str]) -> Layout:

@@ -221,16 +221,32 @@ class Checks:
 
     def believed(self, u: Uncertainty, slip: bool = True) -> np.ndarray:
         """The σ to believe of the estimate whose white-noise σ ``u`` gives (see
-        :meth:`CalibrationRun.std`; ``slip``: with the slip's σ)."""
+        :meth:`CalibrationRun.std`; ``slip``: with the shifts the whole drive shares, the slip's
+        and the held values')."""
         base = believed_std(u.std, *u.spreads(), *self.spreads(u.std))
-        added = self.slip(u.names) if slip else np.full(len(u.names), np.nan)
+        added = self.shifts(u.names) if slip else np.full(len(u.names), np.nan)
         return np.where(np.isfinite(added), np.hypot(base, added), base)
 
     def slip(self, names: tuple[str, ...]) -> np.ndarray:
         """Each of ``names``' σ of the slip (the ``slip`` plug-in's ``std_slip``: what the drive
         leaves open of a lateral slip the model lacks; NaN where it has none)."""
-        found = self.plugin("slip")
-        std = (found.record or {}).get("std_slip") or {} if found is not None else {}
+        return self._record_std("slip", "std_slip", names)
+
+    def held(self, names: tuple[str, ...]) -> np.ndarray:
+        """Each of ``names``' σ of the values the fit holds (the ``held`` plug-in's ``std_held``:
+        what their plausible errors move it by; NaN where nothing held moves it)."""
+        return self._record_std("held", "std_held", names)
+
+    def shifts(self, names: tuple[str, ...]) -> np.ndarray:
+        """The σ of what shifts the whole drive's fit at once, which no spread over the drive
+        measures: the slip's and the held values', in quadrature (NaN where neither has one)."""
+        slip, held = self.slip(names), self.held(names)
+        both = np.hypot(np.nan_to_num(slip), np.nan_to_num(held))
+        return np.where(np.isfinite(slip) | np.isfinite(held), both, np.nan)
+
+    def _record_std(self, check: str, key: str, names: tuple[str, ...]) -> np.ndarray:
+        found = self.plugin(check)
+        std = (found.record or {}).get(key) or {} if found is not None else {}
         return np.array([np.nan if std.get(n) is None else std[n] for n in names], dtype=float)
 
     def moving(self) -> list[tuple[str, np.ndarray]]:
@@ -340,9 +356,9 @@ class CalibrationRun:
     def std(self, solver: str, slip: bool = True) -> dict[str, float]:
         """The 1σ to believe for ``solver``'s estimate: the largest of the white-noise σ, the block
         cross-validation's jackknife σ and the spreads the checks found (:meth:`Checks.spreads`),
-        with the slip's σ (:meth:`Checks.slip`) added in quadrature (``slip``: False, without it).
-        In quadrature: the slip shifts the whole drive's fit at once, an error none of the others
-        measures (:meth:`Checks.believed`)."""
+        with the slip's σ and the held values' (:meth:`Checks.shifts`) added in quadrature
+        (``slip``: False, without them). In quadrature: each shifts the whole drive's fit at once,
+        an error none of the others measures (:meth:`Checks.believed`)."""
         u = self.reports[solver].uncertainty
         std = dict(zip(u.names, map(float, self.checks.believed(u, slip))))
         return {n: float("nan") if n in self.pinned() else s for n, s in std.items()}
