@@ -253,3 +253,23 @@ def test_a_change_beyond_the_jackknife_alone_is_reported_but_not_confirmed(
     assert plain.drifted and plain.confirmed and "not confirmed" not in moved_words(plain)
     assert unconfirmed.drifted and not unconfirmed.confirmed
     assert "+5.3σ), but only +1.7σ if the errors" in moved_words(unconfirmed)
+
+
+def test_a_log_that_determines_a_parameter_much_better_says_so_beside_still_good() -> None:
+    """A calibration from a short drive (a radius ±3 %) checked on a long one that pins it to
+    ±0.01 %: the change is well within the stored σ (STILL GOOD, exit 0), but the stored value lies
+    hundreds of the new log's σ from its refit; the check says which parameters a calibration on
+    this log would tighten, and names none the log knows no better or puts near the stored value."""
+    from nlp_calib.analysis.drift import TIGHTER, decide
+    from nlp_calib.results.check import ParameterChange
+
+    loose = ParameterChange("left_wheel_radius", "m", 0.099, 0.1, 0.003, 1e-5, math.inf, 0.33, 3.0)
+    near = ParameterChange("right_wheel_radius", "m", 0.1, 0.1000001, 0.003, 1e-5, math.inf, 3e-5, 3.0)
+    same = ParameterChange("sensor_x", "m", 0.36, 0.361, 0.002, 0.0019, math.inf, 0.36, 3.0)
+    edge = ParameterChange("sensor_y", "m", 0.06, 0.0601, 0.003, 0.003 / TIGHTER, math.inf, 0.03, 3.0)
+    verdict, reasons, hint = decide((loose, near, same, edge), "", "")
+    assert verdict == STILL_GOOD and not hint and reasons[0].startswith("no parameter moved")
+    (said,) = reasons[1:]
+    assert "left_wheel_radius to ±1e-05 m (the calibration: ±0.003; its value 100σ of this log's away)" in said
+    assert all(n not in said for n in ("right_wheel_radius", "sensor_x", "sensor_y")), said
+    assert decide((near, same, edge), "", "")[1][1:] == ()

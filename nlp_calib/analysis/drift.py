@@ -31,6 +31,8 @@ from nlp_calib.sensors import sensor_for
 
 #: The family-wise probability that a check of an unchanged robot calls a drift.
 FALSE_ALARM = 0.01
+#: A refit whose σ is this many times smaller than the stored calibration's determines it better.
+TIGHTER = 3.0
 #: How a parameter held at its initial value is named in a run's notes.
 HELD = " held at its initial value: "
 
@@ -250,7 +252,31 @@ def decide(found: tuple[ParameterChange, ...], converged: str, hint: str) -> tup
         return CANNOT_TELL, ("no parameter could be compared",), hint
     worst = max(found, key=lambda c: abs(c.z) / c.threshold)
     largest = f"largest: {worst.name} {worst.z:+.1f}σ against ±{worst.threshold:.1f}σ"
-    return STILL_GOOD, (f"no parameter moved beyond its threshold ({largest})",), ""
+    better = tighter(found)
+    return STILL_GOOD, (f"no parameter moved beyond its threshold ({largest})", *better), ""
+
+
+def tighter(found: tuple[ParameterChange, ...]) -> tuple[str, ...]:
+    """Where the new log determines parameters :data:`TIGHTER` times or more better than the stored
+    calibration did and puts the stored value beyond the threshold in its own σ: the words saying
+    so (none: ``()``). The stored σ was honest (the change is within it), but a calibration on this
+    log would hand the robot values that much closer."""
+    better = [
+        c
+        for c in found
+        if not c.untested
+        and 0.0 < TIGHTER * c.std_refit < c.std_stored
+        and math.isfinite(c.threshold)
+        and abs(c.change) > c.threshold * c.std_refit
+    ]
+    if not better:
+        return ()
+    said = ", ".join(
+        f"{c.name} to ±{c.std_refit:.2g} {c.unit} (the calibration: ±{c.std_stored:.2g}; its value "
+        f"{abs(c.change) / c.std_refit:.4g}σ of this log's away)"
+        for c in sorted(better, key=lambda c: -abs(c.change) / c.std_refit)
+    )
+    return (f"this log determines {said}: calibrate on it for a tighter calibration",)
 
 
 def moved_words(c: ParameterChange) -> str:
