@@ -197,7 +197,7 @@ def _what_to_do(r: Response, given: bool) -> str:
     within = f"give it measured to within {_amount(r.within(), r.unit)}"
     if r.name == LAG:
         return f"fit it (alignment.tracker_lag: auto), or {within}"
-    return f"free it (leave it out of known:), or {within}" if given else within
+    return f"free it (leave it out of known:, or give it under priors: with its σ), or {within}" if given else within
 
 
 def concern(r: Response, name: str, run: CalibrationRun) -> str:
@@ -245,7 +245,7 @@ def rests_on(found: list[Response], units: Mapping[str, str]) -> str:
             said.append(
                 f"{n} rests on {r.name} given as {_amount(r.value, r.unit)} and taken as exact: off by "
                 f"{_amount(r.error, r.unit)} ({r.rule}) it would move {n} by {r.shift[n]:+.3g} {unit} "
-                f"({r.in_sigma[n]:+.1f}σ)"
+                f"({r.in_sigma[n]:+.1f}σ; measured to a σ, it goes under priors:)"
             )
     return "; ".join(said)
 
