@@ -270,6 +270,7 @@ def test_a_log_that_determines_a_parameter_much_better_says_so_beside_still_good
     verdict, reasons, hint = decide((loose, near, same, edge), "", "")
     assert verdict == STILL_GOOD and not hint and reasons[0].startswith("no parameter moved")
     (said,) = reasons[1:]
-    assert "left_wheel_radius to ±1e-05 m (the calibration: ±0.003; its value 100σ of this log's away)" in said
+    words = "left_wheel_radius to ±1e-05 m (the calibration: ±0.003; its value 100σ of this log's away)"
+    assert words in said
     assert all(n not in said for n in ("right_wheel_radius", "sensor_x", "sensor_y")), said
     assert decide((near, same, edge), "", "")[1][1:] == ()

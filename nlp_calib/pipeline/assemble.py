@@ -253,9 +253,9 @@ def _checked(
     analysed: tuple[FitAnalysis, LogAnalysis, MountViews | None],
 ) -> CalibrationRun:
     """``run`` with its plug-in checks' results, its reports made again where the checks widened
-    the σ to believe (the slip's σ and the held values', which only a check measures): the mount and the controller's
-    figures state the σ every file does. ``analysed``: the fit's analysis, the log's figures and
-    the mounts' views the reports were made from."""
+    the σ to believe (the slip's σ and the held values', which only a check measures): the mount
+    and the controller's figures state the σ every file does. ``analysed``: the fit's analysis,
+    the log's figures and the mounts' views the reports were made from."""
     checks = dataclasses.replace(run.checks, more=run_checks(run, context))
     fitted, figures, views = analysed
     if not any(math.isfinite(v) for r in run.reports.values() for v in checks.shifts(r.uncertainty.names)):

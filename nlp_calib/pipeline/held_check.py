@@ -197,7 +197,9 @@ def _what_to_do(r: Response, given: bool) -> str:
     within = f"give it measured to within {_amount(r.within(), r.unit)}"
     if r.name == LAG:
         return f"fit it (alignment.tracker_lag: auto), or {within}"
-    return f"free it (leave it out of known:, or give it under priors: with its σ), or {within}" if given else within
+    if not given:
+        return within
+    return f"free it (leave it out of known:, or give it under priors: with its σ), or {within}"
 
 
 def concern(r: Response, name: str, run: CalibrationRun) -> str:
@@ -245,9 +247,9 @@ def rests_on(found: list[Response], units: Mapping[str, str]) -> str:
             said.append(
                 f"{n} rests on {r.name} given as {_amount(r.value, r.unit)} and taken as exact: off by "
                 f"{_amount(r.error, r.unit)} ({r.rule}) it would move {n} by {r.shift[n]:+.3g} {unit} "
-                f"({r.in_sigma[n]:+.1f}σ; measured to a σ, it goes under priors:)"
+                f"({r.in_sigma[n]:+.1f}σ)"
             )
-    return "; ".join(said)
+    return "; ".join(said) + ("; a value measured to a σ goes under priors: instead" if said else "")
 
 
 def std_held(found: list[Response], run: CalibrationRun) -> dict[str, dict[str, float]]:
