@@ -277,9 +277,7 @@ def calibration_yaml(doc: Mapping[str, Any]) -> str:
         f"# 'parameters' are {doc['solver']}'s estimate ({doc['solver_choice']}); 'std' is the 1 sigma to\n"
         "# believe: the larger of 'std_white_noise' (white tracker and encoder noise only: a floor) and\n"
         "# 'std_blocks' (the spread of fits each without one block of the drive: every error that varies)"
-        + (
-            _shift_words(doc)
-        )
+        + (_shift_words(doc))
         + f"# {_mount_words(doc)}: pose of the '{escaped(doc['frames']['sensor'])}' frame in "
         f"'{escaped(doc['frames']['parent'])}'.\n"
     )
