@@ -114,15 +114,15 @@ def between_logs_std(believed: float, white: float, folds: int) -> float:
     return math.sqrt(believed * believed + (folds - 1) * shared)
 
 
-def run_between_logs(run: CalibrationRun, solver: str) -> dict[str, float]:
+def run_between_logs(run: CalibrationRun, solver: str, held: bool = True) -> dict[str, float]:
     """Each σ to believe of a run's estimate as :func:`shared_std` widens it."""
     u = run.reports[solver].uncertainty
     cv = run.checks.crossval
     folds = len(cv.converged) if cv is not None else 0
-    slip, own = run.checks.shifts(u.names), np.fmax(*u.spreads())
+    slip, own = run.checks.shifts(u.names, held), np.fmax(*u.spreads())
     return {
         n: shared_std(sd, (float(u.std[i]), float(own[i]), float(slip[i])), folds)
-        for i, (n, sd) in enumerate(run.std(solver).items())
+        for i, (n, sd) in enumerate(run.std(solver, held=held).items())
     }
 
 
@@ -148,7 +148,7 @@ def run_dof(run: CalibrationRun, solver: str) -> dict[str, float]:
     return {n: believed_dof(w, blocks.get(n), folds) for n, w in white.items()}
 
 
-def untested(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[str, str]:
+def untested(run: CalibrationRun, solver: str, model: KinematicModel, held: bool = True) -> dict[str, str]:
     """The free parameters this log cannot test, with why: held at the initial value, in a direction
     the log does not observe, or known more loosely than the verdict's
     :data:`~nlp_calib.results.checks.WEAK` × the precision a calibration needs. A parameter in a
@@ -163,7 +163,7 @@ def untested(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[st
     params = run.reports[solver].result.param_dict()
     # The sensor's own precisions of its mount (a camera's angles: 0.005 rad, not 1 % of each).
     own = sensor_for(run.scenario.sensor.kind, run.scenario.sensor.scale).reference
-    for name, sd in run.std(solver).items():
+    for name, sd in run.std(solver, held=held).items():
         if name not in run.reports[solver].uncertainty.free or name in out:
             continue
         ref = reference_scale(model, run.scenario.layout.key(name), params[name], own)
@@ -279,6 +279,21 @@ def tighter(found: tuple[ParameterChange, ...]) -> tuple[str, ...]:
     return (f"this log determines {said}: calibrate on it for a tighter calibration",)
 
 
+def common_held(run: CalibrationRun, held: Mapping[str, float]) -> bool:
+    """Whether the stored calibration and the refit both rest on held values (each with a part
+    of its σ from them, ``held`` the stored one's): a check refits with what the calibration
+    held, so a held value's error moves both fits alike and drops out of the change; their σ are
+    then compared without that part. (A scenario that holds other values than the calibration did
+    breaks that; the run's own held check names what it holds.)"""
+    names = run.reports[next(iter(run.reports))].uncertainty.names if run.reports else ()
+    return bool(held) and bool(np.isfinite(run.checks.held(names)).any())
+
+
+def _without(std: Mapping[str, float], held: Mapping[str, float]) -> dict[str, float]:
+    """Each σ of ``std`` with its held part (``held``) taken out in quadrature."""
+    return {n: math.sqrt(max(s * s - held.get(n, 0.0) ** 2, 0.0)) for n, s in std.items()}
+
+
 def moved_words(c: ParameterChange) -> str:
     """``<name> moved by +1.0 % (+0.000105 <unit>, +12.3σ)`` (the percentage for gains and lengths),
     and when the change is not confirmed (:attr:`ParameterChange.confirmed`) how far it is in the
@@ -302,14 +317,20 @@ def check_drift(
     solver: str,
     uncalibrated: Collection[str] = (),
     shared: Mapping[str, float] | None = None,
+    held_std: Mapping[str, float] | None = None,
 ) -> DriftCheck:
     """The check of ``stored`` (values, σ to believe, their degrees of freedom) against ``run``, a
     fit of a new log started from it; ``uncalibrated``: what the stored calibration held or was
     given, which it does not vouch for and a check does not judge; ``shared``: the stored σ as
-    :func:`between_logs_std` widens them (None: as they are)."""
+    :func:`between_logs_std` widens them (None: as they are); ``held_std``: the stored σ's part from
+    held values (see :func:`common_held`)."""
     result = run.reports[solver].result
     free = run.reports[solver].uncertainty.free
-    skipped = untested(run, solver, model)
+    common = common_held(run, held_std or {})
+    if common:
+        stored = (stored[0], _without(stored[1], held_std or {}), stored[2])
+        shared = _without(shared, held_std or {}) if shared is not None else None
+    skipped = untested(run, solver, model, held=not common)
     # Fixed by the scenario, or never estimated by the stored calibration: nothing to compare.
     held = [n for n in result.names if (n not in free and n not in skipped) or n in uncalibrated]
     # A recording's own parameters (its clock offset, a gyro's bias: the sensor's own per log) are
@@ -318,8 +339,8 @@ def check_drift(
     layout, sensor = run.scenario.layout, sensor_for(run.scenario.sensor.kind, run.scenario.sensor.scale)
     robot = {n for n in layout.robot() if layout.key(n) not in sensor.per_log} & set(stored[0])
     values = {n: v for n, v in result.param_dict().items() if n not in held and n in robot}
-    refit = (values, run.std(solver), run_dof(run, solver))
-    widened = (shared if shared is not None else stored[1], run_between_logs(run, solver))
+    refit = (values, run.std(solver, held=not common), run_dof(run, solver))
+    widened = (shared if shared is not None else stored[1], run_between_logs(run, solver, held=not common))
     found = changes(stored, refit, run.scenario, model, skipped, widened)
     hint = drive_more(run, model, [c.name for c in found if c.untested])
     verdict, reasons, hint = decide(found, "" if result.converged else result.reason, hint)

@@ -31,6 +31,7 @@ def check(
         stored.solver,
         stored.uncalibrated(),
         stored.std_shared or None,
+        stored.spreads.held,
     )
     return CheckResult(
         "drift",

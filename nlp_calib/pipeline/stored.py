@@ -26,6 +26,16 @@ from nlp_calib.solvers import SOLVERS
 
 
 @dataclass(frozen=True)
+class StoredSpreads:
+    """A stored calibration's σ as a check reads them beside ``std``: ``shared``, each as if errors
+    were shared by all of a log's blocks; ``held``, each one's part from the held values' plausible
+    errors ('std_held', in ``std`` and ``shared`` in quadrature; empty: none)."""
+
+    shared: Mapping[str, float]
+    held: Mapping[str, float]
+
+
+@dataclass(frozen=True)
 class StoredCalibration:
     """A calibration read from ``path``: ``parameters``, their σ to believe (``std``) and that σ's
     degrees of freedom (``dof``: the jackknife's folds − 1, or infinite for the white-noise σ),
@@ -45,9 +55,14 @@ class StoredCalibration:
     dataset: str | None = None
     #: Every stored parameter in its block, with its log (see :mod:`nlp_calib.results.layout`).
     layout: Layout = field(default_factory=lambda: Layout(()))
-    #: Each σ to believe as if errors were shared by all of a log's blocks
-    #: (:func:`~nlp_calib.analysis.drift.between_logs_std`; empty: as ``std``).
-    std_shared: Mapping[str, float] = field(default_factory=dict)
+    #: The σ a check widens or takes apart (see :class:`StoredSpreads`).
+    spreads: StoredSpreads = field(default_factory=lambda: StoredSpreads({}, {}))
+
+    @property
+    def std_shared(self) -> Mapping[str, float]:
+        """Each σ to believe as if errors were shared by all of a log's blocks
+        (:func:`~nlp_calib.analysis.drift.between_logs_std`; empty: as ``std``)."""
+        return self.spreads.shared
 
     def start(self) -> dict[str, float]:
         """The stored values a fit of a new log starts from, by the keys a scenario gives: the
@@ -166,7 +181,32 @@ def read_calibration(path: Path) -> StoredCalibration:
     scenario, recorded = _scenario_path(doc)
     data = doc.get("dataset")
     dataset = data.get("path") if isinstance(data, Mapping) and isinstance(data.get("path"), str) else None
-    slip = _shifts(doc, names, where)
+    return StoredCalibration(
+        path,
+        model,
+        solver,
+        values,
+        std,
+        dof,
+        scenario,
+        objective,
+        recorded,
+        dataset,
+        layout,
+        _spreads(doc, names, where, (std, white, folds)),
+    )
+
+
+def _spreads(
+    doc: Mapping[str, Any],
+    names: tuple[str, ...],
+    where: str,
+    believed: tuple[Mapping[str, float], Mapping[str, float], int],
+) -> StoredSpreads:
+    """The file's σ as a check widens them (``believed``: the σ to believe, the white-noise σ and
+    the jackknife's folds) and their held values' parts."""
+    std, white, folds = believed
+    slip, held = _shifts(doc, names, where)
     own = _numbers(doc, "std_residuals", names, where, null=True) if doc.get("std_residuals") else {}
     scatter = (
         _numbers(doc, "std_block_scatter", names, where, null=True) if doc.get("std_block_scatter") else {}
@@ -179,21 +219,24 @@ def read_calibration(path: Path) -> StoredCalibration:
         for n in names
     }
     shared = {n: shared_std(std[n], (white[n], averaged[n], slip.get(n, math.nan)), folds) for n in names}
-    return StoredCalibration(
-        path, model, solver, values, std, dof, scenario, objective, recorded, dataset, layout, shared
-    )
+    return StoredSpreads(shared, held)
 
 
-def _shifts(doc: Mapping[str, Any], names: tuple[str, ...], where: str) -> dict[str, float]:
+def _shifts(
+    doc: Mapping[str, Any], names: tuple[str, ...], where: str
+) -> tuple[dict[str, float], dict[str, float]]:
     """Each parameter's σ of the shifts its whole drive shared ('std_slip' and 'std_held', in
-    quadrature; absent: none)."""
-    parts = [_numbers(doc, key, names, where, null=True) for key in ("std_slip", "std_held") if doc.get(key)]
+    quadrature; absent: none), and its 'std_held' alone."""
+    parts = {
+        key: _numbers(doc, key, names, where, null=True) for key in ("std_slip", "std_held") if doc.get(key)
+    }
     out = {}
     for n in names:
-        found = [p[n] for p in parts if p.get(n) is not None and math.isfinite(p[n])]
+        found = [p[n] for p in parts.values() if math.isfinite(p[n])]
         if found:
             out[n] = math.hypot(*found)
-    return out
+    held = {n: v for n, v in parts.get("std_held", {}).items() if math.isfinite(v)}
+    return out, held
 
 
 def _layout(doc: Mapping[str, Any], where: str, model: tuple[KinematicModel, str]) -> Layout:

@@ -219,12 +219,12 @@ class Checks:
         pivots = self.pivots.beyond(white) if self.pivots is not None else np.full(n, np.nan)
         return [blocks, pivots, *(spread for _, spread in self.moving())]
 
-    def believed(self, u: Uncertainty, slip: bool = True) -> np.ndarray:
+    def believed(self, u: Uncertainty, slip: bool = True, held: bool = True) -> np.ndarray:
         """The σ to believe of the estimate whose white-noise σ ``u`` gives (see
         :meth:`CalibrationRun.std`; ``slip``: with the shifts the whole drive shares, the slip's
-        and the held values')."""
+        and, with ``held``, the held values')."""
         base = believed_std(u.std, *u.spreads(), *self.spreads(u.std))
-        added = self.shifts(u.names) if slip else np.full(len(u.names), np.nan)
+        added = self.shifts(u.names, held) if slip else np.full(len(u.names), np.nan)
         return np.where(np.isfinite(added), np.hypot(base, added), base)
 
     def slip(self, names: tuple[str, ...]) -> np.ndarray:
@@ -237,10 +237,12 @@ class Checks:
         what their plausible errors move it by; NaN where nothing held moves it)."""
         return self._record_std("held", "std_held", names)
 
-    def shifts(self, names: tuple[str, ...]) -> np.ndarray:
+    def shifts(self, names: tuple[str, ...], held_values: bool = True) -> np.ndarray:
         """The σ of what shifts the whole drive's fit at once, which no spread over the drive
-        measures: the slip's and the held values', in quadrature (NaN where neither has one)."""
-        slip, held = self.slip(names), self.held(names)
+        measures: the slip's and (``held_values``) the held values', in quadrature (NaN where
+        neither has one)."""
+        slip = self.slip(names)
+        held = self.held(names) if held_values else np.full(len(names), np.nan)
         both = np.hypot(np.nan_to_num(slip), np.nan_to_num(held))
         return np.where(np.isfinite(slip) | np.isfinite(held), both, np.nan)
 
@@ -353,14 +355,15 @@ class CalibrationRun:
             return [(self, "")]
         return [*((part, part.scenario.name) for part in self.logs), (self, "")]
 
-    def std(self, solver: str, slip: bool = True) -> dict[str, float]:
+    def std(self, solver: str, slip: bool = True, held: bool = True) -> dict[str, float]:
         """The 1σ to believe for ``solver``'s estimate: the largest of the white-noise σ, the block
         cross-validation's jackknife σ and the spreads the checks found (:meth:`Checks.spreads`),
         with the slip's σ and the held values' (:meth:`Checks.shifts`) added in quadrature
-        (``slip``: False, without them). In quadrature: each shifts the whole drive's fit at once,
-        an error none of the others measures (:meth:`Checks.believed`)."""
+        (``slip``: False, without them; ``held``: False, without the held values'). In quadrature:
+        each shifts the whole drive's fit at once, an error none of the others measures
+        (:meth:`Checks.believed`)."""
         u = self.reports[solver].uncertainty
-        std = dict(zip(u.names, map(float, self.checks.believed(u, slip))))
+        std = dict(zip(u.names, map(float, self.checks.believed(u, slip, held))))
         return {n: float("nan") if n in self.pinned() else s for n, s in std.items()}
 
     def pinned(self) -> tuple[str, ...]:
