@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nlp_calib.analysis.observability import believed_directions
 from nlp_calib.models import SENSOR_PARAMS, KinematicModel
 from nlp_calib.models.base import reference, reference_scale
 from nlp_calib.results import CalibrationRun, ScenarioInfo
@@ -153,10 +154,13 @@ def untested(run: CalibrationRun, solver: str, model: KinematicModel, held: bool
     the log does not observe, or known more loosely than the verdict's
     :data:`~nlp_calib.results.checks.WEAK` × the precision a calibration needs. A parameter in a
     weakly (not un-) observable combination is judged by its own σ, which already carries that
-    looseness: the combination alone does not make it untestable."""
+    looseness: the combination alone does not make it untestable. The directions are the white
+    noise's and those of the σ to believe
+    (:func:`~nlp_calib.analysis.observability.believed_directions`)."""
     out = {w.split(HELD)[0]: w.split(HELD)[1] for w in run.warnings if HELD in w}
     obs = run.checks.observability
-    for weak in obs.weak if obs is not None else ():
+    # The run's verdict reads the same directions: the white noise's, then those of the σ to believe.
+    for weak in [*(obs.weak if obs is not None else ()), *believed_directions(run, solver)]:
         if weak.std_reference > NOT_OBSERVABLE:
             for name in weak.components:
                 out.setdefault(name, weak.words())

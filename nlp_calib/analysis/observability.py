@@ -16,6 +16,7 @@ import numpy as np
 
 from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
 from nlp_calib.problem import ProblemFunctions
+from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import NOT_OBSERVABLE, WEAK, Observability, WeakDirection
 from nlp_calib.solvers import ProblemEvaluator
 
@@ -106,7 +107,13 @@ def weak_directions(
     """The weak and undetermined directions of the information matrix whose eigenvalues ``lam``
     and eigenvectors ``V`` (in reference units) are given; ``degenerate``: those the drive leaves
     free whatever the noise (:mod:`nlp_calib.analysis.degeneracy`)."""
-    std_dir = _direction_std(lam)
+    return _named(names, _direction_std(lam), V, degenerate)
+
+
+def _named(
+    names: tuple[str, ...], std_dir: np.ndarray, V: np.ndarray, degenerate: np.ndarray
+) -> list[WeakDirection]:
+    """:func:`weak_directions` of directions ``V`` whose 1σ in reference units are ``std_dir``."""
     weak = []
     # Undetermined directions form a subspace whose basis is arbitrary: describe it by the
     # parameters it involves, not vector by vector.
@@ -125,6 +132,27 @@ def weak_directions(
             said.add(frozenset(comps))
             weak.append(WeakDirection(float(std_dir[k]), comps))
     return weak
+
+
+def believed_directions(run: CalibrationRun, solver: str) -> list[WeakDirection]:
+    """The weak and undetermined directions of the covariance ``run`` believes of ``solver``'s
+    estimate, in the precision each parameter needs (:meth:`~nlp_calib.results.layout.Layout.needed`,
+    the verdict's): the white-noise correlations scaled to each parameter's σ to believe. Where the
+    drive's own errors (its blocks' jackknife, its pivots' scatter) widen the σ of parameters the
+    white noise ties together, their combinations widen with them: a combination can be loose
+    while each parameter passes alone. Parameters without a finite σ are left to the rules that
+    find them not determined."""
+    u = run.reports[solver].uncertainty
+    std = run.std(solver)
+    params = run.reports[solver].result.param_dict()
+    keep = [i for i, n in enumerate(u.names) if n in u.free and np.isfinite(std[n]) and std[n] > 0]
+    names = tuple(u.names[i] for i in keep)
+    needed = run.scenario.layout.needed({n: params[n] for n in names})
+    z = np.array([std[n] / needed[n] for n in names])
+    corr = np.nan_to_num(u.correlation[np.ix_(keep, keep)])
+    np.fill_diagonal(corr, 1.0)
+    mu, V = np.linalg.eigh(corr * np.outer(z, z))
+    return _named(names, np.sqrt(np.maximum(mu, 0.0)), V, np.zeros(len(names), dtype=bool))
 
 
 def _within(w: WeakDirection, R: Mapping[str, float], clocks: Mapping[str, float]) -> bool:

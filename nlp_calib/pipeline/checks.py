@@ -59,7 +59,7 @@ RunCheck = Callable[[CalibrationRun, CheckContext], "CheckResult | None"]
 RUN_CHECKS: dict[str, RunCheck] = {
     # First: its σ of the slip is part of the σ to believe every later check reads.
     slip_check.NAME: lambda run, ctx: slip_check.check(run, ctx.model, ctx.fit),
-    determinacy_check.NAME: lambda run, ctx: determinacy_check.check(run),
+    determinacy_check.NAME: lambda run, ctx: determinacy_check.check(run, ctx.model),
     "faults": lambda run, ctx: fault_check.check(run),
     "direction": lambda run, ctx: direction_check.check(run),
     "consistency": lambda run, ctx: consistency_check.check(run),

@@ -1,0 +1,82 @@
+"""A combination of parameters loose in the σ to believe though not in the white-noise σ: the
+verdict names it, with what would determine it, and keeps its parameters from the hand-off."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import two_sinusoids, write_sim
+
+from nlp_calib import Calibration, load_scenario, scenario_from_mapping
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.checks import WEAK, CheckResult
+from nlp_calib.results.run import DOUBTFUL, LIVE
+
+RADII = ("left_wheel_radius", "right_wheel_radius")
+LAG = "tracker_lag"
+
+
+def _observability(run: CalibrationRun) -> CheckResult:
+    found = next((c for c in run.checks.more if c.name == "observability"), None)
+    assert found is not None
+    return found
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_a_ridge_loose_only_in_the_sigma_to_believe_is_named_and_kept_from_handoff(tmp_path: Path) -> None:
+    """The two-sinusoid drive with a small beat on one wheel (a time shift is nearly a mix of the
+    wheels) and rolling radii that vary 1 % along the drive, fitted as a user would (defaults, the
+    lag fitted). The white noise determines every direction; the blocks' σ widen each parameter
+    many times, the radii each still within 5× the 1 % they need, but they move with the lag: the
+    combination's σ (from the run's own σ to believe and correlations) is beyond 5×, and the
+    difference of the radii is off by more than the 1 % a calibration needs of it."""
+    truth = two_sinusoids(tmp_path, beat=0.1, wobble=0.01)
+    path = tmp_path / "cam.yaml"
+    path.write_text(
+        "name: sinusoids\nmodel: diff_drive\nsensor: 3d\ninitial_guess: auto\nknown: {sensor_z: 0.10}\n"
+        "dataset: {poses: cam.tum, joints: cam.joints.csv,\n"
+        "          encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}\n"
+        "solvers: [gauss_newton]\n"
+    )
+    run = Calibration(load_scenario(path)).run(["gauss_newton"])
+    obs, found = run.checks.observability, _observability(run)
+    assert obs is not None and not obs.weak, obs.weak  # the white noise names nothing
+    u = run.reports["gauss_newton"].uncertainty
+    std, params = run.std("gauss_newton"), run.reports["gauss_newton"].result.param_dict()
+    needed = run.scenario.layout.needed(params)
+    for name in RADII:  # each passes alone
+        assert std[name] <= WEAK * needed[name], (name, std[name])
+    off = (params[RADII[1]] - params[RADII[0]]) - (truth[RADII[1]] - truth[RADII[0]])
+    assert abs(off) > needed[RADII[0]]  # what the hand-off would carry
+    loose = found.record["loose_in_believed"]
+    assert len(loose) == 1 and {*RADII, LAG} <= set(loose[0]["components"]), loose
+    # Its σ, from the σ to believe and the white-noise correlations, computed here on their own.
+    names = list(loose[0]["components"])
+    v = np.array([loose[0]["components"][n] for n in names])
+    idx = [u.names.index(n) for n in names]
+    z = np.array([std[n] / needed[n] for n in names])
+    sigma = float(np.sqrt(v @ (u.correlation[np.ix_(idx, idx)] * np.outer(z, z)) @ v / (v @ v)))
+    assert sigma > WEAK and loose[0]["std_in_reference_units"] == pytest.approx(sigma, rel=0.05)
+    said = [r for r in run.verdict.reasons if "move together" in r]
+    assert len(said) == 1 and all(n in said[0] for n in (*RADII, LAG)), run.verdict.reasons
+    assert "give the lag (alignment.tracker_lag" in said[0]
+    assert "move together" in found.words
+    status = run.handoff_status("gauss_newton")
+    for name in RADII:
+        assert status[name][0] == DOUBTFUL and "move together" in status[name][1], status[name]
+    assert status["wheel_separation"][0] == LIVE
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_a_drive_that_determines_everything_gets_no_loose_combination(tmp_path: Path) -> None:
+    """A simulated differential drive with turns (seed 4301, never tuned on), fitted with the
+    defaults: no combination is loose in its σ to believe, and the verdict names none."""
+    log = write_sim(tmp_path, "sim.txt", records=600, seed=4301, model="diff_drive")
+    doc = {"dataset": str(log), "model": "diff_drive", "initial_guess": "from_file"}
+    doc["solvers"] = ["gauss_newton"]
+    run = Calibration(scenario_from_mapping(doc, "turns", tmp_path)).run(["gauss_newton"])
+    found = _observability(run)
+    assert found.record["loose_in_believed"] == []
+    assert not any("move together" in r for r in run.verdict.reasons), run.verdict.reasons
