@@ -160,7 +160,7 @@ def untested(run: CalibrationRun, solver: str, model: KinematicModel, held: bool
     out = {w.split(HELD)[0]: w.split(HELD)[1] for w in run.warnings if HELD in w}
     obs = run.checks.observability
     # The run's verdict reads the same directions: the white noise's, then those of the σ to believe.
-    for weak in [*(obs.weak if obs is not None else ()), *believed_directions(run, solver)]:
+    for weak in [*(obs.weak if obs is not None else ()), *believed_directions(run, solver, held)]:
         if weak.std_reference > NOT_OBSERVABLE:
             for name in weak.components:
                 out.setdefault(name, weak.words())

@@ -134,16 +134,16 @@ def _named(
     return weak
 
 
-def believed_directions(run: CalibrationRun, solver: str) -> list[WeakDirection]:
+def believed_directions(run: CalibrationRun, solver: str, held: bool = True) -> list[WeakDirection]:
     """The weak and undetermined directions of the covariance ``run`` believes of ``solver``'s
     estimate, in the precision each parameter needs (:meth:`~nlp_calib.results.layout.Layout.needed`,
     the verdict's): the white-noise correlations scaled to each parameter's σ to believe. Where the
     drive's own errors (its blocks' jackknife, its pivots' scatter) widen the σ of parameters the
     white noise ties together, their combinations widen with them: a combination can be loose
     while each parameter passes alone. Parameters without a finite σ are left to the rules that
-    find them not determined."""
+    find them not determined; ``held``: False, the σ without the held values' part."""
     u = run.reports[solver].uncertainty
-    std = run.std(solver)
+    std = run.std(solver, held=held)
     params = run.reports[solver].result.param_dict()
     keep = [i for i, n in enumerate(u.names) if n in u.free and np.isfinite(std[n]) and std[n] > 0]
     names = tuple(u.names[i] for i in keep)
