@@ -29,6 +29,7 @@ from nlp_calib.pipeline import Calibration
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.scenario import load_scenario
 from nlp_calib.simulation import SimulationOptions, simulate
+from nlp_calib.simulation.simulate import truth_path
 from nlp_calib.sources import load_log
 
 N_HEADER = 8  # '#' lines of a simulated log
@@ -456,9 +457,12 @@ def test_second_run_into_the_same_folder_does_not_mix_files(sim_log: Path, tmp_p
     out = tmp_path / "out"
     out.mkdir()
     (out / "notes.txt").write_text("mine\n")  # the user's own file: never touched
-    # The lag held: on this 12 s log a fitted one leaves sensor_y to ±8 cm, and the URDF files whose
-    # replacement this test follows would be left out (the subject here is the folder, not the lag).
-    sc = scenario(tmp_path, sim_log, "solvers: [gauss_newton]\nalignment: {tracker_lag: 0.0}\n")
+    # sensor_y given: on this 12 s log a lag fitted, or held with its plausible error in the σ,
+    # leaves it to ±8 cm, and the URDF files whose replacement this test follows would be left out
+    # (the subject here is the folder, not the mount).
+    truth = json.loads(truth_path(sim_log).read_text())["params"]
+    given = f"known: {{sensor_y: {truth['sensor_y']}}}\n"
+    sc = scenario(tmp_path, sim_log, "solvers: [gauss_newton]\nalignment: {tracker_lag: 0.0}\n" + given)
     assert run_cli("run", str(sc), "--out", str(out), "--report").returncode == 0
     first = listing(out)
     assert {"trajectory.png", "report.md", "calibration.yaml", MANIFEST_FILE} <= first

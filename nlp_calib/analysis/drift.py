@@ -16,6 +16,7 @@ honest. Nothing here is tuned on data: α is a choice, the rest follows from it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
@@ -293,6 +294,20 @@ def common_held(run: CalibrationRun, held: Mapping[str, float]) -> bool:
     return bool(held) and bool(np.isfinite(run.checks.held(names)).any())
 
 
+def _as_stated(
+    found: tuple[ParameterChange, ...], stated: tuple[Mapping[str, float], Mapping[str, float]]
+) -> tuple[ParameterChange, ...]:
+    """``found`` with each σ as the calibration and the refit state it (their held parts in), the
+    change judged without them (``z``, the threshold: :func:`common_held`)."""
+    stored, refit = stated
+    return tuple(
+        dataclasses.replace(
+            c, std_stored=stored.get(c.name, c.std_stored), std_refit=refit.get(c.name, c.std_refit)
+        )
+        for c in found
+    )
+
+
 def _without(std: Mapping[str, float], held: Mapping[str, float]) -> dict[str, float]:
     """Each σ of ``std`` with its held part (``held``) taken out in quadrature."""
     return {n: math.sqrt(max(s * s - held.get(n, 0.0) ** 2, 0.0)) for n, s in std.items()}
@@ -331,6 +346,7 @@ def check_drift(
     result = run.reports[solver].result
     free = run.reports[solver].uncertainty.free
     common = common_held(run, held_std or {})
+    stated = (dict(stored[1]), run.std(solver))
     if common:
         stored = (stored[0], _without(stored[1], held_std or {}), stored[2])
         shared = _without(shared, held_std or {}) if shared is not None else None
@@ -346,6 +362,7 @@ def check_drift(
     refit = (values, run.std(solver, held=not common), run_dof(run, solver))
     widened = (shared if shared is not None else stored[1], run_between_logs(run, solver, held=not common))
     found = changes(stored, refit, run.scenario, model, skipped, widened)
+    found = _as_stated(found, stated) if common else found
     hint = drive_more(run, model, [c.name for c in found if c.untested])
     verdict, reasons, hint = decide(found, "" if result.converged else result.reason, hint)
     unjudged = [n for n in result.names if n in uncalibrated]

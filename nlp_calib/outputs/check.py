@@ -50,7 +50,10 @@ def check_text(run: CalibrationRun) -> str:
         "  unit",
     ]
     for c in drift.changes:
-        sigma = math.hypot(c.std_stored, c.std_refit)
+        # The σ the change was judged in (without held values' parts both fits share: its z's).
+        sigma = (
+            abs(c.change / c.z) if math.isfinite(c.z) and c.z != 0 else math.hypot(c.std_stored, c.std_refit)
+        )
         mark = (
             (" <- moved" + ("" if c.confirmed else " (not confirmed)"))
             if c.drifted

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlp_calib.pipeline.fit import Fit
+from nlp_calib.problem.blocks import by_definition
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CAVEAT, FINE, CheckResult
 from nlp_calib.results.layout import CLOCK, KNOWN
@@ -141,7 +142,10 @@ def _fixed_errors(run: CalibrationRun, fit: Fit) -> list[tuple[float, str]]:
             out.append((record_interval(fit), RECORD_INTERVAL))
             continue
         p = layout.param(name) if name in layout else fns.layout.param(name)
-        out.append((p.needed(value), NEEDED))
+        # A block's reference value (what the others are stated against) has no error to move by.
+        out.append(
+            (float("nan"), NEEDED) if by_definition(p.block, p.key, p.log) else (p.needed(value), NEEDED)
+        )
     return out
 
 

@@ -47,6 +47,14 @@ class BlockKind:
 BLOCK_KINDS: dict[str, BlockKind] = {}
 
 
+def by_definition(block: str, key: str, log: int | None) -> bool:
+    """Whether a registered block kind holds its parameter ``key`` (of ``log``) by definition: its
+    ``held``, or the first log's ``held_first`` that the others are stated against. Such a value is
+    no measurement that could be off: moving it re-states the others, it changes no prediction."""
+    kind = BLOCK_KINDS.get(block)
+    return kind is not None and (key in kind.held or (log == 0 and key in kind.held_first))
+
+
 def kinds_for(model: KinematicModel, n_logs: int) -> tuple[str, ...]:
     """The registered block kinds a problem of ``model`` over ``n_logs`` logs has."""
     return tuple(name for name, kind in BLOCK_KINDS.items() if kind.applies(model, n_logs))

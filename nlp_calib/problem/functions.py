@@ -35,7 +35,7 @@ from nlp_calib.models.base import INTEGRATIONS, KinematicModel, Reference, refer
 from nlp_calib.models.clock import LAG_PARAM, LAG_REFERENCE, LAG_UNIT
 from nlp_calib.problem import clock
 from nlp_calib.problem import motion as motion_sources
-from nlp_calib.problem.blocks import BLOCK_KINDS
+from nlp_calib.problem.blocks import BLOCK_KINDS, by_definition
 from nlp_calib.problem.trajectory import TrajectoryFunctions, base_motion, fn, split_params
 from nlp_calib.results.layout import CLOCK, HELD, MODEL, MOUNT, BlockSpec, Layout
 from nlp_calib.sensors import Sensor, sensor_for
@@ -642,10 +642,7 @@ def problem_layout(model: KinematicModel, sensor: Sensor, spec: ProblemSpec) -> 
     own = any(kind.per_log for kind in kinds.values())
     layout = Layout.of(blocks, max(spec.lags, spec.mounts, spec.logs if own else 1), tuple(model.headline))
     held = {p.name for p in layout.parameters if p.block == MOUNT and p.key in sensor.held}
-    for p in layout.parameters:
-        kind = kinds.get(p.block)
-        if kind is not None and (p.key in kind.held or (p.log == 0 and p.key in kind.held_first)):
-            held.add(p.name)
+    held |= {p.name for p in layout.parameters if p.block in kinds and by_definition(p.block, p.key, p.log)}
     return layout.with_status(dict.fromkeys(held, HELD))
 
 

@@ -20,9 +20,10 @@ EXIT_CODES = {STILL_GOOD: 0, DRIFTED: 3, CANNOT_TELL: 4}
 @dataclass(frozen=True)
 class ParameterChange:
     """One parameter: the stored value and its σ to believe, the refit's on the new log, the
-    change in units of the combined σ ``z``, the degrees of freedom of that σ and the threshold
-    ``|z|`` must pass to count as a drift; ``untested`` says why the new log cannot test it ("" when
-    it can)."""
+    change in units of the combined σ ``z`` (each σ without the part from values both fits hold,
+    which moves them alike: :func:`~nlp_calib.analysis.drift.common_held`), the degrees of freedom
+    of that σ and the threshold ``|z|`` must pass to count as a drift; ``untested`` says why the new
+    log cannot test it ("" when it can)."""
 
     name: str
     unit: str
