@@ -8,7 +8,9 @@ the evidence is strong and the alternative clearly better:
   normalised cross-correlations, at every shift of one against the other up to
   :data:`MAX_SHIFT_S`; a best shift over :data:`MIN_SHIFT_S` that agrees far better than the
   recording as stamped means a stream is stamped that much late (a clock set wrong, stamps taken
-  at processing time), which pairs images with the wrong joints. The tracker lag the calibration
+  at processing time), which pairs images with the wrong joints. It must beat every other peak of
+  the curve by the same margin: a drive that repeats matches itself a period on, and a shift the
+  recording cannot tell from another is not a finding. The tracker lag the calibration
   estimates later is a fraction of a second: this is seconds.
 - **Quaternions in another order** (:func:`quaternion_order`): a sensor on a robot driving on a
   floor turns about the floor's normal, and its positions lie in a plane across that normal. Read
