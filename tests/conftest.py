@@ -208,7 +208,11 @@ def boxplus_numpy(x: np.ndarray, delta: np.ndarray) -> np.ndarray:
 
 
 def two_sinusoids(
-    folder: Path, stamp_offset_s: float = -0.01, beat: float = 0.0, wobble: float = 0.0
+    folder: Path,
+    stamp_offset_s: float = -0.01,
+    beat: float = 0.0,
+    wobble: float = 0.0,
+    right_rate: float = 1.0,
 ) -> dict[str, float]:
     """A differential drive whose wheels turn at 2·cos t and 2·sin t rad/s for 30 s (radii 0.1 m,
     separation 0.57 m), joints at 100 Hz, a camera at 50 Hz stamped ``stamp_offset_s`` late, its
@@ -216,10 +220,11 @@ def two_sinusoids(
     wheels. ``beat``: rad/s of ``sin 0.37t`` added to the right wheel (a time shift is then nearly,
     not exactly, a mix); ``wobble``: each wheel's rolling radius varies along the drive by this
     fraction (``sin 0.37t``, ``cos 0.23t``; the truth is the mean), an error a white-noise σ
-    does not count."""
+    does not count; ``right_rate``: the right wheel turns at 2·sin(right_rate·t) (off 1, the
+    drive nearly repeats every 2π s, not exactly)."""
     r, b, dt, mount = 0.1, 0.57, 0.01, (0.36, 0.06, 0.10, -1.58, 0.012, -1.55)
     t = np.arange(3001) * dt
-    wl, wr = 2.0 * np.cos(t[:-1]), 2.0 * np.sin(t[:-1]) + beat * np.sin(0.37 * t[:-1])
+    wl, wr = 2.0 * np.cos(t[:-1]), 2.0 * np.sin(right_rate * t[:-1]) + beat * np.sin(0.37 * t[:-1])
     gl, gr = 1.0 + wobble * np.sin(0.37 * t[:-1]), 1.0 + wobble * np.cos(0.23 * t[:-1])
     travel, turn = 0.5 * r * (wl * gl + wr * gr) * dt, r * (wr * gr - wl * gl) / b * dt
     planar = np.zeros((t.size, 3))

@@ -13,8 +13,10 @@ import yaml
 from conftest import SCENARIOS, two_sinusoids, write_sim
 
 from nlp_calib import Calibration, load_scenario, scenario_from_mapping
+from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import resample_encoders
 from nlp_calib.logs.log import JointStream
+from nlp_calib.logs.screens import clock_shift
 from nlp_calib.models import get_model, load_log
 from nlp_calib.pipeline.options import AlignmentOptions
 from nlp_calib.problem import ProblemSpec, build, build_residual_data
@@ -232,3 +234,75 @@ def test_the_lags_sigma_covers_its_error_over_independent_logs(tmp_path: Path) -
         z.append((estimate - lag) / run.std("gauss_newton")["tracker_lag"])
     assert CHI2_10[0] < float(np.sum(np.square(z))) < CHI2_10[1], z
     assert float(np.max(np.abs(z))) < 3.3, z
+
+
+def _drive(speeds: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Wheel positions ``(n, 2)`` and the tracker ``(n, 8)`` (planar: ``x, y, yaw``, the 3-D part
+    NaN) of a differential drive (radii 0.1 m, track 0.5 m) whose wheels turn at ``speeds`` (n, 2)."""
+    wl, wr = speeds[:, 0], speeds[:, 1]
+    yaw = np.concatenate([[0.0], np.cumsum(0.1 * (wr - wl) / 0.5 * dt)[:-1]])
+    v = 0.05 * (wl + wr)
+    xy = np.column_stack([np.cumsum(v * np.cos(yaw)), np.cumsum(v * np.sin(yaw))]) * dt
+    tracker = np.full((len(wl), 8), np.nan)
+    tracker[:, :3] = np.column_stack([xy, yaw])
+    return np.cumsum(speeds, axis=0) * dt, tracker
+
+
+def _smooth_speeds(rng: np.random.Generator, n: int, dt: float) -> np.ndarray:
+    """Two wheels' speeds (rad/s) wandering smoothly (a 1 s moving average of white noise)."""
+    k = int(1.0 / dt)
+    noise = rng.normal(0.0, 1.0, (n + k, 2))
+    return 2.0 + 3.0 * np.stack([np.convolve(noise[:, j], np.ones(k) / k, "valid")[:n] for j in (0, 1)], 1)
+
+
+@pytest.mark.parametrize("seed", [71, 72, 73])
+def test_the_clock_screen_finds_a_shift_on_a_drive_that_does_not_repeat(seed: int) -> None:
+    """Tracker stamps 7 s late on a drive that never repeats: the shift found (the seconds to add
+    to the joints' times) is +7 s to 0.1 s, unambiguous (the screen's catch stands)."""
+    dt, n = 0.02, 3000
+    joints, tracker = _drive(_smooth_speeds(np.random.default_rng(seed), n, dt), dt)
+    stamps = np.round(np.arange(n) * dt * 1e9).astype(np.int64) + 10**18
+    found = clock_shift(stamps, joints, stamps + 7 * 10**9, tracker)
+    assert found is not None and not found.ambiguous, found
+    assert abs(found.shift - 7.0) < 0.1, found
+
+
+@pytest.mark.parametrize("seed", [71, 72, 73])
+def test_the_clock_screen_cannot_tell_a_shift_by_a_repeating_drives_period(seed: int) -> None:
+    """The same kind of drive, a 6 s stretch driven five times over, the tracker stamped 2.5 s
+    late: shifts 6 s apart agree alike, so the screen says it cannot tell (no refusal); the shift
+    and its rival are each 2.5 s and whole laps."""
+    dt, n = 0.02, 3000
+    lap = _smooth_speeds(np.random.default_rng(seed), 300, dt)
+    joints, tracker = _drive(np.tile(lap, (n // 300, 1)), dt)
+    stamps = np.round(np.arange(n) * dt * 1e9).astype(np.int64) + 10**18
+    found = clock_shift(stamps, joints, stamps + int(2.5e9), tracker)
+    assert found is not None and found.ambiguous, found
+    assert found.rival_s is not None, found
+    for shift in (found.shift, found.rival_s):
+        laps = (shift - 2.5) / 6.0
+        assert abs(laps - round(laps)) < 0.02, found
+
+
+def test_a_nearly_periodic_drive_is_not_refused_for_its_period_and_calibrates(tmp_path: Path) -> None:
+    """Wheels at 2·cos t and 2·sin 1.02t rad/s, stamped right: the drive matches itself about a
+    period on, which the clock screen once read as the joints' stamps 13.7 s late. It warns of
+    the ambiguity, and the run calibrates with every parameter it determines within 4σ (the lag:
+    the images are written 0.01 s late, the opposite of the sign two_sinusoids returns)."""
+    truth = {**two_sinusoids(tmp_path, right_rate=1.02), "tracker_lag": 0.01}
+    path = tmp_path / "cam.yaml"
+    path.write_text(
+        "name: sinusoids\nmodel: diff_drive\nsensor: 3d\ninitial_guess: auto\nknown: {sensor_z: 0.10}\n"
+        "dataset: {poses: cam.tum, joints: cam.joints.csv,\n"
+        "          encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}\n"
+        "alignment: {tracker_lag: auto, search: [-0.05, 0.05]}\nresidual: {horizon_s: 0.25}\n"
+        "information: {translation: 1.0e+6, rotation: 3.0e+5}\nrobust: {kernel: huber, delta: 10.0}\n"
+        "solvers: [gauss_newton]\n"
+    )
+    with pytest.warns(NlpCalibWarning, match=r"the drive repeats, so the recording cannot tell"):
+        run = Calibration(load_scenario(path)).run(["gauss_newton"])
+    params, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
+    determined = [name for name in truth if np.isfinite(std[name])]
+    assert "wheel_separation" in determined, (run.verdict.line(), std)
+    for name in determined:
+        assert abs(params[name] - truth[name]) <= 4 * std[name], (name, params[name], truth[name], std[name])

@@ -117,15 +117,26 @@ def check_clocks(path: Path, joint_ns: np.ndarray, positions: np.ndarray, tracke
     found = clock_shift(joint_ns, positions, ts[first], tracker.values[order][first])
     if found is None:
         return
-    shift, best, stamped = found
+    shift, best, stamped = found.shift, found.best, found.stamped
+    agree = (
+        f"the joints' speed and the tracker's motion agree when the joints' times are shifted by "
+        f"{shift:+.2f} s (correlation {best:.2f}, against {stamped:.2f} as stamped)"
+    )
+    if found.ambiguous:
+        warnings.warn(
+            f"{path}: {agree}, and as well at {found.rival_s:+.2f} s ({found.rival:.2f}): the drive "
+            "repeats, so the recording cannot tell a clock shift from none; its stamps are used as "
+            "they are (if a clock is off, add the seconds to clock_offset in the dataset block)",
+            NlpCalibWarning,
+            stacklevel=3,
+        )
+        return
     late = "the tracker's stamps lie" if shift > 0 else "the joints' stamps lie"
     raise BagError(
         path,
-        f"the joints' speed and the tracker's motion agree when the joints' times are shifted by "
-        f"{shift:+.2f} s (correlation {best:.2f}, against {stamped:.2f} as stamped): {late} "
-        f"{abs(shift):.2f} s late, which pairs poses with the wrong joints; add {shift:+.2f} s to "
-        "clock_offset in the dataset block (the seconds added to the joints' times; the tracker lag "
-        "refines what remains), or fix the recording's stamps",
+        f"{agree}: {late} {abs(shift):.2f} s late, which pairs poses with the wrong joints; add "
+        f"{shift:+.2f} s to clock_offset in the dataset block (the seconds added to the joints' "
+        "times; the tracker lag refines what remains), or fix the recording's stamps",
     )
 
 

@@ -8,7 +8,9 @@ the evidence is strong and the alternative clearly better:
   normalised cross-correlations, at every shift of one against the other up to
   :data:`MAX_SHIFT_S`; a best shift over :data:`MIN_SHIFT_S` that agrees far better than the
   recording as stamped means a stream is stamped that much late (a clock set wrong, stamps taken
-  at processing time), which pairs images with the wrong joints. The tracker lag the calibration
+  at processing time), which pairs images with the wrong joints. It must beat every other peak of
+  the curve by the same margin: a drive that repeats matches itself a period on, and a shift the
+  recording cannot tell from another is not a finding. The tracker lag the calibration
   estimates later is a fraction of a second: this is seconds.
 - **Quaternions in another order** (:func:`quaternion_order`): a sensor on a robot driving on a
   floor turns about the floor's normal, and its positions lie in a plane across that normal. Read
@@ -17,6 +19,8 @@ the evidence is strong and the alternative clearly better:
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -101,14 +105,28 @@ def _correlations(a: np.ndarray, b: np.ndarray, max_lag: int, min_overlap: int) 
     return rho
 
 
-def clock_shift(
+@dataclass(frozen=True)
+class ClockShift:
+    """A shift of the joints' times (s) that agrees better than the stamps: ``best`` its agreement,
+    ``stamped`` the stamps', ``rival``/``rival_s`` the best separate peak's (another shift the
+    curve cannot tell from it within :data:`MIN_GAIN`: the drive repeats; None when none)."""
+
+    shift: float
+    best: float
+    stamped: float
+    rival: float | None = None
+    rival_s: float | None = None
+
+    @property
+    def ambiguous(self) -> bool:
+        return self.rival is not None
+
+
+def _agreement_curve(
     joint_ns: np.ndarray, joints: np.ndarray, tracker_ns: np.ndarray, tracker: np.ndarray
-) -> tuple[float, float, float] | None:
-    """``(shift, best, stamped)``: the seconds to add to the joints' times that make their speed
-    agree best with the tracker's motion, that agreement and the one as stamped, when the shift is
-    over :data:`MIN_SHIFT_S` and clearly better (None otherwise, or when the recording cannot
-    tell). ``joints`` ``(n, J)``: positions; ``tracker`` ``(m, 8)``: ``x, y, yaw, z, qx, qy, qz,
-    qw`` (the 3-D part may be NaN)."""
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(lags, correlation)``: the joints' speed against the tracker's motion at each shift of the
+    joints' times (s; see :func:`clock_shift`)."""
     lo, hi = min(joint_ns[0], tracker_ns[0]), max(joint_ns[-1], tracker_ns[-1])
     step = max(GRID_S, (hi - lo) * 1e-9 / MAX_POINTS)
     grid = np.arange(0.0, (hi - lo) * 1e-9 + step, step)
@@ -130,18 +148,48 @@ def clock_shift(
     rho = _correlations(motion, _standard(speed), max_lag, min_overlap)
     if not np.any(np.isfinite(rho)):
         return None
-    lags = np.arange(-max_lag, max_lag + 1) * step
+    return np.arange(-max_lag, max_lag + 1) * step, rho
+
+
+def _peak(lags: np.ndarray, rho: np.ndarray, best: int) -> float:
+    """The shift at the peak between grid points (a parabola through the three around ``best``)."""
+    shift = float(lags[best])
+    if 0 < best < rho.size - 1 and np.all(np.isfinite(rho[best - 1 : best + 2])):
+        a, b, c = rho[best - 1 : best + 2]
+        curvature = a - 2 * b + c
+        shift += float(0.5 * (a - c) / curvature * (lags[1] - lags[0])) if curvature < 0 else 0.0
+    return shift
+
+
+def clock_shift(
+    joint_ns: np.ndarray, joints: np.ndarray, tracker_ns: np.ndarray, tracker: np.ndarray
+) -> ClockShift | None:
+    """The seconds to add to the joints' times that make their speed agree best with the
+    tracker's motion, when that shift is over :data:`MIN_SHIFT_S`, agrees at least
+    :data:`MIN_CORRELATION` and :data:`MIN_GAIN` more than the stamps (None otherwise, or when the
+    recording cannot tell). Another peak of the curve within :data:`MIN_GAIN` of it (a drive that
+    repeats matches itself a period on) is its ``rival``: the recording cannot tell the two apart.
+    ``joints`` ``(n, J)``: positions; ``tracker`` ``(m, 8)``: ``x, y, yaw, z, qx, qy, qz, qw`` (the
+    3-D part may be NaN)."""
+    curve = _agreement_curve(joint_ns, joints, tracker_ns, tracker)
+    if curve is None:
+        return None
+    lags, rho = curve
     best = int(np.nanargmax(rho))
     near = np.abs(lags) <= MIN_SHIFT_S
     stamped = float(np.nanmax(rho[near])) if np.any(np.isfinite(rho[near])) else -1.0
-    shift, top = float(lags[best]), float(rho[best])
-    if abs(shift) <= MIN_SHIFT_S or top < MIN_CORRELATION or top - stamped < MIN_GAIN:
+    top = float(rho[best])
+    if abs(lags[best]) <= MIN_SHIFT_S or top < MIN_CORRELATION or top - stamped < MIN_GAIN:
         return None
-    if 0 < best < rho.size - 1 and np.all(np.isfinite(rho[best - 1 : best + 2])):
-        a, b, c = rho[best - 1 : best + 2]  # the peak between grid points (a parabola through three)
-        curvature = a - 2 * b + c
-        shift += float(0.5 * (a - c) / curvature * step) if curvature < 0 else 0.0
-    return shift, top, stamped
+    # Separate peaks: local maxima over MIN_SHIFT_S from the best (not its own shoulders).
+    filled = np.where(np.isfinite(rho), rho, -np.inf)
+    local = np.r_[False, (filled[1:-1] >= filled[:-2]) & (filled[1:-1] >= filled[2:]), False]
+    others = np.flatnonzero(local & (np.abs(lags - lags[best]) > MIN_SHIFT_S) & ~near)
+    close = others[top - filled[others] < MIN_GAIN]
+    if close.size:
+        rival = int(close[np.argmax(filled[close])])
+        return ClockShift(_peak(lags, rho, best), top, stamped, float(rho[rival]), _peak(lags, rho, rival))
+    return ClockShift(_peak(lags, rho, best), top, stamped)
 
 
 def _plane_normal(p: np.ndarray) -> np.ndarray | None:
