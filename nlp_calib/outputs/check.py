@@ -66,7 +66,8 @@ def check_text(run: CalibrationRun) -> str:
         )
     lines += [
         "",
-        f"z: the change over √(σ_stored² + σ_refit²), the σ to believe of each; limit: the Student-t "
+        f"z: the change over σ comb. = √(σ_stored² + σ_refit²), the σ to believe of each (without what "
+        "values both fits hold move them by alike); limit: the Student-t "
         f"quantile that an unchanged robot passes with probability {1 - drift.false_alarm:.0%} over "
         f"all {sum(not c.untested for c in drift.changes)} parameters tested",
         f"verdict: {drift.line()}",
