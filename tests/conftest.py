@@ -207,6 +207,32 @@ def boxplus_numpy(x: np.ndarray, delta: np.ndarray) -> np.ndarray:
     return out
 
 
+#: The two-sinusoid drive's scenario (the files :func:`two_sinusoids` writes), before its options.
+SINUSOIDS_HEAD = (
+    "name: sinusoids\nmodel: diff_drive\nsensor: 3d\ninitial_guess: auto\nknown: {sensor_z: 0.10}\n"
+    "dataset: {poses: cam.tum, joints: cam.joints.csv,\n"
+    "          encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}\n"
+)
+#: A camera's formulation as docs/camera.md gives it: quarter-second windows, its information, Huber.
+CAMERA_FORMULATION = (
+    "residual: {horizon_s: 0.25}\ninformation: {translation: 1.0e+6, rotation: 3.0e+5}\n"
+    "robust: {kernel: huber, delta: 10.0}\n"
+)
+
+
+def sinusoids_scenario(
+    folder: Path,
+    alignment: str = "{tracker_lag: auto, search: [-0.05, 0.05]}",
+    formulation: str = CAMERA_FORMULATION,
+) -> Path:
+    """``folder/cam.yaml``: the two-sinusoid drive's scenario with ``alignment`` ("" for the
+    default) and ``formulation``, Gauss-Newton alone."""
+    path = folder / "cam.yaml"
+    align = f"alignment: {alignment}\n" if alignment else ""
+    path.write_text(SINUSOIDS_HEAD + align + formulation + "solvers: [gauss_newton]\n")
+    return path
+
+
 def two_sinusoids(
     folder: Path,
     stamp_offset_s: float = -0.01,

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import SCENARIOS, two_sinusoids, write_sim
+from conftest import SCENARIOS, sinusoids_scenario, two_sinusoids, write_sim
 
 from nlp_calib import Calibration, load_scenario, scenario_from_mapping
 from nlp_calib.core.errors import NlpCalibWarning
@@ -191,15 +191,7 @@ def test_a_lag_the_drive_cannot_separate_from_the_wheels_is_not_determined(tmp_p
     mount take up. The run says NOT DETERMINED naming the lag and the radii, with the way out; every
     parameter it gives a finite σ lies within 3σ of the truth; the clean poses show no fault."""
     truth = two_sinusoids(tmp_path)
-    path = tmp_path / "cam.yaml"
-    path.write_text(
-        "name: sinusoids\nmodel: diff_drive\nsensor: 3d\ninitial_guess: auto\nknown: {sensor_z: 0.10}\n"
-        "dataset: {poses: cam.tum, joints: cam.joints.csv,\n"
-        "          encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}\n"
-        "alignment: {tracker_lag: auto, search: [-0.05, 0.05]}\nresidual: {horizon_s: 0.25}\n"
-        "information: {translation: 1.0e+6, rotation: 3.0e+5}\nrobust: {kernel: huber, delta: 10.0}\n"
-        "solvers: [gauss_newton]\n"
-    )
+    path = sinusoids_scenario(tmp_path)
     run = Calibration(load_scenario(path)).run(["gauss_newton"])
     line = run.verdict.line()
     assert run.verdict.level == UNDETERMINED, line
@@ -290,15 +282,7 @@ def test_a_nearly_periodic_drive_is_not_refused_for_its_period_and_calibrates(tm
     the ambiguity, and the run calibrates with every parameter it determines within 4σ (the lag:
     the images are written 0.01 s late, the opposite of the sign two_sinusoids returns)."""
     truth = {**two_sinusoids(tmp_path, right_rate=1.02), "tracker_lag": 0.01}
-    path = tmp_path / "cam.yaml"
-    path.write_text(
-        "name: sinusoids\nmodel: diff_drive\nsensor: 3d\ninitial_guess: auto\nknown: {sensor_z: 0.10}\n"
-        "dataset: {poses: cam.tum, joints: cam.joints.csv,\n"
-        "          encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}\n"
-        "alignment: {tracker_lag: auto, search: [-0.05, 0.05]}\nresidual: {horizon_s: 0.25}\n"
-        "information: {translation: 1.0e+6, rotation: 3.0e+5}\nrobust: {kernel: huber, delta: 10.0}\n"
-        "solvers: [gauss_newton]\n"
-    )
+    path = sinusoids_scenario(tmp_path)
     with pytest.warns(NlpCalibWarning, match=r"the drive repeats, so the recording cannot tell"):
         run = Calibration(load_scenario(path)).run(["gauss_newton"])
     params, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import two_sinusoids, write_sim
+from conftest import sinusoids_scenario, two_sinusoids, write_sim
 
 from nlp_calib import Calibration, load_scenario, scenario_from_mapping
 from nlp_calib.outputs.handoff import write_calibration
@@ -30,15 +30,7 @@ def _held(run: CalibrationRun) -> CheckResult:
 def _sinusoids(folder: Path, lag: float) -> CalibrationRun:
     """The two-sinusoid drive (a camera at 50 Hz: 20 ms between records) stamped 40 ms late,
     fitted with the lag given as ``lag``."""
-    path = folder / "cam.yaml"
-    path.write_text(
-        "name: sinusoids\nmodel: diff_drive\nsensor: 3d\ninitial_guess: auto\nknown: {sensor_z: 0.10}\n"
-        "dataset: {poses: cam.tum, joints: cam.joints.csv,\n"
-        "          encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}\n"
-        f"alignment: {{tracker_lag: {lag}}}\nresidual: {{horizon_s: 0.25}}\n"
-        "information: {translation: 1.0e+6, rotation: 3.0e+5}\nrobust: {kernel: huber, delta: 10.0}\n"
-        "solvers: [gauss_newton]\n"
-    )
+    path = sinusoids_scenario(folder, f"{{tracker_lag: {lag}}}")
     return Calibration(load_scenario(path)).run(["gauss_newton"])
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import two_sinusoids, write_sim
+from conftest import sinusoids_scenario, two_sinusoids, write_sim
 
 from nlp_calib import Calibration, load_scenario, scenario_from_mapping
 from nlp_calib.results import CalibrationRun
@@ -33,13 +33,7 @@ def test_a_ridge_loose_only_in_the_sigma_to_believe_is_named_and_kept_from_hando
     combination's σ (from the run's own σ to believe and correlations) is beyond 5×, and the
     difference of the radii is off by more than the 1 % a calibration needs of it."""
     truth = two_sinusoids(tmp_path, beat=0.1, wobble=0.01)
-    path = tmp_path / "cam.yaml"
-    path.write_text(
-        "name: sinusoids\nmodel: diff_drive\nsensor: 3d\ninitial_guess: auto\nknown: {sensor_z: 0.10}\n"
-        "dataset: {poses: cam.tum, joints: cam.joints.csv,\n"
-        "          encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}\n"
-        "solvers: [gauss_newton]\n"
-    )
+    path = sinusoids_scenario(tmp_path, alignment="", formulation="")
     run = Calibration(load_scenario(path)).run(["gauss_newton"])
     obs, found = run.checks.observability, _observability(run)
     assert obs is not None and not obs.weak, obs.weak  # the white noise names nothing

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import ros2_bags as rb
-from conftest import REPO, SCENARIOS, cli, two_sinusoids, write_sim
+from conftest import REPO, SCENARIOS, cli, sinusoids_scenario, two_sinusoids, write_sim
 
 import nlp_calib.pipeline.preflight as stages
 from nlp_calib.analysis.determinacy import information, standing
@@ -87,15 +87,7 @@ def _circles(folder: Path) -> tuple[Path, dict[str, float]]:
 
 def _sinusoids(folder: Path) -> tuple[Path, dict[str, float]]:
     truth = two_sinusoids(folder)
-    path = folder / "cam.yaml"
-    path.write_text(
-        "name: sinusoids\nmodel: diff_drive\nsensor: 3d\ninitial_guess: auto\nknown: {sensor_z: 0.10}\n"
-        "dataset: {poses: cam.tum, joints: cam.joints.csv,\n"
-        "          encoders: {left_wheel: left_wheel_joint, right_wheel: right_wheel_joint}}\n"
-        "alignment: {tracker_lag: auto, search: [-0.05, 0.05]}\nresidual: {horizon_s: 0.25}\n"
-        "information: {translation: 1.0e+6, rotation: 3.0e+5}\nrobust: {kernel: huber, delta: 10.0}\n"
-        "solvers: [gauss_newton]\n"
-    )
+    path = sinusoids_scenario(folder)
     return path, {**truth, "sensor_z": 0.10}
 
 

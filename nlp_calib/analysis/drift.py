@@ -284,13 +284,13 @@ def tighter(found: tuple[ParameterChange, ...]) -> tuple[str, ...]:
     return (f"this log determines {said}: calibrate on it for a tighter calibration",)
 
 
-def common_held(run: CalibrationRun, held: Mapping[str, float]) -> bool:
+def common_held(run: CalibrationRun, solver: str, held: Mapping[str, float]) -> bool:
     """Whether the stored calibration and the refit both rest on held values (each with a part
     of its σ from them, ``held`` the stored one's): a check refits with what the calibration
     held, so a held value's error moves both fits alike and drops out of the change; their σ are
     then compared without that part. (A scenario that holds other values than the calibration did
     breaks that; the run's own held check names what it holds.)"""
-    names = run.reports[next(iter(run.reports))].uncertainty.names if run.reports else ()
+    names = run.reports[solver].uncertainty.names
     return bool(held) and bool(np.isfinite(run.checks.held(names)).any())
 
 
@@ -345,7 +345,7 @@ def check_drift(
     held values (see :func:`common_held`)."""
     result = run.reports[solver].result
     free = run.reports[solver].uncertainty.free
-    common = common_held(run, held_std or {})
+    common = common_held(run, solver, held_std or {})
     stated = (dict(stored[1]), run.std(solver))
     if common:
         stored = (stored[0], _without(stored[1], held_std or {}), stored[2])
