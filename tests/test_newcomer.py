@@ -112,6 +112,30 @@ def test_verdicts_good_with_caveats_and_not_determined(tmp_path: Path, demo: Sce
     assert v.level == UNDETERMINED and any("not observable" in r for r in v.reasons), v
 
 
+def test_the_runs_advice_reads_its_own_drive(tmp_path: Path) -> None:
+    """A run left undetermined in its turning parameters is told to turn both ways only where its
+    drive does not: the run reads its fitted records' excitation as the pre-flight does. It had never
+    been given it, so a drive already turning both ways was told to turn both ways."""
+    from dataclasses import replace
+
+    from nlp_calib.analysis.excitation import turns_both_ways
+    from nlp_calib.analysis.verdict import verdict
+    from nlp_calib.pipeline.preflight import preflight
+
+    straight = write_sim(tmp_path, "straight.txt", records=300, seed=5, trajectory="straight")
+    sc = _load(_scenario(tmp_path, straight, "alignment: {tracker_lag: 0}\n"))  # not the clock's advice
+    run = Calibration.setup(sc).run(("gauss_newton",))
+    ex = run.data.excitation
+    assert ex is not None and ex == preflight(sc).excitation[0]  # one reading of the same records
+    assert run.verdict.level == UNDETERMINED and not turns_both_ways(ex), run.verdict
+    assert any("drive turns in both directions" in r for r in run.verdict.reasons), run.verdict
+    both = replace(ex, heading_span_rad=6.0, turned_left_rad=5.0, turned_right_rad=5.0)
+    again = verdict(replace(run, data=replace(run.data, excitation=both)), get_model(sc.model))
+    said = " ".join(again.reasons)
+    assert again.level == UNDETERMINED and "drive turns in both directions" not in said, said
+    assert "the drive turns both ways, yet it leaves" in said, said
+
+
 def _load(path: Path) -> Scenario:
     from nlp_calib.pipeline import load_scenario
 

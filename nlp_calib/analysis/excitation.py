@@ -11,12 +11,17 @@ of at least :data:`MIN_RUN_S`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
+from nlp_calib.analysis.observability import MIN_TURNING
+from nlp_calib.logs import Log
 from nlp_calib.models import KinematicModel
 from nlp_calib.results.preflight import Excitation
+from nlp_calib.sensors import Sensor
 
 #: The path is taken at this step (s) after smoothing over :data:`SMOOTH_S`.
 STEP_S = 0.25
@@ -122,6 +127,24 @@ def excitation(
         speed_median_mps=float(np.median(speed[turned])) if turned.any() else 0.0,
         speed_max_mps=float(np.percentile(speed, 99)) if speed.size else 0.0,
     )
+
+
+def of_log(log: Log, sensor: Sensor, model: KinematicModel, steering_sample: str) -> Excitation:
+    """The excitation of ``log``'s records as ``sensor`` tracks them on the floor (a 3-D reference
+    levelled from its own poses); a track without positions (a gyro's) has no distance or speed.
+    The one reading of a drive the pre-flight and the run's verdict share."""
+    T = sensor.floor_track(log)
+    ex = excitation(log.time_s, T[:, :2], T[:, 2], model, model.inputs(log, steering_sample))
+    if sensor.lengths_unseen:
+        ex = replace(ex, distance_m=math.nan, speed_median_mps=math.nan, speed_max_mps=math.nan)
+    return ex
+
+
+def turns_both_ways(ex: Excitation | None) -> bool:
+    """Whether the drive turns both ways, each at least :data:`MIN_TURNING` (so that "turn both
+    ways" is no advice for it). A heading that never leaves a band under it has not turned for the
+    turning parameters, however often it swings both ways inside it."""
+    return ex is not None and min(ex.heading_span_rad, ex.turned_left_rad, ex.turned_right_rad) >= MIN_TURNING
 
 
 def words(ex: Excitation) -> list[str]:

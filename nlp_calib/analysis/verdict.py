@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nlp_calib.analysis.excitation import turns_both_ways
 from nlp_calib.models import KinematicModel
 from nlp_calib.results import CalibrationRun, Verdict
 from nlp_calib.results.checks import (
@@ -257,13 +258,11 @@ def _undetermined(run: CalibrationRun, model: KinematicModel, hint: str) -> Verd
     if solver is None:
         failures = dict.fromkeys(run.reports[s].result.reason for s in run.solver_order())
         out = (*unfitted, *loose, *(f"no solver converged: {r}" for r in failures))
-        return Verdict(
-            UNDETERMINED, (*out, way_out(group, model, run.scenario.layout, _sensor(run))) if loose else out
-        )
+        return Verdict(UNDETERMINED, (*out, _way_out(run, group, model)) if loose else out)
     if bounded := _trade_off(run, solver):
         return Verdict(
             UNDETERMINED,
-            (bounded, way_out(run.reports[solver].uncertainty.bounded, model, run.scenario.layout)),
+            (bounded, _way_out(run, run.reports[solver].uncertainty.bounded, model)),
         )
     # A lag pinned on its search's edge has no σ; it is a caveat naming its log (lag_caveats).
     missing = [n for n, sd in run.std(solver).items() if not np.isfinite(sd) and n not in run.pinned()]
@@ -274,9 +273,17 @@ def _undetermined(run: CalibrationRun, model: KinematicModel, hint: str) -> Verd
         )
         return Verdict(
             UNDETERMINED,
-            (*why, way_out([*missing, *group], model, run.scenario.layout, _sensor(run), values)),
+            (*why, _way_out(run, [*missing, *group], model, values)),
         )
     return None
+
+
+def _way_out(
+    run: CalibrationRun, names: Sequence[str], model: KinematicModel, values: dict[str, float] | None = None
+) -> str:
+    """:func:`way_out` for ``names`` on ``run``'s drive (its reference, and whether it turns both ways)."""
+    both = turns_both_ways(run.data.excitation)
+    return way_out(names, model, run.scenario.layout, _sensor(run), values, both)
 
 
 def _trade_off(run: CalibrationRun, solver: str) -> str:

@@ -12,6 +12,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from nlp_calib.analysis.excitation import combined, of_log
 from nlp_calib.analysis.handoff import controller_params, driven_turn_rates
 from nlp_calib.analysis.plan import believed
 from nlp_calib.analysis.verdict import verdict
@@ -44,6 +45,7 @@ from nlp_calib.results.checks import NominalCheck
 from nlp_calib.results.faults import FaultReport, Findings
 from nlp_calib.results.layout import KNOWN, MODEL, MOUNT, Layout
 from nlp_calib.results.mount import LogMount, SensorMount
+from nlp_calib.results.preflight import Excitation
 from nlp_calib.sensors import Sensor
 from nlp_calib.solvers import solver_label
 from nlp_calib.sources import BagSource, BesideSource
@@ -120,9 +122,14 @@ def log_info(prepared: PreparedLog, windows: LogWindows) -> LogInfo:
     )
 
 
-def data_info(windows: LogWindows, alignment: Alignment, start_dropped: Mapping[str, int] | None) -> DataInfo:
-    """What of a log the fit used (``start_dropped``: the windows a camera's start left out)."""
+def data_info(
+    prepared: PreparedLog, windows: LogWindows, alignment: Alignment, start_dropped: Mapping[str, int] | None
+) -> DataInfo:
+    """What of a log the fit used (``start_dropped``: the windows a camera's start left out) and how
+    its fitted records excite the robot."""
     data = windows.data
+    steering = prepared.scenario.objective.residual.steering_sample
+    fitted = prepared.log.select(prepared.start, prepared.split)
     return DataInfo(
         used=windows.used,
         fit=windows.fit,
@@ -133,7 +140,14 @@ def data_info(windows: LogWindows, alignment: Alignment, start_dropped: Mapping[
         lag_estimate=alignment.estimate,
         start_dropped=start_dropped,
         fit_dropped=None if data.dropped_selection is None else dict(data.dropped_selection),
+        excitation=of_log(fitted, windows.binder.fns.sensor, prepared.model, steering),
     )
+
+
+def _combined(parts: Sequence[Excitation | None]) -> Excitation | None:
+    """Several logs' excitation as one drive's (None where any log's is unknown)."""
+    known = [p for p in parts if p is not None]
+    return combined(known) if known and len(known) == len(parts) else None
 
 
 def fit_notes(results: Mapping[str, SolverResult], fitted: FitAnalysis, held: Mapping[str, str]) -> list[str]:
@@ -379,7 +393,7 @@ def assemble_run(
     run = CalibrationRun(
         scenario=dataclasses.replace(scenario, layout=scenario.layout.with_start(start.initial)),
         log=log_info(prepared, windows),
-        data=data_info(windows, alignment, _start_dropped(start)),
+        data=data_info(prepared, windows, alignment, _start_dropped(start)),
         baseline=figures.baseline[0],
         baseline_holdout=figures.baseline[1],
         reports=reports,
@@ -500,6 +514,7 @@ def joint_run(
         dropped_faulty=sum(run.data.dropped_faulty for run in parts),
         tracker_lag_s=float("nan"),
         lag_estimate=None,
+        excitation=_combined([run.data.excitation for run in parts]),
     )
     checks = fit_checks(fitted, merged_findings(parts), start, figures.nominal)
     reports = {

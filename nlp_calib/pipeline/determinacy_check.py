@@ -17,6 +17,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from nlp_calib.analysis.excitation import turns_both_ways
 from nlp_calib.analysis.observability import believed_directions
 from nlp_calib.analysis.verdict import way_out
 from nlp_calib.models import MODELS, KinematicModel
@@ -130,6 +131,7 @@ def together(
             f"±{w.std_reference:.3g}× the precision it needs (their σ to believe, with the white noise's "
             "correlations: the drive's own errors widen what it ties), looser than each one's σ shows"
         )
-        advice = way_out(names, kind, run.scenario.layout, sensor) if kind is not None else ""
+        both = turns_both_ways(run.data.excitation)
+        advice = way_out(names, kind, run.scenario.layout, sensor, None, both) if kind is not None else ""
         out.append((f"{why}; {advice}" if advice else why, w))
     return out

@@ -14,7 +14,6 @@ is not determined well enough, the plan ranks what to drive next (:mod:`nlp_cali
 from __future__ import annotations
 
 import functools
-import math
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -25,8 +24,7 @@ import numpy as np
 from nlp_calib.analysis import determinacy as det
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.crossval import combine
-from nlp_calib.analysis.excitation import combined, excitation, smoothed
-from nlp_calib.analysis.observability import MIN_TURNING
+from nlp_calib.analysis.excitation import combined, of_log, smoothed, turns_both_ways
 from nlp_calib.analysis.plan import Setting, believed, plan
 from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.analysis.uncertainty import range_std
@@ -183,14 +181,6 @@ def drive(
     )
     backend = None if run is None else run.problem.binder.backend
     return Drive(parts, one, fns, data, point, words, tuple(p.log for p in parts), backend), held
-
-
-def _track(log: Log, fns: ProblemFunctions) -> tuple[np.ndarray, np.ndarray]:
-    """The reference's positions on the floor and its heading about the floor's normal: a 3-D
-    reference's (a camera's, whose world frame need not be level) levelled from its own 3-D poses,
-    a planar one's as it is."""
-    T = fns.sensor.floor_track(log)
-    return T[:, :2], T[:, 2]
 
 
 def _rough(d: Drive, omega: np.ndarray) -> tuple[np.ndarray, det.Information, str]:
@@ -649,12 +639,8 @@ def _report(sc: Scenario, a: Assessment, t0: float, ahead: bool = True) -> Prefl
     fns, one = d.fns, d.scenario
     exs = []
     for p in d.parts:
-        log = p.log.select(p.start, p.split)
         steering = p.scenario.objective.residual.steering_sample
-        ex = excitation(log.time_s, *_track(log, fns), p.model, p.model.inputs(log, steering))
-        if fns.sensor.lengths_unseen:  # a track without positions (a gyro's): no distance, no speed
-            ex = replace(ex, distance_m=math.nan, speed_median_mps=math.nan, speed_max_mps=math.nan)
-        exs.append(ex)
+        exs.append(of_log(p.log.select(p.start, p.split), fns.sensor, p.model, steering))
     units = fit_info(one, fns).units
     standing = a.standing()
     statuses = det.statuses(fns, standing, a.held, units, combined(exs))
@@ -695,12 +681,10 @@ def _way_out(
 ) -> str:
     """The way out for the loose parameters the verdict refuses for: those not determined when any
     is (a weakly determined lag beside them would turn the advice to the clocks), else the weakly
-    determined ones; on a drive that already turns both ways, not "turn more". A drive whose
-    heading never leaves a band under MIN_TURNING has not turned for the turning parameters, however
-    often it swings both ways inside it: their cause says it "never turns", so must the way out."""
+    determined ones; on a drive that already turns both ways (:func:`turns_both_ways`), not "turn
+    more"."""
     undetermined = [s.name for s in statuses if s.name in loose and s.status == NOT_DETERMINED]
-    both = ex is not None and min(ex.heading_span_rad, ex.turned_left_rad, ex.turned_right_rad) >= MIN_TURNING
-    return way_out(undetermined or loose, fns.model, fns.layout, fns.sensor, values, both)
+    return way_out(undetermined or loose, fns.model, fns.layout, fns.sensor, values, turns_both_ways(ex))
 
 
 def _values(fns: ProblemFunctions, x: np.ndarray, x_fixed: np.ndarray) -> dict[str, float]:

@@ -38,7 +38,7 @@ from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import ControllerParams
 from nlp_calib.results.layout import CLOCK, KNOWN, Layout
 from nlp_calib.results.mount import LogMount, SensorMount
-from nlp_calib.results.preflight import Plan
+from nlp_calib.results.preflight import Excitation, Plan
 from nlp_calib.results.series import OdometryTrack, RunSeries
 from nlp_calib.results.solver import SolverResult
 from nlp_calib.results.uncertainty import Uncertainty
@@ -164,6 +164,9 @@ class DataInfo:
     #: On a joint fit's per-log view: the joint fit's clock offsets held without a σ (any log's,
     #: :meth:`CalibrationRun.pinned`), which the view's σ, the joint's, leaves out as the joint does.
     pinned: tuple[str, ...] = ()
+    #: How the fitted records excite the robot (the pre-flight's reading; several logs' combined),
+    #: which the verdict's advice reads (no "turn both ways" to a drive that does).
+    excitation: Excitation | None = None
 
 
 @dataclass(frozen=True)
