@@ -241,8 +241,9 @@ def two_sinusoids(
     right_rate: float = 1.0,
 ) -> dict[str, float]:
     """A differential drive whose wheels turn at 2·cos t and 2·sin t rad/s for 30 s (radii 0.1 m,
-    separation 0.57 m), joints at 100 Hz, a camera at 50 Hz stamped ``stamp_offset_s`` late, its
-    poses and joints printed to six decimals: a drive on which a time shift is a mix of the two
+    separation 0.57 m), joints at 100 Hz, a camera at 50 Hz whose image of time t is stamped
+    ``t - stamp_offset_s`` (the default: 10 ms late, a tracker_lag of +0.01 s), its poses and joints
+    printed to six decimals: a drive on which a time shift is a mix of the two
     wheels. ``beat``: rad/s of ``sin 0.37t`` added to the right wheel (a time shift is then nearly,
     not exactly, a mix); ``wobble``: each wheel's rolling radius varies along the drive by this
     fraction (``sin 0.37t``, ``cos 0.23t``; the truth is the mean), an error a white-noise σ
@@ -280,5 +281,5 @@ def two_sinusoids(
         sensor_roll=-1.58,
         sensor_pitch=0.012,
         sensor_yaw=-1.55,
-        tracker_lag=stamp_offset_s,
+        tracker_lag=-stamp_offset_s,
     )
