@@ -149,6 +149,12 @@ def _assert_still_good(run: Any, checked: Any) -> None:
     assert judged <= robot and judged, judged
 
 
+def _assert_held_lag_counted(run: Any, lag: str) -> None:
+    """A held lag's plausible error is in the σ the calibration states (and ``check`` reads back)."""
+    held = [c.record.get("std_held") for c in run.checks.more if c.name == "held"]
+    assert bool(held and held[0]) == (lag == "held"), held
+
+
 def _scenario(folder: Path, body: dict[str, Any]) -> Path:
     path = folder / "scenario.yaml"
     path.write_text(yaml.safe_dump({"name": "roundtrip", "solvers": ["gauss_newton"], **body}))
@@ -269,7 +275,13 @@ def test_run_then_check_a_lidars_scan_matches(tmp_path: Path) -> None:
     _assert_still_good(run, checked)
 
 
-def test_run_then_check_vendor_odometry(tmp_path: Path) -> None:
+#: The lag as the scenario leaves it (fitted by default), and held at the clocks as logged: a held
+#: lag's plausible error enters the σ, which ``check`` reads back and judges by alike.
+LAGS = {"fitted": {}, "held": {"alignment": {"tracker_lag": 0.0}}}
+
+
+@pytest.mark.parametrize("lag", list(LAGS))
+def test_run_then_check_vendor_odometry(tmp_path: Path, lag: str) -> None:
     import json
 
     from nlp_calib.simulation.vendor import VendorSimulationOptions, write_vendor_simulation
@@ -283,12 +295,15 @@ def test_run_then_check_vendor_odometry(tmp_path: Path) -> None:
         "dataset": {"odometry": odometry.name, "vendor": vendor, "poses": tum.name},
         "residual": {"horizon_s": 0.5},
         **LIGHT,
+        **LAGS[lag],
     }
     run, checked = _run_and_check(_scenario(tmp_path, body))
     _assert_still_good(run, checked)
+    _assert_held_lag_counted(run, lag)
 
 
-def test_run_then_check_a_lidar_bag(tmp_path: Path) -> None:
+@pytest.mark.parametrize("lag", list(LAGS))
+def test_run_then_check_a_lidar_bag(tmp_path: Path, lag: str) -> None:
     pytest.importorskip("small_gicp")
     from nlp_calib.simulation.lidar import write_lidar_simulation
 
@@ -306,9 +321,11 @@ def test_run_then_check_a_lidar_bag(tmp_path: Path) -> None:
         "information": {"translation": 1.0e6, "rotation": 1.0e5},
         "robust": {"kernel": "huber", "delta": 3.0},
         **LIGHT,
+        **LAGS[lag],
     }
     run, checked = _run_and_check(_scenario(tmp_path, body))
     _assert_still_good(run, checked)
+    _assert_held_lag_counted(run, lag)
 
 
 def test_a_batch_runs_a_scenario_of_several_logs(tmp_path: Path) -> None:
