@@ -148,7 +148,11 @@ def _sigmas(case: str, run: Any, truth: dict[str, float], errors: dict[str, list
         return
     estimate, std = run.reports[solver].result.param_dict(), run.std(solver)
     pivots = run.checks.pivots
-    row = {n: (estimate[n] - v) / std[n] for n, v in truth.items() if np.isfinite(std.get(n, np.nan))}
+    # A value given as known has σ 0 (exact by declaration): not counted, as the docstring says.
+    stated = {n: std.get(n, np.nan) for n in truth}
+    row = {
+        n: (estimate[n] - v) / stated[n] for n, v in truth.items() if np.isfinite(stated[n]) and stated[n] > 0
+    }
     for n, z in row.items():
         errors.setdefault(n, []).append(z)
     count = len(pivots.pivots) if pivots is not None else 0
