@@ -73,19 +73,65 @@ def window_shares(
 ) -> np.ndarray:
     """Each window's term of :func:`noise_share` (those of the window indices ``windows`` alone
     when given, in their order)."""
-    std, counted = noise
-    split = split_noise(np.asarray(std, dtype=float) ** 2, counted)
-    picked, starts, stops = _spans(evaluator.data, windows)
-    out, ends = np.zeros(picked.size), None
-    for w, sens in evaluator.sensitivities(x, windows):
-        if ends is None:
-            n_int, n_in = int(stops.max(initial=0)), evaluator.fns.n_inputs
-            D = sens.D if sens.D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
-            ends = EndNoise(_noise_map(evaluator, D, counted, windows), split)
-        V = ends.between(starts[w], stops[w])
-        rows = ((sens.de_dend @ V) * sens.de_dend).sum(axis=2)  # (windows, error rows)
-        out[w] = weight[picked[w]] * (rows @ evaluator.omega)
-    return out
+    return _Shares(evaluator, weight, noise, windows)(x)
+
+
+class _Shares:
+    """:func:`window_shares` of the same windows at any ``x``: what does not depend on ``x`` (the
+    windows' spans, the noise's split, the counters' increment variances) taken once for the
+    gradient's two passes per parameter."""
+
+    def __init__(
+        self,
+        evaluator: ProblemEvaluator,
+        weight: np.ndarray,
+        noise: tuple[np.ndarray, np.ndarray],
+        windows: np.ndarray | None,
+    ) -> None:
+        std, counted = noise
+        self.evaluator, self.windows = evaluator, windows
+        self.split = split_noise(np.asarray(std, dtype=float) ** 2, counted)
+        picked, self.starts, self.stops = _spans(evaluator.data, windows)
+        self.weight = weight[picked]
+        data = evaluator.data
+        cols = slice(None) if windows is None else data.intervals_of(windows)
+        self.inputs = data.inputs[:, cols]
+        self.counted = np.asarray(counted, dtype=bool)
+        self.variance = _increment_variance(data)[cols] if self.counted.any() else None
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        evaluator = self.evaluator
+        n_in = evaluator.fns.n_inputs
+        if evaluator.fns.prefix:
+            D = evaluator.interval_sensitivity(x, self.windows)
+        else:
+            D = np.broadcast_to(np.eye(n_in), (int(self.stops.max(initial=0)), n_in, n_in))
+        ends = EndNoise(self._noise_map(D), self.split)
+        out = np.zeros(self.weight.size)
+        for w, de_dend in evaluator.end_sensitivities(x, self.windows):
+            V = ends.between(self.starts[w], self.stops[w])
+            rows = ((de_dend @ V) * de_dend).sum(axis=2)  # (windows, error rows)
+            out[w] = self.weight[w] * (rows @ evaluator.omega)
+        return out
+
+    def _noise_map(self, D: np.ndarray) -> np.ndarray:
+        """``D`` from each source of noise: a rate's column folded into its counter's
+        (:func:`~nlp_calib.analysis.uncertainty.reading_map`), and a counter's scaled by
+        ``√(v_j/2)``, ``v_j`` its increment's variance in readings' (:func:`_increment_variance`):
+        a one-interval window's share is then what records re-sampling a joint stream carry (they
+        interpolate its readings, so two records between the same two of them differ by less than
+        two readings' noise: about 0.8 of one for 120 Hz records between 100 Hz joints, where two
+        overstated the share 2.5-fold and the step overshot a differential drive's baseline by 6σ
+        to 11σ). Longer windows, where the share barely depends on the parameters, take it as
+        their ends' intervals give it. The σ keeps two readings per increment
+        (:mod:`~nlp_calib.analysis.uncertainty`): an upper bound there."""
+        D = reading_map(D, self.inputs, rate_rows(self.evaluator.fns.model))
+        v = self.variance
+        if v is None or np.all(v == 2.0):
+            return D
+        out = np.array(D, dtype=float)
+        out[:, :, self.counted] *= np.sqrt(v[: D.shape[0], None, None] / 2.0)
+        return out
 
 
 def _spans(data: ResidualData, windows: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -97,30 +143,6 @@ def _spans(data: ResidualData, windows: np.ndarray | None) -> tuple[np.ndarray, 
         cols = data.intervals_of(windows)
         starts, stops = np.searchsorted(cols, starts), np.searchsorted(cols, stops - 1) + 1
     return picked, starts, stops
-
-
-def _noise_map(
-    evaluator: ProblemEvaluator, D: np.ndarray, counted: np.ndarray, windows: np.ndarray | None
-) -> np.ndarray:
-    """``D`` over the intervals of ``windows`` (every one: all) from each source of noise: a rate's
-    column folded into its counter's (:func:`~nlp_calib.analysis.uncertainty.reading_map`), and a
-    counter's scaled by ``√(v_j/2)``, ``v_j`` its increment's variance in readings'
-    (:func:`_increment_variance`): a one-interval window's share is then what records re-sampling
-    a joint stream carry (they interpolate its readings, so two records between the same two of
-    them differ by less than two readings' noise: about 0.8 of one for 120 Hz records between
-    100 Hz joints, where two overstated the share 2.5-fold and the step overshot a differential
-    drive's baseline by 6σ to 11σ). Longer windows, where the share barely depends on the
-    parameters, take it as their ends' intervals give it. The σ keeps two readings per increment
-    (:mod:`~nlp_calib.analysis.uncertainty`): an upper bound there."""
-    data = evaluator.data
-    cols = slice(None) if windows is None else data.intervals_of(windows)
-    D = reading_map(D, data.inputs[:, cols], rate_rows(evaluator.fns.model))
-    flags, v = np.asarray(counted, dtype=bool), _increment_variance(data)[cols]
-    if not flags.any() or np.all(v == 2.0):
-        return D
-    out = np.array(D, dtype=float)
-    out[:, :, flags] *= np.sqrt(v[: D.shape[0], None, None] / 2.0)
-    return out
 
 
 def mean_shifts(
@@ -316,13 +338,10 @@ def _gradient_terms(
     large share of ``T`` (a few counts' rounding against a 0.1 mrad gyro) depends on the wheels'
     ratios alone, and that error leaked into their scale, held by the reference alone (a text log
     beside a gyro: the radii and the separation +1.2 mm, 1.6σ, on seed 22)."""
+    shares = _Shares(evaluator, weight, noise, windows)
     return np.stack(
         [
-            (
-                window_shares(evaluator, evaluator.boxplus(x, h), weight, noise, windows)
-                - window_shares(evaluator, evaluator.boxplus(x, -h), weight, noise, windows)
-            )
-            / (2.0 * h[i])
+            (shares(evaluator.boxplus(x, h)) - shares(evaluator.boxplus(x, -h))) / (2.0 * h[i])
             for i, h in _steps(sigma)
         ],
         axis=1,
