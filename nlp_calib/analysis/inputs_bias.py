@@ -98,21 +98,32 @@ class _Shares:
         self.inputs = data.inputs[:, cols]
         self.counted = np.asarray(counted, dtype=bool)
         self.variance = _increment_variance(data)[cols] if self.counted.any() else None
+        self.last: tuple[bytes, EndNoise] | None = None
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         evaluator = self.evaluator
-        n_in = evaluator.fns.n_inputs
-        if evaluator.fns.prefix:
-            D = evaluator.interval_sensitivity(x, self.windows)
-        else:
-            D = np.broadcast_to(np.eye(n_in), (int(self.stops.max(initial=0)), n_in, n_in))
-        ends = EndNoise(self._noise_map(D), self.split)
+        ends = self._end_noise(x)
         out = np.zeros(self.weight.size)
         for w, de_dend in evaluator.end_sensitivities(x, self.windows):
             V = ends.between(self.starts[w], self.stops[w])
             rows = ((de_dend @ V) * de_dend).sum(axis=2)  # (windows, error rows)
             out[w] = self.weight[w] * (rows @ evaluator.omega)
         return out
+
+    def _end_noise(self, x: np.ndarray) -> EndNoise:
+        """The noise the windows' ends collect at ``x``: the last one's again where ``x`` has its
+        coordinates that move the intervals' ``D`` (a step of the mount's or the clock's leaves
+        them, and ``D``, as they were)."""
+        fns = self.evaluator.fns
+        key = np.asarray(x)[fns.interval_coordinates].tobytes()
+        if self.last is None or self.last[0] != key:
+            self.last, n_in = None, fns.n_inputs  # the last one's D let go before the next's
+            if fns.prefix:
+                D = self.evaluator.interval_sensitivity(x, self.windows)
+            else:
+                D = np.broadcast_to(np.eye(n_in), (int(self.stops.max(initial=0)), n_in, n_in))
+            self.last = (key, EndNoise(self._noise_map(D), self.split))
+        return self.last[1]
 
     def _noise_map(self, D: np.ndarray) -> np.ndarray:
         """``D`` from each source of noise: a rate's column folded into its counter's

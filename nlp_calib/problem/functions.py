@@ -506,6 +506,18 @@ class ProblemFunctions(TrajectoryFunctions):
         )
 
     @functools.cached_property
+    def interval_coordinates(self) -> np.ndarray:
+        """The free coordinates the prefix poses and :attr:`interval_sensitivity` depend on (the
+        kinematic ones; none without prefix poses): at two points equal in these, both are the
+        same to the bit."""
+        if not self.prefix:
+            return np.zeros(0, dtype=np.intp)
+        uses = [
+            f.which_depends("x", [f.name_out(0)], 1, False) for f in (self.interval_sensitivity, self.step(0))
+        ]
+        return np.flatnonzero(np.any(uses, axis=0))
+
+    @functools.cached_property
     def end_sensitivity(self) -> ca.Function:
         """:attr:`sensitivities`' ``de_dend`` alone, on the motion's values (order 0): at ``h = 0``
         the jets' derivative rows drop out of it, so it is the same arithmetic on a fifth of the
