@@ -197,6 +197,23 @@ def test_the_intervals_sensitivity_moves_with_the_interval_coordinates_alone(mod
     assert not build(m, ProblemSpec(horizon=1)).interval_coordinates.size
 
 
+def test_prefix_jets_kept_across_a_mount_step_are_a_fresh_integrations() -> None:
+    """The scans integrate again only where a kinematic coordinate moved: along a run of points
+    (the mount, a kinematic coordinate, the mount again) one evaluator's normal equations and
+    poses are those of a fresh evaluator at each, to the bit."""
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=4))
+    data = build_residual_data(fns, sim_log("tricycle", 120, 5), ResidualOptions(horizon=4))
+    ev = evaluator(fns, data, np.zeros(0))
+    x = truth("tricycle")
+    mount, kinematic = fns.free.index("sensor_theta"), fns.free.index("axis_length")
+    points = [x, _moved(ev, x, mount, 0.01), _moved(ev, x, kinematic, 0.01), _moved(ev, x, mount, -0.01)]
+    for p in points:
+        kept, fresh = ev.normal_equations(p), evaluator(fns, data, np.zeros(0)).normal_equations(p)
+        assert np.array_equal(kept.H, fresh.H) and np.array_equal(kept.g, fresh.g)
+        D = evaluator(fns, data, np.zeros(0)).interval_sensitivity(p)
+        assert np.array_equal(ev.interval_sensitivity(p), D)
+
+
 @pytest.mark.parametrize("some", [False, True], ids=["every window", "some windows"])
 def test_the_shares_at_a_run_of_points_are_each_points_own(some: bool) -> None:
     """The gradient's passes keep the ends' noise while the kinematic coordinates stay: at points
