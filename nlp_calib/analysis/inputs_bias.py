@@ -38,7 +38,7 @@ from nlp_calib.analysis.uncertainty import EndNoise, per_second, reading_map, sp
 from nlp_calib.models import rate_rows, reference_scales
 from nlp_calib.problem import ResidualData
 from nlp_calib.results.checks import WEAK
-from nlp_calib.solvers import ProblemEvaluator, Sensitivities
+from nlp_calib.solvers import ProblemEvaluator
 
 #: A step below this share of every σ cannot matter: the subset's estimate of it is taken as it is.
 MATTERS = 0.05
@@ -161,10 +161,11 @@ def mean_shifts(
     x: np.ndarray,
     noise: tuple[np.ndarray, np.ndarray],
     windows: np.ndarray | None,
-) -> Callable[[slice, Sensitivities], np.ndarray]:
-    """Per block of windows, each one's expected residual ``β_w`` ``(windows, error rows)`` that
-    the inputs' noise adds through the model's curvature in them (second order: ``½ E[δᵀ∇²e δ]``
-    over each interval's own noise, along each source at a time; the sources independent).
+) -> Callable[[slice, np.ndarray], np.ndarray]:
+    """Per block of windows (given their ``de_dend``), each one's expected residual ``β_w``
+    ``(windows, error rows)`` that the inputs' noise adds through the model's curvature in them
+    (second order: ``½ E[δᵀ∇²e δ]`` over each interval's own noise, along each source at a time;
+    the sources independent).
     On one-interval windows the residuals' own second differences give it; on longer ones each
     interval's end shift ``¼ (D(u+v) − D(u−v)) v`` (the prefix poses held: the terms across
     intervals have no mean), summed over a window's intervals. A rate taken over one interval is
@@ -172,18 +173,18 @@ def mean_shifts(
     less by ``slip·σ_ω²`` per second whatever the rate, a track short by its share of the turn rate."""
     sources = _sources(evaluator, noise)
     if not sources:
-        return lambda w, sens: np.zeros(sens.de_dend.shape[:2])
+        return lambda w, de_dend: np.zeros(de_dend.shape[:2])
     picked, starts, stops = _spans(evaluator.data, windows)
     if not evaluator.fns.prefix:
         beta = _second_differences(evaluator, x, sources)[:, picked].T
-        return lambda w, sens: beta[w]
+        return lambda w, de_dend: beta[w]
     cols = None if windows is None else evaluator.data.intervals_of(windows)
     moved = [v if cols is None else v[:, cols] for v in sources]
     b = _end_shift(evaluator, x, windows, moved[0])
     for v in moved[1:]:  # one source's at a time: a stack of every source's held them all at once
         b = b + _end_shift(evaluator, x, windows, v)
     B = np.concatenate([np.zeros((1, b.shape[1])), np.cumsum(b, axis=0)])
-    return lambda w, sens: np.einsum("nrm,nm->nr", sens.de_dend, B[stops[w]] - B[starts[w]])
+    return lambda w, de_dend: np.einsum("nrm,nm->nr", de_dend, B[stops[w]] - B[starts[w]])
 
 
 def _end_shift(
@@ -329,9 +330,9 @@ def _shift_sum(
     onto the running total (the sum of one pass over every window's term, without holding them)."""
     shift = mean_shifts(evaluator, x, noise, None)
     total = np.zeros((1, evaluator.fns.n_free))
-    for w, sens in evaluator.sensitivities(x):
-        beta = shift(w, sens) * evaluator.omega
-        terms = weight[w, None] * np.einsum("nrk,nr->nk", sens.J, beta)
+    for w, J, de_dend in evaluator.jacobians(x):
+        beta = shift(w, de_dend) * evaluator.omega
+        terms = weight[w, None] * np.einsum("nrk,nr->nk", J, beta)
         total = np.cumsum(np.concatenate([total, terms]), axis=0)[-1:]
     return total[0]
 

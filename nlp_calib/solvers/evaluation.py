@@ -412,6 +412,12 @@ class ProblemEvaluator:
         for w, outs in self._per_window(name, x, windows):
             yield w, outs[-1]
 
+    def jacobians(self, x: np.ndarray) -> Iterator[tuple[slice, np.ndarray, np.ndarray]]:
+        """Every window's ``J`` and ``de_dend`` at ``x``, a block of windows at a time: those of
+        :meth:`sensitivities`, without ``D`` or the tracker's Jacobians."""
+        for w, (J, _, de_dend) in self._per_window("sensitivities", x, None):
+            yield w, J, de_dend
+
     def _per_window(
         self, name: str, x: np.ndarray, windows: np.ndarray | None
     ) -> Iterator[tuple[slice, list[np.ndarray]]]:
