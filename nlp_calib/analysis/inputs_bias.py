@@ -13,11 +13,13 @@ where ``∇F = 0``, is ``Δ = ½ H⁻¹ ∇T`` (``H``, ``g`` are half the Hessia
 :class:`~nlp_calib.solvers.evaluation.NormalEquations`). ``∇T`` is taken by central differences over
 one σ of each free coordinate: ``T`` is smooth on that scale.
 
-Those differences cost a pass over the windows per parameter. ``T`` is a sum over the windows, so
-a strided subset's sum scaled by ``N/n`` estimates it without bias, and the spread of the subset's
-terms says how far off that estimate can be: where the step it gives stays, with that margin,
-below :data:`MATTERS` of every σ, it is taken as it is (it cannot move an estimate by a share of
-its σ that matters); elsewhere ``∇T`` is taken on every window.
+Those differences cost a pass over the windows per parameter: of them it takes ``∂e/∂end`` alone
+(on the scan of values), and along a coordinate that leaves the kinematic ones (a mount's, a
+clock's) the intervals' ``D`` and the noise the ends collect stay, to the bit. ``T`` is a sum
+over the windows, so a strided subset's sum scaled by ``N/n`` estimates it without bias, and the
+spread of the subset's terms says how far off that estimate can be: where the step it gives
+stays, with that margin, below :data:`MATTERS` of every σ, it is taken as it is (it cannot move
+an estimate by a share of its σ that matters); elsewhere ``∇T`` is taken on every window.
 
 The noise also has a mean in the residuals where the model is curved in its inputs (second order,
 ``β_w = ½ E[δᵀ∇²e_w δ]``, :func:`mean_shifts`): the clean residual is the noisy one less ``β``, so
