@@ -158,6 +158,85 @@ def test_some_windows_shares_of_the_cost_are_their_terms_of_the_direct_sum(H: in
     assert_close(shares, direct[picked], rtol=1e-9)
 
 
+def _moved(ev: ProblemEvaluator, x: np.ndarray, i: int, by: float) -> np.ndarray:
+    return ev.boxplus(x, np.where(np.arange(x.size) == i, by, 0.0))
+
+
+@pytest.mark.parametrize("model", ["tricycle", "diff_drive"])
+@pytest.mark.parametrize("horizon", [1, 4])
+@pytest.mark.parametrize("some", [False, True], ids=["every window", "some windows"])
+def test_the_ends_sensitivity_alone_is_the_sensitivities_own(model: str, horizon: int, some: bool) -> None:
+    """``∂e/∂end`` of its own Function, on the scan of values alone, is the full sensitivities'
+    to the bit (the inputs' noise share takes it so), of every window or of some."""
+    fns = build(get_model(model), ProblemSpec(horizon=horizon))
+    data = build_residual_data(fns, sim_log(model, 150, 3), ResidualOptions(horizon=horizon))
+    ev = evaluator(fns, data, np.zeros(0))
+    x = truth(model) * np.random.default_rng(1).uniform(0.9, 1.1, fns.n_free)
+    windows = np.array([0, 1, 7, 30, data.n_residuals - 1]) if some else None
+    full = np.concatenate([s.de_dend for _, s in ev.sensitivities(x, windows)])
+    alone = np.concatenate([d for _, d in ev.end_sensitivities(x, windows)])
+    end_rows = 3 if fns.prefix else fns.n_inputs  # a prefix window's end pose; else its inputs
+    assert full.shape == (data.n_residuals if windows is None else windows.size, 3, end_rows)
+    assert np.array_equal(alone, full)
+
+
+@pytest.mark.parametrize("model", ["tricycle", "diff_drive"])
+def test_the_intervals_sensitivity_moves_with_the_interval_coordinates_alone(model: str) -> None:
+    """``D`` changes along each kinematic coordinate and keeps every bit along the mount's."""
+    m = get_model(model)
+    fns = build(m, ProblemSpec(horizon=4))
+    data = build_residual_data(fns, sim_log(model, 100, 4), ResidualOptions(horizon=4))
+    ev = evaluator(fns, data, np.zeros(0))
+    x = truth(model)
+    kinematic = [i for i, n in enumerate(fns.free) if n in m.kinematic_params]
+    assert fns.interval_coordinates.tolist() == kinematic
+    D = ev.interval_sensitivity(x)
+    for i in range(fns.n_free):
+        moved = ev.interval_sensitivity(_moved(ev, x, i, 1e-3))
+        assert np.array_equal(moved, D) == (i not in kinematic), fns.free[i]
+    assert not build(m, ProblemSpec(horizon=1)).interval_coordinates.size
+
+
+def test_prefix_jets_kept_across_a_mount_step_are_a_fresh_integrations() -> None:
+    """The scans integrate again only where a kinematic coordinate moved: along a run of points
+    (the mount, a kinematic coordinate, the mount again) one evaluator's normal equations and
+    poses are those of a fresh evaluator at each, to the bit."""
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=4))
+    data = build_residual_data(fns, sim_log("tricycle", 120, 5), ResidualOptions(horizon=4))
+    ev = evaluator(fns, data, np.zeros(0))
+    x = truth("tricycle")
+    mount, kinematic = fns.free.index("sensor_theta"), fns.free.index("axis_length")
+    points = [x, _moved(ev, x, mount, 0.01), _moved(ev, x, kinematic, 0.01), _moved(ev, x, mount, -0.01)]
+    for p in points:
+        kept, fresh = ev.normal_equations(p), evaluator(fns, data, np.zeros(0)).normal_equations(p)
+        assert np.array_equal(kept.H, fresh.H) and np.array_equal(kept.g, fresh.g)
+        D = evaluator(fns, data, np.zeros(0)).interval_sensitivity(p)
+        assert np.array_equal(ev.interval_sensitivity(p), D)
+
+
+@pytest.mark.parametrize("some", [False, True], ids=["every window", "some windows"])
+def test_the_shares_at_a_run_of_points_are_each_points_own(some: bool) -> None:
+    """The gradient's passes keep the ends' noise while the kinematic coordinates stay: at points
+    moved along the mount, then a kinematic coordinate, then the mount again, each pass's shares
+    are those of a fresh evaluation there, to the bit."""
+    from nlp_calib.analysis.inputs_bias import _Shares, window_shares
+
+    fns = build(get_model("diff_drive"), ProblemSpec(horizon=5, kernel="huber"))
+    data = build_residual_data(fns, sim_log("diff_drive", 300, 8), ResidualOptions(horizon=5))
+    ev = evaluator(fns, data, np.zeros(0))
+    x = truth("diff_drive") * 1.001
+    noise = (np.array([0.3, 0.5]), np.array([True, False]))
+    _, _, weight = ev.robust_terms(x)
+    windows = np.array([2, 3, 40, data.n_residuals - 1]) if some else None
+    mount, kinematic = fns.free.index("sensor_x"), fns.free.index("baseline")
+    points = [x, _moved(ev, x, mount, 0.01), _moved(ev, x, kinematic, 0.01), _moved(ev, x, mount, -0.01)]
+    shares = _Shares(ev, weight, noise, windows)
+    runs = [shares(p) for p in points]
+    for p, run in zip(points, runs):
+        assert np.array_equal(run, window_shares(ev, p, weight, noise, windows))
+    assert not np.array_equal(runs[2], runs[3])
+
+
 @pytest.mark.parametrize(
     ("counted", "delta"),
     [(None, 0.05), (np.array([True, False]), 0.05), (None, 0.003)],

@@ -13,11 +13,13 @@ where ``∇F = 0``, is ``Δ = ½ H⁻¹ ∇T`` (``H``, ``g`` are half the Hessia
 :class:`~nlp_calib.solvers.evaluation.NormalEquations`). ``∇T`` is taken by central differences over
 one σ of each free coordinate: ``T`` is smooth on that scale.
 
-Those differences cost a pass over the windows per parameter. ``T`` is a sum over the windows, so
-a strided subset's sum scaled by ``N/n`` estimates it without bias, and the spread of the subset's
-terms says how far off that estimate can be: where the step it gives stays, with that margin,
-below :data:`MATTERS` of every σ, it is taken as it is (it cannot move an estimate by a share of
-its σ that matters); elsewhere ``∇T`` is taken on every window.
+Those differences cost a pass over the windows per parameter: of them it takes ``∂e/∂end`` alone
+(on the scan of values), and along a coordinate that leaves the kinematic ones (a mount's, a
+clock's) the intervals' ``D`` and the noise the ends collect stay, to the bit. ``T`` is a sum
+over the windows, so a strided subset's sum scaled by ``N/n`` estimates it without bias, and the
+spread of the subset's terms says how far off that estimate can be: where the step it gives
+stays, with that margin, below :data:`MATTERS` of every σ, it is taken as it is (it cannot move
+an estimate by a share of its σ that matters); elsewhere ``∇T`` is taken on every window.
 
 The noise also has a mean in the residuals where the model is curved in its inputs (second order,
 ``β_w = ½ E[δᵀ∇²e_w δ]``, :func:`mean_shifts`): the clean residual is the noisy one less ``β``, so
@@ -38,7 +40,7 @@ from nlp_calib.analysis.uncertainty import EndNoise, per_second, reading_map, sp
 from nlp_calib.models import rate_rows, reference_scales
 from nlp_calib.problem import ResidualData
 from nlp_calib.results.checks import WEAK
-from nlp_calib.solvers import ProblemEvaluator, Sensitivities
+from nlp_calib.solvers import ProblemEvaluator
 
 #: A step below this share of every σ cannot matter: the subset's estimate of it is taken as it is.
 MATTERS = 0.05
@@ -73,19 +75,76 @@ def window_shares(
 ) -> np.ndarray:
     """Each window's term of :func:`noise_share` (those of the window indices ``windows`` alone
     when given, in their order)."""
-    std, counted = noise
-    split = split_noise(np.asarray(std, dtype=float) ** 2, counted)
-    picked, starts, stops = _spans(evaluator.data, windows)
-    out, ends = np.zeros(picked.size), None
-    for w, sens in evaluator.sensitivities(x, windows):
-        if ends is None:
-            n_int, n_in = int(stops.max(initial=0)), evaluator.fns.n_inputs
-            D = sens.D if sens.D is not None else np.broadcast_to(np.eye(n_in), (n_int, n_in, n_in))
-            ends = EndNoise(_noise_map(evaluator, D, counted, windows), split)
-        V = ends.between(starts[w], stops[w])
-        rows = ((sens.de_dend @ V) * sens.de_dend).sum(axis=2)  # (windows, error rows)
-        out[w] = weight[picked[w]] * (rows @ evaluator.omega)
-    return out
+    return _Shares(evaluator, weight, noise, windows)(x)
+
+
+class _Shares:
+    """:func:`window_shares` of the same windows at any ``x``: what does not depend on ``x`` (the
+    windows' spans, the noise's split, the counters' increment variances) taken once for the
+    gradient's two passes per parameter."""
+
+    def __init__(
+        self,
+        evaluator: ProblemEvaluator,
+        weight: np.ndarray,
+        noise: tuple[np.ndarray, np.ndarray],
+        windows: np.ndarray | None,
+    ) -> None:
+        std, counted = noise
+        self.evaluator, self.windows = evaluator, windows
+        self.split = split_noise(np.asarray(std, dtype=float) ** 2, counted)
+        picked, self.starts, self.stops = _spans(evaluator.data, windows)
+        self.weight = weight[picked]
+        data = evaluator.data
+        cols = slice(None) if windows is None else data.intervals_of(windows)
+        self.inputs = data.inputs[:, cols]
+        self.counted = np.asarray(counted, dtype=bool)
+        self.variance = _increment_variance(data)[cols] if self.counted.any() else None
+        self.last: tuple[bytes, EndNoise] | None = None
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        evaluator = self.evaluator
+        ends = self._end_noise(x)
+        out = np.zeros(self.weight.size)
+        for w, de_dend in evaluator.end_sensitivities(x, self.windows):
+            V = ends.between(self.starts[w], self.stops[w])
+            rows = ((de_dend @ V) * de_dend).sum(axis=2)  # (windows, error rows)
+            out[w] = self.weight[w] * (rows @ evaluator.omega)
+        return out
+
+    def _end_noise(self, x: np.ndarray) -> EndNoise:
+        """The noise the windows' ends collect at ``x``: the last one's again where ``x`` has its
+        coordinates that move the intervals' ``D`` (a step of the mount's or the clock's leaves
+        them, and ``D``, as they were)."""
+        fns = self.evaluator.fns
+        key = np.asarray(x)[fns.interval_coordinates].tobytes()
+        if self.last is None or self.last[0] != key:
+            self.last, n_in = None, fns.n_inputs  # the last one's D let go before the next's
+            if fns.prefix:
+                D = self.evaluator.interval_sensitivity(x, self.windows)
+            else:
+                D = np.broadcast_to(np.eye(n_in), (int(self.stops.max(initial=0)), n_in, n_in))
+            self.last = (key, EndNoise(self._noise_map(D), self.split))
+        return self.last[1]
+
+    def _noise_map(self, D: np.ndarray) -> np.ndarray:
+        """``D`` from each source of noise: a rate's column folded into its counter's
+        (:func:`~nlp_calib.analysis.uncertainty.reading_map`), and a counter's scaled by
+        ``√(v_j/2)``, ``v_j`` its increment's variance in readings' (:func:`_increment_variance`):
+        a one-interval window's share is then what records re-sampling a joint stream carry (they
+        interpolate its readings, so two records between the same two of them differ by less than
+        two readings' noise: about 0.8 of one for 120 Hz records between 100 Hz joints, where two
+        overstated the share 2.5-fold and the step overshot a differential drive's baseline by 6σ
+        to 11σ). Longer windows, where the share barely depends on the parameters, take it as
+        their ends' intervals give it. The σ keeps two readings per increment
+        (:mod:`~nlp_calib.analysis.uncertainty`): an upper bound there."""
+        D = reading_map(D, self.inputs, rate_rows(self.evaluator.fns.model))
+        v = self.variance
+        if v is None or np.all(v == 2.0):
+            return D
+        out = np.array(D, dtype=float)
+        out[:, :, self.counted] *= np.sqrt(v[: D.shape[0], None, None] / 2.0)
+        return out
 
 
 def _spans(data: ResidualData, windows: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -99,39 +158,16 @@ def _spans(data: ResidualData, windows: np.ndarray | None) -> tuple[np.ndarray, 
     return picked, starts, stops
 
 
-def _noise_map(
-    evaluator: ProblemEvaluator, D: np.ndarray, counted: np.ndarray, windows: np.ndarray | None
-) -> np.ndarray:
-    """``D`` over the intervals of ``windows`` (every one: all) from each source of noise: a rate's
-    column folded into its counter's (:func:`~nlp_calib.analysis.uncertainty.reading_map`), and a
-    counter's scaled by ``√(v_j/2)``, ``v_j`` its increment's variance in readings'
-    (:func:`_increment_variance`): a one-interval window's share is then what records re-sampling
-    a joint stream carry (they interpolate its readings, so two records between the same two of
-    them differ by less than two readings' noise: about 0.8 of one for 120 Hz records between
-    100 Hz joints, where two overstated the share 2.5-fold and the step overshot a differential
-    drive's baseline by 6σ to 11σ). Longer windows, where the share barely depends on the
-    parameters, take it as their ends' intervals give it. The σ keeps two readings per increment
-    (:mod:`~nlp_calib.analysis.uncertainty`): an upper bound there."""
-    data = evaluator.data
-    cols = slice(None) if windows is None else data.intervals_of(windows)
-    D = reading_map(D, data.inputs[:, cols], rate_rows(evaluator.fns.model))
-    flags, v = np.asarray(counted, dtype=bool), _increment_variance(data)[cols]
-    if not flags.any() or np.all(v == 2.0):
-        return D
-    out = np.array(D, dtype=float)
-    out[:, :, flags] *= np.sqrt(v[: D.shape[0], None, None] / 2.0)
-    return out
-
-
 def mean_shifts(
     evaluator: ProblemEvaluator,
     x: np.ndarray,
     noise: tuple[np.ndarray, np.ndarray],
     windows: np.ndarray | None,
-) -> Callable[[slice, Sensitivities], np.ndarray]:
-    """Per block of windows, each one's expected residual ``β_w`` ``(windows, error rows)`` that
-    the inputs' noise adds through the model's curvature in them (second order: ``½ E[δᵀ∇²e δ]``
-    over each interval's own noise, along each source at a time; the sources independent).
+) -> Callable[[slice, np.ndarray], np.ndarray]:
+    """Per block of windows (given their ``de_dend``), each one's expected residual ``β_w``
+    ``(windows, error rows)`` that the inputs' noise adds through the model's curvature in them
+    (second order: ``½ E[δᵀ∇²e δ]`` over each interval's own noise, along each source at a time;
+    the sources independent).
     On one-interval windows the residuals' own second differences give it; on longer ones each
     interval's end shift ``¼ (D(u+v) − D(u−v)) v`` (the prefix poses held: the terms across
     intervals have no mean), summed over a window's intervals. A rate taken over one interval is
@@ -139,18 +175,18 @@ def mean_shifts(
     less by ``slip·σ_ω²`` per second whatever the rate, a track short by its share of the turn rate."""
     sources = _sources(evaluator, noise)
     if not sources:
-        return lambda w, sens: np.zeros(sens.de_dend.shape[:2])
+        return lambda w, de_dend: np.zeros(de_dend.shape[:2])
     picked, starts, stops = _spans(evaluator.data, windows)
     if not evaluator.fns.prefix:
         beta = _second_differences(evaluator, x, sources)[:, picked].T
-        return lambda w, sens: beta[w]
+        return lambda w, de_dend: beta[w]
     cols = None if windows is None else evaluator.data.intervals_of(windows)
     moved = [v if cols is None else v[:, cols] for v in sources]
     b = _end_shift(evaluator, x, windows, moved[0])
     for v in moved[1:]:  # one source's at a time: a stack of every source's held them all at once
         b = b + _end_shift(evaluator, x, windows, v)
     B = np.concatenate([np.zeros((1, b.shape[1])), np.cumsum(b, axis=0)])
-    return lambda w, sens: np.einsum("nrm,nm->nr", sens.de_dend, B[stops[w]] - B[starts[w]])
+    return lambda w, de_dend: np.einsum("nrm,nm->nr", de_dend, B[stops[w]] - B[starts[w]])
 
 
 def _end_shift(
@@ -296,9 +332,9 @@ def _shift_sum(
     onto the running total (the sum of one pass over every window's term, without holding them)."""
     shift = mean_shifts(evaluator, x, noise, None)
     total = np.zeros((1, evaluator.fns.n_free))
-    for w, sens in evaluator.sensitivities(x):
-        beta = shift(w, sens) * evaluator.omega
-        terms = weight[w, None] * np.einsum("nrk,nr->nk", sens.J, beta)
+    for w, J, de_dend in evaluator.jacobians(x):
+        beta = shift(w, de_dend) * evaluator.omega
+        terms = weight[w, None] * np.einsum("nrk,nr->nk", J, beta)
         total = np.cumsum(np.concatenate([total, terms]), axis=0)[-1:]
     return total[0]
 
@@ -316,13 +352,10 @@ def _gradient_terms(
     large share of ``T`` (a few counts' rounding against a 0.1 mrad gyro) depends on the wheels'
     ratios alone, and that error leaked into their scale, held by the reference alone (a text log
     beside a gyro: the radii and the separation +1.2 mm, 1.6σ, on seed 22)."""
+    shares = _Shares(evaluator, weight, noise, windows)
     return np.stack(
         [
-            (
-                window_shares(evaluator, evaluator.boxplus(x, h), weight, noise, windows)
-                - window_shares(evaluator, evaluator.boxplus(x, -h), weight, noise, windows)
-            )
-            / (2.0 * h[i])
+            (shares(evaluator.boxplus(x, h)) - shares(evaluator.boxplus(x, -h))) / (2.0 * h[i])
             for i, h in _steps(sigma)
         ],
         axis=1,

@@ -54,7 +54,14 @@ WINDOW_INPUTS = ("motion", "data")
 #: problem: :attr:`ProblemFunctions.data_rows`).
 DATA_ROWS = 4
 #: The order of the motion's derivatives each per-residual Function needs.
-ORDER = {"normal_equations": 1, "cost": 0, "cost_derivatives": 2, "robust_terms": 1, "sensitivities": 1}
+ORDER = {
+    "normal_equations": 1,
+    "cost": 0,
+    "cost_derivatives": 2,
+    "robust_terms": 1,
+    "sensitivities": 1,
+    "end_sensitivity": 0,
+}
 #: The prefix scan's step of each order.
 STEPS = {0: "prefix_value_step", 1: "prefix_step", 2: "prefix_hessian_step"}
 
@@ -135,7 +142,8 @@ class ProblemFunctions(TrajectoryFunctions):
     :func:`unpack_upper`) and g = w·ρ'·JᵀΩe, J = ∂e(x ⊞ Δ)/∂Δ; ``cost`` → w·ρ;
     ``cost_derivatives`` → (cost, gradient, upper triangle of the Hessian) of w·ρ in plain
     coordinates; ``robust_terms`` → (e, s = eᵀΩe, ρ'(s), w·JᵀΩe); ``sensitivities`` (x, x_fixed,
-    motion, data) → (J, ∂e/∂z, ∂e/∂end) for the noise propagation. Prefix problems (``prefix``)
+    motion, data) → (J, ∂e/∂z, ∂e/∂end) for the noise propagation, ``end_sensitivity`` its
+    ``∂e/∂end`` alone (on the motion's values). Prefix problems (``prefix``)
     add the scans' steps (:data:`STEPS`, see :meth:`step`) and ``interval_sensitivity`` (see
     :mod:`nlp_calib.problem.motion`). Whole-problem: ``boxplus`` (x, step) → x ⊞ step;
     ``tangent_map`` x → ∂(x ⊞ Δ)/∂Δ at Δ = 0; ``prior`` → (H, g, cost, grad, hess) of Gaussian
@@ -495,6 +503,33 @@ class ProblemFunctions(TrajectoryFunctions):
             ["x", "x_fixed", "motion", "data"],
             [ca.mtimes(J_plain, self._sym.M), de_dz, de_dend],
             ["J", "de_dz", "de_dend"],
+        )
+
+    @functools.cached_property
+    def interval_coordinates(self) -> np.ndarray:
+        """The free coordinates the prefix poses and :attr:`interval_sensitivity` depend on (the
+        kinematic ones; none without prefix poses): at two points equal in these, both are the
+        same to the bit."""
+        if not self.prefix:
+            return np.zeros(0, dtype=np.intp)
+        uses = [
+            f.which_depends("x", [f.name_out(0)], 1, False) for f in (self.interval_sensitivity, self.step(0))
+        ]
+        return np.flatnonzero(np.any(uses, axis=0))
+
+    @functools.cached_property
+    def end_sensitivity(self) -> ca.Function:
+        """:attr:`sensitivities`' ``de_dend`` alone, on the motion's values (order 0): at ``h = 0``
+        the jets' derivative rows drop out of it, so it is the same arithmetic on a fifth of the
+        instructions and the scan of values alone (the inputs' noise share, once per parameter)."""
+        mo, h, e_h = self._window(ORDER["end_sensitivity"])
+        (de_dend,) = self._at_zero(mo, h, [ca.jacobian(e_h, mo.end)])
+        return fn(
+            "end_sensitivity",
+            [self._sym.x, self._sym.x_fixed, mo.data, self._sym.data],
+            ["x", "x_fixed", "motion", "data"],
+            [de_dend],
+            ["de_dend"],
         )
 
     # --- prefix scans -----------------------------------------------------------------------------

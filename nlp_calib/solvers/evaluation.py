@@ -119,7 +119,7 @@ class Sensitivities:
 #: Functions evaluated once or twice per run (the analyses'): compiling them pays from about this
 #: many windows on; below, the interpreter evaluates them in less time than a compiler takes.
 COMPILE_ANALYSES_FROM = 50_000
-_ANALYSES = ("robust_terms", "sensitivities")
+_ANALYSES = ("robust_terms", "sensitivities", "end_sensitivity")
 
 
 def requests(fns: ProblemFunctions, names: Iterable[str], n_windows: int) -> list[Request]:
@@ -386,16 +386,7 @@ class ProblemEvaluator:
         ``D`` covers their intervals alone, in order: :meth:`ResidualData.intervals_of`)."""
         fns = self.fns
         N = self.n_residuals if windows is None else int(windows.size)
-        # A few windows of many: the interpreter (their compiled map is sized for all of them).
-        backend = self._backend("sensitivities") if windows is None else INTERPRETED
         D = self.interval_sensitivity(x, windows) if fns.prefix else None
-        motion = self.motion.update(ORDER["sensitivities"], x, self.x_fixed, windows)
-        data = (
-            self._on.window_data if windows is None else np.asfortranarray(self._on.window_data[:, windows])
-        )
-        own = stream(
-            backend, fns.sensitivities, {"motion": motion, "data": data}, {"x": x, "x_fixed": self.x_fixed}, N
-        )
         poses_wt = self.data.T_world_sensor
         starts, stops = (
             i if windows is None else i[windows] for i in (self.motion.starts, self.motion.stops)
@@ -404,13 +395,46 @@ class ProblemEvaluator:
         ends = {k: _PickedRows(poses_wt, i) for k, i in (("a", starts), ("b", stops))}
         # Cheap: the interpreter, a block at a time.
         tracker = stream(INTERPRETED, fns.between_jacobians, ends, {}, N)
-        for (w, (J, de_dz, de_dend)), (_, (dz_da, dz_db)) in zip(own, tracker):
-            size = J.shape[1] // fns.n_free
-            n = w.stop - w.start
-            J_, de_dz_, de_dend_, dz_da_, dz_db_ = (
-                _per_column(v, size, n) for v in (J, de_dz, de_dend, dz_da, dz_db)
-            )
-            yield w, Sensitivities(J=J_, de_dz=de_dz_, de_dend=de_dend_, dz_da=dz_da_, dz_db=dz_db_, D=D)
+        p = fns.between_jacobians.size2_out(0)
+        for (w, (J, de_dz, de_dend)), (_, jac) in zip(self._per_window("sensitivities", x, windows), tracker):
+            dz_da, dz_db = (_per_column(v, v.shape[1] // p, w.stop - w.start) for v in jac)
+            yield w, Sensitivities(J=J, de_dz=de_dz, de_dend=de_dend, dz_da=dz_da, dz_db=dz_db, D=D)
+
+    def end_sensitivities(
+        self, x: np.ndarray, windows: np.ndarray | None = None
+    ) -> Iterator[tuple[slice, np.ndarray]]:
+        """:meth:`sensitivities`' ``de_dend`` alone, a block of windows at a time (the same
+        values, without the parameters' and the tracker's Jacobians or ``D``)."""
+        name = "end_sensitivity"
+        if windows is None and self._backend(name) is not INTERPRETED:
+            # Compiled (many windows): the full Function, which the backend has built.
+            name = "sensitivities"
+        for w, outs in self._per_window(name, x, windows):
+            yield w, outs[-1]
+
+    def jacobians(self, x: np.ndarray) -> Iterator[tuple[slice, np.ndarray, np.ndarray]]:
+        """Every window's ``J`` and ``de_dend`` at ``x``, a block of windows at a time: those of
+        :meth:`sensitivities`, without ``D`` or the tracker's Jacobians."""
+        for w, (J, _, de_dend) in self._per_window("sensitivities", x, None):
+            yield w, J, de_dend
+
+    def _per_window(
+        self, name: str, x: np.ndarray, windows: np.ndarray | None
+    ) -> Iterator[tuple[slice, list[np.ndarray]]]:
+        """The unsummed per-window Function ``name``'s outputs ``(block, rows, cols)`` at ``x``, a
+        block of windows at a time (those of ``windows`` alone when given)."""
+        N = self.n_residuals if windows is None else int(windows.size)
+        # A few windows of many: the interpreter (their compiled map is sized for all of them).
+        backend = self._backend(name) if windows is None else INTERPRETED
+        motion = self.motion.update(ORDER[name], x, self.x_fixed, windows)
+        data = (
+            self._on.window_data if windows is None else np.asfortranarray(self._on.window_data[:, windows])
+        )
+        f = getattr(self.fns, name)
+        own = stream(backend, f, {"motion": motion, "data": data}, {"x": x, "x_fixed": self.x_fixed}, N)
+        for w, outs in own:
+            size = outs[0].shape[1] // f.size2_out(0)
+            yield w, [_per_column(v, size, w.stop - w.start) for v in outs]
 
     def interval_sensitivity(
         self, x: np.ndarray, windows: np.ndarray | None = None, shift: np.ndarray | None = None

@@ -38,13 +38,17 @@ class _Scan:
         self.poses = np.zeros((self.rows, n_pad + 1), order="F")
         self._ends = ends
         self._scan = Scan(backend, step, inputs, self.poses)
+        # The free coordinates the step reads (the kinematic ones): points equal in them have
+        # these prefix jets to the bit (a step of the mount's or the clock's integrates nothing).
+        self._reads = np.flatnonzero(step.which_depends("x", [step.name_out(0)], 1, False))
         self.at: bytes | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
         return 2 * self.rows, self._ends.size // 2
 
-    def update(self, key: bytes, x: np.ndarray, x_fixed: np.ndarray) -> _Scan:
+    def update(self, x: np.ndarray, x_fixed: np.ndarray) -> _Scan:
+        key = np.asarray(x, dtype=float)[self._reads].tobytes()
         if self.at != key:
             self._scan.evaluate(x=x, x_fixed=x_fixed)
             self.at = key
@@ -133,7 +137,7 @@ class WindowMotion:
         if not self.prefix:
             return self.direct if windows is None else np.asfortranarray(self.direct[:, windows])
         self.buffer(order)
-        scan = self._scans[order].update(np.asarray(x, dtype=float).tobytes(), x, x_fixed)
+        scan = self._scans[order].update(x, x_fixed)
         return scan if windows is None else scan.picked(windows)
 
     def poses(self, x: np.ndarray, x_fixed: np.ndarray) -> np.ndarray:
