@@ -94,8 +94,9 @@ class Resampler:
             else:
                 columns.append(np.mod(np.round(np.interp(when, t, level)) + log.ticks[0, j], COUNTER_MODULUS))
         ticks = np.stack(columns, axis=1).astype(np.int64)
-        if records is not None:  # the other records as logged
-            ticks = np.concatenate([log.ticks[: rows.start], ticks, log.ticks[rows.stop :]]).astype(np.int64)
+        if records is not None:  # the other records as logged (one copy of a long log's, not three)
+            stretch, ticks = ticks, np.array(log.ticks, dtype=np.int64)
+            ticks[rows] = stretch
         ticks.flags.writeable = False
         return replace(log, ticks=ticks, clock=replace(log.clock, encoder_lag_s=log.encoder_lag_s + lag_s))
 

@@ -122,10 +122,19 @@ class _LagFits:
             self.resampler = Resampler(self.log, self.binder.fns.model.encoder_kinds)
         return self.resampler.at(lag, records, beside_s)[0]
 
+    def bound(
+        self, shifted: Log, records: tuple[int, int], evaluator: ProblemEvaluator | None
+    ) -> ProblemEvaluator:
+        """``evaluator`` (None: a new one), bound to ``records`` of the log or of another of its
+        re-samplings, bound to those of ``shifted``: only its inputs computed again."""
+        if evaluator is None:
+            return self.binder.bind(shifted, *records)[1]
+        return self.binder.rebind(evaluator, shifted, *records)
+
     def fit(self, x: np.ndarray) -> tuple[float, np.ndarray, bool]:
         """The internal fit from ``x`` on the encoders re-sampled at ``x``'s lags."""
         shifted = self.resampled(float(x[self.column]), beside_s=self.beside_s(x))
-        _, self.evaluator = self.binder.bind(shifted, *self.records, evaluator=self.evaluator)
+        self.evaluator = self.bound(shifted, self.records, self.evaluator)
         cost, x_new, converged = self.binder.fit(self.evaluator, x)
         return cost, x_new, bool(converged and np.all(np.isfinite(x_new)))
 
@@ -167,14 +176,17 @@ class _LagFits:
         a, b = self.records
         mid, half = (a + b) // 2, PROFILE_RECORDS // 2
         records = (max(a, mid - half), min(b, mid + half))
-        evaluator, costs = None, np.full(n, np.nan)
+        # The fits' evaluator where the profile reads the same records (a log of up to
+        # PROFILE_RECORDS): the profile's windows are the fits', already bound.
+        evaluator = self.evaluator if records == self.records else None
+        costs = np.full(n, np.nan)
         for i, lag in enumerate(grid):
             # Only the profile's records re-sampled (a long log's others are never read here); the
             # second clock's records stay where ``x`` reads them: its offset is ``x``'s.
             beside = None if self.beside is None else float(x[self.beside] - lag)
             shifted = self.resampled(float(lag), records, beside)
             try:
-                _, evaluator = self.binder.bind(shifted, *records, evaluator=evaluator)
+                evaluator = self.bound(shifted, records, evaluator)
             except NlpCalibError:
                 continue
             at = np.array(x, dtype=float)

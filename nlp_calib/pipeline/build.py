@@ -29,7 +29,7 @@ from nlp_calib.problem import (
 from nlp_calib.problem.blocks import kinds_for
 from nlp_calib.problem.functions import problem_layout
 from nlp_calib.problem.start import closed_form_start, fit_windows
-from nlp_calib.problem.windows import BLOCK, COMPILED_FROM, ColumnMap, compile_columns
+from nlp_calib.problem.windows import BLOCK, COMPILED_FROM, ColumnMap, compile_columns, resampled_data
 from nlp_calib.results.layout import CLOCK, own_name
 from nlp_calib.sensors import SensorStart, sensor_for
 from nlp_calib.solvers import Priors, ProblemEvaluator, get_solver
@@ -359,6 +359,18 @@ class Binder:
         re-bound, when given)."""
         data = self.windows(log, start, stop)
         return data, self.evaluate(data, evaluator)
+
+    def rebind(self, evaluator: ProblemEvaluator, log: Log, start: int, stop: int) -> ProblemEvaluator:
+        """``evaluator``, bound by :meth:`bind` to records ``start:stop`` of a log, bound to the same
+        records of ``log``, that log with its encoders re-sampled at another offset (the same result
+        as :meth:`bind`). Only the inputs and clock data are computed again, where the windows do not
+        depend on the encoders: no stationary windows dropped, none chosen by the sensor's start."""
+        sc = self.scenario
+        if sc.log.samples.drop_stationary or (self.start is not None and self.start.selection is not None):
+            return self.bind(log, start, stop, evaluator)[1]
+        steering = sc.objective.residual.steering_sample
+        evaluator.bind(resampled_data(self.fns, evaluator.data, [log.select(start, stop)], steering))
+        return evaluator
 
     def evaluate(self, data: ResidualData, evaluator: ProblemEvaluator | None = None) -> ProblemEvaluator:
         """An evaluator on the windows ``data`` (``evaluator`` re-bound, when given)."""

@@ -519,6 +519,20 @@ def build_residual_data(
     return _without_faults(data, bad_intervals, bad_records)
 
 
+def resampled_data(
+    fns: ProblemFunctions, data: ResidualData, logs: Sequence[Log], steering_sample: str
+) -> ResidualData:
+    """``data``'s windows on ``logs``: the logs ``data`` was built from with their encoders re-sampled
+    at other offsets. The inputs and clock data are computed again; the windows, the tracker's poses
+    and motions are kept, for they do not depend on the encoders (the caller's to know: windows
+    dropped as stationary, or chosen from the inputs, do)."""
+    inputs = interval_inputs(fns.model, logs, steering_sample)
+    if inputs.shape != data.inputs.shape:
+        raise ProblemError(f"inputs of shape {inputs.shape} do not fit {data.inputs.shape}")
+    clock = _window_clock(fns, logs, inputs) if fns.spec.lags else data.clock
+    return replace(data, logs=tuple(logs), inputs=inputs, clock=clock)
+
+
 def _window_clock(fns: ProblemFunctions, logs: Sequence[Log], inputs: np.ndarray) -> WindowClock:
     """The offsets ``logs``' inputs were re-sampled at (each clock's) and the inputs' rates."""
     lags = tuple(lg.encoder_lag_s for lg in logs)
