@@ -11,6 +11,7 @@ import yaml
 from conftest import sinusoids_scenario, two_sinusoids, write_sim
 
 from nlp_calib import Calibration, load_scenario, scenario_from_mapping
+from nlp_calib.analysis.drift import common_held
 from nlp_calib.outputs.handoff import write_calibration
 from nlp_calib.pipeline.stored import read_calibration
 from nlp_calib.results import CalibrationRun
@@ -86,8 +87,16 @@ def test_a_lag_given_one_interval_off_is_in_the_sigma_of_what_it_moves(tmp_path:
     (path,) = write_calibration(run, tmp_path, "calibration.yaml")
     doc = yaml.safe_load(path.read_text())
     assert doc["std_held"]["wheel_separation"] == pytest.approx(std_held["wheel_separation"], rel=1e-12)
-    shared = read_calibration(path).std_shared
+    stored = read_calibration(path)
+    shared = stored.std_shared
     assert all(shared[n] >= std_held[n] for n in std_held)
+    # The value held is written beside its σ: a check's refit that holds the same one shares that
+    # part of the σ (it drops out of the change); one holding another lag, or none, shares nothing.
+    assert doc["held_values"] == {LAG: 0.02} and stored.spreads.held_values == {LAG: 0.02}
+    parts = (stored.spreads.held, stored.spreads.held_values)
+    assert common_held(run, "gauss_newton", parts)
+    assert not common_held(run, "gauss_newton", (parts[0], {LAG: 0.0}))
+    assert not common_held(run, "gauss_newton", (parts[0], {}))
 
 
 def test_a_lag_held_at_its_truth_on_a_drive_that_determines_everything_moves_nothing_beyond_its_sigma(

@@ -284,14 +284,22 @@ def tighter(found: tuple[ParameterChange, ...]) -> tuple[str, ...]:
     return (f"this log determines {said}: calibrate on it for a tighter calibration",)
 
 
-def common_held(run: CalibrationRun, solver: str, held: Mapping[str, float]) -> bool:
-    """Whether the stored calibration and the refit both rest on held values (each with a part
-    of its σ from them, ``held`` the stored one's): a check refits with what the calibration
-    held, so a held value's error moves both fits alike and drops out of the change; their σ are
-    then compared without that part. (A scenario that holds other values than the calibration did
-    breaks that; the run's own held check names what it holds.)"""
+def common_held(
+    run: CalibrationRun, solver: str, held: tuple[Mapping[str, float], Mapping[str, float]]
+) -> bool:
+    """Whether the stored calibration and the refit rest on the same held values (``held``: the
+    stored σ's parts from them and the values themselves), each with a part of its σ from them: a
+    held value's error then moves both fits alike and drops out of the change, so their σ are
+    compared without that part. A refit that holds other values (a scenario giving another lag)
+    or none shares nothing: each σ is taken whole."""
+    std, values = held
     names = run.reports[solver].uncertainty.names
-    return bool(held) and bool(np.isfinite(run.checks.held(names)).any())
+    if not std or not values or not np.isfinite(run.checks.held(names)).any():
+        return False
+    mine = run.checks.held_values()
+    return mine.keys() == values.keys() and all(
+        abs(mine[n] - v) <= 1e-12 * max(1.0, abs(v)) for n, v in values.items()
+    )
 
 
 def _as_stated(
@@ -336,20 +344,20 @@ def check_drift(
     solver: str,
     uncalibrated: Collection[str] = (),
     shared: Mapping[str, float] | None = None,
-    held_std: Mapping[str, float] | None = None,
+    held_parts: tuple[Mapping[str, float], Mapping[str, float]] = ({}, {}),
 ) -> DriftCheck:
     """The check of ``stored`` (values, σ to believe, their degrees of freedom) against ``run``, a
     fit of a new log started from it; ``uncalibrated``: what the stored calibration held or was
     given, which it does not vouch for and a check does not judge; ``shared``: the stored σ as
-    :func:`between_logs_std` widens them (None: as they are); ``held_std``: the stored σ's part from
-    held values (see :func:`common_held`)."""
+    :func:`between_logs_std` widens them (None: as they are); ``held_parts``: the stored σ's parts
+    from held values and those values (see :func:`common_held`)."""
     result = run.reports[solver].result
     free = run.reports[solver].uncertainty.free
-    common = common_held(run, solver, held_std or {})
+    common = common_held(run, solver, held_parts)
     stated = (dict(stored[1]), run.std(solver))
     if common:
-        stored = (stored[0], _without(stored[1], held_std or {}), stored[2])
-        shared = _without(shared, held_std or {}) if shared is not None else None
+        stored = (stored[0], _without(stored[1], held_parts[0]), stored[2])
+        shared = _without(shared, held_parts[0]) if shared is not None else None
     skipped = untested(run, solver, model, held=not common)
     # Fixed by the scenario, or never estimated by the stored calibration: nothing to compare.
     held = [n for n in result.names if (n not in free and n not in skipped) or n in uncalibrated]

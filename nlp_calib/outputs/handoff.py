@@ -116,6 +116,8 @@ def _sigma_entries(run: CalibrationRun, solver: str, doc: Mapping[str, Any]) -> 
         **_shift_entry(run, solver, "std_slip", run.checks.slip),
         # What the held values' plausible errors move each estimate by, in 'std' already.
         **_shift_entry(run, solver, "std_held", run.checks.held),
+        # ... and the values held (a check's refit that holds others does not share that part).
+        **({"held_values": run.checks.held_values()} if run.checks.held_values() else {}),
         # The jackknife σ's folds: its degrees of freedom + 1.
         "std_blocks_folds": len(run.checks.crossval.converged) if run.checks.crossval is not None else 0,
     }

@@ -31,7 +31,7 @@ def check(
         stored.solver,
         stored.uncalibrated(),
         stored.std_shared or None,
-        stored.spreads.held,
+        (stored.spreads.held, stored.spreads.held_values),
     )
     return CheckResult(
         "drift",

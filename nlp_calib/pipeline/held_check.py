@@ -265,7 +265,9 @@ def std_held(found: list[Response], run: CalibrationRun) -> dict[str, dict[str, 
     names = dict.fromkeys(n for r in counted for n in r.shift)
     std = {n: float(np.sqrt(sum(r.shift[n] ** 2 for r in counted if n in r.shift))) for n in names}
     std = {n: s for n, s in std.items() if np.isfinite(s) and s > 0}
-    return {"std_held": std} if std else {}
+    # The values held, so that a check knows whether its refit holds the same ones.
+    values = {r.name: r.value for r in counted if np.isfinite(r.value)}
+    return {"std_held": std, "held_values": values} if std else {}
 
 
 def check(run: CalibrationRun, fit: Fit | None) -> CheckResult | None:

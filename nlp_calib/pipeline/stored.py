@@ -33,6 +33,8 @@ class StoredSpreads:
 
     shared: Mapping[str, float]
     held: Mapping[str, float]
+    #: The values held whose errors ``held`` is ('held_values', by name; empty: none recorded).
+    held_values: Mapping[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -219,7 +221,22 @@ def _spreads(
         for n in names
     }
     shared = {n: shared_std(std[n], (white[n], averaged[n], slip.get(n, math.nan)), folds) for n in names}
-    return StoredSpreads(shared, held)
+    return StoredSpreads(shared, held, _held_values(doc, where))
+
+
+def _held_values(doc: Mapping[str, Any], where: str) -> dict[str, float]:
+    """'held_values': the values whose errors 'std_held' is, by name (absent: none)."""
+    value = doc.get("held_values")
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping) or not all(isinstance(k, str) for k in value):
+        fail(f"{where}: held_values", f"expected a mapping of names to numbers, got {value!r:.80}")
+    out = {}
+    for name, v in value.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            fail(f"{where}: held_values.{key_name(name)}", f"expected a finite number, got {v!r:.40}")
+        out[name] = float(v)
+    return out
 
 
 def _shifts(

@@ -240,6 +240,13 @@ class Checks:
         what their plausible errors move it by; NaN where nothing held moves it)."""
         return self._record_std("held", "std_held", names)
 
+    def held_values(self) -> dict[str, float]:
+        """The values the fit holds whose plausible errors are in its σ (``std_held``), by name (a
+        lag given as a number: ``alignment.tracker_lag``); empty where none is."""
+        found = self.plugin("held")
+        values = (found.record or {}).get("held_values") or {} if found is not None else {}
+        return {str(n): float(v) for n, v in values.items()}
+
     def shifts(self, names: tuple[str, ...], held_values: bool = True) -> np.ndarray:
         """The σ of what shifts the whole drive's fit at once, which no spread over the drive
         measures: the slip's and (``held_values``) the held values', in quadrature (NaN where
