@@ -6,7 +6,9 @@
 #   help    nlp-calib --help
 #   runimp  importing, in a fresh process, every nlp_calib module a `run` of SCENARIO ends up holding
 #   run     nlp-calib run SCENARIO --data LOG           check  nlp-calib check CALIBRATION LOG
-# Appends "mode what checkout user sys" lines and the load average at each round's start to OUT.
+# Appends to OUT how many modules each command holds (all, the package's), the CPU importing what a
+# run holds took and the share of it spent making dataclasses, then "mode what checkout user sys"
+# lines and the load average at each round's start.
 #   benchmarks/import_cpu.sh OUT REPS SCENARIO LOG CALIBRATION CHECKOUT...
 set -u
 out=$1; reps=$2; scen=$3; data=$(realpath "$4"); calib=$(realpath "$5"); shift 5
@@ -16,18 +18,21 @@ timed() {  # label, then the command
   /usr/bin/time -o "$work/time" -f "%U %S" "$@" > /dev/null 2>&1
   echo "$label $(cat "$work/time")" >> "$out"
 }
-for checkout in "$@"; do  # the modules a run holds at its end, and a filled bytecode cache
+here=$(dirname "$(realpath "$0")")
+for checkout in "$@"; do  # the modules each command holds at its end, and a filled bytecode cache
   n=$(basename "$checkout")
-  (cd "$checkout" && PYTHONPATH="$checkout" PYTHONPYCACHEPREFIX="$work/pyc_$n" PYTHONDONTWRITEBYTECODE= \
-    python3 -c "
-import atexit, runpy, sys
-sys.argv = ['nlp-calib', 'run', '$scen', '--data', '$data', '--out', '$work/out_$n', '--force']
-held = lambda: open('$work/imports_$n.py', 'w').write('import numpy, casadi\n' + ''.join(
-    f'import {m}\n' for m in sorted(sys.modules) if m.split('.')[0] == 'nlp_calib'))
-atexit.register(held)
-runpy.run_module('nlp_calib', run_name='__main__', alter_sys=True)" > /dev/null 2>&1)
-  (cd "$checkout" && PYTHONPATH="$checkout" PYTHONPYCACHEPREFIX="$work/pyc_$n" PYTHONDONTWRITEBYTECODE= \
-    python3 -m nlp_calib check "$calib" "$data" --out "$work/check_$n" --force > /dev/null 2>&1)
+  cd "$checkout" || exit 1
+  export PYTHONPATH="$checkout" PYTHONPYCACHEPREFIX="$work/pyc_$n" PYTHONDONTWRITEBYTECODE=
+  for c in help run check; do
+    case $c in
+      help) args=(--help) ;;
+      run) args=(run "$scen" --data "$data" --out "$work/out_$n" --force) ;;
+      check) args=(check "$calib" "$data" --out "$work/check_$n" --force) ;;
+    esac
+    python3 "$here/import_modules.py" held "$work/imports_${c}_$n.py" "${args[@]}" 2>&1 >/dev/null \
+      | grep '^modules' | sed "s/^modules [^ ]*/modules $c $n/" >> "$out"
+  done
+  python3 "$here/import_modules.py" dataclasses "$work/imports_run_$n.py" | sed "s/^/$n /" >> "$out"
 done
 for _ in $(seq "$reps"); do
   echo "load $(cut -d' ' -f1-3 /proc/loadavg)" >> "$out"
@@ -43,7 +48,7 @@ for _ in $(seq "$reps"); do
       export PYTHONPATH="$checkout"
       timed "$mode floor $n" python3 -c "import numpy, casadi"
       timed "$mode help $n" python3 -m nlp_calib --help
-      timed "$mode runimp $n" python3 "$work/imports_$n.py"
+      timed "$mode runimp $n" python3 "$work/imports_run_$n.py"
       timed "$mode run $n" python3 -m nlp_calib run "$scen" --data "$data" --out "$work/out_$n" --force
       timed "$mode check $n" python3 -m nlp_calib check "$calib" "$data" --out "$work/check_$n" --force
     done
@@ -51,16 +56,17 @@ for _ in $(seq "$reps"); do
 done
 echo "load $(cut -d' ' -f1-3 /proc/loadavg)" >> "$out"
 rm -rf "$work"
-# The median of each over OUT's rounds, in CPU seconds and in the medians of the floor beside it.
+# The median of each over OUT's rounds, in CPU seconds and in floors (the median of every checkout's
+# floor in that mode: the same two imports, timed beside each).
 python3 - "$out" <<'PY'
 import statistics, sys
 cpu = {}
 for line in open(sys.argv[1]):
     f = line.split()
-    if len(f) == 5:
+    if len(f) == 5 and f[0] in ("uncached", "cached"):
         cpu.setdefault(tuple(f[:3]), []).append(float(f[3]) + float(f[4]))
 for (mode, what, checkout), v in cpu.items():
-    floor = statistics.median(cpu[(mode, "floor", checkout)])
+    floor = statistics.median([c for (mo, w, _), v2 in cpu.items() if (mo, w) == (mode, "floor") for c in v2])
     m = statistics.median(v)
     print(f"{mode:8s} {what:6s} {checkout:12s} n={len(v)} median {m:.2f} s = {m / floor:.2f} floors")
 PY
