@@ -36,9 +36,9 @@ if _started_as_the_command():
     # Before numpy loads: its BLAS reads the environment once.
     _threads.native_one_thread_by_default()
 
-import importlib  # noqa: E402
-from typing import TYPE_CHECKING, Any  # noqa: E402
+from typing import TYPE_CHECKING  # noqa: E402
 
+from nlp_calib.core import lazy  # noqa: E402
 from nlp_calib.core.version import __version__  # noqa: E402
 
 if TYPE_CHECKING:
@@ -122,18 +122,7 @@ _EXPORTS: dict[str, str] = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'nlp_calib' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *_EXPORTS})
-
+__getattr__, __dir__ = lazy.exports(__name__, _EXPORTS)
 
 __all__ = [
     "MODELS",

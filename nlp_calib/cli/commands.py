@@ -32,7 +32,7 @@ COMMANDS: dict[str, Command] = {
     "codegen": _on_demand("nlp_calib.cli.codegen", "cmd_codegen"),
     "simulate": _on_demand("nlp_calib.cli.simulate", "cmd_simulate"),
     "import-bag": _on_demand("nlp_calib.cli.import_bag", "cmd_import_bag"),
-    "check": _on_demand("nlp_calib.cli.fleet", "cmd_check"),
+    "check": _on_demand("nlp_calib.cli.check", "cmd_check"),
     "batch": _on_demand("nlp_calib.cli.fleet", "cmd_batch"),
     "preflight": _on_demand("nlp_calib.cli.preflight", "cmd_preflight"),
     "init": _on_demand("nlp_calib.cli.preflight", "cmd_init"),

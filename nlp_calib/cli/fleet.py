@@ -1,12 +1,11 @@
-"""``nlp-calib check`` (is a calibration still good on a new log?) and ``nlp-calib batch`` (many
-logs at once, one folder each and a summary table)."""
+"""``nlp-calib batch``: many logs at once, one folder each and a summary table (each calibrated,
+or checked as ``nlp-calib check`` checks one)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 import time
-from pathlib import Path
 
 from nlp_calib.core import threads
 from nlp_calib.core.errors import UsageError
@@ -21,36 +20,12 @@ from nlp_calib.fleet import (
     run_jobs,
     write_summary,
 )
-from nlp_calib.outputs import registry
 from nlp_calib.outputs.batch import summary_markdown
-from nlp_calib.outputs.check import check_text, drift_of
 from nlp_calib.outputs.outdir import StagedOutput, refuse_collisions
 from nlp_calib.outputs.progress import Progress
 from nlp_calib.pipeline import load_scenario
-from nlp_calib.pipeline.check import check, check_scenario
-from nlp_calib.pipeline.prepare import read_checked
 from nlp_calib.pipeline.stored import read_calibration
 from nlp_calib.results.check import CANNOT_TELL, DRIFTED, EXIT_CODES, STILL_GOOD
-
-#: The output groups ``check`` writes: check.json and the refit's result.json.
-CHECK_GROUPS = ("check", "result")
-
-
-def cmd_check(args: argparse.Namespace) -> int:
-    stored = read_calibration(args.calibration)
-    scenario = check_scenario(stored, args.target)
-    out = check_output_dir(
-        args.out if args.out is not None else Path("out") / f"check_{scenario.dataset.stem}"
-    )
-    if out.resolve() == stored.path.resolve().parent:
-        raise UsageError(f"--out {out} holds the calibration being checked; choose another --out")
-    outputs = registry.selected(CHECK_GROUPS, report=False)
-    refuse_collisions(out, [o.name for o in outputs], force=args.force)
-    run = check(stored, scenario, read_checked(scenario))
-    print(check_text(run))
-    final = registry.write_staged(out, outputs, run, registry.OutputOptions(), "check", force=args.force)
-    print("\n" + "\n".join(f"wrote {p}" for p in final))
-    return drift_of(run).exit_code
 
 
 def _options(args: argparse.Namespace) -> BatchOptions:

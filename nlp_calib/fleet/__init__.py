@@ -7,11 +7,34 @@ processes (:func:`local_workers` of them at once), :func:`~nlp_calib.fleet.clust
 a Dask cluster; any engine that maps a function over arguments runs them elsewhere (docs/fleet.md).
 """
 
-from nlp_calib.fleet.jobs import BatchOptions, Job, batch_jobs
-from nlp_calib.fleet.pool import local_workers, run_jobs
-from nlp_calib.fleet.task import job_outputs, run_job
-from nlp_calib.outputs.batch import SUMMARY_FILES, write_summary
-from nlp_calib.results.batch import BatchRow
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from nlp_calib.core import lazy
+
+if TYPE_CHECKING:
+    from nlp_calib.fleet.jobs import BatchOptions, Job, batch_jobs
+    from nlp_calib.fleet.pool import local_workers, run_jobs
+    from nlp_calib.fleet.task import job_outputs, run_job
+    from nlp_calib.outputs.batch import SUMMARY_FILES, write_summary
+    from nlp_calib.results.batch import BatchRow
+
+# Each name's module is imported at the name's first use (core/lazy.py).
+_EXPORTS: dict[str, str] = {
+    "BatchOptions": "nlp_calib.fleet.jobs",
+    "Job": "nlp_calib.fleet.jobs",
+    "batch_jobs": "nlp_calib.fleet.jobs",
+    "local_workers": "nlp_calib.fleet.pool",
+    "run_jobs": "nlp_calib.fleet.pool",
+    "job_outputs": "nlp_calib.fleet.task",
+    "run_job": "nlp_calib.fleet.task",
+    "SUMMARY_FILES": "nlp_calib.outputs.batch",
+    "write_summary": "nlp_calib.outputs.batch",
+    "BatchRow": "nlp_calib.results.batch",
+}
+
+__getattr__, __dir__ = lazy.exports(__name__, _EXPORTS)
 
 __all__ = [
     "SUMMARY_FILES",

@@ -1,0 +1,57 @@
+"""What a command imports (for ``benchmarks/import_cpu.sh``).
+
+``held FILE ARGS...``: runs ``nlp-calib ARGS`` in this process and, at its exit, writes FILE, a script
+importing numpy, CasADi and every module of the package the command holds; prints how many modules
+it holds (all, the package's). ``dataclasses FILE``: runs such a script and prints the CPU it took and
+the share of it the standard library's ``dataclasses`` took generating the classes' methods.
+"""
+
+from __future__ import annotations
+
+import atexit
+import dataclasses
+import runpy
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+
+def held(script: Path, args: list[str]) -> None:
+    def write() -> None:
+        package = sorted(m for m in sys.modules if m.split(".")[0] == "nlp_calib")
+        script.write_text("import numpy, casadi\n" + "".join(f"import {m}\n" for m in package))
+        print(f"modules {' '.join(args[:1])} {len(sys.modules)} {len(package)}", file=sys.__stderr__)
+
+    atexit.register(write)
+    sys.argv = ["nlp-calib", *args]
+    runpy.run_module("nlp_calib", run_name="__main__", alter_sys=True)
+
+
+def dataclass_share(script: Path) -> None:
+    import casadi  # noqa: F401  # the floor, before the clock starts
+    import numpy  # noqa: F401
+
+    process = dataclasses._process_class  # type: ignore[attr-defined]
+    spent = [0.0, 0]
+
+    def timed(*args: Any, **kwargs: Any) -> Any:
+        t0 = time.process_time()
+        try:
+            return process(*args, **kwargs)
+        finally:
+            spent[0] += time.process_time() - t0
+            spent[1] += 1
+
+    dataclasses._process_class = timed  # type: ignore[attr-defined]
+    t0 = time.process_time()
+    exec(compile(script.read_text(), str(script), "exec"), {})
+    total = time.process_time() - t0
+    print(f"dataclasses {total:.3f} s importing the package, {spent[0]:.3f} s making {spent[1]} dataclasses")
+
+
+if __name__ == "__main__":
+    if sys.argv[1] == "held":
+        held(Path(sys.argv[2]), sys.argv[3:])
+    else:
+        dataclass_share(Path(sys.argv[2]))

@@ -1,0 +1,75 @@
+"""A command loads what it uses: the packages' re-exports are imported at their first use."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import json
+import subprocess
+import sys
+
+import pytest
+from conftest import REPO
+
+#: The packages whose ``__init__`` re-exports through :func:`nlp_calib.core.lazy.exports`.
+LAZY = (
+    "nlp_calib",
+    "nlp_calib.fleet",
+    "nlp_calib.logs",
+    "nlp_calib.pipeline",
+    "nlp_calib.problem",
+    "nlp_calib.results",
+)
+
+
+def _loaded_after(code: str) -> set[str]:
+    """The modules a fresh interpreter holds after running ``code``."""
+    script = f"import json, sys\n{code}\nprint(json.dumps(sorted(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True, cwd=REPO)
+    return set(json.loads(out.stdout.splitlines()[-1]))
+
+
+def test_the_parser_loads_no_pipeline_stage_nor_matplotlib() -> None:
+    """``--help`` and every command's parsing: the grammar, not the calibration."""
+    loaded = _loaded_after("from nlp_calib.cli.parser import build_parser\nbuild_parser()")
+    assert "nlp_calib.cli.parser" in loaded
+    heavy = {"nlp_calib.pipeline.analyse", "nlp_calib.pipeline.calibration", "nlp_calib.fleet.pool"}
+    assert loaded & heavy == set()
+    assert not any(m == "matplotlib" or m.startswith("matplotlib.") for m in loaded)
+
+
+def test_a_package_import_loads_none_of_its_re_exports() -> None:
+    loaded = _loaded_after("import nlp_calib.pipeline, nlp_calib.logs, nlp_calib.results, nlp_calib.fleet")
+    inside = {m for m in loaded if m.count(".") > 1 and not m.startswith("nlp_calib.core.")}
+    assert {m for m in inside if m.startswith("nlp_calib.")} == set()
+
+
+def _type_checking_names(package: str) -> dict[str, str]:
+    """Each name the package's ``if TYPE_CHECKING:`` block imports, with its module."""
+    source = importlib.util.find_spec(package).origin  # type: ignore[union-attr]
+    with open(source, encoding="utf-8") as file:
+        tree = ast.parse(file.read())
+    block = next(n for n in tree.body if isinstance(n, ast.If) and "TYPE_CHECKING" in ast.unparse(n.test))
+    return {
+        alias.asname or alias.name: node.module
+        for node in ast.walk(block)
+        if isinstance(node, ast.ImportFrom) and node.module
+        for alias in node.names
+    }
+
+
+@pytest.mark.parametrize("package", LAZY)
+def test_a_lazy_package_exports_what_its_modules_define(package: str) -> None:
+    """The table names the statically imported names (what mypy and the layer contracts read), each
+    resolves to its module's object, and none is also a module of the package (whose import would
+    set the package's attribute to the module)."""
+    module = importlib.import_module(package)
+    table = module._EXPORTS
+    assert table == _type_checking_names(package)
+    assert set(module.__all__) - {"__version__"} == set(table)
+    for name, source in table.items():
+        assert getattr(module, name) is getattr(importlib.import_module(source), name), name
+        assert importlib.util.find_spec(f"{package}.{name}") is None, name
+    with pytest.raises(AttributeError, match="no attribute 'not_exported'"):
+        module.not_exported  # noqa: B018
+    assert set(table) <= set(dir(module))
