@@ -7,9 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from conftest import sinusoids_scenario, two_sinusoids, write_sim
 
 from nlp_calib import Calibration, load_scenario, scenario_from_mapping
+from nlp_calib.outputs.ros2_control import write_ros2_control
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import WEAK, CheckResult
 from nlp_calib.results.run import DOUBTFUL, LIVE
@@ -61,6 +63,17 @@ def test_a_ridge_loose_only_in_the_sigma_to_believe_is_named_and_kept_from_hando
     for name in RADII:
         assert status[name][0] == DOUBTFUL and "move together" in status[name][1], status[name]
     assert status["wheel_separation"][0] == LIVE
+    # What the loose combination leaves determined is handed off: the mean radius (the controller's
+    # wheel_radius) is known to its precision, and right; the radii's ratio (the multipliers) is not.
+    controller = run.reports["gauss_newton"].controller
+    waived = run.waived("gauss_newton")
+    assert set(waived) == {"wheel_radius"}, waived
+    mean = 0.5 * (truth[RADII[0]] + truth[RADII[1]])
+    assert abs(controller.parameters["wheel_radius"] - mean) <= 2 * controller.std["wheel_radius"]
+    assert controller.std["wheel_radius"] <= needed[RADII[0]]
+    (path,) = write_ros2_control(run, tmp_path, "ros2_control.yaml", "jazzy")
+    live = yaml.safe_load(path.read_text())["diff_drive_controller"]["ros__parameters"]
+    assert "wheel_radius" in live and "left_wheel_radius_multiplier" not in live, live
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")

@@ -157,6 +157,10 @@ def controller_params(
         rests_on={v: tuple(n for n in deps if n not in given) for v, deps in rests_on.items()},
         given={v: why for v, why in from_user.items() if v not in left_out},
         settings=dict(found.settings),
+        gradient={
+            v: {n: float(jac[i, j]) for j, n in enumerate(names) if n in rests_on[v] and n not in given}
+            for i, v in enumerate(found.parameters)
+        },
     )
 
 

@@ -140,10 +140,12 @@ def _doubts(doubts: Mapping[str, str], params: ControllerParams, name: str) -> l
 
 def _value_lines(run: CalibrationRun, solver: str, params: ControllerParams, distro: str) -> list[str]:
     """One line per value (live, or commented out with why on the line above)."""
-    lines, doubted = [], run.doubts(solver)
+    lines, doubted, waived = [], run.doubts(solver), run.waived(solver)
     for name, value in params.parameters.items():
         key = release_name(distro, params.controller, name)
-        if name in params.settings:
+        if name in waived:
+            lines.append(f"    {key}: {value!r}  # ± {params.std[name]:.2g} (1σ); {_comment(waived[name])}")
+        elif name in params.settings:
             lines.append(f"    {key}: {value!r}  # {_comment(params.settings[name])}")
         elif name in params.given:
             lines += [

@@ -51,6 +51,9 @@ def check(run: CalibrationRun, model: KinematicModel | None = None) -> CheckResu
     concerns.update(coarse)
     reasons = [*(w.words() for w in weak), *coarse.values()]
     combined = together(run, solver, model, obs, concerns) if solver is not None else []
+    # The parameters in doubt only as part of a combination loose in the σ to believe: a value
+    # they give that the combination leaves determined is not in doubt (CalibrationRun.waived).
+    alone = sorted({n for _, w in combined for n in w.components} - set(concerns))
     for why, w in combined:
         reasons.append(why)
         for n in w.components:
@@ -69,7 +72,11 @@ def check(run: CalibrationRun, model: KinematicModel | None = None) -> CheckResu
         caveat=reasons[0] if reasons else "",
         caveats=tuple(reasons[1:]),
         concerns=concerns,
-        record={**obs.as_dict(), "loose_in_believed": [_as_dict(w) for _, w in combined]},
+        record={
+            **obs.as_dict(),
+            "loose_in_believed": [_as_dict(w) for _, w in combined],
+            "only_together": alone,
+        },
     )
 
 

@@ -125,3 +125,6 @@ class ControllerParams:
     given: Mapping[str, str] = field(default_factory=dict)
     #: Values no calibration gives but that the others' meaning needs (a multiplier of 1), with why.
     settings: Mapping[str, str] = field(default_factory=dict)
+    #: Each value's derivative in each calibrated parameter it rests on: what the precision each
+    #: parameter needs gives the value (:meth:`CalibrationRun.waived`).
+    gradient: Mapping[str, Mapping[str, float]] = field(default_factory=dict)

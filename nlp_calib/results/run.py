@@ -9,6 +9,7 @@ the same files.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -19,6 +20,7 @@ from nlp_calib.core.errors import UsageError
 from nlp_calib.results import codec
 from nlp_calib.results.check import DriftCheck
 from nlp_calib.results.checks import (
+    FINE,
     CheckResult,
     ConsistencyCheck,
     CostComparison,
@@ -449,6 +451,37 @@ class CalibrationRun:
                 out[name] = (LIVE, "")
         return out
 
+    def waived(self, solver: str) -> dict[str, str]:
+        """The controller values whose calibrated parameters are in doubt only as parts of a
+        combination loose in the σ to believe (the ``observability`` check's ``only_together``),
+        that combination leaving each value known to the precision it needs (its σ within what
+        its parameters' needed precisions give it, in quadrature) and every converged solver
+        agreeing on it that closely: the doubt is on the combination, not on the value. With why."""
+        found = self.checks.plugin("observability")
+        alone = set((found.record or {}).get("only_together") or ()) if found is not None else set()
+        report = self.reports[solver]
+        params, doubted = report.controller, self.doubts(solver)
+        if not alone or params is None:
+            return {}
+        estimate = report.result.param_dict()
+        needed = self.scenario.layout.needed({n: estimate[n] for g in params.gradient.values() for n in g})
+        # A parameter another check puts in doubt, or held, is in doubt on its own account.
+        others = {n for r in self.checks.more if r is not found and r.level != FINE for n in r.concerns}
+        alone -= others | set(report.held)
+        theirs = [r.controller for s, r in self.reports.items() if s != solver and r.result.converged]
+        out = {}
+        for name, deps in params.rests_on.items():
+            doubts = [n for n in deps if n in doubted]
+            need = _needed_of(params.gradient.get(name, {}), needed)
+            sd, value = params.std.get(name, math.inf), params.parameters.get(name, math.nan)
+            apart = [abs(c.parameters.get(name, math.inf) - value) if c else math.inf for c in theirs]
+            if doubts and set(doubts) <= alone and sd <= need and all(d <= need for d in apart):
+                out[name] = (
+                    f"{', '.join(doubts)} move together, but this value is known to ±{sd:.2g}, within the "
+                    f"{need:.2g} it needs"
+                )
+        return out
+
     def doubts(self, solver: str) -> dict[str, str]:
         """The parameters of ``solver``'s estimate not determined well enough to use, with why."""
         return {n: why for n, (status, why) in self.handoff_status(solver).items() if status == DOUBTFUL}
@@ -461,3 +494,11 @@ class CalibrationRun:
     def from_data(cls, data: Any) -> CalibrationRun:
         """The run :meth:`to_data` stored."""
         return codec.load(cls, data)
+
+
+def _needed_of(gradient: Mapping[str, float], needed: Mapping[str, float]) -> float:
+    """The precision a value needs from those its parameters need (``gradient``: its derivative in
+    each), in quadrature; 0 where a parameter's need is unknown (nothing is waived then)."""
+    if not gradient or any(n not in needed for n in gradient):
+        return 0.0
+    return math.sqrt(sum((g * needed[n]) ** 2 for n, g in gradient.items()))
