@@ -226,3 +226,41 @@ def test_records_that_do_not_connect_have_no_full_run_figure_and_no_rpe_across()
     # fault), while the windowed RPE still pairs nothing across it.
     faulty = trajectory_metrics(fns, p, inputs, ref, rpe_window=5, bad_intervals=gap)
     assert faulty.ate.n == ref.shape[0] and faulty.rpe_trans == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("group", ["SE(2)", "SE(3)", "rate"])
+def test_the_rpe_compares_the_translations_of_the_whole_motions_to_the_bit(group: str) -> None:
+    """The RPE over a distance takes a motion's translation alone: the whole motion's (``between``)
+    first columns, the same bits, and so the same figure as the whole motions compared."""
+    from nlp_calib.analysis import metrics
+    from nlp_calib.core import poses3d
+
+    g = metrics.GEOMETRIES[group]
+    rng = np.random.default_rng(5)
+    n = 400
+    if group == "SE(3)":
+        q = rng.normal(size=(n, 4))
+        T = np.hstack(
+            [np.cumsum(rng.normal(0.0, 0.1, (n, 3)), axis=0), q / np.linalg.norm(q, axis=1)[:, None]]
+        )
+        est = np.hstack(
+            [
+                T[:, :3] + rng.normal(0.0, 0.01, (n, 3)),
+                poses3d.quat_multiply(T[:, 3:], q[:1] / np.linalg.norm(q[0])),
+            ]
+        )
+    else:
+        T = np.cumsum(rng.normal(0.0, 0.1, (n, 4 if group == "rate" else 3)), axis=0)
+        est = T + rng.normal(0.0, 0.01, T.shape)
+    i, j = np.arange(n - 30), np.arange(30, n)
+    assert (
+        g.moved(est[i], est[j]).tobytes()
+        == np.ascontiguousarray(g.between(est[i], est[j])[:, : g.dims]).tobytes()
+    )
+    pairs = metrics.rpe_pairs(T, [np.arange(n)], [0.5], g)[0.5]
+    assert pairs[0][0].size > 100
+    whole = [
+        np.linalg.norm(g.between(est[a], est[b])[:, : g.dims] - g.between(T[a], T[b])[:, : g.dims], axis=1)
+        for a, b, _ in pairs
+    ]
+    assert repr(metrics.rpe_of(est, pairs, g)) == repr(ErrorStats.of(np.concatenate(whole)))

@@ -173,16 +173,67 @@ def test_ipopt_takes_steps_below_rounding_without_a_line_search(small_demo: Scen
 
 
 def test_a_released_evaluator_binds_again_with_the_same_results(small_demo: Scenario) -> None:
-    """Letting go of the windows' buffers (a large fit's, while its refits run) changes nothing."""
+    """Letting go of the windows' buffers (a large fit's, while its refits run) changes nothing:
+    evaluated again at another point, it gives what an evaluator never released gives there."""
     cal = Calibration(small_demo)
-    ev, x = cal.evaluator, cal.x0
-    before = ev.normal_equations(x), ev.cost(x), ev.robust_terms(x)
+    ev, twin, x = cal.evaluator, Calibration(small_demo).evaluator, cal.x0
+    ev.normal_equations(x), ev.cost(x), ev.robust_terms(x)
     ev.release()
     assert ev.data.n_residuals == ev.n_residuals > 0
-    after = ev.normal_equations(x), ev.cost(x), ev.robust_terms(x)
+    y = x * (1.0 + 1e-3)
+    after, before = (
+        (e.normal_equations(y), e.cost(y), [np.array(v) for v in e.robust_terms(y)]) for e in (ev, twin)
+    )
     assert np.array_equal(before[0].H, after[0].H) and before[0].cost == after[0].cost
     assert before[1] == after[1]
     assert all(np.array_equal(a, b) for a, b in zip(before[2], after[2]))
+
+
+def _counted(ev):  # type: ignore[no-untyped-def]
+    """``ev`` with its evaluations of each per-window Function counted (``ev.calls``)."""
+    calls: dict[str, int] = {}
+    evaluate = ev._call
+
+    def call(name, x):  # type: ignore[no-untyped-def]
+        calls[name] = calls.get(name, 0) + 1
+        return evaluate(name, x)
+
+    ev._call, ev.calls = call, calls
+    return ev
+
+
+def test_an_evaluator_keeps_what_it_evaluated_at_recent_points_to_the_bit(small_demo: Scenario) -> None:
+    """Both solvers start at one point and the analyses evaluate the estimate again: a point's
+    normal equations and cost come back from the last points' without an evaluation, the same
+    bits as an evaluator that never saw the point evaluates; the residual terms of the last point
+    only while their buffers are bound; normal equations told at a point hold until the next
+    evaluation (as the one point kept before did)."""
+    cal = Calibration(small_demo)
+    ev, twin, x = _counted(cal.evaluator), Calibration(small_demo).evaluator, cal.x0
+    first = ev.normal_equations(x), ev.cost(x), [np.array(v) for v in ev.robust_terms(x)]
+    for k in range(1, 9):  # a solver's iterations in between
+        ev.normal_equations(x * (1.0 + 1e-4 * k)), ev.cost(x * (1.0 - 1e-4 * k))
+    assert ev.calls == {"normal_equations": 9, "cost": 9, "robust_terms": 1}
+    again = ev.normal_equations(x), ev.cost(x), ev.robust_terms(x)
+    assert ev.calls == {"normal_equations": 9, "cost": 9, "robust_terms": 1}
+    fresh = twin.normal_equations(x), twin.cost(x), twin.robust_terms(x)
+    assert again[0] is first[0] and np.array_equal(again[0].H, fresh[0].H)
+    assert again[0].g.tobytes() == fresh[0].g.tobytes() and again[1] == fresh[1] == first[1]
+    assert all(np.array_equal(a, b) and np.array_equal(b, c) for a, b, c in zip(again[2], fresh[2], first[2]))
+    ev.robust_terms(x * (1.0 + 1e-4))
+    ev.robust_terms(x)
+    assert ev.calls["robust_terms"] == 3  # the last point's alone
+    ev.release()  # the residual terms are views of the buffers let go of: evaluated again
+    assert all(np.array_equal(a, b) for a, b in zip(ev.robust_terms(x), first[2]))
+    assert ev.calls["robust_terms"] == 4
+    told = first[0].less(first[0])
+    ev.remember(x, told)
+    assert ev.normal_equations(x) is told and ev.calls["normal_equations"] == 9
+    ev.normal_equations(x * 1.01)
+    assert ev.normal_equations(x) is first[0] and ev.calls["normal_equations"] == 10
+    ev.set_inputs(ev.data.inputs * 1.001)  # other inputs: nothing kept holds
+    ev.normal_equations(x), ev.cost(x)
+    assert ev.calls["normal_equations"] == 11 and ev.calls["cost"] == 10
 
 
 class _HuberLocation:

@@ -41,22 +41,26 @@ from nlp_calib.results.figures import RPE_DISTANCES, RPE_TOLERANCE, ErrorStats, 
 @dataclass(frozen=True)
 class Geometry:
     """The pose algebra a track is scored in: composition, motions, the position's dimensions,
-    the angle of a motion and the best rigid alignment of positions."""
+    the angle of a motion, the best rigid alignment of positions and a motion's translation alone
+    (``between``'s first ``dims`` columns, the same arithmetic: the RPE over a distance needs no
+    angle)."""
 
     accumulate: Callable[[np.ndarray, np.ndarray], np.ndarray]
     between: Callable[[np.ndarray, np.ndarray], np.ndarray]
     dims: int
     angle: Callable[[np.ndarray], np.ndarray]
     align: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+    moved: Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
-PLANAR = Geometry(poses.accumulate, poses.between, 2, lambda rel: np.abs(rel[:, 2]), poses.align)
+PLANAR = Geometry(poses.accumulate, poses.between, 2, lambda rel: np.abs(rel[:, 2]), poses.align, poses.moved)
 SPATIAL = Geometry(
     poses3d.accumulate,
     poses3d.between,
     3,
     lambda rel: np.linalg.norm(poses3d.quat_to_rotvec(rel[:, 3:7]), axis=1),
     poses3d.align,
+    lambda a, b: poses3d.between(a, b)[:, :3],
 )
 
 #: A gyro's "poses": its rates integrated from the first record (and the time), added up; its
@@ -68,6 +72,7 @@ RATE = Geometry(
     3,
     lambda rel: np.zeros(rel.shape[0]),
     lambda est, ref: (np.eye(est.shape[1]), ref.mean(axis=0) - est.mean(axis=0)),
+    lambda a, b: (b - a)[:, :3],
 )
 
 
@@ -180,7 +185,7 @@ def distance_pairs(dist: np.ndarray, delta: float, tol: float) -> tuple[np.ndarr
 
 
 #: Record pairs ``(i, j)`` of one part at a distance along the reference's path, with the
-#: reference's motion ``ref_i⁻¹·ref_j`` between them.
+#: translation of the reference's motion ``ref_i⁻¹·ref_j`` between them.
 Pairs = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
@@ -194,7 +199,7 @@ def rpe_pairs(
         dist = path_distance(T_ref[idx], g)
         for delta in deltas:
             i, j = distance_pairs(dist, delta, RPE_TOLERANCE * delta)
-            out[delta].append((idx[i], idx[j], g.between(T_ref[idx[i]], T_ref[idx[j]])))
+            out[delta].append((idx[i], idx[j], g.moved(T_ref[idx[i]], T_ref[idx[j]])))
     return out
 
 
@@ -221,13 +226,11 @@ def rpe_of(T_est: np.ndarray, pairs: list[Pairs], g: Geometry = PLANAR) -> Error
     """Translation error of the estimate's motions against the reference's over ``pairs``."""
     # The translation of ``ref⁻¹·est`` is the difference of the two translations turned by the
     # reference's rotation: its length is the difference's.
-    d = g.dims
     errors = []
     for i, j, ref in pairs:
         for lo in range(0, i.size, CHUNK):
             rows = slice(lo, lo + CHUNK)
-            est = g.between(T_est[i[rows]], T_est[j[rows]])
-            errors.append(np.linalg.norm(est[:, :d] - ref[rows, :d], axis=1))
+            errors.append(np.linalg.norm(g.moved(T_est[i[rows]], T_est[j[rows]]) - ref[rows], axis=1))
     return ErrorStats.of(np.concatenate(errors) if errors else np.zeros(0))
 
 

@@ -26,9 +26,14 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``a⁻¹ · b`` row by row, angle wrapped."""
+    return np.concatenate([moved(a, b), wrap_angle(b[..., 2] - a[..., 2])[..., None]], axis=-1)
+
+
+def moved(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The translation of ``a⁻¹ · b`` row by row, ``(..., 2)``: :func:`between`'s, without its angle."""
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
-    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])], axis=-1)
+    return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
 
 
 def accumulate(start: np.ndarray, steps: np.ndarray) -> np.ndarray:

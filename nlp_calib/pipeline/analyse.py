@@ -206,9 +206,11 @@ def analyse_fit(
         memory.give_back()
     start = fit.problem.start
     ranges = unc.range_std(start.lower, start.upper, fit.fns.n_free)
-    uncertainty = uncertainties(fit, results, noise, ranges)
     finite = [r for r in results.values() if np.isfinite(r.cost)] or list(results.values())
+    # Before the uncertainty, which evaluates the residuals at the same estimate (kept by the
+    # evaluator) and then lets go of their buffers.
     observability = observability_of(ev, finite[0].x, data.T_world_sensor, clock_needed(layout))
+    uncertainty = uncertainties(fit, results, noise, ranges)
     converged = [r for r in results.values() if r.converged]
     effects = unc.lag_effects(uncertainty[next(iter(results))], fit.fns.layout) if results else ()
     if not converged:

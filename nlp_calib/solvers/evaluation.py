@@ -2,15 +2,18 @@
 
 :class:`ProblemEvaluator` binds the mapped Functions of :mod:`nlp_calib.problem.functions` to the
 windows once; each call then integrates the intervals if the problem needs it
-(:mod:`nlp_calib.solvers.motion`), copies the parameter vector in and the sums out. The last
-normal equations are kept: a solver's accepted trial point, the uncertainty and the observability
-analysis at the same estimate cost one evaluation.
+(:mod:`nlp_calib.solvers.motion`), copies the parameter vector in and the sums out. The normal
+equations and costs of the last points evaluated are kept, and the last point's residual terms
+while their buffers are: a solver's accepted trial point, both solvers' start, the uncertainty and
+the observability analysis at the same estimate cost one evaluation.
 """
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import Generic, TypeVar
 
 import numpy as np
 
@@ -171,13 +174,46 @@ class _PickedRows:
         out[:] = self.values[self.index[lo:hi]].T
 
 
+#: Points whose normal equations and cost an evaluator keeps: the stages evaluate the same few
+#: points again (both solvers' start, the estimate), a solver's iterations lie between them.
+KEPT_POINTS = 32
+
+V = TypeVar("V")
+
+
+class _Kept(Generic[V]):
+    """Values at the last :data:`KEPT_POINTS` points used, keyed by the point's bytes."""
+
+    def __init__(self) -> None:
+        self._values: OrderedDict[bytes, V] = OrderedDict()
+
+    def get(self, key: bytes) -> V | None:
+        value = self._values.get(key)
+        if value is not None:
+            self._values.move_to_end(key)
+        return value
+
+    def put(self, key: bytes, value: V) -> None:
+        self._values[key] = value
+        self._values.move_to_end(key)
+        if len(self._values) > KEPT_POINTS:
+            self._values.popitem(last=False)
+
+
 @dataclass
 class _Last:
-    """The last point's normal equations and exact derivatives, keyed by the point's bytes: kept
-    when the buffers are released, dropped when the windows or their inputs change."""
+    """What was evaluated at recent points, keyed by the point's bytes (an evaluation is a function
+    of the point and the bound data alone: the same bits again): normal equations and costs, kept
+    when the buffers are released; the last point's exact derivatives; the last point's residual
+    terms, views of the bound buffers, dropped with them. All dropped when the windows or their
+    inputs change. ``told``: normal equations known otherwise (:meth:`ProblemEvaluator.remember`),
+    until the next evaluation, as an evaluated point's are kept."""
 
-    normal_equations: tuple[bytes, NormalEquations] | None = None
+    normal_equations: _Kept[NormalEquations] = field(default_factory=_Kept)
+    told: tuple[bytes, NormalEquations] | None = None
+    costs: _Kept[float] = field(default_factory=_Kept)
     derivatives: tuple[bytes, tuple[float, np.ndarray, np.ndarray]] | None = None
+    residuals: tuple[bytes, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] | None = None
 
 
 def _same_windows(a: ResidualData, b: ResidualData) -> bool:
@@ -250,12 +286,15 @@ class ProblemEvaluator:
         next evaluation binds them again; what is bound to the windows themselves stays."""
         if self._windows is not None:
             self._windows.bound.pop(name, None)
+        if name == "robust_terms":
+            self._last.residuals = None
 
     def release(self) -> None:
         """Let go of what is bound to the windows (their padded data, the prefix scans' and the
         mapped Functions' buffers: hundreds of MB on 10^6 windows) until the next evaluation, which
         binds them again (with the same results)."""
         self._windows = None
+        self._last.residuals = None
 
     @property
     def _on(self) -> _Windows:
@@ -322,28 +361,38 @@ class ProblemEvaluator:
 
     def normal_equations(self, x: np.ndarray) -> NormalEquations:
         key = np.asarray(x, dtype=float).tobytes()
-        last = self._last.normal_equations
-        if last is not None and last[0] == key:
-            return last[1]
+        told = self._last.told
+        if told is not None and told[0] == key:
+            return told[1]
+        kept = self._last.normal_equations.get(key)
+        if kept is not None:
+            return kept
         h_upper, g, cost, chi2, inliers = self._call("normal_equations", x)
         H, cost_f = unpack_upper(h_upper, self.fns.n_free), float(cost[0])
         if self.priors.active:
             Hp, gp, cp, _, _ = self._prior(x=x)
             H, g, cost_f = H + Hp, g + gp, cost_f + float(cp[0])
         ne = NormalEquations(H=H, g=g, cost=cost_f, chi2=float(chi2[0]), inliers=round(float(inliers[0])))
-        self._last.normal_equations = (key, ne)
+        self._last.normal_equations.put(key, ne)
+        self._last.told = None
         return ne
 
     def remember(self, x: np.ndarray, ne: NormalEquations) -> None:
         """Take ``ne`` as the normal equations at ``x`` without evaluating them (known otherwise:
-        e.g. a larger set of windows' less those of the windows left out)."""
-        self._last.normal_equations = (np.asarray(x, dtype=float).tobytes(), ne)
+        e.g. a larger set of windows' less those of the windows left out) until the next
+        evaluation."""
+        self._last.told = (np.asarray(x, dtype=float).tobytes(), ne)
 
     def cost(self, x: np.ndarray) -> float:
+        key = np.asarray(x, dtype=float).tobytes()
+        kept = self._last.costs.get(key)
+        if kept is not None:
+            return kept
         (cost,) = self._call("cost", x)
         c = float(cost[0])
         if self.priors.active:
             c += float(self._prior(x=x)[2][0])
+        self._last.costs.put(key, c)
         return c
 
     def cost_derivatives(self, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
@@ -367,15 +416,21 @@ class ProblemEvaluator:
 
     def residual_terms(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`robust_terms` plus each residual's ``JᵀΩe`` ``(n_free, n)`` (manifold)."""
+        key = np.asarray(x, dtype=float).tobytes()
+        last = self._last.residuals
+        if last is not None and last[0] == key:
+            return last[1]
         e, s, w, g = (np.asarray(v) for v in self._call("robust_terms", x))
         n = self.n_residuals
         nf = self.fns.n_free
-        return (
+        out = (
             e.reshape(self.fns.error_rows, -1, order="F")[:, :n],
             s.ravel()[:n],
             w.ravel()[:n],
             g.reshape(nf, -1, order="F")[:, :n],
         )
+        self._last.residuals = (key, out)
+        return out
 
     def sensitivities(
         self, x: np.ndarray, windows: np.ndarray | None = None
