@@ -126,6 +126,30 @@ def test_the_bias_step_takes_every_window_where_it_matters_and_a_subset_where_it
     np.testing.assert_allclose(screened[1].step / full[1].sigma, small, atol=0.2 * np.max(np.abs(small)))
 
 
+def test_the_noises_second_differences_are_the_errors_at_moved_inputs(tmp_path: Path) -> None:
+    """One-record windows: the noise's mean in each residual is ``½ Σ_v (e(u+v) + e(u−v) − 2e(u))``,
+    here against the errors of evaluators of their own at the moved inputs. It was exactly 0: the
+    error at ``u`` was kept as a view of the buffer each moved evaluation overwrote."""
+    ev, x, (std, counted) = _fitted(tmp_path)
+    sources = inputs_bias._sources(ev, (std, counted))
+    assert sources and not ev.fns.prefix
+    found = inputs_bias._second_differences(ev, x, sources)
+    base = ev.data.inputs.copy()
+
+    def errors(inputs: np.ndarray) -> np.ndarray:
+        ev.set_inputs(inputs)
+        return np.array(ev.robust_terms(x)[0])
+
+    here = errors(base)
+    expected = 0.5 * sum(errors(base + v) + errors(base - v) - 2.0 * here for v in sources)
+    ev.set_inputs(base)
+    assert np.max(np.abs(expected)) > 0.0
+    # The sums' order differs: rounding at the errors' own scale, far below the differences.
+    scale = 1e-12 * np.max(np.abs(here))
+    assert scale < 1e-3 * np.max(np.abs(expected))
+    np.testing.assert_allclose(found, expected, rtol=1e-9, atol=scale)
+
+
 def _recorded_z(
     tmp_path: Path, model: str, residual: str, names: tuple[str, ...], **record: Any
 ) -> dict[str, float]:

@@ -233,7 +233,9 @@ def _second_differences(evaluator: ProblemEvaluator, x: np.ndarray, sources: lis
     """``½ Σ_v (e(u+v) + e(u−v) − 2e(u))``, every window's ``(error rows, windows)``, on windows of
     one interval each (no terms across intervals); the evaluator's inputs restored."""
     data = evaluator.data
-    here = evaluator.robust_terms(x)[0]
+    # Copied: the evaluator's terms are views of its buffers, which the next evaluation overwrites
+    # (kept as a view, ``here`` became each perturbed error in turn and every difference was 0).
+    here = np.array(evaluator.robust_terms(x)[0])
     out = np.zeros_like(here)
     try:
         for v in sources:
@@ -271,7 +273,9 @@ def bias_step(evaluator: ProblemEvaluator, x: np.ndarray, noise: tuple[np.ndarra
     if not np.any(np.asarray(noise[0]) > 0) or n == 0:
         return none
     ne = evaluator.normal_equations(x)
-    _, s, weight = evaluator.robust_terms(x)
+    # Copied: the noise's mean evaluates the windows on moved inputs, which overwrites the buffers
+    # these would otherwise be views of.
+    _, s, weight = (np.array(v) for v in evaluator.robust_terms(x))
     try:
         H_inv = np.linalg.inv(ne.H)
     except np.linalg.LinAlgError:

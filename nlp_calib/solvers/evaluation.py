@@ -410,7 +410,8 @@ class ProblemEvaluator:
         return out
 
     def robust_terms(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Per residual: error ``(error rows, n)``, ``s = eᵀΩe`` and the IRLS weight ρ'(s)."""
+        """Per residual: error ``(error rows, n)``, ``s = eᵀΩe`` and the IRLS weight ρ'(s). Views of
+        the evaluator's buffers: the next evaluation overwrites them (copy what is kept)."""
         e, s, w, _ = self.residual_terms(x)
         return e, s, w
 
