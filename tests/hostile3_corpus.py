@@ -81,6 +81,8 @@ class World:
     second: Path
     log: Log
     bags: dict[str, Path] = field(default_factory=dict)
+    #: Folders a command wrote over the first drive, kept for the cases that start from them.
+    written: dict[tuple[str, ...], Path] = field(default_factory=dict)
 
     def messages(self, **kwargs: Any) -> list[Message]:
         return drive_messages(self.log, T0_NS, **kwargs)
@@ -912,14 +914,27 @@ def not_annotated(target: Path, _: Outcome) -> None:
     assert not target.exists() or "my annotation" not in target.read_text()
 
 
+def written(w: World, tmp: Path, command: str, *flags: str) -> tuple[Path, Path]:
+    """The first drive's scenario in ``tmp`` and ``tmp / "out"`` holding what ``command`` (with
+    ``flags``) wrote over it: written once per world, then copied (the manifest names files
+    relative to their folder and their digests, so a copy is what the command would write)."""
+    sc = scenario(tmp, f"dataset: {w.log_path}")
+    key = (command, *flags)
+    if key not in w.written:
+        folder = w.folder / f"written-{len(w.written)}"
+        folder.mkdir()
+        first = [command, str(scenario(folder, f"dataset: {w.log_path}")), "--out", str(folder / "out")]
+        assert run_in_process([*first, *flags], folder).code == 0
+        w.written[key] = folder / "out"
+    shutil.copytree(w.written[key], tmp / "out", symlinks=True)
+    return sc, tmp / "out"
+
+
 def edited_output(
     command: str, name: str, second: tuple[str, ...], force: bool, w: World, tmp: Path
 ) -> Expect:
     """An output of ``command`` edited by the user, then ``command`` again (``second`` options)."""
-    sc = scenario(tmp, f"dataset: {w.log_path}")
-    out = tmp / "out"
-    first = [command, str(sc), "--out", str(out), *(["--report"] if name == "report.md" else [])]
-    assert run_in_process(first, tmp).code == 0
+    sc, out = written(w, tmp, command, *(["--report"] if name == "report.md" else []))
     target = out / name
     target.write_text(target.read_text() + "\nmy annotation\n")
     argv = [command, str(sc), "--out", str(out), *second, *(["--force"] if force else [])]
@@ -930,9 +945,7 @@ def edited_output(
 
 
 def output_replaced_by_link(w: World, tmp: Path) -> Expect:
-    sc = scenario(tmp, f"dataset: {w.log_path}")
-    out = tmp / "out"
-    assert run_in_process(run_out(sc, out), tmp).code == 0
+    sc, out = written(w, tmp, "run")
     (tmp / "elsewhere.yaml").write_text("mine\n")
     (out / "calibration.yaml").unlink()
     (out / "calibration.yaml").symlink_to(tmp / "elsewhere.yaml")
