@@ -166,7 +166,8 @@ def test_determinacy_is_a_plug_in_whose_caveats_and_concerns_the_verdict_reads(r
     obs, found = run.checks.observability, run.checks.plugin("observability")
     assert obs is not None and found is not None and found.level == "fine"
     # ... with the combinations loose only in the σ to believe (none on the demo).
-    assert result_dict(run)["observability"] == {**obs.as_dict(), "loose_in_believed": []}
+    none = {"loose_in_believed": [], "only_together": []}
+    assert result_dict(run)["observability"] == {**obs.as_dict(), **none}
     assert f"  observability: {found.words}" in summary_lines(run)
     weak = WeakDirection(7.0, {"k_steer": 0.8, "steer_offset": -0.6})
     # A σ to believe beyond WEAK× the needed precision: the white-noise σ of axis_length widened.

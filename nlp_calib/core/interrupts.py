@@ -82,14 +82,20 @@ def _unraisable(args: sys.UnraisableHookArgs) -> None:
     """A signal whose exception was raised inside a finalizer or a weakref callback (where Python
     can only print it) is sent again a moment later, to be raised where the program can unwind;
     unless :func:`check` raised it first, or the block of :func:`handled` has ended."""
-    global _swallowed
+    global _swallowed, _defer_depth
     if not isinstance(args.exc_value, (Interrupted, SystemExit)) or _pending is None:
         sys.__unraisablehook__(args)
         return
     _swallowed = True
     timer = threading.Timer(0.01, _redeliver, (_generation, _pending))
     timer.daemon = True
-    timer.start()
+    # Starting the timer waits for its thread: a signal handled in that wait only records (the
+    # timer sends it again). Raised there, it was lost with the timer (a loaded machine, once).
+    _defer_depth += 1
+    try:
+        timer.start()
+    finally:
+        _defer_depth -= 1
 
 
 def _redeliver(generation: int, signum: int) -> None:
