@@ -3,6 +3,7 @@ verdict names it, with what would determine it, and keeps its parameters from th
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ from conftest import sinusoids_scenario, two_sinusoids, write_sim
 from nlp_calib import Calibration, load_scenario, scenario_from_mapping
 from nlp_calib.outputs.ros2_control import write_ros2_control
 from nlp_calib.results import CalibrationRun
-from nlp_calib.results.checks import WEAK, CheckResult
+from nlp_calib.results.checks import CAVEAT, WEAK, CheckResult
 from nlp_calib.results.run import DOUBTFUL, LIVE
 
 RADII = ("left_wheel_radius", "right_wheel_radius")
@@ -71,6 +72,10 @@ def test_a_ridge_loose_only_in_the_sigma_to_believe_is_named_and_kept_from_hando
     mean = 0.5 * (truth[RADII[0]] + truth[RADII[1]])
     assert abs(controller.parameters["wheel_radius"] - mean) <= 2 * controller.std["wheel_radius"]
     assert controller.std["wheel_radius"] <= needed[RADII[0]]
+    # A caveat on every parameter (a wrong model's) leaves nothing waived.
+    wrong = CheckResult("model", CAVEAT, "the model does not fit", about={"concerns": "all"})
+    every = dataclasses.replace(run.checks, more=(*run.checks.more, wrong))
+    assert dataclasses.replace(run, checks=every).waived("gauss_newton") == {}
     (path,) = write_ros2_control(run, tmp_path, "ros2_control.yaml", "jazzy")
     live = yaml.safe_load(path.read_text())["diff_drive_controller"]["ros__parameters"]
     assert "wheel_radius" in live and "left_wheel_radius_multiplier" not in live, live

@@ -461,7 +461,9 @@ class CalibrationRun:
         alone = set((found.record or {}).get("only_together") or ()) if found is not None else set()
         report = self.reports[solver]
         params, doubted = report.controller, self.doubts(solver)
-        if not alone or params is None:
+        # A caveat on every parameter (a wrong model's) puts every value in doubt.
+        every = any(r.level != FINE and r.about.get("concerns") == "all" for r in self.checks.more)
+        if not alone or params is None or every:
             return {}
         estimate = report.result.param_dict()
         needed = self.scenario.layout.needed({n: estimate[n] for g in params.gradient.values() for n in g})
