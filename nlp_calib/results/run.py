@@ -245,9 +245,12 @@ class Checks:
     def held_values(self) -> dict[str, float]:
         """The values the fit holds whose plausible errors are in its σ (``std_held``), by name (a
         lag given as a number: ``alignment.tracker_lag``); empty where none is."""
-        found = self.plugin("held")
-        values = (found.record or {}).get("held_values") or {} if found is not None else {}
-        return {str(n): float(v) for n, v in values.items()}
+        return {str(n): float(v) for n, v in (self.recorded("held", "held_values") or {}).items()}
+
+    def recorded(self, check: str, key: str) -> Any:
+        """What the plug-in check ``check`` recorded under ``key`` (None: nothing)."""
+        found = self.plugin(check)
+        return (found.record or {}).get(key) if found is not None else None
 
     def shifts(self, names: tuple[str, ...], held_values: bool = True) -> np.ndarray:
         """The σ of what shifts the whole drive's fit at once, which no spread over the drive
@@ -259,8 +262,7 @@ class Checks:
         return np.where(np.isfinite(slip) | np.isfinite(held), both, np.nan)
 
     def _record_std(self, check: str, key: str, names: tuple[str, ...]) -> np.ndarray:
-        found = self.plugin(check)
-        std = (found.record or {}).get(key) or {} if found is not None else {}
+        std = self.recorded(check, key) or {}
         return np.array([np.nan if std.get(n) is None else std[n] for n in names], dtype=float)
 
     def moving(self) -> list[tuple[str, np.ndarray]]:
@@ -458,7 +460,7 @@ class CalibrationRun:
         its parameters' needed precisions give it, in quadrature) and every converged solver
         agreeing on it that closely: the doubt is on the combination, not on the value. With why."""
         found = self.checks.plugin("observability")
-        alone = set((found.record or {}).get("only_together") or ()) if found is not None else set()
+        alone = set(self.checks.recorded("observability", "only_together") or ())
         report = self.reports[solver]
         params, doubted = report.controller, self.doubts(solver)
         # A caveat on every parameter (a wrong model's) puts every value in doubt.
