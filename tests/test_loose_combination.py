@@ -1,5 +1,6 @@
 """A combination of parameters loose in the σ to believe though not in the white-noise σ: the
-verdict names it, with what would determine it, and keeps its parameters from the hand-off."""
+verdict names it, with what would determine it, and keeps its parameters from the hand-off; the
+pre-flight, from its own fit, reads the same rule."""
 
 from __future__ import annotations
 
@@ -13,8 +14,10 @@ from conftest import sinusoids_scenario, two_sinusoids, write_sim
 
 from nlp_calib import Calibration, load_scenario, scenario_from_mapping
 from nlp_calib.outputs.ros2_control import write_ros2_control
+from nlp_calib.pipeline.preflight import preflight
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CAVEAT, WEAK, CheckResult
+from nlp_calib.results.preflight import WEAK_DRIVE, WEAKLY, Preflight
 from nlp_calib.results.run import DOUBTFUL, LIVE
 
 RADII = ("left_wheel_radius", "right_wheel_radius")
@@ -36,8 +39,8 @@ def test_a_ridge_loose_only_in_the_sigma_to_believe_is_named_and_kept_from_hando
     combination's σ (from the run's own σ to believe and correlations) is beyond 5×, and the
     difference of the radii is off by more than the 1 % a calibration needs of it."""
     truth = two_sinusoids(tmp_path, beat=0.1, wobble=0.01)
-    path = sinusoids_scenario(tmp_path, alignment="", formulation="")
-    run = Calibration(load_scenario(path)).run(["gauss_newton"])
+    scenario = load_scenario(sinusoids_scenario(tmp_path, alignment="", formulation=""))
+    run = Calibration(scenario).run(["gauss_newton"])
     obs, found = run.checks.observability, _observability(run)
     assert obs is not None and not obs.weak, obs.weak  # the white noise names nothing
     u = run.reports["gauss_newton"].uncertainty
@@ -79,6 +82,22 @@ def test_a_ridge_loose_only_in_the_sigma_to_believe_is_named_and_kept_from_hando
     (path,) = write_ros2_control(run, tmp_path, "ros2_control.yaml", "jazzy")
     live = yaml.safe_load(path.read_text())["diff_drive_controller"]["ros__parameters"]
     assert "wheel_radius" in live and "left_wheel_radius_multiplier" not in live, live
+    # The pre-flight reads the same rule from its own fit: the combination's parameters are weakly
+    # determined, each passing alone, with the run's advice; it does not refuse (nor does the run).
+    report = preflight(scenario)
+    _agrees_with_the_run(report, {*RADII, LAG}, "give the lag (alignment.tracker_lag")
+
+
+def _agrees_with_the_run(report: Preflight, loose: set[str], advice: str) -> None:
+    status = {p.name: p for p in report.parameters}
+    for name in loose:
+        p = status[name]
+        assert p.status == WEAKLY and all(n in p.because for n in loose - {name}), p
+    for name in RADII:  # each passes alone: the combination is why
+        p = status[name]
+        assert p.std_reference <= WEAK and "one combination of them is known only to" in p.because, p
+    assert report.verdict == WEAK_DRIVE and not report.stop_words()
+    assert advice in report.way_out, report.way_out
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
@@ -92,3 +111,5 @@ def test_a_drive_that_determines_everything_gets_no_loose_combination(tmp_path: 
     found = _observability(run)
     assert found.record["loose_in_believed"] == []
     assert not any("move together" in r for r in run.verdict.reasons), run.verdict.reasons
+    report = preflight(scenario_from_mapping(doc, "turns", tmp_path))
+    assert not any("one combination of them" in p.because for p in report.parameters), report.parameters

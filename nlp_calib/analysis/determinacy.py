@@ -17,18 +17,18 @@ hold the model's errors too: the pre-flight's σ is a floor).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
-from nlp_calib.analysis.observability import MIN_TURNING, directions, not_observable
+from nlp_calib.analysis.observability import MIN_TURNING, directions, not_observable, scaled_directions
 from nlp_calib.analysis.streams import chord_scatter
 from nlp_calib.analysis.uncertainty import white_covariance
 from nlp_calib.logs import Log
 from nlp_calib.models.base import reference_scale
 from nlp_calib.problem import ProblemFunctions, ResidualData, over_columns
-from nlp_calib.results.checks import WEAK
+from nlp_calib.results.checks import WEAK, WeakDirection
 from nlp_calib.results.layout import CLOCK
 from nlp_calib.results.preflight import DETERMINED, NOT_DETERMINED, WEAKLY, Excitation, ParameterStatus
 from nlp_calib.solvers import ProblemEvaluator
@@ -231,6 +231,10 @@ class Standing:
     #: Which the run's verdict would call not determined: along a direction beyond the
     #: not-observable limit (:func:`~nlp_calib.analysis.observability.not_observable`).
     unobservable: np.ndarray
+    #: The white noise's correlations of the parameters (NaN where a σ is not finite).
+    correlation: np.ndarray | None = None
+    #: The combinations of several parameters these σ leave loose (:func:`believed`), loosest first.
+    together: tuple[WeakDirection, ...] = ()
 
 
 def standing(
@@ -260,9 +264,25 @@ def standing(
     for i in range(len(names)):
         basis = Vf if undetermined[i] else weak_dirs
         partners.append(_coupled(names, basis, i))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(std, std)
     return Standing(
-        names, std, std / R, R, undetermined, np.asarray(bounded), tuple(partners), not_observable(found)
-    )
+        names, std, std / R, R, undetermined, np.asarray(bounded), tuple(partners), not_observable(found),
+        np.where(np.isfinite(corr), corr, np.nan),
+    )  # fmt: skip
+
+
+def believed(st: Standing) -> Standing:
+    """``st`` with the combinations of several parameters its σ leave loose: the white noise's
+    correlations scaled to each σ over the precision it needs, the run's rule for a combination
+    loose while each parameter passes alone (:func:`~nlp_calib.analysis.observability.scaled_directions`),
+    over the parameters the drive determines."""
+    keep = np.flatnonzero(np.isfinite(st.std_reference) & (st.std_reference > 0) & ~st.undetermined)
+    if st.correlation is None or keep.size < 2:
+        return st
+    names = tuple(st.names[i] for i in keep)
+    found = scaled_directions(names, st.correlation[np.ix_(keep, keep)], st.std_reference[keep])
+    return replace(st, together=tuple(w for w in found if len(w.components) > 1))
 
 
 def _coupled(names: tuple[str, ...], basis: np.ndarray, i: int) -> tuple[str, ...]:
@@ -318,12 +338,17 @@ def statuses(
     ]  # fmt: skip
     for i, name in enumerate(found.names):
         ratio, partners = float(found.std_reference[i]), found.partners[i]
+        loose = next((w for w in found.together if name in w.components), None)
+        if loose is not None and not partners:
+            partners = tuple(n for n in loose.components if n != name)
         if found.undetermined[i] or found.unobservable[i] or _unturned(fns, name, ex):
             status = NOT_DETERMINED
         else:
-            status = WEAKLY if ratio > WEAK else DETERMINED
+            status = WEAKLY if ratio > WEAK or loose is not None else DETERMINED
         words = [_cause(fns, name, partners, ex)] if status != DETERMINED else []
-        if status != DETERMINED:
+        if status == WEAKLY and ratio <= WEAK and loose is not None:
+            words.append(_together(name, loose))
+        elif status != DETERMINED:
             words.append(_trade(partners, bool(found.bounded[i]), found.undetermined[i]))
         out.append(
             ParameterStatus(
@@ -341,6 +366,15 @@ def _unturned(fns: ProblemFunctions, name: str, ex: Excitation | None) -> bool:
     held ±0.3 m where the pre-flight's steps stopped, 1.3e5 m where the run's solver did)."""
     turning = (*fns.model.turning_params, *fns.sensor.turning)
     return ex is not None and name in turning and ex.heading_span_rad < MIN_TURNING
+
+
+def _together(name: str, w: WeakDirection) -> str:
+    """Why ``name``, determined alone, is loose as part of the combination ``w``, in words."""
+    others = ", ".join(n for n in w.components if n != name)
+    return (
+        f"it moves with {others}: one combination of them is known only to ±{w.std_reference:.3g}× the "
+        "precision it needs (their σ, with the white noise's correlations), looser than each one's σ shows"
+    )
 
 
 def _trade(partners: Sequence[str], bounded: bool, free: bool) -> str:

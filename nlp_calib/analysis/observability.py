@@ -149,7 +149,14 @@ def believed_directions(run: CalibrationRun, solver: str, held: bool = True) -> 
     names = tuple(u.names[i] for i in keep)
     needed = run.scenario.layout.needed({n: params[n] for n in names})
     z = np.array([std[n] / needed[n] for n in names])
-    corr = np.nan_to_num(u.correlation[np.ix_(keep, keep)])
+    return scaled_directions(names, u.correlation[np.ix_(keep, keep)], z)
+
+
+def scaled_directions(names: tuple[str, ...], correlation: np.ndarray, z: np.ndarray) -> list[WeakDirection]:
+    """The weak and undetermined directions of the covariance whose correlations are
+    ``correlation`` and whose parameters' σ over the precision each needs are ``z``: the run's
+    :func:`believed_directions` and the pre-flight's, one arithmetic."""
+    corr = np.nan_to_num(np.asarray(correlation, dtype=float))
     np.fill_diagonal(corr, 1.0)
     mu, V = np.linalg.eigh(corr * np.outer(z, z))
     return _named(names, np.sqrt(np.maximum(mu, 0.0)), V, np.zeros(len(names), dtype=bool))

@@ -547,7 +547,7 @@ class Assessment:
         needed = st.reference if self.needed is None else self.needed
         # Not determined as the run's verdict says it (its observability's directions, in the
         # reference units at the start both share); weak against what the verdict needs.
-        return replace(st, std=std, std_reference=std / needed, reference=needed)
+        return det.believed(replace(st, std=std, std_reference=std / needed, reference=needed))
 
 
 def assess(
