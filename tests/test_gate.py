@@ -275,12 +275,13 @@ def test_a_run_searches_its_lag_once_and_the_gate_judges_at_it(
 ) -> None:
     """Issue 41: inside ``run`` the lag is searched once, by the run on the log it fits, and the
     gate judges at that lag; on the demo its verdict is the stand-alone pre-flight's."""
+    from nlp_calib.cli import gate as cli_gate
     from nlp_calib.cli import preflight as cli_preflight
     from nlp_calib.pipeline import align
 
     searched: list[LagEstimate] = []
     judged: list[LagEstimate | None] = []
-    search, judge, gate = align.estimate_tracker_lag, cli_preflight.preflight, cli_preflight.stops
+    search, judge, gate = align.estimate_tracker_lag, cli_preflight.preflight, cli_gate.stops
 
     def counted(*args: object) -> LagEstimate:
         searched.append(search(*args))  # type: ignore[arg-type]
@@ -292,7 +293,7 @@ def test_a_run_searches_its_lag_once_and_the_gate_judges_at_it(
 
     monkeypatch.setattr(align, "estimate_tracker_lag", counted)
     monkeypatch.setattr(pf, "estimate_tracker_lag", counted)
-    monkeypatch.setattr(cli_preflight, "stops", spied)
+    monkeypatch.setattr(cli_gate, "stops", spied)
     demo = SCENARIOS / "demo.yaml"
     proc = cli("run", str(demo), "--solver", "gauss_newton", "--out", str(tmp_path / "out"))
     assert proc.returncode == 0, proc.stderr

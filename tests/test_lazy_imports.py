@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import argparse
 import ast
 import importlib
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from conftest import REPO
+
+from nlp_calib.cli.parser import build_parser, named_command
 
 #: The packages whose ``__init__`` re-exports through :func:`nlp_calib.core.lazy.exports`.
 LAZY = (
@@ -73,3 +77,40 @@ def test_a_lazy_package_exports_what_its_modules_define(package: str) -> None:
     with pytest.raises(AttributeError, match="no attribute 'not_exported'"):
         module.not_exported  # noqa: B018
     assert set(table) <= set(dir(module))
+
+
+def _simulator(loaded: set[str]) -> set[str]:
+    """The modules of ``loaded`` that only simulating or drafting a scenario needs."""
+    return {m for m in loaded if m.startswith(("nlp_calib.simulation", "nlp_calib.pipeline.simconfig"))} | (
+        loaded & {"nlp_calib.pipeline.draft"}
+    )
+
+
+def test_a_compare_loads_no_simulator(tmp_path: Path) -> None:
+    """``compare`` of the demo (a simulated log, its truth beside it: the run reads the truth) from
+    the command line's entry: nothing of the simulator, nor the scenario drafter, is loaded."""
+    out = tmp_path / "out"
+    argv = ["compare", str(REPO / "scenarios" / "demo.yaml"), "--out", str(out)]
+    loaded = _loaded_after(f"from nlp_calib.cli.main import main\nmain({argv!r})")
+    assert "nlp_calib.pipeline.truth" in loaded and (out / "result.json").is_file()
+    assert _simulator(loaded) == set()
+
+
+def test_simulate_parses_with_its_whole_grammar() -> None:
+    """The grammar built for one command is the whole one's for that command; ``simulate``'s is
+    built with it (and loads the simulator), for any other command only its help line."""
+    loaded = _loaded_after("from nlp_calib.cli.parser import build_parser\nbuild_parser('simulate')")
+    assert {"nlp_calib.simulation", "nlp_calib.pipeline.simconfig"} <= _simulator(loaded)
+
+    def commands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+        return next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+
+    whole = commands(build_parser())
+    for name in ("simulate", "compare"):
+        alone = commands(build_parser(named_command(["--debug", name, "x"])))
+        assert list(alone) == list(whole)
+        assert alone[name].format_help() == whole[name].format_help()
+    assert commands(build_parser("compare"))["simulate"]._actions[1:] == []
+    assert build_parser("compare").format_help() == build_parser().format_help()
+    argv = ["simulate", "--out", "x.txt", "--trajectory", "straight", "--records", "500"]
+    assert vars(build_parser(named_command(argv)).parse_args(argv)) == vars(build_parser().parse_args(argv))

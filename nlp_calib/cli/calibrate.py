@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.cli.explain import no_crossvalidation
+from nlp_calib.cli.gate import set_up_and_gate
 from nlp_calib.cli.parser import ALL_SOLVERS
-from nlp_calib.cli.preflight import set_up_and_gate
 from nlp_calib.core import interrupts
 from nlp_calib.core.errors import SolverError, UsageError
 from nlp_calib.core.files import check_output_dir

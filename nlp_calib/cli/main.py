@@ -59,9 +59,9 @@ def _run(argv: list[str]) -> int:
     try:
         interrupts.check()  # a signal while the program started
         # The grammar names every model, solver and option range: loaded only to parse.
-        from nlp_calib.cli.parser import build_parser
+        from nlp_calib.cli.parser import build_parser, named_command
 
-        args = build_parser().parse_args(argv)
+        args = build_parser(named_command(argv)).parse_args(argv)
         with warnings.catch_warnings():
             warnings.simplefilter("always")
             # A library's own warnings (numpy's floating point, say) once each, not once per call.

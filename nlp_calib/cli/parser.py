@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -16,9 +17,6 @@ from nlp_calib.logs.bag_reader import CLOCK_OFFSET, DEFAULT_MAX_GAP_S, JOINT_UNI
 from nlp_calib.models import DEFAULT_MODEL, MODELS, encoders
 from nlp_calib.outputs.ros2_control import DEFAULT_ROS_DISTRO, ROS_DISTROS
 from nlp_calib.pipeline.options import BLOCKS
-from nlp_calib.pipeline.simconfig import CLI_LIMITS
-from nlp_calib.simulation import TRAJECTORIES
-from nlp_calib.simulation.vehicles import VEHICLES
 from nlp_calib.solvers import SOLVERS
 
 #: ``--solver`` values that mean every registered solver.
@@ -284,7 +282,16 @@ def _sub(command: str) -> dict[str, Any]:
     return {"epilog": _epilog(command), "formatter_class": argparse.RawDescriptionHelpFormatter}
 
 
-def build_parser() -> argparse.ArgumentParser:
+def named_command(argv: Sequence[str]) -> str | None:
+    """The command ``argv`` names: its first word that is not an option (the program's own options
+    take no value); None when there is none."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The command line's grammar. ``command``: the one the arguments name (None: any), whose
+    grammar alone is read: ``simulate``'s options, which load the simulator, are added only for it
+    (its help line always)."""
     parser = _Parser(
         prog="nlp-calib",
         description="Calibrate a wheeled robot's kinematics and sensor mounting pose.",
@@ -300,7 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
         _add_validate,
         _add_codegen,
         _add_odometry,
-        _add_simulate,
+        functools.partial(_add_simulate, options=command in (None, "simulate")),
         _add_import_bag,
         _add_check,
         _add_batch,
@@ -378,10 +385,19 @@ def _add_odometry(sub: Any) -> None:
     )
 
 
-def _add_simulate(sub: Any) -> None:
+def _add_simulate(sub: Any, options: bool = True) -> None:
     p = sub.add_parser(
         "simulate", help="write a synthetic log with known truth (truth JSON beside it)", **_sub("simulate")
     )
+    if options:
+        _add_simulate_options(p)
+
+
+def _add_simulate_options(p: argparse.ArgumentParser) -> None:
+    # The simulator's tables, loaded here: a command other than simulate never needs them.
+    from nlp_calib.pipeline.simconfig import CLI_LIMITS
+    from nlp_calib.simulation import TRAJECTORIES
+
     p.add_argument(
         "--out",
         type=_path,
@@ -414,6 +430,8 @@ def _add_simulate(sub: Any) -> None:
 
 def _add_simulated_kinds(p: argparse.ArgumentParser) -> None:
     """What ``simulate`` writes other than a text log: a lidar's, a gyro's, a vehicle's, a vendor's."""
+    from nlp_calib.simulation.vehicles import VEHICLES
+
     kind = p.add_mutually_exclusive_group()
     kind.add_argument(
         "--lidar",

@@ -185,6 +185,12 @@ def atomic_write_text(path: Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def truth_path(log_path: Path) -> Path:
+    """Where the truth JSON of a simulated log lives: beside it, ``<name>.truth.json`` (here, not
+    with the simulator: a run reads it without loading the simulator)."""
+    return log_path.with_suffix(".truth.json")
+
+
 def check_output_dir(out: str | Path) -> Path:
     """Check that ``out`` is, or can be created as, a writable folder, without creating it: a run
     that stops on bad input leaves no empty folders behind. (A probe file is created and removed

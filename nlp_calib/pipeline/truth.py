@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from nlp_calib.core.errors import NlpCalibWarning
+from nlp_calib.core.files import truth_path
 from nlp_calib.models.clock import LAG_PARAM
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import FINE, CheckResult, TruthCheck
 from nlp_calib.results.codec import finite_or_null
-from nlp_calib.simulation import truth_path
 
 #: Parameter values in one form's names and units into another's.
 Converter = Callable[[Mapping[str, float]], dict[str, float]]

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from nlp_calib.core.files import atomic_write_text, atomic_writer
+from nlp_calib.core.files import atomic_write_text, atomic_writer, truth_path
 from nlp_calib.logs import LogHeader, format_header, format_log, format_records
 from nlp_calib.models import MODELS
 from nlp_calib.simulation.blocks import Block, blocks, inject_faults, with_faults, with_odometry
@@ -113,11 +113,6 @@ def simulate(opts: SimulationOptions, block: int | None = None) -> SimulatedLog:
         faults=faults,
         tracker_outliers=joined["outliers"],
     )
-
-
-def truth_path(log_path: Path) -> Path:
-    """Where the truth JSON of a simulated log lives: beside it, ``<name>.truth.json``."""
-    return log_path.with_suffix(".truth.json")
 
 
 def write_simulation(sim: SimulatedLog, out: str | Path) -> tuple[Path, Path]:
