@@ -15,7 +15,9 @@ from conftest import SCENARIOS, write_sim
 
 from nlp_calib import Calibration, load_scenario
 from nlp_calib.pipeline.align import white_std
+from nlp_calib.pipeline.build import at_lags
 from nlp_calib.pipeline.fit import Fit
+from nlp_calib.pipeline.stages import align_stage
 from nlp_calib.solvers import ProblemEvaluator
 
 #: The two starts' optima agree within this share of each parameter's white-noise σ.
@@ -23,22 +25,36 @@ SAME_OPTIMUM_SIGMAS = 0.05
 
 
 @contextmanager
-def passes(ev: ProblemEvaluator) -> Iterator[dict[str, int]]:
-    """Full passes of ``ev`` over its windows (normal equations, costs) while the block runs; a
-    point evaluated before is kept by the evaluator and costs no pass."""
+def passes(ev: ProblemEvaluator | None = None) -> Iterator[dict[str, int]]:
+    """Full passes over their windows (normal equations, costs) of ``ev`` (None: every evaluator)
+    while the block runs; a point evaluated before is kept by the evaluator and costs no pass."""
     counted = {"normal_equations": 0, "cost": 0}
-    call = ev._call
+    owner = ProblemEvaluator if ev is None else ev
+    call = owner._call
 
-    def counting(name: str, x: np.ndarray):  # type: ignore[no-untyped-def]
+    def counting(*args):  # type: ignore[no-untyped-def]
+        name = args[-2]
         if name in counted:
             counted[name] += 1
-        return call(name, x)
+        return call(*args)
 
-    ev._call = counting  # type: ignore[method-assign]
+    owner._call = counting  # type: ignore[method-assign]
     try:
         yield counted
     finally:
-        del ev._call
+        if ev is None:
+            ProblemEvaluator._call = call  # type: ignore[method-assign]
+        else:
+            del ev._call
+
+
+def _white_sigma(fit: Fit, x: np.ndarray) -> np.ndarray:
+    """Each free parameter's white-noise σ at ``x`` on ``fit``'s windows."""
+    ne = fit.evaluator.normal_equations(x)
+    dof = fit.fns.error_rows * fit.evaluator.n_residuals - fit.fns.n_free
+    sigma = np.array([white_std(ne.H, ne.cost / dof, i) for i in range(fit.fns.n_free)])
+    assert np.all(sigma > 0)
+    return sigma
 
 
 def _from_guess(fit: Fit) -> Fit:
@@ -74,10 +90,7 @@ def test_the_fit_from_the_settled_start_ends_at_the_same_optimum_in_fewer_passes
     assert near.converged and far.converged
     assert np.array_equal(fit.solvers_start(), start.settled)
     assert np.array_equal(guess.solvers_start(), start.x0)
-    ne = fit.evaluator.normal_equations(far.x)
-    dof = fit.fns.error_rows * fit.evaluator.n_residuals - fit.fns.n_free
-    sigma = np.array([white_std(ne.H, ne.cost / dof, i) for i in range(fit.fns.n_free)])
-    assert np.all(sigma > 0)
+    sigma = _white_sigma(fit, far.x)
     assert np.all(np.abs(near.x - far.x) <= SAME_OPTIMUM_SIGMAS * sigma), (near.x - far.x) / sigma
     # The guess's own cost is the one pass the choice of start adds.
     assert settled["cost"] == initial["cost"] + 1
@@ -89,10 +102,34 @@ def test_every_solver_starts_from_one_point(calibration: Calibration) -> None:
     results = {name: fit.solve(name) for name in ("gauss_newton", "ipopt")}
     assert all(r.converged for r in results.values())
     gn, ip = results["gauss_newton"], results["ipopt"]
-    ne = fit.evaluator.normal_equations(gn.x)
-    dof = fit.fns.error_rows * fit.evaluator.n_residuals - fit.fns.n_free
-    sigma = np.array([white_std(ne.H, ne.cost / dof, i) for i in range(fit.fns.n_free)])
+    sigma = _white_sigma(fit, gn.x)
     assert np.all(np.abs(gn.x - ip.x) <= SAME_OPTIMUM_SIGMAS * sigma)
+
+
+def test_the_lag_stage_starts_from_the_screens_judging_fit(tmp_path: Path) -> None:
+    """The lag's fits from where the screen's judging fit converged (its lag held at the guess's)
+    settle where they do from the guess, in fewer passes (a lag the guess has already: one fit
+    settles it, and that fit starts at its optimum but for the lag; seed 73, never tuned on)."""
+    log = write_sim(tmp_path, records=3000, seed=73, latency_s=0.0)
+    calibration = Calibration(load_scenario(SCENARIOS / "demo.yaml").with_options(dataset=log))
+    setup, fit = calibration.stages, calibration.fitting
+    judged, estimate = setup.screening.judged, setup.alignment.estimate
+    assert judged is not None and estimate is not None
+    lag = fit.fns.free.index("tracker_lag")
+    assert judged[lag] == estimate.path_s[0]  # the lag re-sampled at first: the guess's
+    # The problem as the lag stage had it: its lag at the guess's, not yet at the one it found.
+    problem = at_lags(setup.problem, [estimate.path_s[0]])
+    with passes() as near:
+        again = align_stage(problem, setup.prepared, setup.screening)
+    unjudged = dataclasses.replace(setup.screening, judged=None)
+    with passes() as far:
+        guess = align_stage(problem, setup.prepared, unjudged)
+    assert again.settled is not None and guess.settled is not None
+    assert np.array_equal(again.settled, fit.problem.start.settled)
+    sigma = _white_sigma(fit, again.settled)
+    assert np.all(np.abs(again.settled - guess.settled) <= SAME_OPTIMUM_SIGMAS * sigma)
+    assert abs(again.lag_s - guess.lag_s) <= SAME_OPTIMUM_SIGMAS * sigma[lag]
+    assert near["normal_equations"] < far["normal_equations"], (near, far)
 
 
 def test_a_start_worse_than_the_initial_guess_is_refused(calibration: Calibration) -> None:

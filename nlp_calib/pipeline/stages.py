@@ -46,7 +46,10 @@ def align_stage(problem: Problem, prepared: PreparedLog, screening: Screening) -
     reach = max(abs(search[0]), abs(search[1]))
     log = prepared.log
     binder = exclude_faults(problem.binder, screening.findings, log.n_records, reach, median_interval(log))
-    return align(binder, screening.fitted_log, prepared.start, prepared.stop, problem.start.x0)
+    # The screen's judging fit converged from the initial guess on nearly these windows, its lag
+    # held at the guess's: the lag's first fit starts there, not at the guess again.
+    x0 = problem.start.x0 if screening.judged is None else screening.judged
+    return align(binder, screening.fitted_log, prepared.start, prepared.stop, x0)
 
 
 @dataclass(frozen=True)
