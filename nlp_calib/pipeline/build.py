@@ -169,7 +169,7 @@ class StartingPoint:
     nominal: Mapping[str, float] = field(default_factory=dict)
     nominal_source: str = ""
     #: The free values a fit of the same problem before this one settled at (the lag stage's; None:
-    #: none): the solvers start there where it explains their windows better than ``x0``, which
+    #: none): the solvers start there where it explains their windows no worse than ``x0``, which
     #: stays the initial guess every figure is judged against.
     settled: np.ndarray | None = None
 
