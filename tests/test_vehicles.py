@@ -740,33 +740,34 @@ def test_the_highway_simulator_adds_bends_a_sliding_axle_and_a_wandering_device_
 LAP = RoadOptions(heading_change=-4.7, bend_angle=0.03, slip_gain=0.004, pose_noise_time_s=120.0)
 
 
-def _half_check(tmp_path: Path, moved: dict[str, float]) -> Any:
-    """The lap's car calibrated on the drive's first half and checked on its second (with the
-    device's mount moved by ``moved`` there), as ``run`` and ``check`` do."""
-    from nlp_calib.outputs.handoff import write_calibration
-    from nlp_calib.pipeline.check import check
-    from nlp_calib.pipeline.stored import read_calibration
+#: The lap's drive: 400 s on the LAP road, with the device's noise wandering as it does on it.
+LAP_DRIVE = {"duration_s": 400.0, "seed": 4802, "road": LAP, "pose_noise": (0.3, 0.002)}
 
-    opts = {"duration_s": 400.0, "seed": 4802, "road": LAP, "pose_noise": (0.3, 0.002)}
-    sims = [simulate_highway(HighwayOptions(**opts, truth=t)) for t in ({}, moved)]  # type: ignore[arg-type]
-    half = sims[0].pose_time_s.size // 2
-    scenarios = []
-    for i, (sim, samples) in enumerate(zip(sims, ({"start": 0, "stop": half}, {"start": half}))):
-        joints, poses, _ = sim.write(tmp_path / f"car{i}")
-        wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
-        sc = {
-            "model": "car_like", "initial_guess": "auto", "solvers": ["gauss_newton"], "samples": samples,
-            "dataset": {"joints": str(joints), "poses": str(poses), "form": "speeds",
-                        "encoders": dict(zip(wheels, wheels))},
-            "known": {"wheelbase": 2.8, "traction_track_width": 1.6},
-        }  # fmt: skip
-        scenarios.append(scenario_from_mapping(sc, f"car{i}", tmp_path))
+
+def _lap_scenario(tmp_path: Path, name: str, sim: Any, samples: dict[str, int]) -> Any:
+    """The car's scenario of ``sim``'s records in ``samples``, as a scenario file states it."""
+    joints, poses, _ = sim.write(tmp_path / name)
+    wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
+    sc = {
+        "model": "car_like", "initial_guess": "auto", "solvers": ["gauss_newton"], "samples": samples,
+        "dataset": {"joints": str(joints), "poses": str(poses), "form": "speeds",
+                    "encoders": dict(zip(wheels, wheels))},
+        "known": {"wheelbase": 2.8, "traction_track_width": 1.6},
+    }  # fmt: skip
+    return scenario_from_mapping(sc, name, tmp_path)
+
+
+def _second_half_drift(tmp_path: Path, cal: Any, moved: dict[str, float], half: int) -> Any:
+    """``check`` of the stored first-half calibration ``cal`` on the lap's second half, the device's
+    mount moved by ``moved`` there, as ``check`` does."""
+    from nlp_calib.pipeline.check import check
+
+    sim = simulate_highway(HighwayOptions(**LAP_DRIVE, truth=moved))  # type: ignore[arg-type]
+    scenario = _lap_scenario(tmp_path, "car1", sim, {"start": half})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        (path,) = write_calibration(Calibration(scenarios[0]).run(), tmp_path, "calibration.yaml")
-        cal = read_calibration(path)
         # As check_scenario starts a scenario file's fit: from the stored values, with its solver.
-        second = scenarios[1].with_options(initial_guess=cal.start(), solvers=(cal.solver,))
+        second = scenario.with_options(initial_guess=cal.start(), solvers=(cal.solver,))
         return check(cal, second).checks.drift
 
 
@@ -775,11 +776,23 @@ def test_a_laps_wandering_device_error_is_no_confirmed_drift_while_a_turned_devi
     """The second half of an unchanged car's lap: its device's heading error, wandering over two
     minutes, is common to every 20 s block of a half, so the jackknife cannot see it; the yaw's
     change (+6.3σ of the jackknife's) is reported, not confirmed. A device turned by 1° on the
-    same drive is a confirmed drift."""
-    same = _half_check(tmp_path / "same", {})
+    same drive is a confirmed drift. The first half is calibrated once, as ``run`` does, and
+    ``check`` reads its stored file for both second halves."""
+    from nlp_calib.outputs.handoff import write_calibration
+    from nlp_calib.pipeline.stored import read_calibration
+
+    first = simulate_highway(HighwayOptions(**LAP_DRIVE, truth={}))  # type: ignore[arg-type]
+    half = first.pose_time_s.size // 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(_lap_scenario(tmp_path, "car0", first, {"start": 0, "stop": half})).run()
+        (path,) = write_calibration(run, tmp_path, "calibration.yaml")
+        cal = read_calibration(path)
+    same = _second_half_drift(tmp_path / "same", cal, {}, half)
     assert same is not None and all(not c.confirmed for c in same.drifted), same.line()
     assert all("not confirmed" in r for r in same.reasons if " moved by " in r)
-    turned = _half_check(tmp_path / "turned", {"sensor_theta": HIGHWAY_TRUTH["sensor_theta"] + 0.0175})
+    turned_theta = {"sensor_theta": HIGHWAY_TRUTH["sensor_theta"] + 0.0175}
+    turned = _second_half_drift(tmp_path / "turned", cal, turned_theta, half)
     assert turned is not None and [c.name for c in turned.drifted] == ["sensor_theta"], turned.line()
     assert turned.drifted[0].confirmed and turned.drifted[0].change == pytest.approx(0.0175, abs=0.005)
 
