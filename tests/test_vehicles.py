@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -64,6 +65,24 @@ def _skid_run(tmp_path: Path, seed: int, pivot_slip: float = 0.1) -> tuple[Any, 
     return run, opts, sim, calib
 
 
+#: A skid-steer's run, its options, drive and calibration, as :func:`_skid_run` returns them.
+SkidRun = tuple[Any, SkidSpinOptions, Any, Any]
+
+
+@pytest.fixture(scope="module")
+def skid_runs(tmp_path_factory: pytest.TempPathFactory) -> Callable[[int, float], SkidRun]:
+    """:func:`_skid_run` of each (seed, pivot slip), made once for the tests that read the same
+    drive's run (none changes it)."""
+    made: dict[tuple[int, float], SkidRun] = {}
+
+    def get(seed: int, pivot_slip: float) -> SkidRun:
+        if (seed, pivot_slip) not in made:
+            made[seed, pivot_slip] = _skid_run(tmp_path_factory.mktemp("skid"), seed, pivot_slip)
+        return made[seed, pivot_slip]
+
+    return get
+
+
 def test_the_skid_steer_simulator_spins_past_pi_and_checks_its_options() -> None:
     sim = simulate_skid_spins(SkidSpinOptions(duration_s=120.0, seed=3))
     t = sim.joint_time_s
@@ -94,9 +113,9 @@ def test_the_skid_steer_simulator_spins_past_pi_and_checks_its_options() -> None
     ],
 )
 def test_a_skid_steer_spinning_past_pi_ends_right_with_covariances_its_windows_show(
-    tmp_path: Path, seed: int, pivot_slip: float
+    skid_runs: Callable[[int, float], SkidRun], seed: int, pivot_slip: float
 ) -> None:
-    run, opts, sim, calib = _skid_run(tmp_path, seed, pivot_slip)
+    run, opts, sim, calib = skid_runs(seed, pivot_slip)
     # The truth in the joint form's names (the counts form's k_left is a radius in m per rad here).
     truth = {JOINT_NAMES.get(n, n): v for n, v in opts.truth.items()}
     # The start survived the wrapped increments: positive radii near the truth, no mirror image.
@@ -162,14 +181,14 @@ def test_a_skid_steers_handed_off_diagonals_are_within_two_of_its_drift_bounded_
 
 
 def test_a_skid_steers_turn_law_takes_the_scatter_of_its_pivots_each_fitted_on_its_own(
-    tmp_path: Path,
+    skid_runs: Callable[[int, float], SkidRun],
 ) -> None:
     """Seed 2, pivots slipping up to ±10 %: every pivot the simulator drove is one draw, the slipped
     ones the fit left out among them, and the σ of what the pivots determine is their scatter about
     the estimate (the block σ alone put turn_slip 6σ off its truth)."""
     from nlp_calib.analysis.pivots import pivots_std
 
-    run, opts, sim, _ = _skid_run(tmp_path, 2, 0.1)
+    run, opts, sim, _ = skid_runs(2, 0.1)
     pivots = run.checks.pivots
     assert pivots is not None
     names = list(pivots.names)
@@ -290,10 +309,12 @@ def test_a_slow_drivers_held_readings_are_filled_in_between_its_updates() -> Non
     assert np.array_equal(fresh_positions(t, both)[0], both)
 
 
-def test_a_skid_steer_whose_pivots_slipped_is_never_called_good(tmp_path: Path) -> None:
+def test_a_skid_steer_whose_pivots_slipped_is_never_called_good(
+    skid_runs: Callable[[int, float], SkidRun],
+) -> None:
     """The slip too small to find biases what the pivots determine beyond its σ (the xfail above):
     the verdict says so; the slipped pivots' heading drift is stated apart from the rates."""
-    run, _, _, _ = _skid_run(tmp_path, 2, 0.1)
+    run, _, _, _ = skid_runs(2, 0.1)
     rates = run.odometry.rates if run.odometry is not None else None
     assert rates is not None and rates.slipped > 0 and rates.slip_per_radian > 0
     assert "pivots the ground slipped on" in rates.words()
