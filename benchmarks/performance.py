@@ -164,13 +164,16 @@ def med(values: list[float]) -> float:
     return float(np.median(values)) if values else float("nan")
 
 
-def end_to_end(scenarios: list[tuple[str, list[str]]], repeats: int, tmp: Path) -> dict[str, Any]:
-    """``compare`` of each scenario, cold and warm cache, interleaved; wall, peak RSS, solver times."""
+def end_to_end(
+    scenarios: list[tuple[str, list[str]]], repeats: int, tmp: Path, warm_up: bool = True
+) -> dict[str, Any]:
+    """``compare`` of each scenario, cold and warm cache, interleaved; wall, peak RSS, solver times
+    (without ``warm_up`` the first warm run may also compile, as a user's first run does)."""
     from nlp_calib.codegen.compiler import cache_dir
 
     env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
     warm = cache_dir()  # the cache a user's runs keep: warm after the first
-    for name, extra in scenarios:  # fill the warm cache (not timed)
+    for name, extra in scenarios if warm_up else ():  # fill the warm cache (not timed)
         launch(
             cli("compare", str(REPO / "scenarios" / f"{name}.yaml"), *extra, "--out", str(tmp / "w")),
             {**env, "NLP_CALIB_CACHE": str(warm)},
@@ -967,7 +970,7 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
         else:
             scenarios = [(n, ["--data", str(real)]) for n in ("real_tricycle", "real_tricycle_seed")]
             scenarios += [("demo", []), ("diff_drive_demo", []), ("camera_demo", [])]
-        return end_to_end(scenarios, repeats, tmp)
+        return end_to_end(scenarios, repeats, tmp, not quick)
     if section == "solvers":
         return solvers(solver_cases(real, quick), repeats, per_factor=not quick)
     if section == "ipopt_lag":
