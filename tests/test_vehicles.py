@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import cli
+from conftest import cli, highway_dataset
 from odometry_truth import sigma_over_truth
 
 from nlp_calib.analysis.precision import HEADING_BUDGET
@@ -768,12 +768,9 @@ LAP_DRIVE = {"duration_s": 400.0, "seed": 4802, "road": LAP, "pose_noise": (0.3,
 def _lap_scenario(tmp_path: Path, name: str, sim: Any, samples: dict[str, int]) -> Any:
     """The car's scenario of ``sim``'s records in ``samples``, as a scenario file states it."""
     joints, poses, _ = sim.write(tmp_path / name)
-    wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
     sc = {
         "model": "car_like", "initial_guess": "auto", "solvers": ["gauss_newton"], "samples": samples,
-        "dataset": {"joints": str(joints), "poses": str(poses), "form": "speeds",
-                    "encoders": dict(zip(wheels, wheels))},
-        "known": {"wheelbase": 2.8, "traction_track_width": 1.6},
+        "dataset": highway_dataset(joints, poses), "known": {"wheelbase": 2.8, "traction_track_width": 1.6},
     }  # fmt: skip
     return scenario_from_mapping(sc, name, tmp_path)
 
