@@ -138,17 +138,42 @@ def cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "nlp_calib", *args]
 
 
+def simulate_log(*args: str) -> None:
+    """``nlp-calib simulate ARGS`` in this process: the same command writes the same bytes, without
+    a fresh interpreter's imports (1.5 s of CPU each, most of a smoke run's small log); what it
+    prints is dropped. The ``simulate`` section times the command in processes of its own."""
+    import contextlib
+    import io
+    import warnings
+
+    from nlp_calib.cli.main import main as nlp_calib_main
+
+    err = io.StringIO()
+    with (
+        warnings.catch_warnings(),
+        contextlib.redirect_stdout(io.StringIO()),
+        contextlib.redirect_stderr(err),
+    ):
+        warnings.simplefilter("ignore")
+        code = nlp_calib_main(["simulate", *args])
+    if code != 0:
+        raise SystemExit(f"nlp-calib simulate {' '.join(args)} failed ({code}): {err.getvalue()[-500:]}")
+
+
 def med(values: list[float]) -> float:
     return float(np.median(values)) if values else float("nan")
 
 
-def end_to_end(scenarios: list[tuple[str, list[str]]], repeats: int, tmp: Path) -> dict[str, Any]:
-    """``compare`` of each scenario, cold and warm cache, interleaved; wall, peak RSS, solver times."""
+def end_to_end(
+    scenarios: list[tuple[str, list[str]]], repeats: int, tmp: Path, warm_up: bool = True
+) -> dict[str, Any]:
+    """``compare`` of each scenario, cold and warm cache, interleaved; wall, peak RSS, solver times
+    (without ``warm_up`` the first warm run may also compile, as a user's first run does)."""
     from nlp_calib.codegen.compiler import cache_dir
 
     env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
     warm = cache_dir()  # the cache a user's runs keep: warm after the first
-    for name, extra in scenarios:  # fill the warm cache (not timed)
+    for name, extra in scenarios if warm_up else ():  # fill the warm cache (not timed)
         launch(
             cli("compare", str(REPO / "scenarios" / f"{name}.yaml"), *extra, "--out", str(tmp / "w")),
             {**env, "NLP_CALIB_CACHE": str(warm)},
@@ -333,12 +358,7 @@ def scaling(sizes: list[int], repeats: int, tmp: Path, warm_up: bool = True) -> 
         # simulator then held a whole log in memory); the command writes the same bytes.
         config = tmp / f"sim_{n}.yaml"
         config.write_text(f"records: {n}\nseed: 11\nsubsteps: {4 if n > 200000 else 20}\n")
-        subprocess.run(
-            cli("simulate", "--config", str(config), "--out", str(logs[n]), "--force"),
-            env=env,
-            check=True,
-            capture_output=True,
-        )
+        simulate_log("--config", str(config), "--out", str(logs[n]), "--force")
     scenario = str(REPO / "scenarios" / "real_tricycle_seed.yaml")
     if warm_up:
         first = str(logs[sizes[0]])
@@ -399,34 +419,22 @@ def sized_runs(
 def horizon(sizes: list[int], repeats: int, tmp: Path, warm_up: bool = True) -> dict[str, Any]:
     """The demo's settings (windows of several records, both solvers, every check) on simulated
     tricycle logs of each size."""
-    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
     logs = {}
     for n in sizes:
         logs[n] = tmp / f"horizon_{n}.txt"
-        subprocess.run(
-            cli("simulate", "--records", str(n), "--seed", "11", "--out", str(logs[n]), "--force"),
-            env=env,
-            check=True,
-            capture_output=True,
-        )
+        simulate_log("--records", str(n), "--seed", "11", "--out", str(logs[n]), "--force")
     return sized_runs("demo", logs, repeats, tmp, warm_up)
 
 
 def camera(sizes: list[int], repeats: int, tmp: Path, warm_up: bool = True) -> dict[str, Any]:
     """The camera demo's settings (3-D mount, lag search, both solvers) on simulated camera drives of
     each number of poses (the demo's simulation options, longer)."""
-    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
     config = REPO / "scenarios" / "data" / "camera_demo.sim.yaml"
     logs = {}
     for n in sizes:
         logs[n] = tmp / f"camera_{n}.tum"  # a fresh folder: nothing to replace
         duration = f"{n / CAMERA_RATE_HZ:g}"
-        subprocess.run(
-            cli("simulate", "--config", str(config), "--duration", duration, "--out", str(logs[n])),
-            env=env,
-            check=True,
-            capture_output=True,
-        )
+        simulate_log("--config", str(config), "--duration", duration, "--out", str(logs[n]))
     return sized_runs("camera_demo", logs, repeats, tmp, warm_up)
 
 
@@ -505,14 +513,8 @@ def gn_pass(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
 
     from nlp_calib.pipeline import Calibration, load_scenario
 
-    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
     log = tmp / f"pass_{records}.txt"
-    subprocess.run(
-        cli("simulate", "--records", str(records), "--seed", "11", "--out", str(log), "--force"),
-        env=env,
-        check=True,
-        capture_output=True,
-    )
+    simulate_log("--records", str(records), "--seed", "11", "--out", str(log), "--force")
     calib = Calibration(load_scenario(REPO / "scenarios" / "demo.yaml").with_dataset(log))
     ev = calib.evaluator
     lib, sizes = fused_loop(ev.fns, tmp)
@@ -593,11 +595,8 @@ def batch(n_logs: int, records: int, repeats: int, tmp: Path, warm_up: bool = Tr
     logs = tmp / "fleet"
     logs.mkdir(exist_ok=True)
     for seed in range(n_logs):
-        subprocess.run(
-            cli("simulate", "--records", str(records), "--seed", str(100 + seed), "--out",
-                str(logs / f"drive_{seed:02d}.txt"), "--force"),
-            env=env, check=True, capture_output=True,
-        )  # fmt: skip
+        drive = logs / f"drive_{seed:02d}.txt"
+        simulate_log("--records", str(records), "--seed", str(100 + seed), "--out", str(drive), "--force")
     scenario = str(REPO / "scenarios" / "demo.yaml")
 
     def once(jobs: int) -> tuple[float, float]:
@@ -640,14 +639,8 @@ def reader(records: int, repeats: int, tmp: Path) -> dict[str, Any]:
 
     from nlp_calib.logs.reader import read_log
 
-    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONWARNINGS="ignore")
     path = tmp / "reader.txt"
-    subprocess.run(
-        cli("simulate", "--records", str(records), "--out", str(path), "--force"),
-        env=env,
-        check=True,
-        capture_output=True,
-    )
+    simulate_log("--records", str(records), "--out", str(path), "--force")
     kinds: dict[str, Any] = {"steering": "absolute", "traction_wheel": "counter"}
     ours = read_log(path, kinds)
     poses = np.hstack([ours.model_pose, ours.T_world_sensor])
@@ -977,7 +970,7 @@ def measure(section: str, quick: bool, real: Path | None, repeats: int, tmp: Pat
         else:
             scenarios = [(n, ["--data", str(real)]) for n in ("real_tricycle", "real_tricycle_seed")]
             scenarios += [("demo", []), ("diff_drive_demo", []), ("camera_demo", [])]
-        return end_to_end(scenarios, repeats, tmp)
+        return end_to_end(scenarios, repeats, tmp, not quick)
     if section == "solvers":
         return solvers(solver_cases(real, quick), repeats, per_factor=not quick)
     if section == "ipopt_lag":

@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from conftest import cli
+from conftest import cli, highway_dataset
 from odometry_truth import sigma_over_truth
 
 from nlp_calib.analysis.precision import HEADING_BUDGET
@@ -64,6 +65,24 @@ def _skid_run(tmp_path: Path, seed: int, pivot_slip: float = 0.1) -> tuple[Any, 
     return run, opts, sim, calib
 
 
+#: A skid-steer's run, its options, drive and calibration, as :func:`_skid_run` returns them.
+SkidRun = tuple[Any, SkidSpinOptions, Any, Any]
+
+
+@pytest.fixture(scope="module")
+def skid_runs(tmp_path_factory: pytest.TempPathFactory) -> Callable[[int, float], SkidRun]:
+    """:func:`_skid_run` of each (seed, pivot slip), made once for the tests that read the same
+    drive's run (none changes it)."""
+    made: dict[tuple[int, float], SkidRun] = {}
+
+    def get(seed: int, pivot_slip: float) -> SkidRun:
+        if (seed, pivot_slip) not in made:
+            made[seed, pivot_slip] = _skid_run(tmp_path_factory.mktemp("skid"), seed, pivot_slip)
+        return made[seed, pivot_slip]
+
+    return get
+
+
 def test_the_skid_steer_simulator_spins_past_pi_and_checks_its_options() -> None:
     sim = simulate_skid_spins(SkidSpinOptions(duration_s=120.0, seed=3))
     t = sim.joint_time_s
@@ -94,9 +113,9 @@ def test_the_skid_steer_simulator_spins_past_pi_and_checks_its_options() -> None
     ],
 )
 def test_a_skid_steer_spinning_past_pi_ends_right_with_covariances_its_windows_show(
-    tmp_path: Path, seed: int, pivot_slip: float
+    skid_runs: Callable[[int, float], SkidRun], seed: int, pivot_slip: float
 ) -> None:
-    run, opts, sim, calib = _skid_run(tmp_path, seed, pivot_slip)
+    run, opts, sim, calib = skid_runs(seed, pivot_slip)
     # The truth in the joint form's names (the counts form's k_left is a radius in m per rad here).
     truth = {JOINT_NAMES.get(n, n): v for n, v in opts.truth.items()}
     # The start survived the wrapped increments: positive radii near the truth, no mirror image.
@@ -162,14 +181,14 @@ def test_a_skid_steers_handed_off_diagonals_are_within_two_of_its_drift_bounded_
 
 
 def test_a_skid_steers_turn_law_takes_the_scatter_of_its_pivots_each_fitted_on_its_own(
-    tmp_path: Path,
+    skid_runs: Callable[[int, float], SkidRun],
 ) -> None:
     """Seed 2, pivots slipping up to ±10 %: every pivot the simulator drove is one draw, the slipped
     ones the fit left out among them, and the σ of what the pivots determine is their scatter about
     the estimate (the block σ alone put turn_slip 6σ off its truth)."""
     from nlp_calib.analysis.pivots import pivots_std
 
-    run, opts, sim, _ = _skid_run(tmp_path, 2, 0.1)
+    run, opts, sim, _ = skid_runs(2, 0.1)
     pivots = run.checks.pivots
     assert pivots is not None
     names = list(pivots.names)
@@ -290,10 +309,12 @@ def test_a_slow_drivers_held_readings_are_filled_in_between_its_updates() -> Non
     assert np.array_equal(fresh_positions(t, both)[0], both)
 
 
-def test_a_skid_steer_whose_pivots_slipped_is_never_called_good(tmp_path: Path) -> None:
+def test_a_skid_steer_whose_pivots_slipped_is_never_called_good(
+    skid_runs: Callable[[int, float], SkidRun],
+) -> None:
     """The slip too small to find biases what the pivots determine beyond its σ (the xfail above):
     the verdict says so; the slipped pivots' heading drift is stated apart from the rates."""
-    run, _, _, _ = _skid_run(tmp_path, 2, 0.1)
+    run, _, _, _ = skid_runs(2, 0.1)
     rates = run.odometry.rates if run.odometry is not None else None
     assert rates is not None and rates.slipped > 0 and rates.slip_per_radian > 0
     assert "pivots the ground slipped on" in rates.words()
@@ -740,33 +761,31 @@ def test_the_highway_simulator_adds_bends_a_sliding_axle_and_a_wandering_device_
 LAP = RoadOptions(heading_change=-4.7, bend_angle=0.03, slip_gain=0.004, pose_noise_time_s=120.0)
 
 
-def _half_check(tmp_path: Path, moved: dict[str, float]) -> Any:
-    """The lap's car calibrated on the drive's first half and checked on its second (with the
-    device's mount moved by ``moved`` there), as ``run`` and ``check`` do."""
-    from nlp_calib.outputs.handoff import write_calibration
-    from nlp_calib.pipeline.check import check
-    from nlp_calib.pipeline.stored import read_calibration
+#: The lap's drive: 400 s on the LAP road, with the device's noise wandering as it does on it.
+LAP_DRIVE = {"duration_s": 400.0, "seed": 4802, "road": LAP, "pose_noise": (0.3, 0.002)}
 
-    opts = {"duration_s": 400.0, "seed": 4802, "road": LAP, "pose_noise": (0.3, 0.002)}
-    sims = [simulate_highway(HighwayOptions(**opts, truth=t)) for t in ({}, moved)]  # type: ignore[arg-type]
-    half = sims[0].pose_time_s.size // 2
-    scenarios = []
-    for i, (sim, samples) in enumerate(zip(sims, ({"start": 0, "stop": half}, {"start": half}))):
-        joints, poses, _ = sim.write(tmp_path / f"car{i}")
-        wheels = ("steering", "rear_left_wheel", "rear_right_wheel")
-        sc = {
-            "model": "car_like", "initial_guess": "auto", "solvers": ["gauss_newton"], "samples": samples,
-            "dataset": {"joints": str(joints), "poses": str(poses), "form": "speeds",
-                        "encoders": dict(zip(wheels, wheels))},
-            "known": {"wheelbase": 2.8, "traction_track_width": 1.6},
-        }  # fmt: skip
-        scenarios.append(scenario_from_mapping(sc, f"car{i}", tmp_path))
+
+def _lap_scenario(tmp_path: Path, name: str, sim: Any, samples: dict[str, int]) -> Any:
+    """The car's scenario of ``sim``'s records in ``samples``, as a scenario file states it."""
+    joints, poses, _ = sim.write(tmp_path / name)
+    sc = {
+        "model": "car_like", "initial_guess": "auto", "solvers": ["gauss_newton"], "samples": samples,
+        "dataset": highway_dataset(joints, poses), "known": {"wheelbase": 2.8, "traction_track_width": 1.6},
+    }  # fmt: skip
+    return scenario_from_mapping(sc, name, tmp_path)
+
+
+def _second_half_drift(tmp_path: Path, cal: Any, moved: dict[str, float], half: int) -> Any:
+    """``check`` of the stored first-half calibration ``cal`` on the lap's second half, the device's
+    mount moved by ``moved`` there, as ``check`` does."""
+    from nlp_calib.pipeline.check import check
+
+    sim = simulate_highway(HighwayOptions(**LAP_DRIVE, truth=moved))  # type: ignore[arg-type]
+    scenario = _lap_scenario(tmp_path, "car1", sim, {"start": half})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        (path,) = write_calibration(Calibration(scenarios[0]).run(), tmp_path, "calibration.yaml")
-        cal = read_calibration(path)
         # As check_scenario starts a scenario file's fit: from the stored values, with its solver.
-        second = scenarios[1].with_options(initial_guess=cal.start(), solvers=(cal.solver,))
+        second = scenario.with_options(initial_guess=cal.start(), solvers=(cal.solver,))
         return check(cal, second).checks.drift
 
 
@@ -775,11 +794,23 @@ def test_a_laps_wandering_device_error_is_no_confirmed_drift_while_a_turned_devi
     """The second half of an unchanged car's lap: its device's heading error, wandering over two
     minutes, is common to every 20 s block of a half, so the jackknife cannot see it; the yaw's
     change (+6.3σ of the jackknife's) is reported, not confirmed. A device turned by 1° on the
-    same drive is a confirmed drift."""
-    same = _half_check(tmp_path / "same", {})
+    same drive is a confirmed drift. The first half is calibrated once, as ``run`` does, and
+    ``check`` reads its stored file for both second halves."""
+    from nlp_calib.outputs.handoff import write_calibration
+    from nlp_calib.pipeline.stored import read_calibration
+
+    first = simulate_highway(HighwayOptions(**LAP_DRIVE, truth={}))  # type: ignore[arg-type]
+    half = first.pose_time_s.size // 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(_lap_scenario(tmp_path, "car0", first, {"start": 0, "stop": half})).run()
+        (path,) = write_calibration(run, tmp_path, "calibration.yaml")
+        cal = read_calibration(path)
+    same = _second_half_drift(tmp_path / "same", cal, {}, half)
     assert same is not None and all(not c.confirmed for c in same.drifted), same.line()
     assert all("not confirmed" in r for r in same.reasons if " moved by " in r)
-    turned = _half_check(tmp_path / "turned", {"sensor_theta": HIGHWAY_TRUTH["sensor_theta"] + 0.0175})
+    turned_theta = {"sensor_theta": HIGHWAY_TRUTH["sensor_theta"] + 0.0175}
+    turned = _second_half_drift(tmp_path / "turned", cal, turned_theta, half)
     assert turned is not None and [c.name for c in turned.drifted] == ["sensor_theta"], turned.line()
     assert turned.drifted[0].confirmed and turned.drifted[0].change == pytest.approx(0.0175, abs=0.005)
 
