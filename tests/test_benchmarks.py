@@ -38,9 +38,9 @@ def test_performance_benchmark_quick_run(tmp_path: Path) -> None:
     doc = json.loads((tmp_path / "performance.json").read_text())
     # One repeat: the smoke run proves every section runs and agrees; the medians are the benchmark's.
     assert doc["repeats"] == 1 and doc["environment"]["cores"] >= 1
-    assert doc["end_to_end"]["import_floor_s"] > 0
+    assert doc["end_to_end"]["import_floor_s"] > 0 and doc["end_to_end"]["import_floor_cpu_s"] > 0
     demo = doc["end_to_end"]["scenarios"]["demo"]
-    for key in ("cold_wall_s", "warm_wall_s", "warm_peak_mb", "gauss_newton_ms", "ipopt_ms"):
+    for key in ("cold_wall_s", "warm_wall_s", "warm_cpu_s", "warm_peak_mb", "gauss_newton_ms", "ipopt_ms"):
         assert demo[key] > 0, key
     for section in ("end_to_end", "solvers", "scaling"):
         assert len(doc[section]["load_start"]) == 3
