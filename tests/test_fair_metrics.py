@@ -102,6 +102,66 @@ def test_distance_pairs_follow_the_all_pairs_rule(seed: int) -> None:
         assert list(zip(i.tolist(), j.tolist())) == _evo_pairs(dist, delta, 0.1 * delta)
 
 
+def test_distance_pairs_first_of_equal_distances_is_the_binary_searchs() -> None:
+    """The first record of each run of equal distances, taken by a running maximum, is the one a
+    binary search over every record finds (stops: runs of equal distances; a NaN tail: one run, as
+    the search sorts NaNs last)."""
+    rng = np.random.default_rng(71)
+    steps = np.where(rng.random(3000) < 0.3, 0.0, rng.uniform(0.0, 0.05, 3000))
+    dist = np.concatenate([[0.0], np.cumsum(steps)])
+    dist[-40:] = np.nan
+    for delta in (0.2, 1.0, 5.0):
+        target, n, tol = dist[:-1] + delta, dist.size, 0.1 * delta
+        i = np.arange(n - 1)
+        j_hi = np.clip(np.searchsorted(dist, target, side="left"), i + 1, n - 1)
+        j_lo = np.clip(j_hi - 1, i + 1, n - 1)
+        j = np.where(np.abs(dist[j_lo] - target) <= np.abs(dist[j_hi] - target), j_lo, j_hi)
+        j = np.maximum(np.searchsorted(dist, dist[j], side="left"), i + 1)
+        keep = np.abs(dist[j] - target) <= tol
+        got = distance_pairs(dist, delta, tol)
+        assert np.array_equal(got[0], i[keep]) and np.array_equal(got[1], j[keep])
+        assert got[0].size > 1000
+
+
+@pytest.mark.parametrize("group", ["SE(2)", "SE(3)"])
+def test_aligned_errors_a_block_of_rows_at_a_time_are_the_one_product(
+    monkeypatch: pytest.MonkeyPatch, group: str
+) -> None:
+    """Aligned errors taken a few rows at a time (one BLAS call over 10^6 rows cost ~5× the CPU in
+    its threads) are the product over every row at once, bit for bit, the last block short."""
+    from nlp_calib.analysis import metrics
+
+    g = metrics.GEOMETRIES[group]
+    rng = np.random.default_rng(5)
+    ref = rng.normal(0.0, 10.0, (1003, 7))
+    est = ref + rng.normal(0.0, 0.5, ref.shape)
+    d = g.dims
+    R, t = g.align(est[:, :d], ref[:, :d])
+    want = np.linalg.norm(est[:, :d] @ R.T + t - ref[:, :d], axis=1)
+    monkeypatch.setattr(metrics, "CHUNK", 10)
+    assert np.array_equal(metrics.aligned_errors(est, ref, g), want)
+
+
+def test_moved_is_the_stacked_formula_to_the_bit() -> None:
+    """The translation of ``a⁻¹·b`` written in place is ``(c·dx + s·dy, −s·dx + c·dy)`` stacked, to
+    the last bit and the sign of a zero: many rows, one pose against many, one pair."""
+    from nlp_calib.core.poses import moved
+
+    def stacked(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+        dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
+        return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
+
+    rng = np.random.default_rng(9)
+    a = rng.normal(0.0, 50.0, (4000, 3))
+    b = a + rng.normal(0.0, 1.0, a.shape)
+    zeros = [[0.0, -0.0, 0.0], [-0.0, 0.0, np.pi], [0.0, 0.0, -np.pi / 2], [1.0, 2.0, -0.0]]
+    a[:4], b[:4] = zeros, np.roll(zeros, 1, axis=0)
+    for x, y in [(a, b), (a[7], b), (a, b[3]), (a[5], b[6])]:
+        got, want = moved(x, y), stacked(x, y)
+        assert got.shape == want.shape and np.array_equal(got.view(np.int64), want.view(np.int64))
+
+
 def test_error_stats_are_evo_s() -> None:
     e = np.array([0.1, 0.4, 0.2, 0.9])
     s = ErrorStats.of(e)
