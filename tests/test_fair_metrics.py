@@ -104,8 +104,8 @@ def test_distance_pairs_follow_the_all_pairs_rule(seed: int) -> None:
 
 def test_distance_pairs_first_of_equal_distances_is_the_binary_searchs() -> None:
     """The first record of each run of equal distances, taken by a running maximum, is the one a
-    binary search over every record finds (stops: runs of equal distances; a NaN tail: one run, as
-    the search sorts NaNs last)."""
+    binary search over every record finds (stops: runs of equal distances; a NaN tail, where the
+    two differ on the first record of a run, but no pair is kept)."""
     rng = np.random.default_rng(71)
     steps = np.where(rng.random(3000) < 0.3, 0.0, rng.uniform(0.0, 0.05, 3000))
     dist = np.concatenate([[0.0], np.cumsum(steps)])

@@ -179,10 +179,9 @@ def distance_pairs(dist: np.ndarray, delta: float, tol: float) -> tuple[np.ndarr
     better_lo = np.abs(dist[j_lo] - target) <= np.abs(dist[j_hi] - target)
     j = np.where(better_lo, j_lo, j_hi)
     # The first index of each run of equal distances, a running maximum (a second binary search
-    # over every record found the same index at five times the CPU).
-    # (NaNs are one run, as the search sorts them.)
-    same = (dist[1:] == dist[:-1]) | (np.isnan(dist[1:]) & np.isnan(dist[:-1]))
-    starts = np.maximum.accumulate(np.where(np.r_[True, ~same], np.arange(n), 0))
+    # over every record found the same index at five times the CPU; a NaN distance, which the
+    # search puts in one run, is never kept).
+    starts = np.maximum.accumulate(np.where(np.r_[True, dist[1:] != dist[:-1]], np.arange(n), 0))
     j = np.maximum(starts[j], i + 1)
     keep = np.abs(dist[j] - target) <= tol
     return i[keep], j[keep]
