@@ -142,26 +142,6 @@ def test_aligned_errors_a_block_of_rows_at_a_time_are_the_one_product(
     assert np.array_equal(metrics.aligned_errors(est, ref, g), want)
 
 
-def test_moved_is_the_stacked_formula_to_the_bit() -> None:
-    """The translation of ``a⁻¹·b`` written in place is ``(c·dx + s·dy, −s·dx + c·dy)`` stacked, to
-    the last bit and the sign of a zero: many rows, one pose against many, one pair."""
-    from nlp_calib.core.poses import moved
-
-    def stacked(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-        dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
-        return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
-
-    rng = np.random.default_rng(9)
-    a = rng.normal(0.0, 50.0, (4000, 3))
-    b = a + rng.normal(0.0, 1.0, a.shape)
-    zeros = [[0.0, -0.0, 0.0], [-0.0, 0.0, np.pi], [0.0, 0.0, -np.pi / 2], [1.0, 2.0, -0.0]]
-    a[:4], b[:4] = zeros, np.roll(zeros, 1, axis=0)
-    for x, y in [(a, b), (a[7], b), (a, b[3]), (a[5], b[6])]:
-        got, want = moved(x, y), stacked(x, y)
-        assert got.shape == want.shape and np.array_equal(got.view(np.int64), want.view(np.int64))
-
-
 def test_error_stats_are_evo_s() -> None:
     e = np.array([0.1, 0.4, 0.2, 0.9])
     s = ErrorStats.of(e)

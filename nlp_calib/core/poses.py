@@ -33,17 +33,7 @@ def moved(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The translation of ``a⁻¹ · b`` row by row, ``(..., 2)``: :func:`between`'s, without its angle."""
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
-    # Written in place, each the same rounded operations as ``c·dx + s·dy`` and ``-s·dx + c·dy``
-    # (``c·dy − s·dx`` is that sum exactly): no temporaries stacked over every row.
-    out = np.empty((*dx.shape, 2))
-    x, y, term = out[..., 0], out[..., 1], np.empty(np.shape(dx))
-    np.multiply(s, dy, out=term)
-    np.multiply(c, dx, out=x)
-    x += term
-    np.multiply(c, dy, out=y)
-    np.multiply(s, dx, out=term)
-    y -= term
-    return out
+    return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
 
 
 def accumulate(start: np.ndarray, steps: np.ndarray) -> np.ndarray:
