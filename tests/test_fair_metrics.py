@@ -127,8 +127,8 @@ def test_distance_pairs_first_of_equal_distances_is_the_binary_searchs() -> None
 def test_aligned_errors_a_block_of_rows_at_a_time_are_the_one_product(
     monkeypatch: pytest.MonkeyPatch, group: str
 ) -> None:
-    """Aligned errors taken a few rows at a time (one BLAS call over 10^6 rows cost ~5× the CPU in
-    its threads) are the product over every row at once, bit for bit, the last block short."""
+    """Aligned errors taken a few rows at a time (one BLAS call over 10^6 rows cost several times the
+    CPU in its threads) are the product over every row at once, bit for bit, the last block short."""
     from nlp_calib.analysis import metrics
 
     g = metrics.GEOMETRIES[group]
