@@ -102,6 +102,46 @@ def test_distance_pairs_follow_the_all_pairs_rule(seed: int) -> None:
         assert list(zip(i.tolist(), j.tolist())) == _evo_pairs(dist, delta, 0.1 * delta)
 
 
+def test_distance_pairs_first_of_equal_distances_is_the_binary_searchs() -> None:
+    """The first record of each run of equal distances, taken by a running maximum, is the one a
+    binary search over every record finds (stops: runs of equal distances; a NaN tail, where the
+    two differ on the first record of a run, but no pair is kept)."""
+    rng = np.random.default_rng(71)
+    steps = np.where(rng.random(3000) < 0.3, 0.0, rng.uniform(0.0, 0.05, 3000))
+    dist = np.concatenate([[0.0], np.cumsum(steps)])
+    dist[-40:] = np.nan
+    for delta in (0.2, 1.0, 5.0):
+        target, n, tol = dist[:-1] + delta, dist.size, 0.1 * delta
+        i = np.arange(n - 1)
+        j_hi = np.clip(np.searchsorted(dist, target, side="left"), i + 1, n - 1)
+        j_lo = np.clip(j_hi - 1, i + 1, n - 1)
+        j = np.where(np.abs(dist[j_lo] - target) <= np.abs(dist[j_hi] - target), j_lo, j_hi)
+        j = np.maximum(np.searchsorted(dist, dist[j], side="left"), i + 1)
+        keep = np.abs(dist[j] - target) <= tol
+        got = distance_pairs(dist, delta, tol)
+        assert np.array_equal(got[0], i[keep]) and np.array_equal(got[1], j[keep])
+        assert got[0].size > 1000
+
+
+@pytest.mark.parametrize("group", ["SE(2)", "SE(3)"])
+def test_aligned_errors_a_block_of_rows_at_a_time_are_the_one_product(
+    monkeypatch: pytest.MonkeyPatch, group: str
+) -> None:
+    """Aligned errors taken a few rows at a time (one BLAS call over 10^6 rows cost several times the
+    CPU in its threads) are the product over every row at once, bit for bit, the last block short."""
+    from nlp_calib.analysis import metrics
+
+    g = metrics.GEOMETRIES[group]
+    rng = np.random.default_rng(5)
+    ref = rng.normal(0.0, 10.0, (1003, 7))
+    est = ref + rng.normal(0.0, 0.5, ref.shape)
+    d = g.dims
+    R, t = g.align(est[:, :d], ref[:, :d])
+    want = np.linalg.norm(est[:, :d] @ R.T + t - ref[:, :d], axis=1)
+    monkeypatch.setattr(metrics, "CHUNK", 10)
+    assert np.array_equal(metrics.aligned_errors(est, ref, g), want)
+
+
 def test_error_stats_are_evo_s() -> None:
     e = np.array([0.1, 0.4, 0.2, 0.9])
     s = ErrorStats.of(e)
