@@ -73,6 +73,7 @@ from nlp_calib.results.series import (
 )
 from nlp_calib.results.uncertainty import Uncertainty
 from nlp_calib.solvers import GaussNewton, ProblemEvaluator
+from nlp_calib.solvers.gauss_newton import one_optimum
 
 #: Fits of this many windows let go of their evaluator's buffers after the solvers and again before
 #: the refits (each later use binds only what it evaluates).
@@ -263,24 +264,17 @@ def uncertainties(
 
 def same_optimum(evaluator: ProblemEvaluator, a: SolverResult, b: SolverResult, tolerance: float) -> bool:
     """Whether converged ``a`` and ``b`` are one optimum to Gauss-Newton's stopping test
-    (``tolerance``: its decrement relative to the cost), measured in ``a``'s normal equations."""
+    (:func:`~nlp_calib.solvers.gauss_newton.one_optimum`), in ``a``'s normal equations (kept from
+    its uncertainty: no evaluation)."""
     if not (a.converged and b.converged) or a.x.shape != b.x.shape:
         return False
-    # Gauss-Newton stops where its decrement gᵀH⁻¹g is at most tolerance·cost. Near the optimum x*
-    # the cost is quadratic, g = H(x − x*), so that decrement is ‖x − x*‖²_H: the stopping test
-    # leaves an estimate anywhere within √(tolerance·cost) of x* in the metric of H, and two
-    # estimates that both pass it are at most twice that apart. Two closer than that cannot be told
-    # apart by the test (one uncertainty serves both); two farther apart are not both at x*. Per
-    # parameter that distance is |δᵢ| ≤ √((H⁻¹)ᵢᵢ)·‖δ‖_H, i.e. √(tolerance·cost/σ²) ≈ √(tolerance·dof)
-    # of the white σ: it grows with the data, as the test's noise does, where a fixed share of σ
-    # does not. ``a``'s normal equations are kept from its uncertainty (no evaluation).
     ne = evaluator.normal_equations(a.x)
     if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
         return False
     # The tangent step from a to b: x ⊞ δ ≈ x + Mδ to first order (the distance is at rounding).
     M = np.asarray(evaluator.tangent_map(a.x), dtype=float)
     delta = np.linalg.lstsq(M, np.asarray(b.x - a.x, dtype=float), rcond=None)[0]
-    return bool(delta @ ne.H @ delta <= 4.0 * tolerance * abs(ne.cost))
+    return one_optimum(ne.H, ne.cost, delta, tolerance)
 
 
 def _against(fit: Fit, x: np.ndarray) -> dict[str, tuple[str, np.ndarray]]:

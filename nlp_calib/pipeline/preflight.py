@@ -267,7 +267,7 @@ def _binder(d: Drive, n_windows: int) -> Binder:
 
 
 def _as_the_run_aligns(
-    d: Drive, omega: np.ndarray, found: LagEstimate | None = None
+    d: Drive, omega: np.ndarray, found: LagEstimate | None = None, begun: np.ndarray | None = None
 ) -> tuple[Drive, Fitted | None] | None:
     """One log whose time offset is fitted: the lag found by the run's own alignment
     (:func:`~nlp_calib.pipeline.align.estimate_tracker_lag`: re-sampled until it stays, then the
@@ -276,8 +276,9 @@ def _as_the_run_aligns(
     stops where the lag sends it (a car's rear track near zero or at its length, on encoders
     re-sampled 1 ms apart): the run's lag is where the run's fit stops. ``found``: the run's own
     estimate where the run has searched already (inside ``run``: on the screened log it fits), else
-    searched here on the log as read. None where the problem has several logs or no free time
-    offset, or no fit converged at any lag."""
+    searched here on the log as read. ``begun``: free values a fit of the run's settled at (the
+    lag stage's, else the screen's judging fit), where the fit starts instead of the start. None
+    where the problem has several logs or no free time offset, or no fit converged at any lag."""
     clocks = _clocks(d)
     if len(d.parts) != 1 or len(clocks) != 1:
         return None
@@ -297,7 +298,11 @@ def _as_the_run_aligns(
     x0 = np.array(d.start.x0, dtype=float)
     x0[column] = found.lag_s
     moved = _resampled(d, x0)
-    fitted = _fitted(moved, omega, x0)
+    # The run's fit converged near this optimum already, on nearly these windows: the fit here
+    # starts where it settled, at the lag found (a few passes, not the descent from the start).
+    begin = x0 if begun is None or begun.shape != x0.shape else np.array(begun, dtype=float)
+    begin[column] = found.lag_s
+    fitted = _fitted(moved, omega, begin)
     if fitted is None:
         return moved, None
     return moved, (
@@ -564,7 +569,7 @@ def assess(
     d, held = drive(sc, logs, run)
     fns = d.fns
     omega = _omega(d)
-    aligned = _as_the_run_aligns(d, omega, found)
+    aligned = _as_the_run_aligns(d, omega, found, _where_the_run_settled(run))
     d, fitted = aligned if aligned is not None else _aligned(d, omega, _fitted(d, omega))
     x, info, where = fitted[:3] if fitted is not None else _rough(d, omega)
     at = "the fit" if fitted is not None else "the start"
@@ -585,6 +590,14 @@ def assess(
         converged=fitted is not None, pending=pending,
     )  # fmt: skip
     return a.completed() if complete else a
+
+
+def _where_the_run_settled(run: Aligned | None) -> np.ndarray | None:
+    """Where a fit of the run's settled (its lag stage's fit, else its screen's judging fit; None:
+    no run, or none converged)."""
+    if run is None:
+        return None
+    return run.alignment.settled if run.alignment.settled is not None else run.screening.judged
 
 
 #: A pre-flight check: what the pre-flight assessed (the drive, the fit where one converged) to a
