@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -16,7 +17,10 @@ from nlp_calib.models import get_model
 from nlp_calib.pipeline import Calibration
 from nlp_calib.pipeline.scenario import AlignmentOptions, Prior, RobustOptions, Scenario, load_scenario
 from nlp_calib.problem import ResidualOptions
+from nlp_calib.results import SolverResult
+from nlp_calib.results.uncertainty import Uncertainty
 from nlp_calib.simulation import SimulationOptions, simulate
+from nlp_calib.solvers import GaussNewtonOptions
 
 DEFAULT_TRUTH = get_model("tricycle").drive.default_truth
 TRUTH = np.array(list(DEFAULT_TRUTH.values()))
@@ -219,3 +223,49 @@ def test_one_uncertainty_where_both_solvers_meet_the_same_optimum(small_demo: Sc
     moved = dataclasses.replace(results["ipopt"], x=results["ipopt"].x + 1e-3 * sigma)
     apart = uncertainties(fit, {"gauss_newton": results["gauss_newton"], "ipopt": moved}, noise, None)
     assert apart["ipopt"] is not apart["gauss_newton"]
+
+
+def _moved(calib: Calibration, result: SolverResult, i: int, spread: float) -> SolverResult:
+    """``result`` moved along the direction that moves free parameter ``i`` most for its length in
+    the metric of H, to ``‖δ‖²_H = spread`` (tangent step; first order: δ is at rounding)."""
+    ne = calib.evaluator.normal_equations(result.x)
+    d = np.linalg.solve(ne.H, np.eye(ne.H.shape[0])[i])
+    d *= np.sqrt(spread / (d @ ne.H @ d))
+    return dataclasses.replace(result, x=result.x + np.asarray(calib.evaluator.tangent_map(result.x)) @ d)
+
+
+@pytest.mark.parametrize(("tolerance", "share", "computed"), [(1e-8, 3.0, 1), (1e-14, 5.0, 2)])
+def test_one_uncertainty_exactly_where_gauss_newtons_stopping_test_cannot_tell_two_estimates_apart(
+    small_demo: Scenario, monkeypatch: pytest.MonkeyPatch, tolerance: float, share: float, computed: int
+) -> None:
+    """Two estimates each within Gauss-Newton's stopping test of one optimum (‖δ‖²_H ≤
+    tolerance·cost) are at most 4·tolerance·cost apart: within that they share an uncertainty
+    (though apart by more than 1e-4 of σ where the tolerance is loose), beyond it they do not
+    (though within 1e-4 of σ where the tolerance is tight). Counted: the uncertainties computed."""
+    from nlp_calib.pipeline.analyse import uncertainties
+
+    scenario = small_demo.with_solver_options(
+        "gauss_newton", GaussNewtonOptions(function_tolerance=tolerance)
+    )
+    calib = Calibration.setup(scenario)
+    noise = calib.stages.windows.input_noise
+    ip = calib.solve("ipopt")
+    assert ip.converged, ip.reason
+    own = unc.estimate(calib.evaluator, ip.x, calib.data, noise[0], counted=noise[1])
+    sigma = own.std[[own.names.index(n) for n in own.free]]
+    cost = calib.evaluator.normal_equations(ip.x).cost
+    moved = _moved(calib, ip, 0, share * tolerance * cost)
+    seen = np.max(np.abs(moved.x - ip.x) / sigma)
+    # The fixed share of σ judged these the other way round.
+    assert (seen > 1e-4) if computed == 1 else (seen < 1e-4), seen
+    estimate = unc.estimate
+    calls: list[int] = []
+
+    def counted(*args: Any, **kwargs: Any) -> Uncertainty:
+        calls.append(1)
+        return estimate(*args, **kwargs)
+
+    monkeypatch.setattr(unc, "estimate", counted)
+    out = uncertainties(calib.fitting, {"ipopt": ip, "moved": moved}, noise, None)
+    assert len(calls) == computed
+    assert (out["moved"] is out["ipopt"]) == (computed == 1)

@@ -72,6 +72,8 @@ from nlp_calib.results.series import (
     TrackSeries,
 )
 from nlp_calib.results.uncertainty import Uncertainty
+from nlp_calib.solvers import GaussNewton, ProblemEvaluator
+from nlp_calib.solvers.gauss_newton import one_optimum
 
 #: Fits of this many windows let go of their evaluator's buffers after the solvers and again before
 #: the refits (each later use binds only what it evaluates).
@@ -239,12 +241,6 @@ def analyse_fit(
     )
 
 
-#: Two estimates are one optimum when every free parameter agrees to this fraction of its σ: their
-#: uncertainties then differ by about this times σ over the parameter's own scale (below 1e-6 of
-#: themselves), and one is computed for both.
-SAME_OPTIMUM_SIGMAS = 1e-4
-
-
 def uncertainties(
     fit: Fit,
     results: Mapping[str, SolverResult],
@@ -252,11 +248,13 @@ def uncertainties(
     ranges: np.ndarray | None,
 ) -> dict[str, Uncertainty]:
     """Each result's uncertainty at its estimate; a result at the optimum of one computed before
-    (both solvers met it) takes that one's."""
+    (both solvers met it within the stopping tolerance) takes that one's."""
     out: dict[str, Uncertainty] = {}
     done: list[tuple[SolverResult, Uncertainty]] = []
+    # The optimum to the tolerance of Gauss-Newton's stopping test, as the scenario sets it.
+    tolerance = fit.problem.binder.scenario.options_for(GaussNewton.name).function_tolerance
     for name, r in results.items():
-        same = [u for prior, u in done if _same_optimum(prior, r, u)]
+        same = [u for prior, u in done if same_optimum(fit.evaluator, prior, r, tolerance)]
         out[name] = (
             same[0] if same else unc.estimate(fit.evaluator, r.x, fit.data, noise[0], ranges, noise[1])
         )
@@ -264,15 +262,19 @@ def uncertainties(
     return out
 
 
-def _same_optimum(a: SolverResult, b: SolverResult, u: Uncertainty) -> bool:
-    """Whether ``b`` converged to ``a``'s optimum, ``u`` its uncertainty (finite σ of every free
-    parameter)."""
+def same_optimum(evaluator: ProblemEvaluator, a: SolverResult, b: SolverResult, tolerance: float) -> bool:
+    """Whether converged ``a`` and ``b`` are one optimum to Gauss-Newton's stopping test
+    (:func:`~nlp_calib.solvers.gauss_newton.one_optimum`), in ``a``'s normal equations (kept from
+    its uncertainty: no evaluation)."""
     if not (a.converged and b.converged) or a.x.shape != b.x.shape:
         return False
-    sigma = np.array([u.std[u.names.index(n)] for n in u.free])
-    if not np.all(np.isfinite(sigma) & (sigma > 0)):
+    ne = evaluator.normal_equations(a.x)
+    if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
         return False
-    return bool(np.all(np.abs(a.x - b.x) <= SAME_OPTIMUM_SIGMAS * sigma))
+    # The tangent step from a to b: x ⊞ δ ≈ x + Mδ to first order (the distance is at rounding).
+    M = np.asarray(evaluator.tangent_map(a.x), dtype=float)
+    delta = np.linalg.lstsq(M, np.asarray(b.x - a.x, dtype=float), rcond=None)[0]
+    return one_optimum(ne.H, ne.cost, delta, tolerance)
 
 
 def _against(fit: Fit, x: np.ndarray) -> dict[str, tuple[str, np.ndarray]]:

@@ -72,6 +72,20 @@ def _scaled_gradient(ne: NormalEquations) -> float:
     return float(np.max(np.abs(ne.g) / d)) if ne.g.size else 0.0
 
 
+def one_optimum(H: np.ndarray, cost: float, delta: np.ndarray, tolerance: float) -> bool:
+    """Whether two estimates ``delta`` apart (a tangent step) are one optimum to the decrement test
+    (``tolerance``: :attr:`GaussNewtonOptions.function_tolerance`), ``H`` and ``cost`` the normal
+    equations at either."""
+    # The test stops where the decrement gᵀH⁻¹g is at most tolerance·cost. Near the optimum x* the
+    # cost is quadratic, g = H(x − x*), so the decrement is ‖x − x*‖²_H: the test leaves an
+    # estimate anywhere within √(tolerance·cost) of x* in the metric of H, and two estimates that
+    # both pass it are at most twice that apart. Two closer than that the test cannot tell apart;
+    # two farther apart are not both at x*. Per parameter, |δᵢ| ≤ √((H⁻¹)ᵢᵢ)·‖δ‖_H: about
+    # √(tolerance·dof) of the white σ (σ² ≈ cost/dof), a share that grows with the data as the
+    # test's own slack does, where a fixed share of σ does not.
+    return bool(delta @ H @ delta <= 4.0 * tolerance * abs(cost))
+
+
 @dataclass(frozen=True)
 class Box:
     """Bounds on the free parameters (±inf where there are none). A coordinate at a bound whose
