@@ -46,16 +46,7 @@ def test_real_log_solvers_agree(real_calibration: Calibration) -> None:
     gn = real_calibration.solve("gauss_newton")
     ip = real_calibration.solve("ipopt")
     agree(gn, ip)
-    # The run's solvers start where the lag stage's fit settled: IPOPT, at the optimum already,
-    # may stop on a step below rounding, which it accepts only where no Gauss-Newton step lowers
-    # the cost. From the header's guess it certifies the optimum by its own test, the same one.
-    assert ip.converged
-    start = real_calibration.fitting.problem.start
-    lower = np.full(start.x0.size, -np.inf) if start.lower is None else start.lower
-    upper = np.full(start.x0.size, np.inf) if start.upper is None else start.upper
-    own = Ipopt(real_calibration.evaluator).solve(start.x0, lower, upper)
-    assert own.trace.stats["return_status"] == "Solve_Succeeded"
-    assert np.allclose(own.x, ip.x, rtol=1e-6, atol=1e-9), (own.x, ip.x)
+    assert ip.trace.stats["return_status"] == "Solve_Succeeded"
     # The fit reduces the cost from the header's guess by more than an order of magnitude.
     assert gn.cost < 0.1 * real_calibration.evaluator.cost(real_calibration.x0)
     assert gn.trace.history[-1].cost == pytest.approx(gn.cost)
