@@ -281,19 +281,18 @@ def test_a_run_searches_its_lag_once_and_the_gate_judges_at_it(
 
     searched: list[LagEstimate] = []
     judged: list[LagEstimate | None] = []
-    search, judge, gate = align.settle_lag, cli_preflight.preflight, cli_gate.stops
+    search, judge, gate = align.estimate_tracker_lag, cli_preflight.preflight, cli_gate.stops
 
-    # Every search settles the lag (the pre-flight's own through estimate_tracker_lag).
-    def counted(*args: object) -> tuple[LagEstimate, object]:
-        found = search(*args)  # type: ignore[arg-type]
-        searched.append(found[0])
-        return found
+    def counted(*args: object) -> LagEstimate:
+        searched.append(search(*args))  # type: ignore[arg-type]
+        return searched[-1]
 
     def spied(sc: object, logs: object, found: LagEstimate | None = None, run: object = None) -> object:
         judged.append(found)
         return gate(sc, logs, found, run)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(align, "settle_lag", counted)
+    monkeypatch.setattr(align, "estimate_tracker_lag", counted)
+    monkeypatch.setattr(pf, "estimate_tracker_lag", counted)
     monkeypatch.setattr(cli_gate, "stops", spied)
     demo = SCENARIOS / "demo.yaml"
     proc = cli("run", str(demo), "--solver", "gauss_newton", "--out", str(tmp_path / "out"))

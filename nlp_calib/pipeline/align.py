@@ -53,16 +53,13 @@ COMPARABLE = 0.1
 class Alignment:
     """The tracker lag used, how it was found, and the log with encoders on the tracker's clock.
 
-    ``valid`` is the record range whose shifted times lie inside the log; ``settled``: the free
-    values the lag's fit settled at, the lag among them (None: no lag fitted, or no fit converged),
-    a start for the fit on nearly the same windows that is nearly its optimum already.
+    ``valid`` is the record range whose shifted times lie inside the log.
     """
 
     lag_s: float
     estimate: LagEstimate | None
     log: Log
     valid: tuple[int, int]
-    settled: np.ndarray | None = None
 
 
 def stays(moved_s: float, std_s: float) -> bool:
@@ -286,19 +283,11 @@ def apart(grid: np.ndarray, costs: np.ndarray, a: float, b: float) -> bool:
 
 
 def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> LagEstimate:
-    """The tracker lag fitted (see :func:`settle_lag`)."""
-    return settle_lag(binder, log, start, stop, x0)[0]
-
-
-def settle_lag(
-    binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray
-) -> tuple[LagEstimate, np.ndarray | None]:
     """The tracker lag fitted with every other parameter, re-sampling the encoders at each new value
     (see the module docstring); from the lag's initial value in ``x0``, or, when that fit does not
     converge, from the best of :data:`COARSE_STARTS` lags over the search; then from the other
     valleys of the cost's profile over the search, the lowest kept (a fit stops in the valley
-    it starts in: a lag off by a period of the drive's motion is a valley too). Second, the free
-    values of the kept fit (None where no fit converged)."""
+    it starts in: a lag off by a period of the drive's motion is a valley too)."""
     column = lag_column(binder)
     assert column is not None
     records = fit_records(binder.scenario, log, start, stop)
@@ -310,7 +299,7 @@ def settle_lag(
         again = _settled(fits, better)
         first = replace(again, path=first.path + again.path, costs=first.costs + again.costs)
     if not first.converged:
-        return LagEstimate(float(first.x[column]), first.path, first.costs, False, False), None
+        return LagEstimate(float(first.x[column]), first.path, first.costs, False, False)
     best, runner, (grid, profile) = _global(fits, first)
     lag = float(best.x[column])
     lo, hi = binder.scenario.log.alignment.search
@@ -318,19 +307,27 @@ def settle_lag(
     path = first.path + (best.path if best is not first else ())
     costs = first.costs + (best.costs if best is not first else ())
     other = () if runner is None else (float(runner.x[column]), float(runner.cost), float(best.cost))
-    profiled = (tuple(map(float, grid)), tuple(map(float, profile)))
-    estimate = LagEstimate(lag, path, costs, at_edge, True, *profiled, other, fits.beside_s(best.x))
-    return estimate, best.x
+    return LagEstimate(
+        lag,
+        path,
+        costs,
+        at_edge,
+        True,
+        tuple(map(float, grid)),
+        tuple(map(float, profile)),
+        other,
+        fits.beside_s(best.x),
+    )
 
 
 def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Alignment:
     """The scenario's tracker lag (given, or estimated when ``auto``) applied to the encoders."""
     sc = binder.scenario
     lag = sc.log.alignment.tracker_lag
-    estimate, settled = None, None
+    estimate = None
     if lag == "auto" and lag_column(binder) is not None:
         with scenario_key(sc, "alignment.search"):
-            estimate, settled = settle_lag(binder, log, start, stop, x0)
+            estimate = estimate_tracker_lag(binder, log, start, stop, x0)
         if not estimate.converged:
             # No fit converged at any lag: the lag is held where it starts (the stamps as logged,
             # unless the search lies all on one side), and the rest is fitted there.
@@ -350,7 +347,7 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
         aligned, valid = resample_encoders(
             log, float(lag), binder.fns.model.encoder_kinds, beside_lag_s=beside
         )
-    return Alignment(lag_s=float(lag), estimate=estimate, log=aligned, valid=valid, settled=settled)
+    return Alignment(lag_s=float(lag), estimate=estimate, log=aligned, valid=valid)
 
 
 def lag_at_edge(sc: Scenario, lag_s: float) -> str:

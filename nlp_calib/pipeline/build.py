@@ -168,10 +168,6 @@ class StartingPoint:
     upper: np.ndarray | None
     nominal: Mapping[str, float] = field(default_factory=dict)
     nominal_source: str = ""
-    #: The free values a fit of the same problem before this one settled at (the lag stage's; None:
-    #: none): the solvers start there where it explains their windows no worse than ``x0``, which
-    #: stays the initial guess every figure is judged against.
-    settled: np.ndarray | None = None
 
 
 def auto_start(
@@ -512,15 +508,6 @@ def at_lags(problem: Problem, lags: Sequence[float], beside: Sequence[float] = (
     initial = {**start.initial, **given}
     x0 = np.array([initial[n] for n in fns.free])
     return replace(problem, start=replace(start, initial=initial, x0=x0))
-
-
-def settled_at(problem: Problem, x: np.ndarray | None) -> Problem:
-    """``problem`` whose solvers may start at ``x`` (:attr:`StartingPoint.settled`; None: from its
-    initial guess)."""
-    if x is None:
-        return problem
-    assert x.shape == problem.start.x0.shape, "a settled start is the same problem's free values"
-    return replace(problem, start=replace(problem.start, settled=np.array(x, dtype=float)))
 
 
 def lags_held(problem: Problem) -> Problem:

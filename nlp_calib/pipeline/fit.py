@@ -44,7 +44,6 @@ class Fit:
         self.evaluator = problem.binder.evaluate(data)
         self.evaluator.prepare(evaluated(problem.binder.scenario, solvers))
         self._solvers: dict[str, Solver] = {}
-        self._start: np.ndarray | None = None
 
     @property
     def fns(self) -> ProblemFunctions:
@@ -59,34 +58,15 @@ class Fit:
         return self._solvers[name]
 
     def solve(self, name: str, from_estimate: bool = False) -> SolverResult:
-        """Run one solver from the starting point (:meth:`solvers_start`); the result is in the
-        model's canonical form. ``from_estimate``: the start is an estimate that took the bias
-        step (a stored calibration checked again), so the solver starts where that step began
-        (:meth:`before_step`)."""
+        """Run one solver from the starting point; the result is in the model's canonical form.
+        ``from_estimate``: the start is an estimate that took the bias step (a stored calibration
+        checked again), so the solver starts where that step began (:meth:`before_step`)."""
         start = self.problem.start
-        x0 = self.before_step(start.x0) if from_estimate else self.solvers_start()
+        x0 = self.before_step(start.x0) if from_estimate else start.x0
         result = self.solver(name).solve(x0, start.lower, start.upper)
         interrupts.check()  # IPOPT catches the signal that stops it and returns as if it had failed
         refuse_rejected_options(self.problem.binder.scenario, result)
         return self.canonical(self.unbiased(dataclasses.replace(result, solver=name)))
-
-    def solvers_start(self) -> np.ndarray:
-        """Where every solver starts (one point, so that their answers check each other): the
-        settled fit of the problem before this one (:attr:`StartingPoint.settled`, within the
-        bounds) where its cost on these windows is no more than the initial guess's, else the
-        initial guess."""
-        if self._start is None:
-            start, ev = self.problem.start, self.evaluator
-            self._start = start.x0
-            if start.settled is not None:
-                x = start.settled
-                if start.lower is not None and start.upper is not None:
-                    x = np.clip(x, start.lower, start.upper)
-                # Every solver's first evaluation is the normal equations at its start (kept by
-                # the evaluator): the guess's cost is the one pass the choice adds.
-                if np.isfinite(cost := ev.normal_equations(x).cost) and cost <= ev.cost(start.x0):
-                    self._start = x
-        return self._start
 
     def unbiased(self, result: SolverResult) -> SolverResult:
         """A converged ``result`` moved by the step that removes the inputs' noise bias, within

@@ -19,15 +19,10 @@ from nlp_calib.pipeline.build import Binder
 from nlp_calib.results.faults import MATCH_KINDS, FaultReport, Findings
 
 
-def find_faults(
-    binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray
-) -> tuple[FaultReport, np.ndarray | None]:
+def find_faults(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> FaultReport:
     """Faults in records ``start:stop`` of ``log`` as logged (nothing re-sampled), the counters
     judged with a fit to the windows the binder keeps and the streams' own glitches spoil not, at
-    the scenario's tracker lag (or, when it is estimated, the screen's own estimate in its range).
-    Second, the free values of the judging fit the counters were judged by (None: none converged),
-    its time offsets held at ``x0``'s."""
-    judged: list[np.ndarray] = []
+    the scenario's tracker lag (or, when it is estimated, the screen's own estimate in its range)."""
 
     def judge(bad_intervals: np.ndarray, bad_records: np.ndarray) -> np.ndarray | None:
         masks = np.zeros(log.n_records - 1, dtype=bool), np.zeros(log.n_records, dtype=bool)
@@ -35,18 +30,14 @@ def find_faults(
         masked = replace(binder.lag_held(x0), bad_intervals=masks[0], bad_records=masks[1])
         _, ev = masked.bind(log, start, stop)
         _, x, converged = masked.fit(ev, x0)
-        if not (converged and np.all(np.isfinite(x))):
-            return None
-        judged.append(x)
-        return ev.params(x)
+        return ev.params(x) if converged and np.all(np.isfinite(x)) else None
 
     sc = binder.scenario
     al = sc.log.alignment
     lag = al.search if al.tracker_lag == "auto" else float(al.tracker_lag)
     sample = sc.objective.residual.steering_sample
     report = screen_log(binder.fns, log.select(start, stop), sample, lag, judge)
-    # The last converged judge is the one whose estimate the counters were judged by.
-    return report.shifted(start, log.line_numbers), (judged[-1] if judged else None)
+    return report.shifted(start, log.line_numbers)
 
 
 def handle_faults(log: Log, report: FaultReport, handling: str) -> tuple[Log, Findings]:
@@ -98,19 +89,17 @@ def exclude_faults(binder: Binder, findings: Findings, n_records: int, lag_s: fl
 
 @dataclass(frozen=True)
 class Screening:
-    """What the screen found in a log, and the log to fit (repaired when the scenario asks);
-    ``judged``: the free values of the fit that judged the counters (None: none converged)."""
+    """What the screen found in a log, and the log to fit (repaired when the scenario asks)."""
 
     findings: Findings
     fitted_log: Log
-    judged: np.ndarray | None = None
 
 
 def screen(binder: Binder, log: Log, records: tuple[int, int], x0: np.ndarray) -> Screening:
     """Screen records ``[start, stop)`` of ``log`` for faults."""
-    report, judged = find_faults(binder, log, *records, x0)
+    report = find_faults(binder, log, *records, x0)
     fitted, findings = handle_faults(log, report, binder.scenario.data.faults.handling)
-    return Screening(findings, fitted, judged)
+    return Screening(findings, fitted)
 
 
 def median_interval(log: Log) -> float:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from nlp_calib.logs import Log
 from nlp_calib.pipeline.align import Alignment, align
-from nlp_calib.pipeline.build import Problem, at_lags, build_stage, lags_held, settled_at
+from nlp_calib.pipeline.build import Problem, at_lags, build_stage, lags_held
 from nlp_calib.pipeline.prepare import PreparedLog, prepare
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.screen import Screening, exclude_faults, median_interval, screen
@@ -46,10 +46,7 @@ def align_stage(problem: Problem, prepared: PreparedLog, screening: Screening) -
     reach = max(abs(search[0]), abs(search[1]))
     log = prepared.log
     binder = exclude_faults(problem.binder, screening.findings, log.n_records, reach, median_interval(log))
-    # The screen's judging fit converged from the initial guess on nearly these windows, its lag
-    # held at the guess's: the lag's first fit starts there, not at the guess again.
-    x0 = problem.start.x0 if screening.judged is None else screening.judged
-    return align(binder, screening.fitted_log, prepared.start, prepared.stop, x0)
+    return align(binder, screening.fitted_log, prepared.start, prepared.stop, problem.start.x0)
 
 
 @dataclass(frozen=True)
@@ -74,9 +71,6 @@ def setup_log(
     if alignment.estimate is not None and not alignment.estimate.converged:
         # A lag no fit converged at is held where the encoders are read (a caveat, not a value).
         problem = lags_held(problem)
-    # The lag stage's fit settled near the optimum on nearly the fit's windows: the solvers may
-    # start there (the fit refuses it where it explains the windows worse than the initial guess).
-    problem = settled_at(problem, alignment.settled)
     windows = bind_windows(problem, prepared, screening, alignment)
     return LogSetup(prepared, problem, screening, alignment, windows)
 
