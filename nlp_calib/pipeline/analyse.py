@@ -104,7 +104,7 @@ class FitAnalysis:
     nominal_params: np.ndarray | None = None
     #: What to drive next, when a parameter is not determined well enough (see :func:`plan_after`).
     plan: Plan | None = None
-    #: Each pivot of the drive (every log's, over several) fitted on its own (None: too few pivots).
+    #: Each pivot of the drive fitted on its own (None: too few pivots, or one log of several).
     pivots: PivotSpread | None = None
 
 
