@@ -21,7 +21,11 @@ the arguments say.
 
 With ``--sigmas``, each case's parameters instead: each estimate's error over its σ to believe
 (``run.std``; the truth is the simulator's), and over all the cases how many lie within 1σ and 2σ,
-per parameter and together (parameters given as known, with no σ, are not counted).
+per parameter and together (parameters given as known, with no σ, are not counted). With
+``--together K`` as well, the skid-steer seeds are fitted K consecutive ones at a time (a
+``datasets:`` scenario each) and each joint estimate is scored so:
+
+    nice -n 10 python3 benchmarks/vehicle_noise.py --sigmas --together 3 --skid 101 102 103
 """
 
 from __future__ import annotations
@@ -92,13 +96,31 @@ def _car(folder: Path, seed: int, _: float) -> tuple[Any, Any, tuple[np.ndarray,
     )
 
 
-def _skid(folder: Path, seed: int, pivot_slip: float) -> tuple[Any, Any, tuple[np.ndarray, np.ndarray, int]]:
+def _skid_drive(folder: Path, seed: int, pivot_slip: float) -> tuple[dict[str, Any], Any]:
+    """A simulated skid-steer drive's ``dataset:`` entry, and the simulation."""
     sim = simulate_skid_spins(SkidSpinOptions(duration_s=240.0, seed=seed, pivot_slip=pivot_slip))
-    joints, motions, _ = sim.write(folder / "skid")
+    joints, motions, _ = sim.write(folder / f"skid{seed}")
     encoders = {"left_wheel": "left_wheel_joint", "right_wheel": "right_wheel_joint"}
-    dataset = {"joints": str(joints), "motions": str(motions), "encoders": encoders}
+    return {"joints": str(joints), "motions": str(motions), "encoders": encoders}, sim
+
+
+def _skid(folder: Path, seed: int, pivot_slip: float) -> tuple[Any, Any, tuple[np.ndarray, np.ndarray, int]]:
+    dataset, sim = _skid_drive(folder, seed, pivot_slip)
     sc = scenario_from_mapping({**SKID, "dataset": dataset}, "skid", folder)
     return sc, Wanted(odometry="gauss_newton"), (sim.joint_time_s, sim.base_poses, EPOCH_NS)
+
+
+def _together(seeds: list[int], k: int, pivot_slip: float, errors: dict[str, list[float]]) -> None:
+    """The skid-steer seeds fitted ``k`` at a time (consecutive ones), each group one ``datasets:``
+    scenario: each joint estimate's errors in its σ to believe (:func:`_sigmas`)."""
+    for i in range(0, len(seeds) - k + 1, k):
+        group = seeds[i : i + k]
+        with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            entries = [_skid_drive(Path(tmp), seed, pivot_slip)[0] for seed in group]
+            sc = scenario_from_mapping({**SKID, "datasets": entries}, "skid", Path(tmp))
+            run = Calibration(sc).run()
+        _sigmas("skid " + "+".join(map(str, group)), run, TRUTH["skid"], errors)
 
 
 def main() -> None:
@@ -114,7 +136,18 @@ def main() -> None:
         help="the rates also over these multiples of the fit's windows",
     )
     ap.add_argument("--sigmas", action="store_true", help="the parameters' errors in their σ instead")
+    ap.add_argument(
+        "--together",
+        type=int,
+        default=0,
+        help="with --sigmas: the skid-steer seeds fitted this many at a time (one datasets: scenario)",
+    )
     args = ap.parse_args()
+    if args.together:
+        errors_together: dict[str, list[float]] = {}
+        _together(args.skid, args.together, args.pivot_slip, errors_together)
+        _coverage(errors_together)
+        return
     if not args.sigmas:
         print("case      way     x      y      θ      together   (σ over the σ holding 95 % of true errors)")
     errors: dict[str, list[float]] = {}

@@ -214,6 +214,57 @@ def test_a_skid_steers_turn_law_takes_the_scatter_of_its_pivots_each_fitted_on_i
     assert std["left_wheel_radius"] == pytest.approx(white["left_wheel_radius"])
 
 
+def test_skid_steers_fitted_together_take_the_scatter_of_every_logs_pivots(tmp_path: Path) -> None:
+    """Two drives (seeds 91 and 92, chosen before their result was seen), pivots slipping up to
+    ±10 %, fitted together: every pivot of both logs is one draw, the slipped ones the fit left out
+    among them, each refit keeping both logs' windows off the pivots; the joint σ of what the
+    pivots determine is their scatter about the joint estimate (a joint fit had none), and of a
+    log's own parameters its own pivots' scatter."""
+    from nlp_calib.pipeline.calibration import log_ranges
+
+    entries, drawn = [], []
+    for seed in (91, 92):
+        sim = simulate_skid_spins(SkidSpinOptions(duration_s=240.0, seed=seed, pivot_slip=0.1))
+        joints, motions, _ = sim.write(tmp_path / f"skid{seed}")
+        encoders = {"left_wheel": "left_wheel_joint", "right_wheel": "right_wheel_joint"}
+        entries.append({"joints": str(joints), "motions": str(motions), "encoders": encoders})
+        drawn.append(int(np.sum(np.diff(np.concatenate([[0], sim.slipped.astype(int)])) == 1)))
+    sc = scenario_from_mapping({**SKID, "datasets": entries}, "joint", tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        calib = Calibration(sc)
+        run = calib.run()
+    pivots = run.checks.pivots
+    assert pivots is not None
+    names = list(pivots.names)
+    # Each pivot lies inside one log's records (the joint numbering), and each log's are the
+    # simulated pivots give or take one at their edges (a pivot whose increments all start or stop
+    # it, or a stretch of turning on the spot the slip spared: seed 91 alone finds 15 of 14).
+    ranges = log_ranges(calib.parts)
+    found = [sum(a <= first and stop <= b for first, stop in pivots.pivots) for a, b in ranges]
+    assert sum(found) == len(pivots.pivots)
+    assert all(abs(f - n) <= 1 for f, n in zip(found, drawn))
+    truth = SkidSpinOptions().truth["turn_slip"]
+    own = pivots.params[:, names.index("turn_slip")]
+    assert own.min() < truth < own.max()
+    estimate = run.reports["gauss_newton"].result.param_dict()
+    centre = np.array([estimate[n] for n in names])
+    # What the logs share takes every pivot's scatter; a log's own parameter (its clock) its own
+    # pivots' only (another log's pivot leaves it where the off-pivot windows put it).
+    owner = {p.name: p.log for p in calib.fitting.fns.layout.parameters if p.log is not None}
+    assert owner, "each log has its own clock"
+    in_log = np.array([next(i for i, (a, b) in enumerate(ranges) if a <= f < b) for f, _ in pivots.pivots])
+    for j, name in enumerate(names):
+        rows = pivots.params[in_log == owner[name], j] if name in owner else pivots.params[:, j]
+        expected = np.sqrt(rows.var(ddof=1) / rows.size + (centre[j] - rows.mean()) ** 2)
+        assert pivots.std[j] == pytest.approx(expected, rel=1e-9), name
+    white = run.reports["gauss_newton"].uncertainty.std_dict()
+    std = run.std("gauss_newton")
+    assert std["turn_slip"] >= pivots.std[names.index("turn_slip")]
+    assert std["turn_slip"] > 3.0 * white["turn_slip"]
+    assert abs(estimate["turn_slip"] - truth) < 3.0 * std["turn_slip"]
+
+
 def test_a_pivot_is_a_run_of_turns_on_the_spot_and_a_window_across_two_joins_them() -> None:
     from nlp_calib.analysis.pivots import pivot_intervals, pivot_windows, pivots_std
 

@@ -59,6 +59,7 @@ from nlp_calib.pipeline.prepare import joint_residual
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.stages import Aligned, LogSetup, setup_log
 from nlp_calib.pipeline.stored import StoredCalibration
+from nlp_calib.pipeline.windows import LogWindows
 from nlp_calib.problem import ProblemFunctions, ResidualData, joined
 from nlp_calib.problem.blocks import per_log_kinds
 from nlp_calib.results import CalibrationRun, ScenarioInfo, SolverResult
@@ -428,22 +429,42 @@ def _fit(
 def _pivots(
     fitting: Fit, parts: Sequence[LogSetup], results: Mapping[str, SolverResult]
 ) -> PivotSpread | None:
-    """One log's pivots, each fitted on its own from the first converged estimate, the slipped
-    pivots the fit left out among them (their windows bound again; see
-    :func:`validation.pivot_spread`). None for several logs, without blocked cross-validation
-    (``validation.blocks: 0``: no refits), or without a converged estimate."""
+    """The drive's pivots, each fitted on its own from the first converged estimate, the slipped
+    pivots the fit left out among them (each log's windows bound again; see
+    :func:`validation.pivot_spread`). Over several logs every log's pivots are one population and
+    their records the joint fit's (the logs end to end). None without blocked cross-validation
+    (``validation.blocks: 0``: no refits) or without a converged estimate."""
     converged = [r for r in results.values() if r.converged]
-    if len(parts) != 1 or not converged or not fitting.problem.binder.scenario.validation.blocks:
+    if not converged or not fitting.problem.binder.scenario.validation.blocks:
         return None
-    windows = parts[0].windows
     data = fitting.data
-    if windows.ground is not None and windows.ground.any() and windows.binder.bad_intervals is not None:
-        slipped = dataclasses.replace(
-            windows.binder, bad_intervals=windows.binder.bad_intervals & ~windows.ground
-        )
-        data = slipped.windows(windows.aligned, *windows.fit)
+    if any(_slipped(p.windows) for p in parts):
+        logs = [_with_slipped(p.windows) for p in parts]
+        # A joint fit's windows say their log where its problem asks (a mount per log).
+        data = logs[0] if len(logs) == 1 else _like(joined(logs), fitting.data)
+    offset = parts[0].windows.fit[0] if len(parts) == 1 else 0
     binder = fitting.problem.binder
-    return validation.pivot_spread(binder, data, converged[0].x, fitting.canonical_params, windows.fit[0])
+    return validation.pivot_spread(binder, data, converged[0].x, fitting.canonical_params, offset)
+
+
+def _like(data: ResidualData, fitted: ResidualData) -> ResidualData:
+    """``data`` saying each window's log where the fit's windows ``fitted`` do."""
+    return data.with_selector() if fitted.clock is not None else data
+
+
+def _slipped(windows: LogWindows) -> bool:
+    """Whether the fit left out windows over pivots the ground slipped on."""
+    ground, bad = windows.ground, windows.binder.bad_intervals
+    return ground is not None and bool(ground.any()) and bad is not None
+
+
+def _with_slipped(windows: LogWindows) -> ResidualData:
+    """A log's fitted windows with those over the pivots the ground slipped on bound again."""
+    if not _slipped(windows):
+        return windows.data
+    assert windows.ground is not None and windows.binder.bad_intervals is not None
+    binder = dataclasses.replace(windows.binder, bad_intervals=windows.binder.bad_intervals & ~windows.ground)
+    return binder.windows(windows.aligned, *windows.fit)
 
 
 def _assemble(

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
@@ -24,7 +25,7 @@ from nlp_calib.analysis.precision import clock_needed, with_clocks
 from nlp_calib.core import memory, threads
 from nlp_calib.models import reference_scales
 from nlp_calib.pipeline.build import Binder, no_priors
-from nlp_calib.problem import ResidualData
+from nlp_calib.problem import ProblemFunctions, ResidualData
 from nlp_calib.results.checks import MIN_FOLDS, WEAK, CrossValidation, DirectionCheck, Fold, PivotSpread
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.layout import CLOCK, Layout
@@ -349,13 +350,12 @@ def pivot_spread(
     """Each pivot of ``data`` fitted on its own, from the estimate ``x`` (free values): the windows
     off every pivot and that pivot's (see :mod:`nlp_calib.analysis.pivots`; ``data`` holds the
     windows of the slipped pivots the estimate left out); the pivots' records numbered from
-    ``offset``. None with fewer than :data:`MIN_FOLDS` pivots whose own fit converges."""
+    ``offset``. Over several logs every log's pivots are one population for what the logs share,
+    and a log's own parameters (its mount, its clock) take its own pivots'. None with fewer than
+    :data:`MIN_FOLDS` pivots whose own fit converges."""
     fns = binder.fns
     full = np.asarray(fns.assemble(x, binder.x_fixed), dtype=float).ravel()
-    # The base's own motion, as the fault screen judges a pivot: a sensor off the turning centre
-    # travels on a pivot.
-    steps = base_increments(fns, full, data.inputs, np.zeros(data.inputs.shape[0]))[0]
-    label = pivot_windows(pivot_intervals(steps), data.starts, data.stops)
+    label, window_log = _pivot_labels(binder, full, data)
     if label.max(initial=-1) + 1 < MIN_FOLDS:
         return None
     whole = None
@@ -377,4 +377,36 @@ def pivot_spread(
         (offset + int(data.starts[label == g].min()), offset + int(data.stops[label == g].max()) + 1)
         for g in done
     )
-    return PivotSpread(tuple(fns.names), ranges, params, pivots_std(params, canonical(full)))
+    logs = np.array([window_log[label == g][0] for g in done])
+    return PivotSpread(tuple(fns.names), ranges, params, _pooled_std(fns, params, canonical(full), logs))
+
+
+def _pivot_labels(binder: Binder, full: np.ndarray, data: ResidualData) -> tuple[np.ndarray, np.ndarray]:
+    """Each window's pivot (-1: off every pivot) and its log. The base's own motion, as the fault
+    screen judges a pivot (a sensor off the turning centre travels on a pivot), each log's from its
+    own view of ``full`` (its mount, its clock): a pivot never spans two logs, whose records the
+    joint numbering joins by an interval of no motion."""
+    fns = binder.fns
+    edges = [*data.offsets, data.n_records]
+    steps = np.zeros((data.inputs.shape[1], 3))
+    for i, (a, b) in enumerate(itertools.pairwise(edges)):
+        params = full if len(data.offsets) == 1 else fns.view(full, i)
+        inputs = data.inputs[:, a : b - 1]
+        steps[a : b - 1] = base_increments(fns, params, inputs, np.zeros(inputs.shape[0]))[0]
+    label = pivot_windows(pivot_intervals(steps), data.starts, data.stops)
+    return label, np.searchsorted(np.asarray(data.offsets), data.starts, side="right") - 1
+
+
+def _pooled_std(
+    fns: ProblemFunctions, params: np.ndarray, estimate: np.ndarray, logs: np.ndarray
+) -> np.ndarray:
+    """:func:`pivots_std` of every pivot for the parameters the logs share, and of log ``i``'s
+    pivots alone for log ``i``'s own (another log's pivot barely moves them: pooled, their scatter
+    would be too small by about the share of that log's pivots)."""
+    std = pivots_std(params, estimate)
+    owner = {p.name: p.log for p in fns.layout.parameters if p.log is not None}
+    for j, name in enumerate(fns.names):
+        if name in owner:
+            mine = logs == owner[name]
+            std[j] = pivots_std(params[mine][:, [j]], estimate[[j]])[0]
+    return std
