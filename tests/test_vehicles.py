@@ -214,12 +214,15 @@ def test_a_skid_steers_turn_law_takes_the_scatter_of_its_pivots_each_fitted_on_i
     assert std["left_wheel_radius"] == pytest.approx(white["left_wheel_radius"])
 
 
-def test_skid_steers_fitted_together_take_the_scatter_of_every_logs_pivots(tmp_path: Path) -> None:
+@pytest.mark.parametrize("mounts", ["shared", "per_log"])
+def test_skid_steers_fitted_together_take_the_scatter_of_every_logs_pivots(
+    tmp_path: Path, mounts: str
+) -> None:
     """Two drives (seeds 91 and 92, chosen before their result was seen), pivots slipping up to
     ±10 %, fitted together: every pivot of both logs is one draw, the slipped ones the fit left out
     among them, each refit keeping both logs' windows off the pivots; the joint σ of what the
     pivots determine is their scatter about the joint estimate (a joint fit had none), and of a
-    log's own parameters its own pivots' scatter."""
+    log's own parameters (its clock; its mount too, one per log) its own pivots' scatter."""
     from nlp_calib.pipeline.calibration import log_ranges
 
     entries, drawn = [], []
@@ -229,7 +232,7 @@ def test_skid_steers_fitted_together_take_the_scatter_of_every_logs_pivots(tmp_p
         encoders = {"left_wheel": "left_wheel_joint", "right_wheel": "right_wheel_joint"}
         entries.append({"joints": str(joints), "motions": str(motions), "encoders": encoders})
         drawn.append(int(np.sum(np.diff(np.concatenate([[0], sim.slipped.astype(int)])) == 1)))
-    sc = scenario_from_mapping({**SKID, "datasets": entries}, "joint", tmp_path)
+    sc = scenario_from_mapping({**SKID, "datasets": entries, "sensor": {"mounts": mounts}}, "joint", tmp_path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         calib = Calibration(sc)
