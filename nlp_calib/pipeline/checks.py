@@ -22,6 +22,7 @@ from nlp_calib.pipeline import (
     drift_check,
     fault_check,
     held_check,
+    leverage_check,
     profile_check,
     rival,
     slip_check,
@@ -60,6 +61,7 @@ RUN_CHECKS: dict[str, RunCheck] = {
     # First: its σ of the slip is part of the σ to believe every later check reads.
     slip_check.NAME: lambda run, ctx: slip_check.check(run, ctx.model, ctx.fit),
     determinacy_check.NAME: lambda run, ctx: determinacy_check.check(run, ctx.model),
+    leverage_check.NAME: lambda run, ctx: leverage_check.check(run, ctx.fit),
     "faults": lambda run, ctx: fault_check.check(run),
     "direction": lambda run, ctx: direction_check.check(run),
     "consistency": lambda run, ctx: consistency_check.check(run),

@@ -1,0 +1,84 @@
+"""The ``leverage`` check: a direction that one stretch of the drive alone determines is named, and
+its parameters kept from the hand-off; a drive that turns throughout has none."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import SINUSOIDS_HEAD
+
+from nlp_calib import Calibration, load_scenario
+from nlp_calib.core import poses3d
+from nlp_calib.results.checks import CAVEAT
+from nlp_calib.results.run import DOUBTFUL
+
+MOUNT = (0.36, 0.06, 0.10, -1.58, 0.012, -1.55)
+RADIUS, SEPARATION = 0.1, 0.57
+#: The one turn of the straight drive: its seconds, inside one of the ten blocks of its 1,501
+#: tracker records (records 600-750 are 12-15 s).
+TURN = (12.5, 14.5)
+
+
+def _drive(folder: Path, left: np.ndarray, right: np.ndarray, dt: float = 0.01) -> None:
+    """A differential drive's joints at 100 Hz (wheel speeds ``left``, ``right`` in rad/s per
+    interval) and a camera's poses at 50 Hz on it, noiseless to six decimals."""
+    travel = 0.5 * RADIUS * (left + right) * dt
+    turn = RADIUS * (right - left) / SEPARATION * dt
+    planar = np.zeros((left.size + 1, 3))
+    for k in range(left.size):
+        x, y, th = planar[k]
+        c = np.sinc(turn[k] / (2 * np.pi)) * travel[k]
+        planar[k + 1] = (x + c * np.cos(th + turn[k] / 2), y + c * np.sin(th + turn[k] / 2), th + turn[k])
+    poses = poses3d.compose(poses3d.from_planar(planar), poses3d.mount_pose(np.array(MOUNT)))
+    t = np.arange(left.size + 1) * dt
+    with (folder / "cam.tum").open("w") as f:
+        for k in range(0, t.size, 2):
+            f.write(f"{1e9 + t[k]:.6f} " + " ".join(f"{v:.6f}" for v in poses[k]) + "\n")
+    angles = np.column_stack([t, *(np.concatenate([[0], np.cumsum(w * dt)]) for w in (left, right))])
+    with (folder / "cam.joints.csv").open("w") as f:
+        f.write("time,left_wheel_joint,right_wheel_joint\n")
+        for row in angles:
+            f.write(f"{1e9 + row[0]:.6f},{row[1]:.6f},{row[2]:.6f}\n")
+
+
+def _run(folder: Path, left: np.ndarray, right: np.ndarray):  # type: ignore[no-untyped-def]
+    _drive(folder, left, right)
+    path = folder / "cam.yaml"
+    path.write_text(SINUSOIDS_HEAD + "alignment: {tracker_lag: 0.0}\nsolvers: [gauss_newton]\n")
+    return Calibration(load_scenario(path)).run(["gauss_newton"])
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_what_one_turn_of_a_straight_drive_alone_determines_is_named_and_kept_from_handoff(
+    tmp_path: Path,
+) -> None:
+    """30 s straight at 2 rad/s but for one 2 s turn: the turn alone determines the wheel
+    separation (a straight drive leaves it free). The check names it with the block holding the
+    turn, and no hand-off file writes it as calibrated."""
+    t = np.arange(3000) * 0.01
+    turning = (t >= TURN[0]) & (t < TURN[1])
+    run = _run(tmp_path, np.where(turning, 1.0, 2.0), np.where(turning, 3.0, 2.0))
+    found = next((c for c in run.checks.more if c.name == "leverage"), None)
+    assert found is not None and found.level == CAVEAT
+    stretches = found.record["stretches"]
+    assert len(stretches) == 1, stretches
+    first, stop = stretches[0]["records"]
+    # The block holds the turn's records (the tracker's, at 50 Hz), and the rest falls short.
+    assert first <= TURN[0] / 0.02 and TURN[1] / 0.02 <= stop, (first, stop)
+    assert "wheel_separation" in stretches[0]["parameters"]
+    assert 0.0 <= stretches[0]["shortfall"] < 1.0
+    assert any("determined only through records" in r for r in run.verdict.reasons)
+    status = run.handoff_status("gauss_newton")
+    assert status["wheel_separation"][0] == DOUBTFUL, status["wheel_separation"]
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_a_drive_that_turns_throughout_has_no_stretch_of_its_own(tmp_path: Path) -> None:
+    """The same 30 s, the wheels at 2 ± cos(0.7 t) rad/s: every block turns both ways, and no
+    block alone determines anything."""
+    t = np.arange(3000) * 0.01
+    run = _run(tmp_path, 2.0 - np.cos(0.7 * t), 2.0 + np.cos(0.7 * t))
+    assert run.verdict.level != "not determined", run.verdict.reasons
+    assert not [c for c in run.checks.more if c.name == "leverage"]
