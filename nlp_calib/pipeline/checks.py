@@ -61,10 +61,10 @@ RUN_CHECKS: dict[str, RunCheck] = {
     # First: its σ of the slip is part of the σ to believe every later check reads.
     slip_check.NAME: lambda run, ctx: slip_check.check(run, ctx.model, ctx.fit),
     determinacy_check.NAME: lambda run, ctx: determinacy_check.check(run, ctx.model),
-    leverage_check.NAME: lambda run, ctx: leverage_check.check(run, ctx.fit),
     "faults": lambda run, ctx: fault_check.check(run),
     "direction": lambda run, ctx: direction_check.check(run),
     "consistency": lambda run, ctx: consistency_check.check(run),
+    leverage_check.NAME: lambda run, ctx: leverage_check.check(run, ctx.fit),
     profile_check.NAME: lambda run, ctx: profile_check.check(run, ctx.scenario, ctx.model, ctx.fit),
     # After every check that widens a σ to believe: a held value's shift is weighed against it.
     held_check.NAME: lambda run, ctx: held_check.check(run, ctx.fit),
