@@ -318,6 +318,12 @@ def test_the_screens_least_lag_skips_lags_and_is_the_whole_profiles_argmin() -> 
             mp.undo()
         assert got == grid[int(np.argmin(0.0 + want))], seed
         assert sum(taken) < 0.9 * 2 * grid.size * tick.size, seed  # lags were skipped
+        # The lags taken over every block, some a few at a time, cost what every lag at once does.
+        profile = counters._LagProfile(t, tick, cs[:, 0].copy(), grid)
+        counters._least([profile], grid.size)
+        whole = np.flatnonzero(~np.isnan(profile.sums).any(axis=0))
+        assert 0 < whole.size < grid.size, seed
+        assert np.array_equal(profile.joined(whole), lag_costs(t, tick, cs[:, 0].copy(), grid)[whole]), seed
 
 
 def test_the_screens_least_lag_is_argmins_on_any_profile() -> None:
