@@ -285,3 +285,89 @@ def test_pairwise_sums_of_blocks_are_numpys_sum_of_all() -> None:
             assert np.array_equal(_pairwise(sums, 0, n, leaf), expected), (n, leaf)
     running = sum(sums(lo, min(lo + 1000, a.shape[1])) for lo in range(0, a.shape[1], 1000))
     assert not np.array_equal(running, want)
+
+
+def test_the_screens_least_lag_skips_lags_and_is_the_whole_profiles_argmin() -> None:
+    """Issue 41: the screen's lag, with the lags that already cost more than one lag's whole cost
+    skipped block by block, is ``np.argmin`` of every counter's whole profile summed (each profile
+    one pass per lag to the last bit: the test above), over many blocks, two counters and
+    irregular records; and lags were skipped (a check that skips none would pass alone)."""
+    from nlp_calib.analysis import counters
+    from nlp_calib.analysis.counters import LAG_STEP, lag_costs
+
+    taken: list[int] = []
+    add = counters._LagProfile.add
+
+    def counted(self: counters._LagProfile, leaf: int, lags: np.ndarray) -> np.ndarray:
+        taken.append(lags.size * (self.leaves[leaf][1] - self.leaves[leaf][0]))
+        return add(self, leaf, lags)
+
+    for seed, lag in ((3, 0.06), (4, -0.13), (5, 0.0)):
+        t, tick, c = _counter(lag, n=40_000, seed=seed)
+        rng = np.random.default_rng(seed)
+        other = rng.integers(0, 9, tick.size).astype(float)
+        cs = np.stack([c, rng.standard_t(3, tick.size) * 1.5], axis=1)
+        grid = -0.3 + LAG_STEP * np.arange(301)
+        want = lag_costs(t, tick, cs[:, 0].copy(), grid) + lag_costs(t, other, cs[:, 1].copy(), grid)
+        mp = pytest.MonkeyPatch()
+        mp.setattr(counters._LagProfile, "add", counted)
+        taken.clear()
+        try:
+            got = screen_lag(t, [tick, other], cs, (-0.3, 0.3))
+        finally:
+            mp.undo()
+        assert got == grid[int(np.argmin(0.0 + want))], seed
+        assert sum(taken) < 0.9 * 2 * grid.size * tick.size, seed  # lags were skipped
+        # The lags taken over every block, some a few at a time, cost what every lag at once does.
+        profile = counters._LagProfile(t, tick, cs[:, 0].copy(), grid)
+        counters._least([profile], grid.size)
+        whole = np.flatnonzero(~np.isnan(profile.sums).any(axis=0))
+        assert 0 < whole.size < grid.size, seed
+        assert np.array_equal(profile.joined(whole), lag_costs(t, tick, cs[:, 0].copy(), grid)[whole]), seed
+
+
+def test_the_screens_least_lag_is_argmins_on_any_profile() -> None:
+    """Issue 41: whatever the blocks' sums (ties, a least among the sampled blocks' worst, NaN,
+    which ``np.argmin`` picks, from a reading that is not a number, infinities), the lag kept is
+    ``np.argmin`` of the whole profiles' sum at every lag."""
+    from nlp_calib.analysis import counters
+
+    class Table(counters._LagProfile):
+        """A profile whose blocks' sums are given (one block per item)."""
+
+        def __init__(self, table: np.ndarray) -> None:
+            self.table, self.finite = table, not np.any(np.isnan(table))
+            self.leaves = [(i, i + 1) for i in range(table.shape[0])]
+            self.first = {i: i for i in range(table.shape[0])}
+            self.sums = np.full(table.shape, np.nan)
+
+        def add(self, leaf: int, lags: np.ndarray) -> np.ndarray:
+            self.sums[leaf, lags] = self.table[leaf, lags]
+            return self.sums[leaf, lags]
+
+        def joined(self, lags: np.ndarray) -> np.ndarray:
+            # Every block of these lags must have been taken: one left out is NaN here.
+            return np.array([np.sum(self.sums[:, j]) for j in lags])
+
+    rng = np.random.default_rng(11)
+    for case in range(40):
+        n_leaves, n_lags = int(rng.integers(1, 300)), int(rng.integers(1, 60))
+        tables = [rng.exponential(1.0, (n_leaves, n_lags)) * rng.uniform(0.5, 3.0, n_lags) for _ in range(2)]
+        if case % 4 == 1:  # ties: two lags alike
+            for t in tables:
+                t[:, -1] = t[:, 0]
+        if case % 4 == 2:  # the least lag, by 1e-9, costs most on the blocks sampled first
+            n_leaves, n_lags = int(rng.integers(500, 3000)), int(rng.integers(2, 60))
+            tables = [rng.exponential(1.0, (n_leaves, n_lags)) for _ in range(2)]
+            m, rest = n_lags // 2, np.ones(n_leaves, dtype=bool)
+            rest[:: counters.SAMPLE_EVERY] = False
+            for t in tables:
+                t[~rest, m] *= 10.0
+                least = min(np.sum(t[:, j]) for j in range(n_lags) if j != m) * (1.0 - 1e-9)
+                t[rest, m] *= (least - np.sum(t[~rest, m])) / np.sum(t[rest, m])
+        if case % 4 == 3:
+            tables[1][rng.integers(n_leaves), rng.integers(n_lags)] = (np.nan, np.inf)[case % 8 == 3]
+        want = np.zeros(n_lags)
+        for t in tables:
+            want += np.array([np.sum(t[:, j]) for j in range(n_lags)])
+        assert counters._least([Table(t) for t in tables], n_lags) == int(np.argmin(want)), case

@@ -116,10 +116,8 @@ def screen_lag(
         return float(lag)
     lo, hi = lag
     grid = lo + LAG_STEP * np.arange(int(np.floor((hi - lo) / LAG_STEP + 1e-9)) + 1)
-    cost = np.zeros(grid.size)
-    for j, x in enumerate(ticks):
-        cost += lag_costs(time_s, x, np.ascontiguousarray(c[:, j]), grid)
-    return float(grid[int(np.argmin(cost))])
+    profiles = [_LagProfile(time_s, x, np.ascontiguousarray(c[:, j]), grid) for j, x in enumerate(ticks)]
+    return float(grid[_least(profiles, grid.size)])
 
 
 def lag_costs(time_s: np.ndarray, x: np.ndarray, c: np.ndarray, grid: np.ndarray) -> np.ndarray:
@@ -129,13 +127,92 @@ def lag_costs(time_s: np.ndarray, x: np.ndarray, c: np.ndarray, grid: np.ndarray
     Taken over blocks of records, every lag at once (temporaries that stay in the processor's
     cache, where one pass over every record per lag went through memory a dozen times), and
     summed as that pass's ``np.sum`` did: the same cost to the last bit (:func:`_pairwise`)."""
-    unit = max(robust_sigma(c), 1e-12)
-    count = np.concatenate([[0.0], np.cumsum(x)])
+    profile = _LagProfile(time_s, x, c, grid)
+    every = np.arange(grid.size)
+    for leaf in range(len(profile.leaves)):
+        profile.add(leaf, every)
+    return profile.joined(every)
 
-    def block(lo: int, hi: int) -> np.ndarray:
-        return _lag_terms(time_s, count, (lo, hi), x[lo:hi], c[lo:hi], unit, grid).sum(axis=1)
 
-    return _pairwise(block, 0, x.size, max(LAG_TERMS // grid.size, 128))
+class _LagProfile:
+    """One counter's lag profile (:func:`lag_costs`) by blocks of records (the leaves of
+    :func:`_pairwise`'s halving), each block's sums kept per lag so that any lags' costs are joined
+    from them as the pass over every record sums them: the lags need not be taken together."""
+
+    def __init__(self, time_s: np.ndarray, x: np.ndarray, c: np.ndarray, grid: np.ndarray) -> None:
+        self.time_s, self.x, self.c, self.grid = time_s, x, c, grid
+        self.unit = max(robust_sigma(c), 1e-12)
+        self.count = np.concatenate([[0.0], np.cumsum(x)])
+        #: Whether every term is a number (no NaN a lag's skipped blocks could hold).
+        self.finite = bool(
+            np.all(np.isfinite(time_s)) and np.all(np.isfinite(self.count)) and np.all(np.isfinite(c))
+        )
+        self.leaf = max(LAG_TERMS // max(grid.size, 1), 128)
+        self.leaves = _leaves(0, x.size, self.leaf)
+        self.first = {a: i for i, (a, _) in enumerate(self.leaves)}
+        #: Each block's sum per lag (NaN: not taken yet).
+        self.sums = np.full((len(self.leaves), grid.size), np.nan)
+
+    def add(self, leaf: int, lags: np.ndarray) -> np.ndarray:
+        """The sums of block ``leaf`` at the lags ``lags`` (indices into the grid, increasing),
+        kept and returned."""
+        a, b = self.leaves[leaf]
+        terms = _lag_terms(
+            self.time_s, self.count, (a, b), self.x[a:b], self.c[a:b], self.unit, self.grid[lags]
+        )
+        self.sums[leaf, lags] = terms.sum(axis=1)
+        return self.sums[leaf, lags]
+
+    def joined(self, lags: np.ndarray) -> np.ndarray:
+        """The cost at ``lags``, every block of theirs taken: np.sum's over every record."""
+        return _pairwise(lambda a, _: self.sums[self.first[a], lags], 0, self.x.size, self.leaf)
+
+
+#: Blocks of the lag profile taken at every lag before the rest are taken lag by lag as needed:
+#: every this many-th block (a sample spread over the log, which picks the lag to beat).
+SAMPLE_EVERY = 16
+#: The lags that cost more than the lag to beat already are dropped every this many blocks.
+PRUNE_EVERY = 8
+
+
+def _least(profiles: list[_LagProfile], n_lags: int) -> int:
+    """The index of the least of the counters' summed lag profiles (``n_lags`` ≥ 1 lags), as
+    ``np.argmin`` of their sum at every lag gives it, without taking every lag over every record:
+    the terms are never negative, so a lag whose blocks taken so far already cost more than one
+    lag's whole cost is not the least, and its other blocks are skipped. The lags left are summed
+    as the whole profile sums them. With a reading that is not a number none is skipped: a NaN,
+    which ``np.argmin`` picks, could be in a block skipped."""
+    every = np.arange(n_lags)
+    n_leaves = len(profiles[0].leaves) if profiles else 0
+    order = [i for r in range(SAMPLE_EVERY) for i in range(r, n_leaves, SAMPLE_EVERY)]
+    sample, rest = order[: -(-n_leaves // SAMPLE_EVERY)], order[-(-n_leaves // SAMPLE_EVERY) :]
+    taken = np.zeros(n_lags)
+    for leaf in sample:
+        for p in profiles:
+            taken += p.add(leaf, every)
+    best = np.array([int(np.argmin(taken))])
+    for leaf in rest:
+        for p in profiles:
+            p.add(leaf, best)
+    # The partial sums' rounding is far below this margin: a lag skipped costs more than ``best``.
+    bound = _total(profiles, best)[0] * (1.0 + 1e-9)
+    alive = every[every != best[0]]
+    skip = all(p.finite for p in profiles)
+    for k, leaf in enumerate(rest):
+        if skip and k % PRUNE_EVERY == 0:
+            alive = alive[~(taken[alive] > bound)]
+        for p in profiles:
+            taken[alive] += p.add(leaf, alive)
+    left = np.union1d(alive, best)
+    return int(left[int(np.argmin(_total(profiles, left)))])
+
+
+def _total(profiles: list[_LagProfile], lags: np.ndarray) -> np.ndarray:
+    """The counters' costs at ``lags`` added as :func:`screen_lag` adds their profiles."""
+    cost = np.zeros(lags.size)
+    for p in profiles:
+        cost += p.joined(lags)
+    return cost
 
 
 def _lag_terms(
@@ -153,9 +230,10 @@ def _lag_terms(
     # The records bracketing every time read: np.interp on them alone gives what it does on all.
     a = max(int(np.searchsorted(time_s, ends[0] - grid[-1], "right")) - 1, 0)
     b = int(np.searchsorted(time_s, ends[-1] - grid[0], "right")) + 1
-    # A record's lags down a column: np.interp's guess of the bracket holds from one to the next.
-    shifted = np.interp(ends[:, None] - grid[None, :], time_s[a:b], count[a:b])
-    r = np.ascontiguousarray((shifted[1:] - shifted[:-1]).T)
+    # A lag's records along a row (no transposed copy): np.interp's guess of the bracket holds
+    # from one to the next.
+    shifted = np.interp(ends[None, :] - grid[:, None], time_s[a:b], count[a:b])
+    r = shifted[:, 1:] - shifted[:, :-1]
     r -= x
     r -= c
     np.abs(r, out=r)
@@ -167,6 +245,14 @@ def _lag_terms(
     r -= 0.5 * HUBER**2
     np.copyto(r, square, where=inside)
     return r
+
+
+def _leaves(lo: int, n: int, leaf: int) -> list[tuple[int, int]]:
+    """The blocks ``(a, b)`` at which :func:`_pairwise` over ``lo … lo + n`` calls ``sums``, in order."""
+    if n <= leaf:
+        return [(lo, lo + n)]
+    half = n // 2 - (n // 2) % 8
+    return _leaves(lo, half, leaf) + _leaves(lo + half, n - half, leaf)
 
 
 def _pairwise(sums: Callable[[int, int], np.ndarray], lo: int, n: int, leaf: int) -> np.ndarray:
