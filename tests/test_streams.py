@@ -371,3 +371,27 @@ def test_the_screens_least_lag_is_argmins_on_any_profile() -> None:
         for t in tables:
             want += np.array([np.sum(t[:, j]) for j in range(n_lags)])
         assert counters._least([Table(t) for t in tables], n_lags) == int(np.argmin(want)), case
+
+
+def test_the_screens_least_lag_when_every_other_lag_costs_more_after_the_sample() -> None:
+    """A counter the tracker implies nearly exactly (noise of a tick, not hundreds): after the
+    sampled blocks every lag but the best already costs more than the best's whole cost, and the
+    search ends with the best's cost alone taken (it had raised an IndexError on no lags left)."""
+    from nlp_calib.analysis import counters
+    from nlp_calib.analysis.counters import LAG_STEP, lag_costs
+
+    t = _times(20_000, 7)
+    rng = np.random.default_rng(7)
+    knots = np.arange(0.0, t[-1] + 3.0, 1.5)
+    v = np.interp(t, knots, rng.uniform(-8000.0, 8000.0, knots.size) / 0.04)
+    fine = np.linspace(-1.0, t[-1] + 1.0, 400001)
+    count = np.cumsum(np.interp(fine, t, v)) * (fine[1] - fine[0])
+    ticks = np.diff(np.round(np.interp(t, fine, count)))
+    c = np.diff(np.interp(t - 0.04, fine, count) + rng.normal(0.0, 1.0, t.size)) - ticks
+    grid = -0.2 + LAG_STEP * np.arange(401)
+    want = grid[int(np.argmin(lag_costs(t, ticks, c.copy(), grid)))]
+    profile = counters._LagProfile(t, ticks, c.copy(), grid)
+    assert grid[counters._least([profile], grid.size)] == want
+    # Every other lag was dropped before the last blocks: only the best was taken over them all.
+    assert np.flatnonzero(~np.isnan(profile.sums).any(axis=0)).size == 1
+    assert screen_lag(t, [ticks], c[:, None], (-0.2, 0.2)) == pytest.approx(0.04, abs=LAG_STEP)

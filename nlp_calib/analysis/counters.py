@@ -201,6 +201,8 @@ def _least(profiles: list[_LagProfile], n_lags: int) -> int:
     for k, leaf in enumerate(rest):
         if skip and k % PRUNE_EVERY == 0:
             alive = alive[~(taken[alive] > bound)]
+        if not alive.size:  # every other lag costs more already: the best's blocks are all taken
+            break
         for p in profiles:
             taken[alive] += p.add(leaf, alive)
     left = np.union1d(alive, best)
