@@ -53,6 +53,7 @@ import numpy as np
 
 from nlp_calib.analysis.block_scatter import block_scatter
 from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
+from nlp_calib.analysis.leverage import stretches
 from nlp_calib.analysis.residual_floor import ScoreRows, beyond
 from nlp_calib.models import rate_rows
 from nlp_calib.problem import ProblemFunctions, ResidualData
@@ -244,7 +245,25 @@ def estimate(
     (cov, bounded), residual = _with_residuals(sandwich, meat, own)
     out = _packaged(fns, cov, _noise_levels(fns, var, Sigma_in), dof)
     out = replace(out, bounded=tuple(n for n, b in zip(fns.free, bounded) if b))
-    return _with_spreads(out, residual, own, white_meat)
+    return _with_stretches(_with_spreads(out, residual, own, white_meat), evaluator, x, own)
+
+
+def _with_stretches(
+    out: Uncertainty, evaluator: ProblemEvaluator, x: np.ndarray, own: ScoreRows
+) -> Uncertainty:
+    """``out`` with the stretches of the drive that alone determine a direction
+    (:func:`~nlp_calib.analysis.leverage.stretches`, from ``own``'s batches' information)."""
+    if own.done != own.hi.size:  # not every window's information summed (too few to batch)
+        return out
+    scale = scales(evaluator.fns, _free_values(evaluator, x))
+    batches = (own.information, own.edges)
+    return replace(out, stretches=stretches(evaluator.fns, evaluator.data, evaluator.omega, scale, batches))
+
+
+def _free_values(evaluator: ProblemEvaluator, x: np.ndarray) -> np.ndarray:
+    """The free parameters' values at ``x`` (evaluator coordinates), in :attr:`free` order."""
+    fns = evaluator.fns
+    return np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[[fns.names.index(f) for f in fns.free]]
 
 
 def _with_spreads(
@@ -303,10 +322,7 @@ def _covariance(
     estimate, the drive's free directions from its windows' motion, the bounds' prior in the
     data's units."""
     fns, data = evaluator.fns, evaluator.data
-    free_values = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()[
-        [fns.names.index(f) for f in fns.free]
-    ]
-    scale = scales(fns, free_values)
+    scale = scales(fns, _free_values(evaluator, x))
     motion2 = motion_scale(fns, data.z, evaluator.omega)
 
     def free(lam: np.ndarray) -> np.ndarray:

@@ -64,7 +64,7 @@ RUN_CHECKS: dict[str, RunCheck] = {
     "faults": lambda run, ctx: fault_check.check(run),
     "direction": lambda run, ctx: direction_check.check(run),
     "consistency": lambda run, ctx: consistency_check.check(run),
-    leverage_check.NAME: lambda run, ctx: leverage_check.check(run, ctx.fit),
+    leverage_check.NAME: lambda run, ctx: leverage_check.check(run),
     profile_check.NAME: lambda run, ctx: profile_check.check(run, ctx.scenario, ctx.model, ctx.fit),
     # After every check that widens a σ to believe: a held value's shift is weighed against it.
     held_check.NAME: lambda run, ctx: held_check.check(run, ctx.fit),

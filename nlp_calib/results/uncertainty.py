@@ -8,6 +8,30 @@ import numpy as np
 
 
 @dataclass(frozen=True)
+class Stretch:
+    """A stretch of the drive, records ``[first, stop)`` of the fit's windows (numbered from the
+    fit's first record), without whose windows the rest leaves the parameters ``names`` free: they
+    are determined by that stretch alone. ``shortfall``: the information the rest gives along its
+    weakest direction over the floor that determines a direction (below 1); ``of``: how many
+    stretches the drive was cut into; ``n_records``: the fit's records (several logs: every log's,
+    end to end)."""
+
+    first: int
+    stop: int
+    names: tuple[str, ...]
+    shortfall: float
+    of: int
+    n_records: int
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "records": [self.first, self.stop],
+            "parameters": list(self.names),
+            "shortfall": self.shortfall,
+        }
+
+
+@dataclass(frozen=True)
 class Uncertainty:
     """Covariance of the free parameters (plain coordinates) and the noise it was built from.
 
@@ -36,6 +60,9 @@ class Uncertainty:
     #: The blocks' χ² about their weighted mean (row 0) and its degrees of freedom (row 1; 0 and
     #: NaN: not judged), per parameter.
     block_chi2: np.ndarray | None = None
+    #: The stretches of the drive that alone determine a direction (see
+    #: :mod:`nlp_calib.analysis.leverage`; empty: none, or not judged).
+    stretches: tuple[Stretch, ...] = ()
 
     def residual_spread(self) -> np.ndarray:
         """:attr:`std_residuals`, NaN everywhere when it was not estimated: a spread the σ to

@@ -1,0 +1,66 @@
+"""Which stretch of the drive alone determines a direction of the parameters.
+
+A direction is determined when the information the drive gives along it clears a floor
+(:mod:`nlp_calib.analysis.degeneracy`). Where one stretch gives nearly all of it, the rest of the
+drive leaves that direction free: a start from standstill that no sinusoid of the rest imitates,
+the one turn of a log that otherwise drives straight. The estimate along it then rests on that
+stretch alone, and neither σ shows it: the white-noise σ counts the stretch's information as the
+whole drive's, and a blocked cross-validation's fold without the stretch has no information along
+the direction, so its refit stays where it starts, at the estimate. The uncertainty already sums
+each contiguous batch of windows' information (:class:`~nlp_calib.analysis.residual_floor.ScoreRows`):
+each batch's is taken out of the whole in turn, and what is left judged by the same floor. A
+stretch across two batches is not found (each alone leaves the other half).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nlp_calib.analysis.degeneracy import FIDELITY, free_directions, motion_scale
+from nlp_calib.problem import ProblemFunctions, ResidualData
+from nlp_calib.results.uncertainty import Stretch
+
+#: A parameter moves along a direction when its squared share of it exceeds this (as the
+#: uncertainty names the parameters of a direction the drive leaves free).
+SHARE = 1e-3
+
+
+def _moved(V: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """Which parameters the directions ``V[:, free]`` move."""
+    return np.asarray((V[:, free] ** 2).sum(axis=1) > SHARE)
+
+
+def stretches(
+    fns: ProblemFunctions,
+    data: ResidualData,
+    omega: np.ndarray,
+    scale: np.ndarray,
+    batches: tuple[np.ndarray, np.ndarray],
+) -> tuple[Stretch, ...]:
+    """The batches of windows (``batches``: each one's data information ``(B, n, n)``, free
+    parameters' coordinates, and the window indices that bound them, ``B + 1``) without whose
+    windows the rest leaves a direction free that all of them determine; ``scale``: each free
+    parameter's reference precision, the units the floor is judged in."""
+    information, edges = batches
+    if information.shape[0] < 2:
+        return ()
+    RR = np.outer(scale, scale)
+    H = information.sum(axis=0)
+    lam, V = np.linalg.eigh(H * RR)
+    whole = _moved(V, free_directions(lam, data.n_residuals, motion_scale(fns, data.z, omega)))
+    found = []
+    for b in range(information.shape[0]):
+        rest = np.ones(data.n_residuals, dtype=bool)
+        rest[edges[b] : edges[b + 1]] = False
+        if not rest.any() or rest.all():
+            continue
+        n, m2 = int(rest.sum()), motion_scale(fns, data.z[:, rest], omega)
+        lam_r, V_r = np.linalg.eigh((H - information[b]) * RR)
+        moved = _moved(V_r, free_directions(lam_r, n, m2)) & ~whole
+        if moved.any():
+            floor = FIDELITY**2 * n * m2
+            names = tuple(f for f, m in zip(fns.free, moved) if m)
+            first, stop = int(data.starts[edges[b]]), int(data.stops[edges[b + 1] - 1]) + 1
+            shortfall = max(float(lam_r[0]), 0.0) / floor if floor > 0 else 0.0
+            found.append(Stretch(first, stop, names, shortfall, information.shape[0], data.n_records))
+    return tuple(found)
