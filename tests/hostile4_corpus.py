@@ -36,6 +36,7 @@ from hostile3_corpus import judge as judge3
 
 from nlp_calib.codegen import compiler
 from nlp_calib.logs import Log
+from nlp_calib.logs.text_tables import seconds
 
 CLASSES = ("code", "verdicts", "urdf", "lost", "check", "messages", "memory")
 CAMERA_ENCODERS = {"left_wheel": "left_wheel_joint", "right_wheel": "right_wheel_joint"}
@@ -1444,32 +1445,46 @@ def within_memory(
     assert extra <= MEMORY_FACTOR * size, (extra / size, peak, base)
 
 
+def _long_rows(before_s: int, w: World) -> tuple[np.ndarray, str, list[str]]:
+    """Six minutes of the camera's joints at 1 kHz, ``before_s`` of them before its 30 s (held at
+    its first values, then at its last): their stamps, the CSV's header and each row after its
+    stamp, formatted once per world for the cases that shift or annotate the same rows."""
+    from nlp_calib.logs.joint_log import format_joint_csv, read_joint_csv
+
+    key = f"long_rows_{before_s}"
+    if key not in w.extra:
+        table = read_joint_csv(w.camera_joints)
+        t = table.time_ns
+        before, after, step = before_s * 10**9, (360 - before_s) * 10**9, 10**6
+        pad_a = np.arange(t[0] - before, t[0], step)
+        pad_b = np.arange(t[-1] + step, t[-1] + after, step)
+        fine = np.arange(t[0], t[-1], step)
+        columns = [np.interp(fine, t, table.positions[:, j]) for j in range(table.positions.shape[1])]
+        q = np.column_stack(columns)
+        times = np.concatenate([pad_a, fine, pad_b])
+        values = np.vstack([np.repeat(q[:1], pad_a.size, 0), q, np.repeat(q[-1:], pad_b.size, 0)])
+        head, *rows = format_joint_csv(np.zeros_like(times), table.names, values).splitlines(keepends=True)
+        stamp = len(seconds(0))  # every row's stamp, 0 here, before its first comma
+        w.extra[key] = (times, head, [r[stamp:] for r in rows])
+    found: tuple[np.ndarray, str, list[str]] = w.extra[key]
+    return found
+
+
 def long_joints(where: str, w: World, tmp: Path) -> Expect:
     """Six minutes of a joint log at 1 kHz (a scaled-down two hours) of which the camera's 30 s pair
     with ``where`` (the middle, the start, the end, or a clock offset given): only what pairs is
     kept, said, and the calibration is the right one."""
-    from nlp_calib.logs.joint_log import format_joint_csv, read_joint_csv
-
-    table = read_joint_csv(w.camera_joints)
-    t = table.time_ns
-    before = {"middle": 180, "end": 360, "offset": 180, "comments": 180, "earlier": 180}[where] * 10**9
-    after = 360 * 10**9 - before
-    step = 10**6
-    pad_a = np.arange(t[0] - before, t[0], step)
-    pad_b = np.arange(t[-1] + step, t[-1] + after, step)
-    fine = np.arange(t[0], t[-1], step)
-    columns = [np.interp(fine, t, table.positions[:, j]) for j in range(table.positions.shape[1])]
-    q = np.column_stack(columns)
-    times = np.concatenate([pad_a, fine, pad_b])
-    values = np.vstack([np.repeat(q[:1], pad_a.size, 0), q, np.repeat(q[-1:], pad_b.size, 0)])
+    times, head, rows = _long_rows({"end": 360}.get(where, 180), w)
     shift = {"offset": 500, "earlier": 900}.get(where, 0) * 10**9
+    stamps = (times - shift).tolist()
     big = tmp / "long.csv"
     with big.open("w") as fh:
-        fh.write(format_joint_csv(times[:1] - shift, table.names, values[:1]))
+        fh.write(head + seconds(stamps[0]) + rows[0])
         step_rows = 10_000 if where == "comments" else 100_000
-        for k in range(1, times.size, step_rows):
-            rows = format_joint_csv(times[k : k + step_rows] - shift, table.names, values[k : k + step_rows])
-            fh.write(rows.split("\n", 1)[1] + ("# a note from the logger\n" if where == "comments" else ""))
+        for k in range(1, len(stamps), step_rows):
+            chunk = zip(stamps[k : k + step_rows], rows[k : k + step_rows])
+            fh.write("".join(seconds(t) + row for t, row in chunk))
+            fh.write("# a note from the logger\n" if where == "comments" else "")
     extra = "" if where != "offset" else ", clock_offset: 500.0"
     sc = camera_scenario(tmp, w.camera, big, block=extra)
     small = camera_scenario(tmp, w.camera, w.camera_joints, name="small.yaml")

@@ -5,8 +5,10 @@ calibrated: the files are parsed back (YAML, XML, ``nlp-calib check``'s reader) 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
@@ -61,6 +63,18 @@ def caveated(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
     assert run.verdict.level == CAVEATS and {"sensor_x", "sensor_y", "sensor_theta"} <= set(
         run.verdict.concerns
     )
+    return run
+
+
+@pytest.fixture(scope="module")
+def held_run(tmp_path_factory: pytest.TempPathFactory) -> Callable[[str], CalibrationRun]:
+    """The differential drive's vendor run with a value held (``extra``: ``known:`` or ``fixed:``),
+    fitted once for every test that reads it (a frozen run: each test writes its own folder)."""
+
+    @functools.cache
+    def run(extra: str) -> CalibrationRun:
+        return _vendor_run(tmp_path_factory.mktemp("held"), "diff_drive", "diff_drive", extra)
+
     return run
 
 
@@ -185,10 +199,12 @@ def test_not_determined_writes_no_handoff_file_and_removes_older_ones(
     assert not any((out / name).exists() for name in HANDOFF)
 
 
-def test_given_values_are_written_as_given_with_no_sigma(tmp_path: Path) -> None:
+def test_given_values_are_written_as_given_with_no_sigma(
+    held_run: Callable[[str], CalibrationRun], tmp_path: Path
+) -> None:
     """known: values are given, not calibrated: null σ (never 0) in every σ block of
     calibration.yaml, which `nlp-calib check` reads back and leaves unjudged."""
-    run = _vendor_run(tmp_path, "diff_drive", "diff_drive", "known: {sensor_theta: 0.05}\n")
+    run = held_run("known: {sensor_theta: 0.05}\n")
     solver = run.handoff_solver()
     assert solver is not None
     status = run.handoff_status(solver)
@@ -207,10 +223,12 @@ def test_given_values_are_written_as_given_with_no_sigma(tmp_path: Path) -> None
 
 
 @pytest.mark.parametrize("extra", ["known: {sensor_theta: 0.05}\n", "fixed: [sensor_theta]\n"])
-def test_result_json_writes_no_sigma_for_a_value_the_fit_held(extra: str, tmp_path: Path) -> None:
+def test_result_json_writes_no_sigma_for_a_value_the_fit_held(
+    extra: str, held_run: Callable[[str], CalibrationRun], tmp_path: Path
+) -> None:
     """result.json and validation.json, like calibration.yaml: null σ (never 0) for a value held
     (given under known: or fixed:), in every σ block; an estimated value keeps its σ."""
-    run = _vendor_run(tmp_path, "diff_drive", "diff_drive", extra)
+    run = held_run(extra)
     out = tmp_path / "out"
     nlp_calib.write_run(run, out)
     doc = json.loads((out / "result.json").read_text())
