@@ -8,6 +8,7 @@ import dataclasses
 import json
 import math
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -156,6 +157,30 @@ def test_a_scenario_with_another_formulation_is_warned_about(stored: Path, tmp_p
     # The stored time offset was the old recording's: the new log's is fitted from the scenario's start.
     assert np.isfinite(stored_values.pop("tracker_lag"))
     assert dict(scenario.parameters.initial_guess) == stored_values  # type: ignore[arg-type]
+
+
+def test_windows_in_seconds_are_the_same_formulation_whatever_horizon_they_resolve_to(tmp_path: Path) -> None:
+    """A calibration made with ``residual.horizon_s`` records the horizon in records its log's rate
+    gave; its own scenario file says only the seconds: checking with that file is no other
+    formulation, and other seconds are."""
+    log = write_sim(tmp_path, "drive.txt", records=600, seed=31)
+    own = tmp_path / "own.yaml"
+    own.write_text(
+        f"dataset: {log}\nmodel: tricycle\nresidual: {{horizon_s: 0.5}}\nsolvers: [gauss_newton]\n"
+    )
+    run = Calibration.setup(load_scenario(own)).run(("gauss_newton",))
+    (tmp_path / "cal").mkdir()
+    (path,) = write_calibration(run, tmp_path / "cal", "calibration.yaml")
+    calibration = read_calibration(path)
+    recorded = calibration.objective["residual"]  # type: ignore[index]
+    assert recorded["horizon_s"] == 0.5 and recorded["horizon"] > 1  # resolved on the log's rate
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_scenario(calibration, own)
+    other = tmp_path / "other.yaml"
+    other.write_text(own.read_text().replace("horizon_s: 0.5", "horizon_s: 1.0"))
+    with pytest.warns(UserWarning, match="formulation alone"):
+        check_scenario(calibration, other)
 
 
 def test_bad_inputs_are_one_line_errors(stored: Path, tmp_path: Path) -> None:

@@ -263,3 +263,23 @@ def test_the_tracker_lag_is_estimated_within_3_ms(options: dict[str, object]) ->
     log, _ = sim("tricycle", seed=6, records=2000, latency_s=0.05, **options)
     calib = Calibration(scenario("tricycle", **RECOMMENDED), log=log)
     assert calib.alignment.lag_s == pytest.approx(0.05, abs=0.003)
+
+
+def test_windows_across_a_gap_are_dropped_but_not_counted_as_left_out_for_faults() -> None:
+    """A gap drops every window across it whatever the faults: only the windows the faults alone
+    leave out are counted for them (a real car's one steering fault was said to leave out 697
+    windows where 7 went for it, the rest for its command stream's gaps)."""
+    log, _ = sim("tricycle", seed=1, records=200)
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=5))
+    options = ResidualOptions(horizon=5)
+    gaps = np.zeros(log.n_records - 1, dtype=bool)
+    gaps[100] = True
+    bad_i = np.zeros(log.n_records - 1, dtype=bool)
+    bad_i[98] = True  # 2 intervals before the gap: 3 of its 5 windows cross the gap too
+    bad_i[50] = True  # far from it: its 5 windows go for the fault alone
+    gapped = build_residual_data(fns, log, options, gaps=gaps)
+    both = build_residual_data(fns, log, options, bad_intervals=bad_i, gaps=gaps)
+    assert gapped.dropped_faulty == 0 and gapped.n_residuals == 195 - 5
+    assert both.dropped_faulty == 5 + 2 and both.n_residuals == gapped.n_residuals - both.dropped_faulty
+    s = both.starts
+    assert not np.any(((s <= 100) & (s + 5 > 100)) | ((s <= 98) & (s + 5 > 98)) | ((s <= 50) & (s + 5 > 50)))

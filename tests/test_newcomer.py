@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import re
 from pathlib import Path
@@ -15,10 +16,12 @@ from nlp_calib.analysis.metrics import path_distance, trajectory_metrics
 from nlp_calib.cli.parser import build_parser
 from nlp_calib.models import get_model
 from nlp_calib.outputs.plots.residuals import BINS, _calibrated_range
-from nlp_calib.pipeline import Calibration, Scenario, Wanted
+from nlp_calib.outputs.summary import summary_lines
+from nlp_calib.pipeline import Calibration, Scenario, Wanted, scenario_from_mapping
 from nlp_calib.pipeline.scenario import FaultOptions, ValidationOptions
 from nlp_calib.problem import ProblemSpec, build
-from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED
+from nlp_calib.results import CalibrationRun
+from nlp_calib.results.run import CAVEATS, GOOD, UNDETERMINED, Verdict
 
 SUBCOMMANDS = ("run", "compare", "validate", "odometry", "codegen", "simulate", "import-bag")
 
@@ -230,3 +233,40 @@ def test_codegen_example_evaluates_the_calibrated_parameters(tmp_path: Path, dem
     expected = Calibration(demo).solve(demo.solvers[0]).params
     assert_close(params, expected, rtol=1e-12)
     assert re.search(r"window: records \d+-\d+ \(lines \d+-\d+\) of demo_tricycle.txt", src)
+
+
+@pytest.mark.parametrize("start", ["auto", "from_file"])
+def test_a_not_determined_summary_gives_the_verdicts_next_step_and_no_other(
+    tmp_path: Path, start: str
+) -> None:
+    """The summary's next step is the one the verdict names; without one, the data-driven start is
+    advised only to a run that did not start from it."""
+    log = write_sim(tmp_path, "drive.txt", records=500, seed=71)
+    sc = scenario_from_mapping(
+        {
+            "dataset": str(log),
+            "initial_guess": start,
+            "validation": {"blocks": 0},
+            "solvers": ["gauss_newton"],
+        },
+        "sc",
+        tmp_path,
+    )
+    run = Calibration(sc).run()
+    assert run.scenario.initial_guess == start
+    named = "the drive leaves k_steer loose; next: hold k_steer at a measured value (known: {k_steer: <v>})"
+    told = _next_steps(dataclasses.replace(run, verdict=Verdict(UNDETERMINED, (named,))))
+    assert "hold k_steer at a measured value (known: {k_steer: <v>})" in told
+    assert not any("initial guess" in step or "check the log" in step for step in told), told
+    bare = _next_steps(
+        dataclasses.replace(run, verdict=Verdict(UNDETERMINED, ("the drive leaves k_steer loose",)))
+    )
+    (again,) = [step for step in bare if "run again" in step]
+    assert ("initial_guess: auto" in again) == (start != "auto"), again
+
+
+def _next_steps(run: CalibrationRun) -> list[str]:
+    """The summary's next steps: the line after 'next: ' and the lines indented below it."""
+    lines = summary_lines(run)
+    first = next(i for i, line in enumerate(lines) if line.startswith("  next: "))
+    return [lines[first][len("  next: ") :], *(line.strip() for line in lines[first + 1 :])]

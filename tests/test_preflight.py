@@ -628,3 +628,57 @@ def test_the_preflight_judges_windows_of_several_lengths_from_its_rough_start(
     found = preflight(load_scenario(_gyro_beside_poses(tmp_path)))
     assert found.verdict == ENOUGH, found.verdict
     assert {p.status for p in found.parameters} == {DETERMINED}
+
+
+def _commanded_car(folder: Path) -> tuple[Path, Path]:
+    """A small car (wheelbase 0.32 m, wheels of 5 cm, tracker 0.2 m ahead of the rear axle) at
+    20 Hz, its wheel speed stepping between 0.5 and 5 m/s (10 and 100 rad/s: 0.5 and 5 rad a
+    record) as a recording of commanded speeds does: its joints (the wheel as its speed, rad/s)
+    and its tracker's poses."""
+    rng = np.random.default_rng(43)
+    t = np.arange(0.0, 60.0, 0.05)
+    held = np.repeat(rng.choice([0.5, 0.5, 0.5, 5.0], 40), 40)[: t.size]
+    steer = 0.3 * np.sin(0.5 * t)
+    th = np.concatenate([[0.0], np.cumsum(held[:-1] * np.tan(steer[:-1]) / 0.32 * 0.05)])
+    x = np.concatenate([[0.0], np.cumsum(held[:-1] * np.cos(th[:-1]) * 0.05)])
+    y = np.concatenate([[0.0], np.cumsum(held[:-1] * np.sin(th[:-1]) * 0.05)])
+    joints, poses = folder / "car.csv", folder / "car.tum"
+    rows = [f"{a:.3f},{s:.6f},{v / 0.05:.6f}" for a, s, v in zip(t, steer, held)]
+    joints.write_text("time,steer_joint,wheel_joint\n" + "\n".join(rows) + "\n")
+    sx, sy = x + 0.2 * np.cos(th), y + 0.2 * np.sin(th)
+    rows = [
+        f"{a:.3f} {p:.6f} {q:.6f} 0 0 0 {math.sin(h / 2):.9f} {math.cos(h / 2):.9f}"
+        for a, p, q, h in zip(t, sx, sy, th)
+    ]
+    poses.write_text("\n".join(rows) + "\n")
+    return joints, poses
+
+
+def test_a_wheel_given_as_speeds_is_never_said_to_wrap(tmp_path: Path) -> None:
+    """Speeds the reader integrates grow as they do: steps of 5 rad a record among steps of 0.5 rad
+    are no wraps (a real car's commanded speeds were refused so), though the same angles given as
+    positions look like a wheel that wraps."""
+    joints, _ = _commanded_car(tmp_path)
+    speeds = np.loadtxt(joints, delimiter=",", skiprows=1)
+    # The angles a trapezoid integration of the speeds gives, written as positions.
+    angle = np.concatenate([[0.0], np.cumsum(0.5 * (speeds[1:, 2] + speeds[:-1, 2]) * np.diff(speeds[:, 0]))])
+    assert np.all(np.diff(angle) > 0)  # a wheel always rolling forward: nothing wrapped
+    steps = np.diff(angle)
+    assert np.median(steps) < 1.0 and np.sum(np.abs(steps - 2 * np.pi) < 2.0) > 10  # what looks like wraps
+    as_positions = tmp_path / "positions.csv"
+    as_positions.write_text(
+        "time,steer_joint,wheel_joint\n"
+        + "\n".join(f"{a:.3f},{s:.6f},{w:.6f}" for a, s, w in zip(speeds[:, 0], speeds[:, 1], angle))
+        + "\n"
+    )
+    kinds = {}
+    for name, form, csv in (("speeds", "speeds", joints), ("positions", "positions", as_positions)):
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(
+            f"name: {name}\nmodel: car_like_bicycle\ndataset: {{joints: {csv.name}, poses: car.tum, "
+            f"form: {form}, encoders: {{steering: steer_joint, traction_motor: wheel_joint}}}}\n"
+            "initial_guess: auto\nknown: {wheelbase: 0.32}\nsolvers: [gauss_newton]\n"
+        )
+        kinds[name] = {u.kind for u in preflight(load_scenario(path)).units}
+    assert "wrapped" not in kinds["speeds"], kinds
+    assert "wrapped" in kinds["positions"], kinds

@@ -3,6 +3,7 @@ small σ (it is said not determined), and a car that does not slide keeps its se
 
 from __future__ import annotations
 
+import re
 import warnings
 from pathlib import Path
 from typing import Any
@@ -223,3 +224,34 @@ def test_a_check_not_made_says_why_and_is_a_caveat_where_the_bends_load_the_tyre
         loaded = not_made(NotMade("too few windows", load))
         assert loaded.level == CAVEAT and said in loaded.caveat and "too few windows" in loaded.caveat
         assert "nan" not in loaded.caveat
+
+
+def test_windows_of_several_records_that_leave_the_bins_empty_are_said_and_shorter_ones_make_it(
+    tmp_path: Path,
+) -> None:
+    """A bin is fitted on the windows lying wholly within its speeds: windows of half a second on a
+    car whose speed keeps changing leave each bin too few, which the check says with the remedy,
+    and the remedy, one-record windows on the same drive, makes the check."""
+    dataset, truth = _drive(tmp_path, 6101, 0.004, 60.0)
+    words = {}
+    for residual in ({"horizon_s": 0.5}, {"horizon": 1}):
+        sc = {
+            "model": "car_like",
+            "initial_guess": "auto",
+            "solvers": ["gauss_newton"],
+            "dataset": dataset,
+            "residual": residual,
+            "validation": {"blocks": 0},
+            "known": {n: truth[n] for n in ("wheelbase", "traction_track_width")},
+        }
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            run = Calibration(scenario_from_mapping(sc, "car", tmp_path)).run()
+        words[str(residual)] = _slip(run).words
+    long, short = words["{'horizon_s': 0.5}"], words["{'horizon': 1}"]
+    held = re.search(
+        r"bins of speed could be fitted.*a bin needs (\d+) windows.* at most (\d+) lie within", long
+    )
+    assert long.startswith("not made: ") and held is not None, long
+    assert int(held.group(2)) < int(held.group(1)) and "residual.horizon: 1" in long
+    assert not short.startswith("not made"), short

@@ -3,11 +3,20 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
 
-from nlp_calib.analysis.uncertainty import EXPLAINED_Z, _Kernel, _Window, chi2_point, expected_kernel_terms
+from nlp_calib.analysis.uncertainty import (
+    EXPLAINED_Z,
+    _Kernel,
+    _Window,
+    bounds_prior,
+    chi2_point,
+    expected_kernel_terms,
+    range_std,
+)
 
 
 @pytest.mark.parametrize(("k", "point"), [(1, 10.828), (3, 16.266), (6, 22.458), (9, 27.877)])
@@ -101,3 +110,14 @@ def test_the_kernels_slopes_follow_the_noise_not_the_windows_residuals() -> None
     wider, _ = _huber_three_rows(3.0, np.array([6.0]))
     assert both[0] == pytest.approx((9 * float(slope[0]) + float(wider[0])) / 10, abs=2e-5)
     assert _Kernel("none", 3.0).slopes(np.zeros(0, dtype=int), np.array([1.0, 0.0]))[0].tolist() == [1.0, 1.0]
+
+
+def test_a_pinned_parameters_bounds_weigh_it_infinitely_and_say_nothing() -> None:
+    """Bounds that meet (a lag pinned where no fit converged) hold the parameter exactly: an infinite
+    prior weight, computed without numpy's division warning reaching the user's terminal."""
+    std = range_std(np.array([0.5, -np.inf, 0.0]), np.array([3.5, np.inf, 0.0]), 3)
+    assert std[0] == pytest.approx(3.0 / math.sqrt(12.0)) and math.isinf(std[1]) and std[2] == 0.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        weight = bounds_prior(std, 2.0, 3)
+    assert weight[0] == pytest.approx(2.0 * 12.0 / 9.0) and weight[1] == 0.0 and math.isinf(weight[2])

@@ -365,7 +365,9 @@ def bounds_prior(bounds_std: np.ndarray | None, sigma2: float, n: int) -> np.nda
     if bounds_std is None:
         return np.zeros(n)
     std = np.asarray(bounds_std, dtype=float)
-    return sigma2 * np.where(np.isfinite(std), std**-2.0, 0.0)
+    # A pinned parameter's bounds meet (a lag no fit converged from): its weight is infinite, as meant.
+    with np.errstate(divide="ignore"):
+        return sigma2 * np.where(np.isfinite(std), std**-2.0, 0.0)
 
 
 def _bounded_covariance(

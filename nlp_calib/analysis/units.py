@@ -95,7 +95,8 @@ def wrapped(log: Log, model: KinematicModel) -> list[UnitFinding]:
     names = log.header.encoder_names
     stream = log.joint_stream
     for j, name in enumerate(names):
-        if model.encoder_kinds.get(name) != "counter":
+        # A position the reader integrated from speeds grows as they do: it cannot have wrapped.
+        if model.encoder_kinds.get(name) != "counter" or (stream is not None and name in stream.integrated):
             continue
         pos = stream.positions[:, j] if stream is not None else log.joint_positions[:, j]
         time_s = stream.time_s if stream is not None else log.time_s

@@ -54,17 +54,27 @@ def _next_steps(run: CalibrationRun, level: str, files: Sequence[str]) -> list[s
         if planned:
             assert plan is not None
             steps.insert(0, f"{plan.line()}; plan.md ranks {len(plan.ranked)} manoeuvres")
-        steps.append(
-            hints[0]
-            if hints
-            else "check the initial guess (or use initial_guess: auto) and the log, then run again"
-        )
+        steps.append(hints[0] if hints else _verdicts_next(run) or _run_again(run))
     elif level == CAVEATS:
         steps.insert(0, "read the caveats above before using the result")
         if planned:
             assert plan is not None
             steps.insert(1, f"to know {plan.target} better, {plan.line()}")
     return steps
+
+
+def _verdicts_next(run: CalibrationRun) -> str:
+    """The next step a reason of the verdict already names ('next: ...'): the summary says that
+    one, not another."""
+    said = [r.split("next: ", 1)[1] for r in run.verdict.reasons if "next: " in r]
+    return said[0] if said else ""
+
+
+def _run_again(run: CalibrationRun) -> str:
+    """What to try when nothing names a next step: the data-driven start, unless it was used."""
+    if run.scenario.initial_guess == "auto":
+        return "check the log (units, signs, which joint is which) and the model, then run again"
+    return "check the initial guess (or use initial_guess: auto) and the log, then run again"
 
 
 def _travelled(run: CalibrationRun) -> str:

@@ -185,7 +185,7 @@ def auto_start(
     the windows better."""
     start, stop = records
     data = build_residual_data(
-        fns, log.select(start, stop), sc.objective.residual, bad_intervals=_within(gaps, start, stop)
+        fns, log.select(start, stop), sc.objective.residual, gaps=_within(gaps, start, stop)
     )
     known = {n: initial[n] for n in fns.fixed}
     with scenario_key(sc, "initial_guess"):
@@ -320,12 +320,6 @@ class Binder:
     #: Per interval of the whole log: gaps in time, which no window crosses whatever the faults.
     gaps: np.ndarray | None = None
 
-    def crossing(self) -> np.ndarray | None:
-        """The intervals no window may cross: the faults' and the gaps."""
-        if self.gaps is None or self.bad_intervals is None:
-            return self.bad_intervals if self.gaps is None else self.gaps
-        return self.bad_intervals | self.gaps
-
     def windows(self, log: Log, start: int, stop: int) -> ResidualData:
         """The residual windows of records ``start:stop`` of ``log`` (those the masks allow)."""
         sc = self.scenario
@@ -334,8 +328,9 @@ class Binder:
             log.select(start, stop),
             sc.objective.residual,
             drop_stationary=sc.log.samples.drop_stationary,
-            bad_intervals=_within(self.crossing(), start, stop),
+            bad_intervals=_within(self.bad_intervals, start, stop),
             bad_records=None if self.bad_records is None else self.bad_records[start:stop],
+            gaps=_within(self.gaps, start, stop),
         )
         if self.start is not None and self.start.selection is not None and data.n_residuals:
             data = sensor_selected(self.fns, data, self.start)

@@ -93,7 +93,7 @@ def _same_formulation(stored: StoredCalibration, sc: Scenario) -> None:
     recorded = stored.objective or {}
     used: dict[str, Any] = {"residual": sc.objective.residual, "robust": sc.objective.robust}
     for key, options in used.items():
-        if key in recorded and dict(recorded[key]) != dataclasses.asdict(options):
+        if key in recorded and _formulation(dict(recorded[key])) != _formulation(dataclasses.asdict(options)):
             warnings.warn(
                 f"{sc.path or sc.name} fits {key} {dataclasses.asdict(options)}, the calibration "
                 f"{recorded[key]}: the parameters may differ by the formulation alone; check with the "
@@ -101,6 +101,17 @@ def _same_formulation(stored: StoredCalibration, sc: Scenario) -> None:
                 NlpCalibWarning,
                 stacklevel=3,
             )
+
+
+def _formulation(options: dict[str, Any]) -> dict[str, Any]:
+    """Residual or robust options as a formulation: with windows given in seconds
+    (``horizon_s``) the record horizon is what each log's rate makes of them, recorded resolved
+    by a run and unresolved in its scenario file, so it is no part of the formulation."""
+    return (
+        {k: v for k, v in options.items() if k != "horizon"}
+        if options.get("horizon_s") is not None
+        else options
+    )
 
 
 def check_scenario(stored: StoredCalibration, target: Path) -> Scenario:

@@ -177,7 +177,7 @@ def drive(
         [p.log.select(p.start, p.split) for p in parts],
         one.objective.residual,
         drop_stationary=one.log.samples.drop_stationary,
-        bad_intervals=_gaps(parts),
+        gaps=_gaps(parts),
     )
     backend = None if run is None else run.problem.binder.backend
     return Drive(parts, one, fns, data, point, words, tuple(p.log for p in parts), backend), held
@@ -342,7 +342,7 @@ def _resampled(d: Drive, x: np.ndarray) -> Drive:
         [p.log.select(p.start, p.split) for p in parts],
         d.scenario.objective.residual,
         drop_stationary=d.scenario.log.samples.drop_stationary,
-        bad_intervals=_gaps(parts),
+        gaps=_gaps(parts),
     )
     return replace(d, parts=tuple(parts), data=data)
 

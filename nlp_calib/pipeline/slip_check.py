@@ -262,6 +262,18 @@ class NotMade:
         return not self.load < MIN_LATERAL
 
 
+def _held(data: ResidualData, label: np.ndarray) -> str:
+    """How many windows a bin of speed can hold: a bin is fitted on the windows whose intervals all
+    lie in it, so windows of several records on a drive whose speed keeps changing leave each bin
+    few; shorter ones put more in each."""
+    within = max(int(np.sum(data.interval_counts(label != j) == 0)) for j in range(BINS))
+    span = int(np.median(data.stops - data.starts)) if data.n_residuals else 1
+    said = f": of the drive's {data.n_residuals} windows, at most {within} lie within one bin's speeds"
+    if span > 1 and data.increment is None:  # windows of poses, as long as the scenario says
+        said += f" (a window spans {span} records; shorter windows, residual.horizon: 1, put more in each)"
+    return said
+
+
 def measure(run: CalibrationRun, model: KinematicModel, fit: Fit) -> SpeedLines | NotMade | None:
     """The run's parameters on bins of speed against the speed squared; why they could not be
     made (:class:`NotMade`); None: no solver converged, or the base turns on the spot (no check)."""
@@ -285,11 +297,10 @@ def measure(run: CalibrationRun, model: KinematicModel, fit: Fit) -> SpeedLines 
     fits, variance = bin_fits(run, model, fit, cut[0])
     lines = slopes(fits, variance, cut[1], fit.canonical_params(at))
     if not np.any(np.isfinite(lines.slope)):
-        fitted, n = int(np.max(np.sum(np.isfinite(fits), axis=0))), fit.data.n_residuals
+        fitted, held = int(np.max(np.sum(np.isfinite(fits), axis=0))), _held(fit.data, cut[0])
         why = (
             f"{fitted} of its {BINS} bins of speed could be fitted on their own ({MIN_BINS} needed; a bin "
-            f"needs {WINDOWS_PER_FREE * fit.fns.n_free} windows, {WINDOWS_PER_FREE} a free parameter, "
-            f"and the drive has {n} in all)"
+            f"needs {WINDOWS_PER_FREE * fit.fns.n_free} windows, {WINDOWS_PER_FREE} a free parameter{held})"
         )
         return NotMade(why, lateral(*motion))
     names = tuple(fit.fns.names)

@@ -470,13 +470,15 @@ def build_residual_data(
     bad_intervals: np.ndarray | None = None,
     bad_records: np.ndarray | None = None,
     inputs: np.ndarray | None = None,
+    gaps: np.ndarray | None = None,
 ) -> ResidualData:
     """The windows of ``options`` over ``log`` (or several logs, end to end, no window crossing
     from one into the next).
 
     Windows in which no encoder moves are dropped when ``drop_stationary``; windows that cross an
     interval of ``bad_intervals`` (a mask over the intervals) or start or end at a record of
-    ``bad_records`` (over the records) are always dropped. ``inputs`` gives the intervals' model
+    ``bad_records`` (over the records) are always dropped, and so are those that cross an interval of
+    ``gaps`` (the streams' gaps: not counted as left out for faults). ``inputs`` gives the intervals' model
     inputs (laid out as :func:`interval_inputs` lays them) when they do not come from the logs'
     encoders, e.g. joint positions paired with a camera's images.
     """
@@ -516,7 +518,7 @@ def build_residual_data(
     if drop_stationary and starts.size:
         keep = data.interval_counts(fns.model.moving(inputs)) > 0
         data = replace(data.select(keep), dropped_stationary=int((~keep).sum()))
-    return _without_faults(data, bad_intervals, bad_records)
+    return _without_faults(data, bad_intervals, bad_records, gaps)
 
 
 def resampled_data(
@@ -566,15 +568,21 @@ def _log_windows(
 
 
 def _without_faults(
-    data: ResidualData, bad_intervals: np.ndarray | None, bad_records: np.ndarray | None
+    data: ResidualData,
+    bad_intervals: np.ndarray | None,
+    bad_records: np.ndarray | None,
+    gaps: np.ndarray | None = None,
 ) -> ResidualData:
-    """``data`` without the windows that cross a bad interval or start or end at a bad record."""
+    """``data`` without the windows that cross a bad interval or a gap or start or end at a bad
+    record; ``dropped_faulty`` counts those the faults alone leave out (a window across a gap goes
+    whatever the faults)."""
     faulty = np.zeros(data.n_residuals, dtype=bool)
     if bad_intervals is not None and np.any(bad_intervals):
         faulty |= data.interval_counts(bad_intervals) > 0
     if bad_records is not None and np.any(bad_records):
         bad = np.asarray(bad_records, dtype=bool)
         faulty |= bad[data.starts] | bad[data.stops]
-    if faulty.any():
-        data = replace(data.select(~faulty), dropped_faulty=int(faulty.sum()))
+    gapped = data.interval_counts(gaps) > 0 if gaps is not None and np.any(gaps) else np.zeros_like(faulty)
+    if (faulty | gapped).any():
+        data = replace(data.select(~(faulty | gapped)), dropped_faulty=int((faulty & ~gapped).sum()))
     return data
