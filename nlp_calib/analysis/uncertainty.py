@@ -235,27 +235,27 @@ def estimate(
     use[sums.kernel.index[explained]] = True
     dof = max(fns.error_rows * int(use.sum()) - fns.n_free, 1)
     meat = white_meat = sums.meat(var, explained)
-    # The data term is not divided by the residuals' variance σ², so a prior of weight σ²/std²
-    # (the scenario's, weighed so; the bounds' below) adds σ² times that weight to the score's
-    # covariance.
+    # The data term is not divided by the residuals' variance σ², so a prior of weight σ²/std² (the
+    # scenario's, weighed so; the bounds' below) adds σ² times that weight to the score's covariance.
     sigma2 = float(np.sum(weight[use] * s[use])) / dof
     if evaluator.priors.active:
         meat = meat + sigma2 * evaluator.prior_information(x)
-    sandwich = _covariance(evaluator, x, ne.H, sigma2, bounds_std)
+    scale = scales(fns, _free_values(evaluator, x))  # reference units, for the free directions
+    sandwich = _covariance(evaluator, x, ne.H, sigma2, (bounds_std, scale))
     (cov, bounded), residual = _with_residuals(sandwich, meat, own)
     out = _packaged(fns, cov, _noise_levels(fns, var, Sigma_in), dof)
     out = replace(out, bounded=tuple(n for n, b in zip(fns.free, bounded) if b))
-    return _with_stretches(_with_spreads(out, residual, own, white_meat), evaluator, x, own)
+    return _with_stretches(_with_spreads(out, residual, own, white_meat), evaluator, scale, own)
 
 
 def _with_stretches(
-    out: Uncertainty, evaluator: ProblemEvaluator, x: np.ndarray, own: ScoreRows
+    out: Uncertainty, evaluator: ProblemEvaluator, scale: np.ndarray, own: ScoreRows
 ) -> Uncertainty:
     """``out`` with the stretches of the drive that alone determine a direction
-    (:func:`~nlp_calib.analysis.leverage.stretches`, from ``own``'s batches' information)."""
+    (:func:`~nlp_calib.analysis.leverage.stretches`, from ``own``'s batches' information, judged in
+    the reference units ``scale``)."""
     if own.done != own.hi.size:  # not every window's information summed (too few to batch)
         return out
-    scale = scales(evaluator.fns, _free_values(evaluator, x))
     batches = (own.information, own.edges)
     return replace(out, stretches=stretches(evaluator.fns, evaluator.data, evaluator.omega, scale, batches))
 
@@ -316,13 +316,13 @@ def _covariance(
     x: np.ndarray,
     H: np.ndarray,
     sigma2: float,
-    bounds_std: np.ndarray | None,
+    bounds_and_scale: tuple[np.ndarray | None, np.ndarray],
 ) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
-    """:func:`_bounded_covariance` at ``x`` as a function of the meat: reference units from the
-    estimate, the drive's free directions from its windows' motion, the bounds' prior in the
-    data's units."""
+    """:func:`_bounded_covariance` at ``x`` as a function of the meat: in the reference units
+    ``scale`` (the estimate's), the drive's free directions from its windows' motion, the bounds'
+    prior in the data's units."""
     fns, data = evaluator.fns, evaluator.data
-    scale = scales(fns, _free_values(evaluator, x))
+    bounds_std, scale = bounds_and_scale
     motion2 = motion_scale(fns, data.z, evaluator.omega)
 
     def free(lam: np.ndarray) -> np.ndarray:

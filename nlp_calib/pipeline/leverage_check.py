@@ -58,7 +58,7 @@ def check(run: CalibrationRun) -> CheckResult | None:
         caveat=said[0],
         caveats=tuple(said[1:]),
         concerns=concerns,
-        record={"stretches": [{**s.as_dict(), "records": [first + s.first, first + s.stop]} for s in found]},
+        record={"stretches": [s.as_dict(first) for s in found]},
         how=(
             "Each stretch's windows are taken out of the fit's information at the estimate, and what is "
             "left judged by the floor that decides what a drive determines."

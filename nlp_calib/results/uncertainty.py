@@ -23,9 +23,10 @@ class Stretch:
     of: int
     n_records: int
 
-    def as_dict(self) -> dict[str, object]:
+    def as_dict(self, offset: int = 0) -> dict[str, object]:
+        """As result.json holds it, its records numbered from ``offset``."""
         return {
-            "records": [self.first, self.stop],
+            "records": [offset + self.first, offset + self.stop],
             "parameters": list(self.names),
             "shortfall": self.shortfall,
         }
