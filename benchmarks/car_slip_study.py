@@ -29,14 +29,17 @@ from car_check_study import scenario
 from nlp_calib.simulation.vehicles import HighwayOptions, RoadOptions, simulate_highway
 
 
-def one(out: Path, seed: int, slip: float) -> tuple[float, bool]:
+def one(out: Path, seed: int, slip: float, horizon_s: float | None = None) -> tuple[float, bool]:
     out.mkdir(parents=True, exist_ok=True)
     road = RoadOptions(heading_change=-4.7, bend_angle=0.03, slip_gain=slip, pose_noise_time_s=5.0)
     sim = simulate_highway(HighwayOptions(duration_s=400.0, seed=seed, road=road, pose_noise=(0.02, 0.002)))
     joints, poses, _ = sim.write(out / "car")
     truth = dict(sim.options.truth)
     half = int(sim.pose_time_s.size // 2)
-    (out / "first.yaml").write_text(yaml.safe_dump(scenario(joints, poses, truth, 0, half)))
+    first = scenario(joints, poses, truth, 0, half)
+    if horizon_s is not None:  # windows of several records, as `init` drafts them
+        first["residual"] = {"horizon_s": horizon_s}
+    (out / "first.yaml").write_text(yaml.safe_dump(first))
     cmd = [sys.executable, "-m", "nlp_calib", "run", str(out / "first.yaml"), "--out", str(out / "first")]
     subprocess.run([*cmd, "--skip-preflight"], capture_output=True, text=True, check=False)
     return report(out, seed, truth["sensor_x"])
@@ -98,8 +101,9 @@ def main() -> None:
     ap.add_argument("out", type=Path)
     ap.add_argument("seeds", type=int, nargs="+")
     ap.add_argument("--slip", type=float, default=0.004)
+    ap.add_argument("--horizon-s", type=float, default=None, help="windows of this duration (s)")
     args = ap.parse_args()
-    found = [one(args.out / str(seed), seed, args.slip) for seed in args.seeds]
+    found = [one(args.out / str(seed), seed, args.slip, args.horizon_s) for seed in args.seeds]
     within = sum(z <= 2.0 for z, _ in found)
     told = sum(said for _, said in found)
     print(f"sensor_x within 2σ of truth: {within} of {len(found)}; NOT DETERMINED: {told}")

@@ -8,10 +8,10 @@ explains as ``x·v·κ`` wherever the speed varies little: the fit moves ``senso
 (0.8 m on a car at 14 m/s with 4 mrad per m/s²), and its σ, the spread of fits along the drive,
 says nothing of a shift that every part of the drive shares.
 
-What tells it is the speed: the drive's moving intervals are put in :data:`BINS` bins of speed,
-each bin's windows fitted on their own from the run's estimate, and each parameter's fits regressed
-on the bins' speed squared (the slip's shift grows with ``v²``; a bin's speed is its intervals'
-weighed by their squared turn rate, as a lever arm's information is), each bin weighed by its own
+What tells it is the speed: the drive's moving windows are put in :data:`BINS` bins by their own
+mean speed, each bin's windows fitted on their own from the run's estimate, and each parameter's
+fits regressed on the bins' speed squared (the slip's shift grows with ``v²``; a bin's speed is its
+windows' weighed by their squared turn rate, as a lever arm's information is), each bin weighed by its own
 information, the slope's σ from the fits' scatter about the line. A slope beyond :data:`T_LIMIT`
 of its σ that moves the parameter over the speeds driven by more than the precision the
 calibration needs means the model lacks what moves it: the run's value and its σ are not believed
@@ -23,6 +23,8 @@ distance from the drive's fit to the value at zero speed, with that value's σ. 
 bases that cannot turn on the spot (cars: a turn on the spot has no lateral
 load) whose drive reaches :data:`MIN_LATERAL` in its bends.
 
+A window is binned by its mean speed, not by whether every record of it lies in one bin: a car that
+brakes and accelerates within a window's half second would otherwise leave every bin nearly empty.
 A bin of speeds is whichever stretches of the drive drove at that speed; a drive that changes its
 speed slowly puts few stretches in each, and an error that varies along the drive (a wandering
 tracker, one bend) then moves neighbouring bins together, which the scatter does not see: the
@@ -78,6 +80,24 @@ def interval_motion(fit: Fit, params: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return speed, rate
 
 
+def window_motion(data: ResidualData, speed: np.ndarray, rate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each window's mean base speed (m/s) and turn rate (rad/s) over its intervals (of
+    :func:`interval_motion`), their durations weighing them; NaN where an interval is not timed."""
+    dt = interval_durations(data)
+    timed = np.isfinite(dt) & np.isfinite(speed) & np.isfinite(rate)
+    untimed = data.interval_counts(~timed) > 0
+
+    def over(values: np.ndarray) -> np.ndarray:
+        c = np.concatenate([[0.0], np.cumsum(np.where(timed, values, 0.0))])
+        return c[data.stops] - c[data.starts]
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        duration = over(dt)
+        mean_speed, mean_rate = over(speed * dt) / duration, over(rate * dt) / duration
+    bad = untimed | ~(duration > 0)
+    return np.where(bad, np.nan, mean_speed), np.where(bad, np.nan, mean_rate)
+
+
 def interval_durations(data: ResidualData) -> np.ndarray:
     """Each interval's duration (s) from its log's stamps; NaN between logs (and everywhere when
     the logs' records are not the windows')."""
@@ -90,20 +110,21 @@ def interval_durations(data: ResidualData) -> np.ndarray:
 
 def lateral(speed: np.ndarray, rate: np.ndarray) -> float:
     """The lateral acceleration (m/s²) the drive's bends reach: the 90th percentile of its moving
-    intervals' (NaN: none moves)."""
+    windows' (NaN: none moves)."""
     moving = np.isfinite(speed) & np.isfinite(rate) & (speed > 0.0)
     return float(np.percentile(np.abs(speed * rate)[moving], 90)) if moving.any() else float("nan")
 
 
 def speed_bins(speed: np.ndarray, rate: np.ndarray) -> tuple[np.ndarray, np.ndarray] | str:
-    """Per interval its bin of speed (0 to :data:`BINS` − 1, slowest first, split at the moving
-    intervals' quantiles; −1 standing or not timed) and each bin's speed squared, its intervals'
-    weighed by their squared turn rate (a straight bin's: their mean); or why the drive cannot be
-    binned: too few moving intervals, bends under :data:`MIN_LATERAL`, or speeds too alike to
-    split or to tell a slip by (the slowest bin over :data:`SPEED_RATIO` of the fastest)."""
+    """Per window (its mean ``speed`` and turn ``rate``) its bin of speed (0 to :data:`BINS` − 1,
+    slowest first, split at the moving windows' quantiles; −1 standing or not timed) and each bin's
+    speed squared, its windows' weighed by their squared turn rate (a straight bin's: their mean);
+    or why the drive cannot be binned: too few moving windows, bends under :data:`MIN_LATERAL`, or
+    speeds too alike to split or to tell a slip by (the slowest bin over :data:`SPEED_RATIO` of the
+    fastest)."""
     moving = np.isfinite(speed) & np.isfinite(rate) & (speed > 0.0)
     if moving.sum() < 4 * BINS:
-        return f"it has {int(moving.sum())} timed moving intervals ({4 * BINS} needed)"
+        return f"it has {int(moving.sum())} timed moving windows ({4 * BINS} needed)"
     if (load := lateral(speed, rate)) < MIN_LATERAL:
         return (
             f"its bends reach {load:.2g} m/s² of lateral acceleration (under {MIN_LATERAL:g} m/s², "
@@ -132,7 +153,7 @@ def bin_fits(
     """Each bin's own fit ``(BINS, n_params)`` in canonical form, from the run's estimate, what the
     bin cannot determine held there, and each value's white-noise variance (its bin's information
     alone: what weighs the bins against each other); NaN for a held parameter and for a bin whose
-    fit did not converge or had too few windows. A bin's intervals are those ``label`` gives its
+    fit did not converge or had too few windows. A bin's windows are those ``label`` gives its
     number. Every free parameter is fitted at once, as the run fits them: fitted one at a time, each
     takes up what the others would (a gain moves with a slipping sensor's lever arm), and
     a drive whose few stretches of one speed share an error is more often taken for a slip."""
@@ -143,10 +164,10 @@ def bin_fits(
 
     def own(j: int) -> None:
         part = label == j
-        hold = [n for n in model.undetermined(data.inputs[:, part]) if n in fns.free]
-        crossing = data.interval_counts(~part) > 0
+        inputs = data.inputs[:, data.intervals_of(np.flatnonzero(part))]
+        hold = [n for n in model.undetermined(inputs) if n in fns.free]
         params, converged, n, ev = validation.refit_without(
-            validation.holding(binder, x, hold), data, crossing, x
+            validation.holding(binder, x, hold), data, ~part, x
         )
         if ev is None:
             return
@@ -262,16 +283,10 @@ class NotMade:
         return not self.load < MIN_LATERAL
 
 
-def _held(data: ResidualData, label: np.ndarray) -> str:
-    """How many windows a bin of speed can hold: a bin is fitted on the windows whose intervals all
-    lie in it, so windows of several records on a drive whose speed keeps changing leave each bin
-    few; shorter ones put more in each."""
-    within = max(int(np.sum(data.interval_counts(label != j) == 0)) for j in range(BINS))
-    span = int(np.median(data.stops - data.starts)) if data.n_residuals else 1
-    said = f": of the drive's {data.n_residuals} windows, at most {within} lie within one bin's speeds"
-    if span > 1 and data.increment is None:  # windows of poses, as long as the scenario says
-        said += f" (a window spans {span} records; shorter windows, residual.horizon: 1, put more in each)"
-    return said
+def _held(label: np.ndarray) -> str:
+    """How many windows the bins of speed hold (a bin is fitted on its own windows)."""
+    counts = np.bincount(label[label >= 0], minlength=BINS)
+    return f": they hold {counts.min()} to {counts.max()} windows"
 
 
 def measure(run: CalibrationRun, model: KinematicModel, fit: Fit) -> SpeedLines | NotMade | None:
@@ -284,7 +299,7 @@ def measure(run: CalibrationRun, model: KinematicModel, fit: Fit) -> SpeedLines 
     at = np.asarray(run.reports[chosen].result.params, dtype=float)
     if model.reach(run.reports[chosen].result.param_dict()).spot_turns:
         return None
-    motion = interval_motion(fit, at)
+    motion = window_motion(fit.data, *interval_motion(fit, at))
     if report is None or chosen != SOLVER:
         said = "is not among the solvers" if report is None else "did not converge"
         return NotMade(
@@ -297,7 +312,7 @@ def measure(run: CalibrationRun, model: KinematicModel, fit: Fit) -> SpeedLines 
     fits, variance = bin_fits(run, model, fit, cut[0])
     lines = slopes(fits, variance, cut[1], fit.canonical_params(at))
     if not np.any(np.isfinite(lines.slope)):
-        fitted, held = int(np.max(np.sum(np.isfinite(fits), axis=0))), _held(fit.data, cut[0])
+        fitted, held = int(np.max(np.sum(np.isfinite(fits), axis=0))), _held(cut[0])
         why = (
             f"{fitted} of its {BINS} bins of speed could be fitted on their own ({MIN_BINS} needed; a bin "
             f"needs {WINDOWS_PER_FREE * fit.fns.n_free} windows, {WINDOWS_PER_FREE} a free parameter{held})"
