@@ -1,7 +1,7 @@
 """A car whose rear axle slides out of bends, calibrated on the first half of its drive: sensor_x
 against its truth, in its σ, and what the run says of it (the ``slip`` check).
 
-    python3 benchmarks/car_slip_study.py OUT SEED [SEED ...] [--slip G]
+    python3 benchmarks/car_slip_study.py OUT SEED [SEED ...] [--slip G] [--horizon-s S] [--circuit]
 
 For each seed: the highway simulator's car (nlp_calib.simulation.vehicles) on the road of
 benchmarks/car_check_study.py (400 s at 8-20 m/s, ``--bend 0.03 --heading -4.7``, the device's noise
@@ -22,17 +22,49 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import yaml
 from car_check_study import scenario
 
 from nlp_calib.simulation.vehicles import HighwayOptions, RoadOptions, simulate_highway
 
+#: ``--circuit``: a small car (an F1/10's size) on a circuit: 1 to 5 m/s, braking and accelerating
+#: every 3 to 10 s, bends loading its tyres to several m/s², records at 18.4 Hz, poses at 19.6 Hz.
+CIRCUIT: dict[str, Any] = {
+    "duration_s": 240.0,
+    "road": {"heading_change": 12.0, "bend_angle": 0.15},
+    "min_speed": 1.0,
+    "max_speed": 5.0,
+    "steer_max": 0.05,
+    "wheel_rate_hz": 18.4,
+    "pose_rate_hz": 19.6,
+    "pose_noise": (0.01, 0.005),
+    "speed_periods_s": (3.0, 10.0),
+    "truth": {
+        "wheelbase": 0.32,
+        "rear_track": 0.25,
+        "sensor_x": 0.2,
+        "sensor_y": 0.0,
+        "sensor_theta": 0.01,
+        "k_traction": 0.05,
+        "steer_offset": -0.006,
+    },
+}
 
-def one(out: Path, seed: int, slip: float, horizon_s: float | None = None) -> tuple[float, bool]:
-    out.mkdir(parents=True, exist_ok=True)
+
+def options(seed: int, slip: float, circuit: bool) -> HighwayOptions:
+    """The highway car of the module docstring, or the ``--circuit`` car."""
+    if circuit:
+        road = RoadOptions(**CIRCUIT["road"], slip_gain=slip)
+        return HighwayOptions(**{**CIRCUIT, "road": road, "seed": seed})
     road = RoadOptions(heading_change=-4.7, bend_angle=0.03, slip_gain=slip, pose_noise_time_s=5.0)
-    sim = simulate_highway(HighwayOptions(duration_s=400.0, seed=seed, road=road, pose_noise=(0.02, 0.002)))
+    return HighwayOptions(duration_s=400.0, seed=seed, road=road, pose_noise=(0.02, 0.002))
+
+
+def one(out: Path, seed: int, slip: float, horizon_s: float | None, circuit: bool) -> tuple[float, bool]:
+    out.mkdir(parents=True, exist_ok=True)
+    sim = simulate_highway(options(seed, slip, circuit))
     joints, poses, _ = sim.write(out / "car")
     truth = dict(sim.options.truth)
     half = int(sim.pose_time_s.size // 2)
@@ -102,8 +134,9 @@ def main() -> None:
     ap.add_argument("seeds", type=int, nargs="+")
     ap.add_argument("--slip", type=float, default=0.004)
     ap.add_argument("--horizon-s", type=float, default=None, help="windows of this duration (s)")
+    ap.add_argument("--circuit", action="store_true", help="the small car on a circuit (CIRCUIT)")
     args = ap.parse_args()
-    found = [one(args.out / str(seed), seed, args.slip, args.horizon_s) for seed in args.seeds]
+    found = [one(args.out / str(seed), seed, args.slip, args.horizon_s, args.circuit) for seed in args.seeds]
     within = sum(z <= 2.0 for z, _ in found)
     told = sum(said for _, said in found)
     print(f"sensor_x within 2σ of truth: {within} of {len(found)}; NOT DETERMINED: {told}")

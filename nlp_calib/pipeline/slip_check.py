@@ -236,7 +236,7 @@ def slopes(fits: np.ndarray, variance: np.ndarray, squared: np.ndarray, drive: n
 class SpeedLines:
     """Each parameter's fits on the bins of speed (``fits`` ``(BINS, n)``, canonical
     form) at the bins' ``speeds`` (m/s), their :class:`Lines` over the speed squared, each slope
-    in its σ (``t``) and which parameters move with the speed (indices)."""
+    in its σ (``t``), which parameters move with the speed (indices) and the precision each needs."""
 
     names: tuple[str, ...]
     speeds: np.ndarray
@@ -244,6 +244,12 @@ class SpeedLines:
     lines: Lines
     t: np.ndarray
     moved: tuple[int, ...]
+    needed: np.ndarray
+
+    def slow_enough(self, i: int) -> float:
+        """The speed (m/s) under which the line moves parameter ``i`` from its value at zero speed by
+        less than the precision it needs: bends driven slower calibrate it."""
+        return float(np.sqrt(self.needed[i] / abs(self.lines.slope[i])))
 
     def at(self, i: int, speed: float) -> float:
         """Parameter ``i`` at ``speed`` (m/s) by its line."""
@@ -330,7 +336,8 @@ def measure(run: CalibrationRun, model: KinematicModel, fit: Fit) -> SpeedLines 
         for i, n in enumerate(names)
         if n in report.uncertainty.free and abs(t[i]) > T_LIMIT and abs(lines.slope[i]) * span > needed[n]
     )
-    return SpeedLines(names, np.sqrt(cut[1]), fits, lines, t, moved)
+    precision = np.array([needed[n] for n in names], dtype=float)
+    return SpeedLines(names, np.sqrt(cut[1]), fits, lines, t, moved, precision)
 
 
 def check(run: CalibrationRun, model: KinematicModel | None, fit: Fit | None) -> CheckResult | None:
@@ -389,12 +396,14 @@ def not_made(found: NotMade) -> CheckResult:
 
 def concern(found: SpeedLines, i: int, unit: str) -> str:
     """Why parameter ``i`` is not determined, in ``unit``, with its value at zero speed and what to do."""
+    unit = "" if unit in ("", "1") else f" {unit}"  # a gain's unit "1" is no unit to print
     lo, hi = float(np.nanmin(found.speeds)), float(np.nanmax(found.speeds))
     zero, std = found.lines.at_zero[i], found.lines.std_at_zero[i]
     return (
-        f"{found.names[i]} is NOT DETERMINED: it moves with the speed ({found.at(i, lo):.4g} {unit} at "
+        f"{found.names[i]} is NOT DETERMINED: it moves with the speed ({found.at(i, lo):.4g}{unit} at "
         f"{lo:.3g} m/s, {found.at(i, hi):.4g} at {hi:.3g} m/s; {abs(found.t[i]):.1f}σ), as tyres sliding "
         "out of bends at speed move it (a lateral slip the model lacks; a linear tyre model puts it at "
         f"{zero:.4g} ± {std:.2g} at zero speed): give it under known: (measured), or calibrate on bends "
-        "driven slowly (a few m/s), where tyres barely slide"
+        f"driven under {found.slow_enough(i):.2g} m/s, where the slide moves it by less than the "
+        f"{found.needed[i]:.2g}{unit} a calibration needs"
     )
