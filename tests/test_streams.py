@@ -124,6 +124,27 @@ def test_stuck_readings_while_moving_are_found_a_hold_at_rest_or_a_start_is_not(
     assert stuck_runs(t, stuck, 3.0, at_rest) == []
 
 
+def test_a_stream_that_moves_by_steps_has_no_stuck_readings(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A steering command held between commands (4 Hz, logged at 20 Hz) moves by a hold and a jump
+    every time it moves: no stuck reading. The share that decides it, independently: the steps
+    right after a repeat over all steps."""
+    t = np.arange(400) * 0.05
+    angle = 0.3 * np.sin(t / 1.3) * np.sin(t / 0.7)
+    command = angle[(np.arange(t.size) // 5) * 5]  # each command held over five records
+    moving = np.ones(t.size - 1, dtype=bool)
+    step = np.abs(np.diff(command))
+    assert np.sum(step[1:][step[:-1] == 0]) / np.sum(step[1:]) > streams.STEPWISE_SHARE
+    assert streams.moves_by_steps(command) and stuck_runs(t, command, 0.01, moving) == []
+    monkeypatch.setattr(streams, "STEPWISE_SHARE", 1.0)  # judged as a smooth sensor: many "stuck"
+    assert len(stuck_runs(t, command, 0.01, moving)) > 10
+    monkeypatch.undo()
+    stuck = angle.copy()
+    stuck[101:106] = stuck[100]  # a smooth sensor's stuck reading is still found
+    assert not streams.moves_by_steps(stuck) and [r[:2] for r in stuck_runs(t, stuck, 0.01, moving)] == [
+        (100, 105)
+    ]
+
+
 def _counter(lag: float, n: int = 3000, seed: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A counter's increments and the tracker's implied ones ``lag`` late, with tracker noise."""
     t = _times(n, seed)

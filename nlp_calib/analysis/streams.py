@@ -40,6 +40,12 @@ MAX_GROUP = 4
 MIN_STUCK = 3
 #: A catch-up is a jump when it exceeds this many times the motion per record around it.
 CATCH_UP_FACTOR = 2.5
+#: A stream that makes more than this share of its motion in the steps right after a repeated
+#: reading moves by steps (a steering command held between commands, a position updated slower
+#: than it is logged): its holds are how it moves, not a stuck sensor's. A sensor that reads
+#: smoothly makes a few per cent of it so (the real tricycle's steering: 3 %; a commanded F1/10
+#: steering: 48 %).
+STEPWISE_SHARE = 0.25
 #: Groups scored at once in the first pass over a stream.
 FIRST_PASS_BLOCK = 8192
 #: An interval between records longer than this many times their median interval, and than
@@ -446,6 +452,14 @@ def off_neighbours(
     return found
 
 
+def moves_by_steps(readings: np.ndarray) -> bool:
+    """Whether a stream makes more than :data:`STEPWISE_SHARE` of its motion in the steps right
+    after a repeated reading (a stream that does not move: no)."""
+    step = np.abs(np.diff(np.asarray(readings, dtype=float)))
+    total = float(np.sum(step[1:]))
+    return total > 0 and float(np.sum(step[1:][step[:-1] == 0])) > STEPWISE_SHARE * total
+
+
 def stuck_runs(
     t: np.ndarray, readings: np.ndarray, floor: float, moving: np.ndarray | None = None
 ) -> list[tuple[int, int, float]]:
@@ -453,8 +467,11 @@ def stuck_runs(
     repeats follow) and then caught up by ``jump`` (reading units) at ``last + 1``, more than
     :data:`CATCH_UP_FACTOR` times the motion per record around it and more than ``floor``; with
     ``moving`` (per interval), only runs over which the robot moved (a reading held while it
-    stands still misleads nothing)."""
+    stands still misleads nothing). None in a stream that moves by steps (:func:`moves_by_steps`):
+    there a hold and the jump after it are how the stream moves."""
     y = np.asarray(readings, dtype=float)
+    if moves_by_steps(y):
+        return []
     n = y.size
     step = np.diff(y)
     held = np.concatenate([[False], step == 0])  # held[k]: record k repeats record k - 1
