@@ -13,9 +13,11 @@ import pytest
 from nlp_calib.analysis.drift import between_logs_std
 from nlp_calib.outputs.handoff import calibration_dict, calibration_yaml
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline.preflight import preflight
 from nlp_calib.pipeline.slip_check import (
     BINS,
     MIN_BINS,
+    MIN_LATERAL,
     NAME,
     T_LIMIT,
     NotMade,
@@ -238,9 +240,9 @@ CIRCUIT_TRUTH = {
 }
 
 
-def _circuit(tmp_path: Path, seed: int, slip: float) -> tuple[Any, float]:
-    """The circuit car's 60 s drive fitted in half-second windows (as ``init`` drafts them), the
-    axle distance and track given: its run and sensor_x's truth."""
+def _circuit_scenario(tmp_path: Path, seed: int, slip: float) -> Any:
+    """The circuit car's 60 s drive in half-second windows (as ``init`` drafts them), the axle
+    distance and track given."""
     road = RoadOptions(heading_change=12.0, bend_angle=0.15, slip_gain=slip)
     opts = HighwayOptions(
         duration_s=60.0,
@@ -269,9 +271,35 @@ def _circuit(tmp_path: Path, seed: int, slip: float) -> tuple[Any, float]:
         "residual": {"horizon_s": 0.5},
         "known": {"wheelbase": 0.32, "traction_track_width": 0.25},
     }
+    return scenario_from_mapping(sc, "circuit", tmp_path)
+
+
+def _circuit(tmp_path: Path, seed: int, slip: float) -> tuple[Any, float]:
+    """The circuit car's run and sensor_x's truth."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return Calibration(scenario_from_mapping(sc, "circuit", tmp_path)).run(), CIRCUIT_TRUTH["sensor_x"]
+        return Calibration(_circuit_scenario(tmp_path, seed, slip)).run(), CIRCUIT_TRUTH["sensor_x"]
+
+
+def test_the_pre_flight_says_its_sigma_hold_for_tyres_that_do_not_slide(tmp_path: Path) -> None:
+    """Where the bends load the tyres (the circuit car), the pre-flight names the slip the run will
+    judge, with the lateral acceleration the run's check would state; on the highway car's
+    straight road (bends under 1 m/s²) it says nothing of it."""
+    circuit = preflight(_circuit_scenario(tmp_path, 23, 0.0))
+    said = circuit.check(NAME)
+    assert said is not None and said.level == CAVEAT and "σ below hold for tyres that do not" in said.words
+    assert said.record["lateral_mps2"] >= MIN_LATERAL and circuit.verdict != "check data"
+    road = RoadOptions(heading_change=-2.0)
+    joints, poses, _ = simulate_highway(HighwayOptions(duration_s=60.0, seed=23, road=road)).write(
+        tmp_path / "hw"
+    )
+    encoders = dict(zip(WHEELS, WHEELS))
+    sc = {
+        "model": "car_like",
+        "dataset": {"joints": str(joints), "poses": str(poses), "form": "speeds", "encoders": encoders},
+        "known": {"wheelbase": 2.8, "traction_track_width": 1.6},
+    }
+    assert preflight(scenario_from_mapping(sc, "highway", tmp_path)).check(NAME) is None
 
 
 @pytest.mark.parametrize("seed", [21, 22])

@@ -32,7 +32,7 @@ from nlp_calib.analysis.verdict import way_out
 from nlp_calib.core.errors import DatasetError, NlpCalibError, PreflightError
 from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.models import counted_inputs
-from nlp_calib.pipeline import units_check
+from nlp_calib.pipeline import slip_check, units_check
 from nlp_calib.pipeline.align import MAX_RESAMPLINGS, estimate_tracker_lag, stays, white_std
 from nlp_calib.pipeline.assemble import fit_info
 from nlp_calib.pipeline.build import (
@@ -596,6 +596,9 @@ PreflightCheck = Callable[[Assessment], "CheckResult | None"]
 PREFLIGHT_CHECKS: dict[str, PreflightCheck] = {
     units_check.NAME: lambda a: units_check.check(
         a.drive.parts, a.drive.fns, a.drive.start.initial, a.fitted()
+    ),
+    slip_check.NAME: lambda a: slip_check.ahead(
+        a.drive.fns, a.drive.data, a.fitted() or _values(a.drive.fns, a.x, a.drive.start.x_fixed)
     ),
 }
 

@@ -35,6 +35,7 @@ and hold fewer bends each, and tell the slip less often.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,7 +44,7 @@ from nlp_calib.analysis.noise_rates import base_increments
 from nlp_calib.models import KinematicModel
 from nlp_calib.pipeline import validation
 from nlp_calib.pipeline.fit import Fit
-from nlp_calib.problem import ResidualData
+from nlp_calib.problem import ProblemFunctions, ResidualData
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.checks import CAVEAT, FINE, CheckResult
 from nlp_calib.solvers.evaluation import is_singular
@@ -68,11 +69,12 @@ WINDOWS_PER_FREE = 10
 SOLVER = "gauss_newton"
 
 
-def interval_motion(fit: Fit, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def interval_motion(
+    fns: ProblemFunctions, data: ResidualData, params: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Each interval's base speed (m/s) and turn rate (rad/s) with ``params`` (the full vector;
     NaN across logs and where the records' stamps do not space it)."""
-    data = fit.data
-    steps = base_increments(fit.fns, params, data.inputs, np.zeros(data.inputs.shape[0]))[0]
+    steps = base_increments(fns, params, data.inputs, np.zeros(data.inputs.shape[0]))[0]
     dt = interval_durations(data)
     with np.errstate(divide="ignore", invalid="ignore"):
         speed = np.where(dt > 0, np.hypot(steps[:, 0], steps[:, 1]) / dt, np.nan)
@@ -305,7 +307,7 @@ def measure(run: CalibrationRun, model: KinematicModel, fit: Fit) -> SpeedLines 
     at = np.asarray(run.reports[chosen].result.params, dtype=float)
     if model.reach(run.reports[chosen].result.param_dict()).spot_turns:
         return None
-    motion = window_motion(fit.data, *interval_motion(fit, at))
+    motion = window_motion(fit.data, *interval_motion(fit.fns, fit.data, at))
     if report is None or chosen != SOLVER:
         said = "is not among the solvers" if report is None else "did not converge"
         return NotMade(
@@ -407,3 +409,23 @@ def concern(found: SpeedLines, i: int, unit: str) -> str:
         f"driven under {found.slow_enough(i):.2g} m/s, where the slide moves it by less than the "
         f"{found.needed[i]:.2g}{unit} a calibration needs"
     )
+
+
+def ahead(fns: ProblemFunctions, data: ResidualData, params: Mapping[str, float]) -> CheckResult | None:
+    """The pre-flight's word on the tyres' slip (None: the base turns on the spot, or its bends
+    stay under :data:`MIN_LATERAL`): the σ it states hold for tyres that do not slide, and the
+    run's check fits the drive's speeds on their own, which can widen them or leave a parameter
+    not determined (a pre-flight has no fit of the bins, so it names what the run will judge)."""
+    if fns.model.reach(params).spot_turns:
+        return None
+    full = np.array([params[n] for n in fns.names], dtype=float)
+    load = lateral(*window_motion(data, *interval_motion(fns, data, full)))
+    if not load >= MIN_LATERAL:
+        return None
+    caveat = (
+        f"the drive's bends reach {load:.2g} m/s² of lateral acceleration, where tyres slide out of "
+        "them: the σ below hold for tyres that do not; the run fits the drive's speeds on their own "
+        "(its slip check) and widens a parameter's σ by what a slip leaves open, or says it NOT "
+        "DETERMINED where the speed moves it"
+    )
+    return CheckResult(NAME, CAVEAT, caveat, caveat=caveat, record={"lateral_mps2": load})
