@@ -87,6 +87,24 @@ def test_what_one_turn_of_a_straight_drive_alone_determines_is_named_and_kept_fr
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
+def test_a_turn_across_two_stretches_is_found_by_the_two_together(tmp_path: Path) -> None:
+    """The straight drive's one turn across the boundary of the first two of the 20 stretches
+    (about 1.5 s each): neither alone determines the wheel separation's direction's loss, the two
+    together do, and the check names both with their records."""
+    t = np.arange(3000) * 0.01
+    turning = (t >= 1.1) & (t < 1.9)
+    run = _run(tmp_path, np.where(turning, 0.0, 2.0), np.where(turning, 4.0, 2.0))
+    found = next((c for c in run.checks.more if c.name == "leverage"), None)
+    assert found is not None and found.level == CAVEAT
+    (stretch,) = found.record["stretches"]
+    first, stop = stretch["records"]
+    assert stretch["stretches"] == 2 and first <= 1.1 / 0.02 and 1.9 / 0.02 <= stop, stretch
+    assert "wheel_separation" in stretch["parameters"]
+    assert any("two neighbouring of 20 stretches" in r for r in run.verdict.reasons)
+    assert run.handoff_status("gauss_newton")["wheel_separation"][0] == DOUBTFUL
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
 def test_a_drive_that_turns_throughout_has_no_stretch_of_its_own(tmp_path: Path) -> None:
     """The same 30 s, the wheels at 2 ± cos(0.7 t) rad/s: every stretch turns both ways, and no
     stretch alone determines anything."""

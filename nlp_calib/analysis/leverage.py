@@ -8,8 +8,9 @@ stretch alone, and neither σ shows it: the white-noise σ counts the stretch's 
 whole drive's, and a blocked cross-validation's fold without the stretch has no information along
 the direction, so its refit stays where it starts, at the estimate. The uncertainty already sums
 each contiguous batch of windows' information (:class:`~nlp_calib.analysis.residual_floor.ScoreRows`):
-each batch's is taken out of the whole in turn, and what is left judged by the same floor. A
-stretch across two batches is not found (each alone leaves the other half).
+each batch's is taken out of the whole in turn, and what is left judged by the same floor; then
+each two neighbouring batches together where neither alone is found, for a stretch across their
+boundary (each alone leaves the other half). A stretch across three is not found.
 """
 
 from __future__ import annotations
@@ -39,8 +40,9 @@ def stretches(
 ) -> tuple[Stretch, ...]:
     """The batches of windows (``batches``: each one's data information ``(B, n, n)``, free
     parameters' coordinates, and the window indices that bound them, ``B + 1``) without whose
-    windows the rest leaves a direction free that all of them determine; ``scale``: each free
-    parameter's reference precision, the units the floor is judged in."""
+    windows the rest leaves a direction free that all of them determine, one batch at a time and
+    then two neighbours together where neither alone is found (a turn across their boundary);
+    ``scale``: each free parameter's reference precision, the units the floor is judged in."""
     information, edges = batches
     if information.shape[0] < 2:
         return ()
@@ -48,19 +50,25 @@ def stretches(
     H = information.sum(axis=0)
     lam, V = np.linalg.eigh(H * RR)
     whole = _moved(V, free_directions(lam, data.n_residuals, motion_scale(fns, data.z, omega)))
-    found = []
-    for b in range(information.shape[0]):
+
+    def without(lo: int, hi: int) -> Stretch | None:
+        """The stretch of batches ``lo … hi − 1``, where the rest leaves a direction free."""
         rest = np.ones(data.n_residuals, dtype=bool)
-        rest[edges[b] : edges[b + 1]] = False
+        rest[edges[lo] : edges[hi]] = False
         if not rest.any() or rest.all():
-            continue
+            return None
         n, m2 = int(rest.sum()), motion_scale(fns, data.z[:, rest], omega)
-        lam_r, V_r = np.linalg.eigh((H - information[b]) * RR)
+        lam_r, V_r = np.linalg.eigh((H - information[lo:hi].sum(axis=0)) * RR)
         moved = _moved(V_r, free_directions(lam_r, n, m2)) & ~whole
-        if moved.any():
-            floor = FIDELITY**2 * n * m2
-            names = tuple(f for f, m in zip(fns.free, moved) if m)
-            first, stop = int(data.starts[edges[b]]), int(data.stops[edges[b + 1] - 1]) + 1
-            shortfall = max(float(lam_r[0]), 0.0) / floor if floor > 0 else 0.0
-            found.append(Stretch(first, stop, names, shortfall, information.shape[0], data.n_records))
-    return tuple(found)
+        if not moved.any():
+            return None
+        floor = FIDELITY**2 * n * m2
+        names = tuple(f for f, m in zip(fns.free, moved) if m)
+        first, stop = int(data.starts[edges[lo]]), int(data.stops[edges[hi] - 1]) + 1
+        shortfall = max(float(lam_r[0]), 0.0) / floor if floor > 0 else 0.0
+        return Stretch(first, stop, names, shortfall, information.shape[0], data.n_records, hi - lo)
+
+    B = information.shape[0]
+    single = [without(b, b + 1) for b in range(B)]
+    pairs = [without(b, b + 2) for b in range(B - 1) if single[b] is None and single[b + 1] is None]
+    return tuple(s for s in (*single, *pairs) if s is not None)

@@ -23,12 +23,18 @@ def _share(shortfall: float) -> str:
     return "none of" if shortfall < 1e-6 else f"{shortfall:.2g}×"
 
 
+def _which(s: Stretch) -> str:
+    """Which of the drive's stretches it is, in words."""
+    many = {1: "one", 2: "two neighbouring"}.get(s.span, f"{s.span} neighbouring")
+    return f"{many} of {s.of} stretches of the drive"
+
+
 def _words(s: Stretch, first: int) -> str:
     many = len(s.names) > 1
     they, their, weakest = ("them", "their", "their weakest combination") if many else ("it", "its", "it")
     return (
         f"{', '.join(s.names)} {'are' if many else 'is'} determined only through records "
-        f"{first + s.first}–{first + s.stop - 1} (one of {s.of} stretches of the drive): the rest leaves "
+        f"{first + s.first}–{first + s.stop - 1} ({_which(s)}): the rest leaves "
         f"{they} free (it gives {_share(s.shortfall)} the information that determines {weakest}), so "
         f"{their} estimates and σ rest on those records alone, and a check on a drive without such a "
         f"stretch cannot test {they}"

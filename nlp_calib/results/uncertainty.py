@@ -14,7 +14,7 @@ class Stretch:
     are determined by that stretch alone. ``shortfall``: the information the rest gives along its
     weakest direction over the floor that determines a direction (below 1); ``of``: how many
     stretches the drive was cut into; ``n_records``: the fit's records (several logs: every log's,
-    end to end)."""
+    end to end); ``span``: how many neighbouring stretches of those it takes."""
 
     first: int
     stop: int
@@ -22,6 +22,7 @@ class Stretch:
     shortfall: float
     of: int
     n_records: int
+    span: int = 1
 
     def as_dict(self, offset: int = 0) -> dict[str, object]:
         """As result.json holds it, its records numbered from ``offset``."""
@@ -29,6 +30,7 @@ class Stretch:
             "records": [offset + self.first, offset + self.stop],
             "parameters": list(self.names),
             "shortfall": self.shortfall,
+            "stretches": self.span,
         }
 
 
