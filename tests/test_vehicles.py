@@ -824,6 +824,30 @@ def test_init_drafts_a_car_and_its_wheel_speeds_from_the_data(tmp_path: Path, fa
     ]
 
 
+def test_a_car_run_the_preflight_stops_writes_its_plan(tmp_path: Path) -> None:
+    """A new user's car (``init`` then ``run``) whose bends cannot tell the steering gain from the
+    wheelbase: the run stops at the pre-flight (exit 4, NOT DETERMINED) and, as a run left NOT
+    DETERMINED does, writes plan.md and plan.png into its folder: the ranking the terminal shows
+    the first four of, for the parameter it names."""
+    joints, _ = _bicycle_files(tmp_path, fast=True)
+    scenario, out = tmp_path / "car.yaml", tmp_path / "out"
+    assert cli("init", str(joints), "--out", str(scenario)).returncode == 0
+    done = cli("run", str(scenario), "--out", str(out))
+    assert done.returncode == 4, done.stdout + done.stderr
+    plan_line = next(line for line in done.stdout.splitlines() if line.startswith("plan: "))
+    target = plan_line.split("the σ of ", 1)[1].split(" ", 1)[0]
+    text = (out / "plan.md").read_text()
+    assert f"**{target}** is the parameter known least well" in text
+    if plan_line.startswith("plan: drive "):
+        assert f"| 1 | {plan_line.removeprefix('plan: drive ').split(':', 1)[0]} |" in text
+    assert (out / "plan.png").read_bytes().startswith(b"\x89PNG")
+    assert f"wrote {out / 'plan.md'}" in done.stdout
+    # Calibrated anyway, the run ends NOT DETERMINED and writes its own plan in its place.
+    anyway = cli("run", str(scenario), "--out", str(out), "--skip-preflight")
+    assert "NOT DETERMINED" in anyway.stdout and (out / "result.json").is_file()
+    assert (out / "plan.md").is_file()
+
+
 def test_init_keeps_a_real_tricycles_model_and_its_positions(tmp_path: Path) -> None:
     """OptiOdom's tricycle (steer_joint, traction_joint as positions) drafts a tricycle without a
     form, on its circles (steering within a car's lock) and its squares (turning on the spot)."""
