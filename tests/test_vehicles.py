@@ -11,13 +11,14 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import cli, highway_dataset
+from conftest import SHARED_DATA, cli, highway_dataset
 from odometry_truth import sigma_over_truth
 
 from nlp_calib.analysis.precision import HEADING_BUDGET
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.core.errors import OptionsError
 from nlp_calib.core.numeric import wrap_angle
+from nlp_calib.logs.joint_log import format_joint_csv
 from nlp_calib.models import MODELS
 from nlp_calib.models.car_like import HIGHWAY_TRUTH
 from nlp_calib.outputs.preflight import preflight_lines
@@ -748,6 +749,117 @@ def test_init_reads_a_steering_joint_with_a_steered_model(
     assert read is None or found == read
     if model == "car_like_ackermann":  # the pair's steering track, held whatever the drive, said
         assert "it holds" in why and "steering_track_width" in why
+
+
+@pytest.mark.parametrize(
+    ("cornering", "model"),
+    [(1.1, "car_like_bicycle"), (0.02, "tricycle"), (None, "tricycle")],
+)
+def test_a_steering_and_one_wheel_joint_are_a_cars_where_the_drive_corners_as_a_car(
+    cornering: float | None, model: str
+) -> None:
+    """A tricycle and a bicycle car read one steering and one wheel joint alike: the drive's bends
+    (their lateral acceleration) tell a car's; a slow drive, or none known, keeps the first
+    registered (a tricycle), naming the car's model to give."""
+    from nlp_calib.pipeline.draft import CAR_CORNERING, guess_model
+
+    chosen, _, why = guess_model(["steering_cmd", "rear_wheels"], None, cornering)
+    assert chosen == model, why
+    if model == "tricycle":
+        assert "--model car_like_bicycle" in why
+    else:
+        assert f"a car's from {CAR_CORNERING:g}" in why
+    # Given, the model is the user's whatever the drive.
+    assert guess_model(["steering_cmd", "rear_wheels"], "tricycle", 1.1)[0] == "tricycle"
+
+
+def _bicycle_files(tmp_path: Path, fast: bool) -> tuple[Path, np.ndarray]:
+    """A simulated car's steering and the mean of its rear wheels' speeds (rad/s) as one joint log,
+    beside the device's poses: on bends at 8-20 m/s, or at a walking pace."""
+    speeds = {"min_speed": 8.0, "max_speed": 20.0} if fast else {"min_speed": 0.3, "max_speed": 0.8}
+    sim = simulate_highway(
+        HighwayOptions(seed=5, duration_s=60.0, road=RoadOptions(bend_angle=0.03), **speeds)
+    )
+    names = list(sim.joint_names)
+    rear = 0.5 * (
+        sim.joint_values[:, names.index("rear_left_wheel")]
+        + sim.joint_values[:, names.index("rear_right_wheel")]
+    )
+    values = np.column_stack([sim.joint_values[:, names.index("steering")], rear])
+    joints = tmp_path / "car.csv"
+    stamps = EPOCH_NS + np.round(sim.joint_time_s * 1e9).astype(np.int64)  # the poses' clock
+    joints.write_text(format_joint_csv(stamps, ("steering_cmd", "rear_wheels"), values))
+    (tmp_path / "car.tum").write_text(sim.poses_tum())
+    # The true base's lateral acceleration, speed × turn rate, at the 90th percentile.
+    step = np.diff(sim.base_poses, axis=0)
+    dt = np.diff(sim.joint_time_s)
+    load = np.hypot(step[:, 0], step[:, 1]) * np.abs(wrap_angle(step[:, 2])) / dt**2
+    return joints, np.percentile(load, 90)
+
+
+@pytest.mark.parametrize("fast", [True, False])
+def test_init_drafts_a_car_and_its_wheel_speeds_from_the_data(tmp_path: Path, fast: bool) -> None:
+    """``init`` on a car's steering and rear wheel speeds: the car's model where the drive corners
+    as a car's, and ``form: speeds`` found by the pre-flight's own detector (the columns' values
+    follow the tracker's speed), so that the draft reads them as speeds."""
+    from nlp_calib.analysis.units import findings
+    from nlp_calib.pipeline.draft import CAR_CORNERING, cornering, draft
+
+    joints, load = _bicycle_files(tmp_path, fast)
+    # The tracker's bends as the draft measures them are the true base's (within its noise at a walk).
+    assert cornering(joints.with_suffix(".tum")) == pytest.approx(load, rel=0.1, abs=0.01)  # pose noise
+    assert (load >= CAR_CORNERING) == fast
+    d = draft(joints, tmp_path / "car.yaml")
+    assert d.raw["model"] == ("car_like_bicycle" if fast else "tricycle")
+    assert d.raw["dataset"]["form"] == "speeds"
+    assert "dataset.form: speeds, because" in d.text and "look like speeds (rad/s)" in d.text
+    # Read back as the run reads it, the wheel columns are speeds: the detector says nothing more.
+    sc = d.scenario(tmp_path / "car.yaml")
+    from nlp_calib.pipeline import prepare
+
+    model, log = prepare.read(sc)
+    track = sc.objective.sensor.sensor.floor_track(log)
+    assert not [
+        f for f in findings(log, model, (track[:, :2], track[:, 2]), None, False) if f.kind == "speeds"
+    ]
+
+
+def test_a_car_run_the_preflight_stops_writes_its_plan(tmp_path: Path) -> None:
+    """A new user's car (``init`` then ``run``) whose bends cannot tell the steering gain from the
+    wheelbase: the run stops at the pre-flight (exit 4, NOT DETERMINED) and, as a run left NOT
+    DETERMINED does, writes plan.md and plan.png into its folder: the ranking the terminal shows
+    the first four of, for the parameter it names."""
+    joints, _ = _bicycle_files(tmp_path, fast=True)
+    scenario, out = tmp_path / "car.yaml", tmp_path / "out"
+    assert cli("init", str(joints), "--out", str(scenario)).returncode == 0
+    done = cli("run", str(scenario), "--out", str(out))
+    assert done.returncode == 4, done.stdout + done.stderr
+    plan_line = next(line for line in done.stdout.splitlines() if line.startswith("plan: "))
+    target = plan_line.split("the σ of ", 1)[1].split(" ", 1)[0]
+    text = (out / "plan.md").read_text()
+    assert f"**{target}** is the parameter known least well" in text
+    if plan_line.startswith("plan: drive "):
+        assert f"| 1 | {plan_line.removeprefix('plan: drive ').split(':', 1)[0]} |" in text
+    assert (out / "plan.png").read_bytes().startswith(b"\x89PNG")
+    assert f"wrote {out / 'plan.md'}" in done.stdout
+    # Calibrated anyway, the run ends NOT DETERMINED and writes its own plan in its place.
+    anyway = cli("run", str(scenario), "--out", str(out), "--skip-preflight")
+    assert "NOT DETERMINED" in anyway.stdout and (out / "result.json").is_file()
+    assert (out / "plan.md").is_file()
+
+
+def test_init_keeps_a_real_tricycles_model_and_its_positions(tmp_path: Path) -> None:
+    """OptiOdom's tricycle (steer_joint, traction_joint as positions) drafts a tricycle without a
+    form, on its circles (steering within a car's lock) and its squares (turning on the spot)."""
+    from nlp_calib.pipeline.draft import draft
+
+    for session in ("circular/140120211440", "square/140120211430"):
+        joints = SHARED_DATA / "real4/optiodom/tricyc" / session / f"{session.split('/')[1]}_run-01.csv"
+        if not joints.is_file():
+            pytest.skip(f"OptiOdom's runs are not at {joints}")
+        d = draft(joints, tmp_path / "tricycle.yaml")
+        assert d.raw["model"] == "tricycle", d.text
+        assert "form" not in d.raw["dataset"]
 
 
 def test_one_steering_joint_for_both_sides_of_an_ackermann_pair_is_refused(tmp_path: Path) -> None:

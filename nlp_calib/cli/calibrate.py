@@ -160,7 +160,7 @@ def _cmd_calibrate(
     logs = [[read_checked(s) for s in sc.per_log()] for sc in scenarios]
     for out in outs:
         refuse_collisions(out, registry.files(outputs), force=args.force)
-    aligned = set_up_and_gate(scenarios, logs, args.skip_preflight, solvers)
+    aligned = set_up_and_gate(scenarios, logs, args.skip_preflight, solvers, (outs, args.force))
     compared = _compare_dir(args, outs) if side_by_side else None
     if compared is not None:
         refuse_collisions(compared, compare.FILES, force=args.force)
@@ -301,7 +301,7 @@ def cmd_odometry(args: argparse.Namespace) -> int:
     outputs = registry.selected(("result", "handoff", "odometry"), args.report)
     log = read_checked(scenario)
     refuse_collisions(out, registry.files(outputs), force=args.force)
-    (stages,) = set_up_and_gate([scenario], [[log]], args.skip_preflight, None)
+    (stages,) = set_up_and_gate([scenario], [[log]], args.skip_preflight, None, ([out], args.force))
     calib = Calibration(scenario, log, None, stages)
     run = calib.run((args.solver,), Wanted(odometry=args.solver))
     print(run_table(run))

@@ -17,6 +17,7 @@ from nlp_calib.outputs.plots.run import ConvergenceSeries
 from nlp_calib.outputs.plots.trust import Standing
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.layout import CLOCK
+from nlp_calib.results.preflight import Plan
 from nlp_calib.results.series import Track
 
 
@@ -46,10 +47,14 @@ def trajectory(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
 
 def plan(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
     """The plan's sketch: the best manoeuvres' paths (nothing when the run needs none)."""
-    ahead = run.checks.plan
+    return plan_sketch(run.checks.plan, run.scenario.name, folder, name)
+
+
+def plan_sketch(ahead: Plan | None, scenario: str, folder: Path, name: str) -> list[Path]:
+    """The sketch of ``ahead`` (a run's plan, or the pre-flight's where it stops a run)."""
     if ahead is None or not ahead.ranked:
         return []
-    title = f"{run.scenario.name}: what to drive next to determine {ahead.target} (best first)"
+    title = f"{scenario}: what to drive next to determine {ahead.target} (best first)"
     return _write(folder, name, plots.plan_png(ahead, title))
 
 

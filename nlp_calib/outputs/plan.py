@@ -45,9 +45,13 @@ def plan_text(plan: Plan, name: str) -> str:
 
 def write_plan(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
     """``plan.md`` when the run has a plan (nothing otherwise)."""
-    plan = run.checks.plan
+    return write_plan_of(run.checks.plan, run.scenario.name, folder, name)
+
+
+def write_plan_of(plan: Plan | None, scenario: str, folder: Path, name: str) -> list[Path]:
+    """``plan.md`` of ``plan`` (a run's, or the pre-flight's where it stops a run; nothing for None)."""
     if plan is None:
         return []
     path = folder / name
-    atomic_write_text(path, plan_text(plan, run.scenario.name))
+    atomic_write_text(path, plan_text(plan, scenario))
     return [path]

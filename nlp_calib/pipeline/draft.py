@@ -7,7 +7,10 @@ joint whose name carries a word of the encoder's name (``left`` for an encoder n
 an angle encoder (``absolute``) a joint named ``steer…``, a wheel (``counter``) left over any joint named
 ``…wheel…``, ``…traction…`` or ``…drive…``; a model is a candidate when every one of its encoders
 takes a joint of its own; of those, a steered one where a joint is named steer…, the one reading
-the most joints, the first registered, is drafted. The tracker is the pose topic
+the most joints, the first registered, is drafted; where a tricycle and a car read the same joints,
+a joint log's drive that corners as a car does (:data:`CAR_CORNERING`) drafts the car. A joint
+log's wheel columns that look like speeds to the pre-flight's detector are drafted with
+``form: speeds``. The tracker is the pose topic
 whose name says most clearly that it is a reference (a motion-capture system's, a ground truth),
 never the robot's own odometry. The text says what was found and why each choice was made, as
 comments, and is read back as a scenario before it is written: ``run`` accepts it as it is.
@@ -16,6 +19,7 @@ comments, and is read back as a scenario before it is written: ``run`` accepts i
 from __future__ import annotations
 
 import re
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +28,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from nlp_calib.analysis.units import findings
 from nlp_calib.core import poses3d
 from nlp_calib.core.config import parse_yaml
 from nlp_calib.core.errors import FieldError, UsageError
@@ -37,8 +42,12 @@ from nlp_calib.logs.reader import read_header
 from nlp_calib.logs.scans import SCAN_TYPE
 from nlp_calib.logs.tum import read_tum
 from nlp_calib.models import MODELS, encoders, model_for_log
+from nlp_calib.models.base import QUARTER_TURN
 from nlp_calib.models.radians import in_units
+from nlp_calib.pipeline import prepare
 from nlp_calib.pipeline.scenario import Scenario, scenario_from_mapping
+from nlp_calib.pipeline.slip_check import lateral
+from nlp_calib.results.preflight import UnitFinding
 from nlp_calib.sensors import BESIDE, sensor_for
 from nlp_calib.sensors.mount import length_params
 from nlp_calib.sources.joints import paired_files
@@ -65,6 +74,11 @@ GYRO_SUFFIX = ".gyro.csv"
 TILTED_RAD = 0.52
 #: ...judged on motions over about this long (s) that turn by at least this much (rad).
 TURN_SPAN_S, TURN_MIN_RAD = 1.0, 0.05
+#: The lateral acceleration (m/s²) a drive's bends reach (:func:`cornering`) from which the draft
+#: reads a steering and a wheel joint as a car's rather than a front-wheel-driven tricycle's: the
+#: F1/10 car's drives reach 1.0-1.4 m/s², a road car's 1-4; OptiOdom's tricycle, its differential
+#: drive and the camera demo 0.02 at most (an industrial base turns slowly).
+CAR_CORNERING = 0.25
 #: What the draft asks of a first run.
 DEFAULTS: Mapping[str, Any] = {
     "initial_guess": "auto",
@@ -128,11 +142,14 @@ def assign(model_name: str, joints: Sequence[str]) -> dict[str, str] | None:
     return out
 
 
-def guess_model(joints: Sequence[str], model: str | None) -> tuple[str, dict[str, str], str]:
+def guess_model(
+    joints: Sequence[str], model: str | None, cornering: float | None = None
+) -> tuple[str, dict[str, str], str]:
     """The model (``model`` when given), its encoders' joints and why, in words: of the models
     whose every encoder finds a joint, the one that reads the most joints (a steer joint beside
-    four wheels is a car's, not a three-wheeler's nor a two-wheeled base's), the first registered of
-    those; a steer joint is read by a steered model where one fits."""
+    four wheels is a car's, not a three-wheeler's nor a two-wheeled base's), of those the one the
+    drive's motion says (``cornering``: see :func:`_by_motion`), else the first registered; a steer
+    joint is read by a steered model where one fits."""
     names = [model] if model is not None else list(MODELS)
     fits = {m: a for m in names if (a := assign(m, joints)) is not None}
     if not fits:
@@ -146,7 +163,7 @@ def guess_model(joints: Sequence[str], model: str | None) -> tuple[str, dict[str
         steered = {m: a for m, a in fits.items() if "absolute" in MODELS[m].encoder_kinds.values()}
         fits = steered or fits
     most = max(len(a) for a in fits.values())
-    chosen = next(m for m, a in fits.items() if len(a) == most)
+    chosen, motion = _by_motion([m for m, a in fits.items() if len(a) == most], model, cornering)
     pairs = ", ".join(f"{e}: {j}" for e, j in fits[chosen].items())
     others = [m for m in fits if m != chosen]
     why = f"{'given' if model else 'the joint names fit it'} ({pairs})"
@@ -155,7 +172,38 @@ def guess_model(joints: Sequence[str], model: str | None) -> tuple[str, dict[str
         why += f"; it reads the most of them ({', '.join(unread)} left unread)"
     if others:
         why += f"; {', '.join(others)} read(s) {'fewer or ' if not model else ''}the same joints"
-    return chosen, fits[chosen], why + _held(chosen)
+    return chosen, fits[chosen], why + motion + _held(chosen)
+
+
+def is_car(model: str) -> bool:
+    """Whether ``model`` is a car's: a steered wheel that turns less than a quarter turn (a
+    tricycle's driving wheel turns it, about the rear axle)."""
+    steer_max = MODELS[model].steer_max
+    return steer_max is not None and steer_max < QUARTER_TURN
+
+
+def _by_motion(tied: Sequence[str], model: str | None, cornering: float | None) -> tuple[str, str]:
+    """Of the models reading the same joints (``tied``, in registry order), the one the drive's
+    motion says, and why in words: a car's where one ties with a tricycle and the drive's bends
+    reach :data:`CAR_CORNERING` (``cornering``, m/s²); else the first registered. A front-wheel-
+    driven tricycle and a car read one steering and one wheel joint alike, and on a drive's bends
+    their kinematics differ only by the wheel's speed over 1/cos of the steering angle, which a
+    wheel radius and a steering gain take up: how the robot corners tells them apart."""
+    cars = [m for m in tied if is_car(m)]
+    if model or not cars or len(cars) == len(tied):
+        return tied[0], ""
+    other = next(m for m in tied if not is_car(m))
+    if cornering is None:
+        return tied[0], f"; {cars[0]} reads the same joints: for a car, give --model {cars[0]}"
+    bends = f"the drive's bends reach {cornering:.2g} m/s² of lateral acceleration (90th percentile"
+    if cornering >= CAR_CORNERING:
+        return cars[
+            0
+        ], f"; {other} reads the same joints, but {bends}; a car's from {CAR_CORNERING:g}): a car"
+    return tied[0], (
+        f"; {cars[0]} reads the same joints, but {bends}; a car's from {CAR_CORNERING:g}): for a car, give "
+        f"--model {cars[0]}"
+    )
 
 
 def _held(model: str) -> str:
@@ -480,16 +528,39 @@ def _draft_alone(
     return Draft(raw, text, (*_listing(found), f"model {name}: {why}", alone.short))
 
 
-def turn_axis_tilt(poses_path: Path) -> float | None:
-    """How far (rad) the axis a TUM file's poses turn about lies from their frame's z: about 0 for a
-    planar tracker's, about π/2 for a camera's optical frame; None where they turn too little."""
+def _motions(poses_path: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """A TUM file's motions over about :data:`TURN_SPAN_S`, each in the frame it starts from
+    ``(n, 7)``, and their durations (s); None where the poses span less."""
     trajectory = read_tum(poses_path)
-    dt = np.diff(trajectory.time_s)
+    t = trajectory.time_s
+    dt = np.diff(t)
     step = max(1, round(TURN_SPAN_S / max(float(np.median(dt)), 1e-9))) if dt.size else 1
     P = trajectory.poses
     if P.shape[0] <= step:
         return None
-    phi = poses3d.quat_to_rotvec(poses3d.between(P[:-step], P[step:])[:, 3:7])
+    return poses3d.between(P[:-step], P[step:]), t[step:] - t[:-step]
+
+
+def cornering(poses_path: Path) -> float | None:
+    """The lateral acceleration (m/s²) a tracker's bends reach, as the slip check measures
+    it (:func:`~nlp_calib.pipeline.slip_check.lateral`: speed × turn rate, the moving motions'
+    90th percentile), over motions of about :data:`TURN_SPAN_S`; None where the poses span less."""
+    found = _motions(poses_path)
+    if found is None:
+        return None
+    motions, span = found
+    # The turn's angle whatever its axis: a camera's optical frame turns about its y.
+    rate = np.linalg.norm(poses3d.quat_to_rotvec(motions[:, 3:7]), axis=1) / span
+    return lateral(np.hypot(motions[:, 0], motions[:, 1]) / span, rate)
+
+
+def turn_axis_tilt(poses_path: Path) -> float | None:
+    """How far (rad) the axis a TUM file's poses turn about lies from their frame's z: about 0 for a
+    planar tracker's, about π/2 for a camera's optical frame; None where they turn too little."""
+    found = _motions(poses_path)
+    if found is None:
+        return None
+    phi = poses3d.quat_to_rotvec(found[0][:, 3:7])
     phi = phi[np.linalg.norm(phi, axis=1) >= TURN_MIN_RAD]
     if phi.shape[0] < 3:
         return None
@@ -521,10 +592,34 @@ def _pose_sensor(poses_path: Path, gyro: bool) -> tuple[dict[str, Any], list[str
     return {"sensor": {"mount": mount, "beside": "gyro"}}, words, todo
 
 
+def speeds_finding(sc: Scenario) -> UnitFinding | None:
+    """The pre-flight's finding (:func:`nlp_calib.analysis.units.findings`) that the wheel columns
+    of ``sc``'s log, read as positions, look like speeds; None where it finds none."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the log's own warnings are the run's to say
+        model, log = prepare.read(sc)
+    track = sc.objective.sensor.sensor.floor_track(log)
+    found = findings(log, model, (track[:, :2], track[:, 2]), None, False)
+    return next((f for f in found if f.kind == "speeds"), None)
+
+
+def _wheel_form(raw: Mapping[str, Any], where: Path) -> list[str]:
+    """``form: speeds`` put in ``raw``'s dataset where its wheel columns look like speeds (the
+    pre-flight's one detector, on the draft as ``run`` would read it), and the words that say why."""
+    sc = scenario_from_mapping(
+        parse_yaml(yaml.safe_dump(dict(raw)), str(where)), str(where), where.parent, where
+    )
+    found = speeds_finding(sc)
+    if found is None:
+        return []
+    raw["dataset"]["form"] = "speeds"
+    return [f"dataset.form: speeds, because {found.words.removesuffix('; say so (form: speeds)')}."]
+
+
 def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
     joints_path, poses_path = paired_files(path)
     table = read_joint_csv(joints_path)
-    name, joints, why = guess_model(list(table.names), model)
+    name, joints, why = guess_model(list(table.names), model, cornering(poses_path))
     gyro_path = poses_path.with_suffix(GYRO_SUFFIX)
     gyro = gyro_path.is_file()
     dataset = {
@@ -536,14 +631,16 @@ def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
     _one_line_names(joints_path, dataset)
     sensor, words, todo = _pose_sensor(poses_path, gyro)
     raw = {"name": where.stem, "model": name, **sensor, "dataset": dataset, **defaults(name)}
+    form = _wheel_form(raw, where)
     header = [
         f"Drafted by nlp-calib init from {joints_path.name} (joints: {', '.join(table.names)}) and "
         f"{poses_path.name}" + (f" (a gyro's rates beside them: {gyro_path.name})." if gyro else "."),
         f"model: {name}, because {why}.",
+        *form,
         *words,
         f"Check it before a run: nlp-calib preflight {where}",
     ]
-    found = (f"joints: {', '.join(table.names)}", f"model {name}: {why}")
+    found = (f"joints: {', '.join(table.names)}", f"model {name}: {why}", *form)
     text = _text(header, raw, NOTES) + "".join(f"# {line}\n" for line in todo)
     return Draft(raw, text, (*found, *((f"gyro beside the poses {gyro_path.name}",) if gyro else ())))
 
