@@ -63,6 +63,32 @@ def test_a_lag_given_off_names_what_it_moves_and_keeps_it_from_the_hand_off(tmp_
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
+def test_a_lag_pinned_on_the_edge_of_its_search_is_held_there_against_what_it_moves(tmp_path: Path) -> None:
+    """The camera's stamps 40 ms late on a drive that determines the lag (a beat on the right wheel),
+    the lag searched within ±20 ms: pinned on the edge at 20 ms, one record interval short, with no
+    σ of its own. The check holds it there, moves it one record interval beyond the edge (to the
+    truth), names what that moves with the search to widen, and keeps them from the hand-off. Its
+    response is the refit's with the lag given at 40 ms, which recovers the truth."""
+    truth = two_sinusoids(tmp_path, stamp_offset_s=-0.04, beat=1.0)
+    path = sinusoids_scenario(tmp_path, "{tracker_lag: auto, search: [-0.02, 0.02]}")
+    run = Calibration(load_scenario(path)).run(["gauss_newton"])
+    assert run.pinned() == ("tracker_lag",)
+    held = _held(run)
+    assert held.level == CAVEAT and run.verdict.level != GOOD
+    record = held.record["held"]["tracker_lag"]
+    assert abs(record["error"] - 0.02) < 1e-3 and "pinned" in record["rule"]
+    fitted = run.reports["gauss_newton"].result.param_dict()
+    for name in MOVED:
+        assert name in record["moved"] and "widen alignment.search" in held.concerns[name]
+        assert run.handoff_status("gauss_newton")[name][0] == DOUBTFUL
+    later_run = _sinusoids(tmp_path, fitted["tracker_lag"] + 0.02)
+    later, std = later_run.reports["gauss_newton"].result.param_dict(), later_run.std("gauss_newton")
+    for name in MOVED:
+        assert later[name] - fitted[name] == pytest.approx(record["shift"][name], rel=0.15), name
+        assert abs(later[name] - truth[name]) < 2.0 * std[name], name
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
 def test_a_lag_given_one_interval_off_is_in_the_sigma_of_what_it_moves(tmp_path: Path) -> None:
     """The camera's stamps 40 ms late, the lag given 20 ms (one record interval, the plausible
     error) off. The σ the data give do not cover what the held lag moves (the radii, sensor_y and

@@ -15,6 +15,10 @@ difference of ``g`` over the held value's plausible error either side:
   problem (``known:``) moves its clock correction;
 * any other: the precision a calibration needs of it (its layout's, at its value).
 
+A lag the fit pinned on the edge of its search (the data put it there or beyond, with no σ) is held
+there too: moved one record interval beyond the edge, the others following it as the fit's normal
+equations say (``−H_oo⁻¹·H_o,lag``), so what it leaves wrong is said and kept from the hand-off.
+
 Each free parameter's shifts over the held values enter its σ to believe in quadrature
 (``std_held``, as the slip's σ does): a value moved within the precision it needs is still off by
 that much. A parameter moved by more than its σ (without them) and the precision a calibration needs
@@ -28,7 +32,7 @@ time offset is taken as exact (:func:`declared`): what it would move is said, no
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -44,6 +48,7 @@ NAME = "held"
 LAG = "alignment.tracker_lag"
 #: The plausible errors' rules, as the record states them.
 RECORD_INTERVAL = "one record interval"
+PINNED = "one record interval beyond the edge of alignment.search it is pinned on"
 NEEDED = "the precision a calibration needs of it"
 
 
@@ -165,10 +170,7 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
     needed = run.scenario.layout.needed({n: estimate[n] for n in free})
     found: list[Response] = []
 
-    def response(
-        name: str, value: float, error: tuple[float, str], gradients: tuple[np.ndarray, ...]
-    ) -> None:
-        move = step(H, *gradients)
+    def response(name: str, value: float, error: tuple[float, str], move: np.ndarray | None) -> None:
         if move is None or not np.all(np.isfinite(move)):
             return
         moved = dict(zip(fns.names, np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params))
@@ -182,11 +184,39 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
             continue
         up, down = base.copy(), base.copy()
         up[i], down[i] = base[i] + error[0], base[i] - error[0]
-        response(name, float(base[i]), error, (_at_fixed(ev, x, up), _at_fixed(ev, x, down)))
+        response(name, float(base[i]), error, step(H, _at_fixed(ev, x, up), _at_fixed(ev, x, down)))
     if fit.given_lag is not None and np.isfinite(d := record_interval(fit)):
         grads = (_at_inputs(ev, x, fit.given_lag(d)), _at_inputs(ev, x, fit.given_lag(-d)))
-        response(LAG, run.data.tracker_lag_s, (d, RECORD_INTERVAL), grads)
-    return found
+        response(LAG, run.data.tracker_lag_s, (d, RECORD_INTERVAL), step(H, *grads))
+    for name in (n for n in run.pinned() if n in free and np.isfinite(record_interval(fit))):
+        move = pinned_step(H, fns.free.index(name))
+        if move is None:
+            continue
+        # The move's coordinates to the lag's seconds: one record interval of it.
+        moved = np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params
+        lag = moved[fns.names.index(name)]
+        if abs(lag) > 0:
+            d = record_interval(fit)
+            response(name, estimate[name], (d, PINNED), move * d / lag)
+    return [replace(r, shift=_without(r.shift, r.name), in_sigma=_without(r.in_sigma, r.name)) for r in found]
+
+
+def _without(values: Mapping[str, float], name: str) -> dict[str, float]:
+    """``values`` without the held value's own entry (a lag pinned in the fit moves itself)."""
+    return {n: v for n, v in values.items() if n != name}
+
+
+def pinned_step(H: np.ndarray, i: int) -> np.ndarray | None:
+    """The fit's move with its coordinate ``i`` (a lag pinned on its search's edge: held there)
+    moved by one unit and the others following it, ``−H_oo⁻¹·H_oi`` (None: singular)."""
+    others = [j for j in range(H.shape[0]) if j != i]
+    move = np.zeros(H.shape[0])
+    move[i] = 1.0
+    try:
+        move[others] = np.linalg.solve(H[np.ix_(others, others)], -H[others, i])
+    except np.linalg.LinAlgError:
+        return None
+    return move
 
 
 def _amount(value: float, unit: str) -> str:
@@ -199,6 +229,8 @@ def _amount(value: float, unit: str) -> str:
 def _what_to_do(r: Response, given: bool) -> str:
     """How to leave the parameters ``r`` moves with a σ that holds (``given``: under known:)."""
     within = f"give it measured to within {_amount(r.within(), r.unit)}"
+    if r.rule == PINNED:
+        return f"widen alignment.search so that the lag is fitted inside it, or {within}"
     if r.name == LAG:
         return f"fit it (alignment.tracker_lag: auto), or {within}"
     if not given:
