@@ -22,9 +22,9 @@ CHECK_GROUPS = ("check", "result")
 def cmd_check(args: argparse.Namespace) -> int:
     stored = read_calibration(args.calibration)
     scenario = check_scenario(stored, args.target)
-    out = check_output_dir(
-        args.out if args.out is not None else Path("out") / f"check_{scenario.dataset.stem}"
-    )
+    # Several logs checked jointly are the scenario's, not its first log's.
+    name = scenario.name if scenario.data.joint else scenario.dataset.stem
+    out = check_output_dir(args.out if args.out is not None else Path("out") / f"check_{name}")
     if out.resolve() == stored.path.resolve().parent:
         raise UsageError(f"--out {out} holds the calibration being checked; choose another --out")
     outputs = registry.selected(CHECK_GROUPS, report=False)
