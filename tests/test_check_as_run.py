@@ -6,6 +6,8 @@ run fitted (issue #43)."""
 from __future__ import annotations
 
 import json
+import math
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +15,7 @@ import pytest
 import yaml
 from conftest import cli
 
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.results.check import CANNOT_TELL, STILL_GOOD
 from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
 
@@ -93,3 +96,22 @@ def test_a_check_fits_the_records_and_lag_the_run_fitted(tmp_path: Path) -> None
         assert check["dataset"][key] == run["dataset"][key], key
     # ...and from there the run's minimum: every change far inside its σ.
     assert all(abs(p["z"]) < 1e-3 for p in check_json(tmp_path / "c")["parameters"].values())
+
+
+@pytest.mark.parametrize(("lags", "held"), [((0.0, 0.0), {"alignment.tracker_lag": 0.0}), ((0.0, 0.02), {})])
+def test_a_joint_fit_records_the_lag_every_log_holds(
+    tmp_path: Path, lags: tuple[float, float], held: Any
+) -> None:
+    # A check takes the held values' part out of both σ only where the refit holds what the stored
+    # calibration held (drift.common_held): a joint fit must say the lag it holds, as one log's does.
+    logs = [drive(tmp_path, f"d{i}", 400, 50 + i) for i in range(2)]
+    entries = [{"path": str(p), "alignment": {"tracker_lag": lag}} for p, lag in zip(logs, lags)]
+    sc = scenario_from_mapping({"name": "held", **FORMULATION, "datasets": entries}, "s", tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    found = run.checks.plugin("held")
+    assert found is not None and found.record is not None
+    assert run.checks.held_values() == held
+    value = found.record["held"]["alignment.tracker_lag"]["value"]
+    assert value == held["alignment.tracker_lag"] if held else math.isnan(value)  # lags that differ: none

@@ -185,8 +185,18 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         response(name, float(base[i]), error, (_at_fixed(ev, x, up), _at_fixed(ev, x, down)))
     if fit.given_lag is not None and np.isfinite(d := record_interval(fit)):
         grads = (_at_inputs(ev, x, fit.given_lag(d)), _at_inputs(ev, x, fit.given_lag(-d)))
-        response(LAG, run.data.tracker_lag_s, (d, RECORD_INTERVAL), grads)
+        response(LAG, held_lag(run, fit), (d, RECORD_INTERVAL), grads)
     return found
+
+
+def held_lag(run: CalibrationRun, fit: Fit) -> float:
+    """The lag given as a number that the fit holds: the run's; over several logs, the one every
+    log holds (NaN where they hold different ones). A check compares it with what the stored
+    calibration held (:func:`~nlp_calib.analysis.drift.common_held`): a joint fit's must be a value."""
+    if np.isfinite(run.data.tracker_lag_s):
+        return float(run.data.tracker_lag_s)
+    lags = {e.alignment.tracker_lag for e in fit.problem.binder.scenario.data.logs}
+    return float(lags.pop()) if len(lags) == 1 else float("nan")
 
 
 def _amount(value: float, unit: str) -> str:
