@@ -107,6 +107,7 @@ def started(a: Aligned, start: Mapping[str, float]) -> Aligned:
     edge the run fitted can fall outside the encoders' reach: the check would then not test what
     the run determined."""
     prepared = a.prepared
-    sc = prepared.scenario.with_options(initial_guess=dict(start))
+    # What ``start`` has no value for (a log's own mount or bias) starts where the run's start put it.
+    sc = prepared.scenario.with_options(initial_guess={**a.problem.start.initial, **start})
     problem = restarted(a.problem, sc, (prepared.log, prepared.start, prepared.split))
     return Aligned(replace(prepared, scenario=sc), problem, a.screening, a.alignment)
