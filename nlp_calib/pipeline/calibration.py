@@ -258,7 +258,8 @@ def _joint_fit(
     data = data.with_selector() if mounts or per_log_kinds(model, len(parts)) else data
     problem = build_stage(one_horizon, model, tuple(held), start_from, solvers, n_records, lags, mounts, data)
     if start is not None:
-        restart = one_horizon.with_options(initial_guess=dict(start))
+        # As each log's (see stages.started): what ``start`` lacks, where the first log's start put it.
+        restart = one_horizon.with_options(initial_guess={**first.problem.start.initial, **start})
         problem = restarted(problem, restart, start_from, lags, mounts)
     return held, Fit(problem, data, solvers, joint_noise(parts), given_lag(parts))
 
