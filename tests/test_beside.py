@@ -108,9 +108,20 @@ def test_a_gyro_and_a_lidar_fit_within_3_sigma_and_check_reads_it_back(
     rpy = joints["base_link_to_imu_link"].find("origin").get("rpy").split()  # type: ignore[union-attr]
     assert float(rpy[0]) == pytest.approx(est["imu_roll"])
     assert stored["beside"]["child"] == "imu_link"
-    check = cli("check", str(tmp_path / "out" / "calibration.yaml"), str(scenario))
+    check = cli(
+        "check", str(tmp_path / "out" / "calibration.yaml"), str(scenario), "--out", str(tmp_path / "c")
+    )
     assert check.returncode == 0, check.stdout + check.stderr
     assert "STILL GOOD" in check.stdout
+    # On the run's own data the check aligns where the run did and fits its records: both clocks
+    # come out as the run's.
+    ran, checked = (json.loads((tmp_path / d / "result.json").read_text()) for d in ("out", "c"))
+    assert checked["alignment"]["estimate"]["lag_s"] == ran["alignment"]["estimate"]["lag_s"]
+    assert checked["dataset"]["used"] == ran["dataset"]["used"]
+    assert checked["dataset"]["residuals"] == ran["dataset"]["residuals"]
+    own, again = (doc["solvers"]["gauss_newton"]["params"] for doc in (ran, checked))
+    assert again["gyro_lag"] == pytest.approx(own["gyro_lag"], abs=1e-9)
+    assert again["tracker_lag"] == pytest.approx(own["tracker_lag"], abs=1e-9)
 
 
 def test_each_sensors_records_are_read_on_its_own_clock(drive: tuple[Path, dict[str, float]]) -> None:

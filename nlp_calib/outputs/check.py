@@ -31,19 +31,20 @@ def check_text(run: CalibrationRun) -> str:
     change in its combined σ, and the verdict."""
     drift = drift_of(run)
     refit = run.reports[drift.solver].metrics.fair_figures()
+    on = "these logs" if run.logs else "this log"
     lines = [
         f"check of {drift.calibration} on {run.log.path} ({run.scenario.name}, {drift.solver})",
         "",
         *(
             [
-                f"{'fair figures on this log':<26}{'stored':>12}{'refit':>12}",
+                f"{'fair figures on ' + on:<26}{'stored':>12}{'refit':>12}",
                 *(
                     f"  {k:<24}{_number(v):>12}{_number(refit.get(k, math.nan)):>12}"
                     for k, v in run.baseline.fair_figures().items()
                 ),
             ]
             if run.scenario.sensor.positions
-            else [f"fair figures on this log: none in metres ({run.scenario.sensor.no_position})"]
+            else [f"fair figures on {on}: none in metres ({run.scenario.sensor.no_position})"]
         ),
         "",
         f"{'parameter':<16}{'stored':>13}{'refit':>13}{'change':>12}{'σ comb.':>10}{'z':>7}{'limit':>7}"

@@ -505,6 +505,23 @@ def at_lags(problem: Problem, lags: Sequence[float], beside: Sequence[float] = (
     return replace(problem, start=replace(start, initial=initial, x0=x0))
 
 
+def restarted(
+    problem: Problem,
+    sc: Scenario,
+    start_from: tuple[Log, int, int],
+    lags: Sequence[float] = (),
+    mounts: Sequence[Mapping[str, float]] = (),
+) -> Problem:
+    """``problem`` started from ``sc``'s initial guess (a stored calibration's values, for a check)
+    on the records ``start_from``: its Functions, backend, priors and the sensor's start that
+    selects its windows stay those it was built with, so a check fits the windows a run fits."""
+    log, start, stop = start_from
+    point = starting_point(sc, problem.fns, log, start, stop, lags, mounts, problem.binder.gaps)
+    bounds = None if point.lower is None or point.upper is None else (point.lower, point.upper)
+    binder = replace(problem.binder, scenario=sc, x_fixed=point.x_fixed, bounds=bounds)
+    return Problem(problem.fns, point, binder)
+
+
 def lags_held(problem: Problem) -> Problem:
     """``problem`` with its time offsets held at their starts (their bounds closed on them), in
     the solvers and in the pipeline's own fits: a lag no fit converged at is no parameter."""

@@ -53,7 +53,7 @@ from nlp_calib.pipeline.assemble import (
     joint_run,
     pinned_alike,
 )
-from nlp_calib.pipeline.build import StartingPoint, build_stage, mount_count
+from nlp_calib.pipeline.build import StartingPoint, build_stage, mount_count, restarted
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import joint_residual
 from nlp_calib.pipeline.scenario import Scenario
@@ -109,16 +109,19 @@ class Calibration:
         log: Log | Sequence[Log] | None = None,
         solvers: Sequence[str] | None = None,
         aligned: Aligned | None = None,
+        start: Mapping[str, float] | None = None,
     ) -> None:
         """``log``: the log already read (with ``datasets``: one per entry), or None to read;
-        ``aligned``: one log's stages before its windows are bound, done already."""
+        ``aligned``: one log's stages before its windows are bound, done already; ``start``: the
+        values the fit starts from instead of the scenario's (a stored calibration's, for a
+        check), every stage before the fit done as a run of the scenario does it."""
         t0 = time.perf_counter()
         self.scenario = sc = scenario
         self.solvers = tuple(solvers or sc.solvers)
         per_log = sc.per_log() if sc.data.joint else (sc,)
         given = [log] if isinstance(log, Log) else list(log) if log is not None else [None] * len(per_log)
         assert aligned is None or len(per_log) == 1, "stages done already are one log's"
-        self.parts = [setup_log(s, log, self.solvers, aligned) for s, log in zip(per_log, given)]
+        self.parts = [setup_log(s, log, self.solvers, aligned, start) for s, log in zip(per_log, given)]
         self.stages = self.parts[0]
         if len(self.parts) == 1:
             self.held: Mapping[str, str] = self.stages.prepared.held
@@ -127,7 +130,7 @@ class Calibration:
                 self.stages.problem, windows.data, self.solvers, windows.input_noise, given_lag(self.parts)
             )
         else:
-            self.held, self.fitting = _joint_fit(sc, self.parts, self.solvers)
+            self.held, self.fitting = _joint_fit(sc, self.parts, self.solvers, start)
         self.setup_time_s = time.perf_counter() - t0
 
     @classmethod
@@ -229,8 +232,11 @@ class Calibration:
         return _joint_run(self, names, wanted or Wanted())
 
 
-def _joint_fit(sc: Scenario, parts: Sequence[LogSetup], solvers: Sequence[str]) -> tuple[dict[str, str], Fit]:
-    """The fit of several set-up logs' windows end to end, and the parameters it holds."""
+def _joint_fit(
+    sc: Scenario, parts: Sequence[LogSetup], solvers: Sequence[str], start: Mapping[str, float] | None = None
+) -> tuple[dict[str, str], Fit]:
+    """The fit of several set-up logs' windows end to end, and the parameters it holds (``start``:
+    the values the fit starts from instead of the scenario's, as :class:`Calibration` takes them)."""
     first = parts[0]
     data = joined([p.windows.data for p in parts])
     # A parameter is held only when the logs together do not determine it (two logs that each
@@ -251,6 +257,10 @@ def _joint_fit(sc: Scenario, parts: Sequence[LogSetup], solvers: Sequence[str]) 
     mounts = [p.problem.start.initial for p in parts] if mount_count(sc, len(parts)) > 1 else []
     data = data.with_selector() if mounts or per_log_kinds(model, len(parts)) else data
     problem = build_stage(one_horizon, model, tuple(held), start_from, solvers, n_records, lags, mounts, data)
+    if start is not None:
+        # As each log's (see stages.started): what ``start`` lacks, where the first log's start put it.
+        restart = one_horizon.with_options(initial_guess={**first.problem.start.initial, **start})
+        problem = restarted(problem, restart, start_from, lags, mounts)
     return held, Fit(problem, data, solvers, joint_noise(parts), given_lag(parts))
 
 

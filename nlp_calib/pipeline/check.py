@@ -1,12 +1,12 @@
 """The check stage: a stored calibration scored and refitted on a new log, and each parameter's
 change judged in the combined σ (:mod:`nlp_calib.analysis.drift`).
 
-The new log goes through every stage of a calibration, started from the stored values: its fair
-figures with the stored values are the run's baseline, the refit's beside them, and the run's
-``drift`` plug-in check (:mod:`nlp_calib.pipeline.drift_check`) carries the comparison
-(``checks.drift``). The refit uses the formulation the calibration was made with: its scenario
-file when it still exists, else the model's defaults with the residual and robust options the
-calibration recorded.
+The new log (or logs, fitted jointly) goes through every stage of a calibration as a run does
+them, its fit started from the stored values: its fair figures with the stored values are the
+run's baseline, the refit's beside them, and the run's ``drift`` plug-in check
+(:mod:`nlp_calib.pipeline.drift_check`) carries the comparison (``checks.drift``). The refit uses
+the formulation the calibration was made with: its scenario file when it still exists, else the
+model's defaults with the residual and robust options the calibration recorded.
 """
 
 from __future__ import annotations
@@ -116,7 +116,8 @@ def _formulation(options: dict[str, Any]) -> dict[str, Any]:
 
 def check_scenario(stored: StoredCalibration, target: Path) -> Scenario:
     """The scenario a check runs: ``target`` when it is a scenario file, else the log ``target``
-    with the calibration's own formulation; started from the stored values, with its solver."""
+    with the calibration's own formulation, with its solver (:func:`check` starts its fit from the
+    stored values)."""
     sc = load_scenario(target) if target.suffix in SCENARIO_SUFFIXES else _recorded(stored, target)
     if sc.model != stored.model:
         raise UsageError(
@@ -124,12 +125,15 @@ def check_scenario(stored: StoredCalibration, target: Path) -> Scenario:
             f"{stored.model}; check with a scenario of the same model"
         )
     _same_formulation(stored, sc)
-    return sc.with_options(initial_guess=stored.start(), solvers=(stored.solver,))
+    return sc.with_options(solvers=(stored.solver,))
 
 
 def check(
     stored: StoredCalibration, scenario: Scenario, logs: Log | Sequence[Log] | None = None
 ) -> CalibrationRun:
-    """The calibration of ``scenario``'s log or logs (read, or ``logs``) from the stored values,
-    with the comparison against them (the ``drift`` plug-in: ``checks.drift``)."""
-    return Calibration(scenario, logs, (stored.solver,)).run((stored.solver,), Wanted(against=stored))
+    """The calibration of ``scenario``'s log or logs (read, or ``logs``; several fitted jointly,
+    as a run fits them) from the stored values, with the comparison against them (the ``drift``
+    plug-in: ``checks.drift``). Every stage before the fit (the screen, the lag, the windows) is
+    done as a run of ``scenario`` does it: on a run's own data the check tests what it fitted."""
+    calib = Calibration(scenario, logs, (stored.solver,), start=stored.start())
+    return calib.run((stored.solver,), Wanted(against=stored))

@@ -187,7 +187,7 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         response(name, float(base[i]), error, step(H, _at_fixed(ev, x, up), _at_fixed(ev, x, down)))
     if fit.given_lag is not None and np.isfinite(d := record_interval(fit)):
         grads = (_at_inputs(ev, x, fit.given_lag(d)), _at_inputs(ev, x, fit.given_lag(-d)))
-        response(LAG, run.data.tracker_lag_s, (d, RECORD_INTERVAL), step(H, *grads))
+        response(LAG, held_lag(run, fit), (d, RECORD_INTERVAL), step(H, *grads))
     for name in (n for n in run.pinned() if n in free and np.isfinite(record_interval(fit))):
         move = pinned_step(H, fns.free.index(name))
         if move is None:
@@ -217,6 +217,16 @@ def pinned_step(H: np.ndarray, i: int) -> np.ndarray | None:
     except np.linalg.LinAlgError:
         return None
     return move
+
+
+def held_lag(run: CalibrationRun, fit: Fit) -> float:
+    """The lag given as a number that the fit holds: the run's; over several logs, the one every
+    log holds (NaN where they hold different ones). A check compares it with what the stored
+    calibration held (:func:`~nlp_calib.analysis.drift.common_held`): a joint fit's must be a value."""
+    if np.isfinite(run.data.tracker_lag_s):
+        return float(run.data.tracker_lag_s)
+    lags = {e.alignment.tracker_lag for e in fit.problem.binder.scenario.data.logs}
+    return float(lags.pop()) if len(lags) == 1 else float("nan")
 
 
 def _amount(value: float, unit: str) -> str:

@@ -3,12 +3,12 @@ its windows bound (:func:`setup_log`), for a calibration and for a check that fi
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 
 from nlp_calib.logs import Log
 from nlp_calib.pipeline.align import Alignment, align
-from nlp_calib.pipeline.build import Problem, at_lags, build_stage, lags_held
+from nlp_calib.pipeline.build import Problem, at_lags, build_stage, lags_held, restarted
 from nlp_calib.pipeline.prepare import PreparedLog, prepare
 from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.pipeline.screen import Screening, exclude_faults, median_interval, screen
@@ -61,11 +61,17 @@ class Aligned:
 
 
 def setup_log(
-    sc: Scenario, log: Log | None, solvers: Sequence[str], aligned: Aligned | None = None
+    sc: Scenario,
+    log: Log | None,
+    solvers: Sequence[str],
+    aligned: Aligned | None = None,
+    start: Mapping[str, float] | None = None,
 ) -> LogSetup:
     """Prepare, build, screen, align and bind one log (``log``: already read, or None;
-    ``aligned``: the stages before binding, done already)."""
+    ``aligned``: the stages before binding, done already; ``start``: the values the fit starts
+    from instead of the scenario's, see :func:`started`)."""
     a = aligned if aligned is not None else align_log(sc, log, solvers)
+    a = a if start is None else started(a, start)
     prepared, problem, screening, alignment = a.prepared, a.problem, a.screening, a.alignment
     problem = at_lags(problem, [alignment.lag_s], [alignment.log.clock.beside_lag_s])
     if alignment.estimate is not None and not alignment.estimate.converged:
@@ -92,3 +98,16 @@ def align_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> Aligned:
     )
     screening = screen(problem.binder, read, records, problem.start.x0)
     return Aligned(prepared, problem, screening, align_stage(problem, prepared, screening))
+
+
+def started(a: Aligned, start: Mapping[str, float]) -> Aligned:
+    """``a`` whose fit starts from ``start`` (a stored calibration's values, for a check): its
+    screen, lag and windows stay those a run of its scenario finds from the scenario's own start.
+    From other values a lag settles elsewhere within its tolerance, and a record at the log's
+    edge the run fitted can fall outside the encoders' reach: the check would then not test what
+    the run determined."""
+    prepared = a.prepared
+    # What ``start`` has no value for (a log's own mount or bias) starts where the run's start put it.
+    sc = prepared.scenario.with_options(initial_guess={**a.problem.start.initial, **start})
+    problem = restarted(a.problem, sc, (prepared.log, prepared.start, prepared.split))
+    return Aligned(replace(prepared, scenario=sc), problem, a.screening, a.alignment)
