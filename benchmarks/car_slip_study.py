@@ -33,14 +33,13 @@ from nlp_calib.simulation.vehicles import HighwayOptions, RoadOptions, simulate_
 #: every 3 to 10 s, bends loading its tyres to several m/s², records at 18.4 Hz, poses at 19.6 Hz.
 CIRCUIT: dict[str, Any] = {
     "duration_s": 240.0,
-    "road": {"heading_change": 12.0, "bend_angle": 0.15},
+    "road": {"heading_change": 12.0, "bend_angle": 0.15, "speed_periods_s": (3.0, 10.0)},
     "min_speed": 1.0,
     "max_speed": 5.0,
     "steer_max": 0.05,
     "wheel_rate_hz": 18.4,
     "pose_rate_hz": 19.6,
     "pose_noise": (0.01, 0.005),
-    "speed_periods_s": (3.0, 10.0),
     "truth": {
         "wheelbase": 0.32,
         "rear_track": 0.25,

@@ -243,7 +243,7 @@ CIRCUIT_TRUTH = {
 def _circuit_scenario(tmp_path: Path, seed: int, slip: float) -> Any:
     """The circuit car's 60 s drive in half-second windows (as ``init`` drafts them), the axle
     distance and track given."""
-    road = RoadOptions(heading_change=12.0, bend_angle=0.15, slip_gain=slip)
+    road = RoadOptions(heading_change=12.0, bend_angle=0.15, slip_gain=slip, speed_periods_s=(3.0, 10.0))
     opts = HighwayOptions(
         duration_s=60.0,
         seed=seed,
@@ -255,7 +255,6 @@ def _circuit_scenario(tmp_path: Path, seed: int, slip: float) -> Any:
         pose_rate_hz=19.6,
         pose_noise=(0.01, 0.005),
         truth=CIRCUIT_TRUTH,
-        speed_periods_s=(3.0, 10.0),
     )
     joints, poses, _ = simulate_highway(opts).write(tmp_path / f"circuit{seed}_{slip:g}")
     sc = {

@@ -263,22 +263,27 @@ class RoadOptions:
     """The road the highway car drives and what a real car has there that the kinematic model
     lacks: the heading's net change (rad), bends (the road wheels' largest angle on them, held 10 to
     40 s), the rear axle sliding out of a bend at ``slip_gain`` rad per m/s² of lateral
-    acceleration, and the device's noise correlated over ``pose_noise_time_s`` (0: white)."""
+    acceleration, and the device's noise correlated over ``pose_noise_time_s`` (0: white); the
+    car's speed changes with periods within ``speed_periods_s`` (a car on a circuit brakes and
+    accelerates every few seconds)."""
 
     heading_change: float = float(np.radians(1.0))
     bend_angle: float = 0.0
     slip_gain: float = 0.0
     pose_noise_time_s: float = 0.0
+    speed_periods_s: tuple[float, float] = (20.0, 120.0)
 
     def __post_init__(self) -> None:
         _limited(self, ROAD_LIMITS, "road's ")
+        lo, hi = self.speed_periods_s
+        if not 0.5 <= lo <= hi <= 3600.0:
+            raise OptionsError(f"speed_periods_s {self.speed_periods_s} must be 0.5 <= lo <= hi <= 3600 s")
 
 
 @dataclass(frozen=True)
 class HighwayOptions:
     """What to simulate (angles in rad, lengths in m, speeds in m/s, wheel speeds' noise in rad/s,
-    the device's ``pose_noise`` as position and heading; the speed changing with periods within
-    ``speed_periods_s``: a car on a circuit brakes and accelerates every few seconds);
+    the device's ``pose_noise`` as position and heading);
     ``truth`` overrides :data:`~nlp_calib.models.car_like.HIGHWAY_TRUTH` by name."""
 
     duration_s: float = 60.0
@@ -293,13 +298,9 @@ class HighwayOptions:
     steer_noise: float = 2e-4
     pose_noise: tuple[float, float] = (0.02, 0.002)
     truth: Mapping[str, float] = field(default_factory=dict)
-    speed_periods_s: tuple[float, float] = (20.0, 120.0)
 
     def __post_init__(self) -> None:
         _checked(self, HIGHWAY_LIMITS, HIGHWAY_TRUTH, "car")
-        lo, hi = self.speed_periods_s
-        if not 0.5 <= lo <= hi <= 3600.0:
-            raise OptionsError(f"speed_periods_s {self.speed_periods_s} must be 0.5 <= lo <= hi <= 3600 s")
         for what, limit, value in zip(("position", "heading"), POSE_NOISE, self.pose_noise):
             if (reason := limit.problem(value)) is not None:
                 raise OptionsError(f"pose_noise's {what} {reason}")
@@ -391,7 +392,7 @@ def simulate_highway(opts: HighwayOptions) -> HighwaySimulation:
     n = int(opts.duration_s / FINE_S)
     time_s = np.arange(n) * FINE_S
     mid, half = 0.5 * (opts.max_speed + opts.min_speed), 0.5 * (opts.max_speed - opts.min_speed)
-    speed = mid + half * _smooth(rng, time_s, opts.speed_periods_s)
+    speed = mid + half * _smooth(rng, time_s, opts.road.speed_periods_s)
     # A driver's corrections (periods of 1.5 to 4 s) within 80 % of the limit, and a steady angle
     # that turns the heading by the road's heading_change in all.
     wobble = 0.8 * opts.steer_max * _smooth(rng, time_s, (1.5, 4.0))
