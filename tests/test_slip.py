@@ -13,6 +13,7 @@ import pytest
 from nlp_calib.analysis.drift import between_logs_std
 from nlp_calib.outputs.handoff import calibration_dict, calibration_yaml
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.pipeline.check import check
 from nlp_calib.pipeline.preflight import preflight
 from nlp_calib.pipeline.slip_check import (
     BINS,
@@ -278,6 +279,26 @@ def _circuit(tmp_path: Path, seed: int, slip: float) -> tuple[Any, float]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return Calibration(_circuit_scenario(tmp_path, seed, slip)).run(), CIRCUIT_TRUTH["sensor_x"]
+
+
+def test_a_check_on_a_drive_whose_slip_leaves_parameters_open_says_to_drive_bends_slowly(
+    tmp_path: Path,
+) -> None:
+    """The circuit car calibrated on a drive without slip, checked on one whose tyres slide (8 mrad
+    per m/s²): what the check cannot test is what the slip leaves open, and its advice is slow bends,
+    not more turning (the drive turns plenty)."""
+    calm, _ = _circuit(tmp_path, 24, 0.0)
+    doc = calibration_dict(calm)
+    assert doc is not None
+    (tmp_path / "calibration.yaml").write_text(calibration_yaml(doc))
+    stored = read_calibration(tmp_path / "calibration.yaml")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        checked = check(stored, _circuit_scenario(tmp_path / "slid", 25, 0.008))
+    drift = checked.checks.drift
+    assert drift is not None and drift.verdict == "cannot tell", drift.reasons
+    assert "drive bends slowly" in drift.hint and "sensor_x" in drift.hint, drift.hint
+    assert "more turning" not in drift.hint
 
 
 def test_the_pre_flight_says_its_sigma_hold_for_tyres_that_do_not_slide(tmp_path: Path) -> None:

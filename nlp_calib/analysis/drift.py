@@ -179,8 +179,18 @@ def untested(run: CalibrationRun, solver: str, model: KinematicModel, held: bool
     return out
 
 
-def drive_more(run: CalibrationRun, model: KinematicModel, names: Sequence[str]) -> str:
-    """What to drive so that a log can test ``names``, in the observability analysis' words."""
+def drive_more(
+    run: CalibrationRun, model: KinematicModel, names: Sequence[str], std: Mapping[str, float] | None = None
+) -> str:
+    """What to drive so that a log can test ``names``: where the tyres' slip makes most of their σ
+    (``std``: the σ to believe; the slip check's ``std_slip`` over half of it), bends driven slowly
+    too; else in the observability analysis' words."""
+    slipped = _slip_bound(run, names, std or {})
+    if slipped:
+        return (
+            f"drive bends slowly as well as at speed (the slower, the less tyres slide): the tyres' slip "
+            f"in this drive's bends leaves {', '.join(slipped)} open, and bends at several speeds tell it"
+        )
     obs = run.checks.observability
     said = [w for w in (obs.warnings if obs is not None else ()) if "drive" in w]
     if said:
@@ -189,6 +199,20 @@ def drive_more(run: CalibrationRun, model: KinematicModel, names: Sequence[str])
     if any(n in lever for n in names):
         return "drive more turning: S-curves or circles in both directions, over a longer log"
     return f"drive longer, with more of what moves {', '.join(names)}"
+
+
+def _slip_bound(run: CalibrationRun, names: Sequence[str], std: Mapping[str, float]) -> list[str]:
+    """Of ``names``, those the slip check moved with the speed or whose σ to believe (``std``) the
+    slip's makes most of (its ``std_slip`` over half of it)."""
+    found = next((c for c in run.checks.more if c.name == "slip"), None)
+    record = found.record if found is not None and isinstance(found.record, Mapping) else {}
+    moved, slip = record.get("moved") or [], record.get("std_slip") or {}
+    return [
+        n
+        for n in names
+        if n in moved
+        or (slip.get(n) is not None and np.isfinite(std.get(n, np.nan)) and slip[n] > 0.5 * std[n])
+    ]
 
 
 def changes(
@@ -371,7 +395,7 @@ def check_drift(
     widened = (shared if shared is not None else stored[1], run_between_logs(run, solver, held=not common))
     found = changes(stored, refit, run.scenario, model, skipped, widened)
     found = _as_stated(found, stated) if common else found
-    hint = drive_more(run, model, [c.name for c in found if c.untested])
+    hint = drive_more(run, model, [c.name for c in found if c.untested], refit[1])
     verdict, reasons, hint = decide(found, "" if result.converged else result.reason, hint)
     unjudged = [n for n in result.names if n in uncalibrated]
     if unjudged:
