@@ -31,6 +31,18 @@ def _moved(V: np.ndarray, free: np.ndarray) -> np.ndarray:
     return np.asarray((V[:, free] ** 2).sum(axis=1) > SHARE)
 
 
+def _own_log(fns: ProblemFunctions, data: ResidualData) -> list[np.ndarray | None]:
+    """Per free parameter, the windows of the log it belongs to (None: the logs share it)."""
+    of = data.log_of(data.starts)
+    logs = [fns.layout.param(n).log if n in fns.layout else None for n in fns.free]
+    return [None if i is None else of == i for i in logs]
+
+
+def _gone(own: list[np.ndarray | None], rest: np.ndarray) -> np.ndarray:
+    """Which free parameters' own log has no window in ``rest``."""
+    return np.array([w is not None and not (w & rest).any() for w in own], dtype=bool)
+
+
 def stretches(
     fns: ProblemFunctions,
     data: ResidualData,
@@ -50,6 +62,7 @@ def stretches(
     H = information.sum(axis=0)
     lam, V = np.linalg.eigh(H * RR)
     whole = _moved(V, free_directions(lam, data.n_residuals, motion_scale(fns, data.z, omega)))
+    own = _own_log(fns, data)
 
     def without(lo: int, hi: int) -> Stretch | None:
         """The stretch of batches ``lo … hi − 1``, where the rest leaves a direction free."""
@@ -59,7 +72,9 @@ def stretches(
             return None
         n, m2 = int(rest.sum()), motion_scale(fns, data.z[:, rest], omega)
         lam_r, V_r = np.linalg.eigh((H - information[lo:hi].sum(axis=0)) * RR)
-        moved = _moved(V_r, free_directions(lam_r, n, m2)) & ~whole
+        # A log's own parameter (its clock, its mount) with none of its log's windows left is free
+        # by construction: its log is the stretch, which is no finding.
+        moved = _moved(V_r, free_directions(lam_r, n, m2)) & ~whole & ~_gone(own, rest)
         if not moved.any():
             return None
         floor = FIDELITY**2 * n * m2
