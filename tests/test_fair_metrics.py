@@ -81,6 +81,33 @@ def test_figures_computed_a_few_motions_at_a_time_are_the_one_pass(monkeypatch: 
     assert whole[0].rpe_distance[1.0].n > 100 and np.isfinite(whole[0].rpe_trans)
 
 
+def test_a_fault_free_stretch_takes_each_statistic_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """One part over every record: its segment ATE is the full run's (the same records, the same
+    track), computed once; the windowed RPE is a mean alone. Each figure against its own
+    computation, to the bit, and only the statistics read are computed."""
+    from nlp_calib.analysis import metrics
+    from nlp_calib.results.figures import RPE_DISTANCES
+
+    fns, p, inputs, ref = _drive()
+    q = p * 1.01
+    counted: list[int] = []
+    of = ErrorStats.of.__func__  # type: ignore[attr-defined]
+    monkeypatch.setattr(ErrorStats, "of", classmethod(lambda cls, e: counted.append(len(e)) or of(cls, e)))
+    m = metrics.trajectory_metrics(fns, q, inputs, ref, rpe_window=5)
+    track = metrics.integrate(fns, q, inputs, ref[0])
+    err = np.linalg.norm(track[:, :2] - ref[:, :2], axis=1)
+    assert m.ate.median == pytest.approx(float(np.median(err)), rel=1e-12) and m.ate.n == err.size
+    assert repr(m.segment_ate) == repr(m.ate)
+    g = metrics.PLANAR
+    rel = [
+        g.between(g.between(ref[i], ref[i + 5]), g.between(track[i], track[i + 5]))
+        for i in range(err.size - 5)
+    ]
+    assert m.rpe_trans == pytest.approx(float(np.linalg.norm(np.array(rel)[:, :2], axis=1).mean()), rel=1e-12)
+    # The full run's, the aligned segments' and each distance's RPE: no median nobody reads.
+    assert len(counted) == 2 + len(RPE_DISTANCES)
+
+
 def _evo_pairs(dist: np.ndarray, delta: float, tol: float) -> list[tuple[int, int]]:
     """The all-pairs rule written out: for each i, the j > i nearest delta further on."""
     pairs = []

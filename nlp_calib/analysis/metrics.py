@@ -320,6 +320,11 @@ def reference(
     )
 
 
+def _mean(errors: np.ndarray) -> float:
+    """``ErrorStats.of(errors).mean`` without the statistics nobody reads (a median's partition)."""
+    return float(errors.mean()) if errors.size else float("nan")
+
+
 def scored(
     fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, ref: Reference
 ) -> TrajectoryMetrics:
@@ -335,18 +340,26 @@ def scored(
     W, pair = ref.window, ref.pair
     rel_trans, rel_rot = _motion_errors(g, track, np.flatnonzero(pair), W, ref.rel)
     # One part over every record restarts where the track starts: the same poses.
-    seg_track = track if ref.parts == [(0, T.shape[0])] else restarted(step, T, ref.parts, g)
-    seg_err = np.linalg.norm(seg_track[ref.scored, : g.dims] - T[ref.scored, : g.dims], axis=1)
+    whole = ref.parts == [(0, T.shape[0])]
+    seg_track = track if whole else restarted(step, T, ref.parts, g)
+    ate = ErrorStats.of(err)
+    if whole and ref.connected:
+        # The one part's scored records are the good ones: the full run's errors, not taken again.
+        segment_ate = ate
+    else:
+        segment_ate = ErrorStats.of(
+            np.linalg.norm(seg_track[ref.scored, : g.dims] - T[ref.scored, : g.dims], axis=1)
+        )
     aligned = [aligned_errors(seg_track[idx], T[idx], g) for idx in ref.scored_parts]
     rpe = {d: rpe_of(seg_track, ref.pairs[d], g) for d in RPE_DISTANCES}
     return TrajectoryMetrics(
         ate_final=float(err[-1]) if err.size else float("nan"),
-        rpe_trans=ErrorStats.of(rel_trans).mean,
-        rpe_rot=ErrorStats.of(rel_rot).mean,
+        rpe_trans=_mean(rel_trans),
+        rpe_rot=_mean(rel_rot),
         rpe_window=W,
         records=int(T.shape[0]),
-        ate=ErrorStats.of(err),
-        segment_ate=ErrorStats.of(seg_err),
+        ate=ate,
+        segment_ate=segment_ate,
         segment_ate_aligned=ErrorStats.of(np.concatenate(aligned) if aligned else np.zeros(0)),
         rpe_distance=rpe,
         segments=len(ref.parts),
