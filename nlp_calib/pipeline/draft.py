@@ -7,10 +7,10 @@ joint whose name carries a word of the encoder's name (``left`` for an encoder n
 an angle encoder (``absolute``) a joint named ``steer…``, a wheel (``counter``) left over any joint named
 ``…wheel…``, ``…traction…`` or ``…drive…``; a model is a candidate when every one of its encoders
 takes a joint of its own; of those, a steered one where a joint is named steer…, the one reading
-the most joints, the first registered, is drafted; where a tricycle and a car read the same joints,
-a joint log's drive that corners as a car does (:data:`CAR_CORNERING`) drafts the car. A joint
-log's wheel columns that look like speeds to the pre-flight's detector are drafted with
-``form: speeds``. The tracker is the pose topic
+the most joints, the first registered, is drafted; where a three-wheeler driven by its steered
+wheel and a car read the same joints, a joint log's drive that corners as a car does
+(:data:`CAR_CORNERING`) drafts the car. A joint log's wheel columns that look like speeds to the
+pre-flight's detector are drafted with ``form: speeds``. The tracker is the pose topic
 whose name says most clearly that it is a reference (a motion-capture system's, a ground truth),
 never the robot's own odometry. The text says what was found and why each choice was made, as
 comments, and is read back as a scenario before it is written: ``run`` accepts it as it is.
@@ -177,18 +177,18 @@ def guess_model(
 
 def is_car(model: str) -> bool:
     """Whether ``model`` is a car's: a steered wheel that turns less than a quarter turn (a
-    tricycle's driving wheel turns it, about the rear axle)."""
+    three-wheeler's driven steered wheel turns a quarter turn, about the rear axle)."""
     steer_max = MODELS[model].steer_max
     return steer_max is not None and steer_max < QUARTER_TURN
 
 
 def _by_motion(tied: Sequence[str], model: str | None, cornering: float | None) -> tuple[str, str]:
     """Of the models reading the same joints (``tied``, in registry order), the one the drive's
-    motion says, and why in words: a car's where one ties with a tricycle and the drive's bends
+    motion says, and why in words: a car's where one ties with a three-wheeler and the drive's bends
     reach :data:`CAR_CORNERING` (``cornering``, m/s²); else the first registered. A front-wheel-
-    driven tricycle and a car read one steering and one wheel joint alike, and on a drive's bends
-    their kinematics differ only by the wheel's speed over 1/cos of the steering angle, which a
-    wheel radius and a steering gain take up: how the robot corners tells them apart."""
+    driven three-wheeler and a car read one steer joint and one wheel joint alike; on a drive's bends
+    their kinematics differ only by the wheel's speed over 1/cos of the steer angle, which a
+    wheel radius and a steer gain take up: how the robot corners tells them apart."""
     cars = [m for m in tied if is_car(m)]
     if model or not cars or len(cars) == len(tied):
         return tied[0], ""
