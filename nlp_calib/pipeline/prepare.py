@@ -259,8 +259,36 @@ def prepare(sc: Scenario, log: Log | None = None) -> PreparedLog:
         warnings.warn(
             f"{name} is held at its initial value: {why} in the fitted records", NlpCalibWarning, stacklevel=2
         )
-    return PreparedLog(
-        sc, model, log, start, stop, first_split, undetermined, gaps_said(sc, log, start, stop)
+    gaps = gaps_said(sc, log, start, stop)
+    windows_between(sc, log, gaps, start, stop)
+    return PreparedLog(sc, model, log, start, stop, first_split, undetermined, gaps)
+
+
+def windows_between(sc: Scenario, log: Log, gaps: np.ndarray, start: int, stop: int) -> None:
+    """Refuse a horizon that fits between none of the selected records' gaps: no window would be
+    left to fit, and the closed form and the pre-flight would say the drive shows nothing. A
+    tracker that delivers its poses in bursts (stamped on arrival) does this: its median interval
+    is milliseconds, so ``horizon_s`` asks for hundreds of records, and its pauses are gaps."""
+    H = sc.objective.residual.horizon
+    if log.reference.kind.horizon(H) is not None or stop - start < 2:
+        return  # measured increments are their own windows
+    cut = np.asarray(gaps[start : stop - 1], dtype=bool)
+    if not cut.any():
+        return
+    # The longest run of intervals between two gaps: a window needs H of them.
+    edges = np.flatnonzero(np.diff(np.concatenate([[1], cut.astype(int), [1]])))
+    longest = int(np.max(edges[1::2] - edges[::2])) if edges.size > 1 else 0
+    if longest >= H:
+        return
+    dt = np.diff(log.time_s[start:stop])
+    part = f"{sc.origin} ({sc.dataset.name})" if sc.origin else str(sc.path or sc.name)
+    raise ScenarioError(
+        f"{part}: residual.horizon: a window of {H} records fits between none of the {int(cut.sum())} gaps "
+        f"in time over {gap_threshold(log.time_s):.3g} s in the selected records (at most {longest} "
+        f"intervals run between two): no window is left to fit. The records are {1e3 * np.median(dt):.3g} ms "
+        f"apart at the median but {1e3 * np.mean(dt):.3g} ms on average: poses that arrive in bursts, "
+        "stamped on arrival, look like this; check the reference's stamps (re-time it, or keep one pose "
+        "per burst), or give residual.horizon in records short enough to fit between the gaps"
     )
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from nlp_calib.analysis.streams import GAP_FACTOR, gap_threshold
 from nlp_calib.core.errors import NlpCalibError
 from nlp_calib.logs import Log
 from nlp_calib.logs.bag_survey import topic_counts
@@ -16,18 +17,19 @@ from nlp_calib.pipeline.scenario import Scenario
 from nlp_calib.results.preflight import Recording, Stream
 from nlp_calib.sources import BagSource
 
-#: An interval longer than this many median intervals is a gap.
-GAP_FACTOR = 5.0
 
-
-def stream(name: str, kind: str, time_s: np.ndarray, note: str = "") -> Stream:
-    """A stream of messages at ``time_s`` (s)."""
+def stream(name: str, kind: str, time_s: np.ndarray, note: str = "", windows: bool = False) -> Stream:
+    """A stream of messages at ``time_s`` (s); ``windows``: its gaps counted as the ones no residual
+    window crosses (:func:`~nlp_calib.analysis.streams.gap_threshold`: the records the windows run
+    over), else as intervals over :data:`~nlp_calib.analysis.streams.GAP_FACTOR` median ones."""
     t = np.asarray(time_s, dtype=float)
     if t.size < 2:
         return Stream(name, kind, int(t.size), 0.0, (float(t[0]) if t.size else 0.0,) * 2, 0, 0.0, note)
     dt = np.diff(t)
     median = float(np.median(dt))
-    gaps = dt > GAP_FACTOR * max(median, 1e-9)
+    # The records' count must be the run's: a tracker that delivers its poses in bursts has a
+    # median interval of milliseconds, and intervals over 5 of them that no window skips.
+    gaps = dt > (gap_threshold(t) if windows else GAP_FACTOR * max(median, 1e-9))
     return Stream(
         name,
         kind,
@@ -57,7 +59,9 @@ def recording(sc: Scenario, log: Log) -> Recording:
     """The recording of ``sc``'s (single) log as it was read (``log``)."""
     source = sc.log.source
     encoders = ", ".join(log.header.encoder_names)
-    streams = [stream("records", f"one per {source.record_word}", log.time_s, f"encoders {encoders}")]
+    streams = [
+        stream("records", f"one per {source.record_word}", log.time_s, f"encoders {encoders}", windows=True)
+    ]
     overlap = None
     joints = log.joint_stream
     if joints is not None:
