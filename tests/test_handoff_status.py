@@ -55,11 +55,25 @@ def _vendor_run(
     return Calibration(load_scenario(sc)).run(wanted=Wanted(series=series))
 
 
+@pytest.fixture(scope="module")
+def misdeclared_run(tmp_path_factory: pytest.TempPathFactory) -> Callable[[str, str], CalibrationRun]:
+    """The vendor run of ``robot`` declared as ``declared``, with its series (a report reads them),
+    fitted once for every test that reads it (a frozen run: each test writes its own folder)."""
+
+    @functools.cache
+    def run(robot: str, declared: str) -> CalibrationRun:
+        return _vendor_run(tmp_path_factory.mktemp("caveat"), robot, declared, series=True)
+
+    return run
+
+
 @pytest.fixture(scope="module", params=[("diff_drive", "tricycle"), ("tricycle", "diff_drive")])
-def caveated(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> CalibrationRun:
+def caveated(
+    request: pytest.FixtureRequest, misdeclared_run: Callable[[str, str], CalibrationRun]
+) -> CalibrationRun:
     """A run whose verdict's caveat (the vendor's odometry is another model's) concerns every
     parameter, the mount's included."""
-    run = _vendor_run(tmp_path_factory.mktemp("caveat"), *request.param)
+    run = misdeclared_run(*request.param)
     assert run.verdict.level == CAVEATS and {"sensor_x", "sensor_y", "sensor_theta"} <= set(
         run.verdict.concerns
     )
@@ -126,8 +140,10 @@ def test_a_caveated_mount_is_stated_as_not_determined_and_no_urdf_carries_it(
     assert stored.parameters == pytest.approx(cal["parameters"])
 
 
-def test_the_report_names_no_urdf_file_the_run_left_out(tmp_path: Path) -> None:
-    run = _vendor_run(tmp_path, "diff_drive", "tricycle", series=True)
+def test_the_report_names_no_urdf_file_the_run_left_out(
+    misdeclared_run: Callable[[str, str], CalibrationRun], tmp_path: Path
+) -> None:
+    run = misdeclared_run("diff_drive", "tricycle")
     assert run.verdict.level == CAVEATS and "sensor_x" in run.verdict.concerns
     out = tmp_path / "out"
     written = {p.name for p in nlp_calib.write_run(run, out, report=True)}

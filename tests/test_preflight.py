@@ -9,9 +9,11 @@ whose wheel speeds are two sinusoids; the shipped demos, which are enough.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -100,10 +102,39 @@ LOOSE = {
 }
 
 
+@pytest.fixture(scope="module")
+def drive_preflight(tmp_path_factory: pytest.TempPathFactory) -> Callable[[str], Preflight]:
+    """The pre-flight of each drive of :data:`DRIVES`, made once for the tests that only read it."""
+
+    @functools.cache
+    def report(name: str) -> Preflight:
+        path, _ = DRIVES[name](tmp_path_factory.mktemp(name))
+        return preflight(load_scenario(path))
+
+    return report
+
+
+@pytest.fixture(scope="module")
+def drive_fit(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> Callable[[str], tuple[Calibration, CalibrationRun, dict[str, float]]]:
+    """Each drive of :data:`DRIVES` fitted by Gauss-Newton: its calibration, run and truth, fitted
+    once for the tests that only read them."""
+
+    @functools.cache
+    def fitted(name: str) -> tuple[Calibration, CalibrationRun, dict[str, float]]:
+        path, truth = DRIVES[name](tmp_path_factory.mktemp(f"{name}_fit"))
+        calib = Calibration(load_scenario(path))
+        return calib, calib.run(["gauss_newton"]), truth
+
+    return fitted
+
+
 @pytest.mark.parametrize("name", list(DRIVES))
-def test_the_preflight_names_what_a_drive_cannot_determine(name: str, tmp_path: Path) -> None:
-    path, _ = DRIVES[name](tmp_path)
-    report = preflight(load_scenario(path))
+def test_the_preflight_names_what_a_drive_cannot_determine(
+    name: str, drive_preflight: Callable[[str], Preflight]
+) -> None:
+    report = drive_preflight(name)
     loose = set(report.named(NOT_DETERMINED)) | set(report.named(WEAKLY))
     print(name, report.verdict, f"{report.time_s:.2f} s", sorted(loose))
     for p in report.parameters:
@@ -117,13 +148,13 @@ def test_the_preflight_names_what_a_drive_cannot_determine(name: str, tmp_path: 
         assert report.plan is not None and report.plan.best is not None
 
 
-def test_the_reasons_say_what_the_drive_lacks(tmp_path: Path) -> None:
-    straight = preflight(load_scenario(_straight(tmp_path)[0]))
+def test_the_reasons_say_what_the_drive_lacks(drive_preflight: Callable[[str], Preflight]) -> None:
+    straight = drive_preflight("straight")
     words = {p.name: p.because for p in straight.parameters}
     assert "never turns" in words["axis_length"] and "never turns" in words["sensor_x"]
     assert "steer_offset" in words["k_steer"]  # on a straight drive only their combination shows
     assert straight.excitation[0].heading_span_rad < 0.1 and straight.excitation[0].reversals == 0
-    sinus = preflight(load_scenario(_sinusoids(tmp_path)[0]))
+    sinus = drive_preflight("sinusoids")
     lag = next(p for p in sinus.parameters if p.name == "tracker_lag")
     assert "time shift" in lag.because and "left_wheel_radius" in lag.because
     assert "alignment.tracker_lag" in sinus.way_out
@@ -189,15 +220,14 @@ PLAN_CASES = [
 
 
 @pytest.mark.parametrize("name", PLAN_CASES)
-def test_the_plans_first_manoeuvre_appended_halves_the_named_sigma(name: str, tmp_path: Path) -> None:
+def test_the_plans_first_manoeuvre_appended_halves_the_named_sigma(
+    name: str, drive_fit: Callable[[str], tuple[Calibration, CalibrationRun, dict[str, float]]]
+) -> None:
     """After a fit, the plan's first manoeuvre, simulated with the true robot (the truth of a
     simulated drive; for the real session, the fitted model) and appended to the drive, lowers the
     σ of the parameter the plan names by at least 2×, judged on the appended windows as the plan
     judges any drive."""
-    path, truth = DRIVES[name](tmp_path)
-    sc = load_scenario(path)
-    calib = Calibration(sc)
-    run = calib.run(["gauss_newton"])
+    calib, run, truth = drive_fit(name)
     plan = run.checks.plan
     assert plan is not None and plan.best is not None
     results = {n: r.result for n, r in run.reports.items()}
@@ -242,11 +272,12 @@ def test_a_run_on_a_drive_that_cannot_succeed_stops_before_any_fit(tmp_path: Pat
     assert cli("preflight", str(SCENARIOS / "demo.yaml")).returncode == 0
 
 
-def test_a_run_plans_what_to_drive_next(tmp_path: Path) -> None:
+def test_a_run_plans_what_to_drive_next(
+    drive_fit: Callable[[str], tuple[Calibration, CalibrationRun, dict[str, float]]], tmp_path: Path
+) -> None:
     """Past the pre-flight (the library runs what it is given), the run's plan is the next step:
     plan.md and its sketch, the summary's next line; the plan stores and reads back with the run."""
-    path, _ = _straight(tmp_path)
-    run = Calibration(load_scenario(path)).run(["gauss_newton"])
+    _, run, _ = drive_fit("straight")
     plan = run.checks.plan
     assert plan is not None and plan.best is not None and "initial guess" in plan.model_from
     lines = summary_lines(run, ["plan.md: what to drive next"])
