@@ -247,6 +247,42 @@ def test_unsynchronised_streams_paired_as_a_bag_raise_no_encoder_fault() -> None
     assert jumps <= touched and len(jumps) >= 0.7 * len(touched)
 
 
+def _tracker_held(lines: list[str], first: int, last: int, every: int = 0) -> list[str]:
+    """The simulated log's lines with the tracker pose of record ``first`` repeated over records
+    ``first + 1 … last`` (``every``: instead, each pose held over ``every`` records throughout)."""
+    out, records = list(lines), [i for i, line in enumerate(lines) if line.startswith("time:")]
+    for r, i in enumerate(records):
+        source = r - r % every if every else (first if first < r <= last else r)
+        head, _ = out[i].split("tracker_pose:")
+        out[i] = head + "tracker_pose:" + lines[records[source]].split("tracker_pose:")[1]
+    return out
+
+
+def test_a_tracker_that_republishes_its_last_pose_while_the_wheels_turn_is_stuck() -> None:
+    """The tracker repeats record 600's pose over records 601-660 while the robot drives (a
+    motion-capture dropout): one ``tracker_stuck`` over them, no window starts or ends at a repeated
+    pose, and the fit agrees with the clean log's. A tracker whose poses are held over four records
+    throughout (slower updates) moves by steps, and is not judged stuck; the clean log has none."""
+    out = simulate(SimulationOptions.of(model="diff_drive", records=1500, seed=8))
+    lines = out.text().splitlines()
+    held = parse_lines(_tracker_held(lines, 600, 660), "sim.txt", model="diff_drive")
+    calib = Calibration(scenario("diff_drive"), log=held)
+    stuck = [f for f in calib.findings.report.faults if f.kind == "tracker_stuck"]
+    assert [(f.first, f.last, f.record) for f in stuck] == [(600, 659, 601)]
+    bad = calib.findings.report.bad_records(held.n_records)
+    assert np.flatnonzero(bad).tolist() == list(range(601, 661))
+    clean = Calibration(scenario("diff_drive"), log=parse_lines(lines, "sim.txt", model="diff_drive"))
+    assert not [f for f in clean.findings.report.faults if f.kind == "tracker_stuck"]
+    a, b = calib.run(["gauss_newton"]), clean.run(["gauss_newton"])
+    std = b.std("gauss_newton")
+    for name, value in b.reports["gauss_newton"].result.param_dict().items():
+        if std.get(name, 0.0) > 0:
+            assert abs(a.reports["gauss_newton"].result.param_dict()[name] - value) < std[name], name
+    slow = parse_lines(_tracker_held(lines, 0, 0, every=4), "sim.txt", model="diff_drive")
+    kinds = [f.kind for f in Calibration(scenario("diff_drive"), log=slow).findings.report.faults]
+    assert "tracker_stuck" not in kinds
+
+
 def test_repair_interpolates_steering_glitches() -> None:
     log, out = sim("tricycle", seed=5, steering_spikes=2, steering_stuck=1)
     calib = Calibration(scenario("tricycle", faults={"handling": "repair"}), log=log)

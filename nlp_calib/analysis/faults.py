@@ -6,6 +6,11 @@ to the stream that explains it:
 - a **tracker** pose off the path its neighbours agree on is the tracker's own glitch
   (``tracker_jump``; :mod:`nlp_calib.analysis.streams`): a stop, a reversal or a start is a kink
   the neighbours on one side continue into, and is never one;
+- a **tracker** that repeats its last pose exactly over records while the wheels turn lost its
+  target and republished the pose (``tracker_stuck``; a motion-capture dropout): the repeated poses
+  are wrong, and no window starts or ends at them. A tracker that moves by steps (over a quarter of
+  its travel right after a repeat: poses held between slower updates) repeats by its nature, and
+  is not judged so;
 - an **absolute encoder** (e.g. a wheel's angle) that leaves the span of its neighbours for one record
   and returns (``steering_spike``), or holds its reading while the robot moves and then catches
   up in one jump (``steering_stuck``), is that encoder's own glitch;
@@ -41,7 +46,14 @@ from nlp_calib.analysis.counters import screen_counters
 from nlp_calib.analysis.joint_repair import repair_joints
 from nlp_calib.analysis.readings import Readings, interpolated_over, readings, turning
 from nlp_calib.analysis.readings import unit as unit_of
-from nlp_calib.analysis.streams import off_neighbours, printed_step, scatter, stuck_runs
+from nlp_calib.analysis.streams import (
+    MIN_STUCK,
+    moves_by_steps,
+    off_neighbours,
+    printed_step,
+    scatter,
+    stuck_runs,
+)
 from nlp_calib.core import poses, poses3d
 from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
@@ -58,6 +70,7 @@ from nlp_calib.results.faults import (
     PIVOT_RADIUS_M,
     PIVOT_SLIP,
     TRACKER_KINDS,
+    TRACKER_STUCK,
     Fault,
     FaultReport,
 )
@@ -128,6 +141,50 @@ def tracker_faults(log: Log, sensor: Sensor) -> list[Fault]:
             )
             found.append(
                 _fault(log, "tracker_jump", None, (g.first - 1, g.last), q, (0.0, off, noise), evidence)
+            )
+    return found
+
+
+def _wheels_turning(log: Log, kinds: Mapping[str, EncoderKind]) -> np.ndarray | None:
+    """Per record interval, whether any wheel (a counter) turned (None: the log has none)."""
+    names = [n for n in log.header.encoder_names if kinds.get(n) == "counter"]
+    if not names:
+        return None
+    if log.joint_positions is not None:
+        cols = [log.header.encoder_index(n) for n in names]
+        return np.any(np.diff(log.joint_positions[:, cols], axis=0) != 0, axis=1)
+    return np.any([wrapped_difference(log.encoder(n)) != 0 for n in names], axis=0)
+
+
+def stuck_tracker(log: Log, sensor: Sensor, kinds: Mapping[str, EncoderKind]) -> list[Fault]:
+    """Runs of records whose tracker pose repeats the one before exactly, over
+    :data:`~nlp_calib.analysis.streams.MIN_STUCK` records or more, while the wheels turn over most
+    of them: the tracker lost its target and republished its last pose. One fault per run."""
+    moving = _wheels_turning(log, kinds)
+    T, position = sensor.jump_signal(log)
+    if moving is None or T.shape[0] < MIN_STUCK + 1:
+        return []
+    step = np.linalg.norm(np.diff(T[:, :position], axis=0), axis=1)
+    if moves_by_steps(np.concatenate([[0.0], np.cumsum(step)])):
+        return []  # poses held between slower updates: a repeat is how this tracker moves
+    same = np.all(np.diff(T, axis=0) == 0, axis=1)
+    found, k, t, lines = [], 0, log.time_s, log.line_numbers
+    while k < same.size:
+        if not same[k]:
+            k += 1
+            continue
+        first = k  # record ``first`` is the last pose read; ``first + 1 … last`` repeat it
+        while k < same.size and same[k]:
+            k += 1
+        last = k
+        if last - first + 1 >= MIN_STUCK and np.mean(moving[first:last]) >= 0.5:
+            evidence = (
+                f"the tracker repeats its pose of record {first} ({log.where(lines[first])}) over records "
+                f"{first + 1}-{last} ({t[last] - t[first]:.2f} s) while the wheels turn: it lost its "
+                "target and republished the last pose"
+            )
+            found.append(
+                _fault(log, TRACKER_STUCK, None, (first, last - 1), first + 1, (0.0, 0.0, 0.0), evidence)
             )
     return found
 
@@ -520,7 +577,9 @@ def cleaned(log: Log, faults: Sequence[Fault]) -> Log:
         )
     bad_pose = np.zeros(log.n_records, dtype=bool)
     for f in faults:
-        if f.kind in TRACKER_KINDS:
+        if f.kind == TRACKER_STUCK:
+            bad_pose[f.first + 1 : f.last + 2] = True
+        elif f.kind in TRACKER_KINDS:
             bad_pose[f.record] = True
         elif f.kind in ABSOLUTE_KINDS and f.encoder is not None:
             bad = np.zeros(log.n_records, dtype=bool)
@@ -608,6 +667,8 @@ def screen(
     with them interpolated over, at the tracker ``lag`` (s, or a range to estimate it in)."""
     model, n = fns.model, log.n_records
     jumps = JUMPS[log.reference.kind.name](log, fns.sensor)
+    if log.reference.kind.name == Poses.name:
+        jumps += stuck_tracker(log, fns.sensor, model.encoder_kinds)
     glitches = tuple(jumps + absolute_faults(log, model.encoder_kinds))
     report = FaultReport(glitches, {}, {}, unit=unit_of(log))
     params = judge(report.bad_intervals(n - 1), report.bad_records(n))

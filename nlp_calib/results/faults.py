@@ -14,7 +14,11 @@ import numpy as np
 
 COUNTER_KINDS = ("stall_then_jump", "reversal", "counter_jump")
 ABSOLUTE_KINDS = ("steering_spike", "steering_stuck")
-TRACKER_KINDS = ("tracker_jump",)
+#: ``tracker_stuck``: the tracker repeats its last pose over records while the wheels turn (it lost
+#: its target and republished the pose): the poses after the first are wrong, no window may start or
+#: end at them.
+TRACKER_STUCK = "tracker_stuck"
+TRACKER_KINDS = ("tracker_jump", TRACKER_STUCK)
 #: A measured increment (a scan match) that is wrong: its matcher said so, or the wheels disagree
 #: with it far beyond the increments' scatter; ``pivot_slip``: such an increment over which the
 #: base pivoted (turned more than it travelled, see ``PIVOT_RADIUS_M``), where the ground lets a
@@ -156,10 +160,13 @@ class FaultReport:
         return mask
 
     def bad_records(self, n_records: int) -> np.ndarray:
-        """Mask of records a residual window must not start or end at (tracker jumps)."""
+        """Mask of records a residual window must not start or end at (tracker jumps, and every pose
+        a stuck tracker repeated)."""
         mask = np.zeros(n_records, dtype=bool)
         for f in self.faults:
-            if f.kind in TRACKER_KINDS and 0 <= f.record < n_records:
+            if f.kind == TRACKER_STUCK:
+                mask[max(f.first + 1, 0) : min(f.last + 2, n_records)] = True
+            elif f.kind in TRACKER_KINDS and 0 <= f.record < n_records:
                 mask[f.record] = True
         return mask
 
