@@ -145,38 +145,22 @@ def tracker_faults(log: Log, sensor: Sensor) -> list[Fault]:
     return found
 
 
-def _wheels_turning(log: Log, kinds: Mapping[str, EncoderKind]) -> np.ndarray | None:
-    """Per record interval, whether any wheel (a counter) turned (None: the log has none)."""
-    names = [n for n in log.header.encoder_names if kinds.get(n) == "counter"]
-    if not names:
-        return None
-    if log.joint_positions is not None:
-        cols = [log.header.encoder_index(n) for n in names]
-        return np.any(np.diff(log.joint_positions[:, cols], axis=0) != 0, axis=1)
-    return np.any([wrapped_difference(log.encoder(n)) != 0 for n in names], axis=0)
-
-
 def stuck_tracker(log: Log, sensor: Sensor, kinds: Mapping[str, EncoderKind]) -> list[Fault]:
     """Runs of records whose tracker pose repeats the one before exactly, over
     :data:`~nlp_calib.analysis.streams.MIN_STUCK` records or more, while the wheels turn over most
     of them: the tracker lost its target and republished its last pose. One fault per run."""
-    moving = _wheels_turning(log, kinds)
+    moving = turning(log, [n for n in log.header.encoder_names if kinds.get(n) == "counter"], records=True)
     T, position = sensor.jump_signal(log)
     if moving is None or T.shape[0] < MIN_STUCK + 1:
         return []
     step = np.linalg.norm(np.diff(T[:, :position], axis=0), axis=1)
     if moves_by_steps(np.concatenate([[0.0], np.cumsum(step)])):
         return []  # poses held between slower updates: a repeat is how this tracker moves
+    # Runs of repeats: record ``first`` is the last pose read, ``first + 1 … last`` repeat it.
     same = np.all(np.diff(T, axis=0) == 0, axis=1)
-    found, k, t, lines = [], 0, log.time_s, log.line_numbers
-    while k < same.size:
-        if not same[k]:
-            k += 1
-            continue
-        first = k  # record ``first`` is the last pose read; ``first + 1 … last`` repeat it
-        while k < same.size and same[k]:
-            k += 1
-        last = k
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], same.astype(np.int8), [0]])))
+    found, t, lines = [], log.time_s, log.line_numbers
+    for first, last in zip(edges[::2], edges[1::2]):
         if last - first + 1 >= MIN_STUCK and np.mean(moving[first:last]) >= 0.5:
             evidence = (
                 f"the tracker repeats its pose of record {first} ({log.where(lines[first])}) over records "

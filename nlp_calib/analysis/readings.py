@@ -79,12 +79,13 @@ def readings(log: Log, name: str) -> Readings:
     return Readings(name, "ticks", log.time_s, values, per_radian, 1.0)
 
 
-def turning(log: Log, names: list[str]) -> np.ndarray | None:
+def turning(log: Log, names: list[str], records: bool = False) -> np.ndarray | None:
     """Per interval of the readings' axis (see :func:`readings`: a joint stream's messages, else
-    the records), whether any of the counters ``names`` changed (None: no counter)."""
+    the records; ``records``: the records' whatever the stream), whether any of the counters
+    ``names`` changed (None: no counter)."""
     if not names:
         return None
-    if log.joint_stream is not None:
+    if log.joint_stream is not None and not records:
         cols = [log.header.encoder_index(n) for n in names]
         return np.any(np.diff(log.joint_stream.positions[:, cols], axis=0) != 0, axis=1)
     if log.joint_positions is not None:

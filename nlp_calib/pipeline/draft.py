@@ -197,9 +197,8 @@ def _by_motion(tied: Sequence[str], model: str | None, cornering: float | None) 
         return tied[0], f"; {cars[0]} reads the same joints: for a car, give --model {cars[0]}"
     bends = f"the drive's bends reach {cornering:.2g} m/s² of lateral acceleration (90th percentile"
     if cornering >= CAR_CORNERING:
-        return cars[
-            0
-        ], f"; {other} reads the same joints, but {bends}; a car's from {CAR_CORNERING:g}): a car"
+        car = f"; {other} reads the same joints, but {bends}; a car's from {CAR_CORNERING:g}): a car"
+        return cars[0], car
     return tied[0], (
         f"; {cars[0]} reads the same joints, but {bends}; a car's from {CAR_CORNERING:g}): for a car, give "
         f"--model {cars[0]}"

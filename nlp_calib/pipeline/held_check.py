@@ -188,15 +188,14 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
     if fit.given_lag is not None and np.isfinite(d := record_interval(fit)):
         grads = (_at_inputs(ev, x, fit.given_lag(d)), _at_inputs(ev, x, fit.given_lag(-d)))
         response(LAG, held_lag(run, fit), (d, RECORD_INTERVAL), step(H, *grads))
-    for name in (n for n in run.pinned() if n in free and np.isfinite(record_interval(fit))):
+    d = record_interval(fit)
+    for name in (n for n in run.pinned() if n in free and np.isfinite(d)):
         move = pinned_step(H, fns.free.index(name))
         if move is None:
             continue
         # The move's coordinates to the lag's seconds: one record interval of it.
-        moved = np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params
-        lag = moved[fns.names.index(name)]
+        lag = (np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params)[fns.names.index(name)]
         if abs(lag) > 0:
-            d = record_interval(fit)
             response(name, estimate[name], (d, PINNED), move * d / lag)
     return [replace(r, shift=_without(r.shift, r.name), in_sigma=_without(r.in_sigma, r.name)) for r in found]
 
