@@ -4,15 +4,18 @@ its parameters kept from the hand-off; a drive that turns throughout has none.""
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from conftest import SINUSOIDS_HEAD
 
 from nlp_calib import Calibration, load_scenario
+from nlp_calib.analysis.degeneracy import motion_scale, motion_terms
 from nlp_calib.core import poses3d
 from nlp_calib.results.checks import CAVEAT
 from nlp_calib.results.run import DOUBTFUL, UNDETERMINED
+from nlp_calib.sensors import BESIDE, SENSORS, sensor_for
 
 MOUNT = (0.36, 0.06, 0.10, -1.58, 0.012, -1.55)
 RADIUS, SEPARATION = 0.1, 0.57
@@ -112,3 +115,25 @@ def test_a_drive_that_turns_throughout_has_no_stretch_of_its_own(tmp_path: Path)
     run = _run(tmp_path, 2.0 - np.cos(0.7 * t), 2.0 + np.cos(0.7 * t))
     assert run.verdict.level != UNDETERMINED, run.verdict.reasons
     assert not [c for c in run.checks.more if c.name == "leverage"]
+
+
+@pytest.mark.parametrize("kind", sorted(SENSORS))
+def test_a_stretchs_rest_takes_its_motion_from_the_windows_own_terms_to_the_bit(kind: str) -> None:
+    """The stretches judge each rest's motion as the mean of the windows' own terms, taken once:
+    the same bits as the motion of the rest's windows alone, for every registered sensor."""
+    sensor = sensor_for(kind)
+    rng = np.random.default_rng(7)
+    z = rng.normal(size=(sensor.z_rows, 5000))
+    if kind.startswith("3d"):
+        z[3:7] /= np.linalg.norm(z[3:7], axis=0)
+    if kind in BESIDE.values():
+        z[-1] = rng.random(z.shape[1]) > 0.5
+    fns = SimpleNamespace(sensor=sensor)
+    omega = rng.uniform(0.5, 2.0, size=sensor.tangent(z[:, :1]).shape[0])
+    terms = motion_terms(fns, z, omega)  # type: ignore[arg-type]
+    rest = np.ones(z.shape[1], dtype=bool)
+    for lo, hi in ((0, 250), (1234, 1999), (4800, 5000)):
+        rest[:] = True
+        rest[lo:hi] = False
+        alone = motion_scale(fns, z[:, rest], omega)  # type: ignore[arg-type]
+        assert float(np.mean(terms[rest])) == alone

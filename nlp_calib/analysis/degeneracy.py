@@ -24,12 +24,17 @@ from nlp_calib.problem import ProblemFunctions
 FIDELITY = 1e-5
 
 
+def motion_terms(fns: ProblemFunctions, z: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """Each window's ``zᵀΩz`` of its measured motion ``z`` (in the residual's tangent rows)."""
+    m = fns.sensor.tangent(z)
+    return np.asarray(np.sum(np.asarray(omega)[:, None] * m**2, axis=0))
+
+
 def motion_scale(fns: ProblemFunctions, z: np.ndarray, omega: np.ndarray) -> float:
-    """``mean zᵀΩz`` over the windows' measured motions ``z`` (in the residual's tangent rows)."""
+    """``mean zᵀΩz`` over the windows' measured motions ``z`` (:func:`motion_terms`)."""
     if z.shape[1] == 0:
         return 0.0
-    m = fns.sensor.tangent(z)
-    return float(np.mean(np.sum(np.asarray(omega)[:, None] * m**2, axis=0)))
+    return float(np.mean(motion_terms(fns, z, omega)))
 
 
 def free_directions(lam: np.ndarray, n_windows: int, motion2: float) -> np.ndarray:
