@@ -39,7 +39,9 @@ def read_text(source: Path, name: str) -> str:
     """A file of ``source``: a folder, or a bare git directory's HEAD."""
     if (source / name).is_file():
         return (source / name).read_text()
-    out = subprocess.run(["git", "-C", str(source), "show", f"HEAD:{name}"], capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        ["git", "-C", str(source), "show", f"HEAD:{name}"], capture_output=True, text=True, check=True
+    )
     return out.stdout
 
 
@@ -60,12 +62,14 @@ def wheel_speeds(source: Path, reduction: float, negate: set[str]) -> tuple[np.n
     for m in MOTORS:
         if motors[m]["stamp"].shape != stamps.shape or np.any(np.abs(motors[m]["stamp"] - stamps) > 1e-3):
             raise SystemExit(f"motor {m}'s stamps are not motor fl's: this converter pairs them row by row")
-    rad = {m: (-1.0 if m in negate else 1.0) * motors[m]["rpm"] * 2 * math.pi / 60 / reduction for m in MOTORS}
+    rad = {
+        m: (-1.0 if m in negate else 1.0) * motors[m]["rpm"] * 2 * math.pi / 60 / reduction for m in MOTORS
+    }
     return stamps, np.stack([(rad["fl"] + rad["rl"]) / 2, (rad["fr"] + rad["rr"]) / 2], axis=1)
 
 
 def burst_ends(stamps: np.ndarray, gap: float) -> np.ndarray:
-    """Indices of each burst's last pose: the poses followed by one more than ``gap`` s later, and the last."""
+    """Indices of each burst's last pose: those followed by one over ``gap`` s later, and the last."""
     return np.append(np.flatnonzero(np.diff(stamps) > gap), stamps.size - 1)
 
 

@@ -222,7 +222,7 @@ def test_rates_ruled_by_a_few_far_segments_are_narrowed_to_the_drift_the_rest_sh
         drawn = np.where(far[:, None], scale * errors, errors)
         fitted = segment_rates(units, shapes, drawn, (np.zeros((0, drawn.shape[0], 3, 3)), reads))[0]
         against = (drawn, np.array(reads), np.zeros(3, dtype=bool))
-        held, _ = hold_rates(units, (np.nan_to_num(fitted), given), (), against)
+        held, _ = hold_rates(units, (np.nan_to_num(fitted), given), (), against, np.array(reads))
         ratios = _ratios(units, held, drawn, np.array(reads))
         factor = 2.0 / np.quantile(ratios, COVERED, axis=0)  # σ over the σ holding 95 %
         assert np.all((factor >= 0.5) & (factor <= 2.0)), (scale, factor)

@@ -392,7 +392,10 @@ def narrowing_target(segments: int) -> float:
 
 
 def _narrowing_share(
-    units: np.ndarray, rates: np.ndarray, which: tuple[np.ndarray, int], against: tuple[np.ndarray, np.ndarray]
+    units: np.ndarray,
+    rates: np.ndarray,
+    which: tuple[np.ndarray, int],
+    against: tuple[np.ndarray, np.ndarray],
 ) -> float:
     """The smallest factor in (0, 1] on the rates ``which`` selects (of component ``c``) whose 2σ
     still holds :func:`narrowing_target`'s share of the segments' errors in that component (1:
@@ -438,14 +441,18 @@ def hold_rates(
     rates: tuple[np.ndarray, np.ndarray],
     bounded: tuple[str, ...],
     against: tuple[np.ndarray, np.ndarray, np.ndarray],
+    reads: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The fitted rates (``rates``: those as ``units`` holds them, and the inputs' noise's) held
     to the drift their segments show (``against``: as :func:`_covered` takes it), both ways:
     narrowed where their 2σ holds more than sampling allows (:func:`_narrowed`), then raised where
-    it holds too few (:func:`_covered`); and the shares so raised per component."""
+    it holds too few (:func:`_covered`); and the shares so raised per component. Narrowed beside
+    the readings' rounding alone (``reads``), the reference's noise counted as the odometry's:
+    never under what holds the errors, so a drift under the reference's noise is not narrowed to
+    nothing (a filter then trusting the wheels completely)."""
     held, given = rates
-    errors, known, _ = against
-    return _covered(units, _narrowed(units, held, bounded, (errors, known)), given, against)
+    errors = against[0]
+    return _covered(units, _narrowed(units, held, bounded, (errors, reads)), given, against)
 
 
 def _three(v: np.ndarray) -> tuple[float, float, float]:
@@ -559,7 +566,7 @@ def noise_rates(
         (units[FITTED], np.r_[np.ravel(rates), spot]) if spot is not None else (units[:6], np.ravel(rates))
     )
     fitted = np.einsum("k,ksii->i", reference, terms[credited]) > 0
-    held, raised = hold_rates(units, (held, given), bounded, (errors, known, fitted))
+    held, raised = hold_rates(units, (held, given), bounded, (errors, known, fitted), reads)
     coverage = float(np.mean(_ratios(units, held, errors, known) <= 2.0))
     return NoiseRates(
         _three(held[:3]),

@@ -20,7 +20,6 @@ from nlp_calib.core.errors import NlpCalibError, shown_path
 from nlp_calib.core.files import forget_inputs
 from nlp_calib.core.text import escaped
 
-
 #: The warnings this command has printed.
 _SHOWN: set[str] = set()
 
