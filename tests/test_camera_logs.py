@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import assert_close
+from conftest import REPO, assert_close, cli
 
 from nlp_calib.core import poses3d
 from nlp_calib.core.errors import DatasetError, NlpCalibWarning
@@ -79,6 +79,20 @@ def test_tum_quaternion_close_to_unit_is_normalised_with_one_warning(tmp_path: P
     assert len(messages) == 1 and messages[0].startswith(f"{p}: 2 quaternion(s) are not of unit norm")
     assert "line 4" in messages[0] and messages[0].endswith("normalised")
     assert_close(np.linalg.norm(traj.poses[:, 3:], axis=1), np.ones(3), rtol=1e-15)
+
+
+def test_a_warning_the_command_meets_twice_is_printed_once(tmp_path: Path) -> None:
+    """``init`` reads a TUM file to draft the scenario and again to check the draft: its warning
+    about quaternions off unit norm reaches the terminal once (main printed it twice)."""
+    data = REPO / "scenarios" / "data"
+    (tmp_path / "drive.csv").write_text((data / "camera_demo.joints.csv").read_text())
+    rows = (data / "camera_demo.tum").read_text().splitlines()
+    first = rows[0].split()
+    rows[0] = " ".join([*first[:4], *(repr(1.00001 * float(v)) for v in first[4:])])
+    (tmp_path / "drive.tum").write_text("\n".join(rows) + "\n")
+    done = cli("init", str(tmp_path / "drive.csv"), "--out", str(tmp_path / "drive.yaml"))
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.count("quaternion(s) are not of unit norm") == 1, done.stderr
 
 
 @pytest.mark.parametrize(("old", "new"), [("100.04", "100.02"), ("100.04", "99.0")])

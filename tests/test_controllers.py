@@ -373,6 +373,21 @@ def test_a_skid_steers_separation_turns_the_base_as_the_model_at_the_drives_medi
     assert "turn rates are unknown" in unknown.places["turn_slip"]
 
 
+def test_a_skid_steers_track_is_said_to_follow_the_turn_rate_as_the_slips_sign_makes_it() -> None:
+    """A negative slip narrows the effective track with the turn rate (the public AgileX Scout's
+    fit: turn_slip -0.57 s/rad, its track running from 1.246 to 0.98 m over the driven rates): the
+    words say it shrinks, as the numbers beside them do (main said it grows whatever the sign)."""
+    from nlp_calib.models.skid_steer import SkidSteer
+
+    rates = (0.0773, 0.256, 0.579)
+    for slip, words in ((-0.565, "shrinks with"), (0.3, "grows with"), (0.0, "does not change with")):
+        params = {"k_left": 0.16, "k_right": 0.16, "baseline": 1.3, "turn_slip": slip}
+        said = SkidSteer().controller(params, EncoderScales({}, driven_turn_rates=rates)).places["turn_slip"]
+        assert f"effective track {words} the base's turn rate" in said, said
+        low, high = (float(v) for v in said.split("it runs from ")[1].split(" m")[0].split(" to "))
+        assert (high > low) == (slip > 0) and (high < low) == (slip < 0), said
+
+
 def test_the_driven_turn_rates_are_the_turning_records_percentiles_despite_a_tracker_outlier() -> None:
     from nlp_calib.analysis.handoff import driven_turn_rates
 

@@ -275,3 +275,16 @@ def test_progress_is_silent_unless_the_stream_is_a_terminal() -> None:
         progress.update(1, "demo: solving")
         assert "[1/3] scenarios: demo: solving" in tty.getvalue()
     assert tty.getvalue().endswith("\r\x1b[K")  # the status line is erased on exit
+
+
+def test_the_summary_names_odometry_csvs_covariance_only_where_one_was_written() -> None:
+    """Where the drift is no noise a filter can use, odometry.csv holds the poses and empty
+    covariance columns: the closing summary says so and why (main named its covariance anyway)."""
+    from types import SimpleNamespace
+
+    why = "the drift against the reference calibrates a noise per interval as large as the inputs' own values"
+    for undetermined in (why, ""):
+        run: Any = SimpleNamespace(odometry=SimpleNamespace(undetermined=undetermined))
+        (line,) = registry.next_steps(["odometry.csv"], run)
+        assert ("with its covariance" in line) == (not undetermined), line
+        assert (f"with no covariance: {why}" in line) == bool(undetermined), line

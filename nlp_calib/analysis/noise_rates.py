@@ -384,6 +384,77 @@ def _covering_share(
     return hi
 
 
+def narrowing_target(segments: int) -> float:
+    """The share of ``segments`` errors a component's 2σ may hold before its rates are narrowed:
+    :data:`COVERED` and two binomial σ of it over half of them (they overlap by half), so that a
+    share the sampling alone gives is left as it is."""
+    return min(1.0, COVERED + 2.0 * float(np.sqrt(COVERED * (1.0 - COVERED) / max(0.5 * segments, 1.0))))
+
+
+def _narrowing_share(
+    units: np.ndarray,
+    rates: np.ndarray,
+    which: tuple[np.ndarray, int],
+    against: tuple[np.ndarray, np.ndarray],
+) -> float:
+    """The smallest factor in (0, 1] on the rates ``which`` selects (of component ``c``) whose 2σ
+    still holds :func:`narrowing_target`'s share of the segments' errors in that component (1:
+    it holds fewer already)."""
+    (mask, c), (errors, known) = which, against
+    target = narrowing_target(errors.shape[0])
+
+    def need(share: float) -> float:
+        scaled = np.where(mask, share * rates, rates)
+        ratios = _ratios(units, scaled, errors, known)[:, c]
+        return float(np.quantile(ratios, target, method="inverted_cdf")) / 2.0
+
+    if need(1.0) > 1.0:
+        return 1.0
+    lo, hi = 0.0, 1.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if need(mid) <= 1.0 else (mid, hi)
+    return hi
+
+
+def _narrowed(
+    units: np.ndarray, rates: np.ndarray, bounded: tuple[str, ...], against: tuple[np.ndarray, np.ndarray]
+) -> np.ndarray:
+    """``rates`` (as ``units`` holds them) narrowed, rate by rate as :func:`_populations` groups
+    them and the heading's first (it carries into the positions), to the smallest share whose 2σ
+    holds :func:`narrowing_target`'s share of their segments' errors: the method of moments fits
+    the squared errors' mean, which a few segments far out rule (a skid-steer's turns against a
+    tracker read late, a slip), and a σ over the rest's many times wider is none a filter can
+    use. A component the segments only bound (:func:`_unshown`) stays the most they allow."""
+    errors, known = against
+    rates = np.array(rates, dtype=float)
+    for c, which, on in sorted(_populations(units), key=lambda p: -p[0]):
+        if AXES[c] in bounded or not np.any(on) or not np.any(rates[which] > 0):
+            continue
+        share = _narrowing_share(units[:, on], rates, (which, c), (errors[on], known[on]))
+        rates = np.where(which, share * rates, rates)
+    return rates
+
+
+def hold_rates(
+    units: np.ndarray,
+    rates: tuple[np.ndarray, np.ndarray],
+    bounded: tuple[str, ...],
+    against: tuple[np.ndarray, np.ndarray, np.ndarray],
+    reads: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The fitted rates (``rates``: those as ``units`` holds them, and the inputs' noise's) held
+    to the drift their segments show (``against``: as :func:`_covered` takes it), both ways:
+    narrowed where their 2σ holds more than sampling allows (:func:`_narrowed`), then raised where
+    it holds too few (:func:`_covered`); and the shares so raised per component. Narrowed beside
+    the readings' rounding alone (``reads``), the reference's noise counted as the odometry's:
+    never under what holds the errors, so a drift under the reference's noise is not narrowed to
+    nothing (a filter then trusting the wheels completely)."""
+    held, given = rates
+    errors = against[0]
+    return _covered(units, _narrowed(units, held, bounded, (errors, reads)), given, against)
+
+
 def _three(v: np.ndarray) -> tuple[float, float, float]:
     return float(v[0]), float(v[1]), float(v[2])
 
@@ -495,7 +566,7 @@ def noise_rates(
         (units[FITTED], np.r_[np.ravel(rates), spot]) if spot is not None else (units[:6], np.ravel(rates))
     )
     fitted = np.einsum("k,ksii->i", reference, terms[credited]) > 0
-    held, raised = _covered(units, held, given, (errors, known, fitted))
+    held, raised = hold_rates(units, (held, given), bounded, (errors, known, fitted), reads)
     coverage = float(np.mean(_ratios(units, held, errors, known) <= 2.0))
     return NoiseRates(
         _three(held[:3]),

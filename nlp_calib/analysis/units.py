@@ -64,6 +64,9 @@ LENGTH_UNITS = {"millimetres": 1e-3, "centimetres": 1e-2}
 #: positions looked like a wheel that wraps, or like nothing).
 SPEED_CORRELATION = 0.8
 SPEED_MARGIN = 0.3
+#: The speed detector's steps span at least this many record intervals (a bursty tracker's stamps
+#: are off by up to one: its speed over six is within about a sixth).
+SPEED_STEP_RECORDS = 6
 #: Two wheels turning against a robot's on this share of the steps judged: one axis is mirrored.
 OPPOSITE_SHARE = 0.8
 #: A curve is gentle where the heading turns less than this per metre (rad/m): both wheels of a
@@ -417,13 +420,20 @@ def _speed_columns(log: Log, model: KinematicModel, xy: np.ndarray) -> list[Unit
         or (stream is not None and set(counters) & set(stream.integrated))
     ):
         return []
-    k = taken(log.time_s, STEP_S)
+    # Steps of several records: a tracker that delivers its poses in bursts stamps them up to one
+    # interval off, and a speed over one interval is then mostly that error.
+    interval = float(np.median(np.diff(log.time_s))) if log.time_s.size > 1 else 0.0
+    k = taken(log.time_s, max(STEP_S, SPEED_STEP_RECORDS * interval))
     if k.size < 8:
         return []
-    speed = np.hypot(*np.diff(xy[k], axis=0).T) / np.diff(log.time_s[k])
+    moved = np.diff(xy[k], axis=0)
+    # A step over which the tracker repeats its pose exactly (it lost its target and republished
+    # the last one) says nothing of the speed.
+    seen = np.any(moved != 0.0, axis=1)
+    speed = np.hypot(*moved.T)[seen] / np.diff(log.time_s[k])[seen]
     wheels = np.stack([_positions(log, n)[k] for n in counters])
-    level = np.mean(np.abs(0.5 * (wheels[:, 1:] + wheels[:, :-1])), axis=0)
-    change = np.mean(np.abs(np.diff(wheels, axis=1)), axis=0)
+    level = np.mean(np.abs(0.5 * (wheels[:, 1:] + wheels[:, :-1])), axis=0)[seen]
+    change = np.mean(np.abs(np.diff(wheels, axis=1)), axis=0)[seen]
     as_speed, as_position = _correlation(level, speed), _correlation(change, speed)
     if as_speed < SPEED_CORRELATION or as_speed < as_position + SPEED_MARGIN:
         return []

@@ -205,7 +205,7 @@ def _closing(run: CalibrationRun, final: Sequence[Path], out: Path) -> None:
     """The files written and the closing summary."""
     print("\n" + "\n".join(_wrote(final, out)) + "\n")
     names = list(dict.fromkeys(p.name for p in final))
-    print("\n".join(summary_lines(run, registry.next_steps(names))) + "\n")
+    print("\n".join(summary_lines(run, registry.next_steps(names, run))) + "\n")
 
 
 def _write_outputs(

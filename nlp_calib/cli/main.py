@@ -20,6 +20,9 @@ from nlp_calib.core.errors import NlpCalibError, shown_path
 from nlp_calib.core.files import forget_inputs
 from nlp_calib.core.text import escaped
 
+#: The warnings this command has printed.
+_SHOWN: set[str] = set()
+
 
 def _show_warning(
     message: Warning | str,
@@ -29,10 +32,16 @@ def _show_warning(
     file: TextIO | None = None,
     line: str | None = None,
 ) -> None:
-    """Print a warning at once, as one line (clearing a progress line on a terminal first)."""
+    """Print a warning at once, as one line (clearing a progress line on a terminal first); a
+    warning the command printed already is not printed again (a file read twice, by a draft and by
+    its check, says what it says of itself once)."""
+    text = str(message)
+    if text in _SHOWN:
+        return
+    _SHOWN.add(text)
     stream = sys.stderr
     clear = "\r\x1b[K" if getattr(stream, "isatty", lambda: False)() else ""
-    print(f"{clear}warning: {escaped(str(message), lines=True)}", file=stream)
+    print(f"{clear}warning: {escaped(text, lines=True)}", file=stream)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -69,6 +78,7 @@ def _run(argv: list[str]) -> int:
             # A file an interrupted import left open is Python's business, not the user's.
             warnings.simplefilter("ignore", ResourceWarning)
             warnings.showwarning = _show_warning
+            _SHOWN.clear()
             return COMMANDS[args.command](args)
     except BaseException as exc:
         if isinstance(exc, SystemExit):  # argparse: --help, --version, a usage error

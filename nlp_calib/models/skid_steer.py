@@ -215,7 +215,7 @@ class SkidSteer(DiffDrive):
         base = wheel_pair(params["k_left"], params["k_right"], separation, scales)
         rule = (
             "no ros2_control parameter: diff_drive_controller's wheel_separation is a fixed track, but a "
-            "skid-steer's effective track grows with the base's turn rate ω (rad/s) as "
+            f"skid-steer's effective track {_track_change(slip)} the base's turn rate ω (rad/s) as "
             f"T0/(1 − turn_slip·|ω|), T0 = {baseline!r} m the zero-rate track (calibration.yaml's)"
         )
         if rates:
@@ -264,6 +264,14 @@ def effective_track(baseline: float, turn_slip: float, rate: float) -> float:
     the base's, times ``baseline``. A rate beyond the law's reach keeps the zero-rate track."""
     divisor = 1.0 - turn_slip * abs(rate)
     return baseline / divisor if divisor > 0.1 else baseline
+
+
+def _track_change(turn_slip: float) -> str:
+    """How the effective track follows the turn rate, by the fitted slip's sign: a negative slip
+    narrows it (the base turns more than its wheels' difference over the zero-rate track would)."""
+    if turn_slip > 0:
+        return "grows with"
+    return "shrinks with" if turn_slip < 0 else "does not change with"
 
 
 def _sensor(params: Mapping[str, float]) -> dict[str, float]:

@@ -55,6 +55,8 @@ class Output:
     next_step: str = ""
     #: A folder of files (its files, not the folder, are checked for collisions as they are written).
     folder: bool = False
+    #: What the summary says of it for a given run, in place of ``next_step`` (what it holds varies).
+    next_step_of: Callable[[CalibrationRun], str] | None = None
 
 
 def _plain(function: Callable[[CalibrationRun, Path, str], list[Path]]) -> Writer:
@@ -112,6 +114,14 @@ def placed(run: CalibrationRun, options: OutputOptions) -> CalibrationRun:
     return dataclasses.replace(run, reports=reports)
 
 
+def _odometry_step(run: CalibrationRun) -> str:
+    """What odometry.csv holds: its covariance only where one was written."""
+    why = run.odometry.undetermined if run.odometry is not None else ""
+    if why:
+        return f"the base link's odometry, one row per record, with no covariance: {why}"
+    return "the base link's odometry with its covariance, one row per record"
+
+
 def _controller(run: CalibrationRun, folder: Path, name: str, options: OutputOptions) -> list[Path]:
     return ros2_control.write_ros2_control(run, folder, name, options.ros_distro, options.controller_name)
 
@@ -120,7 +130,7 @@ def _report(run: CalibrationRun, folder: Path, name: str, options: OutputOptions
     files = names(("handoff",)) if run.handoff_solver() is not None else []
     if handoff.urdf_mount(run) is None:  # a mount not determined: no URDF file is written
         files = [f for f in files if f not in (handoff.URDF_FILE, handoff.ROBOT_URDF_FILE)]
-    return markdown.write_report(run, folder, name, files, next_steps(files))
+    return markdown.write_report(run, folder, name, files, next_steps(files, run))
 
 
 OUTPUTS: tuple[Output, ...] = (
@@ -137,7 +147,7 @@ OUTPUTS: tuple[Output, ...] = (
            next_step="what to drive next, the manoeuvres ranked by how much each would help"),
     Output("plan.png", "result", _plan_png),
     Output("odometry.csv", "odometry", _plain(results.write_odometry),
-           next_step="the base link's odometry with its covariance, one row per record"),
+           next_step="the base link's odometry, one row per record", next_step_of=_odometry_step),
     Output("odometry.png", "odometry", _odometry_png, report=True),
     Output("validation.json", "validation", _plain(results.write_validation)),
     Output("check.json", "check", _plain(check.write_check),
@@ -174,9 +184,14 @@ def files(outputs: Sequence[Output]) -> list[str]:
     return [o.name for o in outputs if not o.folder]
 
 
-def next_steps(files: Sequence[str]) -> list[str]:
-    """What the closing summary says of each of ``files`` that has something to say."""
-    said = {o.name: o.next_step for o in OUTPUTS if o.next_step}
+def next_steps(files: Sequence[str], run: CalibrationRun | None = None) -> list[str]:
+    """What the closing summary says of each of ``files`` that has something to say (of ``run``'s
+    where what a file holds varies)."""
+    said = {
+        o.name: o.next_step_of(run) if o.next_step_of is not None and run is not None else o.next_step
+        for o in OUTPUTS
+        if o.next_step
+    }
     return [f"{name}: {said[name]}" for name in files if name in said]
 
 
