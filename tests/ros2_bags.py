@@ -88,9 +88,10 @@ def record(
     seed: int = 5,
     truth: dict[str, float] | None = None,
     tracker_noise: float = 0.001,
+    latency_s: float = 0.0,
 ) -> Recording:
     """Simulate ``seconds`` of driving and record it as a ROS 2 robot would (the tracker's noise
-    ``tracker_noise`` m and rad)."""
+    ``tracker_noise`` m and rad; its poses seen ``latency_s`` late)."""
     counts_truth = truth or (tricycle_truth() if model == "tricycle" else {})
     opts = SimulationOptions.of(
         records=int(seconds * GRID_HZ),
@@ -102,6 +103,7 @@ def record(
         substeps=2,
         tracker_noise_xy=0.0,
         tracker_noise_theta=0.0,
+        latency_s=latency_s,
     )
     sim = simulate(opts)
     names = get_model(model).encoder_kinds

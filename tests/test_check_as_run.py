@@ -115,3 +115,28 @@ def test_a_joint_fit_records_the_lag_every_log_holds(
     assert run.checks.held_values() == held
     value = found.record["held"]["alignment.tracker_lag"]["value"]
     assert value == held["alignment.tracker_lag"] if held else math.isnan(value)  # lags that differ: none
+
+
+def test_a_joint_fit_holds_each_logs_lag_pinned_on_its_search_edge(tmp_path: Path) -> None:
+    # Two logs 50 ms late, each searched within ±20 ms: every log's lag is pinned at 20 ms. The
+    # joint fit's held check holds both there, as one log's does (it saw none: the joint run knew
+    # its logs' pinned lags only once its logs were attached, after its checks).
+    from nlp_calib.pipeline.held_check import PINNED
+
+    logs = []
+    for i in range(2):
+        path = tmp_path / f"late{i}.txt"
+        write_simulation(simulate(SimulationOptions.of(records=900, seed=60 + i, latency_s=0.05)), path)
+        logs.append(path)
+    entries = [{"path": str(p), "alignment": {"tracker_lag": "auto", "search": [-0.02, 0.02]}} for p in logs]
+    sc = scenario_from_mapping({"name": "pinned", **FORMULATION, "datasets": entries}, "s", tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = Calibration(sc).run()
+    assert run.pinned() == ("tracker_lag_1", "tracker_lag_2")
+    found = run.checks.plugin("held")
+    assert found is not None and found.record is not None
+    held = found.record["held"]
+    assert set(held) == {"tracker_lag_1", "tracker_lag_2"}
+    for record in held.values():
+        assert record["rule"] == PINNED and record["value"] == pytest.approx(0.02, abs=1e-6)

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import ros2_bags as rb
+import yaml
 from conftest import REPO, SCENARIOS, cli, sinusoids_scenario, two_sinusoids, write_sim
 
 import nlp_calib.pipeline.preflight as stages
@@ -334,6 +335,71 @@ def test_init_drafts_a_scenario_run_accepts_and_that_calibrates(model: str, fmt:
         print(f"{model} {fmt} {name}: {value:.6g} (truth {rec.truth[name]:.6g}, {z:+.2f}σ)")
         assert abs(z) <= 3.0, name
     assert cli("init", str(bag), "--out", str(sc)).returncode == 2  # never over a file without --force
+
+
+def _lagging_car(tmp_path: Path, lag_s: float, form: str) -> tuple[Path, rb.Recording]:
+    """A simulated bicycle car whose tracker stamps its poses ``lag_s`` late, as a ROS 2 bag or a
+    joint log (CSV and TUM)."""
+    from nlp_calib.logs.joint_log import format_joint_csv
+    from nlp_calib.logs.tum import format_tum
+
+    rec = rb.record("car_like_bicycle", seconds=60.0, seed=11, latency_s=lag_s)
+    if form == "bag":
+        return rb.write(rec, tmp_path / "car", "sqlite3"), rec
+    half = rec.tracker[:, 2] / 2
+    zeros = np.zeros(half.size)
+    poses = np.column_stack([rec.tracker[:, :2], rec.tracker_z, zeros, zeros, np.sin(half), np.cos(half)])
+    (tmp_path / "car.tum").write_text(format_tum(rec.tracker_ns, poses))
+    joints = tmp_path / "car.csv"
+    joints.write_text(format_joint_csv(rec.joint_ns, rec.joint_names, rec.joints))
+    return joints, rec
+
+
+@pytest.mark.parametrize("form", ["joint_log", "bag"])
+def test_init_drafts_a_lag_search_that_holds_a_real_cars_lag_and_run_fits_it(
+    form: str, tmp_path: Path
+) -> None:
+    """A car's tracker 150 ms late (an F1/10 car's): the draft's search holds it (it was ±0.1 s, so
+    that the run pinned the lag at 100 ms on its edge), and a run of the draft fits it within 3σ
+    of the truth, inside the search."""
+    recording, rec = _lagging_car(tmp_path, 0.15, form)
+    sc = tmp_path / "car.yaml"
+    drafted = cli("init", str(recording), "--model", "car_like_bicycle", "--out", str(sc))
+    assert drafted.returncode == 0, drafted.stderr
+    lo, hi = yaml.safe_load(sc.read_text())["alignment"]["search"]
+    assert lo + 0.1 <= 0.15 <= hi - 0.1, (lo, hi)
+    # A straight-ahead gain and the wheelbase trade off on this drive: one is given, as the
+    # pre-flight asks.
+    sc.write_text(sc.read_text() + f"known: {{wheelbase: {rec.truth['wheelbase']}}}\n")
+    out = tmp_path / "out"
+    proc = cli("run", str(sc), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((out / "result.json").read_text())
+    assert not doc["alignment"]["estimate"]["at_edge"]
+    gn = doc["solvers"]["gauss_newton"]
+    assert abs(gn["params"]["tracker_lag"] - 0.15) <= 3 * gn["std"]["tracker_lag"], gn["params"][
+        "tracker_lag"
+    ]
+
+
+def test_init_widens_the_lag_search_to_the_lag_the_data_show(tmp_path: Path) -> None:
+    """A tracker 800 ms late (a network's stamps): beyond the run's own search, the wheels' and the
+    tracker's speeds show it, and the draft's search holds it with room either side; stamped as
+    seen, they show none and the draft keeps the run's own search."""
+    from nlp_calib.pipeline.draft import LAG_MARGIN_S, draft
+    from nlp_calib.pipeline.options import AlignmentOptions
+
+    for lag in (0.8, 0.0):
+        folder = tmp_path / f"lag{lag}"
+        folder.mkdir()
+        recording, _ = _lagging_car(folder, lag, "joint_log")
+        d = draft(recording, folder / "car.yaml", "car_like_bicycle")
+        lo, hi = d.raw["alignment"]["search"]
+        if lag == 0.0:
+            assert (lo, hi) == AlignmentOptions().search
+            continue
+        assert lo + LAG_MARGIN_S <= lag <= hi - LAG_MARGIN_S and hi < 1.5, (lo, hi)
+        assert "agree best 8" in d.text
 
 
 def test_the_preflight_reads_a_bag_as_init_would_draft_it(tmp_path: Path) -> None:

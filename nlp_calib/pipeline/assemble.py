@@ -46,6 +46,7 @@ from nlp_calib.results.faults import FaultReport, Findings
 from nlp_calib.results.layout import KNOWN, MODEL, MOUNT, Layout
 from nlp_calib.results.mount import LogMount, SensorMount
 from nlp_calib.results.preflight import Excitation
+from nlp_calib.results.run import pinned_in
 from nlp_calib.sensors import Sensor
 from nlp_calib.solvers import solver_label
 from nlp_calib.sources import BagSource, BesideSource
@@ -515,6 +516,8 @@ def joint_run(
         tracker_lag_s=float("nan"),
         lag_estimate=None,
         excitation=_combined([run.data.excitation for run in parts]),
+        # Its logs' lags pinned on their searches' edges: its checks hold them there (held_check).
+        pinned=pinned_in(scenario.layout, parts),
     )
     checks = fit_checks(fitted, merged_findings(parts), start, figures.nominal)
     reports = {

@@ -28,12 +28,14 @@ from typing import Any
 import numpy as np
 import yaml
 
+from nlp_calib.analysis.lag_screen import REACH_S, coarse_lag, shown_lag
 from nlp_calib.analysis.units import findings
 from nlp_calib.core import poses3d
 from nlp_calib.core.config import parse_yaml
 from nlp_calib.core.errors import FieldError, UsageError
 from nlp_calib.core.ranges import check_ros_name
 from nlp_calib.core.text import escaped, unprintable
+from nlp_calib.logs import Log
 from nlp_calib.logs.bag_reader import ODOMETRY_TYPE, POSE_TYPE, TF_TYPE, TRANSFORM_TYPE, is_bag
 from nlp_calib.logs.bag_survey import BagSurvey, Topic, survey
 from nlp_calib.logs.imu import IMU_TYPE
@@ -42,9 +44,10 @@ from nlp_calib.logs.reader import read_header
 from nlp_calib.logs.scans import SCAN_TYPE
 from nlp_calib.logs.tum import read_tum
 from nlp_calib.models import MODELS, encoders, model_for_log
-from nlp_calib.models.base import QUARTER_TURN
+from nlp_calib.models.base import QUARTER_TURN, KinematicModel
 from nlp_calib.models.radians import in_units
 from nlp_calib.pipeline import prepare
+from nlp_calib.pipeline.options import AlignmentOptions
 from nlp_calib.pipeline.scenario import Scenario, scenario_from_mapping
 from nlp_calib.pipeline.slip_check import lateral
 from nlp_calib.results.preflight import UnitFinding
@@ -83,7 +86,7 @@ CAR_CORNERING = 0.25
 DEFAULTS: Mapping[str, Any] = {
     "initial_guess": "auto",
     "residual": {"horizon_s": 0.5},
-    "alignment": {"tracker_lag": "auto", "search": [-0.1, 0.1]},
+    "alignment": {"tracker_lag": "auto", "search": list(AlignmentOptions().search)},
     "solvers": ["gauss_newton"],
 }
 
@@ -323,7 +326,7 @@ def _text(header: Sequence[str], raw: Mapping[str, Any], notes: Mapping[str, str
 NOTES: Mapping[str, str] = {
     "initial_guess": "the closed-form start from the data: no guess needed",
     "residual": "windows of half a second whatever the rates; a steer angle: its two readings' mean",
-    "alignment": "the tracker's lag behind the joints, estimated within ±0.1 s",
+    "alignment": "the tracker's lag behind the joints, fitted within search (why this search: above)",
     "solvers": "add ipopt to compare the two",
 }
 
@@ -399,6 +402,7 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
     handoff = {"handoff": {"controller_name": controller}} if controller else {}
     sensor = _beside(rates, dataset)
     raw = {"name": where.stem, "model": name, **sensor, "dataset": dataset, **defaults(name), **handoff}
+    searched = _searched(raw, where)
     header = [
         f"Drafted by nlp-calib init from {path}: {found.duration_s:.1f} s, {len(found.topics)} topics.",
         *(
@@ -416,6 +420,7 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         + ".",
         *([_beside_words(rates)] if rates else []),
         *([f"sensor_frame {mount}: {MOUNT_WORDS}"] if mount else []),
+        searched,
         f"Check it before a run: nlp-calib preflight {where}",
     ]
     text = _text(header, raw, NOTES)
@@ -424,6 +429,7 @@ def _draft_bag(path: Path, where: Path, model: str | None) -> Draft:
         f"model {name}: {why}",
         f"tracker {best.name}" + (f" (frame {frame})" if frame else ""),
         *([f"gyro beside it {rates[0].name}"] if rates else []),
+        searched,
     )
     return Draft(raw, text, lines)
 
@@ -515,16 +521,21 @@ def _draft_alone(
     dataset[alone.key] = alone.topic.name
     _one_line_names(path, dataset)
     raw = {"name": where.stem, "model": name, **alone.more, "dataset": dataset, **defaults(name)}
+    # A lidar's scans are matched as they are read (seconds a thousand scans): the run's own search.
+    searched = _searched(raw, where) if alone.key != "scan" else ""
     header = [
         f"Drafted by nlp-calib init from {path}: {found.duration_s:.1f} s, {len(found.topics)} topics.",
         *(f"  {line}" for line in _listing(found)),
         f"model: {name}, because {why}.",
         f"joints {', '.join(joints.values())} are the model's encoders {', '.join(joints)}, in that order.",
         alone.words,
+        *([searched] if searched else []),
         f"Check it before a run: nlp-calib preflight {where}",
     ]
     text = _text(header, raw, NOTES) + "".join(f"# {line}\n" for line in alone.todo)
-    return Draft(raw, text, (*_listing(found), f"model {name}: {why}", alone.short))
+    return Draft(
+        raw, text, (*_listing(found), f"model {name}: {why}", alone.short, *([searched] if searched else []))
+    )
 
 
 def _motions(poses_path: Path) -> tuple[np.ndarray, np.ndarray] | None:
@@ -591,28 +602,89 @@ def _pose_sensor(poses_path: Path, gyro: bool) -> tuple[dict[str, Any], list[str
     return {"sensor": {"mount": mount, "beside": "gyro"}}, words, todo
 
 
-def speeds_finding(sc: Scenario) -> UnitFinding | None:
+def speeds_finding(sc: Scenario, read: tuple[KinematicModel, Log] | None = None) -> UnitFinding | None:
     """The pre-flight's finding (:func:`nlp_calib.analysis.units.findings`) that the wheel columns
-    of ``sc``'s log, read as positions, look like speeds; None where it finds none."""
+    of ``sc``'s log (``read``: as already read), read as positions, look like speeds; None where it
+    finds none."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the log's own warnings are the run's to say
-        model, log = prepare.read(sc)
+        model, log = read if read is not None else prepare.read(sc)
     track = sc.objective.sensor.sensor.floor_track(log)
     found = findings(log, model, (track[:, :2], track[:, 2]), None, False)
     return next((f for f in found if f.kind == "speeds"), None)
 
 
-def _wheel_form(raw: Mapping[str, Any], where: Path) -> list[str]:
-    """``form: speeds`` put in ``raw``'s dataset where its wheel columns look like speeds (the
-    pre-flight's one detector, on the draft as ``run`` would read it), and the words that say why."""
-    sc = scenario_from_mapping(
+#: The draft's search holds the lag the data show (:func:`lag_search`) at least this far (s) from
+#: its edges: the coarse lag is good to about its speeds' span, and a fit needs room about a lag.
+LAG_MARGIN_S = 0.25
+
+
+def _wheel_positions(model: KinematicModel, log: Log) -> np.ndarray:
+    """The counters' positions at the records ``(n, k)`` (radians, or counts unwrapped)."""
+    names = [n for n, kind in model.encoder_kinds.items() if kind == "counter"]
+    if log.joint_positions is not None:
+        return np.column_stack([log.joint_position(n) for n in names]) if names else np.zeros((0, 0))
+    return np.column_stack([np.concatenate([[0], np.cumsum(log.increments(n))]) for n in names])
+
+
+def lag_search(sc: Scenario, read: tuple[KinematicModel, Log] | None = None) -> tuple[list[float], str]:
+    """The draft's ``alignment.search`` and why, in words: the search a run makes by default,
+    widened to hold the coarse lag the data show (:mod:`~nlp_calib.analysis.lag_screen`, over
+    ±:data:`~nlp_calib.analysis.lag_screen.REACH_S`) :data:`LAG_MARGIN_S` inside its edges."""
+    lo, hi = AlignmentOptions().search
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the log's own warnings are the run's to say
+        model, log = read if read is not None else prepare.read(sc)
+        wheels = _wheel_positions(model, log)
+        track = sc.objective.sensor.sensor.floor_track(log)
+    found = coarse_lag(log.time_s, wheels, track) if wheels.size else None
+    lag = shown_lag(found)
+    default = f"the search a run makes by default, [{lo:g}, {hi:g}] s"
+    speeds = "the wheels' and the reference's speeds"
+    if found is None:
+        return [lo, hi], f"{default}: {speeds} show no lag (one of them never moves)"
+    if lag is None:
+        return [lo, hi], (
+            f"{default}: {speeds} agree best {1e3 * found[0]:.0f} ms apart (within ±{REACH_S:g} s), hardly "
+            "better than as stamped (a drive whose speed changes slowly tells lags apart poorly)"
+        )
+    shown = f"{speeds} agree best {1e3 * lag:.0f} ms apart (within ±{REACH_S:g} s)"
+    if lo + LAG_MARGIN_S <= lag <= hi - LAG_MARGIN_S:
+        return [lo, hi], f"{default}: {shown}"
+    lo, hi = (
+        min(lo, np.floor(10 * (lag - LAG_MARGIN_S)) / 10),
+        max(hi, np.ceil(10 * (lag + LAG_MARGIN_S)) / 10),
+    )
+    return [float(lo), float(hi)], f"[{lo:g}, {hi:g}] s, wider than {default}, because {shown}"
+
+
+def _drafted(raw: Mapping[str, Any], where: Path) -> Scenario:
+    """``raw`` read back as ``run`` reads a scenario at ``where``."""
+    return scenario_from_mapping(
         parse_yaml(yaml.safe_dump(dict(raw)), str(where)), str(where), where.parent, where
     )
-    found = speeds_finding(sc)
+
+
+def _searched(raw: dict[str, Any], where: Path, read: tuple[KinematicModel, Log] | None = None) -> str:
+    """``alignment.search`` put in ``raw`` (:func:`lag_search`), and the words that say why."""
+    search, why = lag_search(_drafted(raw, where), read)
+    raw["alignment"] = {**raw["alignment"], "search": search}
+    return f"alignment.search: {why}."
+
+
+def _wheel_form(raw: Mapping[str, Any], where: Path) -> tuple[list[str], tuple[KinematicModel, Log] | None]:
+    """``form: speeds`` put in ``raw``'s dataset where its wheel columns look like speeds (the
+    pre-flight's one detector, on the draft as ``run`` would read it), the words that say why, and
+    the log as the draft reads it (None: read as positions, it is not the one ``run`` reads)."""
+    sc = _drafted(raw, where)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the log's own warnings are the run's to say
+        read = prepare.read(sc)
+    found = speeds_finding(sc, read)
     if found is None:
-        return []
+        return [], read
     raw["dataset"]["form"] = "speeds"
-    return [f"dataset.form: speeds, because {found.words.removesuffix('; say so (form: speeds)')}."]
+    return [f"dataset.form: speeds, because {found.words.removesuffix('; say so (form: speeds)')}."], None
 
 
 def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
@@ -630,16 +702,18 @@ def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
     _one_line_names(joints_path, dataset)
     sensor, words, todo = _pose_sensor(poses_path, gyro)
     raw = {"name": where.stem, "model": name, **sensor, "dataset": dataset, **defaults(name)}
-    form = _wheel_form(raw, where)
+    form, read = _wheel_form(raw, where)
+    searched = _searched(raw, where, read)
     header = [
         f"Drafted by nlp-calib init from {joints_path.name} (joints: {', '.join(table.names)}) and "
         f"{poses_path.name}" + (f" (a gyro's rates beside them: {gyro_path.name})." if gyro else "."),
         f"model: {name}, because {why}.",
         *form,
+        searched,
         *words,
         f"Check it before a run: nlp-calib preflight {where}",
     ]
-    found = (f"joints: {', '.join(table.names)}", f"model {name}: {why}", *form)
+    found = (f"joints: {', '.join(table.names)}", f"model {name}: {why}", *form, searched)
     text = _text(header, raw, NOTES) + "".join(f"# {line}\n" for line in todo)
     return Draft(raw, text, (*found, *((f"gyro beside the poses {gyro_path.name}",) if gyro else ())))
 

@@ -10,7 +10,7 @@ the same files.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -390,13 +390,7 @@ class CalibrationRun:
         if not self.logs:
             est = self.data.lag_estimate
             return layout.block(CLOCK) if est is not None and est.pinned else ()
-        return tuple(
-            n
-            for i, part in enumerate(self.logs)
-            if part.data.lag_estimate is not None and part.data.lag_estimate.pinned
-            for n in layout.block(CLOCK, log=i)
-            if layout.param(n).log in (i, None)
-        )
+        return pinned_in(layout, self.logs)
 
     def std_blocks(self) -> dict[str, float] | None:
         """The jackknife σ of the block cross-validation, when it has enough converged folds."""
@@ -506,3 +500,16 @@ def _needed_of(gradient: Mapping[str, float], needed: Mapping[str, float]) -> fl
     if not gradient or any(n not in needed for n in gradient):
         return 0.0
     return math.sqrt(sum((g * needed[n]) ** 2 for n, g in gradient.items()))
+
+
+def pinned_in(layout: Layout, parts: Sequence[CalibrationRun]) -> tuple[str, ...]:
+    """The time offsets of a joint fit's ``layout`` pinned in its logs' runs ``parts`` (each log's
+    own lag estimate on the edge of its search, or none converged): the joint's checks hold them
+    as the joint run does once its logs are attached (:meth:`CalibrationRun.pinned`)."""
+    return tuple(
+        n
+        for i, part in enumerate(parts)
+        if part.data.lag_estimate is not None and part.data.lag_estimate.pinned
+        for n in layout.block(CLOCK, log=i)
+        if layout.param(n).log in (i, None)
+    )
