@@ -477,6 +477,23 @@ def merged_findings(runs: Sequence[CalibrationRun]) -> Findings | None:
     return Findings(report, found[0][1].handling, tuple(r for _, f in found for r in f.repairs))
 
 
+def _joint_log(parts: Sequence[CalibrationRun]) -> LogInfo:
+    """The logs of a joint fit as one: the first's model, encoders and sensor frame, every log's
+    records, drops and duration."""
+    first = parts[0]
+    return LogInfo(
+        path=f"{len(parts)} logs: " + ", ".join(run.log.path for run in parts),
+        records=sum(run.log.records for run in parts),
+        dropped=tuple(d for run in parts for d in run.log.dropped),
+        sensor_frame=first.log.sensor_frame,
+        encoders=first.log.encoders,
+        start_ns=first.log.start_ns,
+        duration_s=sum(run.log.duration_s for run in parts),
+        sensor_z_roll_pitch=first.log.sensor_z_roll_pitch,
+        numbered=first.log.numbered,
+    )
+
+
 def joint_run(
     scenario: ScenarioInfo,
     parts: Sequence[CalibrationRun],
@@ -494,19 +511,8 @@ def joint_run(
     encoders and sensor frame), where the solvers started and the fitted windows; ``fitting``: the
     joint fit itself, for the checks that refit its windows."""
     prepared, start, n_residuals = fit
-    first = parts[0]
     records = sum(run.data.fit[1] - run.data.fit[0] for run in parts)
-    log = LogInfo(
-        path=f"{len(parts)} logs: " + ", ".join(run.log.path for run in parts),
-        records=sum(run.log.records for run in parts),
-        dropped=tuple(d for run in parts for d in run.log.dropped),
-        sensor_frame=first.log.sensor_frame,
-        encoders=first.log.encoders,
-        start_ns=first.log.start_ns,
-        duration_s=sum(run.log.duration_s for run in parts),
-        sensor_z_roll_pitch=first.log.sensor_z_roll_pitch,
-        numbered=first.log.numbered,
-    )
+    log = _joint_log(parts)
     data = DataInfo(
         used=(0, records),
         fit=(0, records),
