@@ -28,7 +28,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from nlp_calib.analysis.odometry import COVERED, Drift, moments, propagate, readings_covariance
+from nlp_calib.analysis.odometry import (
+    COVERED,
+    Drift,
+    covered_margin,
+    moments,
+    propagate,
+    readings_covariance,
+)
 from nlp_calib.analysis.pivots import pivot_intervals
 from nlp_calib.analysis.uncertainty import nnls_small
 from nlp_calib.core import poses
@@ -388,7 +395,7 @@ def narrowing_target(segments: int) -> float:
     """The share of ``segments`` errors a component's 2σ may hold before its rates are narrowed:
     :data:`COVERED` and two binomial σ of it over half of them (they overlap by half), so that a
     share the sampling alone gives is left as it is."""
-    return min(1.0, COVERED + 2.0 * float(np.sqrt(COVERED * (1.0 - COVERED) / max(0.5 * segments, 1.0))))
+    return min(1.0, COVERED + covered_margin(0.5 * segments))
 
 
 def _narrowing_share(

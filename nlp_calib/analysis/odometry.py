@@ -364,6 +364,12 @@ def drift_coverage(
 COVERED = 0.95
 
 
+def covered_margin(samples: float) -> float:
+    """Two binomial σ of the share of ``samples`` independent errors within 2σ about
+    :data:`COVERED`: how far a share counted on them strays from it by sampling alone."""
+    return 2.0 * float(np.sqrt(COVERED * (1.0 - COVERED) / max(samples, 1.0)))
+
+
 def beyond_motion(inputs: np.ndarray, noise: np.ndarray) -> tuple[int, ...]:
     """The inputs (rows of ``inputs``, one column per interval) whose calibrated noise per interval
     ``noise`` reaches the scale of their own values over the drive (the 95th percentile of the
