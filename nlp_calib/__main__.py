@@ -25,7 +25,7 @@ def run() -> int:
             raise SystemExit(f"error: {memory.OUT_OF_MEMORY}") from None
         raise
     finally:
-        kept()
+        kept(save=interrupts.exit_code() is None)  # a signal ends the command without writing
 
 
 if __name__ == "__main__":

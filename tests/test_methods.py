@@ -136,3 +136,11 @@ def test_the_command_keeps_the_methods_in_the_compile_cache(tmp_path: Path) -> N
     assert len(kept) > 100
     subprocess.run([sys.executable, "-m", "nlp_calib", "--help"], env=env, check=True, capture_output=True)
     assert path.stat().st_mtime_ns == first
+
+
+def test_a_command_a_signal_ends_writes_nothing(tmp_path: Path) -> None:
+    done = methods.kept(tmp_path)
+    _classes()
+    done(save=False)
+    assert not hasattr(dataclasses, "exec")
+    assert not (tmp_path / methods.file_name()).exists()

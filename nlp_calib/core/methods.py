@@ -122,18 +122,19 @@ class _Methods:
         builtins.exec(source, globals, locals, **kw)
 
 
-def kept(folder: Path) -> Callable[[], None]:
+def kept(folder: Path) -> Callable[..., None]:
     """Make dataclasses with the methods kept in ``folder``, until the returned function is
-    called; it writes the file again for the next command where texts were compiled meanwhile."""
+    called; it writes the file again for the next command where texts were compiled meanwhile
+    (``save=False``: not, e.g. in a command a signal ends)."""
     path = folder / file_name()
     methods = _Methods(read(path))
     dataclasses.exec = methods  # type: ignore[attr-defined]  # found before the built-in
 
-    def done() -> None:
+    def done(save: bool = True) -> None:
         if getattr(dataclasses, "exec", None) is not methods:
             return  # done already
         del dataclasses.exec  # type: ignore[attr-defined]
-        if methods.compiled:
+        if save and methods.compiled:
             write(path, methods.known if len(methods.known) <= MAX_KEPT else methods.used)
 
     return done
