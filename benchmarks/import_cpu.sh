@@ -4,7 +4,8 @@
 # without a bytecode cache (every module compiled from source, as with PYTHONDONTWRITEBYTECODE=1 and
 # no __pycache__) and with one (PYTHONPYCACHEPREFIX, filled before the first round). Per checkout:
 #   help    nlp-calib --help
-#   runimp  importing, in a fresh process, every nlp_calib module a `run` of SCENARIO ends up holding
+#   runimp  importing, in a fresh process, every nlp_calib module a `run` of SCENARIO ends up holding,
+#           as the command imports them (import_modules.py)
 #   run     nlp-calib run SCENARIO --data LOG           check  nlp-calib check CALIBRATION LOG
 # Appends to OUT how many modules each command holds (all, the package's), the CPU importing what a
 # run holds took and the share of it spent making dataclasses, then "mode what checkout user sys"

@@ -1,7 +1,8 @@
 """What a command imports (for ``benchmarks/import_cpu.sh``).
 
 ``held FILE ARGS...``: runs ``nlp-calib ARGS`` in this process and, at its exit, writes FILE, a script
-importing numpy, CasADi and every module of the package the command holds; prints how many modules
+importing numpy, CasADi and every module of the package the command holds, as the command imports
+them; prints how many modules
 it holds (all, the package's). ``dataclasses FILE``: runs such a script and prints the CPU it took and
 the share of it the standard library's ``dataclasses`` took generating the classes' methods.
 """
@@ -16,11 +17,23 @@ import time
 from pathlib import Path
 from typing import Any
 
+#: The script's start: numpy and CasADi, then the package as the command imports it (with the
+#: dataclasses' compiled methods it keeps, where the checkout has them: ``core/methods.py``).
+AS_THE_COMMAND = """import numpy, casadi
+try:
+    from nlp_calib.core import methods
+    from nlp_calib.core.files import cache_dir
+except ImportError:  # a checkout from before core/methods.py
+    kept = lambda: None
+else:
+    kept = methods.kept(cache_dir())
+"""
+
 
 def held(script: Path, args: list[str]) -> None:
     def write() -> None:
         package = sorted(m for m in sys.modules if m.split(".")[0] == "nlp_calib")
-        script.write_text("import numpy, casadi\n" + "".join(f"import {m}\n" for m in package))
+        script.write_text(AS_THE_COMMAND + "".join(f"import {m}\n" for m in package) + "kept()\n")
         print(f"modules {' '.join(args[:1])} {len(sys.modules)} {len(package)}", file=sys.__stderr__)
 
     atexit.register(write)

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from nlp_calib.core import interrupts, memory
+from nlp_calib.core import interrupts, memory, methods
+from nlp_calib.core.files import cache_dir
 
 
 def run() -> int:
@@ -10,6 +11,8 @@ def run() -> int:
     ``128 + signal``, like a signal later does, even if a library swallowed the exception."""
     interrupts.install()
     memory.fit_to_limit()
+    # The dataclasses' methods compiled by an earlier command: most of the package's import.
+    kept = methods.kept(cache_dir())
     try:
         from nlp_calib.cli import main
 
@@ -21,6 +24,8 @@ def run() -> int:
         if isinstance(exc, MemoryError):  # the libraries did not fit (ulimit -v): one line, exit 1
             raise SystemExit(f"error: {memory.OUT_OF_MEMORY}") from None
         raise
+    finally:
+        kept(save=interrupts.exit_code() is None)  # a signal ends the command without writing
 
 
 if __name__ == "__main__":

@@ -70,3 +70,29 @@ def test_the_profile_is_the_cost_bound_anew_at_each_lag() -> None:
         at = x.copy()
         at[column] = lag
         assert cost == binder.bind(shifted, *calib.fit)[1].cost(at)
+
+
+def test_the_coordinates_a_scan_reads_are_found_once_per_step(monkeypatch: pytest.MonkeyPatch) -> None:
+    """CasADi's dependency analysis of a prefix scan's step (milliseconds: it walks the step's
+    graph) runs once per step Function, not at every evaluator bound; what it finds is the step's."""
+    import casadi as ca
+
+    from nlp_calib.solvers import motion
+
+    motion.reads.cache_clear()
+    analysed: list[int] = []
+    real = ca.Function.which_depends
+
+    def counted(self: ca.Function, *args: object) -> object:
+        analysed.append(hash(self))
+        return real(self, *args)
+
+    monkeypatch.setattr(ca.Function, "which_depends", counted)
+    calib = Calibration(load_scenario(SCENARIOS / "demo.yaml"))
+    binder, x = calib.stages.problem.binder, np.array(calib.x0, dtype=float)
+    for _ in range(3):
+        binder.bind(calib.log, *calib.fit)[1].normal_equations(x)
+    assert analysed and len(analysed) == len(set(analysed))
+    step = calib.fns.step(1)
+    expected = np.flatnonzero(real(step, "x", [step.name_out(0)], 1, False))
+    np.testing.assert_array_equal(motion.reads(step), expected)

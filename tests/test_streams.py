@@ -188,6 +188,31 @@ def test_a_tracker_that_jumps_for_good_is_not_blamed_on_the_counter() -> None:
     assert screen_counter(ticks, shifted, t).findings == ()
 
 
+def test_each_candidate_step_is_taken_once_per_fault_found(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Candidates passed over (a tracker that jumps, cleared by the counter's own history) change no
+    level: a candidate's step is taken again only after a fault is found."""
+    from nlp_calib.analysis import counters
+
+    t, ticks, c = _counter(0.0)
+    lost = ticks.copy()
+    lost[1500] -= 2**16
+    shifted = c + ticks - lost
+    for k in (400, 900, 2200):  # the tracker's count steps there; the counter runs on
+        shifted[k] += 2**16
+    levels: list[tuple[int, ...]] = []
+    level = counters._level
+
+    def counted(C: np.ndarray, idx: np.ndarray) -> float:
+        levels.append(tuple(idx.tolist()))
+        return level(C, idx)
+
+    monkeypatch.setattr(counters, "_level", counted)
+    found = screen_counter(lost, shifted, t).findings
+    assert [f.last for f in found] == [1500]
+    after = levels[0::2]  # a step is its level after the candidate less the one before it
+    assert len(after) <= len(set(after)) * (len(found) + 1)
+
+
 @pytest.mark.parametrize("excursion", [0.0, 0.01])
 def test_the_blocked_screened_first_pass_finds_what_scoring_every_group_at_once_finds(
     excursion: float, monkeypatch: pytest.MonkeyPatch

@@ -328,14 +328,19 @@ def screen_counter(ticks: np.ndarray, c: np.ndarray, time_s: np.ndarray) -> Coun
     open_: list[int] = np.flatnonzero(against | catch_up | large).tolist()
     firsts = _stretches(ticks, c, open_, sigma)
     accepted: list[tuple[int, int]] = []  # stretches (first, last) of the faults found so far
+    # Each candidate's step, until the next fault found: a candidate passed over changes no level.
+    known: dict[int, float] = {}
 
     def step(k: int) -> float:
+        if k in known:
+            return known[k]
         # Levels never reach across a fault already found: it would lend its step to k.
         lo = max((last + 1 for first, last in accepted if last < firsts[k]), default=0)
         hi = min((first for first, last in accepted if first > k), default=N)
         b0, b1 = np.searchsorted(valid, lo, "left"), np.searchsorted(valid, firsts[k], "right")
         a0, a1 = np.searchsorted(valid, k + 1, "left"), np.searchsorted(valid, hi, "right")
-        return _level(C, valid[a0:a1][:W]) - _level(C, valid[b0:b1][-W:])
+        known[k] = _level(C, valid[a0:a1][:W]) - _level(C, valid[b0:b1][-W:])
+        return known[k]
 
     step_sigma = _step_noise(C, valid, np.array([step(k) for k in open_]), sigma)
     found: list[CounterFinding] = []
@@ -354,6 +359,7 @@ def screen_counter(ticks: np.ndarray, c: np.ndarray, time_s: np.ndarray) -> Coun
         if not any(d * steps[i] >= OWN_SHARE * steps[i] ** 2 for d in own_deficits(ticks, time_s, first, k)):
             continue  # the counter's own history runs smoothly through: the tracker is off, not it
         accepted.append((first, k))
+        known.clear()
         open_ = [j for j in open_ if not first <= j <= k and not firsts[j] <= k < j]
         kind = "stall_then_jump" if first < k else ("reversal" if against[k] else "counter_jump")
         total = (float(np.sum(ticks[first : k + 1])), float(np.sum(implied[first : k + 1])))

@@ -45,6 +45,7 @@ from pathlib import Path
 import casadi as ca
 
 from nlp_calib.core.errors import CodegenError, NlpCalibWarning, OptionsError, shown_path
+from nlp_calib.core.files import cache_dir, writable_by_others
 
 #: Optimisation flags for the generated code; -fno-math-errno lets sin/cos/sqrt inline.
 CFLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fPIC", "-shared", "-Wno-int-conversion")
@@ -90,15 +91,6 @@ def find_compiler() -> str | None:
     return None
 
 
-def cache_dir() -> Path:
-    """Where compiled shared objects are kept: ``$NLP_CALIB_CACHE`` or the user cache folder."""
-    env = os.environ.get("NLP_CALIB_CACHE")
-    if env:
-        return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "nlp_calib"
-
-
 def usable_cache_dir() -> Path:
     """The folder compiled code is kept in: :func:`cache_dir`, created if needed, or a private
     temporary folder (with one warning) when another user could write into it; an error naming it
@@ -125,15 +117,6 @@ def usable_cache_dir() -> Path:
     if used == folder:
         _remove_leftovers(folder)
     return used
-
-
-def writable_by_others(st: os.stat_result) -> str | None:
-    """Why another user could change what ``st`` describes (None: only its owner, this user or
-    root, can)."""
-    if st.st_uid not in (os.getuid(), 0):
-        return f"owned by user id {st.st_uid}, not by you"
-    who = [w for w, bit in (("its group", stat.S_IWGRP), ("others", stat.S_IWOTH)) if st.st_mode & bit]
-    return f"writable by {' and '.join(who)} (mode {stat.S_IMODE(st.st_mode):04o})" if who else None
 
 
 def _private_folder(folder: Path, reason: str) -> Path:

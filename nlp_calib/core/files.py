@@ -151,6 +151,24 @@ def reserved_part(path: str | Path) -> str | None:
     return next((p for p in Path(path).parts if p.startswith(RESERVED_PREFIX)), None)
 
 
+def cache_dir() -> Path:
+    """Where compiled code is kept: ``$NLP_CALIB_CACHE`` or the user cache folder."""
+    env = os.environ.get("NLP_CALIB_CACHE")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "nlp_calib"
+
+
+def writable_by_others(st: os.stat_result) -> str | None:
+    """Why another user could change what ``st`` describes (None: only its owner, this user or
+    root, can)."""
+    if st.st_uid not in (os.getuid(), 0):
+        return f"owned by user id {st.st_uid}, not by you"
+    who = [w for w, bit in (("its group", stat.S_IWGRP), ("others", stat.S_IWOTH)) if st.st_mode & bit]
+    return f"writable by {' and '.join(who)} (mode {stat.S_IMODE(st.st_mode):04o})" if who else None
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)

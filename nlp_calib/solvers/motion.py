@@ -10,6 +10,9 @@ for.
 
 from __future__ import annotations
 
+import functools
+
+import casadi as ca
 import numpy as np
 
 from nlp_calib.problem import ProblemFunctions, ResidualData
@@ -21,6 +24,16 @@ def padded_index(index: np.ndarray, n: int) -> np.ndarray:
     """``index`` padded to ``n`` entries with copies of its first (padding windows weigh 0)."""
     out = np.full(n, index[0] if index.size else 0, dtype=np.intp)
     out[: index.size] = index
+    return out
+
+
+@functools.lru_cache(maxsize=32)
+def reads(step: ca.Function) -> np.ndarray:
+    """The free coordinates ``step`` reads (the kinematic ones): points equal in them have its
+    prefix jets to the bit (a step of the mount's or the clock's integrates nothing). Once per
+    step: CasADi walks the step's graph to tell (milliseconds, at every evaluator bound)."""
+    out = np.flatnonzero(step.which_depends("x", [step.name_out(0)], 1, False))
+    out.setflags(write=False)
     return out
 
 
@@ -38,9 +51,7 @@ class _Scan:
         self.poses = np.zeros((self.rows, n_pad + 1), order="F")
         self._ends = ends
         self._scan = Scan(backend, step, inputs, self.poses)
-        # The free coordinates the step reads (the kinematic ones): points equal in them have
-        # these prefix jets to the bit (a step of the mount's or the clock's integrates nothing).
-        self._reads = np.flatnonzero(step.which_depends("x", [step.name_out(0)], 1, False))
+        self._reads = reads(step)
         self.at: bytes | None = None
 
     @property
