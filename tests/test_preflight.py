@@ -779,3 +779,113 @@ def test_a_wheel_given_as_speeds_is_never_said_to_wrap(tmp_path: Path) -> None:
         kinds[name] = {u.kind for u in preflight(load_scenario(path)).units}
     assert "wrapped" not in kinds["speeds"], kinds
     assert "wrapped" in kinds["positions"], kinds
+
+
+def _joint_log(folder: Path, model: str, seed: int, seconds: float = 60.0) -> tuple[Path, rb.Recording]:
+    """A simulated ``model`` drive as a joint log (CSV and TUM) in ``folder``."""
+    from nlp_calib.logs.joint_log import format_joint_csv
+    from nlp_calib.logs.tum import format_tum
+
+    rec = rb.record(model, seconds=seconds, seed=seed)
+    half = rec.tracker[:, 2] / 2
+    zeros = np.zeros(half.size)
+    poses = np.column_stack([rec.tracker[:, :2], rec.tracker_z, zeros, zeros, np.sin(half), np.cos(half)])
+    (folder / "drive.tum").write_text(format_tum(rec.tracker_ns, poses))
+    joints = folder / "drive.csv"
+    joints.write_text(format_joint_csv(rec.joint_ns, rec.joint_names, rec.joints))
+    return joints, rec
+
+
+@pytest.mark.parametrize("model", ["skid_steer", "diff_drive"])
+def test_init_drafts_a_skidding_base_where_it_turns_as_if_its_wheels_were_farther_apart_than_robot_yaml_says(
+    model: str, tmp_path: Path
+) -> None:
+    """Two wheel joints name a differential drive and a skid-steer alike. Against ROBOT.yaml's
+    geometric track (0.55 m, the simulated differential drive's), the simulated skid-steer (its
+    effective track 0.95 m at a slow turn, more at a fast one) turns as if its wheels were 1.7 times
+    or more farther apart: init drafts the skid-steer; the differential drive turns as its track says
+    and stays one. Without ROBOT.yaml the draft says the effective track and drafts no skid-steer."""
+    from nlp_calib.pipeline.draft import SKID_RATIO, draft
+
+    joints, rec = _joint_log(tmp_path, model, seed=11)
+    radii = {n: rec.truth[n] for n in ("left_wheel_radius", "right_wheel_radius")}
+    robot = tmp_path / "robot.yaml"
+    robot.write_text(yaml.safe_dump({"initial_guess": {**radii, "wheel_separation": 0.55}}))
+    drafted = cli("init", str(joints), "--robot", str(robot), "--out", str(tmp_path / "drive.yaml"))
+    assert drafted.returncode == 0, drafted.stderr
+    raw = yaml.safe_load((tmp_path / "drive.yaml").read_text())
+    assert raw["model"] == model and raw["dataset"]["robot"] == "robot.yaml"
+    # The ratio the draft says, against the truth's: the skid-steer's slow-turn track over 0.55 m.
+    said = float(re.search(r"([0-9.]+) times the 0\.55 m", drafted.stdout).group(1))  # type: ignore[union-attr]
+    truth = rec.truth["wheel_separation"] / 0.55
+    if model == "skid_steer":
+        assert said >= max(SKID_RATIO, 0.9 * truth), (said, truth)
+    else:
+        assert abs(said - truth) < 0.15, (said, truth)
+    alone = draft(joints, tmp_path / "alone.yaml")
+    assert alone.raw["model"] == "diff_drive" and "give --model skid_steer" in alone.text
+
+
+def test_init_keeps_optiodoms_differential_drive_against_its_robot_yaml(tmp_path: Path) -> None:
+    """A real differential drive (OptiOdom's, 0.2 m between its wheels) turns as its track says:
+    the draft measures 0.2 m within 5 % and keeps the differential drive."""
+    from conftest import SHARED_DATA
+
+    from nlp_calib.pipeline.draft import draft
+
+    run = SHARED_DATA / "real4/optiodom/diff/circular/231220200134/231220200134_run-01.csv"
+    if not run.is_file():
+        pytest.skip(f"OptiOdom's runs are not at {run.parent}")
+    d = draft(run, tmp_path / "run.yaml", robot=SCENARIOS / "data/optiodom_diff.robot.yaml")
+    assert d.raw["model"] == "diff_drive"
+    ratio = float(re.search(r"([0-9.]+) times the 0\.2 m", d.text).group(1))  # type: ignore[union-attr]
+    assert abs(ratio - 1.0) < 0.05, ratio
+
+
+def _bursty_tracker(rec: rb.Recording, shape: str) -> tuple[np.ndarray, np.ndarray]:
+    """The recording's tracker poses as a tracker that delivers them in bursts every 0.3 s would
+    stamp them, on arrival: ``arrival``, all of a burst 2.5 ms apart from its end (every other
+    pose: 18 a burst); ``last``, each burst's last pose alone, a fifth of them repeating the one
+    before (its target lost), as benchmarks/scout_convert.py keeps them. Their stamps (ns) and
+    indices into the recording's poses."""
+    seen_s = (rec.tracker_ns - rec.joint_ns[0]) * 1e-9
+    burst = np.floor(seen_s / 0.3).astype(int)
+    if shape == "arrival":
+        shown = np.arange(0, burst.size, 2)
+        first = np.searchsorted(burst[shown], burst[shown])
+        arrive_s = (burst[shown] + 1) * 0.3 + 0.0025 * (np.arange(shown.size) - first)
+    else:
+        shown = np.flatnonzero(np.diff(burst, append=burst[-1] + 1))
+        arrive_s = (burst[shown] + 1) * 0.3
+        for i in np.flatnonzero(np.random.default_rng(3).random(shown.size) < 0.2):
+            shown[i] = shown[i - 1] if i else shown[i]
+    return rec.joint_ns[0] + np.round(arrive_s * 1e9).astype(np.int64), shown
+
+
+@pytest.mark.parametrize("shape", ["arrival", "last"])
+def test_init_drafts_speeds_from_a_tracker_that_stamps_its_poses_in_bursts(
+    shape: str, tmp_path: Path
+) -> None:
+    """A tracker that delivers its poses in bursts every 0.3 s and stamps them on arrival
+    (:func:`_bursty_tracker`), beside wheels logged as speeds (rad/s): init drafts ``form:
+    speeds``. On 38a51e6 the speeds over steps of 0.25 s (a burst's stamps up to 0.3 s off) and the
+    repeats hid them (the columns' correlation with the speed 0.70 arrival, 0.54 last, under 0.8);
+    over six records' intervals the arrival stamps' 2.5 ms median still did (0.70)."""
+    from nlp_calib.logs.joint_log import format_joint_csv
+    from nlp_calib.logs.tum import format_tum
+
+    rec = rb.record("diff_drive", seconds=300.0, seed=3)
+    speeds = np.gradient(rec.joints, (rec.joint_ns - rec.joint_ns[0]) * 1e-9, axis=0)
+    stamps_ns, shown = _bursty_tracker(rec, shape)
+    kept = stamps_ns <= rec.joint_ns[-1]
+    planar, z = rec.tracker[shown], rec.tracker_z[shown]
+    half, zeros = planar[:, 2] / 2, np.zeros(shown.size)
+    poses = np.column_stack([planar[:, :2], z, zeros, zeros, np.sin(half), np.cos(half)])
+    (tmp_path / "drive.tum").write_text(format_tum(stamps_ns[kept], poses[kept]))
+    joints = tmp_path / "drive.csv"
+    joints.write_text(format_joint_csv(rec.joint_ns, rec.joint_names, speeds))
+    drafted = cli("init", str(joints), "--out", str(tmp_path / "drive.yaml"))
+    assert drafted.returncode == 0, drafted.stderr
+    assert yaml.safe_load((tmp_path / "drive.yaml").read_text())["dataset"]["form"] == "speeds", (
+        drafted.stdout
+    )

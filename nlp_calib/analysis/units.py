@@ -65,8 +65,10 @@ LENGTH_UNITS = {"millimetres": 1e-3, "centimetres": 1e-2}
 SPEED_CORRELATION = 0.8
 SPEED_MARGIN = 0.3
 #: The speed detector's steps span at least this many record intervals (a bursty tracker's stamps
-#: are off by up to one: its speed over six is within about a sixth).
+#: are off by up to one: its speed over six is within about a sixth), and no more than this (s: a
+#: log's dropout is no interval of its records).
 SPEED_STEP_RECORDS = 6
+SPEED_STEP_MAX_S = 2.0
 #: Two wheels turning against a robot's on this share of the steps judged: one axis is mirrored.
 OPPOSITE_SHARE = 0.8
 #: A curve is gentle where the heading turns less than this per metre (rad/m): both wheels of a
@@ -409,6 +411,17 @@ def _correlation(a: np.ndarray, b: np.ndarray) -> float:
     return c if np.isfinite(c) else 0.0
 
 
+def covering_interval(time_s: np.ndarray) -> float:
+    """The interval between records that half the log's time passes in (s): the records' interval
+    where they come evenly; where a tracker delivers its poses in bursts stamped on arrival (16
+    poses 2.5 ms apart every 0.3 s), the time between its bursts, not the 2.5 ms of their median."""
+    dt = np.sort(np.diff(np.asarray(time_s, dtype=float)))
+    if dt.size == 0:
+        return 0.0
+    passed = np.cumsum(dt)
+    return float(dt[min(int(np.searchsorted(passed, 0.5 * passed[-1])), dt.size - 1)])
+
+
 def _speed_columns(log: Log, model: KinematicModel, xy: np.ndarray) -> list[UnitFinding]:
     """Wheel columns read as positions whose values, not their changes, follow the reference's
     speed (:data:`SPEED_CORRELATION`): speeds."""
@@ -422,8 +435,8 @@ def _speed_columns(log: Log, model: KinematicModel, xy: np.ndarray) -> list[Unit
         return []
     # Steps of several records: a tracker that delivers its poses in bursts stamps them up to one
     # interval off, and a speed over one interval is then mostly that error.
-    interval = float(np.median(np.diff(log.time_s))) if log.time_s.size > 1 else 0.0
-    k = taken(log.time_s, max(STEP_S, SPEED_STEP_RECORDS * interval))
+    interval = min(SPEED_STEP_RECORDS * covering_interval(log.time_s), SPEED_STEP_MAX_S)
+    k = taken(log.time_s, max(STEP_S, interval))
     if k.size < 8:
         return []
     moved = np.diff(xy[k], axis=0)
@@ -431,8 +444,13 @@ def _speed_columns(log: Log, model: KinematicModel, xy: np.ndarray) -> list[Unit
     # the last one) says nothing of the speed.
     seen = np.any(moved != 0.0, axis=1)
     speed = np.hypot(*moved.T)[seen] / np.diff(log.time_s[k])[seen]
-    wheels = np.stack([_positions(log, n)[k] for n in counters])
-    level = np.mean(np.abs(0.5 * (wheels[:, 1:] + wheels[:, :-1])), axis=0)[seen]
+    columns = np.stack([_positions(log, n) for n in counters])
+    wheels = columns[:, k]
+    # A column's mean over each step (by the trapezoid over its records), the speed a speed column
+    # says the robot kept there: its two ends' mean is that only where the speed changes slowly.
+    area = np.cumsum(0.5 * (columns[:, 1:] + columns[:, :-1]) * np.diff(log.time_s), axis=1)
+    area = np.concatenate([np.zeros((len(counters), 1)), area], axis=1)[:, k]
+    level = np.mean(np.abs(np.diff(area, axis=1) / np.diff(log.time_s[k])), axis=0)[seen]
     change = np.mean(np.abs(np.diff(wheels, axis=1)), axis=0)[seen]
     as_speed, as_position = _correlation(level, speed), _correlation(change, speed)
     if as_speed < SPEED_CORRELATION or as_speed < as_position + SPEED_MARGIN:

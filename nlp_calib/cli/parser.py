@@ -664,4 +664,11 @@ def _add_init(sub: Any) -> None:
     p.add_argument(
         "--model", choices=tuple(MODELS), default=None, help="the model (default: guessed from the joints)"
     )
+    p.add_argument(
+        "--robot",
+        type=_path,
+        default=None,
+        metavar="ROBOT.yaml",
+        help="the robot's nominal values (a joint log's): its track tells a skidding base (docs/bags.md)",
+    )
     _add_force(p, "an existing scenario file")

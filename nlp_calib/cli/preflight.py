@@ -62,7 +62,7 @@ def cmd_init(args: argparse.Namespace) -> int:
         raise UsageError(f"--out {out}: a scenario file ends in .yaml")
     check_output_dir(out.parent)
     refuse_collisions(out.parent, [out.name], tracked=False, force=args.force)
-    drafted = draft(args.recording, out, args.model)
+    drafted = draft(args.recording, out, args.model, args.robot)
     note_input(args.recording)
     print("found:")
     print("\n".join(f"  {escaped(line)}" for line in drafted.found))

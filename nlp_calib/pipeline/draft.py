@@ -29,6 +29,7 @@ import numpy as np
 import yaml
 
 from nlp_calib.analysis.lag_screen import REACH_S, coarse_lag, shown_lag
+from nlp_calib.analysis.turning import TURN_STEP_S, Turning, turning
 from nlp_calib.analysis.units import findings
 from nlp_calib.core import poses3d
 from nlp_calib.core.config import parse_yaml
@@ -54,6 +55,7 @@ from nlp_calib.results.preflight import UnitFinding
 from nlp_calib.sensors import BESIDE, sensor_for
 from nlp_calib.sensors.mount import length_params
 from nlp_calib.sources.joints import paired_files
+from nlp_calib.sources.robot import load_robot
 
 #: Words in a topic's name that say it carries a reference, and those that say it does not.
 REFERENCE_WORDS = (
@@ -687,7 +689,106 @@ def _wheel_form(raw: Mapping[str, Any], where: Path) -> tuple[list[str], tuple[K
     return [f"dataset.form: speeds, because {found.words.removesuffix('; say so (form: speeds)')}."], None
 
 
-def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
+#: A two-wheeled base whose wheels' difference turns it as if they were this many times farther
+#: apart than the geometric track (ROBOT.yaml's) says, on most of its turns, skids: a differential
+#: drive turns as its track says (OptiOdom's: 1.0 times), a skid-steer 1.5 to 2 times (a Husky's
+#: ros2_control multiplier is 1.875; the Scout's drive 1.76).
+SKID_RATIO = 1.4
+
+
+def skidding(name: str) -> str | None:
+    """The registered model that reads the same wheels as ``name`` and turns them as it does with
+    a slip more (a skid-steer beside a differential drive); None where there is none."""
+    chosen = MODELS[name]
+    for other in MODELS.values():
+        if (
+            other.name != name
+            and dict(other.encoder_kinds) == dict(chosen.encoder_kinds)
+            and set(chosen.kinematic_params) < set(other.kinematic_params)
+            and set(chosen.turning_params) < set(other.turning_params)
+        ):
+            return other.name
+    return None
+
+
+def nominal_turning(robot: Path, name: str) -> tuple[float, float | None] | None:
+    """ROBOT.yaml's track (m) for the model ``name`` in radians, and its wheels' mean radius (None
+    where it gives none); None where it gives no track."""
+    form = in_units(MODELS[name], "radians")
+    given = load_robot(robot, form).initial_guess
+    tracks = [n for n in form.turning_params if n in length_params(form) and n in given]
+    radii = [given[n] for n in length_params(form) if n not in form.turning_params and n in given]
+    if not tracks:
+        return None
+    return float(given[tracks[0]]), (float(np.mean(radii)) if radii else None)
+
+
+def _turning_words(found: Turning) -> str:
+    return (
+        f"the wheels' difference turns the base as wheels {found.track:.3g} m apart would (the median over "
+        f"{found.steps} turning steps of {TURN_STEP_S:g} s, wheels of {1e3 * found.radius:.0f} mm radius by "
+        "the travel)"
+    )
+
+
+def _skid_verdict(found: Turning, nominal: tuple[float, float | None], robot: Path) -> tuple[bool, str]:
+    """Whether the effective track is :data:`SKID_RATIO` times the geometric one (``nominal``:
+    ROBOT.yaml's track and radius) or more on the median turn and no less on most turns (the
+    lower quartile), and the words for it."""
+    track, radius = nominal
+    # In the wheels' own radians where ROBOT.yaml gives their radius: no travel's bias then.
+    per_heading = track / radius if radius else track / found.radius
+    ratio, most = found.per_heading / per_heading, found.quartiles[0] / per_heading
+    said = f"{ratio:.2f} times the {track:.3g} m between the wheels {robot.name} gives"
+    if ratio >= SKID_RATIO and most >= 1.0:
+        return True, (
+            f"{_turning_words(found)}, {said} (on three turns of four, {most:.2f} times or more): its "
+            "sides skid as it turns (a differential drive's wheels turn it as their track says; from "
+            f"{SKID_RATIO:g} times it, a skid-steer's). This rests on {robot.name}'s track: if it is "
+            "not the robot's, give --model"
+        )
+    if ratio <= 1.0 / SKID_RATIO:
+        return False, (
+            f"{_turning_words(found)}, {said}: the base turns more than its wheels would, which no skid "
+            f"does: check the track and the wheels' radii in {robot.name}"
+        )
+    return False, f"{_turning_words(found)}, {said}: no skid"
+
+
+def _skid_sign(
+    raw: dict[str, Any], where: Path, read: tuple[KinematicModel, Log] | None, robot: Path | None
+) -> tuple[list[str], tuple[KinematicModel, Log] | None]:
+    """For a guessed two-wheeled model with a skidding sibling (:func:`skidding`): the words on the
+    track the drive turns with, the sibling put in ``raw`` where ``robot``'s geometric track says
+    the base skids (:data:`SKID_RATIO`), and the log as read for ``raw`` (None once changed)."""
+    name = raw["model"]
+    skid = skidding(name)
+    if skid is None:
+        return [], read
+    sc = _drafted(raw, where)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the log's own warnings are the run's to say
+        model, log = read if read is not None else prepare.read(sc)
+        track = sc.objective.sensor.sensor.floor_track(log)
+    found = turning(log, model, (track[:, :2], track[:, 2]))
+    nominal = nominal_turning(robot, name) if robot is not None else None
+    if found is None:
+        return [], (model, log)
+    if nominal is None:
+        return [
+            f"{_turning_words(found)}: a skid-steer's sides drag as it turns, so that it turns as if its "
+            f"wheels were farther apart than they are: if yours are nearer, give --model {skid} (or the "
+            "track in a ROBOT.yaml: init --robot)."
+        ], (model, log)
+    skids, words = _skid_verdict(found, nominal, robot or Path())
+    if not skids:
+        return [f"{words}."], (model, log)
+    raw["model"] = skid
+    raw.update(defaults(skid))
+    return [f"model: {skid}, not {name}, because {words} {name}."], None
+
+
+def _draft_joint_log(path: Path, where: Path, model: str | None, robot: Path | None = None) -> Draft:
     joints_path, poses_path = paired_files(path)
     table = read_joint_csv(joints_path)
     name, joints, why = guess_model(list(table.names), model, cornering(poses_path))
@@ -698,22 +799,25 @@ def _draft_joint_log(path: Path, where: Path, model: str | None) -> Draft:
         "poses": _relative(poses_path, where),
         **({"gyro": _relative(gyro_path, where)} if gyro else {}),
         "encoders": dict(joints),
+        **({"robot": _relative(robot, where)} if robot is not None else {}),
     }
     _one_line_names(joints_path, dataset)
     sensor, words, todo = _pose_sensor(poses_path, gyro)
     raw = {"name": where.stem, "model": name, **sensor, "dataset": dataset, **defaults(name)}
     form, read = _wheel_form(raw, where)
+    skid, read = _skid_sign(raw, where, read, robot) if model is None else ([], read)
     searched = _searched(raw, where, read)
     header = [
         f"Drafted by nlp-calib init from {joints_path.name} (joints: {', '.join(table.names)}) and "
         f"{poses_path.name}" + (f" (a gyro's rates beside them: {gyro_path.name})." if gyro else "."),
-        f"model: {name}, because {why}.",
+        f"model: {name}, because {why}." if raw["model"] == name else f"first {name}, because {why}.",
         *form,
+        *skid,
         searched,
         *words,
         f"Check it before a run: nlp-calib preflight {where}",
     ]
-    found = (f"joints: {', '.join(table.names)}", f"model {name}: {why}", *form, searched)
+    found = (f"joints: {', '.join(table.names)}", f"model {name}: {why}", *form, *skid, searched)
     text = _text(header, raw, NOTES) + "".join(f"# {line}\n" for line in todo)
     return Draft(raw, text, (*found, *((f"gyro beside the poses {gyro_path.name}",) if gyro else ())))
 
@@ -729,13 +833,16 @@ def _draft_text_log(path: Path, where: Path, model: str | None) -> Draft:
     return Draft(raw, _text(header, raw, {}), (f"a text log of kind {kind}: model {name}",))
 
 
-def draft(path: Path, where: Path, model: str | None = None) -> Draft:
+def draft(path: Path, where: Path, model: str | None = None, robot: Path | None = None) -> Draft:
     """The scenario drafted from the recording at ``path``, to be written at ``where`` (paths in it
-    are relative to that file), read back as ``run`` reads it."""
+    are relative to that file), read back as ``run`` reads it; ``robot``: a ROBOT.yaml of the
+    robot's nominal values (a joint log's)."""
+    if robot is not None and path.suffix.lower() not in (".csv", ".tum"):
+        raise UsageError(f"--robot {robot}: init reads a ROBOT.yaml beside a joint log (CSV and TUM) only")
     if is_bag(path):
         d = _draft_bag(path, where, model)
     elif path.suffix.lower() in (".csv", ".tum"):
-        d = _draft_joint_log(path, where, model)
+        d = _draft_joint_log(path, where, model, robot)
     else:
         d = _draft_text_log(path, where, model)
     d.scenario(where)  # the draft is one run accepts, or this says why not
