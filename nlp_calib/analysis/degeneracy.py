@@ -28,8 +28,14 @@ def motion_scale(fns: ProblemFunctions, z: np.ndarray, omega: np.ndarray) -> flo
     """``mean zᵀΩz`` over the windows' measured motions ``z`` (in the residual's tangent rows)."""
     if z.shape[1] == 0:
         return 0.0
+    return float(np.mean(motion_terms(fns, z, omega)))
+
+
+def motion_terms(fns: ProblemFunctions, z: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """Each window's ``zᵀΩz`` (:func:`motion_scale` is their mean; the mean of a subset of them is
+    the subset's motion scale to the bit: each window's term is its own arithmetic)."""
     m = fns.sensor.tangent(z)
-    return float(np.mean(np.sum(np.asarray(omega)[:, None] * m**2, axis=0)))
+    return np.asarray(np.sum(np.asarray(omega)[:, None] * m**2, axis=0))
 
 
 def free_directions(lam: np.ndarray, n_windows: int, motion2: float) -> np.ndarray:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nlp_calib.analysis.degeneracy import FIDELITY, free_directions, motion_scale
+from nlp_calib.analysis.degeneracy import FIDELITY, free_directions, motion_terms
 from nlp_calib.problem import ProblemFunctions, ResidualData
 from nlp_calib.results.uncertainty import Stretch
 
@@ -61,7 +61,9 @@ def stretches(
     RR = np.outer(scale, scale)
     H = information.sum(axis=0)
     lam, V = np.linalg.eigh(H * RR)
-    whole = _moved(V, free_directions(lam, data.n_residuals, motion_scale(fns, data.z, omega)))
+    # Each window's motion term once: every stretch's scale is the mean of the rest's.
+    motion = motion_terms(fns, data.z, omega)
+    whole = _moved(V, free_directions(lam, data.n_residuals, float(np.mean(motion)) if motion.size else 0.0))
     own = _own_log(fns, data)
 
     def without(lo: int, hi: int) -> Stretch | None:
@@ -70,7 +72,7 @@ def stretches(
         rest[edges[lo] : edges[hi]] = False
         if not rest.any() or rest.all():
             return None
-        n, m2 = int(rest.sum()), motion_scale(fns, data.z[:, rest], omega)
+        n, m2 = int(rest.sum()), float(np.mean(motion[rest]))
         lam_r, V_r = np.linalg.eigh((H - information[lo:hi].sum(axis=0)) * RR)
         # A log's own parameter (its clock, its mount) with none of its log's windows left is free
         # by construction: its log is the stretch, which is no finding.
