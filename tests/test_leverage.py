@@ -4,15 +4,18 @@ its parameters kept from the hand-off; a drive that turns throughout has none.""
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from conftest import SINUSOIDS_HEAD
 
 from nlp_calib import Calibration, load_scenario
+from nlp_calib.analysis.degeneracy import MOTION_BLOCK, motion_scale, motion_terms
 from nlp_calib.core import poses3d
 from nlp_calib.results.checks import CAVEAT
 from nlp_calib.results.run import DOUBTFUL, UNDETERMINED
+from nlp_calib.sensors import SENSORS
 
 MOUNT = (0.36, 0.06, 0.10, -1.58, 0.012, -1.55)
 RADIUS, SEPARATION = 0.1, 0.57
@@ -112,3 +115,23 @@ def test_a_drive_that_turns_throughout_has_no_stretch_of_its_own(tmp_path: Path)
     run = _run(tmp_path, 2.0 - np.cos(0.7 * t), 2.0 + np.cos(0.7 * t))
     assert run.verdict.level != UNDETERMINED, run.verdict.reasons
     assert not [c for c in run.checks.more if c.name == "leverage"]
+
+
+@pytest.mark.parametrize("kind", ["planar", "3d"])
+def test_each_windows_motion_term_is_the_whole_arrays_to_the_bit(kind: str) -> None:
+    """The windows' motion terms are taken a block at a time, once per stretch search: each is the
+    whole array's arithmetic to the bit, and a subset's mean is its motion scale."""
+    sensor = SENSORS[kind]("fixed")
+    rng = np.random.default_rng(2)
+    n = 2 * MOTION_BLOCK + 11
+    z = rng.normal(size=(sensor.z_rows, n))
+    if kind == "3d":
+        z[3:7] = poses3d.rotvec_to_quat(0.3 * rng.normal(size=(n, 3))).T
+    omega = rng.uniform(1.0, 1e4, sensor.error_rows)
+    fns = SimpleNamespace(sensor=sensor)
+    terms = motion_terms(fns, z, omega)
+    whole = np.sum(omega[:, None] * sensor.tangent(z) ** 2, axis=0)
+    assert terms.tobytes() == whole.tobytes()
+    rest = rng.uniform(size=n) > 0.3
+    subset = np.float64(motion_scale(fns, z[:, rest], omega))
+    assert subset.tobytes() == np.mean(terms[rest]).tobytes()
