@@ -278,6 +278,14 @@ def test_accumulate_is_compose_step_by_step_across_its_blocks() -> None:
     assert poses3d.accumulate(start, steps).tobytes() == expected.tobytes()
 
 
+def test_moved_is_betweens_translation_to_the_bit() -> None:
+    """The RPE's translations skip the rotation's product: the same doubles as ``between``'s."""
+    rng = np.random.default_rng(6)
+    a = np.c_[rng.normal(size=(1000, 3)), poses3d.rotvec_to_quat(rng.normal(size=(1000, 3)))]
+    b = np.c_[rng.normal(size=(1000, 3)), poses3d.rotvec_to_quat(rng.normal(size=(1000, 3)))]
+    assert poses3d.moved(a, b).tobytes() == np.ascontiguousarray(poses3d.between(a, b)[:, :3]).tobytes()
+
+
 def test_turned_is_an_unwrapped_angle_along_a_fixed_axis() -> None:
     axis = np.array([0.0, -np.sqrt(0.75), 0.5])  # the floor normal as a camera 30° down sees it
     angle = np.linspace(0.0, 9.0, 400)  # more than a turn and a half

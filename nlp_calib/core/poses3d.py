@@ -149,6 +149,13 @@ def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return compose(inverse(a), b)
 
 
+def moved(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The translation of ``a⁻¹ · b`` row by row, ``(..., 3)``: :func:`between`'s to the bit (the
+    same rotations of the same numbers, summed alike), without its rotation's product."""
+    qi = quat_conjugate(a[..., 3:])
+    return -rotate(qi, a[..., :3]) + rotate(qi, b[..., :3])
+
+
 def between_at(a: np.ndarray, b: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Poses a fraction ``s`` ``(..., 1)`` of the way from ``a`` to ``b``: the position on the line,
     the rotation along the shorter arc (``s`` 0 gives ``a``, 1 gives ``b``)."""
