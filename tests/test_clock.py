@@ -289,3 +289,19 @@ def test_a_nearly_periodic_drive_is_not_refused_for_its_period_and_calibrates(tm
     assert "wheel_separation" in determined, (run.verdict.line(), std)
     for name in determined:
         assert abs(params[name] - truth[name]) <= 4 * std[name], (name, params[name], truth[name], std[name])
+
+
+def test_a_streams_rates_are_its_own_after_a_replace_and_at_any_times() -> None:
+    """The samples' rates are taken once per stream (a lag search reads them at every lag): a
+    stream made from it with other positions (a repair, a jitter) reads its own, and every call
+    gives the first one's doubles."""
+    rng = np.random.default_rng(8)
+    t = np.cumsum(rng.uniform(0.03, 0.05, 40))
+    q = np.column_stack([np.sin(t), 0.3 * t**2])
+    stream = JointStream(t, q, (0.0, 0.0))
+    at = np.sort(rng.uniform(t[0], t[-1], 25))
+    first = stream.slopes(at)
+    assert stream.slopes(at).tobytes() == first.tobytes()
+    assert stream.slopes(at[::2]).tobytes() == first[::2].tobytes()
+    doubled = dataclasses.replace(stream, positions=2.0 * q)
+    np.testing.assert_array_equal(doubled.slopes(at), 2.0 * first)

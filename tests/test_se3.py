@@ -263,6 +263,29 @@ def test_accumulate_is_compose_step_by_step_to_the_bit() -> None:
     assert poses3d.accumulate(start, steps).tobytes() == expected.tobytes()
 
 
+def test_accumulate_is_compose_step_by_step_across_its_blocks() -> None:
+    """The positions are summed a block of steps at a time: each block goes on from the last
+    one's end to the bit, over more than two blocks and a part of one."""
+    rng = np.random.default_rng(5)
+    n = 2 * poses3d._BLOCK + 37
+    steps = np.c_[0.1 * rng.normal(size=(n, 3)), poses3d.rotvec_to_quat(0.05 * rng.normal(size=(n, 3)))]
+    start = np.r_[rng.normal(size=3), poses3d.rotvec_to_quat(rng.normal(size=3))]
+    expected = np.empty((n + 1, 7))
+    expected[0] = start
+    for k in range(n):
+        expected[k + 1] = poses3d.compose(expected[k], steps[k])
+    expected[:, 3:] /= np.linalg.norm(expected[:, 3:], axis=1, keepdims=True)
+    assert poses3d.accumulate(start, steps).tobytes() == expected.tobytes()
+
+
+def test_moved_is_betweens_translation_to_the_bit() -> None:
+    """The RPE's translations skip the rotation's product: the same doubles as ``between``'s."""
+    rng = np.random.default_rng(6)
+    a = np.c_[rng.normal(size=(1000, 3)), poses3d.rotvec_to_quat(rng.normal(size=(1000, 3)))]
+    b = np.c_[rng.normal(size=(1000, 3)), poses3d.rotvec_to_quat(rng.normal(size=(1000, 3)))]
+    assert poses3d.moved(a, b).tobytes() == np.ascontiguousarray(poses3d.between(a, b)[:, :3]).tobytes()
+
+
 def test_turned_is_an_unwrapped_angle_along_a_fixed_axis() -> None:
     axis = np.array([0.0, -np.sqrt(0.75), 0.5])  # the floor normal as a camera 30° down sees it
     angle = np.linspace(0.0, 9.0, 400)  # more than a turn and a half

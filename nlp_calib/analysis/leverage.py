@@ -61,10 +61,9 @@ def stretches(
     RR = np.outer(scale, scale)
     H = information.sum(axis=0)
     lam, V = np.linalg.eigh(H * RR)
-    # Each window's motion once: a stretch's rest takes the mean of its own (each term the same
-    # bits as taken over the rest alone: the sum runs over the motion's rows, window by window).
+    # Each window's motion term once: every stretch's scale is the mean of the rest's.
     motion = motion_terms(fns, data.z, omega)
-    whole = _moved(V, free_directions(lam, data.n_residuals, float(np.mean(motion))))
+    whole = _moved(V, free_directions(lam, data.n_residuals, float(np.mean(motion)) if motion.size else 0.0))
     own = _own_log(fns, data)
 
     def without(lo: int, hi: int) -> Stretch | None:

@@ -60,7 +60,7 @@ SPATIAL = Geometry(
     3,
     lambda rel: np.linalg.norm(poses3d.quat_to_rotvec(rel[:, 3:7]), axis=1),
     poses3d.align,
-    lambda a, b: poses3d.between(a, b)[:, :3],
+    poses3d.moved,
 )
 
 #: A gyro's "poses": its rates integrated from the first record (and the time), added up; its

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
@@ -138,12 +139,19 @@ class JointStream:
         ts, q = self.time_s, self.positions
         if ts.size < 2:
             return np.zeros((np.shape(t)[0], q.shape[1]))
+        rate = self._sample_rates
+        cols = [np.interp(t, ts, rate[:, j]) for j in range(q.shape[1])]
+        return np.stack(cols, axis=1).reshape(np.shape(t)[0], q.shape[1])
+
+    @functools.cached_property
+    def _sample_rates(self) -> np.ndarray:
+        """Each sample's rate for :meth:`slopes`, once per stream: a lag's re-sampling keeps the
+        stream, and a lag search reads the rates at every lag it tries."""
+        ts, q = self.time_s, self.positions
         ahead, behind = np.r_[1 : ts.size, ts.size - 1], np.r_[0, 0 : ts.size - 1]
         span = ts[ahead] - ts[behind]
         with np.errstate(divide="ignore", invalid="ignore"):
-            rate = np.where(span[:, None] > 0, (q[ahead] - q[behind]) / span[:, None], 0.0)
-        cols = [np.interp(t, ts, rate[:, j]) for j in range(q.shape[1])]
-        return np.stack(cols, axis=1).reshape(np.shape(t)[0], q.shape[1])
+            return frozen(np.where(span[:, None] > 0, (q[ahead] - q[behind]) / span[:, None], 0.0))
 
     def travelled_angle(self, t: np.ndarray, angle: int, wheels: Sequence[int]) -> np.ndarray:
         """Per interval between the times ``t``, column ``angle``'s mean over it as the wheels
