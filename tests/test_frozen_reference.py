@@ -1,0 +1,219 @@
+"""A frozen reference (``tracker_stuck``) over every kind of reference the registry fits: a
+tracker's or a camera's poses repeated exactly, a scan matcher's increments that read no motion at
+all, alone or beside a gyro, while the wheels turn. Each is found with one rule, its windows are
+left out, and a robot standing still (its wheels too) is never one; a gyro cannot show it."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from nlp_calib.logs.imu import format_gyro_csv
+from nlp_calib.logs.joint_log import format_joint_csv
+from nlp_calib.logs.motions import format_motions
+from nlp_calib.logs.reference import Motions, PoseMotions, Poses
+from nlp_calib.logs.tum import format_tum
+from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.sensors import BESIDE, SENSORS
+from nlp_calib.simulation.beside import simulate_beside, simulate_camera_beside, tracker_poses
+from nlp_calib.simulation.camera import CameraNoise, CameraSimulationOptions
+from nlp_calib.simulation.imu import ImuSimulationOptions
+from nlp_calib.simulation.lidar import LidarSimulationOptions
+
+ENCODERS = {"left_wheel": "left_wheel_joint", "right_wheel": "right_wheel_joint"}
+BASE = {
+    "model": "diff_drive",
+    "initial_guess": "auto",
+    "robust": {"kernel": "huber", "delta": 3.0},
+    "solvers": ["gauss_newton"],
+    "validation": {"blocks": 0},
+}
+#: Reference stamps the frozen stretch repeats (and the one it repeats): 1 s of a 10 Hz scanner.
+HELD = 10
+ns = lambda t: np.round(np.asarray(t) * 1e9).astype(np.int64)  # noqa: E731
+
+
+@dataclass(frozen=True)
+class Drive:
+    """One drive's wheel joints, its reference's stamps and readings, and a gyro's rates beside it."""
+
+    joint_t: np.ndarray
+    joint_names: tuple[str, ...]
+    joints: np.ndarray
+    stamps: np.ndarray  # the reference's, s
+    poses: np.ndarray  # (n, 7) TUM poses at the stamps
+    gyro_t: np.ndarray
+    rates: np.ndarray
+
+    def where(self, turning: bool) -> int:
+        """The first of ``HELD + 1`` stamps over which every joint sample moves (``turning``), or
+        none does, in the drive's middle half."""
+        step = np.abs(np.diff(self.joints, axis=0)).sum(axis=1)
+        n = self.stamps.size
+        for i in range(n // 4, 3 * n // 4):
+            inside = (self.joint_t[1:] > self.stamps[i]) & (self.joint_t[:-1] < self.stamps[i + HELD])
+            if np.all(step[inside] > 0) if turning else not np.any(step[inside] > 0):
+                return i
+        raise AssertionError("no such stretch in the drive")
+
+
+def _planar(seed: int) -> Drive:
+    lidar = LidarSimulationOptions(duration_s=30.0, seed=seed, beams=16, degraded_fraction=0.0)
+    sim = simulate_beside(lidar, ImuSimulationOptions(seed=seed))
+    T = tracker_poses(sim.lidar)
+    rng = np.random.default_rng(seed)
+    T = T + rng.normal(0.0, [0.001, 0.001, 0.001], T.shape)  # a tracker's noise, never repeating
+    half = T[:, 2] / 2
+    tum = np.column_stack([T[:, :2], np.zeros((len(T), 3)), np.sin(half), np.cos(half)])
+    s = sim.lidar
+    return Drive(
+        s.joint_time_s,
+        s.joint_names,
+        s.joint_positions,
+        s.scan_time_s,
+        tum,
+        sim.imu.imu_time_s,
+        sim.imu.rates,
+    )
+
+
+def _camera(seed: int) -> Drive:
+    noise = CameraNoise(position=0.001, rotation=0.0017)
+    camera = CameraSimulationOptions(duration_s=30.0, seed=seed, image_rate_hz=10.0, noise=noise)
+    sim = simulate_camera_beside(camera, ImuSimulationOptions(seed=seed))
+    c = sim.camera
+    return Drive(
+        c.joint_time_s,
+        c.joint_names,
+        c.joint_positions,
+        c.image_time_s,
+        c.camera_poses,
+        sim.imu.imu_time_s,
+        sim.imu.rates,
+    )
+
+
+def _poses_held(d: Drive, i: int | None) -> np.ndarray:
+    """The reference's poses, those of stamps ``i + 1 … i + HELD`` repeating stamp ``i``'s."""
+    P = np.array(d.poses)
+    if i is not None:
+        P[i + 1 : i + HELD + 1] = P[i]
+    return P
+
+
+def _planar_increments(P: np.ndarray) -> np.ndarray:
+    """Consecutive TUM poses' planar motions (x, y, θ), exactly zero between equal poses."""
+    theta = 2.0 * np.arctan2(P[:, 5], P[:, 6])
+    c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
+    dx, dy = np.diff(P[:, 0]), np.diff(P[:, 1])
+    dth = np.angle(np.exp(1j * np.diff(theta)))
+    return np.column_stack([c * dx + s * dy, -s * dx + c * dy, dth])
+
+
+def _write(
+    folder: Path, d: Drive, reference: str, i: int | None, gyro_held: bool = False
+) -> dict[str, object]:
+    """The drive's files (its reference frozen from stamp ``i``) and their dataset block."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "joints.csv").write_text(format_joint_csv(ns(d.joint_t), d.joint_names, d.joints))
+    dataset: dict[str, object] = {"joints": str(folder / "joints.csv"), "encoders": ENCODERS}
+    if reference == "poses":
+        (folder / "ref.tum").write_text(format_tum(ns(d.stamps), _poses_held(d, i)))
+        dataset["poses"] = str(folder / "ref.tum")
+    elif reference == "motions":
+        z = _planar_increments(d.poses)
+        if i is not None:
+            z[i : i + HELD] = 0.0  # the matcher read no motion over HELD increments
+        text = format_motions(ns(d.stamps[:-1]), ns(d.stamps[1:]), z, {"converged": np.ones(len(z))})
+        (folder / "ref.csv").write_text(text)
+        dataset["motions"] = str(folder / "ref.csv")
+    rates = np.array(d.rates)
+    if gyro_held and i is not None:
+        k = int(np.searchsorted(d.gyro_t, d.stamps[i]))
+        rates[k + 1 : k + 1 + 20 * HELD] = rates[k]  # the gyro republishes its last rate (1 s)
+    (folder / "gyro.csv").write_text(format_gyro_csv(d.gyro_t, rates))
+    return dataset
+
+
+@dataclass(frozen=True)
+class Kind:
+    """A reference kind the registry fits: its sensor, the files it reads, the reference kind its
+    log is, and whether a frozen reference of it can be told at all."""
+
+    sensor: str
+    reference: str  # "poses", "motions" or "" (the gyro alone)
+    gyro: bool
+    log_kind: str
+    drive: Callable[[int], Drive]
+    frozen_can_show: bool = True
+
+
+KINDS = {
+    "tracker poses": Kind("planar", "poses", False, Poses.name, _planar),
+    "camera 3-D poses": Kind("3d", "poses", False, Poses.name, _camera),
+    "scan matches": Kind("planar", "motions", False, Motions.name, _planar),
+    "tracker poses beside a gyro": Kind(BESIDE[("planar", "gyro")], "poses", True, PoseMotions.name, _planar),
+    "scan matches beside a gyro": Kind(BESIDE[("planar", "gyro")], "motions", True, Motions.name, _planar),
+    "camera 3-D poses beside a gyro": Kind(BESIDE[("3d", "gyro")], "poses", True, PoseMotions.name, _camera),
+    "gyro rates": Kind("gyro", "", True, Motions.name, _planar, frozen_can_show=False),
+}
+
+
+def test_every_registered_sensor_is_a_kind_here() -> None:
+    assert {k.sensor for k in KINDS.values()} == set(SENSORS)
+
+
+def _calibration(folder: Path, kind: Kind, dataset: dict[str, object]) -> Calibration:
+    pair = {v: k for k, v in BESIDE.items()}.get(kind.sensor)
+    sensor: object = kind.sensor if pair is None else {"mount": pair[0], "beside": pair[1]}
+    raw = {**BASE, "sensor": sensor, "dataset": dict(dataset)}
+    if kind.gyro:
+        raw["dataset"]["gyro"] = str(folder / "gyro.csv")  # type: ignore[index]
+    if kind.sensor.startswith("3d"):
+        raw["known"] = {"sensor_z": 0.30}
+    if kind.sensor == "gyro":
+        raw["known"] = {"wheel_separation": 0.5}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sc = scenario_from_mapping(raw, f"{folder.name}.yaml", folder)
+        return Calibration(sc)
+
+
+def _stuck(calib: Calibration) -> list[object]:
+    return [f for f in calib.findings.report.faults if f.kind == "tracker_stuck"]
+
+
+@pytest.mark.parametrize("name", list(KINDS))
+def test_a_frozen_reference_is_found_where_the_wheels_turn_and_never_where_they_stand(
+    name: str, tmp_path: Path
+) -> None:
+    kind = KINDS[name]
+    d = kind.drive(11)
+    i = d.where(turning=True)
+    frozen = _calibration(tmp_path / "frozen", kind, _write(tmp_path / "frozen", d, kind.reference, i, True))
+    log = frozen.log
+    assert log.reference.kind.name == kind.log_kind
+    stuck = _stuck(frozen)
+    if not kind.frozen_can_show:
+        # Its rates held read as a steady turn does: never told from one, never named.
+        assert stuck == []
+        return
+    assert len(stuck) == 1, [(f.kind, f.first, f.last) for f in frozen.findings.report.faults]
+    f = stuck[0]
+    held = d.stamps[i + HELD] - d.stamps[i]
+    assert abs((log.time_s[f.last + 1] - log.time_s[f.first]) - held) < 1e-6, f
+    # No window of the fit starts or ends at a repeated pose.
+    bad = frozen.findings.report.bad_records(log.n_records)
+    assert np.flatnonzero(bad).tolist() == list(range(f.first + 1, f.last + 2))
+    # The drive as logged, and held where the robot stands still (wheels and all): none.
+    clean = _calibration(tmp_path / "clean", kind, _write(tmp_path / "clean", d, kind.reference, None))
+    assert _stuck(clean) == []
+    still = d.where(turning=False)
+    standing = _calibration(tmp_path / "still", kind, _write(tmp_path / "still", d, kind.reference, still))
+    assert _stuck(standing) == []
