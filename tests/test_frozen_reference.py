@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from nlp_calib.logs.imu import format_gyro_csv
 from nlp_calib.logs.joint_log import format_joint_csv
