@@ -10,7 +10,9 @@ to the stream that explains it:
   target and republished the pose (``tracker_stuck``; a motion-capture dropout): the repeated poses
   are wrong, and no window starts or ends at them. A tracker that moves by steps (over a quarter of
   its travel right after a repeat: poses held between slower updates) repeats by its nature, and
-  is not judged so;
+  is not judged so. A reference of its own increments froze the same way when increments that
+  follow on read no motion at all (``sensor.motion_of``) over as many stamps (:data:`FROZEN`: one
+  rule per reference kind; a gyro's rates cannot show it);
 - an **absolute encoder** (e.g. a wheel's angle) that leaves the span of its neighbours for one record
   and returns (``steering_spike``), or holds its reading while the robot moves and then catches
   up in one jump (``steering_stuck``), is that encoder's own glitch;
