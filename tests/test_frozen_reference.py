@@ -215,6 +215,9 @@ def test_a_frozen_reference_is_found_where_the_wheels_turn_and_never_where_they_
     f = stuck[0]
     held = d.stamps[i + HELD] - d.stamps[i]
     assert abs((log.time_s[f.last + 1] - log.time_s[f.first]) - held) < 1e-6, f
+    # The wheels are not blamed for it: the path over a frozen stretch is unknown (here the robot
+    # reverses inside the camera's, which poses interpolated over it miss).
+    assert frozen.findings.report.encoder_faults == ()
     # No window of the fit starts or ends at a repeated pose.
     bad = frozen.findings.report.bad_records(log.n_records)
     assert np.flatnonzero(bad).tolist() == list(range(f.first + 1, f.last + 2))

@@ -615,22 +615,7 @@ def cleaned(log: Log, faults: Sequence[Fault]) -> Log:
             bad = np.zeros(log.n_records, dtype=bool)
             bad[f.first + 1 : f.last + 1] = True
             out = interpolated_over(out, f.encoder, bad)
-    return _without_stuck(out, log, faults).with_poses_interpolated(bad_pose)
-
-
-def _without_stuck(out: Log, log: Log, faults: Sequence[Fault]) -> Log:
-    """``out`` without the increments that start or end at a pose a frozen reference repeated (its
-    intervals then judged by the wheels' own motion, as where no increment measures)."""
-    inc = out.motions
-    stuck = FaultReport(tuple(f for f in faults if f.kind == TRACKER_STUCK), {}, {})
-    if inc is None or not stuck.faults:
-        return out
-    bad = stuck.bad_records(log.n_records)
-    kept = inc.take(~(bad[inc.first] | bad[inc.last]))
-    out = replace(out, reference=replace(out.reference, motions=kept))
-    return (
-        replace(out, T_world_sensor=frozen(kept.chain(log.n_records))) if out.reference.kind.chained else out
-    )
+    return out.with_poses_interpolated(bad_pose)
 
 
 def _evidence(
@@ -659,9 +644,11 @@ def counter_faults(
     log: Log,
     inputs: np.ndarray,
     lag: float | tuple[float, float],
+    unjudged: np.ndarray | None = None,
 ) -> FaultReport:
     """The counter faults of ``log`` (every interval) given calibrated ``params``, the model
-    ``inputs`` and the tracker ``lag`` (s, or a range to estimate it in)."""
+    ``inputs`` and the tracker ``lag`` (s, or a range to estimate it in); the intervals
+    ``unjudged`` (a mask) are taken as no measurement covers them (a frozen reference's)."""
     N = inputs.shape[1]
     counters = fns.model.counter_rows(log)
     if N == 0:
@@ -670,6 +657,8 @@ def counter_faults(
     z = over_columns(fns.between, T[:-1].T, T[1:].T)[0]
     # Intervals no measurement covers: the wheels' own motion, which accuses no counter.
     gap = log.reference.kind.uncovered(log.n_records)
+    if unjudged is not None:
+        gap = gap | unjudged
     if gap.any():
         z[:, gap] = over_columns(fns.predict, np.ravel(np.asarray(params, dtype=float)), inputs[:, gap])[0]
     e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
@@ -743,7 +732,10 @@ def screen(
                 found = increment_faults(fns, params, log, steering_sample, glitches, lag)
         glitches += tuple(found)
     clean = cleaned(log, glitches)
-    counters = counter_faults(fns, params, clean, model.inputs(clean, steering_sample), lag)
+    # Over a frozen reference the path is unknown (poses interpolated over a second miss a
+    # reversal inside it): the counters are not judged there.
+    frozen_at = FaultReport(glitches, {}, {}).frozen_intervals(max(n - 1, 0))
+    counters = counter_faults(fns, params, clean, model.inputs(clean, steering_sample), lag, frozen_at)
     faults = tuple(sorted(glitches + counters.faults, key=lambda f: (f.first, f.kind)))
     return replace(counters, faults=faults)
 
