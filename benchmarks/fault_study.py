@@ -307,17 +307,51 @@ def pairs(seeds: int, step: Callable[[str], None]) -> list[str]:
 
 INTRO = (
     "Every run screens the records as logged, before anything is re-sampled, and puts each mismatch "
-    "down to the stream that explains it (`nlp_calib/analysis/faults.py`): a tracker pose off the path "
-    "its neighbours agree on is the tracker's (`tracker_jump`); a steering reading that leaves the span "
-    "of its neighbours for one record (`steering_spike`) or holds while the robot moves and then catches "
-    "up in one jump (`steering_stuck`) is the steering encoder's; a counter whose count over a stretch "
-    "is wrong in total, as its own history shows and the tracker's motion over several intervals "
-    "confirms at the tracker lag, is the counter's (`stall_then_jump`: stale, then a catch-up off by "
-    "e.g. 2¹⁶ ticks; `reversal`: one increment against the motion; `counter_jump`: counts lost or gained "
-    "in the direction of motion). A stop, a reversal (abrupt or smooth) or a counter wrap is never a "
-    "fault. With `faults: {handling: exclude}` (the default) every residual window crossing an encoder "
-    "fault, or starting or ending at a bad tracker pose, is left out of the fit; `repair` corrects the "
-    "encoders instead (and says what it changed); `keep` only reports.\n"
+    "down to the stream that explains it (`nlp_calib/analysis/faults.py`): a tracker pose off the "
+    "path its neighbours agree on is the tracker's (`tracker_jump`), and so is a tracker that repeats"
+    " its last pose exactly over three records or more while the wheels turn (`tracker_stuck`: it "
+    "lost its target and republished the pose, as a motion-capture system does in a dropout; no "
+    "window starts or ends at a repeated pose; a tracker whose poses are held between slower updates "
+    "moves by steps, by the rule below, and is not judged so); a steering reading that leaves the "
+    "span of its neighbours for one record (`steering_spike`) or holds while the robot moves and then"
+    " catches up in one jump (`steering_stuck`) is the steering encoder's (except on a stream that "
+    "moves by steps: one that makes more than a quarter of its motion in the steps right after a "
+    "repeated reading, as a steering command held between commands or a position updated slower than "
+    "it is logged does, holds and jumps are how it moves, and no reading of it is judged stuck; the "
+    "real tricycle's steering makes 3 % of its motion so, an F1/10 car's commanded steering 48 %); a "
+    "counter whose count over a stretch is wrong in total, as its own history shows and the tracker's"
+    " motion over several intervals confirms at the tracker lag, is the counter's (`stall_then_jump`:"
+    " stale, then a catch-up off by e.g. 2¹⁶ ticks; `reversal`: one increment against the motion; "
+    "`counter_jump`: counts lost or gained in the direction of motion). A stop, a reversal (abrupt or"
+    " smooth) or a counter wrap is never a fault. With `faults: {handling: exclude}` (the default) "
+    "every residual window crossing an encoder fault, or starting or ending at a bad tracker pose, is"
+    " left out of the fit; `repair` corrects the encoders instead (and says what it changed); `keep` "
+    "only reports.\n"
+)
+#: Frozen references over every kind (tests/test_frozen_reference.py).
+FROZEN = (
+    "A frozen reference is one fault over every kind of reference, found by one rule (`FROZEN` in"
+    " `nlp_calib/analysis/faults.py`; each sensor says what its increments read when frozen: "
+    "`motion_of`). A tracker's or a camera's poses (`poses`) repeat the one before exactly; a "
+    "reference of its own increments (a scan matcher's or a vendor's odometry, `motions`, alone "
+    "or beside a gyro; a tracker's or a camera's poses beside a gyro, taken as the motions "
+    "between consecutive poses, `pose_motions`) reads no motion at all over increments that "
+    "follow on (exactly zero; a 3-D motion's rotation within 1e-12 of none, the rounding of the "
+    "motion between two equal poses, where any camera's noise is 1e-4 or more). Either is "
+    "`tracker_stuck` when it lasts three of the reference's stamps or more while the wheels turn "
+    "over at least half of the records between them, and is handled as a tracker's: no window "
+    "starts or ends at a repeated stamp (so the increments over the run go, and the one from its "
+    "last stamp, which holds the catch-up of a reference that republished and then resumed), the "
+    "counters are not judged over it (its path is unknown: poses interpolated over it miss a "
+    "reversal inside it, and named the wheels' counters faulty), and a chain of increments breaks"
+    " there. A reference standing still reads zero too, but its wheels stand still as well: never"
+    " one. One that moves by steps (over a quarter of its travel right after a zero increment) is"
+    " not judged. A gyro cannot have it: its rates read zero on every straight drive, and a gyro "
+    "that republishes its last rate repeats what a steady turn repeats; only the fit, against the"
+    " wheels, could tell them apart, and the screen judges before the fit. "
+    "`tests/test_frozen_reference.py` freezes each kind for 1 s of a simulated drive, where the "
+    "wheels turn slowest: left out, it moves no parameter by its σ from the drive's as logged; "
+    "kept, a tracker's or a camera's (alone or beside a gyro) moves one by over 3σ.\n"
 )
 
 
@@ -326,6 +360,7 @@ def write(args: argparse.Namespace, step: Callable[[str], None]) -> list[str]:
     md = ["# Encoder and tracker faults, and the checks that must not cry wolf\n"]
     md.append("_Generated by `python benchmarks/fault_study.py`; do not edit by hand._\n")
     md.append(INTRO)
+    md.append(FROZEN)
     md.append(
         f"Drives: {DRIVE['records']:,} records at 25 Hz (S-curves with stops and reversals), the tracker "
         f"{1e3 * LAG:.0f} ms late with 4 mm and 1 mrad of noise, settings of `scenarios/real_tricycle.yaml` "

@@ -10,7 +10,9 @@ to the stream that explains it:
   target and republished the pose (``tracker_stuck``; a motion-capture dropout): the repeated poses
   are wrong, and no window starts or ends at them. A tracker that moves by steps (over a quarter of
   its travel right after a repeat: poses held between slower updates) repeats by its nature, and
-  is not judged so;
+  is not judged so. A reference of its own increments froze the same way when increments that
+  follow on read no motion at all (``sensor.motion_of``) over as many stamps (:data:`FROZEN`: one
+  rule per reference kind; a gyro's rates cannot show it);
 - an **absolute encoder** (e.g. a wheel's angle) that leaves the span of its neighbours for one record
   and returns (``steering_spike``), or holds its reading while the robot moves and then catches
   up in one jump (``steering_stuck``), is that encoder's own glitch;
@@ -145,11 +147,26 @@ def tracker_faults(log: Log, sensor: Sensor) -> list[Fault]:
     return found
 
 
+def _counters_turning(log: Log, kinds: Mapping[str, EncoderKind]) -> np.ndarray | None:
+    """Per interval between records, whether a counter of the wheels changed (None: no counter)."""
+    return turning(log, [n for n in log.header.encoder_names if kinds.get(n) == "counter"], records=True)
+
+
+def _stuck_fault(log: Log, first: int, last: int, what: str, why: str) -> Fault:
+    """A frozen reference from record ``first`` (the last reading it made) to ``last``."""
+    t, lines = log.time_s, log.line_numbers
+    evidence = (
+        f"the {what} of record {first} ({log.where(lines[first])}) over records {first + 1}-{last} "
+        f"({t[last] - t[first]:.2f} s) while the wheels turn: {why}"
+    )
+    return _fault(log, TRACKER_STUCK, None, (first, last - 1), first + 1, (0.0, 0.0, 0.0), evidence)
+
+
 def stuck_tracker(log: Log, sensor: Sensor, kinds: Mapping[str, EncoderKind]) -> list[Fault]:
     """Runs of records whose tracker pose repeats the one before exactly, over
     :data:`~nlp_calib.analysis.streams.MIN_STUCK` records or more, while the wheels turn over most
     of them: the tracker lost its target and republished its last pose. One fault per run."""
-    moving = turning(log, [n for n in log.header.encoder_names if kinds.get(n) == "counter"], records=True)
+    moving = _counters_turning(log, kinds)
     T, position = sensor.jump_signal(log)
     if moving is None or T.shape[0] < MIN_STUCK + 1:
         return []
@@ -159,17 +176,46 @@ def stuck_tracker(log: Log, sensor: Sensor, kinds: Mapping[str, EncoderKind]) ->
     # Runs of repeats: record ``first`` is the last pose read, ``first + 1 … last`` repeat it.
     same = np.all(np.diff(T, axis=0) == 0, axis=1)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], same.astype(np.int8), [0]])))
-    found, t, lines = [], log.time_s, log.line_numbers
-    for first, last in zip(edges[::2], edges[1::2]):
-        if last - first + 1 >= MIN_STUCK and np.mean(moving[first:last]) >= 0.5:
-            evidence = (
-                f"the tracker repeats its pose of record {first} ({log.where(lines[first])}) over records "
-                f"{first + 1}-{last} ({t[last] - t[first]:.2f} s) while the wheels turn: it lost its "
-                "target and republished the last pose"
-            )
-            found.append(
-                _fault(log, TRACKER_STUCK, None, (first, last - 1), first + 1, (0.0, 0.0, 0.0), evidence)
-            )
+    return [
+        _stuck_fault(
+            log, first, last, "tracker repeats its pose", "it lost its target and republished the last pose"
+        )
+        for first, last in zip(edges[::2], edges[1::2])
+        if last - first + 1 >= MIN_STUCK and np.mean(moving[first:last]) >= 0.5
+    ]
+
+
+def frozen_increments(log: Log, sensor: Sensor, kinds: Mapping[str, EncoderKind]) -> list[Fault]:
+    """A reference of its own increments that froze: :func:`stuck_tracker`'s rule on its increments.
+    A run of increments that follow on (each from the stamp the one before ended at) and read no
+    motion at all (``sensor.motion_of``: exactly zero), over :data:`~nlp_calib.analysis.streams.MIN_STUCK`
+    of its stamps or more, while the wheels turn over most of the records they span: its poses
+    repeat the run's first. A robot standing still reads zero too, and its wheels say so; a
+    reference that moves by steps (zero increments between slower updates) is not judged; one
+    whose increments cannot show it (``motion_of`` None: a gyro's) neither. One fault per run."""
+    inc, moving = log.motions, _counters_turning(log, kinds)
+    motion = None if inc is None or moving is None else sensor.motion_of(inc.z)
+    if inc is None or moving is None or motion is None:
+        return []
+    own = np.flatnonzero(~np.isnan(motion[:, 0]))
+    own = own[np.argsort(inc.first[own], kind="stable")]
+    travel = np.concatenate([[0.0], np.cumsum(motion[own, 0])])
+    if own.size < MIN_STUCK or moves_by_steps(travel):
+        return []
+    a, b = inc.first[own], inc.last[own]
+    # A run goes on while the next increment is still and starts where this one ended.
+    still = np.all(motion[own] == 0, axis=1)
+    joined = np.concatenate([[False], still[1:] & still[:-1] & (a[1:] == b[:-1])])
+    starts = np.flatnonzero(still & ~joined)
+    found = []
+    for k in starts:
+        j = k
+        while j + 1 < own.size and joined[j + 1]:
+            j += 1
+        first, last = int(a[k]), int(b[j])
+        if j - k + 2 >= MIN_STUCK and np.mean(moving[first:last]) >= 0.5:
+            why = f"its {j - k + 1} increments read no motion at all, as a frozen reference republishes"
+            found.append(_stuck_fault(log, first, last, "reference holds its pose", why))
     return found
 
 
@@ -598,9 +644,11 @@ def counter_faults(
     log: Log,
     inputs: np.ndarray,
     lag: float | tuple[float, float],
+    unjudged: np.ndarray | None = None,
 ) -> FaultReport:
     """The counter faults of ``log`` (every interval) given calibrated ``params``, the model
-    ``inputs`` and the tracker ``lag`` (s, or a range to estimate it in)."""
+    ``inputs`` and the tracker ``lag`` (s, or a range to estimate it in); the intervals
+    ``unjudged`` (a mask) are taken as no measurement covers them (a frozen reference's)."""
     N = inputs.shape[1]
     counters = fns.model.counter_rows(log)
     if N == 0:
@@ -609,6 +657,8 @@ def counter_faults(
     z = over_columns(fns.between, T[:-1].T, T[1:].T)[0]
     # Intervals no measurement covers: the wheels' own motion, which accuses no counter.
     gap = log.reference.kind.uncovered(log.n_records)
+    if unjudged is not None:
+        gap = gap | unjudged
     if gap.any():
         z[:, gap] = over_columns(fns.predict, np.ravel(np.asarray(params, dtype=float)), inputs[:, gap])[0]
     e, de_du = over_columns(fns.interval_residual, np.ravel(np.asarray(params, dtype=float)), inputs, z)
@@ -638,6 +688,15 @@ JUMPS: dict[str, Callable[[Log, Sensor], list[Fault]]] = {
 }
 
 
+#: Each reference kind's frozen stretches (``tracker_stuck``): poses repeated exactly, or
+#: increments that follow on reading no motion at all, while the wheels turn.
+FROZEN: dict[str, Callable[[Log, Sensor, Mapping[str, EncoderKind]], list[Fault]]] = {
+    Poses.name: stuck_tracker,
+    Motions.name: frozen_increments,
+    PoseMotions.name: frozen_increments,
+}
+
+
 #: Fits the model leaving out the windows the masks (per interval, per record) spoil; its
 #: parameters, or None when the fit does not converge.
 Judge = Callable[[np.ndarray, np.ndarray], np.ndarray | None]
@@ -650,9 +709,8 @@ def screen(
     alone, then the counters' against a fit (``judge``) that leaves those glitches out, on readings
     with them interpolated over, at the tracker ``lag`` (s, or a range to estimate it in)."""
     model, n = fns.model, log.n_records
-    jumps = JUMPS[log.reference.kind.name](log, fns.sensor)
-    if log.reference.kind.name == Poses.name:
-        jumps += stuck_tracker(log, fns.sensor, model.encoder_kinds)
+    kind = log.reference.kind.name
+    jumps = JUMPS[kind](log, fns.sensor) + FROZEN[kind](log, fns.sensor, model.encoder_kinds)
     glitches = tuple(jumps + absolute_faults(log, model.encoder_kinds))
     report = FaultReport(glitches, {}, {}, unit=unit_of(log))
     params = judge(report.bad_intervals(n - 1), report.bad_records(n))
@@ -674,7 +732,10 @@ def screen(
                 found = increment_faults(fns, params, log, steering_sample, glitches, lag)
         glitches += tuple(found)
     clean = cleaned(log, glitches)
-    counters = counter_faults(fns, params, clean, model.inputs(clean, steering_sample), lag)
+    # Over a frozen reference the path is unknown (poses interpolated over a second miss a
+    # reversal inside it): the counters are not judged there.
+    frozen_at = FaultReport(glitches, {}, {}).frozen_intervals(max(n - 1, 0))
+    counters = counter_faults(fns, params, clean, model.inputs(clean, steering_sample), lag, frozen_at)
     faults = tuple(sorted(glitches + counters.faults, key=lambda f: (f.first, f.kind)))
     return replace(counters, faults=faults)
 

@@ -89,7 +89,8 @@ def bind_windows(
     breaks = kind.uncovered(log.n_records)
     if kind.chained:
         matches = replace(report, faults=report.reference_faults)
-        breaks = breaks | matches.bad_intervals(max(log.n_records - 1, 0))
+        n_intervals = max(log.n_records - 1, 0)
+        breaks = breaks | matches.bad_intervals(n_intervals) | report.frozen_intervals(n_intervals)
     if prepared.gaps is not None:  # dead reckoning restarts after a gap, as after a fault
         breaks = breaks | prepared.gaps
     broken = alignment.log.joint_breaks()

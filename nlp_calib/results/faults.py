@@ -159,6 +159,15 @@ class FaultReport:
             mask[max(f.first, 0) : min(f.last + 1, n_intervals)] = True
         return mask
 
+    def frozen_intervals(self, n_intervals: int) -> np.ndarray:
+        """Mask of the intervals a frozen reference's repeated poses bound (``tracker_stuck``: its
+        run, and the interval after, from its last repeat): a chain of increments breaks there."""
+        mask = np.zeros(n_intervals, dtype=bool)
+        for f in self.faults:
+            if f.kind == TRACKER_STUCK:
+                mask[max(f.first, 0) : min(f.last + 2, n_intervals)] = True
+        return mask
+
     def bad_records(self, n_records: int) -> np.ndarray:
         """Mask of records a residual window must not start or end at (tracker jumps, and every pose
         a stuck tracker repeated)."""

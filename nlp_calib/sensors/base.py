@@ -133,6 +133,7 @@ class Sensor(Protocol):
         self, params: Mapping[str, float], std: Mapping[str, float], header: LogHeader
     ) -> SensorMount | None: ...  # a 2nd joint
     def screened(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...  # increments judged, as predicted
+    def motion_of(self, z: np.ndarray) -> np.ndarray | None: ...  # per increment (distance, turn)
     def poses(self, log: Log) -> np.ndarray: ...
     def jump_signal(self, log: Log) -> tuple[np.ndarray, int]: ...
     def repaired(self, log: Log, bad: np.ndarray) -> Log: ...
@@ -245,6 +246,12 @@ class SensorDefaults:
         """Which increments ``z`` ``(n, z_rows)`` the screen judges against the sensor's predicted
         motion, and their motions in its layout: all, as they are."""
         return np.ones(z.shape[0], dtype=bool), z
+
+    def motion_of(self, z: np.ndarray) -> np.ndarray | None:
+        """Per increment ``z`` ``(n, z_rows)``, how far its reference moved and turned ``(n, 2)``
+        (NaN for an increment not the reference's), exactly 0 only where it read no motion at all:
+        what a frozen reference's increments show. None: its increments cannot show one."""
+        return None
 
     def heights(self, log: Log) -> np.ndarray | None:
         return None

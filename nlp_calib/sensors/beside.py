@@ -202,6 +202,14 @@ class Beside(SensorDefaults):
         """The reference's increments, judged against its predicted motion (the gyro's are not)."""
         return ~is_gyro(np.asarray(z).T), np.asarray(z)[:, : self._rows]
 
+    def motion_of(self, z: np.ndarray) -> np.ndarray | None:
+        """The reference's increments' motions (its own sensor's word); the gyro's are NaN."""
+        z = np.asarray(z, dtype=float)
+        motion = self.reference_sensor.motion_of(z[:, : self._rows])
+        if motion is None:
+            return None
+        return np.where(is_gyro(z.T)[:, None], np.nan, motion)
+
     def poses(self, log: Log) -> np.ndarray:
         """The reference's poses composed from its one-interval increments (the log's own)."""
         return log.T_world_sensor

@@ -45,6 +45,12 @@ from nlp_calib.symbolic import se3
 HELD_WHY = "planar driving cannot determine a 3-D sensor's height (give the measured one as known.sensor_z)"
 
 
+#: A rotation (the sine of half its angle) no camera reads: the rounding of a quaternion's product
+#: with its own inverse, a few times 1e-18, is below it by six orders, any real camera's noise
+#: (1e-4 and more) above it by eight.
+ROUNDING = 1e-12
+
+
 class CameraPose(SensorDefaults):
     """A 3-D pose sensor (see the module docstring); ``scale_free``: poses known up to scale."""
 
@@ -159,6 +165,13 @@ class CameraPose(SensorDefaults):
 
     def poses(self, log: Log) -> np.ndarray:
         return log.poses_3d()
+
+    def motion_of(self, z: np.ndarray) -> np.ndarray | None:
+        """Each 3-D increment's travel and the norm of its quaternion's vector part, 0 at
+        :data:`ROUNDING` or less (the motion between two equal poses rounds to ~1e-18 there)."""
+        z = np.asarray(z, dtype=float)
+        turn = np.linalg.norm(z[:, 3:6], axis=1)
+        return np.column_stack([np.linalg.norm(z[:, :3], axis=1), np.where(turn > ROUNDING, turn, 0.0)])
 
     def jump_signal(self, log: Log) -> tuple[np.ndarray, int]:
         """``(x, y, z)`` and the rotation accumulated about the world's axes

@@ -160,6 +160,12 @@ class Gyro(SensorDefaults):
         summed = np.vstack([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
         return np.column_stack([summed, log.time_s])
 
+    def motion_of(self, z: np.ndarray) -> np.ndarray | None:
+        """None: a gyro cannot show itself frozen. Its rates read zero on every straight drive,
+        and one that republishes its last rate repeats what a steady turn repeats too; what the
+        wheels say of the turn is the calibration's to find, not a screen's to assume."""
+        return None
+
     def jump_signal(self, log: Log) -> tuple[np.ndarray, int]:
         return self.poses(log)[:, :3], 0
 

@@ -111,6 +111,11 @@ class PlanarPose(SensorDefaults):
     def poses(self, log: Log) -> np.ndarray:
         return log.T_world_sensor
 
+    def motion_of(self, z: np.ndarray) -> np.ndarray | None:
+        """Each increment's travel and the size of its turn."""
+        z = np.asarray(z, dtype=float)
+        return np.column_stack([np.hypot(z[:, 0], z[:, 1]), np.abs(z[:, 2])])
+
     def jump_signal(self, log: Log) -> tuple[np.ndarray, int]:
         """The poses as a signal continuous in time, ``(x, y, θ unwrapped)``, and its position columns."""
         T = np.array(log.T_world_sensor, dtype=float)
