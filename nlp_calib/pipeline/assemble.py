@@ -553,7 +553,18 @@ def pinned_alike(run: CalibrationRun) -> CalibrationRun:
     pinned = run.pinned()
     if not pinned:
         return run
-    views = tuple(dataclasses.replace(p, data=dataclasses.replace(p.data, pinned=pinned)) for p in run.logs)
+    # The joint's held check holds those lags (its σ of them is the joint fit's): each view takes it.
+    held = run.checks.plugin("held")
+    views = tuple(
+        dataclasses.replace(
+            p,
+            data=dataclasses.replace(p.data, pinned=pinned),
+            checks=dataclasses.replace(
+                p.checks, more=(*(c for c in p.checks.more if c.name != "held"), *([held] if held else []))
+            ),
+        )
+        for p in run.logs
+    )
     return dataclasses.replace(run, logs=views)
 
 
