@@ -340,19 +340,24 @@ def test_init_drafts_a_scenario_run_accepts_and_that_calibrates(model: str, fmt:
 def _lagging_car(tmp_path: Path, lag_s: float, form: str) -> tuple[Path, rb.Recording]:
     """A simulated bicycle car whose tracker stamps its poses ``lag_s`` late, as a ROS 2 bag or a
     joint log (CSV and TUM)."""
-    from nlp_calib.logs.joint_log import format_joint_csv
-    from nlp_calib.logs.tum import format_tum
-
     rec = rb.record("car_like_bicycle", seconds=60.0, seed=11, latency_s=lag_s)
     if form == "bag":
         return rb.write(rec, tmp_path / "car", "sqlite3"), rec
+    return _written(rec, tmp_path, "car"), rec
+
+
+def _written(rec: rb.Recording, folder: Path, stem: str) -> Path:
+    """``rec`` as a joint log ``stem.csv`` and its tracker's poses ``stem.tum`` in ``folder``."""
+    from nlp_calib.logs.joint_log import format_joint_csv
+    from nlp_calib.logs.tum import format_tum
+
     half = rec.tracker[:, 2] / 2
     zeros = np.zeros(half.size)
     poses = np.column_stack([rec.tracker[:, :2], rec.tracker_z, zeros, zeros, np.sin(half), np.cos(half)])
-    (tmp_path / "car.tum").write_text(format_tum(rec.tracker_ns, poses))
-    joints = tmp_path / "car.csv"
+    (folder / f"{stem}.tum").write_text(format_tum(rec.tracker_ns, poses))
+    joints = folder / f"{stem}.csv"
     joints.write_text(format_joint_csv(rec.joint_ns, rec.joint_names, rec.joints))
-    return joints, rec
+    return joints
 
 
 @pytest.mark.parametrize("form", ["joint_log", "bag"])
@@ -783,17 +788,8 @@ def test_a_wheel_given_as_speeds_is_never_said_to_wrap(tmp_path: Path) -> None:
 
 def _joint_log(folder: Path, model: str, seed: int, seconds: float = 60.0) -> tuple[Path, rb.Recording]:
     """A simulated ``model`` drive as a joint log (CSV and TUM) in ``folder``."""
-    from nlp_calib.logs.joint_log import format_joint_csv
-    from nlp_calib.logs.tum import format_tum
-
     rec = rb.record(model, seconds=seconds, seed=seed)
-    half = rec.tracker[:, 2] / 2
-    zeros = np.zeros(half.size)
-    poses = np.column_stack([rec.tracker[:, :2], rec.tracker_z, zeros, zeros, np.sin(half), np.cos(half)])
-    (folder / "drive.tum").write_text(format_tum(rec.tracker_ns, poses))
-    joints = folder / "drive.csv"
-    joints.write_text(format_joint_csv(rec.joint_ns, rec.joint_names, rec.joints))
-    return joints, rec
+    return _written(rec, folder, "drive"), rec
 
 
 @pytest.mark.parametrize("model", ["skid_steer", "diff_drive"])
