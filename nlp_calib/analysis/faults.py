@@ -206,12 +206,11 @@ def frozen_increments(log: Log, sensor: Sensor, kinds: Mapping[str, EncoderKind]
     # A run goes on while the next increment is still and starts where this one ended.
     still = np.all(motion[own] == 0, axis=1)
     joined = np.concatenate([[False], still[1:] & still[:-1] & (a[1:] == b[:-1])])
+    # Each run from its first still increment (none joined before it) to its last (none after).
     starts = np.flatnonzero(still & ~joined)
+    ends = np.flatnonzero(still & ~np.concatenate([joined[1:], [False]]))
     found = []
-    for k in starts:
-        j = k
-        while j + 1 < own.size and joined[j + 1]:
-            j += 1
+    for k, j in zip(starts, ends):
         first, last = int(a[k]), int(b[j])
         if j - k + 2 >= MIN_STUCK and np.mean(moving[first:last]) >= 0.5:
             why = f"its {j - k + 1} increments read no motion at all, as a frozen reference republishes"
