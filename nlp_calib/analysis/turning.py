@@ -48,12 +48,6 @@ class Turning:
         return self.radius * self.per_heading
 
 
-def _position(log: Log, name: str) -> np.ndarray:
-    if log.joint_positions is not None:
-        return np.asarray(log.joint_position(name), dtype=float)
-    return np.concatenate([[0.0], np.cumsum(log.increments(name))]).astype(float)
-
-
 def _radius(log: Log, wheels: np.ndarray, xy: np.ndarray, heading: np.ndarray) -> float | None:
     """The base's travel per radian of its wheels' mean turning on gentle curves (m)."""
     k = taken(log.time_s, STEP_S)
@@ -74,7 +68,7 @@ def turning(log: Log, model: KinematicModel, track: tuple[np.ndarray, np.ndarray
     if len(counters) != 2:
         return None
     xy, heading = track
-    wheels = np.column_stack([_position(log, n) for n in counters])
+    wheels = np.column_stack([log.running_position(n) for n in counters])
     k = taken(log.time_s, TURN_STEP_S)
     dth = np.diff(heading[k])
     apart = np.diff(wheels[k, 1] - wheels[k, 0])

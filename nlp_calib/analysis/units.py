@@ -84,14 +84,6 @@ PIVOT_TURN = 0.05
 SIGN_STEP_S = 1.0
 
 
-def _positions(log: Log, name: str) -> np.ndarray:
-    """An encoder's running position at the records: the joint's angle (rad), or a counter's
-    unwrapped count."""
-    if log.joint_positions is not None:
-        return np.asarray(log.joint_position(name), dtype=float)
-    return np.concatenate([[0.0], np.cumsum(log.increments(name))]).astype(float)
-
-
 def wrapped(log: Log, model: KinematicModel) -> list[UnitFinding]:
     """Wheels in radians whose angle wraps (see the module docstring)."""
     if log.joint_positions is None:
@@ -215,11 +207,11 @@ def _scales(
     if gentle.sum() < 3:
         return None
     travel = float(np.sum(np.hypot(*np.diff(xy[k], axis=0).T)[gentle]))
-    turned = float(np.mean([np.sum(np.abs(np.diff(_positions(log, n)[k]))[gentle]) for n in counters]))
+    turned = float(np.mean([np.sum(np.abs(np.diff(log.running_position(n)[k]))[gentle]) for n in counters]))
     radius = travel / turned if turned > 0 else np.inf
     agrees = False
     if len(counters) >= 2:
-        apart = np.diff(_positions(log, counters[1])[k] - _positions(log, counters[0])[k])
+        apart = np.diff(log.running_position(counters[1])[k] - log.running_position(counters[0])[k])
         dth = np.diff(heading[k])
         with np.errstate(invalid="ignore", divide="ignore"):
             agrees = bool(abs(np.corrcoef(apart, dth)[0, 1]) >= TURNING_AGREES)
@@ -233,7 +225,7 @@ def _pivoting(log: Log, counters: list[str], xy: np.ndarray, heading: np.ndarray
     if len(counters) < 2:
         return False
     k, gentle = _gentle(log.time_s, xy, heading)
-    a, b = (np.diff(_positions(log, n)[k])[gentle] for n in counters[:2])
+    a, b = (np.diff(log.running_position(n)[k])[gentle] for n in counters[:2])
     return float(np.sum(np.abs(a + b))) < float(np.sum(np.abs(a - b)))
 
 
@@ -280,7 +272,7 @@ def _track_width(log: Log, counters: list[str], radius: float, k: np.ndarray, he
     if len(counters) < 2:
         return float("nan")
     dth = np.diff(heading[k])
-    apart = np.diff(_positions(log, counters[1])[k] - _positions(log, counters[0])[k])
+    apart = np.diff(log.running_position(counters[1])[k] - log.running_position(counters[0])[k])
     scale = float(np.sum(dth * dth))
     return abs(radius * float(np.sum(apart * dth)) / scale) if scale > 0 else float("nan")
 
@@ -355,7 +347,7 @@ def _mirrored(
     dth = np.abs(np.diff(heading[k]))
     gentle = (ds > 1e-3) & (dth < GENTLE_CURVATURE * ds)
     pivot = (dth > PIVOT_TURN) & (ds < PIVOT_RADIUS * dth)
-    steps = {n: np.diff(_positions(log, n)[k]) for n in counters[:2]}
+    steps = {n: np.diff(log.running_position(n)[k]) for n in counters[:2]}
     a, b = steps.values()
     judged = (a != 0) & (b != 0) & np.isfinite(a) & np.isfinite(b) & (gentle | pivot)
     against = judged & ((np.sign(a) != np.sign(b)) == gentle)
@@ -444,7 +436,7 @@ def _speed_columns(log: Log, model: KinematicModel, xy: np.ndarray) -> list[Unit
     # the last one) says nothing of the speed.
     seen = np.any(moved != 0.0, axis=1)
     speed = np.hypot(*moved.T)[seen] / np.diff(log.time_s[k])[seen]
-    columns = np.stack([_positions(log, n) for n in counters])
+    columns = np.stack([log.running_position(n) for n in counters])
     wheels = columns[:, k]
     # A column's mean over each step (by the trapezoid over its records), the speed a speed column
     # says the robot kept there: its two ends' mean is that only where the speed changes slowly.

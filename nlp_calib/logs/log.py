@@ -394,6 +394,13 @@ class Log:
             raise DatasetError(self.path, None, "holds raw encoder counts, not joint positions in radians")
         return self.joint_positions[:, self.header.encoder_index(name)]
 
+    def running_position(self, name: str) -> np.ndarray:
+        """Encoder ``name``'s running position at each record, as float: the joint's angle (rad),
+        or a counter's count unwrapped from the first record's."""
+        if self.joint_positions is not None:
+            return np.asarray(self.joint_position(name), dtype=float)
+        return np.concatenate([[0.0], np.cumsum(self.increments(name))]).astype(float)
+
     def joint_rates(self) -> np.ndarray | None:
         """Each joint's rate (rad/s) at each record, where the encoders are read (None without a
         joint stream)."""

@@ -624,9 +624,7 @@ LAG_MARGIN_S = 0.25
 def _wheel_positions(model: KinematicModel, log: Log) -> np.ndarray:
     """The counters' positions at the records ``(n, k)`` (radians, or counts unwrapped)."""
     names = [n for n, kind in model.encoder_kinds.items() if kind == "counter"]
-    if log.joint_positions is not None:
-        return np.column_stack([log.joint_position(n) for n in names]) if names else np.zeros((0, 0))
-    return np.column_stack([np.concatenate([[0], np.cumsum(log.increments(n))]) for n in names])
+    return np.column_stack([log.running_position(n) for n in names]) if names else np.zeros((0, 0))
 
 
 def lag_search(sc: Scenario, read: tuple[KinematicModel, Log] | None = None) -> tuple[list[float], str]:
