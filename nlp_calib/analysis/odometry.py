@@ -246,13 +246,28 @@ def segment_drift(
     return Drift(*stacked, *where, np.concatenate(reads))
 
 
+#: How many σ of its predicted variance a segment's error may lie out before the moments leave it
+#: out of their fit (5σ: a false alarm in 10⁶ Gaussian errors). A mean of squares is ruled by its
+#: largest: one reference pose the fault checks missed (a tracker that held a stale pose until the
+#: base drove off, then jumped 2.5 rad) made a motion capture's heading noise 88 mrad.
+FAR_OUT = 5.0
+
+
+def weights(y: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """Each squared error's weight ``y`` in a fit of variances: the inverse of its prediction (a
+    χ² with one degree of freedom spreads as its expectation), 0 for one over :data:`FAR_OUT` σ of
+    it. Only the fit leaves such errors out: a share of the segments they hold is still held to
+    the drift they show (the covering steps count every segment)."""
+    floored = np.maximum(predicted, 1e-6 * float(np.max(predicted)))
+    return np.where(y > FAR_OUT**2 * floored, 0.0, 1.0 / floored)
+
+
 def moments(A: np.ndarray, y: np.ndarray, known: np.ndarray, predicted: np.ndarray) -> np.ndarray:
-    """Non-negative variances ``x`` with ``A·x + known ≈ y`` (squared errors): a squared error's
-    spread grows with its expected value (a χ² with one degree of freedom), so each equation is
-    weighted by the inverse of its prediction, refined a few times."""
+    """Non-negative variances ``x`` with ``A·x + known ≈ y`` (squared errors), each equation
+    weighted as :func:`weights` gives (far out ones left out), refined a few times."""
     var = np.zeros(A.shape[1])
     for _ in range(4):
-        w = 1.0 / np.maximum(predicted, 1e-6 * float(np.max(predicted)))
+        w = weights(y, predicted)
         var = nnls_small(A * w[:, None], (y - known) * w)
         predicted = A @ var + known
     return var
@@ -270,7 +285,7 @@ class _Profile:
 
     def __init__(self, A: np.ndarray, y: np.ndarray, n_in: int, predicted: np.ndarray, top: float) -> None:
         self.A, self.y, self.n_in, self.top = A, y, n_in, top
-        self.w = 1.0 / np.maximum(predicted, 1e-6 * float(np.max(predicted)))
+        self.w = weights(y, predicted)
         self.share = 1.0 / np.maximum(np.mean(A[:, :n_in], axis=0), 1e-300)
 
     def fit(self, scale: float, least: np.ndarray) -> np.ndarray:
