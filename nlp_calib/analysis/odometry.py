@@ -256,10 +256,14 @@ FAR_OUT = 5.0
 def weights(y: np.ndarray, predicted: np.ndarray) -> np.ndarray:
     """Each squared error's weight ``y`` in a fit of variances: the inverse of its prediction (a
     χ² with one degree of freedom spreads as its expectation), 0 for one over :data:`FAR_OUT` σ of
-    it. Only the fit leaves such errors out: a share of the segments they hold is still held to
-    the drift they show (the covering steps count every segment)."""
+    it where such errors are a few: no more than the 1 − :data:`COVERED` the covering steps need
+    not hold (more are the drift itself, a model's error: kept). Only the fit leaves them out: the
+    covering steps count every segment."""
     floored = np.maximum(predicted, 1e-6 * float(np.max(predicted)))
-    return np.where(y > FAR_OUT**2 * floored, 0.0, 1.0 / floored)
+    far = y > FAR_OUT**2 * floored
+    if np.count_nonzero(far) > (1.0 - COVERED) * y.size:
+        far[:] = False
+    return np.where(far, 0.0, 1.0 / floored)
 
 
 def moments(A: np.ndarray, y: np.ndarray, known: np.ndarray, predicted: np.ndarray) -> np.ndarray:
