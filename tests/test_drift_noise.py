@@ -47,3 +47,21 @@ def test_a_reference_not_credited_with_heading_noise_leaves_the_heading_to_the_w
     # The heading's errors (the reference's 1e-4 at both ends) are the wheels' now: over 5 intervals
     # at least a share of them.
     assert noise[0] ** 2 > 1e-5, noise
+
+
+def test_a_few_segments_through_a_reference_glitch_do_not_make_its_noise() -> None:
+    """A tracker that held a stale pose until the base drove off and then jumped 2.5 rad (a real
+    skid-steer's motion capture; no fault check flags a stale pose while the wheels stand still)
+    gives the few segments over the jump its size: a mean of squares is ruled by them, so the
+    moments leave out errors over FAR_OUT σ of their fit."""
+    wheel, reference = 1e-6, 1e-6
+    for seed in range(5):
+        drift = _drift(seed, wheel, reference)
+        glitched = drift.errors.copy()
+        glitched[[0, 1, 60, 120], 2] += 2.5  # the segments across the jump, one of each length and two short
+        noise, ref = drift_noise(Drift(glitched, drift.covs, drift.terms), np.array([FLOOR]))
+        clean_noise, clean_ref = drift_noise(drift, np.array([FLOOR]))
+        # The reference's heading variance is the clean segments' (not 2.5² spread over 180 segments:
+        # 0.1 rad², 10^5 times it), and the wheels' noise too.
+        assert ref[1] < 3 * max(clean_ref[1], reference), (ref, clean_ref)
+        assert noise[0] ** 2 < 3 * clean_noise[0] ** 2, (noise, clean_noise)

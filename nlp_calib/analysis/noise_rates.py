@@ -35,6 +35,7 @@ from nlp_calib.analysis.odometry import (
     moments,
     propagate,
     readings_covariance,
+    weights,
 )
 from nlp_calib.analysis.pivots import pivot_intervals
 from nlp_calib.analysis.uncertainty import nnls_small
@@ -272,6 +273,9 @@ def segment_rates(
     var, bias = np.zeros(A.shape[1]), np.zeros(B.shape[1])
     for _ in range(3):
         w = 1.0 / np.sqrt(np.maximum(predicted, 1e-12 * float(np.max(predicted))))
+        # An error far out of the last fit (a reference's glitch) is left out of the regression
+        # as the moments leave it out: its square would rule both.
+        w = np.where(weights((e - B @ bias) ** 2, predicted) > 0, w, 0.0)
         bias = np.linalg.lstsq(B * w[:, None], e * w, rcond=None)[0]
         var = moments(A / scale, (e - B @ bias) ** 2, k, predicted) / scale
         predicted = A @ var + k

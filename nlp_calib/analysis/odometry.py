@@ -246,13 +246,34 @@ def segment_drift(
     return Drift(*stacked, *where, np.concatenate(reads))
 
 
-def moments(A: np.ndarray, y: np.ndarray, known: np.ndarray, predicted: np.ndarray) -> np.ndarray:
-    """Non-negative variances ``x`` with ``A·x + known ≈ y`` (squared errors): a squared error's
-    spread grows with its expected value (a χ² with one degree of freedom), so each equation is
-    weighted by the inverse of its prediction, refined a few times."""
+#: How many σ of its predicted variance a segment's error may lie out before the moments leave it
+#: out of their fit (5σ: a false alarm in 10⁶ Gaussian errors). A mean of squares is ruled by its
+#: largest: one reference pose the fault checks missed (a tracker that held a stale pose until the
+#: base drove off, then jumped 2.5 rad) made a motion capture's heading noise 88 mrad.
+FAR_OUT = 5.0
+
+
+def weights(y: np.ndarray, predicted: np.ndarray, far_out: float | None = FAR_OUT) -> np.ndarray:
+    """Each squared error's weight ``y`` in a fit of variances: the inverse of its prediction (a
+    χ² with one degree of freedom spreads as its expectation), 0 for one over ``far_out`` σ of
+    it where such errors are a few: no more than the 1 − :data:`COVERED` the covering steps need
+    not hold (more are the drift itself, a model's error: kept; None: none left out). Only the fit
+    leaves them out: the covering steps count every segment."""
+    floored = np.maximum(predicted, 1e-6 * float(np.max(predicted)))
+    far = y > (np.inf if far_out is None else far_out**2) * floored
+    if np.count_nonzero(far) > (1.0 - COVERED) * y.size:
+        far[:] = False
+    return np.where(far, 0.0, 1.0 / floored)
+
+
+def moments(
+    A: np.ndarray, y: np.ndarray, known: np.ndarray, predicted: np.ndarray, far_out: float | None = FAR_OUT
+) -> np.ndarray:
+    """Non-negative variances ``x`` with ``A·x + known ≈ y`` (squared errors), each equation
+    weighted as :func:`weights` gives (far out ones left out), refined a few times."""
     var = np.zeros(A.shape[1])
     for _ in range(4):
-        w = 1.0 / np.maximum(predicted, 1e-6 * float(np.max(predicted)))
+        w = weights(y, predicted, far_out)
         var = nnls_small(A * w[:, None], (y - known) * w)
         predicted = A @ var + known
     return var
@@ -268,9 +289,17 @@ class _Profile:
     share of the predicted drift), the reference's refitted, in the variances of the best fit's
     predictions; ``y``: the squared errors less what the readings' known noise explains."""
 
-    def __init__(self, A: np.ndarray, y: np.ndarray, n_in: int, predicted: np.ndarray, top: float) -> None:
+    def __init__(
+        self,
+        A: np.ndarray,
+        y: np.ndarray,
+        n_in: int,
+        predicted: np.ndarray,
+        top: float,
+        far_out: float | None,
+    ) -> None:
         self.A, self.y, self.n_in, self.top = A, y, n_in, top
-        self.w = 1.0 / np.maximum(predicted, 1e-6 * float(np.max(predicted)))
+        self.w = weights(y, predicted, far_out)
         self.share = 1.0 / np.maximum(np.mean(A[:, :n_in], axis=0), 1e-300)
 
     def fit(self, scale: float, least: np.ndarray) -> np.ndarray:
@@ -307,7 +336,10 @@ def _diagonals(C: np.ndarray) -> np.ndarray:
 
 
 def drift_noise(
-    drift: Drift, floor: np.ndarray, credited: tuple[bool, bool] = (True, True)
+    drift: Drift,
+    floor: np.ndarray,
+    credited: tuple[bool, bool] = (True, True),
+    far_out: float | None = FAR_OUT,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each input's 1σ noise per interval whose propagated covariance (a random walk: slip,
     jitter) explains the observed drift beside the readings' own noise ``floor`` (the encoders'
@@ -318,7 +350,8 @@ def drift_noise(
     so the best fit's split is unstable (a drift under the reference's noise goes either way); the
     inputs get the largest noise the segments allow (within :data:`ALLOWED` of the best fit's
     misfit), at least the best fit's: a filter must not trust the wheels beyond what the data show
-    of them. An input with no floor is exact (an interval's duration) and keeps no noise."""
+    of them. An input with no floor is exact (an interval's duration) and keeps no noise.
+    ``far_out``: the errors the moments leave out (:func:`weights`; None: none)."""
     floor = np.asarray(floor, dtype=float)
     noisy = floor > 0
     n_in = int(noisy.sum())
@@ -330,9 +363,9 @@ def drift_noise(
     y = np.concatenate([errors[:, c] ** 2 for c in range(3)])
     known = _diagonals(drift.known(floor))
     start = np.repeat([max(float(np.mean(errors[:, c] ** 2)), 1e-300) for c in range(3)], len(errors))
-    point = moments(A, y, known, start)
+    point = moments(A, y, known, start, far_out)
     predicted = np.maximum(A @ point + known, 1e-300)
-    var = _largest(_Profile(A, y - known, n_in, predicted, float(np.mean(y))), point[:n_in])
+    var = _largest(_Profile(A, y - known, n_in, predicted, float(np.mean(y)), far_out), point[:n_in])
     noise = np.zeros_like(floor)
     noise[noisy] = np.sqrt(var[:n_in])
     reference = np.zeros(2)

@@ -566,7 +566,8 @@ class Drift:
     """A log's odometry against the base poses the tracker implies over its first ``records``
     used records: the inputs, those poses, the segments' drift, each input's noise per interval
     (with the reference's own variances) that explains it, and what the joints' own noise gives
-    each input per interval (:func:`~nlp_calib.analysis.jitter.input_jitter`)."""
+    each input per interval (:func:`~nlp_calib.analysis.jitter.input_jitter`); ``whole``: the
+    noise fitted with no segment left out, which judges whether the model explains the motion."""
 
     inputs: np.ndarray
     reference: np.ndarray
@@ -574,6 +575,12 @@ class Drift:
     noise: np.ndarray
     reference_var: np.ndarray
     jitter: np.ndarray
+    whole: np.ndarray
+
+    def beyond(self) -> tuple[int, ...]:
+        """The inputs whose noise per interval, fitted on every segment, reaches their own motion's
+        scale (:func:`~nlp_calib.analysis.odometry.beyond_motion`)."""
+        return beyond_motion(self.inputs, self.whole)
 
 
 def calibrated_drift(
@@ -604,8 +611,12 @@ def calibrated_drift(
     credited = (True, windows.data.increment is None)
     noise, reference_var = drift_noise(drift, floor, credited)
     noise = covering_noise(drift, noise, floor, reference_var)
+    # The errors the moments leave out (a reference's glitch) may instead be the model's own,
+    # as large as the motion: whether the noise reaches that is judged with every segment in.
+    whole, whole_var = drift_noise(drift, floor, credited, far_out=None)
+    whole = covering_noise(drift, whole, floor, whole_var)
     jitter = input_jitter(windows.binder.fns.model, sel, steering_sample)
-    return Drift(inputs, reference, drift, noise, reference_var, jitter)
+    return Drift(inputs, reference, drift, noise, reference_var, jitter, whole)
 
 
 def noise_model(
@@ -645,8 +656,8 @@ def odometry(
     reference = over_columns(fit.fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
     n = inputs.shape[1]
     names = fit.fns.model.input_names
-    beyond = beyond_motion(d.inputs, d.noise)
-    why = beyond_motion_words(names, fit.fns.model.input_units, d.noise, beyond) if beyond else ""
+    beyond = d.beyond()
+    why = beyond_motion_words(names, fit.fns.model.input_units, d.whole, beyond) if beyond else ""
     cov = np.full((n + 1, 3, 3), np.nan)
     if not why:
         spans = np.c_[np.zeros(n, dtype=int), np.arange(1, n + 1)]
@@ -677,7 +688,7 @@ def handoff_noise(
     if not fit.fns.sensor.planar_base:
         return None, None
     d, rates = noise_model(fit, windows, params, steering_sample)
-    if beyond_motion(d.inputs, d.noise):
+    if d.beyond():
         return None, None  # the hand-off then says the drift does not determine the noise
     walk = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
