@@ -691,7 +691,8 @@ def _way_out(
     weak = [s for s in statuses if s.name in loose and np.isfinite(s.std_reference)]
     if not undetermined and weak:
         worst = max(weak, key=lambda s: s.std_reference)
-        undetermined = [worst.name, *(n for n in worst.trades_with if n in loose)]
+        group = {worst.name, *worst.trades_with}
+        undetermined = [s.name for s in statuses if s.name in loose and s.name in group]
     return way_out(undetermined or loose, fns.model, fns.layout, fns.sensor, values, turns_both_ways(ex))
 
 
