@@ -407,6 +407,70 @@ def test_init_widens_the_lag_search_to_the_lag_the_data_show(tmp_path: Path) -> 
         assert "agree best 8" in d.text
 
 
+def _slowing_car(seed: int, lag_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A car at 15 m/s that slows by up to 4 m/s into its bends (turn rates up to 0.15 rad/s, of
+    10-60 s periods) over 400 s at 10 Hz, its reference stamped ``lag_s`` late: the records' times,
+    the wheel's position (a wheel of 1 m) and the reference's track (x, y, heading)."""
+    rng = np.random.default_rng(seed)
+    dt = 0.1
+    t = np.arange(0.0, 400.0, dt)
+    w = sum(rng.normal() * np.sin(2 * np.pi * t / p + rng.uniform(0, 6)) for p in rng.uniform(10, 60, 6))
+    w = 0.15 * w / np.abs(w).max()
+    v = 15.0 - 4.0 * np.abs(w) / 0.15
+    th = np.cumsum(w * dt)
+    xy = np.column_stack([np.cumsum(v * np.cos(th) * dt), np.cumsum(v * np.sin(th) * dt)])
+    track = np.column_stack([np.interp(t - lag_s, t, c) for c in (*xy.T, th)])
+    return t, np.cumsum(v * dt)[:, None], track
+
+
+def test_a_car_that_slows_into_its_bends_shows_no_coarse_lag_at_the_edge_of_the_reach() -> None:
+    """The wheels' speed falls as the reference's turning rises: every lag correlates negatively,
+    best at an edge of the ±2 s looked at. No lag is shown there (the real car around Monza: 'agree
+    best 2000 ms apart', and the draft searched [-0.5, 2.3] s for a 45 ms lag); with the stamps
+    the same bends, a lag of 0.8 s that a drive changing its speed every 8 s shows is still shown."""
+    from nlp_calib.analysis.lag_screen import REACH_S, coarse_lag, shown_lag, unshown
+
+    for seed in range(4):
+        found = coarse_lag(*_slowing_car(seed, 0.05))
+        assert found is not None and abs(found[0]) == REACH_S and found[1] < 0, found
+        assert shown_lag(found) is None and "never rise and fall together" in unshown(found), found
+    t, _, track = _slowing_car(0, 0.0)
+    rng = np.random.default_rng(5)
+    v = 10.0 + 5.0 * np.sin(2 * np.pi * t / 8.0 + 1.0) + rng.normal(0.0, 0.05, t.size)
+    lag = shown_lag(coarse_lag(t, np.cumsum(v * 0.1)[:, None], _track_at(t, v, track[:, 2], 0.8)))
+    assert lag is not None and abs(lag - 0.8) <= 0.1, lag
+
+
+def _track_at(t: np.ndarray, v: np.ndarray, heading: np.ndarray, lag_s: float) -> np.ndarray:
+    """The track driven at speeds ``v`` along ``heading``, stamped ``lag_s`` late."""
+    dt = np.diff(t, prepend=t[0] - (t[1] - t[0]))
+    xy = np.column_stack([np.cumsum(v * np.cos(heading) * dt), np.cumsum(v * np.sin(heading) * dt)])
+    return np.column_stack([np.interp(t - lag_s, t, c) for c in (*xy.T, heading)])
+
+
+def test_init_with_a_model_reads_the_one_joint_no_name_gives_and_refuses_where_two_are_left(
+    tmp_path: Path,
+) -> None:
+    """A converter's columns (a steering wheel's and a speedometer's, ``speed``): no name gives the
+    car's wheel joint, but with --model the one joint left is the one encoder left's, and the draft
+    says so (before: refused, its message telling to give --model and edit a draft never written);
+    a differential drive's two unnamed wheels are refused (which is the left one?)."""
+    from nlp_calib.core.errors import UsageError
+    from nlp_calib.pipeline.draft import draft
+
+    rec = rb.record("car_like_bicycle", seconds=30.0, seed=11)
+    renamed = dataclasses.replace(rec, joint_names=("steering_wheel", "speed"))
+    joints = _written(renamed, tmp_path, "car")
+    d = draft(joints, tmp_path / "car.yaml", "car_like_bicycle")
+    assert list(d.raw["dataset"]["encoders"].values()) == ["steering_wheel", "speed"]
+    assert "no name says so of speed" in d.text
+    with pytest.raises(UsageError, match="give --model"):
+        draft(joints, tmp_path / "any.yaml")
+    two = dataclasses.replace(rb.record("diff_drive", seconds=10.0, seed=3), joint_names=("a", "b"))
+    with pytest.raises(UsageError, match="give the encoders' joints in the scenario"):
+        draft(_written(two, tmp_path, "two"), tmp_path / "two.yaml", "diff_drive")
+
+
 def test_the_preflight_reads_a_bag_as_init_would_draft_it(tmp_path: Path) -> None:
     rec = rb.record("diff_drive", seconds=20.0, seed=8)
     bag = rb.write(rec, tmp_path / "drive", "sqlite3")

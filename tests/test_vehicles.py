@@ -1018,6 +1018,14 @@ def test_a_refusals_way_out_addresses_its_own_reason_and_its_plan_is_one_sentenc
     said = _way_out(fns, found, ["k_steer", "tracker_lag"], {}, both)  # type: ignore[arg-type]
     assert "give the lag" not in said and "(known: {k_steer: <value>})" in said, said
     assert _way_out(fns, found[1:], ["tracker_lag"], {}, both).startswith("next: give the lag")  # type: ignore[arg-type]
+    # Only weakly determined, the loosest and what it trades with: the real car around Monza, drafted
+    # by init, had its steering gain and wheelbase at 119× and 124×, the lag at 53×: the advice gave
+    # the lag only.
+    weak = [ParameterStatus("k_steer", WEAKLY, 0.28, 119.0, 0.0023, "1", ("wheelbase",), "")]
+    weak.append(ParameterStatus("wheelbase", WEAKLY, 17.0, 124.0, 0.13, "m", ("k_steer",), ""))
+    weak.append(ParameterStatus("tracker_lag", WEAKLY, 0.007, 53.0, 1e-4, "s", (), ""))
+    said = _way_out(fns, weak, ["k_steer", "wheelbase", "tracker_lag"], {}, both)  # type: ignore[arg-type]
+    assert "give the lag" not in said and "(known: {wheelbase: <value>})" in said, said
     where = "the initial guess, fitted to convergence on the windows judged"
     line = Plan("k_steer", "1", 50.0, 0.2, where, ()).line()
     assert line == f"no manoeuvre considered lowers the σ of k_steer (the model evaluated at {where})"

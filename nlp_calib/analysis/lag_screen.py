@@ -5,7 +5,8 @@ and the reference's (its track's speed and turn rate over the same span, each in
 RMS, summed) rise and fall together with the drive's starts, stops and bends, whatever the
 wheels' radii, signs or units; the reference's, stamped ``lag`` late, follows the wheels' by that
 much. The lag at which they correlate best over ±:data:`REACH_S` is the data's coarse lag when
-it correlates clearly better than the stamps as logged do (:data:`CLEARER`): what ``init``
+it is a peak inside that reach, the correlation there positive, and clearly better than the
+stamps' as logged (:data:`CLEARER`; :func:`unshown`): what ``init``
 drafts ``alignment.search`` to hold (the fit then finds it to its σ). A drive whose speed changes
 slowly (circles at one speed) correlates alike over a second of lags and shows none.
 """
@@ -92,9 +93,24 @@ def coarse_lag(
     return float(lags[best]), float(scores[best]), float(scores[steps])
 
 
-def shown_lag(found: tuple[float, float, float] | None) -> float | None:
-    """The coarse lag of :func:`coarse_lag`'s ``found`` where the data show it (it correlates
-    :data:`CLEARER` better than the stamps as logged), else None."""
-    if found is None or not found[1] - found[2] >= CLEARER:
-        return None
-    return found[0]
+def shown_lag(found: tuple[float, float, float] | None, reach_s: float = REACH_S) -> float | None:
+    """The coarse lag of :func:`coarse_lag`'s ``found`` (over ±``reach_s``) where the data show it,
+    else None (:func:`unshown` says why)."""
+    return None if found is None or unshown(found, reach_s) else found[0]
+
+
+def unshown(found: tuple[float, float, float], reach_s: float = REACH_S) -> str:
+    """Why :func:`coarse_lag`'s ``found`` shows no lag, in words ("": it shows one). The best lag
+    must be a peak inside the reach (at its edge the correlation still rises beyond: a slow drift,
+    not a lag), the speeds must rise and fall together there (a car that slows into its bends
+    makes the wheels' speed fall as the reference's turning rises: a negative correlation, best
+    at whichever edge it drifts to), and it must correlate :data:`CLEARER` better than the stamps
+    as logged."""
+    lag, best, logged = found
+    if not best > 0:
+        return f"they never rise and fall together (correlation {best:.2f} at best)"
+    if abs(lag) > reach_s - 0.5 * STEP_S:
+        return f"their correlation still rises at the edge of ±{reach_s:g} s: no peak, no lag"
+    if not best - logged >= CLEARER:
+        return "hardly better than as stamped (a drive whose speed changes slowly tells lags apart poorly)"
+    return ""

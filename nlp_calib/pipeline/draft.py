@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from nlp_calib.analysis.lag_screen import REACH_S, coarse_lag, shown_lag
+from nlp_calib.analysis.lag_screen import REACH_S, coarse_lag, shown_lag, unshown
 from nlp_calib.analysis.turning import TURN_STEP_S, Turning, turning
 from nlp_calib.analysis.units import findings
 from nlp_calib.core import poses3d
@@ -119,10 +119,19 @@ def _words(name: str) -> set[str]:
     return {w for w in re.split(r"[^a-z0-9]+", name.lower()) if w}
 
 
-def assign(model_name: str, joints: Sequence[str]) -> dict[str, str] | None:
+def assign(model_name: str, joints: Sequence[str], eliminate: bool = False) -> dict[str, str] | None:
     """Each of the model's encoders' joint by name (see the module docstring); None when some
-    encoder finds none of its own."""
+    encoder finds none of its own. ``eliminate`` (the model given): an encoder no name gives a joint
+    takes the one joint of its kind left (:func:`_eliminated`)."""
     model = MODELS[model_name]
+    named = by_name(model, joints)
+    if len(named) == len(encoders(model)):
+        return named
+    return _eliminated(model, joints, named) if eliminate else None
+
+
+def by_name(model: KinematicModel, joints: Sequence[str]) -> dict[str, str]:
+    """The model's encoders whose joint a name gives (see the module docstring), each with it."""
     # A steering encoder reads a steering joint (where any is named so), a wheel one never does.
     steer = [j for j in joints if "steer" in j.lower()]
     out: dict[str, str] = {}
@@ -141,10 +150,35 @@ def assign(model_name: str, joints: Sequence[str]) -> dict[str, str] | None:
             match = free if steer else []
         if not match and kind == "counter":
             match = [j for j in free if any(w in j.lower() for w in WHEEL_WORDS)]
-        if not match:
-            return None
-        out[encoder] = match[0]
+        if match:
+            out[encoder] = match[0]
     return out
+
+
+def _eliminated(model: KinematicModel, joints: Sequence[str], named: dict[str, str]) -> dict[str, str] | None:
+    """``named`` with each encoder it lacks given the one joint of its kind left: an angle encoder
+    (``absolute``) a joint named steer… (the joint left, where it is the only encoder left), a
+    wheel one a joint not so named; None where the joints left are not one per encoder lacking
+    one, one of each kind (two unnamed wheels: which is the left one?). A converter's columns
+    (``speed``) need not carry a wheel's words, but a given model leaves no choice there."""
+    missing = [e for e in encoders(model) if e not in named]
+    left = [j for j in joints if j not in named.values()]
+    if len(left) != len(missing):
+        return None
+    out = dict(named)
+    for encoder in missing:
+        kind = model.encoder_kinds[encoder]
+        same = [e for e in missing if model.encoder_kinds[e] == kind]
+        steer = [j for j in left if "steer" in j.lower()]
+        ours = (
+            (steer or left[: len(missing) == 1])
+            if kind == "absolute"
+            else [j for j in left if j not in steer]
+        )
+        if len(same) != 1 or len(ours) != 1:
+            return None
+        out[encoder] = ours[0]
+    return {e: out[e] for e in encoders(model)}
 
 
 def guess_model(
@@ -156,12 +190,18 @@ def guess_model(
     drive's motion says (``cornering``: see :func:`_by_motion`), else the first registered; a steer
     joint is read by a steered model where one fits."""
     names = [model] if model is not None else list(MODELS)
-    fits = {m: a for m in names if (a := assign(m, joints)) is not None}
+    fits = {m: a for m in names if (a := assign(m, joints, model is not None)) is not None}
     if not fits:
         given = f"model {model}'s encoders ({', '.join(encoders(MODELS[model]))})" if model else "any model"
+        way = (
+            "give the encoders' joints in the scenario"
+            if model
+            else "give --model (a joint no name gives is read by the one encoder of its kind left), or give "
+            "the encoders' joints in the scenario"
+        )
         raise UsageError(
-            f"the joints {', '.join(joints) or '(none)'} do not name the joints of {given}; give --model and "
-            "edit the drafted joints, or name the joints in the scenario (docs/bags.md)"
+            f"the joints {', '.join(joints) or '(none)'} do not name the joints of {given}; {way} "
+            "(docs/bags.md)"
         )
     # A steering joint is read by a steered model where one fits (never a differential drive's).
     if any("steer" in j.lower() for j in joints) and not model:
@@ -172,6 +212,9 @@ def guess_model(
     pairs = ", ".join(f"{e}: {j}" for e, j in fits[chosen].items())
     others = [m for m in fits if m != chosen]
     why = f"{'given' if model else 'the joint names fit it'} ({pairs})"
+    named = by_name(MODELS[chosen], joints)
+    if guessed := [f"{j} ({e})" for e, j in fits[chosen].items() if named.get(e) != j]:
+        why += f"; no name says so of {', '.join(guessed)}: the one joint of its kind left, check it"
     if not model and len(fits[chosen]) < len(joints):
         unread = [j for j in joints if j not in fits[chosen].values()]
         why += f"; it reads the most of them ({', '.join(unread)} left unread)"
@@ -645,8 +688,8 @@ def lag_search(sc: Scenario, read: tuple[KinematicModel, Log] | None = None) -> 
         return [lo, hi], f"{default}: {speeds} show no lag (one of them never moves)"
     if lag is None:
         return [lo, hi], (
-            f"{default}: {speeds} agree best {1e3 * found[0]:.0f} ms apart (within ±{REACH_S:g} s), hardly "
-            "better than as stamped (a drive whose speed changes slowly tells lags apart poorly)"
+            f"{default}: {speeds} show no lag within ±{REACH_S:g} s (best {1e3 * found[0]:.0f} ms apart): "
+            f"{unshown(found)}"
         )
     shown = f"{speeds} agree best {1e3 * lag:.0f} ms apart (within ±{REACH_S:g} s)"
     if lo + LAG_MARGIN_S <= lag <= hi - LAG_MARGIN_S:

@@ -683,10 +683,16 @@ def _way_out(
     ex: Excitation | None,
 ) -> str:
     """The way out for the loose parameters the verdict refuses for: those not determined when any
-    is (a weakly determined lag beside them would turn the advice to the clocks), else the weakly
-    determined ones; on a drive that already turns both ways (:func:`turns_both_ways`), not "turn
-    more"."""
+    is (a weakly determined lag beside them would turn the advice to the clocks), else the loosest
+    weakly determined one (its σ over the precision it needs) and those it trades off with (a lag
+    at 53× beside a car's steering gain and wheelbase at 120× had the advice give the lag only); on
+    a drive that already turns both ways (:func:`turns_both_ways`), not "turn more"."""
     undetermined = [s.name for s in statuses if s.name in loose and s.status == NOT_DETERMINED]
+    weak = [s for s in statuses if s.name in loose and np.isfinite(s.std_reference)]
+    if not undetermined and weak:
+        worst = max(weak, key=lambda s: s.std_reference)
+        group = {worst.name, *worst.trades_with}
+        undetermined = [s.name for s in statuses if s.name in loose and s.name in group]
     return way_out(undetermined or loose, fns.model, fns.layout, fns.sensor, values, turns_both_ways(ex))
 
 
