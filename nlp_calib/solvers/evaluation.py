@@ -203,11 +203,12 @@ class _Kept(Generic[V]):
 @dataclass
 class _Last:
     """What was evaluated at recent points, keyed by the point's bytes (an evaluation is a function
-    of the point and the bound data alone: the same bits again): normal equations and costs, kept
-    when the buffers are released; the last point's exact derivatives; the last point's residual
-    terms, views of the bound buffers, dropped with them. All dropped when the windows or their
-    inputs change (``weighted_chi2`` too: it outlives the residual terms' buffers). ``told``: normal equations known otherwise (:meth:`ProblemEvaluator.remember`),
-    until the next evaluation, as an evaluated point's are kept."""
+    of the point and the bound data alone: the same bits again): normal equations, costs and the
+    residual terms' weighted χ², kept when the buffers are released; the last point's exact
+    derivatives; the last point's residual terms, views of the bound buffers, dropped with them.
+    All dropped when the windows or their inputs change. ``told``: normal equations known
+    otherwise (:meth:`ProblemEvaluator.remember`), until the next evaluation, as an evaluated
+    point's are kept."""
 
     normal_equations: _Kept[NormalEquations] = field(default_factory=_Kept)
     told: tuple[bytes, NormalEquations] | None = None
