@@ -236,6 +236,50 @@ def test_an_evaluator_keeps_what_it_evaluated_at_recent_points_to_the_bit(small_
     assert ev.calls["normal_equations"] == 11 and ev.calls["cost"] == 10
 
 
+def test_ipopt_takes_its_cost_and_gradient_at_a_point_from_one_pass(small_demo: Scenario) -> None:
+    """IPOPT asks for the cost at a trial point and, accepting it, for the gradient there: with the
+    Gauss-Newton Hessian the normal equations answer both, so no cost-only pass is made but the
+    start's check (a cost pass and a normal-equations pass per iteration before)."""
+    cal = Calibration(small_demo)
+    ev = _counted(cal.evaluator)
+    res = cal.fitting.solver("ipopt").solve(cal.x0, cal.start.lower, cal.start.upper)
+    assert res.converged and res.trace.iterations >= 3
+    assert ev.calls.get("cost", 0) == 1
+    # Every point IPOPT asked for once: its start's and one per accepted or rejected trial.
+    assert ev.calls["normal_equations"] <= len(res.trace.history) + 1
+    # The result's cost is the normal equations' at its estimate, as an evaluator that never saw
+    # IPOPT's points gives it.
+    assert res.cost == Calibration(small_demo).evaluator.normal_equations(res.x).cost
+
+
+def test_the_estimate_is_evaluated_where_it_is_reported_and_the_analyses_evaluate_it_once(
+    small_demo: Scenario,
+) -> None:
+    """A solver's estimate moved by the inputs' bias step is reported in the canonical form (an
+    angle wrapped moves its last bits): its cost is the normal equations' there, which the
+    observability, the uncertainty and the plan then take without a pass over the windows but
+    the residual terms' one; the plan's residual variance is the observability's, after the
+    uncertainty let the residual terms' buffers go."""
+    from nlp_calib.analysis.observability import analyse
+    from nlp_calib.pipeline.analyse import plan_setting, uncertainties
+
+    cal = Calibration(small_demo)
+    fit, twin = cal.fitting, Calibration(small_demo).evaluator
+    res = fit.solve("gauss_newton")
+    assert res.converged and fit.bias_taken()
+    fresh = twin.normal_equations(res.x)
+    assert (res.cost, res.chi2, res.inliers) == (fresh.cost, fresh.chi2, fresh.inliers)
+    ev = _counted(fit.evaluator)
+    analyse(ev, res.x, cal.data.T_world_sensor)
+    uncertainties(fit, {"gauss_newton": res}, fit.noise, None)  # type: ignore[arg-type]
+    setting = plan_setting(fit, {"gauss_newton": res}, {})
+    assert setting is not None
+    assert ev.calls.get("normal_equations", 0) == 0 and ev.calls["robust_terms"] == 1
+    _, s, weight = twin.robust_terms(res.x)
+    dof = fit.fns.error_rows * twin.n_residuals - fit.fns.n_free
+    assert setting.sigma2 == float(np.sum(weight * s)) / dof
+
+
 class _HuberLocation:
     """A location's Huber M-estimate (δ = 1) from 20 readings near 0 and 60 far off: most residuals
     past the kernel's threshold, where the reweighted normal equations lack the curvature of the

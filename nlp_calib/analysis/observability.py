@@ -71,9 +71,8 @@ def analyse(
             heading_range_rad=float(np.ptp(heading)),
             warnings=("observability not analysed: the residual is NaN or infinite at every estimate",),
         )
-    _, s, weight = evaluator.robust_terms(x)
     dof = max(fns.error_rows * evaluator.n_residuals - len(names), 1)
-    sigma2 = max(float(np.sum(weight * s)) / dof, 1e-300)
+    sigma2 = max(evaluator.weighted_chi2(x) / dof, 1e-300)
     params = np.asarray(fns.assemble(x, evaluator.x_fixed)).ravel()
     value = dict(zip(fns.names, params))
     values = np.array([value[n] for n in names])

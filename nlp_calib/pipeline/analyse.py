@@ -386,8 +386,9 @@ def plan_setting(fit: Fit, results: Mapping[str, SolverResult], units: Mapping[s
     ne = ev.normal_equations(x)
     if not (np.isfinite(ne.cost) and np.all(np.isfinite(ne.H))):
         return None
-    _, s, weight = ev.robust_terms(x)
-    sigma2 = max(float(np.sum(weight * s)) / max(fns.error_rows * ev.n_residuals - fns.n_free, 1), 1e-300)
+    # Kept from the observability's evaluation at the same estimate (its residuals' buffers are
+    # let go of by then): no pass over the windows.
+    sigma2 = max(ev.weighted_chi2(x) / max(fns.error_rows * ev.n_residuals - fns.n_free, 1), 1e-300)
     info = Information(ne.H, ev.n_residuals, motion_scale(fns, data.z, ev.omega), ne.g, ne.chi2, sigma2)
     sc = fit.problem.binder.scenario
     ranges = unc.range_std(start.lower, start.upper, fns.n_free)

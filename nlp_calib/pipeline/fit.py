@@ -66,11 +66,14 @@ class Fit:
         result = self.solver(name).solve(x0, start.lower, start.upper)
         interrupts.check()  # IPOPT catches the signal that stops it and returns as if it had failed
         refuse_rejected_options(self.problem.binder.scenario, result)
-        return self.canonical(self.unbiased(dataclasses.replace(result, solver=name)))
+        result = dataclasses.replace(result, solver=name)
+        moved = self.unbiased(result)
+        return self.canonical(result) if moved is result else moved
 
     def unbiased(self, result: SolverResult) -> SolverResult:
         """A converged ``result`` moved by the step that removes the inputs' noise bias, within
-        the bounds (errors in variables: :mod:`nlp_calib.analysis.inputs_bias`)."""
+        the bounds (errors in variables: :mod:`nlp_calib.analysis.inputs_bias`), in the canonical
+        form; ``result`` itself where no step is taken."""
         if self.noise is None or not result.converged:
             return result
         ev, start = self.evaluator, self.problem.start
@@ -84,10 +87,11 @@ class Fit:
         x = ev.boxplus(result.x, known[0].step)
         if start.lower is not None and start.upper is not None:
             x = np.clip(x, start.lower, start.upper)
-        ne = ev.normal_equations(x)
-        return dataclasses.replace(
-            result, x=x, params=ev.params(x), cost=ne.cost, chi2=ne.chi2, inliers=ne.inliers
-        )
+        moved = self.canonical(dataclasses.replace(result, x=x, params=ev.params(x)))
+        # Evaluated at the estimate as reported (its canonical form, where wrapping an angle moves
+        # its last bits), where the analyses evaluate the normal equations again: one pass, not two.
+        ne = ev.normal_equations(moved.x)
+        return dataclasses.replace(moved, cost=ne.cost, chi2=ne.chi2, inliers=ne.inliers)
 
     def bias_taken(self) -> dict[str, float]:
         """The inputs' bias step this fit took, per free coordinate (empty: none)."""

@@ -203,15 +203,17 @@ class _Kept(Generic[V]):
 @dataclass
 class _Last:
     """What was evaluated at recent points, keyed by the point's bytes (an evaluation is a function
-    of the point and the bound data alone: the same bits again): normal equations and costs, kept
-    when the buffers are released; the last point's exact derivatives; the last point's residual
-    terms, views of the bound buffers, dropped with them. All dropped when the windows or their
-    inputs change. ``told``: normal equations known otherwise (:meth:`ProblemEvaluator.remember`),
-    until the next evaluation, as an evaluated point's are kept."""
+    of the point and the bound data alone: the same bits again): normal equations, costs and the
+    residual terms' weighted χ², kept when the buffers are released; the last point's exact
+    derivatives; the last point's residual terms, views of the bound buffers, dropped with them.
+    All dropped when the windows or their inputs change. ``told``: normal equations known
+    otherwise (:meth:`ProblemEvaluator.remember`), until the next evaluation, as an evaluated
+    point's are kept."""
 
     normal_equations: _Kept[NormalEquations] = field(default_factory=_Kept)
     told: tuple[bytes, NormalEquations] | None = None
     costs: _Kept[float] = field(default_factory=_Kept)
+    weighted_chi2: _Kept[float] = field(default_factory=_Kept)
     derivatives: tuple[bytes, tuple[float, np.ndarray, np.ndarray]] | None = None
     residuals: tuple[bytes, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] | None = None
 
@@ -432,6 +434,19 @@ class ProblemEvaluator:
         )
         self._last.residuals = (key, out)
         return out
+
+    def weighted_chi2(self, x: np.ndarray) -> float:
+        """``Σ ρ'(s)·s`` over the windows at ``x`` (of :meth:`robust_terms`): the residuals' variance
+        times their degrees of freedom, as the observability and the plan take it. Kept per point,
+        where the residual terms' buffers are let go of after the uncertainty's use."""
+        key = np.asarray(x, dtype=float).tobytes()
+        kept = self._last.weighted_chi2.get(key)
+        if kept is not None:
+            return kept
+        _, s, weight = self.robust_terms(x)
+        value = float(np.sum(weight * s))
+        self._last.weighted_chi2.put(key, value)
+        return value
 
     def sensitivities(
         self, x: np.ndarray, windows: np.ndarray | None = None

@@ -2,9 +2,9 @@
 
 IPOPT asks for the cost, its gradient and the Hessian of the Lagrangian at points of its own
 choosing. Each is answered by the evaluator (so the windows' motion is integrated once per point,
-by the same compiled code, and nothing is differentiated again): the cost by ``cost``; the
-gradient and the exact Hessian by ``cost_derivatives``, or the gradient and a Gauss-Newton
-Hessian by the normal equations, mapped from the manifold perturbation to plain coordinates
+by the same compiled code, and nothing is differentiated again): the gradient and the exact
+Hessian by ``cost_derivatives`` (the cost by ``cost``), or the cost, the gradient and a
+Gauss-Newton Hessian by the normal equations, mapped from the manifold perturbation to plain coordinates
 (``J_plain = J·M⁻¹``, ``M = ∂(x ⊞ Δ)/∂Δ``): ``∇f = 2·M⁻ᵀg`` and ``∇²f ≈ 2·M⁻ᵀHM⁻¹`` (exact for
 the priors). For Huber, the lifted form ``min Σ v·s + δ²(1/v − 1)`` over ``(x, v)`` adds one
 variable per residual.
@@ -123,6 +123,11 @@ class NlpOracle:
         return np.linalg.inv(self.ev.tangent_map(x))
 
     def _f(self, v: np.ndarray, _p: np.ndarray) -> Sequence[np.ndarray | float]:
+        if not self.lifted and not self.exact:
+            # The normal equations' cost: IPOPT asks for the gradient at the point it accepts next,
+            # and they carry it (one pass over the windows for both, where a cost-only pass and
+            # then the normal equations took two; the same objective, by the other Function).
+            return [self.ev.normal_equations(v).cost]
         if not self.lifted:
             return [self.ev.cost(v)]
         x, w = self._split(v)
