@@ -685,7 +685,8 @@ def _way_out(
     """The way out for the loose parameters the verdict refuses for: those not determined when any
     is (a weakly determined lag beside them would turn the advice to the clocks), else the loosest
     weakly determined one (its σ over the precision it needs) and those it trades off with (a lag
-    at 53× beside a car's steering gain and wheelbase at 120× had the advice give the lag only); on
+    at 53× its needed precision beside two kinematic parameters that traded at 120× had the advice
+    give the lag only); on
     a drive that already turns both ways (:func:`turns_both_ways`), not "turn more"."""
     undetermined = [s.name for s in statuses if s.name in loose and s.status == NOT_DETERMINED]
     weak = [s for s in statuses if s.name in loose and np.isfinite(s.std_reference)]
