@@ -269,11 +269,18 @@ def test_a_drift_of_rounded_readings_alone_is_no_random_walk() -> None:
 @pytest.fixture(scope="module")
 def diff_drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, object, object, Path]:
     sim = simulate(SimulationOptions.of(model="diff_drive", records=1500, seed=7))
-    log = parse_log(sim.text().splitlines(), get_model("diff_drive").encoder_kinds, "sim")
+    calib, run = _odometry_run("diff_drive", sim.text().splitlines())
+    return sim, calib, run, tmp_path_factory.mktemp("noise")
+
+
+def _odometry_run(model: str, lines: list[str]) -> tuple[Calibration, object]:
+    """A Gauss-Newton calibration of the log ``lines`` with windows of 10 intervals, no blocks,
+    and its odometry."""
+    log = parse_log(lines, get_model(model).encoder_kinds, "sim")
     sc = Scenario.of(
         "noise",
         "sim.txt",
-        model="diff_drive",
+        model=model,
         solvers=("gauss_newton",),
         residual=ResidualOptions(horizon=10),
         validation=ValidationOptions(blocks=0),
@@ -281,8 +288,7 @@ def diff_drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, object
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         calib = Calibration(sc, log=log)
-        run = calib.run(wanted=Wanted(odometry="gauss_newton"))
-    return sim, calib, run, tmp_path_factory.mktemp("noise")
+        return calib, calib.run(wanted=Wanted(odometry="gauss_newton"))
 
 
 def test_a_diff_drives_odometry_noise_is_the_drift_its_windows_truly_have(diff_drive: tuple) -> None:
@@ -614,20 +620,7 @@ def test_a_tracker_that_relocked_leaves_a_skid_steers_odometry_noise_the_drift_i
     narrow there; here 10^8 too wide). Against the true base: the rates and the twist within a
     factor 2 of the σ whose 2σ holds 95 % of the true errors."""
     sim = simulate(SimulationOptions.of(model="skid_steer", records=1500, seed=7))
-    lines = _relocked(sim.text().splitlines(), 20, 2.5, 0.2)
-    log = parse_log(lines, get_model("skid_steer").encoder_kinds, "sim")
-    sc = Scenario.of(
-        "relocked",
-        "sim.txt",
-        model="skid_steer",
-        solvers=("gauss_newton",),
-        residual=ResidualOptions(horizon=10),
-        validation=ValidationOptions(blocks=0),
-    )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        calib = Calibration(sc, log=log)
-        run = calib.run(wanted=Wanted(odometry="gauss_newton"))
+    calib, run = _odometry_run("skid_steer", _relocked(sim.text().splitlines(), 20, 2.5, 0.2))
     found = sigma_over_truth(calib, run, (sim.time_ns * 1e-9, sim.T_world_base_true, 0))
     for way in ("rates", "twist"):
         ratios = next(r for (w, _), r in found.items() if w == way)
