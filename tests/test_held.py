@@ -3,6 +3,7 @@ moved by its plausible error, and what that moves in the free parameters against
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -35,8 +36,21 @@ def _sinusoids(folder: Path, lag: float) -> CalibrationRun:
     return Calibration(load_scenario(path)).run(["gauss_newton"])
 
 
+@pytest.fixture(scope="module")
+def one_interval_off(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, float], CalibrationRun]:
+    """The drive of :func:`_sinusoids` and its truth, fitted with the lag given 20 ms (one record
+    interval) off: one calibration for the tests that read it."""
+    folder = tmp_path_factory.mktemp("one_interval_off")
+    truth = two_sinusoids(folder, stamp_offset_s=-0.04)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # as the tests that read it filter them
+        return truth, _sinusoids(folder, 0.02)
+
+
 @pytest.mark.filterwarnings("ignore::UserWarning")
-def test_a_lag_given_off_names_what_it_moves_and_keeps_it_from_the_hand_off(tmp_path: Path) -> None:
+def test_a_lag_given_off_names_what_it_moves_and_keeps_it_from_the_hand_off(
+    tmp_path: Path, one_interval_off: tuple[dict[str, float], CalibrationRun]
+) -> None:
     """The camera's stamps 40 ms late (two record intervals), the lag given as 0: on this drive a
     time shift is a mix of the two wheels, which the radii and the mount take up (4 % on a radius,
     at σ of 1e-8 m). The check names the radii and sensor_y with the lag and what to do, and keeps
@@ -53,7 +67,7 @@ def test_a_lag_given_off_names_what_it_moves_and_keeps_it_from_the_hand_off(tmp_
         assert LAG in held.concerns[name] and "tracker_lag: auto" in held.concerns[name]
         status, why = run.handoff_status("gauss_newton")[name]
         assert status == DOUBTFUL and LAG in why
-    later = _sinusoids(tmp_path, 0.02).reports["gauss_newton"].result.param_dict()
+    later = one_interval_off[1].reports["gauss_newton"].result.param_dict()  # the same drive
     fitted = run.reports["gauss_newton"].result.param_dict()
     for name in MOVED:
         shift = record["shift"][name]
@@ -89,14 +103,15 @@ def test_a_lag_pinned_on_the_edge_of_its_search_is_held_there_against_what_it_mo
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
-def test_a_lag_given_one_interval_off_is_in_the_sigma_of_what_it_moves(tmp_path: Path) -> None:
+def test_a_lag_given_one_interval_off_is_in_the_sigma_of_what_it_moves(
+    tmp_path: Path, one_interval_off: tuple[dict[str, float], CalibrationRun]
+) -> None:
     """The camera's stamps 40 ms late, the lag given 20 ms (one record interval, the plausible
     error) off. The σ the data give do not cover what the held lag moves (the radii, sensor_y and
     wheel_separation, which it moves within the 1 % a calibration needs, are many of them off); with
     each parameter's ``std_held`` in quadrature every estimate lies within 1.5σ of the truth, and the
     calibration.yaml ``nlp-calib check`` reads carries it in its between-logs σ."""
-    truth = two_sinusoids(tmp_path, stamp_offset_s=-0.04)
-    run = _sinusoids(tmp_path, 0.02)
+    truth, run = one_interval_off
     held = _held(run)
     std_held = held.record["std_held"]
     fitted, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")

@@ -7,9 +7,12 @@ that never meet the joints', 1 % tracker outliers, the nominal mount on ``/tf_st
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import re
+import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +47,24 @@ def bags(recording: rb.Recording, tmp_path_factory: pytest.TempPathFactory) -> d
     return {fmt: rb.write(recording, folder / f"drive_{fmt}", fmt) for fmt in ("sqlite3", "mcap")}
 
 
+@pytest.fixture(scope="module")
+def bag_run(
+    recording: rb.Recording, bags: dict[str, Path], tmp_path_factory: pytest.TempPathFactory
+) -> Callable[[str], tuple[subprocess.CompletedProcess[str], Path]]:
+    """``run`` on each bag as it is (the scenario of :func:`_scenario`): its process and output
+    folder, run once for the tests that read it. The sqlite3 bag's with ``--report``: evo reads its
+    trajectory, and the report adds files, never a figure of result.json."""
+
+    @functools.cache
+    def made(fmt: str) -> tuple[subprocess.CompletedProcess[str], Path]:
+        folder = tmp_path_factory.mktemp(f"run_{fmt}")
+        sc = _scenario(folder, rb.dataset_block(bags[fmt], recording))
+        report = ("--report",) if fmt == "sqlite3" else ()
+        return cli("run", str(sc), "--out", str(folder / "out"), *report), folder / "out"
+
+    return made
+
+
 def _scenario(folder: Path, dataset: str, extra: str = "", name: str = "robot") -> Path:
     path = folder / f"{name}.yaml"
     path.write_text(
@@ -67,11 +88,9 @@ def _assert_recovered(params: dict[str, float], truth: dict[str, float]) -> None
 
 @pytest.mark.parametrize("fmt", ["sqlite3", "mcap"])
 def test_a_recording_calibrates_in_robot_units_with_only_topics_and_joints(
-    fmt: str, recording: rb.Recording, bags: dict[str, Path], tmp_path: Path
+    fmt: str, recording: rb.Recording, bag_run: Callable[[str], tuple[subprocess.CompletedProcess[str], Path]]
 ) -> None:
-    out = tmp_path / "out"
-    sc = _scenario(tmp_path, rb.dataset_block(bags[fmt], recording))
-    proc = cli("run", str(sc), "--out", str(out))
+    proc, out = bag_run(fmt)
     assert proc.returncode == 0, proc.stderr
     doc = json.loads((out / "result.json").read_text())
     params = doc["solvers"]["gauss_newton"]["params"]
@@ -358,7 +377,10 @@ def test_tf_static_gives_the_nominal_mount(
 
 
 def test_import_bag_writes_joints_and_poses_that_calibrate_as_the_bag(
-    recording: rb.Recording, bags: dict[str, Path], tmp_path: Path
+    recording: rb.Recording,
+    bags: dict[str, Path],
+    bag_run: Callable[[str], tuple[subprocess.CompletedProcess[str], Path]],
+    tmp_path: Path,
 ) -> None:
     out = tmp_path / "drive.csv"
     args = ["import-bag", str(bags["mcap"]), "--out", str(out), "--model", "tricycle", "--joint-states"]
@@ -373,11 +395,13 @@ def test_import_bag_writes_joints_and_poses_that_calibrate_as_the_bag(
         f"dataset: {{joints: {out}, poses: {out.with_suffix('.tum')}, encoders: "
         f"{{steering: {recording.joint_names[0]}, traction_wheel: {recording.joint_names[1]}}}}}"
     )
-    runs = [
-        Calibration(load_scenario(_scenario(tmp_path, b, name=n))).run().reports["gauss_newton"].result
-        for b, n in ((block, "files"), (rb.dataset_block(bags["mcap"], recording), "bag"))
-    ]
-    a, e = (np.array(list(r.param_dict().values())) for r in runs)
+    files = Calibration(load_scenario(_scenario(tmp_path, block, name="files"))).run()
+    fitted = files.reports["gauss_newton"].result.param_dict()
+    proc, bag_out = bag_run("mcap")  # the same scenario on the bag itself
+    assert proc.returncode == 0, proc.stderr
+    read = json.loads((bag_out / "result.json").read_text())["solvers"]["gauss_newton"]["params"]
+    assert list(read) == list(fitted)
+    a, e = np.array(list(fitted.values())), np.array(list(read.values()))
     assert np.max(np.abs(a - e) / np.maximum(np.abs(e), 1e-3)) < 1e-9
 
 
@@ -402,16 +426,14 @@ def test_a_joint_log_block_names_its_keys(tmp_path: Path) -> None:
 
 
 def test_evo_reproduces_the_reported_ate_against_the_bags_own_topic(
-    recording: rb.Recording, bags: dict[str, Path], tmp_path: Path
+    bags: dict[str, Path], bag_run: Callable[[str], tuple[subprocess.CompletedProcess[str], Path]]
 ) -> None:
     evo = pytest.importorskip("evo")
     from evo.core import metrics, sync
     from evo.tools import file_interface
     from rosbags.rosbag2 import Reader
 
-    out = tmp_path / "out"
-    sc = _scenario(tmp_path, rb.dataset_block(bags["sqlite3"], recording))
-    proc = cli("run", str(sc), "--out", str(out), "--report")
+    proc, out = bag_run("sqlite3")  # with --report: the trajectories
     assert proc.returncode == 0, proc.stderr
     doc = json.loads((out / "result.json").read_text())
     with Reader(bags["sqlite3"]) as reader:
