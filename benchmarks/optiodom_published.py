@@ -36,7 +36,9 @@ NAMES = {
 }
 
 
-def pairs(study: dict[str, Any], rows: list[dict[str, str]]) -> list[tuple[str, str, str, float, float, float]]:
+def pairs(
+    study: dict[str, Any], rows: list[dict[str, str]]
+) -> list[tuple[str, str, str, float, float, float]]:
     """(method, session, parameter, ours, published, our σ) for every published value of a fitted session."""
     out = []
     for row in rows:
@@ -47,7 +49,9 @@ def pairs(study: dict[str, Any], rows: list[dict[str, str]]) -> list[tuple[str, 
             continue
         for column, name in NAMES[robot].items():
             if row[column]:
-                out.append((row["sheet"], session, name, fit["params"][name], float(row[column]), fit["std"][name]))
+                out.append(
+                    (row["sheet"], session, name, fit["params"][name], float(row[column]), fit["std"][name])
+                )
     return out
 
 
@@ -70,7 +74,10 @@ def main() -> int:
             f"{v.min():+.1f} | {np.median(v):+.1f} | {v.max():+.1f}"
         )
     every = np.array([abs(ours - theirs) / sd for _, _, _, ours, theirs, sd in found])
-    print(f"all: {every.size} comparisons, {np.mean(every < 2):.0%} within 2σ, {np.mean(every < 3):.0%} within 3σ")
+    print(
+        f"all: {every.size} comparisons, {np.mean(every < 2):.0%} within 2σ, "
+        f"{np.mean(every < 3):.0%} within 3σ"
+    )
     print("largest:")
     for method, session, name, ours, theirs, sd in sorted(found, key=lambda p: -abs(p[3] - p[4]) / p[5])[:8]:
         print(
@@ -84,9 +91,14 @@ def main() -> int:
     spread: dict[tuple[str, str], list[float]] = defaultdict(list)
     for (session, name), values in by.items():
         if len(values) > 1:
-            spread[(session.split("/")[0], name)].append((max(values) - min(values)) / study[session]["std"][name])
+            spread[(session.split("/")[0], name)].append(
+                (max(values) - min(values)) / study[session]["std"][name]
+            )
     for (robot, name), s in sorted(spread.items()):
-        print(f"  {robot} {name}: {len(s)} sessions, median {np.median(s):.1f}σ, range {min(s):.1f}–{max(s):.1f}σ")
+        print(
+            f"  {robot} {name}: {len(s)} sessions, median {np.median(s):.1f}σ, "
+            f"range {min(s):.1f}–{max(s):.1f}σ"
+        )
     return 0
 
 

@@ -108,7 +108,8 @@ def spread_rows(results: list[dict[str, Any]], by_day: bool = False) -> list[str
         if "params" in r:
             groups[group_key(r["session"], by_day)].append(r)
     rows = [
-        f"| robot/path{'/day' if by_day else ''} | sessions | parameter | mean | spread (std over sessions) | median σ | spread / σ |",
+        f"| robot/path{'/day' if by_day else ''} | sessions | parameter | mean | "
+        "spread (std over sessions) | median σ | spread / σ |",
         "|---|---|---|---|---|---|---|",
     ]
     for key, rs in groups.items():

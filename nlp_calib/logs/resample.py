@@ -97,7 +97,9 @@ class Resampler:
             else:
                 # Counters stay whole: their increments are counts (and move far more per record).
                 columns.append(np.mod(np.round(np.interp(when, t, level)) + log.ticks[0, j], COUNTER_MODULUS))
-        dtype = np.float64 if any(self.kinds.get(n) == "absolute" for n in log.header.encoder_names) else np.int64
+        dtype = (
+            np.float64 if any(self.kinds.get(n) == "absolute" for n in log.header.encoder_names) else np.int64
+        )
         ticks = np.stack(columns, axis=1).astype(dtype)
         if records is not None:  # the other records as logged (one copy of a long log's, not three)
             stretch, ticks = ticks, np.array(log.ticks, dtype=dtype)
