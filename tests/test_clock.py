@@ -18,7 +18,6 @@ from nlp_calib.logs import resample_encoders
 from nlp_calib.logs.log import JointStream
 from nlp_calib.logs.screens import clock_shift
 from nlp_calib.models import get_model, load_log
-from nlp_calib.pipeline.align import _LagFits, lag_column
 from nlp_calib.pipeline.options import AlignmentOptions
 from nlp_calib.problem import ProblemSpec, build, build_residual_data
 from nlp_calib.problem.windows import ResidualOptions
@@ -41,43 +40,6 @@ def test_a_stretch_re_sampled_alone_is_the_whole_logs_re_sampling() -> None:
         assert not np.array_equal(whole.ticks[300:900], log.ticks[300:900])  # it does move them
         assert np.array_equal(part.ticks[:300], log.ticks[:300])
         assert np.array_equal(part.ticks[900:], log.ticks[900:])
-
-
-def test_an_angle_is_re_sampled_by_less_than_a_tick() -> None:
-    """An absolute encoder re-sampled at a lag under a tick's worth of its motion reads the angle
-    interpolated there (its unwrapped readings, linear between records), not the reading rounded
-    back to the one logged: rounded, a shift of 50 µs left the demo's steering as logged."""
-    model = get_model("tricycle")
-    log = load_log(SCENARIOS / "data" / "demo_tricycle.txt", model)
-    col = log.header.encoder_names.index("steering")
-    vmax = log.header.encoder_max[col]
-    turns = np.unwrap(2.0 * np.pi * log.ticks[:, col].astype(float) / vmax) / (2.0 * np.pi)
-    for lag in (5e-5, -2e-4):
-        shifted, (a, b) = resample_encoders(log, lag, model.encoder_kinds)
-        expected = np.mod(np.interp(log.time_s[a:b] - lag, log.time_s, turns) * vmax, vmax)
-        got = np.asarray(shifted.ticks[a:b, col], dtype=float)
-        off = np.abs((got - expected + vmax / 2) % vmax - vmax / 2)
-        assert off.max() < 1e-6, f"lag {lag}: {off.max():.3f} ticks off the interpolated angle"
-
-
-def test_the_fitted_lag_does_not_depend_on_where_the_encoders_were_re_sampled() -> None:
-    """The lag fitted on the encoders re-sampled at τ₀ (τ₀ + the fit's offset from it) is the same
-    for τ₀ a fraction of a millisecond apart: the problem's correction is exact to first order.
-    With the angles rounded to whole ticks a share of τ₀ stayed in the estimate (about a fifth of
-    it on the demo: a bias that grows against the lag's σ as the log grows)."""
-    calib = Calibration(load_scenario(SCENARIOS / "demo.yaml").with_options(solvers=["gauss_newton"]))
-    binder, log = calib.stages.problem.binder, calib.log
-    column = lag_column(binder)
-    assert column is not None
-    fits = _LagFits(binder, log, calib.fit, column)
-    fitted = []
-    for tau in (0.0, 3e-4):
-        x = np.array(calib.x0, dtype=float)
-        x[column] = tau
-        _, x_new, converged = fits.fit(x)
-        assert converged
-        fitted.append(float(x_new[column]))
-    assert abs(fitted[1] - fitted[0]) < 0.02 * 3e-4, f"fitted lags {fitted} (s)"
 
 
 def _residuals(lag_data: float, lag_param: float, horizon: int) -> np.ndarray:

@@ -90,19 +90,12 @@ class Resampler:
         for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
             level, when = self.levels()[j], tq[rows] - self.late[j]
             if self.kinds.get(name) == "absolute":
-                # Not rounded to whole ticks: a shift under a tick's worth of the angle's motion
-                # would be lost, and the lag fitted on it would carry the shift it was told was
-                # applied (a bias of a share of the re-sampled lag that grows against its σ with N).
-                columns.append(np.mod(np.interp(when, t, level) * vmax, vmax))
+                columns.append(np.mod(np.round(np.interp(when, t, level) * vmax), vmax))
             else:
-                # Counters stay whole: their increments are counts (and move far more per record).
                 columns.append(np.mod(np.round(np.interp(when, t, level)) + log.ticks[0, j], COUNTER_MODULUS))
-        dtype = (
-            np.float64 if any(self.kinds.get(n) == "absolute" for n in log.header.encoder_names) else np.int64
-        )
-        ticks = np.stack(columns, axis=1).astype(dtype)
+        ticks = np.stack(columns, axis=1).astype(np.int64)
         if records is not None:  # the other records as logged (one copy of a long log's, not three)
-            stretch, ticks = ticks, np.array(log.ticks, dtype=dtype)
+            stretch, ticks = ticks, np.array(log.ticks, dtype=np.int64)
             ticks[rows] = stretch
         ticks.flags.writeable = False
         return replace(log, ticks=ticks, clock=replace(log.clock, encoder_lag_s=log.encoder_lag_s + lag_s))

@@ -144,7 +144,6 @@ class _LagFits:
         path: list[float] = []
         costs: list[float] = []
         converged = False
-        step = 0.0
         for _ in range(MAX_RESAMPLINGS):
             resampled, beside = float(x[self.column]), self.beside_s(x)
             cost, x_new, converged = self.fit(x)
@@ -152,14 +151,6 @@ class _LagFits:
             costs.append(cost)
             if not converged:
                 break
-            moved = float(x_new[self.column]) - resampled
-            if moved * step < 0.0:
-                # A step back over the last one: the fits overshoot each other (a loose lag, where
-                # the first-order correction reaches too far): go half way, or they alternate
-                # between two lags until the re-samplings run out, wherever that leaves them.
-                x_new[self.column] = resampled + 0.5 * moved
-                moved *= 0.5
-            step = moved
             x = x_new
             now = self.beside_s(x)
             still = now is None or beside is None or stays(now - beside, self.lag_std(x, self.beside))
