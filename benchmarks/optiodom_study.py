@@ -93,14 +93,23 @@ def fit(folder: Path) -> dict[str, Any]:
     return out
 
 
-def spread_rows(results: list[dict[str, Any]]) -> list[str]:
-    """Per robot and path type, each parameter's session-to-session spread against its σ."""
+def group_key(session: str, by_day: bool) -> str:
+    """A session's group: its robot and path type, and with ``by_day`` its day (a session's name
+    starts with its date, DDMMYYYY)."""
+    robot, path, name = session.split("/")
+    return f"{robot}/{path}" + (f"/{name[:8]}" if by_day else "")
+
+
+def spread_rows(results: list[dict[str, Any]], by_day: bool = False) -> list[str]:
+    """Per robot and path type (``by_day``: and day), each parameter's session-to-session spread
+    against its σ."""
     groups: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for r in results:
         if "params" in r:
-            groups["/".join(r["session"].split("/")[:2])].append(r)
+            groups[group_key(r["session"], by_day)].append(r)
     rows = [
-        "| robot/path | sessions | parameter | mean | spread (std over sessions) | median σ | spread / σ |",
+        f"| robot/path{'/day' if by_day else ''} | sessions | parameter | mean | "
+        "spread (std over sessions) | median σ | spread / σ |",
         "|---|---|---|---|---|---|---|",
     ]
     for key, rs in groups.items():
@@ -143,6 +152,7 @@ def main() -> int:
         levels[r["verdict"]] += 1
     print("\nverdicts: " + ", ".join(f"{k} {v}" for k, v in levels.items()))
     print("\n".join(spread_rows(results)))
+    print("\n".join(["", *spread_rows(results, by_day=True)]))
     print(f"\n_Study run time: {time.perf_counter() - t0:.0f} s._")
     if args.json is not None:
         args.json.write_text(json.dumps(results, indent=1))
