@@ -7,9 +7,11 @@ fit use one, so nothing is built twice.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
+import casadi as ca
 import numpy as np
 
 from nlp_calib.analysis import uncertainty
@@ -282,11 +284,24 @@ def prepare_backend(sc: Scenario, fns: ProblemFunctions, solvers: Sequence[str],
 
 
 def _column_map(backend: Backend) -> ColumnMap | None:
-    """The helper Functions' map over blocks of columns: the backend's compiled chunks (None:
-    interpreted, or blocks that are no whole number of its chunks)."""
+    """The helper Functions' maps over blocks of columns: the backend's compiled chunks, by its
+    maps of fixed sizes (None: interpreted, or blocks that are no whole number of its chunks)."""
     if backend.name != "compiled" or BLOCK % backend.chunk:
         return None
-    return lambda f, n, mapped: backend.map(f, n, mapped, False)
+    return functools.partial(_column_pieces, backend)
+
+
+def _column_pieces(
+    backend: Backend, f: ca.Function, n: int, mapped: tuple[str, ...]
+) -> list[tuple[ca.Function, int]]:
+    return [(_column_piece(backend, f, cols, mapped), cols) for cols in backend.spans(n)]
+
+
+@functools.lru_cache(maxsize=64)
+def _column_piece(backend: Backend, f: ca.Function, n: int, mapped: tuple[str, ...]) -> ca.Function:
+    """``backend.map`` over ``n`` columns, built once per Function and size (a map of a compiled
+    chunk takes tens of milliseconds to build: each call built its own)."""
+    return backend.map(f, n, mapped, False)
 
 
 def sensor_selected(fns: ProblemFunctions, data: ResidualData, start: SensorStart) -> ResidualData:
