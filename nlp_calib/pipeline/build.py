@@ -8,6 +8,7 @@ fit use one, so nothing is built twice.
 from __future__ import annotations
 
 import functools
+import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -335,10 +336,20 @@ class Binder:
     #: Per interval of the whole log: gaps in time, which no window crosses whatever the faults.
     gaps: np.ndarray | None = None
 
+    #: Each evaluator :meth:`rebind` bound where the sensor's start chooses the windows: its records
+    #: and their windows before the choice (they do not depend on the encoders), while it lives.
+    _unchosen: weakref.WeakKeyDictionary[ProblemEvaluator, tuple[tuple[int, int], ResidualData]] = field(
+        default_factory=weakref.WeakKeyDictionary, init=False, repr=False, compare=False
+    )
+
     def windows(self, log: Log, start: int, stop: int) -> ResidualData:
         """The residual windows of records ``start:stop`` of ``log`` (those the masks allow)."""
+        return self._chosen(self._unchosen_windows(log, start, stop), start, stop)
+
+    def _unchosen_windows(self, log: Log, start: int, stop: int) -> ResidualData:
+        """:meth:`windows` before the sensor's start chooses among them."""
         sc = self.scenario
-        data = build_residual_data(
+        return build_residual_data(
             self.fns,
             log.select(start, stop),
             sc.objective.residual,
@@ -347,6 +358,9 @@ class Binder:
             bad_records=None if self.bad_records is None else self.bad_records[start:stop],
             gaps=_within(self.gaps, start, stop),
         )
+
+    def _chosen(self, data: ResidualData, start: int, stop: int) -> ResidualData:
+        """The windows ``data`` the sensor's start keeps (enough of them for the parameters)."""
         if self.start is not None and self.start.selection is not None and data.n_residuals:
             data = sensor_selected(self.fns, data, self.start)
         if data.n_residuals < self.fns.n_free:
@@ -374,13 +388,24 @@ class Binder:
         """``evaluator``, bound by :meth:`bind` to records ``start:stop`` of a log, bound to the same
         records of ``log``, that log with its encoders re-sampled at another offset (the same result
         as :meth:`bind`). Only the inputs and clock data are computed again, where the windows do not
-        depend on the encoders: no stationary windows dropped, none chosen by the sensor's start."""
+        depend on the encoders: no stationary windows dropped. Where the sensor's start chooses
+        among them by the inputs, it chooses again among the windows kept from the evaluator's
+        first rebind (a lag search's 41 lags built its windows and their motions 41 times)."""
         sc = self.scenario
-        if sc.log.samples.drop_stationary or (self.start is not None and self.start.selection is not None):
+        if sc.log.samples.drop_stationary:
             return self.bind(log, start, stop, evaluator)[1]
         steering = sc.objective.residual.steering_sample
-        evaluator.bind(resampled_data(self.fns, evaluator.data, [log.select(start, stop)], steering))
-        return evaluator
+        shifted = [log.select(start, stop)]
+        if self.start is None or self.start.selection is None:
+            evaluator.bind(resampled_data(self.fns, evaluator.data, shifted, steering))
+            return evaluator
+        kept = self._unchosen.get(evaluator)
+        if kept is not None and kept[0] == (start, stop):
+            unchosen = resampled_data(self.fns, kept[1], shifted, steering)
+        else:
+            unchosen = self._unchosen_windows(log, start, stop)
+        self._unchosen[evaluator] = ((start, stop), unchosen)
+        return self.evaluate(self._chosen(unchosen, start, stop), evaluator)
 
     def evaluate(self, data: ResidualData, evaluator: ProblemEvaluator | None = None) -> ProblemEvaluator:
         """An evaluator on the windows ``data`` (``evaluator`` re-bound, when given)."""
