@@ -291,6 +291,29 @@ def test_short_column_maps_of_a_compiled_run_compile_their_whole_chunks(
 
 
 @needs_compiler
+def test_a_compiled_runs_start_maps_its_helpers_compiled(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 41: a run that compiles its helpers (here from 100 records on) has them compiled
+    before its start: the closed form's predictions and the tracker's motions over every window
+    of the log (interpreted, a few seconds of a camera's run at 10^6 poses) map the compiled
+    chunks."""
+    from nlp_calib.pipeline import build
+    from nlp_calib.problem import windows
+
+    monkeypatch.setattr(windows, "_column_map", [])  # no earlier run's
+    monkeypatch.setattr(build, "COMPILED_FROM", 100)
+    compiled_at_start: list[bool] = []
+    own = build.starting_point
+
+    def spied(*args: object, **kwargs: object) -> object:
+        compiled_at_start.append(bool(windows._column_map))
+        return own(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(build, "starting_point", spied)
+    Calibration(load_scenario(SCENARIOS / "camera_demo.yaml"))
+    assert compiled_at_start == [True]
+
+
+@needs_compiler
 def test_a_summed_compiled_map_leaves_a_sum_per_chunk_added_in_casadis_order(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

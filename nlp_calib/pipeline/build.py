@@ -512,8 +512,10 @@ def build_stage(
     per log); no window crosses ``gaps`` (per interval of the log)."""
     fns = build_problem(sc, model, tuple(held), max(len(lags), len(mounts), 1))
     log, start, stop = start_from
-    point = starting_point(sc, fns, log, start, stop, lags, mounts, gaps)
+    # The backend first: the start's helpers over every window (the tracker's motions, a closed
+    # form's predictions) then map its compiled chunks, not CasADi's interpreter.
     backend = prepare_backend(sc, fns, solvers, n_records)
+    point = starting_point(sc, fns, log, start, stop, lags, mounts, gaps)
     bounds = None if point.lower is None or point.upper is None else (point.lower, point.upper)
     binder = Binder(
         sc, fns, backend, point.x_fixed, no_priors(fns.n_free), start=point.sensor, bounds=bounds, gaps=gaps
