@@ -252,10 +252,65 @@ def test_long_column_maps_of_a_compiled_run_give_the_interpreted_columns(
         got = windows.over_columns(f, *args)
         for g, w in zip(got, f.map(1000)(*args), strict=True):
             assert np.array_equal(g, np.asarray(w))
-    assert calls == [128, 128]  # one compiled map per call's block size
-    calls.clear()
-    windows.over_columns(f, params, cols[:, :999])  # below COMPILED_FROM: interpreted
-    assert calls == []
+    assert calls == [128, 104, 128, 104]  # the compiled pieces of each block size, once per call
+
+
+@needs_compiler
+def test_short_column_maps_of_a_compiled_run_compile_their_whole_chunks(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 41: a compiled run's helper calls over fewer columns than a block (the lag search's
+    windows, the folds' blocks, a start's windows: interpreted, they cost more than the run's whole
+    compiled blocks) evaluate their whole chunks compiled, by the backend's maps of fixed sizes
+    built once per process, and the last few columns interpreted: CasADi's map, to the bit."""
+    from nlp_calib.pipeline import build
+    from nlp_calib.problem import windows
+    from nlp_calib.solvers.backends import BackendOptions, make_backend
+
+    monkeypatch.setenv("NLP_CALIB_CACHE", str(tmp_path / "cache"))
+    p, u = ca.SX.sym("p", 2), ca.SX.sym("u", 3)
+    f = ca.Function("f", [p, u], [ca.vertcat(p[0] * u[0] + u[1], ca.sin(u[2]) * p[1]), ca.exp(u * p[0])])
+    backend = make_backend(BackendOptions(kind="compiled"))
+    column_map = build._column_map(backend)
+    assert column_map is not None
+    built: list[int] = []
+    own_map = backend.map
+    monkeypatch.setattr(backend, "map", lambda fn, n, *a: built.append(n) or own_map(fn, n, *a))
+    monkeypatch.setattr(windows, "_column_map", [column_map])
+    rng = np.random.default_rng(1)
+    params = rng.normal(size=2)
+    chunk = backend.chunk
+    for n in (13 * chunk + 5, 13 * chunk + 5, chunk - 1, 2 * chunk):
+        cols = rng.normal(size=(3, n))
+        got = windows.over_columns(f, params, cols)
+        for g, w in zip(got, f.map(n)(params, cols), strict=True):
+            assert np.array_equal(g, np.asarray(w))
+    # 13 chunks as maps of 8, 4 and 1 chunks, each built once (the second call and the last one's
+    # 2 chunks build nothing new but the 2); fewer than a chunk interpreted.
+    assert built == [8 * chunk, 4 * chunk, chunk, 2 * chunk]
+
+
+@needs_compiler
+def test_a_compiled_runs_start_maps_its_helpers_compiled(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 41: a run that compiles its helpers (here from 100 records on) has them compiled
+    before its start: the closed form's predictions and the tracker's motions over every window
+    of the log (interpreted, a few seconds of a camera's run at 10^6 poses) map the compiled
+    chunks."""
+    from nlp_calib.pipeline import build
+    from nlp_calib.problem import windows
+
+    monkeypatch.setattr(windows, "_column_map", [])  # no earlier run's
+    monkeypatch.setattr(build, "COMPILED_FROM", 100)
+    compiled_at_start: list[bool] = []
+    own = build.starting_point
+
+    def spied(*args: object, **kwargs: object) -> object:
+        compiled_at_start.append(bool(windows._column_map))
+        return own(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(build, "starting_point", spied)
+    Calibration(load_scenario(SCENARIOS / "camera_demo.yaml"))
+    assert compiled_at_start == [True]
 
 
 @needs_compiler

@@ -96,3 +96,29 @@ def test_the_coordinates_a_scan_reads_are_found_once_per_step(monkeypatch: pytes
     step = calib.fns.step(1)
     expected = np.flatnonzero(real(step, "x", [step.name_out(0)], 1, False))
     np.testing.assert_array_equal(motion.reads(step), expected)
+
+
+def test_windows_the_sensors_start_chooses_are_built_once_per_rebound_evaluator(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Issue 41: where the sensor's start chooses the windows by the inputs (a camera's), a rebound
+    evaluator's windows before the choice are built at its first rebind alone (they do not depend
+    on the encoders); each re-sampling chooses among them again: a new bind's windows."""
+    from nlp_calib.pipeline import build
+
+    calib = Calibration(load_scenario(SCENARIOS / "camera_demo.yaml"))
+    fns, log, binder = calib.fns, calib.log, calib.stages.problem.binder
+    assert binder.start is not None and binder.start.selection is not None
+    built: list[int] = []
+    own = build.build_residual_data
+    monkeypatch.setattr(build, "build_residual_data", lambda *a, **k: built.append(1) or own(*a, **k))
+    rebound = binder.bind(log, *calib.fit)[1]
+    for lag in (0.013, -0.031, 0.002, 0.021):
+        shifted, _ = resample_encoders(log, lag, fns.model.encoder_kinds)
+        rebound = binder.rebind(rebound, shifted, *calib.fit)
+        chosen = rebound.data
+        fresh = binder.bind(shifted, *calib.fit)[1].data
+        _same_data(chosen, fresh)
+        assert chosen.dropped_selection == fresh.dropped_selection
+    # One bind, its first rebind and the four fresh binds built windows; the other rebinds none.
+    assert len(built) == 1 + 1 + 4

@@ -7,9 +7,12 @@ fit use one, so nothing is built twice.
 
 from __future__ import annotations
 
+import functools
+import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
+import casadi as ca
 import numpy as np
 
 from nlp_calib.analysis import uncertainty
@@ -282,11 +285,24 @@ def prepare_backend(sc: Scenario, fns: ProblemFunctions, solvers: Sequence[str],
 
 
 def _column_map(backend: Backend) -> ColumnMap | None:
-    """The helper Functions' map over blocks of columns: the backend's compiled chunks (None:
-    interpreted, or blocks that are no whole number of its chunks)."""
+    """The helper Functions' maps over blocks of columns: the backend's compiled chunks, by its
+    maps of fixed sizes (None: interpreted, or blocks that are no whole number of its chunks)."""
     if backend.name != "compiled" or BLOCK % backend.chunk:
         return None
-    return lambda f, n, mapped: backend.map(f, n, mapped, False)
+    return functools.partial(_column_pieces, backend)
+
+
+def _column_pieces(
+    backend: Backend, f: ca.Function, n: int, mapped: tuple[str, ...]
+) -> list[tuple[ca.Function, int]]:
+    return [(_column_piece(backend, f, cols, mapped), cols) for cols in backend.spans(n)]
+
+
+@functools.lru_cache(maxsize=64)
+def _column_piece(backend: Backend, f: ca.Function, n: int, mapped: tuple[str, ...]) -> ca.Function:
+    """``backend.map`` over ``n`` columns, built once per Function and size (a map of a compiled
+    chunk takes tens of milliseconds to build: each call built its own)."""
+    return backend.map(f, n, mapped, False)
 
 
 def sensor_selected(fns: ProblemFunctions, data: ResidualData, start: SensorStart) -> ResidualData:
@@ -320,10 +336,20 @@ class Binder:
     #: Per interval of the whole log: gaps in time, which no window crosses whatever the faults.
     gaps: np.ndarray | None = None
 
+    #: Each evaluator :meth:`rebind` bound where the sensor's start chooses the windows: its records
+    #: and their windows before the choice (they do not depend on the encoders), while it lives.
+    _unchosen: weakref.WeakKeyDictionary[ProblemEvaluator, tuple[tuple[int, int], ResidualData]] = field(
+        default_factory=weakref.WeakKeyDictionary, init=False, repr=False, compare=False
+    )
+
     def windows(self, log: Log, start: int, stop: int) -> ResidualData:
         """The residual windows of records ``start:stop`` of ``log`` (those the masks allow)."""
+        return self._chosen(self._unchosen_windows(log, start, stop), start, stop)
+
+    def _unchosen_windows(self, log: Log, start: int, stop: int) -> ResidualData:
+        """:meth:`windows` before the sensor's start chooses among them."""
         sc = self.scenario
-        data = build_residual_data(
+        return build_residual_data(
             self.fns,
             log.select(start, stop),
             sc.objective.residual,
@@ -332,6 +358,9 @@ class Binder:
             bad_records=None if self.bad_records is None else self.bad_records[start:stop],
             gaps=_within(self.gaps, start, stop),
         )
+
+    def _chosen(self, data: ResidualData, start: int, stop: int) -> ResidualData:
+        """The windows ``data`` the sensor's start keeps (enough of them for the parameters)."""
         if self.start is not None and self.start.selection is not None and data.n_residuals:
             data = sensor_selected(self.fns, data, self.start)
         if data.n_residuals < self.fns.n_free:
@@ -359,13 +388,24 @@ class Binder:
         """``evaluator``, bound by :meth:`bind` to records ``start:stop`` of a log, bound to the same
         records of ``log``, that log with its encoders re-sampled at another offset (the same result
         as :meth:`bind`). Only the inputs and clock data are computed again, where the windows do not
-        depend on the encoders: no stationary windows dropped, none chosen by the sensor's start."""
+        depend on the encoders: no stationary windows dropped. Where the sensor's start chooses
+        among them by the inputs, it chooses again among the windows kept from the evaluator's
+        first rebind (a lag search's 41 lags built its windows and their motions 41 times)."""
         sc = self.scenario
-        if sc.log.samples.drop_stationary or (self.start is not None and self.start.selection is not None):
+        if sc.log.samples.drop_stationary:
             return self.bind(log, start, stop, evaluator)[1]
         steering = sc.objective.residual.steering_sample
-        evaluator.bind(resampled_data(self.fns, evaluator.data, [log.select(start, stop)], steering))
-        return evaluator
+        shifted = [log.select(start, stop)]
+        if self.start is None or self.start.selection is None:
+            evaluator.bind(resampled_data(self.fns, evaluator.data, shifted, steering))
+            return evaluator
+        kept = self._unchosen.get(evaluator)
+        if kept is not None and kept[0] == (start, stop):
+            unchosen = resampled_data(self.fns, kept[1], shifted, steering)
+        else:
+            unchosen = self._unchosen_windows(log, start, stop)
+        self._unchosen[evaluator] = ((start, stop), unchosen)
+        return self.evaluate(self._chosen(unchosen, start, stop), evaluator)
 
     def evaluate(self, data: ResidualData, evaluator: ProblemEvaluator | None = None) -> ProblemEvaluator:
         """An evaluator on the windows ``data`` (``evaluator`` re-bound, when given)."""
@@ -472,8 +512,10 @@ def build_stage(
     per log); no window crosses ``gaps`` (per interval of the log)."""
     fns = build_problem(sc, model, tuple(held), max(len(lags), len(mounts), 1))
     log, start, stop = start_from
-    point = starting_point(sc, fns, log, start, stop, lags, mounts, gaps)
+    # The backend first: the start's helpers over every window (the tracker's motions, a closed
+    # form's predictions) then map its compiled chunks, not CasADi's interpreter.
     backend = prepare_backend(sc, fns, solvers, n_records)
+    point = starting_point(sc, fns, log, start, stop, lags, mounts, gaps)
     bounds = None if point.lower is None or point.upper is None else (point.lower, point.upper)
     binder = Binder(
         sc, fns, backend, point.x_fixed, no_priors(fns.n_free), start=point.sensor, bounds=bounds, gaps=gaps

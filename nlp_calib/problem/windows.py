@@ -264,19 +264,20 @@ def interval_inputs(model: KinematicModel, logs: Sequence[Log], steering_sample:
 
 #: Columns a helper Function is mapped over at a time (a map over a million columns is slow to build).
 BLOCK = 1 << 14
-#: Columns from which :func:`over_columns` maps a compiled chunk, when a run gave it a way to
-#: (:func:`compile_columns`): each helper is evaluated a few times per run over every interval,
-#: and the interpreter took a tenth of a run of 10^6 records doing it; below, it is quick enough.
+#: Records from which a run maps :func:`over_columns`' calls with compiled chunks (:func:`compile_columns`):
+#: each helper is evaluated a few times per run over every interval, and the interpreter took a
+#: tenth of a run of 10^6 records doing it; below, it is quick enough.
 COMPILED_FROM = 50_000
 
-#: ``(f, n, mapped inputs) -> f`` over ``n`` columns of those inputs (the others the same for
-#: every column): a compiled backend's map.
-ColumnMap = Callable[[ca.Function, int, tuple[str, ...]], ca.Function]
+#: ``(f, n, mapped inputs) -> pieces``: ``f`` over the first columns of ``n`` (the other inputs the
+#: same for every column) as a compiled backend's maps, one after the other, each with the number
+#: of columns it takes; the rest (fewer than a chunk) is left to CasADi's map.
+ColumnMap = Callable[[ca.Function, int, tuple[str, ...]], list[tuple[ca.Function, int]]]
 _column_map: list[ColumnMap] = []
 
 
 def compile_columns(column_map: ColumnMap | None) -> None:
-    """Map long :func:`over_columns` calls with ``column_map`` from now on (None: CasADi's map,
+    """Map :func:`over_columns` calls with ``column_map`` from now on (None: CasADi's map,
     interpreted). Set with each run's backend: the process's runs share the helper Functions."""
     _column_map[:] = [] if column_map is None else [column_map]
 
@@ -285,6 +286,27 @@ def compile_columns(column_map: ColumnMap | None) -> None:
 def _mapped(f: ca.Function, n: int) -> ca.Function:
     """``f`` mapped over ``n`` columns, built once per Function and size."""
     return f.map(n)
+
+
+#: A piece of a block bound to numpy memory: its buffer, its call, its inputs and its columns.
+_Bound = tuple[ca.FunctionBuffer, Callable[[], None], list[np.ndarray], int]
+
+
+def _bound(f: ca.Function, n: int, mapped: tuple[str, ...]) -> list[_Bound]:
+    """Buffers that evaluate ``f`` over a block of ``n`` columns, one piece after the other: its
+    whole chunks compiled (where a run set a column map), the rest interpreted. A block of a few
+    thousand columns interpreted cost more than a run's whole compiled blocks (the lag search's
+    windows, the folds' blocks, a start's windows)."""
+    fms = _column_map[0](f, n, mapped) if _column_map else []
+    rest = n - sum(cols for _, cols in fms)
+    out = []
+    for fm, cols in [*fms, *([(_mapped(f, rest), rest)] if rest else [])]:
+        buf, call = fm.buffer()
+        ins = [np.empty(fm.nnz_in(i)) for i in range(fm.n_in())]
+        for i, arr in enumerate(ins):
+            buf.set_arg(i, arr.data)
+        out.append((buf, call, ins, cols))
+    return out
 
 
 def over_columns(f: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
@@ -304,30 +326,24 @@ def over_columns(f: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
             for out, r, (_, c) in zip(outs, [res] if f.n_out() == 1 else res, shapes):
                 out[:, c * lo : c * hi] = np.asarray(r)
         return outs
-    buffers: dict[int, tuple[ca.FunctionBuffer, Callable[[], None], list[np.ndarray]]] = {}
+    blocks: dict[int, list[_Bound]] = {}
     mapped = tuple(f.name_in(i) for i, a in enumerate(args) if a.ndim == 2)
-    compiled = _column_map[0] if _column_map and n >= COMPILED_FROM else None
     for lo in range(0, n, BLOCK):
-        hi = min(n, lo + BLOCK)
-        if hi - lo not in buffers:
-            # Whole blocks compiled; the last one's few columns (any number) interpreted.
-            whole = compiled is not None and hi - lo == BLOCK
-            fm = compiled(f, BLOCK, mapped) if compiled is not None and whole else _mapped(f, hi - lo)
-            buf, call = fm.buffer()
-            ins = [np.empty(fm.nnz_in(i)) for i in range(fm.n_in())]
-            for i, arr in enumerate(ins):
-                buf.set_arg(i, arr.data)
-            buffers[hi - lo] = (buf, call, ins)
-        buf, call, ins = buffers[hi - lo]
-        for target, a in zip(ins, args):
-            if a.ndim == 2:
-                target[:] = np.ravel(a[:, lo:hi], order="F")
-            elif a.size:  # the same column for every column of the block (once, where compiled)
-                target.reshape(-1, a.size)[:] = np.ravel(a)
-        for i, (out, (_, c)) in enumerate(zip(outs, shapes)):
-            # A block of columns of a column-major array is one contiguous run: written in place.
-            buf.set_res(i, out[:, c * lo : c * hi].reshape(-1, order="F").data)
-        call()
+        size = min(n, lo + BLOCK) - lo
+        if size not in blocks:
+            blocks[size] = _bound(f, size, mapped)
+        at = lo
+        for buf, call, ins, cols in blocks[size]:
+            for target, a in zip(ins, args):
+                if a.ndim == 2:
+                    target[:] = np.ravel(a[:, at : at + cols], order="F")
+                elif a.size:  # the same column for every column of the piece (once, where compiled)
+                    target.reshape(-1, a.size)[:] = np.ravel(a)
+            for i, (out, (_, c)) in enumerate(zip(outs, shapes)):
+                # A piece's columns of a column-major array are one contiguous run: written in place.
+                buf.set_res(i, out[:, c * at : c * (at + cols)].reshape(-1, order="F").data)
+            call()
+            at += cols
     return outs
 
 
