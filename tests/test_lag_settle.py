@@ -51,14 +51,24 @@ def test_a_lag_whose_re_samplings_overshoot_each_other_settles_at_the_root(slope
     assert fits.calls <= MAX_RESAMPLINGS + BRACKET_STEPS
 
 
-def test_a_fitted_lag_that_jumps_across_the_lag_settles_at_the_cheaper_side_of_the_jump() -> None:
+def test_a_fitted_lag_that_jumps_across_the_lag_settles_on_the_cheaper_side_of_the_jump() -> None:
     """The lag fitted at τ jumps across τ at 20 ms (from 26 ms below it to 12 ms above): no lag
-    stays. The loop closes in on the jump, to its tolerance (0.25 ms), and keeps the fit of least
-    cost of the two lags that bracket it (the one above the jump here)."""
+    stays. The loop closes in on the jump, to its tolerance (0.25 ms), and keeps the re-sampling
+    of least cost (above the jump here), the fit from it made once more."""
     fits = _Fits(lambda t: 0.026 if t < 0.02 else 0.012, lambda t: 1.0 if t < 0.02 else 0.9, 0.001)
     lag, path = _settle(fits, 0.0)
-    assert lag == 0.012, path
+    assert lag >= 0.02 and path[-1] == lag, path
     assert min(abs(p - 0.02) for p in path if p >= 0.02) < 0.00025, path
+
+
+def test_the_cheapest_re_sampling_is_kept_over_the_root_once_the_fits_overshoot() -> None:
+    """The lag fitted at τ overshoots τ (slope −1.2 about 18 ms) while the fits' cost is least
+    at 0 (the encoders as logged, each re-sampling away from them costing more): the loop finds
+    where it stays, and keeps the re-sampling at 0, the fit from it made again."""
+    fits = _Fits(lambda t: 0.018 - 1.2 * (t - 0.018), lambda t: 1.0 + abs(t), 0.004)
+    lag, path = _settle(fits, 0.0)
+    assert lag == 0.0 and path[-1] == 0.0, path
+    assert min(abs(p - 0.018) for p in path) < 0.001, path
 
 
 def test_plain_re_samplings_that_close_in_are_kept() -> None:

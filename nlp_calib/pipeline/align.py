@@ -150,14 +150,14 @@ class _LagFits:
 
     def settle(self, x: np.ndarray) -> tuple[np.ndarray, list[float], list[float], bool]:
         """Fits from ``x``, re-sampled at each new lag until it stays within the larger of
-        :data:`LAG_TOLERANCE_S` and a quarter of its white-noise σ, or until the lags where it
-        moved either way lie closer than that or the re-samplings run out (the fit of least cost
-        of those two kept); see the module docstring."""
+        :data:`LAG_TOLERANCE_S` and a quarter of its white-noise σ (see the module docstring). Where
+        the re-samplings took secant or bisection steps (:func:`next_lag`), the fit of least cost of
+        all kept: its lag, re-sampled there once more (the cost compares fits of one tracker)."""
         path: list[float] = []
         costs: list[float] = []
         tried: list[tuple[float, float]] = []  # (the lag re-sampled at, the lag fitted there)
-        fits: list[tuple[float, np.ndarray]] = []  # (cost, fit)
-        converged, ends = False, None
+        fits: list[np.ndarray] = []
+        converged = False
         for _ in range(MAX_RESAMPLINGS + BRACKET_STEPS):
             resampled, beside = float(x[self.column]), self.beside_s(x)
             cost, x_new, converged = self.fit(x)
@@ -166,23 +166,28 @@ class _LagFits:
             if not converged:
                 return x, path, costs, converged
             tried.append((resampled, float(x_new[self.column])))
-            fits.append((cost, x_new))
+            fits.append(x_new)
             now = self.beside_s(x_new)
             tolerance = max(LAG_TOLERANCE_S, 0.25 * self.lag_std(x_new))
             still = now is None or beside is None or stays(now - beside, self.lag_std(x_new, self.beside))
             ends = bracket(tried)
             if still and abs(tried[-1][1] - resampled) < tolerance:
-                return x_new, path, costs, converged
+                break
             if ends is not None and abs(tried[ends[0]][0] - tried[ends[1]][0]) < tolerance:
                 break
             lag = next_lag(tried)
             if len(tried) >= MAX_RESAMPLINGS and lag == tried[-1][1]:
-                ends = None  # plain re-samplings (each closer than the last) and their budget spent
-                break
+                break  # plain re-samplings (each closer than the last) and their budget spent
             x = _moved_to(x_new, lag, self.column, self.beside)
-        if ends is None:
-            return fits[-1][1], path, costs, converged
-        return min((fits[i] for i in ends), key=lambda f: f[0])[1], path, costs, converged
+        best = int(np.argmin(costs))
+        if plain(tried) or (best == len(fits) - 1 and abs(tried[-1][1] - tried[-1][0]) < tolerance):
+            return fits[-1], path, costs, converged
+        # Back to the cheapest fit's re-sampling, so that the fit from it is that fit again.
+        x = _moved_to(fits[best], tried[best][0], self.column, self.beside)
+        cost, x_new, converged = self.fit(x)
+        path.append(tried[best][0])
+        costs.append(cost)
+        return _moved_to(x_new, tried[best][0], self.column, self.beside), path, costs, converged
 
     def lag_std(self, x: np.ndarray, column: int | None = None) -> float:
         """The lag's (``column``'s) white-noise σ at ``x`` from the last fit's normal equations (0
@@ -245,6 +250,12 @@ def _moved_to(x: np.ndarray, lag: float, column: int, beside: int | None) -> np.
     return moved
 
 
+def plain(tried: list[tuple[float, float]]) -> bool:
+    """Whether each of the re-sampled lags ``tried`` (the lag, the lag fitted there) was the lag
+    fitted at the one before (no secant or bisection step)."""
+    return all(b[0] == a[1] for a, b in itertools.pairwise(tried))
+
+
 def bracket(tried: list[tuple[float, float]]) -> tuple[int, int] | None:
     """The last of the re-sampled lags ``tried`` (the lag, the lag fitted there) and the last before
     it where the fit moved the other way (their indices; None: no such pair): g's root lies between."""
@@ -264,8 +275,7 @@ def next_lag(tried: list[tuple[float, float]]) -> float:
     half, which then at least quarters), or through the last two lags where g has kept its sign;
     once a step was not the fitted lag, none is."""
     g = [fitted - lag for lag, fitted in tried]
-    plain = all(b[0] == a[1] for a, b in itertools.pairwise(tried))
-    if plain and (len(tried) < 2 or abs(g[-1]) < SHRINK * abs(g[-2])):
+    if plain(tried) and (len(tried) < 2 or abs(g[-1]) < SHRINK * abs(g[-2])):
         return tried[-1][1]
     ends = bracket(tried)
     if ends is None:
