@@ -7,7 +7,9 @@ correction is exact to first order in the distance from the re-sampled lag, so t
 ends near zero). The settled lag is a root of g(τ) = (the lag fitted on the encoders re-sampled at
 τ) − τ: where those re-samplings stop bringing g towards zero (a loose lag, where the fits
 overshoot each other and alternate between two lags), the next τ is a secant or bisection step
-between the last lags where g had either sign, so the re-samplings close in on the root.
+between the last lags where g had either sign, so the re-samplings close in on the root; then
+the re-sampling of least cost of all tried is kept (the costs compare fits of the same tracker
+poses: a root can lie where re-sampling between rows fits worse than the readings as logged).
 ``alignment.search`` bounds it; its σ, correlations and observability come from the same
 Functions as every other parameter's.
 """
