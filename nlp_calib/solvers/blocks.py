@@ -187,11 +187,7 @@ def stream(
     the first ``n`` columns' blocks are evaluated. Memory stays one block's, however many columns."""
     n = next(iter(mapped.values())).shape[1] if n is None else n
     pieces = _Pieces(backend, f, mapped, static, False, n)
-    # One set of arrays, the widest block's: the last (narrower) block writes their first columns,
-    # where arrays of its own were held beside them (their pieces' buffers stay bound to them).
-    widest = max(pieces.width, default=0)
-    whole = [np.zeros((r, c * widest), order="F") for r, c in pieces.shapes]
-    outs = {size: [a[:, : c * size] for a, (_, c) in zip(whole, pieces.shapes)] for size in pieces.width}
+    outs = {size: [np.zeros((r, c * size), order="F") for r, c in pieces.shapes] for size in pieces.width}
     for lo, hi in pieces.blocks:
         pieces.evaluate(lo, hi, outs[hi - lo])
         yield slice(lo, min(hi, n)), outs[hi - lo]
