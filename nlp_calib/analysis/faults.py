@@ -125,7 +125,7 @@ def tracker_faults(log: Log, sensor: Sensor) -> list[Fault]:
     t, lines = log.time_s, log.line_numbers
     # The printed precision of the poses (and their discretisation, the path's own bend: see
     # streams.path_bend) is the least scatter a miss is judged by, however clean the data.
-    sc = scatter(t, T, printed_step(T))
+    sc = replace(scatter(t, T, printed_step(T)), vector=position)
     if not np.any(sc.floor > 0):
         # Poses without scatter at rest (a noise-free simulation) give no scale to judge a miss by:
         # a smooth path's own curvature would be taken for glitches.

@@ -101,11 +101,13 @@ class Scatter:
     at rest, growing with the rate of change by ``timing`` (s: the readings' timing noise).
     ``bend`` ``(2, n, d)``, where given: the path's own acceleration around each record, looking
     back (``bend[0]``) and ahead (``bend[1]``), where it exceeds what the noise explains: a smooth
-    path misses a chord by that much whatever its noise (:func:`path_bend`)."""
+    path misses a chord by that much whatever its noise (:func:`path_bend`). ``vector``: how many
+    leading columns are one vector's components (a position), whose rate changes as a whole."""
 
     floor: np.ndarray
     timing: np.ndarray
     bend: np.ndarray | None = None
+    vector: int = 0
 
     def at(self, rate: np.ndarray) -> np.ndarray:
         return np.sqrt(self.floor**2 + (self.timing * rate) ** 2)
@@ -287,7 +289,18 @@ def _scored(
     # further from the two records that define them are the less certain.
     fL, fR, fC = _spread(t, l2, l1, tm), _spread(t, r1, r2, tm), _spread(t, l1, r1, tm)
 
+    # A change of rate from vL to vR made smoothly anywhere between the near neighbours (a start
+    # over a few records, not a corner) misses every one of these paths by up to a quarter of the
+    # change times the span: no noise, so taken off the miss rather than scaled by the threshold.
+    # A vector's rate may turn as it changes (a start while the wheel swings): each component is
+    # allowed the size of the whole change.
+    change = np.abs(vR - vL)
+    if sc.vector > 1:
+        change[:, : sc.vector] = np.linalg.norm(change[:, : sc.vector], axis=1)[:, None]
+    slack = (change * (t[r1] - t[l1])[:, None] / 4.0)[:, None]
+
     def size(D: np.ndarray, k: np.ndarray) -> np.ndarray:
+        D = np.maximum(np.abs(D) - slack, 0.0)
         return np.sqrt(np.sum((D / (k[..., None] * sigma[:, None])) ** 2, axis=-1))
 
     left = np.maximum.accumulate(size(ym - L, fL), axis=1)  # left[:, j]: worst of 0..j
