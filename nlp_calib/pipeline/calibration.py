@@ -397,13 +397,8 @@ def given_lag(parts: Sequence[LogSetup]) -> Callable[[float], np.ndarray] | None
     if any(p.prepared.scenario.log.alignment.tracker_lag == "auto" for p in parts):
         return None
     # Each aligned log is re-sampled on from its own lag: what ``d`` adds is the offset from it.
-    logs = [(p.windows, Resampler(p.alignment.log, p.problem.fns.model.encoder_kinds)) for p in parts]
-
-    def inputs(d: float) -> np.ndarray:
-        data = [w.data.with_inputs(w.binder.inputs(r.at(d)[0], *w.fit)) for w, r in logs]
-        return data[0].inputs if len(data) == 1 else joined(data).inputs
-
-    return inputs
+    resamplers = [Resampler(p.alignment.log, p.problem.fns.model.encoder_kinds) for p in parts]
+    return lambda d: _inputs_of(parts, [r.at(d)[0] for r in resamplers])
 
 
 def read_speeds(parts: Sequence[LogSetup]) -> Callable[[float], np.ndarray] | None:
@@ -414,14 +409,16 @@ def read_speeds(parts: Sequence[LogSetup]) -> Callable[[float], np.ndarray] | No
     if all(lg.joint_stream is None or lg.joint_stream.quadrature is None for lg in logs):
         return None
 
-    def inputs(side: float) -> np.ndarray:
-        data = [
-            p.windows.data.with_inputs(p.windows.binder.inputs(speeds_read(lg, side), *p.windows.fit))
-            for p, lg in zip(parts, logs)
-        ]
-        return data[0].inputs if len(data) == 1 else joined(data).inputs
+    return lambda side: _inputs_of(parts, [speeds_read(lg, side) for lg in logs])
 
-    return inputs
+
+def _inputs_of(parts: Sequence[LogSetup], logs: Sequence[Log]) -> np.ndarray:
+    """The fitted windows' interval inputs of ``parts`` (end to end) read from ``logs``, one each:
+    the same logs read another way (re-sampled, speeds read otherwise)."""
+    data = [
+        p.windows.data.with_inputs(p.windows.binder.inputs(lg, *p.windows.fit)) for p, lg in zip(parts, logs)
+    ]
+    return data[0].inputs if len(data) == 1 else joined(data).inputs
 
 
 def joint_noise(parts: Sequence[LogSetup]) -> tuple[np.ndarray, np.ndarray]:
