@@ -3,9 +3,17 @@ angle integrated independently."""
 
 from __future__ import annotations
 
-import numpy as np
+from pathlib import Path
 
+import numpy as np
+import pytest
+
+from nlp_calib.models import get_model, load_log
 from nlp_calib.models.base import sampled_angle
+from nlp_calib.problem import ProblemSpec, build, build_residual_data
+from nlp_calib.problem.windows import ResidualOptions
+from nlp_calib.simulation.simulate import SimulationOptions, simulate, write_simulation
+from nlp_calib.solvers import ProblemEvaluator
 
 DT = 0.04
 
@@ -40,3 +48,35 @@ def test_travel_falls_back_to_the_mean_where_the_direction_changes() -> None:
     t, travel, phi = _drive(speed, angle, 4)
     assert travel[0] * travel[1] < 0
     np.testing.assert_array_equal(sampled_angle(phi, "travel", travel, t)[:2], sampled_angle(phi, "mean")[:2])
+
+
+def _lag_step(log_path: Path, truth: dict[str, float], sample: str) -> float:
+    """The lag's Gauss-Newton step (ms) from the truth, lag 0, on a noise-free log: the bias the
+    model's error gives the fitted lag (the demo's residual options)."""
+    model = get_model("tricycle")
+    fns = build(model, ProblemSpec(horizon=10, lags=1))
+    data = build_residual_data(
+        fns, load_log(log_path, model), ResidualOptions(horizon=10, steering_sample=sample)
+    )
+    ev = ProblemEvaluator(fns, data, x_fixed=np.zeros(0), omega=np.ones(3), delta=1e9)
+    ne = ev.normal_equations(np.array([*(truth[n] for n in fns.names[:-1]), 0.0]))
+    return float(-np.linalg.solve(ne.H, ne.g)[-1] * 1e3)
+
+
+@pytest.mark.parametrize("stops", [0.15, 0.0])
+def test_travel_halves_the_lags_bias_from_starting_off_stops(tmp_path: Path, stops: float) -> None:
+    """The simulated drive holds a stop, then leaves it over a shorter stretch than it took to stop:
+    steering while speeding up, more sharply than while slowing down. The readings' mean steering
+    biases the lag fitted on a noise-free log (truth: 0) by -0.05 ms here (-0.035 ms on 10^5
+    records, whatever the tracker noise: 2.5σ of the first fit at 10^6); the travel-weighted one
+    by half as much. Without stops, neither biases it."""
+    opts = SimulationOptions.of(
+        records=20000, seed=38, tracker_noise_xy=0.0, tracker_noise_theta=0.0, stop_fraction=stops
+    )
+    log_path, _ = write_simulation(simulate(opts), tmp_path / "drive.txt")
+    mean, travel = (_lag_step(log_path, dict(opts.truth), s) for s in ("mean", "travel"))
+    if stops:
+        assert mean < -0.04
+        assert abs(travel) < 0.55 * abs(mean)
+    else:
+        assert abs(mean) < 0.005 and abs(travel) < 0.005
