@@ -194,28 +194,32 @@ def joint_stream(
     integrated: list[str],
     header: LogHeader,
     breaks: np.ndarray | None,
+    quadrature: np.ndarray | None = None,
 ) -> JointStream:
     """The joints' own stream (:class:`JointStream`) of ``positions`` at ``time_s`` (``names``: the
     joints', in the header's encoder order), each joint's resolution read off its readings as
     published, the readings a slow driver held filled in between its updates
-    (:func:`fresh_positions`)."""
+    (:func:`fresh_positions`); ``quadrature``: the integrated joints' (:attr:`JointStream.quadrature`)."""
     steps = [0.0 if n in integrated else resolution(positions[:, j]) for j, n in enumerate(names)]
     by_velocity = tuple(e for e, n in zip(header.encoder_names, names) if n in integrated)
     filled, fresh = fresh_positions(time_s, positions)
-    return JointStream(time_s, frozen(filled), tuple(steps), by_velocity, breaks, frozen(fresh))
+    held = None if quadrature is None else frozen(quadrature)
+    return JointStream(time_s, frozen(filled), tuple(steps), by_velocity, breaks, frozen(fresh), held)
 
 
 def joint_positions(
     path: Path, joints: Stamped, names: tuple[str, ...]
-) -> tuple[np.ndarray, np.ndarray, list[str]]:
+) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray | None]:
     """The joints' messages in stamp order (one per stamp), their positions (rad; a joint with
-    only velocities integrated over the stamps from 0), and the joints so integrated."""
+    only velocities integrated over the stamps from 0), the joints so integrated, and their
+    :attr:`~nlp_calib.logs.log.JointStream.quadrature` (None: none integrated)."""
     order = np.argsort(joints.stamp_ns, kind="stable")
     ns = joints.stamp_ns[order]
     first = np.concatenate([[True], np.diff(ns) > 0])
     ns, values = ns[first], joints.values[order][first]
     n = len(names)
     columns, integrated = [], []
+    quadrature = np.zeros((ns.size, n))
     for j, name in enumerate(names):
         position, velocity = values[:, j], values[:, n + j]
         if np.all(np.isfinite(position)):
@@ -230,8 +234,11 @@ def joint_positions(
             )
         dt = np.diff(ns).astype(float) * 1e-9
         columns.append(np.concatenate([[0.0], np.cumsum(0.5 * (velocity[1:] + velocity[:-1]) * dt)]))
+        # Each speed held over the interval after its stamp: v_i·dt_i, the trapezoid's less half
+        # the jump to the next (the mean over the interval before: v_(i+1)·dt_i, plus it).
+        quadrature[:, j] = np.concatenate([[0.0], np.cumsum(0.5 * (velocity[:-1] - velocity[1:]) * dt)])
         integrated.append(name)
-    return ns, np.stack(columns, axis=1), integrated
+    return ns, np.stack(columns, axis=1), integrated, (quadrature if integrated else None)
 
 
 def breaks_s(joints: Stamped, start_ns: int) -> np.ndarray | None:
@@ -282,7 +289,7 @@ def timed_by_tracker(
     warning says when poses fell in joint gaps, joints were integrated or messages were dropped;
     ``numbered``: what the tracker's line numbers count (a bag topic's ``/topic message``)."""
     check_overlap(p, joints, tracker)
-    joint_ns, positions, integrated = joint_positions(p, joints, names)
+    joint_ns, positions, integrated, quadrature = joint_positions(p, joints, names)
     check_clocks(p, joint_ns, positions, tracker)
     index, timing = at_tracker(joint_ns, tracker, max_gap_s)
     drops = Drops({**joints.drops.counts, **tracker.drops.counts})
@@ -294,7 +301,9 @@ def timed_by_tracker(
     stamps = tracker.stamp_ns[index]
     start_ns = int(stamps[0])
     stream_s = frozen((joint_ns - start_ns).astype(float) * 1e-9)
-    stream = joint_stream(stream_s, positions, names, integrated, header, breaks_s(joints, start_ns))
+    stream = joint_stream(
+        stream_s, positions, names, integrated, header, breaks_s(joints, start_ns), quadrature
+    )
     time_s = frozen((stamps - start_ns).astype(float) * 1e-9)
     poses = np.array(tracker.values[index, :3], dtype=float)
     poses[:, 2] = wrap_angle(poses[:, 2])
@@ -325,7 +334,7 @@ def joint_files(path: str | Path, topics: BagTopics) -> tuple[str, str, str]:
     joints = replace(
         joints, stamp_ns=joints.stamp_ns + clock_shift_ns(p, joints, tracker, topics.clock_offset)
     )
-    joint_ns, positions, integrated = joint_positions(p, joints, topics.joints)
+    joint_ns, positions, integrated, _ = joint_positions(p, joints, topics.joints)
     order = np.argsort(tracker.stamp_ns, kind="stable")
     ts = tracker.stamp_ns[order]
     first = np.concatenate([[True], np.diff(ts) > 0])

@@ -96,6 +96,11 @@ class JointStream:
     #: ``(n, n_joints)``: which messages are readings of their own, the others a slow driver's
     #: held reading filled in between its updates (None: every message is one).
     fresh: np.ndarray | None = None
+    #: ``(n, n_joints)``: for the joints integrated from speeds (``integrated``), the positions
+    #: with each speed held over the interval after its stamp less the trapezoids' (the mean over
+    #: the interval before gives the trapezoids' less this): what a speed column leaves open,
+    #: half an interval's reading either way (0 for the others; None: none integrated).
+    quadrature: np.ndarray | None = None
 
     def updates_s(self) -> np.ndarray:
         """Each joint's median time between its own readings (s): its driver's update period."""

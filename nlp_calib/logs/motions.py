@@ -237,7 +237,7 @@ def timed_by_motions(
     record at each stamp of the ``motions`` the joints cover, and the increments between them;
     ``numbered``: what the motions' line numbers count (a bag topic's ``/topic message``)."""
     check_overlap(p, joints, Stamped(motions.path, motions.start_ns, np.zeros((motions.n, 0))))
-    joint_ns, positions, integrated = joint_positions(p, joints, tuple(names))
+    joint_ns, positions, integrated, quadrature = joint_positions(p, joints, tuple(names))
     stamps, keep, left = _records(p, joint_ns, motions, max_gap_s)
     if keep.sum() < 1:
         raise DatasetError(str(p), None, f"no increment lies inside the joints' stream ({left})")
@@ -252,7 +252,8 @@ def timed_by_motions(
         {k: frozen(v[keep]) for k, v in motions.quality.items()},
     )
     stream_s = frozen((joint_ns - start_ns).astype(float) * 1e-9)
-    stream = joint_stream(stream_s, positions, tuple(names), integrated, header, breaks_s(joints, start_ns))
+    breaks = breaks_s(joints, start_ns)
+    stream = joint_stream(stream_s, positions, tuple(names), integrated, header, breaks, quadrature)
     time_s = frozen((stamps - start_ns).astype(float) * 1e-9)
     n = int(stamps.size)
     # A record's "line" is that of the first increment that starts or ends there.

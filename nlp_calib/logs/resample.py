@@ -130,3 +130,15 @@ def _joints_resampled(
     clock = replace(log.clock, encoder_lag_s=lag_s, beside_lag_s=beside)
     shifted = replace(log, joint_positions=frozen(positions), clock=clock)
     return shifted, (int(valid[0]), int(valid[-1]) + 1)
+
+
+def speeds_read(log: Log, side: float) -> Log:
+    """``log`` with its joints integrated from speeds read as held over the interval after each
+    stamp (``side`` +1) or as the mean over the interval before (−1) instead of sampled at it (the
+    trapezoids', :attr:`~nlp_calib.logs.log.JointStream.quadrature`), at the log's own lag; the
+    log itself where no joint was integrated."""
+    stream = log.joint_stream
+    if stream is None or stream.quadrature is None:
+        return log
+    moved = replace(stream, positions=frozen(stream.positions + side * stream.quadrature))
+    return _joints_resampled(replace(log, joint_stream=moved), 0.0, [0.0] * stream.positions.shape[1])[0]

@@ -4,12 +4,19 @@ An estimated lag is a parameter of the problem (``tracker_lag``, :mod:`nlp_calib
 the internal solver fits it with every other parameter, the encoders re-sampled at its value, and
 again at the new value until it moves by less than :data:`LAG_TOLERANCE_S` (the problem's clock
 correction is exact to first order in the distance from the re-sampled lag, so that distance
-ends near zero). ``alignment.search`` bounds it; its σ, correlations and observability come from
-the same Functions as every other parameter's.
+ends near zero). The settled lag is a root of g(τ) = (the lag fitted on the encoders re-sampled at
+τ) − τ: where those re-samplings stop bringing g towards zero (a loose lag, where the fits
+overshoot each other and alternate between two lags), the next τ is a secant or bisection step
+between the last lags where g had either sign, so the re-samplings close in on the root; then
+the re-sampling of least cost of all tried is kept (the costs compare fits of the same tracker
+poses: a root can lie where re-sampling between rows fits worse than the readings as logged).
+``alignment.search`` bounds it; its σ, correlations and observability come from the same
+Functions as every other parameter's.
 """
 
 from __future__ import annotations
 
+import itertools
 import warnings
 from dataclasses import dataclass, replace
 
@@ -30,6 +37,11 @@ from nlp_calib.solvers import ProblemEvaluator
 LAG_TOLERANCE_S = 1e-4
 #: ...or this many times.
 MAX_RESAMPLINGS = 8
+#: Re-samplings stop bringing the lag towards where it stays when one moves it by more than this
+#: share of the last move: the next lag is then a secant or bisection step (:func:`next_lag`).
+SHRINK = 0.8
+#: Steps of that kind beyond :data:`MAX_RESAMPLINGS` (each at least quarters the lags' bracket).
+BRACKET_STEPS = 8
 #: Lags over the search a fit starts from when the fit from the lag's initial value does not converge.
 COARSE_STARTS = 9
 #: The profile of the cost over the search: at most this many lags, at least this far apart (s).
@@ -140,23 +152,44 @@ class _LagFits:
 
     def settle(self, x: np.ndarray) -> tuple[np.ndarray, list[float], list[float], bool]:
         """Fits from ``x``, re-sampled at each new lag until it stays within the larger of
-        :data:`LAG_TOLERANCE_S` and a quarter of its white-noise σ (see the module docstring)."""
+        :data:`LAG_TOLERANCE_S` and a quarter of its white-noise σ (see the module docstring). Where
+        the re-samplings took secant or bisection steps (:func:`next_lag`), the fit of least cost of
+        all kept: its lag, re-sampled there once more (the cost compares fits of one tracker)."""
         path: list[float] = []
         costs: list[float] = []
+        tried: list[tuple[float, float]] = []  # (the lag re-sampled at, the lag fitted there)
+        fits: list[np.ndarray] = []
         converged = False
-        for _ in range(MAX_RESAMPLINGS):
+        for _ in range(MAX_RESAMPLINGS + BRACKET_STEPS):
             resampled, beside = float(x[self.column]), self.beside_s(x)
             cost, x_new, converged = self.fit(x)
             path.append(resampled)
             costs.append(cost)
             if not converged:
+                return x, path, costs, converged
+            tried.append((resampled, float(x_new[self.column])))
+            fits.append(x_new)
+            now = self.beside_s(x_new)
+            tolerance = max(LAG_TOLERANCE_S, 0.25 * self.lag_std(x_new))
+            still = now is None or beside is None or stays(now - beside, self.lag_std(x_new, self.beside))
+            ends = bracket(tried)
+            if still and abs(tried[-1][1] - resampled) < tolerance:
                 break
-            x = x_new
-            now = self.beside_s(x)
-            still = now is None or beside is None or stays(now - beside, self.lag_std(x, self.beside))
-            if still and stays(float(x[self.column]) - resampled, self.lag_std(x)):
+            if ends is not None and abs(tried[ends[0]][0] - tried[ends[1]][0]) < tolerance:
                 break
-        return x, path, costs, converged
+            lag = next_lag(tried)
+            if len(tried) >= MAX_RESAMPLINGS and lag == tried[-1][1]:
+                break  # plain re-samplings (each closer than the last) and their budget spent
+            x = _moved_to(x_new, lag, self.column, self.beside)
+        best = int(np.argmin(costs))
+        if plain(tried) or (best == len(fits) - 1 and abs(tried[-1][1] - tried[-1][0]) < tolerance):
+            return fits[-1], path, costs, converged
+        # Back to the cheapest fit's re-sampling, so that the fit from it is that fit again.
+        x = _moved_to(fits[best], tried[best][0], self.column, self.beside)
+        cost, x_new, converged = self.fit(x)
+        path.append(tried[best][0])
+        costs.append(cost)
+        return _moved_to(x_new, tried[best][0], self.column, self.beside), path, costs, converged
 
     def lag_std(self, x: np.ndarray, column: int | None = None) -> float:
         """The lag's (``column``'s) white-noise σ at ``x`` from the last fit's normal equations (0
@@ -206,6 +239,60 @@ class _LagFits:
             if converged and (best is None or cost < best[0]):
                 best = (cost, x_new)
         return None if best is None else best[1]
+
+
+def _moved_to(x: np.ndarray, lag: float, column: int, beside: int | None) -> np.ndarray:
+    """``x`` with its lag at ``lag`` (a second clock, at ``beside``, keeps its offset over it)."""
+    if lag == float(x[column]):
+        return x
+    moved = x.copy()
+    moved[column] = lag
+    if beside is not None:
+        moved[beside] = x[beside] + (lag - float(x[column]))
+    return moved
+
+
+def plain(tried: list[tuple[float, float]]) -> bool:
+    """Whether each of the re-sampled lags ``tried`` (the lag, the lag fitted there) was the lag
+    fitted at the one before (no secant or bisection step)."""
+    return all(b[0] == a[1] for a, b in itertools.pairwise(tried))
+
+
+def bracket(tried: list[tuple[float, float]]) -> tuple[int, int] | None:
+    """The last of the re-sampled lags ``tried`` (the lag, the lag fitted there) and the last before
+    it where the fit moved the other way (their indices; None: no such pair): g's root lies between."""
+    sign = np.sign(tried[-1][1] - tried[-1][0]) if tried else 0.0
+    if sign == 0.0:
+        return None
+    other = next(
+        (i for i in range(len(tried) - 2, -1, -1) if np.sign(tried[i][1] - tried[i][0]) == -sign), None
+    )
+    return None if other is None else (len(tried) - 1, other)
+
+
+def next_lag(tried: list[tuple[float, float]]) -> float:
+    """The lag to re-sample at next after ``tried`` (the lag, the lag fitted there): the fitted lag
+    while each fit moves it by under :data:`SHRINK` of the move before; else the secant of g
+    between the ends of the :func:`bracket` (bisection where it falls outside the bracket's middle
+    half, which then at least quarters), or through the last two lags where g has kept its sign;
+    once a step was not the fitted lag, none is."""
+    g = [fitted - lag for lag, fitted in tried]
+    if plain(tried) and (len(tried) < 2 or abs(g[-1]) < SHRINK * abs(g[-2])):
+        return tried[-1][1]
+    ends = bracket(tried)
+    if ends is None:
+        (a, ga), (b, gb) = (tried[-2][0], g[-2]), (tried[-1][0], g[-1])
+        secant = b - gb * (b - a) / (gb - ga) if gb != ga else b + gb
+        # Only onwards in g's direction, and no further than plain steps shrinking by SHRINK
+        # each would sum to (1 / (1 - SHRINK) of the last): a secant of two close values of a
+        # noisy g reaches far beyond where it holds.
+        reach = (secant - b) / gb if gb != 0.0 else 0.0
+        return float(secant) if 1.0 < reach <= 1.0 / (1.0 - SHRINK) else tried[-1][1]
+    (a, ga), (b, gb) = ((tried[i][0], g[i]) for i in ends)
+    secant = a - ga * (b - a) / (gb - ga)
+    lo, hi = min(a, b), max(a, b)
+    quarter = 0.25 * (hi - lo)
+    return float(secant) if lo + quarter <= secant <= hi - quarter else 0.5 * (a + b)
 
 
 def valleys(grid: np.ndarray, costs: np.ndarray) -> list[float]:

@@ -25,7 +25,7 @@ from nlp_calib.analysis.precision import clock_needed, log_precision, tightest, 
 from nlp_calib.core import memory
 from nlp_calib.core.errors import NlpCalibWarning
 from nlp_calib.logs import Log
-from nlp_calib.logs.resample import Resampler
+from nlp_calib.logs.resample import Resampler, speeds_read
 from nlp_calib.models import KinematicModel, reference_scales
 from nlp_calib.pipeline import consistency_check, validation
 from nlp_calib.pipeline.align import Alignment
@@ -127,7 +127,12 @@ class Calibration:
             self.held: Mapping[str, str] = self.stages.prepared.held
             windows = self.stages.windows
             self.fitting = Fit(
-                self.stages.problem, windows.data, self.solvers, windows.input_noise, given_lag(self.parts)
+                self.stages.problem,
+                windows.data,
+                self.solvers,
+                windows.input_noise,
+                given_lag(self.parts),
+                read_speeds(self.parts),
             )
         else:
             self.held, self.fitting = _joint_fit(sc, self.parts, self.solvers, start)
@@ -261,7 +266,7 @@ def _joint_fit(
         # As each log's (see stages.started): what ``start`` lacks, where the first log's start put it.
         restart = one_horizon.with_options(initial_guess={**first.problem.start.initial, **start})
         problem = restarted(problem, restart, start_from, lags, mounts)
-    return held, Fit(problem, data, solvers, joint_noise(parts), given_lag(parts))
+    return held, Fit(problem, data, solvers, joint_noise(parts), given_lag(parts), read_speeds(parts))
 
 
 def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> CalibrationRun:
@@ -325,7 +330,14 @@ def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
     """One log of several fitted on its own (its stages' windows and problem, nothing built again)."""
     return _run(
         part.prepared.scenario,
-        Fit(part.problem, part.windows.data, solvers, part.windows.input_noise, given_lag([part])),
+        Fit(
+            part.problem,
+            part.windows.data,
+            solvers,
+            part.windows.input_noise,
+            given_lag([part]),
+            read_speeds([part]),
+        ),
         [part],
         solvers,
         Wanted(),
@@ -389,6 +401,24 @@ def given_lag(parts: Sequence[LogSetup]) -> Callable[[float], np.ndarray] | None
 
     def inputs(d: float) -> np.ndarray:
         data = [w.data.with_inputs(w.binder.inputs(r.at(d)[0], *w.fit)) for w, r in logs]
+        return data[0].inputs if len(data) == 1 else joined(data).inputs
+
+    return inputs
+
+
+def read_speeds(parts: Sequence[LogSetup]) -> Callable[[float], np.ndarray] | None:
+    """Where a log's joints were integrated from speeds, the fitted windows' interval inputs (the
+    logs end to end) with each speed read as held over the interval after its stamp (``side`` +1)
+    or as the mean over the interval before (−1), not sampled at it (None: no log's were)."""
+    logs = [p.alignment.log for p in parts]
+    if all(lg.joint_stream is None or lg.joint_stream.quadrature is None for lg in logs):
+        return None
+
+    def inputs(side: float) -> np.ndarray:
+        data = [
+            p.windows.data.with_inputs(p.windows.binder.inputs(speeds_read(lg, side), *p.windows.fit))
+            for p, lg in zip(parts, logs)
+        ]
         return data[0].inputs if len(data) == 1 else joined(data).inputs
 
     return inputs

@@ -26,7 +26,9 @@ class Fit:
     ``noise``, the inputs' 1σ and which are counters (see :func:`bias_step`), when each estimate
     is to be freed of the bias the inputs' noise gives it; ``given_lag``, where every log's tracker
     lag is given as a number (no parameter of the problem), the windows' interval inputs with each
-    log's encoders read ``d`` s later than at it (``given_lag(d)``)."""
+    log's encoders read ``d`` s later than at it (``given_lag(d)``); ``speeds_read``, where a log's
+    joints were integrated from speeds, the windows' inputs with each speed read as held over the
+    interval after its stamp (``speeds_read(1)``) or the mean over the one before (``(-1)``)."""
 
     def __init__(
         self,
@@ -35,11 +37,13 @@ class Fit:
         solvers: Sequence[str],
         noise: tuple[np.ndarray, np.ndarray] | None = None,
         given_lag: Callable[[float], np.ndarray] | None = None,
+        speeds_read: Callable[[float], np.ndarray] | None = None,
     ) -> None:
         self.problem = problem
         self.data = data
         self.noise = noise
         self.given_lag = given_lag
+        self.speeds_read = speeds_read
         self._bias: list[BiasStep] = []
         self.evaluator = problem.binder.evaluate(data)
         self.evaluator.prepare(evaluated(problem.binder.scenario, solvers))

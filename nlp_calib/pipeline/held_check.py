@@ -15,6 +15,13 @@ difference of ``g`` over the held value's plausible error either side:
   problem (``known:``) moves its clock correction;
 * any other: the precision a calibration needs of it (its layout's, at its value).
 
+Speeds integrated into positions (``form: speeds``, a bag's joints with only velocities) are
+read as samples at their stamps (trapezoids); a speed column does not say whether its value is
+that, the mean over the interval before, or a rate held over the interval after (a controller's
+command, a simulator's step): each reads the motion half an interval apart, and where the rate
+jumps between intervals the trapezoids' positions err by |Δω|·dt/2. That reading is held as a
+value too (:data:`SPEEDS`, half an interval either way: the estimate's move between the readings).
+
 A lag the fit pinned on the edge of its search (the data put it there or beyond, with no σ) is held
 there too: moved one record interval beyond the edge, the others following it as the fit's normal
 equations say (``−H_oo⁻¹·H_o,lag``), so what it leaves wrong is said and kept from the hand-off.
@@ -50,6 +57,9 @@ LAG = "alignment.tracker_lag"
 RECORD_INTERVAL = "one record interval"
 PINNED = "one record interval beyond the edge of alignment.search it is pinned on"
 NEEDED = "the precision a calibration needs of it"
+#: How speeds integrated into positions are read (held as a value; its error, half an interval).
+SPEEDS = "dataset.form: speeds"
+HALF_INTERVAL = "each speed the rate held over the interval after its stamp, or the mean over the one before"
 
 
 @dataclass(frozen=True)
@@ -176,7 +186,8 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         moved = dict(zip(fns.names, np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params))
         shift = {n: float(moved[n]) for n in free}
         z = {n: shift[n] / std[n] if std.get(n, 0.0) > 0 else float("nan") for n in free}
-        found.append(Response(name, value, error[0], error[1], units.get(name, "s"), shift, z, needed))
+        unit = "interval" if name == SPEEDS else units.get(name, "s")
+        found.append(Response(name, value, error[0], error[1], unit, shift, z, needed))
 
     base = np.asarray(ev.x_fixed, dtype=float)
     for i, (name, error) in enumerate(zip(fns.fixed, _fixed_errors(run, fit))):
@@ -188,6 +199,10 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
     if fit.given_lag is not None and np.isfinite(d := record_interval(fit)):
         grads = (_at_inputs(ev, x, fit.given_lag(d)), _at_inputs(ev, x, fit.given_lag(-d)))
         response(LAG, held_lag(run, fit), (d, RECORD_INTERVAL), step(H, *grads))
+    if fit.speeds_read is not None:
+        # The trapezoids are the two readings' mean: the central difference of the two.
+        grads = (_at_inputs(ev, x, fit.speeds_read(1.0)), _at_inputs(ev, x, fit.speeds_read(-1.0)))
+        response(SPEEDS, 0.0, (0.5, HALF_INTERVAL), step(H, *grads))
     d = record_interval(fit)
     for name in (n for n in run.pinned() if n in free and np.isfinite(d)):
         move = pinned_step(H, fns.free.index(name))
@@ -229,9 +244,11 @@ def held_lag(run: CalibrationRun, fit: Fit) -> float:
 
 
 def _amount(value: float, unit: str) -> str:
-    """``value`` in ``unit`` (a time in ms; a ratio bare)."""
+    """``value`` in ``unit`` (a time in ms; a ratio bare; a share of the joints' interval)."""
     if unit == "s":
         return f"{1e3 * value:.3g} ms"
+    if unit == "interval":
+        return f"{value:.3g} of an interval"
     return f"{value:.4g}" if unit in ("", "1") else f"{value:.4g} {unit}"
 
 
@@ -242,6 +259,8 @@ def _what_to_do(r: Response, given: bool) -> str:
         return f"widen alignment.search so that the lag is fitted inside it, or {within}"
     if r.name == LAG:
         return f"fit it (alignment.tracker_lag: auto), or {within}"
+    if r.name == SPEEDS:
+        return "give the joints' angles (form: positions) or their increments per interval (form: increments)"
     if not given:
         return within
     return f"free it (leave it out of known:, or give it under priors: with its σ), or {within}"
@@ -251,6 +270,14 @@ def concern(r: Response, name: str, run: CalibrationRun) -> str:
     """Why parameter ``name`` is not believed: the held value of ``r`` moves it beyond its σ."""
     unit, layout = run.scenario.units.get(name, ""), run.scenario.layout
     given = r.name in layout and layout.param(r.name).status == KNOWN
+    if r.name == SPEEDS:
+        return (
+            f"{name} rests on how the speeds are read ({SPEEDS}: each a sample at its stamp, integrated "
+            f"by trapezoids): read as the rate held over the interval after each stamp, it moves {name} "
+            f"by {r.shift[name]:+.3g} {unit}, as the mean over the interval before by {-r.shift[name]:+.3g} "
+            f"{unit} ({abs(r.in_sigma[name]):.1f}× the σ the data give; a calibration needs "
+            f"{r.needed[name]:.2g} {unit}); {_what_to_do(r, given)}"
+        )
     return (
         f"{name} rests on {r.name} held at {_amount(r.value, r.unit)}: off by {_amount(r.error, r.unit)} "
         f"({r.rule}), it moves {name} by {r.shift[name]:+.3g} {unit} ({r.in_sigma[name]:+.1f}× the σ the "

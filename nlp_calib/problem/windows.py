@@ -336,7 +336,9 @@ def over_columns(f: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
         for buf, call, ins, cols in blocks[size]:
             for target, a in zip(ins, args):
                 if a.ndim == 2:
-                    target[:] = np.ravel(a[:, at : at + cols], order="F")
+                    # Column by column, straight from ``a`` (a ravelled copy of a row-major
+                    # argument's columns was a second copy of every block).
+                    target.reshape(cols, a.shape[0])[:] = a[:, at : at + cols].T
                 elif a.size:  # the same column for every column of the piece (once, where compiled)
                     target.reshape(-1, a.size)[:] = np.ravel(a)
             for i, (out, (_, c)) in enumerate(zip(outs, shapes)):
