@@ -302,7 +302,7 @@ def travel_weighted(travel: np.ndarray | None, time_s: np.ndarray | None) -> np.
     of travel changes within the interval."""
     if travel is None or time_s is None:
         raise ModelError(
-            "steering_sample 'travel' is for a model that reads its travel from a counter (tricycle)"
+            "steering_sample 'travel' is for a model that reads its travel from counters (a steered one)"
         )
     speed = np.abs(record_rates(np.asarray(travel, dtype=float)[None], np.asarray(time_s, dtype=float))[0])
     v_a, v_b = speed[:-1], speed[1:]
