@@ -112,7 +112,8 @@ def test_a_joint_fit_records_the_lag_every_log_holds(
         run = Calibration(sc).run()
     found = run.checks.plugin("held")
     assert found is not None and found.record is not None
-    assert run.checks.held_values() == held
+    # A steered model also holds how each interval's steer angle is read (held_check.STEERING).
+    assert run.checks.held_values() == {**held, "residual.steering_sample": 0.0}
     value = found.record["held"]["alignment.tracker_lag"]["value"]
     assert value == held["alignment.tracker_lag"] if held else math.isnan(value)  # lags that differ: none
 
@@ -137,6 +138,6 @@ def test_a_joint_fit_holds_each_logs_lag_pinned_on_its_search_edge(tmp_path: Pat
     found = run.checks.plugin("held")
     assert found is not None and found.record is not None
     held = found.record["held"]
-    assert set(held) == {"tracker_lag_1", "tracker_lag_2"}
-    for record in held.values():
+    assert set(held) == {"tracker_lag_1", "tracker_lag_2", "residual.steering_sample"}
+    for record in (held["tracker_lag_1"], held["tracker_lag_2"]):
         assert record["rule"] == PINNED and record["value"] == pytest.approx(0.02, abs=1e-6)

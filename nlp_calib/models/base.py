@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 import casadi as ca
 import numpy as np
 
+from nlp_calib.core.errors import ModelError
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import EncoderKind, Log, LogHeader
 from nlp_calib.models.clock import LAG_REFERENCE
@@ -33,7 +34,7 @@ SENSOR_UNITS: Mapping[str, str] = {"sensor_x": "m", "sensor_y": "m", "sensor_the
 INTEGRATIONS = ("exact", "euler")
 #: 1σ of rounding to whole ticks (uniform over one tick).
 QUANTISATION = 1.0 / np.sqrt(12.0)
-STEERING_SAMPLES = ("start", "end", "mean")
+STEERING_SAMPLES = ("start", "end", "mean", "travel")
 
 #: A reference precision: a fraction of the parameter's value, or an absolute amount in its unit.
 Reference = tuple[Literal["relative", "absolute"], float]
@@ -272,14 +273,45 @@ def record_rates(increments: np.ndarray, time_s: np.ndarray) -> np.ndarray:
     return (np.hstack([pad, increments]) + np.hstack([increments, pad])) / span
 
 
-def sampled_angle(angle: np.ndarray, steering_sample: str) -> np.ndarray:
+def sampled_angle(
+    angle: np.ndarray,
+    steering_sample: str,
+    travel: np.ndarray | None = None,
+    time_s: np.ndarray | None = None,
+) -> np.ndarray:
     """Per interval, an angle read at each record (rad), taken at the interval's ``start``, its
-    ``end`` or the ``mean`` of both (along the shorter arc)."""
+    ``end``, the ``mean`` of both (along the shorter arc), or ``travel``: the angle the interval's
+    travel saw (:func:`travel_weighted`; needs each interval's ``travel`` and the records' ``time_s``)."""
     if steering_sample == "start":
         return angle[:-1]
     if steering_sample == "end":
         return angle[1:]
-    return wrap_angle(angle[:-1] + 0.5 * wrap_angle(angle[1:] - angle[:-1]))
+    change = wrap_angle(angle[1:] - angle[:-1])
+    share = 0.5 if steering_sample == "mean" else travel_weighted(travel, time_s)
+    return wrap_angle(angle[:-1] + share * change)
+
+
+def travel_weighted(travel: np.ndarray | None, time_s: np.ndarray | None) -> np.ndarray:
+    """Per interval, where along its angle's change the travel's mean lies: ``½ + (v_b − v_a) / (6
+    (v_a + v_b))`` for speeds ``v_a``, ``v_b`` at its two records (:func:`record_rates`), the
+    angle and the speed each linear over it. The angle turns the motion in proportion to the
+    travel, so an interval that speeds up while it steers (off a stop) turned by the angle nearer
+    its end than the two readings' mean; the mean is half an interval's share of the change off,
+    in opposite directions speeding up and slowing down, and a drive that starts off more sharply
+    than it stops biases a time offset fitted on it (the tracker lag). ``½`` where the direction
+    of travel changes within the interval."""
+    if travel is None or time_s is None:
+        raise ModelError(
+            "steering_sample 'travel' is for a model that reads its travel from counters (a steered one)"
+        )
+    speed = np.abs(record_rates(np.asarray(travel, dtype=float)[None], np.asarray(time_s, dtype=float))[0])
+    v_a, v_b = speed[:-1], speed[1:]
+    total = v_a + v_b
+    one_way = (travel[:-1] * travel[1:] >= 0) if travel.size > 1 else np.ones(0, dtype=bool)
+    same = np.concatenate([[True], one_way]) & np.concatenate([one_way, [True]])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shift = np.where((total > 0) & same, (v_b - v_a) / (6.0 * total), 0.0)
+    return 0.5 + shift
 
 
 def canonical(

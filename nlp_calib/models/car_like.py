@@ -326,24 +326,28 @@ class CarLike:
                 f"{list(log.header.encoder_names)}"
             )
 
-    def steering_rows(self, log: Log, steering_sample: str) -> list[np.ndarray]:
-        """Each steering encoder's angle ``wrap(2π·s/s_max)``, sampled as asked."""
+    def steering_rows(
+        self, log: Log, steering_sample: str, travel: np.ndarray | None = None
+    ) -> list[np.ndarray]:
+        """Each steering encoder's angle ``wrap(2π·s/s_max)``, sampled as asked (``travel``: each
+        interval's travel in any unit, for ``steering_sample: travel``)."""
         rows = []
+        time_s = np.asarray(log.time_s, dtype=float)
         for enc, kind in self.encoder_kinds.items():
             if kind == "absolute":
                 s_max = float(log.header.encoder_range(enc))
-                rows.append(
-                    sampled_angle(wrap_angle(2.0 * np.pi * log.encoder(enc) / s_max), steering_sample)
-                )
+                angle = wrap_angle(2.0 * np.pi * log.encoder(enc) / s_max)
+                rows.append(sampled_angle(angle, steering_sample, travel, time_s))
         return rows
 
     def inputs(self, log: Log, steering_sample: str) -> np.ndarray:
-        """Rows: each wheel counter's increments, then each steering angle sampled as asked."""
+        """Rows: each wheel counter's increments, then each steering angle sampled as asked (the
+        travel that weighs it, the counters' summed increments: only their speeds' ratio counts)."""
         self._check_encoders(log, steering_sample)
         wheels = [
             log.increments(e).astype(float) for e, kind in self.encoder_kinds.items() if kind == "counter"
         ]
-        return np.vstack([*wheels, *self.steering_rows(log, steering_sample)])
+        return np.vstack([*wheels, *self.steering_rows(log, steering_sample, np.sum(wheels, axis=0))])
 
     def input_rates(self, log: Log) -> None:
         """None: counts are re-sampled on whole ticks, so the intervals give the rates."""

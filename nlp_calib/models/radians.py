@@ -287,13 +287,20 @@ class InRadians:
         return np.vstack(rows)
 
     def _steering(self, log: Log, encoder: str, steering_sample: str) -> np.ndarray:
-        """A steering joint's angle per interval: its ``mean`` over the interval as the wheels
-        travelled it where the joints stream finer than the records
-        (:meth:`~nlp_calib.logs.log.JointStream.travelled_angle`), else read at the records."""
+        """A steering joint's angle per interval: its ``mean`` (or ``travel``) over the interval as
+        the wheels travelled it where the joints stream finer than the records
+        (:meth:`~nlp_calib.logs.log.JointStream.travelled_angle`), else read at the records
+        (``travel``: weighed by the wheel joints' summed increments)."""
         stream = log.joint_stream
-        if steering_sample != "mean" or stream is None:
-            return sampled_angle(wrap_angle(log.joint_position(encoder)), steering_sample)
         wheels = [log.header.encoder_index(e) for e, kind in self.encoder_kinds.items() if kind == "counter"]
+        if steering_sample not in ("mean", "travel") or stream is None:
+            travel = sum(
+                np.diff(log.joint_position(e)) for e, k in self.encoder_kinds.items() if k == "counter"
+            )
+            angle = wrap_angle(log.joint_position(encoder))
+            return sampled_angle(
+                angle, steering_sample, np.asarray(travel, dtype=float), np.asarray(log.time_s)
+            )
         read = log.read_times()
         return wrap_angle(stream.travelled_angle(read, log.header.encoder_index(encoder), wheels))
 

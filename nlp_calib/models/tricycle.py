@@ -267,7 +267,7 @@ class Tricycle:
         t_max = header.encoder_max[header.encoder_index(TRACTION_ENCODER)]
         revs = log.increments(TRACTION_ENCODER) / float(t_max)
         angle = wrap_angle(2.0 * np.pi * log.encoder(STEERING_ENCODER) / float(s_max))
-        return np.vstack([revs, sampled_angle(angle, steering_sample)])
+        return np.vstack([revs, sampled_angle(angle, steering_sample, revs, np.asarray(log.time_s))])
 
     def moving(self, inputs: np.ndarray) -> np.ndarray:
         return np.asarray(inputs[0] != 0.0)

@@ -423,10 +423,11 @@ class Binder:
             backend=self.backend,
         )
 
-    def inputs(self, log: Log, start: int, stop: int) -> np.ndarray:
-        """The interval inputs of records ``start:stop`` of ``log`` (what :meth:`bind` binds)."""
-        steering = self.scenario.objective.residual.steering_sample
-        return interval_inputs(self.fns.model, [log.select(start, stop)], steering)
+    def inputs(self, log: Log, start: int, stop: int, sample: str | None = None) -> np.ndarray:
+        """The interval inputs of records ``start:stop`` of ``log`` (what :meth:`bind` binds; with
+        each interval's steer angle read as ``sample`` instead of the scenario's steering_sample)."""
+        sample = sample or self.scenario.objective.residual.steering_sample
+        return interval_inputs(self.fns.model, [log.select(start, stop)], sample)
 
     def lag_held(self, x0: np.ndarray) -> Binder:
         """This binder with the time offsets held at their values in ``x0`` (fits on the records as

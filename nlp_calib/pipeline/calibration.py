@@ -133,6 +133,7 @@ class Calibration:
                 windows.input_noise,
                 given_lag(self.parts),
                 read_speeds(self.parts),
+                read_steering(self.parts),
             )
         else:
             self.held, self.fitting = _joint_fit(sc, self.parts, self.solvers, start)
@@ -266,7 +267,9 @@ def _joint_fit(
         # As each log's (see stages.started): what ``start`` lacks, where the first log's start put it.
         restart = one_horizon.with_options(initial_guess={**first.problem.start.initial, **start})
         problem = restarted(problem, restart, start_from, lags, mounts)
-    return held, Fit(problem, data, solvers, joint_noise(parts), given_lag(parts), read_speeds(parts))
+    return held, Fit(
+        problem, data, solvers, joint_noise(parts), given_lag(parts), read_speeds(parts), read_steering(parts)
+    )
 
 
 def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> CalibrationRun:
@@ -337,6 +340,7 @@ def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
             part.windows.input_noise,
             given_lag([part]),
             read_speeds([part]),
+            read_steering([part]),
         ),
         [part],
         solvers,
@@ -419,6 +423,24 @@ def _inputs_of(parts: Sequence[LogSetup], logs: Sequence[Log]) -> np.ndarray:
         p.windows.data.with_inputs(p.windows.binder.inputs(lg, *p.windows.fit)) for p, lg in zip(parts, logs)
     ]
     return data[0].inputs if len(data) == 1 else joined(data).inputs
+
+
+def read_steering(parts: Sequence[LogSetup]) -> Callable[[str], np.ndarray] | None:
+    """Where the model reads a steer angle (an absolute encoder), the fitted windows' interval
+    inputs (the logs end to end) with each interval's steer angle read as ``sample`` (a
+    ``steering_sample``) instead of the scenario's (None: no steer angle)."""
+    model = parts[0].problem.fns.model
+    if "absolute" not in model.encoder_kinds.values():
+        return None
+
+    def inputs(sample: str) -> np.ndarray:
+        data = [
+            p.windows.data.with_inputs(p.windows.binder.inputs(p.alignment.log, *p.windows.fit, sample))
+            for p in parts
+        ]
+        return data[0].inputs if len(data) == 1 else joined(data).inputs
+
+    return inputs
 
 
 def joint_noise(parts: Sequence[LogSetup]) -> tuple[np.ndarray, np.ndarray]:

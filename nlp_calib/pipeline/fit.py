@@ -28,7 +28,9 @@ class Fit:
     lag is given as a number (no parameter of the problem), the windows' interval inputs with each
     log's encoders read ``d`` s later than at it (``given_lag(d)``); ``speeds_read``, where a log's
     joints were integrated from speeds, the windows' inputs with each speed read as held over the
-    interval after its stamp (``speeds_read(1)``) or the mean over the one before (``(-1)``)."""
+    interval after its stamp (``speeds_read(1)``) or the mean over the one before (``(-1)``);
+    ``steering_read``, where the model reads a steer angle, the windows' inputs with each
+    interval's steer angle read as the given ``steering_sample`` (``steering_read("travel")``)."""
 
     def __init__(
         self,
@@ -38,12 +40,14 @@ class Fit:
         noise: tuple[np.ndarray, np.ndarray] | None = None,
         given_lag: Callable[[float], np.ndarray] | None = None,
         speeds_read: Callable[[float], np.ndarray] | None = None,
+        steering_read: Callable[[str], np.ndarray] | None = None,
     ) -> None:
         self.problem = problem
         self.data = data
         self.noise = noise
         self.given_lag = given_lag
         self.speeds_read = speeds_read
+        self.steering_read = steering_read
         self._bias: list[BiasStep] = []
         self.evaluator = problem.binder.evaluate(data)
         self.evaluator.prepare(evaluated(problem.binder.scenario, solvers))

@@ -22,6 +22,13 @@ command, a simulator's step): each reads the motion half an interval apart, and 
 jumps between intervals the trapezoids' positions err by |Δω|·dt/2. That reading is held as a
 value too (:data:`SPEEDS`, half an interval either way: the estimate's move between the readings).
 
+A steer angle read at each record (an absolute encoder) is turned into each interval's by the
+two readings' mean (``steering_sample: mean``) or the angle its travel saw (``travel``: speed and
+angle linear over it); the motion follows the angle weighted by the distance travelled, which
+neither reading gives exactly where the drive speeds up or slows down while it steers (off and into
+stops). That reading is held as a value too (:data:`STEERING`): the estimate's move between the
+two readings, whichever the scenario fits with.
+
 A lag the fit pinned on the edge of its search (the data put it there or beyond, with no σ) is held
 there too: moved one record interval beyond the edge, the others following it as the fit's normal
 equations say (``−H_oo⁻¹·H_o,lag``), so what it leaves wrong is said and kept from the hand-off.
@@ -60,6 +67,10 @@ NEEDED = "the precision a calibration needs of it"
 #: How speeds integrated into positions are read (held as a value; its error, half an interval).
 SPEEDS = "dataset.form: speeds"
 HALF_INTERVAL = "each speed the rate held over the interval after its stamp, or the mean over the one before"
+#: How each interval's steer angle is read from its two readings (held as a value; its error, the
+#: move between the readings' mean and the angle the interval's travel saw).
+STEERING = "residual.steering_sample"
+READINGS = "each interval's steer angle the one its travel saw, or its two readings' mean"
 
 
 @dataclass(frozen=True)
@@ -186,7 +197,7 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         moved = dict(zip(fns.names, np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params))
         shift = {n: float(moved[n]) for n in free}
         z = {n: shift[n] / std[n] if std.get(n, 0.0) > 0 else float("nan") for n in free}
-        unit = "interval" if name == SPEEDS else units.get(name, "s")
+        unit = {SPEEDS: "interval", STEERING: "reading"}.get(name) or units.get(name, "s")
         found.append(Response(name, value, error[0], error[1], unit, shift, z, needed))
 
     base = np.asarray(ev.x_fixed, dtype=float)
@@ -203,6 +214,11 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         # The trapezoids are the two readings' mean: the central difference of the two.
         grads = (_at_inputs(ev, x, fit.speeds_read(1.0)), _at_inputs(ev, x, fit.speeds_read(-1.0)))
         response(SPEEDS, 0.0, (0.5, HALF_INTERVAL), step(H, *grads))
+    if fit.steering_read is not None:
+        # The whole move from one reading to the other (step's is half the difference).
+        grads = (_at_inputs(ev, x, fit.steering_read("travel")), _at_inputs(ev, x, fit.steering_read("mean")))
+        half = step(H, *grads)
+        response(STEERING, 0.0, (1.0, READINGS), None if half is None else 2.0 * half)
     d = record_interval(fit)
     for name in (n for n in run.pinned() if n in free and np.isfinite(d)):
         move = pinned_step(H, fns.free.index(name))
@@ -249,6 +265,8 @@ def _amount(value: float, unit: str) -> str:
         return f"{1e3 * value:.3g} ms"
     if unit == "interval":
         return f"{value:.3g} of an interval"
+    if unit == "reading":
+        return "the other reading" if value else "the scenario's reading"
     return f"{value:.4g}" if unit in ("", "1") else f"{value:.4g} {unit}"
 
 
@@ -261,6 +279,8 @@ def _what_to_do(r: Response, given: bool) -> str:
         return f"fit it (alignment.tracker_lag: auto), or {within}"
     if r.name == SPEEDS:
         return "give the joints' angles (form: positions) or their increments per interval (form: increments)"
+    if r.name == STEERING:
+        return "record faster (the angle and the speed then change less over an interval)"
     if not given:
         return within
     return f"free it (leave it out of known:, or give it under priors: with its σ), or {within}"
@@ -276,6 +296,14 @@ def concern(r: Response, name: str, run: CalibrationRun) -> str:
             f"by trapezoids): read as the rate held over the interval after each stamp, it moves {name} "
             f"by {r.shift[name]:+.3g} {unit}, as the mean over the interval before by {-r.shift[name]:+.3g} "
             f"{unit} ({abs(r.in_sigma[name]):.1f}× the σ the data give; a calibration needs "
+            f"{r.needed[name]:.2g} {unit}); {_what_to_do(r, given)}"
+        )
+    if r.name == STEERING:
+        return (
+            f"{name} rests on how each interval's steer angle is read ({STEERING}: the motion follows the "
+            f"angle weighted by the distance travelled): read as the angle the travel saw instead of the "
+            f"two readings' mean, it moves {name} by {r.shift[name]:+.3g} {unit} "
+            f"({abs(r.in_sigma[name]):.1f}× the σ the data give; a calibration needs "
             f"{r.needed[name]:.2g} {unit}); {_what_to_do(r, given)}"
         )
     return (
