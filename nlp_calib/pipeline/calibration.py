@@ -416,11 +416,13 @@ def read_speeds(parts: Sequence[LogSetup]) -> Callable[[float], np.ndarray] | No
     return lambda side: _inputs_of(parts, [speeds_read(lg, side) for lg in logs])
 
 
-def _inputs_of(parts: Sequence[LogSetup], logs: Sequence[Log]) -> np.ndarray:
+def _inputs_of(parts: Sequence[LogSetup], logs: Sequence[Log], sample: str | None = None) -> np.ndarray:
     """The fitted windows' interval inputs of ``parts`` (end to end) read from ``logs``, one each:
-    the same logs read another way (re-sampled, speeds read otherwise)."""
+    the same logs read another way (re-sampled, speeds read otherwise, each interval's steer angle
+    read as ``sample`` rather than the scenario's steering_sample)."""
     data = [
-        p.windows.data.with_inputs(p.windows.binder.inputs(lg, *p.windows.fit)) for p, lg in zip(parts, logs)
+        p.windows.data.with_inputs(p.windows.binder.inputs(lg, *p.windows.fit, sample))
+        for p, lg in zip(parts, logs)
     ]
     return data[0].inputs if len(data) == 1 else joined(data).inputs
 
@@ -433,14 +435,8 @@ def read_steering(parts: Sequence[LogSetup]) -> Callable[[str], np.ndarray] | No
     if "absolute" not in model.encoder_kinds.values():
         return None
 
-    def inputs(sample: str) -> np.ndarray:
-        data = [
-            p.windows.data.with_inputs(p.windows.binder.inputs(p.alignment.log, *p.windows.fit, sample))
-            for p in parts
-        ]
-        return data[0].inputs if len(data) == 1 else joined(data).inputs
-
-    return inputs
+    logs = [p.alignment.log for p in parts]
+    return lambda sample: _inputs_of(parts, logs, sample)
 
 
 def joint_noise(parts: Sequence[LogSetup]) -> tuple[np.ndarray, np.ndarray]:
