@@ -25,6 +25,7 @@ from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
 from nlp_calib.analysis.observability import (
     MIN_TURNING,
     directions,
+    held_to,
     needs_turns,
     not_observable,
     scaled_directions,
@@ -276,9 +277,10 @@ def standing(
         partners.append(_coupled(names, basis, i))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
+    white = np.where(undetermined, np.inf, held_to(found))
     return Standing(
         names, std, std / R, R, undetermined, np.asarray(bounded), tuple(partners), not_observable(found),
-        np.where(np.isfinite(corr), corr, np.nan), white_reference=found.std_reference,
+        np.where(np.isfinite(corr), corr, np.nan), white_reference=white,
     )  # fmt: skip
 
 

@@ -87,7 +87,7 @@ def analyse(
         weak = [w for w in weak if not _within(w, dict(zip(names, R)), clocks)]
     # The heading's range, not its summed steps: tracker noise adds up over thousands of steps.
     turning = float(np.ptp(heading))
-    warnings = [w for w in [no_turning(fns, names, turning, found.std_reference)] if w]
+    warnings = [w for w in [no_turning(fns, names, turning, held_to(found))] if w]
     for w in sorted(weak, key=lambda w: -w.std_reference):
         size = f"1σ = {w.std_reference:.3g} ×" if np.isfinite(w.std_reference) else "no information at"
         warnings.append(w.words() + f" ({size} the reference precision)")
@@ -182,6 +182,13 @@ def not_observable(found: Directions) -> np.ndarray:
     undetermined subspace). The pre-flight's gate reads the same."""
     null = (_direction_std(found.lam) > NOT_OBSERVABLE) | found.free
     return np.asarray((found.V[:, null] ** 2).sum(axis=1) > IN_DIRECTION)
+
+
+def held_to(found: Directions) -> np.ndarray:
+    """Each parameter's white-noise 1σ in reference units, unbounded along a direction the drive
+    leaves free or beyond :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` (:func:`not_observable`:
+    there the eigenvalues' floor makes its figure meaningless, 1σ ≈ 1 on a straight drive)."""
+    return np.where(not_observable(found), np.inf, found.std_reference)
 
 
 def needs_turns(
