@@ -198,10 +198,10 @@ def needs_turns(
     (``turning_params``), on a drive whose heading spans less than :data:`MIN_TURNING`, whose
     white-noise 1σ (``std_reference``, in reference units at the fit) is not within
     :data:`~nlp_calib.results.checks.WEAK`. Within it, the bends the drive has hold it and that σ
-    is honest: CamOdomCalibraTool's sinSpeed1 (0.25 rad) at 0.0005-0.004x, every parameter within
-    1.6σ of the truth. Beyond it, the fit can leave the σ's point far behind (a straight diff
-    drive's baseline, ±0.3 m where a pre-flight's steps stopped, went to 1.3e5 m in a run). The
-    pre-flight's refusal and the run's observability read this one rule."""
+    is honest (a drive of gentle S-curves whose uneven wheel speeds carry the turns:
+    ``tests/test_preflight.py``). Beyond it, the fit can leave the σ's point far behind (a straight
+    diff drive's baseline, ±0.3 m where a pre-flight's steps stopped, went to 1.3e5 m in a run).
+    The pre-flight's refusal and the run's observability read this one rule."""
     if not heading_span < MIN_TURNING:
         return np.zeros(len(names), dtype=bool)
     z = np.asarray(std_reference, dtype=float)
