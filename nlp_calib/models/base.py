@@ -299,9 +299,9 @@ def curvature_correction(angle: np.ndarray, time_s: np.ndarray) -> np.ndarray:
     """Per interval, what its angle's mean over time differs from its two readings' mean by:
     ``−φ̈·h²/12`` for an interval of ``h`` s, ``φ̈`` the mean of the second differences at its two
     records (0 at the log's ends). The same for the mean the travel saw, whatever the speed's
-    linear change. A steering that turns one way and back over a second and a half of 25 Hz
-    records (it peaks between its readings) reads about ``h²/12·ω²`` short of its turn (1.3·10⁻⁴,
-    about 3σ of ``k_steer`` on a 10⁴-record drive at 0.2 mm tracker noise). A record whose second
+    linear change. A steering that turns one way and back peaks between its readings, whose mean
+    reads every peak short: on the simulator's drives that put ``k_steer`` +1.5·10⁻⁴ high at 25 Hz
+    (3σ at 0.2 mm tracker noise; ``benchmarks/steering_interval_study.py``). A record whose second
     difference has a neighbour of the opposite sign at least half its size is a reading off the
     line of both neighbours (a one-record spike, a reading held then caught up): it gives none,
     so a glitch moves only the two intervals that read it."""
