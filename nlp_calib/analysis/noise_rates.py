@@ -501,9 +501,12 @@ def _populations(units: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray]]:
     of, every = COMPONENTS[:n], np.ones(units.shape[1], dtype=bool)
     if n < 7:
         return [(c, of == c, every) for c in range(3)]
-    pivots = units[6][:, 2, 2] > 0
-    arcs = (of == 2) & (np.arange(n) < 6)
-    return [(0, of == 0, every), (1, of == 1, every), (2, arcs, ~pivots), (2, np.arange(n) == 6, pivots)]
+    pivots, rate = units[6][:, 2, 2] > 0, np.arange(n)
+    arcs = (of == 2) & (rate < 6)
+    # A pivot's position error grows with its turn, not with metres: a per-metre rate raised to
+    # hold it gives every arc's metre a pivot's drift (its lever, a mount's offset turned).
+    out = [(c, rate == c, ~pivots) for c in (0, 1)] + [(c, rate == 3 + c, pivots) for c in (0, 1)]
+    return [*out, (2, arcs, ~pivots), (2, rate == 6, pivots)]
 
 
 def _covered(
