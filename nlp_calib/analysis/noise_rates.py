@@ -18,8 +18,8 @@ not show (a car's wheels under its device's 2 cm) is the joints' own noise's
 interval, which a pivot's drift rules) only where the segments cannot tell it apart. A component
 whose 2σ holds fewer than :data:`~nlp_calib.analysis.odometry.COVERED` of the segments' errors gets
 the smallest share of the inputs' noise's rates that makes it hold them, each rate on the segments
-it is stated for (the pivots' heading rate on those that pivot): at least the drift the windows
-show.
+it is stated for (the pivots' heading rate and the positions' per radian on those that pivot, the
+positions' per metre on the rest): at least the drift the windows show.
 """
 
 from __future__ import annotations
@@ -495,8 +495,9 @@ COMPONENTS = np.array([0, 1, 2, 0, 1, 2, 2])
 def _populations(units: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray]]:
     """What :func:`_covered` raises, each with the segments it is judged on: a component's rates
     (those :data:`COMPONENTS` gives it) on every segment; where the pivots' heading rate is apart
-    (``units``' seventh), the arcs' heading rates on the segments that do not pivot and the
-    pivots' on those that do: each rate never under the drift of the segments it is stated for."""
+    (``units``' seventh), the arcs' heading rates and the positions' per metre on the segments that
+    do not pivot, the pivots' heading rate and the positions' per radian on those that do: each
+    rate never under the drift of the segments it is stated for."""
     n = units.shape[0]
     of, every = COMPONENTS[:n], np.ones(units.shape[1], dtype=bool)
     if n < 7:
