@@ -15,6 +15,8 @@ import yaml
 
 from nlp_calib.cli.main import main
 from nlp_calib.core.errors import ConfigError, DatasetError, ModelError
+from nlp_calib.logs.bag_joints import joint_positions
+from nlp_calib.logs.bag_reader import Stamped
 from nlp_calib.logs.joint_log import format_joint_csv, wheel_positions
 from nlp_calib.logs.motions import format_motions, read_motions
 from nlp_calib.models import MODELS, get_model
@@ -152,10 +154,16 @@ def test_wheels_as_speeds_or_counts_per_cycle_are_positions() -> None:
     t = np.arange(0, 11) * 100_000_000  # 10 Hz
     angle = 0.3 * np.arange(11.0) + 0.02 * np.arange(11.0) ** 2
     speeds = np.gradient(angle, t * 1e-9)
-    from_speeds = wheel_positions(t, np.column_stack([speeds, angle]), [True, False], "speeds", None)
+    # A speeds column is the joints' stream's velocities (NaN positions), integrated as a bag's are.
+    none = np.full(t.size, np.nan)
+    stream = Stamped("joints.csv", t, np.column_stack([none, angle, speeds, none]))
+    _, from_speeds, integrated, _ = joint_positions(Path("joints.csv"), stream, ("wheel", "steer"))
+    assert integrated == ["wheel"]
     # Trapezoids integrate a quadratic's sampled derivative exactly (central differences inside).
     assert np.allclose(from_speeds[1:-1, 0] - from_speeds[1, 0], angle[1:-1] - angle[1], atol=0.011)
     assert np.array_equal(from_speeds[:, 1], angle)  # an absolute joint's column is its position
+    with pytest.raises(ValueError, match="integrated with the joints' stream"):
+        wheel_positions(t, np.column_stack([speeds, angle]), [True, False], "speeds", None)
     counts = np.concatenate([[0.0], np.diff(angle)]) * 4096 / (2 * np.pi)
     from_counts = wheel_positions(t, counts[:, None], [True], "increments", 4096)
     np.testing.assert_allclose(from_counts[:, 0], angle - angle[0], atol=1e-12)

@@ -5,10 +5,12 @@ Times in seconds (read to the nanosecond), joint positions in radians as ROS pub
 ``#`` lines are comments. A row with another number of fields, a value that is not a finite
 number and a time that does not increase are refused with the file and the line.
 
-A wheel's column may hold another form (:data:`WHEEL_FORMS`, :func:`wheel_positions`): its speed
-(rad/s), integrated over the stamps by trapezoids, or its increment over each cycle (the cycle
+A wheel's column may hold another form (:data:`WHEEL_FORMS`): its speed (rad/s), a velocity of
+the joints' stream integrated over the stamps by trapezoids as a bag's are
+(:func:`~nlp_calib.logs.bag_joints.joint_positions`), or its increment over each cycle (the cycle
 that ends at the row's stamp; counts, turned into radians by the counts per turn, or radians),
-summed. An absolute joint's column (an angle it reads as it is) is always its position.
+summed (:func:`wheel_positions`). An absolute joint's column (an angle it reads as it is) is
+always its position.
 """
 
 from __future__ import annotations
@@ -134,13 +136,8 @@ def wheel_positions(
     cols = np.flatnonzero(np.asarray(wheels, dtype=bool))
     if form == "positions" or cols.size == 0:
         return out
-    if form == "speeds":
-        dt = np.diff(time_ns).astype(float) * 1e-9
-        v = out[:, cols]
-        out[:, cols] = np.vstack(
-            [np.zeros((1, cols.size)), np.cumsum(0.5 * (v[1:] + v[:-1]) * dt[:, None], axis=0)]
-        )
-        return out
+    if form == "speeds":  # a stream's velocities (see the module docstring), never positions here
+        raise ValueError("speeds are integrated with the joints' stream, not read as positions")
     per_count = 2.0 * np.pi / counts_per_turn if counts_per_turn is not None else 1.0
     steps = out[1:, cols] * per_count  # the first row's increment ends at the log's first stamp
     out[:, cols] = np.vstack([np.zeros((1, cols.size)), np.cumsum(steps, axis=0)])
