@@ -164,31 +164,42 @@ def path_bend(t: np.ndarray, y: np.ndarray, sc: Scatter) -> np.ndarray | None:
     """Each record's acceleration of the path ``(2, n, d)`` over :data:`BEND_WINDOW` second
     differences behind it and ahead of it, where it exceeds :data:`BEND_OVER_NOISE` times what the
     stream's scatter explains (0 elsewhere: a noisy stream's chords already allow for it); None
-    when nothing bends beyond its noise."""
+    when nothing bends beyond its noise. Taken :data:`MEDIAN_BLOCK` records at a time (each
+    record's value from its own neighbours: the temporaries of a block, not of the log)."""
     n, d = y.shape
     if n < BEND_WINDOW + 2:
         return None
-    h_left, h_right = np.maximum(t[1:-1] - t[:-2], 1e-12), np.maximum(t[2:] - t[1:-1], 1e-12)
-    slope_left, slope_right = (y[1:-1] - y[:-2]) / h_left[:, None], (y[2:] - y[1:-1]) / h_right[:, None]
+    bend = np.zeros((2, n, d))
+    for lo in range(BEND_WINDOW - 1, n, MEDIAN_BLOCK):
+        hi = min(lo + MEDIAN_BLOCK, n)
+        bend[0, lo:hi] = _bend_behind(t, y, sc, (lo, hi))
+    # Looking ahead from a record is looking back from the record a window later.
+    bend[1, : n - BEND_WINDOW + 1] = bend[0, BEND_WINDOW - 1 :]
+    return bend if bend[0].any() else None
+
+
+def _bend_behind(t: np.ndarray, y: np.ndarray, sc: Scatter, rows: tuple[int, int]) -> np.ndarray:
+    """:func:`path_bend` looking back, at the records ``rows`` (``lo >= BEND_WINDOW - 1``): the
+    median of the second differences at the :data:`BEND_WINDOW` records ending at each (nan at a
+    log's ends), where it exceeds that of their noise floors (inf at the ends)."""
+    lo, hi = rows
+    n, d = y.shape
+    a = lo - (BEND_WINDOW - 1)  # the first record whose second difference a row's median takes
+    i0, i1 = max(a, 1), min(hi, n - 1)  # those of them with a neighbour on each side
+    ts, ys = t[i0 - 1 : i1 + 1], y[i0 - 1 : i1 + 1]
+    h_left, h_right = np.maximum(ts[1:-1] - ts[:-2], 1e-12), np.maximum(ts[2:] - ts[1:-1], 1e-12)
+    slope_left, slope_right = (ys[1:-1] - ys[:-2]) / h_left[:, None], (ys[2:] - ys[1:-1]) / h_right[:, None]
     accel = np.abs(slope_right - slope_left) / (0.5 * (h_left + h_right))[:, None]
     h2 = (0.5 * (h_left + h_right))[:, None] ** 2
     rate = np.maximum(np.abs(slope_left), np.abs(slope_right))
     # White noise of scatter σ gives second differences of median 0.6745·√6·σ.
     noise = 0.6745 * np.sqrt(6.0) * sc.at(rate) / h2
-    level = np.full((n, d), np.nan)
-    level[1:-1] = accel
-    floor = np.full((n, d), np.inf)
-    floor[1:-1] = BEND_OVER_NOISE * noise
-    medians = np.full((n, d), np.nan)
-    medians[BEND_WINDOW - 1 :] = _trailing_medians(level)
-    limits = np.full((n, d), np.inf)
-    limits[BEND_WINDOW - 1 :] = _trailing_medians(floor)
-    back = np.where(np.nan_to_num(medians, nan=0.0) > limits, np.nan_to_num(medians, nan=0.0), 0.0)
-    ahead = np.zeros((n, d))
-    ahead[: n - BEND_WINDOW + 1] = back[BEND_WINDOW - 1 :]
-    if not (back.any() or ahead.any()):
-        return None
-    return np.stack([back, ahead])
+    level = np.full((hi - a, d), np.nan)
+    level[i0 - a : i1 - a] = accel
+    floor = np.full((hi - a, d), np.inf)
+    floor[i0 - a : i1 - a] = BEND_OVER_NOISE * noise
+    medians = np.nan_to_num(_trailing_medians(level), nan=0.0)
+    return np.where(medians > _trailing_medians(floor), medians, 0.0)
 
 
 #: Records whose trailing medians are taken at once: bounds the window's copies (a log's worth at
