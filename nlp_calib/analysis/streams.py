@@ -46,8 +46,9 @@ CATCH_UP_FACTOR = 2.5
 #: smoothly makes a few per cent of it so (the real tricycle's steering: 3 %; a commanded F1/10
 #: steering: 48 %).
 STEPWISE_SHARE = 0.25
-#: Groups scored at once in the first pass over a stream.
+#: Groups scored at once in the first pass over a stream; records bounded at once before it.
 FIRST_PASS_BLOCK = 8192
+BOUND_BLOCK = 65_536
 #: An interval between records longer than this many times their median interval, and than
 #: :data:`MIN_GAP_S`, is a gap in a stream (the tracker lost, the joints missing): one arc of the
 #: model cannot span it. (A fast log's jitter makes intervals of several times the median, and
@@ -198,8 +199,8 @@ def _bend_behind(t: np.ndarray, y: np.ndarray, sc: Scatter, rows: tuple[int, int
     level[i0 - a : i1 - a] = accel
     floor = np.full((hi - a, d), np.inf)
     floor[i0 - a : i1 - a] = BEND_OVER_NOISE * noise
-    medians = np.nan_to_num(_trailing_medians(level), nan=0.0)
-    return np.where(medians > _trailing_medians(floor), medians, 0.0)
+    medians = np.nan_to_num(running_medians(level), nan=0.0)
+    return np.where(medians > running_medians(floor), medians, 0.0)
 
 
 #: Records whose trailing medians are taken at once: bounds the window's copies (a log's worth at
@@ -207,11 +208,12 @@ def _bend_behind(t: np.ndarray, y: np.ndarray, sc: Scatter, rows: tuple[int, int
 MEDIAN_BLOCK = 65_536
 
 
-def _trailing_medians(a: np.ndarray) -> np.ndarray:
-    """The nan-median of every run of :data:`BEND_WINDOW` rows of ``a`` ``(n, d)``, ``(n - 6, d)``,
-    a block of rows at a time."""
-    n, w = a.shape[0], BEND_WINDOW
-    out = np.empty((max(n - w + 1, 0), a.shape[1]))
+def running_medians(a: np.ndarray, w: int = BEND_WINDOW) -> np.ndarray:
+    """The nan-median of every run of ``w`` rows of ``a`` ``(n, ...)``, ``(n - w + 1, ...)``
+    (:func:`_window_medians`), a block of rows at a time; ``np.median``'s values where no run
+    holds a nan (a zero's sign may differ)."""
+    n = a.shape[0]
+    out = np.empty((max(n - w + 1, 0), *a.shape[1:]))
     for lo in range(0, out.shape[0], MEDIAN_BLOCK):
         hi = min(lo + MEDIAN_BLOCK, out.shape[0])
         out[lo:hi] = _window_medians(a[lo : hi + w - 1], w)
@@ -230,9 +232,13 @@ def _window_medians(a: np.ndarray, w: int) -> np.ndarray:
             rows[i], rows[i + 1] = np.minimum(rows[i], rows[i + 1]), np.maximum(rows[i], rows[i + 1])
     # Even runs: the mean of the middle two, as np.median takes it.
     med = np.array(rows[w // 2]) if w % 2 else (rows[w // 2 - 1] + rows[w // 2]) / 2
-    nan = np.lib.stride_tricks.sliding_window_view(np.isnan(a), w, axis=0).any(axis=-1)
-    if nan.any():
-        med[nan] = np.nanmedian(np.lib.stride_tricks.sliding_window_view(a, w, axis=0)[nan], axis=-1)
+    isnan = np.isnan(a)
+    if not isnan.any():
+        return med
+    # The runs with a nan: those over which the count of nans grows.
+    count = np.concatenate([np.zeros((1, *a.shape[1:]), dtype=np.int64), np.cumsum(isnan, axis=0)])
+    nan = count[w:] > count[:-w]
+    med[nan] = np.nanmedian(np.lib.stride_tricks.sliding_window_view(a, w, axis=0)[nan], axis=-1)
     return med
 
 
@@ -422,6 +428,36 @@ def _resolve(
     return sorted(kept, key=lambda f: f.first)
 
 
+def _may_depart(y: np.ndarray, idx: np.ndarray, excursion: np.ndarray | float, reach: int) -> np.ndarray:
+    """Per usable record ``idx``, whether it may leave the span of some pair of near neighbours
+    (usable, within ``reach`` of it on either side) by more than ``excursion`` (:func:`_departs`);
+    a record that may not is in no group that departs. Each component's departure from any pair is
+    at most its departure from the largest of the least neighbours on each side and the least of
+    the largest (a bound with the same roundings in the same direction, taken with a margin); a
+    reading that is not a number may always. A block of records at a time."""
+    least = np.broadcast_to(np.asarray(excursion, dtype=float), (y.shape[1],))
+    may = np.ones(idx.size, dtype=bool)
+    if not np.any(least > 0):
+        return may
+    scale = np.where(least > 0, least, np.inf)
+    for lo in range(0, idx.size, BOUND_BLOCK):
+        hi = min(lo + BOUND_BLOCK, idx.size)
+        a, b = max(lo - reach, 0), min(hi + reach, idx.size)
+        # The block with its neighbours, and beyond the log's ends readings that bound nothing.
+        low, high = np.full((2, b - a + 2 * reach, y.shape[1]), np.inf)
+        high[:] = -np.inf
+        low[reach : reach + b - a] = high[reach : reach + b - a] = y[idx[a:b]]
+        at = reach + lo - a
+        sides = [np.arange(at - reach, at), np.arange(at + 1, at + reach + 1)]
+        least_of = [np.minimum.reduce([low[k : k + hi - lo] for k in side]) for side in sides]
+        most_of = [np.maximum.reduce([high[k : k + hi - lo] for k in side]) for side in sides]
+        yq = low[at : at + hi - lo]
+        out = np.maximum(yq - np.maximum(*least_of), np.minimum(*most_of) - yq)
+        out = np.maximum(out, 0.0) / scale
+        may[lo:hi] = ~(np.sum(out * out, axis=1) <= 1.0 - 1e-9)
+    return may
+
+
 def _candidates(
     t: np.ndarray,
     y: np.ndarray,
@@ -434,6 +470,9 @@ def _candidates(
     threshold, excursion, max_group = limits
     idx = np.flatnonzero(usable)
     candidate = np.zeros(len(t), dtype=bool)
+    # How many of the usable records before each may leave the span of a pair of near neighbours:
+    # a group with none among its records does not (its score is 0), and is not looked at.
+    may = np.concatenate([[0], np.cumsum(_may_depart(y, idx, excursion, max_group))])
     for g in range(1, max_group + 1):
         # A block of groups at a time (each group's score is its own: blocks keep the temporaries
         # in cache), and of those only the groups that leave the span of their near neighbours
@@ -441,6 +480,7 @@ def _candidates(
         P = idx.size - g - 3
         for lo in range(0, max(P, 0), FIRST_PASS_BLOCK):
             p = np.arange(lo, min(lo + FIRST_PASS_BLOCK, P))
+            p = p[may[p + 2 + g] > may[p + 2]]
             m = idx[(p + 2)[:, None] + np.arange(g)[None, :]]
             keep = _departs(y, (idx[p + 1], idx[p + 2 + g]), m, excursion)
             m, p = m[keep], p[keep]
