@@ -44,6 +44,7 @@ from nlp_calib.results.preflight import (
     WEAKLY,
     Preflight,
 )
+from nlp_calib.results.run import UNDETERMINED
 from nlp_calib.simulation.beside import simulate_beside, write_tracked_files
 from nlp_calib.simulation.imu import ImuSimulationOptions
 from nlp_calib.simulation.lidar import LidarSimulationOptions
@@ -161,13 +162,14 @@ def test_the_reasons_say_what_the_drive_lacks(drive_preflight: Callable[[str], P
     assert "alignment.tracker_lag" in sinus.way_out
 
 
-def _swinging(folder: Path) -> Path:
+def _swinging(folder: Path, noise: float = 0.001, swing: float = 0.12) -> Path:
     """A differential drive (radii 0.1 m, separation 0.57 m) driving ahead at 0.2 m/s for 25 s while
-    its heading swings as 0.12·(1 − cos t): it turns about 0.5 rad each way, its heading spanning
-    0.24 rad; joints at 100 Hz, the base's pose at 50 Hz with 1 mm and 1 mrad of noise (seed 5)."""
+    its heading swings as swing·(1 − cos t): at 0.12 it turns about 0.5 rad each way, its heading
+    spanning 0.24 rad (0: straight ahead); joints at 100 Hz, the base's pose at 50 Hz with ``noise``
+    m and rad of noise (seed 5)."""
     r, b, dt = 0.1, 0.57, 0.01
     t = np.arange(2501) * dt
-    turn_rate = 0.12 * np.sin(t[:-1])
+    turn_rate = swing * np.sin(t[:-1])
     wl, wr = (0.2 - 0.5 * b * turn_rate) / r, (0.2 + 0.5 * b * turn_rate) / r
     heading = np.concatenate([[0.0], np.cumsum(turn_rate * dt)])
     mid = heading[:-1] + 0.5 * turn_rate * dt
@@ -175,7 +177,7 @@ def _swinging(folder: Path) -> Path:
     y = np.concatenate([[0.0], np.cumsum(0.2 * dt * np.sin(mid))])
     rng = np.random.default_rng(5)
     images = np.arange(0, t.size, 2)
-    noisy = np.column_stack([x, y, heading])[images] + rng.normal(0, [0.001, 0.001, 0.001], (images.size, 3))
+    noisy = np.column_stack([x, y, heading])[images] + rng.normal(0, noise, (images.size, 3))
     with (folder / "swing.tum").open("w") as f:
         for s, (px, py, th) in zip(t[images], noisy):
             f.write(f"{s:.6f} {px:.6f} {py:.6f} 0 0 0 {math.sin(th / 2):.9f} {math.cos(th / 2):.9f}\n")
@@ -192,11 +194,16 @@ def _swinging(folder: Path) -> Path:
     return path
 
 
+SWUNG = ("wheel_separation", "sensor_x", "sensor_y")
+SWING_TRUTH = {"left_wheel_radius": 0.1, "right_wheel_radius": 0.1, "wheel_separation": 0.57}
+
+
 def test_a_drive_whose_heading_stays_in_a_narrow_band_is_told_to_turn(tmp_path: Path) -> None:
-    """Swinging both ways inside a 0.24 rad band: the separation and the lever arm "never turn";
-    the way out must not say that the drive already turns both ways (it did, beside that cause), but
-    ask for the turns it lacks."""
-    report = preflight(load_scenario(_swinging(tmp_path)))
+    """Swinging both ways inside a 0.26 rad band under 5 mm of tracker noise: the separation and the
+    lever arm "never turn" (their white σ over 10× the precision they need); the way out must not
+    say that the drive already turns both ways (it did, beside that cause), but ask for the turns
+    it lacks."""
+    report = preflight(load_scenario(_swinging(tmp_path, noise=0.005)))
     ex = report.excitation[0]
     assert ex.heading_span_rad < 0.3 <= min(ex.turned_left_rad, ex.turned_right_rad), ex
     words = {p.name: p.because for p in report.parameters}
@@ -204,6 +211,40 @@ def test_a_drive_whose_heading_stays_in_a_narrow_band_is_told_to_turn(tmp_path: 
     assert report.verdict == NOT_ENOUGH, report.way_out
     assert "turns both ways" not in report.way_out, report.way_out
     assert "turns in both directions" in report.way_out, report.way_out
+
+
+def test_a_drive_that_turns_little_is_not_refused_where_its_bends_hold_the_parameters(tmp_path: Path) -> None:
+    """The same swing under 1 mm of noise (as CamOdomCalibraTool's sinSpeed1, 0.25 rad): the σ of the
+    separation and the lever arm are within the precision they need, and the fit finds them within
+    3σ of the truth: the heading's span is a caveat, not a refusal (it refused them, "never turns"),
+    and the run's observability says the same (it said "not observable" beside a GOOD verdict)."""
+    scenario = load_scenario(_swinging(tmp_path))
+    report = preflight(scenario)
+    assert report.excitation[0].heading_span_rad < 0.3, report.excitation[0]
+    status = {p.name: p for p in report.parameters}
+    assert report.verdict == ENOUGH, [p.words() for p in report.parameters]
+    for name in SWUNG:
+        assert status[name].status == DETERMINED and status[name].std_reference < 1, status[name].words()
+        assert "heading spans only" in status[name].because, status[name].words()
+    run = Calibration(scenario).run(["gauss_newton"])
+    assert run.verdict.level != UNDETERMINED, run.verdict
+    fitted, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
+    truth = {**SWING_TRUTH, "sensor_x": 0.0, "sensor_y": 0.0, "sensor_theta": 0.0}
+    for name, value in truth.items():
+        assert abs(fitted[name] - value) < 3 * std[name], (name, fitted[name], std[name])
+        assert std[name] < status[name].reference, (name, std[name])  # as the pre-flight said
+    assert run.checks.observability is not None
+    said = run.checks.observability.warnings[0]
+    assert said.startswith("little turning") and "not observable" not in said, said
+
+
+def test_a_drive_straight_ahead_is_still_refused(tmp_path: Path) -> None:
+    """Straight ahead (no swing): nothing shows the separation or the lever arm; the gate stops it."""
+    report = preflight(load_scenario(_swinging(tmp_path, swing=0.0)))
+    assert report.verdict == NOT_ENOUGH, [p.words() for p in report.parameters]
+    missing = {p.name: p.because for p in report.missing()}
+    assert set(SWUNG) <= set(missing), missing
+    assert all("never turns" in missing[n] for n in SWUNG), missing
 
 
 @pytest.mark.parametrize("demo", ["demo.yaml", "diff_drive_demo.yaml", "camera_demo.yaml"])

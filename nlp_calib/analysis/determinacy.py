@@ -22,7 +22,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from nlp_calib.analysis.degeneracy import free_directions, motion_scale, scales
-from nlp_calib.analysis.observability import MIN_TURNING, directions, not_observable, scaled_directions
+from nlp_calib.analysis.observability import (
+    MIN_TURNING,
+    directions,
+    held_to,
+    needs_turns,
+    not_observable,
+    scaled_directions,
+)
 from nlp_calib.analysis.streams import chord_scatter
 from nlp_calib.analysis.uncertainty import white_covariance
 from nlp_calib.logs import Log
@@ -235,6 +242,10 @@ class Standing:
     correlation: np.ndarray | None = None
     #: The combinations of several parameters these σ leave loose (:func:`believed`), loosest first.
     together: tuple[WeakDirection, ...] = ()
+    #: Each one's white-noise 1σ in the reference units of the run's observability (its
+    #: ``std_reference``, whatever σ and precision ``std`` and ``reference`` become): what
+    #: :func:`~nlp_calib.analysis.observability.needs_turns` reads, as the run reads it.
+    white_reference: np.ndarray | None = None
 
 
 def standing(
@@ -266,9 +277,10 @@ def standing(
         partners.append(_coupled(names, basis, i))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
+    white = np.where(undetermined, np.inf, held_to(found))
     return Standing(
         names, std, std / R, R, undetermined, np.asarray(bounded), tuple(partners), not_observable(found),
-        np.where(np.isfinite(corr), corr, np.nan),
+        np.where(np.isfinite(corr), corr, np.nan), white_reference=white,
     )  # fmt: skip
 
 
@@ -297,9 +309,11 @@ def _coupled(names: tuple[str, ...], basis: np.ndarray, i: int) -> tuple[str, ..
     return tuple(names[j] for j in np.flatnonzero((c > COUPLED) & (np.diag(P) > 1e-3)) if j != i)
 
 
-def _cause(fns: ProblemFunctions, name: str, partners: Sequence[str], ex: Excitation | None) -> str:
+def _cause(
+    fns: ProblemFunctions, name: str, partners: Sequence[str], ex: Excitation | None, unturned: bool
+) -> str:
     """What about the drive leaves ``name`` loose, where the excitation shows it ("" when nothing
-    simple does)."""
+    simple does); ``unturned``: it needs turns the drive lacks (:func:`_unturned`)."""
     model = fns.model
     if fns.layout.in_block(name, CLOCK):
         moved = ", ".join(p for p in partners if not fns.layout.in_block(p, CLOCK)) or "the other parameters"
@@ -308,7 +322,8 @@ def _cause(fns: ProblemFunctions, name: str, partners: Sequence[str], ex: Excita
     if ex is None or name not in turning:
         return ""
     if ex.heading_span_rad < MIN_TURNING:
-        return f"the drive never turns (the heading spans {ex.heading_span_rad:.2f} rad)"
+        lacks = "never turns" if unturned else "turns little"
+        return f"the drive {lacks} (the heading spans {ex.heading_span_rad:.2f} rad)"
     if min(ex.turned_left_rad, ex.turned_right_rad) < MIN_TURNING:
         side = "left" if ex.turned_left_rad >= ex.turned_right_rad else "right"
         return f"the drive turns only to the {side}"
@@ -336,16 +351,19 @@ def statuses(
         )
         for name, why in held.items()
     ]  # fmt: skip
+    unturned = _unturned(fns, found, ex)
     for i, name in enumerate(found.names):
         ratio, partners = float(found.std_reference[i]), found.partners[i]
         loose = next((w for w in found.together if name in w.components), None)
         if loose is not None and not partners:
             partners = tuple(n for n in loose.components if n != name)
-        if found.undetermined[i] or found.unobservable[i] or _unturned(fns, name, ex):
+        if found.undetermined[i] or found.unobservable[i] or unturned[i]:
             status = NOT_DETERMINED
         else:
             status = WEAKLY if ratio > WEAK or loose is not None else DETERMINED
-        words = [_cause(fns, name, partners, ex)] if status != DETERMINED else []
+        words = [_cause(fns, name, partners, ex, bool(unturned[i]))] if status != DETERMINED else []
+        if status == DETERMINED:
+            words.append(_bends(fns, name, ex, ratio, float(found.reference[i])))
         if status == WEAKLY and ratio <= WEAK and loose is not None:
             words.append(_together(name, loose))
         elif status != DETERMINED:
@@ -359,13 +377,27 @@ def statuses(
     return tuple(out)
 
 
-def _unturned(fns: ProblemFunctions, name: str, ex: Excitation | None) -> bool:
-    """Whether ``name`` needs turns the drive never makes (its heading spans less than
-    :data:`~nlp_calib.analysis.observability.MIN_TURNING`): the run's observability calls it not
-    observable then, wherever its fit stops (a straight diff drive's baseline and lever arm,
-    held ±0.3 m where the pre-flight's steps stopped, 1.3e5 m where the run's solver did)."""
+def _unturned(fns: ProblemFunctions, found: Standing, ex: Excitation | None) -> np.ndarray:
+    """Which parameters need turns the drive lacks: the run's observability's rule
+    (:func:`~nlp_calib.analysis.observability.needs_turns`) on the white σ both compute, so that the
+    gate (which has no σ to believe) and the report refuse alike."""
+    if ex is None:
+        return np.zeros(len(found.names), dtype=bool)
+    white = found.std_reference if found.white_reference is None else found.white_reference
     turning = (*fns.model.turning_params, *fns.sensor.turning)
-    return ex is not None and name in turning and ex.heading_span_rad < MIN_TURNING
+    return needs_turns(turning, found.names, ex.heading_span_rad, white)
+
+
+def _bends(fns: ProblemFunctions, name: str, ex: Excitation | None, ratio: float, needed: float) -> str:
+    """The caveat of a turning parameter determined on a drive whose heading spans less than
+    :data:`~nlp_calib.analysis.observability.MIN_TURNING` ("" elsewhere)."""
+    turning = (*fns.model.turning_params, *fns.sensor.turning)
+    if ex is None or name not in turning or not ex.heading_span_rad < MIN_TURNING:
+        return ""
+    return (
+        f"the heading spans only {ex.heading_span_rad:.2f} rad, yet the drive's bends hold it to "
+        f"{ratio:.3g}× the {needed:.2g} needed"
+    )
 
 
 def _together(name: str, w: WeakDirection) -> str:

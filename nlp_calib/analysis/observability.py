@@ -9,7 +9,7 @@ checked too: a log that never turns cannot tell an axis length or a lever arm.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,7 +87,7 @@ def analyse(
         weak = [w for w in weak if not _within(w, dict(zip(names, R)), clocks)]
     # The heading's range, not its summed steps: tracker noise adds up over thousands of steps.
     turning = float(np.ptp(heading))
-    warnings = [w for w in [no_turning(fns, names, turning)] if w]
+    warnings = [w for w in [no_turning(fns, names, turning, held_to(found))] if w]
     for w in sorted(weak, key=lambda w: -w.std_reference):
         size = f"1σ = {w.std_reference:.3g} ×" if np.isfinite(w.std_reference) else "no information at"
         warnings.append(w.words() + f" ({size} the reference precision)")
@@ -184,15 +184,51 @@ def not_observable(found: Directions) -> np.ndarray:
     return np.asarray((found.V[:, null] ** 2).sum(axis=1) > IN_DIRECTION)
 
 
-def no_turning(fns: ProblemFunctions, names: tuple[str, ...], turning: float) -> str:
-    """The warning for a log that does not turn enough to show a lever arm ("" when it does)."""
+def held_to(found: Directions) -> np.ndarray:
+    """Each parameter's white-noise 1σ in reference units, unbounded along a direction the drive
+    leaves free or beyond :data:`~nlp_calib.results.checks.NOT_OBSERVABLE` (:func:`not_observable`:
+    there the eigenvalues' floor makes its figure meaningless, 1σ ≈ 1 on a straight drive)."""
+    return np.where(not_observable(found), np.inf, found.std_reference)
+
+
+def needs_turns(
+    turning_params: Sequence[str], names: Sequence[str], heading_span: float, std_reference: np.ndarray
+) -> np.ndarray:
+    """Which of ``names`` the drive leaves loose for want of turns: a parameter only turns show
+    (``turning_params``), on a drive whose heading spans less than :data:`MIN_TURNING`, whose
+    white-noise 1σ (``std_reference``, in reference units at the fit) is not within
+    :data:`~nlp_calib.results.checks.WEAK`. Within it, the bends the drive has hold it and that σ
+    is honest (a drive of gentle S-curves whose uneven wheel speeds carry the turns:
+    ``tests/test_preflight.py``). Beyond it, the fit can leave the σ's point far behind (a straight
+    diff drive's baseline, ±0.3 m where a pre-flight's steps stopped, went to 1.3e5 m in a run).
+    The pre-flight's refusal and the run's observability read this one rule."""
+    if not heading_span < MIN_TURNING:
+        return np.zeros(len(names), dtype=bool)
+    z = np.asarray(std_reference, dtype=float)
+    return np.array([n in turning_params and not z[i] <= WEAK for i, n in enumerate(names)], dtype=bool)
+
+
+def no_turning(
+    fns: ProblemFunctions, names: tuple[str, ...], turning: float, std_reference: np.ndarray
+) -> str:
+    """The warning for a log that does not turn enough to show a lever arm (:func:`needs_turns`),
+    or the caveat of one that turns little while its bends hold them ("" when it turns enough)."""
     if turning >= MIN_TURNING:
         return ""
     model = fns.model
-    lever = [n for n in (*model.turning_params, *fns.sensor.turning) if n in names]
+    params = (*model.turning_params, *fns.sensor.turning)
+    lever = [n for n in params if n in names]
     if not lever:  # every lever arm given: nothing a turn would determine is left (no empty list)
         return ""
-    what = ", ".join(lever) + (f" and {model.turning_note}" if model.turning_note else "")
+    loose = needs_turns(params, names, turning, std_reference)
+    unheld = [n for n, out in zip(names, loose) if out]
+    if not unheld:
+        worst = max(float(std_reference[names.index(n)]) for n in lever)
+        return (
+            f"little turning: the sensor's heading spans only {turning:.2f} rad over the whole log, yet "
+            f"its bends hold {', '.join(lever)} (each 1σ at most {worst:.2g}× the reference precision)"
+        )  # no "drive" in it: a verdict's way out reads the warnings that say what to drive
+    what = ", ".join(unheld) + (f" and {model.turning_note}" if model.turning_note else "")
     return (
         f"no turning: the sensor's heading spans only {turning:.2f} rad over the whole log, so "
         f"{what} are not observable; drive S-curves or circles in both directions"

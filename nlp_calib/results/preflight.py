@@ -124,6 +124,8 @@ class ParameterStatus:
         elif self.status == DETERMINED and np.isfinite(self.std):
             size = f" (±{self.std:.2g} {self.unit})"
         why = f", because {self.because}" if self.because else ""
+        if self.status == DETERMINED and self.because:  # a caveat, not a cause
+            why = f"; {self.because}"
         return f"{self.name}: {head[self.status]}{size}{why}"
 
 
