@@ -67,9 +67,9 @@ def _lag_step(log_path: Path, truth: dict[str, float], sample: str) -> float:
 def test_travel_halves_the_lags_bias_from_starting_off_stops(tmp_path: Path, stops: float) -> None:
     """The simulated drive holds a stop, then leaves it over a shorter stretch than it took to stop:
     steering while speeding up, more sharply than while slowing down. The readings' mean steering
-    biases the lag fitted on a noise-free log (truth: 0) by -0.05 ms here (-0.035 ms on 10^5
-    records, whatever the tracker noise: 2.5σ of the first fit at 10^6); the travel-weighted one
-    by half as much. Without stops, neither biases it."""
+    biases the lag fitted on a noise-free log (truth: 0) by -0.045 ms here (-0.035 ms on 10^5
+    records before the curvature correction, whatever the tracker noise: 2.5σ of the first fit at
+    10^6); the travel-weighted one by under half as much (-0.020 ms). Without stops, neither biases it."""
     opts = SimulationOptions.of(
         records=20000, seed=38, tracker_noise_xy=0.0, tracker_noise_theta=0.0, stop_fraction=stops
     )

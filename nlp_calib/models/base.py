@@ -280,15 +280,43 @@ def sampled_angle(
     time_s: np.ndarray | None = None,
 ) -> np.ndarray:
     """Per interval, an angle read at each record (rad), taken at the interval's ``start``, its
-    ``end``, the ``mean`` of both (along the shorter arc), or ``travel``: the angle the interval's
-    travel saw (:func:`travel_weighted`; needs each interval's ``travel`` and the records' ``time_s``)."""
+    ``end``, the ``mean`` over the interval, or ``travel``: the angle the interval's travel saw
+    (:func:`travel_weighted`; needs each interval's ``travel`` and the records' ``time_s``). Both
+    ``mean`` and ``travel`` take the angle between the two readings (along the shorter arc) and
+    correct it for the angle's curvature over the interval (:func:`curvature_correction`; records
+    equally spaced where ``time_s`` is None)."""
     if steering_sample == "start":
         return angle[:-1]
     if steering_sample == "end":
         return angle[1:]
     change = wrap_angle(angle[1:] - angle[:-1])
     share = 0.5 if steering_sample == "mean" else travel_weighted(travel, time_s)
-    return wrap_angle(angle[:-1] + share * change)
+    times = np.arange(angle.size, dtype=float) if time_s is None else np.asarray(time_s, dtype=float)
+    return wrap_angle(angle[:-1] + share * change + curvature_correction(angle, times))
+
+
+def curvature_correction(angle: np.ndarray, time_s: np.ndarray) -> np.ndarray:
+    """Per interval, what its angle's mean over time differs from its two readings' mean by:
+    ``−φ̈·h²/12`` for an interval of ``h`` s, ``φ̈`` the mean of the second differences at its two
+    records (0 at the log's ends). The same for the mean the travel saw, whatever the speed's
+    linear change. A steering that turns one way and back peaks between its readings, whose mean
+    reads every peak short: on the simulator's drives that put ``k_steer`` +1.5·10⁻⁴ high at 25 Hz
+    (3σ at 0.2 mm tracker noise; ``benchmarks/steering_interval_study.py``). A record whose second
+    difference has a neighbour of the opposite sign at least half its size is a reading off the
+    line of both neighbours (a one-record spike, a reading held then caught up): it gives none,
+    so a glitch moves only the two intervals that read it."""
+    h = np.diff(time_s)
+    if h.size < 2:
+        return np.zeros(h.size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = np.where(h > 0, wrap_angle(np.diff(angle)) / h, 0.0)
+        span = h[:-1] + h[1:]
+        inner = np.where(span > 0, 2.0 * np.diff(slope) / span, 0.0)
+    acc = np.concatenate([[0.0], inner, [0.0]])
+    around = np.concatenate([[0.0], acc, [0.0]])
+    opposed = [(side * acc < 0) & (np.abs(side) >= 0.5 * np.abs(acc)) for side in (around[:-2], around[2:])]
+    acc = np.where(opposed[0] | opposed[1], 0.0, acc)
+    return -0.5 * (acc[:-1] + acc[1:]) * h * h / 12.0
 
 
 def travel_weighted(travel: np.ndarray | None, time_s: np.ndarray | None) -> np.ndarray:
