@@ -283,6 +283,41 @@ def test_a_tracker_that_republishes_its_last_pose_while_the_wheels_turn_is_stuck
     assert "tracker_stuck" not in kinds
 
 
+def test_the_screen_takes_a_trackers_jump_signal_once() -> None:
+    """A tracker's glitches and its frozen stretches are judged on one jump signal, computed once
+    per screen (a camera's rotations were accumulated for each), and found as each judge finds
+    them alone."""
+    from types import SimpleNamespace
+
+    from nlp_calib.analysis import faults
+    from nlp_calib.sensors import sensor_for
+
+    class Counting:
+        def __init__(self) -> None:
+            self.sensor, self.calls = sensor_for("planar"), 0
+
+        def jump_signal(self, log: Log) -> tuple[np.ndarray, int]:
+            self.calls += 1
+            return self.sensor.jump_signal(log)
+
+        def __getattr__(self, name: str) -> object:
+            return getattr(self.sensor, name)
+
+    out = simulate(SimulationOptions.of(model="diff_drive", records=1500, seed=8, outlier_fraction=0.01))
+    log = parse_lines(_tracker_held(out.text().splitlines(), 600, 660), "sim.txt", model="diff_drive")
+    model, sensor = get_model("diff_drive"), Counting()
+    fns = SimpleNamespace(model=model, sensor=sensor)
+    report = faults.screen(fns, log, "mean", 0.0, lambda intervals, records: None)  # type: ignore[arg-type]
+    assert sensor.calls == 1
+    alone = faults.tracker_faults(log, sensor.sensor) + faults.stuck_tracker(
+        log, sensor.sensor, model.encoder_kinds
+    )
+    assert {f.kind for f in alone} == {"tracker_jump", "tracker_stuck"}
+    assert sorted(report.faults, key=lambda f: (f.record, f.kind)) == sorted(
+        alone, key=lambda f: (f.record, f.kind)
+    )
+
+
 def test_repair_interpolates_steering_glitches() -> None:
     log, out = sim("tricycle", seed=5, steering_spikes=2, steering_stuck=1)
     calib = Calibration(scenario("tricycle", faults={"handling": "repair"}), log=log)

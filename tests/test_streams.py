@@ -441,3 +441,129 @@ def test_the_screens_least_lag_when_every_other_lag_costs_more_after_the_sample(
     # Every other lag was dropped before the last blocks: only the best was taken over them all.
     assert np.flatnonzero(~np.isnan(profile.sums).any(axis=0)).size == 1
     assert screen_lag(t, [ticks], c[:, None], (-0.2, 0.2)) == pytest.approx(0.04, abs=LAG_STEP)
+
+
+def test_a_group_that_departs_has_a_record_that_may() -> None:
+    """The first pass's bound per record (:func:`streams._may_depart`) is never below a group's
+    departure: every group of up to ``reach`` usable records that leaves its near neighbours'
+    span (``_departs``) holds a record the bound says may, on readings at the threshold, equal
+    readings, infinities and nans, and with components of no excursion."""
+    rng = np.random.default_rng(11)
+    for trial in range(40):
+        n, d = int(rng.integers(8, 400)), int(rng.choice([1, 2, 3, 6]))
+        y = np.round(rng.normal(0.0, 1.0, (n, d)), int(rng.integers(0, 3)))
+        y[rng.integers(0, n, 3)] = rng.choice([np.nan, np.inf, -np.inf, 0.0], (3, d))
+        least = rng.choice([0.0, 0.5, 1.0], d) if trial % 2 else np.full(d, 1.0)
+        # A record exactly the excursion beyond a neighbour: the threshold itself.
+        y[n // 2] = y[n // 2 - 1] + least
+        idx = np.flatnonzero(rng.random(n) > 0.1)
+        for reach in range(1, 5):
+            may = streams._may_depart(y, idx, least, reach)
+            for g in range(1, reach + 1):
+                P = idx.size - g - 3
+                if P <= 0:
+                    continue
+                p = np.arange(P)
+                m = idx[(p + 2)[:, None] + np.arange(g)[None, :]]
+                departs = streams._departs(y, (idx[p + 1], idx[p + 2 + g]), m, least)
+                members = may[(p + 2)[:, None] + np.arange(g)[None, :]].any(axis=1)
+                assert not np.any(departs & ~members), (trial, reach, g)
+
+
+def test_the_first_pass_judges_only_groups_with_a_record_that_may_depart(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """On a moving path with noise and a few glitches, the first pass asks whether a group departs
+    of a small share of the groups (it asked of every one), and finds what judging every group
+    finds (an independent, unblocked computation)."""
+    t = _times(6000, seed=2)
+    rng = np.random.default_rng(3)
+    y = np.column_stack([_path(t, [(60.0, -0.6), (150.0, 0.3)]), 3.0 * np.sin(0.05 * t)])
+    y += rng.normal(0.0, 0.002, y.shape)
+    bad = rng.choice(np.arange(10, t.size - 10), 30, replace=False)
+    y[bad] += rng.normal(0.0, 0.05, (bad.size, 2))
+    sc = scatter(t, y)
+    excursion = 3.0 * sc.floor
+    usable = np.ones(t.size, dtype=bool)
+    expected = np.zeros(t.size, dtype=bool)
+    for g in range(1, 5):
+        P = t.size - g - 3
+        m = np.arange(2, 2 + P)[:, None] + np.arange(g)[None, :]
+        outside = (
+            np.arange(P),
+            np.arange(1, P + 1),
+            np.arange(2 + g, 2 + g + P),
+            np.arange(3 + g, 3 + g + P),
+        )
+        s, _ = streams._scores(t, y, sc, outside, m, excursion)
+        expected[m[s > streams.OFF_SIGMAS].ravel()] = True
+    assert expected[bad].sum() >= 5
+    asked = []
+    departs = streams._departs
+
+    def counted(
+        y: np.ndarray, near: tuple[np.ndarray, np.ndarray], m: np.ndarray, least: object
+    ) -> np.ndarray:
+        if np.any(np.asarray(least) > 0):
+            asked.append(m.shape[0])
+        return departs(y, near, m, least)
+
+    monkeypatch.setattr(streams, "_departs", counted)
+    got = streams._candidates(t, y, sc, usable, (streams.OFF_SIGMAS, excursion, 4))
+    assert np.array_equal(got, expected)
+    assert sum(asked) < 0.1 * 4 * t.size
+
+
+def test_the_path_bend_holds_a_block_not_the_log(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``path_bend`` takes its medians a block of records at a time: its values are those of every
+    record's window over the whole log at once (np.nanmedian, computed here), and the memory it
+    holds beyond its output is a block's (it held a dozen copies of the signal)."""
+    import tracemalloc
+
+    monkeypatch.setattr(streams, "MEDIAN_BLOCK", 4096)
+    n, w = 60_000, streams.BEND_WINDOW
+    t = _times(n, seed=6)
+    rng = np.random.default_rng(6)
+    y = np.column_stack([np.sin(0.3 * t), np.cos(0.05 * t), 0.01 * t]) + rng.normal(0.0, 1e-4, (n, 3))
+    sc = streams.chord_scatter(t, y)
+    tracemalloc.start()
+    got = streams.path_bend(t, y, sc)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert got is not None and got.any()
+    h_left, h_right = np.maximum(t[1:-1] - t[:-2], 1e-12), np.maximum(t[2:] - t[1:-1], 1e-12)
+    left, right = (y[1:-1] - y[:-2]) / h_left[:, None], (y[2:] - y[1:-1]) / h_right[:, None]
+    mid = (0.5 * (h_left + h_right))[:, None]
+    level = np.vstack([np.full((1, 3), np.nan), np.abs(right - left) / mid, np.full((1, 3), np.nan)])
+    noise = 0.6745 * np.sqrt(6.0) * sc.at(np.maximum(np.abs(left), np.abs(right))) / mid**2
+    floor = np.vstack([np.full((1, 3), np.inf), streams.BEND_OVER_NOISE * noise, np.full((1, 3), np.inf)])
+    window = np.lib.stride_tricks.sliding_window_view
+    with np.errstate(invalid="ignore"):
+        med = np.nan_to_num(np.nanmedian(window(level, w, axis=0), axis=-1), nan=0.0)
+    back = np.zeros((n, 3))
+    back[w - 1 :] = np.where(med > np.nanmedian(window(floor, w, axis=0), axis=-1), med, 0.0)
+    assert got.tobytes() == np.stack([back, np.vstack([back[w - 1 :], np.zeros((w - 1, 3))])]).tobytes()
+    assert peak < got.nbytes + 40 * 4096 * 3 * 8
+
+
+def test_a_counters_step_noise_takes_running_medians_as_np_median_does() -> None:
+    """``running_medians`` gives np.median's values over every run (readings rounded to whole
+    ticks: many equal, zeros of either sign), and a counter's step noise from them is the one from
+    np.median's to the bit, with a nan among the levels (its runs' medians nan) or without."""
+    from nlp_calib.analysis.counters import PERSIST_INTERVALS, _step_noise
+    from nlp_calib.analysis.streams import robust_sigma, running_medians
+
+    rng = np.random.default_rng(9)
+    W = PERSIST_INTERVALS
+    window = np.lib.stride_tricks.sliding_window_view
+    for trial in range(6):
+        C = np.round(rng.normal(0.0, 2.0, 5000)) * rng.choice([1.0, -1.0], 5000)
+        if trial % 2:
+            C[rng.integers(0, C.size, 3)] = np.nan
+        valid = rng.random(C.size) > 0.3
+        levels = C[valid]
+        expected = np.median(window(levels, W), axis=1)
+        if trial % 2 == 0:
+            assert np.array_equal(running_medians(levels, W), expected)
+        want = max(robust_sigma(expected[W:] - expected[:-W]), 0.1)
+        assert np.float64(_step_noise(C, valid, C[:30], 0.1)).tobytes() == np.float64(want).tobytes()

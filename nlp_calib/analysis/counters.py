@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlp_calib.analysis.streams import robust_sigma
+from nlp_calib.analysis.streams import robust_sigma, running_medians
 
 #: A correction beyond this many robust standard deviations starts a candidate fault...
 CANDIDATE_SIGMAS = 6.0
@@ -305,7 +305,13 @@ def _step_noise(C: np.ndarray, valid: np.ndarray, fallback: np.ndarray, sigma: f
     W = PERSIST_INTERVALS
     levels = C[valid]
     if levels.size >= 2 * W:
-        medians = np.median(np.lib.stride_tricks.sliding_window_view(levels, W), axis=1)
+        # A sorting network's medians where no level is a nan: np.median's values (a zero's sign
+        # aside, which the robust σ of their steps drops: the same σ to the bit); a nan makes its
+        # runs' medians nan, as np.median does.
+        if np.isnan(levels).any():
+            medians = np.median(np.lib.stride_tricks.sliding_window_view(levels, W), axis=1)
+        else:
+            medians = running_medians(levels, W)
         return max(robust_sigma(medians[W:] - medians[:-W]), sigma)
     return max(robust_sigma(fallback), sigma)
 

@@ -117,10 +117,16 @@ def _fault(
     return Fault(kind, encoder, intervals[0], intervals[1], record, t, line, *size, evidence)
 
 
-def tracker_faults(log: Log, sensor: Sensor) -> list[Fault]:
+#: A sensor's jump signal of a log and how many of its leading columns are positions
+#: (``Sensor.jump_signal``).
+Signal = tuple[np.ndarray, int]
+
+
+def tracker_faults(log: Log, sensor: Sensor, signal: Signal | None = None) -> list[Fault]:
     """Tracker poses off the path their neighbours agree on (see :mod:`nlp_calib.analysis.streams`),
-    on the signal the ``sensor`` judges them by (its jump signal), its positions in its length unit."""
-    T, position = sensor.jump_signal(log)
+    on the signal the ``sensor`` judges them by (its jump signal; ``signal``: computed already), its
+    positions in its length unit."""
+    T, position = sensor.jump_signal(log) if signal is None else signal
     length = sensor.length_unit
     t, lines = log.time_s, log.line_numbers
     # The printed precision of the poses (and their discretisation, the path's own bend: see
@@ -162,12 +168,15 @@ def _stuck_fault(log: Log, first: int, last: int, what: str, why: str) -> Fault:
     return _fault(log, TRACKER_STUCK, None, (first, last - 1), first + 1, (0.0, 0.0, 0.0), evidence)
 
 
-def stuck_tracker(log: Log, sensor: Sensor, kinds: Mapping[str, EncoderKind]) -> list[Fault]:
+def stuck_tracker(
+    log: Log, sensor: Sensor, kinds: Mapping[str, EncoderKind], signal: Signal | None = None
+) -> list[Fault]:
     """Runs of records whose tracker pose repeats the one before exactly, over
     :data:`~nlp_calib.analysis.streams.MIN_STUCK` records or more, while the wheels turn over most
-    of them: the tracker lost its target and republished its last pose. One fault per run."""
+    of them: the tracker lost its target and republished its last pose (judged on the sensor's jump
+    signal; ``signal``: computed already). One fault per run."""
     moving = _counters_turning(log, kinds)
-    T, position = sensor.jump_signal(log)
+    T, position = sensor.jump_signal(log) if signal is None else signal
     if moving is None or T.shape[0] < MIN_STUCK + 1:
         return []
     step = np.linalg.norm(np.diff(T[:, :position], axis=0), axis=1)
@@ -185,14 +194,17 @@ def stuck_tracker(log: Log, sensor: Sensor, kinds: Mapping[str, EncoderKind]) ->
     ]
 
 
-def frozen_increments(log: Log, sensor: Sensor, kinds: Mapping[str, EncoderKind]) -> list[Fault]:
+def frozen_increments(
+    log: Log, sensor: Sensor, kinds: Mapping[str, EncoderKind], signal: Signal | None = None
+) -> list[Fault]:
     """A reference of its own increments that froze: :func:`stuck_tracker`'s rule on its increments.
     A run of increments that follow on (each from the stamp the one before ended at) and read no
     motion at all (``sensor.motion_of``: exactly zero), over :data:`~nlp_calib.analysis.streams.MIN_STUCK`
     of its stamps or more, while the wheels turn over most of the records they span: its poses
     repeat the run's first. A robot standing still reads zero too, and its wheels say so; a
     reference that moves by steps (zero increments between slower updates) is not judged; one
-    whose increments cannot show it (``motion_of`` None: a gyro's) neither. One fault per run."""
+    whose increments cannot show it (``motion_of`` None: a gyro's) neither. One fault per run
+    (``signal``: the poses' jump signal, which increments do not judge by)."""
     inc, moving = log.motions, _counters_turning(log, kinds)
     motion = None if inc is None or moving is None else sensor.motion_of(inc.z)
     if inc is None or moving is None or motion is None:
@@ -677,19 +689,20 @@ def counter_faults(
 
 
 #: Each reference kind's own glitches (:mod:`nlp_calib.logs.reference`): poses off their
-#: neighbours, or motions its matcher said are poor.
-JUMPS: dict[str, Callable[[Log, Sensor], list[Fault]]] = {
+#: neighbours, or motions its matcher said are poor (the jump signal given where it is computed
+#: already: ``FROZEN`` judges the same one).
+JUMPS: dict[str, Callable[[Log, Sensor, Signal | None], list[Fault]]] = {
     Poses.name: tracker_faults,
-    Motions.name: lambda log, sensor: match_faults(log),
+    Motions.name: lambda log, sensor, signal: match_faults(log),
     # A tracker's increments beside a gyro's: judged as increments (increment_faults), as a
     # scan matcher's are.
-    PoseMotions.name: lambda log, sensor: match_faults(log),
+    PoseMotions.name: lambda log, sensor, signal: match_faults(log),
 }
 
 
 #: Each reference kind's frozen stretches (``tracker_stuck``): poses repeated exactly, or
 #: increments that follow on reading no motion at all, while the wheels turn.
-FROZEN: dict[str, Callable[[Log, Sensor, Mapping[str, EncoderKind]], list[Fault]]] = {
+FROZEN: dict[str, Callable[[Log, Sensor, Mapping[str, EncoderKind], Signal | None], list[Fault]]] = {
     Poses.name: stuck_tracker,
     Motions.name: frozen_increments,
     PoseMotions.name: frozen_increments,
@@ -709,7 +722,9 @@ def screen(
     with them interpolated over, at the tracker ``lag`` (s, or a range to estimate it in)."""
     model, n = fns.model, log.n_records
     kind = log.reference.kind.name
-    jumps = JUMPS[kind](log, fns.sensor) + FROZEN[kind](log, fns.sensor, model.encoder_kinds)
+    # A tracker's poses are judged on one jump signal for its glitches and its frozen stretches.
+    signal = fns.sensor.jump_signal(log) if kind == Poses.name else None
+    jumps = JUMPS[kind](log, fns.sensor, signal) + FROZEN[kind](log, fns.sensor, model.encoder_kinds, signal)
     glitches = tuple(jumps + absolute_faults(log, model.encoder_kinds))
     report = FaultReport(glitches, {}, {}, unit=unit_of(log))
     params = judge(report.bad_intervals(n - 1), report.bad_records(n))

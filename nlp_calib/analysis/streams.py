@@ -46,8 +46,9 @@ CATCH_UP_FACTOR = 2.5
 #: smoothly makes a few per cent of it so (the real tricycle's steering: 3 %; a commanded F1/10
 #: steering: 48 %).
 STEPWISE_SHARE = 0.25
-#: Groups scored at once in the first pass over a stream.
+#: Groups scored at once in the first pass over a stream; records bounded at once before it.
 FIRST_PASS_BLOCK = 8192
+BOUND_BLOCK = 65_536
 #: An interval between records longer than this many times their median interval, and than
 #: :data:`MIN_GAP_S`, is a gap in a stream (the tracker lost, the joints missing): one arc of the
 #: model cannot span it. (A fast log's jitter makes intervals of several times the median, and
@@ -85,14 +86,26 @@ def printed_step(y: np.ndarray) -> np.ndarray:
     out = np.zeros(y.shape[1])
     for c in range(y.shape[1]):
         v = y[np.isfinite(y[:, c]), c]
+        # |v|·10^k rounds up with |v|: its largest is the largest |v|'s.
+        largest = float(np.max(np.abs(v))) if v.size else 0.0
         for k in range(10):
-            scaled = v * 10.0**k
-            if not v.size or np.max(np.abs(scaled)) > 1e9:
+            if not v.size or largest * 10.0**k > 1e9:
                 break  # beyond what a double tells apart from its decimals
-            if np.max(np.abs(scaled - np.round(scaled))) < 1e-6:
+            # The first readings tell most columns' decimals apart (and cost a fraction of all).
+            if _rounded(v[:PRINTED_HEAD], k) and _rounded(v, k):
                 out[c] = 10.0**-k
                 break
     return out
+
+
+#: The readings :func:`printed_step` tries each number of decimals on before all of them.
+PRINTED_HEAD = 4096
+
+
+def _rounded(v: np.ndarray, k: int) -> bool:
+    """Whether the values ``v`` are written with ``k`` decimals (to 1e-6 of a step)."""
+    scaled = v * 10.0**k
+    return bool(np.max(np.abs(scaled - np.round(scaled))) < 1e-6)
 
 
 @dataclass(frozen=True)
@@ -164,31 +177,42 @@ def path_bend(t: np.ndarray, y: np.ndarray, sc: Scatter) -> np.ndarray | None:
     """Each record's acceleration of the path ``(2, n, d)`` over :data:`BEND_WINDOW` second
     differences behind it and ahead of it, where it exceeds :data:`BEND_OVER_NOISE` times what the
     stream's scatter explains (0 elsewhere: a noisy stream's chords already allow for it); None
-    when nothing bends beyond its noise."""
+    when nothing bends beyond its noise. Taken :data:`MEDIAN_BLOCK` records at a time (each
+    record's value from its own neighbours: the temporaries of a block, not of the log)."""
     n, d = y.shape
     if n < BEND_WINDOW + 2:
         return None
-    h_left, h_right = np.maximum(t[1:-1] - t[:-2], 1e-12), np.maximum(t[2:] - t[1:-1], 1e-12)
-    slope_left, slope_right = (y[1:-1] - y[:-2]) / h_left[:, None], (y[2:] - y[1:-1]) / h_right[:, None]
+    bend = np.zeros((2, n, d))
+    for lo in range(BEND_WINDOW - 1, n, MEDIAN_BLOCK):
+        hi = min(lo + MEDIAN_BLOCK, n)
+        bend[0, lo:hi] = _bend_behind(t, y, sc, (lo, hi))
+    # Looking ahead from a record is looking back from the record a window later.
+    bend[1, : n - BEND_WINDOW + 1] = bend[0, BEND_WINDOW - 1 :]
+    return bend if bend[0].any() else None
+
+
+def _bend_behind(t: np.ndarray, y: np.ndarray, sc: Scatter, rows: tuple[int, int]) -> np.ndarray:
+    """:func:`path_bend` looking back, at the records ``rows`` (``lo >= BEND_WINDOW - 1``): the
+    median of the second differences at the :data:`BEND_WINDOW` records ending at each (nan at a
+    log's ends), where it exceeds that of their noise floors (inf at the ends)."""
+    lo, hi = rows
+    n, d = y.shape
+    a = lo - (BEND_WINDOW - 1)  # the first record whose second difference a row's median takes
+    i0, i1 = max(a, 1), min(hi, n - 1)  # those of them with a neighbour on each side
+    ts, ys = t[i0 - 1 : i1 + 1], y[i0 - 1 : i1 + 1]
+    h_left, h_right = np.maximum(ts[1:-1] - ts[:-2], 1e-12), np.maximum(ts[2:] - ts[1:-1], 1e-12)
+    slope_left, slope_right = (ys[1:-1] - ys[:-2]) / h_left[:, None], (ys[2:] - ys[1:-1]) / h_right[:, None]
     accel = np.abs(slope_right - slope_left) / (0.5 * (h_left + h_right))[:, None]
     h2 = (0.5 * (h_left + h_right))[:, None] ** 2
     rate = np.maximum(np.abs(slope_left), np.abs(slope_right))
     # White noise of scatter σ gives second differences of median 0.6745·√6·σ.
     noise = 0.6745 * np.sqrt(6.0) * sc.at(rate) / h2
-    level = np.full((n, d), np.nan)
-    level[1:-1] = accel
-    floor = np.full((n, d), np.inf)
-    floor[1:-1] = BEND_OVER_NOISE * noise
-    medians = np.full((n, d), np.nan)
-    medians[BEND_WINDOW - 1 :] = _trailing_medians(level)
-    limits = np.full((n, d), np.inf)
-    limits[BEND_WINDOW - 1 :] = _trailing_medians(floor)
-    back = np.where(np.nan_to_num(medians, nan=0.0) > limits, np.nan_to_num(medians, nan=0.0), 0.0)
-    ahead = np.zeros((n, d))
-    ahead[: n - BEND_WINDOW + 1] = back[BEND_WINDOW - 1 :]
-    if not (back.any() or ahead.any()):
-        return None
-    return np.stack([back, ahead])
+    level = np.full((hi - a, d), np.nan)
+    level[i0 - a : i1 - a] = accel
+    floor = np.full((hi - a, d), np.inf)
+    floor[i0 - a : i1 - a] = BEND_OVER_NOISE * noise
+    medians = np.nan_to_num(running_medians(level), nan=0.0)
+    return np.where(medians > running_medians(floor), medians, 0.0)
 
 
 #: Records whose trailing medians are taken at once: bounds the window's copies (a log's worth at
@@ -196,11 +220,12 @@ def path_bend(t: np.ndarray, y: np.ndarray, sc: Scatter) -> np.ndarray | None:
 MEDIAN_BLOCK = 65_536
 
 
-def _trailing_medians(a: np.ndarray) -> np.ndarray:
-    """The nan-median of every run of :data:`BEND_WINDOW` rows of ``a`` ``(n, d)``, ``(n - 6, d)``,
-    a block of rows at a time."""
-    n, w = a.shape[0], BEND_WINDOW
-    out = np.empty((max(n - w + 1, 0), a.shape[1]))
+def running_medians(a: np.ndarray, w: int = BEND_WINDOW) -> np.ndarray:
+    """The nan-median of every run of ``w`` rows of ``a`` ``(n, ...)``, ``(n - w + 1, ...)``
+    (:func:`_window_medians`), a block of rows at a time; ``np.median``'s values where no run
+    holds a nan (a zero's sign may differ)."""
+    n = a.shape[0]
+    out = np.empty((max(n - w + 1, 0), *a.shape[1:]))
     for lo in range(0, out.shape[0], MEDIAN_BLOCK):
         hi = min(lo + MEDIAN_BLOCK, out.shape[0])
         out[lo:hi] = _window_medians(a[lo : hi + w - 1], w)
@@ -219,9 +244,13 @@ def _window_medians(a: np.ndarray, w: int) -> np.ndarray:
             rows[i], rows[i + 1] = np.minimum(rows[i], rows[i + 1]), np.maximum(rows[i], rows[i + 1])
     # Even runs: the mean of the middle two, as np.median takes it.
     med = np.array(rows[w // 2]) if w % 2 else (rows[w // 2 - 1] + rows[w // 2]) / 2
-    nan = np.lib.stride_tricks.sliding_window_view(np.isnan(a), w, axis=0).any(axis=-1)
-    if nan.any():
-        med[nan] = np.nanmedian(np.lib.stride_tricks.sliding_window_view(a, w, axis=0)[nan], axis=-1)
+    isnan = np.isnan(a)
+    if not isnan.any():
+        return med
+    # The runs with a nan: those over which the count of nans grows.
+    count = np.concatenate([np.zeros((1, *a.shape[1:]), dtype=np.int64), np.cumsum(isnan, axis=0)])
+    nan = count[w:] > count[:-w]
+    med[nan] = np.nanmedian(np.lib.stride_tricks.sliding_window_view(a, w, axis=0)[nan], axis=-1)
     return med
 
 
@@ -411,6 +440,43 @@ def _resolve(
     return sorted(kept, key=lambda f: f.first)
 
 
+def _may_depart(y: np.ndarray, idx: np.ndarray, excursion: np.ndarray | float, reach: int) -> np.ndarray:
+    """Per usable record ``idx``, whether it may leave the span of some pair of near neighbours
+    (usable, within ``reach`` of it on either side) by more than ``excursion`` (:func:`_departs`);
+    a record that may not is in no group that departs. Each component's departure from any pair is
+    at most its departure from the largest of the least neighbours on each side and the least of
+    the largest (a bound with the same roundings in the same direction, taken with a margin); a
+    reading that is not a number may always. A block of records at a time."""
+    least = np.broadcast_to(np.asarray(excursion, dtype=float), (y.shape[1],))
+    may = np.ones(idx.size, dtype=bool)
+    if not np.any(least > 0):
+        return may
+    scale = np.where(least > 0, least, np.inf)
+    for lo in range(0, idx.size, BOUND_BLOCK):
+        hi = min(lo + BOUND_BLOCK, idx.size)
+        a, b = max(lo - reach, 0), min(hi + reach, idx.size)
+        # The block with its neighbours, and beyond the log's ends readings that bound nothing.
+        low, high = np.full((2, b - a + 2 * reach, y.shape[1]), np.inf)
+        high[:] = -np.inf
+        low[reach : reach + b - a] = high[reach : reach + b - a] = y[idx[a:b]]
+        at, m = reach + lo - a, hi - lo
+        # The largest of the least readings on each side, and the least of the largest.
+        least_of, most_of = low[at - 1 : at - 1 + m].copy(), high[at - 1 : at - 1 + m].copy()
+        right_least, right_most = low[at + 1 : at + 1 + m].copy(), high[at + 1 : at + 1 + m].copy()
+        for k in range(2, reach + 1):
+            np.minimum(least_of, low[at - k : at - k + m], out=least_of)
+            np.maximum(most_of, high[at - k : at - k + m], out=most_of)
+            np.minimum(right_least, low[at + k : at + k + m], out=right_least)
+            np.maximum(right_most, high[at + k : at + k + m], out=right_most)
+        np.maximum(least_of, right_least, out=least_of)
+        np.minimum(most_of, right_most, out=most_of)
+        yq = low[at : at + m]
+        out = np.maximum(yq - least_of, most_of - yq)
+        out = np.maximum(out, 0.0) / scale
+        may[lo:hi] = ~(np.sum(out * out, axis=1) <= 1.0 - 1e-9)
+    return may
+
+
 def _candidates(
     t: np.ndarray,
     y: np.ndarray,
@@ -423,6 +489,9 @@ def _candidates(
     threshold, excursion, max_group = limits
     idx = np.flatnonzero(usable)
     candidate = np.zeros(len(t), dtype=bool)
+    # How many of the usable records before each may leave the span of a pair of near neighbours:
+    # a group with none among its records does not (its score is 0), and is not looked at.
+    may = np.concatenate([[0], np.cumsum(_may_depart(y, idx, excursion, max_group))])
     for g in range(1, max_group + 1):
         # A block of groups at a time (each group's score is its own: blocks keep the temporaries
         # in cache), and of those only the groups that leave the span of their near neighbours
@@ -430,11 +499,13 @@ def _candidates(
         P = idx.size - g - 3
         for lo in range(0, max(P, 0), FIRST_PASS_BLOCK):
             p = np.arange(lo, min(lo + FIRST_PASS_BLOCK, P))
+            p = p[may[p + 2 + g] > may[p + 2]]
             m = idx[(p + 2)[:, None] + np.arange(g)[None, :]]
             keep = _departs(y, (idx[p + 1], idx[p + 2 + g]), m, excursion)
             m, p = m[keep], p[keep]
             outside = (idx[p], idx[p + 1], idx[p + 2 + g], idx[p + 3 + g])
-            s, _ = _scores(t, y, sc, outside, m, excursion)
+            # Every group kept departs: its score is not judged against the excursion again.
+            s, _ = _scores(t, y, sc, outside, m, 0.0)
             candidate[m[s > threshold].ravel()] = True
     return candidate
 
