@@ -37,7 +37,6 @@ from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs import Log
 from nlp_calib.models import get_model, load_log
 from nlp_calib.models.base import curvature_correction, record_rates
-from nlp_calib.models.car_like_ackermann import wheel_angles
 from nlp_calib.models.drives import integrate_base
 from nlp_calib.problem import ProblemSpec, build, build_residual_data
 from nlp_calib.problem.windows import ResidualOptions
@@ -189,23 +188,24 @@ class _Car:
             np.arctan(length * tl / (length + half * tl)) + np.arctan(length * tr / (length - half * tr))
         )
 
-    def reading(self, phi: np.ndarray, base: np.ndarray | None = None) -> np.ndarray:
-        """``base`` (the ``mean`` inputs) with each steering row reading the bicycle angle ``phi``."""
-        u = (self.mean if base is None else base).copy()
+    def reading(self, phi: np.ndarray) -> np.ndarray:
+        """The ``mean`` inputs with the steering rows moved so the model's bicycle angle is ``phi``:
+        an Ackermann pair's both joints by one shift (Newton on it), their split as read, since the
+        Gauss-Newton step's Jacobian follows each joint's reading, not only the angle they give."""
+        u = self.mean.copy()
         k, off = self.truth["k_steer"], self.truth["steer_offset"]
-        wheel = (
-            [phi]
-            if len(self.steer) == 1
-            else wheel_angles(phi, self.truth["wheelbase"], self.truth["steering_track"])
-        )
-        for row, angle in zip(self.steer, wheel):
-            u[row] = (angle - off) / k
+        for _ in range(1 if len(self.steer) == 1 else 4):
+            shift = (phi - self.phi([k * u[row] + off for row in self.steer])) / k
+            for row in self.steer:
+                u[row] = u[row] + shift
         return u
 
 
-def _car_quadratic(car: _Car) -> tuple[np.ndarray, np.ndarray]:
-    """Per interval, the mean angle and the mean tangent the travel saw, each joint's angle the
-    quadratic through its readings whose mean the curvature correction gives, the speed linear."""
+def _car_quadratic(car: _Car) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per interval, the bicycle angle of each joint's mean angle the travel saw (the model's
+    reading of the Ackermann pair), the mean bicycle angle and the mean tangent the travel saw, each
+    joint's angle the quadratic through its readings whose mean the curvature correction gives,
+    the speed linear."""
     t = np.asarray(car.log.time_s, dtype=float)
     u = (np.arange(FINE) + 0.5) / FINE
     v = np.abs(record_rates(car.mean[car.wheels].sum(0)[None], t)[0])
@@ -215,8 +215,10 @@ def _car_quadratic(car: _Car) -> tuple[np.ndarray, np.ndarray]:
     for a in car.angles:
         bend = -6.0 * curvature_correction(a, t)[:, None] * u[None] * (u[None] - 1.0)
         wheel.append(car.truth["k_steer"] * (a[:-1, None] + wrap_angle(np.diff(a))[:, None] * u[None] + bend))
-    phi = car.phi([x + car.truth["steer_offset"] for x in wheel])
-    return (w * phi).sum(1) / w.sum(1), np.arctan((w * np.tan(phi)).sum(1) / w.sum(1))
+    wheel = [x + car.truth["steer_offset"] for x in wheel]
+    pair = car.phi([(w * x).sum(1) / w.sum(1) for x in wheel])
+    phi = car.phi(wheel)
+    return pair, (w * phi).sum(1) / w.sum(1), np.arctan((w * np.tan(phi)).sum(1) / w.sum(1))
 
 
 def _car_simulator(car: _Car, substeps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -259,7 +261,11 @@ def _car(args: argparse.Namespace) -> None:
     _show_car("readings' mean (uncorrected)", car.step(plain))
     _show_car("mean (curvature-corrected)", car.step(car.mean))
     _show_car("travel (curvature-corrected)", car.step(car.model.inputs(car.log, "travel")))
-    mean, tan = _car_quadratic(car)
+    pair, mean, tan = _car_quadratic(car)
+    if len(car.steer) > 1:
+        _show_car(
+            "readings' quadratic: the pair of each joint's mean the travel saw", car.step(car.reading(pair))
+        )
     _show_car("readings' quadratic: tan of the mean angle the travel saw", car.step(car.reading(mean)))
     _show_car("readings' quadratic: mean tan the travel saw", car.step(car.reading(tan)))
     mean, tan, exact = _car_simulator(car, args.substeps)
