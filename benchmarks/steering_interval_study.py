@@ -21,7 +21,8 @@ curvature is ``tan φ / wheelbase``: each steering row replaced by the angle tha
 bicycle angle (the Ackermann pair's mean) a reference, in turn the mean angle and the mean tangent
 the travel saw, from a quadratic through the readings (the curvature correction's own reading) and
 from the simulator's sub-steps; then the sub-steps' exact curvature with the counters' travel
-unrounded. ``--ticks 20`` reads the steering on 2²⁰ ticks, ``--substeps 200`` refines the simulator.
+unrounded. ``--ticks 20`` reads the steering on 2²⁰ ticks, ``--substeps 200`` refines the simulator,
+``--horizon 1`` fits one-interval windows (a scenario's default).
 """
 
 from __future__ import annotations
@@ -152,7 +153,8 @@ class _Car:
 
     def __init__(self, args: argparse.Namespace) -> None:
         self.model = get_model(args.model)
-        self.fns = build(self.model, ProblemSpec(horizon=10, lags=1))
+        self.horizon = args.horizon
+        self.fns = build(self.model, ProblemSpec(horizon=args.horizon, lags=1))
         ranges = {e: 2**args.ticks for e, kind in self.model.encoder_kinds.items() if kind == "absolute"}
         self.opts = SimulationOptions.of(
             model=args.model, records=args.records, seed=args.seed, tracker_noise_xy=0.0,
@@ -172,7 +174,7 @@ class _Car:
         ]
 
     def step(self, inputs: np.ndarray) -> dict[str, float]:
-        options = ResidualOptions(horizon=10, steering_sample="mean")
+        options = ResidualOptions(horizon=self.horizon, steering_sample="mean")
         data = build_residual_data(self.fns, self.log, options, inputs=inputs)
         ev = ProblemEvaluator(self.fns, data, x_fixed=np.zeros(0), omega=np.ones(3), delta=1e9)
         ne = ev.normal_equations(np.array([*(self.truth[n] for n in self.fns.names[:-1]), 0.0]))
@@ -287,6 +289,7 @@ def main() -> None:
     parser.add_argument("--stops", type=float, default=0.15)
     parser.add_argument("--ticks", type=int, default=13, help="a car's steering encoder: 2^ticks a turn")
     parser.add_argument("--substeps", type=int, default=20, help="a car's simulator sub-steps")
+    parser.add_argument("--horizon", type=int, default=10, help="a car's windows, in intervals")
     args = parser.parse_args()
     if args.model == "tricycle":
         _tricycle(args)
