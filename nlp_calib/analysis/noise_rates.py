@@ -18,8 +18,8 @@ not show (a car's wheels under its device's 2 cm) is the joints' own noise's
 interval, which a pivot's drift rules) only where the segments cannot tell it apart. A component
 whose 2σ holds fewer than :data:`~nlp_calib.analysis.odometry.COVERED` of the segments' errors gets
 the smallest share of the inputs' noise's rates that makes it hold them, each rate on the segments
-it is stated for (the pivots' heading rate and the positions' per radian on those that pivot, the
-positions' per metre on the rest): at least the drift the windows show.
+it is stated for (the pivots' heading rate on those that pivot): at least the drift the windows
+show.
 """
 
 from __future__ import annotations
@@ -495,19 +495,15 @@ COMPONENTS = np.array([0, 1, 2, 0, 1, 2, 2])
 def _populations(units: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray]]:
     """What :func:`_covered` raises, each with the segments it is judged on: a component's rates
     (those :data:`COMPONENTS` gives it) on every segment; where the pivots' heading rate is apart
-    (``units``' seventh), the arcs' heading rates and the positions' per metre on the segments that
-    do not pivot, the pivots' heading rate and the positions' per radian on those that do: each
-    rate never under the drift of the segments it is stated for."""
+    (``units``' seventh), the arcs' heading rates on the segments that do not pivot and the
+    pivots' on those that do: each rate never under the drift of the segments it is stated for."""
     n = units.shape[0]
     of, every = COMPONENTS[:n], np.ones(units.shape[1], dtype=bool)
     if n < 7:
         return [(c, of == c, every) for c in range(3)]
-    pivots, rate = units[6][:, 2, 2] > 0, np.arange(n)
-    arcs = (of == 2) & (rate < 6)
-    # A pivot's position error grows with its turn, not with metres: a per-metre rate raised to
-    # hold it gives every arc's metre a pivot's drift (its lever, a mount's offset turned).
-    out = [(c, rate == c, ~pivots) for c in (0, 1)] + [(c, rate == 3 + c, pivots) for c in (0, 1)]
-    return [*out, (2, arcs, ~pivots), (2, rate == 6, pivots)]
+    pivots = units[6][:, 2, 2] > 0
+    arcs = (of == 2) & (np.arange(n) < 6)
+    return [(0, of == 0, every), (1, of == 1, every), (2, arcs, ~pivots), (2, np.arange(n) == 6, pivots)]
 
 
 def _covered(
