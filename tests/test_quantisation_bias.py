@@ -16,12 +16,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 import ros2_bags as rb
 from conftest import cli, write_sim
 
 from nlp_calib.analysis import inputs_bias
+from nlp_calib.core.numeric import wrapped_difference
 from nlp_calib.logs.log import JointStream
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
+from nlp_calib.simulation.simulate import SimulationOptions, simulate
 
 SEEDS = (901, 903, 905)
 FINE = {
@@ -197,3 +200,46 @@ def test_a_resampled_joints_increments_carry_their_readings_noise_as_interpolate
     drawn = np.var(np.diff([np.interp(t, stream.time_s, r) for r in readings], axis=1), axis=0)
     np.testing.assert_allclose(stream.increment_variance(t), drawn, rtol=0.15)
     np.testing.assert_array_equal(stream.increment_variance(stream.time_s[:50]), 2.0)
+
+
+def test_a_counter_that_stands_still_carries_the_rounding_its_wheel_had(tmp_path: Path) -> None:
+    """A car's drive with stops: each wheel counter's increment carries, as the bias step's
+    sources take it, the rounding the simulator's drive gave it, read off the same drive with
+    counts a hundred times finer (the true travel to 1 % of a tick). Where the wheels roll, two
+    readings' (uniform rounding); summed over the intervals whose count did not change, at least
+    what the wheel travelled there and at most twice it. Two readings on each of them were 20
+    times it: a reading's rounding is that of the wheel's position, the same over a stop."""
+    opts: dict[str, Any] = {"model": "car_like", "seed": 4611, "records": 4000, "latency_s": 0.0}
+    log = write_sim(tmp_path, "car.txt", **opts)
+    k = SimulationOptions.of(**opts).truth["k_traction"]
+    fine = simulate(SimulationOptions.of(**opts, truth={"k_traction": k / 100}))
+    raw = {
+        "model": "car_like",
+        "dataset": str(log),
+        "residual": {"horizon": 1},
+        "alignment": {"tracker_lag": 0.0},
+    }
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        c = Calibration.setup(scenario_from_mapping(raw, "car", tmp_path))
+    ev, (std, counted) = c.fitting.evaluator, c.stages.windows.input_noise
+    sources = inputs_bias._sources(ev, (std, counted))
+    kinds = ev.fns.model.encoder_kinds
+    names = [e for e in kinds if kinds[e] == "counter"]  # the counters' inputs come first, in this order
+    wheels = [row for row in range(len(counted)) if counted[row]]
+    assert wheels == [0, 1] and len(names) == 2 and ev.data.offsets == (0,)
+    for row in wheels:
+        counts = ev.data.inputs[row]
+        travel = (
+            wrapped_difference(fine.ticks[:, fine.header.encoder_index(names[row])])[: counts.size] / 100.0
+        )
+        rounding = 12.0 * (counts - travel) ** 2  # in readings' (a tick's rounding: 1/12 tick²)
+        modelled = (sum(v[row] for v in sources) / std[row]) ** 2
+        still = counts == 0
+        assert still.sum() > 200, still.sum()
+        assert 1.0 <= modelled[still].sum() / rounding[still].sum() <= 2.0, (
+            modelled[still].sum(),
+            rounding[still].sum(),
+        )
+        assert np.mean(rounding[~still]) == pytest.approx(2.0, rel=0.1)
+        np.testing.assert_allclose(modelled[~still], 2.0, rtol=1e-12)

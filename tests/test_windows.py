@@ -105,12 +105,19 @@ def test_windows_touching_flagged_intervals_can_be_dropped() -> None:
     assert_close(kept.z, data.z[:, counts == 0], rtol=0.0)
 
 
-def _by_reading(F: np.ndarray, counted: np.ndarray) -> np.ndarray:
+def _by_reading(F: np.ndarray, counted: np.ndarray, data: ResidualData) -> np.ndarray:
     """Each window's map ``(w, h, c, i)`` from its intervals' inputs to its error, written over the
     readings ``h = 0..H`` of its intervals' ends: a counted input's interval ``h`` is the reading
-    ``h + 1`` less the reading ``h``; another input's interval is its own (the reading ``h``)."""
+    ``h + 1`` less the reading ``h``, each interval's share of two readings' noise as the model
+    gives it (less where the counter stood); another input's interval is its own (the reading ``h``)."""
+    from nlp_calib.analysis.inputs_bias import _increment_variance
+
+    v = _increment_variance(data, counted)  # (inputs, intervals)
+    H = F.shape[1]
+    scale = np.sqrt(v[:, data.starts[:, None] + np.arange(H)] / 2.0).transpose(1, 2, 0)  # (w, h, i)
+    Fs = np.where(counted, F * scale[:, :, None, :], F)
     own = np.concatenate([F, np.zeros_like(F[:, :1])], axis=1)
-    read = np.concatenate([-F[:, :1], F[:, :-1] - F[:, 1:], F[:, -1:]], axis=1)
+    read = np.concatenate([-Fs[:, :1], Fs[:, :-1] - Fs[:, 1:], Fs[:, -1:]], axis=1)
     return np.where(counted, read, own)
 
 
@@ -135,7 +142,7 @@ def test_the_inputs_share_of_the_cost_is_the_sum_over_every_window_and_reading(H
     _, _, weight = ev.robust_terms(x)
     D = _column_jacobian(fns, data, x)
     F = D[:, :, : fns.n_inputs * H].reshape(3, data.n_residuals, H, fns.n_inputs).transpose(1, 2, 0, 3)
-    direct = np.einsum("w,c,whci,i->", weight, ev.omega, _by_reading(F, counted) ** 2, sigma_in**2)
+    direct = np.einsum("w,c,whci,i->", weight, ev.omega, _by_reading(F, counted, data) ** 2, sigma_in**2)
     assert noise_share(ev, x, weight, (sigma_in, counted)) == pytest.approx(direct, rel=1e-9)
 
 
@@ -152,7 +159,7 @@ def test_some_windows_shares_of_the_cost_are_their_terms_of_the_direct_sum(H: in
     _, _, weight = ev.robust_terms(x)
     D = _column_jacobian(fns, data, x)
     F = D[:, :, : fns.n_inputs * H].reshape(3, data.n_residuals, H, fns.n_inputs).transpose(1, 2, 0, 3)
-    direct = np.einsum("w,c,whci,i->w", weight, ev.omega, _by_reading(F, counted) ** 2, sigma_in**2)
+    direct = np.einsum("w,c,whci,i->w", weight, ev.omega, _by_reading(F, counted, data) ** 2, sigma_in**2)
     picked = np.array([2, 3, 5, 40, 41, 120, data.n_residuals - 1])
     shares = window_shares(ev, x, weight, (sigma_in, counted), picked)
     assert_close(shares, direct[picked], rtol=1e-9)
