@@ -9,6 +9,7 @@ import pytest
 from conftest import assert_close, parse_lines
 
 from nlp_calib.analysis import uncertainty as unc
+from nlp_calib.analysis.inputs_bias import _increment_variance
 from nlp_calib.logs import Log
 from nlp_calib.models import get_model
 from nlp_calib.problem import (
@@ -105,17 +106,18 @@ def test_windows_touching_flagged_intervals_can_be_dropped() -> None:
     assert_close(kept.z, data.z[:, counts == 0], rtol=0.0)
 
 
-def _by_reading(F: np.ndarray, counted: np.ndarray, data: ResidualData) -> np.ndarray:
+def _by_reading(F: np.ndarray, counted: np.ndarray, data: ResidualData | None = None) -> np.ndarray:
     """Each window's map ``(w, h, c, i)`` from its intervals' inputs to its error, written over the
     readings ``h = 0..H`` of its intervals' ends: a counted input's interval ``h`` is the reading
-    ``h + 1`` less the reading ``h``, each interval's share of two readings' noise as the model
-    gives it (less where the counter stood); another input's interval is its own (the reading ``h``)."""
-    from nlp_calib.analysis.inputs_bias import _increment_variance
-
-    v = _increment_variance(data, counted)  # (inputs, intervals)
-    H = F.shape[1]
-    scale = np.sqrt(v[:, data.starts[:, None] + np.arange(H)] / 2.0).transpose(1, 2, 0)  # (w, h, i)
-    Fs = np.where(counted, F * scale[:, :, None, :], F)
+    ``h + 1`` less the reading ``h`` (with ``data``, each interval's share of two readings' noise
+    as the noise-bias step gives it, less where the counter stood; without, two readings' as the
+    uncertainty takes it); another input's interval is its own (the reading ``h``)."""
+    Fs = F
+    if data is not None:
+        v = _increment_variance(data, counted)  # (inputs, intervals)
+        H = F.shape[1]
+        scale = np.sqrt(v[:, data.starts[:, None] + np.arange(H)] / 2.0).transpose(1, 2, 0)  # (w, h, i)
+        Fs = np.where(counted, F * scale[:, :, None, :], F)
     own = np.concatenate([F, np.zeros_like(F[:, :1])], axis=1)
     read = np.concatenate([-Fs[:, :1], Fs[:, :-1] - Fs[:, 1:], Fs[:, -1:]], axis=1)
     return np.where(counted, read, own)
