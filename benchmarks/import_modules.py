@@ -18,8 +18,16 @@ from pathlib import Path
 from typing import Any
 
 #: The script's start: numpy and CasADi, then the package as the command imports it (with the
-#: dataclasses' compiled methods it keeps, where the checkout has them: ``core/methods.py``).
-AS_THE_COMMAND = """import numpy, casadi
+#: dataclasses' compiled methods it keeps, where the checkout has them: ``core/methods.py``; and
+#: the garbage collector paused until the command's modules are loaded: ``core/collector.py``).
+AS_THE_COMMAND = """try:
+    from nlp_calib.core import collector
+except ImportError:  # a checkout from before core/collector.py
+    resume = lambda: None
+else:
+    collector.pause()
+    resume = collector.resume
+import numpy, casadi
 try:
     from nlp_calib.core import methods
     from nlp_calib.core.files import cache_dir
@@ -33,7 +41,7 @@ else:
 def held(script: Path, args: list[str]) -> None:
     def write() -> None:
         package = sorted(m for m in sys.modules if m.split(".")[0] == "nlp_calib")
-        script.write_text(AS_THE_COMMAND + "".join(f"import {m}\n" for m in package) + "kept()\n")
+        script.write_text(AS_THE_COMMAND + "".join(f"import {m}\n" for m in package) + "resume()\nkept()\n")
         print(f"modules {' '.join(args[:1])} {len(sys.modules)} {len(package)}", file=sys.__stderr__)
 
     atexit.register(write)
