@@ -93,9 +93,8 @@ def collector(script: Path) -> None:
     """The collector's passes while ``script`` runs, and the objects it tracks at its end."""
     passes = _count_passes()
     exec(compile(script.read_text(), str(script), "exec"), {})
-    print(
-        f"collector passes (young, middle, full) {passes}, tracked at the end {len(gc.get_objects()) + gc.get_freeze_count()}"
-    )
+    tracked = len(gc.get_objects()) + gc.get_freeze_count()
+    print(f"collector passes (young, middle, full) {passes}, tracked at the end {tracked}")
 
 
 if __name__ == "__main__":

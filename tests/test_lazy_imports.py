@@ -182,3 +182,11 @@ def test_a_command_called_in_a_process_leaves_its_collector_alone() -> None:
         assert not gc.isenabled() and gc.get_freeze_count() == frozen
     finally:
         gc.enable()
+
+
+def test_the_compiled_backend_loads_no_process_machinery() -> None:
+    """A command whose compiled code is cached starts no compiler: ``subprocess`` (and what it
+    loads) comes in only with the first compile."""
+    loaded = _loaded_after("import nlp_calib.solvers.backends.compiled")
+    assert "nlp_calib.codegen.compiler" in loaded
+    assert "subprocess" not in loaded
