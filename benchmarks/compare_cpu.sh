@@ -5,6 +5,8 @@
 # more checkouts interleaved, REPS rounds. Warm: each checkout's bytecode cache (PYTHONPYCACHEPREFIX)
 # and the compile cache filled by one compare first. Appends "what checkout user sys maxrss_kB"
 # lines and the load average at each round's start to OUT, then prints the medians in floors.
+# WHAT (environment; default "floor compare imports") times only the ones it names, e.g. WHAT="floor
+# imports" for more rounds of the imports at the cost of one compare per checkout.
 #   benchmarks/compare_cpu.sh OUT REPS SCENARIO LOG CHECKOUT...
 set -u
 out=$1; reps=$2; scen=$3; data=$(realpath "$4"); shift 4
@@ -26,7 +28,7 @@ for _ in $(seq "$reps"); do
     n=$(basename "$checkout")
     cd "$checkout" || exit 1
     export PYTHONPATH="$checkout" PYTHONPYCACHEPREFIX="$work/pyc_$n"
-    for what in floor compare imports; do
+    for what in ${WHAT:-floor compare imports}; do
       case $what in
         floor) cmd=(python3 -c "import numpy, casadi") ;;
         compare) cmd=(python3 -m nlp_calib compare "$scen" --data "$data" --out "$work/out_$n" --force) ;;
@@ -50,6 +52,8 @@ for line in open(sys.argv[1]):
 for checkout in dict.fromkeys(c for _, c in cpu):
     floor = statistics.median(cpu[("floor", checkout)])
     for what in ("floor", "compare", "imports"):
+        if (what, checkout) not in cpu:
+            continue
         v = cpu[(what, checkout)]
         m = statistics.median(v)
         peak = statistics.median(rss[(what, checkout)])

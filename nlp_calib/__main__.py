@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from nlp_calib.core import interrupts, memory, methods
+from nlp_calib.core import collector, interrupts, memory, methods
 from nlp_calib.core.files import cache_dir
 
 
 def run() -> int:
     """The command. A signal while its libraries load (numpy, CasADi) ends it quietly with
     ``128 + signal``, like a signal later does, even if a library swallowed the exception."""
+    collector.pause()  # until the command's modules are loaded (cli/commands.py)
     interrupts.install()
     memory.fit_to_limit()
     # The dataclasses' methods compiled by an earlier command: most of the package's import.
@@ -25,6 +26,7 @@ def run() -> int:
             raise SystemExit(f"error: {memory.OUT_OF_MEMORY}") from None
         raise
     finally:
+        collector.resume()  # a command that never loaded its module (--help, a usage error)
         kept(save=interrupts.exit_code() is None)  # a signal ends the command without writing
 
 

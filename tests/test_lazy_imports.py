@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import ast
+import gc
 import importlib
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +16,7 @@ import pytest
 from conftest import REPO
 
 from nlp_calib.cli.parser import build_parser, named_command
+from nlp_calib.core import collector
 
 #: The packages whose ``__init__`` re-exports through :func:`nlp_calib.core.lazy.exports`.
 LAZY = (
@@ -114,3 +117,76 @@ def test_simulate_parses_with_its_whole_grammar() -> None:
     assert build_parser("compare").format_help() == build_parser().format_help()
     argv = ["simulate", "--out", "x.txt", "--trajectory", "straight", "--records", "500"]
     assert vars(build_parser(named_command(argv)).parse_args(argv)) == vars(build_parser().parse_args(argv))
+
+
+#: A fresh interpreter runs the command as ``nlp-calib`` does, with ``validate``'s module replaced
+#: by ``probe`` (written beside it): what the collector did while the module loaded and after.
+_PROBE = """import gc, json, sys
+from nlp_calib import __main__ as entry
+from nlp_calib.cli import commands
+commands.COMMANDS["validate"] = commands._on_demand("probe", "cmd")
+sys.argv = ["nlp-calib", *sys.argv[1:]]
+try:
+    code = entry.run()
+except SystemExit as exc:
+    code = exc.code
+print(json.dumps({"code": code, "after": gc.isenabled()}))
+"""
+_MODULE = """import gc, json
+LOADING = gc.isenabled()
+def cmd(args):
+    print(json.dumps({"loading": LOADING, "running": gc.isenabled(), "frozen": gc.get_freeze_count()}))
+    return 0
+"""
+
+
+def _probed(tmp_path: Path, *argv: str) -> list[dict[str, object]]:
+    (tmp_path / "probe.py").write_text(_MODULE)
+    (tmp_path / "probe_run.py").write_text(_PROBE)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(tmp_path)])}
+    out = subprocess.run(
+        [sys.executable, str(tmp_path / "probe_run.py"), *argv],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=REPO,
+    )
+    return [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
+
+
+def test_a_command_loads_its_modules_with_the_collector_paused(tmp_path: Path) -> None:
+    """Loading makes objects that live as long as the process: no collector passes while the
+    command's module loads; it runs with the collector on, what loading made frozen out of it."""
+    command, end = _probed(tmp_path, "validate", "scenarios/demo.yaml")
+    assert command["loading"] is False
+    assert command["running"] is True
+    assert isinstance(command["frozen"], int) and command["frozen"] > 10_000  # numpy, CasADi, the parser
+    assert end == {"code": 0, "after": True}
+
+
+def test_a_command_that_loads_no_module_gives_the_collector_back(tmp_path: Path) -> None:
+    """``--help`` (argparse exits) never reaches a command's module: the collector is on again."""
+    (end,) = _probed(tmp_path, "--help")
+    assert end == {"code": 0, "after": True}
+
+
+def test_a_command_called_in_a_process_leaves_its_collector_alone() -> None:
+    """A program or test calling a command in its own process: nothing paused, nothing frozen."""
+    frozen = gc.get_freeze_count()
+    collector.resume()
+    assert gc.isenabled() and gc.get_freeze_count() == frozen
+    gc.disable()
+    try:
+        collector.pause()  # the program's own choice stands
+        collector.resume()
+        assert not gc.isenabled() and gc.get_freeze_count() == frozen
+    finally:
+        gc.enable()
+
+
+def test_the_compiled_backend_loads_no_process_machinery() -> None:
+    """A command whose compiled code is cached starts no compiler: ``subprocess`` (and what it
+    loads) comes in only with the first compile."""
+    loaded = _loaded_after("import nlp_calib.solvers.backends.compiled")
+    assert "nlp_calib.codegen.compiler" in loaded
+    assert "subprocess" not in loaded

@@ -9,6 +9,8 @@ import argparse
 import importlib
 from collections.abc import Callable
 
+from nlp_calib.core import collector
+
 Command = Callable[[argparse.Namespace], int]
 
 
@@ -16,7 +18,10 @@ def _on_demand(module: str, name: str) -> Command:
     """The command ``name`` of ``module``, imported at its first call."""
 
     def command(args: argparse.Namespace) -> int:
-        run: Command = getattr(importlib.import_module(module), name)
+        try:
+            run: Command = getattr(importlib.import_module(module), name)
+        finally:
+            collector.resume()  # what the command runs makes the garbage worth collecting
         return run(args)
 
     command.__name__ = command.__qualname__ = name

@@ -34,18 +34,21 @@ import os
 import shutil
 import signal
 import stat
-import subprocess
 import tempfile
 import threading
 import time
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import casadi as ca
 
 from nlp_calib.core.errors import CodegenError, NlpCalibWarning, OptionsError, shown_path
 from nlp_calib.core.files import cache_dir, writable_by_others
+
+if TYPE_CHECKING:
+    import subprocess
 
 #: Optimisation flags for the generated code; -fno-math-errno lets sin/cos/sqrt inline.
 CFLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fPIC", "-shared", "-Wno-int-conversion")
@@ -268,6 +271,8 @@ def _probe(compiler: str) -> str | None:
 def run_compiler(command: list[str], timeout: float, what: str) -> None:
     """Run a compiler in its own process group: a compile past ``timeout`` seconds, or cut short
     by :func:`stop_compilers`, ends with its children (a wrapper script and what it started)."""
+    import subprocess  # here: a command whose compiled code is cached never starts a compiler
+
     try:
         proc = subprocess.Popen(
             command,
@@ -298,6 +303,8 @@ def run_compiler(command: list[str], timeout: float, what: str) -> None:
 
 
 def _stop(proc: subprocess.Popen[str]) -> None:
+    import subprocess  # loaded by run_compiler, which started ``proc``
+
     with contextlib.suppress(OSError):
         os.killpg(proc.pid, signal.SIGKILL)
     with contextlib.suppress(subprocess.TimeoutExpired, OSError, ValueError):
