@@ -303,3 +303,22 @@ def two_sinusoids(
         sensor_yaw=-1.55,
         tracker_lag=-stamp_offset_s,
     )
+
+
+def steering_step(log_path: Path, truth: dict[str, float], sample: str) -> dict[str, float]:
+    """Each parameter's Gauss-Newton step from the truth (the lag at 0) on a noise-free tricycle
+    log with its steer angle read as ``sample`` (the demo's residual options): the bias the interval
+    model's error gives it."""
+    from nlp_calib.models import load_log
+    from nlp_calib.problem import ProblemSpec, build, build_residual_data
+    from nlp_calib.problem.windows import ResidualOptions
+    from nlp_calib.solvers import ProblemEvaluator
+
+    model = get_model("tricycle")
+    fns = build(model, ProblemSpec(horizon=10, lags=1))
+    data = build_residual_data(
+        fns, load_log(log_path, model), ResidualOptions(horizon=10, steering_sample=sample)
+    )
+    ev = ProblemEvaluator(fns, data, x_fixed=np.zeros(0), omega=np.ones(3), delta=1e9)
+    ne = ev.normal_equations(np.array([*(truth[n] for n in fns.names[:-1]), 0.0]))
+    return dict(zip(fns.names, map(float, -np.linalg.solve(ne.H, ne.g))))

@@ -8,13 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import steering_step
 
-from nlp_calib.models import get_model, load_log
 from nlp_calib.models.base import sampled_angle
-from nlp_calib.problem import ProblemSpec, build, build_residual_data
-from nlp_calib.problem.windows import ResidualOptions
 from nlp_calib.simulation.simulate import SimulationOptions, simulate, write_simulation
-from nlp_calib.solvers import ProblemEvaluator
 
 
 def _jittered_times(records: int) -> np.ndarray:
@@ -59,14 +56,7 @@ def test_a_one_record_spike_moves_only_the_two_intervals_that_read_it() -> None:
 def _k_steer_step(log_path: Path, truth: dict[str, float], sample: str) -> float:
     """k_steer's Gauss-Newton step from the truth (lag 0) on a noise-free log: the bias the
     interval model's error gives it (the demo's residual options)."""
-    model = get_model("tricycle")
-    fns = build(model, ProblemSpec(horizon=10, lags=1))
-    data = build_residual_data(
-        fns, load_log(log_path, model), ResidualOptions(horizon=10, steering_sample=sample)
-    )
-    ev = ProblemEvaluator(fns, data, x_fixed=np.zeros(0), omega=np.ones(3), delta=1e9)
-    ne = ev.normal_equations(np.array([*(truth[n] for n in fns.names[:-1]), 0.0]))
-    return float(-np.linalg.solve(ne.H, ne.g)[fns.names.index("k_steer")])
+    return steering_step(log_path, truth, sample)["k_steer"]
 
 
 @pytest.mark.parametrize("sample", ["mean", "travel"])

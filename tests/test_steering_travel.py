@@ -7,13 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import steering_step
 
-from nlp_calib.models import get_model, load_log
 from nlp_calib.models.base import sampled_angle
-from nlp_calib.problem import ProblemSpec, build, build_residual_data
-from nlp_calib.problem.windows import ResidualOptions
 from nlp_calib.simulation.simulate import SimulationOptions, simulate, write_simulation
-from nlp_calib.solvers import ProblemEvaluator
+
+LAG = "tracker_lag"
 
 DT = 0.04
 
@@ -53,14 +52,7 @@ def test_travel_falls_back_to_the_mean_where_the_direction_changes() -> None:
 def _lag_step(log_path: Path, truth: dict[str, float], sample: str) -> float:
     """The lag's Gauss-Newton step (ms) from the truth, lag 0, on a noise-free log: the bias the
     model's error gives the fitted lag (the demo's residual options)."""
-    model = get_model("tricycle")
-    fns = build(model, ProblemSpec(horizon=10, lags=1))
-    data = build_residual_data(
-        fns, load_log(log_path, model), ResidualOptions(horizon=10, steering_sample=sample)
-    )
-    ev = ProblemEvaluator(fns, data, x_fixed=np.zeros(0), omega=np.ones(3), delta=1e9)
-    ne = ev.normal_equations(np.array([*(truth[n] for n in fns.names[:-1]), 0.0]))
-    return float(-np.linalg.solve(ne.H, ne.g)[-1] * 1e3)
+    return steering_step(log_path, truth, sample)[LAG] * 1e3
 
 
 @pytest.mark.parametrize("stops", [0.15, 0.0])
