@@ -93,19 +93,21 @@ def test_one_record_windows_recover_a_diff_drives_baseline_within_its_sigma(tmp_
     assert abs(z) < 1.5 and all(said)
 
 
+def _one_record_windows(tmp_path: Path, log: Path, model: str, lag: float) -> Calibration:
+    """The calibration set up on ``log`` with one-record windows and the lag given as ``lag``."""
+    raw = {"model": model, "dataset": str(log), "alignment": {"tracker_lag": lag}, "residual": {"horizon": 1}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return Calibration.setup(scenario_from_mapping(raw, model, tmp_path))
+
+
 def _fitted(tmp_path: Path) -> tuple[Any, np.ndarray, Any]:
     """The evaluator, Gauss-Newton's optimum and the inputs' noise of one-record windows (seed 901)."""
     log = write_sim(tmp_path, "s.txt", records=2000, seed=901, model="diff_drive", latency_s=0.02)
-    raw = {
-        "model": "diff_drive",
-        "dataset": str(log),
-        "alignment": {"tracker_lag": 0.02},
-        "residual": {"horizon": 1},
-    }
+    c = _one_record_windows(tmp_path, log, "diff_drive", 0.02)
+    fit = c.fitting
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        c = Calibration.setup(scenario_from_mapping(raw, "s", tmp_path))
-        fit = c.fitting
         x = fit.solver("gauss_newton").solve(fit.problem.start.x0, None, None).x
     return fit.evaluator, x, c.stages.windows.input_noise
 
@@ -213,15 +215,7 @@ def test_a_counter_that_stands_still_carries_the_rounding_its_wheel_had(tmp_path
     log = write_sim(tmp_path, "car.txt", **opts)
     k = SimulationOptions.of(**opts).truth["k_traction"]
     fine = simulate(SimulationOptions.of(**opts, truth={"k_traction": k / 100}))
-    raw = {
-        "model": "car_like",
-        "dataset": str(log),
-        "residual": {"horizon": 1},
-        "alignment": {"tracker_lag": 0.0},
-    }
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        c = Calibration.setup(scenario_from_mapping(raw, "car", tmp_path))
+    c = _one_record_windows(tmp_path, log, "car_like", 0.0)
     ev, (std, counted) = c.fitting.evaluator, c.stages.windows.input_noise
     sources = inputs_bias._sources(ev, (std, counted))
     kinds = ev.fns.model.encoder_kinds
