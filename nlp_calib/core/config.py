@@ -386,6 +386,8 @@ def parse_yaml(text: str, source: str) -> Any:
         mark = getattr(exc, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark is not None else source
         problem = getattr(exc, "problem", None) or "invalid YAML"
+        if "nesting depth" in problem:  # PyYAML ≥ 6.0.4 bounds the depth itself, before our loader
+            raise ConfigError(f"{where}: not a usable YAML document (nested too deeply: {problem})") from None
         raise ConfigError(f"{where}: not valid YAML ({problem})") from None
     except RecursionError:
         raise ConfigError(f"{source}: not a usable YAML document (nested too deeply)") from None
