@@ -76,7 +76,7 @@ def sigma_over_truth(
         a, b = poses.between(true[i], true[j]), poses.between(track[i], track[j])
         error = np.c_[a[:, :2] - b[:, :2], wrap_angle(a[:, 2] - b[:, 2])]
         read = readings_covariance(Pr, track, i, j, -track[i, 2])
-        C = rates_covariances(increments, rates, np.c_[i, j]) + read
+        C = rates_covariances(increments, rates, np.c_[i, j], d.arc) + read
         out[("rates", L)] = _over(error, np.sqrt(np.clip(np.diagonal(C, axis1=1, axis2=2), 0.0, None)))
     return out
 
