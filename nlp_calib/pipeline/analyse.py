@@ -719,7 +719,7 @@ def handoff_noise(
     chained = windows.data.increment is not None
     segments = d.drift.errors.shape[0]
     shown = Shown(
-        bad_intervals[:n], d.reference, lever, d.reference_var, segments, chained, bad_records[: n + 1]
+        bad_intervals[:n], d.reference, lever, d.reference_var, segments, chained, bad_records[: n + 1], d.arc
     )
     found = odometry_noise(fit.fns, params, d.inputs, time_s, (rates, windows.input_noise_std, walk), shown)
     return found, (d, rates)
