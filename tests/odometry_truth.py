@@ -1,8 +1,10 @@
 """The calibrated odometry's σ against the drift it truly has on a simulated drive (issue #43 item 4):
 over windows of the fit's own length and longer, the dead-reckoned motion against the true base's,
 beside the σ the one noise model gives it (the per-metre and per-radian rates grown as a filter
-grows them, with the readings' rounding at both ends), and ros2_control.yaml's diagonals (the
-pose's after a metre, the twist's over one interval) against the true errors over those spans."""
+grows them, with the readings' rounding at both ends and the one-arc integration's own error per
+interval where the joints' samples show it, as ``nlp-calib odometry``'s), and ros2_control.yaml's
+diagonals (the pose's after a metre, the twist's over one interval) against the true errors over
+those spans."""
 
 from __future__ import annotations
 

@@ -33,10 +33,10 @@ from nlp_calib.analysis.odometry import (
     Drift,
     covered_margin,
     grown_variances,
-    running_sums,
     moments,
     propagate,
     readings_covariance,
+    running_sums,
     weights,
 )
 from nlp_calib.analysis.pivots import pivot_intervals
@@ -324,7 +324,10 @@ def systematic_rates(
     grows as the turn's square, a rate as the turn: a pivot's turns (a few radians) fitted beside
     an arc's would give every arc a pivot's share."""
     lengths = spans[:, 1] - spans[:, 0]
-    travel, turn = running_sums(np.hypot(increments[:, 0], increments[:, 1])), running_sums(np.abs(increments[:, 2]))
+    travel, turn = (
+        running_sums(np.hypot(increments[:, 0], increments[:, 1])),
+        running_sums(np.abs(increments[:, 2])),
+    )
     spun = running_sums(on_spot(increments)[:, 1])
     i, j = spans[:, 0], spans[:, 1]
     along = np.c_[travel[j] - travel[i], np.zeros(i.size), turn[j] - turn[i] - spun[j] + spun[i]]
