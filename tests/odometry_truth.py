@@ -1,8 +1,10 @@
 """The calibrated odometry's σ against the drift it truly has on a simulated drive (issue #43 item 4):
 over windows of the fit's own length and longer, the dead-reckoned motion against the true base's,
 beside the σ the one noise model gives it (the per-metre and per-radian rates grown as a filter
-grows them, with the readings' rounding at both ends), and ros2_control.yaml's diagonals (the
-pose's after a metre, the twist's over one interval) against the true errors over those spans."""
+grows them, with the readings' rounding at both ends and the one-arc integration's own error per
+interval where the joints' samples show it, as ``nlp-calib odometry``'s), and ros2_control.yaml's
+diagonals (the pose's after a metre, the twist's over one interval) against the true errors over
+those spans."""
 
 from __future__ import annotations
 
@@ -76,7 +78,7 @@ def sigma_over_truth(
         a, b = poses.between(true[i], true[j]), poses.between(track[i], track[j])
         error = np.c_[a[:, :2] - b[:, :2], wrap_angle(a[:, 2] - b[:, 2])]
         read = readings_covariance(Pr, track, i, j, -track[i, 2])
-        C = rates_covariances(increments, rates, np.c_[i, j]) + read
+        C = rates_covariances(increments, rates, np.c_[i, j], d.arc) + read
         out[("rates", L)] = _over(error, np.sqrt(np.clip(np.diagonal(C, axis1=1, axis2=2), 0.0, None)))
     return out
 

@@ -656,3 +656,23 @@ def test_a_tracker_that_relocked_leaves_a_skid_steers_odometry_noise_the_drift_i
         ratios = next(r for (w, _), r in found.items() if w == way)
         stated = ratios[~np.isnan(ratios)]
         assert np.all((0.5 <= stated) & (stated <= 2.0)), (way, ratios)
+
+
+def test_the_one_arc_error_of_an_interval_is_its_increment_less_its_joints_samples_integrated() -> None:
+    """A base that drives 1 m out, pivots a quarter turn and backs 1 m inside one interval: its
+    wheels' net motion is the pivot alone, so one arc on it puts the base where it started, turned;
+    its joints' samples put it 1 m ahead and 1 m to the right: the one-arc error (base frame at the
+    start) is (−1, +1, 0) m, m, rad. An interval of one arc, sampled in two equal halves, has none."""
+    from nlp_calib.analysis.odometry import one_arc_errors
+    from nlp_calib.problem import ProblemSpec, build
+
+    fns = build(get_model("diff_drive"), ProblemSpec(horizon=1))
+    metres_per_tick, baseline = 1e-3, 0.5
+    params = np.array([metres_per_tick, metres_per_tick, baseline, 0.0, 0.0, 0.0])
+    out, turn = 1.0 / metres_per_tick, baseline * np.pi / 4.0 / metres_per_tick  # ticks
+    left, right = 150.0, 250.0  # each half of the arc
+    fine = np.array([[out, -turn, -out, left, left], [out, turn, -out, right, right]])
+    coarse = np.c_[fine[:, :3].sum(axis=1), fine[:, 3:].sum(axis=1)]
+    found = one_arc_errors(fns, params, coarse, (fine, np.array([0, 3, 5])))
+    np.testing.assert_allclose(found[0], [-1.0, 1.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(found[1], 0.0, atol=1e-12)

@@ -181,6 +181,38 @@ def test_a_skid_steers_handed_off_diagonals_are_within_two_of_its_drift_bounded_
     assert np.all((0.5 <= stated) & (stated <= 2.0)), (pose, twist)
 
 
+def _reversals(sim: Any) -> int:
+    """How many of the drive's 2 s records the true base drives more than twice its net motion in
+    (and over 10 cm): it reverses, or swings its turn, inside one record."""
+    count = 0
+    for t0, t1 in sim.motion_stamps_s:
+        inside = (sim.joint_time_s >= t0) & (sim.joint_time_s <= t1)
+        xy = sim.base_poses[inside, :2]
+        path = float(np.sum(np.hypot(*np.diff(xy, axis=0).T))) if xy.shape[0] > 1 else 0.0
+        count += int(path > max(2.0 * float(np.hypot(*(xy[-1] - xy[0]))), 0.1)) if xy.size else 0
+    return count
+
+
+@pytest.mark.parametrize(("seed", "pivot_slip"), [(9606, 0.1), (7, 0.0)])
+def test_a_skid_steer_reversing_inside_its_records_is_covered_across(
+    skid_runs: Callable[[int, float], SkidRun], seed: int, pivot_slip: float
+) -> None:
+    """A skid-steer that reverses inside some 2 s records (seed 9606 of #43, and seed 7 without
+    slip, the first tried): the model integrates one arc on each record's net wheel motion, which
+    such a record is not (56 mm across in 18 cm net, at 10x the σ the rates gave it: 0.43 and 0.39
+    of the across drift the fit's windows truly have). That error is the model's, known where the
+    joints have samples of their own: beside the rates, nlp-calib odometry's covariance over the
+    fit's windows holds their across drift within a factor 2 (over only where the rates say the
+    segments bound it)."""
+    run, _, sim, calib = skid_runs(seed, pivot_slip)
+    assert _reversals(sim) >= 2
+    found = sigma_over_truth(calib, run, (sim.joint_time_s, sim.base_poses, EPOCH_NS))
+    rates = found[("rates", 1)]
+    assert rates[1] >= 0.5, rates
+    assert rates[1] <= 2.0 or "across" in run.odometry.rates.bounded, rates
+    _within_two_unless_bounded(rates, run.odometry.rates)
+
+
 def test_a_skid_steers_turn_law_takes_the_scatter_of_its_pivots_each_fitted_on_its_own(
     skid_runs: Callable[[int, float], SkidRun],
 ) -> None:

@@ -285,7 +285,8 @@ class Shown:
     ``segments`` drift segments; ``chained``: the reference is its own increments chained, one an
     interval (a scan matcher's), its noise over a span each increment's; ``bad_records``
     ``(n + 1,)``: the reference's poses a fault spoiled (a tracker's outlier: no end of a span
-    judged)."""
+    judged); ``arc`` ``(n, 3)``: each interval's one-arc integration error
+    (:func:`~nlp_calib.analysis.odometry.one_arc_errors`; None: not known)."""
 
     faults: np.ndarray
     reference: np.ndarray
@@ -294,6 +295,7 @@ class Shown:
     segments: int
     chained: bool = False
     bad_records: np.ndarray | None = None
+    arc: np.ndarray | None = None
 
 
 def most_reference(variances: np.ndarray, segments: int) -> np.ndarray:
@@ -396,7 +398,10 @@ def odometry_noise(
     dt = np.diff(np.asarray(time_s, dtype=float))
     n = inputs.shape[1]
     steps = np.c_[np.arange(n), np.arange(1, n + 1)]
-    C, track = model_covariances(fns, params, inputs, (rates, reading), steps)
+    # The track integrates one arc per interval, as the spans' drift it is held to does: both
+    # carry that integration's error where the joints' own samples show it.
+    arc = shown.arc if shown is not None else None
+    C, track = model_covariances(fns, params, inputs, (rates, reading), steps, arc)
     faults = shown.faults if shown is not None else None
     twist = _twist(fns, inputs, dt, C, faults) if n else np.full(3, np.nan)
     if shown is not None and n:
@@ -410,7 +415,7 @@ def odometry_noise(
         spans = spans[clean] if clean.any() else spans
     pose = np.full(3, np.nan)
     if spans.size:
-        found = model_covariances(fns, params, inputs, (rates, reading), spans)[0]
+        found = model_covariances(fns, params, inputs, (rates, reading), spans, arc)[0]
         pose = covering_variance(np.diagonal(found, axis1=1, axis2=2))
         if shown is not None:
             rounding = covering_variance(_rounding(found, track, rates, spans))

@@ -32,9 +32,11 @@ from nlp_calib.analysis.odometry import (
     COVERED,
     Drift,
     covered_margin,
+    grown_variances,
     moments,
     propagate,
     readings_covariance,
+    running_sums,
     weights,
 )
 from nlp_calib.analysis.pivots import pivot_intervals
@@ -70,48 +72,18 @@ def fit_rates(increments: np.ndarray, variances: np.ndarray) -> np.ndarray:
     return out
 
 
-def _sums(values: np.ndarray) -> np.ndarray:
-    """Cumulative sums with a leading zero, so ``s[j] − s[i]`` sums rows ``i`` to ``j − 1``."""
-    return np.concatenate([np.zeros((1, *values.shape[1:])), np.cumsum(values, axis=0)])
-
-
 def grown_covariances(
     increments: np.ndarray, rates: np.ndarray, spans: np.ndarray, amounts: np.ndarray | None = None
 ) -> np.ndarray:
     """The covariance ``(S, 3, 3)`` of each span ``(i, j)``'s motion, in the base frame at ``i``,
     grown from each interval's ``Q = diag(rates·(|distance|, |turn|))`` added at its end and
-    carried to ``j`` (a heading error turns the rest of the span): by cumulative sums of
-    ``Q``'s world-frame terms against the end's position, one pass for every span. ``amounts``
-    ``(n, 2)``: what the rates multiply instead of each interval's |distance| and |turn| (a rate
-    per radian turned on the spot: the pivots' turns, 0 elsewhere)."""
-    track = poses.accumulate(np.zeros(3), increments)
+    carried to ``j`` (a heading error turns the rest of the span; :func:`grown_variances`).
+    ``amounts`` ``(n, 2)``: what the rates multiply instead of each interval's |distance| and
+    |turn| (a rate per radian turned on the spot: the pivots' turns, 0 elsewhere)."""
     A = np.c_[np.hypot(increments[:, 0], increments[:, 1]), np.abs(increments[:, 2])]
     if amounts is not None:
         A = np.asarray(amounts, dtype=float)
-    q = A @ rates  # (n, 3): along, across, heading per interval
-    th = track[:-1, 2]
-    c, s = np.cos(th), np.sin(th)
-    xx, yy, xy = (
-        c * c * q[:, 0] + s * s * q[:, 1],
-        s * s * q[:, 0] + c * c * q[:, 1],
-        c * s * (q[:, 0] - q[:, 1]),
-    )
-    e, x, y = q[:, 2], track[1:, 0], track[1:, 1]
-    S = _sums(np.stack([xx, yy, xy, e, x * e, y * e, x * x * e, y * y * e, x * y * e], axis=1))
-    i, j = spans[:, 0], spans[:, 1]
-    a, b, cxy, E, XE, YE, XXE, YYE, XYE = (S[j] - S[i]).T
-    xj, yj = track[j, 0], track[j, 1]
-    C = np.zeros((spans.shape[0], 3, 3))
-    C[:, 0, 0] = a + yj * yj * E - 2.0 * yj * YE + YYE
-    C[:, 1, 1] = b + xj * xj * E - 2.0 * xj * XE + XXE
-    C[:, 0, 1] = C[:, 1, 0] = cxy - (xj * yj * E - xj * YE - yj * XE + XYE)
-    C[:, 0, 2] = C[:, 2, 0] = -(yj * E - YE)
-    C[:, 1, 2] = C[:, 2, 1] = xj * E - XE
-    C[:, 2, 2] = E
-    ci, si = np.cos(track[i, 2]), np.sin(track[i, 2])
-    R = np.zeros((spans.shape[0], 3, 3))
-    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = ci, si, -si, ci, 1.0
-    return R @ C @ np.swapaxes(R, 1, 2)
+    return grown_variances(increments, A @ rates, spans)
 
 
 def on_spot(increments: np.ndarray) -> np.ndarray:
@@ -127,9 +99,19 @@ def _arcs(increments: np.ndarray) -> np.ndarray:
     return np.c_[np.hypot(increments[:, 0], increments[:, 1]), np.abs(increments[:, 2]) - spun[:, 1]]
 
 
-def rates_covariances(increments: np.ndarray, rates: NoiseRates, spans: np.ndarray) -> np.ndarray:
+def rates_covariances(
+    increments: np.ndarray, rates: NoiseRates, spans: np.ndarray, arc: np.ndarray | None = None
+) -> np.ndarray:
     """The rates' covariance of each span ``(i, j)``'s motion ``(S, 3, 3)`` (:func:`grown_covariances`),
-    the heading's per radian turned on the spot ``rates.on_spot`` in place of ``per_radian``'s."""
+    the heading's per radian turned on the spot ``rates.on_spot`` in place of ``per_radian``'s;
+    with ``arc`` ``(n, 3)``, each interval's one-arc integration error, its square grown beside them
+    (:func:`~nlp_calib.analysis.odometry.one_arc_errors`: the odometry integrated one arc per
+    interval carries it, a filter integrating the joints' own samples does not)."""
+    beside = np.zeros((spans.shape[0], 3, 3)) if arc is None else grown_variances(increments, arc**2, spans)
+    return beside + _rates_grown(increments, rates, spans)
+
+
+def _rates_grown(increments: np.ndarray, rates: NoiseRates, spans: np.ndarray) -> np.ndarray:
     per = np.array([rates.per_metre, rates.per_radian])
     if rates.on_spot is None:
         return grown_covariances(increments, per, spans)
@@ -149,17 +131,20 @@ def model_covariances(
     inputs: np.ndarray,
     noise: tuple[NoiseRates, np.ndarray],
     spans: np.ndarray,
+    arc: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The one noise model's covariance of each span ``(i, j)``'s motion ``(S, 3, 3)`` (``j > i``),
     in the base frame at ``i``, and the track dead-reckoned from the origin ``(n + 1, 3)``: the
     rates per metre and per radian grown as a filter grows them, beside each end's reading's
-    rounding (``noise``: the rates, each input's reading 1σ). Every covariance the tool hands off
-    (the controller's diagonals, ``nlp-calib odometry``'s) is one of these."""
+    rounding (``noise``: the rates, each input's reading 1σ), and ``arc``'s one-arc integration
+    errors where the track integrates one arc per interval (:func:`rates_covariances`). Every
+    covariance the tool hands off (the controller's diagonals, ``nlp-calib odometry``'s) is one of
+    these."""
     rates, floor = noise
     track, P = propagate(fns, params, inputs, np.zeros(3), np.asarray(floor, dtype=float))
     increments = poses.between(track[:-1], track[1:])
     i, j = spans[:, 0], spans[:, 1]
-    return rates_covariances(increments, rates, spans) + readings_covariance(
+    return rates_covariances(increments, rates, spans, arc) + readings_covariance(
         P, track, i, j, -track[i, 2]
     ), track
 
@@ -232,8 +217,8 @@ def systematic_shapes(increments: np.ndarray, spans: np.ndarray) -> np.ndarray:
     out[1, :, :2] = np.c_[-moved[:, 1], moved[:, 0]]
     spun = increments[:, 2] * pivot_intervals(increments)
     for k, w in ((2, distance), (3, increments[:, 2]), (SPOT_SHAPE, spun)):
-        W = _sums(w)
-        Wp = _sums(w[:, None] * xy[1:])
+        W = running_sums(w)
+        Wp = running_sums(w[:, None] * xy[1:])
         turned = W[j] - W[i]
         arm = xy[j] * turned[:, None] - (Wp[j] - Wp[i])  # Σ w·(p_j − p_{k+1})
         out[k, :, :2] = np.c_[-arm[:, 1], arm[:, 0]]
@@ -339,8 +324,11 @@ def systematic_rates(
     grows as the turn's square, a rate as the turn: a pivot's turns (a few radians) fitted beside
     an arc's would give every arc a pivot's share."""
     lengths = spans[:, 1] - spans[:, 0]
-    travel, turn = _sums(np.hypot(increments[:, 0], increments[:, 1])), _sums(np.abs(increments[:, 2]))
-    spun = _sums(on_spot(increments)[:, 1])
+    travel, turn = (
+        running_sums(np.hypot(increments[:, 0], increments[:, 1])),
+        running_sums(np.abs(increments[:, 2])),
+    )
+    spun = running_sums(on_spot(increments)[:, 1])
     i, j = spans[:, 0], spans[:, 1]
     along = np.c_[travel[j] - travel[i], np.zeros(i.size), turn[j] - turn[i] - spun[j] + spun[i]]
     pivots = spun[j] > spun[i]

@@ -144,6 +144,59 @@ def _grown(P: np.ndarray, est: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.n
     return Pj - F[extra] @ Pi @ np.swapaxes(F, -1, -2)[extra]
 
 
+def running_sums(values: np.ndarray) -> np.ndarray:
+    """Cumulative sums with a leading zero, so ``s[j] − s[i]`` sums rows ``i`` to ``j − 1``."""
+    return np.concatenate([np.zeros((1, *values.shape[1:])), np.cumsum(values, axis=0)])
+
+
+def grown_variances(increments: np.ndarray, q: np.ndarray, spans: np.ndarray) -> np.ndarray:
+    """The covariance ``(S, 3, 3)`` of each span ``(i, j)``'s motion, in the base frame at ``i``,
+    grown from each interval's ``diag(q)`` (``q`` ``(n, 3)``: along, across, heading, in the base
+    frame at its start) added at its end and carried to ``j`` (a heading error turns the rest of
+    the span): by cumulative sums of its world-frame terms against the end's position, one pass
+    for every span."""
+    track = poses.accumulate(np.zeros(3), increments)
+    th = track[:-1, 2]
+    c, s = np.cos(th), np.sin(th)
+    xx, yy, xy = (
+        c * c * q[:, 0] + s * s * q[:, 1],
+        s * s * q[:, 0] + c * c * q[:, 1],
+        c * s * (q[:, 0] - q[:, 1]),
+    )
+    e, x, y = q[:, 2], track[1:, 0], track[1:, 1]
+    S = running_sums(np.stack([xx, yy, xy, e, x * e, y * e, x * x * e, y * y * e, x * y * e], axis=1))
+    i, j = spans[:, 0], spans[:, 1]
+    a, b, cxy, E, XE, YE, XXE, YYE, XYE = (S[j] - S[i]).T
+    xj, yj = track[j, 0], track[j, 1]
+    C = np.zeros((spans.shape[0], 3, 3))
+    C[:, 0, 0] = a + yj * yj * E - 2.0 * yj * YE + YYE
+    C[:, 1, 1] = b + xj * xj * E - 2.0 * xj * XE + XXE
+    C[:, 0, 1] = C[:, 1, 0] = cxy - (xj * yj * E - xj * YE - yj * XE + XYE)
+    C[:, 0, 2] = C[:, 2, 0] = -(yj * E - YE)
+    C[:, 1, 2] = C[:, 2, 1] = xj * E - XE
+    C[:, 2, 2] = E
+    ci, si = np.cos(track[i, 2]), np.sin(track[i, 2])
+    R = np.zeros((spans.shape[0], 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = ci, si, -si, ci, 1.0
+    return R @ C @ np.swapaxes(R, 1, 2)
+
+
+def one_arc_errors(
+    fns: ProblemFunctions, params: np.ndarray, inputs: np.ndarray, fine: tuple[np.ndarray, np.ndarray]
+) -> np.ndarray:
+    """Each interval's increment as the model integrates it, one arc on the inputs over the whole
+    interval, less the increment its joints' own samples integrate to (``fine``: the inputs
+    between those samples, and where the intervals' ends fall among them), ``(n, 3)`` in the base
+    frame at its start: a drive that changes inside an interval (reverses, or swings its turn one
+    way then the other) is not one arc, and that error is the model's, not the wheels' noise."""
+    u, at = fine
+    zero = np.zeros(inputs.shape[0])
+    coarse = propagate(fns, params, inputs, np.zeros(3), zero)[0]
+    track = propagate(fns, params, u, np.zeros(3), zero)[0]
+    a, b = poses.between(coarse[:-1], coarse[1:]), poses.between(track[at[:-1]], track[at[1:]])
+    return np.c_[a[:, :2] - b[:, :2], wrap_angle(a[:, 2] - b[:, 2])]
+
+
 def segment_covariance(
     P: np.ndarray, est: np.ndarray, i: np.ndarray, j: np.ndarray, turn: np.ndarray
 ) -> np.ndarray:
@@ -200,7 +253,9 @@ class Drift:
     (per unit variance of its position and of its heading, see :func:`_tracker_terms`); each
     segment's first and last record ``(S, 2)``, the reference's heading at its start ``(S,)`` and
     each input's unit-noise covariance of its two ends' readings ``(S, n_inputs, 3, 3)`` (see
-    :func:`readings_covariance`: a resolution's rounding, which does not add up along a drive)."""
+    :func:`readings_covariance`: a resolution's rounding, which does not add up along a drive);
+    ``arcs``: the one-arc integration's errors' covariance of each ``(S, 3, 3)``
+    (:func:`one_arc_errors`, squared, grown as a random walk's; None: none known)."""
 
     errors: np.ndarray
     covs: np.ndarray
@@ -208,12 +263,15 @@ class Drift:
     spans: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=int))
     start_headings: np.ndarray = field(default_factory=lambda: np.zeros(0))
     reads: np.ndarray | None = None
+    arcs: np.ndarray | None = None
 
     def known(self, floor: np.ndarray) -> np.ndarray:
-        """The errors' covariance ``(S, 3, 3)`` from a reading noise of ``floor`` (1σ per input)."""
+        """The errors' covariance ``(S, 3, 3)`` from a reading noise of ``floor`` (1σ per input),
+        and the one-arc integration's (``arcs``): known, so no noise is fitted to them."""
+        out = np.zeros((self.errors.shape[0], 3, 3)) if self.arcs is None else self.arcs
         if self.reads is None:
-            return np.zeros((self.errors.shape[0], 3, 3))
-        return np.einsum("k,skij->sij", np.asarray(floor, dtype=float) ** 2, self.reads)
+            return out
+        return out + np.einsum("k,skij->sij", np.asarray(floor, dtype=float) ** 2, self.reads)
 
 
 def segment_drift(
@@ -225,14 +283,16 @@ def segment_drift(
     good: np.ndarray,
     lengths: Sequence[int] = DRIFT_LENGTHS,
     lever: np.ndarray | None = None,
+    arc: np.ndarray | None = None,
 ) -> Drift:
     """The odometry against the reference base poses over segments of ``lengths`` records inside
     each fault-free part (half-overlapping, ends at good reference poses), each restarted from the
     reference at its start; ``lever`` ``(n, 2)``: the base's position less the sensor's at each
     record (world axes; None: none), through which the reference's heading noise reaches the
-    base's position."""
+    base's position; ``arc`` ``(n - 1, 3)``: each interval's one-arc integration error
+    (:func:`one_arc_errors`; None: none known), its square grown over each segment."""
     lever = np.zeros((T_world_base.shape[0], 2)) if lever is None else np.asarray(lever, dtype=float)
-    errors, covs, terms, spans, headings, reads = [], [], [], [], [], []
+    errors, covs, terms, spans, headings, reads, arcs = [], [], [], [], [], [], []
     for a, b in parts:
         if b - a < 2:
             continue
@@ -249,12 +309,22 @@ def segment_drift(
             terms.append(term)
             spans.append(np.c_[a + i, a + j])
             headings.append(ref[i, 2])
+            if arc is not None:
+                arcs.append(_arcs_grown(est, arc[a : b - 1], np.c_[i, j], ref[i, 2]))
     n_in = inputs.shape[0]
     if not errors:
         return Drift(np.zeros((0, 3)), np.zeros((0, n_in, 3, 3)), np.zeros((0, 2, 3, 3)))
     stacked = (np.concatenate(errors), np.concatenate(covs), np.concatenate(terms))
     where = (np.concatenate(spans).astype(int), np.concatenate(headings))
-    return Drift(*stacked, *where, np.concatenate(reads))
+    return Drift(*stacked, *where, np.concatenate(reads), np.concatenate(arcs) if arcs else None)
+
+
+def _arcs_grown(track: np.ndarray, arc: np.ndarray, spans: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """The one-arc errors ``arc``' squares grown over each span ``(i, j)`` of ``track``
+    (:func:`grown_variances`), in world axes at the reference's ``heading`` at ``i`` (as the
+    segments' errors are)."""
+    C = grown_variances(poses.between(track[:-1], track[1:]), arc**2, spans)
+    return _turned(C, heading)
 
 
 #: How many σ of its predicted variance a segment's error may lie out before the moments leave it

@@ -30,6 +30,7 @@ from nlp_calib.analysis.odometry import (
     beyond_motion_words,
     covering_noise,
     drift_noise,
+    one_arc_errors,
     propagate,
     segment_drift,
 )
@@ -38,6 +39,7 @@ from nlp_calib.analysis.plan import Setting, plan
 from nlp_calib.analysis.precision import clock_needed
 from nlp_calib.analysis.tracks import dead_reckoned, segment_figures
 from nlp_calib.core import memory
+from nlp_calib.logs import Log
 from nlp_calib.models import header_parameters
 from nlp_calib.pipeline import validation
 from nlp_calib.pipeline.fit import Fit
@@ -568,7 +570,8 @@ class Drift:
     used records: the inputs, those poses, the segments' drift, each input's noise per interval
     (with the reference's own variances) that explains it, and what the joints' own noise gives
     each input per interval (:func:`~nlp_calib.analysis.jitter.input_jitter`); ``whole``: the
-    noise fitted with no segment left out, which judges whether the model explains the motion."""
+    noise fitted with no segment left out, which judges whether the model explains the motion;
+    ``arc``: each interval's one-arc integration error (:func:`one_arc`; None: not known)."""
 
     inputs: np.ndarray
     reference: np.ndarray
@@ -577,6 +580,7 @@ class Drift:
     reference_var: np.ndarray
     jitter: np.ndarray
     whole: np.ndarray
+    arc: np.ndarray | None = None
 
     def beyond(self) -> tuple[int, ...]:
         """The inputs whose noise per interval, fitted on every segment, reaches their own motion's
@@ -602,8 +606,9 @@ def calibrated_drift(
     spans = windows.data.stops - windows.data.starts
     own = int(np.bincount(spans).argmax()) if spans.size else DRIFT_LENGTHS[0]
     lever = reference[:, :2] - np.asarray(sel.T_world_sensor)[:, :2]
+    arc = one_arc(fns, params, (sel, inputs), steering_sample)
     drift = segment_drift(
-        fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS), lever
+        fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS), lever, arc
     )
     floor = windows.input_noise_std
     # A tracker's poses tell its own noise from the wheels' (by the drift's growth with length);
@@ -617,7 +622,20 @@ def calibrated_drift(
     whole, whole_var = drift_noise(drift, floor, credited, far_out=None)
     whole = covering_noise(drift, whole, floor, whole_var)
     jitter = input_jitter(windows.binder.fns.model, sel, steering_sample)
-    return Drift(inputs, reference, drift, noise, reference_var, jitter, whole)
+    return Drift(inputs, reference, drift, noise, reference_var, jitter, whole, arc)
+
+
+def one_arc(
+    fns: ProblemFunctions, params: np.ndarray, records: tuple[Log, np.ndarray], steering_sample: str
+) -> np.ndarray | None:
+    """Each interval's one-arc integration error (:func:`~nlp_calib.analysis.odometry.one_arc_errors`)
+    over the log ``records`` (with its inputs), where its joints have samples of their own between
+    its records (None: they have none, and the error is not known)."""
+    sel, inputs = records
+    fine, at = sel.at_joint_samples()
+    if at is None:
+        return None
+    return one_arc_errors(fns, params, inputs, (fns.model.inputs(fine, steering_sample), at))
 
 
 def noise_model(
@@ -662,7 +680,9 @@ def odometry(
     cov = np.full((n + 1, 3, 3), np.nan)
     if not why:
         spans = np.c_[np.zeros(n, dtype=int), np.arange(1, n + 1)]
-        C, _ = model_covariances(fit.fns, params, inputs, (rates, floor), spans)
+        # The track below integrates one arc per interval: its covariance carries that error too.
+        arc = one_arc(fit.fns, params, (sel, inputs), steering_sample)
+        C, _ = model_covariances(fit.fns, params, inputs, (rates, floor), spans, arc)
         c, s = np.cos(reference[0, 2]), np.sin(reference[0, 2])
         R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         cov = np.concatenate([np.zeros((1, 3, 3)), R @ C @ R.T])
@@ -699,7 +719,7 @@ def handoff_noise(
     chained = windows.data.increment is not None
     segments = d.drift.errors.shape[0]
     shown = Shown(
-        bad_intervals[:n], d.reference, lever, d.reference_var, segments, chained, bad_records[: n + 1]
+        bad_intervals[:n], d.reference, lever, d.reference_var, segments, chained, bad_records[: n + 1], d.arc
     )
     found = odometry_noise(fit.fns, params, d.inputs, time_s, (rates, windows.input_noise_std, walk), shown)
     return found, (d, rates)
