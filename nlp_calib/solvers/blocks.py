@@ -22,8 +22,9 @@ from typing import Protocol, TypeAlias
 import casadi as ca
 import numpy as np
 
+from nlp_calib.core.numeric import pieces
 from nlp_calib.solvers.backends import Backend, Buffered
-from nlp_calib.solvers.backends.base import fold_sizes
+from nlp_calib.solvers.backends.base import FOLD_SIZES
 
 #: Columns per block: a multiple of every backend's chunk.
 BLOCK = 1 << 14
@@ -207,7 +208,7 @@ class Scan:
         self.spans: list[tuple[Buffered, int, int]] = []
         by_size: dict[int, Buffered] = {}
         lo = 0
-        for size in fold_sizes(inputs.shape[1] // backend.chunk):
+        for size in pieces(inputs.shape[1] // backend.chunk, FOLD_SIZES):
             if size not in by_size:
                 by_size[size] = Buffered(backend.fold(step, size))
             hi = lo + size * backend.chunk

@@ -25,8 +25,9 @@ BACKENDS = ("interpreted", "compiled")
 SCAN_CHUNK = 64
 #: Sizes, in chunks, of the folds a scan of any length is evaluated with, one after the other
 #: (largest first): each is built once per process, not once per evaluator and data size (a fold's
-#: build grows with its size and dominated the evaluators' set-up).
-FOLD_SIZES = (256, 16, 1)
+#: build grows with its size and dominated the evaluators' set-up); the pieces every fold or map
+#: over columns takes (:func:`~nlp_calib.core.numeric.pieces`).
+FOLD_SIZES = PIECE_SIZES
 #: Sizes, in chunks, of the compiled maps a block of windows is evaluated with, one after the
 #: other (largest first), for the same reason: a map of a compiled chunk takes a build time growing
 #: with its size (40-80 ms at 256 chunks), and data of every size would otherwise build its own.
@@ -77,11 +78,6 @@ def scan_chunk(step: ca.Function, chunk: int) -> ca.Function:
         ["state", "x", "x_fixed", "u"],
         ["last", "states"],
     )
-
-
-def fold_sizes(chunks: int, sizes: Sequence[int] = FOLD_SIZES) -> list[int]:
-    """``chunks`` as a sum of ``sizes`` (ending in 1), largest first."""
-    return pieces(chunks, sizes)
 
 
 @functools.lru_cache(maxsize=64)
@@ -143,7 +139,7 @@ class Backend:
     def unsummed_spans(self, n: int) -> list[int]:
         """The sizes of the maps ``n`` columns are evaluated with when not summed, one after the
         other (a size may repeat)."""
-        return fold_sizes(n, UNSUMMED_SIZES)
+        return pieces(n, UNSUMMED_SIZES)
 
     def fold(self, step: ca.Function, chunks: int) -> ca.Function:
         """``step`` folded over ``chunks`` chunks of intervals: (state, x, x_fixed, U) → states."""

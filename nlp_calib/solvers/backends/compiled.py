@@ -43,13 +43,13 @@ from nlp_calib.codegen.compiler import (
 )
 from nlp_calib.core import interrupts, threads
 from nlp_calib.core.errors import CodegenError, NlpCalibWarning
+from nlp_calib.core.numeric import pieces
 from nlp_calib.solvers.backends.base import (
     INTERPRETED,
     MAP_SIZES,
     Backend,
     BackendOptions,
     Request,
-    fold_sizes,
     scan_chunk,
 )
 
@@ -160,7 +160,7 @@ class CompiledBackend(Backend):
         return n // self.chunk
 
     def spans(self, n: int) -> list[int]:
-        return [size * self.chunk for size in fold_sizes(n // self.chunk, MAP_SIZES)]
+        return [size * self.chunk for size in pieces(n // self.chunk, MAP_SIZES)]
 
     def unsummed_spans(self, n: int) -> list[int]:
         return self.spans(n)
