@@ -94,12 +94,14 @@ def test_one_record_windows_recover_a_diff_drives_baseline_within_its_sigma(tmp_
 
 
 def _fitted(tmp_path: Path) -> tuple[Any, np.ndarray, Any]:
-    """The evaluator, Gauss-Newton's optimum and the inputs' noise of one-record windows (seed 901)."""
-    log = write_sim(tmp_path, "s.txt", records=2000, seed=901, model="diff_drive", latency_s=0.02)
+    """The evaluator, Gauss-Newton's optimum and the inputs' noise of one-record windows (seed 901),
+    the counts as logged: each a reading of its own, the whole rounding noise of two per increment
+    (re-sampled at a lag, they blend two readings, with less)."""
+    log = write_sim(tmp_path, "s.txt", records=2000, seed=901, model="diff_drive", latency_s=0.0)
     raw = {
         "model": "diff_drive",
         "dataset": str(log),
-        "alignment": {"tracker_lag": 0.02},
+        "alignment": {"tracker_lag": 0.0},
         "residual": {"horizon": 1},
     }
     with warnings.catch_warnings():
