@@ -186,20 +186,30 @@ def test_the_preflight_calls_not_observable_what_the_runs_verdict_does() -> None
     assert list(obs.not_observable(free)) == [True, False, False]
 
 
-def test_a_car_whose_rear_track_the_drive_does_not_hold_is_refused_by_both(tmp_path: Path) -> None:
-    """The gate study's car (seed 501 of its defaults: s-curves, 1500 records, stamps 29.9 ms late,
-    the lag fitted) was refused (exit 4, "cannot determine rear_track") while the fit, run anyway,
-    ended usable with caveats: the pre-flight's fit now starts where the run's does, at the lag the
-    run's alignment finds, and ends where the run's ends. Its rear track fits about as well near
-    zero as at its length; with each interval's steer angle read to its curvature, the σ at the
-    fit says so too (0.77 m; 0.106 m, "weakly", before, while the cost put zero within 2.6σ and
-    that σ 5.4σ away), and the pre-flight and the run refuse it alike, naming it."""
-    report, calibration, run = _gate_study_car(tmp_path, "car_like")
+@pytest.mark.parametrize("model", ["car_like", "car_like_ackermann"])
+def test_a_car_whose_rear_track_the_drive_barely_holds_is_never_handed_off(tmp_path: Path, model: str) -> None:
+    """The gate study's car draw 501 (s-curves, 1500 records, stamps 29.9 ms late, the lag fitted):
+    its rear track fits about as well near zero as at its length. Its σ at the fit moves tenfold
+    with how each interval is read (0.106, 0.773 and 0.082 m on three versions of the reading),
+    so what is held is what must not move: the pre-flight and the run agree (refused by both, or
+    both with caveats), they start and end at one fit with one σ, the truth lies within 3σ, and
+    the rear track reaches the hand-off as not determined, named by the verdict or by the profile
+    (zero within 3σ by the cost: a second valley or a plateau), never as calibrated (#43 item 5)."""
+    report, calibration, run = _gate_study_car(tmp_path, model)
     rear = next(p for p in report.parameters if p.name == "rear_track")
-    assert report.exit_code == 4 and rear.status == NOT_DETERMINED, (report.exit_code, rear)
-    assert all(p.status != NOT_DETERMINED for p in report.parameters if p.name != "rear_track")
-    assert run.verdict.level == UNDETERMINED and "rear_track" in run.verdict.line(), run.verdict
+    assert rear.status in (WEAKLY, NOT_DETERMINED), rear
+    assert [p.name for p in report.missing() if p.name != "rear_track"] == []
+    refused = {4: UNDETERMINED, 3: CAVEATS}
+    assert refused[report.exit_code] == run.verdict.level, (report.exit_code, run.verdict)
     _same_fit_and_sigma(report, calibration, run)
+    assert "rear_track" in run.doubts("gauss_newton"), run.doubts("gauss_newton")
+    profile = next(r for r in run.checks.more if r.name == "profile")
+    if run.verdict.level == UNDETERMINED:
+        assert "rear_track" in run.verdict.line(), run.verdict
+    else:
+        assert profile.level == CAVEAT and set(profile.concerns) == {"rear_track"}, profile
+    if profile.level == CAVEAT:  # zero within 3σ by the cost
+        assert profile.table["sigmas_by_cost"]["rear_track"] < profile_check.WITHIN, profile.table
 
 
 def _gate_study_car(tmp_path: Path, model: str) -> tuple[Preflight, Calibration, CalibrationRun]:
@@ -224,28 +234,6 @@ def _gate_study_car(tmp_path: Path, model: str) -> tuple[Preflight, Calibration,
         calibration = Calibration(sc)
         run = calibration.run()
     return report, calibration, run
-
-
-def test_a_car_whose_rear_track_the_drive_barely_holds_is_not_refused(tmp_path: Path) -> None:
-    """The gate study's car draw 501 as an Ackermann car (its steering track held) was refused
-    (exit 4, "cannot determine rear_track") while the fit, run anyway, ended usable with caveats:
-    the pre-flight's fit now starts where the run's does and ends where the run's ends. Its rear
-    track fits about as well near zero as at its length: the profile says so, a caveat concerning
-    it (its value never handed off as calibrated), whatever σ its valley gives (#43 item 5)."""
-    report, calibration, run = _gate_study_car(tmp_path, "car_like_ackermann")
-    assert report.exit_code == 3 and report.stop_words() == "", report.stop_words()
-    rear = next(p for p in report.parameters if p.name == "rear_track")
-    assert rear.status == WEAKLY, rear
-    assert run.verdict.level == CAVEATS, run.verdict
-    _same_fit_and_sigma(report, calibration, run)
-    profile = next(r for r in run.checks.more if r.name == "profile")
-    assert profile.level == CAVEAT and set(profile.concerns) == {"rear_track"}, profile
-    # Zero within 3σ by the cost, while its σ puts it beyond 3σ.
-    assert (
-        profile.table["sigmas_by_cost"]["rear_track"]
-        < profile_check.WITHIN
-        < profile.table["sigmas_by_std"]["rear_track"]
-    ), profile.table
 
 
 def _same_fit_and_sigma(report: Preflight, calibration: Calibration, run: CalibrationRun) -> None:
