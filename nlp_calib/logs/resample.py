@@ -24,8 +24,8 @@ def resample_encoders(
 
     Shifting the inputs rather than the tracker keeps the measurements, and so the cost, comparable
     across lags. Counters are interpolated on their unwrapped cumulative count, absolute encoders on
-    their unwrapped angle (counters keep the fractional counts, absolute encoders whole ticks:
-    :attr:`Log.ticks` then holds floats); joints in radians are re-sampled from their own stream,
+    their unwrapped angle (both keep fractional ticks: :attr:`Log.ticks` then holds
+    floats); joints in radians are re-sampled from their own stream,
     at its own stamps (:attr:`Log.joint_stream`), never from values already interpolated. Returns the
     log and the record range ``[first, stop)`` whose shifted times lie inside the log (outside it
     the readings are clamped and must not be used). ``delays`` reads an encoder that much later still (s, by
@@ -90,12 +90,12 @@ class Resampler:
         columns = []
         for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
             level, when = self.levels()[j], tq[rows] - self.late[j]
+            # Fractional ticks: rounded back to whole ticks, a lag within a fraction of a tick per
+            # interval gave the logged readings back under the shifted label, and the alignment
+            # walked the lag by the same step at every re-sampling.
             if self.kinds.get(name) == "absolute":
-                columns.append(np.mod(np.round(np.interp(when, t, level) * vmax), vmax))
+                columns.append(np.mod(np.interp(when, t, level) * vmax, vmax))
             else:
-                # Fractional counts: rounded back to whole ticks, a lag within a fraction of a tick
-                # per interval gave the logged readings back under the shifted label, and the
-                # alignment walked the lag by the same step at every re-sampling.
                 columns.append(np.mod(np.interp(when, t, level) + log.ticks[0, j], COUNTER_MODULUS))
         ticks = np.stack(columns, axis=1).astype(float)
         if records is not None:  # the other records as logged (one copy of a long log's, not three)
