@@ -141,3 +141,26 @@ def test_a_joint_fit_holds_each_logs_lag_pinned_on_its_search_edge(tmp_path: Pat
     assert set(held) == {"tracker_lag_1", "tracker_lag_2", "residual.steering_sample"}
     for record in (held["tracker_lag_1"], held["tracker_lag_2"]):
         assert record["rule"] == PINNED and record["value"] == pytest.approx(0.02, abs=1e-6)
+
+
+def test_a_check_judges_only_what_the_calibration_determined(tmp_path: Path) -> None:
+    """A car whose drive leaves its rear track, wheelbase and steering gain loose together: the run
+    hands them off as not determined and the rest as calibrated. Its check on the same log judged
+    those three too and could not tell ("rear_track is known only to ±0.048 m from this drive");
+    it judges what the calibration vouches for and names the rest as not judged."""
+    log = tmp_path / "car.txt"
+    write_simulation(simulate(SimulationOptions.of(model="car_like", records=3000, seed=8801)), log)
+    sc = tmp_path / "car.yaml"
+    sc.write_text(yaml.safe_dump({"model": "car_like", "dataset": str(log), "initial_guess": "from_file",
+                                  "solvers": ["gauss_newton"]}))  # fmt: skip
+    ran = cli("run", str(sc), "--out", str(tmp_path / "run"))
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    stored = yaml.safe_load((tmp_path / "run" / "calibration.yaml").read_text())
+    doubted = set(stored.get("not_determined") or {})
+    assert "rear_track" in doubted, stored.get("verdict")
+    checked = cli("check", str(tmp_path / "run" / "calibration.yaml"), str(sc), "--out", str(tmp_path / "c"))
+    assert checked.returncode == 0, checked.stdout + checked.stderr
+    doc = check_json(tmp_path / "c")
+    assert doc["verdict"] == STILL_GOOD
+    assert doubted.isdisjoint(doc["parameters"]) and doc["parameters"]
+    assert f"not judged: {', '.join(n for n in stored['parameters'] if n in doubted)}" in checked.stdout

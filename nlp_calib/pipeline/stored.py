@@ -35,6 +35,9 @@ class StoredSpreads:
     held: Mapping[str, float]
     #: The values held whose errors ``held`` is ('held_values', by name; empty: none recorded).
     held_values: Mapping[str, float] = field(default_factory=dict)
+    #: The parameters the calibration estimated but did not determine ('not_determined'): their σ
+    #: vouch for no value, so a check has none of theirs to judge.
+    doubted: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -78,9 +81,10 @@ class StoredCalibration:
         }
 
     def uncalibrated(self) -> tuple[str, ...]:
-        """The parameters this calibration did not estimate (held, or given as known): a check has
-        nothing of theirs to judge."""
-        return tuple(p.name for p in self.layout.parameters if p.status != FREE)
+        """The parameters this calibration did not estimate (held, or given as known) or estimated
+        without determining them (its 'not_determined'): a check has nothing of theirs to judge."""
+        held = tuple(p.name for p in self.layout.parameters if p.status != FREE)
+        return held + tuple(n for n in self.spreads.doubted if n not in held)
 
     def stats(self) -> tuple[Mapping[str, float], Mapping[str, float], Mapping[str, float]]:
         """Values, σ to believe and degrees of freedom, as the drift check compares them."""
@@ -221,7 +225,18 @@ def _spreads(
         for n in names
     }
     shared = {n: shared_std(std[n], (white[n], averaged[n], slip.get(n, math.nan)), folds) for n in names}
-    return StoredSpreads(shared, held, _held_values(doc, where))
+    return StoredSpreads(shared, held, _held_values(doc, where), _doubted(doc, names, where))
+
+
+def _doubted(doc: Mapping[str, Any], names: tuple[str, ...], where: str) -> tuple[str, ...]:
+    """'not_determined': the parameters the calibration did not determine, with why (absent:
+    none; a file written before it was recorded has none)."""
+    value = doc.get("not_determined")
+    if value is None:
+        return ()
+    if not isinstance(value, Mapping) or not all(isinstance(k, str) and k in names for k in value):
+        fail(f"{where}: not_determined", f"expected a mapping of its parameters to why, got {value!r:.80}")
+    return tuple(value)
 
 
 def _held_values(doc: Mapping[str, Any], where: str) -> dict[str, float]:
