@@ -89,7 +89,7 @@ class _Pieces:
         for size in sorted({hi - lo for lo, hi in self.blocks}):
             a = o = 0
             self.pieces[size] = []
-            for span in backend.spans(size):
+            for span in backend.spans(size) if reduce else backend.unsummed_spans(size):
                 width = backend.parts(span) if reduce else span
                 self.pieces[size].append((a, a + span, o, o + width))
                 a, o = a + span, o + width
