@@ -516,7 +516,7 @@ def test_the_odometry_folded_block_by_block_in_numpy_memory_is_the_step_applied_
     inputs = np.vstack([rng.uniform(0.5, 1.5, n), rng.uniform(-0.3, 0.3, n)])
     p, std = np.array([0.5, 0.01, 1.5, 0.02, 1.0, 0.1, 0.05]), np.array([1e-3, 2e-3])
     start = np.array([1.0, -2.0, 0.3])
-    monkeypatch.setattr(odometry, "FOLD_BLOCK", 7)
+    monkeypatch.setattr(odometry, "FOLD_LENGTHS", (7, 3, 1))
     track, P = odometry.propagate(fns, p, inputs, start, std)
     state = np.concatenate([start, np.zeros(9)])
     want = [state]
@@ -527,6 +527,36 @@ def test_the_odometry_folded_block_by_block_in_numpy_memory_is_the_step_applied_
     assert np.array_equal(track, W[:, :3])
     assert np.array_equal(P, W[:, 3:].reshape(-1, 3, 3, order="F"))
     assert np.all(np.diff(P[:, 2, 2]) > 0)  # the heading's variance grows
+
+
+def test_the_odometry_of_any_length_is_folded_by_folds_of_the_fixed_lengths(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Logs of any length are folded by folds of :data:`FOLD_LENGTHS` alone (each built once),
+    digit for digit the fold over every interval at once."""
+    from nlp_calib.analysis import odometry
+    from nlp_calib.problem import ProblemSpec, build
+
+    fns = build(get_model("tricycle"), ProblemSpec(horizon=1))
+    built: list[int] = []
+    fold = odometry._fold
+
+    def recording(step: object, n: int) -> object:
+        built.append(n)
+        return fold(step, n)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(odometry, "_fold", recording)
+    rng = np.random.default_rng(6)
+    p, std = np.array([0.5, 0.01, 1.5, 0.02, 1.0, 0.1, 0.05]), np.array([1e-3, 2e-3])
+    for n in (531, 300):
+        inputs = np.vstack([rng.uniform(0.5, 1.5, n), rng.uniform(-0.3, 0.3, n)])
+        track, P = odometry.propagate(fns, p, inputs, np.array([1.0, -2.0, 0.3]), std)
+        state0 = np.concatenate([[1.0, -2.0, 0.3], np.zeros(9)])
+        whole = fns.odometry_step.mapaccum("whole", n)
+        W = np.asarray(whole(state0, np.repeat(p[:, None], n, 1), inputs, np.repeat(std[:, None], n, 1))).T
+        assert np.array_equal(track[1:], W[:, :3])
+        assert np.array_equal(P[1:], W[:, 3:].reshape(-1, 3, 3, order="F"))
+    assert set(built) == set(odometry.FOLD_LENGTHS)
 
 
 def test_a_noise_as_large_as_the_inputs_own_values_is_named() -> None:

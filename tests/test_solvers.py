@@ -343,3 +343,46 @@ def test_a_buffer_binds_caller_memory_and_refuses_an_array_it_would_have_to_copy
             buf.rebind("u", wrong)
     with pytest.raises(KeyError):
         buf.rebind("v", inputs[:, 4:7])
+
+
+def test_the_interpreters_unsummed_maps_have_fixed_sizes_and_the_bits_of_one_map(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Per-column outputs (the analyses' Functions below the compiled size) are evaluated by maps
+    of the interpreter's fixed sizes alone, built once whatever the window count, giving what one
+    map over every column gives, bit for bit; a summed map stays one map (its order of sums)."""
+    import casadi as ca
+
+    from nlp_calib.solvers import blocks
+    from nlp_calib.solvers.backends.base import INTERPRETED, UNSUMMED_SIZES
+
+    p, u = ca.SX.sym("p", 2), ca.SX.sym("u", 3)
+    f = ca.Function(
+        "f", [p, u], [ca.vertcat(p[0] * u[0] + u[1], ca.sin(u[2]) * p[1]), u * p[1]], ["p", "u"], ["a", "b"]
+    )
+    built: list[tuple[int, bool]] = []
+    mapped = blocks._mapped
+
+    def recording(
+        backend: object, fn: ca.Function, n: int, names: tuple[str, ...], reduce: bool
+    ) -> ca.Function:
+        built.append((n, reduce))
+        return mapped(backend, fn, n, names, reduce)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(blocks, "_mapped", recording)
+    rng = np.random.default_rng(8)
+    params = rng.normal(size=2)
+    for n in (531, 300):
+        cols = np.asfortranarray(rng.normal(size=(3, n)))
+        want = [np.asarray(w) for w in f.map(n)(params, cols)]
+        got = blocks.BlockMap(INTERPRETED, f, {"u": cols}, {"p": params}, reduce=False)(p=params)
+        assert all(np.array_equal(g, w) for g, w in zip(got, want))
+        ((_, streamed),) = list(blocks.stream(INTERPRETED, f, {"u": cols}, {"p": params}))
+        assert all(np.array_equal(g, w) for g, w in zip(streamed, want))
+        summed = blocks.BlockMap(INTERPRETED, f, {"u": cols}, {"p": params}, reduce=True)(p=params)
+        assert all(
+            np.array_equal(np.ravel(g), np.ravel(w))
+            for g, w in zip(summed, f.map("whole", "serial", n, [0], [0, 1])(params, cols))
+        )
+    assert {n for n, reduce in built if not reduce} <= set(UNSUMMED_SIZES)
+    assert {n for n, reduce in built if reduce} == {531, 300}

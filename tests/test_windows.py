@@ -366,6 +366,33 @@ def test_over_columns_in_bound_buffers_gives_what_a_casadi_map_gives(monkeypatch
         assert np.array_equal(g, np.asarray(w))
 
 
+def test_over_columns_interprets_by_maps_of_fixed_sizes_with_the_bits_of_one_map(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Interpreted, any number of columns is evaluated by maps of the fixed sizes alone (each built
+    once, whatever the count), giving what one CasADi map over every column gives, bit for bit."""
+    from nlp_calib.problem import windows
+
+    p, u = ca.SX.sym("p", 2), ca.SX.sym("u", 3)
+    f = ca.Function("f", [p, u], [ca.vertcat(p[0] * u[0] + u[1], ca.sin(u[2]) * p[1]), u * p[1]])
+    built: list[int] = []
+    mapped = windows._mapped
+
+    def recording(fn: ca.Function, n: int) -> ca.Function:
+        built.append(n)
+        return mapped(fn, n)
+
+    monkeypatch.setattr(windows, "_mapped", recording)
+    rng = np.random.default_rng(4)
+    params = rng.normal(size=2)
+    for n in (531, 300, 17):
+        cols = rng.normal(size=(3, n))
+        got = windows.over_columns(f, params, cols)
+        for g, w in zip(got, f.map(n)(params, cols)):
+            assert np.array_equal(g, np.asarray(w))
+    assert set(built) <= set(windows.INTERPRETED_SIZES)
+
+
 def test_over_columns_with_an_empty_shared_column() -> None:
     """A shared input with no rows (a model without free parameters of a kind) fills nothing."""
     from nlp_calib.problem import windows

@@ -8,7 +8,7 @@ the intervals with ``mapaccum``. ``σ_u`` is the encoders' noise on the model in
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -18,6 +18,7 @@ from nlp_calib.analysis.uncertainty import nnls_small
 from nlp_calib.core import poses
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.problem import ProblemFunctions
+from nlp_calib.solvers.backends.base import fold_sizes
 
 
 def propagate(
@@ -40,51 +41,64 @@ def propagate(
     return states[:, :3], states[:, 3:].reshape(-1, 3, 3, order="F")
 
 
-#: Intervals folded at a time: the states come back in numpy memory bound to the fold's buffer, a
-#: block at a time (whole, through CasADi's matrices, 10^6 intervals took ~400 MB of Python floats).
-FOLD_BLOCK = 1 << 16
+#: Lengths of the folds the intervals are folded with, one after the other (largest first, a length
+#: repeated), each state written straight into numpy memory bound to the fold's buffer (whole,
+#: through CasADi's matrices, 10^6 intervals took ~400 MB of Python floats). Fixed lengths, each
+#: built once: a fold's build grows with its length (about 4 µs an interval), and every length of
+#: log the covariances and the noise model propagate built its own.
+FOLD_LENGTHS = (256, 16, 1)
 
 
 def _folded(
     step: ca.Function, state0: np.ndarray, same: tuple[np.ndarray, np.ndarray], inputs: np.ndarray
 ) -> np.ndarray:
     """``step`` folded from ``state0`` over the columns of ``inputs`` (``same``: the parameters and
-    the inputs' 1σ, the same for every interval), each state ``(rows, n)``: a block's last state
+    the inputs' 1σ, the same for every interval), each state ``(rows, n)``: a fold's last state
     starts the next, so the arithmetic is one fold's."""
     n = inputs.shape[1]
     out = np.empty((state0.size, n), order="F")
-    state = np.array(state0, dtype=float)
     params, std = (np.asarray(v, dtype=float).reshape(-1, 1) for v in same)
-    for lo in range(0, n, FOLD_BLOCK):
-        hi = min(n, lo + FOLD_BLOCK)
-        fold = _fold(step, hi - lo)
-        if not all(fold.sparsity_in(i).is_dense() for i in range(4)) or not fold.sparsity_out(0).is_dense():
-            raise ValueError("the odometry step's arguments must be dense to fold in numpy memory")
-        buf, call = fold.buffer()
-        # The step's order: state, parameters, inputs, the inputs' 1σ. Bound to the buffer: the
-        # arrays stay alive until the call.
-        held = [
-            np.ravel(np.asarray(a, dtype=float), order="F")
-            for a in (
-                state,
-                np.repeat(params, hi - lo, axis=1),
-                inputs[:, lo:hi],
-                np.repeat(std, hi - lo, axis=1),
-            )
-        ]
-        for i, a in enumerate(held):
-            buf.set_arg(i, a.data)
+    bound: dict[int, tuple[ca.FunctionBuffer, Callable[[], None], list[np.ndarray]]] = {}
+    state = np.array(state0, dtype=float)
+    lo = 0
+    for length in fold_sizes(n, FOLD_LENGTHS):
+        if length not in bound:
+            bound[length] = _bound_fold(step, length, params, std)
+        buf, call, held = bound[length]
+        hi = lo + length
+        held[0][:] = state
+        held[2].reshape(length, -1)[:] = inputs[:, lo:hi].T
         res = out[:, lo:hi].reshape(-1, order="F")  # a view: a block of a column-major array's columns
         buf.set_res(0, res.data)
         call()
-        state = out[:, hi - 1].copy()
+        state = out[:, hi - 1]
+        lo = hi
     return out
+
+
+def _bound_fold(
+    step: ca.Function, length: int, params: np.ndarray, std: np.ndarray
+) -> tuple[ca.FunctionBuffer, Callable[[], None], list[np.ndarray]]:
+    """The fold of ``length`` intervals with a buffer bound to numpy memory: the state, the
+    parameters, the inputs and their 1σ (the step's order), the parameters and 1σ filled."""
+    fold = _fold(step, length)
+    if not all(fold.sparsity_in(i).is_dense() for i in range(4)) or not fold.sparsity_out(0).is_dense():
+        raise ValueError("the odometry step's arguments must be dense to fold in numpy memory")
+    buf, call = fold.buffer()
+    held = [
+        np.zeros(fold.nnz_in(0)),
+        np.ravel(np.repeat(params, length, axis=1), order="F"),
+        np.zeros(fold.nnz_in(2)),
+        np.ravel(np.repeat(std, length, axis=1), order="F"),
+    ]
+    for i, a in enumerate(held):
+        buf.set_arg(i, a.data)
+    return buf, call, held
 
 
 @functools.lru_cache(maxsize=8)
 def _fold(step: ca.Function, n: int) -> ca.Function:
-    """``step`` folded over ``n`` intervals, built once per length: the covariance per input row
-    and the noise model propagate the same log several times."""
+    """``step`` folded over ``n`` intervals, built once per length."""
     return step.mapaccum("odometry", n)
 
 

@@ -288,6 +288,20 @@ def _mapped(f: ca.Function, n: int) -> ca.Function:
     return f.map(n)
 
 
+#: Sizes of the interpreter's maps over the columns no compiled map takes, one after the other
+#: (largest first, a size repeated).
+INTERPRETED_SIZES = (256, 16, 1)
+
+
+def _sizes(n: int) -> list[int]:
+    """``n`` columns as a sum of :data:`INTERPRETED_SIZES`, largest first."""
+    out = []
+    for size in INTERPRETED_SIZES:
+        out += [size] * (n // size)
+        n %= size
+    return out
+
+
 #: A piece of a block bound to numpy memory: its buffer, its call, its inputs and its columns.
 _Bound = tuple[ca.FunctionBuffer, Callable[[], None], list[np.ndarray], int]
 
@@ -299,14 +313,19 @@ def _bound(f: ca.Function, n: int, mapped: tuple[str, ...]) -> list[_Bound]:
     windows, the folds' blocks, a start's windows)."""
     fms = _column_map[0](f, n, mapped) if _column_map else []
     rest = n - sum(cols for _, cols in fms)
-    out = []
-    for fm, cols in [*fms, *([(_mapped(f, rest), rest)] if rest else [])]:
-        buf, call = fm.buffer()
-        ins = [np.empty(fm.nnz_in(i)) for i in range(fm.n_in())]
-        for i, arr in enumerate(ins):
-            buf.set_arg(i, arr.data)
-        out.append((buf, call, ins, cols))
-    return out
+    # The rest interpreted by maps of fixed sizes (each column's outputs its own: the same bits):
+    # a map's build grows with its size, and every number of columns built its own.
+    fms += [(_mapped(f, cols), cols) for cols in _sizes(rest)]
+    # Pieces of one size share a buffer: each is filled and bound to its outputs just before its call.
+    made: dict[int, _Bound] = {}
+    for fm, cols in fms:
+        if id(fm) not in made:
+            buf, call = fm.buffer()
+            ins = [np.empty(fm.nnz_in(i)) for i in range(fm.n_in())]
+            for i, arr in enumerate(ins):
+                buf.set_arg(i, arr.data)
+            made[id(fm)] = (buf, call, ins, cols)
+    return [made[id(fm)] for fm, _ in fms]
 
 
 def over_columns(f: ca.Function, *args: np.ndarray) -> list[np.ndarray]:

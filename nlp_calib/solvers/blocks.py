@@ -60,7 +60,8 @@ class _Pieces:
     backend's maps of fixed sizes one after the other (:meth:`Backend.spans`: nothing is built per
     data size). One buffer per map size, bound to a piece's columns until a piece of another block
     takes it (a mapped Function's work memory holds a piece's inputs: one buffer per piece would
-    hold them all again; a block has each size once), and one piece-sized array per made input. A
+    hold them all again; a block has each size once, but for the interpreter's unsummed pieces,
+    which repeat a size and bind again at each piece), and one piece-sized array per made input. A
     piece's outputs go to the columns of the caller's ``targets`` that :attr:`pieces` gives it: its
     columns, or, summed, its partial sums."""
 
@@ -89,7 +90,7 @@ class _Pieces:
         for size in sorted({hi - lo for lo, hi in self.blocks}):
             a = o = 0
             self.pieces[size] = []
-            for span in backend.spans(size):
+            for span in backend.spans(size) if reduce else backend.unsummed_spans(size):
                 width = backend.parts(span) if reduce else span
                 self.pieces[size].append((a, a + span, o, o + width))
                 a, o = a + span, o + width

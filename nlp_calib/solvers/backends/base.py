@@ -31,6 +31,11 @@ FOLD_SIZES = (256, 16, 1)
 #: with its size (40-80 ms at 256 chunks), and data of every size would otherwise build its own.
 #: Each size at most once in a block: every piece of a block keeps its own buffer's binding.
 MAP_SIZES = (256, 128, 64, 32, 16, 8, 4, 2, 1)
+#: Sizes, in columns, of the interpreter's unsummed maps (each column's outputs its own: pieces of
+#: any sizes give the same bits), one after the other, a size repeated: a map's build grows with its
+#: size (about 4 µs a column, 12 ms for the sensitivities over 2,304 windows) and the analyses' maps
+#: were built again for every window count; these are built once per Function.
+UNSUMMED_SIZES = (256, 16, 1)
 
 
 @dataclass(frozen=True)
@@ -139,6 +144,11 @@ class Backend:
         """The sizes of the maps ``n`` columns are evaluated with, one after the other (here one
         map of every size: the map sums its columns itself)."""
         return [n]
+
+    def unsummed_spans(self, n: int) -> list[int]:
+        """The sizes of the maps ``n`` columns are evaluated with when not summed, one after the
+        other (a size may repeat)."""
+        return fold_sizes(n, UNSUMMED_SIZES)
 
     def fold(self, step: ca.Function, chunks: int) -> ca.Function:
         """``step`` folded over ``chunks`` chunks of intervals: (state, x, x_fixed, U) → states."""
