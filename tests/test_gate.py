@@ -187,7 +187,9 @@ def test_the_preflight_calls_not_observable_what_the_runs_verdict_does() -> None
 
 
 @pytest.mark.parametrize("model", ["car_like", "car_like_ackermann"])
-def test_a_car_whose_rear_track_the_drive_barely_holds_is_never_handed_off(tmp_path: Path, model: str) -> None:
+def test_a_car_whose_rear_track_the_drive_barely_holds_is_never_handed_off(
+    tmp_path: Path, model: str
+) -> None:
     """The gate study's car draw 501 (s-curves, 1500 records, stamps 29.9 ms late, the lag fitted):
     its rear track fits about as well near zero as at its length. Its σ at the fit moves tenfold
     with how each interval is read (0.106, 0.773 and 0.082 m on three versions of the reading),

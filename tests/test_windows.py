@@ -10,6 +10,7 @@ from conftest import assert_close, parse_lines
 
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.inputs_bias import _increment_variance
+from nlp_calib.core.numeric import PIECE_SIZES
 from nlp_calib.logs import Log
 from nlp_calib.models import get_model
 from nlp_calib.problem import (
@@ -390,7 +391,7 @@ def test_over_columns_interprets_by_maps_of_fixed_sizes_with_the_bits_of_one_map
         got = windows.over_columns(f, params, cols)
         for g, w in zip(got, f.map(n)(params, cols)):
             assert np.array_equal(g, np.asarray(w))
-    assert set(built) <= set(windows.INTERPRETED_SIZES)
+    assert set(built) <= set(PIECE_SIZES)
 
 
 def test_over_columns_with_an_empty_shared_column() -> None:

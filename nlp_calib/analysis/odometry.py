@@ -16,9 +16,8 @@ import numpy as np
 
 from nlp_calib.analysis.uncertainty import nnls_small
 from nlp_calib.core import poses
-from nlp_calib.core.numeric import wrap_angle
+from nlp_calib.core.numeric import PIECE_SIZES, pieces, wrap_angle
 from nlp_calib.problem import ProblemFunctions
-from nlp_calib.solvers.backends.base import fold_sizes
 
 
 def propagate(
@@ -41,12 +40,10 @@ def propagate(
     return states[:, :3], states[:, 3:].reshape(-1, 3, 3, order="F")
 
 
-#: Lengths of the folds the intervals are folded with, one after the other (largest first, a length
-#: repeated), each state written straight into numpy memory bound to the fold's buffer (whole,
-#: through CasADi's matrices, 10^6 intervals took ~400 MB of Python floats). Fixed lengths, each
-#: built once: a fold's build grows with its length (about 4 µs an interval), and every length of
-#: log the covariances and the noise model propagate built its own.
-FOLD_LENGTHS = (256, 16, 1)
+#: Lengths of the folds the intervals are folded with, one after the other (a length repeated), each
+#: state written straight into numpy memory bound to the fold's buffer (whole, through CasADi's
+#: matrices, 10^6 intervals took ~400 MB of Python floats); each length built once.
+FOLD_LENGTHS = PIECE_SIZES
 
 
 def _folded(
@@ -61,7 +58,7 @@ def _folded(
     bound: dict[int, tuple[ca.FunctionBuffer, Callable[[], None], list[np.ndarray]]] = {}
     state = np.array(state0, dtype=float)
     lo = 0
-    for length in fold_sizes(n, FOLD_LENGTHS):
+    for length in pieces(n, FOLD_LENGTHS):
         if length not in bound:
             bound[length] = _bound_fold(step, length, params, std)
         buf, call, held = bound[length]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 #: uint32 counters wrap at 2**32 (not 2**32 - 1).
@@ -20,3 +22,18 @@ def wrapped_difference(ticks: np.ndarray, modulus: int = COUNTER_MODULUS) -> np.
     t = t.astype(np.int64) if np.issubdtype(t.dtype, np.integer) else t.astype(float)
     half = modulus // 2
     return ((t[1:] - t[:-1] + half) % modulus) - half
+
+
+#: Sizes of the pieces an interpreted map or fold over columns is built in, one after the other (a
+#: size repeated): a map's build grows with its size (about 4 µs a column) and every number of
+#: columns would build its own; pieces of fixed sizes are built once per Function.
+PIECE_SIZES = (256, 16, 1)
+
+
+def pieces(n: int, sizes: Sequence[int] = PIECE_SIZES) -> list[int]:
+    """``n`` as a sum of ``sizes`` (ending in 1), largest first."""
+    out = []
+    for size in sizes:
+        out += [size] * (n // size)
+        n %= size
+    return out

@@ -26,6 +26,7 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.core.errors import ProblemError
+from nlp_calib.core.numeric import pieces
 from nlp_calib.core.ranges import Range, check_choice, check_range
 from nlp_calib.logs import Log
 from nlp_calib.models.base import INTEGRATIONS, STEERING_SAMPLES, KinematicModel
@@ -288,20 +289,6 @@ def _mapped(f: ca.Function, n: int) -> ca.Function:
     return f.map(n)
 
 
-#: Sizes of the interpreter's maps over the columns no compiled map takes, one after the other
-#: (largest first, a size repeated).
-INTERPRETED_SIZES = (256, 16, 1)
-
-
-def _sizes(n: int) -> list[int]:
-    """``n`` columns as a sum of :data:`INTERPRETED_SIZES`, largest first."""
-    out = []
-    for size in INTERPRETED_SIZES:
-        out += [size] * (n // size)
-        n %= size
-    return out
-
-
 #: A piece of a block bound to numpy memory: its buffer, its call, its inputs and its columns.
 _Bound = tuple[ca.FunctionBuffer, Callable[[], None], list[np.ndarray], int]
 
@@ -315,7 +302,7 @@ def _bound(f: ca.Function, n: int, mapped: tuple[str, ...]) -> list[_Bound]:
     rest = n - sum(cols for _, cols in fms)
     # The rest interpreted by maps of fixed sizes (each column's outputs its own: the same bits):
     # a map's build grows with its size, and every number of columns built its own.
-    fms += [(_mapped(f, cols), cols) for cols in _sizes(rest)]
+    fms += [(_mapped(f, cols), cols) for cols in pieces(rest)]
     # Pieces of one size share a buffer: each is filled and bound to its outputs just before its call.
     made: dict[int, _Bound] = {}
     for fm, cols in fms:

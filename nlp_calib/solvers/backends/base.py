@@ -18,6 +18,7 @@ import casadi as ca
 import numpy as np
 
 from nlp_calib.core.errors import OptionsError
+from nlp_calib.core.numeric import PIECE_SIZES, pieces
 
 BACKENDS = ("interpreted", "compiled")
 #: Intervals one call of a scan's chunk integrates.
@@ -32,10 +33,8 @@ FOLD_SIZES = (256, 16, 1)
 #: Each size at most once in a block: every piece of a block keeps its own buffer's binding.
 MAP_SIZES = (256, 128, 64, 32, 16, 8, 4, 2, 1)
 #: Sizes, in columns, of the interpreter's unsummed maps (each column's outputs its own: pieces of
-#: any sizes give the same bits), one after the other, a size repeated: a map's build grows with its
-#: size (about 4 µs a column, 12 ms for the sensitivities over 2,304 windows) and the analyses' maps
-#: were built again for every window count; these are built once per Function.
-UNSUMMED_SIZES = (256, 16, 1)
+#: any sizes give the same bits; :data:`~nlp_calib.core.numeric.PIECE_SIZES`).
+UNSUMMED_SIZES = PIECE_SIZES
 
 
 @dataclass(frozen=True)
@@ -82,11 +81,7 @@ def scan_chunk(step: ca.Function, chunk: int) -> ca.Function:
 
 def fold_sizes(chunks: int, sizes: Sequence[int] = FOLD_SIZES) -> list[int]:
     """``chunks`` as a sum of ``sizes`` (ending in 1), largest first."""
-    out = []
-    for size in sizes:
-        out += [size] * (chunks // size)
-        chunks %= size
-    return out
+    return pieces(chunks, sizes)
 
 
 @functools.lru_cache(maxsize=64)
