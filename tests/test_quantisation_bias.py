@@ -102,9 +102,11 @@ def _one_record_windows(tmp_path: Path, log: Path, model: str, lag: float) -> Ca
 
 
 def _fitted(tmp_path: Path) -> tuple[Any, np.ndarray, Any]:
-    """The evaluator, Gauss-Newton's optimum and the inputs' noise of one-record windows (seed 901)."""
-    log = write_sim(tmp_path, "s.txt", records=2000, seed=901, model="diff_drive", latency_s=0.02)
-    c = _one_record_windows(tmp_path, log, "diff_drive", 0.02)
+    """The evaluator, Gauss-Newton's optimum and the inputs' noise of one-record windows (seed 901),
+    the counts as logged: each a reading of its own, the whole rounding noise of two per increment
+    (re-sampled at a lag, they blend two readings, with less)."""
+    log = write_sim(tmp_path, "s.txt", records=2000, seed=901, model="diff_drive", latency_s=0.0)
+    c = _one_record_windows(tmp_path, log, "diff_drive", 0.0)
     fit = c.fitting
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

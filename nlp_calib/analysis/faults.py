@@ -778,7 +778,7 @@ def repair(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]:
 
 def _repair_counts(log: Log, report: FaultReport) -> tuple[Log, tuple[str, ...]]:
     """``log`` with its counters' faults corrected (see :func:`repair`), one line per change."""
-    ticks = np.array(log.ticks, dtype=np.int64)
+    ticks = np.array(log.ticks)  # its own dtype: whole ticks as logged, fractional re-sampled
     changes = []
     for f in report.counter_faults:
         assert f.encoder is not None

@@ -103,7 +103,7 @@ def interpolated_over(log: Log, name: str, bad: np.ndarray) -> Log:
     fixed = np.interp(t[bad], t[~bad], y[~bad])
     if log.joint_positions is None:
         vmax = log.header.encoder_max[col]
-        ticks = np.array(log.ticks, dtype=np.int64)
+        ticks = np.array(log.ticks)  # its own dtype: whole ticks as logged, fractional re-sampled
         ticks[bad, col] = np.mod(np.round(fixed), vmax)
         return replace(log, ticks=frozen(ticks))
     positions = np.array(log.joint_positions, dtype=float)

@@ -16,8 +16,10 @@ def wrap_angle(a: np.ndarray | float) -> np.ndarray:
 
 
 def wrapped_difference(ticks: np.ndarray, modulus: int = COUNTER_MODULUS) -> np.ndarray:
-    """``d = ((t[k+1] - t[k] + m/2) mod m) - m/2``: the signed step of a wrapping counter."""
-    t = np.asarray(ticks, dtype=np.int64)
+    """``d = ((t[k+1] - t[k] + m/2) mod m) - m/2``: the signed step of a wrapping counter; in
+    whole ticks (int64) for logged readings, fractional for counts re-sampled between them."""
+    t = np.asarray(ticks)
+    t = t.astype(np.int64) if np.issubdtype(t.dtype, np.integer) else t.astype(float)
     half = modulus // 2
     return ((t[1:] - t[:-1] + half) % modulus) - half
 

@@ -79,6 +79,26 @@ class LogHeader:
         return self.encoder_max[self.encoder_index(name)]
 
 
+def blended_increment_variance(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Per interval between the times ``t``, the variance of an increment of readings taken at
+    ``stamps`` and interpolated linearly at ``t``, in one reading's (the readings' noises
+    independent): 2 where ``t`` are the stamps; less where both ends interpolate one pair of
+    readings (their difference's share of it) or the ends share a reading."""
+    ts = np.asarray(stamps, dtype=float)
+    if ts.size < 2 or np.size(t) < 2:
+        return np.full(max(np.size(t) - 1, 0), 2.0)
+    k = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, ts.size - 2)
+    alpha = np.clip((t - ts[k]) / (ts[k + 1] - ts[k]), 0.0, 1.0)
+    # Each end reads (1 − α)·n_k + α·n_{k+1}; the increment weighs the readings k_i, k_i + 1
+    # by −(1 − α_i), −α_i and k_{i+1}, k_{i+1} + 1 by 1 − α_{i+1}, α_{i+1}.
+    a0, a1, b0, b1 = -(1.0 - alpha[:-1]), -alpha[:-1], 1.0 - alpha[1:], alpha[1:]
+    d = k[1:] - k[:-1]
+    apart = a0**2 + a1**2 + b0**2 + b1**2
+    return np.where(
+        d == 0, (a0 + b0) ** 2 + (a1 + b1) ** 2, np.where(d == 1, a0**2 + (a1 + b0) ** 2 + b1**2, apart)
+    )
+
+
 @dataclass(frozen=True)
 class JointStream:
     """Joint positions (rad, ``(n, n_joints)`` in the header's encoder order) on the joints' own
@@ -192,22 +212,8 @@ class JointStream:
 
     def increment_variance(self, t: np.ndarray) -> np.ndarray:
         """Per interval between the times ``t``, the variance of the joints' increment read there,
-        in one stream reading's (its readings' noises independent): 2 where ``t`` are the stream's
-        own stamps; less where both ends interpolate one pair of readings (their difference's share
-        of it) or the ends share a reading."""
-        ts = self.time_s
-        if ts.size < 2 or np.size(t) < 2:
-            return np.full(max(np.size(t) - 1, 0), 2.0)
-        k = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, ts.size - 2)
-        alpha = np.clip((t - ts[k]) / (ts[k + 1] - ts[k]), 0.0, 1.0)
-        # Each end reads (1 − α)·n_k + α·n_{k+1}; the increment weighs the readings k_i, k_i + 1
-        # by −(1 − α_i), −α_i and k_{i+1}, k_{i+1} + 1 by 1 − α_{i+1}, α_{i+1}.
-        a0, a1, b0, b1 = -(1.0 - alpha[:-1]), -alpha[:-1], 1.0 - alpha[1:], alpha[1:]
-        d = k[1:] - k[:-1]
-        apart = a0**2 + a1**2 + b0**2 + b1**2
-        return np.where(
-            d == 0, (a0 + b0) ** 2 + (a1 + b1) ** 2, np.where(d == 1, a0**2 + (a1 + b0) ** 2 + b1**2, apart)
-        )
+        in one stream reading's (:func:`blended_increment_variance` at the stream's stamps)."""
+        return blended_increment_variance(self.time_s, t)
 
     def covers(self, t: np.ndarray) -> np.ndarray:
         """Which of the times ``t`` lie inside the stream."""
@@ -378,15 +384,19 @@ class Log:
 
     def increment_variance(self) -> np.ndarray:
         """Per interval, a counter's increment's variance in one reading's where the encoders are
-        read (:meth:`JointStream.increment_variance`): 2 without a joint stream (each record a
-        reading of its own)."""
+        read (:meth:`JointStream.increment_variance`): 2 for counts as logged (each record a reading
+        of its own); counts re-sampled between the records (fractional, at the log's
+        :attr:`encoder_lag_s`) blend two readings' each (:func:`blended_increment_variance`)."""
         stream = self.joint_stream
-        if stream is None:
+        if stream is None and np.issubdtype(self.ticks.dtype, np.integer):
             return np.full(max(self.n_records - 1, 0), 2.0)
+        if stream is None:
+            t = np.asarray(self.time_s, dtype=float)
+            return blended_increment_variance(t, t - self.encoder_lag_s)
         return stream.increment_variance(self.read_times())
 
     def encoder(self, name: str) -> np.ndarray:
-        """Raw readings of one encoder, ``(n_records,)`` int64."""
+        """Readings of one encoder, ``(n_records,)``: int64 as logged, float where re-sampled."""
         return self.ticks[:, self.header.encoder_index(name)]
 
     def increments(self, name: str) -> np.ndarray:

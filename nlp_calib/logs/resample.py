@@ -24,10 +24,11 @@ def resample_encoders(
 
     Shifting the inputs rather than the tracker keeps the measurements, and so the cost, comparable
     across lags. Counters are interpolated on their unwrapped cumulative count, absolute encoders on
-    their unwrapped angle; joints in radians are re-sampled from their own stream, at its own stamps
-    (:attr:`Log.joint_stream`), never from values already interpolated. Returns the log and the
-    record range ``[first, stop)`` whose shifted times lie inside the log (outside it the readings
-    are clamped and must not be used). ``delays`` reads an encoder that much later still (s, by
+    their unwrapped angle (both keep fractional ticks: :attr:`Log.ticks` then holds
+    floats); joints in radians are re-sampled from their own stream,
+    at its own stamps (:attr:`Log.joint_stream`), never from values already interpolated. Returns the
+    log and the record range ``[first, stop)`` whose shifted times lie inside the log (outside it
+    the readings are clamped and must not be used). ``delays`` reads an encoder that much later still (s, by
     name): a stream whose effect lags its readings. The lag adds to the log's own
     (:attr:`Log.encoder_lag_s`). ``records``: only those records' readings re-sampled (each the
     value the whole log's re-sampling gives it), the others' left as logged, for a caller that
@@ -89,13 +90,16 @@ class Resampler:
         columns = []
         for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
             level, when = self.levels()[j], tq[rows] - self.late[j]
+            # Fractional ticks: rounded back to whole ticks, a lag within a fraction of a tick per
+            # interval gave the logged readings back under the shifted label, and the alignment
+            # walked the lag by the same step at every re-sampling.
             if self.kinds.get(name) == "absolute":
-                columns.append(np.mod(np.round(np.interp(when, t, level) * vmax), vmax))
+                columns.append(np.mod(np.interp(when, t, level) * vmax, vmax))
             else:
-                columns.append(np.mod(np.round(np.interp(when, t, level)) + log.ticks[0, j], COUNTER_MODULUS))
-        ticks = np.stack(columns, axis=1).astype(np.int64)
+                columns.append(np.mod(np.interp(when, t, level) + log.ticks[0, j], COUNTER_MODULUS))
+        ticks = np.stack(columns, axis=1).astype(float)
         if records is not None:  # the other records as logged (one copy of a long log's, not three)
-            stretch, ticks = ticks, np.array(log.ticks, dtype=np.int64)
+            stretch, ticks = ticks, np.array(log.ticks, dtype=float)
             ticks[rows] = stretch
         ticks.flags.writeable = False
         return replace(log, ticks=ticks, clock=replace(log.clock, encoder_lag_s=log.encoder_lag_s + lag_s))
