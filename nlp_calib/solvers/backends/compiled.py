@@ -165,9 +165,6 @@ class CompiledBackend(Backend):
     def unsummed_spans(self, n: int) -> list[int]:
         return self.spans(n)
 
-    def unsummed_spans(self, n: int) -> list[int]:
-        return self.spans(n)
-
     def _threaded(self, fc: ca.Function, chunks: int, reduce_in: list[int]) -> ca.Function:
         """The chunk map on ``threads`` threads, broadcast inputs tiled."""
         # map(n, 'thread', t) maps every input: a thin MX wrapper tiles the broadcast ones (the
