@@ -47,14 +47,19 @@ def _rounding(model: str, lines: list[str], lag_s: float) -> tuple[float, float]
     return float(np.var(diff)), float(np.mean(blended_increment_variance(t, t - lag_s)))
 
 
-def score(model: str, seed: int) -> str:
-    """One case's line: the lag found, the rows' ratios (x, y, θ, together), the rounding's."""
+def score(model: str, seed: int, tracker: float = 0.002) -> str:
+    """One case's line: the lag found, the rows' ratios (x, y, θ, together), the rounding's;
+    ``tracker``: the tracker's noise (m and rad, 1σ; the tests' 2 mm and 2 mrad)."""
     import test_odometry_noise as tests
     from odometry_truth import sigma_over_truth
 
     from nlp_calib.simulation import SimulationOptions, simulate
 
-    sim = simulate(SimulationOptions.of(model=model, records=1500, seed=seed))
+    sim = simulate(
+        SimulationOptions.of(
+            model=model, records=1500, seed=seed, tracker_noise_xy=tracker, tracker_noise_theta=tracker
+        )
+    )
     lines = sim.text().splitlines()
     if model == "skid_steer":
         lines = tests._relocked(lines, 20, 2.5, 0.2)
@@ -63,7 +68,7 @@ def score(model: str, seed: int) -> str:
         calib, run = tests._odometry_run(model, lines)
     lag = float(run.data.lag_estimate.lag_s)
     head = f"{model} {seed} lag {lag * 1e3:.3f} ms"
-    if run.odometry is None:
+    if run.odometry is None or run.odometry.rates is None:
         return f"{head} no odometry handed off"
     found = sigma_over_truth(calib, run, (sim.time_ns * 1e-9, sim.T_world_base_true, 0))
     rows = " ".join(f"{k[0]} {np.round(found[k], 2).tolist()}" for k in ROWS if k in found)
@@ -75,10 +80,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--diff", type=int, nargs="*", default=[], help="diff-drive seeds")
     ap.add_argument("--skid", type=int, nargs="*", default=[], help="relocked skid-steer seeds")
+    ap.add_argument("--tracker", type=float, default=0.002, help="the tracker's noise (m and rad, 1σ)")
     args = ap.parse_args()
     for model, seeds in (("diff_drive", args.diff), ("skid_steer", args.skid)):
         for seed in seeds:
-            print(score(model, seed), flush=True)
+            print(score(model, seed, args.tracker), flush=True)
 
 
 if __name__ == "__main__":

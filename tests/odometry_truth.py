@@ -140,3 +140,16 @@ def _handed_off(
     sigma[1] = np.nan
     out[("twist", 1)] = _over(v, np.broadcast_to(sigma, v.shape))
     return out
+
+
+def reference_base(calib: Any, run: Any) -> tuple[np.ndarray, np.ndarray, int]:
+    """The reference's base poses at the fit's records, as :func:`sigma_over_truth` takes a truth
+    (times in s since the log's start, the poses, that start): the σ against what the windows show
+    of the drift, the reference's own noise in it, as a user's data show it."""
+    part, fit = calib.parts[0], calib.fitting
+    solver = run.handoff_solver() or next(iter(run.reports))
+    params = fit.fns.view(run.reports[solver].result.params, 0)
+    steering = part.prepared.scenario.objective.residual.steering_sample
+    d = calibrated_drift(fit, part.windows, params, steering)
+    t = np.asarray(part.windows.selected.time_s, dtype=float)
+    return t, np.asarray(d.reference), int(run.log.start_ns)
