@@ -680,18 +680,26 @@ def _walk_segments(n: int, length: int, step: tuple[int, float] | None) -> Drift
     return Drift(errors, np.zeros((i.size, 2, 3, 3)), np.zeros((i.size, 2, 3, 3)), spans, np.zeros(i.size))
 
 
-def test_a_step_every_segment_across_one_interval_shares_is_the_references() -> None:
+def test_a_step_every_segment_across_one_interval_shares_is_the_references_where_it_steps() -> None:
     """A heading step of 2.5 rad in interval 47 (every segment across it, none other, 10³ σ out)
-    lies in the intervals the two segments across it share, [45, 50); a random walk has none, nor
-    has one segment far out alone (its own slip: no second segment across it agrees), nor two far
-    out that share no interval."""
-    assert reference_step(_walk_segments(400, 10, (47, 2.5))) == (45, 50)
-    assert reference_step(_walk_segments(400, 10, None)) is None
-    one = _walk_segments(400, 10, None)
+    lies in the intervals the two segments across it share, [45, 50), where the reference's own
+    heading steps there; not where it turns smoothly (the wheels' slip: the odometry's own drift).
+    A random walk has none, nor has one segment far out alone (no second segment across it
+    agrees), nor two far out that share no interval."""
+    rng = np.random.default_rng(5)
+    n = 400
+    smooth = np.c_[0.02 * np.arange(n), np.zeros(n), 0.1 * np.sin(np.arange(n) / 50)]
+    smooth += rng.normal(0, 1e-4, (n, 3))
+    stepped = smooth.copy()
+    stepped[48:, 2] += 2.5
+    assert reference_step(_walk_segments(n, 10, (47, 2.5)), stepped) == (45, 50)
+    assert reference_step(_walk_segments(n, 10, (47, 2.5)), smooth) is None
+    assert reference_step(_walk_segments(n, 10, None), stepped) is None
+    one = _walk_segments(n, 10, None)
     one.errors[20, 2] += 2.5
-    assert reference_step(one) is None
+    assert reference_step(one, stepped) is None
     one.errors[60, 2] += 2.5
-    assert reference_step(one) is None
+    assert reference_step(one, stepped) is None
 
 
 def test_the_one_arc_error_of_an_interval_is_its_increment_less_its_joints_samples_integrated() -> None:

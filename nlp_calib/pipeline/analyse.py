@@ -616,7 +616,7 @@ def calibrated_drift(
         lambda parts: segment_drift(
             fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS), lever, arc
         ),
-        bad_intervals[: n - 1],
+        (bad_intervals[: n - 1], reference),
     )
     floor = windows.input_noise_std
     # A tracker's poses tell its own noise from the wheels' (by the drift's growth with length);
@@ -638,15 +638,16 @@ MOST_STEPS = 4
 
 
 def _stepless_drift(
-    drift_over: Callable[[list[tuple[int, int]]], DriftSegments], bad: np.ndarray
+    drift_over: Callable[[list[tuple[int, int]]], DriftSegments], against: tuple[np.ndarray, np.ndarray]
 ) -> tuple[DriftSegments, tuple[int, ...]]:
     """The drift segments (``drift_over`` the fault-free parts) inside the parts the bad intervals
-    ``bad`` leave, none across a step of the reference the fault checks missed
-    (:func:`~nlp_calib.analysis.odometry.reference_step`), and the records those steps end at."""
-    bad = np.array(bad, dtype=bool)
+    leave (``against``: those, and the reference's base poses), none across a step of the
+    reference the fault checks missed (:func:`~nlp_calib.analysis.odometry.reference_step`), and
+    the records those steps end at."""
+    bad, reference = np.array(against[0], dtype=bool), against[1]
     drift, stepped = drift_over(segments(bad.size + 1, bad)), []
     for _ in range(MOST_STEPS):
-        step = reference_step(drift)
+        step = reference_step(drift, reference)
         if step is None:
             break
         bad[step[0] : step[1]] = True
