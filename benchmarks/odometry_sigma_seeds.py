@@ -10,8 +10,9 @@ the arguments name, as ``tests/odometry_truth.py`` scores them (above 1: the σ 
 drift; the tests' bounds are 0.5 and 2), to tell a seed on the edge of a bound from a class of
 drives. Per case it also prints how the re-sampled counts differ from those rounded back to whole
 ticks at the lag found (``var(round − fractional)`` in ticks², a logged reading's rounding is 1/12)
-and the blended increment variance the re-sampled readings' rounding has (2 as logged). Nothing here
-tunes anything: the seeds are whatever the arguments say.
+and the blended increment variance the re-sampled readings' rounding has (2 as logged); where no
+odometry covariance is handed off, why (the odometry's ``undetermined``, else the verdict). Nothing
+here tunes anything: the seeds are whatever the arguments say.
 """
 
 from __future__ import annotations
@@ -69,7 +70,8 @@ def score(model: str, seed: int, tracker: float = 0.002) -> str:
     lag = float(run.data.lag_estimate.lag_s)
     head = f"{model} {seed} lag {lag * 1e3:.3f} ms"
     if run.odometry is None or run.odometry.rates is None:
-        return f"{head} no odometry handed off"
+        why = run.odometry.undetermined if run.odometry is not None else run.verdict.level
+        return f"{head} no odometry handed off: {why}"
     found = sigma_over_truth(calib, run, (sim.time_ns * 1e-9, sim.T_world_base_true, 0))
     rows = " ".join(f"{k[0]} {np.round(found[k], 2).tolist()}" for k in ROWS if k in found)
     var, blended = _rounding(model, lines, lag)

@@ -28,7 +28,7 @@ from nlp_calib.analysis.noise_rates import (
     segment_rates,
     systematic_shapes,
 )
-from nlp_calib.analysis.odometry import COVERED, Drift, drift_noise
+from nlp_calib.analysis.odometry import COVERED, Drift, drift_noise, reference_step
 from nlp_calib.analysis.pivots import pivot_intervals
 from nlp_calib.core import poses
 from nlp_calib.core.numeric import wrap_angle
@@ -328,21 +328,25 @@ def test_a_diff_drives_odometry_noise_is_the_drift_its_windows_truly_have(precis
         assert np.all((0.5 <= stated) & (stated <= 2.0)), (way, ratios)
 
 
-def _bounded_never_narrow(sim: object, calib: object, run: object, ways: tuple[str, ...]) -> None:
-    """A drift under the reference's noise: every rate said to be bounded, each way's σ never
-    under half the σ whose 2σ holds 95 % of the true errors, and never over twice the one that
-    holds what the windows show against the reference (its own noise in it: the most the data
-    allow; a relock the screen missed had made the rates 10^3x that)."""
-    assert set(run.odometry.rates.bounded) == {"along", "across", "heading"}, run.odometry.rates
+def _held_to_what_the_windows_show(sim: object, calib: object, run: object, ways: tuple[str, ...]) -> None:
+    """Each way's σ (x, y, θ: along, across, heading) never under half the σ whose 2σ holds 95 %
+    of the true errors, and never over twice the one that holds the windows' errors against the
+    reference (its own noise in them: the most the data allow; a relock the screen missed had made
+    the rates 10^3x that); where the rates of a component are only bounded (the drift under the
+    reference's noise, said) that is all, elsewhere within a factor 2 of the true errors' too."""
+    bounded = np.array([a in run.odometry.rates.bounded for a in ("along", "across", "heading")])
     truth = sigma_over_truth(calib, run, (sim.time_ns * 1e-9, sim.T_world_base_true, 0))
     shown = sigma_over_truth(calib, run, reference_base(calib, run))
     for way in ways:
         over_truth, over_shown = (
             next(r for (w, _), r in found.items() if w == way) for found in (truth, shown)
         )
-        print(way, over_truth, over_shown)
-        assert np.all(over_truth[~np.isnan(over_truth)] >= 0.5), (way, over_truth)
-        assert np.all(over_shown[~np.isnan(over_shown)] <= 2.0), (way, over_shown)
+        print(way, bounded, over_truth, over_shown)
+        stated = ~np.isnan(over_truth)  # NaN: what the file does not state (the twist's vy)
+        assert np.all(over_truth[stated] >= 0.5), (way, over_truth)
+        assert np.all(over_shown[stated] <= 2.0), (way, over_shown)
+        determined = stated & ~np.r_[bounded, bounded.any()]
+        assert np.all(over_truth[determined] <= 2.0), (way, bounded, over_truth)
 
 
 def test_a_drift_under_the_trackers_noise_is_handed_off_at_the_most_the_windows_allow(
@@ -350,10 +354,10 @@ def test_a_drift_under_the_trackers_noise_is_handed_off_at_the_most_the_windows_
 ) -> None:
     """The simulator's tracker (2 mm, 2 mrad) over a diff-drive whose wheels drift a few tenths of
     a millimetre a metre: the segments cannot tell the drift from the tracker's noise, so the
-    rates are the most they allow, said, never narrower than the true drift and never wider than
-    the windows' errors."""
+    rates are the most they allow, said (:func:`_held_to_what_the_windows_show`)."""
     sim, calib, run, _ = diff_drive
-    _bounded_never_narrow(sim, calib, run, ("rates", "pose", "twist"))
+    assert set(run.odometry.rates.bounded) == {"along", "across", "heading"}, run.odometry.rates
+    _held_to_what_the_windows_show(sim, calib, run, ("rates", "pose", "twist"))
 
 
 def _rotation(theta: float) -> np.ndarray:
@@ -694,26 +698,67 @@ def _relocked(lines: list[str], records: int, turn: float, shift: float) -> list
     return out
 
 
-@pytest.mark.parametrize("tracker", [PRECISE, COARSE])
+@pytest.mark.parametrize("seed, tracker", [(7, PRECISE), (2, COARSE), (6, COARSE), (7, COARSE)])
 def test_a_tracker_that_relocked_leaves_a_skid_steers_odometry_noise_the_drift_it_truly_has(
-    tracker: float,
+    seed: int, tracker: float
 ) -> None:
     """A real skid-steer's motion capture held a wrong pose until the base drove off, then jumped
     2.5 rad and 0.2 m: no fault check flags it, and the few segments across the jump ruled the
     moments' mean of squares (the reference's heading noise 88 mrad, the odometry's rates 5x too
-    narrow there; here 10^8 too wide). Against the true base: the rates and the twist within a
-    factor 2 of the σ whose 2σ holds 95 % of the true errors where the windows show the drift;
-    under the simulator's tracker, bounded and never narrow (:func:`_bounded_never_narrow`)."""
-    sim = _simulated("skid_steer", 7, tracker)
+    narrow there; here 10^8 too wide). Seeds 2 and 6 were never tuned on: the segments across the
+    jump made the heading's rate per metre 21 rad²/m (the rates 2000x too wide) on seed 2, and the
+    noise per interval as large as the wheels' motion on seed 6 (no odometry noise handed off).
+    The step is said, and no segment crosses it. Against the true base: the rates and the twist
+    within a factor 2 of the σ whose 2σ holds 95 % of the true errors where the windows show the
+    drift; under the simulator's tracker, as :func:`_held_to_what_the_windows_show` holds them."""
+    sim = _simulated("skid_steer", seed, tracker)
     calib, run = _odometry_run("skid_steer", _relocked(sim.text().splitlines(), 20, 2.5, 0.2))
+    assert any("the tracker's poses step at" in w and "(record 20 of" in w for w in run.warnings), (
+        run.warnings
+    )
     if tracker == COARSE:
-        _bounded_never_narrow(sim, calib, run, ("rates", "twist"))
+        _held_to_what_the_windows_show(sim, calib, run, ("rates", "twist"))
         return
     found = sigma_over_truth(calib, run, (sim.time_ns * 1e-9, sim.T_world_base_true, 0))
     for way in ("rates", "twist"):
         ratios = next(r for (w, _), r in found.items() if w == way)
         stated = ratios[~np.isnan(ratios)]
         assert np.all((0.5 <= stated) & (stated <= 2.0)), (way, ratios)
+
+
+def _walk_segments(n: int, length: int, step: tuple[int, float] | None) -> Drift:
+    """Half-overlapping segments of ``length`` records over ``n`` of a 1 mm and 1 mrad random walk,
+    each with the heading ``step`` (interval, rad) where it crosses that interval."""
+    rng = np.random.default_rng(3)
+    walk = np.cumsum(rng.normal(0, 1e-3, (n, 3)), axis=0)
+    i = np.arange(0, n - length, length // 2)
+    spans = np.c_[i, i + length]
+    errors = walk[spans[:, 1]] - walk[spans[:, 0]]
+    if step is not None:
+        errors[(spans[:, 0] <= step[0]) & (step[0] < spans[:, 1]), 2] += step[1]
+    return Drift(errors, np.zeros((i.size, 2, 3, 3)), np.zeros((i.size, 2, 3, 3)), spans, np.zeros(i.size))
+
+
+def test_a_step_every_segment_across_one_interval_shares_is_the_references_where_it_steps() -> None:
+    """A heading step of 2.5 rad in interval 47 (every segment across it, none other, 10³ σ out)
+    lies in the intervals the two segments across it share, [45, 50), where the reference's own
+    heading steps there; not where it turns smoothly (the wheels' slip: the odometry's own drift).
+    A random walk has none, nor has one segment far out alone (no second segment across it
+    agrees), nor two far out that share no interval."""
+    rng = np.random.default_rng(5)
+    n = 400
+    smooth = np.c_[0.02 * np.arange(n), np.zeros(n), 0.1 * np.sin(np.arange(n) / 50)]
+    smooth += rng.normal(0, 1e-4, (n, 3))
+    stepped = smooth.copy()
+    stepped[48:, 2] += 2.5
+    assert reference_step(_walk_segments(n, 10, (47, 2.5)), stepped) == (45, 50)
+    assert reference_step(_walk_segments(n, 10, (47, 2.5)), smooth) is None
+    assert reference_step(_walk_segments(n, 10, None), stepped) is None
+    one = _walk_segments(n, 10, None)
+    one.errors[20, 2] += 2.5
+    assert reference_step(one, stepped) is None
+    one.errors[60, 2] += 2.5
+    assert reference_step(one, stepped) is None
 
 
 def test_the_one_arc_error_of_an_interval_is_its_increment_less_its_joints_samples_integrated() -> None:

@@ -334,6 +334,57 @@ def _arcs_grown(track: np.ndarray, arc: np.ndarray, spans: np.ndarray, heading: 
 FAR_OUT = 5.0
 
 
+def _far_by_length(drift: Drift) -> np.ndarray:
+    """Which segments' errors lie over :data:`FAR_OUT` robust σ (1.4826 median absolute deviations)
+    of those of their own length from their median, in any component."""
+    lengths = drift.spans[:, 1] - drift.spans[:, 0]
+    far = np.zeros(lengths.size, dtype=bool)
+    for length in np.unique(lengths):
+        on = lengths == length
+        dev = np.abs(drift.errors[on] - np.median(drift.errors[on], axis=0))
+        scale = 1.4826 * np.median(dev, axis=0)
+        far[on] = np.any(dev > FAR_OUT * np.maximum(scale, 1e-12), axis=1)
+    return far
+
+
+def _steps_itself(reference: np.ndarray, a: int, b: int) -> bool:
+    """Whether the reference's own increment over one of the intervals ``[a, b)`` departs from the
+    mean of its neighbours' by over :data:`FAR_OUT` robust σ of every interval's such departure,
+    in any component: the reference stepped there (the wheels slipping do not move it so)."""
+    d = np.diff(np.asarray(reference, dtype=float), axis=0)
+    d[:, 2] = wrap_angle(d[:, 2])
+    if d.shape[0] < 3:
+        return False
+    bent = d[1:-1] - 0.5 * (d[:-2] + d[2:])  # row m: interval m + 1
+    scale = 1.4826 * np.median(np.abs(bent - np.median(bent, axis=0)), axis=0)
+    at = bent[max(a - 1, 0) : max(b - 1, 1)]
+    return bool(np.any(np.abs(at) > FAR_OUT * np.maximum(scale, 1e-12)))
+
+
+def reference_step(drift: Drift, reference: np.ndarray) -> tuple[int, int] | None:
+    """The intervals ``[a, b)`` (records ``a`` to ``b``) a step of the ``reference`` (its base
+    poses ``(n, 3)``) lies in, where the fault checks missed one (a tracker that held a wrong pose,
+    then relocked on its target): the intervals two far-out segments (:func:`_far_by_length`) or
+    more all cross, every segment across them far out, and over which the reference's own
+    increments step (:func:`_steps_itself`). One event, not a drift: a random walk's rates grown
+    to cover it are 10³ too wide, a noise per interval fitted with it as large as the motion.
+    None: no such step."""
+    far = _far_by_length(drift)
+    if np.count_nonzero(far) < 2:
+        return None
+    i, j = drift.spans[far, 0], drift.spans[far, 1]
+    crossed = np.zeros(int(j.max()) + 1, dtype=int)
+    np.add.at(crossed, i, 1)
+    np.add.at(crossed, j, -1)
+    k = int(np.argmax(np.cumsum(crossed)))
+    across = (i <= k) & (k < j)
+    a, b = int(i[across].max()), int(j[across].min())
+    every = (drift.spans[:, 0] <= a) & (drift.spans[:, 1] >= b)
+    if np.count_nonzero(across) < 2 or not np.all(far[every]) or not _steps_itself(reference, a, b):
+        return None
+    return a, b
+
+
 def weights(y: np.ndarray, predicted: np.ndarray, far_out: float | None = FAR_OUT) -> np.ndarray:
     """Each squared error's weight ``y`` in a fit of variances: the inverse of its prediction (a
     χ² with one degree of freedom spreads as its expectation), 0 for one over ``far_out`` σ of

@@ -10,7 +10,7 @@ covariance. The outputs only format what this stage computed.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -32,6 +32,7 @@ from nlp_calib.analysis.odometry import (
     drift_noise,
     one_arc_errors,
     propagate,
+    reference_step,
     segment_drift,
 )
 from nlp_calib.analysis.odometry import Drift as DriftSegments
@@ -122,6 +123,9 @@ class LogAnalysis:
     nominal: Scores | None = None
     #: The handed-off solver's odometry noise as its controller publishes it.
     noise: Mapping[str, OdometryNoise | None] = dataclasses.field(default_factory=dict)
+    #: What the odometry noise's drift found worth saying: the reference's steps it left out, why
+    #: no noise is handed off where it withheld one.
+    noise_notes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -581,6 +585,8 @@ class Drift:
     jitter: np.ndarray
     whole: np.ndarray
     arc: np.ndarray | None = None
+    #: The records a step of the reference the fault checks missed ended at (no segment crosses it).
+    stepped: tuple[int, ...] = ()
 
     def beyond(self) -> tuple[int, ...]:
         """The inputs whose noise per interval, fitted on every segment, reaches their own motion's
@@ -600,15 +606,17 @@ def calibrated_drift(
     inputs = windows.binder.fns.model.inputs(sel, steering_sample)
     reference = over_columns(fns.base_from_sensor, sel.T_world_sensor.T, np.ravel(params))[0].T
     bad_intervals, bad_records = windows.masks()
-    parts = segments(n, bad_intervals[: n - 1])
     # The fit's own windows are segments too: a log of short fault-free parts (a scan matcher's
     # increments between bad matches) still shows its drift over them.
     spans = windows.data.stops - windows.data.starts
     own = int(np.bincount(spans).argmax()) if spans.size else DRIFT_LENGTHS[0]
     lever = reference[:, :2] - np.asarray(sel.T_world_sensor)[:, :2]
     arc = one_arc(fns, params, (sel, inputs), steering_sample)
-    drift = segment_drift(
-        fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS), lever, arc
+    drift, stepped = _stepless_drift(
+        lambda parts: segment_drift(
+            fns, params, inputs, reference, parts, ~bad_records[:n], (own, *DRIFT_LENGTHS), lever, arc
+        ),
+        (bad_intervals[: n - 1], reference),
     )
     floor = windows.input_noise_std
     # A tracker's poses tell its own noise from the wheels' (by the drift's growth with length);
@@ -622,7 +630,30 @@ def calibrated_drift(
     whole, whole_var = drift_noise(drift, floor, credited, far_out=None)
     whole = covering_noise(drift, whole, floor, whole_var)
     jitter = input_jitter(windows.binder.fns.model, sel, steering_sample)
-    return Drift(inputs, reference, drift, noise, reference_var, jitter, whole, arc)
+    return Drift(inputs, reference, drift, noise, reference_var, jitter, whole, arc, stepped)
+
+
+#: The most steps of the reference :func:`_stepless_drift` takes out of one log's segments.
+MOST_STEPS = 4
+
+
+def _stepless_drift(
+    drift_over: Callable[[list[tuple[int, int]]], DriftSegments], against: tuple[np.ndarray, np.ndarray]
+) -> tuple[DriftSegments, tuple[int, ...]]:
+    """The drift segments (``drift_over`` the fault-free parts) inside the parts the bad intervals
+    leave (``against``: those, and the reference's base poses), none across a step of the
+    reference the fault checks missed (:func:`~nlp_calib.analysis.odometry.reference_step`), and
+    the records those steps end at."""
+    bad, reference = np.array(against[0], dtype=bool), against[1]
+    drift, stepped = drift_over(segments(bad.size + 1, bad)), []
+    for _ in range(MOST_STEPS):
+        step = reference_step(drift, reference)
+        if step is None:
+            break
+        bad[step[0] : step[1]] = True
+        stepped.append(step[1])
+        drift = drift_over(segments(bad.size + 1, bad))
+    return drift, tuple(stepped)
 
 
 def one_arc(
@@ -705,12 +736,12 @@ def handoff_noise(
 ) -> tuple[OdometryNoise | None, tuple[Drift, NoiseRates] | None]:
     """The covariance a controller publishes with its odometry at ``params``, from the one noise
     model (:func:`noise_model`), with that model (None for a 3-D sensor, whose poses do not give
-    the planar base's)."""
+    the planar base's; the covariance None where the drift withholds it, :meth:`Drift.beyond`)."""
     if not fit.fns.sensor.planar_base:
         return None, None
     d, rates = noise_model(fit, windows, params, steering_sample)
     if d.beyond():
-        return None, None  # the hand-off then says the drift does not determine the noise
+        return None, (d, rates)  # the hand-off then says the drift does not determine the noise
     walk = dict(zip(fit.fns.model.input_names, map(float, d.noise)))
     time_s = windows.selected.time_s[: d.inputs.shape[1] + 1]
     n = d.inputs.shape[1]
@@ -775,4 +806,24 @@ def analyse_log(
     if wanted.odometry is not None and wanted.odometry in results:
         params = fit.fns.view(results[wanted.odometry].params, view.part)
         odo = odometry(fit, windows, params, steering, model if wanted.odometry == first else None)
-    return dataclasses.replace(figures, series=series, odometry=odo, noise=noise)
+    notes = _noise_notes(fit, windows, model[0]) if model is not None else ()
+    return dataclasses.replace(figures, series=series, odometry=odo, noise=noise, noise_notes=notes)
+
+
+def _noise_notes(fit: Fit, windows: LogWindows, drift: Drift) -> tuple[str, ...]:
+    """The reference's steps the odometry noise's segments left out, and why the hand-off states
+    no odometry noise where the drift withholds it."""
+    t = np.asarray(windows.selected.time_s, dtype=float)
+    out = [
+        f"the tracker's poses step at {t[k]:.3f} s (record {k} of those used), which the fault checks "
+        "did not flag (a tracker that held a wrong pose, then relocked): the odometry noise's drift "
+        "segments across it were left out (one event, not a drift the wheels have)"
+        for k in drift.stepped
+    ]
+    if beyond := drift.beyond():
+        names, units = fit.fns.model.input_names, fit.fns.model.input_units
+        out.append(
+            "no odometry noise handed off (calibration.yaml's odometry_noise, ros2_control.yaml's "
+            f"covariance diagonals): {beyond_motion_words(names, units, drift.whole, beyond)}"
+        )
+    return tuple(out)

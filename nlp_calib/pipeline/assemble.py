@@ -404,6 +404,7 @@ def assemble_run(
             *lag_notes(prepared.scenario, alignment),
             *mount_notes(prepared.scenario, start),
             *threshold_notes(prepared.scenario, results),
+            *figures.noise_notes,
         ),
         verdict=Verdict("", ()),
         series=figures.series,
