@@ -30,7 +30,7 @@ from nlp_calib.analysis.observability import IN_DIRECTION, directions, not_obser
 from nlp_calib.analysis.plan import Setting, believed, plan
 from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.analysis.uncertainty import range_std
-from nlp_calib.analysis.verdict import way_out
+from nlp_calib.analysis.verdict import RANGE_SIGMAS, way_out
 from nlp_calib.core.errors import DatasetError, NlpCalibError, PreflightError
 from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.models import counted_inputs
@@ -571,15 +571,34 @@ class Assessment:
         fns = self.drive.fns
         return dict(zip(fns.names, np.asarray(fns.assemble(self.x, self.drive.start.x_fixed)).ravel()))
 
+    def misplaced(self, white: np.ndarray) -> np.ndarray:
+        """Which free parameters the converged fit puts outside what the model can have, known so
+        loosely (``white``: their white-noise σ, which the gate has too) that the model's range is
+        within :data:`~nlp_calib.analysis.verdict.RANGE_SIGMAS` of them: a weak direction's stop,
+        which the run's verdict calls not determined (a wheel's gain negative on one circle one way
+        reads as its encoder mirrored, 9.9σ off the truth), not a value."""
+        fitted = self.fitted()
+        if fitted is None:
+            return np.zeros(len(white), dtype=bool)
+        ranges = self.drive.fns.model.physical_ranges
+        out = []
+        for name, std in zip(self.drive.fns.free, white):
+            lo, hi = ranges.get(name, (-np.inf, np.inf))
+            v, reach = fitted[name], RANGE_SIGMAS * std
+            out.append(
+                not lo <= v <= hi and (not np.isfinite(reach) or (v + reach >= lo and v - reach <= hi))
+            )
+        return np.array(out, dtype=bool)
+
     def standing(self, info: det.Information | None = None) -> det.Standing:
         """Each free parameter's standing on these windows (or on those whose information is ``info``)."""
         d = self.drive
         st = det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std)
         if info is not None:
             return st
-        if self.stalled is not None:  # free where the run's fit stops: no σ holds them
-            free = st.undetermined | self.stalled
-            st = replace(st, undetermined=free, std=np.where(self.stalled, np.inf, st.std))
+        free = self.stalled if self.stalled is not None else self.misplaced(st.std)
+        if free.any():  # not determined where the run's fit stops: no σ holds them
+            st = replace(st, undetermined=st.undetermined | free, std=np.where(free, np.inf, st.std))
         # One σ and one needed precision with the run's: the white σ says what the drive leaves
         # free, the run's how well the rest is known, against what the run's verdict needs.
         std = st.std
