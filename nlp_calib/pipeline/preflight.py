@@ -538,14 +538,17 @@ class Assessment:
     propagated: np.ndarray | None = None
     #: What the run's verdict will need of each free parameter (None: the model's references).
     needed: np.ndarray | None = None
-    #: Whether the run's internal solver converged on the judged windows (``x``: its fit).
-    converged: bool = False
+    #: How the run's internal solver ended on the judged windows: True, converged (``x``: its
+    #: fit); :class:`Stalled`, on a singular normal matrix (``x``: the rough start); False, else.
+    ended: bool | Stalled = False
     #: What computes ``propagated`` and ``needed`` where they are not computed yet (None: they
     #: are): whether a run stops needs neither (:func:`stops`).
     pending: Callable[[], tuple[np.ndarray | None, np.ndarray]] | None = None
-    #: Which free parameters the run's solver leaves free where it stops on a singular normal
-    #: matrix (:class:`Stalled`; None: it did not stop so).
-    stalled: np.ndarray | None = None
+
+    @property
+    def converged(self) -> bool:
+        """Whether the run's internal solver converged on the judged windows (``x``: its fit)."""
+        return self.ended is True
 
     @property
     def omega(self) -> np.ndarray:
@@ -596,7 +599,7 @@ class Assessment:
         st = det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std)
         if info is not None:
             return st
-        free = self.stalled if self.stalled is not None else self.misplaced(st.std)
+        free = self.ended.undetermined if isinstance(self.ended, Stalled) else self.misplaced(st.std)
         if free.any():  # not determined where the run's fit stops: no σ holds them
             st = replace(st, undetermined=st.undetermined | free, std=np.where(free, np.inf, st.std))
         # One σ and one needed precision with the run's: the white σ says what the drive leaves
@@ -627,9 +630,8 @@ def assess(
     aligned = _as_the_run_aligns(d, omega, found)
     d, ended = aligned if aligned is not None else _aligned(d, omega, _fitted(d, omega))
     fitted = ended if isinstance(ended, tuple) else None
-    stalled = ended.undetermined if isinstance(ended, Stalled) else None
     x, info, where = fitted[:3] if fitted is not None else _rough(d, omega)
-    if stalled is not None:
+    if isinstance(ended, Stalled):
         where += "; the run's solver, fitted from it, stops on a singular normal matrix"
     at = "the fit" if fitted is not None else "the start"
     sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info, at)
@@ -644,10 +646,8 @@ def assess(
     def pending() -> tuple[np.ndarray | None, np.ndarray]:
         return (sigma() if sigma is not None else None), _needed(d, x)
 
-    a = Assessment(
-        d, held, x, where, info, sigma2, noise, bounds,
-        converged=fitted is not None, pending=pending, stalled=stalled,
-    )  # fmt: skip
+    state = ended if isinstance(ended, Stalled) else fitted is not None
+    a = Assessment(d, held, x, where, info, sigma2, noise, bounds, ended=state, pending=pending)
     return a.completed() if complete else a
 
 
