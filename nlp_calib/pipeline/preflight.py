@@ -24,11 +24,13 @@ import numpy as np
 from nlp_calib.analysis import determinacy as det
 from nlp_calib.analysis import uncertainty as unc
 from nlp_calib.analysis.crossval import combine
+from nlp_calib.analysis.degeneracy import scales
 from nlp_calib.analysis.excitation import combined, of_log, smoothed, turns_both_ways
+from nlp_calib.analysis.observability import IN_DIRECTION, directions, not_observable
 from nlp_calib.analysis.plan import Setting, believed, plan
 from nlp_calib.analysis.precision import log_precision, tightest
 from nlp_calib.analysis.uncertainty import range_std
-from nlp_calib.analysis.verdict import way_out
+from nlp_calib.analysis.verdict import RANGE_SIGMAS, way_out
 from nlp_calib.core.errors import DatasetError, NlpCalibError, PreflightError
 from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.models import counted_inputs
@@ -55,7 +57,7 @@ from nlp_calib.results.checks import CheckResult, Fold, LagEstimate, believed_st
 from nlp_calib.results.layout import CLOCK
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Excitation, ParameterStatus, Preflight
 from nlp_calib.solvers.backends import Backend
-from nlp_calib.solvers.evaluation import NormalEquations, ProblemEvaluator
+from nlp_calib.solvers.evaluation import SINGULAR_CONDITION, NormalEquations, ProblemEvaluator, is_singular
 
 #: The closed-form start is taken on the stretch of at most this many records that turns most.
 START_RECORDS = 5000
@@ -225,14 +227,28 @@ def _judged(d: Drive) -> ResidualData:
     return d.data if idx.size == n else d.data.select(idx)
 
 
-def _fitted(d: Drive, omega: np.ndarray, x0: np.ndarray | None = None) -> Fitted | None:
+@dataclass(frozen=True)
+class Stalled:
+    """Where the run's internal solver stopped without converging on a normal matrix it calls
+    singular (:func:`~nlp_calib.solvers.evaluation.is_singular`, the solver's own test): the run's
+    fit from the same start stops there too, and its verdict is NOT DETERMINED. ``undetermined``:
+    each free parameter the information there leaves free, as the run's observability reads it
+    (:func:`~nlp_calib.analysis.observability.not_observable`), else the solver's own near-null
+    directions' parameters."""
+
+    undetermined: np.ndarray
+
+
+def _fitted(d: Drive, omega: np.ndarray, x0: np.ndarray | None = None) -> Fitted | Stalled | None:
     """The start fitted to convergence by the run's internal solver on the windows whose information
     is judged (robust kernel, bounds), and the information there: the σ a fit will give is read
-    where the fit ends, never at the start, whose misfit is no noise. None where the fit does not
-    converge (a drive that leaves a direction free: its normal equations are singular). The
-    information is the fit's own normal equations at its optimum (not evaluated again). Last, what
-    computes each free parameter's σ as the run does there (:func:`_propagated`). ``x0``: where the
-    fit starts (the start's)."""
+    where the fit ends, never at the start, whose misfit is no noise. Where the fit stops on a
+    singular normal matrix, what it leaves free there (:class:`Stalled`: a drive whose every
+    relative motion is alike, circles of one radius one way, leaves the start's information weak,
+    not free, yet the fit runs along it to where it is free); None where it does not converge
+    otherwise. The information is the fit's own normal equations at its optimum (not evaluated
+    again). Last, what computes each free parameter's σ as the run does there
+    (:func:`_propagated`). ``x0``: where the fit starts (the start's)."""
     fns, start = d.fns, d.start
     windows = _judged(d)
     if windows.n_residuals < fns.n_free:
@@ -241,7 +257,7 @@ def _fitted(d: Drive, omega: np.ndarray, x0: np.ndarray | None = None) -> Fitted
     try:
         evaluator = binder.evaluate(windows)
         _, x, converged = binder.fit(evaluator, start.x0 if x0 is None else x0)
-        if not converged or not np.all(np.isfinite(x)):
+        if not np.all(np.isfinite(x)):
             return None
         # The fit's own normal equations at its optimum are the windows' information there.
         whole = evaluator.normal_equations(x)
@@ -251,9 +267,26 @@ def _fitted(d: Drive, omega: np.ndarray, x0: np.ndarray | None = None) -> Fitted
     info = det.of_terms(fns, windows, omega, (whole.H, whole.g, whole.cost), s, weight)
     if not np.isfinite(info.chi2) or not np.all(np.isfinite(info.H)):
         return None
+    if not converged:
+        return _stalled(d, omega, x, info)
     words = f"{d.start_words}, fitted to convergence on the windows judged"
     sigma = functools.partial(_propagated, d, binder, x, windows, (evaluator, whole))
     return np.asarray(x, dtype=float), info, words, sigma
+
+
+def _stalled(d: Drive, omega: np.ndarray, x: np.ndarray, info: det.Information) -> Stalled | None:
+    """:class:`Stalled` where the fit that ended at ``x`` (the windows' information there:
+    ``info``) stopped on a singular normal matrix, else None."""
+    if not is_singular(info.H):
+        return None
+    sigma2, _ = det.noise(d.fns, [p.log for p in d.parts], omega, info, "the fit's end")
+    found = directions(info.H, sigma2, scales(d.fns, x), info.n_windows, info.motion2)
+    free = not_observable(found)
+    if not free.any():  # the solver's own rank test: the directions it calls singular
+        dd = np.sqrt(np.diag(info.H))
+        lam, V = np.linalg.eigh(info.H / np.outer(dd, dd))
+        free = (V[:, lam < lam[-1] / SINGULAR_CONDITION] ** 2).sum(axis=1) > IN_DIRECTION
+    return Stalled(np.asarray(free))
 
 
 def _binder(d: Drive, n_windows: int) -> Binder:
@@ -268,7 +301,7 @@ def _binder(d: Drive, n_windows: int) -> Binder:
 
 def _as_the_run_aligns(
     d: Drive, omega: np.ndarray, found: LagEstimate | None = None
-) -> tuple[Drive, Fitted | None] | None:
+) -> tuple[Drive, Fitted | Stalled | None] | None:
     """One log whose time offset is fitted: the lag found by the run's own alignment
     (:func:`~nlp_calib.pipeline.align.estimate_tracker_lag`: re-sampled until it stays, then the
     other valleys of its profile), the encoders re-sampled there and the fit from the start with
@@ -298,8 +331,8 @@ def _as_the_run_aligns(
     x0[column] = found.lag_s
     moved = _resampled(d, x0)
     fitted = _fitted(moved, omega, x0)
-    if fitted is None:
-        return moved, None
+    if not isinstance(fitted, tuple):
+        return moved, fitted
     return moved, (
         fitted[0],
         fitted[1],
@@ -374,7 +407,9 @@ def _read_at(d: Drive, column: int, log: int) -> float:
     return clock.encoder_lag_s + (clock.beside_lag_s if second else 0.0)
 
 
-def _aligned(d: Drive, omega: np.ndarray, fitted: Fitted | None) -> tuple[Drive, Fitted | None]:
+def _aligned(
+    d: Drive, omega: np.ndarray, fitted: Fitted | Stalled | None
+) -> tuple[Drive, Fitted | Stalled | None]:
     """The fit on the encoders re-sampled at its own time offsets until each stays
     (:func:`~nlp_calib.pipeline.align.stays`), as the run's alignment re-samples them (the clock
     correction is exact only to first order away from the lag the encoders were re-sampled at):
@@ -383,7 +418,7 @@ def _aligned(d: Drive, omega: np.ndarray, fitted: Fitted | None) -> tuple[Drive,
     encoders as read."""
     clocks = _clocks(d)
     for _ in range(MAX_RESAMPLINGS if clocks else 0):
-        if fitted is None:
+        if not isinstance(fitted, tuple):
             break
         x, info = fitted[0], fitted[1]
         sigma2 = info.chi2 / max(d.fns.error_rows * info.n_windows - d.fns.n_free, 1)
@@ -395,7 +430,7 @@ def _aligned(d: Drive, omega: np.ndarray, fitted: Fitted | None) -> tuple[Drive,
         x0 = np.array(d.start.x0, dtype=float)
         x0[[i for i, _ in clocks]] = x[[i for i, _ in clocks]]
         again = _fitted(moved, omega, x0)
-        if again is None:
+        if not isinstance(again, tuple):
             break
         d, fitted = moved, (again[0], again[1], f"{again[2]} re-sampled at its time offset", again[3])
     return d, fitted
@@ -503,11 +538,17 @@ class Assessment:
     propagated: np.ndarray | None = None
     #: What the run's verdict will need of each free parameter (None: the model's references).
     needed: np.ndarray | None = None
-    #: Whether the run's internal solver converged on the judged windows (``x``: its fit).
-    converged: bool = False
+    #: How the run's internal solver ended on the judged windows: True, converged (``x``: its
+    #: fit); :class:`Stalled`, on a singular normal matrix (``x``: the rough start); False, else.
+    ended: bool | Stalled = False
     #: What computes ``propagated`` and ``needed`` where they are not computed yet (None: they
     #: are): whether a run stops needs neither (:func:`stops`).
     pending: Callable[[], tuple[np.ndarray | None, np.ndarray]] | None = None
+
+    @property
+    def converged(self) -> bool:
+        """Whether the run's internal solver converged on the judged windows (``x``: its fit)."""
+        return self.ended is True
 
     @property
     def omega(self) -> np.ndarray:
@@ -533,12 +574,34 @@ class Assessment:
         fns = self.drive.fns
         return dict(zip(fns.names, np.asarray(fns.assemble(self.x, self.drive.start.x_fixed)).ravel()))
 
+    def misplaced(self, white: np.ndarray) -> np.ndarray:
+        """Which free parameters the converged fit puts outside what the model can have, known so
+        loosely (``white``: their white-noise σ, which the gate has too) that the model's range is
+        within :data:`~nlp_calib.analysis.verdict.RANGE_SIGMAS` of them: a weak direction's stop,
+        which the run's verdict calls not determined (a wheel's gain negative on one circle one way
+        reads as its encoder mirrored, 9.9σ off the truth), not a value."""
+        fitted = self.fitted()
+        if fitted is None:
+            return np.zeros(len(white), dtype=bool)
+        ranges = self.drive.fns.model.physical_ranges
+        out = []
+        for name, std in zip(self.drive.fns.free, white):
+            lo, hi = ranges.get(name, (-np.inf, np.inf))
+            v, reach = fitted[name], RANGE_SIGMAS * std
+            out.append(
+                not lo <= v <= hi and (not np.isfinite(reach) or (v + reach >= lo and v - reach <= hi))
+            )
+        return np.array(out, dtype=bool)
+
     def standing(self, info: det.Information | None = None) -> det.Standing:
         """Each free parameter's standing on these windows (or on those whose information is ``info``)."""
         d = self.drive
         st = det.standing(d.fns, info or self.info, self.sigma2, self.x, self.bounds_std)
         if info is not None:
             return st
+        free = self.ended.undetermined if isinstance(self.ended, Stalled) else self.misplaced(st.std)
+        if free.any():  # not determined where the run's fit stops: no σ holds them
+            st = replace(st, undetermined=st.undetermined | free, std=np.where(free, np.inf, st.std))
         # One σ and one needed precision with the run's: the white σ says what the drive leaves
         # free, the run's how well the rest is known, against what the run's verdict needs.
         std = st.std
@@ -565,8 +628,11 @@ def assess(
     fns = d.fns
     omega = _omega(d)
     aligned = _as_the_run_aligns(d, omega, found)
-    d, fitted = aligned if aligned is not None else _aligned(d, omega, _fitted(d, omega))
+    d, ended = aligned if aligned is not None else _aligned(d, omega, _fitted(d, omega))
+    fitted = ended if isinstance(ended, tuple) else None
     x, info, where = fitted[:3] if fitted is not None else _rough(d, omega)
+    if isinstance(ended, Stalled):
+        where += "; the run's solver, fitted from it, stops on a singular normal matrix"
     at = "the fit" if fitted is not None else "the start"
     sigma2, noise = det.noise(fns, [p.log for p in d.parts], omega, info, at)
     if fitted is not None:
@@ -580,10 +646,8 @@ def assess(
     def pending() -> tuple[np.ndarray | None, np.ndarray]:
         return (sigma() if sigma is not None else None), _needed(d, x)
 
-    a = Assessment(
-        d, held, x, where, info, sigma2, noise, bounds,
-        converged=fitted is not None, pending=pending,
-    )  # fmt: skip
+    state = ended if isinstance(ended, Stalled) else fitted is not None
+    a = Assessment(d, held, x, where, info, sigma2, noise, bounds, ended=state, pending=pending)
     return a.completed() if complete else a
 
 
