@@ -247,6 +247,13 @@ class LagEstimate:
     profile_costs: tuple[float, ...] = ()
     other: tuple[float, ...] = ()
     beside_s: float | None = None
+    returned: float | None = None
+
+    @property
+    def loose(self) -> bool:
+        """Whether the drive does not determine the lag: fits re-sampled off it stay near where they
+        were re-sampled (:attr:`returned` below :data:`RETURNS`), so its white-noise σ is no error."""
+        return self.returned is not None and self.returned < RETURNS
 
     @property
     def ambiguous(self) -> bool:
@@ -255,9 +262,10 @@ class LagEstimate:
 
     @property
     def pinned(self) -> bool:
-        """Whether the lag is a held value, not a fitted one: on the search's edge, or where no
-        fit converged (held where the encoders were read)."""
-        return self.at_edge or not self.converged
+        """Whether the lag is a held value, not a fitted one: on the search's edge, where no fit
+        converged (held where the encoders were read), or not determined by the drive (:attr:`loose`:
+        held where the fits settled)."""
+        return self.at_edge or not self.converged or self.loose
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -269,7 +277,13 @@ class LagEstimate:
             "profile_s": list(self.profile_s),
             "profile_costs": [c if np.isfinite(c) else None for c in self.profile_costs],
             "other": list(self.other),
+            "returned": self.returned,
         }
+
+
+#: A fitted lag whose fits, re-sampled off it, take back less than this share of the offset is not
+#: determined by the drive (:attr:`LagEstimate.loose`; the alignment measures it).
+RETURNS = 0.5
 
 
 @dataclass(frozen=True)
