@@ -255,6 +255,17 @@ class LagEstimate:
         were re-sampled (:attr:`returned` below :data:`RETURNS`), so its white-noise σ is no error."""
         return self.returned is not None and self.returned < RETURNS
 
+    def returned_std(self, white: float) -> float:
+        """The σ of a lag whose fits re-sampled off it take back only a share of the offset beyond
+        their noise (:data:`SHORT`): its white-noise σ ``white`` over that share. The settled lag is
+        where the fitted lag meets the re-sampled one, a root the noise of each fit moves by that
+        noise over the share taken back; the white σ also counts the noise of the rates at the
+        windows' ends as the lag's information (errors in the variables). NaN elsewhere."""
+        share = self.returned
+        if share is None or not RETURNS <= share < SHORT:
+            return float("nan")
+        return white / share
+
     @property
     def ambiguous(self) -> bool:
         """Whether a second valley of comparable cost leaves the lag between two values."""
@@ -281,9 +292,16 @@ class LagEstimate:
         }
 
 
-#: A fitted lag whose fits, re-sampled off it, take back less than this share of the offset is not
-#: determined by the drive (:attr:`LagEstimate.loose`; the alignment measures it).
-RETURNS = 0.5
+#: The alignment checks a settled lag by fits on the encoders re-sampled this many of its
+#: white-noise σ either side of it: each should take the offset back.
+RETURN_SIGMAS = 8.0
+#: A fitted lag whose fits, re-sampled off it, take back less than this share of the offset (2 of
+#: its white σ: no more than their own noise) is not determined by the drive (:attr:`LagEstimate.loose`).
+RETURNS = 0.25
+#: The share taken back where the lag is determined scatters about 1 by 1/(√2·RETURN_SIGMAS) (each
+#: side's fit by its white σ); below 1 by more than its 95 % point (1.645 of that), the lag's σ is
+#: its white σ over the share (:meth:`LagEstimate.returned_std`).
+SHORT = 1.0 - 1.645 / (np.sqrt(2.0) * RETURN_SIGMAS)
 
 
 @dataclass(frozen=True)
