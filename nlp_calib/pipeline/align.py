@@ -24,8 +24,8 @@ truth 0). So the settled lag is re-sampled ``RETURN_SIGMAS`` (8) white σ either
 there (:meth:`_LagFits.returned`). A lag whose fits take back less than ``RETURNS`` (a quarter:
 2σ, their own noise) is named not determined (held where it settled, with no σ, as a lag pinned
 on its search's edge); one whose fits take back only part beyond their noise has its white σ over
-that share as its σ (:meth:`~nlp_calib.results.checks.LagEstimate.returned_std`; the real
-tricycle's log: half, 2.8 ms, within its blocks' 4.4 ms).
+that share as its σ (:meth:`~nlp_calib.results.checks.LagEstimate.returned_std`; the shipped
+real log: half, 2.8 ms, within its blocks' 4.4 ms).
 """
 
 from __future__ import annotations
