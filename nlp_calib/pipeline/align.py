@@ -244,8 +244,8 @@ class _LagFits:
     def returned(self, x: np.ndarray) -> float | None:
         """The share of a displacement of ``RETURN_SIGMAS`` white-noise σ of the settled lag
         (``x``'s) that fits on the encoders re-sampled there take back, averaged over the sides
-        inside the search (1: each returns to the lag; 0: each stays where it was re-sampled; a fit
-        that does not converge takes nothing back). None: no σ, or no side inside."""
+        inside the search whose fits converge (1: each returns to the lag; 0: each stays where it
+        was re-sampled). None: no σ, or no such side."""
         lag = float(x[self.column])
         # The normal equations at the settled lag, on the data re-sampled there.
         shifted = self.resampled(lag, beside_s=self.beside_s(x))
@@ -256,7 +256,8 @@ class _LagFits:
         shares = []
         for side in sides:
             _, x_new, converged = self.fit(_moved_to(x, lag + side, self.column, self.beside))
-            shares.append((lag + side - float(x_new[self.column])) / side if converged else 0.0)
+            if converged:  # one that stops short says nothing (a short car's log: 0.7-0.85 back)
+                shares.append((lag + side - float(x_new[self.column])) / side)
         return float(np.mean(shares)) if shares else None
 
     def coarse_start(self, x0: np.ndarray) -> np.ndarray | None:
