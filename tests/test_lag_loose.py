@@ -19,7 +19,7 @@ import pytest
 
 from nlp_calib.pipeline import Calibration, scenario_from_mapping
 from nlp_calib.results import CalibrationRun
-from nlp_calib.results.checks import RETURNS
+from nlp_calib.results.checks import RETURNS, LagEstimate
 from nlp_calib.simulation import SimulationOptions, simulate
 from nlp_calib.simulation.simulate import write_simulation
 
@@ -68,3 +68,18 @@ def test_a_lag_the_drive_determines_returns_and_keeps_its_sigma(tmp_path: Path) 
     assert est.returned > 0.8 > RETURNS and not est.loose and run.pinned() == ()
     std, z = _lag_z(run)
     assert np.isfinite(std) and abs(z) <= 3.0
+
+
+@pytest.mark.parametrize(
+    ("share", "std"), [(1.0, None), (0.9, None), (0.5, 0.004), (0.3, 0.002 / 0.3), (0.2, None)]
+)
+def test_a_lag_its_fits_return_to_in_part_has_its_white_sigma_over_the_share(
+    share: float, std: float | None
+) -> None:
+    """Taken back within the noise of a full return (above SHORT, 0.85) the white σ stands; a part
+    beyond it, the white σ over the share (a skid steer's circles, seed 3: 0.37, its lag 61.5 ±
+    29 ms, +2.1σ of the truth, +2.8σ before); below RETURNS the lag has none: not determined."""
+    est = LagEstimate(0.01, (0.0,), (1.0,), returned=share)
+    got = est.returned_std(0.002)
+    assert np.isnan(got) if std is None else got == pytest.approx(std), got
+    assert est.loose == (share < RETURNS) and est.pinned == est.loose
