@@ -189,7 +189,8 @@ def test_several_logs_each_have_their_own_lag(tmp_path: Path) -> None:
 def test_a_lag_the_drive_cannot_separate_from_the_wheels_is_not_determined(tmp_path: Path) -> None:
     """Two sinusoidal wheel speeds: a time shift is a mix of the wheels, which the radii and the
     mount take up. The run says NOT DETERMINED naming the lag and the radii, with the way out; every
-    parameter it gives a finite σ lies within 3σ of the truth; the clean poses show no fault."""
+    parameter it gives a finite σ lies within 3σ of the truth, and the one it gives none is the lag,
+    held as not determined (its fits re-sampled off it stay there); the clean poses show no fault."""
     truth = two_sinusoids(tmp_path)
     path = sinusoids_scenario(tmp_path)
     run = Calibration(load_scenario(path)).run(["gauss_newton"])
@@ -199,6 +200,9 @@ def test_a_lag_the_drive_cannot_separate_from_the_wheels_is_not_determined(tmp_p
     assert run.checks.findings is not None and run.checks.findings.report.faults == ()
     params, std = run.reports["gauss_newton"].result.param_dict(), run.std("gauss_newton")
     for name, true in truth.items():
+        if not np.isfinite(std[name]):
+            assert name == "tracker_lag" and run.pinned() == (name,), (name, std[name])
+            continue
         assert abs(params[name] - true) <= 3 * std[name], (name, params[name], true, std[name])
 
 

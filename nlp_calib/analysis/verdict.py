@@ -88,8 +88,9 @@ def concerns(run: CalibrationRun, solver: str, model: KinematicModel) -> dict[st
 
 def lag_caveats(path: str, lag: LagEstimate | None) -> list[str]:
     """What the time offset of the log at ``path`` leaves open, naming the log: a lag no fit
-    converged at (held), pinned on the edge of its search (its value is the bound's, with no σ), or
-    two valleys of comparable cost."""
+    converged at (held), pinned on the edge of its search (its value is the bound's, with no σ),
+    not determined by the drive (held where the fits settled, with no σ), or two valleys of
+    comparable cost."""
     if lag is None:
         return []
     name = Path(path).name or path
@@ -103,6 +104,13 @@ def lag_caveats(path: str, lag: LagEstimate | None) -> list[str]:
         return [
             f"{name}: the tracker lag is pinned on the edge of alignment.search at {1e3 * lag.lag_s:.0f} ms "
             "(not determined within it: widen the search, or give the lag)"
+        ]
+    if lag.loose:
+        return [
+            f"{name}: the tracker lag is not determined by this drive: held at {1e3 * lag.lag_s:.0f} ms, "
+            f"where fits re-sampled off it stay ({100 * (lag.returned or 0.0):.0f} % of the offset taken "
+            "back): starts, stops and turns of different lengths determine it, or give the lag as "
+            "alignment.tracker_lag"
         ]
     if lag.ambiguous:
         other, cost, own = lag.other

@@ -413,7 +413,8 @@ def _add_simulate_options(p: argparse.ArgumentParser) -> None:
         "--trajectory",
         choices=TRAJECTORIES,
         default=None,
-        help="s_curves: turns, stops and reversals (default); straight: no turning; no_reversals",
+        help="s_curves: turns, stops and reversals (default); straight: no turning; no_reversals; "
+        "circles: constant speed, turning one way then the other",
     )
     for flag, field, what in (
         ("--records", "records", "records to write"),

@@ -198,7 +198,8 @@ def lag_lines(run: CalibrationRun) -> list[str]:
         )
         sd = 1e3 * std.get(effect.lag, float("nan"))
         pinned = effect.lag in run.pinned()
-        spread = " ms, pinned on the edge of alignment.search (no σ)" if pinned else f" ± {sd:.2g} ms"
+        where = "not determined by this drive" if est.loose else "pinned on the edge of alignment.search"
+        spread = f" ms, {where} (no σ)" if pinned else f" ± {sd:.2g} ms"
         out.append(
             f"{effect.lag} {1e3 * lag:.1f}{spread}, a parameter of the fit "
             f"(encoders re-sampled at {len(est.path_s)} lags on the way)"

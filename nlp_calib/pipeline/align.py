@@ -12,6 +12,20 @@ the re-sampling of least cost of all tried is kept (the costs compare fits of th
 poses: a root can lie where re-sampling between rows fits worse than the readings as logged).
 ``alignment.search`` bounds it; its σ, correlations and observability come from the same
 Functions as every other parameter's.
+
+That σ holds where the fit on data re-sampled off the lag takes the offset back: the problem's
+correction moves each window's ends along the rates at them, read from the same rounded
+readings, and where the drive's speeds barely change (circles at constant speed) those rates'
+differences are the readings' rounding alone. Their noise then makes up the lag's information
+(a σ too small) and shrinks what the fit takes back of an offset (errors in the variables): the
+fitted lag follows the lag the data were re-sampled at, g has roots wherever its noise crosses
+zero, and the one kept is wrong by many of its σ (constant circles each way: −90 ms ± 13 ms, the
+truth 0). So the settled lag is re-sampled ``RETURN_SIGMAS`` (8) white σ either side and fitted
+there (:meth:`_LagFits.returned`). A lag whose fits take back less than ``RETURNS`` (a quarter:
+2σ, their own noise) is named not determined (held where it settled, with no σ, as a lag pinned
+on its search's edge); one whose fits take back only part beyond their noise has its white σ over
+that share as its σ (:meth:`~nlp_calib.results.checks.LagEstimate.returned_std`; the shipped
+real log: half, 2.8 ms, within its blocks' 4.4 ms).
 """
 
 from __future__ import annotations
@@ -29,7 +43,7 @@ from nlp_calib.pipeline.build import Binder
 from nlp_calib.pipeline.keys import scenario_key
 from nlp_calib.pipeline.prepare import fit_records
 from nlp_calib.pipeline.scenario import Scenario
-from nlp_calib.results.checks import LagEstimate
+from nlp_calib.results.checks import RETURN_SIGMAS, LagEstimate
 from nlp_calib.results.layout import CLOCK
 from nlp_calib.solvers import ProblemEvaluator
 
@@ -227,6 +241,25 @@ class _LagFits:
             costs[i] = float(evaluator.cost(at))
         return grid, costs
 
+    def returned(self, x: np.ndarray) -> float | None:
+        """The share of a displacement of ``RETURN_SIGMAS`` white-noise σ of the settled lag
+        (``x``'s) that fits on the encoders re-sampled there take back, averaged over the sides
+        inside the search whose fits converge (1: each returns to the lag; 0: each stays where it
+        was re-sampled). None: no σ, or no such side."""
+        lag = float(x[self.column])
+        # The normal equations at the settled lag, on the data re-sampled there.
+        shifted = self.resampled(lag, beside_s=self.beside_s(x))
+        self.evaluator = self.bound(shifted, self.records, self.evaluator)
+        step = RETURN_SIGMAS * self.lag_std(x)
+        lo, hi = self.binder.scenario.log.alignment.search
+        sides = [s for s in (-step, step) if step > 0 and lo <= lag + s <= hi]
+        shares = []
+        for side in sides:
+            _, x_new, converged = self.fit(_moved_to(x, lag + side, self.column, self.beside))
+            if converged:  # one that stops short says nothing (a short car's log: 0.7-0.85 back)
+                shares.append((lag + side - float(x_new[self.column])) / side)
+        return float(np.mean(shares)) if shares else None
+
     def coarse_start(self, x0: np.ndarray) -> np.ndarray | None:
         """The start of the converged fit of least cost from lags spread over the search (None: none
         converged): a start only, the lag is then fitted from it."""
@@ -388,6 +421,7 @@ def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np
     if not first.converged:
         return LagEstimate(float(first.x[column]), first.path, first.costs, False, False)
     best, runner, (grid, profile) = _global(fits, first)
+    back = fits.returned(best.x)
     lag = float(best.x[column])
     lo, hi = binder.scenario.log.alignment.search
     at_edge = bool(abs(lag - lo) < 1e-6 or abs(lag - hi) < 1e-6)
@@ -404,6 +438,7 @@ def estimate_tracker_lag(binder: Binder, log: Log, start: int, stop: int, x0: np
         tuple(map(float, profile)),
         other,
         fits.beside_s(best.x),
+        back,
     )
 
 
@@ -424,6 +459,8 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
             warnings.warn(lag_not_fitted(sc, estimate.lag_s), NlpCalibWarning, stacklevel=2)
         elif estimate.at_edge:
             warnings.warn(lag_at_edge(sc, estimate.lag_s), NlpCalibWarning, stacklevel=2)
+        elif estimate.loose:
+            warnings.warn(lag_loose(sc, estimate), NlpCalibWarning, stacklevel=2)
         lag = estimate.lag_s
     elif lag == "auto":
         # Held (known, or fixed at its initial value): the data are re-sampled there.
@@ -458,4 +495,17 @@ def lag_not_fitted(sc: Scenario, lag_s: float) -> str:
         f"the lag is not fitted (the encoders are read at {1e3 * lag_s:.1f} ms): the observability lines "
         "say what this drive cannot determine; where they name nothing, search around the lag the "
         "log's clocks allow, or give it as alignment.tracker_lag"
+    )
+
+
+def lag_loose(sc: Scenario, estimate: LagEstimate) -> str:
+    """The warning for a tracker lag the drive does not determine (:attr:`LagEstimate.loose`)."""
+    share = 100.0 * (estimate.returned or 0.0)
+    return (
+        f"{sc.path or sc.name}: alignment.tracker_lag: the drive does not determine the lag: fits on the "
+        f"encoders re-sampled {RETURN_SIGMAS:g} of its white-noise σ either side of "
+        f"{1e3 * estimate.lag_s:.1f} ms take back {share:.0f} % of that (a determined lag, all of it), "
+        "so it is held there with no σ; "
+        "the wheels' speeds barely change on this drive (starts, stops and turns of different lengths "
+        "determine it), or give the lag as alignment.tracker_lag"
     )

@@ -18,7 +18,7 @@ from nlp_calib.analysis.plan import believed
 from nlp_calib.analysis.verdict import verdict
 from nlp_calib.logs import LogHeader
 from nlp_calib.models.controllers import EncoderScales
-from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_not_fitted
+from nlp_calib.pipeline.align import Alignment, lag_at_edge, lag_loose, lag_not_fitted
 from nlp_calib.pipeline.analyse import FitAnalysis, LogAnalysis, Scores
 from nlp_calib.pipeline.build import StartingPoint
 from nlp_calib.pipeline.checks import CheckContext, run_checks
@@ -183,13 +183,15 @@ def bias_notes(step: Mapping[str, float], std: Mapping[str, float]) -> list[str]
 
 
 def lag_notes(sc: Scenario, alignment: Alignment) -> list[str]:
-    """What a log's time alignment found worth saying: a lag at the edge of its search, or a lag
-    no fit converged at."""
+    """What a log's time alignment found worth saying: a lag at the edge of its search, a lag no
+    fit converged at, or one the drive does not determine."""
     est = alignment.estimate
     if est is not None and not est.converged:
         return [lag_not_fitted(sc, alignment.lag_s)]
     if est is not None and est.at_edge:
         return [lag_at_edge(sc, alignment.lag_s)]
+    if est is not None and est.loose:
+        return [lag_loose(sc, est)]
     return []
 
 

@@ -29,8 +29,9 @@ neither reading gives exactly where the drive speeds up or slows down while it s
 stops). That reading is held as a value too (:data:`STEERING`): the estimate's move between the
 two readings, whichever the scenario fits with.
 
-A lag the fit pinned on the edge of its search (the data put it there or beyond, with no σ) is held
-there too: moved one record interval beyond the edge, the others following it as the fit's normal
+A lag the fit pinned on the edge of its search (the data put it there or beyond, with no σ), or
+one the drive does not determine (held where its fits settled), is held there too: moved one
+record interval (beyond the edge), the others following it as the fit's normal
 equations say (``−H_oo⁻¹·H_o,lag``), so what it leaves wrong is said and kept from the hand-off.
 
 Each free parameter's shifts over the held values enter its σ to believe in quadrature
@@ -63,6 +64,7 @@ LAG = "alignment.tracker_lag"
 #: The plausible errors' rules, as the record states them.
 RECORD_INTERVAL = "one record interval"
 PINNED = "one record interval beyond the edge of alignment.search it is pinned on"
+LOOSE = "one record interval from where the fits settled (the drive does not determine the lag)"
 NEEDED = "the precision a calibration needs of it"
 #: How speeds integrated into positions are read (held as a value; its error, half an interval).
 SPEEDS = "dataset.form: speeds"
@@ -227,13 +229,20 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         # The move's coordinates to the lag's seconds: one record interval of it.
         lag = (np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params)[fns.names.index(name)]
         if abs(lag) > 0:
-            response(name, estimate[name], (d, PINNED), move * d / lag)
+            response(name, estimate[name], (d, _pinned_rule(run)), move * d / lag)
     return [replace(r, shift=_without(r.shift, r.name), in_sigma=_without(r.in_sigma, r.name)) for r in found]
 
 
 def _without(values: Mapping[str, float], name: str) -> dict[str, float]:
     """``values`` without the held value's own entry (a lag pinned in the fit moves itself)."""
     return {n: v for n, v in values.items() if n != name}
+
+
+def _pinned_rule(run: CalibrationRun) -> str:
+    """The rule of a pinned lag's error: a lag the drive does not determine is held where its fits
+    settled, any other on its search's edge."""
+    est = run.data.lag_estimate
+    return LOOSE if est is not None and est.loose else PINNED
 
 
 def pinned_step(H: np.ndarray, i: int) -> np.ndarray | None:
@@ -275,6 +284,8 @@ def _what_to_do(r: Response, given: bool) -> str:
     within = f"give it measured to within {_amount(r.within(), r.unit)}"
     if r.rule == PINNED:
         return f"widen alignment.search so that the lag is fitted inside it, or {within}"
+    if r.rule == LOOSE:
+        return f"drive with starts, stops and turns of different lengths, or {within}"
     if r.name == LAG:
         return f"fit it (alignment.tracker_lag: auto), or {within}"
     if r.name == SPEEDS:

@@ -247,6 +247,24 @@ class LagEstimate:
     profile_costs: tuple[float, ...] = ()
     other: tuple[float, ...] = ()
     beside_s: float | None = None
+    returned: float | None = None
+
+    @property
+    def loose(self) -> bool:
+        """Whether the drive does not determine the lag: fits re-sampled off it stay near where they
+        were re-sampled (:attr:`returned` below :data:`RETURNS`), so its white-noise σ is no error."""
+        return self.returned is not None and self.returned < RETURNS
+
+    def returned_std(self, white: float) -> float:
+        """The σ of a lag whose fits re-sampled off it take back only a share of the offset beyond
+        their noise (:data:`SHORT`): its white-noise σ ``white`` over that share. The settled lag is
+        where the fitted lag meets the re-sampled one, a root the noise of each fit moves by that
+        noise over the share taken back; the white σ also counts the noise of the rates at the
+        windows' ends as the lag's information (errors in the variables). NaN elsewhere."""
+        share = self.returned
+        if share is None or not RETURNS <= share < SHORT:
+            return float("nan")
+        return white / share
 
     @property
     def ambiguous(self) -> bool:
@@ -255,9 +273,10 @@ class LagEstimate:
 
     @property
     def pinned(self) -> bool:
-        """Whether the lag is a held value, not a fitted one: on the search's edge, or where no
-        fit converged (held where the encoders were read)."""
-        return self.at_edge or not self.converged
+        """Whether the lag is a held value, not a fitted one: on the search's edge, where no fit
+        converged (held where the encoders were read), or not determined by the drive (:attr:`loose`:
+        held where the fits settled)."""
+        return self.at_edge or not self.converged or self.loose
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -269,7 +288,20 @@ class LagEstimate:
             "profile_s": list(self.profile_s),
             "profile_costs": [c if np.isfinite(c) else None for c in self.profile_costs],
             "other": list(self.other),
+            "returned": self.returned,
         }
+
+
+#: The alignment checks a settled lag by fits on the encoders re-sampled this many of its
+#: white-noise σ either side of it: each should take the offset back.
+RETURN_SIGMAS = 8.0
+#: A fitted lag whose fits, re-sampled off it, take back less than this share of the offset (2 of
+#: its white σ: no more than their own noise) is not determined by the drive (:attr:`LagEstimate.loose`).
+RETURNS = 0.25
+#: The share taken back where the lag is determined scatters about 1 by 1/(√2·RETURN_SIGMAS) (each
+#: side's fit by its white σ); below 1 by more than its 95 % point (1.645 of that), the lag's σ is
+#: its white σ over the share (:meth:`LagEstimate.returned_std`).
+SHORT = 1.0 - 1.645 / (np.sqrt(2.0) * RETURN_SIGMAS)
 
 
 @dataclass(frozen=True)

@@ -378,6 +378,12 @@ class CalibrationRun:
         (:meth:`Checks.believed`)."""
         u = self.reports[solver].uncertainty
         std = dict(zip(u.names, map(float, self.checks.believed(u, slip, held))))
+        est = None if self.logs else self.data.lag_estimate
+        if est is not None:
+            for n in (n for n in self.scenario.layout.block(CLOCK) if n in u.names):
+                # A lag its fits return to only in part: its white σ over that share, where larger.
+                wide = est.returned_std(float(u.std[u.names.index(n)]))
+                std[n] = max(std[n], wide) if np.isfinite(wide) else std[n]
         return {n: float("nan") if n in self.pinned() else s for n, s in std.items()}
 
     def pinned(self) -> tuple[str, ...]:

@@ -16,7 +16,7 @@ from nlp_calib.core.ranges import Range
 from nlp_calib.models import DEFAULT_MODEL, MODELS
 from nlp_calib.simulation.faults import COUNTER_FAULT_KINDS
 
-TRAJECTORIES = ("s_curves", "straight", "no_reversals")
+TRAJECTORIES = ("s_curves", "straight", "no_reversals", "circles")
 #: How the speed changes sign: through zero over seconds, or within :data:`ABRUPT_S`.
 REVERSALS = ("smooth", "abrupt")
 ABRUPT_S = 0.02
@@ -72,7 +72,8 @@ class Sampling:
 @dataclass(frozen=True)
 class DriveShape:
     """How the base drives: ``trajectory`` (``s_curves``: turns, stops and reversals; ``straight``:
-    no turning; ``no_reversals``: turns and stops, always forward), the top speed (m/s), the
+    no turning; ``no_reversals``: turns and stops, always forward; ``circles``: circles at constant
+    speed, turning one way for the first half and the other for the second), the top speed (m/s), the
     turning profile's amplitude (each model's drive reads it in its own way, see its ``steps``),
     the fraction of stops, and ``reversals``: ``smooth`` (the speed passes through zero over
     seconds) or ``abrupt`` (within :data:`ABRUPT_S`)."""
@@ -270,11 +271,25 @@ def profiles_on(
     return np.interp(t_mid, kt, kv), np.interp(t_mid, kt, ks), np.interp(t_fine[1:] - t0, kt, ks)
 
 
+def circles(
+    opts: ProfileSettings, n_knots: int, duration: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Knots of circles at constant speed and turn from rest, the turn reversed halfway: the speeds
+    change only at the start and at the reversal (a drive that barely tells a time offset)."""
+    t = np.concatenate([[0.0], np.cumsum(np.full(n_knots, 1.5))])
+    speed = np.full(t.size, 0.6 * opts.max_speed)
+    speed[0] = 0.0
+    turn = np.where(t > duration / 2, -0.5, 0.5) * opts.max_turn
+    return t, speed, turn
+
+
 def drive_profiles(
     opts: ProfileSettings, rng: np.random.Generator, duration: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Knot times, speeds and turning amplitudes; linear between knots."""
     n_knots = int(duration / 1.5) + 3
+    if opts.trajectory == "circles":
+        return circles(opts, n_knots, duration)
     t = np.concatenate([[0.0], np.cumsum(rng.uniform(1.0, 2.5, n_knots))])
     speed = rng.uniform(0.3, 1.0, t.size) * opts.max_speed
     if opts.trajectory == "s_curves":

@@ -125,6 +125,8 @@ def lag_png(est: LagEstimate, std: float, title: str) -> bytes:
         words.append("the lag ended on the edge of its search: the true lag may lie beyond")
     if not est.converged:
         words.append("the last fit did not converge")
+    if est.loose:
+        words.append("fits re-sampled off the lag stay there: the drive does not determine it")
     ax.set_xlabel("tracker lag (the scenario's tracker_lag) [ms]")
     ax.set_ylabel("cost of the fit")
     ax.set_title(
