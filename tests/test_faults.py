@@ -529,8 +529,9 @@ def test_a_sound_increment_where_the_turn_rate_jumps_is_judged_at_the_references
     match does."""
     from types import SimpleNamespace
 
-    from nlp_calib.analysis.faults import MATCH_SCATTER, _disagreement, _robust, _screen_lag
+    from nlp_calib.analysis.faults import MATCH_SCATTER, _disagreement, _screen_lag
     from nlp_calib.core import poses
+    from nlp_calib.core.numeric import robust_spread
     from nlp_calib.logs.relative import RelativeMotions
 
     rng = np.random.default_rng(5)
@@ -560,7 +561,7 @@ def test_a_sound_increment_where_the_turn_rate_jumps_is_judged_at_the_references
 
     def flagged(lag_s: float) -> set[int]:
         e = at(lag_s)[0]
-        centre, spread = _robust(e)
+        centre, spread = robust_spread(e)
         return set(np.flatnonzero(np.max(np.abs(e - centre) / spread, axis=1) > MATCH_SCATTER).tolist())
 
     assert 200 in flagged(0.0) and len(flagged(0.0)) > 3  # the jumps' sound increments too

@@ -57,7 +57,7 @@ from nlp_calib.analysis.streams import (
     stuck_runs,
 )
 from nlp_calib.core import poses, poses3d
-from nlp_calib.core.numeric import COUNTER_MODULUS, wrapped_difference
+from nlp_calib.core.numeric import COUNTER_MODULUS, robust_spread, wrapped_difference
 from nlp_calib.logs import EncoderKind, Log
 from nlp_calib.logs.log import JointStream, frozen
 from nlp_calib.logs.reference import Motions, PoseMotions, Poses
@@ -315,7 +315,7 @@ def increment_faults(
     lag_s = _screen_lag(at, judged, lag)
     error, unit, travel, turned, arc, valid = at(lag_s)
     judged &= (inc.first >= valid[0]) & (inc.last < valid[1])
-    centre, spread = _robust(error[judged])
+    centre, spread = robust_spread(error[judged])
     if judged.sum() < 10 or not np.all(spread > 0):
         return []  # no scatter to judge by (a noise-free simulation)
     # A pivot: the base turns more than it travels (a gyro's steps hold no travel: never one).
@@ -359,12 +359,6 @@ def _words(kind: str, e: np.ndarray, unit: tuple[str, ...], by: float, turned: f
             "the robot's odometry meets it)"
         )
     return why
-
-
-def _robust(error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The columns' median and robust σ (1.4826 × the median absolute deviation)."""
-    centre = np.median(error, axis=0)
-    return centre, 1.4826 * np.median(np.abs(error - centre), axis=0)
 
 
 #: The screen's lag is fitted by this many Gauss-Newton steps on the increments' disagreement,
@@ -481,7 +475,7 @@ def _screen_lag(at: _IncrementsAt, judged: np.ndarray, lag: float | tuple[float,
     for _ in range(SCREEN_LAG_STEPS):
         (error, *_, v0), (ahead, *_, v1), (behind, *_, v2) = at(tau), at(tau + h), at(tau - h)
         keep &= (inc.first >= max(v0[0], v1[0], v2[0])) & (inc.last < min(v0[1], v1[1], v2[1]))
-        centre, spread = _robust(error[keep]) if keep.sum() >= 10 else (0.0, np.zeros(1))
+        centre, spread = robust_spread(error[keep]) if keep.sum() >= 10 else (0.0, np.zeros(1))
         if not np.all(spread > 0):
             return tau
         a, b = (ahead - behind) / (2 * h) / spread, (error - centre) / spread

@@ -16,7 +16,7 @@ import numpy as np
 
 from nlp_calib.analysis.uncertainty import nnls_small
 from nlp_calib.core import poses
-from nlp_calib.core.numeric import PIECE_SIZES, pieces, wrap_angle
+from nlp_calib.core.numeric import PIECE_SIZES, pieces, robust_spread, wrap_angle
 from nlp_calib.problem import ProblemFunctions
 
 
@@ -341,9 +341,8 @@ def _far_by_length(drift: Drift) -> np.ndarray:
     far = np.zeros(lengths.size, dtype=bool)
     for length in np.unique(lengths):
         on = lengths == length
-        dev = np.abs(drift.errors[on] - np.median(drift.errors[on], axis=0))
-        scale = 1.4826 * np.median(dev, axis=0)
-        far[on] = np.any(dev > FAR_OUT * np.maximum(scale, 1e-12), axis=1)
+        centre, scale = robust_spread(drift.errors[on])
+        far[on] = np.any(np.abs(drift.errors[on] - centre) > FAR_OUT * np.maximum(scale, 1e-12), axis=1)
     return far
 
 
@@ -356,7 +355,7 @@ def _steps_itself(reference: np.ndarray, a: int, b: int) -> bool:
     if d.shape[0] < 3:
         return False
     bent = d[1:-1] - 0.5 * (d[:-2] + d[2:])  # row m: interval m + 1
-    scale = 1.4826 * np.median(np.abs(bent - np.median(bent, axis=0)), axis=0)
+    scale = robust_spread(bent)[1]
     at = bent[max(a - 1, 0) : max(b - 1, 1)]
     return bool(np.any(np.abs(at) > FAR_OUT * np.maximum(scale, 1e-12)))
 

@@ -10,6 +10,13 @@ import numpy as np
 COUNTER_MODULUS = 2**32
 
 
+def robust_spread(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The columns' median and robust σ (1.4826 × the median absolute deviation: a Gaussian's σ
+    that a few outliers do not move)."""
+    centre = np.median(x, axis=0)
+    return centre, 1.4826 * np.median(np.abs(x - centre), axis=0)
+
+
 def wrap_angle(a: np.ndarray | float) -> np.ndarray:
     """Angles onto (-π, π] (encoder convention: ticks above s_max/2 are negative angles)."""
     return np.pi - np.mod(np.pi - np.asarray(a, dtype=float), 2.0 * np.pi)

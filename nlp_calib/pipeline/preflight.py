@@ -57,7 +57,7 @@ from nlp_calib.results.checks import CheckResult, Fold, LagEstimate, believed_st
 from nlp_calib.results.layout import CLOCK
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, Excitation, ParameterStatus, Preflight
 from nlp_calib.solvers.backends import Backend
-from nlp_calib.solvers.evaluation import SINGULAR_CONDITION, NormalEquations, ProblemEvaluator, is_singular
+from nlp_calib.solvers.evaluation import NormalEquations, ProblemEvaluator, is_singular, singular_share
 
 #: The closed-form start is taken on the stretch of at most this many records that turns most.
 START_RECORDS = 5000
@@ -283,9 +283,7 @@ def _stalled(d: Drive, omega: np.ndarray, x: np.ndarray, info: det.Information) 
     found = directions(info.H, sigma2, scales(d.fns, x), info.n_windows, info.motion2)
     free = not_observable(found)
     if not free.any():  # the solver's own rank test: the directions it calls singular
-        dd = np.sqrt(np.diag(info.H))
-        lam, V = np.linalg.eigh(info.H / np.outer(dd, dd))
-        free = (V[:, lam < lam[-1] / SINGULAR_CONDITION] ** 2).sum(axis=1) > IN_DIRECTION
+        free = singular_share(info.H) > IN_DIRECTION
     return Stalled(np.asarray(free))
 
 

@@ -34,14 +34,34 @@ SINGULAR_REASON = (
 )
 
 
-def scaled_condition(H: np.ndarray) -> float:
-    """Condition number of ``D^-1/2 H D^-1/2`` (``D = diag H``): insensitive to parameter units."""
+def _unit_scaled(H: np.ndarray) -> np.ndarray | None:
+    """``D^-1/2 H D^-1/2`` (``D = diag H``), insensitive to parameter units; None where ``H`` is
+    not finite or a diagonal entry is not positive."""
     d = np.diag(H)
     if np.any(~np.isfinite(H)) or np.any(d <= 0):
-        return float("inf")
+        return None
     s = 1.0 / np.sqrt(d)
-    eig = np.linalg.eigvalsh(H * s[:, None] * s[None, :])
+    return H * s[:, None] * s[None, :]
+
+
+def scaled_condition(H: np.ndarray) -> float:
+    """Condition number of ``D^-1/2 H D^-1/2`` (``D = diag H``): insensitive to parameter units."""
+    scaled = _unit_scaled(H)
+    if scaled is None:
+        return float("inf")
+    eig = np.linalg.eigvalsh(scaled)
     return float(eig[-1] / eig[0]) if eig[0] > 0 else float("inf")
+
+
+def singular_share(H: np.ndarray) -> np.ndarray:
+    """Each parameter's share ``(n,)`` of the directions :func:`is_singular` finds (the scaled
+    eigenvalues under the largest over :data:`SINGULAR_CONDITION`); 1 everywhere where ``H`` is not
+    finite or a diagonal entry is not positive."""
+    scaled = _unit_scaled(H)
+    if scaled is None:
+        return np.ones(H.shape[0])
+    lam, V = np.linalg.eigh(scaled)
+    return np.asarray((V[:, lam < lam[-1] / SINGULAR_CONDITION] ** 2).sum(axis=1))
 
 
 def is_singular(H: np.ndarray) -> bool:
