@@ -17,7 +17,7 @@ import functools
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -35,7 +35,7 @@ from nlp_calib.core.errors import DatasetError, NlpCalibError, PreflightError
 from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.models import counted_inputs
 from nlp_calib.pipeline import slip_check, units_check
-from nlp_calib.pipeline.align import MAX_RESAMPLINGS, estimate_tracker_lag, stays, white_std
+from nlp_calib.pipeline.align import MAX_RESAMPLINGS, estimate_tracker_lag, lag_held, stays, white_std
 from nlp_calib.pipeline.assemble import fit_info
 from nlp_calib.pipeline.build import (
     INTERNAL_SOLVER,
@@ -87,6 +87,9 @@ class Drive:
     #: The run's own evaluation backend, where the pre-flight judges inside a run (None: one of
     #: its own): a second would build its maps again and reset what the run set for its helpers.
     backend: Backend | None = None
+    #: Each free time offset's estimate by the run's alignment of its log, by name (the run's
+    #: return check: a lag it holds, or whose σ it widens, is so here too; empty: none known).
+    lags: Mapping[str, LagEstimate] = field(default_factory=dict)
 
 
 def _prepared(
@@ -327,7 +330,7 @@ def _as_the_run_aligns(
         return None
     x0 = np.array(d.start.x0, dtype=float)
     x0[column] = found.lag_s
-    moved = _resampled(d, x0)
+    moved = replace(_resampled(d, x0), lags={d.fns.free[column]: found})
     fitted = _fitted(moved, omega, x0)
     if not isinstance(fitted, tuple):
         return moved, fitted
@@ -605,10 +608,52 @@ class Assessment:
         std = st.std
         if self.propagated is not None:
             std = np.where(np.isfinite(st.std) & np.isfinite(self.propagated), self.propagated, st.std)
+        std = _returned(d, st.std, std)
         needed = st.reference if self.needed is None else self.needed
         # Not determined as the run's verdict says it (its observability's directions, in the
         # reference units at the start both share); weak against what the verdict needs.
         return det.believed(replace(st, std=std, std_reference=std / needed, reference=needed))
+
+
+def _returned(d: Drive, white: np.ndarray, std: np.ndarray) -> np.ndarray:
+    """``std`` with each time offset whose run's fits re-sampled off it take back only part of the
+    offset at its white σ (``white``) over that share where larger, as the run's σ
+    (:meth:`~nlp_calib.results.checks.LagEstimate.returned_std`)."""
+    out = np.array(std, dtype=float)
+    for name, est in d.lags.items():
+        i = d.fns.free.index(name)
+        wide = est.returned_std(float(white[i]))
+        if np.isfinite(wide) and np.isfinite(out[i]):
+            out[i] = max(out[i], wide)
+    return out
+
+
+def _held_lags(
+    statuses: Sequence[ParameterStatus], lags: Mapping[str, LagEstimate]
+) -> tuple[ParameterStatus, ...]:
+    """``statuses`` with each time offset the run holds with no σ (its alignment's estimate
+    pinned: on its search's edge, or not determined by the drive, :attr:`LagEstimate.loose`)
+    held as the run holds it: a caveat of the run's verdict, not a σ. One the drive leaves free
+    anyway stays not determined."""
+    out = []
+    for s in statuses:
+        est = lags.get(s.name)
+        if est is None or not est.pinned or s.status == NOT_DETERMINED:
+            out.append(s)
+            continue
+        because = lag_held(est)
+        out.append(
+            replace(
+                s,
+                status=NOT_DETERMINED,
+                std=np.inf,
+                std_reference=np.inf,
+                trades_with=(),
+                because=because,
+                held=True,
+            )
+        )
+    return tuple(out)
 
 
 def assess(
@@ -708,7 +753,7 @@ def _report(sc: Scenario, a: Assessment, t0: float, ahead: bool = True) -> Prefl
         exs.append(of_log(p.log.select(p.start, p.split), fns.sensor, p.model, steering))
     units = fit_info(one, fns).units
     standing = a.standing()
-    statuses = det.statuses(fns, standing, a.held, units, combined(exs))
+    statuses = _held_lags(det.statuses(fns, standing, a.held, units, combined(exs)), d.lags)
     loose = [s.name for s in statuses if s.status in (NOT_DETERMINED, WEAKLY) and not s.held]
     plan_ahead = None
     if loose and ahead:
