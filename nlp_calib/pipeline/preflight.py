@@ -544,7 +544,7 @@ class Assessment:
     ended: bool | Stalled = False
     #: What computes ``propagated`` and ``needed`` where they are not computed yet (None: they
     #: are): whether a run stops needs neither (:func:`stops`).
-    pending: Callable[[], tuple[np.ndarray | None, np.ndarray]] | None = None
+    pending: Callable[[], tuple[np.ndarray | None, np.ndarray, Mapping[str, LagEstimate]]] | None = None
 
     @property
     def converged(self) -> bool:
@@ -565,8 +565,9 @@ class Assessment:
         """This assessment with its σ to believe and the needed precisions computed."""
         if self.pending is None:
             return self
-        propagated, needed = self.pending()
-        return replace(self, propagated=propagated, needed=needed, pending=None)
+        propagated, needed, lags = self.pending()
+        drive = replace(self.drive, lags=lags)
+        return replace(self, drive=drive, propagated=propagated, needed=needed, pending=None)
 
     def fitted(self) -> dict[str, float] | None:
         """Every parameter where the fit converged (None: it did not)."""
@@ -686,12 +687,42 @@ def assess(
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     sigma = fitted[3] if fitted is not None else None
 
-    def pending() -> tuple[np.ndarray | None, np.ndarray]:
-        return (sigma() if sigma is not None else None), _needed(d, x)
+    def pending() -> tuple[np.ndarray | None, np.ndarray, Mapping[str, LagEstimate]]:
+        return (sigma() if sigma is not None else None), _needed(d, x), _own_lags(sc, logs, d)
 
     state = ended if isinstance(ended, Stalled) else fitted is not None
     a = Assessment(d, held, x, where, info, sigma2, noise, bounds, ended=state, pending=pending)
     return a.completed() if complete else a
+
+
+def _own_lags(sc: Scenario, logs: Sequence[Log] | None, d: Drive) -> Mapping[str, LagEstimate]:
+    """Each log's own free time offset with the estimate the run's alignment finds on that log alone
+    (several logs: the run aligns each before their joint fit, and holds, or widens the σ of, a lag
+    its return check finds loose; one log: the estimate the pre-flight fitted at). Whether the
+    pre-flight stops a run needs none (a held lag is no parameter the run cannot determine), so
+    they are searched only for the full report. ``logs``: the logs as read (None: from their
+    sources)."""
+    if len(d.parts) < 2:
+        return d.lags
+    per_log, out = sc.per_log(), {}
+    for i, own in _clocks(d):
+        if len(own) != 1:  # one offset shared by every log: no one log's alignment holds it
+            continue
+        k = own[0]
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # the run says what its alignment says
+                one, _ = drive(per_log[k], None if logs is None else [logs[k]])
+                part = one.parts[0]
+                if len(_clocks(one)) != 1:
+                    continue
+                binder = _binder(one, one.data.n_residuals)
+                est = estimate_tracker_lag(binder, one.read[0], part.start, part.stop, one.start.x0)
+        except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
+            continue
+        if est.converged:
+            out[d.fns.free[i]] = est
+    return out
 
 
 #: A pre-flight check: what the pre-flight assessed (the drive, the fit where one converged) to a
