@@ -37,7 +37,14 @@ from nlp_calib.models.base import reference_scale
 from nlp_calib.problem import ProblemFunctions, ResidualData, over_columns
 from nlp_calib.results.checks import WEAK, WeakDirection
 from nlp_calib.results.layout import CLOCK
-from nlp_calib.results.preflight import DETERMINED, NOT_DETERMINED, WEAKLY, Excitation, ParameterStatus
+from nlp_calib.results.preflight import (
+    DETERMINED,
+    HELD_AT_START,
+    NOT_DETERMINED,
+    WEAKLY,
+    Excitation,
+    ParameterStatus,
+)
 from nlp_calib.solvers import ProblemEvaluator
 from nlp_calib.symbolic.kernels import kernel_function
 
@@ -347,7 +354,7 @@ def statuses(
         ParameterStatus(
             name, NOT_DETERMINED, np.inf, np.inf, reference_scale(fns.model, fns.layout.key(name), 1.0),
             units.get(name, ""),
-            (), f"it is held at its initial value: {why}", held=True,
+            (), f"{HELD_AT_START}: {why}", held=True,
         )
         for name, why in held.items()
     ]  # fmt: skip

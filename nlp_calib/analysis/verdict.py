@@ -148,6 +148,8 @@ def _checks(run: CalibrationRun) -> list[str]:
     """What the clock and the held parameters leave open, in words."""
     out = [w for w in run.warnings if " held at its initial value" in w]
     out += lag_caveats(run.log.path, run.data.lag_estimate)
+    if run.data.lag_estimate is None:  # a joint fit's: each log's own lag, as that log's run says it
+        out += [c for path, est in run.data.lags.values() for c in lag_caveats(path, est)]
     out += steering_caveats(run)
     return out
 

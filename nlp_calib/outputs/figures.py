@@ -143,7 +143,8 @@ def lag(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
     if est is None:
         return []
     solver = run.chosen_solver()
-    clock = run.scenario.layout.block(CLOCK)
+    # The lag this estimate is of (a joint fit's view: its own log's, among every log's).
+    clock = [n for n, e in run.lag_estimates().items() if e is est] or run.scenario.layout.block(CLOCK)
     std = run.std(solver).get(clock[0], math.nan) if solver is not None and len(clock) == 1 else math.nan
     title = f"{run.scenario.name}: the tracker lag's cost profile ({Path(run.log.path).name})"
     return _write(folder, name, plots.lag_png(est, std, title))

@@ -8,6 +8,7 @@ import math
 from nlp_calib.results.preflight import (
     CHECK_DATA,
     ENOUGH,
+    HELD_AT_START,
     NOT_DETERMINED,
     NOT_ENOUGH,
     WEAK_DRIVE,
@@ -66,11 +67,16 @@ VERDICT_WORDS = {
 
 
 def _weak_words(report: Preflight) -> str:
-    """What leaves the drive weak: parameters determined only weakly, and those the run holds."""
-    weak, held = report.named(WEAKLY), report.named(NOT_DETERMINED)
+    """What leaves the drive weak: parameters determined only weakly, and those the run holds (at
+    their start, or a time offset where its fit settled)."""
+    weak = report.named(WEAKLY)
+    held = [p for p in report.parameters if p.status == NOT_DETERMINED]
+    start = [p.name for p in held if p.because.startswith(HELD_AT_START)]
+    settled = [p.name for p in held if not p.because.startswith(HELD_AT_START)]
     return "; ".join(
         [*([f"{', '.join(weak)} determined only weakly"] if weak else []),
-         *([f"{', '.join(held)} held at its start, as the run will hold it"] if held else [])]
+         *([f"{', '.join(start)} held at its start, as the run will hold it"] if start else []),
+         *([f"{', '.join(settled)} held with no σ, as the run will hold it"] if settled else [])]
     )  # fmt: skip
 
 

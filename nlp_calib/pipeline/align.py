@@ -509,3 +509,23 @@ def lag_loose(sc: Scenario, estimate: LagEstimate) -> str:
         "the wheels' speeds barely change on this drive (starts, stops and turns of different lengths "
         "determine it), or give the lag as alignment.tracker_lag"
     )
+
+
+def lag_held(estimate: LagEstimate) -> str:
+    """Why the run holds a pinned tracker lag (:attr:`LagEstimate.pinned`) with no σ, in words (the
+    pre-flight's, beside the run's warning)."""
+    at = f"{1e3 * estimate.lag_s:.1f} ms"
+    if not estimate.converged:
+        return f"no fit converged at any lag in alignment.search: the run holds it at {at} with no σ"
+    if estimate.at_edge:
+        return (
+            f"the run's fit puts it on the edge of alignment.search ({at}), held there with no σ (widen "
+            "the search, or give the lag as alignment.tracker_lag)"
+        )
+    share = 100.0 * (estimate.returned or 0.0)
+    return (
+        f"the run holds it at {at} with no σ: fits on the encoders re-sampled {RETURN_SIGMAS:g} of its "
+        f"white-noise σ either side take back {share:.0f} % of that (a determined lag, all of it); "
+        "starts, stops and turns of different lengths determine it, or give the lag as "
+        "alignment.tracker_lag"
+    )

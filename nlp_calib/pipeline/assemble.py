@@ -46,7 +46,7 @@ from nlp_calib.results.faults import FaultReport, Findings
 from nlp_calib.results.layout import KNOWN, MODEL, MOUNT, Layout
 from nlp_calib.results.mount import LogMount, SensorMount
 from nlp_calib.results.preflight import Excitation
-from nlp_calib.results.run import pinned_in
+from nlp_calib.results.run import lags_in, pinned_in
 from nlp_calib.sensors import Sensor
 from nlp_calib.solvers import solver_label
 from nlp_calib.sources import BagSource, BesideSource
@@ -527,6 +527,8 @@ def joint_run(
         excitation=_combined([run.data.excitation for run in parts]),
         # Its logs' lags pinned on their searches' edges: its checks hold them there (held_check).
         pinned=pinned_in(scenario.layout, parts),
+        # Its logs' own lags as each log's alignment found them: their return checks (std, verdict).
+        lags=lags_in(scenario.layout, parts),
     )
     checks = fit_checks(fitted, merged_findings(parts), start, figures.nominal)
     reports = {
@@ -552,10 +554,14 @@ def joint_run(
 
 def pinned_alike(run: CalibrationRun) -> CalibrationRun:
     """``run`` whose per-log views leave out the σ of every clock offset the joint fit holds without
-    one (a log's pinned lag is no log's to state a σ of: each view's σ is the joint fit's)."""
+    one (a log's pinned lag is no log's to state a σ of: each view's σ is the joint fit's), and read
+    each log's lag as the joint does (:attr:`~nlp_calib.results.run.DataInfo.lags`: a view's own
+    estimate is its own log's lag's, not the others')."""
     pinned = run.pinned()
+    lags = run.data.lags
+    views = tuple(dataclasses.replace(p, data=dataclasses.replace(p.data, lags=lags)) for p in run.logs)
     if not pinned:
-        return run
+        return dataclasses.replace(run, logs=views)
     # The joint's held check holds those lags (its σ of them is the joint fit's): each view takes it.
     held = run.checks.plugin("held")
     views = tuple(
@@ -566,7 +572,7 @@ def pinned_alike(run: CalibrationRun) -> CalibrationRun:
                 p.checks, more=(*(c for c in p.checks.more if c.name != "held"), *([held] if held else []))
             ),
         )
-        for p in run.logs
+        for p in views
     )
     return dataclasses.replace(run, logs=views)
 

@@ -229,7 +229,7 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         # The move's coordinates to the lag's seconds: one record interval of it.
         lag = (np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params)[fns.names.index(name)]
         if abs(lag) > 0:
-            response(name, estimate[name], (d, _pinned_rule(run)), move * d / lag)
+            response(name, estimate[name], (d, _pinned_rule(run, name)), move * d / lag)
     return [replace(r, shift=_without(r.shift, r.name), in_sigma=_without(r.in_sigma, r.name)) for r in found]
 
 
@@ -238,10 +238,10 @@ def _without(values: Mapping[str, float], name: str) -> dict[str, float]:
     return {n: v for n, v in values.items() if n != name}
 
 
-def _pinned_rule(run: CalibrationRun) -> str:
-    """The rule of a pinned lag's error: a lag the drive does not determine is held where its fits
-    settled, any other on its search's edge."""
-    est = run.data.lag_estimate
+def _pinned_rule(run: CalibrationRun, name: str) -> str:
+    """The rule of pinned lag ``name``'s error: a lag the drive does not determine is held where its
+    fits settled, any other on its search's edge (a joint fit's: its own log's estimate)."""
+    est = run.lag_estimates().get(name)
     return LOOSE if est is not None and est.loose else PINNED
 
 

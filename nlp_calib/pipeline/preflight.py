@@ -17,7 +17,7 @@ import functools
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -35,7 +35,7 @@ from nlp_calib.core.errors import DatasetError, NlpCalibError, PreflightError
 from nlp_calib.logs import Log, resample_encoders
 from nlp_calib.models import counted_inputs
 from nlp_calib.pipeline import slip_check, units_check
-from nlp_calib.pipeline.align import MAX_RESAMPLINGS, estimate_tracker_lag, stays, white_std
+from nlp_calib.pipeline.align import MAX_RESAMPLINGS, estimate_tracker_lag, lag_held, stays, white_std
 from nlp_calib.pipeline.assemble import fit_info
 from nlp_calib.pipeline.build import (
     INTERNAL_SOLVER,
@@ -87,6 +87,9 @@ class Drive:
     #: The run's own evaluation backend, where the pre-flight judges inside a run (None: one of
     #: its own): a second would build its maps again and reset what the run set for its helpers.
     backend: Backend | None = None
+    #: Each free time offset's estimate by the run's alignment of its log, by name (the run's
+    #: return check: a lag it holds, or whose σ it widens, is so here too; empty: none known).
+    lags: Mapping[str, LagEstimate] = field(default_factory=dict)
 
 
 def _prepared(
@@ -327,7 +330,7 @@ def _as_the_run_aligns(
         return None
     x0 = np.array(d.start.x0, dtype=float)
     x0[column] = found.lag_s
-    moved = _resampled(d, x0)
+    moved = replace(_resampled(d, x0), lags={d.fns.free[column]: found})
     fitted = _fitted(moved, omega, x0)
     if not isinstance(fitted, tuple):
         return moved, fitted
@@ -541,7 +544,7 @@ class Assessment:
     ended: bool | Stalled = False
     #: What computes ``propagated`` and ``needed`` where they are not computed yet (None: they
     #: are): whether a run stops needs neither (:func:`stops`).
-    pending: Callable[[], tuple[np.ndarray | None, np.ndarray]] | None = None
+    pending: Callable[[], tuple[np.ndarray | None, np.ndarray, Mapping[str, LagEstimate]]] | None = None
 
     @property
     def converged(self) -> bool:
@@ -562,8 +565,9 @@ class Assessment:
         """This assessment with its σ to believe and the needed precisions computed."""
         if self.pending is None:
             return self
-        propagated, needed = self.pending()
-        return replace(self, propagated=propagated, needed=needed, pending=None)
+        propagated, needed, lags = self.pending()
+        drive = replace(self.drive, lags=lags)
+        return replace(self, drive=drive, propagated=propagated, needed=needed, pending=None)
 
     def fitted(self) -> dict[str, float] | None:
         """Every parameter where the fit converged (None: it did not)."""
@@ -605,10 +609,52 @@ class Assessment:
         std = st.std
         if self.propagated is not None:
             std = np.where(np.isfinite(st.std) & np.isfinite(self.propagated), self.propagated, st.std)
+        std = _returned(d, st.std, std)
         needed = st.reference if self.needed is None else self.needed
         # Not determined as the run's verdict says it (its observability's directions, in the
         # reference units at the start both share); weak against what the verdict needs.
         return det.believed(replace(st, std=std, std_reference=std / needed, reference=needed))
+
+
+def _returned(d: Drive, white: np.ndarray, std: np.ndarray) -> np.ndarray:
+    """``std`` with each time offset whose run's fits re-sampled off it take back only part of the
+    offset at its white σ (``white``) over that share where larger, as the run's σ
+    (:meth:`~nlp_calib.results.checks.LagEstimate.returned_std`)."""
+    out = np.array(std, dtype=float)
+    for name, est in d.lags.items():
+        i = d.fns.free.index(name)
+        wide = est.returned_std(float(white[i]))
+        if np.isfinite(wide) and np.isfinite(out[i]):
+            out[i] = max(out[i], wide)
+    return out
+
+
+def _held_lags(
+    statuses: Sequence[ParameterStatus], lags: Mapping[str, LagEstimate]
+) -> tuple[ParameterStatus, ...]:
+    """``statuses`` with each time offset the run holds with no σ (its alignment's estimate
+    pinned: on its search's edge, or not determined by the drive, :attr:`LagEstimate.loose`)
+    held as the run holds it: a caveat of the run's verdict, not a σ. One the drive leaves free
+    anyway stays not determined."""
+    out = []
+    for s in statuses:
+        est = lags.get(s.name)
+        if est is None or not est.pinned or s.status == NOT_DETERMINED:
+            out.append(s)
+            continue
+        because = lag_held(est)
+        out.append(
+            replace(
+                s,
+                status=NOT_DETERMINED,
+                std=np.inf,
+                std_reference=np.inf,
+                trades_with=(),
+                because=because,
+                held=True,
+            )
+        )
+    return tuple(out)
 
 
 def assess(
@@ -641,12 +687,42 @@ def assess(
     bounds = range_std(d.start.lower, d.start.upper, fns.n_free)
     sigma = fitted[3] if fitted is not None else None
 
-    def pending() -> tuple[np.ndarray | None, np.ndarray]:
-        return (sigma() if sigma is not None else None), _needed(d, x)
+    def pending() -> tuple[np.ndarray | None, np.ndarray, Mapping[str, LagEstimate]]:
+        return (sigma() if sigma is not None else None), _needed(d, x), _own_lags(sc, logs, d)
 
     state = ended if isinstance(ended, Stalled) else fitted is not None
     a = Assessment(d, held, x, where, info, sigma2, noise, bounds, ended=state, pending=pending)
     return a.completed() if complete else a
+
+
+def _own_lags(sc: Scenario, logs: Sequence[Log] | None, d: Drive) -> Mapping[str, LagEstimate]:
+    """Each log's own free time offset with the estimate the run's alignment finds on that log alone
+    (several logs: the run aligns each before their joint fit, and holds, or widens the σ of, a lag
+    its return check finds loose; one log: the estimate the pre-flight fitted at). Whether the
+    pre-flight stops a run needs none (a held lag is no parameter the run cannot determine), so
+    they are searched only for the full report. ``logs``: the logs as read (None: from their
+    sources)."""
+    if len(d.parts) < 2:
+        return d.lags
+    per_log, out = sc.per_log(), {}
+    for i, own in _clocks(d):
+        if len(own) != 1:  # one offset shared by every log: no one log's alignment holds it
+            continue
+        k = own[0]
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # the run says what its alignment says
+                one, _ = drive(per_log[k], None if logs is None else [logs[k]])
+                part = one.parts[0]
+                if len(_clocks(one)) != 1:
+                    continue
+                binder = _binder(one, one.data.n_residuals)
+                est = estimate_tracker_lag(binder, one.read[0], part.start, part.stop, one.start.x0)
+        except (NlpCalibError, np.linalg.LinAlgError, ValueError, ArithmeticError):
+            continue
+        if est.converged:
+            out[d.fns.free[i]] = est
+    return out
 
 
 #: A pre-flight check: what the pre-flight assessed (the drive, the fit where one converged) to a
@@ -708,7 +784,7 @@ def _report(sc: Scenario, a: Assessment, t0: float, ahead: bool = True) -> Prefl
         exs.append(of_log(p.log.select(p.start, p.split), fns.sensor, p.model, steering))
     units = fit_info(one, fns).units
     standing = a.standing()
-    statuses = det.statuses(fns, standing, a.held, units, combined(exs))
+    statuses = _held_lags(det.statuses(fns, standing, a.held, units, combined(exs)), d.lags)
     loose = [s.name for s in statuses if s.status in (NOT_DETERMINED, WEAKLY) and not s.held]
     plan_ahead = None
     if loose and ahead:

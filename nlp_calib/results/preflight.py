@@ -23,6 +23,10 @@ DETERMINED = "determined"
 WEAKLY = "weakly"
 NOT_DETERMINED = "not"
 
+#: Why a parameter the run holds at its start is held (a pinned time offset is held where the run's
+#: fit settled: its own words).
+HELD_AT_START = "it is held at its initial value"
+
 #: The pre-flight's verdicts, from best to worst, and the exit code each gives.
 ENOUGH = "enough"
 WEAK_DRIVE = "weak"
@@ -110,7 +114,8 @@ class ParameterStatus:
     unit: str
     trades_with: tuple[str, ...]
     because: str
-    #: Held at its initial value by the run (the model says the drive cannot determine it at all).
+    #: Held by the run with no σ: at its initial value (the model says the drive cannot determine it
+    #: at all), or a time offset where the run's fit settled (its alignment's estimate pinned).
     held: bool = False
 
     def words(self) -> str:

@@ -169,6 +169,10 @@ class DataInfo:
     #: How the fitted records excite the robot (the pre-flight's reading; several logs' combined),
     #: which the verdict's advice reads (no "turn both ways" to a drive that does).
     excitation: Excitation | None = None
+    #: On a joint fit and its per-log views: each log's own time offset by name, with its log's
+    #: path and the log's alignment estimate (its return check, whether pinned), which the joint
+    #: reads as one log's run reads :attr:`lag_estimate` (empty: one log's run).
+    lags: Mapping[str, tuple[str, LagEstimate]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -378,13 +382,20 @@ class CalibrationRun:
         (:meth:`Checks.believed`)."""
         u = self.reports[solver].uncertainty
         std = dict(zip(u.names, map(float, self.checks.believed(u, slip, held))))
-        est = None if self.logs else self.data.lag_estimate
-        if est is not None:
-            for n in (n for n in self.scenario.layout.block(CLOCK) if n in u.names):
+        for n, est in self.lag_estimates().items():
+            if n in u.names:
                 # A lag its fits return to only in part: its white σ over that share, where larger.
                 wide = est.returned_std(float(u.std[u.names.index(n)]))
                 std[n] = max(std[n], wide) if np.isfinite(wide) else std[n]
         return {n: float("nan") if n in self.pinned() else s for n, s in std.items()}
+
+    def lag_estimates(self) -> dict[str, LagEstimate]:
+        """Each time offset's alignment estimate by name: a joint fit's (and its views') each log's
+        own (:attr:`DataInfo.lags`), one log's run its one estimate."""
+        if self.data.lags:
+            return {n: est for n, (_, est) in self.data.lags.items()}
+        est = None if self.logs else self.data.lag_estimate
+        return {} if est is None else dict.fromkeys(self.scenario.layout.block(CLOCK), est)
 
     def pinned(self) -> tuple[str, ...]:
         """The time offsets pinned on the edge of their search (the bound's value: the data put
@@ -506,6 +517,18 @@ def _needed_of(gradient: Mapping[str, float], needed: Mapping[str, float]) -> fl
     if not gradient or any(n not in needed for n in gradient):
         return 0.0
     return math.sqrt(sum((g * needed[n]) ** 2 for n, g in gradient.items()))
+
+
+def lags_in(layout: Layout, parts: Sequence[CalibrationRun]) -> dict[str, tuple[str, LagEstimate]]:
+    """Each log's own time offset in a joint fit's ``layout`` with its log's path and that log's
+    alignment estimate, from its logs' runs ``parts`` (:attr:`DataInfo.lags`)."""
+    return {
+        n: (part.log.path, part.data.lag_estimate)
+        for i, part in enumerate(parts)
+        if part.data.lag_estimate is not None
+        for n in layout.block(CLOCK, log=i)
+        if layout.param(n).log == i
+    }
 
 
 def pinned_in(layout: Layout, parts: Sequence[CalibrationRun]) -> tuple[str, ...]:
