@@ -3,6 +3,7 @@
     nice -n 10 python3 benchmarks/lag_coverage.py --first 700 --seeds 3          # study set
     nice -n 10 python3 benchmarks/lag_coverage.py --first 800 --seeds 3          # confirmation set
     nice -n 10 python3 benchmarks/lag_coverage.py --kinds camera lidar --first 700 --seeds 2
+    nice -n 10 python3 benchmarks/lag_coverage.py --kinds tracker --first 900 --seeds 16 --noise-scale 0.1
 
 Kinds: ``tracker`` (a simulated text log of each of ``--models``: s-curves, the tracker's stamps
 late by 0–30 ms, the scenario a user writes first with ``tracker_lag: auto``), ``camera`` (a
@@ -53,6 +54,9 @@ LAGS = ("tracker_lag", "gyro_lag")
 #: ``--every-model``: every model on each seed's drive (as ``gate_study.py`` does), to show that
 #: such logs are not independent draws.
 EVERY_MODEL = False
+#: ``--noise-scale``: the text logs' tracker noise in the simulator's (0.1: a tracker ten times
+#: finer, where the re-sampling's bias across a start from rest is as large as the lag's σ).
+NOISE_SCALE = 1.0
 
 
 def _run(doc: dict[str, Any], name: str, folder: Path) -> CalibrationRun:
@@ -85,7 +89,11 @@ def tracker(folder: Path, seed: int, models: list[str]) -> list[Row]:
             seed=seed,
             model=model,
             drive=DriveShape(trajectory="s_curves"),
-            tracker=TrackerSim(latency_s=lag),
+            tracker=TrackerSim(
+                latency_s=lag,
+                tracker_noise_xy=NOISE_SCALE * TrackerSim().tracker_noise_xy,
+                tracker_noise_theta=NOISE_SCALE * TrackerSim().tracker_noise_theta,
+            ),
         )
         log, _ = simulate_to_file(opts, folder / f"{model}_{seed}.txt")
         doc: dict[str, Any] = {"dataset": str(log), "model": model, "initial_guess": "from_file"}
@@ -241,9 +249,10 @@ def main() -> int:
     ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=list(KINDS))
     ap.add_argument("--models", nargs="+", default=["tricycle", "diff_drive", "car_like", "skid_steer"])
     ap.add_argument("--every-model", action="store_true", help="tracker: every model on each seed")
+    ap.add_argument("--noise-scale", type=float, default=1.0, help="tracker: its noise, in the simulator's")
     args = ap.parse_args()
-    global EVERY_MODEL
-    EVERY_MODEL = args.every_model
+    global EVERY_MODEL, NOISE_SCALE
+    EVERY_MODEL, NOISE_SCALE = args.every_model, args.noise_scale
     rows: list[Row] = []
     with tempfile.TemporaryDirectory() as tmp:
         for kind in args.kinds:
