@@ -86,6 +86,12 @@ class WindowClock:
         return out
 
 
+#: Windows :meth:`ResidualData.write_data` writes at a time: their columns of the column-major data
+#: stay in the processor's cache while each row is written (a row over every window went through
+#: the whole matrix's memory, a dozen times a write).
+WRITE_BLOCK = 4096
+
+
 @dataclass(frozen=True)
 class ResidualData:
     """The windows of one fit and the data they are evaluated on (records numbered as above).
@@ -148,34 +154,65 @@ class ResidualData:
     def n_records(self) -> int:
         return int(self.T_world_sensor.shape[0])
 
+    @property
+    def data_rows(self) -> int:
+        """The rows of :meth:`data`."""
+        return self.z.shape[0] + self._n_clock_rows() + 1
+
     def data(self) -> np.ndarray:
         """The per-window ``data = [z, clock, w]`` matrix, column-major (see
         :attr:`ProblemFunctions.clock_rows`)."""
-        clock = self.clock_rows()
-        rows, extra = self.z.shape[0], clock.shape[0]
-        out = np.empty((rows + extra + 1, self.n_residuals), order="F")
-        out[0:rows] = self.z
-        out[rows : rows + extra] = clock
-        out[rows + extra] = 1.0
+        out = np.empty((self.data_rows, self.n_residuals), order="F")
+        self.write_data(out)
         return out
+
+    def write_data(self, out: np.ndarray, *, clock_only: bool = False) -> None:
+        """:meth:`data` written into the first :attr:`n_residuals` columns of ``out`` (column-major),
+        :data:`WRITE_BLOCK` windows at a time, each row straight from its source; ``clock_only``:
+        the clock rows alone, where ``out`` holds these windows' ``z`` and weights already (the
+        same windows on re-sampled inputs)."""
+        n, rows = self.n_residuals, self.z.shape[0]
+        clock = slice(rows, rows + self._n_clock_rows())
+        for lo in range(0, n, WRITE_BLOCK):
+            cols = slice(lo, min(n, lo + WRITE_BLOCK))
+            if not clock_only:
+                out[:rows, cols] = self.z[:, cols]
+                out[-1, cols] = 1.0
+            self._write_clock(out[clock, cols], cols)
 
     def log_of(self, records: np.ndarray) -> np.ndarray:
         """The index of the log each of ``records`` belongs to."""
         return np.searchsorted(np.asarray(self.offsets), records, side="right") - 1
 
+    def _n_clock_rows(self) -> int:
+        if self.clock is None:
+            return 0
+        return len(self.logs) + (2 * self.clock.rates.shape[0] + 1 if self.clock.lags else 0)
+
     def clock_rows(self) -> np.ndarray:
         """Each window's clock data (``(0, n)`` without a time offset): the rates at its first and
         last record, its log's re-sampled offset and which log it belongs to."""
+        out = np.empty((self._n_clock_rows(), self.n_residuals))
+        self._write_clock(out, slice(None))
+        return out
+
+    def _write_clock(self, out: np.ndarray, cols: slice) -> None:
+        """:meth:`clock_rows`' columns ``cols`` written into ``out``, row by row."""
         if self.clock is None:
-            return np.zeros((0, self.n_residuals))
-        which = self.log_of(self.starts)
-        select = np.zeros((len(self.logs), self.n_residuals))
-        select[which, np.arange(self.n_residuals)] = 1.0
+            return
+        starts = self.starts[cols]
+        which = self.log_of(starts)
+        select = out[out.shape[0] - len(self.logs) :]
+        select[:] = 0.0
+        select[which, np.arange(starts.size)] = 1.0
         if not self.clock.lags:
-            return select  # a mount per log: which log alone
-        rates = self.clock.rates
-        resampled = self.clock.resampled(which, self.z)[None, :]
-        return np.vstack([rates[:, self.starts], rates[:, self.stops], resampled, select])
+            return  # a mount per log: which log alone
+        rates, stops = self.clock.rates, self.stops[cols]
+        k = rates.shape[0]
+        for i in range(k):
+            out[i] = rates[i, starts]
+            out[k + i] = rates[i, stops]
+        out[2 * k] = self.clock.resampled(which, self.z[:, cols])
 
     def interval_counts(self, flagged: np.ndarray) -> np.ndarray:
         """How many of each window's intervals ``flagged`` (a mask over the intervals) marks."""

@@ -18,7 +18,7 @@ from typing import Generic, TypeVar
 import numpy as np
 
 from nlp_calib.problem import ORDER, SUMMED, WINDOW_INPUTS, ProblemFunctions, ResidualData, unpack_upper
-from nlp_calib.solvers.backends import INTERPRETED, Backend, Buffered, Request, pad_columns
+from nlp_calib.solvers.backends import INTERPRETED, Backend, Buffered, Request
 from nlp_calib.solvers.blocks import BlockMap, stream
 from nlp_calib.solvers.motion import WindowMotion
 
@@ -238,6 +238,16 @@ class _Last:
     residuals: tuple[bytes, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] | None = None
 
 
+def _fill(window_data: np.ndarray, data: ResidualData, clock_only: bool = False) -> None:
+    """``data``'s per-window data written into ``window_data``, padded as :func:`pad_columns` pads
+    it (``clock_only``: :meth:`ResidualData.write_data`'s)."""
+    n = data.n_residuals
+    data.write_data(window_data, clock_only=clock_only)
+    if window_data.shape[1] > n:
+        window_data[:, n:] = window_data[:, :1] if n else 0.0
+        window_data[-1, n:] = 0.0
+
+
 def _same_windows(a: ResidualData, b: ResidualData) -> bool:
     """Whether ``b`` has ``a``'s windows (their records and tracker motions) and layout, its
     inputs and clock data aside."""
@@ -301,7 +311,8 @@ class ProblemEvaluator:
     def _write_inputs(self, windows: _Windows) -> None:
         """The bound data's inputs and per-window data written into ``windows``' buffers."""
         windows.motion.set_inputs(self._data.inputs)
-        windows.window_data[:] = pad_columns(self._data.data(), windows.n_padded)
+        # The same windows: their ``z`` and weights are in the buffer already.
+        _fill(windows.window_data, self._data, clock_only=True)
 
     def unbind(self, name: str) -> None:
         """Let go of the Function ``name``'s bound buffers (its outputs over every window) until its
@@ -323,9 +334,11 @@ class ProblemEvaluator:
         if self._windows is None:
             data = self._data
             n_padded = self.backend.padded(data.n_residuals)
+            window_data = np.empty((data.data_rows, n_padded), order="F")
+            _fill(window_data, data)
             self._windows = _Windows(
                 n_padded=n_padded,
-                window_data=pad_columns(data.data(), n_padded),
+                window_data=window_data,
                 motion=WindowMotion(self.fns, self.backend, data, n_padded),
             )
         return self._windows
