@@ -18,7 +18,7 @@ from typing import Generic, TypeVar
 import numpy as np
 
 from nlp_calib.problem import ORDER, SUMMED, WINDOW_INPUTS, ProblemFunctions, ResidualData, unpack_upper
-from nlp_calib.solvers.backends import INTERPRETED, Backend, Buffered, Request
+from nlp_calib.solvers.backends import INTERPRETED, Backend, Buffered, Request, pad_in_place
 from nlp_calib.solvers.blocks import BlockMap, stream
 from nlp_calib.solvers.motion import WindowMotion
 
@@ -241,11 +241,8 @@ class _Last:
 def _fill(window_data: np.ndarray, data: ResidualData, clock_only: bool = False) -> None:
     """``data``'s per-window data written into ``window_data``, padded as :func:`pad_columns` pads
     it (``clock_only``: :meth:`ResidualData.write_data`'s)."""
-    n = data.n_residuals
     data.write_data(window_data, clock_only=clock_only)
-    if window_data.shape[1] > n:
-        window_data[:, n:] = window_data[:, :1] if n else 0.0
-        window_data[-1, n:] = 0.0
+    pad_in_place(window_data, data.n_residuals)
 
 
 def _same_windows(a: ResidualData, b: ResidualData) -> bool:

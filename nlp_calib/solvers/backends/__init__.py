@@ -10,6 +10,7 @@ from nlp_calib.solvers.backends.base import (
     Buffered,
     Request,
     pad_columns,
+    pad_in_place,
 )
 from nlp_calib.solvers.backends.compiled import CompiledBackend, make_compiled_backend
 
@@ -31,4 +32,5 @@ __all__ = [
     "Request",
     "make_backend",
     "pad_columns",
+    "pad_in_place",
 ]

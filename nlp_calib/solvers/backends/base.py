@@ -256,8 +256,13 @@ def pad_columns(columns: np.ndarray, n_pad: int) -> np.ndarray:
     rows, n = columns.shape
     out = np.empty((rows, n_pad), order="F")
     out[:, :n] = columns
-    if n_pad > n:
-        filler = columns[:, :1] if n else np.zeros((rows, 1))
-        out[:, n:] = filler
-        out[-1, n:] = 0.0
+    pad_in_place(out, n)
     return out
+
+
+def pad_in_place(out: np.ndarray, n: int) -> None:
+    """``out``'s columns past its first ``n`` made zero-weight copies of its first column (zeros
+    where ``n`` is 0), as :func:`pad_columns` pads."""
+    if out.shape[1] > n:
+        out[:, n:] = out[:, :1] if n else 0.0
+        out[-1, n:] = 0.0
