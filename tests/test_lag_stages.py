@@ -13,13 +13,18 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import write_sim
 
 from nlp_calib.outputs.handoff import calibration_dict, write_calibration
 from nlp_calib.outputs.terminal import lag_lines
+from nlp_calib.core.errors import ProblemError
+from nlp_calib.models import get_model
 from nlp_calib.pipeline import Calibration, Scenario, scenario_from_mapping
+from nlp_calib.pipeline.build import build_problem
 from nlp_calib.pipeline.preflight import assess, preflight
 from nlp_calib.pipeline.stored import read_calibration
+from nlp_calib.problem import ProblemSpec, build
 from nlp_calib.results import CalibrationRun
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, ParameterStatus, Preflight
 from nlp_calib.results.layout import FREE, HELD
@@ -130,3 +135,18 @@ def test_every_file_states_a_lag_the_run_holds_held(tmp_path: Path) -> None:
     assert _laid(doc, LAG) == HELD and _laid(doc, "baseline") == FREE
     assert "not determined by this drive" in doc["held"][LAG] and LAG in doc["not_determined"]
     assert LAG in read_calibration(path).uncalibrated()
+
+
+def test_no_problem_fits_one_lag_for_several_logs(tmp_path: Path) -> None:
+    """A lag shared by several logs has no return check (each log's alignment re-samples that log
+    at its own lag), so none is fitted: a joint fit's lag is each log's own, each checked, and a
+    problem of one offset over several logs is refused (before: built, its lag shared unchecked)."""
+    logs = [tmp_path / "a.txt", tmp_path / "b.txt"]
+    sc = _scenario(tmp_path, logs, "diff_drive")
+    layout = build_problem(sc, get_model("diff_drive"), n_logs=2).layout
+    assert [(p.name, p.log) for p in layout.parameters if p.block == "clock"] == [
+        ("tracker_lag_1", 0),
+        ("tracker_lag_2", 1),
+    ]
+    with pytest.raises(ProblemError, match="one per log"):
+        build(get_model("diff_drive"), ProblemSpec(lags=1, logs=2))
