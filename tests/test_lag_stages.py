@@ -16,18 +16,18 @@ import numpy as np
 import pytest
 from conftest import write_sim
 
-from nlp_calib.outputs.handoff import calibration_dict, write_calibration
-from nlp_calib.outputs.terminal import lag_lines
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.models import get_model
+from nlp_calib.outputs.handoff import calibration_dict, write_calibration
+from nlp_calib.outputs.terminal import lag_lines
 from nlp_calib.pipeline import Calibration, Scenario, scenario_from_mapping
 from nlp_calib.pipeline.build import build_problem
 from nlp_calib.pipeline.preflight import assess, preflight
 from nlp_calib.pipeline.stored import read_calibration
 from nlp_calib.problem import ProblemSpec, build
 from nlp_calib.results import CalibrationRun
-from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, ParameterStatus, Preflight
 from nlp_calib.results.layout import FREE, HELD
+from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, ParameterStatus, Preflight
 from nlp_calib.results.run import GOOD
 
 LAG = "tracker_lag"
