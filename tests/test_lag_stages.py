@@ -9,6 +9,7 @@ lag "pinned on the edge of alignment.search"; the pre-flight of the two logs cal
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from pathlib import Path
 
@@ -150,3 +151,18 @@ def test_no_problem_fits_one_lag_for_several_logs(tmp_path: Path) -> None:
     ]
     with pytest.raises(ProblemError, match="one per log"):
         build(get_model("diff_drive"), ProblemSpec(lags=1, logs=2))
+
+
+def test_a_lag_pinned_on_its_search_edge_is_held_in_calibration_yaml(tmp_path: Path) -> None:
+    """S-curves on time searched over [50, 100] ms: the lag pinned at 50 ms, no σ; before, its
+    layout said ``status: free``."""
+    log = write_sim(
+        tmp_path, "curves.txt", model="diff_drive", records=1200, seed=9901, trajectory="s_curves"
+    )
+    sc = _scenario(tmp_path, [log], "diff_drive")
+    run = _run(sc.with_options(alignment=dataclasses.replace(sc.log.alignment, search=(0.05, 0.1))))
+    est = run.data.lag_estimate
+    assert est is not None and est.at_edge and run.pinned() == (LAG,)
+    doc = calibration_dict(run)
+    assert doc is not None and doc["std"][LAG] is None and _laid(doc, LAG) == HELD
+    assert doc["held"][LAG].startswith("pinned on the edge of alignment.search")
