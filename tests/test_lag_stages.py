@@ -9,16 +9,25 @@ lag "pinned on the edge of alignment.search"; the pre-flight of the two logs cal
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import write_sim
 
+from nlp_calib.core.errors import ProblemError
+from nlp_calib.models import get_model
+from nlp_calib.outputs.handoff import calibration_dict, write_calibration
 from nlp_calib.outputs.terminal import lag_lines
 from nlp_calib.pipeline import Calibration, Scenario, scenario_from_mapping
+from nlp_calib.pipeline.build import build_problem
 from nlp_calib.pipeline.preflight import assess, preflight
+from nlp_calib.pipeline.stored import read_calibration
+from nlp_calib.problem import ProblemSpec, build
 from nlp_calib.results import CalibrationRun
+from nlp_calib.results.layout import FREE, HELD
 from nlp_calib.results.preflight import NOT_DETERMINED, WEAKLY, ParameterStatus, Preflight
 from nlp_calib.results.run import GOOD
 
@@ -40,6 +49,13 @@ def _run(sc: Scenario) -> CalibrationRun:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return Calibration(sc).run()
+
+
+def _laid(doc: dict[str, object], name: str) -> str:
+    """The status calibration.yaml's ``layout`` gives parameter ``name``."""
+    layout = doc["layout"]
+    assert isinstance(layout, dict)
+    return next(str(p["status"]) for p in layout["parameters"] if p["name"] == name)
 
 
 def _status(report: Preflight, name: str) -> ParameterStatus:
@@ -94,7 +110,59 @@ def test_a_joint_fit_and_its_preflight_read_each_logs_return_check(tmp_path: Pat
     for view in run.logs:
         words = next(w for w in lag_lines(view) if w.startswith("tracker_lag_2"))
         assert "not determined by this drive" in words, words
+    # The joint's calibration.yaml holds the circles' lag alone, as its std and held_values do.
+    doc = calibration_dict(run)
+    assert doc is not None and doc["std"]["tracker_lag_2"] is None and doc["std"]["tracker_lag_1"] > 0
+    assert (_laid(doc, "tracker_lag_1"), _laid(doc, "tracker_lag_2")) == (FREE, HELD)
+    assert set(doc["held"]) == {"tracker_lag_2"}, doc["held"]
     report = preflight(sc)
     second = _status(report, "tracker_lag_2")
     assert second.status == NOT_DETERMINED and second.held, second
     assert report.exit_code == 3
+
+
+def test_every_file_states_a_lag_the_run_holds_held(tmp_path: Path) -> None:
+    """Before: calibration.yaml gave the held lag ``std: null`` and listed it in ``held_values``,
+    but its layout said ``status: free``, its ``held:`` and ``not_determined:`` left it out, and
+    ``nlp-calib check`` read it back as calibrated."""
+    log = write_sim(
+        tmp_path, "circles.txt", model="diff_drive", records=3000, seed=9901, trajectory="circles"
+    )
+    run = _run(_scenario(tmp_path, [log], "diff_drive"))
+    assert run.pinned() == (LAG,)
+    (path,) = write_calibration(run, tmp_path / "cal", "calibration.yaml")
+    doc = calibration_dict(run)
+    assert doc is not None and doc["std"][LAG] is None and LAG in doc["held_values"]
+    assert _laid(doc, LAG) == HELD and _laid(doc, "baseline") == FREE
+    assert "not determined by this drive" in doc["held"][LAG] and LAG in doc["not_determined"]
+    assert LAG in read_calibration(path).uncalibrated()
+
+
+def test_no_problem_fits_one_lag_for_several_logs(tmp_path: Path) -> None:
+    """A lag shared by several logs has no return check (each log's alignment re-samples that log
+    at its own lag), so none is fitted: a joint fit's lag is each log's own, each checked, and a
+    problem of one offset over several logs is refused (before: built, its lag shared unchecked)."""
+    logs = [tmp_path / "a.txt", tmp_path / "b.txt"]
+    sc = _scenario(tmp_path, logs, "diff_drive")
+    layout = build_problem(sc, get_model("diff_drive"), n_logs=2).layout
+    assert [(p.name, p.log) for p in layout.parameters if p.block == "clock"] == [
+        ("tracker_lag_1", 0),
+        ("tracker_lag_2", 1),
+    ]
+    with pytest.raises(ProblemError, match="one per log"):
+        build(get_model("diff_drive"), ProblemSpec(lags=1, logs=2))
+
+
+def test_a_lag_pinned_on_its_search_edge_is_held_in_calibration_yaml(tmp_path: Path) -> None:
+    """S-curves on time searched over [50, 100] ms: the lag pinned at 50 ms, no σ; before, its
+    layout said ``status: free``."""
+    log = write_sim(
+        tmp_path, "curves.txt", model="diff_drive", records=1200, seed=9901, trajectory="s_curves"
+    )
+    sc = _scenario(tmp_path, [log], "diff_drive")
+    run = _run(sc.with_options(alignment=dataclasses.replace(sc.log.alignment, search=(0.05, 0.1))))
+    est = run.data.lag_estimate
+    assert est is not None and est.at_edge and run.pinned() == (LAG,)
+    doc = calibration_dict(run)
+    assert doc is not None and doc["std"][LAG] is None and _laid(doc, LAG) == HELD
+    assert doc["held"][LAG].startswith("pinned on the edge of alignment.search")

@@ -59,7 +59,7 @@ def calibration_dict(run: CalibrationRun) -> dict[str, Any] | None:
         "tool": {"name": "nlp_calib", "version": __version__},
         # Every parameter below in its block (model, mount, clock), with its log, unit, status,
         # range and needed precision: what `nlp-calib check` reads the file by.
-        "layout": {"version": LAYOUT_VERSION, **codec.to_data(sc.layout)},
+        "layout": {"version": LAYOUT_VERSION, **codec.to_data(run.stated_layout())},
         "scenario": {"name": sc.name, "path": sc.path},
         "model": doc["model"],
         "dataset": {
@@ -180,8 +180,9 @@ def _noise_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
 
 def _held_entry(run: CalibrationRun, solver: str) -> dict[str, Any]:
     """``held:``: each parameter the fit held (given under ``known:``, held under ``fixed:``, or
-    held at its guess because the drive cannot determine it), with why; none: no entry."""
-    held = run.reports[solver].held
+    held at its guess because the drive cannot determine it, or a time offset the run holds with
+    no σ), with why; none: no entry."""
+    held = run.held_in(solver)
     return {"held": dict(held)} if held else {}
 
 

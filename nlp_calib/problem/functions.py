@@ -114,6 +114,10 @@ class ProblemSpec:
         check_range("mounts", self.mounts, MOUNTS)
         if self.mounts > 1 and self.lags and self.lags != self.mounts:
             raise ProblemError(f"{self.mounts} mounts (one per log) but {self.lags} time offsets")
+        # One offset fitted for several logs would have no return check (the alignment re-samples
+        # one log at its own lag): a shared clock's lag is given (``alignment.tracker_lag: 0.03``).
+        if self.logs > 1 and self.lags not in (0, self.logs):
+            raise ProblemError(f"{self.logs} logs but {self.lags} time offsets (one per log, or none)")
         check_range("horizon", self.horizon, HORIZON)
         check_choice("integration", self.integration, INTEGRATIONS)
         check_choice("kernel", self.kernel, KERNELS)

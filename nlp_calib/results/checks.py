@@ -278,6 +278,22 @@ class LagEstimate:
         held where the fits settled)."""
         return self.at_edge or not self.converged or self.loose
 
+    @property
+    def held_why(self) -> str:
+        """Why a :attr:`pinned` lag is held with no σ, as the hand-off files state it ("" when it
+        is fitted)."""
+        if not self.converged:
+            return "held where the encoders were read: no fit converged at any lag in alignment.search"
+        if self.at_edge:
+            return "pinned on the edge of alignment.search: the data put the lag there or beyond"
+        if self.loose:
+            share = 100.0 * (self.returned or 0.0)
+            return (
+                "not determined by this drive: held where the fits settled (fits re-sampled off it "
+                f"take back {share:.0f} % of the offset)"
+            )
+        return ""
+
     def as_dict(self) -> dict[str, object]:
         return {
             "lag_s": self.lag_s,

@@ -38,7 +38,7 @@ from nlp_calib.results.checks import (
 from nlp_calib.results.faults import Findings
 from nlp_calib.results.figures import TrajectoryMetrics
 from nlp_calib.results.handoff import ControllerParams
-from nlp_calib.results.layout import CLOCK, KNOWN, Layout
+from nlp_calib.results.layout import CLOCK, FREE, HELD, KNOWN, Layout
 from nlp_calib.results.mount import LogMount, SensorMount
 from nlp_calib.results.preflight import Excitation, Plan
 from nlp_calib.results.series import OdometryTrack, RunSeries
@@ -444,12 +444,30 @@ class CalibrationRun:
             return None
         return self.chosen_solver()
 
+    def held_lags(self) -> dict[str, str]:
+        """Each time offset the run holds with no σ (:meth:`pinned`), with why: every file the run
+        writes states it held, not free."""
+        estimates = self.lag_estimates()
+        return {n: estimates[n].held_why if n in estimates else "held with no σ" for n in self.pinned()}
+
+    def held_in(self, solver: str) -> dict[str, str]:
+        """What ``solver``'s estimate holds rather than determines, with why: what its fit held
+        (:attr:`SolverReport.held`) and the time offsets the run holds (:meth:`held_lags`)."""
+        return {**self.held_lags(), **self.reports[solver].held}
+
+    def stated_layout(self) -> Layout:
+        """The layout as the run's files state it: each time offset the run holds (:meth:`pinned`)
+        held, not free (the fit frees it; the run gives it no σ)."""
+        layout = self.scenario.layout
+        return layout.with_status({n: HELD for n in self.pinned() if layout.param(n).status == FREE})
+
     def handoff_status(self, solver: str) -> dict[str, tuple[str, str]]:
         """Each parameter of ``solver``'s estimate with its standing in every hand-off file and
         why: :data:`GIVEN` (``known:``, ``fixed:``), :data:`DOUBTFUL` (held at its guess because
-        the drive cannot determine it, or a caveat of the verdict concerns it) or :data:`LIVE`.
+        the drive cannot determine it, a time offset the run holds with no σ, or a caveat of the
+        verdict concerns it) or :data:`LIVE`.
         The one decision every hand-off file formats."""
-        layout, held = self.scenario.layout, self.reports[solver].held
+        layout, held = self.scenario.layout, self.held_in(solver)
         given = {p.name for p in layout.parameters if p.status == KNOWN}
         concerns = self.verdict.concerns
         out: dict[str, tuple[str, str]] = {}
