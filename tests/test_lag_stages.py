@@ -19,7 +19,9 @@ from conftest import write_sim
 
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.models import get_model
+from nlp_calib.outputs import figures, plots
 from nlp_calib.outputs.handoff import calibration_dict, write_calibration
+from nlp_calib.outputs.plots.trust import Standing
 from nlp_calib.outputs.terminal import lag_lines
 from nlp_calib.pipeline import Calibration, Scenario, scenario_from_mapping
 from nlp_calib.pipeline.build import build_problem
@@ -153,9 +155,11 @@ def test_no_problem_fits_one_lag_for_several_logs(tmp_path: Path) -> None:
         build(get_model("diff_drive"), ProblemSpec(lags=1, logs=2))
 
 
-def test_a_lag_pinned_on_its_search_edge_is_held_in_calibration_yaml(tmp_path: Path) -> None:
+def test_a_lag_pinned_on_its_search_edge_is_held_in_calibration_yaml(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """S-curves on time searched over [50, 100] ms: the lag pinned at 50 ms, no σ; before, its
-    layout said ``status: free``."""
+    layout said ``status: free``, and the trust figure called it "not determined by this drive"."""
     log = write_sim(
         tmp_path, "curves.txt", model="diff_drive", records=1200, seed=9901, trajectory="s_curves"
     )
@@ -166,3 +170,8 @@ def test_a_lag_pinned_on_its_search_edge_is_held_in_calibration_yaml(tmp_path: P
     doc = calibration_dict(run)
     assert doc is not None and doc["std"][LAG] is None and _laid(doc, LAG) == HELD
     assert doc["held"][LAG].startswith("pinned on the edge of alignment.search")
+    drawn: dict[str, Standing] = {}
+    monkeypatch.setattr(plots, "trust_png", lambda rows, *_: drawn.update({r.name: r for r in rows}) or b"")
+    figures.trust(run, tmp_path, "trust")
+    assert (drawn[LAG].status, drawn[LAG].why) == (HELD, "pinned on the edge of alignment.search")
+    assert (drawn["baseline"].status, drawn["baseline"].why) == (FREE, "")

@@ -123,10 +123,11 @@ def trust(run: CalibrationRun, folder: Path, name: str) -> list[Path]:
     if solver is None:
         return []
     values, std = run.reports[solver].result.param_dict(), run.std(solver)
-    layout = run.scenario.layout
+    # A time offset the run holds with no σ is held here as in every file (its reason's first words).
+    layout, held = run.stated_layout(), run.held_lags()
     rows = [
         Standing(p.name, p.unit, values.get(p.name, p.start), std.get(p.name, math.nan),
-                 p.needed(values.get(p.name, p.start)), p.status)
+                 p.needed(values.get(p.name, p.start)), p.status, held.get(p.name, "").split(":")[0])
         for p in layout.parameters
     ]  # fmt: skip
     u = run.reports[solver].uncertainty

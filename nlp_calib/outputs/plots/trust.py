@@ -27,6 +27,8 @@ class Standing:
     std: float
     needed: float
     status: str
+    #: Why a parameter that is not free is held, in a few words ("": it is not estimated).
+    why: str = ""
 
 
 #: Bar colours: within the precision needed, within the verdict's limit, beyond it (or no σ).
@@ -43,7 +45,11 @@ def _ratio_axes(ax: Axes, rows: Sequence[Standing]) -> None:
         if r.status != "free":
             ax.barh(yi, top, left=low, color=_GIVEN, alpha=0.25)
             ax.text(
-                low * 1.1, yi, f"{r.status}: {r.value:.4g}{unit} (not estimated)", va="center", fontsize=8
+                low * 1.1,
+                yi,
+                f"{r.status}: {r.value:.4g}{unit} ({r.why or 'not estimated'})",
+                va="center",
+                fontsize=8,
             )
             continue
         if not (math.isfinite(r.std) and r.std > 0):
