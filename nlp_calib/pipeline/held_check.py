@@ -29,6 +29,18 @@ neither reading gives exactly where the drive speeds up or slows down while it s
 stops). That reading is held as a value too (:data:`STEERING`): the estimate's move between the
 two readings, whichever the scenario fits with.
 
+Encoder readings re-sampled between records (at a lag that is no whole number of intervals) are
+interpolated linearly, which reads a rate that changes inside the interval (a start from rest:
+the speed rises within one interval) off by up to ``f(1 − f)·h·|Δv|`` (``f``: where the reading
+falls, ``h``: the interval, ``Δv``: the rate after it less the rate before), by ``f(1 − f)/2·h·Δv``
+on average over where the change lies, always on the side of the change. No interpolation of the
+readings sees where it lies, and such windows are where the lag's information is. That reading is
+held as a value too (:data:`RESAMPLED`): the estimate's whole move from the readings as
+interpolated to each less that expected error (:func:`~nlp_calib.logs.resample.kink_error`).
+The errors share their sign over every start (and the other over every stop), so the move is taken
+whole, not as independent noise; a change spread evenly over the intervals around it is read off by
+half of it, so the move is an upper bound there.
+
 A lag the fit pinned on the edge of its search (the data put it there or beyond, with no σ), or
 one the drive does not determine (held where its fits settled), is held there too: moved one
 record interval (beyond the edge), the others following it as the fit's normal
@@ -73,6 +85,10 @@ HALF_INTERVAL = "each speed the rate held over the interval after its stamp, or 
 #: move between the readings' mean and the angle the interval's travel saw).
 STEERING = "residual.steering_sample"
 READINGS = "each interval's steer angle the one its travel saw, or its two readings' mean"
+#: How readings re-sampled between records are read (held as a value; its error, the move from the
+#: readings as interpolated to each less its interpolation's expected error).
+RESAMPLED = "readings re-sampled between records"
+KINKS = "each less its interpolation's expected error where the rate changes inside its interval"
 
 
 @dataclass(frozen=True)
@@ -185,7 +201,8 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
     report = run.reports[solver]
     x = np.asarray(report.result.x, dtype=float)
     ev, fns = fit.evaluator, fit.fns
-    H = ev.normal_equations(x).H
+    ne = ev.normal_equations(x)
+    H, g = ne.H, np.asarray(ne.g, dtype=float)
     params = np.asarray(ev.params(x), dtype=float)
     std, units = run.std(solver), run.scenario.units
     free = [n for n in fns.free if n in report.uncertainty.free]
@@ -199,7 +216,7 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         moved = dict(zip(fns.names, np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params))
         shift = {n: float(moved[n]) for n in free}
         z = {n: shift[n] / std[n] if std.get(n, 0.0) > 0 else float("nan") for n in free}
-        unit = {SPEEDS: "interval", STEERING: "reading"}.get(name) or units.get(name, "s")
+        unit = {SPEEDS: "interval", STEERING: "reading", RESAMPLED: "reading"}.get(name) or units.get(name, "s")
         found.append(Response(name, value, error[0], error[1], unit, shift, z, needed))
 
     base = np.asarray(ev.x_fixed, dtype=float)
@@ -221,6 +238,10 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         grads = (_at_inputs(ev, x, fit.steering_read("travel")), _at_inputs(ev, x, fit.steering_read("mean")))
         half = step(H, *grads)
         response(STEERING, 0.0, (1.0, READINGS), None if half is None else 2.0 * half)
+    if fit.kinked_read is not None:
+        # The whole move from the readings as interpolated (the fit's own gradient) to the other.
+        half = step(H, _at_inputs(ev, x, fit.kinked_read()), g)
+        response(RESAMPLED, 0.0, (1.0, KINKS), None if half is None else 2.0 * half)
     d = record_interval(fit)
     for name in (n for n in run.pinned() if n in free and np.isfinite(d)):
         move = pinned_step(H, fns.free.index(name))
@@ -292,6 +313,8 @@ def _what_to_do(r: Response, given: bool) -> str:
         return "give the joints' angles (form: positions) or their increments per interval (form: increments)"
     if r.name == STEERING:
         return "record faster (the angle and the speed then change less over an interval)"
+    if r.name == RESAMPLED:
+        return "record the encoders faster (a rate then changes less inside an interval)"
     if not given:
         return within
     return f"free it (leave it out of known:, or give it under priors: with its σ), or {within}"
@@ -316,6 +339,13 @@ def concern(r: Response, name: str, run: CalibrationRun) -> str:
             f"two readings' mean, it moves {name} by {r.shift[name]:+.3g} {unit} "
             f"({abs(r.in_sigma[name]):.1f}× the σ the data give; a calibration needs "
             f"{r.needed[name]:.2g} {unit}); {_what_to_do(r, given)}"
+        )
+    if r.name == RESAMPLED:
+        return (
+            f"{name} rests on how {RESAMPLED} are read (linearly, where a rate that changes inside an "
+            f"interval is read off by up to a quarter of the change over it): {KINKS}, it moves {name} by "
+            f"{r.shift[name]:+.3g} {unit} ({abs(r.in_sigma[name]):.1f}× the σ the data give; a calibration "
+            f"needs {r.needed[name]:.2g} {unit}); {_what_to_do(r, given)}"
         )
     return (
         f"{name} rests on {r.name} held at {_amount(r.value, r.unit)}: off by {_amount(r.error, r.unit)} "
