@@ -99,7 +99,9 @@ class Resampler:
         columns = []
         for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
             level, when = self.levels()[j], tq[rows] - self.late[j]
-            value = np.interp(when, t, level) - (kink_error(t, level, when) if kinked else 0.0)
+            # A tick of the level: a count, or an absolute encoder's step in turns.
+            tick = 1.0 / vmax if self.kinds.get(name) == "absolute" else 1.0
+            value = np.interp(when, t, level) - (kink_error(t, level, when, tick) if kinked else 0.0)
             # Fractional ticks: rounded back to whole ticks, a lag within a fraction of a tick per
             # interval gave the logged readings back under the shifted label, and the alignment
             # walked the lag by the same step at every re-sampling.
@@ -115,15 +117,17 @@ class Resampler:
         return replace(log, ticks=ticks, clock=replace(log.clock, encoder_lag_s=log.encoder_lag_s + lag_s))
 
 
-def kink_error(t: np.ndarray, level: np.ndarray, when: np.ndarray) -> np.ndarray:
+def kink_error(t: np.ndarray, level: np.ndarray, when: np.ndarray, resolution: float = 1.0) -> np.ndarray:
     """The expected error of ``level`` (readings at ``t``) interpolated linearly at ``when``, where
     its rate changes inside the interval, from the rate over the interval before ``v_a`` to the one
     after ``v_b``, at a point unknown, even odds anywhere in it (a start from rest: the speed rises
     within one interval). A change at ``s`` of the interval puts the chord
     ``h·(v_b − v_a)·f·(1 − s)`` (``f < s``) or ``h·(v_b − v_a)·s·(1 − f)`` off at its fraction ``f``:
     at most ``f(1 − f)·h·|v_b − v_a|`` (at ``s = f``), ``f(1 − f)/2·h·(v_b − v_a)`` over ``s``, which is
-    returned (twice the error of a rate that changes evenly over the three intervals). Readings on a
-    record, and in the first and last interval, 0."""
+    returned (twice the error of a rate that changes evenly over the three intervals). A change the
+    readings' rounding alone could give (each reading within half its ``resolution``, so each rate
+    within ``resolution`` over its interval) is none: 0, as on a record and in the first and last
+    interval."""
     n = t.size
     if n < 4:
         return np.zeros(np.shape(when))
@@ -132,9 +136,11 @@ def kink_error(t: np.ndarray, level: np.ndarray, when: np.ndarray) -> np.ndarray
     span = np.where(h > 0, h, np.inf)  # records on one stamp: no rate, no fraction between them
     f = np.clip((when - t[k]) / span[k], 0.0, 1.0)
     rate = np.diff(level) / span
-    inside = (k >= 1) & (k <= n - 3) & (h[k] > 0)
-    change = np.where(inside, rate[np.minimum(k + 1, n - 2)] - rate[np.maximum(k - 1, 0)], 0.0)
-    return 0.5 * f * (1.0 - f) * h[k] * change
+    before, after = np.maximum(k - 1, 0), np.minimum(k + 1, n - 2)
+    change = rate[after] - rate[before]
+    rounding = resolution * (1.0 / span[before] + 1.0 / span[after])
+    shown = (k >= 1) & (k <= n - 3) & (h[k] > 0) & (np.abs(change) > rounding)
+    return np.where(shown, 0.5 * f * (1.0 - f) * h[k] * change, 0.0)
 
 
 def _joints_resampled(
