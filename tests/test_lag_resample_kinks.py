@@ -32,12 +32,18 @@ def test_the_expected_error_is_the_mean_over_where_the_rate_changes() -> None:
     when = t[3] + np.array([0.1, 0.25, 0.5, 0.8]) * (t[4] - t[3])
     starts = t[3] + (np.arange(2000) + 0.5) / 2000 * (t[4] - t[3])
     errors = [np.interp(when, t, _kinked(t, s, 50.0)) - _kinked(when, s, 50.0) for s in starts]
-    expected = [kink_error(t, _kinked(t, s, 50.0), when) for s in starts]
+    expected = [kink_error(t, _kinked(t, s, 50.0), when, resolution=0.0) for s in starts]
     assert np.allclose(np.mean(expected, axis=0), np.mean(errors, axis=0), rtol=2e-3)
     assert np.all(np.mean(errors, axis=0) > 0)  # the chord above a start: always one side
     # On a record nothing is interpolated, and an even rate has no error.
-    assert np.allclose(kink_error(t, _kinked(t, 0.033, 50.0), t), 0.0)
-    assert np.allclose(kink_error(t, 7.0 * t, when), 0.0)
+    assert np.allclose(kink_error(t, _kinked(t, 0.033, 50.0), t, resolution=0.0), 0.0)
+    assert np.allclose(kink_error(t, 7.0 * t, when, resolution=0.0), 0.0)
+    # Counts rounded to whole ticks: a change within what the rounding gives (0.5 tick over an
+    # interval, below the 2 its four readings' rounding could) is none; 500 ticks a second is.
+    assert np.allclose(kink_error(t, np.round(_kinked(t, 0.033, 50.0)), when), 0.0)
+    coarse = np.round(_kinked(t, 0.033, 500.0))
+    assert np.all(kink_error(t, coarse, when) == kink_error(t, coarse, when, resolution=0.0))
+    assert np.all(kink_error(t, coarse, when) > 0)
 
 
 def test_a_precise_trackers_lag_lies_within_its_sigma_to_believe(tmp_path: Path) -> None:
