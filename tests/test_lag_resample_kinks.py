@@ -56,7 +56,9 @@ def test_a_precise_trackers_lag_lies_within_its_sigma_to_believe(tmp_path: Path)
         tracker_noise_xy=0.1 * TrackerSim().tracker_noise_xy,
         tracker_noise_theta=0.1 * TrackerSim().tracker_noise_theta,
     )
-    opts = SimulationOptions(seed=501, model="tricycle", drive=DriveShape(trajectory="s_curves"), tracker=tracker)
+    opts = SimulationOptions(
+        seed=501, model="tricycle", drive=DriveShape(trajectory="s_curves"), tracker=tracker
+    )
     log, _ = simulate_to_file(opts, tmp_path / "drive.txt")
     doc = {"dataset": str(log), "model": "tricycle", "initial_guess": "from_file"}
     doc |= {"solvers": ["gauss_newton"], "alignment": {"tracker_lag": "auto"}}

@@ -216,7 +216,9 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         moved = dict(zip(fns.names, np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params))
         shift = {n: float(moved[n]) for n in free}
         z = {n: shift[n] / std[n] if std.get(n, 0.0) > 0 else float("nan") for n in free}
-        unit = {SPEEDS: "interval", STEERING: "reading", RESAMPLED: "reading"}.get(name) or units.get(name, "s")
+        unit = {SPEEDS: "interval", STEERING: "reading", RESAMPLED: "reading"}.get(name) or units.get(
+            name, "s"
+        )
         found.append(Response(name, value, error[0], error[1], unit, shift, z, needed))
 
     base = np.asarray(ev.x_fixed, dtype=float)
