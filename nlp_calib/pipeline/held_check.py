@@ -231,19 +231,8 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
     if fit.given_lag is not None and np.isfinite(d := record_interval(fit)):
         grads = (_at_inputs(ev, x, fit.given_lag(d)), _at_inputs(ev, x, fit.given_lag(-d)))
         response(LAG, held_lag(run, fit), (d, RECORD_INTERVAL), step(H, *grads))
-    if fit.speeds_read is not None:
-        # The trapezoids are the two readings' mean: the central difference of the two.
-        grads = (_at_inputs(ev, x, fit.speeds_read(1.0)), _at_inputs(ev, x, fit.speeds_read(-1.0)))
-        response(SPEEDS, 0.0, (0.5, HALF_INTERVAL), step(H, *grads))
-    if fit.steering_read is not None:
-        # The whole move from one reading to the other (step's is half the difference).
-        grads = (_at_inputs(ev, x, fit.steering_read("travel")), _at_inputs(ev, x, fit.steering_read("mean")))
-        half = step(H, *grads)
-        response(STEERING, 0.0, (1.0, READINGS), None if half is None else 2.0 * half)
-    if fit.kinked_read is not None:
-        # The whole move from the readings as interpolated (the fit's own gradient) to the other.
-        half = step(H, _at_inputs(ev, x, fit.kinked_read()), g)
-        response(RESAMPLED, 0.0, (1.0, KINKS), None if half is None else 2.0 * half)
+    for name, error, move in _readings(fit, x, H, g):
+        response(name, 0.0, error, move)
     d = record_interval(fit)
     for name in (n for n in run.pinned() if n in free and np.isfinite(d)):
         move = pinned_step(H, fns.free.index(name))
@@ -254,6 +243,28 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         if abs(lag) > 0:
             response(name, estimate[name], (d, _pinned_rule(run, name)), move * d / lag)
     return [replace(r, shift=_without(r.shift, r.name), in_sigma=_without(r.in_sigma, r.name)) for r in found]
+
+
+def _readings(
+    fit: Fit, x: np.ndarray, H: np.ndarray, g: np.ndarray
+) -> list[tuple[str, tuple[float, str], np.ndarray | None]]:
+    """How the readings are read, each held as a value: its name, its error and rule, and the fit's
+    move over that error (``H``, ``g``: the normal equations at ``x``, the readings as fitted)."""
+    ev, out = fit.evaluator, []
+    if fit.speeds_read is not None:
+        # The trapezoids are the two readings' mean: the central difference of the two.
+        grads = (_at_inputs(ev, x, fit.speeds_read(1.0)), _at_inputs(ev, x, fit.speeds_read(-1.0)))
+        out.append((SPEEDS, (0.5, HALF_INTERVAL), step(H, *grads)))
+    if fit.steering_read is not None:
+        # The whole move from one reading to the other (step's is half the difference).
+        grads = (_at_inputs(ev, x, fit.steering_read("travel")), _at_inputs(ev, x, fit.steering_read("mean")))
+        half = step(H, *grads)
+        out.append((STEERING, (1.0, READINGS), None if half is None else 2.0 * half))
+    if fit.kinked_read is not None:
+        # The whole move from the readings as interpolated (the fit's own gradient) to the other.
+        half = step(H, _at_inputs(ev, x, fit.kinked_read()), g)
+        out.append((RESAMPLED, (1.0, KINKS), None if half is None else 2.0 * half))
+    return out
 
 
 def _without(values: Mapping[str, float], name: str) -> dict[str, float]:
