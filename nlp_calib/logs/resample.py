@@ -124,10 +124,11 @@ def kink_error(t: np.ndarray, level: np.ndarray, when: np.ndarray, resolution: f
     within one interval). A change at ``s`` of the interval puts the chord
     ``h·(v_b − v_a)·f·(1 − s)`` (``f < s``) or ``h·(v_b − v_a)·s·(1 − f)`` off at its fraction ``f``:
     at most ``f(1 − f)·h·|v_b − v_a|`` (at ``s = f``), ``f(1 − f)/2·h·(v_b − v_a)`` over ``s``, which is
-    returned (twice the error of a rate that changes evenly over the three intervals). A change the
-    readings' rounding alone could give (each reading within half its ``resolution``, so each rate
-    within ``resolution`` over its interval) is none: 0, as on a record and in the first and last
-    interval."""
+    returned (twice the error of a rate that changes evenly over the three intervals). The change is
+    taken less what the readings' rounding alone could give (each reading within half its
+    ``resolution``, so each rate within ``resolution`` over its interval): the least change the
+    readings show (on coarse counts, the rounding's changes had made a noise of their own). 0 on a
+    record and in the first and last interval."""
     n = t.size
     if n < 4:
         return np.zeros(np.shape(when))
@@ -139,8 +140,9 @@ def kink_error(t: np.ndarray, level: np.ndarray, when: np.ndarray, resolution: f
     before, after = np.maximum(k - 1, 0), np.minimum(k + 1, n - 2)
     change = rate[after] - rate[before]
     rounding = resolution * (1.0 / span[before] + 1.0 / span[after])
-    shown = (k >= 1) & (k <= n - 3) & (h[k] > 0) & (np.abs(change) > rounding)
-    return np.where(shown, 0.5 * f * (1.0 - f) * h[k] * change, 0.0)
+    shown = np.sign(change) * np.maximum(np.abs(change) - rounding, 0.0)
+    inside = (k >= 1) & (k <= n - 3) & (h[k] > 0)
+    return np.where(inside, 0.5 * f * (1.0 - f) * h[k] * shown, 0.0)
 
 
 def _joints_resampled(
