@@ -72,9 +72,9 @@ class Resampler:
         kinked: bool = False,
     ) -> tuple[Log, tuple[int, int]]:
         """The log re-sampled at ``lag_s`` (see :func:`resample_encoders`); ``kinked``: each
-        reading between records less its interpolation's expected error (:func:`kink_error`), a
-        plausible other reading of the same records (joints re-sampled from their own stream, as
-        they are)."""
+        counter's reading between records less its interpolation's expected error
+        (:func:`kink_error`), a plausible other reading of the same records (absolute encoders,
+        and joints re-sampled from their own stream, as they are)."""
         log, late = self.log, self.late
         moved = beside_lag_s is not None and beside_lag_s != log.clock.beside_lag_s
         if lag_s == 0.0 and not any(late) and not moved:
@@ -99,9 +99,12 @@ class Resampler:
         columns = []
         for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
             level, when = self.levels()[j], tq[rows] - self.late[j]
-            # A tick of the level: a count, or an absolute encoder's step in turns.
-            tick = 1.0 / vmax if self.kinds.get(name) == "absolute" else 1.0
-            value = np.interp(when, t, level) - (kink_error(t, level, when, tick) if kinked else 0.0)
+            value = np.interp(when, t, level)
+            if kinked and self.kinds.get(name) != "absolute":
+                # A count's: an interval's increment is two readings' difference, so a reading's
+                # error is the increment's (an angle's interval value is its readings' mean,
+                # corrected for their curvature: a reading's error is not the value's).
+                value = value - kink_error(t, level, when)
             # Fractional ticks: rounded back to whole ticks, a lag within a fraction of a tick per
             # interval gave the logged readings back under the shifted label, and the alignment
             # walked the lag by the same step at every re-sampling.
