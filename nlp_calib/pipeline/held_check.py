@@ -29,17 +29,17 @@ neither reading gives exactly where the drive speeds up or slows down while it s
 stops). That reading is held as a value too (:data:`STEERING`): the estimate's move between the
 two readings, whichever the scenario fits with.
 
-Encoder readings re-sampled between records (at a lag that is no whole number of intervals) are
+Counts re-sampled between records (at a lag that is no whole number of intervals) are
 interpolated linearly, which reads a rate that changes inside the interval (a start from rest:
 the speed rises within one interval) off by up to ``f(1 − f)·h·|Δv|`` (``f``: where the reading
 falls, ``h``: the interval, ``Δv``: the rate after it less the rate before), by ``f(1 − f)/2·h·Δv``
 on average over where the change lies, always on the side of the change. No interpolation of the
 readings sees where it lies, and such windows are where the lag's information is. That reading is
-held as a value too (:data:`RESAMPLED`): the estimate's whole move from the readings as
-interpolated to each less that expected error (:func:`~nlp_calib.logs.resample.kink_error`).
-The errors share their sign over every start (and the other over every stop), so the move is taken
-whole, not as independent noise; a change spread evenly over the intervals around it is read off by
-half of it, so the move is an upper bound there.
+held as a value too (:data:`RESAMPLED`): the time offsets' whole move from the counts as
+interpolated to each less that expected error (:func:`~nlp_calib.logs.resample.kink_error`),
+taken whole, not as independent noise (every start puts its counts off on one side); a change
+spread evenly over the intervals around it is read off by half of it, so the move is an upper
+bound there. The other parameters' moves are not held against them (:func:`_own`).
 
 A lag the fit pinned on the edge of its search (the data put it there or beyond, with no σ), or
 one the drive does not determine (held where its fits settled), is held there too: moved one
