@@ -251,8 +251,8 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
 def _own(r: Response, fit: Fit) -> Response:
     """``r`` with only what it is held against: the re-sampled counts' move, the time offsets'
     alone (what the lags' coverage measured it against); the others' moves, not measured against
-    what re-sampling does to them, are no error of theirs (a 0.2 mm skid steer's turn_slip moved
-    3× its σ, where the fit lay 1.2σ off)."""
+    what re-sampling does to them, are no error of theirs (on a 0.2 mm skid steer one moved 3× its
+    σ where the fit lay 1.2σ off, docs/scenarios.md)."""
     if r.name != RESAMPLED:
         return r
     clocks = [n for n in r.shift if fit.fns.layout.in_block(n, CLOCK)]
