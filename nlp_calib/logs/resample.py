@@ -65,9 +65,16 @@ class Resampler:
         return self._levels
 
     def at(
-        self, lag_s: float, records: tuple[int, int] | None = None, beside_lag_s: float | None = None
+        self,
+        lag_s: float,
+        records: tuple[int, int] | None = None,
+        beside_lag_s: float | None = None,
+        kinked: bool = False,
     ) -> tuple[Log, tuple[int, int]]:
-        """The log re-sampled at ``lag_s`` (see :func:`resample_encoders`)."""
+        """The log re-sampled at ``lag_s`` (see :func:`resample_encoders`); ``kinked``: each
+        counter's reading between records less its interpolation's expected error
+        (:func:`kink_error`), a plausible other reading of the same records (absolute encoders,
+        and joints re-sampled from their own stream, as they are)."""
         log, late = self.log, self.late
         moved = beside_lag_s is not None and beside_lag_s != log.clock.beside_lag_s
         if lag_s == 0.0 and not any(late) and not moved:
@@ -82,27 +89,63 @@ class Resampler:
                 f"a lag of {lag_s:g} s leaves fewer than 2 records of the {t[-1] - t[0]:.1f} s log; "
                 "use a lag well below the log's duration"
             )
-        return self._shifted(lag_s, tq, records), (int(valid[0]), int(valid[-1]) + 1)
+        return self._shifted(lag_s, tq, records, kinked), (int(valid[0]), int(valid[-1]) + 1)
 
-    def _shifted(self, lag_s: float, tq: np.ndarray, records: tuple[int, int] | None) -> Log:
+    def _shifted(
+        self, lag_s: float, tq: np.ndarray, records: tuple[int, int] | None, kinked: bool = False
+    ) -> Log:
         log, t = self.log, self.log.time_s
         rows = slice(*(records or (0, log.n_records)))
         columns = []
         for j, (name, vmax) in enumerate(zip(log.header.encoder_names, log.header.encoder_max)):
             level, when = self.levels()[j], tq[rows] - self.late[j]
+            value = np.interp(when, t, level)
+            if kinked and self.kinds.get(name) != "absolute":
+                # A count's: an interval's increment is two readings' difference, so a reading's
+                # error is the increment's (an angle's interval value is its readings' mean,
+                # corrected for their curvature: a reading's error is not the value's).
+                value = value - kink_error(t, level, when)
             # Fractional ticks: rounded back to whole ticks, a lag within a fraction of a tick per
             # interval gave the logged readings back under the shifted label, and the alignment
             # walked the lag by the same step at every re-sampling.
             if self.kinds.get(name) == "absolute":
-                columns.append(np.mod(np.interp(when, t, level) * vmax, vmax))
+                columns.append(np.mod(value * vmax, vmax))
             else:
-                columns.append(np.mod(np.interp(when, t, level) + log.ticks[0, j], COUNTER_MODULUS))
+                columns.append(np.mod(value + log.ticks[0, j], COUNTER_MODULUS))
         ticks = np.stack(columns, axis=1).astype(float)
         if records is not None:  # the other records as logged (one copy of a long log's, not three)
             stretch, ticks = ticks, np.array(log.ticks, dtype=float)
             ticks[rows] = stretch
         ticks.flags.writeable = False
         return replace(log, ticks=ticks, clock=replace(log.clock, encoder_lag_s=log.encoder_lag_s + lag_s))
+
+
+def kink_error(t: np.ndarray, level: np.ndarray, when: np.ndarray, resolution: float = 1.0) -> np.ndarray:
+    """The expected error of ``level`` (readings at ``t``) interpolated linearly at ``when``, where
+    its rate changes inside the interval, from the rate over the interval before ``v_a`` to the one
+    after ``v_b``, at a point unknown, even odds anywhere in it (a start from rest: the speed rises
+    within one interval). A change at ``s`` of the interval puts the chord
+    ``h·(v_b − v_a)·f·(1 − s)`` (``f < s``) or ``h·(v_b − v_a)·s·(1 − f)`` off at its fraction ``f``:
+    at most ``f(1 − f)·h·|v_b − v_a|`` (at ``s = f``), ``f(1 − f)/2·h·(v_b − v_a)`` over ``s``, which is
+    returned (twice the error of a rate that changes evenly over the three intervals). The change is
+    taken less what the readings' rounding alone could give (each reading within half its
+    ``resolution``, so each rate within ``resolution`` over its interval): the least change the
+    readings show (on coarse counts, the rounding's changes had made a noise of their own). 0 on a
+    record and in the first and last interval."""
+    n = t.size
+    if n < 4:
+        return np.zeros(np.shape(when))
+    k = np.clip(np.searchsorted(t, when, side="right") - 1, 0, n - 2)
+    h = np.diff(t)
+    span = np.where(h > 0, h, np.inf)  # records on one stamp: no rate, no fraction between them
+    f = np.clip((when - t[k]) / span[k], 0.0, 1.0)
+    rate = np.diff(level) / span
+    before, after = np.maximum(k - 1, 0), np.minimum(k + 1, n - 2)
+    change = rate[after] - rate[before]
+    rounding = resolution * (1.0 / span[before] + 1.0 / span[after])
+    shown = np.sign(change) * np.maximum(np.abs(change) - rounding, 0.0)
+    inside = (k >= 1) & (k <= n - 3) & (h[k] > 0)
+    return np.where(inside, 0.5 * f * (1.0 - f) * h[k] * shown, 0.0)
 
 
 def _joints_resampled(

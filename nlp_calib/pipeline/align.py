@@ -86,6 +86,8 @@ class Alignment:
     estimate: LagEstimate | None
     log: Log
     valid: tuple[int, int]
+    #: The log as it was before its encoders were re-sampled (None: not kept).
+    source: Log | None = None
 
 
 def stays(moved_s: float, std_s: float) -> bool:
@@ -471,7 +473,7 @@ def align(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray) -> Al
         aligned, valid = resample_encoders(
             log, float(lag), binder.fns.model.encoder_kinds, beside_lag_s=beside
         )
-    return Alignment(lag_s=float(lag), estimate=estimate, log=aligned, valid=valid)
+    return Alignment(lag_s=float(lag), estimate=estimate, log=aligned, valid=valid, source=log)
 
 
 def lag_at_edge(sc: Scenario, lag_s: float) -> str:

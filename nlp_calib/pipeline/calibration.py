@@ -134,6 +134,7 @@ class Calibration:
                 given_lag(self.parts),
                 read_speeds(self.parts),
                 read_steering(self.parts),
+                read_kinked(self.parts),
             )
         else:
             self.held, self.fitting = _joint_fit(sc, self.parts, self.solvers, start)
@@ -268,7 +269,14 @@ def _joint_fit(
         restart = one_horizon.with_options(initial_guess={**first.problem.start.initial, **start})
         problem = restarted(problem, restart, start_from, lags, mounts)
     return held, Fit(
-        problem, data, solvers, joint_noise(parts), given_lag(parts), read_speeds(parts), read_steering(parts)
+        problem,
+        data,
+        solvers,
+        joint_noise(parts),
+        given_lag(parts),
+        read_speeds(parts),
+        read_steering(parts),
+        read_kinked(parts),
     )
 
 
@@ -341,6 +349,7 @@ def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
             given_lag([part]),
             read_speeds([part]),
             read_steering([part]),
+            read_kinked([part]),
         ),
         [part],
         solvers,
@@ -437,6 +446,36 @@ def read_steering(parts: Sequence[LogSetup]) -> Callable[[str], np.ndarray] | No
 
     logs = [p.alignment.log for p in parts]
     return lambda sample: _inputs_of(parts, logs, sample)
+
+
+def read_kinked(parts: Sequence[LogSetup]) -> Callable[[], np.ndarray] | None:
+    """Where a log's encoder readings were re-sampled between its records (at its lag), the fitted
+    windows' interval inputs (the logs end to end) with each such reading less its interpolation's
+    expected error where the rate changes inside the interval (:func:`~nlp_calib.logs.resample.kink_error`;
+    the other logs' as fitted; None: no log's readings were re-sampled between records)."""
+    shifted = [_kinkable(p) for p in parts]
+    if not any(shifted):
+        return None
+
+    def inputs() -> np.ndarray:
+        logs = []
+        for p, kinkable in zip(parts, shifted):
+            a, kinds = p.alignment, p.problem.fns.model.encoder_kinds
+            if kinkable and a.source is not None:
+                beside = a.log.clock.beside_lag_s
+                logs.append(Resampler(a.source, kinds).at(a.lag_s, beside_lag_s=beside, kinked=True)[0])
+            else:
+                logs.append(a.log)
+        return _inputs_of(parts, logs)
+
+    return inputs
+
+
+def _kinkable(part: LogSetup) -> bool:
+    """Whether ``part``'s encoder readings (counts, angles; not joints re-sampled from their own
+    stream) were re-sampled between its records."""
+    source = part.alignment.source
+    return source is not None and source.joint_stream is None and part.alignment.log is not source
 
 
 def joint_noise(parts: Sequence[LogSetup]) -> tuple[np.ndarray, np.ndarray]:

@@ -30,7 +30,9 @@ class Fit:
     joints were integrated from speeds, the windows' inputs with each speed read as held over the
     interval after its stamp (``speeds_read(1)``) or the mean over the one before (``(-1)``);
     ``steering_read``, where the model reads a steer angle, the windows' inputs with each
-    interval's steer angle read as the given ``steering_sample`` (``steering_read("travel")``)."""
+    interval's steer angle read as the given ``steering_sample`` (``steering_read("travel")``);
+    ``kinked_read``, where encoder readings were re-sampled between records, the windows' inputs
+    with each such reading less its interpolation's expected error (``kinked_read()``)."""
 
     def __init__(
         self,
@@ -41,6 +43,7 @@ class Fit:
         given_lag: Callable[[float], np.ndarray] | None = None,
         speeds_read: Callable[[float], np.ndarray] | None = None,
         steering_read: Callable[[str], np.ndarray] | None = None,
+        kinked_read: Callable[[], np.ndarray] | None = None,
     ) -> None:
         self.problem = problem
         self.data = data
@@ -48,6 +51,7 @@ class Fit:
         self.given_lag = given_lag
         self.speeds_read = speeds_read
         self.steering_read = steering_read
+        self.kinked_read = kinked_read
         self._bias: list[BiasStep] = []
         self.evaluator = problem.binder.evaluate(data)
         self.evaluator.prepare(evaluated(problem.binder.scenario, solvers))

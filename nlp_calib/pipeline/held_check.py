@@ -29,6 +29,18 @@ neither reading gives exactly where the drive speeds up or slows down while it s
 stops). That reading is held as a value too (:data:`STEERING`): the estimate's move between the
 two readings, whichever the scenario fits with.
 
+Counts re-sampled between records (at a lag that is no whole number of intervals) are
+interpolated linearly, which reads a rate that changes inside the interval (a start from rest:
+the speed rises within one interval) off by up to ``f(1 − f)·h·|Δv|`` (``f``: where the reading
+falls, ``h``: the interval, ``Δv``: the rate after it less the rate before), by ``f(1 − f)/2·h·Δv``
+on average over where the change lies, always on the side of the change. No interpolation of the
+readings sees where it lies, and such windows are where the lag's information is. That reading is
+held as a value too (:data:`RESAMPLED`): the time offsets' whole move from the counts as
+interpolated to each less that expected error (:func:`~nlp_calib.logs.resample.kink_error`),
+taken whole, not as independent noise (every start puts its counts off on one side); a change
+spread evenly over the intervals around it is read off by half of it, so the move is an upper
+bound there. The other parameters' moves are not held against them (:func:`_own`).
+
 A lag the fit pinned on the edge of its search (the data put it there or beyond, with no σ), or
 one the drive does not determine (held where its fits settled), is held there too: moved one
 record interval (beyond the edge), the others following it as the fit's normal
@@ -73,6 +85,10 @@ HALF_INTERVAL = "each speed the rate held over the interval after its stamp, or 
 #: move between the readings' mean and the angle the interval's travel saw).
 STEERING = "residual.steering_sample"
 READINGS = "each interval's steer angle the one its travel saw, or its two readings' mean"
+#: How readings re-sampled between records are read (held as a value; its error, the move from the
+#: readings as interpolated to each less its interpolation's expected error).
+RESAMPLED = "readings re-sampled between records"
+KINKS = "each less its interpolation's expected error where the rate changes inside its interval"
 
 
 @dataclass(frozen=True)
@@ -185,7 +201,8 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
     report = run.reports[solver]
     x = np.asarray(report.result.x, dtype=float)
     ev, fns = fit.evaluator, fit.fns
-    H = ev.normal_equations(x).H
+    ne = ev.normal_equations(x)
+    H, g = ne.H, np.asarray(ne.g, dtype=float)
     params = np.asarray(ev.params(x), dtype=float)
     std, units = run.std(solver), run.scenario.units
     free = [n for n in fns.free if n in report.uncertainty.free]
@@ -199,7 +216,9 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         moved = dict(zip(fns.names, np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params))
         shift = {n: float(moved[n]) for n in free}
         z = {n: shift[n] / std[n] if std.get(n, 0.0) > 0 else float("nan") for n in free}
-        unit = {SPEEDS: "interval", STEERING: "reading"}.get(name) or units.get(name, "s")
+        unit = {SPEEDS: "interval", STEERING: "reading", RESAMPLED: "reading"}.get(name) or units.get(
+            name, "s"
+        )
         found.append(Response(name, value, error[0], error[1], unit, shift, z, needed))
 
     base = np.asarray(ev.x_fixed, dtype=float)
@@ -212,15 +231,8 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
     if fit.given_lag is not None and np.isfinite(d := record_interval(fit)):
         grads = (_at_inputs(ev, x, fit.given_lag(d)), _at_inputs(ev, x, fit.given_lag(-d)))
         response(LAG, held_lag(run, fit), (d, RECORD_INTERVAL), step(H, *grads))
-    if fit.speeds_read is not None:
-        # The trapezoids are the two readings' mean: the central difference of the two.
-        grads = (_at_inputs(ev, x, fit.speeds_read(1.0)), _at_inputs(ev, x, fit.speeds_read(-1.0)))
-        response(SPEEDS, 0.0, (0.5, HALF_INTERVAL), step(H, *grads))
-    if fit.steering_read is not None:
-        # The whole move from one reading to the other (step's is half the difference).
-        grads = (_at_inputs(ev, x, fit.steering_read("travel")), _at_inputs(ev, x, fit.steering_read("mean")))
-        half = step(H, *grads)
-        response(STEERING, 0.0, (1.0, READINGS), None if half is None else 2.0 * half)
+    for name, error, move in _readings(fit, x, H, g):
+        response(name, 0.0, error, move)
     d = record_interval(fit)
     for name in (n for n in run.pinned() if n in free and np.isfinite(d)):
         move = pinned_step(H, fns.free.index(name))
@@ -230,7 +242,43 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
         lag = (np.asarray(ev.params(ev.boxplus(x, move)), dtype=float) - params)[fns.names.index(name)]
         if abs(lag) > 0:
             response(name, estimate[name], (d, _pinned_rule(run, name)), move * d / lag)
-    return [replace(r, shift=_without(r.shift, r.name), in_sigma=_without(r.in_sigma, r.name)) for r in found]
+    return [
+        _own(replace(r, shift=_without(r.shift, r.name), in_sigma=_without(r.in_sigma, r.name)), fit)
+        for r in found
+    ]
+
+
+def _own(r: Response, fit: Fit) -> Response:
+    """``r`` with only what it is held against: the re-sampled counts' move, the time offsets'
+    alone (what the lags' coverage measured it against); the others' moves, not measured against
+    what re-sampling does to them, are no error of theirs (on a 0.2 mm skid steer one moved 3× its
+    σ where the fit lay 1.2σ off, docs/scenarios.md)."""
+    if r.name != RESAMPLED:
+        return r
+    clocks = [n for n in r.shift if fit.fns.layout.in_block(n, CLOCK)]
+    return replace(r, shift={n: r.shift[n] for n in clocks}, in_sigma={n: r.in_sigma[n] for n in clocks})
+
+
+def _readings(
+    fit: Fit, x: np.ndarray, H: np.ndarray, g: np.ndarray
+) -> list[tuple[str, tuple[float, str], np.ndarray | None]]:
+    """How the readings are read, each held as a value: its name, its error and rule, and the fit's
+    move over that error (``H``, ``g``: the normal equations at ``x``, the readings as fitted)."""
+    ev, out = fit.evaluator, []
+    if fit.speeds_read is not None:
+        # The trapezoids are the two readings' mean: the central difference of the two.
+        grads = (_at_inputs(ev, x, fit.speeds_read(1.0)), _at_inputs(ev, x, fit.speeds_read(-1.0)))
+        out.append((SPEEDS, (0.5, HALF_INTERVAL), step(H, *grads)))
+    if fit.steering_read is not None:
+        # The whole move from one reading to the other (step's is half the difference).
+        grads = (_at_inputs(ev, x, fit.steering_read("travel")), _at_inputs(ev, x, fit.steering_read("mean")))
+        half = step(H, *grads)
+        out.append((STEERING, (1.0, READINGS), None if half is None else 2.0 * half))
+    if fit.kinked_read is not None:
+        # The whole move from the readings as interpolated (the fit's own gradient) to the other.
+        half = step(H, _at_inputs(ev, x, fit.kinked_read()), g)
+        out.append((RESAMPLED, (1.0, KINKS), None if half is None else 2.0 * half))
+    return out
 
 
 def _without(values: Mapping[str, float], name: str) -> dict[str, float]:
@@ -292,6 +340,8 @@ def _what_to_do(r: Response, given: bool) -> str:
         return "give the joints' angles (form: positions) or their increments per interval (form: increments)"
     if r.name == STEERING:
         return "record faster (the angle and the speed then change less over an interval)"
+    if r.name == RESAMPLED:
+        return "record the encoders faster (a rate then changes less inside an interval)"
     if not given:
         return within
     return f"free it (leave it out of known:, or give it under priors: with its σ), or {within}"
@@ -316,6 +366,13 @@ def concern(r: Response, name: str, run: CalibrationRun) -> str:
             f"two readings' mean, it moves {name} by {r.shift[name]:+.3g} {unit} "
             f"({abs(r.in_sigma[name]):.1f}× the σ the data give; a calibration needs "
             f"{r.needed[name]:.2g} {unit}); {_what_to_do(r, given)}"
+        )
+    if r.name == RESAMPLED:
+        return (
+            f"{name} rests on how {RESAMPLED} are read (linearly, where a rate that changes inside an "
+            f"interval is read off by up to a quarter of the change over it): {KINKS}, it moves {name} by "
+            f"{r.shift[name]:+.3g} {unit} ({abs(r.in_sigma[name]):.1f}× the σ the data give; a calibration "
+            f"needs {r.needed[name]:.2g} {unit}); {_what_to_do(r, given)}"
         )
     return (
         f"{name} rests on {r.name} held at {_amount(r.value, r.unit)}: off by {_amount(r.error, r.unit)} "
