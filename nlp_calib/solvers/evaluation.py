@@ -329,7 +329,7 @@ class ProblemEvaluator:
         for v in (*arrays, self.priors.mean, self.priors.sqrt_info):
             a = np.ascontiguousarray(v)  # the buffer's transpose: a view, no copy
             h.update(f"{a.dtype.str}{a.shape}".encode())
-            h.update(a)
+            h.update(a.data)
         return (self.fns, self.backend, self.delta, h.digest())
 
     @contextmanager
