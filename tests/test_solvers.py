@@ -236,6 +236,43 @@ def test_an_evaluator_keeps_what_it_evaluated_at_recent_points_to_the_bit(small_
     assert ev.calls["normal_equations"] == 11 and ev.calls["cost"] == 10
 
 
+def _twin(ev, **changed):  # type: ignore[no-untyped-def]
+    """A new evaluator of ``ev``'s windows and settings (``changed``: some of them other)."""
+    from nlp_calib.solvers.evaluation import ProblemEvaluator
+
+    given = {"x_fixed": ev.x_fixed, "omega": ev.omega, "delta": ev.delta, "priors": ev.priors}
+    return ProblemEvaluator(ev.fns, ev.data, backend=ev.backend, **{**given, **changed})
+
+
+def test_a_gauss_newton_run_recalls_what_a_run_on_the_same_windows_evaluated_to_the_bit(
+    small_demo: Scenario,
+) -> None:
+    """The screen's judging fit, the pre-flight's and the fit stage's start from one point on the
+    same windows, each on its own evaluator: a run on an evaluator of the same contents takes the
+    normal equations a recent run evaluated (no pass over the windows) and ends, its evaluator
+    keeping the same points, where a run that evaluates every one ends, to the bit; on other
+    contents (other weights) it evaluates its own."""
+    from nlp_calib.solvers.gauss_newton import GaussNewton, solve
+
+    cal = Calibration(small_demo)
+    ev, x0 = cal.evaluator, cal.x0
+    former = solve(_twin(ev), x0)  # the module's loop alone: nothing recalled, nothing kept for later
+    first = GaussNewton(ev).solve(x0)
+    twin = _counted(_twin(ev))
+    again = GaussNewton(twin).solve(x0)
+    assert former.converged and twin.calls == {}
+    for res in (first, again):
+        assert res.x.tobytes() == former.x.tobytes() and res.cost == former.cost
+        assert res.trace.history == former.trace.history
+    twin.normal_equations(x0), twin.normal_equations(again.x)  # kept as if evaluated here
+    assert twin.calls == {}
+    other = _counted(_twin(ev, omega=ev.omega * 2.0))
+    weighed = GaussNewton(other).solve(x0)
+    plain = _counted(_twin(ev, omega=ev.omega * 2.0))
+    assert weighed.x.tobytes() == solve(plain, x0).x.tobytes()
+    assert other.calls["normal_equations"] == plain.calls["normal_equations"] > 0
+
+
 def test_ipopt_takes_its_cost_and_gradient_at_a_point_from_one_pass(small_demo: Scenario) -> None:
     """IPOPT asks for the cost at a trial point and, accepting it, for the gradient there: with the
     Gauss-Newton Hessian the normal equations answer both, so no cost-only pass is made but the

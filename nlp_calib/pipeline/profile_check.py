@@ -19,6 +19,8 @@ cost: the run's σ is the yardstick.
 
 from __future__ import annotations
 
+from contextlib import AbstractContextManager, nullcontext
+
 import numpy as np
 
 from nlp_calib.core.errors import NlpCalibError
@@ -77,6 +79,11 @@ class _Holding:
 
     def params(self, x: np.ndarray) -> np.ndarray:
         return self.evaluator.params(self.full(x))
+
+    def recalling(self) -> AbstractContextManager[None]:
+        """Nothing recalled: each profile point's fit holds other values (hashing the run's
+        windows for each would cost more than the passes it could save)."""
+        return nullcontext()
 
 
 def _held_cost(fit: Fit, run: CalibrationRun, name: str, value: float) -> float | None:

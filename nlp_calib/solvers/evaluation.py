@@ -5,13 +5,19 @@ windows once; each call then integrates the intervals if the problem needs it
 (:mod:`nlp_calib.solvers.motion`), copies the parameter vector in and the sums out. The normal
 equations and costs of the last points evaluated are kept, and the last point's residual terms
 while their buffers are: a solver's accepted trial point, both solvers' start, the uncertainty and
-the observability analysis at the same estimate cost one evaluation.
+the observability analysis at the same estimate cost one evaluation. A Gauss-Newton run recalls
+the normal equations a recent run evaluated on the same contents (:meth:`ProblemEvaluator.recalling`):
+the screen's judging fit, the pre-flight's and the fit stage's from the same start are one run's
+passes over the windows, not three.
 """
 
 from __future__ import annotations
 
+import hashlib
+import threading
 from collections import OrderedDict
 from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
@@ -200,6 +206,12 @@ KEPT_POINTS = 32
 
 V = TypeVar("V")
 
+#: The normal equations the last few Gauss-Newton runs evaluated, per evaluator contents
+#: (:meth:`ProblemEvaluator.contents`), keyed by the point's bytes; most recent last.
+_RECALLED: OrderedDict[tuple[object, ...], dict[bytes, NormalEquations]] = OrderedDict()
+_RECALLED_KEPT = 4
+_RECALLED_LOCK = threading.Lock()
+
 
 class _Kept(Generic[V]):
     """Values at the last :data:`KEPT_POINTS` points used, keyed by the point's bytes."""
@@ -290,6 +302,7 @@ class ProblemEvaluator:
             "tangent_map": Buffered(fns.tangent_map),
             "assemble": Buffered(fns.assemble),
         }
+        self._known: dict[bytes, NormalEquations] | None = None
         self.bind(data)
 
     def bind(self, data: ResidualData) -> None:
@@ -304,6 +317,37 @@ class ProblemEvaluator:
             self._write_inputs(kept)
             return
         self._windows: _Windows | None = None
+
+    def contents(self) -> tuple[object, ...]:
+        """What an evaluation here is a function of, besides the point: the Functions and backend
+        (the objects themselves), the robust kernel's width, and a hash of the bound windows' data
+        as padded, the intervals' inputs, the windows' first and last records, the held values,
+        the weights and the priors."""
+        h = hashlib.blake2b(digest_size=16)
+        data = self._data
+        arrays = (self._on.window_data.T, data.inputs, data.starts, data.stops, self.x_fixed, self.omega)
+        for v in (*arrays, self.priors.mean, self.priors.sqrt_info):
+            a = np.ascontiguousarray(v)  # the buffer's transpose: a view, no copy
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(a.data)
+        return (self.fns, self.backend, self.delta, h.digest())
+
+    @contextmanager
+    def recalling(self) -> Iterator[None]:
+        """Within: the normal equations at a point a recent run evaluated on the same
+        :meth:`contents` are taken from it (the same bits: an evaluation is a function of the point
+        and those alone), and those evaluated here kept for the next such run."""
+        key = self.contents()
+        with _RECALLED_LOCK:
+            known = _RECALLED.pop(key, {})
+            _RECALLED[key] = known
+            while len(_RECALLED) > _RECALLED_KEPT:
+                del _RECALLED[next(iter(_RECALLED))]
+        self._known = known
+        try:
+            yield
+        finally:
+            self._known = None
 
     def _write_inputs(self, windows: _Windows) -> None:
         """The bound data's inputs and per-window data written into ``windows``' buffers."""
@@ -399,15 +443,23 @@ class ProblemEvaluator:
         kept = self._last.normal_equations.get(key)
         if kept is not None:
             return kept
+        known = self._known
+        ne = None if known is None else known.get(key)
+        if ne is None:
+            ne = self._evaluate_normal_equations(x)
+            if known is not None:
+                known[key] = ne
+        self._last.normal_equations.put(key, ne)
+        self._last.told = None
+        return ne
+
+    def _evaluate_normal_equations(self, x: np.ndarray) -> NormalEquations:
         h_upper, g, cost, chi2, inliers = self._call("normal_equations", x)
         H, cost_f = unpack_upper(h_upper, self.fns.n_free), float(cost[0])
         if self.priors.active:
             Hp, gp, cp, _, _ = self._prior(x=x)
             H, g, cost_f = H + Hp, g + gp, cost_f + float(cp[0])
-        ne = NormalEquations(H=H, g=g, cost=cost_f, chi2=float(chi2[0]), inliers=round(float(inliers[0])))
-        self._last.normal_equations.put(key, ne)
-        self._last.told = None
-        return ne
+        return NormalEquations(H=H, g=g, cost=cost_f, chi2=float(chi2[0]), inliers=round(float(inliers[0])))
 
     def remember(self, x: np.ndarray, ne: NormalEquations) -> None:
         """Take ``ne`` as the normal equations at ``x`` without evaluating them (known otherwise:

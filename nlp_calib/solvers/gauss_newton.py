@@ -243,8 +243,11 @@ class GaussNewton:
         lower: np.ndarray | Sequence[float] | None = None,
         upper: np.ndarray | Sequence[float] | None = None,
     ) -> SolverResult:
-        """Minimise the robust cost from ``x0`` (free parameters) within the bounds, if any."""
-        return solve(self.evaluator, x0, self.options, lower, upper)
+        """Minimise the robust cost from ``x0`` (free parameters) within the bounds, if any; the
+        normal equations a recent run on the same windows evaluated are recalled, not evaluated
+        again (:meth:`~nlp_calib.solvers.evaluation.ProblemEvaluator.recalling`)."""
+        with self.evaluator.recalling():
+            return solve(self.evaluator, x0, self.options, lower, upper)
 
 
 def solve(
