@@ -16,7 +16,7 @@ from odometry_truth import sigma_over_truth
 
 from nlp_calib.analysis.precision import HEADING_BUDGET
 from nlp_calib.analysis.verdict import verdict
-from nlp_calib.core.errors import OptionsError
+from nlp_calib.core.errors import DatasetError, OptionsError
 from nlp_calib.core.numeric import wrap_angle
 from nlp_calib.logs.joint_log import format_joint_csv
 from nlp_calib.models import MODELS
@@ -1082,3 +1082,26 @@ def test_the_preflights_windows_never_cross_a_gap_in_the_tracker_as_the_runs_do(
     times = np.concatenate([lg.time_s for lg in data.logs])
     spans = times[data.stops] - times[data.starts]
     assert data.n_residuals > 0 and np.max(spans) < 1.0, np.max(spans)
+
+
+def test_init_drafts_a_joint_log_beside_its_motions_as_simulate_writes_them(tmp_path: Path) -> None:
+    """``simulate --vehicle skid_spins`` writes ``NAME.csv`` beside ``NAME.motions.csv``; ``init`` on
+    either drafts a scenario of the two that a run reads (before: "no NAME.tum beside it"), the
+    model by the joints' names and the drive's turning; a TUM file beside the joints is still
+    their reference."""
+    from nlp_calib.pipeline.draft import draft
+    from nlp_calib.pipeline.prepare import read
+
+    joints, motions, _ = simulate_skid_spins(SkidSpinOptions(duration_s=60.0, seed=5)).write(
+        tmp_path / "skid"
+    )
+    for named in (joints, motions):
+        d = draft(named, tmp_path / "skid.yaml")
+        assert d.raw["dataset"]["joints"] == joints.name and d.raw["dataset"]["motions"] == motions.name
+        assert "poses" not in d.raw["dataset"] and d.raw["model"] in MODELS
+        _, log = read(d.scenario(tmp_path / "skid.yaml"))
+        assert log.n_records >= 60.0 / 2.0  # one record per stamp of the 2 s increments
+    tum = tmp_path / "skid.tum"
+    tum.write_text("0 0 0 0 0 0 0 1\n")
+    with pytest.raises(DatasetError, match=r"skid\.tum: holds 1 pose"):  # its pair read, as before
+        draft(joints, tmp_path / "both.yaml")

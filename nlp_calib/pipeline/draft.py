@@ -33,7 +33,7 @@ from nlp_calib.analysis.turning import TURN_STEP_S, Turning, turning
 from nlp_calib.analysis.units import findings
 from nlp_calib.core import poses3d
 from nlp_calib.core.config import parse_yaml
-from nlp_calib.core.errors import FieldError, UsageError
+from nlp_calib.core.errors import DatasetError, FieldError, UsageError
 from nlp_calib.core.ranges import check_ros_name
 from nlp_calib.core.text import escaped, unprintable
 from nlp_calib.logs import Log
@@ -55,6 +55,7 @@ from nlp_calib.results.preflight import UnitFinding
 from nlp_calib.sensors import BESIDE, sensor_for
 from nlp_calib.sensors.mount import length_params
 from nlp_calib.sources.joints import paired_files
+from nlp_calib.sources.motions import MOTIONS_SUFFIX, motions_pair
 from nlp_calib.sources.robot import load_robot
 
 #: Words in a topic's name that say it carries a reference, and those that say it does not.
@@ -829,28 +830,62 @@ def _skid_sign(
     return [f"model: {skid}, not {name}, because {words} {name}."], None
 
 
-def _draft_joint_log(path: Path, where: Path, model: str | None, robot: Path | None = None) -> Draft:
+@dataclass(frozen=True)
+class _Reference:
+    """What a joint log's recording is fitted against, as a draft writes it: the joints' CSV, the
+    reference's files by their dataset key (a TUM file's poses and a gyro's rates beside them, or
+    the sensor's own motions), how the draft names them and how hard the drive corners (None:
+    not measured)."""
+
+    joints: Path
+    files: Mapping[str, Path]
+    named: str
+    cornering: float | None = None
+
+
+def _reference(path: Path) -> _Reference:
+    """The recording ``path`` names: a joint log with a TUM file, or (its motions file beside it,
+    no TUM file) with a motions file (docs/motions.md)."""
+    joints_path, motions_path = motions_pair(path)
+    tum = (
+        path.suffix.lower() == ".tum" or path.with_name(f"{path.stem.removesuffix('.joints')}.tum").is_file()
+    )
+    if path.name.endswith(MOTIONS_SUFFIX) or (motions_path.is_file() and not tum):
+        if not joints_path.is_file():
+            raise DatasetError(str(path), None, f"no {joints_path.name} beside it (its joints' CSV)")
+        return _Reference(
+            joints_path, {"motions": motions_path}, f"{motions_path.name} (the sensor's motions)"
+        )
     joints_path, poses_path = paired_files(path)
-    table = read_joint_csv(joints_path)
-    name, joints, why = guess_model(list(table.names), model, cornering(poses_path))
     gyro_path = poses_path.with_suffix(GYRO_SUFFIX)
-    gyro = gyro_path.is_file()
+    files = {"poses": poses_path, **({"gyro": gyro_path} if gyro_path.is_file() else {})}
+    named = poses_path.name + (f" (a gyro's rates beside them: {gyro_path.name})" if "gyro" in files else "")
+    return _Reference(joints_path, files, named, cornering(poses_path))
+
+
+def _draft_joint_log(path: Path, where: Path, model: str | None, robot: Path | None = None) -> Draft:
+    ref = _reference(path)
+    table = read_joint_csv(ref.joints)
+    name, joints, why = guess_model(list(table.names), model, ref.cornering)
     dataset = {
-        "joints": _relative(joints_path, where),
-        "poses": _relative(poses_path, where),
-        **({"gyro": _relative(gyro_path, where)} if gyro else {}),
+        "joints": _relative(ref.joints, where),
+        **{key: _relative(p, where) for key, p in ref.files.items()},
         "encoders": dict(joints),
         **({"robot": _relative(robot, where)} if robot is not None else {}),
     }
-    _one_line_names(joints_path, dataset)
-    sensor, words, todo = _pose_sensor(poses_path, gyro)
+    _one_line_names(ref.joints, dataset)
+    gyro = "gyro" in ref.files
+    if "poses" in ref.files:
+        sensor, words, todo = _pose_sensor(ref.files["poses"], gyro)
+    else:
+        sensor, words, todo = {}, ["the reference: the sensor's own motions, each over its two stamps."], ()
     raw = {"name": where.stem, "model": name, **sensor, "dataset": dataset, **defaults(name)}
     form, read = _wheel_form(raw, where)
     skid, read = _skid_sign(raw, where, read, robot) if model is None else ([], read)
     searched = _searched(raw, where, read)
     header = [
-        f"Drafted by nlp-calib init from {joints_path.name} (joints: {', '.join(table.names)}) and "
-        f"{poses_path.name}" + (f" (a gyro's rates beside them: {gyro_path.name})." if gyro else "."),
+        f"Drafted by nlp-calib init from {ref.joints.name} (joints: {', '.join(table.names)}) and "
+        f"{ref.named}.",
         f"model: {name}, because {why}." if raw["model"] == name else f"first {name}, because {why}.",
         *form,
         *skid,
@@ -860,7 +895,7 @@ def _draft_joint_log(path: Path, where: Path, model: str | None, robot: Path | N
     ]
     found = (f"joints: {', '.join(table.names)}", f"model {name}: {why}", *form, *skid, searched)
     text = _text(header, raw, NOTES) + "".join(f"# {line}\n" for line in todo)
-    return Draft(raw, text, (*found, *((f"gyro beside the poses {gyro_path.name}",) if gyro else ())))
+    return Draft(raw, text, (*found, *((f"gyro beside the poses {ref.files['gyro'].name}",) if gyro else ())))
 
 
 def _draft_text_log(path: Path, where: Path, model: str | None) -> Draft:

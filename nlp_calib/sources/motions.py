@@ -36,6 +36,15 @@ REQUIRED = ("joints", "motions", "encoders")
 MOTIONS_SUFFIX = ".motions.csv"
 
 
+def motions_pair(path: Path) -> tuple[Path, Path]:
+    """The joints' CSV and the motions file of one recording, named by either: ``NAME.csv`` and
+    ``NAME.motions.csv`` side by side (as ``simulate --vehicle skid_spins`` writes them)."""
+    name = path.name
+    if name.endswith(MOTIONS_SUFFIX):
+        return path.with_name(name[: -len(MOTIONS_SUFFIX)] + ".csv"), path
+    return path, path.with_name(name[: -len(path.suffix)] + MOTIONS_SUFFIX)
+
+
 @dataclass(frozen=True)
 class MotionsSource:
     """A CSV joint log (``joints``), a motions file (``motions``), the joint that is each of the
@@ -93,11 +102,7 @@ class MotionsSource:
     def moved(self, path: Path) -> MotionsSource:
         """The same block on another recording: ``NAME.motions.csv`` and ``NAME.csv`` side by side,
         named by either."""
-        name = path.name
-        if name.endswith(MOTIONS_SUFFIX):
-            motions, joints = path, path.with_name(name[: -len(MOTIONS_SUFFIX)] + ".csv")
-        else:
-            joints, motions = path, path.with_name(path.name[: -len(path.suffix)] + MOTIONS_SUFFIX)
+        joints, motions = motions_pair(path)
         missing = [p for p in (joints, motions) if not p.is_file()]
         if missing:
             raise DatasetError(
