@@ -95,6 +95,7 @@ def reader_case(
 
 READER_CASES: dict[str, tuple[Callable[[list[str]], list[str]], tuple[str, ...]]] = {
     "empty file": (lambda ls: [], ("the file is empty",)),
+    "records without a header": (lambda ls: ls[N_HEADER:], (":1:", "no '#' header before this record")),
     "header only": (lambda ls: ls[:N_HEADER], (":8:", "ends after the header")),
     "missing header field": (
         lambda ls: [ln for ln in ls if not ln.startswith("#joints_max_enc_values")],

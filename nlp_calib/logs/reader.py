@@ -183,10 +183,20 @@ def read_header(path: str | Path) -> LogHeader:
     """The header of a log file (its ``#`` lines up to the first record)."""
     p = Path(path)
     with open_log(p) as fh:
-        header, _ = _split_header(_blocks(_chunks(fh)), str(p))
+        header, records = _split_header(_blocks(_chunks(fh)), str(p))
+        first = next(records, None)
+    if not header and first is None:
+        raise DatasetError(str(p), None, "the file is empty; expected a '#' header and records")
     if not header:
+        assert first is not None
+        line, blob, _ = first
+        fields = len(blob.split(b"\n", 1)[0].split())
         raise DatasetError(
-            str(p), None, "the file is empty or has no '#' header; expected a header and records"
+            str(p),
+            line,
+            f"no '#' header before this record ({fields} fields): a text log starts with '#' lines "
+            "naming its model and encoders (docs/log-format.md); a robot's own odometry (t x y θ) is "
+            "read as dataset: {odometry: FILE, poses: POSES.tum} (docs/vendor.md)",
         )
     return parse_header(header, str(p), checks=False)
 
