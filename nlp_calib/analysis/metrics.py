@@ -41,9 +41,10 @@ from nlp_calib.results.figures import RPE_DISTANCES, RPE_TOLERANCE, ErrorStats, 
 @dataclass(frozen=True)
 class Geometry:
     """The pose algebra a track is scored in: composition, motions, the position's dimensions,
-    the angle of a motion, the best rigid alignment of positions and a motion's translation alone
+    the angle of a motion, the best rigid alignment of positions, a motion's translation alone
     (``between``'s first ``dims`` columns, the same arithmetic: the RPE over a distance needs no
-    angle)."""
+    angle) and the alignment to positions already centred (``align``'s arithmetic, the reference's
+    side given: ``(est, ref − mean, mean)``)."""
 
     accumulate: Callable[[np.ndarray, np.ndarray], np.ndarray]
     between: Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -51,9 +52,18 @@ class Geometry:
     angle: Callable[[np.ndarray], np.ndarray]
     align: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
     moved: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    align_centred: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
-PLANAR = Geometry(poses.accumulate, poses.between, 2, lambda rel: np.abs(rel[:, 2]), poses.align, poses.moved)
+PLANAR = Geometry(
+    poses.accumulate,
+    poses.between,
+    2,
+    lambda rel: np.abs(rel[:, 2]),
+    poses.align,
+    poses.moved,
+    poses.align_centred,
+)
 SPATIAL = Geometry(
     poses3d.accumulate,
     poses3d.between,
@@ -61,6 +71,7 @@ SPATIAL = Geometry(
     lambda rel: np.linalg.norm(poses3d.quat_to_rotvec(rel[:, 3:7]), axis=1),
     poses3d.align,
     poses3d.moved,
+    poses3d.align_centred,
 )
 
 #: A gyro's "poses": its rates integrated from the first record (and the time), added up; its
@@ -73,6 +84,7 @@ RATE = Geometry(
     lambda rel: np.zeros(rel.shape[0]),
     lambda est, ref: (np.eye(est.shape[1]), ref.mean(axis=0) - est.mean(axis=0)),
     lambda a, b: (b - a)[:, :3],
+    lambda est, ref_centred, mu_r: (np.eye(est.shape[1]), mu_r - est.mean(axis=0)),
 )
 
 
@@ -250,10 +262,23 @@ def rpe_of(T_est: np.ndarray, pairs: list[Pairs], g: Geometry = PLANAR) -> Error
 def aligned_errors(T_est: np.ndarray, T_ref: np.ndarray, g: Geometry = PLANAR) -> np.ndarray:
     """Position errors after the best rigid alignment (SE(2), or SE(3)) of the estimate's
     positions to the reference."""
+    return _aligned(T_est, T_ref, centred(T_ref, g), g)
+
+
+def centred(T_ref: np.ndarray, g: Geometry = PLANAR) -> tuple[np.ndarray, np.ndarray]:
+    """The reference's side of an alignment: its positions less their mean, and the mean."""
+    mu_r = T_ref[:, : g.dims].mean(axis=0)
+    return T_ref[:, : g.dims] - mu_r, mu_r
+
+
+def _aligned(
+    T_est: np.ndarray, T_ref: np.ndarray, side: tuple[np.ndarray, np.ndarray], g: Geometry
+) -> np.ndarray:
+    """:func:`aligned_errors` with the reference's side of the alignment given (:func:`centred`)."""
     d = g.dims
     if T_est.shape[0] < 2 or not np.all(np.isfinite(T_est[:, :d])):
         return lengths(T_est[:, :d] - T_ref[:, :d])  # NaN where the track is
-    R, t = g.align(T_est[:, :d], T_ref[:, :d])
+    R, t = g.align_centred(T_est[:, :d], *side)
     # A :data:`CHUNK` of rows at a time: the product of every row at once is one BLAS call whose
     # threads cost several times the CPU at 10^6 rows (each row's arithmetic is the same).
     out = np.empty(T_est.shape[0])
@@ -267,11 +292,24 @@ def aligned_errors(T_est: np.ndarray, T_ref: np.ndarray, g: Geometry = PLANAR) -
 class Positions:
     """The reference's poses as every parameter set's figures read them, gathered once: the
     positions of the ``good`` records (the full run's), of the ``scored`` ones (the segments') and
-    each scored part's poses (``parts``, the aligned errors')."""
+    each scored part's poses (``parts``, the aligned errors'); and the rows a track's figures read
+    (``good_rows``, ``part_rows``): a slice where they run without a gap, so that a track's rows are
+    read in place, not copied (the same values in the same layout)."""
 
     good: np.ndarray
     scored: np.ndarray
     parts: list[np.ndarray]
+    good_rows: slice | np.ndarray
+    part_rows: list[slice | np.ndarray]
+    #: Each scored part's side of the alignment (:func:`centred`).
+    sides: list[tuple[np.ndarray, np.ndarray]]
+
+
+def _rows(idx: np.ndarray) -> slice | np.ndarray:
+    """The record indices ``idx`` (increasing) as a slice where they run without a gap."""
+    if idx.size and idx[-1] - idx[0] + 1 == idx.size:
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+    return idx
 
 
 @dataclass(frozen=True)
@@ -331,7 +369,14 @@ def reference(
     connected = breaks is None or not np.any(breaks)
     # Over records that do not connect, a full-run track chains them: no full-run figure.
     full = good if connected else np.zeros_like(good)
-    at = Positions(T_ref[full, : g.dims], T_ref[scored, : g.dims], [T_ref[idx] for idx in scored_parts])
+    at = Positions(
+        T_ref[full, : g.dims],
+        T_ref[scored, : g.dims],
+        [T_ref[idx] for idx in scored_parts],
+        _rows(np.flatnonzero(full)),
+        [_rows(idx) for idx in scored_parts],
+        [centred(T_ref[idx], g) for idx in scored_parts],
+    )
     return Reference(
         T=T_ref,
         good=good,
@@ -363,8 +408,7 @@ def scored(
     track = g.accumulate(T[0], step)
     # A bad tracker pose is the tracker's error, not the calibration's: left out of every figure.
     # Over records that do not connect, a full-run track chains them: no full-run figure.
-    good = ref.good if ref.connected else np.zeros_like(ref.good)
-    err = lengths(track[good, : g.dims] - ref.at.good)
+    err = lengths(track[ref.at.good_rows, : g.dims] - ref.at.good)
     W, pair = ref.window, ref.pair
     rel_trans, rel_rot = _motion_errors(g, track, np.flatnonzero(pair), W, ref.rel)
     # One part over every record restarts where the track starts: the same poses.
@@ -376,7 +420,8 @@ def scored(
         segment_ate = ate
     else:
         segment_ate = ErrorStats.of(lengths(seg_track[ref.scored, : g.dims] - ref.at.scored))
-    aligned = [aligned_errors(seg_track[idx], T_idx, g) for idx, T_idx in zip(ref.scored_parts, ref.at.parts)]
+    at = ref.at
+    aligned = [_aligned(seg_track[r], T_r, side, g) for r, T_r, side in zip(at.part_rows, at.parts, at.sides)]
     rpe = {d: rpe_of(seg_track, ref.pairs[d], g) for d in RPE_DISTANCES}
     return TrajectoryMetrics(
         ate_final=float(err[-1]) if err.size else float("nan"),
