@@ -369,13 +369,17 @@ def reference(
     connected = breaks is None or not np.any(breaks)
     # Over records that do not connect, a full-run track chains them: no full-run figure.
     full = good if connected else np.zeros_like(good)
+    good_rows, part_rows = _rows(np.flatnonzero(full)), [_rows(idx) for idx in scored_parts]
+    # Rows without a gap are read in place, not copied; a part's poses in the layout of the copy
+    # the alignment's sums read (a C-ordered block: the same order of sums, the same bits).
+    poses_of_parts = [np.ascontiguousarray(T_ref[r]) for r in part_rows]
     at = Positions(
-        T_ref[full, : g.dims],
-        T_ref[scored, : g.dims],
-        [T_ref[idx] for idx in scored_parts],
-        _rows(np.flatnonzero(full)),
-        [_rows(idx) for idx in scored_parts],
-        [centred(T_ref[idx], g) for idx in scored_parts],
+        T_ref[good_rows, : g.dims],
+        T_ref[_rows(np.flatnonzero(scored)), : g.dims],
+        poses_of_parts,
+        good_rows,
+        part_rows,
+        [centred(T_r, g) for T_r in poses_of_parts],
     )
     return Reference(
         T=T_ref,
