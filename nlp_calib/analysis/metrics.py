@@ -41,9 +41,10 @@ from nlp_calib.results.figures import RPE_DISTANCES, RPE_TOLERANCE, ErrorStats, 
 @dataclass(frozen=True)
 class Geometry:
     """The pose algebra a track is scored in: composition, motions, the position's dimensions,
-    the angle of a motion, the best rigid alignment of positions and a motion's translation alone
+    the angle of a motion, the best rigid alignment of positions, a motion's translation alone
     (``between``'s first ``dims`` columns, the same arithmetic: the RPE over a distance needs no
-    angle)."""
+    angle) and the alignment to positions already centred (``align``'s arithmetic, the reference's
+    side given: ``(est, ref − mean, mean)``)."""
 
     accumulate: Callable[[np.ndarray, np.ndarray], np.ndarray]
     between: Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -51,9 +52,18 @@ class Geometry:
     angle: Callable[[np.ndarray], np.ndarray]
     align: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
     moved: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    align_centred: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
-PLANAR = Geometry(poses.accumulate, poses.between, 2, lambda rel: np.abs(rel[:, 2]), poses.align, poses.moved)
+PLANAR = Geometry(
+    poses.accumulate,
+    poses.between,
+    2,
+    lambda rel: np.abs(rel[:, 2]),
+    poses.align,
+    poses.moved,
+    poses.align_centred,
+)
 SPATIAL = Geometry(
     poses3d.accumulate,
     poses3d.between,
@@ -61,6 +71,7 @@ SPATIAL = Geometry(
     lambda rel: np.linalg.norm(poses3d.quat_to_rotvec(rel[:, 3:7]), axis=1),
     poses3d.align,
     poses3d.moved,
+    poses3d.align_centred,
 )
 
 #: A gyro's "poses": its rates integrated from the first record (and the time), added up; its
@@ -73,6 +84,7 @@ RATE = Geometry(
     lambda rel: np.zeros(rel.shape[0]),
     lambda est, ref: (np.eye(est.shape[1]), ref.mean(axis=0) - est.mean(axis=0)),
     lambda a, b: (b - a)[:, :3],
+    lambda est, ref_centred, mu_r: (np.eye(est.shape[1]), mu_r - est.mean(axis=0)),
 )
 
 
@@ -160,9 +172,19 @@ def restarted(
     return out
 
 
+def lengths(v: np.ndarray) -> np.ndarray:
+    """Each row's Euclidean length: ``np.linalg.norm(v, axis=1)``'s arithmetic (squares summed
+    left to right, then the root: the same bits), a column at a time (the reduction over a row of
+    two or three took several times the CPU)."""
+    out = v[:, 0] * v[:, 0]
+    for k in range(1, v.shape[1]):
+        out += v[:, k] * v[:, k]
+    return np.sqrt(out, out=out)
+
+
 def path_distance(T_ref: np.ndarray, g: Geometry = PLANAR) -> np.ndarray:
     """Distance travelled along the reference's positions up to each record (m)."""
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(T_ref[:, : g.dims], axis=0), axis=1))])
+    return np.concatenate([[0.0], np.cumsum(lengths(np.diff(T_ref[:, : g.dims], axis=0)))])
 
 
 def distance_pairs(dist: np.ndarray, delta: float, tol: float) -> tuple[np.ndarray, np.ndarray]:
@@ -217,12 +239,12 @@ def _motion_errors(
     records ``first`` and ``first + window``, :data:`CHUNK` pairs at a time (each pair's arithmetic
     is the one pass's)."""
     d = g.dims
-    lengths, angles = np.zeros(first.size), np.zeros(first.size)
+    size, angles = np.zeros(first.size), np.zeros(first.size)
     for lo in range(0, first.size, CHUNK):
         rows, i = slice(lo, lo + CHUNK), first[lo : lo + CHUNK]
         rel = g.between(ref[rows], g.between(track[i], track[i + window]))
-        lengths[rows], angles[rows] = np.linalg.norm(rel[:, :d], axis=1), g.angle(rel)
-    return lengths, angles
+        size[rows], angles[rows] = lengths(rel[:, :d]), g.angle(rel)
+    return size, angles
 
 
 def rpe_of(T_est: np.ndarray, pairs: list[Pairs], g: Geometry = PLANAR) -> ErrorStats:
@@ -233,24 +255,61 @@ def rpe_of(T_est: np.ndarray, pairs: list[Pairs], g: Geometry = PLANAR) -> Error
     for i, j, ref in pairs:
         for lo in range(0, i.size, CHUNK):
             rows = slice(lo, lo + CHUNK)
-            errors.append(np.linalg.norm(g.moved(T_est[i[rows]], T_est[j[rows]]) - ref[rows], axis=1))
+            errors.append(lengths(g.moved(T_est[i[rows]], T_est[j[rows]]) - ref[rows]))
     return ErrorStats.of(np.concatenate(errors) if errors else np.zeros(0))
 
 
 def aligned_errors(T_est: np.ndarray, T_ref: np.ndarray, g: Geometry = PLANAR) -> np.ndarray:
     """Position errors after the best rigid alignment (SE(2), or SE(3)) of the estimate's
     positions to the reference."""
+    return _aligned(T_est, T_ref, centred(T_ref, g), g)
+
+
+def centred(T_ref: np.ndarray, g: Geometry = PLANAR) -> tuple[np.ndarray, np.ndarray]:
+    """The reference's side of an alignment: its positions less their mean, and the mean."""
+    mu_r = T_ref[:, : g.dims].mean(axis=0)
+    return T_ref[:, : g.dims] - mu_r, mu_r
+
+
+def _aligned(
+    T_est: np.ndarray, T_ref: np.ndarray, side: tuple[np.ndarray, np.ndarray], g: Geometry
+) -> np.ndarray:
+    """:func:`aligned_errors` with the reference's side of the alignment given (:func:`centred`)."""
     d = g.dims
     if T_est.shape[0] < 2 or not np.all(np.isfinite(T_est[:, :d])):
-        return np.linalg.norm(T_est[:, :d] - T_ref[:, :d], axis=1)  # NaN where the track is
-    R, t = g.align(T_est[:, :d], T_ref[:, :d])
+        return lengths(T_est[:, :d] - T_ref[:, :d])  # NaN where the track is
+    R, t = g.align_centred(T_est[:, :d], *side)
     # A :data:`CHUNK` of rows at a time: the product of every row at once is one BLAS call whose
     # threads cost several times the CPU at 10^6 rows (each row's arithmetic is the same).
     out = np.empty(T_est.shape[0])
     for lo in range(0, out.size, CHUNK):
         rows = slice(lo, lo + CHUNK)
-        out[rows] = np.linalg.norm(T_est[rows, :d] @ R.T + t - T_ref[rows, :d], axis=1)
+        out[rows] = lengths(T_est[rows, :d] @ R.T + t - T_ref[rows, :d])
     return out
+
+
+@dataclass(frozen=True)
+class Positions:
+    """The reference's poses as every parameter set's figures read them, gathered once: the
+    positions of the ``good`` records (the full run's), of the ``scored`` ones (the segments') and
+    each scored part's poses (``parts``, the aligned errors'); and the rows a track's figures read
+    (``good_rows``, ``part_rows``): a slice where they run without a gap, so that a track's rows are
+    read in place, not copied (the same values in the same layout)."""
+
+    good: np.ndarray
+    scored: np.ndarray
+    parts: list[np.ndarray]
+    good_rows: slice | np.ndarray
+    part_rows: list[slice | np.ndarray]
+    #: Each scored part's side of the alignment (:func:`centred`).
+    sides: list[tuple[np.ndarray, np.ndarray]]
+
+
+def _rows(idx: np.ndarray) -> slice | np.ndarray:
+    """The record indices ``idx`` (increasing) as a slice where they run without a gap."""
+    if idx.size and idx[-1] - idx[0] + 1 == idx.size:
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+    return idx
 
 
 @dataclass(frozen=True)
@@ -272,6 +331,8 @@ class Reference:
     scored_parts: list[np.ndarray]
     pairs: dict[float, list[Pairs]]
     distance_m: float
+    #: The reference's poses as the figures read them.
+    at: Positions
     #: Whether the records connect end to end (no gap, missing increment or log's end between
     #: them): a full-run track over records that do not chains what does not connect.
     connected: bool = True
@@ -305,6 +366,21 @@ def reference(
     scored &= good
     # A bad tracker pose is left out of the path too, as it is of the exported files.
     scored_parts = [a + np.flatnonzero(good[a:b]) for a, b in parts]
+    connected = breaks is None or not np.any(breaks)
+    # Over records that do not connect, a full-run track chains them: no full-run figure.
+    full = good if connected else np.zeros_like(good)
+    good_rows, part_rows = _rows(np.flatnonzero(full)), [_rows(idx) for idx in scored_parts]
+    # Rows without a gap are read in place, not copied; a part's poses in the layout of the copy
+    # the alignment's sums read (a C-ordered block: the same order of sums, the same bits).
+    poses_of_parts = [np.ascontiguousarray(T_ref[r]) for r in part_rows]
+    at = Positions(
+        T_ref[good_rows, : g.dims],
+        T_ref[_rows(np.flatnonzero(scored)), : g.dims],
+        poses_of_parts,
+        good_rows,
+        part_rows,
+        [centred(T_r, g) for T_r in poses_of_parts],
+    )
     return Reference(
         T=T_ref,
         good=good,
@@ -316,7 +392,8 @@ def reference(
         scored_parts=scored_parts,
         pairs=rpe_pairs(T_ref, scored_parts, RPE_DISTANCES, g),
         distance_m=float(path_distance(T_ref[good], g)[-1]) if good.any() else 0.0,
-        connected=breaks is None or not np.any(breaks),
+        at=at,
+        connected=connected,
     )
 
 
@@ -335,8 +412,7 @@ def scored(
     track = g.accumulate(T[0], step)
     # A bad tracker pose is the tracker's error, not the calibration's: left out of every figure.
     # Over records that do not connect, a full-run track chains them: no full-run figure.
-    good = ref.good if ref.connected else np.zeros_like(ref.good)
-    err = np.linalg.norm(track[good, : g.dims] - T[good, : g.dims], axis=1)
+    err = lengths(track[ref.at.good_rows, : g.dims] - ref.at.good)
     W, pair = ref.window, ref.pair
     rel_trans, rel_rot = _motion_errors(g, track, np.flatnonzero(pair), W, ref.rel)
     # One part over every record restarts where the track starts: the same poses.
@@ -347,10 +423,9 @@ def scored(
         # The one part's scored records are the good ones: the full run's errors, not taken again.
         segment_ate = ate
     else:
-        segment_ate = ErrorStats.of(
-            np.linalg.norm(seg_track[ref.scored, : g.dims] - T[ref.scored, : g.dims], axis=1)
-        )
-    aligned = [aligned_errors(seg_track[idx], T[idx], g) for idx in ref.scored_parts]
+        segment_ate = ErrorStats.of(lengths(seg_track[ref.scored, : g.dims] - ref.at.scored))
+    at = ref.at
+    aligned = [_aligned(seg_track[r], T_r, side, g) for r, T_r, side in zip(at.part_rows, at.parts, at.sides)]
     rpe = {d: rpe_of(seg_track, ref.pairs[d], g) for d in RPE_DISTANCES}
     return TrajectoryMetrics(
         ate_final=float(err[-1]) if err.size else float("nan"),

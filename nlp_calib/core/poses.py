@@ -56,8 +56,17 @@ def align(est_xy: np.ndarray, ref_xy: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
     The planar case of Umeyama's method without scale (a proper rotation: no reflection).
     """
-    mu_e, mu_r = est_xy.mean(axis=0), ref_xy.mean(axis=0)
-    cov = (ref_xy - mu_r).T @ (est_xy - mu_e)
+    mu_r = ref_xy.mean(axis=0)
+    return align_centred(est_xy, ref_xy - mu_r, mu_r)
+
+
+def align_centred(
+    est_xy: np.ndarray, ref_centred: np.ndarray, mu_r: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`align` with the reference's side given: its positions less their mean ``mu_r`` (the
+    same arithmetic: one reference's side serves every estimate aligned to it)."""
+    mu_e = est_xy.mean(axis=0)
+    cov = ref_centred.T @ (est_xy - mu_e)
     U, _, Vt = np.linalg.svd(cov)
     D = np.diag([1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0])
     R = U @ D @ Vt

@@ -249,8 +249,16 @@ def mount_pose(mount: np.ndarray) -> np.ndarray:
 def align(est: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The rotation ``R`` (3×3) and translation ``t`` minimising ``Σ |R·est + t − ref|²`` (Umeyama,
     no scale, a proper rotation)."""
-    mu_e, mu_r = est.mean(axis=0), ref.mean(axis=0)
-    U, _, Vt = np.linalg.svd((ref - mu_r).T @ (est - mu_e))
+    mu_r = ref.mean(axis=0)
+    return align_centred(est, ref - mu_r, mu_r)
+
+
+def align_centred(
+    est: np.ndarray, ref_centred: np.ndarray, mu_r: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`align` with the reference's side given: its positions less their mean ``mu_r``."""
+    mu_e = est.mean(axis=0)
+    U, _, Vt = np.linalg.svd(ref_centred.T @ (est - mu_e))
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0])
     R = U @ D @ Vt
     return R, mu_r - R @ mu_e
