@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -35,19 +36,29 @@ def test_aligned_errors_undo_a_rigid_motion_and_pass_nan_through() -> None:
     assert np.isnan(aligned_errors(est, ref)[4])
 
 
-def test_parameter_sets_scored_together_score_as_alone() -> None:
-    """The reference's side computed once for several parameter sets gives each set's figures
-    exactly, on a stretch with bad intervals and bad records."""
-    from nlp_calib.analysis.metrics import each_metrics, integrate, trajectory_metrics
+def _tricycle_drive(
+    seed: int, n: int, traction: tuple[float, float]
+) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
+    """A horizon-1 tricycle's Functions, its parameters, ``n - 1`` random intervals' inputs (the
+    traction's increments uniform over ``traction``) and its dead-reckoned track with 1 cm of noise."""
+    from nlp_calib.analysis import metrics
     from nlp_calib.models import get_model
     from nlp_calib.problem import ProblemSpec, build
 
     fns = build(get_model("tricycle"), ProblemSpec(horizon=1))
     p = np.array([0.5, 0.01, 1.5, 0.0, 1.0, 0.0, 0.0])
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(seed)
+    inputs = np.vstack([rng.uniform(*traction, n - 1), rng.uniform(-0.3, 0.3, n - 1)])
+    return fns, p, inputs, metrics.integrate(fns, p, inputs, np.zeros(3)) + rng.normal(0.0, 0.01, (n, 3))
+
+
+def test_parameter_sets_scored_together_score_as_alone() -> None:
+    """The reference's side computed once for several parameter sets gives each set's figures
+    exactly, on a stretch with bad intervals and bad records."""
+    from nlp_calib.analysis.metrics import each_metrics, trajectory_metrics
+
     n = 400
-    inputs = np.vstack([rng.uniform(0.5, 1.5, n - 1), rng.uniform(-0.3, 0.3, n - 1)])
-    ref = integrate(fns, p, inputs, np.zeros(3)) + rng.normal(0.0, 0.01, (n, 3))
+    fns, p, inputs, ref = _tricycle_drive(3, n, (0.5, 1.5))
     bad_i, bad_r = np.zeros(n - 1, dtype=bool), np.zeros(n, dtype=bool)
     bad_i[[90, 250]], bad_r[[30, 301]] = True, True
     sets = [p, p * 1.01, p * 0.98]
@@ -62,15 +73,9 @@ def test_figures_computed_a_few_motions_at_a_time_are_the_one_pass(monkeypatch: 
     """The RPE's motions compared a chunk at a time (bounded temporaries at 10^6 records) give
     every figure of the one pass, digit for digit, with faults in the stretch."""
     from nlp_calib.analysis import metrics
-    from nlp_calib.models import get_model
-    from nlp_calib.problem import ProblemSpec, build
 
-    fns = build(get_model("tricycle"), ProblemSpec(horizon=1))
-    p = np.array([0.5, 0.01, 1.5, 0.0, 1.0, 0.0, 0.0])
-    rng = np.random.default_rng(11)
     n = 600
-    inputs = np.vstack([rng.uniform(0.5, 1.5, n - 1), rng.uniform(-0.3, 0.3, n - 1)])
-    ref = metrics.integrate(fns, p, inputs, np.zeros(3)) + rng.normal(0.0, 0.01, (n, 3))
+    fns, p, inputs, ref = _tricycle_drive(11, n, (0.5, 1.5))
     bad_i, bad_r = np.zeros(n - 1, dtype=bool), np.zeros(n, dtype=bool)
     bad_i[[140, 333]], bad_r[[50, 401]] = True, True
     kw = {"rpe_window": 10, "bad_intervals": bad_i, "bad_records": bad_r}
@@ -396,15 +401,9 @@ def test_each_sets_figures_are_the_former_arithmetic_to_the_bit(
     faster, the same bits) and the reference's side of each segment's alignment taken once, not
     per parameter set."""
     from nlp_calib.analysis import metrics
-    from nlp_calib.models import get_model
-    from nlp_calib.problem import ProblemSpec, build
 
-    fns = build(get_model("tricycle"), ProblemSpec(horizon=1))
-    p = np.array([0.5, 0.01, 1.5, 0.0, 1.0, 0.0, 0.0])
-    rng = np.random.default_rng(17)
     n = 900
-    inputs = np.vstack([rng.uniform(0.05, 0.15, n - 1), rng.uniform(-0.3, 0.3, n - 1)])
-    T = metrics.integrate(fns, p, inputs, np.zeros(3)) + rng.normal(0.0, 0.01, (n, 3))
+    fns, p, inputs, T = _tricycle_drive(17, n, (0.05, 0.15))
     bad_i, bad_r, breaks = np.zeros(n - 1, dtype=bool), np.zeros(n, dtype=bool), np.zeros(n - 1, dtype=bool)
     if stretch == "faults":
         bad_i[[150, 151, 600]], bad_r[[40, 41, 333, 899]] = True, True
