@@ -231,7 +231,10 @@ def responses(run: CalibrationRun, fit: Fit) -> list[Response]:
     if fit.given_lag is not None and np.isfinite(d := record_interval(fit)):
         grads = (_at_inputs(ev, x, fit.given_lag(d)), _at_inputs(ev, x, fit.given_lag(-d)))
         response(LAG, held_lag(run, fit), (d, RECORD_INTERVAL), step(H, *grads))
-    for name, error, move in _readings(fit, x, H, g):
+    # The re-sampled counts' reading is held against the time offsets alone (:func:`_own`): with
+    # none determined (given, or pinned with no σ) there is nothing it is held against.
+    clocks = any(fns.layout.in_block(n, CLOCK) and n not in run.pinned() for n in free)
+    for name, error, move in _readings(fit, x, H, g, clocks):
         response(name, 0.0, error, move)
     d = record_interval(fit)
     for name in (n for n in run.pinned() if n in free and np.isfinite(d)):
@@ -260,10 +263,12 @@ def _own(r: Response, fit: Fit) -> Response:
 
 
 def _readings(
-    fit: Fit, x: np.ndarray, H: np.ndarray, g: np.ndarray
+    fit: Fit, x: np.ndarray, H: np.ndarray, g: np.ndarray, clocks: bool
 ) -> list[tuple[str, tuple[float, str], np.ndarray | None]]:
     """How the readings are read, each held as a value: its name, its error and rule, and the fit's
-    move over that error (``H``, ``g``: the normal equations at ``x``, the readings as fitted)."""
+    move over that error (``H``, ``g``: the normal equations at ``x``, the readings as fitted;
+    ``clocks``: whether a time offset is determined, the one thing re-sampled counts are held
+    against)."""
     ev, out = fit.evaluator, []
     if fit.speeds_read is not None:
         # The trapezoids are the two readings' mean: the central difference of the two.
@@ -274,7 +279,7 @@ def _readings(
         grads = (_at_inputs(ev, x, fit.steering_read("travel")), _at_inputs(ev, x, fit.steering_read("mean")))
         half = step(H, *grads)
         out.append((STEERING, (1.0, READINGS), None if half is None else 2.0 * half))
-    if fit.kinked_read is not None:
+    if fit.kinked_read is not None and clocks:
         # The whole move from the readings as interpolated (the fit's own gradient) to the other.
         half = step(H, _at_inputs(ev, x, fit.kinked_read()), g)
         out.append((RESAMPLED, (1.0, KINKS), None if half is None else 2.0 * half))
