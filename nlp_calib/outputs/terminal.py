@@ -199,7 +199,7 @@ def lag_lines(run: CalibrationRun) -> list[str]:
         sd = 1e3 * std.get(effect.lag, float("nan"))
         pinned = effect.lag in run.pinned()
         own = run.lag_estimates().get(effect.lag, est)  # a joint fit's view: that lag's own log's
-        where = "not determined by this drive" if own.loose else "pinned on the edge of alignment.search"
+        where = own.held_reason or "pinned on the edge of alignment.search"
         spread = f" ms, {where} (no σ)" if pinned else f" ± {sd:.2g} ms"
         out.append(
             f"{effect.lag} {1e3 * lag:.1f}{spread}, a parameter of the fit "

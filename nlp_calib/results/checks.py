@@ -279,18 +279,27 @@ class LagEstimate:
         return self.at_edge or not self.converged or self.loose
 
     @property
-    def held_why(self) -> str:
-        """Why a :attr:`pinned` lag is held with no σ, as the hand-off files state it ("" when it
-        is fitted)."""
+    def held_reason(self) -> str:
+        """Why a :attr:`pinned` lag is held with no σ, in a few words (every output's, the figure's
+        and the terminal's; "" when it is fitted)."""
         if not self.converged:
-            return "held where the encoders were read: no fit converged at any lag in alignment.search"
+            return "held where the encoders were read"
         if self.at_edge:
-            return "pinned on the edge of alignment.search: the data put the lag there or beyond"
+            return "pinned on the edge of alignment.search"
+        return "not determined by this drive" if self.loose else ""
+
+    @property
+    def held_why(self) -> str:
+        """:attr:`held_reason` with what it rests on, as the hand-off files state it."""
+        if not self.converged:
+            return f"{self.held_reason}: no fit converged at any lag in alignment.search"
+        if self.at_edge:
+            return f"{self.held_reason}: the data put the lag there or beyond"
         if self.loose:
             share = 100.0 * (self.returned or 0.0)
             return (
-                "not determined by this drive: held where the fits settled (fits re-sampled off it "
-                f"take back {share:.0f} % of the offset)"
+                f"{self.held_reason}: held where the fits settled (fits re-sampled off it take back "
+                f"{share:.0f} % of the offset)"
             )
         return ""
 
