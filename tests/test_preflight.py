@@ -335,6 +335,19 @@ def test_a_run_plans_what_to_drive_next(
     assert np.array_equal(restored.best.path, plan.best.path)
 
 
+def test_a_tracker_without_scatter_gets_no_ratio_to_it(noiseless_log: Path, tmp_path: Path) -> None:
+    """A tracker whose poses scatter by nothing (no noise; a real one's exact repeats where it lost
+    its target, as an OptiTrack's in a public AgileX Scout recording) leaves the residuals' spread
+    the noise, said as it is: a ratio to a scatter of 0 had read "1.5e+145 times"."""
+    path = tmp_path / "noiseless.yaml"
+    path.write_text(
+        f"name: noiseless\nmodel: tricycle\ndataset: {noiseless_log}\ninitial_guess: from_file\n"
+        "residual: {horizon: 10}\nsolvers: [gauss_newton]\n"
+    )
+    report = preflight(load_scenario(path))
+    assert "reads 0 mm, 0 mrad" in report.noise and "times" not in report.noise, report.noise
+
+
 def test_a_good_drive_gets_no_plan() -> None:
     run = Calibration(load_scenario(SCENARIOS / "demo.yaml")).run(["gauss_newton"])
     assert run.checks.plan is None

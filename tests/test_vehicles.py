@@ -646,11 +646,12 @@ def test_a_cars_steering_offset_must_resolve_what_turns_its_heading_at_its_own_s
     )
     nominal = NominalCheck({"k_steer": 1.0}, "a test", np.zeros(0), better)
     behind = dataclasses.replace(run, checks=dataclasses.replace(run.checks, nominal=nominal))
-    level = verdict(behind, MODELS["car_like"]).level
-    assert level != GOOD and any(
-        "no closer to the tracker than the nominal robot" in r
-        for r in verdict(behind, MODELS["car_like"]).reasons
+    said = verdict(behind, MODELS["car_like"])
+    assert said.level != GOOD and any(
+        "no closer to the tracker than the nominal robot" in r for r in said.reasons
     )
+    # Said once: the caveat is the gain's own words, which the verdict's line had repeated after it.
+    assert said.line().count("no closer to the tracker than the nominal robot") == 1, said.line()
 
 
 def test_a_track_held_at_its_start_is_never_blamed_on_the_encoders(tmp_path: Path) -> None:

@@ -220,11 +220,18 @@ def noise(
     )
     rows = np.asarray(omega, dtype=float)
     tracker = float(np.mean(rows * 2.0 * sigma[: rows.size] ** 2))
-    if info.spread2 > tracker:
-        times = np.sqrt(info.spread2 / max(tracker, 1e-300))
+    if info.spread2 > tracker and tracker > 0.0:
+        times = np.sqrt(info.spread2 / tracker)
         return info.spread2, (
             f"the residuals' spread at {at}, {times:.2g} times what the tracker's scatter about its "
             f"path ({said}) gives"
+        )
+    if info.spread2 > tracker:
+        # Poses without noise, or repeated exactly where the tracker moves slowest (a tracker that
+        # lost its target republishes its last pose): no ratio to a scatter of nothing.
+        return (
+            info.spread2,
+            f"the residuals' spread at {at} (the tracker's scatter about its path reads {said})",
         )
     return max(tracker, 1e-18), f"the tracker's scatter about its path: {said}"
 

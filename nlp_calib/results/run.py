@@ -335,7 +335,9 @@ class Verdict:
     concerns: Mapping[str, str] = field(default_factory=dict)
 
     def line(self) -> str:
-        return f"{self.level.upper()}: " + "; ".join((*self.reasons, *((self.gain,) if self.gain else ())))
+        # A calibration behind the nominal robot has its gain among the reasons already (a caveat).
+        gain = (self.gain,) if self.gain and self.gain not in self.reasons else ()
+        return f"{self.level.upper()}: " + "; ".join((*self.reasons, *gain))
 
 
 @dataclass(frozen=True)
