@@ -625,6 +625,22 @@ def test_the_run_past_the_preflight_says_not_determined_for_the_preflights_reaso
     assert refused - held and all(n in said for n in refused - held), (refused, said)
 
 
+def test_a_mount_given_under_known_is_never_called_calibrated_in_robot_urdf(
+    car_known: tuple[Any, HighwayOptions, Any, Any], tmp_path: Path
+) -> None:
+    """The car's device position is given under ``known:`` and only its yaw calibrated:
+    sensor_mount.urdf.xml said so, while robot.urdf, the same joint in a whole robot, called the
+    mount calibrated and said nothing of x and y. Both now say what each number is."""
+    from nlp_calib import write_run
+
+    _, _, run, _ = car_known
+    write_run(run, tmp_path)
+    joint, robot = ((tmp_path / n).read_text() for n in ("sensor_mount.urdf.xml", "robot.urdf"))
+    said = "Calibrated: yaw; z, roll, pitch not known (0), which planar driving cannot see; x given"
+    assert said in joint
+    assert said in robot, robot.splitlines()[1]
+
+
 def test_the_preflight_states_the_sigma_the_run_will_state(
     car_known: tuple[Any, HighwayOptions, Any, Any],
 ) -> None:
