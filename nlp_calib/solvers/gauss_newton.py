@@ -36,7 +36,8 @@ class GaussNewtonOptions:
     ``function_tolerance`` (the optimum, to rounding), when the scaled gradient
     ``max |g_i| / sqrt(H_ii)`` is below ``gradient_tolerance``, or when an undamped accepted step
     is below ``step_tolerance`` (relative to ``|x|``) and lowered the cost by less than
-    ``function_tolerance``.
+    ``function_tolerance``; where no step lowers the cost, converged when the scaled gradient or
+    the decrement is within ``_ROUNDING_SLACK`` times its tolerance (the cost's own rounding).
     """
 
     max_iterations: int = 200
