@@ -463,7 +463,11 @@ CAR_KNOWN = ("k_steer", "wheelbase", "rear_track", "sensor_x", "sensor_y")
 
 
 def _car_scenario(
-    tmp_path: Path, seed: int, known: tuple[str, ...] = (), truth: dict[str, float] | None = None
+    tmp_path: Path,
+    seed: int,
+    known: tuple[str, ...] = (),
+    truth: dict[str, float] | None = None,
+    residual: dict[str, Any] | None = None,
 ) -> tuple[Any, HighwayOptions]:
     opts = HighwayOptions(seed=seed, truth=truth or {})
     joints, poses, _ = simulate_highway(opts).write(tmp_path / "car")
@@ -480,6 +484,7 @@ def _car_scenario(
             "encoders": dict(zip(wheels, wheels)),
         },
         "known": {CAR_NAMES.get(n, n): truth[CAR_NAMES.get(n, n)] for n in known},
+        **({"residual": residual} if residual else {}),
     }
     return scenario_from_mapping(sc, "car", tmp_path), opts
 
@@ -554,6 +559,33 @@ def test_a_highway_car_given_what_it_cannot_determine_finds_its_wheel_scale_and_
         assert run.scenario.layout.param(name).status == KNOWN
 
 
+def test_a_highway_cars_lag_is_fitted_where_its_cost_rounds_above_the_solvers_tolerance(
+    tmp_path: Path,
+) -> None:
+    """The scenario ``init`` drafts for a highway car (windows of half a second, the steer angle's
+    two readings' mean), given what a straight kilometre cannot determine: over 700 m its cost's
+    own rounding (1e-13 of it) passes the solver's function tolerance (1e-14), so a fit started at
+    the optimum found no step that lowered the cost and its decrement, 1e-13 of the cost, was called
+    not converged: the lag's re-sampling stopped there, every start over the search did the same,
+    and the run held the lag at 0 ms, "not fitted" (seed 9403, never tuned on)."""
+    residual = {"horizon_s": 0.5, "steering_sample": "mean"}
+    sc, opts = _car_scenario(tmp_path, 9403, CAR_KNOWN, residual=residual)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run = Calibration(sc).run()
+    said = [str(w.message) for w in caught]
+    assert not [w for w in said if "no fit converged" in w], said
+    estimate = run.data.lag_estimate
+    assert estimate is not None and estimate.converged and not estimate.pinned
+    result, std = run.reports["gauss_newton"].result, run.std("gauss_newton")
+    assert result.converged
+    truth = {CAR_NAMES.get(n, n): v for n, v in opts.truth.items()}
+    # The simulator's lag is 0: the fitted one within its σ, and every estimate within 3σ of the truth.
+    assert abs(result.param_dict()["tracker_lag"]) < 3.0 * std["tracker_lag"]
+    for name in ("traction_wheels_radius", "sensor_theta", "steer_offset"):
+        assert abs(result.param_dict()[name] - truth[name]) < 3.0 * std[name], (name, std[name])
+
+
 def test_a_wheel_over_a_metre_is_a_robots_wheel(tmp_path: Path) -> None:
     """Wheels of 1.2 m radius (a tractor's, a haul truck's; or a car's speed in m/s read as the
     rad/s of a 1 m wheel, 0.6 % fast): within what the joints' form calls a real robot's wheel
@@ -591,6 +623,22 @@ def test_the_run_past_the_preflight_says_not_determined_for_the_preflights_reaso
     assert "are the encoders" not in said and "not observable" in said
     held = {n for n in refused if run.scenario.layout.param(n).status == HELD}
     assert refused - held and all(n in said for n in refused - held), (refused, said)
+
+
+def test_a_mount_given_under_known_is_never_called_calibrated_in_robot_urdf(
+    car_known: tuple[Any, HighwayOptions, Any, Any], tmp_path: Path
+) -> None:
+    """The car's device position is given under ``known:`` and only its yaw calibrated:
+    sensor_mount.urdf.xml said so, while robot.urdf, the same joint in a whole robot, called the
+    mount calibrated and said nothing of x and y. Both now say what each number is."""
+    from nlp_calib import write_run
+
+    _, _, run, _ = car_known
+    write_run(run, tmp_path)
+    joint, robot = ((tmp_path / n).read_text() for n in ("sensor_mount.urdf.xml", "robot.urdf"))
+    said = "Calibrated: yaw; z, roll, pitch not known (0), which planar driving cannot see; x given"
+    assert said in joint
+    assert said in robot, robot.splitlines()[1]
 
 
 def test_the_preflight_states_the_sigma_the_run_will_state(

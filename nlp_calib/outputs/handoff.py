@@ -413,10 +413,17 @@ def urdf_robot(run: CalibrationRun, solver: str, mount: SensorMount | None = Non
         ET.SubElement(robot, "link", {"name": m.child})
     for m in mounts:
         robot.append(_joint(m))
+    # What each joint's numbers are (calibrated, given, not known, not determined well enough),
+    # as URDF_FILE says it: a value given or not determined is never passed off as calibrated.
+    said = (
+        f"{mount.words().capitalize()}."
+        if len(mounts) == 1
+        else " ".join(f"'{m.child}': {m.words()}." for m in mounts)
+    )
     comment = (
         f" The sensor mount calibrated by nlp_calib {__version__}: scenario {run.scenario.name}, "
-        f"solver {solver}. A complete robot description (base and sensor links, the fixed joint) "
-        f"that URDF tools load as it is; {URDF_FILE} holds the joint alone for pasting. "
+        f"solver {solver}. {said} A complete robot description (base and sensor links, the fixed "
+        f"joint) that URDF tools load as it is; {URDF_FILE} holds the joint alone for pasting. "
     )
     return _xml(robot, comment)
 
