@@ -106,6 +106,32 @@ def test_a_highway_cars_plan_is_driven_at_a_circles_speed_and_reversed_slowly(tm
     assert np.isfinite(plan.best.target_std_after)
 
 
+def test_a_plan_names_what_no_manoeuvre_it_offers_determines(tmp_path: Path) -> None:
+    """A highway car's steering gain and wheelbase trade off at every radius it can drive (the
+    curvature is their ratio at small steer angles): the plan's manoeuvres lower the mount's σ, but
+    it had said nothing of the two it leaves as loose as they were, so a driver who followed it got
+    NOT DETERMINED again. It names them and the way out (known:), in the line and in plan.md; a
+    tricycle's straight drive, which turns determine, names nothing."""
+    from test_vehicles import _car_scenario
+
+    from nlp_calib.outputs.plan import plan_text
+
+    sc, _ = _car_scenario(tmp_path, seed=1)
+    report = preflight(sc)
+    plan = report.plan
+    assert plan is not None and plan.best is not None
+    assert set(plan.beyond) == {"k_steer", "wheelbase"}, plan.beyond
+    # Each named one is not determined on the drive and stays so whichever manoeuvre is appended.
+    loose = {p.name for p in report.parameters if p.status == "not"}
+    assert set(plan.beyond) <= loose, loose
+    said = "no manoeuvre considered determines k_steer, wheelbase: give what you know of them under known:"
+    assert said in plan.line(), plan.line()
+    assert said[1:] in plan_text(plan, "car")
+    straight = preflight(load_scenario(_straight(tmp_path, "tricycle"))).plan
+    assert straight is not None and straight.beyond == (), straight.beyond
+    assert "no manoeuvre considered" not in straight.line()
+
+
 def test_plan_md_states_the_runs_sigma_of_its_target(tmp_path: Path) -> None:
     """One σ per parameter: plan.md's σ of its target is the run's 1σ as the summary states it (it
     gave the white-noise σ of the plan's own information, 0.25 m against the summary's ±0.052 m)."""

@@ -383,8 +383,13 @@ def plan(s: Setting, free_only: bool = False) -> Plan | None:
     unit = s.units.get(name, "")
     kinematic = fns.model.kinematic_params
     size = {n: abs(float(v)) for n, v in zip(kinematic, params) if s.units.get(n) == "m" and v != 0}
+    beyond = tuple(
+        fns.free[j]
+        for j in np.flatnonzero(before.undetermined)
+        if all(after.undetermined[j] for *_, after in tried)
+    )
     return Plan(
-        name, unit, float(ratio[target]), float(before.std[target]), s.model_from, tuple(ranked), size
+        name, unit, float(ratio[target]), float(before.std[target]), s.model_from, tuple(ranked), size, beyond
     )
 
 

@@ -38,6 +38,8 @@ def plan_text(plan: Plan, name: str) -> str:
     ]
     for i, m in enumerate(plan.ranked):
         lines.append(f"| {i + 1} | {m.words} | {_sigma(m.worst_after)} | {_sigma(m.target_std_after)} |")
+    if plan.beyond:
+        lines += ["", f"{plan.beyond_words()[0].upper()}{plan.beyond_words()[1:]}."]
     if plan.ranked:
         lines += ["", "![the best manoeuvres, from a standstill heading along x](plan.png)"]
     return "\n".join(lines) + "\n"

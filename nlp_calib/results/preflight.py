@@ -166,6 +166,9 @@ class Plan:
     ranked: tuple[Manoeuvre, ...]
     #: The robot's lengths (m) by name (its wheelbase, its track), for a sketch's scale.
     size_m: Mapping[str, float] = field(default_factory=dict)
+    #: The parameters the drive does not determine that no manoeuvre considered determines either
+    #: (a car's steering gain against its wheelbase at radii it can drive): only ``known:`` does.
+    beyond: tuple[str, ...] = ()
 
     @property
     def best(self) -> Manoeuvre | None:
@@ -186,7 +189,14 @@ class Plan:
         return (
             f"drive {best.words}: the σ of {self.target} would fall from {_sigma(before)}"
             f"{unit if np.isfinite(before) else ''} to {_sigma(after)}{unit if np.isfinite(after) else ''}"
+            + (f"; {self.beyond_words()}" if self.beyond else "")
         )
+
+    def beyond_words(self) -> str:
+        """What no manoeuvre of the plan determines (:attr:`beyond`), and what does, in words."""
+        names = ", ".join(self.beyond)
+        what = "what you know of them" if len(self.beyond) > 1 else "its measured value"
+        return f"no manoeuvre considered determines {names}: give {what} under known:"
 
 
 def _sigma(value: float) -> str:
