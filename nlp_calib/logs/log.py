@@ -63,6 +63,8 @@ class LogHeader:
     counts_per_turn: Mapping[str, float] = field(default_factory=dict)
     #: The header of a sensor read beside the reference (a gyro's: its frame, its nominal mount).
     beside: LogHeader | None = None
+    #: What reading the log warned of (each warning's text, as shown): its run's result states it.
+    said: tuple[str, ...] = ()
 
     def encoder_index(self, name: str) -> int:
         """Column of the encoder called ``name`` in :attr:`Log.ticks`."""

@@ -250,7 +250,7 @@ def report_markdown(
                 f"> **{run.scenario.label(s)} did not converge** ({res.reason}); do not use its parameters.",
                 "",
             ]
-    out += [f"> warning: {w}" for w in run.warnings]
+    out += [f"> warning: {w}" for w in run.every_warning()]
     out += _handoff_section(run, handoff)
     for file, heading, caption in FIGURES:
         if file in images:

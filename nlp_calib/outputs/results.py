@@ -196,7 +196,7 @@ def result_dict(run: CalibrationRun) -> dict[str, Any]:
         "logs": _logs_dict(run),
         "start": _cost_dict(checks.start),
         "nominal": _nominal_dict(run),
-        "warnings": list(run.warnings),
+        "warnings": list(run.every_warning()),
         "verdict": {
             "level": run.verdict.level,
             "reasons": list(run.verdict.reasons),

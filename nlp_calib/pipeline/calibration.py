@@ -24,6 +24,7 @@ from nlp_calib.analysis.consistency import compare_logs, determined
 from nlp_calib.analysis.precision import clock_needed, log_precision, tightest, with_clocks
 from nlp_calib.core import memory
 from nlp_calib.core.errors import NlpCalibWarning
+from nlp_calib.core.said import each_once, kept
 from nlp_calib.logs import Log
 from nlp_calib.logs.resample import Resampler, speeds_read
 from nlp_calib.models import KinematicModel, reference_scales
@@ -121,24 +122,29 @@ class Calibration:
         per_log = sc.per_log() if sc.data.joint else (sc,)
         given = [log] if isinstance(log, Log) else list(log) if log is not None else [None] * len(per_log)
         assert aligned is None or len(per_log) == 1, "stages done already are one log's"
-        self.parts = [setup_log(s, log, self.solvers, aligned, start) for s, log in zip(per_log, given)]
-        self.stages = self.parts[0]
-        if len(self.parts) == 1:
-            self.held: Mapping[str, str] = self.stages.prepared.held
-            windows = self.stages.windows
-            self.fitting = Fit(
-                self.stages.problem,
-                windows.data,
-                self.solvers,
-                windows.input_noise,
-                given_lag(self.parts),
-                read_speeds(self.parts),
-                read_steering(self.parts),
-                read_kinked(self.parts),
-            )
-        else:
-            self.held, self.fitting = _joint_fit(sc, self.parts, self.solvers, start)
+        with kept() as said:
+            self.parts = [setup_log(s, log, self.solvers, aligned, start) for s, log in zip(per_log, given)]
+            self.stages = self.parts[0]
+            self.held, self.fitting = self._fitting(start)
+        # What reading the logs and the stages before the fit warned of, done here or before.
+        self.said = each_once(*(p.said for p in self.parts), said)
         self.setup_time_s = time.perf_counter() - t0
+
+    def _fitting(self, start: Mapping[str, float] | None) -> tuple[Mapping[str, str], Fit]:
+        """The parameters the fit holds, with why, and the fit of the set-up logs."""
+        if len(self.parts) > 1:
+            return _joint_fit(self.scenario, self.parts, self.solvers, start)
+        windows = self.stages.windows
+        return self.stages.prepared.held, Fit(
+            self.stages.problem,
+            windows.data,
+            self.solvers,
+            windows.input_noise,
+            given_lag(self.parts),
+            read_speeds(self.parts),
+            read_steering(self.parts),
+            read_kinked(self.parts),
+        )
 
     @classmethod
     def setup(
@@ -234,9 +240,16 @@ class Calibration:
         tell one robot's story; the result is the joint fit scored on every log, with each log's
         run (its figures with the joint estimates) in ``logs``."""
         names = tuple(solvers or self.scenario.solvers)
-        if len(self.parts) == 1:
-            return _run(self.scenario, self.fitting, self.parts, names, wanted or Wanted())[2][0]
-        return _joint_run(self, names, wanted or Wanted())
+        with kept() as said:
+            if len(self.parts) == 1:
+                run = _run(self.scenario, self.fitting, self.parts, names, wanted or Wanted())[2][0]
+            else:
+                run = _joint_run(self, names, wanted or Wanted())
+                # Each log's own result: what reading it and its stages said.
+                own = [part.with_said(p.said) for part, p in zip(run.logs, self.parts)]
+                run = dataclasses.replace(run, logs=tuple(own))
+        # Every warning the run printed is in its result: what setting it up said, then running it.
+        return run.with_said(each_once(self.said, said))
 
 
 def _joint_fit(

@@ -15,6 +15,7 @@ import numpy as np
 
 from nlp_calib.analysis.streams import GAP_FACTOR, MIN_GAP_S, gap_threshold, time_gaps
 from nlp_calib.core.errors import DatasetError, ModelError, NlpCalibWarning, ScenarioError
+from nlp_calib.core.said import each_once, kept
 from nlp_calib.logs import Log
 from nlp_calib.logs.reference import Poses
 from nlp_calib.models import KinematicModel, get_model
@@ -72,7 +73,9 @@ def _read(sc: Scenario, log: Log | None) -> tuple[KinematicModel, Log]:
             )
         return model, log
     try:
-        return model, _own_frame(sc.log.source.read(model, strict=sc.data.strict))
+        with kept() as said:
+            log = _own_frame(sc.log.source.read(model, strict=sc.data.strict))
+        return model, replace(log, header=replace(log.header, said=each_once(log.header.said, said)))
     except DatasetError as exc:
         if exc.droppable:
             raise exc.with_hint("set 'strict: false' in the scenario to drop such records") from None

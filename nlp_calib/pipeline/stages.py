@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
+from nlp_calib.core.said import each_once, kept
 from nlp_calib.logs import Log
 from nlp_calib.pipeline.align import Alignment, align
 from nlp_calib.pipeline.build import Problem, at_lags, build_stage, lags_held, restarted
@@ -24,6 +25,8 @@ class LogSetup:
     screening: Screening
     alignment: Alignment
     windows: LogWindows
+    #: What reading the log and these stages warned of (each warning's text): its run states it.
+    said: tuple[str, ...] = ()
 
     @property
     def used(self) -> tuple[int, int]:
@@ -58,6 +61,8 @@ class Aligned:
     problem: Problem
     screening: Screening
     alignment: Alignment
+    #: What these stages warned of as they ran (each warning's text): the run's result states it.
+    said: tuple[str, ...] = ()
 
 
 def setup_log(
@@ -77,12 +82,21 @@ def setup_log(
     if alignment.estimate is not None and not alignment.estimate.converged:
         # A lag no fit converged at is held where the encoders are read (a caveat, not a value).
         problem = lags_held(problem)
-    windows = bind_windows(problem, prepared, screening, alignment)
-    return LogSetup(prepared, problem, screening, alignment, windows)
+    with kept() as said:
+        windows = bind_windows(problem, prepared, screening, alignment)
+    told = each_once(prepared.log.header.said, a.said, said)
+    return LogSetup(prepared, problem, screening, alignment, windows, told)
 
 
 def align_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> Aligned:
-    """Prepare, build, screen and align one log (``log``: already read, or None)."""
+    """Prepare, build, screen and align one log (``log``: already read, or None), with what
+    they warned of."""
+    with kept() as said:
+        a = _align_log(sc, log, solvers)
+    return replace(a, said=tuple(said))
+
+
+def _align_log(sc: Scenario, log: Log | None, solvers: Sequence[str]) -> Aligned:
     prepared = prepare(sc, log)
     read = prepared.log
     records = (prepared.start, prepared.stop)

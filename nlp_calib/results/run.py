@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -145,6 +145,9 @@ class LogInfo:
     sensor_z_roll_pitch: tuple[float, float, float] | None = None
     #: What its line numbers count: a text file's ``line``, a bag topic's ``/topic message``.
     numbered: str = "line"
+    #: What reading it and the run's stages warned of as they ran (each warning's text, as shown):
+    #: beside the run's notes in :meth:`CalibrationRun.every_warning`.
+    said: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -362,6 +365,15 @@ class CalibrationRun:
     #: A calibration over several logs: each log's run, the joint estimates beside that log's own
     #: figures (this run is the joint fit over every log; empty for one log).
     logs: tuple[CalibrationRun, ...] = ()
+
+    def every_warning(self) -> tuple[str, ...]:
+        """Every warning of the run, each once: what its stages said as they ran (reading its log
+        first), then its notes (:attr:`warnings`, which the checks and the verdict read)."""
+        return tuple(dict.fromkeys((*self.log.said, *self.warnings)))
+
+    def with_said(self, said: Sequence[str]) -> CalibrationRun:
+        """This run with ``said`` among what its stages warned of (:attr:`LogInfo.said`)."""
+        return replace(self, log=replace(self.log, said=(*self.log.said, *said)))
 
     @property
     def initial(self) -> dict[str, float]:
