@@ -175,3 +175,34 @@ def test_a_lag_pinned_on_its_search_edge_is_held_in_calibration_yaml(
     figures.trust(run, tmp_path, "trust")
     assert (drawn[LAG].status, drawn[LAG].why) == (HELD, "pinned on the edge of alignment.search")
     assert (drawn["baseline"].status, drawn["baseline"].why) == (FREE, "")
+
+
+def test_the_stand_alone_preflight_judges_at_the_lag_the_run_finds_on_its_screened_log(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A log whose tracker glitches (3 % of its poses far off) the run's screen leaves out: the run
+    searches its lag on the screened log, and a pre-flight inside ``run`` judges there. The
+    stand-alone pre-flight had searched on the log as read, its lag settled elsewhere (−2.86 ms
+    against the run's −1.56 ms on this log, its return 0.80 against 0.98; a real car with gaps: held with no σ at 20.8 ms against
+    the run's 45 ± 31 ms), so the two said different things of one drive. It now goes through the
+    run's stages first: the lag it judges at is the run's, to the bit."""
+    from nlp_calib.pipeline import preflight as pf
+
+    log = write_sim(tmp_path, records=3000, seed=7, outlier_fraction=0.03)
+    sc = _scenario(tmp_path, [log], "tricycle")
+    seen: dict[str, object] = {}
+    original = pf.assess
+
+    def assess_kept(*args: object, **kwargs: object) -> object:
+        seen["a"] = found = original(*args, **kwargs)  # type: ignore[arg-type]
+        return found
+
+    monkeypatch.setattr(pf, "assess", assess_kept)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        preflight(sc)
+    monkeypatch.undo()
+    judged = seen["a"].drive.lags[LAG]  # type: ignore[attr-defined]
+    estimate = _run(sc).data.lag_estimate
+    assert estimate is not None and judged.lag_s == estimate.lag_s, (judged.lag_s, estimate.lag_s)
+    assert judged.returned == estimate.returned
