@@ -183,9 +183,10 @@ def test_the_stand_alone_preflight_judges_at_the_lag_the_run_finds_on_its_screen
     """A log whose tracker glitches (3 % of its poses far off) the run's screen leaves out: the run
     searches its lag on the screened log, and a pre-flight inside ``run`` judges there. The
     stand-alone pre-flight had searched on the log as read, its lag settled elsewhere (−2.86 ms
-    against the run's −1.56 ms on this log, its return 0.80 against 0.98; a real car with gaps: held with no σ at 20.8 ms against
-    the run's 45 ± 31 ms), so the two said different things of one drive. It now goes through the
-    run's stages first: the lag it judges at is the run's, to the bit."""
+    against the run's −1.56 ms on this log, its return 0.80 against 0.98; a real car with gaps:
+    held with no σ at 20.8 ms against the run's 45 ± 31 ms), so the two said different things of
+    one drive. It now goes through the run's stages first: the lag it judges at is the run's, to
+    the bit."""
     from nlp_calib.pipeline import preflight as pf
 
     log = write_sim(tmp_path, records=3000, seed=7, outlier_fraction=0.03)
