@@ -127,6 +127,8 @@ def test_a_plan_names_what_no_manoeuvre_it_offers_determines(tmp_path: Path) -> 
     said = "no manoeuvre considered determines k_steer, wheelbase: give what you know of them under known:"
     assert said in plan.line(), plan.line()
     assert said[1:] in plan_text(plan, "car")
+    # Said too where no manoeuvre lowers the target's σ (a car's converter scenario: k_steer's).
+    assert said in dataclasses.replace(plan, ranked=()).line()
     straight = preflight(load_scenario(_straight(tmp_path, "tricycle"))).plan
     assert straight is not None and straight.beyond == (), straight.beyond
     assert "no manoeuvre considered" not in straight.line()

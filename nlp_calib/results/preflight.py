@@ -183,7 +183,8 @@ class Plan:
             # model_from is a phrase of its own (the fit, or a start with how it was reached):
             # in parentheses, a sentence around it stays one.
             where = f"the model evaluated at {self.model_from}"
-            return f"no manoeuvre considered lowers the σ of {self.target} ({where})"
+            beyond = f"; {self.beyond_words()}" if self.beyond else ""
+            return f"no manoeuvre considered lowers the σ of {self.target} ({where}){beyond}"
         unit = f" {self.target_unit}" if self.target_unit not in ("", "1") else ""
         before, after = self.target_std_before, best.target_std_after
         return (
