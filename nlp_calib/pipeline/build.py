@@ -43,6 +43,10 @@ from nlp_calib.solvers.evaluation import requests
 #: validation refits): the fastest.
 INTERNAL_SOLVER = "gauss_newton"
 
+#: A refit stops when the undamped Gauss-Newton step's predicted cost decrease is below this
+#: squared, times the cost per window: a step of about this fraction of the estimate's σ.
+REFIT_SIGMAS = 0.01
+
 
 def lag_count(sc: Scenario, n_logs: int) -> int:
     """Time offsets in the problem: one per log when the scenario estimates the lag, else none."""

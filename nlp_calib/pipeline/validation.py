@@ -24,7 +24,7 @@ from nlp_calib.analysis.pivots import pivot_intervals, pivot_windows, pivots_std
 from nlp_calib.analysis.precision import clock_needed, with_clocks
 from nlp_calib.core import memory, threads
 from nlp_calib.models import reference_scales
-from nlp_calib.pipeline.build import Binder, no_priors
+from nlp_calib.pipeline.build import REFIT_SIGMAS, Binder, no_priors
 from nlp_calib.problem import ProblemFunctions, ResidualData
 from nlp_calib.results.checks import MIN_FOLDS, WEAK, CrossValidation, DirectionCheck, Fold, PivotSpread
 from nlp_calib.results.figures import TrajectoryMetrics
@@ -37,10 +37,6 @@ MAX_THREADS = 2
 
 T = TypeVar("T")
 R = TypeVar("R")
-
-#: A refit stops when the undamped Gauss-Newton step's predicted cost decrease is below this
-#: squared, times the cost per window: a step of about this fraction of the estimate's σ.
-REFIT_SIGMAS = 0.01
 
 #: Folds of this many windows or more are one Gauss-Newton step from the whole fit's normal equations
 #: less those of the windows left out (:func:`_stepped`); below, they are refitted from the estimate
