@@ -449,7 +449,12 @@ class Binder:
         self, evaluator: ProblemEvaluator, x0: np.ndarray, tolerance: float | None = None
     ) -> tuple[float, np.ndarray, bool]:
         """The internal solver's cost, estimate and convergence from ``x0``; with ``tolerance``,
-        converged once the undamped step would lower the cost by less than that fraction of it."""
+        converged once the undamped step would lower the cost by less than that fraction of it.
+        A fit out of iterations goes on from where it stopped until its next step would move it by
+        under :data:`REFIT_SIGMAS` of its σ, as a refit stops: what a stage reads of it (a fault's
+        judgement, a lag, a fold) needs no more (a skid-steer whose pivots mostly slipped ran out
+        of its 200 steps at its optimum but for the last digits, and its screen judged nothing);
+        one still far from its optimum does not stop so."""
         name = INTERNAL_SOLVER
         with scenario_key(self.scenario, name):
             options = self.scenario.options_for(name)
@@ -457,6 +462,10 @@ class Binder:
                 options = replace(options, function_tolerance=max(options.function_tolerance, tolerance))
             lower, upper = self.bounds if self.bounds is not None else (None, None)
             res = get_solver(name)(evaluator, options).solve(x0, lower, upper)
+            if not res.converged and res.iterations >= options.max_iterations and np.all(np.isfinite(res.x)):
+                near = REFIT_SIGMAS**2 / max(evaluator.n_residuals, 1)
+                options = replace(options, function_tolerance=max(options.function_tolerance, near))
+                res = get_solver(name)(evaluator, options).solve(res.x, lower, upper)
         return res.cost, res.x, res.converged
 
 

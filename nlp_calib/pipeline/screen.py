@@ -15,7 +15,7 @@ import numpy as np
 from nlp_calib.analysis.faults import repair
 from nlp_calib.analysis.faults import screen as screen_log
 from nlp_calib.logs import Log
-from nlp_calib.pipeline.build import REFIT_SIGMAS, Binder
+from nlp_calib.pipeline.build import Binder
 from nlp_calib.results.faults import MATCH_KINDS, FaultReport, Findings
 
 
@@ -29,13 +29,10 @@ def find_faults(binder: Binder, log: Log, start: int, stop: int, x0: np.ndarray)
         masks[0][start : stop - 1], masks[1][start:stop] = bad_intervals, bad_records
         masked = replace(binder.lag_held(x0), bad_intervals=masks[0], bad_records=masks[1])
         _, ev = masked.bind(log, start, stop)
+        # A fit out of iterations at its optimum but for the last digits goes on to REFIT_SIGMAS
+        # of its σ (Binder.fit): a skid-steer whose pivots mostly slipped, 235 steps to the
+        # solver's 1e-14, its 200th estimate the same to 12 digits, had been left unjudged.
         _, x, converged = masked.fit(ev, x0)
-        if not converged and np.all(np.isfinite(x)):
-            # Out of iterations at its optimum but for the last digits (a skid-steer whose pivots
-            # mostly slipped: 235 steps to the solver's 1e-14, its 200th estimate the same to 12
-            # digits), the screen had judged nothing. Judging needs the estimate to a step of
-            # REFIT_SIGMAS of its σ, as a refit does; a fit still far from one does not stop so.
-            _, x, converged = masked.fit(ev, x, REFIT_SIGMAS**2 / max(ev.n_residuals, 1))
         return ev.params(x) if converged and np.all(np.isfinite(x)) else None
 
     sc = binder.scenario
