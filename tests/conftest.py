@@ -12,6 +12,7 @@ import stat
 import subprocess
 import sys
 import tempfile
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -24,7 +25,8 @@ from nlp_calib.core import poses3d
 from nlp_calib.core.threads import native_one_thread_by_default
 from nlp_calib.logs import Log, parse_log
 from nlp_calib.models import get_model
-from nlp_calib.pipeline import Scenario, load_scenario, scenario_from_mapping
+from nlp_calib.pipeline import Calibration, Scenario, load_scenario, scenario_from_mapping
+from nlp_calib.results import CalibrationRun
 from nlp_calib.simulation import SimulationOptions, simulate, write_simulation
 
 REPO = Path(__file__).resolve().parents[1]
@@ -140,6 +142,19 @@ def highway_dataset(joints: Path, poses: Path) -> dict[str, object]:
         "form": "speeds",
         "encoders": dict(zip(wheels, wheels)),
     }
+
+
+def run_fitting_the_lag(sc: Scenario) -> CalibrationRun:
+    """``sc`` run with every warning caught, its tracker lag fitted: no warning that no fit
+    converged at any lag, and an estimate that converged and is not pinned."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run = Calibration(sc).run()
+    said = [str(w.message) for w in caught]
+    assert not [w for w in said if "no fit converged" in w], said
+    estimate = run.data.lag_estimate
+    assert estimate is not None and estimate.converged and not estimate.pinned
+    return run
 
 
 def write_sim(tmp_path: Path, name: str = "sim.txt", **kwargs: object) -> Path:

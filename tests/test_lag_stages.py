@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import write_sim
+from conftest import run_fitting_the_lag, write_sim
 
 from nlp_calib.core.errors import ProblemError
 from nlp_calib.models import get_model
@@ -222,15 +222,9 @@ def test_every_stages_fit_out_of_iterations_goes_on_to_its_optimum(tmp_path: Pat
     raw.update(
         solvers=["gauss_newton"], alignment={"tracker_lag": "auto"}, gauss_newton={"max_iterations": 3}
     )
-    sc = scenario_from_mapping(raw, "budget", tmp_path)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        run = Calibration(sc).run()
-    said = [str(w.message) for w in caught]
-    assert not [w for w in said if "no fit converged" in w], said
+    run = run_fitting_the_lag(scenario_from_mapping(raw, "budget", tmp_path))
     estimate = run.data.lag_estimate
-    assert estimate is not None and estimate.converged and not estimate.pinned
-    assert abs(estimate.lag_s) < 3.0 * run.std("gauss_newton")[LAG]
+    assert estimate is not None and abs(estimate.lag_s) < 3.0 * run.std("gauss_newton")[LAG]
     assert not run.checks.findings.report.unchecked, run.checks.findings.report.unchecked
     result = run.reports["gauss_newton"].result
     assert not result.converged and "iteration limit (3)" in result.reason

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import SHARED_DATA, cli, highway_dataset
+from conftest import SHARED_DATA, cli, highway_dataset, run_fitting_the_lag
 from odometry_truth import sigma_over_truth
 
 from nlp_calib.analysis.precision import HEADING_BUDGET
@@ -590,13 +590,7 @@ def test_a_highway_cars_lag_is_fitted_where_its_cost_rounds_above_the_solvers_to
     and the run held the lag at 0 ms, "not fitted" (seed 9403, never tuned on)."""
     residual = {"horizon_s": 0.5, "steering_sample": "mean"}
     sc, opts = _car_scenario(tmp_path, 9403, CAR_KNOWN, residual=residual)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        run = Calibration(sc).run()
-    said = [str(w.message) for w in caught]
-    assert not [w for w in said if "no fit converged" in w], said
-    estimate = run.data.lag_estimate
-    assert estimate is not None and estimate.converged and not estimate.pinned
+    run = run_fitting_the_lag(sc)
     result, std = run.reports["gauss_newton"].result, run.std("gauss_newton")
     assert result.converged
     truth = {CAR_NAMES.get(n, n): v for n, v in opts.truth.items()}
