@@ -54,7 +54,7 @@ from nlp_calib.pipeline.assemble import (
     joint_run,
     pinned_alike,
 )
-from nlp_calib.pipeline.build import StartingPoint, build_stage, mount_count, restarted
+from nlp_calib.pipeline.build import Problem, StartingPoint, build_stage, mount_count, restarted
 from nlp_calib.pipeline.fit import Fit
 from nlp_calib.pipeline.prepare import joint_residual
 from nlp_calib.pipeline.scenario import Scenario
@@ -135,16 +135,8 @@ class Calibration:
         if len(self.parts) > 1:
             return _joint_fit(self.scenario, self.parts, self.solvers, start)
         windows = self.stages.windows
-        return self.stages.prepared.held, Fit(
-            self.stages.problem,
-            windows.data,
-            self.solvers,
-            windows.input_noise,
-            given_lag(self.parts),
-            read_speeds(self.parts),
-            read_steering(self.parts),
-            read_kinked(self.parts),
-        )
+        fit = fit_of(self.stages.problem, windows.data, self.solvers, windows.input_noise, self.parts)
+        return self.stages.prepared.held, fit
 
     @classmethod
     def setup(
@@ -281,16 +273,7 @@ def _joint_fit(
         # As each log's (see stages.started): what ``start`` lacks, where the first log's start put it.
         restart = one_horizon.with_options(initial_guess={**first.problem.start.initial, **start})
         problem = restarted(problem, restart, start_from, lags, mounts)
-    return held, Fit(
-        problem,
-        data,
-        solvers,
-        joint_noise(parts),
-        given_lag(parts),
-        read_speeds(parts),
-        read_steering(parts),
-        read_kinked(parts),
-    )
+    return held, fit_of(problem, data, solvers, joint_noise(parts), parts)
 
 
 def _joint_run(calib: Calibration, names: Sequence[str], wanted: Wanted) -> CalibrationRun:
@@ -352,22 +335,21 @@ def _joint(
 
 def _own_run(part: LogSetup, solvers: Sequence[str]) -> CalibrationRun:
     """One log of several fitted on its own (its stages' windows and problem, nothing built again)."""
-    return _run(
-        part.prepared.scenario,
-        Fit(
-            part.problem,
-            part.windows.data,
-            solvers,
-            part.windows.input_noise,
-            given_lag([part]),
-            read_speeds([part]),
-            read_steering([part]),
-            read_kinked([part]),
-        ),
-        [part],
-        solvers,
-        Wanted(),
-    )[2][0]
+    fit = fit_of(part.problem, part.windows.data, solvers, part.windows.input_noise, [part])
+    return _run(part.prepared.scenario, fit, [part], solvers, Wanted())[2][0]
+
+
+def fit_of(
+    problem: Problem,
+    data: ResidualData,
+    solvers: Sequence[str],
+    noise: tuple[np.ndarray, np.ndarray],
+    parts: Sequence[LogSetup],
+) -> Fit:
+    """The fit of ``data`` with every other reading of ``parts``' logs the held check weighs (a
+    given lag's, the speeds', the steer angle's, the re-sampled counts')."""
+    readings = (given_lag(parts), read_speeds(parts), read_steering(parts), read_kinked(parts))
+    return Fit(problem, data, solvers, noise, *readings)
 
 
 def consistency(
